@@ -1,0 +1,38 @@
+"""physcore: fast, honest particle physics for Python.
+
+Build a :class:`Scene` from only the physics it needs, step it in parallel in Rust, check the
+energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
+"""
+from __future__ import annotations
+
+from . import _core
+from ._errors import InvalidInputError, PhyscoreError, SimulationDiverged
+from .scene import INTEGRATORS, EnergyReport, Scene
+from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
+
+__version__ = _core.__version__
+
+__all__ = [
+    "Scene",
+    "EnergyReport",
+    "INTEGRATORS",
+    "Gravity",
+    "Drag",
+    "Springs",
+    "PairwiseGravity",
+    "Plane",
+    "PhyscoreError",
+    "InvalidInputError",
+    "SimulationDiverged",
+    "scenes",
+    "render",
+    "__version__",
+]
+
+
+def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
+    if name in ("scenes", "render", "diagnostics"):
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'physcore' has no attribute {name!r}")

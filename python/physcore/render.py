@@ -1,0 +1,705 @@
+"""Animated GIF rendering of physcore scenes, with numpy rasterisation and Pillow output.
+
+The whole animation is simulated first and kept in memory (positions as float32), then a single
+camera is fitted to every frame, and each frame is rasterised into a uint8 palette-index image:
+springs as 1-pixel lines coloured by strain, particles as filled discs coloured by speed. The
+frames are written as a palette GIF with one fixed palette, atomically.
+
+Public functions
+----------------
+gif(scene, path, ...)          simulate a scene forward and write an animated GIF.
+render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
+"""
+from __future__ import annotations
+
+import math
+import operator
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any, NamedTuple, Optional, Tuple
+
+import numpy as np
+
+__all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
+
+#: Valid values of the ``color_by`` argument.
+COLOR_BY = ("speed", "none")
+
+#: Spring strain |(L - L0) / L0| at which the strain colours saturate (fully red or blue).
+STRAIN_SATURATION = 0.1
+
+#: Default oblique view of 3D scenes, (azimuth, elevation) in degrees.
+DEFAULT_VIEW = (-60.0, 25.0)
+
+# ---------------------------------------------------------------------------------------------
+# The one fixed palette. Index layout (kept < 128 entries so GIF colour tables stay small).
+# ---------------------------------------------------------------------------------------------
+_BACKGROUND = 0
+_PLANE_FILL = 1
+_PLANE_LINE = 2
+_PINNED = 3
+_PLAIN = 4
+_N_SPEED = 64
+_SPEED0 = 5
+_N_STRAIN = 31
+_STRAIN0 = _SPEED0 + _N_SPEED
+
+# viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
+# brightest yellow hardly shows on the white background.
+_VIRIDIS = np.array(
+    [
+        [0x44, 0x01, 0x54], [0x47, 0x2D, 0x7B], [0x3B, 0x52, 0x8B],
+        [0x2C, 0x72, 0x8E], [0x21, 0x91, 0x8C], [0x28, 0xAE, 0x80],
+        [0x5E, 0xC9, 0x62], [0xAD, 0xDC, 0x30], [0xFD, 0xE7, 0x25],
+    ],
+    dtype=np.float64,
+)
+_STRAIN_BLUE = np.array([33.0, 102.0, 172.0])  # compressed
+_STRAIN_GREY = np.array([165.0, 165.0, 165.0])  # at rest
+_STRAIN_RED = np.array([200.0, 30.0, 40.0])  # stretched
+
+
+def _build_palette() -> np.ndarray:
+    pal = np.zeros((_STRAIN0 + _N_STRAIN, 3), dtype=np.float64)
+    pal[_BACKGROUND] = (255, 255, 255)
+    pal[_PLANE_FILL] = (228, 222, 212)
+    pal[_PLANE_LINE] = (110, 95, 80)
+    pal[_PINNED] = (255, 127, 14)
+    pal[_PLAIN] = (31, 119, 180)
+    t = np.linspace(0.0, 0.9, _N_SPEED) * (len(_VIRIDIS) - 1)
+    k = np.minimum(t.astype(int), len(_VIRIDIS) - 2)
+    f = (t - k)[:, None]
+    pal[_SPEED0:_STRAIN0] = _VIRIDIS[k] * (1 - f) + _VIRIDIS[k + 1] * f
+    half = _N_STRAIN // 2
+    s = np.linspace(-1.0, 1.0, _N_STRAIN)[:, None]
+    pal[_STRAIN0:] = np.where(
+        s < 0, _STRAIN_GREY + (_STRAIN_GREY - _STRAIN_BLUE) * s, _STRAIN_GREY + (_STRAIN_RED - _STRAIN_GREY) * s
+    )
+    assert pal.shape[0] == _STRAIN0 + 2 * half + 1
+    return np.round(pal).astype(np.uint8)
+
+
+_PALETTE = _build_palette()
+
+
+# ---------------------------------------------------------------------------------------------
+# Argument checks
+# ---------------------------------------------------------------------------------------------
+def _check_int(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be an int, got {value!r}")
+    try:
+        n = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{name} must be an int, got {type(value).__name__} {value!r}") from None
+    if n < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {n}")
+    return n
+
+
+def _check_size(size: Any) -> Tuple[int, int]:
+    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__"):
+        raise TypeError(f"size must be a pair of ints (width, height), got {size!r}")
+    if len(size) != 2:
+        raise ValueError(f"size must be a pair of ints (width, height), got {size!r}")
+    w = _check_int("size[0] (width)", size[0], 16)
+    h = _check_int("size[1] (height)", size[1], 16)
+    if w > 65535 or h > 65535:
+        raise ValueError(f"size must be at most 65535 x 65535 (the GIF limit), got {w}x{h}")
+    return w, h
+
+
+def _check_fps(fps: Any) -> float:
+    if isinstance(fps, (bool, np.bool_)) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise TypeError(f"fps must be a number, got {fps!r}")
+    f = float(fps)
+    if not (math.isfinite(f) and f > 0):
+        raise ValueError(f"fps must be a finite number > 0, got {fps!r}")
+    return f
+
+
+def _check_color_by(color_by: Any) -> str:
+    if color_by not in COLOR_BY:
+        valid = ", ".join(repr(c) for c in COLOR_BY)
+        raise ValueError(f"color_by must be one of {valid}; got {color_by!r}")
+    return str(color_by)
+
+
+def _check_radius(radius: Any) -> Optional[int]:
+    if radius is None:
+        return None
+    r = _check_int("radius", radius, 0)
+    if r > 200:
+        raise ValueError(f"radius must be <= 200 pixels, got {r}")
+    return r
+
+
+def _check_view(view: Any) -> Tuple[float, float]:
+    if view is None:
+        return DEFAULT_VIEW
+    try:
+        az, el = (float(a) for a in view)
+    except (TypeError, ValueError):
+        raise ValueError(f"view must be (azimuth_deg, elevation_deg), got {view!r}") from None
+    if not (math.isfinite(az) and math.isfinite(el)):
+        raise ValueError(f"view must be finite angles in degrees, got {view!r}")
+    return az, el
+
+
+def _check_path(path: Any) -> Path:
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
+    p = Path(path)
+    if p.suffix.lower() != ".gif":
+        raise ValueError(f"path must end in .gif, got {str(p)!r}")
+    if not p.parent.is_dir():
+        raise ValueError(f"path: directory {str(p.parent)!r} does not exist")
+    if p.is_dir():
+        raise ValueError(f"path {str(p)!r} is a directory")
+    return p
+
+
+def _gif_duration_ms(fps: float) -> int:
+    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp.
+    cs = min(max(round(100.0 / fps), 2), 65535)
+    return int(cs * 10)
+
+
+# ---------------------------------------------------------------------------------------------
+# Recording: what the simulation produced, per frame
+# ---------------------------------------------------------------------------------------------
+class _Recording(NamedTuple):
+    positions: np.ndarray  # (F, N, dim) float32, relative to `origin`
+    origin: np.ndarray  # (dim,) float64
+    speeds: Optional[np.ndarray]  # (F, N) float32, m/s
+    pairs: Optional[Tuple[np.ndarray, np.ndarray]]  # (M,), (M,) intp
+    strain: Optional[np.ndarray]  # (F, M) float32, NaN where the rest length is 0
+    pinned: np.ndarray  # (N,) bool
+    planes: list  # [(point (dim,), normal (dim,))] float64, normal unit length
+
+
+def _finite_mean(x: np.ndarray) -> np.ndarray:
+    ok = np.isfinite(x).all(axis=1)
+    return x[ok].mean(axis=0) if ok.any() else np.zeros(x.shape[1])
+
+
+def _strain(x: np.ndarray, i: np.ndarray, j: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    length = np.sqrt(((x[j] - x[i]) ** 2).sum(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(rest > 0, (length - rest) / rest, np.nan)
+
+
+def _planes(planes: Any, dim: int) -> list:
+    """Plane objects (.point, .normal) -> [(point, unit normal)]; degenerate ones are skipped."""
+    out = []
+    for pl in planes or []:
+        p = np.asarray(pl.point, dtype=np.float64).reshape(-1)
+        n = np.asarray(pl.normal, dtype=np.float64).reshape(-1)
+        nn = float(np.sqrt(n @ n)) if n.shape == (dim,) else 0.0
+        if p.shape == (dim,) and nn > 0 and np.isfinite(p).all() and math.isfinite(nn):
+            out.append((p, n / nn))
+    return out
+
+
+def _scene_springs(scene: Any) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    i, j, rest = scene.spring_pairs()
+    i = np.asarray(i, dtype=np.intp)
+    if i.size == 0:
+        return None
+    return i, np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64)
+
+
+def _simulate(
+    scene: Any, frames: int, steps_per_frame: int, need_speed: bool, springs: bool, progress: bool
+) -> _Recording:
+    dim = int(scene.dim)
+    if dim not in (2, 3):
+        raise ValueError(f"scene.dim must be 2 or 3, got {dim}")
+    n = int(scene.n_particles)
+    sp = _scene_springs(scene) if springs else None
+    x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+    # Store positions relative to the start centroid so float32 keeps its precision far from 0.
+    origin = _finite_mean(x) if n else np.zeros(dim)
+    pos = np.empty((frames, n, dim), dtype=np.float32)
+    speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
+    strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=frames, desc="simulating", unit="frame", file=sys.stderr)
+    try:
+        for k in range(frames):
+            if k:
+                scene.step(steps_per_frame)
+                x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+            pos[k] = x - origin
+            if speeds is not None:
+                v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
+                speeds[k] = np.sqrt((v * v).sum(axis=1))
+            if strain is not None:
+                strain[k] = _strain(x, *sp)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    pinned = np.asarray(scene.pinned, dtype=bool).reshape(n)
+    pairs = (sp[0], sp[1]) if sp is not None else None
+    return _Recording(pos, origin, speeds, pairs, strain, pinned, _planes(getattr(scene, "planes", None), dim))
+
+
+# ---------------------------------------------------------------------------------------------
+# Camera
+# ---------------------------------------------------------------------------------------------
+class _Camera:
+    """Orthographic camera: world -> screen plane (right, up) -> pixel (col, row).
+
+    3D uses an oblique view: the camera sits at azimuth `az` (from +x towards +y) and elevation
+    `el` above the xy-plane, looking at the origin, with +z up on screen.
+    """
+
+    def __init__(self, dim: int, view: Tuple[float, float], size: Tuple[int, int]):
+        self.dim = dim
+        self.width, self.height = size
+        if dim == 3:
+            az, el = math.radians(view[0]), math.radians(view[1])
+            right = [-math.sin(az), math.cos(az), 0.0]
+            up = [-math.sin(el) * math.cos(az), -math.sin(el) * math.sin(az), math.cos(el)]
+            toward = [math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)]
+            self.basis = np.array([right, up, toward], dtype=np.float64).T  # (3, 3)
+        else:
+            self.basis = np.eye(2)
+        self.centre = np.zeros(2)
+        self.scale = 1.0
+
+    def project(self, x: np.ndarray) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+        """(N, dim) world -> (N, 2) screen-plane coordinates and (N,) depth (3D; larger = nearer)."""
+        s = x @ self.basis.astype(x.dtype, copy=False)
+        if self.dim == 3:
+            return s[:, :2], s[:, 2]
+        return s, None
+
+    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int) -> None:
+        """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side."""
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or np.any(hi < lo):
+            lo, hi = np.full(2, -0.5), np.full(2, 0.5)
+        ext = hi - lo
+        if ext.max() <= 0.0:
+            # A single point (one particle, or all at one place): show a unit box around it.
+            ext = np.ones(2)
+        avail = np.array([max(self.width - 2 * pad, 1), max(self.height - 2 * pad, 1)], dtype=float)
+        with np.errstate(divide="ignore"):
+            self.scale = float(np.min(np.where(ext > 0, avail / ext, np.inf)))
+        self.centre = 0.5 * (lo + hi)
+
+    def pixels(self, s: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+        """(N, 2) screen-plane coordinates -> float pixel column and row (pixel k spans [k, k+1))."""
+        col = (s[:, 0] - self.centre[0]) * self.scale + 0.5 * self.width
+        row = 0.5 * self.height - (s[:, 1] - self.centre[1]) * self.scale
+        return col, row
+
+
+def _screen_bounds(cam: _Camera, positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    for x in positions:  # per frame: the (F, N, 2) projection of a big run need not fit in memory
+        s, _ = cam.project(x)
+        s = s[np.isfinite(s).all(axis=1)]
+        if s.size:
+            lo = np.minimum(lo, s.min(axis=0))
+            hi = np.maximum(hi, s.max(axis=0))
+    return lo, hi
+
+
+def _auto_radius(n: int, size: Tuple[int, int]) -> int:
+    # About a third of the mean spacing were the particles spread over the image; capped so a few
+    # bodies (Kepler) are dots rather than blobs.
+    w, h = size
+    r = int(0.3 * math.sqrt(w * h / max(n, 1)))
+    return max(0, min(r, max(1, min(w, h) // 40)))
+
+
+# ---------------------------------------------------------------------------------------------
+# Rasterisation (numpy only; no per-particle Python loops)
+# ---------------------------------------------------------------------------------------------
+def _disc_stencil(radius: int, width: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Row and column offsets (S,) intp of a filled disc of `radius` pixels."""
+    d = np.arange(-radius, radius + 1)
+    dy, dx = np.meshgrid(d, d, indexing="ij")
+    # r^2 + r/2 rounds the disc: radius 1 is a plus, radius 2 a 5x5 square without corners.
+    keep = dx * dx + dy * dy <= radius * radius + 0.5 * radius
+    return dy[keep].astype(np.intp), dx[keep].astype(np.intp)
+
+
+def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line."""
+    w, h = cam.width, cam.height
+    img = np.full((h, w), _BACKGROUND, dtype=np.uint8)
+    if cam.dim != 2 or not planes:
+        return img
+    # World coordinates (relative to origin) of the pixel centres.
+    xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
+    ys = (0.5 * h - (np.arange(h) + 0.5)) / cam.scale + cam.centre[1]
+    for p, n in planes:
+        p = p - origin
+        # Signed distance in pixels; > 0 on the allowed side.
+        d = ((xs[None, :] - p[0]) * n[0] + (ys[:, None] - p[1]) * n[1]) * cam.scale
+        img[d < 0] = _PLANE_FILL
+        img[np.abs(d) <= 0.75] = _PLANE_LINE
+    return img
+
+
+def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
+    """Draw segments (M,) pixel endpoints into buf by sampling about one point per pixel."""
+    h, w = buf.shape
+    ok = np.isfinite(c0) & np.isfinite(r0) & np.isfinite(c1) & np.isfinite(r1)
+    if not ok.all():
+        c0, r0, c1, r1, colors = c0[ok], r0[ok], c1[ok], r1[ok], colors[ok]
+    if c0.size == 0:
+        return
+    dc, dr = c1 - c0, r1 - r0
+    # Samples per segment: one per pixel along the longer axis; the cap only bites on segments far
+    # outside the image, which cannot happen with a fitted camera but keeps memory bounded.
+    n = np.minimum(np.ceil(np.maximum(np.abs(dc), np.abs(dr))), 4 * (w + h)).astype(np.intp) + 1
+    seg = np.repeat(np.arange(n.size), n)
+    start = np.cumsum(n) - n
+    t = (np.arange(seg.size) - start[seg]) / np.maximum(n - 1, 1)[seg]
+    cc = np.floor(c0[seg] + t * dc[seg]).astype(np.intp)
+    rr = np.floor(r0[seg] + t * dr[seg]).astype(np.intp)
+    inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
+    buf.reshape(-1)[(rr * w + cc)[inside]] = colors[seg[inside]]
+
+
+def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
+    """Draw discs at (N,) pixel centres; later particles overwrite earlier ones."""
+    h, w = buf.shape
+    dy, dx = stencil
+    reach = int(np.abs(dx).max()) + 1
+    ok = (col > -reach) & (col < w + reach) & (row > -reach) & (row < h + reach)  # also drops NaN
+    ci = np.floor(col[ok]).astype(np.intp)
+    ri = np.floor(row[ok]).astype(np.intp)
+    colors = colors[ok]
+    if dy.size == 1:
+        inside = (ci >= 0) & (ci < w) & (ri >= 0) & (ri < h)
+        buf.reshape(-1)[(ri * w + ci)[inside]] = colors[inside]
+        return
+    rr = ri[:, None] + dy[None, :]
+    cc = ci[:, None] + dx[None, :]
+    inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
+    # 1-D fancy assignment writes in index order, so the particle drawn last wins a pixel.
+    buf.reshape(-1)[(rr * w + cc)[inside]] = np.broadcast_to(colors[:, None], rr.shape)[inside]
+
+
+def _speed_levels(speed: np.ndarray, vmax: float) -> np.ndarray:
+    """(N,) speeds -> (N,) uint8 palette indices on the sequential map; vmax maps to the top."""
+    if not (vmax > 0 and math.isfinite(vmax)):
+        return np.full(speed.shape, _SPEED0, dtype=np.uint8)
+    lv = np.nan_to_num(speed * (_N_SPEED / vmax), nan=0.0, posinf=_N_SPEED, neginf=0.0)
+    return (_SPEED0 + np.clip(lv, 0, _N_SPEED - 1).astype(np.uint8)).astype(np.uint8)
+
+
+def _strain_levels(strain: np.ndarray) -> np.ndarray:
+    """(M,) strains -> (M,) uint8 palette indices; NaN (zero rest length) -> at-rest grey."""
+    half = _N_STRAIN // 2
+    s = np.clip(np.nan_to_num(strain, nan=0.0) / STRAIN_SATURATION, -1.0, 1.0)
+    return (_STRAIN0 + half + np.rint(s * half)).astype(np.uint8)
+
+
+class _Rasteriser:
+    """Everything fixed over an animation: camera, background, stencil, colour scale."""
+
+    def __init__(
+        self,
+        rec: _Recording,
+        size: Tuple[int, int],
+        color_by: str,
+        radius: Optional[int],
+        view: Tuple[float, float],
+        speed_scale: Optional[float] = None,
+    ):
+        n, dim = rec.positions.shape[1:]
+        self.rec = rec
+        self.radius = _auto_radius(n, size) if radius is None else radius
+        self.cam = _Camera(dim, view, size)
+        pad = max(self.radius + 2, int(round(0.05 * min(size))))
+        self.cam.fit(*_screen_bounds(self.cam, rec.positions), pad)
+        self.stencil = _disc_stencil(self.radius, size[0])
+        self.background = _background(self.cam, rec.planes, rec.origin)
+        self.color_by = color_by
+        self.vmax = 0.0
+        if color_by == "speed" and rec.speeds is not None and rec.speeds.size:
+            if speed_scale is None:
+                finite = rec.speeds[np.isfinite(rec.speeds)]
+                # 99th percentile: a few fast outliers should not wash out the whole map.
+                speed_scale = float(np.percentile(finite, 99)) if finite.size else 0.0
+            self.vmax = float(speed_scale)
+
+    def frame(self, k: int) -> np.ndarray:
+        """(H, W) uint8 palette-index image of frame k."""
+        rec = self.rec
+        buf = self.background.copy()
+        s, depth = self.cam.project(rec.positions[k])
+        col, row = self.cam.pixels(s)
+        if rec.pairs is not None and rec.strain is not None:
+            i, j = rec.pairs
+            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k]))
+        if col.size == 0:
+            return buf
+        if self.color_by == "speed" and rec.speeds is not None:
+            colors = _speed_levels(rec.speeds[k], self.vmax)
+        else:
+            colors = np.full(col.shape, _PLAIN, dtype=np.uint8)
+        colors[rec.pinned] = _PINNED
+        if depth is not None:
+            order = np.argsort(depth, kind="stable")  # painter's algorithm: far ones first
+        elif rec.pinned.any():
+            order = np.argsort(rec.pinned, kind="stable")  # pinned ones on top
+        else:
+            order = None
+        if order is not None:
+            col, row, colors = col[order], row[order], colors[order]
+        _draw_discs(buf, col, row, colors, self.stencil)
+        return buf
+
+
+# ---------------------------------------------------------------------------------------------
+# Public API
+# ---------------------------------------------------------------------------------------------
+def gif(
+    scene: Any,
+    path: "str | os.PathLike[str]",
+    *,
+    frames: int = 90,
+    steps_per_frame: int = 10,
+    fps: float = 30,
+    size: Tuple[int, int] = (480, 360),
+    color_by: str = "speed",
+    radius: Optional[int] = None,
+    springs: bool = True,
+    view: Optional[Tuple[float, float]] = None,
+    progress: bool = False,
+) -> Path:
+    """Simulate `scene` forward and write the motion as an animated GIF.
+
+    Frame 0 shows the current state; between consecutive frames the scene advances
+    ``steps_per_frame`` steps, so the animation covers ``(frames - 1) * steps_per_frame * scene.dt``
+    seconds of simulated time and the scene is left at the last frame's state. The whole run is
+    simulated before anything is drawn, and a single camera is fitted to all frames, so the view
+    does not move.
+
+    Parameters
+    ----------
+    scene : physcore.Scene
+        A 2D or 3D scene. It is stepped in place.
+    path : str or os.PathLike
+        Output file; must end in ``.gif`` and its directory must exist. Written atomically: a
+        temporary file in the same directory is renamed onto `path` only once complete.
+    frames : int, default 90
+        Number of frames, >= 1.
+    steps_per_frame : int, default 10
+        Simulation steps between frames, >= 1.
+    fps : float, default 30
+        Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
+        below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
+        (fps above 50 play at 50).
+    size : (int, int), default (480, 360)
+        Image width and height in pixels, each >= 16.
+    color_by : {"speed", "none"}, default "speed"
+        Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s), its top fixed over the
+        whole animation at the 99th percentile of all frames' speeds. ``"none"``: one colour.
+        Pinned particles are always orange.
+    radius : int, optional
+        Particle disc radius in pixels (0 draws single pixels). Default: chosen from the particle
+        count and image size.
+    springs : bool, default True
+        Draw the springs of all ``Springs`` terms as lines under the particles, coloured by strain
+        (L - L0)/L0: grey at rest, red stretched, blue compressed, saturating at
+        ``STRAIN_SATURATION`` (10 %).
+    view : (float, float), optional
+        3D only: (azimuth, elevation) of the orthographic camera in degrees; screen up is +z.
+        Default ``(-60, 25)``. Ignored for 2D scenes (x right, y up).
+    progress : bool, default False
+        Show a tqdm progress bar on stderr while simulating.
+
+    Returns
+    -------
+    pathlib.Path
+        `path`.
+
+    Raises
+    ------
+    TypeError, ValueError
+        On an invalid argument, naming it; raised before the scene is stepped or a file is made.
+    physcore.SimulationDiverged
+        If the simulation diverges; no file is written (the scene is rolled back to the last
+        good state of the failing ``step`` call by the scene itself).
+    OSError
+        If the file cannot be written; no partial file is left behind.
+
+    Notes
+    -----
+    Collider planes are drawn in 2D (shaded solid side and an edge line), not in 3D. Pillow
+    merges consecutive identical frames into one longer frame, so a GIF of a scene at rest can
+    report fewer frames than `frames` while playing for the same time.
+    """
+    frames = _check_int("frames", frames, 1)
+    steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1)
+    duration = _gif_duration_ms(_check_fps(fps))
+    size = _check_size(size)
+    color_by = _check_color_by(color_by)
+    radius = _check_radius(radius)
+    view = _check_view(view)
+    path = _check_path(path)
+
+    rec = _simulate(scene, frames, steps_per_frame, color_by == "speed", bool(springs), bool(progress))
+    ras = _Rasteriser(rec, size, color_by, radius, view)
+    _write_gif(path, (ras.frame(k) for k in range(frames)), duration)
+    return path
+
+
+def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
+    from PIL import Image
+
+    palette = _PALETTE.tobytes()
+    images = []
+    for buf in index_frames:
+        im = Image.fromarray(buf)  # 'L' from the (H, W) uint8 buffer; putpalette makes it 'P'
+        im.putpalette(palette)
+        images.append(im)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.stem + ".", suffix=".gif.part")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            # Passing the palette writes it once as the global colour table and keeps Pillow from
+            # re-optimising it per frame (smaller files, and faster).
+            images[0].save(
+                fh,
+                format="GIF",
+                save_all=True,
+                append_images=images[1:],
+                duration=duration_ms,
+                loop=0,
+                palette=palette,
+            )
+        # mkstemp makes the file 0600; give it the mode an ordinary new file would have.
+        try:
+            mode = path.stat().st_mode & 0o777
+        except OSError:
+            mode = 0o644
+        os.chmod(tmp, mode)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def render_frame(
+    positions: Any,
+    *,
+    size: Tuple[int, int] = (480, 360),
+    velocities: Optional[np.ndarray] = None,
+    pinned: Optional[np.ndarray] = None,
+    springs: Any = None,
+    planes: Optional[list] = None,
+    color_by: str = "speed",
+    speed_scale: Optional[float] = None,
+    radius: Optional[int] = None,
+    view: Optional[Tuple[float, float]] = None,
+) -> np.ndarray:
+    """Rasterise one state to an RGB image, with the camera fitted to that state.
+
+    Parameters
+    ----------
+    positions : array_like (N, dim) float, or physcore.Scene
+        Particle positions in m, dim 2 or 3. A Scene supplies its positions, and also its
+        velocities, pinned flags, springs and planes unless those are given explicitly.
+    size : (int, int), default (480, 360)
+        Width and height in pixels, each >= 16.
+    velocities : array_like (N, dim) float, optional
+        m/s; needed for ``color_by="speed"`` (without them all particles get the lowest colour).
+    pinned : array_like (N,) bool, optional
+        Pinned particles are drawn orange.
+    springs : (i, j, rest) or bool, optional
+        Spring endpoints, int arrays (M,), and rest lengths, float (M,) m, as returned by
+        ``Scene.spring_pairs()``; drawn as strain-coloured lines. For a Scene, None or True takes
+        its springs and False draws none.
+    planes : list of objects with ``.point`` and ``.normal`` (dim,) arrays, optional
+        Collider planes, drawn in 2D only.
+    color_by : {"speed", "none"}, default "speed"
+    speed_scale : float, optional
+        Speed (m/s) at the top of the colour map; default the 99th percentile of the speeds.
+    radius : int, optional
+        Disc radius in pixels; default chosen from N and `size`.
+    view : (float, float), optional
+        3D camera (azimuth, elevation) in degrees, default ``(-60, 25)``.
+
+    Returns
+    -------
+    numpy.ndarray (H, W, 3) uint8
+        The RGB image (row 0 at the top).
+
+    Raises
+    ------
+    TypeError, ValueError
+        On an invalid argument or inconsistent array shapes.
+    """
+    size = _check_size(size)
+    color_by = _check_color_by(color_by)
+    radius = _check_radius(radius)
+    view = _check_view(view)
+    if springs is False:
+        sp = None
+    elif hasattr(positions, "positions") and hasattr(positions, "spring_pairs") and (springs is None or springs is True):
+        sp = _scene_springs(positions)
+    elif springs is None or springs is True:
+        sp = None
+    else:
+        i, j, rest = springs
+        sp = (np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64))
+        if not (sp[0].shape == sp[1].shape == sp[2].shape and sp[0].ndim == 1):
+            raise ValueError("springs: i, j and rest must be 1-D arrays of equal length")
+    if hasattr(positions, "positions"):
+        scene = positions
+        positions = scene.positions
+        velocities = scene.velocities if velocities is None else velocities
+        pinned = scene.pinned if pinned is None else pinned
+        planes = getattr(scene, "planes", None) if planes is None else planes
+
+    x = np.asarray(positions, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise ValueError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
+    n, dim = x.shape
+    if sp is not None and sp[0].size and (
+        min(sp[0].min(), sp[1].min()) < 0 or max(sp[0].max(), sp[1].max()) >= n
+    ):
+        raise ValueError(f"springs: particle index out of range for {n} particles")
+    pin = np.zeros(n, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool)
+    if pin.shape != (n,):
+        raise ValueError(f"pinned must have shape ({n},), got {pin.shape}")
+    speeds = None
+    if color_by == "speed" and velocities is not None:
+        v = np.asarray(velocities, dtype=np.float64)
+        if v.shape != x.shape:
+            raise ValueError(f"velocities must have shape {x.shape}, got {v.shape}")
+        speeds = np.sqrt((v * v).sum(axis=1)).astype(np.float32)[None]
+    if speed_scale is not None:
+        speed_scale = float(speed_scale)
+        if not (speed_scale > 0 and math.isfinite(speed_scale)):
+            raise ValueError(f"speed_scale must be a finite number > 0, got {speed_scale!r}")
+
+    origin = _finite_mean(x) if n else np.zeros(dim)
+    rec = _Recording(
+        positions=(x - origin).astype(np.float32)[None],
+        origin=origin,
+        speeds=speeds,
+        pairs=(sp[0], sp[1]) if sp is not None else None,
+        strain=_strain(x, *sp).astype(np.float32)[None] if sp is not None else None,
+        pinned=pin,
+        planes=_planes(planes, dim),
+    )
+    ras = _Rasteriser(rec, size, color_by, radius, view, speed_scale=speed_scale)
+    return _PALETTE[ras.frame(0)]

@@ -1,0 +1,240 @@
+"""Force terms and colliders: plain, immutable descriptions that a :class:`~physcore.Scene` adds.
+
+A scene computes only the terms it holds. Every term validates its own arguments when it is
+constructed; what depends on the scene (dimension, particle indices) is checked by
+:meth:`Scene.add`, before anything changes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Union
+
+import numpy as np
+
+from ._errors import InvalidInputError
+
+__all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane"]
+
+ArrayLike = Union[float, int, "np.typing.ArrayLike"]
+
+
+def _finite_float(value: object, arg: str, *, minimum: Optional[float] = None, strict: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{arg}: expected a real number, got {type(value).__name__}")
+    v = float(value)
+    if not np.isfinite(v):
+        raise InvalidInputError(f"{arg}: must be finite, got {v}")
+    if minimum is not None and (v < minimum or (strict and v == minimum)):
+        op = ">" if strict else ">="
+        raise InvalidInputError(f"{arg}: must be {op} {minimum}, got {v}")
+    return v
+
+
+def _vector(value: object, arg: str) -> np.ndarray:
+    try:
+        a = np.asarray(value)
+    except Exception as exc:  # pragma: no cover - numpy raises many kinds
+        raise TypeError(f"{arg}: expected a sequence of 2 or 3 numbers") from exc
+    if a.dtype.kind not in "iuf" or a.dtype == bool:
+        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    if a.ndim != 1 or a.shape[0] not in (2, 3):
+        raise InvalidInputError(f"{arg}: expected shape (2,) or (3,), got {a.shape}")
+    a = a.astype(np.float64)
+    if not np.all(np.isfinite(a)):
+        raise InvalidInputError(f"{arg}: must be finite, got {a.tolist()}")
+    a.setflags(write=False)
+    return a
+
+
+def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
+    a = np.asarray(value)
+    if a.dtype.kind not in "iuf" or a.dtype == bool:
+        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    if a.ndim == 0:
+        a = np.full(m, float(a))
+    if a.shape != (m,):
+        raise InvalidInputError(f"{arg}: expected a scalar or shape ({m},), got {a.shape}")
+    if not np.all(np.isfinite(a)) or np.any(a < 0):
+        bad = int(np.flatnonzero(~np.isfinite(a) | (a < 0))[0])
+        raise InvalidInputError(f"{arg}: entry {bad} is {a[bad]} (must be finite and >= 0)")
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class Gravity:
+    """Uniform gravity: force ``m g`` on every free particle; potential ``-m g·x``.
+
+    Parameters
+    ----------
+    g : array_like, shape (dim,)
+        Gravitational acceleration, m/s². Earth: ``[0, -9.81]`` (2D) or ``[0, 0, -9.81]`` (3D).
+    name : str
+        Key of this term in the energy books.
+    """
+
+    g: np.ndarray
+    name: str = "gravity"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "g", _vector(self.g, "g"))
+
+
+@dataclass(frozen=True)
+class Drag:
+    """Linear (Stokes) drag ``F = -b v`` on every free particle; dissipates ``b |v|²``.
+
+    Parameters
+    ----------
+    coefficient : float
+        Drag coefficient ``b`` ≥ 0, kg/s.
+    name : str
+        Key of this term in the energy books.
+    """
+
+    coefficient: float
+    name: str = "drag"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))
+
+
+@dataclass(frozen=True)
+class Springs:
+    """Hookean springs with dashpot damping along the spring axis.
+
+    Force on ``i`` from spring ``(i, j)``: ``f = [k (L - L0) + c (v_j - v_i)·n] n`` with
+    ``n = (x_j - x_i)/L`` (and ``-f`` on ``j``); potential ``½ k (L - L0)²``; the dashpot
+    dissipates ``c ((v_j - v_i)·n)²``. Coincident endpoints exert no force (the axis is undefined).
+
+    Parameters
+    ----------
+    i, j : array_like of int, shape (M,)
+        Particle indices of the two ends of each spring (``i != j``, both < ``n_particles``).
+    stiffness : float or array_like, shape (M,)
+        ``k`` ≥ 0, N/m.
+    damping : float or array_like, shape (M,)
+        Dashpot coefficient ``c`` ≥ 0, N·s/m. Default 0.
+    rest_length : None, float or array_like, shape (M,)
+        ``L0`` ≥ 0, m. ``None`` (default) takes each spring's length at the moment it is added.
+    name : str
+        Key of this term in the energy books.
+
+    Raises
+    ------
+    TypeError
+        Non-integer indices or non-numeric parameters.
+    ValueError
+        Mismatched lengths, negative indices, ``i == j``, negative or non-finite parameters.
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    stiffness: ArrayLike = field(default=1.0)
+    damping: ArrayLike = 0.0
+    rest_length: Optional[ArrayLike] = None
+    name: str = "springs"
+
+    def __post_init__(self) -> None:
+        idx = []
+        for arg, val in (("i", self.i), ("j", self.j)):
+            a = np.asarray(val)
+            if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
+                raise TypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
+            if a.ndim != 1:
+                raise InvalidInputError(f"{arg}: expected shape (M,), got {a.shape}")
+            a = a.astype(np.int64)
+            if a.size and a.min() < 0:
+                raise InvalidInputError(f"{arg}: indices must be >= 0, got {int(a.min())}")
+            a.setflags(write=False)
+            idx.append(a)
+        i, j = idx
+        if i.shape != j.shape:
+            raise InvalidInputError(f"j: has {j.shape[0]} entries but i has {i.shape[0]}")
+        same = np.flatnonzero(i == j)
+        if same.size:
+            raise InvalidInputError(f"i/j: spring {int(same[0])} joins particle {int(i[same[0]])} to itself")
+        m = i.shape[0]
+        object.__setattr__(self, "i", i)
+        object.__setattr__(self, "j", j)
+        object.__setattr__(self, "stiffness", _per_spring(self.stiffness, m, "stiffness"))
+        object.__setattr__(self, "damping", _per_spring(self.damping, m, "damping"))
+        if self.rest_length is not None:
+            object.__setattr__(self, "rest_length", _per_spring(self.rest_length, m, "rest_length"))
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+
+@dataclass(frozen=True)
+class PairwiseGravity:
+    """Newtonian gravity between every pair of particles, with Plummer softening.
+
+    ``a_i = G Σ_j m_j (x_j - x_i) / (|x_j - x_i|² + ε²)^{3/2}`` and
+    ``U = -G Σ_{i<j} m_i m_j / (|x_j - x_i|² + ε²)^{1/2}`` (Plummer 1911; Aarseth, *Gravitational
+    N-body simulations*, 2003, eq. 2.4). Direct summation, O(N²), parallel over particles.
+    Pinned particles attract but do not move.
+
+    Parameters
+    ----------
+    G : float
+        Gravitational constant > 0, m³/(kg·s²). Default 1 (N-body units).
+    softening : float
+        Plummer softening length ε ≥ 0, m. Default 0.
+    name : str
+        Key of this term in the energy books.
+    """
+
+    G: float = 1.0
+    softening: float = 0.0
+    name: str = "pairwise_gravity"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "G", _finite_float(self.G, "G", minimum=0.0, strict=True))
+        object.__setattr__(self, "softening", _finite_float(self.softening, "softening", minimum=0.0))
+
+
+@dataclass(frozen=True)
+class Plane:
+    """Half-space collider ``{x : (x - point)·normal ≥ 0}`` with restitution and friction.
+
+    After each step a particle below the plane is projected onto it; if moving into the plane its
+    normal velocity becomes ``-e v_n`` and its tangential speed drops by ``μ (1 + e) |v_n|``
+    (Coulomb friction on the collision impulse, never reversing it). The energy removed is booked
+    under ``"collisions"`` in :meth:`Scene.energy`.
+
+    Parameters
+    ----------
+    point : array_like, shape (dim,)
+        A point on the plane, m.
+    normal : array_like, shape (dim,)
+        Normal pointing into the allowed side (normalised for you; must be non-zero).
+    restitution : float
+        Coefficient of restitution ``e`` in [0, 1]. Default 0.5.
+    friction : float
+        Coulomb friction coefficient ``μ`` ≥ 0. Default 0.
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+    restitution: float = 0.5
+    friction: float = 0.0
+
+    def __post_init__(self) -> None:
+        point = _vector(self.point, "point")
+        normal = _vector(self.normal, "normal")
+        if point.shape != normal.shape:
+            raise InvalidInputError(f"normal: has {normal.shape[0]} components, point has {point.shape[0]}")
+        norm = float(np.linalg.norm(normal))
+        if norm == 0.0:
+            raise InvalidInputError("normal: must be non-zero")
+        unit = normal / norm
+        unit.setflags(write=False)
+        object.__setattr__(self, "point", point)
+        object.__setattr__(self, "normal", unit)
+        e = _finite_float(self.restitution, "restitution", minimum=0.0)
+        if e > 1.0:
+            raise InvalidInputError(f"restitution: must be in [0, 1], got {e}")
+        object.__setattr__(self, "restitution", e)
+        object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))

@@ -1,0 +1,82 @@
+//! Half-space collider {x : (x − p)·n ≥ 0} with restitution and Coulomb friction.
+//!
+//! A particle found below the plane after a step is projected back onto it; if it moves into the
+//! plane, its normal velocity is reversed and scaled by the restitution e (v_n ← −e v_n), and its
+//! tangential velocity is reduced by μ·(1 + e)|v_n| (Coulomb friction on the collision impulse),
+//! never past zero. The energy this removes is booked as dissipated: the change in kinetic energy
+//! plus the work −F·Δx of the last evaluated force F over the projection Δx (exact for uniform
+//! gravity, first order otherwise).
+use crate::par;
+use crate::state::Model;
+use crate::vector::{Real, Vector};
+
+#[derive(Clone, Debug)]
+pub struct Plane<V: Vector> {
+    /// A point on the plane, m.
+    pub point: V,
+    /// Unit normal pointing into the allowed half-space.
+    pub normal: V,
+    /// Coefficient of restitution e in [0, 1].
+    pub restitution: Real,
+    /// Coulomb friction coefficient μ ≥ 0.
+    pub friction: Real,
+}
+
+impl<V: Vector> Plane<V> {
+    /// Resolves contacts; returns (energy dissipated J, whether any particle was touched).
+    pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V]) -> (Real, bool) {
+        let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
+        let touched = std::sync::atomic::AtomicBool::new(false);
+        let diss = sum2(x, v, |s, x, v| {
+            let mut d = 0.0;
+            for k in 0..x.len() {
+                let i = s + k;
+                if model.inv_mass[i] == 0.0 {
+                    continue;
+                }
+                let depth = (x[k] - p).dot(n);
+                if depth >= 0.0 {
+                    continue;
+                }
+                touched.store(true, std::sync::atomic::Ordering::Relaxed);
+                let m = model.mass[i];
+                let ke0 = 0.5 * m * v[k].length_squared();
+                let dx = n * (-depth);
+                x[k] += dx;
+                let vn = v[k].dot(n);
+                if vn < 0.0 {
+                    let vt = v[k] - n * vn;
+                    let vt2 = vt.length_squared();
+                    let dvn = (1.0 + e) * (-vn);
+                    let vt_new = if mu > 0.0 && vt2 > 0.0 {
+                        let vtl = vt2.sqrt();
+                        vt * ((vtl - mu * dvn).max(0.0) / vtl)
+                    } else {
+                        vt
+                    };
+                    v[k] = vt_new + n * (-e * vn);
+                }
+                let ke1 = 0.5 * m * v[k].length_squared();
+                // Projection work: ΔU ≈ −F·Δx.
+                let du = if f_last.len() > i { -f_last[i].dot(dx) } else { 0.0 };
+                d += (ke0 - ke1) - du;
+            }
+            d
+        });
+        (diss, touched.into_inner())
+    }
+}
+
+fn sum2<V: Vector>(x: &mut [V], v: &mut [V], f: impl Fn(usize, &mut [V], &mut [V]) -> Real + Sync + Send) -> Real {
+    use rayon::prelude::*;
+    let partials: Vec<Real> = if x.len() >= par::PAR_MIN {
+        x.par_chunks_mut(par::CHUNK)
+            .zip(v.par_chunks_mut(par::CHUNK))
+            .enumerate()
+            .map(|(c, (x, v))| f(c * par::CHUNK, x, v))
+            .collect()
+    } else {
+        x.chunks_mut(par::CHUNK).zip(v.chunks_mut(par::CHUNK)).enumerate().map(|(c, (x, v))| f(c * par::CHUNK, x, v)).collect()
+    };
+    partials.into_iter().fold(0.0, |a, b| a + b)
+}

@@ -1,0 +1,33 @@
+//! The one error enum of the core. The Python bindings map `InvalidInput` to a `ValueError`
+//! subclass and `Diverged` to `physcore.SimulationDiverged`.
+use thiserror::Error;
+
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum Error {
+    /// A user-supplied argument is invalid. Raised before any state changes.
+    #[error("{arg}: {msg}")]
+    InvalidInput { arg: String, msg: String },
+
+    /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
+    /// `step(n)` call started.
+    #[error(
+        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} has a non-finite \
+         {quantity}. The state was rolled back to step {rolled_back_to}. Try a smaller dt \
+         (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable integrator, or softening."
+    )]
+    Diverged {
+        step: u64,
+        t: f64,
+        particle: usize,
+        quantity: &'static str,
+        rolled_back_to: u64,
+        dt: f64,
+        suggested_dt: f64,
+    },
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
+
+pub fn invalid(arg: &str, msg: impl Into<String>) -> Error {
+    Error::InvalidInput { arg: arg.to_string(), msg: msg.into() }
+}

@@ -1,0 +1,17 @@
+//! physcore's Rust core: particle state, force terms, integrators, colliders and energy books,
+//! written once for 2D and 3D over glam's `DVec2`/`DVec3`. Plain Rust; the Python bindings live
+//! in `python/` behind the `python` feature.
+pub mod boundary;
+pub mod error;
+pub mod integrators;
+pub mod par;
+pub mod simulation;
+pub mod state;
+pub mod terms;
+pub mod vector;
+
+#[cfg(feature = "python")]
+mod python;
+
+pub use error::{Error, Result};
+pub use simulation::{EnergyReport, Simulation};

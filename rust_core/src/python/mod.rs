@@ -1,0 +1,360 @@
+//! Python bindings (the only module that knows pyo3). Arrays cross in bulk; the Python facade
+//! (`physcore.Scene`) validates inputs first, and everything is validated again here so the
+//! private module is safe to call directly. The GIL is released around stepping.
+use crate::boundary::Plane;
+use crate::error::Error;
+use crate::integrators::{self, IntegratorInfo};
+use crate::simulation::{EnergyReport, Simulation};
+use crate::terms::{Drag, PairwiseGravity, Springs, UniformGravity};
+use crate::vector::{from_flat, to_flat, Real, Vector};
+use glam::{DVec2, DVec3};
+use numpy::ndarray::{Array1, Array2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Maps the core's error enum onto the Python hierarchy defined in `physcore/_errors.py`.
+fn to_py(py: Python<'_>, e: Error) -> PyErr {
+    let msg = e.to_string();
+    let build = || -> PyResult<PyErr> {
+        let errors = py.import("physcore._errors")?;
+        Ok(match e {
+            Error::InvalidInput { .. } => PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?),
+            Error::Diverged { step, t, particle, quantity, suggested_dt, rolled_back_to, .. } => {
+                let exc = errors
+                    .getattr("SimulationDiverged")?
+                    .call1((msg.clone(), step, t, particle, quantity, suggested_dt, rolled_back_to))?;
+                PyErr::from_value(exc)
+            }
+        })
+    };
+    build().unwrap_or_else(|_| PyValueError::new_err(msg))
+}
+
+enum Inner {
+    D2(Simulation<DVec2>),
+    D3(Simulation<DVec3>),
+}
+
+macro_rules! with_sim {
+    ($self:expr, $s:ident => $body:expr) => {
+        match $self {
+            Inner::D2($s) => $body,
+            Inner::D3($s) => $body,
+        }
+    };
+}
+
+fn flat2<'a>(a: &'a PyReadonlyArray2<'_, f64>, dim: usize, arg: &str) -> PyResult<&'a [f64]> {
+    let shape = a.shape();
+    if shape[1] != dim {
+        return Err(PyValueError::new_err(format!("{arg}: expected shape (N, {dim}), got ({}, {})", shape[0], shape[1])));
+    }
+    a.as_slice().map_err(|_| PyValueError::new_err(format!("{arg}: array must be C-contiguous")))
+}
+
+fn slice1<'a, T: numpy::Element>(a: &'a PyReadonlyArray1<'_, T>, arg: &str) -> PyResult<&'a [T]> {
+    a.as_slice().map_err(|_| PyValueError::new_err(format!("{arg}: array must be contiguous")))
+}
+
+fn vec_of<V: Vector>(v: &[f64], arg: &str) -> PyResult<V> {
+    if v.len() != V::DIM {
+        return Err(PyValueError::new_err(format!("{arg}: expected {} components, got {}", V::DIM, v.len())));
+    }
+    Ok(V::from_slice(v))
+}
+
+fn to_array2<'py, V: Vector>(py: Python<'py>, v: &[V]) -> Bound<'py, PyArray2<f64>> {
+    Array2::from_shape_vec((v.len(), V::DIM), to_flat(v)).expect("shape matches").into_pyarray(py)
+}
+
+fn info_dict<'py>(py: Python<'py>, i: IntegratorInfo) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", i.name)?;
+    d.set_item("order", i.order)?;
+    d.set_item("symplectic", i.symplectic)?;
+    d.set_item("force_evals_per_step", i.force_evals_per_step)?;
+    Ok(d)
+}
+
+fn energy_dict<'py>(py: Python<'py>, e: EnergyReport) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("kinetic", e.kinetic)?;
+    let pot = PyDict::new(py);
+    for (k, u) in &e.potential {
+        pot.set_item(k, u)?;
+    }
+    let dis = PyDict::new(py);
+    for (k, u) in &e.dissipated {
+        dis.set_item(k, u)?;
+    }
+    d.set_item("potential", pot)?;
+    d.set_item("dissipated", dis)?;
+    Ok(d)
+}
+
+/// Low-level simulation handle. Use `physcore.Scene`, which validates inputs and keeps the
+/// scene description needed for `save()`.
+#[pyclass(module = "physcore._core")]
+pub struct Simulation2 {
+    inner: Inner,
+}
+
+#[pymethods]
+impl Simulation2 {
+    #[new]
+    #[pyo3(signature = (dim, integrator, dt, threads=None))]
+    fn new(py: Python<'_>, dim: usize, integrator: &str, dt: f64, threads: Option<usize>) -> PyResult<Self> {
+        let inner = match dim {
+            2 => Inner::D2(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            3 => Inner::D3(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            _ => return Err(PyValueError::new_err(format!("dim: must be 2 or 3, got {dim}"))),
+        };
+        Ok(Self { inner })
+    }
+
+    #[getter]
+    fn dim(&self) -> usize {
+        match self.inner {
+            Inner::D2(_) => 2,
+            Inner::D3(_) => 3,
+        }
+    }
+
+    #[getter]
+    fn n_particles(&self) -> usize {
+        with_sim!(&self.inner, s => s.n_particles())
+    }
+
+    #[getter]
+    fn time(&self) -> f64 {
+        with_sim!(&self.inner, s => s.sys.state.t)
+    }
+
+    #[getter]
+    fn step_count(&self) -> u64 {
+        with_sim!(&self.inner, s => s.sys.state.step)
+    }
+
+    #[getter]
+    fn dt(&self) -> f64 {
+        with_sim!(&self.inner, s => s.dt)
+    }
+
+    #[setter]
+    fn set_dt(&mut self, py: Python<'_>, dt: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_dt(dt)).map_err(|e| to_py(py, e))
+    }
+
+    #[getter]
+    fn integrator(&self) -> &'static str {
+        with_sim!(&self.inner, s => s.integrator_info().name)
+    }
+
+    #[setter]
+    fn set_integrator(&mut self, py: Python<'_>, name: &str) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_integrator(name)).map_err(|e| to_py(py, e))
+    }
+
+    fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        info_dict(py, with_sim!(&self.inner, s => s.integrator_info()))
+    }
+
+    #[getter]
+    fn force_evaluations(&self) -> u64 {
+        with_sim!(&self.inner, s => s.force_evaluations())
+    }
+
+    /// Appends particles; returns the index of the first.
+    fn add_particles(
+        &mut self,
+        py: Python<'_>,
+        positions: PyReadonlyArray2<'_, f64>,
+        velocities: PyReadonlyArray2<'_, f64>,
+        masses: PyReadonlyArray1<'_, f64>,
+        pinned: PyReadonlyArray1<'_, bool>,
+    ) -> PyResult<usize> {
+        let dim = self.dim();
+        let x = flat2(&positions, dim, "positions")?;
+        let v = flat2(&velocities, dim, "velocities")?;
+        let m = slice1(&masses, "masses")?.to_vec();
+        let p = slice1(&pinned, "pinned")?.to_vec();
+        with_sim!(&mut self.inner, s => s.add_particles(from_flat(x), from_flat(v), m, p)).map_err(|e| to_py(py, e))
+    }
+
+    /// Positions, m: a new (N, dim) float64 array (a copy; writing to it changes nothing).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.x))
+    }
+
+    /// Velocities, m/s: a new (N, dim) float64 array (a copy).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.v))
+    }
+
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.mass.clone()).into_pyarray(py))
+    }
+
+    #[getter]
+    fn pinned<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
+        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.inv_mass.iter().map(|&im| im == 0.0).collect()).into_pyarray(py))
+    }
+
+    #[pyo3(signature = (positions=None, velocities=None))]
+    fn set_state(&mut self, py: Python<'_>, positions: Option<PyReadonlyArray2<'_, f64>>, velocities: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<()> {
+        let dim = self.dim();
+        let x = positions.as_ref().map(|a| flat2(a, dim, "positions")).transpose()?;
+        let v = velocities.as_ref().map(|a| flat2(a, dim, "velocities")).transpose()?;
+        with_sim!(&mut self.inner, s => s.set_state(x.map(from_flat), v.map(from_flat))).map_err(|e| to_py(py, e))
+    }
+
+    fn add_gravity(&mut self, py: Python<'_>, name: String, g: Vec<f64>) -> PyResult<()> {
+        if g.iter().any(|c| !c.is_finite()) {
+            return Err(PyValueError::new_err("g: must be finite"));
+        }
+        with_sim!(&mut self.inner, s => {
+            let t = UniformGravity { name, g: vec_of(&g, "g")? };
+            s.add_term(Box::new(t))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    fn add_drag(&mut self, py: Python<'_>, name: String, coefficient: f64) -> PyResult<()> {
+        if !(coefficient.is_finite() && coefficient >= 0.0) {
+            return Err(PyValueError::new_err(format!("coefficient: {coefficient} must be finite and >= 0")));
+        }
+        with_sim!(&mut self.inner, s => s.add_term(Box::new(Drag { name, b: coefficient }))).map_err(|e| to_py(py, e))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn add_springs(
+        &mut self,
+        py: Python<'_>,
+        name: String,
+        i: PyReadonlyArray1<'_, u32>,
+        j: PyReadonlyArray1<'_, u32>,
+        stiffness: PyReadonlyArray1<'_, f64>,
+        damping: PyReadonlyArray1<'_, f64>,
+        rest_length: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<()> {
+        let (i, j) = (slice1(&i, "i")?.to_vec(), slice1(&j, "j")?.to_vec());
+        let (k, c, r) = (slice1(&stiffness, "stiffness")?.to_vec(), slice1(&damping, "damping")?.to_vec(), slice1(&rest_length, "rest_length")?.to_vec());
+        with_sim!(&mut self.inner, s => {
+            let n = s.n_particles();
+            Springs::new(name, i, j, k, c, r, n).and_then(|t| s.add_term(Box::new(t)))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    #[pyo3(name = "add_pairwise_gravity")]
+    fn add_pairwise_gravity(&mut self, py: Python<'_>, name: String, g: f64, softening: f64) -> PyResult<()> {
+        if !(g.is_finite() && g > 0.0) {
+            return Err(PyValueError::new_err(format!("G: {g} must be finite and > 0")));
+        }
+        if !(softening.is_finite() && softening >= 0.0) {
+            return Err(PyValueError::new_err(format!("softening: {softening} must be finite and >= 0")));
+        }
+        with_sim!(&mut self.inner, s => s.add_term(Box::new(PairwiseGravity::new(name, g, softening)))).map_err(|e| to_py(py, e))
+    }
+
+    fn add_plane(&mut self, py: Python<'_>, point: Vec<f64>, normal: Vec<f64>, restitution: f64, friction: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            let p = Plane { point: vec_of(&point, "point")?, normal: vec_of(&normal, "normal")?, restitution, friction };
+            s.add_plane(p)
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// Runs n steps in Rust with the GIL released.
+    fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
+        let inner = &mut self.inner;
+        py.detach(|| with_sim!(inner, s => s.step(n))).map_err(|e| to_py(py, e))
+    }
+
+    fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let inner = &self.inner;
+        let e = py.detach(|| with_sim!(inner, s => s.energy()));
+        energy_dict(py, e)
+    }
+
+    fn momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let p: Vec<Real> = with_sim!(&self.inner, s => { let p = s.momentum(); (0..p_dim(&p)).map(|k| p.comp(k)).collect() });
+        Array1::from_vec(p).into_pyarray(py)
+    }
+
+    fn angular_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        Array1::from_vec(with_sim!(&self.inner, s => s.angular_momentum()).to_vec()).into_pyarray(py)
+    }
+
+    fn suggest_dt(&self) -> f64 {
+        with_sim!(&self.inner, s => s.suggest_dt())
+    }
+
+    /// (per-term dissipated energy in term order, collisions), J.
+    fn ledger(&self) -> (Vec<f64>, f64) {
+        with_sim!(&self.inner, s => (s.sys.forces.dissipated.clone(), s.collision_dissipated))
+    }
+
+    /// Cached forces (N, dim) and term powers carried between steps, or None.
+    fn integrator_cache<'py>(&self, py: Python<'py>) -> Option<(Bound<'py, PyArray2<f64>>, Vec<f64>)> {
+        with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| (to_array2(py, &f), p)))
+    }
+
+    #[pyo3(signature = (t, step, dissipated, collisions, cache_forces=None, cache_power=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn restore(
+        &mut self,
+        py: Python<'_>,
+        t: f64,
+        step: u64,
+        dissipated: Vec<f64>,
+        collisions: f64,
+        cache_forces: Option<PyReadonlyArray2<'_, f64>>,
+        cache_power: Option<Vec<f64>>,
+    ) -> PyResult<()> {
+        let dim = self.dim();
+        let f = cache_forces.as_ref().map(|a| flat2(a, dim, "cache_forces")).transpose()?;
+        with_sim!(&mut self.inner, s => {
+            let cache = match (f, cache_power) {
+                (Some(f), Some(p)) => Some((from_flat(f), p)),
+                _ => None,
+            };
+            s.restore(t, step, &dissipated, collisions, cache)
+        })
+        .map_err(|e| to_py(py, e))
+    }
+}
+
+fn p_dim<V: Vector>(_: &V) -> usize {
+    V::DIM
+}
+
+/// Name, order, symplectic flag and force evaluations per step of every integrator.
+#[pyfunction]
+fn integrator_table<'py>(py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+    integrators::NAMES
+        .iter()
+        .map(|n| info_dict(py, integrators::by_name::<DVec2>(n).expect("listed").info()))
+        .collect()
+}
+
+/// Number of threads in rayon's global pool.
+#[pyfunction]
+fn default_threads() -> usize {
+    rayon::current_num_threads()
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Simulation2>()?;
+    m.add_function(wrap_pyfunction!(integrator_table, m)?)?;
+    m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}

@@ -1,0 +1,401 @@
+//! A simulation: state, model, force terms, integrator, colliders and the energy books.
+use crate::boundary::Plane;
+use crate::error::{invalid, Error, Result};
+use crate::integrators::{self, Integrator, IntegratorInfo, System};
+use crate::par;
+use crate::state::{Model, State};
+use crate::terms::{ForceSet, Term};
+use crate::vector::{Real, Vector};
+
+/// Energy books at one instant (J). `total()` = kinetic + Σ potential + Σ dissipated is conserved
+/// by the exact dynamics; its change is the integrator's error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EnergyReport {
+    pub kinetic: Real,
+    /// Potential energy of each conservative term, by term name.
+    pub potential: Vec<(String, Real)>,
+    /// Energy dissipated so far by each dissipative term and by the colliders ("collisions").
+    pub dissipated: Vec<(String, Real)>,
+}
+
+impl EnergyReport {
+    pub fn total(&self) -> Real {
+        self.kinetic + self.potential.iter().map(|p| p.1).sum::<Real>() + self.dissipated.iter().map(|p| p.1).sum::<Real>()
+    }
+}
+
+pub struct Simulation<V: Vector> {
+    pub sys: System<V>,
+    integrator: Box<dyn Integrator<V>>,
+    pub colliders: Vec<Plane<V>>,
+    /// Energy removed by the colliders so far, J.
+    pub collision_dissipated: Real,
+    /// Time step, s.
+    pub dt: Real,
+    pool: Option<rayon::ThreadPool>,
+}
+
+impl<V: Vector> Simulation<V> {
+    /// `threads`: `None` uses rayon's global pool (all cores, or `RAYON_NUM_THREADS`).
+    pub fn new(integrator: &str, dt: Real, threads: Option<usize>) -> Result<Self> {
+        check_dt(dt)?;
+        let pool = match threads {
+            None => None,
+            Some(0) => return Err(invalid("threads", "must be >= 1 (or None for all cores)")),
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| invalid("threads", format!("could not start {n} threads: {e}")))?,
+            ),
+        };
+        Ok(Self {
+            sys: System { state: State::default(), model: Model::default(), forces: ForceSet::default() },
+            integrator: integrators::by_name(integrator)?,
+            colliders: Vec::new(),
+            collision_dissipated: 0.0,
+            dt,
+            pool,
+        })
+    }
+
+    fn run<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        match &self.pool {
+            Some(p) => p.install(f),
+            None => f(),
+        }
+    }
+
+    pub fn n_particles(&self) -> usize {
+        self.sys.state.x.len()
+    }
+    pub fn integrator_info(&self) -> IntegratorInfo {
+        self.integrator.info()
+    }
+    pub fn set_integrator(&mut self, name: &str) -> Result<()> {
+        self.integrator = integrators::by_name(name)?;
+        Ok(())
+    }
+    pub fn set_dt(&mut self, dt: Real) -> Result<()> {
+        check_dt(dt)?;
+        self.dt = dt;
+        Ok(())
+    }
+    pub fn force_evaluations(&self) -> u64 {
+        self.sys.forces.evaluations
+    }
+
+    /// Appends particles; returns the index of the first. Pinned particles get zero velocity.
+    pub fn add_particles(&mut self, x: Vec<V>, mut v: Vec<V>, mass: Vec<Real>, pinned: Vec<bool>) -> Result<usize> {
+        let n = x.len();
+        if v.len() != n {
+            return Err(invalid("velocities", format!("has {} rows, positions has {n}", v.len())));
+        }
+        if mass.len() != n {
+            return Err(invalid("masses", format!("has {} entries, positions has {n}", mass.len())));
+        }
+        if pinned.len() != n {
+            return Err(invalid("pinned", format!("has {} entries, positions has {n}", pinned.len())));
+        }
+        if let Some(i) = x.iter().position(|p| !p.is_finite()) {
+            return Err(invalid("positions", format!("row {i} is not finite: {:?}", x[i])));
+        }
+        if let Some(i) = v.iter().position(|p| !p.is_finite()) {
+            return Err(invalid("velocities", format!("row {i} is not finite: {:?}", v[i])));
+        }
+        if let Some(i) = mass.iter().position(|m| !(m.is_finite() && *m > 0.0)) {
+            return Err(invalid("masses", format!("entry {i} is {} (must be finite and > 0)", mass[i])));
+        }
+        let first = self.n_particles();
+        for (k, &p) in pinned.iter().enumerate() {
+            if p {
+                v[k] = V::ZERO;
+            }
+        }
+        self.sys.model.inv_mass.extend(mass.iter().zip(&pinned).map(|(m, &p)| if p { 0.0 } else { 1.0 / m }));
+        self.sys.model.mass.extend(mass);
+        self.sys.state.x.extend(x);
+        self.sys.state.v.extend(v);
+        self.integrator.reset();
+        Ok(first)
+    }
+
+    pub fn add_term(&mut self, t: Box<dyn Term<V>>) -> Result<()> {
+        if self.sys.forces.terms.iter().any(|o| o.name() == t.name()) {
+            return Err(invalid("name", format!("the scene already has a term named {:?}", t.name())));
+        }
+        if t.min_particles() > self.n_particles() {
+            return Err(invalid("term", format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles())));
+        }
+        self.sys.forces.push(t);
+        self.integrator.reset();
+        Ok(())
+    }
+
+    pub fn add_plane(&mut self, p: Plane<V>) -> Result<()> {
+        if !p.point.is_finite() {
+            return Err(invalid("point", "must be finite"));
+        }
+        let l2 = p.normal.length_squared();
+        if !(l2.is_finite() && l2 > 0.0) {
+            return Err(invalid("normal", "must be finite and non-zero"));
+        }
+        if !(0.0..=1.0).contains(&p.restitution) {
+            return Err(invalid("restitution", format!("{} is outside [0, 1]", p.restitution)));
+        }
+        if !(p.friction.is_finite() && p.friction >= 0.0) {
+            return Err(invalid("friction", format!("{} must be finite and >= 0", p.friction)));
+        }
+        let normal = p.normal / l2.sqrt();
+        self.colliders.push(Plane { normal, ..p });
+        Ok(())
+    }
+
+    /// Replaces positions and/or velocities (same particle count), e.g. to restore a saved run.
+    pub fn set_state(&mut self, x: Option<Vec<V>>, v: Option<Vec<V>>) -> Result<()> {
+        let n = self.n_particles();
+        if let Some(x) = &x {
+            if x.len() != n {
+                return Err(invalid("positions", format!("has {} rows, the scene has {n} particles", x.len())));
+            }
+            if let Some(i) = x.iter().position(|p| !p.is_finite()) {
+                return Err(invalid("positions", format!("row {i} is not finite")));
+            }
+        }
+        if let Some(v) = &v {
+            if v.len() != n {
+                return Err(invalid("velocities", format!("has {} rows, the scene has {n} particles", v.len())));
+            }
+            if let Some(i) = v.iter().position(|p| !p.is_finite()) {
+                return Err(invalid("velocities", format!("row {i} is not finite")));
+            }
+        }
+        if let Some(x) = x {
+            self.sys.state.x = x;
+        }
+        if let Some(mut v) = v {
+            for (i, vi) in v.iter_mut().enumerate() {
+                if self.sys.model.is_pinned(i) {
+                    *vi = V::ZERO;
+                }
+            }
+            self.sys.state.v = v;
+        }
+        self.integrator.reset();
+        Ok(())
+    }
+
+    /// Restores time, step count, the dissipation books and the integrator cache of a saved run.
+    pub fn restore(&mut self, t: Real, step: u64, dissipated: &[Real], collisions: Real, cache: Option<(Vec<V>, Vec<Real>)>) -> Result<()> {
+        if dissipated.len() != self.sys.forces.terms.len() {
+            return Err(invalid("dissipated", "does not match the scene's terms"));
+        }
+        self.sys.state.t = t;
+        self.sys.state.step = step;
+        self.sys.forces.dissipated.copy_from_slice(dissipated);
+        self.collision_dissipated = collisions;
+        match cache {
+            Some((f, p)) if f.len() == self.n_particles() && p.len() == dissipated.len() => self.integrator.set_cache(f, p),
+            Some(_) => return Err(invalid("cache", "does not match the scene")),
+            None => self.integrator.reset(),
+        }
+        Ok(())
+    }
+
+    pub fn integrator_cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+        self.integrator.cache().map(|(f, p)| (f.to_vec(), p.to_vec()))
+    }
+
+    /// Runs `n` steps. On divergence (NaN/inf in a position or velocity) the state, books and
+    /// caches are rolled back to where this call started and `Error::Diverged` names the step.
+    pub fn step(&mut self, n: u64) -> Result<()> {
+        if n == 0 || self.n_particles() == 0 {
+            self.sys.state.t += 0.0;
+            if self.n_particles() == 0 {
+                self.sys.state.t += n as Real * self.dt;
+                self.sys.state.step += n;
+            }
+            return Ok(());
+        }
+        let saved = (
+            self.sys.state.clone(),
+            self.sys.forces.dissipated.clone(),
+            self.collision_dissipated,
+            self.integrator_cache(),
+        );
+        let pool = self.pool.take();
+        let result = match &pool {
+            Some(p) => p.install(|| self.step_inner(n)),
+            None => self.step_inner(n),
+        };
+        self.pool = pool;
+        if let Err(Error::Diverged { step, particle, quantity, t, .. }) = result {
+            let (state, diss, coll, cache) = saved;
+            let rolled_back_to = state.step;
+            self.sys.state = state;
+            self.sys.forces.dissipated = diss;
+            self.collision_dissipated = coll;
+            match cache {
+                Some((f, p)) => self.integrator.set_cache(f, p),
+                None => self.integrator.reset(),
+            }
+            let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
+            return Err(Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt });
+        }
+        result
+    }
+
+    fn step_inner(&mut self, n: u64) -> Result<()> {
+        let dt = self.dt;
+        for _ in 0..n {
+            self.integrator.step(&mut self.sys, dt);
+            self.sys.state.t += dt;
+            self.sys.state.step += 1;
+            if !self.colliders.is_empty() {
+                let mut touched = false;
+                let f = self.integrator.last_forces();
+                for c in &self.colliders {
+                    let (d, t) = c.apply(&mut self.sys.state.x, &mut self.sys.state.v, &self.sys.model, f);
+                    self.collision_dissipated += d;
+                    touched |= t;
+                }
+                if touched {
+                    self.integrator.reset();
+                }
+            }
+            if let Some((particle, quantity)) = self.first_non_finite() {
+                return Err(Error::Diverged {
+                    step: self.sys.state.step,
+                    t: self.sys.state.t,
+                    particle,
+                    quantity,
+                    rolled_back_to: 0,
+                    dt,
+                    suggested_dt: 0.0,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Cheap check every step: x·0 is NaN exactly when x is NaN or infinite.
+    fn first_non_finite(&self) -> Option<(usize, &'static str)> {
+        let (x, v) = (&self.sys.state.x, &self.sys.state.v);
+        let probe = par::sum(x.len(), 0.0, |r| {
+            let mut acc = 0.0;
+            for i in r {
+                for k in 0..V::DIM {
+                    acc += x[i].comp(k) * 0.0 + v[i].comp(k) * 0.0;
+                }
+            }
+            acc
+        });
+        if probe == 0.0 {
+            return None;
+        }
+        (0..x.len()).find_map(|i| {
+            if !x[i].is_finite() {
+                Some((i, "position"))
+            } else if !v[i].is_finite() {
+                Some((i, "velocity"))
+            } else {
+                None
+            }
+        })
+    }
+
+    /// A step size (s) safely inside the stability region of the stiffest term: half of its
+    /// fastest time scale (springs: 1/ω_max by a Gershgorin bound; gravity: closest free-fall
+    /// time; drag: m/b). Falls back to the current dt if no term has a time scale.
+    pub fn suggest_dt(&self) -> Real {
+        let ts = self
+            .sys
+            .forces
+            .terms
+            .iter()
+            .filter_map(|t| t.time_scale(&self.sys.state.x, &self.sys.model))
+            .fold(f64::INFINITY, f64::min);
+        if ts.is_finite() {
+            0.5 * ts
+        } else {
+            self.dt
+        }
+    }
+
+    pub fn energy(&self) -> EnergyReport {
+        self.run(|| {
+            let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
+            let kinetic = 0.5
+                * par::sum(x.len(), 0.0, |r| {
+                    let mut k = 0.0;
+                    for i in r {
+                        if m.inv_mass[i] != 0.0 {
+                            k += m.mass[i] * v[i].length_squared();
+                        }
+                    }
+                    k
+                });
+            let potential = self
+                .sys
+                .forces
+                .terms
+                .iter()
+                .filter_map(|t| t.potential(x, m).map(|u| (t.name().to_string(), u)))
+                .collect();
+            let mut dissipated: Vec<(String, Real)> = self
+                .sys
+                .forces
+                .terms
+                .iter()
+                .zip(&self.sys.forces.dissipated)
+                .filter(|(t, _)| t.dissipative())
+                .map(|(t, d)| (t.name().to_string(), *d))
+                .collect();
+            if !self.colliders.is_empty() {
+                dissipated.push(("collisions".to_string(), self.collision_dissipated));
+            }
+            EnergyReport { kinetic, potential, dissipated }
+        })
+    }
+
+    /// Σ m v over free particles, kg·m/s.
+    pub fn momentum(&self) -> V {
+        let (v, m) = (&self.sys.state.v, &self.sys.model);
+        self.run(|| {
+            par::sum(v.len(), V::ZERO, |r| {
+                let mut p = V::ZERO;
+                for i in r {
+                    if m.inv_mass[i] != 0.0 {
+                        p += v[i] * m.mass[i];
+                    }
+                }
+                p
+            })
+        })
+    }
+
+    /// Σ m x × v about the origin over free particles, kg·m²/s (2D: only z is non-zero).
+    pub fn angular_momentum(&self) -> [Real; 3] {
+        let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
+        let l = self.run(|| {
+            par::sum(x.len(), glam::DVec3::ZERO, |r| {
+                let mut l = glam::DVec3::ZERO;
+                for i in r {
+                    if m.inv_mass[i] != 0.0 {
+                        let c = x[i].cross3(v[i]);
+                        l += glam::DVec3::from_array(c) * m.mass[i];
+                    }
+                }
+                l
+            })
+        });
+        l.to_array()
+    }
+}
+
+fn check_dt(dt: Real) -> Result<()> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(invalid("dt", format!("{dt} must be finite and > 0 (seconds)")));
+    }
+    Ok(())
+}

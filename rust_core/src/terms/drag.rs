@@ -1,0 +1,50 @@
+//! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|².
+use super::Term;
+use crate::par;
+use crate::state::Model;
+use crate::vector::{Real, Vector};
+
+pub struct Drag {
+    pub name: String,
+    /// Drag coefficient b, kg/s (N·s/m), ≥ 0.
+    pub b: Real,
+}
+
+impl<V: Vector> Term<V> for Drag {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn add_forces(&mut self, _x: &[V], v: &[V], model: &Model, f: &mut [V], want: bool) -> Real {
+        let b = self.b;
+        let body = |s: usize, f: &mut [V]| {
+            let mut p = 0.0;
+            for (k, fi) in f.iter_mut().enumerate() {
+                let i = s + k;
+                if model.inv_mass[i] != 0.0 {
+                    *fi -= v[i] * b;
+                    p += b * v[i].length_squared();
+                }
+            }
+            p
+        };
+        if want {
+            par::chunks1_sum(f, body)
+        } else {
+            par::chunks1(f, |s, f| {
+                body(s, f);
+            });
+            0.0
+        }
+    }
+    fn potential(&self, _x: &[V], _m: &Model) -> Option<Real> {
+        None
+    }
+    fn dissipative(&self) -> bool {
+        self.b > 0.0
+    }
+    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
+        // Velocity relaxation time m/b of the lightest free particle.
+        let m = model.mass.iter().zip(&model.inv_mass).filter(|(_, &im)| im != 0.0).map(|(m, _)| *m).fold(f64::INFINITY, f64::min);
+        (self.b > 0.0 && m.is_finite()).then(|| m / self.b)
+    }
+}

@@ -1,0 +1,45 @@
+//! Uniform gravity: F_i = m_i g on every free particle; U = −Σ m_i g·x_i.
+use super::Term;
+use crate::par;
+use crate::state::Model;
+use crate::vector::{Real, Vector};
+
+pub struct UniformGravity<V: Vector> {
+    pub name: String,
+    /// Gravitational acceleration, m/s².
+    pub g: V,
+}
+
+impl<V: Vector> Term<V> for UniformGravity<V> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool) -> Real {
+        let g = self.g;
+        par::chunks1(f, |s, f| {
+            for (k, fi) in f.iter_mut().enumerate() {
+                let i = s + k;
+                // Pinned particles feel no force that matters; skip so their books stay zero.
+                if model.inv_mass[i] != 0.0 {
+                    *fi += g * model.mass[i];
+                }
+            }
+        });
+        0.0
+    }
+    fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
+        let g = self.g;
+        Some(par::sum(x.len(), 0.0, |r| {
+            let mut u = 0.0;
+            for i in r {
+                if model.inv_mass[i] != 0.0 {
+                    u -= model.mass[i] * g.dot(x[i]);
+                }
+            }
+            u
+        }))
+    }
+    fn dissipative(&self) -> bool {
+        false
+    }
+}

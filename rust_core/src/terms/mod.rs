@@ -1,0 +1,92 @@
+//! Force terms. A scene holds only the terms it names; each is evaluated only if present.
+pub mod drag;
+pub mod gravity;
+pub mod pairwise_gravity;
+pub mod springs;
+
+use crate::par;
+use crate::state::Model;
+use crate::vector::{Real, Vector};
+
+pub use drag::Drag;
+pub use gravity::UniformGravity;
+pub use pairwise_gravity::PairwiseGravity;
+pub use springs::Springs;
+
+/// One force term.
+pub trait Term<V: Vector>: Send + Sync {
+    /// Stable name used as the key of the energy books (unique within a scene).
+    fn name(&self) -> &str;
+    /// Adds this term's forces (N) to `f`. If `want_power`, returns the power it dissipates
+    /// at this state (W, ≥ 0); otherwise the return value is unspecified (0).
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool) -> Real;
+    /// Potential energy (J) if the term is conservative (or has a conservative part).
+    fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
+    /// Whether the term can dissipate energy (drag, dashpots).
+    fn dissipative(&self) -> bool;
+    /// Largest particle index the term refers to, plus one (0 if none).
+    fn min_particles(&self) -> usize {
+        0
+    }
+    /// The fastest time scale the term introduces (s), used to suggest a dt on divergence.
+    fn time_scale(&self, _x: &[V], _model: &Model) -> Option<Real> {
+        None
+    }
+}
+
+/// The terms of a scene plus their dissipation ledger.
+pub struct ForceSet<V: Vector> {
+    pub terms: Vec<Box<dyn Term<V>>>,
+    /// Energy dissipated by each term so far (J), same order as `terms`.
+    pub dissipated: Vec<Real>,
+    power: Vec<Real>,
+    /// Whether any term dissipates (else power is never asked for).
+    any_dissipative: bool,
+    /// Force evaluations so far (for the work-precision books).
+    pub evaluations: u64,
+}
+
+impl<V: Vector> Default for ForceSet<V> {
+    fn default() -> Self {
+        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0 }
+    }
+}
+
+impl<V: Vector> ForceSet<V> {
+    pub fn push(&mut self, t: Box<dyn Term<V>>) {
+        self.any_dissipative |= t.dissipative();
+        self.terms.push(t);
+        self.dissipated.push(0.0);
+        self.power.push(0.0);
+    }
+
+    /// Total force (N) at `(x, v)` into `f`. Remembers each term's dissipated power at this
+    /// state for a following `book_power` call.
+    pub fn eval(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
+        self.evaluations += 1;
+        par::chunks1(f, |_, f| f.fill(V::ZERO));
+        let want = self.any_dissipative;
+        for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
+            *p = t.add_forces(x, v, model, f, want && t.dissipative());
+        }
+    }
+
+    /// Books `weight` × (power at the last `eval`) into the dissipation ledger. Integrators call
+    /// this with their quadrature weight (e.g. dt/6 for RK4's first stage).
+    #[inline]
+    pub fn book_power(&mut self, weight: Real) {
+        if self.any_dissipative {
+            for (d, p) in self.dissipated.iter_mut().zip(&self.power) {
+                *d += weight * p;
+            }
+        }
+    }
+
+    /// Power at the last `eval`, per term (W).
+    pub fn last_power(&self) -> &[Real] {
+        &self.power
+    }
+    pub fn set_last_power(&mut self, p: &[Real]) {
+        self.power.copy_from_slice(p);
+    }
+}

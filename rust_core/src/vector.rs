@@ -1,0 +1,108 @@
+//! The one precision alias and the small `Vector` trait that lets every kernel be written once
+//! for 2D (`DVec2`) and 3D (`DVec3`). glam's unpadded f64 vectors are used (not `Vec3A`) so a
+//! buffer maps onto an `(N, dim)` float64 array.
+use glam::{DVec2, DVec3};
+use std::fmt::Debug;
+use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};
+
+/// Scalar type of the whole core.
+pub type Real = f64;
+
+pub trait Vector:
+    Copy
+    + Send
+    + Sync
+    + Default
+    + PartialEq
+    + Debug
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Real, Output = Self>
+    + Div<Real, Output = Self>
+    + Neg<Output = Self>
+    + AddAssign
+    + SubAssign
+    + 'static
+{
+    const DIM: usize;
+    const ZERO: Self;
+    fn dot(self, other: Self) -> Real;
+    #[inline(always)]
+    fn length_squared(self) -> Real {
+        self.dot(self)
+    }
+    fn is_finite(self) -> bool;
+    /// Component `k` (0 = x, 1 = y, 2 = z); `k < DIM`.
+    fn comp(self, k: usize) -> Real;
+    /// Build from the first `DIM` entries of `s`.
+    fn from_slice(s: &[Real]) -> Self;
+    /// `self × other` as a 3-vector (in 2D only the z component is non-zero).
+    fn cross3(self, other: Self) -> [Real; 3];
+}
+
+impl Vector for DVec2 {
+    const DIM: usize = 2;
+    const ZERO: Self = DVec2::ZERO;
+    #[inline(always)]
+    fn dot(self, o: Self) -> Real {
+        self.x * o.x + self.y * o.y
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        self.x.is_finite() && self.y.is_finite()
+    }
+    #[inline(always)]
+    fn comp(self, k: usize) -> Real {
+        self[k]
+    }
+    #[inline(always)]
+    fn from_slice(s: &[Real]) -> Self {
+        DVec2::new(s[0], s[1])
+    }
+    #[inline(always)]
+    fn cross3(self, o: Self) -> [Real; 3] {
+        [0.0, 0.0, self.x * o.y - self.y * o.x]
+    }
+}
+
+impl Vector for DVec3 {
+    const DIM: usize = 3;
+    const ZERO: Self = DVec3::ZERO;
+    #[inline(always)]
+    fn dot(self, o: Self) -> Real {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.z.is_finite()
+    }
+    #[inline(always)]
+    fn comp(self, k: usize) -> Real {
+        self[k]
+    }
+    #[inline(always)]
+    fn from_slice(s: &[Real]) -> Self {
+        DVec3::new(s[0], s[1], s[2])
+    }
+    #[inline(always)]
+    fn cross3(self, o: Self) -> [Real; 3] {
+        let c = self.cross(o);
+        [c.x, c.y, c.z]
+    }
+}
+
+/// Flat `[x0, y0, (z0,) x1, ...]` → vectors. `flat.len()` must be a multiple of `V::DIM`.
+pub fn from_flat<V: Vector>(flat: &[Real]) -> Vec<V> {
+    flat.chunks_exact(V::DIM).map(V::from_slice).collect()
+}
+
+/// Vectors → flat row-major `(N, DIM)` buffer.
+pub fn to_flat<V: Vector>(v: &[V]) -> Vec<Real> {
+    let mut out = Vec::with_capacity(v.len() * V::DIM);
+    for p in v {
+        for k in 0..V::DIM {
+            out.push(p.comp(k));
+        }
+    }
+    out
+}
