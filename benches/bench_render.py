@@ -1,9 +1,10 @@
 """Rasterisation speed of physcore.render: milliseconds per frame for 1e5 particles.
 
 Run: python benches/bench_render.py [N]
-Times the per-frame work of `physcore.render.gif` (projection, springs, discs into the uint8
-index buffer) on a random 2D cloud and a 3D cloud, and the public `render_frame` (which also fits
-the camera and expands to RGB).
+Times, on a jittered square grid of N particles with springs to grid neighbours (a cloth), in 2D
+and 3D: the per-frame work inside `physcore.render.gif` (projection, spring lines and discs into
+the uint8 index buffer, camera already fitted) and the public `render_frame` (which also fits the
+camera and expands the result to RGB).
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import numpy as np
 from physcore import render
 
 
-def _time(fn, repeat: int = 20) -> float:
+def _best_ms(fn, repeat: int) -> float:
     fn()  # warm up
     best = float("inf")
     for _ in range(repeat):
@@ -25,32 +26,46 @@ def _time(fn, repeat: int = 20) -> float:
     return best * 1e3
 
 
-def main(n: int = 100_000) -> None:
+def _cloth(n: int, dim: int, rng: np.random.Generator):
+    side = max(2, int(round(n ** 0.5)))
+    g = np.arange(side, dtype=np.float64)
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g))
+    x = np.stack([gx, gy] + ([0.1 * np.sin(gx / 7)] if dim == 3 else []), axis=1)
+    x += rng.normal(scale=0.05, size=x.shape)
+    v = rng.normal(size=x.shape)
+    idx = np.arange(side * side).reshape(side, side)
+    i = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
+    j = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    return x, v, (i, j, np.ones(i.size))
+
+
+def main(n: int = 100_000, size=(480, 360)) -> None:
     rng = np.random.default_rng(0)
     for dim in (2, 3):
-        x = rng.normal(size=(n, dim))
-        v = rng.normal(size=(n, dim))
-        # A chain of springs through all particles, so lines are drawn too.
-        i = np.arange(n - 1)
-        springs = (i, i + 1, np.full(n - 1, 0.05))
-        rec = render._Recording(
-            positions=x.astype(np.float32)[None],
-            origin=np.zeros(dim),
-            speeds=np.linalg.norm(v, axis=1).astype(np.float32)[None],
-            pairs=None,
-            strain=None,
-            pinned=np.zeros(n, dtype=bool),
-            planes=[],
-        )
-        ras = render._Rasteriser(rec, (480, 360), "speed", None, render.DEFAULT_VIEW)
-        t_frame = _time(lambda: ras.frame(0))
-        t_public = _time(lambda: render.render_frame(x, velocities=v), repeat=5)
-        t_springs = _time(lambda: render.render_frame(x, velocities=v, springs=springs), repeat=5)
-        print(
-            f"{dim}D, {n} particles, 480x360, radius {ras.radius}: "
-            f"gif frame {t_frame:.1f} ms, render_frame {t_public:.1f} ms, "
-            f"render_frame + {n - 1} springs {t_springs:.1f} ms"
-        )
+        x, v, springs = _cloth(n, dim, rng)
+        i, j, rest = springs
+        for with_springs in (False, True):
+            for radius in (None, 2):
+                rec = render._Recording(
+                    positions=x.astype(np.float32)[None],
+                    origin=np.zeros(dim),
+                    speeds=render._row_norms(v).astype(np.float32)[None],
+                    pairs=(i, j) if with_springs else None,
+                    strain=render._strain(x, i, j, rest).astype(np.float32)[None] if with_springs else None,
+                    pinned=np.zeros(len(x), dtype=bool),
+                    planes=[],
+                )
+                ras = render._Rasteriser(rec, size, "speed", radius, render.DEFAULT_VIEW)
+                t_frame = _best_ms(lambda: ras.frame(0), 20)
+                sp = springs if with_springs else False
+                t_public = _best_ms(
+                    lambda: render.render_frame(x, velocities=v, springs=sp, size=size, radius=radius), 5
+                )
+                what = f"{len(x)} particles" + (f" + {i.size} springs" if with_springs else "")
+                print(
+                    f"{dim}D {what}, {size[0]}x{size[1]}, radius {ras.radius}: "
+                    f"gif frame {t_frame:.1f} ms, render_frame {t_public:.1f} ms"
+                )
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import os
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, NamedTuple, Optional, Tuple
+from typing import Any, NamedTuple, Optional, Tuple, Union
 
 import numpy as np
 
@@ -180,13 +180,31 @@ class _Recording(NamedTuple):
     planes: list  # [(point (dim,), normal (dim,))] float64, normal unit length
 
 
+# Row-wise helpers written column by column: numpy reductions along a short last axis (N, 2)
+# are several times slower than whole-column operations.
+def _rows_finite(x: np.ndarray) -> np.ndarray:
+    """(N, d) -> (N,) bool, True where the whole row is finite."""
+    ok = np.isfinite(x[:, 0])
+    for c in range(1, x.shape[1]):
+        ok &= np.isfinite(x[:, c])
+    return ok
+
+
+def _row_norms(v: np.ndarray) -> np.ndarray:
+    """(N, d) -> (N,) Euclidean norms."""
+    return np.sqrt(np.einsum("ij,ij->i", v, v))
+
+
 def _finite_mean(x: np.ndarray) -> np.ndarray:
-    ok = np.isfinite(x).all(axis=1)
-    return x[ok].mean(axis=0) if ok.any() else np.zeros(x.shape[1])
+    """(N, d) -> (d,) mean of the finite rows; zeros if there are none."""
+    if np.isfinite(x).all():
+        return np.array([x[:, c].mean() for c in range(x.shape[1])]) if len(x) else np.zeros(x.shape[1])
+    ok = _rows_finite(x)
+    return np.array([x[ok, c].mean() for c in range(x.shape[1])]) if ok.any() else np.zeros(x.shape[1])
 
 
 def _strain(x: np.ndarray, i: np.ndarray, j: np.ndarray, rest: np.ndarray) -> np.ndarray:
-    length = np.sqrt(((x[j] - x[i]) ** 2).sum(axis=1))
+    length = _row_norms(x[j] - x[i])
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(rest > 0, (length - rest) / rest, np.nan)
 
@@ -227,7 +245,7 @@ def _simulate(
     strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from tqdm import tqdm  # plain text bar: works in terminals and notebooks alike
 
         bar = tqdm(total=frames, desc="simulating", unit="frame", file=sys.stderr)
     try:
@@ -238,7 +256,7 @@ def _simulate(
             pos[k] = x - origin
             if speeds is not None:
                 v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
-                speeds[k] = np.sqrt((v * v).sum(axis=1))
+                speeds[k] = _row_norms(v)
             if strain is not None:
                 strain[k] = _strain(x, *sp)
             if bar is not None:
@@ -282,17 +300,21 @@ class _Camera:
             return s[:, :2], s[:, 2]
         return s, None
 
-    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int) -> None:
-        """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side."""
+    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0) -> None:
+        """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side.
+
+        A box no wider than `tol` (world units) counts as a point and gets a unit box around it.
+        """
         if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or np.any(hi < lo):
             lo, hi = np.full(2, -0.5), np.full(2, 0.5)
         ext = hi - lo
-        if ext.max() <= 0.0:
-            # A single point (one particle, or all at one place): show a unit box around it.
-            ext = np.ones(2)
         avail = np.array([max(self.width - 2 * pad, 1), max(self.height - 2 * pad, 1)], dtype=float)
-        with np.errstate(divide="ignore"):
-            self.scale = float(np.min(np.where(ext > 0, avail / ext, np.inf)))
+        if ext.max() <= tol:
+            # A single point (one particle, all at one place, or all on one line of sight).
+            self.scale = float(avail.min())
+        else:
+            # A flat box (particles on a line) is fitted along its long side only.
+            self.scale = float(min(a / e for a, e in zip(avail, ext) if e > tol))
         self.centre = 0.5 * (lo + hi)
 
     def pixels(self, s: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
@@ -302,18 +324,23 @@ class _Camera:
         return col, row
 
 
-def _screen_bounds(cam: _Camera, positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+def _screen_bounds(cam: _Camera, positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:
+    """Screen-plane bounding box (lo, hi) of all finite (F, N, dim) positions, and max |x|."""
+    lo, hi, amax = np.full(2, np.inf), np.full(2, -np.inf), 0.0
     for x in positions:  # per frame: the (F, N, 2) projection of a big run need not fit in memory
+        if not np.isfinite(x).all():
+            x = x[_rows_finite(x)]
+        if x.size == 0:
+            continue
         s, _ = cam.project(x)
-        s = s[np.isfinite(s).all(axis=1)]
-        if s.size:
-            lo = np.minimum(lo, s.min(axis=0))
-            hi = np.maximum(hi, s.max(axis=0))
-    return lo, hi
+        lo = np.minimum(lo, [s[:, 0].min(), s[:, 1].min()])
+        hi = np.maximum(hi, [s[:, 0].max(), s[:, 1].max()])
+        amax = max(amax, float(np.abs(x).max()))
+    return lo, hi, amax
 
 
 def _auto_radius(n: int, size: Tuple[int, int]) -> int:
+    """Disc radius in pixels from the particle count alone (an upper bound for the final one)."""
     # About a third of the mean spacing were the particles spread over the image; capped so a few
     # bodies (Kepler) are dots rather than blobs.
     w, h = size
@@ -321,10 +348,25 @@ def _auto_radius(n: int, size: Tuple[int, int]) -> int:
     return max(0, min(r, max(1, min(w, h) // 40)))
 
 
+def _spring_radius(rec: "_Recording", scale: float) -> Optional[int]:
+    """Disc radius in pixels from the median spring length at frame 0, or None without springs.
+
+    Keeps discs to about a third of the neighbour spacing so that the springs stay visible.
+    """
+    if rec.pairs is None or rec.pairs[0].size == 0:
+        return None
+    i, j = rec.pairs
+    x = rec.positions[0]
+    length = float(np.median(_row_norms(x[j] - x[i])))
+    if not (length > 0 and math.isfinite(length)):
+        return None
+    return int(0.3 * length * scale)
+
+
 # ---------------------------------------------------------------------------------------------
 # Rasterisation (numpy only; no per-particle Python loops)
 # ---------------------------------------------------------------------------------------------
-def _disc_stencil(radius: int, width: int) -> Tuple[np.ndarray, np.ndarray]:
+def _disc_stencil(radius: int) -> Tuple[np.ndarray, np.ndarray]:
     """Row and column offsets (S,) intp of a filled disc of `radius` pixels."""
     d = np.arange(-radius, radius + 1)
     dy, dx = np.meshgrid(d, d, indexing="ij")
@@ -352,44 +394,69 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
 
 
 def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
-    """Draw segments (M,) pixel endpoints into buf by sampling about one point per pixel."""
+    """Draw segments between (M,) float pixel endpoints, sampling about one point per pixel.
+
+    colors is (M,) uint8. Samples falling outside buf are dropped.
+    """
     h, w = buf.shape
     ok = np.isfinite(c0) & np.isfinite(r0) & np.isfinite(c1) & np.isfinite(r1)
+    # Segments wholly outside the image cost nothing.
+    ok &= (np.maximum(c0, c1) >= 0) & (np.minimum(c0, c1) < w)
+    ok &= (np.maximum(r0, r1) >= 0) & (np.minimum(r0, r1) < h)
     if not ok.all():
         c0, r0, c1, r1, colors = c0[ok], r0[ok], c1[ok], r1[ok], colors[ok]
     if c0.size == 0:
         return
-    dc, dr = c1 - c0, r1 - r0
-    # Samples per segment: one per pixel along the longer axis; the cap only bites on segments far
-    # outside the image, which cannot happen with a fitted camera but keeps memory bounded.
-    n = np.minimum(np.ceil(np.maximum(np.abs(dc), np.abs(dr))), 4 * (w + h)).astype(np.intp) + 1
-    seg = np.repeat(np.arange(n.size), n)
-    start = np.cumsum(n) - n
-    t = (np.arange(seg.size) - start[seg]) / np.maximum(n - 1, 1)[seg]
-    cc = np.floor(c0[seg] + t * dc[seg]).astype(np.intp)
-    rr = np.floor(r0[seg] + t * dr[seg]).astype(np.intp)
+    c0, r0 = c0.astype(np.float32), r0.astype(np.float32)
+    dc, dr = c1.astype(np.float32) - c0, r1.astype(np.float32) - r0
+    # One sample per pixel along the longer axis, capped (a segment crossing the image from far
+    # outside would otherwise cost memory for nothing).
+    n = np.minimum(np.ceil(np.maximum(np.abs(dc), np.abs(dr))), 2 * (w + h)).astype(np.int64) + 1
+    first = np.cumsum(n) - n
+    # Sample k of segment m sits at t = k / (n_m - 1); np.repeat spreads per-segment values.
+    k = np.arange(int(first[-1] + n[-1]), dtype=np.int64) - np.repeat(first, n)
+    t = k.astype(np.float32) * np.repeat((1.0 / np.maximum(n - 1, 1)).astype(np.float32), n)
+    cc = np.floor(np.repeat(c0, n) + t * np.repeat(dc, n)).astype(np.int64)
+    rr = np.floor(np.repeat(r0, n) + t * np.repeat(dr, n)).astype(np.int64)
+    vals = np.repeat(colors, n)
     inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
-    buf.reshape(-1)[(rr * w + cc)[inside]] = colors[seg[inside]]
+    if not inside.all():
+        cc, rr, vals = cc[inside], rr[inside], vals[inside]
+    buf.reshape(-1)[rr * w + cc] = vals
 
 
 def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
-    """Draw discs at (N,) pixel centres; later particles overwrite earlier ones."""
+    """Draw filled discs at (N,) float pixel centres with (N,) uint8 colours.
+
+    Particles later in the arrays overwrite earlier ones (1-D fancy assignment writes in index
+    order), which gives the painter's order.
+    """
     h, w = buf.shape
     dy, dx = stencil
-    reach = int(np.abs(dx).max()) + 1
-    ok = (col > -reach) & (col < w + reach) & (row > -reach) & (row < h + reach)  # also drops NaN
-    ci = np.floor(col[ok]).astype(np.intp)
-    ri = np.floor(row[ok]).astype(np.intp)
-    colors = colors[ok]
-    if dy.size == 1:
-        inside = (ci >= 0) & (ci < w) & (ri >= 0) & (ri < h)
-        buf.reshape(-1)[(ri * w + ci)[inside]] = colors[inside]
-        return
-    rr = ri[:, None] + dy[None, :]
-    cc = ci[:, None] + dx[None, :]
-    inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
-    # 1-D fancy assignment writes in index order, so the particle drawn last wins a pixel.
-    buf.reshape(-1)[(rr * w + cc)[inside]] = np.broadcast_to(colors[:, None], rr.shape)[inside]
+    r = int(np.abs(dx).max())
+    ok = (col > -r - 1) & (col < w + r) & (row > -r - 1) & (row < h + r)  # also drops NaN
+    if not ok.all():
+        col, row, colors = col[ok], row[ok], colors[ok]
+    ci = np.floor(col).astype(np.int64)
+    ri = np.floor(row).astype(np.int64)
+    flat = buf.reshape(-1)
+    # Discs wholly inside need no per-pixel bounds test. A fitted camera keeps every particle at
+    # least r + 2 pixels from the edges, so the clipped path below is the rare one and drawing it
+    # second cannot upset the painter's order in practice.
+    inner = (ci >= r) & (ci < w - r) & (ri >= r) & (ri < h - r)
+    all_inner = bool(inner.all())
+    centre = ri * w + ci if all_inner else ri[inner] * w + ci[inner]
+    offsets = dy.astype(np.int64) * w + dx
+    if offsets.size == 1:
+        flat[centre] = colors if all_inner else colors[inner]
+    else:
+        flat[(centre[:, None] + offsets).reshape(-1)] = np.repeat(colors if all_inner else colors[inner], offsets.size)
+    if not all_inner:
+        edge = ~inner
+        rr = ri[edge][:, None] + dy
+        cc = ci[edge][:, None] + dx
+        inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
+        flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
 
 
 def _speed_levels(speed: np.ndarray, vmax: float) -> np.ndarray:
@@ -424,10 +491,18 @@ class _Rasteriser:
         self.radius = _auto_radius(n, size) if radius is None else radius
         self.cam = _Camera(dim, view, size)
         pad = max(self.radius + 2, int(round(0.05 * min(size))))
-        self.cam.fit(*_screen_bounds(self.cam, rec.positions), pad)
-        self.stencil = _disc_stencil(self.radius, size[0])
+        lo, hi, amax = _screen_bounds(self.cam, rec.positions)
+        # Positions are float32 relative to the origin: extents below their rounding are zero.
+        self.cam.fit(lo, hi, pad, tol=1e-6 * amax)
+        if radius is None:
+            r_springs = _spring_radius(rec, self.cam.scale)
+            if r_springs is not None:
+                self.radius = min(self.radius, r_springs)
+        self.stencil = _disc_stencil(self.radius)
         self.background = _background(self.cam, rec.planes, rec.origin)
         self.color_by = color_by
+        # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
+        self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
         self.vmax = 0.0
         if color_by == "speed" and rec.speeds is not None and rec.speeds.size:
             if speed_scale is None:
@@ -454,10 +529,8 @@ class _Rasteriser:
         colors[rec.pinned] = _PINNED
         if depth is not None:
             order = np.argsort(depth, kind="stable")  # painter's algorithm: far ones first
-        elif rec.pinned.any():
-            order = np.argsort(rec.pinned, kind="stable")  # pinned ones on top
         else:
-            order = None
+            order = self.pin_order
         if order is not None:
             col, row, colors = col[order], row[order], colors[order]
         _draw_discs(buf, col, row, colors, self.stencil)
@@ -469,7 +542,7 @@ class _Rasteriser:
 # ---------------------------------------------------------------------------------------------
 def gif(
     scene: Any,
-    path: "str | os.PathLike[str]",
+    path: Union[str, os.PathLike],
     *,
     frames: int = 90,
     steps_per_frame: int = 10,
@@ -685,7 +758,7 @@ def render_frame(
         v = np.asarray(velocities, dtype=np.float64)
         if v.shape != x.shape:
             raise ValueError(f"velocities must have shape {x.shape}, got {v.shape}")
-        speeds = np.sqrt((v * v).sum(axis=1)).astype(np.float32)[None]
+        speeds = _row_norms(v).astype(np.float32)[None]
     if speed_scale is not None:
         speed_scale = float(speed_scale)
         if not (speed_scale > 0 and math.isfinite(speed_scale)):

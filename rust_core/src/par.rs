@@ -124,3 +124,12 @@ pub fn find_first(n: usize, bad: impl Fn(usize) -> bool + Sync + Send) -> Option
         (0..n).find(|&i| bad(i))
     }
 }
+
+/// Whether `f(range)` holds for any fixed chunk of `0..n`.
+pub fn any(n: usize, f: impl Fn(Range<usize>) -> bool + Sync + Send) -> bool {
+    if n >= PAR_MIN {
+        ranges(n).collect::<Vec<_>>().into_par_iter().any(&f)
+    } else {
+        ranges(n).any(&f)
+    }
+}

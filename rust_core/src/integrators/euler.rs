@@ -1,6 +1,6 @@
 //! Explicit (forward) Euler: x' = x + dt v, v' = v + dt a(x, v). First order, not symplectic;
 //! energy grows for every dt on an oscillator. Included for contrast.
-use super::{ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -23,7 +23,7 @@ impl<V: Vector> Integrator<V> for ExplicitEuler<V> {
             for k in 0..x.len() {
                 let i = s + k;
                 x[k] += v[k] * dt;
-                v[k] += f[i] * (im[i] * dt);
+                v[k] += accel(f[i], im[i]) * dt;
             }
         });
     }

@@ -71,3 +71,13 @@ pub(crate) fn ensure_len<V: Vector>(buf: &mut Vec<V>, n: usize) {
         buf.resize(n, V::ZERO);
     }
 }
+
+/// Acceleration f/m, exactly zero for pinned particles (inverse mass 0) even when f is not finite.
+#[inline(always)]
+pub(crate) fn accel<V: Vector>(f: V, inv_mass: Real) -> V {
+    if inv_mass == 0.0 {
+        V::ZERO
+    } else {
+        f * inv_mass
+    }
+}

@@ -1,6 +1,6 @@
 //! Classic fourth-order Runge–Kutta on (x, v) (Kutta 1901; Hairer, Nørsett & Wanner, Solving
 //! ODEs I, Table 1.2). Fourth order, not symplectic, four force evaluations per step.
-use super::{ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -32,7 +32,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
         par::chunks4(&mut self.xs, &mut self.vs, &mut self.ax, &mut self.av, |s, xs, vs, ax, av| {
             for k in 0..xs.len() {
                 let i = s + k;
-                let a = f[i] * im[i];
+                let a = accel(f[i], im[i]);
                 ax[k] = v0[i];
                 av[k] = a;
                 xs[k] = x0[i] + v0[i] * (0.5 * dt);
@@ -47,7 +47,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
             par::chunks4(&mut self.xs, &mut self.vs, &mut self.ax, &mut self.av, |s, xs, vs, ax, av| {
                 for k in 0..xs.len() {
                     let i = s + k;
-                    let a = f[i] * im[i];
+                    let a = accel(f[i], im[i]);
                     ax[k] += vs[k] * 2.0;
                     av[k] += a * 2.0;
                     xs[k] = x0[i] + vs[k] * stage_dt;
@@ -64,7 +64,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
             for k in 0..x.len() {
                 let i = s + k;
                 x[k] += (ax[i] + vs[i]) * w;
-                v[k] += (av[i] + f[i] * im[i]) * w;
+                v[k] += (av[i] + accel(f[i], im[i])) * w;
             }
         });
     }

@@ -1,6 +1,6 @@
 //! Semi-implicit (symplectic) Euler, kick then drift: v' = v + dt a(x, v); x' = x + dt v'.
 //! First order, symplectic: bounded energy error on conservative systems for ω·dt < 2.
-use super::{ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -22,7 +22,7 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
         par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             for k in 0..x.len() {
                 let i = s + k;
-                v[k] += f[i] * (im[i] * dt);
+                v[k] += accel(f[i], im[i]) * dt;
                 x[k] += v[k] * dt;
             }
         });

@@ -3,7 +3,7 @@
 //! Second order, symplectic, time-reversible. The force at x' is kept for the next step
 //! ("first same as last"), so it costs one force evaluation per step. Velocity-dependent forces
 //! (drag, dashpots) are evaluated with v½, the usual explicit choice.
-use super::{ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -35,7 +35,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
         par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             for k in 0..x.len() {
                 let i = s + k;
-                v[k] += f[i] * (im[i] * half);
+                v[k] += accel(f[i], im[i]) * half;
                 x[k] += v[k] * dt;
             }
         });
@@ -47,7 +47,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
         par::chunks1(&mut sys.state.v, |s, v| {
             for k in 0..v.len() {
                 let i = s + k;
-                v[k] += f[i] * (im[i] * half);
+                v[k] += accel(f[i], im[i]) * half;
             }
         });
     }

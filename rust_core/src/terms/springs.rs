@@ -22,8 +22,11 @@ pub struct Springs<V: Vector> {
     pub c: Vec<Real>,
     /// Rest length L0, m.
     pub rest: Vec<Real>,
-    /// CSR incidence: springs of particle p are `inc[off[p]..off[p+1]]`, each `2·s + (p is j)`.
+    /// CSR incidence: particle p is endpoint i of springs `inc[off[p]..mid[p]]` (force +fs) and
+    /// endpoint j of springs `inc[mid[p]..off[p+1]]` (force −fs). Split so the gather has no
+    /// data-dependent branch.
     off: Vec<u32>,
+    mid: Vec<u32>,
     inc: Vec<u32>,
     /// Scratch: force on endpoint i of each spring.
     fs: Vec<V>,
@@ -62,27 +65,32 @@ impl<V: Vector> Springs<V> {
                 return Err(invalid("i/j", format!("spring {s} joins particle {a} to itself")));
             }
         }
-        // CSR by counting sort of endpoints.
-        let mut off = vec![0u32; n_particles + 1];
+        // CSR by counting sort of endpoints: per particle, its "i" springs then its "j" springs.
+        let mut n_i = vec![0u32; n_particles];
+        let mut n_j = vec![0u32; n_particles];
         for s in 0..m {
-            off[i[s] as usize + 1] += 1;
-            off[j[s] as usize + 1] += 1;
+            n_i[i[s] as usize] += 1;
+            n_j[j[s] as usize] += 1;
         }
+        let mut off = vec![0u32; n_particles + 1];
+        let mut mid = vec![0u32; n_particles];
         for p in 0..n_particles {
-            off[p + 1] += off[p];
+            mid[p] = off[p] + n_i[p];
+            off[p + 1] = mid[p] + n_j[p];
         }
-        let mut fill = off.clone();
+        let mut fill_i = off[..n_particles].to_vec();
+        let mut fill_j = mid.clone();
         let mut inc = vec![0u32; 2 * m];
         for s in 0..m {
             let a = i[s] as usize;
-            inc[fill[a] as usize] = 2 * s as u32;
-            fill[a] += 1;
+            inc[fill_i[a] as usize] = s as u32;
+            fill_i[a] += 1;
             let b = j[s] as usize;
-            inc[fill[b] as usize] = 2 * s as u32 + 1;
-            fill[b] += 1;
+            inc[fill_j[b] as usize] = s as u32;
+            fill_j[b] += 1;
         }
         let any_damping = c.iter().any(|&c| c > 0.0);
-        Ok(Self { name, i, j, k, c, rest, off, inc, fs: vec![V::ZERO; m], any_damping })
+        Ok(Self { name, i, j, k, c, rest, off, mid, inc, fs: vec![V::ZERO; m], any_damping })
     }
 
     pub fn len(&self) -> usize {
@@ -102,7 +110,7 @@ impl<V: Vector> Springs<V> {
             return (V::ZERO, 0.0);
         }
         let l = l2.sqrt();
-        let n = d / l;
+        let n = d * (1.0 / l); // one division, not one per component
         let vn = (v[b] - v[a]).dot(n);
         let c = self.c[s];
         let mag = self.k[s] * (l - self.rest[s]) + c * vn;
@@ -139,18 +147,16 @@ impl<V: Vector> Term<V> for Springs<V> {
         };
         // Gather: particles added after the springs have no incidences.
         let n_cov = self.off.len() - 1;
-        let (off, inc, fsr) = (&self.off, &self.inc, &fs);
+        let (off, mid, inc, fsr) = (&self.off, &self.mid, &self.inc, &fs);
         par::chunks1(&mut f[..n_cov], |p0, f| {
             for (k, fp) in f.iter_mut().enumerate() {
                 let p = p0 + k;
                 let mut acc = V::ZERO;
-                for &e in &inc[off[p] as usize..off[p + 1] as usize] {
-                    let fv = fsr[(e >> 1) as usize];
-                    if e & 1 == 0 {
-                        acc += fv;
-                    } else {
-                        acc -= fv;
-                    }
+                for &s in &inc[off[p] as usize..mid[p] as usize] {
+                    acc += fsr[s as usize];
+                }
+                for &s in &inc[mid[p] as usize..off[p + 1] as usize] {
+                    acc -= fsr[s as usize];
                 }
                 *fp += acc;
             }
@@ -185,10 +191,7 @@ impl<V: Vector> Term<V> for Springs<V> {
         let n = self.off.len() - 1;
         let mut w2: Real = 0.0;
         for p in 0..n {
-            let ks: Real = self.inc[self.off[p] as usize..self.off[p + 1] as usize]
-                .iter()
-                .map(|&e| self.k[(e >> 1) as usize])
-                .sum();
+            let ks: Real = self.inc[self.off[p] as usize..self.off[p + 1] as usize].iter().map(|&s| self.k[s as usize]).sum();
             w2 = w2.max(2.0 * model.inv_mass[p] * ks);
         }
         (w2 > 0.0).then(|| 1.0 / w2.sqrt())

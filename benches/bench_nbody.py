@@ -1,0 +1,49 @@
+"""Direct-sum N-body workload (WORKLOADS.md §3): N equal masses 1/N in the unit ball at rest
+(numpy default_rng(42)), G = 1, Plummer ε = 0.01, leapfrog (KDK velocity Verlet) at dt = 1e-3,
+float64. 5 warm-up steps, 3 blocks of S = 400 (N=1024) / 40 (N=4096); pair interactions
+credited N² per step."""
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import physcore as pc
+
+from _common import median_block_time, require_release, si, table
+
+
+def initial(n: int) -> np.ndarray:
+    rng = np.random.default_rng(42)
+    r = rng.random(n) ** (1 / 3)
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return d * r[:, None]
+
+
+def build(n: int, threads: int) -> pc.Scene:
+    scene = pc.Scene(3, integrator="verlet", dt=1e-3, threads=threads)
+    scene.add_particles(initial(n), masses=1.0 / n)
+    scene.add(pc.PairwiseGravity(G=1.0, softening=0.01))
+    return scene
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--sizes", default="1024,4096")
+    ap.add_argument("--threads", default="1,2")
+    args = ap.parse_args()
+    require_release()
+    rows = []
+    for n in map(int, args.sizes.split(",")):
+        steps = 400 if n <= 1024 else 40
+        for th in map(int, args.threads.split(",")):
+            scene = build(n, th)
+            scene.step(5)
+            t = median_block_time(scene, steps)
+            rows.append([n, th, f"{t / steps * 1e3:.3f}", f"{steps / t:.1f}", si(n * n * steps / t)])
+    print(table(["N", "threads", "ms/step", "steps/s", "pair interactions/s"], rows))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,376 @@
+"""The ``physcore`` command line: list the ready-made scenes and render them to animated GIFs.
+
+Usage::
+
+    physcore scenes
+    physcore render SCENE [-o OUT.gif] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
+                          [--dt DT] [--steps-per-frame K] [--color-by speed|none]
+                          [--param key=value ...]
+
+Exit codes: 0 success, 1 the simulation diverged or the file could not be written, 2 bad usage
+(unknown scene, parameter or option value).
+"""
+from __future__ import annotations
+
+import argparse
+import inspect
+import re
+import sys
+import textwrap
+import time
+import typing
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+__all__ = ["main"]
+
+# Animation defaults when a scene function has no ``render_defaults`` entry.
+_FALLBACK = {"frames": 90, "steps_per_frame": 10, "fps": 30.0, "size": (480, 360), "color_by": "speed"}
+
+# Scene-function keywords that have their own options rather than --param.
+_OWN_OPTION = {"integrator": "--integrator", "dt": "--dt"}
+
+_TRUE = {"true", "1", "yes", "on", "y", "t"}
+_FALSE = {"false", "0", "no", "off", "n", "f"}
+
+
+class _UsageError(Exception):
+    """A bad command line; reported on stderr with exit code 2."""
+
+
+# --------------------------------------------------------------------------- argument types
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def _size(text: str) -> Tuple[int, int]:
+    m = re.fullmatch(r"\s*(\d+)\s*[xX×,]\s*(\d+)\s*", text)
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 480x360; got {text!r}")
+    w, h = int(m.group(1)), int(m.group(2))
+    if w < 16 or h < 16:
+        raise argparse.ArgumentTypeError(f"width and height must be >= 16 pixels, got {w}x{h}")
+    return w, h
+
+
+def _view(text: str) -> Tuple[float, float]:
+    try:
+        az, el = (float(p) for p in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZIMUTH,ELEVATION in degrees, e.g. -60,25; got {text!r}") from None
+    return az, el
+
+
+def _key_value(text: str) -> Tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"expected key=value, got {text!r}")
+    return key.strip(), value.strip()
+
+
+# --------------------------------------------------------------------------- scene parameters
+def _scene_params(fn: Callable[..., Any]) -> Dict[str, inspect.Parameter]:
+    """Keyword parameters (with defaults) of a scene function, in order."""
+    return {
+        name: p
+        for name, p in inspect.signature(fn).parameters.items()
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+    }
+
+
+def _param_type(fn: Callable[..., Any], name: str, default: Any) -> Optional[type]:
+    """The type a --param value converts to: the default's type, else the annotation's."""
+    if default is not None and default is not inspect.Parameter.empty:
+        return type(default)
+    try:
+        hint = typing.get_type_hints(fn).get(name)
+    except Exception:  # unresolvable annotations (e.g. newer syntax on an older Python)
+        return None
+    # Optional[X] is Union[X, None]: take X.
+    args = [a for a in getattr(hint, "__args__", ()) if a is not type(None)]
+    if len(args) == 1 and isinstance(args[0], type):
+        return args[0]
+    return hint if isinstance(hint, type) else None
+
+
+def _convert(name: str, text: str, kind: Optional[type], default: Any) -> Any:
+    """Convert a --param string to `kind`; 'none' gives None where the default is None."""
+    if default is None and text.lower() == "none":
+        return None
+    try:
+        if kind is bool:
+            low = text.lower()
+            if low in _TRUE:
+                return True
+            if low in _FALSE:
+                return False
+            raise ValueError
+        if kind is int:
+            return int(text)
+        if kind is float:
+            return float(text)
+        if kind in (tuple, list):
+            items = [float(t) for t in text.replace(" ", "").strip("()[]").split(",") if t]
+            return kind(items)
+        if kind is None or kind is str:
+            if kind is None:  # no type to go by: the most specific that parses
+                for conv in (int, float):
+                    try:
+                        return conv(text)
+                    except ValueError:
+                        pass
+            return text
+        return kind(text)
+    except (TypeError, ValueError):
+        pass
+    what = {bool: "true/false (or 1/0, yes/no)", int: "an integer", float: "a number"}.get(
+        kind, "a comma-separated list of numbers" if kind in (tuple, list) else getattr(kind, "__name__", "?")
+    )
+    raise _UsageError(f"--param {name}: expected {what}, got {text!r}")
+
+
+def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[Tuple[str, str]]) -> Dict[str, Any]:
+    params = _scene_params(fn)
+    kwargs: Dict[str, Any] = {}
+    for key, text in pairs:
+        if key in _OWN_OPTION:
+            raise _UsageError(f"--param {key}: use the {_OWN_OPTION[key]} option instead")
+        if key not in params:
+            valid = ", ".join(k for k in params if k not in _OWN_OPTION) or "(none)"
+            raise _UsageError(f"unknown parameter {key!r} for scene {scene_name!r}; valid parameters: {valid}")
+        default = params[key].default
+        kwargs[key] = _convert(key, text, _param_type(fn, key, default), default)
+    return kwargs
+
+
+def _summary(fn: Callable[..., Any]) -> str:
+    doc = inspect.getdoc(fn) or ""
+    return doc.strip().splitlines()[0].strip() if doc.strip() else ""
+
+
+def _defaults_text(fn: Callable[..., Any]) -> str:
+    parts = []
+    for name, p in _scene_params(fn).items():
+        parts.append(name if p.default is inspect.Parameter.empty else f"{name}={p.default!r}")
+    return ", ".join(parts)
+
+
+# --------------------------------------------------------------------------- commands
+def _registry() -> Dict[str, Callable[..., Any]]:
+    from . import scenes
+
+    return dict(scenes.REGISTRY)
+
+
+def _cmd_scenes(args: argparse.Namespace) -> int:
+    registry = _registry()
+    width = max((len(n) for n in registry), default=0) + 2
+    out = sys.stdout
+    for name, fn in registry.items():
+        out.write(f"{name.ljust(width)}{_summary(fn)}\n")
+        body = textwrap.fill(
+            "parameters: " + _defaults_text(fn),
+            width=100,
+            initial_indent=" " * (width + 2),
+            subsequent_indent=" " * (width + 4),
+            break_on_hyphens=False,
+        )
+        out.write(body + "\n")
+    out.write("\nRender one with: physcore render NAME -o NAME.gif [--param key=value ...]\n")
+    return 0
+
+
+def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:
+    """Animation settings: command-line options, else the scene's render_defaults, else fallbacks."""
+    d = dict(getattr(fn, "render_defaults", None) or {})
+    frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
+    if args.steps_per_frame is not None:
+        spf = args.steps_per_frame
+    elif "steps_per_frame" in d:
+        spf = int(d["steps_per_frame"])
+    elif "frame_time" in d:
+        # Simulated seconds per frame: keeps the animation's time span whatever dt is.
+        spf = max(1, int(round(float(d["frame_time"]) / dt)))
+    else:
+        spf = _FALLBACK["steps_per_frame"]
+    fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
+    size = args.size if args.size is not None else d.get("size", _FALLBACK["size"])
+    if isinstance(size, str):
+        size = _size(size)
+    color_by = args.color_by if args.color_by is not None else d.get("color_by", _FALLBACK["color_by"])
+    settings = {"frames": frames, "steps_per_frame": spf, "fps": fps, "size": tuple(size), "color_by": color_by}
+    view = args.view if args.view is not None else d.get("view")
+    if view is not None:
+        settings["view"] = tuple(view)
+    radius = args.radius if args.radius is not None else d.get("radius")
+    if radius is not None:
+        settings["radius"] = radius
+    return settings
+
+
+def _human_bytes(n: int) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000.0
+    return f"{n} B"  # pragma: no cover
+
+
+def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    from . import render
+    from ._errors import SimulationDiverged
+
+    registry = _registry()
+    name = args.scene
+    if name not in registry:
+        parser.error(f"unknown scene {name!r}; valid scenes: {', '.join(registry)}")
+    fn = registry[name]
+    try:
+        kwargs = _scene_kwargs(name, fn, args.param or [])
+    except _UsageError as e:
+        parser.error(str(e))
+    if args.integrator is not None:
+        kwargs["integrator"] = args.integrator
+    if args.dt is not None:
+        kwargs["dt"] = args.dt
+    out = Path(args.output if args.output is not None else f"{name}.gif")
+
+    t0 = time.perf_counter()
+    try:
+        scene = fn(**kwargs)
+    except (TypeError, ValueError) as e:
+        parser.error(f"scene {name!r}: {e}")
+    settings = _render_settings(fn, args, scene.dt)
+    time0 = scene.time
+    try:
+        path = render.gif(
+            scene, out, springs=not args.no_springs, progress=not args.quiet, **settings
+        )
+    except SimulationDiverged as e:
+        msg = f"physcore render: error: simulation diverged: {e}"
+        dt_hint = getattr(e, "suggested_dt", float("nan"))
+        if dt_hint == dt_hint and dt_hint > 0:  # not NaN
+            msg += f"\n  try a smaller time step, e.g. --dt {dt_hint:.3g} (now {scene.dt:.3g} s)"
+        print(msg + f"\n  no file written ({out})", file=sys.stderr)
+        return 1
+    except (TypeError, ValueError) as e:
+        parser.error(str(e))
+    except OSError as e:
+        print(f"physcore render: error: cannot write {out}: {e}", file=sys.stderr)
+        return 1
+    wall = time.perf_counter() - t0
+
+    frames, fps, (w, h) = settings["frames"], settings["fps"], settings["size"]
+    steps = (frames - 1) * settings["steps_per_frame"]
+    drift = scene.energy_drift()
+    print(f"wrote {path}")
+    print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s), {w}x{h} px")
+    print(f"  file size:      {_human_bytes(path.stat().st_size)}")
+    print(
+        f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
+        f"{settings['steps_per_frame']} per frame, {scene.integrator})"
+    )
+    print(f"  energy drift:   {drift:+.1e} (relative)")
+    print(f"  wall time:      {wall:.2f} s")
+    return 0
+
+
+# --------------------------------------------------------------------------- parser
+def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
+    """The top-level parser and the ``render`` subparser (whose .error() reports usage errors)."""
+    from . import render
+
+    try:
+        from .scene import INTEGRATORS
+
+        integrators: Optional[List[str]] = [d["name"] for d in INTEGRATORS]
+    except Exception:  # the extension failed to load: let the scene call report it
+        integrators = None
+    try:
+        from importlib.metadata import version
+
+        ver = version("physcore")
+    except Exception:
+        ver = "unknown"
+
+    parser = argparse.ArgumentParser(
+        prog="physcore",
+        description="physcore: fast, honest particle physics. Render ready-made scenes to GIFs.",
+    )
+    parser.add_argument("--version", action="version", version=f"physcore {ver}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    sub.add_parser("scenes", help="list the ready-made scenes and their parameters",
+                   description="List the ready-made scenes, their one-line descriptions and parameters.")
+
+    r = sub.add_parser(
+        "render",
+        help="simulate a scene and write an animated GIF",
+        description="Simulate a ready-made scene and write it as an animated GIF. Animation defaults "
+        "come from the scene (see `physcore scenes`).",
+    )
+    r.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
+    r.add_argument("-o", "--output", metavar="OUT.gif", help="output file (default: SCENE.gif)")
+    r.add_argument("--frames", type=_positive_int, metavar="N", help="number of frames")
+    r.add_argument("--fps", type=_positive_float, metavar="F", help="frames per second of playback")
+    r.add_argument("--size", type=_size, metavar="WxH", help="image size in pixels, e.g. 480x360")
+    r.add_argument("--steps-per-frame", type=_positive_int, metavar="K",
+                   help="simulation steps between frames (default: the scene's simulated time per frame)")
+    r.add_argument("--integrator", choices=integrators, metavar="NAME",
+                   help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
+    r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
+    r.add_argument("--color-by", choices=render.COLOR_BY, help="particle colouring (default: speed)")
+    r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
+    r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
+    r.add_argument("--no-springs", action="store_true", help="do not draw springs")
+    r.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
+                   help="scene parameter, repeatable (e.g. --param n=48 --param ground=true)")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    return parser, r
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run the ``physcore`` command line.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name; default ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        Exit code: 0 success, 1 simulation diverged or write failure, 2 usage error.
+    """
+    parser, render_parser = _build_parser()
+    try:
+        args = parser.parse_args(None if argv is None else list(argv))
+        if args.command == "scenes":
+            return _cmd_scenes(args)
+        return _cmd_render(args, render_parser)
+    except SystemExit as e:  # argparse errors (2) and --help/--version (0)
+        return e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+    except KeyboardInterrupt:
+        print("physcore: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,85 @@
+//! Integrator numerics: convergence orders, stability, energy behaviour.
+mod common;
+use common::oscillator;
+use physcore_core::integrators::{by_name, NAMES};
+
+fn error_at(integrator: &str, dt: f64, t_end: f64) -> f64 {
+    let mut s = oscillator(integrator, dt);
+    let n = (t_end / dt).round() as u64;
+    s.step(n).unwrap();
+    let t = s.sys.state.t;
+    let (x, v) = (s.sys.state.x[1], s.sys.state.v[1]);
+    ((x.x - t.cos()).powi(2) + (v.x + t.sin()).powi(2) + x.y.powi(2) + v.y.powi(2)).sqrt()
+}
+
+fn observed_order(integrator: &str, dt0: f64) -> f64 {
+    let e1 = error_at(integrator, dt0, 2.0);
+    let e2 = error_at(integrator, dt0 / 2.0, 2.0);
+    let e3 = error_at(integrator, dt0 / 4.0, 2.0);
+    0.5 * ((e1 / e2).log2() + (e2 / e3).log2())
+}
+
+#[test]
+fn convergence_orders_match_reported_order() {
+    for (name, dt0) in [("euler", 1e-3), ("semi_implicit_euler", 1e-3), ("verlet", 1e-2), ("rk4", 5e-2)] {
+        let p = observed_order(name, dt0);
+        let reported = by_name::<glam::DVec2>(name).unwrap().info().order as f64;
+        assert!((p - reported).abs() < 0.1, "{name}: observed order {p:.3}, reported {reported}");
+    }
+}
+
+#[test]
+fn integrator_table() {
+    let infos: Vec<_> = NAMES.iter().map(|n| by_name::<glam::DVec3>(n).unwrap().info()).collect();
+    let got: Vec<_> = infos.iter().map(|i| (i.name, i.order, i.symplectic, i.force_evals_per_step)).collect();
+    assert_eq!(
+        got,
+        vec![("euler", 1, false, 1), ("semi_implicit_euler", 1, true, 1), ("verlet", 2, true, 1), ("rk4", 4, false, 4)]
+    );
+    assert!(by_name::<glam::DVec2>("leapfrogg").is_err());
+}
+
+/// Amplitude growth factor after `steps` steps at ω·dt = w (ω = 1).
+fn growth(integrator: &str, w: f64, steps: u64) -> f64 {
+    let mut s = oscillator(integrator, w);
+    match s.step(steps) {
+        Ok(()) => {
+            let e = s.energy().total();
+            (e / 0.5).sqrt()
+        }
+        Err(_) => f64::INFINITY,
+    }
+}
+
+#[test]
+fn stability_limits_match_theory() {
+    // Semi-implicit Euler and Verlet: stable for ω·dt < 2; RK4: up to 2√2; explicit Euler: never.
+    for name in ["semi_implicit_euler", "verlet"] {
+        assert!(growth(name, 1.95, 2000) < 100.0, "{name} should be stable at 1.95");
+        assert!(growth(name, 2.05, 2000) > 1e6, "{name} should be unstable at 2.05");
+    }
+    assert!(growth("rk4", 2.8, 2000) < 2.0, "rk4 stable (damped) just below 2√2");
+    assert!(growth("rk4", 2.86, 2000) > 10.0, "rk4 unstable above 2√2");
+    assert!(growth("euler", 0.01, 20_000) > 2.0, "explicit Euler grows even at small dt");
+}
+
+#[test]
+fn symplectic_methods_have_no_secular_energy_drift() {
+    for name in ["semi_implicit_euler", "verlet"] {
+        let mut s = oscillator(name, 0.1);
+        let e0 = s.energy().total();
+        let mut first = 0.0f64;
+        let mut last = 0.0f64;
+        for k in 0..40_000 {
+            s.step(1).unwrap();
+            let de = ((s.energy().total() - e0) / e0).abs();
+            if k < 10_000 {
+                first = first.max(de);
+            } else if k >= 30_000 {
+                last = last.max(de);
+            }
+        }
+        assert!(last < 1.5 * first, "{name}: error grew from {first:e} to {last:e}");
+        assert!(first < 0.06, "{name}: error {first:e} too large at ω·dt = 0.1");
+    }
+}

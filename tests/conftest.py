@@ -1,0 +1,184 @@
+"""Shared fixtures and helpers for the physics and API tests.
+
+Everything here builds scenes from the public API only; expectations in the tests come from
+closed-form physics (harmonic oscillator, Kepler problem, constant acceleration), never from
+numbers copied out of a previous run.
+"""
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from typing import Callable, List, Optional, Sequence, Tuple
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, settings
+
+import physcore as pc
+
+# When a property test fails, hypothesis imports its patch writer (libcst), whose import emits a
+# DeprecationWarning (mypy_extensions.TypedDict); under ``filterwarnings = error`` that turns a
+# readable failure into an INTERNALERROR. Import it once here, quietly, so it is cached.
+with warnings.catch_warnings():
+    warnings.simplefilter("ignore")
+    try:
+        import hypothesis.extra._patching  # noqa: F401
+    except Exception:  # pragma: no cover - optional dependency of hypothesis
+        pass
+
+settings.register_profile(
+    "ci",
+    max_examples=25,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+# A heavier profile for hunting flaky tolerances: HYPOTHESIS_PROFILE=stress pytest tests
+settings.register_profile("stress", parent=settings.get_profile("ci"), max_examples=400)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+#: All integrator names, as the library reports them.
+INTEGRATOR_NAMES: Tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
+SYMPLECTIC: Tuple[str, ...] = ("semi_implicit_euler", "verlet")
+
+EPS = np.finfo(np.float64).eps
+
+
+@pytest.fixture(params=INTEGRATOR_NAMES)
+def integrator(request) -> str:
+    """Each integrator name in turn."""
+    return request.param
+
+
+# --------------------------------------------------------------------------- scene builders
+def oscillator(
+    integrator: str,
+    dt: float,
+    *,
+    omega: float = 1.0,
+    mass: float = 1.0,
+    x0: Sequence[float] = (1.0, 0.0),
+    v0: Sequence[float] = (0.0, 0.5),
+) -> pc.Scene:
+    """Isotropic 2D harmonic oscillator: a free particle tied to a pinned one at the origin by a
+    spring of rest length 0, so the force is exactly ``-k x`` (k = m ω²).
+
+    Particle 1 is the oscillator; x(t) = x0 cos ωt + (v0/ω) sin ωt.
+    """
+    s = pc.Scene(2, integrator=integrator, dt=dt, threads=1)
+    s.add_particles([[0.0, 0.0], list(x0)], [[0.0, 0.0], list(v0)], masses=[1.0, mass], pinned=[True, False])
+    s.add(pc.Springs([0], [1], stiffness=mass * omega**2, rest_length=0.0))
+    return s
+
+
+def oscillator_exact(t: float, omega: float = 1.0, x0=(1.0, 0.0), v0=(0.0, 0.5)) -> Tuple[np.ndarray, np.ndarray]:
+    """Closed-form (x, v) of :func:`oscillator` at time t."""
+    x0, v0 = np.asarray(x0, float), np.asarray(v0, float)
+    c, s = math.cos(omega * t), math.sin(omega * t)
+    return x0 * c + v0 / omega * s, -x0 * omega * s + v0 * c
+
+
+def random_network(
+    seed: int,
+    n: int,
+    *,
+    dim: int = 2,
+    n_springs: Optional[int] = None,
+    n_pinned: int = 0,
+    speed: float = 0.3,
+    integrator: str = "verlet",
+    dt: float = 1e-3,
+    damping: float = 0.0,
+) -> pc.Scene:
+    """A random conservative spring network: random positions (kept apart), random springs with
+    rest length None (taken from the initial geometry), random masses and velocities.
+
+    The first ``n_pinned`` particles are pinned. Each particle gets at least one spring.
+    """
+    rng = np.random.default_rng(seed)
+    x = _separated_points(rng, n, dim, min_dist=0.2, box=1.5)
+    v = rng.normal(scale=speed, size=(n, dim))
+    m = rng.uniform(0.5, 2.0, size=n)
+    pinned = np.zeros(n, dtype=bool)
+    pinned[:n_pinned] = True
+    pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
+    order = rng.permutation(len(pairs))
+    want = n_springs if n_springs is not None else max(n, int(1.5 * n))
+    chosen: List[Tuple[int, int]] = []
+    covered = set()
+    # Guarantee every particle is attached to something, then add random extra springs.
+    for p in range(n):
+        if p in covered:
+            continue
+        q = int(rng.integers(0, n - 1))
+        q = q if q < p else q + 1
+        e = (min(p, q), max(p, q))
+        if e not in chosen:
+            chosen.append(e)
+        covered.update(e)
+    for k in order:
+        if len(chosen) >= want:
+            break
+        e = pairs[k]
+        if e not in chosen:
+            chosen.append(e)
+    i = np.array([a for a, _ in chosen], dtype=np.int64)
+    j = np.array([b for _, b in chosen], dtype=np.int64)
+    stiff = rng.uniform(1.0, 10.0, size=len(chosen))
+    s = pc.Scene(dim, integrator=integrator, dt=dt, threads=1)
+    s.add_particles(x, v, masses=m, pinned=pinned)
+    s.add(pc.Springs(i, j, stiffness=stiff, damping=damping))
+    return s
+
+
+def random_cloud(seed: int, n: int, *, dim: int = 3, speed: float = 0.3, box: float = 1.0) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random (positions, velocities, masses) of n free particles, kept apart."""
+    rng = np.random.default_rng(seed)
+    x = _separated_points(rng, n, dim, min_dist=0.1 * box, box=box)
+    v = rng.normal(scale=speed, size=(n, dim))
+    m = rng.uniform(0.5, 2.0, size=n)
+    return x, v, m
+
+
+def _separated_points(rng: np.random.Generator, n: int, dim: int, *, min_dist: float, box: float) -> np.ndarray:
+    pts: List[np.ndarray] = []
+    tries = 0
+    while len(pts) < n:
+        p = rng.uniform(-box, box, size=dim)
+        tries += 1
+        if all(np.linalg.norm(p - q) >= min_dist for q in pts) or tries > 10_000:
+            pts.append(p)
+    return np.array(pts)
+
+
+# --------------------------------------------------------------------------- measurements
+def sample(scene: pc.Scene, n_steps: int, every: int, f: Callable[[pc.Scene], object]) -> list:
+    """Step ``n_steps`` in chunks of ``every``; return ``[f(scene)]`` at the start and after each chunk."""
+    out = [f(scene)]
+    done = 0
+    while done < n_steps:
+        k = min(every, n_steps - done)
+        scene.step(k)
+        done += k
+        out.append(f(scene))
+    return out
+
+
+def total_energy(scene: pc.Scene) -> float:
+    return scene.energy().total
+
+
+def phase_norm(scene: pc.Scene, particle: int = 1, omega: float = 1.0) -> float:
+    """sqrt(ω²|x|² + |v|²) of one particle (the oscillator's amplitude in phase space)."""
+    x = scene.positions[particle]
+    v = scene.velocities[particle]
+    return float(math.sqrt(omega**2 * x @ x + v @ v))
+
+
+def fit_slope(xs: Sequence[float], ys: Sequence[float]) -> float:
+    """Least-squares slope of ys against xs."""
+    return float(np.polyfit(np.asarray(xs, float), np.asarray(ys, float), 1)[0])
+
+
+def state(scene: pc.Scene) -> Tuple[np.ndarray, np.ndarray]:
+    return scene.positions, scene.velocities

@@ -1,0 +1,186 @@
+"""Integrators: observed order of convergence, cost accounting and linear stability limits, all
+on the undamped harmonic oscillator whose exact solution and stability theory are known."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import physcore as pc
+from conftest import INTEGRATOR_NAMES, fit_slope, oscillator, oscillator_exact, phase_norm
+
+# ---------------------------------------------------------------------------- order of accuracy
+
+#: Expected global order and the dt ladder (4 values, 3 halvings) over which it is measured.
+#: RK4's ladder is coarser so that its error (∝ dt⁴) stays far above round-off.
+ORDER_CASES = {
+    "euler": (1, [0.02, 0.01, 0.005, 0.0025]),
+    "semi_implicit_euler": (1, [0.02, 0.01, 0.005, 0.0025]),
+    "verlet": (2, [0.04, 0.02, 0.01, 0.005]),
+    "rk4": (4, [0.1, 0.05, 0.025, 0.0125]),
+}
+T_FINAL = 2.0
+
+
+def _error_at(integrator: str, dt: float) -> float:
+    s = oscillator(integrator, dt)
+    n = round(T_FINAL / dt)
+    s.step(n)
+    xe, ve = oscillator_exact(n * dt)
+    x, v = s.positions[1], s.velocities[1]
+    return float(np.linalg.norm(np.concatenate([x - xe, v - ve])))
+
+
+@pytest.mark.parametrize("name", INTEGRATOR_NAMES)
+def test_observed_order_of_convergence(name):
+    order, dts = ORDER_CASES[name]
+    errs = [_error_at(name, dt) for dt in dts]
+    # Errors must shrink monotonically, and stay far above double-precision round-off.
+    assert all(a > b for a, b in zip(errs, errs[1:])), errs
+    assert min(errs) > 1e-11
+    slope = fit_slope(np.log(dts), np.log(errs))
+    assert abs(slope - order) < 0.2, f"{name}: observed order {slope:.3f}, expected {order}"
+
+
+def test_order_table_matches_reported_orders():
+    # The table that tells users the order must agree with the order ladder above.
+    for d in pc.INTEGRATORS:
+        assert d["order"] == ORDER_CASES[d["name"]][0]
+
+
+# ---------------------------------------------------------------------------- the table and cost
+def test_integrator_table():
+    expected = {
+        "euler": (1, False, 1),
+        "semi_implicit_euler": (1, True, 1),
+        "verlet": (2, True, 1),
+        "rk4": (4, False, 4),
+    }
+    got = {d["name"]: (d["order"], d["symplectic"], d["force_evals_per_step"]) for d in pc.INTEGRATORS}
+    assert got == expected
+    assert all(set(d) == {"name", "order", "symplectic", "force_evals_per_step"} for d in pc.INTEGRATORS)
+    for d in pc.INTEGRATORS:
+        s = pc.Scene(2, integrator=d["name"])
+        assert s.integrator_info == d
+
+
+@pytest.mark.parametrize("name", INTEGRATOR_NAMES)
+def test_force_evaluations_per_step(name):
+    per_step = next(d["force_evals_per_step"] for d in pc.INTEGRATORS if d["name"] == name)
+    s = oscillator(name, 0.01)
+    assert s.force_evaluations == 0
+    s.step(1)
+    first = s.force_evaluations
+    # Velocity Verlet evaluates the force once at the start ("first same as last" afterwards).
+    assert first == per_step + (1 if name == "verlet" else 0)
+    for k in (1, 10, 100):
+        before = s.force_evaluations
+        s.step(k)
+        assert s.force_evaluations - before == per_step * k
+
+
+def test_verlet_force_cache_is_dropped_when_state_changes():
+    s = oscillator("verlet", 0.01)
+    s.step(5)
+    before = s.force_evaluations
+    s.positions = s.positions  # an outside change invalidates the cached force
+    s.step(5)
+    assert s.force_evaluations - before == 5 + 1
+
+
+# ---------------------------------------------------------------------------- stability
+def _amplitudes(name: str, h: float, n_steps: int):
+    """Phase-space amplitude of the ω = 1 oscillator (dt = h) after each step; None if the
+    library reported divergence."""
+    s = oscillator(name, h)
+    a = [phase_norm(s)]
+    try:
+        for _ in range(n_steps):
+            s.step(1)
+            a.append(phase_norm(s))
+    except pc.SimulationDiverged:
+        return None
+    return np.array(a)
+
+
+def test_explicit_euler_energy_grows_by_one_plus_h_squared():
+    # For x' = v, v' = -x explicit Euler multiplies x² + v² by exactly (1 + h²) per step.
+    h, n = 0.1, 200
+    s = oscillator("euler", h)
+    e0 = s.energy().total
+    energies = [e0]
+    for _ in range(n):
+        s.step(1)
+        energies.append(s.energy().total)
+    energies = np.array(energies)
+    assert np.all(np.diff(energies) > 0), "explicit Euler must gain energy every step"
+    ratio = energies[1:] / energies[:-1]
+    np.testing.assert_allclose(ratio, 1 + h * h, rtol=1e-9)
+    assert energies[-1] / e0 == pytest.approx((1 + h * h) ** n, rel=1e-8)
+
+
+@pytest.mark.parametrize("name", ["semi_implicit_euler", "verlet"])
+def test_symplectic_stable_below_two(name):
+    # Both have the Störmer–Verlet stability interval ω·dt < 2. At 1.9 the orbit stays on an
+    # invariant ellipse: the amplitude is bounded (for these maps at most ~4.5× the start).
+    a = _amplitudes(name, 1.9, 2000)
+    assert a is not None
+    assert np.all(np.isfinite(a))
+    assert a.max() < 10 * a[0]
+    q = len(a) // 4
+    assert a[-q:].max() <= 1.01 * a[:q].max()
+
+
+@pytest.mark.parametrize("name", ["semi_implicit_euler", "verlet"])
+def test_symplectic_unstable_above_two(name):
+    # At ω·dt = 2.1 the amplification matrix has an eigenvalue of modulus
+    # (2.41 + sqrt(2.41² - 4))/2 ≈ 1.88: exponential growth (or a reported divergence).
+    a = _amplitudes(name, 2.1, 300)
+    if a is not None:
+        assert a[-1] > 1e6 * a[0]
+
+
+def _rk4_factor(h: float) -> float:
+    # |R(ih)| for R(z) = 1 + z + z²/2 + z³/6 + z⁴/24: |R|² = 1 - h⁶/72 + h⁸/576.
+    return math.sqrt(1 - h**6 / 72 + h**8 / 576)
+
+
+def test_rk4_stability_limit_is_two_root_two():
+    assert _rk4_factor(2.7) < 1 < _rk4_factor(2.9)  # the theory the test relies on
+    stable = _amplitudes("rk4", 2.7, 300)
+    assert stable is not None
+    assert stable[-1] < stable[0]
+    unstable = _amplitudes("rk4", 2.9, 300)
+    if unstable is not None:
+        assert unstable[-1] > 1e6 * unstable[0]
+
+
+@pytest.mark.parametrize("h", [0.5, 1.5, 2.7, 2.9])
+def test_rk4_amplification_factor_matches_theory(h):
+    # The RK4 map of the isotropic oscillator is a scaled rotation: the phase-space amplitude
+    # is multiplied by exactly |R(ih)| each step.
+    a = _amplitudes("rk4", h, 20)
+    assert a is not None
+    np.testing.assert_allclose(a[1:] / a[:-1], _rk4_factor(h), rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["semi_implicit_euler", "verlet"])
+def test_symplectic_conserves_modified_energy_exactly(name):
+    # Both symplectic maps conserve a quadratic "shadow" energy of the oscillator exactly:
+    #   velocity Verlet:         v² + (1 - h²/4) x²
+    #   semi-implicit Euler (kick then drift, v after the kick): x² + v² - h x·v
+    # (ω = 1, m = 1). Checking it pins down which scheme is implemented, not just its order.
+    h = 0.7
+    s = oscillator(name, h)
+
+    def shadow():
+        x, v = s.positions[1], s.velocities[1]
+        if name == "verlet":
+            return v @ v + (1 - h * h / 4) * (x @ x)
+        return x @ x + v @ v - h * (x @ v)
+
+    q0 = shadow()
+    for _ in range(500):
+        s.step(1)
+        assert shadow() == pytest.approx(q0, rel=1e-11)
