@@ -2,6 +2,12 @@
 3 blocks in a row, median reported; the state keeps evolving between blocks."""
 from __future__ import annotations
 
+import os
+
+# numpy's OpenBLAS worker threads spin after a BLAS call and steal cycles from the stepping
+# threads on a 2-core machine; the benchmarks do no BLAS work.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import statistics
 import sys
 import time

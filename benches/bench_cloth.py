@@ -9,12 +9,12 @@ from __future__ import annotations
 import argparse
 import math
 
+from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
 from physcore.scenes import cloth_springs
 
-from _common import median_block_time, require_release, si, table
 
 
 def build(g: int, threads: int) -> pc.Scene:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import argparse
 
+from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
 
-from _common import median_block_time, require_release, si, table
 
 
 def main() -> None:

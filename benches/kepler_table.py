@@ -9,11 +9,11 @@ import math
 import statistics
 import time
 
+from _common import require_release, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
 
-from _common import require_release, table
 
 
 def run(integrator: str, n: int, orbits: int):

@@ -59,7 +59,8 @@ def cloth(
     size: float = 1.0,
     mass: float = 1.0,
     stiffness: float = 2000.0,
-    damping: float = 0.02,
+    damping: float = 0.5,
+    air_drag: float = 0.5,
     pin: str = "edge",
     ground: bool = False,
     integrator: str = "verlet",
@@ -70,7 +71,8 @@ def cloth(
 
     The sheet starts flat in the z = 0 plane (x, y in [0, size]); the row y = 0 is pinned
     (``pin="edge"``) or only its two corners (``pin="corners"``). Structural, shear and bend
-    springs (stiffness N/m, dashpot damping N·s/m) join neighbours; gravity is (0, 0, -9.81) m/s².
+    springs (stiffness N/m, dashpot damping N·s/m) join neighbours; gravity is (0, 0, -9.81) m/s²;
+    linear air drag b = air_drag · m per particle (air_drag in 1/s; 0 turns it off).
     ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5). ``dt=None``
     uses 1/ω_max (twice :meth:`Scene.suggest_dt`), half of velocity Verlet's stability limit.
     """
@@ -91,6 +93,8 @@ def cloth(
     i, j = cloth_springs(n)
     scene.add(Springs(i, j, stiffness=stiffness, damping=damping))
     scene.add(Gravity([0.0, 0.0, -9.81]))
+    if air_drag:
+        scene.add(Drag(_positive(air_drag, "air_drag") * mass / (n * n)))
     if ground:
         scene.add(Plane([0.0, 0.0, -0.8 * size], [0.0, 0.0, 1.0], restitution=0.1, friction=0.5))
     if dt is None:
@@ -99,7 +103,7 @@ def cloth(
     return scene
 
 
-cloth.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (480, 360)}
+cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360)}
 
 
 def projectile(

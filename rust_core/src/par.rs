@@ -133,3 +133,17 @@ pub fn any(n: usize, f: impl Fn(Range<usize>) -> bool + Sync + Send) -> bool {
         ranges(n).any(&f)
     }
 }
+
+/// Like `chunks2`, with each chunk returning a flag; returns whether any chunk raised it.
+pub fn chunks2_any<A: Send, B: Send>(
+    a: &mut [A],
+    b: &mut [B],
+    f: impl Fn(usize, &mut [A], &mut [B]) -> bool + Sync + Send,
+) -> bool {
+    let flags: Vec<bool> = if a.len() >= PAR_MIN {
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    } else {
+        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    };
+    flags.into_iter().any(|x| x)
+}

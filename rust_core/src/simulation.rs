@@ -248,14 +248,15 @@ impl<V: Vector> Simulation<V> {
     fn step_inner(&mut self, n: u64) -> Result<()> {
         let dt = self.dt;
         for _ in 0..n {
-            self.integrator.step(&mut self.sys, dt);
+            let non_finite = self.integrator.step(&mut self.sys, dt);
             self.sys.state.t += dt;
             self.sys.state.step += 1;
             if !self.colliders.is_empty() {
                 let mut touched = false;
                 let f = self.integrator.last_forces();
+                let g = self.sys.forces.g;
                 for c in &self.colliders {
-                    let (d, t) = c.apply(&mut self.sys.state.x, &mut self.sys.state.v, &self.sys.model, f);
+                    let (d, t) = c.apply(&mut self.sys.state.x, &mut self.sys.state.v, &self.sys.model, f, g);
                     self.collision_dissipated += d;
                     touched |= t;
                 }
@@ -263,7 +264,8 @@ impl<V: Vector> Simulation<V> {
                     self.integrator.reset();
                 }
             }
-            if let Some((particle, quantity)) = self.first_non_finite() {
+            if non_finite {
+                let (particle, quantity) = self.first_non_finite().unwrap_or((0, "position"));
                 return Err(Error::Diverged {
                     step: self.sys.state.step,
                     t: self.sys.state.t,
@@ -278,22 +280,9 @@ impl<V: Vector> Simulation<V> {
         Ok(())
     }
 
-    /// Cheap check every step: an OR-reduction of "not finite" that the compiler vectorises;
-    /// only when it fires is the first bad particle looked up.
+    /// The first particle (by index) with a non-finite position or velocity.
     fn first_non_finite(&self) -> Option<(usize, &'static str)> {
         let (x, v) = (&self.sys.state.x, &self.sys.state.v);
-        let any_bad = par::any(x.len(), |r| {
-            let mut bad = false;
-            for i in r {
-                for k in 0..V::DIM {
-                    bad |= !x[i].comp(k).is_finite() | !v[i].comp(k).is_finite();
-                }
-            }
-            bad
-        });
-        if !any_bad {
-            return None;
-        }
         (0..x.len()).find_map(|i| {
             if !x[i].is_finite() {
                 Some((i, "position"))

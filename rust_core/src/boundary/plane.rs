@@ -4,8 +4,8 @@
 //! plane, its normal velocity is reversed and scaled by the restitution e (v_n ← −e v_n), and its
 //! tangential velocity is reduced by μ·(1 + e)|v_n| (Coulomb friction on the collision impulse),
 //! never past zero. The energy this removes is booked as dissipated: the change in kinetic energy
-//! plus the work −F·Δx of the last evaluated force F over the projection Δx (exact for uniform
-//! gravity, first order otherwise).
+//! plus the work −F·Δx of the last evaluated force F (with gravity) over the projection Δx
+//! (exact for uniform gravity, first order otherwise).
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
@@ -24,7 +24,8 @@ pub struct Plane<V: Vector> {
 
 impl<V: Vector> Plane<V> {
     /// Resolves contacts; returns (energy dissipated J, whether any particle was touched).
-    pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V]) -> (Real, bool) {
+    /// `f_last`: forces of the last evaluation; `g`: uniform acceleration (not in `f_last`).
+    pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
         let touched = std::sync::atomic::AtomicBool::new(false);
         let diss = sum2(x, v, |s, x, v| {
@@ -58,7 +59,8 @@ impl<V: Vector> Plane<V> {
                 }
                 let ke1 = 0.5 * m * v[k].length_squared();
                 // Projection work: ΔU ≈ −F·Δx.
-                let du = if f_last.len() > i { -f_last[i].dot(dx) } else { 0.0 };
+                let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
+                let du = -f.dot(dx);
                 d += (ke0 - ke1) - du;
             }
             d

@@ -36,8 +36,9 @@ pub struct IntegratorInfo {
 pub trait Integrator<V: Vector>: Send + Sync {
     fn info(&self) -> IntegratorInfo;
     /// Advances `sys.state` by `dt` (x, v only; the caller advances time) and books the energy
-    /// dissipated by the force terms during the step.
-    fn step(&mut self, sys: &mut System<V>, dt: Real);
+    /// dissipated by the force terms during the step. Returns `true` if any position or
+    /// velocity is not finite afterwards (checked in the final update pass, at no extra pass).
+    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool;
     /// Forces (N) of the most recent evaluation, one per particle.
     fn last_forces(&self) -> &[V];
     /// Drop anything cached across steps (the state was changed from outside the integrator).
@@ -72,12 +73,23 @@ pub(crate) fn ensure_len<V: Vector>(buf: &mut Vec<V>, n: usize) {
     }
 }
 
-/// Acceleration f/m, exactly zero for pinned particles (inverse mass 0) even when f is not finite.
+/// Acceleration f/m + g (g: the uniform fields), exactly zero for pinned particles (inverse
+/// mass 0) even when f is not finite.
 #[inline(always)]
-pub(crate) fn accel<V: Vector>(f: V, inv_mass: Real) -> V {
+pub(crate) fn accel<V: Vector>(f: V, inv_mass: Real, g: V) -> V {
     if inv_mass == 0.0 {
         V::ZERO
     } else {
-        f * inv_mass
+        f * inv_mass + g
     }
+}
+
+/// Whether a position or velocity has a NaN or infinite component (branch-free, vectorisable).
+#[inline(always)]
+pub(crate) fn bad<V: Vector>(x: V, v: V) -> bool {
+    let mut b = false;
+    for k in 0..V::DIM {
+        b |= !x.comp(k).is_finite() | !v.comp(k).is_finite();
+    }
+    b
 }

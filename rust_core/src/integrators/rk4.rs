@@ -1,6 +1,6 @@
 //! Classic fourth-order Runge–Kutta on (x, v) (Kutta 1901; Hairer, Nørsett & Wanner, Solving
 //! ODEs I, Table 1.2). Fourth order, not symplectic, four force evaluations per step.
-use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -17,12 +17,12 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "rk4", order: 4, symplectic: false, force_evals_per_step: 4 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) {
+    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         for b in [&mut self.f, &mut self.xs, &mut self.vs, &mut self.ax, &mut self.av] {
             ensure_len(b, n);
         }
-        let im = &sys.model.inv_mass;
+        let (im, g) = (&sys.model.inv_mass, sys.forces.g);
         let (x0, v0) = (&sys.state.x, &sys.state.v);
 
         // Stage 1 at (x, v).
@@ -32,7 +32,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
         par::chunks4(&mut self.xs, &mut self.vs, &mut self.ax, &mut self.av, |s, xs, vs, ax, av| {
             for k in 0..xs.len() {
                 let i = s + k;
-                let a = accel(f[i], im[i]);
+                let a = accel(f[i], im[i], g);
                 ax[k] = v0[i];
                 av[k] = a;
                 xs[k] = x0[i] + v0[i] * (0.5 * dt);
@@ -47,7 +47,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
             par::chunks4(&mut self.xs, &mut self.vs, &mut self.ax, &mut self.av, |s, xs, vs, ax, av| {
                 for k in 0..xs.len() {
                     let i = s + k;
-                    let a = accel(f[i], im[i]);
+                    let a = accel(f[i], im[i], g);
                     ax[k] += vs[k] * 2.0;
                     av[k] += a * 2.0;
                     xs[k] = x0[i] + vs[k] * stage_dt;
@@ -60,13 +60,16 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
         sys.forces.book_power(dt / 6.0);
         let (f, vs, ax, av) = (&self.f, &self.vs, &self.ax, &self.av);
         let w = dt / 6.0;
-        par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
+        par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
+            let mut b = false;
             for k in 0..x.len() {
                 let i = s + k;
                 x[k] += (ax[i] + vs[i]) * w;
-                v[k] += (av[i] + accel(f[i], im[i])) * w;
+                v[k] += (av[i] + accel(f[i], im[i], g)) * w;
+                b |= bad(x[k], v[k]);
             }
-        });
+            b
+        })
     }
     fn last_forces(&self) -> &[V] {
         &self.f

@@ -1,6 +1,6 @@
 //! Semi-implicit (symplectic) Euler, kick then drift: v' = v + dt a(x, v); x' = x + dt v'.
 //! First order, symplectic: bounded energy error on conservative systems for ω·dt < 2.
-use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -13,19 +13,22 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "semi_implicit_euler", order: 1, symplectic: true, force_evals_per_step: 1 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) {
+    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         ensure_len(&mut self.f, n);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
         sys.forces.book_power(dt);
-        let (f, im) = (&self.f, &sys.model.inv_mass);
-        par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
+        let (f, im, g) = (&self.f, &sys.model.inv_mass, sys.forces.g);
+        par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
+            let mut b = false;
             for k in 0..x.len() {
                 let i = s + k;
-                v[k] += accel(f[i], im[i]) * dt;
+                v[k] += accel(f[i], im[i], g) * dt;
                 x[k] += v[k] * dt;
+                b |= bad(x[k], v[k]);
             }
-        });
+            b
+        })
     }
     fn last_forces(&self) -> &[V] {
         &self.f

@@ -3,7 +3,7 @@
 //! Second order, symplectic, time-reversible. The force at x' is kept for the next step
 //! ("first same as last"), so it costs one force evaluation per step. Velocity-dependent forces
 //! (drag, dashpots) are evaluated with v½, the usual explicit choice.
-use super::{accel, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -19,7 +19,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "verlet", order: 2, symplectic: true, force_evals_per_step: 1 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) {
+    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         if !self.valid || self.f.len() != n {
             ensure_len(&mut self.f, n);
@@ -31,11 +31,11 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
         sys.forces.set_last_power(&self.p);
         sys.forces.book_power(0.5 * dt);
         let half = 0.5 * dt;
-        let (f, im) = (&self.f, &sys.model.inv_mass);
+        let (f, im, g) = (&self.f, &sys.model.inv_mass, sys.forces.g);
         par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             for k in 0..x.len() {
                 let i = s + k;
-                v[k] += accel(f[i], im[i]) * half;
+                v[k] += accel(f[i], im[i], g) * half;
                 x[k] += v[k] * dt;
             }
         });
@@ -44,12 +44,15 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
         self.p.clear();
         self.p.extend_from_slice(sys.forces.last_power());
         let f = &self.f;
-        par::chunks1(&mut sys.state.v, |s, v| {
+        par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
+            let mut b = false;
             for k in 0..v.len() {
                 let i = s + k;
-                v[k] += accel(f[i], im[i]) * half;
+                v[k] += accel(f[i], im[i], g) * half;
+                b |= bad(x[k], v[k]);
             }
-        });
+            b
+        })
     }
     fn last_forces(&self) -> &[V] {
         &self.f

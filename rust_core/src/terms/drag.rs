@@ -14,16 +14,15 @@ impl<V: Vector> Term<V> for Drag {
     fn name(&self) -> &str {
         &self.name
     }
-    fn add_forces(&mut self, _x: &[V], v: &[V], model: &Model, f: &mut [V], want: bool) -> Real {
+    fn add_forces(&mut self, _x: &[V], v: &[V], model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
         let b = self.b;
         let body = |s: usize, f: &mut [V]| {
             let mut p = 0.0;
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
-                if model.inv_mass[i] != 0.0 {
-                    *fi -= v[i] * b;
-                    p += b * v[i].length_squared();
-                }
+                let fd = if model.inv_mass[i] != 0.0 { v[i] * (-b) } else { V::ZERO };
+                *fi = if assign { fd } else { *fi + fd };
+                p += b * v[i].length_squared();
             }
             p
         };

@@ -14,18 +14,19 @@ impl<V: Vector> Term<V> for UniformGravity<V> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool) -> Real {
+    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
         let g = self.g;
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
-                // Pinned particles feel no force that matters; skip so their books stay zero.
-                if model.inv_mass[i] != 0.0 {
-                    *fi += g * model.mass[i];
-                }
+                let fg = if model.inv_mass[i] != 0.0 { g * model.mass[i] } else { V::ZERO };
+                *fi = if assign { fg } else { *fi + fg };
             }
         });
         0.0
+    }
+    fn uniform_acceleration(&self) -> Option<V> {
+        Some(self.g)
     }
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         let g = self.g;

@@ -17,9 +17,15 @@ pub use springs::Springs;
 pub trait Term<V: Vector>: Send + Sync {
     /// Stable name used as the key of the energy books (unique within a scene).
     fn name(&self) -> &str;
-    /// Adds this term's forces (N) to `f`. If `want_power`, returns the power it dissipates
-    /// at this state (W, ≥ 0); otherwise the return value is unspecified (0).
-    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool) -> Real;
+    /// Adds this term's forces (N) to `f` — or, if `assign`, writes them over whatever `f` holds
+    /// (saves a zeroing pass for the first term). If `want_power`, returns the power it
+    /// dissipates at this state (W, ≥ 0); otherwise the return value is unspecified (0).
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real;
+    /// `Some(g)` for a uniform acceleration field (uniform gravity): integrators then add `g` to
+    /// every free particle's acceleration directly and `add_forces` is never called.
+    fn uniform_acceleration(&self) -> Option<V> {
+        None
+    }
     /// Potential energy (J) if the term is conservative (or has a conservative part).
     fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
     /// Whether the term can dissipate energy (drag, dashpots).
@@ -44,30 +50,42 @@ pub struct ForceSet<V: Vector> {
     any_dissipative: bool,
     /// Force evaluations so far (for the work-precision books).
     pub evaluations: u64,
+    /// Sum of the uniform acceleration fields (m/s²), applied by the integrators.
+    pub g: V,
 }
 
 impl<V: Vector> Default for ForceSet<V> {
     fn default() -> Self {
-        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0 }
+        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0, g: V::ZERO }
     }
 }
 
 impl<V: Vector> ForceSet<V> {
     pub fn push(&mut self, t: Box<dyn Term<V>>) {
         self.any_dissipative |= t.dissipative();
+        if let Some(g) = t.uniform_acceleration() {
+            self.g += g;
+        }
         self.terms.push(t);
         self.dissipated.push(0.0);
         self.power.push(0.0);
     }
 
-    /// Total force (N) at `(x, v)` into `f`. Remembers each term's dissipated power at this
-    /// state for a following `book_power` call.
+    /// Total force (N) at `(x, v)` into `f`, uniform fields excluded (see `g`). Remembers each
+    /// term's dissipated power at this state for a following `book_power` call.
     pub fn eval(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
         self.evaluations += 1;
-        par::chunks1(f, |_, f| f.fill(V::ZERO));
         let want = self.any_dissipative;
+        let mut assign = true;
         for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
-            *p = t.add_forces(x, v, model, f, want && t.dissipative());
+            if t.uniform_acceleration().is_some() {
+                continue;
+            }
+            *p = t.add_forces(x, v, model, f, want && t.dissipative(), assign);
+            assign = false;
+        }
+        if assign {
+            par::chunks1(f, |_, f| f.fill(V::ZERO));
         }
     }
 

@@ -148,7 +148,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         &self.name
     }
 
-    fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool) -> Real {
+    fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
         self.pack(x, model);
         let kernel = pick_kernel();
         let (xs, ys, zs, ms) = (&self.xs, &self.ys, &self.zs, &self.ms);
@@ -156,6 +156,9 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         let g = self.g;
         let body = |i: usize, fi: &mut V| {
             if model.inv_mass[i] == 0.0 {
+                if assign {
+                    *fi = V::ZERO;
+                }
                 return; // pinned: its force is never used
             }
             let a = kernel(xs[i], ys[i], zs[i], xs, ys, zs, ms, eps2);
@@ -164,7 +167,8 @@ impl<V: Vector> Term<V> for PairwiseGravity {
             for k in 0..V::DIM {
                 buf[k] = a[k] * gm;
             }
-            *fi += V::from_slice(&buf);
+            let fg = V::from_slice(&buf);
+            *fi = if assign { fg } else { *fi + fg };
         };
         // O(N) work per item: parallel from a few dozen particles on, in fixed small chunks.
         if x.len() >= 64 {
