@@ -12,7 +12,6 @@ import warnings
 from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
-import pytest
 from hypothesis import HealthCheck, settings
 
 import physcore as pc
@@ -42,12 +41,6 @@ INTEGRATOR_NAMES: Tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
 SYMPLECTIC: Tuple[str, ...] = ("semi_implicit_euler", "verlet")
 
 EPS = np.finfo(np.float64).eps
-
-
-@pytest.fixture(params=INTEGRATOR_NAMES)
-def integrator(request) -> str:
-    """Each integrator name in turn."""
-    return request.param
 
 
 # --------------------------------------------------------------------------- scene builders
@@ -178,7 +171,3 @@ def phase_norm(scene: pc.Scene, particle: int = 1, omega: float = 1.0) -> float:
 def fit_slope(xs: Sequence[float], ys: Sequence[float]) -> float:
     """Least-squares slope of ys against xs."""
     return float(np.polyfit(np.asarray(xs, float), np.asarray(ys, float), 1)[0])
-
-
-def state(scene: pc.Scene) -> Tuple[np.ndarray, np.ndarray]:
-    return scene.positions, scene.velocities

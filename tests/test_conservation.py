@@ -10,7 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import physcore as pc
-from conftest import EPS, SYMPLECTIC, random_cloud, random_network, sample, total_energy
+from conftest import SYMPLECTIC, random_cloud, random_network, sample, total_energy
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)
 

@@ -31,7 +31,7 @@ __all__ = [
 
 
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
-    if name in ("scenes", "render", "diagnostics"):
+    if name in ("scenes", "render", "cli"):
         import importlib
 
         return importlib.import_module(f".{name}", __name__)

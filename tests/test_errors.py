@@ -1,0 +1,303 @@
+"""Bad input is refused before anything changes; divergence is reported and rolled back."""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+import physcore as pc
+
+
+@pytest.fixture
+def scene2d() -> pc.Scene:
+    s = pc.Scene(2, integrator="verlet", dt=1e-3, threads=1)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], [[0.0, 0.0], [0.0, 0.5], [0.1, 0.0]], masses=[1.0, 2.0, 3.0], pinned=[True, False, False])
+    s.add(pc.Springs([0, 1], [1, 2], stiffness=10.0))
+    s.step(5)
+    return s
+
+
+def _snapshot(s: pc.Scene):
+    return (
+        s.n_particles,
+        s.positions,
+        s.velocities,
+        s.masses,
+        s.pinned,
+        tuple(t.name for t in s.terms),
+        len(s.planes),
+        s.step_count,
+        s.time,
+        s.dt,
+        s.integrator,
+        s.energy(),
+    )
+
+
+def _assert_unchanged(s: pc.Scene, snap) -> None:
+    now = _snapshot(s)
+    assert now[0] == snap[0]
+    for a, b in zip(now[1:5], snap[1:5]):
+        assert np.array_equal(a, b)
+    assert now[5:] == snap[5:]
+
+
+def _raises(s: pc.Scene, exc, arg: str, fn):
+    """``fn()`` raises ``exc`` whose message names ``arg``; the scene is unchanged."""
+    snap = _snapshot(s)
+    with pytest.raises(exc) as info:
+        fn()
+    assert re.search(rf"\b{re.escape(arg)}\b", str(info.value)), f"message does not name {arg!r}: {info.value}"
+    _assert_unchanged(s, snap)
+    return info.value
+
+
+def test_invalid_input_error_is_a_value_error():
+    assert issubclass(pc.InvalidInputError, ValueError)
+    assert issubclass(pc.InvalidInputError, pc.PhyscoreError)
+    assert issubclass(pc.SimulationDiverged, pc.PhyscoreError)
+    assert issubclass(pc.SimulationDiverged, RuntimeError)
+    assert not issubclass(pc.SimulationDiverged, ValueError)
+
+
+# ----------------------------------------------------------------------------- add_particles
+@pytest.mark.parametrize(
+    "kwargs, arg",
+    [
+        (dict(positions=np.zeros((2, 3))), "positions"),  # 3D points in a 2D scene
+        (dict(positions=np.zeros((2, 2, 1))), "positions"),
+        (dict(positions=np.zeros(5)), "positions"),
+        (dict(positions=np.zeros((2, 2)), velocities=np.zeros((3, 2))), "velocities"),
+        (dict(positions=np.zeros((2, 2)), velocities=np.zeros((2, 3))), "velocities"),
+        (dict(positions=np.zeros((2, 2)), masses=[1.0, 2.0, 3.0]), "masses"),
+        (dict(positions=np.zeros((2, 2)), masses=np.ones((2, 1))), "masses"),
+        (dict(positions=[[0.0, np.nan]]), "positions"),
+        (dict(positions=[[0.0, 0.0], [np.inf, 1.0]]), "positions"),
+        (dict(positions=[[0.0, 0.0]], velocities=[[0.0, -np.inf]]), "velocities"),
+        (dict(positions=[[0.0, 0.0]], masses=np.nan), "masses"),
+        (dict(positions=[[0.0, 0.0]], masses=np.inf), "masses"),
+        (dict(positions=[[0.0, 0.0], [1.0, 1.0]], masses=[1.0, 0.0]), "masses"),
+        (dict(positions=[[0.0, 0.0], [1.0, 1.0]], masses=[1.0, -2.0]), "masses"),
+        (dict(positions=[[0.0, 0.0], [1.0, 1.0]], pinned=[True]), "pinned"),
+    ],
+)
+def test_add_particles_value_errors(scene2d, kwargs, arg):
+    e = _raises(scene2d, ValueError, arg, lambda: scene2d.add_particles(**kwargs))
+    assert isinstance(e, pc.InvalidInputError)
+
+
+@pytest.mark.parametrize(
+    "kwargs, arg",
+    [
+        (dict(positions=[["a", "b"]]), "positions"),
+        (dict(positions=np.zeros((1, 2), dtype=complex)), "positions"),
+        (dict(positions=np.zeros((1, 2), dtype=bool)), "positions"),
+        (dict(positions=[[0.0, 0.0]], velocities=np.zeros((1, 2), dtype=complex)), "velocities"),
+        (dict(positions=[[0.0, 0.0]], masses="heavy"), "masses"),
+        (dict(positions=[[0.0, 0.0]], masses=1 + 2j), "masses"),
+        (dict(positions=[[0.0, 0.0]], pinned=[1]), "pinned"),
+    ],
+)
+def test_add_particles_type_errors(scene2d, kwargs, arg):
+    _raises(scene2d, TypeError, arg, lambda: scene2d.add_particles(**kwargs))
+
+
+def test_positions_setter_validates(scene2d):
+    _raises(scene2d, ValueError, "positions", lambda: setattr(scene2d, "positions", np.zeros((2, 2))))
+    _raises(scene2d, ValueError, "positions", lambda: setattr(scene2d, "positions", np.full((3, 2), np.nan)))
+    _raises(scene2d, TypeError, "positions", lambda: setattr(scene2d, "positions", np.zeros((3, 2), dtype=complex)))
+    _raises(scene2d, ValueError, "velocities", lambda: setattr(scene2d, "velocities", np.zeros((3, 3))))
+    _raises(scene2d, ValueError, "velocities", lambda: setattr(scene2d, "velocities", [[0, 0], [0, np.inf], [0, 0]]))
+
+
+# ----------------------------------------------------------------------------- scene settings
+@pytest.mark.parametrize("dt", [0.0, -1e-3, math.nan, math.inf, -math.inf])
+def test_bad_dt(scene2d, dt):
+    _raises(scene2d, ValueError, "dt", lambda: setattr(scene2d, "dt", dt))
+    with pytest.raises(ValueError, match="dt"):
+        pc.Scene(2, dt=dt)
+
+
+@pytest.mark.parametrize("dt", ["1e-3", None, True, 1e-3 + 0j])
+def test_dt_wrong_type(scene2d, dt):
+    _raises(scene2d, TypeError, "dt", lambda: setattr(scene2d, "dt", dt))
+
+
+def test_unknown_integrator_lists_valid_names(scene2d):
+    names = [d["name"] for d in pc.INTEGRATORS]
+    for call in (lambda: pc.Scene(2, integrator="leapfrog"), lambda: setattr(scene2d, "integrator", "leapfrog")):
+        snap = _snapshot(scene2d)
+        with pytest.raises(ValueError, match="integrator") as info:
+            call()
+        assert "leapfrog" in str(info.value)
+        for n in names:
+            assert n in str(info.value)
+        _assert_unchanged(scene2d, snap)
+    _raises(scene2d, TypeError, "integrator", lambda: setattr(scene2d, "integrator", 4))
+
+
+@pytest.mark.parametrize("dim", [0, 1, 4])
+def test_unknown_dim(dim):
+    with pytest.raises(ValueError, match=r"\bdim\b"):
+        pc.Scene(dim)
+
+
+@pytest.mark.parametrize("dim", [2.0, "2", True, None])
+def test_dim_wrong_type(dim):
+    with pytest.raises(TypeError, match=r"\bdim\b"):
+        pc.Scene(dim)
+
+
+@pytest.mark.parametrize("threads, exc", [(0, ValueError), (-2, ValueError), (1.5, TypeError), ("2", TypeError), (True, TypeError)])
+def test_bad_threads(threads, exc):
+    with pytest.raises(exc, match="threads"):
+        pc.Scene(2, threads=threads)
+
+
+# ----------------------------------------------------------------------------- terms
+def test_spring_index_out_of_range(scene2d):
+    _raises(scene2d, ValueError, "j", lambda: scene2d.add(pc.Springs([0], [3])))
+    _raises(scene2d, ValueError, "i", lambda: scene2d.add(pc.Springs([7], [1])))
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, arg",
+    [
+        (dict(i=[0, 1], j=[1, 1]), ValueError, "i/j"),  # a spring from particle 1 to itself
+        (dict(i=[0], j=[-1]), ValueError, "j"),
+        (dict(i=[0, 1], j=[1]), ValueError, "j"),
+        (dict(i=[0], j=[1], stiffness=-1.0), ValueError, "stiffness"),
+        (dict(i=[0], j=[1], stiffness=np.nan), ValueError, "stiffness"),
+        (dict(i=[0, 1], j=[1, 2], stiffness=[1.0, 2.0, 3.0]), ValueError, "stiffness"),
+        (dict(i=[0], j=[1], damping=-0.1), ValueError, "damping"),
+        (dict(i=[0], j=[1], rest_length=-1.0), ValueError, "rest_length"),
+        (dict(i=[0.0], j=[1.0]), TypeError, "i"),
+        (dict(i=[0], j=[1], stiffness="stiff"), TypeError, "stiffness"),
+    ],
+)
+def test_springs_validation(kwargs, exc, arg):
+    with pytest.raises(exc) as info:
+        pc.Springs(**kwargs)
+    assert re.search(rf"(^|\W){re.escape(arg)}\b", str(info.value)), str(info.value)
+
+
+@pytest.mark.parametrize(
+    "make, exc, arg",
+    [
+        (lambda: pc.Plane([0.0, 0.0], [0.0, 0.0]), ValueError, "normal"),
+        (lambda: pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=1.5), ValueError, "restitution"),
+        (lambda: pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=-0.1), ValueError, "restitution"),
+        (lambda: pc.Plane([0.0, 0.0], [0.0, 1.0], friction=-1.0), ValueError, "friction"),
+        (lambda: pc.Plane([0.0, 0.0], [0.0, 0.0, 1.0]), ValueError, "normal"),
+        (lambda: pc.Plane([0.0, np.nan], [0.0, 1.0]), ValueError, "point"),
+        (lambda: pc.Gravity([0.0, 0.0, 0.0, -9.8]), ValueError, "g"),
+        (lambda: pc.Gravity([0.0, np.inf]), ValueError, "g"),
+        (lambda: pc.Gravity(["a", "b"]), TypeError, "g"),
+        (lambda: pc.Drag(-1.0), ValueError, "coefficient"),
+        (lambda: pc.Drag(math.nan), ValueError, "coefficient"),
+        (lambda: pc.Drag("1"), TypeError, "coefficient"),
+        (lambda: pc.PairwiseGravity(G=0.0), ValueError, "G"),
+        (lambda: pc.PairwiseGravity(G=-1.0), ValueError, "G"),
+        (lambda: pc.PairwiseGravity(softening=-0.1), ValueError, "softening"),
+    ],
+)
+def test_term_constructors_validate(make, exc, arg):
+    with pytest.raises(exc) as info:
+        make()
+    assert re.search(rf"\b{re.escape(arg)}\b", str(info.value)), str(info.value)
+
+
+def test_vector_of_wrong_length_for_scene(scene2d):
+    _raises(scene2d, ValueError, "g", lambda: scene2d.add(pc.Gravity([0.0, 0.0, -9.81])))
+    _raises(scene2d, ValueError, "point", lambda: scene2d.add(pc.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0])))
+    s3 = pc.Scene(3)
+    s3.add_particles([[0.0, 0.0, 0.0]])
+    _raises(s3, ValueError, "g", lambda: s3.add(pc.Gravity([0.0, -9.81])))
+
+
+@pytest.mark.parametrize("item", [None, 3.0, "gravity", np.zeros(2), pc.Gravity])
+def test_add_non_term_is_type_error(scene2d, item):
+    _raises(scene2d, TypeError, "item", lambda: scene2d.add(item))
+
+
+# ----------------------------------------------------------------------------- step()
+def test_step_argument(scene2d):
+    _raises(scene2d, ValueError, "n", lambda: scene2d.step(-1))
+    for bad in (1.5, "3", None, True):
+        _raises(scene2d, TypeError, "n", lambda: scene2d.step(bad))
+    # step(0) is a no-op; numpy integers are ints.
+    snap = _snapshot(scene2d)
+    scene2d.step(0)
+    _assert_unchanged(scene2d, snap)
+    scene2d.step(np.int64(2))
+    assert scene2d.step_count == snap[7] + 2
+
+
+def test_load_rejects_missing_file(tmp_path):
+    with pytest.raises(OSError):
+        pc.Scene.load(tmp_path / "nope.npz")
+
+
+# ----------------------------------------------------------------------------- divergence
+def _stiff_scene(integrator: str = "euler") -> pc.Scene:
+    # ω = sqrt(k/m) = 1e6 rad/s.
+    s = pc.Scene(2, integrator=integrator, dt=1e-7, threads=1)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 0.0]], pinned=[True, False])
+    s.add(pc.Springs([0], [1], stiffness=1e12, rest_length=0.5))
+    return s
+
+
+@pytest.mark.parametrize("integrator", ["euler", "semi_implicit_euler", "verlet", "rk4"])
+def test_divergence_is_reported_and_rolled_back(integrator):
+    s = _stiff_scene(integrator)
+    s.step(50)  # fine at ω·dt = 0.1
+    assert np.all(np.isfinite(s.positions))
+    before = _snapshot(s)
+    s.dt = 1e-3  # ω·dt = 1000: far outside every method's stability region
+    with pytest.raises(pc.SimulationDiverged) as info:
+        s.step(100_000)
+    e = info.value
+    # Rolled back to where the failing call started.
+    after = _snapshot(s)
+    assert np.all(np.isfinite(s.positions)) and np.all(np.isfinite(s.velocities))
+    assert np.array_equal(after[1], before[1]) and np.array_equal(after[2], before[2])
+    assert s.step_count == before[7] == 50
+    assert s.time == before[8]
+    assert s.energy() == before[11]
+    # The exception names the step, the particle and a dt that would work.
+    assert e.rolled_back_to == 50
+    assert 50 < e.step <= 50 + 100_000
+    assert e.particle == 1  # the only free particle
+    assert e.quantity in ("position", "velocity")
+    assert math.isfinite(e.time) and e.time > before[8]
+    msg = str(e)
+    assert f"step {e.step}" in msg
+    assert f"particle {e.particle}" in msg
+    assert "dt" in msg
+    suggested = [float(m) for m in re.findall(r"(\d+(?:\.\d*)?e[+-]?\d+) s\b", msg)]
+    assert any(v == pytest.approx(e.suggested_dt, rel=1e-3) for v in suggested), msg
+    # Every method here is stable for ω·dt < 2 (Euler variants / Verlet) or 2.8 (RK4): the
+    # suggestion must be inside that, and smaller than the step that failed.
+    assert 0 < e.suggested_dt < 1e-3
+    assert 1e6 * e.suggested_dt < 2
+    # Following the advice works.
+    if integrator != "euler":  # explicit Euler is unstable at every dt on an undamped spring
+        s.dt = e.suggested_dt
+        s.step(1000)
+        assert np.all(np.isfinite(s.positions))
+        assert s.step_count == 1050
+
+
+def test_divergence_from_huge_velocities():
+    s = pc.Scene(3, integrator="verlet", dt=1e-3, threads=1)
+    s.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 1e300, 0.0], [0.0, 0.0, 0.0]])
+    s.add(pc.Springs([0, 1], [1, 2], stiffness=1.0))
+    x0 = s.positions
+    with pytest.raises(pc.SimulationDiverged) as info:
+        s.step(10)
+    assert info.value.particle in (0, 1, 2)
+    assert info.value.rolled_back_to == 0
+    assert s.step_count == 0 and s.time == 0.0
+    assert np.array_equal(s.positions, x0)
