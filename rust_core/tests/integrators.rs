@@ -83,3 +83,29 @@ fn symplectic_methods_have_no_secular_energy_drift() {
         assert!(first < 0.06, "{name}: error {first:e} too large at ω·dt = 0.1");
     }
 }
+
+/// Damped oscillator m x'' = -k x - c x' (m = k = 1, c = 0.4): x(t) = e^{-ζt}(cos ω_d t + ζ/ω_d sin ω_d t).
+fn damped_error(integrator: &str, dt: f64) -> f64 {
+    use physcore_core::terms::Springs;
+    let c = 0.4;
+    let mut s = physcore_core::Simulation::new(integrator, dt, Some(1)).unwrap();
+    s.add_particles(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)], vec![glam::DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false]).unwrap();
+    // Rest length 0.5 keeps the spring axis along x for |x| > 0.5 with a 0.5 amplitude.
+    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![c], vec![0.5], 2).unwrap())).unwrap();
+    s.set_state(Some(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)]), None).unwrap();
+    let n = (2.0 / dt).round() as u64;
+    s.step(n).unwrap();
+    let t = s.sys.state.t;
+    let (z, wd) = (c / 2.0, (1.0f64 - c * c / 4.0).sqrt());
+    let exact = 0.5 + 0.5 * (-z * t).exp() * ((wd * t).cos() + z / wd * (wd * t).sin());
+    (s.sys.state.x[1].x - exact).abs()
+}
+
+#[test]
+fn verlet_stays_second_order_with_velocity_dependent_forces() {
+    for (name, want) in [("verlet", 2.0), ("rk4", 4.0), ("semi_implicit_euler", 1.0)] {
+        let (e1, e2, e3) = (damped_error(name, 0.02), damped_error(name, 0.01), damped_error(name, 0.005));
+        let p = 0.5 * ((e1 / e2).log2() + (e2 / e3).log2());
+        assert!((p - want).abs() < 0.15, "{name}: observed order {p:.3} with damping, expected {want}");
+    }
+}

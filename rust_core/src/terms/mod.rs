@@ -100,6 +100,11 @@ impl<V: Vector> ForceSet<V> {
         }
     }
 
+    /// Whether any term depends on velocity (drag, dashpots).
+    pub fn velocity_dependent(&self) -> bool {
+        self.any_dissipative
+    }
+
     /// Power at the last `eval`, per term (W).
     pub fn last_power(&self) -> &[Real] {
         &self.power
