@@ -3,9 +3,17 @@
 //! Force on i from spring (i, j): f = [k (L − L0) + c (v_j − v_i)·n] n, n = (x_j − x_i)/L,
 //! and −f on j. Potential ½ k (L − L0)²; the dashpot dissipates c ((v_j − v_i)·n)².
 //!
-//! Each spring is evaluated once into a per-spring buffer (parallel over springs); then each
-//! particle gathers its own springs through a CSR incidence list (parallel over particles).
-//! No atomics and a fixed summation order: bit-identical results for any thread count.
+//! Each particle gathers the forces of its own springs (parallel over particles, no scatter, no
+//! atomics, a fixed summation order: bit-identical results for any thread count). A spring is
+//! thus evaluated once from each end; the two evaluations are exact negatives of each other
+//! (x_j − x_i = −(x_i − x_j) exactly in IEEE arithmetic), so momentum is conserved to round-off.
+//! Evaluating twice costs arithmetic but saves a per-spring force buffer and a second pass; the
+//! kernel is bound by memory traffic, not arithmetic.
+//!
+//! The incidence lists are stored as sliced ELLPACK with slices of 8 particles (SELL-8, the
+//! layout of sparse matrix–vector products on SIMD hardware: Kreutzer et al. 2014, SIAM J. Sci.
+//! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so the
+//! AVX-512 kernel handles 8 particles per instruction with contiguous loads of the spring data.
 use super::Term;
 use crate::error::{invalid, Result};
 use crate::par;
@@ -14,6 +22,7 @@ use crate::vector::{Real, Vector};
 
 pub struct Springs<V: Vector> {
     pub name: String,
+    /// Spring endpoints in canonical order (i < j, sorted by (i, j)).
     pub i: Vec<u32>,
     pub j: Vec<u32>,
     /// Stiffness k, N/m.
@@ -22,16 +31,25 @@ pub struct Springs<V: Vector> {
     pub c: Vec<Real>,
     /// Rest length L0, m.
     pub rest: Vec<Real>,
-    /// CSR incidence: particle p is endpoint i of springs `inc[off[p]..mid[p]]` (force +fs) and
-    /// endpoint j of springs `inc[mid[p]..off[p+1]]` (force −fs). Split so the gather has no
-    /// data-dependent branch.
-    off: Vec<u32>,
-    mid: Vec<u32>,
-    inc: Vec<u32>,
-    /// Scratch: force on endpoint i of each spring.
-    fs: Vec<V>,
+    /// SELL-8 incidence: slice g (particles 8g..8g+8) owns entries `start[g]..start[g+1]`, slot
+    /// `s`, lane `l` at `start[g] + 8 s + l`; padding entries point at the particle itself (a
+    /// zero-length spring exerts no force).
+    start: Vec<u32>,
+    other: Vec<u32>,
+    e_rest: Vec<Real>,
+    /// Per-entry k and c (empty when `uniform`).
+    e_k: Vec<Real>,
+    e_c: Vec<Real>,
+    /// Particles covered (the particle count when the springs were added).
+    n_cov: usize,
     any_damping: bool,
+    /// `Some((k, c))` when every spring has the same stiffness and damping (a cloth, a chain):
+    /// the kernels then stream no per-spring k and c.
+    uniform: Option<(Real, Real)>,
+    _v: std::marker::PhantomData<V>,
 }
+
+const SLICE: usize = 8;
 
 impl<V: Vector> Springs<V> {
     /// Builds the term; `n_particles` is the current particle count (indices must be below it).
@@ -65,10 +83,8 @@ impl<V: Vector> Springs<V> {
                 return Err(invalid("i/j", format!("spring {s} joins particle {a} to itself")));
             }
         }
-        // Canonical order: i < j, sorted by (i, j). Then each particle's "plus" springs are
-        // contiguous in the force buffer and its "minus" springs were written shortly before, so
-        // both passes walk memory nearly in order (the caller's spring order is not kept; no
-        // result depends on it beyond round-off in sums).
+        // Canonical order: i < j, sorted by (i, j), so each particle's springs are listed in a
+        // fixed order whatever order the caller gave.
         let (i, j, k, c, rest) = {
             let mut order: Vec<usize> = (0..m).collect();
             let key = |s: usize| (i[s].min(j[s]), i[s].max(j[s]));
@@ -81,32 +97,77 @@ impl<V: Vector> Springs<V> {
                 order.iter().map(|&s| rest[s]).collect::<Vec<Real>>(),
             )
         };
-        // CSR by counting sort of endpoints: per particle, its "i" springs then its "j" springs.
-        let mut n_i = vec![0u32; n_particles];
-        let mut n_j = vec![0u32; n_particles];
-        for s in 0..m {
-            n_i[i[s] as usize] += 1;
-            n_j[j[s] as usize] += 1;
-        }
-        let mut off = vec![0u32; n_particles + 1];
-        let mut mid = vec![0u32; n_particles];
-        for p in 0..n_particles {
-            mid[p] = off[p] + n_i[p];
-            off[p + 1] = mid[p] + n_j[p];
-        }
-        let mut fill_i = off[..n_particles].to_vec();
-        let mut fill_j = mid.clone();
-        let mut inc = vec![0u32; 2 * m];
-        for s in 0..m {
-            let a = i[s] as usize;
-            inc[fill_i[a] as usize] = s as u32;
-            fill_i[a] += 1;
-            let b = j[s] as usize;
-            inc[fill_j[b] as usize] = s as u32;
-            fill_j[b] += 1;
-        }
         let any_damping = c.iter().any(|&c| c > 0.0);
-        Ok(Self { name, i, j, k, c, rest, off, mid, inc, fs: vec![V::ZERO; m], any_damping })
+        let uniform = match (k.first(), c.first()) {
+            (Some(&k0), Some(&c0)) if k.iter().all(|&x| x == k0) && c.iter().all(|&x| x == c0) => Some((k0, c0)),
+            _ => None,
+        };
+        // Per-particle incidence lists (CSR, by counting sort), then SELL-8 slices.
+        let n = n_particles;
+        let mut off = vec![0u32; n + 1];
+        for s in 0..m {
+            off[i[s] as usize + 1] += 1;
+            off[j[s] as usize + 1] += 1;
+        }
+        for p in 0..n {
+            off[p + 1] += off[p];
+        }
+        let mut fill = off.clone();
+        let mut inc = vec![(0u32, 0u32); 2 * m]; // (other endpoint, spring)
+        for s in 0..m {
+            let (a, b) = (i[s] as usize, j[s] as usize);
+            inc[fill[a] as usize] = (j[s], s as u32);
+            fill[a] += 1;
+            inc[fill[b] as usize] = (i[s], s as u32);
+            fill[b] += 1;
+        }
+        let n_slices = n.div_ceil(SLICE);
+        let mut start = vec![0u32; n_slices + 1];
+        for g in 0..n_slices {
+            let w = (g * SLICE..((g + 1) * SLICE).min(n)).map(|p| off[p + 1] - off[p]).max().unwrap_or(0);
+            start[g + 1] = start[g] + SLICE as u32 * w;
+        }
+        let entries = start[n_slices] as usize;
+        let mut other = vec![0u32; entries];
+        let mut e_rest = vec![0.0; entries];
+        let (mut e_k, mut e_c) = if uniform.is_some() { (vec![], vec![]) } else { (vec![0.0; entries], vec![0.0; entries]) };
+        for g in 0..n_slices {
+            let w = (start[g + 1] - start[g]) as usize / SLICE;
+            for slot in 0..w {
+                for lane in 0..SLICE {
+                    let p = g * SLICE + lane;
+                    let e = start[g] as usize + SLICE * slot + lane;
+                    // Padding: the particle itself (or, past the last particle, the last one).
+                    other[e] = p.min(n - 1) as u32;
+                    if p < n && slot < (off[p + 1] - off[p]) as usize {
+                        let (o, s) = inc[off[p] as usize + slot];
+                        other[e] = o;
+                        e_rest[e] = rest[s as usize];
+                        if uniform.is_none() {
+                            e_k[e] = k[s as usize];
+                            e_c[e] = c[s as usize];
+                        }
+                    }
+                }
+            }
+        }
+        Ok(Self {
+            name,
+            i,
+            j,
+            k,
+            c,
+            rest,
+            start,
+            other,
+            e_rest,
+            e_k,
+            e_c,
+            n_cov: n,
+            any_damping,
+            uniform,
+            _v: std::marker::PhantomData,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -117,20 +178,41 @@ impl<V: Vector> Springs<V> {
     }
 
     #[inline(always)]
-    fn spring_force(&self, s: usize, x: &[V], v: &[V], want_power: bool) -> (V, Real) {
-        let (a, b) = (self.i[s] as usize, self.j[s] as usize);
-        let d = x[b] - x[a];
-        let l2 = d.length_squared();
-        if l2 <= 0.0 {
-            // Coincident endpoints: the axis is undefined, so the spring exerts no force.
-            return (V::ZERO, 0.0);
+    fn kc(&self, e: usize) -> (Real, Real) {
+        match self.uniform {
+            Some(kc) => kc,
+            None => (self.e_k[e], self.e_c[e]),
         }
-        let l = l2.sqrt();
-        let n = d * (1.0 / l); // one division, not one per component
-        let vn = (v[b] - v[a]).dot(n);
-        let c = self.c[s];
-        let mag = self.k[s] * (l - self.rest[s]) + c * vn;
-        (n * mag, if want_power { c * vn * vn } else { 0.0 })
+    }
+
+    /// Total spring force on particle `p` (N) and half the dashpot power of its springs (W).
+    #[inline(always)]
+    fn particle_force(&self, p: usize, x: &[V], v: &[V], want_power: bool) -> (V, Real) {
+        let g = p / SLICE;
+        let w = (self.start[g + 1] - self.start[g]) as usize / SLICE;
+        let base = self.start[g] as usize + p % SLICE;
+        let (xp, vp) = (x[p], v[p]);
+        let mut acc = V::ZERO;
+        let mut pw = 0.0;
+        for slot in 0..w {
+            let e = base + SLICE * slot;
+            let o = self.other[e] as usize;
+            let d = x[o] - xp;
+            let l2 = d.length_squared();
+            if l2 <= 0.0 {
+                // Padding, or coincident endpoints: the axis is undefined, no force.
+                continue;
+            }
+            let l = l2.sqrt();
+            let n = d * (1.0 / l); // one division, not one per component
+            let vn = (v[o] - vp).dot(n);
+            let (k, c) = self.kc(e);
+            acc += n * (k * (l - self.e_rest[e]) + c * vn);
+            if want_power {
+                pw += c * vn * vn;
+            }
+        }
+        (acc, 0.5 * pw)
     }
 }
 
@@ -151,43 +233,47 @@ fn simd_available<V: Vector>() -> bool {
 }
 
 impl<V: Vector> Springs<V> {
-    /// Eight springs per iteration with AVX-512: endpoints fetched by gather, 1/L from
-    /// `vrsqrt14pd` plus two Newton steps (a few ulp from the scalar path, whose sqrt and
-    /// division would dominate). Writes `out[..done]` for springs `s0..s0 + done` (a multiple of
-    /// 8); the caller finishes the rest with the scalar path. Returns (done, dissipated power).
+    /// Spring forces on the 8 particles of slice `g` (all below `n_cov`) with AVX-512: other
+    /// endpoints fetched by gather, 1/L from `vrsqrt14pd` plus two Newton steps (a few ulp from
+    /// the scalar path's sqrt and division). Writes (assign) or adds the forces into `out[..8]`;
+    /// returns half the dashpot power.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn forces_avx512(&self, s0: usize, out: &mut [V], x: &[V], v: &[V], want: bool) -> (usize, Real) {
+    unsafe fn slice_avx512(&self, g: usize, out: &mut [V], x: &[V], v: &[V], want: bool, assign: bool) -> Real {
         use std::arch::x86_64::*;
         let dim = V::DIM;
-        let xp = x.as_ptr() as *const f64;
-        let vp = v.as_ptr() as *const f64;
-        let n8 = out.len() / 8 * 8;
+        let xptr = x.as_ptr() as *const f64;
+        let vptr = v.as_ptr() as *const f64;
         let (zero, half, three_halves) = (_mm512_setzero_pd(), _mm512_set1_pd(0.5), _mm512_set1_pd(1.5));
-        let mut power = zero;
         let stride = _mm256_set1_epi32(dim as i32);
-        let mut k = 0;
-        while k < n8 {
-            let s = s0 + k;
-            let ia = _mm256_mullo_epi32(_mm256_loadu_si256(self.i.as_ptr().add(s) as *const __m256i), stride);
-            let ib = _mm256_mullo_epi32(_mm256_loadu_si256(self.j.as_ptr().add(s) as *const __m256i), stride);
+        let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let pidx = _mm256_mullo_epi32(_mm256_add_epi32(_mm256_set1_epi32((g * SLICE) as i32), lanes), stride);
+        let mut xp = [zero; 3];
+        let mut vp = [zero; 3];
+        for c in 0..dim {
+            xp[c] = _mm512_i32gather_pd::<8>(pidx, xptr.add(c));
+            vp[c] = _mm512_i32gather_pd::<8>(pidx, vptr.add(c));
+        }
+        let mut acc = [zero; 3];
+        let mut power = zero;
+        let (s0, s1) = (self.start[g] as usize, self.start[g + 1] as usize);
+        let mut e = s0;
+        while e < s1 {
+            // SAFETY: e + 8 <= s1 <= other.len(); indices < n_cov <= x.len() (checked in `new`).
+            let oi = _mm256_mullo_epi32(_mm256_loadu_si256(self.other.as_ptr().add(e) as *const __m256i), stride);
             let mut d = [zero; 3];
             let mut dv = [zero; 3];
             let mut l2 = zero;
             for c in 0..dim {
-                let xa = _mm512_i32gather_pd::<8>(ia, xp.add(c));
-                let xb = _mm512_i32gather_pd::<8>(ib, xp.add(c));
-                let va = _mm512_i32gather_pd::<8>(ia, vp.add(c));
-                let vb = _mm512_i32gather_pd::<8>(ib, vp.add(c));
-                d[c] = _mm512_sub_pd(xb, xa);
-                dv[c] = _mm512_sub_pd(vb, va);
+                d[c] = _mm512_sub_pd(_mm512_i32gather_pd::<8>(oi, xptr.add(c)), xp[c]);
+                dv[c] = _mm512_sub_pd(_mm512_i32gather_pd::<8>(oi, vptr.add(c)), vp[c]);
                 l2 = _mm512_fmadd_pd(d[c], d[c], l2);
             }
             let h = _mm512_mul_pd(l2, half);
             let mut y = _mm512_rsqrt14_pd(l2);
             y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
             y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
-            // Coincident endpoints (L = 0): no force, as in the scalar path.
+            // Padding and coincident endpoints (L = 0): no force, as in the scalar path.
             let y = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(l2, zero), y);
             let l = _mm512_mul_pd(l2, y);
             let mut vn = zero;
@@ -195,24 +281,29 @@ impl<V: Vector> Springs<V> {
                 d[c] = _mm512_mul_pd(d[c], y); // unit axis n
                 vn = _mm512_fmadd_pd(dv[c], d[c], vn);
             }
-            let kk = _mm512_loadu_pd(self.k.as_ptr().add(s));
-            let cc = _mm512_loadu_pd(self.c.as_ptr().add(s));
-            let l0 = _mm512_loadu_pd(self.rest.as_ptr().add(s));
+            let (kk, cc) = match self.uniform {
+                Some((k, c)) => (_mm512_set1_pd(k), _mm512_set1_pd(c)),
+                None => (_mm512_loadu_pd(self.e_k.as_ptr().add(e)), _mm512_loadu_pd(self.e_c.as_ptr().add(e))),
+            };
+            let l0 = _mm512_loadu_pd(self.e_rest.as_ptr().add(e));
             let mag = _mm512_fmadd_pd(cc, vn, _mm512_mul_pd(kk, _mm512_sub_pd(l, l0)));
+            for c in 0..dim {
+                acc[c] = _mm512_fmadd_pd(mag, d[c], acc[c]);
+            }
             if want {
                 power = _mm512_fmadd_pd(_mm512_mul_pd(cc, vn), vn, power);
             }
-            let mut lanes = [[0.0f64; 8]; 3];
-            for c in 0..dim {
-                _mm512_storeu_pd(lanes[c].as_mut_ptr(), _mm512_mul_pd(mag, d[c]));
-            }
-            for l in 0..8 {
-                let comps = [lanes[0][l], lanes[1][l], lanes[2][l]];
-                out[k + l] = V::from_slice(&comps[..dim]);
-            }
-            k += 8;
+            e += SLICE;
         }
-        (n8, _mm512_reduce_add_pd(power))
+        let mut comps = [[0.0f64; 8]; 3];
+        for c in 0..dim {
+            _mm512_storeu_pd(comps[c].as_mut_ptr(), acc[c]);
+        }
+        for (l, o) in out.iter_mut().enumerate().take(SLICE) {
+            let f = V::from_slice(&[comps[0][l], comps[1][l], comps[2][l]][..dim]);
+            *o = if assign { f } else { *o + f };
+        }
+        0.5 * _mm512_reduce_add_pd(power)
     }
 }
 
@@ -223,51 +314,36 @@ impl<V: Vector> Term<V> for Springs<V> {
 
     fn add_forces(&mut self, x: &[V], v: &[V], _model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
         let want = want && self.any_damping;
-        let mut fs = std::mem::take(&mut self.fs);
-        let this = &*self;
+        let n_cov = self.n_cov;
         let simd = simd_available::<V>();
-        let power = par::chunks1_sum(&mut fs, |s0, out| {
-            let mut done = 0;
-            let mut p = 0.0;
+        // Chunks start at multiples of par::CHUNK, itself a multiple of SLICE: slices never
+        // straddle two chunks.
+        let power = par::chunks1_sum(&mut f[..n_cov], |p0, f| {
+            let mut pw = 0.0;
+            let mut k = 0;
             #[cfg(target_arch = "x86_64")]
             if simd {
-                // SAFETY: AVX-512F was detected at run time; indices were validated in `new`.
-                let (d, pw) = unsafe { this.forces_avx512(s0, out, x, v, want) };
-                done = d;
-                p = pw;
-            }
-            for (k, o) in out.iter_mut().enumerate().skip(done) {
-                let (fv, pw) = this.spring_force(s0 + k, x, v, want);
-                *o = fv;
-                p += pw;
-            }
-            p
-        });
-        let power = if want { power } else { 0.0 };
-        // Gather: particles added after the springs have no incidences.
-        let n_cov = self.off.len() - 1;
-        let (off, mid, inc, fsr) = (&self.off, &self.mid, &self.inc, &fs);
-        par::chunks1(&mut f[..n_cov], |p0, f| {
-            for (k, fp) in f.iter_mut().enumerate() {
-                let p = p0 + k;
-                // Two accumulators: the sum is not one long chain of dependent additions.
-                let (mut a, mut b) = (V::ZERO, V::ZERO);
-                let plus = &inc[off[p] as usize..mid[p] as usize];
-                let minus = &inc[mid[p] as usize..off[p + 1] as usize];
-                for &s in plus {
-                    a += fsr[s as usize];
+                while k + SLICE <= f.len() {
+                    // SAFETY: AVX-512F detected at run time; the slice's 8 particles exist.
+                    pw += unsafe { self.slice_avx512((p0 + k) / SLICE, &mut f[k..k + SLICE], x, v, want, assign) };
+                    k += SLICE;
                 }
-                for &s in minus {
-                    b -= fsr[s as usize];
-                }
-                *fp = if assign { a + b } else { *fp + (a + b) };
             }
+            for (q, fp) in f.iter_mut().enumerate().skip(k) {
+                let (fv, p) = self.particle_force(p0 + q, x, v, want);
+                *fp = if assign { fv } else { *fp + fv };
+                pw += p;
+            }
+            pw
         });
         if assign {
             par::chunks1(&mut f[n_cov..], |_, f| f.fill(V::ZERO));
         }
-        self.fs = fs;
-        power
+        if want {
+            power
+        } else {
+            0.0
+        }
     }
 
     fn potential(&self, x: &[V], _m: &Model) -> Option<Real> {
@@ -287,16 +363,21 @@ impl<V: Vector> Term<V> for Springs<V> {
     }
 
     fn min_particles(&self) -> usize {
-        self.off.len() - 1
+        self.n_cov
     }
 
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         // Gershgorin bound on the largest angular frequency of the linearised network:
         // ω_max² ≤ max_p 2 (1/m_p) Σ_{s ∋ p} k_s (equal masses; a safe estimate otherwise).
-        let n = self.off.len() - 1;
         let mut w2: Real = 0.0;
-        for p in 0..n {
-            let ks: Real = self.inc[self.off[p] as usize..self.off[p + 1] as usize].iter().map(|&s| self.k[s as usize]).sum();
+        for p in 0..self.n_cov {
+            let g = p / SLICE;
+            let w = (self.start[g + 1] - self.start[g]) as usize / SLICE;
+            let ks: Real = (0..w)
+                .map(|slot| self.start[g] as usize + SLICE * slot + p % SLICE)
+                .filter(|&e| self.other[e] as usize != p)
+                .map(|e| self.kc(e).0)
+                .sum();
             w2 = w2.max(2.0 * model.inv_mass[p] * ks);
         }
         (w2 > 0.0).then(|| 1.0 / w2.sqrt())
