@@ -126,7 +126,13 @@ unsafe fn accel_avx2(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs:
 
 type AccelFn = fn(Real, Real, Real, &[Real], &[Real], &[Real], &[Real], Real) -> [Real; 3];
 
+/// The kernel for this CPU, decided once per process.
 fn pick_kernel() -> AccelFn {
+    static KERNEL: std::sync::OnceLock<AccelFn> = std::sync::OnceLock::new();
+    *KERNEL.get_or_init(detect_kernel)
+}
+
+fn detect_kernel() -> AccelFn {
     #[cfg(target_arch = "x86_64")]
     {
         if std::env::var_os("PHYSCORE_NO_SIMD").is_none() {
