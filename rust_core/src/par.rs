@@ -116,34 +116,28 @@ pub fn chunks1_sum<A: Send>(
     partials.into_iter().fold(0.0, |a, b| a + b)
 }
 
-/// Index of the first item (in index order) for which `bad` holds, if any.
-pub fn find_first(n: usize, bad: impl Fn(usize) -> bool + Sync + Send) -> Option<usize> {
-    if n >= PAR_MIN {
-        (0..n).into_par_iter().find_first(|&i| bad(i))
+/// Like `chunks2`, with each chunk returning a value; the values are folded in chunk order
+/// (deterministic for any thread count).
+pub fn chunks2_fold<A: Send, B: Send, T: Send>(
+    a: &mut [A],
+    b: &mut [B],
+    zero: T,
+    fold: impl Fn(T, T) -> T,
+    f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
+) -> T {
+    let partials: Vec<T> = if a.len() >= PAR_MIN {
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
     } else {
-        (0..n).find(|&i| bad(i))
-    }
+        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    };
+    partials.into_iter().fold(zero, fold)
 }
 
-/// Whether `f(range)` holds for any fixed chunk of `0..n`.
-pub fn any(n: usize, f: impl Fn(Range<usize>) -> bool + Sync + Send) -> bool {
-    if n >= PAR_MIN {
-        ranges(n).collect::<Vec<_>>().into_par_iter().any(&f)
-    } else {
-        ranges(n).any(&f)
-    }
-}
-
-/// Like `chunks2`, with each chunk returning a flag; returns whether any chunk raised it.
+/// `chunks2` whose chunks raise a flag; returns whether any did.
 pub fn chunks2_any<A: Send, B: Send>(
     a: &mut [A],
     b: &mut [B],
     f: impl Fn(usize, &mut [A], &mut [B]) -> bool + Sync + Send,
 ) -> bool {
-    let flags: Vec<bool> = if a.len() >= PAR_MIN {
-        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
-    } else {
-        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
-    };
-    flags.into_iter().any(|x| x)
+    chunks2_fold(a, b, false, |x, y| x | y, f)
 }

@@ -27,9 +27,9 @@ impl<V: Vector> Plane<V> {
     /// `f_last`: forces of the last evaluation; `g`: uniform acceleration (not in `f_last`).
     pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
-        let touched = std::sync::atomic::AtomicBool::new(false);
-        let diss = sum2(x, v, |s, x, v| {
+        par::chunks2_fold(x, v, (0.0, false), |a, b| (a.0 + b.0, a.1 | b.1), |s, x, v| {
             let mut d = 0.0;
+            let mut touched = false;
             for k in 0..x.len() {
                 let i = s + k;
                 if model.inv_mass[i] == 0.0 {
@@ -39,7 +39,7 @@ impl<V: Vector> Plane<V> {
                 if depth >= 0.0 {
                     continue;
                 }
-                touched.store(true, std::sync::atomic::Ordering::Relaxed);
+                touched = true;
                 let m = model.mass[i];
                 let ke0 = 0.5 * m * v[k].length_squared();
                 let dx = n * (-depth);
@@ -63,22 +63,7 @@ impl<V: Vector> Plane<V> {
                 let du = -f.dot(dx);
                 d += (ke0 - ke1) - du;
             }
-            d
-        });
-        (diss, touched.into_inner())
+            (d, touched)
+        })
     }
-}
-
-fn sum2<V: Vector>(x: &mut [V], v: &mut [V], f: impl Fn(usize, &mut [V], &mut [V]) -> Real + Sync + Send) -> Real {
-    use rayon::prelude::*;
-    let partials: Vec<Real> = if x.len() >= par::PAR_MIN {
-        x.par_chunks_mut(par::CHUNK)
-            .zip(v.par_chunks_mut(par::CHUNK))
-            .enumerate()
-            .map(|(c, (x, v))| f(c * par::CHUNK, x, v))
-            .collect()
-    } else {
-        x.chunks_mut(par::CHUNK).zip(v.chunks_mut(par::CHUNK)).enumerate().map(|(c, (x, v))| f(c * par::CHUNK, x, v)).collect()
-    };
-    partials.into_iter().fold(0.0, |a, b| a + b)
 }
