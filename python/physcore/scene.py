@@ -439,9 +439,10 @@ class Scene:
         return float(l[2]) if self.dim == 2 else l
 
     def suggest_dt(self) -> float:
-        """Half of the fastest time scale of the scene's terms, s (springs: 1/ω_max from a
-        Gershgorin bound; pairwise gravity: closest free-fall time; drag: m/b); the current dt
-        if no term has one."""
+        """Half of the fastest time scale of the scene's terms, s (springs: 1/ω_max and, with
+        dashpots, 1/λ_max = m/(2 Σc), both from Gershgorin bounds; pairwise gravity: closest
+        free-fall time; drag: m/b); the current dt if no term has one. Explicit integrators are
+        stable at this dt; pairwise gravity can later reach shorter time scales than now."""
         return self._sim.suggest_dt()
 
     # ---------------------------------------------------------------- persistence

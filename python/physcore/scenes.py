@@ -59,7 +59,7 @@ def cloth(
     size: float = 1.0,
     mass: float = 1.0,
     stiffness: float = 2000.0,
-    damping: float = 0.5,
+    damping: float = 0.1,
     air_drag: float = 0.5,
     pin: str = "edge",
     ground: bool = False,
@@ -74,7 +74,7 @@ def cloth(
     springs (stiffness N/m, dashpot damping N·s/m) join neighbours; gravity is (0, 0, -9.81) m/s²;
     linear air drag b = air_drag · m per particle (air_drag in 1/s; 0 turns it off).
     ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5). ``dt=None``
-    uses 1/ω_max (twice :meth:`Scene.suggest_dt`), half of velocity Verlet's stability limit.
+    uses twice :meth:`Scene.suggest_dt` (1/ω_max here), half of velocity Verlet's stability limit.
     """
     n = _count(n, "n", 2)
     size, mass, stiffness = _positive(size, "size"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
@@ -98,7 +98,8 @@ def cloth(
     if ground:
         scene.add(Plane([0.0, 0.0, -0.8 * size], [0.0, 0.0, 1.0], restitution=0.1, friction=0.5))
     if dt is None:
-        # suggest_dt() is 1/(2 ω_max); 1/ω_max is still well inside Verlet's limit 2/ω_max.
+        # suggest_dt() is half the fastest time scale (1/ω_max or the dashpot's 1/λ_max); twice
+        # that is still well inside velocity Verlet's limits (2/ω_max; 2/λ_max with dashpots).
         scene.dt = 2 * scene.suggest_dt()
     return scene
 

@@ -109,3 +109,22 @@ fn verlet_stays_second_order_with_velocity_dependent_forces() {
         assert!((p - want).abs() < 0.15, "{name}: observed order {p:.3} with damping, expected {want}");
     }
 }
+
+/// A strongly damped spring (2c/m = 200/s against ω = 1/s): the suggested dt must come from the
+/// dashpot rate, and the explicit integrators must be stable there with balanced books.
+#[test]
+fn suggested_dt_accounts_for_dashpots() {
+    use physcore_core::terms::Springs;
+    for name in ["semi_implicit_euler", "verlet", "rk4"] {
+        let mut s = physcore_core::Simulation::new(name, 1.0, Some(1)).unwrap();
+        s.add_particles(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)], vec![glam::DVec2::ZERO, glam::DVec2::new(0.0, 1.0)], vec![1.0, 1.0], vec![true, false]).unwrap();
+        s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![100.0], vec![0.5], 2).unwrap())).unwrap();
+        let dt = s.suggest_dt();
+        assert!(dt <= 0.5 / 200.0 + 1e-15, "{name}: suggested {dt} ignores the dashpot rate 2c/m = 200/s");
+        s.set_dt(dt).unwrap();
+        s.step(2000).unwrap();
+        let e = s.energy();
+        let total = e.total();
+        assert!((total - 0.5 - 0.125).abs() < 1e-2, "{name}: books {e:?}");
+    }
+}

@@ -367,19 +367,25 @@ impl<V: Vector> Term<V> for Springs<V> {
     }
 
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
-        // Gershgorin bound on the largest angular frequency of the linearised network:
-        // ω_max² ≤ max_p 2 (1/m_p) Σ_{s ∋ p} k_s (equal masses; a safe estimate otherwise).
+        // Gershgorin bounds on the linearised network: the largest angular frequency,
+        // ω_max² ≤ max_p 2 (1/m_p) Σ_{s ∋ p} k_s, and the fastest dashpot rate,
+        // λ_max ≤ max_p 2 (1/m_p) Σ_{s ∋ p} c_s (equal masses; safe estimates otherwise).
+        // Explicit steps need dt below ~2/ω_max and ~2/λ_max; the time scale is the smaller of
+        // 1/ω_max and 1/λ_max.
         let mut w2: Real = 0.0;
+        let mut lam: Real = 0.0;
         for p in 0..self.n_cov {
             let g = p / SLICE;
             let w = (self.start[g + 1] - self.start[g]) as usize / SLICE;
-            let ks: Real = (0..w)
+            let (ks, cs) = (0..w)
                 .map(|slot| self.start[g] as usize + SLICE * slot + p % SLICE)
                 .filter(|&e| self.other[e] as usize != p)
-                .map(|e| self.kc(e).0)
-                .sum();
+                .map(|e| self.kc(e))
+                .fold((0.0, 0.0), |(a, b), (k, c)| (a + k, b + c));
             w2 = w2.max(2.0 * model.inv_mass[p] * ks);
+            lam = lam.max(2.0 * model.inv_mass[p] * cs);
         }
-        (w2 > 0.0).then(|| 1.0 / w2.sqrt())
+        let t = (1.0 / w2.sqrt()).min(1.0 / lam);
+        t.is_finite().then_some(t)
     }
 }
