@@ -13,7 +13,7 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from ._errors import InvalidInputError
-from .scene import Scene
+from .scene import Scene, _check_int as _count
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
 __all__ = ["cloth", "projectile", "kepler", "spring_chain", "REGISTRY"]
@@ -24,14 +24,6 @@ def _positive(value: float, arg: str) -> float:
     if not (math.isfinite(value) and value > 0):
         raise InvalidInputError(f"{arg}: must be finite and > 0, got {value}")
     return value
-
-
-def _count(value: int, arg: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{arg}: expected an int, got {type(value).__name__}")
-    if value < minimum:
-        raise InvalidInputError(f"{arg}: must be >= {minimum}, got {value}")
-    return int(value)
 
 
 def cloth_springs(n: int):

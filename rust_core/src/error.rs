@@ -24,6 +24,10 @@ pub enum Error {
         dt: f64,
         suggested_dt: f64,
     },
+
+    /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
+    #[error("interrupted; the state was rolled back to step {rolled_back_to}")]
+    Interrupted { rolled_back_to: u64 },
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -209,12 +209,16 @@ impl<V: Vector> Simulation<V> {
     /// Runs `n` steps. On divergence (NaN/inf in a position or velocity) the state, books and
     /// caches are rolled back to where this call started and `Error::Diverged` names the step.
     pub fn step(&mut self, n: u64) -> Result<()> {
+        self.step_interruptible(n, &mut || false)
+    }
+
+    /// `step(n)`, polling `interrupted` on the calling thread about every 10⁶ particle-steps
+    /// (a Python binding checks for Ctrl-C there). When it returns true the state is rolled back
+    /// like on divergence and `Error::Interrupted` is returned.
+    pub fn step_interruptible(&mut self, n: u64, interrupted: &mut dyn FnMut() -> bool) -> Result<()> {
         if n == 0 || self.n_particles() == 0 {
-            self.sys.state.t += 0.0;
-            if self.n_particles() == 0 {
-                self.sys.state.t += n as Real * self.dt;
-                self.sys.state.step += n;
-            }
+            self.sys.state.t += n as Real * self.dt;
+            self.sys.state.step += n;
             return Ok(());
         }
         let saved = (
@@ -223,26 +227,43 @@ impl<V: Vector> Simulation<V> {
             self.collision_dissipated,
             self.integrator_cache(),
         );
+        let slab = (1_000_000 / self.n_particles() as u64).max(1);
         let pool = self.pool.take();
-        let result = match &pool {
-            Some(p) => p.install(|| self.step_inner(n)),
-            None => self.step_inner(n),
-        };
-        self.pool = pool;
-        if let Err(Error::Diverged { step, particle, quantity, t, .. }) = result {
-            let (state, diss, coll, cache) = saved;
-            let rolled_back_to = state.step;
-            self.sys.state = state;
-            self.sys.forces.dissipated = diss;
-            self.collision_dissipated = coll;
-            match cache {
-                Some((f, p)) => self.integrator.set_cache(f, p),
-                None => self.integrator.reset(),
+        let mut left = n;
+        let mut result = Ok(());
+        while left > 0 && result.is_ok() {
+            let k = left.min(slab);
+            result = match &pool {
+                Some(p) => p.install(|| self.step_inner(k)),
+                None => self.step_inner(k),
+            };
+            left -= k;
+            if result.is_ok() && left > 0 && interrupted() {
+                result = Err(Error::Interrupted { rolled_back_to: 0 });
             }
-            let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
-            return Err(Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt });
         }
-        result
+        self.pool = pool;
+        if result.is_ok() {
+            return result;
+        }
+        let (state, diss, coll, cache) = saved;
+        let rolled_back_to = state.step;
+        self.sys.state = state;
+        self.sys.forces.dissipated = diss;
+        self.collision_dissipated = coll;
+        match cache {
+            Some((f, p)) => self.integrator.set_cache(f, p),
+            None => self.integrator.reset(),
+        }
+        Err(match result {
+            Err(Error::Diverged { step, particle, quantity, t, .. }) => {
+                let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
+                Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt }
+            }
+            Err(Error::Interrupted { .. }) => Error::Interrupted { rolled_back_to },
+            Err(e) => e,
+            Ok(()) => unreachable!("handled above"),
+        })
     }
 
     fn step_inner(&mut self, n: u64) -> Result<()> {

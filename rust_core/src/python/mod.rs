@@ -21,6 +21,7 @@ fn to_py(py: Python<'_>, e: Error) -> PyErr {
         let errors = py.import("physcore._errors")?;
         Ok(match e {
             Error::InvalidInput { .. } => PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?),
+            Error::Interrupted { .. } => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg.clone()),
             Error::Diverged { step, t, particle, quantity, suggested_dt, rolled_back_to, .. } => {
                 let exc = errors
                     .getattr("SimulationDiverged")?
@@ -270,10 +271,27 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
-    /// Runs n steps in Rust with the GIL released.
+    /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed about every 10⁶
+    /// particle-steps: the state is rolled back to where the call started and
+    /// KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
         let inner = &mut self.inner;
-        py.detach(|| with_sim!(inner, s => s.step(n))).map_err(|e| to_py(py, e))
+        let mut pending: Option<PyErr> = None;
+        let result = py.detach(|| {
+            let mut interrupted = || match Python::attach(|py| py.check_signals()) {
+                Ok(()) => false,
+                Err(e) => {
+                    pending = Some(e);
+                    true
+                }
+            };
+            with_sim!(inner, s => s.step_interruptible(n, &mut interrupted))
+        });
+        match result {
+            Ok(()) => Ok(()),
+            Err(Error::Interrupted { .. }) => Err(pending.unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(()))),
+            Err(e) => Err(to_py(py, e)),
+        }
     }
 
     fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
