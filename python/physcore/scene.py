@@ -289,6 +289,8 @@ class Scene:
         SimulationDiverged
             NaN/inf appeared; the scene is rolled back to where this call started, and the
             exception names the step, the particle and a suggested dt.
+        KeyboardInterrupt
+            Ctrl-C, noticed about every 10⁶ particle-steps; the scene is rolled back likewise.
         """
         n = _check_int(n, "n", 0)
         if self._e0 is None:
