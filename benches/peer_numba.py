@@ -26,13 +26,11 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import statistics
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # run from anywhere
 
-from _common import require_release, si, table  # first: sets up the environment before numpy loads
+from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 try:
@@ -47,16 +45,6 @@ from physcore.scenes import cloth_springs
 
 JIT = dict(parallel=True, fastmath=False, cache=False)  # the prange kernels
 DRIVER = dict(parallel=False, fastmath=False, cache=False)  # step loops that call the kernels (no prange of their own)
-
-
-def _median_block(step_block, steps: int, blocks: int = 3) -> float:
-    """Median wall time (s) of `blocks` consecutive blocks; `step_block(steps)` advances the state."""
-    times = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        step_block(steps)
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
 
 
 # --------------------------------------------------------------------------------------------
@@ -328,14 +316,14 @@ def run_cloth(sizes, threads, rows, checks) -> None:
         rates = {}
         scene = bench_cloth.build(g, threads)
         scene.step(20)
-        t = _median_block(scene.step, steps)
+        t = median_block_time(scene.step, steps)
         assert np.isfinite(scene.positions).all()
         rates["physcore f64"] = n * steps / t
         del scene
         for label, dt in (("numba f64", np.float64), ("numba f32", np.float32)):
             c = NumbaCloth(g, dt)
             c.step(20)  # first call compiles (for this dtype); excluded
-            t = _median_block(c.step, steps)
+            t = median_block_time(c.step, steps)
             assert np.isfinite(c.x).all()
             rates[label] = n * steps / t
         _add_rows(rows, "cloth", f"{g}² (N={n})", "particle-steps/s", rates)
@@ -360,18 +348,18 @@ def run_nbody(sizes, threads, rows, checks) -> None:
         rates = {}
         scene = bench_nbody.build(n, threads)
         scene.step(5)
-        t = _median_block(scene.step, steps)
+        t = median_block_time(scene.step, steps)
         rates["physcore f64"] = n * n * steps / t
         del scene
         nb = NumbaNBody(n)
         nb.step(5)
-        t = _median_block(nb.step, steps)
+        t = median_block_time(nb.step, steps)
         assert np.isfinite(nb.positions).all()
         rates["numba f64"] = n * n * steps / t
         del nb
         nb = NumbaNBody(n, "naive")
         nb.step(5)
-        t = _median_block(nb.step, steps)
+        t = median_block_time(nb.step, steps)
         rates["numba f64, naive loop"] = n * n * steps / t
         _add_rows(rows, "N-body", f"N={n}", "pair interactions/s", rates)
 
