@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from . import _core
 from ._errors import InvalidInputError, PhyscoreError, SimulationDiverged
+from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
@@ -21,6 +22,9 @@ __all__ = [
     "Springs",
     "PairwiseGravity",
     "Plane",
+    "Fluid",
+    "neighbors",
+    "fluids",
     "PhyscoreError",
     "InvalidInputError",
     "SimulationDiverged",

@@ -6,6 +6,7 @@ all state and steps ``n`` steps per call with the GIL released. Arrays cross in 
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -16,6 +17,7 @@ import numpy as np
 
 from . import _core
 from ._errors import InvalidInputError
+from .fluids import Fluid
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -26,7 +28,7 @@ INTEGRATORS: Tuple[Dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
 _FORMAT_VERSION = 1
 
-Term = Union[Gravity, Drag, Springs, PairwiseGravity]
+Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
 
 
 @dataclass(frozen=True)
@@ -213,7 +215,11 @@ class Scene:
 
     def add(self, item: Union[Term, Plane]) -> Union[Term, Plane]:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
-        :class:`PairwiseGravity`) or a collider (:class:`Plane`).
+        :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`) or a collider (:class:`Plane`).
+
+        A :class:`~physcore.fluids.Fluid` brings its own particles: they are appended, the stored
+        fluid records the first index and the resolved ``sound_speed``, and the scene's ``dt`` is
+        lowered to the fluid's CFL limit if it is above it.
 
         A term whose name is already taken gets ``_2``, ``_3``, ... appended. Returns the term as
         stored (for :class:`Springs` with ``rest_length=None``, with the rest lengths resolved).
@@ -226,6 +232,8 @@ class Scene:
             Vector length differs from ``dim``; spring index out of range.
         """
         dim = self.dim
+        if isinstance(item, Fluid):
+            return self._add_fluid(item)
         if isinstance(item, Plane):
             for arg in ("point", "normal"):
                 if getattr(item, arg).shape[0] != dim:
@@ -271,6 +279,77 @@ class Scene:
         self._e0 = None
         return item
 
+    def add_fluid(self, positions: "np.typing.ArrayLike", **params: Any) -> np.ndarray:
+        """Add a WCSPH fluid block: ``scene.add(Fluid(positions, **params))``.
+
+        Takes the parameters of :class:`~physcore.fluids.Fluid` (``spacing`` is required) and
+        returns the new particles' indices, ``(N,)`` int64.
+
+        Examples
+        --------
+        >>> import physcore as pc
+        >>> from physcore.fluids import lattice, tank_walls
+        >>> scene = pc.Scene(dim=2, integrator="semi_implicit_euler")
+        >>> _ = scene.add(pc.Gravity([0.0, -9.81]))
+        >>> ids = scene.add_fluid(lattice([0, 0], [0.2, 0.1], 0.01), spacing=0.01,
+        ...                       walls=tank_walls([0, 0], [0.4, 0.3], 0.01))
+        >>> len(ids), scene.dt < 1e-3
+        (200, True)
+        >>> substeps = scene.advance(0.01)   # CFL-limited substeps
+        """
+        fluid = self._add_fluid(Fluid(positions, **params))
+        assert fluid.first is not None
+        return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
+
+    def _add_fluid(self, fluid: Fluid, first: Optional[int] = None) -> Fluid:
+        """Append the fluid's particles (unless ``first`` says they exist) and its SPH term."""
+        import dataclasses
+
+        dim = self.dim
+        if fluid.dim != dim:
+            raise InvalidInputError(f"positions: the fluid is {fluid.dim}D, the scene is {dim}D")
+        name = self._unique_name(fluid.name)
+        c0 = fluid.sound_speed
+        if c0 is None:
+            g = sum((t.g for t in self._terms if isinstance(t, Gravity)), np.zeros(dim))
+            gn = float(np.linalg.norm(g))
+            height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if gn > 0 and len(fluid) else 0.0
+            v0 = 0.0 if fluid.velocities is None or not len(fluid) else float(np.linalg.norm(fluid.velocities, axis=1).max())
+            vmax = max(math.sqrt(2.0 * gn * height), v0)
+            if not vmax > 0:
+                raise InvalidInputError(
+                    "sound_speed: cannot be estimated for a fluid at rest without gravity; give sound_speed= (m/s)"
+                )
+            c0 = 10.0 * vmax
+        fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
+        walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
+        psi = fluid.wall_psi()
+        if first is None:
+            n = len(fluid)
+            m = fluid.particle_mass()
+            first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
+        self._sim.add_sph(
+            name,
+            first,
+            len(fluid),
+            fluid.h,
+            fluid.density,
+            c0,
+            int(fluid.gamma),
+            fluid.viscosity,
+            bool(fluid.clamp_pressure),
+            fluid.kernel,
+            fluid.precision,
+            np.ascontiguousarray(walls, dtype=np.float64),
+            np.ascontiguousarray(psi, dtype=np.float64),
+        )
+        fluid = dataclasses.replace(fluid, first=first)
+        self._terms.append(fluid)
+        # A step above the fluid's CFL limit would blow up on the first step.
+        self._sim.dt = min(self.dt, fluid.max_dt())
+        self._e0 = None
+        return fluid
+
     def _unique_name(self, base: str) -> str:
         if not isinstance(base, str) or not base:
             raise TypeError("name: expected a non-empty str")
@@ -296,6 +375,27 @@ class Scene:
         if self._e0 is None:
             self._set_reference_energy()
         self._sim.step(n)
+
+    def advance(self, duration: float) -> int:
+        """Advance ``duration`` seconds in ``n = ⌈duration / suggest_dt()⌉`` equal substeps, so each
+        is inside the stability limits at the start of the call (springs, gravity, fluid CFL).
+        Sets :attr:`dt` to ``duration / n`` and returns ``n`` (the substeps chosen).
+
+        Raises
+        ------
+        TypeError, ValueError
+            ``duration`` not a finite number > 0 (seconds).
+        SimulationDiverged, KeyboardInterrupt
+            As for :meth:`step`; ``dt`` is rolled back too.
+        """
+        if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
+            raise TypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
+        duration = float(duration)
+        if not (math.isfinite(duration) and duration > 0):
+            raise InvalidInputError(f"duration: must be finite and > 0 (seconds), got {duration}")
+        if self._e0 is None:
+            self._set_reference_energy()
+        return int(self._sim.advance(duration))
 
     def _set_reference_energy(self) -> None:
         e = self.energy()
@@ -440,6 +540,26 @@ class Scene:
         l = self._sim.angular_momentum()
         return float(l[2]) if self.dim == 2 else l
 
+    def density(self) -> np.ndarray:
+        """SPH density of every particle now, kg/m³ (kg/m² in 2D): ``(N,)`` float64, 0 for
+        particles in no fluid (computed in float64)."""
+        return self._sim.fluid_fields()[0]
+
+    def pressure(self) -> np.ndarray:
+        """Equation-of-state pressure of every particle now, Pa: ``(N,)`` float64, 0 for
+        particles in no fluid (computed in float64)."""
+        return self._sim.fluid_fields()[1]
+
+    def boundary_points(self) -> np.ndarray:
+        """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""
+        walls = [t.walls for t in self._terms if isinstance(t, Fluid) and t.walls is not None]
+        return np.concatenate(walls) if walls else np.zeros((0, self.dim))
+
+    @property
+    def fluids(self) -> Tuple[Fluid, ...]:
+        """The fluids, as added (with ``first`` and ``sound_speed`` resolved)."""
+        return tuple(t for t in self._terms if isinstance(t, Fluid))
+
     def suggest_dt(self) -> float:
         """Half of the fastest time scale of the scene's terms, s (springs: 1/ω_max and, with
         dashpots, 1/λ_max = m/(2 Σc), both from Gershgorin bounds; pairwise gravity: closest
@@ -471,6 +591,18 @@ class Scene:
                 terms_meta.append({"type": "drag", "name": t.name, "coefficient": t.coefficient})
             elif isinstance(t, PairwiseGravity):
                 terms_meta.append({"type": "pairwise_gravity", "name": t.name, "G": t.G, "softening": t.softening})
+            elif isinstance(t, Fluid):
+                params = {
+                    f: getattr(t, f)
+                    for f in ("spacing", "density", "sound_speed", "viscosity", "smoothing", "kernel", "gamma", "clamp_pressure", "precision", "first")
+                }
+                params["gamma"] = int(params["gamma"])
+                params["clamp_pressure"] = bool(params["clamp_pressure"])
+                params["mass"] = t.particle_mass()
+                terms_meta.append({"type": "fluid", "name": t.name, "count": len(t), **params})
+                arrays[f"term{k}_positions"] = t.positions
+                arrays[f"term{k}_walls"] = t.walls if t.walls is not None else np.zeros((0, self.dim))
+                arrays[f"term{k}_wall_volume"] = t.wall_psi() / t.density
             else:
                 terms_meta.append({"type": "springs", "name": t.name})
                 for f in ("i", "j", "stiffness", "damping", "rest_length"):
@@ -535,6 +667,27 @@ class Scene:
                     scene.add(Drag(t["coefficient"], name=t["name"]))
                 elif kind == "pairwise_gravity":
                     scene.add(PairwiseGravity(t["G"], t["softening"], name=t["name"]))
+                elif kind == "fluid":
+                    walls = z[f"term{k}_walls"]
+                    fl = Fluid(
+                        z[f"term{k}_positions"],
+                        t["spacing"],
+                        density=t["density"],
+                        sound_speed=t["sound_speed"],
+                        viscosity=t["viscosity"],
+                        smoothing=t["smoothing"],
+                        kernel=t["kernel"],
+                        gamma=t["gamma"],
+                        clamp_pressure=t["clamp_pressure"],
+                        mass=t["mass"],
+                        walls=walls if len(walls) else None,
+                        wall_volume=z[f"term{k}_wall_volume"] if len(walls) else "lattice",
+                        precision=t["precision"],
+                        name=t["name"],
+                    )
+                    dt_saved = scene.dt
+                    scene._add_fluid(fl, first=int(t["first"]))
+                    scene._sim.dt = dt_saved
                 else:
                     f = {a: z[f"term{k}_{a}"] for a in ("i", "j", "stiffness", "damping", "rest_length")}
                     scene.add(Springs(name=t["name"], **f))

@@ -3,9 +3,11 @@
 //! in `python/` behind the `python` feature.
 pub mod boundary;
 pub mod error;
+pub mod grid;
 pub mod integrators;
 pub mod par;
 pub mod simulation;
+pub mod sph;
 pub mod state;
 pub mod terms;
 pub mod vector;

@@ -266,6 +266,55 @@ impl<V: Vector> Simulation<V> {
         })
     }
 
+    /// Advances by `duration` seconds in `n` equal substeps, n = ⌈duration / suggest_dt()⌉, so
+    /// every substep is inside the stability limits at the start of the call (CFL for fluids).
+    /// Sets `dt` to duration / n and returns n. On divergence or interrupt everything, dt
+    /// included, is rolled back as in `step`.
+    pub fn advance_interruptible(&mut self, duration: Real, interrupted: &mut dyn FnMut() -> bool) -> Result<u64> {
+        if !(duration.is_finite() && duration > 0.0) {
+            return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
+        }
+        let safe = self.run(|| self.suggest_dt());
+        let n = (duration / safe).ceil().max(1.0);
+        if n > 1e12 {
+            return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
+        }
+        let n = n as u64;
+        let old = self.dt;
+        self.dt = duration / n as Real;
+        if self.dt != old {
+            // A cached force is still valid; a velocity predicted with the old dt is not.
+            if self.sys.forces.velocity_dependent() {
+                self.integrator.reset();
+            }
+        }
+        match self.step_interruptible(n, interrupted) {
+            Ok(()) => Ok(n),
+            Err(e) => {
+                self.dt = old;
+                Err(e)
+            }
+        }
+    }
+
+    /// Density (kg/m^dim) and pressure (Pa) of every particle, from the SPH terms (0 for
+    /// particles that are in no fluid).
+    pub fn fluid_fields(&self) -> (Vec<Real>, Vec<Real>) {
+        let n = self.n_particles();
+        let (mut rho, mut p) = (vec![0.0; n], vec![0.0; n]);
+        self.run(|| {
+            for t in &self.sys.forces.terms {
+                if let Some(s) = t.as_sph() {
+                    let (r, q) = s.fields(&self.sys.state.x, &self.sys.model);
+                    let range = s.range();
+                    rho[range.clone()].copy_from_slice(&r);
+                    p[range].copy_from_slice(&q);
+                }
+            }
+        });
+        (rho, p)
+    }
+
     fn step_inner(&mut self, n: u64) -> Result<()> {
         let dt = self.dt;
         for _ in 0..n {
@@ -326,8 +375,17 @@ impl<V: Vector> Simulation<V> {
             .iter()
             .filter_map(|t| t.time_scale(&self.sys.state.x, &self.sys.model))
             .fold(f64::INFINITY, f64::min);
-        if ts.is_finite() {
-            0.5 * ts
+        let g = self.sys.forces.g.length_squared().sqrt();
+        let limit = self
+            .sys
+            .forces
+            .terms
+            .iter()
+            .filter_map(|t| t.max_dt(&self.sys.state.x, &self.sys.state.v, &self.sys.model, g))
+            .fold(f64::INFINITY, f64::min);
+        let dt = (0.5 * ts).min(limit);
+        if dt.is_finite() {
+            dt
         } else {
             self.dt
         }

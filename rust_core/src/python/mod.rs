@@ -5,6 +5,7 @@ use crate::boundary::Plane;
 use crate::error::Error;
 use crate::integrators::{self, IntegratorInfo};
 use crate::simulation::{EnergyReport, Simulation};
+use crate::sph::{KernelKind, Precision, Sph, SphParams};
 use crate::terms::{Drag, PairwiseGravity, Springs, UniformGravity};
 use crate::vector::{from_flat, to_flat, Real, Vector};
 use glam::{DVec2, DVec3};
@@ -276,22 +277,53 @@ impl Simulation2 {
     /// KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
         let inner = &mut self.inner;
-        let mut pending: Option<PyErr> = None;
-        let result = py.detach(|| {
-            let mut interrupted = || match Python::attach(|py| py.check_signals()) {
-                Ok(()) => false,
-                Err(e) => {
-                    pending = Some(e);
-                    true
-                }
-            };
-            with_sim!(inner, s => s.step_interruptible(n, &mut interrupted))
-        });
-        match result {
-            Ok(()) => Ok(()),
-            Err(Error::Interrupted { .. }) => Err(pending.unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(()))),
-            Err(e) => Err(to_py(py, e)),
-        }
+        interruptible(py, |stop| with_sim!(inner, s => s.step_interruptible(n, stop)))
+    }
+
+    /// Advances `duration` seconds in automatically chosen substeps; returns their number.
+    fn advance(&mut self, py: Python<'_>, duration: f64) -> PyResult<u64> {
+        let inner = &mut self.inner;
+        interruptible(py, |stop| with_sim!(inner, s => s.advance_interruptible(duration, stop)))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (name, first, n, h, density, sound_speed, gamma, viscosity, clamp_pressure, kernel, precision, walls, wall_psi))]
+    fn add_sph(
+        &mut self,
+        py: Python<'_>,
+        name: String,
+        first: usize,
+        n: usize,
+        h: f64,
+        density: f64,
+        sound_speed: f64,
+        gamma: i32,
+        viscosity: f64,
+        clamp_pressure: bool,
+        kernel: &str,
+        precision: &str,
+        walls: PyReadonlyArray2<'_, f64>,
+        wall_psi: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<()> {
+        let kernel = KernelKind::by_name(kernel).map_err(|e| to_py(py, e))?;
+        let precision = Precision::by_name(precision).map_err(|e| to_py(py, e))?;
+        let p = SphParams { h, rho0: density, c0: sound_speed, gamma, alpha: viscosity, clamp: clamp_pressure, kernel, precision };
+        let psi = slice1(&wall_psi, "wall_psi")?.to_vec();
+        with_sim!(&mut self.inner, s => {
+            let w = from_flat(flat2(&walls, p_dim(&s.sys.state.x.first().copied().unwrap_or_default()), "walls")?);
+            if first.checked_add(n).is_none_or(|e| e > s.n_particles()) {
+                return Err(PyValueError::new_err(format!("n: particles {first}..{} are not all in the scene ({})", first.saturating_add(n), s.n_particles())));
+            }
+            Sph::new(&name, first, n, p, w, psi).and_then(|t| s.add_term(Box::new(t)))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// (density, pressure) of every particle, (N,) float64 each; 0 outside fluids.
+    fn fluid_fields<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let inner = &self.inner;
+        let (r, p) = py.detach(|| with_sim!(inner, s => s.fluid_fields()));
+        (Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py))
     }
 
     fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -352,6 +384,44 @@ fn p_dim<V: Vector>(_: &V) -> usize {
     V::DIM
 }
 
+/// Runs `f` with the GIL released; `f` polls the closure it is given for Ctrl-C.
+fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&mut dyn FnMut() -> bool) -> Result<T, Error> + Send) -> PyResult<T> {
+    let mut pending: Option<PyErr> = None;
+    let result = py.detach(|| {
+        let mut interrupted = || match Python::attach(|py| py.check_signals()) {
+            Ok(()) => false,
+            Err(e) => {
+                pending = Some(e);
+                true
+            }
+        };
+        f(&mut interrupted)
+    });
+    match result {
+        Ok(v) => Ok(v),
+        Err(Error::Interrupted { .. }) => Err(pending.unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(()))),
+        Err(e) => Err(to_py(py, e)),
+    }
+}
+
+/// All pairs i < j of `points` ((N, 2) or (N, 3) float64, C-contiguous) closer than `radius`:
+/// two (M,) int64 arrays, sorted by i then j.
+#[pyfunction]
+fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f64) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>)> {
+    let dim = points.shape()[1];
+    let flat = flat2(&points, if dim == 3 { 3 } else { 2 }, "points")?.to_vec();
+    let r = py.detach(|| {
+        if dim == 3 {
+            crate::grid::neighbor_pairs::<DVec3>(&from_flat(&flat), radius)
+        } else {
+            crate::grid::neighbor_pairs::<DVec2>(&from_flat(&flat), radius)
+        }
+    });
+    let (i, j) = r.map_err(|e| to_py(py, e))?;
+    let cv = |a: Vec<u32>| Array1::from_iter(a.into_iter().map(i64::from)).into_pyarray(py);
+    Ok((cv(i), cv(j)))
+}
+
 /// Name, order, symplectic flag and force evaluations per step of every integrator.
 #[pyfunction]
 fn integrator_table<'py>(py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
@@ -372,6 +442,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation2>()?;
     m.add_function(wrap_pyfunction!(integrator_table, m)?)?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(neighbors, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

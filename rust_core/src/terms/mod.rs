@@ -38,6 +38,15 @@ pub trait Term<V: Vector>: Send + Sync {
     fn time_scale(&self, _x: &[V], _model: &Model) -> Option<Real> {
         None
     }
+    /// The largest step (s) explicit integrators may take at this state, for terms whose limit
+    /// is not a time scale (SPH: CFL and force criteria). `g`: magnitude of the uniform fields.
+    fn max_dt(&self, _x: &[V], _v: &[V], _model: &Model, _g: Real) -> Option<Real> {
+        None
+    }
+    /// The term as an SPH fluid, if it is one (for its density and pressure fields).
+    fn as_sph(&self) -> Option<&crate::sph::Sph<V>> {
+        None
+    }
 }
 
 /// The terms of a scene plus their dissipation ledger.

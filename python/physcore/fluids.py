@@ -1,0 +1,325 @@
+"""Weakly compressible SPH fluids (WCSPH): the :class:`Fluid` term, lattice and tank helpers, and
+:func:`neighbors`, the spatial hash on its own.
+
+Physics (all in the Rust core, f32 or f64):
+
+* density by summation, ``ρ_i = Σ_j m_j W_ij + Σ_b Ψ_b W_ib`` (self included; ``b``: static wall
+  particles with ``Ψ_b = ρ0 V_b``, Akinci et al., ACM TOG 31(4) 62, 2012, eq. 4–5);
+* Tait equation of state ``p = B[(ρ/ρ0)^γ − 1]``, ``B = ρ0 c0²/γ`` (Monaghan, J. Comput. Phys.
+  110, 1994; Becker & Teschner 2007, eq. 6), by default clamped to ``p ≥ 0``;
+* the symmetric pressure force with Monaghan (1992) artificial viscosity,
+  ``dv_i/dt = −Σ_j m_j (p_i/ρ_i² + p_j/ρ_j² + Π_ij) ∇_i W_ij − Σ_b Ψ_b (p_i/ρ_i²) ∇_i W_ib``,
+  ``Π_ij = −α c0 μ_ij / ρ̄_ij``, ``μ_ij = h v_ij·r_ij/(r_ij² + 0.01h²)`` for approaching pairs
+  (Monaghan, Annu. Rev. Astron. Astrophys. 30, 1992, eq. 4.1–4.2); walls are free-slip
+  (Akinci et al. 2012, eq. 10, without wall viscosity), so fluid neither leaks nor sticks;
+* kernels: cubic spline (Monaghan & Lattanzio 1985) and Wendland C2 (Dehnen & Aly 2012), support
+  ``2h``, normalised in 2D and 3D;
+* energy books: the pressure force is the gradient of the internal energy ``Σ m_i u(ρ_i)``,
+  ``u' = p/ρ²`` (Price, J. Comput. Phys. 231, 2012, §3.2), booked as the fluid's potential; the
+  viscosity's dissipation ``½ Σ_ij m_i m_j Π_ij v_ij·∇_i W_ij`` is accumulated; gravity is a
+  separate :class:`~physcore.Gravity` term.
+* time step: CFL ``0.25 h/(c0 (1 + 0.6α) + |v|max)`` and force ``0.25 √(h/|a|max)`` criteria
+  (Monaghan 1992, §5) through :meth:`Scene.suggest_dt` and :meth:`Scene.advance`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional, Tuple, Union
+
+import numpy as np
+
+from . import _core
+from ._errors import InvalidInputError
+from .terms import _finite_float
+
+__all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
+
+#: Kernel names accepted by :class:`Fluid`.
+KERNELS = ("cubic_spline", "wendland_c2")
+
+
+def _array2(value: object, arg: str, dims: Tuple[int, ...] = (2, 3)) -> np.ndarray:
+    a = np.asarray(value)
+    if a.dtype.kind not in "iuf" or a.dtype == bool:
+        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    if a.ndim != 2 or a.shape[1] not in dims:
+        want = " or ".join(f"(N, {d})" for d in dims)
+        raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
+    return a
+
+
+def neighbors(points: "np.typing.ArrayLike", radius: float) -> Tuple[np.ndarray, np.ndarray]:
+    """All pairs of points closer than ``radius``, found with physcore's parallel spatial hash.
+
+    A pair ``(i, j)`` with ``i < j`` is returned when ``Σ_k (p_i,k − p_j,k)² < radius²``, evaluated
+    in float64 in that order (points exactly ``radius`` apart are not neighbours). The domain is
+    unbounded (cells are hashed when the points are spread out), so huge and negative coordinates
+    work.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, d), d in {1, 2, 3}
+        Coordinates (float64 after conversion). N may be 0.
+    radius : float
+        Search radius > 0, finite, in the points' units.
+
+    Returns
+    -------
+    i, j : numpy.ndarray, shape (M,), int64
+        Indices with ``i < j``, sorted by ``i`` then ``j``.
+
+    Raises
+    ------
+    TypeError
+        Non-numeric points or radius.
+    ValueError
+        Wrong shape, NaN/inf coordinates, radius not finite and > 0.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> i, j = pc.neighbors([[0.0, 0.0], [0.5, 0.0], [2.0, 0.0]], radius=1.0)
+    >>> i.tolist(), j.tolist()
+    ([0], [1])
+    """
+    pts = _array2(points, "points", (1, 2, 3))
+    r = _finite_float(radius, "radius", minimum=0.0, strict=True)
+    if pts.shape[1] == 1:
+        pts = np.ascontiguousarray(np.hstack([pts, np.zeros_like(pts)]))
+    if pts.shape[0] < 2:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return _core.neighbors(pts, r)
+
+
+def kernel_w(q: np.ndarray, h: float, dim: int, kernel: str = "cubic_spline") -> np.ndarray:
+    """The smoothing kernel ``W(r) = σ_d w(q)``, ``q = r/h``, support ``2h`` (1/m^dim).
+
+    Cubic spline: ``w = ¼(2−q)₊³ − (1−q)₊³``, ``σ₂ = 10/(7πh²)``, ``σ₃ = 1/(πh³)``.
+    Wendland C2: ``w = (1 − q/2)₊⁴ (2q + 1)``, ``σ₂ = 7/(4πh²)``, ``σ₃ = 21/(16πh³)``.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if kernel == "cubic_spline":
+        s = 10.0 / (7.0 * math.pi * h * h) if dim == 2 else 1.0 / (math.pi * h**3)
+        return s * (0.25 * np.clip(2.0 - q, 0, None) ** 3 - np.clip(1.0 - q, 0, None) ** 3)
+    if kernel == "wendland_c2":
+        s = 7.0 / (4.0 * math.pi * h * h) if dim == 2 else 21.0 / (16.0 * math.pi * h**3)
+        t = np.clip(1.0 - 0.5 * q, 0, None)
+        return s * t**4 * (2.0 * q + 1.0)
+    raise InvalidInputError(f"kernel: unknown kernel {kernel!r}; valid: {', '.join(KERNELS)}")
+
+
+def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> float:
+    """``Σ_j W(x_i − x_j)`` over an infinite cubic lattice of the given spacing (1/m^dim): a fluid
+    particle's mass ``ρ0 / sum`` makes a lattice at rest have exactly the rest density."""
+    k = int(math.ceil(2.0 * h / spacing)) + 1
+    ax = np.arange(-k, k + 1) * spacing
+    grids = np.meshgrid(*([ax] * dim), indexing="ij")
+    r = np.sqrt(sum(g**2 for g in grids))
+    return float(kernel_w(r / h, h, dim, kernel).sum())
+
+
+def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> np.ndarray:
+    """Particle centres filling the box ``[lower, upper]`` on a cubic lattice: positions
+    ``lower + (i + ½) spacing`` for every cell of the box (the box sides are rounded to whole
+    cells). Returns ``(N, dim)`` float64, m. Ordered with the first axis fastest."""
+    lo = np.asarray(lower, dtype=np.float64)
+    hi = np.asarray(upper, dtype=np.float64)
+    s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
+    if lo.shape != hi.shape or lo.ndim != 1 or lo.shape[0] not in (2, 3):
+        raise InvalidInputError(f"lower/upper: expected two vectors of length 2 or 3, got {lo.shape} and {hi.shape}")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
+        raise InvalidInputError("upper: must be finite and > lower on every axis")
+    n = np.maximum(np.rint((hi - lo) / s).astype(np.int64), 1)
+    axes = [lo[d] + (np.arange(n[d]) + 0.5) * s for d in range(lo.shape[0])]
+    grids = np.meshgrid(*axes[::-1], indexing="ij")[::-1]
+    return np.ascontiguousarray(np.stack([g.ravel() for g in grids], axis=1))
+
+
+def tank_walls(
+    lower: "np.typing.ArrayLike",
+    upper: "np.typing.ArrayLike",
+    spacing: float,
+    layers: int = 3,
+    *,
+    top: bool = False,
+) -> np.ndarray:
+    """Static wall particles lining the inside box ``[lower, upper]`` (an open tank unless
+    ``top``): ``layers`` lattice layers outside each face, on the same lattice as
+    :func:`lattice` (so a fluid filled with :func:`lattice` continues into the wall). Use at
+    least ``⌈2h/spacing⌉`` layers for full kernel support (3 for h = 1.3 spacing).
+
+    Returns ``(M, dim)`` float64, m."""
+    lo = np.asarray(lower, dtype=np.float64)
+    hi = np.asarray(upper, dtype=np.float64)
+    s = float(spacing)
+    if not isinstance(layers, (int, np.integer)) or isinstance(layers, bool) or layers < 1:
+        raise InvalidInputError(f"layers: must be an int >= 1, got {layers!r}")
+    pad = layers * s
+    outer_hi = hi.copy() + pad
+    if not top:
+        outer_hi[-1] = hi[-1]  # open top: walls only up to the rim
+    pts = lattice(lo - pad, outer_hi, s)
+    inside = np.all((pts > lo) & (pts < hi), axis=1)
+    return np.ascontiguousarray(pts[~inside])
+
+
+@dataclass(frozen=True)
+class Fluid:
+    """A WCSPH fluid: its particles and parameters, SI units. Add it with :meth:`Scene.add`
+    (or :meth:`Scene.add_fluid`), which appends the particles and the force term.
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, dim)
+        Initial particle positions, m, e.g. from :func:`lattice` (spacing apart).
+    spacing : float
+        Initial particle spacing ``Δx``, m (> 0). Sets ``h = smoothing · Δx`` and the masses.
+    velocities : array_like, shape (N, dim), optional
+        Initial velocities, m/s. Default zero.
+    density : float
+        Rest density ``ρ0``, kg/m³ (kg/m² in 2D). Default 1000 (water).
+    sound_speed : float, optional
+        Numerical speed of sound ``c0``, m/s. Default ``10 × v_max`` with
+        ``v_max = max(√(2|g|H), max |v0|)``, ``H`` the fluid's extent along the scene's gravity when
+        it is added: density then varies by about 1 % (Monaghan 1994).
+    viscosity : float
+        Artificial viscosity ``α`` ≥ 0 (Monaghan 1992). Default 0.05.
+    smoothing : float
+        ``h / Δx`` > 0. Default 1.3.
+    kernel : {"cubic_spline", "wendland_c2"}
+        Default ``"cubic_spline"``.
+    gamma : int
+        Tait exponent γ (1..15). Default 7 (water).
+    clamp_pressure : bool
+        Clamp ``p ≥ 0`` (no tension at the free surface). Default True.
+    mass : float, optional
+        Particle mass, kg. Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
+        starts exactly at the rest density (``≈ ρ0 Δx^dim``).
+    walls : array_like, shape (M, dim), optional
+        Static wall (boundary) particle positions, e.g. from :func:`tank_walls`.
+    wall_volume : "lattice", "akinci", float or array_like shape (M,)
+        Volume ``V_b`` of each wall particle (``Ψ_b = ρ0 V_b``). ``"lattice"`` (default): walls
+        sampled on the fluid's lattice with full kernel support, ``Ψ_b = mass``. ``"akinci"``:
+        ``V_b = 1/Σ_k W_bk`` over the walls (Akinci et al. 2012, eq. 4), for thin or irregular walls.
+    precision : {"f64", "f32"}
+        Arithmetic of the density and force passes (positions and velocities stay float64).
+        ``"f32"`` is about twice as fast. Default ``"f64"``.
+    name : str
+        Key of the fluid in the energy books.
+
+    Raises
+    ------
+    TypeError, ValueError
+        Bad types or values, naming the argument.
+    """
+
+    positions: np.ndarray
+    spacing: float
+    velocities: Optional[np.ndarray] = None
+    density: float = 1000.0
+    sound_speed: Optional[float] = None
+    viscosity: float = 0.05
+    smoothing: float = 1.3
+    kernel: str = "cubic_spline"
+    gamma: int = 7
+    clamp_pressure: bool = True
+    mass: Optional[float] = None
+    walls: Optional[np.ndarray] = None
+    wall_volume: Union[str, float, np.ndarray] = "lattice"
+    precision: str = "f64"
+    name: str = "fluid"
+    #: Index of the first particle once added to a scene (set by :meth:`Scene.add`).
+    first: Optional[int] = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        x = _array2(self.positions, "positions")
+        dim = x.shape[1]
+        object.__setattr__(self, "positions", x)
+        if self.velocities is not None:
+            v = _array2(self.velocities, "velocities")
+            if v.shape != x.shape:
+                raise InvalidInputError(f"velocities: expected shape {x.shape}, got {v.shape}")
+            object.__setattr__(self, "velocities", v)
+        object.__setattr__(self, "spacing", _finite_float(self.spacing, "spacing", minimum=0.0, strict=True))
+        object.__setattr__(self, "density", _finite_float(self.density, "density", minimum=0.0, strict=True))
+        if self.sound_speed is not None:
+            object.__setattr__(self, "sound_speed", _finite_float(self.sound_speed, "sound_speed", minimum=0.0, strict=True))
+        object.__setattr__(self, "viscosity", _finite_float(self.viscosity, "viscosity", minimum=0.0))
+        object.__setattr__(self, "smoothing", _finite_float(self.smoothing, "smoothing", minimum=0.0, strict=True))
+        if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
+            raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
+        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)):
+            raise TypeError(f"gamma: expected an int, got {type(self.gamma).__name__}")
+        if not 1 <= self.gamma <= 15:
+            raise InvalidInputError(f"gamma: must be in 1..15, got {self.gamma}")
+        if not isinstance(self.clamp_pressure, (bool, np.bool_)):
+            raise TypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
+        if self.mass is not None:
+            object.__setattr__(self, "mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True))
+        if self.walls is not None:
+            w = _array2(self.walls, "walls")
+            if w.shape[1] != dim:
+                raise InvalidInputError(f"walls: expected shape (M, {dim}), got {w.shape}")
+            object.__setattr__(self, "walls", w)
+        wv = self.wall_volume
+        if isinstance(wv, str):
+            if wv not in ("lattice", "akinci"):
+                raise InvalidInputError(f"wall_volume: expected 'lattice', 'akinci', a float or an array, got {wv!r}")
+        else:
+            a = np.asarray(wv)
+            if a.dtype.kind not in "iuf" or a.dtype == bool:
+                raise TypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
+            m = 0 if self.walls is None else self.walls.shape[0]
+            a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
+            if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
+                raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
+            object.__setattr__(self, "wall_volume", a)
+        if self.precision not in ("f32", "f64"):
+            raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
+        if not isinstance(self.name, str) or not self.name:
+            raise TypeError("name: expected a non-empty str")
+
+    @property
+    def dim(self) -> int:
+        return int(self.positions.shape[1])
+
+    @property
+    def h(self) -> float:
+        """Smoothing length ``h = smoothing · spacing``, m (kernel support ``2h``)."""
+        return self.smoothing * self.spacing
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    def particle_mass(self) -> float:
+        """Mass of each particle, kg (see ``mass``)."""
+        if self.mass is not None:
+            return self.mass
+        return self.density / lattice_density_sum(self.spacing, self.h, self.dim, self.kernel)
+
+    def wall_psi(self) -> np.ndarray:
+        """``Ψ_b = ρ0 V_b`` of each wall particle, kg: (M,) float64."""
+        if self.walls is None or len(self.walls) == 0:
+            return np.zeros(0)
+        wv = self.wall_volume
+        if isinstance(wv, np.ndarray):
+            return self.density * wv
+        if wv == "lattice":
+            return np.full(len(self.walls), self.particle_mass())
+        i, j = neighbors(self.walls, 2.0 * self.h)
+        r = np.linalg.norm(self.walls[i] - self.walls[j], axis=1)
+        w = kernel_w(r / self.h, self.h, self.dim, self.kernel)
+        total = np.full(len(self.walls), float(kernel_w(np.zeros(1), self.h, self.dim, self.kernel)[0]))
+        total += np.bincount(i, w, len(self.walls)) + np.bincount(j, w, len(self.walls))
+        return self.density / total
+
+    def max_dt(self) -> float:
+        """CFL limit at rest, ``0.25 h / (c0 (1 + 0.6 α))``, s (needs ``sound_speed``)."""
+        if self.sound_speed is None:
+            raise InvalidInputError("sound_speed: not set yet (it is estimated when the fluid is added to a scene)")
+        return 0.25 * self.h / (self.sound_speed * (1.0 + 0.6 * self.viscosity))

@@ -1,0 +1,474 @@
+//! The spatial hash (cell list): particles counting-sorted by cell, rebuilt each step in parallel.
+//!
+//! Cell size = the interaction radius, so every neighbour of a particle lies in its own cell or
+//! one of the 3^dim − 1 around it. The domain is unbounded: when the cells spanned by the
+//! particles' bounding box are few (≤ 4N + 4096) they are numbered densely, row by row, so the
+//! three cells of a row are one contiguous run of sorted particles; otherwise (a particle far away,
+//! huge or negative coordinates) cell coordinates are hashed into 2N..4N buckets. Either way a
+//! query yields a few contiguous ranges of the sorted order ("candidates") that contain every
+//! particle closer than the radius; the caller filters by distance. Neighbours are visited cell by
+//! cell, never stored per particle.
+//!
+//! Hash collisions only add candidates: a particle in a bucket but not in one of the query's
+//! neighbour cells is at least one cell width, i.e. ≥ radius, away on some axis. Buckets shared by
+//! two neighbour cells are visited once.
+//!
+//! The sort is stable (by cell, then original index), so its result does not depend on the
+//! thread count.
+use crate::error::{invalid, Result};
+use crate::vector::{Real, Vector};
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Maximum candidate ranges a query returns (3D, hashed: 27 cells).
+pub const MAX_RANGES: usize = 27;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Mode {
+    /// Cells numbered densely over the bounding box `lo .. lo + n` (cell coordinates).
+    Dense { lo: [i64; 3], n: [i64; 3] },
+    /// Cell coordinates hashed into `mask + 1` buckets.
+    Hash { mask: u64 },
+}
+
+/// A cell list over a set of points (see the module docs).
+#[derive(Clone, Debug)]
+pub struct CellList {
+    cell: Real,
+    inv_cell: Real,
+    dim: usize,
+    mode: Mode,
+    /// `order[k]`: the original index of the k-th particle in sorted order.
+    pub order: Vec<u32>,
+    /// Cell coordinates of each particle in sorted order.
+    pub cells: Vec<[i64; 3]>,
+    /// Bucket b holds sorted particles `start[b] .. start[b + 1]`.
+    start: Vec<u32>,
+    keys: Vec<u32>,
+    hist: Vec<u32>,
+}
+
+/// Candidate ranges of one query (into the sorted order).
+#[derive(Clone, Copy, Debug)]
+pub struct Ranges {
+    pub r: [(u32, u32); MAX_RANGES],
+    pub len: usize,
+}
+
+impl Ranges {
+    #[inline]
+    pub fn iter(&self) -> impl Iterator<Item = Range<usize>> + '_ {
+        self.r[..self.len].iter().map(|&(a, b)| a as usize..b as usize)
+    }
+}
+
+#[inline(always)]
+fn cell_coord(x: Real, inv: Real) -> i64 {
+    // `as` saturates (and maps NaN to 0, which callers have rejected): a monotone map, so points
+    // within one cell width stay in the same or adjacent cells and nothing is missed.
+    (x * inv).floor() as i64
+}
+
+#[inline(always)]
+fn hash(c: [i64; 3], mask: u64) -> usize {
+    // Large odd multipliers then a xor-shift mix: neighbouring cells land far apart.
+    let h = (c[0] as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (c[1] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (c[2] as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    ((h ^ (h >> 29) ^ (h >> 47)) & mask) as usize
+}
+
+/// Raw pointer that may be shared between the threads of the parallel scatter; each thread writes
+/// a disjoint set of indices.
+#[derive(Clone, Copy)]
+struct SyncPtr<T>(*mut T);
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
+
+impl CellList {
+    /// An empty cell list with cell size `cell` (> 0, finite), for points of dimension `dim`.
+    pub fn new(cell: Real, dim: usize) -> Result<Self> {
+        if !(cell.is_finite() && cell > 0.0) {
+            return Err(invalid("radius", format!("{cell} must be finite and > 0")));
+        }
+        if !(dim == 2 || dim == 3) {
+            return Err(invalid("dim", format!("{dim} must be 2 or 3")));
+        }
+        Ok(Self {
+            cell,
+            inv_cell: 1.0 / cell,
+            dim,
+            mode: Mode::Hash { mask: 0 },
+            order: Vec::new(),
+            cells: Vec::new(),
+            start: vec![0, 0],
+            keys: Vec::new(),
+            hist: Vec::new(),
+        })
+    }
+
+    pub fn cell_size(&self) -> Real {
+        self.cell
+    }
+
+    pub fn len(&self) -> usize {
+        self.order.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.order.is_empty()
+    }
+
+    /// Whether the last build numbered cells densely (else it hashed them).
+    pub fn is_dense(&self) -> bool {
+        matches!(self.mode, Mode::Dense { .. })
+    }
+
+    /// Cell coordinates of point `p` (unused axes 0).
+    #[inline(always)]
+    pub fn cell_of<V: Vector>(&self, p: V) -> [i64; 3] {
+        let mut c = [0i64; 3];
+        for (k, ck) in c.iter_mut().enumerate().take(V::DIM) {
+            *ck = cell_coord(p.comp(k), self.inv_cell);
+        }
+        c
+    }
+
+    /// Sorts `x` (finite points; at most u32::MAX − 1) into cells. Parallel when `x` is large.
+    pub fn build<V: Vector>(&mut self, x: &[V]) {
+        debug_assert_eq!(V::DIM, self.dim);
+        let n = x.len();
+        assert!(n < u32::MAX as usize, "cell list: too many points");
+        let inv = self.inv_cell;
+        let par = n >= crate::par::PAR_MIN;
+
+        // 1. Bounding box in cell coordinates.
+        let bbox = |r: Range<usize>| {
+            let mut lo = [i64::MAX; 3];
+            let mut hi = [i64::MIN; 3];
+            for i in r {
+                for k in 0..V::DIM {
+                    let c = cell_coord(x[i].comp(k), inv);
+                    lo[k] = lo[k].min(c);
+                    hi[k] = hi[k].max(c);
+                }
+            }
+            (lo, hi)
+        };
+        let merge = |a: ([i64; 3], [i64; 3]), b: ([i64; 3], [i64; 3])| {
+            let mut o = a;
+            for k in 0..3 {
+                o.0[k] = a.0[k].min(b.0[k]);
+                o.1[k] = a.1[k].max(b.1[k]);
+            }
+            o
+        };
+        let (lo, hi) = if par {
+            (0..n.div_ceil(crate::par::CHUNK))
+                .into_par_iter()
+                .map(|c| bbox(c * crate::par::CHUNK..((c + 1) * crate::par::CHUNK).min(n)))
+                .reduce(|| ([i64::MAX; 3], [i64::MIN; 3]), merge)
+        } else {
+            bbox(0..n)
+        };
+        let mut dims = [1i64; 3];
+        let mut cells: i128 = 1;
+        for k in 0..V::DIM {
+            let span = if n == 0 { 1 } else { (hi[k] as i128 - lo[k] as i128) + 1 };
+            cells *= span;
+            dims[k] = span.min(i64::MAX as i128) as i64;
+        }
+        let limit = 4 * n as i128 + 4096;
+        self.mode = if n > 0 && cells <= limit {
+            let mut l = [0i64; 3];
+            l[..V::DIM].copy_from_slice(&lo[..V::DIM]);
+            Mode::Dense { lo: l, n: dims }
+        } else {
+            let buckets = (2 * n).next_power_of_two().max(1024) as u64;
+            Mode::Hash { mask: buckets - 1 }
+        };
+        let nb = match self.mode {
+            Mode::Dense { n: d, .. } => (d[0] * d[1] * d[2]) as usize,
+            Mode::Hash { mask } => mask as usize + 1,
+        };
+
+        // 2. Bucket of every point.
+        self.keys.resize(n, 0);
+        let mode = self.mode;
+        let key_of = move |p: V| -> u32 {
+            let mut c = [0i64; 3];
+            for (k, ck) in c.iter_mut().enumerate().take(V::DIM) {
+                *ck = cell_coord(p.comp(k), inv);
+            }
+            bucket(mode, c) as u32
+        };
+        crate::par::chunks1(&mut self.keys, |s, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = key_of(x[s + k]);
+            }
+        });
+
+        // 3. Stable counting sort: per-part histograms, exclusive scan over (bucket, part), scatter.
+        let parts = if par { rayon::current_num_threads().clamp(1, 16) } else { 1 };
+        let per = n.div_ceil(parts).max(1);
+        self.hist.clear();
+        self.hist.resize(parts * nb, 0);
+        let keys = &self.keys;
+        {
+            let h = &mut self.hist;
+            let count = |(p, hp): (usize, &mut [u32])| {
+                for &kk in &keys[(p * per).min(n)..((p + 1) * per).min(n)] {
+                    hp[kk as usize] += 1;
+                }
+            };
+            if parts > 1 {
+                h.par_chunks_mut(nb).enumerate().for_each(count);
+            } else {
+                h.chunks_mut(nb).enumerate().for_each(count);
+            }
+        }
+        self.start.resize(nb + 1, 0);
+        let mut acc = 0u32;
+        for b in 0..nb {
+            self.start[b] = acc;
+            for p in 0..parts {
+                let c = self.hist[p * nb + b];
+                self.hist[p * nb + b] = acc;
+                acc += c;
+            }
+        }
+        self.start[nb] = acc;
+        self.order.resize(n, 0);
+        let out = SyncPtr(self.order.as_mut_ptr());
+        let scatter = |(p, off): (usize, &mut [u32])| {
+            let out = out;
+            for i in (p * per).min(n)..((p + 1) * per).min(n) {
+                let b = keys[i] as usize;
+                // SAFETY: the scan gives every (part, bucket) a disjoint slot range within 0..n.
+                unsafe { *out.0.add(off[b] as usize) = i as u32 };
+                off[b] += 1;
+            }
+        };
+        if parts > 1 {
+            self.hist.par_chunks_mut(nb).enumerate().for_each(scatter);
+        } else {
+            self.hist.chunks_mut(nb).enumerate().for_each(scatter);
+        }
+
+        // 4. Cell coordinates in sorted order (for queries).
+        self.cells.resize(n, [0; 3]);
+        let order = &self.order;
+        crate::par::chunks1(&mut self.cells, |s, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                let p = x[order[s + k] as usize];
+                for (a, oa) in o.iter_mut().enumerate().take(V::DIM) {
+                    *oa = cell_coord(p.comp(a), inv);
+                }
+            }
+        });
+    }
+
+    /// Candidate ranges (into the sorted order) holding every point closer than the cell size to
+    /// any point of cell `c`.
+    #[inline]
+    pub fn query(&self, c: [i64; 3]) -> Ranges {
+        let mut out = Ranges { r: [(0, 0); MAX_RANGES], len: 0 };
+        if self.order.is_empty() {
+            return out;
+        }
+        let (dz_lo, dz_hi) = if self.dim == 3 { (-1i64, 1i64) } else { (0, 0) };
+        match self.mode {
+            Mode::Dense { lo, n } => {
+                let x0 = c[0].saturating_sub(1).saturating_sub(lo[0]).max(0);
+                let x1 = c[0].saturating_add(1).saturating_sub(lo[0]).min(n[0] - 1);
+                if x0 > x1 {
+                    return out;
+                }
+                for dz in dz_lo..=dz_hi {
+                    let z = c[2].saturating_add(dz).saturating_sub(lo[2]);
+                    if z < 0 || z >= n[2] {
+                        continue;
+                    }
+                    for dy in -1i64..=1 {
+                        let y = c[1].saturating_add(dy).saturating_sub(lo[1]);
+                        if y < 0 || y >= n[1] {
+                            continue;
+                        }
+                        let row = ((z * n[1] + y) * n[0]) as usize;
+                        let a = self.start[row + x0 as usize];
+                        let b = self.start[row + x1 as usize + 1];
+                        if a < b {
+                            out.r[out.len] = (a, b);
+                            out.len += 1;
+                        }
+                    }
+                }
+            }
+            Mode::Hash { mask } => {
+                let mut seen = [usize::MAX; MAX_RANGES];
+                let mut ns = 0;
+                for dz in dz_lo..=dz_hi {
+                    for dy in -1i64..=1 {
+                        for dx in -1i64..=1 {
+                            let b = hash([c[0].wrapping_add(dx), c[1].wrapping_add(dy), c[2].wrapping_add(dz)], mask);
+                            if seen[..ns].contains(&b) {
+                                continue;
+                            }
+                            seen[ns] = b;
+                            ns += 1;
+                            let (a, e) = (self.start[b], self.start[b + 1]);
+                            if a < e {
+                                out.r[out.len] = (a, e);
+                                out.len += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// All pairs (i, j), i < j (original indices), with squared distance < radius² evaluated in
+    /// f64 as Σ_k (x_i,k − x_j,k)², sorted by i then j. `radius` = the cell size.
+    pub fn pairs<V: Vector>(&self, x: &[V]) -> (Vec<u32>, Vec<u32>) {
+        let n = x.len();
+        assert_eq!(n, self.order.len(), "cell list built for other points");
+        let r2 = self.cell * self.cell;
+        // Sorted slot of each original index, to find a point's cell.
+        let mut slot = vec![0u32; n];
+        for (k, &i) in self.order.iter().enumerate() {
+            slot[i as usize] = k as u32;
+        }
+        let block = |r: Range<usize>| {
+            let mut pi = Vec::new();
+            let mut pj = Vec::new();
+            let mut row = Vec::new();
+            for i in r {
+                let xi = x[i];
+                row.clear();
+                for rg in self.query(self.cells[slot[i] as usize]).iter() {
+                    for &j in &self.order[rg] {
+                        let j = j as usize;
+                        if j > i {
+                            let mut d2 = 0.0;
+                            for k in 0..V::DIM {
+                                let d = xi.comp(k) - x[j].comp(k);
+                                d2 += d * d;
+                            }
+                            if d2 < r2 {
+                                row.push(j as u32);
+                            }
+                        }
+                    }
+                }
+                row.sort_unstable();
+                pi.extend(std::iter::repeat_n(i as u32, row.len()));
+                pj.extend_from_slice(&row);
+            }
+            (pi, pj)
+        };
+        let chunk = crate::par::CHUNK;
+        let blocks: Vec<(Vec<u32>, Vec<u32>)> = if n >= crate::par::PAR_MIN {
+            (0..n.div_ceil(chunk)).into_par_iter().map(|c| block(c * chunk..((c + 1) * chunk).min(n))).collect()
+        } else {
+            vec![block(0..n)]
+        };
+        let total: usize = blocks.iter().map(|b| b.0.len()).sum();
+        let mut i_out = Vec::with_capacity(total);
+        let mut j_out = Vec::with_capacity(total);
+        for (a, b) in blocks {
+            i_out.extend(a);
+            j_out.extend(b);
+        }
+        (i_out, j_out)
+    }
+
+    /// Heap bytes held (for the memory-per-particle figures).
+    pub fn bytes(&self) -> usize {
+        self.order.capacity() * 4 + self.cells.capacity() * 24 + self.start.capacity() * 4 + self.keys.capacity() * 4 + self.hist.capacity() * 4
+    }
+}
+
+#[inline(always)]
+fn bucket(mode: Mode, c: [i64; 3]) -> usize {
+    match mode {
+        Mode::Dense { lo, n } => (((c[2] - lo[2]) * n[1] + (c[1] - lo[1])) * n[0] + (c[0] - lo[0])) as usize,
+        Mode::Hash { mask } => hash(c, mask),
+    }
+}
+
+/// All pairs i < j of `x` closer than `radius` (see [`CellList::pairs`]).
+pub fn neighbor_pairs<V: Vector>(x: &[V], radius: Real) -> Result<(Vec<u32>, Vec<u32>)> {
+    if let Some(i) = x.iter().position(|p| !p.is_finite()) {
+        return Err(invalid("points", format!("row {i} is not finite")));
+    }
+    if x.len() >= u32::MAX as usize {
+        return Err(invalid("points", "too many points"));
+    }
+    let mut g = CellList::new(radius, V::DIM)?;
+    g.build(x);
+    Ok(g.pairs(x))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DVec2, DVec3};
+
+    fn brute<V: Vector>(x: &[V], r: Real) -> (Vec<u32>, Vec<u32>) {
+        let (mut a, mut b) = (vec![], vec![]);
+        for i in 0..x.len() {
+            for j in i + 1..x.len() {
+                let mut d2 = 0.0;
+                for k in 0..V::DIM {
+                    let d = x[i].comp(k) - x[j].comp(k);
+                    d2 += d * d;
+                }
+                if d2 < r * r {
+                    a.push(i as u32);
+                    b.push(j as u32);
+                }
+            }
+        }
+        (a, b)
+    }
+
+    fn lcg(s: &mut u64) -> f64 {
+        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*s >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn matches_brute_force_dense_and_hashed() {
+        let mut s = 7;
+        for &(n, span, far) in &[(500usize, 5.0, false), (5000, 20.0, false), (300, 5.0, true), (6000, 30.0, true)] {
+            let mut x: Vec<DVec2> = (0..n).map(|_| DVec2::new(lcg(&mut s) * span - span / 2.0, lcg(&mut s) * span)).collect();
+            if far {
+                x.push(DVec2::new(1e12, -3e11)); // forces hashing
+            }
+            let got = neighbor_pairs(&x, 0.7).unwrap();
+            assert_eq!(got, brute(&x, 0.7));
+            let mut g = CellList::new(0.7, 2).unwrap();
+            g.build(&x);
+            assert_eq!(g.is_dense(), !far);
+        }
+        let x: Vec<DVec3> = (0..3000).map(|_| DVec3::new(lcg(&mut s) * 6.0, lcg(&mut s) * 6.0, lcg(&mut s) * 6.0)).collect();
+        assert_eq!(neighbor_pairs(&x, 0.8).unwrap(), brute(&x, 0.8));
+    }
+
+    #[test]
+    fn sort_is_independent_of_thread_count() {
+        let mut s = 3;
+        let x: Vec<DVec3> = (0..20000).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))).collect();
+        let build = |t| {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(t).build().unwrap();
+            pool.install(|| {
+                let mut g = CellList::new(0.05, 3).unwrap();
+                g.build(&x);
+                g.order
+            })
+        };
+        assert_eq!(build(1), build(3));
+    }
+}

@@ -1,0 +1,179 @@
+//! Smoothing kernels with support 2h, and the scalar type (f32/f64) the SPH passes run in.
+//!
+//! With q = r/h: W(r) = σ_d w(q) and ∇_i W(r_ij) = (σ_d / h²) g(q) r_ij, r_ij = x_i − x_j, where
+//! g(q) = w'(q)/q. Writing the gradient through g avoids dividing by r (finite at r = 0, where it
+//! gives the zero vector).
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// The SPH passes' scalar: `f32` (twice the SIMD lanes) or `f64`.
+pub trait Float:
+    Copy
+    + Send
+    + Sync
+    + Default
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + std::fmt::Debug
+    + 'static
+{
+    const ZERO: Self;
+    const ONE: Self;
+    fn of(x: f64) -> Self;
+    fn f64(self) -> f64;
+    fn sqrt(self) -> Self;
+    fn max(self, o: Self) -> Self;
+    fn min(self, o: Self) -> Self;
+}
+
+macro_rules! float_impl {
+    ($t:ty) => {
+        impl Float for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            #[inline(always)]
+            fn of(x: f64) -> Self {
+                x as $t
+            }
+            #[inline(always)]
+            fn f64(self) -> f64 {
+                self as f64
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            // Plain compares (not IEEE maxNum): they vectorise to one instruction.
+            #[inline(always)]
+            fn max(self, o: Self) -> Self {
+                if self > o {
+                    self
+                } else {
+                    o
+                }
+            }
+            #[inline(always)]
+            fn min(self, o: Self) -> Self {
+                if self < o {
+                    self
+                } else {
+                    o
+                }
+            }
+        }
+    };
+}
+float_impl!(f32);
+float_impl!(f64);
+
+pub trait Kernel: Copy + Send + Sync + Default + 'static {
+    const NAME: &'static str;
+    /// Normalisation σ_d for dimension `dim` (2 or 3) and smoothing length `h`.
+    fn sigma(h: f64, dim: usize) -> f64;
+    /// w(q), zero for q ≥ 2.
+    fn w<F: Float>(q: F) -> F;
+    /// g(q) = w'(q)/q, zero for q ≥ 2 (and ≤ 0 everywhere: the kernel decreases).
+    fn g<F: Float>(q: F) -> F;
+}
+
+/// Cubic spline (M4), Monaghan & Lattanzio (1985), eq. 21:
+/// w(q) = ¼(2−q)₊³ − (1−q)₊³; σ₂ = 10/(7π h²), σ₃ = 1/(π h³).
+#[derive(Clone, Copy, Default, Debug)]
+pub struct CubicSpline;
+
+impl Kernel for CubicSpline {
+    const NAME: &'static str = "cubic_spline";
+    fn sigma(h: f64, dim: usize) -> f64 {
+        use std::f64::consts::PI;
+        if dim == 2 {
+            10.0 / (7.0 * PI * h * h)
+        } else {
+            1.0 / (PI * h * h * h)
+        }
+    }
+    #[inline(always)]
+    fn w<F: Float>(q: F) -> F {
+        let a = (F::of(2.0) - q).max(F::ZERO);
+        let b = (F::ONE - q).max(F::ZERO);
+        F::of(0.25) * a * a * a - b * b * b
+    }
+    #[inline(always)]
+    fn g<F: Float>(q: F) -> F {
+        // q < 1: w'/q = −3 + 9/4 q exactly (no cancellation near 0); q ≥ 1: −¾(2−q)²/q.
+        let a = (F::of(2.0) - q).max(F::ZERO);
+        let inner = F::of(-3.0) + F::of(2.25) * q;
+        let outer = F::of(-0.75) * a * a / q.max(F::ONE);
+        if q < F::ONE {
+            inner
+        } else {
+            outer
+        }
+    }
+}
+
+/// Wendland C2, Wendland (1995); in the support-2h form of Dehnen & Aly (2012), Table 1:
+/// w(q) = (1 − q/2)₊⁴ (2q + 1); σ₂ = 7/(4π h²), σ₃ = 21/(16π h³).
+#[derive(Clone, Copy, Default, Debug)]
+pub struct WendlandC2;
+
+impl Kernel for WendlandC2 {
+    const NAME: &'static str = "wendland_c2";
+    fn sigma(h: f64, dim: usize) -> f64 {
+        use std::f64::consts::PI;
+        if dim == 2 {
+            7.0 / (4.0 * PI * h * h)
+        } else {
+            21.0 / (16.0 * PI * h * h * h)
+        }
+    }
+    #[inline(always)]
+    fn w<F: Float>(q: F) -> F {
+        let t = (F::ONE - F::of(0.5) * q).max(F::ZERO);
+        let t2 = t * t;
+        t2 * t2 * (F::of(2.0) * q + F::ONE)
+    }
+    #[inline(always)]
+    fn g<F: Float>(q: F) -> F {
+        let t = (F::ONE - F::of(0.5) * q).max(F::ZERO);
+        F::of(-5.0) * t * t * t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// ∫ W dV = 1 (radial quadrature) and g = w'/q (finite differences), in 2D and 3D.
+    fn check<K: Kernel>() {
+        let h = 0.7;
+        for dim in [2usize, 3] {
+            let n = 200_000;
+            let dr = 2.0 * h / n as f64;
+            let mut total = 0.0;
+            for k in 0..n {
+                let r = (k as f64 + 0.5) * dr;
+                let shell = if dim == 2 { 2.0 * std::f64::consts::PI * r } else { 4.0 * std::f64::consts::PI * r * r };
+                total += K::sigma(h, dim) * K::w(r / h) * shell * dr;
+            }
+            assert!((total - 1.0).abs() < 1e-8, "{} {dim}D integrates to {total}", K::NAME);
+        }
+        for &q in &[0.05f64, 0.5, 0.99, 1.01, 1.5, 1.9] {
+            let e = 1e-6;
+            let d = (K::w(q + e) - K::w(q - e)) / (2.0 * e);
+            assert!((d / q - K::g(q)).abs() < 1e-6, "{} g({q})", K::NAME);
+        }
+        assert_eq!(K::w(2.0f64), 0.0);
+        assert_eq!(K::g(2.0f64), 0.0);
+        assert_eq!(K::w(3.0f64), 0.0);
+        assert!(K::g(0.0f64).is_finite());
+    }
+
+    #[test]
+    fn kernels_are_normalised_and_consistent() {
+        check::<CubicSpline>();
+        check::<WendlandC2>();
+    }
+}

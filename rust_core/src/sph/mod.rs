@@ -1,0 +1,770 @@
+//! Weakly compressible SPH (WCSPH) as one force term.
+//!
+//! Density by summation, ρ_i = Σ_j m_j W_ij + Σ_b Ψ_b W_ib (self included; b runs over static wall
+//! particles of "mass" Ψ_b = ρ0 V_b, Akinci et al. 2012, eq. 4–5). Tait equation of state,
+//! p = B[(ρ/ρ0)^γ − 1], B = ρ0 c0²/γ (Monaghan 1994; Becker & Teschner 2007, eq. 6), optionally
+//! clamped to p ≥ 0. Symmetric, momentum-conserving pressure force with Monaghan (1992) artificial
+//! viscosity:
+//!
+//!   dv_i/dt = −Σ_j m_j (p_i/ρ_i² + p_j/ρ_j² + Π_ij) ∇_i W_ij − Σ_b Ψ_b (p_i/ρ_i²) ∇_i W_ib,
+//!   Π_ij = −α c0 μ_ij / ρ̄_ij,  μ_ij = h v_ij·r_ij / (r_ij² + 0.01 h²) if v_ij·r_ij < 0, else 0.
+//!
+//! The wall term is Akinci et al. (2012), eq. 10 (free slip: no wall viscosity, so fluid cannot
+//! stick). With summation density the pressure part is exactly the gradient of the internal
+//! energy U = Σ_i m_i u(ρ_i), u' = p/ρ² (the SPH Lagrangian, Price 2012, §3.2), so `potential`
+//! books U and the energy books balance: the viscosity dissipates
+//! P = ½ Σ_ij m_i m_j Π_ij v_ij·∇_i W_ij ≥ 0 (Monaghan 1992, §4).
+//!
+//! Each evaluation counting-sorts the fluid into cells (`grid`), gathers positions and velocities
+//! into cell order (structure of arrays, f32 or f64), and runs two passes, density then forces,
+//! over contiguous candidate runs, 8 or 16 pairs at a time (SIMD lanes). Forces are gathered per
+//! particle: no atomics, bit-identical for any thread count.
+pub mod kernels;
+
+use crate::error::{invalid, Result};
+use crate::grid::{CellList, Ranges};
+use crate::par;
+use crate::state::Model;
+use crate::terms::Term;
+use crate::vector::{Real, Vector};
+use kernels::{CubicSpline, Float, Kernel, WendlandC2};
+use rayon::prelude::*;
+use std::marker::PhantomData;
+use std::ops::Range;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelKind {
+    CubicSpline,
+    WendlandC2,
+}
+
+impl KernelKind {
+    pub fn by_name(s: &str) -> Result<Self> {
+        match s {
+            "cubic_spline" => Ok(Self::CubicSpline),
+            "wendland_c2" => Ok(Self::WendlandC2),
+            o => Err(invalid("kernel", format!("unknown kernel {o:?}; valid: cubic_spline, wendland_c2"))),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Precision {
+    F32,
+    F64,
+}
+
+impl Precision {
+    pub fn by_name(s: &str) -> Result<Self> {
+        match s {
+            "f32" | "float32" => Ok(Self::F32),
+            "f64" | "float64" => Ok(Self::F64),
+            o => Err(invalid("precision", format!("unknown precision {o:?}; valid: f32, f64"))),
+        }
+    }
+}
+
+/// Fluid parameters, SI units.
+#[derive(Clone, Copy, Debug)]
+pub struct SphParams {
+    /// Smoothing length h, m (support 2h).
+    pub h: Real,
+    /// Rest density ρ0, kg/m^dim.
+    pub rho0: Real,
+    /// Speed of sound c0, m/s.
+    pub c0: Real,
+    /// Tait exponent γ (integer, 1..=15; water: 7).
+    pub gamma: i32,
+    /// Monaghan artificial viscosity α (≥ 0).
+    pub alpha: Real,
+    /// Clamp the pressure to p ≥ 0 (no tension at the free surface).
+    pub clamp: bool,
+    pub kernel: KernelKind,
+    pub precision: Precision,
+}
+
+impl SphParams {
+    pub fn validate(&self) -> Result<()> {
+        let pos = |v: Real, a: &'static str| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(a, format!("{v} must be finite and > 0")))
+            }
+        };
+        pos(self.h, "h")?;
+        pos(self.rho0, "density")?;
+        pos(self.c0, "sound_speed")?;
+        if !(1..=15).contains(&self.gamma) {
+            return Err(invalid("gamma", format!("{} must be an integer in 1..=15", self.gamma)));
+        }
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return Err(invalid("viscosity", format!("{} must be finite and >= 0", self.alpha)));
+        }
+        Ok(())
+    }
+    /// Tait stiffness B = ρ0 c0² / γ, Pa.
+    pub fn b(&self) -> Real {
+        self.rho0 * self.c0 * self.c0 / self.gamma as Real
+    }
+    /// Pressure (Pa) at density `rho`.
+    pub fn pressure(&self, rho: Real) -> Real {
+        let p = self.b() * ((rho / self.rho0).powi(self.gamma) - 1.0);
+        if self.clamp {
+            p.max(0.0)
+        } else {
+            p
+        }
+    }
+    /// Specific internal energy u(ρ) = ∫_{ρ0}^{ρ} p/ρ'² dρ', J/kg (zero at rest density, ≥ 0).
+    pub fn internal_energy(&self, rho: Real) -> Real {
+        let s = rho / self.rho0;
+        if self.clamp && s <= 1.0 {
+            return 0.0;
+        }
+        let g = self.gamma as Real;
+        let b = self.b() / self.rho0;
+        if self.gamma == 1 {
+            b * (s.ln() + 1.0 / s - 1.0)
+        } else {
+            b * (s.powi(self.gamma - 1) / (g - 1.0) + 1.0 / s - g / (g - 1.0))
+        }
+    }
+}
+
+/// Static wall particles: positions, Ψ_b = ρ0 V_b (kg/m^dim · m^dim = kg), sorted into cells.
+#[derive(Clone, Debug)]
+struct Walls {
+    grid: CellList,
+    pos: [Vec<f64>; 3],
+    psi: Vec<f64>,
+}
+
+/// Sorted, padded structure-of-arrays buffers in the precision of the passes.
+#[derive(Clone, Debug, Default)]
+struct Bufs<F: Float> {
+    pos: [Vec<F>; 3],
+    vel: [Vec<F>; 3],
+    m: Vec<F>,
+    rho: Vec<F>,
+    /// p/ρ², m⁵/(kg s²) in 3D.
+    pr: Vec<F>,
+    wpos: [Vec<F>; 3],
+    wpsi: Vec<F>,
+}
+
+/// Loads past the end of a run read up to `PAD` padding entries (masked out).
+const PAD: usize = 16;
+
+/// The SPH force term over particles `first .. first + n` of a scene.
+pub struct Sph<V: Vector> {
+    name: String,
+    first: usize,
+    n: usize,
+    p: SphParams,
+    grid: CellList,
+    walls: Walls,
+    b32: Bufs<f32>,
+    b64: Bufs<f64>,
+    /// Largest |dv/dt| of the last evaluation (without uniform fields), m/s².
+    amax: Real,
+    _v: PhantomData<V>,
+}
+
+impl<V: Vector> Sph<V> {
+    /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.
+    pub fn new(name: &str, first: usize, n: usize, p: SphParams, walls: Vec<V>, psi: Vec<Real>) -> Result<Self> {
+        p.validate()?;
+        if walls.len() != psi.len() {
+            return Err(invalid("wall_volume", format!("has {} entries, walls has {}", psi.len(), walls.len())));
+        }
+        if let Some(i) = walls.iter().position(|w| !w.is_finite()) {
+            return Err(invalid("walls", format!("row {i} is not finite")));
+        }
+        if let Some(i) = psi.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
+            return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
+        }
+        let support = 2.0 * p.h;
+        let mut wg = CellList::new(support, V::DIM)?;
+        wg.build(&walls);
+        let mut pos: [Vec<f64>; 3] = Default::default();
+        for (d, pd) in pos.iter_mut().enumerate().take(V::DIM) {
+            *pd = wg.order.iter().map(|&i| walls[i as usize].comp(d)).chain(std::iter::repeat_n(0.0, PAD)).collect();
+        }
+        let spsi: Vec<f64> = wg.order.iter().map(|&i| psi[i as usize]).chain(std::iter::repeat_n(0.0, PAD)).collect();
+        let walls = Walls { grid: wg, pos, psi: spsi };
+        let mut s = Self {
+            name: name.to_string(),
+            first,
+            n,
+            p,
+            grid: CellList::new(support, V::DIM)?,
+            walls,
+            b32: Bufs::default(),
+            b64: Bufs::default(),
+            amax: 0.0,
+            _v: PhantomData,
+        };
+        s.b32.set_walls(&s.walls);
+        s.b64.set_walls(&s.walls);
+        Ok(s)
+    }
+
+    pub fn params(&self) -> &SphParams {
+        &self.p
+    }
+    pub fn range(&self) -> Range<usize> {
+        self.first..self.first + self.n
+    }
+    pub fn n_walls(&self) -> usize {
+        self.walls.grid.len()
+    }
+    /// Heap bytes of the grid and pass buffers (memory-per-particle figures).
+    pub fn bytes(&self) -> usize {
+        fn b<F: Float>(x: &Bufs<F>) -> usize {
+            let s = std::mem::size_of::<F>();
+            (x.pos.iter().chain(&x.vel).chain(&x.wpos).map(|v| v.capacity()).sum::<usize>()
+                + x.m.capacity()
+                + x.rho.capacity()
+                + x.pr.capacity()
+                + x.wpsi.capacity())
+                * s
+        }
+        self.grid.bytes() + b(&self.b32) + b(&self.b64) + self.walls.grid.bytes()
+    }
+
+    /// Density (kg/m^dim) and pressure (Pa) of each fluid particle, in particle order, computed
+    /// now in f64.
+    pub fn fields(&self, x: &[V], model: &Model) -> (Vec<Real>, Vec<Real>) {
+        let mut grid = self.grid.clone();
+        let mut b = Bufs::<f64>::default();
+        b.set_walls(&self.walls);
+        let xs = &x[self.range()];
+        grid.build(xs);
+        b.gather(&grid, xs, None, &model.mass[self.range()]);
+        density::<V, f64>(&self.p, &grid, &self.walls.grid, &mut b);
+        let mut rho = vec![0.0; self.n];
+        let mut p = vec![0.0; self.n];
+        for (k, &i) in grid.order.iter().enumerate() {
+            rho[i as usize] = b.rho[k];
+            p[i as usize] = self.p.pressure(b.rho[k]);
+        }
+        (rho, p)
+    }
+
+}
+
+/// One evaluation in precision `F`: build the cell list, gather, density pass, force pass.
+/// Returns (dissipated power W, max |a|²).
+#[allow(clippy::too_many_arguments)]
+fn eval<V: Vector, F: Float>(
+    p: &SphParams,
+    grid: &mut CellList,
+    walls: &CellList,
+    b: &mut Bufs<F>,
+    x: &[V],
+    v: &[V],
+    m: &[Real],
+    out: &mut [V],
+    want_power: bool,
+) -> (Real, Real) {
+    grid.build(x);
+    b.gather(grid, x, Some(v), m);
+    density::<V, F>(p, grid, walls, b);
+    match (p.kernel, V::DIM) {
+        (KernelKind::CubicSpline, 2) => force_pass::<V, F, CubicSpline, 2>(p, grid, walls, b, out, want_power),
+        (KernelKind::CubicSpline, _) => force_pass::<V, F, CubicSpline, 3>(p, grid, walls, b, out, want_power),
+        (KernelKind::WendlandC2, 2) => force_pass::<V, F, WendlandC2, 2>(p, grid, walls, b, out, want_power),
+        (KernelKind::WendlandC2, _) => force_pass::<V, F, WendlandC2, 3>(p, grid, walls, b, out, want_power),
+    }
+}
+
+fn density<V: Vector, F: Float>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
+    match (p.kernel, V::DIM) {
+        (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(p, grid, walls, b),
+        (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(p, grid, walls, b),
+        (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(p, grid, walls, b),
+        (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(p, grid, walls, b),
+    }
+}
+
+impl<F: Float> Bufs<F> {
+    fn set_walls(&mut self, w: &Walls) {
+        for d in 0..3 {
+            self.wpos[d] = w.pos[d].iter().map(|&a| F::of(a)).collect();
+        }
+        self.wpsi = w.psi.iter().map(|&a| F::of(a)).collect();
+    }
+
+    /// Positions, velocities and masses into cell order (padded by `PAD`).
+    fn gather<V: Vector>(&mut self, grid: &CellList, x: &[V], v: Option<&[V]>, m: &[Real]) {
+        let n = x.len();
+        let order = &grid.order;
+        for d in 0..V::DIM {
+            self.pos[d].resize(n + PAD, F::ZERO);
+            self.vel[d].resize(n + PAD, F::ZERO);
+        }
+        self.m.resize(n + PAD, F::ZERO);
+        self.rho.resize(n + PAD, F::ONE);
+        self.pr.resize(n + PAD, F::ZERO);
+        let [p0, p1, p2] = &mut self.pos;
+        let [v0, v1, v2] = &mut self.vel;
+        let ptr = [SyncPtr(p0.as_mut_ptr()), SyncPtr(p1.as_mut_ptr()), SyncPtr(p2.as_mut_ptr())];
+        let vptr = [SyncPtr(v0.as_mut_ptr()), SyncPtr(v1.as_mut_ptr()), SyncPtr(v2.as_mut_ptr())];
+        par::chunks1(&mut self.m[..n], |s, mm| {
+            for (k, mk) in mm.iter_mut().enumerate() {
+                let i = order[s + k] as usize;
+                *mk = F::of(m[i]);
+                for d in 0..V::DIM {
+                    // SAFETY: each sorted slot s + k is written by exactly one chunk.
+                    unsafe {
+                        *ptr[d].get().add(s + k) = F::of(x[i].comp(d));
+                        *vptr[d].get().add(s + k) = F::of(v.map_or(0.0, |v| v[i].comp(d)));
+                    }
+                }
+            }
+        });
+    }
+}
+
+#[derive(Clone, Copy)]
+struct SyncPtr<T>(*mut T);
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
+impl<T> SyncPtr<T> {
+    #[inline(always)]
+    fn get(self) -> *mut T {
+        self.0
+    }
+}
+
+// ------------------------------------------------------------------------------------------------
+// The passes. `L` pairs at a time from contiguous candidate runs; lanes past a run's end are
+// masked. Written as plain loops over `[F; L]` lane arrays that LLVM turns into SIMD; compiled
+// twice, for AVX-512 (chosen at run time) and for the baseline target.
+// ------------------------------------------------------------------------------------------------
+
+fn simd_ok() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        static OK: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *OK.get_or_init(|| {
+            std::env::var_os("PHYSCORE_NO_SIMD").is_none()
+                && is_x86_feature_detected!("avx512f")
+                && is_x86_feature_detected!("avx512dq")
+                && is_x86_feature_detected!("avx512vl")
+        })
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+#[inline(always)]
+fn hsum<F: Float, const L: usize>(mut a: [F; L]) -> F {
+    let mut w = L / 2;
+    while w > 0 {
+        for l in 0..w {
+            a[l] = a[l] + a[l + w];
+        }
+        w /= 2;
+    }
+    a[0]
+}
+
+#[inline(always)]
+fn lanes<F: Float, const L: usize>(s: &[F], j: usize) -> &[F; L] {
+    s[j..j + L].try_into().unwrap()
+}
+
+/// Σ_j mass_j w(q_ij) over one candidate run, into `acc`.
+#[inline(always)]
+fn dens_run<F: Float, K: Kernel, const D: usize, const L: usize>(
+    acc: &mut [F; L],
+    xi: [F; 3],
+    pos: &[Vec<F>; 3],
+    mass: &[F],
+    r: Range<usize>,
+    inv_h: F,
+) {
+    let mut j = r.start;
+    while j < r.end {
+        let lim = r.end - j;
+        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&pos[d], j) } else { lanes::<F, L>(&pos[0], j) });
+        let m = lanes::<F, L>(mass, j);
+        for l in 0..L {
+            let mut r2 = F::ZERO;
+            for d in 0..D {
+                let dd = xi[d] - p[d][l];
+                r2 = r2 + dd * dd;
+            }
+            let w = K::w(r2.sqrt() * inv_h) * m[l];
+            acc[l] = acc[l] + if l < lim { w } else { F::ZERO };
+        }
+        j += L;
+    }
+}
+
+#[inline(always)]
+fn density_chunk<F: Float, K: Kernel, const D: usize, const L: usize>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    ks: Range<usize>,
+    rho: &mut [F],
+    pr: &mut [F],
+) {
+    let inv_h = F::of(1.0 / p.h);
+    let sigma = F::of(K::sigma(p.h, D));
+    let inv_rho0 = F::of(1.0 / p.rho0);
+    let bb = F::of(p.b());
+    let mut last = [i64::MIN; 3];
+    let mut rg = Ranges { r: [(0, 0); crate::grid::MAX_RANGES], len: 0 };
+    let mut wr = rg;
+    let base = ks.start;
+    for k in ks {
+        let c = grid.cells[k];
+        if c != last {
+            rg = grid.query(c);
+            wr = walls.query(c);
+            last = c;
+        }
+        let xi: [F; 3] = std::array::from_fn(|d| if d < D { b.pos[d][k] } else { F::ZERO });
+        let mut acc = [F::ZERO; L];
+        for r in rg.iter() {
+            dens_run::<F, K, D, L>(&mut acc, xi, &b.pos, &b.m, r, inv_h);
+        }
+        for r in wr.iter() {
+            dens_run::<F, K, D, L>(&mut acc, xi, &b.wpos, &b.wpsi, r, inv_h);
+        }
+        let d = sigma * hsum(acc);
+        let s = d * inv_rho0;
+        let mut sg = s;
+        for _ in 1..p.gamma {
+            sg = sg * s;
+        }
+        let mut pk = bb * (sg - F::ONE);
+        if p.clamp {
+            pk = pk.max(F::ZERO);
+        }
+        rho[k - base] = d;
+        pr[k - base] = pk / (d * d);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
+unsafe fn density_chunk_avx512<F: Float, K: Kernel, const D: usize, const L: usize>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    ks: Range<usize>,
+    rho: &mut [F],
+    pr: &mut [F],
+) {
+    density_chunk::<F, K, D, L>(p, grid, walls, b, ks, rho, pr)
+}
+
+fn density_pass<F: Float, K: Kernel, const D: usize>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
+    let n = grid.len();
+    let mut rho = std::mem::take(&mut b.rho);
+    let mut pr = std::mem::take(&mut b.pr);
+    let simd = simd_ok();
+    let f32 = std::mem::size_of::<F>() == 4;
+    {
+        let bref: &Bufs<F> = b;
+        par::chunks2(&mut rho[..n], &mut pr[..n], |s, rc, pc| {
+            let ks = s..s + rc.len();
+            #[cfg(target_arch = "x86_64")]
+            if simd {
+                // SAFETY: the CPU has the features (simd_ok).
+                unsafe {
+                    if f32 {
+                        density_chunk_avx512::<F, K, D, 16>(p, grid, walls, bref, ks, rc, pc)
+                    } else {
+                        density_chunk_avx512::<F, K, D, 8>(p, grid, walls, bref, ks, rc, pc)
+                    }
+                }
+                return;
+            }
+            let _ = simd;
+            if f32 {
+                density_chunk::<F, K, D, 8>(p, grid, walls, bref, ks, rc, pc)
+            } else {
+                density_chunk::<F, K, D, 4>(p, grid, walls, bref, ks, rc, pc)
+            }
+        });
+    }
+    b.rho = rho;
+    b.pr = pr;
+}
+
+/// Fluid–fluid pairs of one candidate run: Σ_j m_j (P_i + P_j + Π_ij) g_ij r_ij into `acc`,
+/// and Σ_j m_j Π_ij g_ij (v_ij·r_ij) into `pacc` if `POWER`.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn force_run<F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
+    acc: &mut [[F; L]; 3],
+    pacc: &mut [F; L],
+    xi: [F; 3],
+    vi: [F; 3],
+    rho_i: F,
+    pr_i: F,
+    b: &Bufs<F>,
+    r: Range<usize>,
+    inv_h: F,
+    visc: F,
+    eps_h2: F,
+) {
+    let mut j = r.start;
+    while j < r.end {
+        let lim = r.end - j;
+        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.pos[d], j) } else { lanes::<F, L>(&b.pos[0], j) });
+        let v: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.vel[d], j) } else { lanes::<F, L>(&b.vel[0], j) });
+        let m = lanes::<F, L>(&b.m, j);
+        let rho = lanes::<F, L>(&b.rho, j);
+        let pr = lanes::<F, L>(&b.pr, j);
+        for l in 0..L {
+            let mut dx = [F::ZERO; 3];
+            let mut r2 = F::ZERO;
+            let mut vr = F::ZERO;
+            for d in 0..D {
+                dx[d] = xi[d] - p[d][l];
+                r2 = r2 + dx[d] * dx[d];
+                vr = vr + (vi[d] - v[d][l]) * dx[d];
+            }
+            let g = K::g(r2.sqrt() * inv_h);
+            // Π_ij ≥ 0: −α c0 h min(v·r, 0) · 2 / ((r² + 0.01h²)(ρ_i + ρ_j)).
+            let pi = visc * (-vr).max(F::ZERO) / ((r2 + eps_h2) * (rho_i + rho[l]));
+            let c = m[l] * (pr_i + pr[l] + pi) * g;
+            let c = if l < lim { c } else { F::ZERO };
+            for d in 0..D {
+                acc[d][l] = acc[d][l] + c * dx[d];
+            }
+            if POWER {
+                let w = m[l] * pi * g * vr;
+                pacc[l] = pacc[l] + if l < lim { w } else { F::ZERO };
+            }
+        }
+        j += L;
+    }
+}
+
+/// Fluid–wall pairs of one run: Σ_b Ψ_b g_ib r_ib into `acc`.
+#[inline(always)]
+fn wall_run<F: Float, K: Kernel, const D: usize, const L: usize>(acc: &mut [[F; L]; 3], xi: [F; 3], b: &Bufs<F>, r: Range<usize>, inv_h: F) {
+    let mut j = r.start;
+    while j < r.end {
+        let lim = r.end - j;
+        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.wpos[d], j) } else { lanes::<F, L>(&b.wpos[0], j) });
+        let psi = lanes::<F, L>(&b.wpsi, j);
+        for l in 0..L {
+            let mut dx = [F::ZERO; 3];
+            let mut r2 = F::ZERO;
+            for d in 0..D {
+                dx[d] = xi[d] - p[d][l];
+                r2 = r2 + dx[d] * dx[d];
+            }
+            let c = psi[l] * K::g(r2.sqrt() * inv_h);
+            let c = if l < lim { c } else { F::ZERO };
+            for d in 0..D {
+                acc[d][l] = acc[d][l] + c * dx[d];
+            }
+        }
+        j += L;
+    }
+}
+
+/// Forces (N) of the sorted particles `ks` into `out` (particle order); returns (Σ power
+/// partial, max |a|²).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn force_chunk<V: Vector, F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    ks: Range<usize>,
+    out: SyncPtr<V>,
+) -> (f64, f64) {
+    let inv_h = F::of(1.0 / p.h);
+    let scale = -K::sigma(p.h, D) / (p.h * p.h);
+    let visc = F::of(2.0 * p.alpha * p.c0 * p.h);
+    let eps_h2 = F::of(0.01 * p.h * p.h);
+    let mut last = [i64::MIN; 3];
+    let mut rg = Ranges { r: [(0, 0); crate::grid::MAX_RANGES], len: 0 };
+    let mut wr = rg;
+    let mut power = 0.0f64;
+    let mut amax = 0.0f64;
+    for k in ks {
+        let c = grid.cells[k];
+        if c != last {
+            rg = grid.query(c);
+            wr = walls.query(c);
+            last = c;
+        }
+        let xi: [F; 3] = std::array::from_fn(|d| if d < D { b.pos[d][k] } else { F::ZERO });
+        let vi: [F; 3] = std::array::from_fn(|d| if d < D { b.vel[d][k] } else { F::ZERO });
+        let (rho_i, pr_i) = (b.rho[k], b.pr[k]);
+        let mut acc = [[F::ZERO; L]; 3];
+        let mut pacc = [F::ZERO; L];
+        for r in rg.iter() {
+            force_run::<F, K, D, L, POWER>(&mut acc, &mut pacc, xi, vi, rho_i, pr_i, b, r, inv_h, visc, eps_h2);
+        }
+        let mut wacc = [[F::ZERO; L]; 3];
+        for r in wr.iter() {
+            wall_run::<F, K, D, L>(&mut wacc, xi, b, r, inv_h);
+        }
+        let mi = b.m[k].f64();
+        let mut a = [0.0f64; 3];
+        for d in 0..D {
+            a[d] = scale * (hsum(acc[d]).f64() + pr_i.f64() * hsum(wacc[d]).f64());
+        }
+        let a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+        amax = amax.max(a2);
+        if POWER {
+            power += 0.5 * mi * (-scale) * hsum(pacc).f64();
+        }
+        let mut fv = [0.0; 3];
+        for d in 0..D {
+            fv[d] = mi * a[d];
+        }
+        // SAFETY: `order` is a permutation; each particle is written by exactly one chunk.
+        unsafe { *out.get().add(grid.order[k] as usize) = V::from_slice(&fv[..D]) };
+    }
+    (power, amax)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
+unsafe fn force_chunk_avx512<V: Vector, F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    ks: Range<usize>,
+    out: SyncPtr<V>,
+) -> (f64, f64) {
+    force_chunk::<V, F, K, D, L, POWER>(p, grid, walls, b, ks, out)
+}
+
+fn force_chunk_any<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    ks: Range<usize>,
+    out: SyncPtr<V>,
+) -> (f64, f64) {
+    let f32 = std::mem::size_of::<F>() == 4;
+    #[cfg(target_arch = "x86_64")]
+    if simd_ok() {
+        // SAFETY: the CPU has the features (simd_ok).
+        return unsafe {
+            if f32 {
+                force_chunk_avx512::<V, F, K, D, 16, POWER>(p, grid, walls, b, ks, out)
+            } else {
+                force_chunk_avx512::<V, F, K, D, 8, POWER>(p, grid, walls, b, ks, out)
+            }
+        };
+    }
+    if f32 {
+        force_chunk::<V, F, K, D, 8, POWER>(p, grid, walls, b, ks, out)
+    } else {
+        force_chunk::<V, F, K, D, 4, POWER>(p, grid, walls, b, ks, out)
+    }
+}
+
+fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    out: &mut [V],
+    want_power: bool,
+) -> (f64, f64) {
+    let n = grid.len();
+    let ptr = SyncPtr(out.as_mut_ptr());
+    let chunk = |c: usize| {
+        let ks = c * par::CHUNK..((c + 1) * par::CHUNK).min(n);
+        if want_power {
+            force_chunk_any::<V, F, K, D, true>(p, grid, walls, b, ks, ptr)
+        } else {
+            force_chunk_any::<V, F, K, D, false>(p, grid, walls, b, ks, ptr)
+        }
+    };
+    let nc = n.div_ceil(par::CHUNK);
+    let parts: Vec<(f64, f64)> = if n >= par::PAR_MIN { (0..nc).into_par_iter().map(chunk).collect() } else { (0..nc).map(chunk).collect() };
+    // Fixed chunk order: the same sum for any thread count.
+    parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)))
+}
+
+impl<V: Vector> Term<V> for Sph<V> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real {
+        let r = self.range();
+        if assign {
+            // Particles outside the fluid get no SPH force.
+            let (head, rest) = f.split_at_mut(r.start);
+            head.fill(V::ZERO);
+            rest[r.len()..].fill(V::ZERO);
+        }
+        if self.n == 0 {
+            return 0.0;
+        }
+        // The pass writes the fluid's forces over `f`; to add instead, keep what was there.
+        let prev: Option<Vec<V>> = if assign { None } else { Some(f[r.clone()].to_vec()) };
+        let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
+        let (power, amax) = match self.p.precision {
+            Precision::F32 => eval::<V, f32>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power),
+            Precision::F64 => eval::<V, f64>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power),
+        };
+        self.amax = amax;
+        if let Some(prev) = prev {
+            for (fi, pi) in f[r].iter_mut().zip(prev) {
+                *fi += pi;
+            }
+        }
+        power
+    }
+
+    fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
+        if self.n == 0 {
+            return Some(0.0);
+        }
+        let (rho, _) = self.fields(x, model);
+        let m = &model.mass[self.range()];
+        Some(par::sum(self.n, 0.0, |r| r.map(|i| m[i] * self.p.internal_energy(rho[i])).sum::<Real>()))
+    }
+
+    fn dissipative(&self) -> bool {
+        self.p.alpha > 0.0
+    }
+
+    fn as_sph(&self) -> Option<&Sph<V>> {
+        Some(self)
+    }
+
+    fn min_particles(&self) -> usize {
+        self.first + self.n
+    }
+
+    fn max_dt(&self, _x: &[V], v: &[V], _model: &Model, g: Real) -> Option<Real> {
+        if self.n == 0 {
+            return None;
+        }
+        let vs = &v[self.range()];
+        let vmax = vs.iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
+        // CFL (Monaghan 1992, §5, with the viscous term) and force criterion.
+        let cfl = 0.25 * self.p.h / (self.p.c0 * (1.0 + 0.6 * self.p.alpha) + vmax);
+        let a = self.amax.sqrt() + g;
+        let force = if a > 0.0 { 0.25 * (self.p.h / a).sqrt() } else { f64::INFINITY };
+        Some(cfl.min(force))
+    }
+}
