@@ -1,13 +1,18 @@
 """The ``physcore`` command line (physcore.cli): scenes listing, render, errors and exit codes."""
 from __future__ import annotations
 
+import math
 import shutil
 import subprocess
 import sys
+from typing import Optional
 
+import numpy as np
 import pytest
 from PIL import Image
 
+import physcore as pc
+from physcore import cli, render
 from physcore.cli import main
 
 SMALL = ["--frames", "5", "--size", "64x48", "--steps-per-frame", "2"]
@@ -85,6 +90,8 @@ def test_bad_param(tmp_path, capsys, param, message):
         ["--fps", "-1"],
         ["--integrator", "leapfrog"],
         ["--color-by", "mass"],
+        ["--frame-time", "0"],
+        ["--frame-time", "1", "--steps-per-frame", "1"],
         ["--param", "n=0"],  # rejected by the scene itself
     ],
 )
@@ -137,3 +144,172 @@ def test_python_dash_m(tmp_path):
     assert "5/5" in res.stderr  # the progress bar
     with Image.open(out) as im:
         assert im.n_frames == 5
+
+
+# --------------------------------------------------------------------------- fluid-style scenes
+# Stand-ins for the SPH scenes: a real Scene behind a wrapper with a fluid scene's optional methods
+# (pressure, boundary_points, advance), registered under a test name for the CLI to find.
+class Tank:
+    def __init__(self, scene, hide=()):
+        self.scene = scene
+        self.hide = set(hide)
+        self.advanced = []
+
+    def __getattribute__(self, name):
+        if name in object.__getattribute__(self, "hide"):
+            raise AttributeError(name)
+        return object.__getattribute__(self, name)
+
+    def __getattr__(self, name):
+        if name in object.__getattribute__(self, "hide"):
+            raise AttributeError(name)
+        return getattr(self.scene, name)
+
+    def pressure(self):
+        return np.maximum(1000.0 * 9.81 * (1.0 - self.scene.positions[:, 1]), 0.0)
+
+    def boundary_points(self):
+        ys = np.arange(-0.1, 1.2, 0.05)
+        xs = np.arange(-0.1, 1.05, 0.05)
+        return np.concatenate([np.column_stack([np.full_like(ys, -0.1), ys]),
+                               np.column_stack([np.full_like(ys, 1.0), ys]),
+                               np.column_stack([xs, np.full_like(xs, -0.1)])])
+
+    def advance(self, duration):
+        k = max(1, math.ceil(duration / self.scene.dt - 1e-9))
+        self.scene.step(k)
+        self.advanced.append(duration)
+        return k
+
+
+@pytest.fixture
+def tanks(monkeypatch):
+    """Registers 'tank' (automatic substeps, pressure colouring by default) and 'tank_plain'
+    (neither pressure() nor advance()); returns the list of scenes made."""
+    made = []
+
+    def make(hide, n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+        g = np.linspace(0.2, 0.6, n)
+        gx, gy = (a.ravel() for a in np.meshgrid(g, g + 0.3))
+        s = pc.Scene(dim=2, integrator=integrator, dt=1e-3 if dt is None else dt)
+        s.add_particles(np.column_stack([gx, gy]))
+        s.add(pc.Gravity([0.0, -9.81]))
+        made.append(Tank(s, hide))
+        return made[-1]
+
+    def tank(n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+        """A falling block in a tank (test stand-in for a fluid scene)."""
+        return make((), n, integrator, dt)
+
+    def tank_plain(n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+        """The same without pressure() and advance()."""
+        return make(("pressure", "advance"), n, integrator, dt)
+
+    def tank_boom(n: int = 1, integrator: str = "verlet", dt: Optional[float] = None):
+        """A particle at 1e308 m/s: diverges on the first substep."""
+        s = pc.Scene(dim=2, integrator=integrator, dt=10.0 if dt is None else dt)
+        s.add_particles(np.zeros((1, 2)), np.array([[1e308, 0.0]]))
+        made.append(Tank(s))
+        return made[-1]
+
+    tank_boom.render_defaults = {"frames": 3, "frame_time": 10.0, "substeps": "auto", "size": (64, 48)}
+    tank.render_defaults = {"frames": 5, "fps": 30, "frame_time": 0.05, "substeps": "auto",
+                            "size": (200, 150), "color_by": "pressure"}
+    tank_plain.render_defaults = {"frames": 5, "fps": 30, "frame_time": 0.01, "size": (200, 150)}
+    registry = dict(cli._registry())
+    registry.update(tank=tank, tank_plain=tank_plain, tank_boom=tank_boom)
+    monkeypatch.setattr(cli, "_registry", lambda: registry)
+    return made
+
+
+PRESSURE_RGB = {tuple(int(v) for v in c) for c in render._PALETTE[render._PRESSURE0:render._PRESSURE0 + render._N_PRESSURE]}
+TEXT_RGB = tuple(int(v) for v in render._PALETTE[render._TEXT])
+
+
+def gif_colours(path) -> set:
+    with Image.open(path) as im:
+        rgb = np.asarray(im.convert("RGB"))
+    return {tuple(int(v) for v in c) for c in np.unique(rgb.reshape(-1, 3), axis=0)}
+
+
+def test_auto_substeps_from_render_defaults(tmp_path, capsys, tanks):
+    out = tmp_path / "t.gif"
+    assert main(["render", "tank", "-o", str(out)]) == 0
+    (scene,) = tanks
+    assert scene.advanced == [0.05] * 4  # frame_time from render_defaults, once per frame after the first
+    assert math.isclose(scene.time, 0.2, rel_tol=1e-9)
+    with Image.open(out) as im:
+        assert im.n_frames == 5 and im.size == (200, 150)
+    colours = gif_colours(out)
+    assert len(colours & PRESSURE_RGB) > 10  # render_defaults' color_by="pressure" (particles and bar)
+    assert TEXT_RGB in colours  # the colour bar's labels
+    captured = capsys.readouterr()
+    assert "substeps:" in captured.out and "200 in all" in captured.out and "50.0 per frame" in captured.out
+    assert "4 intervals of 0.05 s" in captured.out
+    assert "energy drift:" in captured.out
+    assert "substeps=50" in captured.err  # the progress bar
+
+
+def test_steps_per_frame_turns_auto_substeps_off(tmp_path, capsys, tanks):
+    out = tmp_path / "t.gif"
+    assert main(["render", "tank", "-o", str(out), "--steps-per-frame", "3", "-q"]) == 0
+    (scene,) = tanks
+    assert scene.advanced == []
+    assert scene.step_count == 12
+    stdout = capsys.readouterr().out
+    assert "12 steps of dt = 0.001 s, 3 per frame" in stdout
+    assert "substeps:" not in stdout
+
+
+def test_frame_time_option(tmp_path, capsys, tanks):
+    out = tmp_path / "t.gif"
+    assert main(["render", "tank", "-o", str(out), "--frame-time", "0.02", "--frames", "3", "-q"]) == 0
+    assert tanks[0].advanced == [0.02, 0.02]
+    assert "40 in all" in capsys.readouterr().out
+    # A scene without automatic substeps takes round(frame_time / dt) fixed steps instead.
+    out2 = tmp_path / "c.gif"
+    assert main(["render", "spring_chain", "-o", str(out2), "--frame-time", "0.005", "--dt", "1e-3",
+                 "--frames", "5", "--size", "64x48", "-q"]) == 0
+    assert "20 steps of dt = 0.001 s, 5 per frame" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--frame-time", "0"],
+        ["--frame-time", "-0.1"],
+        ["--frame-time", "nan"],
+        ["--frame-time", "soon"],
+        ["--frame-time", "0.01", "--steps-per-frame", "2"],
+    ],
+)
+def test_bad_frame_time_exit_2(tmp_path, capsys, tanks, extra):
+    assert main(["render", "tank", "-o", str(tmp_path / "x.gif"), "-q"] + extra) == 2
+    assert "error" in capsys.readouterr().err
+    assert all(s.time == 0.0 for s in tanks)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_color_by_and_colorbar_options(tmp_path, capsys, tanks):
+    speed = tmp_path / "s.gif"
+    assert main(["render", "tank", "-o", str(speed), "--color-by", "speed", "-q"]) == 0
+    assert not gif_colours(speed) & PRESSURE_RGB  # the option beats render_defaults
+    bare = tmp_path / "b.gif"
+    assert main(["render", "tank", "-o", str(bare), "--no-colorbar", "-q"]) == 0
+    colours = gif_colours(bare)
+    assert colours & PRESSURE_RGB and TEXT_RGB not in colours
+    # Pressure colouring of a scene without pressure(): a usage error, before any stepping.
+    out = tmp_path / "p.gif"
+    assert main(["render", "tank_plain", "-o", str(out), "--color-by", "pressure", "-q"]) == 2
+    assert "color_by" in capsys.readouterr().err
+    assert tanks[-1].time == 0.0
+    assert not out.exists()
+
+
+def test_divergence_with_auto_substeps_exit_1_and_no_file(tmp_path, capsys, tanks):
+    out = tmp_path / "boom.gif"
+    assert main(["render", "tank_boom", "-o", str(out), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "diverged" in err and "no file written" in err
+    assert tanks[0].advanced == []  # advance() raised: nothing was recorded as taken
+    assert list(tmp_path.iterdir()) == []

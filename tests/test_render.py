@@ -320,3 +320,321 @@ def test_failure_while_writing_removes_the_temporary_file(tmp_path, monkeypatch)
     with pytest.raises(OSError, match="disk full"):
         render.gif(pendulum_pair(), tmp_path / "x.gif", frames=2, size=(32, 32))
     assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- fluid-scene features
+# The SPH scenes are not needed to test the renderer's side of the contract: a real Scene behind a
+# thin wrapper supplies the optional methods a fluid scene has (pressure, boundary_points,
+# advance), each with a simple, known behaviour.
+RHO_G = 1000.0 * 9.81  # Pa per metre of depth
+SURFACE = 1.0  # m, height of the pretend free surface
+
+
+class FluidLike:
+    """A physcore.Scene plus ``pressure()`` (hydrostatic below SURFACE), ``boundary_points()`` and
+    ``advance(duration)`` (ceil(duration / dt) steps of dt, the count returned).
+
+    Attributes named in `hide` behave as if missing (AttributeError), like on a plain scene.
+    """
+
+    def __init__(self, scene, walls=None, hide=()):
+        self.scene = scene
+        self.walls = np.zeros((0, scene.dim)) if walls is None else np.asarray(walls, dtype=float)
+        self.hide = set(hide)
+        self.advanced = []  # durations passed to advance()
+        self.pressure_calls = 0
+
+    def __getattribute__(self, name):
+        if name in object.__getattribute__(self, "hide"):
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return object.__getattribute__(self, name)
+
+    def __getattr__(self, name):  # everything else: the real scene
+        if name in object.__getattribute__(self, "hide"):
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        return getattr(self.scene, name)
+
+    def pressure(self):
+        self.pressure_calls += 1
+        return np.maximum(RHO_G * (SURFACE - self.scene.positions[:, -1]), 0.0)
+
+    def boundary_points(self):
+        return self.walls
+
+    def advance(self, duration):
+        k = max(1, math.ceil(duration / self.scene.dt - 1e-9))
+        self.scene.step(k)
+        self.advanced.append(duration)
+        return k
+
+
+def tank_walls(width: float = 2.0, height: float = 1.5, spacing: float = 0.05) -> np.ndarray:
+    """A U-shaped tank of wall points: floor at y = -0.1, walls at x = -0.1 and x = width."""
+    ys = np.arange(-0.1, height, spacing)
+    xs = np.arange(-0.1, width + spacing / 2, spacing)
+    return np.concatenate([
+        np.column_stack([np.full_like(ys, -0.1), ys]),
+        np.column_stack([np.full_like(ys, width), ys]),
+        np.column_stack([xs, np.full_like(xs, -0.1)]),
+    ])
+
+
+def falling_block(walls=True, hide=()) -> FluidLike:
+    """A 6 x 6 block of free particles (y in [0.5, 1]) falling into a tank."""
+    g = np.linspace(0.0, 0.5, 6)
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g))
+    s = pc.Scene(dim=2, integrator="verlet", dt=1e-3)
+    s.add_particles(np.column_stack([gx + 0.2, gy + 0.5]))
+    s.add(pc.Gravity([0.0, -9.81]))
+    return FluidLike(s, tank_walls() if walls else None, hide=hide)
+
+
+def palette_rgb(start: int, count: int) -> set:
+    return {tuple(int(v) for v in c) for c in render._PALETTE[start:start + count]}
+
+
+PRESSURE_RGB = palette_rgb(render._PRESSURE0, render._N_PRESSURE)
+SPEED_RGB = palette_rgb(render._SPEED0, render._N_SPEED)
+WALL_RGB = np.asarray(render._PALETTE[render._WALL])
+TEXT_RGB = np.asarray(render._PALETTE[render._TEXT])
+
+
+def colours_of(img: np.ndarray) -> set:
+    return {tuple(int(v) for v in c) for c in np.unique(img.reshape(-1, 3), axis=0)}
+
+
+def band(img: np.ndarray, rows: int = 16, cols: int = 180) -> np.ndarray:
+    """The top-right corner where the colour bar goes."""
+    return img[:rows, -cols:]
+
+
+def test_pressure_maps_zero_to_the_bottom_and_the_scale_to_the_top():
+    x = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    img = render.render_frame(
+        x, pressures=[-1.5e4, 0.0, 3e4], pressure_scale=2e4, color_by="pressure", radius=2, size=(96, 32), colorbar=False
+    )
+    row = img[16]
+    cols = np.nonzero(ink(img)[16])[0]
+    lo, zero, top = row[cols.min()], row[48], row[cols.max()]  # the particles at 0, 1 and 2 m
+    assert tuple(zero) == tuple(render._PALETTE[render._PRESSURE0])  # 0 Pa: bottom of the map
+    assert tuple(lo) == tuple(zero)  # negative pressure: clipped to the bottom
+    assert tuple(top) == tuple(render._PALETTE[render._PRESSURE0 + render._N_PRESSURE - 1])  # above the scale: top
+    assert tuple(top) in PRESSURE_RGB and tuple(top) not in SPEED_RGB
+
+
+def test_pressure_gif_colours_follow_depth_on_a_fixed_scale(tmp_path):
+    scene = falling_block(walls=False)
+    path = render.gif(scene, tmp_path / "p.gif", frames=5, frame_time=0.05, size=(64, 80), color_by="pressure")
+    imgs = frames_rgb(path)
+    assert len(imgs) == 5
+    tops = []
+    for img in imgs:
+        particle = ink(img)
+        found = colours_of(img[particle])
+        assert found <= PRESSURE_RGB, found - PRESSURE_RGB  # only pressure colours (no bar at 64 px)
+        # The deepest particles (lowest rows) carry the highest pressure: the colour of the
+        # bottom-most ink row is later on the map than that of the top-most one.
+        r = np.nonzero(particle.any(axis=1))[0]
+        levels = {c: k for k, c in enumerate(sorted(PRESSURE_RGB, key=lambda c: _pressure_index(c)))}
+        top_row = [levels[tuple(c)] for c in img[r[0]][particle[r[0]]]]
+        bottom_row = [levels[tuple(c)] for c in img[r[-1]][particle[r[-1]]]]
+        assert min(bottom_row) > max(top_row)
+        tops.append(max(bottom_row))
+    # The block falls deeper, so its pressure (on one scale for the whole animation) rises.
+    assert tops[-1] > tops[0]
+    assert scene.pressure_calls == 5  # read once per frame
+
+
+def _pressure_index(rgb) -> int:
+    pal = render._PALETTE[render._PRESSURE0:render._PRESSURE0 + render._N_PRESSURE]
+    return int(np.nonzero(np.all(pal == np.asarray(rgb), axis=1))[0][0])
+
+
+@pytest.mark.parametrize("wrapper", ["hidden", "plain"])
+def test_pressure_without_a_pressure_method_raises_before_stepping(tmp_path, wrapper):
+    if wrapper == "hidden":
+        scene = falling_block(hide=("pressure",))
+    else:
+        # An object whose pressure() itself raises AttributeError.
+        scene = falling_block()
+        scene.pressure = lambda: (_ for _ in ()).throw(AttributeError("no fluid here"))
+    with pytest.raises(ValueError, match="color_by"):
+        render.gif(scene, tmp_path / "x.gif", frames=3, color_by="pressure", progress=True)
+    assert scene.time == 0.0 and scene.step_count == 0
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(ValueError, match="color_by"):
+        render.render_frame(np.zeros((3, 2)), color_by="pressure")
+
+
+def test_pressure_of_the_wrong_shape_raises_before_stepping(tmp_path):
+    scene = falling_block()
+    scene.pressure = lambda: np.zeros(3)
+    with pytest.raises(ValueError, match="pressure"):
+        render.gif(scene, tmp_path / "x.gif", frames=3, color_by="pressure")
+    assert scene.time == 0.0
+    assert list(tmp_path.iterdir()) == []
+
+
+def moving_pair():
+    x = np.array([[0.0, 0.0], [1.0, 0.5]])
+    v = np.array([[0.0, 0.0], [3.2, 0.0]])
+    return x, v
+
+
+def test_colorbar_is_drawn_when_on_and_absent_when_off():
+    x, v = moving_pair()
+    on = render.render_frame(x, velocities=v, radius=3)
+    off = render.render_frame(x, velocities=v, radius=3, colorbar=False)
+    none = render.render_frame(x, velocities=v, radius=3, color_by="none")
+    assert on.shape == off.shape == (360, 480, 3)
+    # On: labels in the text colour and the gradient strip, in the top-right corner.
+    corner = band(on)
+    assert np.all(corner == TEXT_RGB, axis=-1).sum() > 60
+    strip = colours_of(corner) & SPEED_RGB
+    assert len(strip) >= 48  # (nearly) the whole map, in a 96-pixel strip
+    # The strip runs from the bottom of the map (left) to the top (right).
+    row = corner[8]
+    is_map = np.array([tuple(c) in SPEED_RGB for c in row])
+    cols = np.nonzero(is_map)[0]
+    assert tuple(row[cols[0]]) == tuple(render._PALETTE[render._SPEED0])
+    assert tuple(row[cols[-1]]) == tuple(render._PALETTE[render._SPEED0 + render._N_SPEED - 1])
+    # Off, and for color_by="none": nothing there.
+    assert not ink(band(off)).any()
+    assert not ink(band(none)).any()
+    # The particles are drawn either way, and none of them inside the bar's band, even where the
+    # usual margin is narrower than the band.
+    assert ink(on[16:]).sum() == ink(off).sum() > 0
+    corner = np.array([[0.0, 0.0], [1.0, 0.5], [0.5, 0.25]])
+    vel = np.array([[1.0, 0.0], [2.0, 0.0], [0.0, 0.0]])
+    on = render.render_frame(corner, velocities=vel, radius=2, size=(200, 100))
+    off = render.render_frame(corner, velocities=vel, radius=2, size=(200, 100), colorbar=False)
+    assert np.all(band(on) == TEXT_RGB, axis=-1).any()
+    assert ink(off[:16]).any()  # without the bar, the top particle sits in those rows
+    assert ink(on[16:]).sum() == ink(off).sum() == 3 * 21  # three whole discs of radius 2 (5x5 less corners)
+    # Nothing moving: the scale's top is 0 and there is no bar.
+    still = render.render_frame(x, velocities=np.zeros_like(v), radius=3)
+    assert not ink(band(still)).any()
+
+
+def test_colorbar_labels_and_units():
+    assert render._colorbar_labels("speed", 3.2) == ("0", "3.2 m/s")
+    assert render._colorbar_labels("speed", 1234.5) == ("0", "1234 m/s")
+    assert render._colorbar_labels("pressure", 19620.0) == ("0", "19.6 kPa")
+    assert render._colorbar_labels("pressure", 512.0) == ("0", "512 Pa")
+    assert render._colorbar_labels("pressure", 999.9) == ("0", "1 kPa")  # rounds up into kPa
+    assert render._colorbar_labels("pressure", 2.5e6) == ("0", "2.5 MPa")
+    # Different ranges give different labels, so the drawn bar differs too.
+    x, v = moving_pair()
+    a = render.render_frame(x, velocities=v, radius=3, speed_scale=3.2)
+    b = render.render_frame(x, velocities=v, radius=3, speed_scale=12.0)
+    assert not np.array_equal(band(a), band(b))
+
+
+def test_colorbar_is_left_out_of_tiny_images():
+    x, v = moving_pair()
+    small = render.render_frame(x, velocities=v, size=(64, 64), radius=1)
+    assert not np.any(np.all(small == TEXT_RGB, axis=-1))
+
+
+def test_colorbar_in_the_gif_is_fixed_over_the_animation(tmp_path):
+    scene = falling_block()
+    on = render.gif(scene, tmp_path / "on.gif", frames=4, frame_time=0.05, color_by="pressure", size=(240, 180))
+    off = render.gif(falling_block(), tmp_path / "off.gif", frames=4, frame_time=0.05, color_by="pressure",
+                     size=(240, 180), colorbar=False)
+    on_imgs, off_imgs = frames_rgb(on), frames_rgb(off)
+    for img in on_imgs:
+        assert np.array_equal(band(img, cols=150), band(on_imgs[0], cols=150))
+        assert np.all(band(img, cols=150) == TEXT_RGB, axis=-1).sum() > 40
+        assert len(colours_of(band(img, cols=150)) & PRESSURE_RGB) >= 20
+    for img in off_imgs:
+        assert not np.any(np.all(img == TEXT_RGB, axis=-1))
+
+
+def test_boundary_points_are_grey_static_and_in_the_camera_fit(tmp_path):
+    scene = falling_block()
+    path = render.gif(scene, tmp_path / "w.gif", frames=4, frame_time=0.05, color_by="none", size=(160, 120))
+    imgs = frames_rgb(path)
+    walls = [np.all(img == WALL_RGB, axis=-1) for img in imgs]
+    for w in walls:
+        # The tank is in view: its two side walls and its floor, near the image's edges.
+        r, c = np.nonzero(w)
+        assert c.min() < 20 and c.max() > 140 and r.max() > 100
+        assert w[:, :20].sum() > 40 and w[:, -20:].sum() > 40
+    # Static: the wall pixels not covered by a particle stay the same.
+    assert np.array_equal(walls[0][:, -20:], walls[-1][:, -20:])
+    # Without boundary points the free particles fill the view instead.
+    plain = render.gif(falling_block(walls=False), tmp_path / "p.gif", frames=1, color_by="none", size=(160, 120))
+    assert not np.any(np.all(frames_rgb(plain)[0] == WALL_RGB, axis=-1))
+
+
+def test_boundary_points_lie_under_the_particles():
+    x = np.array([[0.0, 0.0], [1.0, 0.0]])
+    img = render.render_frame(x, boundary=x.copy(), color_by="none", radius=3, size=(64, 32), colorbar=False)
+    assert not np.any(np.all(img == WALL_RGB, axis=-1))  # each wall point is covered by a particle
+    walls_only = render.render_frame(np.zeros((0, 2)), boundary=x, radius=3, size=(64, 32))
+    assert np.all(walls_only == WALL_RGB, axis=-1).sum() > 20
+    with pytest.raises(ValueError, match="boundary"):
+        render.render_frame(x, boundary=np.zeros((4, 3)))
+
+
+def test_boundary_points_in_3d():
+    g = np.linspace(-1.0, 1.0, 5)
+    gx, gy = (a.ravel() for a in np.meshgrid(g, g))
+    floor = np.column_stack([gx, gy, np.full(gx.size, -1.0)])
+    img = render.render_frame(np.zeros((1, 3)), boundary=floor, radius=2, size=(80, 60), color_by="none")
+    assert np.all(img == WALL_RGB, axis=-1).sum() > 25
+    # An empty set of boundary points changes nothing.
+    a = render.render_frame(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), boundary=np.zeros((0, 3)), size=(80, 60))
+    b = render.render_frame(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), size=(80, 60))
+    assert np.array_equal(a, b)
+
+
+def test_frame_time_drives_advance(tmp_path, capsys):
+    scene = falling_block()
+    path = render.gif(scene, tmp_path / "f.gif", frames=6, frame_time=0.02, size=(64, 64), progress=True)
+    assert scene.advanced == [0.02] * 5  # once per frame after the first, with frame_time
+    assert scene.step_count == 5 * 20  # what advance() chose: ceil(0.02 / 1e-3) substeps each
+    assert math.isclose(scene.time, 5 * 0.02, rel_tol=1e-9)
+    with Image.open(path) as im:
+        assert im.n_frames == 6
+    err = capsys.readouterr().err
+    assert "6/6" in err and "substeps=20" in err
+
+
+def test_frame_time_none_keeps_fixed_steps(tmp_path):
+    scene = falling_block()
+    render.gif(scene, tmp_path / "f.gif", frames=3, steps_per_frame=7, size=(32, 32))
+    assert scene.advanced == []
+    assert scene.step_count == 14
+    scene = falling_block()
+    render.gif(scene, tmp_path / "g.gif", frames=3, size=(32, 32))
+    assert scene.advanced == [] and scene.step_count == 20  # the default, 10 steps per frame
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, name",
+    [
+        ({"frame_time": 0.0}, ValueError, "frame_time"),
+        ({"frame_time": -0.01}, ValueError, "frame_time"),
+        ({"frame_time": float("nan")}, ValueError, "frame_time"),
+        ({"frame_time": float("inf")}, ValueError, "frame_time"),
+        ({"frame_time": "0.1"}, TypeError, "frame_time"),
+        ({"frame_time": True}, TypeError, "frame_time"),
+        ({"frame_time": 0.01, "steps_per_frame": 5}, ValueError, "steps_per_frame.*frame_time"),
+        ({"frame_time": 0.01, "color_by": "pressure", "fps": 0}, ValueError, "fps"),
+    ],
+)
+def test_bad_frame_time_raises_before_stepping(tmp_path, kwargs, exc, name):
+    scene = falling_block()
+    with pytest.raises(exc, match=name):
+        render.gif(scene, tmp_path / "x.gif", frames=3, **kwargs)
+    assert scene.advanced == [] and scene.time == 0.0 and scene.step_count == 0
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_frame_time_needs_advance(tmp_path):
+    scene = falling_block(hide=("advance",))
+    with pytest.raises(ValueError, match="frame_time"):
+        render.gif(scene, tmp_path / "x.gif", frames=3, frame_time=0.01)
+    assert scene.time == 0.0
+    assert list(tmp_path.iterdir()) == []

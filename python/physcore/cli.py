@@ -4,8 +4,16 @@ Usage::
 
     physcore scenes
     physcore render SCENE [-o OUT.gif] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
-                          [--dt DT] [--steps-per-frame K] [--color-by speed|none]
+                          [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
+                          [--color-by speed|pressure|none] [--no-colorbar]
                           [--param key=value ...]
+
+A scene function's ``render_defaults`` dict gives its animation defaults: ``frames``, ``fps``,
+``size``, ``color_by``, ``view``, ``radius``, and either ``steps_per_frame`` or ``frame_time``
+(simulated seconds per frame, rendered as ``round(frame_time / dt)`` steps of dt). With
+``"substeps": "auto"`` next to ``frame_time`` each frame calls ``scene.advance(frame_time)``,
+which picks its own substeps (fluids: CFL and stability limits), unless ``--steps-per-frame``
+is given.
 
 Exit codes: 0 success, 1 the simulation diverged or the file could not be written, 2 bad usage
 (unknown scene, parameter or option value).
@@ -14,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import math
 import re
 import sys
 import textwrap
@@ -197,24 +206,33 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:
-    """Animation settings: command-line options, else the scene's render_defaults, else fallbacks."""
+    """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
+
+    The result holds either ``steps_per_frame`` (fixed steps of dt) or ``frame_time`` (automatic
+    substeps: ``scene.advance``), never both.
+    """
     d = dict(getattr(fn, "render_defaults", None) or {})
     frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
+    auto = str(d.get("substeps", "")).lower() == "auto"
+    frame_time = args.frame_time if args.frame_time is not None else d.get("frame_time")
+    stepping: Dict[str, Any]
     if args.steps_per_frame is not None:
-        spf = args.steps_per_frame
-    elif "steps_per_frame" in d:
-        spf = int(d["steps_per_frame"])
-    elif "frame_time" in d:
+        stepping = {"steps_per_frame": args.steps_per_frame}
+    elif "steps_per_frame" in d and args.frame_time is None and not auto:
+        stepping = {"steps_per_frame": int(d["steps_per_frame"])}
+    elif frame_time is not None and auto:
+        stepping = {"frame_time": float(frame_time)}
+    elif frame_time is not None:
         # Simulated seconds per frame: keeps the animation's time span whatever dt is.
-        spf = max(1, int(round(float(d["frame_time"]) / dt)))
+        stepping = {"steps_per_frame": max(1, int(round(float(frame_time) / dt)))}
     else:
-        spf = _FALLBACK["steps_per_frame"]
+        stepping = {"steps_per_frame": _FALLBACK["steps_per_frame"]}
     fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
     size = args.size if args.size is not None else d.get("size", _FALLBACK["size"])
     if isinstance(size, str):
         size = _size(size)
     color_by = args.color_by if args.color_by is not None else d.get("color_by", _FALLBACK["color_by"])
-    settings = {"frames": frames, "steps_per_frame": spf, "fps": fps, "size": tuple(size), "color_by": color_by}
+    settings = {"frames": frames, **stepping, "fps": fps, "size": tuple(size), "color_by": color_by}
     view = args.view if args.view is not None else d.get("view")
     if view is not None:
         settings["view"] = tuple(view)
@@ -224,12 +242,42 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     return settings
 
 
+class _SubstepCounter:
+    """The scene, seen through a proxy that notes what each ``advance`` call returns."""
+
+    def __init__(self, scene: Any) -> None:
+        self._scene = scene
+        self.counts: List[Any] = []
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._scene, name)
+
+    def advance(self, duration: float) -> Any:
+        taken = self._scene.advance(duration)
+        self.counts.append(taken)
+        return taken
+
+
 def _human_bytes(n: int) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1000.0
     return f"{n} B"  # pragma: no cover
+
+
+def _substeps_text(counts: Sequence[Any]) -> str:
+    """'N in all, automatic: M per frame on average (min a, max b)' from advance()'s returns."""
+    if not counts:
+        return "automatic (no frame advanced)"
+    try:
+        n = [int(c) for c in counts]
+    except (TypeError, ValueError):
+        return f"automatic ({len(counts)} frames advanced; the scene did not report substep counts)"
+    return (
+        f"{sum(n)} in all, automatic: {sum(n) / len(n):.1f} per frame on average "
+        f"(min {min(n)}, max {max(n)})"
+    )
 
 
 def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -258,14 +306,29 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         parser.error(f"scene {name!r}: {e}")
     settings = _render_settings(fn, args, scene.dt)
     time0 = scene.time
+    counter = None
+    target = scene
+    if "frame_time" in settings and callable(getattr(scene, "advance", None)):
+        target = counter = _SubstepCounter(scene)
     try:
         path = render.gif(
-            scene, out, springs=not args.no_springs, progress=not args.quiet, **settings
+            target,
+            out,
+            springs=not args.no_springs,
+            colorbar=not args.no_colorbar,
+            progress=not args.quiet,
+            **settings,
         )
     except SimulationDiverged as e:
         msg = f"physcore render: error: simulation diverged: {e}"
         dt_hint = getattr(e, "suggested_dt", float("nan"))
-        if dt_hint == dt_hint and dt_hint > 0:  # not NaN
+        if dt_hint == dt_hint and dt_hint > 0 and "frame_time" in settings:  # not NaN; automatic substeps
+            k = max(1, math.ceil(settings["frame_time"] / dt_hint))
+            msg += (
+                f"\n  the automatic substeps were too long; try fixed ones, e.g. "
+                f"--dt {dt_hint:.3g} --steps-per-frame {k}"
+            )
+        elif dt_hint == dt_hint and dt_hint > 0:  # not NaN
             msg += f"\n  try a smaller time step, e.g. --dt {dt_hint:.3g} (now {scene.dt:.3g} s)"
         print(msg + f"\n  no file written ({out})", file=sys.stderr)
         return 1
@@ -277,15 +340,22 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     wall = time.perf_counter() - t0
 
     frames, fps, (w, h) = settings["frames"], settings["fps"], settings["size"]
-    steps = (frames - 1) * settings["steps_per_frame"]
     drift = scene.energy_drift()
     print(f"wrote {path}")
     print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s), {w}x{h} px")
     print(f"  file size:      {_human_bytes(path.stat().st_size)}")
-    print(
-        f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
-        f"{settings['steps_per_frame']} per frame, {scene.integrator})"
-    )
+    if "frame_time" in settings:
+        print(
+            f"  simulated time: {scene.time - time0:.4g} s ({frames - 1} intervals of "
+            f"{settings['frame_time']:.4g} s between frames, {scene.integrator})"
+        )
+        print(f"  substeps:       {_substeps_text(counter.counts if counter is not None else [])}")
+    else:
+        steps = (frames - 1) * settings["steps_per_frame"]
+        print(
+            f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
+            f"{settings['steps_per_frame']} per frame, {scene.integrator})"
+        )
     print(f"  energy drift:   {drift:+.1e} (relative)")
     print(f"  wall time:      {wall:.2f} s")
     return 0
@@ -331,12 +401,19 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--frames", type=_positive_int, metavar="N", help="number of frames")
     r.add_argument("--fps", type=_positive_float, metavar="F", help="frames per second of playback")
     r.add_argument("--size", type=_size, metavar="WxH", help="image size in pixels, e.g. 480x360")
-    r.add_argument("--steps-per-frame", type=_positive_int, metavar="K",
-                   help="simulation steps between frames (default: the scene's simulated time per frame)")
+    stepping = r.add_mutually_exclusive_group()
+    stepping.add_argument("--steps-per-frame", type=_positive_int, metavar="K",
+                          help="simulation steps of dt between frames (default: the scene's simulated time "
+                          "per frame; also turns off a scene's automatic substeps)")
+    stepping.add_argument("--frame-time", type=_positive_float, metavar="SECONDS",
+                          help="simulated seconds between frames (default: the scene's); scenes with automatic "
+                          "substeps (fluids) pick their own, others take round(SECONDS/dt) steps of dt")
     r.add_argument("--integrator", choices=integrators, metavar="NAME",
                    help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
-    r.add_argument("--color-by", choices=render.COLOR_BY, help="particle colouring (default: speed)")
+    r.add_argument("--color-by", choices=render.COLOR_BY,
+                   help="particle colouring (default: the scene's, else speed)")
+    r.add_argument("--no-colorbar", action="store_true", help="do not draw the colour bar")
     r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")

@@ -2,8 +2,9 @@
 
 The whole animation is simulated first and kept in memory (positions as float32), then a single
 camera is fitted to every frame, and each frame is rasterised into a uint8 palette-index image:
-springs as 1-pixel lines coloured by strain, particles as filled discs coloured by speed. The
-frames are written as a palette GIF with one fixed palette, atomically.
+static boundary (wall) particles in grey, springs as 1-pixel lines coloured by strain, particles
+as filled discs coloured by speed or pressure, and a colour bar with the scale's range and unit.
+The frames are written as a palette GIF with one fixed palette, atomically.
 
 Public functions
 ----------------
@@ -25,7 +26,7 @@ import numpy as np
 __all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
 
 #: Valid values of the ``color_by`` argument.
-COLOR_BY = ("speed", "none")
+COLOR_BY = ("speed", "pressure", "none")
 
 #: Spring strain |(L - L0) / L0| at which the strain colours saturate (fully red or blue).
 STRAIN_SATURATION = 0.1
@@ -34,7 +35,8 @@ STRAIN_SATURATION = 0.1
 DEFAULT_VIEW = (-60.0, 25.0)
 
 # ---------------------------------------------------------------------------------------------
-# The one fixed palette. Index layout (kept < 128 entries so GIF colour tables stay small).
+# The one fixed palette. Index layout (at most 256 entries, the GIF limit; Pillow always encodes
+# with 8-bit LZW codes, so the size of the table costs only its 768 bytes, once per file).
 # ---------------------------------------------------------------------------------------------
 _BACKGROUND = 0
 _PLANE_FILL = 1
@@ -45,6 +47,11 @@ _N_SPEED = 64
 _SPEED0 = 5
 _N_STRAIN = 31
 _STRAIN0 = _SPEED0 + _N_SPEED
+_WALL = _STRAIN0 + _N_STRAIN  # static boundary particles: neutral grey
+_TEXT = _WALL + 1  # colour-bar labels and outline
+_N_PRESSURE = 64
+_PRESSURE0 = _TEXT + 1
+_PALETTE_SIZE = _PRESSURE0 + _N_PRESSURE
 
 # viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
 # brightest yellow hardly shows on the white background.
@@ -56,28 +63,46 @@ _VIRIDIS = np.array(
     ],
     dtype=np.float64,
 )
+# plasma sampled at 9 points in [0, 1] (deep blue, purple, pink, orange, yellow); a sequential
+# map distinct from the speed one, cut at 0.88 for the same reason.
+_PLASMA = np.array(
+    [
+        [0x0D, 0x08, 0x87], [0x4C, 0x02, 0xA1], [0x7E, 0x03, 0xA8],
+        [0xA9, 0x23, 0x95], [0xCC, 0x47, 0x78], [0xE5, 0x6B, 0x5D],
+        [0xF8, 0x94, 0x41], [0xFD, 0xC3, 0x28], [0xF0, 0xF9, 0x21],
+    ],
+    dtype=np.float64,
+)
 _STRAIN_BLUE = np.array([33.0, 102.0, 172.0])  # compressed
 _STRAIN_GREY = np.array([165.0, 165.0, 165.0])  # at rest
 _STRAIN_RED = np.array([200.0, 30.0, 40.0])  # stretched
 
 
+def _sample_map(anchors: np.ndarray, top: float, n: int) -> np.ndarray:
+    """(n, 3) colours interpolated linearly along `anchors` (K, 3) from 0 to `top` in [0, 1]."""
+    t = np.linspace(0.0, top, n) * (len(anchors) - 1)
+    k = np.minimum(t.astype(int), len(anchors) - 2)
+    f = (t - k)[:, None]
+    return anchors[k] * (1 - f) + anchors[k + 1] * f
+
+
 def _build_palette() -> np.ndarray:
-    pal = np.zeros((_STRAIN0 + _N_STRAIN, 3), dtype=np.float64)
+    pal = np.zeros((_PALETTE_SIZE, 3), dtype=np.float64)
     pal[_BACKGROUND] = (255, 255, 255)
     pal[_PLANE_FILL] = (228, 222, 212)
     pal[_PLANE_LINE] = (110, 95, 80)
     pal[_PINNED] = (255, 127, 14)
     pal[_PLAIN] = (31, 119, 180)
-    t = np.linspace(0.0, 0.9, _N_SPEED) * (len(_VIRIDIS) - 1)
-    k = np.minimum(t.astype(int), len(_VIRIDIS) - 2)
-    f = (t - k)[:, None]
-    pal[_SPEED0:_STRAIN0] = _VIRIDIS[k] * (1 - f) + _VIRIDIS[k + 1] * f
+    pal[_SPEED0:_STRAIN0] = _sample_map(_VIRIDIS, 0.9, _N_SPEED)
     half = _N_STRAIN // 2
     s = np.linspace(-1.0, 1.0, _N_STRAIN)[:, None]
-    pal[_STRAIN0:] = np.where(
+    pal[_STRAIN0:_WALL] = np.where(
         s < 0, _STRAIN_GREY + (_STRAIN_GREY - _STRAIN_BLUE) * s, _STRAIN_GREY + (_STRAIN_RED - _STRAIN_GREY) * s
     )
-    assert pal.shape[0] == _STRAIN0 + 2 * half + 1
+    pal[_WALL] = (178, 178, 178)
+    pal[_TEXT] = (30, 30, 30)
+    pal[_PRESSURE0:] = _sample_map(_PLASMA, 0.88, _N_PRESSURE)
+    assert _WALL == _STRAIN0 + 2 * half + 1 and pal.shape[0] <= 256
     return np.round(pal).astype(np.uint8)
 
 
@@ -118,6 +143,19 @@ def _check_fps(fps: Any) -> float:
     if not (math.isfinite(f) and f > 0):
         raise ValueError(f"fps must be a finite number > 0, got {fps!r}")
     return f
+
+
+def _check_frame_time(frame_time: Any) -> Optional[float]:
+    if frame_time is None:
+        return None
+    if isinstance(frame_time, (bool, np.bool_)) or not isinstance(
+        frame_time, (int, float, np.integer, np.floating)
+    ):
+        raise TypeError(f"frame_time must be a number of seconds or None, got {frame_time!r}")
+    t = float(frame_time)
+    if not (math.isfinite(t) and t > 0):
+        raise ValueError(f"frame_time must be a finite number of seconds > 0, got {frame_time!r}")
+    return t
 
 
 def _check_color_by(color_by: Any) -> str:
@@ -178,6 +216,8 @@ class _Recording(NamedTuple):
     strain: Optional[np.ndarray]  # (F, M) float32, NaN where the rest length is 0
     pinned: np.ndarray  # (N,) bool
     planes: list  # [(point (dim,), normal (dim,))] float64, normal unit length
+    pressures: Optional[np.ndarray] = None  # (F, N) float32, Pa
+    walls: Optional[np.ndarray] = None  # (B, dim) float64 static boundary points, relative to `origin`
 
 
 # Row-wise helpers written column by column: numpy reductions along a short last axis (N, 2)
@@ -229,19 +269,85 @@ def _scene_springs(scene: Any) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndar
     return i, np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64)
 
 
+def _pressure_array(p: Any, n: int) -> np.ndarray:
+    """Check what ``scene.pressure()`` returned: (N,) float64 Pa."""
+    p = np.asarray(p, dtype=np.float64)
+    if p.shape != (n,):
+        raise ValueError(f"scene.pressure() must return an array of shape ({n},) in Pa, got shape {p.shape}")
+    return p
+
+
+def _scene_pressure(scene: Any, n: int) -> np.ndarray:
+    """``scene.pressure()`` as (N,) float64 Pa; ValueError naming color_by if the scene has none."""
+    try:
+        p = scene.pressure()
+    except AttributeError as e:
+        raise ValueError(
+            f"color_by='pressure' needs a scene with a pressure() method (an SPH fluid); "
+            f"this one has none ({e})"
+        ) from None
+    return _pressure_array(p, n)
+
+
+def _boundary_array(b: Any, dim: int) -> np.ndarray:
+    """Static boundary points (B, dim) float64, non-finite rows dropped."""
+    b = np.asarray(b, dtype=np.float64)
+    if b.size == 0:
+        return np.zeros((0, dim))
+    if b.ndim != 2 or b.shape[1] != dim:
+        raise ValueError(f"boundary points must have shape (B, {dim}), got {b.shape}")
+    return b if np.isfinite(b).all() else b[_rows_finite(b)]
+
+
+def _scene_boundary(scene: Any, dim: int) -> Optional[np.ndarray]:
+    """``scene.boundary_points()`` as (B, dim) float64, or None where the scene has no such method."""
+    method = getattr(scene, "boundary_points", None)
+    if not callable(method):
+        return None
+    try:
+        b = method()
+    except AttributeError:
+        return None
+    return _boundary_array(b, dim)
+
+
+def _check_advance(scene: Any) -> None:
+    if not callable(getattr(scene, "advance", None)):
+        raise ValueError(
+            "frame_time needs a scene with an advance(duration) method (automatic substeps); "
+            "this one has none: use steps_per_frame instead"
+        )
+
+
 def _simulate(
-    scene: Any, frames: int, steps_per_frame: int, need_speed: bool, springs: bool, progress: bool
+    scene: Any,
+    frames: int,
+    steps_per_frame: int,
+    need_speed: bool,
+    springs: bool,
+    progress: bool,
+    need_pressure: bool = False,
+    frame_time: Optional[float] = None,
 ) -> _Recording:
+    """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
+
+    Between frames: ``scene.step(steps_per_frame)``, or ``scene.advance(frame_time)`` when
+    `frame_time` is given. Everything read from the scene is checked at frame 0, so a bad scene
+    raises before it is stepped.
+    """
     dim = int(scene.dim)
     if dim not in (2, 3):
         raise ValueError(f"scene.dim must be 2 or 3, got {dim}")
     n = int(scene.n_particles)
     sp = _scene_springs(scene) if springs else None
     x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+    p0 = _scene_pressure(scene, n) if need_pressure else None
+    walls = _scene_boundary(scene, dim)
     # Store positions relative to the start centroid so float32 keeps its precision far from 0.
-    origin = _finite_mean(x) if n else np.zeros(dim)
+    origin = _finite_mean(x) if n else (_finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim))
     pos = np.empty((frames, n, dim), dtype=np.float32)
     speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
+    pressures = np.empty((frames, n), dtype=np.float32) if need_pressure else None
     strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
     bar = None
     if progress:
@@ -251,12 +357,22 @@ def _simulate(
     try:
         for k in range(frames):
             if k:
-                scene.step(steps_per_frame)
+                if frame_time is None:
+                    scene.step(steps_per_frame)
+                else:
+                    taken = scene.advance(frame_time)
+                    if bar is not None:
+                        try:
+                            bar.set_postfix(substeps=operator.index(taken), refresh=False)
+                        except TypeError:
+                            bar.set_postfix(substeps="?", refresh=False)
                 x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
             pos[k] = x - origin
             if speeds is not None:
                 v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
                 speeds[k] = _row_norms(v)
+            if pressures is not None:
+                pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
             if strain is not None:
                 strain[k] = _strain(x, *sp)
             if bar is not None:
@@ -266,7 +382,17 @@ def _simulate(
             bar.close()
     pinned = np.asarray(scene.pinned, dtype=bool).reshape(n)
     pairs = (sp[0], sp[1]) if sp is not None else None
-    return _Recording(pos, origin, speeds, pairs, strain, pinned, _planes(getattr(scene, "planes", None), dim))
+    return _Recording(
+        pos,
+        origin,
+        speeds,
+        pairs,
+        strain,
+        pinned,
+        _planes(getattr(scene, "planes", None), dim),
+        pressures=pressures,
+        walls=None if walls is None else walls - origin,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -292,6 +418,7 @@ class _Camera:
             self.basis = np.eye(2)
         self.centre = np.zeros(2)
         self.scale = 1.0
+        self.row0 = 0.5 * self.height  # pixel row of the screen-plane centre
 
     def project(self, x: np.ndarray) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """(N, dim) world -> (N, 2) screen-plane coordinates and (N,) depth (3D; larger = nearer)."""
@@ -300,15 +427,19 @@ class _Camera:
             return s[:, :2], s[:, 2]
         return s, None
 
-    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0) -> None:
+    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0, top_pad: Optional[int] = None) -> None:
         """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side.
 
-        A box no wider than `tol` (world units) counts as a point and gets a unit box around it.
+        `top_pad` (default `pad`) keeps that many pixels spare at the top instead (room for the
+        colour bar). A box no wider than `tol` (world units) counts as a point and gets a unit box
+        around it.
         """
+        top = pad if top_pad is None else top_pad
         if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or np.any(hi < lo):
             lo, hi = np.full(2, -0.5), np.full(2, 0.5)
         ext = hi - lo
-        avail = np.array([max(self.width - 2 * pad, 1), max(self.height - 2 * pad, 1)], dtype=float)
+        avail = np.array([max(self.width - 2 * pad, 1), max(self.height - pad - top, 1)], dtype=float)
+        self.row0 = 0.5 * self.height + 0.5 * (top - pad)
         if ext.max() <= tol:
             # A single point (one particle, all at one place, or all on one line of sight).
             self.scale = float(avail.min())
@@ -320,7 +451,7 @@ class _Camera:
     def pixels(self, s: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
         """(N, 2) screen-plane coordinates -> float pixel column and row (pixel k spans [k, k+1))."""
         col = (s[:, 0] - self.centre[0]) * self.scale + 0.5 * self.width
-        row = 0.5 * self.height - (s[:, 1] - self.centre[1]) * self.scale
+        row = self.row0 - (s[:, 1] - self.centre[1]) * self.scale
         return col, row
 
 
@@ -383,7 +514,7 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
         return img
     # World coordinates (relative to origin) of the pixel centres.
     xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
-    ys = (0.5 * h - (np.arange(h) + 0.5)) / cam.scale + cam.centre[1]
+    ys = (cam.row0 - (np.arange(h) + 0.5)) / cam.scale + cam.centre[1]
     for p, n in planes:
         p = p - origin
         # Signed distance in pixels; > 0 on the allowed side.
@@ -459,12 +590,109 @@ def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
         flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
 
 
-def _speed_levels(speed: np.ndarray, vmax: float) -> np.ndarray:
-    """(N,) speeds -> (N,) uint8 palette indices on the sequential map; vmax maps to the top."""
+def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> np.ndarray:
+    """(N,) values -> (N,) uint8 indices into the sequential map of `levels` entries at `base`.
+
+    0 (and anything below, and NaN) maps to the bottom, `vmax` and above to the top.
+    """
     if not (vmax > 0 and math.isfinite(vmax)):
-        return np.full(speed.shape, _SPEED0, dtype=np.uint8)
-    lv = np.nan_to_num(speed * (_N_SPEED / vmax), nan=0.0, posinf=_N_SPEED, neginf=0.0)
-    return (_SPEED0 + np.clip(lv, 0, _N_SPEED - 1).astype(np.uint8)).astype(np.uint8)
+        return np.full(values.shape, base, dtype=np.uint8)
+    lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
+    return (base + np.clip(lv, 0, levels - 1).astype(np.uint8)).astype(np.uint8)
+
+
+# ---------------------------------------------------------------------------------------------
+# Colour bar: a horizontal gradient strip with its range and unit, in the top-right corner. The
+# camera keeps a band at the top free of particles for it, so it never hides any, and since the
+# scale is fixed over the animation it is drawn once, into the background.
+# ---------------------------------------------------------------------------------------------
+_CB_MARGIN = 4  # pixels between the colour bar and the image's top and right edges
+_CB_GAP = 4  # pixels between a label and the strip
+_CB_MIN_LENGTH = 32  # shortest strip worth drawing, pixels
+_CB_MAX_LENGTH = 120
+
+
+class _ColorBarLayout(NamedTuple):
+    lo: str  # label at the bottom of the scale (left of the strip)
+    hi: str  # label at the top (right of the strip), with the unit
+    lo_x: int  # left pixel column of `lo`
+    strip_x: int  # first gradient column
+    length: int  # gradient columns
+    hi_x: int  # left pixel column of `hi`
+    text_y: int  # top row of the labels' text cell
+    band: int  # rows [0, band) hold the colour bar
+
+
+def _font():
+    from PIL import ImageFont
+
+    # The classic bitmap font (about 6x11 pixels a character): crisp in a palette image.
+    load = getattr(ImageFont, "load_default_imagefont", None)  # Pillow >= 10.1
+    return load() if load is not None else ImageFont.load_default()
+
+
+def _text_mask(text: str) -> np.ndarray:
+    """(11, width) bool pixels of `text` in the default bitmap font."""
+    from PIL import Image, ImageDraw
+
+    font = _font()
+    x0, y0, x1, y1 = font.getbbox(text)
+    im = Image.new("L", (max(int(x1), 1), max(int(y1), 1)), 0)
+    ImageDraw.Draw(im).text((0, 0), text, fill=255, font=font)
+    return np.asarray(im) > 127
+
+
+def _format_value(v: float) -> str:
+    """Three significant digits; plain digits (no exponent) from 1000 up to 10^6."""
+    return f"{v:.0f}" if 1000 <= v < 1e6 else f"{v:.3g}"
+
+
+def _colorbar_labels(color_by: str, vmax: float) -> Tuple[str, str]:
+    """Bottom and top labels of the colour bar; pressure in Pa, kPa, MPa or GPa, whichever reads
+    as a number below 1000."""
+    if color_by == "pressure":
+        for factor, unit in ((1.0, "Pa"), (1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa")):
+            if float(f"{vmax / factor:.3g}") < 1000:
+                break
+        return "0", f"{_format_value(vmax / factor)} {unit}"
+    return "0", f"{_format_value(vmax)} m/s"
+
+
+def _colorbar_layout(size: Tuple[int, int], lo: str, hi: str) -> Optional[_ColorBarLayout]:
+    """Where the colour bar goes in an image of `size`, or None if it would not fit legibly."""
+    w, h = size
+    lo_mask, hi_mask = _text_mask(lo), _text_mask(hi)
+    lo_w, hi_w = lo_mask.shape[1], hi_mask.shape[1]
+    text_y = _CB_MARGIN - 1  # the font's cell has 2 blank rows above the digits
+    band = text_y + max(lo_mask.shape[0], hi_mask.shape[0]) + 2
+    if 5 * band > h:  # the band would take more than a fifth of the height
+        return None
+    # Right to left: margin, top label, gap, strip (with a 1-pixel outline), gap, bottom label.
+    spare = w - 2 * _CB_MARGIN - hi_w - lo_w - 2 * _CB_GAP - 2
+    length = min(max(int(round(0.2 * w)), _CB_MIN_LENGTH), _CB_MAX_LENGTH, spare)
+    if length < _CB_MIN_LENGTH:
+        return None
+    hi_x = w - _CB_MARGIN - hi_w
+    strip_x = hi_x - _CB_GAP - 1 - length
+    lo_x = strip_x - 1 - _CB_GAP - lo_w
+    return _ColorBarLayout(lo, hi, lo_x, strip_x, length, hi_x, text_y, band)
+
+
+def _draw_colorbar(buf: np.ndarray, bar: _ColorBarLayout, base: int, levels: int) -> None:
+    """Draw the colour bar of the `levels`-entry map at palette index `base` into buf (H, W)."""
+    # Clear its box (a collider's shading may reach the top of the image).
+    buf[: bar.band, max(bar.lo_x - 2, 0) :] = _BACKGROUND
+    for text, x in ((bar.lo, bar.lo_x), (bar.hi, bar.hi_x)):
+        mask = _text_mask(text)
+        region = buf[bar.text_y : bar.text_y + mask.shape[0], x : x + mask.shape[1]]
+        region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+    # Strip over the digits' rows (2..8 of the font cell), outlined.
+    top, bottom = bar.text_y + 1, bar.text_y + 9  # outline rows
+    x0, x1 = bar.strip_x - 1, bar.strip_x + bar.length  # outline columns
+    buf[top : bottom + 1, x0 : x1 + 1] = _TEXT
+    c = np.arange(bar.length)
+    ramp = (base + np.minimum((c + 0.5) * levels / bar.length, levels - 1).astype(np.int64)).astype(np.uint8)
+    buf[top + 1 : bottom, bar.strip_x : bar.strip_x + bar.length] = ramp[None, :]
 
 
 def _strain_levels(strain: np.ndarray) -> np.ndarray:
@@ -485,31 +713,55 @@ class _Rasteriser:
         radius: Optional[int],
         view: Tuple[float, float],
         speed_scale: Optional[float] = None,
+        *,
+        pressure_scale: Optional[float] = None,
+        colorbar: bool = False,
     ):
         n, dim = rec.positions.shape[1:]
+        walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
-        self.radius = _auto_radius(n, size) if radius is None else radius
+        self.radius = _auto_radius(n + (0 if walls is None else len(walls)), size) if radius is None else radius
+        self.color_by = color_by
+        # The colour scale: 0 at the bottom, the top fixed over the animation.
+        self.vmax = 0.0
+        values, scale, base, levels = {
+            "speed": (rec.speeds, speed_scale, _SPEED0, _N_SPEED),
+            "pressure": (rec.pressures, pressure_scale, _PRESSURE0, _N_PRESSURE),
+        }.get(color_by, (None, None, 0, 0))
+        if values is not None and values.size:
+            if scale is None:
+                finite = values[np.isfinite(values)]
+                # 99th percentile: a few outliers should not wash out the whole map.
+                scale = float(np.percentile(finite, 99)) if finite.size else 0.0
+            self.vmax = float(scale)
+        self.colorbar = None
+        if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
+            self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax))
         self.cam = _Camera(dim, view, size)
         pad = max(self.radius + 2, int(round(0.05 * min(size))))
         lo, hi, amax = _screen_bounds(self.cam, rec.positions)
+        if walls is not None:
+            wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
+            lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
+        # Keep the colour bar's band free: no disc reaches into it.
+        top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         # Positions are float32 relative to the origin: extents below their rounding are zero.
-        self.cam.fit(lo, hi, pad, tol=1e-6 * amax)
+        self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad)
         if radius is None:
             r_springs = _spring_radius(rec, self.cam.scale)
             if r_springs is not None:
                 self.radius = min(self.radius, r_springs)
         self.stencil = _disc_stencil(self.radius)
         self.background = _background(self.cam, rec.planes, rec.origin)
-        self.color_by = color_by
+        if walls is not None:
+            # Static: drawn once, under everything that moves.
+            s, _ = self.cam.project(walls)
+            col, row = self.cam.pixels(s)
+            _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
+        if self.colorbar is not None:
+            _draw_colorbar(self.background, self.colorbar, base, levels)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
-        self.vmax = 0.0
-        if color_by == "speed" and rec.speeds is not None and rec.speeds.size:
-            if speed_scale is None:
-                finite = rec.speeds[np.isfinite(rec.speeds)]
-                # 99th percentile: a few fast outliers should not wash out the whole map.
-                speed_scale = float(np.percentile(finite, 99)) if finite.size else 0.0
-            self.vmax = float(speed_scale)
 
     def frame(self, k: int) -> np.ndarray:
         """(H, W) uint8 palette-index image of frame k."""
@@ -523,7 +775,9 @@ class _Rasteriser:
         if col.size == 0:
             return buf
         if self.color_by == "speed" and rec.speeds is not None:
-            colors = _speed_levels(rec.speeds[k], self.vmax)
+            colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
+        elif self.color_by == "pressure" and rec.pressures is not None:
+            colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
         else:
             colors = np.full(col.shape, _PLAIN, dtype=np.uint8)
         colors[rec.pinned] = _PINNED
@@ -545,10 +799,12 @@ def gif(
     path: Union[str, os.PathLike],
     *,
     frames: int = 90,
-    steps_per_frame: int = 10,
+    steps_per_frame: Optional[int] = None,
+    frame_time: Optional[float] = None,
     fps: float = 30,
     size: Tuple[int, int] = (480, 360),
     color_by: str = "speed",
+    colorbar: bool = True,
     radius: Optional[int] = None,
     springs: bool = True,
     view: Optional[Tuple[float, float]] = None,
@@ -556,36 +812,56 @@ def gif(
 ) -> Path:
     """Simulate `scene` forward and write the motion as an animated GIF.
 
-    Frame 0 shows the current state; between consecutive frames the scene advances
-    ``steps_per_frame`` steps, so the animation covers ``(frames - 1) * steps_per_frame * scene.dt``
-    seconds of simulated time and the scene is left at the last frame's state. The whole run is
-    simulated before anything is drawn, and a single camera is fitted to all frames, so the view
-    does not move.
+    Frame 0 shows the current state; between consecutive frames the scene advances either
+    ``steps_per_frame`` steps of ``scene.dt`` (default), so the animation covers
+    ``(frames - 1) * steps_per_frame * scene.dt`` seconds of simulated time, or, with
+    `frame_time`, ``frame_time`` seconds with substeps the scene picks itself, covering
+    ``(frames - 1) * frame_time`` seconds. The scene is left at the last frame's state. The whole
+    run is simulated before anything is drawn, and a single camera is fitted to all frames (and to
+    the scene's boundary particles), so the view does not move.
 
     Parameters
     ----------
     scene : physcore.Scene
-        A 2D or 3D scene. It is stepped in place.
+        A 2D or 3D scene. It is stepped in place. Optional methods, used when present:
+        ``pressure()`` -> (N,) float64 Pa (needed for ``color_by="pressure"``),
+        ``boundary_points()`` -> (B, dim) float64 m, static wall particles (B may be 0), and
+        ``advance(duration)`` -> int substeps taken (needed for `frame_time`).
     path : str or os.PathLike
         Output file; must end in ``.gif`` and its directory must exist. Written atomically: a
         temporary file in the same directory is renamed onto `path` only once complete.
     frames : int, default 90
         Number of frames, >= 1.
-    steps_per_frame : int, default 10
-        Simulation steps between frames, >= 1.
+    steps_per_frame : int, optional
+        Simulation steps of ``scene.dt`` between frames, >= 1. Default 10 when `frame_time` is
+        not given; giving both is an error.
+    frame_time : float, optional
+        Simulated seconds between frames, finite and > 0. Each frame then calls
+        ``scene.advance(frame_time)``, which picks its own substeps (from the scene's CFL and
+        stability limits) and returns how many it took; with `progress` the bar shows the last
+        frame's count. The scene must have an ``advance`` method.
     fps : float, default 30
         Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
         below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
         (fps above 50 play at 50).
     size : (int, int), default (480, 360)
         Image width and height in pixels, each >= 16.
-    color_by : {"speed", "none"}, default "speed"
-        Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s), its top fixed over the
-        whole animation at the 99th percentile of all frames' speeds. ``"none"``: one colour.
-        Pinned particles are always orange.
+    color_by : {"speed", "pressure", "none"}, default "speed"
+        Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
+        plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
+        negative values get the bottom colour). Both scales run from 0 at the bottom to a top
+        fixed over the whole animation at the 99th percentile of all frames' values.
+        ``"none"``: one colour. Pinned particles are always orange.
+    colorbar : bool, default True
+        With ``color_by`` "speed" or "pressure", draw a colour bar in the top-right corner: a
+        gradient strip labelled "0" and the top of the scale with its unit (m/s; Pa, kPa, MPa or
+        GPa, whichever reads below 1000), e.g. ``0 [strip] 19.6 kPa``. The camera keeps a band at
+        the top free for it, so no particle is hidden. It is left out where it would not be
+        legible (images narrower than about 100 pixels or shorter than 80) and when the top of
+        the scale is 0 (nothing moves, no pressure).
     radius : int, optional
-        Particle disc radius in pixels (0 draws single pixels). Default: chosen from the particle
-        count and image size.
+        Particle disc radius in pixels (0 draws single pixels). Default: chosen from the number
+        of particles and boundary particles and the image size.
     springs : bool, default True
         Draw the springs of all ``Springs`` terms as lines under the particles, coloured by strain
         (L - L0)/L0: grey at rest, red stretched, blue compressed, saturating at
@@ -605,29 +881,50 @@ def gif(
     ------
     TypeError, ValueError
         On an invalid argument, naming it; raised before the scene is stepped or a file is made.
+        This includes ``color_by="pressure"`` on a scene without ``pressure()`` (or whose
+        ``pressure()`` raises AttributeError), and `frame_time` on a scene without ``advance``.
     physcore.SimulationDiverged
         If the simulation diverges; no file is written (the scene is rolled back to the last
-        good state of the failing ``step`` call by the scene itself).
+        good state of the failing ``step``/``advance`` call by the scene itself).
     OSError
         If the file cannot be written; no partial file is left behind.
 
     Notes
     -----
-    Collider planes are drawn in 2D (shaded solid side and an edge line), not in 3D. Pillow
+    Collider planes are drawn in 2D (shaded solid side and an edge line), not in 3D. Boundary
+    particles are drawn once, in grey, under everything that moves; in 3D they are projected the
+    same way but not depth-sorted against the moving particles (always underneath). Pillow
     merges consecutive identical frames into one longer frame, so a GIF of a scene at rest can
     report fewer frames than `frames` while playing for the same time.
     """
     frames = _check_int("frames", frames, 1)
-    steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1)
+    frame_time = _check_frame_time(frame_time)
+    if steps_per_frame is None:
+        steps_per_frame = 10
+    elif frame_time is not None:
+        raise ValueError("give steps_per_frame or frame_time, not both")
+    else:
+        steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1)
     duration = _gif_duration_ms(_check_fps(fps))
     size = _check_size(size)
     color_by = _check_color_by(color_by)
     radius = _check_radius(radius)
     view = _check_view(view)
     path = _check_path(path)
+    if frame_time is not None:
+        _check_advance(scene)
 
-    rec = _simulate(scene, frames, steps_per_frame, color_by == "speed", bool(springs), bool(progress))
-    ras = _Rasteriser(rec, size, color_by, radius, view)
+    rec = _simulate(
+        scene,
+        frames,
+        steps_per_frame,
+        color_by == "speed",
+        bool(springs),
+        bool(progress),
+        need_pressure=color_by == "pressure",
+        frame_time=frame_time,
+    )
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=bool(colorbar))
     _write_gif(path, (ras.frame(k) for k in range(frames)), duration)
     return path
 
@@ -678,8 +975,12 @@ def render_frame(
     pinned: Optional[np.ndarray] = None,
     springs: Any = None,
     planes: Optional[list] = None,
+    pressures: Optional[np.ndarray] = None,
+    boundary: Optional[np.ndarray] = None,
     color_by: str = "speed",
     speed_scale: Optional[float] = None,
+    pressure_scale: Optional[float] = None,
+    colorbar: bool = True,
     radius: Optional[int] = None,
     view: Optional[Tuple[float, float]] = None,
 ) -> np.ndarray:
@@ -689,7 +990,9 @@ def render_frame(
     ----------
     positions : array_like (N, dim) float, or physcore.Scene
         Particle positions in m, dim 2 or 3. A Scene supplies its positions, and also its
-        velocities, pinned flags, springs and planes unless those are given explicitly.
+        velocities, pinned flags, springs, planes, pressures (``pressure()``, only for
+        ``color_by="pressure"``) and boundary points (``boundary_points()``, where it has those
+        methods) unless those are given explicitly.
     size : (int, int), default (480, 360)
         Width and height in pixels, each >= 16.
     velocities : array_like (N, dim) float, optional
@@ -702,11 +1005,20 @@ def render_frame(
         its springs and False draws none.
     planes : list of objects with ``.point`` and ``.normal`` (dim,) arrays, optional
         Collider planes, drawn in 2D only.
-    color_by : {"speed", "none"}, default "speed"
+    pressures : array_like (N,) float, optional
+        Pa; needed for ``color_by="pressure"`` (from the Scene's ``pressure()`` otherwise).
+    boundary : array_like (B, dim) float, optional
+        Static boundary (wall) particles in m, drawn in grey under the particles and included
+        in the camera fit.
+    color_by : {"speed", "pressure", "none"}, default "speed"
     speed_scale : float, optional
         Speed (m/s) at the top of the colour map; default the 99th percentile of the speeds.
+    pressure_scale : float, optional
+        Pressure (Pa) at the top of the colour map; default the 99th percentile of the pressures.
+    colorbar : bool, default True
+        Draw the colour bar (see `gif`) when colouring by speed or pressure.
     radius : int, optional
-        Disc radius in pixels; default chosen from N and `size`.
+        Disc radius in pixels; default chosen from N + B and `size`.
     view : (float, float), optional
         3D camera (azimuth, elevation) in degrees, default ``(-60, 25)``.
 
@@ -718,7 +1030,8 @@ def render_frame(
     Raises
     ------
     TypeError, ValueError
-        On an invalid argument or inconsistent array shapes.
+        On an invalid argument or inconsistent array shapes; ``color_by="pressure"`` without
+        pressures (neither given nor from a Scene with ``pressure()``) names `color_by`.
     """
     size = _check_size(size)
     color_by = _check_color_by(color_by)
@@ -741,6 +1054,11 @@ def render_frame(
         velocities = scene.velocities if velocities is None else velocities
         pinned = scene.pinned if pinned is None else pinned
         planes = getattr(scene, "planes", None) if planes is None else planes
+        dim = np.asarray(positions).shape[-1]
+        if pressures is None and color_by == "pressure":
+            pressures = _scene_pressure(scene, len(np.asarray(positions)))
+        if boundary is None:
+            boundary = _scene_boundary(scene, dim)
 
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] not in (2, 3):
@@ -759,12 +1077,32 @@ def render_frame(
         if v.shape != x.shape:
             raise ValueError(f"velocities must have shape {x.shape}, got {v.shape}")
         speeds = _row_norms(v).astype(np.float32)[None]
-    if speed_scale is not None:
-        speed_scale = float(speed_scale)
-        if not (speed_scale > 0 and math.isfinite(speed_scale)):
-            raise ValueError(f"speed_scale must be a finite number > 0, got {speed_scale!r}")
+    pres = None
+    if color_by == "pressure":
+        if pressures is None:
+            raise ValueError("color_by='pressure' needs pressures= (or a scene with a pressure() method)")
+        p = np.asarray(pressures, dtype=np.float64)
+        if p.shape != (n,):
+            raise ValueError(f"pressures must have shape ({n},), got {p.shape}")
+        pres = p.astype(np.float32)[None]
+    walls = None
+    if boundary is not None:
+        try:
+            walls = _boundary_array(boundary, dim)
+        except ValueError as e:
+            raise ValueError(f"boundary: {e}") from None
+    for name, value in (("speed_scale", speed_scale), ("pressure_scale", pressure_scale)):
+        if value is not None:
+            v = float(value)
+            if not (v > 0 and math.isfinite(v)):
+                raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    speed_scale = None if speed_scale is None else float(speed_scale)
+    pressure_scale = None if pressure_scale is None else float(pressure_scale)
 
-    origin = _finite_mean(x) if n else np.zeros(dim)
+    if n:
+        origin = _finite_mean(x)
+    else:
+        origin = _finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim)
     rec = _Recording(
         positions=(x - origin).astype(np.float32)[None],
         origin=origin,
@@ -773,6 +1111,10 @@ def render_frame(
         strain=_strain(x, *sp).astype(np.float32)[None] if sp is not None else None,
         pinned=pin,
         planes=_planes(planes, dim),
+        pressures=pres,
+        walls=None if walls is None else walls - origin,
     )
-    ras = _Rasteriser(rec, size, color_by, radius, view, speed_scale=speed_scale)
+    ras = _Rasteriser(
+        rec, size, color_by, radius, view, speed_scale=speed_scale, pressure_scale=pressure_scale, colorbar=bool(colorbar)
+    )
     return _PALETTE[ras.frame(0)]
