@@ -64,9 +64,12 @@ impl Ranges {
 
 #[inline(always)]
 fn cell_coord(x: Real, inv: Real) -> i64 {
-    // `as` saturates (and maps NaN to 0, which callers have rejected): a monotone map, so points
-    // within one cell width stay in the same or adjacent cells and nothing is missed.
-    (x * inv).floor() as i64
+    // `as` truncates and saturates (NaN → 0, which callers have rejected): a monotone map, so
+    // points within one cell width stay in the same or adjacent cells and nothing is missed.
+    // floor by hand: the baseline x86-64 target has no rounding instruction and `floor` is a call.
+    let t = x * inv;
+    let c = t as i64;
+    c - ((c as f64) > t) as i64
 }
 
 #[inline(always)]

@@ -315,6 +315,22 @@ impl<V: Vector> Simulation<V> {
         (rho, p)
     }
 
+    /// Wall time (s) the SPH terms have spent in (cell list + gather, density, forces) so far,
+    /// and heap bytes they hold.
+    pub fn fluid_profile(&self) -> ([f64; 3], usize) {
+        let mut c = [0.0; 3];
+        let mut bytes = 0;
+        for t in &self.sys.forces.terms {
+            if let Some(s) = t.as_sph() {
+                for k in 0..3 {
+                    c[k] += s.clock[k];
+                }
+                bytes += s.bytes();
+            }
+        }
+        (c, bytes)
+    }
+
     fn step_inner(&mut self, n: u64) -> Result<()> {
         let dt = self.dt;
         for _ in 0..n {

@@ -319,6 +319,12 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
+    /// ((grid_s, density_s, forces_s), heap bytes) of the SPH terms.
+    fn fluid_profile(&self) -> ((f64, f64, f64), usize) {
+        let (c, b) = with_sim!(&self.inner, s => s.fluid_profile());
+        ((c[0], c[1], c[2]), b)
+    }
+
     /// (density, pressure) of every particle, (N,) float64 each; 0 outside fluids.
     fn fluid_fields<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
         let inner = &self.inner;

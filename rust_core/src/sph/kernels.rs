@@ -71,6 +71,8 @@ float_impl!(f64);
 
 pub trait Kernel: Copy + Send + Sync + Default + 'static {
     const NAME: &'static str;
+    /// Wendland C2 (else cubic spline): selects the SIMD passes' formulas.
+    const WENDLAND: bool;
     /// Normalisation σ_d for dimension `dim` (2 or 3) and smoothing length `h`.
     fn sigma(h: f64, dim: usize) -> f64;
     /// w(q), zero for q ≥ 2.
@@ -86,6 +88,7 @@ pub struct CubicSpline;
 
 impl Kernel for CubicSpline {
     const NAME: &'static str = "cubic_spline";
+    const WENDLAND: bool = false;
     fn sigma(h: f64, dim: usize) -> f64 {
         use std::f64::consts::PI;
         if dim == 2 {
@@ -121,6 +124,7 @@ pub struct WendlandC2;
 
 impl Kernel for WendlandC2 {
     const NAME: &'static str = "wendland_c2";
+    const WENDLAND: bool = true;
     fn sigma(h: f64, dim: usize) -> f64 {
         use std::f64::consts::PI;
         if dim == 2 {

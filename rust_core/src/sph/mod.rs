@@ -20,6 +20,8 @@
 //! over contiguous candidate runs, 8 or 16 pairs at a time (SIMD lanes). Forces are gathered per
 //! particle: no atomics, bit-identical for any thread count.
 pub mod kernels;
+#[cfg(target_arch = "x86_64")]
+mod simd;
 
 use crate::error::{invalid, Result};
 use crate::grid::{CellList, Ranges};
@@ -168,6 +170,8 @@ pub struct Sph<V: Vector> {
     b64: Bufs<f64>,
     /// Largest |dv/dt| of the last evaluation (without uniform fields), m/s².
     amax: Real,
+    /// Wall time spent so far in (cell list + gather, density pass, force pass), s.
+    pub clock: [f64; 3],
     _v: PhantomData<V>,
 }
 
@@ -203,6 +207,7 @@ impl<V: Vector> Sph<V> {
             b32: Bufs::default(),
             b64: Bufs::default(),
             amax: 0.0,
+            clock: [0.0; 3],
             _v: PhantomData,
         };
         s.b32.set_walls(&s.walls);
@@ -267,16 +272,24 @@ fn eval<V: Vector, F: Float>(
     m: &[Real],
     out: &mut [V],
     want_power: bool,
+    clock: &mut [f64; 3],
 ) -> (Real, Real) {
+    let t0 = std::time::Instant::now();
     grid.build(x);
     b.gather(grid, x, Some(v), m);
+    let t1 = std::time::Instant::now();
     density::<V, F>(p, grid, walls, b);
-    match (p.kernel, V::DIM) {
+    let t2 = std::time::Instant::now();
+    clock[0] += (t1 - t0).as_secs_f64();
+    clock[1] += (t2 - t1).as_secs_f64();
+    let r = match (p.kernel, V::DIM) {
         (KernelKind::CubicSpline, 2) => force_pass::<V, F, CubicSpline, 2>(p, grid, walls, b, out, want_power),
         (KernelKind::CubicSpline, _) => force_pass::<V, F, CubicSpline, 3>(p, grid, walls, b, out, want_power),
         (KernelKind::WendlandC2, 2) => force_pass::<V, F, WendlandC2, 2>(p, grid, walls, b, out, want_power),
         (KernelKind::WendlandC2, _) => force_pass::<V, F, WendlandC2, 3>(p, grid, walls, b, out, want_power),
-    }
+    };
+    clock[2] += t2.elapsed().as_secs_f64();
+    r
 }
 
 fn density<V: Vector, F: Float>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
@@ -286,6 +299,19 @@ fn density<V: Vector, F: Float>(p: &SphParams, grid: &CellList, walls: &CellList
         (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(p, grid, walls, b),
         (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(p, grid, walls, b),
     }
+}
+
+/// `&Bufs<A>` as `&Bufs<B>` for A = B (asserted): lets the f32/f64 SIMD passes take the generic
+/// buffers.
+#[allow(dead_code)]
+unsafe fn cast<A: Float, B: Float>(b: &Bufs<A>) -> &Bufs<B> {
+    assert_eq!(std::any::TypeId::of::<A>(), std::any::TypeId::of::<B>());
+    &*(b as *const Bufs<A> as *const Bufs<B>)
+}
+#[allow(dead_code)]
+unsafe fn cast_mut<A: Float, B: Float>(s: &mut [A]) -> &mut [B] {
+    assert_eq!(std::any::TypeId::of::<A>(), std::any::TypeId::of::<B>());
+    std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut B, s.len())
 }
 
 impl<F: Float> Bufs<F> {
@@ -359,6 +385,21 @@ fn simd_ok() -> bool {
     {
         false
     }
+}
+
+/// s^γ: a fixed multiplication chain for water's γ = 7 (this runs once per particle per step).
+#[inline(always)]
+pub(crate) fn powi<F: Float>(s: F, gamma: i32) -> F {
+    if gamma == 7 {
+        let s2 = s * s;
+        let s4 = s2 * s2;
+        return s4 * s2 * s;
+    }
+    let mut r = s;
+    for _ in 1..gamma {
+        r = r * s;
+    }
+    r
 }
 
 #[inline(always)]
@@ -441,10 +482,7 @@ fn density_chunk<F: Float, K: Kernel, const D: usize, const L: usize>(
         }
         let d = sigma * hsum(acc);
         let s = d * inv_rho0;
-        let mut sg = s;
-        for _ in 1..p.gamma {
-            sg = sg * s;
-        }
+        let sg = powi(s, p.gamma);
         let mut pk = bb * (sg - F::ONE);
         if p.clamp {
             pk = pk.max(F::ZERO);
@@ -452,20 +490,6 @@ fn density_chunk<F: Float, K: Kernel, const D: usize, const L: usize>(
         rho[k - base] = d;
         pr[k - base] = pk / (d * d);
     }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
-unsafe fn density_chunk_avx512<F: Float, K: Kernel, const D: usize, const L: usize>(
-    p: &SphParams,
-    grid: &CellList,
-    walls: &CellList,
-    b: &Bufs<F>,
-    ks: Range<usize>,
-    rho: &mut [F],
-    pr: &mut [F],
-) {
-    density_chunk::<F, K, D, L>(p, grid, walls, b, ks, rho, pr)
 }
 
 fn density_pass<F: Float, K: Kernel, const D: usize>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
@@ -480,12 +504,13 @@ fn density_pass<F: Float, K: Kernel, const D: usize>(p: &SphParams, grid: &CellL
             let ks = s..s + rc.len();
             #[cfg(target_arch = "x86_64")]
             if simd {
-                // SAFETY: the CPU has the features (simd_ok).
+                let sigma = K::sigma(p.h, D);
+                // SAFETY: the CPU has the features (simd_ok); the casts are checked by TypeId.
                 unsafe {
                     if f32 {
-                        density_chunk_avx512::<F, K, D, 16>(p, grid, walls, bref, ks, rc, pc)
+                        if K::WENDLAND { simd::f32x16::density_chunk::<true, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) } else { simd::f32x16::density_chunk::<false, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) }
                     } else {
-                        density_chunk_avx512::<F, K, D, 8>(p, grid, walls, bref, ks, rc, pc)
+                        if K::WENDLAND { simd::f64x8::density_chunk::<true, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) } else { simd::f64x8::density_chunk::<false, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) }
                     }
                 }
                 return;
@@ -638,19 +663,6 @@ fn force_chunk<V: Vector, F: Float, K: Kernel, const D: usize, const L: usize, c
     (power, amax)
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
-unsafe fn force_chunk_avx512<V: Vector, F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
-    p: &SphParams,
-    grid: &CellList,
-    walls: &CellList,
-    b: &Bufs<F>,
-    ks: Range<usize>,
-    out: SyncPtr<V>,
-) -> (f64, f64) {
-    force_chunk::<V, F, K, D, L, POWER>(p, grid, walls, b, ks, out)
-}
-
 fn force_chunk_any<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool>(
     p: &SphParams,
     grid: &CellList,
@@ -662,12 +674,13 @@ fn force_chunk_any<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: 
     let f32 = std::mem::size_of::<F>() == 4;
     #[cfg(target_arch = "x86_64")]
     if simd_ok() {
-        // SAFETY: the CPU has the features (simd_ok).
+        let sigma = K::sigma(p.h, D);
+        // SAFETY: the CPU has the features (simd_ok); the casts are checked by TypeId.
         return unsafe {
             if f32 {
-                force_chunk_avx512::<V, F, K, D, 16, POWER>(p, grid, walls, b, ks, out)
+                if K::WENDLAND { simd::f32x16::force_chunk::<V, true, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) } else { simd::f32x16::force_chunk::<V, false, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) }
             } else {
-                force_chunk_avx512::<V, F, K, D, 8, POWER>(p, grid, walls, b, ks, out)
+                if K::WENDLAND { simd::f64x8::force_chunk::<V, true, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) } else { simd::f64x8::force_chunk::<V, false, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) }
             }
         };
     }
@@ -722,8 +735,8 @@ impl<V: Vector> Term<V> for Sph<V> {
         let prev: Option<Vec<V>> = if assign { None } else { Some(f[r.clone()].to_vec()) };
         let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
         let (power, amax) = match self.p.precision {
-            Precision::F32 => eval::<V, f32>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power),
-            Precision::F64 => eval::<V, f64>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power),
+            Precision::F32 => eval::<V, f32>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power, &mut self.clock),
+            Precision::F64 => eval::<V, f64>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power, &mut self.clock),
         };
         self.amax = amax;
         if let Some(prev) = prev {
