@@ -187,13 +187,6 @@ def test_large_random_cloud_uses_the_parallel_path():
     check(pts, 0.02)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "core bug: CellList assigns cells with floor(x * (1/radius)); the rounded product can put "
-        "two points less than radius apart two cells apart, so the pair is never examined"
-    ),
-)
 @pytest.mark.parametrize(
     "a, b, radius",
     [
@@ -203,20 +196,13 @@ def test_large_random_cloud_uses_the_parallel_path():
     ],
 )
 def test_pair_just_inside_the_radius_across_a_cell_boundary(a, b, radius):
+    # Regression: floor(x / radius) rounds, so cells are made slightly larger than the radius.
     d = b - a
     assert d * d < radius * radius  # a pair by the contract
     i, j = pc.neighbors([[a], [b]], radius)
     assert i.tolist() == [0] and j.tolist() == [1]
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "core bug: CellList::build multiplies the per-axis cell spans in i128 without an overflow "
-        "check; 3 spans of 1e14 cells wrap, the dense mode is chosen, and allocating its buckets "
-        "panics (PanicException 'capacity overflow') instead of hashing"
-    ),
-)
 def test_far_apart_points_in_3d_with_a_small_radius():
     pts = np.array([[0.0, 0.0, 0.0], [0.001, 0.0, 0.0], [-1e12, -1e12, -1e12], [-1e12, -1e12, -1e12 + 0.001]])
     try:

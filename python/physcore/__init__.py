@@ -9,7 +9,7 @@ from . import _core
 from ._errors import InvalidInputError, PhyscoreError, SimulationDiverged
 from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
-from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
+from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
 
 __version__ = _core.__version__
 
@@ -22,6 +22,7 @@ __all__ = [
     "Springs",
     "PairwiseGravity",
     "Plane",
+    "Box",
     "Fluid",
     "neighbors",
     "fluids",

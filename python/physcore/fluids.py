@@ -40,7 +40,10 @@ KERNELS = ("cubic_spline", "wendland_c2")
 
 
 def _array2(value: object, arg: str, dims: Tuple[int, ...] = (2, 3)) -> np.ndarray:
-    a = np.asarray(value)
+    try:
+        a = np.asarray(value)
+    except ValueError as exc:  # ragged nested sequences
+        raise InvalidInputError(f"{arg}: not a rectangular array ({exc})") from None
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim != 2 or a.shape[1] not in dims:
@@ -251,6 +254,11 @@ class Fluid:
             object.__setattr__(self, "sound_speed", _finite_float(self.sound_speed, "sound_speed", minimum=0.0, strict=True))
         object.__setattr__(self, "viscosity", _finite_float(self.viscosity, "viscosity", minimum=0.0))
         object.__setattr__(self, "smoothing", _finite_float(self.smoothing, "smoothing", minimum=0.0, strict=True))
+        if not 0.5 <= self.smoothing <= 4.0:
+            raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")
+        h = self.smoothing * self.spacing
+        if not (math.isfinite(h) and h > 1e-300 and self.spacing ** x.shape[1] > 0 and math.isfinite(self.spacing ** x.shape[1])):
+            raise InvalidInputError(f"spacing: {self.spacing} m gives a smoothing length or particle volume outside float64 range")
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)):
@@ -279,6 +287,8 @@ class Fluid:
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
                 raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
             object.__setattr__(self, "wall_volume", a)
+        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed**2):
+            raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
         if self.precision not in ("f32", "f64"):
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
         if not isinstance(self.name, str) or not self.name:

@@ -18,7 +18,7 @@ import numpy as np
 from . import _core
 from ._errors import InvalidInputError
 from .fluids import Fluid
-from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
+from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
@@ -149,6 +149,7 @@ class Scene:
         self._threads = threads
         self._terms: List[Term] = []
         self._planes: List[Plane] = []
+        self._boxes: List[Box] = []
         self._e0: Optional[float] = None
         self._e0_scale: float = 0.0
 
@@ -213,7 +214,7 @@ class Scene:
         self._e0 = None
         return np.arange(first, first + n, dtype=np.int64)
 
-    def add(self, item: Union[Term, Plane]) -> Union[Term, Plane]:
+    def add(self, item: Union[Term, Plane, Box]) -> Union[Term, Plane, Box]:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
         :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`) or a collider (:class:`Plane`).
 
@@ -234,6 +235,14 @@ class Scene:
         dim = self.dim
         if isinstance(item, Fluid):
             return self._add_fluid(item)
+        if isinstance(item, Box):
+            for arg in ("lower", "upper"):
+                if getattr(item, arg).shape[0] != dim:
+                    raise InvalidInputError(f"{arg}: has {getattr(item, arg).shape[0]} components, the scene is {dim}D")
+            self._sim.add_box(item.lower.tolist(), item.upper.tolist(), item.restitution, item.friction)
+            self._boxes.append(item)
+            self._e0 = None
+            return item
         if isinstance(item, Plane):
             for arg in ("point", "normal"):
                 if getattr(item, arg).shape[0] != dim:
@@ -243,7 +252,7 @@ class Scene:
             self._e0 = None
             return item
         if not isinstance(item, (Gravity, Drag, Springs, PairwiseGravity)):
-            raise TypeError(f"item: expected a physcore term or Plane, got {type(item).__name__}")
+            raise TypeError(f"item: expected a physcore term, Fluid, Plane or Box, got {type(item).__name__}")
         name = self._unique_name(item.name)
         if isinstance(item, Gravity):
             if item.g.shape[0] != dim:
@@ -492,8 +501,13 @@ class Scene:
 
     @property
     def planes(self) -> List[Plane]:
-        """The colliders (a copy of the list)."""
-        return list(self._planes)
+        """The plane colliders, with the faces of :class:`Box` colliders as planes (a new list)."""
+        return list(self._planes) + [f for b in self._boxes for f in b.faces()]
+
+    @property
+    def boxes(self) -> List[Box]:
+        """The box colliders (a copy of the list)."""
+        return list(self._boxes)
 
     def spring_pairs(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),
@@ -629,6 +643,10 @@ class Scene:
                 {"point": p.point.tolist(), "normal": p.normal.tolist(), "restitution": p.restitution, "friction": p.friction}
                 for p in self._planes
             ],
+            "boxes": [
+                {"lower": b.lower.tolist(), "upper": b.upper.tolist(), "restitution": b.restitution, "friction": b.friction}
+                for b in self._boxes
+            ],
         }
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float))
@@ -693,6 +711,8 @@ class Scene:
                     scene.add(Springs(name=t["name"], **f))
             for p in meta["planes"]:
                 scene.add(Plane(p["point"], p["normal"], p["restitution"], p["friction"]))
+            for b in meta.get("boxes", []):
+                scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
             cache_f = z["cache_forces"] if "cache_forces" in z.files else None
             cache_p = z["cache_power"].tolist() if "cache_power" in z.files else None
             scene._sim.restore(
@@ -711,5 +731,5 @@ class Scene:
         terms = ", ".join(t.name for t in self._terms) or "no terms"
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
-            f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)})"
+            f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)})"
         )

@@ -13,7 +13,7 @@ import numpy as np
 
 from ._errors import InvalidInputError
 
-__all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane"]
+__all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
 
 ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
@@ -238,3 +238,53 @@ class Plane:
             raise InvalidInputError(f"restitution: must be in [0, 1], got {e}")
         object.__setattr__(self, "restitution", e)
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
+
+
+@dataclass(frozen=True)
+class Box:
+    """Axis-aligned box collider that keeps particles inside ``[lower, upper]`` (a tank or room).
+
+    One pass over the particles handles all faces; each face acts like a :class:`Plane` with
+    the same restitution and friction (a particle found outside is projected onto the face; if
+    it moves outward its normal velocity becomes ``-e v_n`` and its tangential speed drops by
+    ``μ (1 + e) |v_n|``). The energy removed is booked under ``"collisions"``.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (dim,)
+        Corners, m; ``upper > lower`` on every axis.
+    restitution : float
+        Coefficient of restitution ``e`` in [0, 1]. Default 0.5.
+    friction : float
+        Coulomb friction coefficient ``μ`` ≥ 0. Default 0.
+    """
+
+    lower: np.ndarray
+    upper: np.ndarray
+    restitution: float = 0.5
+    friction: float = 0.0
+
+    def __post_init__(self) -> None:
+        lo = _vector(self.lower, "lower")
+        hi = _vector(self.upper, "upper")
+        if lo.shape != hi.shape:
+            raise InvalidInputError(f"upper: has {hi.shape[0]} components, lower has {lo.shape[0]}")
+        if not np.all(hi > lo):
+            raise InvalidInputError(f"upper: must be > lower on every axis, got {hi.tolist()} and {lo.tolist()}")
+        object.__setattr__(self, "lower", lo)
+        object.__setattr__(self, "upper", hi)
+        e = _finite_float(self.restitution, "restitution", minimum=0.0)
+        if e > 1.0:
+            raise InvalidInputError(f"restitution: must be in [0, 1], got {e}")
+        object.__setattr__(self, "restitution", e)
+        object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
+
+    def faces(self) -> "list[Plane]":
+        """The box's faces as inward-facing :class:`Plane` objects (for drawing)."""
+        out = []
+        for k in range(self.lower.shape[0]):
+            n = np.zeros(self.lower.shape[0])
+            n[k] = 1.0
+            out.append(Plane(self.lower, n, self.restitution, self.friction))
+            out.append(Plane(self.upper, -n, self.restitution, self.friction))
+        return out

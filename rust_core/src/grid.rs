@@ -178,7 +178,8 @@ impl CellList {
         let mut cells: i128 = 1;
         for k in 0..V::DIM {
             let span = if n == 0 { 1 } else { (hi[k] as i128 - lo[k] as i128) + 1 };
-            cells *= span;
+            // Saturates: three spans of up to 2⁶⁴ cells each overflow i128 (→ hashed mode).
+            cells = cells.saturating_mul(span);
             dims[k] = span.min(i64::MAX as i128) as i64;
         }
         let limit = 4 * n as i128 + 4096;
@@ -333,11 +334,12 @@ impl CellList {
     }
 
     /// All pairs (i, j), i < j (original indices), with squared distance < radius² evaluated in
-    /// f64 as Σ_k (x_i,k − x_j,k)², sorted by i then j. `radius` = the cell size.
-    pub fn pairs<V: Vector>(&self, x: &[V]) -> (Vec<u32>, Vec<u32>) {
+    /// f64 as Σ_k (x_i,k − x_j,k)², sorted by i then j. `radius` ≤ the cell size.
+    pub fn pairs<V: Vector>(&self, x: &[V], radius: Real) -> (Vec<u32>, Vec<u32>) {
         let n = x.len();
         assert_eq!(n, self.order.len(), "cell list built for other points");
-        let r2 = self.cell * self.cell;
+        assert!(radius <= self.cell);
+        let r2 = radius * radius;
         // Sorted slot of each original index, to find a point's cell.
         let mut slot = vec![0u32; n];
         for (k, &i) in self.order.iter().enumerate() {
@@ -409,9 +411,18 @@ pub fn neighbor_pairs<V: Vector>(x: &[V], radius: Real) -> Result<(Vec<u32>, Vec
     if x.len() >= u32::MAX as usize {
         return Err(invalid("points", "too many points"));
     }
-    let mut g = CellList::new(radius, V::DIM)?;
+    if !(radius.is_finite() && radius > 0.0) {
+        return Err(invalid("radius", format!("{radius} must be finite and > 0")));
+    }
+    // floor(x/cell) is rounded: two points just under `radius` apart could land two cells apart.
+    // A cell slightly larger than the radius, by more than the rounding of x/cell (relative
+    // 2⁻⁵³ of the largest |x|/radius), makes that impossible; it only adds candidates.
+    let amax = x.iter().map(|p| (0..V::DIM).map(|k| p.comp(k).abs()).fold(0.0, f64::max)).fold(0.0, f64::max);
+    let margin = (8.0 * f64::EPSILON * (amax / radius + 1.0)).max(1e-12);
+    let cell = radius * (1.0 + margin);
+    let mut g = CellList::new(if cell.is_finite() { cell } else { f64::MAX }, V::DIM)?;
     g.build(x);
-    Ok(g.pairs(x))
+    Ok(g.pairs(x, radius))
 }
 
 #[cfg(test)]

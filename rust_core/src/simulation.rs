@@ -1,5 +1,5 @@
 //! A simulation: state, model, force terms, integrator, colliders and the energy books.
-use crate::boundary::Plane;
+use crate::boundary::{Aabb, Collider, Plane};
 use crate::error::{invalid, Error, Result};
 use crate::integrators::{self, Integrator, IntegratorInfo, System};
 use crate::par;
@@ -27,7 +27,7 @@ impl EnergyReport {
 pub struct Simulation<V: Vector> {
     pub sys: System<V>,
     integrator: Box<dyn Integrator<V>>,
-    pub colliders: Vec<Plane<V>>,
+    pub colliders: Vec<Collider<V>>,
     /// Energy removed by the colliders so far, J.
     pub collision_dissipated: Real,
     /// Time step, s.
@@ -147,7 +147,24 @@ impl<V: Vector> Simulation<V> {
             return Err(invalid("friction", format!("{} must be finite and >= 0", p.friction)));
         }
         let normal = p.normal / l2.sqrt();
-        self.colliders.push(Plane { normal, ..p });
+        self.colliders.push(Collider::Plane(Plane { normal, ..p }));
+        Ok(())
+    }
+
+    pub fn add_box(&mut self, b: Aabb<V>) -> Result<()> {
+        if !(b.lo.is_finite() && b.hi.is_finite()) {
+            return Err(invalid("lower/upper", "must be finite"));
+        }
+        if (0..V::DIM).any(|k| !(b.hi.comp(k) > b.lo.comp(k))) {
+            return Err(invalid("upper", "must be > lower on every axis"));
+        }
+        if !(0.0..=1.0).contains(&b.restitution) {
+            return Err(invalid("restitution", format!("{} is outside [0, 1]", b.restitution)));
+        }
+        if !(b.friction.is_finite() && b.friction >= 0.0) {
+            return Err(invalid("friction", format!("{} must be finite and >= 0", b.friction)));
+        }
+        self.colliders.push(Collider::Box(b));
         Ok(())
     }
 

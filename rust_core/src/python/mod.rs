@@ -1,7 +1,7 @@
 //! Python bindings (the only module that knows pyo3). Arrays cross in bulk; the Python facade
 //! (`physcore.Scene`) validates inputs first, and everything is validated again here so the
 //! private module is safe to call directly. The GIL is released around stepping.
-use crate::boundary::Plane;
+use crate::boundary::{Aabb, Plane};
 use crate::error::Error;
 use crate::integrators::{self, IntegratorInfo};
 use crate::simulation::{EnergyReport, Simulation};
@@ -268,6 +268,14 @@ impl Simulation2 {
         with_sim!(&mut self.inner, s => {
             let p = Plane { point: vec_of(&point, "point")?, normal: vec_of(&normal, "normal")?, restitution, friction };
             s.add_plane(p)
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    fn add_box(&mut self, py: Python<'_>, lower: Vec<f64>, upper: Vec<f64>, restitution: f64, friction: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            let b = Aabb { lo: vec_of(&lower, "lower")?, hi: vec_of(&upper, "upper")?, restitution, friction };
+            s.add_box(b)
         })
         .map_err(|e| to_py(py, e))
     }
