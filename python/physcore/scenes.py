@@ -190,7 +190,9 @@ def spring_chain(
     """Spring chain: n particles joined by springs, first one pinned, released horizontally.
 
     It swings down under gravity like a heavy rope. Total mass (kg) shared equally, spring
-    stiffness (N/m) and dashpot damping (N·s/m) per link. ``dt=None`` uses the suggested step.
+    stiffness (N/m) and dashpot damping (N·s/m) per link. ``dt=None`` uses half the suggested
+    step: the whip at the end of the swing reaches energy errors of 2e-3 at the suggested step
+    (stable, but visible in the books) and 3e-4 at half of it.
     """
     n = _count(n, "n", 2)
     length, mass, stiffness = _positive(length, "length"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
@@ -207,7 +209,7 @@ def spring_chain(
     g[1 if dim == 2 else 2] = -9.81
     scene.add(Gravity(g))
     if dt is None:
-        scene.dt = scene.suggest_dt()
+        scene.dt = 0.5 * scene.suggest_dt()
     return scene
 
 
