@@ -370,7 +370,13 @@ impl<T> SyncPtr<T> {
 // twice, for AVX-512 (chosen at run time) and for the baseline target.
 // ------------------------------------------------------------------------------------------------
 
+/// Set by tests to compare the portable passes with the SIMD ones in one process.
+static FORCE_PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 fn simd_ok() -> bool {
+    if FORCE_PORTABLE.load(std::sync::atomic::Ordering::Relaxed) {
+        return false;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         static OK: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
@@ -779,5 +785,103 @@ impl<V: Vector> Term<V> for Sph<V> {
         let a = self.amax.sqrt() + g;
         let force = if a > 0.0 { 0.25 * (self.p.h / a).sqrt() } else { f64::INFINITY };
         Some(cfl.min(force))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DVec2, DVec3};
+
+    fn lcg(s: &mut u64) -> f64 {
+        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*s >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// A jittered lattice blob (moving) plus a floor of wall particles under it.
+    fn blob<V: Vector>(n: usize, dx: f64, seed: u64) -> (Vec<V>, Vec<V>, Vec<V>) {
+        let mut s = seed;
+        let side = (n as f64).powf(1.0 / V::DIM as f64).ceil() as usize;
+        let (mut x, mut v, mut w) = (vec![], vec![], vec![]);
+        for k in 0..n {
+            let mut c = [0.0; 3];
+            let mut u = [0.0; 3];
+            let mut idx = k;
+            for d in 0..V::DIM {
+                c[d] = ((idx % side) as f64 + 0.5 + 0.3 * (lcg(&mut s) - 0.5)) * dx;
+                u[d] = lcg(&mut s) - 0.5;
+                idx /= side;
+            }
+            x.push(V::from_slice(&c[..V::DIM]));
+            v.push(V::from_slice(&u[..V::DIM]));
+        }
+        for k in 0..side * side {
+            for layer in 0..3 {
+                let mut c = [0.0; 3];
+                c[0] = ((k % side) as f64 + 0.5) * dx;
+                if V::DIM == 3 {
+                    c[1] = ((k / side) as f64 + 0.5) * dx;
+                } else if k >= side {
+                    continue;
+                }
+                c[V::DIM - 1] = -(layer as f64 + 0.5) * dx;
+                w.push(V::from_slice(&c[..V::DIM]));
+            }
+        }
+        (x, v, w)
+    }
+
+    fn forces<V: Vector>(p: SphParams, x: &[V], v: &[V], w: &[V], m: f64, portable: bool) -> (Vec<V>, f64) {
+        FORCE_PORTABLE.store(portable, std::sync::atomic::Ordering::Relaxed);
+        let n = x.len();
+        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n] };
+        let mut t = Sph::new("fluid", 0, n, p, w.to_vec(), vec![m; w.len()]).unwrap();
+        let mut f = vec![V::ZERO; n];
+        let pw = t.add_forces(x, v, &model, &mut f, true, true);
+        FORCE_PORTABLE.store(false, std::sync::atomic::Ordering::Relaxed);
+        (f, pw)
+    }
+
+    fn check<V: Vector>() {
+        let dx = 0.01;
+        for kernel in [KernelKind::CubicSpline, KernelKind::WendlandC2] {
+            for (precision, tol) in [(Precision::F32, 1e-5), (Precision::F64, 1e-11)] {
+                // Compressed 5 % so that the pressure term is active everywhere.
+                let p = SphParams { h: 1.3 * dx, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel, precision };
+                let (x, v, w) = blob::<V>(3000, dx * 0.95, 11);
+                let m = 1000.0 * dx.powi(V::DIM as i32);
+                let (fs, ps) = forces(p, &x, &v, &w, m, false);
+                let (fp, pp) = forces(p, &x, &v, &w, m, true);
+                let scale = fp.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+                assert!(scale > 0.0);
+                let diff = fs.iter().zip(&fp).map(|(a, b)| (*a - *b).length_squared()).fold(0.0, f64::max).sqrt();
+                assert!(diff <= tol * scale, "{kernel:?} {precision:?} {}D: SIMD vs portable {diff:e} of {scale:e}", V::DIM);
+                assert!(pp > 0.0 && (ps - pp).abs() <= 10.0 * tol * pp, "power {ps} vs {pp}");
+                // Without walls, the pair forces are antisymmetric: Σ f = 0 to round-off.
+                let (f0, _) = forces(p, &x, &v, &[], m, true);
+                let total = f0.iter().fold(V::ZERO, |a, b| a + *b);
+                let abs: f64 = f0.iter().map(|f| f.length_squared().sqrt()).sum();
+                assert!(total.length_squared().sqrt() <= tol * abs, "{kernel:?} {precision:?}: net force {total:?} of {abs:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn simd_and_portable_passes_agree_and_conserve_momentum() {
+        check::<DVec2>();
+        check::<DVec3>();
+    }
+
+    #[test]
+    fn internal_energy_is_the_integral_of_p_over_rho_squared() {
+        let p = SphParams { h: 0.01, rho0: 1000.0, c0: 30.0, gamma: 7, alpha: 0.0, clamp: false, kernel: KernelKind::CubicSpline, precision: Precision::F64 };
+        for &rho in &[950.0, 1000.0, 1013.0, 1100.0] {
+            let e = 1e-3;
+            let du = (p.internal_energy(rho + e) - p.internal_energy(rho - e)) / (2.0 * e);
+            let want = p.pressure(rho) / (rho * rho);
+            assert!((du - want).abs() <= 1e-6 * want.abs().max(1e-3), "u'({rho}) = {du}, p/rho^2 = {want}");
+        }
+        assert_eq!(p.internal_energy(1000.0), 0.0);
+        assert!(p.internal_energy(990.0) > 0.0 && p.internal_energy(1010.0) > 0.0);
     }
 }
