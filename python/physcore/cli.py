@@ -258,6 +258,29 @@ class _SubstepCounter:
         return taken
 
 
+class _EnergyProbe:
+    """The scene, seen through a proxy that records the energy books after each frame."""
+
+    def __init__(self, scene: Any, recorder: Any, real: Any) -> None:
+        self._scene = scene
+        self._rec = recorder
+        self._real = real
+        recorder.record(real)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._scene, name)
+
+    def step(self, n: int = 1) -> Any:
+        r = self._scene.step(n)
+        self._rec.record(self._real)
+        return r
+
+    def advance(self, duration: float) -> Any:
+        r = self._scene.advance(duration)
+        self._rec.record(self._real)
+        return r
+
+
 def _human_bytes(n: int) -> str:
     for unit in ("B", "kB", "MB", "GB"):
         if n < 1000 or unit == "GB":
@@ -310,6 +333,18 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     target = scene
     if "frame_time" in settings and callable(getattr(scene, "advance", None)):
         target = counter = _SubstepCounter(scene)
+    recorder = None
+    if args.energy_plot is not None:
+        if not str(args.energy_plot).lower().endswith(".png"):
+            parser.error(f"--energy-plot: must end in .png, got {args.energy_plot!r}")
+        try:
+            import matplotlib  # noqa: F401 - fail before simulating, not after
+        except ImportError:
+            parser.error('--energy-plot needs matplotlib: pip install "physcore[plot]"')
+        from .diagnostics import EnergyRecorder
+
+        recorder = EnergyRecorder()
+        target = _EnergyProbe(target, recorder, scene)
     try:
         path = render.gif(
             target,
@@ -339,9 +374,17 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         return 1
     wall = time.perf_counter() - t0
 
+    if recorder is not None:
+        try:
+            recorder.plot(args.energy_plot, title=f"{name}: energy books")
+        except OSError as e:
+            print(f"physcore render: error: cannot write {args.energy_plot}: {e}", file=sys.stderr)
+            return 1
     frames, fps, (w, h) = settings["frames"], settings["fps"], settings["size"]
     drift = scene.energy_drift()
     print(f"wrote {path}")
+    if recorder is not None:
+        print(f"wrote {args.energy_plot} (energy books at {len(recorder)} frames)")
     print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s), {w}x{h} px")
     print(f"  file size:      {_human_bytes(path.stat().st_size)}")
     if "frame_time" in settings:
@@ -414,6 +457,12 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--color-by", choices=render.COLOR_BY,
                    help="particle colouring (default: the scene's, else speed)")
     r.add_argument("--no-colorbar", action="store_true", help="do not draw the colour bar")
+    r.add_argument(
+        "--energy-plot",
+        metavar="PNG",
+        help="also write a plot of the energy books over time (kinetic, potential by term, "
+        "dissipated, total, relative drift), sampled every frame; needs matplotlib",
+    )
     r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")
