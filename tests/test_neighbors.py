@@ -118,7 +118,8 @@ def huge(draw):
 @example((np.array([[0.0, 0.0], [1.0, 0.0]]), 1.0))  # exactly at the radius: no pair
 @example((np.array([[0.0], [np.nextafter(1.0, 0.0)]]), 1.0))  # one ulp inside: a pair
 def test_matches_brute_force_random_points(case):
-    check(*case)
+    i, j = check(*case)
+    assert np.all(i < j)
 
 
 @given(lattices())
@@ -134,12 +135,14 @@ def test_matches_brute_force_on_lattices_with_ties(case):
 
 @given(far_and_near())
 def test_matches_brute_force_hashed_cells(case):
-    check(*case)
+    i, j = check(*case)
+    assert np.all(i < j)
 
 
 @given(huge())
 def test_matches_brute_force_huge_and_negative_coordinates(case):
-    check(*case)
+    i, j = check(*case)
+    assert np.all(i < j)
 
 
 @given(st.integers(1, 3), st.floats(-1e12, 1e12), st.floats(1e-6, 1e6))
@@ -184,7 +187,8 @@ def test_large_random_cloud_uses_the_parallel_path():
     rng = np.random.default_rng(3)
     pts = rng.uniform(-1.0, 1.0, size=(6000, 2))
     pts[:500] = pts[500:1000]  # duplicates
-    check(pts, 0.02)
+    i, j = check(pts, 0.02)
+    assert len(i) >= 500 and np.all(i < j)  # at least the duplicated pairs
 
 
 @pytest.mark.parametrize(

@@ -273,6 +273,24 @@ def _box(dim: int, x: Tuple[float, float], height: Tuple[float, float], depth: T
     return [x[0], depth[0], height[0]], [x[1], depth[1], height[1]]
 
 
+def _water_in_tank(positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads) -> Scene:
+    """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers."""
+    scene = _fluid_scene(dim, integrator, dt, threads)
+    scene.add_fluid(
+        positions,
+        spacing=dx,
+        walls=tank_walls(tlo, thi, dx, layers=3, top=lid),
+        precision=precision,
+        kernel=kernel,
+        viscosity=viscosity,
+        sound_speed=sound_speed,
+        name="water",
+    )
+    if dt is not None:
+        scene.dt = dt
+    return scene
+
+
 def dam_break(
     *,
     dim: int = 2,
@@ -353,22 +371,12 @@ def dam_break(
     if not height <= top:
         raise InvalidInputError(f"tank: height {top} must be at least the column height {height}")
     dx = width / n
-    scene = _fluid_scene(dim, integrator, dt, threads)
     lo, hi = _box(dim, (0.0, width), (0.0, height), (0.0, depth))
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
-    scene.add_fluid(
-        lattice(lo, hi, dx),
-        spacing=dx,
-        walls=tank_walls(tlo, thi, dx, layers=3, top=lid),
-        precision=precision,
-        kernel=kernel,
-        viscosity=viscosity,
-        sound_speed=sound_speed,
-        name="water",
+    return _water_in_tank(
+        lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
+        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads,
     )
-    if dt is not None:
-        scene.dt = dt
-    return scene
 
 
 # 120 frames (4 s at 30 fps) over T = t·√(2g/width) = 0..4 for the default width (1 m): the
@@ -477,20 +485,10 @@ def drop(
         # 10× the impact speed bound √(2 g H), H from the floor to the block's top (the fluid's
         # own estimate would miss the fall of a block into an empty tank).
         sound_speed = 10.0 * math.sqrt(2.0 * _G * (pool + fall + block))
-    scene = _fluid_scene(dim, integrator, dt, threads)
-    scene.add_fluid(
-        np.concatenate(parts),
-        spacing=dx,
-        walls=tank_walls(tlo, thi, dx, layers=3, top=lid),
-        precision=precision,
-        kernel=kernel,
-        viscosity=viscosity,
-        sound_speed=sound_speed,
-        name="water",
+    return _water_in_tank(
+        np.concatenate(parts), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
+        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads,
     )
-    if dt is not None:
-        scene.dt = dt
-    return scene
 
 
 # 120 frames, 2 s: the fall (0.35 s), the splash and the waves' first return from the walls.

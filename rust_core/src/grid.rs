@@ -16,6 +16,7 @@
 //! The sort is stable (by cell, then original index), so its result does not depend on the
 //! thread count.
 use crate::error::{invalid, Result};
+use crate::par::SyncPtr;
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -81,12 +82,6 @@ fn hash(c: [i64; 3], mask: u64) -> usize {
     ((h ^ (h >> 29) ^ (h >> 47)) & mask) as usize
 }
 
-/// Raw pointer that may be shared between the threads of the parallel scatter; each thread writes
-/// a disjoint set of indices.
-#[derive(Clone, Copy)]
-struct SyncPtr<T>(*mut T);
-unsafe impl<T> Send for SyncPtr<T> {}
-unsafe impl<T> Sync for SyncPtr<T> {}
 
 impl CellList {
     /// An empty cell list with cell size `cell` (> 0, finite), for points of dimension `dim`.
@@ -249,7 +244,7 @@ impl CellList {
             for i in (p * per).min(n)..((p + 1) * per).min(n) {
                 let b = keys[i] as usize;
                 // SAFETY: the scan gives every (part, bucket) a disjoint slot range within 0..n.
-                unsafe { *out.0.add(off[b] as usize) = i as u32 };
+                unsafe { *out.get().add(off[b] as usize) = i as u32 };
                 off[b] += 1;
             }
         };

@@ -141,3 +141,16 @@ pub fn chunks2_any<A: Send, B: Send>(
 ) -> bool {
     chunks2_fold(a, b, false, |x, y| x | y, f)
 }
+
+/// A raw pointer shared by the threads of a parallel pass in which each thread writes a disjoint
+/// set of indices (a scatter through a permutation, the cell-list sort).
+#[derive(Clone, Copy)]
+pub struct SyncPtr<T>(pub *mut T);
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
+impl<T> SyncPtr<T> {
+    #[inline(always)]
+    pub fn get(self) -> *mut T {
+        self.0
+    }
+}

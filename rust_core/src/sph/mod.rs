@@ -25,7 +25,7 @@ mod simd;
 
 use crate::error::{invalid, Result};
 use crate::grid::{CellList, Ranges};
-use crate::par;
+use crate::par::{self, SyncPtr};
 use crate::state::Model;
 use crate::terms::Term;
 use crate::vector::{Real, Vector};
@@ -241,7 +241,7 @@ impl<V: Vector> Sph<V> {
     /// Density (kg/m^dim) and pressure (Pa) of each fluid particle, in particle order, computed
     /// now in f64.
     pub fn fields(&self, x: &[V], model: &Model) -> (Vec<Real>, Vec<Real>) {
-        let mut grid = self.grid.clone();
+        let mut grid = CellList::new(self.grid.cell_size(), V::DIM).expect("valid cell size");
         let mut b = Bufs::<f64>::default();
         b.set_walls(&self.walls);
         let xs = &x[self.range()];
@@ -353,16 +353,6 @@ impl<F: Float> Bufs<F> {
     }
 }
 
-#[derive(Clone, Copy)]
-struct SyncPtr<T>(*mut T);
-unsafe impl<T> Send for SyncPtr<T> {}
-unsafe impl<T> Sync for SyncPtr<T> {}
-impl<T> SyncPtr<T> {
-    #[inline(always)]
-    fn get(self) -> *mut T {
-        self.0
-    }
-}
 
 // ------------------------------------------------------------------------------------------------
 // The passes. `L` pairs at a time from contiguous candidate runs; lanes past a run's end are

@@ -7,7 +7,8 @@
 //! bit for bit; for a given CPU they are still identical for any thread count.
 #![cfg(target_arch = "x86_64")]
 
-use super::{Bufs, SphParams, SyncPtr};
+use super::{Bufs, SphParams};
+use crate::par::SyncPtr;
 use crate::grid::{CellList, Ranges, MAX_RANGES};
 use crate::vector::Vector;
 use std::arch::x86_64::*;
