@@ -19,12 +19,17 @@ ORDER_CASES = {
     "semi_implicit_euler": (1, [0.02, 0.01, 0.005, 0.0025]),
     "verlet": (2, [0.04, 0.02, 0.01, 0.005]),
     "rk4": (4, [0.1, 0.05, 0.025, 0.0125]),
+    # Tolerances so loose that every output step is one accepted Dormand–Prince step of dt:
+    # this measures the order of the tableau itself (its error control is tested below).
+    "rk45": (5, [0.4, 0.2, 0.1, 0.05]),
 }
 T_FINAL = 2.0
 
 
 def _error_at(integrator: str, dt: float) -> float:
     s = oscillator(integrator, dt)
+    if integrator == "rk45":
+        s.rtol, s.atol = 0.5, 1e6
     n = round(T_FINAL / dt)
     s.step(n)
     xe, ve = oscillator_exact(n * dt)
@@ -56,6 +61,7 @@ def test_integrator_table():
         "semi_implicit_euler": (1, True, 1),
         "verlet": (2, True, 1),
         "rk4": (4, False, 4),
+        "rk45": (5, False, 6),
     }
     got = {d["name"]: (d["order"], d["symplectic"], d["force_evals_per_step"]) for d in pc.INTEGRATORS}
     assert got == expected
@@ -65,7 +71,7 @@ def test_integrator_table():
         assert s.integrator_info == d
 
 
-@pytest.mark.parametrize("name", INTEGRATOR_NAMES)
+@pytest.mark.parametrize("name", [n for n in INTEGRATOR_NAMES if n != "rk45"])
 def test_force_evaluations_per_step(name):
     per_step = next(d["force_evals_per_step"] for d in pc.INTEGRATORS if d["name"] == name)
     s = oscillator(name, 0.01)
@@ -78,6 +84,47 @@ def test_force_evaluations_per_step(name):
         before = s.force_evaluations
         s.step(k)
         assert s.force_evaluations - before == per_step * k
+
+
+def test_rk45_force_evaluations_are_six_per_internal_step():
+    s = oscillator("rk45", 0.5)
+    s.step(1)
+    st = s.integrator_stats
+    # One evaluation at the start (first same as last afterwards) and one for the starting step.
+    assert s.force_evaluations == 2 + 6 * (st["accepted"] + st["rejected"])
+    for k in (1, 10):
+        before, b = s.force_evaluations, s.integrator_stats
+        s.step(k)
+        a = s.integrator_stats
+        assert a["accepted"] - b["accepted"] >= k
+        assert s.force_evaluations - before == 6 * (a["accepted"] - b["accepted"] + a["rejected"] - b["rejected"])
+    assert pc.Scene(2).integrator_stats is None
+
+
+@pytest.mark.parametrize("rtol", [1e-4, 1e-6, 1e-8, 1e-10])
+def test_rk45_error_is_proportional_to_tolerance(rtol):
+    # Global error over 5 periods within a small multiple of rtol (tolerance proportionality,
+    # Hairer, Nørsett & Wanner I, §II.4), and well above it would mean the control is slack.
+    s = oscillator("rk45", 0.25)
+    s.rtol, s.atol = rtol, rtol * 1e-3
+    n = round(10 * math.pi / 0.25)
+    s.step(n)
+    xe, ve = oscillator_exact(n * 0.25)
+    err = float(np.linalg.norm(np.concatenate([s.positions[1] - xe, s.velocities[1] - ve])))
+    assert 1e-2 * rtol < err < 100 * rtol, f"rtol {rtol:g}: global error {err:.2e}"
+    assert s.time == n * 0.25
+
+
+def test_rk45_lands_on_output_times_and_adapts():
+    # A Kepler orbit with e = 0.9: the internal step near pericentre is far below the output
+    # step, and the controller rejects only a few percent of its attempts.
+    s = pc.scenes.kepler(e=0.9, mass_ratio=0.0, integrator="rk45", dt=2 * math.pi / 8)
+    s.rtol, s.atol = 1e-9, 1e-12
+    s.step(8 * 5)
+    st = s.integrator_stats
+    assert st["accepted"] > 5 * 8 * 5
+    assert st["rejected"] < 0.1 * st["accepted"]
+    assert s.energy_drift() < 1e-7
 
 
 def test_verlet_force_cache_is_dropped_when_state_changes():

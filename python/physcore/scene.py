@@ -84,6 +84,23 @@ def _check_integrator(name: object) -> str:
     return name
 
 
+def _check_tol(value: object, arg: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{arg}: expected a number, got {type(value).__name__}")
+    return float(value)
+
+
+_PRECISIONS = ("f64", "f32")
+
+
+def _check_precision(value: object) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"precision: expected 'f64' or 'f32', got {type(value).__name__}")
+    if value not in _PRECISIONS:
+        raise InvalidInputError(f"precision: must be 'f64' or 'f32', got {value!r}")
+    return value
+
+
 def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
     a = np.asarray(value)
@@ -111,10 +128,25 @@ class Scene:
         Spatial dimension.
     integrator : str
         ``"euler"`` (explicit, 1st order, for contrast), ``"semi_implicit_euler"`` (symplectic,
-        1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default) or ``"rk4"``
-        (classic Runge–Kutta, 4th order, 4 force evaluations per step).
+        1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"rk4"``
+        (classic Runge–Kutta, 4th order, 4 force evaluations per step) or ``"rk45"`` (adaptive
+        Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
+        evaluations each; see `rtol`).
     dt : float
-        Time step, s (> 0). Default 1e-3.
+        Time step, s (> 0). Default 1e-3. For ``"rk45"`` it is the output interval: each step
+        of ``dt`` is integrated in as many internal steps as the tolerances need and lands
+        exactly on its end.
+    rtol, atol : float
+        Tolerances of ``"rk45"`` (kept, and ignored, by the fixed-step integrators). A step is
+        accepted when every position and velocity component i has a local error estimate below
+        ``atol + rtol · |y_i|`` (atol in m for positions and m/s for velocities; max norm over
+        all particles). ``rtol`` in [1e-14, 1), default 1e-6; ``atol`` >= 0, default 1e-9.
+    precision : {"f64", "f32"}
+        ``"f64"`` (default) keeps positions and velocities in double precision. ``"f32"`` keeps
+        them in single precision: every stored value is rounded to the nearest float32 after
+        each step (the arithmetic within a step stays float64), as a float32 state array would
+        hold them; ``positions``/``velocities`` are then returned as float32. It shows what
+        single precision costs in accuracy (see the work-precision table in the README).
     threads : int or None
         Worker threads for this scene; ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``).
         Results are bit-identical for any thread count.
@@ -136,16 +168,31 @@ class Scene:
     1.0
     """
 
-    def __init__(self, dim: int = 2, *, integrator: str = "verlet", dt: float = 1e-3, threads: Optional[int] = None) -> None:
+    def __init__(
+        self,
+        dim: int = 2,
+        *,
+        integrator: str = "verlet",
+        dt: float = 1e-3,
+        rtol: float = 1e-6,
+        atol: float = 1e-9,
+        precision: str = "f64",
+        threads: Optional[int] = None,
+    ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
         if dim not in (2, 3):
             raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
         integrator = _check_integrator(integrator)
         dt = _check_dt(dt)
+        rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
+        precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
-        self._sim = _core.Simulation2(int(dim), integrator, dt, threads)
+        sim = _core.Simulation2(int(dim), integrator, dt, threads)
+        sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
+        sim.single = precision == "f32"
+        self._sim = sim
         self._threads = threads
         self._terms: List[Term] = []
         self._planes: List[Plane] = []
@@ -385,15 +432,23 @@ class Scene:
             self._set_reference_energy()
         self._sim.step(n)
 
-    def advance(self, duration: float) -> int:
-        """Advance ``duration`` seconds in ``n = ⌈duration / suggest_dt()⌉`` equal substeps, so each
-        is inside the stability limits at the start of the call (springs, gravity, fluid CFL).
-        Sets :attr:`dt` to ``duration / n`` and returns ``n`` (the substeps chosen).
+    def advance(self, duration: float, *, substeps: Union[str, int] = "auto") -> int:
+        """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
+        to ``duration / n``.
+
+        With ``substeps="auto"`` (default) ``n = ⌈duration / auto_dt⌉``, where ``auto_dt``
+        (:meth:`auto_dt`) keeps every substep inside the stability region of the scene's
+        integrator at the start of the call: a quarter of its stability interval on the
+        imaginary axis over the fastest angular frequency ω_max in the scene (ω·dt = 0.5 for
+        semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
+        above a term's own limit (the fluid CFL condition). ``"rk45"`` controls its own internal
+        steps, so it takes one substep per call unless a CFL limit asks for more. An int gives
+        that many substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
 
         Raises
         ------
         TypeError, ValueError
-            ``duration`` not a finite number > 0 (seconds).
+            ``duration`` not a finite number > 0 (seconds); ``substeps`` not "auto" or an int >= 1.
         SimulationDiverged, KeyboardInterrupt
             As for :meth:`step`; ``dt`` is rolled back too.
         """
@@ -402,9 +457,37 @@ class Scene:
         duration = float(duration)
         if not (math.isfinite(duration) and duration > 0):
             raise InvalidInputError(f"duration: must be finite and > 0 (seconds), got {duration}")
+        if isinstance(substeps, str):
+            if substeps != "auto":
+                raise InvalidInputError(f"substeps: must be 'auto' or an int >= 1, got {substeps!r}")
+            fixed = None
+        else:
+            fixed = _check_int(substeps, "substeps", 1)
         if self._e0 is None:
             self._set_reference_energy()
-        return int(self._sim.advance(duration))
+        if fixed is None:
+            return int(self._sim.advance(duration))
+        dt = duration / fixed
+        if not dt > 0:
+            raise InvalidInputError(f"substeps: {fixed} substeps of {duration} s underflow")
+        old = self._sim.dt
+        self._sim.dt = dt
+        try:
+            self._sim.step(fixed)
+        except BaseException:
+            self._sim.dt = old
+            raise
+        return fixed
+
+    def auto_dt(self) -> float:
+        """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before
+        rounding to a whole number of substeps per call): see :meth:`advance`. ``inf`` for
+        ``"rk45"`` without a CFL limit; the current :attr:`dt` for a scene with no time scale
+        (free flight, uniform gravity only)."""
+        d = self._sim.auto_dt()
+        if d is not None:
+            return float(d)
+        return math.inf if self.integrator == "rk45" else self.dt
 
     def _set_reference_energy(self) -> None:
         e = self.energy()
@@ -450,6 +533,39 @@ class Scene:
         self._sim.integrator = _check_integrator(name)
 
     @property
+    def rtol(self) -> float:
+        """Relative tolerance of ``"rk45"``. Settable; see the class docstring."""
+        return self._sim.tolerances[0]
+
+    @rtol.setter
+    def rtol(self, value: float) -> None:
+        self._sim.set_tolerances(_check_tol(value, "rtol"), self.atol)
+
+    @property
+    def atol(self) -> float:
+        """Absolute tolerance of ``"rk45"`` (m for positions, m/s for velocities). Settable."""
+        return self._sim.tolerances[1]
+
+    @atol.setter
+    def atol(self, value: float) -> None:
+        self._sim.set_tolerances(self.rtol, _check_tol(value, "atol"))
+
+    @property
+    def precision(self) -> str:
+        """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor)."""
+        return "f32" if self._sim.single else "f64"
+
+    @property
+    def integrator_stats(self) -> Optional[Dict[str, Any]]:
+        """For ``"rk45"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
+        rejected so far by the step-size controller, and the internal step (s) it will try next.
+        ``None`` for the fixed-step integrators."""
+        st = self._sim.adaptive_stats()
+        if st is None:
+            return None
+        return {"accepted": int(st[0]), "rejected": int(st[1]), "next_step": float(st[2])}
+
+    @property
     def integrator_info(self) -> Dict[str, Any]:
         """``{"name", "order", "symplectic", "force_evals_per_step"}`` of the current integrator."""
         return dict(self._sim.integrator_info())
@@ -465,8 +581,10 @@ class Scene:
 
     @property
     def positions(self) -> np.ndarray:
-        """Positions, m: ``(N, dim)`` float64, a copy. Assigning validates and replaces them."""
-        return self._sim.positions
+        """Positions, m: ``(N, dim)`` float64 (float32 with ``precision="f32"``), a copy.
+        Assigning validates and replaces them."""
+        x = self._sim.positions
+        return x.astype(np.float32) if self._sim.single else x
 
     @positions.setter
     def positions(self, value: "np.typing.ArrayLike") -> None:
@@ -476,8 +594,9 @@ class Scene:
     @property
     def velocities(self) -> np.ndarray:
         """Velocities, m/s: ``(N, dim)`` float64, a copy. Assigning validates and replaces them
-        (pinned particles stay at rest)."""
-        return self._sim.velocities
+        (pinned particles stay at rest). float32 with ``precision="f32"``."""
+        v = self._sim.velocities
+        return v.astype(np.float32) if self._sim.single else v
 
     @velocities.setter
     def velocities(self, value: "np.typing.ArrayLike") -> None:
@@ -586,7 +705,7 @@ class Scene:
         """Write the whole scene to a ``.npz`` file, atomically (temporary file, then rename).
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
-        Verlet force cache and the energy books are saved too).
+        Verlet force cache, the rk45 step-size controller and the energy books are saved too).
         """
         path = Path(path)
         if path.suffix != ".npz":
@@ -632,6 +751,9 @@ class Scene:
             "dim": self.dim,
             "integrator": self.integrator,
             "dt": self.dt,
+            "rtol": self.rtol,
+            "atol": self.atol,
+            "precision": self.precision,
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,
@@ -672,6 +794,9 @@ class Scene:
                 meta["dim"],
                 integrator=meta["integrator"],
                 dt=meta["dt"],
+                rtol=meta.get("rtol", 1e-6),
+                atol=meta.get("atol", 1e-9),
+                precision=meta.get("precision", "f64"),
                 threads=threads if threads is not None else meta["threads"],
             )
             n = z["positions"].shape[0]

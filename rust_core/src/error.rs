@@ -11,9 +11,9 @@ pub enum Error {
     /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
     /// `step(n)` call started.
     #[error(
-        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} has a non-finite \
-         {quantity}. The state was rolled back to step {rolled_back_to}. Try a smaller dt \
-         (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable integrator, or softening."
+        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} {what}. The state was rolled back to step {rolled_back_to}. Try a smaller dt \
+         (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable integrator, or softening.",
+        what = describe(quantity)
     )]
     Diverged {
         step: u64,
@@ -28,6 +28,17 @@ pub enum Error {
     /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
     #[error("interrupted; the state was rolled back to step {rolled_back_to}")]
     Interrupted { rolled_back_to: u64 },
+}
+
+/// What went wrong with the particle: `quantity` is "position" or "velocity" (non-finite), or
+/// "error" (an adaptive integrator could not meet its tolerances at any step size).
+fn describe(quantity: &str) -> String {
+    match quantity {
+        "error" => "has a local error that rk45 cannot bring within rtol/atol at any step size \
+                    (its forces are not finite or not smooth there)"
+            .to_string(),
+        q => format!("has a non-finite {q}"),
+    }
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -133,6 +133,31 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     partials.into_iter().fold(zero, fold)
 }
 
+/// Like `chunks1`, with each chunk returning a value folded in chunk order (deterministic).
+pub fn chunks1_fold<A: Send, T: Send>(
+    a: &mut [A],
+    zero: T,
+    fold: impl Fn(T, T) -> T,
+    f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
+) -> T {
+    let partials: Vec<T> = if a.len() >= PAR_MIN {
+        a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
+    } else {
+        a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
+    };
+    partials.into_iter().fold(zero, fold)
+}
+
+/// Deterministic fold of `f(range)` over fixed chunks of `0..n` (e.g. a maximum).
+pub fn reduce<T: Send>(n: usize, zero: T, fold: impl Fn(T, T) -> T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T {
+    let partials: Vec<T> = if n >= PAR_MIN {
+        ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()
+    } else {
+        ranges(n).map(&f).collect()
+    };
+    partials.into_iter().fold(zero, fold)
+}
+
 /// `chunks2` whose chunks raise a flag; returns whether any did.
 pub fn chunks2_any<A: Send, B: Send>(
     a: &mut [A],

@@ -38,6 +38,8 @@ pub trait Vector:
     fn from_slice(s: &[Real]) -> Self;
     /// `self × other` as a 3-vector (in 2D only the z component is non-zero).
     fn cross3(self, other: Self) -> [Real; 3];
+    /// Each component rounded to the nearest float32 (the single-precision state).
+    fn round_f32(self) -> Self;
 }
 
 impl Vector for DVec2 {
@@ -62,6 +64,10 @@ impl Vector for DVec2 {
     #[inline(always)]
     fn cross3(self, o: Self) -> [Real; 3] {
         [0.0, 0.0, self.x * o.y - self.y * o.x]
+    }
+    #[inline(always)]
+    fn round_f32(self) -> Self {
+        DVec2::new(self.x as f32 as f64, self.y as f32 as f64)
     }
 }
 
@@ -88,6 +94,10 @@ impl Vector for DVec3 {
     fn cross3(self, o: Self) -> [Real; 3] {
         let c = self.cross(o);
         [c.x, c.y, c.z]
+    }
+    #[inline(always)]
+    fn round_f32(self) -> Self {
+        DVec3::new(self.x as f32 as f64, self.y as f32 as f64, self.z as f32 as f64)
     }
 }
 

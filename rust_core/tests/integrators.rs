@@ -34,7 +34,7 @@ fn integrator_table() {
     let got: Vec<_> = infos.iter().map(|i| (i.name, i.order, i.symplectic, i.force_evals_per_step)).collect();
     assert_eq!(
         got,
-        vec![("euler", 1, false, 1), ("semi_implicit_euler", 1, true, 1), ("verlet", 2, true, 1), ("rk4", 4, false, 4)]
+        vec![("euler", 1, false, 1), ("semi_implicit_euler", 1, true, 1), ("verlet", 2, true, 1), ("rk4", 4, false, 4), ("rk45", 5, false, 6)]
     );
     assert!(by_name::<glam::DVec2>("leapfrogg").is_err());
 }
@@ -127,4 +127,95 @@ fn suggested_dt_accounts_for_dashpots() {
         let total = e.total();
         assert!((total - 0.5 - 0.125).abs() < 1e-2, "{name}: books {e:?}");
     }
+}
+
+/// rk45 on the oscillator (ω = 1) over 10 periods, one output step per unit time: the global
+/// error follows the tolerance (tolerance proportionality, Hairer, Nørsett & Wanner I, §II.4),
+/// each call lands exactly on its output time, and the work grows like rtol^(-1/5).
+#[test]
+fn rk45_error_follows_tolerance() {
+    let t_end = 20.0 * std::f64::consts::PI;
+    let mut errs = vec![];
+    let mut evals = vec![];
+    for rtol in [1e-4, 1e-6, 1e-8, 1e-10] {
+        let mut s = oscillator("rk45", 1.0);
+        s.set_tolerances(rtol, rtol * 1e-3).unwrap();
+        let n = t_end.round() as u64;
+        s.step(n).unwrap();
+        let t = s.sys.state.t;
+        assert_eq!(t, n as f64, "time is n·dt exactly");
+        let (x, v) = (s.sys.state.x[1], s.sys.state.v[1]);
+        let e = ((x.x - t.cos()).powi(2) + (v.x + t.sin()).powi(2)).sqrt();
+        let (acc, rej, _) = s.adaptive_stats().unwrap();
+        assert!(acc > 0 && rej <= acc, "rtol {rtol}: {acc} accepted, {rej} rejected");
+        errs.push(e);
+        evals.push(s.force_evaluations() as f64);
+    }
+    for k in 0..errs.len() {
+        let rtol = [1e-4, 1e-6, 1e-8, 1e-10][k];
+        // ~60 steps' local errors of ≤ rtol each add up to at most a few hundred rtol.
+        assert!(errs[k] < 300.0 * rtol && errs[k] > 1e-3 * rtol, "rtol {rtol}: global error {:e}", errs[k]);
+    }
+    for k in 1..errs.len() {
+        let r = errs[k - 1] / errs[k];
+        assert!((10.0..1e4).contains(&r), "100× smaller rtol gave {r:.1}× smaller error");
+        // Order 5: 100× tighter costs 100^(1/5) ≈ 2.5× more evaluations.
+        let w = evals[k] / evals[k - 1];
+        assert!((1.8..3.5).contains(&w), "100× smaller rtol cost {w:.2}× the evaluations");
+    }
+}
+
+/// rk45 follows a Kepler orbit with e = 0.9 through 10 pericentre passages (a 1.9/0.1 = 19:1
+/// range of distances): the step shrinks near pericentre instead of failing, energy holds.
+#[test]
+fn rk45_kepler_high_eccentricity() {
+    use glam::DVec2;
+    use physcore_core::terms::PairwiseGravity;
+    let e: f64 = 0.9;
+    let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.5, Some(1)).unwrap();
+    let rp = 1.0 - e;
+    let vp = ((1.0 + e) / rp).sqrt();
+    s.add_particles(vec![DVec2::ZERO, DVec2::new(rp, 0.0)], vec![DVec2::ZERO, DVec2::new(0.0, vp)], vec![1.0, 1e-12], vec![true, false]).unwrap();
+    s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
+    s.set_tolerances(1e-10, 1e-13).unwrap();
+    let e0 = s.energy().total();
+    let period = 2.0 * std::f64::consts::PI;
+    s.set_dt(period / 16.0).unwrap();
+    s.step(160).unwrap();
+    let de = ((s.energy().total() - e0) / e0).abs();
+    let x = s.sys.state.x[1];
+    assert!(de < 1e-7, "energy error {de:e}");
+    assert!((x - DVec2::new(rp, 0.0)).length() < 1e-5, "back at pericentre after 10 orbits: {x:?}");
+    let (acc, _, _) = s.adaptive_stats().unwrap();
+    assert!(acc > 160, "adaptive steps taken: {acc}");
+}
+
+/// Same scene, 1 and 2 threads, an rk45 run larger than one parallel chunk: bit-identical.
+#[test]
+fn rk45_is_deterministic_and_fails_cleanly() {
+    use glam::DVec2;
+    use physcore_core::terms::Springs;
+    let run = |threads| {
+        let n = 5000;
+        let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.01, Some(threads)).unwrap();
+        let x: Vec<DVec2> = (0..n).map(|i| DVec2::new(i as f64 * 0.01, ((i * 7919) % 13) as f64 * 1e-3)).collect();
+        s.add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect()).unwrap();
+        let a: Vec<u32> = (0..n as u32 - 1).collect();
+        let b: Vec<u32> = (1..n as u32).collect();
+        s.add_term(Box::new(Springs::new("s".into(), a, b, vec![50.0; n - 1], vec![0.0; n - 1], vec![0.009; n - 1], n).unwrap())).unwrap();
+        s.step(5).unwrap();
+        (s.sys.state.x.clone(), s.sys.state.v.clone())
+    };
+    assert_eq!(run(1), run(2));
+
+    // Forces that are infinite at the start: the controller gives up with the particle named,
+    // and the state is rolled back.
+    use physcore_core::terms::PairwiseGravity;
+    let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.1, Some(1)).unwrap();
+    s.add_particles(vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![false, false]).unwrap();
+    s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
+    let err = s.step(1).unwrap_err().to_string();
+    assert!(err.contains("rtol/atol") && err.contains("particle"), "{err}");
+    assert_eq!(s.sys.state.step, 0);
+    assert_eq!(s.sys.state.x[1], DVec2::new(1e-160, 0.0));
 }

@@ -1,6 +1,6 @@
 //! Explicit (forward) Euler: x' = x + dt v, v' = v + dt a(x, v). First order, not symplectic;
 //! energy grows for every dt on an oscillator. Included for contrast.
-use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -18,13 +18,13 @@ impl<V: Vector> Integrator<V> for ExplicitEuler<V> {
         ensure_len(&mut self.f, n);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
         sys.forces.book_power(dt);
-        let (f, im, g) = (&self.f, &sys.model.inv_mass, sys.forces.g);
+        let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
         par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             let mut b = false;
             for k in 0..x.len() {
                 let i = s + k;
-                x[k] += v[k] * dt;
-                v[k] += accel(f[i], im[i], g) * dt;
+                x[k] = store(x[k] + v[k] * dt, single);
+                v[k] = store(v[k] + accel(f[i], im[i], g) * dt, single);
                 b |= bad(x[k], v[k]);
             }
             b

@@ -2,6 +2,7 @@
 //! its force evaluations per step, so the speed/accuracy trade can be tabulated honestly.
 pub mod euler;
 pub mod rk4;
+pub mod rk45;
 pub mod semi_implicit_euler;
 pub mod verlet;
 
@@ -12,6 +13,7 @@ use crate::vector::{Real, Vector};
 
 pub use euler::ExplicitEuler;
 pub use rk4::Rk4;
+pub use rk45::Rk45;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
 
@@ -20,6 +22,9 @@ pub struct System<V: Vector> {
     pub state: State<V>,
     pub model: Model,
     pub forces: ForceSet<V>,
+    /// Single-precision state: integrators round every stored position and velocity to the
+    /// nearest float32 (`store`), so forces are always evaluated at representable states.
+    pub single: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -43,16 +48,34 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn last_forces(&self) -> &[V];
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
-    /// Cached forces carried from one step to the next (velocity Verlet's "first same as last"),
-    /// with the term powers at that state; needed to continue a saved run bit for bit.
-    fn cache(&self) -> Option<(&[V], &[Real])> {
+    /// What the integrator carries from one step to the next ("first same as last" forces, the
+    /// term powers there, an adaptive controller's memory); needed to continue a saved run, or
+    /// to retry a rolled-back one, bit for bit.
+    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
         None
     }
-    fn set_cache(&mut self, _f: Vec<V>, _p: Vec<Real>) {}
+    /// Restores `cache()`'s output at the state whose velocities are `v`, for a scene with
+    /// `n_terms` terms; returns false (and changes nothing) if it does not fit.
+    fn set_cache(&mut self, _f: Vec<V>, _p: Vec<Real>, _v: &[V], _n_terms: usize) -> bool {
+        false
+    }
+    /// Sets the tolerances of an adaptive integrator; false if it has none.
+    fn set_tolerances(&mut self, _rtol: Real, _atol: Real) -> bool {
+        false
+    }
+    /// (accepted, rejected internal steps, next internal step in s) of an adaptive integrator.
+    fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
+        None
+    }
+    /// Why the last `step` failed with a finite state (adaptive step control gave up): the
+    /// particle and what was wrong.
+    fn failure(&self) -> Option<(usize, &'static str)> {
+        None
+    }
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 4] = ["euler", "semi_implicit_euler", "verlet", "rk4"];
+pub const NAMES: [&str; 5] = ["euler", "semi_implicit_euler", "verlet", "rk4", "rk45"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -60,6 +83,7 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "semi_implicit_euler" => Box::new(SemiImplicitEuler::default()),
         "verlet" => Box::new(VelocityVerlet::default()),
         "rk4" => Box::new(Rk4::default()),
+        "rk45" => Box::new(Rk45::default()),
         other => {
             return Err(invalid("integrator", format!("unknown integrator {other:?}; valid names: {}", NAMES.join(", "))))
         }
@@ -81,6 +105,16 @@ pub(crate) fn accel<V: Vector>(f: V, inv_mass: Real, g: V) -> V {
         V::ZERO
     } else {
         f * inv_mass + g
+    }
+}
+
+/// A position or velocity as the state stores it (rounded to float32 in single precision).
+#[inline(always)]
+pub(crate) fn store<V: Vector>(x: V, single: bool) -> V {
+    if single {
+        x.round_f32()
+    } else {
+        x
     }
 }
 

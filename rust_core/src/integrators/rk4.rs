@@ -1,6 +1,6 @@
 //! Classic fourth-order Runge–Kutta on (x, v) (Kutta 1901; Hairer, Nørsett & Wanner, Solving
 //! ODEs I, Table 1.2). Fourth order, not symplectic, four force evaluations per step.
-use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -60,12 +60,13 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
         sys.forces.book_power(dt / 6.0);
         let (f, vs, ax, av) = (&self.f, &self.vs, &self.ax, &self.av);
         let w = dt / 6.0;
+        let single = sys.single;
         par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             let mut b = false;
             for k in 0..x.len() {
                 let i = s + k;
-                x[k] += (ax[i] + vs[i]) * w;
-                v[k] += (av[i] + accel(f[i], im[i], g)) * w;
+                x[k] = store(x[k] + (ax[i] + vs[i]) * w, single);
+                v[k] = store(v[k] + (av[i] + accel(f[i], im[i], g)) * w, single);
                 b |= bad(x[k], v[k]);
             }
             b

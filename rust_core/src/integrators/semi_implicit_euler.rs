@@ -1,6 +1,6 @@
 //! Semi-implicit (symplectic) Euler, kick then drift: v' = v + dt a(x, v); x' = x + dt v'.
 //! First order, symplectic: bounded energy error on conservative systems for ω·dt < 2.
-use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -18,13 +18,13 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
         ensure_len(&mut self.f, n);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
         sys.forces.book_power(dt);
-        let (f, im, g) = (&self.f, &sys.model.inv_mass, sys.forces.g);
+        let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
         par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
             let mut b = false;
             for k in 0..x.len() {
                 let i = s + k;
-                v[k] += accel(f[i], im[i], g) * dt;
-                x[k] += v[k] * dt;
+                v[k] = store(v[k] + accel(f[i], im[i], g) * dt, single);
+                x[k] = store(x[k] + v[k] * dt, single);
                 b |= bad(x[k], v[k]);
             }
             b

@@ -7,7 +7,7 @@
 //! v + dt a(x, v), whose O(dt²) error keeps the method second order; evaluating them with v½
 //! (a common shortcut) would drop it to first order. Without such forces the prediction is
 //! skipped and the method is exactly the symplectic velocity Verlet.
-use super::{accel, bad, ensure_len, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -37,16 +37,16 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
         sys.forces.set_last_power(&self.p);
         sys.forces.book_power(0.5 * dt);
         let half = 0.5 * dt;
-        let (f, im, g) = (&self.f, &sys.model.inv_mass, sys.forces.g);
+        let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
         if sys.forces.velocity_dependent() {
             ensure_len(&mut self.vp, n);
             par::chunks3(&mut sys.state.x, &mut sys.state.v, &mut self.vp, |s, x, v, vp| {
                 for k in 0..x.len() {
                     let i = s + k;
                     let a = accel(f[i], im[i], g);
-                    vp[k] = v[k] + a * dt;
-                    v[k] += a * half;
-                    x[k] += v[k] * dt;
+                    vp[k] = store(v[k] + a * dt, single);
+                    v[k] = store(v[k] + a * half, single);
+                    x[k] = store(x[k] + v[k] * dt, single);
                 }
             });
             sys.forces.eval(&sys.state.x, &self.vp, &sys.model, &mut self.f);
@@ -54,8 +54,8 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
             par::chunks2(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
                 for k in 0..x.len() {
                     let i = s + k;
-                    v[k] += accel(f[i], im[i], g) * half;
-                    x[k] += v[k] * dt;
+                    v[k] = store(v[k] + accel(f[i], im[i], g) * half, single);
+                    x[k] = store(x[k] + v[k] * dt, single);
                 }
             });
             sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
@@ -68,7 +68,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
             let mut b = false;
             for k in 0..v.len() {
                 let i = s + k;
-                v[k] += accel(f[i], im[i], g) * half;
+                v[k] = store(v[k] + accel(f[i], im[i], g) * half, single);
                 b |= bad(x[k], v[k]);
             }
             b
@@ -80,12 +80,16 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn reset(&mut self) {
         self.valid = false;
     }
-    fn cache(&self) -> Option<(&[V], &[Real])> {
-        self.valid.then_some((&self.f[..], &self.p[..]))
+    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+        self.valid.then(|| (self.f.clone(), self.p.clone()))
     }
-    fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>) {
+    fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
+        if f.len() != v.len() || p.len() != n_terms {
+            return false;
+        }
         self.f = f;
         self.p = p;
         self.valid = true;
+        true
     }
 }

@@ -159,6 +159,37 @@ impl Simulation2 {
         with_sim!(&mut self.inner, s => s.set_integrator(name)).map_err(|e| to_py(py, e))
     }
 
+    /// (rtol, atol) of the adaptive integrator.
+    #[getter]
+    fn tolerances(&self) -> (f64, f64) {
+        with_sim!(&self.inner, s => s.tolerances())
+    }
+
+    fn set_tolerances(&mut self, py: Python<'_>, rtol: f64, atol: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
+    }
+
+    /// (accepted, rejected, next internal step s) for "rk45", else None.
+    fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
+        with_sim!(&self.inner, s => s.adaptive_stats())
+    }
+
+    /// Whether the state is kept in single precision.
+    #[getter]
+    fn single(&self) -> bool {
+        with_sim!(&self.inner, s => s.single())
+    }
+
+    #[setter]
+    fn set_single(&mut self, single: bool) {
+        with_sim!(&mut self.inner, s => s.set_single(single))
+    }
+
+    /// The substep advance() would take now, or None.
+    fn auto_dt(&self) -> Option<f64> {
+        with_sim!(&self.inner, s => s.auto_dt())
+    }
+
     fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         info_dict(py, with_sim!(&self.inner, s => s.integrator_info()))
     }
