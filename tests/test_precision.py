@@ -38,7 +38,8 @@ def test_explicit_euler_step_is_the_rounded_double_step():
     for prec in ("f64", "f32"):
         s = pc.Scene(3, integrator="euler", dt=1e-3, precision=prec, threads=1)
         s.add_particles(x, v, masses=m)
-        s.add(pc.PairwiseGravity(G=1.0, softening=0.05))
+        # Springs compute in float64 at either precision (pairwise gravity would not).
+        s.add(pc.Springs(np.arange(39), np.arange(1, 40), stiffness=50.0, rest_length=0.1))
         s.step(1)
         runs[prec] = s
     assert np.array_equal(runs["f32"].positions, runs["f64"].positions.astype(np.float32))
@@ -98,3 +99,18 @@ def test_f32_rounds_assigned_state():
 def test_bad_precision(bad, exc):
     with pytest.raises(exc, match="precision"):
         pc.Scene(2, precision=bad)
+
+
+def test_f32_pairwise_gravity_runs_in_single_precision():
+    # The float32 N-body kernel: forces agree with float64 ones to single precision, not better.
+    x, v, m = random_cloud(4, 300, dim=3, speed=0.1, box=1.0)
+    x = x.astype(np.float32).astype(np.float64)
+    acc = {}
+    for prec in ("f64", "f32"):
+        s = pc.Scene(3, integrator="euler", dt=1e-6, precision=prec, threads=1)
+        s.add_particles(x, np.zeros_like(x), masses=m)
+        s.add(pc.PairwiseGravity(G=1.0, softening=0.01))
+        s.step(1)
+        acc[prec] = s._sim.velocities / 1e-6
+    err = np.abs(acc["f32"] - acc["f64"]).max() / np.abs(acc["f64"]).max()
+    assert 1e-9 < err < 1e-5, err

@@ -116,6 +116,9 @@ impl<V: Vector> Simulation<V> {
             self.integrator.reset();
         }
         self.sys.single = single;
+        for t in &mut self.sys.forces.terms {
+            t.set_single(single);
+        }
     }
     pub fn single(&self) -> bool {
         self.sys.single
@@ -172,6 +175,8 @@ impl<V: Vector> Simulation<V> {
         if t.min_particles() > self.n_particles() {
             return Err(invalid("term", format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles())));
         }
+        let mut t = t;
+        t.set_single(self.sys.single);
         self.sys.forces.push(t);
         self.integrator.reset();
         Ok(())

@@ -43,6 +43,9 @@ pub trait Term<V: Vector>: Send + Sync {
     fn max_dt(&self, _x: &[V], _v: &[V], _model: &Model, _g: Real) -> Option<Real> {
         None
     }
+    /// Told when the scene's state becomes single precision (`true`) or double: a term may then
+    /// compute in float32 where that is faster (pairwise gravity does).
+    fn set_single(&mut self, _single: bool) {}
     /// The term as an SPH fluid, if it is one (for its density and pressure fields).
     fn as_sph(&self) -> Option<&crate::sph::Sph<V>> {
         None
