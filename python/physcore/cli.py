@@ -327,6 +327,16 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         scene = fn(**kwargs)
     except (TypeError, ValueError) as e:
         parser.error(f"scene {name!r}: {e}")
+    if args.rtol is not None or args.atol is not None:
+        if scene.integrator != "rk45":
+            parser.error("--rtol/--atol apply to the adaptive integrator: add --integrator rk45")
+        try:
+            if args.rtol is not None:
+                scene.rtol = args.rtol
+            if args.atol is not None:
+                scene.atol = args.atol
+        except ValueError as e:
+            parser.error(str(e))
     settings = _render_settings(fn, args, scene.dt)
     time0 = scene.time
     counter = None
@@ -399,6 +409,12 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
             f"{settings['steps_per_frame']} per frame, {scene.integrator})"
         )
+    stats = getattr(scene, "integrator_stats", None)
+    if stats:
+        print(
+            f"  rk45:           {stats['accepted']} internal steps accepted, {stats['rejected']} rejected "
+            f"(rtol {scene.rtol:g}, atol {scene.atol:g})"
+        )
     print(f"  energy drift:   {drift:+.1e} (relative)")
     print(f"  wall time:      {wall:.2f} s")
     return 0
@@ -454,6 +470,8 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--integrator", choices=integrators, metavar="NAME",
                    help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
+    r.add_argument("--rtol", type=_positive_float, metavar="R", help="relative tolerance of --integrator rk45 (default 1e-6)")
+    r.add_argument("--atol", type=float, metavar="A", help="absolute tolerance of --integrator rk45 (default 1e-9)")
     r.add_argument("--color-by", choices=render.COLOR_BY,
                    help="particle colouring (default: the scene's, else speed)")
     r.add_argument("--no-colorbar", action="store_true", help="do not draw the colour bar")
