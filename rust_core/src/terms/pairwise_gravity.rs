@@ -132,8 +132,9 @@ unsafe fn accel_avx512(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], z
         let r2 = _mm512_fmadd_pd(dx, dx, _mm512_fmadd_pd(dy, dy, _mm512_fmadd_pd(dz, dz, eps)));
         let h = _mm512_mul_pd(r2, half);
         let mut y = _mm512_rsqrt14_pd(r2);
-        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
-        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
+        // (h·y)·y: y² alone would overflow for r < 1e-154.
+        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
+        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
         let s = _mm512_mul_pd(m, _mm512_mul_pd(y, _mm512_mul_pd(y, y)));
         // r² = 0 (self term, or coincident points without softening): no force.
         let s = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(r2, zero), s);
@@ -206,7 +207,7 @@ unsafe fn accel32_avx512(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: 
         let m = _mm512_loadu_ps(ms.as_ptr().add(b));
         let r2 = _mm512_fmadd_ps(dx, dx, _mm512_fmadd_ps(dy, dy, _mm512_fmadd_ps(dz, dz, eps)));
         let mut y = _mm512_rsqrt14_ps(r2);
-        y = _mm512_mul_ps(y, _mm512_fnmadd_ps(_mm512_mul_ps(r2, half), _mm512_mul_ps(y, y), three_halves));
+        y = _mm512_mul_ps(y, _mm512_fnmadd_ps(_mm512_mul_ps(_mm512_mul_ps(r2, half), y), y, three_halves));
         let s = _mm512_mul_ps(m, _mm512_mul_ps(y, _mm512_mul_ps(y, y)));
         let s = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(r2, zero), s);
         ax = _mm512_fmadd_ps(s, dx, ax);

@@ -271,8 +271,10 @@ impl<V: Vector> Springs<V> {
             }
             let h = _mm512_mul_pd(l2, half);
             let mut y = _mm512_rsqrt14_pd(l2);
-            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
-            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(h, _mm512_mul_pd(y, y), three_halves));
+            // (h·y)·y, not h·(y·y): y² = 1/L² overflows for L < 1e-154 (found by the stability
+            // tests: springs that had decayed to 1e-155 m turned into NaN).
+            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
+            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
             // Padding and coincident endpoints (L = 0): no force, as in the scalar path.
             let y = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(l2, zero), y);
             let l = _mm512_mul_pd(l2, y);
