@@ -43,19 +43,19 @@ def test_auto_substeps_follow_each_integrators_stability_interval():
 @pytest.mark.parametrize("k", [1e2, 1e6, 1e10])
 def test_auto_substeps_stay_stable_over_stiffness(integrator, k):
     # Over 8 orders of magnitude of stiffness the automatic substeps keep the undamped chain
-    # stable for 10 frames of 20 stiff periods each. Bounds from each method's linear theory at
-    # ω·dt ≤ 0.5: semi-implicit Euler's modified energy differs from H by up to ω·dt/2 = 0.25,
-    # Verlet's by (ω·dt)²/8 ≈ 0.03; RK4 damps a mode by (ω·dt)⁶/72 ≈ 2e-4 of its energy per step
-    # (measured: 5.6 % of the total over the 5000 steps of the softest chain, whose large
-    # stretches feed the stiff modes); rk45 is held to its tolerance.
+    # stable for 10 frames of up to 20 stiff periods each (at most 2 s: the soft chain's swing
+    # is chaotic later, and its links then fold through zero length, where the force direction
+    # jumps). Bounds from each method's linear theory at ω·dt ≤ 0.5: semi-implicit Euler's
+    # modified energy differs from H by up to ω·dt/2 = 0.25, Verlet's by (ω·dt)²/8 ≈ 0.03; RK4
+    # loses at most (ω·dt)⁶/72 ≈ 2e-4 of a mode's energy per step, rk45 is held to its rtol.
     s = _stiff_chain(integrator, k)
     if integrator == "rk45":
         s.rtol, s.atol = 1e-5, 1e-9
     period = 2 * math.pi * math.sqrt(s.masses[1] / k)
-    frame = 20 * period  # many stiff periods per frame
+    frame = min(20 * period, 0.2)
     taken = [s.advance(frame) for _ in range(10)]
     assert all(t >= 1 for t in taken)
-    bound = {"semi_implicit_euler": 0.25, "verlet": 0.03, "rk4": 0.1}.get(integrator, 1e-3)
+    bound = {"semi_implicit_euler": 0.25, "verlet": 0.03}.get(integrator, 1e-3)
     assert abs(s.energy_drift()) < bound, (taken, s.energy_drift())
 
 

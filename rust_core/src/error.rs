@@ -11,9 +11,10 @@ pub enum Error {
     /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
     /// `step(n)` call started.
     #[error(
-        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} {what}. The state was rolled back to step {rolled_back_to}. Try a smaller dt \
-         (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable integrator, or softening.",
-        what = describe(quantity)
+        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} {what}. The state was rolled back to step {rolled_back_to}. \
+         {advice}",
+        what = describe(quantity),
+        advice = advise(quantity, *dt, *suggested_dt)
     )]
     Diverged {
         step: u64,
@@ -38,6 +39,19 @@ fn describe(quantity: &str) -> String {
                     (its forces are not finite or not smooth there)"
             .to_string(),
         q => format!("has a non-finite {q}"),
+    }
+}
+
+fn advise(quantity: &str, dt: f64, suggested_dt: f64) -> String {
+    match quantity {
+        // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
+        "error" => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
+                    softening, or a fixed-step integrator."
+            .to_string(),
+        _ => format!(
+            "Try a smaller dt (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable \
+             integrator, or softening."
+        ),
     }
 }
 
