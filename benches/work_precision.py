@@ -66,7 +66,6 @@ import platform
 import signal
 import statistics
 import sys
-import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -82,6 +81,7 @@ from _common import require_release, table  # noqa: E402  first: sets up the env
 import numpy as np  # noqa: E402
 
 import physcore as pc  # noqa: E402
+from physcore._atomic import atomic_write  # noqa: E402
 from physcore.scenes import cloth_springs  # noqa: E402
 
 DEFAULT_OUT = _HERE.parent / "docs"
@@ -409,20 +409,7 @@ def sweep(prob: Problem, cap_s: float, guard_s: float, cache: Dict[Tuple, Dict[s
 # --------------------------------------------------------------------------- outputs
 def _atomic_write(path: Path, write: Callable[[Any], None], binary: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb" if binary else "w", **({} if binary else {"newline": "", "encoding": "utf-8"})) as f:
-            write(f)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    atomic_write(path, write, binary=binary)
 
 
 def _csv_value(v: Any) -> Any:

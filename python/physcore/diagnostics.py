@@ -20,11 +20,12 @@ Examples
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Dict, List, Union
 
 import numpy as np
+
+from ._atomic import atomic_write
 
 __all__ = ["EnergyRecorder"]
 
@@ -136,12 +137,5 @@ class EnergyRecorder:
         ad.set_ylabel("relative drift")
         ad.set_xlabel("time (s)")
         ad.ticklabel_format(axis="y", style="sci", scilimits=(-2, 2))
-        fd, tmp = tempfile.mkstemp(suffix=".png.tmp", dir=path.parent if str(path.parent) else ".")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                fig.savefig(fh, format="png")
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, lambda fh: fig.savefig(fh, format="png"))
         return path

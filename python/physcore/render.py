@@ -17,11 +17,12 @@ import math
 import operator
 import os
 import sys
-import tempfile
 from pathlib import Path
 from typing import Any, NamedTuple, Optional, Tuple, Union
 
 import numpy as np
+
+from ._atomic import atomic_write
 
 __all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
 
@@ -938,33 +939,14 @@ def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
         im = Image.fromarray(buf)  # 'L' from the (H, W) uint8 buffer; putpalette makes it 'P'
         im.putpalette(palette)
         images.append(im)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix="." + path.stem + ".", suffix=".gif.part")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            # Passing the palette writes it once as the global colour table and keeps Pillow from
-            # re-optimising it per frame (smaller files, and faster).
-            images[0].save(
-                fh,
-                format="GIF",
-                save_all=True,
-                append_images=images[1:],
-                duration=duration_ms,
-                loop=0,
-                palette=palette,
-            )
-        # mkstemp makes the file 0600; give it the mode an ordinary new file would have.
-        try:
-            mode = path.stat().st_mode & 0o777
-        except OSError:
-            mode = 0o644
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    # Passing the palette writes it once as the global colour table and keeps Pillow from
+    # re-optimising it per frame (smaller files, and faster).
+    atomic_write(
+        path,
+        lambda fh: images[0].save(
+            fh, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0, palette=palette
+        ),
+    )
 
 
 def render_frame(

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple, Union
@@ -19,6 +18,7 @@ from . import _core
 from ._errors import InvalidInputError
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
+from ._atomic import atomic_write
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
@@ -773,14 +773,7 @@ class Scene:
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float))
         arrays["time_hex"] = np.array(float(self.time).hex())
-        fd, tmp = tempfile.mkstemp(suffix=".npz.tmp", dir=path.parent if str(path.parent) else ".")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, **arrays)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
 
     @classmethod

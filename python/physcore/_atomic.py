@@ -1,0 +1,31 @@
+"""One atomic file writer for every output physcore makes (scenes, GIFs, plots, tables)."""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import IO, Any, Callable, Union
+
+__all__ = ["atomic_write"]
+
+
+def atomic_write(path: Union[str, os.PathLike], write: Callable[[IO[Any]], None], *, binary: bool = True) -> Path:
+    """Call ``write(fh)`` on a temporary file in ``path``'s directory, then rename it onto
+    ``path`` (atomic on POSIX and Windows), so ``path`` is either the old file or the complete new
+    one. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is left
+    untouched. The new file gets the mode an ordinary new file would (0666 minus the umask;
+    mkstemp makes 0600). Text mode writes UTF-8 with no newline translation."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".part")
+    try:
+        kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}
+        with os.fdopen(fd, "wb" if binary else "w", **kw) as fh:
+            write(fh)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
