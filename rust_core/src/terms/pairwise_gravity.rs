@@ -19,7 +19,38 @@ use crate::state::Model;
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 
+use crate::sph::kernels::Float;
+
 const LANES: usize = 8;
+const LANES32: usize = 16;
+
+/// Structure-of-arrays copy of the sources, padded with massless points to a multiple of the
+/// kernel's lane count.
+#[derive(Default)]
+struct Soa<T> {
+    xs: Vec<T>,
+    ys: Vec<T>,
+    zs: Vec<T>,
+    ms: Vec<T>,
+}
+
+impl<T: Float> Soa<T> {
+    fn pack<V: Vector>(&mut self, x: &[V], model: &Model, lanes: usize) {
+        let np = x.len().div_ceil(lanes) * lanes;
+        for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
+            a.clear();
+            a.resize(np, T::ZERO);
+        }
+        for (i, p) in x.iter().enumerate() {
+            self.xs[i] = T::of(p.comp(0));
+            self.ys[i] = T::of(p.comp(1));
+            if V::DIM == 3 {
+                self.zs[i] = T::of(p.comp(2));
+            }
+            self.ms[i] = T::of(model.mass[i]);
+        }
+    }
+}
 
 pub struct PairwiseGravity {
     pub name: String,
@@ -27,86 +58,58 @@ pub struct PairwiseGravity {
     pub g: Real,
     /// Plummer softening length ε, m.
     pub softening: Real,
-    // Structure-of-arrays copy of the sources, padded with massless points to a multiple of LANES.
-    xs: Vec<Real>,
-    ys: Vec<Real>,
-    zs: Vec<Real>,
-    ms: Vec<Real>,
-    /// float32 copies for a single-precision state.
+    src: Soa<Real>,
+    /// Single-precision state: the sources in float32 and the float32 kernels.
     single: bool,
-    xs32: Vec<f32>,
-    ys32: Vec<f32>,
-    zs32: Vec<f32>,
-    ms32: Vec<f32>,
+    src32: Soa<f32>,
 }
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {
-        Self { name, g, softening, xs: vec![], ys: vec![], zs: vec![], ms: vec![], single: false, xs32: vec![], ys32: vec![], zs32: vec![], ms32: vec![] }
-    }
-
-    fn pack32<V: Vector>(&mut self, x: &[V], model: &Model) {
-        let n = x.len();
-        let np = n.div_ceil(LANES32) * LANES32;
-        for a in [&mut self.xs32, &mut self.ys32, &mut self.zs32, &mut self.ms32] {
-            a.clear();
-            a.resize(np, 0.0);
-        }
-        for (i, p) in x.iter().enumerate() {
-            self.xs32[i] = p.comp(0) as f32;
-            self.ys32[i] = p.comp(1) as f32;
-            if V::DIM == 3 {
-                self.zs32[i] = p.comp(2) as f32;
-            }
-            self.ms32[i] = model.mass[i] as f32;
-        }
-    }
-
-    fn pack<V: Vector>(&mut self, x: &[V], model: &Model) {
-        let n = x.len();
-        let np = n.div_ceil(LANES) * LANES;
-        for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
-            a.clear();
-            a.resize(np, 0.0);
-        }
-        for (i, p) in x.iter().enumerate() {
-            self.xs[i] = p.comp(0);
-            self.ys[i] = p.comp(1);
-            if V::DIM == 3 {
-                self.zs[i] = p.comp(2);
-            }
-            self.ms[i] = model.mass[i];
-        }
+        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default() }
     }
 }
 
-/// Σ_j m_j d_j / (|d_j|² + ε²)^{3/2} for a receiver at (xi, yi, zi); returns (ax, ay, az) / G.
+/// Σ_j m_j d_j / (|d_j|² + ε²)^{3/2} for a receiver at (xi, yi, zi) in `L` independent lanes
+/// (so the loop vectorises), summed lane-pairwise at the end; returns (ax, ay, az) / G.
 #[inline(always)]
-fn accel_generic(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs: &[Real], ms: &[Real], eps2: Real) -> [Real; 3] {
-    let mut ax = [0.0; LANES];
-    let mut ay = [0.0; LANES];
-    let mut az = [0.0; LANES];
-    for (((bx, by), bz), bm) in xs
-        .chunks_exact(LANES)
-        .zip(ys.chunks_exact(LANES))
-        .zip(zs.chunks_exact(LANES))
-        .zip(ms.chunks_exact(LANES))
-    {
-        for l in 0..LANES {
+fn accel_portable<T: Float, const L: usize>(xi: T, yi: T, zi: T, xs: &[T], ys: &[T], zs: &[T], ms: &[T], eps2: T) -> [Real; 3] {
+    let mut ax = [T::ZERO; L];
+    let mut ay = [T::ZERO; L];
+    let mut az = [T::ZERO; L];
+    for (((bx, by), bz), bm) in xs.chunks_exact(L).zip(ys.chunks_exact(L)).zip(zs.chunks_exact(L)).zip(ms.chunks_exact(L)) {
+        for l in 0..L {
             let dx = bx[l] - xi;
             let dy = by[l] - yi;
             let dz = bz[l] - zi;
             let r2 = dx * dx + dy * dy + dz * dz + eps2;
             let s = bm[l] / (r2 * r2.sqrt());
             // r2 == 0 only for the self term (or coincident points without softening): no force.
-            let s = if r2 > 0.0 { s } else { 0.0 };
-            ax[l] += s * dx;
-            ay[l] += s * dy;
-            az[l] += s * dz;
+            let s = if r2 > T::ZERO { s } else { T::ZERO };
+            ax[l] = ax[l] + s * dx;
+            ay[l] = ay[l] + s * dy;
+            az[l] = az[l] + s * dz;
         }
     }
-    let red = |a: [Real; LANES]| ((a[0] + a[4]) + (a[1] + a[5])) + ((a[2] + a[6]) + (a[3] + a[7]));
+    let red = |mut a: [T; L]| {
+        let mut w = L;
+        while w > 1 {
+            w /= 2;
+            for l in 0..w {
+                a[l] = a[l] + a[l + w];
+            }
+        }
+        a[0].f64()
+    };
     [red(ax), red(ay), red(az)]
+}
+
+fn accel_generic(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs: &[Real], ms: &[Real], eps2: Real) -> [Real; 3] {
+    accel_portable::<Real, LANES>(xi, yi, zi, xs, ys, zs, ms, eps2)
+}
+
+fn accel32_generic(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
+    accel_portable::<f32, LANES32>(xi, yi, zi, xs, ys, zs, ms, eps2)
 }
 
 /// AVX-512 path: 1/r from the hardware estimate `vrsqrt14pd` (relative error < 2⁻¹⁴) refined by
@@ -154,42 +157,6 @@ unsafe fn accel_avx2(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs:
 
 type AccelFn = fn(Real, Real, Real, &[Real], &[Real], &[Real], &[Real], Real) -> [Real; 3];
 
-const LANES32: usize = 16;
-
-/// float32 version of `accel_generic` (single-precision state).
-#[inline(always)]
-fn accel32_generic(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
-    let mut ax = [0.0f32; LANES32];
-    let mut ay = [0.0f32; LANES32];
-    let mut az = [0.0f32; LANES32];
-    for (((bx, by), bz), bm) in xs
-        .chunks_exact(LANES32)
-        .zip(ys.chunks_exact(LANES32))
-        .zip(zs.chunks_exact(LANES32))
-        .zip(ms.chunks_exact(LANES32))
-    {
-        for l in 0..LANES32 {
-            let dx = bx[l] - xi;
-            let dy = by[l] - yi;
-            let dz = bz[l] - zi;
-            let r2 = dx * dx + dy * dy + dz * dz + eps2;
-            let s = bm[l] / (r2 * r2.sqrt());
-            let s = if r2 > 0.0 { s } else { 0.0 };
-            ax[l] += s * dx;
-            ay[l] += s * dy;
-            az[l] += s * dz;
-        }
-    }
-    let red = |a: [f32; LANES32]| {
-        let mut t = [0.0f32; 8];
-        for l in 0..8 {
-            t[l] = a[l] + a[l + 8];
-        }
-        (((t[0] + t[4]) + (t[1] + t[5])) + ((t[2] + t[6]) + (t[3] + t[7]))) as Real
-    };
-    [red(ax), red(ay), red(az)]
-}
-
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 unsafe fn accel32_avx512(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
@@ -226,47 +193,52 @@ unsafe fn accel32_avx2(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[
 
 type Accel32Fn = fn(f32, f32, f32, &[f32], &[f32], &[f32], &[f32], f32) -> [Real; 3];
 
-fn pick_kernel32() -> Accel32Fn {
-    static KERNEL: std::sync::OnceLock<Accel32Fn> = std::sync::OnceLock::new();
-    *KERNEL.get_or_init(|| {
+/// The instruction set the kernels use on this CPU, decided once per process.
+#[derive(Clone, Copy, PartialEq)]
+enum Simd {
+    Avx512,
+    Avx2,
+    Portable,
+}
+
+fn simd() -> Simd {
+    static LEVEL: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
+    *LEVEL.get_or_init(|| {
         #[cfg(target_arch = "x86_64")]
         {
             if std::env::var_os("PHYSCORE_NO_SIMD").is_none() {
                 if is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the features were detected at run time.
-                    return |a, b, c, d, e, f, g, h| unsafe { accel32_avx512(a, b, c, d, e, f, g, h) };
+                    return Simd::Avx512;
                 }
                 if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                    // SAFETY: the features were detected at run time.
-                    return |a, b, c, d, e, f, g, h| unsafe { accel32_avx2(a, b, c, d, e, f, g, h) };
+                    return Simd::Avx2;
                 }
             }
         }
-        accel32_generic
+        Simd::Portable
     })
 }
 
-/// The kernel for this CPU, decided once per process.
 fn pick_kernel() -> AccelFn {
-    static KERNEL: std::sync::OnceLock<AccelFn> = std::sync::OnceLock::new();
-    *KERNEL.get_or_init(detect_kernel)
+    match simd() {
+        // SAFETY (both): the features were detected at run time.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => |a, b, c, d, e, f, g, h| unsafe { accel_avx512(a, b, c, d, e, f, g, h) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => |a, b, c, d, e, f, g, h| unsafe { accel_avx2(a, b, c, d, e, f, g, h) },
+        _ => accel_generic,
+    }
 }
 
-fn detect_kernel() -> AccelFn {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::env::var_os("PHYSCORE_NO_SIMD").is_none() {
-            if is_x86_feature_detected!("avx512f") {
-                // SAFETY: the features were detected at run time.
-                return |a, b, c, d, e, f, g, h| unsafe { accel_avx512(a, b, c, d, e, f, g, h) };
-            }
-            if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                // SAFETY: the features were detected at run time.
-                return |a, b, c, d, e, f, g, h| unsafe { accel_avx2(a, b, c, d, e, f, g, h) };
-            }
-        }
+fn pick_kernel32() -> Accel32Fn {
+    match simd() {
+        // SAFETY (both): the features were detected at run time.
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx512 => |a, b, c, d, e, f, g, h| unsafe { accel32_avx512(a, b, c, d, e, f, g, h) },
+        #[cfg(target_arch = "x86_64")]
+        Simd::Avx2 => |a, b, c, d, e, f, g, h| unsafe { accel32_avx2(a, b, c, d, e, f, g, h) },
+        _ => accel32_generic,
     }
-    accel_generic
 }
 
 impl<V: Vector> Term<V> for PairwiseGravity {
@@ -280,13 +252,13 @@ impl<V: Vector> Term<V> for PairwiseGravity {
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
         if self.single {
-            self.pack32(x, model);
+            self.src32.pack(x, model, LANES32);
         } else {
-            self.pack(x, model);
+            self.src.pack(x, model, LANES);
         }
         let (kernel, kernel32) = (pick_kernel(), pick_kernel32());
-        let (xs, ys, zs, ms) = (&self.xs, &self.ys, &self.zs, &self.ms);
-        let (xs32, ys32, zs32, ms32) = (&self.xs32, &self.ys32, &self.zs32, &self.ms32);
+        let Soa { xs, ys, zs, ms } = &self.src;
+        let Soa { xs: xs32, ys: ys32, zs: zs32, ms: ms32 } = &self.src32;
         let eps2 = self.softening * self.softening;
         let eps2_32 = eps2 as f32;
         let single = self.single;
@@ -389,11 +361,12 @@ mod tests {
         };
         let x: Vec<glam::DVec3> = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd())).collect();
         let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
-        pg.pack(&x, &model);
+        pg.src.pack(&x, &model, LANES);
         let fast = pick_kernel();
+        let Soa { xs, ys, zs, ms } = &pg.src;
         for i in 0..n {
-            let a = accel_generic(pg.xs[i], pg.ys[i], pg.zs[i], &pg.xs, &pg.ys, &pg.zs, &pg.ms, 0.0);
-            let b = fast(pg.xs[i], pg.ys[i], pg.zs[i], &pg.xs, &pg.ys, &pg.zs, &pg.ms, 0.0);
+            let a = accel_generic(xs[i], ys[i], zs[i], xs, ys, zs, ms, 0.0);
+            let b = fast(xs[i], ys[i], zs[i], xs, ys, zs, ms, 0.0);
             let mut naive = glam::DVec3::ZERO;
             for j in 0..n {
                 if j != i {
@@ -418,12 +391,13 @@ mod tests {
         };
         let x: Vec<glam::DVec3> = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd()).round_f32()).collect();
         let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
-        pg.pack32(&x, &model);
+        pg.src32.pack(&x, &model, LANES32);
         let fast = pick_kernel32();
+        let Soa { xs, ys, zs, ms } = &pg.src32;
         for i in 0..n {
-            let (xi, yi, zi) = (pg.xs32[i], pg.ys32[i], pg.zs32[i]);
-            let a = accel32_generic(xi, yi, zi, &pg.xs32, &pg.ys32, &pg.zs32, &pg.ms32, 1e-4);
-            let b = fast(xi, yi, zi, &pg.xs32, &pg.ys32, &pg.zs32, &pg.ms32, 1e-4);
+            let (xi, yi, zi) = (xs[i], ys[i], zs[i]);
+            let a = accel32_generic(xi, yi, zi, xs, ys, zs, ms, 1e-4);
+            let b = fast(xi, yi, zi, xs, ys, zs, ms, 1e-4);
             let mut naive = glam::DVec3::ZERO;
             for j in 0..n {
                 let d = x[j] - x[i];
