@@ -333,3 +333,19 @@ def test_render_tolerance_errors(tmp_path, capsys, extra, message):
     assert main(["render", "kepler", "-o", str(out), "-q"] + SMALL + extra) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_render_substeps_option(tmp_path, capsys):
+    out = tmp_path / "c.gif"
+    base = ["render", "spring_chain", "-o", str(out), "-q", "--frames", "4", "--size", "64x48", "--frame-time", "0.01"]
+    assert main(base + ["--substeps", "7"]) == 0
+    stdout = capsys.readouterr().out
+    assert "7 per frame (fixed" in stdout and "21 steps" not in stdout
+    assert main(base + ["--substeps", "auto"]) == 0
+    stdout = capsys.readouterr().out
+    assert "automatic:" in stdout
+    for bad in (["--substeps", "0"], ["--substeps", "many"]):
+        assert main(base + bad) == 2
+        assert "--substeps" in capsys.readouterr().err
+    assert main(["render", "spring_chain", "-o", str(out), "-q", "--steps-per-frame", "3", "--substeps", "4"]) == 2
+    assert "--substeps goes with --frame-time" in capsys.readouterr().err

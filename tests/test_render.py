@@ -638,3 +638,19 @@ def test_frame_time_needs_advance(tmp_path):
         render.gif(scene, tmp_path / "x.gif", frames=3, frame_time=0.01)
     assert scene.time == 0.0
     assert list(tmp_path.iterdir()) == []
+
+
+def test_gif_fixed_substeps_per_frame(tmp_path):
+    s = pc.scenes.spring_chain(n=5, threads=1)
+    pc.render.gif(s, tmp_path / "a.gif", frames=4, frame_time=0.01, substeps=5, size=(32, 32))
+    assert s.step_count == 3 * 5
+    assert s.dt == pytest.approx(0.01 / 5, rel=1e-15)
+    auto = pc.scenes.spring_chain(n=5, threads=1)
+    pc.render.gif(auto, tmp_path / "b.gif", frames=4, frame_time=0.01, size=(32, 32))
+    assert auto.step_count == 3 * math.ceil(0.01 / auto.auto_dt() - 1e-9)
+    for kw, exc in [({"substeps": 0}, ValueError), ({"substeps": "fast"}, ValueError), ({"substeps": 2.5}, TypeError)]:
+        with pytest.raises(exc, match="substeps"):
+            pc.render.gif(s, tmp_path / "c.gif", frames=2, frame_time=0.01, **kw)
+    with pytest.raises(ValueError, match="substeps needs frame_time"):
+        pc.render.gif(s, tmp_path / "c.gif", frames=2, substeps=3)
+    assert not (tmp_path / "c.gif").exists()

@@ -205,6 +205,18 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _substeps_arg(text: str) -> Any:
+    if text == "auto":
+        return text
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or an int >= 1, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or an int >= 1, got {text!r}")
+    return n
+
+
 def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:
     """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
 
@@ -216,7 +228,16 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     auto = str(d.get("substeps", "")).lower() == "auto"
     frame_time = args.frame_time if args.frame_time is not None else d.get("frame_time")
     stepping: Dict[str, Any]
-    if args.steps_per_frame is not None:
+    substeps = getattr(args, "substeps", None)
+    if substeps is not None:
+        if args.steps_per_frame is not None:
+            raise _UsageError("--substeps goes with --frame-time, not --steps-per-frame")
+        if frame_time is None:
+            raise _UsageError("--substeps needs --frame-time (this scene has no default frame time)")
+        stepping = {"frame_time": float(frame_time)}
+        if substeps != "auto":
+            stepping["substeps"] = int(substeps)
+    elif args.steps_per_frame is not None:
         stepping = {"steps_per_frame": args.steps_per_frame}
     elif "steps_per_frame" in d and args.frame_time is None and not auto:
         stepping = {"steps_per_frame": int(d["steps_per_frame"])}
@@ -252,8 +273,8 @@ class _SubstepCounter:
     def __getattr__(self, name: str) -> Any:
         return getattr(self._scene, name)
 
-    def advance(self, duration: float) -> Any:
-        taken = self._scene.advance(duration)
+    def advance(self, duration: float, **kw: Any) -> Any:
+        taken = self._scene.advance(duration, **kw)
         self.counts.append(taken)
         return taken
 
@@ -275,8 +296,8 @@ class _EnergyProbe:
         self._rec.record(self._real)
         return r
 
-    def advance(self, duration: float) -> Any:
-        r = self._scene.advance(duration)
+    def advance(self, duration: float, **kw: Any) -> Any:
+        r = self._scene.advance(duration, **kw)
         self._rec.record(self._real)
         return r
 
@@ -337,7 +358,10 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 scene.atol = args.atol
         except ValueError as e:
             parser.error(str(e))
-    settings = _render_settings(fn, args, scene.dt)
+    try:
+        settings = _render_settings(fn, args, scene.dt)
+    except _UsageError as e:
+        parser.error(str(e))
     time0 = scene.time
     counter = None
     target = scene
@@ -402,7 +426,10 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             f"  simulated time: {scene.time - time0:.4g} s ({frames - 1} intervals of "
             f"{settings['frame_time']:.4g} s between frames, {scene.integrator})"
         )
-        print(f"  substeps:       {_substeps_text(counter.counts if counter is not None else [])}")
+        if "substeps" in settings:
+            print(f"  substeps:       {settings['substeps']} per frame (fixed by --substeps)")
+        else:
+            print(f"  substeps:       {_substeps_text(counter.counts if counter is not None else [])}")
     else:
         steps = (frames - 1) * settings["steps_per_frame"]
         print(
@@ -467,6 +494,9 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     stepping.add_argument("--frame-time", type=_positive_float, metavar="SECONDS",
                           help="simulated seconds between frames (default: the scene's); scenes with automatic "
                           "substeps (fluids) pick their own, others take round(SECONDS/dt) steps of dt")
+    r.add_argument("--substeps", type=_substeps_arg, metavar="auto|N",
+                   help="with the frame time: 'auto' picks each frame's substeps inside the integrator's "
+                   "stability region (and reports them), N fixes them")
     r.add_argument("--integrator", choices=integrators, metavar="NAME",
                    help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")

@@ -329,6 +329,7 @@ def _simulate(
     progress: bool,
     need_pressure: bool = False,
     frame_time: Optional[float] = None,
+    substeps: Union[str, int] = "auto",
 ) -> _Recording:
     """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
 
@@ -361,7 +362,8 @@ def _simulate(
                 if frame_time is None:
                     scene.step(steps_per_frame)
                 else:
-                    taken = scene.advance(frame_time)
+                    # Only a fixed count is passed on, so any advance(duration) scene works.
+                    taken = scene.advance(frame_time) if substeps == "auto" else scene.advance(frame_time, substeps=substeps)
                     if bar is not None:
                         try:
                             bar.set_postfix(substeps=operator.index(taken), refresh=False)
@@ -802,6 +804,7 @@ def gif(
     frames: int = 90,
     steps_per_frame: Optional[int] = None,
     frame_time: Optional[float] = None,
+    substeps: Union[str, int] = "auto",
     fps: float = 30,
     size: Tuple[int, int] = (480, 360),
     color_by: str = "speed",
@@ -841,6 +844,10 @@ def gif(
         ``scene.advance(frame_time)``, which picks its own substeps (from the scene's CFL and
         stability limits) and returns how many it took; with `progress` the bar shows the last
         frame's count. The scene must have an ``advance`` method.
+    substeps : "auto" or int, default "auto"
+        With `frame_time`: ``"auto"`` lets ``scene.advance`` choose the substeps of every frame
+        inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
+        fixes that many per frame. Needs `frame_time`.
     fps : float, default 30
         Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
         below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
@@ -900,6 +907,13 @@ def gif(
     """
     frames = _check_int("frames", frames, 1)
     frame_time = _check_frame_time(frame_time)
+    if isinstance(substeps, str):
+        if substeps != "auto":
+            raise ValueError(f"substeps must be 'auto' or an int >= 1, got {substeps!r}")
+    else:
+        substeps = _check_int("substeps", substeps, 1)
+        if frame_time is None:
+            raise ValueError("substeps needs frame_time (seconds between frames)")
     if steps_per_frame is None:
         steps_per_frame = 10
     elif frame_time is not None:
@@ -924,6 +938,7 @@ def gif(
         bool(progress),
         need_pressure=color_by == "pressure",
         frame_time=frame_time,
+        substeps=substeps,
     )
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=bool(colorbar))
     _write_gif(path, (ras.frame(k) for k in range(frames)), duration)
