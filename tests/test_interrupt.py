@@ -35,3 +35,23 @@ def test_keyboard_interrupt_rolls_back_long_step(threads):
     assert np.array_equal(scene.positions, before)
     scene.step(2)  # still usable
     assert scene.step_count == 5
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_keyboard_interrupt_reaches_rk45_internal_steps():
+    # Few output steps, each of many internal rk45 steps (a stiff cloth with a long dt): the
+    # interrupt is polled by internal work, not only between output steps.
+    scene = pc.scenes.cloth(n=48, integrator="rk45", dt=0.5)
+    scene.rtol = 1e-10
+    before = scene.positions
+    timer = threading.Timer(0.5, os.kill, args=(os.getpid(), signal.SIGINT))
+    timer.start()
+    t0 = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            scene.step(200)  # minutes of work if not interrupted
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - t0 < 10.0
+    assert scene.step_count == 0
+    assert np.array_equal(scene.positions, before)

@@ -303,16 +303,25 @@ impl<V: Vector> Simulation<V> {
             self.collision_dissipated,
             self.integrator_cache(),
         );
-        let slab = (1_000_000 / self.n_particles() as u64).max(1);
+        let per_slab = 1_000_000 / self.n_particles() as u64;
+        let internal = |s: &Self| s.integrator.adaptive_stats().map(|(a, r, _)| a + r);
+        // An adaptive integrator may take many internal steps per step: learn how many from the
+        // first step, then size the slabs by internal steps.
+        let mut slab = if internal(self).is_some() { 1 } else { per_slab.max(1) };
         let pool = self.pool.take();
         let mut left = n;
         let mut result = Ok(());
         while left > 0 && result.is_ok() {
             let k = left.min(slab);
+            let before = internal(self);
             result = match &pool {
                 Some(p) => p.install(|| self.step_inner(k)),
                 None => self.step_inner(k),
             };
+            if let (Some(b), Some(a)) = (before, internal(self)) {
+                let per_step = ((a - b) as f64 / k as f64).max(1.0);
+                slab = ((per_slab as f64 / per_step) as u64).max(1);
+            }
             left -= k;
             if result.is_ok() && left > 0 && interrupted() {
                 result = Err(Error::Interrupted { rolled_back_to: 0 });
