@@ -119,3 +119,10 @@ def test_rk45_books_dissipation():
     s.step(100)
     assert s.energy().dissipated["springs"] > 0
     assert s.energy_drift() < 1e-6
+
+
+def test_repr_names_tolerances_and_precision():
+    r = repr(pc.Scene(2, integrator="rk45", rtol=1e-8, precision="f32"))
+    assert "rtol=1e-08" in r and "precision='f32'" in r
+    r = repr(pc.Scene(2))
+    assert "rtol" not in r and "precision" not in r

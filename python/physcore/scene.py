@@ -849,5 +849,7 @@ class Scene:
         terms = ", ".join(t.name for t in self._terms) or "no terms"
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
-            f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)})"
+            + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
+            + ("precision='f32', " if self.precision == "f32" else "")
+            + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)})"
         )
