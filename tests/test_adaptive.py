@@ -126,3 +126,14 @@ def test_repr_names_tolerances_and_precision():
     assert "rtol=1e-08" in r and "precision='f32'" in r
     r = repr(pc.Scene(2))
     assert "rtol" not in r and "precision" not in r
+
+
+def test_rk45_pure_relative_tolerance_with_pinned_particles():
+    # atol = 0: components that stay exactly 0 (a pinned anchor, the unused axis) have a zero
+    # error, which must pass a zero tolerance rather than divide 0 by 0.
+    s = oscillator("rk45", 0.5)
+    s.rtol, s.atol = 1e-8, 0.0
+    s.step(20)
+    assert s.integrator_stats["accepted"] >= 20
+    assert np.array_equal(s.positions[0], [0.0, 0.0])
+    assert abs(s.energy_drift()) < 1e-6

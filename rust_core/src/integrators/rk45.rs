@@ -94,7 +94,9 @@ fn scaled_max<V: Vector>(e: V, a: V, b: V, rtol: Real, atol: Real) -> Real {
     let mut m: Real = 0.0;
     for k in 0..V::DIM {
         let sc = atol + rtol * a.comp(k).abs().max(b.comp(k).abs());
-        let r = e.comp(k).abs() / sc;
+        // A zero error is within any tolerance, even a zero one (atol = 0 on a pinned particle).
+        let ek = e.comp(k).abs();
+        let r = if ek == 0.0 { 0.0 } else { ek / sc };
         // NaN-propagating max: a non-finite error must reject the step.
         m = if r.is_nan() || r > m { r } else { m };
     }
@@ -235,7 +237,8 @@ impl<V: Vector> Rk45<V> {
         let d0 = norm(x0, v0, x0, v0);
         let d1 = norm(&self.kx[0], &self.kv[0], x0, v0);
         let mut h0 = if d0 < 1e-5 || d1 < 1e-5 { 1e-6 * span } else { 0.01 * d0 / d1 };
-        h0 = h0.min(span);
+        // A zero atol on a component that starts at 0 makes d1 infinite and h0 zero.
+        h0 = if h0 > 1e-10 * span { h0.min(span) } else { 1e-10 * span };
         {
             let (kx_lo, kx_hi) = self.kx.split_at_mut(1);
             let (kx0, kv0) = (&kx_lo[0], &self.kv[0]);
@@ -262,8 +265,9 @@ impl<V: Vector> Rk45<V> {
         }) / h0;
         let h1 = if d1.max(d2) <= 1e-15 { (1e-6 * span).max(h0 * 1e-3) } else { (0.01 / d1.max(d2)).powf(0.2) };
         let h = (100.0 * h0).min(h1);
+        // Never 0: a first step that is too long is rejected and shrunk by the controller.
         if h.is_finite() && h > 0.0 {
-            h
+            h.max(1e-10 * span)
         } else {
             h0
         }
@@ -299,6 +303,11 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         while done < dt {
             let left = dt - done;
             // Land exactly on the end of dt; stretch by ≤ 1 % rather than leave a sliver.
+            if !(self.h > 0.0) || done + self.h == done {
+                // No progress possible (the controller's step underflowed).
+                self.failed = Some(0);
+                return true;
+            }
             let last = self.h >= left * 0.99;
             let h = if last { left } else { self.h };
             self.stage::<1>(sys, h);
@@ -352,7 +361,7 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
                 just_rejected = true;
                 let fac = if err.is_finite() { (SAFETY * err.powf(-0.2)).max(FAC_MIN) } else { FAC_MIN };
                 self.h = h * fac;
-                if rejects >= MAX_REJECTS || !(self.h > 0.0) || done + self.h == done {
+                if rejects >= MAX_REJECTS || done + self.h == done {
                     self.failed = Some(self.worst_particle(sys, h));
                     // The FSAL stage is still valid (state unchanged).
                     return true;
