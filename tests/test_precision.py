@@ -131,3 +131,15 @@ def test_rk45_f32_does_not_chase_rounding():
     # One extra evaluation per step in f32 (the derivative at the rounded state): 7/6.
     assert evals["f32"] < 1.5 * evals["f64"], evals
     assert err["f32"] < 1e-4, err
+
+
+def test_f32_rejects_values_beyond_float32():
+    s = pc.Scene(2, precision="f32")
+    with pytest.raises(ValueError, match="positions.*float32"):
+        s.add_particles([[1e39, 0.0]])
+    assert s.n_particles == 0
+    s.add_particles([[1.0, 0.0]])
+    with pytest.raises(ValueError, match="velocities.*float32"):
+        s.velocities = [[0.0, -1e40]]
+    assert s.velocities[0, 1] == 0.0
+    pc.Scene(2).add_particles([[1e39, 0.0]])  # fine in float64

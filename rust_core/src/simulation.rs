@@ -123,6 +123,17 @@ impl<V: Vector> Simulation<V> {
     pub fn single(&self) -> bool {
         self.sys.single
     }
+
+    /// With a single-precision state, values must fit float32 (|x| ≤ 3.4e38), or rounding
+    /// would store infinities.
+    fn check_single_range(&self, x: &[V], arg: &str) -> Result<()> {
+        if self.sys.single {
+            if let Some(i) = x.iter().position(|p| !p.round_f32().is_finite()) {
+                return Err(invalid(arg, format!("row {i} does not fit float32 (precision=\"f32\"): {p:?}", p = x[i])));
+            }
+        }
+        Ok(())
+    }
     pub fn set_dt(&mut self, dt: Real) -> Result<()> {
         check_dt(dt)?;
         self.dt = dt;
@@ -153,6 +164,8 @@ impl<V: Vector> Simulation<V> {
         if let Some(i) = mass.iter().position(|m| !(m.is_finite() && *m > 0.0)) {
             return Err(invalid("masses", format!("entry {i} is {} (must be finite and > 0)", mass[i])));
         }
+        self.check_single_range(&x, "positions")?;
+        self.check_single_range(&v, "velocities")?;
         let first = self.n_particles();
         for (k, &p) in pinned.iter().enumerate() {
             if p {
@@ -222,6 +235,7 @@ impl<V: Vector> Simulation<V> {
     pub fn set_state(&mut self, x: Option<Vec<V>>, v: Option<Vec<V>>) -> Result<()> {
         let n = self.n_particles();
         if let Some(x) = &x {
+            self.check_single_range(x, "positions")?;
             if x.len() != n {
                 return Err(invalid("positions", format!("has {} rows, the scene has {n} particles", x.len())));
             }
@@ -230,6 +244,7 @@ impl<V: Vector> Simulation<V> {
             }
         }
         if let Some(v) = &v {
+            self.check_single_range(v, "velocities")?;
             if v.len() != n {
                 return Err(invalid("velocities", format!("has {} rows, the scene has {n} particles", v.len())));
             }
