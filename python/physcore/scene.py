@@ -465,19 +465,7 @@ class Scene:
             fixed = _check_int(substeps, "substeps", 1)
         if self._e0 is None:
             self._set_reference_energy()
-        if fixed is None:
-            return int(self._sim.advance(duration))
-        dt = duration / fixed
-        if not dt > 0:
-            raise InvalidInputError(f"substeps: {fixed} substeps of {duration} s underflow")
-        old = self._sim.dt
-        self._sim.dt = dt
-        try:
-            self._sim.step(fixed)
-        except BaseException:
-            self._sim.dt = old
-            raise
-        return fixed
+        return int(self._sim.advance(duration, fixed))
 
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before

@@ -373,18 +373,27 @@ impl<V: Vector> Simulation<V> {
     /// Advances by `duration` seconds in `n` equal substeps, n = ⌈duration / auto_dt()⌉, so
     /// every substep is inside the stability region of the integrator at the start of the call
     /// (and the CFL limit for fluids).
-    /// Sets `dt` to duration / n and returns n. On divergence or interrupt everything, dt
-    /// included, is rolled back as in `step`.
-    pub fn advance_interruptible(&mut self, duration: Real, interrupted: &mut dyn FnMut() -> bool) -> Result<u64> {
+    /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
+    /// divergence or interrupt everything, dt included, is rolled back as in `step`.
+    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, interrupted: &mut dyn FnMut() -> bool) -> Result<u64> {
         if !(duration.is_finite() && duration > 0.0) {
             return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
         }
-        let safe = self.run(|| self.auto_dt()).unwrap_or(if self.integrator.info().name == "rk45" { duration } else { self.dt });
-        let n = (duration / safe).ceil().max(1.0);
-        if n > 1e12 {
-            return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
+        let n = match substeps {
+            Some(0) => return Err(invalid("substeps", "must be >= 1")),
+            Some(n) => n,
+            None => {
+                let safe = self.run(|| self.auto_dt()).unwrap_or(if self.integrator.info().name == "rk45" { duration } else { self.dt });
+                let n = (duration / safe).ceil().max(1.0);
+                if n > 1e12 {
+                    return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
+                }
+                n as u64
+            }
+        };
+        if !(duration / n as Real > 0.0) {
+            return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
         }
-        let n = n as u64;
         let old = self.dt;
         self.dt = duration / n as Real;
         if self.dt != old {

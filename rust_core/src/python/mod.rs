@@ -320,9 +320,10 @@ impl Simulation2 {
     }
 
     /// Advances `duration` seconds in automatically chosen substeps; returns their number.
-    fn advance(&mut self, py: Python<'_>, duration: f64) -> PyResult<u64> {
+    #[pyo3(signature = (duration, substeps=None))]
+    fn advance(&mut self, py: Python<'_>, duration: f64, substeps: Option<u64>) -> PyResult<u64> {
         let inner = &mut self.inner;
-        interruptible(py, |stop| with_sim!(inner, s => s.advance_interruptible(duration, stop)))
+        interruptible(py, |stop| with_sim!(inner, s => s.advance_interruptible(duration, substeps, stop)))
     }
 
     #[allow(clippy::too_many_arguments)]
