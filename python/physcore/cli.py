@@ -206,15 +206,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
 
 
 def _substeps_arg(text: str) -> Any:
-    if text == "auto":
-        return text
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or an int >= 1, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or an int >= 1, got {text!r}")
-    return n
+    return text if text == "auto" else _positive_int(text)
 
 
 def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:

@@ -95,12 +95,7 @@ pub fn sum<T>(n: usize, zero: T, f: impl Fn(Range<usize>) -> T + Sync + Send) ->
 where
     T: Send + Copy + std::ops::Add<Output = T>,
 {
-    let partials: Vec<T> = if n >= PAR_MIN {
-        ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()
-    } else {
-        ranges(n).map(&f).collect()
-    };
-    partials.into_iter().fold(zero, |a, b| a + b)
+    reduce(n, zero, |a, b| a + b, f)
 }
 
 /// Deterministic sum where each chunk also writes into its own slice of `out` (fused pass).
@@ -108,12 +103,7 @@ pub fn chunks1_sum<A: Send>(
     a: &mut [A],
     f: impl Fn(usize, &mut [A]) -> f64 + Sync + Send,
 ) -> f64 {
-    let partials: Vec<f64> = if a.len() >= PAR_MIN {
-        a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
-    } else {
-        a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
-    };
-    partials.into_iter().fold(0.0, |a, b| a + b)
+    chunks1_fold(a, 0.0, |a, b| a + b, f)
 }
 
 /// Like `chunks2`, with each chunk returning a value; the values are folded in chunk order
