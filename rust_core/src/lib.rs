@@ -6,6 +6,7 @@ pub mod error;
 pub mod grid;
 pub mod integrators;
 pub mod par;
+pub mod simd;
 pub mod simulation;
 pub mod sph;
 pub mod state;

@@ -40,9 +40,15 @@ pub trait Vector:
     fn cross3(self, other: Self) -> [Real; 3];
     /// Each component rounded to the nearest float32 (the single-precision state).
     fn round_f32(self) -> Self;
+    /// The vectors as a flat row-major `(N, DIM)` slice of reals (no copy).
+    fn flat(v: &[Self]) -> &[Real];
 }
 
 impl Vector for DVec2 {
+    #[inline(always)]
+    fn flat(v: &[Self]) -> &[Real] {
+        bytemuck::cast_slice(v)
+    }
     const DIM: usize = 2;
     const ZERO: Self = DVec2::ZERO;
     #[inline(always)]
@@ -72,6 +78,10 @@ impl Vector for DVec2 {
 }
 
 impl Vector for DVec3 {
+    #[inline(always)]
+    fn flat(v: &[Self]) -> &[Real] {
+        bytemuck::cast_slice(v)
+    }
     const DIM: usize = 3;
     const ZERO: Self = DVec3::ZERO;
     #[inline(always)]

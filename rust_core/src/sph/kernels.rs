@@ -1,73 +1,10 @@
-//! Smoothing kernels with support 2h, and the scalar type (f32/f64) the SPH passes run in.
+//! Smoothing kernels with support 2h (scalar, and on SIMD vectors for the passes).
 //!
 //! With q = r/h: W(r) = σ_d w(q) and ∇_i W(r_ij) = (σ_d / h²) g(q) r_ij, r_ij = x_i − x_j, where
 //! g(q) = w'(q)/q. Writing the gradient through g avoids dividing by r (finite at r = 0, where it
 //! gives the zero vector).
-use std::ops::{Add, Div, Mul, Neg, Sub};
-
-/// The SPH passes' scalar: `f32` (twice the SIMD lanes) or `f64`.
-pub trait Float:
-    Copy
-    + Send
-    + Sync
-    + Default
-    + PartialOrd
-    + Add<Output = Self>
-    + Sub<Output = Self>
-    + Mul<Output = Self>
-    + Div<Output = Self>
-    + Neg<Output = Self>
-    + std::fmt::Debug
-    + 'static
-{
-    const ZERO: Self;
-    const ONE: Self;
-    fn of(x: f64) -> Self;
-    fn f64(self) -> f64;
-    fn sqrt(self) -> Self;
-    fn max(self, o: Self) -> Self;
-    fn min(self, o: Self) -> Self;
-}
-
-macro_rules! float_impl {
-    ($t:ty) => {
-        impl Float for $t {
-            const ZERO: Self = 0.0;
-            const ONE: Self = 1.0;
-            #[inline(always)]
-            fn of(x: f64) -> Self {
-                x as $t
-            }
-            #[inline(always)]
-            fn f64(self) -> f64 {
-                self as f64
-            }
-            #[inline(always)]
-            fn sqrt(self) -> Self {
-                <$t>::sqrt(self)
-            }
-            // Plain compares (not IEEE maxNum): they vectorise to one instruction.
-            #[inline(always)]
-            fn max(self, o: Self) -> Self {
-                if self > o {
-                    self
-                } else {
-                    o
-                }
-            }
-            #[inline(always)]
-            fn min(self, o: Self) -> Self {
-                if self < o {
-                    self
-                } else {
-                    o
-                }
-            }
-        }
-    };
-}
-float_impl!(f32);
-float_impl!(f64);
+pub use crate::simd::Float;
+use crate::simd::{Simd, P};
 
 pub trait Kernel: Copy + Send + Sync + Default + 'static {
     const NAME: &'static str;
@@ -79,6 +16,10 @@ pub trait Kernel: Copy + Send + Sync + Default + 'static {
     fn w<F: Float>(q: F) -> F;
     /// g(q) = w'(q)/q, zero for q ≥ 2 (and ≤ 0 everywhere: the kernel decreases).
     fn g<F: Float>(q: F) -> F;
+    /// `w` on a SIMD vector of q.
+    fn wv<S: Simd, F: Float>(q: P<S, F>) -> P<S, F>;
+    /// `g` on a SIMD vector of q, given 1/q (finite: q is kept above a tiny floor).
+    fn gv<S: Simd, F: Float>(q: P<S, F>, inv_q: P<S, F>) -> P<S, F>;
 }
 
 /// Cubic spline (M4), Monaghan & Lattanzio (1985), eq. 21:
@@ -115,6 +56,21 @@ impl Kernel for CubicSpline {
             outer
         }
     }
+    #[inline(always)]
+    fn wv<S: Simd, F: Float>(q: P<S, F>) -> P<S, F> {
+        let (z, s) = (P::zero(q.s), q.s);
+        let a = (P::splat(s, F::of(2.0)) - q).max(z);
+        let b = (P::splat(s, F::ONE) - q).max(z);
+        (b * b).neg_mul_add(b, P::splat(s, F::of(0.25)) * (a * a * a))
+    }
+    #[inline(always)]
+    fn gv<S: Simd, F: Float>(q: P<S, F>, inv_q: P<S, F>) -> P<S, F> {
+        let (z, s) = (P::zero(q.s), q.s);
+        let a = (P::splat(s, F::of(2.0)) - q).max(z);
+        let inner = P::splat(s, F::of(2.25)).mul_add(q, P::splat(s, F::of(-3.0)));
+        let outer = P::splat(s, F::of(-0.75)) * (a * a) * inv_q;
+        q.lt(P::splat(s, F::ONE)).select(inner, outer)
+    }
 }
 
 /// Wendland C2, Wendland (1995); in the support-2h form of Dehnen & Aly (2012), Table 1:
@@ -143,6 +99,19 @@ impl Kernel for WendlandC2 {
     fn g<F: Float>(q: F) -> F {
         let t = (F::ONE - F::of(0.5) * q).max(F::ZERO);
         F::of(-5.0) * t * t * t
+    }
+    #[inline(always)]
+    fn wv<S: Simd, F: Float>(q: P<S, F>) -> P<S, F> {
+        let s = q.s;
+        let t = P::splat(s, F::of(0.5)).neg_mul_add(q, P::splat(s, F::ONE)).max(P::zero(s));
+        let t2 = t * t;
+        (t2 * t2) * P::splat(s, F::of(2.0)).mul_add(q, P::splat(s, F::ONE))
+    }
+    #[inline(always)]
+    fn gv<S: Simd, F: Float>(q: P<S, F>, _inv_q: P<S, F>) -> P<S, F> {
+        let s = q.s;
+        let t = P::splat(s, F::of(0.5)).neg_mul_add(q, P::splat(s, F::ONE)).max(P::zero(s));
+        P::splat(s, F::of(-5.0)) * (t * t * t)
     }
 }
 

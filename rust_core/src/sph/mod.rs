@@ -20,15 +20,15 @@
 //! over contiguous candidate runs, 8 or 16 pairs at a time (SIMD lanes). Forces are gathered per
 //! particle: no atomics, bit-identical for any thread count.
 pub mod kernels;
-#[cfg(target_arch = "x86_64")]
-mod simd;
+mod passes;
 
 use crate::error::{invalid, Result};
-use crate::grid::{CellList, Ranges};
+use crate::grid::CellList;
 use crate::par::{self, SyncPtr};
 use crate::state::Model;
 use crate::terms::Term;
 use crate::vector::{Real, Vector};
+use crate::simd::{self, Level};
 use kernels::{CubicSpline, Float, Kernel, WendlandC2};
 use rayon::prelude::*;
 use std::marker::PhantomData;
@@ -247,7 +247,7 @@ impl<V: Vector> Sph<V> {
         let xs = &x[self.range()];
         grid.build(xs);
         b.gather(&grid, xs, None, &model.mass[self.range()]);
-        density::<V, f64>(&self.p, &grid, &self.walls.grid, &mut b);
+        density::<V, f64>(simd::level(), &self.p, &grid, &self.walls.grid, &mut b);
         let mut rho = vec![0.0; self.n];
         let mut p = vec![0.0; self.n];
         for (k, &i) in grid.order.iter().enumerate() {
@@ -257,12 +257,42 @@ impl<V: Vector> Sph<V> {
         (rho, p)
     }
 
+    /// `add_forces` at a given SIMD level.
+    #[allow(clippy::too_many_arguments)]
+    fn forces_at(&mut self, level: Level, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real {
+        let r = self.range();
+        if assign {
+            // Particles outside the fluid get no SPH force.
+            let (head, rest) = f.split_at_mut(r.start);
+            head.fill(V::ZERO);
+            rest[r.len()..].fill(V::ZERO);
+        }
+        if self.n == 0 {
+            return 0.0;
+        }
+        // The pass writes the fluid's forces over `f`; to add instead, keep what was there.
+        let prev: Option<Vec<V>> = if assign { None } else { Some(f[r.clone()].to_vec()) };
+        let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
+        let (power, amax) = match self.p.precision {
+            Precision::F32 => eval::<V, f32>(level, &self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power, &mut self.clock),
+            Precision::F64 => eval::<V, f64>(level, &self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power, &mut self.clock),
+        };
+        self.amax = amax;
+        if let Some(prev) = prev {
+            for (fi, pi) in f[r].iter_mut().zip(prev) {
+                *fi += pi;
+            }
+        }
+        power
+    }
+
 }
 
 /// One evaluation in precision `F`: build the cell list, gather, density pass, force pass.
 /// Returns (dissipated power W, max |a|²).
 #[allow(clippy::too_many_arguments)]
 fn eval<V: Vector, F: Float>(
+    level: Level,
     p: &SphParams,
     grid: &mut CellList,
     walls: &CellList,
@@ -278,40 +308,27 @@ fn eval<V: Vector, F: Float>(
     grid.build(x);
     b.gather(grid, x, Some(v), m);
     let t1 = std::time::Instant::now();
-    density::<V, F>(p, grid, walls, b);
+    density::<V, F>(level, p, grid, walls, b);
     let t2 = std::time::Instant::now();
     clock[0] += (t1 - t0).as_secs_f64();
     clock[1] += (t2 - t1).as_secs_f64();
     let r = match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => force_pass::<V, F, CubicSpline, 2>(p, grid, walls, b, out, want_power),
-        (KernelKind::CubicSpline, _) => force_pass::<V, F, CubicSpline, 3>(p, grid, walls, b, out, want_power),
-        (KernelKind::WendlandC2, 2) => force_pass::<V, F, WendlandC2, 2>(p, grid, walls, b, out, want_power),
-        (KernelKind::WendlandC2, _) => force_pass::<V, F, WendlandC2, 3>(p, grid, walls, b, out, want_power),
+        (KernelKind::CubicSpline, 2) => force_pass::<V, F, CubicSpline, 2>(level, p, grid, walls, b, out, want_power),
+        (KernelKind::CubicSpline, _) => force_pass::<V, F, CubicSpline, 3>(level, p, grid, walls, b, out, want_power),
+        (KernelKind::WendlandC2, 2) => force_pass::<V, F, WendlandC2, 2>(level, p, grid, walls, b, out, want_power),
+        (KernelKind::WendlandC2, _) => force_pass::<V, F, WendlandC2, 3>(level, p, grid, walls, b, out, want_power),
     };
     clock[2] += t2.elapsed().as_secs_f64();
     r
 }
 
-fn density<V: Vector, F: Float>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
+fn density<V: Vector, F: Float>(level: Level, p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
     match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(p, grid, walls, b),
-        (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(p, grid, walls, b),
-        (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(p, grid, walls, b),
-        (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(p, grid, walls, b),
+        (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(level, p, grid, walls, b),
+        (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(level, p, grid, walls, b),
+        (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(level, p, grid, walls, b),
+        (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(level, p, grid, walls, b),
     }
-}
-
-/// `&Bufs<A>` as `&Bufs<B>` for A = B (asserted): lets the f32/f64 SIMD passes take the generic
-/// buffers.
-#[allow(dead_code)]
-unsafe fn cast<A: Float, B: Float>(b: &Bufs<A>) -> &Bufs<B> {
-    assert_eq!(std::any::TypeId::of::<A>(), std::any::TypeId::of::<B>());
-    &*(b as *const Bufs<A> as *const Bufs<B>)
-}
-#[allow(dead_code)]
-unsafe fn cast_mut<A: Float, B: Float>(s: &mut [A]) -> &mut [B] {
-    assert_eq!(std::any::TypeId::of::<A>(), std::any::TypeId::of::<B>());
-    std::slice::from_raw_parts_mut(s.as_mut_ptr() as *mut B, s.len())
 }
 
 impl<F: Float> Bufs<F> {
@@ -354,35 +371,6 @@ impl<F: Float> Bufs<F> {
 }
 
 
-// ------------------------------------------------------------------------------------------------
-// The passes. `L` pairs at a time from contiguous candidate runs; lanes past a run's end are
-// masked. Written as plain loops over `[F; L]` lane arrays that LLVM turns into SIMD; compiled
-// twice, for AVX-512 (chosen at run time) and for the baseline target.
-// ------------------------------------------------------------------------------------------------
-
-/// Set by tests to compare the portable passes with the SIMD ones in one process.
-static FORCE_PORTABLE: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-fn simd_ok() -> bool {
-    if FORCE_PORTABLE.load(std::sync::atomic::Ordering::Relaxed) {
-        return false;
-    }
-    #[cfg(target_arch = "x86_64")]
-    {
-        static OK: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        *OK.get_or_init(|| {
-            std::env::var_os("PHYSCORE_NO_SIMD").is_none()
-                && is_x86_feature_detected!("avx512f")
-                && is_x86_feature_detected!("avx512dq")
-                && is_x86_feature_detected!("avx512vl")
-        })
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// s^γ: a fixed multiplication chain for water's γ = 7 (this runs once per particle per step).
 #[inline(always)]
 pub(crate) fn powi<F: Float>(s: F, gamma: i32) -> F {
@@ -398,296 +386,23 @@ pub(crate) fn powi<F: Float>(s: F, gamma: i32) -> F {
     r
 }
 
-#[inline(always)]
-fn hsum<F: Float, const L: usize>(mut a: [F; L]) -> F {
-    let mut w = L / 2;
-    while w > 0 {
-        for l in 0..w {
-            a[l] = a[l] + a[l + w];
-        }
-        w /= 2;
-    }
-    a[0]
-}
-
-#[inline(always)]
-fn lanes<F: Float, const L: usize>(s: &[F], j: usize) -> &[F; L] {
-    s[j..j + L].try_into().unwrap()
-}
-
-/// Σ_j mass_j w(q_ij) over one candidate run, into `acc`.
-#[inline(always)]
-fn dens_run<F: Float, K: Kernel, const D: usize, const L: usize>(
-    acc: &mut [F; L],
-    xi: [F; 3],
-    pos: &[Vec<F>; 3],
-    mass: &[F],
-    r: Range<usize>,
-    inv_h: F,
-) {
-    let mut j = r.start;
-    while j < r.end {
-        let lim = r.end - j;
-        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&pos[d], j) } else { lanes::<F, L>(&pos[0], j) });
-        let m = lanes::<F, L>(mass, j);
-        for l in 0..L {
-            let mut r2 = F::ZERO;
-            for d in 0..D {
-                let dd = xi[d] - p[d][l];
-                r2 = r2 + dd * dd;
-            }
-            let w = K::w(r2.sqrt() * inv_h) * m[l];
-            acc[l] = acc[l] + if l < lim { w } else { F::ZERO };
-        }
-        j += L;
-    }
-}
-
-#[inline(always)]
-fn density_chunk<F: Float, K: Kernel, const D: usize, const L: usize>(
-    p: &SphParams,
-    grid: &CellList,
-    walls: &CellList,
-    b: &Bufs<F>,
-    ks: Range<usize>,
-    rho: &mut [F],
-    pr: &mut [F],
-) {
-    let inv_h = F::of(1.0 / p.h);
-    let sigma = F::of(K::sigma(p.h, D));
-    let inv_rho0 = F::of(1.0 / p.rho0);
-    let bb = F::of(p.b());
-    let mut last = [i64::MIN; 3];
-    let mut rg = Ranges { r: [(0, 0); crate::grid::MAX_RANGES], len: 0 };
-    let mut wr = rg;
-    let base = ks.start;
-    for k in ks {
-        let c = grid.cells[k];
-        if c != last {
-            rg = grid.query(c);
-            wr = walls.query(c);
-            last = c;
-        }
-        let xi: [F; 3] = std::array::from_fn(|d| if d < D { b.pos[d][k] } else { F::ZERO });
-        let mut acc = [F::ZERO; L];
-        for r in rg.iter() {
-            dens_run::<F, K, D, L>(&mut acc, xi, &b.pos, &b.m, r, inv_h);
-        }
-        for r in wr.iter() {
-            dens_run::<F, K, D, L>(&mut acc, xi, &b.wpos, &b.wpsi, r, inv_h);
-        }
-        let d = sigma * hsum(acc);
-        let s = d * inv_rho0;
-        let sg = powi(s, p.gamma);
-        let mut pk = bb * (sg - F::ONE);
-        if p.clamp {
-            pk = pk.max(F::ZERO);
-        }
-        rho[k - base] = d;
-        pr[k - base] = pk / (d * d);
-    }
-}
-
-fn density_pass<F: Float, K: Kernel, const D: usize>(p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
+fn density_pass<F: Float, K: Kernel, const D: usize>(level: Level, p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>) {
     let n = grid.len();
     let mut rho = std::mem::take(&mut b.rho);
     let mut pr = std::mem::take(&mut b.pr);
-    let simd = simd_ok();
-    let f32 = std::mem::size_of::<F>() == 4;
     {
-        let bref: &Bufs<F> = b;
-        par::chunks2(&mut rho[..n], &mut pr[..n], |s, rc, pc| {
-            let ks = s..s + rc.len();
-            #[cfg(target_arch = "x86_64")]
-            if simd {
-                let sigma = K::sigma(p.h, D);
-                // SAFETY: the CPU has the features (simd_ok); the casts are checked by TypeId.
-                unsafe {
-                    if f32 {
-                        if K::WENDLAND { simd::f32x16::density_chunk::<true, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) } else { simd::f32x16::density_chunk::<false, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) }
-                    } else {
-                        if K::WENDLAND { simd::f64x8::density_chunk::<true, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) } else { simd::f64x8::density_chunk::<false, D>(p, sigma, grid, walls, cast(bref), ks, cast_mut(rc), cast_mut(pc)) }
-                    }
-                }
-                return;
-            }
-            let _ = simd;
-            if f32 {
-                density_chunk::<F, K, D, 8>(p, grid, walls, bref, ks, rc, pc)
-            } else {
-                density_chunk::<F, K, D, 4>(p, grid, walls, bref, ks, rc, pc)
-            }
+        let b: &Bufs<F> = b;
+        par::chunks2(&mut rho[..n], &mut pr[..n], |s, rho, pr| {
+            let ks = s..s + rho.len();
+            simd::dispatch(level, passes::Density::<F, K, D> { p, grid, walls, b, ks, rho, pr, _k: PhantomData });
         });
     }
     b.rho = rho;
     b.pr = pr;
 }
 
-/// Fluid–fluid pairs of one candidate run: Σ_j m_j (P_i + P_j + Π_ij) g_ij r_ij into `acc`,
-/// and Σ_j m_j Π_ij g_ij (v_ij·r_ij) into `pacc` if `POWER`.
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn force_run<F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
-    acc: &mut [[F; L]; 3],
-    pacc: &mut [F; L],
-    xi: [F; 3],
-    vi: [F; 3],
-    rho_i: F,
-    pr_i: F,
-    b: &Bufs<F>,
-    r: Range<usize>,
-    inv_h: F,
-    visc: F,
-    eps_h2: F,
-) {
-    let mut j = r.start;
-    while j < r.end {
-        let lim = r.end - j;
-        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.pos[d], j) } else { lanes::<F, L>(&b.pos[0], j) });
-        let v: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.vel[d], j) } else { lanes::<F, L>(&b.vel[0], j) });
-        let m = lanes::<F, L>(&b.m, j);
-        let rho = lanes::<F, L>(&b.rho, j);
-        let pr = lanes::<F, L>(&b.pr, j);
-        for l in 0..L {
-            let mut dx = [F::ZERO; 3];
-            let mut r2 = F::ZERO;
-            let mut vr = F::ZERO;
-            for d in 0..D {
-                dx[d] = xi[d] - p[d][l];
-                r2 = r2 + dx[d] * dx[d];
-                vr = vr + (vi[d] - v[d][l]) * dx[d];
-            }
-            let g = K::g(r2.sqrt() * inv_h);
-            // Π_ij ≥ 0: −α c0 h min(v·r, 0) · 2 / ((r² + 0.01h²)(ρ_i + ρ_j)).
-            let pi = visc * (-vr).max(F::ZERO) / ((r2 + eps_h2) * (rho_i + rho[l]));
-            let c = m[l] * (pr_i + pr[l] + pi) * g;
-            let c = if l < lim { c } else { F::ZERO };
-            for d in 0..D {
-                acc[d][l] = acc[d][l] + c * dx[d];
-            }
-            if POWER {
-                let w = m[l] * pi * g * vr;
-                pacc[l] = pacc[l] + if l < lim { w } else { F::ZERO };
-            }
-        }
-        j += L;
-    }
-}
-
-/// Fluid–wall pairs of one run: Σ_b Ψ_b g_ib r_ib into `acc`.
-#[inline(always)]
-fn wall_run<F: Float, K: Kernel, const D: usize, const L: usize>(acc: &mut [[F; L]; 3], xi: [F; 3], b: &Bufs<F>, r: Range<usize>, inv_h: F) {
-    let mut j = r.start;
-    while j < r.end {
-        let lim = r.end - j;
-        let p: [&[F; L]; 3] = std::array::from_fn(|d| if d < D { lanes::<F, L>(&b.wpos[d], j) } else { lanes::<F, L>(&b.wpos[0], j) });
-        let psi = lanes::<F, L>(&b.wpsi, j);
-        for l in 0..L {
-            let mut dx = [F::ZERO; 3];
-            let mut r2 = F::ZERO;
-            for d in 0..D {
-                dx[d] = xi[d] - p[d][l];
-                r2 = r2 + dx[d] * dx[d];
-            }
-            let c = psi[l] * K::g(r2.sqrt() * inv_h);
-            let c = if l < lim { c } else { F::ZERO };
-            for d in 0..D {
-                acc[d][l] = acc[d][l] + c * dx[d];
-            }
-        }
-        j += L;
-    }
-}
-
-/// Forces (N) of the sorted particles `ks` into `out` (particle order); returns (Σ power
-/// partial, max |a|²).
-#[inline(always)]
-#[allow(clippy::too_many_arguments)]
-fn force_chunk<V: Vector, F: Float, K: Kernel, const D: usize, const L: usize, const POWER: bool>(
-    p: &SphParams,
-    grid: &CellList,
-    walls: &CellList,
-    b: &Bufs<F>,
-    ks: Range<usize>,
-    out: SyncPtr<V>,
-) -> (f64, f64) {
-    let inv_h = F::of(1.0 / p.h);
-    let scale = -K::sigma(p.h, D) / (p.h * p.h);
-    let visc = F::of(2.0 * p.alpha * p.c0 * p.h);
-    let eps_h2 = F::of(0.01 * p.h * p.h);
-    let mut last = [i64::MIN; 3];
-    let mut rg = Ranges { r: [(0, 0); crate::grid::MAX_RANGES], len: 0 };
-    let mut wr = rg;
-    let mut power = 0.0f64;
-    let mut amax = 0.0f64;
-    for k in ks {
-        let c = grid.cells[k];
-        if c != last {
-            rg = grid.query(c);
-            wr = walls.query(c);
-            last = c;
-        }
-        let xi: [F; 3] = std::array::from_fn(|d| if d < D { b.pos[d][k] } else { F::ZERO });
-        let vi: [F; 3] = std::array::from_fn(|d| if d < D { b.vel[d][k] } else { F::ZERO });
-        let (rho_i, pr_i) = (b.rho[k], b.pr[k]);
-        let mut acc = [[F::ZERO; L]; 3];
-        let mut pacc = [F::ZERO; L];
-        for r in rg.iter() {
-            force_run::<F, K, D, L, POWER>(&mut acc, &mut pacc, xi, vi, rho_i, pr_i, b, r, inv_h, visc, eps_h2);
-        }
-        let mut wacc = [[F::ZERO; L]; 3];
-        for r in wr.iter() {
-            wall_run::<F, K, D, L>(&mut wacc, xi, b, r, inv_h);
-        }
-        let mi = b.m[k].f64();
-        let mut a = [0.0f64; 3];
-        for d in 0..D {
-            a[d] = scale * (hsum(acc[d]).f64() + pr_i.f64() * hsum(wacc[d]).f64());
-        }
-        let a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
-        amax = amax.max(a2);
-        if POWER {
-            power += 0.5 * mi * (-scale) * hsum(pacc).f64();
-        }
-        let mut fv = [0.0; 3];
-        for d in 0..D {
-            fv[d] = mi * a[d];
-        }
-        // SAFETY: `order` is a permutation; each particle is written by exactly one chunk.
-        unsafe { *out.get().add(grid.order[k] as usize) = V::from_slice(&fv[..D]) };
-    }
-    (power, amax)
-}
-
-fn force_chunk_any<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool>(
-    p: &SphParams,
-    grid: &CellList,
-    walls: &CellList,
-    b: &Bufs<F>,
-    ks: Range<usize>,
-    out: SyncPtr<V>,
-) -> (f64, f64) {
-    let f32 = std::mem::size_of::<F>() == 4;
-    #[cfg(target_arch = "x86_64")]
-    if simd_ok() {
-        let sigma = K::sigma(p.h, D);
-        // SAFETY: the CPU has the features (simd_ok); the casts are checked by TypeId.
-        return unsafe {
-            if f32 {
-                if K::WENDLAND { simd::f32x16::force_chunk::<V, true, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) } else { simd::f32x16::force_chunk::<V, false, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) }
-            } else {
-                if K::WENDLAND { simd::f64x8::force_chunk::<V, true, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) } else { simd::f64x8::force_chunk::<V, false, D, POWER>(p, sigma, grid, walls, cast(b), ks, out) }
-            }
-        };
-    }
-    if f32 {
-        force_chunk::<V, F, K, D, 8, POWER>(p, grid, walls, b, ks, out)
-    } else {
-        force_chunk::<V, F, K, D, 4, POWER>(p, grid, walls, b, ks, out)
-    }
-}
-
 fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
+    level: Level,
     p: &SphParams,
     grid: &CellList,
     walls: &CellList,
@@ -696,13 +411,13 @@ fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
     want_power: bool,
 ) -> (f64, f64) {
     let n = grid.len();
-    let ptr = SyncPtr(out.as_mut_ptr());
+    let out = SyncPtr(out.as_mut_ptr());
     let chunk = |c: usize| {
         let ks = c * par::CHUNK..((c + 1) * par::CHUNK).min(n);
         if want_power {
-            force_chunk_any::<V, F, K, D, true>(p, grid, walls, b, ks, ptr)
+            simd::dispatch(level, passes::Forces::<V, F, K, D, true> { p, grid, walls, b, ks, out, _k: PhantomData })
         } else {
-            force_chunk_any::<V, F, K, D, false>(p, grid, walls, b, ks, ptr)
+            simd::dispatch(level, passes::Forces::<V, F, K, D, false> { p, grid, walls, b, ks, out, _k: PhantomData })
         }
     };
     let nc = n.div_ceil(par::CHUNK);
@@ -717,30 +432,7 @@ impl<V: Vector> Term<V> for Sph<V> {
     }
 
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real {
-        let r = self.range();
-        if assign {
-            // Particles outside the fluid get no SPH force.
-            let (head, rest) = f.split_at_mut(r.start);
-            head.fill(V::ZERO);
-            rest[r.len()..].fill(V::ZERO);
-        }
-        if self.n == 0 {
-            return 0.0;
-        }
-        // The pass writes the fluid's forces over `f`; to add instead, keep what was there.
-        let prev: Option<Vec<V>> = if assign { None } else { Some(f[r.clone()].to_vec()) };
-        let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
-        let (power, amax) = match self.p.precision {
-            Precision::F32 => eval::<V, f32>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power, &mut self.clock),
-            Precision::F64 => eval::<V, f64>(&self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power, &mut self.clock),
-        };
-        self.amax = amax;
-        if let Some(prev) = prev {
-            for (fi, pi) in f[r].iter_mut().zip(prev) {
-                *fi += pi;
-            }
-        }
-        power
+        self.forces_at(simd::level(), x, v, model, f, want_power, assign)
     }
 
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
@@ -821,43 +513,79 @@ mod tests {
         (x, v, w)
     }
 
-    fn forces<V: Vector>(p: SphParams, x: &[V], v: &[V], w: &[V], m: f64, portable: bool) -> (Vec<V>, f64) {
-        FORCE_PORTABLE.store(portable, std::sync::atomic::Ordering::Relaxed);
+    fn forces<V: Vector>(p: SphParams, x: &[V], v: &[V], w: &[V], m: f64, level: Level) -> (Vec<V>, f64) {
         let n = x.len();
         let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n] };
         let mut t = Sph::new("fluid", 0, n, p, w.to_vec(), vec![m; w.len()]).unwrap();
         let mut f = vec![V::ZERO; n];
-        let pw = t.add_forces(x, v, &model, &mut f, true, true);
-        FORCE_PORTABLE.store(false, std::sync::atomic::Ordering::Relaxed);
+        let pw = t.forces_at(level, x, v, &model, &mut f, true, true);
         (f, pw)
+    }
+
+    /// The WCSPH forces and viscous power by brute force over all pairs, in f64, from the scalar
+    /// kernel formulas: the oracle of the passes.
+    fn brute<V: Vector, K: Kernel>(p: &SphParams, x: &[V], v: &[V], w: &[V], m: f64) -> (Vec<V>, f64) {
+        let (n, d) = (x.len(), V::DIM);
+        let sigma = K::sigma(p.h, d);
+        let wk = |r2: f64| sigma * K::w(r2.sqrt() / p.h);
+        let rho: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|j| m * wk((x[i] - x[j]).length_squared())).sum::<f64>() + w.iter().map(|b| m * wk((x[i] - *b).length_squared())).sum::<f64>())
+            .collect();
+        let pp: Vec<f64> = rho.iter().map(|&r| p.pressure(r) / (r * r)).collect();
+        let grad = |r: V| r * (sigma / (p.h * p.h) * K::g(r.length_squared().sqrt() / p.h));
+        let mut power = 0.0;
+        let f = (0..n)
+            .map(|i| {
+                let mut a = V::ZERO;
+                for j in 0..n {
+                    let r = x[i] - x[j];
+                    let vr = (v[i] - v[j]).dot(r);
+                    let pi = 2.0 * p.alpha * p.c0 * p.h * (-vr).max(0.0) / ((r.length_squared() + 0.01 * p.h * p.h) * (rho[i] + rho[j]));
+                    a -= grad(r) * (m * (pp[i] + pp[j] + pi));
+                    power += 0.5 * m * m * pi * grad(r).dot(v[i] - v[j]);
+                }
+                for b in w {
+                    a -= grad(x[i] - *b) * (m * pp[i]);
+                }
+                a * m
+            })
+            .collect();
+        (f, power)
     }
 
     fn check<V: Vector>() {
         let dx = 0.01;
         for kernel in [KernelKind::CubicSpline, KernelKind::WendlandC2] {
-            for (precision, tol) in [(Precision::F32, 1e-5), (Precision::F64, 1e-11)] {
-                // Compressed 5 % so that the pressure term is active everywhere.
-                let p = SphParams { h: 1.3 * dx, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel, precision };
-                let (x, v, w) = blob::<V>(3000, dx * 0.95, 11);
-                let m = 1000.0 * dx.powi(V::DIM as i32);
-                let (fs, ps) = forces(p, &x, &v, &w, m, false);
-                let (fp, pp) = forces(p, &x, &v, &w, m, true);
-                let scale = fp.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
-                assert!(scale > 0.0);
-                let diff = fs.iter().zip(&fp).map(|(a, b)| (*a - *b).length_squared()).fold(0.0, f64::max).sqrt();
-                assert!(diff <= tol * scale, "{kernel:?} {precision:?} {}D: SIMD vs portable {diff:e} of {scale:e}", V::DIM);
-                assert!(pp > 0.0 && (ps - pp).abs() <= 10.0 * tol * pp, "power {ps} vs {pp}");
-                // Without walls, the pair forces are antisymmetric: Σ f = 0 to round-off.
-                let (f0, _) = forces(p, &x, &v, &[], m, true);
-                let total = f0.iter().fold(V::ZERO, |a, b| a + *b);
-                let abs: f64 = f0.iter().map(|f| f.length_squared().sqrt()).sum();
-                assert!(total.length_squared().sqrt() <= tol * abs, "{kernel:?} {precision:?}: net force {total:?} of {abs:e}");
+            // Compressed 5 % so that the pressure term is active everywhere.
+            let p64 = SphParams { h: 1.3 * dx, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel, precision: Precision::F64 };
+            let (x, v, w) = blob::<V>(1500, dx * 0.95, 11);
+            let m = 1000.0 * dx.powi(V::DIM as i32);
+            let (fb, pb) = match kernel {
+                KernelKind::CubicSpline => brute::<V, CubicSpline>(&p64, &x, &v, &w, m),
+                KernelKind::WendlandC2 => brute::<V, WendlandC2>(&p64, &x, &v, &w, m),
+            };
+            let scale = fb.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+            assert!(scale > 0.0 && pb > 0.0);
+            // f32: float32 positions (spacing ~1e-2, |x| ~ 0.2) and sums of ~30 terms.
+            for (precision, tol) in [(Precision::F32, 2e-4), (Precision::F64, 1e-11)] {
+                let p = SphParams { precision, ..p64 };
+                for level in Level::available() {
+                    let (fs, ps) = forces(p, &x, &v, &w, m, level);
+                    let diff = fs.iter().zip(&fb).map(|(a, b)| (*a - *b).length_squared()).fold(0.0, f64::max).sqrt();
+                    assert!(diff <= tol * scale, "{kernel:?} {precision:?} {}D {level:?}: vs brute force {diff:e} of {scale:e}", V::DIM);
+                    assert!((ps - pb).abs() <= 10.0 * tol * pb, "{level:?} power {ps} vs {pb}");
+                    // Without walls, the pair forces are antisymmetric: Σ f = 0 to round-off.
+                    let (f0, _) = forces(p, &x, &v, &[], m, level);
+                    let total = f0.iter().fold(V::ZERO, |a, b| a + *b);
+                    let abs: f64 = f0.iter().map(|f| f.length_squared().sqrt()).sum();
+                    assert!(total.length_squared().sqrt() <= tol * abs, "{kernel:?} {precision:?} {level:?}: net force {total:?} of {abs:e}");
+                }
             }
         }
     }
 
     #[test]
-    fn simd_and_portable_passes_agree_and_conserve_momentum() {
+    fn every_level_matches_brute_force_and_conserves_momentum() {
         check::<DVec2>();
         check::<DVec3>();
     }

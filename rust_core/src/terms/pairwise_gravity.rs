@@ -4,28 +4,25 @@
 //! a_i = G Σ_j m_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2}        (Plummer 1911; Aarseth 2003, eq. 2.4)
 //! U   = −G Σ_{i<j} m_i m_j / (|x_j − x_i|² + ε²)^{1/2}
 //!
-//! The inner loop runs over a structure-of-arrays copy of the sources in blocks of `LANES`
-//! independent accumulators, so it vectorises. The best kernel is picked at run time (no
-//! `target-cpu=native` in the build): hand-written AVX-512 (rsqrt + Newton), else the portable
-//! loop compiled for AVX2, else SSE2. Results never depend on the thread count; the AVX-512 path
-//! differs from the others by a few ulp. `PHYSCORE_NO_SIMD=1` forces the portable kernel.
+//! The inner loop runs over a structure-of-arrays copy of the sources, one SIMD vector of sources
+//! at a time, written once over the portable SIMD layer (`crate::simd`) for f32 and f64 and every
+//! instruction set: 1/r comes from the layer's fast reciprocal square root (hardware estimate plus
+//! Newton steps), not a square root and a division, which would bound the loop at several cycles
+//! per pair. Results never depend on the thread count; levels differ by a few ulp.
 //!
-//! With a single-precision state the sum runs in float32 (16 lanes, 1/r from `vrsqrt14ps` plus
-//! one Newton step, relative error ~1e-8 < float32's 6e-8): twice the pairs per instruction.
-//! The positions are then float32 values already, so differences lose nothing more.
+//! With a single-precision state the sum runs in float32 (twice the lanes per instruction). The
+//! positions are then float32 values already, so differences lose nothing more.
 use super::Term;
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
+use crate::simd::{self, Float, Kernel, Level, Simd, P};
 use rayon::prelude::*;
 
-use crate::sph::kernels::Float;
+/// Sources are padded with massless points to a multiple of the widest vector (16 f32 lanes).
+const PAD: usize = 16;
 
-const LANES: usize = 8;
-const LANES32: usize = 16;
-
-/// Structure-of-arrays copy of the sources, padded with massless points to a multiple of the
-/// kernel's lane count.
+/// Structure-of-arrays copy of the sources, padded with massless points.
 #[derive(Default)]
 struct Soa<T> {
     xs: Vec<T>,
@@ -35,8 +32,8 @@ struct Soa<T> {
 }
 
 impl<T: Float> Soa<T> {
-    fn pack<V: Vector>(&mut self, x: &[V], model: &Model, lanes: usize) {
-        let np = x.len().div_ceil(lanes) * lanes;
+    fn pack<V: Vector>(&mut self, x: &[V], model: &Model) {
+        let np = x.len().div_ceil(PAD) * PAD;
         for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
             a.clear();
             a.resize(np, T::ZERO);
@@ -59,185 +56,74 @@ pub struct PairwiseGravity {
     /// Plummer softening length ε, m.
     pub softening: Real,
     src: Soa<Real>,
-    /// Single-precision state: the sources in float32 and the float32 kernels.
+    /// Single-precision state: the sources in float32 and the float32 kernel.
     single: bool,
     src32: Soa<f32>,
+    /// Scratch: accelerations / G of the last evaluation.
+    acc: Vec<[Real; 3]>,
 }
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {
-        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default() }
+        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new() }
     }
 }
 
-/// Σ_j m_j d_j / (|d_j|² + ε²)^{3/2} for a receiver at (xi, yi, zi) in `L` independent lanes
-/// (so the loop vectorises), summed lane-pairwise at the end; returns (ax, ay, az) / G.
-#[inline(always)]
-fn accel_portable<T: Float, const L: usize>(xi: T, yi: T, zi: T, xs: &[T], ys: &[T], zs: &[T], ms: &[T], eps2: T) -> [Real; 3] {
-    let mut ax = [T::ZERO; L];
-    let mut ay = [T::ZERO; L];
-    let mut az = [T::ZERO; L];
-    for (((bx, by), bz), bm) in xs.chunks_exact(L).zip(ys.chunks_exact(L)).zip(zs.chunks_exact(L)).zip(ms.chunks_exact(L)) {
-        for l in 0..L {
-            let dx = bx[l] - xi;
-            let dy = by[l] - yi;
-            let dz = bz[l] - zi;
-            let r2 = dx * dx + dy * dy + dz * dz + eps2;
-            let s = bm[l] / (r2 * r2.sqrt());
-            // r2 == 0 only for the self term (or coincident points without softening): no force.
-            let s = if r2 > T::ZERO { s } else { T::ZERO };
-            ax[l] = ax[l] + s * dx;
-            ay[l] = ay[l] + s * dy;
-            az[l] = az[l] + s * dz;
+/// Accelerations / G of receivers `rows` (indices into the sources) into `out` (one `[ax, ay, az]`
+/// per row): Σ_j m_j d_j (|d_j|² + ε²)^{-3/2}, one SIMD vector of sources at a time, lanes summed
+/// at the end.
+struct Accel<'a, F: Float> {
+    src: &'a Soa<F>,
+    eps2: F,
+    rows: std::ops::Range<usize>,
+    out: &'a mut [[Real; 3]],
+}
+
+impl<F: Float> Kernel for Accel<'_, F> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) {
+        let Soa { xs, ys, zs, ms } = self.src;
+        let l = P::<S, F>::lanes();
+        let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, self.eps2));
+        for (i, out) in self.rows.zip(self.out.iter_mut()) {
+            let (xi, yi, zi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]));
+            let (mut ax, mut ay, mut az) = (zero, zero, zero);
+            let src = xs.chunks_exact(l).zip(ys.chunks_exact(l)).zip(zs.chunks_exact(l)).zip(ms.chunks_exact(l));
+            for (((bx, by), bz), bm) in src {
+                let dx = P::load(s, bx) - xi;
+                let dy = P::load(s, by) - yi;
+                let dz = P::load(s, bz) - zi;
+                let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
+                let y = r2.rsqrt();
+                // r² = 0 only for the self term (or coincident points without softening): no force.
+                let w = r2.gt(zero).select(P::load(s, bm) * (y * y * y), zero);
+                ax = w.mul_add(dx, ax);
+                ay = w.mul_add(dy, ay);
+                az = w.mul_add(dz, az);
+            }
+            *out = [ax.sum().f64(), ay.sum().f64(), az.sum().f64()];
         }
     }
-    let red = |mut a: [T; L]| {
-        let mut w = L;
-        while w > 1 {
-            w /= 2;
-            for l in 0..w {
-                a[l] = a[l] + a[l + w];
-            }
-        }
-        a[0].f64()
+}
+
+/// Receivers per parallel task: O(N) work each, so small tasks balance well.
+const ROWS: usize = 16;
+
+/// Accelerations / G of every source (one `[ax, ay, az]` each), in parallel over fixed blocks of
+/// receivers (the same result for any thread count).
+fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, out: &mut Vec<[Real; 3]>) {
+    out.clear();
+    out.resize(n, [0.0; 3]);
+    let block = |(c, out): (usize, &mut [[Real; 3]])| {
+        let r = c * ROWS..c * ROWS + out.len();
+        simd::dispatch(level, Accel { src, eps2, rows: r, out });
     };
-    [red(ax), red(ay), red(az)]
-}
-
-fn accel_generic(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs: &[Real], ms: &[Real], eps2: Real) -> [Real; 3] {
-    accel_portable::<Real, LANES>(xi, yi, zi, xs, ys, zs, ms, eps2)
-}
-
-fn accel32_generic(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
-    accel_portable::<f32, LANES32>(xi, yi, zi, xs, ys, zs, ms, eps2)
-}
-
-/// AVX-512 path: 1/r from the hardware estimate `vrsqrt14pd` (relative error < 2⁻¹⁴) refined by
-/// two Newton–Raphson steps y ← y (3/2 − r² y²/2) (error ≈ 1.5 e² per step, so ~2⁻⁵² after two),
-/// instead of a square root and a division, which would bound the loop at ~4 cycles per pair.
-/// Results agree with the portable kernel to a few ulp, not bit for bit; they are still
-/// identical for any thread count.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn accel_avx512(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs: &[Real], ms: &[Real], eps2: Real) -> [Real; 3] {
-    use std::arch::x86_64::*;
-    debug_assert!(xs.len() % 8 == 0 && ys.len() == xs.len() && zs.len() == xs.len() && ms.len() == xs.len());
-    let (pxi, pyi, pzi) = (_mm512_set1_pd(xi), _mm512_set1_pd(yi), _mm512_set1_pd(zi));
-    let (eps, half, three_halves, zero) = (_mm512_set1_pd(eps2), _mm512_set1_pd(0.5), _mm512_set1_pd(1.5), _mm512_setzero_pd());
-    let (mut ax, mut ay, mut az) = (zero, zero, zero);
-    let mut b = 0;
-    while b < xs.len() {
-        // SAFETY: b + 8 <= len, all four slices have the same length (padded to LANES).
-        let dx = _mm512_sub_pd(_mm512_loadu_pd(xs.as_ptr().add(b)), pxi);
-        let dy = _mm512_sub_pd(_mm512_loadu_pd(ys.as_ptr().add(b)), pyi);
-        let dz = _mm512_sub_pd(_mm512_loadu_pd(zs.as_ptr().add(b)), pzi);
-        let m = _mm512_loadu_pd(ms.as_ptr().add(b));
-        let r2 = _mm512_fmadd_pd(dx, dx, _mm512_fmadd_pd(dy, dy, _mm512_fmadd_pd(dz, dz, eps)));
-        let h = _mm512_mul_pd(r2, half);
-        let mut y = _mm512_rsqrt14_pd(r2);
-        // (h·y)·y: y² alone would overflow for r < 1e-154.
-        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
-        y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
-        let s = _mm512_mul_pd(m, _mm512_mul_pd(y, _mm512_mul_pd(y, y)));
-        // r² = 0 (self term, or coincident points without softening): no force.
-        let s = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(r2, zero), s);
-        ax = _mm512_fmadd_pd(s, dx, ax);
-        ay = _mm512_fmadd_pd(s, dy, ay);
-        az = _mm512_fmadd_pd(s, dz, az);
-        b += 8;
-    }
-    [_mm512_reduce_add_pd(ax), _mm512_reduce_add_pd(ay), _mm512_reduce_add_pd(az)]
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn accel_avx2(xi: Real, yi: Real, zi: Real, xs: &[Real], ys: &[Real], zs: &[Real], ms: &[Real], eps2: Real) -> [Real; 3] {
-    accel_generic(xi, yi, zi, xs, ys, zs, ms, eps2)
-}
-
-type AccelFn = fn(Real, Real, Real, &[Real], &[Real], &[Real], &[Real], Real) -> [Real; 3];
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn accel32_avx512(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
-    use std::arch::x86_64::*;
-    debug_assert!(xs.len() % 16 == 0 && ys.len() == xs.len() && zs.len() == xs.len() && ms.len() == xs.len());
-    let (pxi, pyi, pzi) = (_mm512_set1_ps(xi), _mm512_set1_ps(yi), _mm512_set1_ps(zi));
-    let (eps, half, three_halves, zero) = (_mm512_set1_ps(eps2), _mm512_set1_ps(0.5), _mm512_set1_ps(1.5), _mm512_setzero_ps());
-    let (mut ax, mut ay, mut az) = (zero, zero, zero);
-    let mut b = 0;
-    while b < xs.len() {
-        // SAFETY: b + 16 <= len, all four slices have the same length (padded to LANES32).
-        let dx = _mm512_sub_ps(_mm512_loadu_ps(xs.as_ptr().add(b)), pxi);
-        let dy = _mm512_sub_ps(_mm512_loadu_ps(ys.as_ptr().add(b)), pyi);
-        let dz = _mm512_sub_ps(_mm512_loadu_ps(zs.as_ptr().add(b)), pzi);
-        let m = _mm512_loadu_ps(ms.as_ptr().add(b));
-        let r2 = _mm512_fmadd_ps(dx, dx, _mm512_fmadd_ps(dy, dy, _mm512_fmadd_ps(dz, dz, eps)));
-        let mut y = _mm512_rsqrt14_ps(r2);
-        y = _mm512_mul_ps(y, _mm512_fnmadd_ps(_mm512_mul_ps(_mm512_mul_ps(r2, half), y), y, three_halves));
-        let s = _mm512_mul_ps(m, _mm512_mul_ps(y, _mm512_mul_ps(y, y)));
-        let s = _mm512_maskz_mov_ps(_mm512_cmp_ps_mask::<_CMP_GT_OQ>(r2, zero), s);
-        ax = _mm512_fmadd_ps(s, dx, ax);
-        ay = _mm512_fmadd_ps(s, dy, ay);
-        az = _mm512_fmadd_ps(s, dz, az);
-        b += 16;
-    }
-    [_mm512_reduce_add_ps(ax) as Real, _mm512_reduce_add_ps(ay) as Real, _mm512_reduce_add_ps(az) as Real]
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn accel32_avx2(xi: f32, yi: f32, zi: f32, xs: &[f32], ys: &[f32], zs: &[f32], ms: &[f32], eps2: f32) -> [Real; 3] {
-    accel32_generic(xi, yi, zi, xs, ys, zs, ms, eps2)
-}
-
-type Accel32Fn = fn(f32, f32, f32, &[f32], &[f32], &[f32], &[f32], f32) -> [Real; 3];
-
-/// The instruction set the kernels use on this CPU, decided once per process.
-#[derive(Clone, Copy, PartialEq)]
-enum Simd {
-    Avx512,
-    Avx2,
-    Portable,
-}
-
-fn simd() -> Simd {
-    static LEVEL: std::sync::OnceLock<Simd> = std::sync::OnceLock::new();
-    *LEVEL.get_or_init(|| {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::env::var_os("PHYSCORE_NO_SIMD").is_none() {
-                if is_x86_feature_detected!("avx512f") {
-                    return Simd::Avx512;
-                }
-                if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
-                    return Simd::Avx2;
-                }
-            }
-        }
-        Simd::Portable
-    })
-}
-
-fn pick_kernel() -> AccelFn {
-    match simd() {
-        // SAFETY (both): the features were detected at run time.
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx512 => |a, b, c, d, e, f, g, h| unsafe { accel_avx512(a, b, c, d, e, f, g, h) },
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx2 => |a, b, c, d, e, f, g, h| unsafe { accel_avx2(a, b, c, d, e, f, g, h) },
-        _ => accel_generic,
-    }
-}
-
-fn pick_kernel32() -> Accel32Fn {
-    match simd() {
-        // SAFETY (both): the features were detected at run time.
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx512 => |a, b, c, d, e, f, g, h| unsafe { accel32_avx512(a, b, c, d, e, f, g, h) },
-        #[cfg(target_arch = "x86_64")]
-        Simd::Avx2 => |a, b, c, d, e, f, g, h| unsafe { accel32_avx2(a, b, c, d, e, f, g, h) },
-        _ => accel32_generic,
+    // O(N) work per item: parallel from a few dozen particles on.
+    if n >= 64 {
+        out.par_chunks_mut(ROWS).enumerate().for_each(block);
+    } else {
+        out.chunks_mut(ROWS).enumerate().for_each(block);
     }
 }
 
@@ -251,50 +137,33 @@ impl<V: Vector> Term<V> for PairwiseGravity {
     }
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
-        if self.single {
-            self.src32.pack(x, model, LANES32);
-        } else {
-            self.src.pack(x, model, LANES);
-        }
-        let (kernel, kernel32) = (pick_kernel(), pick_kernel32());
-        let Soa { xs, ys, zs, ms } = &self.src;
-        let Soa { xs: xs32, ys: ys32, zs: zs32, ms: ms32 } = &self.src32;
         let eps2 = self.softening * self.softening;
-        let eps2_32 = eps2 as f32;
-        let single = self.single;
-        let g = self.g;
-        let body = |i: usize, fi: &mut V| {
-            if model.inv_mass[i] == 0.0 {
-                if assign {
-                    *fi = V::ZERO;
-                }
-                return; // pinned: its force is never used
-            }
-            let a = if single {
-                kernel32(xs32[i], ys32[i], zs32[i], xs32, ys32, zs32, ms32, eps2_32)
-            } else {
-                kernel(xs[i], ys[i], zs[i], xs, ys, zs, ms, eps2)
-            };
-            let gm = g * model.mass[i];
-            let mut buf = [0.0; 3];
-            for k in 0..V::DIM {
-                buf[k] = a[k] * gm;
-            }
-            let fg = V::from_slice(&buf);
-            *fi = if assign { fg } else { *fi + fg };
-        };
-        // O(N) work per item: parallel from a few dozen particles on, in fixed small chunks.
-        if x.len() >= 64 {
-            f.par_chunks_mut(16).enumerate().for_each(|(c, f)| {
-                for (k, fi) in f.iter_mut().enumerate() {
-                    body(c * 16 + k, fi);
-                }
-            });
+        let level = simd::level();
+        let mut acc = std::mem::take(&mut self.acc);
+        if self.single {
+            self.src32.pack(x, model);
+            accelerations(&self.src32, x.len(), eps2 as f32, level, &mut acc);
         } else {
-            for (i, fi) in f.iter_mut().enumerate() {
-                body(i, fi);
-            }
+            self.src.pack(x, model);
+            accelerations(&self.src, x.len(), eps2, level, &mut acc);
         }
+        let g = self.g;
+        par::chunks1(f, |s, f| {
+            for (k, fi) in f.iter_mut().enumerate() {
+                let i = s + k;
+                if model.inv_mass[i] == 0.0 {
+                    // Pinned: its force is never used.
+                    if assign {
+                        *fi = V::ZERO;
+                    }
+                    continue;
+                }
+                let (a, gm) = (acc[i], g * model.mass[i]);
+                let fg = V::from_slice(&[a[0] * gm, a[1] * gm, a[2] * gm][..V::DIM]);
+                *fi = if assign { fg } else { *fi + fg };
+            }
+        });
+        self.acc = acc;
         0.0
     }
 
@@ -350,63 +219,60 @@ pub fn encounter_time<V: Vector>(g: Real, softening: Real, x: &[V], model: &Mode
 mod tests {
     use super::*;
 
-    #[test]
-    fn simd_paths_match_the_naive_sum_to_round_off() {
-        let n = 203; // not a multiple of LANES: exercises the massless padding
-        let mut pg = PairwiseGravity::new("g".into(), 1.0, 0.0);
-        let mut seed = 12345u64;
+    fn cloud(n: usize, seed: u64, single: bool) -> (Vec<glam::DVec3>, Model) {
+        let mut seed = seed;
         let mut rnd = || {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        let x: Vec<glam::DVec3> = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd())).collect();
+        let x = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd())).map(|p| if single { p.round_f32() } else { p }).collect();
         let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
-        pg.src.pack(&x, &model, LANES);
-        let fast = pick_kernel();
-        let Soa { xs, ys, zs, ms } = &pg.src;
-        for i in 0..n {
-            let a = accel_generic(xs[i], ys[i], zs[i], xs, ys, zs, ms, 0.0);
-            let b = fast(xs[i], ys[i], zs[i], xs, ys, zs, ms, 0.0);
-            let mut naive = glam::DVec3::ZERO;
-            for j in 0..n {
-                if j != i {
-                    let d = x[j] - x[i];
-                    naive += d * (model.mass[j] / d.length().powi(3));
+        (x, model)
+    }
+
+    /// Every level this CPU has (the others cannot run here and are not claimed).
+    #[test]
+    fn every_level_matches_the_naive_sum_to_round_off() {
+        let n = 203; // not a multiple of any lane count: exercises the massless padding
+        let (x, model) = cloud(n, 12345, false);
+        let mut src = Soa::<f64>::default();
+        src.pack(&x, &model);
+        for level in Level::available() {
+            let mut acc = Vec::new();
+            accelerations(&src, n, 0.0, level, &mut acc);
+            for i in 0..n {
+                let mut naive = glam::DVec3::ZERO;
+                for j in 0..n {
+                    if j != i {
+                        let d = x[j] - x[i];
+                        naive += d * (model.mass[j] / d.length().powi(3));
+                    }
                 }
-            }
-            for got in [glam::DVec3::from_array(a), glam::DVec3::from_array(b)] {
-                assert!((got - naive).length() <= 1e-13 * naive.length().max(1.0), "{got} vs {naive}");
+                let got = glam::DVec3::from_array(acc[i]);
+                assert!((got - naive).length() <= 1e-13 * naive.length().max(1.0), "{level:?}: {got} vs {naive}");
             }
         }
     }
 
     #[test]
-    fn float32_paths_match_the_naive_sum_to_single_precision() {
+    fn float32_levels_match_the_naive_sum_to_single_precision() {
         let n = 517;
-        let mut pg = PairwiseGravity::new("g".into(), 1.0, 0.01);
-        let mut seed = 777u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let x: Vec<glam::DVec3> = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd()).round_f32()).collect();
-        let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
-        pg.src32.pack(&x, &model, LANES32);
-        let fast = pick_kernel32();
-        let Soa { xs, ys, zs, ms } = &pg.src32;
-        for i in 0..n {
-            let (xi, yi, zi) = (xs[i], ys[i], zs[i]);
-            let a = accel32_generic(xi, yi, zi, xs, ys, zs, ms, 1e-4);
-            let b = fast(xi, yi, zi, xs, ys, zs, ms, 1e-4);
-            let mut naive = glam::DVec3::ZERO;
-            for j in 0..n {
-                let d = x[j] - x[i];
-                naive += d * ((model.mass[j] as f32) as f64 / (d.length_squared() + 1e-4).powf(1.5));
-            }
-            for got in [glam::DVec3::from_array(a), glam::DVec3::from_array(b)] {
+        let (x, model) = cloud(n, 777, true);
+        let mut src = Soa::<f32>::default();
+        src.pack(&x, &model);
+        for level in Level::available() {
+            let mut acc = Vec::new();
+            accelerations(&src, n, 1e-4, level, &mut acc);
+            for i in 0..n {
+                let mut naive = glam::DVec3::ZERO;
+                for j in 0..n {
+                    let d = x[j] - x[i];
+                    naive += d * ((model.mass[j] as f32) as f64 / (d.length_squared() + 1e-4).powf(1.5));
+                }
                 // Sum of n float32 terms: error ~ sqrt(n)·6e-8 of the term magnitudes.
                 let scale: f64 = (0..n).map(|j| model.mass[j] / ((x[j] - x[i]).length_squared() + 1e-4)).sum();
-                assert!((got - naive).length() <= 2e-5 * scale, "{got} vs {naive}");
+                let got = glam::DVec3::from_array(acc[i]);
+                assert!((got - naive).length() <= 2e-5 * scale, "{level:?}: {got} vs {naive}");
             }
         }
     }

@@ -12,11 +12,13 @@
 //!
 //! The incidence lists are stored as sliced ELLPACK with slices of 8 particles (SELL-8, the
 //! layout of sparse matrix–vector products on SIMD hardware: Kreutzer et al. 2014, SIAM J. Sci.
-//! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so the
-//! AVX-512 kernel handles 8 particles per instruction with contiguous loads of the spring data.
+//! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so one SIMD
+//! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
+//! written once over `crate::simd`, for every instruction set).
 use super::Term;
 use crate::error::{invalid, Result};
 use crate::par;
+use crate::simd::{self, Kernel, Simd, P};
 use crate::state::Model;
 use crate::vector::{Real, Vector};
 
@@ -185,8 +187,9 @@ impl<V: Vector> Springs<V> {
         }
     }
 
-    /// Total spring force on particle `p` (N) and half the dashpot power of its springs (W).
-    #[inline(always)]
+    /// Total spring force on particle `p` (N) and half the dashpot power of its springs (W): the
+    /// scalar reference the SIMD kernel is tested against.
+    #[cfg(test)]
     fn particle_force(&self, p: usize, x: &[V], v: &[V], want_power: bool) -> (V, Real) {
         let g = p / SLICE;
         let w = (self.start[g + 1] - self.start[g]) as usize / SLICE;
@@ -216,127 +219,94 @@ impl<V: Vector> Springs<V> {
     }
 }
 
-/// Whether the AVX-512 spring kernel can run (and `V` is a plain array of `DIM` f64s).
-#[inline]
-fn simd_available<V: Vector>() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::sync::OnceLock;
-        static OK: OnceLock<bool> = OnceLock::new();
-        std::mem::size_of::<V>() == V::DIM * 8
-            && *OK.get_or_init(|| std::env::var_os("PHYSCORE_NO_SIMD").is_none() && is_x86_feature_detected!("avx512f"))
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
+/// Spring forces of the slices `g0 .. g0 + out.len() / SLICE` (the last may be partial: `out` ends
+/// at the last covered particle), written over or added to `out`; returns half the dashpot power.
+/// One SIMD vector holds `lanes` particles of a slice (8/lanes vectors per slice); slot s of
+/// those particles is one contiguous run of entries. 1/L comes from the layer's rsqrt (a few ulp
+/// from a square root and a division).
+struct SliceForces<'a, V: Vector> {
+    sp: &'a Springs<V>,
+    x: &'a [V],
+    v: &'a [V],
+    g0: usize,
+    out: &'a mut [V],
+    want: bool,
+    assign: bool,
+}
+
+impl<V: Vector> Kernel for SliceForces<'_, V> {
+    type Output = Real;
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> Real {
+        let SliceForces { sp, x, v, g0, out, want, assign } = self;
+        let (xf, vf) = (V::flat(x), V::flat(v));
+        let l = P::<S, f64>::lanes();
+        let dim = V::DIM;
+        let last = sp.n_cov - 1;
+        let zero = P::<S, f64>::zero(s);
+        let uniform = sp.uniform.map(|(k, c)| (P::splat(s, k), P::splat(s, c)));
+        let mut power = zero;
+        for (gs, out) in out.chunks_mut(SLICE).enumerate() {
+            let g = g0 + gs;
+            let (s0, s1) = (sp.start[g] as usize, sp.start[g + 1] as usize);
+            for (q, out) in out.chunks_mut(l).enumerate() {
+                let p0 = g * SLICE + q * l;
+                // Lanes past the last particle (a partial last slice) repeat it; never written.
+                let own = |c: usize, a: &[V]| P::<S, f64>::from_fn(s, |k| a[(p0 + k).min(last)].comp(c));
+                let (xp, vp) = ([own(0, x), own(1, x), if dim == 3 { own(2, x) } else { zero }], [own(0, v), own(1, v), if dim == 3 { own(2, v) } else { zero }]);
+                let mut acc = [zero; 3];
+                let mut e = s0 + q * l;
+                while e < s1 {
+                    let (ox, ov) = s.gather_rows_f64s(xf, vf, dim, &sp.other[e..]);
+                    let mut d = [zero; 3];
+                    let mut dv = [zero; 3];
+                    let mut l2 = zero;
+                    for c in 0..dim {
+                        d[c] = P { s, v: ox[c] } - xp[c];
+                        dv[c] = P { s, v: ov[c] } - vp[c];
+                        l2 = d[c].mul_add(d[c], l2);
+                    }
+                    // Padding and coincident endpoints (L = 0): the axis is undefined, no force.
+                    let y = l2.gt(zero).select(l2.rsqrt(), zero);
+                    let len = l2 * y;
+                    let mut vn = zero;
+                    for c in 0..dim {
+                        d[c] = d[c] * y; // unit axis n
+                        vn = dv[c].mul_add(d[c], vn);
+                    }
+                    let (kk, cc) = match uniform {
+                        Some(kc) => kc,
+                        None => (P::load(s, &sp.e_k[e..]), P::load(s, &sp.e_c[e..])),
+                    };
+                    let mag = cc.mul_add(vn, kk * (len - P::load(s, &sp.e_rest[e..])));
+                    for c in 0..dim {
+                        acc[c] = mag.mul_add(d[c], acc[c]);
+                    }
+                    if want {
+                        power = (cc * vn).mul_add(vn, power);
+                    }
+                    e += SLICE;
+                }
+                let a = [acc[0].to_array(), acc[1].to_array(), acc[2].to_array()];
+                for (k, o) in out.iter_mut().enumerate() {
+                    let f = V::from_slice(&[a[0][k], a[1][k], a[2][k]][..dim]);
+                    *o = if assign { f } else { *o + f };
+                }
+            }
+        }
+        0.5 * power.sum()
     }
 }
 
 impl<V: Vector> Springs<V> {
-    /// Spring forces on the 8 particles of slice `g` (all below `n_cov`) with AVX-512: other
-    /// endpoints fetched by gather, 1/L from `vrsqrt14pd` plus two Newton steps (a few ulp from
-    /// the scalar path's sqrt and division). Writes (assign) or adds the forces into `out[..8]`;
-    /// returns half the dashpot power.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f")]
-    unsafe fn slice_avx512(&self, g: usize, out: &mut [V], x: &[V], v: &[V], want: bool, assign: bool) -> Real {
-        use std::arch::x86_64::*;
-        let dim = V::DIM;
-        let xptr = x.as_ptr() as *const f64;
-        let vptr = v.as_ptr() as *const f64;
-        let (zero, half, three_halves) = (_mm512_setzero_pd(), _mm512_set1_pd(0.5), _mm512_set1_pd(1.5));
-        let stride = _mm256_set1_epi32(dim as i32);
-        let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        let pidx = _mm256_mullo_epi32(_mm256_add_epi32(_mm256_set1_epi32((g * SLICE) as i32), lanes), stride);
-        let mut xp = [zero; 3];
-        let mut vp = [zero; 3];
-        for c in 0..dim {
-            xp[c] = _mm512_i32gather_pd::<8>(pidx, xptr.add(c));
-            vp[c] = _mm512_i32gather_pd::<8>(pidx, vptr.add(c));
-        }
-        let mut acc = [zero; 3];
-        let mut power = zero;
-        let (s0, s1) = (self.start[g] as usize, self.start[g + 1] as usize);
-        let mut e = s0;
-        while e < s1 {
-            // SAFETY: e + 8 <= s1 <= other.len(); indices < n_cov <= x.len() (checked in `new`).
-            let oi = _mm256_mullo_epi32(_mm256_loadu_si256(self.other.as_ptr().add(e) as *const __m256i), stride);
-            let mut d = [zero; 3];
-            let mut dv = [zero; 3];
-            let mut l2 = zero;
-            for c in 0..dim {
-                d[c] = _mm512_sub_pd(_mm512_i32gather_pd::<8>(oi, xptr.add(c)), xp[c]);
-                dv[c] = _mm512_sub_pd(_mm512_i32gather_pd::<8>(oi, vptr.add(c)), vp[c]);
-                l2 = _mm512_fmadd_pd(d[c], d[c], l2);
-            }
-            let h = _mm512_mul_pd(l2, half);
-            let mut y = _mm512_rsqrt14_pd(l2);
-            // (h·y)·y, not h·(y·y): y² = 1/L² overflows for L < 1e-154 (found by the stability
-            // tests: springs that had decayed to 1e-155 m turned into NaN).
-            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
-            y = _mm512_mul_pd(y, _mm512_fnmadd_pd(_mm512_mul_pd(h, y), y, three_halves));
-            // Padding and coincident endpoints (L = 0): no force, as in the scalar path.
-            let y = _mm512_maskz_mov_pd(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(l2, zero), y);
-            let l = _mm512_mul_pd(l2, y);
-            let mut vn = zero;
-            for c in 0..dim {
-                d[c] = _mm512_mul_pd(d[c], y); // unit axis n
-                vn = _mm512_fmadd_pd(dv[c], d[c], vn);
-            }
-            let (kk, cc) = match self.uniform {
-                Some((k, c)) => (_mm512_set1_pd(k), _mm512_set1_pd(c)),
-                None => (_mm512_loadu_pd(self.e_k.as_ptr().add(e)), _mm512_loadu_pd(self.e_c.as_ptr().add(e))),
-            };
-            let l0 = _mm512_loadu_pd(self.e_rest.as_ptr().add(e));
-            let mag = _mm512_fmadd_pd(cc, vn, _mm512_mul_pd(kk, _mm512_sub_pd(l, l0)));
-            for c in 0..dim {
-                acc[c] = _mm512_fmadd_pd(mag, d[c], acc[c]);
-            }
-            if want {
-                power = _mm512_fmadd_pd(_mm512_mul_pd(cc, vn), vn, power);
-            }
-            e += SLICE;
-        }
-        let mut comps = [[0.0f64; 8]; 3];
-        for c in 0..dim {
-            _mm512_storeu_pd(comps[c].as_mut_ptr(), acc[c]);
-        }
-        for (l, o) in out.iter_mut().enumerate().take(SLICE) {
-            let f = V::from_slice(&[comps[0][l], comps[1][l], comps[2][l]][..dim]);
-            *o = if assign { f } else { *o + f };
-        }
-        0.5 * _mm512_reduce_add_pd(power)
-    }
-}
-
-impl<V: Vector> Term<V> for Springs<V> {
-    fn name(&self) -> &str {
-        &self.name
-    }
-
-    fn add_forces(&mut self, x: &[V], v: &[V], _model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
+    /// `add_forces` at a given SIMD level.
+    fn forces(&self, level: simd::Level, x: &[V], v: &[V], f: &mut [V], want: bool, assign: bool) -> Real {
         let want = want && self.any_damping;
         let n_cov = self.n_cov;
-        let simd = simd_available::<V>();
         // Chunks start at multiples of par::CHUNK, itself a multiple of SLICE: slices never
         // straddle two chunks.
-        let power = par::chunks1_sum(&mut f[..n_cov], |p0, f| {
-            let mut pw = 0.0;
-            let mut k = 0;
-            #[cfg(target_arch = "x86_64")]
-            if simd {
-                while k + SLICE <= f.len() {
-                    // SAFETY: AVX-512F detected at run time; the slice's 8 particles exist.
-                    pw += unsafe { self.slice_avx512((p0 + k) / SLICE, &mut f[k..k + SLICE], x, v, want, assign) };
-                    k += SLICE;
-                }
-            }
-            for (q, fp) in f.iter_mut().enumerate().skip(k) {
-                let (fv, p) = self.particle_force(p0 + q, x, v, want);
-                *fp = if assign { fv } else { *fp + fv };
-                pw += p;
-            }
-            pw
+        let power = par::chunks1_sum(&mut f[..n_cov], |p0, out| {
+            simd::dispatch(level, SliceForces { sp: self, x, v, g0: p0 / SLICE, out, want, assign })
         });
         if assign {
             par::chunks1(&mut f[n_cov..], |_, f| f.fill(V::ZERO));
@@ -347,7 +317,16 @@ impl<V: Vector> Term<V> for Springs<V> {
             0.0
         }
     }
+}
 
+impl<V: Vector> Term<V> for Springs<V> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn add_forces(&mut self, x: &[V], v: &[V], _model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
+        self.forces(simd::level(), x, v, f, want, assign)
+    }
     fn potential(&self, x: &[V], _m: &Model) -> Option<Real> {
         Some(par::sum(self.len(), 0.0, |r| {
             let mut u = 0.0;
@@ -389,5 +368,63 @@ impl<V: Vector> Term<V> for Springs<V> {
         }
         let t = (1.0 / w2.sqrt()).min(1.0 / lam);
         t.is_finite().then_some(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simd::Level;
+    use glam::{DVec2, DVec3};
+
+    fn lcg(s: &mut u64) -> f64 {
+        *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*s >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// A random network over 203 particles (a partial last slice, uneven degrees, one spring of
+    /// zero length) at every level this CPU has, against the scalar per-particle reference.
+    fn check<V: Vector>(uniform: bool) {
+        let n = 203;
+        let mut s = 5;
+        let mut x: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        x[7] = x[3];
+        let v: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5][..V::DIM])).collect();
+        let (mut i, mut j) = (vec![3u32], vec![7u32]);
+        for a in 0..n as u32 {
+            for _ in 0..(a % 5) {
+                let b = (lcg(&mut s) * n as f64) as u32;
+                if b != a && !(i.contains(&a.min(b)) && j.contains(&a.max(b))) {
+                    i.push(a);
+                    j.push(b);
+                }
+            }
+        }
+        let m = i.len();
+        let k: Vec<f64> = (0..m).map(|q| if uniform { 50.0 } else { 10.0 + q as f64 }).collect();
+        let c: Vec<f64> = (0..m).map(|q| if uniform { 0.3 } else { 0.01 * q as f64 }).collect();
+        let rest: Vec<f64> = (0..m).map(|_| 0.2 * lcg(&mut s)).collect();
+        let sp = Springs::<V>::new("s".into(), i, j, k, c, rest, n).unwrap();
+        let (want, pw): (Vec<V>, f64) = {
+            let r: Vec<(V, f64)> = (0..n).map(|p| sp.particle_force(p, &x, &v, true)).collect();
+            (r.iter().map(|a| a.0).collect(), r.iter().map(|a| a.1).sum())
+        };
+        let scale = want.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+        for level in Level::available() {
+            let mut f = vec![V::ZERO; n];
+            let p = sp.forces(level, &x, &v, &mut f, true, true);
+            for q in 0..n {
+                assert!((f[q] - want[q]).length_squared().sqrt() <= 1e-13 * scale, "{level:?} particle {q}: {:?} vs {:?}", f[q], want[q]);
+            }
+            assert!((p - pw).abs() <= 1e-12 * pw, "{level:?} power {p} vs {pw}");
+        }
+    }
+
+    #[test]
+    fn every_level_matches_the_scalar_reference() {
+        check::<DVec2>(true);
+        check::<DVec3>(true);
+        check::<DVec2>(false);
+        check::<DVec3>(false);
     }
 }

@@ -1,0 +1,602 @@
+//! One portable SIMD layer for every hot kernel. A kernel is written once, generic over a token
+//! `S: Simd` and a precision `F: Float`, and [`dispatch`] runs it compiled for the level picked at
+//! run time: scalar, AVX2 + FMA (x86-64-v3), AVX-512 (x86-64-v4) or NEON (aarch64).
+//!
+//! Built on `pulp` (the layer under faer and gemm). Why pulp: its tokens can only be made when the
+//! CPU has the features, so kernel bodies hold no `unsafe` and name no intrinsics; one generic
+//! source is compiled per level inside a `#[target_feature]` wrapper (runtime dispatch, no
+//! `target-cpu=native`); it covers every level we ship for, and it is maintained as faer's base.
+//! Considered and not taken: `multiversion` clones whole functions but has no rsqrt, masks or
+//! selects; `wide` fixes the level at compile time; `std::simd` is nightly-only; a layer of our
+//! own would be more unsafe code to keep.
+//!
+//! What physics kernels need beyond pulp lives here: [`Simd::rsqrt_f64s`] / [`Simd::rsqrt_f32s`],
+//! 1/√x from the hardware estimate refined by Newton steps — one primitive with a fast
+//! implementation per level and a portable default (a square root and a division) — and
+//! [`Float`] / [`P`], which let one kernel source serve f32 and f64 with arithmetic operators.
+//!
+//! The level is chosen once per process (one probe for the whole core): the best the CPU has, or
+//! the one named by `PHYSCORE_SIMD=scalar|avx2|avx512|neon|auto`. A level the CPU lacks, or an
+//! unknown name, is an error (`check`), never a crash. Tests can switch levels (`set_level`).
+use crate::error::{invalid, Result};
+use std::fmt::Debug;
+use std::ops::{Add, Div, Mul, Neg, Sub};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::OnceLock;
+
+pub use pulp::Simd as PulpSimd;
+
+#[cfg(target_arch = "aarch64")]
+mod aarch64;
+#[cfg(target_arch = "x86_64")]
+mod x86;
+
+/// An instruction-set level of the kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Level {
+    /// Portable code for the baseline target (one lane per operation).
+    Scalar,
+    /// x86-64-v3: AVX2 + FMA, 4 f64 / 8 f32 lanes.
+    Avx2,
+    /// x86-64-v4: AVX-512 F/BW/CD/DQ/VL, 8 f64 / 16 f32 lanes.
+    Avx512,
+    /// aarch64 NEON (Advanced SIMD), 2 f64 / 4 f32 lanes.
+    Neon,
+}
+
+impl Level {
+    pub const ALL: [Level; 4] = [Level::Scalar, Level::Avx2, Level::Avx512, Level::Neon];
+
+    /// The stable lower-case name (`PHYSCORE_SIMD` takes these).
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::Scalar => "scalar",
+            Level::Avx2 => "avx2",
+            Level::Avx512 => "avx512",
+            Level::Neon => "neon",
+        }
+    }
+
+    pub fn by_name(s: &str) -> Option<Level> {
+        Level::ALL.into_iter().find(|l| l.name() == s)
+    }
+
+    /// Whether this CPU (and this build's architecture) can run the level.
+    pub fn supported(self) -> bool {
+        match self {
+            Level::Scalar => true,
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx2 => pulp::x86::V3::try_new().is_some(),
+            #[cfg(target_arch = "x86_64")]
+            Level::Avx512 => pulp::x86::V4::try_new().is_some(),
+            #[cfg(target_arch = "aarch64")]
+            Level::Neon => pulp::aarch64::Neon::try_new().is_some(),
+            #[allow(unreachable_patterns)]
+            _ => false,
+        }
+    }
+
+    /// The levels this CPU supports, slowest first (scalar is always there).
+    pub fn available() -> Vec<Level> {
+        Level::ALL.into_iter().filter(|l| l.supported()).collect()
+    }
+
+    /// The fastest supported level.
+    pub fn best() -> Level {
+        *Level::available().last().expect("scalar is always available")
+    }
+}
+
+/// The level named by `PHYSCORE_SIMD` (or the best one), decided once per process.
+fn probe() -> &'static std::result::Result<Level, String> {
+    static PROBE: OnceLock<std::result::Result<Level, String>> = OnceLock::new();
+    PROBE.get_or_init(|| {
+        let Some(raw) = std::env::var_os("PHYSCORE_SIMD") else {
+            return Ok(Level::best());
+        };
+        let s = raw.to_string_lossy().trim().to_ascii_lowercase();
+        if s.is_empty() || s == "auto" {
+            return Ok(Level::best());
+        }
+        let names = || Level::available().iter().map(|l| l.name()).collect::<Vec<_>>().join(", ");
+        match Level::by_name(&s) {
+            None => Err(format!("PHYSCORE_SIMD={s:?} is not a level; valid: scalar, avx2, avx512, neon, auto (this CPU: {})", names())),
+            Some(l) if !l.supported() => Err(format!("PHYSCORE_SIMD={s:?}: this CPU cannot run {s}; it supports {} (or auto)", names())),
+            Some(l) => Ok(l),
+        }
+    })
+}
+
+/// 0: no override; 1 + index into `Level::ALL` otherwise.
+static FORCED: AtomicU8 = AtomicU8::new(0);
+
+/// The level the kernels run at, or the reason `PHYSCORE_SIMD` cannot be honoured.
+pub fn check() -> Result<Level> {
+    match FORCED.load(Ordering::Relaxed) {
+        0 => probe().clone().map_err(|e| invalid("PHYSCORE_SIMD", e)),
+        k => Ok(Level::ALL[k as usize - 1]),
+    }
+}
+
+/// The level the kernels run at (scalar if `PHYSCORE_SIMD` is invalid; scenes refuse to be built
+/// then, see `check`).
+#[inline]
+pub fn level() -> Level {
+    check().unwrap_or(Level::Scalar)
+}
+
+/// Forces a level for this process (`None`: back to `PHYSCORE_SIMD` or the best). Results at
+/// different levels agree to a few ulp, not bit for bit. Errors if the CPU lacks the level.
+pub fn set_level(l: Option<Level>) -> Result<()> {
+    match l {
+        None => FORCED.store(0, Ordering::Relaxed),
+        Some(l) if !l.supported() => {
+            let have = Level::available().iter().map(|l| l.name()).collect::<Vec<_>>().join(", ");
+            return Err(invalid("level", format!("this CPU cannot run {}; it supports {have}", l.name())));
+        }
+        Some(l) => FORCED.store(1 + Level::ALL.iter().position(|&x| x == l).expect("listed") as u8, Ordering::Relaxed),
+    }
+    Ok(())
+}
+
+/// A short description of the CPU (model name where the OS tells it, else the architecture).
+pub fn cpu_name() -> String {
+    #[cfg(target_os = "linux")]
+    if let Ok(s) = std::fs::read_to_string("/proc/cpuinfo") {
+        if let Some(l) = s.lines().find(|l| l.starts_with("model name") || l.starts_with("Model")) {
+            if let Some((_, v)) = l.split_once(':') {
+                return v.trim().to_string();
+            }
+        }
+    }
+    std::env::consts::ARCH.to_string()
+}
+
+/// pulp's SIMD operations plus the fast approximate reciprocal square root, per level.
+///
+/// `rsqrt_*` returns 1/√x to about 1 ulp (f64: a few ulp; f32: ≤ 3 ulp) for every positive
+/// finite x, and is unspecified (inf or NaN) for x = 0: kernels mask those lanes.
+pub trait Simd: pulp::Simd {
+    /// Rows `idx[..F64_LANES]` of two row-major `(n, dim)` arrays `a` and `b` (positions and
+    /// velocities, dim 2 or 3), one vector per component (component 2 is zero in 2D). Panics if
+    /// an index is out of bounds. Portable default: lane by lane; AVX-512 and AVX2 use the
+    /// hardware gather.
+    #[inline(always)]
+    fn gather_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([Self::f64s; 3], [Self::f64s; 3]) {
+        let l = Self::F64_LANES;
+        let idx = &idx[..l];
+        let zero = self.splat_f64s(0.0);
+        let (mut ra, mut rb) = ([zero; 3], [zero; 3]);
+        for c in 0..dim {
+            let (mut ba, mut bb) = ([0.0f64; 8], [0.0f64; 8]);
+            for k in 0..l {
+                let r = idx[k] as usize * dim + c;
+                ba[k] = a[r];
+                bb[k] = b[r];
+            }
+            ra[c] = pulp::bytemuck::pod_read_unaligned(pulp::bytemuck::cast_slice(&ba[..l]));
+            rb[c] = pulp::bytemuck::pod_read_unaligned(pulp::bytemuck::cast_slice(&bb[..l]));
+        }
+        (ra, rb)
+    }
+
+    #[inline(always)]
+    fn rsqrt_f64s(self, x: Self::f64s) -> Self::f64s {
+        self.div_f64s(self.splat_f64s(1.0), self.sqrt_f64s(x))
+    }
+    #[inline(always)]
+    fn rsqrt_f32s(self, x: Self::f32s) -> Self::f32s {
+        self.div_f32s(self.splat_f32s(1.0), self.sqrt_f32s(x))
+    }
+}
+
+impl Simd for pulp::Scalar {}
+
+/// One Newton–Raphson step for y ≈ 1/√x, with h = x/2: y (3/2 − (h y) y). Written (h·y)·y, not
+/// h·(y·y): y² overflows for x below 1e-308^(1/2)·… (springs decayed to 1e-155 m turned NaN).
+/// The error e becomes ≈ 1.5 e² per step.
+#[inline(always)]
+pub(crate) fn newton_rsqrt_f64<S: pulp::Simd>(s: S, h: S::f64s, y: S::f64s) -> S::f64s {
+    s.mul_f64s(y, s.negate_mul_add_f64s(s.mul_f64s(h, y), y, s.splat_f64s(1.5)))
+}
+#[inline(always)]
+pub(crate) fn newton_rsqrt_f32<S: pulp::Simd>(s: S, h: S::f32s, y: S::f32s) -> S::f32s {
+    s.mul_f32s(y, s.negate_mul_add_f32s(s.mul_f32s(h, y), y, s.splat_f32s(1.5)))
+}
+
+/// A kernel, generic over the SIMD token. `run` and everything it calls must be
+/// `#[inline(always)]` so that it is compiled inside the level's `#[target_feature]` wrapper.
+pub trait Kernel {
+    type Output;
+    fn run<S: Simd>(self, s: S) -> Self::Output;
+}
+
+/// Adapts a `Kernel` to pulp's `WithSimd`, handing it the concrete token (whose type implements
+/// our `Simd`, which pulp's generic parameter cannot promise).
+struct Run<K, S>(K, S);
+impl<K: Kernel, T: Simd> pulp::WithSimd for Run<K, T> {
+    type Output = K::Output;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> K::Output {
+        self.0.run(self.1)
+    }
+}
+
+/// Runs `k` compiled for `level` (scalar if this CPU cannot run `level`).
+#[inline]
+pub fn dispatch<K: Kernel>(level: Level, k: K) -> K::Output {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if level == Level::Avx512 {
+            if let Some(s) = pulp::x86::V4::try_new() {
+                return pulp::Simd::vectorize(s, Run(k, s));
+            }
+        } else if level == Level::Avx2 {
+            if let Some(s) = pulp::x86::V3::try_new() {
+                return pulp::Simd::vectorize(s, Run(k, s));
+            }
+        }
+    }
+    #[cfg(target_arch = "aarch64")]
+    if level == Level::Neon {
+        if let Some(s) = pulp::aarch64::Neon::try_new() {
+            return pulp::Simd::vectorize(s, Run(k, s));
+        }
+    }
+    let _ = level;
+    k.run(pulp::Scalar::new())
+}
+
+/// The precision of a kernel: f32 or f64, with its SIMD vectors for token `S`.
+pub trait Float:
+    Copy
+    + Send
+    + Sync
+    + Default
+    + PartialOrd
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + Debug
+    + pulp::bytemuck::Pod
+    + 'static
+{
+    const ZERO: Self;
+    const ONE: Self;
+    fn of(x: f64) -> Self;
+    fn f64(self) -> f64;
+    fn sqrt(self) -> Self;
+    /// Plain compare (not IEEE maxNum): vectorises to one instruction.
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        if self > o {
+            self
+        } else {
+            o
+        }
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        if self < o {
+            self
+        } else {
+            o
+        }
+    }
+
+    type V<S: Simd>: Copy + pulp::bytemuck::Pod;
+    type M<S: Simd>: Copy;
+    fn lanes<S: Simd>() -> usize;
+    fn splat<S: Simd>(s: S, x: Self) -> Self::V<S>;
+    /// The first `lanes` entries of `a` (panics if `a` is shorter).
+    fn load<S: Simd>(s: S, a: &[Self]) -> Self::V<S>;
+    fn vadd<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn vsub<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn vmul<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn vdiv<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    /// a·b + c (fused where the level has FMA; the scalar level has none and must not call libm's
+    /// software fma).
+    fn mul_add<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>, c: Self::V<S>) -> Self::V<S>;
+    /// c − a·b.
+    fn neg_mul_add<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>, c: Self::V<S>) -> Self::V<S>;
+    fn vmax<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn vmin<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn vlt<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::M<S>;
+    fn vgt<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::M<S>;
+    /// `m ? a : b` lane by lane.
+    fn select<S: Simd>(s: S, m: Self::M<S>, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    fn rsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
+    /// Sum of the lanes (a fixed pairwise order per level).
+    fn sum<S: Simd>(s: S, a: Self::V<S>) -> Self;
+}
+
+macro_rules! float_impl {
+    ($t:ty, $v:ident, $m:ident, $lanes:ident, $($op:ident = $f:ident),*) => {
+        impl Float for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            #[inline(always)]
+            fn of(x: f64) -> Self {
+                x as $t
+            }
+            #[inline(always)]
+            fn f64(self) -> f64 {
+                self as f64
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            type V<S: Simd> = S::$v;
+            type M<S: Simd> = S::$m;
+            #[inline(always)]
+            fn lanes<S: Simd>() -> usize {
+                S::$lanes
+            }
+            #[inline(always)]
+            fn load<S: Simd>(_: S, a: &[Self]) -> S::$v {
+                pulp::bytemuck::pod_read_unaligned(pulp::bytemuck::cast_slice(&a[..S::$lanes]))
+            }
+            float_impl!(@ops $t, $v, $m, $($op = $f),*);
+        }
+    };
+    (@ops $t:ty, $v:ident, $m:ident, splat = $splat:ident, add = $add:ident, sub = $sub:ident, mul = $mul:ident,
+     div = $div:ident, fma = $fma:ident, fnma = $fnma:ident, max = $max:ident, min = $min:ident, lt = $lt:ident,
+     gt = $gt:ident, select = $sel:ident, rsqrt = $rsqrt:ident, sum = $sum:ident) => {
+        #[inline(always)]
+        fn splat<S: Simd>(s: S, x: Self) -> S::$v {
+            s.$splat(x)
+        }
+        #[inline(always)]
+        fn vadd<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$add(a, b)
+        }
+        #[inline(always)]
+        fn vsub<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$sub(a, b)
+        }
+        #[inline(always)]
+        fn vmul<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$mul(a, b)
+        }
+        #[inline(always)]
+        fn vdiv<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$div(a, b)
+        }
+        #[inline(always)]
+        fn mul_add<S: Simd>(s: S, a: S::$v, b: S::$v, c: S::$v) -> S::$v {
+            s.$fma(a, b, c)
+        }
+        #[inline(always)]
+        fn neg_mul_add<S: Simd>(s: S, a: S::$v, b: S::$v, c: S::$v) -> S::$v {
+            s.$fnma(a, b, c)
+        }
+        #[inline(always)]
+        fn vmax<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$max(a, b)
+        }
+        #[inline(always)]
+        fn vmin<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$v {
+            s.$min(a, b)
+        }
+        #[inline(always)]
+        fn vlt<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$m {
+            s.$lt(a, b)
+        }
+        #[inline(always)]
+        fn vgt<S: Simd>(s: S, a: S::$v, b: S::$v) -> S::$m {
+            s.$gt(a, b)
+        }
+        #[inline(always)]
+        fn select<S: Simd>(s: S, m: S::$m, a: S::$v, b: S::$v) -> S::$v {
+            s.$sel(m, a, b)
+        }
+        #[inline(always)]
+        fn rsqrt<S: Simd>(s: S, x: S::$v) -> S::$v {
+            s.$rsqrt(x)
+        }
+        #[inline(always)]
+        fn sum<S: Simd>(s: S, a: S::$v) -> Self {
+            s.$sum(a)
+        }
+    };
+}
+
+float_impl!(f64, f64s, m64s, F64_LANES,
+    splat = splat_f64s, add = add_f64s, sub = sub_f64s, mul = mul_f64s, div = div_f64s, fma = mul_add_e_f64s,
+    fnma = negate_mul_add_e_f64s, max = max_f64s, min = min_f64s, lt = less_than_f64s, gt = greater_than_f64s,
+    select = select_f64s, rsqrt = rsqrt_f64s, sum = reduce_sum_f64s);
+float_impl!(f32, f32s, m32s, F32_LANES,
+    splat = splat_f32s, add = add_f32s, sub = sub_f32s, mul = mul_f32s, div = div_f32s, fma = mul_add_e_f32s,
+    fnma = negate_mul_add_e_f32s, max = max_f32s, min = min_f32s, lt = less_than_f32s, gt = greater_than_f32s,
+    select = select_f32s, rsqrt = rsqrt_f32s, sum = reduce_sum_f32s);
+
+/// A SIMD vector of `F` with its token, so kernels read like scalar code (`a * b + c`). The token
+/// is zero-sized: a `P` is just the register.
+pub struct P<S: Simd, F: Float> {
+    pub s: S,
+    pub v: F::V<S>,
+}
+
+/// A lane mask of `P`.
+pub struct Mask<S: Simd, F: Float>(pub F::M<S>);
+
+impl<S: Simd, F: Float> Clone for P<S, F> {
+    #[inline(always)]
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<S: Simd, F: Float> Copy for P<S, F> {}
+impl<S: Simd, F: Float> Clone for Mask<S, F> {
+    #[inline(always)]
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<S: Simd, F: Float> Copy for Mask<S, F> {}
+
+impl<S: Simd, F: Float> P<S, F> {
+    #[inline(always)]
+    pub fn lanes() -> usize {
+        F::lanes::<S>()
+    }
+    #[inline(always)]
+    pub fn splat(s: S, x: F) -> Self {
+        P { s, v: F::splat(s, x) }
+    }
+    #[inline(always)]
+    pub fn zero(s: S) -> Self {
+        Self::splat(s, F::ZERO)
+    }
+    /// `a[..lanes]` (panics if shorter).
+    #[inline(always)]
+    pub fn load(s: S, a: &[F]) -> Self {
+        P { s, v: F::load(s, a) }
+    }
+    /// Lane l = f(l), for l < lanes (lane indices, odd gathers; see `Simd::gather_rows_f64s`).
+    #[inline(always)]
+    pub fn from_fn(s: S, mut f: impl FnMut(usize) -> F) -> Self {
+        let mut buf = [F::ZERO; 16];
+        for (l, b) in buf.iter_mut().enumerate().take(Self::lanes()) {
+            *b = f(l);
+        }
+        Self::load(s, &buf)
+    }
+    /// Lanes as an array (first `lanes` entries used).
+    #[inline(always)]
+    pub fn to_array(self) -> [F; 16] {
+        let mut buf = [F::ZERO; 16];
+        let n = Self::lanes();
+        let bytes: &mut [u8] = pulp::bytemuck::cast_slice_mut(&mut buf[..n]);
+        bytes.copy_from_slice(pulp::bytemuck::bytes_of(&self.v));
+        buf
+    }
+    /// self·b + c.
+    #[inline(always)]
+    pub fn mul_add(self, b: Self, c: Self) -> Self {
+        P { s: self.s, v: F::mul_add(self.s, self.v, b.v, c.v) }
+    }
+    /// c − self·b.
+    #[inline(always)]
+    pub fn neg_mul_add(self, b: Self, c: Self) -> Self {
+        P { s: self.s, v: F::neg_mul_add(self.s, self.v, b.v, c.v) }
+    }
+    #[inline(always)]
+    pub fn max(self, o: Self) -> Self {
+        P { s: self.s, v: F::vmax(self.s, self.v, o.v) }
+    }
+    #[inline(always)]
+    pub fn min(self, o: Self) -> Self {
+        P { s: self.s, v: F::vmin(self.s, self.v, o.v) }
+    }
+    #[inline(always)]
+    pub fn lt(self, o: Self) -> Mask<S, F> {
+        Mask(F::vlt(self.s, self.v, o.v))
+    }
+    #[inline(always)]
+    pub fn gt(self, o: Self) -> Mask<S, F> {
+        Mask(F::vgt(self.s, self.v, o.v))
+    }
+    /// 1/√self (see `Simd::rsqrt_f64s`; unspecified at 0).
+    #[inline(always)]
+    pub fn rsqrt(self) -> Self {
+        P { s: self.s, v: F::rsqrt(self.s, self.v) }
+    }
+    #[inline(always)]
+    pub fn sum(self) -> F {
+        F::sum(self.s, self.v)
+    }
+}
+
+impl<S: Simd, F: Float> Mask<S, F> {
+    /// `self ? a : b`.
+    #[inline(always)]
+    pub fn select(self, a: P<S, F>, b: P<S, F>) -> P<S, F> {
+        P { s: a.s, v: F::select(a.s, self.0, a.v, b.v) }
+    }
+}
+
+macro_rules! binop {
+    ($tr:ident, $m:ident, $f:ident) => {
+        impl<S: Simd, F: Float> $tr for P<S, F> {
+            type Output = Self;
+            #[inline(always)]
+            fn $m(self, o: Self) -> Self {
+                P { s: self.s, v: F::$f(self.s, self.v, o.v) }
+            }
+        }
+    };
+}
+binop!(Add, add, vadd);
+binop!(Sub, sub, vsub);
+binop!(Mul, mul, vmul);
+binop!(Div, div, vdiv);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Rsqrt<'a, F: Float>(&'a [F], &'a mut [F]);
+    impl<F: Float> Kernel for Rsqrt<'_, F> {
+        type Output = ();
+        #[inline(always)]
+        fn run<S: Simd>(self, s: S) {
+            let l = P::<S, F>::lanes();
+            for (x, y) in self.0.chunks_exact(l).zip(self.1.chunks_exact_mut(l)) {
+                let r = P::<S, F>::load(s, x).rsqrt().to_array();
+                y.copy_from_slice(&r[..l]);
+            }
+        }
+    }
+
+    /// x over 600 decades (f64) / 70 (f32), including the f32 range limits that the AVX2 f64 path
+    /// must route around.
+    fn inputs<F: Float>(lo: i32, hi: i32) -> Vec<F> {
+        let mut v = Vec::new();
+        let mut e = lo as f64;
+        while e < hi as f64 {
+            for m in [1.0, 1.37, 2.0, 3.99, 7.1] {
+                v.push(F::of(m * 10f64.powf(e)));
+            }
+            e += 0.37;
+        }
+        v.resize(v.len().div_ceil(16) * 16, F::ONE);
+        v
+    }
+
+    #[test]
+    fn rsqrt_is_accurate_on_every_available_level() {
+        for level in Level::available() {
+            let x = inputs::<f64>(-300, 300);
+            let mut y = vec![0.0; x.len()];
+            dispatch(level, Rsqrt(&x, &mut y));
+            for (a, b) in x.iter().zip(&y) {
+                let exact = 1.0 / a.sqrt();
+                assert!(((b - exact) / exact).abs() < 4.0 * f64::EPSILON, "{level:?} f64 rsqrt({a:e}) = {b:e}, want {exact:e}");
+            }
+            let x = inputs::<f32>(-36, 37);
+            let mut y = vec![0.0f32; x.len()];
+            dispatch(level, Rsqrt(&x, &mut y));
+            for (a, b) in x.iter().zip(&y) {
+                let exact = 1.0 / (*a as f64).sqrt();
+                assert!(((*b as f64 - exact) / exact).abs() < 4.0 * f32::EPSILON as f64, "{level:?} f32 rsqrt({a:e}) = {b:e}");
+            }
+        }
+    }
+
+    #[test]
+    fn level_names_round_trip_and_unsupported_levels_are_refused() {
+        for l in Level::ALL {
+            assert_eq!(Level::by_name(l.name()), Some(l));
+        }
+        assert!(Level::Scalar.supported());
+        assert!(Level::available().contains(&Level::best()));
+        #[cfg(target_arch = "x86_64")]
+        assert!(set_level(Some(Level::Neon)).is_err());
+        #[cfg(target_arch = "aarch64")]
+        assert!(set_level(Some(Level::Avx2)).is_err());
+    }
+}
