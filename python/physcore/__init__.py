@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from . import _core
 from ._errors import InvalidInputError, PhyscoreError, SimulationDiverged
+from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
@@ -31,6 +32,10 @@ __all__ = [
     "SimulationDiverged",
     "scenes",
     "render",
+    "simd_level",
+    "simd_levels",
+    "set_simd_level",
+    "info",
     "__version__",
 ]
 

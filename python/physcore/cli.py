@@ -205,6 +205,17 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_info() -> int:
+    from ._system import info
+
+    d = info()
+    print(f"physcore {d['version']} ({d['build']} build)")
+    print(f"cpu: {d['cpu']}")
+    print(f"simd level: {d['simd_level']} (available: {', '.join(d['simd_levels'])}; set PHYSCORE_SIMD to force one)")
+    print(f"threads: {d['threads']}")
+    return 1 if d["simd_level"].startswith("invalid") else 0
+
+
 def _substeps_arg(text: str) -> Any:
     return text if text == "auto" else _positive_int(text)
 
@@ -467,6 +478,10 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
 
     sub.add_parser("scenes", help="list the ready-made scenes and their parameters",
                    description="List the ready-made scenes, their one-line descriptions and parameters.")
+    sub.add_parser("info", help="show the version, CPU, SIMD level and threads",
+                   description="Show physcore's version and build, the CPU, the SIMD level the kernels run at "
+                   "(set PHYSCORE_SIMD=scalar|avx2|avx512|neon|auto to force one) and the levels this CPU has, "
+                   "and the default thread count.")
 
     r = sub.add_parser(
         "render",
@@ -530,6 +545,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         args = parser.parse_args(None if argv is None else list(argv))
         if args.command == "scenes":
             return _cmd_scenes(args)
+        if args.command == "info":
+            return _cmd_info()
         return _cmd_render(args, render_parser)
     except SystemExit as e:  # argparse errors (2) and --help/--version (0)
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 1)

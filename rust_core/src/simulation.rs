@@ -42,6 +42,8 @@ impl<V: Vector> Simulation<V> {
     /// `threads`: `None` uses rayon's global pool (all cores, or `RAYON_NUM_THREADS`).
     pub fn new(integrator: &str, dt: Real, threads: Option<usize>) -> Result<Self> {
         check_dt(dt)?;
+        // A PHYSCORE_SIMD the CPU cannot honour is refused here, before any state exists.
+        crate::simd::check()?;
         let pool = match threads {
             None => None,
             Some(0) => return Err(invalid("threads", "must be >= 1 (or None for all cores)")),

@@ -483,11 +483,47 @@ fn default_threads() -> usize {
     rayon::current_num_threads()
 }
 
+/// The SIMD level the kernels run at ("scalar", "avx2", "avx512" or "neon"); InvalidInputError
+/// if PHYSCORE_SIMD names a level that is unknown or that this CPU lacks.
+#[pyfunction]
+fn simd_level(py: Python<'_>) -> PyResult<&'static str> {
+    crate::simd::check().map(|l| l.name()).map_err(|e| to_py(py, e))
+}
+
+/// The SIMD levels this CPU supports, slowest first.
+#[pyfunction]
+fn simd_levels() -> Vec<&'static str> {
+    crate::simd::Level::available().into_iter().map(|l| l.name()).collect()
+}
+
+/// Forces the SIMD level for this process (None: back to PHYSCORE_SIMD, else the best).
+#[pyfunction]
+#[pyo3(signature = (level=None))]
+fn set_simd_level(py: Python<'_>, level: Option<&str>) -> PyResult<()> {
+    let l = match level {
+        None => None,
+        Some(name) => Some(crate::simd::Level::by_name(name).ok_or_else(|| {
+            to_py(py, crate::error::invalid("level", format!("unknown SIMD level {name:?}; valid: scalar, avx2, avx512, neon")))
+        })?),
+    };
+    crate::simd::set_level(l).map_err(|e| to_py(py, e))
+}
+
+/// A short description of this CPU.
+#[pyfunction]
+fn cpu_name() -> String {
+    crate::simd::cpu_name()
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation2>()?;
     m.add_function(wrap_pyfunction!(integrator_table, m)?)?;
     m.add_function(wrap_pyfunction!(default_threads, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_level, m)?)?;
+    m.add_function(wrap_pyfunction!(simd_levels, m)?)?;
+    m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
+    m.add_function(wrap_pyfunction!(cpu_name, m)?)?;
     m.add_function(wrap_pyfunction!(neighbors, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -100,8 +100,8 @@ fn probe() -> &'static std::result::Result<Level, String> {
         }
         let names = || Level::available().iter().map(|l| l.name()).collect::<Vec<_>>().join(", ");
         match Level::by_name(&s) {
-            None => Err(format!("PHYSCORE_SIMD={s:?} is not a level; valid: scalar, avx2, avx512, neon, auto (this CPU: {})", names())),
-            Some(l) if !l.supported() => Err(format!("PHYSCORE_SIMD={s:?}: this CPU cannot run {s}; it supports {} (or auto)", names())),
+            None => Err(format!("{s:?} is not a SIMD level; valid: scalar, avx2, avx512, neon, auto (this CPU has {})", names())),
+            Some(l) if !l.supported() => Err(format!("this CPU cannot run {s}; it has {} (or use auto)", names())),
             Some(l) => Ok(l),
         }
     })

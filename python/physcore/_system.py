@@ -1,0 +1,62 @@
+"""What physcore runs on: the CPU, the SIMD level of the kernels, threads and build."""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional
+
+from . import _core
+
+__all__ = ["simd_level", "simd_levels", "set_simd_level", "info"]
+
+
+def simd_level() -> str:
+    """The instruction-set level the hot kernels run at.
+
+    One of ``"scalar"``, ``"avx2"`` (x86-64-v3: AVX2 + FMA), ``"avx512"`` (x86-64-v4) or ``"neon"``
+    (aarch64). By default the best level this CPU has; the environment variable
+    ``PHYSCORE_SIMD=scalar|avx2|avx512|neon|auto`` (read once, at first use) or
+    :func:`set_simd_level` forces one.
+
+    Raises
+    ------
+    InvalidInputError
+        ``PHYSCORE_SIMD`` names an unknown level or one this CPU lacks (scenes then refuse to be
+        built with the same error).
+    """
+    return _core.simd_level()
+
+
+def simd_levels() -> List[str]:
+    """The SIMD levels this CPU supports, slowest first (``"scalar"`` is always there)."""
+    return list(_core.simd_levels())
+
+
+def set_simd_level(level: Optional[str] = None) -> None:
+    """Force the SIMD level of the kernels for this process (``None``: back to ``PHYSCORE_SIMD``,
+    else the best level).
+
+    Every level computes the same physics; results agree to a few ulp, not bit for bit, so switch
+    before a run, not in the middle of one you want to reproduce exactly. Thread count never
+    changes results at a given level.
+
+    Raises
+    ------
+    InvalidInputError
+        ``level`` is not one of :func:`simd_levels` (unknown, or this CPU lacks it).
+    """
+    _core.set_simd_level(level)
+
+
+def info() -> Dict[str, Any]:
+    """physcore's version, build profile, CPU, SIMD level (active and available) and default threads."""
+    try:
+        level = _core.simd_level()
+    except ValueError as e:  # an invalid PHYSCORE_SIMD: report it rather than fail
+        level = f"invalid ({e})"
+    return {
+        "version": _core.__version__,
+        "build": _core.build_profile,
+        "cpu": _core.cpu_name(),
+        "simd_level": level,
+        "simd_levels": simd_levels(),
+        "threads": _core.default_threads(),
+    }
