@@ -12,6 +12,7 @@ import warnings
 from typing import Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, settings
 
 import physcore as pc
@@ -41,6 +42,25 @@ INTEGRATOR_NAMES: Tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
 SYMPLECTIC: Tuple[str, ...] = ("semi_implicit_euler", "verlet")
 
 EPS = np.finfo(np.float64).eps
+
+#: Every SIMD level the kernels are written for; a test taking the ``simd_level`` fixture runs once
+#: per level this CPU has and is skipped, saying so, for the others.
+SIMD_LEVELS: Tuple[str, ...] = ("scalar", "avx2", "avx512", "neon")
+
+
+@pytest.fixture(params=SIMD_LEVELS)
+def simd_level(request):
+    """Runs the test with the kernels forced to one SIMD level (restored afterwards)."""
+    level = request.param
+    have = pc.simd_levels()
+    if level not in have:
+        pytest.skip(f"{level}: this CPU cannot run it (it has {', '.join(have)}); not claimed as tested here")
+    pc.set_simd_level(level)
+    try:
+        assert pc.simd_level() == level
+        yield level
+    finally:
+        pc.set_simd_level(None)
 
 
 # --------------------------------------------------------------------------- scene builders

@@ -1,0 +1,130 @@
+"""The SIMD levels: selection, errors, and the agreement tests.
+
+Each hot kernel (springs, pairwise gravity in f64 and f32, SPH density and forces in f32 and f64)
+is one source compiled for every level; these tests run each scene at every level this CPU has
+(the ``simd_level`` fixture skips the others with the reason) and compare it with the scalar
+level, and check that at that level 1 and 2 threads give bit-identical results. Tolerances come
+from the rsqrt primitive's accuracy (a few ulp) amplified by a few steps of dynamics, not from
+a previous run.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import physcore as pc
+
+# ------------------------------------------------------------------------------- selection
+
+
+def test_the_active_level_is_one_this_cpu_has():
+    levels = pc.simd_levels()
+    assert levels[0] == "scalar"
+    assert set(levels) <= {"scalar", "avx2", "avx512", "neon"}
+    assert pc.simd_level() in levels
+    info = pc.info()
+    assert info["simd_level"] == pc.simd_level() and info["simd_levels"] == levels
+    assert info["cpu"] and info["threads"] >= 1
+
+
+def test_set_simd_level_refuses_unknown_and_unsupported_levels():
+    before = pc.simd_level()
+    with pytest.raises(pc.InvalidInputError, match="level"):
+        pc.set_simd_level("sse9")
+    missing = [lv for lv in ("avx2", "avx512", "neon") if lv not in pc.simd_levels()]
+    for lv in missing:
+        with pytest.raises(pc.InvalidInputError, match="cannot run"):
+            pc.set_simd_level(lv)
+    assert pc.simd_level() == before  # a refused call changes nothing
+
+
+def _run(code: str, env: dict) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", code], env={**os.environ, **env}, capture_output=True, text=True, timeout=120)
+
+
+def test_physcore_simd_environment_variable_forces_a_level():
+    for lv in pc.simd_levels() + ["auto"]:
+        r = _run("import physcore as pc, json; print(json.dumps(pc.simd_level()))", {"PHYSCORE_SIMD": lv.upper()})
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout) == (pc.simd_levels()[-1] if lv == "auto" else lv)
+
+
+@pytest.mark.parametrize("value", ["avx1024", "neon" if sys.platform != "darwin" else "avx2"])
+def test_an_invalid_physcore_simd_is_a_clear_error_not_a_crash(value):
+    if value in pc.simd_levels():
+        pytest.skip(f"this CPU has {value}")
+    code = (
+        "import physcore as pc\n"
+        "try:\n    pc.Scene(2)\nexcept pc.InvalidInputError as e:\n    print('refused:', e)\n"
+    )
+    r = _run(code, {"PHYSCORE_SIMD": value})
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("refused: PHYSCORE_SIMD") and value in r.stdout
+    cli = subprocess.run([sys.executable, "-m", "physcore", "info"], env={**os.environ, "PHYSCORE_SIMD": value},
+                         capture_output=True, text=True, timeout=120)
+    assert cli.returncode == 1 and "invalid" in cli.stdout and "Traceback" not in cli.stderr
+
+
+def test_cli_info_names_the_cpu_and_level():
+    r = subprocess.run([sys.executable, "-m", "physcore", "info"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert f"simd level: {pc.simd_level()}" in r.stdout and "cpu:" in r.stdout
+
+
+# ------------------------------------------------------------------------------- agreement
+
+
+def _cloth(threads):
+    return pc.scenes.cloth(n=72, threads=threads)  # 5184 particles: past the parallel threshold
+
+
+def _nbody(threads, precision):
+    rng = np.random.default_rng(3)
+    s = pc.Scene(3, integrator="verlet", dt=1e-3, threads=threads, precision=precision)
+    s.add_particles(rng.normal(size=(301, 3)), masses=1.0 / 301)
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.01))
+    return s
+
+
+def _fluid(threads, precision, dim):
+    return pc.scenes.dam_break(dim=dim, n=40 if dim == 2 else 10, precision=precision, threads=threads)
+
+
+SCENES = {
+    "cloth-springs-f64": (lambda t: _cloth(t), 20, 1e-12),
+    "nbody-f64": (lambda t: _nbody(t, "f64"), 20, 1e-12),
+    "nbody-f32": (lambda t: _nbody(t, "f32"), 20, 1e-5),
+    "sph2d-f32": (lambda t: _fluid(t, "f32", 2), 10, 1e-4),
+    "sph2d-f64": (lambda t: _fluid(t, "f64", 2), 10, 1e-11),
+    "sph3d-f32": (lambda t: _fluid(t, "f32", 3), 5, 1e-4),
+}
+
+
+def _final(name, threads):
+    build, steps, _ = SCENES[name]
+    s = build(threads)
+    x0 = s.positions
+    s.step(steps)
+    return x0, s.positions
+
+
+@pytest.mark.parametrize("name", SCENES)
+def test_every_level_agrees_with_scalar_and_is_thread_count_deterministic(name, simd_level):
+    x0, x1 = _final(name, 1)
+    _, x2 = _final(name, 2)
+    assert np.array_equal(x1, x2), f"{name} at {simd_level}: 1 and 2 threads differ"
+    pc.set_simd_level("scalar")
+    _, ref = _final(name, 1)
+    pc.set_simd_level(simd_level)
+    moved = np.abs(ref - x0).max()
+    assert moved > 0
+    tol = SCENES[name][2]
+    # Relative to how far the particles moved: float32 state rounding is shared by all levels.
+    assert np.abs(x1 - ref).max() <= tol * max(moved, np.abs(ref).max() * 1e-3), (
+        f"{name} at {simd_level}: max deviation {np.abs(x1 - ref).max():.3e} from scalar (moved {moved:.3e})"
+    )
