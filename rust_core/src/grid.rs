@@ -47,6 +47,8 @@ pub struct CellList {
     start: Vec<u32>,
     keys: Vec<u32>,
     hist: Vec<u32>,
+    /// Scratch: cell coordinates of each point in input order.
+    coords: Vec<[i64; 3]>,
 }
 
 /// Candidate ranges of one query (into the sorted order).
@@ -102,6 +104,7 @@ impl CellList {
             start: vec![0, 0],
             keys: Vec::new(),
             hist: Vec::new(),
+            coords: Vec::new(),
         })
     }
 
@@ -140,15 +143,25 @@ impl CellList {
         let inv = self.inv_cell;
         let par = n >= crate::par::PAR_MIN;
 
-        // 1. Bounding box in cell coordinates.
+        // 1. Cell coordinates of every point, once (the bounding box, the keys and the sorted
+        //    cells all read them).
+        let mut coords = std::mem::take(&mut self.coords);
+        coords.resize(n, [0; 3]);
+        crate::par::chunks1(&mut coords, |s, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                let p = x[s + k];
+                for (a, oa) in o.iter_mut().enumerate().take(V::DIM) {
+                    *oa = cell_coord(p.comp(a), inv);
+                }
+            }
+        });
         let bbox = |r: Range<usize>| {
             let mut lo = [i64::MAX; 3];
             let mut hi = [i64::MIN; 3];
-            for i in r {
+            for c in &coords[r] {
                 for k in 0..V::DIM {
-                    let c = cell_coord(x[i].comp(k), inv);
-                    lo[k] = lo[k].min(c);
-                    hi[k] = hi[k].max(c);
+                    lo[k] = lo[k].min(c[k]);
+                    hi[k] = hi[k].max(c[k]);
                 }
             }
             (lo, hi)
@@ -161,14 +174,7 @@ impl CellList {
             }
             o
         };
-        let (lo, hi) = if par {
-            (0..n.div_ceil(crate::par::CHUNK))
-                .into_par_iter()
-                .map(|c| bbox(c * crate::par::CHUNK..((c + 1) * crate::par::CHUNK).min(n)))
-                .reduce(|| ([i64::MAX; 3], [i64::MIN; 3]), merge)
-        } else {
-            bbox(0..n)
-        };
+        let (lo, hi) = crate::par::reduce(n, ([i64::MAX; 3], [i64::MIN; 3]), merge, bbox);
         let mut dims = [1i64; 3];
         let mut cells: i128 = 1;
         for k in 0..V::DIM {
@@ -194,16 +200,9 @@ impl CellList {
         // 2. Bucket of every point.
         self.keys.resize(n, 0);
         let mode = self.mode;
-        let key_of = move |p: V| -> u32 {
-            let mut c = [0i64; 3];
-            for (k, ck) in c.iter_mut().enumerate().take(V::DIM) {
-                *ck = cell_coord(p.comp(k), inv);
-            }
-            bucket(mode, c) as u32
-        };
         crate::par::chunks1(&mut self.keys, |s, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                *o = key_of(x[s + k]);
+                *o = bucket(mode, coords[s + k]) as u32;
             }
         });
 
@@ -259,12 +258,10 @@ impl CellList {
         let order = &self.order;
         crate::par::chunks1(&mut self.cells, |s, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                let p = x[order[s + k] as usize];
-                for (a, oa) in o.iter_mut().enumerate().take(V::DIM) {
-                    *oa = cell_coord(p.comp(a), inv);
-                }
+                *o = coords[order[s + k] as usize];
             }
         });
+        self.coords = coords;
     }
 
     /// Candidate ranges (into the sorted order) holding every point closer than the cell size to
@@ -386,7 +383,7 @@ impl CellList {
 
     /// Heap bytes held (for the memory-per-particle figures).
     pub fn bytes(&self) -> usize {
-        self.order.capacity() * 4 + self.cells.capacity() * 24 + self.start.capacity() * 4 + self.keys.capacity() * 4 + self.hist.capacity() * 4
+        self.order.capacity() * 4 + self.cells.capacity() * 24 + self.start.capacity() * 4 + self.keys.capacity() * 4 + self.hist.capacity() * 4 + self.coords.capacity() * 24
     }
 }
 

@@ -465,6 +465,13 @@ impl<S: Simd, F: Float> P<S, F> {
         }
         Self::load(s, &buf)
     }
+    /// Writes the lanes over `dst[..lanes]` (panics if shorter).
+    #[inline(always)]
+    pub fn store(self, dst: &mut [F]) {
+        let n = Self::lanes();
+        let bytes: &mut [u8] = pulp::bytemuck::cast_slice_mut(&mut dst[..n]);
+        bytes.copy_from_slice(pulp::bytemuck::bytes_of(&self.v));
+    }
     /// Lanes as an array (first `lanes` entries used).
     #[inline(always)]
     pub fn to_array(self) -> [F; 16] {

@@ -59,13 +59,15 @@ pub struct PairwiseGravity {
     /// Single-precision state: the sources in float32 and the float32 kernel.
     single: bool,
     src32: Soa<f32>,
-    /// Scratch: accelerations / G of the last evaluation.
+    /// Scratch: accelerations / G of the last evaluation, and the symmetric sum's column sums.
     acc: Vec<[Real; 3]>,
+    sym: SymScratch<Real>,
+    sym32: SymScratch<f32>,
 }
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {
-        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new() }
+        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new(), sym: SymScratch::default(), sym32: SymScratch::default() }
     }
 }
 
@@ -127,6 +129,145 @@ fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, out: &
     }
 }
 
+/// Column sums of one task of the symmetric sum: −Σ_i m_i d_ij (|d_ij|² + ε²)^{-3/2} for every
+/// source j (structure of arrays, one entry per padded source).
+#[derive(Default)]
+struct Cols<F> {
+    x: Vec<F>,
+    y: Vec<F>,
+    z: Vec<F>,
+}
+
+/// Scratch of the symmetric sum, per precision.
+#[derive(Default)]
+struct SymScratch<F> {
+    cols: Vec<Cols<F>>,
+}
+
+/// Receivers `block` (starting on a lane boundary) of the symmetric sum: their own block by
+/// direct summation, and every source past `beyond` (the block's end, on a lane boundary) once
+/// per pair, adding the pair's reaction on the source into `cols` (Newton's third law: each
+/// pair's 1/r³ is computed once, not twice). `MASK`: guard r² = 0 (only without softening).
+struct Sym<'a, F: Float, const MASK: bool> {
+    src: &'a Soa<F>,
+    eps2: F,
+    block: std::ops::Range<usize>,
+    beyond: usize,
+    out: &'a mut [[Real; 3]],
+    cols: &'a mut Cols<F>,
+}
+
+impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
+    type Output = ();
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) {
+        let Soa { xs, ys, zs, ms } = self.src;
+        let l = P::<S, F>::lanes();
+        let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, self.eps2));
+        let own = self.block.start..self.block.start + self.block.len().div_ceil(l) * l;
+        let far = self.beyond..xs.len();
+        let Cols { x: cx, y: cy, z: cz } = self.cols;
+        for (i, out) in self.block.clone().zip(self.out.iter_mut()) {
+            let (xi, yi, zi, mi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, ms[i]));
+            let (mut ax, mut ay, mut az) = (zero, zero, zero);
+            let src = xs[own.clone()].chunks_exact(l).zip(ys[own.clone()].chunks_exact(l)).zip(zs[own.clone()].chunks_exact(l)).zip(ms[own.clone()].chunks_exact(l));
+            for (((bx, by), bz), bm) in src {
+                let dx = P::load(s, bx) - xi;
+                let dy = P::load(s, by) - yi;
+                let dz = P::load(s, bz) - zi;
+                let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
+                let y = r2.rsqrt();
+                // The self term (r² = ε², d = 0) adds nothing; without softening r² = 0: masked.
+                let w = r2.gt(zero).select(P::load(s, bm) * (y * y * y), zero);
+                ax = w.mul_add(dx, ax);
+                ay = w.mul_add(dy, ay);
+                az = w.mul_add(dz, az);
+            }
+            let src = xs[far.clone()].chunks_exact(l).zip(ys[far.clone()].chunks_exact(l)).zip(zs[far.clone()].chunks_exact(l)).zip(ms[far.clone()].chunks_exact(l));
+            let col = cx[far.clone()].chunks_exact_mut(l).zip(cy[far.clone()].chunks_exact_mut(l)).zip(cz[far.clone()].chunks_exact_mut(l));
+            for ((((bx, by), bz), bm), ((ox, oy), oz)) in src.zip(col) {
+                let dx = P::load(s, bx) - xi;
+                let dy = P::load(s, by) - yi;
+                let dz = P::load(s, bz) - zi;
+                let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
+                let y = r2.rsqrt();
+                let mut y3 = y * y * y;
+                if MASK {
+                    y3 = r2.gt(zero).select(y3, zero);
+                }
+                let w = P::load(s, bm) * y3;
+                ax = w.mul_add(dx, ax);
+                ay = w.mul_add(dy, ay);
+                az = w.mul_add(dz, az);
+                let wj = mi * y3;
+                wj.neg_mul_add(dx, P::load(s, ox)).store(ox);
+                wj.neg_mul_add(dy, P::load(s, oy)).store(oy);
+                wj.neg_mul_add(dz, P::load(s, oz)).store(oz);
+            }
+            *out = [ax.sum().f64(), ay.sum().f64(), az.sum().f64()];
+        }
+    }
+}
+
+/// Receiver blocks of the symmetric sum (a multiple of 16 sources each).
+const BLOCKS: usize = 32;
+/// Below this many bodies the direct sum is used (the symmetric one's blocks would be tiny).
+const SYM_MIN: usize = 1024;
+
+/// Accelerations / G of every source by the symmetric sum: `BLOCKS` receiver blocks; block b
+/// interacts directly with itself and once per pair with every later block. Tasks pair block b
+/// with block BLOCKS−1−b (equal work) and each owns its column sums; a body's acceleration is its
+/// row sum plus the tasks' column sums in task order, so the result does not depend on the
+/// thread count.
+fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, scratch: &mut SymScratch<F>, out: &mut Vec<[Real; 3]>) {
+    out.clear();
+    out.resize(n, [0.0; 3]);
+    let np = src.xs.len();
+    let t = n.div_ceil(BLOCKS).div_ceil(PAD) * PAD;
+    let nb = n.div_ceil(t);
+    let ntask = nb.div_ceil(2);
+    scratch.cols.resize_with(ntask, Cols::default);
+    for c in &mut scratch.cols {
+        for a in [&mut c.x, &mut c.y, &mut c.z] {
+            a.clear();
+            a.resize(np, F::ZERO);
+        }
+    }
+    // Pair the blocks from both ends: (0, nb−1), (1, nb−2), ...
+    let mut blocks: Vec<Option<(usize, &mut [[Real; 3]])>> = out.chunks_mut(t).enumerate().map(Some).collect();
+    let mut tasks = Vec::with_capacity(ntask);
+    for k in 0..ntask {
+        let a = blocks[k].take().expect("each block once");
+        let b = if nb - 1 - k != k { blocks[nb - 1 - k].take() } else { None };
+        tasks.push((a, b));
+    }
+    let mask = !(eps2 > F::ZERO);
+    let run = |((a, b), cols): ((( usize, &mut [[Real; 3]]), Option<(usize, &mut [[Real; 3]])>), &mut Cols<F>)| {
+        for (bi, out) in std::iter::once(a).chain(b) {
+            let block = bi * t..bi * t + out.len();
+            let beyond = (bi + 1) * t;
+            let beyond = beyond.min(np);
+            if mask {
+                simd::dispatch(level, Sym::<F, true> { src, eps2, block, beyond, out, cols });
+            } else {
+                simd::dispatch(level, Sym::<F, false> { src, eps2, block, beyond, out, cols });
+            }
+        }
+    };
+    tasks.into_par_iter().zip(scratch.cols.par_iter_mut()).for_each(run);
+    let cols = &scratch.cols;
+    par::chunks1(out, |s, out| {
+        for (k, o) in out.iter_mut().enumerate() {
+            let i = s + k;
+            for c in cols {
+                o[0] += c.x[i].f64();
+                o[1] += c.y[i].f64();
+                o[2] += c.z[i].f64();
+            }
+        }
+    });
+}
+
 impl<V: Vector> Term<V> for PairwiseGravity {
     fn name(&self) -> &str {
         &self.name
@@ -140,12 +281,24 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         let eps2 = self.softening * self.softening;
         let level = simd::level();
         let mut acc = std::mem::take(&mut self.acc);
-        if self.single {
-            self.src32.pack(x, model);
-            accelerations(&self.src32, x.len(), eps2 as f32, level, &mut acc);
-        } else {
-            self.src.pack(x, model);
-            accelerations(&self.src, x.len(), eps2, level, &mut acc);
+        let n = x.len();
+        match (self.single, n >= SYM_MIN) {
+            (true, sym) => {
+                self.src32.pack(x, model);
+                if sym {
+                    accelerations_sym(&self.src32, n, eps2 as f32, level, &mut self.sym32, &mut acc);
+                } else {
+                    accelerations(&self.src32, n, eps2 as f32, level, &mut acc);
+                }
+            }
+            (false, sym) => {
+                self.src.pack(x, model);
+                if sym {
+                    accelerations_sym(&self.src, n, eps2, level, &mut self.sym, &mut acc);
+                } else {
+                    accelerations(&self.src, n, eps2, level, &mut acc);
+                }
+            }
         }
         let g = self.g;
         par::chunks1(f, |s, f| {
@@ -250,6 +403,41 @@ mod tests {
                 }
                 let got = glam::DVec3::from_array(acc[i]);
                 assert!((got - naive).length() <= 1e-13 * naive.length().max(1.0), "{level:?}: {got} vs {naive}");
+            }
+        }
+    }
+
+    /// The symmetric (Newton's third law) sum at every level, with and without softening, for a
+    /// body count that fills no block evenly.
+    #[test]
+    fn symmetric_sum_matches_the_naive_sum_at_every_level() {
+        let n = 1107;
+        let (x, model) = cloud(n, 99, false);
+        let mut src = Soa::<f64>::default();
+        src.pack(&x, &model);
+        for eps2 in [0.0, 1e-4] {
+            let naive: Vec<glam::DVec3> = (0..n)
+                .map(|i| {
+                    let mut a = glam::DVec3::ZERO;
+                    for j in (0..n).filter(|&j| j != i) {
+                        let d = x[j] - x[i];
+                        a += d * (model.mass[j] / (d.length_squared() + eps2).powf(1.5));
+                    }
+                    a
+                })
+                .collect();
+            for level in Level::available() {
+                let (mut acc, mut scratch) = (Vec::new(), SymScratch::default());
+                accelerations_sym(&src, n, eps2, level, &mut scratch, &mut acc);
+                let mut momentum = glam::DVec3::ZERO;
+                for i in 0..n {
+                    let got = glam::DVec3::from_array(acc[i]);
+                    assert!((got - naive[i]).length() <= 1e-12 * naive[i].length().max(1.0), "{level:?} eps2={eps2} body {i}: {got} vs {}", naive[i]);
+                    momentum += got * model.mass[i];
+                }
+                // Each pair's force is computed once and applied with both signs.
+                let scale: f64 = (0..n).map(|i| glam::DVec3::from_array(acc[i]).length() * model.mass[i]).sum();
+                assert!(momentum.length() <= 1e-14 * scale, "{level:?}: net force {momentum} of {scale}");
             }
         }
     }
