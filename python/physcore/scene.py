@@ -425,7 +425,10 @@ class Scene:
             NaN/inf appeared; the scene is rolled back to where this call started, and the
             exception names the step, the particle and a suggested dt.
         KeyboardInterrupt
-            Ctrl-C, noticed about every 10⁶ particle-steps; the scene is rolled back likewise.
+            Ctrl-C (or any exception raised by a Python signal handler), noticed within about
+            20 ms plus one force evaluation: between steps and between rk45's internal steps;
+            the scene is rolled back likewise. A call of at most 4096 particle-steps with a
+            fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
         """
         n = _check_int(n, "n", 0)
         if self._e0 is None:

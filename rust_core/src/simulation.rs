@@ -6,6 +6,10 @@ use crate::par;
 use crate::state::{Model, State};
 use crate::terms::{ForceSet, Term};
 use crate::vector::{Real, Vector};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::Duration;
 
 /// Energy books at one instant (J). `total()` = kinetic + Σ potential + Σ dissipated is conserved
 /// by the exact dynamics; its change is the integrator's error.
@@ -35,7 +39,7 @@ pub struct Simulation<V: Vector> {
     /// Tolerances of the adaptive integrator ("rk45"); kept when switching integrators.
     rtol: Real,
     atol: Real,
-    pool: Option<rayon::ThreadPool>,
+    pool: Option<Arc<rayon::ThreadPool>>,
 }
 
 impl<V: Vector> Simulation<V> {
@@ -47,12 +51,12 @@ impl<V: Vector> Simulation<V> {
         let pool = match threads {
             None => None,
             Some(0) => return Err(invalid("threads", "must be >= 1 (or None for all cores)")),
-            Some(n) => Some(
+            Some(n) => Some(Arc::new(
                 rayon::ThreadPoolBuilder::new()
                     .num_threads(n)
                     .build()
                     .map_err(|e| invalid("threads", format!("could not start {n} threads: {e}")))?,
-            ),
+            )),
         };
         Ok(Self {
             sys: System { state: State::default(), model: Model::default(), forces: ForceSet::default(), single: false },
@@ -302,13 +306,16 @@ impl<V: Vector> Simulation<V> {
     /// Runs `n` steps. On divergence (NaN/inf in a position or velocity) the state, books and
     /// caches are rolled back to where this call started and `Error::Diverged` names the step.
     pub fn step(&mut self, n: u64) -> Result<()> {
-        self.step_interruptible(n, &mut || false)
+        self.step_interruptible(n, &AtomicBool::new(false))
     }
 
-    /// `step(n)`, polling `interrupted` on the calling thread about every 10⁶ particle-steps
-    /// (a Python binding checks for Ctrl-C there). When it returns true the state is rolled back
-    /// like on divergence and `Error::Interrupted` is returned.
-    pub fn step_interruptible(&mut self, n: u64, interrupted: &mut dyn FnMut() -> bool) -> Result<()> {
+    /// `step(n)` that stops once `stop` is set, from any thread (the Python binding sets it on
+    /// Ctrl-C). The flag is read before every step and, in "rk45", before every internal step
+    /// attempt; a single force evaluation is not interrupted. Reading it is a relaxed atomic
+    /// load and changes no result. When it is seen set, the state is rolled back like on
+    /// divergence and `Error::Interrupted` is returned; a flag set before the call stops it
+    /// before the first step.
+    pub fn step_interruptible(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
         if n == 0 || self.n_particles() == 0 {
             self.sys.state.t += n as Real * self.dt;
             self.sys.state.step += n;
@@ -320,31 +327,11 @@ impl<V: Vector> Simulation<V> {
             self.collision_dissipated,
             self.integrator_cache(),
         );
-        let per_slab = 1_000_000 / self.n_particles() as u64;
-        let internal = |s: &Self| s.integrator.adaptive_stats().map(|(a, r, _)| a + r);
-        // An adaptive integrator may take many internal steps per step: learn how many from the
-        // first step, then size the slabs by internal steps.
-        let mut slab = if internal(self).is_some() { 1 } else { per_slab.max(1) };
-        let pool = self.pool.take();
-        let mut left = n;
-        let mut result = Ok(());
-        while left > 0 && result.is_ok() {
-            let k = left.min(slab);
-            let before = internal(self);
-            result = match &pool {
-                Some(p) => p.install(|| self.step_inner(k)),
-                None => self.step_inner(k),
-            };
-            if let (Some(b), Some(a)) = (before, internal(self)) {
-                let per_step = ((a - b) as f64 / k as f64).max(1.0);
-                slab = ((per_slab as f64 / per_step) as u64).max(1);
-            }
-            left -= k;
-            if result.is_ok() && left > 0 && interrupted() {
-                result = Err(Error::Interrupted { rolled_back_to: 0 });
-            }
-        }
-        self.pool = pool;
+        let pool = self.pool.clone();
+        let result = match &pool {
+            Some(p) => p.install(|| self.step_inner(n, stop)),
+            None => self.step_inner(n, stop),
+        };
         if result.is_ok() {
             return result;
         }
@@ -372,12 +359,43 @@ impl<V: Vector> Simulation<V> {
         })
     }
 
+    /// Runs `job(self)` as a task on this simulation's pool (rayon's global pool if it has none)
+    /// while `watch` runs on the calling thread, and returns the job's result once it is done.
+    /// `watch` gets `wait(timeout)`, true as soon as the job has finished (false on timeout), so
+    /// the calling thread stays free, e.g. to set the stop flag of `step_interruptible`: the
+    /// Python binding runs Python's signal handlers there (Python runs them on its main thread
+    /// only). Costs one hand-off to a pool thread (~20 µs), not a thread start (~60 µs).
+    /// Called from a thread of the pool the task would go to, the job runs on the calling
+    /// thread (a task queued behind it could wait forever) and `wait` reports it done at once.
+    pub fn run_watched<R: Send>(&mut self, job: impl FnOnce(&mut Self) -> R + Send, watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool)) -> R {
+        let pool = self.pool.clone();
+        let on_pool = match &pool {
+            Some(p) => p.current_thread_index().is_some(),
+            // rayon::in_place_scope queues on the caller's own pool if it has one.
+            None => rayon::current_thread_index().is_some(),
+        };
+        if on_pool {
+            let r = job(self);
+            watch(&mut |_| true);
+            return r;
+        }
+        let mut out = None;
+        let slot = &mut out;
+        let task = move || *slot = Some(job(self));
+        match &pool {
+            Some(p) => p.in_place_scope(|s| spawn_watched(s, task, watch)),
+            None => rayon::in_place_scope(|s| spawn_watched(s, task, watch)),
+        }
+        out.expect("the scope returns after its task")
+    }
+
     /// Advances by `duration` seconds in `n` equal substeps, n = ⌈duration / auto_dt()⌉, so
     /// every substep is inside the stability region of the integrator at the start of the call
     /// (and the CFL limit for fluids).
     /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
     /// divergence or interrupt everything, dt included, is rolled back as in `step`.
-    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, interrupted: &mut dyn FnMut() -> bool) -> Result<u64> {
+    /// `stop` as in `step_interruptible`.
+    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, stop: &AtomicBool) -> Result<u64> {
         if !(duration.is_finite() && duration > 0.0) {
             return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
         }
@@ -398,16 +416,22 @@ impl<V: Vector> Simulation<V> {
         }
         let old = self.dt;
         self.dt = duration / n as Real;
-        if self.dt != old {
-            // A cached force is still valid; a velocity predicted with the old dt is not.
-            if self.sys.forces.velocity_dependent() {
-                self.integrator.reset();
-            }
+        // A cached force is still valid; a velocity predicted with the old dt is not. The cache
+        // is kept aside so that a rolled-back call leaves it as it was.
+        let dropped = (self.dt != old && self.sys.forces.velocity_dependent()).then(|| self.integrator_cache());
+        if dropped.is_some() {
+            self.integrator.reset();
         }
-        match self.step_interruptible(n, interrupted) {
+        match self.step_interruptible(n, stop) {
             Ok(()) => Ok(n),
             Err(e) => {
                 self.dt = old;
+                if let Some(Some((f, p))) = dropped {
+                    let n_terms = self.sys.forces.terms.len();
+                    if !self.integrator.set_cache(f, p, &self.sys.state.v, n_terms) {
+                        self.integrator.reset();
+                    }
+                }
                 Err(e)
             }
         }
@@ -447,10 +471,16 @@ impl<V: Vector> Simulation<V> {
         (c, bytes)
     }
 
-    fn step_inner(&mut self, n: u64) -> Result<()> {
+    fn step_inner(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
         let dt = self.dt;
+        let interrupted = Err(Error::Interrupted { rolled_back_to: 0 });
         for _ in 0..n {
-            let non_finite = self.integrator.step(&mut self.sys, dt);
+            if stop.load(Ordering::Relaxed) {
+                return interrupted;
+            }
+            let Ok(non_finite) = self.integrator.step_interruptible(&mut self.sys, dt, stop) else {
+                return interrupted;
+            };
             self.sys.state.t += dt;
             self.sys.state.step += 1;
             if !self.colliders.is_empty() {
@@ -621,6 +651,20 @@ impl<V: Vector> Simulation<V> {
         });
         l.to_array()
     }
+}
+
+/// Spawns `task` in `s` and runs `watch` here with a `wait` that reports the task's end.
+fn spawn_watched<'s>(s: &rayon::Scope<'s>, task: impl FnOnce() + Send + 's, watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool)) {
+    let (tx, rx) = mpsc::channel::<()>();
+    s.spawn(move |_| {
+        let _done = tx; // dropped when the task ends, by a panic too
+        task();
+    });
+    let mut done = false;
+    watch(&mut |timeout| {
+        done = done || !matches!(rx.recv_timeout(timeout), Err(RecvTimeoutError::Timeout));
+        done
+    });
 }
 
 fn check_dt(dt: Real) -> Result<()> {

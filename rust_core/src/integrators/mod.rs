@@ -10,6 +10,7 @@ use crate::error::{invalid, Result};
 use crate::state::{Model, State};
 use crate::terms::ForceSet;
 use crate::vector::{Real, Vector};
+use std::sync::atomic::AtomicBool;
 
 pub use euler::ExplicitEuler;
 pub use rk4::Rk4;
@@ -26,6 +27,10 @@ pub struct System<V: Vector> {
     /// nearest float32 (`store`), so forces are always evaluated at representable states.
     pub single: bool,
 }
+
+/// `Integrator::step_interruptible` saw its stop flag set and abandoned the step.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stopped;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct IntegratorInfo {
@@ -44,6 +49,14 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// dissipated by the force terms during the step. Returns `true` if any position or
     /// velocity is not finite afterwards (checked in the final update pass, at no extra pass).
     fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool;
+    /// `step`, giving up part-way with `Err(Stopped)` once `stop` is seen set; the state and
+    /// the integrator's cache are then partly advanced, and the caller must roll both back.
+    /// By default `stop` is not read: a fixed-step method's step is a few force evaluations, and
+    /// the caller polls between steps. An adaptive one polls before every internal attempt.
+    fn step_interruptible(&mut self, sys: &mut System<V>, dt: Real, stop: &AtomicBool) -> std::result::Result<bool, Stopped> {
+        let _ = stop;
+        Ok(self.step(sys, dt))
+    }
     /// Forces (N) of the most recent evaluation, one per particle.
     fn last_forces(&self) -> &[V];
     /// Drop anything cached across steps (the state was changed from outside the integrator).

@@ -13,9 +13,13 @@
 //! eq. 2.43c), h' = h · clamp(0.9 · err^−0.17 · err_prev^0.04, 0.2, 10), with no growth right
 //! after a rejection. The first h comes from Hairer's starting-step heuristic (ODEs I, §II.4).
 //! Seven stages, "first same as last": 6 force evaluations per accepted step.
-use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
+//!
+//! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
+//! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Stopped, System};
 use crate::par;
 use crate::vector::{Real, Vector};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 const A: [[Real; 6]; 7] = [
     [0.0; 6],
@@ -280,6 +284,11 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
     }
 
     fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+        let never = AtomicBool::new(false);
+        self.step_interruptible(sys, dt, &never).unwrap_or(true)
+    }
+
+    fn step_interruptible(&mut self, sys: &mut System<V>, dt: Real, stop: &AtomicBool) -> Result<bool, Stopped> {
         let n = sys.state.x.len();
         if self.xs.len() != n {
             self.fsal = false;
@@ -301,12 +310,15 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         let mut rejects = 0u32;
         let mut just_rejected = false;
         while done < dt {
+            if stop.load(Ordering::Relaxed) {
+                return Err(Stopped);
+            }
             let left = dt - done;
             // Land exactly on the end of dt; stretch by ≤ 1 % rather than leave a sliver.
             if !(self.h > 0.0) || done + self.h == done {
                 // No progress possible (the controller's step underflowed).
                 self.failed = Some(0);
-                return true;
+                return Ok(true);
             }
             let last = self.h >= left * 0.99;
             let h = if last { left } else { self.h };
@@ -364,12 +376,12 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
                 if rejects >= MAX_REJECTS || done + self.h == done {
                     self.failed = Some(self.worst_particle(sys, h));
                     // The FSAL stage is still valid (state unchanged).
-                    return true;
+                    return Ok(true);
                 }
             }
         }
         // The state was checked finite in `error`.
-        false
+        Ok(false)
     }
 
     fn last_forces(&self) -> &[V] {
@@ -396,21 +408,27 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
     }
 
     /// The derivative at the current state (accelerations) and, after the stage-0 powers, the
-    /// controller's memory (next h, last error), so a saved run continues bit for bit.
+    /// controller's memory (next h, last error), so a saved run continues bit for bit. Without
+    /// a derivative there are no forces and no powers, only the controller's memory.
     fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
         let f = if self.fsal { self.kv[0].clone() } else { Vec::new() };
-        let mut p = if self.fsal { self.pw[0].clone() } else { vec![0.0; self.pw[0].len()] };
+        let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
         p.extend([self.h, self.err_prev]);
         Some((f, p))
     }
 
     fn set_cache(&mut self, f: Vec<V>, mut p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
-        if p.len() != n_terms + 2 || !(f.is_empty() || f.len() == v.len()) {
+        // Without a derivative (`f` empty) the powers are absent (or zeros, in files saved by
+        // earlier versions); the controller is restored either way (a rolled-back first call
+        // needs it).
+        let fits = p.len() == n_terms + 2 || (f.is_empty() && p.len() == 2);
+        if !fits || !(f.is_empty() || f.len() == v.len()) {
             return false;
         }
-        self.err_prev = p[n_terms + 1];
-        self.h = p[n_terms];
-        p.truncate(n_terms);
+        let k = p.len() - 2;
+        self.err_prev = p[k + 1];
+        self.h = p[k];
+        p.truncate(k);
         self.fsal = !f.is_empty();
         if self.fsal {
             self.kx[0] = v.to_vec();

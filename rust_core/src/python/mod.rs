@@ -14,6 +14,8 @@ use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2,
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 /// Maps the core's error enum onto the Python hierarchy defined in `physcore/_errors.py`.
 fn to_py(py: Python<'_>, e: Error) -> PyErr {
@@ -311,19 +313,22 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
-    /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed about every 10⁶
-    /// particle-steps: the state is rolled back to where the call started and
-    /// KeyboardInterrupt is raised.
+    /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed within about
+    /// `SIGNAL_POLL` plus one force evaluation (see `interruptible`): the state is rolled back
+    /// to where the call started and KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
-        let inner = &mut self.inner;
-        interruptible(py, |stop| with_sim!(inner, s => s.step_interruptible(n, stop)))
+        with_sim!(&mut self.inner, s => {
+            if s.adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
+                return py.detach(|| s.step(n)).map_err(|e| to_py(py, e));
+            }
+            interruptible(py, s, |s, stop| s.step_interruptible(n, stop))
+        })
     }
 
     /// Advances `duration` seconds in automatically chosen substeps; returns their number.
     #[pyo3(signature = (duration, substeps=None))]
     fn advance(&mut self, py: Python<'_>, duration: f64, substeps: Option<u64>) -> PyResult<u64> {
-        let inner = &mut self.inner;
-        interruptible(py, |stop| with_sim!(inner, s => s.advance_interruptible(duration, substeps, stop)))
+        with_sim!(&mut self.inner, s => interruptible(py, s, |s, stop| s.advance_interruptible(duration, substeps, stop)))
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -430,23 +435,48 @@ fn p_dim<V: Vector>(_: &V) -> usize {
     V::DIM
 }
 
-/// Runs `f` with the GIL released; `f` polls the closure it is given for Ctrl-C.
-fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&mut dyn FnMut() -> bool) -> Result<T, Error> + Send) -> PyResult<T> {
+/// How often the calling thread runs Python's signal handlers while a step runs.
+const SIGNAL_POLL: Duration = Duration::from_millis(20);
+
+/// Calls of at most this many particle-steps with a fixed-step integrator run on the calling
+/// thread, unwatched: even pairwise gravity (N² per step) keeps them to milliseconds, and the
+/// hand-off to a pool thread (~20 µs) would cost more than a small scene's step. Ctrl-C then
+/// lands right after the call, as it would between calls.
+const SHORT_CALL: u64 = 4096;
+
+/// Runs `f` with the GIL released as a task on the simulation's pool (`run_watched`), while the
+/// calling thread wakes every `SIGNAL_POLL` to run Python's signal handlers (`check_signals`;
+/// Python runs them on the main thread only, so the stepping code, on a pool thread, cannot).
+/// If a handler raises (Ctrl-C: KeyboardInterrupt), the stop flag is set, `f` rolls back and
+/// returns `Error::Interrupted`, and the handler's exception is raised. If `f` finished before
+/// it saw the flag, its work stands and the exception is raised as if the signal had come
+/// right after the call.
+fn interruptible<V: Vector, T: Send>(
+    py: Python<'_>,
+    sim: &mut Simulation<V>,
+    f: impl FnOnce(&mut Simulation<V>, &AtomicBool) -> Result<T, Error> + Send,
+) -> PyResult<T> {
+    let stop = AtomicBool::new(false);
     let mut pending: Option<PyErr> = None;
     let result = py.detach(|| {
-        let mut interrupted = || match Python::attach(|py| py.check_signals()) {
-            Ok(()) => false,
-            Err(e) => {
-                pending = Some(e);
-                true
-            }
-        };
-        f(&mut interrupted)
+        sim.run_watched(
+            |s| f(s, &stop),
+            |wait| {
+                while !wait(SIGNAL_POLL) {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        pending = Some(e);
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                }
+            },
+        )
     });
-    match result {
-        Ok(v) => Ok(v),
-        Err(Error::Interrupted { .. }) => Err(pending.unwrap_or_else(|| pyo3::exceptions::PyKeyboardInterrupt::new_err(()))),
-        Err(e) => Err(to_py(py, e)),
+    match (result, pending) {
+        (Ok(v), None) => Ok(v),
+        (_, Some(e)) => Err(e),
+        (Err(Error::Interrupted { .. }), None) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
+        (Err(e), None) => Err(to_py(py, e)),
     }
 }
 

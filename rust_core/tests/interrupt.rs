@@ -1,0 +1,176 @@
+//! The stop flag of `step_interruptible`: read between steps and between rk45's internal step
+//! attempts, it rolls everything back, and reading it never changes a result; `run_watched`
+//! leaves the calling thread free to set it.
+mod common;
+use common::cloth;
+use glam::DVec3;
+use physcore_core::error::Error;
+use physcore_core::integrators::NAMES;
+use physcore_core::state::Model;
+use physcore_core::terms::{Springs, Term, UniformGravity};
+use physcore_core::Simulation;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// A force-free term that sets `flag` during its `at`-th evaluation (counting from 1), so an
+/// interrupt lands at a chosen point inside a step, the same on every run.
+struct Tripwire {
+    flag: Arc<AtomicBool>,
+    at: u64,
+    calls: u64,
+}
+
+impl Term<DVec3> for Tripwire {
+    fn name(&self) -> &str {
+        "tripwire"
+    }
+    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, f: &mut [DVec3], _want_power: bool, assign: bool) -> f64 {
+        if assign {
+            f.fill(DVec3::ZERO);
+        }
+        self.calls += 1;
+        if self.calls == self.at {
+            self.flag.store(true, Ordering::Relaxed);
+        }
+        0.0
+    }
+    fn potential(&self, _x: &[DVec3], _m: &Model) -> Option<f64> {
+        None
+    }
+    fn dissipative(&self) -> bool {
+        false
+    }
+}
+
+type Snapshot = (Vec<DVec3>, Vec<DVec3>, f64, u64, Vec<f64>, f64, Option<(Vec<DVec3>, Vec<f64>)>);
+
+fn snapshot(s: &Simulation<DVec3>) -> Snapshot {
+    let st = &s.sys.state;
+    (st.x.clone(), st.v.clone(), st.t, st.step, s.sys.forces.dissipated.clone(), s.collision_dissipated, s.integrator_cache())
+}
+
+/// A damped 8×8 cloth (dissipation books in play) with a tripwire; rk45 gets one long output
+/// step of many internal steps.
+fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> Simulation<DVec3> {
+    let mut s = cloth(8, integrator, threads, 0.05);
+    s.add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
+    if integrator == "rk45" {
+        s.set_dt(0.5).unwrap();
+        s.set_tolerances(1e-9, 1e-12).unwrap();
+    }
+    s
+}
+
+#[test]
+fn flag_set_before_the_call_stops_it_before_the_first_step() {
+    for name in NAMES {
+        let unused = Arc::new(AtomicBool::new(false));
+        let mut s = scene(name, 1, &unused, 0);
+        s.step(2).unwrap();
+        let before = snapshot(&s);
+        let evals = s.force_evaluations();
+        let stop = AtomicBool::new(true);
+        assert_eq!(s.step_interruptible(5, &stop), Err(Error::Interrupted { rolled_back_to: 2 }), "{name}");
+        assert_eq!(s.force_evaluations(), evals, "{name}: no work after a set flag");
+        assert!(snapshot(&s) == before, "{name}: state changed");
+        let dt = s.dt;
+        assert_eq!(s.advance_interruptible(1.0, Some(3), &stop), Err(Error::Interrupted { rolled_back_to: 2 }), "{name}");
+        assert_eq!(s.dt, dt, "{name}: advance restores dt");
+        assert!(snapshot(&s) == before, "{name}: state changed by advance");
+    }
+}
+
+#[test]
+fn interrupt_inside_a_call_rolls_back_and_the_retry_is_bit_identical() {
+    for name in NAMES {
+        for threads in [1, 2] {
+            // Where the flag goes up: mid-call, and for rk45 inside its single output step.
+            let (warmup, n) = if name == "rk45" { (1, 1) } else { (2, 20) };
+            let mut reference = scene(name, threads, &Arc::new(AtomicBool::new(false)), 0);
+            reference.step(warmup).unwrap();
+            let e0 = reference.force_evaluations();
+            reference.step(n).unwrap();
+            let call_evals = reference.force_evaluations() - e0;
+            let at = e0 + call_evals / 2;
+
+            let flag = Arc::new(AtomicBool::new(false));
+            let mut s = scene(name, threads, &flag, at);
+            s.step(warmup).unwrap();
+            let before = snapshot(&s);
+            let r = s.step_interruptible(n, &flag);
+            assert_eq!(r, Err(Error::Interrupted { rolled_back_to: warmup }), "{name}, {threads} threads");
+            assert!(snapshot(&s) == before, "{name}, {threads} threads: not rolled back");
+            // The flag is read before every step / internal attempt: at most one more attempt.
+            let after = s.force_evaluations() - at;
+            let bound = if name == "rk45" { 6 } else { 4 };
+            assert!(after <= bound, "{name}: {after} force evaluations after the flag went up (call: {call_evals})");
+            if name == "rk45" {
+                assert!(call_evals > 100, "the rk45 output step should be long; it took {call_evals} evaluations");
+            }
+
+            flag.store(false, Ordering::Relaxed);
+            s.step(n).unwrap();
+            assert!(snapshot(&s) == snapshot(&reference), "{name}, {threads} threads: retry differs from the uninterrupted run");
+        }
+    }
+}
+
+/// A stiff hanging chain under rk45 whose one output step (dt = 10⁴ s) takes minutes.
+fn long_rk45_step(threads: Option<usize>) -> Simulation<DVec3> {
+    let n = 200;
+    let mut s = Simulation::new("rk45", 1e4, threads).unwrap();
+    let x = (0..n).map(|i| DVec3::new(i as f64 / n as f64, 0.0, 0.0)).collect();
+    s.add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect()).unwrap();
+    let (i, j): (Vec<u32>, Vec<u32>) = (0..n as u32 - 1).map(|i| (i, i + 1)).unzip();
+    let m = i.len();
+    s.add_term(Box::new(Springs::new("springs".into(), i, j, vec![1e4; m], vec![0.0; m], vec![1.0 / n as f64; m], n).unwrap())).unwrap();
+    s.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
+    s.set_tolerances(1e-10, 1e-12).unwrap();
+    s
+}
+
+#[test]
+fn a_watcher_on_the_calling_thread_stops_a_step_running_on_the_pool() {
+    for threads in [None, Some(1), Some(2)] {
+        let mut s = long_rk45_step(threads);
+        let before = snapshot(&s);
+        let stop = AtomicBool::new(false);
+        let caller = std::thread::current().id();
+        let mut timeouts = 0;
+        let t0 = Instant::now();
+        let r = s.run_watched(
+            |s| {
+                assert_ne!(std::thread::current().id(), caller, "the job runs on a pool thread");
+                s.step_interruptible(1, &stop)
+            },
+            |wait| {
+                while !wait(Duration::from_millis(20)) {
+                    timeouts += 1;
+                    if timeouts == 3 {
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                }
+            },
+        );
+        assert_eq!(r, Err(Error::Interrupted { rolled_back_to: 0 }), "threads {threads:?}");
+        assert!(timeouts >= 3, "threads {threads:?}");
+        // Generous: the flag is read between internal attempts of ~1 ms here.
+        assert!(t0.elapsed() < Duration::from_secs(10), "threads {threads:?}: took {:?}", t0.elapsed());
+        assert!(snapshot(&s) == before, "threads {threads:?}: not rolled back");
+        // A finished job is reported at once, and its result returned.
+        let r = s.run_watched(|s| s.n_particles(), |wait| assert!(wait(Duration::from_secs(60))));
+        assert_eq!(r, 200);
+    }
+}
+
+#[test]
+fn run_watched_from_a_pool_thread_runs_the_job_there() {
+    // On the only thread of a pool, a task queued on that pool would never start.
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let mut s = long_rk45_step(None);
+    s.set_dt(1e-3).unwrap();
+    let r = one.install(|| s.run_watched(|s| s.step(1), |wait| assert!(wait(Duration::from_secs(60)))));
+    assert_eq!(r, Ok(()));
+    assert_eq!(s.sys.state.step, 1);
+}
