@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
+from _common import header, median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
@@ -50,6 +50,7 @@ def main() -> None:
             t = median_block_time(scene, steps)
             rows.append([f"{g}²", g * g, n_springs, th, f"{t / steps * 1e3:.3f}", si(g * g * steps / t), si(n_springs * steps / t)])
             assert np.isfinite(scene.positions).all()
+    print(header(args.threads))
     print(table(["cloth", "N", "springs", "threads", "ms/step", "particle-steps/s", "spring-evals/s"], rows))
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
+from _common import header, median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
@@ -29,6 +29,7 @@ def main() -> None:
         scene.step(1)
         t = median_block_time(scene, args.steps)
         rows.append([args.n, th, f"{t / args.steps * 1e3:.2f}", si(args.n * args.steps / t)])
+    print(header(args.threads))
     print(table(["N", "threads", "ms/step", "particle-steps/s"], rows))
 
 

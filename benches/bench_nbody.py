@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
+from _common import header, median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
@@ -45,6 +45,7 @@ def main() -> None:
                 scene.step(5)
                 t = median_block_time(scene, steps)
                 rows.append([n, th, prec, f"{t / steps * 1e3:.3f}", f"{steps / t:.1f}", si(n * n * steps / t)])
+    print(header(args.threads))
     print(table(["N", "threads", "precision", "ms/step", "steps/s", "pair interactions/s"], rows))
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 import time
 
+from _common import header  # first: sets up the environment before numpy loads
 import numpy as np
 
 from physcore import render
@@ -40,6 +41,7 @@ def _cloth(n: int, dim: int, rng: np.random.Generator):
 
 
 def main(n: int = 100_000, size=(480, 360)) -> None:
+    print(header(1) + " (rasterisation is numpy, single-threaded; the SIMD level does not apply)")
     rng = np.random.default_rng(0)
     for dim in (2, 3):
         x, v, springs = _cloth(n, dim, rng)

@@ -34,7 +34,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from _common import median_block_time, require_release, si, table  # first: sets up the environment
+from _common import header, median_block_time, require_release, si, table  # first: sets up the environment
 import numpy as np
 
 import physcore as pc
@@ -110,6 +110,7 @@ def main() -> int:
                 rows.append(["3D 97k", r["N"], prec, th, si(r["rate"])] + [f"{100 * s:.0f} %" for s in r["split"]] + [f"{r['bytes']:.0f}"])
                 print(rows[-1], flush=True)
     print()
+    print(header(args.threads))
     print(table(["workload", "N", "precision", "threads", "particle-steps/s", "cell list", "density", "forces", "rest", "bytes/particle"], rows))
 
     if peer is not None:
@@ -129,6 +130,7 @@ def main() -> int:
             prow.append([size, si(a), si(b), f"{a / b:.2f}x"])
             print(prow[-1], flush=True)
         print()
+        print(header(th) + " · numba at its native ISA")
         print(table(["size", "physcore f32", "numba f32", "ratio"], prow))
     return 0
 

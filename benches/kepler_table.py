@@ -9,7 +9,7 @@ import math
 import statistics
 import time
 
-from _common import require_release, table  # first: sets up the environment before numpy loads
+from _common import header, require_release, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
@@ -46,6 +46,7 @@ def main() -> None:
         for n in map(int, args.steps_per_orbit.split(",")):
             worst, err, wall = run(name, n, args.orbits)
             rows.append([name, f"P/{n}", f"{worst:.2e}", f"{err:.2e}", f"{wall * 1e3:.1f}"])
+    print(header())
     print(table(["integrator", "dt", "max abs(E/E0-1)", "abs(r(t_end)-r0)", "wall ms"], rows))
 
 

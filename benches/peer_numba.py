@@ -9,14 +9,18 @@ gather only (each particle computes its own force; no atomics, no races).
   neighbour list (other index + rest length); every spring is evaluated from both ends. float32
   and float64 variants (all arithmetic in the array dtype). 20 warm-up steps (the first call
   compiles), then 3 blocks of S = 1000 (G=128) / 250 (G=256) steps; median. Metric: particle-steps/s.
-* N-body: float64, masses 1/N, G = 1, Plummer ε = 0.01, uniform ball at rest (bench_nbody.initial),
+* N-body: masses 1/N, G = 1, Plummer ε = 0.01, uniform ball at rest (bench_nbody.initial),
   leapfrog KDK at dt = 1e-3, one force evaluation per step (the end-of-step acceleration is kept
   for the next step's first kick, as physcore's Verlet does). 5 warm-up steps, then 3 blocks of
   S = 400 (N=1024) / 40 (N=4096); median. Metric: pair interactions/s credited N² per step.
+  float64 and float32 variants: one kernel, compiled per dtype; every constant comes from a
+  vector of the state's dtype (a Python float would promote float32 arithmetic to float64).
 
-physcore (float64 only) runs the identical scene built by bench_cloth.build / bench_nbody.build
-with the same thread count. Before timing, physcore and numba-f64 are stepped from the same initial
-state and their positions compared (cloth: 50 steps, N-body: 20 steps).
+physcore runs the identical scene built by bench_cloth.build (float64) / bench_nbody.build
+(float64, and precision="f32" for the N-body) with the same thread count. The ratio column
+compares the same precision only (physcore f64 / numba f64, physcore f32 / numba f32; "—" where
+physcore has no row of that precision). Before timing, physcore and numba are stepped from the
+same initial state and their positions compared (cloth: 50 steps, N-body: 20 steps).
 
 Usage: python benches/peer_numba.py [--only cloth|nbody] [--sizes ...] [--threads 2]
 Needs numba: ``pip install numba`` (or ``pip install ".[bench]"``).
@@ -30,7 +34,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # run from anywhere
 
-from _common import median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
+from _common import header, median_block_time, require_release, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 try:
@@ -180,20 +184,28 @@ class NumbaCloth:
 TILE = 64
 
 
+# p = [ε², G, dt, dt/2, 0], an array of the state's dtype (as the cloth's p): with float32 state
+# every operand is float32 and no Python float literal promotes the arithmetic to float64.
+P_EPS2, P_G, P_DT, P_HALF, P_ZERO = range(5)
+
+
 @njit(**JIT)
-def _nbody_accel(px, py, pz, m, ax, ay, az, eps2, gconst):
+def _nbody_accel(px, py, pz, m, ax, ay, az, p):
     """a_i = G Σ_j m_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2}, all N² terms (the self term is 0
-    since ε > 0); prange over tiles of receivers i, structure-of-arrays positions."""
+    since ε > 0); prange over tiles of receivers i, structure-of-arrays positions; all arithmetic
+    in the dtype of the arrays."""
     n = px.shape[0]
+    eps2 = p[P_EPS2]
+    gconst = p[P_G]
     for b in prange((n + TILE - 1) // TILE):
         i0 = b * TILE
         w = min(TILE, n - i0)
         xi = px[i0:i0 + w].copy()
         yi = py[i0:i0 + w].copy()
         zi = pz[i0:i0 + w].copy()
-        sx = np.zeros(w)
-        sy = np.zeros(w)
-        sz = np.zeros(w)
+        sx = np.zeros_like(xi)  # the state's dtype (np.zeros(w) would be float64)
+        sy = np.zeros_like(xi)
+        sz = np.zeros_like(xi)
         for j in range(n):
             xj = px[j]
             yj = py[j]
@@ -215,16 +227,19 @@ def _nbody_accel(px, py, pz, m, ax, ay, az, eps2, gconst):
 
 
 @njit(**JIT)
-def _nbody_accel_naive(px, py, pz, m, ax, ay, az, eps2, gconst):
+def _nbody_accel_naive(px, py, pz, m, ax, ay, az, p):
     """The textbook kernel: prange over i, scalar reduction over j (shown for reference)."""
     n = px.shape[0]
+    eps2 = p[P_EPS2]
+    gconst = p[P_G]
+    zero = p[P_ZERO]
     for i in prange(n):
         xi = px[i]
         yi = py[i]
         zi = pz[i]
-        sx = 0.0
-        sy = 0.0
-        sz = 0.0
+        sx = zero
+        sy = zero
+        sz = zero
         for j in range(n):
             dx = px[j] - xi
             dy = py[j] - yi
@@ -241,11 +256,12 @@ def _nbody_accel_naive(px, py, pz, m, ax, ay, az, eps2, gconst):
 
 def _make_nbody_block(accel):
     @njit(**DRIVER)
-    def block(px, py, pz, vx, vy, vz, ax, ay, az, m, eps2, gconst, dt, steps):
+    def block(px, py, pz, vx, vy, vz, ax, ay, az, m, p, steps):
         """`steps` leapfrog KDK steps; (ax, ay, az) hold the acceleration at the current positions
         on entry and on exit, so each step costs one force evaluation. The O(N) kick/drift loops
         are serial: at N <= 4096 they take microseconds, less than starting a parallel region."""
-        half = 0.5 * dt
+        dt = p[P_DT]
+        half = p[P_HALF]
         n = px.shape[0]
         for _ in range(steps):
             for i in range(n):
@@ -255,7 +271,7 @@ def _make_nbody_block(accel):
                 px[i] += dt * vx[i]
                 py[i] += dt * vy[i]
                 pz[i] += dt * vz[i]
-            accel(px, py, pz, m, ax, ay, az, eps2, gconst)
+            accel(px, py, pz, m, ax, ay, az, p)
             for i in range(n):
                 vx[i] += half * ax[i]
                 vy[i] += half * ay[i]
@@ -268,18 +284,20 @@ _nbody_block = {"tiled": _make_nbody_block(_nbody_accel), "naive": _make_nbody_b
 
 
 class NumbaNBody:
-    def __init__(self, n: int, kernel: str = "tiled"):
+    """The §3 N-body with the state (and all arithmetic) in `dtype`."""
+
+    def __init__(self, n: int, kernel: str = "tiled", dtype=np.float64):
         self.block = _nbody_block[kernel]
         x = bench_nbody.initial(n)
-        self.px, self.py, self.pz = (np.ascontiguousarray(x[:, d]) for d in range(3))
-        self.vx, self.vy, self.vz = (np.zeros(n) for _ in range(3))
-        self.ax, self.ay, self.az = (np.zeros(n) for _ in range(3))
-        self.m = np.full(n, 1.0 / n)
-        self.eps2 = 0.01**2
-        self.gconst = 1.0
-        self.dt = 1e-3
-        accel = _nbody_accel if kernel == "tiled" else _nbody_accel_naive
-        accel(self.px, self.py, self.pz, self.m, self.ax, self.ay, self.az, self.eps2, self.gconst)
+        self.px, self.py, self.pz = (np.ascontiguousarray(x[:, d], dtype=dtype) for d in range(3))
+        self.vx, self.vy, self.vz = (np.zeros(n, dtype) for _ in range(3))
+        self.ax, self.ay, self.az = (np.zeros(n, dtype) for _ in range(3))
+        self.m = np.full(n, 1.0 / n, dtype)
+        dt = 1e-3
+        self.p = np.array([0.01**2, 1.0, dt, 0.5 * dt, 0.0], dtype)
+        self.dt = float(self.p[P_DT])
+        self.accel = _nbody_accel if kernel == "tiled" else _nbody_accel_naive
+        self.accel(self.px, self.py, self.pz, self.m, self.ax, self.ay, self.az, self.p)
 
     @property
     def positions(self) -> np.ndarray:
@@ -287,7 +305,7 @@ class NumbaNBody:
 
     def step(self, steps: int) -> None:
         self.block(self.px, self.py, self.pz, self.vx, self.vy, self.vz, self.ax, self.ay, self.az,
-                     self.m, self.eps2, self.gconst, self.dt, steps)
+                   self.m, self.p, steps)
 
 
 # --------------------------------------------------------------------------------------------
@@ -332,43 +350,91 @@ def run_cloth(sizes, threads, rows, checks) -> None:
 def run_nbody(sizes, threads, rows, checks) -> None:
     for n in sizes:
         steps = 400 if n <= 1024 else 40
-        ref = bench_nbody.build(n, threads)
-        ref.step(20)
-        nb = NumbaNBody(n)
-        nb.step(20)
-        d = float(np.abs(ref.positions - nb.positions).max())
-        naive = NumbaNBody(n, "naive")
-        naive.step(20)
-        dn = float(np.abs(naive.positions - nb.positions).max())
-        moved = float(np.abs(ref.positions - bench_nbody.initial(n)).max())
-        checks.append(f"N-body N={n}, 20 steps: max |x_physcore − x_numba-f64| = {d:.2e} (max displacement "
-                      f"{moved:.2e}); numba tiled vs naive kernel: {dn:.1e}")
-        del ref, nb, naive
+        # correctness: 20 steps from the same initial state, each precision against the other code
+        # and against float64
+        x = {}
+        for label, make in (("physcore f64", lambda: bench_nbody.build(n, threads)),
+                            ("physcore f32", lambda: bench_nbody.build(n, threads, "f32")),
+                            ("numba f64", lambda: NumbaNBody(n)),
+                            ("numba f64, naive loop", lambda: NumbaNBody(n, "naive")),
+                            ("numba f32", lambda: NumbaNBody(n, dtype=np.float32))):
+            sim = make()
+            sim.step(20)
+            x[label] = np.asarray(sim.positions, dtype=np.float64)
+            del sim
+
+        def d(a, b):
+            return float(np.abs(x[a] - x[b]).max())
+
+        moved = float(np.abs(x["physcore f64"] - bench_nbody.initial(n)).max())
+        checks.append(f"N-body N={n}, 20 steps: max |x_physcore − x_numba-f64| = {d('physcore f64', 'numba f64'):.2e} "
+                      f"(max displacement {moved:.2e}); numba tiled vs naive kernel: "
+                      f"{d('numba f64', 'numba f64, naive loop'):.1e}")
+        checks.append(f"N-body N={n}, 20 steps, float32: max |x_physcore-f32 − x_numba-f32| = "
+                      f"{d('physcore f32', 'numba f32'):.2e}; vs float64: physcore-f32 − physcore-f64 "
+                      f"{d('physcore f32', 'physcore f64'):.2e}, numba-f32 − numba-f64 {d('numba f32', 'numba f64'):.2e}")
+        del x
 
         rates = {}
-        scene = bench_nbody.build(n, threads)
-        scene.step(5)
-        t = median_block_time(scene.step, steps)
-        rates["physcore f64"] = n * n * steps / t
-        del scene
-        nb = NumbaNBody(n)
-        nb.step(5)
-        t = median_block_time(nb.step, steps)
-        assert np.isfinite(nb.positions).all()
-        rates["numba f64"] = n * n * steps / t
-        del nb
-        nb = NumbaNBody(n, "naive")
-        nb.step(5)
-        t = median_block_time(nb.step, steps)
-        rates["numba f64, naive loop"] = n * n * steps / t
+        for label, make in (("physcore f64", lambda: bench_nbody.build(n, threads)),
+                            ("numba f64", lambda: NumbaNBody(n)),
+                            ("numba f64, naive loop", lambda: NumbaNBody(n, "naive")),
+                            ("physcore f32", lambda: bench_nbody.build(n, threads, "f32")),
+                            ("numba f32", lambda: NumbaNBody(n, dtype=np.float32))):
+            sim = make()
+            sim.step(5)
+            t = median_block_time(sim.step, steps)
+            assert np.isfinite(sim.positions).all()
+            rates[label] = n * n * steps / t
+            del sim
         _add_rows(rows, "N-body", f"N={n}", "pair interactions/s", rates)
+    if sizes:
+        ops = {**f64_instructions(_nbody_accel), **f64_instructions(_nbody_block["tiled"])}
+        checks.append("numba f32 N-body kernel and driver: "
+                      + ("no double-precision arithmetic in the generated code" if not ops else
+                         f"DOUBLE-PRECISION INSTRUCTIONS in the generated code (promoted to float64): {ops}"))
+
+
+def f64_instructions(dispatcher, dtype=numba.float32) -> dict:
+    """Double-precision arithmetic / conversion instructions (x86 `...sd`/`...pd` mnemonics, with the
+    parallel gufuncs included) in the code numba generated for the signatures of `dispatcher` whose
+    array arguments are all `dtype`: empty when nothing was promoted to float64. Other ISAs: {}."""
+    import platform
+    import re
+    from collections import Counter
+
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        return {}
+    found: Counter = Counter()
+    for sig in dispatcher.signatures:
+        arrays = [a for a in sig if isinstance(a, numba.types.Array)]
+        if not arrays or any(a.dtype != dtype for a in arrays):
+            continue
+        asm = dispatcher.inspect_asm(sig)
+        found.update(re.findall(r"\b(v?(?:add|sub|mul|div|sqrt|min|max|f[n]?m(?:add|sub)\w*|cvtss2|cvtsi2)(?:sd|pd))\b", asm))
+    return dict(found)
 
 
 def _add_rows(rows, workload, size, metric, rates) -> None:
-    pc_rate = rates["physcore f64"]
+    """Ratio = physcore / this at the same precision (f64 vs f64, f32 vs f32); "—" for the physcore
+    rows and where physcore has no row of that precision."""
+    import re
+
     for label, r in rates.items():
-        ratio = "—" if label.startswith("physcore") else f"{pc_rate / r:.2f}"
+        prec = re.search(r"\bf(32|64)\b", label)
+        ref = rates.get(f"physcore {prec.group(0)}") if prec else None
+        ratio = "—" if label.startswith("physcore") or ref is None else f"{ref / r:.2f}"
         rows.append([workload, size, label, f"{si(r)} {metric}", ratio])
+
+
+def numba_cpu() -> str:
+    """The CPU numba compiles for (its native ISA unless NUMBA_CPU_NAME says otherwise)."""
+    try:
+        import llvmlite.binding as ll
+
+        return numba.config.CPU_NAME or ll.get_host_cpu_name()
+    except Exception:  # noqa: BLE001 - informational only
+        return "?"
 
 
 def main() -> None:
@@ -402,10 +468,13 @@ def main() -> None:
     if nbody_sizes:
         run_nbody(nbody_sizes, args.threads, rows, checks)
 
-    print(f"numba {numba.__version__}, threading layer {numba.threading_layer()}, "
-          f"{numba.get_num_threads()} numba threads; physcore threads={args.threads}; "
+    print(f"numba {numba.__version__} (LLVM target {numba_cpu()}: numba at its native ISA), threading layer "
+          f"{numba.threading_layer()}, {numba.get_num_threads()} numba threads; physcore threads={args.threads}; "
           f"os.cpu_count()={os.cpu_count()}\n")
-    print(table(["workload", "size", "implementation", "rate", "physcore / this"], rows))
+    print(header(args.threads))
+    print(table(["workload", "size", "implementation", "rate", "physcore / this (same precision)"], rows))
+    print("(ratio: physcore / this at the same precision; — on physcore's rows and where physcore has no row "
+          "of that precision)")
     print("\nCorrectness (same initial state, same number of steps):")
     for c in checks:
         print("  " + c)

@@ -55,7 +55,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # run from anywhere
 
-from _common import median_block_time, si, table  # first: sets up the environment before numpy loads
+from _common import header, median_block_time, si, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 try:
@@ -420,6 +420,7 @@ def main() -> None:
     rows = run(args.sizes, args.threads)
     print(f"numba {numba.__version__}, threading layer {numba.threading_layer()}, {numba.get_num_threads()} "
           f"threads, os.cpu_count()={os.cpu_count()}; SPH-2D dam break, float32, protocol 'from rest'\n")
+    print(header(args.threads) + " (physcore does not run here; numba runs at its native ISA)")
     print(table(["size", "N", "S", "median block (s)", "particle-steps/s"],
                 [[r["size"], f"{r['N']:,}", r["S"], f"{r['median_s']:.3f}", si(r["particle_steps_per_s"])]
                  for r in rows]))

@@ -8,7 +8,7 @@ without sampling). scipy's right-hand side is Python, as in the workload definit
     pip install ".[bench]"     # numba and scipy
     python benches/peer_scipy_kepler.py
 """
-from _common import require_release  # first: sets up the environment before numpy loads
+from _common import header, require_release  # first: sets up the environment before numpy loads
 
 import math
 import statistics
@@ -51,6 +51,7 @@ def run_scipy(method, rtol, atol):
     return statistics.median(walls), e, float(np.linalg.norm(sol.y[:2, -1] - [0.5, 0])), sol.nfev
 def main() -> None:
     require_release()
+    print(header(1) + f" · scipy {scipy.__version__}\n")
     print("| code | method | rtol / atol | max abs(E/E0-1) | abs(r(t_end)-r0) | force evaluations | wall s | physcore faster |")
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for rtol, atol in [(1e-6, 1e-9), (1e-10, 1e-12)]:

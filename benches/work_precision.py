@@ -76,7 +76,7 @@ _HERE = Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:
     sys.path.insert(0, str(_HERE))
 
-from _common import require_release, table  # noqa: E402  first: sets up the environment before numpy loads
+from _common import header, require_release, table  # noqa: E402  first: sets up the environment before numpy loads
 
 import numpy as np  # noqa: E402
 
@@ -445,6 +445,7 @@ def markdown(problems: List[Problem], rows: List[Dict[str, Any]], command: str) 
         f"- machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores ({platform.platform()})",
         f"- date: {datetime.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
         f"- physcore {ver} ({profile} build), Python {platform.python_version()}",
+        f"- {header(sorted({r['threads'] for r in rows}) or None)} (per run: the threads column)",
         f"- command: `{command}`",
         "- errors: max relative energy error over the samples; position error relative to the length scale "
         "(see the script's docstring); — = diverged or stopped; 2 significant digits",
