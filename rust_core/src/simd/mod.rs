@@ -604,6 +604,10 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         assert!(set_level(Some(Level::Neon)).is_err());
         #[cfg(target_arch = "aarch64")]
-        assert!(set_level(Some(Level::Avx2)).is_err());
+        {
+            assert!(set_level(Some(Level::Avx2)).is_err());
+            // Every aarch64 CPU has NEON: the agreement tests do run the neon level there.
+            assert_eq!(Level::best(), Level::Neon);
+        }
     }
 }
