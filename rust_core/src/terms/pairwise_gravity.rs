@@ -85,28 +85,36 @@ impl<F: Float> Kernel for Accel<'_, F> {
     type Output = ();
     #[inline(always)]
     fn run<S: Simd>(self, s: S) {
-        let Soa { xs, ys, zs, ms } = self.src;
-        let l = P::<S, F>::lanes();
-        let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, self.eps2));
+        let all = 0..self.src.xs.len();
         for (i, out) in self.rows.zip(self.out.iter_mut()) {
-            let (xi, yi, zi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]));
-            let (mut ax, mut ay, mut az) = (zero, zero, zero);
-            let src = xs.chunks_exact(l).zip(ys.chunks_exact(l)).zip(zs.chunks_exact(l)).zip(ms.chunks_exact(l));
-            for (((bx, by), bz), bm) in src {
-                let dx = P::load(s, bx) - xi;
-                let dy = P::load(s, by) - yi;
-                let dz = P::load(s, bz) - zi;
-                let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
-                let y = r2.rsqrt();
-                // r² = 0 only for the self term (or coincident points without softening): no force.
-                let w = r2.gt(zero).select(P::load(s, bm) * (y * y * y), zero);
-                ax = w.mul_add(dx, ax);
-                ay = w.mul_add(dy, ay);
-                az = w.mul_add(dz, az);
-            }
-            *out = [ax.sum().f64(), ay.sum().f64(), az.sum().f64()];
+            *out = direct(s, self.src, all.clone(), i, self.eps2);
         }
     }
+}
+
+/// Σ_j m_j d_j (|d_j|² + ε²)^{-3/2} over the sources `js` (whole vectors) for receiver `i`, one
+/// SIMD vector of sources at a time, lanes summed at the end; returns (ax, ay, az) / G.
+#[inline(always)]
+fn direct<S: Simd, F: Float>(s: S, src: &Soa<F>, js: std::ops::Range<usize>, i: usize, eps2: F) -> [Real; 3] {
+    let Soa { xs, ys, zs, ms } = src;
+    let l = P::<S, F>::lanes();
+    let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, eps2));
+    let (xi, yi, zi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]));
+    let (mut ax, mut ay, mut az) = (zero, zero, zero);
+    let src = xs[js.clone()].chunks_exact(l).zip(ys[js.clone()].chunks_exact(l)).zip(zs[js.clone()].chunks_exact(l)).zip(ms[js].chunks_exact(l));
+    for (((bx, by), bz), bm) in src {
+        let dx = P::load(s, bx) - xi;
+        let dy = P::load(s, by) - yi;
+        let dz = P::load(s, bz) - zi;
+        let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
+        let y = r2.rsqrt();
+        // r² = 0 only for the self term (or coincident points without softening): no force.
+        let w = r2.gt(zero).select(P::load(s, bm) * (y * y * y), zero);
+        ax = w.mul_add(dx, ax);
+        ay = w.mul_add(dy, ay);
+        az = w.mul_add(dz, az);
+    }
+    [ax.sum().f64(), ay.sum().f64(), az.sum().f64()]
 }
 
 /// Receivers per parallel task: O(N) work each, so small tasks balance well.
@@ -168,21 +176,9 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
         let far = self.beyond..xs.len();
         let Cols { x: cx, y: cy, z: cz } = self.cols;
         for (i, out) in self.block.clone().zip(self.out.iter_mut()) {
+            let near = direct(s, self.src, own.clone(), i, self.eps2);
             let (xi, yi, zi, mi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, ms[i]));
             let (mut ax, mut ay, mut az) = (zero, zero, zero);
-            let src = xs[own.clone()].chunks_exact(l).zip(ys[own.clone()].chunks_exact(l)).zip(zs[own.clone()].chunks_exact(l)).zip(ms[own.clone()].chunks_exact(l));
-            for (((bx, by), bz), bm) in src {
-                let dx = P::load(s, bx) - xi;
-                let dy = P::load(s, by) - yi;
-                let dz = P::load(s, bz) - zi;
-                let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
-                let y = r2.rsqrt();
-                // The self term (r² = ε², d = 0) adds nothing; without softening r² = 0: masked.
-                let w = r2.gt(zero).select(P::load(s, bm) * (y * y * y), zero);
-                ax = w.mul_add(dx, ax);
-                ay = w.mul_add(dy, ay);
-                az = w.mul_add(dz, az);
-            }
             let src = xs[far.clone()].chunks_exact(l).zip(ys[far.clone()].chunks_exact(l)).zip(zs[far.clone()].chunks_exact(l)).zip(ms[far.clone()].chunks_exact(l));
             let col = cx[far.clone()].chunks_exact_mut(l).zip(cy[far.clone()].chunks_exact_mut(l)).zip(cz[far.clone()].chunks_exact_mut(l));
             for ((((bx, by), bz), bm), ((ox, oy), oz)) in src.zip(col) {
@@ -204,10 +200,13 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
                 wj.neg_mul_add(dy, P::load(s, oy)).store(oy);
                 wj.neg_mul_add(dz, P::load(s, oz)).store(oz);
             }
-            *out = [ax.sum().f64(), ay.sum().f64(), az.sum().f64()];
+            *out = [near[0] + ax.sum().f64(), near[1] + ay.sum().f64(), near[2] + az.sum().f64()];
         }
     }
 }
+
+/// A receiver block of the symmetric sum: its index and its rows of the output.
+type Block<'a> = (usize, &'a mut [[Real; 3]]);
 
 /// Receiver blocks of the symmetric sum (a multiple of 16 sources each).
 const BLOCKS: usize = 32;
@@ -234,15 +233,15 @@ fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, sc
         }
     }
     // Pair the blocks from both ends: (0, nb−1), (1, nb−2), ...
-    let mut blocks: Vec<Option<(usize, &mut [[Real; 3]])>> = out.chunks_mut(t).enumerate().map(Some).collect();
+    let mut blocks: Vec<Option<Block>> = out.chunks_mut(t).enumerate().map(Some).collect();
     let mut tasks = Vec::with_capacity(ntask);
     for k in 0..ntask {
         let a = blocks[k].take().expect("each block once");
         let b = if nb - 1 - k != k { blocks[nb - 1 - k].take() } else { None };
         tasks.push((a, b));
     }
-    let mask = !(eps2 > F::ZERO);
-    let run = |((a, b), cols): ((( usize, &mut [[Real; 3]]), Option<(usize, &mut [[Real; 3]])>), &mut Cols<F>)| {
+    let mask = eps2 <= F::ZERO;
+    let run = |((a, b), cols): ((Block, Option<Block>), &mut Cols<F>)| {
         for (bi, out) in std::iter::once(a).chain(b) {
             let block = bi * t..bi * t + out.len();
             let beyond = (bi + 1) * t;
