@@ -12,7 +12,8 @@ pub trait Kernel: Copy + Send + Sync + Default + 'static {
     const WENDLAND: bool;
     /// Normalisation σ_d for dimension `dim` (2 or 3) and smoothing length `h`.
     fn sigma(h: f64, dim: usize) -> f64;
-    /// w(q), zero for q ≥ 2.
+    /// w(q), zero for q ≥ 2. The scalar forms `w`, `g` are the reference: the passes use `wv`,
+    /// `gv`, tested against them lane by lane at every SIMD level.
     fn w<F: Float>(q: F) -> F;
     /// g(q) = w'(q)/q, zero for q ≥ 2 (and ≤ 0 everywhere: the kernel decreases).
     fn g<F: Float>(q: F) -> F;
@@ -142,6 +143,33 @@ mod tests {
         assert_eq!(K::g(2.0f64), 0.0);
         assert_eq!(K::w(3.0f64), 0.0);
         assert!(K::g(0.0f64).is_finite());
+    }
+
+    /// `wv`/`gv` on SIMD vectors equal the scalar forms lane by lane (to rounding), at every level.
+    struct Lanes<K>(std::marker::PhantomData<K>);
+    impl<K: Kernel> crate::simd::Kernel for Lanes<K> {
+        type Output = ();
+        #[inline(always)]
+        fn run<S: Simd>(self, s: S) {
+            let qs: Vec<f64> = (0..=64).map(|k| 0.03125 * k as f64 + 1e-3).collect();
+            let l = P::<S, f64>::lanes();
+            for c in qs.chunks(l) {
+                let q = P::<S, f64>::from_fn(s, |k| c.get(k).copied().unwrap_or(1.0));
+                let (w, g) = (K::wv(q).to_array(), K::gv(q, P::splat(s, 1.0) / q).to_array());
+                for (k, &qk) in c.iter().enumerate() {
+                    assert!((w[k] - K::w(qk)).abs() <= 1e-15, "{} w({qk})", K::NAME);
+                    assert!((g[k] - K::g(qk)).abs() <= 1e-13 * K::g(qk).abs().max(1.0), "{} g({qk})", K::NAME);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn simd_forms_match_the_scalar_reference_at_every_level() {
+        for level in crate::simd::Level::available() {
+            crate::simd::dispatch(level, Lanes::<CubicSpline>(std::marker::PhantomData));
+            crate::simd::dispatch(level, Lanes::<WendlandC2>(std::marker::PhantomData));
+        }
     }
 
     #[test]
