@@ -193,6 +193,7 @@ impl Simd for pulp::Scalar {}
 /// One Newton–Raphson step for y ≈ 1/√x, with h = x/2: y (3/2 − (h y) y). Written (h·y)·y, not
 /// h·(y·y): y² overflows for x below 1e-308^(1/2)·… (springs decayed to 1e-155 m turned NaN).
 /// The error e becomes ≈ 1.5 e² per step.
+#[cfg(target_arch = "aarch64")]
 #[inline(always)]
 pub(crate) fn newton_rsqrt_f64<S: pulp::Simd>(s: S, h: S::f64s, y: S::f64s) -> S::f64s {
     s.mul_f64s(y, s.negate_mul_add_f64s(s.mul_f64s(h, y), y, s.splat_f64s(1.5)))

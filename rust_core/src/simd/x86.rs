@@ -1,6 +1,6 @@
 //! The fast reciprocal square root and gathers on x86-64 (the only ISA-specific code of the
 //! kernels).
-use super::{newton_rsqrt_f32, newton_rsqrt_f64, Simd};
+use super::{newton_rsqrt_f32, Simd};
 use pulp::x86::{V3, V4};
 use pulp::{cast, Simd as _};
 
@@ -9,13 +9,6 @@ type F32s3 = <V3 as pulp::Simd>::f32s;
 type F64s4 = <V4 as pulp::Simd>::f64s;
 type F32s4 = <V4 as pulp::Simd>::f32s;
 
-/// AVX2 keeps the portable lane-by-lane row gather: `vgatherdpd` measured slower here (cloth 128²,
-/// Zen 5 at the AVX2 level: 35–38 M particle-steps/s with it, 42–52 M without).
-///
-/// AVX2 has an estimate only for f32 (`vrsqrtps`, relative error ≤ 1.5·2⁻¹²). f64 takes it through
-/// float32 and three Newton steps (error 3.7e-4 → 2e-7 → 6e-14 → round-off); lanes outside
-/// float32's range, where the estimate would be 0 or inf, take the exact square root and division
-/// (a branch per vector, never taken in practice).
 /// Checks that rows `idx` of `(n, dim)` arrays `a` and `b` exist, so the gathers below read in
 /// bounds.
 #[inline(always)]
@@ -24,20 +17,35 @@ fn check_rows(a: &[f64], b: &[f64], dim: usize, idx: &[u32]) {
     assert!((max + 1) * dim <= a.len().min(b.len()), "gather: row {max} out of bounds");
 }
 
+/// AVX2 keeps the portable lane-by-lane row gather: `vgatherdpd` measured slower here (cloth 128²,
+/// Zen 5 at the AVX2 level: 35–38 M particle-steps/s with it, 42–52 M without).
+///
+/// AVX2 has an estimate only for f32 (`vrsqrtps`, relative error ≤ 1.5·2⁻¹²). f64 takes it through
+/// float32, one Newton step there and one third-order step in f64 (see `rsqrt_f64s`); a vector
+/// with a lane outside float32's normal range takes the exact square root and division (a branch
+/// per vector, not taken for physical distances).
 impl Simd for V3 {
     #[inline(always)]
     fn rsqrt_f64s(self, x: F64s3) -> F64s3 {
-        let zero = self.splat_f64s(0.0);
-        let small = self.and_m64s(self.greater_than_f64s(x, zero), self.less_than_f64s(x, self.splat_f64s(1e-36)));
-        let out = self.or_m64s(small, self.greater_than_f64s(x, self.splat_f64s(1e36)));
-        if self.avx._mm256_movemask_pd(cast(out)) != 0 {
+        // Estimate and one Newton step in float32 on the narrow vector (four lanes in an xmm):
+        // 3.7e-4 → ≈ 4e-7 (float32 rounding included).
+        let xf = self.avx._mm256_cvtpd_ps(cast(x));
+        let y0 = self.sse._mm_rsqrt_ps(xf);
+        let hy = self.sse._mm_mul_ps(self.sse._mm_mul_ps(xf, self.sse._mm_set1_ps(0.5)), y0);
+        let y1 = self.sse._mm_mul_ps(y0, self.fma._mm_fnmadd_ps(hy, y0, self.sse._mm_set1_ps(1.5)));
+        // Lanes outside float32's normal range (and 0, negative or NaN) end the float32 step as
+        // inf or NaN (y1 · 0 is NaN): take the exact square root and division for the vector.
+        let z = self.sse._mm_mul_ps(y1, self.sse._mm_setzero_ps());
+        if self.sse._mm_movemask_ps(self.sse._mm_cmpunord_ps(z, z)) != 0 {
             return self.div_f64s(self.splat_f64s(1.0), self.sqrt_f64s(x));
         }
-        let y = cast(self.avx._mm256_cvtps_pd(self.sse._mm_rsqrt_ps(self.avx._mm256_cvtpd_ps(cast(x)))));
-        let h = self.mul_f64s(x, self.splat_f64s(0.5));
-        let y = newton_rsqrt_f64(self, h, y);
-        let y = newton_rsqrt_f64(self, h, y);
-        newton_rsqrt_f64(self, h, y)
+        let y: F64s3 = cast(self.avx._mm256_cvtps_pd(y1));
+        // One third-order (Householder) step in f64: with e = 1 − x y², 1/√x = y (1 − e)^{-1/2}
+        // = y (1 + e/2 + 3e²/8 + …); error ≈ (5/16) e³ → round-off. Three Newton steps in f64
+        // cost 12 operations; this and the float32 step 9, most on half-width vectors.
+        let e = self.negate_mul_add_f64s(self.mul_f64s(x, y), y, self.splat_f64s(1.0));
+        let p = self.mul_add_f64s(e, self.splat_f64s(0.375), self.splat_f64s(0.5));
+        self.mul_add_f64s(self.mul_f64s(y, e), p, y)
     }
 
     /// `vrsqrtps` plus one Newton step (error ≈ 2e-7, under 2 ulp of float32).
@@ -49,8 +57,8 @@ impl Simd for V3 {
 }
 
 /// AVX-512: the hardware row gather (cloth 128²: 54 M particle-steps/s against 26–31 M lane by
-/// lane), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; two Newton steps for f64
-/// (→ 5.6e-9 → round-off), one for f32 (→ 5.6e-9, below float32 rounding).
+/// lane), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; one fourth-order step for
+/// f64 (→ 4e-18, round-off), one Newton step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
     #[inline(always)]
     fn gather_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([F64s4; 3], [F64s4; 3]) {
@@ -71,10 +79,13 @@ impl Simd for V4 {
 
     #[inline(always)]
     fn rsqrt_f64s(self, x: F64s4) -> F64s4 {
-        let y = cast(self.avx512f._mm512_rsqrt14_pd(cast(x)));
-        let h = self.mul_f64s(x, self.splat_f64s(0.5));
-        let y = newton_rsqrt_f64(self, h, y);
-        newton_rsqrt_f64(self, h, y)
+        let y: F64s4 = cast(self.avx512f._mm512_rsqrt14_pd(cast(x)));
+        // One fourth-order step: with e = 1 − x y², y (1 + e/2 + 3e²/8 + 5e³/16); error
+        // ≈ (35/128) e⁴ < 4e-18 from e < 2⁻¹⁴: 6 operations, against 7 for two Newton steps.
+        let e = self.negate_mul_add_f64s(self.mul_f64s(x, y), y, self.splat_f64s(1.0));
+        let p = self.mul_add_f64s(e, self.splat_f64s(0.3125), self.splat_f64s(0.375));
+        let p = self.mul_add_f64s(e, p, self.splat_f64s(0.5));
+        self.mul_add_f64s(self.mul_f64s(y, e), p, y)
     }
 
     #[inline(always)]

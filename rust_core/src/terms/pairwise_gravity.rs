@@ -177,7 +177,8 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
         let Cols { x: cx, y: cy, z: cz } = self.cols;
         for (i, out) in self.block.clone().zip(self.out.iter_mut()) {
             let near = direct(s, self.src, own.clone(), i, self.eps2);
-            let (xi, yi, zi, mi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, ms[i]));
+            // −m_i hoisted: the reaction is one FMA per component (negation is exact).
+            let (xi, yi, zi, nmi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, -ms[i]));
             let (mut ax, mut ay, mut az) = (zero, zero, zero);
             let src = xs[far.clone()].chunks_exact(l).zip(ys[far.clone()].chunks_exact(l)).zip(zs[far.clone()].chunks_exact(l)).zip(ms[far.clone()].chunks_exact(l));
             let col = cx[far.clone()].chunks_exact_mut(l).zip(cy[far.clone()].chunks_exact_mut(l)).zip(cz[far.clone()].chunks_exact_mut(l));
@@ -195,10 +196,10 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
                 ax = w.mul_add(dx, ax);
                 ay = w.mul_add(dy, ay);
                 az = w.mul_add(dz, az);
-                let wj = mi * y3;
-                wj.neg_mul_add(dx, P::load(s, ox)).store(ox);
-                wj.neg_mul_add(dy, P::load(s, oy)).store(oy);
-                wj.neg_mul_add(dz, P::load(s, oz)).store(oz);
+                let wj = nmi * y3;
+                wj.mul_add(dx, P::load(s, ox)).store(ox);
+                wj.mul_add(dy, P::load(s, oy)).store(oy);
+                wj.mul_add(dz, P::load(s, oz)).store(oz);
             }
             *out = [near[0] + ax.sum().f64(), near[1] + ay.sum().f64(), near[2] + az.sum().f64()];
         }
