@@ -10,6 +10,7 @@ pub mod simd;
 pub mod simulation;
 pub mod sph;
 pub mod state;
+pub mod stop;
 pub mod terms;
 pub mod vector;
 
@@ -17,4 +18,4 @@ pub mod vector;
 mod python;
 
 pub use error::{Error, Result};
-pub use simulation::{EnergyReport, Simulation};
+pub use simulation::{Checkpoint, EnergyReport, Simulation};

@@ -4,6 +4,7 @@ use crate::error::{invalid, Error, Result};
 use crate::integrators::{self, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::state::{Model, State};
+use crate::stop::Stop;
 use crate::terms::{ForceSet, Term};
 use crate::vector::{Real, Vector};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -26,6 +27,15 @@ impl EnergyReport {
     pub fn total(&self) -> Real {
         self.kinetic + self.potential.iter().map(|p| p.1).sum::<Real>() + self.dissipated.iter().map(|p| p.1).sum::<Real>()
     }
+}
+
+/// What `Simulation::rollback` restores (see `Simulation::checkpoint`).
+pub struct Checkpoint<V: Vector> {
+    state: State<V>,
+    dissipated: Vec<Real>,
+    collisions: Real,
+    cache: Option<(Vec<V>, Vec<Real>)>,
+    dt: Real,
 }
 
 pub struct Simulation<V: Vector> {
@@ -306,40 +316,64 @@ impl<V: Vector> Simulation<V> {
     /// Runs `n` steps. On divergence (NaN/inf in a position or velocity) the state, books and
     /// caches are rolled back to where this call started and `Error::Diverged` names the step.
     pub fn step(&mut self, n: u64) -> Result<()> {
-        self.step_interruptible(n, &AtomicBool::new(false))
+        self.step_interruptible(n, &Arc::new(AtomicBool::new(false)))
     }
 
     /// `step(n)` that stops once `stop` is set, from any thread (the Python binding sets it on
-    /// Ctrl-C). The flag is read before every step and, in "rk45", before every internal step
-    /// attempt; a single force evaluation is not interrupted. Reading it is a relaxed atomic
-    /// load and changes no result. When it is seen set, the state is rolled back like on
-    /// divergence and `Error::Interrupted` is returned; a flag set before the call stops it
-    /// before the first step.
-    pub fn step_interruptible(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
+    /// Ctrl-C). The flag is read before and after every step, in "rk45" before every internal
+    /// step attempt, and inside long force evaluations (pairwise gravity, see `crate::stop`).
+    /// Reading it is a relaxed atomic load and changes no result. When it is seen set, the
+    /// state is rolled back like on divergence and `Error::Interrupted` is returned; a flag set
+    /// before the call stops it before the first step, and one set during the last step still
+    /// rolls the call back.
+    pub fn step_interruptible(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<()> {
+        self.step_checkpointed(n, stop).map(drop)
+    }
+
+    /// `step_interruptible` that, on success, returns the checkpoint taken at its start, so the
+    /// caller can still undo the call (`rollback`): the Python binding does when a signal
+    /// arrived while the call was finishing.
+    pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint<V>> {
+        let cp = self.checkpoint();
         if n == 0 || self.n_particles() == 0 {
             self.sys.state.t += n as Real * self.dt;
             self.sys.state.step += n;
-            return Ok(());
+            return Ok(cp);
         }
-        let saved = (
-            self.sys.state.clone(),
-            self.sys.forces.dissipated.clone(),
-            self.collision_dissipated,
-            self.integrator_cache(),
-        );
-        let pool = self.pool.clone();
-        let result = match &pool {
-            Some(p) => p.install(|| self.step_inner(n, stop)),
-            None => self.step_inner(n, stop),
-        };
-        if result.is_ok() {
-            return result;
+        match self.with_stop(stop, |s| s.step_inner(n, stop)) {
+            Ok(()) => Ok(cp),
+            Err(e) => Err(self.fail(cp, e)),
         }
-        let (state, diss, coll, cache) = saved;
+    }
+
+    /// Everything a `step` or `advance` call changes, to undo it with `rollback`: the state,
+    /// the dissipation books, the integrator's cache and dt. A copy of the positions and
+    /// velocities.
+    pub fn checkpoint(&self) -> Checkpoint<V> {
+        Checkpoint {
+            state: self.sys.state.clone(),
+            dissipated: self.sys.forces.dissipated.clone(),
+            collisions: self.collision_dissipated,
+            cache: self.integrator_cache(),
+            dt: self.dt,
+        }
+    }
+
+    /// Restores a checkpoint of this simulation; returns the step count it restored.
+    pub fn rollback(&mut self, cp: Checkpoint<V>) -> u64 {
+        let dt = cp.dt;
+        let step = self.restore_state(cp);
+        self.dt = dt;
+        step
+    }
+
+    /// `rollback` but for dt (an error about the failed call still needs its dt).
+    fn restore_state(&mut self, cp: Checkpoint<V>) -> u64 {
+        let Checkpoint { state, dissipated, collisions, cache, .. } = cp;
         let rolled_back_to = state.step;
         self.sys.state = state;
-        self.sys.forces.dissipated = diss;
-        self.collision_dissipated = coll;
+        self.sys.forces.dissipated = dissipated;
+        self.collision_dissipated = collisions;
         let n_terms = self.sys.forces.terms.len();
         let restored = match cache {
             Some((f, p)) => self.integrator.set_cache(f, p, &self.sys.state.v, n_terms),
@@ -348,15 +382,37 @@ impl<V: Vector> Simulation<V> {
         if !restored {
             self.integrator.reset();
         }
-        Err(match result {
-            Err(Error::Diverged { step, particle, quantity, t, .. }) => {
+        rolled_back_to
+    }
+
+    /// Rolls a failed call back to `cp` and completes its error (where it was rolled back to,
+    /// the suggested dt of a divergence).
+    fn fail(&mut self, cp: Checkpoint<V>, e: Error) -> Error {
+        let dt = cp.dt;
+        let rolled_back_to = self.restore_state(cp);
+        let e = match e {
+            Error::Diverged { step, particle, quantity, t, .. } => {
+                // The dt that failed: `advance` ran substeps shorter than the saved dt.
                 let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
                 Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt }
             }
-            Err(Error::Interrupted { .. }) => Error::Interrupted { rolled_back_to },
-            Err(e) => e,
-            Ok(()) => unreachable!("handled above"),
-        })
+            Error::Interrupted { .. } => Error::Interrupted { rolled_back_to },
+            e => e,
+        };
+        self.dt = dt;
+        e
+    }
+
+    /// Runs `f` on this simulation's pool with `stop` handed to the terms for its duration.
+    fn with_stop<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&mut Self) -> R + Send) -> R {
+        self.sys.forces.set_stop(&Stop::new(Some(stop.clone())));
+        let pool = self.pool.clone();
+        let r = match &pool {
+            Some(p) => p.install(|| f(self)),
+            None => f(self),
+        };
+        self.sys.forces.set_stop(&Stop::default());
+        r
     }
 
     /// Runs `job(self)` as a task on this simulation's pool (rayon's global pool if it has none)
@@ -395,45 +451,56 @@ impl<V: Vector> Simulation<V> {
     /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
     /// divergence or interrupt everything, dt included, is rolled back as in `step`.
     /// `stop` as in `step_interruptible`.
-    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, stop: &AtomicBool) -> Result<u64> {
+    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, stop: &Arc<AtomicBool>) -> Result<u64> {
+        self.advance_checkpointed(duration, substeps, stop).map(|(n, _)| n)
+    }
+
+    /// `advance_interruptible` that also returns the checkpoint taken at its start (as
+    /// `step_checkpointed`).
+    pub fn advance_checkpointed(&mut self, duration: Real, substeps: Option<u64>, stop: &Arc<AtomicBool>) -> Result<(u64, Checkpoint<V>)> {
         if !(duration.is_finite() && duration > 0.0) {
             return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
         }
-        let n = match substeps {
-            Some(0) => return Err(invalid("substeps", "must be >= 1")),
-            Some(n) => n,
-            None => {
-                let safe = self.run(|| self.auto_dt()).unwrap_or(if self.integrator.info().name == "rk45" { duration } else { self.dt });
-                let n = (duration / safe).ceil().max(1.0);
-                if n > 1e12 {
-                    return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
-                }
-                n as u64
-            }
-        };
-        if !(duration / n as Real > 0.0) {
-            return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
+        if substeps == Some(0) {
+            return Err(invalid("substeps", "must be >= 1"));
         }
-        let old = self.dt;
-        self.dt = duration / n as Real;
-        // A cached force is still valid; a velocity predicted with the old dt is not. The cache
-        // is kept aside so that a rolled-back call leaves it as it was.
-        let dropped = (self.dt != old && self.sys.forces.velocity_dependent()).then(|| self.integrator_cache());
-        if dropped.is_some() {
-            self.integrator.reset();
-        }
-        match self.step_interruptible(n, stop) {
-            Ok(()) => Ok(n),
-            Err(e) => {
-                self.dt = old;
-                if let Some(Some((f, p))) = dropped {
-                    let n_terms = self.sys.forces.terms.len();
-                    if !self.integrator.set_cache(f, p, &self.sys.state.v, n_terms) {
-                        self.integrator.reset();
+        let cp = self.checkpoint();
+        let r = self.with_stop(stop, |s| {
+            let n = match substeps {
+                Some(n) => n,
+                None => {
+                    // O(N²) for pairwise gravity below 20,000 bodies; the term polls `stop`.
+                    let safe = s.auto_dt().unwrap_or(if s.integrator.info().name == "rk45" { duration } else { s.dt });
+                    if stop.load(Ordering::Relaxed) {
+                        return Err(Error::Interrupted { rolled_back_to: 0 });
                     }
+                    let n = (duration / safe).ceil().max(1.0);
+                    if n > 1e12 {
+                        return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
+                    }
+                    n as u64
                 }
-                Err(e)
+            };
+            if !(duration / n as Real > 0.0) {
+                return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
             }
+            let old = s.dt;
+            s.dt = duration / n as Real;
+            // A cached force is still valid; a velocity predicted with the old dt is not (the
+            // checkpoint keeps the cache for a rollback).
+            if s.dt != old && s.sys.forces.velocity_dependent() {
+                s.integrator.reset();
+            }
+            if s.n_particles() == 0 {
+                s.sys.state.t += n as Real * s.dt;
+                s.sys.state.step += n;
+                return Ok(n);
+            }
+            s.step_inner(n, stop).map(|()| n)
+        });
+        match r {
+            Ok(n) => Ok((n, cp)),
+            Err(e) => Err(self.fail(cp, e)),
         }
     }
 
@@ -481,6 +548,11 @@ impl<V: Vector> Simulation<V> {
             let Ok(non_finite) = self.integrator.step_interruptible(&mut self.sys, dt, stop) else {
                 return interrupted;
             };
+            // Set during the step: a term may have skipped part of its forces, so the step
+            // (the last one too) must not stand.
+            if stop.load(Ordering::Relaxed) {
+                return interrupted;
+            }
             self.sys.state.t += dt;
             self.sys.state.step += 1;
             if !self.colliders.is_empty() {

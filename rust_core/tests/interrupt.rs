@@ -9,7 +9,7 @@ use physcore_core::integrators::NAMES;
 use physcore_core::state::Model;
 use physcore_core::terms::{Springs, Term, UniformGravity};
 use physcore_core::Simulation;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -70,7 +70,7 @@ fn flag_set_before_the_call_stops_it_before_the_first_step() {
         s.step(2).unwrap();
         let before = snapshot(&s);
         let evals = s.force_evaluations();
-        let stop = AtomicBool::new(true);
+        let stop = Arc::new(AtomicBool::new(true));
         assert_eq!(s.step_interruptible(5, &stop), Err(Error::Interrupted { rolled_back_to: 2 }), "{name}");
         assert_eq!(s.force_evaluations(), evals, "{name}: no work after a set flag");
         assert!(snapshot(&s) == before, "{name}: state changed");
@@ -116,6 +116,59 @@ fn interrupt_inside_a_call_rolls_back_and_the_retry_is_bit_identical() {
     }
 }
 
+#[test]
+fn a_flag_set_during_the_last_step_rolls_the_call_back() {
+    // The flag goes up in the first force evaluation of a one-step call: the step's forces may
+    // be partial (a term skips its work), so the step must not stand.
+    for name in NAMES {
+        let mut probe = scene(name, 1, &Arc::new(AtomicBool::new(false)), 0);
+        probe.step(2).unwrap();
+        let at = probe.force_evaluations() + 1;
+        let flag = Arc::new(AtomicBool::new(false));
+        let mut s = scene(name, 1, &flag, at);
+        s.step(2).unwrap();
+        let before = snapshot(&s);
+        assert_eq!(s.step_interruptible(1, &flag), Err(Error::Interrupted { rolled_back_to: 2 }), "{name}");
+        assert!(snapshot(&s) == before, "{name}: the last step stood");
+    }
+}
+
+/// Counts its evaluations (a force-free term).
+struct Counter(Arc<AtomicU64>);
+
+impl Term<DVec3> for Counter {
+    fn name(&self) -> &str {
+        "counter"
+    }
+    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, _f: &mut [DVec3], _want_power: bool, _assign: bool) -> f64 {
+        self.0.fetch_add(1, Ordering::Relaxed);
+        0.0
+    }
+    fn potential(&self, _x: &[DVec3], _m: &Model) -> Option<f64> {
+        None
+    }
+    fn dissipative(&self) -> bool {
+        false
+    }
+}
+
+#[test]
+fn once_the_flag_is_up_the_remaining_terms_of_an_evaluation_are_skipped() {
+    for name in ["verlet", "rk4"] {
+        let flag = Arc::new(AtomicBool::new(false));
+        let at = 7;
+        let mut s = scene(name, 1, &flag, at);
+        let calls = Arc::new(AtomicU64::new(0));
+        s.add_term(Box::new(Counter(calls.clone()))).unwrap();
+        assert_eq!(s.step_interruptible(20, &flag), Err(Error::Interrupted { rolled_back_to: 0 }), "{name}");
+        // The counter comes after the tripwire: it misses the evaluation in which the flag went up.
+        assert_eq!(calls.load(Ordering::Relaxed), at - 1, "{name}");
+        // Between calls the terms see no flag, even one left set.
+        s.step(1).unwrap();
+        assert!(calls.load(Ordering::Relaxed) > at - 1, "{name}");
+    }
+}
+
 /// A stiff hanging chain under rk45 whose one output step (dt = 10⁴ s) takes minutes.
 fn long_rk45_step(threads: Option<usize>) -> Simulation<DVec3> {
     let n = 200;
@@ -135,7 +188,7 @@ fn a_watcher_on_the_calling_thread_stops_a_step_running_on_the_pool() {
     for threads in [None, Some(1), Some(2)] {
         let mut s = long_rk45_step(threads);
         let before = snapshot(&s);
-        let stop = AtomicBool::new(false);
+        let stop = Arc::new(AtomicBool::new(false));
         let caller = std::thread::current().id();
         let mut timeouts = 0;
         let t0 = Instant::now();

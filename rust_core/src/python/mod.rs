@@ -4,7 +4,7 @@
 use crate::boundary::{Aabb, Plane};
 use crate::error::Error;
 use crate::integrators::{self, IntegratorInfo};
-use crate::simulation::{EnergyReport, Simulation};
+use crate::simulation::{Checkpoint, EnergyReport, Simulation};
 use crate::sph::{KernelKind, Precision, Sph, SphParams};
 use crate::terms::{Drag, PairwiseGravity, Springs, UniformGravity};
 use crate::vector::{from_flat, to_flat, Real, Vector};
@@ -15,6 +15,7 @@ use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 /// Maps the core's error enum onto the Python hierarchy defined in `physcore/_errors.py`.
@@ -314,21 +315,23 @@ impl Simulation2 {
     }
 
     /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed within about
-    /// `SIGNAL_POLL` plus one force evaluation (see `interruptible`): the state is rolled back
-    /// to where the call started and KeyboardInterrupt is raised.
+    /// `SIGNAL_POLL` plus a fraction of a millisecond of kernel work (see `interruptible`): the
+    /// state is rolled back to where the call started and KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
             if s.adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
-                return py.detach(|| s.step(n)).map_err(|e| to_py(py, e));
+                let never = Arc::new(AtomicBool::new(false));
+                let cp = py.detach(|| s.step_checkpointed(n, &never)).map_err(|e| to_py(py, e))?;
+                return undo_if_signalled(py, s, ((), cp));
             }
-            interruptible(py, s, |s, stop| s.step_interruptible(n, stop))
+            interruptible(py, s, |s, stop| s.step_checkpointed(n, stop).map(|cp| ((), cp)))
         })
     }
 
     /// Advances `duration` seconds in automatically chosen substeps; returns their number.
     #[pyo3(signature = (duration, substeps=None))]
     fn advance(&mut self, py: Python<'_>, duration: f64, substeps: Option<u64>) -> PyResult<u64> {
-        with_sim!(&mut self.inner, s => interruptible(py, s, |s, stop| s.advance_interruptible(duration, substeps, stop)))
+        with_sim!(&mut self.inner, s => interruptible(py, s, |s, stop| s.advance_checkpointed(duration, substeps, stop)))
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -440,23 +443,37 @@ const SIGNAL_POLL: Duration = Duration::from_millis(20);
 
 /// Calls of at most this many particle-steps with a fixed-step integrator run on the calling
 /// thread, unwatched: even pairwise gravity (N² per step) keeps them to milliseconds, and the
-/// hand-off to a pool thread (~20 µs) would cost more than a small scene's step. Ctrl-C then
-/// lands right after the call, as it would between calls.
+/// hand-off to a pool thread (~20 µs) would cost more than a small scene's step. A signal that
+/// came during such a call is handled right after it, and the call is undone as if it had been
+/// interrupted (`undo_if_signalled`).
 const SHORT_CALL: u64 = 4096;
+
+/// Runs Python's signal handlers after a finished call; if one raises (Ctrl-C), the call is
+/// undone (`rollback` to `cp`) and the handler's exception raised, so an interrupted call never
+/// stands, however close to its end the signal came. Returns the call's result otherwise.
+fn undo_if_signalled<V: Vector, T>(py: Python<'_>, sim: &mut Simulation<V>, (v, cp): (T, Checkpoint<V>)) -> PyResult<T> {
+    match py.check_signals() {
+        Ok(()) => Ok(v),
+        Err(e) => {
+            sim.rollback(cp);
+            Err(e)
+        }
+    }
+}
 
 /// Runs `f` with the GIL released as a task on the simulation's pool (`run_watched`), while the
 /// calling thread wakes every `SIGNAL_POLL` to run Python's signal handlers (`check_signals`;
 /// Python runs them on the main thread only, so the stepping code, on a pool thread, cannot).
 /// If a handler raises (Ctrl-C: KeyboardInterrupt), the stop flag is set, `f` rolls back and
 /// returns `Error::Interrupted`, and the handler's exception is raised. If `f` finished before
-/// it saw the flag, its work stands and the exception is raised as if the signal had come
-/// right after the call.
+/// it saw the flag, the handlers run once more and, if one raises, `f`'s work is undone with
+/// the checkpoint it returned: an interrupted call never stands.
 fn interruptible<V: Vector, T: Send>(
     py: Python<'_>,
     sim: &mut Simulation<V>,
-    f: impl FnOnce(&mut Simulation<V>, &AtomicBool) -> Result<T, Error> + Send,
+    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<(T, Checkpoint<V>), Error> + Send,
 ) -> PyResult<T> {
-    let stop = AtomicBool::new(false);
+    let stop = Arc::new(AtomicBool::new(false));
     let mut pending: Option<PyErr> = None;
     let result = py.detach(|| {
         sim.run_watched(
@@ -473,8 +490,12 @@ fn interruptible<V: Vector, T: Send>(
         )
     });
     match (result, pending) {
-        (Ok(v), None) => Ok(v),
-        (_, Some(e)) => Err(e),
+        (Ok(done), None) => undo_if_signalled(py, sim, done),
+        (Ok((_, cp)), Some(e)) => {
+            sim.rollback(cp);
+            Err(e)
+        }
+        (Err(_), Some(e)) => Err(e),
         (Err(Error::Interrupted { .. }), None) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
         (Err(e), None) => Err(to_py(py, e)),
     }

@@ -6,6 +6,7 @@ pub mod springs;
 
 use crate::par;
 use crate::state::Model;
+use crate::stop::Stop;
 use crate::vector::{Real, Vector};
 
 pub use drag::Drag;
@@ -50,6 +51,10 @@ pub trait Term<V: Vector>: Send + Sync {
     fn as_sph(&self) -> Option<&crate::sph::Sph<V>> {
         None
     }
+    /// The stop flag of the interruptible call in progress (`Stop::default()` between calls).
+    /// A term whose one evaluation may take long polls it and skips the rest of its work once
+    /// it is set (see `crate::stop`); the others ignore it.
+    fn set_stop(&mut self, _stop: Stop) {}
 }
 
 /// The terms of a scene plus their dissipation ledger.
@@ -64,11 +69,13 @@ pub struct ForceSet<V: Vector> {
     pub evaluations: u64,
     /// Sum of the uniform acceleration fields (m/s²), applied by the integrators.
     pub g: V,
+    /// The stop flag of the call in progress: once set, `eval` skips the remaining terms.
+    stop: Stop,
 }
 
 impl<V: Vector> Default for ForceSet<V> {
     fn default() -> Self {
-        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0, g: V::ZERO }
+        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0, g: V::ZERO, stop: Stop::default() }
     }
 }
 
@@ -84,7 +91,8 @@ impl<V: Vector> ForceSet<V> {
     }
 
     /// Total force (N) at `(x, v)` into `f`, uniform fields excluded (see `g`). Remembers each
-    /// term's dissipated power at this state for a following `book_power` call.
+    /// term's dissipated power at this state for a following `book_power` call. Once the stop
+    /// flag is set the remaining terms are skipped (the step will be rolled back).
     pub fn eval(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
         self.evaluations += 1;
         let want = self.any_dissipative;
@@ -92,6 +100,9 @@ impl<V: Vector> ForceSet<V> {
         for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
             if t.uniform_acceleration().is_some() {
                 continue;
+            }
+            if self.stop.is_set() {
+                break;
             }
             *p = t.add_forces(x, v, model, f, want && t.dissipative(), assign);
             assign = false;
@@ -110,6 +121,14 @@ impl<V: Vector> ForceSet<V> {
                 *d += weight * p;
             }
         }
+    }
+
+    /// Hands every term the stop flag of the call in progress (see `crate::stop`).
+    pub fn set_stop(&mut self, stop: &Stop) {
+        for t in &mut self.terms {
+            t.set_stop(stop.clone());
+        }
+        self.stop = stop.clone();
     }
 
     /// Whether any term depends on velocity (drag, dashpots).

@@ -12,12 +12,18 @@
 //!
 //! With a single-precision state the sum runs in float32 (twice the lanes per instruction). The
 //! positions are then float32 values already, so differences lose nothing more.
+//!
+//! One evaluation at N = 10⁵ is seconds of work, so the kernels read the stop flag of the call
+//! (`crate::stop`) before every block of 16 receivers (direct sum) or every receiver (symmetric
+//! sum, whose blocks are N/32), i.e. every ~N·16 pairs at most, and skip the rest once it is set.
 use super::Term;
 use crate::par;
-use crate::state::Model;
-use crate::vector::{Real, Vector};
 use crate::simd::{self, Float, Kernel, Level, Simd, P};
+use crate::state::Model;
+use crate::stop::Stop;
+use crate::vector::{Real, Vector};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Sources are padded with massless points to a multiple of the widest vector (16 f32 lanes).
 const PAD: usize = 16;
@@ -63,11 +69,13 @@ pub struct PairwiseGravity {
     acc: Vec<[Real; 3]>,
     sym: SymScratch<Real>,
     sym32: SymScratch<f32>,
+    /// The stop flag of the call in progress.
+    stop: Stop,
 }
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {
-        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new(), sym: SymScratch::default(), sym32: SymScratch::default() }
+        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new(), sym: SymScratch::default(), sym32: SymScratch::default(), stop: Stop::default() }
     }
 }
 
@@ -121,11 +129,15 @@ fn direct<S: Simd, F: Float>(s: S, src: &Soa<F>, js: std::ops::Range<usize>, i: 
 const ROWS: usize = 16;
 
 /// Accelerations / G of every source (one `[ax, ay, az]` each), in parallel over fixed blocks of
-/// receivers (the same result for any thread count).
-fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, out: &mut Vec<[Real; 3]>) {
+/// receivers (the same result for any thread count). Once `stop` is set the remaining blocks
+/// are skipped (their rows are left as they were).
+fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, stop: &AtomicBool, out: &mut Vec<[Real; 3]>) {
     out.clear();
     out.resize(n, [0.0; 3]);
     let block = |(c, out): (usize, &mut [[Real; 3]])| {
+        if stop.load(Ordering::Relaxed) {
+            return;
+        }
         let r = c * ROWS..c * ROWS + out.len();
         simd::dispatch(level, Accel { src, eps2, rows: r, out });
     };
@@ -158,6 +170,8 @@ struct SymScratch<F> {
 /// pair's 1/r³ is computed once, not twice). `MASK`: guard r² = 0 (only without softening).
 struct Sym<'a, F: Float, const MASK: bool> {
     src: &'a Soa<F>,
+    /// Read before every receiver: the rest of the block is skipped once it is set.
+    stop: &'a AtomicBool,
     eps2: F,
     block: std::ops::Range<usize>,
     beyond: usize,
@@ -176,6 +190,9 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
         let far = self.beyond..xs.len();
         let Cols { x: cx, y: cy, z: cz } = self.cols;
         for (i, out) in self.block.clone().zip(self.out.iter_mut()) {
+            if self.stop.load(Ordering::Relaxed) {
+                return;
+            }
             let near = direct(s, self.src, own.clone(), i, self.eps2);
             // −m_i hoisted: the reaction is one FMA per component (negation is exact).
             let (xi, yi, zi, nmi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, -ms[i]));
@@ -218,8 +235,8 @@ const SYM_MIN: usize = 1024;
 /// interacts directly with itself and once per pair with every later block. Tasks pair block b
 /// with block BLOCKS−1−b (equal work) and each owns its column sums; a body's acceleration is its
 /// row sum plus the tasks' column sums in task order, so the result does not depend on the
-/// thread count.
-fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, scratch: &mut SymScratch<F>, out: &mut Vec<[Real; 3]>) {
+/// thread count. Once `stop` is set the remaining receivers are skipped.
+fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, stop: &AtomicBool, scratch: &mut SymScratch<F>, out: &mut Vec<[Real; 3]>) {
     out.clear();
     out.resize(n, [0.0; 3]);
     let np = src.xs.len();
@@ -248,9 +265,9 @@ fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, sc
             let beyond = (bi + 1) * t;
             let beyond = beyond.min(np);
             if mask {
-                simd::dispatch(level, Sym::<F, true> { src, eps2, block, beyond, out, cols });
+                simd::dispatch(level, Sym::<F, true> { src, stop, eps2, block, beyond, out, cols });
             } else {
-                simd::dispatch(level, Sym::<F, false> { src, eps2, block, beyond, out, cols });
+                simd::dispatch(level, Sym::<F, false> { src, stop, eps2, block, beyond, out, cols });
             }
         }
     };
@@ -277,26 +294,31 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         self.single = single;
     }
 
+    fn set_stop(&mut self, stop: Stop) {
+        self.stop = stop;
+    }
+
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
         let eps2 = self.softening * self.softening;
         let level = simd::level();
         let mut acc = std::mem::take(&mut self.acc);
         let n = x.len();
+        let stop = self.stop.flag();
         match (self.single, n >= SYM_MIN) {
             (true, sym) => {
                 self.src32.pack(x, model);
                 if sym {
-                    accelerations_sym(&self.src32, n, eps2 as f32, level, &mut self.sym32, &mut acc);
+                    accelerations_sym(&self.src32, n, eps2 as f32, level, stop, &mut self.sym32, &mut acc);
                 } else {
-                    accelerations(&self.src32, n, eps2 as f32, level, &mut acc);
+                    accelerations(&self.src32, n, eps2 as f32, level, stop, &mut acc);
                 }
             }
             (false, sym) => {
                 self.src.pack(x, model);
                 if sym {
-                    accelerations_sym(&self.src, n, eps2, level, &mut self.sym, &mut acc);
+                    accelerations_sym(&self.src, n, eps2, level, stop, &mut self.sym, &mut acc);
                 } else {
-                    accelerations(&self.src, n, eps2, level, &mut acc);
+                    accelerations(&self.src, n, eps2, level, stop, &mut acc);
                 }
             }
         }
@@ -347,16 +369,20 @@ impl<V: Vector> Term<V> for PairwiseGravity {
 
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {
         // O(N²): only asked for when suggesting a dt after a divergence.
-        (x.len() <= 20_000).then(|| encounter_time(self.g, self.softening, x, model)).flatten()
+        (x.len() <= 20_000).then(|| encounter_time(self.g, self.softening, x, model, self.stop.flag())).flatten()
     }
 }
 
-/// Shortest pairwise free-fall time sqrt((r² + ε²)^{3/2} / (G (m_i + m_j))) (s), O(N²).
-pub fn encounter_time<V: Vector>(g: Real, softening: Real, x: &[V], model: &Model) -> Option<Real> {
+/// Shortest pairwise free-fall time sqrt((r² + ε²)^{3/2} / (G (m_i + m_j))) (s), O(N²). Once
+/// `stop` is set the remaining rows are skipped (the result is then meaningless).
+pub fn encounter_time<V: Vector>(g: Real, softening: Real, x: &[V], model: &Model, stop: &AtomicBool) -> Option<Real> {
     let n = x.len();
     let eps2 = softening * softening;
     let mut best = f64::INFINITY;
     for i in 0..n {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
         for j in i + 1..n {
             let r2 = (x[j] - x[i]).length_squared() + eps2;
             let t2 = (r2 * r2.sqrt()) / (g * (model.mass[i] + model.mass[j]));
@@ -392,7 +418,7 @@ mod tests {
         src.pack(&x, &model);
         for level in Level::available() {
             let mut acc = Vec::new();
-            accelerations(&src, n, 0.0, level, &mut acc);
+            accelerations(&src, n, 0.0, level, &AtomicBool::new(false), &mut acc);
             for i in 0..n {
                 let mut naive = glam::DVec3::ZERO;
                 for j in 0..n {
@@ -428,7 +454,7 @@ mod tests {
                 .collect();
             for level in Level::available() {
                 let (mut acc, mut scratch) = (Vec::new(), SymScratch::default());
-                accelerations_sym(&src, n, eps2, level, &mut scratch, &mut acc);
+                accelerations_sym(&src, n, eps2, level, &AtomicBool::new(false), &mut scratch, &mut acc);
                 let mut momentum = glam::DVec3::ZERO;
                 for i in 0..n {
                     let got = glam::DVec3::from_array(acc[i]);
@@ -442,6 +468,32 @@ mod tests {
         }
     }
 
+    /// With the stop flag set the kernels compute nothing (every row keeps the zero it was
+    /// cleared to); unset, the same call fills every row.
+    #[test]
+    fn a_set_stop_flag_skips_the_remaining_work() {
+        let n = 1500; // above SYM_MIN: both sums apply
+        let (x, model) = cloud(n, 5, false);
+        let mut src = Soa::<f64>::default();
+        src.pack(&x, &model);
+        let level = simd::level();
+        for stopped in [true, false] {
+            let stop = AtomicBool::new(stopped);
+            let (mut direct, mut sym, mut scratch) = (Vec::new(), Vec::new(), SymScratch::default());
+            accelerations(&src, n, 1e-4, level, &stop, &mut direct);
+            accelerations_sym(&src, n, 1e-4, level, &stop, &mut scratch, &mut sym);
+            for (name, acc) in [("direct", &direct), ("symmetric", &sym)] {
+                let computed = acc.iter().filter(|a| a[0] != 0.0).count();
+                // Unset: the symmetric sum's column sums reach every row.
+                let expected = if stopped { 0 } else { n };
+                assert_eq!(computed, expected, "{name}, stop = {stopped}");
+            }
+        }
+        let stop = AtomicBool::new(true);
+        assert_eq!(encounter_time(1.0, 0.0, &x, &model, &stop), None);
+        assert!(encounter_time(1.0, 0.0, &x, &model, &AtomicBool::new(false)).is_some());
+    }
+
     #[test]
     fn float32_levels_match_the_naive_sum_to_single_precision() {
         let n = 517;
@@ -450,7 +502,7 @@ mod tests {
         src.pack(&x, &model);
         for level in Level::available() {
             let mut acc = Vec::new();
-            accelerations(&src, n, 1e-4, level, &mut acc);
+            accelerations(&src, n, 1e-4, level, &AtomicBool::new(false), &mut acc);
             for i in 0..n {
                 let mut naive = glam::DVec3::ZERO;
                 for j in 0..n {
