@@ -6,7 +6,14 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 from __future__ import annotations
 
 from . import _core
-from ._errors import InvalidInputError, PhyscoreError, SimulationDiverged
+from ._errors import (
+    InvalidInputError,
+    OutOfMemoryError,
+    PhyscoreError,
+    SimulationDiverged,
+    ThreadPoolError,
+    ThreadPoolWarning,
+)
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
@@ -30,6 +37,9 @@ __all__ = [
     "PhyscoreError",
     "InvalidInputError",
     "SimulationDiverged",
+    "OutOfMemoryError",
+    "ThreadPoolError",
+    "ThreadPoolWarning",
     "scenes",
     "render",
     "simd_level",

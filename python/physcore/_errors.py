@@ -1,7 +1,14 @@
 """physcore's exception hierarchy (raised from Rust through ``physcore._core`` as well)."""
 from __future__ import annotations
 
-__all__ = ["PhyscoreError", "InvalidInputError", "SimulationDiverged"]
+__all__ = [
+    "PhyscoreError",
+    "InvalidInputError",
+    "SimulationDiverged",
+    "OutOfMemoryError",
+    "ThreadPoolError",
+    "ThreadPoolWarning",
+]
 
 
 class PhyscoreError(Exception):
@@ -10,6 +17,30 @@ class PhyscoreError(Exception):
 
 class InvalidInputError(PhyscoreError, ValueError):
     """An argument is invalid. Raised before any state changes; the message names the argument."""
+
+
+class OutOfMemoryError(PhyscoreError, MemoryError):
+    """A buffer sized by the input could not be allocated. Nothing was changed.
+
+    The message says what needed how much; ``bytes`` is that amount (the whole call's need
+    where it is known up front, else the buffer that failed). Free memory or make the input
+    smaller.
+    """
+
+    def __init__(self, message: str, bytes: int = -1) -> None:
+        super().__init__(message)
+        self.bytes = bytes
+
+
+class ThreadPoolError(PhyscoreError, RuntimeError):
+    """``threads=n`` was asked for but the n threads could not be started (the process's limit
+    on threads, ``ulimit -u``). Ask for fewer, or pass ``threads=None``."""
+
+
+class ThreadPoolWarning(RuntimeWarning):
+    """A scene built with ``threads=None`` could not start its threads and runs on the calling
+    thread alone: same results, slower, and Ctrl-C takes effect when a call ends (the call is
+    still undone)."""
 
 
 class SimulationDiverged(PhyscoreError, RuntimeError):

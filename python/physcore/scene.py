@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple, Union
@@ -15,7 +16,7 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from . import _core
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, ThreadPoolWarning
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
 from ._atomic import atomic_write
@@ -149,12 +150,15 @@ class Scene:
         single precision costs in accuracy (see the work-precision table in the README).
     threads : int or None
         Worker threads for this scene; ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``).
-        Results are bit-identical for any thread count.
+        Results are bit-identical for any thread count. If no thread can be started (a limit on
+        threads), ``None`` runs on the calling thread with a :class:`ThreadPoolWarning`.
 
     Raises
     ------
     TypeError, ValueError
         Bad argument types or values (the message names the argument).
+    ThreadPoolError
+        ``threads=n`` threads could not be started.
 
     Examples
     --------
@@ -190,6 +194,15 @@ class Scene:
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
         sim = _core.Simulation2(int(dim), integrator, dt, threads)
+        if sim.sequential is not None:
+            warnings.warn(
+                f"threads=None: could not start a thread pool ({sim.sequential}); this scene runs on "
+                "the calling thread alone (same results, slower; Ctrl-C takes effect when a call "
+                "ends, and the call is still undone). The process has probably hit its limit on "
+                "threads (ulimit -u, RLIMIT_NPROC).",
+                ThreadPoolWarning,
+                stacklevel=2,
+            )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.single = precision == "f32"
         self._sim = sim

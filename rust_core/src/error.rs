@@ -29,6 +29,22 @@ pub enum Error {
     /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
     #[error("interrupted; the state was rolled back to step {rolled_back_to}")]
     Interrupted { rolled_back_to: u64 },
+
+    /// A pool of `threads` threads could not be started (the process's limit on threads).
+    #[error(
+        "threads: could not start {threads} threads ({reason}); the process has probably hit its \
+         limit on threads (ulimit -u, RLIMIT_NPROC). Ask for fewer threads, or pass threads=None \
+         to use what can be started (the calling thread alone if no thread can)"
+    )]
+    Threads { threads: usize, reason: String },
+
+    /// A buffer sized by the input could not be allocated; nothing was changed.
+    #[error(
+        "{what}: needs {size} for {of}, more than can be allocated now (nothing was changed). \
+         Free memory, or make the input smaller",
+        size = crate::alloc::human(*bytes)
+    )]
+    OutOfMemory { what: String, bytes: u64, of: String },
 }
 
 /// What went wrong with the particle: `quantity` is "position" or "velocity" (non-finite), or

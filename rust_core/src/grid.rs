@@ -15,6 +15,7 @@
 //!
 //! The sort is stable (by cell, then original index), so its result does not depend on the
 //! thread count.
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::SyncPtr;
 use crate::vector::{Real, Vector};
@@ -141,7 +142,7 @@ impl CellList {
         let n = x.len();
         assert!(n < u32::MAX as usize, "cell list: too many points");
         let inv = self.inv_cell;
-        let par = n >= crate::par::PAR_MIN;
+        let par = n >= crate::par::PAR_MIN && crate::par::on_pool();
 
         // 1. Cell coordinates of every point, once (the bounding box, the keys and the sorted
         //    cells all read them).
@@ -326,59 +327,114 @@ impl CellList {
     }
 
     /// All pairs (i, j), i < j (original indices), with squared distance < radius² evaluated in
-    /// f64 as Σ_k (x_i,k − x_j,k)², sorted by i then j. `radius` ≤ the cell size.
-    pub fn pairs<V: Vector>(&self, x: &[V], radius: Real) -> (Vec<u32>, Vec<u32>) {
+    /// f64 as Σ_k (x_i,k − x_j,k)², sorted by i then j, as int64 (what numpy indexes with).
+    /// The pairs are counted first, so memory for them is asked once, in full, and a refusal is
+    /// `Error::OutOfMemory` naming the pair count. `radius` ≤ the cell size.
+    pub fn pairs<V: Vector>(&self, x: &[V], radius: Real) -> Result<(Vec<i64>, Vec<i64>)> {
         let n = x.len();
         assert_eq!(n, self.order.len(), "cell list built for other points");
         assert!(radius <= self.cell);
         let r2 = radius * radius;
+        let need = Need::new("neighbors", Need::bytes_of::<u32>(n), format!("{} points", count(n as u128)));
         // Sorted slot of each original index, to find a point's cell.
-        let mut slot = vec![0u32; n];
+        let mut slot = need.filled(n, 0u32)?;
         for (k, &i) in self.order.iter().enumerate() {
             slot[i as usize] = k as u32;
         }
-        let block = |r: Range<usize>| {
-            let mut pi = Vec::new();
-            let mut pj = Vec::new();
-            let mut row = Vec::new();
-            for i in r {
-                let xi = x[i];
-                row.clear();
-                for rg in self.query(self.cells[slot[i] as usize]).iter() {
-                    for &j in &self.order[rg] {
-                        let j = j as usize;
-                        if j > i {
-                            let mut d2 = 0.0;
-                            for k in 0..V::DIM {
-                                let d = xi.comp(k) - x[j].comp(k);
-                                d2 += d * d;
-                            }
-                            if d2 < r2 {
-                                row.push(j as u32);
-                            }
+        // Row i: its neighbours j > i, sorted, into `row` (room for every candidate reserved).
+        let neighbours = |i: usize, row: &mut Vec<u32>| -> Result<()> {
+            let xi = x[i];
+            let ranges = self.query(self.cells[slot[i] as usize]);
+            row.clear();
+            need.reserve(row, ranges.iter().map(|r| r.len()).sum())?;
+            for rg in ranges.iter() {
+                for &j in &self.order[rg] {
+                    let j = j as usize;
+                    if j > i {
+                        let mut d2 = 0.0;
+                        for k in 0..V::DIM {
+                            let d = xi.comp(k) - x[j].comp(k);
+                            d2 += d * d;
+                        }
+                        if d2 < r2 {
+                            row.push(j as u32);
                         }
                     }
                 }
-                row.sort_unstable();
-                pi.extend(std::iter::repeat_n(i as u32, row.len()));
-                pj.extend_from_slice(&row);
             }
-            (pi, pj)
+            Ok(())
         };
         let chunk = crate::par::CHUNK;
-        let blocks: Vec<(Vec<u32>, Vec<u32>)> = if n >= crate::par::PAR_MIN {
-            (0..n.div_ceil(chunk)).into_par_iter().map(|c| block(c * chunk..((c + 1) * chunk).min(n))).collect()
-        } else {
-            vec![block(0..n)]
+        let blocks = n.div_ceil(chunk);
+        let rows = |b: usize| b * chunk..((b + 1) * chunk).min(n);
+        let parallel = n >= crate::par::PAR_MIN && crate::par::on_pool();
+        // 1. Pairs per block of rows.
+        let count_block = |b: usize| -> Result<usize> {
+            let mut row = Vec::new();
+            let mut c = 0;
+            for i in rows(b) {
+                neighbours(i, &mut row)?;
+                c += row.len();
+            }
+            Ok(c)
         };
-        let total: usize = blocks.iter().map(|b| b.0.len()).sum();
-        let mut i_out = Vec::with_capacity(total);
-        let mut j_out = Vec::with_capacity(total);
-        for (a, b) in blocks {
-            i_out.extend(a);
-            j_out.extend(b);
+        let counts: Vec<usize> = if parallel {
+            (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()?
+        } else {
+            (0..blocks).map(count_block).collect::<Result<_>>()?
+        };
+        let total: usize = counts.iter().sum();
+        let need = Need::new("neighbors", 2 * Need::bytes_of::<i64>(total), format!("{} pairs", count(total as u128)));
+        need.check()?;
+        let mut i_out = need.filled(total, 0i64)?;
+        let mut j_out = need.filled(total, 0i64)?;
+        // 2. Each block fills its own slices, in row order.
+        let mut parts = Vec::with_capacity(blocks);
+        let (mut is, mut js) = (&mut i_out[..], &mut j_out[..]);
+        for (b, &c) in counts.iter().enumerate() {
+            let (a, rest_i) = std::mem::take(&mut is).split_at_mut(c);
+            let (bb, rest_j) = std::mem::take(&mut js).split_at_mut(c);
+            parts.push((b, a, bb));
+            is = rest_i;
+            js = rest_j;
         }
-        (i_out, j_out)
+        let fill = |(b, pi, pj): (usize, &mut [i64], &mut [i64])| -> Result<()> {
+            let mut row = Vec::new();
+            let mut k = 0;
+            for i in rows(b) {
+                neighbours(i, &mut row)?;
+                row.sort_unstable();
+                for &j in &row {
+                    pi[k] = i as i64;
+                    pj[k] = j as i64;
+                    k += 1;
+                }
+            }
+            Ok(())
+        };
+        if parallel {
+            parts.into_par_iter().try_for_each(fill)?;
+        } else {
+            parts.into_iter().try_for_each(fill)?;
+        }
+        Ok((i_out, j_out))
+    }
+
+    /// Room for a build over `n` points (every buffer at its largest), so that a build is then
+    /// sure not to allocate. `what`: the call, for the error.
+    pub fn reserve(&mut self, n: usize, what: &'static str) -> Result<()> {
+        let parts = if crate::par::on_pool() { rayon::current_num_threads().clamp(1, 16) } else { 1 };
+        // Buckets: dense ≤ 4n + 4096 cells; hashed: a power of two ≤ 4n (≥ 1024).
+        let nb = (4 * n + 4096).max((2 * n).next_power_of_two().max(1024));
+        let bytes = Need::bytes_of::<[i64; 3]>(2 * n) + Need::bytes_of::<u32>(2 * n + (parts + 1) * nb + 1);
+        let need = Need::new(what, bytes, format!("the cell list of {} points", count(n as u128)));
+        need.check()?;
+        need.reserve(&mut self.coords, n)?;
+        need.reserve(&mut self.cells, n)?;
+        need.reserve(&mut self.keys, n)?;
+        need.reserve(&mut self.order, n)?;
+        need.reserve(&mut self.hist, parts * nb)?;
+        need.reserve(&mut self.start, nb + 1)
     }
 
     /// Heap bytes held (for the memory-per-particle figures).
@@ -396,7 +452,7 @@ fn bucket(mode: Mode, c: [i64; 3]) -> usize {
 }
 
 /// All pairs i < j of `x` closer than `radius` (see [`CellList::pairs`]).
-pub fn neighbor_pairs<V: Vector>(x: &[V], radius: Real) -> Result<(Vec<u32>, Vec<u32>)> {
+pub fn neighbor_pairs<V: Vector>(x: &[V], radius: Real) -> Result<(Vec<i64>, Vec<i64>)> {
     if let Some(i) = x.iter().position(|p| !p.is_finite()) {
         return Err(invalid("points", format!("row {i} is not finite")));
     }
@@ -413,8 +469,9 @@ pub fn neighbor_pairs<V: Vector>(x: &[V], radius: Real) -> Result<(Vec<u32>, Vec
     let margin = (8.0 * f64::EPSILON * (amax / radius + 1.0)).max(1e-12);
     let cell = radius * (1.0 + margin);
     let mut g = CellList::new(if cell.is_finite() { cell } else { f64::MAX }, V::DIM)?;
+    g.reserve(x.len(), "neighbors")?;
     g.build(x);
-    Ok(g.pairs(x, radius))
+    g.pairs(x, radius)
 }
 
 #[cfg(test)]
@@ -422,7 +479,7 @@ mod tests {
     use super::*;
     use glam::{DVec2, DVec3};
 
-    fn brute<V: Vector>(x: &[V], r: Real) -> (Vec<u32>, Vec<u32>) {
+    fn brute<V: Vector>(x: &[V], r: Real) -> (Vec<i64>, Vec<i64>) {
         let (mut a, mut b) = (vec![], vec![]);
         for i in 0..x.len() {
             for j in i + 1..x.len() {
@@ -432,8 +489,8 @@ mod tests {
                     d2 += d * d;
                 }
                 if d2 < r * r {
-                    a.push(i as u32);
-                    b.push(j as u32);
+                    a.push(i as i64);
+                    b.push(j as i64);
                 }
             }
         }

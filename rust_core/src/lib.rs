@@ -1,6 +1,7 @@
 //! physcore's Rust core: particle state, force terms, integrators, colliders and energy books,
 //! written once for 2D and 3D over glam's `DVec2`/`DVec3`. Plain Rust; the Python bindings live
 //! in `python/` behind the `python` feature.
+pub mod alloc;
 pub mod boundary;
 pub mod error;
 pub mod grid;

@@ -2,12 +2,55 @@
 //! thread count, and reductions add chunk partials in chunk order, so 1 and many threads give
 //! bit-identical results. Small problems run the same chunks serially (rayon's fork-join costs
 //! microseconds, which dominates a 2-body orbit).
+//!
+//! Loops run in parallel only on a thread of one of physcore's own pools (inside
+//! `ThreadPool::install`: a simulation's pool or `default_pool`); anywhere else they run the
+//! same chunks in order on the calling thread. They never touch rayon's implicit global pool:
+//! if that one cannot start its threads (a process or thread limit, RLIMIT_NPROC), rayon panics
+//! on that use and on every later one. Our pools are built with the fallible `build()`.
 use rayon::prelude::*;
+use rayon::ThreadPool;
 use std::ops::Range;
+use std::sync::{Arc, Mutex};
 
 pub const CHUNK: usize = 1024;
 /// Below this many items a loop runs serially (same chunks, same order, same result).
 pub const PAR_MIN: usize = 4 * CHUNK;
+
+/// Whether parallel loops may fork here: on a worker thread of one of our pools.
+#[inline]
+pub fn on_pool() -> bool {
+    rayon::current_thread_index().is_some()
+}
+
+/// Whether a loop over `n` items runs in parallel.
+#[inline]
+fn parallel(n: usize) -> bool {
+    n >= PAR_MIN && on_pool()
+}
+
+/// The pool of every simulation built with `threads=None`: all cores, or `RAYON_NUM_THREADS`
+/// threads, started on first use. If the threads cannot be started, returns why; the next call
+/// tries again (the limit may have been lifted).
+pub fn default_pool() -> Result<Arc<ThreadPool>, String> {
+    static POOL: Mutex<Option<Arc<ThreadPool>>> = Mutex::new(None);
+    let mut pool = POOL.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(p) = &*pool {
+        return Ok(p.clone());
+    }
+    let p = Arc::new(rayon::ThreadPoolBuilder::new().build().map_err(|e| e.to_string())?);
+    *pool = Some(p.clone());
+    Ok(p)
+}
+
+/// Runs `f` on `pool` if there is one (its loops then run in parallel), else on the calling
+/// thread (sequentially).
+pub fn install<R: Send>(pool: Option<&ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
+    match pool {
+        Some(p) => p.install(f),
+        None => f(),
+    }
+}
 
 #[inline]
 fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
@@ -16,7 +59,7 @@ fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
 
 /// `f(start, chunk)` on consecutive chunks of `a`.
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
-    if a.len() >= PAR_MIN {
+    if parallel(a.len()) {
         a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
     } else {
         a.chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
@@ -30,7 +73,7 @@ pub fn chunks2<A: Send, B: Send>(
     f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send,
 ) {
     debug_assert_eq!(a.len(), b.len());
-    if a.len() >= PAR_MIN {
+    if parallel(a.len()) {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .enumerate()
@@ -50,7 +93,7 @@ pub fn chunks3<A: Send, B: Send, C: Send>(
     c: &mut [C],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C]) + Sync + Send,
 ) {
-    if a.len() >= PAR_MIN {
+    if parallel(a.len()) {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .zip(c.par_chunks_mut(CHUNK))
@@ -73,7 +116,7 @@ pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     d: &mut [D],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
 ) {
-    if a.len() >= PAR_MIN {
+    if parallel(a.len()) {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .zip(c.par_chunks_mut(CHUNK))
@@ -115,7 +158,7 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = if a.len() >= PAR_MIN {
+    let partials: Vec<T> = if parallel(a.len()) {
         a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
     } else {
         a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
@@ -130,7 +173,7 @@ pub fn chunks1_fold<A: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = if a.len() >= PAR_MIN {
+    let partials: Vec<T> = if parallel(a.len()) {
         a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
     } else {
         a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
@@ -140,7 +183,7 @@ pub fn chunks1_fold<A: Send, T: Send>(
 
 /// Deterministic fold of `f(range)` over fixed chunks of `0..n` (e.g. a maximum).
 pub fn reduce<T: Send>(n: usize, zero: T, fold: impl Fn(T, T) -> T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T {
-    let partials: Vec<T> = if n >= PAR_MIN {
+    let partials: Vec<T> = if parallel(n) {
         ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()
     } else {
         ranges(n).map(&f).collect()

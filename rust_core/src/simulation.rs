@@ -1,4 +1,5 @@
 //! A simulation: state, model, force terms, integrator, colliders and the energy books.
+use crate::alloc::{count, Need};
 use crate::boundary::{Aabb, Collider, Plane};
 use crate::error::{invalid, Error, Result};
 use crate::integrators::{self, Integrator, IntegratorInfo, System};
@@ -49,42 +50,54 @@ pub struct Simulation<V: Vector> {
     /// Tolerances of the adaptive integrator ("rk45"); kept when switching integrators.
     rtol: Real,
     atol: Real,
+    /// The pool the stepping runs on; `None`: the calling thread only (see `sequential`).
     pool: Option<Arc<rayon::ThreadPool>>,
+    /// Why there is no pool: the default one could not start its threads.
+    sequential: Option<String>,
 }
 
 impl<V: Vector> Simulation<V> {
-    /// `threads`: `None` uses rayon's global pool (all cores, or `RAYON_NUM_THREADS`).
+    /// `threads`: `None` shares `par::default_pool` (all cores, or `RAYON_NUM_THREADS`), or, if
+    /// its threads cannot be started (a thread limit), runs on the calling thread only
+    /// (`sequential()` says why); `Some(n)`: a pool of its own, `Error::Threads` if the n
+    /// threads cannot be started.
     pub fn new(integrator: &str, dt: Real, threads: Option<usize>) -> Result<Self> {
         check_dt(dt)?;
         // A PHYSCORE_SIMD the CPU cannot honour is refused here, before any state exists.
         crate::simd::check()?;
-        let pool = match threads {
-            None => None,
+        let integrator = integrators::by_name(integrator)?;
+        let (pool, sequential) = match threads {
+            None => match par::default_pool() {
+                Ok(p) => (Some(p), None),
+                Err(reason) => (None, Some(reason)),
+            },
             Some(0) => return Err(invalid("threads", "must be >= 1 (or None for all cores)")),
-            Some(n) => Some(Arc::new(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| invalid("threads", format!("could not start {n} threads: {e}")))?,
-            )),
+            Some(n) => match rayon::ThreadPoolBuilder::new().num_threads(n).build() {
+                Ok(p) => (Some(Arc::new(p)), None),
+                Err(e) => return Err(Error::Threads { threads: n, reason: e.to_string() }),
+            },
         };
         Ok(Self {
             sys: System { state: State::default(), model: Model::default(), forces: ForceSet::default(), single: false },
-            integrator: integrators::by_name(integrator)?,
+            integrator,
             colliders: Vec::new(),
             collision_dissipated: 0.0,
             dt,
             rtol: 1e-6,
             atol: 1e-9,
             pool,
+            sequential,
         })
     }
 
     fn run<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
-        match &self.pool {
-            Some(p) => p.install(f),
-            None => f(),
-        }
+        par::install(self.pool.as_deref(), f)
+    }
+
+    /// Why this simulation runs on the calling thread only (its pool could not start its
+    /// threads), if it does. Results are the same either way.
+    pub fn sequential(&self) -> Option<&str> {
+        self.sequential.as_deref()
     }
 
     pub fn n_particles(&self) -> usize {
@@ -183,6 +196,13 @@ impl<V: Vector> Simulation<V> {
         self.check_single_range(&x, "positions")?;
         self.check_single_range(&v, "velocities")?;
         let first = self.n_particles();
+        let need = Need::new("add_particles", Need::bytes_of::<V>(2 * n) + Need::bytes_of::<Real>(2 * n), format!("{} particles", count(n as u128)));
+        need.check()?;
+        let total = first.checked_add(n).ok_or_else(|| need.error())?;
+        need.reserve(&mut self.sys.state.x, total)?;
+        need.reserve(&mut self.sys.state.v, total)?;
+        need.reserve(&mut self.sys.model.mass, total)?;
+        need.reserve(&mut self.sys.model.inv_mass, total)?;
         for (k, &p) in pinned.iter().enumerate() {
             if p {
                 v[k] = V::ZERO;
@@ -334,7 +354,8 @@ impl<V: Vector> Simulation<V> {
     /// caller can still undo the call (`rollback`): the Python binding does when a signal
     /// arrived while the call was finishing.
     pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint<V>> {
-        let cp = self.checkpoint();
+        self.prepare()?;
+        let cp = self.checkpoint()?;
         if n == 0 || self.n_particles() == 0 {
             self.sys.state.t += n as Real * self.dt;
             self.sys.state.step += n;
@@ -348,15 +369,38 @@ impl<V: Vector> Simulation<V> {
 
     /// Everything a `step` or `advance` call changes, to undo it with `rollback`: the state,
     /// the dissipation books, the integrator's cache and dt. A copy of the positions and
-    /// velocities.
-    pub fn checkpoint(&self) -> Checkpoint<V> {
-        Checkpoint {
-            state: self.sys.state.clone(),
+    /// velocities (and cached forces), allocated fallibly (`Error::OutOfMemory`).
+    pub fn checkpoint(&self) -> Result<Checkpoint<V>> {
+        let n = self.n_particles();
+        let need = Need::new("step", Need::bytes_of::<V>(3 * n), format!("a copy of the state of {} particles (to roll back to)", count(n as u128)));
+        let st = &self.sys.state;
+        let state = State { x: need.copy(&st.x)?, v: need.copy(&st.v)?, t: st.t, step: st.step };
+        Ok(Checkpoint {
+            state,
             dissipated: self.sys.forces.dissipated.clone(),
             collisions: self.collision_dissipated,
-            cache: self.integrator_cache(),
+            cache: self.integrator.try_cache().map_err(|_| need.error())?,
             dt: self.dt,
+        })
+    }
+
+    /// Reserves, fallibly, the per-particle scratch of the integrator and the terms (sized on
+    /// the first step and after particles are added), so that stepping allocates nothing that
+    /// could abort the process; a refusal is `Error::OutOfMemory` and changes nothing.
+    fn prepare(&mut self) -> Result<()> {
+        let n = self.n_particles();
+        let name = self.integrator.info().name;
+        let bufs = self.integrator.scratch(self.sys.forces.velocity_dependent());
+        let missing = bufs.iter().filter(|b| b.capacity() < n).count();
+        let of = format!("the {name} integrator's scratch for {} particles", count(n as u128));
+        let need = Need::new("step", Need::bytes_of::<V>(n) * missing as u128, of);
+        for b in bufs {
+            need.reserve(b, n)?;
         }
+        let pool = self.pool.clone();
+        let terms = &mut self.sys.forces.terms;
+        // On the pool: the cell lists size their histograms by its thread count.
+        par::install(pool.as_deref(), || terms.iter_mut().try_for_each(|t| t.reserve(n)))
     }
 
     /// Restores a checkpoint of this simulation; returns the step count it restored.
@@ -407,30 +451,27 @@ impl<V: Vector> Simulation<V> {
     fn with_stop<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&mut Self) -> R + Send) -> R {
         self.sys.forces.set_stop(&Stop::new(Some(stop.clone())));
         let pool = self.pool.clone();
-        let r = match &pool {
-            Some(p) => p.install(|| f(self)),
-            None => f(self),
-        };
+        let r = par::install(pool.as_deref(), || f(self));
         self.sys.forces.set_stop(&Stop::default());
         r
     }
 
-    /// Runs `job(self)` as a task on this simulation's pool (rayon's global pool if it has none)
-    /// while `watch` runs on the calling thread, and returns the job's result once it is done.
+    /// Runs `job(self)` as a task on this simulation's pool while `watch` runs on the calling
+    /// thread, and returns the job's result once it is done.
     /// `watch` gets `wait(timeout)`, true as soon as the job has finished (false on timeout), so
     /// the calling thread stays free, e.g. to set the stop flag of `step_interruptible`: the
     /// Python binding runs Python's signal handlers there (Python runs them on its main thread
     /// only). Costs one hand-off to a pool thread (~20 µs), not a thread start (~60 µs).
     /// Called from a thread of the pool the task would go to, the job runs on the calling
-    /// thread (a task queued behind it could wait forever) and `wait` reports it done at once.
+    /// thread (a task queued behind it could wait forever) and `wait` reports it done at once;
+    /// so it does without a pool (`sequential()`): nothing can then watch while the job runs.
     pub fn run_watched<R: Send>(&mut self, job: impl FnOnce(&mut Self) -> R + Send, watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool)) -> R {
-        let pool = self.pool.clone();
-        let on_pool = match &pool {
-            Some(p) => p.current_thread_index().is_some(),
-            // rayon::in_place_scope queues on the caller's own pool if it has one.
-            None => rayon::current_thread_index().is_some(),
+        let Some(pool) = self.pool.clone() else {
+            let r = job(self);
+            watch(&mut |_| true);
+            return r;
         };
-        if on_pool {
+        if pool.current_thread_index().is_some() {
             let r = job(self);
             watch(&mut |_| true);
             return r;
@@ -438,10 +479,7 @@ impl<V: Vector> Simulation<V> {
         let mut out = None;
         let slot = &mut out;
         let task = move || *slot = Some(job(self));
-        match &pool {
-            Some(p) => p.in_place_scope(|s| spawn_watched(s, task, watch)),
-            None => rayon::in_place_scope(|s| spawn_watched(s, task, watch)),
-        }
+        pool.in_place_scope(|s| spawn_watched(s, task, watch));
         out.expect("the scope returns after its task")
     }
 
@@ -464,7 +502,8 @@ impl<V: Vector> Simulation<V> {
         if substeps == Some(0) {
             return Err(invalid("substeps", "must be >= 1"));
         }
-        let cp = self.checkpoint();
+        self.prepare()?;
+        let cp = self.checkpoint()?;
         let r = self.with_stop(stop, |s| {
             let n = match substeps {
                 Some(n) => n,

@@ -10,6 +10,7 @@ use crate::error::{invalid, Result};
 use crate::state::{Model, State};
 use crate::terms::ForceSet;
 use crate::vector::{Real, Vector};
+use std::collections::TryReserveError;
 use std::sync::atomic::AtomicBool;
 
 pub use euler::ExplicitEuler;
@@ -59,6 +60,10 @@ pub trait Integrator<V: Vector>: Send + Sync {
     }
     /// Forces (N) of the most recent evaluation, one per particle.
     fn last_forces(&self) -> &[V];
+    /// The per-particle scratch buffers `step` sizes to the particle count (with
+    /// velocity-dependent forces or not), so the simulation can reserve them fallibly before
+    /// stepping (a refused allocation is then an error, not an abort of the process).
+    fn scratch(&mut self, velocity_dependent: bool) -> Vec<&mut Vec<V>>;
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
     /// What the integrator carries from one step to the next ("first same as last" forces, the
@@ -66,6 +71,10 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// to retry a rolled-back one, bit for bit.
     fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
         None
+    }
+    /// `cache()`, with its copy of the per-particle forces allocated fallibly.
+    fn try_cache(&self) -> std::result::Result<Option<(Vec<V>, Vec<Real>)>, TryReserveError> {
+        Ok(self.cache())
     }
     /// Restores `cache()`'s output at the state whose velocities are `v`, for a scene with
     /// `n_terms` terms; returns false (and changes nothing) if it does not fit.
@@ -101,6 +110,14 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
             return Err(invalid("integrator", format!("unknown integrator {other:?}; valid names: {}", NAMES.join(", "))))
         }
     })
+}
+
+/// A copy of `s`, allocated fallibly.
+pub(crate) fn try_copy<T: Clone>(s: &[T]) -> std::result::Result<Vec<T>, TryReserveError> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(s.len())?;
+    v.extend_from_slice(s);
+    Ok(v)
 }
 
 #[inline]

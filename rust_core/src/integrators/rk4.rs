@@ -75,4 +75,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
     fn last_forces(&self) -> &[V] {
         &self.f
     }
+    fn scratch(&mut self, _velocity_dependent: bool) -> Vec<&mut Vec<V>> {
+        vec![&mut self.f, &mut self.xs, &mut self.vs, &mut self.ax, &mut self.av]
+    }
 }

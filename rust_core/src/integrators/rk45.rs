@@ -16,7 +16,8 @@
 //!
 //! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
 //! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
-use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Stopped, System};
+use super::{accel, bad, ensure_len, store, try_copy, Integrator, IntegratorInfo, Stopped, System};
+use std::collections::TryReserveError;
 use crate::par;
 use crate::vector::{Real, Vector};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -388,6 +389,12 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         &self.f
     }
 
+    fn scratch(&mut self, _velocity_dependent: bool) -> Vec<&mut Vec<V>> {
+        let mut s: Vec<&mut Vec<V>> = vec![&mut self.xs, &mut self.f];
+        s.extend(self.kx.iter_mut().chain(self.kv.iter_mut()));
+        s
+    }
+
     fn reset(&mut self) {
         // Keep h: it is still a good guess after a collision or an edit of the state.
         self.fsal = false;
@@ -411,10 +418,16 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
     /// controller's memory (next h, last error), so a saved run continues bit for bit. Without
     /// a derivative there are no forces and no powers, only the controller's memory.
     fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
-        let f = if self.fsal { self.kv[0].clone() } else { Vec::new() };
         let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
         p.extend([self.h, self.err_prev]);
-        Some((f, p))
+        Some((if self.fsal { self.kv[0].clone() } else { Vec::new() }, p))
+    }
+
+    fn try_cache(&self) -> Result<Option<(Vec<V>, Vec<Real>)>, TryReserveError> {
+        let f = if self.fsal { try_copy(&self.kv[0])? } else { Vec::new() };
+        let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
+        p.extend([self.h, self.err_prev]);
+        Ok(Some((f, p)))
     }
 
     fn set_cache(&mut self, f: Vec<V>, mut p: Vec<Real>, v: &[V], n_terms: usize) -> bool {

@@ -33,4 +33,7 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
     fn last_forces(&self) -> &[V] {
         &self.f
     }
+    fn scratch(&mut self, _velocity_dependent: bool) -> Vec<&mut Vec<V>> {
+        vec![&mut self.f]
+    }
 }

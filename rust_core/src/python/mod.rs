@@ -1,13 +1,14 @@
 //! Python bindings (the only module that knows pyo3). Arrays cross in bulk; the Python facade
 //! (`physcore.Scene`) validates inputs first, and everything is validated again here so the
 //! private module is safe to call directly. The GIL is released around stepping.
+use crate::alloc::{count, Need};
 use crate::boundary::{Aabb, Plane};
 use crate::error::Error;
 use crate::integrators::{self, IntegratorInfo};
 use crate::simulation::{Checkpoint, EnergyReport, Simulation};
 use crate::sph::{KernelKind, Precision, Sph, SphParams};
 use crate::terms::{Drag, PairwiseGravity, Springs, UniformGravity};
-use crate::vector::{from_flat, to_flat, Real, Vector};
+use crate::vector::{Real, Vector};
 use glam::{DVec2, DVec3};
 use numpy::ndarray::{Array1, Array2};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
@@ -26,6 +27,8 @@ fn to_py(py: Python<'_>, e: Error) -> PyErr {
         Ok(match e {
             Error::InvalidInput { .. } => PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?),
             Error::Interrupted { .. } => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg.clone()),
+            Error::Threads { .. } => PyErr::from_value(errors.getattr("ThreadPoolError")?.call1((msg.clone(),))?),
+            Error::OutOfMemory { bytes, .. } => PyErr::from_value(errors.getattr("OutOfMemoryError")?.call1((msg.clone(), bytes))?),
             Error::Diverged { step, t, particle, quantity, suggested_dt, rolled_back_to, .. } => {
                 let exc = errors
                     .getattr("SimulationDiverged")?
@@ -70,8 +73,27 @@ fn vec_of<V: Vector>(v: &[f64], arg: &str) -> PyResult<V> {
     Ok(V::from_slice(v))
 }
 
-fn to_array2<'py, V: Vector>(py: Python<'py>, v: &[V]) -> Bound<'py, PyArray2<f64>> {
-    Array2::from_shape_vec((v.len(), V::DIM), to_flat(v)).expect("shape matches").into_pyarray(py)
+/// A new (N, dim) array of `v` (`what`: the getter, for a MemoryError).
+fn to_array2<'py, V: Vector>(py: Python<'py>, v: &[V], what: &'static str) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let need = Need::new(what, Need::bytes_of::<V>(v.len()), format!("a copy of {} rows", count(v.len() as u128)));
+    let mut flat = need.filled(v.len() * V::DIM, 0.0).map_err(|e| to_py(py, e))?;
+    for (row, p) in flat.chunks_exact_mut(V::DIM).zip(v) {
+        for (k, o) in row.iter_mut().enumerate() {
+            *o = p.comp(k);
+        }
+    }
+    Ok(Array2::from_shape_vec((v.len(), V::DIM), flat).expect("shape matches").into_pyarray(py))
+}
+
+/// Copies of (N, dim) rows as vectors, allocated fallibly (`need`).
+fn vectors<V: Vector>(flat: &[f64], need: &Need) -> Result<Vec<V>, Error> {
+    need.collect(flat.chunks_exact(V::DIM).map(V::from_slice))
+}
+
+/// `from_flat` that reports a refused allocation as `Error::OutOfMemory` of call `what`.
+fn try_from_flat<V: Vector>(flat: &[f64], what: &'static str, of: &str) -> Result<Vec<V>, Error> {
+    let n = flat.len() / V::DIM;
+    vectors(flat, &Need::new(what, Need::bytes_of::<V>(n), format!("{} {of}", count(n as u128))))
 }
 
 fn info_dict<'py>(py: Python<'py>, i: IntegratorInfo) -> PyResult<Bound<'py, PyDict>> {
@@ -140,6 +162,13 @@ impl Simulation2 {
     #[getter]
     fn step_count(&self) -> u64 {
         with_sim!(&self.inner, s => s.sys.state.step)
+    }
+
+    /// Why this simulation runs on the calling thread alone (its threads could not be
+    /// started), or None.
+    #[getter]
+    fn sequential(&self) -> Option<String> {
+        with_sim!(&self.inner, s => s.sequential().map(str::to_string))
     }
 
     #[getter]
@@ -214,21 +243,32 @@ impl Simulation2 {
         let dim = self.dim();
         let x = flat2(&positions, dim, "positions")?;
         let v = flat2(&velocities, dim, "velocities")?;
-        let m = slice1(&masses, "masses")?.to_vec();
-        let p = slice1(&pinned, "pinned")?.to_vec();
-        with_sim!(&mut self.inner, s => s.add_particles(from_flat(x), from_flat(v), m, p)).map_err(|e| to_py(py, e))
+        let (m, p) = (slice1(&masses, "masses")?, slice1(&pinned, "pinned")?);
+        // The copies made here plus what the scene grows by (state and masses).
+        let n = x.len() / dim;
+        let bytes = n as u128 * (2 * 2 * 8 * dim as u128 + 2 * 8 + 8 + 1);
+        let need = Need::new("add_particles", bytes, format!("{} particles", count(n as u128)));
+        let copies = || -> Result<_, Error> {
+            need.check()?;
+            Ok((need.copy(m)?, need.copy(p)?))
+        };
+        let (m, p) = copies().map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => {
+            vectors(x, &need).and_then(|x| Ok((x, vectors(v, &need)?))).and_then(|(x, v)| s.add_particles(x, v, m, p))
+        })
+        .map_err(|e| to_py(py, e))
     }
 
     /// Positions, m: a new (N, dim) float64 array (a copy; writing to it changes nothing).
     #[getter]
-    fn positions<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.x))
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.x, "positions"))
     }
 
     /// Velocities, m/s: a new (N, dim) float64 array (a copy).
     #[getter]
-    fn velocities<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.v))
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.v, "velocities"))
     }
 
     #[getter]
@@ -246,7 +286,12 @@ impl Simulation2 {
         let dim = self.dim();
         let x = positions.as_ref().map(|a| flat2(a, dim, "positions")).transpose()?;
         let v = velocities.as_ref().map(|a| flat2(a, dim, "velocities")).transpose()?;
-        with_sim!(&mut self.inner, s => s.set_state(x.map(from_flat), v.map(from_flat))).map_err(|e| to_py(py, e))
+        with_sim!(&mut self.inner, s => {
+            let x = x.map(|x| try_from_flat(x, "set_state", "positions")).transpose();
+            let v = v.map(|v| try_from_flat(v, "set_state", "velocities")).transpose();
+            x.and_then(|x| Ok((x, v?))).and_then(|(x, v)| s.set_state(x, v))
+        })
+        .map_err(|e| to_py(py, e))
     }
 
     fn add_gravity(&mut self, py: Python<'_>, name: String, g: Vec<f64>) -> PyResult<()> {
@@ -278,8 +323,12 @@ impl Simulation2 {
         damping: PyReadonlyArray1<'_, f64>,
         rest_length: PyReadonlyArray1<'_, f64>,
     ) -> PyResult<()> {
-        let (i, j) = (slice1(&i, "i")?.to_vec(), slice1(&j, "j")?.to_vec());
-        let (k, c, r) = (slice1(&stiffness, "stiffness")?.to_vec(), slice1(&damping, "damping")?.to_vec(), slice1(&rest_length, "rest_length")?.to_vec());
+        let (i, j) = (slice1(&i, "i")?, slice1(&j, "j")?);
+        let (k, c, r) = (slice1(&stiffness, "stiffness")?, slice1(&damping, "damping")?, slice1(&rest_length, "rest_length")?);
+        let m = i.len().max(j.len()).max(k.len()).max(c.len()).max(r.len());
+        let need = Need::new("springs", m as u128 * (2 * 4 + 3 * 8), format!("copies of {} springs", count(m as u128)));
+        let copies = || -> Result<_, Error> { Ok((need.copy(i)?, need.copy(j)?, need.copy(k)?, need.copy(c)?, need.copy(r)?)) };
+        let (i, j, k, c, r) = copies().map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => {
             let n = s.n_particles();
             Springs::new(name, i, j, k, c, r, n).and_then(|t| s.add_term(Box::new(t)))
@@ -356,9 +405,11 @@ impl Simulation2 {
         let kernel = KernelKind::by_name(kernel).map_err(|e| to_py(py, e))?;
         let precision = Precision::by_name(precision).map_err(|e| to_py(py, e))?;
         let p = SphParams { h, rho0: density, c0: sound_speed, gamma, alpha: viscosity, clamp: clamp_pressure, kernel, precision };
-        let psi = slice1(&wall_psi, "wall_psi")?.to_vec();
+        let psi = slice1(&wall_psi, "wall_psi")?;
+        let need = Need::new("add_fluid", Need::bytes_of::<f64>(psi.len()), format!("{} wall particles", count(psi.len() as u128)));
+        let psi = need.copy(psi).map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => {
-            let w = from_flat(flat2(&walls, p_dim(&s.sys.state.x.first().copied().unwrap_or_default()), "walls")?);
+            let w = try_from_flat(flat2(&walls, p_dim(&s.sys.state.x.first().copied().unwrap_or_default()), "walls")?, "add_fluid", "wall particles").map_err(|e| to_py(py, e))?;
             if first.checked_add(n).is_none_or(|e| e > s.n_particles()) {
                 return Err(PyValueError::new_err(format!("n: particles {first}..{} are not all in the scene ({})", first.saturating_add(n), s.n_particles())));
             }
@@ -405,8 +456,8 @@ impl Simulation2 {
     }
 
     /// Cached forces (N, dim) and term powers carried between steps, or None.
-    fn integrator_cache<'py>(&self, py: Python<'py>) -> Option<(Bound<'py, PyArray2<f64>>, Vec<f64>)> {
-        with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| (to_array2(py, &f), p)))
+    fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<(Bound<'py, PyArray2<f64>>, Vec<f64>)>> {
+        with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
     }
 
     #[pyo3(signature = (t, step, dissipated, collisions, cache_forces=None, cache_power=None))]
@@ -425,10 +476,10 @@ impl Simulation2 {
         let f = cache_forces.as_ref().map(|a| flat2(a, dim, "cache_forces")).transpose()?;
         with_sim!(&mut self.inner, s => {
             let cache = match (f, cache_power) {
-                (Some(f), Some(p)) => Some((from_flat(f), p)),
-                _ => None,
+                (Some(f), Some(p)) => try_from_flat(f, "restore", "cached forces").map(|f| Some((f, p))),
+                _ => Ok(None),
             };
-            s.restore(t, step, &dissipated, collisions, cache)
+            cache.and_then(|cache| s.restore(t, step, &dissipated, collisions, cache))
         })
         .map_err(|e| to_py(py, e))
     }
@@ -502,21 +553,22 @@ fn interruptible<V: Vector, T: Send>(
 }
 
 /// All pairs i < j of `points` ((N, 2) or (N, 3) float64, C-contiguous) closer than `radius`:
-/// two (M,) int64 arrays, sorted by i then j.
+/// two (M,) int64 arrays, sorted by i then j. OutOfMemoryError (a MemoryError) if the pairs do
+/// not fit in memory: they are counted before any is stored.
 #[pyfunction]
 fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f64) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>)> {
-    let dim = points.shape()[1];
-    let flat = flat2(&points, if dim == 3 { 3 } else { 2 }, "points")?.to_vec();
-    let r = py.detach(|| {
-        if dim == 3 {
-            crate::grid::neighbor_pairs::<DVec3>(&from_flat(&flat), radius)
-        } else {
-            crate::grid::neighbor_pairs::<DVec2>(&from_flat(&flat), radius)
-        }
-    });
+    let dim = if points.shape()[1] == 3 { 3 } else { 2 };
+    let flat = flat2(&points, dim, "points")?;
+    let pool = crate::par::default_pool().ok();
+    let r = if dim == 3 {
+        let x = try_from_flat::<DVec3>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
+        py.detach(|| crate::par::install(pool.as_deref(), || crate::grid::neighbor_pairs(&x, radius)))
+    } else {
+        let x = try_from_flat::<DVec2>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
+        py.detach(|| crate::par::install(pool.as_deref(), || crate::grid::neighbor_pairs(&x, radius)))
+    };
     let (i, j) = r.map_err(|e| to_py(py, e))?;
-    let cv = |a: Vec<u32>| Array1::from_iter(a.into_iter().map(i64::from)).into_pyarray(py);
-    Ok((cv(i), cv(j)))
+    Ok((i.into_pyarray(py), j.into_pyarray(py)))
 }
 
 /// Name, order, symplectic flag and force evaluations per step of every integrator.
@@ -528,10 +580,10 @@ fn integrator_table<'py>(py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
         .collect()
 }
 
-/// Number of threads in rayon's global pool.
+/// Number of threads of the pool of scenes built with threads=None (1 if it cannot start).
 #[pyfunction]
 fn default_threads() -> usize {
-    rayon::current_num_threads()
+    crate::par::default_pool().map_or(1, |p| p.current_num_threads())
 }
 
 /// The SIMD level the kernels run at ("scalar", "avx2", "avx512" or "neon"); InvalidInputError

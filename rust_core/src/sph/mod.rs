@@ -22,6 +22,7 @@
 pub mod kernels;
 mod passes;
 
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::grid::CellList;
 use crate::par::{self, SyncPtr};
@@ -177,6 +178,8 @@ pub struct Sph<V: Vector> {
     /// The stop flag of the call in progress: read between the phases of an evaluation and
     /// before every chunk of its passes (an evaluation at N = 10⁶ takes ~0.3 s).
     stop: Stop,
+    /// Scratch: the forces of other terms, kept while the passes write the fluid's.
+    prev: Vec<V>,
     _v: PhantomData<V>,
 }
 
@@ -194,13 +197,25 @@ impl<V: Vector> Sph<V> {
             return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
         }
         let support = 2.0 * p.h;
+        let nw = walls.len();
+        // Sorted copies in f64, f32 and f64 pass buffers (positions and Ψ).
+        let bytes = ((nw + PAD) * (V::DIM + 1) * (8 + 4 + 8)) as u128;
+        let need = Need::new("add_fluid", bytes, format!("{} wall particles", count(nw as u128)));
+        need.check()?;
         let mut wg = CellList::new(support, V::DIM)?;
+        wg.reserve(nw, "add_fluid")?;
         wg.build(&walls);
         let mut pos: [Vec<f64>; 3] = Default::default();
         for (d, pd) in pos.iter_mut().enumerate().take(V::DIM) {
-            *pd = wg.order.iter().map(|&i| walls[i as usize].comp(d)).chain(std::iter::repeat_n(0.0, PAD)).collect();
+            *pd = need.filled(nw + PAD, 0.0)?;
+            for (o, &i) in pd.iter_mut().zip(&wg.order) {
+                *o = walls[i as usize].comp(d);
+            }
         }
-        let spsi: Vec<f64> = wg.order.iter().map(|&i| psi[i as usize]).chain(std::iter::repeat_n(0.0, PAD)).collect();
+        let mut spsi = need.filled(nw + PAD, 0.0)?;
+        for (o, &i) in spsi.iter_mut().zip(&wg.order) {
+            *o = psi[i as usize];
+        }
         let walls = Walls { grid: wg, pos, psi: spsi };
         let mut s = Self {
             name: name.to_string(),
@@ -214,10 +229,11 @@ impl<V: Vector> Sph<V> {
             amax: 0.0,
             clock: [0.0; 3],
             stop: Stop::default(),
+            prev: Vec::new(),
             _v: PhantomData,
         };
-        s.b32.set_walls(&s.walls);
-        s.b64.set_walls(&s.walls);
+        s.b32.set_walls(&s.walls, &need)?;
+        s.b64.set_walls(&s.walls, &need)?;
         Ok(s)
     }
 
@@ -248,8 +264,7 @@ impl<V: Vector> Sph<V> {
     /// now in f64.
     pub fn fields(&self, x: &[V], model: &Model) -> (Vec<Real>, Vec<Real>) {
         let mut grid = CellList::new(self.grid.cell_size(), V::DIM).expect("valid cell size");
-        let mut b = Bufs::<f64>::default();
-        b.set_walls(&self.walls);
+        let mut b = Bufs::<f64> { wpos: self.b64.wpos.clone(), wpsi: self.b64.wpsi.clone(), ..Bufs::default() };
         let xs = &x[self.range()];
         grid.build(xs);
         b.gather(&grid, xs, None, &model.mass[self.range()]);
@@ -277,7 +292,11 @@ impl<V: Vector> Sph<V> {
             return 0.0;
         }
         // The pass writes the fluid's forces over `f`; to add instead, keep what was there.
-        let prev: Option<Vec<V>> = if assign { None } else { Some(f[r.clone()].to_vec()) };
+        let mut prev = std::mem::take(&mut self.prev);
+        prev.clear();
+        if !assign {
+            prev.extend_from_slice(&f[r.clone()]);
+        }
         let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
         let stop = self.stop.flag();
         let (power, amax) = match self.p.precision {
@@ -285,11 +304,12 @@ impl<V: Vector> Sph<V> {
             Precision::F64 => eval::<V, f64>(level, &self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power, &mut self.clock, stop),
         };
         self.amax = amax;
-        if let Some(prev) = prev {
-            for (fi, pi) in f[r].iter_mut().zip(prev) {
-                *fi += pi;
+        if !assign {
+            for (fi, pi) in f[r].iter_mut().zip(&prev) {
+                *fi += *pi;
             }
         }
+        self.prev = prev;
         power
     }
 
@@ -348,11 +368,24 @@ fn density<V: Vector, F: Float>(level: Level, p: &SphParams, grid: &CellList, wa
 }
 
 impl<F: Float> Bufs<F> {
-    fn set_walls(&mut self, w: &Walls) {
-        for d in 0..3 {
-            self.wpos[d] = w.pos[d].iter().map(|&a| F::of(a)).collect();
+    /// Room for `gather` of `n` particles.
+    fn reserve<V: Vector>(&mut self, n: usize, need: &Need) -> Result<()> {
+        for d in 0..V::DIM {
+            need.reserve(&mut self.pos[d], n + PAD)?;
+            need.reserve(&mut self.vel[d], n + PAD)?;
         }
-        self.wpsi = w.psi.iter().map(|&a| F::of(a)).collect();
+        for a in [&mut self.m, &mut self.rho, &mut self.pr] {
+            need.reserve(a, n + PAD)?;
+        }
+        Ok(())
+    }
+
+    fn set_walls(&mut self, w: &Walls, need: &Need) -> Result<()> {
+        for d in 0..3 {
+            self.wpos[d] = need.collect(w.pos[d].iter().map(|&a| F::of(a)))?;
+        }
+        self.wpsi = need.collect(w.psi.iter().map(|&a| F::of(a)))?;
+        Ok(())
     }
 
     /// Positions, velocities and masses into cell order (padded by `PAD`).
@@ -445,7 +478,7 @@ fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
         }
     };
     let nc = n.div_ceil(par::CHUNK);
-    let parts: Vec<(f64, f64)> = if n >= par::PAR_MIN { (0..nc).into_par_iter().map(chunk).collect() } else { (0..nc).map(chunk).collect() };
+    let parts: Vec<(f64, f64)> = if n >= par::PAR_MIN && par::on_pool() { (0..nc).into_par_iter().map(chunk).collect() } else { (0..nc).map(chunk).collect() };
     // Fixed chunk order: the same sum for any thread count.
     parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)))
 }
@@ -478,6 +511,20 @@ impl<V: Vector> Term<V> for Sph<V> {
 
     fn set_stop(&mut self, stop: Stop) {
         self.stop = stop;
+    }
+
+    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
+        let n = self.n;
+        let (f, arrays) = (match self.p.precision { Precision::F32 => 4, Precision::F64 => 8 }, 2 * V::DIM + 3);
+        let bytes = (arrays * (n + PAD) * f) as u128 + Need::bytes_of::<V>(n);
+        let need = Need::new("step", bytes, format!("the SPH buffers of {} particles", count(n as u128)));
+        need.check()?;
+        match self.p.precision {
+            Precision::F32 => self.b32.reserve::<V>(n, &need)?,
+            Precision::F64 => self.b64.reserve::<V>(n, &need)?,
+        }
+        need.reserve(&mut self.prev, n)?;
+        self.grid.reserve(n, "step")
     }
 
     fn min_particles(&self) -> usize {

@@ -4,6 +4,7 @@ pub mod gravity;
 pub mod pairwise_gravity;
 pub mod springs;
 
+use crate::error::Result;
 use crate::par;
 use crate::state::Model;
 use crate::stop::Stop;
@@ -55,6 +56,12 @@ pub trait Term<V: Vector>: Send + Sync {
     /// A term whose one evaluation may take long polls it and skips the rest of its work once
     /// it is set (see `crate::stop`); the others ignore it.
     fn set_stop(&mut self, _stop: Stop) {}
+    /// Reserves, fallibly, the scratch an evaluation over `n` particles needs, so that the
+    /// evaluation then allocates nothing (a refused allocation is `Error::OutOfMemory`, not an
+    /// abort of the process). Terms without per-particle scratch need not implement it.
+    fn reserve(&mut self, _n: usize) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// The terms of a scene plus their dissipation ledger.

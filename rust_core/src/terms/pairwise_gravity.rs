@@ -17,6 +17,8 @@
 //! (`crate::stop`) before every block of 16 receivers (direct sum) or every receiver (symmetric
 //! sum, whose blocks are N/32), i.e. every ~N·16 pairs at most, and skip the rest once it is set.
 use super::Term;
+use crate::alloc::{count, Need};
+use crate::error::Result;
 use crate::par;
 use crate::simd::{self, Float, Kernel, Level, Simd, P};
 use crate::state::Model;
@@ -38,6 +40,15 @@ struct Soa<T> {
 }
 
 impl<T: Float> Soa<T> {
+    /// Room for `n` sources.
+    fn reserve(&mut self, n: usize, need: &Need) -> Result<()> {
+        let np = n.div_ceil(PAD) * PAD;
+        for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
+            need.reserve(a, np)?;
+        }
+        Ok(())
+    }
+
     fn pack<V: Vector>(&mut self, x: &[V], model: &Model) {
         let np = x.len().div_ceil(PAD) * PAD;
         for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
@@ -142,7 +153,7 @@ fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, stop: 
         simd::dispatch(level, Accel { src, eps2, rows: r, out });
     };
     // O(N) work per item: parallel from a few dozen particles on.
-    if n >= 64 {
+    if n >= 64 && par::on_pool() {
         out.par_chunks_mut(ROWS).enumerate().for_each(block);
     } else {
         out.chunks_mut(ROWS).enumerate().for_each(block);
@@ -226,6 +237,22 @@ impl<F: Float, const MASK: bool> Kernel for Sym<'_, F, MASK> {
 /// A receiver block of the symmetric sum: its index and its rows of the output.
 type Block<'a> = (usize, &'a mut [[Real; 3]]);
 
+impl<F: Float> SymScratch<F> {
+    /// Room for the column sums of `n` sources (see `accelerations_sym`).
+    fn reserve(&mut self, n: usize, need: &Need) -> Result<()> {
+        let np = n.div_ceil(PAD) * PAD;
+        let t = n.div_ceil(BLOCKS).div_ceil(PAD) * PAD;
+        let ntask = n.div_ceil(t.max(1)).div_ceil(2);
+        self.cols.resize_with(ntask, Cols::default);
+        for c in &mut self.cols {
+            for a in [&mut c.x, &mut c.y, &mut c.z] {
+                need.reserve(a, np)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Receiver blocks of the symmetric sum (a multiple of 16 sources each).
 const BLOCKS: usize = 32;
 /// Below this many bodies the direct sum is used (the symmetric one's blocks would be tiny).
@@ -271,7 +298,11 @@ fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, st
             }
         }
     };
-    tasks.into_par_iter().zip(scratch.cols.par_iter_mut()).for_each(run);
+    if par::on_pool() {
+        tasks.into_par_iter().zip(scratch.cols.par_iter_mut()).for_each(run);
+    } else {
+        tasks.into_iter().zip(scratch.cols.iter_mut()).for_each(run);
+    }
     let cols = &scratch.cols;
     par::chunks1(out, |s, out| {
         for (k, o) in out.iter_mut().enumerate() {
@@ -296,6 +327,31 @@ impl<V: Vector> Term<V> for PairwiseGravity {
 
     fn set_stop(&mut self, stop: Stop) {
         self.stop = stop;
+    }
+
+    fn reserve(&mut self, n: usize) -> Result<()> {
+        let np = n.div_ceil(PAD) * PAD;
+        let f = if self.single { 4 } else { 8 };
+        let cols = if n >= SYM_MIN { 3 * (BLOCKS / 2) * np * f } else { 0 };
+        let bytes = (4 * np * f + cols) as u128 + Need::bytes_of::<[Real; 3]>(n);
+        let need = Need::new("step", bytes, format!("pairwise gravity between {} bodies", count(n as u128)));
+        need.check()?;
+        need.reserve(&mut self.acc, n)?;
+        match (self.single, n >= SYM_MIN) {
+            (true, sym) => {
+                self.src32.reserve(n, &need)?;
+                if sym {
+                    self.sym32.reserve(n, &need)?;
+                }
+            }
+            (false, sym) => {
+                self.src.reserve(n, &need)?;
+                if sym {
+                    self.sym.reserve(n, &need)?;
+                }
+            }
+        }
+        Ok(())
     }
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {

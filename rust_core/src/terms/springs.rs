@@ -16,6 +16,7 @@
 //! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
 //! written once over `crate::simd`, for every instruction set).
 use super::Term;
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::simd::{self, Kernel, Simd, P};
@@ -85,18 +86,23 @@ impl<V: Vector> Springs<V> {
                 return Err(invalid("i/j", format!("spring {s} joins particle {a} to itself")));
             }
         }
+        // Everything below but the SELL-8 arrays, whose size is known only later.
+        let of = format!("{} springs on {} particles", count(m as u128), count(n_particles as u128));
+        let bytes = m as u128 * (8 + 2 * 4 + 3 * 8 + 2 * 8) + 2 * Need::bytes_of::<u32>(n_particles + 1);
+        let need = Need::new("springs", bytes, &of);
+        need.check()?;
         // Canonical order: i < j, sorted by (i, j), so each particle's springs are listed in a
-        // fixed order whatever order the caller gave.
+        // fixed order whatever order the caller gave (ties, duplicate springs, by given order:
+        // an unstable sort on a unique key needs no buffer).
         let (i, j, k, c, rest) = {
-            let mut order: Vec<usize> = (0..m).collect();
-            let key = |s: usize| (i[s].min(j[s]), i[s].max(j[s]));
-            order.sort_by_key(|&s| key(s));
+            let mut order = need.collect(0..m)?;
+            order.sort_unstable_by_key(|&s| (i[s].min(j[s]), i[s].max(j[s]), s));
             (
-                order.iter().map(|&s| i[s].min(j[s])).collect::<Vec<u32>>(),
-                order.iter().map(|&s| i[s].max(j[s])).collect::<Vec<u32>>(),
-                order.iter().map(|&s| k[s]).collect::<Vec<Real>>(),
-                order.iter().map(|&s| c[s]).collect::<Vec<Real>>(),
-                order.iter().map(|&s| rest[s]).collect::<Vec<Real>>(),
+                need.collect(order.iter().map(|&s| i[s].min(j[s])))?,
+                need.collect(order.iter().map(|&s| i[s].max(j[s])))?,
+                need.collect(order.iter().map(|&s| k[s]))?,
+                need.collect(order.iter().map(|&s| c[s]))?,
+                need.collect(order.iter().map(|&s| rest[s]))?,
             )
         };
         let any_damping = c.iter().any(|&c| c > 0.0);
@@ -106,7 +112,7 @@ impl<V: Vector> Springs<V> {
         };
         // Per-particle incidence lists (CSR, by counting sort), then SELL-8 slices.
         let n = n_particles;
-        let mut off = vec![0u32; n + 1];
+        let mut off = need.filled(n + 1, 0u32)?;
         for s in 0..m {
             off[i[s] as usize + 1] += 1;
             off[j[s] as usize + 1] += 1;
@@ -114,8 +120,8 @@ impl<V: Vector> Springs<V> {
         for p in 0..n {
             off[p + 1] += off[p];
         }
-        let mut fill = off.clone();
-        let mut inc = vec![(0u32, 0u32); 2 * m]; // (other endpoint, spring)
+        let mut fill = need.copy(&off)?;
+        let mut inc = need.filled(2 * m, (0u32, 0u32))?; // (other endpoint, spring)
         for s in 0..m {
             let (a, b) = (i[s] as usize, j[s] as usize);
             inc[fill[a] as usize] = (j[s], s as u32);
@@ -124,15 +130,21 @@ impl<V: Vector> Springs<V> {
             fill[b] += 1;
         }
         let n_slices = n.div_ceil(SLICE);
-        let mut start = vec![0u32; n_slices + 1];
+        let mut start = need.filled(n_slices + 1, 0u32)?;
+        // Padded entries: up to 8× the largest degree per slice, which u32 offsets must hold.
+        let mut entries: u64 = 0;
         for g in 0..n_slices {
             let w = (g * SLICE..((g + 1) * SLICE).min(n)).map(|p| off[p + 1] - off[p]).max().unwrap_or(0);
-            start[g + 1] = start[g] + SLICE as u32 * w;
+            entries += SLICE as u64 * w as u64;
+            start[g + 1] = u32::try_from(entries).map_err(|_| invalid("i/j", format!("{of}: too many padded incidence entries ({entries})")))?;
         }
-        let entries = start[n_slices] as usize;
-        let mut other = vec![0u32; entries];
-        let mut e_rest = vec![0.0; entries];
-        let (mut e_k, mut e_c) = if uniform.is_some() { (vec![], vec![]) } else { (vec![0.0; entries], vec![0.0; entries]) };
+        let entries = entries as usize;
+        let per_entry = if uniform.is_some() { 4 + 8 } else { 4 + 3 * 8 };
+        let need = Need::new("springs", bytes + entries as u128 * per_entry, &of);
+        need.check()?;
+        let mut other = need.filled(entries, 0u32)?;
+        let mut e_rest = need.filled(entries, 0.0)?;
+        let (mut e_k, mut e_c) = if uniform.is_some() { (vec![], vec![]) } else { (need.filled(entries, 0.0)?, need.filled(entries, 0.0)?) };
         for g in 0..n_slices {
             let w = (start[g + 1] - start[g]) as usize / SLICE;
             for slot in 0..w {
