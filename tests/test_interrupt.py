@@ -1,9 +1,10 @@
 """Ctrl-C during a long step(n) stops it promptly and leaves the scene as it was before the call.
 
 The stepping runs on a pool thread while the calling (main) thread runs Python's signal handlers
-every 20 ms and sets a stop flag that the core reads between steps and between rk45's internal
-step attempts. Typical latency is tens of milliseconds (benches/interrupt_latency.py); the bound
-asserted here is generous because the tests may run on slow, loaded hardware.
+every 20 ms and sets a stop flag that the core reads between steps, between rk45's internal
+step attempts and inside long force evaluations (pairwise gravity per block of receivers, SPH per
+chunk). Typical latency is tens of milliseconds (benches/interrupt_latency.py); the bounds
+asserted here are generous because the tests may run on slow, loaded hardware.
 """
 from __future__ import annotations
 
@@ -98,6 +99,29 @@ def test_keyboard_interrupt_rolls_back_advance_and_dt(threads):
     assert latency < LATENCY_BOUND
     _assert_unchanged(scene, before)
     assert scene.dt == 0.01
+
+
+def test_keyboard_interrupt_inside_one_force_evaluation():
+    # Pairwise gravity over 40,000 bodies: one evaluation is 8·10^8 pair interactions. One rk4
+    # step (four evaluations) is interrupted during its first: the kernels see the flag, so the
+    # call ends well within one evaluation, not after the step's four, and the step is undone.
+    n = 40_000
+    rng = np.random.default_rng(2)
+    scene = pc.Scene(3, integrator="euler", dt=1e-4)
+    scene.add_particles(rng.random((n, 3)), 0.1 * rng.normal(size=(n, 3)), masses=np.full(n, 1.0 / n))
+    scene.add(pc.PairwiseGravity(G=1.0, softening=0.01))
+    scene.step(1)  # the first call also starts threads and sizes buffers
+    t0 = time.perf_counter()
+    scene.step(1)  # one evaluation
+    t_eval = time.perf_counter() - t0
+    if t_eval < 0.1:
+        pytest.skip(f"one evaluation takes {t_eval:.3f} s here: too short to tell polling from finishing")
+    scene.integrator = "rk4"
+    before = _snapshot(scene)
+    latency = _interrupt(lambda: scene.step(1), 0.3 * t_eval)
+    # Without polling inside the kernels the call would end after 3.7 evaluations.
+    assert latency < min(LATENCY_BOUND, t_eval), f"latency {latency:.3f} s, one evaluation {t_eval:.3f} s"
+    _assert_unchanged(scene, before)
 
 
 class _Stop(Exception):
