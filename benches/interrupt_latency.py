@@ -1,13 +1,16 @@
-"""Ctrl-C latency: time from SIGINT to KeyboardInterrupt raised by a long step(n), median of 3.
+"""Ctrl-C latency: time from SIGINT to KeyboardInterrupt raised by a long step(n), median and
+max of --repeats tries.
 
 Cases: (a) 2·10^5 particles under uniform gravity, step(10^7), every integrator; (b) the stiff
 rk45 cloth of tests/test_interrupt.py (48², dt = 0.5 s, rtol = 1e-10), whose every output step is
-thousands of internal steps; (c) pairwise gravity N = 5000 with verlet, where one step is one
-O(N²) force evaluation, which is not interrupted: it bounds the latency from below. Each case
-runs with threads=None (rayon's global pool) and threads=2. "step" is the wall time of one
-output step (of one internal attempt for (b)), for comparison. The SIGINT is sent 0.3-0.34 s
-into the call by a timer thread (a seeded random delay, so that it does not keep one phase
-with the 20 ms signal polling); the latency includes the rollback of the state.
+thousands of internal steps; (d) every integrator × term: pairwise gravity (N = 2·10^4, one
+evaluation ~2·10^8 pair interactions), a springs cloth (1000², 10^6 particles) and an SPH fluid
+(the 2D dam break of bench_sph.py at 10^6 particles, f64), where one force evaluation is a
+large part of a second: the kernels poll the stop flag inside it. (a) and (b) run with
+threads=None (the default pool) and threads=2, (d) with threads=None. "eval" is the wall time
+of one force evaluation (one semi-implicit Euler step), for comparison. The SIGINT is sent
+0.3-0.34 s into the call by a timer thread (a seeded random delay, so that it does not keep one
+phase with the 20 ms signal polling); the latency includes the rollback of the state.
 """
 from __future__ import annotations
 
@@ -19,7 +22,7 @@ import statistics
 import threading
 import time
 
-from _common import require_release, table  # first: sets up the environment before numpy loads
+from _common import header, require_release, table  # first: sets up the environment before numpy loads
 import numpy as np
 
 import physcore as pc
@@ -78,6 +81,16 @@ def nbody_scene(threads, n: int):
     return scene
 
 
+def big_cloth_scene(n: int):
+    return pc.scenes.cloth(n=n, integrator="semi_implicit_euler", dt=1e-4)
+
+
+def fluid_scene(nx: int):
+    from bench_sph import build
+
+    return build(nx, precision="f64")
+
+
 def ms(t: float) -> str:
     return f"{1e3 * t:.1f}"
 
@@ -86,20 +99,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--n-gravity", type=int, default=200_000)
-    ap.add_argument("--n-nbody", type=int, default=5000)
-    ap.add_argument("--cases", default="abc", help="which cases to run, e.g. 'c'")
+    ap.add_argument("--n-nbody", type=int, default=20_000)
+    ap.add_argument("--n-cloth", type=int, default=1000, help="cloth side (n² particles)")
+    ap.add_argument("--nx-fluid", type=int, default=710, help="fluid lattice (2 nx² particles)")
+    ap.add_argument("--cases", default="abd", help="which cases to run, e.g. 'd'")
     args = ap.parse_args()
     require_release()
     rows = []
+    names = [d["name"] for d in pc.INTEGRATORS]
 
-    def measure(label, integrator, threads, scene, call, step):
+    def measure(label, integrator, threads, scene, call, t_eval):
         lat = [latency(lambda: call(scene)) for _ in range(args.repeats)]
-        rows.append([label, integrator, str(threads), ms(step), ms(statistics.median(lat)), ms(max(lat))])
+        rows.append([label, integrator, str(threads), ms(t_eval), ms(statistics.median(lat)), ms(max(lat))])
         print(" | ".join(rows[-1]), flush=True)
 
-    names = [d["name"] for d in pc.INTEGRATORS] if "a" in args.cases else []
     for threads in (None, 2):
-        for integrator in names:
+        for integrator in names if "a" in args.cases else []:
             scene = gravity_scene(integrator, threads, args.n_gravity)
             scene.step(2)
             measure(f"(a) gravity N={args.n_gravity}", integrator, threads, scene, lambda s: s.step(10**7), step_time(scene, 3))
@@ -111,12 +126,24 @@ def main() -> None:
             t = step_time(probe)
             st = probe.integrator_stats
             measure("(b) rk45 cloth 48²", "rk45", threads, scene, lambda s: s.step(200), t / (st["accepted"] + st["rejected"]))
-        if "c" in args.cases:
-            scene = nbody_scene(threads, args.n_nbody)
+    if "d" in args.cases:
+        terms = [
+            (f"(d) pairwise N={args.n_nbody}", lambda: nbody_scene(None, args.n_nbody)),
+            (f"(d) springs cloth N={args.n_cloth ** 2}", lambda: big_cloth_scene(args.n_cloth)),
+            (f"(d) SPH fluid N={2 * args.nx_fluid ** 2}", lambda: fluid_scene(args.nx_fluid)),
+        ]
+        for label, make in terms:
+            scene = make()
+            scene.integrator = "semi_implicit_euler"  # one evaluation per step
             scene.step(1)
-            measure(f"(c) pairwise N={args.n_nbody}", "verlet", threads, scene, lambda s: s.step(10**6), step_time(scene, 3))
+            t_eval = step_time(scene, 2)
+            for integrator in names:
+                scene.integrator = integrator
+                measure(label, integrator, None, scene, lambda s: s.step(10**7), t_eval)
+            del scene
     print()
-    print(table(["case", "integrator", "threads", "step (ms)", "latency median (ms)", "max (ms)"], rows))
+    print(header())
+    print(table(["case", "integrator", "threads", "eval or step (ms)", "latency median (ms)", "max (ms)"], rows))
 
 
 if __name__ == "__main__":

@@ -142,7 +142,6 @@ impl CellList {
         let n = x.len();
         assert!(n < u32::MAX as usize, "cell list: too many points");
         let inv = self.inv_cell;
-        let par = n >= crate::par::PAR_MIN && crate::par::on_pool();
 
         // 1. Cell coordinates of every point, once (the bounding box, the keys and the sorted
         //    cells all read them).
@@ -208,7 +207,7 @@ impl CellList {
         });
 
         // 3. Stable counting sort: per-part histograms, exclusive scan over (bucket, part), scatter.
-        let parts = if par { rayon::current_num_threads().clamp(1, 16) } else { 1 };
+        let parts = if n >= crate::par::PAR_MIN { crate::par::threads().clamp(1, 16) } else { 1 };
         let per = n.div_ceil(parts).max(1);
         self.hist.clear();
         self.hist.resize(parts * nb, 0);
@@ -220,9 +219,7 @@ impl CellList {
                     hp[kk as usize] += 1;
                 }
             };
-            if parts > 1 {
-                h.par_chunks_mut(nb).enumerate().for_each(count);
-            } else {
+            if parts == 1 || crate::par::fork(|| h.par_chunks_mut(nb).enumerate().for_each(count)).is_none() {
                 h.chunks_mut(nb).enumerate().for_each(count);
             }
         }
@@ -248,10 +245,9 @@ impl CellList {
                 off[b] += 1;
             }
         };
-        if parts > 1 {
-            self.hist.par_chunks_mut(nb).enumerate().for_each(scatter);
-        } else {
-            self.hist.chunks_mut(nb).enumerate().for_each(scatter);
+        let h = &mut self.hist;
+        if parts == 1 || crate::par::fork(|| h.par_chunks_mut(nb).enumerate().for_each(scatter)).is_none() {
+            h.chunks_mut(nb).enumerate().for_each(scatter);
         }
 
         // 4. Cell coordinates in sorted order (for queries).
@@ -367,7 +363,6 @@ impl CellList {
         let chunk = crate::par::CHUNK;
         let blocks = n.div_ceil(chunk);
         let rows = |b: usize| b * chunk..((b + 1) * chunk).min(n);
-        let parallel = n >= crate::par::PAR_MIN && crate::par::on_pool();
         // 1. Pairs per block of rows.
         let count_block = |b: usize| -> Result<usize> {
             let mut row = Vec::new();
@@ -378,10 +373,9 @@ impl CellList {
             }
             Ok(c)
         };
-        let counts: Vec<usize> = if parallel {
-            (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()?
-        } else {
-            (0..blocks).map(count_block).collect::<Result<_>>()?
+        let counts: Vec<usize> = match crate::par::fork_if(n, || (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()) {
+            Some(c) => c?,
+            None => (0..blocks).map(count_block).collect::<Result<_>>()?,
         };
         let total: usize = counts.iter().sum();
         let need = Need::new("neighbors", 2 * Need::bytes_of::<i64>(total), format!("{} pairs", count(total as u128)));
@@ -412,10 +406,10 @@ impl CellList {
             }
             Ok(())
         };
-        if parallel {
-            parts.into_par_iter().try_for_each(fill)?;
-        } else {
-            parts.into_iter().try_for_each(fill)?;
+        let mut parts = Some(parts);
+        match crate::par::fork_if(n, || parts.take().unwrap_or_default().into_par_iter().try_for_each(fill)) {
+            Some(r) => r?,
+            None => parts.unwrap_or_default().into_iter().try_for_each(fill)?,
         }
         Ok((i_out, j_out))
     }
@@ -423,7 +417,7 @@ impl CellList {
     /// Room for a build over `n` points (every buffer at its largest), so that a build is then
     /// sure not to allocate. `what`: the call, for the error.
     pub fn reserve(&mut self, n: usize, what: &'static str) -> Result<()> {
-        let parts = if crate::par::on_pool() { rayon::current_num_threads().clamp(1, 16) } else { 1 };
+        let parts = crate::par::threads().clamp(1, 16);
         // Buckets: dense ≤ 4n + 4096 cells; hashed: a power of two ≤ 4n (≥ 1024).
         let nb = (4 * n + 4096).max((2 * n).next_power_of_two().max(1024));
         let bytes = Need::bytes_of::<[i64; 3]>(2 * n) + Need::bytes_of::<u32>(2 * n + (parts + 1) * nb + 1);

@@ -3,13 +3,14 @@
 //! bit-identical results. Small problems run the same chunks serially (rayon's fork-join costs
 //! microseconds, which dominates a 2-body orbit).
 //!
-//! Loops run in parallel only on a thread of one of physcore's own pools (inside
-//! `ThreadPool::install`: a simulation's pool or `default_pool`); anywhere else they run the
-//! same chunks in order on the calling thread. They never touch rayon's implicit global pool:
-//! if that one cannot start its threads (a process or thread limit, RLIMIT_NPROC), rayon panics
-//! on that use and on every later one. Our pools are built with the fallible `build()`.
+//! Loops fork only onto one of physcore's own pools (a simulation's, or `default_pool`): the one
+//! `install` names for the calling thread, or the pool whose thread runs them; without one they
+//! run the same chunks in order on the calling thread. They never touch rayon's implicit global
+//! pool: if that one cannot start its threads (a process or thread limit, RLIMIT_NPROC), rayon
+//! panics on that use and on every later one. Our pools are built with the fallible `build()`.
 use rayon::prelude::*;
 use rayon::ThreadPool;
+use std::cell::RefCell;
 use std::ops::Range;
 use std::sync::{Arc, Mutex};
 
@@ -17,16 +18,52 @@ pub const CHUNK: usize = 1024;
 /// Below this many items a loop runs serially (same chunks, same order, same result).
 pub const PAR_MIN: usize = 4 * CHUNK;
 
-/// Whether parallel loops may fork here: on a worker thread of one of our pools.
-#[inline]
-pub fn on_pool() -> bool {
-    rayon::current_thread_index().is_some()
+thread_local! {
+    /// The pool the calling thread's loops fork onto (set by `install`).
+    static POOL: RefCell<Option<Arc<ThreadPool>>> = const { RefCell::new(None) };
 }
 
-/// Whether a loop over `n` items runs in parallel.
+/// Runs `f` on the calling thread with `pool` as the pool its parallel loops fork onto (`None`:
+/// they run serially). No hand-off to a pool thread for the call itself (~10-20 µs, the whole
+/// cost of a small scene's step): only loops long enough to fork pay it.
+pub fn install<R>(pool: Option<&Arc<ThreadPool>>, f: impl FnOnce() -> R) -> R {
+    struct Restore(Option<Arc<ThreadPool>>);
+    impl Drop for Restore {
+        fn drop(&mut self) {
+            POOL.with(|p| *p.borrow_mut() = self.0.take());
+        }
+    }
+    let _restore = Restore(POOL.with(|p| p.replace(pool.cloned())));
+    f()
+}
+
+/// Runs `f`, which forks rayon work, on the pool of the call in progress: directly on one of
+/// its threads, through `ThreadPool::install` from elsewhere. `None` (and `f` not run) if there
+/// is no such pool: the caller then runs its loop serially.
+pub fn fork<R: Send>(f: impl FnOnce() -> R + Send) -> Option<R> {
+    if rayon::current_thread_index().is_some() {
+        return Some(f());
+    }
+    let pool = POOL.with(|p| p.borrow().clone())?;
+    Some(pool.install(f))
+}
+
+/// `fork` for a loop over `n` items: small ones never fork.
 #[inline]
-fn parallel(n: usize) -> bool {
-    n >= PAR_MIN && on_pool()
+pub fn fork_if<R: Send>(n: usize, f: impl FnOnce() -> R + Send) -> Option<R> {
+    if n >= PAR_MIN {
+        fork(f)
+    } else {
+        None
+    }
+}
+
+/// Threads the loops of the call in progress fork onto (1 without a pool).
+pub fn threads() -> usize {
+    if rayon::current_thread_index().is_some() {
+        return rayon::current_num_threads();
+    }
+    POOL.with(|p| p.borrow().as_ref().map_or(1, |p| p.current_num_threads()))
 }
 
 /// The pool of every simulation built with `threads=None`: all cores, or `RAYON_NUM_THREADS`
@@ -43,15 +80,6 @@ pub fn default_pool() -> Result<Arc<ThreadPool>, String> {
     Ok(p)
 }
 
-/// Runs `f` on `pool` if there is one (its loops then run in parallel), else on the calling
-/// thread (sequentially).
-pub fn install<R: Send>(pool: Option<&ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
-    match pool {
-        Some(p) => p.install(f),
-        None => f(),
-    }
-}
-
 #[inline]
 fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
     (0..n.div_ceil(CHUNK)).map(move |c| c * CHUNK..((c + 1) * CHUNK).min(n))
@@ -59,9 +87,11 @@ fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
 
 /// `f(start, chunk)` on consecutive chunks of `a`.
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
-    if parallel(a.len()) {
-        a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
-    } else {
+    if fork_if(a.len(), || {
+        a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a))
+    })
+    .is_none()
+    {
         a.chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
     }
 }
@@ -73,12 +103,14 @@ pub fn chunks2<A: Send, B: Send>(
     f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send,
 ) {
     debug_assert_eq!(a.len(), b.len());
-    if parallel(a.len()) {
+    if fork_if(a.len(), || {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(c, (a, b))| f(c * CHUNK, a, b));
-    } else {
+            .for_each(|(c, (a, b))| f(c * CHUNK, a, b))
+    })
+    .is_none()
+    {
         a.chunks_mut(CHUNK)
             .zip(b.chunks_mut(CHUNK))
             .enumerate()
@@ -93,13 +125,15 @@ pub fn chunks3<A: Send, B: Send, C: Send>(
     c: &mut [C],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C]) + Sync + Send,
 ) {
-    if parallel(a.len()) {
+    if fork_if(a.len(), || {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .zip(c.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(k, ((a, b), c))| f(k * CHUNK, a, b, c));
-    } else {
+            .for_each(|(k, ((a, b), c))| f(k * CHUNK, a, b, c))
+    })
+    .is_none()
+    {
         a.chunks_mut(CHUNK)
             .zip(b.chunks_mut(CHUNK))
             .zip(c.chunks_mut(CHUNK))
@@ -116,14 +150,16 @@ pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     d: &mut [D],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
 ) {
-    if parallel(a.len()) {
+    if fork_if(a.len(), || {
         a.par_chunks_mut(CHUNK)
             .zip(b.par_chunks_mut(CHUNK))
             .zip(c.par_chunks_mut(CHUNK))
             .zip(d.par_chunks_mut(CHUNK))
             .enumerate()
-            .for_each(|(k, (((a, b), c), d))| f(k * CHUNK, a, b, c, d));
-    } else {
+            .for_each(|(k, (((a, b), c), d))| f(k * CHUNK, a, b, c, d))
+    })
+    .is_none()
+    {
         a.chunks_mut(CHUNK)
             .zip(b.chunks_mut(CHUNK))
             .zip(c.chunks_mut(CHUNK))
@@ -158,10 +194,9 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = if parallel(a.len()) {
-        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
-    } else {
-        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    let partials: Vec<T> = match fork_if(a.len(), || a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()) {
+        Some(p) => p,
+        None => a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect(),
     };
     partials.into_iter().fold(zero, fold)
 }
@@ -173,20 +208,18 @@ pub fn chunks1_fold<A: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = if parallel(a.len()) {
-        a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
-    } else {
-        a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()
+    let partials: Vec<T> = match fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()) {
+        Some(p) => p,
+        None => a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect(),
     };
     partials.into_iter().fold(zero, fold)
 }
 
 /// Deterministic fold of `f(range)` over fixed chunks of `0..n` (e.g. a maximum).
 pub fn reduce<T: Send>(n: usize, zero: T, fold: impl Fn(T, T) -> T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T {
-    let partials: Vec<T> = if parallel(n) {
-        ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()
-    } else {
-        ranges(n).map(&f).collect()
+    let partials: Vec<T> = match fork_if(n, || ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()) {
+        Some(p) => p,
+        None => ranges(n).map(&f).collect(),
     };
     partials.into_iter().fold(zero, fold)
 }

@@ -91,7 +91,7 @@ impl<V: Vector> Simulation<V> {
     }
 
     fn run<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
-        par::install(self.pool.as_deref(), f)
+        par::install(self.pool.as_ref(), f)
     }
 
     /// Why this simulation runs on the calling thread only (its pool could not start its
@@ -400,7 +400,7 @@ impl<V: Vector> Simulation<V> {
         let pool = self.pool.clone();
         let terms = &mut self.sys.forces.terms;
         // On the pool: the cell lists size their histograms by its thread count.
-        par::install(pool.as_deref(), || terms.iter_mut().try_for_each(|t| t.reserve(n)))
+        par::install(pool.as_ref(), || terms.iter_mut().try_for_each(|t| t.reserve(n)))
     }
 
     /// Restores a checkpoint of this simulation; returns the step count it restored.
@@ -451,7 +451,7 @@ impl<V: Vector> Simulation<V> {
     fn with_stop<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&mut Self) -> R + Send) -> R {
         self.sys.forces.set_stop(&Stop::new(Some(stop.clone())));
         let pool = self.pool.clone();
-        let r = par::install(pool.as_deref(), || f(self));
+        let r = par::install(pool.as_ref(), || f(self));
         self.sys.forces.set_stop(&Stop::default());
         r
     }
@@ -520,7 +520,8 @@ impl<V: Vector> Simulation<V> {
                     n as u64
                 }
             };
-            if !(duration / n as Real > 0.0) {
+            // duration is finite and > 0: the quotient is never NaN, at worst 0 (underflow).
+            if duration / n as Real <= 0.0 {
                 return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
             }
             let old = s.dt;

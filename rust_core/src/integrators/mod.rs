@@ -29,6 +29,9 @@ pub struct System<V: Vector> {
     pub single: bool,
 }
 
+/// What an integrator carries between steps (`Integrator::cache`): forces and term powers.
+pub type Cache<V> = (Vec<V>, Vec<Real>);
+
 /// `Integrator::step_interruptible` saw its stop flag set and abandoned the step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Stopped;
@@ -73,7 +76,7 @@ pub trait Integrator<V: Vector>: Send + Sync {
         None
     }
     /// `cache()`, with its copy of the per-particle forces allocated fallibly.
-    fn try_cache(&self) -> std::result::Result<Option<(Vec<V>, Vec<Real>)>, TryReserveError> {
+    fn try_cache(&self) -> std::result::Result<Option<Cache<V>>, TryReserveError> {
         Ok(self.cache())
     }
     /// Restores `cache()`'s output at the state whose velocities are `v`, for a scene with

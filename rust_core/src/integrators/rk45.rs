@@ -16,7 +16,7 @@
 //!
 //! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
 //! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
-use super::{accel, bad, ensure_len, store, try_copy, Integrator, IntegratorInfo, Stopped, System};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Stopped, System};
 use std::collections::TryReserveError;
 use crate::par;
 use crate::vector::{Real, Vector};
@@ -423,7 +423,7 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         Some((if self.fsal { self.kv[0].clone() } else { Vec::new() }, p))
     }
 
-    fn try_cache(&self) -> Result<Option<(Vec<V>, Vec<Real>)>, TryReserveError> {
+    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         let f = if self.fsal { try_copy(&self.kv[0])? } else { Vec::new() };
         let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
         p.extend([self.h, self.err_prev]);

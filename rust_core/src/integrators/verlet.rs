@@ -7,7 +7,7 @@
 //! v + dt a(x, v), whose O(dt²) error keeps the method second order; evaluating them with v½
 //! (a common shortcut) would drop it to first order. Without such forces the prediction is
 //! skipped and the method is exactly the symplectic velocity Verlet.
-use super::{accel, bad, ensure_len, store, try_copy, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, System};
 use std::collections::TryReserveError;
 use crate::par;
 use crate::vector::{Real, Vector};
@@ -91,7 +91,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
         self.valid.then(|| (self.f.clone(), self.p.clone()))
     }
-    fn try_cache(&self) -> Result<Option<(Vec<V>, Vec<Real>)>, TryReserveError> {
+    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
     }
     fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {

@@ -73,6 +73,11 @@ fn vec_of<V: Vector>(v: &[f64], arg: &str) -> PyResult<V> {
     Ok(V::from_slice(v))
 }
 
+/// Cached forces (N, dim) and term powers.
+type CacheArrays<'py> = (Bound<'py, PyArray2<f64>>, Vec<f64>);
+/// Neighbour pairs (i, j), (M,) int64 each.
+type Pairs<'py> = (Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>);
+
 /// A new (N, dim) array of `v` (`what`: the getter, for a MemoryError).
 fn to_array2<'py, V: Vector>(py: Python<'py>, v: &[V], what: &'static str) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let need = Need::new(what, Need::bytes_of::<V>(v.len()), format!("a copy of {} rows", count(v.len() as u128)));
@@ -456,7 +461,7 @@ impl Simulation2 {
     }
 
     /// Cached forces (N, dim) and term powers carried between steps, or None.
-    fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<(Bound<'py, PyArray2<f64>>, Vec<f64>)>> {
+    fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<CacheArrays<'py>>> {
         with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
     }
 
@@ -556,16 +561,16 @@ fn interruptible<V: Vector, T: Send>(
 /// two (M,) int64 arrays, sorted by i then j. OutOfMemoryError (a MemoryError) if the pairs do
 /// not fit in memory: they are counted before any is stored.
 #[pyfunction]
-fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f64) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray1<i64>>)> {
+fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f64) -> PyResult<Pairs<'py>> {
     let dim = if points.shape()[1] == 3 { 3 } else { 2 };
     let flat = flat2(&points, dim, "points")?;
     let pool = crate::par::default_pool().ok();
     let r = if dim == 3 {
         let x = try_from_flat::<DVec3>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
-        py.detach(|| crate::par::install(pool.as_deref(), || crate::grid::neighbor_pairs(&x, radius)))
+        py.detach(|| crate::par::install(pool.as_ref(), || crate::grid::neighbor_pairs(&x, radius)))
     } else {
         let x = try_from_flat::<DVec2>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
-        py.detach(|| crate::par::install(pool.as_deref(), || crate::grid::neighbor_pairs(&x, radius)))
+        py.detach(|| crate::par::install(pool.as_ref(), || crate::grid::neighbor_pairs(&x, radius)))
     };
     let (i, j) = r.map_err(|e| to_py(py, e))?;
     Ok((i.into_pyarray(py), j.into_pyarray(py)))

@@ -478,7 +478,10 @@ fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
         }
     };
     let nc = n.div_ceil(par::CHUNK);
-    let parts: Vec<(f64, f64)> = if n >= par::PAR_MIN && par::on_pool() { (0..nc).into_par_iter().map(chunk).collect() } else { (0..nc).map(chunk).collect() };
+    let parts: Vec<(f64, f64)> = match par::fork_if(n, || (0..nc).into_par_iter().map(chunk).collect()) {
+        Some(p) => p,
+        None => (0..nc).map(chunk).collect(),
+    };
     // Fixed chunk order: the same sum for any thread count.
     parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)))
 }

@@ -153,9 +153,7 @@ fn accelerations<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, stop: 
         simd::dispatch(level, Accel { src, eps2, rows: r, out });
     };
     // O(N) work per item: parallel from a few dozen particles on.
-    if n >= 64 && par::on_pool() {
-        out.par_chunks_mut(ROWS).enumerate().for_each(block);
-    } else {
+    if n < 64 || par::fork(|| out.par_chunks_mut(ROWS).enumerate().for_each(block)).is_none() {
         out.chunks_mut(ROWS).enumerate().for_each(block);
     }
 }
@@ -298,10 +296,10 @@ fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, st
             }
         }
     };
-    if par::on_pool() {
-        tasks.into_par_iter().zip(scratch.cols.par_iter_mut()).for_each(run);
-    } else {
-        tasks.into_iter().zip(scratch.cols.iter_mut()).for_each(run);
+    let cols = &mut scratch.cols;
+    let mut tasks = Some(tasks);
+    if par::fork(|| tasks.take().unwrap_or_default().into_par_iter().zip(cols.par_iter_mut()).for_each(run)).is_none() {
+        tasks.unwrap_or_default().into_iter().zip(cols.iter_mut()).for_each(run);
     }
     let cols = &scratch.cols;
     par::chunks1(out, |s, out| {
