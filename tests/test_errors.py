@@ -301,3 +301,28 @@ def test_divergence_from_huge_velocities():
     assert info.value.rolled_back_to == 0
     assert s.step_count == 0 and s.time == 0.0
     assert np.array_equal(s.positions, x0)
+
+
+def test_step_count_never_wraps():
+    # The step count is an int64 in files: a call that would take it past 2**63 - 1 is refused,
+    # naming the argument, before anything changes (a scene with no particles steps instantly).
+    s = pc.Scene(2, dt=1.0)
+    for n in (2**64, 2**63):
+        with pytest.raises(pc.InvalidInputError, match="^n: "):
+            s.step(n)
+    assert s.step_count == 0
+    s.step(2**63 - 2)
+    with pytest.raises(pc.InvalidInputError, match="^n: "):
+        s.step(2)
+    assert s.step_count == 2**63 - 2
+    with pytest.raises(pc.InvalidInputError, match="^substeps: "):
+        s.advance(1.0, substeps=2)
+    s.step(1)
+    assert s.step_count == 2**63 - 1
+
+
+def test_step_time_overflow_is_refused():
+    s = pc.Scene(2, dt=1e300)
+    with pytest.raises(pc.InvalidInputError, match="^n: "):
+        s.step(10**10)
+    assert s.time == 0.0

@@ -59,6 +59,10 @@ class EnergyReport:
     mechanical: float
 
 
+#: The largest step count (files store it as an int64; it never wraps).
+_MAX_STEPS = 2**63 - 1
+
+
 def _check_int(value: object, arg: str, minimum: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise TypeError(f"{arg}: expected an int, got {type(value).__name__}")
@@ -431,6 +435,8 @@ class Scene:
             fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
         """
         n = _check_int(n, "n", 0)
+        if n > _MAX_STEPS - self.step_count:
+            raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
         self._sim.step(n)
@@ -466,6 +472,8 @@ class Scene:
             fixed = None
         else:
             fixed = _check_int(substeps, "substeps", 1)
+            if fixed > _MAX_STEPS - self.step_count:
+                raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
         return int(self._sim.advance(duration, fixed))

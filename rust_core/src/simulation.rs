@@ -9,6 +9,9 @@ use crate::vector::{Real, Vector};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::Arc;
+
+/// The largest step count: files store it as an int64, and it must never wrap.
+pub const MAX_STEPS: u64 = i64::MAX as u64;
 use std::time::Duration;
 
 /// Energy books at one instant (J). `total()` = kinetic + Σ potential + Σ dissipated is conserved
@@ -280,14 +283,26 @@ impl<V: Vector> Simulation<V> {
     }
 
     /// Restores time, step count, the dissipation books and the integrator cache of a saved run.
+    /// Restores what `save` wrote beside the state: time (s), step count, the energy books
+    /// (J) and the integrator's cache. Every value is checked before anything changes.
     pub fn restore(&mut self, t: Real, step: u64, dissipated: &[Real], collisions: Real, cache: Option<(Vec<V>, Vec<Real>)>) -> Result<()> {
         if dissipated.len() != self.sys.forces.terms.len() {
             return Err(invalid("dissipated", "does not match the scene's terms"));
         }
-        self.sys.state.t = t;
-        self.sys.state.step = step;
-        self.sys.forces.dissipated.copy_from_slice(dissipated);
-        self.collision_dissipated = collisions;
+        if !t.is_finite() {
+            return Err(invalid("time", format!("must be finite, got {t}")));
+        }
+        if step > MAX_STEPS {
+            return Err(invalid("step", format!("must be at most 2**63 - 1, got {step}")));
+        }
+        if let Some(d) = dissipated.iter().chain([&collisions]).find(|d| !d.is_finite()) {
+            return Err(invalid("dissipated", format!("must be finite, got {d}")));
+        }
+        if let Some((f, p)) = &cache {
+            if !(f.iter().all(|x| x.is_finite()) && p.iter().all(|x| x.is_finite())) {
+                return Err(invalid("cache", "must be finite"));
+            }
+        }
         match cache {
             Some((f, p)) => {
                 if !self.integrator.set_cache(f, p, &self.sys.state.v, dissipated.len()) {
@@ -296,6 +311,10 @@ impl<V: Vector> Simulation<V> {
             }
             None => self.integrator.reset(),
         }
+        self.sys.state.t = t;
+        self.sys.state.step = step;
+        self.sys.forces.dissipated.copy_from_slice(dissipated);
+        self.collision_dissipated = collisions;
         Ok(())
     }
 
@@ -316,8 +335,15 @@ impl<V: Vector> Simulation<V> {
     /// divergence and `Error::Interrupted` is returned; a flag set before the call stops it
     /// before the first step.
     pub fn step_interruptible(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
+        if n > MAX_STEPS - self.sys.state.step {
+            return Err(invalid("n", format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.sys.state.step)));
+        }
         if n == 0 || self.n_particles() == 0 {
-            self.sys.state.t += n as Real * self.dt;
+            let t = self.sys.state.t + n as Real * self.dt;
+            if !t.is_finite() {
+                return Err(invalid("n", format!("{n} steps of {:e} s take the time past the largest float", self.dt)));
+            }
+            self.sys.state.t = t;
             self.sys.state.step += n;
             return Ok(());
         }
@@ -326,6 +352,7 @@ impl<V: Vector> Simulation<V> {
             self.sys.forces.dissipated.clone(),
             self.collision_dissipated,
             self.integrator_cache(),
+            self.integrator.adaptive_stats(),
         );
         let pool = self.pool.clone();
         let result = match &pool {
@@ -335,7 +362,10 @@ impl<V: Vector> Simulation<V> {
         if result.is_ok() {
             return result;
         }
-        let (state, diss, coll, cache) = saved;
+        let (state, diss, coll, cache, stats) = saved;
+        if let Some((accepted, rejected, _)) = stats {
+            self.integrator.set_adaptive_counts(accepted, rejected);
+        }
         let rolled_back_to = state.step;
         self.sys.state = state;
         self.sys.forces.dissipated = diss;
@@ -411,6 +441,10 @@ impl<V: Vector> Simulation<V> {
                 n as u64
             }
         };
+        if n > MAX_STEPS - self.sys.state.step {
+            let arg = if substeps.is_some() { "substeps" } else { "duration" };
+            return Err(invalid(arg, format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.sys.state.step)));
+        }
         if !(duration / n as Real > 0.0) {
             return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
         }
