@@ -1,7 +1,7 @@
 """physcore's exception hierarchy (raised from Rust through ``physcore._core`` as well)."""
 from __future__ import annotations
 
-__all__ = ["PhyscoreError", "InvalidInputError", "SimulationDiverged"]
+__all__ = ["PhyscoreError", "InvalidInputError", "SimulationDiverged", "SceneBusyError"]
 
 
 class PhyscoreError(Exception):
@@ -38,3 +38,9 @@ class SimulationDiverged(PhyscoreError, RuntimeError):
         self.quantity = quantity
         self.suggested_dt = suggested_dt
         self.rolled_back_to = rolled_back_to
+
+
+class SceneBusyError(PhyscoreError, RuntimeError):
+    """A Scene was used from a second thread while another thread steps it (``step``,
+    ``advance``, a render). A Scene belongs to one thread at a time: wait for the other call to
+    return, or give each thread its own Scene."""

@@ -8,14 +8,15 @@ from __future__ import annotations
 import json
 import math
 import os
+import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
 from . import _core
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, SceneBusyError
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
 from ._atomic import atomic_write
@@ -196,6 +197,10 @@ class Scene:
         sim = _core.Simulation2(int(dim), integrator, dt, threads)
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.single = precision == "f32"
+        # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
+        # that release the GIL for long, and _busy names the thread inside one.
+        self._lock = threading.Lock()
+        self._busy: Optional[int] = None
         self._sim = sim
         self._threads = threads
         self._terms: List[Term] = []
@@ -203,6 +208,38 @@ class Scene:
         self._boxes: List[Box] = []
         self._e0: Optional[float] = None
         self._e0_scale: float = 0.0
+
+    # ---------------------------------------------------------------- threads
+    @property
+    def _sim(self) -> "_core.Simulation2":
+        # A Scene is not shared between threads while one of them steps it: every use from
+        # another thread then raises SceneBusyError, instead of pyo3's bare "Already mutably
+        # borrowed" RuntimeError.
+        busy = self._busy
+        if busy is not None and busy != threading.get_ident():
+            raise SceneBusyError(
+                "this Scene is being stepped by another thread; use a Scene from one thread at a "
+                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
+            )
+        return self._raw_sim
+
+    @_sim.setter
+    def _sim(self, sim: "_core.Simulation2") -> None:
+        self._raw_sim = sim
+
+    def _exclusive(self, call: Callable[["_core.Simulation2"], Any]) -> Any:
+        """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
+        only user of the scene; another thread's use meanwhile raises :class:`SceneBusyError`
+        (so does this call, if another thread is inside one)."""
+        sim = self._sim
+        if not self._lock.acquire(blocking=False):
+            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
+        self._busy = threading.get_ident()
+        try:
+            return call(sim)
+        finally:
+            self._busy = None
+            self._lock.release()
 
     # ---------------------------------------------------------------- building
     def add_particles(
@@ -439,7 +476,7 @@ class Scene:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        self._sim.step(n)
+        self._exclusive(lambda sim: sim.step(n))
 
     def advance(self, duration: float, *, substeps: Union[str, int] = "auto") -> int:
         """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
@@ -476,14 +513,14 @@ class Scene:
                 raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        return int(self._sim.advance(duration, fixed))
+        return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
 
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before
         rounding to a whole number of substeps per call): see :meth:`advance`. ``inf`` for
         ``"rk45"`` without a CFL limit; the current :attr:`dt` for a scene with no time scale
         (free flight, uniform gravity only)."""
-        d = self._sim.auto_dt()
+        d = self._exclusive(lambda sim: sim.auto_dt())
         if d is not None:
             return float(d)
         return math.inf if self.integrator == "rk45" else self.dt
@@ -642,7 +679,7 @@ class Scene:
     # ---------------------------------------------------------------- diagnostics
     def energy(self) -> EnergyReport:
         """The energy books now (computed in Rust; pairwise gravity costs O(N²))."""
-        d = self._sim.energy()
+        d = self._exclusive(lambda sim: sim.energy())
         pot = dict(d["potential"])
         dis = dict(d["dissipated"])
         mech = d["kinetic"] + sum(pot.values())
@@ -675,12 +712,12 @@ class Scene:
     def density(self) -> np.ndarray:
         """SPH density of every particle now, kg/m³ (kg/m² in 2D): ``(N,)`` float64, 0 for
         particles in no fluid (computed in float64)."""
-        return self._sim.fluid_fields()[0]
+        return self._exclusive(lambda sim: sim.fluid_fields())[0]
 
     def pressure(self) -> np.ndarray:
         """Equation-of-state pressure of every particle now, Pa: ``(N,)`` float64, 0 for
         particles in no fluid (computed in float64)."""
-        return self._sim.fluid_fields()[1]
+        return self._exclusive(lambda sim: sim.fluid_fields())[1]
 
     def boundary_points(self) -> np.ndarray:
         """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""
@@ -697,7 +734,7 @@ class Scene:
         dashpots, 1/λ_max = m/(2 Σc), both from Gershgorin bounds; pairwise gravity: closest
         free-fall time; drag: m/b); the current dt if no term has one. Explicit integrators are
         stable at this dt; pairwise gravity can later reach shorter time scales than now."""
-        return self._sim.suggest_dt()
+        return self._exclusive(lambda sim: sim.suggest_dt())
 
     # ---------------------------------------------------------------- persistence
     def save(self, path: Union[str, os.PathLike]) -> Path:
