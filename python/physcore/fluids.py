@@ -286,8 +286,12 @@ class Fluid:
             a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
                 raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
+            with np.errstate(over="ignore", under="ignore"):
+                psi = a * self.density
+            if not np.all(np.isfinite(psi) & (psi > 0)):
+                raise InvalidInputError("wall_volume: the wall masses density·wall_volume are outside float64 range")
             object.__setattr__(self, "wall_volume", a)
-        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed**2):
+        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
         if self.precision not in ("f32", "f64"):
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
