@@ -795,6 +795,31 @@ def test_failed_save_with_a_long_name_leaves_nothing(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
+def test_overflowed_energy_baseline_is_not_saved(tmp_path):
+    # Finite state, energy beyond float64: the drift baseline is inf. The file keeps no baseline
+    # (the loader refuses non-finite numbers) and the loaded scene takes a new one when stepped.
+    s = pc.Scene(2, threads=1)
+    s.add_particles([[0.0, 1e300], [1.0, 0.0]], masses=[1e10, 1.0])
+    s.add(pc.Gravity([0.0, -9.81]))
+    s.step(1)
+    assert math.isinf(s.energy().total)
+    t = pc.Scene.load(s.save(tmp_path / "o.npz"))
+    assert t.energy_drift() == 0.0 and np.array_equal(t.positions, s.positions)
+
+
+def test_overflowed_books_are_refused_at_save(tmp_path):
+    # Drag at 1e160 m/s dissipates more than float64 holds; saving says so instead of writing a
+    # file that load would refuse.
+    s = pc.Scene(2, threads=1)
+    s.add_particles([[0.0, 0.0]], [[1e160, 0.0]])
+    s.add(pc.Drag(1.0))
+    s.step(1)
+    assert s.energy().dissipated["drag"] == math.inf
+    with pytest.raises(pc.InvalidInputError, match=r"^ledger: \[inf\] overflowed float64"):
+        s.save(tmp_path / "d.npz")
+    assert os.listdir(tmp_path) == []
+
+
 def test_round_trip_is_bit_identical_for_every_integrator(tmp_path):
     for integ in ("euler", "semi_implicit_euler", "verlet", "rk4", "rk45"):
         a, b = reference_scene(integ), reference_scene(integ)

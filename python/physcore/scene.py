@@ -755,9 +755,9 @@ class Scene:
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
-        for field, v in (("time", np.array([self.time])), ("ledger", arrays["ledger"]), ("collisions", np.array([collisions]))):
+        for field, v in (("time", [self.time]), ("ledger", ledger), ("collisions", [collisions])):
             if not np.isfinite(v).all():
-                raise InvalidInputError(f"{field}: the scene's {field} is not finite ({v.tolist()}); it cannot be saved")
+                raise InvalidInputError(f"{field}: {list(v)} overflowed float64; a scene file holds finite values only, so this scene cannot be saved")
         cache = self._sim.integrator_cache()
         if cache is not None:
             arrays["cache_forces"] = cache[0]
