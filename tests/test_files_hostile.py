@@ -92,6 +92,11 @@ def ref(tmp_path_factory) -> Ref:
     return make_ref(tmp_path_factory.mktemp("ref"))
 
 
+@pytest.fixture(scope="module")
+def fuzz_dir(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("fuzz")
+
+
 # ------------------------------------------------------------------------------ crafting files
 def zip_bytes(members: List[Tuple[str, bytes]], compress: int = zipfile.ZIP_STORED) -> bytes:
     buf = io.BytesIO()
@@ -323,13 +328,13 @@ BAD_FIELDS: List[Tuple[tuple, List[Any]]] = [
     (("terms", FLUID, "kernel"), ["box", 3, None]),
     (("terms", FLUID, "precision"), ["f16", None]),
     (("terms", FLUID, "mass"), [-1.0, 0.0, NAN, None]),
-    (("terms", FLUID, "spacing"), [0.0, -0.01, INF, 1e-320]),
+    (("terms", FLUID, "spacing"), [0.0, -0.01, INF, 1e-320, 1e300]),
     (("terms", FLUID, "smoothing"), [10.0, 0.1, NAN]),
     (("terms", FLUID, "density"), ["x", 0.0, At(f"meta.terms[{FLUID}].sound_speed", 1e308)]),
-    (("terms", FLUID, "sound_speed"), [INF, 0.0, 1e300, None]),
-    (("terms", FLUID, "viscosity"), [-0.1, NAN]),
+    (("terms", FLUID, "sound_speed"), [INF, 0.0, 1e300, None, Either(1e150)]),
+    (("terms", FLUID, "viscosity"), [-0.1, NAN, Either(1e300)]),
     (("planes", 0, "point"), [[0.0], [0.0, NAN], None]),
-    (("planes", 0, "normal"), [[0.0, 0.0], [0.0, "up"]]),
+    (("planes", 0, "normal"), [[0.0, 0.0], [0.0, "up"], Either([1e300, 1e300]), Either([5e-324, 0.0])]),
     (("planes", 0, "restitution"), [2.0, -0.1, NAN]),
     (("planes", 0, "friction"), [-1.0, INF]),
     (("boxes", 0, "upper"), [[-20.0, 10.0], [10.0]]),
@@ -589,8 +594,8 @@ def load_or_refuse(path: Path, max_bytes: int) -> Optional[pc.Scene]:
 
 # ------------------------------------------------------------------------------ corpus tests
 @pytest.mark.parametrize("case", CORPUS, ids=[f"{c.family}:{c.name}" for c in CORPUS])
-def test_crafted_file(ref, tmp_path, case):
-    path = tmp_path / "k.npz"
+def test_crafted_file(ref, fuzz_dir, case):
+    path = fuzz_dir / "k.npz"  # one directory for all cases: a tmp_path each costs more than the load
     path.write_bytes(case.build(ref))
     # What a file can make the loader allocate: about its size, plus a fixed overhead.
     scene = load_or_refuse(path, max_bytes=4 * path.stat().st_size + (32 << 20))
@@ -795,6 +800,13 @@ def test_failed_save_with_a_long_name_leaves_nothing(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.parametrize("normal, unit", [([1e300, 1e300], [0.5**0.5, 0.5**0.5]), ([5e-324, 0.0], [1.0, 0.0]), ([0.0, -1e-200], [0.0, -1.0])])
+def test_plane_normal_of_extreme_magnitude_is_normalised(normal, unit):
+    # Found by the meta fuzzer: |n|² overflowed (a zero "unit" normal) or underflowed (refused).
+    n = pc.Plane([0.0, 0.0], normal).normal
+    assert np.allclose(n, unit, rtol=1e-15, atol=0) and abs(np.linalg.norm(n) - 1.0) <= 2e-16
+
+
 def test_overflowed_energy_baseline_is_not_saved(tmp_path):
     # Finite state, energy beyond float64: the drift baseline is inf. The file keeps no baseline
     # (the loader refuses non-finite numbers) and the loaded scene takes a new one when stepped.
@@ -923,11 +935,6 @@ ARRAYS_ST = hnp.arrays(
     st.sampled_from([np.float64, np.float32, np.int64, np.int32, np.bool_, np.uint8, np.complex128]),
     hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=9),
 )
-
-
-@pytest.fixture(scope="module")
-def fuzz_dir(tmp_path_factory) -> Path:
-    return tmp_path_factory.mktemp("fuzz")
 
 
 @FAST

@@ -257,7 +257,9 @@ class Fluid:
         if not 0.5 <= self.smoothing <= 4.0:
             raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")
         h = self.smoothing * self.spacing
-        if not (math.isfinite(h) and h > 1e-300 and self.spacing ** x.shape[1] > 0 and math.isfinite(self.spacing ** x.shape[1])):
+        # Products, not **, which raises OverflowError instead of giving inf.
+        h_d, spacing_d = math.prod([h] * dim), math.prod([self.spacing] * dim)
+        if not (math.isfinite(h) and h > 1e-300 and spacing_d > 0 and math.isfinite(spacing_d) and math.isfinite(h_d)):
             raise InvalidInputError(f"spacing: {self.spacing} m gives a smoothing length or particle volume outside float64 range")
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
