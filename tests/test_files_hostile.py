@@ -13,6 +13,7 @@ here and at length with ``pytest -m fuzz``.
 """
 from __future__ import annotations
 
+import gzip
 import io
 import json
 import math
@@ -211,7 +212,7 @@ CONTAINER = [
     Case("container", "text", lambda r: b"hello, this is not a scene\n" * 10, field=""),
     Case("container", "random", lambda r: np.random.default_rng(0).bytes(4096), field=""),
     Case("container", "npy-not-npz", lambda r: r.members["positions"], field=""),
-    Case("container", "gzip", lambda r: __import__("gzip").compress(r.data), field=""),
+    Case("container", "gzip", lambda r: gzip.compress(r.data), field=""),
     Case("container", "crc-mismatch", _crc_flip, field="positions"),
     Case("container", "member-not-npy", _not_npy_member, field="positions"),
     Case("container", "empty-zip", lambda r: zip_bytes([]), field="meta"),
