@@ -6,7 +6,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 from __future__ import annotations
 
 from . import _core
-from ._errors import InvalidInputError, PhyscoreError, SceneBusyError, SimulationDiverged
+from ._errors import InvalidInputError, PhyscoreError, SceneBusyError, SceneFileError, SimulationDiverged
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
@@ -29,6 +29,7 @@ __all__ = [
     "fluids",
     "PhyscoreError",
     "InvalidInputError",
+    "SceneFileError",
     "SimulationDiverged",
     "SceneBusyError",
     "scenes",

@@ -1,7 +1,7 @@
 """physcore's exception hierarchy (raised from Rust through ``physcore._core`` as well)."""
 from __future__ import annotations
 
-__all__ = ["PhyscoreError", "InvalidInputError", "SimulationDiverged", "SceneBusyError"]
+__all__ = ["PhyscoreError", "InvalidInputError", "SceneFileError", "SimulationDiverged", "SceneBusyError"]
 
 
 class PhyscoreError(Exception):
@@ -10,6 +10,28 @@ class PhyscoreError(Exception):
 
 class InvalidInputError(PhyscoreError, ValueError):
     """An argument is invalid. Raised before any state changes; the message names the argument."""
+
+
+class SceneFileError(InvalidInputError):
+    """A file given to :meth:`Scene.load` is not a scene file physcore can read: not a zip
+    archive, truncated or corrupted, a member missing, extra or malformed, a field of the wrong
+    type or out of range, or sizes beyond what the file itself holds.
+
+    It is the one error :meth:`Scene.load` raises for what is *in* a file (the file could be
+    opened); failures to open it stay ``OSError``. The message starts with the file name and the
+    offending field (``"meta.step"``, ``"positions"``, ``"meta.terms[2].g"``), also kept as the
+    attributes ``path`` (str) and ``field`` (str, ``""`` for the archive as a whole). Nothing in
+    the file is executed (object arrays are refused before their data is read).
+    """
+
+    def __init__(self, path: str, field: str, problem: str) -> None:
+        super().__init__(f"{path}: {field}: {problem}" if field else f"{path}: {problem}")
+        self.path = path
+        self.field = field
+        self.problem = problem
+
+    def __reduce__(self):  # pickles (multiprocessing) despite the three-argument constructor
+        return (type(self), (self.path, self.field, self.problem))
 
 
 class SimulationDiverged(PhyscoreError, RuntimeError):

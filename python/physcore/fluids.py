@@ -257,7 +257,9 @@ class Fluid:
         if not 0.5 <= self.smoothing <= 4.0:
             raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")
         h = self.smoothing * self.spacing
-        if not (math.isfinite(h) and h > 1e-300 and self.spacing ** x.shape[1] > 0 and math.isfinite(self.spacing ** x.shape[1])):
+        # Products, not **, which raises OverflowError instead of giving inf.
+        h_d, spacing_d = math.prod([h] * dim), math.prod([self.spacing] * dim)
+        if not (math.isfinite(h) and h > 1e-300 and spacing_d > 0 and math.isfinite(spacing_d) and math.isfinite(h_d)):
             raise InvalidInputError(f"spacing: {self.spacing} m gives a smoothing length or particle volume outside float64 range")
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
@@ -286,8 +288,12 @@ class Fluid:
             a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
                 raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
+            with np.errstate(over="ignore", under="ignore"):
+                psi = a * self.density
+            if not np.all(np.isfinite(psi) & (psi > 0)):
+                raise InvalidInputError("wall_volume: the wall masses density·wall_volume are outside float64 range")
             object.__setattr__(self, "wall_volume", a)
-        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed**2):
+        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
         if self.precision not in ("f32", "f64"):
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")

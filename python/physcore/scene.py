@@ -19,6 +19,7 @@ from . import _core
 from ._errors import InvalidInputError, SceneBusyError
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
+from . import _scenefile
 from ._atomic import atomic_write
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -27,7 +28,6 @@ __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 #: evaluations per step, as reported by the core.
 INTEGRATORS: Tuple[Dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
-_FORMAT_VERSION = 1
 
 Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
 
@@ -70,6 +70,14 @@ def _check_int(value: object, arg: str, minimum: int) -> int:
     if value < minimum:
         raise InvalidInputError(f"{arg}: must be >= {minimum}, got {value}")
     return int(value)
+
+
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _check_dt(dt: object) -> float:
@@ -742,8 +750,21 @@ class Scene:
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
         Verlet force cache, the rk45 step-size controller and the energy books are saved too).
+        The layout is described in ``physcore/_scenefile.py``. An energy-drift baseline that
+        overflowed float64 is not saved (the loaded scene takes a new one at its next step).
+
+        Raises
+        ------
+        TypeError
+            ``path`` is not a str or os.PathLike.
+        ValueError
+            ``path`` does not end in ``.npz``; the energy books are not finite (they overflowed
+            float64), so the file could not be loaded back.
+        OSError
+            The file cannot be written; ``path`` is then left as it was and no temporary file
+            remains.
         """
-        path = Path(path)
+        path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
         arrays: Dict[str, np.ndarray] = {
@@ -778,12 +799,17 @@ class Scene:
                     arrays[f"term{k}_{f}"] = np.asarray(getattr(t, f))
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
+        # The loader refuses non-finite books; say so now rather than write a file it refuses.
+        for field, v in (("time", [self.time]), ("ledger", ledger), ("collisions", [collisions])):
+            if not np.isfinite(v).all():
+                raise InvalidInputError(f"{field}: {list(v)} overflowed float64; a scene file holds finite values only, so this scene cannot be saved")
         cache = self._sim.integrator_cache()
         if cache is not None:
             arrays["cache_forces"] = cache[0]
             arrays["cache_power"] = np.asarray(cache[1], dtype=np.float64)
+        e0_finite = self._e0 is not None and math.isfinite(self._e0) and math.isfinite(self._e0_scale)
         meta = {
-            "format": _FORMAT_VERSION,
+            "format": _scenefile.FORMAT_VERSION,
             "dim": self.dim,
             "integrator": self.integrator,
             "dt": self.dt,
@@ -794,8 +820,8 @@ class Scene:
             "time": self.time,
             "step": self.step_count,
             "collisions": collisions,
-            "e0": self._e0,
-            "e0_scale": self._e0_scale,
+            "e0": self._e0 if e0_finite else None,
+            "e0_scale": self._e0_scale if e0_finite else 0.0,
             "terms": terms_meta,
             "planes": [
                 {"point": p.point.tolist(), "normal": p.normal.tolist(), "restitution": p.restitution, "friction": p.friction}
@@ -807,39 +833,79 @@ class Scene:
             ],
         }
         # float.hex keeps every float bit-exact through JSON.
-        arrays["meta"] = np.array(json.dumps(meta, default=float))
+        arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
         arrays["time_hex"] = np.array(float(self.time).hex())
         atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike], *, threads: Optional[int] = None) -> "Scene":
-        """Read a scene written by :meth:`save`. ``threads`` overrides the saved thread count."""
-        with np.load(Path(path), allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format") != _FORMAT_VERSION:
-                raise InvalidInputError(f"path: unsupported scene format {meta.get('format')!r}")
+        """Read a scene written by :meth:`save`.
+
+        The file is treated as hostile (see ``physcore/_scenefile.py``): every field is checked
+        as strictly as the API checks arguments, then the API validates again; object arrays are
+        never read, nothing is executed, and the loader allocates no more array memory than the
+        file's size (sizes claimed in headers are checked against the bytes present first).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A ``.npz`` file written by :meth:`save`.
+        threads : int or None
+            Overrides the saved thread count. Without it the saved count is used, capped at the
+            number of CPUs this process may use (results do not depend on it, and a file should
+            not decide how many threads start); ``None`` saved stays ``None`` (all cores).
+
+        Raises
+        ------
+        TypeError
+            ``path`` is not a str or os.PathLike; ``threads`` is not an int.
+        ValueError
+            ``threads`` < 1.
+        SceneFileError
+            (a ``ValueError``) for anything wrong with the file's contents: not a zip, truncated
+            or damaged, a member missing, extra, compressed or of the wrong dtype or shape, a
+            non-finite number, a field of the wrong type or out of range (``step`` must be an
+            integer in [0, 2**63)), or a value the API refuses. The message names the file and
+            the field.
+        OSError
+            The file cannot be opened (missing, no permission).
+        """
+        path = _scenefile.check_path(path)
+        if threads is not None:
+            threads = _check_int(threads, "threads", 1)
+        sf = _scenefile.read(path)
+        meta, z, r = sf.meta, sf.arrays, sf.reader
+        if threads is None and meta["threads"] is not None:
+            threads = min(meta["threads"], _usable_cpus())
+        with r.api("meta"):
             scene = cls(
                 meta["dim"],
                 integrator=meta["integrator"],
                 dt=meta["dt"],
-                rtol=meta.get("rtol", 1e-6),
-                atol=meta.get("atol", 1e-9),
-                precision=meta.get("precision", "f64"),
-                threads=threads if threads is not None else meta["threads"],
+                rtol=meta["rtol"],
+                atol=meta["atol"],
+                precision=meta["precision"],
+                threads=threads,
             )
-            n = z["positions"].shape[0]
-            if n:
+        if z["positions"].shape[0]:
+            with r.api(""):  # the API's argument names are the members' names
                 scene.add_particles(z["positions"], z["velocities"], z["masses"], z["pinned"])
-            for k, t in enumerate(meta["terms"]):
-                kind = t["type"]
-                if kind == "gravity":
+        for k, t in enumerate(meta["terms"]):
+            ctx = f"meta.terms[{k}]"
+            kind = t["type"]
+            if kind == "gravity":
+                with r.api(ctx):
                     scene.add(Gravity(t["g"], name=t["name"]))
-                elif kind == "drag":
+            elif kind == "drag":
+                with r.api(ctx):
                     scene.add(Drag(t["coefficient"], name=t["name"]))
-                elif kind == "pairwise_gravity":
+            elif kind == "pairwise_gravity":
+                with r.api(ctx):
                     scene.add(PairwiseGravity(t["G"], t["softening"], name=t["name"]))
-                elif kind == "fluid":
+            elif kind == "fluid":
+                members = {a: f"term{k}_{a}" for a in ("positions", "walls", "wall_volume")}
+                with r.api(ctx, {**members, "n": f"{ctx}.first"}):
                     walls = z[f"term{k}_walls"]
                     fl = Fluid(
                         z[f"term{k}_positions"],
@@ -858,27 +924,29 @@ class Scene:
                         name=t["name"],
                     )
                     dt_saved = scene.dt
-                    scene._add_fluid(fl, first=int(t["first"]))
+                    scene._add_fluid(fl, first=t["first"])
                     scene._sim.dt = dt_saved
-                else:
-                    f = {a: z[f"term{k}_{a}"] for a in ("i", "j", "stiffness", "damping", "rest_length")}
-                    scene.add(Springs(name=t["name"], **f))
-            for p in meta["planes"]:
+            else:
+                fields = ("i", "j", "stiffness", "damping", "rest_length")
+                with r.api(ctx, {**{a: f"term{k}_{a}" for a in fields}, "i/j": f"term{k}_i"}):
+                    scene.add(Springs(name=t["name"], **{a: z[f"term{k}_{a}"] for a in fields}))
+        for i, p in enumerate(meta["planes"]):
+            with r.api(f"meta.planes[{i}]"):
                 scene.add(Plane(p["point"], p["normal"], p["restitution"], p["friction"]))
-            for b in meta.get("boxes", []):
+        for i, b in enumerate(meta["boxes"]):
+            with r.api(f"meta.boxes[{i}]"):
                 scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
-            cache_f = z["cache_forces"] if "cache_forces" in z.files else None
-            cache_p = z["cache_power"].tolist() if "cache_power" in z.files else None
+        with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
             scene._sim.restore(
-                float.fromhex(str(z["time_hex"])),
-                int(meta["step"]),
+                sf.time,
+                meta["step"],
                 z["ledger"].tolist(),
-                float(meta["collisions"]),
-                cache_f,
-                cache_p,
+                meta["collisions"],
+                z.get("cache_forces"),
+                z["cache_power"].tolist() if "cache_power" in z else None,
             )
-            scene._e0 = meta["e0"]
-            scene._e0_scale = meta["e0_scale"]
+        scene._e0 = meta["e0"]
+        scene._e0_scale = meta["e0_scale"]
         return scene
 
     def __repr__(self) -> str:

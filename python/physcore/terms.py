@@ -226,9 +226,14 @@ class Plane:
         normal = _vector(self.normal, "normal")
         if point.shape != normal.shape:
             raise InvalidInputError(f"normal: has {normal.shape[0]} components, point has {point.shape[0]}")
-        norm = float(np.linalg.norm(normal))
-        if norm == 0.0:
+        if not np.any(normal):
             raise InvalidInputError("normal: must be non-zero")
+        with np.errstate(over="ignore", under="ignore"):
+            norm = float(np.linalg.norm(normal))
+        if not 1e-150 < norm < 1e150:
+            # |normal|² would overflow or underflow (a zero or infinite "unit" normal): scale first.
+            normal = normal / np.abs(normal).max()
+            norm = float(np.linalg.norm(normal))
         unit = normal / norm
         unit.setflags(write=False)
         object.__setattr__(self, "point", point)
