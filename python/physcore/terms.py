@@ -11,6 +11,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import _check
 from ._errors import InvalidInputError
 
 __all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
@@ -19,9 +20,7 @@ ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
 
 def _finite_float(value: object, arg: str, *, minimum: Optional[float] = None, strict: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{arg}: expected a real number, got {type(value).__name__}")
-    v = float(value)
+    v = _check.real(arg, value)  # TypeError for bool/str/None; an int beyond float64 is refused
     if not np.isfinite(v):
         raise InvalidInputError(f"{arg}: must be finite, got {v}")
     if minimum is not None and (v < minimum or (strict and v == minimum)):
