@@ -29,6 +29,7 @@ __all__ = [
     "flag",
     "choice",
     "mass",
+    "array",
     "memory_limit",
     "memory",
     "human_bytes",
@@ -144,6 +145,15 @@ def mass(name: str, value: Any) -> float:
     if not (math.isfinite(m) and m >= MIN_MASS):
         raise InvalidInputError(f"{name}: {m} kg is not a usable mass (must be finite and >= {MIN_MASS:.3g} kg, so that 1/m is finite)")
     return m
+
+
+def array(name: str, value: Any) -> np.ndarray:
+    """``np.asarray(value)``, with a ragged nested sequence refused by name (InvalidInputError)
+    instead of numpy's unnamed ValueError."""
+    try:
+        return np.asarray(value)
+    except (ValueError, TypeError) as e:
+        raise InvalidInputError(f"{name}: not a rectangular array of numbers ({' '.join(str(e).split())[:80]})") from None
 
 
 def memory_limit() -> int:

@@ -137,7 +137,7 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
 
 
 def _corner(value: object, arg: str) -> np.ndarray:
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     return a.astype(np.float64)
@@ -307,14 +307,14 @@ class Fluid:
         if self.walls is not None:
             w = _array2(self.walls, "walls")
             if w.shape[1] != dim:
-                raise InvalidInputError(f"walls: expected shape (M, {dim}), got {w.shape}")
+                raise InvalidInputError(f"walls: expected shape (M, {dim}) (the positions are {dim}D), got {w.shape}")
             object.__setattr__(self, "walls", w)
         wv = self.wall_volume
         if isinstance(wv, str):
             if wv not in ("lattice", "akinci"):
                 raise InvalidInputError(f"wall_volume: expected 'lattice', 'akinci', a float or an array, got {wv!r}")
         else:
-            a = np.asarray(wv)
+            a = _check.array("wall_volume", wv)
             if a.dtype.kind not in "iuf" or a.dtype == bool:
                 raise TypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
             m = 0 if self.walls is None else self.walls.shape[0]

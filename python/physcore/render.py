@@ -41,6 +41,9 @@ DEFAULT_VIEW = (-60.0, 25.0)
 #: ``n · dt`` are no longer exact in float64 (and no run would finish anyway).
 MAX_STEPS = 2**53
 
+# Most automatic substeps Scene.advance takes in one call (it refuses more, naming duration).
+_MAX_AUTO_SUBSTEPS = 1e12
+
 # ---------------------------------------------------------------------------------------------
 # The one fixed palette. Index layout (at most 256 entries, the GIF limit; Pillow always encodes
 # with 8-bit LZW codes, so the size of the table costs only its 768 bytes, once per file).
@@ -139,9 +142,13 @@ def _short(value: Any) -> str:
 
 
 def _check_size(size: Any) -> Tuple[int, int]:
-    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__"):
+    try:
+        count = len(size)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(size, (str, bytes)) or count < 0:
         raise TypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
-    if len(size) != 2:
+    if count != 2:
         raise InvalidInputError(f"size must be a pair of ints (width, height), got {_short(size)}")
     w = _check_int("size[0] (width)", size[0], 16)
     h = _check_int("size[1] (height)", size[1], 16)
@@ -167,8 +174,9 @@ def _check_frame_time(frame_time: Any) -> Optional[float]:
     ):
         raise TypeError(f"frame_time must be a number of seconds or None, got {_short(frame_time)}")
     t = _check.real("frame_time", frame_time)
-    if not (math.isfinite(t) and t > 0):
-        raise InvalidInputError(f"frame_time must be a finite number of seconds > 0, got {_short(frame_time)}")
+    # As Scene.advance: a subnormal duration has no finite reciprocal.
+    if not (math.isfinite(t) and t >= _check.MIN_NORMAL):
+        raise InvalidInputError(f"frame_time must be a finite number of seconds >= {_check.MIN_NORMAL:.3g}, got {_short(frame_time)}")
     return t
 
 
@@ -191,7 +199,11 @@ def _check_radius(radius: Any) -> Optional[int]:
 def _check_view(view: Any) -> Tuple[float, float]:
     if view is None:
         return DEFAULT_VIEW
-    if isinstance(view, (str, bytes)) or not hasattr(view, "__len__") or len(view) != 2:
+    try:
+        count = len(view)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(view, (str, bytes)) or count != 2:
         raise InvalidInputError(f"view must be (azimuth_deg, elevation_deg), got {_short(view)}")
     az, el = (_check.real("view", a) for a in view)
     if not (math.isfinite(az) and math.isfinite(el)):
@@ -225,6 +237,20 @@ def _check_writable(path: Path) -> None:
     os.unlink(probe)
 
 
+def _check_auto_substeps(scene: Any, frame_time: float) -> None:
+    """Refuse, naming frame_time, a frame that would need more automatic substeps than
+    ``Scene.advance`` takes in one call (1e12) at the scene's current substep."""
+    auto_dt = getattr(scene, "auto_dt", None)
+    if not callable(auto_dt):
+        return
+    step = float(auto_dt())
+    if step > 0 and not frame_time / step <= _MAX_AUTO_SUBSTEPS:
+        raise InvalidInputError(
+            f"frame_time: {frame_time:.3g} s per frame would take {frame_time / step:.3g} automatic substeps of "
+            f"{step:.3g} s, more than {_MAX_AUTO_SUBSTEPS:.0e}; give a shorter frame_time"
+        )
+
+
 def _check_memory(scene: Any, frames: int, size: Tuple[int, int], springs: bool) -> None:
     """Refuse, before simulating, an animation whose recording and frames would not fit in
     memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size."""
@@ -244,8 +270,9 @@ def _check_memory(scene: Any, frames: int, size: Tuple[int, int], springs: bool)
 
 
 def _gif_duration_ms(fps: float) -> int:
-    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp.
-    cs = min(max(round(100.0 / fps), 2), 65535)
+    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp
+    # (before rounding: 100 / fps is inf for a subnormal fps).
+    cs = round(min(max(100.0 / fps, 2.0), 65535.0))
     return int(cs * 10)
 
 
@@ -326,7 +353,7 @@ def _scene_pressure(scene: Any, n: int) -> np.ndarray:
     try:
         p = scene.pressure()
     except AttributeError as e:
-        raise ValueError(
+        raise InvalidInputError(
             f"color_by='pressure' needs a scene with a pressure() method (an SPH fluid); "
             f"this one has none ({e})"
         ) from None
@@ -357,7 +384,7 @@ def _scene_boundary(scene: Any, dim: int) -> Optional[np.ndarray]:
 
 def _check_advance(scene: Any) -> None:
     if not callable(getattr(scene, "advance", None)):
-        raise ValueError(
+        raise InvalidInputError(
             "frame_time needs a scene with an advance(duration) method (automatic substeps); "
             "this one has none: use steps_per_frame instead"
         )
@@ -382,7 +409,7 @@ def _simulate(
     """
     dim = int(scene.dim)
     if dim not in (2, 3):
-        raise ValueError(f"scene.dim must be 2 or 3, got {dim}")
+        raise InvalidInputError(f"scene.dim must be 2 or 3, got {dim}")
     n = int(scene.n_particles)
     sp = _scene_springs(scene) if springs else None
     x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
@@ -413,14 +440,17 @@ def _simulate(
                         except TypeError:
                             bar.set_postfix(substeps="?", refresh=False)
                 x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
-            pos[k] = x - origin
-            if speeds is not None:
-                v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
-                speeds[k] = _row_norms(v)
-            if pressures is not None:
-                pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
-            if strain is not None:
-                strain[k] = _strain(x, *sp)
+            # A value beyond float32 (or a difference beyond float64) is stored as inf, and its
+            # particle is then left out of the drawing like any non-finite one.
+            with np.errstate(over="ignore", invalid="ignore"):
+                pos[k] = x - origin
+                if speeds is not None:
+                    v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
+                    speeds[k] = _row_norms(v)
+                if pressures is not None:
+                    pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
+                if strain is not None:
+                    strain[k] = _strain(x, *sp)
             if bar is not None:
                 bar.update(1)
     finally:
@@ -468,7 +498,9 @@ class _Camera:
 
     def project(self, x: np.ndarray) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """(N, dim) world -> (N, 2) screen-plane coordinates and (N,) depth (3D; larger = nearer)."""
-        s = x @ self.basis.astype(x.dtype, copy=False)
+        # inf coordinates (beyond float32, see _simulate) give NaN rows, which are not drawn.
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = x @ self.basis.astype(x.dtype, copy=False)
         if self.dim == 3:
             return s[:, :2], s[:, 2]
         return s, None
@@ -643,7 +675,8 @@ def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> n
     """
     if not (vmax > 0 and math.isfinite(vmax)):
         return np.full(values.shape, base, dtype=np.uint8)
-    lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # a subnormal vmax: overflow to inf, the top
+        lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
     return (base + np.clip(lv, 0, levels - 1).astype(np.uint8)).astype(np.uint8)
 
 
@@ -744,7 +777,8 @@ def _draw_colorbar(buf: np.ndarray, bar: _ColorBarLayout, base: int, levels: int
 def _strain_levels(strain: np.ndarray) -> np.ndarray:
     """(M,) strains -> (M,) uint8 palette indices; NaN (zero rest length) -> at-rest grey."""
     half = _N_STRAIN // 2
-    s = np.clip(np.nan_to_num(strain, nan=0.0) / STRAIN_SATURATION, -1.0, 1.0)
+    # Clipped before dividing, so that a strain near the float32 limit cannot overflow.
+    s = np.clip(np.nan_to_num(strain, nan=0.0), -STRAIN_SATURATION, STRAIN_SATURATION) / STRAIN_SATURATION
     return (_STRAIN0 + half + np.rint(s * half)).astype(np.uint8)
 
 
@@ -887,10 +921,11 @@ def gif(
         Simulation steps of ``scene.dt`` between frames, 1 to :data:`MAX_STEPS` (2**53). Default
         10 when `frame_time` is not given; giving both is an error.
     frame_time : float, optional
-        Simulated seconds between frames, finite and > 0. Each frame then calls
-        ``scene.advance(frame_time)``, which picks its own substeps (from the scene's CFL and
-        stability limits) and returns how many it took; with `progress` the bar shows the last
-        frame's count. The scene must have an ``advance`` method.
+        Simulated seconds between frames, finite and at least 2.2e-308 (a normal float64). Each
+        frame then calls ``scene.advance(frame_time)``, which picks its own substeps (from the
+        scene's CFL and stability limits) and returns how many it took; with `progress` the bar
+        shows the last frame's count. The scene must have an ``advance`` method, and a frame
+        that would need more than 1e12 automatic substeps is refused before simulating.
     substeps : "auto" or int, default "auto"
         With `frame_time`: ``"auto"`` lets ``scene.advance`` choose the substeps of every frame
         inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
@@ -984,6 +1019,8 @@ def gif(
     path = _check_path(path)
     if frame_time is not None:
         _check_advance(scene)
+        if substeps == "auto":
+            _check_auto_substeps(scene, frame_time)
     _check_memory(scene, frames, size, springs)
     _check_writable(path)
 

@@ -30,6 +30,7 @@ _FORMAT_VERSION = 1
 #: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
 MAX_THREADS = 65535
 _MIN_DT = _check.MIN_NORMAL
+_MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
 Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
 
@@ -99,7 +100,7 @@ def _check_precision(value: object) -> str:
 
 def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
@@ -257,7 +258,7 @@ class Scene:
         x = _points(positions, "positions", dim)
         n = x.shape[0]
         v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
-        m = np.asarray(masses)
+        m = _check.array("masses", masses)
         if m.dtype.kind not in "iuf" or m.dtype == bool:
             raise TypeError(f"masses: expected real numbers, got dtype {m.dtype}")
         m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
@@ -273,7 +274,7 @@ class Scene:
         if pinned is None:
             p = np.zeros(n, dtype=bool)
         else:
-            p = np.asarray(pinned)
+            p = _check.array("pinned", pinned)
             if p.dtype != bool:
                 raise TypeError(f"pinned: expected booleans, got dtype {p.dtype}")
             if p.shape != (n,):
@@ -404,25 +405,27 @@ class Scene:
             vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
             if not vmax > 0:
                 raise InvalidInputError(
-                    "sound_speed: cannot be estimated for a fluid at rest without gravity; give sound_speed= (m/s)"
+                    "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
+                    "positions spread along it; give sound_speed= (m/s)"
                 )
             c0 = 10.0 * vmax
             if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
                 raise InvalidInputError(
-                    f"sound_speed: the estimate 10·v_max = {c0:.3g} m/s (from gravity, the fluid's height and "
-                    "velocities) makes the Tait stiffness overflow float64; give sound_speed= (m/s)"
+                    f"sound_speed: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions "
+                    "and the velocities, makes the Tait stiffness density · c0² overflow float64; give sound_speed= (m/s)"
                 )
         fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
         walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
         with np.errstate(over="ignore"):
             psi = fluid.wall_psi()
         if not np.all(np.isfinite(psi) & (psi > 0)):
-            raise InvalidInputError("wall_volume: density · wall volume is not a finite number > 0 (kg) for every wall particle")
+            raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
         max_dt = fluid.max_dt()
         # The scene's dt is lowered to this; a subnormal or zero step would never advance.
-        if not (math.isfinite(max_dt) and max_dt >= _MIN_DT):
+        if not max_dt >= _MIN_DT:
             raise InvalidInputError(
-                f"sound_speed: with spacing {fluid.spacing:g} m the CFL step {max_dt:.3g} s is below float64's normal range"
+                f"sound_speed, viscosity, spacing: the fluid's CFL step 0.25 h / (c0 (1 + 0.6 α)) = {max_dt:.3g} s "
+                "is below float64's normal range"
             )
         m = fluid.particle_mass()
         if first is None:
@@ -494,22 +497,31 @@ class Scene:
 
         Raises
         ------
-        TypeError, ValueError
-            ``duration`` not a finite number > 0 (seconds); ``substeps`` not "auto" or an int >= 1.
+        TypeError
+            ``duration`` not a number, ``substeps`` not "auto" or an int (bools are neither).
+        InvalidInputError
+            (a ``ValueError``) ``duration`` not finite or below 2.2e-308 s (the smallest normal
+            float64); ``substeps`` not in 1..2**53 or giving substeps below 2.2e-308 s; automatic
+            substeps above 1e12 per call.
         SimulationDiverged, KeyboardInterrupt
             As for :meth:`step`; ``dt`` is rolled back too.
         """
         if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
             raise TypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
-        duration = float(duration)
-        if not (math.isfinite(duration) and duration > 0):
-            raise InvalidInputError(f"duration: must be finite and > 0 (seconds), got {duration}")
+        duration = _check.real("duration", duration)
+        # As for dt: a subnormal duration would become a step with no finite reciprocal.
+        if not (math.isfinite(duration) and duration >= _MIN_DT):
+            raise InvalidInputError(f"duration: must be finite and >= {_MIN_DT:.3g} (seconds), got {duration}")
         if isinstance(substeps, str):
             if substeps != "auto":
                 raise InvalidInputError(f"substeps: must be 'auto' or an int >= 1, got {substeps!r}")
             fixed = None
         else:
-            fixed = _check_int(substeps, "substeps", 1)
+            fixed = _check_int(substeps, "substeps", 1, _MAX_SUBSTEPS)
+            if not duration / fixed >= _MIN_DT:
+                raise InvalidInputError(
+                    f"substeps: {fixed} substeps of {duration:g} s would each be below float64's normal range"
+                )
         if self._e0 is None:
             self._set_reference_energy()
         return int(self._sim.advance(duration, fixed))
@@ -705,11 +717,7 @@ class Scene:
         if not all(math.isfinite(v) for v in (self._e0, self._e0_scale, e.total, scale)):
             return math.nan
         denom = max(abs(self._e0), self._e0_scale, scale)
-        if not denom > 0:
-            return 0.0
-        diff = e.total - self._e0
-        # E - E0 can overflow when both are near the float64 limit; divide first then.
-        return diff / denom if math.isfinite(diff) else e.total / denom - self._e0 / denom
+        return (e.total - self._e0) / denom if denom > 0 else 0.0
 
     def momentum(self) -> np.ndarray:
         """Linear momentum ``Σ m v`` of free particles, kg·m/s: (dim,) float64."""

@@ -72,7 +72,19 @@ def _particles(args: str, n_particles: float, n_springs: float = 0) -> None:
 
 
 def _big(count: float) -> str:
-    return str(count) if count < 1e15 else f"{float(count):.3g}"
+    if count < 1e15:
+        return str(count)
+    if isinstance(count, int):  # may be beyond float64: give its order of magnitude
+        return f"about 1e{int(count.bit_length() * math.log10(2))}"
+    return f"{count:.3g}"
+
+
+def _per(total: float, count: int) -> float:
+    """``total / count`` for a count that may be beyond float64 (then 0.0)."""
+    try:
+        return total / count
+    except OverflowError:
+        return 0.0
 
 
 def _set_stable_dt(scene: Scene, factor: float, args: str) -> None:
@@ -146,8 +158,9 @@ def cloth(
     ground = _flag(ground, "ground")
     dt = _optional(dt, "dt")
     s = size / (n - 1)
-    if not s >= _check.MIN_NORMAL:
-        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is below float64's normal range")
+    # Bend springs span 2 s and their lengths come from squared lengths: (2 s)², with a margin.
+    if not (s >= _check.MIN_NORMAL and math.isfinite(8 * s * s)):
+        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside float64's usable range")
     m = _particle_mass(mass / (n * n), "mass, n")
     b = air_drag * mass / (n * n)
     if not math.isfinite(b):
@@ -171,7 +184,7 @@ def cloth(
     if dt is None:
         # suggest_dt() is half the fastest time scale (1/ω_max or the dashpot's 1/λ_max); twice
         # that is still well inside velocity Verlet's limits (2/ω_max; 2/λ_max with dashpots).
-        _set_stable_dt(scene, 2.0, "stiffness, damping, mass")
+        _set_stable_dt(scene, 2.0, "stiffness, damping, air_drag, mass")
     return _finite_books(scene, "size, mass")
 
 
@@ -298,8 +311,10 @@ def spring_chain(
     damping = _nonneg(damping, "damping")
     dim = _dim(dim)
     dt = _optional(dt, "dt")
-    if not length / (n - 1) >= _check.MIN_NORMAL:
-        raise InvalidInputError(f"length: a link of length/(n - 1) = {length / (n - 1):.3g} m is below float64's normal range")
+    link = length / (n - 1)
+    # Spring lengths come from squared lengths: link², with a margin for rounding.
+    if not (link >= _check.MIN_NORMAL and math.isfinite(2 * link * link)):
+        raise InvalidInputError(f"length: a link of length/(n - 1) = {link:.3g} m is outside float64's usable range")
     m = _particle_mass(mass / n, "mass, n")
     x = np.zeros((n, dim))
     x[:, 0] = np.linspace(0.0, length, n)
@@ -326,7 +341,7 @@ def _pair(value: object, arg: str) -> Tuple[float, float]:
     """A (length, height) pair of finite numbers > 0, m."""
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
         raise TypeError(f"{arg}: expected (length, height) in m, got {type(value).__name__}")
-    items = list(value)
+    items = list(value) if not (isinstance(value, np.ndarray) and value.ndim == 0) else []
     if len(items) != 2:
         raise InvalidInputError(f"{arg}: expected (length, height) in m, got {len(items)} numbers")
     a, b = (_check.positive_float(arg, v) for v in items)
@@ -465,10 +480,10 @@ def dam_break(
     width, height, depth = _positive(width, "width"), _positive(height, "height"), _positive(depth, "depth")
     length, top = _pair(tank, "tank")
     if not width < length:
-        raise InvalidInputError(f"tank: length {length} must exceed the column width {width}")
+        raise InvalidInputError(f"tank, width: the tank's length {length} must exceed the column width {width}")
     if not height <= top:
-        raise InvalidInputError(f"tank: height {top} must be at least the column height {height}")
-    dx = _spacing(width / n, "n, width")
+        raise InvalidInputError(f"tank, height: the tank's height {top} must be at least the column height {height}")
+    dx = _spacing(_per(width, n), "n, width")
     lo, hi = _box(dim, (0.0, width), (0.0, height), (0.0, depth))
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("n, width, height, depth, tank", _lattice_size(lo, hi, dx) + _walls_size(tlo, thi, dx))
@@ -563,18 +578,23 @@ def drop(
     depth = _positive(depth, "depth")
     pool, fall, block = _nonneg(pool, "pool"), _nonneg(fall, "fall"), _positive(block, "block")
     if not block < min(length, depth if dim == 3 else length):
-        raise InvalidInputError(f"block: side {block} must be smaller than the tank's length{' and depth' if dim == 3 else ''}")
+        raise InvalidInputError(
+            f"block, tank{', depth' if dim == 3 else ''}: the block's side {block} must be smaller than the tank's "
+            f"length{' and depth' if dim == 3 else ''}"
+        )
     if not pool + fall + block <= top:
-        raise InvalidInputError(f"tank: height {top} must be at least pool + fall + block = {pool + fall + block}")
-    dx = _spacing(length / n, "n, tank")
+        raise InvalidInputError(
+            f"tank, pool, fall, block: the tank's height {top} must be at least pool + fall + block = {pool + fall + block}"
+        )
+    dx = _spacing(_per(length, n), "n, tank")
     if not block >= 2 * dx:
-        raise InvalidInputError(f"n: {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
+        raise InvalidInputError(f"n, block, tank: n = {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("n, tank, depth, pool, block", _lattice_size(tlo, thi, dx) + _walls_size(tlo, thi, dx))
     snap = lambda v: round(v / dx) * dx  # keep the block on the pool's (and walls') lattice
     x0 = snap(0.5 * (length - block))
     z0 = snap(pool + fall)
-    y0 = snap(0.5 * (depth - block))
+    y0 = snap(0.5 * (depth - block)) if dim == 3 else 0.0  # 2D: no depth (which may be huge)
     parts = []
     if pool > 0:
         lo, hi = _box(dim, (0.0, length), (0.0, pool), (0.0, depth))

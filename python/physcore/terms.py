@@ -46,7 +46,7 @@ def _vector(value: object, arg: str) -> np.ndarray:
 
 
 def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     a = a.astype(np.float64)
@@ -138,7 +138,7 @@ class Springs:
     def __post_init__(self) -> None:
         idx = []
         for arg, val in (("i", self.i), ("j", self.j)):
-            a = np.asarray(val)
+            a = _check.array(arg, val)
             if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
                 raise TypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
             if a.ndim != 1:
@@ -225,9 +225,13 @@ class Plane:
         normal = _vector(self.normal, "normal")
         if point.shape != normal.shape:
             raise InvalidInputError(f"normal: has {normal.shape[0]} components, point has {point.shape[0]}")
-        norm = float(np.linalg.norm(normal))
+        with np.errstate(over="ignore"):
+            norm = float(np.linalg.norm(normal))
         if norm == 0.0:
             raise InvalidInputError("normal: must be non-zero")
+        if not np.isfinite(norm):  # |normal|² overflowed (components near 1e308): scale first
+            normal = normal / np.max(np.abs(normal))
+            norm = float(np.linalg.norm(normal))
         unit = normal / norm
         unit.setflags(write=False)
         object.__setattr__(self, "point", point)
