@@ -15,6 +15,7 @@ memory limit is lowered while fuzzing so that the refusal path is exercised inst
 """
 from __future__ import annotations
 
+import inspect
 import io
 import math
 import re
@@ -316,8 +317,6 @@ def _scene_value(fn: str, arg: str):
 def _scene_args():
     out = []
     for name, fn in pc.scenes.REGISTRY.items():
-        import inspect
-
         out += [(name, a) for a in inspect.signature(fn).parameters]
     return out
 

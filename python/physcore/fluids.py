@@ -214,7 +214,8 @@ class Fluid:
     positions : array_like, shape (N, dim)
         Initial particle positions, m, e.g. from :func:`lattice` (spacing apart).
     spacing : float
-        Initial particle spacing ``Δx``, m (> 0). Sets ``h = smoothing · Δx`` and the masses.
+        Initial particle spacing ``Δx``, m, in :data:`SPACING_RANGE` (1e-100 to 1e100, so that
+        ``h^dim`` and its reciprocal fit float64). Sets ``h = smoothing · Δx`` and the masses.
     velocities : array_like, shape (N, dim), optional
         Initial velocities, m/s. Default zero.
     density : float
@@ -234,7 +235,7 @@ class Fluid:
     clamp_pressure : bool
         Clamp ``p ≥ 0`` (no tension at the free surface). Default True.
     mass : float, optional
-        Particle mass, kg. Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
+        Particle mass, kg (at least 2.2e-308, so that 1/m is finite). Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
         starts exactly at the rest density (``≈ ρ0 Δx^dim``).
     walls : array_like, shape (M, dim), optional
         Static wall (boundary) particle positions, e.g. from :func:`tank_walls`.
@@ -250,8 +251,11 @@ class Fluid:
 
     Raises
     ------
-    TypeError, ValueError
-        Bad types or values, naming the argument.
+    TypeError
+        An argument of the wrong type, naming it.
+    InvalidInputError
+        (a ``ValueError``) A value out of range, naming it, including a density and spacing
+        whose particle mass ``≈ ρ0 Δx^dim`` or Tait stiffness ``ρ0 c0²`` float64 cannot hold.
     """
 
     positions: np.ndarray

@@ -299,8 +299,9 @@ class Scene:
         ------
         TypeError
             ``item`` is not a term or collider.
-        ValueError
-            Vector length differs from ``dim``; spring index out of range.
+        InvalidInputError
+            (a ``ValueError``) Vector length differs from ``dim``; spring index out of range; a
+            spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
         if isinstance(item, Fluid):
@@ -369,6 +370,11 @@ class Scene:
 
         Takes the parameters of :class:`~physcore.fluids.Fluid` (``spacing`` is required) and
         returns the new particles' indices, ``(N,)`` int64.
+
+        Raises TypeError / InvalidInputError naming the argument, before anything is added, for
+        the fluid's own parameters (see :class:`~physcore.fluids.Fluid`) and for what the scene
+        derives from them: an estimated ``sound_speed`` whose Tait stiffness overflows, a CFL
+        step below float64's normal range, wall masses that are not finite and > 0.
 
         Examples
         --------

@@ -4,6 +4,14 @@
 Every function accepts ``integrator=`` and ``dt=`` (``None``: the scene's own choice) and
 ``threads=``. ``render_defaults`` on each function gives the CLI's animation defaults
 (``frame_time`` is simulated seconds per frame).
+
+Every function raises, before building anything, ``TypeError`` for an argument of the wrong type
+(``str``, ``bool`` or ``None`` where a number is meant, anything but True/False for a flag) and
+:class:`~physcore.InvalidInputError` (a ``ValueError``) for a value out of range or one whose
+consequences float64 cannot hold: a particle mass whose reciprocal overflows, a spacing or
+stable time step below the normal range, energy books beyond float64, or more particles than
+fit in memory (about 512 B each and 256 B per spring, against half the physical memory). The
+message names the arguments involved.
 """
 from __future__ import annotations
 
@@ -149,6 +157,8 @@ def cloth(
     linear air drag b = air_drag · m per particle (air_drag in 1/s; 0 turns it off).
     ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5). ``dt=None``
     uses twice :meth:`Scene.suggest_dt` (1/ω_max here), half of velocity Verlet's stability limit.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
     n = _count(n, "n", 2)
     _particles("n", n * n, 6 * n * n)
@@ -206,6 +216,9 @@ def projectile(
     2D, gravity (0, -9.81) m/s², optional linear drag (kg/s), a ground plane y = 0 with the given
     restitution and friction 0.2. Without drag and ground the closed form is
     x = v0 cos θ t, y = v0 sin θ t - g t²/2.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring), e.g.
+    for a speed whose kinetic energy overflows float64.
     """
     n = _count(n, "n", 1)
     _particles("n", n)
@@ -250,6 +263,11 @@ def kepler(
     P = 2π sqrt(a³ / (G M)); total energy -G m1 m2 / (2a). ``mass_ratio = 0`` pins a unit-mass
     star at the origin and makes the planet (mass 1) a test particle: then E = -1/(2a) exactly.
     ``dt=None`` uses P / steps_per_orbit.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring); the
+    separations a(1 - e) and a(1 + e) must lie in :data:`KEPLER_RANGE` (1e-100 to 1e100 m) so
+    that r², 1/r³ and v² stay inside float64, and both masses must be usable (mass_ratio 0 or
+    in about [2.2e-308, 4.5e307]).
     """
     e = _check.float_in_range("e", e, 0.0, 1.0, hi_open=True)
     a = _positive(a, "a")
@@ -304,6 +322,8 @@ def spring_chain(
     stiffness (N/m) and dashpot damping (N·s/m) per link. ``dt=None`` uses half the suggested
     step: the whip at the end of the swing reaches energy errors of 2e-3 at the suggested step
     (stable, but visible in the books) and 3e-4 at half of it.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
     n = _count(n, "n", 2)
     _particles("n", n, n)
@@ -466,6 +486,12 @@ def dam_break(
         Particles ``0 .. N`` are the water (one fluid, ``"water"``); ``scene.boundary_points()``
         are the tank's walls.
 
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument; also a spacing
+        ``width / n`` outside :data:`~physcore.fluids.SPACING_RANGE`.
+
     Examples
     --------
     >>> import physcore as pc
@@ -563,6 +589,12 @@ def drop(
     -------
     Scene
         The pool's particles first, then the block's; one fluid, ``"water"``.
+
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument; also a spacing
+        ``tank[0] / n`` outside :data:`~physcore.fluids.SPACING_RANGE`.
 
     Examples
     --------
