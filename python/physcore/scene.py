@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _core
+from . import _check, _core
 from ._errors import InvalidInputError, SceneBusyError
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
@@ -28,6 +28,10 @@ __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 #: evaluations per step, as reported by the core.
 INTEGRATORS: Tuple[Dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
+#: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
+MAX_THREADS = 65535
+_MIN_DT = _check.MIN_NORMAL
+_MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
 Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
 
@@ -64,12 +68,8 @@ class EnergyReport:
 _MAX_STEPS = 2**63 - 1
 
 
-def _check_int(value: object, arg: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{arg}: expected an int, got {type(value).__name__}")
-    if value < minimum:
-        raise InvalidInputError(f"{arg}: must be >= {minimum}, got {value}")
-    return int(value)
+def _check_int(value: object, arg: str, minimum: int, maximum: Optional[int] = None) -> int:
+    return _check.int_in_range(arg, value, minimum, maximum)
 
 
 def _usable_cpus() -> int:
@@ -81,11 +81,10 @@ def _usable_cpus() -> int:
 
 
 def _check_dt(dt: object) -> float:
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
-        raise TypeError(f"dt: expected a number of seconds, got {type(dt).__name__}")
-    dt = float(dt)
-    if not (np.isfinite(dt) and dt > 0):
-        raise InvalidInputError(f"dt: must be finite and > 0 (seconds), got {dt}")
+    dt = _check.real("dt", dt)
+    # A subnormal step has no usable reciprocal (rates, CFL ratios) and would never advance time.
+    if not (math.isfinite(dt) and dt >= _MIN_DT):
+        raise InvalidInputError(f"dt: must be finite and >= {_MIN_DT:.3g} (seconds), got {dt}")
     return dt
 
 
@@ -98,9 +97,7 @@ def _check_integrator(name: object) -> str:
 
 
 def _check_tol(value: object, arg: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{arg}: expected a number, got {type(value).__name__}")
-    return float(value)
+    return _check.real(arg, value)
 
 
 _PRECISIONS = ("f64", "f32")
@@ -116,7 +113,7 @@ def _check_precision(value: object) -> str:
 
 def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
@@ -130,6 +127,22 @@ def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.nd
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
     return a
+
+
+def _norm(v: "np.typing.ArrayLike") -> float:
+    """Euclidean norm without overflow warnings: inf when it is beyond float64."""
+    try:
+        return math.hypot(*(float(c) for c in np.ravel(v)))
+    except OverflowError:
+        return math.inf
+
+
+def _max_row_norm(a: np.ndarray) -> float:
+    """Largest row norm of a finite (N, d) array, scaled so that squaring cannot overflow."""
+    top = float(np.max(np.abs(a))) if a.size else 0.0
+    if top == 0.0:
+        return 0.0
+    return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
 
 
 class Scene:
@@ -146,7 +159,8 @@ class Scene:
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
         evaluations each; see `rtol`).
     dt : float
-        Time step, s (> 0). Default 1e-3. For ``"rk45"`` it is the output interval: each step
+        Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
+        step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
         of ``dt`` is integrated in as many internal steps as the tolerances need and lands
         exactly on its end.
     rtol, atol : float
@@ -161,13 +175,17 @@ class Scene:
         hold them; ``positions``/``velocities`` are then returned as float32. It shows what
         single precision costs in accuracy (see the work-precision table in the README).
     threads : int or None
-        Worker threads for this scene; ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``).
-        Results are bit-identical for any thread count.
+        Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
+        ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
+        for any thread count.
 
     Raises
     ------
-    TypeError, ValueError
-        Bad argument types or values (the message names the argument).
+    TypeError
+        An argument of the wrong type (``bool`` and ``str`` are not numbers); names it.
+    InvalidInputError
+        (a ``ValueError``) An argument out of range, or not representable (e.g. an int beyond
+        float64, ``threads=2**64``); names it.
 
     Examples
     --------
@@ -201,7 +219,7 @@ class Scene:
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
         precision = _check_precision(precision)
         if threads is not None:
-            threads = _check_int(threads, "threads", 1)
+            threads = _check_int(threads, "threads", 1, MAX_THREADS)
         sim = _core.Simulation2(int(dim), integrator, dt, threads)
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.single = precision == "f32"
@@ -266,7 +284,8 @@ class Scene:
         velocities : array_like, shape (N, dim), optional
             Velocities, m/s. Default zero. Ignored (set to zero) for pinned particles.
         masses : float or array_like, shape (N,)
-            Masses, kg, finite and > 0. Default 1.
+            Masses, kg: finite and at least the smallest normal float64 (2.2e-308), so that the
+            inverse mass is finite. Default 1.
         pinned : array_like of bool, shape (N,), optional
             ``True`` fixes a particle in place (infinite inertia); it still attracts under
             :class:`PairwiseGravity` and anchors springs. Default none pinned.
@@ -280,27 +299,31 @@ class Scene:
         ------
         TypeError
             Non-numeric arrays.
-        ValueError
-            Wrong shapes, NaN/inf, non-positive masses.
+        InvalidInputError
+            (a ``ValueError``) Wrong shapes, NaN/inf, masses not in [2.2e-308, finite]; nothing
+            is added.
         """
         dim = self.dim
         x = _points(positions, "positions", dim)
         n = x.shape[0]
         v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
-        m = np.asarray(masses)
+        m = _check.array("masses", masses)
         if m.dtype.kind not in "iuf" or m.dtype == bool:
             raise TypeError(f"masses: expected real numbers, got dtype {m.dtype}")
         m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
         if m.shape != (n,):
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
-        bad = ~(np.isfinite(m) & (m > 0))
+        # The integrators divide by the mass: below the smallest normal float64 1/m overflows.
+        bad = ~(np.isfinite(m) & (m >= _check.MIN_MASS))
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            raise InvalidInputError(f"masses: entry {k} is {m[k]} (must be finite and > 0, kg)")
+            raise InvalidInputError(
+                f"masses: entry {k} is {m[k]} (must be finite and >= {_check.MIN_MASS:.3g} kg, so that 1/m is finite)"
+            )
         if pinned is None:
             p = np.zeros(n, dtype=bool)
         else:
-            p = np.asarray(pinned)
+            p = _check.array("pinned", pinned)
             if p.dtype != bool:
                 raise TypeError(f"pinned: expected booleans, got dtype {p.dtype}")
             if p.shape != (n,):
@@ -325,8 +348,9 @@ class Scene:
         ------
         TypeError
             ``item`` is not a term or collider.
-        ValueError
-            Vector length differs from ``dim``; spring index out of range.
+        InvalidInputError
+            (a ``ValueError``) Vector length differs from ``dim``; spring index out of range; a
+            spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
         if isinstance(item, Fluid):
@@ -370,7 +394,13 @@ class Scene:
             rest = item.rest_length
             if rest is None:
                 x = self.positions
-                rest = np.linalg.norm(x[item.j] - x[item.i], axis=1) if len(item) else np.zeros(0)
+                with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
+                    rest = np.linalg.norm(x[item.j] - x[item.i], axis=1) if len(item) else np.zeros(0)
+                if not np.all(np.isfinite(rest)):
+                    k = int(np.flatnonzero(~np.isfinite(rest))[0])
+                    raise InvalidInputError(
+                        f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
+                    )
             item = Springs(item.i, item.j, stiffness=item.stiffness, damping=item.damping, rest_length=rest, name=name)
             self._sim.add_springs(
                 name,
@@ -389,6 +419,11 @@ class Scene:
 
         Takes the parameters of :class:`~physcore.fluids.Fluid` (``spacing`` is required) and
         returns the new particles' indices, ``(N,)`` int64.
+
+        Raises TypeError / InvalidInputError naming the argument, before anything is added, for
+        the fluid's own parameters (see :class:`~physcore.fluids.Fluid`) and for what the scene
+        derives from them: an estimated ``sound_speed`` whose Tait stiffness overflows, a CFL
+        step below float64's normal range, wall masses that are not finite and > 0.
 
         Examples
         --------
@@ -417,21 +452,39 @@ class Scene:
         c0 = fluid.sound_speed
         if c0 is None:
             g = sum((t.g for t in self._terms if isinstance(t, Gravity)), np.zeros(dim))
-            gn = float(np.linalg.norm(g))
-            height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if gn > 0 and len(fluid) else 0.0
-            v0 = 0.0 if fluid.velocities is None or not len(fluid) else float(np.linalg.norm(fluid.velocities, axis=1).max())
-            vmax = max(math.sqrt(2.0 * gn * height), v0)
+            gn = _norm(g)
+            # Overflow (huge g, positions or velocities) gives inf here, refused below by name.
+            with np.errstate(over="ignore", invalid="ignore"):
+                height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
+                v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
+            vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
             if not vmax > 0:
                 raise InvalidInputError(
-                    "sound_speed: cannot be estimated for a fluid at rest without gravity; give sound_speed= (m/s)"
+                    "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
+                    "positions spread along it; give sound_speed= (m/s)"
                 )
             c0 = 10.0 * vmax
+            if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
+                raise InvalidInputError(
+                    f"sound_speed: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions "
+                    "and the velocities, makes the Tait stiffness density · c0² overflow float64; give sound_speed= (m/s)"
+                )
         fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
         walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
-        psi = fluid.wall_psi()
+        with np.errstate(over="ignore"):
+            psi = fluid.wall_psi()
+        if not np.all(np.isfinite(psi) & (psi > 0)):
+            raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
+        max_dt = fluid.max_dt()
+        # The scene's dt is lowered to this; a subnormal or zero step would never advance.
+        if not max_dt >= _MIN_DT:
+            raise InvalidInputError(
+                f"sound_speed, viscosity, spacing: the fluid's CFL step 0.25 h / (c0 (1 + 0.6 α)) = {max_dt:.3g} s "
+                "is below float64's normal range"
+            )
+        m = fluid.particle_mass()
         if first is None:
             n = len(fluid)
-            m = fluid.particle_mass()
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
         self._sim.add_sph(
             name,
@@ -451,7 +504,7 @@ class Scene:
         fluid = dataclasses.replace(fluid, first=first)
         self._terms.append(fluid)
         # A step above the fluid's CFL limit would blow up on the first step.
-        self._sim.dt = min(self.dt, fluid.max_dt())
+        self._sim.dt = min(self.dt, max_dt)
         self._e0 = None
         return fluid
 
@@ -501,22 +554,31 @@ class Scene:
 
         Raises
         ------
-        TypeError, ValueError
-            ``duration`` not a finite number > 0 (seconds); ``substeps`` not "auto" or an int >= 1.
+        TypeError
+            ``duration`` not a number, ``substeps`` not "auto" or an int (bools are neither).
+        InvalidInputError
+            (a ``ValueError``) ``duration`` not finite or below 2.2e-308 s (the smallest normal
+            float64); ``substeps`` not in 1..2**53 or giving substeps below 2.2e-308 s; automatic
+            substeps above 1e12 per call.
         SimulationDiverged, KeyboardInterrupt
             As for :meth:`step`; ``dt`` is rolled back too.
         """
         if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
             raise TypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
-        duration = float(duration)
-        if not (math.isfinite(duration) and duration > 0):
-            raise InvalidInputError(f"duration: must be finite and > 0 (seconds), got {duration}")
+        duration = _check.real("duration", duration)
+        # As for dt: a subnormal duration would become a step with no finite reciprocal.
+        if not (math.isfinite(duration) and duration >= _MIN_DT):
+            raise InvalidInputError(f"duration: must be finite and >= {_MIN_DT:.3g} (seconds), got {duration}")
         if isinstance(substeps, str):
             if substeps != "auto":
                 raise InvalidInputError(f"substeps: must be 'auto' or an int >= 1, got {substeps!r}")
             fixed = None
         else:
-            fixed = _check_int(substeps, "substeps", 1)
+            fixed = _check_int(substeps, "substeps", 1, _MAX_SUBSTEPS)
+            if not duration / fixed >= _MIN_DT:
+                raise InvalidInputError(
+                    f"substeps: {fixed} substeps of {duration:g} s would each be below float64's normal range"
+                )
             if fixed > _MAX_STEPS - self.step_count:
                 raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
@@ -686,7 +748,10 @@ class Scene:
 
     # ---------------------------------------------------------------- diagnostics
     def energy(self) -> EnergyReport:
-        """The energy books now (computed in Rust; pairwise gravity costs O(N²))."""
+        """The energy books now (computed in Rust; pairwise gravity costs O(N²)).
+
+        A part beyond float64 (huge masses or speeds) is reported as it comes out, ``±inf`` or
+        NaN, not clamped; :meth:`energy_drift` is then NaN."""
         d = self._exclusive(lambda sim: sim.energy())
         pot = dict(d["potential"])
         dis = dict(d["dissipated"])
@@ -699,11 +764,17 @@ class Scene:
         ``(E - E0) / max(|E0|, S0, S)`` where ``S0``, ``S`` are the sums of the magnitudes of the
         books' parts at the start and now: relative to ``|E0|`` normally, and to the energy scale
         in play when ``E0`` is zero by the choice of potential reference (e.g. a cloth at rest).
+
+        NaN when the books at the start or now are not finite (e.g. ``½ m v²`` or ``G m² / r``
+        beyond float64 for masses near 1e308): the drift is then unknown, never reported as 0.
+        The trajectory itself may still be fine; :meth:`energy` shows which part overflowed.
         """
         if self._e0 is None:
             return 0.0
         e = self.energy()
         scale = abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
+        if not all(math.isfinite(v) for v in (self._e0, self._e0_scale, e.total, scale)):
+            return math.nan
         denom = max(abs(self._e0), self._e0_scale, scale)
         return (e.total - self._e0) / denom if denom > 0 else 0.0
 
