@@ -97,6 +97,43 @@ def test_rk45_gives_up_with_a_named_particle_and_rolls_back():
     assert info.value.particle in (0, 1)
     assert info.value.quantity == "error"
     assert s.step_count == 0 and np.array_equal(s.positions, x0)
+    # The rollback covers the controller's books too: the failed attempts are not counted and
+    # the never-stepped scene has no next step yet.
+    assert s.integrator_stats == {"accepted": 0, "rejected": 0, "next_step": 0.0}
+
+
+def test_rk45_rollback_keeps_the_counts_of_earlier_calls():
+    s = pc.Scene(2, integrator="rk45", dt=0.1)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]], masses=[1.0, 1.0, 1.0])
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.0))
+    s.step(2)
+    before = s.integrator_stats
+    assert before["accepted"] >= 2
+    s.positions = [[0.0, 0.0], [1e-160, 0.0], [5.0, 0.0]]
+    with pytest.raises(pc.SimulationDiverged):
+        s.step(3)
+    assert s.integrator_stats["accepted"] == before["accepted"]
+    assert s.integrator_stats["rejected"] == before["rejected"]
+
+
+@pytest.mark.parametrize("when", ["fresh", "step0", "switched"])
+def test_rk45_scene_saved_before_its_first_step_loads(tmp_path, when):
+    # Saved before rk45 has taken a step (no derivative cached yet), the file must load and the
+    # loaded scene continue exactly as the original.
+    if when == "switched":
+        s = pc.scenes.kepler()
+        s.step(10)
+        s.integrator = "rk45"
+    else:
+        s = pc.scenes.kepler(integrator="rk45")
+        if when == "step0":
+            s.step(0)
+    path = s.save(tmp_path / "k.npz")
+    t = pc.Scene.load(path)
+    s.step(5)
+    t.step(5)
+    assert np.array_equal(s.positions, t.positions)
+    assert s.integrator_stats == t.integrator_stats
 
 
 def test_rk45_is_thread_count_independent():

@@ -6,7 +6,13 @@ import tempfile
 from pathlib import Path
 from typing import IO, Any, Callable, Union
 
-__all__ = ["atomic_write"]
+__all__ = ["atomic_write", "TEMP_PREFIX", "TEMP_SUFFIX"]
+
+#: The temporary file is ``.physcore-XXXXXXXX.tmp`` (22 bytes) in the target's directory: short
+#: whatever the target's name, so any name the file system allows (up to NAME_MAX, 255 bytes)
+#: can be written, and recognisable if a power cut ever leaves one behind.
+TEMP_PREFIX = ".physcore-"
+TEMP_SUFFIX = ".tmp"
 
 
 def atomic_write(path: Union[str, os.PathLike], write: Callable[[IO[Any]], None], *, binary: bool = True) -> Path:
@@ -14,9 +20,12 @@ def atomic_write(path: Union[str, os.PathLike], write: Callable[[IO[Any]], None]
     ``path`` (atomic on POSIX and Windows), so ``path`` is either the old file or the complete new
     one. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is left
     untouched. The new file gets the mode an ordinary new file would (0666 minus the umask;
-    mkstemp makes 0600). Text mode writes UTF-8 with no newline translation."""
+    mkstemp makes 0600). Text mode writes UTF-8 with no newline translation.
+
+    The temporary name does not derive from ``path``'s (see :data:`TEMP_PREFIX`), so a target
+    name of up to the file system's limit works."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=f".{path.name}.", suffix=".part")
+    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
     try:
         kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}
         with os.fdopen(fd, "wb" if binary else "w", **kw) as fh:

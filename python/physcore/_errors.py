@@ -4,7 +4,9 @@ from __future__ import annotations
 __all__ = [
     "PhyscoreError",
     "InvalidInputError",
+    "SceneFileError",
     "SimulationDiverged",
+    "SceneBusyError",
     "OutOfMemoryError",
     "ThreadPoolError",
     "ThreadPoolWarning",
@@ -17,6 +19,28 @@ class PhyscoreError(Exception):
 
 class InvalidInputError(PhyscoreError, ValueError):
     """An argument is invalid. Raised before any state changes; the message names the argument."""
+
+
+class SceneFileError(InvalidInputError):
+    """A file given to :meth:`Scene.load` is not a scene file physcore can read: not a zip
+    archive, truncated or corrupted, a member missing, extra or malformed, a field of the wrong
+    type or out of range, or sizes beyond what the file itself holds.
+
+    It is the one error :meth:`Scene.load` raises for what is *in* a file (the file could be
+    opened); failures to open it stay ``OSError``. The message starts with the file name and the
+    offending field (``"meta.step"``, ``"positions"``, ``"meta.terms[2].g"``), also kept as the
+    attributes ``path`` (str) and ``field`` (str, ``""`` for the archive as a whole). Nothing in
+    the file is executed (object arrays are refused before their data is read).
+    """
+
+    def __init__(self, path: str, field: str, problem: str) -> None:
+        super().__init__(f"{path}: {field}: {problem}" if field else f"{path}: {problem}")
+        self.path = path
+        self.field = field
+        self.problem = problem
+
+    def __reduce__(self):  # pickles (multiprocessing) despite the three-argument constructor
+        return (type(self), (self.path, self.field, self.problem))
 
 
 class OutOfMemoryError(PhyscoreError, MemoryError):
@@ -69,3 +93,9 @@ class SimulationDiverged(PhyscoreError, RuntimeError):
         self.quantity = quantity
         self.suggested_dt = suggested_dt
         self.rolled_back_to = rolled_back_to
+
+
+class SceneBusyError(PhyscoreError, RuntimeError):
+    """A Scene was used from a second thread while another thread steps it (``step``,
+    ``advance``, a render). A Scene belongs to one thread at a time: wait for the other call to
+    return, or give each thread its own Scene."""

@@ -16,13 +16,20 @@ which picks its own substeps (fluids: CFL and stability limits), unless ``--step
 is given.
 
 Exit codes: 0 success, 1 the simulation diverged or the file could not be written, 2 bad usage
-(unknown scene, parameter or option value).
+(unknown scene, parameter or option value, or a request too large for memory). Every usage error
+is one line on stderr, ``physcore render: error: ...``, with no traceback.
+
+Before anything is built or simulated, the frames buffer (``frames × width × height`` palette
+bytes, twice over while encoding) is estimated and refused above half the physical memory
+(:func:`physcore._check.memory_limit`); the scene functions then refuse particle counts that
+would not fit (e.g. ``--param n=100000``), and :func:`physcore.render.gif` the whole recording.
 """
 from __future__ import annotations
 
 import argparse
 import inspect
 import math
+import os
 import re
 import sys
 import textwrap
@@ -36,6 +43,9 @@ __all__ = ["main"]
 # Animation defaults when a scene function has no ``render_defaults`` entry.
 _FALLBACK = {"frames": 90, "steps_per_frame": 10, "fps": 30.0, "size": (480, 360), "color_by": "speed"}
 
+# Most steps per frame: render.MAX_STEPS (2**53), as a float for the comparison with frame_time/dt.
+_MAX_STEPS = float(2**53)
+
 # Scene-function keywords that have their own options rather than --param.
 _OWN_OPTION = {"integrator": "--integrator", "dt": "--dt"}
 
@@ -45,6 +55,13 @@ _FALSE = {"false", "0", "no", "off", "n", "f"}
 
 class _UsageError(Exception):
     """A bad command line; reported on stderr with exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line on stderr (no usage dump), exit 2."""
+
+    def error(self, message: str) -> typing.NoReturn:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(str(message).split())}\n")
 
 
 # --------------------------------------------------------------------------- argument types
@@ -220,6 +237,25 @@ def _substeps_arg(text: str) -> Any:
     return text if text == "auto" else _positive_int(text)
 
 
+def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace) -> Tuple[int, Tuple[int, int]]:
+    """Frames and (width, height): the command line's, else the scene's render_defaults."""
+    d = dict(getattr(fn, "render_defaults", None) or {})
+    frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
+    size = args.size if args.size is not None else d.get("size", _FALLBACK["size"])
+    if isinstance(size, str):
+        size = _size(size)
+    return frames, (int(size[0]), int(size[1]))
+
+
+def _check_frames_memory(fn: Callable[..., Any], args: argparse.Namespace) -> None:
+    """Refuse, before the scene is built, a frames buffer too large for memory (the palette
+    index buffer and its Pillow image, one byte per pixel each, for every frame)."""
+    from ._check import memory
+
+    frames, (w, h) = _frames_and_size(fn, args)
+    memory("--frames, --size", 2 * frames * w * h, f"{frames} frames of {w}x{h} pixels")
+
+
 def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:
     """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
 
@@ -227,7 +263,7 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     substeps: ``scene.advance``), never both.
     """
     d = dict(getattr(fn, "render_defaults", None) or {})
-    frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
+    frames, size = _frames_and_size(fn, args)
     auto = str(d.get("substeps", "")).lower() == "auto"
     frame_time = args.frame_time if args.frame_time is not None else d.get("frame_time")
     stepping: Dict[str, Any]
@@ -248,13 +284,16 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
         stepping = {"frame_time": float(frame_time)}
     elif frame_time is not None:
         # Simulated seconds per frame: keeps the animation's time span whatever dt is.
-        stepping = {"steps_per_frame": max(1, int(round(float(frame_time) / dt)))}
+        ratio = float(frame_time) / dt
+        if not ratio <= _MAX_STEPS:
+            raise _UsageError(
+                f"--frame-time: {float(frame_time):.3g} s per frame is {ratio:.3g} steps of dt = {dt:.3g} s, "
+                f"above {_MAX_STEPS:.3g}; give a shorter --frame-time or a larger --dt"
+            )
+        stepping = {"steps_per_frame": max(1, int(round(ratio)))}
     else:
         stepping = {"steps_per_frame": _FALLBACK["steps_per_frame"]}
     fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
-    size = args.size if args.size is not None else d.get("size", _FALLBACK["size"])
-    if isinstance(size, str):
-        size = _size(size)
     color_by = args.color_by if args.color_by is not None else d.get("color_by", _FALLBACK["color_by"])
     settings = {"frames": frames, **stepping, "fps": fps, "size": tuple(size), "color_by": color_by}
     view = args.view if args.view is not None else d.get("view")
@@ -306,11 +345,9 @@ class _EnergyProbe:
 
 
 def _human_bytes(n: int) -> str:
-    for unit in ("B", "kB", "MB", "GB"):
-        if n < 1000 or unit == "GB":
-            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1000.0
-    return f"{n} B"  # pragma: no cover
+    from ._check import human_bytes
+
+    return human_bytes(n)
 
 
 def _substeps_text(counts: Sequence[Any]) -> str:
@@ -345,11 +382,28 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if args.dt is not None:
         kwargs["dt"] = args.dt
     out = Path(args.output if args.output is not None else f"{name}.gif")
+    # Everything that can be checked without the scene is, before it is built (seconds for big
+    # fluids) and simulated (minutes): the frames buffer's memory, the output paths.
+    try:
+        _check_frames_memory(fn, args)
+        render._check_path(out)
+    except _UsageError as e:
+        parser.error(str(e))
+    except (TypeError, ValueError) as e:
+        parser.error(str(e))
+    for target_path in [out] + ([Path(args.energy_plot)] if args.energy_plot is not None else []):
+        try:
+            render._check_writable(target_path)
+        except OSError as e:
+            reason = os.strerror(e.errno) if e.errno else str(e)
+            print(f"physcore render: error: cannot write {target_path}: {reason}", file=sys.stderr)
+            return 1
 
     t0 = time.perf_counter()
     try:
         scene = fn(**kwargs)
-    except (TypeError, ValueError) as e:
+    except (TypeError, ValueError, OverflowError) as e:
+        # OverflowError: an argument beyond float64 that a scene function did not name itself.
         parser.error(f"scene {name!r}: {e}")
     if args.rtol is not None or args.atol is not None:
         if scene.integrator != "rk45":
@@ -468,7 +522,7 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     except Exception:
         ver = "unknown"
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="physcore",
         description="physcore: fast, honest particle physics. Render ready-made scenes to GIFs.",
     )

@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Optional, Tuple, Union
+from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _core
+from . import _check, _core
 from ._errors import InvalidInputError
 from .terms import _finite_float
 
@@ -37,6 +37,10 @@ __all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
 
 #: Kernel names accepted by :class:`Fluid`.
 KERNELS = ("cubic_spline", "wendland_c2")
+
+#: Range of ``Fluid(spacing=...)``, m: keeps ``h^dim``, its reciprocal (the kernel's
+#: normalisation) and squared kernel distances inside float64.
+SPACING_RANGE = (1e-100, 1e100)
 
 
 def _array2(value: object, arg: str, dims: Tuple[int, ...] = (2, 3)) -> np.ndarray:
@@ -54,6 +58,12 @@ def _array2(value: object, arg: str, dims: Tuple[int, ...] = (2, 3)) -> np.ndarr
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
     return a
+
+
+def _scaled(a: np.ndarray, factor: float) -> np.ndarray:
+    """``factor * a`` with overflow giving inf quietly (the caller refuses it by name)."""
+    with np.errstate(over="ignore"):
+        return factor * a
 
 
 def neighbors(points: "np.typing.ArrayLike", radius: float) -> Tuple[np.ndarray, np.ndarray]:
@@ -126,18 +136,43 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
     return float(kernel_w(r / h, h, dim, kernel).sum())
 
 
-def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> np.ndarray:
-    """Particle centres filling the box ``[lower, upper]`` on a cubic lattice: positions
-    ``lower + (i + ½) spacing`` for every cell of the box (the box sides are rounded to whole
-    cells). Returns ``(N, dim)`` float64, m. Ordered with the first axis fastest."""
-    lo = np.asarray(lower, dtype=np.float64)
-    hi = np.asarray(upper, dtype=np.float64)
+def _corner(value: object, arg: str) -> np.ndarray:
+    a = _check.array(arg, value)
+    if a.dtype.kind not in "iuf" or a.dtype == bool:
+        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    return a.astype(np.float64)
+
+
+def lattice_counts(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> List[int]:
+    """Cells along each axis of :func:`lattice` (Python ints, never overflowing; the box sides
+    are rounded to whole cells, at least one)."""
+    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
     s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
     if lo.shape != hi.shape or lo.ndim != 1 or lo.shape[0] not in (2, 3):
         raise InvalidInputError(f"lower/upper: expected two vectors of length 2 or 3, got {lo.shape} and {hi.shape}")
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
         raise InvalidInputError("upper: must be finite and > lower on every axis")
-    n = np.maximum(np.rint((hi - lo) / s).astype(np.int64), 1)
+    counts = []
+    for d in range(lo.shape[0]):
+        cells = (float(hi[d]) - float(lo[d])) / s  # Python floats: overflow gives inf, no warning
+        counts.append(max(round(cells), 1) if math.isfinite(cells) else -1)
+    return counts
+
+
+def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> np.ndarray:
+    """Particle centres filling the box ``[lower, upper]`` on a cubic lattice: positions
+    ``lower + (i + ½) spacing`` for every cell of the box (the box sides are rounded to whole
+    cells). Returns ``(N, dim)`` float64, m. Ordered with the first axis fastest.
+
+    Raises TypeError / InvalidInputError naming the argument, and InvalidInputError naming
+    ``spacing`` when the lattice would not fit in memory (:func:`physcore._check.memory_limit`)."""
+    counts = lattice_counts(lower, upper, spacing)
+    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
+    s = float(spacing)
+    total = math.prod(counts) if min(counts) > 0 else math.inf
+    # meshgrid, stack and the result: about three copies of (N, dim) float64.
+    _check.memory("spacing", 3 * 8 * len(counts) * total, f"a lattice of {total} points")
+    n = np.array(counts, dtype=np.int64)
     axes = [lo[d] + (np.arange(n[d]) + 0.5) * s for d in range(lo.shape[0])]
     grids = np.meshgrid(*axes[::-1], indexing="ij")[::-1]
     return np.ascontiguousarray(np.stack([g.ravel() for g in grids], axis=1))
@@ -157,11 +192,9 @@ def tank_walls(
     least ``⌈2h/spacing⌉`` layers for full kernel support (3 for h = 1.3 spacing).
 
     Returns ``(M, dim)`` float64, m."""
-    lo = np.asarray(lower, dtype=np.float64)
-    hi = np.asarray(upper, dtype=np.float64)
-    s = float(spacing)
-    if not isinstance(layers, (int, np.integer)) or isinstance(layers, bool) or layers < 1:
-        raise InvalidInputError(f"layers: must be an int >= 1, got {layers!r}")
+    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
+    s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
+    layers = _check.int_in_range("layers", layers, 1, 1000)
     pad = layers * s
     outer_hi = hi.copy() + pad
     if not top:
@@ -181,7 +214,8 @@ class Fluid:
     positions : array_like, shape (N, dim)
         Initial particle positions, m, e.g. from :func:`lattice` (spacing apart).
     spacing : float
-        Initial particle spacing ``Δx``, m (> 0). Sets ``h = smoothing · Δx`` and the masses.
+        Initial particle spacing ``Δx``, m, in :data:`SPACING_RANGE` (1e-100 to 1e100, so that
+        ``h^dim`` and its reciprocal fit float64). Sets ``h = smoothing · Δx`` and the masses.
     velocities : array_like, shape (N, dim), optional
         Initial velocities, m/s. Default zero.
     density : float
@@ -201,7 +235,7 @@ class Fluid:
     clamp_pressure : bool
         Clamp ``p ≥ 0`` (no tension at the free surface). Default True.
     mass : float, optional
-        Particle mass, kg. Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
+        Particle mass, kg (at least 2.2e-308, so that 1/m is finite). Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
         starts exactly at the rest density (``≈ ρ0 Δx^dim``).
     walls : array_like, shape (M, dim), optional
         Static wall (boundary) particle positions, e.g. from :func:`tank_walls`.
@@ -217,8 +251,11 @@ class Fluid:
 
     Raises
     ------
-    TypeError, ValueError
-        Bad types or values, naming the argument.
+    TypeError
+        An argument of the wrong type, naming it.
+    InvalidInputError
+        (a ``ValueError``) A value out of range, naming it, including a density and spacing
+        whose particle mass ``≈ ρ0 Δx^dim`` or Tait stiffness ``ρ0 c0²`` float64 cannot hold.
     """
 
     positions: np.ndarray
@@ -256,9 +293,11 @@ class Fluid:
         object.__setattr__(self, "smoothing", _finite_float(self.smoothing, "smoothing", minimum=0.0, strict=True))
         if not 0.5 <= self.smoothing <= 4.0:
             raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")
-        h = self.smoothing * self.spacing
-        if not (math.isfinite(h) and h > 1e-300 and self.spacing ** x.shape[1] > 0 and math.isfinite(self.spacing ** x.shape[1])):
-            raise InvalidInputError(f"spacing: {self.spacing} m gives a smoothing length or particle volume outside float64 range")
+        lo, hi = SPACING_RANGE
+        if not lo <= self.spacing <= hi:
+            raise InvalidInputError(
+                f"spacing: must be in [{lo:g}, {hi:g}] m (so that h^dim, 1/h^dim and kernel distances fit float64), got {self.spacing}"
+            )
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)):
@@ -268,28 +307,43 @@ class Fluid:
         if not isinstance(self.clamp_pressure, (bool, np.bool_)):
             raise TypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
         if self.mass is not None:
-            object.__setattr__(self, "mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True))
+            object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
         if self.walls is not None:
             w = _array2(self.walls, "walls")
             if w.shape[1] != dim:
-                raise InvalidInputError(f"walls: expected shape (M, {dim}), got {w.shape}")
+                raise InvalidInputError(f"walls: expected shape (M, {dim}) (the positions are {dim}D), got {w.shape}")
             object.__setattr__(self, "walls", w)
         wv = self.wall_volume
         if isinstance(wv, str):
             if wv not in ("lattice", "akinci"):
                 raise InvalidInputError(f"wall_volume: expected 'lattice', 'akinci', a float or an array, got {wv!r}")
         else:
-            a = np.asarray(wv)
+            a = _check.array("wall_volume", wv)
             if a.dtype.kind not in "iuf" or a.dtype == bool:
                 raise TypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
             m = 0 if self.walls is None else self.walls.shape[0]
             a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
                 raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
+            with np.errstate(over="ignore", under="ignore"):
+                psi = a * self.density
+            if not np.all(np.isfinite(psi) & (psi > 0)):
+                raise InvalidInputError("wall_volume: the wall masses density·wall_volume are outside float64 range")
             object.__setattr__(self, "wall_volume", a)
-        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed**2):
+        if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
-        if self.precision not in ("f32", "f64"):
+        if self.mass is None:
+            # ρ0 Δx^dim, computed here so that a density or spacing giving an unusable particle
+            # mass is refused by name (not later as "masses" of Scene.add_particles).
+            m = self.particle_mass()
+            if not (math.isfinite(m) and m >= _check.MIN_MASS):
+                raise InvalidInputError(
+                    f"density: {self.density} kg/m^{dim} with spacing {self.spacing} m gives a particle mass of {m:.3g} kg, "
+                    f"outside float64's usable range [{_check.MIN_MASS:.3g}, max]"
+                )
+        if isinstance(self.wall_volume, np.ndarray) and not np.all(np.isfinite(_scaled(self.wall_volume, self.density))):
+            raise InvalidInputError("wall_volume: density · wall volume overflows float64")
+        if not isinstance(self.precision, str) or self.precision not in ("f32", "f64"):
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
         if not isinstance(self.name, str) or not self.name:
             raise TypeError("name: expected a non-empty str")

@@ -22,7 +22,9 @@ from typing import Any, NamedTuple, Optional, Tuple, Union
 
 import numpy as np
 
+from . import _check
 from ._atomic import atomic_write
+from ._errors import InvalidInputError
 
 __all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
 
@@ -34,6 +36,13 @@ STRAIN_SATURATION = 0.1
 
 #: Default oblique view of 3D scenes, (azimuth, elevation) in degrees.
 DEFAULT_VIEW = (-60.0, 25.0)
+
+#: Largest ``steps_per_frame`` and ``substeps``: 2**53, beyond which step counts and the time
+#: ``n · dt`` are no longer exact in float64 (and no run would finish anyway).
+MAX_STEPS = 2**53
+
+# Most automatic substeps Scene.advance takes in one call (it refuses more, naming duration).
+_MAX_AUTO_SUBSTEPS = 1e12
 
 # ---------------------------------------------------------------------------------------------
 # The one fixed palette. Index layout (at most 256 entries, the GIF limit; Pillow always encodes
@@ -113,36 +122,47 @@ _PALETTE = _build_palette()
 # ---------------------------------------------------------------------------------------------
 # Argument checks
 # ---------------------------------------------------------------------------------------------
-def _check_int(name: str, value: Any, minimum: int) -> int:
+def _check_int(name: str, value: Any, minimum: int, maximum: Optional[int] = None) -> int:
     if isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be an int, got {value!r}")
     try:
         n = operator.index(value)
     except TypeError:
-        raise TypeError(f"{name} must be an int, got {type(value).__name__} {value!r}") from None
+        raise TypeError(f"{name} must be an int, got {type(value).__name__} {_short(value)}") from None
     if n < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {n}")
+        raise InvalidInputError(f"{name} must be >= {minimum}, got {n}")
+    if maximum is not None and n > maximum:
+        raise InvalidInputError(f"{name} must be <= {maximum}, got {_short(n)}")
     return n
 
 
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
 def _check_size(size: Any) -> Tuple[int, int]:
-    if isinstance(size, (str, bytes)) or not hasattr(size, "__len__"):
-        raise TypeError(f"size must be a pair of ints (width, height), got {size!r}")
-    if len(size) != 2:
-        raise ValueError(f"size must be a pair of ints (width, height), got {size!r}")
+    try:
+        count = len(size)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(size, (str, bytes)) or count < 0:
+        raise TypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
+    if count != 2:
+        raise InvalidInputError(f"size must be a pair of ints (width, height), got {_short(size)}")
     w = _check_int("size[0] (width)", size[0], 16)
     h = _check_int("size[1] (height)", size[1], 16)
     if w > 65535 or h > 65535:
-        raise ValueError(f"size must be at most 65535 x 65535 (the GIF limit), got {w}x{h}")
+        raise InvalidInputError(f"size must be at most 65535 x 65535 (the GIF limit), got {_short(w)}x{_short(h)}")
     return w, h
 
 
 def _check_fps(fps: Any) -> float:
     if isinstance(fps, (bool, np.bool_)) or not isinstance(fps, (int, float, np.integer, np.floating)):
-        raise TypeError(f"fps must be a number, got {fps!r}")
-    f = float(fps)
+        raise TypeError(f"fps must be a number, got {_short(fps)}")
+    f = _check.real("fps", fps)
     if not (math.isfinite(f) and f > 0):
-        raise ValueError(f"fps must be a finite number > 0, got {fps!r}")
+        raise InvalidInputError(f"fps must be a finite number > 0, got {_short(fps)}")
     return f
 
 
@@ -152,17 +172,18 @@ def _check_frame_time(frame_time: Any) -> Optional[float]:
     if isinstance(frame_time, (bool, np.bool_)) or not isinstance(
         frame_time, (int, float, np.integer, np.floating)
     ):
-        raise TypeError(f"frame_time must be a number of seconds or None, got {frame_time!r}")
-    t = float(frame_time)
-    if not (math.isfinite(t) and t > 0):
-        raise ValueError(f"frame_time must be a finite number of seconds > 0, got {frame_time!r}")
+        raise TypeError(f"frame_time must be a number of seconds or None, got {_short(frame_time)}")
+    t = _check.real("frame_time", frame_time)
+    # As Scene.advance: a subnormal duration has no finite reciprocal.
+    if not (math.isfinite(t) and t >= _check.MIN_NORMAL):
+        raise InvalidInputError(f"frame_time must be a finite number of seconds >= {_check.MIN_NORMAL:.3g}, got {_short(frame_time)}")
     return t
 
 
 def _check_color_by(color_by: Any) -> str:
-    if color_by not in COLOR_BY:
+    if not isinstance(color_by, str) or color_by not in COLOR_BY:
         valid = ", ".join(repr(c) for c in COLOR_BY)
-        raise ValueError(f"color_by must be one of {valid}; got {color_by!r}")
+        raise InvalidInputError(f"color_by must be one of {valid}; got {_short(color_by)}")
     return str(color_by)
 
 
@@ -171,7 +192,7 @@ def _check_radius(radius: Any) -> Optional[int]:
         return None
     r = _check_int("radius", radius, 0)
     if r > 200:
-        raise ValueError(f"radius must be <= 200 pixels, got {r}")
+        raise InvalidInputError(f"radius must be <= 200 pixels, got {_short(r)}")
     return r
 
 
@@ -179,11 +200,14 @@ def _check_view(view: Any) -> Tuple[float, float]:
     if view is None:
         return DEFAULT_VIEW
     try:
-        az, el = (float(a) for a in view)
-    except (TypeError, ValueError):
-        raise ValueError(f"view must be (azimuth_deg, elevation_deg), got {view!r}") from None
+        count = len(view)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(view, (str, bytes)) or count != 2:
+        raise InvalidInputError(f"view must be (azimuth_deg, elevation_deg), got {_short(view)}")
+    az, el = (_check.real("view", a) for a in view)
     if not (math.isfinite(az) and math.isfinite(el)):
-        raise ValueError(f"view must be finite angles in degrees, got {view!r}")
+        raise InvalidInputError(f"view must be finite angles in degrees, got {_short(view)}")
     return az, el
 
 
@@ -192,17 +216,63 @@ def _check_path(path: Any) -> Path:
         raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
     if p.suffix.lower() != ".gif":
-        raise ValueError(f"path must end in .gif, got {str(p)!r}")
+        raise InvalidInputError(f"path must end in .gif, got {str(p)!r}")
     if not p.parent.is_dir():
-        raise ValueError(f"path: directory {str(p.parent)!r} does not exist")
+        raise InvalidInputError(f"path: directory {str(p.parent)!r} does not exist")
     if p.is_dir():
-        raise ValueError(f"path {str(p)!r} is a directory")
+        raise InvalidInputError(f"path {str(p)!r} is a directory")
     return p
 
 
+def _check_writable(path: Path) -> None:
+    """Create and remove a file beside ``path``, as the final atomic write will: an unwritable
+    directory then fails in milliseconds, not after the whole simulation. Raises OSError."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".probe")
+    except OSError as e:
+        raise type(e)(e.errno, f"path: cannot create files in {str(path.parent)!r} ({e.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _check_auto_substeps(scene: Any, frame_time: float) -> None:
+    """Refuse, naming frame_time, a frame that would need more automatic substeps than
+    ``Scene.advance`` takes in one call (1e12) at the scene's current substep."""
+    auto_dt = getattr(scene, "auto_dt", None)
+    if not callable(auto_dt):
+        return
+    step = float(auto_dt())
+    if step > 0 and not frame_time / step <= _MAX_AUTO_SUBSTEPS:
+        raise InvalidInputError(
+            f"frame_time: {frame_time:.3g} s per frame would take {frame_time / step:.3g} automatic substeps of "
+            f"{step:.3g} s, more than {_MAX_AUTO_SUBSTEPS:.0e}; give a shorter frame_time"
+        )
+
+
+def _check_memory(scene: Any, frames: int, size: Tuple[int, int], springs: bool) -> None:
+    """Refuse, before simulating, an animation whose recording and frames would not fit in
+    memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size."""
+    n = int(getattr(scene, "n_particles", 0))
+    m = 0
+    if springs and callable(getattr(scene, "spring_pairs", None)):
+        m = int(np.asarray(scene.spring_pairs()[0]).size)
+    dim = int(getattr(scene, "dim", 3))
+    # float32 positions, speed, pressure per particle and strain per spring; the palette-index
+    # buffer and its Pillow image per frame.
+    per_frame = 4 * n * (dim + 2) + 4 * m + 2 * size[0] * size[1]
+    _check.memory(
+        "frames, size",
+        frames * per_frame,
+        f"{_short(frames)} frames of {size[0]}x{size[1]} pixels and {n} particles",
+    )
+
+
 def _gif_duration_ms(fps: float) -> int:
-    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp.
-    cs = min(max(round(100.0 / fps), 2), 65535)
+    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp
+    # (before rounding: 100 / fps is inf for a subnormal fps).
+    cs = round(min(max(100.0 / fps, 2.0), 65535.0))
     return int(cs * 10)
 
 
@@ -283,7 +353,7 @@ def _scene_pressure(scene: Any, n: int) -> np.ndarray:
     try:
         p = scene.pressure()
     except AttributeError as e:
-        raise ValueError(
+        raise InvalidInputError(
             f"color_by='pressure' needs a scene with a pressure() method (an SPH fluid); "
             f"this one has none ({e})"
         ) from None
@@ -314,7 +384,7 @@ def _scene_boundary(scene: Any, dim: int) -> Optional[np.ndarray]:
 
 def _check_advance(scene: Any) -> None:
     if not callable(getattr(scene, "advance", None)):
-        raise ValueError(
+        raise InvalidInputError(
             "frame_time needs a scene with an advance(duration) method (automatic substeps); "
             "this one has none: use steps_per_frame instead"
         )
@@ -339,7 +409,7 @@ def _simulate(
     """
     dim = int(scene.dim)
     if dim not in (2, 3):
-        raise ValueError(f"scene.dim must be 2 or 3, got {dim}")
+        raise InvalidInputError(f"scene.dim must be 2 or 3, got {dim}")
     n = int(scene.n_particles)
     sp = _scene_springs(scene) if springs else None
     x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
@@ -370,14 +440,17 @@ def _simulate(
                         except TypeError:
                             bar.set_postfix(substeps="?", refresh=False)
                 x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
-            pos[k] = x - origin
-            if speeds is not None:
-                v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
-                speeds[k] = _row_norms(v)
-            if pressures is not None:
-                pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
-            if strain is not None:
-                strain[k] = _strain(x, *sp)
+            # A value beyond float32 (or a difference beyond float64) is stored as inf, and its
+            # particle is then left out of the drawing like any non-finite one.
+            with np.errstate(over="ignore", invalid="ignore"):
+                pos[k] = x - origin
+                if speeds is not None:
+                    v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
+                    speeds[k] = _row_norms(v)
+                if pressures is not None:
+                    pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
+                if strain is not None:
+                    strain[k] = _strain(x, *sp)
             if bar is not None:
                 bar.update(1)
     finally:
@@ -425,7 +498,9 @@ class _Camera:
 
     def project(self, x: np.ndarray) -> Tuple[np.ndarray, Optional[np.ndarray]]:
         """(N, dim) world -> (N, 2) screen-plane coordinates and (N,) depth (3D; larger = nearer)."""
-        s = x @ self.basis.astype(x.dtype, copy=False)
+        # inf coordinates (beyond float32, see _simulate) give NaN rows, which are not drawn.
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = x @ self.basis.astype(x.dtype, copy=False)
         if self.dim == 3:
             return s[:, :2], s[:, 2]
         return s, None
@@ -600,7 +675,8 @@ def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> n
     """
     if not (vmax > 0 and math.isfinite(vmax)):
         return np.full(values.shape, base, dtype=np.uint8)
-    lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
+    with np.errstate(over="ignore", invalid="ignore"):  # a subnormal vmax: overflow to inf, the top
+        lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
     return (base + np.clip(lv, 0, levels - 1).astype(np.uint8)).astype(np.uint8)
 
 
@@ -701,7 +777,8 @@ def _draw_colorbar(buf: np.ndarray, bar: _ColorBarLayout, base: int, levels: int
 def _strain_levels(strain: np.ndarray) -> np.ndarray:
     """(M,) strains -> (M,) uint8 palette indices; NaN (zero rest length) -> at-rest grey."""
     half = _N_STRAIN // 2
-    s = np.clip(np.nan_to_num(strain, nan=0.0) / STRAIN_SATURATION, -1.0, 1.0)
+    # Clipped before dividing, so that a strain near the float32 limit cannot overflow.
+    s = np.clip(np.nan_to_num(strain, nan=0.0), -STRAIN_SATURATION, STRAIN_SATURATION) / STRAIN_SATURATION
     return (_STRAIN0 + half + np.rint(s * half)).astype(np.uint8)
 
 
@@ -832,22 +909,27 @@ def gif(
         ``boundary_points()`` -> (B, dim) float64 m, static wall particles (B may be 0), and
         ``advance(duration)`` -> int substeps taken (needed for `frame_time`).
     path : str or os.PathLike
-        Output file; must end in ``.gif`` and its directory must exist. Written atomically: a
+        Output file; must end in ``.gif`` and its directory must exist and be writable (checked
+        by creating and removing a file there before simulating). Written atomically: a
         temporary file in the same directory is renamed onto `path` only once complete.
     frames : int, default 90
-        Number of frames, >= 1.
+        Number of frames, >= 1. Together with `size` and the scene's particles it must fit in
+        memory: the estimate ``frames · (4 N (dim + 2) + 4 M + 2 W H)`` bytes (N particles,
+        M springs, W × H pixels) is refused above :func:`physcore._check.memory_limit` (half
+        the physical memory) before anything is simulated.
     steps_per_frame : int, optional
-        Simulation steps of ``scene.dt`` between frames, >= 1. Default 10 when `frame_time` is
-        not given; giving both is an error.
+        Simulation steps of ``scene.dt`` between frames, 1 to :data:`MAX_STEPS` (2**53). Default
+        10 when `frame_time` is not given; giving both is an error.
     frame_time : float, optional
-        Simulated seconds between frames, finite and > 0. Each frame then calls
-        ``scene.advance(frame_time)``, which picks its own substeps (from the scene's CFL and
-        stability limits) and returns how many it took; with `progress` the bar shows the last
-        frame's count. The scene must have an ``advance`` method.
+        Simulated seconds between frames, finite and at least 2.2e-308 (a normal float64). Each
+        frame then calls ``scene.advance(frame_time)``, which picks its own substeps (from the
+        scene's CFL and stability limits) and returns how many it took; with `progress` the bar
+        shows the last frame's count. The scene must have an ``advance`` method, and a frame
+        that would need more than 1e12 automatic substeps is refused before simulating.
     substeps : "auto" or int, default "auto"
         With `frame_time`: ``"auto"`` lets ``scene.advance`` choose the substeps of every frame
         inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
-        fixes that many per frame. Needs `frame_time`.
+        (1 to 2**53) fixes that many per frame. Needs `frame_time`.
     fps : float, default 30
         Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
         below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
@@ -887,15 +969,21 @@ def gif(
 
     Raises
     ------
-    TypeError, ValueError
-        On an invalid argument, naming it; raised before the scene is stepped or a file is made.
-        This includes ``color_by="pressure"`` on a scene without ``pressure()`` (or whose
-        ``pressure()`` raises AttributeError), and `frame_time` on a scene without ``advance``.
+    TypeError
+        An argument of the wrong type (``bool`` is not an int, ``str`` not a number, and
+        `colorbar`, `springs`, `progress` must be bools), naming it.
+    physcore.InvalidInputError
+        (a ``ValueError``) An invalid value, naming it, including an animation too large for
+        memory (naming frames and size). Raised before the scene is stepped or a file is made.
+        ValueError also covers ``color_by="pressure"`` on a scene without ``pressure()`` (or
+        whose ``pressure()`` raises AttributeError), and `frame_time` on a scene without
+        ``advance``.
     physcore.SimulationDiverged
         If the simulation diverges; no file is written (the scene is rolled back to the last
         good state of the failing ``step``/``advance`` call by the scene itself).
     OSError
-        If the file cannot be written; no partial file is left behind.
+        If the file cannot be written: an unwritable directory is found before simulating; a
+        failure while writing leaves no partial file behind.
 
     Notes
     -----
@@ -909,38 +997,45 @@ def gif(
     frame_time = _check_frame_time(frame_time)
     if isinstance(substeps, str):
         if substeps != "auto":
-            raise ValueError(f"substeps must be 'auto' or an int >= 1, got {substeps!r}")
+            raise InvalidInputError(f"substeps must be 'auto' or an int >= 1, got {_short(substeps)}")
     else:
-        substeps = _check_int("substeps", substeps, 1)
+        substeps = _check_int("substeps", substeps, 1, MAX_STEPS)
         if frame_time is None:
-            raise ValueError("substeps needs frame_time (seconds between frames)")
+            raise InvalidInputError("substeps needs frame_time (seconds between frames)")
     if steps_per_frame is None:
         steps_per_frame = 10
     elif frame_time is not None:
-        raise ValueError("give steps_per_frame or frame_time, not both")
+        raise InvalidInputError("give steps_per_frame or frame_time, not both")
     else:
-        steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1)
+        steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1, MAX_STEPS)
     duration = _gif_duration_ms(_check_fps(fps))
     size = _check_size(size)
     color_by = _check_color_by(color_by)
     radius = _check_radius(radius)
     view = _check_view(view)
+    colorbar = _check.flag("colorbar", colorbar)
+    springs = _check.flag("springs", springs)
+    progress = _check.flag("progress", progress)
     path = _check_path(path)
     if frame_time is not None:
         _check_advance(scene)
+        if substeps == "auto":
+            _check_auto_substeps(scene, frame_time)
+    _check_memory(scene, frames, size, springs)
+    _check_writable(path)
 
     rec = _simulate(
         scene,
         frames,
         steps_per_frame,
         color_by == "speed",
-        bool(springs),
-        bool(progress),
+        springs,
+        progress,
         need_pressure=color_by == "pressure",
         frame_time=frame_time,
         substeps=substeps,
     )
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=bool(colorbar))
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
     _write_gif(path, (ras.frame(k) for k in range(frames)), duration)
     return path
 

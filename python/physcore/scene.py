@@ -8,17 +8,19 @@ from __future__ import annotations
 import json
 import math
 import os
+import threading
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Callable, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
-from . import _core
-from ._errors import InvalidInputError, ThreadPoolWarning
+from . import _check, _core
+from ._errors import InvalidInputError, SceneBusyError, ThreadPoolWarning
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
+from . import _scenefile
 from ._atomic import atomic_write
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -27,7 +29,10 @@ __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 #: evaluations per step, as reported by the core.
 INTEGRATORS: Tuple[Dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
-_FORMAT_VERSION = 1
+#: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
+MAX_THREADS = 65535
+_MIN_DT = _check.MIN_NORMAL
+_MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
 Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
 
@@ -60,20 +65,27 @@ class EnergyReport:
     mechanical: float
 
 
-def _check_int(value: object, arg: str, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{arg}: expected an int, got {type(value).__name__}")
-    if value < minimum:
-        raise InvalidInputError(f"{arg}: must be >= {minimum}, got {value}")
-    return int(value)
+#: The largest step count (files store it as an int64; it never wraps).
+_MAX_STEPS = 2**63 - 1
+
+
+def _check_int(value: object, arg: str, minimum: int, maximum: Optional[int] = None) -> int:
+    return _check.int_in_range(arg, value, minimum, maximum)
+
+
+def _usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
 
 
 def _check_dt(dt: object) -> float:
-    if isinstance(dt, bool) or not isinstance(dt, (int, float, np.integer, np.floating)):
-        raise TypeError(f"dt: expected a number of seconds, got {type(dt).__name__}")
-    dt = float(dt)
-    if not (np.isfinite(dt) and dt > 0):
-        raise InvalidInputError(f"dt: must be finite and > 0 (seconds), got {dt}")
+    dt = _check.real("dt", dt)
+    # A subnormal step has no usable reciprocal (rates, CFL ratios) and would never advance time.
+    if not (math.isfinite(dt) and dt >= _MIN_DT):
+        raise InvalidInputError(f"dt: must be finite and >= {_MIN_DT:.3g} (seconds), got {dt}")
     return dt
 
 
@@ -86,9 +98,7 @@ def _check_integrator(name: object) -> str:
 
 
 def _check_tol(value: object, arg: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{arg}: expected a number, got {type(value).__name__}")
-    return float(value)
+    return _check.real(arg, value)
 
 
 _PRECISIONS = ("f64", "f32")
@@ -104,7 +114,7 @@ def _check_precision(value: object) -> str:
 
 def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
@@ -118,6 +128,22 @@ def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.nd
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
     return a
+
+
+def _norm(v: "np.typing.ArrayLike") -> float:
+    """Euclidean norm without overflow warnings: inf when it is beyond float64."""
+    try:
+        return math.hypot(*(float(c) for c in np.ravel(v)))
+    except OverflowError:
+        return math.inf
+
+
+def _max_row_norm(a: np.ndarray) -> float:
+    """Largest row norm of a finite (N, d) array, scaled so that squaring cannot overflow."""
+    top = float(np.max(np.abs(a))) if a.size else 0.0
+    if top == 0.0:
+        return 0.0
+    return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
 
 
 class Scene:
@@ -134,7 +160,8 @@ class Scene:
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
         evaluations each; see `rtol`).
     dt : float
-        Time step, s (> 0). Default 1e-3. For ``"rk45"`` it is the output interval: each step
+        Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
+        step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
         of ``dt`` is integrated in as many internal steps as the tolerances need and lands
         exactly on its end.
     rtol, atol : float
@@ -149,14 +176,18 @@ class Scene:
         hold them; ``positions``/``velocities`` are then returned as float32. It shows what
         single precision costs in accuracy (see the work-precision table in the README).
     threads : int or None
-        Worker threads for this scene; ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``).
-        Results are bit-identical for any thread count. If no thread can be started (a limit on
-        threads), ``None`` runs on the calling thread with a :class:`ThreadPoolWarning`.
+        Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
+        ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
+        for any thread count. If no thread can be started (a limit on threads), ``None`` runs on
+        the calling thread with a :class:`ThreadPoolWarning`.
 
     Raises
     ------
-    TypeError, ValueError
-        Bad argument types or values (the message names the argument).
+    TypeError
+        An argument of the wrong type (``bool`` and ``str`` are not numbers); names it.
+    InvalidInputError
+        (a ``ValueError``) An argument out of range, or not representable (e.g. an int beyond
+        float64, ``threads=2**64``); names it.
     ThreadPoolError
         ``threads=n`` threads could not be started.
 
@@ -192,7 +223,7 @@ class Scene:
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
         precision = _check_precision(precision)
         if threads is not None:
-            threads = _check_int(threads, "threads", 1)
+            threads = _check_int(threads, "threads", 1, MAX_THREADS)
         sim = _core.Simulation2(int(dim), integrator, dt, threads)
         if sim.sequential is not None:
             warnings.warn(
@@ -205,6 +236,10 @@ class Scene:
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.single = precision == "f32"
+        # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
+        # that release the GIL for long, and _busy names the thread inside one.
+        self._lock = threading.Lock()
+        self._busy: Optional[int] = None
         self._sim = sim
         self._threads = threads
         self._terms: List[Term] = []
@@ -212,6 +247,38 @@ class Scene:
         self._boxes: List[Box] = []
         self._e0: Optional[float] = None
         self._e0_scale: float = 0.0
+
+    # ---------------------------------------------------------------- threads
+    @property
+    def _sim(self) -> "_core.Simulation2":
+        # A Scene is not shared between threads while one of them steps it: every use from
+        # another thread then raises SceneBusyError, instead of pyo3's bare "Already mutably
+        # borrowed" RuntimeError.
+        busy = self._busy
+        if busy is not None and busy != threading.get_ident():
+            raise SceneBusyError(
+                "this Scene is being stepped by another thread; use a Scene from one thread at a "
+                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
+            )
+        return self._raw_sim
+
+    @_sim.setter
+    def _sim(self, sim: "_core.Simulation2") -> None:
+        self._raw_sim = sim
+
+    def _exclusive(self, call: Callable[["_core.Simulation2"], Any]) -> Any:
+        """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
+        only user of the scene; another thread's use meanwhile raises :class:`SceneBusyError`
+        (so does this call, if another thread is inside one)."""
+        sim = self._sim
+        if not self._lock.acquire(blocking=False):
+            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
+        self._busy = threading.get_ident()
+        try:
+            return call(sim)
+        finally:
+            self._busy = None
+            self._lock.release()
 
     # ---------------------------------------------------------------- building
     def add_particles(
@@ -230,7 +297,8 @@ class Scene:
         velocities : array_like, shape (N, dim), optional
             Velocities, m/s. Default zero. Ignored (set to zero) for pinned particles.
         masses : float or array_like, shape (N,)
-            Masses, kg, finite and > 0. Default 1.
+            Masses, kg: finite and at least the smallest normal float64 (2.2e-308), so that the
+            inverse mass is finite. Default 1.
         pinned : array_like of bool, shape (N,), optional
             ``True`` fixes a particle in place (infinite inertia); it still attracts under
             :class:`PairwiseGravity` and anchors springs. Default none pinned.
@@ -244,27 +312,31 @@ class Scene:
         ------
         TypeError
             Non-numeric arrays.
-        ValueError
-            Wrong shapes, NaN/inf, non-positive masses.
+        InvalidInputError
+            (a ``ValueError``) Wrong shapes, NaN/inf, masses not in [2.2e-308, finite]; nothing
+            is added.
         """
         dim = self.dim
         x = _points(positions, "positions", dim)
         n = x.shape[0]
         v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
-        m = np.asarray(masses)
+        m = _check.array("masses", masses)
         if m.dtype.kind not in "iuf" or m.dtype == bool:
             raise TypeError(f"masses: expected real numbers, got dtype {m.dtype}")
         m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
         if m.shape != (n,):
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
-        bad = ~(np.isfinite(m) & (m > 0))
+        # The integrators divide by the mass: below the smallest normal float64 1/m overflows.
+        bad = ~(np.isfinite(m) & (m >= _check.MIN_MASS))
         if bad.any():
             k = int(np.flatnonzero(bad)[0])
-            raise InvalidInputError(f"masses: entry {k} is {m[k]} (must be finite and > 0, kg)")
+            raise InvalidInputError(
+                f"masses: entry {k} is {m[k]} (must be finite and >= {_check.MIN_MASS:.3g} kg, so that 1/m is finite)"
+            )
         if pinned is None:
             p = np.zeros(n, dtype=bool)
         else:
-            p = np.asarray(pinned)
+            p = _check.array("pinned", pinned)
             if p.dtype != bool:
                 raise TypeError(f"pinned: expected booleans, got dtype {p.dtype}")
             if p.shape != (n,):
@@ -289,8 +361,9 @@ class Scene:
         ------
         TypeError
             ``item`` is not a term or collider.
-        ValueError
-            Vector length differs from ``dim``; spring index out of range.
+        InvalidInputError
+            (a ``ValueError``) Vector length differs from ``dim``; spring index out of range; a
+            spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
         if isinstance(item, Fluid):
@@ -334,7 +407,13 @@ class Scene:
             rest = item.rest_length
             if rest is None:
                 x = self.positions
-                rest = np.linalg.norm(x[item.j] - x[item.i], axis=1) if len(item) else np.zeros(0)
+                with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
+                    rest = np.linalg.norm(x[item.j] - x[item.i], axis=1) if len(item) else np.zeros(0)
+                if not np.all(np.isfinite(rest)):
+                    k = int(np.flatnonzero(~np.isfinite(rest))[0])
+                    raise InvalidInputError(
+                        f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
+                    )
             item = Springs(item.i, item.j, stiffness=item.stiffness, damping=item.damping, rest_length=rest, name=name)
             self._sim.add_springs(
                 name,
@@ -353,6 +432,11 @@ class Scene:
 
         Takes the parameters of :class:`~physcore.fluids.Fluid` (``spacing`` is required) and
         returns the new particles' indices, ``(N,)`` int64.
+
+        Raises TypeError / InvalidInputError naming the argument, before anything is added, for
+        the fluid's own parameters (see :class:`~physcore.fluids.Fluid`) and for what the scene
+        derives from them: an estimated ``sound_speed`` whose Tait stiffness overflows, a CFL
+        step below float64's normal range, wall masses that are not finite and > 0.
 
         Examples
         --------
@@ -381,21 +465,39 @@ class Scene:
         c0 = fluid.sound_speed
         if c0 is None:
             g = sum((t.g for t in self._terms if isinstance(t, Gravity)), np.zeros(dim))
-            gn = float(np.linalg.norm(g))
-            height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if gn > 0 and len(fluid) else 0.0
-            v0 = 0.0 if fluid.velocities is None or not len(fluid) else float(np.linalg.norm(fluid.velocities, axis=1).max())
-            vmax = max(math.sqrt(2.0 * gn * height), v0)
+            gn = _norm(g)
+            # Overflow (huge g, positions or velocities) gives inf here, refused below by name.
+            with np.errstate(over="ignore", invalid="ignore"):
+                height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
+                v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
+            vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
             if not vmax > 0:
                 raise InvalidInputError(
-                    "sound_speed: cannot be estimated for a fluid at rest without gravity; give sound_speed= (m/s)"
+                    "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
+                    "positions spread along it; give sound_speed= (m/s)"
                 )
             c0 = 10.0 * vmax
+            if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
+                raise InvalidInputError(
+                    f"sound_speed: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions "
+                    "and the velocities, makes the Tait stiffness density · c0² overflow float64; give sound_speed= (m/s)"
+                )
         fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
         walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
-        psi = fluid.wall_psi()
+        with np.errstate(over="ignore"):
+            psi = fluid.wall_psi()
+        if not np.all(np.isfinite(psi) & (psi > 0)):
+            raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
+        max_dt = fluid.max_dt()
+        # The scene's dt is lowered to this; a subnormal or zero step would never advance.
+        if not max_dt >= _MIN_DT:
+            raise InvalidInputError(
+                f"sound_speed, viscosity, spacing: the fluid's CFL step 0.25 h / (c0 (1 + 0.6 α)) = {max_dt:.3g} s "
+                "is below float64's normal range"
+            )
+        m = fluid.particle_mass()
         if first is None:
             n = len(fluid)
-            m = fluid.particle_mass()
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
         self._sim.add_sph(
             name,
@@ -415,7 +517,7 @@ class Scene:
         fluid = dataclasses.replace(fluid, first=first)
         self._terms.append(fluid)
         # A step above the fluid's CFL limit would blow up on the first step.
-        self._sim.dt = min(self.dt, fluid.max_dt())
+        self._sim.dt = min(self.dt, max_dt)
         self._e0 = None
         return fluid
 
@@ -444,9 +546,11 @@ class Scene:
             fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
         """
         n = _check_int(n, "n", 0)
+        if n > _MAX_STEPS - self.step_count:
+            raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        self._sim.step(n)
+        self._exclusive(lambda sim: sim.step(n))
 
     def advance(self, duration: float, *, substeps: Union[str, int] = "auto") -> int:
         """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
@@ -463,32 +567,43 @@ class Scene:
 
         Raises
         ------
-        TypeError, ValueError
-            ``duration`` not a finite number > 0 (seconds); ``substeps`` not "auto" or an int >= 1.
+        TypeError
+            ``duration`` not a number, ``substeps`` not "auto" or an int (bools are neither).
+        InvalidInputError
+            (a ``ValueError``) ``duration`` not finite or below 2.2e-308 s (the smallest normal
+            float64); ``substeps`` not in 1..2**53 or giving substeps below 2.2e-308 s; automatic
+            substeps above 1e12 per call.
         SimulationDiverged, KeyboardInterrupt
             As for :meth:`step`; ``dt`` is rolled back too.
         """
         if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
             raise TypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
-        duration = float(duration)
-        if not (math.isfinite(duration) and duration > 0):
-            raise InvalidInputError(f"duration: must be finite and > 0 (seconds), got {duration}")
+        duration = _check.real("duration", duration)
+        # As for dt: a subnormal duration would become a step with no finite reciprocal.
+        if not (math.isfinite(duration) and duration >= _MIN_DT):
+            raise InvalidInputError(f"duration: must be finite and >= {_MIN_DT:.3g} (seconds), got {duration}")
         if isinstance(substeps, str):
             if substeps != "auto":
                 raise InvalidInputError(f"substeps: must be 'auto' or an int >= 1, got {substeps!r}")
             fixed = None
         else:
-            fixed = _check_int(substeps, "substeps", 1)
+            fixed = _check_int(substeps, "substeps", 1, _MAX_SUBSTEPS)
+            if not duration / fixed >= _MIN_DT:
+                raise InvalidInputError(
+                    f"substeps: {fixed} substeps of {duration:g} s would each be below float64's normal range"
+                )
+            if fixed > _MAX_STEPS - self.step_count:
+                raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        return int(self._sim.advance(duration, fixed))
+        return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
 
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before
         rounding to a whole number of substeps per call): see :meth:`advance`. ``inf`` for
         ``"rk45"`` without a CFL limit; the current :attr:`dt` for a scene with no time scale
         (free flight, uniform gravity only)."""
-        d = self._sim.auto_dt()
+        d = self._exclusive(lambda sim: sim.auto_dt())
         if d is not None:
             return float(d)
         return math.inf if self.integrator == "rk45" else self.dt
@@ -646,8 +761,11 @@ class Scene:
 
     # ---------------------------------------------------------------- diagnostics
     def energy(self) -> EnergyReport:
-        """The energy books now (computed in Rust; pairwise gravity costs O(N²))."""
-        d = self._sim.energy()
+        """The energy books now (computed in Rust; pairwise gravity costs O(N²)).
+
+        A part beyond float64 (huge masses or speeds) is reported as it comes out, ``±inf`` or
+        NaN, not clamped; :meth:`energy_drift` is then NaN."""
+        d = self._exclusive(lambda sim: sim.energy())
         pot = dict(d["potential"])
         dis = dict(d["dissipated"])
         mech = d["kinetic"] + sum(pot.values())
@@ -659,11 +777,17 @@ class Scene:
         ``(E - E0) / max(|E0|, S0, S)`` where ``S0``, ``S`` are the sums of the magnitudes of the
         books' parts at the start and now: relative to ``|E0|`` normally, and to the energy scale
         in play when ``E0`` is zero by the choice of potential reference (e.g. a cloth at rest).
+
+        NaN when the books at the start or now are not finite (e.g. ``½ m v²`` or ``G m² / r``
+        beyond float64 for masses near 1e308): the drift is then unknown, never reported as 0.
+        The trajectory itself may still be fine; :meth:`energy` shows which part overflowed.
         """
         if self._e0 is None:
             return 0.0
         e = self.energy()
         scale = abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
+        if not all(math.isfinite(v) for v in (self._e0, self._e0_scale, e.total, scale)):
+            return math.nan
         denom = max(abs(self._e0), self._e0_scale, scale)
         return (e.total - self._e0) / denom if denom > 0 else 0.0
 
@@ -680,12 +804,12 @@ class Scene:
     def density(self) -> np.ndarray:
         """SPH density of every particle now, kg/m³ (kg/m² in 2D): ``(N,)`` float64, 0 for
         particles in no fluid (computed in float64)."""
-        return self._sim.fluid_fields()[0]
+        return self._exclusive(lambda sim: sim.fluid_fields())[0]
 
     def pressure(self) -> np.ndarray:
         """Equation-of-state pressure of every particle now, Pa: ``(N,)`` float64, 0 for
         particles in no fluid (computed in float64)."""
-        return self._sim.fluid_fields()[1]
+        return self._exclusive(lambda sim: sim.fluid_fields())[1]
 
     def boundary_points(self) -> np.ndarray:
         """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""
@@ -702,7 +826,7 @@ class Scene:
         dashpots, 1/λ_max = m/(2 Σc), both from Gershgorin bounds; pairwise gravity: closest
         free-fall time; drag: m/b); the current dt if no term has one. Explicit integrators are
         stable at this dt; pairwise gravity can later reach shorter time scales than now."""
-        return self._sim.suggest_dt()
+        return self._exclusive(lambda sim: sim.suggest_dt())
 
     # ---------------------------------------------------------------- persistence
     def save(self, path: Union[str, os.PathLike]) -> Path:
@@ -710,8 +834,21 @@ class Scene:
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
         Verlet force cache, the rk45 step-size controller and the energy books are saved too).
+        The layout is described in ``physcore/_scenefile.py``. An energy-drift baseline that
+        overflowed float64 is not saved (the loaded scene takes a new one at its next step).
+
+        Raises
+        ------
+        TypeError
+            ``path`` is not a str or os.PathLike.
+        ValueError
+            ``path`` does not end in ``.npz``; the energy books are not finite (they overflowed
+            float64), so the file could not be loaded back.
+        OSError
+            The file cannot be written; ``path`` is then left as it was and no temporary file
+            remains.
         """
-        path = Path(path)
+        path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
         arrays: Dict[str, np.ndarray] = {
@@ -746,12 +883,17 @@ class Scene:
                     arrays[f"term{k}_{f}"] = np.asarray(getattr(t, f))
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
+        # The loader refuses non-finite books; say so now rather than write a file it refuses.
+        for field, v in (("time", [self.time]), ("ledger", ledger), ("collisions", [collisions])):
+            if not np.isfinite(v).all():
+                raise InvalidInputError(f"{field}: {list(v)} overflowed float64; a scene file holds finite values only, so this scene cannot be saved")
         cache = self._sim.integrator_cache()
         if cache is not None:
             arrays["cache_forces"] = cache[0]
             arrays["cache_power"] = np.asarray(cache[1], dtype=np.float64)
+        e0_finite = self._e0 is not None and math.isfinite(self._e0) and math.isfinite(self._e0_scale)
         meta = {
-            "format": _FORMAT_VERSION,
+            "format": _scenefile.FORMAT_VERSION,
             "dim": self.dim,
             "integrator": self.integrator,
             "dt": self.dt,
@@ -762,8 +904,8 @@ class Scene:
             "time": self.time,
             "step": self.step_count,
             "collisions": collisions,
-            "e0": self._e0,
-            "e0_scale": self._e0_scale,
+            "e0": self._e0 if e0_finite else None,
+            "e0_scale": self._e0_scale if e0_finite else 0.0,
             "terms": terms_meta,
             "planes": [
                 {"point": p.point.tolist(), "normal": p.normal.tolist(), "restitution": p.restitution, "friction": p.friction}
@@ -775,39 +917,79 @@ class Scene:
             ],
         }
         # float.hex keeps every float bit-exact through JSON.
-        arrays["meta"] = np.array(json.dumps(meta, default=float))
+        arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
         arrays["time_hex"] = np.array(float(self.time).hex())
         atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike], *, threads: Optional[int] = None) -> "Scene":
-        """Read a scene written by :meth:`save`. ``threads`` overrides the saved thread count."""
-        with np.load(Path(path), allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            if meta.get("format") != _FORMAT_VERSION:
-                raise InvalidInputError(f"path: unsupported scene format {meta.get('format')!r}")
+        """Read a scene written by :meth:`save`.
+
+        The file is treated as hostile (see ``physcore/_scenefile.py``): every field is checked
+        as strictly as the API checks arguments, then the API validates again; object arrays are
+        never read, nothing is executed, and the loader allocates no more array memory than the
+        file's size (sizes claimed in headers are checked against the bytes present first).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A ``.npz`` file written by :meth:`save`.
+        threads : int or None
+            Overrides the saved thread count. Without it the saved count is used, capped at the
+            number of CPUs this process may use (results do not depend on it, and a file should
+            not decide how many threads start); ``None`` saved stays ``None`` (all cores).
+
+        Raises
+        ------
+        TypeError
+            ``path`` is not a str or os.PathLike; ``threads`` is not an int.
+        ValueError
+            ``threads`` < 1.
+        SceneFileError
+            (a ``ValueError``) for anything wrong with the file's contents: not a zip, truncated
+            or damaged, a member missing, extra, compressed or of the wrong dtype or shape, a
+            non-finite number, a field of the wrong type or out of range (``step`` must be an
+            integer in [0, 2**63)), or a value the API refuses. The message names the file and
+            the field.
+        OSError
+            The file cannot be opened (missing, no permission).
+        """
+        path = _scenefile.check_path(path)
+        if threads is not None:
+            threads = _check_int(threads, "threads", 1)
+        sf = _scenefile.read(path)
+        meta, z, r = sf.meta, sf.arrays, sf.reader
+        if threads is None and meta["threads"] is not None:
+            threads = min(meta["threads"], _usable_cpus())
+        with r.api("meta"):
             scene = cls(
                 meta["dim"],
                 integrator=meta["integrator"],
                 dt=meta["dt"],
-                rtol=meta.get("rtol", 1e-6),
-                atol=meta.get("atol", 1e-9),
-                precision=meta.get("precision", "f64"),
-                threads=threads if threads is not None else meta["threads"],
+                rtol=meta["rtol"],
+                atol=meta["atol"],
+                precision=meta["precision"],
+                threads=threads,
             )
-            n = z["positions"].shape[0]
-            if n:
+        if z["positions"].shape[0]:
+            with r.api(""):  # the API's argument names are the members' names
                 scene.add_particles(z["positions"], z["velocities"], z["masses"], z["pinned"])
-            for k, t in enumerate(meta["terms"]):
-                kind = t["type"]
-                if kind == "gravity":
+        for k, t in enumerate(meta["terms"]):
+            ctx = f"meta.terms[{k}]"
+            kind = t["type"]
+            if kind == "gravity":
+                with r.api(ctx):
                     scene.add(Gravity(t["g"], name=t["name"]))
-                elif kind == "drag":
+            elif kind == "drag":
+                with r.api(ctx):
                     scene.add(Drag(t["coefficient"], name=t["name"]))
-                elif kind == "pairwise_gravity":
+            elif kind == "pairwise_gravity":
+                with r.api(ctx):
                     scene.add(PairwiseGravity(t["G"], t["softening"], name=t["name"]))
-                elif kind == "fluid":
+            elif kind == "fluid":
+                members = {a: f"term{k}_{a}" for a in ("positions", "walls", "wall_volume")}
+                with r.api(ctx, {**members, "n": f"{ctx}.first"}):
                     walls = z[f"term{k}_walls"]
                     fl = Fluid(
                         z[f"term{k}_positions"],
@@ -826,27 +1008,29 @@ class Scene:
                         name=t["name"],
                     )
                     dt_saved = scene.dt
-                    scene._add_fluid(fl, first=int(t["first"]))
+                    scene._add_fluid(fl, first=t["first"])
                     scene._sim.dt = dt_saved
-                else:
-                    f = {a: z[f"term{k}_{a}"] for a in ("i", "j", "stiffness", "damping", "rest_length")}
-                    scene.add(Springs(name=t["name"], **f))
-            for p in meta["planes"]:
+            else:
+                fields = ("i", "j", "stiffness", "damping", "rest_length")
+                with r.api(ctx, {**{a: f"term{k}_{a}" for a in fields}, "i/j": f"term{k}_i"}):
+                    scene.add(Springs(name=t["name"], **{a: z[f"term{k}_{a}"] for a in fields}))
+        for i, p in enumerate(meta["planes"]):
+            with r.api(f"meta.planes[{i}]"):
                 scene.add(Plane(p["point"], p["normal"], p["restitution"], p["friction"]))
-            for b in meta.get("boxes", []):
+        for i, b in enumerate(meta["boxes"]):
+            with r.api(f"meta.boxes[{i}]"):
                 scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
-            cache_f = z["cache_forces"] if "cache_forces" in z.files else None
-            cache_p = z["cache_power"].tolist() if "cache_power" in z.files else None
+        with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
             scene._sim.restore(
-                float.fromhex(str(z["time_hex"])),
-                int(meta["step"]),
+                sf.time,
+                meta["step"],
                 z["ledger"].tolist(),
-                float(meta["collisions"]),
-                cache_f,
-                cache_p,
+                meta["collisions"],
+                z.get("cache_forces"),
+                z["cache_power"].tolist() if "cache_power" in z else None,
             )
-            scene._e0 = meta["e0"]
-            scene._e0_scale = meta["e0_scale"]
+        scene._e0 = meta["e0"]
+        scene._e0_scale = meta["e0_scale"]
         return scene
 
     def __repr__(self) -> str:

@@ -4,6 +4,14 @@
 Every function accepts ``integrator=`` and ``dt=`` (``None``: the scene's own choice) and
 ``threads=``. ``render_defaults`` on each function gives the CLI's animation defaults
 (``frame_time`` is simulated seconds per frame).
+
+Every function raises, before building anything, ``TypeError`` for an argument of the wrong type
+(``str``, ``bool`` or ``None`` where a number is meant, anything but True/False for a flag) and
+:class:`~physcore.InvalidInputError` (a ``ValueError``) for a value out of range or one whose
+consequences float64 cannot hold: a particle mass whose reciprocal overflows, a spacing or
+stable time step below the normal range, energy books beyond float64, or more particles than
+fit in memory (about 512 B each and 256 B per spring, against half the physical memory). The
+message names the arguments involved.
 """
 from __future__ import annotations
 
@@ -12,19 +20,100 @@ from typing import Callable, Dict, Optional, Tuple
 
 import numpy as np
 
+from . import _check
 from ._errors import InvalidInputError
-from .fluids import lattice, tank_walls
-from .scene import Scene, _check_int as _count
+from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
+from .scene import Scene
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
 __all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "REGISTRY"]
 
 
-def _positive(value: float, arg: str) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0):
-        raise InvalidInputError(f"{arg}: must be finite and > 0, got {value}")
+# Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
+# argument), plus checks of what the scene derives from them, naming the arguments involved.
+def _positive(value: object, arg: str) -> float:
+    return _check.positive_float(arg, value)
+
+
+def _nonneg(value: object, arg: str) -> float:
+    return _check.nonneg_float(arg, value)
+
+
+def _count(value: object, arg: str, minimum: int) -> int:
+    return _check.int_in_range(arg, value, minimum)
+
+
+def _flag(value: object, arg: str) -> bool:
+    return _check.flag(arg, value)
+
+
+def _dim(dim: object) -> int:
+    if isinstance(dim, (bool, np.bool_)) or not isinstance(dim, (int, np.integer)):
+        raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
+    if dim not in (2, 3):
+        raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
+    return int(dim)
+
+
+def _optional(value: object, arg: str) -> Optional[float]:
+    """None, or a finite number > 0."""
+    return None if value is None else _check.positive_float(arg, value)
+
+
+def _particle_mass(value: float, args: str) -> float:
+    """A per-particle mass derived from ``args``; refused by their names if 1/m would overflow."""
+    if not (math.isfinite(value) and value >= _check.MIN_MASS):
+        raise InvalidInputError(
+            f"{args}: give each particle a mass of {value:.3g} kg, outside float64's usable range "
+            f"[{_check.MIN_MASS:.3g} kg, max] (its reciprocal must be finite)"
+        )
     return value
+
+
+def _particles(args: str, n_particles: float, n_springs: float = 0) -> None:
+    """Refuse, naming ``args``, a scene too large for memory (estimated before allocating)."""
+    _check.memory(
+        args,
+        n_particles * _check.PARTICLE_BYTES + n_springs * _check.SPRING_BYTES,
+        f"{_big(n_particles)} particles" + (f" and {_big(n_springs)} springs" if n_springs else ""),
+    )
+
+
+def _big(count: float) -> str:
+    if count < 1e15:
+        return str(count)
+    if isinstance(count, int):  # may be beyond float64: give its order of magnitude
+        return f"about 1e{int(count.bit_length() * math.log10(2))}"
+    return f"{count:.3g}"
+
+
+def _per(total: float, count: int) -> float:
+    """``total / count`` for a count that may be beyond float64 (then 0.0)."""
+    try:
+        return total / count
+    except OverflowError:
+        return 0.0
+
+
+def _set_stable_dt(scene: Scene, factor: float, args: str) -> None:
+    """``scene.dt = factor · scene.suggest_dt()``, refused by ``args`` outside float64's normal range."""
+    dt = factor * scene.suggest_dt()
+    if not (math.isfinite(dt) and dt >= _check.MIN_NORMAL):
+        raise InvalidInputError(
+            f"{args}: the stable time step for these values, {dt:.3g} s, is outside float64's normal range; "
+            "change them or give dt="
+        )
+    scene.dt = dt
+
+
+def _finite_books(scene: Scene, args: str) -> Scene:
+    """The scene, once its energy books are finite; else refused naming ``args``."""
+    e = scene.energy()
+    if not math.isfinite(e.total) or not math.isfinite(e.kinetic):
+        raise InvalidInputError(
+            f"{args}: the scene's energy (kinetic {e.kinetic:.3g} J, total {e.total:.3g} J) is beyond float64"
+        )
+    return scene
 
 
 def cloth_springs(n: int):
@@ -68,12 +157,24 @@ def cloth(
     linear air drag b = air_drag · m per particle (air_drag in 1/s; 0 turns it off).
     ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5). ``dt=None``
     uses twice :meth:`Scene.suggest_dt` (1/ω_max here), half of velocity Verlet's stability limit.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
     n = _count(n, "n", 2)
+    _particles("n", n * n, 6 * n * n)
     size, mass, stiffness = _positive(size, "size"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
-    if pin not in ("edge", "corners"):
-        raise InvalidInputError(f"pin: must be 'edge' or 'corners', got {pin!r}")
+    damping, air_drag = _nonneg(damping, "damping"), _nonneg(air_drag, "air_drag")
+    pin = _check.choice("pin", pin, ("edge", "corners"))
+    ground = _flag(ground, "ground")
+    dt = _optional(dt, "dt")
     s = size / (n - 1)
+    # Bend springs span 2 s and their lengths come from squared lengths: (2 s)², with a margin.
+    if not (s >= _check.MIN_NORMAL and math.isfinite(8 * s * s)):
+        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside float64's usable range")
+    m = _particle_mass(mass / (n * n), "mass, n")
+    b = air_drag * mass / (n * n)
+    if not math.isfinite(b):
+        raise InvalidInputError(f"air_drag: the drag coefficient air_drag · m = {b} kg/s overflows float64")
     gx, gy = np.meshgrid(np.arange(n) * s, np.arange(n) * s)
     x = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n)], axis=1)
     pinned = np.zeros(n * n, dtype=bool)
@@ -82,19 +183,19 @@ def cloth(
     else:
         pinned[[0, n - 1]] = True
     scene = Scene(3, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
-    scene.add_particles(x, masses=mass / (n * n), pinned=pinned)
+    scene.add_particles(x, masses=m, pinned=pinned)
     i, j = cloth_springs(n)
     scene.add(Springs(i, j, stiffness=stiffness, damping=damping))
     scene.add(Gravity([0.0, 0.0, -9.81]))
     if air_drag:
-        scene.add(Drag(_positive(air_drag, "air_drag") * mass / (n * n)))
+        scene.add(Drag(b))
     if ground:
         scene.add(Plane([0.0, 0.0, -0.8 * size], [0.0, 0.0, 1.0], restitution=0.1, friction=0.5))
     if dt is None:
         # suggest_dt() is half the fastest time scale (1/ω_max or the dashpot's 1/λ_max); twice
         # that is still well inside velocity Verlet's limits (2/ω_max; 2/λ_max with dashpots).
-        scene.dt = 2 * scene.suggest_dt()
-    return scene
+        _set_stable_dt(scene, 2.0, "stiffness, damping, air_drag, mass")
+    return _finite_books(scene, "size, mass")
 
 
 cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360)}
@@ -115,9 +216,18 @@ def projectile(
     2D, gravity (0, -9.81) m/s², optional linear drag (kg/s), a ground plane y = 0 with the given
     restitution and friction 0.2. Without drag and ground the closed form is
     x = v0 cos θ t, y = v0 sin θ t - g t²/2.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring), e.g.
+    for a speed whose kinetic energy overflows float64.
     """
     n = _count(n, "n", 1)
+    _particles("n", n)
     speed = _positive(speed, "speed")
+    drag = _nonneg(drag, "drag")
+    restitution = _check.float_in_range("restitution", restitution, 0.0, 1.0)
+    ground = _flag(ground, "ground")
+    if not math.isfinite(0.5 * speed * speed * n):
+        raise InvalidInputError(f"speed: the kinetic energy n · ½ (1 kg) speed² of {speed:.3g} m/s overflows float64")
     angles = np.radians(np.linspace(20.0, 70.0, n)) if n > 1 else np.radians([45.0])
     v = speed * np.stack([np.cos(angles), np.sin(angles)], axis=1)
     scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
@@ -127,10 +237,14 @@ def projectile(
         scene.add(Drag(drag))
     if ground:
         scene.add(Plane([0.0, 0.0], [0.0, 1.0], restitution=restitution, friction=0.2))
-    return scene
+    return _finite_books(scene, "speed")
 
 
 projectile.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320)}
+
+
+#: Range of a Kepler orbit's separations a(1 ∓ e), m: keeps r², 1/r³ and v² = GM/r inside float64.
+KEPLER_RANGE = (1e-100, 1e100)
 
 
 def kepler(
@@ -149,19 +263,34 @@ def kepler(
     P = 2π sqrt(a³ / (G M)); total energy -G m1 m2 / (2a). ``mass_ratio = 0`` pins a unit-mass
     star at the origin and makes the planet (mass 1) a test particle: then E = -1/(2a) exactly.
     ``dt=None`` uses P / steps_per_orbit.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring); the
+    separations a(1 - e) and a(1 + e) must lie in :data:`KEPLER_RANGE` (1e-100 to 1e100 m) so
+    that r², 1/r³ and v² stay inside float64, and both masses must be usable (mass_ratio 0 or
+    in about [2.2e-308, 4.5e307]).
     """
-    e = float(e)
-    if not (0.0 <= e < 1.0):
-        raise InvalidInputError(f"e: eccentricity must be in [0, 1), got {e}")
+    e = _check.float_in_range("e", e, 0.0, 1.0, hi_open=True)
     a = _positive(a, "a")
-    q = float(mass_ratio)
-    if not (math.isfinite(q) and q >= 0):
-        raise InvalidInputError(f"mass_ratio: must be finite and >= 0, got {q}")
+    lo, hi = KEPLER_RANGE
+    if not (a * (1 - e) >= lo and a * (1 + e) <= hi):
+        raise InvalidInputError(
+            f"a: the separations a(1 - e) = {a * (1 - e):.3g} m to a(1 + e) = {a * (1 + e):.3g} m must lie in "
+            f"[{lo:g}, {hi:g}] m (so that r², 1/r³ and v² stay inside float64); check a and e"
+        )
+    q = _nonneg(mass_ratio, "mass_ratio")
+    if q > 0:
+        _particle_mass(min(1 / (1 + q), q / (1 + q)), "mass_ratio")
     steps_per_orbit = _count(steps_per_orbit, "steps_per_orbit", 1)
     period = 2 * math.pi * math.sqrt(a**3)
+    # Ints beyond 2**1000 would overflow the conversion to float; any such step is 0 anyway.
+    step = period / steps_per_orbit if steps_per_orbit <= 2**1000 else 0.0
+    if dt is None and not step >= _check.MIN_NORMAL:
+        raise InvalidInputError(
+            f"steps_per_orbit: the step P / steps_per_orbit = {step:.3g} s is below float64's normal range (P = {period:.3g} s)"
+        )
     rp = a * (1 - e)
     vp = math.sqrt((1 + e) / (a * (1 - e)))
-    scene = Scene(2, integrator=integrator, dt=period / steps_per_orbit if dt is None else dt, threads=threads)
+    scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
     if q == 0:
         scene.add_particles([[0.0, 0.0], [rp, 0.0]], [[0.0, 0.0], [0.0, vp]], masses=[1.0, 1.0], pinned=[True, False])
     else:
@@ -193,24 +322,33 @@ def spring_chain(
     stiffness (N/m) and dashpot damping (N·s/m) per link. ``dt=None`` uses half the suggested
     step: the whip at the end of the swing reaches energy errors of 2e-3 at the suggested step
     (stable, but visible in the books) and 3e-4 at half of it.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
     n = _count(n, "n", 2)
+    _particles("n", n, n)
     length, mass, stiffness = _positive(length, "length"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
-    if dim not in (2, 3):
-        raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
+    damping = _nonneg(damping, "damping")
+    dim = _dim(dim)
+    dt = _optional(dt, "dt")
+    link = length / (n - 1)
+    # Spring lengths come from squared lengths: link², with a margin for rounding.
+    if not (link >= _check.MIN_NORMAL and math.isfinite(2 * link * link)):
+        raise InvalidInputError(f"length: a link of length/(n - 1) = {link:.3g} m is outside float64's usable range")
+    m = _particle_mass(mass / n, "mass, n")
     x = np.zeros((n, dim))
     x[:, 0] = np.linspace(0.0, length, n)
     pinned = np.zeros(n, dtype=bool)
     pinned[0] = True
     scene = Scene(dim, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
-    scene.add_particles(x, masses=mass / n, pinned=pinned)
+    scene.add_particles(x, masses=m, pinned=pinned)
     scene.add(Springs(np.arange(n - 1), np.arange(1, n), stiffness=stiffness, damping=damping))
     g = [0.0] * dim
     g[1 if dim == 2 else 2] = -9.81
     scene.add(Gravity(g))
     if dt is None:
-        scene.dt = 0.5 * scene.suggest_dt()
-    return scene
+        _set_stable_dt(scene, 0.5, "stiffness, damping, mass")
+    return _finite_books(scene, "length, mass")
 
 
 spring_chain.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (400, 400)}
@@ -219,40 +357,35 @@ spring_chain.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 30, 
 _G = 9.81  # m/s², gravity of the fluid scenes
 
 
-def _dim(dim: object) -> int:
-    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
-        raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
-    if dim not in (2, 3):
-        raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
-    return int(dim)
-
-
 def _pair(value: object, arg: str) -> Tuple[float, float]:
     """A (length, height) pair of finite numbers > 0, m."""
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"{arg}: expected (length, height) in m, got {value!r}")
-    try:
-        a = [float(v) for v in value]  # type: ignore[union-attr]
-    except (TypeError, ValueError):
-        raise TypeError(f"{arg}: expected (length, height) in m, got {value!r}") from None
-    if len(a) != 2:
-        raise InvalidInputError(f"{arg}: expected (length, height) in m, got {len(a)} numbers")
-    for v in a:
-        _positive(v, arg)
-    return a[0], a[1]
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
+        raise TypeError(f"{arg}: expected (length, height) in m, got {type(value).__name__}")
+    items = list(value) if not (isinstance(value, np.ndarray) and value.ndim == 0) else []
+    if len(items) != 2:
+        raise InvalidInputError(f"{arg}: expected (length, height) in m, got {len(items)} numbers")
+    a, b = (_check.positive_float(arg, v) for v in items)
+    return a, b
 
 
-def _flag(value: object, arg: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{arg}: expected True or False, got {type(value).__name__}")
-    return bool(value)
+def _spacing(dx: float, args: str) -> float:
+    """The fluid's lattice spacing derived from ``args``, inside :data:`SPACING_RANGE`."""
+    lo, hi = SPACING_RANGE
+    if not lo <= dx <= hi:
+        raise InvalidInputError(f"{args}: give a particle spacing of {dx:.3g} m, outside [{lo:g}, {hi:g}] m")
+    return dx
 
 
-def _nonneg(value: float, arg: str) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value >= 0):
-        raise InvalidInputError(f"{arg}: must be finite and >= 0, got {value}")
-    return value
+def _lattice_size(lo, hi, dx) -> float:
+    """Particles of ``lattice(lo, hi, dx)`` (inf beyond float64), counted without allocating."""
+    counts = lattice_counts(lo, hi, dx)
+    return math.prod(counts) if min(counts) > 0 else math.inf
+
+
+def _walls_size(lo, hi, dx) -> float:
+    """At most the particles of ``tank_walls(lo, hi, dx, layers=3)``: its whole outer lattice."""
+    pad = 3 * dx
+    return _lattice_size([v - pad for v in lo], [v + pad for v in hi], dx)
 
 
 def _fluid_scene(dim: int, integrator: str, dt: Optional[float], threads: Optional[int]) -> Scene:
@@ -288,7 +421,7 @@ def _water_in_tank(positions, dx, tlo, thi, *, dim, lid, precision, kernel, visc
     )
     if dt is not None:
         scene.dt = dt
-    return scene
+    return _finite_books(scene, "n, tank")
 
 
 def dam_break(
@@ -353,6 +486,12 @@ def dam_break(
         Particles ``0 .. N`` are the water (one fluid, ``"water"``); ``scene.boundary_points()``
         are the tank's walls.
 
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument; also a spacing
+        ``width / n`` outside :data:`~physcore.fluids.SPACING_RANGE`.
+
     Examples
     --------
     >>> import physcore as pc
@@ -367,12 +506,13 @@ def dam_break(
     width, height, depth = _positive(width, "width"), _positive(height, "height"), _positive(depth, "depth")
     length, top = _pair(tank, "tank")
     if not width < length:
-        raise InvalidInputError(f"tank: length {length} must exceed the column width {width}")
+        raise InvalidInputError(f"tank, width: the tank's length {length} must exceed the column width {width}")
     if not height <= top:
-        raise InvalidInputError(f"tank: height {top} must be at least the column height {height}")
-    dx = width / n
+        raise InvalidInputError(f"tank, height: the tank's height {top} must be at least the column height {height}")
+    dx = _spacing(_per(width, n), "n, width")
     lo, hi = _box(dim, (0.0, width), (0.0, height), (0.0, depth))
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
+    _particles("n, width, height, depth, tank", _lattice_size(lo, hi, dx) + _walls_size(tlo, thi, dx))
     return _water_in_tank(
         lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
         viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads,
@@ -450,6 +590,12 @@ def drop(
     Scene
         The pool's particles first, then the block's; one fluid, ``"water"``.
 
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument; also a spacing
+        ``tank[0] / n`` outside :data:`~physcore.fluids.SPACING_RANGE`.
+
     Examples
     --------
     >>> import physcore as pc
@@ -464,23 +610,29 @@ def drop(
     depth = _positive(depth, "depth")
     pool, fall, block = _nonneg(pool, "pool"), _nonneg(fall, "fall"), _positive(block, "block")
     if not block < min(length, depth if dim == 3 else length):
-        raise InvalidInputError(f"block: side {block} must be smaller than the tank's length{' and depth' if dim == 3 else ''}")
+        raise InvalidInputError(
+            f"block, tank{', depth' if dim == 3 else ''}: the block's side {block} must be smaller than the tank's "
+            f"length{' and depth' if dim == 3 else ''}"
+        )
     if not pool + fall + block <= top:
-        raise InvalidInputError(f"tank: height {top} must be at least pool + fall + block = {pool + fall + block}")
-    dx = length / n
+        raise InvalidInputError(
+            f"tank, pool, fall, block: the tank's height {top} must be at least pool + fall + block = {pool + fall + block}"
+        )
+    dx = _spacing(_per(length, n), "n, tank")
     if not block >= 2 * dx:
-        raise InvalidInputError(f"n: {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
+        raise InvalidInputError(f"n, block, tank: n = {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
+    tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
+    _particles("n, tank, depth, pool, block", _lattice_size(tlo, thi, dx) + _walls_size(tlo, thi, dx))
     snap = lambda v: round(v / dx) * dx  # keep the block on the pool's (and walls') lattice
     x0 = snap(0.5 * (length - block))
     z0 = snap(pool + fall)
-    y0 = snap(0.5 * (depth - block))
+    y0 = snap(0.5 * (depth - block)) if dim == 3 else 0.0  # 2D: no depth (which may be huge)
     parts = []
     if pool > 0:
         lo, hi = _box(dim, (0.0, length), (0.0, pool), (0.0, depth))
         parts.append(lattice(lo, hi, dx))
     lo, hi = _box(dim, (x0, x0 + block), (z0, z0 + block), (y0, y0 + block))
     parts.append(lattice(lo, hi, dx))
-    tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     if sound_speed is None:
         # 10× the impact speed bound √(2 g H), H from the floor to the block's top (the fluid's
         # own estimate would miss the fall of a block into an empty tank).

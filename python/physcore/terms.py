@@ -11,6 +11,7 @@ from typing import Optional, Union
 
 import numpy as np
 
+from . import _check
 from ._errors import InvalidInputError
 
 __all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
@@ -19,9 +20,7 @@ ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
 
 def _finite_float(value: object, arg: str, *, minimum: Optional[float] = None, strict: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{arg}: expected a real number, got {type(value).__name__}")
-    v = float(value)
+    v = _check.real(arg, value)  # TypeError for bool/str/None; an int beyond float64 is refused
     if not np.isfinite(v):
         raise InvalidInputError(f"{arg}: must be finite, got {v}")
     if minimum is not None and (v < minimum or (strict and v == minimum)):
@@ -47,7 +46,7 @@ def _vector(value: object, arg: str) -> np.ndarray:
 
 
 def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
-    a = np.asarray(value)
+    a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     a = a.astype(np.float64)
@@ -139,7 +138,7 @@ class Springs:
     def __post_init__(self) -> None:
         idx = []
         for arg, val in (("i", self.i), ("j", self.j)):
-            a = np.asarray(val)
+            a = _check.array(arg, val)
             if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
                 raise TypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
             if a.ndim != 1:
@@ -226,9 +225,14 @@ class Plane:
         normal = _vector(self.normal, "normal")
         if point.shape != normal.shape:
             raise InvalidInputError(f"normal: has {normal.shape[0]} components, point has {point.shape[0]}")
-        norm = float(np.linalg.norm(normal))
-        if norm == 0.0:
+        if not np.any(normal):
             raise InvalidInputError("normal: must be non-zero")
+        with np.errstate(over="ignore", under="ignore"):
+            norm = float(np.linalg.norm(normal))
+        if not 1e-150 < norm < 1e150:
+            # |normal|² would overflow or underflow (a zero or infinite "unit" normal): scale first.
+            normal = normal / np.abs(normal).max()
+            norm = float(np.linalg.norm(normal))
         unit = normal / norm
         unit.setflags(write=False)
         object.__setattr__(self, "point", point)

@@ -11,6 +11,9 @@ use crate::vector::{Real, Vector};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::Arc;
+
+/// The largest step count: files store it as an int64, and it must never wrap.
+pub const MAX_STEPS: u64 = i64::MAX as u64;
 use std::time::Duration;
 
 /// Energy books at one instant (J). `total()` = kinetic + Σ potential + Σ dissipated is conserved
@@ -36,6 +39,8 @@ pub struct Checkpoint<V: Vector> {
     dissipated: Vec<Real>,
     collisions: Real,
     cache: Option<(Vec<V>, Vec<Real>)>,
+    /// rk45's (accepted, rejected, next h): the counts are restored too.
+    adaptive: Option<(u64, u64, Real)>,
     dt: Real,
 }
 
@@ -310,14 +315,26 @@ impl<V: Vector> Simulation<V> {
     }
 
     /// Restores time, step count, the dissipation books and the integrator cache of a saved run.
+    /// Restores what `save` wrote beside the state: time (s), step count, the energy books
+    /// (J) and the integrator's cache. Every value is checked before anything changes.
     pub fn restore(&mut self, t: Real, step: u64, dissipated: &[Real], collisions: Real, cache: Option<(Vec<V>, Vec<Real>)>) -> Result<()> {
         if dissipated.len() != self.sys.forces.terms.len() {
             return Err(invalid("dissipated", "does not match the scene's terms"));
         }
-        self.sys.state.t = t;
-        self.sys.state.step = step;
-        self.sys.forces.dissipated.copy_from_slice(dissipated);
-        self.collision_dissipated = collisions;
+        if !t.is_finite() {
+            return Err(invalid("time", format!("must be finite, got {t}")));
+        }
+        if step > MAX_STEPS {
+            return Err(invalid("step", format!("must be at most 2**63 - 1, got {step}")));
+        }
+        if let Some(d) = dissipated.iter().chain([&collisions]).find(|d| !d.is_finite()) {
+            return Err(invalid("dissipated", format!("must be finite, got {d}")));
+        }
+        if let Some((f, p)) = &cache {
+            if !(f.iter().all(|x| x.is_finite()) && p.iter().all(|x| x.is_finite())) {
+                return Err(invalid("cache", "must be finite"));
+            }
+        }
         match cache {
             Some((f, p)) => {
                 if !self.integrator.set_cache(f, p, &self.sys.state.v, dissipated.len()) {
@@ -326,6 +343,10 @@ impl<V: Vector> Simulation<V> {
             }
             None => self.integrator.reset(),
         }
+        self.sys.state.t = t;
+        self.sys.state.step = step;
+        self.sys.forces.dissipated.copy_from_slice(dissipated);
+        self.collision_dissipated = collisions;
         Ok(())
     }
 
@@ -354,10 +375,17 @@ impl<V: Vector> Simulation<V> {
     /// caller can still undo the call (`rollback`): the Python binding does when a signal
     /// arrived while the call was finishing.
     pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint<V>> {
+        if n > MAX_STEPS - self.sys.state.step {
+            return Err(invalid("n", format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.sys.state.step)));
+        }
         self.prepare()?;
         let cp = self.checkpoint()?;
         if n == 0 || self.n_particles() == 0 {
-            self.sys.state.t += n as Real * self.dt;
+            let t = self.sys.state.t + n as Real * self.dt;
+            if !t.is_finite() {
+                return Err(invalid("n", format!("{n} steps of {:e} s take the time past the largest float", self.dt)));
+            }
+            self.sys.state.t = t;
             self.sys.state.step += n;
             return Ok(cp);
         }
@@ -380,6 +408,7 @@ impl<V: Vector> Simulation<V> {
             dissipated: self.sys.forces.dissipated.clone(),
             collisions: self.collision_dissipated,
             cache: self.integrator.try_cache().map_err(|_| need.error())?,
+            adaptive: self.integrator.adaptive_stats(),
             dt: self.dt,
         })
     }
@@ -413,7 +442,10 @@ impl<V: Vector> Simulation<V> {
 
     /// `rollback` but for dt (an error about the failed call still needs its dt).
     fn restore_state(&mut self, cp: Checkpoint<V>) -> u64 {
-        let Checkpoint { state, dissipated, collisions, cache, .. } = cp;
+        let Checkpoint { state, dissipated, collisions, cache, adaptive, .. } = cp;
+        if let Some((accepted, rejected, _)) = adaptive {
+            self.integrator.set_adaptive_counts(accepted, rejected);
+        }
         let rolled_back_to = state.step;
         self.sys.state = state;
         self.sys.forces.dissipated = dissipated;
@@ -520,6 +552,10 @@ impl<V: Vector> Simulation<V> {
                     n as u64
                 }
             };
+            if n > MAX_STEPS - s.sys.state.step {
+                let arg = if substeps.is_some() { "substeps" } else { "duration" };
+                return Err(invalid(arg, format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", s.sys.state.step)));
+            }
             // duration is finite and > 0: the quotient is never NaN, at worst 0 (underflow).
             if duration / n as Real <= 0.0 {
                 return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
@@ -532,7 +568,11 @@ impl<V: Vector> Simulation<V> {
                 s.integrator.reset();
             }
             if s.n_particles() == 0 {
-                s.sys.state.t += n as Real * s.dt;
+                let t = s.sys.state.t + n as Real * s.dt;
+                if !t.is_finite() {
+                    return Err(invalid("duration", format!("{duration} s take the time past the largest float")));
+                }
+                s.sys.state.t = t;
                 s.sys.state.step += n;
                 return Ok(n);
             }

@@ -92,6 +92,9 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
         None
     }
+    /// Sets the accepted and rejected counts of an adaptive integrator (a rolled-back call
+    /// leaves them as they were).
+    fn set_adaptive_counts(&mut self, _accepted: u64, _rejected: u64) {}
     /// Why the last `step` failed with a finite state (adaptive step control gave up): the
     /// particle and what was wrong.
     fn failure(&self) -> Option<(usize, &'static str)> {

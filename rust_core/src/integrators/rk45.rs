@@ -410,6 +410,11 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         Some((self.accepted, self.rejected, self.h))
     }
 
+    fn set_adaptive_counts(&mut self, accepted: u64, rejected: u64) {
+        self.accepted = accepted;
+        self.rejected = rejected;
+    }
+
     fn failure(&self) -> Option<(usize, &'static str)> {
         self.failed.map(|i| (i, "error"))
     }

@@ -222,9 +222,10 @@ impl Simulation2 {
         with_sim!(&mut self.inner, s => s.set_single(single))
     }
 
-    /// The substep advance() would take now, or None.
-    fn auto_dt(&self) -> Option<f64> {
-        with_sim!(&self.inner, s => s.auto_dt())
+    /// The substep advance() would take now, or None (GIL released: O(N²) with gravity).
+    fn auto_dt(&self, py: Python<'_>) -> Option<f64> {
+        let inner = &self.inner;
+        py.detach(|| with_sim!(inner, s => s.auto_dt()))
     }
 
     fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -451,8 +452,10 @@ impl Simulation2 {
         Array1::from_vec(with_sim!(&self.inner, s => s.angular_momentum()).to_vec()).into_pyarray(py)
     }
 
-    fn suggest_dt(&self) -> f64 {
-        with_sim!(&self.inner, s => s.suggest_dt())
+    /// O(N²) with pairwise gravity: the GIL is released.
+    fn suggest_dt(&self, py: Python<'_>) -> f64 {
+        let inner = &self.inner;
+        py.detach(|| with_sim!(inner, s => s.suggest_dt()))
     }
 
     /// (per-term dissipated energy in term order, collisions), J.

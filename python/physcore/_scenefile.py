@@ -1,0 +1,548 @@
+"""The scene file: the layout :meth:`Scene.save` writes and the hostile-file reader behind
+:meth:`Scene.load`.
+
+A scene file is a zip archive of uncompressed ``.npy`` members, as ``numpy.savez`` writes it:
+``meta`` (a JSON string: parameters, terms, colliders, counters), ``time_hex`` (the time as
+``float.hex``), ``positions``, ``velocities``, ``masses``, ``pinned``, the per-term arrays
+``term{k}_*``, ``ledger`` (energy dissipated per term, J) and, for the integrators that keep one,
+``cache_forces`` and ``cache_power``.
+
+The reader treats every file as hostile:
+
+* nothing in it is executed: object arrays are refused from their header, before any data;
+* nothing is allocated from a size the file claims before the claim is checked against the bytes
+  the file holds: members must be stored (not compressed, so no zip bombs), each ``.npy``
+  header's shape times item size must equal its member's size, the members must fit in the
+  archive, and the zip central directory and ``meta`` have fixed caps. Array data read is
+  therefore at most the file's size;
+* every field is checked for type and range (numbers finite, counters integers in range, no bool
+  for an int, no unknown keys or members), and what reaches the Scene API is validated there
+  again.
+
+Every failure is one :class:`~physcore.SceneFileError` naming the file and the field.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import stat
+import struct
+import warnings
+import zipfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any, Dict, Iterator, List, Mapping, Optional, Tuple
+
+import numpy as np
+
+from ._errors import InvalidInputError, SceneFileError
+
+__all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
+
+FORMAT_VERSION = 1
+#: Bytes of zip central directory accepted (room for ~50 000 members; zipfile keeps a Python
+#: object of a few hundred bytes per 46-byte entry, so this caps that cost too).
+MAX_CENTRAL_DIRECTORY = 4 << 20
+#: Characters of ``meta`` JSON accepted (4 bytes each in the file; ~10 000 terms or colliders).
+MAX_META_CHARS = 1 << 22
+MAX_TIME_HEX_CHARS = 64
+#: numpy's own default cap on a ``.npy`` header, bytes.
+MAX_NPY_HEADER = 10_000
+#: ``step`` is a u64 in the core; files keep it below 2**63 so it survives any int64 consumer.
+STEP_LIMIT = 2**63
+_CHUNK = 1 << 20
+
+# Fields of each term type and collider, by kind of value (see _Reader.value).
+TERM_FIELDS: Dict[str, Dict[str, str]] = {
+    "gravity": {"g": "vector"},
+    "drag": {"coefficient": "number"},
+    "pairwise_gravity": {"G": "number", "softening": "number"},
+    "springs": {},
+    "fluid": {
+        "count": "count",
+        "first": "count",
+        "spacing": "number",
+        "density": "number",
+        "sound_speed": "number",
+        "viscosity": "number",
+        "smoothing": "number",
+        "kernel": "str",
+        "gamma": "int",
+        "clamp_pressure": "bool",
+        "precision": "str",
+        "mass": "number",
+    },
+}
+COLLIDER_FIELDS: Dict[str, Dict[str, str]] = {
+    "planes": {"point": "vector", "normal": "vector", "restitution": "number", "friction": "number"},
+    "boxes": {"lower": "vector", "upper": "vector", "restitution": "number", "friction": "number"},
+}
+_META_FIELDS: Dict[str, str] = {
+    "format": "int",
+    "dim": "int",
+    "integrator": "str",
+    "dt": "number",
+    "threads": "threads",
+    "time": "time",
+    "step": "step",
+    "collisions": "number",
+    "e0": "optional_number",
+    "e0_scale": "nonnegative",
+    "terms": "list",
+    "planes": "list",
+}
+# Absent from files of earlier versions; these are the values those versions used.
+_META_DEFAULTS: Dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": []}
+_META_OPTIONAL: Dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list"}
+
+
+def check_path(path: object, arg: str = "path") -> Path:
+    """``path`` as a :class:`~pathlib.Path`.
+
+    Raises
+    ------
+    TypeError
+        ``path`` is not a str or an ``os.PathLike`` giving a str.
+    ValueError
+        It contains a NUL character.
+    """
+    p = os.fspath(path) if isinstance(path, os.PathLike) else path
+    if not isinstance(p, str):
+        raise TypeError(f"{arg}: expected a file name (str or os.PathLike), got {type(path).__name__}")
+    if "\0" in p:
+        raise InvalidInputError(f"{arg}: contains a NUL character")
+    return Path(p)
+
+
+def _show(value: object) -> str:
+    """A short repr for messages (a hostile file may hold megabyte strings)."""
+    r = repr(value) if not isinstance(value, int) or abs(value) < 10**40 else f"an integer of {len(str(abs(value)))} digits"
+    return r if len(r) <= 80 else r[:77] + "..."
+
+
+def _kind(value: object) -> str:
+    return {dict: "an object", list: "a list", str: "a string", bool: "a bool", type(None): "null"}.get(type(value), type(value).__name__)
+
+
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _no_duplicates(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
+    out: Dict[str, Any] = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(k)
+        out[k] = v
+    return out
+
+
+class _Reader:
+    """Error construction and typed field checks for one file."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def error(self, field: str, problem: str) -> SceneFileError:
+        return SceneFileError(self.name, field, problem)
+
+    @contextmanager
+    def api(self, context: str, members: Optional[Mapping[str, str]] = None) -> Iterator[None]:
+        """Turns the Scene API's TypeError/ValueError (whose message starts with the argument's
+        name) into a SceneFileError naming the field: ``members`` maps argument names to the file
+        members they came from; others become ``context.argument``."""
+        try:
+            yield
+        except SceneFileError:
+            raise
+        except (TypeError, ValueError, OverflowError) as exc:
+            msg = str(exc)
+            m = re.match(r"([A-Za-z_][\w/]*): (.*)", msg, re.S)
+            if m:
+                arg, problem = m.groups()
+                field = (members or {}).get(arg) or (f"{context}.{arg}" if context else arg)
+            else:
+                field, problem = context, msg
+            raise self.error(field, problem) from exc
+
+    # ------------------------------------------------------------ JSON values
+    def number(self, field: str, v: object) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise self.error(field, f"must be a finite number, got {_kind(v)} {_show(v)}")
+        try:
+            x = float(v)
+        except OverflowError:
+            raise self.error(field, f"must be a finite number, got {_show(v)}") from None
+        if not math.isfinite(x):
+            raise self.error(field, f"must be a finite number, got {x}")
+        return x
+
+    def integer(self, field: str, v: object, lo: int, hi: int, hi_text: str = "") -> int:
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v < hi:
+            raise self.error(field, f"must be an integer in [{lo}, {hi_text or hi}), got {_kind(v)} {_show(v)}")
+        return v
+
+    def value(self, field: str, kind: str, v: object, dim: int = 0) -> Any:
+        if kind == "number":
+            return self.number(field, v)
+        if kind == "nonnegative":
+            x = self.number(field, v)
+            if x < 0:
+                raise self.error(field, f"must be >= 0, got {x}")
+            return x
+        if kind == "optional_number":
+            return None if v is None else self.number(field, v)
+        if kind == "time":
+            x = self.number(field, v)
+            if x < 0:
+                raise self.error(field, f"must be >= 0 (s), got {x}")
+            return x
+        if kind == "step":
+            return self.integer(field, v, 0, STEP_LIMIT, "2**63")
+        if kind == "count":
+            return self.integer(field, v, 0, STEP_LIMIT, "2**63")
+        if kind == "int":
+            if isinstance(v, bool) or not isinstance(v, int):
+                raise self.error(field, f"must be an integer, got {_kind(v)} {_show(v)}")
+            return v
+        if kind == "threads":
+            if v is None:
+                return None
+            return self.integer(field, v, 1, STEP_LIMIT, "2**63")
+        if kind == "str":
+            if not isinstance(v, str):
+                raise self.error(field, f"must be a string, got {_kind(v)} {_show(v)}")
+            return v
+        if kind == "bool":
+            if not isinstance(v, bool):
+                raise self.error(field, f"must be true or false, got {_kind(v)} {_show(v)}")
+            return v
+        if kind == "list":
+            if not isinstance(v, list):
+                raise self.error(field, f"must be a list, got {_kind(v)}")
+            return v
+        if kind == "vector":
+            if not isinstance(v, list) or len(v) != dim:
+                raise self.error(field, f"must be a list of {dim} numbers (the scene is {dim}D), got {_kind(v)} {_show(v)}")
+            return [self.number(f"{field}[{i}]", x) for i, x in enumerate(v)]
+        raise AssertionError(kind)  # pragma: no cover - a kind name missing above
+
+    def record(self, field: str, v: object, fields: Mapping[str, str], dim: int, required: Tuple[str, ...] = ()) -> Dict[str, Any]:
+        """A JSON object with exactly the keys ``fields`` (plus ``required``, checked by the
+        caller), each converted by its kind."""
+        if not isinstance(v, dict):
+            raise self.error(field, f"must be an object, got {_kind(v)}")
+        allowed = set(fields) | set(required)
+        for k in v:
+            if k not in allowed:
+                raise self.error(field, f"unknown key {_show(k)} (expected {', '.join(sorted(allowed))})")
+        for k in (*required, *fields):
+            if k not in v:
+                raise self.error(f"{field}.{k}", "missing")
+        out = {k: v[k] for k in required}
+        out.update({k: self.value(f"{field}.{k}", kind, v[k], dim) for k, kind in fields.items()})
+        return out
+
+
+# ---------------------------------------------------------------------------------- the meta
+def _parse_meta(r: _Reader, text: str) -> Dict[str, Any]:
+    try:
+        raw = json.loads(text, object_pairs_hook=_no_duplicates)
+    except _DuplicateKey as exc:
+        raise r.error("meta", f"duplicate key {_show(str(exc))}") from None
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, int digit limit, deep nesting
+        raise r.error("meta", f"not valid JSON ({type(exc).__name__}: {_show(str(exc))})") from None
+    if not isinstance(raw, dict):
+        raise r.error("meta", f"must be a JSON object, got {_kind(raw)}")
+    # The version first, so a newer file says so instead of listing unknown keys.
+    if "format" not in raw:
+        raise r.error("meta.format", "missing")
+    fmt = raw["format"]
+    if isinstance(fmt, bool) or not isinstance(fmt, int) or fmt != FORMAT_VERSION:
+        raise r.error("meta.format", f"unsupported scene format {_show(fmt)} (this physcore reads format {FORMAT_VERSION})")
+    dim = raw.get("dim")
+    if isinstance(dim, bool) or not isinstance(dim, int) or dim not in (2, 3):
+        raise r.error("meta.dim", f"must be 2 or 3, got {_kind(dim)} {_show(dim)}")
+    fields = {**_META_FIELDS, **{k: kind for k, kind in _META_OPTIONAL.items() if k in raw}}
+    meta = r.record("meta", raw, fields, dim)
+    for k, default in _META_DEFAULTS.items():
+        meta.setdefault(k, default)
+
+    terms = []
+    names = {"collisions"}  # reserved: the colliders' entry in the energy books
+    for k, t in enumerate(meta["terms"]):
+        field = f"meta.terms[{k}]"
+        if not isinstance(t, dict):
+            raise r.error(field, f"must be an object, got {_kind(t)}")
+        kind = t.get("type")
+        if not isinstance(kind, str) or kind not in TERM_FIELDS:
+            raise r.error(f"{field}.type", f"unknown term type {_show(kind)} (expected one of {', '.join(TERM_FIELDS)})")
+        rec = r.record(field, t, TERM_FIELDS[kind], dim, required=("type", "name"))
+        name = rec.get("name")
+        if not isinstance(name, str) or not name:
+            raise r.error(f"{field}.name", f"must be a non-empty string, got {_kind(name)} {_show(name)}")
+        if name in names:
+            raise r.error(f"{field}.name", f"{_show(name)} is taken (by an earlier term, or reserved)")
+        names.add(name)
+        terms.append(rec)
+    meta["terms"] = terms
+    for group, spec in COLLIDER_FIELDS.items():
+        meta[group] = [r.record(f"meta.{group}[{i}]", c, spec, dim) for i, c in enumerate(meta[group])]
+    return meta
+
+
+# ---------------------------------------------------------------------------------- the archive
+def _open_regular(path: Path, name: str) -> Tuple[IO[bytes], int]:
+    """Opens ``path`` for reading without blocking (a FIFO would wait for a writer forever) and
+    refuses anything but a regular file (a device could be endless)."""
+    flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    fd = os.open(path, flags)
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            raise SceneFileError(name, "", "not a regular file (a directory, pipe or device); give a .npz written by Scene.save")
+        return os.fdopen(fd, "rb"), st.st_size
+    except BaseException:
+        os.close(fd)
+        raise
+
+
+def _central_directory_size(fh: IO[bytes], size: int) -> Optional[int]:
+    """The central directory size the zip's end records declare, located as zipfile locates
+    them (end record last, or in the last 64 KiB; a Zip64 record just before it overrides);
+    None if there is no end record (zipfile then reports the file is not a zip)."""
+    start = max(size - (1 << 16) - 22, 0)
+    fh.seek(start)
+    tail = fh.read()
+    if tail[-22:-18] == b"PK\x05\x06" and tail[-2:] == b"\0\0":
+        pos = len(tail) - 22
+    else:
+        pos = tail.rfind(b"PK\x05\x06")
+        if pos < 0 or len(tail) - pos < 22:
+            return None
+    cd_size = struct.unpack_from("<L", tail, pos + 12)[0]
+    locator = start + pos - 20
+    if locator >= 56:
+        fh.seek(locator)
+        if fh.read(4) == b"PK\x06\x07":
+            fh.seek(locator - 56)
+            rec = fh.read(56)
+            if rec[:4] == b"PK\x06\x06":
+                cd_size = struct.unpack_from("<Q", rec, 40)[0]
+    return cd_size
+
+
+@dataclass
+class _Spec:
+    """An expected member: dtype (kind + item size, or "U" for a string) and shape, one name per
+    axis; a name bound to a size (by the meta, or by the first member read with it) must match."""
+
+    dtype: str
+    shape: Tuple[str, ...]
+    max_chars: int = 0
+
+
+def _read_member(
+    r: _Reader, zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, spec: _Spec, sizes: Dict[str, Tuple[int, str]]
+) -> np.ndarray:
+    try:
+        fh = zf.open(info)
+    except Exception as exc:  # damaged local header: zipfile raises several kinds
+        raise r.error(field, f"unreadable zip member ({type(exc).__name__}: {_show(str(exc))})") from None
+    with fh:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error")  # numpy warns (and goes on) on Python-2 headers
+                version = np.lib.format.read_magic(fh)
+                if version == (1, 0):
+                    shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh, max_header_size=MAX_NPY_HEADER)
+                elif version == (2, 0):
+                    shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh, max_header_size=MAX_NPY_HEADER)
+                else:
+                    raise ValueError(f"unsupported .npy version {version}")
+            header = fh.tell()
+        except Exception as exc:  # numpy's header parser raises several kinds
+            raise r.error(field, f"not a valid .npy header ({type(exc).__name__}: {_show(str(exc))})") from None
+        if dtype.hasobject or dtype.names is not None or dtype.subdtype is not None:
+            raise r.error(field, f"dtype {dtype.descr if dtype.names else dtype.str} is refused (object or structured arrays are never read)")
+        code = "U" if dtype.kind == "U" else f"{dtype.kind}{dtype.itemsize}"
+        if code != spec.dtype:
+            want = {"U": "a string", "b1": "bool"}.get(spec.dtype, f"{np.dtype(spec.dtype).name}")
+            raise r.error(field, f"expected {want}, got dtype {dtype.str}")
+        if spec.max_chars and dtype.itemsize > 4 * spec.max_chars:
+            raise r.error(field, f"{dtype.itemsize // 4} characters is over the limit of {spec.max_chars}")
+        if fortran:
+            raise r.error(field, "Fortran-ordered arrays are not written by Scene.save")
+        if len(shape) != len(spec.shape) or not all(type(n) is int and n >= 0 for n in shape):
+            want = "(" + ", ".join(str(p) for p in spec.shape) + ("," if len(spec.shape) == 1 else "") + ")"
+            raise r.error(field, f"expected shape {want}, got {_show(shape)}")
+        for axis, (n, p) in enumerate(zip(shape, spec.shape)):
+            if p in sizes and n != sizes[p][0]:
+                what = ("rows", "columns")[axis] if len(shape) == 2 else "entries"
+                want, origin = sizes[p]
+                raise r.error(field, f"has {n} {what} where {origin} {'is' if origin.startswith('meta') else 'has'} {want}")
+        count = math.prod(shape)
+        nbytes = count * dtype.itemsize
+        # The claim is checked against the member's real size before anything is allocated.
+        if header + nbytes != info.file_size:
+            raise r.error(field, f"the header claims shape {_show(shape)} ({nbytes} bytes) but the member holds {info.file_size - header}")
+        for n, p in zip(shape, spec.shape):
+            sizes.setdefault(p, (n, field))
+        out = np.empty(count, dtype=dtype)
+        raw = out.view(np.uint8)
+        try:
+            done = 0
+            while done < nbytes:
+                chunk = fh.read(min(_CHUNK, nbytes - done))
+                if not chunk:
+                    raise EOFError("the data ends early")
+                raw[done : done + len(chunk)] = np.frombuffer(chunk, np.uint8)
+                done += len(chunk)
+            if fh.read(1):  # also makes zipfile check the CRC
+                raise ValueError("data past the array's end")
+        except Exception as exc:  # BadZipFile (CRC), OSError, EOFError
+            raise r.error(field, f"damaged data ({type(exc).__name__}: {_show(str(exc))})") from None
+    out = out.reshape(shape)
+    if not out.dtype.isnative:
+        out = out.astype(out.dtype.newbyteorder("="))
+    if dtype.kind == "b" and raw.size and raw.max() > 1:
+        raise r.error(field, f"entry {int(np.argmax(raw > 1))} is not a bool (byte {int(raw.max())})")  # Rust reads bool bytes
+    if dtype.kind == "f":
+        bad = ~np.isfinite(out)
+        if bad.any():
+            at = np.unravel_index(int(np.argmax(bad)), out.shape)
+            at_s = str(int(at[0])) if len(at) == 1 else str(tuple(int(i) for i in at))
+            raise r.error(field, f"entry {at_s} is {out[at]} (must be finite)")
+    return out
+
+
+def _read_text(r: _Reader, zf: zipfile.ZipFile, infos: Dict[str, zipfile.ZipInfo], field: str, max_chars: int) -> str:
+    if field not in infos:
+        raise r.error(field, "missing member (not a scene file written by Scene.save?)")
+    a = _read_member(r, zf, infos[field], field, _Spec("U", (), max_chars), {})
+    codes = a.reshape(-1).view(np.uint32)
+    if codes.size and (codes.max() > 0x10FFFF or np.any((codes >= 0xD800) & (codes < 0xE000))):
+        raise r.error(field, "holds invalid Unicode code points")
+    return str(a[()])
+
+
+def _expected_members(meta: Dict[str, Any]) -> Tuple[Dict[str, _Spec], Dict[str, _Spec], Dict[str, Tuple[int, str]]]:
+    """(required, optional) members of a file with this meta, in reading order, and the sizes
+    the meta fixes (axis name -> (size, field))."""
+    d = "D"
+    sizes = {"D": (meta["dim"], "meta.dim"), "T": (len(meta["terms"]), "the number of meta.terms")}
+    fx = "f4" if meta["precision"] == "f32" else "f8"  # positions/velocities as the scene holds them
+    req = {
+        "positions": _Spec(fx, ("N", d)),
+        "velocities": _Spec(fx, ("N", d)),
+        "masses": _Spec("f8", ("N",)),
+        "pinned": _Spec("b1", ("N",)),
+        "ledger": _Spec("f8", ("T",)),
+    }
+    for k, t in enumerate(meta["terms"]):
+        if t["type"] == "springs":
+            for f in ("i", "j"):
+                req[f"term{k}_{f}"] = _Spec("i8", (f"M{k}",))
+            for f in ("stiffness", "damping", "rest_length"):
+                req[f"term{k}_{f}"] = _Spec("f8", (f"M{k}",))
+        elif t["type"] == "fluid":
+            sizes[f"F{k}"] = (t["count"], f"meta.terms[{k}].count")
+            req[f"term{k}_positions"] = _Spec("f8", (f"F{k}", d))
+            req[f"term{k}_walls"] = _Spec("f8", (f"W{k}", d))
+            req[f"term{k}_wall_volume"] = _Spec("f8", (f"W{k}",))
+    opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
+    return req, opt, sizes
+
+
+@dataclass
+class SceneFile:
+    """What :func:`read` returns: the checked meta and arrays, and the reader (for errors)."""
+
+    meta: Dict[str, Any]
+    arrays: Dict[str, np.ndarray]
+    time: float
+    reader: _Reader
+
+
+def read(path: Path) -> SceneFile:
+    """Reads and checks a scene file (see the module docstring).
+
+    Raises
+    ------
+    OSError
+        The file cannot be opened (missing, no permission).
+    SceneFileError
+        Anything wrong with what is in it.
+    """
+    r = _Reader(str(path))
+    fh, size = _open_regular(path, r.name)
+    with fh:
+        cd = _central_directory_size(fh, size)
+        if cd is not None and cd > MAX_CENTRAL_DIRECTORY:
+            raise r.error("", f"zip central directory of {cd} bytes is over the limit of {MAX_CENTRAL_DIRECTORY} (a scene file has a few dozen members)")
+        fh.seek(0)
+        try:
+            zf = zipfile.ZipFile(fh)
+        except Exception as exc:  # zipfile raises many kinds on damaged archives
+            raise r.error("", f"not a readable zip archive ({type(exc).__name__}: {_show(str(exc))}); give a .npz written by Scene.save") from None
+        with zf:
+            infos: Dict[str, zipfile.ZipInfo] = {}
+            total = 0
+            for info in zf.infolist():
+                stem = info.filename[:-4] if info.filename.endswith(".npy") else None
+                if stem is None or not re.fullmatch(r"[a-z0-9_]+", stem):
+                    raise r.error("", f"unexpected member {_show(info.filename)} (not a scene file written by Scene.save?)")
+                if stem in infos:
+                    raise r.error(stem, "appears twice in the archive")
+                if info.flag_bits & 0x1:
+                    raise r.error(stem, "is encrypted")
+                if info.compress_type != zipfile.ZIP_STORED or info.compress_size != info.file_size:
+                    raise r.error(stem, "is compressed; Scene.save stores members uncompressed, and the loader reads no more than the file holds")
+                total += info.compress_size
+                infos[stem] = info
+            if total > size:
+                raise r.error("", f"members claim {total} bytes, more than the file's {size}")
+
+            meta = _parse_meta(r, _read_text(r, zf, infos, "meta", MAX_META_CHARS))
+            req, opt, sizes = _expected_members(meta)
+            expected = {**req, "meta": None, "time_hex": None}
+            for stem in infos:
+                if stem not in expected and stem not in opt:
+                    raise r.error(stem, "unexpected member for this meta (not written by Scene.save)")
+            for stem in req:
+                if stem not in infos:
+                    raise r.error(stem, "missing member")
+            if ("cache_forces" in infos) != ("cache_power" in infos):
+                raise r.error("cache_forces" if "cache_forces" not in infos else "cache_power", "missing member (the integrator cache has two)")
+            arrays = {}
+            for stem, spec in {**req, **opt}.items():
+                if stem in infos:
+                    arrays[stem] = _read_member(r, zf, infos[stem], stem, spec, sizes)
+
+            text = _read_text(r, zf, infos, "time_hex", MAX_TIME_HEX_CHARS)
+            try:
+                time = float.fromhex(text)
+            except (ValueError, OverflowError):
+                raise r.error("time_hex", f"not a hexadecimal float: {_show(text)}") from None
+            if time != meta["time"]:  # both are written from the same float; NaN fails here too
+                raise r.error("time_hex", f"{_show(text)} does not match meta.time = {meta['time']!r}")
+
+    n = sizes["N"][0]
+    if sizes.get("C", (0,))[0] not in (0, n):
+        raise r.error("cache_forces", f"has {sizes['C'][0]} rows where positions has {n}")
+    if sizes.get("K", (0,))[0] > len(meta["terms"]) + 2:
+        raise r.error("cache_power", f"has {sizes['K'][0]} entries, more than the integrators keep for {len(meta['terms'])} terms")
+    taken: List[Tuple[int, int, int]] = []
+    for k, t in enumerate(meta["terms"]):
+        if t["type"] == "fluid":
+            if t["first"] + t["count"] > n:
+                raise r.error(f"meta.terms[{k}].first", f"particles {t['first']}..{t['first'] + t['count']} are not all in the scene ({n})")
+            taken.append((t["first"], t["first"] + t["count"], k))
+    taken.sort()
+    for (a0, a1, ka), (b0, b1, kb) in zip(taken, taken[1:]):
+        if b0 < a1:
+            raise r.error(f"meta.terms[{kb}].first", f"its particles overlap those of meta.terms[{ka}] (each fluid owns its own)")
+    return SceneFile(meta, arrays, time, r)
