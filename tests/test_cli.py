@@ -349,3 +349,18 @@ def test_render_substeps_option(tmp_path, capsys):
         assert "--substeps" in capsys.readouterr().err
     assert main(["render", "spring_chain", "-o", str(out), "-q", "--steps-per-frame", "3", "--substeps", "4"]) == 2
     assert "--substeps goes with --frame-time" in capsys.readouterr().err
+
+
+def test_out_of_memory_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
+    # A MemoryError from anywhere in the run (here: the renderer) is reported in one line, with
+    # exit code 2 and no traceback, and no file is left behind.
+    def gif(*args, **kwargs):
+        raise MemoryError("frames: needs 12.0 GB for 400 frames")
+
+    monkeypatch.setattr(render, "gif", gif)
+    out = tmp_path / "x.gif"
+    assert main(["render", "spring_chain", "-o", str(out), "--frames", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "out of memory" in err and "12.0 GB" in err and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists()

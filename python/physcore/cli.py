@@ -592,7 +592,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     Returns
     -------
     int
-        Exit code: 0 success, 1 simulation diverged or write failure, 2 usage error.
+        Exit code: 0 success, 1 simulation diverged or write failure, 2 usage error or out of
+        memory, 130 interrupted (Ctrl-C).
     """
     parser, render_parser = _build_parser()
     try:
@@ -607,6 +608,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except KeyboardInterrupt:
         print("physcore: interrupted", file=sys.stderr)
         return 130
+    except MemoryError as e:  # pc.OutOfMemoryError names what needed how much; numpy's may not
+        print(f"physcore: error: out of memory: {e or 'an allocation failed'}; nothing was written", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

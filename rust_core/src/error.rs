@@ -64,6 +64,13 @@ fn advise(quantity: &str, dt: f64, suggested_dt: f64) -> String {
         "error" => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
                     softening, or a fixed-step integrator."
             .to_string(),
+        // A suggestion that is not a usable step (0, subnormal, NaN) would read "try dt = 0":
+        // the forces themselves are the problem (overflowing masses, coincident particles).
+        _ if !(suggested_dt >= f64::MIN_POSITIVE && suggested_dt.is_finite()) => format!(
+            "No stable dt exists for this state (the fastest time scale is {suggested_dt:.3e} s): \
+             check for coincident particles, overflowing masses or stiffnesses; softening helps \
+             with gravity (dt now {dt:.3e} s)."
+        ),
         _ => format!(
             "Try a smaller dt (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable \
              integrator, or softening."
@@ -75,4 +82,23 @@ pub type Result<T> = std::result::Result<T, Error>;
 
 pub fn invalid(arg: &str, msg: impl Into<String>) -> Error {
     Error::InvalidInput { arg: arg.to_string(), msg: msg.into() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn diverged(suggested_dt: f64) -> String {
+        Error::Diverged { step: 3, t: 0.3, particle: 1, quantity: "position", rolled_back_to: 0, dt: 0.1, suggested_dt }.to_string()
+    }
+
+    #[test]
+    fn advice_never_suggests_an_unusable_dt() {
+        assert!(diverged(1e-3).contains("e.g. 1.000e-3 s"));
+        for bad in [0.0, 1e-310, f64::NAN, f64::INFINITY] {
+            let m = diverged(bad);
+            assert!(m.contains("No stable dt exists"), "{bad:e}: {m}");
+            assert!(!m.contains("e.g."), "{bad:e}: {m}");
+        }
+    }
 }

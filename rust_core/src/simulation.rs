@@ -547,7 +547,7 @@ impl<V: Vector> Simulation<V> {
                     }
                     let n = (duration / safe).ceil().max(1.0);
                     if n > 1e12 {
-                        return Err(invalid("duration", format!("{duration} s would take {n:e} substeps of {safe:e} s")));
+                        return Err(invalid("duration", format!("{duration:.3e} s would take {n:.3e} substeps of {safe:.3e} s")));
                     }
                     n as u64
                 }
@@ -556,9 +556,10 @@ impl<V: Vector> Simulation<V> {
                 let arg = if substeps.is_some() { "substeps" } else { "duration" };
                 return Err(invalid(arg, format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", s.sys.state.step)));
             }
-            // duration is finite and > 0: the quotient is never NaN, at worst 0 (underflow).
-            if duration / n as Real <= 0.0 {
-                return Err(invalid("substeps", format!("{n} substeps of {duration} s underflow")));
+            // duration is finite and > 0: the quotient is never NaN, at worst 0 or subnormal,
+            // a step with no finite reciprocal (rates, CFL numbers): refused.
+            if duration / (n as Real) < Real::MIN_POSITIVE {
+                return Err(invalid("substeps", format!("{n} substeps of {duration:.3e} s would each be below float64's normal range")));
             }
             let old = s.dt;
             s.dt = duration / n as Real;
