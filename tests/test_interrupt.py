@@ -124,6 +124,27 @@ def test_keyboard_interrupt_inside_one_force_evaluation():
     _assert_unchanged(scene, before)
 
 
+def test_keyboard_interrupt_inside_the_gravity_potential():
+    # energy() with pairwise gravity is an O(N²) sum (4·10^8 pairs at N = 40,000): Ctrl-C stops
+    # it within a fraction of one sum, and it changes nothing.
+    n = 40_000
+    rng = np.random.default_rng(3)
+    scene = pc.Scene(3, dt=1e-4)
+    scene.add_particles(rng.random((n, 3)), masses=np.full(n, 1.0 / n))
+    scene.add(pc.PairwiseGravity(G=1.0, softening=0.01))
+    t0 = time.perf_counter()
+    e0 = scene.energy()
+    t_sum = time.perf_counter() - t0
+    if t_sum < 0.25:
+        pytest.skip(f"one potential sum takes {t_sum:.3f} s here: too short to tell polling from finishing")
+    before = _snapshot(scene)
+    latency = _interrupt(scene.energy, 0.2 * t_sum)
+    # Without polling the sum would run to its end, 0.8 t_sum after the signal.
+    assert latency < min(LATENCY_BOUND, 0.5 * t_sum), f"latency {latency:.3f} s, one sum {t_sum:.3f} s"
+    _assert_unchanged(scene, before)
+    assert scene.energy() == e0
+
+
 class _Stop(Exception):
     pass
 

@@ -735,6 +735,18 @@ impl<V: Vector> Simulation<V> {
         (dt.is_finite() && dt > 0.0).then_some(dt)
     }
 
+    /// `energy()` that stops once `stop` is set (Ctrl-C): the O(N²) gravity potential reads it
+    /// per row. Nothing changes either way; an interrupted call returns `Error::Interrupted`.
+    pub fn energy_interruptible(&mut self, stop: &Arc<AtomicBool>) -> Result<EnergyReport> {
+        self.with_stop(stop, |s| {
+            let e = s.energy();
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted { rolled_back_to: s.sys.state.step });
+            }
+            Ok(e)
+        })
+    }
+
     pub fn energy(&self) -> EnergyReport {
         self.run(|| {
             let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);

@@ -437,9 +437,9 @@ impl Simulation2 {
         (Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py))
     }
 
-    fn energy<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let inner = &self.inner;
-        let e = py.detach(|| with_sim!(inner, s => s.energy()));
+    /// The energy books; O(N²) with pairwise gravity, so Ctrl-C interrupts it (nothing changes).
+    fn energy<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let e = with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.energy_interruptible(stop)))?;
         energy_dict(py, e)
     }
 
@@ -555,6 +555,37 @@ fn interruptible<V: Vector, T: Send>(
             Err(e)
         }
         (Err(_), Some(e)) => Err(e),
+        (Err(Error::Interrupted { .. }), None) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
+        (Err(e), None) => Err(to_py(py, e)),
+    }
+}
+
+/// `interruptible` for a call that changes nothing (the energy books): Ctrl-C, or any exception
+/// of a Python signal handler, stops it and is raised; there is nothing to roll back.
+fn interruptible_read<V: Vector, T: Send>(
+    py: Python<'_>,
+    sim: &mut Simulation<V>,
+    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
+) -> PyResult<T> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut pending: Option<PyErr> = None;
+    let result = py.detach(|| {
+        sim.run_watched(
+            |s| f(s, &stop),
+            |wait| {
+                while !wait(SIGNAL_POLL) {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        pending = Some(e);
+                        stop.store(true, Ordering::Relaxed);
+                        return;
+                    }
+                }
+            },
+        )
+    });
+    match (result, pending) {
+        (_, Some(e)) => Err(e),
+        (Ok(v), None) => Ok(v),
         (Err(Error::Interrupted { .. }), None) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
         (Err(e), None) => Err(to_py(py, e)),
     }

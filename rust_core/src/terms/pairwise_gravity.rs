@@ -399,10 +399,16 @@ impl<V: Vector> Term<V> for PairwiseGravity {
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         let eps2 = self.softening * self.softening;
         let n = x.len();
-        // Σ_i Σ_{j>i}: each chunk of receivers sums its own rows in index order.
+        // Σ_i Σ_{j>i}: each chunk of receivers sums its own rows in index order. O(N²): the
+        // stop flag of the call is read per row, and once it is set the sum is abandoned (the
+        // caller discards it).
+        let stop = self.stop.flag();
         let u = par::sum(n, 0.0, |r| {
             let mut u = 0.0;
             for i in r {
+                if stop.load(Ordering::Relaxed) {
+                    break;
+                }
                 let mut row = 0.0;
                 for j in i + 1..n {
                     let r2 = (x[j] - x[i]).length_squared() + eps2;
