@@ -523,15 +523,13 @@ fn undo_if_signalled<V: Vector, T>(py: Python<'_>, sim: &mut Simulation<V>, (v, 
 /// Runs `f` with the GIL released as a task on the simulation's pool (`run_watched`), while the
 /// calling thread wakes every `SIGNAL_POLL` to run Python's signal handlers (`check_signals`;
 /// Python runs them on the main thread only, so the stepping code, on a pool thread, cannot).
-/// If a handler raises (Ctrl-C: KeyboardInterrupt), the stop flag is set, `f` rolls back and
-/// returns `Error::Interrupted`, and the handler's exception is raised. If `f` finished before
-/// it saw the flag, the handlers run once more and, if one raises, `f`'s work is undone with
-/// the checkpoint it returned: an interrupted call never stands.
-fn interruptible<V: Vector, T: Send>(
+/// If a handler raises (Ctrl-C: KeyboardInterrupt), the stop flag is set and the handler's
+/// exception is returned beside `f`'s result.
+fn watched<V: Vector, T: Send>(
     py: Python<'_>,
     sim: &mut Simulation<V>,
-    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<(T, Checkpoint<V>), Error> + Send,
-) -> PyResult<T> {
+    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
+) -> (Result<T, Error>, Option<PyErr>) {
     let stop = Arc::new(AtomicBool::new(false));
     let mut pending: Option<PyErr> = None;
     let result = py.detach(|| {
@@ -548,7 +546,19 @@ fn interruptible<V: Vector, T: Send>(
             },
         )
     });
-    match (result, pending) {
+    (result, pending)
+}
+
+/// `f` under `watched`: once a handler raises, `f` rolls back and returns `Error::Interrupted`,
+/// and the handler's exception is raised. If `f` finished before it saw the flag, the handlers
+/// run once more and, if one raises, `f`'s work is undone with the checkpoint it returned: an
+/// interrupted call never stands.
+fn interruptible<V: Vector, T: Send>(
+    py: Python<'_>,
+    sim: &mut Simulation<V>,
+    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<(T, Checkpoint<V>), Error> + Send,
+) -> PyResult<T> {
+    match watched(py, sim, f) {
         (Ok(done), None) => undo_if_signalled(py, sim, done),
         (Ok((_, cp)), Some(e)) => {
             sim.rollback(cp);
@@ -560,30 +570,14 @@ fn interruptible<V: Vector, T: Send>(
     }
 }
 
-/// `interruptible` for a call that changes nothing (the energy books): Ctrl-C, or any exception
-/// of a Python signal handler, stops it and is raised; there is nothing to roll back.
+/// `f` under `watched`, for a call that changes nothing (the energy books): a handler's
+/// exception stops it and is raised; there is nothing to roll back.
 fn interruptible_read<V: Vector, T: Send>(
     py: Python<'_>,
     sim: &mut Simulation<V>,
     f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
 ) -> PyResult<T> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut pending: Option<PyErr> = None;
-    let result = py.detach(|| {
-        sim.run_watched(
-            |s| f(s, &stop),
-            |wait| {
-                while !wait(SIGNAL_POLL) {
-                    if let Err(e) = Python::attach(|py| py.check_signals()) {
-                        pending = Some(e);
-                        stop.store(true, Ordering::Relaxed);
-                        return;
-                    }
-                }
-            },
-        )
-    });
-    match (result, pending) {
+    match watched(py, sim, f) {
         (_, Some(e)) => Err(e),
         (Ok(v), None) => Ok(v),
         (Err(Error::Interrupted { .. }), None) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
