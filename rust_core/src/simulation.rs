@@ -735,15 +735,17 @@ impl<V: Vector> Simulation<V> {
         (dt.is_finite() && dt > 0.0).then_some(dt)
     }
 
-    /// `energy()` that stops once `stop` is set (Ctrl-C): the O(N²) gravity potential reads it
-    /// per row. Nothing changes either way; an interrupted call returns `Error::Interrupted`.
-    pub fn energy_interruptible(&mut self, stop: &Arc<AtomicBool>) -> Result<EnergyReport> {
+    /// Runs a read-only query (`energy`, `suggest_dt`, `auto_dt`) with `stop` handed to the
+    /// terms, whose O(N²) sums (gravity's potential and time scale) read it per row. Nothing
+    /// changes either way; once `stop` is set the result is dropped and `Error::Interrupted`
+    /// returned.
+    pub fn query_interruptible<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&Self) -> R + Send) -> Result<R> {
         self.with_stop(stop, |s| {
-            let e = s.energy();
+            let r = f(s);
             if stop.load(Ordering::Relaxed) {
                 return Err(Error::Interrupted { rolled_back_to: s.sys.state.step });
             }
-            Ok(e)
+            Ok(r)
         })
     }
 

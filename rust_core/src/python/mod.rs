@@ -222,10 +222,10 @@ impl Simulation2 {
         with_sim!(&mut self.inner, s => s.set_single(single))
     }
 
-    /// The substep advance() would take now, or None (GIL released: O(N²) with gravity).
-    fn auto_dt(&self, py: Python<'_>) -> Option<f64> {
-        let inner = &self.inner;
-        py.detach(|| with_sim!(inner, s => s.auto_dt()))
+    /// The substep advance() would take now, or None (O(N²) with gravity: GIL released, and
+    /// Ctrl-C interrupts it).
+    fn auto_dt(&mut self, py: Python<'_>) -> PyResult<Option<f64>> {
+        with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.auto_dt())))
     }
 
     fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -439,7 +439,7 @@ impl Simulation2 {
 
     /// The energy books; O(N²) with pairwise gravity, so Ctrl-C interrupts it (nothing changes).
     fn energy<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let e = with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.energy_interruptible(stop)))?;
+        let e = with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.energy())))?;
         energy_dict(py, e)
     }
 
@@ -452,10 +452,9 @@ impl Simulation2 {
         Array1::from_vec(with_sim!(&self.inner, s => s.angular_momentum()).to_vec()).into_pyarray(py)
     }
 
-    /// O(N²) with pairwise gravity: the GIL is released.
-    fn suggest_dt(&self, py: Python<'_>) -> f64 {
-        let inner = &self.inner;
-        py.detach(|| with_sim!(inner, s => s.suggest_dt()))
+    /// O(N²) with pairwise gravity: the GIL is released and Ctrl-C interrupts it.
+    fn suggest_dt(&mut self, py: Python<'_>) -> PyResult<f64> {
+        with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.suggest_dt())))
     }
 
     /// (per-term dissipated energy in term order, collisions), J.
