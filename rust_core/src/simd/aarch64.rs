@@ -10,6 +10,8 @@ type F32s = <Neon as pulp::Simd>::f32s;
 /// `frsqrte` (an 8-bit estimate, relative error ≤ 2⁻⁸) over the whole range; three Newton steps
 /// for f64 (→ 2.3e-5 → 8e-10 → round-off), two for f32.
 impl Simd for Neon {
+    const REGISTERS: usize = 32;
+
     #[inline(always)]
     fn rsqrt_f64s(self, x: F64s) -> F64s {
         // SAFETY: NEON is part of every aarch64 target this builds for (and the token proves it);

@@ -155,6 +155,10 @@ pub fn cpu_name() -> String {
 /// `rsqrt_*` returns 1/√x to about 1 ulp (f64: a few ulp; f32: ≤ 3 ulp) for every positive
 /// finite x, and is unspecified (inf or NaN) for x = 0: kernels mask those lanes.
 pub trait Simd: pulp::Simd {
+    /// Vector registers of the level (16 on AVX2, 32 on AVX-512 and NEON): kernels that keep
+    /// several receivers in registers size their tiles by it.
+    const REGISTERS: usize = 16;
+
     /// Rows `idx[..F64_LANES]` of two row-major `(n, dim)` arrays `a` and `b` (positions and
     /// velocities, dim 2 or 3), one vector per component (component 2 is zero in 2D). Panics if
     /// an index is out of bounds. Portable default: lane by lane (AVX2 too: its gather measured

@@ -60,6 +60,8 @@ impl Simd for V3 {
 /// lane), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; one fourth-order step for
 /// f64 (→ 4e-18, round-off), one Newton step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
+    const REGISTERS: usize = 32;
+
     #[inline(always)]
     fn gather_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([F64s4; 3], [F64s4; 3]) {
         let idx: [u32; 8] = idx[..8].try_into().expect("8 lanes");
