@@ -56,14 +56,14 @@ impl Simd for V3 {
     }
 }
 
-/// AVX-512: the hardware row gather (cloth 128²: 54 M particle-steps/s against 26–31 M lane by
-/// lane), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; one fourth-order step for
+/// AVX-512: the hardware row gather (Zen 5, cloth 128²: 54 M particle-steps/s against 26–31 M lane
+/// by lane; not used on Zen 4, see `hardware_gather_pays`), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; one fourth-order step for
 /// f64 (→ 4e-18, round-off), one Newton step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
     const REGISTERS: usize = 32;
 
     #[inline(always)]
-    fn gather_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([F64s4; 3], [F64s4; 3]) {
+    fn gather_rows_f64s_hw(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([F64s4; 3], [F64s4; 3]) {
         let idx: [u32; 8] = idx[..8].try_into().expect("8 lanes");
         check_rows(a, b, dim, &idx);
         let offs = self.avx2._mm256_mullo_epi32(cast(idx), self.avx._mm256_set1_epi32(dim as i32));

@@ -250,6 +250,19 @@ impl<V: Vector> Kernel for SliceForces<'_, V> {
     type Output = Real;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> Real {
+        // The gather only moves data: either way gives the same bits.
+        if simd::hardware_gather_pays() {
+            self.slices::<S, true>(s)
+        } else {
+            self.slices::<S, false>(s)
+        }
+    }
+}
+
+impl<V: Vector> SliceForces<'_, V> {
+    /// `HW`: the level's hardware row gather (`Simd::gather_rows_f64s_hw`), else lane by lane.
+    #[inline(always)]
+    fn slices<S: Simd, const HW: bool>(self, s: S) -> Real {
         let SliceForces { sp, x, v, g0, out, want, assign } = self;
         let (xf, vf) = (V::flat(x), V::flat(v));
         let l = P::<S, f64>::lanes();
@@ -269,7 +282,7 @@ impl<V: Vector> Kernel for SliceForces<'_, V> {
                 let mut acc = [zero; 3];
                 let mut e = s0 + q * l;
                 while e < s1 {
-                    let (ox, ov) = s.gather_rows_f64s(xf, vf, dim, &sp.other[e..]);
+                    let (ox, ov) = if HW { s.gather_rows_f64s_hw(xf, vf, dim, &sp.other[e..]) } else { s.gather_rows_f64s(xf, vf, dim, &sp.other[e..]) };
                     let mut d = [zero; 3];
                     let mut dv = [zero; 3];
                     let mut l2 = zero;
