@@ -728,6 +728,48 @@ mod tests {
         }
     }
 
+    /// Receivers `i0..i0+R` for a tile of R, and one at a time.
+    struct Tiles<'a, const R: usize>(&'a Soa<f64>, std::ops::Range<usize>, usize, f64, &'a mut Cols<f64>);
+    impl<const R: usize> Kernel for Tiles<'_, R> {
+        type Output = Vec<[Real; 3]>;
+        #[inline(always)]
+        fn run<S: Simd>(self, s: S) -> Vec<[Real; 3]> {
+            let Tiles(src, far, i0, eps2, cols) = self;
+            if R == 1 {
+                (0..4).map(|k| far_tile::<S, f64, 1, false>(s, src, far.clone(), i0 + k, eps2, cols)[0]).collect()
+            } else {
+                far_tile::<S, f64, R, false>(s, src, far, i0, eps2, cols).to_vec()
+            }
+        }
+    }
+
+    /// A tile of receivers gives the same bits as the receivers one at a time, row sums and
+    /// column sums both, at every level (the tiles only share loads; the order of every sum is
+    /// kept).
+    #[test]
+    fn receiver_tiles_give_the_same_bits_as_one_receiver_at_a_time() {
+        let n = 300;
+        let (x, model) = cloud(n, 4242, false);
+        let mut src = Soa::<f64>::default();
+        src.pack(&x, &model);
+        let far = 64..src.xs.len();
+        let cols = || Cols { x: vec![0.25; src.xs.len()], y: vec![-0.5; src.xs.len()], z: vec![1.0; src.xs.len()] };
+        for level in Level::available() {
+            let (mut c1, mut c2, mut c4) = (cols(), cols(), cols());
+            let one = simd::dispatch(level, Tiles::<1>(&src, far.clone(), 7, 1e-4, &mut c1));
+            let mut two = simd::dispatch(level, Tiles::<2>(&src, far.clone(), 7, 1e-4, &mut c2));
+            two.extend(simd::dispatch(level, Tiles::<2>(&src, far.clone(), 9, 1e-4, &mut c2)));
+            let four = simd::dispatch(level, Tiles::<4>(&src, far.clone(), 7, 1e-4, &mut c4));
+            for (name, rows, c) in [("2", &two, &c2), ("4", &four, &c4)] {
+                assert_eq!(rows.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(), one.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(), "{level:?} tile {name}: rows");
+                for (a, b) in [(&c.x, &c1.x), (&c.y, &c1.y), (&c.z, &c1.z)] {
+                    assert!(a.iter().zip(b.iter()).all(|(p, q)| p.to_bits() == q.to_bits()), "{level:?} tile {name}: columns");
+                }
+            }
+            assert!(c1.x[far.clone()].iter().any(|&v| v != 0.25), "the columns were updated");
+        }
+    }
+
     /// With the stop flag set the kernels compute nothing (every row keeps the zero it was
     /// cleared to); unset, the same call fills every row.
     #[test]
