@@ -182,6 +182,11 @@ pub trait Simd: pulp::Simd {
     /// Vector registers of the level (16 on AVX2, 32 on AVX-512 and NEON): kernels that keep
     /// several receivers in registers size their tiles by it.
     const REGISTERS: usize = 16;
+    /// 0, or k: kernels that compute many f64 1/√x route one receiver in k through the divider
+    /// (`P::rsqrt_exact`) while the rest take the estimate (`P::rsqrt`), so that both the FMA
+    /// units and the divider work (AVX2: k = 2, see `x86.rs`). The choice is fixed per receiver
+    /// index, so results do not depend on the thread count or the tiling.
+    const SPLIT_RSQRT: usize = 0;
 
     /// Rows `idx[..F64_LANES]` of two row-major `(n, dim)` arrays `a` and `b` (positions and
     /// velocities, dim 2 or 3), one vector per component (component 2 is zero in 2D), lane by
@@ -342,6 +347,8 @@ pub trait Float:
     /// `m ? a : b` lane by lane.
     fn select<S: Simd>(s: S, m: Self::M<S>, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
     fn rsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
+    /// The correctly rounded square root.
+    fn vsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
     /// Sum of the lanes (a fixed pairwise order per level).
     fn sum<S: Simd>(s: S, a: Self::V<S>) -> Self;
 }
@@ -378,7 +385,7 @@ macro_rules! float_impl {
     };
     (@ops $t:ty, $v:ident, $m:ident, splat = $splat:ident, add = $add:ident, sub = $sub:ident, mul = $mul:ident,
      div = $div:ident, fma = $fma:ident, fnma = $fnma:ident, max = $max:ident, min = $min:ident, lt = $lt:ident,
-     gt = $gt:ident, select = $sel:ident, rsqrt = $rsqrt:ident, sum = $sum:ident) => {
+     gt = $gt:ident, select = $sel:ident, rsqrt = $rsqrt:ident, sqrt = $sqrt:ident, sum = $sum:ident) => {
         #[inline(always)]
         fn splat<S: Simd>(s: S, x: Self) -> S::$v {
             s.$splat(x)
@@ -432,6 +439,10 @@ macro_rules! float_impl {
             s.$rsqrt(x)
         }
         #[inline(always)]
+        fn vsqrt<S: Simd>(s: S, x: S::$v) -> S::$v {
+            s.$sqrt(x)
+        }
+        #[inline(always)]
         fn sum<S: Simd>(s: S, a: S::$v) -> Self {
             s.$sum(a)
         }
@@ -441,11 +452,11 @@ macro_rules! float_impl {
 float_impl!(f64, f64s, m64s, F64_LANES,
     splat = splat_f64s, add = add_f64s, sub = sub_f64s, mul = mul_f64s, div = div_f64s, fma = mul_add_e_f64s,
     fnma = negate_mul_add_e_f64s, max = max_f64s, min = min_f64s, lt = less_than_f64s, gt = greater_than_f64s,
-    select = select_f64s, rsqrt = rsqrt_f64s, sum = reduce_sum_f64s);
+    select = select_f64s, rsqrt = rsqrt_f64s, sqrt = sqrt_f64s, sum = reduce_sum_f64s);
 float_impl!(f32, f32s, m32s, F32_LANES,
     splat = splat_f32s, add = add_f32s, sub = sub_f32s, mul = mul_f32s, div = div_f32s, fma = mul_add_e_f32s,
     fnma = negate_mul_add_e_f32s, max = max_f32s, min = min_f32s, lt = less_than_f32s, gt = greater_than_f32s,
-    select = select_f32s, rsqrt = rsqrt_f32s, sum = reduce_sum_f32s);
+    select = select_f32s, rsqrt = rsqrt_f32s, sqrt = sqrt_f32s, sum = reduce_sum_f32s);
 
 /// A SIMD vector of `F` with its token, so kernels read like scalar code (`a * b + c`). The token
 /// is zero-sized: a `P` is just the register.
@@ -545,6 +556,12 @@ impl<S: Simd, F: Float> P<S, F> {
     #[inline(always)]
     pub fn rsqrt(self) -> Self {
         P { s: self.s, v: F::rsqrt(self.s, self.v) }
+    }
+    /// 1/√self as a correctly rounded square root and a division: the divider, not the FMA
+    /// units (see `Simd::SPLIT_RSQRT`).
+    #[inline(always)]
+    pub fn rsqrt_exact(self) -> Self {
+        Self::splat(self.s, F::ONE) / P { s: self.s, v: F::vsqrt(self.s, self.v) }
     }
     #[inline(always)]
     pub fn sum(self) -> F {

@@ -308,6 +308,10 @@ fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(s: S, src: &Soa
     // −m_i hoisted: the reaction is one FMA per component (negation is exact).
     let nmi: [P<S, F>; R] = std::array::from_fn(|r| P::splat(s, -ms[i0 + r]));
     let mut acc = [[zero; 3]; R];
+    // One receiver in `S::SPLIT_RSQRT` takes f64 1/√ through the divider where the level asks
+    // for it (a fixed choice per receiver index: the same bits for any tiling and thread count).
+    let k = S::SPLIT_RSQRT;
+    let exact: [bool; R] = std::array::from_fn(|r| std::mem::size_of::<F>() == 8 && k > 0 && (i0 + r) % k == k - 1);
     let Cols { x: cx, y: cy, z: cz } = cols;
     let col = cx[far.clone()].chunks_exact_mut(l).zip(cy[far.clone()].chunks_exact_mut(l)).zip(cz[far.clone()].chunks_exact_mut(l));
     for ((bx, by, bz, bm), ((ox, oy), oz)) in src.vectors(far, l).zip(col) {
@@ -318,7 +322,7 @@ fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(s: S, src: &Soa
             let dy = y - xi[r][1];
             let dz = z - xi[r][2];
             let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
-            let rinv = r2.rsqrt();
+            let rinv = if exact[r] { r2.rsqrt_exact() } else { r2.rsqrt() };
             let mut y3 = rinv * rinv * rinv;
             if MASK {
                 y3 = r2.gt(zero).select(y3, zero);
