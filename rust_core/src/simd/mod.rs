@@ -679,7 +679,6 @@ mod tests {
                 }
             }
         }
-        let _ = hardware_gather_pays();
     }
 
     #[test]

@@ -63,8 +63,9 @@ impl Simd for V3 {
 }
 
 /// AVX-512: the hardware row gather (Zen 5, cloth 128²: 54 M particle-steps/s against 26–31 M lane
-/// by lane; not used on Zen 4, see `hardware_gather_pays`), and `vrsqrt14` (relative error < 2⁻¹⁴) over the whole range; one fourth-order step for
-/// f64 (→ 4e-18, round-off), one Newton step for f32 (→ 5.6e-9, below float32 rounding).
+/// by lane; not used on Zen 4, see `hardware_gather_pays`), and `vrsqrt14` (relative error
+/// < 2⁻¹⁴) over the whole range; one fourth-order step for f64 (→ 4e-18, round-off), one Newton
+/// step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
     const REGISTERS: usize = 32;
 

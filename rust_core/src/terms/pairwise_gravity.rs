@@ -603,6 +603,13 @@ impl Kernel for Encounter<'_> {
 mod tests {
     use super::*;
 
+    /// The sources of `x` in precision `T`, as the term packs them.
+    fn packed<T: Float>(x: &[glam::DVec3], model: &Model) -> Soa<T> {
+        let mut src = Soa::default();
+        src.pack(x, model);
+        src
+    }
+
     fn cloud(n: usize, seed: u64, single: bool) -> (Vec<glam::DVec3>, Model) {
         let mut seed = seed;
         let mut rnd = || {
@@ -619,8 +626,7 @@ mod tests {
     fn every_level_matches_the_naive_sum_to_round_off() {
         let n = 203; // not a multiple of any lane count: exercises the massless padding
         let (x, model) = cloud(n, 12345, false);
-        let mut src = Soa::<f64>::default();
-        src.pack(&x, &model);
+        let src = packed::<f64>(&x, &model);
         for level in Level::available() {
             let mut acc = Vec::new();
             accelerations(&src, n, 0.0, level, &AtomicBool::new(false), &mut acc);
@@ -655,8 +661,7 @@ mod tests {
                     }
                 }
             }
-            let mut src = Soa::<f64>::default();
-            src.pack(&x, &model);
+            let src = packed::<f64>(&x, &model);
             for level in Level::available() {
                 let never = AtomicBool::new(false);
                 // Rows in uneven pieces, as the parallel chunks cut them.
@@ -685,8 +690,7 @@ mod tests {
                     }
                 }
             }
-            let mut src = Soa::<f64>::default();
-            src.pack(&x, &model);
+            let src = packed::<f64>(&x, &model);
             for level in Level::available() {
                 let never = AtomicBool::new(false);
                 let rate = [0..1, 1..50, 50..200, 200..n].into_iter().map(|rows| simd::dispatch(level, Encounter { src: &src, n, eps2: eps * eps, rows, stop: &never })).fold(0.0, f64::max);
@@ -703,8 +707,7 @@ mod tests {
     fn symmetric_sum_matches_the_naive_sum_at_every_level() {
         let n = 1107;
         let (x, model) = cloud(n, 99, false);
-        let mut src = Soa::<f64>::default();
-        src.pack(&x, &model);
+        let src = packed::<f64>(&x, &model);
         for eps2 in [0.0, 1e-4] {
             let naive: Vec<glam::DVec3> = (0..n)
                 .map(|i| {
@@ -754,8 +757,7 @@ mod tests {
     fn receiver_tiles_give_the_same_bits_as_one_receiver_at_a_time() {
         let n = 300;
         let (x, model) = cloud(n, 4242, false);
-        let mut src = Soa::<f64>::default();
-        src.pack(&x, &model);
+        let src = packed::<f64>(&x, &model);
         let far = 64..src.xs.len();
         let cols = || Cols { x: vec![0.25; src.xs.len()], y: vec![-0.5; src.xs.len()], z: vec![1.0; src.xs.len()] };
         for level in Level::available() {
@@ -780,8 +782,7 @@ mod tests {
     fn a_set_stop_flag_skips_the_remaining_work() {
         let n = 1500; // above SYM_MIN: both sums apply
         let (x, model) = cloud(n, 5, false);
-        let mut src = Soa::<f64>::default();
-        src.pack(&x, &model);
+        let src = packed::<f64>(&x, &model);
         let level = simd::level();
         for stopped in [true, false] {
             let stop = AtomicBool::new(stopped);
@@ -804,8 +805,7 @@ mod tests {
     fn float32_levels_match_the_naive_sum_to_single_precision() {
         let n = 517;
         let (x, model) = cloud(n, 777, true);
-        let mut src = Soa::<f32>::default();
-        src.pack(&x, &model);
+        let src = packed::<f32>(&x, &model);
         for level in Level::available() {
             let mut acc = Vec::new();
             accelerations(&src, n, 1e-4, level, &AtomicBool::new(false), &mut acc);
