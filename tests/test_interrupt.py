@@ -164,3 +164,43 @@ def test_exception_of_a_signal_handler_is_raised_after_the_rollback():
         _assert_unchanged(scene, before)
     finally:
         signal.signal(signal.SIGUSR1, old)
+
+
+def _longest_pause_of_another_thread(call) -> tuple[float, float]:
+    """Runs ``call()`` on this thread while another Python thread ticks; returns the call's wall
+    time and the longest interval in which the other thread could not run Python (the GIL was
+    not to be had)."""
+    ticks = []
+    done = threading.Event()
+
+    def tick():
+        while not done.is_set():
+            ticks.append(time.perf_counter())
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    while not ticks:  # the ticker runs before the call starts
+        time.sleep(0.001)
+    t0 = time.perf_counter()
+    call()
+    t1 = time.perf_counter()
+    done.set()
+    ticker.join()
+    inside = [t0] + [t for t in ticks if t0 < t < t1] + [t1]
+    return t1 - t0, max(b - a for a, b in zip(inside, inside[1:]))
+
+
+@pytest.mark.parametrize("query", ["energy", "suggest_dt", "auto_dt", "step"])
+def test_long_calls_release_the_gil(query):
+    # Issue 17 item 9: suggest_dt held the GIL for 285 ms at N = 1e4, freezing every other Python
+    # thread. Each long call now runs without the GIL (the calling thread only takes it every
+    # 20 ms to run signal handlers), so another thread is never paused for most of the call.
+    rng = np.random.default_rng(3)
+    n = 20000
+    s = pc.Scene(dim=2, dt=1e-4, threads=1)
+    s.add_particles(rng.normal(size=(n, 2)), np.zeros((n, 2)), masses=np.ones(n))
+    s.add(pc.terms.PairwiseGravity(G=1.0, softening=0.01))
+    call = (lambda: s.step(1)) if query == "step" else getattr(s, query)
+    wall, pause = _longest_pause_of_another_thread(call)
+    assert wall > 0.01, f"{query} took {wall:.4f} s, too short to tell"
+    assert pause < 0.5 * wall, f"another thread was paused {pause:.3f} s of {query}'s {wall:.3f} s"
