@@ -44,7 +44,10 @@ fn cloth(g: usize) -> Simulation<DVec3> {
     let rest: Vec<f64> = i.iter().zip(&j).map(|(&a, &b)| (x[a as usize] - x[b as usize]).length()).collect();
     let ns = i.len();
     s.add_particles(x, vec![DVec3::ZERO; n], vec![m; n], (0..n).map(|p| p < g).collect()).unwrap();
-    s.add_term(Box::new(Springs::new("springs".into(), i, j, vec![k; ns], vec![0.1 * (k * m).sqrt(); ns], rest, n).unwrap())).unwrap();
+    s.add_term(Box::new(
+        Springs::new("springs".into(), i, j, vec![k; ns], vec![0.1 * (k * m).sqrt(); ns], rest, n).unwrap(),
+    ))
+    .unwrap();
     s.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
     s
 }
@@ -73,7 +76,11 @@ fn main() {
             for (g, steps) in [(128, 1000), (256, 250)] {
                 let mut s = cloth(g);
                 let t = time(&mut s, steps);
-                println!("{:7} cloth {g} {:.1} M particle-steps/s", level.name(), (g * g) as f64 * steps as f64 / t / 1e6);
+                println!(
+                    "{:7} cloth {g} {:.1} M particle-steps/s",
+                    level.name(),
+                    (g * g) as f64 * steps as f64 / t / 1e6
+                );
             }
         }
         if what == "nbody" {
@@ -88,7 +95,12 @@ fn main() {
                     ts.push(t0.elapsed().as_secs_f64());
                 }
                 ts.sort_by(|a, b| a.partial_cmp(b).unwrap());
-                println!("{:7} nbody {} {:.2} G pairs/s", level.name(), if single { "f32" } else { "f64" }, (n * n * 20) as f64 / ts[1] / 1e9);
+                println!(
+                    "{:7} nbody {} {:.2} G pairs/s",
+                    level.name(),
+                    if single { "f32" } else { "f64" },
+                    (n * n * 20) as f64 / ts[1] / 1e9
+                );
             }
         }
     }

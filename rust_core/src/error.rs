@@ -89,7 +89,8 @@ mod tests {
     use super::*;
 
     fn diverged(suggested_dt: f64) -> String {
-        Error::Diverged { step: 3, t: 0.3, particle: 1, quantity: "position", rolled_back_to: 0, dt: 0.1, suggested_dt }.to_string()
+        Error::Diverged { step: 3, t: 0.3, particle: 1, quantity: "position", rolled_back_to: 0, dt: 0.1, suggested_dt }
+            .to_string()
     }
 
     #[test]

@@ -85,7 +85,6 @@ fn hash(c: [i64; 3], mask: u64) -> usize {
     ((h ^ (h >> 29) ^ (h >> 47)) & mask) as usize
 }
 
-
 impl CellList {
     /// An empty cell list with cell size `cell` (> 0, finite), for points of dimension `dim`.
     pub fn new(cell: Real, dim: usize) -> Result<Self> {
@@ -373,10 +372,11 @@ impl CellList {
             }
             Ok(c)
         };
-        let counts: Vec<usize> = match crate::par::fork_if(n, || (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()) {
-            Some(c) => c?,
-            None => (0..blocks).map(count_block).collect::<Result<_>>()?,
-        };
+        let counts: Vec<usize> =
+            match crate::par::fork_if(n, || (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()) {
+                Some(c) => c?,
+                None => (0..blocks).map(count_block).collect::<Result<_>>()?,
+            };
         let total: usize = counts.iter().sum();
         let need = Need::new("neighbors", 2 * Need::bytes_of::<i64>(total), format!("{} pairs", count(total as u128)));
         need.check()?;
@@ -433,7 +433,12 @@ impl CellList {
 
     /// Heap bytes held (for the memory-per-particle figures).
     pub fn bytes(&self) -> usize {
-        self.order.capacity() * 4 + self.cells.capacity() * 24 + self.start.capacity() * 4 + self.keys.capacity() * 4 + self.hist.capacity() * 4 + self.coords.capacity() * 24
+        self.order.capacity() * 4
+            + self.cells.capacity() * 24
+            + self.start.capacity() * 4
+            + self.keys.capacity() * 4
+            + self.hist.capacity() * 4
+            + self.coords.capacity() * 24
     }
 }
 
@@ -500,7 +505,8 @@ mod tests {
     fn matches_brute_force_dense_and_hashed() {
         let mut s = 7;
         for &(n, span, far) in &[(500usize, 5.0, false), (5000, 20.0, false), (300, 5.0, true), (6000, 30.0, true)] {
-            let mut x: Vec<DVec2> = (0..n).map(|_| DVec2::new(lcg(&mut s) * span - span / 2.0, lcg(&mut s) * span)).collect();
+            let mut x: Vec<DVec2> =
+                (0..n).map(|_| DVec2::new(lcg(&mut s) * span - span / 2.0, lcg(&mut s) * span)).collect();
             if far {
                 x.push(DVec2::new(1e12, -3e11)); // forces hashing
             }
@@ -510,7 +516,8 @@ mod tests {
             g.build(&x);
             assert_eq!(g.is_dense(), !far);
         }
-        let x: Vec<DVec3> = (0..3000).map(|_| DVec3::new(lcg(&mut s) * 6.0, lcg(&mut s) * 6.0, lcg(&mut s) * 6.0)).collect();
+        let x: Vec<DVec3> =
+            (0..3000).map(|_| DVec3::new(lcg(&mut s) * 6.0, lcg(&mut s) * 6.0, lcg(&mut s) * 6.0)).collect();
         assert_eq!(neighbor_pairs(&x, 0.8).unwrap(), brute(&x, 0.8));
     }
 

@@ -87,34 +87,20 @@ fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
 
 /// `f(start, chunk)` on consecutive chunks of `a`.
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
-    if fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a))
-    })
-    .is_none()
-    {
+    if fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a))).is_none() {
         a.chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
     }
 }
 
 /// `f(start, chunk_a, chunk_b)` on matching chunks of two equally long slices.
-pub fn chunks2<A: Send, B: Send>(
-    a: &mut [A],
-    b: &mut [B],
-    f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send,
-) {
+pub fn chunks2<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send) {
     debug_assert_eq!(a.len(), b.len());
     if fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (a, b))| f(c * CHUNK, a, b))
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (a, b))| f(c * CHUNK, a, b))
     })
     .is_none()
     {
-        a.chunks_mut(CHUNK)
-            .zip(b.chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(c, (a, b))| f(c * CHUNK, a, b));
+        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().for_each(|(c, (a, b))| f(c * CHUNK, a, b));
     }
 }
 
@@ -178,10 +164,7 @@ where
 }
 
 /// Deterministic sum where each chunk also writes into its own slice of `out` (fused pass).
-pub fn chunks1_sum<A: Send>(
-    a: &mut [A],
-    f: impl Fn(usize, &mut [A]) -> f64 + Sync + Send,
-) -> f64 {
+pub fn chunks1_sum<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) -> f64 + Sync + Send) -> f64 {
     chunks1_fold(a, 0.0, |a, b| a + b, f)
 }
 
@@ -194,9 +177,13 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = match fork_if(a.len(), || a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()) {
+    let partials: Vec<T> = match fork_if(a.len(), || {
+        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    }) {
         Some(p) => p,
-        None => a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect(),
+        None => {
+            a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+        }
     };
     partials.into_iter().fold(zero, fold)
 }
@@ -208,10 +195,11 @@ pub fn chunks1_fold<A: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = match fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()) {
-        Some(p) => p,
-        None => a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect(),
-    };
+    let partials: Vec<T> =
+        match fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()) {
+            Some(p) => p,
+            None => a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect(),
+        };
     partials.into_iter().fold(zero, fold)
 }
 

@@ -29,7 +29,9 @@ pub struct EnergyReport {
 
 impl EnergyReport {
     pub fn total(&self) -> Real {
-        self.kinetic + self.potential.iter().map(|p| p.1).sum::<Real>() + self.dissipated.iter().map(|p| p.1).sum::<Real>()
+        self.kinetic
+            + self.potential.iter().map(|p| p.1).sum::<Real>()
+            + self.dissipated.iter().map(|p| p.1).sum::<Real>()
     }
 }
 
@@ -83,7 +85,12 @@ impl<V: Vector> Simulation<V> {
             },
         };
         Ok(Self {
-            sys: System { state: State::default(), model: Model::default(), forces: ForceSet::default(), single: false },
+            sys: System {
+                state: State::default(),
+                model: Model::default(),
+                forces: ForceSet::default(),
+                single: false,
+            },
             integrator,
             colliders: Vec::new(),
             collision_dissipated: 0.0,
@@ -201,7 +208,11 @@ impl<V: Vector> Simulation<V> {
         self.check_single_range(&x, "positions")?;
         self.check_single_range(&v, "velocities")?;
         let first = self.n_particles();
-        let need = Need::new("add_particles", Need::bytes_of::<V>(2 * n) + Need::bytes_of::<Real>(2 * n), format!("{} particles", count(n as u128)));
+        let need = Need::new(
+            "add_particles",
+            Need::bytes_of::<V>(2 * n) + Need::bytes_of::<Real>(2 * n),
+            format!("{} particles", count(n as u128)),
+        );
         need.check()?;
         let total = first.checked_add(n).ok_or_else(|| need.error())?;
         need.reserve(&mut self.sys.state.x, total)?;
@@ -227,7 +238,10 @@ impl<V: Vector> Simulation<V> {
             return Err(invalid("name", format!("the scene already has a term named {:?}", t.name())));
         }
         if t.min_particles() > self.n_particles() {
-            return Err(invalid("term", format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles())));
+            return Err(invalid(
+                "term",
+                format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles()),
+            ));
         }
         let mut t = t;
         t.set_single(self.sys.single);
@@ -317,7 +331,14 @@ impl<V: Vector> Simulation<V> {
     /// Restores time, step count, the dissipation books and the integrator cache of a saved run.
     /// Restores what `save` wrote beside the state: time (s), step count, the energy books
     /// (J) and the integrator's cache. Every value is checked before anything changes.
-    pub fn restore(&mut self, t: Real, step: u64, dissipated: &[Real], collisions: Real, cache: Option<(Vec<V>, Vec<Real>)>) -> Result<()> {
+    pub fn restore(
+        &mut self,
+        t: Real,
+        step: u64,
+        dissipated: &[Real],
+        collisions: Real,
+        cache: Option<(Vec<V>, Vec<Real>)>,
+    ) -> Result<()> {
         if dissipated.len() != self.sys.forces.terms.len() {
             return Err(invalid("dissipated", "does not match the scene's terms"));
         }
@@ -376,7 +397,10 @@ impl<V: Vector> Simulation<V> {
     /// arrived while the call was finishing.
     pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint<V>> {
         if n > MAX_STEPS - self.sys.state.step {
-            return Err(invalid("n", format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.sys.state.step)));
+            return Err(invalid(
+                "n",
+                format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.sys.state.step),
+            ));
         }
         self.prepare()?;
         let cp = self.checkpoint()?;
@@ -400,7 +424,11 @@ impl<V: Vector> Simulation<V> {
     /// velocities (and cached forces), allocated fallibly (`Error::OutOfMemory`).
     pub fn checkpoint(&self) -> Result<Checkpoint<V>> {
         let n = self.n_particles();
-        let need = Need::new("step", Need::bytes_of::<V>(3 * n), format!("a copy of the state of {} particles (to roll back to)", count(n as u128)));
+        let need = Need::new(
+            "step",
+            Need::bytes_of::<V>(3 * n),
+            format!("a copy of the state of {} particles (to roll back to)", count(n as u128)),
+        );
         let st = &self.sys.state;
         let state = State { x: need.copy(&st.x)?, v: need.copy(&st.v)?, t: st.t, step: st.step };
         Ok(Checkpoint {
@@ -497,7 +525,11 @@ impl<V: Vector> Simulation<V> {
     /// Called from a thread of the pool the task would go to, the job runs on the calling
     /// thread (a task queued behind it could wait forever) and `wait` reports it done at once;
     /// so it does without a pool (`sequential()`): nothing can then watch while the job runs.
-    pub fn run_watched<R: Send>(&mut self, job: impl FnOnce(&mut Self) -> R + Send, watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool)) -> R {
+    pub fn run_watched<R: Send>(
+        &mut self,
+        job: impl FnOnce(&mut Self) -> R + Send,
+        watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool),
+    ) -> R {
         let Some(pool) = self.pool.clone() else {
             let r = job(self);
             watch(&mut |_| true);
@@ -521,13 +553,23 @@ impl<V: Vector> Simulation<V> {
     /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
     /// divergence or interrupt everything, dt included, is rolled back as in `step`.
     /// `stop` as in `step_interruptible`.
-    pub fn advance_interruptible(&mut self, duration: Real, substeps: Option<u64>, stop: &Arc<AtomicBool>) -> Result<u64> {
+    pub fn advance_interruptible(
+        &mut self,
+        duration: Real,
+        substeps: Option<u64>,
+        stop: &Arc<AtomicBool>,
+    ) -> Result<u64> {
         self.advance_checkpointed(duration, substeps, stop).map(|(n, _)| n)
     }
 
     /// `advance_interruptible` that also returns the checkpoint taken at its start (as
     /// `step_checkpointed`).
-    pub fn advance_checkpointed(&mut self, duration: Real, substeps: Option<u64>, stop: &Arc<AtomicBool>) -> Result<(u64, Checkpoint<V>)> {
+    pub fn advance_checkpointed(
+        &mut self,
+        duration: Real,
+        substeps: Option<u64>,
+        stop: &Arc<AtomicBool>,
+    ) -> Result<(u64, Checkpoint<V>)> {
         if !(duration.is_finite() && duration > 0.0) {
             return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
         }
@@ -547,19 +589,28 @@ impl<V: Vector> Simulation<V> {
                     }
                     let n = (duration / safe).ceil().max(1.0);
                     if n > 1e12 {
-                        return Err(invalid("duration", format!("{duration:.3e} s would take {n:.3e} substeps of {safe:.3e} s")));
+                        return Err(invalid(
+                            "duration",
+                            format!("{duration:.3e} s would take {n:.3e} substeps of {safe:.3e} s"),
+                        ));
                     }
                     n as u64
                 }
             };
             if n > MAX_STEPS - s.sys.state.step {
                 let arg = if substeps.is_some() { "substeps" } else { "duration" };
-                return Err(invalid(arg, format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", s.sys.state.step)));
+                return Err(invalid(
+                    arg,
+                    format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", s.sys.state.step),
+                ));
             }
             // duration is finite and > 0: the quotient is never NaN, at worst 0 or subnormal,
             // a step with no finite reciprocal (rates, CFL numbers): refused.
             if duration / (n as Real) < Real::MIN_POSITIVE {
-                return Err(invalid("substeps", format!("{n} substeps of {duration:.3e} s would each be below float64's normal range")));
+                return Err(invalid(
+                    "substeps",
+                    format!("{n} substeps of {duration:.3e} s would each be below float64's normal range"),
+                ));
             }
             let old = s.dt;
             s.dt = duration / n as Real;
@@ -656,7 +707,8 @@ impl<V: Vector> Simulation<V> {
                 }
             }
             if non_finite {
-                let (particle, quantity) = self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, "position"));
+                let (particle, quantity) =
+                    self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, "position"));
                 return Err(Error::Diverged {
                     step: self.sys.state.step,
                     t: self.sys.state.t,
@@ -739,7 +791,11 @@ impl<V: Vector> Simulation<V> {
     /// terms, whose O(N²) sums (gravity's potential and time scale) read it per row. Nothing
     /// changes either way; once `stop` is set the result is dropped and `Error::Interrupted`
     /// returned.
-    pub fn query_interruptible<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&Self) -> R + Send) -> Result<R> {
+    pub fn query_interruptible<R: Send>(
+        &mut self,
+        stop: &Arc<AtomicBool>,
+        f: impl FnOnce(&Self) -> R + Send,
+    ) -> Result<R> {
         self.with_stop(stop, |s| {
             let r = f(s);
             if stop.load(Ordering::Relaxed) {
@@ -821,7 +877,11 @@ impl<V: Vector> Simulation<V> {
 }
 
 /// Spawns `task` in `s` and runs `watch` here with a `wait` that reports the task's end.
-fn spawn_watched<'s>(s: &rayon::Scope<'s>, task: impl FnOnce() + Send + 's, watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool)) {
+fn spawn_watched<'s>(
+    s: &rayon::Scope<'s>,
+    task: impl FnOnce() + Send + 's,
+    watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool),
+) {
     let (tx, rx) = mpsc::channel::<()>();
     s.spawn(move |_| {
         let _done = tx; // dropped when the task ends, by a panic too

@@ -34,7 +34,13 @@ fn integrator_table() {
     let got: Vec<_> = infos.iter().map(|i| (i.name, i.order, i.symplectic, i.force_evals_per_step)).collect();
     assert_eq!(
         got,
-        vec![("euler", 1, false, 1), ("semi_implicit_euler", 1, true, 1), ("verlet", 2, true, 1), ("rk4", 4, false, 4), ("rk45", 5, false, 6)]
+        vec![
+            ("euler", 1, false, 1),
+            ("semi_implicit_euler", 1, true, 1),
+            ("verlet", 2, true, 1),
+            ("rk4", 4, false, 4),
+            ("rk45", 5, false, 6)
+        ]
     );
     assert!(by_name::<glam::DVec2>("leapfrogg").is_err());
 }
@@ -89,9 +95,16 @@ fn damped_error(integrator: &str, dt: f64) -> f64 {
     use physcore_core::terms::Springs;
     let c = 0.4;
     let mut s = physcore_core::Simulation::new(integrator, dt, Some(1)).unwrap();
-    s.add_particles(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)], vec![glam::DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false]).unwrap();
+    s.add_particles(
+        vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
+        vec![glam::DVec2::ZERO; 2],
+        vec![1.0, 1.0],
+        vec![true, false],
+    )
+    .unwrap();
     // Rest length 0.5 keeps the spring axis along x for |x| > 0.5 with a 0.5 amplitude.
-    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![c], vec![0.5], 2).unwrap())).unwrap();
+    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![c], vec![0.5], 2).unwrap()))
+        .unwrap();
     s.set_state(Some(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)]), None).unwrap();
     let n = (2.0 / dt).round() as u64;
     s.step(n).unwrap();
@@ -117,8 +130,15 @@ fn suggested_dt_accounts_for_dashpots() {
     use physcore_core::terms::Springs;
     for name in ["semi_implicit_euler", "verlet", "rk4"] {
         let mut s = physcore_core::Simulation::new(name, 1.0, Some(1)).unwrap();
-        s.add_particles(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)], vec![glam::DVec2::ZERO, glam::DVec2::new(0.0, 1.0)], vec![1.0, 1.0], vec![true, false]).unwrap();
-        s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![100.0], vec![0.5], 2).unwrap())).unwrap();
+        s.add_particles(
+            vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
+            vec![glam::DVec2::ZERO, glam::DVec2::new(0.0, 1.0)],
+            vec![1.0, 1.0],
+            vec![true, false],
+        )
+        .unwrap();
+        s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![100.0], vec![0.5], 2).unwrap()))
+            .unwrap();
         let dt = s.suggest_dt();
         assert!(dt <= 0.5 / 200.0 + 1e-15, "{name}: suggested {dt} ignores the dashpot rate 2c/m = 200/s");
         s.set_dt(dt).unwrap();
@@ -175,7 +195,13 @@ fn rk45_kepler_high_eccentricity() {
     let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.5, Some(1)).unwrap();
     let rp = 1.0 - e;
     let vp = ((1.0 + e) / rp).sqrt();
-    s.add_particles(vec![DVec2::ZERO, DVec2::new(rp, 0.0)], vec![DVec2::ZERO, DVec2::new(0.0, vp)], vec![1.0, 1e-12], vec![true, false]).unwrap();
+    s.add_particles(
+        vec![DVec2::ZERO, DVec2::new(rp, 0.0)],
+        vec![DVec2::ZERO, DVec2::new(0.0, vp)],
+        vec![1.0, 1e-12],
+        vec![true, false],
+    )
+    .unwrap();
     s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
     s.set_tolerances(1e-10, 1e-13).unwrap();
     let e0 = s.energy().total();
@@ -202,7 +228,10 @@ fn rk45_is_deterministic_and_fails_cleanly() {
         s.add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect()).unwrap();
         let a: Vec<u32> = (0..n as u32 - 1).collect();
         let b: Vec<u32> = (1..n as u32).collect();
-        s.add_term(Box::new(Springs::new("s".into(), a, b, vec![50.0; n - 1], vec![0.0; n - 1], vec![0.009; n - 1], n).unwrap())).unwrap();
+        s.add_term(Box::new(
+            Springs::new("s".into(), a, b, vec![50.0; n - 1], vec![0.0; n - 1], vec![0.009; n - 1], n).unwrap(),
+        ))
+        .unwrap();
         s.step(5).unwrap();
         (s.sys.state.x.clone(), s.sys.state.v.clone())
     };
@@ -212,7 +241,13 @@ fn rk45_is_deterministic_and_fails_cleanly() {
     // and the state is rolled back.
     use physcore_core::terms::PairwiseGravity;
     let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.1, Some(1)).unwrap();
-    s.add_particles(vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![false, false]).unwrap();
+    s.add_particles(
+        vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)],
+        vec![DVec2::ZERO; 2],
+        vec![1.0, 1.0],
+        vec![false, false],
+    )
+    .unwrap();
     s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
     let err = s.step(1).unwrap_err().to_string();
     assert!(err.contains("rtol/atol") && err.contains("particle"), "{err}");

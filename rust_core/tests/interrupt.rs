@@ -25,7 +25,15 @@ impl Term<DVec3> for Tripwire {
     fn name(&self) -> &str {
         "tripwire"
     }
-    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, f: &mut [DVec3], _want_power: bool, assign: bool) -> f64 {
+    fn add_forces(
+        &mut self,
+        _x: &[DVec3],
+        _v: &[DVec3],
+        _m: &Model,
+        f: &mut [DVec3],
+        _want_power: bool,
+        assign: bool,
+    ) -> f64 {
         if assign {
             f.fill(DVec3::ZERO);
         }
@@ -47,7 +55,15 @@ type Snapshot = (Vec<DVec3>, Vec<DVec3>, f64, u64, Vec<f64>, f64, Option<(Vec<DV
 
 fn snapshot(s: &Simulation<DVec3>) -> Snapshot {
     let st = &s.sys.state;
-    (st.x.clone(), st.v.clone(), st.t, st.step, s.sys.forces.dissipated.clone(), s.collision_dissipated, s.integrator_cache())
+    (
+        st.x.clone(),
+        st.v.clone(),
+        st.t,
+        st.step,
+        s.sys.forces.dissipated.clone(),
+        s.collision_dissipated,
+        s.integrator_cache(),
+    )
 }
 
 /// A damped 8×8 cloth (dissipation books in play) with a tripwire; rk45 gets one long output
@@ -75,7 +91,11 @@ fn flag_set_before_the_call_stops_it_before_the_first_step() {
         assert_eq!(s.force_evaluations(), evals, "{name}: no work after a set flag");
         assert!(snapshot(&s) == before, "{name}: state changed");
         let dt = s.dt;
-        assert_eq!(s.advance_interruptible(1.0, Some(3), &stop), Err(Error::Interrupted { rolled_back_to: 2 }), "{name}");
+        assert_eq!(
+            s.advance_interruptible(1.0, Some(3), &stop),
+            Err(Error::Interrupted { rolled_back_to: 2 }),
+            "{name}"
+        );
         assert_eq!(s.dt, dt, "{name}: advance restores dt");
         assert!(snapshot(&s) == before, "{name}: state changed by advance");
     }
@@ -111,7 +131,10 @@ fn interrupt_inside_a_call_rolls_back_and_the_retry_is_bit_identical() {
 
             flag.store(false, Ordering::Relaxed);
             s.step(n).unwrap();
-            assert!(snapshot(&s) == snapshot(&reference), "{name}, {threads} threads: retry differs from the uninterrupted run");
+            assert!(
+                snapshot(&s) == snapshot(&reference),
+                "{name}, {threads} threads: retry differs from the uninterrupted run"
+            );
         }
     }
 }
@@ -140,7 +163,15 @@ impl Term<DVec3> for Counter {
     fn name(&self) -> &str {
         "counter"
     }
-    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, _f: &mut [DVec3], _want_power: bool, _assign: bool) -> f64 {
+    fn add_forces(
+        &mut self,
+        _x: &[DVec3],
+        _v: &[DVec3],
+        _m: &Model,
+        _f: &mut [DVec3],
+        _want_power: bool,
+        _assign: bool,
+    ) -> f64 {
         self.0.fetch_add(1, Ordering::Relaxed);
         0.0
     }
@@ -177,7 +208,10 @@ fn long_rk45_step(threads: Option<usize>) -> Simulation<DVec3> {
     s.add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect()).unwrap();
     let (i, j): (Vec<u32>, Vec<u32>) = (0..n as u32 - 1).map(|i| (i, i + 1)).unzip();
     let m = i.len();
-    s.add_term(Box::new(Springs::new("springs".into(), i, j, vec![1e4; m], vec![0.0; m], vec![1.0 / n as f64; m], n).unwrap())).unwrap();
+    s.add_term(Box::new(
+        Springs::new("springs".into(), i, j, vec![1e4; m], vec![0.0; m], vec![1.0 / n as f64; m], n).unwrap(),
+    ))
+    .unwrap();
     s.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
     s.set_tolerances(1e-10, 1e-12).unwrap();
     s

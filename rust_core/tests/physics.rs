@@ -99,8 +99,15 @@ fn plane_bounce_follows_restitution() {
 #[test]
 fn divergence_is_reported_and_rolled_back() {
     let mut s = Simulation::new("euler", 1.0, Some(1)).unwrap();
-    s.add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO, DVec2::new(0.0, 1.0)], vec![1.0, 1.0], vec![true, false]).unwrap();
-    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1e9], vec![0.0], vec![0.5], 2).unwrap())).unwrap();
+    s.add_particles(
+        vec![DVec2::ZERO, DVec2::new(1.0, 0.0)],
+        vec![DVec2::ZERO, DVec2::new(0.0, 1.0)],
+        vec![1.0, 1.0],
+        vec![true, false],
+    )
+    .unwrap();
+    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1e9], vec![0.0], vec![0.5], 2).unwrap()))
+        .unwrap();
     s.step(2).unwrap_or(());
     let before = s.sys.state.clone();
     match s.step(10_000) {
@@ -140,7 +147,10 @@ fn bad_input_is_rejected_before_state_changes() {
 fn zero_length_spring_and_coincident_bodies_give_no_nan() {
     let mut s = Simulation::new("rk4", 1e-3, Some(1)).unwrap();
     s.add_particles(vec![DVec3::ONE; 3], vec![DVec3::ZERO; 3], vec![1.0; 3], vec![false; 3]).unwrap();
-    s.add_term(Box::new(Springs::new("s".into(), vec![0, 1], vec![1, 2], vec![10.0; 2], vec![1.0; 2], vec![0.0, 1.0], 3).unwrap())).unwrap();
+    s.add_term(Box::new(
+        Springs::new("s".into(), vec![0, 1], vec![1, 2], vec![10.0; 2], vec![1.0; 2], vec![0.0, 1.0], 3).unwrap(),
+    ))
+    .unwrap();
     s.add_term(Box::new(physcore_core::terms::PairwiseGravity::new("g".into(), 1.0, 0.0))).unwrap();
     s.step(100).unwrap();
     assert!(s.sys.state.x.iter().all(|p| p.is_finite()));

@@ -29,67 +29,73 @@ impl<V: Vector> Aabb<V> {
             lo[k] = self.lo.comp(k);
             hi[k] = self.hi.comp(k);
         }
-        par::chunks2_fold(x, v, (0.0, false), |a, b| (a.0 + b.0, a.1 | b.1), |s, x, v| {
-            let mut d = 0.0;
-            let mut touched = false;
-            for k in 0..x.len() {
-                let mut outside = false;
-                for a in 0..V::DIM {
-                    let c = x[k].comp(a);
-                    outside |= (c < lo[a]) | (c > hi[a]);
-                }
-                if !outside {
-                    continue;
-                }
-                let i = s + k;
-                if model.inv_mass[i] == 0.0 {
-                    continue;
-                }
-                touched = true;
-                let m = model.mass[i];
-                let mut xa = [0.0; 3];
-                let mut va = [0.0; 3];
-                for a in 0..V::DIM {
-                    xa[a] = x[k].comp(a);
-                    va[a] = v[k].comp(a);
-                }
-                let ke0 = 0.5 * m * v[k].length_squared();
-                let x0 = x[k];
-                for a in 0..V::DIM {
-                    // Outward direction along axis a: −1 below lo, +1 above hi.
-                    let out = if xa[a] < lo[a] {
-                        xa[a] = lo[a];
-                        -1.0
-                    } else if xa[a] > hi[a] {
-                        xa[a] = hi[a];
-                        1.0
-                    } else {
+        par::chunks2_fold(
+            x,
+            v,
+            (0.0, false),
+            |a, b| (a.0 + b.0, a.1 | b.1),
+            |s, x, v| {
+                let mut d = 0.0;
+                let mut touched = false;
+                for k in 0..x.len() {
+                    let mut outside = false;
+                    for a in 0..V::DIM {
+                        let c = x[k].comp(a);
+                        outside |= (c < lo[a]) | (c > hi[a]);
+                    }
+                    if !outside {
                         continue;
-                    };
-                    let vn = va[a] * out; // > 0: moving outward
-                    if vn > 0.0 {
-                        let dvn = (1.0 + e) * vn;
-                        va[a] = -e * va[a];
-                        if mu > 0.0 {
-                            let vt2: Real = (0..V::DIM).filter(|&b| b != a).map(|b| va[b] * va[b]).sum();
-                            if vt2 > 0.0 {
-                                let vt = vt2.sqrt();
-                                let s = (vt - mu * dvn).max(0.0) / vt;
-                                for b in (0..V::DIM).filter(|&b| b != a) {
-                                    va[b] *= s;
+                    }
+                    let i = s + k;
+                    if model.inv_mass[i] == 0.0 {
+                        continue;
+                    }
+                    touched = true;
+                    let m = model.mass[i];
+                    let mut xa = [0.0; 3];
+                    let mut va = [0.0; 3];
+                    for a in 0..V::DIM {
+                        xa[a] = x[k].comp(a);
+                        va[a] = v[k].comp(a);
+                    }
+                    let ke0 = 0.5 * m * v[k].length_squared();
+                    let x0 = x[k];
+                    for a in 0..V::DIM {
+                        // Outward direction along axis a: −1 below lo, +1 above hi.
+                        let out = if xa[a] < lo[a] {
+                            xa[a] = lo[a];
+                            -1.0
+                        } else if xa[a] > hi[a] {
+                            xa[a] = hi[a];
+                            1.0
+                        } else {
+                            continue;
+                        };
+                        let vn = va[a] * out; // > 0: moving outward
+                        if vn > 0.0 {
+                            let dvn = (1.0 + e) * vn;
+                            va[a] = -e * va[a];
+                            if mu > 0.0 {
+                                let vt2: Real = (0..V::DIM).filter(|&b| b != a).map(|b| va[b] * va[b]).sum();
+                                if vt2 > 0.0 {
+                                    let vt = vt2.sqrt();
+                                    let s = (vt - mu * dvn).max(0.0) / vt;
+                                    for b in (0..V::DIM).filter(|&b| b != a) {
+                                        va[b] *= s;
+                                    }
                                 }
                             }
                         }
                     }
+                    x[k] = V::from_slice(&xa[..V::DIM]);
+                    v[k] = V::from_slice(&va[..V::DIM]);
+                    let ke1 = 0.5 * m * v[k].length_squared();
+                    let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
+                    let du = -f.dot(x[k] - x0);
+                    d += (ke0 - ke1) - du;
                 }
-                x[k] = V::from_slice(&xa[..V::DIM]);
-                v[k] = V::from_slice(&va[..V::DIM]);
-                let ke1 = 0.5 * m * v[k].length_squared();
-                let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
-                let du = -f.dot(x[k] - x0);
-                d += (ke0 - ke1) - du;
-            }
-            (d, touched)
-        })
+                (d, touched)
+            },
+        )
     }
 }

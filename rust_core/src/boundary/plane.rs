@@ -27,43 +27,49 @@ impl<V: Vector> Plane<V> {
     /// `f_last`: forces of the last evaluation; `g`: uniform acceleration (not in `f_last`).
     pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
-        par::chunks2_fold(x, v, (0.0, false), |a, b| (a.0 + b.0, a.1 | b.1), |s, x, v| {
-            let mut d = 0.0;
-            let mut touched = false;
-            for k in 0..x.len() {
-                let i = s + k;
-                if model.inv_mass[i] == 0.0 {
-                    continue;
+        par::chunks2_fold(
+            x,
+            v,
+            (0.0, false),
+            |a, b| (a.0 + b.0, a.1 | b.1),
+            |s, x, v| {
+                let mut d = 0.0;
+                let mut touched = false;
+                for k in 0..x.len() {
+                    let i = s + k;
+                    if model.inv_mass[i] == 0.0 {
+                        continue;
+                    }
+                    let depth = (x[k] - p).dot(n);
+                    if depth >= 0.0 {
+                        continue;
+                    }
+                    touched = true;
+                    let m = model.mass[i];
+                    let ke0 = 0.5 * m * v[k].length_squared();
+                    let dx = n * (-depth);
+                    x[k] += dx;
+                    let vn = v[k].dot(n);
+                    if vn < 0.0 {
+                        let vt = v[k] - n * vn;
+                        let vt2 = vt.length_squared();
+                        let dvn = (1.0 + e) * (-vn);
+                        let vt_new = if mu > 0.0 && vt2 > 0.0 {
+                            let vtl = vt2.sqrt();
+                            vt * ((vtl - mu * dvn).max(0.0) / vtl)
+                        } else {
+                            vt
+                        };
+                        v[k] = vt_new + n * (-e * vn);
+                    }
+                    let ke1 = 0.5 * m * v[k].length_squared();
+                    // Projection work: ΔU ≈ −F·Δx.
+                    let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
+                    let du = -f.dot(dx);
+                    d += (ke0 - ke1) - du;
                 }
-                let depth = (x[k] - p).dot(n);
-                if depth >= 0.0 {
-                    continue;
-                }
-                touched = true;
-                let m = model.mass[i];
-                let ke0 = 0.5 * m * v[k].length_squared();
-                let dx = n * (-depth);
-                x[k] += dx;
-                let vn = v[k].dot(n);
-                if vn < 0.0 {
-                    let vt = v[k] - n * vn;
-                    let vt2 = vt.length_squared();
-                    let dvn = (1.0 + e) * (-vn);
-                    let vt_new = if mu > 0.0 && vt2 > 0.0 {
-                        let vtl = vt2.sqrt();
-                        vt * ((vtl - mu * dvn).max(0.0) / vtl)
-                    } else {
-                        vt
-                    };
-                    v[k] = vt_new + n * (-e * vn);
-                }
-                let ke1 = 0.5 * m * v[k].length_squared();
-                // Projection work: ΔU ≈ −F·Δx.
-                let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
-                let du = -f.dot(dx);
-                d += (ke0 - ke1) - du;
-            }
-            (d, touched)
-        })
+                (d, touched)
+            },
+        )
     }
 }

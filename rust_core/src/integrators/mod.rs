@@ -57,7 +57,12 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// the integrator's cache are then partly advanced, and the caller must roll both back.
     /// By default `stop` is not read: a fixed-step method's step is a few force evaluations, and
     /// the caller polls between steps. An adaptive one polls before every internal attempt.
-    fn step_interruptible(&mut self, sys: &mut System<V>, dt: Real, stop: &AtomicBool) -> std::result::Result<bool, Stopped> {
+    fn step_interruptible(
+        &mut self,
+        sys: &mut System<V>,
+        dt: Real,
+        stop: &AtomicBool,
+    ) -> std::result::Result<bool, Stopped> {
         let _ = stop;
         Ok(self.step(sys, dt))
     }
@@ -113,7 +118,10 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "rk4" => Box::new(Rk4::default()),
         "rk45" => Box::new(Rk45::default()),
         other => {
-            return Err(invalid("integrator", format!("unknown integrator {other:?}; valid names: {}", NAMES.join(", "))))
+            return Err(invalid(
+                "integrator",
+                format!("unknown integrator {other:?}; valid names: {}", NAMES.join(", ")),
+            ))
         }
     })
 }

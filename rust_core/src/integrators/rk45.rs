@@ -17,9 +17,9 @@
 //! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
 //! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
 use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Stopped, System};
-use std::collections::TryReserveError;
 use crate::par;
 use crate::vector::{Real, Vector};
+use std::collections::TryReserveError;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 const A: [[Real; 6]; 7] = [
@@ -33,15 +33,8 @@ const A: [[Real; 6]; 7] = [
     [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
 ];
 /// e = b − b̂ (5th minus embedded 4th-order weights), for the error estimate.
-const E: [Real; 7] = [
-    71.0 / 57600.0,
-    0.0,
-    -71.0 / 16695.0,
-    71.0 / 1920.0,
-    -17253.0 / 339200.0,
-    22.0 / 525.0,
-    -1.0 / 40.0,
-];
+const E: [Real; 7] =
+    [71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0];
 const SAFETY: Real = 0.9;
 const FAC_MIN: Real = 0.2;
 const FAC_MAX: Real = 10.0;
@@ -214,7 +207,13 @@ impl<V: Vector> Rk45<V> {
                 ex += self.kx[j][i] * E[j];
                 ev += self.kv[j][i] * E[j];
             }
-            let e = scaled_max(ex * h, x0[i], x1, self.rtol, self.atol).max(scaled_max(ev * h, v0[i], v1, self.rtol, self.atol));
+            let e = scaled_max(ex * h, x0[i], x1, self.rtol, self.atol).max(scaled_max(
+                ev * h,
+                v0[i],
+                v1,
+                self.rtol,
+                self.atol,
+            ));
             if bad(x1, v1) || e.is_nan() {
                 return i;
             }
@@ -234,7 +233,9 @@ impl<V: Vector> Rk45<V> {
             par::reduce(a.len(), 0.0, max_combine, |r| {
                 let mut m: Real = 0.0;
                 for i in r {
-                    m = m.max(scaled_max(a[i], sa[i], sa[i], rtol, atol)).max(scaled_max(b[i], sb[i], sb[i], rtol, atol));
+                    m = m
+                        .max(scaled_max(a[i], sa[i], sa[i], rtol, atol))
+                        .max(scaled_max(b[i], sb[i], sb[i], rtol, atol));
                 }
                 m
             })

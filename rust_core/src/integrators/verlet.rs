@@ -8,9 +8,9 @@
 //! (a common shortcut) would drop it to first order. Without such forces the prediction is
 //! skipped and the method is exactly the symplectic velocity Verlet.
 use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, System};
-use std::collections::TryReserveError;
 use crate::par;
 use crate::vector::{Real, Vector};
+use std::collections::TryReserveError;
 
 #[derive(Default)]
 pub struct VelocityVerlet<V: Vector> {

@@ -25,14 +25,24 @@ fn to_py(py: Python<'_>, e: Error) -> PyErr {
     let build = || -> PyResult<PyErr> {
         let errors = py.import("physcore._errors")?;
         Ok(match e {
-            Error::InvalidInput { .. } => PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?),
+            Error::InvalidInput { .. } => {
+                PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?)
+            }
             Error::Interrupted { .. } => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg.clone()),
             Error::Threads { .. } => PyErr::from_value(errors.getattr("ThreadPoolError")?.call1((msg.clone(),))?),
-            Error::OutOfMemory { bytes, .. } => PyErr::from_value(errors.getattr("OutOfMemoryError")?.call1((msg.clone(), bytes))?),
+            Error::OutOfMemory { bytes, .. } => {
+                PyErr::from_value(errors.getattr("OutOfMemoryError")?.call1((msg.clone(), bytes))?)
+            }
             Error::Diverged { step, t, particle, quantity, suggested_dt, rolled_back_to, .. } => {
-                let exc = errors
-                    .getattr("SimulationDiverged")?
-                    .call1((msg.clone(), step, t, particle, quantity, suggested_dt, rolled_back_to))?;
+                let exc = errors.getattr("SimulationDiverged")?.call1((
+                    msg.clone(),
+                    step,
+                    t,
+                    particle,
+                    quantity,
+                    suggested_dt,
+                    rolled_back_to,
+                ))?;
                 PyErr::from_value(exc)
             }
         })
@@ -57,7 +67,10 @@ macro_rules! with_sim {
 fn flat2<'a>(a: &'a PyReadonlyArray2<'_, f64>, dim: usize, arg: &str) -> PyResult<&'a [f64]> {
     let shape = a.shape();
     if shape[1] != dim {
-        return Err(PyValueError::new_err(format!("{arg}: expected shape (N, {dim}), got ({}, {})", shape[0], shape[1])));
+        return Err(PyValueError::new_err(format!(
+            "{arg}: expected shape (N, {dim}), got ({}, {})",
+            shape[0], shape[1]
+        )));
     }
     a.as_slice().map_err(|_| PyValueError::new_err(format!("{arg}: array must be C-contiguous")))
 }
@@ -288,7 +301,12 @@ impl Simulation2 {
     }
 
     #[pyo3(signature = (positions=None, velocities=None))]
-    fn set_state(&mut self, py: Python<'_>, positions: Option<PyReadonlyArray2<'_, f64>>, velocities: Option<PyReadonlyArray2<'_, f64>>) -> PyResult<()> {
+    fn set_state(
+        &mut self,
+        py: Python<'_>,
+        positions: Option<PyReadonlyArray2<'_, f64>>,
+        velocities: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<()> {
         let dim = self.dim();
         let x = positions.as_ref().map(|a| flat2(a, dim, "positions")).transpose()?;
         let v = velocities.as_ref().map(|a| flat2(a, dim, "velocities")).transpose()?;
@@ -330,10 +348,12 @@ impl Simulation2 {
         rest_length: PyReadonlyArray1<'_, f64>,
     ) -> PyResult<()> {
         let (i, j) = (slice1(&i, "i")?, slice1(&j, "j")?);
-        let (k, c, r) = (slice1(&stiffness, "stiffness")?, slice1(&damping, "damping")?, slice1(&rest_length, "rest_length")?);
+        let (k, c, r) =
+            (slice1(&stiffness, "stiffness")?, slice1(&damping, "damping")?, slice1(&rest_length, "rest_length")?);
         let m = i.len().max(j.len()).max(k.len()).max(c.len()).max(r.len());
         let need = Need::new("springs", m as u128 * (2 * 4 + 3 * 8), format!("copies of {} springs", count(m as u128)));
-        let copies = || -> Result<_, Error> { Ok((need.copy(i)?, need.copy(j)?, need.copy(k)?, need.copy(c)?, need.copy(r)?)) };
+        let copies =
+            || -> Result<_, Error> { Ok((need.copy(i)?, need.copy(j)?, need.copy(k)?, need.copy(c)?, need.copy(r)?)) };
         let (i, j, k, c, r) = copies().map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => {
             let n = s.n_particles();
@@ -350,10 +370,18 @@ impl Simulation2 {
         if !(softening.is_finite() && softening >= 0.0) {
             return Err(PyValueError::new_err(format!("softening: {softening} must be finite and >= 0")));
         }
-        with_sim!(&mut self.inner, s => s.add_term(Box::new(PairwiseGravity::new(name, g, softening)))).map_err(|e| to_py(py, e))
+        with_sim!(&mut self.inner, s => s.add_term(Box::new(PairwiseGravity::new(name, g, softening))))
+            .map_err(|e| to_py(py, e))
     }
 
-    fn add_plane(&mut self, py: Python<'_>, point: Vec<f64>, normal: Vec<f64>, restitution: f64, friction: f64) -> PyResult<()> {
+    fn add_plane(
+        &mut self,
+        py: Python<'_>,
+        point: Vec<f64>,
+        normal: Vec<f64>,
+        restitution: f64,
+        friction: f64,
+    ) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
             let p = Plane { point: vec_of(&point, "point")?, normal: vec_of(&normal, "normal")?, restitution, friction };
             s.add_plane(p)
@@ -361,7 +389,14 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
-    fn add_box(&mut self, py: Python<'_>, lower: Vec<f64>, upper: Vec<f64>, restitution: f64, friction: f64) -> PyResult<()> {
+    fn add_box(
+        &mut self,
+        py: Python<'_>,
+        lower: Vec<f64>,
+        upper: Vec<f64>,
+        restitution: f64,
+        friction: f64,
+    ) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
             let b = Aabb { lo: vec_of(&lower, "lower")?, hi: vec_of(&upper, "upper")?, restitution, friction };
             s.add_box(b)
@@ -410,9 +445,22 @@ impl Simulation2 {
     ) -> PyResult<()> {
         let kernel = KernelKind::by_name(kernel).map_err(|e| to_py(py, e))?;
         let precision = Precision::by_name(precision).map_err(|e| to_py(py, e))?;
-        let p = SphParams { h, rho0: density, c0: sound_speed, gamma, alpha: viscosity, clamp: clamp_pressure, kernel, precision };
+        let p = SphParams {
+            h,
+            rho0: density,
+            c0: sound_speed,
+            gamma,
+            alpha: viscosity,
+            clamp: clamp_pressure,
+            kernel,
+            precision,
+        };
         let psi = slice1(&wall_psi, "wall_psi")?;
-        let need = Need::new("add_fluid", Need::bytes_of::<f64>(psi.len()), format!("{} wall particles", count(psi.len() as u128)));
+        let need = Need::new(
+            "add_fluid",
+            Need::bytes_of::<f64>(psi.len()),
+            format!("{} wall particles", count(psi.len() as u128)),
+        );
         let psi = need.copy(psi).map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => {
             let w = try_from_flat(flat2(&walls, p_dim(&s.sys.state.x.first().copied().unwrap_or_default()), "walls")?, "add_fluid", "wall particles").map_err(|e| to_py(py, e))?;
@@ -444,7 +492,8 @@ impl Simulation2 {
     }
 
     fn momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        let p: Vec<Real> = with_sim!(&self.inner, s => { let p = s.momentum(); (0..p_dim(&p)).map(|k| p.comp(k)).collect() });
+        let p: Vec<Real> =
+            with_sim!(&self.inner, s => { let p = s.momentum(); (0..p_dim(&p)).map(|k| p.comp(k)).collect() });
         Array1::from_vec(p).into_pyarray(py)
     }
 
@@ -509,7 +558,11 @@ const SHORT_CALL: u64 = 4096;
 /// Runs Python's signal handlers after a finished call; if one raises (Ctrl-C), the call is
 /// undone (`rollback` to `cp`) and the handler's exception raised, so an interrupted call never
 /// stands, however close to its end the signal came. Returns the call's result otherwise.
-fn undo_if_signalled<V: Vector, T>(py: Python<'_>, sim: &mut Simulation<V>, (v, cp): (T, Checkpoint<V>)) -> PyResult<T> {
+fn undo_if_signalled<V: Vector, T>(
+    py: Python<'_>,
+    sim: &mut Simulation<V>,
+    (v, cp): (T, Checkpoint<V>),
+) -> PyResult<T> {
     match py.check_signals() {
         Ok(()) => Ok(v),
         Err(e) => {
@@ -606,10 +659,7 @@ fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f
 /// Name, order, symplectic flag and force evaluations per step of every integrator.
 #[pyfunction]
 fn integrator_table<'py>(py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
-    integrators::NAMES
-        .iter()
-        .map(|n| info_dict(py, integrators::by_name::<DVec2>(n).expect("listed").info()))
-        .collect()
+    integrators::NAMES.iter().map(|n| info_dict(py, integrators::by_name::<DVec2>(n).expect("listed").info())).collect()
 }
 
 /// Number of threads of the pool of scenes built with threads=None (1 if it cannot start).
@@ -638,7 +688,13 @@ fn set_simd_level(py: Python<'_>, level: Option<&str>) -> PyResult<()> {
     let l = match level {
         None => None,
         Some(name) => Some(crate::simd::Level::by_name(name).ok_or_else(|| {
-            to_py(py, crate::error::invalid("level", format!("unknown SIMD level {name:?}; valid: scalar, avx2, avx512, neon")))
+            to_py(
+                py,
+                crate::error::invalid(
+                    "level",
+                    format!("unknown SIMD level {name:?}; valid: scalar, avx2, avx512, neon"),
+                ),
+            )
         })?),
     };
     crate::simd::set_level(l).map_err(|e| to_py(py, e))

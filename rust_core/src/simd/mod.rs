@@ -98,7 +98,10 @@ fn probe() -> &'static std::result::Result<Level, String> {
         }
         let names = || Level::available().iter().map(|l| l.name()).collect::<Vec<_>>().join(", ");
         match Level::by_name(&s) {
-            None => Err(format!("{s:?} is not a SIMD level; valid: scalar, avx2, avx512, neon, auto (this CPU has {})", names())),
+            None => Err(format!(
+                "{s:?} is not a SIMD level; valid: scalar, avx2, avx512, neon, auto (this CPU has {})",
+                names()
+            )),
             Some(l) if !l.supported() => Err(format!("this CPU cannot run {s}; it has {} (or use auto)", names())),
             Some(l) => Ok(l),
         }
@@ -449,14 +452,48 @@ macro_rules! float_impl {
     };
 }
 
-float_impl!(f64, f64s, m64s, F64_LANES,
-    splat = splat_f64s, add = add_f64s, sub = sub_f64s, mul = mul_f64s, div = div_f64s, fma = mul_add_e_f64s,
-    fnma = negate_mul_add_e_f64s, max = max_f64s, min = min_f64s, lt = less_than_f64s, gt = greater_than_f64s,
-    select = select_f64s, rsqrt = rsqrt_f64s, sqrt = sqrt_f64s, sum = reduce_sum_f64s);
-float_impl!(f32, f32s, m32s, F32_LANES,
-    splat = splat_f32s, add = add_f32s, sub = sub_f32s, mul = mul_f32s, div = div_f32s, fma = mul_add_e_f32s,
-    fnma = negate_mul_add_e_f32s, max = max_f32s, min = min_f32s, lt = less_than_f32s, gt = greater_than_f32s,
-    select = select_f32s, rsqrt = rsqrt_f32s, sqrt = sqrt_f32s, sum = reduce_sum_f32s);
+float_impl!(
+    f64,
+    f64s,
+    m64s,
+    F64_LANES,
+    splat = splat_f64s,
+    add = add_f64s,
+    sub = sub_f64s,
+    mul = mul_f64s,
+    div = div_f64s,
+    fma = mul_add_e_f64s,
+    fnma = negate_mul_add_e_f64s,
+    max = max_f64s,
+    min = min_f64s,
+    lt = less_than_f64s,
+    gt = greater_than_f64s,
+    select = select_f64s,
+    rsqrt = rsqrt_f64s,
+    sqrt = sqrt_f64s,
+    sum = reduce_sum_f64s
+);
+float_impl!(
+    f32,
+    f32s,
+    m32s,
+    F32_LANES,
+    splat = splat_f32s,
+    add = add_f32s,
+    sub = sub_f32s,
+    mul = mul_f32s,
+    div = div_f32s,
+    fma = mul_add_e_f32s,
+    fnma = negate_mul_add_e_f32s,
+    max = max_f32s,
+    min = min_f32s,
+    lt = less_than_f32s,
+    gt = greater_than_f32s,
+    select = select_f32s,
+    rsqrt = rsqrt_f32s,
+    sqrt = sqrt_f32s,
+    sum = reduce_sum_f32s
+);
 
 /// A SIMD vector of `F` with its token, so kernels read like scalar code (`a * b + c`). The token
 /// is zero-sized: a `P` is just the register.
@@ -633,14 +670,20 @@ mod tests {
             dispatch(level, Rsqrt(&x, &mut y));
             for (a, b) in x.iter().zip(&y) {
                 let exact = 1.0 / a.sqrt();
-                assert!(((b - exact) / exact).abs() < 4.0 * f64::EPSILON, "{level:?} f64 rsqrt({a:e}) = {b:e}, want {exact:e}");
+                assert!(
+                    ((b - exact) / exact).abs() < 4.0 * f64::EPSILON,
+                    "{level:?} f64 rsqrt({a:e}) = {b:e}, want {exact:e}"
+                );
             }
             let x = inputs::<f32>(-36, 37);
             let mut y = vec![0.0f32; x.len()];
             dispatch(level, Rsqrt(&x, &mut y));
             for (a, b) in x.iter().zip(&y) {
                 let exact = 1.0 / (*a as f64).sqrt();
-                assert!(((*b as f64 - exact) / exact).abs() < 4.0 * f32::EPSILON as f64, "{level:?} f32 rsqrt({a:e}) = {b:e}");
+                assert!(
+                    ((*b as f64 - exact) / exact).abs() < 4.0 * f32::EPSILON as f64,
+                    "{level:?} f32 rsqrt({a:e}) = {b:e}"
+                );
             }
         }
     }

@@ -280,7 +280,16 @@ impl<V: Vector> Sph<V> {
 
     /// `add_forces` at a given SIMD level.
     #[allow(clippy::too_many_arguments)]
-    fn forces_at(&mut self, level: Level, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real {
+    fn forces_at(
+        &mut self,
+        level: Level,
+        x: &[V],
+        v: &[V],
+        model: &Model,
+        f: &mut [V],
+        want_power: bool,
+        assign: bool,
+    ) -> Real {
         let r = self.range();
         if assign {
             // Particles outside the fluid get no SPH force.
@@ -300,8 +309,34 @@ impl<V: Vector> Sph<V> {
         let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
         let stop = self.stop.flag();
         let (power, amax) = match self.p.precision {
-            Precision::F32 => eval::<V, f32>(level, &self.p, &mut self.grid, &self.walls.grid, &mut self.b32, xs, vs, ms, out, want_power, &mut self.clock, stop),
-            Precision::F64 => eval::<V, f64>(level, &self.p, &mut self.grid, &self.walls.grid, &mut self.b64, xs, vs, ms, out, want_power, &mut self.clock, stop),
+            Precision::F32 => eval::<V, f32>(
+                level,
+                &self.p,
+                &mut self.grid,
+                &self.walls.grid,
+                &mut self.b32,
+                xs,
+                vs,
+                ms,
+                out,
+                want_power,
+                &mut self.clock,
+                stop,
+            ),
+            Precision::F64 => eval::<V, f64>(
+                level,
+                &self.p,
+                &mut self.grid,
+                &self.walls.grid,
+                &mut self.b64,
+                xs,
+                vs,
+                ms,
+                out,
+                want_power,
+                &mut self.clock,
+                stop,
+            ),
         };
         self.amax = amax;
         if !assign {
@@ -312,7 +347,6 @@ impl<V: Vector> Sph<V> {
         self.prev = prev;
         power
     }
-
 }
 
 /// One evaluation in precision `F`: build the cell list, gather, density pass, force pass.
@@ -349,16 +383,31 @@ fn eval<V: Vector, F: Float>(
         return (0.0, 0.0);
     }
     let r = match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => force_pass::<V, F, CubicSpline, 2>(level, p, grid, walls, b, out, want_power, stop),
-        (KernelKind::CubicSpline, _) => force_pass::<V, F, CubicSpline, 3>(level, p, grid, walls, b, out, want_power, stop),
-        (KernelKind::WendlandC2, 2) => force_pass::<V, F, WendlandC2, 2>(level, p, grid, walls, b, out, want_power, stop),
-        (KernelKind::WendlandC2, _) => force_pass::<V, F, WendlandC2, 3>(level, p, grid, walls, b, out, want_power, stop),
+        (KernelKind::CubicSpline, 2) => {
+            force_pass::<V, F, CubicSpline, 2>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::CubicSpline, _) => {
+            force_pass::<V, F, CubicSpline, 3>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::WendlandC2, 2) => {
+            force_pass::<V, F, WendlandC2, 2>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::WendlandC2, _) => {
+            force_pass::<V, F, WendlandC2, 3>(level, p, grid, walls, b, out, want_power, stop)
+        }
     };
     clock[2] += t2.elapsed().as_secs_f64();
     r
 }
 
-fn density<V: Vector, F: Float>(level: Level, p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>, stop: &AtomicBool) {
+fn density<V: Vector, F: Float>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &mut Bufs<F>,
+    stop: &AtomicBool,
+) {
     match (p.kernel, V::DIM) {
         (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(level, p, grid, walls, b, stop),
         (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(level, p, grid, walls, b, stop),
@@ -419,7 +468,6 @@ impl<F: Float> Bufs<F> {
     }
 }
 
-
 /// s^γ: a fixed multiplication chain for water's γ = 7 (this runs once per particle per step).
 #[inline(always)]
 pub(crate) fn powi<F: Float>(s: F, gamma: i32) -> F {
@@ -435,7 +483,14 @@ pub(crate) fn powi<F: Float>(s: F, gamma: i32) -> F {
     r
 }
 
-fn density_pass<F: Float, K: Kernel, const D: usize>(level: Level, p: &SphParams, grid: &CellList, walls: &CellList, b: &mut Bufs<F>, stop: &AtomicBool) {
+fn density_pass<F: Float, K: Kernel, const D: usize>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &mut Bufs<F>,
+    stop: &AtomicBool,
+) {
     let n = grid.len();
     let mut rho = std::mem::take(&mut b.rho);
     let mut pr = std::mem::take(&mut b.pr);
@@ -518,7 +573,13 @@ impl<V: Vector> Term<V> for Sph<V> {
 
     fn reserve(&mut self, _n_particles: usize) -> Result<()> {
         let n = self.n;
-        let (f, arrays) = (match self.p.precision { Precision::F32 => 4, Precision::F64 => 8 }, 2 * V::DIM + 3);
+        let (f, arrays) = (
+            match self.p.precision {
+                Precision::F32 => 4,
+                Precision::F64 => 8,
+            },
+            2 * V::DIM + 3,
+        );
         let bytes = (arrays * (n + PAD) * f) as u128 + Need::bytes_of::<V>(n);
         let need = Need::new("step", bytes, format!("the SPH buffers of {} particles", count(n as u128)));
         need.check()?;
@@ -606,7 +667,16 @@ mod tests {
         let (x, v, w) = blob::<DVec2>(900, 0.1, 3);
         let n = x.len();
         let model = Model { mass: vec![10.0; n], inv_mass: vec![0.1; n] };
-        let p = SphParams { h: 0.13, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel: KernelKind::CubicSpline, precision: Precision::F64 };
+        let p = SphParams {
+            h: 0.13,
+            rho0: 1000.0,
+            c0: 20.0,
+            gamma: 7,
+            alpha: 0.1,
+            clamp: true,
+            kernel: KernelKind::CubicSpline,
+            precision: Precision::F64,
+        };
         let mut t = Sph::new("fluid", 0, n, p, w.clone(), vec![10.0; w.len()]).unwrap();
         for stopped in [true, false] {
             t.set_stop(Stop::new(Some(std::sync::Arc::new(AtomicBool::new(stopped)))));
@@ -625,7 +695,10 @@ mod tests {
         let sigma = K::sigma(p.h, d);
         let wk = |r2: f64| sigma * K::w(r2.sqrt() / p.h);
         let rho: Vec<f64> = (0..n)
-            .map(|i| (0..n).map(|j| m * wk((x[i] - x[j]).length_squared())).sum::<f64>() + w.iter().map(|b| m * wk((x[i] - *b).length_squared())).sum::<f64>())
+            .map(|i| {
+                (0..n).map(|j| m * wk((x[i] - x[j]).length_squared())).sum::<f64>()
+                    + w.iter().map(|b| m * wk((x[i] - *b).length_squared())).sum::<f64>()
+            })
             .collect();
         let pp: Vec<f64> = rho.iter().map(|&r| p.pressure(r) / (r * r)).collect();
         let grad = |r: V| r * (sigma / (p.h * p.h) * K::g(r.length_squared().sqrt() / p.h));
@@ -636,7 +709,8 @@ mod tests {
                 for j in 0..n {
                     let r = x[i] - x[j];
                     let vr = (v[i] - v[j]).dot(r);
-                    let pi = 2.0 * p.alpha * p.c0 * p.h * (-vr).max(0.0) / ((r.length_squared() + 0.01 * p.h * p.h) * (rho[i] + rho[j]));
+                    let pi = 2.0 * p.alpha * p.c0 * p.h * (-vr).max(0.0)
+                        / ((r.length_squared() + 0.01 * p.h * p.h) * (rho[i] + rho[j]));
                     a -= grad(r) * (m * (pp[i] + pp[j] + pi));
                     power += 0.5 * m * m * pi * grad(r).dot(v[i] - v[j]);
                 }
@@ -653,7 +727,16 @@ mod tests {
         let dx = 0.01;
         for kernel in [KernelKind::CubicSpline, KernelKind::WendlandC2] {
             // Compressed 5 % so that the pressure term is active everywhere.
-            let p64 = SphParams { h: 1.3 * dx, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel, precision: Precision::F64 };
+            let p64 = SphParams {
+                h: 1.3 * dx,
+                rho0: 1000.0,
+                c0: 20.0,
+                gamma: 7,
+                alpha: 0.1,
+                clamp: true,
+                kernel,
+                precision: Precision::F64,
+            };
             let (x, v, w) = blob::<V>(1500, dx * 0.95, 11);
             let m = 1000.0 * dx.powi(V::DIM as i32);
             let (fb, pb) = match kernel {
@@ -668,13 +751,20 @@ mod tests {
                 for level in Level::available() {
                     let (fs, ps) = forces(p, &x, &v, &w, m, level);
                     let diff = fs.iter().zip(&fb).map(|(a, b)| (*a - *b).length_squared()).fold(0.0, f64::max).sqrt();
-                    assert!(diff <= tol * scale, "{kernel:?} {precision:?} {}D {level:?}: vs brute force {diff:e} of {scale:e}", V::DIM);
+                    assert!(
+                        diff <= tol * scale,
+                        "{kernel:?} {precision:?} {}D {level:?}: vs brute force {diff:e} of {scale:e}",
+                        V::DIM
+                    );
                     assert!((ps - pb).abs() <= 10.0 * tol * pb, "{level:?} power {ps} vs {pb}");
                     // Without walls, the pair forces are antisymmetric: Σ f = 0 to round-off.
                     let (f0, _) = forces(p, &x, &v, &[], m, level);
                     let total = f0.iter().fold(V::ZERO, |a, b| a + *b);
                     let abs: f64 = f0.iter().map(|f| f.length_squared().sqrt()).sum();
-                    assert!(total.length_squared().sqrt() <= tol * abs, "{kernel:?} {precision:?} {level:?}: net force {total:?} of {abs:e}");
+                    assert!(
+                        total.length_squared().sqrt() <= tol * abs,
+                        "{kernel:?} {precision:?} {level:?}: net force {total:?} of {abs:e}"
+                    );
                 }
             }
         }
@@ -688,7 +778,16 @@ mod tests {
 
     #[test]
     fn internal_energy_is_the_integral_of_p_over_rho_squared() {
-        let p = SphParams { h: 0.01, rho0: 1000.0, c0: 30.0, gamma: 7, alpha: 0.0, clamp: false, kernel: KernelKind::CubicSpline, precision: Precision::F64 };
+        let p = SphParams {
+            h: 0.01,
+            rho0: 1000.0,
+            c0: 30.0,
+            gamma: 7,
+            alpha: 0.0,
+            clamp: false,
+            kernel: KernelKind::CubicSpline,
+            precision: Precision::F64,
+        };
         for &rho in &[950.0, 1000.0, 1013.0, 1100.0] {
             let e = 1e-3;
             let du = (p.internal_energy(rho + e) - p.internal_energy(rho - e)) / (2.0 * e);

@@ -159,9 +159,18 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
             let mut acc = [zero; 3];
             let mut pacc = zero;
             for r in nb.fluid.iter() {
-                let pos = run(&b.pos[0], &r, l).chunks_exact(l).zip(run(&b.pos[1], &r, l).chunks_exact(l)).zip(run(&b.pos[z], &r, l).chunks_exact(l));
-                let vel = run(&b.vel[0], &r, l).chunks_exact(l).zip(run(&b.vel[1], &r, l).chunks_exact(l)).zip(run(&b.vel[z], &r, l).chunks_exact(l));
-                let par = run(&b.m, &r, l).chunks_exact(l).zip(run(&b.rho, &r, l).chunks_exact(l)).zip(run(&b.pr, &r, l).chunks_exact(l));
+                let pos = run(&b.pos[0], &r, l)
+                    .chunks_exact(l)
+                    .zip(run(&b.pos[1], &r, l).chunks_exact(l))
+                    .zip(run(&b.pos[z], &r, l).chunks_exact(l));
+                let vel = run(&b.vel[0], &r, l)
+                    .chunks_exact(l)
+                    .zip(run(&b.vel[1], &r, l).chunks_exact(l))
+                    .zip(run(&b.vel[z], &r, l).chunks_exact(l));
+                let par = run(&b.m, &r, l)
+                    .chunks_exact(l)
+                    .zip(run(&b.rho, &r, l).chunks_exact(l))
+                    .zip(run(&b.pr, &r, l).chunks_exact(l));
                 let mut left = P::splat(s, F::of((r.end - r.start) as f64));
                 for ((((px, py), pz), ((ux, uy), uz)), ((m, rho), pr)) in pos.zip(vel).zip(par) {
                     let mut dx = [xi[0] - P::load(s, px), xi[1] - P::load(s, py), zero];
@@ -191,7 +200,10 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
             }
             let mut wacc = [zero; 3];
             for r in nb.wall.iter() {
-                let pos = run(&b.wpos[0], &r, l).chunks_exact(l).zip(run(&b.wpos[1], &r, l).chunks_exact(l)).zip(run(&b.wpos[z], &r, l).chunks_exact(l));
+                let pos = run(&b.wpos[0], &r, l)
+                    .chunks_exact(l)
+                    .zip(run(&b.wpos[1], &r, l).chunks_exact(l))
+                    .zip(run(&b.wpos[z], &r, l).chunks_exact(l));
                 let mut left = P::splat(s, F::of((r.end - r.start) as f64));
                 for (((px, py), pz), psi) in pos.zip(run(&b.wpsi, &r, l).chunks_exact(l)) {
                     let mut dx = [xi[0] - P::load(s, px), xi[1] - P::load(s, py), zero];

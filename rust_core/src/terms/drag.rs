@@ -43,7 +43,13 @@ impl<V: Vector> Term<V> for Drag {
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         // Velocity relaxation time m/b of the lightest free particle.
-        let m = model.mass.iter().zip(&model.inv_mass).filter(|(_, &im)| im != 0.0).map(|(m, _)| *m).fold(f64::INFINITY, f64::min);
+        let m = model
+            .mass
+            .iter()
+            .zip(&model.inv_mass)
+            .filter(|(_, &im)| im != 0.0)
+            .map(|(m, _)| *m)
+            .fold(f64::INFINITY, f64::min);
         (self.b > 0.0 && m.is_finite()).then(|| m / self.b)
     }
 }

@@ -82,7 +82,15 @@ pub struct ForceSet<V: Vector> {
 
 impl<V: Vector> Default for ForceSet<V> {
     fn default() -> Self {
-        Self { terms: Vec::new(), dissipated: Vec::new(), power: Vec::new(), any_dissipative: false, evaluations: 0, g: V::ZERO, stop: Stop::default() }
+        Self {
+            terms: Vec::new(),
+            dissipated: Vec::new(),
+            power: Vec::new(),
+            any_dissipative: false,
+            evaluations: 0,
+            g: V::ZERO,
+            stop: Stop::default(),
+        }
     }
 }
 

@@ -46,7 +46,11 @@ impl<T: Float> Soa<T> {
     #[inline(always)]
     fn vectors(&self, r: std::ops::Range<usize>, l: usize) -> impl Iterator<Item = (&[T], &[T], &[T], &[T])> {
         let (x, y, z, m) = (&self.xs[r.clone()], &self.ys[r.clone()], &self.zs[r.clone()], &self.ms[r]);
-        x.chunks_exact(l).zip(y.chunks_exact(l)).zip(z.chunks_exact(l)).zip(m.chunks_exact(l)).map(|(((x, y), z), m)| (x, y, z, m))
+        x.chunks_exact(l)
+            .zip(y.chunks_exact(l))
+            .zip(z.chunks_exact(l))
+            .zip(m.chunks_exact(l))
+            .map(|(((x, y), z), m)| (x, y, z, m))
     }
 
     /// Room for `n` sources.
@@ -95,7 +99,18 @@ pub struct PairwiseGravity {
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {
-        Self { name, g, softening, src: Soa::default(), single: false, src32: Soa::default(), acc: Vec::new(), sym: SymScratch::default(), sym32: SymScratch::default(), stop: Stop::default() }
+        Self {
+            name,
+            g,
+            softening,
+            src: Soa::default(),
+            single: false,
+            src32: Soa::default(),
+            acc: Vec::new(),
+            sym: SymScratch::default(),
+            sym32: SymScratch::default(),
+            stop: Stop::default(),
+        }
     }
 }
 
@@ -300,11 +315,19 @@ impl<F: Float, const MASK: bool> Sym<'_, F, MASK> {
 /// returns each receiver's row sum Σ_j m_j d_ij (|d_ij|² + ε²)^{-3/2} and adds each pair's
 /// reaction −m_i d_ij (…)^{-3/2} to the column sums `cols`, receivers in order.
 #[inline(always)]
-fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(s: S, src: &Soa<F>, far: std::ops::Range<usize>, i0: usize, eps2: F, cols: &mut Cols<F>) -> [[Real; 3]; R] {
+fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(
+    s: S,
+    src: &Soa<F>,
+    far: std::ops::Range<usize>,
+    i0: usize,
+    eps2: F,
+    cols: &mut Cols<F>,
+) -> [[Real; 3]; R] {
     let Soa { xs, ys, zs, ms } = src;
     let l = P::<S, F>::lanes();
     let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, eps2));
-    let xi: [[P<S, F>; 3]; R] = std::array::from_fn(|r| [P::splat(s, xs[i0 + r]), P::splat(s, ys[i0 + r]), P::splat(s, zs[i0 + r])]);
+    let xi: [[P<S, F>; 3]; R] =
+        std::array::from_fn(|r| [P::splat(s, xs[i0 + r]), P::splat(s, ys[i0 + r]), P::splat(s, zs[i0 + r])]);
     // −m_i hoisted: the reaction is one FMA per component (negation is exact).
     let nmi: [P<S, F>; R] = std::array::from_fn(|r| P::splat(s, -ms[i0 + r]));
     let mut acc = [[zero; 3]; R];
@@ -313,7 +336,10 @@ fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(s: S, src: &Soa
     let k = S::SPLIT_RSQRT;
     let exact: [bool; R] = std::array::from_fn(|r| std::mem::size_of::<F>() == 8 && k > 0 && (i0 + r) % k == k - 1);
     let Cols { x: cx, y: cy, z: cz } = cols;
-    let col = cx[far.clone()].chunks_exact_mut(l).zip(cy[far.clone()].chunks_exact_mut(l)).zip(cz[far.clone()].chunks_exact_mut(l));
+    let col = cx[far.clone()]
+        .chunks_exact_mut(l)
+        .zip(cy[far.clone()].chunks_exact_mut(l))
+        .zip(cz[far.clone()].chunks_exact_mut(l));
     for ((bx, by, bz, bm), ((ox, oy), oz)) in src.vectors(far, l).zip(col) {
         let (x, y, z, m) = (P::load(s, bx), P::load(s, by), P::load(s, bz), P::load(s, bm));
         let (mut sx, mut sy, mut sz) = (P::load(s, ox), P::load(s, oy), P::load(s, oz));
@@ -372,7 +398,15 @@ const SYM_MIN: usize = 1024;
 /// with block BLOCKS−1−b (equal work) and each owns its column sums; a body's acceleration is its
 /// row sum plus the tasks' column sums in task order, so the result does not depend on the
 /// thread count. Once `stop` is set the remaining receivers are skipped.
-fn accelerations_sym<F: Float>(src: &Soa<F>, n: usize, eps2: F, level: Level, stop: &AtomicBool, scratch: &mut SymScratch<F>, out: &mut Vec<[Real; 3]>) {
+fn accelerations_sym<F: Float>(
+    src: &Soa<F>,
+    n: usize,
+    eps2: F,
+    level: Level,
+    stop: &AtomicBool,
+    scratch: &mut SymScratch<F>,
+    out: &mut Vec<[Real; 3]>,
+) {
     out.clear();
     out.resize(n, [0.0; 3]);
     let np = src.xs.len();
@@ -537,7 +571,8 @@ pub fn encounter_time<V: Vector>(g: Real, softening: Real, x: &[V], model: &Mode
     let mut src = Soa::<Real>::default();
     src.pack(x, model);
     let (eps2, level, n) = (softening * softening, simd::level(), x.len());
-    let rate = par::reduce(n, 0.0, Real::max, |rows| simd::dispatch(level, Encounter { src: &src, n, eps2, rows, stop }));
+    let rate =
+        par::reduce(n, 0.0, Real::max, |rows| simd::dispatch(level, Encounter { src: &src, n, eps2, rows, stop }));
     // G = 0 (or no pair with a time scale): none.
     (rate > 0.0).then(|| (1.0 / (g * rate)).sqrt()).filter(|t| t.is_finite())
 }
@@ -616,7 +651,10 @@ mod tests {
             seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
         };
-        let x = (0..n).map(|_| glam::DVec3::new(rnd(), rnd(), rnd())).map(|p| if single { p.round_f32() } else { p }).collect();
+        let x = (0..n)
+            .map(|_| glam::DVec3::new(rnd(), rnd(), rnd()))
+            .map(|p| if single { p.round_f32() } else { p })
+            .collect();
         let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
         (x, model)
     }
@@ -665,8 +703,14 @@ mod tests {
             for level in Level::available() {
                 let never = AtomicBool::new(false);
                 // Rows in uneven pieces, as the parallel chunks cut them.
-                let got: f64 = [0..1, 1..50, 50..97, 97..n].into_iter().map(|rows| simd::dispatch(level, Potential { src: &src, eps2: eps * eps, rows, stop: &never })).sum();
-                assert!(got.is_finite() && ((got - naive) / naive).abs() < 1e-13, "{level:?} eps {eps}: {got} vs {naive}");
+                let got: f64 = [0..1, 1..50, 50..97, 97..n]
+                    .into_iter()
+                    .map(|rows| simd::dispatch(level, Potential { src: &src, eps2: eps * eps, rows, stop: &never }))
+                    .sum();
+                assert!(
+                    got.is_finite() && ((got - naive) / naive).abs() < 1e-13,
+                    "{level:?} eps {eps}: {got} vs {naive}"
+                );
             }
         }
     }
@@ -693,7 +737,10 @@ mod tests {
             let src = packed::<f64>(&x, &model);
             for level in Level::available() {
                 let never = AtomicBool::new(false);
-                let rate = [0..1, 1..50, 50..200, 200..n].into_iter().map(|rows| simd::dispatch(level, Encounter { src: &src, n, eps2: eps * eps, rows, stop: &never })).fold(0.0, f64::max);
+                let rate = [0..1, 1..50, 50..200, 200..n]
+                    .into_iter()
+                    .map(|rows| simd::dispatch(level, Encounter { src: &src, n, eps2: eps * eps, rows, stop: &never }))
+                    .fold(0.0, f64::max);
                 let got = (1.0 / (2.0 * rate)).sqrt();
                 assert!(((got - naive) / naive).abs() < 1e-14, "{level:?} eps {eps}: {got} vs {naive}");
             }
@@ -725,7 +772,11 @@ mod tests {
                 let mut momentum = glam::DVec3::ZERO;
                 for i in 0..n {
                     let got = glam::DVec3::from_array(acc[i]);
-                    assert!((got - naive[i]).length() <= 1e-12 * naive[i].length().max(1.0), "{level:?} eps2={eps2} body {i}: {got} vs {}", naive[i]);
+                    assert!(
+                        (got - naive[i]).length() <= 1e-12 * naive[i].length().max(1.0),
+                        "{level:?} eps2={eps2} body {i}: {got} vs {}",
+                        naive[i]
+                    );
                     momentum += got * model.mass[i];
                 }
                 // Each pair's force is computed once and applied with both signs.
@@ -767,9 +818,16 @@ mod tests {
             two.extend(simd::dispatch(level, Tiles::<2>(&src, far.clone(), 9, 1e-4, &mut c2)));
             let four = simd::dispatch(level, Tiles::<4>(&src, far.clone(), 7, 1e-4, &mut c4));
             for (name, rows, c) in [("2", &two, &c2), ("4", &four, &c4)] {
-                assert_eq!(rows.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(), one.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(), "{level:?} tile {name}: rows");
+                assert_eq!(
+                    rows.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    one.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                    "{level:?} tile {name}: rows"
+                );
                 for (a, b) in [(&c.x, &c1.x), (&c.y, &c1.y), (&c.z, &c1.z)] {
-                    assert!(a.iter().zip(b.iter()).all(|(p, q)| p.to_bits() == q.to_bits()), "{level:?} tile {name}: columns");
+                    assert!(
+                        a.iter().zip(b.iter()).all(|(p, q)| p.to_bits() == q.to_bits()),
+                        "{level:?} tile {name}: columns"
+                    );
                 }
             }
             assert!(c1.x[far.clone()].iter().any(|&v| v != 0.25), "the columns were updated");

@@ -80,7 +80,10 @@ impl<V: Vector> Springs<V> {
         for s in 0..m {
             let (a, b) = (i[s] as usize, j[s] as usize);
             if a >= n_particles || b >= n_particles {
-                return Err(invalid("i/j", format!("spring {s} joins {a} and {b}, but the scene has {n_particles} particles")));
+                return Err(invalid(
+                    "i/j",
+                    format!("spring {s} joins {a} and {b}, but the scene has {n_particles} particles"),
+                ));
             }
             if a == b {
                 return Err(invalid("i/j", format!("spring {s} joins particle {a} to itself")));
@@ -136,7 +139,8 @@ impl<V: Vector> Springs<V> {
         for g in 0..n_slices {
             let w = (g * SLICE..((g + 1) * SLICE).min(n)).map(|p| off[p + 1] - off[p]).max().unwrap_or(0);
             entries += SLICE as u64 * w as u64;
-            start[g + 1] = u32::try_from(entries).map_err(|_| invalid("i/j", format!("{of}: too many padded incidence entries ({entries})")))?;
+            start[g + 1] = u32::try_from(entries)
+                .map_err(|_| invalid("i/j", format!("{of}: too many padded incidence entries ({entries})")))?;
         }
         let entries = entries as usize;
         let per_entry = if uniform.is_some() { 4 + 8 } else { 4 + 3 * 8 };
@@ -144,7 +148,8 @@ impl<V: Vector> Springs<V> {
         need.check()?;
         let mut other = need.filled(entries, 0u32)?;
         let mut e_rest = need.filled(entries, 0.0)?;
-        let (mut e_k, mut e_c) = if uniform.is_some() { (vec![], vec![]) } else { (need.filled(entries, 0.0)?, need.filled(entries, 0.0)?) };
+        let (mut e_k, mut e_c) =
+            if uniform.is_some() { (vec![], vec![]) } else { (need.filled(entries, 0.0)?, need.filled(entries, 0.0)?) };
         for g in 0..n_slices {
             let w = (start[g + 1] - start[g]) as usize / SLICE;
             for slot in 0..w {
@@ -278,11 +283,18 @@ impl<V: Vector> SliceForces<'_, V> {
                 let p0 = g * SLICE + q * l;
                 // Lanes past the last particle (a partial last slice) repeat it; never written.
                 let own = |c: usize, a: &[V]| P::<S, f64>::from_fn(s, |k| a[(p0 + k).min(last)].comp(c));
-                let (xp, vp) = ([own(0, x), own(1, x), if dim == 3 { own(2, x) } else { zero }], [own(0, v), own(1, v), if dim == 3 { own(2, v) } else { zero }]);
+                let (xp, vp) = (
+                    [own(0, x), own(1, x), if dim == 3 { own(2, x) } else { zero }],
+                    [own(0, v), own(1, v), if dim == 3 { own(2, v) } else { zero }],
+                );
                 let mut acc = [zero; 3];
                 let mut e = s0 + q * l;
                 while e < s1 {
-                    let (ox, ov) = if HW { s.gather_rows_f64s_hw(xf, vf, dim, &sp.other[e..]) } else { s.gather_rows_f64s(xf, vf, dim, &sp.other[e..]) };
+                    let (ox, ov) = if HW {
+                        s.gather_rows_f64s_hw(xf, vf, dim, &sp.other[e..])
+                    } else {
+                        s.gather_rows_f64s(xf, vf, dim, &sp.other[e..])
+                    };
                     let mut d = [zero; 3];
                     let mut dv = [zero; 3];
                     let mut l2 = zero;
@@ -414,7 +426,9 @@ mod tests {
         let mut s = 5;
         let mut x: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
         x[7] = x[3];
-        let v: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5][..V::DIM])).collect();
+        let v: Vec<V> = (0..n)
+            .map(|_| V::from_slice(&[lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, lcg(&mut s) - 0.5][..V::DIM]))
+            .collect();
         let (mut i, mut j) = (vec![3u32], vec![7u32]);
         for a in 0..n as u32 {
             for _ in 0..(a % 5) {
@@ -439,7 +453,12 @@ mod tests {
             let mut f = vec![V::ZERO; n];
             let p = sp.forces(level, &x, &v, &mut f, true, true);
             for q in 0..n {
-                assert!((f[q] - want[q]).length_squared().sqrt() <= 1e-13 * scale, "{level:?} particle {q}: {:?} vs {:?}", f[q], want[q]);
+                assert!(
+                    (f[q] - want[q]).length_squared().sqrt() <= 1e-13 * scale,
+                    "{level:?} particle {q}: {:?} vs {:?}",
+                    f[q],
+                    want[q]
+                );
             }
             assert!((p - pw).abs() <= 1e-12 * pw, "{level:?} power {p} vs {pw}");
         }

@@ -6,8 +6,10 @@ use physcore_core::Simulation;
 /// Unit-mass particle on a unit spring to a pinned anchor at the origin: x(t) = cos t.
 pub fn oscillator(integrator: &str, dt: f64) -> Simulation<DVec2> {
     let mut s = Simulation::new(integrator, dt, Some(1)).unwrap();
-    s.add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false]).unwrap();
-    s.add_term(Box::new(Springs::new("springs".into(), vec![0], vec![1], vec![1.0], vec![0.0], vec![0.0], 2).unwrap())).unwrap();
+    s.add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false])
+        .unwrap();
+    s.add_term(Box::new(Springs::new("springs".into(), vec![0], vec![1], vec![1.0], vec![0.0], vec![0.0], 2).unwrap()))
+        .unwrap();
     s
 }
 
@@ -62,7 +64,8 @@ pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> Simula
     }
     let m = a.len();
     let rest: Vec<f64> = a.iter().zip(&b).map(|(&i, &j)| (x[j as usize] - x[i as usize]).length()).collect();
-    sim.add_term(Box::new(Springs::new("springs".into(), a, b, vec![100.0; m], vec![damping; m], rest, np).unwrap())).unwrap();
+    sim.add_term(Box::new(Springs::new("springs".into(), a, b, vec![100.0; m], vec![damping; m], rest, np).unwrap()))
+        .unwrap();
     sim.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
     sim
 }
@@ -71,7 +74,8 @@ pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> Simula
 pub fn cloud(n: usize, threads: usize, softening: f64) -> Simulation<DVec3> {
     let mut r = Rng(7);
     let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(r.uniform(), r.uniform(), r.uniform())).collect();
-    let v: Vec<DVec3> = (0..n).map(|_| DVec3::new(r.uniform() - 0.5, r.uniform() - 0.5, r.uniform() - 0.5) * 0.1).collect();
+    let v: Vec<DVec3> =
+        (0..n).map(|_| DVec3::new(r.uniform() - 0.5, r.uniform() - 0.5, r.uniform() - 0.5) * 0.1).collect();
     let mut sim = Simulation::new("verlet", 1e-3, Some(threads)).unwrap();
     sim.add_particles(x, v, vec![1.0 / n as f64; n], vec![false; n]).unwrap();
     sim.add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, softening))).unwrap();
