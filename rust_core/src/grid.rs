@@ -236,7 +236,6 @@ impl CellList {
         self.order.resize(n, 0);
         let out = SyncPtr(self.order.as_mut_ptr());
         let scatter = |(p, off): (usize, &mut [u32])| {
-            let out = out;
             for i in (p * per).min(n)..((p + 1) * per).min(n) {
                 let b = keys[i] as usize;
                 // SAFETY: the scan gives every (part, bucket) a disjoint slot range within 0..n.

@@ -74,7 +74,7 @@ impl<V: Vector> Aabb<V> {
                         let vn = va[a] * out; // > 0: moving outward
                         if vn > 0.0 {
                             let dvn = (1.0 + e) * vn;
-                            va[a] = -e * va[a];
+                            va[a] *= -e;
                             if mu > 0.0 {
                                 let vt2: Real = (0..V::DIM).filter(|&b| b != a).map(|b| va[b] * va[b]).sum();
                                 if vt2 > 0.0 {
