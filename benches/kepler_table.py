@@ -5,7 +5,6 @@ diagnostics (median of 3)."""
 from __future__ import annotations
 
 import argparse
-import math
 import statistics
 import time
 

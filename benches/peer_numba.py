@@ -211,19 +211,19 @@ def _nbody_accel(px, py, pz, m, ax, ay, az, p):
             yj = py[j]
             zj = pz[j]
             mj = m[j]
-            for l in range(w):
-                dx = xj - xi[l]
-                dy = yj - yi[l]
-                dz = zj - zi[l]
+            for q in range(w):
+                dx = xj - xi[q]
+                dy = yj - yi[q]
+                dz = zj - zi[q]
                 r2 = dx * dx + dy * dy + dz * dz + eps2
                 s = mj / (r2 * np.sqrt(r2))
-                sx[l] += s * dx
-                sy[l] += s * dy
-                sz[l] += s * dz
-        for l in range(w):
-            ax[i0 + l] = gconst * sx[l]
-            ay[i0 + l] = gconst * sy[l]
-            az[i0 + l] = gconst * sz[l]
+                sx[q] += s * dx
+                sy[q] += s * dy
+                sz[q] += s * dz
+        for q in range(w):
+            ax[i0 + q] = gconst * sx[q]
+            ay[i0 + q] = gconst * sy[q]
+            az[i0 + q] = gconst * sz[q]
 
 
 @njit(**JIT)
@@ -363,7 +363,7 @@ def run_nbody(sizes, threads, rows, checks) -> None:
             x[label] = np.asarray(sim.positions, dtype=np.float64)
             del sim
 
-        def d(a, b):
+        def d(a, b, x=x):
             return float(np.abs(x[a] - x[b]).max())
 
         moved = float(np.abs(x["physcore f64"] - bench_nbody.initial(n)).max())

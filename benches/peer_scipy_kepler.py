@@ -30,7 +30,8 @@ def run_pc(rtol, atol):
         t0 = time.perf_counter()
         if sample:
             for _ in range(2000):
-                s.step(1); errs.append(abs(energy(s.positions[1], s.velocities[1]) / -0.5 - 1))
+                s.step(1)
+                errs.append(abs(energy(s.positions[1], s.velocities[1]) / -0.5 - 1))
         else:
             s.step(2000)
         return time.perf_counter() - t0, s, errs
@@ -46,7 +47,9 @@ def run_scipy(method, rtol, atol):
     ts = np.linspace(0, 100 * P, 2001)
     walls = []
     for _ in range(3):
-        t0 = time.perf_counter(); sol = solve_ivp(f, (0, 100 * P), y0, method=method, rtol=rtol, atol=atol, t_eval=ts); walls.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        sol = solve_ivp(f, (0, 100 * P), y0, method=method, rtol=rtol, atol=atol, t_eval=ts)
+        walls.append(time.perf_counter() - t0)
     e = max(abs(energy(sol.y[:2, k], sol.y[2:, k]) / -0.5 - 1) for k in range(len(ts)))
     return statistics.median(walls), e, float(np.linalg.norm(sol.y[:2, -1] - [0.5, 0])), sol.nfev
 def main() -> None:

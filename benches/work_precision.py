@@ -70,7 +70,9 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
 
 _HERE = Path(__file__).resolve().parent
 if str(_HERE) not in sys.path:
@@ -93,7 +95,7 @@ CSV_FIELDS = [
 ]
 
 
-def integrator_names() -> List[str]:
+def integrator_names() -> list[str]:
     return [d["name"] for d in pc.INTEGRATORS]
 
 
@@ -119,12 +121,12 @@ class Problem:
     f32_ms: Sequence[int]
     rtols: Sequence[float]
     f32_rtols: Sequence[float]
-    threads: Optional[int]
+    threads: int | None
     length: float  # position error normalisation, m
     periodic: bool  # Kepler: error |x(T) - x(0)|, no reference
     period: float = 0.0  # Kepler: P, for the dt labels
-    free: Optional[np.ndarray] = field(default=None, repr=False)  # mask of free particles
-    ref: Optional[np.ndarray] = field(default=None, repr=False)
+    free: np.ndarray | None = field(default=None, repr=False)  # mask of free particles
+    ref: np.ndarray | None = field(default=None, repr=False)
     energy_scale: float = 0.0  # chain, cloth: energy errors are relative to this, J
     ref_note: str = ""
 
@@ -220,7 +222,7 @@ def cloth_problem(g: int, span: float, ms, f32_ms, rtols, f32_rtols, stiffness: 
     return p
 
 
-def make_problems(quick: bool) -> List[Problem]:
+def make_problems(quick: bool) -> list[Problem]:
     if quick:
         kq = dict(orbits=2, ns=[64, 128, 256], f32_ns=[128], rtols=[1e-4, 1e-8], f32_rtols=[1e-4])
         return [kepler_problem(e, **kq) for e in (0.0, 0.5, 0.9)] + [
@@ -248,7 +250,7 @@ class _Deadline(BaseException):
 class deadline:
     """Raise _Deadline after `seconds` (POSIX main thread only; otherwise no guard)."""
 
-    def __init__(self, seconds: Optional[float]) -> None:
+    def __init__(self, seconds: float | None) -> None:
         self.seconds = seconds
         self.armed = False
         self.usable = (seconds is not None and hasattr(signal, "setitimer")
@@ -258,7 +260,7 @@ class deadline:
         if self.armed:
             raise _Deadline()
 
-    def __enter__(self) -> "deadline":
+    def __enter__(self) -> deadline:
         if self.usable:
             self.old = signal.signal(signal.SIGALRM, self._fire)
             self.armed = True
@@ -272,8 +274,8 @@ class deadline:
             signal.signal(signal.SIGALRM, self.old)
 
 
-def _scene_kwargs(prob: Problem, integrator: str, precision: str, dt: float, rtol: Optional[float]) -> Dict[str, Any]:
-    kw: Dict[str, Any] = dict(integrator=integrator, dt=dt, threads=prob.threads)
+def _scene_kwargs(prob: Problem, integrator: str, precision: str, dt: float, rtol: float | None) -> dict[str, Any]:
+    kw: dict[str, Any] = dict(integrator=integrator, dt=dt, threads=prob.threads)
     if rtol is not None:
         kw.update(rtol=rtol, atol=1e-3 * rtol * prob.length)
     if precision != "f64":
@@ -285,8 +287,8 @@ def _scale(e) -> float:
     return abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
 
 
-def simulate(prob: Problem, integrator: str, precision: str, m: int, rtol: Optional[float],
-             guard_s: Optional[float]) -> Dict[str, Any]:
+def simulate(prob: Problem, integrator: str, precision: str, m: int, rtol: float | None,
+             guard_s: float | None) -> dict[str, Any]:
     """One run: sampled energy error, final positions, cost. Position error is filled by the caller."""
     dt = prob.sample / m
     steps_per_call = 1 if rtol is not None else m
@@ -339,14 +341,14 @@ def simulate(prob: Problem, integrator: str, precision: str, m: int, rtol: Optio
     }
 
 
-def _progress(row: Dict[str, Any], prob: Problem) -> None:
+def _progress(row: dict[str, Any], prob: Problem) -> None:
     r = f" rtol={row['rtol']:.0e}" if row["rtol"] is not None else ""
     print(f"{prob.name:11s} {row['integrator']:19s} {row['precision']} dt={prob.dt_label(row['dt']):>9s}{r:11s} "
           f"evals={row['force_evals']:>9d} wall={row['wall_s']:8.3f}s dE={row['max_rel_energy_error']:.1e} "
           f"dx={row['position_error']:.1e} {row['status']}", file=sys.stderr, flush=True)
 
 
-def make_reference(prob: Problem, cache: Dict[Tuple, Dict[str, Any]]) -> List[Dict[str, Any]]:
+def make_reference(prob: Problem, cache: dict[tuple, dict[str, Any]]) -> list[dict[str, Any]]:
     """rk4 (float64) at half the smallest dt of the sweep; error estimate from the smallest dt."""
     names = integrator_names()
     ref_integ = "rk4" if "rk4" in names else max(pc.INTEGRATORS, key=lambda d: (d["order"], d["name"] != "rk45"))["name"]
@@ -370,8 +372,8 @@ def make_reference(prob: Problem, cache: Dict[Tuple, Dict[str, Any]]) -> List[Di
     return [fine]
 
 
-def sweep(prob: Problem, cap_s: float, guard_s: float, cache: Dict[Tuple, Dict[str, Any]]) -> List[Dict[str, Any]]:
-    rows: List[Dict[str, Any]] = []
+def sweep(prob: Problem, cap_s: float, guard_s: float, cache: dict[tuple, dict[str, Any]]) -> list[dict[str, Any]]:
+    rows: list[dict[str, Any]] = []
     precisions = ["f64"] + (["f32"] if has_precision() else [])
     for integ in integrator_names():
         for prec in precisions:
@@ -380,7 +382,7 @@ def sweep(prob: Problem, cap_s: float, guard_s: float, cache: Dict[Tuple, Dict[s
                 values = prob.rtols if prec == "f64" else prob.f32_rtols
             else:
                 values = prob.ms if prec == "f64" else prob.f32_ms
-            prev: Optional[Tuple[float, float]] = None  # (value, wall)
+            prev: tuple[float, float] | None = None  # (value, wall)
             diverged_run = 0
             for v in values:
                 key = (integ, prec, 1 if adaptive else v, v if adaptive else None)
@@ -420,7 +422,7 @@ def _csv_value(v: Any) -> Any:
     return v
 
 
-def write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
+def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
     def w(f):
         wr = csv.writer(f)
         wr.writerow(CSV_FIELDS)
@@ -429,13 +431,13 @@ def write_csv(path: Path, rows: List[Dict[str, Any]]) -> None:
     _atomic_write(path, w)
 
 
-def _sci(x: Optional[float]) -> str:
+def _sci(x: float | None) -> str:
     if x is None:
         return ""
     return f"{x:.1e}" if math.isfinite(x) else "—"
 
 
-def markdown(problems: List[Problem], rows: List[Dict[str, Any]], command: str) -> str:
+def markdown(problems: list[Problem], rows: list[dict[str, Any]], command: str) -> str:
     import physcore
     ver = getattr(physcore, "__version__", "?")
     profile = getattr(pc._core, "build_profile", "?")
@@ -469,7 +471,7 @@ def markdown(problems: List[Problem], rows: List[Dict[str, Any]], command: str) 
     return "\n".join(lines)
 
 
-def plot(path: Path, problems: List[Problem], rows: List[Dict[str, Any]]) -> None:
+def plot(path: Path, problems: list[Problem], rows: list[dict[str, Any]]) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -493,7 +495,7 @@ def plot(path: Path, problems: List[Problem], rows: List[Dict[str, Any]]) -> Non
                     if not pts:
                         continue
                     any_data = True
-                    xs, ys = zip(*pts)
+                    xs, ys = zip(*pts, strict=False)
                     ymin, ymax = min(ymin, *ys), max(ymax, *ys)
                     ax.plot(xs, ys, linestyle="--" if prec == "f32" else "-", marker=markers[k % len(markers)],
                             markersize=4, color=colours[integ], mfc="none" if prec == "f32" else colours[integ],
@@ -514,7 +516,7 @@ def plot(path: Path, problems: List[Problem], rows: List[Dict[str, Any]]) -> Non
                 ax.set_ylabel(label)
     handles, labels = [], []
     for ax in axes.ravel():
-        for h, lab in zip(*ax.get_legend_handles_labels()):
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=False):
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
@@ -527,7 +529,7 @@ def plot(path: Path, problems: List[Problem], rows: List[Dict[str, Any]]) -> Non
 
 
 # --------------------------------------------------------------------------- main
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="tiny sweep (seconds; any build)")
     ap.add_argument("--problems", default="kepler,chain,cloth",
@@ -548,9 +550,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     out = Path(args.out)
     command = " ".join(["python benches/work_precision.py", *(sys.argv[1:] if argv is None else [str(a) for a in argv])])
     t_start = time.perf_counter()
-    rows: List[Dict[str, Any]] = []
+    rows: list[dict[str, Any]] = []
     for prob in problems:
-        cache: Dict[Tuple, Dict[str, Any]] = {}
+        cache: dict[tuple, dict[str, Any]] = {}
         if not prob.periodic:
             rows += make_reference(prob, cache)
         rows += sweep(prob, cap, guard, cache)

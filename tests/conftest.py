@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 import os
 import warnings
-from typing import Callable, List, Optional, Sequence, Tuple
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import pytest
@@ -24,7 +24,7 @@ with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     try:
         import hypothesis.extra._patching  # noqa: F401
-    except Exception:  # pragma: no cover - optional dependency of hypothesis
+    except Exception:  # noqa: BLE001 - pragma: no cover - optional dependency of hypothesis
         pass
 
 settings.register_profile(
@@ -38,14 +38,14 @@ settings.register_profile("stress", parent=settings.get_profile("ci"), max_examp
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 #: All integrator names, as the library reports them.
-INTEGRATOR_NAMES: Tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
-SYMPLECTIC: Tuple[str, ...] = ("semi_implicit_euler", "verlet")
+INTEGRATOR_NAMES: tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
+SYMPLECTIC: tuple[str, ...] = ("semi_implicit_euler", "verlet")
 
 EPS = np.finfo(np.float64).eps
 
 #: Every SIMD level the kernels are written for; a test taking the ``simd_level`` fixture runs once
 #: per level this CPU has and is skipped, saying so, for the others.
-SIMD_LEVELS: Tuple[str, ...] = ("scalar", "avx2", "avx512", "neon")
+SIMD_LEVELS: tuple[str, ...] = ("scalar", "avx2", "avx512", "neon")
 
 
 @pytest.fixture(params=SIMD_LEVELS)
@@ -84,7 +84,7 @@ def oscillator(
     return s
 
 
-def oscillator_exact(t: float, omega: float = 1.0, x0=(1.0, 0.0), v0=(0.0, 0.5)) -> Tuple[np.ndarray, np.ndarray]:
+def oscillator_exact(t: float, omega: float = 1.0, x0=(1.0, 0.0), v0=(0.0, 0.5)) -> tuple[np.ndarray, np.ndarray]:
     """Closed-form (x, v) of :func:`oscillator` at time t."""
     x0, v0 = np.asarray(x0, float), np.asarray(v0, float)
     c, s = math.cos(omega * t), math.sin(omega * t)
@@ -96,7 +96,7 @@ def random_network(
     n: int,
     *,
     dim: int = 2,
-    n_springs: Optional[int] = None,
+    n_springs: int | None = None,
     n_pinned: int = 0,
     speed: float = 0.3,
     integrator: str = "verlet",
@@ -117,7 +117,7 @@ def random_network(
     pairs = [(a, b) for a in range(n) for b in range(a + 1, n)]
     order = rng.permutation(len(pairs))
     want = n_springs if n_springs is not None else max(n, int(1.5 * n))
-    chosen: List[Tuple[int, int]] = []
+    chosen: list[tuple[int, int]] = []
     covered = set()
     # Guarantee every particle is attached to something, then add random extra springs.
     for p in range(n):
@@ -144,7 +144,7 @@ def random_network(
     return s
 
 
-def random_cloud(seed: int, n: int, *, dim: int = 3, speed: float = 0.3, box: float = 1.0) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+def random_cloud(seed: int, n: int, *, dim: int = 3, speed: float = 0.3, box: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Random (positions, velocities, masses) of n free particles, kept apart."""
     rng = np.random.default_rng(seed)
     x = _separated_points(rng, n, dim, min_dist=0.1 * box, box=box)
@@ -154,7 +154,7 @@ def random_cloud(seed: int, n: int, *, dim: int = 3, speed: float = 0.3, box: fl
 
 
 def _separated_points(rng: np.random.Generator, n: int, dim: int, *, min_dist: float, box: float) -> np.ndarray:
-    pts: List[np.ndarray] = []
+    pts: list[np.ndarray] = []
     tries = 0
     while len(pts) < n:
         p = rng.uniform(-box, box, size=dim)

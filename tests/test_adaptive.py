@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import oscillator
 
 import physcore as pc
-from conftest import oscillator
 
 
 def _stiff_chain(integrator: str, k: float = 1e4) -> pc.Scene:

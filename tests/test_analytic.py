@@ -5,9 +5,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import EPS, INTEGRATOR_NAMES
 
 import physcore as pc
-from conftest import EPS, INTEGRATOR_NAMES
 
 # dt = 2⁻¹⁰ s is exact in binary, so t = n·dt is exact and only arithmetic round-off remains.
 DT_EXACT = 2.0**-10

@@ -1,6 +1,7 @@
 """The Python contract of Scene, the terms and the package namespace."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -148,10 +149,11 @@ def test_springs_rest_length_resolved_from_geometry(scene):
 
 def test_terms_are_immutable():
     g = pc.Gravity([0.0, -9.81])
-    with pytest.raises(Exception):
-        g.g[1] = 0.0  # read-only array
-    with pytest.raises(Exception):
-        g.name = "other"  # frozen dataclass
+    with pytest.raises(ValueError, match="read-only"):
+        g.g[1] = 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        g.name = "other"
+    assert g.name == "gravity" and np.array_equal(g.g, [0.0, -9.81])
     p = pc.Plane([0.0, 0.0], [0.0, 3.0])
     assert np.array_equal(p.normal, [0.0, 1.0])  # normalised
 

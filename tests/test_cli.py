@@ -5,7 +5,6 @@ import math
 import shutil
 import subprocess
 import sys
-from typing import Optional
 
 import numpy as np
 import pytest
@@ -188,7 +187,7 @@ def tanks(monkeypatch):
     (neither pressure() nor advance()); returns the list of scenes made."""
     made = []
 
-    def make(hide, n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+    def make(hide, n: int = 4, integrator: str = "verlet", dt: float | None = None):
         g = np.linspace(0.2, 0.6, n)
         gx, gy = (a.ravel() for a in np.meshgrid(g, g + 0.3))
         s = pc.Scene(dim=2, integrator=integrator, dt=1e-3 if dt is None else dt)
@@ -197,15 +196,15 @@ def tanks(monkeypatch):
         made.append(Tank(s, hide))
         return made[-1]
 
-    def tank(n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+    def tank(n: int = 4, integrator: str = "verlet", dt: float | None = None):
         """A falling block in a tank (test stand-in for a fluid scene)."""
         return make((), n, integrator, dt)
 
-    def tank_plain(n: int = 4, integrator: str = "verlet", dt: Optional[float] = None):
+    def tank_plain(n: int = 4, integrator: str = "verlet", dt: float | None = None):
         """The same without pressure() and advance()."""
         return make(("pressure", "advance"), n, integrator, dt)
 
-    def tank_boom(n: int = 1, integrator: str = "verlet", dt: Optional[float] = None):
+    def tank_boom(n: int = 1, integrator: str = "verlet", dt: float | None = None):
         """A particle at 1e308 m/s: diverges on the first substep."""
         s = pc.Scene(dim=2, integrator=integrator, dt=10.0 if dt is None else dt)
         s.add_particles(np.zeros((1, 2)), np.array([[1e308, 0.0]]))

@@ -6,11 +6,11 @@ import math
 
 import numpy as np
 import pytest
+from conftest import SYMPLECTIC, random_cloud, random_network, sample, total_energy
 from hypothesis import given
 from hypothesis import strategies as st
 
 import physcore as pc
-from conftest import SYMPLECTIC, random_cloud, random_network, sample, total_energy
 
 seeds = st.integers(min_value=0, max_value=2**32 - 1)
 
@@ -144,8 +144,8 @@ def test_angular_momentum_conserved_by_symplectic_methods(integrator, seed, n, d
     l0 = np.atleast_1d(s.angular_momentum())
     samples = sample(s, 2000, 100, lambda s: (np.atleast_1d(s.angular_momentum()), _angular_scale(s)))
     scale = max(sc for _, sc in samples)
-    for l, _ in samples:
-        assert np.all(np.abs(l - l0) <= 1e-10 * scale)
+    for am, _ in samples:
+        assert np.all(np.abs(am - l0) <= 1e-10 * scale)
 
 
 def test_explicit_euler_does_not_conserve_angular_momentum():
@@ -208,7 +208,7 @@ def test_dissipation_books_balance_first_order_methods(integrator):
         reports = sample(s, 4000, 10, lambda s: s.energy())
         total = np.array([r.total for r in reports])
         assert np.abs(total - total[0]).max() < H_NET * abs(total[0])
-        for r0, r1 in zip(reports, reports[1:]):
+        for r0, r1 in zip(reports, reports[1:], strict=False):
             for name in r0.dissipated:
                 assert 0 <= r0.dissipated[name] <= r1.dissipated[name]
 

@@ -5,9 +5,9 @@ import os
 
 import numpy as np
 import pytest
+from conftest import INTEGRATOR_NAMES, random_cloud
 
 import physcore as pc
-from conftest import INTEGRATOR_NAMES, random_cloud
 
 
 def _assert_same_run(a: pc.Scene, b: pc.Scene) -> None:

@@ -39,7 +39,7 @@ def _snapshot(s: pc.Scene):
 def _assert_unchanged(s: pc.Scene, snap) -> None:
     now = _snapshot(s)
     assert now[0] == snap[0]
-    for a, b in zip(now[1:5], snap[1:5]):
+    for a, b in zip(now[1:5], snap[1:5], strict=False):
         assert np.array_equal(a, b)
     assert now[5:] == snap[5:]
 
@@ -226,7 +226,7 @@ def test_add_non_term_is_type_error(scene2d, item):
 def test_step_argument(scene2d):
     _raises(scene2d, ValueError, "n", lambda: scene2d.step(-1))
     for bad in (1.5, "3", None, True):
-        _raises(scene2d, TypeError, "n", lambda: scene2d.step(bad))
+        _raises(scene2d, TypeError, "n", lambda bad=bad: scene2d.step(bad))
     # step(0) is a no-op; numpy integers are ints.
     snap = _snapshot(scene2d)
     scene2d.step(0)
@@ -236,7 +236,7 @@ def test_step_argument(scene2d):
 
 
 def test_load_rejects_missing_file(tmp_path):
-    with pytest.raises(OSError):
+    with pytest.raises(FileNotFoundError, match="nope.npz"):
         pc.Scene.load(tmp_path / "nope.npz")
 
 

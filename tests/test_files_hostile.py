@@ -26,9 +26,10 @@ import tracemalloc
 import warnings
 import zipfile
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any
 
 import numpy as np
 import pytest
@@ -72,8 +73,8 @@ class Ref:
     """A valid saved file: its bytes, members (name without .npy -> bytes) and meta."""
 
     data: bytes
-    members: Dict[str, bytes]
-    meta: Dict[str, Any]
+    members: dict[str, bytes]
+    meta: dict[str, Any]
 
     def array(self, name: str) -> np.ndarray:
         return np.lib.format.read_array(io.BytesIO(self.members[name]), allow_pickle=False)
@@ -99,7 +100,7 @@ def fuzz_dir(tmp_path_factory) -> Path:
 
 
 # ------------------------------------------------------------------------------ crafting files
-def zip_bytes(members: List[Tuple[str, bytes]], compress: int = zipfile.ZIP_STORED) -> bytes:
+def zip_bytes(members: list[tuple[str, bytes]], compress: int = zipfile.ZIP_STORED) -> bytes:
     buf = io.BytesIO()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # zipfile warns on duplicate names; some cases want them
@@ -109,7 +110,7 @@ def zip_bytes(members: List[Tuple[str, bytes]], compress: int = zipfile.ZIP_STOR
     return buf.getvalue()
 
 
-def rebuilt(ref: Ref, replace: Optional[Dict[str, Optional[bytes]]] = None, add: Tuple[Tuple[str, bytes], ...] = ()) -> bytes:
+def rebuilt(ref: Ref, replace: dict[str, bytes | None] | None = None, add: tuple[tuple[str, bytes], ...] = ()) -> bytes:
     """The reference with members replaced (None removes one) or added, valid CRCs throughout."""
     replace = replace or {}
     out = [(f"{k}.npy", replace.get(k, v)) for k, v in ref.members.items() if replace.get(k, v) is not None]
@@ -122,7 +123,7 @@ def npy(a: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def npy_raw(header: str, data: bytes = b"", version: Tuple[int, int] = (1, 0)) -> bytes:
+def npy_raw(header: str, data: bytes = b"", version: tuple[int, int] = (1, 0)) -> bytes:
     """A .npy member with a hand-written header (numpy's writer refuses the hostile ones)."""
     h = header.encode("latin1")
     fmt = "<H" if version[0] == 1 else "<I"
@@ -139,7 +140,7 @@ def hdr(descr: str, shape: tuple, fortran: bool = False, raw: bool = False) -> s
 RAW = "\x00raw\x00"  # a meta value replaced by the JSON text after it, verbatim
 
 
-def meta_text(meta: Dict[str, Any]) -> str:
+def meta_text(meta: dict[str, Any]) -> str:
     text = json.dumps(meta)  # NaN and Infinity as Python writes them
     while f'"{RAW}' in text:  # "\x00raw\x00TEXT" -> TEXT
         i = text.index(f'"{RAW}')
@@ -148,7 +149,7 @@ def meta_text(meta: Dict[str, Any]) -> str:
     return text
 
 
-def with_meta(ref: Ref, edit: Callable[[Dict[str, Any]], None]) -> bytes:
+def with_meta(ref: Ref, edit: Callable[[dict[str, Any]], None]) -> bytes:
     meta = json.loads(json.dumps(ref.meta))
     edit(meta)
     return rebuilt(ref, {"meta": npy(np.array(meta_text(meta)))})
@@ -181,12 +182,12 @@ class Case:
     build: Callable[[Ref], bytes]
     #: "refuse" (SceneFileError naming `field`, or any field if None), "load", or "either".
     expect: str = "refuse"
-    field: Optional[str] = None
+    field: str | None = None
     #: A name the message must contain (for an inconsistency, found at either end).
-    mentions: Optional[str] = None
+    mentions: str | None = None
 
 
-def _truncations() -> List[Case]:
+def _truncations() -> list[Case]:
     cases = []
     for frac in (0.0, 0.1, 0.5, 0.9, 0.99):
         cases.append(Case("container", f"truncated-{frac}", lambda r, f=frac: r.data[: int(len(r.data) * f)], field=""))
@@ -299,7 +300,7 @@ class Either:
 
 # (path in meta, bad values): every field, with the wrong type or out of range. The error must
 # name the field (or, for a list, one of its entries), unless At says otherwise.
-BAD_FIELDS: List[Tuple[tuple, List[Any]]] = [
+BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("format",), [2, 0, "1", True, 1.0, None]),
     (("dim",), [4, 1, 2.0, "2", True, None]),
     (("integrator",), ["leapfrog", 3, None, ["verlet"]]),
@@ -341,7 +342,7 @@ BAD_FIELDS: List[Tuple[tuple, List[Any]]] = [
     (("boxes", 0, "upper"), [[-20.0, 10.0], [10.0]]),
     (("boxes", 0, "lower"), [At("meta.boxes[0].upper", [10.0, 10.0]), [NAN, 0.0]]),
 ]
-META_FIELDS: List[Case] = []
+META_FIELDS: list[Case] = []
 for _path, _values in BAD_FIELDS:
     for _v in _values:
         _field = _v.field if isinstance(_v, At) else field_name(_path)
@@ -402,7 +403,7 @@ ARRAY_MEMBERS = [
 ]  # fmt: skip
 
 
-def _array_cases() -> List[Case]:
+def _array_cases() -> list[Case]:
     cases = []
 
     def case(name: str, member: str, make: Callable[[np.ndarray], bytes], expect: str = "refuse", anywhere: bool = False) -> None:
@@ -466,7 +467,7 @@ ARRAYS = _array_cases()
 
 
 # Allocation: sizes the file claims beyond what it holds.
-def raw_zip(entries: List[Tuple[str, int, int, bytes, int]]) -> bytes:
+def raw_zip(entries: list[tuple[str, int, int, bytes, int]]) -> bytes:
     """A zip written by hand from (name, method, crc32, stored bytes, uncompressed size), so the
     stored bytes can be a deflate stream made elsewhere."""
     out, central = bytearray(), bytearray()
@@ -540,7 +541,7 @@ class _Marker:
         return (open, (self.path, "w"))
 
 
-def _pickle_cases() -> List[Case]:
+def _pickle_cases() -> list[Case]:
     def payload(r: Ref, member: str) -> bytes:
         return rebuilt(r, {member: npy(np.array([_Marker()], dtype=object))})
 
@@ -551,7 +552,7 @@ def _pickle_cases() -> List[Case]:
 
 PICKLE = _pickle_cases()
 
-CORPUS: List[Case] = CONTAINER + MEMBERS + META_JSON + META_FIELDS + ARRAYS + ALLOCATION + PICKLE
+CORPUS: list[Case] = CONTAINER + MEMBERS + META_JSON + META_FIELDS + ARRAYS + ALLOCATION + PICKLE
 
 
 # ------------------------------------------------------------------------------ checking a load
@@ -576,7 +577,7 @@ def check_loaded(scene: pc.Scene, path: Path) -> None:
     assert back.energy().dissipated == scene.energy().dissipated
 
 
-def load_or_refuse(path: Path, max_bytes: int) -> Optional[pc.Scene]:
+def load_or_refuse(path: Path, max_bytes: int) -> pc.Scene | None:
     """Scene.load(path): the scene, or None when it raised SceneFileError naming the file;
     any other exception fails. Python-heap allocation during the call (numpy's included) must
     stay below `max_bytes`."""
@@ -585,7 +586,7 @@ def load_or_refuse(path: Path, max_bytes: int) -> Optional[pc.Scene]:
         scene = pc.Scene.load(path)
     except pc.SceneFileError as exc:
         scene = None
-        assert str(path) in str(exc) and exc.path == str(path), str(exc)
+        assert str(path) in str(exc) and exc.path == str(path), str(exc)  # noqa: PT017 - the peak is read in finally
     finally:
         peak = tracemalloc.get_traced_memory()[1]
         tracemalloc.stop()
@@ -714,7 +715,7 @@ def test_thread_count_from_a_file_is_capped(ref, tmp_path):
 def test_a_fifo_does_not_hang(tmp_path):
     fifo = tmp_path / "pipe.npz"
     os.mkfifo(fifo)
-    result: List[BaseException] = []
+    result: list[BaseException] = []
     t = threading.Thread(target=lambda: _catch(result, lambda: pc.Scene.load(fifo)), daemon=True)
     t.start()
     t.join(10.0)
@@ -722,7 +723,7 @@ def test_a_fifo_does_not_hang(tmp_path):
     assert len(result) == 1 and type(result[0]) is pc.SceneFileError, result
 
 
-def _catch(out: List[BaseException], f: Callable[[], Any]) -> None:
+def _catch(out: list[BaseException], f: Callable[[], Any]) -> None:
     try:
         f()
     except BaseException as exc:  # noqa: BLE001 - handed to the test thread
@@ -844,7 +845,7 @@ def test_round_trip_is_bit_identical_for_every_integrator(tmp_path):
 
 
 # ------------------------------------------------------------------------------ fuzzing
-def _mutate(data: bytes, ops: List[Tuple[int, int, int]]) -> bytes:
+def _mutate(data: bytes, ops: list[tuple[int, int, int]]) -> bytes:
     out = bytearray(data)
     for op, pos, val in ops:
         if not out:
@@ -866,7 +867,7 @@ def _mutate(data: bytes, ops: List[Tuple[int, int, int]]) -> bytes:
 
 
 OPS = st.lists(st.tuples(st.integers(0, 5), st.integers(0, 2**32), st.integers(0, 255)), min_size=1, max_size=8)
-_FUZZ_REF: Dict[str, Ref] = {}
+_FUZZ_REF: dict[str, Ref] = {}
 
 
 def _fuzz_ref(tmp_dir: Path) -> Ref:
@@ -908,7 +909,7 @@ JSON_VALUES = st.recursive(
 )
 
 
-def _meta_paths(meta: Any, prefix: tuple = ()) -> List[tuple]:
+def _meta_paths(meta: Any, prefix: tuple = ()) -> list[tuple]:
     out = [prefix] if prefix else []
     if isinstance(meta, dict):
         for k, v in meta.items():

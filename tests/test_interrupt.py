@@ -187,7 +187,7 @@ def _longest_pause_of_another_thread(call) -> tuple[float, float]:
     done.set()
     ticker.join()
     inside = [t0] + [t for t in ticks if t0 < t < t1] + [t1]
-    return t1 - t0, max(b - a for a, b in zip(inside, inside[1:]))
+    return t1 - t0, max(b - a for a, b in zip(inside, inside[1:], strict=False))
 
 
 @pytest.mark.parametrize("query", ["energy", "suggest_dt", "auto_dt", "step"])

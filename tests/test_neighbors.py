@@ -37,8 +37,8 @@ def check(points, radius):
     assert i.shape == j.shape and i.ndim == 1
     assert np.array_equal(i, bi) and np.array_equal(j, bj), (
         f"{len(i)} pairs found, {len(bi)} expected; "
-        f"missing {sorted(set(zip(bi.tolist(), bj.tolist())) - set(zip(i.tolist(), j.tolist())))[:5]}, "
-        f"extra {sorted(set(zip(i.tolist(), j.tolist())) - set(zip(bi.tolist(), bj.tolist())))[:5]}"
+        f"missing {sorted(set(zip(bi.tolist(), bj.tolist(), strict=False)) - set(zip(i.tolist(), j.tolist(), strict=False)))[:5]}, "
+        f"extra {sorted(set(zip(i.tolist(), j.tolist(), strict=False)) - set(zip(bi.tolist(), bj.tolist(), strict=False)))[:5]}"
     )
     return i, j
 

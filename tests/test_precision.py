@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
+from conftest import random_cloud
 
 import physcore as pc
-from conftest import random_cloud
 
 
 def _kepler(precision: str, steps_per_orbit: int, integrator: str = "verlet") -> pc.Scene:

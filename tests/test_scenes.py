@@ -11,7 +11,6 @@ import pytest
 
 import physcore as pc
 
-
 FLUID_SCENES = ("dam_break", "drop")
 
 

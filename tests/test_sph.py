@@ -151,7 +151,7 @@ def test_hydrostatic_layer_pressure_and_density():
     assert abs(rel.mean()) < 0.01, rel.mean()
     assert np.abs(rel[bulk]).max() < 0.01, np.abs(rel[bulk]).max()
     rows = []
-    for lo, hi in zip(edges[:-1], edges[1:]):
+    for lo, hi in zip(edges[:-1], edges[1:], strict=False):
         m = inner & (x[:, 1] >= lo) & (x[:, 1] < hi)
         y = x[m, 1].mean()
         expect = RHO0 * G * (surface - y)
@@ -204,7 +204,7 @@ def test_dam_break_front_matches_martin_and_moyce(kernel):
     z_raw = np.interp(t_exp, ts, zs)
     err = z_sim / z_exp - 1.0
     err_raw = z_raw / z_exp - 1.0
-    MM_TABLES[kernel] = list(zip(t_exp, z_exp, z_sim, err, z_raw, err_raw))
+    MM_TABLES[kernel] = list(zip(t_exp, z_exp, z_sim, err, z_raw, err_raw, strict=False))
     table = "\n".join(
         f"  {T:5.2f} {ze:5.2f} {zs_:6.3f} {e:+7.2%}   {zr:6.3f} {er:+7.2%}"
         for T, ze, zs_, e, zr, er in MM_TABLES[kernel]

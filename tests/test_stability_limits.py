@@ -29,7 +29,7 @@ steps, the shadow energy at h = 0.7, Euler's factor at h = 0.1) is not repeated 
 from __future__ import annotations
 
 import math
-from typing import Callable, Tuple
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -108,7 +108,7 @@ def model_growth(name: str, h: float, n: int) -> float:
         return float(np.linalg.norm(np.linalg.matrix_power(step_matrix(name, h), n) @ s0) / np.linalg.norm(s0))
 
 
-def bisect(unstable: Callable[[float], bool], lo: float, hi: float, rel: float) -> Tuple[float, float]:
+def bisect(unstable: Callable[[float], bool], lo: float, hi: float, rel: float) -> tuple[float, float]:
     """Narrow [lo, hi] (lo stable, hi unstable) until hi - lo <= rel * hi; returns (lo, hi)."""
     while hi - lo > rel * hi:
         mid = 0.5 * (lo + hi)
@@ -124,7 +124,7 @@ def _unit(angle: float) -> np.ndarray:
     return np.array([math.cos(angle), math.sin(angle)])
 
 
-def oscillators(name: str, h: float, path: str, start: Tuple[float, float]) -> Tuple[pc.Scene, slice]:
+def oscillators(name: str, h: float, path: str, start: tuple[float, float]) -> tuple[pc.Scene, slice]:
     """Scene of independent oscillators (ω = OMEGA) at dt = h/ω, each starting at phase-space
     point a·start along its own direction in the plane; returns (scene, slice of oscillators).
 
@@ -149,7 +149,7 @@ def oscillators(name: str, h: float, path: str, start: Tuple[float, float]) -> T
     return s, slice(0, count)
 
 
-def phase(s: pc.Scene, osc: slice) -> Tuple[np.ndarray, np.ndarray]:
+def phase(s: pc.Scene, osc: slice) -> tuple[np.ndarray, np.ndarray]:
     """Signed components (x, u) of each oscillator along its own direction (anchor at origin)."""
     x, v = s.positions[osc], s.velocities[osc]
     n = len(x)
@@ -163,7 +163,7 @@ def amplitude(s: pc.Scene, osc: slice) -> np.ndarray:
     return np.sqrt((x**2).sum(axis=1) + (v**2).sum(axis=1) / OMEGA**2)
 
 
-def trajectory(name: str, h: float, path: str, start: Tuple[float, float], n: int):
+def trajectory(name: str, h: float, path: str, start: tuple[float, float], n: int):
     """(x, u) of each oscillator after 0..n steps, arrays of shape (n + 1, oscillators)."""
     s, osc = oscillators(name, h, path, start)
     xs, us = [], []
@@ -237,9 +237,9 @@ def test_measured_stability_limit_matches_theory(name, path, record_property, si
         # And it is where the theoretical one-step matrix first grows by GAIN in n steps (not
         # merely somewhere below it): the core's map is that matrix, near the limit too.
         if name == "rk4":  # |R(ih)|^n = gain solved from the closed form (exact, no matrix power)
-            m_lo, m_hi = bisect(lambda h: n * math.log(spectral_radius(name, h)) > math.log(GAIN), 2.5, 3.0, 1e-13)
+            m_lo, m_hi = bisect(lambda h, n=n: n * math.log(spectral_radius(name, h)) > math.log(GAIN), 2.5, 3.0, 1e-13)
         else:
-            m_lo, m_hi = bisect(lambda h: not model_growth(name, h, n) <= GAIN, lo, hi, 1e-13)
+            m_lo, m_hi = bisect(lambda h, n=n: not model_growth(name, h, n) <= GAIN, lo, hi, 1e-13)
         predicted = 0.5 * (m_lo + m_hi)
         assert abs(measured - predicted) <= res + 1e-12, f"{msg}; one-step-matrix theory predicts {predicted:.10f}"
         assert abs((predicted - h0) / delta_n - 1) < 0.01, "the δ_n formula itself (leading order)"

@@ -1,6 +1,5 @@
 """physcore.testing: its strategies generate valid scenes whose conservation laws hold, and its
 assertions fail when the laws do not hold."""
-import numpy as np
 import pytest
 from hypothesis import given, settings
 

@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any, Callable, Union
+from typing import IO, Any
 
 __all__ = ["atomic_write", "TEMP_PREFIX", "TEMP_SUFFIX"]
 
@@ -15,7 +16,7 @@ TEMP_PREFIX = ".physcore-"
 TEMP_SUFFIX = ".tmp"
 
 
-def atomic_write(path: Union[str, os.PathLike], write: Callable[[IO[Any]], None], *, binary: bool = True) -> Path:
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, binary: bool = True) -> Path:
     """Call ``write(fh)`` on a temporary file in ``path``'s directory, then rename it onto
     ``path`` (atomic on POSIX and Windows), so ``path`` is either the old file or the complete new
     one. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is left

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import math
 import os
-from typing import Any, Iterable, Optional
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -108,7 +109,7 @@ def float_in_range(
     return v
 
 
-def int_in_range(name: str, value: Any, lo: int, hi: Optional[int] = None) -> int:
+def int_in_range(name: str, value: Any, lo: int, hi: int | None = None) -> int:
     """An int (Python or numpy, not bool) with ``lo <= value <= hi``."""
     if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iu":
         value = value[()]

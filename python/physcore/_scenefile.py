@@ -31,10 +31,11 @@ import stat
 import struct
 import warnings
 import zipfile
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any, Dict, Iterator, List, Mapping, Optional, Tuple
+from typing import IO, Any
 
 import numpy as np
 
@@ -56,7 +57,7 @@ STEP_LIMIT = 2**63
 _CHUNK = 1 << 20
 
 # Fields of each term type and collider, by kind of value (see _Reader.value).
-TERM_FIELDS: Dict[str, Dict[str, str]] = {
+TERM_FIELDS: dict[str, dict[str, str]] = {
     "gravity": {"g": "vector"},
     "drag": {"coefficient": "number"},
     "pairwise_gravity": {"G": "number", "softening": "number"},
@@ -76,11 +77,11 @@ TERM_FIELDS: Dict[str, Dict[str, str]] = {
         "mass": "number",
     },
 }
-COLLIDER_FIELDS: Dict[str, Dict[str, str]] = {
+COLLIDER_FIELDS: dict[str, dict[str, str]] = {
     "planes": {"point": "vector", "normal": "vector", "restitution": "number", "friction": "number"},
     "boxes": {"lower": "vector", "upper": "vector", "restitution": "number", "friction": "number"},
 }
-_META_FIELDS: Dict[str, str] = {
+_META_FIELDS: dict[str, str] = {
     "format": "int",
     "dim": "int",
     "integrator": "str",
@@ -95,8 +96,8 @@ _META_FIELDS: Dict[str, str] = {
     "planes": "list",
 }
 # Absent from files of earlier versions; these are the values those versions used.
-_META_DEFAULTS: Dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": []}
-_META_OPTIONAL: Dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list"}
+_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": []}
+_META_OPTIONAL: dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list"}
 
 
 def check_path(path: object, arg: str = "path") -> Path:
@@ -131,8 +132,8 @@ class _DuplicateKey(ValueError):
     pass
 
 
-def _no_duplicates(pairs: List[Tuple[str, Any]]) -> Dict[str, Any]:
-    out: Dict[str, Any] = {}
+def _no_duplicates(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
     for k, v in pairs:
         if k in out:
             raise _DuplicateKey(k)
@@ -150,7 +151,7 @@ class _Reader:
         return SceneFileError(self.name, field, problem)
 
     @contextmanager
-    def api(self, context: str, members: Optional[Mapping[str, str]] = None) -> Iterator[None]:
+    def api(self, context: str, members: Mapping[str, str] | None = None) -> Iterator[None]:
         """Turns the Scene API's TypeError/ValueError (whose message starts with the argument's
         name) into a SceneFileError naming the field: ``members`` maps argument names to the file
         members they came from; others become ``context.argument``."""
@@ -230,7 +231,7 @@ class _Reader:
             return [self.number(f"{field}[{i}]", x) for i, x in enumerate(v)]
         raise AssertionError(kind)  # pragma: no cover - a kind name missing above
 
-    def record(self, field: str, v: object, fields: Mapping[str, str], dim: int, required: Tuple[str, ...] = ()) -> Dict[str, Any]:
+    def record(self, field: str, v: object, fields: Mapping[str, str], dim: int, required: tuple[str, ...] = ()) -> dict[str, Any]:
         """A JSON object with exactly the keys ``fields`` (plus ``required``, checked by the
         caller), each converted by its kind."""
         if not isinstance(v, dict):
@@ -248,7 +249,7 @@ class _Reader:
 
 
 # ---------------------------------------------------------------------------------- the meta
-def _parse_meta(r: _Reader, text: str) -> Dict[str, Any]:
+def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
     try:
         raw = json.loads(text, object_pairs_hook=_no_duplicates)
     except _DuplicateKey as exc:
@@ -295,7 +296,7 @@ def _parse_meta(r: _Reader, text: str) -> Dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------- the archive
-def _open_regular(path: Path, name: str) -> Tuple[IO[bytes], int]:
+def _open_regular(path: Path, name: str) -> tuple[IO[bytes], int]:
     """Opens ``path`` for reading without blocking (a FIFO would wait for a writer forever) and
     refuses anything but a regular file (a device could be endless)."""
     flags = os.O_RDONLY | getattr(os, "O_BINARY", 0) | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
@@ -310,7 +311,7 @@ def _open_regular(path: Path, name: str) -> Tuple[IO[bytes], int]:
         raise
 
 
-def _central_directory_size(fh: IO[bytes], size: int) -> Optional[int]:
+def _central_directory_size(fh: IO[bytes], size: int) -> int | None:
     """The central directory size the zip's end records declare, located as zipfile locates
     them (end record last, or in the last 64 KiB; a Zip64 record just before it overrides);
     None if there is no end record (zipfile then reports the file is not a zip)."""
@@ -341,16 +342,16 @@ class _Spec:
     axis; a name bound to a size (by the meta, or by the first member read with it) must match."""
 
     dtype: str
-    shape: Tuple[str, ...]
+    shape: tuple[str, ...]
     max_chars: int = 0
 
 
 def _read_member(
-    r: _Reader, zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, spec: _Spec, sizes: Dict[str, Tuple[int, str]]
+    r: _Reader, zf: zipfile.ZipFile, info: zipfile.ZipInfo, field: str, spec: _Spec, sizes: dict[str, tuple[int, str]]
 ) -> np.ndarray:
     try:
         fh = zf.open(info)
-    except Exception as exc:  # damaged local header: zipfile raises several kinds
+    except Exception as exc:  # noqa: BLE001 - damaged local header: zipfile raises several kinds
         raise r.error(field, f"unreadable zip member ({type(exc).__name__}: {_show(str(exc))})") from None
     with fh:
         try:
@@ -364,7 +365,7 @@ def _read_member(
                 else:
                     raise ValueError(f"unsupported .npy version {version}")
             header = fh.tell()
-        except Exception as exc:  # numpy's header parser raises several kinds
+        except Exception as exc:  # noqa: BLE001 - numpy's header parser raises several kinds
             raise r.error(field, f"not a valid .npy header ({type(exc).__name__}: {_show(str(exc))})") from None
         if dtype.hasobject or dtype.names is not None or dtype.subdtype is not None:
             raise r.error(field, f"dtype {dtype.descr if dtype.names else dtype.str} is refused (object or structured arrays are never read)")
@@ -379,7 +380,7 @@ def _read_member(
         if len(shape) != len(spec.shape) or not all(type(n) is int and n >= 0 for n in shape):
             want = "(" + ", ".join(str(p) for p in spec.shape) + ("," if len(spec.shape) == 1 else "") + ")"
             raise r.error(field, f"expected shape {want}, got {_show(shape)}")
-        for axis, (n, p) in enumerate(zip(shape, spec.shape)):
+        for axis, (n, p) in enumerate(zip(shape, spec.shape, strict=False)):
             if p in sizes and n != sizes[p][0]:
                 what = ("rows", "columns")[axis] if len(shape) == 2 else "entries"
                 want, origin = sizes[p]
@@ -389,7 +390,7 @@ def _read_member(
         # The claim is checked against the member's real size before anything is allocated.
         if header + nbytes != info.file_size:
             raise r.error(field, f"the header claims shape {_show(shape)} ({nbytes} bytes) but the member holds {info.file_size - header}")
-        for n, p in zip(shape, spec.shape):
+        for n, p in zip(shape, spec.shape, strict=False):
             sizes.setdefault(p, (n, field))
         out = np.empty(count, dtype=dtype)
         raw = out.view(np.uint8)
@@ -403,7 +404,7 @@ def _read_member(
                 done += len(chunk)
             if fh.read(1):  # also makes zipfile check the CRC
                 raise ValueError("data past the array's end")
-        except Exception as exc:  # BadZipFile (CRC), OSError, EOFError
+        except Exception as exc:  # noqa: BLE001 - BadZipFile (CRC), OSError, EOFError
             raise r.error(field, f"damaged data ({type(exc).__name__}: {_show(str(exc))})") from None
     out = out.reshape(shape)
     if not out.dtype.isnative:
@@ -419,7 +420,7 @@ def _read_member(
     return out
 
 
-def _read_text(r: _Reader, zf: zipfile.ZipFile, infos: Dict[str, zipfile.ZipInfo], field: str, max_chars: int) -> str:
+def _read_text(r: _Reader, zf: zipfile.ZipFile, infos: dict[str, zipfile.ZipInfo], field: str, max_chars: int) -> str:
     if field not in infos:
         raise r.error(field, "missing member (not a scene file written by Scene.save?)")
     a = _read_member(r, zf, infos[field], field, _Spec("U", (), max_chars), {})
@@ -429,7 +430,7 @@ def _read_text(r: _Reader, zf: zipfile.ZipFile, infos: Dict[str, zipfile.ZipInfo
     return str(a[()])
 
 
-def _expected_members(meta: Dict[str, Any]) -> Tuple[Dict[str, _Spec], Dict[str, _Spec], Dict[str, Tuple[int, str]]]:
+def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str, _Spec], dict[str, tuple[int, str]]]:
     """(required, optional) members of a file with this meta, in reading order, and the sizes
     the meta fixes (axis name -> (size, field))."""
     d = "D"
@@ -461,8 +462,8 @@ def _expected_members(meta: Dict[str, Any]) -> Tuple[Dict[str, _Spec], Dict[str,
 class SceneFile:
     """What :func:`read` returns: the checked meta and arrays, and the reader (for errors)."""
 
-    meta: Dict[str, Any]
-    arrays: Dict[str, np.ndarray]
+    meta: dict[str, Any]
+    arrays: dict[str, np.ndarray]
     time: float
     reader: _Reader
 
@@ -486,10 +487,10 @@ def read(path: Path) -> SceneFile:
         fh.seek(0)
         try:
             zf = zipfile.ZipFile(fh)
-        except Exception as exc:  # zipfile raises many kinds on damaged archives
+        except Exception as exc:  # noqa: BLE001 - zipfile raises many kinds on damaged archives
             raise r.error("", f"not a readable zip archive ({type(exc).__name__}: {_show(str(exc))}); give a .npz written by Scene.save") from None
         with zf:
-            infos: Dict[str, zipfile.ZipInfo] = {}
+            infos: dict[str, zipfile.ZipInfo] = {}
             total = 0
             for info in zf.infolist():
                 stem = info.filename[:-4] if info.filename.endswith(".npy") else None
@@ -535,14 +536,14 @@ def read(path: Path) -> SceneFile:
         raise r.error("cache_forces", f"has {sizes['C'][0]} rows where positions has {n}")
     if sizes.get("K", (0,))[0] > len(meta["terms"]) + 2:
         raise r.error("cache_power", f"has {sizes['K'][0]} entries, more than the integrators keep for {len(meta['terms'])} terms")
-    taken: List[Tuple[int, int, int]] = []
+    taken: list[tuple[int, int, int]] = []
     for k, t in enumerate(meta["terms"]):
         if t["type"] == "fluid":
             if t["first"] + t["count"] > n:
                 raise r.error(f"meta.terms[{k}].first", f"particles {t['first']}..{t['first'] + t['count']} are not all in the scene ({n})")
             taken.append((t["first"], t["first"] + t["count"], k))
     taken.sort()
-    for (a0, a1, ka), (b0, b1, kb) in zip(taken, taken[1:]):
+    for (_, a1, ka), (b0, _, kb) in zip(taken, taken[1:], strict=False):
         if b0 < a1:
             raise r.error(f"meta.terms[{kb}].first", f"its particles overlap those of meta.terms[{ka}] (each fluid owns its own)")
     return SceneFile(meta, arrays, time, r)

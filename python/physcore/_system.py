@@ -1,7 +1,7 @@
 """What physcore runs on: the CPU, the SIMD level of the kernels, threads and build."""
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional
+from typing import Any
 
 from . import _core
 
@@ -25,12 +25,12 @@ def simd_level() -> str:
     return _core.simd_level()
 
 
-def simd_levels() -> List[str]:
+def simd_levels() -> list[str]:
     """The SIMD levels this CPU supports, slowest first (``"scalar"`` is always there)."""
     return list(_core.simd_levels())
 
 
-def set_simd_level(level: Optional[str] = None) -> None:
+def set_simd_level(level: str | None = None) -> None:
     """Force the SIMD level of the kernels for this process (``None``: back to ``PHYSCORE_SIMD``,
     else the best level).
 
@@ -46,7 +46,7 @@ def set_simd_level(level: Optional[str] = None) -> None:
     _core.set_simd_level(level)
 
 
-def info() -> Dict[str, Any]:
+def info() -> dict[str, Any]:
     """physcore's version, build profile, CPU, SIMD level (active and available) and default threads."""
     try:
         level = _core.simd_level()

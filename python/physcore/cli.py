@@ -35,8 +35,9 @@ import sys
 import textwrap
 import time
 import typing
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any
 
 __all__ = ["main"]
 
@@ -85,7 +86,7 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _size(text: str) -> Tuple[int, int]:
+def _size(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d+)\s*[xX×,]\s*(\d+)\s*", text)
     if not m:
         raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels, e.g. 480x360; got {text!r}")
@@ -95,7 +96,7 @@ def _size(text: str) -> Tuple[int, int]:
     return w, h
 
 
-def _view(text: str) -> Tuple[float, float]:
+def _view(text: str) -> tuple[float, float]:
     try:
         az, el = (float(p) for p in text.split(","))
     except ValueError:
@@ -103,7 +104,7 @@ def _view(text: str) -> Tuple[float, float]:
     return az, el
 
 
-def _key_value(text: str) -> Tuple[str, str]:
+def _key_value(text: str) -> tuple[str, str]:
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
         raise argparse.ArgumentTypeError(f"expected key=value, got {text!r}")
@@ -111,7 +112,7 @@ def _key_value(text: str) -> Tuple[str, str]:
 
 
 # --------------------------------------------------------------------------- scene parameters
-def _scene_params(fn: Callable[..., Any]) -> Dict[str, inspect.Parameter]:
+def _scene_params(fn: Callable[..., Any]) -> dict[str, inspect.Parameter]:
     """Keyword parameters (with defaults) of a scene function, in order."""
     return {
         name: p
@@ -120,13 +121,13 @@ def _scene_params(fn: Callable[..., Any]) -> Dict[str, inspect.Parameter]:
     }
 
 
-def _param_type(fn: Callable[..., Any], name: str, default: Any) -> Optional[type]:
+def _param_type(fn: Callable[..., Any], name: str, default: Any) -> type | None:
     """The type a --param value converts to: the default's type, else the annotation's."""
     if default is not None and default is not inspect.Parameter.empty:
         return type(default)
     try:
         hint = typing.get_type_hints(fn).get(name)
-    except Exception:  # unresolvable annotations (e.g. newer syntax on an older Python)
+    except Exception:  # noqa: BLE001 - unresolvable annotations (e.g. newer syntax on an older Python)
         return None
     # Optional[X] is Union[X, None]: take X.
     args = [a for a in getattr(hint, "__args__", ()) if a is not type(None)]
@@ -135,7 +136,7 @@ def _param_type(fn: Callable[..., Any], name: str, default: Any) -> Optional[typ
     return hint if isinstance(hint, type) else None
 
 
-def _convert(name: str, text: str, kind: Optional[type], default: Any) -> Any:
+def _convert(name: str, text: str, kind: type | None, default: Any) -> Any:
     """Convert a --param string to `kind`; 'none' gives None where the default is None."""
     if default is None and text.lower() == "none":
         return None
@@ -171,9 +172,9 @@ def _convert(name: str, text: str, kind: Optional[type], default: Any) -> Any:
     raise _UsageError(f"--param {name}: expected {what}, got {text!r}")
 
 
-def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[Tuple[str, str]]) -> Dict[str, Any]:
+def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[tuple[str, str]]) -> dict[str, Any]:
     params = _scene_params(fn)
-    kwargs: Dict[str, Any] = {}
+    kwargs: dict[str, Any] = {}
     for key, text in pairs:
         if key in _OWN_OPTION:
             raise _UsageError(f"--param {key}: use the {_OWN_OPTION[key]} option instead")
@@ -198,7 +199,7 @@ def _defaults_text(fn: Callable[..., Any]) -> str:
 
 
 # --------------------------------------------------------------------------- commands
-def _registry() -> Dict[str, Callable[..., Any]]:
+def _registry() -> dict[str, Callable[..., Any]]:
     from . import scenes
 
     return dict(scenes.REGISTRY)
@@ -237,7 +238,7 @@ def _substeps_arg(text: str) -> Any:
     return text if text == "auto" else _positive_int(text)
 
 
-def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace) -> Tuple[int, Tuple[int, int]]:
+def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace) -> tuple[int, tuple[int, int]]:
     """Frames and (width, height): the command line's, else the scene's render_defaults."""
     d = dict(getattr(fn, "render_defaults", None) or {})
     frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
@@ -256,7 +257,7 @@ def _check_frames_memory(fn: Callable[..., Any], args: argparse.Namespace) -> No
     memory("--frames, --size", 2 * frames * w * h, f"{frames} frames of {w}x{h} pixels")
 
 
-def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> Dict[str, Any]:
+def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> dict[str, Any]:
     """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
 
     The result holds either ``steps_per_frame`` (fixed steps of dt) or ``frame_time`` (automatic
@@ -266,7 +267,7 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     frames, size = _frames_and_size(fn, args)
     auto = str(d.get("substeps", "")).lower() == "auto"
     frame_time = args.frame_time if args.frame_time is not None else d.get("frame_time")
-    stepping: Dict[str, Any]
+    stepping: dict[str, Any]
     substeps = getattr(args, "substeps", None)
     if substeps is not None:
         if args.steps_per_frame is not None:
@@ -310,7 +311,7 @@ class _SubstepCounter:
 
     def __init__(self, scene: Any) -> None:
         self._scene = scene
-        self.counts: List[Any] = []
+        self.counts: list[Any] = []
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._scene, name)
@@ -505,21 +506,21 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
 
 
 # --------------------------------------------------------------------------- parser
-def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
+def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     """The top-level parser and the ``render`` subparser (whose .error() reports usage errors)."""
     from . import render
 
     try:
         from .scene import INTEGRATORS
 
-        integrators: Optional[List[str]] = [d["name"] for d in INTEGRATORS]
-    except Exception:  # the extension failed to load: let the scene call report it
+        integrators: list[str] | None = [d["name"] for d in INTEGRATORS]
+    except Exception:  # noqa: BLE001 - the extension failed to load: let the scene call report it
         integrators = None
     try:
         from importlib.metadata import version
 
         ver = version("physcore")
-    except Exception:
+    except Exception:  # noqa: BLE001 - any failure means the same here
         ver = "unknown"
 
     parser = _Parser(
@@ -581,7 +582,7 @@ def _build_parser() -> Tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     return parser, r
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``physcore`` command line.
 
     Parameters

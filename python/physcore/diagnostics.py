@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Dict, List, Union
 
 import numpy as np
 
@@ -44,12 +43,12 @@ class EnergyRecorder:
     """
 
     def __init__(self) -> None:
-        self._t: List[float] = []
-        self._kin: List[float] = []
-        self._pot: Dict[str, List[float]] = {}
-        self._dis: Dict[str, List[float]] = {}
-        self._tot: List[float] = []
-        self._scale: List[float] = []
+        self._t: list[float] = []
+        self._kin: list[float] = []
+        self._pot: dict[str, list[float]] = {}
+        self._dis: dict[str, list[float]] = {}
+        self._tot: list[float] = []
+        self._scale: list[float] = []
 
     def record(self, scene) -> None:
         """Append the books of ``scene`` now (one ``scene.energy()`` call)."""
@@ -58,7 +57,7 @@ class EnergyRecorder:
         for book, src in ((self._pot, e.potential), (self._dis, e.dissipated)):
             for name, value in src.items():
                 book.setdefault(name, [0.0] * k).append(float(value))
-            for name, values in book.items():
+            for values in book.values():
                 if len(values) == k:  # a book that disappeared
                     values.append(0.0)
         self._t.append(float(scene.time))
@@ -82,11 +81,11 @@ class EnergyRecorder:
         return np.asarray(self._tot)
 
     @property
-    def potential(self) -> Dict[str, np.ndarray]:
+    def potential(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self._pot.items()}
 
     @property
-    def dissipated(self) -> Dict[str, np.ndarray]:
+    def dissipated(self) -> dict[str, np.ndarray]:
         return {k: np.asarray(v) for k, v in self._dis.items()}
 
     @property
@@ -98,7 +97,7 @@ class EnergyRecorder:
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(denom > 0, (tot - tot[0]) / denom, 0.0)
 
-    def plot(self, path: Union[str, os.PathLike], *, title: str = "energy books") -> Path:
+    def plot(self, path: str | os.PathLike, *, title: str = "energy books") -> Path:
         """Write a PNG: the books over time (kinetic, potential by term, dissipated by source,
         total) above the relative drift of the total. Written atomically.
 

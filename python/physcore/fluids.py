@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple, Union
 
 import numpy as np
 
@@ -43,7 +42,7 @@ KERNELS = ("cubic_spline", "wendland_c2")
 SPACING_RANGE = (1e-100, 1e100)
 
 
-def _array2(value: object, arg: str, dims: Tuple[int, ...] = (2, 3)) -> np.ndarray:
+def _array2(value: object, arg: str, dims: tuple[int, ...] = (2, 3)) -> np.ndarray:
     try:
         a = np.asarray(value)
     except ValueError as exc:  # ragged nested sequences
@@ -66,7 +65,7 @@ def _scaled(a: np.ndarray, factor: float) -> np.ndarray:
         return factor * a
 
 
-def neighbors(points: "np.typing.ArrayLike", radius: float) -> Tuple[np.ndarray, np.ndarray]:
+def neighbors(points: np.typing.ArrayLike, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """All pairs of points closer than ``radius``, found with physcore's parallel spatial hash.
 
     A pair ``(i, j)`` with ``i < j`` is returned when ``Σ_k (p_i,k − p_j,k)² < radius²``, evaluated
@@ -143,7 +142,7 @@ def _corner(value: object, arg: str) -> np.ndarray:
     return a.astype(np.float64)
 
 
-def lattice_counts(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> List[int]:
+def lattice_counts(lower: np.typing.ArrayLike, upper: np.typing.ArrayLike, spacing: float) -> list[int]:
     """Cells along each axis of :func:`lattice` (Python ints, never overflowing; the box sides
     are rounded to whole cells, at least one)."""
     lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
@@ -159,7 +158,7 @@ def lattice_counts(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", s
     return counts
 
 
-def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing: float) -> np.ndarray:
+def lattice(lower: np.typing.ArrayLike, upper: np.typing.ArrayLike, spacing: float) -> np.ndarray:
     """Particle centres filling the box ``[lower, upper]`` on a cubic lattice: positions
     ``lower + (i + ½) spacing`` for every cell of the box (the box sides are rounded to whole
     cells). Returns ``(N, dim)`` float64, m. Ordered with the first axis fastest.
@@ -167,7 +166,7 @@ def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing:
     Raises TypeError / InvalidInputError naming the argument, and InvalidInputError naming
     ``spacing`` when the lattice would not fit in memory (:func:`physcore._check.memory_limit`)."""
     counts = lattice_counts(lower, upper, spacing)
-    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
+    lo = _corner(lower, "lower")  # upper was checked by lattice_counts
     s = float(spacing)
     total = math.prod(counts) if min(counts) > 0 else math.inf
     # meshgrid, stack and the result: about three copies of (N, dim) float64.
@@ -179,8 +178,8 @@ def lattice(lower: "np.typing.ArrayLike", upper: "np.typing.ArrayLike", spacing:
 
 
 def tank_walls(
-    lower: "np.typing.ArrayLike",
-    upper: "np.typing.ArrayLike",
+    lower: np.typing.ArrayLike,
+    upper: np.typing.ArrayLike,
     spacing: float,
     layers: int = 3,
     *,
@@ -260,21 +259,21 @@ class Fluid:
 
     positions: np.ndarray
     spacing: float
-    velocities: Optional[np.ndarray] = None
+    velocities: np.ndarray | None = None
     density: float = 1000.0
-    sound_speed: Optional[float] = None
+    sound_speed: float | None = None
     viscosity: float = 0.05
     smoothing: float = 1.3
     kernel: str = "cubic_spline"
     gamma: int = 7
     clamp_pressure: bool = True
-    mass: Optional[float] = None
-    walls: Optional[np.ndarray] = None
-    wall_volume: Union[str, float, np.ndarray] = "lattice"
+    mass: float | None = None
+    walls: np.ndarray | None = None
+    wall_volume: str | float | np.ndarray = "lattice"
     precision: str = "f64"
     name: str = "fluid"
     #: Index of the first particle once added to a scene (set by :meth:`Scene.add`).
-    first: Optional[int] = field(default=None, compare=False)
+    first: int | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         x = _array2(self.positions, "positions")

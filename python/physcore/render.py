@@ -18,7 +18,7 @@ import operator
 import os
 import sys
 from pathlib import Path
-from typing import Any, NamedTuple, Optional, Tuple, Union
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -122,7 +122,7 @@ _PALETTE = _build_palette()
 # ---------------------------------------------------------------------------------------------
 # Argument checks
 # ---------------------------------------------------------------------------------------------
-def _check_int(name: str, value: Any, minimum: int, maximum: Optional[int] = None) -> int:
+def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
     if isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name} must be an int, got {value!r}")
     try:
@@ -141,7 +141,7 @@ def _short(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
-def _check_size(size: Any) -> Tuple[int, int]:
+def _check_size(size: Any) -> tuple[int, int]:
     try:
         count = len(size)
     except TypeError:  # no len(), or a 0-d array
@@ -166,7 +166,7 @@ def _check_fps(fps: Any) -> float:
     return f
 
 
-def _check_frame_time(frame_time: Any) -> Optional[float]:
+def _check_frame_time(frame_time: Any) -> float | None:
     if frame_time is None:
         return None
     if isinstance(frame_time, (bool, np.bool_)) or not isinstance(
@@ -187,7 +187,7 @@ def _check_color_by(color_by: Any) -> str:
     return str(color_by)
 
 
-def _check_radius(radius: Any) -> Optional[int]:
+def _check_radius(radius: Any) -> int | None:
     if radius is None:
         return None
     r = _check_int("radius", radius, 0)
@@ -196,7 +196,7 @@ def _check_radius(radius: Any) -> Optional[int]:
     return r
 
 
-def _check_view(view: Any) -> Tuple[float, float]:
+def _check_view(view: Any) -> tuple[float, float]:
     if view is None:
         return DEFAULT_VIEW
     try:
@@ -251,7 +251,7 @@ def _check_auto_substeps(scene: Any, frame_time: float) -> None:
         )
 
 
-def _check_memory(scene: Any, frames: int, size: Tuple[int, int], springs: bool) -> None:
+def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool) -> None:
     """Refuse, before simulating, an animation whose recording and frames would not fit in
     memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size."""
     n = int(getattr(scene, "n_particles", 0))
@@ -282,13 +282,13 @@ def _gif_duration_ms(fps: float) -> int:
 class _Recording(NamedTuple):
     positions: np.ndarray  # (F, N, dim) float32, relative to `origin`
     origin: np.ndarray  # (dim,) float64
-    speeds: Optional[np.ndarray]  # (F, N) float32, m/s
-    pairs: Optional[Tuple[np.ndarray, np.ndarray]]  # (M,), (M,) intp
-    strain: Optional[np.ndarray]  # (F, M) float32, NaN where the rest length is 0
+    speeds: np.ndarray | None  # (F, N) float32, m/s
+    pairs: tuple[np.ndarray, np.ndarray] | None  # (M,), (M,) intp
+    strain: np.ndarray | None  # (F, M) float32, NaN where the rest length is 0
     pinned: np.ndarray  # (N,) bool
     planes: list  # [(point (dim,), normal (dim,))] float64, normal unit length
-    pressures: Optional[np.ndarray] = None  # (F, N) float32, Pa
-    walls: Optional[np.ndarray] = None  # (B, dim) float64 static boundary points, relative to `origin`
+    pressures: np.ndarray | None = None  # (F, N) float32, Pa
+    walls: np.ndarray | None = None  # (B, dim) float64 static boundary points, relative to `origin`
 
 
 # Row-wise helpers written column by column: numpy reductions along a short last axis (N, 2)
@@ -332,7 +332,7 @@ def _planes(planes: Any, dim: int) -> list:
     return out
 
 
-def _scene_springs(scene: Any) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+def _scene_springs(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     i, j, rest = scene.spring_pairs()
     i = np.asarray(i, dtype=np.intp)
     if i.size == 0:
@@ -370,7 +370,7 @@ def _boundary_array(b: Any, dim: int) -> np.ndarray:
     return b if np.isfinite(b).all() else b[_rows_finite(b)]
 
 
-def _scene_boundary(scene: Any, dim: int) -> Optional[np.ndarray]:
+def _scene_boundary(scene: Any, dim: int) -> np.ndarray | None:
     """``scene.boundary_points()`` as (B, dim) float64, or None where the scene has no such method."""
     method = getattr(scene, "boundary_points", None)
     if not callable(method):
@@ -398,8 +398,8 @@ def _simulate(
     springs: bool,
     progress: bool,
     need_pressure: bool = False,
-    frame_time: Optional[float] = None,
-    substeps: Union[str, int] = "auto",
+    frame_time: float | None = None,
+    substeps: str | int = "auto",
 ) -> _Recording:
     """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
 
@@ -481,7 +481,7 @@ class _Camera:
     `el` above the xy-plane, looking at the origin, with +z up on screen.
     """
 
-    def __init__(self, dim: int, view: Tuple[float, float], size: Tuple[int, int]):
+    def __init__(self, dim: int, view: tuple[float, float], size: tuple[int, int]):
         self.dim = dim
         self.width, self.height = size
         if dim == 3:
@@ -496,7 +496,7 @@ class _Camera:
         self.scale = 1.0
         self.row0 = 0.5 * self.height  # pixel row of the screen-plane centre
 
-    def project(self, x: np.ndarray) -> Tuple[np.ndarray, Optional[np.ndarray]]:
+    def project(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(N, dim) world -> (N, 2) screen-plane coordinates and (N,) depth (3D; larger = nearer)."""
         # inf coordinates (beyond float32, see _simulate) give NaN rows, which are not drawn.
         with np.errstate(over="ignore", invalid="ignore"):
@@ -505,7 +505,7 @@ class _Camera:
             return s[:, :2], s[:, 2]
         return s, None
 
-    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0, top_pad: Optional[int] = None) -> None:
+    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0, top_pad: int | None = None) -> None:
         """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side.
 
         `top_pad` (default `pad`) keeps that many pixels spare at the top instead (room for the
@@ -523,17 +523,17 @@ class _Camera:
             self.scale = float(avail.min())
         else:
             # A flat box (particles on a line) is fitted along its long side only.
-            self.scale = float(min(a / e for a, e in zip(avail, ext) if e > tol))
+            self.scale = float(min(a / e for a, e in zip(avail, ext, strict=False) if e > tol))
         self.centre = 0.5 * (lo + hi)
 
-    def pixels(self, s: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+    def pixels(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 2) screen-plane coordinates -> float pixel column and row (pixel k spans [k, k+1))."""
         col = (s[:, 0] - self.centre[0]) * self.scale + 0.5 * self.width
         row = self.row0 - (s[:, 1] - self.centre[1]) * self.scale
         return col, row
 
 
-def _screen_bounds(cam: _Camera, positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:
+def _screen_bounds(cam: _Camera, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """Screen-plane bounding box (lo, hi) of all finite (F, N, dim) positions, and max |x|."""
     lo, hi, amax = np.full(2, np.inf), np.full(2, -np.inf), 0.0
     for x in positions:  # per frame: the (F, N, 2) projection of a big run need not fit in memory
@@ -548,7 +548,7 @@ def _screen_bounds(cam: _Camera, positions: np.ndarray) -> Tuple[np.ndarray, np.
     return lo, hi, amax
 
 
-def _auto_radius(n: int, size: Tuple[int, int]) -> int:
+def _auto_radius(n: int, size: tuple[int, int]) -> int:
     """Disc radius in pixels from the particle count alone (an upper bound for the final one)."""
     # About a third of the mean spacing were the particles spread over the image; capped so a few
     # bodies (Kepler) are dots rather than blobs.
@@ -557,7 +557,7 @@ def _auto_radius(n: int, size: Tuple[int, int]) -> int:
     return max(0, min(r, max(1, min(w, h) // 40)))
 
 
-def _spring_radius(rec: "_Recording", scale: float) -> Optional[int]:
+def _spring_radius(rec: _Recording, scale: float) -> int | None:
     """Disc radius in pixels from the median spring length at frame 0, or None without springs.
 
     Keeps discs to about a third of the neighbour spacing so that the springs stay visible.
@@ -575,7 +575,7 @@ def _spring_radius(rec: "_Recording", scale: float) -> Optional[int]:
 # ---------------------------------------------------------------------------------------------
 # Rasterisation (numpy only; no per-particle Python loops)
 # ---------------------------------------------------------------------------------------------
-def _disc_stencil(radius: int) -> Tuple[np.ndarray, np.ndarray]:
+def _disc_stencil(radius: int) -> tuple[np.ndarray, np.ndarray]:
     """Row and column offsets (S,) intp of a filled disc of `radius` pixels."""
     d = np.arange(-radius, radius + 1)
     dy, dx = np.meshgrid(d, d, indexing="ij")
@@ -726,18 +726,18 @@ def _format_value(v: float) -> str:
     return f"{v:.0f}" if 1000 <= v < 1e6 else f"{v:.3g}"
 
 
-def _colorbar_labels(color_by: str, vmax: float) -> Tuple[str, str]:
+def _colorbar_labels(color_by: str, vmax: float) -> tuple[str, str]:
     """Bottom and top labels of the colour bar; pressure in Pa, kPa, MPa or GPa, whichever reads
     as a number below 1000."""
     if color_by == "pressure":
-        for factor, unit in ((1.0, "Pa"), (1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa")):
+        for factor, unit in ((1.0, "Pa"), (1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa")):  # noqa: B007 - used after the loop
             if float(f"{vmax / factor:.3g}") < 1000:
                 break
         return "0", f"{_format_value(vmax / factor)} {unit}"
     return "0", f"{_format_value(vmax)} m/s"
 
 
-def _colorbar_layout(size: Tuple[int, int], lo: str, hi: str) -> Optional[_ColorBarLayout]:
+def _colorbar_layout(size: tuple[int, int], lo: str, hi: str) -> _ColorBarLayout | None:
     """Where the colour bar goes in an image of `size`, or None if it would not fit legibly."""
     w, h = size
     lo_mask, hi_mask = _text_mask(lo), _text_mask(hi)
@@ -788,13 +788,13 @@ class _Rasteriser:
     def __init__(
         self,
         rec: _Recording,
-        size: Tuple[int, int],
+        size: tuple[int, int],
         color_by: str,
-        radius: Optional[int],
-        view: Tuple[float, float],
-        speed_scale: Optional[float] = None,
+        radius: int | None,
+        view: tuple[float, float],
+        speed_scale: float | None = None,
         *,
-        pressure_scale: Optional[float] = None,
+        pressure_scale: float | None = None,
         colorbar: bool = False,
     ):
         n, dim = rec.positions.shape[1:]
@@ -876,19 +876,19 @@ class _Rasteriser:
 # ---------------------------------------------------------------------------------------------
 def gif(
     scene: Any,
-    path: Union[str, os.PathLike],
+    path: str | os.PathLike,
     *,
     frames: int = 90,
-    steps_per_frame: Optional[int] = None,
-    frame_time: Optional[float] = None,
-    substeps: Union[str, int] = "auto",
+    steps_per_frame: int | None = None,
+    frame_time: float | None = None,
+    substeps: str | int = "auto",
     fps: float = 30,
-    size: Tuple[int, int] = (480, 360),
+    size: tuple[int, int] = (480, 360),
     color_by: str = "speed",
     colorbar: bool = True,
-    radius: Optional[int] = None,
+    radius: int | None = None,
     springs: bool = True,
-    view: Optional[Tuple[float, float]] = None,
+    view: tuple[float, float] | None = None,
     progress: bool = False,
 ) -> Path:
     """Simulate `scene` forward and write the motion as an animated GIF.
@@ -1062,19 +1062,19 @@ def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
 def render_frame(
     positions: Any,
     *,
-    size: Tuple[int, int] = (480, 360),
-    velocities: Optional[np.ndarray] = None,
-    pinned: Optional[np.ndarray] = None,
+    size: tuple[int, int] = (480, 360),
+    velocities: np.ndarray | None = None,
+    pinned: np.ndarray | None = None,
     springs: Any = None,
-    planes: Optional[list] = None,
-    pressures: Optional[np.ndarray] = None,
-    boundary: Optional[np.ndarray] = None,
+    planes: list | None = None,
+    pressures: np.ndarray | None = None,
+    boundary: np.ndarray | None = None,
     color_by: str = "speed",
-    speed_scale: Optional[float] = None,
-    pressure_scale: Optional[float] = None,
+    speed_scale: float | None = None,
+    pressure_scale: float | None = None,
     colorbar: bool = True,
-    radius: Optional[int] = None,
-    view: Optional[Tuple[float, float]] = None,
+    radius: int | None = None,
+    view: tuple[float, float] | None = None,
 ) -> np.ndarray:
     """Rasterise one state to an RGB image, with the camera fitted to that state.
 

@@ -10,31 +10,31 @@ import math
 import os
 import threading
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Optional, Tuple, Union
+from typing import Any
 
 import numpy as np
 
-from . import _check, _core
+from . import _check, _core, _scenefile
+from ._atomic import atomic_write
 from ._errors import InvalidInputError, SceneBusyError, ThreadPoolWarning
 from .fluids import Fluid
 from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
-from . import _scenefile
-from ._atomic import atomic_write
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
 #: Integrator names accepted by ``Scene(integrator=...)``, with order, symplecticity and force
 #: evaluations per step, as reported by the core.
-INTEGRATORS: Tuple[Dict[str, Any], ...] = tuple(_core.integrator_table())
+INTEGRATORS: tuple[dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
 #: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
 MAX_THREADS = 65535
 _MIN_DT = _check.MIN_NORMAL
 _MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
-Term = Union[Gravity, Drag, Springs, PairwiseGravity, Fluid]
+Term = Gravity | Drag | Springs | PairwiseGravity | Fluid
 
 
 @dataclass(frozen=True)
@@ -59,8 +59,8 @@ class EnergyReport:
     """
 
     kinetic: float
-    potential: Dict[str, float]
-    dissipated: Dict[str, float]
+    potential: dict[str, float]
+    dissipated: dict[str, float]
     total: float
     mechanical: float
 
@@ -69,7 +69,7 @@ class EnergyReport:
 _MAX_STEPS = 2**63 - 1
 
 
-def _check_int(value: object, arg: str, minimum: int, maximum: Optional[int] = None) -> int:
+def _check_int(value: object, arg: str, minimum: int, maximum: int | None = None) -> int:
     return _check.int_in_range(arg, value, minimum, maximum)
 
 
@@ -112,7 +112,7 @@ def _check_precision(value: object) -> str:
     return value
 
 
-def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.ndarray:
+def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
     a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
@@ -130,7 +130,7 @@ def _points(value: object, arg: str, dim: int, n: Optional[int] = None) -> np.nd
     return a
 
 
-def _norm(v: "np.typing.ArrayLike") -> float:
+def _norm(v: np.typing.ArrayLike) -> float:
     """Euclidean norm without overflow warnings: inf when it is beyond float64."""
     try:
         return math.hypot(*(float(c) for c in np.ravel(v)))
@@ -212,7 +212,7 @@ class Scene:
         rtol: float = 1e-6,
         atol: float = 1e-9,
         precision: str = "f64",
-        threads: Optional[int] = None,
+        threads: int | None = None,
     ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
@@ -239,18 +239,18 @@ class Scene:
         # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
         # that release the GIL for long, and _busy names the thread inside one.
         self._lock = threading.Lock()
-        self._busy: Optional[int] = None
+        self._busy: int | None = None
         self._sim = sim
         self._threads = threads
-        self._terms: List[Term] = []
-        self._planes: List[Plane] = []
-        self._boxes: List[Box] = []
-        self._e0: Optional[float] = None
+        self._terms: list[Term] = []
+        self._planes: list[Plane] = []
+        self._boxes: list[Box] = []
+        self._e0: float | None = None
         self._e0_scale: float = 0.0
 
     # ---------------------------------------------------------------- threads
     @property
-    def _sim(self) -> "_core.Simulation2":
+    def _sim(self) -> _core.Simulation2:
         # A Scene is not shared between threads while one of them steps it: every use from
         # another thread then raises SceneBusyError, instead of pyo3's bare "Already mutably
         # borrowed" RuntimeError.
@@ -263,10 +263,10 @@ class Scene:
         return self._raw_sim
 
     @_sim.setter
-    def _sim(self, sim: "_core.Simulation2") -> None:
+    def _sim(self, sim: _core.Simulation2) -> None:
         self._raw_sim = sim
 
-    def _exclusive(self, call: Callable[["_core.Simulation2"], Any]) -> Any:
+    def _exclusive(self, call: Callable[[_core.Simulation2], Any]) -> Any:
         """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
         only user of the scene; another thread's use meanwhile raises :class:`SceneBusyError`
         (so does this call, if another thread is inside one)."""
@@ -283,10 +283,10 @@ class Scene:
     # ---------------------------------------------------------------- building
     def add_particles(
         self,
-        positions: "np.typing.ArrayLike",
-        velocities: Optional["np.typing.ArrayLike"] = None,
-        masses: Union[float, "np.typing.ArrayLike"] = 1.0,
-        pinned: Optional["np.typing.ArrayLike"] = None,
+        positions: np.typing.ArrayLike,
+        velocities: np.typing.ArrayLike | None = None,
+        masses: float | np.typing.ArrayLike = 1.0,
+        pinned: np.typing.ArrayLike | None = None,
     ) -> np.ndarray:
         """Append particles.
 
@@ -346,7 +346,7 @@ class Scene:
         self._e0 = None
         return np.arange(first, first + n, dtype=np.int64)
 
-    def add(self, item: Union[Term, Plane, Box]) -> Union[Term, Plane, Box]:
+    def add(self, item: Term | Plane | Box) -> Term | Plane | Box:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
         :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`) or a collider (:class:`Plane`).
 
@@ -427,7 +427,7 @@ class Scene:
         self._e0 = None
         return item
 
-    def add_fluid(self, positions: "np.typing.ArrayLike", **params: Any) -> np.ndarray:
+    def add_fluid(self, positions: np.typing.ArrayLike, **params: Any) -> np.ndarray:
         """Add a WCSPH fluid block: ``scene.add(Fluid(positions, **params))``.
 
         Takes the parameters of :class:`~physcore.fluids.Fluid` (``spacing`` is required) and
@@ -454,7 +454,7 @@ class Scene:
         assert fluid.first is not None
         return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
 
-    def _add_fluid(self, fluid: Fluid, first: Optional[int] = None) -> Fluid:
+    def _add_fluid(self, fluid: Fluid, first: int | None = None) -> Fluid:
         """Append the fluid's particles (unless ``first`` says they exist) and its SPH term."""
         import dataclasses
 
@@ -552,7 +552,7 @@ class Scene:
             self._set_reference_energy()
         self._exclusive(lambda sim: sim.step(n))
 
-    def advance(self, duration: float, *, substeps: Union[str, int] = "auto") -> int:
+    def advance(self, duration: float, *, substeps: str | int = "auto") -> int:
         """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
         to ``duration / n``.
 
@@ -675,7 +675,7 @@ class Scene:
         return "f32" if self._sim.single else "f64"
 
     @property
-    def integrator_stats(self) -> Optional[Dict[str, Any]]:
+    def integrator_stats(self) -> dict[str, Any] | None:
         """For ``"rk45"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
         rejected so far by the step-size controller, and the internal step (s) it will try next.
         ``None`` for the fixed-step integrators."""
@@ -685,12 +685,12 @@ class Scene:
         return {"accepted": int(st[0]), "rejected": int(st[1]), "next_step": float(st[2])}
 
     @property
-    def integrator_info(self) -> Dict[str, Any]:
+    def integrator_info(self) -> dict[str, Any]:
         """``{"name", "order", "symplectic", "force_evals_per_step"}`` of the current integrator."""
         return dict(self._sim.integrator_info())
 
     @property
-    def threads(self) -> Optional[int]:
+    def threads(self) -> int | None:
         return self._threads
 
     @property
@@ -706,7 +706,7 @@ class Scene:
         return x.astype(np.float32) if self._sim.single else x
 
     @positions.setter
-    def positions(self, value: "np.typing.ArrayLike") -> None:
+    def positions(self, value: np.typing.ArrayLike) -> None:
         self._sim.set_state(positions=_points(value, "positions", self.dim, self.n_particles))
         self._e0 = None
 
@@ -718,7 +718,7 @@ class Scene:
         return v.astype(np.float32) if self._sim.single else v
 
     @velocities.setter
-    def velocities(self, value: "np.typing.ArrayLike") -> None:
+    def velocities(self, value: np.typing.ArrayLike) -> None:
         self._sim.set_state(velocities=_points(value, "velocities", self.dim, self.n_particles))
         self._e0 = None
 
@@ -733,21 +733,21 @@ class Scene:
         return self._sim.pinned
 
     @property
-    def terms(self) -> Tuple[Term, ...]:
+    def terms(self) -> tuple[Term, ...]:
         """The force terms, in the order added (names resolved)."""
         return tuple(self._terms)
 
     @property
-    def planes(self) -> List[Plane]:
+    def planes(self) -> list[Plane]:
         """The plane colliders, with the faces of :class:`Box` colliders as planes (a new list)."""
         return list(self._planes) + [f for b in self._boxes for f in b.faces()]
 
     @property
-    def boxes(self) -> List[Box]:
+    def boxes(self) -> list[Box]:
         """The box colliders (a copy of the list)."""
         return list(self._boxes)
 
-    def spring_pairs(self) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),
         int64 (M,), float64 (M,) in m."""
         springs = [t for t in self._terms if isinstance(t, Springs)]
@@ -795,11 +795,11 @@ class Scene:
         """Linear momentum ``Σ m v`` of free particles, kg·m/s: (dim,) float64."""
         return self._sim.momentum()
 
-    def angular_momentum(self) -> Union[float, np.ndarray]:
+    def angular_momentum(self) -> float | np.ndarray:
         """Angular momentum ``Σ m x × v`` about the origin of free particles, kg·m²/s:
         a float (the z component) in 2D, a (3,) float64 array in 3D."""
-        l = self._sim.angular_momentum()
-        return float(l[2]) if self.dim == 2 else l
+        am = self._sim.angular_momentum()
+        return float(am[2]) if self.dim == 2 else am
 
     def density(self) -> np.ndarray:
         """SPH density of every particle now, kg/m³ (kg/m² in 2D): ``(N,)`` float64, 0 for
@@ -817,7 +817,7 @@ class Scene:
         return np.concatenate(walls) if walls else np.zeros((0, self.dim))
 
     @property
-    def fluids(self) -> Tuple[Fluid, ...]:
+    def fluids(self) -> tuple[Fluid, ...]:
         """The fluids, as added (with ``first`` and ``sound_speed`` resolved)."""
         return tuple(t for t in self._terms if isinstance(t, Fluid))
 
@@ -829,7 +829,7 @@ class Scene:
         return self._exclusive(lambda sim: sim.suggest_dt())
 
     # ---------------------------------------------------------------- persistence
-    def save(self, path: Union[str, os.PathLike]) -> Path:
+    def save(self, path: str | os.PathLike) -> Path:
         """Write the whole scene to a ``.npz`` file, atomically (temporary file, then rename).
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
@@ -851,7 +851,7 @@ class Scene:
         path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
-        arrays: Dict[str, np.ndarray] = {
+        arrays: dict[str, np.ndarray] = {
             "positions": self.positions,
             "velocities": self.velocities,
             "masses": self.masses,
@@ -923,7 +923,7 @@ class Scene:
         return path
 
     @classmethod
-    def load(cls, path: Union[str, os.PathLike], *, threads: Optional[int] = None) -> "Scene":
+    def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
 
         The file is treated as hostile (see ``physcore/_scenefile.py``): every field is checked

@@ -16,7 +16,7 @@ message names the arguments involved.
 from __future__ import annotations
 
 import math
-from typing import Callable, Dict, Optional, Tuple
+from collections.abc import Callable
 
 import numpy as np
 
@@ -55,7 +55,7 @@ def _dim(dim: object) -> int:
     return int(dim)
 
 
-def _optional(value: object, arg: str) -> Optional[float]:
+def _optional(value: object, arg: str) -> float | None:
     """None, or a finite number > 0."""
     return None if value is None else _check.positive_float(arg, value)
 
@@ -146,8 +146,8 @@ def cloth(
     pin: str = "edge",
     ground: bool = False,
     integrator: str = "verlet",
-    dt: Optional[float] = None,
-    threads: Optional[int] = None,
+    dt: float | None = None,
+    threads: int | None = None,
 ) -> Scene:
     """Hanging cloth: an n×n mass-spring sheet, one edge pinned, falling and swinging under gravity.
 
@@ -208,8 +208,8 @@ def projectile(
     restitution: float = 0.6,
     ground: bool = True,
     integrator: str = "verlet",
-    dt: Optional[float] = 1e-3,
-    threads: Optional[int] = None,
+    dt: float | None = 1e-3,
+    threads: int | None = None,
 ) -> Scene:
     """Projectiles: n balls (1 kg) launched from the origin at angles from 20° to 70°, bouncing.
 
@@ -253,8 +253,8 @@ def kepler(
     mass_ratio: float = 1e-3,
     steps_per_orbit: int = 1000,
     integrator: str = "verlet",
-    dt: Optional[float] = None,
-    threads: Optional[int] = None,
+    dt: float | None = None,
+    threads: int | None = None,
 ) -> Scene:
     """Kepler orbit: two bodies under Newtonian gravity (G = 1, total mass 1), eccentricity e.
 
@@ -313,8 +313,8 @@ def spring_chain(
     damping: float = 0.0,
     dim: int = 2,
     integrator: str = "verlet",
-    dt: Optional[float] = None,
-    threads: Optional[int] = None,
+    dt: float | None = None,
+    threads: int | None = None,
 ) -> Scene:
     """Spring chain: n particles joined by springs, first one pinned, released horizontally.
 
@@ -357,7 +357,7 @@ spring_chain.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 30, 
 _G = 9.81  # m/s², gravity of the fluid scenes
 
 
-def _pair(value: object, arg: str) -> Tuple[float, float]:
+def _pair(value: object, arg: str) -> tuple[float, float]:
     """A (length, height) pair of finite numbers > 0, m."""
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
         raise TypeError(f"{arg}: expected (length, height) in m, got {type(value).__name__}")
@@ -388,7 +388,7 @@ def _walls_size(lo, hi, dx) -> float:
     return _lattice_size([v - pad for v in lo], [v + pad for v in hi], dx)
 
 
-def _fluid_scene(dim: int, integrator: str, dt: Optional[float], threads: Optional[int]) -> Scene:
+def _fluid_scene(dim: int, integrator: str, dt: float | None, threads: int | None) -> Scene:
     """A scene with gravity along −y (2D) or −z (3D), added before the fluid so that the fluid's
     default sound speed is estimated from it."""
     scene = Scene(dim, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
@@ -398,7 +398,7 @@ def _fluid_scene(dim: int, integrator: str, dt: Optional[float], threads: Option
     return scene
 
 
-def _box(dim: int, x: Tuple[float, float], height: Tuple[float, float], depth: Tuple[float, float]):
+def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: tuple[float, float]):
     """Lower and upper corners of a box spanning ``x`` along x, ``height`` along the vertical
     axis (y in 2D, z in 3D) and, in 3D, ``depth`` along y."""
     if dim == 2:
@@ -427,19 +427,19 @@ def _water_in_tank(positions, dx, tlo, thi, *, dim, lid, precision, kernel, visc
 def dam_break(
     *,
     dim: int = 2,
-    n: Optional[int] = None,
+    n: int | None = None,
     width: float = 1.0,
     height: float = 2.0,
-    tank: Tuple[float, float] = (4.0, 3.0),
+    tank: tuple[float, float] = (4.0, 3.0),
     depth: float = 1.0,
     lid: bool = True,
     precision: str = "f32",
     kernel: str = "cubic_spline",
     viscosity: float = 0.05,
-    sound_speed: Optional[float] = None,
+    sound_speed: float | None = None,
     integrator: str = "semi_implicit_euler",
-    dt: Optional[float] = None,
-    threads: Optional[int] = None,
+    dt: float | None = None,
+    threads: int | None = None,
 ) -> Scene:
     """Dam break: a water column collapses in a tank, surges along the floor and splashes back.
 
@@ -537,8 +537,8 @@ dam_break.render_defaults = {
 def drop(
     *,
     dim: int = 2,
-    n: Optional[int] = None,
-    tank: Tuple[float, float] = (2.0, 2.0),
+    n: int | None = None,
+    tank: tuple[float, float] = (2.0, 2.0),
     depth: float = 1.0,
     lid: bool = True,
     pool: float = 0.6,
@@ -547,10 +547,10 @@ def drop(
     precision: str = "f32",
     kernel: str = "cubic_spline",
     viscosity: float = 0.05,
-    sound_speed: Optional[float] = None,
+    sound_speed: float | None = None,
     integrator: str = "semi_implicit_euler",
-    dt: Optional[float] = None,
-    threads: Optional[int] = None,
+    dt: float | None = None,
+    threads: int | None = None,
 ) -> Scene:
     """Drop: a block of water falls into a pool at rest in a tank and splashes.
 
@@ -623,7 +623,9 @@ def drop(
         raise InvalidInputError(f"n, block, tank: n = {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("n, tank, depth, pool, block", _lattice_size(tlo, thi, dx) + _walls_size(tlo, thi, dx))
-    snap = lambda v: round(v / dx) * dx  # keep the block on the pool's (and walls') lattice
+    def snap(v):  # keep the block on the pool's (and walls') lattice
+        return round(v / dx) * dx
+
     x0 = snap(0.5 * (length - block))
     z0 = snap(pool + fall)
     y0 = snap(0.5 * (depth - block)) if dim == 3 else 0.0  # 2D: no depth (which may be huge)
@@ -654,7 +656,7 @@ drop.render_defaults = {
 }
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
-REGISTRY: Dict[str, Callable[..., Scene]] = {
+REGISTRY: dict[str, Callable[..., Scene]] = {
     "cloth": cloth,
     "projectile": projectile,
     "kepler": kepler,

@@ -7,7 +7,7 @@ constructed; what depends on the scene (dimension, particle indices) is checked 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Union
+from typing import Union
 
 import numpy as np
 
@@ -19,7 +19,7 @@ __all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
 ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
 
-def _finite_float(value: object, arg: str, *, minimum: Optional[float] = None, strict: bool = False) -> float:
+def _finite_float(value: object, arg: str, *, minimum: float | None = None, strict: bool = False) -> float:
     v = _check.real(arg, value)  # TypeError for bool/str/None; an int beyond float64 is refused
     if not np.isfinite(v):
         raise InvalidInputError(f"{arg}: must be finite, got {v}")
@@ -132,7 +132,7 @@ class Springs:
     j: np.ndarray
     stiffness: ArrayLike = field(default=1.0)
     damping: ArrayLike = 0.0
-    rest_length: Optional[ArrayLike] = None
+    rest_length: ArrayLike | None = None
     name: str = "springs"
 
     def __post_init__(self) -> None:
@@ -283,7 +283,7 @@ class Box:
         object.__setattr__(self, "restitution", e)
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
 
-    def faces(self) -> "list[Plane]":
+    def faces(self) -> list[Plane]:
         """The box's faces as inward-facing :class:`Plane` objects (for drawing)."""
         out = []
         for k in range(self.lower.shape[0]):

@@ -16,8 +16,6 @@ Examples
 """
 from __future__ import annotations
 
-from typing import Optional
-
 import numpy as np
 
 from .scene import Scene
@@ -45,7 +43,7 @@ def _positions(draw, st, n: int, dim: int, spread: float) -> np.ndarray:
     return np.asarray(flat, dtype=np.float64).reshape(n, dim)
 
 
-def spring_networks(*, dim: Optional[int] = None, max_particles: int = 12, integrator: str = "verlet", damping: bool = False):
+def spring_networks(*, dim: int | None = None, max_particles: int = 12, integrator: str = "verlet", damping: bool = False):
     """Strategy for scenes of 2..max_particles particles joined by random Hookean springs (rest
     length = initial length ≥ 0.2 m, stiffness 1..1e3 N/m, masses 0.1..10 kg, optional dashpots), with
     random initial velocities (never all zero), no gravity, no pins, and ``dt = suggest_dt()/4``:
@@ -71,7 +69,7 @@ def spring_networks(*, dim: Optional[int] = None, max_particles: int = 12, integ
         if not pairs:
             x[1] = x[0] + 0.5
             pairs = [(0, 1)]
-        i, j = (np.array(c, dtype=np.int64) for c in zip(*pairs))
+        i, j = (np.array(c, dtype=np.int64) for c in zip(*pairs, strict=False))
         k = draw(st.floats(1.0, 1e3))
         c = draw(st.floats(0.0, 1.0)) if damping else 0.0
         m = np.asarray(draw(st.lists(st.floats(0.1, 10.0), min_size=n, max_size=n)))
@@ -110,7 +108,7 @@ def nbody_systems(*, dim: int = 3, max_bodies: int = 8, integrator: str = "verle
     return build()
 
 
-def particle_clouds(*, dim: Optional[int] = None, max_particles: int = 50, gravity: bool = True, integrator: str = "verlet"):
+def particle_clouds(*, dim: int | None = None, max_particles: int = 50, gravity: bool = True, integrator: str = "verlet"):
     """Strategy for free particles (random positions, velocities and masses) under uniform
     gravity (or none): the motion is exactly ballistic, so every integrator of order ≥ 2 is
     exact up to round-off."""
