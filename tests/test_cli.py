@@ -363,3 +363,16 @@ def test_out_of_memory_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys):
     assert "out of memory" in err and "12.0 GB" in err and "Traceback" not in err
     assert len(err.strip().splitlines()) == 1
     assert not out.exists()
+
+
+def test_a_closed_pipe_is_not_a_traceback():
+    # `physcore scenes | head -1`: the reader leaves early; the command ends quietly.
+    with subprocess.Popen(
+        [sys.executable, "-m", "physcore", "scenes"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, bufsize=0
+    ) as proc:
+        proc.stdout.read(1)
+        proc.stdout.close()
+        err = proc.stderr.read().decode()
+        proc.wait(timeout=60)
+    assert "Traceback" not in err and "BrokenPipeError" not in err, err
+    assert proc.returncode in (0, 1)  # 0 if it finished writing before the reader left

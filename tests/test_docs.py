@@ -1,17 +1,18 @@
 """The README's Python example, the docstring examples, and the _core.pyi stub are checked."""
 from __future__ import annotations
 
-import ast
 import doctest
+import importlib
+import os
+import pkgutil
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 import physcore
-import physcore.scene
-import physcore.terms
-from physcore import _core
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -35,29 +36,48 @@ def test_readme_python_example_runs(k, tmp_path, monkeypatch):
         assert gif.stat().st_size > 1000
 
 
-@pytest.mark.parametrize("module", [physcore.scene, physcore.terms])
-def test_docstring_examples(module):
+PUBLIC_MODULES = sorted(m.name for m in pkgutil.iter_modules(physcore.__path__) if not m.name.startswith("_"))
+
+
+def test_public_modules_are_found():
+    assert {"scene", "terms", "scenes", "render", "cli"} <= set(PUBLIC_MODULES)
+
+
+@pytest.mark.parametrize("name", PUBLIC_MODULES)
+def test_docstring_examples(name):
+    # Every public module carries runnable examples, and all of them pass (a module without any
+    # would pass vacuously, so it fails here).
+    module = importlib.import_module(f"physcore.{name}")
     result = doctest.testmod(module, verbose=False)
+    assert result.attempted > 0, f"physcore.{name} has no docstring examples"
     assert result.failed == 0
 
 
-def test_stub_matches_compiled_module():
-    stub = ast.parse((ROOT / "python" / "physcore" / "_core.pyi").read_text())
-    top = set()
-    methods = set()
-    for node in stub.body:
-        if isinstance(node, ast.FunctionDef):
-            top.add(node.name)
-        elif isinstance(node, ast.AnnAssign):
-            top.add(node.target.id)
-        elif isinstance(node, ast.ClassDef):
-            top.add(node.name)
-            for item in node.body:
-                if isinstance(item, ast.FunctionDef) and item.name != "__init__":
-                    methods.add(item.name)
-                elif isinstance(item, ast.AnnAssign):
-                    methods.add(item.target.id)
-    public = {n for n in dir(_core) if not n.startswith("_")} | {"__version__"}
-    assert top == public
-    compiled_methods = {n for n in dir(_core.Simulation2) if not n.startswith("_")}
-    assert methods == compiled_methods
+def _stubtest(stub_text: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    """mypy's stubtest of ``stub_text`` (as physcore/_core.pyi) against the compiled module: every
+    name, signature (parameter names, kinds, defaults), property and class flag. The stub is
+    copied beside an empty package stub so that mypy reads this checkout's stub, not the
+    installed copy, and checks only the stub."""
+    pkg = tmp_path / "stubs" / "physcore"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.pyi").write_text("")
+    (pkg / "_core.pyi").write_text(stub_text)
+    env = {**os.environ, "MYPYPATH": str(pkg.parent)}
+    return subprocess.run(
+        [sys.executable, "-m", "mypy.stubtest", "physcore._core", "--mypy-config-file", os.devnull],
+        capture_output=True, text=True, env=env, cwd=tmp_path, check=False,
+    )
+
+
+def test_stub_matches_compiled_module(tmp_path):
+    result = _stubtest((ROOT / "python" / "physcore" / "_core.pyi").read_text(), tmp_path)
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_stub_check_catches_a_wrong_signature(tmp_path):
+    # The check above must be able to fail: a parameter the compiled function lacks is reported.
+    stub = (ROOT / "python" / "physcore" / "_core.pyi").read_text()
+    wrong = stub.replace("def simd_levels() -> list[str]: ...", "def simd_levels(x: int) -> list[str]: ...")
+    assert wrong != stub
+    result = _stubtest(wrong, tmp_path)
+    assert result.returncode != 0 and "simd_levels" in result.stdout, result.stdout + result.stderr

@@ -1,8 +1,22 @@
-# Type stubs for the compiled module physcore._core (checked against it by tests/test_api_stub.py).
-from typing import Any
+# Type stubs for the compiled module physcore._core, checked against it (names, signatures,
+# defaults, class flags) by mypy's stubtest in tests/test_docs.py.
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "Simulation2",
+    "integrator_table",
+    "default_threads",
+    "simd_level",
+    "simd_levels",
+    "set_simd_level",
+    "cpu_name",
+    "neighbors",
+    "build_profile",
+    "__version__",
+]
 
 build_profile: str
 __version__: str
@@ -15,8 +29,9 @@ def set_simd_level(level: str | None = None) -> None: ...
 def cpu_name() -> str: ...
 def neighbors(points: npt.NDArray[np.float64], radius: float) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]: ...
 
+@final
 class Simulation2:
-    def __init__(self, dim: int, integrator: str, dt: float, threads: int | None = None) -> None: ...
+    def __new__(cls, dim: int, integrator: str, dt: float, threads: int | None = None) -> Simulation2: ...
     @property
     def dim(self) -> int: ...
     @property

@@ -23,6 +23,14 @@ Before anything is built or simulated, the frames buffer (``frames × width × h
 bytes, twice over while encoding) is estimated and refused above half the physical memory
 (:func:`physcore._check.memory_limit`); the scene functions then refuse particle counts that
 would not fit (e.g. ``--param n=100000``), and :func:`physcore.render.gif` the whole recording.
+
+Examples
+--------
+:func:`main` takes the arguments as a list and returns the exit code:
+
+>>> from physcore.cli import main
+>>> main(["render", "no_such_scene"])
+2
 """
 from __future__ import annotations
 
@@ -612,6 +620,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MemoryError as e:  # pc.OutOfMemoryError names what needed how much; numpy's may not
         print(f"physcore: error: out of memory: {e or 'an allocation failed'}; nothing was written", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `physcore scenes | head`: the reader left; say nothing more
+        # Python's documented recipe: point stdout at devnull so the exit flush cannot fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

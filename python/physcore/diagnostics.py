@@ -14,7 +14,7 @@ Examples
 ...     rec.record(scene)
 ...     scene.step(100)
 >>> rec.record(scene)
->>> len(rec), abs(rec.drift[-1]) < 1e-3
+>>> len(rec), bool(abs(rec.drift[-1]) < 1e-3)
 (6, True)
 """
 from __future__ import annotations

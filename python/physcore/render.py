@@ -10,6 +10,19 @@ Public functions
 ----------------
 gif(scene, path, ...)          simulate a scene forward and write an animated GIF.
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
+
+Examples
+--------
+>>> import os, tempfile
+>>> import physcore as pc
+>>> scene = pc.scenes.projectile(n=3)
+>>> image = pc.render.render_frame(scene.positions, velocities=scene.velocities, size=(64, 48))
+>>> image.shape, image.dtype
+((48, 64, 3), dtype('uint8'))
+>>> with tempfile.TemporaryDirectory() as tmp:
+...     out = pc.render.gif(scene, os.path.join(tmp, "balls.gif"), frames=4, size=(64, 48))
+...     out.name, out.stat().st_size > 0
+('balls.gif', True)
 """
 from __future__ import annotations
 

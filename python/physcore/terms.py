@@ -3,6 +3,23 @@
 A scene computes only the terms it holds. Every term validates its own arguments when it is
 constructed; what depends on the scene (dimension, particle indices) is checked by
 :meth:`Scene.add`, before anything changes.
+
+Examples
+--------
+>>> import physcore as pc
+>>> scene = pc.Scene(dim=2, dt=1e-3, threads=1)
+>>> scene.add_particles([[0.0, 1.0]], [[1.0, 0.0]], masses=[2.0])
+array([0])
+>>> scene.add(pc.Gravity([0.0, -9.81]))
+Gravity(g=array([ 0.  , -9.81]), name='gravity')
+>>> _ = scene.add(pc.Plane(point=[0.0, 0.0], normal=[0.0, 1.0], restitution=0.5))
+>>> scene.step(100)
+>>> round(scene.time, 6), bool(scene.positions[0, 1] < 1.0)
+(0.1, True)
+>>> pc.Gravity([0.0, float("nan")])
+Traceback (most recent call last):
+...
+physcore._errors.InvalidInputError: g: must be finite, got [0.0, nan]
 """
 from __future__ import annotations
 
