@@ -56,27 +56,16 @@ MAX_NPY_HEADER = 10_000
 STEP_LIMIT = 2**63
 _CHUNK = 1 << 20
 
-# Fields of each term type and collider, by kind of value (see _Reader.value).
-TERM_FIELDS: dict[str, dict[str, str]] = {
-    "gravity": {"g": "vector"},
-    "drag": {"coefficient": "number"},
-    "pairwise_gravity": {"G": "number", "softening": "number"},
-    "springs": {},
-    "fluid": {
-        "count": "count",
-        "first": "count",
-        "spacing": "number",
-        "density": "number",
-        "sound_speed": "number",
-        "viscosity": "number",
-        "smoothing": "number",
-        "kernel": "str",
-        "gamma": "int",
-        "clamp_pressure": "bool",
-        "precision": "str",
-        "mass": "number",
-    },
-}
+def _term_types() -> dict[str, type]:
+    """Every registered term type by its key: each describes its own record (``record_fields``,
+    ``record_arrays``; see :class:`physcore.terms.Term`)."""
+    from . import fluids  # noqa: F401 - registers Fluid
+    from .terms import REGISTRY
+
+    return REGISTRY
+
+
+# Fields of each collider, by kind of value (see _Reader.value).
 COLLIDER_FIELDS: dict[str, dict[str, str]] = {
     "planes": {"point": "vector", "normal": "vector", "restitution": "number", "friction": "number"},
     "boxes": {"lower": "vector", "upper": "vector", "restitution": "number", "friction": "number"},
@@ -279,9 +268,10 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         if not isinstance(t, dict):
             raise r.error(field, f"must be an object, got {_kind(t)}")
         kind = t.get("type")
-        if not isinstance(kind, str) or kind not in TERM_FIELDS:
-            raise r.error(f"{field}.type", f"unknown term type {_show(kind)} (expected one of {', '.join(TERM_FIELDS)})")
-        rec = r.record(field, t, TERM_FIELDS[kind], dim, required=("type", "name"))
+        types = _term_types()
+        if not isinstance(kind, str) or kind not in types:
+            raise r.error(f"{field}.type", f"unknown term type {_show(kind)} (expected one of {', '.join(types)})")
+        rec = r.record(field, t, types[kind].record_fields, dim, required=("type", "name"))
         name = rec.get("name")
         if not isinstance(name, str) or not name:
             raise r.error(f"{field}.name", f"must be a non-empty string, got {_kind(name)} {_show(name)}")
@@ -443,17 +433,19 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
         "pinned": _Spec("b1", ("N",)),
         "ledger": _Spec("f8", ("T",)),
     }
+    types = _term_types()
     for k, t in enumerate(meta["terms"]):
-        if t["type"] == "springs":
-            for f in ("i", "j"):
-                req[f"term{k}_{f}"] = _Spec("i8", (f"M{k}",))
-            for f in ("stiffness", "damping", "rest_length"):
-                req[f"term{k}_{f}"] = _Spec("f8", (f"M{k}",))
-        elif t["type"] == "fluid":
-            sizes[f"F{k}"] = (t["count"], f"meta.terms[{k}].count")
-            req[f"term{k}_positions"] = _Spec("f8", (f"F{k}", d))
-            req[f"term{k}_walls"] = _Spec("f8", (f"W{k}", d))
-            req[f"term{k}_wall_volume"] = _Spec("f8", (f"W{k}",))
+        cls = types[t["type"]]
+        for f, (dtype, axes) in cls.record_arrays.items():
+            named = []
+            for a in axes:
+                if a == "D":
+                    named.append(d)
+                    continue
+                if a in cls.record_fields:  # sized by the record: e.g. a fluid's count
+                    sizes[f"{a}{k}"] = (t[a], f"meta.terms[{k}].{a}")
+                named.append(f"{a}{k}")
+            req[f"term{k}_{f}"] = _Spec(dtype, tuple(named))
     opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
     return req, opt, sizes
 
@@ -537,8 +529,9 @@ def read(path: Path) -> SceneFile:
     if sizes.get("K", (0,))[0] > len(meta["terms"]) + 2:
         raise r.error("cache_power", f"has {sizes['K'][0]} entries, more than the integrators keep for {len(meta['terms'])} terms")
     taken: list[tuple[int, int, int]] = []
+    types = _term_types()
     for k, t in enumerate(meta["terms"]):
-        if t["type"] == "fluid":
+        if types[t["type"]].owns_particles:
             if t["first"] + t["count"] > n:
                 raise r.error(f"meta.terms[{k}].first", f"particles {t['first']}..{t['first'] + t['count']} are not all in the scene ({n})")
             taken.append((t["first"], t["first"] + t["count"], k))

@@ -25,12 +25,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from . import _check, _core
 from ._errors import InvalidInputError
-from .terms import _finite_float
+from .terms import Term, _finite_float
+
+if TYPE_CHECKING:
+    from .scene import Scene
 
 __all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
 
@@ -203,8 +207,8 @@ def tank_walls(
     return np.ascontiguousarray(pts[~inside])
 
 
-@dataclass(frozen=True)
-class Fluid:
+@dataclass(frozen=True, eq=False)
+class Fluid(Term, kind="fluid"):
     """A WCSPH fluid: its particles and parameters, SI units. Add it with :meth:`Scene.add`
     (or :meth:`Scene.add_fluid`), which appends the particles and the force term.
 
@@ -346,6 +350,68 @@ class Fluid:
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
         if not isinstance(self.name, str) or not self.name:
             raise TypeError("name: expected a non-empty str")
+
+    # ------------------------------------------------------------ the term protocol (see Term)
+    record_fields: ClassVar[dict[str, str]] = {
+        "count": "count",
+        "first": "count",
+        "spacing": "number",
+        "density": "number",
+        "sound_speed": "number",
+        "viscosity": "number",
+        "smoothing": "number",
+        "kernel": "str",
+        "gamma": "int",
+        "clamp_pressure": "bool",
+        "precision": "str",
+        "mass": "number",
+    }
+    record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
+        "positions": ("f8", ("count", "D")),
+        "walls": ("f8", ("W", "D")),
+        "wall_volume": ("f8", ("W",)),
+    }
+    owns_particles: ClassVar[bool] = True
+
+    def _attach(self, scene: Scene, name: str) -> Fluid:
+        return scene._add_fluid(self, name)
+
+    def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        meta: dict[str, Any] = {"count": len(self), "first": self.first}
+        for f in ("spacing", "density", "sound_speed", "viscosity", "smoothing", "kernel", "precision"):
+            meta[f] = getattr(self, f)
+        meta["gamma"] = int(self.gamma)
+        meta["clamp_pressure"] = bool(self.clamp_pressure)
+        meta["mass"] = self.particle_mass()
+        walls = self.walls if self.walls is not None else np.zeros((0, self.dim))
+        return meta, {"positions": self.positions, "walls": walls, "wall_volume": self.wall_psi() / self.density}
+
+    @classmethod
+    def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
+        return {"n": f"{ctx}.first"}
+
+    @classmethod
+    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        walls = arrays["walls"]
+        fluid = cls(
+            arrays["positions"],
+            meta["spacing"],
+            density=meta["density"],
+            sound_speed=meta["sound_speed"],
+            viscosity=meta["viscosity"],
+            smoothing=meta["smoothing"],
+            kernel=meta["kernel"],
+            gamma=meta["gamma"],
+            clamp_pressure=meta["clamp_pressure"],
+            mass=meta["mass"],
+            walls=walls if len(walls) else None,
+            wall_volume=arrays["wall_volume"] if len(walls) else "lattice",
+            precision=meta["precision"],
+            name=meta["name"],
+        )
+        dt_saved = scene.dt  # the file's dt, which adding lowers to the fluid's CFL limit
+        scene._terms.append(scene._add_fluid(fluid, scene._unique_name(fluid.name), first=meta["first"]))
+        scene._sim.dt = dt_saved
 
     @property
     def dim(self) -> int:

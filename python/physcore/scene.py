@@ -21,7 +21,7 @@ from . import _check, _core, _scenefile
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, SceneBusyError, ThreadPoolWarning
 from .fluids import Fluid
-from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
+from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
@@ -34,7 +34,6 @@ MAX_THREADS = 65535
 _MIN_DT = _check.MIN_NORMAL
 _MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
-Term = Gravity | Drag | Springs | PairwiseGravity | Fluid
 
 
 @dataclass(frozen=True)
@@ -366,8 +365,6 @@ class Scene:
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
-        if isinstance(item, Fluid):
-            return self._add_fluid(item)
         if isinstance(item, Box):
             for arg in ("lower", "upper"):
                 if getattr(item, arg).shape[0] != dim:
@@ -384,45 +381,9 @@ class Scene:
             self._planes.append(item)
             self._e0 = None
             return item
-        if not isinstance(item, (Gravity, Drag, Springs, PairwiseGravity)):
+        if not isinstance(item, Term) or REGISTRY.get(type(item).kind) is not type(item):
             raise TypeError(f"item: expected a physcore term, Fluid, Plane or Box, got {type(item).__name__}")
-        name = self._unique_name(item.name)
-        if isinstance(item, Gravity):
-            if item.g.shape[0] != dim:
-                raise InvalidInputError(f"g: has {item.g.shape[0]} components, the scene is {dim}D")
-            item = Gravity(item.g, name=name)
-            self._sim.add_gravity(name, item.g.tolist())
-        elif isinstance(item, Drag):
-            item = Drag(item.coefficient, name=name)
-            self._sim.add_drag(name, item.coefficient)
-        elif isinstance(item, PairwiseGravity):
-            item = PairwiseGravity(item.G, item.softening, name=name)
-            self._sim.add_pairwise_gravity(name, item.G, item.softening)
-        else:
-            n = self.n_particles
-            for arg in ("i", "j"):
-                a = getattr(item, arg)
-                if a.size and a.max() >= n:
-                    raise InvalidInputError(f"{arg}: index {int(a.max())} is out of range for {n} particles")
-            rest = item.rest_length
-            if rest is None:
-                x = self.positions
-                with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
-                    rest = np.linalg.norm(x[item.j] - x[item.i], axis=1) if len(item) else np.zeros(0)
-                if not np.all(np.isfinite(rest)):
-                    k = int(np.flatnonzero(~np.isfinite(rest))[0])
-                    raise InvalidInputError(
-                        f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
-                    )
-            item = Springs(item.i, item.j, stiffness=item.stiffness, damping=item.damping, rest_length=rest, name=name)
-            self._sim.add_springs(
-                name,
-                item.i.astype(np.uint32),
-                item.j.astype(np.uint32),
-                np.ascontiguousarray(item.stiffness),
-                np.ascontiguousarray(item.damping),
-                np.ascontiguousarray(item.rest_length),
-            )
+        item = item._attach(self, self._unique_name(item.name))
         self._terms.append(item)
         self._e0 = None
         return item
@@ -450,18 +411,18 @@ class Scene:
         (200, True)
         >>> substeps = scene.advance(0.01)   # CFL-limited substeps
         """
-        fluid = self._add_fluid(Fluid(positions, **params))
+        fluid = self.add(Fluid(positions, **params))
         assert fluid.first is not None
         return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
 
-    def _add_fluid(self, fluid: Fluid, first: int | None = None) -> Fluid:
-        """Append the fluid's particles (unless ``first`` says they exist) and its SPH term."""
+    def _add_fluid(self, fluid: Fluid, name: str, first: int | None = None) -> Fluid:
+        """Append the fluid's particles (unless ``first`` says they exist) and its SPH term
+        (:meth:`Fluid._attach`); returns the fluid as stored, for the caller to append."""
         import dataclasses
 
         dim = self.dim
         if fluid.dim != dim:
             raise InvalidInputError(f"positions: the fluid is {fluid.dim}D, the scene is {dim}D")
-        name = self._unique_name(fluid.name)
         c0 = fluid.sound_speed
         if c0 is None:
             g = sum((t.g for t in self._terms if isinstance(t, Gravity)), np.zeros(dim))
@@ -515,7 +476,6 @@ class Scene:
             np.ascontiguousarray(psi, dtype=np.float64),
         )
         fluid = dataclasses.replace(fluid, first=first)
-        self._terms.append(fluid)
         # A step above the fluid's CFL limit would blow up on the first step.
         self._sim.dt = min(self.dt, max_dt)
         self._e0 = None
@@ -859,28 +819,9 @@ class Scene:
         }
         terms_meta = []
         for k, t in enumerate(self._terms):
-            if isinstance(t, Gravity):
-                terms_meta.append({"type": "gravity", "name": t.name, "g": t.g.tolist()})
-            elif isinstance(t, Drag):
-                terms_meta.append({"type": "drag", "name": t.name, "coefficient": t.coefficient})
-            elif isinstance(t, PairwiseGravity):
-                terms_meta.append({"type": "pairwise_gravity", "name": t.name, "G": t.G, "softening": t.softening})
-            elif isinstance(t, Fluid):
-                params = {
-                    f: getattr(t, f)
-                    for f in ("spacing", "density", "sound_speed", "viscosity", "smoothing", "kernel", "gamma", "clamp_pressure", "precision", "first")
-                }
-                params["gamma"] = int(params["gamma"])
-                params["clamp_pressure"] = bool(params["clamp_pressure"])
-                params["mass"] = t.particle_mass()
-                terms_meta.append({"type": "fluid", "name": t.name, "count": len(t), **params})
-                arrays[f"term{k}_positions"] = t.positions
-                arrays[f"term{k}_walls"] = t.walls if t.walls is not None else np.zeros((0, self.dim))
-                arrays[f"term{k}_wall_volume"] = t.wall_psi() / t.density
-            else:
-                terms_meta.append({"type": "springs", "name": t.name})
-                for f in ("i", "j", "stiffness", "damping", "rest_length"):
-                    arrays[f"term{k}_{f}"] = np.asarray(getattr(t, f))
+            record, members = t._record()
+            terms_meta.append({"type": t.kind, "name": t.name, **record})
+            arrays.update({f"term{k}_{a}": v for a, v in members.items()})
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
@@ -977,43 +918,10 @@ class Scene:
                 scene.add_particles(z["positions"], z["velocities"], z["masses"], z["pinned"])
         for k, t in enumerate(meta["terms"]):
             ctx = f"meta.terms[{k}]"
-            kind = t["type"]
-            if kind == "gravity":
-                with r.api(ctx):
-                    scene.add(Gravity(t["g"], name=t["name"]))
-            elif kind == "drag":
-                with r.api(ctx):
-                    scene.add(Drag(t["coefficient"], name=t["name"]))
-            elif kind == "pairwise_gravity":
-                with r.api(ctx):
-                    scene.add(PairwiseGravity(t["G"], t["softening"], name=t["name"]))
-            elif kind == "fluid":
-                members = {a: f"term{k}_{a}" for a in ("positions", "walls", "wall_volume")}
-                with r.api(ctx, {**members, "n": f"{ctx}.first"}):
-                    walls = z[f"term{k}_walls"]
-                    fl = Fluid(
-                        z[f"term{k}_positions"],
-                        t["spacing"],
-                        density=t["density"],
-                        sound_speed=t["sound_speed"],
-                        viscosity=t["viscosity"],
-                        smoothing=t["smoothing"],
-                        kernel=t["kernel"],
-                        gamma=t["gamma"],
-                        clamp_pressure=t["clamp_pressure"],
-                        mass=t["mass"],
-                        walls=walls if len(walls) else None,
-                        wall_volume=z[f"term{k}_wall_volume"] if len(walls) else "lattice",
-                        precision=t["precision"],
-                        name=t["name"],
-                    )
-                    dt_saved = scene.dt
-                    scene._add_fluid(fl, first=t["first"])
-                    scene._sim.dt = dt_saved
-            else:
-                fields = ("i", "j", "stiffness", "damping", "rest_length")
-                with r.api(ctx, {**{a: f"term{k}_{a}" for a in fields}, "i/j": f"term{k}_i"}):
-                    scene.add(Springs(name=t["name"], **{a: z[f"term{k}_{a}"] for a in fields}))
+            cls = REGISTRY[t["type"]]
+            members = {a: f"term{k}_{a}" for a in cls.record_arrays}
+            with r.api(ctx, {**members, **cls.record_api_names(k, ctx)}):
+                cls._load(scene, t, {a: z[m] for a, m in members.items()})
         for i, p in enumerate(meta["planes"]):
             with r.api(f"meta.planes[{i}]"):
                 scene.add(Plane(p["point"], p["normal"], p["restitution"], p["friction"]))

@@ -23,15 +23,22 @@ physcore._errors.InvalidInputError: g: must be finite, got [0.0, nan]
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import Union
+from typing import TYPE_CHECKING, Any, ClassVar, Union
 
 import numpy as np
 
 from . import _check
 from ._errors import InvalidInputError
 
-__all__ = ["Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
+if TYPE_CHECKING:
+    from .scene import Scene
+
+__all__ = ["Term", "Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
+
+#: Every force term by its type key (``Term.kind``), filled as the term classes are defined.
+REGISTRY: dict[str, type[Term]] = {}
 
 ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
@@ -78,8 +85,92 @@ def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
     return a
 
 
-@dataclass(frozen=True)
-class Gravity:
+def _same(a: object, b: object) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and np.array_equal(a, b)
+    return bool(a == b)
+
+
+def _hashable(v: object) -> object:
+    return (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
+
+
+class Term:
+    """Base of the force-term records. A subclass registers itself by its type key
+    (``class Gravity(Term, kind="gravity")``) and describes itself completely, so that adding a
+    term to physcore touches only its own files: how it attaches to a scene (:meth:`_attach`),
+    what a scene file holds of it (:attr:`record_fields`, :attr:`record_arrays`,
+    :meth:`_record`) and how it is rebuilt from a file (:meth:`_load`). Records compare by
+    value (arrays element-wise) and are immutable.
+    """
+
+    #: The term's type key in scene files, unique across terms.
+    kind: ClassVar[str] = ""
+    #: Scalar fields a scene file holds in ``meta.terms[k]`` (besides ``type`` and ``name``), by
+    #: the kind of value the loader checks (``"number"``, ``"vector"``, ``"int"``, ...).
+    record_fields: ClassVar[dict[str, str]] = {}
+    #: Array members ``term{k}_{field}`` of a scene file: field -> (dtype, axes). An axis named
+    #: after a record field takes its size from it, ``"D"`` is the dimension, and any other name
+    #: is a size the term's arrays share.
+    record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
+    #: True when the term owns a run of the scene's particles (``first``, ``count`` in its record).
+    owns_particles: ClassVar[bool] = False
+
+    name: str
+
+    def __init_subclass__(cls, kind: str = "", **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if kind:
+            if kind in REGISTRY:
+                raise TypeError(f"kind: {kind!r} is already the key of {REGISTRY[kind].__name__}")
+            cls.kind = kind
+            REGISTRY[kind] = cls
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(
+            _same(getattr(self, f.name), getattr(other, f.name)) for f in dataclasses.fields(self) if f.compare
+        )
+
+    def __hash__(self) -> int:
+        return hash((type(self), *(_hashable(getattr(self, f.name)) for f in dataclasses.fields(self) if f.compare)))
+
+    # ------------------------------------------------------------ the protocol of a term type
+    def _attach(self, scene: Scene, name: str) -> Term:
+        """Check the term against ``scene`` (dimension, indices), add it to the core under
+        ``name`` and return the record as stored. Raises before changing anything."""
+        raise NotImplementedError(f"{type(self).__name__} does not say how it attaches to a scene")
+
+    def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """What a scene file holds of this term: the ``record_fields`` (JSON values) and the
+        ``record_arrays``."""
+        meta = {}
+        for f in self.record_fields:
+            v = getattr(self, f)
+            meta[f] = v.tolist() if isinstance(v, np.ndarray) else v
+        return meta, {a: np.asarray(getattr(self, a)) for a in self.record_arrays}
+
+    @classmethod
+    def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
+        """Error-message names: the file fields that argument names of :meth:`_load` stand for,
+        beyond ``record_fields`` (as ``{ctx}.{field}``) and ``record_arrays`` (``term{k}_{field}``)."""
+        return {}
+
+    @classmethod
+    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        """Rebuild the term from its checked record and add it to ``scene``."""
+        fields = {f: meta[f] for f in cls.record_fields}
+        scene.add(cls(**fields, **arrays, name=meta["name"]))
+
+
+def _same_dim(scene: Scene, arg: str, v: np.ndarray) -> None:
+    if v.shape[0] != scene.dim:
+        raise InvalidInputError(f"{arg}: has {v.shape[0]} components, the scene is {scene.dim}D")
+
+
+@dataclass(frozen=True, eq=False)
+class Gravity(Term, kind="gravity"):
     """Uniform gravity: force ``m g`` on every free particle; potential ``-m g·x``.
 
     Parameters
@@ -93,12 +184,19 @@ class Gravity:
     g: np.ndarray
     name: str = "gravity"
 
+    record_fields: ClassVar[dict[str, str]] = {"g": "vector"}
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "g", _vector(self.g, "g"))
 
+    def _attach(self, scene: Scene, name: str) -> Gravity:
+        _same_dim(scene, "g", self.g)
+        scene._sim.add_gravity(name, self.g.tolist())
+        return dataclasses.replace(self, name=name)
 
-@dataclass(frozen=True)
-class Drag:
+
+@dataclass(frozen=True, eq=False)
+class Drag(Term, kind="drag"):
     """Linear (Stokes) drag ``F = -b v`` on every free particle; dissipates ``b |v|²``.
 
     Parameters
@@ -112,12 +210,18 @@ class Drag:
     coefficient: float
     name: str = "drag"
 
+    record_fields: ClassVar[dict[str, str]] = {"coefficient": "number"}
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))
 
+    def _attach(self, scene: Scene, name: str) -> Drag:
+        scene._sim.add_drag(name, self.coefficient)
+        return dataclasses.replace(self, name=name)
 
-@dataclass(frozen=True)
-class Springs:
+
+@dataclass(frozen=True, eq=False)
+class Springs(Term, kind="springs"):
     """Hookean springs with dashpot damping along the spring axis.
 
     Force on ``i`` from spring ``(i, j)``: ``f = [k (L - L0) + c (v_j - v_i)·n] n`` with
@@ -179,12 +283,51 @@ class Springs:
         if self.rest_length is not None:
             object.__setattr__(self, "rest_length", _per_spring(self.rest_length, m, "rest_length"))
 
+    record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
+        "i": ("i8", ("M",)),
+        "j": ("i8", ("M",)),
+        "stiffness": ("f8", ("M",)),
+        "damping": ("f8", ("M",)),
+        "rest_length": ("f8", ("M",)),
+    }
+
     def __len__(self) -> int:
         return int(self.i.shape[0])
 
+    @classmethod
+    def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
+        return {"i/j": f"term{k}_i"}
 
-@dataclass(frozen=True)
-class PairwiseGravity:
+    def _attach(self, scene: Scene, name: str) -> Springs:
+        n = scene.n_particles
+        for arg in ("i", "j"):
+            a = getattr(self, arg)
+            if a.size and a.max() >= n:
+                raise InvalidInputError(f"{arg}: index {int(a.max())} is out of range for {n} particles")
+        rest = self.rest_length
+        if rest is None:
+            x = scene.positions
+            with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
+                rest = np.linalg.norm(x[self.j] - x[self.i], axis=1) if len(self) else np.zeros(0)
+            if not np.all(np.isfinite(rest)):
+                k = int(np.flatnonzero(~np.isfinite(rest))[0])
+                raise InvalidInputError(
+                    f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
+                )
+        stored = dataclasses.replace(self, rest_length=rest, name=name)
+        scene._sim.add_springs(
+            name,
+            stored.i.astype(np.uint32),
+            stored.j.astype(np.uint32),
+            np.ascontiguousarray(stored.stiffness),
+            np.ascontiguousarray(stored.damping),
+            np.ascontiguousarray(stored.rest_length),
+        )
+        return stored
+
+
+@dataclass(frozen=True, eq=False)
+class PairwiseGravity(Term, kind="pairwise_gravity"):
     """Newtonian gravity between every pair of particles, with Plummer softening.
 
     ``a_i = G Σ_j m_j (x_j - x_i) / (|x_j - x_i|² + ε²)^{3/2}`` and
@@ -209,6 +352,12 @@ class PairwiseGravity:
     def __post_init__(self) -> None:
         object.__setattr__(self, "G", _finite_float(self.G, "G", minimum=0.0, strict=True))
         object.__setattr__(self, "softening", _finite_float(self.softening, "softening", minimum=0.0))
+
+    record_fields: ClassVar[dict[str, str]] = {"G": "number", "softening": "number"}
+
+    def _attach(self, scene: Scene, name: str) -> PairwiseGravity:
+        scene._sim.add_pairwise_gravity(name, self.G, self.softening)
+        return dataclasses.replace(self, name=name)
 
 
 @dataclass(frozen=True)
