@@ -58,7 +58,7 @@ class _Wind(Term, kind="test_wind"):
     def _attach(self, scene, name):
         if self.a.shape[0] != scene.dim:
             raise pc.InvalidInputError(f"a: has {self.a.shape[0]} components, the scene is {scene.dim}D")
-        scene._sim.add_gravity(name, self.a.tolist())
+        scene._sim.add_term("gravity", name, {"g": self.a})
         return dataclasses.replace(self, name=name)
 
 

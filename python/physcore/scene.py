@@ -460,20 +460,23 @@ class Scene:
         if first is None:
             n = len(fluid)
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
-        self._sim.add_sph(
+        self._sim.add_term(
+            "sph",
             name,
-            first,
-            len(fluid),
-            fluid.h,
-            fluid.density,
-            c0,
-            int(fluid.gamma),
-            fluid.viscosity,
-            bool(fluid.clamp_pressure),
-            fluid.kernel,
-            fluid.precision,
-            np.ascontiguousarray(walls, dtype=np.float64),
-            np.ascontiguousarray(psi, dtype=np.float64),
+            {
+                "first": first,
+                "n": len(fluid),
+                "h": fluid.h,
+                "density": fluid.density,
+                "sound_speed": c0,
+                "gamma": int(fluid.gamma),
+                "viscosity": fluid.viscosity,
+                "clamp_pressure": bool(fluid.clamp_pressure),
+                "kernel": fluid.kernel,
+                "precision": fluid.precision,
+                "walls": np.ascontiguousarray(walls, dtype=np.float64),
+                "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
+            },
         )
         fluid = dataclasses.replace(fluid, first=first)
         # A step above the fluid's CFL limit would blow up on the first step.

@@ -191,7 +191,7 @@ class Gravity(Term, kind="gravity"):
 
     def _attach(self, scene: Scene, name: str) -> Gravity:
         _same_dim(scene, "g", self.g)
-        scene._sim.add_gravity(name, self.g.tolist())
+        scene._sim.add_term("gravity", name, {"g": self.g})
         return dataclasses.replace(self, name=name)
 
 
@@ -216,7 +216,7 @@ class Drag(Term, kind="drag"):
         object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))
 
     def _attach(self, scene: Scene, name: str) -> Drag:
-        scene._sim.add_drag(name, self.coefficient)
+        scene._sim.add_term("drag", name, {"coefficient": self.coefficient})
         return dataclasses.replace(self, name=name)
 
 
@@ -315,13 +315,16 @@ class Springs(Term, kind="springs"):
                     f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
                 )
         stored = dataclasses.replace(self, rest_length=rest, name=name)
-        scene._sim.add_springs(
+        scene._sim.add_term(
+            "springs",
             name,
-            stored.i.astype(np.uint32),
-            stored.j.astype(np.uint32),
-            np.ascontiguousarray(stored.stiffness),
-            np.ascontiguousarray(stored.damping),
-            np.ascontiguousarray(stored.rest_length),
+            {
+                "i": stored.i.astype(np.uint32),
+                "j": stored.j.astype(np.uint32),
+                "stiffness": np.ascontiguousarray(stored.stiffness),
+                "damping": np.ascontiguousarray(stored.damping),
+                "rest_length": np.ascontiguousarray(stored.rest_length),
+            },
         )
         return stored
 
@@ -356,7 +359,7 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
     record_fields: ClassVar[dict[str, str]] = {"G": "number", "softening": "number"}
 
     def _attach(self, scene: Scene, name: str) -> PairwiseGravity:
-        scene._sim.add_pairwise_gravity(name, self.G, self.softening)
+        scene._sim.add_term("pairwise_gravity", name, {"G": self.G, "softening": self.softening})
         return dataclasses.replace(self, name=name)
 
 

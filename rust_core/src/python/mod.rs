@@ -6,15 +6,16 @@ use crate::boundary::{Aabb, Plane};
 use crate::error::Error;
 use crate::integrators::{self, IntegratorInfo};
 use crate::simulation::{Checkpoint, EnergyReport, Simulation};
-use crate::sph::{KernelKind, Precision, Sph, SphParams};
-use crate::terms::{Drag, PairwiseGravity, Springs, UniformGravity};
+use crate::terms::registry::{self, Context, Params, Value};
 use crate::vector::{Real, Vector};
 use glam::{DVec2, DVec3};
 use numpy::ndarray::{Array1, Array2};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
-use pyo3::exceptions::PyValueError;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
@@ -112,6 +113,42 @@ fn vectors<V: Vector>(flat: &[f64], need: &Need) -> Result<Vec<V>, Error> {
 fn try_from_flat<V: Vector>(flat: &[f64], what: &'static str, of: &str) -> Result<Vec<V>, Error> {
     let n = flat.len() / V::DIM;
     vectors(flat, &Need::new(what, Need::bytes_of::<V>(n), format!("{} {of}", count(n as u128))))
+}
+
+/// A term's parameters from a Python dict (see `Simulation2::add_term`); a refused copy is an
+/// `OutOfMemoryError` of `kind` naming the parameter and its length.
+fn params_of(py: Python<'_>, kind: &'static str, d: &Bound<'_, PyDict>) -> PyResult<Params> {
+    let copy_of = |key: &str, n: usize, bytes: u128| {
+        Need::new(kind, bytes, format!("a copy of its {key} ({} entries)", count(n as u128)))
+    };
+    let mut p = Params::new();
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        let value = if let Ok(b) = v.cast::<PyBool>() {
+            Value::Number(if b.is_true() { 1.0 } else { 0.0 })
+        } else if let Ok(x) = v.cast::<PyFloat>() {
+            Value::Number(x.value())
+        } else if let Ok(x) = v.cast::<PyInt>() {
+            Value::Number(x.extract::<f64>()?)
+        } else if let Ok(s) = v.cast::<PyString>() {
+            Value::Text(s.to_str()?.to_string())
+        } else if let Ok(a) = v.extract::<PyReadonlyArrayDyn<'_, u32>>() {
+            let s = a.as_slice().map_err(|_| PyValueError::new_err(format!("{key}: array must be contiguous")))?;
+            let need = copy_of(&key, s.len(), Need::bytes_of::<u32>(s.len()));
+            Value::Indices(need.copy(s).map_err(|e| to_py(py, e))?)
+        } else if let Ok(a) = v.extract::<PyReadonlyArrayDyn<'_, f64>>() {
+            let s = a.as_slice().map_err(|_| PyValueError::new_err(format!("{key}: array must be C-contiguous")))?;
+            let need = copy_of(&key, s.len(), Need::bytes_of::<f64>(s.len()));
+            Value::Floats(need.copy(s).map_err(|e| to_py(py, e))?)
+        } else {
+            return Err(PyTypeError::new_err(format!(
+                "{key}: expected a number, bool, str or a float64/uint32 array, got {}",
+                v.get_type().name()?
+            )));
+        };
+        p.insert(&key, value);
+    }
+    Ok(p)
 }
 
 fn info_dict<'py>(py: Python<'py>, i: IntegratorInfo) -> PyResult<Bound<'py, PyDict>> {
@@ -318,60 +355,23 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
-    fn add_gravity(&mut self, py: Python<'_>, name: String, g: Vec<f64>) -> PyResult<()> {
-        if g.iter().any(|c| !c.is_finite()) {
-            return Err(PyValueError::new_err("g: must be finite"));
+    /// Adds a force term of registered type `kind` (see `terms::registry`) named `name`, built
+    /// from `params`: numbers, bools, strings, and 1-D or 2-D arrays (float64: numbers; uint32:
+    /// particle indices), copied fallibly.
+    fn add_term(&mut self, py: Python<'_>, kind: &str, name: String, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
+        let p = params_of(py, ty.kind, params)?;
+        match &mut self.inner {
+            Inner::D2(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec2>(name, p, &ctx).and_then(|t| s.add_term(t))
+            }
+            Inner::D3(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.add_term(t))
+            }
         }
-        with_sim!(&mut self.inner, s => {
-            let t = UniformGravity { name, g: vec_of(&g, "g")? };
-            s.add_term(Box::new(t))
-        })
         .map_err(|e| to_py(py, e))
-    }
-
-    fn add_drag(&mut self, py: Python<'_>, name: String, coefficient: f64) -> PyResult<()> {
-        if !(coefficient.is_finite() && coefficient >= 0.0) {
-            return Err(PyValueError::new_err(format!("coefficient: {coefficient} must be finite and >= 0")));
-        }
-        with_sim!(&mut self.inner, s => s.add_term(Box::new(Drag { name, b: coefficient }))).map_err(|e| to_py(py, e))
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn add_springs(
-        &mut self,
-        py: Python<'_>,
-        name: String,
-        i: PyReadonlyArray1<'_, u32>,
-        j: PyReadonlyArray1<'_, u32>,
-        stiffness: PyReadonlyArray1<'_, f64>,
-        damping: PyReadonlyArray1<'_, f64>,
-        rest_length: PyReadonlyArray1<'_, f64>,
-    ) -> PyResult<()> {
-        let (i, j) = (slice1(&i, "i")?, slice1(&j, "j")?);
-        let (k, c, r) =
-            (slice1(&stiffness, "stiffness")?, slice1(&damping, "damping")?, slice1(&rest_length, "rest_length")?);
-        let m = i.len().max(j.len()).max(k.len()).max(c.len()).max(r.len());
-        let need = Need::new("springs", m as u128 * (2 * 4 + 3 * 8), format!("copies of {} springs", count(m as u128)));
-        let copies =
-            || -> Result<_, Error> { Ok((need.copy(i)?, need.copy(j)?, need.copy(k)?, need.copy(c)?, need.copy(r)?)) };
-        let (i, j, k, c, r) = copies().map_err(|e| to_py(py, e))?;
-        with_sim!(&mut self.inner, s => {
-            let n = s.n_particles();
-            Springs::new(name, i, j, k, c, r, n).and_then(|t| s.add_term(Box::new(t)))
-        })
-        .map_err(|e| to_py(py, e))
-    }
-
-    #[pyo3(name = "add_pairwise_gravity")]
-    fn add_pairwise_gravity(&mut self, py: Python<'_>, name: String, g: f64, softening: f64) -> PyResult<()> {
-        if !(g.is_finite() && g > 0.0) {
-            return Err(PyValueError::new_err(format!("G: {g} must be finite and > 0")));
-        }
-        if !(softening.is_finite() && softening >= 0.0) {
-            return Err(PyValueError::new_err(format!("softening: {softening} must be finite and >= 0")));
-        }
-        with_sim!(&mut self.inner, s => s.add_term(Box::new(PairwiseGravity::new(name, g, softening))))
-            .map_err(|e| to_py(py, e))
     }
 
     fn add_plane(
@@ -422,54 +422,6 @@ impl Simulation2 {
     #[pyo3(signature = (duration, substeps=None))]
     fn advance(&mut self, py: Python<'_>, duration: f64, substeps: Option<u64>) -> PyResult<u64> {
         with_sim!(&mut self.inner, s => interruptible(py, s, |s, stop| s.advance_checkpointed(duration, substeps, stop)))
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (name, first, n, h, density, sound_speed, gamma, viscosity, clamp_pressure, kernel, precision, walls, wall_psi))]
-    fn add_sph(
-        &mut self,
-        py: Python<'_>,
-        name: String,
-        first: usize,
-        n: usize,
-        h: f64,
-        density: f64,
-        sound_speed: f64,
-        gamma: i32,
-        viscosity: f64,
-        clamp_pressure: bool,
-        kernel: &str,
-        precision: &str,
-        walls: PyReadonlyArray2<'_, f64>,
-        wall_psi: PyReadonlyArray1<'_, f64>,
-    ) -> PyResult<()> {
-        let kernel = KernelKind::by_name(kernel).map_err(|e| to_py(py, e))?;
-        let precision = Precision::by_name(precision).map_err(|e| to_py(py, e))?;
-        let p = SphParams {
-            h,
-            rho0: density,
-            c0: sound_speed,
-            gamma,
-            alpha: viscosity,
-            clamp: clamp_pressure,
-            kernel,
-            precision,
-        };
-        let psi = slice1(&wall_psi, "wall_psi")?;
-        let need = Need::new(
-            "add_fluid",
-            Need::bytes_of::<f64>(psi.len()),
-            format!("{} wall particles", count(psi.len() as u128)),
-        );
-        let psi = need.copy(psi).map_err(|e| to_py(py, e))?;
-        with_sim!(&mut self.inner, s => {
-            let w = try_from_flat(flat2(&walls, p_dim(&s.sys.state.x.first().copied().unwrap_or_default()), "walls")?, "add_fluid", "wall particles").map_err(|e| to_py(py, e))?;
-            if first.checked_add(n).is_none_or(|e| e > s.n_particles()) {
-                return Err(PyValueError::new_err(format!("n: particles {first}..{} are not all in the scene ({})", first.saturating_add(n), s.n_particles())));
-            }
-            Sph::new(&name, first, n, p, w, psi).and_then(|t| s.add_term(Box::new(t)))
-        })
-        .map_err(|e| to_py(py, e))
     }
 
     /// ((grid_s, density_s, forces_s), heap bytes) of the SPH terms.

@@ -29,6 +29,7 @@ use crate::par::{self, SyncPtr};
 use crate::simd::{self, Level};
 use crate::state::Model;
 use crate::stop::Stop;
+use crate::terms::registry::{Context, Params};
 use crate::terms::Term;
 use crate::vector::{Real, Vector};
 use kernels::{CubicSpline, Float, Kernel, WendlandC2};
@@ -182,6 +183,36 @@ pub struct Sph<V: Vector> {
     prev: Vec<V>,
     _v: PhantomData<V>,
 }
+
+/// The registered builder: the fluid's particles `first..first + n` must already be in the
+/// scene; parameters as in `SphParams` under the Python API's names.
+fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
+    let (first, n) = (p.count("first", ctx.n_particles)?, p.count("n", ctx.n_particles)?);
+    if first + n > ctx.n_particles {
+        return Err(invalid(
+            "n",
+            format!("particles {first}..{} are not all in the scene ({})", first + n, ctx.n_particles),
+        ));
+    }
+    let gamma = p.number("gamma")?;
+    if gamma.fract() != 0.0 || gamma.abs() > 1e3 {
+        return Err(invalid("gamma", format!("expected a whole number, got {gamma}")));
+    }
+    let params = SphParams {
+        h: p.number("h")?,
+        rho0: p.number("density")?,
+        c0: p.number("sound_speed")?,
+        gamma: gamma as i32,
+        alpha: p.number("viscosity")?,
+        clamp: p.flag("clamp_pressure")?,
+        kernel: KernelKind::by_name(p.text("kernel")?)?,
+        precision: Precision::by_name(p.text("precision")?)?,
+    };
+    let walls = p.take_vectors::<V>("walls")?;
+    let psi = p.take_floats("wall_psi")?;
+    Ok(Box::new(Sph::new(&name, first, n, params, walls, psi)?))
+}
+crate::register_term!("sph", build);
 
 impl<V: Vector> Sph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.

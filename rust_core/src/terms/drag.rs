@@ -1,8 +1,19 @@
 //! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|².
+use super::registry::{Context, Params};
 use super::Term;
+use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
+
+fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term<V>>> {
+    let b = p.number("coefficient")?;
+    if b < 0.0 {
+        return Err(invalid("coefficient", format!("{b} must be finite and >= 0")));
+    }
+    Ok(Box::new(Drag { name, b }))
+}
+crate::register_term!("drag", build);
 
 pub struct Drag {
     pub name: String,

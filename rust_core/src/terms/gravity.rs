@@ -1,8 +1,15 @@
 //! Uniform gravity: F_i = m_i g on every free particle; U = −Σ m_i g·x_i.
+use super::registry::{Context, Params};
 use super::Term;
+use crate::error::Result;
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
+
+fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term<V>>> {
+    Ok(Box::new(UniformGravity { name, g: p.vector("g")? }))
+}
+crate::register_term!("gravity", build);
 
 pub struct UniformGravity<V: Vector> {
     pub name: String,

@@ -2,6 +2,7 @@
 pub mod drag;
 pub mod gravity;
 pub mod pairwise_gravity;
+pub mod registry;
 pub mod springs;
 
 use crate::error::Result;

@@ -17,9 +17,10 @@
 //! (`crate::stop`) before every block of 16 receivers (direct sum) or every tile of 2–4 receivers
 //! (symmetric sum, whose blocks are N/32), i.e. every ~N·16 pairs at most, and skip the rest once
 //! it is set.
+use super::registry::{Context, Params};
 use super::Term;
 use crate::alloc::{count, Need};
-use crate::error::Result;
+use crate::error::{invalid, Result};
 use crate::par;
 use crate::simd::{self, Float, Kernel, Level, Simd, P};
 use crate::state::Model;
@@ -96,6 +97,18 @@ pub struct PairwiseGravity {
     /// The stop flag of the call in progress.
     stop: Stop,
 }
+
+fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term<V>>> {
+    let (g, softening) = (p.number("G")?, p.number("softening")?);
+    if g <= 0.0 {
+        return Err(invalid("G", format!("{g} must be finite and > 0")));
+    }
+    if softening < 0.0 {
+        return Err(invalid("softening", format!("{softening} must be finite and >= 0")));
+    }
+    Ok(Box::new(PairwiseGravity::new(name, g, softening)))
+}
+crate::register_term!("pairwise_gravity", build);
 
 impl PairwiseGravity {
     pub fn new(name: String, g: Real, softening: Real) -> Self {

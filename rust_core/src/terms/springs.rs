@@ -15,6 +15,7 @@
 //! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so one SIMD
 //! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
 //! written once over `crate::simd`, for every instruction set).
+use super::registry::{Context, Params};
 use super::Term;
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
@@ -53,6 +54,13 @@ pub struct Springs<V: Vector> {
 }
 
 const SLICE: usize = 8;
+
+fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
+    let (i, j) = (p.take_indices("i")?, p.take_indices("j")?);
+    let (k, c, rest) = (p.take_floats("stiffness")?, p.take_floats("damping")?, p.take_floats("rest_length")?);
+    Ok(Box::new(Springs::<V>::new(name, i, j, k, c, rest, ctx.n_particles)?))
+}
+crate::register_term!("springs", build);
 
 impl<V: Vector> Springs<V> {
     /// Builds the term; `n_particles` is the current particle count (indices must be below it).

@@ -1,0 +1,220 @@
+//! Term types by key. Each term file registers how to build itself from named parameters
+//! (`register_term!("gravity", build)` beside its `impl Term`), so a front end adds any term
+//! through one call, [`lookup`] then [`TermType::build`], and adding a term type touches only its
+//! own file (plus its `mod` line). The registry is collected at link time by `inventory`
+//! (dtolnay's crate: no global constructor to call, works on every platform Rust targets).
+use super::Term;
+use crate::alloc::{count, Need};
+use crate::error::{invalid, Result};
+use crate::vector::{Real, Vector};
+use glam::{DVec2, DVec3};
+use std::any::Any;
+use std::collections::BTreeMap;
+
+/// One parameter value as a front end hands it over.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    Number(Real),
+    /// A flat run of numbers (a vector, one number per particle or per spring, or rows of
+    /// vectors flattened).
+    Floats(Vec<Real>),
+    /// Particle indices.
+    Indices(Vec<u32>),
+    Text(String),
+}
+
+impl Value {
+    fn kind(&self) -> &'static str {
+        match self {
+            Value::Number(_) => "a number",
+            Value::Floats(_) => "an array of numbers",
+            Value::Indices(_) => "an array of particle indices",
+            Value::Text(_) => "a string",
+        }
+    }
+}
+
+/// The named parameters of one term. Accessors name the parameter in their errors.
+#[derive(Debug, Default, Clone, PartialEq)]
+pub struct Params {
+    values: BTreeMap<String, Value>,
+}
+
+impl Params {
+    pub fn new() -> Self {
+        Self::default()
+    }
+    pub fn with(mut self, key: &str, value: Value) -> Self {
+        self.insert(key, value);
+        self
+    }
+    pub fn insert(&mut self, key: &str, value: Value) {
+        self.values.insert(key.to_string(), value);
+    }
+    fn get(&self, key: &str) -> Result<&Value> {
+        self.values.get(key).ok_or_else(|| invalid(key, "missing"))
+    }
+    fn wrong(key: &str, want: &str, got: &Value) -> crate::error::Error {
+        invalid(key, format!("expected {want}, got {}", got.kind()))
+    }
+    /// A finite number.
+    pub fn number(&self, key: &str) -> Result<Real> {
+        match self.get(key)? {
+            Value::Number(x) if x.is_finite() => Ok(*x),
+            Value::Number(x) => Err(invalid(key, format!("must be finite, got {x}"))),
+            v => Err(Self::wrong(key, "a number", v)),
+        }
+    }
+    /// A whole number in `0..=max` (given as a number, as front ends without integers do).
+    pub fn count(&self, key: &str, max: usize) -> Result<usize> {
+        let x = self.number(key)?;
+        if x < 0.0 || x.fract() != 0.0 || x > max as Real {
+            return Err(invalid(key, format!("expected a whole number in 0..={max}, got {x}")));
+        }
+        Ok(x as usize)
+    }
+    /// A yes/no (given as 1 or 0).
+    pub fn flag(&self, key: &str) -> Result<bool> {
+        match self.number(key)? {
+            x if x == 1.0 => Ok(true),
+            x if x == 0.0 => Ok(false),
+            x => Err(invalid(key, format!("expected true or false (1 or 0), got {x}"))),
+        }
+    }
+    /// A finite vector of the scene's dimension.
+    pub fn vector<V: Vector>(&self, key: &str) -> Result<V> {
+        match self.get(key)? {
+            Value::Floats(v) if v.len() == V::DIM && v.iter().all(|c| c.is_finite()) => Ok(V::from_slice(v)),
+            Value::Floats(v) if v.len() == V::DIM => Err(invalid(key, "must be finite")),
+            Value::Floats(v) => Err(invalid(key, format!("expected {} components, got {}", V::DIM, v.len()))),
+            v => Err(Self::wrong(key, "a vector", v)),
+        }
+    }
+    /// Moves out a flat array of numbers (not checked: the term checks what it needs).
+    pub fn take_floats(&mut self, key: &str) -> Result<Vec<Real>> {
+        match self.values.remove(key) {
+            Some(Value::Floats(v)) => Ok(v),
+            Some(v) => Err(Self::wrong(key, "an array of numbers", &v)),
+            None => Err(invalid(key, "missing")),
+        }
+    }
+    /// Moves out rows of vectors given flattened (length a multiple of the dimension).
+    pub fn take_vectors<V: Vector>(&mut self, key: &str) -> Result<Vec<V>> {
+        let flat = self.take_floats(key)?;
+        if flat.len() % V::DIM != 0 {
+            return Err(invalid(key, format!("expected rows of {} numbers, got {} numbers", V::DIM, flat.len())));
+        }
+        let n = flat.len() / V::DIM;
+        let need = Need::new("add_term", Need::bytes_of::<V>(n), format!("{} rows of {key}", count(n as u128)));
+        need.collect(flat.chunks_exact(V::DIM).map(V::from_slice))
+    }
+    /// Moves out particle indices.
+    pub fn take_indices(&mut self, key: &str) -> Result<Vec<u32>> {
+        match self.values.remove(key) {
+            Some(Value::Indices(v)) => Ok(v),
+            Some(v) => Err(Self::wrong(key, "an array of particle indices", &v)),
+            None => Err(invalid(key, "missing")),
+        }
+    }
+    pub fn text(&self, key: &str) -> Result<&str> {
+        match self.get(key)? {
+            Value::Text(s) => Ok(s),
+            v => Err(Self::wrong(key, "a string", v)),
+        }
+    }
+}
+
+/// What a term may need to know of the scene it joins.
+#[derive(Debug, Clone, Copy)]
+pub struct Context {
+    pub n_particles: usize,
+}
+
+/// Builds one term of the scene's dimension from its name and parameters.
+pub type Build<V> = fn(String, Params, &Context) -> Result<Box<dyn Term<V>>>;
+
+/// A registered term type: its key and its builders for 2D and 3D.
+#[derive(Debug)]
+pub struct TermType {
+    pub kind: &'static str,
+    build2: Build<DVec2>,
+    build3: Build<DVec3>,
+}
+
+impl TermType {
+    pub const fn new(kind: &'static str, build2: Build<DVec2>, build3: Build<DVec3>) -> Self {
+        Self { kind, build2, build3 }
+    }
+
+    /// The term for a scene of vectors `V` (`DVec2` or `DVec3`).
+    pub fn build<V: Vector>(&self, name: String, params: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
+        // Exactly one of the two casts succeeds: V is DVec2 or DVec3 (the only `Vector`s).
+        let builders: [&dyn Any; 2] = [&self.build2, &self.build3];
+        for b in builders {
+            if let Some(f) = b.downcast_ref::<Build<V>>() {
+                return f(name, params, ctx);
+            }
+        }
+        unreachable!("Vector is implemented for DVec2 and DVec3 only")
+    }
+}
+
+inventory::collect!(TermType);
+
+/// The registered type `kind`.
+pub fn lookup(kind: &str) -> Result<&'static TermType> {
+    inventory::iter::<TermType>
+        .into_iter()
+        .find(|t| t.kind == kind)
+        .ok_or_else(|| invalid("kind", format!("unknown term type {kind:?}; known: {}", kinds().join(", "))))
+}
+
+/// Every registered key, sorted.
+pub fn kinds() -> Vec<&'static str> {
+    let mut k: Vec<_> = inventory::iter::<TermType>.into_iter().map(|t| t.kind).collect();
+    k.sort_unstable();
+    k
+}
+
+/// Registers a term type: `register_term!("gravity", build)` with
+/// `fn build<V: Vector>(name: String, p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>>`.
+#[macro_export]
+macro_rules! register_term {
+    ($kind:literal, $build:ident) => {
+        inventory::submit! {
+            $crate::terms::registry::TermType::new($kind, $build::<glam::DVec2>, $build::<glam::DVec3>)
+        }
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_term_type_is_registered_once() {
+        let k = kinds();
+        for want in ["drag", "gravity", "pairwise_gravity", "sph", "springs"] {
+            assert!(k.contains(&want), "{want} missing from {k:?}");
+        }
+        let mut unique = k.clone();
+        unique.dedup();
+        assert_eq!(unique, k, "a key is registered twice");
+        assert!(lookup("no_such_term").unwrap_err().to_string().contains("known: "));
+    }
+
+    #[test]
+    fn a_term_builds_for_both_dimensions_and_names_bad_parameters() {
+        let ctx = Context { n_particles: 0 };
+        let g = lookup("gravity").unwrap();
+        let p2 = Params::new().with("g", Value::Floats(vec![0.0, -9.81]));
+        assert_eq!(g.build::<DVec2>("g".into(), p2.clone(), &ctx).unwrap().name(), "g");
+        let e = g.build::<DVec3>("g".into(), p2, &ctx).err().unwrap().to_string();
+        assert!(e.starts_with("g: expected 3 components"), "{e}");
+        let e = g.build::<DVec2>("g".into(), Params::new(), &ctx).err().unwrap().to_string();
+        assert_eq!(e, "g: missing");
+        let text = Params::new().with("g", Value::Text("down".into()));
+        let e = g.build::<DVec2>("g".into(), text, &ctx).err().unwrap().to_string();
+        assert_eq!(e, "g: expected a vector, got a string");
+    }
+}
