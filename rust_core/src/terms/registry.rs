@@ -75,10 +75,11 @@ impl Params {
     }
     /// A yes/no (given as 1 or 0).
     pub fn flag(&self, key: &str) -> Result<bool> {
-        match self.number(key)? {
-            x if x == 1.0 => Ok(true),
-            x if x == 0.0 => Ok(false),
-            x => Err(invalid(key, format!("expected true or false (1 or 0), got {x}"))),
+        let x = self.number(key)?;
+        if x == 1.0 || x == 0.0 {
+            Ok(x == 1.0)
+        } else {
+            Err(invalid(key, format!("expected true or false (1 or 0), got {x}")))
         }
     }
     /// A finite vector of the scene's dimension.
