@@ -62,6 +62,8 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.add(pc.Springs([0, 1], [1, 2], stiffness=[50.0, 80.0], damping=0.1))
     s.add(pc.PairwiseGravity(0.5, 0.1))
     s.add_fluid(lattice([5.0, 0.0], [5.02, 0.02], 0.01), spacing=0.01, walls=tank_walls([5.0, 0.0], [5.02, 0.02], 0.01, layers=1))
+    s.set_attribute("charge", np.linspace(-1e-3, 1e-3, s.n_particles))
+    s.set_attribute("radius", np.full(s.n_particles, 0.01))
     s.add(pc.Plane([0.0, -1.0], [0.0, 1.0], restitution=0.4, friction=0.2))
     s.add(pc.Box([-10.0, -10.0], [10.0, 10.0]))
     s.step(4)
@@ -364,7 +366,7 @@ for _path in [("format",), ("dim",), ("integrator",), ("dt",), ("threads",), ("t
 META_FIELDS += [
     Case("meta-fields", "term-unknown-key", lambda r: with_meta(r, lambda m: m["terms"][DRAG].update(power=2)), field=f"meta.terms[{DRAG}]"),
     Case("meta-fields", "plane-unknown-key", lambda r: with_meta(r, lambda m: m["planes"][0].update(k=1)), field="meta.planes[0]"),
-    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field="meta.terms[5].first"),
+    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{FLUID + 1}].first"),
     Case("meta-fields", "second-fluid", lambda r: second_fluid(r, overlap=False), expect="load"),
     # Old files lack these; the defaults of their time apply.
     Case("meta-fields", "no-rtol-atol-precision-boxes", lambda r: with_meta(r, lambda m: [m.pop(k) for k in ("rtol", "atol", "precision", "boxes")]), expect="load"),
@@ -374,9 +376,10 @@ META_FIELDS += [
 ]
 
 def second_fluid(r: Ref, overlap: bool) -> bytes:
-    """The reference with a copy of its fluid as term 5, owning the same particles (overlap) or
-    the three particles before them."""
+    """The reference with a copy of its fluid as a last term, owning the same particles (overlap)
+    or the three particles before them."""
     meta = json.loads(json.dumps(r.meta))
+    k = len(meta["terms"])
     t = dict(meta["terms"][FLUID], name="fluid_b")
     if not overlap:
         t.update(first=0, count=3)
@@ -388,9 +391,9 @@ def second_fluid(r: Ref, overlap: bool) -> bytes:
         r,
         {"meta": npy(np.array(meta_text(meta))), "ledger": npy(ledger), "cache_power": npy(np.append(power, 0.0))},
         add=(
-            ("term5_positions.npy", npy(fluid_x if overlap else fluid_x[:3])),
-            ("term5_walls.npy", r.members["term4_walls"]),
-            ("term5_wall_volume.npy", r.members["term4_wall_volume"]),
+            (f"term{k}_positions.npy", npy(fluid_x if overlap else fluid_x[:3])),
+            (f"term{k}_walls.npy", r.members["term4_walls"]),
+            (f"term{k}_wall_volume.npy", r.members["term4_wall_volume"]),
         ),
     )
 
@@ -399,7 +402,7 @@ REF_DTYPES = {"pinned": np.bool_, "term2_i": np.int64, "term2_j": np.int64}
 ARRAY_MEMBERS = [
     "positions", "velocities", "masses", "pinned", "ledger", "cache_forces", "cache_power",
     "term2_i", "term2_j", "term2_stiffness", "term2_damping", "term2_rest_length",
-    "term4_positions", "term4_walls", "term4_wall_volume",
+    "term4_positions", "term4_walls", "term4_wall_volume", "attr_charge", "attr_radius",
 ]  # fmt: skip
 
 

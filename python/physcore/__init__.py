@@ -6,6 +6,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 from __future__ import annotations
 
 from . import _core
+from . import terms as _terms
 from ._errors import (
     InvalidInputError,
     OutOfMemoryError,
@@ -19,7 +20,7 @@ from ._errors import (
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
 from .scene import INTEGRATORS, EnergyReport, Scene
-from .terms import Box, Drag, Gravity, PairwiseGravity, Plane, Springs
+from .terms import *  # noqa: F403 - every term record, as terms.__all__ lists them
 
 __version__ = _core.__version__
 
@@ -27,12 +28,7 @@ __all__ = [
     "Scene",
     "EnergyReport",
     "INTEGRATORS",
-    "Gravity",
-    "Drag",
-    "Springs",
-    "PairwiseGravity",
-    "Plane",
-    "Box",
+    *_terms.__all__,
     "Fluid",
     "neighbors",
     "fluids",

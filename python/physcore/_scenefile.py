@@ -39,6 +39,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from . import _core
 from ._errors import InvalidInputError, SceneFileError
 
 __all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
@@ -447,6 +448,8 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
                 named.append(f"{a}{k}")
             req[f"term{k}_{f}"] = _Spec(dtype, tuple(named))
     opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
+    # Optional per-particle attributes (charge, radius): one value per particle when set.
+    opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})
     return req, opt, sizes
 
 

@@ -696,6 +696,43 @@ class Scene:
         return self._sim.pinned
 
     @property
+    def attributes(self) -> dict[str, np.ndarray]:
+        """The optional per-particle attributes set so far (see :meth:`set_attribute`): name ->
+        ``(N,)`` float64 copy."""
+        return dict(self._sim.attributes())
+
+    def set_attribute(self, name: str, values: np.typing.ArrayLike) -> None:
+        """Set an optional per-particle attribute, one value per particle: ``"charge"`` (C,
+        read by :class:`~physcore.terms.ElectricField`) or ``"radius"`` (m, ≥ 0). A scene pays
+        for an attribute only once it is set; particles added later hold 0 until it is set
+        again. Saved and loaded with the scene.
+
+        Parameters
+        ----------
+        name : str
+            ``"charge"`` or ``"radius"``.
+        values : array_like, shape (N,)
+            Finite numbers in the attribute's SI unit.
+
+        Raises
+        ------
+        TypeError
+            ``name`` is not a str, or ``values`` is not numeric.
+        InvalidInputError
+            (a ``ValueError``) unknown ``name``, wrong length, a non-finite value or a negative
+            radius. Nothing changes.
+        """
+        if not isinstance(name, str):
+            raise TypeError(f"name: expected a str, got {type(name).__name__}")
+        a = _check.array(name, values)
+        if a.dtype.kind not in "iuf" or a.dtype == bool:
+            raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+        if a.ndim != 1:
+            raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")
+        self._exclusive(lambda sim: sim.set_attribute(name, np.ascontiguousarray(a, dtype=np.float64)))
+        self._e0 = None  # the potential of charge-dependent terms changed
+
+    @property
     def terms(self) -> tuple[Term, ...]:
         """The force terms, in the order added (names resolved)."""
         return tuple(self._terms)
@@ -819,6 +856,7 @@ class Scene:
             "velocities": self.velocities,
             "masses": self.masses,
             "pinned": self.pinned,
+            **{f"attr_{a}": v for a, v in self.attributes.items()},
         }
         terms_meta = []
         for k, t in enumerate(self._terms):
@@ -919,6 +957,10 @@ class Scene:
         if z["positions"].shape[0]:
             with r.api(""):  # the API's argument names are the members' names
                 scene.add_particles(z["positions"], z["velocities"], z["masses"], z["pinned"])
+        for a, _ in _core.particle_attributes():
+            if f"attr_{a}" in z:
+                with r.api("", {a: f"attr_{a}"}):
+                    scene.set_attribute(a, z[f"attr_{a}"])
         for k, t in enumerate(meta["terms"]):
             ctx = f"meta.terms[{k}]"
             cls = REGISTRY[t["type"]]

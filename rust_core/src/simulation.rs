@@ -224,13 +224,41 @@ impl<V: Vector> Simulation<V> {
                 v[k] = V::ZERO;
             }
         }
+        for a in self.sys.model.attributes.values_mut() {
+            need.reserve(a, total)?;
+        }
         self.sys.model.inv_mass.extend(mass.iter().zip(&pinned).map(|(m, &p)| if p { 0.0 } else { 1.0 / m }));
         self.sys.model.mass.extend(mass);
+        for a in self.sys.model.attributes.values_mut() {
+            a.resize(total, 0.0); // new particles hold 0 until set
+        }
         let single = self.sys.single;
         self.sys.state.x.extend(x.into_iter().map(|p| integrators::store(p, single)));
         self.sys.state.v.extend(v.into_iter().map(|p| integrators::store(p, single)));
         self.integrator.reset();
         Ok(first)
+    }
+
+    /// Sets the optional per-particle attribute `name` (one of `state::ATTRIBUTES`) to `values`,
+    /// one finite value per particle (radius: ≥ 0). Changes nothing on error.
+    pub fn set_attribute(&mut self, name: &str, values: Vec<Real>) -> Result<()> {
+        let Some(&(key, _)) = crate::state::ATTRIBUTES.iter().find(|(k, _)| *k == name) else {
+            let known: Vec<_> = crate::state::ATTRIBUTES.iter().map(|(k, _)| *k).collect();
+            return Err(invalid("name", format!("unknown attribute {name:?}; known: {}", known.join(", "))));
+        };
+        if values.len() != self.n_particles() {
+            return Err(invalid(
+                key,
+                format!("has {} entries, the scene has {} particles", values.len(), self.n_particles()),
+            ));
+        }
+        if let Some(i) = values.iter().position(|q| !q.is_finite() || (key == "radius" && *q < 0.0)) {
+            let rule = if key == "radius" { "finite and >= 0" } else { "finite" };
+            return Err(invalid(key, format!("entry {i} is {} (must be {rule})", values[i])));
+        }
+        self.sys.model.attributes.insert(key, values);
+        self.integrator.reset();
+        Ok(())
     }
 
     pub fn add_term(&mut self, t: Box<dyn Term<V>>) -> Result<()> {

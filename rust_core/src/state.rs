@@ -1,5 +1,6 @@
 //! Particle state (what changes during a run) and the model (what does not).
 use crate::vector::{Real, Vector};
+use std::collections::BTreeMap;
 
 /// Positions, velocities and time: the part of a simulation that changes every step.
 #[derive(Clone, Debug, Default)]
@@ -22,9 +23,20 @@ pub struct Model {
     pub mass: Vec<Real>,
     /// 1 / mass for free particles, 0 for pinned ones, 1/kg.
     pub inv_mass: Vec<Real>,
+    /// Optional per-particle attributes (see [`ATTRIBUTES`]), each one value per particle; a
+    /// scene pays for an attribute only once it is set.
+    pub attributes: BTreeMap<&'static str, Vec<Real>>,
 }
 
+/// The optional per-particle attributes a scene may carry, with their SI units. Particles
+/// without a value (added before the attribute was set, or after without one) hold 0.
+pub const ATTRIBUTES: &[(&str, &str)] = &[("charge", "C"), ("radius", "m")];
+
 impl Model {
+    /// The attribute `name`'s values (one per particle), if it has been set.
+    pub fn attribute(&self, name: &str) -> Option<&[Real]> {
+        self.attributes.get(name).map(|a| a.as_slice())
+    }
     pub fn len(&self) -> usize {
         self.mass.len()
     }

@@ -355,6 +355,25 @@ impl Simulation2 {
         .map_err(|e| to_py(py, e))
     }
 
+    /// Sets the optional per-particle attribute `name` (`state::ATTRIBUTES`), (N,) float64.
+    fn set_attribute(&mut self, py: Python<'_>, name: &str, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        let v = slice1(&values, name)?;
+        let need = Need::new("set_attribute", Need::bytes_of::<f64>(v.len()), format!("a copy of {name}"));
+        let v = need.copy(v).map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => s.set_attribute(name, v)).map_err(|e| to_py(py, e))
+    }
+
+    /// The attributes set so far: name -> (N,) float64 copy.
+    fn attributes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        with_sim!(&self.inner, s => {
+            for (k, a) in &s.sys.model.attributes {
+                d.set_item(*k, a.clone().into_pyarray(py))?;
+            }
+        });
+        Ok(d)
+    }
+
     /// Adds a force term of registered type `kind` (see `terms::registry`) named `name`, built
     /// from `params`: numbers, bools, strings, and 1-D or 2-D arrays (float64: numbers; uint32:
     /// particle indices), copied fallibly.
@@ -658,6 +677,12 @@ fn cpu_name() -> String {
     crate::simd::cpu_name()
 }
 
+/// The optional per-particle attributes a scene may carry: name -> SI unit.
+#[pyfunction]
+fn particle_attributes() -> Vec<(&'static str, &'static str)> {
+    crate::state::ATTRIBUTES.to_vec()
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation2>()?;
@@ -667,6 +692,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simd_levels, m)?)?;
     m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
     m.add_function(wrap_pyfunction!(cpu_name, m)?)?;
+    m.add_function(wrap_pyfunction!(particle_attributes, m)?)?;
     m.add_function(wrap_pyfunction!(neighbors, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

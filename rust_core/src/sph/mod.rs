@@ -685,7 +685,7 @@ mod tests {
 
     fn forces<V: Vector>(p: SphParams, x: &[V], v: &[V], w: &[V], m: f64, level: Level) -> (Vec<V>, f64) {
         let n = x.len();
-        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n] };
+        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
         let mut t = Sph::new("fluid", 0, n, p, w.to_vec(), vec![m; w.len()]).unwrap();
         let mut f = vec![V::ZERO; n];
         let pw = t.forces_at(level, x, v, &model, &mut f, true, true);
@@ -697,7 +697,7 @@ mod tests {
     fn a_set_stop_flag_skips_the_evaluation() {
         let (x, v, w) = blob::<DVec2>(900, 0.1, 3);
         let n = x.len();
-        let model = Model { mass: vec![10.0; n], inv_mass: vec![0.1; n] };
+        let model = Model { mass: vec![10.0; n], inv_mass: vec![0.1; n], ..Default::default() };
         let p = SphParams {
             h: 0.13,
             rho0: 1000.0,

@@ -668,7 +668,11 @@ mod tests {
             .map(|_| glam::DVec3::new(rnd(), rnd(), rnd()))
             .map(|p| if single { p.round_f32() } else { p })
             .collect();
-        let model = Model { mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(), inv_mass: vec![1.0; n] };
+        let model = Model {
+            mass: (0..n).map(|k| 1.0 + k as f64 / n as f64).collect(),
+            inv_mass: vec![1.0; n],
+            ..Default::default()
+        };
         (x, model)
     }
 
