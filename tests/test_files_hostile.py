@@ -44,7 +44,7 @@ FAST = settings(max_examples=100, deadline=None, suppress_health_check=list(Heal
 LONG = settings(max_examples=3000, deadline=None, suppress_health_check=list(HealthCheck))
 
 # Term indices in the reference scene (the order they are added).
-GRAVITY, DRAG, SPRINGS, PAIRWISE, FLUID = range(5)
+GRAVITY, DRAG, SPRINGS, PAIRWISE, FLUID, EFIELD = range(6)
 
 
 # ------------------------------------------------------------------------------ the reference
@@ -64,6 +64,7 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.add_fluid(lattice([5.0, 0.0], [5.02, 0.02], 0.01), spacing=0.01, walls=tank_walls([5.0, 0.0], [5.02, 0.02], 0.01, layers=1))
     s.set_attribute("charge", np.linspace(-1e-3, 1e-3, s.n_particles))
     s.set_attribute("radius", np.full(s.n_particles, 0.01))
+    s.add(pc.ElectricField([2.0, 1.0]))
     s.add(pc.Plane([0.0, -1.0], [0.0, 1.0], restitution=0.4, friction=0.2))
     s.add(pc.Box([-10.0, -10.0], [10.0, 10.0]))
     s.step(4)
@@ -323,6 +324,7 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("terms", GRAVITY, "name"), ["", 3, None, At(f"meta.terms[{DRAG}].name", "drag"), "collisions"]),
     (("terms", GRAVITY, "type"), ["magic", 3, None, "Gravity"]),
     (("terms", DRAG, "coefficient"), [-1.0, NAN, "x", None, True]),
+    (("terms", EFIELD, "E"), [[1.0], [NAN, 0.0], [INF, 0.0], "east", [True, 0.0], None, [1.0, 2.0, 3.0]]),
     (("terms", PAIRWISE, "G"), [0.0, -1.0, INF]),
     (("terms", PAIRWISE, "softening"), [-1.0, NAN]),
     (("terms", FLUID, "count"), [-1, 1.5, At("term4_positions", 5), At("term4_positions", 3), 2**63, True]),
@@ -366,7 +368,7 @@ for _path in [("format",), ("dim",), ("integrator",), ("dt",), ("threads",), ("t
 META_FIELDS += [
     Case("meta-fields", "term-unknown-key", lambda r: with_meta(r, lambda m: m["terms"][DRAG].update(power=2)), field=f"meta.terms[{DRAG}]"),
     Case("meta-fields", "plane-unknown-key", lambda r: with_meta(r, lambda m: m["planes"][0].update(k=1)), field="meta.planes[0]"),
-    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{FLUID + 1}].first"),
+    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{EFIELD + 1}].first"),
     Case("meta-fields", "second-fluid", lambda r: second_fluid(r, overlap=False), expect="load"),
     # Old files lack these; the defaults of their time apply.
     Case("meta-fields", "no-rtol-atol-precision-boxes", lambda r: with_meta(r, lambda m: [m.pop(k) for k in ("rtol", "atol", "precision", "boxes")]), expect="load"),

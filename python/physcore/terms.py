@@ -35,7 +35,7 @@ from ._errors import InvalidInputError
 if TYPE_CHECKING:
     from .scene import Scene
 
-__all__ = ["Term", "Gravity", "Drag", "Springs", "PairwiseGravity", "Plane", "Box"]
+__all__ = ["Term", "Gravity", "Drag", "Springs", "PairwiseGravity", "ElectricField", "Plane", "Box"]
 
 #: Every force term by its type key (``Term.kind``), filled as the term classes are defined.
 REGISTRY: dict[str, type[Term]] = {}
@@ -360,6 +360,46 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
 
     def _attach(self, scene: Scene, name: str) -> PairwiseGravity:
         scene._sim.add_term("pairwise_gravity", name, {"G": self.G, "softening": self.softening})
+        return dataclasses.replace(self, name=name)
+
+
+@dataclass(frozen=True, eq=False)
+class ElectricField(Term, kind="uniform_electric_field"):
+    """A uniform electric field acting on charged particles: force ``q E`` on every free
+    particle, potential ``-q E·x`` (Griffiths, *Introduction to Electrodynamics*, 4th ed., eqs.
+    2.21 and 4.14). The charges are the scene's ``"charge"`` attribute
+    (:meth:`Scene.set_attribute`); particles without one feel nothing.
+
+    Parameters
+    ----------
+    E : array_like, shape (dim,)
+        Field strength, V/m (= N/C).
+    name : str
+        Key of this term in the energy books.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> s = pc.Scene(dim=2, dt=1e-3, threads=1)
+    >>> _ = s.add_particles([[0.0, 0.0], [0.0, 1.0]], masses=[1.0, 1.0])
+    >>> s.set_attribute("charge", [1e-3, -1e-3])          # C
+    >>> _ = s.add(pc.ElectricField([100.0, 0.0]))          # V/m: a = qE/m = ±0.1 m/s²
+    >>> s.step(1000)
+    >>> s.positions[:, 0].round(6)                          # x = a t²/2 after 1 s
+    array([ 0.05, -0.05])
+    """
+
+    E: np.ndarray
+    name: str = "electric_field"
+
+    record_fields: ClassVar[dict[str, str]] = {"E": "vector"}
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "E", _vector(self.E, "E"))
+
+    def _attach(self, scene: Scene, name: str) -> ElectricField:
+        _same_dim(scene, "E", self.E)
+        scene._sim.add_term(self.kind, name, {"E": self.E})
         return dataclasses.replace(self, name=name)
 
 

@@ -1,5 +1,6 @@
 //! Force terms. A scene holds only the terms it names; each is evaluated only if present.
 pub mod drag;
+pub mod electric_field;
 pub mod gravity;
 pub mod pairwise_gravity;
 pub mod registry;
