@@ -367,3 +367,46 @@ def test_a_scene_stepped_by_another_thread_says_so():
     assert all(isinstance(e, pc.PhyscoreError) and "another thread" in str(e) for e in seen)
     assert s.step_count in (4000, 4001, 4002, 4003)  # a racing step(1) may land before or after
     s.step(1)  # usable again from this thread
+
+
+# ----------------------------------------------------------------------------- one hierarchy
+def _bad_calls():
+    import physcore.diagnostics
+    import physcore.render
+    import physcore.testing
+
+    s = pc.scenes.kepler()
+    return {
+        "Scene(dim='2')": lambda: pc.Scene(dim="2"),
+        "Scene(integrator=3)": lambda: pc.Scene(integrator=3),
+        "add_particles(masses=str)": lambda: s.add_particles([[0.0, 0.0]], masses=["a"]),
+        "add(object())": lambda: s.add(object()),
+        "Gravity('down')": lambda: pc.Gravity("down"),
+        "Springs(float idx)": lambda: pc.Springs([0.5], [1.0]),
+        "scenes.kepler(e='0.5')": lambda: pc.scenes.kepler(e="0.5"),
+        "lattice(spacing=-1)": lambda: pc.fluids.lattice([0, 0], [1, 1], -1.0),
+        "Fluid(gamma=1.5)": lambda: pc.Fluid(np.zeros((1, 2)), 0.1, gamma=1.5),
+        "gif(size='big')": lambda: physcore.render.gif(s, "x.gif", size="big"),
+        "gif(fps=-1)": lambda: physcore.render.gif(s, "x.gif", fps=-1),
+        "render_frame(bad shape)": lambda: physcore.render.render_frame(np.zeros((3, 4))),
+        "EnergyRecorder.plot(no samples)": lambda: physcore.diagnostics.EnergyRecorder().plot("e.png"),
+        "assert_energy_conserved(steps=0)": lambda: physcore.testing.assert_energy_conserved(s, steps=0, rtol=1e-3),
+        "_core: add_term(bad param type)": lambda: s._sim.add_term("gravity", "g2", {"g": object()}),
+        "_core: add_term(unknown kind)": lambda: s._sim.add_term("no_such", "x", {}),
+        "_core: Simulation2(dim=4)": lambda: pc._core.Simulation2(4, "verlet", 1e-3),
+        "_core: set_state(wrong shape)": lambda: s._sim.set_state(np.zeros((2, 3))),
+    }
+
+
+@pytest.mark.parametrize("name", list(_bad_calls()))
+def test_every_user_error_is_a_physcore_error_and_a_value_or_type_error(name, tmp_path, monkeypatch):
+    # Issue 10 item 4: no bare ValueError/TypeError escapes the hierarchy, from Python or Rust.
+    monkeypatch.chdir(tmp_path)
+    call = _bad_calls()[name]
+    with pytest.raises((ValueError, TypeError)) as info:
+        call()
+    assert isinstance(info.value, pc.PhyscoreError), f"{name}: {type(info.value).__mro__}"
+    if isinstance(info.value, TypeError):
+        assert isinstance(info.value, pc.InvalidTypeError)
+    else:
+        assert isinstance(info.value, pc.InvalidInputError)

@@ -9,6 +9,7 @@ from . import _core
 from . import terms as _terms
 from ._errors import (
     InvalidInputError,
+    InvalidTypeError,
     OutOfMemoryError,
     PhyscoreError,
     SceneBusyError,
@@ -34,6 +35,7 @@ __all__ = [
     "fluids",
     "PhyscoreError",
     "InvalidInputError",
+    "InvalidTypeError",
     "SceneFileError",
     "SimulationDiverged",
     "SceneBusyError",

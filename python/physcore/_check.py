@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 
 __all__ = [
     "MIN_NORMAL",
@@ -66,7 +66,7 @@ def real(name: str, value: Any) -> float:
     if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iuf":
         value = value[()]
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, _REAL):
-        raise TypeError(f"{name}: expected a real number, got {type(value).__name__} {_short(value)}")
+        raise InvalidTypeError(f"{name}: expected a real number, got {type(value).__name__} {_short(value)}")
     try:
         return float(value)
     except OverflowError:  # an int beyond float64
@@ -114,7 +114,7 @@ def int_in_range(name: str, value: Any, lo: int, hi: int | None = None) -> int:
     if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "iu":
         value = value[()]
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise TypeError(f"{name}: expected an int, got {type(value).__name__} {_short(value)}")
+        raise InvalidTypeError(f"{name}: expected an int, got {type(value).__name__} {_short(value)}")
     v = int(value)
     if v < lo:
         raise InvalidInputError(f"{name}: must be >= {lo}, got {v}")
@@ -126,7 +126,7 @@ def int_in_range(name: str, value: Any, lo: int, hi: int | None = None) -> int:
 def flag(name: str, value: Any) -> bool:
     """True or False (Python or numpy bool); anything else, truthy or not, is a TypeError."""
     if not isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name}: expected True or False, got {type(value).__name__} {_short(value)}")
+        raise InvalidTypeError(f"{name}: expected True or False, got {type(value).__name__} {_short(value)}")
     return bool(value)
 
 
@@ -134,7 +134,7 @@ def choice(name: str, value: Any, options: Iterable[str]) -> str:
     """One of the names in ``options`` (TypeError for a non-str, InvalidInputError listing them)."""
     options = tuple(options)
     if not isinstance(value, str):
-        raise TypeError(f"{name}: expected one of {', '.join(map(repr, options))}, got {type(value).__name__}")
+        raise InvalidTypeError(f"{name}: expected one of {', '.join(map(repr, options))}, got {type(value).__name__}")
     if value not in options:
         raise InvalidInputError(f"{name}: must be one of {', '.join(map(repr, options))}, got {_short(value)}")
     return str(value)

@@ -4,6 +4,7 @@ from __future__ import annotations
 __all__ = [
     "PhyscoreError",
     "InvalidInputError",
+    "InvalidTypeError",
     "SceneFileError",
     "SimulationDiverged",
     "SceneBusyError",
@@ -19,6 +20,11 @@ class PhyscoreError(Exception):
 
 class InvalidInputError(PhyscoreError, ValueError):
     """An argument is invalid. Raised before any state changes; the message names the argument."""
+
+
+class InvalidTypeError(PhyscoreError, TypeError):
+    """An argument has the wrong type (a ``TypeError``); the message starts with its name.
+    Nothing was changed."""
 
 
 class SceneFileError(InvalidInputError):

@@ -40,7 +40,7 @@ from typing import IO, Any
 import numpy as np
 
 from . import _core
-from ._errors import InvalidInputError, SceneFileError
+from ._errors import InvalidInputError, InvalidTypeError, SceneFileError
 
 __all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
 
@@ -102,7 +102,7 @@ def check_path(path: object, arg: str = "path") -> Path:
     """
     p = os.fspath(path) if isinstance(path, os.PathLike) else path
     if not isinstance(p, str):
-        raise TypeError(f"{arg}: expected a file name (str or os.PathLike), got {type(path).__name__}")
+        raise InvalidTypeError(f"{arg}: expected a file name (str or os.PathLike), got {type(path).__name__}")
     if "\0" in p:
         raise InvalidInputError(f"{arg}: contains a NUL character")
     return Path(p)

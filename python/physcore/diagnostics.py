@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import atomic_write
+from ._errors import InvalidInputError
 
 __all__ = ["EnergyRecorder"]
 
@@ -110,9 +111,9 @@ class EnergyRecorder:
         """
         path = Path(path)
         if path.suffix.lower() != ".png":
-            raise ValueError(f"path: must end in .png, got {str(path)!r}")
+            raise InvalidInputError(f"path: must end in .png, got {str(path)!r}")
         if not self._t:
-            raise ValueError("recorder: no samples recorded")
+            raise InvalidInputError("recorder: no samples recorded")
         try:
             import matplotlib
 

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 
 from . import _check, _core
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 from .terms import Term, _finite_float
 
 if TYPE_CHECKING:
@@ -52,7 +52,7 @@ def _array2(value: object, arg: str, dims: tuple[int, ...] = (2, 3)) -> np.ndarr
     except ValueError as exc:  # ragged nested sequences
         raise InvalidInputError(f"{arg}: not a rectangular array ({exc})") from None
     if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim != 2 or a.shape[1] not in dims:
         want = " or ".join(f"(N, {d})" for d in dims)
         raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
@@ -142,7 +142,7 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
 def _corner(value: object, arg: str) -> np.ndarray:
     a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     return a.astype(np.float64)
 
 
@@ -304,11 +304,11 @@ class Fluid(Term, kind="fluid"):
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
         if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)):
-            raise TypeError(f"gamma: expected an int, got {type(self.gamma).__name__}")
+            raise InvalidTypeError(f"gamma: expected an int, got {type(self.gamma).__name__}")
         if not 1 <= self.gamma <= 15:
             raise InvalidInputError(f"gamma: must be in 1..15, got {self.gamma}")
         if not isinstance(self.clamp_pressure, (bool, np.bool_)):
-            raise TypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
+            raise InvalidTypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
         if self.mass is not None:
             object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
         if self.walls is not None:
@@ -323,7 +323,7 @@ class Fluid(Term, kind="fluid"):
         else:
             a = _check.array("wall_volume", wv)
             if a.dtype.kind not in "iuf" or a.dtype == bool:
-                raise TypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
+                raise InvalidTypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
             m = 0 if self.walls is None else self.walls.shape[0]
             a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
@@ -349,7 +349,7 @@ class Fluid(Term, kind="fluid"):
         if not isinstance(self.precision, str) or self.precision not in ("f32", "f64"):
             raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
         if not isinstance(self.name, str) or not self.name:
-            raise TypeError("name: expected a non-empty str")
+            raise InvalidTypeError("name: expected a non-empty str")
 
     # ------------------------------------------------------------ the term protocol (see Term)
     record_fields: ClassVar[dict[str, str]] = {

@@ -37,7 +37,7 @@ import numpy as np
 
 from . import _check
 from ._atomic import atomic_write
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 
 __all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
 
@@ -137,11 +137,11 @@ _PALETTE = _build_palette()
 # ---------------------------------------------------------------------------------------------
 def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
     if isinstance(value, (bool, np.bool_)):
-        raise TypeError(f"{name} must be an int, got {value!r}")
+        raise InvalidTypeError(f"{name} must be an int, got {value!r}")
     try:
         n = operator.index(value)
     except TypeError:
-        raise TypeError(f"{name} must be an int, got {type(value).__name__} {_short(value)}") from None
+        raise InvalidTypeError(f"{name} must be an int, got {type(value).__name__} {_short(value)}") from None
     if n < minimum:
         raise InvalidInputError(f"{name} must be >= {minimum}, got {n}")
     if maximum is not None and n > maximum:
@@ -160,7 +160,7 @@ def _check_size(size: Any) -> tuple[int, int]:
     except TypeError:  # no len(), or a 0-d array
         count = -1
     if isinstance(size, (str, bytes)) or count < 0:
-        raise TypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
+        raise InvalidTypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
     if count != 2:
         raise InvalidInputError(f"size must be a pair of ints (width, height), got {_short(size)}")
     w = _check_int("size[0] (width)", size[0], 16)
@@ -172,7 +172,7 @@ def _check_size(size: Any) -> tuple[int, int]:
 
 def _check_fps(fps: Any) -> float:
     if isinstance(fps, (bool, np.bool_)) or not isinstance(fps, (int, float, np.integer, np.floating)):
-        raise TypeError(f"fps must be a number, got {_short(fps)}")
+        raise InvalidTypeError(f"fps must be a number, got {_short(fps)}")
     f = _check.real("fps", fps)
     if not (math.isfinite(f) and f > 0):
         raise InvalidInputError(f"fps must be a finite number > 0, got {_short(fps)}")
@@ -185,7 +185,7 @@ def _check_frame_time(frame_time: Any) -> float | None:
     if isinstance(frame_time, (bool, np.bool_)) or not isinstance(
         frame_time, (int, float, np.integer, np.floating)
     ):
-        raise TypeError(f"frame_time must be a number of seconds or None, got {_short(frame_time)}")
+        raise InvalidTypeError(f"frame_time must be a number of seconds or None, got {_short(frame_time)}")
     t = _check.real("frame_time", frame_time)
     # As Scene.advance: a subnormal duration has no finite reciprocal.
     if not (math.isfinite(t) and t >= _check.MIN_NORMAL):
@@ -226,7 +226,7 @@ def _check_view(view: Any) -> tuple[float, float]:
 
 def _check_path(path: Any) -> Path:
     if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
+        raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
     if p.suffix.lower() != ".gif":
         raise InvalidInputError(f"path must end in .gif, got {str(p)!r}")
@@ -357,7 +357,7 @@ def _pressure_array(p: Any, n: int) -> np.ndarray:
     """Check what ``scene.pressure()`` returned: (N,) float64 Pa."""
     p = np.asarray(p, dtype=np.float64)
     if p.shape != (n,):
-        raise ValueError(f"scene.pressure() must return an array of shape ({n},) in Pa, got shape {p.shape}")
+        raise InvalidInputError(f"scene.pressure() must return an array of shape ({n},) in Pa, got shape {p.shape}")
     return p
 
 
@@ -379,7 +379,7 @@ def _boundary_array(b: Any, dim: int) -> np.ndarray:
     if b.size == 0:
         return np.zeros((0, dim))
     if b.ndim != 2 or b.shape[1] != dim:
-        raise ValueError(f"boundary points must have shape (B, {dim}), got {b.shape}")
+        raise InvalidInputError(f"boundary points must have shape (B, {dim}), got {b.shape}")
     return b if np.isfinite(b).all() else b[_rows_finite(b)]
 
 
@@ -1152,7 +1152,7 @@ def render_frame(
         i, j, rest = springs
         sp = (np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64))
         if not (sp[0].shape == sp[1].shape == sp[2].shape and sp[0].ndim == 1):
-            raise ValueError("springs: i, j and rest must be 1-D arrays of equal length")
+            raise InvalidInputError("springs: i, j and rest must be 1-D arrays of equal length")
     if hasattr(positions, "positions"):
         scene = positions
         positions = scene.positions
@@ -1167,40 +1167,40 @@ def render_frame(
 
     x = np.asarray(positions, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] not in (2, 3):
-        raise ValueError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
+        raise InvalidInputError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
     n, dim = x.shape
     if sp is not None and sp[0].size and (
         min(sp[0].min(), sp[1].min()) < 0 or max(sp[0].max(), sp[1].max()) >= n
     ):
-        raise ValueError(f"springs: particle index out of range for {n} particles")
+        raise InvalidInputError(f"springs: particle index out of range for {n} particles")
     pin = np.zeros(n, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool)
     if pin.shape != (n,):
-        raise ValueError(f"pinned must have shape ({n},), got {pin.shape}")
+        raise InvalidInputError(f"pinned must have shape ({n},), got {pin.shape}")
     speeds = None
     if color_by == "speed" and velocities is not None:
         v = np.asarray(velocities, dtype=np.float64)
         if v.shape != x.shape:
-            raise ValueError(f"velocities must have shape {x.shape}, got {v.shape}")
+            raise InvalidInputError(f"velocities must have shape {x.shape}, got {v.shape}")
         speeds = _row_norms(v).astype(np.float32)[None]
     pres = None
     if color_by == "pressure":
         if pressures is None:
-            raise ValueError("color_by='pressure' needs pressures= (or a scene with a pressure() method)")
+            raise InvalidInputError("color_by='pressure' needs pressures= (or a scene with a pressure() method)")
         p = np.asarray(pressures, dtype=np.float64)
         if p.shape != (n,):
-            raise ValueError(f"pressures must have shape ({n},), got {p.shape}")
+            raise InvalidInputError(f"pressures must have shape ({n},), got {p.shape}")
         pres = p.astype(np.float32)[None]
     walls = None
     if boundary is not None:
         try:
             walls = _boundary_array(boundary, dim)
         except ValueError as e:
-            raise ValueError(f"boundary: {e}") from None
+            raise InvalidInputError(f"boundary: {e}") from None
     for name, value in (("speed_scale", speed_scale), ("pressure_scale", pressure_scale)):
         if value is not None:
             v = float(value)
             if not (v > 0 and math.isfinite(v)):
-                raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+                raise InvalidInputError(f"{name} must be a finite number > 0, got {value!r}")
     speed_scale = None if speed_scale is None else float(speed_scale)
     pressure_scale = None if pressure_scale is None else float(pressure_scale)
 

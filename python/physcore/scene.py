@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _check, _core, _scenefile
 from ._atomic import atomic_write
-from ._errors import InvalidInputError, SceneBusyError, ThreadPoolWarning
+from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, ThreadPoolWarning
 from .fluids import Fluid
 from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
 
@@ -90,7 +90,7 @@ def _check_dt(dt: object) -> float:
 
 def _check_integrator(name: object) -> str:
     if not isinstance(name, str):
-        raise TypeError(f"integrator: expected a name (str), got {type(name).__name__}")
+        raise InvalidTypeError(f"integrator: expected a name (str), got {type(name).__name__}")
     if name not in _INTEGRATOR_NAMES:
         raise InvalidInputError(f"integrator: unknown integrator {name!r}; valid names: {', '.join(_INTEGRATOR_NAMES)}")
     return name
@@ -105,7 +105,7 @@ _PRECISIONS = ("f64", "f32")
 
 def _check_precision(value: object) -> str:
     if not isinstance(value, str):
-        raise TypeError(f"precision: expected 'f64' or 'f32', got {type(value).__name__}")
+        raise InvalidTypeError(f"precision: expected 'f64' or 'f32', got {type(value).__name__}")
     if value not in _PRECISIONS:
         raise InvalidInputError(f"precision: must be 'f64' or 'f32', got {value!r}")
     return value
@@ -115,7 +115,7 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
     a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
         a = a[None, :]
     if a.ndim != 2 or a.shape[1] != dim:
@@ -214,7 +214,7 @@ class Scene:
         threads: int | None = None,
     ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
-            raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
+            raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
         if dim not in (2, 3):
             raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
         integrator = _check_integrator(integrator)
@@ -321,7 +321,7 @@ class Scene:
         v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
         m = _check.array("masses", masses)
         if m.dtype.kind not in "iuf" or m.dtype == bool:
-            raise TypeError(f"masses: expected real numbers, got dtype {m.dtype}")
+            raise InvalidTypeError(f"masses: expected real numbers, got dtype {m.dtype}")
         m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
         if m.shape != (n,):
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
@@ -337,7 +337,7 @@ class Scene:
         else:
             p = _check.array("pinned", pinned)
             if p.dtype != bool:
-                raise TypeError(f"pinned: expected booleans, got dtype {p.dtype}")
+                raise InvalidTypeError(f"pinned: expected booleans, got dtype {p.dtype}")
             if p.shape != (n,):
                 raise InvalidInputError(f"pinned: expected shape ({n},), got {p.shape}")
             p = np.ascontiguousarray(p)
@@ -382,7 +382,7 @@ class Scene:
             self._e0 = None
             return item
         if not isinstance(item, Term) or REGISTRY.get(type(item).kind) is not type(item):
-            raise TypeError(f"item: expected a physcore term, Fluid, Plane or Box, got {type(item).__name__}")
+            raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane or Box, got {type(item).__name__}")
         item = item._attach(self, self._unique_name(item.name))
         self._terms.append(item)
         self._e0 = None
@@ -486,7 +486,7 @@ class Scene:
 
     def _unique_name(self, base: str) -> str:
         if not isinstance(base, str) or not base:
-            raise TypeError("name: expected a non-empty str")
+            raise InvalidTypeError("name: expected a non-empty str")
         taken = {t.name for t in self._terms} | {"collisions"}
         name, k = base, 2
         while name in taken:
@@ -540,7 +540,7 @@ class Scene:
             As for :meth:`step`; ``dt`` is rolled back too.
         """
         if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
-            raise TypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
+            raise InvalidTypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
         duration = _check.real("duration", duration)
         # As for dt: a subnormal duration would become a step with no finite reciprocal.
         if not (math.isfinite(duration) and duration >= _MIN_DT):
@@ -723,10 +723,10 @@ class Scene:
             radius. Nothing changes.
         """
         if not isinstance(name, str):
-            raise TypeError(f"name: expected a str, got {type(name).__name__}")
+            raise InvalidTypeError(f"name: expected a str, got {type(name).__name__}")
         a = _check.array(name, values)
         if a.dtype.kind not in "iuf" or a.dtype == bool:
-            raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+            raise InvalidTypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
         if a.ndim != 1:
             raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")
         self._exclusive(lambda sim: sim.set_attribute(name, np.ascontiguousarray(a, dtype=np.float64)))

@@ -21,7 +21,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .scene import Scene
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
@@ -49,7 +49,7 @@ def _flag(value: object, arg: str) -> bool:
 
 def _dim(dim: object) -> int:
     if isinstance(dim, (bool, np.bool_)) or not isinstance(dim, (int, np.integer)):
-        raise TypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
+        raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
     if dim not in (2, 3):
         raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
     return int(dim)
@@ -360,7 +360,7 @@ _G = 9.81  # m/s², gravity of the fluid scenes
 def _pair(value: object, arg: str) -> tuple[float, float]:
     """A (length, height) pair of finite numbers > 0, m."""
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)):
-        raise TypeError(f"{arg}: expected (length, height) in m, got {type(value).__name__}")
+        raise InvalidTypeError(f"{arg}: expected (length, height) in m, got {type(value).__name__}")
     items = list(value) if not (isinstance(value, np.ndarray) and value.ndim == 0) else []
     if len(items) != 2:
         raise InvalidInputError(f"{arg}: expected (length, height) in m, got {len(items)} numbers")

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Union
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 
 if TYPE_CHECKING:
     from .scene import Scene
@@ -57,9 +57,9 @@ def _vector(value: object, arg: str) -> np.ndarray:
     try:
         a = np.asarray(value)
     except Exception as exc:  # pragma: no cover - numpy raises many kinds
-        raise TypeError(f"{arg}: expected a sequence of 2 or 3 numbers") from exc
+        raise InvalidTypeError(f"{arg}: expected a sequence of 2 or 3 numbers") from exc
     if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     if a.ndim != 1 or a.shape[0] not in (2, 3):
         raise InvalidInputError(f"{arg}: expected shape (2,) or (3,), got {a.shape}")
     a = a.astype(np.float64)
@@ -72,7 +72,7 @@ def _vector(value: object, arg: str) -> np.ndarray:
 def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
     a = _check.array(arg, value)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise TypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
     a = a.astype(np.float64)
     if a.ndim == 0:
         a = np.full(m, float(a))
@@ -122,7 +122,7 @@ class Term:
         super().__init_subclass__(**kwargs)
         if kind:
             if kind in REGISTRY:
-                raise TypeError(f"kind: {kind!r} is already the key of {REGISTRY[kind].__name__}")
+                raise InvalidTypeError(f"kind: {kind!r} is already the key of {REGISTRY[kind].__name__}")
             cls.kind = kind
             REGISTRY[kind] = cls
 
@@ -261,7 +261,7 @@ class Springs(Term, kind="springs"):
         for arg, val in (("i", self.i), ("j", self.j)):
             a = _check.array(arg, val)
             if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
-                raise TypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
+                raise InvalidTypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
             if a.ndim != 1:
                 raise InvalidInputError(f"{arg}: expected shape (M,), got {a.shape}")
             a = a.astype(np.int64)

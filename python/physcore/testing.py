@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._errors import InvalidInputError
 from .scene import Scene
 from .terms import Gravity, PairwiseGravity, Springs
 
@@ -94,7 +95,7 @@ def nbody_systems(*, dim: int = 3, max_bodies: int = 8, integrator: str = "verle
     0.1). The step resolves the closest possible encounter, not only the current separations:
     ``dt = min(suggest_dt(), 0.05 √(ε³/(G M))) / 4`` with M the total mass."""
     if not softening > 0:
-        raise ValueError("softening: must be > 0 (the step is chosen from the softened encounter time)")
+        raise InvalidInputError("softening: must be > 0 (the step is chosen from the softened encounter time)")
     st = _st()
 
     @st.composite
@@ -147,7 +148,7 @@ def assert_energy_conserved(scene: Scene, steps: int, rtol: float, *, samples: i
         With the step and the drift where the books first failed to balance.
     """
     if steps < 1 or samples < 1:
-        raise ValueError("steps, samples: must be >= 1")
+        raise InvalidInputError("steps, samples: must be >= 1")
     worst = 0.0
     done = 0
     for k in range(1, samples + 1):
@@ -175,7 +176,7 @@ def assert_momentum_conserved(scene: Scene, steps: int, rtol: float = 1e-10) -> 
         With the momentum error.
     """
     if scene.pinned.any() or scene.planes or scene.boxes:
-        raise ValueError("scene: pinned particles and colliders exchange momentum with the outside")
+        raise InvalidInputError("scene: pinned particles and colliders exchange momentum with the outside")
     g = sum((t.g for t in scene.terms if isinstance(t, Gravity)), np.zeros(scene.dim))
     m = scene.masses
     p0 = scene.momentum()

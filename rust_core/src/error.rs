@@ -8,6 +8,10 @@ pub enum Error {
     #[error("{arg}: {msg}")]
     InvalidInput { arg: String, msg: String },
 
+    /// A user-supplied argument has the wrong type (Python: `InvalidTypeError`, a `TypeError`).
+    #[error("{arg}: {msg}")]
+    InvalidType { arg: String, msg: String },
+
     /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
     /// `step(n)` call started.
     #[error(

@@ -3,7 +3,7 @@
 //! private module is safe to call directly. The GIL is released around stepping.
 use crate::alloc::{count, Need};
 use crate::boundary::{Aabb, Plane};
-use crate::error::Error;
+use crate::error::{invalid, Error};
 use crate::integrators::{self, IntegratorInfo};
 use crate::simulation::{Checkpoint, EnergyReport, Simulation};
 use crate::terms::registry::{self, Context, Params, Value};
@@ -13,7 +13,7 @@ use numpy::ndarray::{Array1, Array2};
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -29,6 +29,7 @@ fn to_py(py: Python<'_>, e: Error) -> PyErr {
             Error::InvalidInput { .. } => {
                 PyErr::from_value(errors.getattr("InvalidInputError")?.call1((msg.clone(),))?)
             }
+            Error::InvalidType { .. } => PyErr::from_value(errors.getattr("InvalidTypeError")?.call1((msg.clone(),))?),
             Error::Interrupted { .. } => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg.clone()),
             Error::Threads { .. } => PyErr::from_value(errors.getattr("ThreadPoolError")?.call1((msg.clone(),))?),
             Error::OutOfMemory { bytes, .. } => {
@@ -51,6 +52,11 @@ fn to_py(py: Python<'_>, e: Error) -> PyErr {
     build().unwrap_or_else(|_| PyValueError::new_err(msg))
 }
 
+/// `to_py` where no `Python` token is at hand (the GIL is held: we are inside a call).
+fn err(e: Error) -> PyErr {
+    Python::attach(|py| to_py(py, e))
+}
+
 enum Inner {
     D2(Simulation<DVec2>),
     D3(Simulation<DVec3>),
@@ -68,21 +74,18 @@ macro_rules! with_sim {
 fn flat2<'a>(a: &'a PyReadonlyArray2<'_, f64>, dim: usize, arg: &str) -> PyResult<&'a [f64]> {
     let shape = a.shape();
     if shape[1] != dim {
-        return Err(PyValueError::new_err(format!(
-            "{arg}: expected shape (N, {dim}), got ({}, {})",
-            shape[0], shape[1]
-        )));
+        return Err(err(invalid(arg, format!("expected shape (N, {dim}), got ({}, {})", shape[0], shape[1]))));
     }
-    a.as_slice().map_err(|_| PyValueError::new_err(format!("{arg}: array must be C-contiguous")))
+    a.as_slice().map_err(|_| err(invalid(arg, "array must be C-contiguous")))
 }
 
 fn slice1<'a, T: numpy::Element>(a: &'a PyReadonlyArray1<'_, T>, arg: &str) -> PyResult<&'a [T]> {
-    a.as_slice().map_err(|_| PyValueError::new_err(format!("{arg}: array must be contiguous")))
+    a.as_slice().map_err(|_| err(invalid(arg, "array must be contiguous")))
 }
 
 fn vec_of<V: Vector>(v: &[f64], arg: &str) -> PyResult<V> {
     if v.len() != V::DIM {
-        return Err(PyValueError::new_err(format!("{arg}: expected {} components, got {}", V::DIM, v.len())));
+        return Err(err(invalid(arg, format!("expected {} components, got {}", V::DIM, v.len()))));
     }
     Ok(V::from_slice(v))
 }
@@ -133,18 +136,16 @@ fn params_of(py: Python<'_>, kind: &'static str, d: &Bound<'_, PyDict>) -> PyRes
         } else if let Ok(s) = v.cast::<PyString>() {
             Value::Text(s.to_str()?.to_string())
         } else if let Ok(a) = v.extract::<PyReadonlyArrayDyn<'_, u32>>() {
-            let s = a.as_slice().map_err(|_| PyValueError::new_err(format!("{key}: array must be contiguous")))?;
+            let s = a.as_slice().map_err(|_| to_py(py, invalid(&key, "array must be contiguous")))?;
             let need = copy_of(&key, s.len(), Need::bytes_of::<u32>(s.len()));
             Value::Indices(need.copy(s).map_err(|e| to_py(py, e))?)
         } else if let Ok(a) = v.extract::<PyReadonlyArrayDyn<'_, f64>>() {
-            let s = a.as_slice().map_err(|_| PyValueError::new_err(format!("{key}: array must be C-contiguous")))?;
+            let s = a.as_slice().map_err(|_| to_py(py, invalid(&key, "array must be C-contiguous")))?;
             let need = copy_of(&key, s.len(), Need::bytes_of::<f64>(s.len()));
             Value::Floats(need.copy(s).map_err(|e| to_py(py, e))?)
         } else {
-            return Err(PyTypeError::new_err(format!(
-                "{key}: expected a number, bool, str or a float64/uint32 array, got {}",
-                v.get_type().name()?
-            )));
+            let msg = format!("expected a number, bool, str or a float64/uint32 array, got {}", v.get_type().name()?);
+            return Err(to_py(py, Error::InvalidType { arg: key, msg }));
         };
         p.insert(&key, value);
     }
@@ -191,7 +192,7 @@ impl Simulation2 {
         let inner = match dim {
             2 => Inner::D2(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
             3 => Inner::D3(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
-            _ => return Err(PyValueError::new_err(format!("dim: must be 2 or 3, got {dim}"))),
+            _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
         Ok(Self { inner })
     }
