@@ -654,3 +654,47 @@ def test_gif_fixed_substeps_per_frame(tmp_path):
     with pytest.raises(ValueError, match="substeps needs frame_time"):
         pc.render.gif(s, tmp_path / "c.gif", frames=2, substeps=3)
     assert not (tmp_path / "c.gif").exists()
+
+
+# ----------------------------------------------------------------------------- record / gif split
+def test_gif_of_a_recording_is_the_gif_of_the_scene(tmp_path):
+    # Producing apart from presenting: gif(scene, ...) is gif(record(scene, ...), ...), byte for byte.
+    args = {"frames": 6, "steps_per_frame": 15}
+    a = pc.render.gif(pc.scenes.spring_chain(n=6), tmp_path / "a.gif", size=(96, 72), **args)
+    rec = pc.render.record(pc.scenes.spring_chain(n=6), **args)
+    b = pc.render.gif(rec, tmp_path / "b.gif", size=(96, 72))
+    assert a.read_bytes() == b.read_bytes()
+    # One recording, several drawings, no stepping.
+    c = pc.render.gif(rec, tmp_path / "c.gif", size=(64, 48), color_by="none", springs=False)
+    assert c.read_bytes() != b.read_bytes()
+
+
+def test_record_calls_on_frame_once_per_frame_with_the_substeps():
+    seen = []
+    scene = pc.scenes.spring_chain(n=4)
+    rec = pc.render.record(
+        scene, frames=4, frame_time=0.01, on_frame=lambda k, s, n: seen.append((k, s is scene, n, s.time))
+    )
+    assert [k for k, *_ in seen] == [0, 1, 2, 3]
+    assert all(same for _, same, _, _ in seen)
+    assert seen[0][2] is None and all(isinstance(n, int) and n >= 1 for _, _, n, _ in seen[1:])
+    assert np.array_equal(rec.times, [t for *_, t in seen])
+    assert rec.times[-1] == pytest.approx(0.03, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "kwargs, arg",
+    [({"frames": 3}, "frames"), ({"frame_time": 0.1}, "frame_time"), ({"color_by": "pressure"}, "color_by")],
+)
+def test_a_recording_refuses_simulation_arguments(tmp_path, kwargs, arg):
+    rec = pc.render.record(pc.scenes.spring_chain(n=4), frames=2)
+    with pytest.raises(pc.InvalidInputError, match=f"^{arg}: "):
+        pc.render.gif(rec, tmp_path / "x.gif", **kwargs)
+    assert not (tmp_path / "x.gif").exists()
+
+
+def test_record_refuses_a_bad_callback_before_stepping():
+    scene = pc.scenes.spring_chain(n=4)
+    with pytest.raises(pc.InvalidTypeError, match="^on_frame: "):
+        pc.render.record(scene, frames=2, on_frame="print")
+    assert scene.step_count == 0

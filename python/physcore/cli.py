@@ -314,45 +314,6 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     return settings
 
 
-class _SubstepCounter:
-    """The scene, seen through a proxy that notes what each ``advance`` call returns."""
-
-    def __init__(self, scene: Any) -> None:
-        self._scene = scene
-        self.counts: list[Any] = []
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._scene, name)
-
-    def advance(self, duration: float, **kw: Any) -> Any:
-        taken = self._scene.advance(duration, **kw)
-        self.counts.append(taken)
-        return taken
-
-
-class _EnergyProbe:
-    """The scene, seen through a proxy that records the energy books after each frame."""
-
-    def __init__(self, scene: Any, recorder: Any, real: Any) -> None:
-        self._scene = scene
-        self._rec = recorder
-        self._real = real
-        recorder.record(real)
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._scene, name)
-
-    def step(self, n: int = 1) -> Any:
-        r = self._scene.step(n)
-        self._rec.record(self._real)
-        return r
-
-    def advance(self, duration: float, **kw: Any) -> Any:
-        r = self._scene.advance(duration, **kw)
-        self._rec.record(self._real)
-        return r
-
-
 def _human_bytes(n: int) -> str:
     from ._check import human_bytes
 
@@ -429,10 +390,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     except _UsageError as e:
         parser.error(str(e))
     time0 = scene.time
-    counter = None
-    target = scene
-    if "frame_time" in settings and callable(getattr(scene, "advance", None)):
-        target = counter = _SubstepCounter(scene)
+    counts: list[Any] = []  # substeps taken per frame (frame_time with automatic substeps)
     recorder = None
     if args.energy_plot is not None:
         if not str(args.energy_plot).lower().endswith(".png"):
@@ -444,15 +402,29 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         from .diagnostics import EnergyRecorder
 
         recorder = EnergyRecorder()
-        target = _EnergyProbe(target, recorder, scene)
+        recorder.record(scene)
+
+    def on_frame(k: int, scene: Any, substeps: Any) -> None:  # observers, not proxies
+        if k and substeps is not None:
+            counts.append(substeps)
+        if k and recorder is not None:
+            recorder.record(scene)
+
+    produce = ("frames", "steps_per_frame", "frame_time", "substeps", "color_by")
     try:
+        recording = render.record(
+            scene,
+            springs=not args.no_springs,
+            progress=not args.quiet,
+            on_frame=on_frame,
+            **{k: v for k, v in settings.items() if k in produce},
+        )
         path = render.gif(
-            target,
+            recording,
             out,
             springs=not args.no_springs,
             colorbar=not args.no_colorbar,
-            progress=not args.quiet,
-            **settings,
+            **{k: v for k, v in settings.items() if k not in produce or k == "color_by"},
         )
     except SimulationDiverged as e:
         msg = f"physcore render: error: simulation diverged: {e}"
@@ -495,7 +467,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         if "substeps" in settings:
             print(f"  substeps:       {settings['substeps']} per frame (fixed by --substeps)")
         else:
-            print(f"  substeps:       {_substeps_text(counter.counts if counter is not None else [])}")
+            print(f"  substeps:       {_substeps_text(counts)}")
     else:
         steps = (frames - 1) * settings["steps_per_frame"]
         print(

@@ -8,7 +8,8 @@ The frames are written as a palette GIF with one fixed palette, atomically.
 
 Public functions
 ----------------
-gif(scene, path, ...)          simulate a scene forward and write an animated GIF.
+record(scene, ...)             step a scene and return every frame's state (a Recording).
+gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
 
 Examples
@@ -39,7 +40,7 @@ from . import _check
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError
 
-__all__ = ["gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
+__all__ = ["record", "Recording", "gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
 
 #: Valid values of the ``color_by`` argument.
 COLOR_BY = ("speed", "pressure", "none")
@@ -292,16 +293,47 @@ def _gif_duration_ms(fps: float) -> int:
 # ---------------------------------------------------------------------------------------------
 # Recording: what the simulation produced, per frame
 # ---------------------------------------------------------------------------------------------
-class _Recording(NamedTuple):
-    positions: np.ndarray  # (F, N, dim) float32, relative to `origin`
-    origin: np.ndarray  # (dim,) float64
-    speeds: np.ndarray | None  # (F, N) float32, m/s
-    pairs: tuple[np.ndarray, np.ndarray] | None  # (M,), (M,) intp
-    strain: np.ndarray | None  # (F, M) float32, NaN where the rest length is 0
-    pinned: np.ndarray  # (N,) bool
-    planes: list  # [(point (dim,), normal (dim,))] float64, normal unit length
-    pressures: np.ndarray | None = None  # (F, N) float32, Pa
-    walls: np.ndarray | None = None  # (B, dim) float64 static boundary points, relative to `origin`
+class Recording(NamedTuple):
+    """What :func:`record` produced: the scene's state at every frame, as data (no pixels).
+
+    Attributes
+    ----------
+    positions : (F, N, dim) float32
+        Positions relative to `origin`, m (float32 keeps its precision near the scene's centre).
+    origin : (dim,) float64
+        Centroid of the first frame, m; absolute positions are ``positions + origin``.
+    speeds : (F, N) float32 or None
+        |v|, m/s (recorded when asked for).
+    pairs : ((M,), (M,)) intp or None
+        Spring endpoints, when springs were recorded.
+    strain : (F, M) float32 or None
+        Spring strain (L - L0)/L0, NaN where the rest length is 0.
+    pinned : (N,) bool
+    planes : list of (point (dim,), normal (dim,)) float64
+        The scene's collider planes (unit normals).
+    pressures : (F, N) float32 or None
+        Pa (recorded when asked for).
+    walls : (B, dim) float64 or None
+        Static boundary points, relative to `origin`.
+    times : (F,) float64 or None
+        The scene's time at each frame, s.
+    """
+
+    positions: np.ndarray
+    origin: np.ndarray
+    speeds: np.ndarray | None
+    pairs: tuple[np.ndarray, np.ndarray] | None
+    strain: np.ndarray | None
+    pinned: np.ndarray
+    planes: list
+    pressures: np.ndarray | None = None
+    walls: np.ndarray | None = None
+    times: np.ndarray | None = None
+
+    @property
+    def frames(self) -> int:
+        return int(self.positions.shape[0])
+
 
 
 # Row-wise helpers written column by column: numpy reductions along a short last axis (N, 2)
@@ -413,7 +445,8 @@ def _simulate(
     need_pressure: bool = False,
     frame_time: float | None = None,
     substeps: str | int = "auto",
-) -> _Recording:
+    on_frame: Any = None,
+) -> Recording:
     """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
 
     Between frames: ``scene.step(steps_per_frame)``, or ``scene.advance(frame_time)`` when
@@ -434,6 +467,8 @@ def _simulate(
     speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
     pressures = np.empty((frames, n), dtype=np.float32) if need_pressure else None
     strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
+    has_time = hasattr(scene, "time")
+    times = np.empty(frames) if has_time else None
     bar = None
     if progress:
         from tqdm import tqdm  # plain text bar: works in terminals and notebooks alike
@@ -441,6 +476,7 @@ def _simulate(
         bar = tqdm(total=frames, desc="simulating", unit="frame", file=sys.stderr)
     try:
         for k in range(frames):
+            taken = None
             if k:
                 if frame_time is None:
                     scene.step(steps_per_frame)
@@ -464,6 +500,10 @@ def _simulate(
                     pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
                 if strain is not None:
                     strain[k] = _strain(x, *sp)
+            if times is not None:
+                times[k] = float(scene.time)
+            if on_frame is not None:
+                on_frame(k, scene, taken)
             if bar is not None:
                 bar.update(1)
     finally:
@@ -471,7 +511,7 @@ def _simulate(
             bar.close()
     pinned = np.asarray(scene.pinned, dtype=bool).reshape(n)
     pairs = (sp[0], sp[1]) if sp is not None else None
-    return _Recording(
+    return Recording(
         pos,
         origin,
         speeds,
@@ -481,6 +521,7 @@ def _simulate(
         _planes(getattr(scene, "planes", None), dim),
         pressures=pressures,
         walls=None if walls is None else walls - origin,
+        times=times,
     )
 
 
@@ -570,7 +611,7 @@ def _auto_radius(n: int, size: tuple[int, int]) -> int:
     return max(0, min(r, max(1, min(w, h) // 40)))
 
 
-def _spring_radius(rec: _Recording, scale: float) -> int | None:
+def _spring_radius(rec: Recording, scale: float) -> int | None:
     """Disc radius in pixels from the median spring length at frame 0, or None without springs.
 
     Keeps discs to about a third of the neighbour spacing so that the springs stay visible.
@@ -800,7 +841,7 @@ class _Rasteriser:
 
     def __init__(
         self,
-        rec: _Recording,
+        rec: Recording,
         size: tuple[int, int],
         color_by: str,
         radius: int | None,
@@ -891,10 +932,10 @@ def gif(
     scene: Any,
     path: str | os.PathLike,
     *,
-    frames: int = 90,
+    frames: int | None = None,
     steps_per_frame: int | None = None,
     frame_time: float | None = None,
-    substeps: str | int = "auto",
+    substeps: str | int | None = None,
     fps: float = 30,
     size: tuple[int, int] = (480, 360),
     color_by: str = "speed",
@@ -904,7 +945,8 @@ def gif(
     view: tuple[float, float] | None = None,
     progress: bool = False,
 ) -> Path:
-    """Simulate `scene` forward and write the motion as an animated GIF.
+    """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
+    ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
 
     Frame 0 shows the current state; between consecutive frames the scene advances either
     ``steps_per_frame`` steps of ``scene.dt`` (default), so the animation covers
@@ -916,8 +958,10 @@ def gif(
 
     Parameters
     ----------
-    scene : physcore.Scene
-        A 2D or 3D scene. It is stepped in place. Optional methods, used when present:
+    scene : physcore.Scene or Recording
+        A recording from :func:`record` (then `frames`, `steps_per_frame`, `frame_time` and
+        `substeps` must be left out: it is already simulated, and `color_by` needs what it
+        recorded), or a 2D or 3D scene, stepped in place. Optional methods, used when present:
         ``pressure()`` -> (N,) float64 Pa (needed for ``color_by="pressure"``),
         ``boundary_points()`` -> (B, dim) float64 m, static wall particles (B may be 0), and
         ``advance(duration)`` -> int substeps taken (needed for `frame_time`).
@@ -926,7 +970,7 @@ def gif(
         by creating and removing a file there before simulating). Written atomically: a
         temporary file in the same directory is renamed onto `path` only once complete.
     frames : int, default 90
-        Number of frames, >= 1. Together with `size` and the scene's particles it must fit in
+        Number of frames, >= 1 (scenes only). Together with `size` and the scene's particles it must fit in
         memory: the estimate ``frames · (4 N (dim + 2) + 4 M + 2 W H)`` bytes (N particles,
         M springs, W × H pixels) is refused above :func:`physcore._check.memory_limit` (half
         the physical memory) before anything is simulated.
@@ -1006,9 +1050,52 @@ def gif(
     merges consecutive identical frames into one longer frame, so a GIF of a scene at rest can
     report fewer frames than `frames` while playing for the same time.
     """
-    frames = _check_int("frames", frames, 1)
+    duration = _gif_duration_ms(_check_fps(fps))
+    size = _check_size(size)
+    color_by = _check_color_by(color_by)
+    radius = _check_radius(radius)
+    view = _check_view(view)
+    colorbar = _check.flag("colorbar", colorbar)
+    springs = _check.flag("springs", springs)
+    progress = _check.flag("progress", progress)
+    path = _check_path(path)
+    if isinstance(scene, Recording):
+        rec = scene
+        given = [a for a, v in (("frames", frames), ("steps_per_frame", steps_per_frame), ("frame_time", frame_time), ("substeps", substeps)) if v is not None]
+        if given:
+            raise InvalidInputError(f"{given[0]}: a Recording is already simulated; give it to record() instead")
+        if color_by == "speed" and rec.speeds is None or color_by == "pressure" and rec.pressures is None:
+            raise InvalidInputError(f"color_by: the recording holds no {color_by}s; record(..., color_by={color_by!r})")
+        if not springs:
+            rec = rec._replace(pairs=None, strain=None)
+        _check.memory("frames, size", rec.frames * 2 * size[0] * size[1], f"{rec.frames} frames of {size[0]}x{size[1]} pixels")
+        _check_writable(path)
+    else:
+        plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
+        _check_memory(scene, plan["frames"], size, springs)
+        _check_writable(path)
+        rec = _simulate(scene, progress=progress, **plan)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
+    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), duration)
+    return path
+
+
+def _plan(
+    scene: Any,
+    frames: int | None,
+    steps_per_frame: int | None,
+    frame_time: float | None,
+    substeps: str | int | None,
+    color_by: str,
+    springs: bool,
+) -> dict[str, Any]:
+    """The checked simulation arguments of :func:`record` (and :func:`gif` of a scene), as
+    keyword arguments of ``_simulate``. Raises before anything is stepped."""
+    frames = _check_int("frames", 90 if frames is None else frames, 1)
     frame_time = _check_frame_time(frame_time)
-    if isinstance(substeps, str):
+    if substeps is None:
+        substeps = "auto"
+    elif isinstance(substeps, str):
         if substeps != "auto":
             raise InvalidInputError(f"substeps must be 'auto' or an int >= 1, got {_short(substeps)}")
     else:
@@ -1021,36 +1108,77 @@ def gif(
         raise InvalidInputError("give steps_per_frame or frame_time, not both")
     else:
         steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1, MAX_STEPS)
-    duration = _gif_duration_ms(_check_fps(fps))
-    size = _check_size(size)
-    color_by = _check_color_by(color_by)
-    radius = _check_radius(radius)
-    view = _check_view(view)
-    colorbar = _check.flag("colorbar", colorbar)
-    springs = _check.flag("springs", springs)
-    progress = _check.flag("progress", progress)
-    path = _check_path(path)
     if frame_time is not None:
         _check_advance(scene)
         if substeps == "auto":
             _check_auto_substeps(scene, frame_time)
-    _check_memory(scene, frames, size, springs)
-    _check_writable(path)
+    return {
+        "frames": frames,
+        "steps_per_frame": steps_per_frame,
+        "need_speed": color_by == "speed",
+        "springs": springs,
+        "need_pressure": color_by == "pressure",
+        "frame_time": frame_time,
+        "substeps": substeps,
+    }
 
-    rec = _simulate(
-        scene,
-        frames,
-        steps_per_frame,
-        color_by == "speed",
-        springs,
-        progress,
-        need_pressure=color_by == "pressure",
-        frame_time=frame_time,
-        substeps=substeps,
-    )
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
-    _write_gif(path, (ras.frame(k) for k in range(frames)), duration)
-    return path
+
+def record(
+    scene: Any,
+    *,
+    frames: int = 90,
+    steps_per_frame: int | None = None,
+    frame_time: float | None = None,
+    substeps: str | int = "auto",
+    color_by: str = "speed",
+    springs: bool = True,
+    progress: bool = False,
+    on_frame: Any = None,
+) -> Recording:
+    """Step `scene` and return every frame's state as data: the producing half of :func:`gif`.
+
+    Frame 0 is the current state; between frames the scene advances ``steps_per_frame`` steps
+    (default 10) or, with `frame_time`, ``frame_time`` seconds in automatic (or `substeps`
+    fixed) substeps, exactly as :func:`gif` does with the same arguments. The scene is left at
+    the last frame.
+
+    Parameters
+    ----------
+    scene, frames, steps_per_frame, frame_time, substeps, springs, progress
+        As for :func:`gif`.
+    color_by : {"speed", "pressure", "none"}, default "speed"
+        Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
+    on_frame : callable, optional
+        ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
+        ``scene.advance`` returned for that frame (None for frame 0 and for fixed steps). For
+        progress reports and probes (energy books, counters); it must not change the scene.
+
+    Returns
+    -------
+    Recording
+        Give it to :func:`gif` to draw (``gif(recording, path, size=..., ...)``).
+
+    Raises
+    ------
+    As :func:`gif` (bad arguments before stepping; :class:`physcore.SimulationDiverged`).
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> rec = pc.render.record(pc.scenes.projectile(n=2), frames=5, steps_per_frame=20)
+    >>> rec.frames, rec.positions.shape, rec.positions.dtype
+    (5, (5, 2, 2), dtype('float32'))
+    >>> rec.times.round(6).tolist()
+    [0.0, 0.02, 0.04, 0.06, 0.08]
+    """
+    color_by = _check_color_by(color_by)
+    springs = _check.flag("springs", springs)
+    progress = _check.flag("progress", progress)
+    if on_frame is not None and not callable(on_frame):
+        raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
+    plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
+    _check_memory(scene, plan["frames"], (0, 0), springs)
+    return _simulate(scene, progress=progress, on_frame=on_frame, **plan)
 
 
 def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
@@ -1208,7 +1336,7 @@ def render_frame(
         origin = _finite_mean(x)
     else:
         origin = _finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim)
-    rec = _Recording(
+    rec = Recording(
         positions=(x - origin).astype(np.float32)[None],
         origin=origin,
         speeds=speeds,
