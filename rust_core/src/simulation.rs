@@ -664,36 +664,40 @@ impl<V: Vector> Simulation<V> {
         }
     }
 
-    /// Density (kg/m^dim) and pressure (Pa) of every particle, from the SPH terms (0 for
-    /// particles that are in no fluid).
-    pub fn fluid_fields(&self) -> (Vec<Real>, Vec<Real>) {
+    /// The named output fields of every term (see `Term::fields`), one value per particle (0
+    /// for particles a field does not cover); `names` fixes which and in what order.
+    pub fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
         let n = self.n_particles();
-        let (mut rho, mut p) = (vec![0.0; n], vec![0.0; n]);
+        let mut out = vec![vec![0.0; n]; names.len()];
         self.run(|| {
             for t in &self.sys.forces.terms {
-                if let Some(s) = t.as_sph() {
-                    let (r, q) = s.fields(&self.sys.state.x, &self.sys.model);
-                    let range = s.range();
-                    rho[range.clone()].copy_from_slice(&r);
-                    p[range].copy_from_slice(&q);
+                for (name, range, values) in t.fields(&self.sys.state.x, &self.sys.model) {
+                    if let Some(k) = names.iter().position(|m| *m == name) {
+                        out[k][range].copy_from_slice(&values);
+                    }
                 }
             }
         });
-        (rho, p)
+        out
     }
 
-    /// Wall time (s) the SPH terms have spent in (cell list + gather, density, forces) so far,
-    /// and heap bytes they hold.
+    /// Density (kg/m^dim) and pressure (Pa) of every particle, from the fluid terms (0 for
+    /// particles that are in no fluid).
+    pub fn fluid_fields(&self) -> (Vec<Real>, Vec<Real>) {
+        let mut f = self.fields(&["density", "pressure"]).into_iter();
+        (f.next().expect("asked for two"), f.next().expect("asked for two"))
+    }
+
+    /// Wall time (s) the terms that keep such books have spent in their phases so far (SPH:
+    /// cell list + gather, density, forces), and the heap bytes they hold.
     pub fn fluid_profile(&self) -> ([f64; 3], usize) {
         let mut c = [0.0; 3];
         let mut bytes = 0;
-        for t in &self.sys.forces.terms {
-            if let Some(s) = t.as_sph() {
-                for k in 0..3 {
-                    c[k] += s.clock[k];
-                }
-                bytes += s.bytes();
+        for (clock, b) in self.sys.forces.terms.iter().filter_map(|t| t.profile()) {
+            for k in 0..3 {
+                c[k] += clock[k];
             }
+            bytes += b;
         }
         (c, bytes)
     }

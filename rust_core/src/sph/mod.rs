@@ -594,8 +594,13 @@ impl<V: Vector> Term<V> for Sph<V> {
         self.p.alpha > 0.0
     }
 
-    fn as_sph(&self) -> Option<&Sph<V>> {
-        Some(self)
+    fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
+        let (rho, p) = Sph::fields(self, x, model);
+        vec![("density", self.range(), rho), ("pressure", self.range(), p)]
+    }
+
+    fn profile(&self) -> Option<([f64; 3], usize)> {
+        Some((self.clock, self.bytes()))
     }
 
     fn set_stop(&mut self, stop: Stop) {

@@ -11,6 +11,7 @@ use crate::par;
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::vector::{Real, Vector};
+use std::ops::Range;
 
 pub use drag::Drag;
 pub use gravity::UniformGravity;
@@ -50,8 +51,15 @@ pub trait Term<V: Vector>: Send + Sync {
     /// Told when the scene's state becomes single precision (`true`) or double: a term may then
     /// compute in float32 where that is faster (pairwise gravity does).
     fn set_single(&mut self, _single: bool) {}
-    /// The term as an SPH fluid, if it is one (for its density and pressure fields).
-    fn as_sph(&self) -> Option<&crate::sph::Sph<V>> {
+    /// Named per-particle output fields the term computes now (SPH: "density" in kg/m^dim,
+    /// "pressure" in Pa), each over the particles it covers: `(name, particle range, values)`.
+    fn fields(&self, _x: &[V], _model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
+        Vec::new()
+    }
+    /// Wall time (s) the term has spent so far in up to three phases of its evaluation (SPH:
+    /// cell list and gather, density, forces) and the heap bytes it holds; `None` if it keeps
+    /// no such books.
+    fn profile(&self) -> Option<([f64; 3], usize)> {
         None
     }
     /// The stop flag of the interruptible call in progress (`Stop::default()` between calls).
