@@ -393,7 +393,7 @@ def _bad_calls():
         "assert_energy_conserved(steps=0)": lambda: physcore.testing.assert_energy_conserved(s, steps=0, rtol=1e-3),
         "_core: add_term(bad param type)": lambda: s._sim.add_term("gravity", "g2", {"g": object()}),
         "_core: add_term(unknown kind)": lambda: s._sim.add_term("no_such", "x", {}),
-        "_core: Simulation2(dim=4)": lambda: pc._core.Simulation2(4, "verlet", 1e-3),
+        "_core: Simulation(dim=4)": lambda: pc._core.Simulation(4, "verlet", 1e-3),
         "_core: set_state(wrong shape)": lambda: s._sim.set_state(np.zeros((2, 3))),
     }
 

@@ -6,7 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
-    "Simulation2",
+    "Simulation",
     "integrator_table",
     "default_threads",
     "simd_level",
@@ -32,8 +32,8 @@ def particle_attributes() -> list[tuple[str, str]]: ...
 def neighbors(points: npt.NDArray[np.float64], radius: float) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]: ...
 
 @final
-class Simulation2:
-    def __new__(cls, dim: int, integrator: str, dt: float, threads: int | None = None) -> Simulation2: ...
+class Simulation:
+    def __new__(cls, dim: int, integrator: str, dt: float, threads: int | None = None) -> Simulation: ...
     @property
     def dim(self) -> int: ...
     @property

@@ -223,7 +223,7 @@ class Scene:
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
-        sim = _core.Simulation2(int(dim), integrator, dt, threads)
+        sim = _core.Simulation(int(dim), integrator, dt, threads)
         if sim.sequential is not None:
             warnings.warn(
                 f"threads=None: could not start a thread pool ({sim.sequential}); this scene runs on "
@@ -249,7 +249,7 @@ class Scene:
 
     # ---------------------------------------------------------------- threads
     @property
-    def _sim(self) -> _core.Simulation2:
+    def _sim(self) -> _core.Simulation:
         # A Scene is not shared between threads while one of them steps it: every use from
         # another thread then raises SceneBusyError, instead of pyo3's bare "Already mutably
         # borrowed" RuntimeError.
@@ -262,10 +262,10 @@ class Scene:
         return self._raw_sim
 
     @_sim.setter
-    def _sim(self, sim: _core.Simulation2) -> None:
+    def _sim(self, sim: _core.Simulation) -> None:
         self._raw_sim = sim
 
-    def _exclusive(self, call: Callable[[_core.Simulation2], Any]) -> Any:
+    def _exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
         """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
         only user of the scene; another thread's use meanwhile raises :class:`SceneBusyError`
         (so does this call, if another thread is inside one)."""

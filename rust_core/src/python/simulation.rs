@@ -1,0 +1,355 @@
+//! The `_core.Simulation` class: a handle on one 2D or 3D `crate::Simulation`.
+use super::{convert::*, errors::*, watch::*, Inner};
+use crate::alloc::{count, Need};
+use crate::boundary::{Aabb, Plane};
+use crate::error::{invalid, Error};
+use crate::simulation::Simulation;
+use crate::terms::registry::{self, Context};
+use crate::vector::{Real, Vector};
+use glam::{DVec2, DVec3};
+use numpy::ndarray::Array1;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// Low-level simulation handle. Use `physcore.Scene`, which validates inputs and keeps the
+/// scene description needed for `save()`.
+#[pyclass(module = "physcore._core", name = "Simulation")]
+pub struct PySimulation {
+    inner: Inner,
+}
+
+#[pymethods]
+impl PySimulation {
+    #[new]
+    #[pyo3(signature = (dim, integrator, dt, threads=None))]
+    fn new(py: Python<'_>, dim: usize, integrator: &str, dt: f64, threads: Option<usize>) -> PyResult<Self> {
+        let inner = match dim {
+            2 => Inner::D2(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            3 => Inner::D3(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
+        };
+        Ok(Self { inner })
+    }
+
+    #[getter]
+    fn dim(&self) -> usize {
+        match self.inner {
+            Inner::D2(_) => 2,
+            Inner::D3(_) => 3,
+        }
+    }
+
+    #[getter]
+    fn n_particles(&self) -> usize {
+        with_sim!(&self.inner, s => s.n_particles())
+    }
+
+    #[getter]
+    fn time(&self) -> f64 {
+        with_sim!(&self.inner, s => s.sys.state.t)
+    }
+
+    #[getter]
+    fn step_count(&self) -> u64 {
+        with_sim!(&self.inner, s => s.sys.state.step)
+    }
+
+    /// Why this simulation runs on the calling thread alone (its threads could not be
+    /// started), or None.
+    #[getter]
+    fn sequential(&self) -> Option<String> {
+        with_sim!(&self.inner, s => s.sequential().map(str::to_string))
+    }
+
+    #[getter]
+    fn dt(&self) -> f64 {
+        with_sim!(&self.inner, s => s.dt)
+    }
+
+    #[setter]
+    fn set_dt(&mut self, py: Python<'_>, dt: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_dt(dt)).map_err(|e| to_py(py, e))
+    }
+
+    #[getter]
+    fn integrator(&self) -> &'static str {
+        with_sim!(&self.inner, s => s.integrator_info().name)
+    }
+
+    #[setter]
+    fn set_integrator(&mut self, py: Python<'_>, name: &str) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_integrator(name)).map_err(|e| to_py(py, e))
+    }
+
+    /// (rtol, atol) of the adaptive integrator.
+    #[getter]
+    fn tolerances(&self) -> (f64, f64) {
+        with_sim!(&self.inner, s => s.tolerances())
+    }
+
+    fn set_tolerances(&mut self, py: Python<'_>, rtol: f64, atol: f64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
+    }
+
+    /// (accepted, rejected, next internal step s) for "rk45", else None.
+    fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
+        with_sim!(&self.inner, s => s.adaptive_stats())
+    }
+
+    /// Whether the state is kept in single precision.
+    #[getter]
+    fn single(&self) -> bool {
+        with_sim!(&self.inner, s => s.single())
+    }
+
+    #[setter]
+    fn set_single(&mut self, single: bool) {
+        with_sim!(&mut self.inner, s => s.set_single(single))
+    }
+
+    /// The substep advance() would take now, or None (O(N²) with gravity: GIL released, and
+    /// Ctrl-C interrupts it).
+    fn auto_dt(&mut self, py: Python<'_>) -> PyResult<Option<f64>> {
+        with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.auto_dt())))
+    }
+
+    fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        info_dict(py, with_sim!(&self.inner, s => s.integrator_info()))
+    }
+
+    #[getter]
+    fn force_evaluations(&self) -> u64 {
+        with_sim!(&self.inner, s => s.force_evaluations())
+    }
+
+    /// Appends particles; returns the index of the first.
+    fn add_particles(
+        &mut self,
+        py: Python<'_>,
+        positions: PyReadonlyArray2<'_, f64>,
+        velocities: PyReadonlyArray2<'_, f64>,
+        masses: PyReadonlyArray1<'_, f64>,
+        pinned: PyReadonlyArray1<'_, bool>,
+    ) -> PyResult<usize> {
+        let dim = self.dim();
+        let x = flat2(&positions, dim, "positions")?;
+        let v = flat2(&velocities, dim, "velocities")?;
+        let (m, p) = (slice1(&masses, "masses")?, slice1(&pinned, "pinned")?);
+        // The copies made here plus what the scene grows by (state and masses).
+        let n = x.len() / dim;
+        let bytes = n as u128 * (2 * 2 * 8 * dim as u128 + 2 * 8 + 8 + 1);
+        let need = Need::new("add_particles", bytes, format!("{} particles", count(n as u128)));
+        let copies = || -> Result<_, Error> {
+            need.check()?;
+            Ok((need.copy(m)?, need.copy(p)?))
+        };
+        let (m, p) = copies().map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => {
+            vectors(x, &need).and_then(|x| Ok((x, vectors(v, &need)?))).and_then(|(x, v)| s.add_particles(x, v, m, p))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// Positions, m: a new (N, dim) float64 array (a copy; writing to it changes nothing).
+    #[getter]
+    fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.x, "positions"))
+    }
+
+    /// Velocities, m/s: a new (N, dim) float64 array (a copy).
+    #[getter]
+    fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.v, "velocities"))
+    }
+
+    #[getter]
+    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.mass.clone()).into_pyarray(py))
+    }
+
+    #[getter]
+    fn pinned<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
+        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.inv_mass.iter().map(|&im| im == 0.0).collect()).into_pyarray(py))
+    }
+
+    #[pyo3(signature = (positions=None, velocities=None))]
+    fn set_state(
+        &mut self,
+        py: Python<'_>,
+        positions: Option<PyReadonlyArray2<'_, f64>>,
+        velocities: Option<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<()> {
+        let dim = self.dim();
+        let x = positions.as_ref().map(|a| flat2(a, dim, "positions")).transpose()?;
+        let v = velocities.as_ref().map(|a| flat2(a, dim, "velocities")).transpose()?;
+        with_sim!(&mut self.inner, s => {
+            let x = x.map(|x| try_from_flat(x, "set_state", "positions")).transpose();
+            let v = v.map(|v| try_from_flat(v, "set_state", "velocities")).transpose();
+            x.and_then(|x| Ok((x, v?))).and_then(|(x, v)| s.set_state(x, v))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// Sets the optional per-particle attribute `name` (`state::ATTRIBUTES`), (N,) float64.
+    fn set_attribute(&mut self, py: Python<'_>, name: &str, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        let v = slice1(&values, name)?;
+        let need = Need::new("set_attribute", Need::bytes_of::<f64>(v.len()), format!("a copy of {name}"));
+        let v = need.copy(v).map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => s.set_attribute(name, v)).map_err(|e| to_py(py, e))
+    }
+
+    /// The attributes set so far: name -> (N,) float64 copy.
+    fn attributes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        with_sim!(&self.inner, s => {
+            for (k, a) in &s.sys.model.attributes {
+                d.set_item(*k, a.clone().into_pyarray(py))?;
+            }
+        });
+        Ok(d)
+    }
+
+    /// Adds a force term of registered type `kind` (see `terms::registry`) named `name`, built
+    /// from `params`: numbers, bools, strings, and 1-D or 2-D arrays (float64: numbers; uint32:
+    /// particle indices), copied fallibly.
+    fn add_term(&mut self, py: Python<'_>, kind: &str, name: String, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
+        let p = params_of(py, ty.kind, params)?;
+        match &mut self.inner {
+            Inner::D2(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec2>(name, p, &ctx).and_then(|t| s.add_term(t))
+            }
+            Inner::D3(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.add_term(t))
+            }
+        }
+        .map_err(|e| to_py(py, e))
+    }
+
+    fn add_plane(
+        &mut self,
+        py: Python<'_>,
+        point: Vec<f64>,
+        normal: Vec<f64>,
+        restitution: f64,
+        friction: f64,
+    ) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            let p = Plane { point: vec_of(&point, "point")?, normal: vec_of(&normal, "normal")?, restitution, friction };
+            s.add_plane(p)
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    fn add_box(
+        &mut self,
+        py: Python<'_>,
+        lower: Vec<f64>,
+        upper: Vec<f64>,
+        restitution: f64,
+        friction: f64,
+    ) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            let b = Aabb { lo: vec_of(&lower, "lower")?, hi: vec_of(&upper, "upper")?, restitution, friction };
+            s.add_box(b)
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed within about
+    /// `SIGNAL_POLL` plus a fraction of a millisecond of kernel work (see `interruptible`): the
+    /// state is rolled back to where the call started and KeyboardInterrupt is raised.
+    fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            if s.adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
+                let never = Arc::new(AtomicBool::new(false));
+                let cp = py.detach(|| s.step_checkpointed(n, &never)).map_err(|e| to_py(py, e))?;
+                return undo_if_signalled(py, s, ((), cp));
+            }
+            interruptible(py, s, |s, stop| s.step_checkpointed(n, stop).map(|cp| ((), cp)))
+        })
+    }
+
+    /// Advances `duration` seconds in automatically chosen substeps; returns their number.
+    #[pyo3(signature = (duration, substeps=None))]
+    fn advance(&mut self, py: Python<'_>, duration: f64, substeps: Option<u64>) -> PyResult<u64> {
+        with_sim!(&mut self.inner, s => interruptible(py, s, |s, stop| s.advance_checkpointed(duration, substeps, stop)))
+    }
+
+    /// ((grid_s, density_s, forces_s), heap bytes) of the SPH terms.
+    fn fluid_profile(&self) -> ((f64, f64, f64), usize) {
+        let (c, b) = with_sim!(&self.inner, s => s.fluid_profile());
+        ((c[0], c[1], c[2]), b)
+    }
+
+    /// (density, pressure) of every particle, (N,) float64 each; 0 outside fluids.
+    fn fluid_fields<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+        let inner = &self.inner;
+        let (r, p) = py.detach(|| with_sim!(inner, s => s.fluid_fields()));
+        (Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py))
+    }
+
+    /// The energy books; O(N²) with pairwise gravity, so Ctrl-C interrupts it (nothing changes).
+    fn energy<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let e = with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.energy())))?;
+        energy_dict(py, e)
+    }
+
+    fn momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        let p: Vec<Real> =
+            with_sim!(&self.inner, s => { let p = s.momentum(); (0..p_dim(&p)).map(|k| p.comp(k)).collect() });
+        Array1::from_vec(p).into_pyarray(py)
+    }
+
+    fn angular_momentum<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        Array1::from_vec(with_sim!(&self.inner, s => s.angular_momentum()).to_vec()).into_pyarray(py)
+    }
+
+    /// O(N²) with pairwise gravity: the GIL is released and Ctrl-C interrupts it.
+    fn suggest_dt(&mut self, py: Python<'_>) -> PyResult<f64> {
+        with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.suggest_dt())))
+    }
+
+    /// (per-term dissipated energy in term order, collisions), J.
+    fn ledger(&self) -> (Vec<f64>, f64) {
+        with_sim!(&self.inner, s => (s.sys.forces.dissipated.clone(), s.collision_dissipated))
+    }
+
+    /// Cached forces (N, dim) and term powers carried between steps, or None.
+    fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<CacheArrays<'py>>> {
+        with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
+    }
+
+    #[pyo3(signature = (t, step, dissipated, collisions, cache_forces=None, cache_power=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn restore(
+        &mut self,
+        py: Python<'_>,
+        t: f64,
+        step: u64,
+        dissipated: Vec<f64>,
+        collisions: f64,
+        cache_forces: Option<PyReadonlyArray2<'_, f64>>,
+        cache_power: Option<Vec<f64>>,
+    ) -> PyResult<()> {
+        let dim = self.dim();
+        let f = cache_forces.as_ref().map(|a| flat2(a, dim, "cache_forces")).transpose()?;
+        with_sim!(&mut self.inner, s => {
+            let cache = match (f, cache_power) {
+                (Some(f), Some(p)) => try_from_flat(f, "restore", "cached forces").map(|f| Some((f, p))),
+                _ => Ok(None),
+            };
+            cache.and_then(|cache| s.restore(t, step, &dissipated, collisions, cache))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+}
+
+fn p_dim<V: Vector>(_: &V) -> usize {
+    V::DIM
+}
