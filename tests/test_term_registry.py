@@ -89,3 +89,19 @@ def test_an_unregistered_term_is_refused_when_added_so_saving_never_meets_it():
     with pytest.raises(TypeError, match="Unkeyed"):
         s.add(Unkeyed())
     assert s.terms == ()
+
+
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: pc.Gravity([0.0, -9.81], "g"),
+        lambda: pc.Drag(0.1, "air"),
+        lambda: pc.PairwiseGravity(1.0, 0.0, "grav"),
+        lambda: pc.ElectricField([1.0, 0.0], "e"),
+        lambda: pc.Springs([0], [1], 1.0, 0.0, None, "s"),
+    ],
+)
+def test_a_term_name_is_keyword_only(make):
+    # The physics arguments may be positional; the energy-book key must be named (name=...).
+    with pytest.raises(TypeError, match="positional argument"):
+        make()

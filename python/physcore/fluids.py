@@ -275,9 +275,9 @@ class Fluid(Term, kind="fluid"):
     walls: np.ndarray | None = None
     wall_volume: str | float | np.ndarray = "lattice"
     precision: str = "f64"
-    name: str = "fluid"
+    name: str = field(default="fluid", kw_only=True)
     #: Index of the first particle once added to a scene (set by :meth:`Scene.add`).
-    first: int | None = field(default=None, compare=False)
+    first: int | None = field(default=None, compare=False, kw_only=True)
 
     def __post_init__(self) -> None:
         x = _array2(self.positions, "positions")

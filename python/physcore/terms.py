@@ -182,7 +182,7 @@ class Gravity(Term, kind="gravity"):
     """
 
     g: np.ndarray
-    name: str = "gravity"
+    name: str = field(default="gravity", kw_only=True)
 
     record_fields: ClassVar[dict[str, str]] = {"g": "vector"}
 
@@ -208,7 +208,7 @@ class Drag(Term, kind="drag"):
     """
 
     coefficient: float
-    name: str = "drag"
+    name: str = field(default="drag", kw_only=True)
 
     record_fields: ClassVar[dict[str, str]] = {"coefficient": "number"}
 
@@ -254,7 +254,7 @@ class Springs(Term, kind="springs"):
     stiffness: ArrayLike = field(default=1.0)
     damping: ArrayLike = 0.0
     rest_length: ArrayLike | None = None
-    name: str = "springs"
+    name: str = field(default="springs", kw_only=True)
 
     def __post_init__(self) -> None:
         idx = []
@@ -350,7 +350,7 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
 
     G: float = 1.0
     softening: float = 0.0
-    name: str = "pairwise_gravity"
+    name: str = field(default="pairwise_gravity", kw_only=True)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "G", _finite_float(self.G, "G", minimum=0.0, strict=True))
@@ -390,7 +390,7 @@ class ElectricField(Term, kind="uniform_electric_field"):
     """
 
     E: np.ndarray
-    name: str = "electric_field"
+    name: str = field(default="electric_field", kw_only=True)
 
     record_fields: ClassVar[dict[str, str]] = {"E": "vector"}
 
