@@ -570,7 +570,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
     }
 
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {
-        // O(N²): left out above 2·10⁴ bodies (suggest_dt and the divergence advice say so).
+        // O(N²): left out above 2·10⁴ bodies (documented at Scene.suggest_dt).
         (x.len() <= 20_000).then(|| encounter_time(self.g, self.softening, x, model, self.stop.flag())).flatten()
     }
 }
