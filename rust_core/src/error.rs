@@ -20,15 +20,7 @@ pub enum Error {
         what = describe(quantity),
         advice = advise(quantity, *dt, *suggested_dt)
     )]
-    Diverged {
-        step: u64,
-        t: f64,
-        particle: usize,
-        quantity: &'static str,
-        rolled_back_to: u64,
-        dt: f64,
-        suggested_dt: f64,
-    },
+    Diverged { step: u64, t: f64, particle: usize, quantity: Failure, rolled_back_to: u64, dt: f64, suggested_dt: f64 },
 
     /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
     #[error("interrupted; the state was rolled back to step {rolled_back_to}")]
@@ -51,21 +43,42 @@ pub enum Error {
     OutOfMemory { what: String, bytes: u64, of: String },
 }
 
-/// What went wrong with the particle: `quantity` is "position" or "velocity" (non-finite), or
-/// "error" (an adaptive integrator could not meet its tolerances at any step size).
-fn describe(quantity: &str) -> String {
-    match quantity {
-        "error" => "has a local error that rk45 cannot bring within rtol/atol at any step size \
-                    (its forces are not finite or not smooth there)"
-            .to_string(),
-        q => format!("has a non-finite {q}"),
+/// What went wrong with the particle of a diverged step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// Its position is not finite.
+    Position,
+    /// Its velocity is not finite.
+    Velocity,
+    /// An adaptive integrator could not bring its local error within the tolerances at any
+    /// step size (the state is still finite).
+    Error,
+}
+
+impl Failure {
+    /// The name Python sees (`SimulationDiverged.quantity`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Failure::Position => "position",
+            Failure::Velocity => "velocity",
+            Failure::Error => "error",
+        }
     }
 }
 
-fn advise(quantity: &str, dt: f64, suggested_dt: f64) -> String {
+fn describe(quantity: &Failure) -> String {
+    match quantity {
+        Failure::Error => "has a local error that rk45 cannot bring within rtol/atol at any step size \
+                    (its forces are not finite or not smooth there)"
+            .to_string(),
+        q => format!("has a non-finite {}", q.as_str()),
+    }
+}
+
+fn advise(quantity: &Failure, dt: f64, suggested_dt: f64) -> String {
     match quantity {
         // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
-        "error" => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
+        Failure::Error => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
                     softening, or a fixed-step integrator."
             .to_string(),
         // A suggestion that is not a usable step (0, subnormal, NaN) would read "try dt = 0":
@@ -93,8 +106,16 @@ mod tests {
     use super::*;
 
     fn diverged(suggested_dt: f64) -> String {
-        Error::Diverged { step: 3, t: 0.3, particle: 1, quantity: "position", rolled_back_to: 0, dt: 0.1, suggested_dt }
-            .to_string()
+        Error::Diverged {
+            step: 3,
+            t: 0.3,
+            particle: 1,
+            quantity: Failure::Position,
+            rolled_back_to: 0,
+            dt: 0.1,
+            suggested_dt,
+        }
+        .to_string()
     }
 
     #[test]

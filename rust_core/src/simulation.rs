@@ -1,7 +1,7 @@
 //! A simulation: state, model, force terms, integrator, colliders and the energy books.
 use crate::alloc::{count, Need};
 use crate::boundary::{Aabb, Collider, Plane};
-use crate::error::{invalid, Error, Result};
+use crate::error::{invalid, Error, Failure, Result};
 use crate::integrators::{self, Integrator, IntegratorInfo, System};
 use crate::par;
 use crate::state::{Model, State};
@@ -740,7 +740,7 @@ impl<V: Vector> Simulation<V> {
             }
             if non_finite {
                 let (particle, quantity) =
-                    self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, "position"));
+                    self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, Failure::Position));
                 return Err(Error::Diverged {
                     step: self.sys.state.step,
                     t: self.sys.state.t,
@@ -756,13 +756,13 @@ impl<V: Vector> Simulation<V> {
     }
 
     /// The first particle (by index) with a non-finite position or velocity.
-    fn first_non_finite(&self) -> Option<(usize, &'static str)> {
+    fn first_non_finite(&self) -> Option<(usize, Failure)> {
         let (x, v) = (&self.sys.state.x, &self.sys.state.v);
         (0..x.len()).find_map(|i| {
             if !x[i].is_finite() {
-                Some((i, "position"))
+                Some((i, Failure::Position))
             } else if !v[i].is_finite() {
-                Some((i, "velocity"))
+                Some((i, Failure::Velocity))
             } else {
                 None
             }

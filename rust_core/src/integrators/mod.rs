@@ -102,7 +102,7 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn set_adaptive_counts(&mut self, _accepted: u64, _rejected: u64) {}
     /// Why the last `step` failed with a finite state (adaptive step control gave up): the
     /// particle and what was wrong.
-    fn failure(&self) -> Option<(usize, &'static str)> {
+    fn failure(&self) -> Option<(usize, crate::error::Failure)> {
         None
     }
 }

@@ -416,8 +416,8 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         self.rejected = rejected;
     }
 
-    fn failure(&self) -> Option<(usize, &'static str)> {
-        self.failed.map(|i| (i, "error"))
+    fn failure(&self) -> Option<(usize, crate::error::Failure)> {
+        self.failed.map(|i| (i, crate::error::Failure::Error))
     }
 
     /// The derivative at the current state (accelerations) and, after the stage-0 powers, the

@@ -25,7 +25,7 @@ pub(super) fn to_py(py: Python<'_>, e: Error) -> PyErr {
                     step,
                     t,
                     particle,
-                    quantity,
+                    quantity.as_str(),
                     suggested_dt,
                     rolled_back_to,
                 ))?;
