@@ -157,6 +157,15 @@ def array(name: str, value: Any) -> np.ndarray:
         raise InvalidInputError(f"{name}: not a rectangular array of numbers ({' '.join(str(e).split())[:80]})") from None
 
 
+def real_array(name: str, value: Any) -> np.ndarray:
+    """:func:`array` of real numbers: InvalidTypeError naming ``name`` for any other dtype
+    (bools, strings, objects, complex)."""
+    a = array(name, value)
+    if a.dtype.kind not in "iuf" or a.dtype == bool:
+        raise InvalidTypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+    return a
+
+
 def memory_limit() -> int:
     """Largest memory, bytes, that physcore plans for one request before refusing it: half the
     physical memory, or 4 GiB where that cannot be read."""

@@ -140,9 +140,7 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
 
 
 def _corner(value: object, arg: str) -> np.ndarray:
-    a = _check.array(arg, value)
-    if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    a = _check.real_array(arg, value)
     return a.astype(np.float64)
 
 

@@ -113,9 +113,7 @@ def _check_precision(value: object) -> str:
 
 def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarray:
     """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
-    a = _check.array(arg, value)
-    if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    a = _check.real_array(arg, value)
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
         a = a[None, :]
     if a.ndim != 2 or a.shape[1] != dim:
@@ -319,9 +317,7 @@ class Scene:
         x = _points(positions, "positions", dim)
         n = x.shape[0]
         v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
-        m = _check.array("masses", masses)
-        if m.dtype.kind not in "iuf" or m.dtype == bool:
-            raise InvalidTypeError(f"masses: expected real numbers, got dtype {m.dtype}")
+        m = _check.real_array("masses", masses)
         m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
         if m.shape != (n,):
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
@@ -724,9 +720,7 @@ class Scene:
         """
         if not isinstance(name, str):
             raise InvalidTypeError(f"name: expected a str, got {type(name).__name__}")
-        a = _check.array(name, values)
-        if a.dtype.kind not in "iuf" or a.dtype == bool:
-            raise InvalidTypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
+        a = _check.real_array(name, values)
         if a.ndim != 1:
             raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")
         self._exclusive(lambda sim: sim.set_attribute(name, np.ascontiguousarray(a, dtype=np.float64)))

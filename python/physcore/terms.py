@@ -70,9 +70,7 @@ def _vector(value: object, arg: str) -> np.ndarray:
 
 
 def _per_spring(value: object, m: int, arg: str) -> np.ndarray:
-    a = _check.array(arg, value)
-    if a.dtype.kind not in "iuf" or a.dtype == bool:
-        raise InvalidTypeError(f"{arg}: expected real numbers, got dtype {a.dtype}")
+    a = _check.real_array(arg, value)
     a = a.astype(np.float64)
     if a.ndim == 0:
         a = np.full(m, float(a))
@@ -138,9 +136,18 @@ class Term:
 
     # ------------------------------------------------------------ the protocol of a term type
     def _attach(self, scene: Scene, name: str) -> Term:
-        """Check the term against ``scene`` (dimension, indices), add it to the core under
-        ``name`` and return the record as stored. Raises before changing anything."""
-        raise NotImplementedError(f"{type(self).__name__} does not say how it attaches to a scene")
+        """Check the term against ``scene``, add it to the core under ``name`` and return the
+        record as stored. Raises before changing anything. By default the core term of the same
+        ``kind`` gets the ``record_fields`` as its parameters, each ``"vector"`` one checked
+        against the scene's dimension; terms with more to check (indices, particles) override it."""
+        params = {}
+        for f, kind in self.record_fields.items():
+            value = getattr(self, f)
+            if kind == "vector":
+                _same_dim(scene, f, value)
+            params[f] = value
+        scene._sim.add_term(self.kind, name, params)
+        return dataclasses.replace(self, name=name)
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """What a scene file holds of this term: the ``record_fields`` (JSON values) and the
@@ -189,11 +196,6 @@ class Gravity(Term, kind="gravity"):
     def __post_init__(self) -> None:
         object.__setattr__(self, "g", _vector(self.g, "g"))
 
-    def _attach(self, scene: Scene, name: str) -> Gravity:
-        _same_dim(scene, "g", self.g)
-        scene._sim.add_term("gravity", name, {"g": self.g})
-        return dataclasses.replace(self, name=name)
-
 
 @dataclass(frozen=True, eq=False)
 class Drag(Term, kind="drag"):
@@ -214,10 +216,6 @@ class Drag(Term, kind="drag"):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))
-
-    def _attach(self, scene: Scene, name: str) -> Drag:
-        scene._sim.add_term("drag", name, {"coefficient": self.coefficient})
-        return dataclasses.replace(self, name=name)
 
 
 @dataclass(frozen=True, eq=False)
@@ -358,10 +356,6 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
 
     record_fields: ClassVar[dict[str, str]] = {"G": "number", "softening": "number"}
 
-    def _attach(self, scene: Scene, name: str) -> PairwiseGravity:
-        scene._sim.add_term("pairwise_gravity", name, {"G": self.G, "softening": self.softening})
-        return dataclasses.replace(self, name=name)
-
 
 @dataclass(frozen=True, eq=False)
 class ElectricField(Term, kind="uniform_electric_field"):
@@ -396,11 +390,6 @@ class ElectricField(Term, kind="uniform_electric_field"):
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "E", _vector(self.E, "E"))
-
-    def _attach(self, scene: Scene, name: str) -> ElectricField:
-        _same_dim(scene, "E", self.E)
-        scene._sim.add_term(self.kind, name, {"E": self.E})
-        return dataclasses.replace(self, name=name)
 
 
 @dataclass(frozen=True)
