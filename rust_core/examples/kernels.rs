@@ -3,30 +3,30 @@
 use glam::DVec3;
 use physcore_core::simd::{self, Level};
 use physcore_core::terms::{PairwiseGravity, Springs, UniformGravity};
-use physcore_core::Simulation;
+use physcore_core::World;
 use std::time::Instant;
 
-fn nbody(n: usize, single: bool) -> Simulation<DVec3> {
-    let mut s = Simulation::<DVec3>::new("verlet", 1e-3, None).unwrap();
+fn nbody(n: usize, single: bool) -> World<DVec3> {
+    let mut s = World::<DVec3>::new("verlet", 1e-3, None).unwrap();
     let mut seed = 42u64;
     let mut rnd = || {
         seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     };
     let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(rnd(), rnd(), rnd())).collect();
-    s.add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], vec![false; n]).unwrap();
-    s.add_term(Box::new(PairwiseGravity::new("g".into(), 1.0, 0.01))).unwrap();
-    s.set_single(single);
+    s.particles_mut().add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], vec![false; n]).unwrap();
+    s.particles_mut().add_term(Box::new(PairwiseGravity::new("g".into(), 1.0, 0.01))).unwrap();
+    s.particles_mut().set_single(single);
     s
 }
 
 /// WORKLOADS §2 cloth: g×g, structural + shear + bend springs, row 0 pinned, semi-implicit Euler.
-fn cloth(g: usize) -> Simulation<DVec3> {
+fn cloth(g: usize) -> World<DVec3> {
     let n = g * g;
     let m = 1.0 / n as f64;
     let k = 100.0;
     let sp = 1.0 / (g - 1) as f64;
-    let mut s = Simulation::<DVec3>::new("semi_implicit_euler", 0.25 * (m / k).sqrt(), None).unwrap();
+    let mut s = World::<DVec3>::new("semi_implicit_euler", 0.25 * (m / k).sqrt(), None).unwrap();
     let x: Vec<DVec3> = (0..n).map(|p| DVec3::new((p % g) as f64 * sp, (p / g) as f64 * sp, 0.0)).collect();
     let (mut i, mut j) = (vec![], vec![]);
     for y in 0..g {
@@ -43,16 +43,19 @@ fn cloth(g: usize) -> Simulation<DVec3> {
     }
     let rest: Vec<f64> = i.iter().zip(&j).map(|(&a, &b)| (x[a as usize] - x[b as usize]).length()).collect();
     let ns = i.len();
-    s.add_particles(x, vec![DVec3::ZERO; n], vec![m; n], (0..n).map(|p| p < g).collect()).unwrap();
-    s.add_term(Box::new(
-        Springs::new("springs".into(), i, j, vec![k; ns], vec![0.1 * (k * m).sqrt(); ns], rest, n).unwrap(),
-    ))
-    .unwrap();
-    s.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
+    s.particles_mut().add_particles(x, vec![DVec3::ZERO; n], vec![m; n], (0..n).map(|p| p < g).collect()).unwrap();
+    s.particles_mut()
+        .add_term(Box::new(
+            Springs::new("springs".into(), i, j, vec![k; ns], vec![0.1 * (k * m).sqrt(); ns], rest, n).unwrap(),
+        ))
+        .unwrap();
+    s.particles_mut()
+        .add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) }))
+        .unwrap();
     s
 }
 
-fn time(s: &mut Simulation<DVec3>, steps: u64) -> f64 {
+fn time(s: &mut World<DVec3>, steps: u64) -> f64 {
     s.step(steps / 10).unwrap();
     let mut ts = vec![];
     for _ in 0..3 {

@@ -1,6 +1,12 @@
-//! physcore's Rust core: particle state, force terms, integrators, colliders and energy books,
-//! written once for 2D and 3D over glam's `DVec2`/`DVec3`. Plain Rust; the Python bindings live
-//! in `python/` behind the `python` feature.
+//! physcore's Rust core, written once for 2D and 3D over glam's `DVec2`/`DVec3`. Plain Rust; the
+//! Python bindings live in `python/` behind the `python` feature.
+//!
+//! A [`World`] steps one or more systems (`systems`) with one clock, thread pool and rollback.
+//! The particle system holds the particle state and model (`state`), force terms (`terms`,
+//! `sph`), an integrator (`integrators`, with tableaux from `ode`) and the projection stage
+//! (`constraints`). Shared services: the neighbour search (`neighbors`), the SIMD layer
+//! (`simd`), deterministic parallel loops (`par`), fallible allocation (`alloc`), the stop flag
+//! (`stop`) and typed errors (`error`).
 
 // Two lints the numerics disagree with, allowed for the whole crate on purpose:
 // - `!(x > 0.0)` is the NaN-catching test (a NaN fails every comparison); `partial_cmp` would
@@ -9,21 +15,24 @@
 //   the papers write them; an iterator over one of them would make the others look different.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 pub mod alloc;
-pub mod boundary;
+pub mod constraints;
 pub mod error;
 pub mod grid;
 pub mod integrators;
+pub mod ode;
 pub mod par;
 pub mod simd;
-pub mod simulation;
 pub mod sph;
 pub mod state;
 pub mod stop;
+pub mod systems;
 pub mod terms;
 pub mod vector;
+pub mod world;
 
 #[cfg(feature = "python")]
 mod python;
 
 pub use error::{Error, Result};
-pub use simulation::{Checkpoint, EnergyReport, Simulation};
+pub use systems::EnergyReport;
+pub use world::{Checkpoint, World};

@@ -2,17 +2,14 @@
 use crate::vector::{Real, Vector};
 use std::collections::BTreeMap;
 
-/// Positions, velocities and time: the part of a simulation that changes every step.
-#[derive(Clone, Debug, Default)]
+/// Positions and velocities: the part of a particle system that changes every step (time and
+/// the step count belong to the `World`, which steps every system together).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct State<V: Vector> {
     /// Positions, m.
     pub x: Vec<V>,
     /// Velocities, m/s.
     pub v: Vec<V>,
-    /// Simulated time, s.
-    pub t: Real,
-    /// Steps taken since the scene was built.
-    pub step: u64,
 }
 
 /// Per-particle constants. `inv_mass == 0` marks a pinned particle: it never moves, but its

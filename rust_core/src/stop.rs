@@ -1,6 +1,6 @@
 //! The stop flag of a call in progress (Ctrl-C), as the force terms see it.
 //!
-//! `Simulation::step_interruptible` hands its flag to every term for the length of the call
+//! `World::step_interruptible` hands its flag to every term for the length of the call
 //! (`Term::set_stop`). A term whose one evaluation is long (pairwise gravity: O(N²)) reads it
 //! every fraction of a millisecond of work and, once it is set, skips the rest, leaving its
 //! forces partly written: the simulation sees the flag after the evaluation and rolls the whole

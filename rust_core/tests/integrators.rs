@@ -7,8 +7,8 @@ fn error_at(integrator: &str, dt: f64, t_end: f64) -> f64 {
     let mut s = oscillator(integrator, dt);
     let n = (t_end / dt).round() as u64;
     s.step(n).unwrap();
-    let t = s.sys.state.t;
-    let (x, v) = (s.sys.state.x[1], s.sys.state.v[1]);
+    let t = s.time();
+    let (x, v) = (s.particles().state().x[1], s.particles().state().v[1]);
     ((x.x - t.cos()).powi(2) + (v.x + t.sin()).powi(2) + x.y.powi(2) + v.y.powi(2)).sqrt()
 }
 
@@ -94,24 +94,26 @@ fn symplectic_methods_have_no_secular_energy_drift() {
 fn damped_error(integrator: &str, dt: f64) -> f64 {
     use physcore_core::terms::Springs;
     let c = 0.4;
-    let mut s = physcore_core::Simulation::new(integrator, dt, Some(1)).unwrap();
-    s.add_particles(
-        vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
-        vec![glam::DVec2::ZERO; 2],
-        vec![1.0, 1.0],
-        vec![true, false],
-    )
-    .unwrap();
-    // Rest length 0.5 keeps the spring axis along x for |x| > 0.5 with a 0.5 amplitude.
-    s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![c], vec![0.5], 2).unwrap()))
+    let mut s = physcore_core::World::new(integrator, dt, Some(1)).unwrap();
+    s.particles_mut()
+        .add_particles(
+            vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
+            vec![glam::DVec2::ZERO; 2],
+            vec![1.0, 1.0],
+            vec![true, false],
+        )
         .unwrap();
-    s.set_state(Some(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)]), None).unwrap();
+    // Rest length 0.5 keeps the spring axis along x for |x| > 0.5 with a 0.5 amplitude.
+    s.particles_mut()
+        .add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![c], vec![0.5], 2).unwrap()))
+        .unwrap();
+    s.particles_mut().set_state(Some(vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)]), None).unwrap();
     let n = (2.0 / dt).round() as u64;
     s.step(n).unwrap();
-    let t = s.sys.state.t;
+    let t = s.time();
     let (z, wd) = (c / 2.0, (1.0f64 - c * c / 4.0).sqrt());
     let exact = 0.5 + 0.5 * (-z * t).exp() * ((wd * t).cos() + z / wd * (wd * t).sin());
-    (s.sys.state.x[1].x - exact).abs()
+    (s.particles().state().x[1].x - exact).abs()
 }
 
 #[test]
@@ -129,15 +131,19 @@ fn verlet_stays_second_order_with_velocity_dependent_forces() {
 fn suggested_dt_accounts_for_dashpots() {
     use physcore_core::terms::Springs;
     for name in ["semi_implicit_euler", "verlet", "rk4"] {
-        let mut s = physcore_core::Simulation::new(name, 1.0, Some(1)).unwrap();
-        s.add_particles(
-            vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
-            vec![glam::DVec2::ZERO, glam::DVec2::new(0.0, 1.0)],
-            vec![1.0, 1.0],
-            vec![true, false],
-        )
-        .unwrap();
-        s.add_term(Box::new(Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![100.0], vec![0.5], 2).unwrap()))
+        let mut s = physcore_core::World::new(name, 1.0, Some(1)).unwrap();
+        s.particles_mut()
+            .add_particles(
+                vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
+                vec![glam::DVec2::ZERO, glam::DVec2::new(0.0, 1.0)],
+                vec![1.0, 1.0],
+                vec![true, false],
+            )
+            .unwrap();
+        s.particles_mut()
+            .add_term(Box::new(
+                Springs::new("s".into(), vec![0], vec![1], vec![1.0], vec![100.0], vec![0.5], 2).unwrap(),
+            ))
             .unwrap();
         let dt = s.suggest_dt();
         assert!(dt <= 0.5 / 200.0 + 1e-15, "{name}: suggested {dt} ignores the dashpot rate 2c/m = 200/s");
@@ -159,14 +165,14 @@ fn rk45_error_follows_tolerance() {
     let mut evals = vec![];
     for rtol in [1e-4, 1e-6, 1e-8, 1e-10] {
         let mut s = oscillator("rk45", 1.0);
-        s.set_tolerances(rtol, rtol * 1e-3).unwrap();
+        s.particles_mut().set_tolerances(rtol, rtol * 1e-3).unwrap();
         let n = t_end.round() as u64;
         s.step(n).unwrap();
-        let t = s.sys.state.t;
+        let t = s.time();
         assert_eq!(t, n as f64, "time is n·dt exactly");
-        let (x, v) = (s.sys.state.x[1], s.sys.state.v[1]);
+        let (x, v) = (s.particles().state().x[1], s.particles().state().v[1]);
         let e = ((x.x - t.cos()).powi(2) + (v.x + t.sin()).powi(2)).sqrt();
-        let (acc, rej, _) = s.adaptive_stats().unwrap();
+        let (acc, rej, _) = s.particles().adaptive_stats().unwrap();
         assert!(acc > 0 && rej <= acc, "rtol {rtol}: {acc} accepted, {rej} rejected");
         errs.push(e);
         evals.push(s.force_evaluations() as f64);
@@ -192,27 +198,28 @@ fn rk45_kepler_high_eccentricity() {
     use glam::DVec2;
     use physcore_core::terms::PairwiseGravity;
     let e: f64 = 0.9;
-    let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.5, Some(1)).unwrap();
+    let mut s = physcore_core::World::<DVec2>::new("rk45", 0.5, Some(1)).unwrap();
     let rp = 1.0 - e;
     let vp = ((1.0 + e) / rp).sqrt();
-    s.add_particles(
-        vec![DVec2::ZERO, DVec2::new(rp, 0.0)],
-        vec![DVec2::ZERO, DVec2::new(0.0, vp)],
-        vec![1.0, 1e-12],
-        vec![true, false],
-    )
-    .unwrap();
-    s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
-    s.set_tolerances(1e-10, 1e-13).unwrap();
+    s.particles_mut()
+        .add_particles(
+            vec![DVec2::ZERO, DVec2::new(rp, 0.0)],
+            vec![DVec2::ZERO, DVec2::new(0.0, vp)],
+            vec![1.0, 1e-12],
+            vec![true, false],
+        )
+        .unwrap();
+    s.particles_mut().add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
+    s.particles_mut().set_tolerances(1e-10, 1e-13).unwrap();
     let e0 = s.energy().total();
     let period = 2.0 * std::f64::consts::PI;
     s.set_dt(period / 16.0).unwrap();
     s.step(160).unwrap();
     let de = ((s.energy().total() - e0) / e0).abs();
-    let x = s.sys.state.x[1];
+    let x = s.particles().state().x[1];
     assert!(de < 1e-7, "energy error {de:e}");
     assert!((x - DVec2::new(rp, 0.0)).length() < 1e-5, "back at pericentre after 10 orbits: {x:?}");
-    let (acc, _, _) = s.adaptive_stats().unwrap();
+    let (acc, _, _) = s.particles().adaptive_stats().unwrap();
     assert!(acc > 160, "adaptive steps taken: {acc}");
 }
 
@@ -223,34 +230,38 @@ fn rk45_is_deterministic_and_fails_cleanly() {
     use physcore_core::terms::Springs;
     let run = |threads| {
         let n = 5000;
-        let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.01, Some(threads)).unwrap();
+        let mut s = physcore_core::World::<DVec2>::new("rk45", 0.01, Some(threads)).unwrap();
         let x: Vec<DVec2> = (0..n).map(|i| DVec2::new(i as f64 * 0.01, ((i * 7919) % 13) as f64 * 1e-3)).collect();
-        s.add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect()).unwrap();
+        s.particles_mut()
+            .add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect())
+            .unwrap();
         let a: Vec<u32> = (0..n as u32 - 1).collect();
         let b: Vec<u32> = (1..n as u32).collect();
-        s.add_term(Box::new(
-            Springs::new("s".into(), a, b, vec![50.0; n - 1], vec![0.0; n - 1], vec![0.009; n - 1], n).unwrap(),
-        ))
-        .unwrap();
+        s.particles_mut()
+            .add_term(Box::new(
+                Springs::new("s".into(), a, b, vec![50.0; n - 1], vec![0.0; n - 1], vec![0.009; n - 1], n).unwrap(),
+            ))
+            .unwrap();
         s.step(5).unwrap();
-        (s.sys.state.x.clone(), s.sys.state.v.clone())
+        (s.particles().state().x.clone(), s.particles().state().v.clone())
     };
     assert_eq!(run(1), run(2));
 
     // Forces that are infinite at the start: the controller gives up with the particle named,
     // and the state is rolled back.
     use physcore_core::terms::PairwiseGravity;
-    let mut s = physcore_core::Simulation::<DVec2>::new("rk45", 0.1, Some(1)).unwrap();
-    s.add_particles(
-        vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)],
-        vec![DVec2::ZERO; 2],
-        vec![1.0, 1.0],
-        vec![false, false],
-    )
-    .unwrap();
-    s.add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
+    let mut s = physcore_core::World::<DVec2>::new("rk45", 0.1, Some(1)).unwrap();
+    s.particles_mut()
+        .add_particles(
+            vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)],
+            vec![DVec2::ZERO; 2],
+            vec![1.0, 1.0],
+            vec![false, false],
+        )
+        .unwrap();
+    s.particles_mut().add_term(Box::new(PairwiseGravity::new("gravity".into(), 1.0, 0.0))).unwrap();
     let err = s.step(1).unwrap_err().to_string();
     assert!(err.contains("rtol/atol") && err.contains("particle"), "{err}");
-    assert_eq!(s.sys.state.step, 0);
-    assert_eq!(s.sys.state.x[1], DVec2::new(1e-160, 0.0));
+    assert_eq!(s.steps(), 0);
+    assert_eq!(s.particles().state().x[1], DVec2::new(1e-160, 0.0));
 }

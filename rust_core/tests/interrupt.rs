@@ -8,7 +8,7 @@ use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;
 use physcore_core::state::Model;
 use physcore_core::terms::{Springs, Term, UniformGravity};
-use physcore_core::Simulation;
+use physcore_core::World;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -53,27 +53,27 @@ impl Term<DVec3> for Tripwire {
 
 type Snapshot = (Vec<DVec3>, Vec<DVec3>, f64, u64, Vec<f64>, f64, Option<(Vec<DVec3>, Vec<f64>)>);
 
-fn snapshot(s: &Simulation<DVec3>) -> Snapshot {
-    let st = &s.sys.state;
+fn snapshot(s: &World<DVec3>) -> Snapshot {
+    let st = s.particles().state();
     (
         st.x.clone(),
         st.v.clone(),
-        st.t,
-        st.step,
-        s.sys.forces.dissipated.clone(),
-        s.collision_dissipated,
-        s.integrator_cache(),
+        s.time(),
+        s.steps(),
+        s.particles().forces().dissipated.clone(),
+        s.particles().constraints_dissipated(),
+        s.particles().integrator_cache(),
     )
 }
 
 /// A damped 8×8 cloth (dissipation books in play) with a tripwire; rk45 gets one long output
 /// step of many internal steps.
-fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> Simulation<DVec3> {
+fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> World<DVec3> {
     let mut s = cloth(8, integrator, threads, 0.05);
-    s.add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
+    s.particles_mut().add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
     if integrator == "rk45" {
         s.set_dt(0.5).unwrap();
-        s.set_tolerances(1e-9, 1e-12).unwrap();
+        s.particles_mut().set_tolerances(1e-9, 1e-12).unwrap();
     }
     s
 }
@@ -190,7 +190,7 @@ fn once_the_flag_is_up_the_remaining_terms_of_an_evaluation_are_skipped() {
         let at = 7;
         let mut s = scene(name, 1, &flag, at);
         let calls = Arc::new(AtomicU64::new(0));
-        s.add_term(Box::new(Counter(calls.clone()))).unwrap();
+        s.particles_mut().add_term(Box::new(Counter(calls.clone()))).unwrap();
         assert_eq!(s.step_interruptible(20, &flag), Err(Error::Interrupted { rolled_back_to: 0 }), "{name}");
         // The counter comes after the tripwire: it misses the evaluation in which the flag went up.
         assert_eq!(calls.load(Ordering::Relaxed), at - 1, "{name}");
@@ -201,19 +201,24 @@ fn once_the_flag_is_up_the_remaining_terms_of_an_evaluation_are_skipped() {
 }
 
 /// A stiff hanging chain under rk45 whose one output step (dt = 10⁴ s) takes minutes.
-fn long_rk45_step(threads: Option<usize>) -> Simulation<DVec3> {
+fn long_rk45_step(threads: Option<usize>) -> World<DVec3> {
     let n = 200;
-    let mut s = Simulation::new("rk45", 1e4, threads).unwrap();
+    let mut s = World::new("rk45", 1e4, threads).unwrap();
     let x = (0..n).map(|i| DVec3::new(i as f64 / n as f64, 0.0, 0.0)).collect();
-    s.add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect()).unwrap();
+    s.particles_mut()
+        .add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect())
+        .unwrap();
     let (i, j): (Vec<u32>, Vec<u32>) = (0..n as u32 - 1).map(|i| (i, i + 1)).unzip();
     let m = i.len();
-    s.add_term(Box::new(
-        Springs::new("springs".into(), i, j, vec![1e4; m], vec![0.0; m], vec![1.0 / n as f64; m], n).unwrap(),
-    ))
-    .unwrap();
-    s.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
-    s.set_tolerances(1e-10, 1e-12).unwrap();
+    s.particles_mut()
+        .add_term(Box::new(
+            Springs::new("springs".into(), i, j, vec![1e4; m], vec![0.0; m], vec![1.0 / n as f64; m], n).unwrap(),
+        ))
+        .unwrap();
+    s.particles_mut()
+        .add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) }))
+        .unwrap();
+    s.particles_mut().set_tolerances(1e-10, 1e-12).unwrap();
     s
 }
 
@@ -259,5 +264,5 @@ fn run_watched_from_a_pool_thread_runs_the_job_there() {
     s.set_dt(1e-3).unwrap();
     let r = one.install(|| s.run_watched(|s| s.step(1), |wait| assert!(wait(Duration::from_secs(60)))));
     assert_eq!(r, Ok(()));
-    assert_eq!(s.sys.state.step, 1);
+    assert_eq!(s.steps(), 1);
 }

@@ -1,6 +1,6 @@
 //! Explicit (forward) Euler: x' = x + dt v, v' = v + dt a(x, v). First order, not symplectic;
 //! energy grows for every dt on an oscillator. Included for contrast.
-use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -13,7 +13,7 @@ impl<V: Vector> Integrator<V> for ExplicitEuler<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "euler", order: 1, symplectic: false, force_evals_per_step: 1 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         ensure_len(&mut self.f, n);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);

@@ -19,8 +19,8 @@ pub use rk45::Rk45;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
 
-/// What a simulation hands an integrator: state, constants and the force terms.
-pub struct System<V: Vector> {
+/// What a particle system hands its integrator: state, constants and the force terms.
+pub struct Particles<V: Vector> {
     pub state: State<V>,
     pub model: Model,
     pub forces: ForceSet<V>,
@@ -52,14 +52,14 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// Advances `sys.state` by `dt` (x, v only; the caller advances time) and books the energy
     /// dissipated by the force terms during the step. Returns `true` if any position or
     /// velocity is not finite afterwards (checked in the final update pass, at no extra pass).
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool;
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool;
     /// `step`, giving up part-way with `Err(Stopped)` once `stop` is seen set; the state and
     /// the integrator's cache are then partly advanced, and the caller must roll both back.
     /// By default `stop` is not read: a fixed-step method's step is a few force evaluations, and
     /// the caller polls between steps. An adaptive one polls before every internal attempt.
     fn step_interruptible(
         &mut self,
-        sys: &mut System<V>,
+        sys: &mut Particles<V>,
         dt: Real,
         stop: &AtomicBool,
     ) -> std::result::Result<bool, Stopped> {

@@ -1,6 +1,6 @@
 //! Classic fourth-order Runge–Kutta on (x, v) (Kutta 1901; Hairer, Nørsett & Wanner, Solving
 //! ODEs I, Table 1.2). Fourth order, not symplectic, four force evaluations per step.
-use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -17,7 +17,7 @@ impl<V: Vector> Integrator<V> for Rk4<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "rk4", order: 4, symplectic: false, force_evals_per_step: 4 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         for b in [&mut self.f, &mut self.xs, &mut self.vs, &mut self.ax, &mut self.av] {
             ensure_len(b, n);

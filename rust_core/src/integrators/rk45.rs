@@ -16,25 +16,19 @@
 //!
 //! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
 //! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Stopped, System};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles, Stopped};
+use crate::ode;
 use crate::par;
 use crate::vector::{Real, Vector};
 use std::collections::TryReserveError;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-const A: [[Real; 6]; 7] = [
-    [0.0; 6],
-    [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-    [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
-    [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
-    [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
-    [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
-    // Row 7 is the 5th-order weights b: stage 7 is evaluated at the new state (FSAL).
-    [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
-];
-/// e = b − b̂ (5th minus embedded 4th-order weights), for the error estimate.
-const E: [Real; 7] =
-    [71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0];
+// The tableau (a, e = b − b̂) is the ODE layer's; stage 7's row of `a` is b (FSAL).
+const A: [[Real; ode::MAX_STAGES]; ode::MAX_STAGES] = ode::DOPRI5.a;
+const E: [Real; ode::MAX_STAGES] = match ode::DOPRI5.e {
+    Some(e) => e,
+    None => panic!("Dormand–Prince has an embedded estimate"),
+};
 const SAFETY: Real = 0.9;
 const FAC_MIN: Real = 0.2;
 const FAC_MAX: Real = 10.0;
@@ -111,7 +105,7 @@ fn max_combine(a: Real, b: Real) -> Real {
 
 impl<V: Vector> Rk45<V> {
     /// Derivative at the current state into stage 0.
-    fn first_stage(&mut self, sys: &mut System<V>) {
+    fn first_stage(&mut self, sys: &mut Particles<V>) {
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
         self.pw[0].clear();
         self.pw[0].extend_from_slice(sys.forces.last_power());
@@ -130,7 +124,7 @@ impl<V: Vector> Rk45<V> {
     /// Stage `S` (1..=6) at x0 + h Σ_j A[S][j] k_j; converts the forces of stage S−1 (in `f`)
     /// to accelerations in the same pass (stage 0's are converted by `first_stage`). `S` is a
     /// constant so the sum over j unrolls with the tableau folded in.
-    fn stage<const S: usize>(&mut self, sys: &mut System<V>, h: Real) {
+    fn stage<const S: usize>(&mut self, sys: &mut Particles<V>, h: Real) {
         let s = S;
         let (im, g) = (&sys.model.inv_mass, sys.forces.g);
         let (x0, v0) = (&sys.state.x, &sys.state.v);
@@ -167,7 +161,7 @@ impl<V: Vector> Rk45<V> {
     }
 
     /// Converts stage 7's forces and returns the scaled error norm (NaN if not finite).
-    fn error(&mut self, sys: &System<V>, h: Real) -> Real {
+    fn error(&mut self, sys: &Particles<V>, h: Real) -> Real {
         let (im, g) = (&sys.model.inv_mass, sys.forces.g);
         let (x0, v0) = (&sys.state.x, &sys.state.v);
         let (f, xs) = (&self.f, &self.xs);
@@ -197,7 +191,7 @@ impl<V: Vector> Rk45<V> {
 
     /// Particle of the last attempt with a non-finite or else the largest scaled error (for the
     /// divergence report).
-    fn worst_particle(&self, sys: &System<V>, h: Real) -> usize {
+    fn worst_particle(&self, sys: &Particles<V>, h: Real) -> usize {
         let (x0, v0) = (&sys.state.x, &sys.state.v);
         let mut best = (0, Real::NEG_INFINITY);
         for i in 0..x0.len() {
@@ -226,7 +220,7 @@ impl<V: Vector> Rk45<V> {
 
     /// Hairer's starting step (Solving ODEs I, §II.4): h with h⁵·|y''| ≈ 0.01 in the error norm.
     /// Costs one force evaluation (not booked: it does not advance the state).
-    fn initial_step(&mut self, sys: &mut System<V>, span: Real) -> Real {
+    fn initial_step(&mut self, sys: &mut Particles<V>, span: Real) -> Real {
         let (x0, v0) = (&sys.state.x, &sys.state.v);
         let (rtol, atol) = (self.rtol, self.atol);
         let norm = |a: &[V], b: &[V], sa: &[V], sb: &[V]| -> Real {
@@ -285,12 +279,12 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         IntegratorInfo { name: "rk45", order: 5, symplectic: false, force_evals_per_step: 6 }
     }
 
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let never = AtomicBool::new(false);
         self.step_interruptible(sys, dt, &never).unwrap_or(true)
     }
 
-    fn step_interruptible(&mut self, sys: &mut System<V>, dt: Real, stop: &AtomicBool) -> Result<bool, Stopped> {
+    fn step_interruptible(&mut self, sys: &mut Particles<V>, dt: Real, stop: &AtomicBool) -> Result<bool, Stopped> {
         let n = sys.state.x.len();
         if self.xs.len() != n {
             self.fsal = false;
@@ -333,7 +327,7 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
             let err = self.error(sys, h);
             if err <= 1.0 {
                 // Accept: the new state is stage 7's, whose derivative starts the next step.
-                for (j, b) in A[6].iter().enumerate() {
+                for (j, b) in ode::DOPRI5.b[..6].iter().enumerate() {
                     sys.forces.set_last_power(&self.pw[j]);
                     sys.forces.book_power(h * b);
                 }

@@ -1,6 +1,6 @@
 //! Semi-implicit (symplectic) Euler, kick then drift: v' = v + dt a(x, v); x' = x + dt v'.
 //! First order, symplectic: bounded energy error on conservative systems for ω·dt < 2.
-use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 
@@ -13,7 +13,7 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "semi_implicit_euler", order: 1, symplectic: true, force_evals_per_step: 1 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         ensure_len(&mut self.f, n);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);

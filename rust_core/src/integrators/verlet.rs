@@ -7,7 +7,7 @@
 //! v + dt a(x, v), whose O(dt²) error keeps the method second order; evaluating them with v½
 //! (a common shortcut) would drop it to first order. Without such forces the prediction is
 //! skipped and the method is exactly the symplectic velocity Verlet.
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, System};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 use std::collections::TryReserveError;
@@ -26,7 +26,7 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn info(&self) -> IntegratorInfo {
         IntegratorInfo { name: "verlet", order: 2, symplectic: true, force_evals_per_step: 1 }
     }
-    fn step(&mut self, sys: &mut System<V>, dt: Real) -> bool {
+    fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         if !self.valid || self.f.len() != n {
             ensure_len(&mut self.f, n);

@@ -4,7 +4,7 @@ use super::errors::*;
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Error};
 use crate::integrators::IntegratorInfo;
-use crate::simulation::EnergyReport;
+use crate::systems::EnergyReport;
 use crate::terms::registry::{Params, Value};
 use crate::vector::Vector;
 use numpy::ndarray::Array2;

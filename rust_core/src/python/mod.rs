@@ -2,7 +2,7 @@
 //! (`physcore.Scene`) validates inputs first, and everything is validated again here so the
 //! private module is safe to call directly. The GIL is released around stepping.
 use crate::integrators;
-use crate::simulation::Simulation;
+use crate::world::World;
 use glam::{DVec2, DVec3};
 use numpy::{IntoPyArray, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -28,8 +28,8 @@ use simulation::PySimulation;
 
 /// A simulation of either dimension (the core is generic over the vector type).
 enum Inner {
-    D2(Simulation<DVec2>),
-    D3(Simulation<DVec3>),
+    D2(World<DVec2>),
+    D3(World<DVec3>),
 }
 
 /// All pairs i < j of `points` ((N, 2) or (N, 3) float64, C-contiguous) closer than `radius`:

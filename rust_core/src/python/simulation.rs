@@ -1,11 +1,11 @@
-//! The `_core.Simulation` class: a handle on one 2D or 3D `crate::Simulation`.
+//! The `_core.Simulation` class: a handle on one 2D or 3D `crate::World`.
 use super::{convert::*, errors::*, watch::*, Inner};
 use crate::alloc::{count, Need};
-use crate::boundary::{Aabb, Plane};
+use crate::constraints::{Aabb, Plane};
 use crate::error::{invalid, Error};
-use crate::simulation::Simulation;
 use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
+use crate::world::World;
 use glam::{DVec2, DVec3};
 use numpy::ndarray::Array1;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -27,8 +27,8 @@ impl PySimulation {
     #[pyo3(signature = (dim, integrator, dt, threads=None))]
     fn new(py: Python<'_>, dim: usize, integrator: &str, dt: f64, threads: Option<usize>) -> PyResult<Self> {
         let inner = match dim {
-            2 => Inner::D2(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
-            3 => Inner::D3(Simulation::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            2 => Inner::D2(World::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            3 => Inner::D3(World::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
             _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
         Ok(Self { inner })
@@ -49,12 +49,12 @@ impl PySimulation {
 
     #[getter]
     fn time(&self) -> f64 {
-        with_sim!(&self.inner, s => s.sys.state.t)
+        with_sim!(&self.inner, s => s.time())
     }
 
     #[getter]
     fn step_count(&self) -> u64 {
-        with_sim!(&self.inner, s => s.sys.state.step)
+        with_sim!(&self.inner, s => s.steps())
     }
 
     /// Why this simulation runs on the calling thread alone (its threads could not be
@@ -76,38 +76,38 @@ impl PySimulation {
 
     #[getter]
     fn integrator(&self) -> &'static str {
-        with_sim!(&self.inner, s => s.integrator_info().name)
+        with_sim!(&self.inner, s => s.particles().integrator_info().name)
     }
 
     #[setter]
     fn set_integrator(&mut self, py: Python<'_>, name: &str) -> PyResult<()> {
-        with_sim!(&mut self.inner, s => s.set_integrator(name)).map_err(|e| to_py(py, e))
+        with_sim!(&mut self.inner, s => s.particles_mut().set_integrator(name)).map_err(|e| to_py(py, e))
     }
 
     /// (rtol, atol) of the adaptive integrator.
     #[getter]
     fn tolerances(&self) -> (f64, f64) {
-        with_sim!(&self.inner, s => s.tolerances())
+        with_sim!(&self.inner, s => s.particles().tolerances())
     }
 
     fn set_tolerances(&mut self, py: Python<'_>, rtol: f64, atol: f64) -> PyResult<()> {
-        with_sim!(&mut self.inner, s => s.set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
+        with_sim!(&mut self.inner, s => s.particles_mut().set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
     }
 
     /// (accepted, rejected, next internal step s) for "rk45", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
-        with_sim!(&self.inner, s => s.adaptive_stats())
+        with_sim!(&self.inner, s => s.particles().adaptive_stats())
     }
 
     /// Whether the state is kept in single precision.
     #[getter]
     fn single(&self) -> bool {
-        with_sim!(&self.inner, s => s.single())
+        with_sim!(&self.inner, s => s.particles().single())
     }
 
     #[setter]
     fn set_single(&mut self, single: bool) {
-        with_sim!(&mut self.inner, s => s.set_single(single))
+        with_sim!(&mut self.inner, s => s.particles_mut().set_single(single))
     }
 
     /// The substep advance() would take now, or None (O(N²) with gravity: GIL released, and
@@ -117,7 +117,7 @@ impl PySimulation {
     }
 
     fn integrator_info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        info_dict(py, with_sim!(&self.inner, s => s.integrator_info()))
+        info_dict(py, with_sim!(&self.inner, s => s.particles().integrator_info()))
     }
 
     #[getter]
@@ -148,7 +148,7 @@ impl PySimulation {
         };
         let (m, p) = copies().map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => {
-            vectors(x, &need).and_then(|x| Ok((x, vectors(v, &need)?))).and_then(|(x, v)| s.add_particles(x, v, m, p))
+            vectors(x, &need).and_then(|x| Ok((x, vectors(v, &need)?))).and_then(|(x, v)| s.particles_mut().add_particles(x, v, m, p))
         })
         .map_err(|e| to_py(py, e))
     }
@@ -156,23 +156,23 @@ impl PySimulation {
     /// Positions, m: a new (N, dim) float64 array (a copy; writing to it changes nothing).
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.x, "positions"))
+        with_sim!(&self.inner, s => to_array2(py, &s.particles().state().x, "positions"))
     }
 
     /// Velocities, m/s: a new (N, dim) float64 array (a copy).
     #[getter]
     fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        with_sim!(&self.inner, s => to_array2(py, &s.sys.state.v, "velocities"))
+        with_sim!(&self.inner, s => to_array2(py, &s.particles().state().v, "velocities"))
     }
 
     #[getter]
     fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.mass.clone()).into_pyarray(py))
+        with_sim!(&self.inner, s => Array1::from_vec(s.particles().model().mass.clone()).into_pyarray(py))
     }
 
     #[getter]
     fn pinned<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
-        with_sim!(&self.inner, s => Array1::from_vec(s.sys.model.inv_mass.iter().map(|&im| im == 0.0).collect()).into_pyarray(py))
+        with_sim!(&self.inner, s => Array1::from_vec(s.particles().model().inv_mass.iter().map(|&im| im == 0.0).collect()).into_pyarray(py))
     }
 
     #[pyo3(signature = (positions=None, velocities=None))]
@@ -188,7 +188,7 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => {
             let x = x.map(|x| try_from_flat(x, "set_state", "positions")).transpose();
             let v = v.map(|v| try_from_flat(v, "set_state", "velocities")).transpose();
-            x.and_then(|x| Ok((x, v?))).and_then(|(x, v)| s.set_state(x, v))
+            x.and_then(|x| Ok((x, v?))).and_then(|(x, v)| s.particles_mut().set_state(x, v))
         })
         .map_err(|e| to_py(py, e))
     }
@@ -198,14 +198,14 @@ impl PySimulation {
         let v = slice1(&values, name)?;
         let need = Need::new("set_attribute", Need::bytes_of::<f64>(v.len()), format!("a copy of {name}"));
         let v = need.copy(v).map_err(|e| to_py(py, e))?;
-        with_sim!(&mut self.inner, s => s.set_attribute(name, v)).map_err(|e| to_py(py, e))
+        with_sim!(&mut self.inner, s => s.particles_mut().set_attribute(name, v)).map_err(|e| to_py(py, e))
     }
 
     /// The attributes set so far: name -> (N,) float64 copy.
     fn attributes<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
         with_sim!(&self.inner, s => {
-            for (k, a) in &s.sys.model.attributes {
+            for (k, a) in &s.particles().model().attributes {
                 d.set_item(*k, a.clone().into_pyarray(py))?;
             }
         });
@@ -221,11 +221,11 @@ impl PySimulation {
         match &mut self.inner {
             Inner::D2(s) => {
                 let ctx = Context { n_particles: s.n_particles() };
-                ty.build::<DVec2>(name, p, &ctx).and_then(|t| s.add_term(t))
+                ty.build::<DVec2>(name, p, &ctx).and_then(|t| s.particles_mut().add_term(t))
             }
             Inner::D3(s) => {
                 let ctx = Context { n_particles: s.n_particles() };
-                ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.add_term(t))
+                ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.particles_mut().add_term(t))
             }
         }
         .map_err(|e| to_py(py, e))
@@ -240,8 +240,8 @@ impl PySimulation {
         friction: f64,
     ) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
-            let p = Plane { point: vec_of(&point, "point")?, normal: vec_of(&normal, "normal")?, restitution, friction };
-            s.add_plane(p)
+            let p = Plane::new(vec_of(&point, "point")?, vec_of(&normal, "normal")?, restitution, friction);
+            p.map(|p| s.particles_mut().add_constraint(Box::new(p)))
         })
         .map_err(|e| to_py(py, e))
     }
@@ -255,8 +255,8 @@ impl PySimulation {
         friction: f64,
     ) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
-            let b = Aabb { lo: vec_of(&lower, "lower")?, hi: vec_of(&upper, "upper")?, restitution, friction };
-            s.add_box(b)
+            let b = Aabb::new(vec_of(&lower, "lower")?, vec_of(&upper, "upper")?, restitution, friction);
+            b.map(|b| s.particles_mut().add_constraint(Box::new(b)))
         })
         .map_err(|e| to_py(py, e))
     }
@@ -266,7 +266,7 @@ impl PySimulation {
     /// state is rolled back to where the call started and KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
-            if s.adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
+            if s.particles().adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
                 let never = Arc::new(AtomicBool::new(false));
                 let cp = py.detach(|| s.step_checkpointed(n, &never)).map_err(|e| to_py(py, e))?;
                 return undo_if_signalled(py, s, ((), cp));
@@ -283,7 +283,7 @@ impl PySimulation {
 
     /// ((grid_s, density_s, forces_s), heap bytes) of the SPH terms.
     fn fluid_profile(&self) -> ((f64, f64, f64), usize) {
-        let (c, b) = with_sim!(&self.inner, s => s.fluid_profile());
+        let (c, b) = with_sim!(&self.inner, s => s.particles().fluid_profile());
         ((c[0], c[1], c[2]), b)
     }
 
@@ -317,12 +317,12 @@ impl PySimulation {
 
     /// (per-term dissipated energy in term order, collisions), J.
     fn ledger(&self) -> (Vec<f64>, f64) {
-        with_sim!(&self.inner, s => (s.sys.forces.dissipated.clone(), s.collision_dissipated))
+        with_sim!(&self.inner, s => (s.particles().forces().dissipated.clone(), s.particles().constraints_dissipated()))
     }
 
     /// Cached forces (N, dim) and term powers carried between steps, or None.
     fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<CacheArrays<'py>>> {
-        with_sim!(&self.inner, s => s.integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
+        with_sim!(&self.inner, s => s.particles().integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
     }
 
     #[pyo3(signature = (t, step, dissipated, collisions, cache_forces=None, cache_power=None))]

@@ -2,8 +2,8 @@
 //! the calling thread runs Python's signal handlers, and an interrupted call is rolled back.
 use super::errors::*;
 use crate::error::Error;
-use crate::simulation::{Checkpoint, Simulation};
 use crate::vector::Vector;
+use crate::world::{Checkpoint, World};
 use pyo3::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -24,8 +24,8 @@ pub(super) const SHORT_CALL: u64 = 4096;
 /// stands, however close to its end the signal came. Returns the call's result otherwise.
 pub(super) fn undo_if_signalled<V: Vector, T>(
     py: Python<'_>,
-    sim: &mut Simulation<V>,
-    (v, cp): (T, Checkpoint<V>),
+    sim: &mut World<V>,
+    (v, cp): (T, Checkpoint),
 ) -> PyResult<T> {
     match py.check_signals() {
         Ok(()) => Ok(v),
@@ -43,8 +43,8 @@ pub(super) fn undo_if_signalled<V: Vector, T>(
 /// exception is returned beside `f`'s result.
 pub(super) fn watched<V: Vector, T: Send>(
     py: Python<'_>,
-    sim: &mut Simulation<V>,
-    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
+    sim: &mut World<V>,
+    f: impl FnOnce(&mut World<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
 ) -> (Result<T, Error>, Option<PyErr>) {
     let stop = Arc::new(AtomicBool::new(false));
     let mut pending: Option<PyErr> = None;
@@ -71,8 +71,8 @@ pub(super) fn watched<V: Vector, T: Send>(
 /// interrupted call never stands.
 pub(super) fn interruptible<V: Vector, T: Send>(
     py: Python<'_>,
-    sim: &mut Simulation<V>,
-    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<(T, Checkpoint<V>), Error> + Send,
+    sim: &mut World<V>,
+    f: impl FnOnce(&mut World<V>, &Arc<AtomicBool>) -> Result<(T, Checkpoint), Error> + Send,
 ) -> PyResult<T> {
     match watched(py, sim, f) {
         (Ok(done), None) => undo_if_signalled(py, sim, done),
@@ -90,8 +90,8 @@ pub(super) fn interruptible<V: Vector, T: Send>(
 /// exception stops it and is raised; there is nothing to roll back.
 pub(super) fn interruptible_read<V: Vector, T: Send>(
     py: Python<'_>,
-    sim: &mut Simulation<V>,
-    f: impl FnOnce(&mut Simulation<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
+    sim: &mut World<V>,
+    f: impl FnOnce(&mut World<V>, &Arc<AtomicBool>) -> Result<T, Error> + Send,
 ) -> PyResult<T> {
     match watched(py, sim, f) {
         (_, Some(e)) => Err(e),

@@ -1,14 +1,18 @@
 #![allow(dead_code)]
 use glam::{DVec2, DVec3};
 use physcore_core::terms::{PairwiseGravity, Springs, UniformGravity};
-use physcore_core::Simulation;
+use physcore_core::World;
 
 /// Unit-mass particle on a unit spring to a pinned anchor at the origin: x(t) = cos t.
-pub fn oscillator(integrator: &str, dt: f64) -> Simulation<DVec2> {
-    let mut s = Simulation::new(integrator, dt, Some(1)).unwrap();
-    s.add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false])
+pub fn oscillator(integrator: &str, dt: f64) -> World<DVec2> {
+    let mut s = World::new(integrator, dt, Some(1)).unwrap();
+    s.particles_mut()
+        .add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false])
         .unwrap();
-    s.add_term(Box::new(Springs::new("springs".into(), vec![0], vec![1], vec![1.0], vec![0.0], vec![0.0], 2).unwrap()))
+    s.particles_mut()
+        .add_term(Box::new(
+            Springs::new("springs".into(), vec![0], vec![1], vec![1.0], vec![0.0], vec![0.0], 2).unwrap(),
+        ))
         .unwrap();
     s
 }
@@ -29,7 +33,7 @@ impl Rng {
 }
 
 /// n×n cloth in the z = 0 plane, first row pinned, structural + shear springs, gravity.
-pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> Simulation<DVec3> {
+pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> World<DVec3> {
     let s_ = 1.0 / (n - 1) as f64;
     let mut x = Vec::new();
     let mut pinned = Vec::new();
@@ -40,8 +44,8 @@ pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> Simula
         }
     }
     let np = n * n;
-    let mut sim = Simulation::new(integrator, 1e-4, Some(threads)).unwrap();
-    sim.add_particles(x.clone(), vec![DVec3::ZERO; np], vec![1.0 / np as f64; np], pinned).unwrap();
+    let mut sim = World::new(integrator, 1e-4, Some(threads)).unwrap();
+    sim.particles_mut().add_particles(x.clone(), vec![DVec3::ZERO; np], vec![1.0 / np as f64; np], pinned).unwrap();
     let (mut a, mut b) = (Vec::new(), Vec::new());
     for j in 0..n {
         for i in 0..n {
@@ -64,20 +68,23 @@ pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> Simula
     }
     let m = a.len();
     let rest: Vec<f64> = a.iter().zip(&b).map(|(&i, &j)| (x[j as usize] - x[i as usize]).length()).collect();
-    sim.add_term(Box::new(Springs::new("springs".into(), a, b, vec![100.0; m], vec![damping; m], rest, np).unwrap()))
+    sim.particles_mut()
+        .add_term(Box::new(Springs::new("springs".into(), a, b, vec![100.0; m], vec![damping; m], rest, np).unwrap()))
         .unwrap();
-    sim.add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) })).unwrap();
+    sim.particles_mut()
+        .add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) }))
+        .unwrap();
     sim
 }
 
 /// Cloud of n bodies in the unit cube with small random velocities, under pairwise gravity.
-pub fn cloud(n: usize, threads: usize, softening: f64) -> Simulation<DVec3> {
+pub fn cloud(n: usize, threads: usize, softening: f64) -> World<DVec3> {
     let mut r = Rng(7);
     let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(r.uniform(), r.uniform(), r.uniform())).collect();
     let v: Vec<DVec3> =
         (0..n).map(|_| DVec3::new(r.uniform() - 0.5, r.uniform() - 0.5, r.uniform() - 0.5) * 0.1).collect();
-    let mut sim = Simulation::new("verlet", 1e-3, Some(threads)).unwrap();
-    sim.add_particles(x, v, vec![1.0 / n as f64; n], vec![false; n]).unwrap();
-    sim.add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, softening))).unwrap();
+    let mut sim = World::new("verlet", 1e-3, Some(threads)).unwrap();
+    sim.particles_mut().add_particles(x, v, vec![1.0 / n as f64; n], vec![false; n]).unwrap();
+    sim.particles_mut().add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, softening))).unwrap();
     sim
 }

@@ -6,6 +6,8 @@
 //! never past zero. The energy this removes is booked as dissipated: the change in kinetic energy
 //! plus the work −F·Δx of the last evaluated force F (with gravity) over the projection Δx
 //! (exact for uniform gravity, first order otherwise).
+use super::{check_contact, Constraint};
+use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
@@ -13,19 +15,33 @@ use crate::vector::{Real, Vector};
 #[derive(Clone, Debug)]
 pub struct Plane<V: Vector> {
     /// A point on the plane, m.
-    pub point: V,
+    pub(crate) point: V,
     /// Unit normal pointing into the allowed half-space.
-    pub normal: V,
+    pub(crate) normal: V,
     /// Coefficient of restitution e in [0, 1].
-    pub restitution: Real,
+    pub(crate) restitution: Real,
     /// Coulomb friction coefficient μ ≥ 0.
-    pub friction: Real,
+    pub(crate) friction: Real,
 }
 
 impl<V: Vector> Plane<V> {
-    /// Resolves contacts; returns (energy dissipated J, whether any particle was touched).
-    /// `f_last`: forces of the last evaluation; `g`: uniform acceleration (not in `f_last`).
-    pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
+    /// The plane through `point` (m) with `normal` (any length > 0: it is normalised) pointing
+    /// into the allowed side; `InvalidInput` naming the argument if one is out of range.
+    pub fn new(point: V, normal: V, restitution: Real, friction: Real) -> Result<Self> {
+        if !point.is_finite() {
+            return Err(invalid("point", "must be finite"));
+        }
+        let l2 = normal.length_squared();
+        if !(l2.is_finite() && l2 > 0.0) {
+            return Err(invalid("normal", "must be finite and non-zero"));
+        }
+        check_contact(restitution, friction)?;
+        Ok(Self { point, normal: normal / l2.sqrt(), restitution, friction })
+    }
+}
+
+impl<V: Vector> Constraint<V> for Plane<V> {
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
         par::chunks2_fold(
             x,

@@ -3,6 +3,8 @@
 //! projected onto the face; if it moves outward its normal velocity becomes −e·v_n and its
 //! tangential velocity drops by μ(1 + e)|v_n| (never reversing). The energy removed (ΔKE plus the
 //! work −F·Δx of the last force and gravity over the projection) is booked as dissipated.
+use super::{check_contact, Constraint};
+use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
@@ -10,18 +12,31 @@ use crate::vector::{Real, Vector};
 #[derive(Clone, Debug)]
 pub struct Aabb<V: Vector> {
     /// Lower corner, m.
-    pub lo: V,
+    pub(crate) lo: V,
     /// Upper corner, m (> lo on every axis).
-    pub hi: V,
+    pub(crate) hi: V,
     /// Coefficient of restitution e in [0, 1].
-    pub restitution: Real,
+    pub(crate) restitution: Real,
     /// Coulomb friction coefficient μ ≥ 0.
-    pub friction: Real,
+    pub(crate) friction: Real,
 }
 
 impl<V: Vector> Aabb<V> {
-    /// Resolves contacts; returns (energy dissipated J, whether any particle was touched).
-    pub fn apply(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
+    /// The box [lo, hi] (m); `InvalidInput` naming the argument if one is out of range.
+    pub fn new(lo: V, hi: V, restitution: Real, friction: Real) -> Result<Self> {
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(invalid("lower/upper", "must be finite"));
+        }
+        if (0..V::DIM).any(|k| !(hi.comp(k) > lo.comp(k))) {
+            return Err(invalid("upper", "must be > lower on every axis"));
+        }
+        check_contact(restitution, friction)?;
+        Ok(Self { lo, hi, restitution, friction })
+    }
+}
+
+impl<V: Vector> Constraint<V> for Aabb<V> {
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (e, mu) = (self.restitution, self.friction);
         let mut lo = [0.0; 3];
         let mut hi = [0.0; 3];

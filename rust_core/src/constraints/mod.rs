@@ -1,0 +1,77 @@
+//! The constraint (projection) stage: run after each integration step, it moves particles back
+//! into the allowed set and corrects their velocities. Today's walls (`Plane`, `Aabb`) live
+//! here; position-based constraints (XPBD, Macklin, Müller & Chentanez 2016) will join them.
+//! The energy a projection removes goes into one book, "collisions".
+pub mod aabb;
+pub mod plane;
+pub use aabb::Aabb;
+pub use plane::Plane;
+
+use crate::error::{invalid, Result};
+use crate::par;
+use crate::state::{Model, State};
+use crate::vector::{Real, Vector};
+
+/// One constraint of the projection stage.
+pub trait Constraint<V: Vector>: Send + Sync {
+    /// Projects `x` back into the allowed set and corrects `v` (restitution, friction); returns
+    /// (energy removed, J; whether any particle was moved). `f_last`: forces (N) of the last
+    /// evaluation, `g`: the uniform acceleration (m/s², not in `f_last`), for the work the
+    /// projection does against them.
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool);
+}
+
+/// The constraints of a particle system, applied in the order they were added, and the energy
+/// they have removed so far.
+pub struct Constraints<V: Vector> {
+    items: Vec<Box<dyn Constraint<V>>>,
+    /// Energy removed by the constraints so far, J (the "collisions" book).
+    pub dissipated: Real,
+}
+
+impl<V: Vector> Default for Constraints<V> {
+    fn default() -> Self {
+        Self { items: Vec::new(), dissipated: 0.0 }
+    }
+}
+
+impl<V: Vector> Constraints<V> {
+    pub fn push(&mut self, c: Box<dyn Constraint<V>>) {
+        self.items.push(c);
+    }
+    pub fn is_empty(&self) -> bool {
+        self.items.is_empty()
+    }
+    pub fn len(&self) -> usize {
+        self.items.len()
+    }
+
+    /// Runs every constraint on `state` and books what they remove; returns whether any particle
+    /// was moved (a cached force or stage derivative is then stale). With a single-precision
+    /// state the moved state is rounded back to float32.
+    pub fn apply(&mut self, state: &mut State<V>, model: &Model, f_last: &[V], g: V, single: bool) -> bool {
+        let mut touched = false;
+        for c in &self.items {
+            let (d, t) = c.project(&mut state.x, &mut state.v, model, f_last, g);
+            self.dissipated += d;
+            touched |= t;
+        }
+        if touched && single {
+            par::chunks2(&mut state.x, &mut state.v, |_, x, v| {
+                x.iter_mut().chain(v.iter_mut()).for_each(|p| *p = p.round_f32());
+            });
+        }
+        touched
+    }
+}
+
+/// The contact coefficients every wall takes: restitution e in [0, 1], friction μ ≥ 0.
+pub(crate) fn check_contact(restitution: Real, friction: Real) -> Result<()> {
+    if !(0.0..=1.0).contains(&restitution) {
+        return Err(invalid("restitution", format!("{restitution} is outside [0, 1]")));
+    }
+    if !(friction.is_finite() && friction >= 0.0) {
+        return Err(invalid("friction", format!("{friction} must be finite and >= 0")));
+    }
+    Ok(())
+}

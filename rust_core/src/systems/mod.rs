@@ -1,0 +1,109 @@
+//! Systems: what a [`World`](crate::world::World) steps together. Each owns its state and
+//! buffers and answers the world through one trait: advance by dt, energy books, the largest
+//! stable dt, snapshot/restore (rollback, bit-identical restarts) and named output fields.
+//!
+//! - [`particles::ParticleSystem`]: particles under force terms (springs, gravity, SPH, …),
+//!   stepped by a particle integrator, then projected by the constraint stage (walls).
+//! - [`ode::OdeSystem`]: a first-order ODE y' = f(y) on a flat array, stepped by any explicit
+//!   Butcher tableau of [`crate::ode`] (flows such as the Lorenz system; a field discretised in
+//!   space, by the method of lines).
+//!
+//! Couplings between systems ([`Coupling`]) run after all systems have stepped.
+pub mod ode;
+pub mod particles;
+
+use crate::error::{Failure, Result};
+use crate::stop::Stop;
+use crate::vector::{Real, Vector};
+use std::any::Any;
+use std::sync::atomic::AtomicBool;
+
+/// Energy books at one instant (J). `total()` = kinetic + Σ potential + Σ dissipated is conserved
+/// by the exact dynamics; its change is the integrator's error.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct EnergyReport {
+    pub kinetic: Real,
+    /// Potential energy of each conservative term, by term name.
+    pub potential: Vec<(String, Real)>,
+    /// Energy dissipated so far by each dissipative term and by the constraints ("collisions").
+    pub dissipated: Vec<(String, Real)>,
+}
+
+impl EnergyReport {
+    pub fn total(&self) -> Real {
+        self.kinetic
+            + self.potential.iter().map(|p| p.1).sum::<Real>()
+            + self.dissipated.iter().map(|p| p.1).sum::<Real>()
+    }
+    /// Adds another system's books to these (kinetic energies add; named entries append).
+    pub fn merge(&mut self, other: EnergyReport) {
+        self.kinetic += other.kinetic;
+        self.potential.extend(other.potential);
+        self.dissipated.extend(other.dissipated);
+    }
+}
+
+/// Everything a system needs to return to an earlier instant, bit for bit. Opaque to the
+/// world: only the system that made it reads it back (`System::restore`), so each system keeps
+/// whatever it needs (a particle system: state, books, its integrator's cache) without the
+/// world knowing its types.
+pub type Snapshot = Box<dyn Any + Send>;
+
+/// Why a system's step did not stand.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Halt {
+    /// The stop flag was seen set (the step may be partial).
+    Stopped,
+    /// A value became non-finite (or an adaptive step could not be controlled): the element
+    /// (particle, grid cell, ODE component) and what went wrong.
+    Diverged { index: usize, quantity: Failure },
+}
+
+/// One system of a world. Methods that run kernels are called on the world's thread pool.
+pub trait System: Send + Sync {
+    /// Short name, e.g. "particles" (the books of several systems are told apart by it).
+    fn name(&self) -> &str;
+    /// Whether there is nothing to step (the world then only advances time).
+    fn is_empty(&self) -> bool;
+    /// Reserves, fallibly, what stepping will need (`Error::OutOfMemory` and no change if it
+    /// cannot), so that a step allocates nothing that could abort the process.
+    fn prepare(&mut self) -> Result<()> {
+        Ok(())
+    }
+    /// Hands the system the stop flag of the call in progress (`Stop::default()` after it),
+    /// for evaluations long enough to poll it (see `crate::stop`).
+    fn set_stop(&mut self, _stop: &Stop) {}
+    /// Advances by `dt` seconds. On `Err` the world rolls every system back.
+    fn step(&mut self, dt: Real, stop: &AtomicBool) -> std::result::Result<(), Halt>;
+    /// Told that the world's dt changed between calls: drop anything predicted with the old one.
+    fn dt_changed(&mut self) {}
+    /// Whether the system picks its own internal steps (an adaptive integrator): with no stable
+    /// dt anywhere, `World::advance` then takes the whole duration as one step.
+    fn adaptive(&self) -> bool {
+        false
+    }
+    /// The largest step (s) `World::advance` should take now, `None` if the system sets none.
+    fn auto_dt(&self) -> Option<Real>;
+    /// A step (s) safely inside the stability region, to suggest after a divergence; `None` if
+    /// the system has no time scale.
+    fn suggest_dt(&self) -> Option<Real>;
+    /// The energy books now.
+    fn energy(&self) -> EnergyReport;
+    /// The named output fields `names`, one value per element (0 where a field is not defined;
+    /// all zeros if the system has no field of that name).
+    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>>;
+    /// A copy of everything `step` changes, allocated fallibly.
+    fn snapshot(&self) -> Result<Snapshot>;
+    /// Returns to `snapshot`, which this system made.
+    fn restore(&mut self, snapshot: Snapshot);
+}
+
+/// An exchange between systems (tracers carried by a grid's velocity, a fluid pushing a body),
+/// run by the world after every system has stepped, in the order the couplings were added. It
+/// keeps no state of its own (rollback restores the systems only); it reads other systems
+/// through their named fields.
+pub trait Coupling<V: Vector>: Send + Sync {
+    fn name(&self) -> &str;
+    /// Applies the exchange over a step of `dt` seconds.
+    fn apply(&mut self, particles: &mut particles::ParticleSystem<V>, others: &mut [Box<dyn System>], dt: Real);
+}

@@ -1,0 +1,528 @@
+//! The world: every system of a scene, stepped together on one thread pool, with one clock
+//! (time, step count, dt), rollback, interrupts and the energy books of all systems.
+//!
+//! ```text
+//!   World ── clock (t, step, dt), thread pool, stop flag, checkpoints
+//!     ├── ParticleSystem  (systems/particles)   state + model
+//!     │     ├── ForceSet: terms (springs, gravity, SPH, fields…; terms/, sph/)
+//!     │     ├── Integrator (integrators/; tableaux from ode/)
+//!     │     └── Constraints: projection after each step (constraints/: walls; XPBD next)
+//!     ├── further systems behind `System` (systems/ode; grids next)
+//!     └── Couplings between systems, after every step
+//! ```
+//!
+//! One call (`step`, `advance`) is atomic: it takes a checkpoint of every system first, and a
+//! divergence or an interrupt anywhere restores all of them.
+use crate::error::{invalid, Error, Result};
+use crate::par;
+use crate::stop::Stop;
+use crate::systems::particles::ParticleSystem;
+use crate::systems::{Coupling, EnergyReport, Halt, Snapshot, System};
+use crate::vector::{Real, Vector};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// The largest step count: files store it as an int64, and it must never wrap.
+pub const MAX_STEPS: u64 = i64::MAX as u64;
+
+/// What `World::rollback` restores (see `World::checkpoint`).
+pub struct Checkpoint {
+    snapshots: Vec<Snapshot>,
+    t: Real,
+    step: u64,
+    dt: Real,
+}
+
+pub struct World<V: Vector> {
+    /// The first system: every scene has particles (possibly none).
+    particles: ParticleSystem<V>,
+    /// Further systems, stepped after the particles in the order they were added.
+    others: Vec<Box<dyn System>>,
+    couplings: Vec<Box<dyn Coupling<V>>>,
+    /// Simulated time, s.
+    t: Real,
+    /// Steps taken since the world was built.
+    step: u64,
+    /// Time step, s.
+    pub dt: Real,
+    /// The pool the stepping runs on; `None`: the calling thread only (see `sequential`).
+    pool: Option<Arc<rayon::ThreadPool>>,
+    /// Why there is no pool: the default one could not start its threads.
+    sequential: Option<String>,
+}
+
+impl<V: Vector> World<V> {
+    /// A world with an empty particle system stepped by `integrator` (`integrators::NAMES`).
+    /// `threads`: `None` shares `par::default_pool` (all cores, or `RAYON_NUM_THREADS`), or, if
+    /// its threads cannot be started (a thread limit), runs on the calling thread only
+    /// (`sequential()` says why); `Some(n)`: a pool of its own, `Error::Threads` if the n
+    /// threads cannot be started.
+    pub fn new(integrator: &str, dt: Real, threads: Option<usize>) -> Result<Self> {
+        check_dt(dt)?;
+        // A PHYSCORE_SIMD the CPU cannot honour is refused here, before any state exists.
+        crate::simd::check()?;
+        let particles = ParticleSystem::new(integrator)?;
+        let (pool, sequential) = match threads {
+            None => match par::default_pool() {
+                Ok(p) => (Some(p), None),
+                Err(reason) => (None, Some(reason)),
+            },
+            Some(0) => return Err(invalid("threads", "must be >= 1 (or None for all cores)")),
+            Some(n) => match rayon::ThreadPoolBuilder::new().num_threads(n).build() {
+                Ok(p) => (Some(Arc::new(p)), None),
+                Err(e) => return Err(Error::Threads { threads: n, reason: e.to_string() }),
+            },
+        };
+        Ok(Self { particles, others: Vec::new(), couplings: Vec::new(), t: 0.0, step: 0, dt, pool, sequential })
+    }
+
+    /// Runs `f` on this world's pool (or the calling thread without one).
+    pub fn run<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        par::install(self.pool.as_ref(), f)
+    }
+
+    /// Why this world runs on the calling thread only (its pool could not start its threads),
+    /// if it does. Results are the same either way.
+    pub fn sequential(&self) -> Option<&str> {
+        self.sequential.as_deref()
+    }
+
+    pub fn particles(&self) -> &ParticleSystem<V> {
+        &self.particles
+    }
+    pub fn particles_mut(&mut self) -> &mut ParticleSystem<V> {
+        &mut self.particles
+    }
+    /// The systems after the particles.
+    pub fn others(&self) -> &[Box<dyn System>] {
+        &self.others
+    }
+    /// Adds a system, stepped after those already there; returns its index in `others`.
+    pub fn add_system(&mut self, s: Box<dyn System>) -> Result<usize> {
+        if s.name() == self.particles.name() || self.others.iter().any(|o| o.name() == s.name()) {
+            return Err(invalid("name", format!("the world already has a system named {:?}", s.name())));
+        }
+        self.others.push(s);
+        Ok(self.others.len() - 1)
+    }
+    /// Adds a coupling, run after every step (after those already there).
+    pub fn add_coupling(&mut self, c: Box<dyn Coupling<V>>) {
+        self.couplings.push(c);
+    }
+
+    /// Every system, the particles first.
+    fn systems(&self) -> impl Iterator<Item = &(dyn System + 'static)> {
+        std::iter::once(&self.particles as &dyn System).chain(self.others.iter().map(|s| s.as_ref()))
+    }
+    fn systems_mut(&mut self) -> impl Iterator<Item = &mut (dyn System + 'static)> {
+        let others = self.others.iter_mut().map(|s| s.as_mut());
+        std::iter::once(&mut self.particles as &mut (dyn System + 'static)).chain(others)
+    }
+
+    pub fn n_particles(&self) -> usize {
+        self.particles.n_particles()
+    }
+    /// Simulated time, s.
+    pub fn time(&self) -> Real {
+        self.t
+    }
+    /// Steps taken so far.
+    pub fn steps(&self) -> u64 {
+        self.step
+    }
+    pub fn set_dt(&mut self, dt: Real) -> Result<()> {
+        check_dt(dt)?;
+        self.dt = dt;
+        Ok(())
+    }
+    pub fn force_evaluations(&self) -> u64 {
+        self.particles.force_evaluations()
+    }
+
+    /// Restores what `save` wrote beside the state: time (s), step count, the particle
+    /// system's energy books (J) and its integrator's cache. Every value is checked before
+    /// anything changes.
+    pub fn restore(
+        &mut self,
+        t: Real,
+        step: u64,
+        dissipated: &[Real],
+        collisions: Real,
+        cache: Option<crate::integrators::Cache<V>>,
+    ) -> Result<()> {
+        self.particles.check_books(dissipated, collisions, &cache)?;
+        if !t.is_finite() {
+            return Err(invalid("time", format!("must be finite, got {t}")));
+        }
+        if step > MAX_STEPS {
+            return Err(invalid("step", format!("must be at most 2**63 - 1, got {step}")));
+        }
+        self.particles.restore_books(dissipated, collisions, cache)?;
+        self.t = t;
+        self.step = step;
+        Ok(())
+    }
+
+    /// Runs `n` steps. On divergence (NaN/inf anywhere) every system, the books and the caches
+    /// are rolled back to where this call started and `Error::Diverged` names the step.
+    pub fn step(&mut self, n: u64) -> Result<()> {
+        self.step_interruptible(n, &Arc::new(AtomicBool::new(false)))
+    }
+
+    /// `step(n)` that stops once `stop` is set, from any thread (the Python binding sets it on
+    /// Ctrl-C). The flag is read before and after every step, in "rk45" before every internal
+    /// step attempt, and inside long force evaluations (pairwise gravity, see `crate::stop`).
+    /// Reading it is a relaxed atomic load and changes no result. When it is seen set, the
+    /// state is rolled back like on divergence and `Error::Interrupted` is returned; a flag set
+    /// before the call stops it before the first step, and one set during the last step still
+    /// rolls the call back.
+    pub fn step_interruptible(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<()> {
+        self.step_checkpointed(n, stop).map(drop)
+    }
+
+    /// `step_interruptible` that, on success, returns the checkpoint taken at its start, so the
+    /// caller can still undo the call (`rollback`): the Python binding does when a signal
+    /// arrived while the call was finishing.
+    pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint> {
+        if n > MAX_STEPS - self.step {
+            return Err(invalid(
+                "n",
+                format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.step),
+            ));
+        }
+        self.prepare()?;
+        let cp = self.checkpoint()?;
+        if n == 0 || self.is_empty() {
+            let t = self.t + n as Real * self.dt;
+            if !t.is_finite() {
+                return Err(invalid("n", format!("{n} steps of {:e} s take the time past the largest float", self.dt)));
+            }
+            self.t = t;
+            self.step += n;
+            return Ok(cp);
+        }
+        match self.with_stop(stop, |s| s.step_inner(n, stop)) {
+            Ok(()) => Ok(cp),
+            Err(e) => Err(self.fail(cp, e)),
+        }
+    }
+
+    /// Whether no system has anything to step.
+    fn is_empty(&self) -> bool {
+        self.systems().all(|s| s.is_empty())
+    }
+
+    /// Everything a `step` or `advance` call changes, to undo it with `rollback`: a snapshot of
+    /// every system, the clock and dt. Allocated fallibly (`Error::OutOfMemory`).
+    pub fn checkpoint(&self) -> Result<Checkpoint> {
+        let snapshots = self.systems().map(|s| s.snapshot()).collect::<Result<Vec<_>>>()?;
+        Ok(Checkpoint { snapshots, t: self.t, step: self.step, dt: self.dt })
+    }
+
+    /// Reserves, fallibly, what every system's stepping needs (on the pool: the cell lists size
+    /// their histograms by its thread count); a refusal is `Error::OutOfMemory` and changes
+    /// nothing.
+    fn prepare(&mut self) -> Result<()> {
+        let pool = self.pool.clone();
+        par::install(pool.as_ref(), || self.systems_mut().try_for_each(|s| s.prepare()))
+    }
+
+    /// Restores a checkpoint of this world; returns the step count it restored.
+    pub fn rollback(&mut self, cp: Checkpoint) -> u64 {
+        let dt = cp.dt;
+        let step = self.restore_state(cp);
+        self.dt = dt;
+        step
+    }
+
+    /// `rollback` but for dt (an error about the failed call still needs its dt).
+    fn restore_state(&mut self, cp: Checkpoint) -> u64 {
+        let Checkpoint { snapshots, t, step, .. } = cp;
+        for (s, snap) in self.systems_mut().zip(snapshots) {
+            s.restore(snap);
+        }
+        self.t = t;
+        self.step = step;
+        step
+    }
+
+    /// Rolls a failed call back to `cp` and completes its error (where it was rolled back to,
+    /// the suggested dt of a divergence).
+    fn fail(&mut self, cp: Checkpoint, e: Error) -> Error {
+        let dt = cp.dt;
+        let rolled_back_to = self.restore_state(cp);
+        let e = match e {
+            Error::Diverged { step, particle, quantity, t, .. } => {
+                // The dt that failed: `advance` ran substeps shorter than the saved dt.
+                let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
+                Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt }
+            }
+            Error::Interrupted { .. } => Error::Interrupted { rolled_back_to },
+            e => e,
+        };
+        self.dt = dt;
+        e
+    }
+
+    /// Runs `f` on this world's pool with `stop` handed to the systems for its duration.
+    fn with_stop<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&mut Self) -> R + Send) -> R {
+        let flag = Stop::new(Some(stop.clone()));
+        self.systems_mut().for_each(|s| s.set_stop(&flag));
+        let pool = self.pool.clone();
+        let r = par::install(pool.as_ref(), || f(self));
+        self.systems_mut().for_each(|s| s.set_stop(&Stop::default()));
+        r
+    }
+
+    /// Runs `job(self)` as a task on this world's pool while `watch` runs on the calling
+    /// thread, and returns the job's result once it is done.
+    /// `watch` gets `wait(timeout)`, true as soon as the job has finished (false on timeout), so
+    /// the calling thread stays free, e.g. to set the stop flag of `step_interruptible`: the
+    /// Python binding runs Python's signal handlers there (Python runs them on its main thread
+    /// only). Costs one hand-off to a pool thread (~20 µs), not a thread start (~60 µs).
+    /// Called from a thread of the pool the task would go to, the job runs on the calling
+    /// thread (a task queued behind it could wait forever) and `wait` reports it done at once;
+    /// so it does without a pool (`sequential()`): nothing can then watch while the job runs.
+    pub fn run_watched<R: Send>(
+        &mut self,
+        job: impl FnOnce(&mut Self) -> R + Send,
+        watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool),
+    ) -> R {
+        let Some(pool) = self.pool.clone() else {
+            let r = job(self);
+            watch(&mut |_| true);
+            return r;
+        };
+        if pool.current_thread_index().is_some() {
+            let r = job(self);
+            watch(&mut |_| true);
+            return r;
+        }
+        let mut out = None;
+        let slot = &mut out;
+        let task = move || *slot = Some(job(self));
+        pool.in_place_scope(|s| spawn_watched(s, task, watch));
+        out.expect("the scope returns after its task")
+    }
+
+    /// Advances by `duration` seconds in `n` equal substeps, n = ⌈duration / auto_dt()⌉, so
+    /// every substep is inside the stability region of every system at the start of the call
+    /// (and the CFL limit for fluids).
+    /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
+    /// divergence or interrupt everything, dt included, is rolled back as in `step`.
+    /// `stop` as in `step_interruptible`.
+    pub fn advance_interruptible(
+        &mut self,
+        duration: Real,
+        substeps: Option<u64>,
+        stop: &Arc<AtomicBool>,
+    ) -> Result<u64> {
+        self.advance_checkpointed(duration, substeps, stop).map(|(n, _)| n)
+    }
+
+    /// `advance_interruptible` that also returns the checkpoint taken at its start (as
+    /// `step_checkpointed`).
+    pub fn advance_checkpointed(
+        &mut self,
+        duration: Real,
+        substeps: Option<u64>,
+        stop: &Arc<AtomicBool>,
+    ) -> Result<(u64, Checkpoint)> {
+        if !(duration.is_finite() && duration > 0.0) {
+            return Err(invalid("duration", format!("{duration} must be finite and > 0 (seconds)")));
+        }
+        if substeps == Some(0) {
+            return Err(invalid("substeps", "must be >= 1"));
+        }
+        self.prepare()?;
+        let cp = self.checkpoint()?;
+        let r = self.with_stop(stop, |s| {
+            let n = match substeps {
+                Some(n) => n,
+                None => {
+                    // O(N²) for pairwise gravity below 20,000 bodies; the term polls `stop`.
+                    // With no limit anywhere, systems that pick their own steps take the whole
+                    // duration at once.
+                    let fallback = if s.systems().all(|s| s.adaptive()) { duration } else { s.dt };
+                    let safe = s.auto_dt().unwrap_or(fallback);
+                    if stop.load(Ordering::Relaxed) {
+                        return Err(Error::Interrupted { rolled_back_to: 0 });
+                    }
+                    let n = (duration / safe).ceil().max(1.0);
+                    if n > 1e12 {
+                        return Err(invalid(
+                            "duration",
+                            format!("{duration:.3e} s would take {n:.3e} substeps of {safe:.3e} s"),
+                        ));
+                    }
+                    n as u64
+                }
+            };
+            if n > MAX_STEPS - s.step {
+                let arg = if substeps.is_some() { "substeps" } else { "duration" };
+                return Err(invalid(
+                    arg,
+                    format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", s.step),
+                ));
+            }
+            // duration is finite and > 0: the quotient is never NaN, at worst 0 or subnormal,
+            // a step with no finite reciprocal (rates, CFL numbers): refused.
+            if duration / (n as Real) < Real::MIN_POSITIVE {
+                return Err(invalid(
+                    "substeps",
+                    format!("{n} substeps of {duration:.3e} s would each be below float64's normal range"),
+                ));
+            }
+            let old = s.dt;
+            s.dt = duration / n as Real;
+            if s.dt != old {
+                s.systems_mut().for_each(|s| s.dt_changed());
+            }
+            if s.is_empty() {
+                let t = s.t + n as Real * s.dt;
+                if !t.is_finite() {
+                    return Err(invalid("duration", format!("{duration} s take the time past the largest float")));
+                }
+                s.t = t;
+                s.step += n;
+                return Ok(n);
+            }
+            s.step_inner(n, stop).map(|()| n)
+        });
+        match r {
+            Ok(n) => Ok((n, cp)),
+            Err(e) => Err(self.fail(cp, e)),
+        }
+    }
+
+    /// The particle system's named output fields (see `Term::fields`), one value per particle
+    /// (0 for particles a field does not cover); `names` fixes which and in what order.
+    pub fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+        self.run(|| self.particles.particle_fields(names))
+    }
+
+    /// Density (kg/m^dim) and pressure (Pa) of every particle, from the fluid terms (0 for
+    /// particles that are in no fluid).
+    pub fn fluid_fields(&self) -> (Vec<Real>, Vec<Real>) {
+        let mut f = self.fields(&["density", "pressure"]).into_iter();
+        (f.next().expect("asked for two"), f.next().expect("asked for two"))
+    }
+
+    /// `n` steps of every system, then the couplings; the clock advances after each.
+    fn step_inner(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
+        let dt = self.dt;
+        let interrupted = Err(Error::Interrupted { rolled_back_to: 0 });
+        for _ in 0..n {
+            if stop.load(Ordering::Relaxed) {
+                return interrupted;
+            }
+            let halt = self.systems_mut().find_map(|s| s.step(dt, stop).err());
+            if halt == Some(Halt::Stopped) {
+                return interrupted;
+            }
+            self.t += dt;
+            self.step += 1;
+            if let Some(Halt::Diverged { index, quantity }) = halt {
+                return Err(Error::Diverged {
+                    step: self.step,
+                    t: self.t,
+                    particle: index,
+                    quantity,
+                    rolled_back_to: 0,
+                    dt,
+                    suggested_dt: 0.0,
+                });
+            }
+            for c in &mut self.couplings {
+                c.apply(&mut self.particles, &mut self.others, dt);
+            }
+        }
+        Ok(())
+    }
+
+    /// A step size (s) safely inside the stability region of every system (the particles:
+    /// half of the stiffest term's fastest time scale). Falls back to the current dt if no
+    /// system has a time scale.
+    pub fn suggest_dt(&self) -> Real {
+        let dt = self.run(|| self.systems().filter_map(|s| s.suggest_dt()).fold(f64::INFINITY, f64::min));
+        if dt.is_finite() {
+            dt
+        } else {
+            self.dt
+        }
+    }
+
+    /// The largest substep `advance` takes: the smallest of the systems' `auto_dt` (see
+    /// `ParticleSystem`'s for the stability argument). `None` if nothing in the world sets a
+    /// time scale.
+    pub fn auto_dt(&self) -> Option<Real> {
+        let dt = self.run(|| self.systems().filter_map(|s| s.auto_dt()).fold(f64::INFINITY, f64::min));
+        (dt.is_finite() && dt > 0.0).then_some(dt)
+    }
+
+    /// Runs a read-only query (`energy`, `suggest_dt`, `auto_dt`) with `stop` handed to the
+    /// systems, whose O(N²) sums (gravity's potential and time scale) read it per row. Nothing
+    /// changes either way; once `stop` is set the result is dropped and `Error::Interrupted`
+    /// returned.
+    pub fn query_interruptible<R: Send>(
+        &mut self,
+        stop: &Arc<AtomicBool>,
+        f: impl FnOnce(&Self) -> R + Send,
+    ) -> Result<R> {
+        self.with_stop(stop, |s| {
+            let r = f(s);
+            if stop.load(Ordering::Relaxed) {
+                return Err(Error::Interrupted { rolled_back_to: s.step });
+            }
+            Ok(r)
+        })
+    }
+
+    /// The energy books of every system, the particles' first.
+    pub fn energy(&self) -> EnergyReport {
+        self.run(|| {
+            let mut e = self.particles.energy();
+            for s in &self.others {
+                e.merge(s.energy());
+            }
+            e
+        })
+    }
+
+    /// Σ m v over free particles, kg·m/s.
+    pub fn momentum(&self) -> V {
+        self.run(|| self.particles.momentum())
+    }
+
+    /// Σ m x × v about the origin over free particles, kg·m²/s (2D: only z is non-zero).
+    pub fn angular_momentum(&self) -> [Real; 3] {
+        self.run(|| self.particles.angular_momentum())
+    }
+}
+
+/// Spawns `task` in `s` and runs `watch` here with a `wait` that reports the task's end.
+fn spawn_watched<'s>(
+    s: &rayon::Scope<'s>,
+    task: impl FnOnce() + Send + 's,
+    watch: impl FnOnce(&mut dyn FnMut(Duration) -> bool),
+) {
+    let (tx, rx) = mpsc::channel::<()>();
+    s.spawn(move |_| {
+        let _done = tx; // dropped when the task ends, by a panic too
+        task();
+    });
+    let mut done = false;
+    watch(&mut |timeout| {
+        done = done || !matches!(rx.recv_timeout(timeout), Err(RecvTimeoutError::Timeout));
+        done
+    });
+}
+
+fn check_dt(dt: Real) -> Result<()> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(invalid("dt", format!("{dt} must be finite and > 0 (seconds)")));
+    }
+    Ok(())
+}

@@ -1,0 +1,133 @@
+//! The world: several systems stepped together with one clock, atomic rollback across all of
+//! them, couplings after every step, and the ODE layer's tableaux shared with the particle
+//! integrators.
+mod common;
+use common::oscillator;
+use glam::DVec2;
+use physcore_core::error::Error;
+use physcore_core::systems::ode::OdeSystem;
+use physcore_core::systems::particles::ParticleSystem;
+use physcore_core::systems::{Coupling, System};
+use physcore_core::World;
+use std::sync::{Arc, Mutex};
+
+/// q' = p, p' = −q: the particle oscillator of `common::oscillator` as a first-order ODE.
+fn harmonic(method: &str, max_dt: Option<f64>) -> OdeSystem {
+    let rhs = Box::new(|y: &[f64], dy: &mut [f64]| {
+        dy[0] = y[1];
+        dy[1] = -y[0];
+    });
+    OdeSystem::new("harmonic", vec![1.0, 0.0], method, rhs, max_dt)
+        .unwrap()
+        .with_energy(Box::new(|y: &[f64]| 0.5 * (y[0] * y[0] + y[1] * y[1])))
+}
+
+#[test]
+fn a_second_system_steps_with_the_particles_on_one_clock_and_the_tableau_matches_rk4() {
+    let mut w = oscillator("rk4", 0.01);
+    w.add_system(Box::new(harmonic("rk4", None))).unwrap();
+    w.step(700).unwrap();
+    assert_eq!(w.steps(), 700);
+    assert!((w.time() - 7.0).abs() < 1e-12);
+    let q = w.others()[0].fields(&["y"])[0].clone();
+    let x = w.particles().state().x[1].x;
+    // The same problem by the fused particle RK4 and by the generic tableau step: equal up to
+    // the rounding of differently ordered sums, and both at RK4's accuracy.
+    assert!((q[0] - x).abs() < 1e-13, "tableau rk4 {} vs particle rk4 {x}", q[0]);
+    assert!((q[0] - 7.0f64.cos()).abs() < 1e-8);
+    // The books of both systems, in one report: each conserves its energy to RK4's error.
+    let e = w.energy();
+    assert!(e.potential.iter().any(|(n, _)| n == "harmonic"), "{e:?}");
+    assert!((e.total() - 1.0).abs() < 1e-8, "0.5 (particle) + 0.5 (ODE), got {}", e.total());
+}
+
+#[test]
+fn a_divergence_in_any_system_rolls_every_system_back() {
+    let mut w = oscillator("verlet", 0.01);
+    // y' = y², y(0) = 1 blows up at t = 1.
+    let blowup = Box::new(|y: &[f64], dy: &mut [f64]| dy[0] = y[0] * y[0]);
+    w.add_system(Box::new(OdeSystem::new("blowup", vec![1.0], "euler", blowup, None).unwrap())).unwrap();
+    w.step(10).unwrap();
+    let (x, y, t) = (w.particles().state().clone(), w.others()[0].fields(&["y"]), w.time());
+    match w.step(100_000) {
+        Err(Error::Diverged { step, rolled_back_to, particle, .. }) => {
+            assert!(step > 10 && step < 100_000);
+            assert_eq!(rolled_back_to, 10);
+            assert_eq!(particle, 0, "the ODE component that blew up");
+        }
+        other => panic!("expected a divergence, got {other:?}"),
+    }
+    assert!(w.particles().state() == &x, "the particles were not rolled back with the ODE");
+    assert_eq!(w.others()[0].fields(&["y"]), y);
+    assert_eq!((w.time(), w.steps()), (t, 10));
+}
+
+#[test]
+fn advance_keeps_to_the_smallest_stable_step_of_all_systems() {
+    let mut w = oscillator("verlet", 0.1);
+    let particles_dt = w.auto_dt().unwrap();
+    w.add_system(Box::new(harmonic("rk4", Some(particles_dt / 3.0)))).unwrap();
+    assert_eq!(w.auto_dt(), Some(particles_dt / 3.0));
+    let n = w.advance_interruptible(1.0, None, &Arc::default()).unwrap();
+    assert_eq!(n, (1.0 / (particles_dt / 3.0)).ceil() as u64);
+}
+
+/// Records the ODE's state it sees after every step.
+struct Probe(Arc<Mutex<Vec<f64>>>);
+
+impl Coupling<DVec2> for Probe {
+    fn name(&self) -> &str {
+        "probe"
+    }
+    fn apply(&mut self, _particles: &mut ParticleSystem<DVec2>, others: &mut [Box<dyn System>], _dt: f64) {
+        self.0.lock().unwrap().push(others[0].fields(&["y"])[0][0]);
+    }
+}
+
+#[test]
+fn couplings_run_after_every_step_and_see_the_stepped_systems() {
+    let seen = Arc::new(Mutex::new(Vec::new()));
+    let mut w = World::<DVec2>::new("verlet", 0.1, Some(1)).unwrap();
+    w.add_system(Box::new(harmonic("heun", None))).unwrap();
+    w.add_coupling(Box::new(Probe(seen.clone())));
+    let mut alone = harmonic("heun", None);
+    let mut expected = Vec::new();
+    for _ in 0..5 {
+        alone.step(0.1, &Default::default()).unwrap();
+        expected.push(alone.y()[0]);
+    }
+    w.step(5).unwrap();
+    assert_eq!(*seen.lock().unwrap(), expected);
+}
+
+#[test]
+fn system_names_are_unique_and_bad_ode_input_is_refused() {
+    let mut w = oscillator("verlet", 0.1);
+    w.add_system(Box::new(harmonic("rk4", None))).unwrap();
+    assert!(matches!(w.add_system(Box::new(harmonic("rk4", None))), Err(Error::InvalidInput { .. })));
+    let rhs = || Box::new(|_: &[f64], _: &mut [f64]| {});
+    assert!(OdeSystem::new("x", vec![1.0], "rk5", rhs(), None).is_err());
+    assert!(OdeSystem::new("x", vec![f64::NAN], "rk4", rhs(), None).is_err());
+    assert!(OdeSystem::new("x", vec![1.0], "rk4", rhs(), Some(0.0)).is_err());
+    assert_eq!(w.others().len(), 1);
+}
+
+#[test]
+fn an_ode_system_is_bit_identical_for_1_and_2_threads() {
+    let run = |threads| {
+        let mut w = World::<DVec2>::new("verlet", 1e-3, Some(threads)).unwrap();
+        let n = 200_000;
+        let y0: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
+        // A ring of coupled rates: every derivative reads its neighbours.
+        let rhs = Box::new(move |y: &[f64], dy: &mut [f64]| {
+            for i in 0..y.len() {
+                dy[i] = y[(i + 1) % y.len()] - 2.0 * y[i] + y[(i + y.len() - 1) % y.len()] - y[i] * y[i] * y[i];
+            }
+        });
+        w.add_system(Box::new(OdeSystem::new("ring", y0, "dopri5", rhs, None).unwrap())).unwrap();
+        w.step(20).unwrap();
+        w.others()[0].fields(&["y"]).remove(0)
+    };
+    let (a, b) = (run(1), run(2));
+    assert!(a.iter().zip(&b).all(|(p, q)| p.to_bits() == q.to_bits()));
+}
