@@ -361,7 +361,7 @@ def _one_line_usage_error(capsys) -> str:
 )
 def test_cli_user_errors_are_one_line_and_exit_2(tmp_path, capsys, argv, mentions):
     out = tmp_path / "x.gif"
-    with mock.patch.object(render, "_simulate", side_effect=AssertionError("simulated")):
+    with mock.patch.object(render._recording, "_simulate", side_effect=AssertionError("simulated")):
         assert main(argv + ["-o", str(out), "-q"]) == 2
     assert re.search(mentions, _one_line_usage_error(capsys))
     assert list(tmp_path.iterdir()) == []

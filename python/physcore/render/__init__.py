@@ -1,0 +1,76 @@
+"""Animated GIF rendering of physcore scenes, with numpy rasterisation and Pillow output.
+
+The whole animation is simulated first and kept in memory (positions as float32), then a single
+camera is fitted to every frame, and each frame is rasterised into a uint8 palette-index image:
+static boundary (wall) particles in grey, springs as 1-pixel lines coloured by strain, particles
+as filled discs coloured by speed or pressure, and a colour bar with the scale's range and unit.
+The frames are written as a palette GIF with one fixed palette, atomically.
+
+Public functions
+----------------
+record(scene, ...)             step a scene and return every frame's state (a Recording).
+gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
+render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
+
+Layout
+------
+A package of private modules, one idea each; a module imports only from those listed above it.
+The public names are defined there and re-exported here (with ``__module__`` set to this
+package, so that they read, pickle and document as ``physcore.render.NAME``).
+
+_rows           row-wise numpy helpers on (N, d) point arrays: finite rows, norms, finite mean.
+_palette        the one fixed palette, and the colour maps onto it (speed, pressure, strain).
+_camera         orthographic camera (projection, fit to every frame), ``DEFAULT_VIEW``.
+_checks         argument checks of the public functions, ``COLOR_BY``.
+_scene_state    reading a scene's optional parts: springs and strain, planes, pressures, walls.
+_recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
+_colorbar       the colour bar: labels, layout and drawing into the background.
+_raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images).
+_gif            ``gif()``: record a scene if given one, rasterise, write a palette GIF atomically.
+_frame          ``render_frame()``: one state to an RGB array.
+
+Examples
+--------
+>>> import os, tempfile
+>>> import physcore as pc
+>>> scene = pc.scenes.projectile(n=3)
+>>> image = pc.render.render_frame(scene.positions, velocities=scene.velocities, size=(64, 48))
+>>> image.shape, image.dtype
+((48, 64, 3), dtype('uint8'))
+>>> with tempfile.TemporaryDirectory() as tmp:
+...     out = pc.render.gif(scene, os.path.join(tmp, "balls.gif"), frames=4, size=(64, 48))
+...     out.name, out.stat().st_size > 0
+('balls.gif', True)
+"""
+from __future__ import annotations
+
+# Names outside __all__ are re-exported with a redundant alias: DEFAULT_VIEW and MAX_STEPS are
+# documented constants; the private ones, none of them API, are reached through this package by
+# the CLI (_check_path, _check_writable), the tests (palette indices, _colorbar_labels) and
+# benches/bench_render.py (_Rasteriser, _row_norms, _strain).
+from ._camera import DEFAULT_VIEW as DEFAULT_VIEW
+from ._checks import COLOR_BY
+from ._checks import _check_path as _check_path
+from ._checks import _check_writable as _check_writable
+from ._colorbar import _colorbar_labels as _colorbar_labels
+from ._frame import render_frame
+from ._gif import gif
+from ._palette import _N_PRESSURE as _N_PRESSURE
+from ._palette import _N_SPEED as _N_SPEED
+from ._palette import _PALETTE as _PALETTE
+from ._palette import _PRESSURE0 as _PRESSURE0
+from ._palette import _SPEED0 as _SPEED0
+from ._palette import _TEXT as _TEXT
+from ._palette import _WALL as _WALL
+from ._palette import STRAIN_SATURATION
+from ._raster import _Rasteriser as _Rasteriser
+from ._recording import MAX_STEPS as MAX_STEPS
+from ._recording import Recording, record
+from ._rows import _row_norms as _row_norms
+from ._scene_state import _strain as _strain
+
+__all__ = ["record", "Recording", "gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
+
+for _public in (Recording, record, gif, render_frame):
+    _public.__module__ = __name__
+del _public

@@ -1,0 +1,176 @@
+"""Argument checks of the public functions: each returns the checked value or raises
+InvalidTypeError / InvalidInputError naming the argument, before anything is stepped or written."""
+from __future__ import annotations
+
+import math
+import operator
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import _check
+from .._errors import InvalidInputError, InvalidTypeError
+from ._camera import DEFAULT_VIEW
+
+#: Valid values of the ``color_by`` argument.
+COLOR_BY = ("speed", "pressure", "none")
+
+# Most automatic substeps Scene.advance takes in one call (it refuses more, naming duration).
+_MAX_AUTO_SUBSTEPS = 1e12
+
+
+def _check_int(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
+    if isinstance(value, (bool, np.bool_)):
+        raise InvalidTypeError(f"{name} must be an int, got {value!r}")
+    try:
+        n = operator.index(value)
+    except TypeError:
+        raise InvalidTypeError(f"{name} must be an int, got {type(value).__name__} {_short(value)}") from None
+    if n < minimum:
+        raise InvalidInputError(f"{name} must be >= {minimum}, got {n}")
+    if maximum is not None and n > maximum:
+        raise InvalidInputError(f"{name} must be <= {maximum}, got {_short(n)}")
+    return n
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _check_size(size: Any) -> tuple[int, int]:
+    try:
+        count = len(size)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(size, (str, bytes)) or count < 0:
+        raise InvalidTypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
+    if count != 2:
+        raise InvalidInputError(f"size must be a pair of ints (width, height), got {_short(size)}")
+    w = _check_int("size[0] (width)", size[0], 16)
+    h = _check_int("size[1] (height)", size[1], 16)
+    if w > 65535 or h > 65535:
+        raise InvalidInputError(f"size must be at most 65535 x 65535 (the GIF limit), got {_short(w)}x{_short(h)}")
+    return w, h
+
+
+def _check_fps(fps: Any) -> float:
+    if isinstance(fps, (bool, np.bool_)) or not isinstance(fps, (int, float, np.integer, np.floating)):
+        raise InvalidTypeError(f"fps must be a number, got {_short(fps)}")
+    f = _check.real("fps", fps)
+    if not (math.isfinite(f) and f > 0):
+        raise InvalidInputError(f"fps must be a finite number > 0, got {_short(fps)}")
+    return f
+
+
+def _check_frame_time(frame_time: Any) -> float | None:
+    if frame_time is None:
+        return None
+    if isinstance(frame_time, (bool, np.bool_)) or not isinstance(
+        frame_time, (int, float, np.integer, np.floating)
+    ):
+        raise InvalidTypeError(f"frame_time must be a number of seconds or None, got {_short(frame_time)}")
+    t = _check.real("frame_time", frame_time)
+    # As Scene.advance: a subnormal duration has no finite reciprocal.
+    if not (math.isfinite(t) and t >= _check.MIN_NORMAL):
+        raise InvalidInputError(f"frame_time must be a finite number of seconds >= {_check.MIN_NORMAL:.3g}, got {_short(frame_time)}")
+    return t
+
+
+def _check_color_by(color_by: Any) -> str:
+    if not isinstance(color_by, str) or color_by not in COLOR_BY:
+        valid = ", ".join(repr(c) for c in COLOR_BY)
+        raise InvalidInputError(f"color_by must be one of {valid}; got {_short(color_by)}")
+    return str(color_by)
+
+
+def _check_radius(radius: Any) -> int | None:
+    if radius is None:
+        return None
+    r = _check_int("radius", radius, 0)
+    if r > 200:
+        raise InvalidInputError(f"radius must be <= 200 pixels, got {_short(r)}")
+    return r
+
+
+def _check_view(view: Any) -> tuple[float, float]:
+    if view is None:
+        return DEFAULT_VIEW
+    try:
+        count = len(view)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if isinstance(view, (str, bytes)) or count != 2:
+        raise InvalidInputError(f"view must be (azimuth_deg, elevation_deg), got {_short(view)}")
+    az, el = (_check.real("view", a) for a in view)
+    if not (math.isfinite(az) and math.isfinite(el)):
+        raise InvalidInputError(f"view must be finite angles in degrees, got {_short(view)}")
+    return az, el
+
+
+def _check_path(path: Any) -> Path:
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
+    p = Path(path)
+    if p.suffix.lower() != ".gif":
+        raise InvalidInputError(f"path must end in .gif, got {str(p)!r}")
+    if not p.parent.is_dir():
+        raise InvalidInputError(f"path: directory {str(p.parent)!r} does not exist")
+    if p.is_dir():
+        raise InvalidInputError(f"path {str(p)!r} is a directory")
+    return p
+
+
+def _check_writable(path: Path) -> None:
+    """Create and remove a file beside ``path``, as the final atomic write will: an unwritable
+    directory then fails in milliseconds, not after the whole simulation. Raises OSError."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".probe")
+    except OSError as e:
+        raise type(e)(e.errno, f"path: cannot create files in {str(path.parent)!r} ({e.strerror})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def _check_auto_substeps(scene: Any, frame_time: float) -> None:
+    """Refuse, naming frame_time, a frame that would need more automatic substeps than
+    ``Scene.advance`` takes in one call (1e12) at the scene's current substep."""
+    auto_dt = getattr(scene, "auto_dt", None)
+    if not callable(auto_dt):
+        return
+    step = float(auto_dt())
+    if step > 0 and not frame_time / step <= _MAX_AUTO_SUBSTEPS:
+        raise InvalidInputError(
+            f"frame_time: {frame_time:.3g} s per frame would take {frame_time / step:.3g} automatic substeps of "
+            f"{step:.3g} s, more than {_MAX_AUTO_SUBSTEPS:.0e}; give a shorter frame_time"
+        )
+
+
+def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool) -> None:
+    """Refuse, before simulating, an animation whose recording and frames would not fit in
+    memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size."""
+    n = int(getattr(scene, "n_particles", 0))
+    m = 0
+    if springs and callable(getattr(scene, "spring_pairs", None)):
+        m = int(np.asarray(scene.spring_pairs()[0]).size)
+    dim = int(getattr(scene, "dim", 3))
+    # float32 positions, speed, pressure per particle and strain per spring; the palette-index
+    # buffer and its Pillow image per frame.
+    per_frame = 4 * n * (dim + 2) + 4 * m + 2 * size[0] * size[1]
+    _check.memory(
+        "frames, size",
+        frames * per_frame,
+        f"{_short(frames)} frames of {size[0]}x{size[1]} pixels and {n} particles",
+    )
+
+
+def _check_advance(scene: Any) -> None:
+    if not callable(getattr(scene, "advance", None)):
+        raise InvalidInputError(
+            "frame_time needs a scene with an advance(duration) method (automatic substeps); "
+            "this one has none: use steps_per_frame instead"
+        )

@@ -1,0 +1,203 @@
+"""Animated GIF output: :func:`gif` draws a Recording (or records a scene first) and writes every
+frame with the one fixed palette, atomically."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from .. import _check
+from .._atomic import atomic_write
+from .._errors import InvalidInputError
+from . import _recording
+from ._checks import (
+    _check_color_by,
+    _check_fps,
+    _check_memory,
+    _check_path,
+    _check_radius,
+    _check_size,
+    _check_view,
+    _check_writable,
+)
+from ._palette import _PALETTE
+from ._raster import _Rasteriser
+
+
+def gif(
+    scene: Any,
+    path: str | os.PathLike,
+    *,
+    frames: int | None = None,
+    steps_per_frame: int | None = None,
+    frame_time: float | None = None,
+    substeps: str | int | None = None,
+    fps: float = 30,
+    size: tuple[int, int] = (480, 360),
+    color_by: str = "speed",
+    colorbar: bool = True,
+    radius: int | None = None,
+    springs: bool = True,
+    view: tuple[float, float] | None = None,
+    progress: bool = False,
+) -> Path:
+    """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
+    ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
+
+    Frame 0 shows the current state; between consecutive frames the scene advances either
+    ``steps_per_frame`` steps of ``scene.dt`` (default), so the animation covers
+    ``(frames - 1) * steps_per_frame * scene.dt`` seconds of simulated time, or, with
+    `frame_time`, ``frame_time`` seconds with substeps the scene picks itself, covering
+    ``(frames - 1) * frame_time`` seconds. The scene is left at the last frame's state. The whole
+    run is simulated before anything is drawn, and a single camera is fitted to all frames (and to
+    the scene's boundary particles), so the view does not move.
+
+    Parameters
+    ----------
+    scene : physcore.Scene or Recording
+        A recording from :func:`record` (then `frames`, `steps_per_frame`, `frame_time` and
+        `substeps` must be left out: it is already simulated, and `color_by` needs what it
+        recorded), or a 2D or 3D scene, stepped in place. Optional methods, used when present:
+        ``pressure()`` -> (N,) float64 Pa (needed for ``color_by="pressure"``),
+        ``boundary_points()`` -> (B, dim) float64 m, static wall particles (B may be 0), and
+        ``advance(duration)`` -> int substeps taken (needed for `frame_time`).
+    path : str or os.PathLike
+        Output file; must end in ``.gif`` and its directory must exist and be writable (checked
+        by creating and removing a file there before simulating). Written atomically: a
+        temporary file in the same directory is renamed onto `path` only once complete.
+    frames : int, default 90
+        Number of frames, >= 1 (scenes only). Together with `size` and the scene's particles it must fit in
+        memory: the estimate ``frames · (4 N (dim + 2) + 4 M + 2 W H)`` bytes (N particles,
+        M springs, W × H pixels) is refused above :func:`physcore._check.memory_limit` (half
+        the physical memory) before anything is simulated.
+    steps_per_frame : int, optional
+        Simulation steps of ``scene.dt`` between frames, 1 to :data:`MAX_STEPS` (2**53). Default
+        10 when `frame_time` is not given; giving both is an error.
+    frame_time : float, optional
+        Simulated seconds between frames, finite and at least 2.2e-308 (a normal float64). Each
+        frame then calls ``scene.advance(frame_time)``, which picks its own substeps (from the
+        scene's CFL and stability limits) and returns how many it took; with `progress` the bar
+        shows the last frame's count. The scene must have an ``advance`` method, and a frame
+        that would need more than 1e12 automatic substeps is refused before simulating.
+    substeps : "auto" or int, default "auto"
+        With `frame_time`: ``"auto"`` lets ``scene.advance`` choose the substeps of every frame
+        inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
+        (1 to 2**53) fixes that many per frame. Needs `frame_time`.
+    fps : float, default 30
+        Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
+        below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
+        (fps above 50 play at 50).
+    size : (int, int), default (480, 360)
+        Image width and height in pixels, each >= 16.
+    color_by : {"speed", "pressure", "none"}, default "speed"
+        Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
+        plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
+        negative values get the bottom colour). Both scales run from 0 at the bottom to a top
+        fixed over the whole animation at the 99th percentile of all frames' values.
+        ``"none"``: one colour. Pinned particles are always orange.
+    colorbar : bool, default True
+        With ``color_by`` "speed" or "pressure", draw a colour bar in the top-right corner: a
+        gradient strip labelled "0" and the top of the scale with its unit (m/s; Pa, kPa, MPa or
+        GPa, whichever reads below 1000), e.g. ``0 [strip] 19.6 kPa``. The camera keeps a band at
+        the top free for it, so no particle is hidden. It is left out where it would not be
+        legible (images narrower than about 100 pixels or shorter than 80) and when the top of
+        the scale is 0 (nothing moves, no pressure).
+    radius : int, optional
+        Particle disc radius in pixels (0 draws single pixels). Default: chosen from the number
+        of particles and boundary particles and the image size.
+    springs : bool, default True
+        Draw the springs of all ``Springs`` terms as lines under the particles, coloured by strain
+        (L - L0)/L0: grey at rest, red stretched, blue compressed, saturating at
+        ``STRAIN_SATURATION`` (10 %).
+    view : (float, float), optional
+        3D only: (azimuth, elevation) of the orthographic camera in degrees; screen up is +z.
+        Default ``(-60, 25)``. Ignored for 2D scenes (x right, y up).
+    progress : bool, default False
+        Show a tqdm progress bar on stderr while simulating.
+
+    Returns
+    -------
+    pathlib.Path
+        `path`.
+
+    Raises
+    ------
+    TypeError
+        An argument of the wrong type (``bool`` is not an int, ``str`` not a number, and
+        `colorbar`, `springs`, `progress` must be bools), naming it.
+    physcore.InvalidInputError
+        (a ``ValueError``) An invalid value, naming it, including an animation too large for
+        memory (naming frames and size). Raised before the scene is stepped or a file is made.
+        ValueError also covers ``color_by="pressure"`` on a scene without ``pressure()`` (or
+        whose ``pressure()`` raises AttributeError), and `frame_time` on a scene without
+        ``advance``.
+    physcore.SimulationDiverged
+        If the simulation diverges; no file is written (the scene is rolled back to the last
+        good state of the failing ``step``/``advance`` call by the scene itself).
+    OSError
+        If the file cannot be written: an unwritable directory is found before simulating; a
+        failure while writing leaves no partial file behind.
+
+    Notes
+    -----
+    Collider planes are drawn in 2D (shaded solid side and an edge line), not in 3D. Boundary
+    particles are drawn once, in grey, under everything that moves; in 3D they are projected the
+    same way but not depth-sorted against the moving particles (always underneath). Pillow
+    merges consecutive identical frames into one longer frame, so a GIF of a scene at rest can
+    report fewer frames than `frames` while playing for the same time.
+    """
+    duration = _gif_duration_ms(_check_fps(fps))
+    size = _check_size(size)
+    color_by = _check_color_by(color_by)
+    radius = _check_radius(radius)
+    view = _check_view(view)
+    colorbar = _check.flag("colorbar", colorbar)
+    springs = _check.flag("springs", springs)
+    progress = _check.flag("progress", progress)
+    path = _check_path(path)
+    if isinstance(scene, _recording.Recording):
+        rec = scene
+        given = [a for a, v in (("frames", frames), ("steps_per_frame", steps_per_frame), ("frame_time", frame_time), ("substeps", substeps)) if v is not None]
+        if given:
+            raise InvalidInputError(f"{given[0]}: a Recording is already simulated; give it to record() instead")
+        if color_by == "speed" and rec.speeds is None or color_by == "pressure" and rec.pressures is None:
+            raise InvalidInputError(f"color_by: the recording holds no {color_by}s; record(..., color_by={color_by!r})")
+        if not springs:
+            rec = rec._replace(pairs=None, strain=None)
+        _check.memory("frames, size", rec.frames * 2 * size[0] * size[1], f"{rec.frames} frames of {size[0]}x{size[1]} pixels")
+        _check_writable(path)
+    else:
+        plan = _recording._plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
+        _check_memory(scene, plan["frames"], size, springs)
+        _check_writable(path)
+        # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
+        rec = _recording._simulate(scene, progress=progress, **plan)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
+    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), duration)
+    return path
+
+
+def _gif_duration_ms(fps: float) -> int:
+    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp
+    # (before rounding: 100 / fps is inf for a subnormal fps).
+    cs = round(min(max(100.0 / fps, 2.0), 65535.0))
+    return int(cs * 10)
+
+
+def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
+    from PIL import Image
+
+    palette = _PALETTE.tobytes()
+    images = []
+    for buf in index_frames:
+        im = Image.fromarray(buf)  # 'L' from the (H, W) uint8 buffer; putpalette makes it 'P'
+        im.putpalette(palette)
+        images.append(im)
+    # Passing the palette writes it once as the global colour table and keeps Pillow from
+    # re-optimising it per frame (smaller files, and faster).
+    atomic_write(
+        path,
+        lambda fh: images[0].save(
+            fh, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0, palette=palette
+        ),
+    )

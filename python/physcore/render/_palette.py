@@ -1,0 +1,105 @@
+"""The one fixed palette of every image and GIF, and the colour maps from values to its indices:
+speed (viridis-like), pressure (plasma-like) and spring strain (blue, grey, red)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: Spring strain |(L - L0) / L0| at which the strain colours saturate (fully red or blue).
+STRAIN_SATURATION = 0.1
+
+
+# ---------------------------------------------------------------------------------------------
+# The one fixed palette. Index layout (at most 256 entries, the GIF limit; Pillow always encodes
+# with 8-bit LZW codes, so the size of the table costs only its 768 bytes, once per file).
+# ---------------------------------------------------------------------------------------------
+_BACKGROUND = 0
+_PLANE_FILL = 1
+_PLANE_LINE = 2
+_PINNED = 3
+_PLAIN = 4
+_N_SPEED = 64
+_SPEED0 = 5
+_N_STRAIN = 31
+_STRAIN0 = _SPEED0 + _N_SPEED
+_WALL = _STRAIN0 + _N_STRAIN  # static boundary particles: neutral grey
+_TEXT = _WALL + 1  # colour-bar labels and outline
+_N_PRESSURE = 64
+_PRESSURE0 = _TEXT + 1
+_PALETTE_SIZE = _PRESSURE0 + _N_PRESSURE
+
+# viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
+# brightest yellow hardly shows on the white background.
+_VIRIDIS = np.array(
+    [
+        [0x44, 0x01, 0x54], [0x47, 0x2D, 0x7B], [0x3B, 0x52, 0x8B],
+        [0x2C, 0x72, 0x8E], [0x21, 0x91, 0x8C], [0x28, 0xAE, 0x80],
+        [0x5E, 0xC9, 0x62], [0xAD, 0xDC, 0x30], [0xFD, 0xE7, 0x25],
+    ],
+    dtype=np.float64,
+)
+# plasma sampled at 9 points in [0, 1] (deep blue, purple, pink, orange, yellow); a sequential
+# map distinct from the speed one, cut at 0.88 for the same reason.
+_PLASMA = np.array(
+    [
+        [0x0D, 0x08, 0x87], [0x4C, 0x02, 0xA1], [0x7E, 0x03, 0xA8],
+        [0xA9, 0x23, 0x95], [0xCC, 0x47, 0x78], [0xE5, 0x6B, 0x5D],
+        [0xF8, 0x94, 0x41], [0xFD, 0xC3, 0x28], [0xF0, 0xF9, 0x21],
+    ],
+    dtype=np.float64,
+)
+_STRAIN_BLUE = np.array([33.0, 102.0, 172.0])  # compressed
+_STRAIN_GREY = np.array([165.0, 165.0, 165.0])  # at rest
+_STRAIN_RED = np.array([200.0, 30.0, 40.0])  # stretched
+
+
+def _sample_map(anchors: np.ndarray, top: float, n: int) -> np.ndarray:
+    """(n, 3) colours interpolated linearly along `anchors` (K, 3) from 0 to `top` in [0, 1]."""
+    t = np.linspace(0.0, top, n) * (len(anchors) - 1)
+    k = np.minimum(t.astype(int), len(anchors) - 2)
+    f = (t - k)[:, None]
+    return anchors[k] * (1 - f) + anchors[k + 1] * f
+
+
+def _build_palette() -> np.ndarray:
+    pal = np.zeros((_PALETTE_SIZE, 3), dtype=np.float64)
+    pal[_BACKGROUND] = (255, 255, 255)
+    pal[_PLANE_FILL] = (228, 222, 212)
+    pal[_PLANE_LINE] = (110, 95, 80)
+    pal[_PINNED] = (255, 127, 14)
+    pal[_PLAIN] = (31, 119, 180)
+    pal[_SPEED0:_STRAIN0] = _sample_map(_VIRIDIS, 0.9, _N_SPEED)
+    half = _N_STRAIN // 2
+    s = np.linspace(-1.0, 1.0, _N_STRAIN)[:, None]
+    pal[_STRAIN0:_WALL] = np.where(
+        s < 0, _STRAIN_GREY + (_STRAIN_GREY - _STRAIN_BLUE) * s, _STRAIN_GREY + (_STRAIN_RED - _STRAIN_GREY) * s
+    )
+    pal[_WALL] = (178, 178, 178)
+    pal[_TEXT] = (30, 30, 30)
+    pal[_PRESSURE0:] = _sample_map(_PLASMA, 0.88, _N_PRESSURE)
+    assert _WALL == _STRAIN0 + 2 * half + 1 and pal.shape[0] <= 256
+    return np.round(pal).astype(np.uint8)
+
+
+_PALETTE = _build_palette()
+
+
+def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> np.ndarray:
+    """(N,) values -> (N,) uint8 indices into the sequential map of `levels` entries at `base`.
+
+    0 (and anything below, and NaN) maps to the bottom, `vmax` and above to the top.
+    """
+    if not (vmax > 0 and math.isfinite(vmax)):
+        return np.full(values.shape, base, dtype=np.uint8)
+    with np.errstate(over="ignore", invalid="ignore"):  # a subnormal vmax: overflow to inf, the top
+        lv = np.nan_to_num(values * (levels / vmax), nan=0.0, posinf=levels, neginf=0.0)
+    return (base + np.clip(lv, 0, levels - 1).astype(np.uint8)).astype(np.uint8)
+
+
+def _strain_levels(strain: np.ndarray) -> np.ndarray:
+    """(M,) strains -> (M,) uint8 palette indices; NaN (zero rest length) -> at-rest grey."""
+    half = _N_STRAIN // 2
+    # Clipped before dividing, so that a strain near the float32 limit cannot overflow.
+    s = np.clip(np.nan_to_num(strain, nan=0.0), -STRAIN_SATURATION, STRAIN_SATURATION) / STRAIN_SATURATION
+    return (_STRAIN0 + half + np.rint(s * half)).astype(np.uint8)

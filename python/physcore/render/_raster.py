@@ -1,0 +1,234 @@
+"""Rasterisation of a :class:`Recording` into (H, W) uint8 palette-index images, numpy only (no
+per-particle Python loops): collider background, boundary particles, spring lines and particle
+discs, drawn by a :class:`_Rasteriser` that fixes camera, disc size and colour scale over an
+animation."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._camera import _Camera, _screen_bounds
+from ._colorbar import _colorbar_labels, _colorbar_layout, _draw_colorbar
+from ._palette import (
+    _BACKGROUND,
+    _N_PRESSURE,
+    _N_SPEED,
+    _PINNED,
+    _PLAIN,
+    _PLANE_FILL,
+    _PLANE_LINE,
+    _PRESSURE0,
+    _SPEED0,
+    _WALL,
+    _scalar_levels,
+    _strain_levels,
+)
+from ._recording import Recording
+from ._rows import _row_norms
+
+
+def _auto_radius(n: int, size: tuple[int, int]) -> int:
+    """Disc radius in pixels from the particle count alone (an upper bound for the final one)."""
+    # About a third of the mean spacing were the particles spread over the image; capped so a few
+    # bodies (Kepler) are dots rather than blobs.
+    w, h = size
+    r = int(0.3 * math.sqrt(w * h / max(n, 1)))
+    return max(0, min(r, max(1, min(w, h) // 40)))
+
+
+def _spring_radius(rec: Recording, scale: float) -> int | None:
+    """Disc radius in pixels from the median spring length at frame 0, or None without springs.
+
+    Keeps discs to about a third of the neighbour spacing so that the springs stay visible.
+    """
+    if rec.pairs is None or rec.pairs[0].size == 0:
+        return None
+    i, j = rec.pairs
+    x = rec.positions[0]
+    length = float(np.median(_row_norms(x[j] - x[i])))
+    if not (length > 0 and math.isfinite(length)):
+        return None
+    return int(0.3 * length * scale)
+
+
+def _disc_stencil(radius: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column offsets (S,) intp of a filled disc of `radius` pixels."""
+    d = np.arange(-radius, radius + 1)
+    dy, dx = np.meshgrid(d, d, indexing="ij")
+    # r^2 + r/2 rounds the disc: radius 1 is a plus, radius 2 a 5x5 square without corners.
+    keep = dx * dx + dy * dy <= radius * radius + 0.5 * radius
+    return dy[keep].astype(np.intp), dx[keep].astype(np.intp)
+
+
+def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
+    """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line."""
+    w, h = cam.width, cam.height
+    img = np.full((h, w), _BACKGROUND, dtype=np.uint8)
+    if cam.dim != 2 or not planes:
+        return img
+    # World coordinates (relative to origin) of the pixel centres.
+    xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
+    ys = (cam.row0 - (np.arange(h) + 0.5)) / cam.scale + cam.centre[1]
+    for p, n in planes:
+        p = p - origin
+        # Signed distance in pixels; > 0 on the allowed side.
+        d = ((xs[None, :] - p[0]) * n[0] + (ys[:, None] - p[1]) * n[1]) * cam.scale
+        img[d < 0] = _PLANE_FILL
+        img[np.abs(d) <= 0.75] = _PLANE_LINE
+    return img
+
+
+def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
+    """Draw segments between (M,) float pixel endpoints, sampling about one point per pixel.
+
+    colors is (M,) uint8. Samples falling outside buf are dropped.
+    """
+    h, w = buf.shape
+    ok = np.isfinite(c0) & np.isfinite(r0) & np.isfinite(c1) & np.isfinite(r1)
+    # Segments wholly outside the image cost nothing.
+    ok &= (np.maximum(c0, c1) >= 0) & (np.minimum(c0, c1) < w)
+    ok &= (np.maximum(r0, r1) >= 0) & (np.minimum(r0, r1) < h)
+    if not ok.all():
+        c0, r0, c1, r1, colors = c0[ok], r0[ok], c1[ok], r1[ok], colors[ok]
+    if c0.size == 0:
+        return
+    c0, r0 = c0.astype(np.float32), r0.astype(np.float32)
+    dc, dr = c1.astype(np.float32) - c0, r1.astype(np.float32) - r0
+    # One sample per pixel along the longer axis, capped (a segment crossing the image from far
+    # outside would otherwise cost memory for nothing).
+    n = np.minimum(np.ceil(np.maximum(np.abs(dc), np.abs(dr))), 2 * (w + h)).astype(np.int64) + 1
+    first = np.cumsum(n) - n
+    # Sample k of segment m sits at t = k / (n_m - 1); np.repeat spreads per-segment values.
+    k = np.arange(int(first[-1] + n[-1]), dtype=np.int64) - np.repeat(first, n)
+    t = k.astype(np.float32) * np.repeat((1.0 / np.maximum(n - 1, 1)).astype(np.float32), n)
+    cc = np.floor(np.repeat(c0, n) + t * np.repeat(dc, n)).astype(np.int64)
+    rr = np.floor(np.repeat(r0, n) + t * np.repeat(dr, n)).astype(np.int64)
+    vals = np.repeat(colors, n)
+    inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
+    if not inside.all():
+        cc, rr, vals = cc[inside], rr[inside], vals[inside]
+    buf.reshape(-1)[rr * w + cc] = vals
+
+
+def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
+    """Draw filled discs at (N,) float pixel centres with (N,) uint8 colours.
+
+    Particles later in the arrays overwrite earlier ones (1-D fancy assignment writes in index
+    order), which gives the painter's order.
+    """
+    h, w = buf.shape
+    dy, dx = stencil
+    r = int(np.abs(dx).max())
+    ok = (col > -r - 1) & (col < w + r) & (row > -r - 1) & (row < h + r)  # also drops NaN
+    if not ok.all():
+        col, row, colors = col[ok], row[ok], colors[ok]
+    ci = np.floor(col).astype(np.int64)
+    ri = np.floor(row).astype(np.int64)
+    flat = buf.reshape(-1)
+    # Discs wholly inside need no per-pixel bounds test. A fitted camera keeps every particle at
+    # least r + 2 pixels from the edges, so the clipped path below is the rare one and drawing it
+    # second cannot upset the painter's order in practice.
+    inner = (ci >= r) & (ci < w - r) & (ri >= r) & (ri < h - r)
+    all_inner = bool(inner.all())
+    centre = ri * w + ci if all_inner else ri[inner] * w + ci[inner]
+    offsets = dy.astype(np.int64) * w + dx
+    if offsets.size == 1:
+        flat[centre] = colors if all_inner else colors[inner]
+    else:
+        flat[(centre[:, None] + offsets).reshape(-1)] = np.repeat(colors if all_inner else colors[inner], offsets.size)
+    if not all_inner:
+        edge = ~inner
+        rr = ri[edge][:, None] + dy
+        cc = ci[edge][:, None] + dx
+        inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
+        flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
+
+
+class _Rasteriser:
+    """Everything fixed over an animation: camera, background, stencil, colour scale."""
+
+    def __init__(
+        self,
+        rec: Recording,
+        size: tuple[int, int],
+        color_by: str,
+        radius: int | None,
+        view: tuple[float, float],
+        speed_scale: float | None = None,
+        *,
+        pressure_scale: float | None = None,
+        colorbar: bool = False,
+    ):
+        n, dim = rec.positions.shape[1:]
+        walls = rec.walls if rec.walls is not None and len(rec.walls) else None
+        self.rec = rec
+        self.radius = _auto_radius(n + (0 if walls is None else len(walls)), size) if radius is None else radius
+        self.color_by = color_by
+        # The colour scale: 0 at the bottom, the top fixed over the animation.
+        self.vmax = 0.0
+        values, scale, base, levels = {
+            "speed": (rec.speeds, speed_scale, _SPEED0, _N_SPEED),
+            "pressure": (rec.pressures, pressure_scale, _PRESSURE0, _N_PRESSURE),
+        }.get(color_by, (None, None, 0, 0))
+        if values is not None and values.size:
+            if scale is None:
+                finite = values[np.isfinite(values)]
+                # 99th percentile: a few outliers should not wash out the whole map.
+                scale = float(np.percentile(finite, 99)) if finite.size else 0.0
+            self.vmax = float(scale)
+        self.colorbar = None
+        if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
+            self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax))
+        self.cam = _Camera(dim, view, size)
+        pad = max(self.radius + 2, int(round(0.05 * min(size))))
+        lo, hi, amax = _screen_bounds(self.cam, rec.positions)
+        if walls is not None:
+            wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
+            lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
+        # Keep the colour bar's band free: no disc reaches into it.
+        top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
+        # Positions are float32 relative to the origin: extents below their rounding are zero.
+        self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad)
+        if radius is None:
+            r_springs = _spring_radius(rec, self.cam.scale)
+            if r_springs is not None:
+                self.radius = min(self.radius, r_springs)
+        self.stencil = _disc_stencil(self.radius)
+        self.background = _background(self.cam, rec.planes, rec.origin)
+        if walls is not None:
+            # Static: drawn once, under everything that moves.
+            s, _ = self.cam.project(walls)
+            col, row = self.cam.pixels(s)
+            _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
+        if self.colorbar is not None:
+            _draw_colorbar(self.background, self.colorbar, base, levels)
+        # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
+        self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
+
+    def frame(self, k: int) -> np.ndarray:
+        """(H, W) uint8 palette-index image of frame k."""
+        rec = self.rec
+        buf = self.background.copy()
+        s, depth = self.cam.project(rec.positions[k])
+        col, row = self.cam.pixels(s)
+        if rec.pairs is not None and rec.strain is not None:
+            i, j = rec.pairs
+            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k]))
+        if col.size == 0:
+            return buf
+        if self.color_by == "speed" and rec.speeds is not None:
+            colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
+        elif self.color_by == "pressure" and rec.pressures is not None:
+            colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
+        else:
+            colors = np.full(col.shape, _PLAIN, dtype=np.uint8)
+        colors[rec.pinned] = _PINNED
+        if depth is not None:
+            order = np.argsort(depth, kind="stable")  # painter's algorithm: far ones first
+        else:
+            order = self.pin_order
+        if order is not None:
+            col, row, colors = col[order], row[order], colors[order]
+        _draw_discs(buf, col, row, colors, self.stencil)
+        return buf

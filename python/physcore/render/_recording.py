@@ -1,0 +1,260 @@
+"""Producing frames of data: :class:`Recording` (a scene's state at every frame, no pixels) and
+:func:`record`, which steps a scene and fills one."""
+from __future__ import annotations
+
+import operator
+import sys
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .. import _check
+from .._errors import InvalidInputError, InvalidTypeError
+from ._checks import (
+    _check_advance,
+    _check_auto_substeps,
+    _check_color_by,
+    _check_frame_time,
+    _check_int,
+    _check_memory,
+    _short,
+)
+from ._rows import _finite_mean, _row_norms
+from ._scene_state import _planes, _pressure_array, _scene_boundary, _scene_pressure, _scene_springs, _strain
+
+#: Largest ``steps_per_frame`` and ``substeps``: 2**53, beyond which step counts and the time
+#: ``n · dt`` are no longer exact in float64 (and no run would finish anyway).
+MAX_STEPS = 2**53
+
+
+class Recording(NamedTuple):
+    """What :func:`record` produced: the scene's state at every frame, as data (no pixels).
+
+    Attributes
+    ----------
+    positions : (F, N, dim) float32
+        Positions relative to `origin`, m (float32 keeps its precision near the scene's centre).
+    origin : (dim,) float64
+        Centroid of the first frame, m; absolute positions are ``positions + origin``.
+    speeds : (F, N) float32 or None
+        |v|, m/s (recorded when asked for).
+    pairs : ((M,), (M,)) intp or None
+        Spring endpoints, when springs were recorded.
+    strain : (F, M) float32 or None
+        Spring strain (L - L0)/L0, NaN where the rest length is 0.
+    pinned : (N,) bool
+    planes : list of (point (dim,), normal (dim,)) float64
+        The scene's collider planes (unit normals).
+    pressures : (F, N) float32 or None
+        Pa (recorded when asked for).
+    walls : (B, dim) float64 or None
+        Static boundary points, relative to `origin`.
+    times : (F,) float64 or None
+        The scene's time at each frame, s.
+    """
+
+    positions: np.ndarray
+    origin: np.ndarray
+    speeds: np.ndarray | None
+    pairs: tuple[np.ndarray, np.ndarray] | None
+    strain: np.ndarray | None
+    pinned: np.ndarray
+    planes: list
+    pressures: np.ndarray | None = None
+    walls: np.ndarray | None = None
+    times: np.ndarray | None = None
+
+    @property
+    def frames(self) -> int:
+        return int(self.positions.shape[0])
+
+
+def _simulate(
+    scene: Any,
+    frames: int,
+    steps_per_frame: int,
+    need_speed: bool,
+    springs: bool,
+    progress: bool,
+    need_pressure: bool = False,
+    frame_time: float | None = None,
+    substeps: str | int = "auto",
+    on_frame: Any = None,
+) -> Recording:
+    """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
+
+    Between frames: ``scene.step(steps_per_frame)``, or ``scene.advance(frame_time)`` when
+    `frame_time` is given. Everything read from the scene is checked at frame 0, so a bad scene
+    raises before it is stepped.
+    """
+    dim = int(scene.dim)
+    if dim not in (2, 3):
+        raise InvalidInputError(f"scene.dim must be 2 or 3, got {dim}")
+    n = int(scene.n_particles)
+    sp = _scene_springs(scene) if springs else None
+    x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+    p0 = _scene_pressure(scene, n) if need_pressure else None
+    walls = _scene_boundary(scene, dim)
+    # Store positions relative to the start centroid so float32 keeps its precision far from 0.
+    origin = _finite_mean(x) if n else (_finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim))
+    pos = np.empty((frames, n, dim), dtype=np.float32)
+    speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
+    pressures = np.empty((frames, n), dtype=np.float32) if need_pressure else None
+    strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
+    has_time = hasattr(scene, "time")
+    times = np.empty(frames) if has_time else None
+    bar = None
+    if progress:
+        from tqdm import tqdm  # plain text bar: works in terminals and notebooks alike
+
+        bar = tqdm(total=frames, desc="simulating", unit="frame", file=sys.stderr)
+    try:
+        for k in range(frames):
+            taken = None
+            if k:
+                if frame_time is None:
+                    scene.step(steps_per_frame)
+                else:
+                    # Only a fixed count is passed on, so any advance(duration) scene works.
+                    taken = scene.advance(frame_time) if substeps == "auto" else scene.advance(frame_time, substeps=substeps)
+                    if bar is not None:
+                        try:
+                            bar.set_postfix(substeps=operator.index(taken), refresh=False)
+                        except TypeError:
+                            bar.set_postfix(substeps="?", refresh=False)
+                x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+            # A value beyond float32 (or a difference beyond float64) is stored as inf, and its
+            # particle is then left out of the drawing like any non-finite one.
+            with np.errstate(over="ignore", invalid="ignore"):
+                pos[k] = x - origin
+                if speeds is not None:
+                    v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
+                    speeds[k] = _row_norms(v)
+                if pressures is not None:
+                    pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
+                if strain is not None:
+                    strain[k] = _strain(x, *sp)
+            if times is not None:
+                times[k] = float(scene.time)
+            if on_frame is not None:
+                on_frame(k, scene, taken)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    pinned = np.asarray(scene.pinned, dtype=bool).reshape(n)
+    pairs = (sp[0], sp[1]) if sp is not None else None
+    return Recording(
+        pos,
+        origin,
+        speeds,
+        pairs,
+        strain,
+        pinned,
+        _planes(getattr(scene, "planes", None), dim),
+        pressures=pressures,
+        walls=None if walls is None else walls - origin,
+        times=times,
+    )
+
+
+def _plan(
+    scene: Any,
+    frames: int | None,
+    steps_per_frame: int | None,
+    frame_time: float | None,
+    substeps: str | int | None,
+    color_by: str,
+    springs: bool,
+) -> dict[str, Any]:
+    """The checked simulation arguments of :func:`record` (and :func:`gif` of a scene), as
+    keyword arguments of ``_simulate``. Raises before anything is stepped."""
+    frames = _check_int("frames", 90 if frames is None else frames, 1)
+    frame_time = _check_frame_time(frame_time)
+    if substeps is None:
+        substeps = "auto"
+    elif isinstance(substeps, str):
+        if substeps != "auto":
+            raise InvalidInputError(f"substeps must be 'auto' or an int >= 1, got {_short(substeps)}")
+    else:
+        substeps = _check_int("substeps", substeps, 1, MAX_STEPS)
+        if frame_time is None:
+            raise InvalidInputError("substeps needs frame_time (seconds between frames)")
+    if steps_per_frame is None:
+        steps_per_frame = 10
+    elif frame_time is not None:
+        raise InvalidInputError("give steps_per_frame or frame_time, not both")
+    else:
+        steps_per_frame = _check_int("steps_per_frame", steps_per_frame, 1, MAX_STEPS)
+    if frame_time is not None:
+        _check_advance(scene)
+        if substeps == "auto":
+            _check_auto_substeps(scene, frame_time)
+    return {
+        "frames": frames,
+        "steps_per_frame": steps_per_frame,
+        "need_speed": color_by == "speed",
+        "springs": springs,
+        "need_pressure": color_by == "pressure",
+        "frame_time": frame_time,
+        "substeps": substeps,
+    }
+
+
+def record(
+    scene: Any,
+    *,
+    frames: int = 90,
+    steps_per_frame: int | None = None,
+    frame_time: float | None = None,
+    substeps: str | int = "auto",
+    color_by: str = "speed",
+    springs: bool = True,
+    progress: bool = False,
+    on_frame: Any = None,
+) -> Recording:
+    """Step `scene` and return every frame's state as data: the producing half of :func:`gif`.
+
+    Frame 0 is the current state; between frames the scene advances ``steps_per_frame`` steps
+    (default 10) or, with `frame_time`, ``frame_time`` seconds in automatic (or `substeps`
+    fixed) substeps, exactly as :func:`gif` does with the same arguments. The scene is left at
+    the last frame.
+
+    Parameters
+    ----------
+    scene, frames, steps_per_frame, frame_time, substeps, springs, progress
+        As for :func:`gif`.
+    color_by : {"speed", "pressure", "none"}, default "speed"
+        Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
+    on_frame : callable, optional
+        ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
+        ``scene.advance`` returned for that frame (None for frame 0 and for fixed steps). For
+        progress reports and probes (energy books, counters); it must not change the scene.
+
+    Returns
+    -------
+    Recording
+        Give it to :func:`gif` to draw (``gif(recording, path, size=..., ...)``).
+
+    Raises
+    ------
+    As :func:`gif` (bad arguments before stepping; :class:`physcore.SimulationDiverged`).
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> rec = pc.render.record(pc.scenes.projectile(n=2), frames=5, steps_per_frame=20)
+    >>> rec.frames, rec.positions.shape, rec.positions.dtype
+    (5, (5, 2, 2), dtype('float32'))
+    >>> rec.times.round(6).tolist()
+    [0.0, 0.02, 0.04, 0.06, 0.08]
+    """
+    color_by = _check_color_by(color_by)
+    springs = _check.flag("springs", springs)
+    progress = _check.flag("progress", progress)
+    if on_frame is not None and not callable(on_frame):
+        raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
+    plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
+    _check_memory(scene, plan["frames"], (0, 0), springs)
+    return _simulate(scene, progress=progress, on_frame=on_frame, **plan)

@@ -1,0 +1,79 @@
+"""Reading a scene's state into checked float64 arrays: springs and their strain, collider planes,
+pressures and static boundary points (the optional parts a scene may or may not have)."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from .._errors import InvalidInputError
+from ._rows import _row_norms, _rows_finite
+
+
+def _strain(x: np.ndarray, i: np.ndarray, j: np.ndarray, rest: np.ndarray) -> np.ndarray:
+    length = _row_norms(x[j] - x[i])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(rest > 0, (length - rest) / rest, np.nan)
+
+
+def _planes(planes: Any, dim: int) -> list:
+    """Plane objects (.point, .normal) -> [(point, unit normal)]; degenerate ones are skipped."""
+    out = []
+    for pl in planes or []:
+        p = np.asarray(pl.point, dtype=np.float64).reshape(-1)
+        n = np.asarray(pl.normal, dtype=np.float64).reshape(-1)
+        nn = float(np.sqrt(n @ n)) if n.shape == (dim,) else 0.0
+        if p.shape == (dim,) and nn > 0 and np.isfinite(p).all() and math.isfinite(nn):
+            out.append((p, n / nn))
+    return out
+
+
+def _scene_springs(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    i, j, rest = scene.spring_pairs()
+    i = np.asarray(i, dtype=np.intp)
+    if i.size == 0:
+        return None
+    return i, np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64)
+
+
+def _pressure_array(p: Any, n: int) -> np.ndarray:
+    """Check what ``scene.pressure()`` returned: (N,) float64 Pa."""
+    p = np.asarray(p, dtype=np.float64)
+    if p.shape != (n,):
+        raise InvalidInputError(f"scene.pressure() must return an array of shape ({n},) in Pa, got shape {p.shape}")
+    return p
+
+
+def _scene_pressure(scene: Any, n: int) -> np.ndarray:
+    """``scene.pressure()`` as (N,) float64 Pa; ValueError naming color_by if the scene has none."""
+    try:
+        p = scene.pressure()
+    except AttributeError as e:
+        raise InvalidInputError(
+            f"color_by='pressure' needs a scene with a pressure() method (an SPH fluid); "
+            f"this one has none ({e})"
+        ) from None
+    return _pressure_array(p, n)
+
+
+def _boundary_array(b: Any, dim: int) -> np.ndarray:
+    """Static boundary points (B, dim) float64, non-finite rows dropped."""
+    b = np.asarray(b, dtype=np.float64)
+    if b.size == 0:
+        return np.zeros((0, dim))
+    if b.ndim != 2 or b.shape[1] != dim:
+        raise InvalidInputError(f"boundary points must have shape (B, {dim}), got {b.shape}")
+    return b if np.isfinite(b).all() else b[_rows_finite(b)]
+
+
+def _scene_boundary(scene: Any, dim: int) -> np.ndarray | None:
+    """``scene.boundary_points()`` as (B, dim) float64, or None where the scene has no such method."""
+    method = getattr(scene, "boundary_points", None)
+    if not callable(method):
+        return None
+    try:
+        b = method()
+    except AttributeError:
+        return None
+    return _boundary_array(b, dim)
