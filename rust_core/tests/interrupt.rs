@@ -7,7 +7,7 @@ use glam::DVec3;
 use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;
 use physcore_core::state::Model;
-use physcore_core::terms::{Springs, Term, UniformGravity};
+use physcore_core::terms::{Springs, Term, UniformGravity, Write};
 use physcore_core::World;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -25,16 +25,8 @@ impl Term<DVec3> for Tripwire {
     fn name(&self) -> &str {
         "tripwire"
     }
-    fn add_forces(
-        &mut self,
-        _x: &[DVec3],
-        _v: &[DVec3],
-        _m: &Model,
-        f: &mut [DVec3],
-        _want_power: bool,
-        assign: bool,
-    ) -> f64 {
-        if assign {
+    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, f: &mut [DVec3], write: Write) -> f64 {
+        if write == Write::Overwrite {
             f.fill(DVec3::ZERO);
         }
         self.calls += 1;
@@ -163,15 +155,7 @@ impl Term<DVec3> for Counter {
     fn name(&self) -> &str {
         "counter"
     }
-    fn add_forces(
-        &mut self,
-        _x: &[DVec3],
-        _v: &[DVec3],
-        _m: &Model,
-        _f: &mut [DVec3],
-        _want_power: bool,
-        _assign: bool,
-    ) -> f64 {
+    fn add_forces(&mut self, _x: &[DVec3], _v: &[DVec3], _m: &Model, _f: &mut [DVec3], _write: Write) -> f64 {
         self.0.fetch_add(1, Ordering::Relaxed);
         0.0
     }

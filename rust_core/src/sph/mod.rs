@@ -30,7 +30,7 @@ use crate::simd::{self, Level};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::Term;
+use crate::terms::{Term, Write};
 use crate::vector::{Real, Vector};
 use kernels::{CubicSpline, Float, Kernel, WendlandC2};
 use rayon::prelude::*;
@@ -577,8 +577,9 @@ impl<V: Vector> Term<V> for Sph<V> {
         &self.name
     }
 
-    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real {
-        self.forces_at(simd::level(), x, v, model, f, want_power, assign)
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
+        let want_power = Term::<V>::dissipative(self);
+        self.forces_at(simd::level(), x, v, model, f, want_power, write == Write::Overwrite)
     }
 
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {

@@ -1,6 +1,6 @@
 //! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|².
 use super::registry::{Context, Params};
-use super::Term;
+use super::{Term, Write};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -25,19 +25,19 @@ impl<V: Vector> Term<V> for Drag {
     fn name(&self) -> &str {
         &self.name
     }
-    fn add_forces(&mut self, _x: &[V], v: &[V], model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
+    fn add_forces(&mut self, _x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let b = self.b;
         let body = |s: usize, f: &mut [V]| {
             let mut p = 0.0;
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
                 let fd = if model.inv_mass[i] != 0.0 { v[i] * (-b) } else { V::ZERO };
-                *fi = if assign { fd } else { *fi + fd };
+                write.put(fi, fd);
                 p += b * v[i].length_squared();
             }
             p
         };
-        if want {
+        if b > 0.0 {
             par::chunks1_sum(f, body)
         } else {
             par::chunks1(f, |s, f| {

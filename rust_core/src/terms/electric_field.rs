@@ -2,7 +2,7 @@
 //! particles (Griffiths, *Introduction to Electrodynamics*, 4th ed., eqs. 2.21 and 4.14 for a
 //! point charge). q is the `charge` attribute (C); a scene without it feels no force.
 use super::registry::{Context, Params};
-use super::Term;
+use super::{Term, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -23,7 +23,7 @@ impl<V: Vector> Term<V> for UniformElectricField<V> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
+    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let (e, q) = (self.e, model.attribute("charge"));
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
@@ -32,7 +32,7 @@ impl<V: Vector> Term<V> for UniformElectricField<V> {
                     Some(q) if model.inv_mass[i] != 0.0 => e * q[i],
                     _ => V::ZERO,
                 };
-                *fi = if assign { fe } else { *fi + fe };
+                write.put(fi, fe);
             }
         });
         0.0
@@ -68,11 +68,11 @@ mod tests {
         let x = [DVec2::new(1.0, 2.0); 3];
         let mut t = UniformElectricField { name: "e".into(), e: DVec2::new(3.0, -1.0) };
         let mut f = [DVec2::ONE; 3];
-        t.add_forces(&x, &x, &model, &mut f, false, true);
+        t.add_forces(&x, &x, &model, &mut f, Write::Overwrite);
         assert_eq!(f, [DVec2::ZERO; 3]); // no charge attribute: no force
         assert_eq!(t.potential(&x, &model), Some(0.0));
         model.attributes.insert("charge", vec![2.0, 5.0, -1.0]);
-        t.add_forces(&x, &x, &model, &mut f, false, false);
+        t.add_forces(&x, &x, &model, &mut f, Write::Add);
         assert_eq!(f, [DVec2::new(6.0, -2.0), DVec2::ZERO, DVec2::new(-3.0, 1.0)]);
         // U = -(2 + (-1)) (3·1 - 1·2): the pinned particle's charge does not count.
         assert_eq!(t.potential(&x, &model), Some(-1.0));

@@ -1,6 +1,6 @@
 //! Uniform gravity: F_i = m_i g on every free particle; U = −Σ m_i g·x_i.
 use super::registry::{Context, Params};
-use super::Term;
+use super::{Term, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -21,13 +21,13 @@ impl<V: Vector> Term<V> for UniformGravity<V> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
+    fn add_forces(&mut self, _x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let g = self.g;
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
                 let fg = if model.inv_mass[i] != 0.0 { g * model.mass[i] } else { V::ZERO };
-                *fi = if assign { fg } else { *fi + fg };
+                write.put(fi, fg);
             }
         });
         0.0

@@ -18,14 +18,34 @@ pub use gravity::UniformGravity;
 pub use pairwise_gravity::PairwiseGravity;
 pub use springs::Springs;
 
+/// How a term stores its forces in the buffer of an evaluation: the first term overwrites what
+/// the buffer holds (the previous evaluation's forces), which saves a zeroing pass; the others
+/// add to it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Write {
+    Overwrite,
+    Add,
+}
+
+impl Write {
+    /// Stores force `f` into `slot` (`=` or `+=`).
+    #[inline(always)]
+    pub fn put<V: Vector>(self, slot: &mut V, f: V) {
+        *slot = match self {
+            Write::Overwrite => f,
+            Write::Add => *slot + f,
+        };
+    }
+}
+
 /// One force term.
 pub trait Term<V: Vector>: Send + Sync {
     /// Stable name used as the key of the energy books (unique within a scene).
     fn name(&self) -> &str;
-    /// Adds this term's forces (N) to `f` — or, if `assign`, writes them over whatever `f` holds
-    /// (saves a zeroing pass for the first term). If `want_power`, returns the power it
-    /// dissipates at this state (W, ≥ 0); otherwise the return value is unspecified (0).
-    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], want_power: bool, assign: bool) -> Real;
+    /// Stores this term's forces (N) at `(x, v)` in `f` as `write` says, one per particle (0 for
+    /// particles it does not act on). Returns the power it dissipates at this state (W, ≥ 0)
+    /// if it is `dissipative()`, else 0 (conservative terms skip that sum).
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real;
     /// `Some(g)` for a uniform acceleration field (uniform gravity): integrators then add `g` to
     /// every free particle's acceleration directly and `add_forces` is never called.
     fn uniform_acceleration(&self) -> Option<V> {
@@ -120,8 +140,7 @@ impl<V: Vector> ForceSet<V> {
     /// flag is set the remaining terms are skipped (the step will be rolled back).
     pub fn eval(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
         self.evaluations += 1;
-        let want = self.any_dissipative;
-        let mut assign = true;
+        let mut write = Write::Overwrite;
         for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
             if t.uniform_acceleration().is_some() {
                 continue;
@@ -129,10 +148,10 @@ impl<V: Vector> ForceSet<V> {
             if self.stop.is_set() {
                 break;
             }
-            *p = t.add_forces(x, v, model, f, want && t.dissipative(), assign);
-            assign = false;
+            *p = t.add_forces(x, v, model, f, write);
+            write = Write::Add;
         }
-        if assign {
+        if write == Write::Overwrite {
             par::chunks1(f, |_, f| f.fill(V::ZERO));
         }
     }

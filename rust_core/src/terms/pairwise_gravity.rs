@@ -18,7 +18,7 @@
 //! (symmetric sum, whose blocks are N/32), i.e. every ~N·16 pairs at most, and skip the rest once
 //! it is set.
 use super::registry::{Context, Params};
-use super::Term;
+use super::{Term, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
@@ -510,7 +510,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         Ok(())
     }
 
-    fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], _want: bool, assign: bool) -> Real {
+    fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let eps2 = self.softening * self.softening;
         let level = simd::level();
         let mut acc = std::mem::take(&mut self.acc);
@@ -540,14 +540,14 @@ impl<V: Vector> Term<V> for PairwiseGravity {
                 let i = s + k;
                 if model.inv_mass[i] == 0.0 {
                     // Pinned: its force is never used.
-                    if assign {
+                    if write == Write::Overwrite {
                         *fi = V::ZERO;
                     }
                     continue;
                 }
                 let (a, gm) = (acc[i], g * model.mass[i]);
                 let fg = V::from_slice(&[a[0] * gm, a[1] * gm, a[2] * gm][..V::DIM]);
-                *fi = if assign { fg } else { *fi + fg };
+                write.put(fi, fg);
             }
         });
         self.acc = acc;

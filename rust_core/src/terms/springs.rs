@@ -16,7 +16,7 @@
 //! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
 //! written once over `crate::simd`, for every instruction set).
 use super::registry::{Context, Params};
-use super::Term;
+use super::{Term, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
@@ -255,8 +255,9 @@ struct SliceForces<'a, V: Vector> {
     v: &'a [V],
     g0: usize,
     out: &'a mut [V],
+    /// Whether to sum the dashpots' power (only if any spring is damped).
     want: bool,
-    assign: bool,
+    write: Write,
 }
 
 impl<V: Vector> Kernel for SliceForces<'_, V> {
@@ -276,7 +277,7 @@ impl<V: Vector> SliceForces<'_, V> {
     /// `HW`: the level's hardware row gather (`Simd::gather_rows_f64s_hw`), else lane by lane.
     #[inline(always)]
     fn slices<S: Simd, const HW: bool>(self, s: S) -> Real {
-        let SliceForces { sp, x, v, g0, out, want, assign } = self;
+        let SliceForces { sp, x, v, g0, out, want, write } = self;
         let (xf, vf) = (V::flat(x), V::flat(v));
         let l = P::<S, f64>::lanes();
         let dim = V::DIM;
@@ -335,7 +336,7 @@ impl<V: Vector> SliceForces<'_, V> {
                 let a = [acc[0].to_array(), acc[1].to_array(), acc[2].to_array()];
                 for (k, o) in out.iter_mut().enumerate() {
                     let f = V::from_slice(&[a[0][k], a[1][k], a[2][k]][..dim]);
-                    *o = if assign { f } else { *o + f };
+                    write.put(o, f);
                 }
             }
         }
@@ -345,15 +346,15 @@ impl<V: Vector> SliceForces<'_, V> {
 
 impl<V: Vector> Springs<V> {
     /// `add_forces` at a given SIMD level.
-    fn forces(&self, level: simd::Level, x: &[V], v: &[V], f: &mut [V], want: bool, assign: bool) -> Real {
-        let want = want && self.any_damping;
+    fn forces(&self, level: simd::Level, x: &[V], v: &[V], f: &mut [V], write: Write) -> Real {
+        let want = self.any_damping;
         let n_cov = self.n_cov;
         // Chunks start at multiples of par::CHUNK, itself a multiple of SLICE: slices never
         // straddle two chunks.
         let power = par::chunks1_sum(&mut f[..n_cov], |p0, out| {
-            simd::dispatch(level, SliceForces { sp: self, x, v, g0: p0 / SLICE, out, want, assign })
+            simd::dispatch(level, SliceForces { sp: self, x, v, g0: p0 / SLICE, out, want, write })
         });
-        if assign {
+        if write == Write::Overwrite {
             par::chunks1(&mut f[n_cov..], |_, f| f.fill(V::ZERO));
         }
         if want {
@@ -369,8 +370,8 @@ impl<V: Vector> Term<V> for Springs<V> {
         &self.name
     }
 
-    fn add_forces(&mut self, x: &[V], v: &[V], _model: &Model, f: &mut [V], want: bool, assign: bool) -> Real {
-        self.forces(simd::level(), x, v, f, want, assign)
+    fn add_forces(&mut self, x: &[V], v: &[V], _model: &Model, f: &mut [V], write: Write) -> Real {
+        self.forces(simd::level(), x, v, f, write)
     }
     fn potential(&self, x: &[V], _m: &Model) -> Option<Real> {
         Some(par::sum(self.len(), 0.0, |r| {
@@ -459,7 +460,7 @@ mod tests {
         let scale = want.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
         for level in Level::available() {
             let mut f = vec![V::ZERO; n];
-            let p = sp.forces(level, &x, &v, &mut f, true, true);
+            let p = sp.forces(level, &x, &v, &mut f, Write::Overwrite);
             for q in 0..n {
                 assert!(
                     (f[q] - want[q]).length_squared().sqrt() <= 1e-13 * scale,
