@@ -48,7 +48,7 @@ def main(n: int = 100_000, size=(480, 360)) -> None:
         i, j, rest = springs
         for with_springs in (False, True):
             for radius in (None, 2):
-                rec = render._Recording(
+                rec = render.Recording(
                     positions=x.astype(np.float32)[None],
                     origin=np.zeros(dim),
                     speeds=render._row_norms(v).astype(np.float32)[None],
