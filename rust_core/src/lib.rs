@@ -11,8 +11,8 @@
 pub mod alloc;
 pub mod boundary;
 pub mod error;
-pub mod grid;
 pub mod integrators;
+pub mod neighbors;
 pub mod par;
 pub mod simd;
 pub mod simulation;
