@@ -17,8 +17,8 @@
 pub mod alloc;
 pub mod constraints;
 pub mod error;
-pub mod grid;
 pub mod integrators;
+pub mod neighbors;
 pub mod ode;
 pub mod par;
 pub mod simd;

@@ -42,10 +42,10 @@ fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f
     let pool = crate::par::default_pool().ok();
     let r = if dim == 3 {
         let x = try_from_flat::<DVec3>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
-        py.detach(|| crate::par::install(pool.as_ref(), || crate::grid::neighbor_pairs(&x, radius)))
+        py.detach(|| crate::par::install(pool.as_ref(), || crate::neighbors::neighbor_pairs(&x, radius)))
     } else {
         let x = try_from_flat::<DVec2>(flat, "neighbors", "points").map_err(|e| to_py(py, e))?;
-        py.detach(|| crate::par::install(pool.as_ref(), || crate::grid::neighbor_pairs(&x, radius)))
+        py.detach(|| crate::par::install(pool.as_ref(), || crate::neighbors::neighbor_pairs(&x, radius)))
     };
     let (i, j) = r.map_err(|e| to_py(py, e))?;
     Ok((i.into_pyarray(py), j.into_pyarray(py)))

@@ -6,14 +6,142 @@
 //! masked. r and 1/r come from the layer's fast reciprocal square root (the passes would
 //! otherwise spend most of their time in the divider). Forces are gathered per particle: no
 //! atomics, bit-identical for any thread count; levels differ by a few ulp.
-use super::kernels::{Float, Kernel};
-use super::{powi, Bufs, SphParams};
-use crate::grid::{CellList, Ranges, MAX_RANGES};
-use crate::par::SyncPtr;
-use crate::simd::{Kernel as SimdKernel, Simd, P};
+//!
+//! `density` and `forces` are the entry points: they pick the kernel and dimension (compile-time
+//! parameters of the passes), cut the sorted particles into chunks (`par::CHUNK`) run in
+//! parallel, and hand each chunk to the SIMD level in use. The force pass sums its chunks'
+//! dissipated power in chunk order.
+use super::buffers::Bufs;
+use super::kernels::{CubicSpline, Float, Kernel, WendlandC2};
+use super::params::{KernelKind, SphParams};
+use crate::neighbors::{CellList, Ranges, MAX_RANGES};
+use crate::par::{self, SyncPtr};
+use crate::simd::{self, Kernel as SimdKernel, Level, Simd, P};
 use crate::vector::Vector;
+use rayon::prelude::*;
 use std::marker::PhantomData;
 use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// The density pass for the kernel of `p` and the dimension of `V`: ρ and p/ρ² of the particles
+/// in `grid` into `b.rho`, `b.pr` (cell order).
+pub(super) fn density<V: Vector, F: Float>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &mut Bufs<F>,
+    stop: &AtomicBool,
+) {
+    match (p.kernel, V::DIM) {
+        (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(level, p, grid, walls, b, stop),
+        (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(level, p, grid, walls, b, stop),
+        (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(level, p, grid, walls, b, stop),
+        (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(level, p, grid, walls, b, stop),
+    }
+}
+
+/// The force pass for the kernel of `p` and the dimension of `V`: the forces of the particles
+/// in `grid` into `out` (particle order); returns (dissipated power W, max |a|²).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn forces<V: Vector, F: Float>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    out: &mut [V],
+    want_power: bool,
+    stop: &AtomicBool,
+) -> (f64, f64) {
+    match (p.kernel, V::DIM) {
+        (KernelKind::CubicSpline, 2) => {
+            force_pass::<V, F, CubicSpline, 2>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::CubicSpline, _) => {
+            force_pass::<V, F, CubicSpline, 3>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::WendlandC2, 2) => {
+            force_pass::<V, F, WendlandC2, 2>(level, p, grid, walls, b, out, want_power, stop)
+        }
+        (KernelKind::WendlandC2, _) => {
+            force_pass::<V, F, WendlandC2, 3>(level, p, grid, walls, b, out, want_power, stop)
+        }
+    }
+}
+
+fn density_pass<F: Float, K: Kernel, const D: usize>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &mut Bufs<F>,
+    stop: &AtomicBool,
+) {
+    let n = grid.len();
+    let mut rho = std::mem::take(&mut b.rho);
+    let mut pr = std::mem::take(&mut b.pr);
+    {
+        let b: &Bufs<F> = b;
+        par::chunks2(&mut rho[..n], &mut pr[..n], |s, rho, pr| {
+            if stop.load(Ordering::Relaxed) {
+                return;
+            }
+            let ks = s..s + rho.len();
+            simd::dispatch(level, Density::<F, K, D> { p, grid, walls, b, ks, rho, pr, _k: PhantomData });
+        });
+    }
+    b.rho = rho;
+    b.pr = pr;
+}
+
+#[allow(clippy::too_many_arguments)]
+fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
+    level: Level,
+    p: &SphParams,
+    grid: &CellList,
+    walls: &CellList,
+    b: &Bufs<F>,
+    out: &mut [V],
+    want_power: bool,
+    stop: &AtomicBool,
+) -> (f64, f64) {
+    let n = grid.len();
+    let out = SyncPtr(out.as_mut_ptr());
+    let chunk = |c: usize| {
+        if stop.load(Ordering::Relaxed) {
+            return (0.0, 0.0);
+        }
+        let ks = c * par::CHUNK..((c + 1) * par::CHUNK).min(n);
+        if want_power {
+            simd::dispatch(level, Forces::<V, F, K, D, true> { p, grid, walls, b, ks, out, _k: PhantomData })
+        } else {
+            simd::dispatch(level, Forces::<V, F, K, D, false> { p, grid, walls, b, ks, out, _k: PhantomData })
+        }
+    };
+    let nc = n.div_ceil(par::CHUNK);
+    let parts: Vec<(f64, f64)> = match par::fork_if(n, || (0..nc).into_par_iter().map(chunk).collect()) {
+        Some(p) => p,
+        None => (0..nc).map(chunk).collect(),
+    };
+    // Fixed chunk order: the same sum for any thread count.
+    parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)))
+}
+
+/// s^γ: a fixed multiplication chain for water's γ = 7 (this runs once per particle per step).
+#[inline(always)]
+fn powi<F: Float>(s: F, gamma: i32) -> F {
+    if gamma == 7 {
+        let s2 = s * s;
+        let s4 = s2 * s2;
+        return s4 * s2 * s;
+    }
+    let mut r = s;
+    for _ in 1..gamma {
+        r = r * s;
+    }
+    r
+}
 
 /// Smallest r² the passes take a square root of (r = 0 is the self pair): keeps 1/r finite.
 #[inline(always)]
