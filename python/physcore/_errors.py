@@ -11,6 +11,7 @@ __all__ = [
     "OutOfMemoryError",
     "ThreadPoolError",
     "ThreadPoolWarning",
+    "SeparateFluidsWarning",
 ]
 
 
@@ -71,6 +72,14 @@ class ThreadPoolWarning(RuntimeWarning):
     """A scene built with ``threads=None`` could not start its threads and runs on the calling
     thread alone: same results, slower, and Ctrl-C takes effect when a call ends (the call is
     still undone)."""
+
+
+class SeparateFluidsWarning(UserWarning):
+    """A second :class:`~physcore.fluids.Fluid` was added to a scene that has one. Each fluid
+    sees only its own particles and walls, so two fluids pass through each other. For one body
+    of water in several pieces (a drop above a pool), put all positions in one ``Fluid``;
+    fluids of different kinds that push on each other need a neighbour search shared between
+    them, which physcore does not have yet."""
 
 
 class SimulationDiverged(PhyscoreError, RuntimeError):

@@ -210,6 +210,10 @@ class Fluid(Term, kind="fluid"):
     """A WCSPH fluid: its particles and parameters, SI units. Add it with :meth:`Scene.add`
     (or :meth:`Scene.add_fluid`), which appends the particles and the force term.
 
+    A fluid interacts with its own particles and walls only: two ``Fluid`` s in one scene pass
+    through each other (adding the second warns, :class:`~physcore.SeparateFluidsWarning`). Put
+    one body of water, however many pieces it starts in, in one ``Fluid``.
+
     Parameters
     ----------
     positions : array_like, shape (N, dim)

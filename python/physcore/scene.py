@@ -19,7 +19,7 @@ import numpy as np
 
 from . import _check, _core, _scenefile
 from ._atomic import atomic_write
-from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, ThreadPoolWarning
+from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SeparateFluidsWarning, ThreadPoolWarning
 from .fluids import Fluid
 from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
 
@@ -453,6 +453,13 @@ class Scene:
                 "is below float64's normal range"
             )
         m = fluid.particle_mass()
+        if first is None and any(isinstance(t, Fluid) for t in self._terms):
+            warnings.warn(
+                f"{name!r} is the scene's second fluid: fluids do not interact (each sees only its own "
+                "particles and walls), so they will pass through each other; put one body of water in one Fluid",
+                SeparateFluidsWarning,
+                stacklevel=4,
+            )
         if first is None:
             n = len(fluid)
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
