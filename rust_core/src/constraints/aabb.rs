@@ -3,7 +3,7 @@
 //! projected onto the face; if it moves outward its normal velocity becomes −e·v_n and its
 //! tangential velocity drops by μ(1 + e)|v_n| (never reversing). The energy removed (ΔKE plus the
 //! work −F·Δx of the last force and gravity over the projection) is booked as dissipated.
-use super::{check_contact, Constraint};
+use super::{Constraint, Contact};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -15,10 +15,7 @@ pub struct Aabb<V: Vector> {
     pub(crate) lo: V,
     /// Upper corner, m (> lo on every axis).
     pub(crate) hi: V,
-    /// Coefficient of restitution e in [0, 1].
-    pub(crate) restitution: Real,
-    /// Coulomb friction coefficient μ ≥ 0.
-    pub(crate) friction: Real,
+    pub(crate) contact: Contact,
 }
 
 impl<V: Vector> Aabb<V> {
@@ -30,14 +27,14 @@ impl<V: Vector> Aabb<V> {
         if (0..V::DIM).any(|k| !(hi.comp(k) > lo.comp(k))) {
             return Err(invalid("upper", "must be > lower on every axis"));
         }
-        check_contact(restitution, friction)?;
-        Ok(Self { lo, hi, restitution, friction })
+        let contact = Contact::new(restitution, friction)?;
+        Ok(Self { lo, hi, contact })
     }
 }
 
 impl<V: Vector> Constraint<V> for Aabb<V> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let (e, mu) = (self.restitution, self.friction);
+        let Contact { restitution: e, friction: mu } = self.contact;
         let mut lo = [0.0; 3];
         let mut hi = [0.0; 3];
         for k in 0..V::DIM {

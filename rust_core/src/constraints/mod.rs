@@ -65,13 +65,24 @@ impl<V: Vector> Constraints<V> {
     }
 }
 
-/// The contact coefficients every wall takes: restitution e in [0, 1], friction μ ≥ 0.
-pub(crate) fn check_contact(restitution: Real, friction: Real) -> Result<()> {
-    if !(0.0..=1.0).contains(&restitution) {
-        return Err(invalid("restitution", format!("{restitution} is outside [0, 1]")));
+/// The contact coefficients of a wall.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contact {
+    /// Coefficient of restitution e in [0, 1].
+    pub restitution: Real,
+    /// Coulomb friction coefficient μ ≥ 0.
+    pub friction: Real,
+}
+
+impl Contact {
+    /// `InvalidInput` naming the argument if e is outside [0, 1] or μ is not finite and ≥ 0.
+    pub fn new(restitution: Real, friction: Real) -> Result<Self> {
+        if !(0.0..=1.0).contains(&restitution) {
+            return Err(invalid("restitution", format!("{restitution} is outside [0, 1]")));
+        }
+        if !(friction.is_finite() && friction >= 0.0) {
+            return Err(invalid("friction", format!("{friction} must be finite and >= 0")));
+        }
+        Ok(Self { restitution, friction })
     }
-    if !(friction.is_finite() && friction >= 0.0) {
-        return Err(invalid("friction", format!("{friction} must be finite and >= 0")));
-    }
-    Ok(())
 }

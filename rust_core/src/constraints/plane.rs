@@ -6,7 +6,7 @@
 //! never past zero. The energy this removes is booked as dissipated: the change in kinetic energy
 //! plus the work −F·Δx of the last evaluated force F (with gravity) over the projection Δx
 //! (exact for uniform gravity, first order otherwise).
-use super::{check_contact, Constraint};
+use super::{Constraint, Contact};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -18,10 +18,7 @@ pub struct Plane<V: Vector> {
     pub(crate) point: V,
     /// Unit normal pointing into the allowed half-space.
     pub(crate) normal: V,
-    /// Coefficient of restitution e in [0, 1].
-    pub(crate) restitution: Real,
-    /// Coulomb friction coefficient μ ≥ 0.
-    pub(crate) friction: Real,
+    pub(crate) contact: Contact,
 }
 
 impl<V: Vector> Plane<V> {
@@ -35,14 +32,14 @@ impl<V: Vector> Plane<V> {
         if !(l2.is_finite() && l2 > 0.0) {
             return Err(invalid("normal", "must be finite and non-zero"));
         }
-        check_contact(restitution, friction)?;
-        Ok(Self { point, normal: normal / l2.sqrt(), restitution, friction })
+        let contact = Contact::new(restitution, friction)?;
+        Ok(Self { point, normal: normal / l2.sqrt(), contact })
     }
 }
 
 impl<V: Vector> Constraint<V> for Plane<V> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let (p, n, e, mu) = (self.point, self.normal, self.restitution, self.friction);
+        let (p, n, Contact { restitution: e, friction: mu }) = (self.point, self.normal, self.contact);
         par::chunks2_fold(
             x,
             v,
