@@ -19,7 +19,7 @@ pub struct Tableau {
     /// Order of accuracy of `b`.
     pub order: u32,
     pub stages: usize,
-    /// Strictly lower triangular: a[i][j] = 0 for j ≥ i.
+    /// Strictly lower triangular: `a[i][j] = 0` for j ≥ i.
     pub a: [[Real; MAX_STAGES]; MAX_STAGES],
     pub b: [Real; MAX_STAGES],
     pub c: [Real; MAX_STAGES],
