@@ -7,7 +7,7 @@ use glam::DVec2;
 use physcore_core::error::Error;
 use physcore_core::systems::ode::OdeSystem;
 use physcore_core::systems::particles::ParticleSystem;
-use physcore_core::systems::{Coupling, System};
+use physcore_core::systems::{Arrays, Coupling, System};
 use physcore_core::World;
 use std::sync::{Arc, Mutex};
 
@@ -130,4 +130,68 @@ fn an_ode_system_is_bit_identical_for_1_and_2_threads() {
     };
     let (a, b) = (run(1), run(2));
     assert!(a.iter().zip(&b).all(|(p, q)| p.to_bits() == q.to_bits()));
+}
+
+/// A damped cloth falling onto a floor (constraint books), plus an ODE system.
+fn restartable(integrator: &str) -> World<glam::DVec3> {
+    use physcore_core::constraints::Plane;
+    let mut w = common::cloth(6, integrator, 2, 0.05);
+    let floor = Plane::new(glam::DVec3::new(0.0, 0.0, -0.05), glam::DVec3::Z, 0.5, 0.3).unwrap();
+    w.particles_mut().add_constraint(Box::new(floor));
+    w.add_system(Box::new(harmonic("dopri5", None))).unwrap();
+    if integrator == "rk45" {
+        w.set_dt(0.01).unwrap();
+    }
+    w
+}
+
+#[test]
+fn a_run_restarted_from_its_saved_arrays_continues_bit_for_bit() {
+    for integrator in physcore_core::integrators::NAMES {
+        let mut a = restartable(integrator);
+        a.step(30).unwrap();
+        let (clock, systems) = a.save();
+        let mut b = restartable(integrator);
+        b.load(clock, &systems).unwrap();
+        a.step(40).unwrap();
+        b.step(40).unwrap();
+        assert!(a.particles().state() == b.particles().state(), "{integrator}: particles differ after the restart");
+        assert_eq!(a.others()[0].fields(&["y"]), b.others()[0].fields(&["y"]), "{integrator}");
+        assert_eq!(a.energy(), b.energy(), "{integrator}: books differ");
+        assert_eq!((a.time(), a.steps()), (b.time(), b.steps()));
+        assert_eq!(a.particles().adaptive_stats(), b.particles().adaptive_stats(), "{integrator}");
+    }
+}
+
+#[test]
+fn a_bad_saved_state_is_refused_by_name_and_changes_nothing() {
+    let mut a = restartable("verlet");
+    a.step(5).unwrap();
+    let (clock, good) = a.save();
+    let mut b = restartable("verlet");
+    b.step(3).unwrap();
+    let before = b.save();
+    let edit = |sys: usize, name: &str, f: &dyn Fn(&mut Vec<f64>)| {
+        let mut s = good.clone();
+        let (_, arrays) = &mut s[sys];
+        f(&mut arrays.iter_mut().find(|(n, _)| n == name).unwrap().1);
+        s
+    };
+    let cases: Vec<(&str, Vec<(String, Arrays)>)> = vec![
+        ("x", edit(0, "x", &|x| x[4] = f64::NAN)),
+        ("v", edit(0, "v", &|v| v.truncate(3))),
+        ("dissipated", edit(0, "dissipated", &|d| d[0] = f64::INFINITY)),
+        ("y", edit(1, "y", &|y| y.push(0.0))),
+        ("systems", good[..1].to_vec()),
+    ];
+    for (arg, saved) in cases {
+        match b.load(clock, &saved) {
+            Err(Error::InvalidInput { arg: got, .. }) => assert_eq!(got, arg),
+            other => panic!("{arg}: expected InvalidInput, got {other:?}"),
+        }
+        assert_eq!(b.save(), before, "{arg}: a refused load changed the world");
+    }
+    assert!(b.load((f64::NAN, 0, 0.1), &good).is_err());
+    assert!(b.load((0.0, 0, 0.0), &good).is_err());
+    assert_eq!(b.save(), before);
 }

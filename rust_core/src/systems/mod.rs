@@ -49,6 +49,22 @@ impl EnergyReport {
 /// world knowing its types.
 pub type Snapshot = Box<dyn Any + Send>;
 
+/// A system's state as named arrays of reals: what a scene file stores for it. `System::load`
+/// reads it back bit for bit, so a run restarted from it continues exactly as the original.
+pub type Arrays = Vec<(String, Vec<Real>)>;
+
+/// The array `name` of `arrays`, which must hold `len` values (`None`: any length); an
+/// `InvalidInput` naming it otherwise.
+pub fn array<'a>(arrays: &'a Arrays, name: &str, len: Option<usize>) -> Result<&'a [Real]> {
+    let Some((_, a)) = arrays.iter().find(|(n, _)| n == name) else {
+        return Err(crate::error::invalid(name, "is missing"));
+    };
+    if let Some(len) = len.filter(|&l| l != a.len()) {
+        return Err(crate::error::invalid(name, format!("has {} values, expected {len}", a.len())));
+    }
+    Ok(a)
+}
+
 /// Why a system's step did not stand.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Halt {
@@ -94,6 +110,11 @@ pub trait System: Send + Sync {
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>>;
     /// A copy of everything `step` changes, allocated fallibly.
     fn snapshot(&self) -> Result<Snapshot>;
+    /// Everything a restart needs (state, books, caches), as named arrays.
+    fn save(&self) -> Arrays;
+    /// Loads what `save` wrote for a system built the same way; every array is checked (names,
+    /// lengths, finite values) before anything changes.
+    fn load(&mut self, arrays: &Arrays) -> Result<()>;
     /// Returns to `snapshot`, which this system made.
     fn restore(&mut self, snapshot: Snapshot);
 }

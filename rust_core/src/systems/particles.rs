@@ -1,7 +1,7 @@
 //! The particle system: particles (state + model) under force terms, advanced by a particle
 //! integrator, then projected by the constraint stage. Everything physcore simulated before
 //! the `World` existed is this one system.
-use super::{EnergyReport, Halt, Snapshot, System};
+use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::alloc::{count, Need};
 use crate::constraints::{Constraint, Constraints};
 use crate::error::{invalid, Failure, Result};
@@ -536,6 +536,72 @@ impl<V: Vector> System for ParticleSystem<V> {
             cache: self.integrator.try_cache().map_err(|_| need.error())?,
             adaptive: self.integrator.adaptive_stats(),
         }))
+    }
+
+    /// "x", "v" (n × dim, row-major), "dissipated" (one per term), "collisions" (one) and, if the
+    /// integrator carries them, "cache_forces" (n × dim) and "cache_power" (one per term).
+    fn save(&self) -> Arrays {
+        let flat = |a: &[V]| V::flat(a).to_vec();
+        let st = &self.sys.state;
+        let mut out = vec![
+            ("x".to_string(), flat(&st.x)),
+            ("v".to_string(), flat(&st.v)),
+            ("dissipated".to_string(), self.sys.forces.dissipated.clone()),
+            ("collisions".to_string(), vec![self.constraints.dissipated]),
+        ];
+        if let Some((f, p)) = self.integrator.cache() {
+            out.push(("cache_forces".to_string(), flat(&f)));
+            out.push(("cache_power".to_string(), p));
+        }
+        if let Some((accepted, rejected, _)) = self.integrator.adaptive_stats() {
+            // Counts below 2^53 are exact in a float64.
+            out.push(("adaptive_counts".to_string(), vec![accepted as Real, rejected as Real]));
+        }
+        out
+    }
+
+    fn load(&mut self, arrays: &Arrays) -> Result<()> {
+        let (n, d, terms) = (self.n_particles(), V::DIM, self.sys.forces.terms.len());
+        let vectors = |name: &str, len: Option<usize>| -> Result<Vec<V>> {
+            let a = array(arrays, name, len)?;
+            if a.len() % d != 0 {
+                return Err(invalid(name, format!("has {} values, not rows of {d}", a.len())));
+            }
+            if let Some(i) = a.iter().position(|c| !c.is_finite()) {
+                return Err(invalid(name, format!("value {i} is not finite: {}", a[i])));
+            }
+            Ok(a.chunks_exact(d).map(V::from_slice).collect())
+        };
+        let (x, v) = (vectors("x", Some(n * d))?, vectors("v", Some(n * d))?);
+        let dissipated = array(arrays, "dissipated", Some(terms))?;
+        let collisions = array(arrays, "collisions", Some(1))?[0];
+        // The cache's shape is the integrator's own (rk45 adds its controller's memory):
+        // `restore_books` asks the integrator whether it fits.
+        let cache = match arrays.iter().any(|(k, _)| k == "cache_forces") {
+            true => Some((vectors("cache_forces", None)?, array(arrays, "cache_power", None)?.to_vec())),
+            false => None,
+        };
+        let counts = match arrays.iter().any(|(k, _)| k == "adaptive_counts") {
+            true => {
+                let c = array(arrays, "adaptive_counts", Some(2))?;
+                if c.iter().any(|k| !(k.is_finite() && *k >= 0.0 && k.fract() == 0.0 && *k < 2f64.powi(53))) {
+                    return Err(invalid("adaptive_counts", "must be whole numbers in [0, 2**53)"));
+                }
+                Some((c[0] as u64, c[1] as u64))
+            }
+            false => None,
+        };
+        self.check_books(dissipated, collisions, &cache)?;
+        // The cache can only be checked against the integrator once the state is in: on a
+        // refusal everything returns to the snapshot.
+        let before = self.snapshot()?;
+        let r = self.set_state(Some(x), Some(v)).and_then(|()| self.restore_books(dissipated, collisions, cache));
+        if r.is_err() {
+            self.restore(before);
+        } else if let Some((accepted, rejected)) = counts {
+            self.integrator.set_adaptive_counts(accepted, rejected);
+        }
+        r
     }
 
     fn restore(&mut self, snapshot: Snapshot) {
