@@ -433,7 +433,7 @@ impl<V: Vector> World<V> {
     /// The particle system's named output fields (see `Term::fields`), one value per particle
     /// (0 for particles a field does not cover); `names` fixes which and in what order.
     pub fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
-        self.run(|| self.particles.particle_fields(names))
+        self.run(|| self.particles.fields(names))
     }
 
     /// Density (kg/m^dim) and pressure (Pa) of every particle, from the fluid terms (0 for

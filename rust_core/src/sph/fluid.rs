@@ -139,7 +139,7 @@ impl<V: Vector> Sph<V> {
     fn forces_at(&mut self, level: Level, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let r = self.range();
         // The viscosity's power is summed only if it dissipates.
-        let want_power = self.p.alpha > 0.0;
+        let want_power = Term::<V>::dissipative(self);
         let assign = write == Write::Overwrite;
         if assign {
             // Particles outside the fluid get no SPH force.

@@ -317,21 +317,6 @@ impl<V: Vector> ParticleSystem<V> {
         self.integrator.cache()
     }
 
-    /// The named output fields of every term (see `Term::fields`), one value per particle (0
-    /// for particles a field does not cover); `names` fixes which and in what order.
-    pub fn particle_fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
-        let n = self.n_particles();
-        let mut out = vec![vec![0.0; n]; names.len()];
-        for t in &self.sys.forces.terms {
-            for (name, range, values) in t.fields(&self.sys.state.x, &self.sys.model) {
-                if let Some(k) = names.iter().position(|m| *m == name) {
-                    out[k][range].copy_from_slice(&values);
-                }
-            }
-        }
-        out
-    }
-
     /// Wall time (s) the terms that keep such books have spent in their phases so far (SPH:
     /// cell list + gather, density, forces), and the heap bytes they hold.
     pub fn fluid_profile(&self) -> ([f64; 3], usize) {
@@ -516,8 +501,19 @@ impl<V: Vector> System for ParticleSystem<V> {
         EnergyReport { kinetic, potential, dissipated }
     }
 
+    /// The named output fields of every term (see `Term::fields`), one value per particle (0
+    /// for particles a field does not cover); `names` fixes which and in what order.
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
-        self.particle_fields(names)
+        let n = self.n_particles();
+        let mut out = vec![vec![0.0; n]; names.len()];
+        for t in &self.sys.forces.terms {
+            for (name, range, values) in t.fields(&self.sys.state.x, &self.sys.model) {
+                if let Some(k) = names.iter().position(|m| *m == name) {
+                    out[k][range].copy_from_slice(&values);
+                }
+            }
+        }
+        out
     }
 
     /// A copy of the positions and velocities (and cached forces), allocated fallibly.
