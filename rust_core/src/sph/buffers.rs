@@ -1,7 +1,9 @@
-//! The data the passes read, in cell order: the static wall particles (`Walls`, sorted once at
-//! construction) and the per-evaluation structure-of-arrays buffers (`Bufs`, one set per
-//! precision, `BufSet`): the gather of positions, velocities and masses into cell order, the
-//! wall arrays in the pass precision, and the reservation that makes a step allocation-free.
+//! The data the passes read, in cell order: each fluid's static wall particles (`Walls`, sorted
+//! once at construction, with their arrays in both pass precisions) and the per-evaluation
+//! structure-of-arrays buffers (`Bufs`, one set per precision, `BufSet`): the gather of
+//! positions, velocities and masses into cell order (and, when several fluids share the passes,
+//! each particle's fluid and viscosity coefficient), and the reservation that makes a step
+//! allocation-free.
 use super::kernels::Float;
 use crate::alloc::{count, Need};
 use crate::error::Result;
@@ -9,12 +11,21 @@ use crate::neighbors::CellList;
 use crate::par::{self, SyncPtr};
 use crate::vector::{Real, Vector};
 
-/// Static wall particles: positions, Ψ_b = ρ0 V_b (kg/m^dim · m^dim = kg), sorted into cells.
+/// Wall particles in the precision of the passes, in the cell order of `Walls::grid`, padded.
+#[derive(Clone, Debug, Default)]
+pub(super) struct WallArrays<F: Float> {
+    pub(super) pos: [Vec<F>; 3],
+    /// Ψ_b = ρ0 V_b, kg.
+    pub(super) psi: Vec<F>,
+}
+
+/// Static wall particles: positions and Ψ_b = ρ0 V_b (kg/m^dim · m^dim = kg), sorted into cells,
+/// in both pass precisions.
 #[derive(Clone, Debug)]
 pub(super) struct Walls {
     pub(super) grid: CellList,
-    pos: [Vec<f64>; 3],
-    psi: Vec<f64>,
+    w32: WallArrays<f32>,
+    w64: WallArrays<f64>,
 }
 
 /// Sorted, padded structure-of-arrays buffers in the precision of the passes.
@@ -26,30 +37,36 @@ pub(super) struct Bufs<F: Float> {
     pub(super) rho: Vec<F>,
     /// p/ρ², m⁵/(kg s²) in 3D.
     pub(super) pr: Vec<F>,
-    pub(super) wpos: [Vec<F>; 3],
-    pub(super) wpsi: Vec<F>,
+    /// Several fluids only: each particle's fluid (index in its group) ...
+    pub(super) fluid: Vec<u8>,
+    /// ... and its α c0 h (m²/s), half of the pair's viscosity coefficient.
+    pub(super) visc: Vec<F>,
 }
 
 /// Loads past the end of a run read up to `PAD` padding entries (masked out).
 pub(super) const PAD: usize = 16;
 
-/// The pass buffers of both precisions (the wall arrays of both are set at construction; the
-/// particle arrays of the one in use are filled by each evaluation).
+/// The pass buffers of both precisions (the particle arrays of the one in use are filled by
+/// each evaluation).
 #[derive(Clone, Debug, Default)]
 pub(super) struct BufSet {
     pub(super) b32: Bufs<f32>,
     pub(super) b64: Bufs<f64>,
 }
 
-/// A pass precision (f32 or f64): picks its buffers out of a `BufSet`, so that an evaluation is
-/// written once, generic over the precision.
+/// A pass precision (f32 or f64): picks its buffers out of a `BufSet` and its arrays out of
+/// `Walls`, so that an evaluation is written once, generic over the precision.
 pub(super) trait PassFloat: Float {
     fn bufs(set: &mut BufSet) -> &mut Bufs<Self>;
+    fn walls(w: &Walls) -> &WallArrays<Self>;
 }
 
 impl PassFloat for f32 {
     fn bufs(set: &mut BufSet) -> &mut Bufs<f32> {
         &mut set.b32
+    }
+    fn walls(w: &Walls) -> &WallArrays<f32> {
+        &w.w32
     }
 }
 
@@ -57,38 +74,56 @@ impl PassFloat for f64 {
     fn bufs(set: &mut BufSet) -> &mut Bufs<f64> {
         &mut set.b64
     }
+    fn walls(w: &Walls) -> &WallArrays<f64> {
+        &w.w64
+    }
+}
+
+impl Walls {
+    /// The wall particles `walls` (finite) with their Ψ (`psi`, one each) sorted into cells of
+    /// side `support`, with their arrays in both precisions.
+    pub(super) fn new<V: Vector>(walls: &[V], psi: &[Real], support: Real) -> Result<Self> {
+        let nw = walls.len();
+        let bytes = ((nw + PAD) * (V::DIM + 1) * (4 + 8)) as u128;
+        let need = Need::new("add_fluid", bytes, format!("{} wall particles", count(nw as u128)));
+        need.check()?;
+        let mut grid = CellList::new(support, V::DIM)?;
+        grid.reserve(nw, "add_fluid")?;
+        grid.build(walls);
+        let w32 = WallArrays::sorted(&grid, walls, psi, &need)?;
+        let w64 = WallArrays::sorted(&grid, walls, psi, &need)?;
+        Ok(Self { grid, w32, w64 })
+    }
+
+    /// Heap bytes held.
+    pub(super) fn bytes(&self) -> usize {
+        self.grid.bytes() + self.w32.bytes() + self.w64.bytes()
+    }
+}
+
+impl<F: Float> WallArrays<F> {
+    fn sorted<V: Vector>(grid: &CellList, walls: &[V], psi: &[Real], need: &Need) -> Result<Self> {
+        let n = walls.len();
+        let mut w = Self::default();
+        for d in 0..V::DIM {
+            w.pos[d] = need.filled(n + PAD, F::ZERO)?;
+            for (o, &i) in w.pos[d].iter_mut().zip(&grid.order) {
+                *o = F::of(walls[i as usize].comp(d));
+            }
+        }
+        w.psi = need.filled(n + PAD, F::ZERO)?;
+        for (o, &i) in w.psi.iter_mut().zip(&grid.order) {
+            *o = F::of(psi[i as usize]);
+        }
+        Ok(w)
+    }
+
+    fn bytes(&self) -> usize {
+        (self.pos.iter().map(|v| v.capacity()).sum::<usize>() + self.psi.capacity()) * std::mem::size_of::<F>()
+    }
 }
 
 impl BufSet {
-    /// The wall particles `walls` (finite) with their Ψ (`psi`, one each) sorted into cells of
-    /// side `support`, and the buffers of both precisions holding them.
-    pub(super) fn with_walls<V: Vector>(walls: &[V], psi: &[Real], support: Real) -> Result<(Walls, Self)> {
-        let nw = walls.len();
-        // Sorted copies in f64, f32 and f64 pass buffers (positions and Ψ).
-        let bytes = ((nw + PAD) * (V::DIM + 1) * (8 + 4 + 8)) as u128;
-        let need = Need::new("add_fluid", bytes, format!("{} wall particles", count(nw as u128)));
-        need.check()?;
-        let mut wg = CellList::new(support, V::DIM)?;
-        wg.reserve(nw, "add_fluid")?;
-        wg.build(walls);
-        let mut pos: [Vec<f64>; 3] = Default::default();
-        for (d, pd) in pos.iter_mut().enumerate().take(V::DIM) {
-            *pd = need.filled(nw + PAD, 0.0)?;
-            for (o, &i) in pd.iter_mut().zip(&wg.order) {
-                *o = walls[i as usize].comp(d);
-            }
-        }
-        let mut spsi = need.filled(nw + PAD, 0.0)?;
-        for (o, &i) in spsi.iter_mut().zip(&wg.order) {
-            *o = psi[i as usize];
-        }
-        let walls = Walls { grid: wg, pos, psi: spsi };
-        let mut set = Self::default();
-        set.b32.set_walls(&walls, &need)?;
-        set.b64.set_walls(&walls, &need)?;
-        Ok((walls, set))
-    }
-
     /// Heap bytes of the pass buffers (memory-per-particle figures).
     pub(super) fn bytes(&self) -> usize {
         self.b32.bytes() + self.b64.bytes()
@@ -96,8 +131,8 @@ impl BufSet {
 }
 
 impl<F: Float> Bufs<F> {
-    /// Room for `gather` of `n` particles.
-    pub(super) fn reserve<V: Vector>(&mut self, n: usize, need: &Need) -> Result<()> {
+    /// Room for `gather` of `n` particles (and, for several fluids, `gather_fluids`).
+    pub(super) fn reserve<V: Vector>(&mut self, n: usize, several: bool, need: &Need) -> Result<()> {
         for d in 0..V::DIM {
             need.reserve(&mut self.pos[d], n + PAD)?;
             need.reserve(&mut self.vel[d], n + PAD)?;
@@ -105,14 +140,10 @@ impl<F: Float> Bufs<F> {
         for a in [&mut self.m, &mut self.rho, &mut self.pr] {
             need.reserve(a, n + PAD)?;
         }
-        Ok(())
-    }
-
-    fn set_walls(&mut self, w: &Walls, need: &Need) -> Result<()> {
-        for d in 0..3 {
-            self.wpos[d] = need.collect(w.pos[d].iter().map(|&a| F::of(a)))?;
+        if several {
+            need.reserve(&mut self.fluid, n + PAD)?;
+            need.reserve(&mut self.visc, n + PAD)?;
         }
-        self.wpsi = need.collect(w.psi.iter().map(|&a| F::of(a)))?;
         Ok(())
     }
 
@@ -146,14 +177,32 @@ impl<F: Float> Bufs<F> {
         });
     }
 
+    /// Several fluids: each particle's fluid (`fluid`, by particle) and α c0 h (`visc`, by
+    /// fluid) into cell order.
+    pub(super) fn gather_fluids(&mut self, grid: &CellList, fluid: &[u8], visc: &[Real]) {
+        let n = fluid.len();
+        self.fluid.resize(n + PAD, 0);
+        self.visc.resize(n + PAD, F::ZERO);
+        let vp = SyncPtr(self.visc.as_mut_ptr());
+        par::chunks1(&mut self.fluid[..n], |s, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                let f = fluid[grid.order[s + k] as usize];
+                *o = f;
+                // SAFETY: each sorted slot s + k is written by exactly one chunk.
+                unsafe { *vp.get().add(s + k) = F::of(visc[f as usize]) };
+            }
+        });
+    }
+
     /// Heap bytes held.
     fn bytes(&self) -> usize {
         let s = std::mem::size_of::<F>();
-        (self.pos.iter().chain(&self.vel).chain(&self.wpos).map(|v| v.capacity()).sum::<usize>()
+        (self.pos.iter().chain(&self.vel).map(|v| v.capacity()).sum::<usize>()
             + self.m.capacity()
             + self.rho.capacity()
             + self.pr.capacity()
-            + self.wpsi.capacity())
+            + self.visc.capacity())
             * s
+            + self.fluid.capacity()
     }
 }

@@ -1,14 +1,16 @@
-//! The SPH force term: `Sph<V>`, the fluid (particles `first .. first + n` of a scene) and its
-//! static walls, as a `Term` (forces, internal energy, density and pressure fields, time step
-//! limit, buffer reservation), and its registration under the key "sph". One evaluation
-//! (`Sph::eval`, written once for both pass precisions) builds the cell list, gathers into cell
-//! order (`buffers`), then runs the density and force passes (`passes`).
-use super::buffers::{BufSet, Bufs, PassFloat, Walls, PAD};
+//! The SPH force term: `Sph<V>`, one fluid (particles `first .. first + n` of a scene, its
+//! parameters and static walls) as a `Term` (forces, internal energy, density and pressure
+//! fields, time step limit, buffer reservation), and its registration under the key "sph".
+//!
+//! A fluid is a member of a `Group` (`group`): alone in one by default, and when added to a
+//! system that already has a fluid with the same support, kernel and precision
+//! (`Term::share`), a member of that fluid's group, so the two push on each other. The group
+//! evaluates; the term hands it the scene's arrays and keeps its own books.
+use super::buffers::Walls;
+use super::group::{Group, Member};
 use super::params::{KernelKind, Precision, SphParams};
-use super::passes;
-use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
-use crate::neighbors::CellList;
+use crate::neighbors::Shared;
 use crate::par;
 use crate::simd::{self, Level};
 use crate::state::Model;
@@ -16,9 +18,8 @@ use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
 use crate::terms::{Term, Write};
 use crate::vector::{Real, Vector};
-use std::marker::PhantomData;
 use std::ops::Range;
-use std::sync::atomic::Ordering;
+use std::sync::{Arc, Mutex, MutexGuard};
 
 /// The SPH force term over particles `first .. first + n` of a scene.
 pub struct Sph<V: Vector> {
@@ -26,19 +27,12 @@ pub struct Sph<V: Vector> {
     first: usize,
     n: usize,
     p: SphParams,
-    grid: CellList,
-    walls: Walls,
-    bufs: BufSet,
-    /// Largest |dv/dt| of the last evaluation (without uniform fields), m/s².
-    amax: Real,
-    /// Wall time spent so far in (cell list + gather, density pass, force pass), s.
-    pub clock: [f64; 3],
+    /// The group it evaluates in, and its index there.
+    group: Arc<Mutex<Group<V>>>,
+    who: usize,
     /// The stop flag of the call in progress: read between the phases of an evaluation and
     /// before every chunk of its passes (an evaluation at N = 10⁶ takes ~0.3 s).
     stop: Stop,
-    /// Scratch: the forces of other terms, kept while the passes write the fluid's.
-    prev: Vec<V>,
-    _v: PhantomData<V>,
 }
 
 /// The registered builder: the fluid's particles `first..first + n` must already be in the
@@ -84,21 +78,16 @@ impl<V: Vector> Sph<V> {
         if let Some(i) = psi.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
             return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
         }
-        let support = 2.0 * p.h;
-        let (walls, bufs) = BufSet::with_walls(&walls, &psi, support)?;
+        let walls = Walls::new(&walls, &psi, 2.0 * p.h)?;
+        let group = Group::new(first..first + n, p, walls)?;
         Ok(Self {
             name: name.to_string(),
             first,
             n,
             p,
-            grid: CellList::new(support, V::DIM)?,
-            walls,
-            bufs,
-            amax: 0.0,
-            clock: [0.0; 3],
+            group: Arc::new(Mutex::new(group)),
+            who: 0,
             stop: Stop::default(),
-            prev: Vec::new(),
-            _v: PhantomData,
         })
     }
 
@@ -109,100 +98,44 @@ impl<V: Vector> Sph<V> {
         self.first..self.first + self.n
     }
     pub fn n_walls(&self) -> usize {
-        self.walls.grid.len()
+        self.group().members[self.who].walls.grid.len()
     }
-    /// Heap bytes of the grid and pass buffers (memory-per-particle figures).
-    pub fn bytes(&self) -> usize {
-        self.grid.bytes() + self.bufs.bytes() + self.walls.grid.bytes()
+    /// How many fluids evaluate together with this one, itself included.
+    pub fn group_size(&self) -> usize {
+        self.group().members.len()
     }
 
-    /// Density (kg/m^dim) and pressure (Pa) of each fluid particle, in particle order, computed
-    /// now in f64.
+    /// The group (a poisoned lock only means a panic elsewhere; the group holds no invariant a
+    /// panic can break between evaluations).
+    fn group(&self) -> MutexGuard<'_, Group<V>> {
+        self.group.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Density (kg/m^dim) and pressure (Pa) of each particle of this fluid, in particle order,
+    /// computed now in f64 (with the other fluids of its group in the sums).
     pub fn fields(&self, x: &[V], model: &Model) -> (Vec<Real>, Vec<Real>) {
-        let mut grid = CellList::new(self.grid.cell_size(), V::DIM).expect("valid cell size");
-        let mut b =
-            Bufs::<f64> { wpos: self.bufs.b64.wpos.clone(), wpsi: self.bufs.b64.wpsi.clone(), ..Bufs::default() };
-        let xs = &x[self.range()];
-        grid.build(xs);
-        b.gather(&grid, xs, None, &model.mass[self.range()]);
-        passes::density::<V, f64>(simd::level(), &self.p, &grid, &self.walls.grid, &mut b, Stop::default().flag());
-        let mut rho = vec![0.0; self.n];
-        let mut p = vec![0.0; self.n];
-        for (k, &i) in grid.order.iter().enumerate() {
-            rho[i as usize] = b.rho[k];
-            p[i as usize] = self.p.pressure(b.rho[k]);
-        }
+        let g = self.group();
+        let all = g.densities(x, &model.mass);
+        let rho = g.share_of(self.who, &all).to_vec();
+        let p = rho.iter().map(|&r| self.p.pressure(r)).collect();
         (rho, p)
     }
 
     /// `add_forces` at a given SIMD level.
     fn forces_at(&mut self, level: Level, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let r = self.range();
-        // The viscosity's power is summed only if it dissipates.
-        let want_power = Term::<V>::dissipative(self);
-        let assign = write == Write::Overwrite;
-        if assign {
+        if write == Write::Overwrite {
             // Particles outside the fluid get no SPH force.
             let (head, rest) = f.split_at_mut(r.start);
             head.fill(V::ZERO);
             rest[r.len()..].fill(V::ZERO);
         }
-        if self.n == 0 {
+        let mut g = self.group.lock().unwrap_or_else(|e| e.into_inner());
+        if g.len() == 0 {
             return 0.0;
         }
-        // The pass writes the fluid's forces over `f`; to add instead, keep what was there.
-        let mut prev = std::mem::take(&mut self.prev);
-        prev.clear();
-        if !assign {
-            prev.extend_from_slice(&f[r.clone()]);
-        }
-        let (xs, vs, ms, out) = (&x[r.clone()], &v[r.clone()], &model.mass[r.clone()], &mut f[r.clone()]);
-        let (power, amax) = match self.p.precision {
-            Precision::F32 => self.eval::<f32>(level, xs, vs, ms, out, want_power),
-            Precision::F64 => self.eval::<f64>(level, xs, vs, ms, out, want_power),
-        };
-        self.amax = amax;
-        if !assign {
-            for (fi, pi) in f[r].iter_mut().zip(&prev) {
-                *fi += *pi;
-            }
-        }
-        self.prev = prev;
-        power
-    }
-
-    /// One evaluation in precision `F`: build the cell list, gather, density pass, force pass.
-    /// Returns (dissipated power W, max |a|²). Once the stop flag is set the rest is skipped and
-    /// `out` is left partly written.
-    fn eval<F: PassFloat>(
-        &mut self,
-        level: Level,
-        x: &[V],
-        v: &[V],
-        m: &[Real],
-        out: &mut [V],
-        want_power: bool,
-    ) -> (Real, Real) {
-        let Self { p, grid, walls, bufs, clock, stop, .. } = self;
-        let (walls, b, stop) = (&walls.grid, F::bufs(bufs), stop.flag());
-        let stopped = || stop.load(Ordering::Relaxed);
-        let t0 = std::time::Instant::now();
-        grid.build(x);
-        if stopped() {
-            return (0.0, 0.0);
-        }
-        b.gather(grid, x, Some(v), m);
-        let t1 = std::time::Instant::now();
-        passes::density::<V, F>(level, p, grid, walls, b, stop);
-        let t2 = std::time::Instant::now();
-        clock[0] += (t1 - t0).as_secs_f64();
-        clock[1] += (t2 - t1).as_secs_f64();
-        if stopped() {
-            return (0.0, 0.0);
-        }
-        let r = passes::forces::<V, F>(level, p, grid, walls, b, out, want_power, stop);
-        clock[2] += t2.elapsed().as_secs_f64();
-        r
+        g.forces(self.who, level, x, v, &model.mass, f, write, &self.stop);
+        g.sums.power[self.who]
     }
 }
 
@@ -225,7 +158,8 @@ impl<V: Vector> Term<V> for Sph<V> {
     }
 
     fn dissipative(&self) -> bool {
-        self.p.alpha > 0.0
+        // Its pairs with another fluid of the group dissipate if either fluid is viscous.
+        self.group().dissipative()
     }
 
     fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
@@ -234,31 +168,42 @@ impl<V: Vector> Term<V> for Sph<V> {
     }
 
     fn profile(&self) -> Option<([f64; 3], usize)> {
-        Some((self.clock, self.bytes()))
+        // The group's clock and buffers are booked once, by its first fluid.
+        let g = self.group();
+        Some(if self.who == 0 { (g.clock, g.bytes()) } else { ([0.0; 3], 0) })
     }
 
     fn set_stop(&mut self, stop: Stop) {
         self.stop = stop;
     }
 
-    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
-        let n = self.n;
-        let (f, arrays) = (
-            match self.p.precision {
-                Precision::F32 => 4,
-                Precision::F64 => 8,
-            },
-            2 * V::DIM + 3,
-        );
-        let bytes = (arrays * (n + PAD) * f) as u128 + Need::bytes_of::<V>(n);
-        let need = Need::new("step", bytes, format!("the SPH buffers of {} particles", count(n as u128)));
-        need.check()?;
-        match self.p.precision {
-            Precision::F32 => self.bufs.b32.reserve::<V>(n, &need)?,
-            Precision::F64 => self.bufs.b64.reserve::<V>(n, &need)?,
+    fn share(&mut self, shared: &mut Shared) -> Result<()> {
+        let key = Group::<V>::key(&self.p);
+        if let Some(other) = shared.find::<Mutex<Group<V>>>(&key) {
+            if Arc::ptr_eq(&other, &self.group) {
+                return Ok(());
+            }
+            let mut g = other.lock().unwrap_or_else(|e| e.into_inner());
+            if g.admits(&self.range()) {
+                // Move this fluid (alone in its group until now) into the other group.
+                let mine = std::mem::replace(&mut self.group, other.clone());
+                match Arc::try_unwrap(mine) {
+                    Ok(m) => self.who = g.join(m.into_inner().unwrap_or_else(|e| e.into_inner()).into_member()),
+                    Err(mine) => self.group = mine, // shared already (not before it is added): stay alone
+                }
+                return Ok(());
+            }
+            if !g.full() {
+                // Its particles overlap a member's: it stays alone, and the group stays registered.
+                return Ok(());
+            }
         }
-        need.reserve(&mut self.prev, n)?;
-        self.grid.reserve(n, "step")
+        shared.register(key, self.group.clone());
+        Ok(())
+    }
+
+    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
+        self.group().reserve()
     }
 
     fn min_particles(&self) -> usize {
@@ -273,7 +218,7 @@ impl<V: Vector> Term<V> for Sph<V> {
         let vmax = vs.iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
         // CFL (Monaghan 1992, §5, with the viscous term) and force criterion.
         let cfl = 0.25 * self.p.h / (self.p.c0 * (1.0 + 0.6 * self.p.alpha) + vmax);
-        let a = self.amax.sqrt() + g;
+        let a = self.group().sums.amax[self.who].sqrt() + g;
         let force = if a > 0.0 { 0.25 * (self.p.h / a).sqrt() } else { f64::INFINITY };
         Some(cfl.min(force))
     }
@@ -283,6 +228,7 @@ impl<V: Vector> Term<V> for Sph<V> {
 mod tests {
     use super::*;
     use crate::sph::kernels::{CubicSpline, Kernel, WendlandC2};
+    use crate::sph::passes::MAX_FLUIDS;
     use glam::{DVec2, DVec3};
     use std::sync::atomic::AtomicBool;
 
@@ -361,19 +307,31 @@ mod tests {
     }
 
     /// The WCSPH forces and viscous power by brute force over all pairs, in f64, from the scalar
-    /// kernel formulas: the oracle of the passes.
-    fn brute<V: Vector, K: Kernel>(p: &SphParams, x: &[V], v: &[V], w: &[V], m: f64) -> (Vec<V>, f64) {
-        let (n, d) = (x.len(), V::DIM);
-        let sigma = K::sigma(p.h, d);
-        let wk = |r2: f64| sigma * K::w(r2.sqrt() / p.h);
+    /// kernel formulas: the oracle of the passes. Particle i belongs to fluid `fl[i]` (parameters
+    /// `ps[fl[i]]`, walls `ws[fl[i]]` of Ψ = `psi[fl[i]]`) and has mass `m[i]`; a pair's viscosity
+    /// coefficient is the mean of its fluids' α c0.
+    #[allow(clippy::too_many_arguments)]
+    fn brute_several<V: Vector, K: Kernel>(
+        ps: &[SphParams],
+        fl: &[usize],
+        x: &[V],
+        v: &[V],
+        m: &[f64],
+        ws: &[Vec<V>],
+        psi: &[f64],
+    ) -> (Vec<V>, f64) {
+        let (n, d, h) = (x.len(), V::DIM, ps[0].h);
+        let sigma = K::sigma(h, d);
+        let wk = |r2: f64| sigma * K::w(r2.sqrt() / h);
         let rho: Vec<f64> = (0..n)
             .map(|i| {
-                (0..n).map(|j| m * wk((x[i] - x[j]).length_squared())).sum::<f64>()
-                    + w.iter().map(|b| m * wk((x[i] - *b).length_squared())).sum::<f64>()
+                (0..n).map(|j| m[j] * wk((x[i] - x[j]).length_squared())).sum::<f64>()
+                    + ws[fl[i]].iter().map(|b| psi[fl[i]] * wk((x[i] - *b).length_squared())).sum::<f64>()
             })
             .collect();
-        let pp: Vec<f64> = rho.iter().map(|&r| p.pressure(r) / (r * r)).collect();
-        let grad = |r: V| r * (sigma / (p.h * p.h) * K::g(r.length_squared().sqrt() / p.h));
+        let pp: Vec<f64> = (0..n).map(|i| ps[fl[i]].pressure(rho[i]) / (rho[i] * rho[i])).collect();
+        let ac: Vec<f64> = (0..n).map(|i| ps[fl[i]].alpha * ps[fl[i]].c0).collect();
+        let grad = |r: V| r * (sigma / (h * h) * K::g(r.length_squared().sqrt() / h));
         let mut power = 0.0;
         let f = (0..n)
             .map(|i| {
@@ -381,18 +339,58 @@ mod tests {
                 for j in 0..n {
                     let r = x[i] - x[j];
                     let vr = (v[i] - v[j]).dot(r);
-                    let pi = 2.0 * p.alpha * p.c0 * p.h * (-vr).max(0.0)
-                        / ((r.length_squared() + 0.01 * p.h * p.h) * (rho[i] + rho[j]));
-                    a -= grad(r) * (m * (pp[i] + pp[j] + pi));
-                    power += 0.5 * m * m * pi * grad(r).dot(v[i] - v[j]);
+                    let pi = (ac[i] + ac[j]) * h * (-vr).max(0.0)
+                        / ((r.length_squared() + 0.01 * h * h) * (rho[i] + rho[j]));
+                    a -= grad(r) * (m[j] * (pp[i] + pp[j] + pi));
+                    power += 0.5 * m[i] * m[j] * pi * grad(r).dot(v[i] - v[j]);
                 }
-                for b in w {
-                    a -= grad(x[i] - *b) * (m * pp[i]);
+                for b in &ws[fl[i]] {
+                    a -= grad(x[i] - *b) * (psi[fl[i]] * pp[i]);
                 }
-                a * m
+                a * m[i]
             })
             .collect();
         (f, power)
+    }
+
+    fn brute<V: Vector, K: Kernel>(p: &SphParams, x: &[V], v: &[V], w: &[V], m: f64) -> (Vec<V>, f64) {
+        let n = x.len();
+        brute_several::<V, K>(&[*p], &vec![0; n], x, v, &vec![m; n], &[w.to_vec()], &[m])
+    }
+
+    /// Fluids over consecutive ranges of `x` (`cuts`: their sizes), with parameters `ps`, walls
+    /// `ws` (Ψ = `psi`), joined into one group as a system joins them; forces as the system
+    /// evaluates them (in order, adding), and the total power.
+    #[allow(clippy::too_many_arguments)]
+    fn forces_several<V: Vector>(
+        ps: &[SphParams],
+        cuts: &[usize],
+        x: &[V],
+        v: &[V],
+        m: &[f64],
+        ws: &[Vec<V>],
+        psi: &[f64],
+        level: Level,
+    ) -> (Vec<V>, f64, usize) {
+        let n = x.len();
+        let model = Model { mass: m.to_vec(), inv_mass: m.iter().map(|m| 1.0 / m).collect(), ..Default::default() };
+        let mut shared = Shared::default();
+        let mut terms = Vec::new();
+        let mut first = 0;
+        for (k, &c) in cuts.iter().enumerate() {
+            let mut t = Sph::new(&format!("f{k}"), first, c, ps[k], ws[k].clone(), vec![psi[k]; ws[k].len()]).unwrap();
+            t.share(&mut shared).unwrap();
+            t.reserve(n).unwrap();
+            terms.push(t);
+            first += c;
+        }
+        let mut f = vec![V::from_slice(&[7.0; 3][..V::DIM]); n];
+        let mut power = 0.0;
+        for (k, t) in terms.iter_mut().enumerate() {
+            let write = if k == 0 { Write::Overwrite } else { Write::Add };
+            power += t.forces_at(level, x, v, &model, &mut f, write);
+        }
+        (f, power, terms[0].group_size())
     }
 
     fn check<V: Vector>() {
@@ -446,5 +444,128 @@ mod tests {
     fn every_level_matches_brute_force_and_conserves_momentum() {
         check::<DVec2>();
         check::<DVec3>();
+    }
+
+    fn params(kernel: KernelKind, precision: Precision, h: f64) -> SphParams {
+        SphParams { h, rho0: 1000.0, c0: 20.0, gamma: 7, alpha: 0.1, clamp: true, kernel, precision }
+    }
+
+    /// Two fluids of different rest density, sound speed, viscosity, γ, clamp and masses, each
+    /// with its own walls, joined into one group: at every level the forces and power match the
+    /// brute-force oracle of interacting fluids, and without walls the net force is zero.
+    fn check_several<V: Vector>() {
+        let dx = 0.01;
+        let (x, v, w) = blob::<V>(1200, dx * 0.95, 5);
+        let n = x.len();
+        let cut = n / 3;
+        let ma = 1000.0 * dx.powi(V::DIM as i32);
+        let m: Vec<f64> = (0..n).map(|i| if i < cut { ma } else { 0.6 * ma }).collect();
+        let half: Vec<V> = w.iter().copied().step_by(2).collect();
+        let walls = [w.clone(), half];
+        let psi = [ma, 0.6 * ma];
+        for kernel in [KernelKind::CubicSpline, KernelKind::WendlandC2] {
+            let a = params(kernel, Precision::F64, 1.3 * dx);
+            let b = SphParams { rho0: 600.0, c0: 15.0, gamma: 3, alpha: 0.3, clamp: false, ..a };
+            let fl: Vec<usize> = (0..n).map(|i| usize::from(i >= cut)).collect();
+            let (fb, pb) = match kernel {
+                KernelKind::CubicSpline => brute_several::<V, CubicSpline>(&[a, b], &fl, &x, &v, &m, &walls, &psi),
+                KernelKind::WendlandC2 => brute_several::<V, WendlandC2>(&[a, b], &fl, &x, &v, &m, &walls, &psi),
+            };
+            let scale = fb.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+            assert!(scale > 0.0 && pb > 0.0);
+            for (precision, tol) in [(Precision::F32, 2e-4), (Precision::F64, 1e-11)] {
+                let ps = [SphParams { precision, ..a }, SphParams { precision, ..b }];
+                for level in Level::available() {
+                    let (fs, p, size) = forces_several(&ps, &[cut, n - cut], &x, &v, &m, &walls, &psi, level);
+                    assert_eq!(size, 2, "the fluids joined one group");
+                    let diff = fs.iter().zip(&fb).map(|(a, b)| (*a - *b).length_squared()).fold(0.0, f64::max).sqrt();
+                    assert!(
+                        diff <= tol * scale,
+                        "{kernel:?} {precision:?} {}D {level:?}: {diff:e} of {scale:e}",
+                        V::DIM
+                    );
+                    assert!((p - pb).abs() <= 10.0 * tol * pb, "{level:?} power {p} vs {pb}");
+                    let none = [vec![], vec![]];
+                    let (f0, _, _) = forces_several(&ps, &[cut, n - cut], &x, &v, &m, &none, &psi, level);
+                    let total = f0.iter().fold(V::ZERO, |a, b| a + *b);
+                    let abs: f64 = f0.iter().map(|f| f.length_squared().sqrt()).sum();
+                    assert!(total.length_squared().sqrt() <= tol * abs, "{level:?}: net force {total:?} of {abs:e}");
+                    // Fluid b alone, for contrast: its forces change when a is there (they interact).
+                    let alone = forces_several(
+                        &ps[1..],
+                        &[n - cut],
+                        &x[cut..],
+                        &v[cut..],
+                        &m[cut..],
+                        &walls[1..],
+                        &psi[1..],
+                        level,
+                    )
+                    .0;
+                    let changed = alone.iter().zip(&fs[cut..]).filter(|(p, q)| p != q).count();
+                    assert!(changed > (n - cut) / 10, "{level:?}: only {changed} forces of b changed");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn several_fluids_match_brute_force_and_conserve_momentum_at_every_level() {
+        check_several::<DVec2>();
+        check_several::<DVec3>();
+    }
+
+    /// One fluid split into three identical fluids (same parameters and walls) gives the same
+    /// bits as the one fluid, at every level and in both precisions: the several-fluid path is
+    /// the one-fluid path when the fluids agree.
+    #[test]
+    fn one_fluid_split_in_three_gives_the_same_bits() {
+        let dx = 0.01;
+        let (x, v, w) = blob::<DVec2>(2000, dx * 0.95, 9);
+        let n = x.len();
+        let m = vec![0.1; n];
+        for precision in [Precision::F32, Precision::F64] {
+            let p = params(KernelKind::WendlandC2, precision, 1.3 * dx);
+            for level in Level::available() {
+                let (one, p1, s1) = forces_several(&[p], &[n], &x, &v, &m, &[w.clone()], &[0.1], level);
+                let cuts = [700, 1, n - 701];
+                let (three, p3, s3) =
+                    forces_several(&[p; 3], &cuts, &x, &v, &m, &[w.clone(), w.clone(), w.clone()], &[0.1; 3], level);
+                assert_eq!((s1, s3), (1, 3));
+                assert!(one == three, "{precision:?} {level:?}: forces differ");
+                assert!((p1 - p3).abs() <= 1e-12 * p1, "{precision:?} {level:?}: power {p1} vs {p3}");
+            }
+        }
+    }
+
+    /// Fluids join only where they can share passes: another smoothing length, kernel or
+    /// precision, or overlapping particles, make a group of their own.
+    #[test]
+    fn fluids_join_only_compatible_groups() {
+        let p = params(KernelKind::CubicSpline, Precision::F64, 0.1);
+        let mut shared = Shared::default();
+        let mut make = |first: usize, n: usize, p: SphParams| {
+            let mut t = Sph::<DVec2>::new("f", first, n, p, vec![], vec![]).unwrap();
+            t.share(&mut shared).unwrap();
+            t
+        };
+        let a = make(0, 10, p);
+        let b = make(10, 10, SphParams { rho0: 500.0, alpha: 0.0, ..p });
+        assert_eq!((a.group_size(), b.group_size()), (2, 2));
+        assert!(b.dissipative(), "pairs with the viscous fluid dissipate");
+        for other in [
+            SphParams { h: 0.11, ..p },
+            SphParams { kernel: KernelKind::WendlandC2, ..p },
+            SphParams { precision: Precision::F32, ..p },
+        ] {
+            assert_eq!(make(100, 5, other).group_size(), 1, "{other:?}");
+        }
+        assert_eq!(make(15, 10, p).group_size(), 1, "overlaps b");
+        assert_eq!(a.group_size(), 2);
+        for k in 0..MAX_FLUIDS - 2 {
+            assert_eq!(make(200 + 10 * k, 10, p).group_size(), 3 + k);
+        }
+        assert_eq!(make(500, 10, p).group_size(), 1, "the group is full: a new one starts");
+        assert_eq!(make(600, 10, p).group_size(), 2, "and later fluids join the new one");
     }
 }

@@ -33,6 +33,7 @@ pub mod kernels;
 
 mod buffers;
 mod fluid;
+mod group;
 mod params;
 mod passes;
 

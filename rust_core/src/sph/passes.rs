@@ -7,11 +7,20 @@
 //! otherwise spend most of their time in the divider). Forces are gathered per particle: no
 //! atomics, bit-identical for any thread count; levels differ by a few ulp.
 //!
-//! `density` and `forces` are the entry points: they pick the kernel and dimension (compile-time
-//! parameters of the passes), cut the sorted particles into chunks (`par::CHUNK`) run in
-//! parallel, and hand each chunk to the SIMD level in use. The force pass sums its chunks'
-//! dissipated power in chunk order.
-use super::buffers::Bufs;
+//! The particles may belong to several fluids that share the passes (one cell list over all of
+//! them, so they push on each other; see `group`): each particle then takes its own fluid's
+//! equation of state and walls, and a pair's viscosity coefficient is the mean of the two
+//! fluids' α c0 (Monaghan 1992, eq. 4.2 with the pair's mean sound speed c̄_ij; symmetric in
+//! i, j, so momentum is still conserved and the dissipation is still ≥ 0). That path is a
+//! compile-time parameter (`SEVERAL`), so one fluid runs the single-fluid loop; one fluid split
+//! into several gives the same bits on both paths (½(a + a) = a exactly, and the pair sums run
+//! in the same order).
+//!
+//! `density` and `forces` are the entry points: they pick the kernel, dimension and path
+//! (compile-time parameters of the passes), cut the sorted particles into chunks (`par::CHUNK`)
+//! run in parallel, and hand each chunk to the SIMD level in use. The force pass sums its
+//! chunks' dissipated power in chunk order.
+use super::buffers::{Bufs, WallArrays};
 use super::kernels::{CubicSpline, Float, Kernel, WendlandC2};
 use super::params::{KernelKind, SphParams};
 use crate::neighbors::{CellList, Ranges, MAX_RANGES};
@@ -23,58 +32,111 @@ use std::marker::PhantomData;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// The density pass for the kernel of `p` and the dimension of `V`: ρ and p/ρ² of the particles
-/// in `grid` into `b.rho`, `b.pr` (cell order).
+/// Most fluids that can share the passes (a group; see `group`).
+pub(super) const MAX_FLUIDS: usize = 8;
+
+/// One fluid as the passes see it: its Tait equation of state in the pass precision and its
+/// static walls.
+pub(super) struct FluidView<'a, F: Float> {
+    /// Tait stiffness B, Pa.
+    b: F,
+    /// 1/ρ0, m^dim/kg.
+    inv_rho0: F,
+    gamma: i32,
+    clamp: bool,
+    walls: &'a CellList,
+    w: &'a WallArrays<F>,
+}
+
+impl<'a, F: Float> FluidView<'a, F> {
+    pub(super) fn new(p: &SphParams, walls: &'a CellList, w: &'a WallArrays<F>) -> Self {
+        Self { b: F::of(p.b()), inv_rho0: F::of(1.0 / p.rho0), gamma: p.gamma, clamp: p.clamp, walls, w }
+    }
+}
+
+/// Per fluid of the pass: the power its particles' viscosity dissipates (W; ½ of each pair's
+/// to each side) and their largest |dv/dt|² (m²/s⁴).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Sums {
+    pub(super) power: [f64; MAX_FLUIDS],
+    pub(super) amax: [f64; MAX_FLUIDS],
+}
+
+impl Sums {
+    fn fold(mut self, o: Sums) -> Sums {
+        for k in 0..MAX_FLUIDS {
+            self.power[k] += o.power[k];
+            self.amax[k] = self.amax[k].max(o.amax[k]);
+        }
+        self
+    }
+}
+
+/// The density pass for the kernel of `p` (its h and kernel; the equations of state are the
+/// fluids') and the dimension of `V`: ρ and p/ρ² of the particles in `grid` into `b.rho`,
+/// `b.pr` (cell order). Several `fluids` take the path that reads `b.fluid`.
 pub(super) fn density<V: Vector, F: Float>(
     level: Level,
     p: &SphParams,
     grid: &CellList,
-    walls: &CellList,
+    fluids: &[FluidView<F>],
     b: &mut Bufs<F>,
     stop: &AtomicBool,
 ) {
+    macro_rules! go {
+        ($k:ty, $d:literal) => {
+            if fluids.len() > 1 {
+                density_pass::<F, $k, $d, true>(level, p, grid, fluids, b, stop)
+            } else {
+                density_pass::<F, $k, $d, false>(level, p, grid, fluids, b, stop)
+            }
+        };
+    }
     match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => density_pass::<F, CubicSpline, 2>(level, p, grid, walls, b, stop),
-        (KernelKind::CubicSpline, _) => density_pass::<F, CubicSpline, 3>(level, p, grid, walls, b, stop),
-        (KernelKind::WendlandC2, 2) => density_pass::<F, WendlandC2, 2>(level, p, grid, walls, b, stop),
-        (KernelKind::WendlandC2, _) => density_pass::<F, WendlandC2, 3>(level, p, grid, walls, b, stop),
+        (KernelKind::CubicSpline, 2) => go!(CubicSpline, 2),
+        (KernelKind::CubicSpline, _) => go!(CubicSpline, 3),
+        (KernelKind::WendlandC2, 2) => go!(WendlandC2, 2),
+        (KernelKind::WendlandC2, _) => go!(WendlandC2, 3),
     }
 }
 
-/// The force pass for the kernel of `p` and the dimension of `V`: the forces of the particles
-/// in `grid` into `out` (particle order); returns (dissipated power W, max |a|²).
+/// The force pass for the kernel of `p` (its h and kernel; with one fluid also its α and c0)
+/// and the dimension of `V`: the forces of the particles in `grid` into `out` (particle order);
+/// returns per fluid the dissipated power (W, summed only if `want_power`) and max |a|².
 #[allow(clippy::too_many_arguments)]
 pub(super) fn forces<V: Vector, F: Float>(
     level: Level,
     p: &SphParams,
     grid: &CellList,
-    walls: &CellList,
+    fluids: &[FluidView<F>],
     b: &Bufs<F>,
     out: &mut [V],
     want_power: bool,
     stop: &AtomicBool,
-) -> (f64, f64) {
+) -> Sums {
+    macro_rules! go {
+        ($k:ty, $d:literal) => {
+            match (fluids.len() > 1, want_power) {
+                (true, true) => force_pass::<V, F, $k, $d, true, true>(level, p, grid, fluids, b, out, stop),
+                (true, false) => force_pass::<V, F, $k, $d, true, false>(level, p, grid, fluids, b, out, stop),
+                (false, true) => force_pass::<V, F, $k, $d, false, true>(level, p, grid, fluids, b, out, stop),
+                (false, false) => force_pass::<V, F, $k, $d, false, false>(level, p, grid, fluids, b, out, stop),
+            }
+        };
+    }
     match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => {
-            force_pass::<V, F, CubicSpline, 2>(level, p, grid, walls, b, out, want_power, stop)
-        }
-        (KernelKind::CubicSpline, _) => {
-            force_pass::<V, F, CubicSpline, 3>(level, p, grid, walls, b, out, want_power, stop)
-        }
-        (KernelKind::WendlandC2, 2) => {
-            force_pass::<V, F, WendlandC2, 2>(level, p, grid, walls, b, out, want_power, stop)
-        }
-        (KernelKind::WendlandC2, _) => {
-            force_pass::<V, F, WendlandC2, 3>(level, p, grid, walls, b, out, want_power, stop)
-        }
+        (KernelKind::CubicSpline, 2) => go!(CubicSpline, 2),
+        (KernelKind::CubicSpline, _) => go!(CubicSpline, 3),
+        (KernelKind::WendlandC2, 2) => go!(WendlandC2, 2),
+        (KernelKind::WendlandC2, _) => go!(WendlandC2, 3),
     }
 }
 
-fn density_pass<F: Float, K: Kernel, const D: usize>(
+fn density_pass<F: Float, K: Kernel, const D: usize, const SEVERAL: bool>(
     level: Level,
     p: &SphParams,
     grid: &CellList,
-    walls: &CellList,
+    fluids: &[FluidView<F>],
     b: &mut Bufs<F>,
     stop: &AtomicBool,
 ) {
@@ -88,7 +150,7 @@ fn density_pass<F: Float, K: Kernel, const D: usize>(
                 return;
             }
             let ks = s..s + rho.len();
-            simd::dispatch(level, Density::<F, K, D> { p, grid, walls, b, ks, rho, pr, _k: PhantomData });
+            simd::dispatch(level, Density::<F, K, D, SEVERAL> { p, grid, fluids, b, ks, rho, pr, _k: PhantomData });
         });
     }
     b.rho = rho;
@@ -96,36 +158,31 @@ fn density_pass<F: Float, K: Kernel, const D: usize>(
 }
 
 #[allow(clippy::too_many_arguments)]
-fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize>(
+fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const POWER: bool>(
     level: Level,
     p: &SphParams,
     grid: &CellList,
-    walls: &CellList,
+    fluids: &[FluidView<F>],
     b: &Bufs<F>,
     out: &mut [V],
-    want_power: bool,
     stop: &AtomicBool,
-) -> (f64, f64) {
+) -> Sums {
     let n = grid.len();
     let out = SyncPtr(out.as_mut_ptr());
     let chunk = |c: usize| {
         if stop.load(Ordering::Relaxed) {
-            return (0.0, 0.0);
+            return Sums::default();
         }
         let ks = c * par::CHUNK..((c + 1) * par::CHUNK).min(n);
-        if want_power {
-            simd::dispatch(level, Forces::<V, F, K, D, true> { p, grid, walls, b, ks, out, _k: PhantomData })
-        } else {
-            simd::dispatch(level, Forces::<V, F, K, D, false> { p, grid, walls, b, ks, out, _k: PhantomData })
-        }
+        simd::dispatch(level, Forces::<V, F, K, D, SEVERAL, POWER> { p, grid, fluids, b, ks, out, _k: PhantomData })
     };
     let nc = n.div_ceil(par::CHUNK);
-    let parts: Vec<(f64, f64)> = match par::fork_if(n, || (0..nc).into_par_iter().map(chunk).collect()) {
+    let parts: Vec<Sums> = match par::fork_if(n, || (0..nc).into_par_iter().map(chunk).collect()) {
         Some(p) => p,
         None => (0..nc).map(chunk).collect(),
     };
     // Fixed chunk order: the same sum for any thread count.
-    parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1.max(b.1)))
+    parts.into_iter().fold(Sums::default(), Sums::fold)
 }
 
 /// s^γ: a fixed multiplication chain for water's γ = 7 (this runs once per particle per step).
@@ -153,28 +210,32 @@ fn tiny<F: Float>() -> F {
     }
 }
 
-/// The candidate runs of the cell of sorted particle `k`, cached while consecutive particles
-/// share a cell (they do: the order is by cell).
-struct Neighbours<'a> {
+/// The candidate runs around sorted particle `k`: fluid runs of its cell, and wall runs of its
+/// cell in its fluid's walls, cached while consecutive particles share both (they mostly do:
+/// the order is by cell).
+struct Neighbours<'a, F: Float> {
     grid: &'a CellList,
-    walls: &'a CellList,
-    last: [i64; 3],
+    fluids: &'a [FluidView<'a, F>],
+    last: ([i64; 3], usize),
     fluid: Ranges,
     wall: Ranges,
 }
 
-impl<'a> Neighbours<'a> {
-    fn new(grid: &'a CellList, walls: &'a CellList) -> Self {
+impl<'a, F: Float> Neighbours<'a, F> {
+    fn new(grid: &'a CellList, fluids: &'a [FluidView<'a, F>]) -> Self {
         let empty = Ranges { r: [(0, 0); MAX_RANGES], len: 0 };
-        Self { grid, walls, last: [i64::MIN; 3], fluid: empty, wall: empty }
+        Self { grid, fluids, last: ([i64::MIN; 3], 0), fluid: empty, wall: empty }
     }
+    /// Particle `k` of fluid `f`.
     #[inline(always)]
-    fn at(&mut self, k: usize) {
+    fn at(&mut self, k: usize, f: usize) {
         let c = self.grid.cells[k];
-        if c != self.last {
-            self.fluid = self.grid.query(c);
-            self.wall = self.walls.query(c);
-            self.last = c;
+        if (c, f) != self.last {
+            if c != self.last.0 {
+                self.fluid = self.grid.query(c);
+            }
+            self.wall = self.fluids[f].walls.query(c);
+            self.last = (c, f);
         }
     }
 }
@@ -192,11 +253,21 @@ fn iota<S: Simd, F: Float>(s: S) -> P<S, F> {
     P::from_fn(s, |k| F::of(k as f64))
 }
 
+/// The fluid of sorted particle `k` (0 on the one-fluid path, which has no `b.fluid`).
+#[inline(always)]
+fn fluid_of<F: Float, const SEVERAL: bool>(b: &Bufs<F>, k: usize) -> usize {
+    if SEVERAL {
+        b.fluid[k] as usize
+    } else {
+        0
+    }
+}
+
 /// Summation density and Tait pressure (as p/ρ²) of sorted particles `ks`.
-pub(super) struct Density<'a, F: Float, K: Kernel, const D: usize> {
+pub(super) struct Density<'a, F: Float, K: Kernel, const D: usize, const SEVERAL: bool> {
     pub p: &'a SphParams,
     pub grid: &'a CellList,
-    pub walls: &'a CellList,
+    pub fluids: &'a [FluidView<'a, F>],
     pub b: &'a Bufs<F>,
     pub ks: Range<usize>,
     pub rho: &'a mut [F],
@@ -204,23 +275,25 @@ pub(super) struct Density<'a, F: Float, K: Kernel, const D: usize> {
     pub _k: PhantomData<K>,
 }
 
-impl<F: Float, K: Kernel, const D: usize> SimdKernel for Density<'_, F, K, D> {
+impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for Density<'_, F, K, D, SEVERAL> {
     type Output = ();
     #[inline(always)]
     fn run<S: Simd>(self, s: S) {
-        let Density { p, grid, walls, b, ks, rho, pr, .. } = self;
+        let Density { p, grid, fluids, b, ks, rho, pr, .. } = self;
         let l = P::<S, F>::lanes();
         let (zero, lanes, tiny) = (P::<S, F>::zero(s), iota::<S, F>(s), P::splat(s, tiny::<F>()));
         let inv_h = P::splat(s, F::of(1.0 / p.h));
-        let (sigma, inv_rho0, bb) = (F::of(K::sigma(p.h, D)), F::of(1.0 / p.rho0), F::of(p.b()));
+        let sigma = F::of(K::sigma(p.h, D));
         let z = if D == 3 { 2 } else { 0 };
-        let mut nb = Neighbours::new(grid, walls);
+        let mut nb = Neighbours::new(grid, fluids);
         let base = ks.start;
         for k in ks {
-            nb.at(k);
+            let f = fluid_of::<F, SEVERAL>(b, k);
+            nb.at(k, f);
+            let fl = &fluids[f];
             let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
             let mut acc = zero;
-            for (pos, mass, ranges) in [(&b.pos, &b.m, &nb.fluid), (&b.wpos, &b.wpsi, &nb.wall)] {
+            for (pos, mass, ranges) in [(&b.pos, &b.m, &nb.fluid), (&fl.w.pos, &fl.w.psi, &nb.wall)] {
                 for r in ranges.iter() {
                     let cols = run(&pos[0], &r, l).chunks_exact(l).zip(run(&pos[1], &r, l).chunks_exact(l));
                     let cols = cols.zip(run(&pos[z], &r, l).chunks_exact(l)).zip(run(mass, &r, l).chunks_exact(l));
@@ -242,8 +315,8 @@ impl<F: Float, K: Kernel, const D: usize> SimdKernel for Density<'_, F, K, D> {
                 }
             }
             let d = sigma * acc.sum();
-            let mut pk = bb * (powi(d * inv_rho0, p.gamma) - F::ONE);
-            if p.clamp {
+            let mut pk = fl.b * (powi(d * fl.inv_rho0, fl.gamma) - F::ONE);
+            if fl.clamp {
                 pk = pk.max(F::ZERO);
             }
             rho[k - base] = d;
@@ -253,37 +326,45 @@ impl<F: Float, K: Kernel, const D: usize> SimdKernel for Density<'_, F, K, D> {
 }
 
 /// Pressure, viscosity and wall forces (N) of sorted particles `ks`, written to `out` in particle
-/// order; returns (dissipated power partial, max |a|²).
-pub(super) struct Forces<'a, V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> {
+/// order; returns this chunk's power and max |a|² per fluid.
+pub(super) struct Forces<'a, V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const POWER: bool> {
     pub p: &'a SphParams,
     pub grid: &'a CellList,
-    pub walls: &'a CellList,
+    pub fluids: &'a [FluidView<'a, F>],
     pub b: &'a Bufs<F>,
     pub ks: Range<usize>,
     pub out: SyncPtr<V>,
     pub _k: PhantomData<K>,
 }
 
-impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKernel for Forces<'_, V, F, K, D, POWER> {
-    type Output = (f64, f64);
+impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const POWER: bool> SimdKernel
+    for Forces<'_, V, F, K, D, SEVERAL, POWER>
+{
+    type Output = Sums;
     #[inline(always)]
-    fn run<S: Simd>(self, s: S) -> (f64, f64) {
-        let Forces { p, grid, walls, b, ks, out, .. } = self;
+    fn run<S: Simd>(self, s: S) -> Sums {
+        let Forces { p, grid, fluids, b, ks, out, .. } = self;
         let l = P::<S, F>::lanes();
         let (zero, lanes, tiny) = (P::<S, F>::zero(s), iota::<S, F>(s), P::splat(s, tiny::<F>()));
         let (h, inv_h) = (P::splat(s, F::of(p.h)), P::splat(s, F::of(1.0 / p.h)));
         let scale = -K::sigma(p.h, D) / (p.h * p.h);
+        // One fluid: 2 α c0 h for every pair. Several: (α c0 h)_i + (α c0 h)_j.
         let visc = P::splat(s, F::of(2.0 * p.alpha * p.c0 * p.h));
         let eps_h2 = P::splat(s, F::of(0.01 * p.h * p.h));
         let step = P::splat(s, F::of(l as f64));
         let z = if D == 3 { 2 } else { 0 };
-        let mut nb = Neighbours::new(grid, walls);
-        let (mut power, mut amax) = (0.0f64, 0.0f64);
+        // The viscosity column: only read on the several-fluid path.
+        let vcol = if SEVERAL { &b.visc } else { &b.m };
+        let mut nb = Neighbours::new(grid, fluids);
+        let mut sums = Sums::default();
         for k in ks {
-            nb.at(k);
+            let f = fluid_of::<F, SEVERAL>(b, k);
+            nb.at(k, f);
+            let fl = &fluids[f];
             let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
             let vi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.vel[d][k]) } else { zero });
             let (rho_i, pr_i) = (P::splat(s, b.rho[k]), P::splat(s, b.pr[k]));
+            let visc_i = if SEVERAL { P::splat(s, b.visc[k]) } else { zero };
             let mut acc = [zero; 3];
             let mut pacc = zero;
             for r in nb.fluid.iter() {
@@ -298,9 +379,10 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
                 let par = run(&b.m, &r, l)
                     .chunks_exact(l)
                     .zip(run(&b.rho, &r, l).chunks_exact(l))
-                    .zip(run(&b.pr, &r, l).chunks_exact(l));
+                    .zip(run(&b.pr, &r, l).chunks_exact(l))
+                    .zip(run(vcol, &r, l).chunks_exact(l));
                 let mut left = P::splat(s, F::of((r.end - r.start) as f64));
-                for ((((px, py), pz), ((ux, uy), uz)), ((m, rho), pr)) in pos.zip(vel).zip(par) {
+                for ((((px, py), pz), ((ux, uy), uz)), (((m, rho), pr), vc)) in pos.zip(vel).zip(par) {
                     let mut dx = [xi[0] - P::load(s, px), xi[1] - P::load(s, py), zero];
                     let mut r2 = dx[0].mul_add(dx[0], dx[1] * dx[1]);
                     let mut vr = (vi[0] - P::load(s, ux)).mul_add(dx[0], (vi[1] - P::load(s, uy)) * dx[1]);
@@ -312,9 +394,10 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
                     let x = r2.max(tiny);
                     let inv_r = x.rsqrt();
                     let gq = K::gv(x * inv_r * inv_h, h * inv_r);
-                    // Π_ij = 2 α c0 h max(−v·r, 0) / ((r² + 0.01h²)(ρ_i + ρ_j)) ≥ 0.
+                    // Π_ij = 2 (α c0)_ij h max(−v·r, 0) / ((r² + 0.01h²)(ρ_i + ρ_j)) ≥ 0.
                     let approach = (zero - vr).max(zero);
-                    let pi = visc * approach / ((r2 + eps_h2) * (rho_i + P::load(s, rho)));
+                    let vij = if SEVERAL { visc_i + P::load(s, vc) } else { visc };
+                    let pi = vij * approach / ((r2 + eps_h2) * (rho_i + P::load(s, rho)));
                     let mg = lanes.lt(left).select(P::load(s, m) * gq, zero);
                     let cf = mg * (pr_i + P::load(s, pr) + pi);
                     for d in 0..D {
@@ -328,12 +411,12 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
             }
             let mut wacc = [zero; 3];
             for r in nb.wall.iter() {
-                let pos = run(&b.wpos[0], &r, l)
+                let pos = run(&fl.w.pos[0], &r, l)
                     .chunks_exact(l)
-                    .zip(run(&b.wpos[1], &r, l).chunks_exact(l))
-                    .zip(run(&b.wpos[z], &r, l).chunks_exact(l));
+                    .zip(run(&fl.w.pos[1], &r, l).chunks_exact(l))
+                    .zip(run(&fl.w.pos[z], &r, l).chunks_exact(l));
                 let mut left = P::splat(s, F::of((r.end - r.start) as f64));
-                for (((px, py), pz), psi) in pos.zip(run(&b.wpsi, &r, l).chunks_exact(l)) {
+                for (((px, py), pz), psi) in pos.zip(run(&fl.w.psi, &r, l).chunks_exact(l)) {
                     let mut dx = [xi[0] - P::load(s, px), xi[1] - P::load(s, py), zero];
                     let mut r2 = dx[0].mul_add(dx[0], dx[1] * dx[1]);
                     if D == 3 {
@@ -356,14 +439,14 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const POWER: bool> SimdKern
             for d in 0..D {
                 a[d] = scale * (acc[d].sum().f64() + pri * wacc[d].sum().f64());
             }
-            amax = amax.max(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+            sums.amax[f] = sums.amax[f].max(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
             if POWER {
-                power += 0.5 * mi * (-scale) * pacc.sum().f64();
+                sums.power[f] += 0.5 * mi * (-scale) * pacc.sum().f64();
             }
             let fv = [mi * a[0], mi * a[1], mi * a[2]];
             // SAFETY: `order` is a permutation; each particle is written by exactly one chunk.
             unsafe { *out.get().add(grid.order[k] as usize) = V::from_slice(&fv[..D]) };
         }
-        (power, amax)
+        sums
     }
 }

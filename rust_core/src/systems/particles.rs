@@ -226,7 +226,7 @@ impl<V: Vector> ParticleSystem<V> {
         }
         let mut t = t;
         t.set_single(self.sys.single);
-        self.sys.forces.push(t);
+        self.sys.forces.push(t)?;
         self.integrator.reset();
         Ok(())
     }

@@ -7,6 +7,7 @@ pub mod registry;
 pub mod springs;
 
 use crate::error::Result;
+use crate::neighbors::Shared;
 use crate::par;
 use crate::state::Model;
 use crate::stop::Stop;
@@ -92,6 +93,13 @@ pub trait Term<V: Vector>: Send + Sync {
     fn reserve(&mut self, _n: usize) -> Result<()> {
         Ok(())
     }
+    /// Called once when the term is added to a system, before it is evaluated: a term that
+    /// needs neighbours joins a search that terms of its kind already share in this system, or
+    /// registers its own (see `neighbors::Shared`). Terms without neighbours need not implement
+    /// it.
+    fn share(&mut self, _shared: &mut Shared) -> Result<()> {
+        Ok(())
+    }
 }
 
 /// The terms of a scene plus their dissipation ledger.
@@ -108,6 +116,8 @@ pub struct ForceSet<V: Vector> {
     pub g: V,
     /// The stop flag of the call in progress: once set, `eval` skips the remaining terms.
     stop: Stop,
+    /// The neighbour searches the terms share (`Term::share`).
+    shared: Shared,
 }
 
 impl<V: Vector> Default for ForceSet<V> {
@@ -120,12 +130,16 @@ impl<V: Vector> Default for ForceSet<V> {
             evaluations: 0,
             g: V::ZERO,
             stop: Stop::default(),
+            shared: Shared::default(),
         }
     }
 }
 
 impl<V: Vector> ForceSet<V> {
-    pub fn push(&mut self, t: Box<dyn Term<V>>) {
+    /// Adds `t` after the others (it is evaluated after them), first letting it join the
+    /// neighbour searches the terms share.
+    pub fn push(&mut self, mut t: Box<dyn Term<V>>) -> Result<()> {
+        t.share(&mut self.shared)?;
         self.any_dissipative |= t.dissipative();
         if let Some(g) = t.uniform_acceleration() {
             self.g += g;
@@ -133,6 +147,7 @@ impl<V: Vector> ForceSet<V> {
         self.terms.push(t);
         self.dissipated.push(0.0);
         self.power.push(0.0);
+        Ok(())
     }
 
     /// Total force (N) at `(x, v)` into `f`, uniform fields excluded (see `g`). Remembers each
