@@ -593,25 +593,6 @@ def test_advance_bad_duration():
     assert _state(s) == before
 
 
-def test_a_second_fluid_warns_that_fluids_do_not_interact_and_indeed_they_pass_through(tmp_path):
-    """The documented limitation, checked: two fluids moving head-on swap sides (each sees only
-    itself), the second one added warns, one fluid does not, and loading a saved two-fluid scene
-    does not warn again (the warning was given when it was built)."""
-    dx = 0.02
-    scene = pc.Scene(dim=2, integrator="semi_implicit_euler")
-    block = lattice([0, 0], [0.1, 0.1], dx)
-    scene.add(Fluid(block, dx, velocities=np.tile([2.0, 0.0], (len(block), 1)), sound_speed=20.0, name="left"))
-    with pytest.warns(pc.SeparateFluidsWarning, match="'right' is the scene's second fluid"):
-        scene.add(Fluid(block + [0.3, 0.0], dx, velocities=np.tile([-2.0, 0.0], (len(block), 1)), sound_speed=20.0, name="right"))
-    n = len(block)
-    scene.advance(0.15)
-    x = scene.positions[:, 0]
-    # Interacting fluids would stop each other near x = 0.2; these have crossed.
-    assert x[:n].mean() > x[n:].mean() + 0.2, (x[:n].mean(), x[n:].mean())
-    scene.save(tmp_path / "two.npz")
-    pc.Scene.load(tmp_path / "two.npz")  # filterwarnings = error: a warning here fails the test
-
-
 def test_one_fluid_does_not_warn():
     scene = pc.Scene(dim=2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -9.81]))

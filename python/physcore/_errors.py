@@ -75,11 +75,10 @@ class ThreadPoolWarning(RuntimeWarning):
 
 
 class SeparateFluidsWarning(UserWarning):
-    """A second :class:`~physcore.fluids.Fluid` was added to a scene that has one. Each fluid
-    sees only its own particles and walls, so two fluids pass through each other. For one body
-    of water in several pieces (a drop above a pool), put all positions in one ``Fluid``;
-    fluids of different kinds that push on each other need a neighbour search shared between
-    them, which physcore does not have yet."""
+    """A :class:`~physcore.fluids.Fluid` was added that will not interact with some fluid
+    already in the scene, so the two pass through each other. Fluids share one neighbour search,
+    and push on each other, when they have the same ``h`` (``smoothing · spacing``), kernel and
+    precision, up to 8 per search; give the fluids that should meet the same three."""
 
 
 class SimulationDiverged(PhyscoreError, RuntimeError):

@@ -143,6 +143,10 @@ def _max_row_norm(a: np.ndarray) -> float:
     return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
 
 
+#: Most fluids that share one neighbour search (the core's MAX_FLUIDS).
+_FLUIDS_PER_SEARCH = 8
+
+
 class Scene:
     """A particle system: particles, the force terms and colliders it names, an integrator.
 
@@ -411,6 +415,28 @@ class Scene:
         assert fluid.first is not None
         return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
 
+    def _warn_separate_fluids(self, fluid: Fluid, name: str) -> None:
+        """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
+        already in the scene. Fluids share one neighbour search, and so push on each other, when
+        they have the same ``h``, kernel and precision, up to 8 per search (the core's rule; a
+        9th starts a new search, which the next ones join)."""
+        fluids = [t for t in self._terms if isinstance(t, Fluid)]
+        alike = [f for f in fluids if (f.h, f.kernel, f.precision) == (fluid.h, fluid.kernel, fluid.precision)]
+        together = alike[len(alike) - len(alike) % _FLUIDS_PER_SEARCH :]
+        apart = [f.name for f in fluids if all(f is not g for g in together)]
+        if apart:
+            why = (
+                f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
+                if len(together) < len(alike)
+                else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and precision"
+            )
+            shown = ", ".join(repr(a) for a in apart[:5]) + (", ..." if len(apart) > 5 else "")
+            warnings.warn(
+                f"{name!r} does not interact with the scene's fluid(s) {shown} and will pass through them: {why}",
+                SeparateFluidsWarning,
+                stacklevel=5,
+            )
+
     def _add_fluid(self, fluid: Fluid, name: str, first: int | None = None) -> Fluid:
         """Append the fluid's particles (unless ``first`` says they exist) and its SPH term
         (:meth:`Fluid._attach`); returns the fluid as stored, for the caller to append."""
@@ -453,13 +479,8 @@ class Scene:
                 "is below float64's normal range"
             )
         m = fluid.particle_mass()
-        if first is None and any(isinstance(t, Fluid) for t in self._terms):
-            warnings.warn(
-                f"{name!r} is the scene's second fluid: fluids do not interact (each sees only its own "
-                "particles and walls), so they will pass through each other; put one body of water in one Fluid",
-                SeparateFluidsWarning,
-                stacklevel=4,
-            )
+        if first is None:
+            self._warn_separate_fluids(fluid, name)
         if first is None:
             n = len(fluid)
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles

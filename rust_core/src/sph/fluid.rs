@@ -7,7 +7,7 @@
 //! (`Term::share`), a member of that fluid's group, so the two push on each other. The group
 //! evaluates; the term hands it the scene's arrays and keeps its own books.
 use super::buffers::Walls;
-use super::group::{Group, Member};
+use super::group::Group;
 use super::params::{KernelKind, Precision, SphParams};
 use crate::error::{invalid, Result};
 use crate::neighbors::Shared;
@@ -527,7 +527,7 @@ mod tests {
         for precision in [Precision::F32, Precision::F64] {
             let p = params(KernelKind::WendlandC2, precision, 1.3 * dx);
             for level in Level::available() {
-                let (one, p1, s1) = forces_several(&[p], &[n], &x, &v, &m, &[w.clone()], &[0.1], level);
+                let (one, p1, s1) = forces_several(&[p], &[n], &x, &v, &m, std::slice::from_ref(&w), &[0.1], level);
                 let cuts = [700, 1, n - 701];
                 let (three, p3, s3) =
                     forces_several(&[p; 3], &cuts, &x, &v, &m, &[w.clone(), w.clone(), w.clone()], &[0.1; 3], level);

@@ -210,7 +210,9 @@ impl<V: Vector> Group<V> {
                 std::mem::take(&mut self.m),
                 std::mem::take(&mut self.forces),
             );
-            (gx.clear(), gv.clear(), gm.clear());
+            gx.clear();
+            gv.clear();
+            gm.clear();
             for m in &self.members {
                 gx.extend_from_slice(&x[m.range.clone()]);
                 gv.extend_from_slice(&v[m.range.clone()]);
