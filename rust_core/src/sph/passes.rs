@@ -226,11 +226,18 @@ impl<'a, F: Float> Neighbours<'a, F> {
         let empty = Ranges { r: [(0, 0); MAX_RANGES], len: 0 };
         Self { grid, fluids, last: ([i64::MIN; 3], 0), fluid: empty, wall: empty }
     }
-    /// Particle `k` of fluid `f`.
+    /// Particle `k` of fluid `f` (always 0 unless `SEVERAL`: the one-fluid path then keys the
+    /// cache by the cell alone).
     #[inline(always)]
-    fn at(&mut self, k: usize, f: usize) {
+    fn at<const SEVERAL: bool>(&mut self, k: usize, f: usize) {
         let c = self.grid.cells[k];
-        if (c, f) != self.last {
+        if !SEVERAL {
+            if c != self.last.0 {
+                self.fluid = self.grid.query(c);
+                self.wall = self.fluids[0].walls.query(c);
+                self.last.0 = c;
+            }
+        } else if (c, f) != self.last {
             if c != self.last.0 {
                 self.fluid = self.grid.query(c);
             }
@@ -287,10 +294,11 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
         let z = if D == 3 { 2 } else { 0 };
         let mut nb = Neighbours::new(grid, fluids);
         let base = ks.start;
+        let first = &fluids[0];
         for k in ks {
             let f = fluid_of::<F, SEVERAL>(b, k);
-            nb.at(k, f);
-            let fl = &fluids[f];
+            nb.at::<SEVERAL>(k, f);
+            let fl = if SEVERAL { &fluids[f] } else { first };
             let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
             let mut acc = zero;
             for (pos, mass, ranges) in [(&b.pos, &b.m, &nb.fluid), (&fl.w.pos, &fl.w.psi, &nb.wall)] {
@@ -353,14 +361,13 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
         let eps_h2 = P::splat(s, F::of(0.01 * p.h * p.h));
         let step = P::splat(s, F::of(l as f64));
         let z = if D == 3 { 2 } else { 0 };
-        // The viscosity column: only read on the several-fluid path.
-        let vcol = if SEVERAL { &b.visc } else { &b.m };
         let mut nb = Neighbours::new(grid, fluids);
         let mut sums = Sums::default();
+        let first = &fluids[0];
         for k in ks {
             let f = fluid_of::<F, SEVERAL>(b, k);
-            nb.at(k, f);
-            let fl = &fluids[f];
+            nb.at::<SEVERAL>(k, f);
+            let fl = if SEVERAL { &fluids[f] } else { first };
             let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
             let vi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.vel[d][k]) } else { zero });
             let (rho_i, pr_i) = (P::splat(s, b.rho[k]), P::splat(s, b.pr[k]));
@@ -379,10 +386,12 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                 let par = run(&b.m, &r, l)
                     .chunks_exact(l)
                     .zip(run(&b.rho, &r, l).chunks_exact(l))
-                    .zip(run(&b.pr, &r, l).chunks_exact(l))
-                    .zip(run(vcol, &r, l).chunks_exact(l));
+                    .zip(run(&b.pr, &r, l).chunks_exact(l));
+                // The candidates' α c0 h: a column of the several-fluid path only (the one-fluid
+                // loop zips nothing more than it did before fluids could meet).
+                let mut visc_j = if SEVERAL { run(&b.visc, &r, l).chunks_exact(l) } else { [].chunks_exact(l) };
                 let mut left = P::splat(s, F::of((r.end - r.start) as f64));
-                for ((((px, py), pz), ((ux, uy), uz)), (((m, rho), pr), vc)) in pos.zip(vel).zip(par) {
+                for ((((px, py), pz), ((ux, uy), uz)), ((m, rho), pr)) in pos.zip(vel).zip(par) {
                     let mut dx = [xi[0] - P::load(s, px), xi[1] - P::load(s, py), zero];
                     let mut r2 = dx[0].mul_add(dx[0], dx[1] * dx[1]);
                     let mut vr = (vi[0] - P::load(s, ux)).mul_add(dx[0], (vi[1] - P::load(s, uy)) * dx[1]);
@@ -396,7 +405,12 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                     let gq = K::gv(x * inv_r * inv_h, h * inv_r);
                     // Π_ij = 2 (α c0)_ij h max(−v·r, 0) / ((r² + 0.01h²)(ρ_i + ρ_j)) ≥ 0.
                     let approach = (zero - vr).max(zero);
-                    let vij = if SEVERAL { visc_i + P::load(s, vc) } else { visc };
+                    let vij = if SEVERAL {
+                        // The column is as long as the run.
+                        visc_j.next().map_or(visc, |vc| visc_i + P::load(s, vc))
+                    } else {
+                        visc
+                    };
                     let pi = vij * approach / ((r2 + eps_h2) * (rho_i + P::load(s, rho)));
                     let mg = lanes.lt(left).select(P::load(s, m) * gq, zero);
                     let cf = mg * (pr_i + P::load(s, pr) + pi);
