@@ -171,8 +171,9 @@ impl<V: Vector> Group<V> {
     }
 
     /// Stores member `who`'s SPH forces (N) in `f[its range]` as `write` says, evaluating the
-    /// group first unless a fresh result waits for this member (see the module docs). Returns
-    /// the member's dissipated power (W; 0 unless `want_power`).
+    /// group first unless a fresh result waits for this member (see the module docs); `sums`
+    /// then holds each member's dissipated power (W; 0 unless the group is dissipative) and
+    /// max |a|².
     #[allow(clippy::too_many_arguments)]
     pub(super) fn forces(
         &mut self,

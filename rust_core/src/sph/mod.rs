@@ -20,6 +20,12 @@
 //! forces, over contiguous candidate runs, 8 or 16 pairs at a time (SIMD lanes). Forces are
 //! gathered per particle: no atomics, bit-identical for any thread count.
 //!
+//! Several fluids of one system with the same h, kernel and precision share that evaluation (a
+//! group, found through `neighbors::Shared`): one cell list and one pass pair over all their
+//! particles, so they push on each other, each particle with its own fluid's equation of state,
+//! viscosity and walls. Mixing: summation density over all fluids (smeared across a density
+//! jump); pair viscosity with the mean of the two fluids' α c0.
+//!
 //! Layout, one concept a file:
 //! - `params`: `SphParams` (and `KernelKind`, `Precision`): validation, the Tait equation of
 //!   state p(ρ) and the internal energy u(ρ).
@@ -27,8 +33,11 @@
 //! - `buffers`: the static walls sorted into cells, and the padded structure-of-arrays buffers
 //!   the passes read (the gather into cell order, reservation), one set per precision.
 //! - `passes`: the density and force passes (SIMD, parallel over chunks of sorted particles).
-//! - `fluid`: `Sph`, the force term itself: construction, one evaluation (cell list, gather,
-//!   passes), the `Term` implementation, and its registration as "sph".
+//! - `group`: `Group`, the fluids that share one search, and one evaluation of them (cell list,
+//!   gather, passes), written once for both pass precisions.
+//! - `fluid`: `Sph`, the force term itself (one fluid): construction, joining a group, the
+//!   `Term` implementation (its share of the forces, its own books and fields), and its
+//!   registration as "sph".
 pub mod kernels;
 
 mod buffers;
