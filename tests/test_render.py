@@ -608,7 +608,9 @@ def test_frame_time_none_keeps_fixed_steps(tmp_path):
     assert scene.step_count == 14
     scene = falling_block()
     render.gif(scene, tmp_path / "g.gif", frames=3, size=(32, 32))
-    assert scene.advanced == [] and scene.step_count == 20  # the default, 10 steps per frame
+    # The default: 1/30 s of simulated time per frame (real time at 30 fps), as fixed steps:
+    # round((1/30) / 1e-3) = 33 steps of dt a frame.
+    assert scene.advanced == [] and scene.step_count == 66
 
 
 @pytest.mark.parametrize(

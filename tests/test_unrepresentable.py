@@ -326,7 +326,7 @@ def test_gif_memory_estimate_follows_the_limit(tmp_path):
     assert s.time == 0.0
     with mock.patch.object(_check, "memory_limit", lambda: need):
         render.gif(s, tmp_path / "x.gif", frames=frames, size=size)
-    assert s.step_count == 3 * 10
+    assert s.step_count == 3 * 33  # the default frame time 1/30 s = 33 steps of dt = 1e-3 s
 
 
 # --------------------------------------------------------------------------- CLI

@@ -54,9 +54,17 @@ __all__ = [
 ]
 
 
+_LAZY = ("scenes", "render", "cli")
+
+
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
-    if name in ("scenes", "render", "cli"):
+    if name in _LAZY:
         import importlib
 
         return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'physcore' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    # The lazy submodules are part of the package's surface (tab completion, dir()).
+    return sorted(set(globals()) | set(_LAZY))

@@ -200,10 +200,17 @@ def _summary(fn: Callable[..., Any]) -> str:
 
 
 def _defaults_text(fn: Callable[..., Any]) -> str:
-    parts = []
+    """The scene function's keywords as ``physcore scenes`` lists them: the ``--param`` ones, then
+    those set by their own options (``--integrator``, ``--dt``), which ``--param`` refuses."""
+    params, options = [], []
     for name, p in _scene_params(fn).items():
-        parts.append(name if p.default is inspect.Parameter.empty else f"{name}={p.default!r}")
-    return ", ".join(parts)
+        text = name if p.default is inspect.Parameter.empty else f"{name}={p.default!r}"
+        if name in _OWN_OPTION:
+            options.append(f"{_OWN_OPTION[name]} (default {p.default!r})")
+        else:
+            params.append(text)
+    out = "parameters (--param key=value): " + (", ".join(params) or "none")
+    return out + ("; options: " + ", ".join(options) if options else "")
 
 
 # --------------------------------------------------------------------------- commands
@@ -220,7 +227,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
     for name, fn in registry.items():
         out.write(f"{name.ljust(width)}{_summary(fn)}\n")
         body = textwrap.fill(
-            "parameters: " + _defaults_text(fn),
+            _defaults_text(fn),
             width=100,
             initial_indent=" " * (width + 2),
             subsequent_indent=" " * (width + 4),
@@ -292,14 +299,17 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     elif frame_time is not None and auto:
         stepping = {"frame_time": float(frame_time)}
     elif frame_time is not None:
-        # Simulated seconds per frame: keeps the animation's time span whatever dt is.
+        # Simulated seconds per frame: keeps the animation's time span whatever dt is (the
+        # conversion record() uses for a scene's defaults).
+        from .render._recording import steps_for
+
         ratio = float(frame_time) / dt
         if not ratio <= _MAX_STEPS:
             raise _UsageError(
                 f"--frame-time: {float(frame_time):.3g} s per frame is {ratio:.3g} steps of dt = {dt:.3g} s, "
                 f"above {_MAX_STEPS:.3g}; give a shorter --frame-time or a larger --dt"
             )
-        stepping = {"steps_per_frame": max(1, int(round(ratio)))}
+        stepping = {"steps_per_frame": steps_for(float(frame_time), dt)}
     else:
         stepping = {"steps_per_frame": _FALLBACK["steps_per_frame"]}
     fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
@@ -427,9 +437,11 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             **{k: v for k, v in settings.items() if k not in produce or k == "color_by"},
         )
     except SimulationDiverged as e:
-        msg = f"physcore render: error: simulation diverged: {e}"
+        msg = f"physcore render: error: {e}"  # the message says "simulation diverged at step ..."
         dt_hint = getattr(e, "suggested_dt", float("nan"))
-        if dt_hint == dt_hint and dt_hint > 0 and "frame_time" in settings:  # not NaN; automatic substeps
+        if getattr(scene, "integrator", None) == "euler":
+            msg += "\n  try --integrator verlet (a smaller --dt does not make explicit Euler stable)"
+        elif dt_hint == dt_hint and dt_hint > 0 and "frame_time" in settings:  # not NaN; automatic substeps
             k = max(1, math.ceil(settings["frame_time"] / dt_hint))
             msg += (
                 f"\n  the automatic substeps were too long; try fixed ones, e.g. "

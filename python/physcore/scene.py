@@ -248,6 +248,10 @@ class Scene:
         self._boxes: list[Box] = []
         self._e0: float | None = None
         self._e0_scale: float = 0.0
+        #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
+        #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
+        #: ``None``: the renderer's own (real-time playback). Not saved with the scene.
+        self.render_defaults: dict[str, Any] | None = None
 
     # ---------------------------------------------------------------- threads
     @property

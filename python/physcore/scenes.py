@@ -15,8 +15,10 @@ message names the arguments involved.
 """
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -654,6 +656,26 @@ drop.render_defaults = {
     "color_by": "pressure",
     "size": (480, 480),
 }
+
+def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
+    """`fn` returning scenes that carry its ``render_defaults`` (so ``render.gif(scene)`` shows
+    the motion ``physcore render NAME`` shows); same name, docs, signature and attributes."""
+
+    @functools.wraps(fn)
+    def scene_function(*args: Any, **kwargs: Any) -> Scene:
+        scene = fn(*args, **kwargs)
+        scene.render_defaults = dict(fn.render_defaults)  # type: ignore[attr-defined]
+        return scene
+
+    return scene_function
+
+
+cloth = _stamped(cloth)
+projectile = _stamped(projectile)
+kepler = _stamped(kepler)
+spring_chain = _stamped(spring_chain)
+dam_break = _stamped(dam_break)
+drop = _stamped(drop)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {

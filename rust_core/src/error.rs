@@ -18,9 +18,20 @@ pub enum Error {
         "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} {what}. The state was rolled back to step {rolled_back_to}. \
          {advice}",
         what = describe(quantity),
-        advice = advise(quantity, *dt, *suggested_dt)
+        advice = advise(quantity, *dt, *suggested_dt, *explicit_euler)
     )]
-    Diverged { step: u64, t: f64, particle: usize, quantity: Failure, rolled_back_to: u64, dt: f64, suggested_dt: f64 },
+    Diverged {
+        step: u64,
+        t: f64,
+        particle: usize,
+        quantity: Failure,
+        rolled_back_to: u64,
+        dt: f64,
+        suggested_dt: f64,
+        /// The particles were stepped by explicit Euler, which no smaller dt makes stable for an
+        /// undamped oscillation.
+        explicit_euler: bool,
+    },
 
     /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
     #[error("interrupted; the state was rolled back to step {rolled_back_to}")]
@@ -75,8 +86,15 @@ fn describe(quantity: &Failure) -> String {
     }
 }
 
-fn advise(quantity: &Failure, dt: f64, suggested_dt: f64) -> String {
+fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool) -> String {
     match quantity {
+        // |1 + iω dt| > 1 for every ω > 0: explicit Euler amplifies every undamped oscillation
+        // (springs, orbits) by (1 + ω²dt²)^(1/2) a step, so a smaller dt only delays this.
+        _ if explicit_euler => format!(
+            "Explicit Euler amplifies every undamped oscillation (springs, orbits) at any dt: a \
+             smaller dt (now {dt:.3e} s; the fastest time scale asks for {suggested_dt:.3e} s) \
+             only delays this. Use semi_implicit_euler, verlet or rk4."
+        ),
         // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
         Failure::Error => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
                     softening, or a fixed-step integrator."
@@ -114,6 +132,7 @@ mod tests {
             rolled_back_to: 0,
             dt: 0.1,
             suggested_dt,
+            explicit_euler: false,
         }
         .to_string()
     }
@@ -126,5 +145,22 @@ mod tests {
             assert!(m.contains("No stable dt exists"), "{bad:e}: {m}");
             assert!(!m.contains("e.g."), "{bad:e}: {m}");
         }
+    }
+
+    #[test]
+    fn explicit_euler_is_told_to_change_integrator_not_dt() {
+        let e = Error::Diverged {
+            step: 3,
+            t: 0.3,
+            particle: 1,
+            quantity: Failure::Velocity,
+            rolled_back_to: 0,
+            dt: 0.1,
+            suggested_dt: 1e-3,
+            explicit_euler: true,
+        };
+        let m = e.to_string();
+        assert!(m.contains("at any dt") && m.contains("verlet"), "{m}");
+        assert!(!m.contains("e.g."), "{m}");
     }
 }

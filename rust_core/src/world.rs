@@ -290,7 +290,17 @@ impl<V: Vector> World<V> {
             Error::Diverged { step, particle, quantity, t, .. } => {
                 // The dt that failed: `advance` ran substeps shorter than the saved dt.
                 let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
-                Error::Diverged { step, t, particle, quantity, rolled_back_to, dt: self.dt, suggested_dt }
+                let explicit_euler = self.particles.integrator_info().name == "euler";
+                Error::Diverged {
+                    step,
+                    t,
+                    particle,
+                    quantity,
+                    rolled_back_to,
+                    dt: self.dt,
+                    suggested_dt,
+                    explicit_euler,
+                }
             }
             Error::Interrupted { .. } => Error::Interrupted { rolled_back_to },
             e => e,
@@ -466,6 +476,7 @@ impl<V: Vector> World<V> {
                     rolled_back_to: 0,
                     dt,
                     suggested_dt: 0.0,
+                    explicit_euler: false,
                 });
             }
             for c in &mut self.couplings {

@@ -32,9 +32,9 @@ def gif(
     steps_per_frame: int | None = None,
     frame_time: float | None = None,
     substeps: str | int | None = None,
-    fps: float = 30,
-    size: tuple[int, int] = (480, 360),
-    color_by: str = "speed",
+    fps: float | None = None,
+    size: tuple[int, int] | None = None,
+    color_by: str | None = None,
     colorbar: bool = True,
     radius: int | None = None,
     springs: bool = True,
@@ -45,10 +45,13 @@ def gif(
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
 
     Frame 0 shows the current state; between consecutive frames the scene advances either
-    ``steps_per_frame`` steps of ``scene.dt`` (default), so the animation covers
+    ``steps_per_frame`` steps of ``scene.dt``, so the animation covers
     ``(frames - 1) * steps_per_frame * scene.dt`` seconds of simulated time, or, with
     `frame_time`, ``frame_time`` seconds with substeps the scene picks itself, covering
-    ``(frames - 1) * frame_time`` seconds. The scene is left at the last frame's state. The whole
+    ``(frames - 1) * frame_time`` seconds. Given neither, it advances as ``physcore render``
+    does (see :func:`record`): a ready-made scene by its ``render_defaults``, any other scene by
+    1/30 s of simulated time per frame, so it plays in real time. `frames`, `fps`, `size` and
+    `color_by` default to the scene's ``render_defaults`` too (else 90, 30, (480, 360), "speed"). The scene is left at the last frame's state. The whole
     run is simulated before anything is drawn, and a single camera is fitted to all frames (and to
     the scene's boundary particles), so the view does not move.
 
@@ -65,14 +68,14 @@ def gif(
         Output file; must end in ``.gif`` and its directory must exist and be writable (checked
         by creating and removing a file there before simulating). Written atomically: a
         temporary file in the same directory is renamed onto `path` only once complete.
-    frames : int, default 90
+    frames : int, optional
         Number of frames, >= 1 (scenes only). Together with `size` and the scene's particles it must fit in
         memory: the estimate ``frames · (4 N (dim + 2) + 4 M + 2 W H)`` bytes (N particles,
         M springs, W × H pixels) is refused above :func:`physcore._check.memory_limit` (half
         the physical memory) before anything is simulated.
     steps_per_frame : int, optional
-        Simulation steps of ``scene.dt`` between frames, 1 to :data:`MAX_STEPS` (2**53). Default
-        10 when `frame_time` is not given; giving both is an error.
+        Simulation steps of ``scene.dt`` between frames, 1 to :data:`MAX_STEPS` (2**53); giving
+        it and `frame_time` is an error. Given neither, see above.
     frame_time : float, optional
         Simulated seconds between frames, finite and at least 2.2e-308 (a normal float64). Each
         frame then calls ``scene.advance(frame_time)``, which picks its own substeps (from the
@@ -83,13 +86,14 @@ def gif(
         With `frame_time`: ``"auto"`` lets ``scene.advance`` choose the substeps of every frame
         inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
         (1 to 2**53) fixes that many per frame. Needs `frame_time`.
-    fps : float, default 30
-        Playback rate, > 0. GIF stores delays in whole centiseconds and most viewers play delays
-        below 20 ms at 100 ms, so the delay is rounded to 10 ms and clamped to at least 20 ms
-        (fps above 50 play at 50).
-    size : (int, int), default (480, 360)
+    fps : float, optional
+        Playback rate, > 0. GIF stores delays in whole centiseconds, so the delays alternate
+        (30 fps: 30, 30, 40 ms, …) to keep the playing time exact: frame k starts at
+        ``round(k · 100 / fps)`` cs. Most viewers play delays below 20 ms at 100 ms, so each is
+        at least 20 ms (fps above 50 play at 50).
+    size : (int, int), optional
         Image width and height in pixels, each >= 16.
-    color_by : {"speed", "pressure", "none"}, default "speed"
+    color_by : {"speed", "pressure", "none"}, optional
         Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
         plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
         negative values get the bottom colour). Both scales run from 0 at the bottom to a top
@@ -146,9 +150,12 @@ def gif(
     merges consecutive identical frames into one longer frame, so a GIF of a scene at rest can
     report fewer frames than `frames` while playing for the same time.
     """
-    duration = _gif_duration_ms(_check_fps(fps))
-    size = _check_size(size)
-    color_by = _check_color_by(color_by)
+    # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
+    # them), else 30 fps, 480x360, speed.
+    d = {} if isinstance(scene, _recording.Recording) else _recording.scene_defaults(scene)
+    fps = _check_fps(d.get("fps", 30.0) if fps is None else fps)
+    size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
+    color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     radius = _check_radius(radius)
     view = _check_view(view)
     colorbar = _check.flag("colorbar", colorbar)
@@ -173,18 +180,20 @@ def gif(
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
-    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), duration)
+    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames))
     return path
 
 
-def _gif_duration_ms(fps: float) -> int:
-    # GIF delays are whole centiseconds; most viewers play delays under 20 ms at 100 ms, so clamp
-    # (before rounding: 100 / fps is inf for a subnormal fps).
-    cs = round(min(max(100.0 / fps, 2.0), 65535.0))
-    return int(cs * 10)
+def _gif_delays_ms(fps: float, frames: int) -> list[int]:
+    """Per-frame delays (ms, multiples of 10) for `frames` frames at `fps`: GIF delays are whole
+    centiseconds, so frame k starts at round(k · 100/fps) cs and the total is exact to 1 cs;
+    each delay is at least 2 cs (most viewers play shorter ones at 100 ms) and at most 65535."""
+    step = min(max(100.0 / fps, 2.0), 65535.0)  # before rounding: 100/fps is inf for a subnormal fps
+    starts = [round(k * step) for k in range(frames + 1)]
+    return [10 * (b - a) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
-def _write_gif(path: Path, index_frames, duration_ms: int) -> None:
+def _write_gif(path: Path, index_frames, duration_ms: list[int]) -> None:
     from PIL import Image
 
     palette = _PALETTE.tobytes()

@@ -2,6 +2,7 @@
 :func:`record`, which steps a scene and fills one."""
 from __future__ import annotations
 
+import math
 import operator
 import sys
 from typing import Any, NamedTuple
@@ -159,6 +160,42 @@ def _simulate(
     )
 
 
+def scene_defaults(scene: Any) -> dict[str, Any]:
+    """The scene's animation defaults (``scene.render_defaults``, set by :mod:`physcore.scenes`),
+    or {} for a scene without them."""
+    d = getattr(scene, "render_defaults", None)
+    return dict(d) if isinstance(d, dict) else {}
+
+
+def steps_for(frame_time: float, dt: float) -> int:
+    """Steps of `dt` closest to `frame_time` simulated seconds (at least 1); InvalidInputError
+    naming frame_time above MAX_STEPS. The one conversion the CLI and the library share."""
+    ratio = float(frame_time) / float(dt)
+    if not ratio <= MAX_STEPS:
+        raise InvalidInputError(
+            f"frame_time: {float(frame_time):.3g} s per frame is {ratio:.3g} steps of dt = {float(dt):.3g} s, "
+            f"above {MAX_STEPS:.3g}; give a shorter frame_time or a larger dt"
+        )
+    return max(1, int(round(ratio)))
+
+
+def default_stepping(scene: Any, d: dict[str, Any]) -> tuple[int, float | None]:
+    """(steps_per_frame, frame_time) when the caller gives neither, the same as ``physcore
+    render``: the scene's ``render_defaults`` (a fixed step count, or a frame time: in automatic
+    substeps if it says ``"substeps": "auto"``, else as the nearest number of steps of dt), and
+    for a scene without them one frame per 1/fps of simulated time (real-time playback at the
+    default 30 fps). A scene without a usable ``dt`` takes 10 steps per frame."""
+    if "steps_per_frame" in d:
+        return _check_int("steps_per_frame", d["steps_per_frame"], 1, MAX_STEPS), None
+    frame_time = float(d.get("frame_time", 1.0 / float(d.get("fps", 30.0))))
+    if str(d.get("substeps", "")).lower() == "auto":
+        return 1, frame_time
+    dt = getattr(scene, "dt", None)
+    if not isinstance(dt, (int, float)) or not (dt > 0 and math.isfinite(dt)):
+        return 10, None
+    return steps_for(frame_time, dt), None
+
+
 def _plan(
     scene: Any,
     frames: int | None,
@@ -170,7 +207,8 @@ def _plan(
 ) -> dict[str, Any]:
     """The checked simulation arguments of :func:`record` (and :func:`gif` of a scene), as
     keyword arguments of ``_simulate``. Raises before anything is stepped."""
-    frames = _check_int("frames", 90 if frames is None else frames, 1)
+    d = scene_defaults(scene)
+    frames = _check_int("frames", d.get("frames", 90) if frames is None else frames, 1)
     frame_time = _check_frame_time(frame_time)
     if substeps is None:
         substeps = "auto"
@@ -181,8 +219,10 @@ def _plan(
         substeps = _check_int("substeps", substeps, 1, MAX_STEPS)
         if frame_time is None:
             raise InvalidInputError("substeps needs frame_time (seconds between frames)")
-    if steps_per_frame is None:
-        steps_per_frame = 10
+    if steps_per_frame is None and frame_time is None:
+        steps_per_frame, frame_time = default_stepping(scene, d)
+    elif steps_per_frame is None:
+        steps_per_frame = 1  # unused: frame_time steps the scene
     elif frame_time is not None:
         raise InvalidInputError("give steps_per_frame or frame_time, not both")
     else:
@@ -205,11 +245,11 @@ def _plan(
 def record(
     scene: Any,
     *,
-    frames: int = 90,
+    frames: int | None = None,
     steps_per_frame: int | None = None,
     frame_time: float | None = None,
     substeps: str | int = "auto",
-    color_by: str = "speed",
+    color_by: str | None = None,
     springs: bool = True,
     progress: bool = False,
     on_frame: Any = None,
@@ -217,16 +257,18 @@ def record(
     """Step `scene` and return every frame's state as data: the producing half of :func:`gif`.
 
     Frame 0 is the current state; between frames the scene advances ``steps_per_frame`` steps
-    (default 10) or, with `frame_time`, ``frame_time`` seconds in automatic (or `substeps`
-    fixed) substeps, exactly as :func:`gif` does with the same arguments. The scene is left at
-    the last frame.
+    or, with `frame_time`, ``frame_time`` seconds in automatic (or `substeps` fixed) substeps,
+    exactly as :func:`gif` does with the same arguments. Given neither, it advances as
+    ``physcore render`` does: by the scene's ``render_defaults`` (the ready-made scenes have
+    them), else 1/30 s of simulated time per frame in steps of ``scene.dt`` (real time at 30
+    fps). `frames` defaults to the scene's, else 90. The scene is left at the last frame.
 
     Parameters
     ----------
     scene, frames, steps_per_frame, frame_time, substeps, springs, progress
         As for :func:`gif`.
-    color_by : {"speed", "pressure", "none"}, default "speed"
-        Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
+    color_by : {"speed", "pressure", "none"}, optional
+        Default: the scene's ``render_defaults``, else ``"speed"``. Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
     on_frame : callable, optional
         ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
         ``scene.advance`` returned for that frame (None for frame 0 and for fixed steps). For
@@ -250,7 +292,7 @@ def record(
     >>> rec.times.round(6).tolist()
     [0.0, 0.02, 0.04, 0.06, 0.08]
     """
-    color_by = _check_color_by(color_by)
+    color_by = _check_color_by(scene_defaults(scene).get("color_by", "speed") if color_by is None else color_by)
     springs = _check.flag("springs", springs)
     progress = _check.flag("progress", progress)
     if on_frame is not None and not callable(on_frame):

@@ -46,7 +46,15 @@ def _pressure_array(p: Any, n: int) -> np.ndarray:
 
 
 def _scene_pressure(scene: Any, n: int) -> np.ndarray:
-    """``scene.pressure()`` as (N,) float64 Pa; ValueError naming color_by if the scene has none."""
+    """``scene.pressure()`` as (N,) float64 Pa; ValueError naming color_by if the scene has none
+    (no ``pressure()`` method, or a physcore Scene without a fluid, whose pressure is 0 everywhere
+    and would draw one flat colour)."""
+    from ..scene import Scene  # here: the scene module imports the renderer's package lazily too
+
+    if isinstance(scene, Scene) and scene.fluids == ():
+        raise InvalidInputError(
+            "color_by='pressure': the scene has no fluid (its pressure is 0 everywhere); add a Fluid or use color_by='speed'"
+        )
     try:
         p = scene.pressure()
     except AttributeError as e:

@@ -1,0 +1,131 @@
+"""What a new user tripped over on a first run (issue 16, "What a new user tripped over"): each
+check runs what they ran.
+
+* ``render.gif(scenes.cloth(), path)`` with no options shows the motion ``physcore render cloth``
+  shows (the scene's frame time, not 10 steps), and any other scene plays in real time;
+* a "4 s" GIF plays for 4 s: GIF delays are whole centiseconds, so they alternate;
+* ``color_by="pressure"`` on a scene without a fluid is an error, not a flat blue picture;
+* ``physcore scenes`` lists as parameters only what ``--param`` accepts;
+* ``dir(physcore)`` shows ``render`` and ``scenes``;
+* a diverging explicit-Euler render says once that the simulation diverged, and advises another
+  integrator rather than a smaller dt (which explicit Euler never becomes stable with).
+"""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image, ImageSequence
+
+import physcore as pc
+from physcore import render
+
+
+def test_library_defaults_are_the_clis_for_a_ready_made_scene():
+    scene = pc.scenes.cloth(n=8)
+    assert scene.render_defaults == pc.scenes.cloth.render_defaults
+    rec = render.record(scene, frames=3)
+    frame_time = pc.scenes.cloth.render_defaults["frame_time"]
+    step = np.diff(rec.times)
+    # round(frame_time / dt) steps of dt: within half a step of the scene's frame time (1/30 s).
+    assert np.all(np.abs(step - frame_time) <= 0.5 * scene.dt + 1e-12), (step, frame_time, scene.dt)
+    assert render.record(pc.scenes.cloth(n=8)).frames == pc.scenes.cloth.render_defaults["frames"]
+
+
+def test_a_scene_without_defaults_plays_in_real_time(tmp_path):
+    scene = pc.Scene(2, dt=1e-3)
+    scene.add_particles([[0.0, 0.0]], velocities=[[1.0, 0.0]])
+    assert scene.render_defaults is None
+    rec = render.record(scene, frames=4)
+    assert np.allclose(np.diff(rec.times), 0.033, atol=1e-12)  # round((1/30) / 1e-3) = 33 steps
+    path = render.gif(pc.Scene(2, dt=1e-3), tmp_path / "x.gif", frames=2)
+    with Image.open(path) as im:
+        assert im.size == (480, 360)
+
+
+def test_the_ready_made_scenes_carry_their_defaults_and_the_functions_keep_their_signatures():
+    import inspect
+
+    for name, fn in pc.scenes.REGISTRY.items():
+        assert fn.__name__ == name and "render_defaults" in vars(fn)
+        assert "integrator" in inspect.signature(fn).parameters
+
+
+@pytest.mark.parametrize("fps, frames", [(30, 90), (30, 121), (24, 48), (25, 10), (7, 9), (60, 30)])
+def test_gif_plays_for_frames_over_fps_seconds(tmp_path, fps, frames):
+    """The delays sum to frames/fps within 10 ms (one centisecond), each a multiple of 10 ms and
+    at least 20 ms (60 fps plays at 50). Pillow merges identical consecutive frames and adds their
+    delays, which keeps the sum: the total is what is checked."""
+    scene = pc.Scene(2, dt=1e-3)
+    scene.add_particles(np.zeros((2, 2)), velocities=[[1.0, 0.3], [-1.0, 0.5]])
+    path = render.gif(scene, tmp_path / "t.gif", frames=frames, fps=fps, size=(64, 64), steps_per_frame=100)
+    with Image.open(path) as im:
+        delays = [f.info["duration"] for f in ImageSequence.Iterator(im)]
+    assert 0 < len(delays) <= frames
+    assert all(d % 10 == 0 and d >= 20 for d in delays), delays
+    want = frames * 1000 / min(fps, 50)
+    assert abs(sum(delays) - want) <= 10, (sum(delays), want)
+    if fps == 30:
+        assert {30, 40} <= set(delays), set(delays)  # alternating, not a flat 30 (3.6 s for "4 s")
+
+
+def test_pressure_colouring_needs_a_fluid(tmp_path):
+    scene = pc.scenes.projectile(n=2)
+    with pytest.raises(pc.InvalidInputError, match="color_by='pressure': the scene has no fluid"):
+        render.gif(scene, tmp_path / "p.gif", frames=2, color_by="pressure")
+    assert not (tmp_path / "p.gif").exists()
+    assert scene.step_count == 0  # refused before stepping
+
+
+def test_cli_pressure_on_a_scene_without_fluid_is_a_usage_error(tmp_path):
+    out = tmp_path / "p.gif"
+    r = subprocess.run([sys.executable, "-m", "physcore", "render", "projectile", "--color-by", "pressure",
+                        "--frames", "2", "-o", str(out), "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    assert "no fluid" in r.stderr and not out.exists()
+
+
+def test_scenes_listing_offers_only_what_param_accepts():
+    r = subprocess.run([sys.executable, "-m", "physcore", "scenes"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    for block in text.split("parameters (--param key=value): ")[1:]:
+        params = block.split(";")[0]
+        assert "integrator=" not in params and "dt=" not in params, params
+    assert "options: --integrator (default 'verlet'), --dt" in text
+    # What the listing offers, --param takes.
+    r = subprocess.run([sys.executable, "-m", "physcore", "render", "spring_chain", "--param", "n=3",
+                        "--integrator", "rk4", "--frames", "2", "--size", "32x32", "-o", "/dev/null", "--quiet"],
+                       capture_output=True, text=True)
+    assert "--param" not in r.stderr, r.stderr
+
+
+def test_dir_shows_the_lazy_submodules():
+    names = dir(pc)
+    assert "render" in names and "scenes" in names and "Scene" in names
+    assert pc.render.gif is render.gif
+
+
+def test_a_diverging_explicit_euler_render_advises_another_integrator(tmp_path):
+    out = tmp_path / "e.gif"
+    r = subprocess.run([sys.executable, "-m", "physcore", "render", "cloth",
+                        "--integrator", "euler", "--param", "n=12", "--size", "32x32", "-o", str(out), "--quiet"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1, (r.returncode, r.stderr)
+    err = r.stderr
+    assert err.count("diverged") == 1, err
+    assert "at any dt" in err and "--integrator verlet" in err, err
+    assert "e.g." not in err and "try a smaller time step" not in err, err
+    assert "Warning" not in err and not out.exists()
+
+
+def test_the_python_error_says_so_too():
+    scene = pc.scenes.cloth(n=12, integrator="euler")
+    with pytest.raises(pc.SimulationDiverged) as info:
+        scene.step(20000)
+    assert "Explicit Euler amplifies every undamped oscillation" in str(info.value)
+    assert "Try a smaller dt" not in str(info.value)
+    assert math.isfinite(scene.time) and scene.step_count == 0
