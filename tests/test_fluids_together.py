@@ -225,3 +225,31 @@ def test_a_ninth_fluid_alike_starts_a_new_search_and_warns():
         scene.add(Fluid(lattice([2.2, 0], [2.26, 0.06], dx), dx, sound_speed=10.0, name="f9"))
     message = str(caught[0].message)
     assert "'f0'" in message and "'f8'" not in message, message
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "rk45"])
+def test_fluids_apart_in_the_particle_order_meet_in_3d(integrator):
+    """Two 3D blocks head-on with other particles added between them (the fluids' particle ranges
+    are not contiguous), under RK4 (four evaluations a step) and rk45 (trial stages): they stop
+    each other, the free particles feel no SPH force, and the fluids' momentum is conserved to
+    round-off."""
+    dx = 0.025
+    scene = pc.Scene(dim=3, integrator=integrator)
+    block = lattice([0, 0, 0], [0.1, 0.1, 0.1], dx)
+    n = len(block)
+    scene.add(Fluid(block, dx, velocities=np.tile([1.5, 0, 0], (n, 1)), sound_speed=15.0, name="a"))
+    free = scene.add_particles(np.array([[5.0, 0, 0], [5.0, 1.0, 0], [5.0, 2.0, 0]]), velocities=np.zeros((3, 3)))
+    scene.add(Fluid(block + [0.25, 0, 0], dx, velocities=np.tile([-1.5, 0, 0], (n, 1)), sound_speed=15.0,
+                    density=900.0, name="b"))
+    assert scene.terms[0].first == 0 and scene.terms[1].first == n + 3
+    fluid = np.r_[0:n, n + 3:2 * n + 3]
+    m = scene.masses[:, None]
+    p0 = (m[fluid] * scene.velocities[fluid]).sum(axis=0)
+    scale = float((m[fluid] * np.abs(scene.velocities[fluid])).sum())
+    scene.advance(0.1)
+    v, x = scene.velocities, scene.positions
+    assert np.all(v[free] == 0.0), "non-fluid particles get no SPH force"
+    pa = (m[:n] * v[:n]).sum(axis=0)
+    assert pa[0] < 0.5 * float(m[:n].sum()) * 1.5, pa  # a lost most of its momentum to b
+    assert x[:n, 0].mean() < x[n + 3:, 0].mean()
+    assert np.abs((m[fluid] * v[fluid]).sum(axis=0) - p0).max() < 1e-12 * scale
