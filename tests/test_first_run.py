@@ -129,3 +129,31 @@ def test_the_python_error_says_so_too():
     assert "Explicit Euler amplifies every undamped oscillation" in str(info.value)
     assert "Try a smaller dt" not in str(info.value)
     assert math.isfinite(scene.time) and scene.step_count == 0
+
+
+def _ink_centre(img: np.ndarray, colour) -> tuple[float, float]:
+    rows, cols = np.nonzero(np.all(img == np.asarray(colour), axis=2))
+    return float(rows.mean()), float(cols.mean())
+
+
+def test_render_frame_in_a_loop_keeps_one_view_with_an_extent():
+    """Frames made in a loop: a pinned particle at the origin and one moving away. With the same
+    `extent` in every call the pinned one stays on its pixels; without it each call refits the
+    camera to its own state and the pinned one jumps."""
+    from physcore.render._palette import _PALETTE, _PINNED
+
+    pinned_rgb = _PALETTE[_PINNED]
+    centres = {"fitted": [], "extent": []}
+    for t in (0.0, 0.5, 1.0):
+        x = np.array([[0.0, 0.0], [1.0 + 2.0 * t, 0.5]])
+        for kind, extra in (("fitted", {}), ("extent", {"extent": ([-0.5, -0.5], [3.5, 1.0])})):
+            img = render.render_frame(x, pinned=[True, False], size=(96, 64), radius=2, colorbar=False, **extra)
+            centres[kind].append(_ink_centre(img, pinned_rgb))
+    assert len(set(centres["extent"])) == 1, centres["extent"]
+    assert len(set(centres["fitted"])) > 1, centres["fitted"]
+
+
+@pytest.mark.parametrize("bad", [[0.0, 1.0], ([0, 0], [1]), ([0, 0], [-1, 1]), ([0, np.nan], [1, 1]), "box"])
+def test_render_frame_refuses_a_bad_extent(bad):
+    with pytest.raises(pc.InvalidInputError, match="extent"):
+        render.render_frame(np.zeros((2, 2)), extent=bad, size=(32, 32))

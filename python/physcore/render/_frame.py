@@ -32,8 +32,14 @@ def render_frame(
     colorbar: bool = True,
     radius: int | None = None,
     view: tuple[float, float] | None = None,
+    extent: Any = None,
 ) -> np.ndarray:
-    """Rasterise one state to an RGB image, with the camera fitted to that state.
+    """Rasterise one state to an RGB image, with the camera fitted to that state (or to
+    `extent`).
+
+    Frames made in a loop keep one view and one colour scale when they are given: pass the same
+    `extent`, `speed_scale` (or `pressure_scale`) and `radius` to every call (by default each
+    call fits its own state, so a moving scene's frames would jump).
 
     Parameters
     ----------
@@ -70,6 +76,9 @@ def render_frame(
         Disc radius in pixels; default chosen from N + B and `size`.
     view : (float, float), optional
         3D camera (azimuth, elevation) in degrees, default ``(-60, 25)``.
+    extent : (array_like (dim,), array_like (dim,)), optional
+        A box ``(lower, upper)`` in m that the camera is fitted to instead of the state (and its
+        boundary points): the same box gives the same view in every frame.
 
     Returns
     -------
@@ -148,7 +157,22 @@ def render_frame(
     speed_scale = None if speed_scale is None else float(speed_scale)
     pressure_scale = None if pressure_scale is None else float(pressure_scale)
 
-    if n:
+    box = None
+    if extent is not None:
+        try:
+            lo_hi = np.asarray(extent, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"extent: expected (lower, upper), two points of {dim} coordinates") from None
+        if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
+            raise InvalidInputError(
+                f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, "
+                f"got shape {lo_hi.shape}"
+            )
+        # The box's corners: every combination of lower/upper per axis.
+        box = np.array([[lo_hi[(k >> d) & 1, d] for d in range(dim)] for k in range(2**dim)])
+    if box is not None:
+        origin = box.mean(axis=0)
+    elif n:
         origin = _finite_mean(x)
     else:
         origin = _finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim)
@@ -164,6 +188,7 @@ def render_frame(
         walls=None if walls is None else walls - origin,
     )
     ras = _Rasteriser(
-        rec, size, color_by, radius, view, speed_scale=speed_scale, pressure_scale=pressure_scale, colorbar=bool(colorbar)
+        rec, size, color_by, radius, view, speed_scale=speed_scale, pressure_scale=pressure_scale,
+        colorbar=bool(colorbar), fit=None if box is None else box - origin,
     )
     return _PALETTE[ras.frame(0)]

@@ -159,7 +159,10 @@ class _Rasteriser:
         *,
         pressure_scale: float | None = None,
         colorbar: bool = False,
+        fit: np.ndarray | None = None,
     ):
+        """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
+        of the recorded positions and walls (``render_frame(extent=...)``)."""
         n, dim = rec.positions.shape[1:]
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
@@ -182,10 +185,13 @@ class _Rasteriser:
             self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax))
         self.cam = _Camera(dim, view, size)
         pad = max(self.radius + 2, int(round(0.05 * min(size))))
-        lo, hi, amax = _screen_bounds(self.cam, rec.positions)
-        if walls is not None:
-            wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
-            lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
+        if fit is not None:
+            lo, hi, amax = _screen_bounds(self.cam, np.asarray(fit, dtype=np.float32)[None])
+        else:
+            lo, hi, amax = _screen_bounds(self.cam, rec.positions)
+            if walls is not None:
+                wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
+                lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
         # Keep the colour bar's band free: no disc reaches into it.
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         # Positions are float32 relative to the origin: extents below their rounding are zero.
