@@ -157,3 +157,13 @@ def test_render_frame_in_a_loop_keeps_one_view_with_an_extent():
 def test_render_frame_refuses_a_bad_extent(bad):
     with pytest.raises(pc.InvalidInputError, match="extent"):
         render.render_frame(np.zeros((2, 2)), extent=bad, size=(32, 32))
+
+
+def test_kepler_speeds_are_not_labelled_m_per_s():
+    """The Kepler scene is in G = 1 units: its colour bar says so, not m/s; SI scenes keep m/s."""
+    from physcore.render._colorbar import _colorbar_labels
+
+    assert render.record(pc.scenes.kepler(), frames=2).speed_unit == "(G=1)"
+    assert render.record(pc.scenes.cloth(n=6), frames=2).speed_unit == "m/s"
+    assert _colorbar_labels("speed", 1.25, "(G=1)") == ("0", "1.25 (G=1)")
+    assert _colorbar_labels("speed", 1.25) == ("0", "1.25 m/s")

@@ -304,7 +304,13 @@ def kepler(
     return scene
 
 
-kepler.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4 * math.pi / 120, "size": (400, 400)}
+kepler.render_defaults = {
+    "frames": 120,
+    "fps": 30,
+    "frame_time": 4 * math.pi / 120,
+    "size": (400, 400),
+    "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
+}
 
 
 def spring_chain(

@@ -50,15 +50,15 @@ def _format_value(v: float) -> str:
     return f"{v:.0f}" if 1000 <= v < 1e6 else f"{v:.3g}"
 
 
-def _colorbar_labels(color_by: str, vmax: float) -> tuple[str, str]:
+def _colorbar_labels(color_by: str, vmax: float, speed_unit: str = "m/s") -> tuple[str, str]:
     """Bottom and top labels of the colour bar; pressure in Pa, kPa, MPa or GPa, whichever reads
-    as a number below 1000."""
+    as a number below 1000; speed in `speed_unit`."""
     if color_by == "pressure":
         for factor, unit in ((1.0, "Pa"), (1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa")):  # noqa: B007 - used after the loop
             if float(f"{vmax / factor:.3g}") < 1000:
                 break
         return "0", f"{_format_value(vmax / factor)} {unit}"
-    return "0", f"{_format_value(vmax)} m/s"
+    return "0", f"{_format_value(vmax)} {speed_unit}".rstrip()
 
 
 def _colorbar_layout(size: tuple[int, int], lo: str, hi: str) -> _ColorBarLayout | None:

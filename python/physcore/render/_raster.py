@@ -182,7 +182,7 @@ class _Rasteriser:
             self.vmax = float(scale)
         self.colorbar = None
         if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
-            self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax))
+            self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax, rec.speed_unit))
         self.cam = _Camera(dim, view, size)
         pad = max(self.radius + 2, int(round(0.05 * min(size))))
         if fit is not None:

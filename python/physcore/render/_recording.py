@@ -52,6 +52,9 @@ class Recording(NamedTuple):
         Static boundary points, relative to `origin`.
     times : (F,) float64 or None
         The scene's time at each frame, s.
+    speed_unit : str
+        The unit the colour bar gives speeds in: "m/s", or the scene's ``render_defaults``
+        ``speed_unit`` (Kepler: "(G=1)", a scene in units where G = 1).
     """
 
     positions: np.ndarray
@@ -64,6 +67,7 @@ class Recording(NamedTuple):
     pressures: np.ndarray | None = None
     walls: np.ndarray | None = None
     times: np.ndarray | None = None
+    speed_unit: str = "m/s"
 
     @property
     def frames(self) -> int:
@@ -157,6 +161,7 @@ def _simulate(
         pressures=pressures,
         walls=None if walls is None else walls - origin,
         times=times,
+        speed_unit=str(scene_defaults(scene).get("speed_unit", "m/s")),
     )
 
 
