@@ -167,3 +167,38 @@ def test_kepler_speeds_are_not_labelled_m_per_s():
     assert render.record(pc.scenes.cloth(n=6), frames=2).speed_unit == "m/s"
     assert _colorbar_labels("speed", 1.25, "(G=1)") == ("0", "1.25 (G=1)")
     assert _colorbar_labels("speed", 1.25) == ("0", "1.25 m/s")
+
+
+def test_strain_is_a_colour_choice_on_the_runs_own_scale(tmp_path):
+    """A hanging cloth strains well under 1 %: coloured by strain, its springs (drawn over grey
+    discs) use both ends of the map, whose ends are ± the run's 99th percentile of |strain| (the
+    colour bar says it in %), not a fixed 10 % under which everything is grey."""
+    from physcore.render._palette import _N_STRAIN, _PALETTE, _STRAIN0
+
+    rec = render.record(pc.scenes.cloth(n=12), frames=20, color_by="strain")
+    p99 = float(np.percentile(np.abs(rec.strain[np.isfinite(rec.strain)]), 99))
+    assert 0 < p99 < 0.02  # the strains this test is about: far below STRAIN_SATURATION
+    path = render.gif(rec, tmp_path / "s.gif", color_by="strain", size=(240, 180))
+    with Image.open(path) as im:
+        im.seek(im.n_frames - 1)
+        img = np.asarray(im.convert("RGB"))
+    used = {tuple(c) for c in img.reshape(-1, 3)}
+    ends = 4  # the 4 most saturated colours at each end of the diverging map
+    blues = {tuple(int(v) for v in _PALETTE[_STRAIN0 + k]) for k in range(ends)}
+    reds = {tuple(int(v) for v in _PALETTE[_STRAIN0 + _N_STRAIN - 1 - k]) for k in range(ends)}
+    assert used & blues and used & reds, "both compressed and stretched springs show"
+    from physcore.render._colorbar import _colorbar_labels
+
+    lo, hi = _colorbar_labels("strain", p99)
+    assert lo.startswith("-") and hi.startswith("+") and hi.endswith("%")
+
+
+def test_strain_colouring_needs_springs(tmp_path):
+    with pytest.raises(pc.InvalidInputError, match="no springs"):
+        render.record(pc.scenes.projectile(n=2), frames=2, color_by="strain")
+    with pytest.raises(pc.InvalidInputError, match="springs=True"):
+        render.record(pc.scenes.cloth(n=6), frames=2, color_by="strain", springs=False)
+    rec = render.record(pc.scenes.cloth(n=6), frames=2)
+    with pytest.raises(pc.InvalidInputError, match="strain"):
+        render.gif(rec, tmp_path / "x.gif", color_by="strain", springs=False)
+    assert not (tmp_path / "x.gif").exists()

@@ -53,6 +53,9 @@ def _format_value(v: float) -> str:
 def _colorbar_labels(color_by: str, vmax: float, speed_unit: str = "m/s") -> tuple[str, str]:
     """Bottom and top labels of the colour bar; pressure in Pa, kPa, MPa or GPa, whichever reads
     as a number below 1000; speed in `speed_unit`."""
+    if color_by == "strain":
+        pct = _format_value(100.0 * vmax)
+        return f"-{pct}%", f"+{pct}%"
     if color_by == "pressure":
         for factor, unit in ((1.0, "Pa"), (1e3, "kPa"), (1e6, "MPa"), (1e9, "GPa")):  # noqa: B007 - used after the loop
             if float(f"{vmax / factor:.3g}") < 1000:

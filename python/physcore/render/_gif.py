@@ -93,8 +93,12 @@ def gif(
         at least 20 ms (fps above 50 play at 50).
     size : (int, int), optional
         Image width and height in pixels, each >= 16.
-    color_by : {"speed", "pressure", "none"}, optional
-        Particle colouring. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
+    color_by : {"speed", "pressure", "strain", "none"}, optional
+        Particle colouring. ``"strain"``: plain discs under the springs, which are drawn on top
+        in a blue (compressed), grey, red (stretched) map whose ends are ± the run's 99th
+        percentile of |strain| (the colour bar gives it in %), so small strains show; the scene
+        needs springs. Otherwise springs are drawn under the discs and saturate at
+        ``STRAIN_SATURATION``. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
         plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
         negative values get the bottom colour). Both scales run from 0 at the bottom to a top
         fixed over the whole animation at the 99th percentile of all frames' values.
@@ -169,6 +173,8 @@ def gif(
             raise InvalidInputError(f"{given[0]}: a Recording is already simulated; give it to record() instead")
         if color_by == "speed" and rec.speeds is None or color_by == "pressure" and rec.pressures is None:
             raise InvalidInputError(f"color_by: the recording holds no {color_by}s; record(..., color_by={color_by!r})")
+        if color_by == "strain" and (rec.strain is None or not springs):
+            raise InvalidInputError("color_by='strain': the recording holds no springs (or springs=False)")
         if not springs:
             rec = rec._replace(pairs=None, strain=None)
         _check.memory("frames, size", rec.frames * 2 * size[0] * size[1], f"{rec.frames} frames of {size[0]}x{size[1]} pixels")

@@ -97,9 +97,10 @@ def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> n
     return (base + np.clip(lv, 0, levels - 1).astype(np.uint8)).astype(np.uint8)
 
 
-def _strain_levels(strain: np.ndarray) -> np.ndarray:
-    """(M,) strains -> (M,) uint8 palette indices; NaN (zero rest length) -> at-rest grey."""
+def _strain_levels(strain: np.ndarray, saturation: float = STRAIN_SATURATION) -> np.ndarray:
+    """(M,) strains -> (M,) uint8 palette indices, fully blue or red at ±`saturation`; NaN (zero
+    rest length) -> at-rest grey."""
     half = _N_STRAIN // 2
     # Clipped before dividing, so that a strain near the float32 limit cannot overflow.
-    s = np.clip(np.nan_to_num(strain, nan=0.0), -STRAIN_SATURATION, STRAIN_SATURATION) / STRAIN_SATURATION
+    s = np.clip(np.nan_to_num(strain, nan=0.0), -saturation, saturation) / saturation
     return (_STRAIN0 + half + np.rint(s * half)).astype(np.uint8)

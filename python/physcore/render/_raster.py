@@ -14,13 +14,16 @@ from ._palette import (
     _BACKGROUND,
     _N_PRESSURE,
     _N_SPEED,
+    _N_STRAIN,
     _PINNED,
     _PLAIN,
     _PLANE_FILL,
     _PLANE_LINE,
     _PRESSURE0,
     _SPEED0,
+    _STRAIN0,
     _WALL,
+    STRAIN_SATURATION,
     _scalar_levels,
     _strain_levels,
 )
@@ -173,6 +176,9 @@ class _Rasteriser:
         values, scale, base, levels = {
             "speed": (rec.speeds, speed_scale, _SPEED0, _N_SPEED),
             "pressure": (rec.pressures, pressure_scale, _PRESSURE0, _N_PRESSURE),
+            # Strain: the run's own scale (|strain|, saturating at its 99th percentile), so a
+            # cloth straining 0.3 % shows its pattern rather than grey under a fixed 10 %.
+            "strain": (None if rec.strain is None else np.abs(rec.strain), None, _STRAIN0, _N_STRAIN),
         }.get(color_by, (None, None, 0, 0))
         if values is not None and values.size:
             if scale is None:
@@ -180,6 +186,8 @@ class _Rasteriser:
                 # 99th percentile: a few outliers should not wash out the whole map.
                 scale = float(np.percentile(finite, 99)) if finite.size else 0.0
             self.vmax = float(scale)
+        # Springs saturate at the strain scale when colouring by strain, else at the fixed 10 %.
+        self.strain_scale = self.vmax if color_by == "strain" and self.vmax > 0 else STRAIN_SATURATION
         self.colorbar = None
         if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
             self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax, rec.speed_unit))
@@ -218,9 +226,12 @@ class _Rasteriser:
         buf = self.background.copy()
         s, depth = self.cam.project(rec.positions[k])
         col, row = self.cam.pixels(s)
-        if rec.pairs is not None and rec.strain is not None:
+        springs = rec.pairs is not None and rec.strain is not None
+        # Colouring by strain draws the springs over the discs (the picture is the springs).
+        on_top = self.color_by == "strain"
+        if springs and not on_top:
             i, j = rec.pairs
-            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k]))
+            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         if col.size == 0:
             return buf
         if self.color_by == "speed" and rec.speeds is not None:
@@ -228,13 +239,16 @@ class _Rasteriser:
         elif self.color_by == "pressure" and rec.pressures is not None:
             colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
         else:
-            colors = np.full(col.shape, _PLAIN, dtype=np.uint8)
+            # Strain: grey discs, so that blue reads as compressed springs only.
+            colors = np.full(col.shape, _WALL if on_top else _PLAIN, dtype=np.uint8)
         colors[rec.pinned] = _PINNED
         if depth is not None:
             order = np.argsort(depth, kind="stable")  # painter's algorithm: far ones first
         else:
             order = self.pin_order
-        if order is not None:
-            col, row, colors = col[order], row[order], colors[order]
-        _draw_discs(buf, col, row, colors, self.stencil)
+        c, r, cs = (col, row, colors) if order is None else (col[order], row[order], colors[order])
+        _draw_discs(buf, c, r, cs, self.stencil)
+        if springs and on_top:
+            i, j = rec.pairs
+            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return buf

@@ -236,6 +236,11 @@ def _plan(
         _check_advance(scene)
         if substeps == "auto":
             _check_auto_substeps(scene, frame_time)
+    if color_by == "strain":
+        if not springs:
+            raise InvalidInputError("color_by='strain' colours the springs: it needs springs=True")
+        if not hasattr(scene, "spring_pairs") or _scene_springs(scene) is None:
+            raise InvalidInputError("color_by='strain': the scene has no springs; use color_by='speed'")
     return {
         "frames": frames,
         "steps_per_frame": steps_per_frame,
