@@ -202,3 +202,38 @@ def test_strain_colouring_needs_springs(tmp_path):
     with pytest.raises(pc.InvalidInputError, match="strain"):
         render.gif(rec, tmp_path / "x.gif", color_by="strain", springs=False)
     assert not (tmp_path / "x.gif").exists()
+
+
+def _last_frame(path) -> np.ndarray:
+    with Image.open(path) as im:
+        im.seek(im.n_frames - 1)
+        return np.asarray(im.convert("RGB"))
+
+
+def test_trails_show_the_paths(tmp_path):
+    """Projectiles with a trail: the last frame has trail-shaded pixels along the arcs, and their
+    number grows with the trail's length; without a trail there are none. The ready-made Kepler
+    and projectile scenes have one by default (one orbit; the whole flight)."""
+    from physcore.render._palette import _N_TRAIL, _PALETTE, _TRAIL0
+
+    shades = {tuple(int(v) for v in _PALETTE[_TRAIL0 + k]) for k in range(_N_TRAIL)}
+
+    def trail_pixels(path) -> int:
+        img = _last_frame(path)
+        return sum(int(np.all(img == np.asarray(c), axis=2).sum()) for c in shades)
+
+    counts = {}
+    for t in (0, 10, 40):
+        s = pc.scenes.projectile(n=3)
+        counts[t] = trail_pixels(render.gif(s, tmp_path / f"t{t}.gif", frames=41, size=(160, 120), trail=t))
+    assert counts[0] == 0 and 0 < counts[10] < counts[40], counts
+    assert pc.scenes.kepler().render_defaults["trail"] == 60
+    assert trail_pixels(render.gif(pc.scenes.kepler(), tmp_path / "k.gif", frames=40, size=(120, 120))) > 0
+
+
+@pytest.mark.parametrize("bad, exc", [(-1, ValueError), (1.5, TypeError), ("3", TypeError)])
+def test_a_bad_trail_is_refused_by_name(tmp_path, bad, exc):
+    scene = pc.scenes.projectile(n=2)
+    with pytest.raises(exc, match="trail"):
+        render.gif(scene, tmp_path / "x.gif", frames=2, trail=bad)
+    assert not (tmp_path / "x.gif").exists() and scene.step_count == 0  # before stepping

@@ -315,6 +315,9 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
     color_by = args.color_by if args.color_by is not None else d.get("color_by", _FALLBACK["color_by"])
     settings = {"frames": frames, **stepping, "fps": fps, "size": tuple(size), "color_by": color_by}
+    trail = args.trail if getattr(args, "trail", None) is not None else d.get("trail")
+    if trail:
+        settings["trail"] = min(int(trail), frames)
     view = args.view if args.view is not None else d.get("view")
     if view is not None:
         settings["view"] = tuple(view)
@@ -568,6 +571,8 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")
+    r.add_argument("--trail", type=int, metavar="N",
+                   help="draw each particle's path over the last N frames, fading (0: none; default: the scene's)")
     r.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
                    help="scene parameter, repeatable (e.g. --param n=48 --param ground=true)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")

@@ -242,7 +242,7 @@ def projectile(
     return _finite_books(scene, "speed")
 
 
-projectile.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320)}
+projectile.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320), "trail": 120}
 
 
 #: Range of a Kepler orbit's separations a(1 ∓ e), m: keeps r², 1/r³ and v² = GM/r inside float64.
@@ -310,6 +310,7 @@ kepler.render_defaults = {
     "frame_time": 4 * math.pi / 120,
     "size": (400, 400),
     "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
+    "trail": 60,  # one orbit (the 120 frames cover two)
 }
 
 

@@ -13,6 +13,7 @@ from . import _recording
 from ._checks import (
     _check_color_by,
     _check_fps,
+    _check_int,
     _check_memory,
     _check_path,
     _check_radius,
@@ -40,6 +41,7 @@ def gif(
     springs: bool = True,
     view: tuple[float, float] | None = None,
     progress: bool = False,
+    trail: int | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -122,6 +124,10 @@ def gif(
         Default ``(-60, 25)``. Ignored for 2D scenes (x right, y up).
     progress : bool, default False
         Show a tqdm progress bar on stderr while simulating.
+    trail : int, optional
+        Draw each moving particle's path over the previous `trail` frames behind it, fading with
+        age (orbits, parabolas, figure-eights). 0: none. Default: the scene's ``render_defaults``
+        (Kepler: one orbit; projectiles: the whole flight), else 0.
 
     Returns
     -------
@@ -160,6 +166,7 @@ def gif(
     fps = _check_fps(d.get("fps", 30.0) if fps is None else fps)
     size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
+    trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)
     radius = _check_radius(radius)
     view = _check_view(view)
     colorbar = _check.flag("colorbar", colorbar)
@@ -185,7 +192,8 @@ def gif(
         _check_writable(path)
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar)
+    trail = min(trail, rec.frames)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail)
     _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames))
     return path
 

@@ -27,7 +27,9 @@ _WALL = _STRAIN0 + _N_STRAIN  # static boundary particles: neutral grey
 _TEXT = _WALL + 1  # colour-bar labels and outline
 _N_PRESSURE = 64
 _PRESSURE0 = _TEXT + 1
-_PALETTE_SIZE = _PRESSURE0 + _N_PRESSURE
+_N_TRAIL = 8  # trail shades, oldest (palest) first
+_TRAIL0 = _PRESSURE0 + _N_PRESSURE
+_PALETTE_SIZE = _TRAIL0 + _N_TRAIL
 
 # viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
 # brightest yellow hardly shows on the white background.
@@ -77,7 +79,11 @@ def _build_palette() -> np.ndarray:
     )
     pal[_WALL] = (178, 178, 178)
     pal[_TEXT] = (30, 30, 30)
-    pal[_PRESSURE0:] = _sample_map(_PLASMA, 0.88, _N_PRESSURE)
+    pal[_PRESSURE0:_TRAIL0] = _sample_map(_PLASMA, 0.88, _N_PRESSURE)
+    # Trails fade into the white background: from 10 % to 55 % of the way to a slate grey.
+    slate = np.array([70.0, 80.0, 100.0])
+    for k, a in enumerate(np.linspace(0.1, 0.55, _N_TRAIL)):
+        pal[_TRAIL0 + k] = (1 - a) * np.array([255.0, 255.0, 255.0]) + a * slate
     assert _WALL == _STRAIN0 + 2 * half + 1 and pal.shape[0] <= 256
     return np.round(pal).astype(np.uint8)
 

@@ -15,6 +15,7 @@ from ._palette import (
     _N_PRESSURE,
     _N_SPEED,
     _N_STRAIN,
+    _N_TRAIL,
     _PINNED,
     _PLAIN,
     _PLANE_FILL,
@@ -22,6 +23,7 @@ from ._palette import (
     _PRESSURE0,
     _SPEED0,
     _STRAIN0,
+    _TRAIL0,
     _WALL,
     STRAIN_SATURATION,
     _scalar_levels,
@@ -163,9 +165,11 @@ class _Rasteriser:
         pressure_scale: float | None = None,
         colorbar: bool = False,
         fit: np.ndarray | None = None,
+        trail: int = 0,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
-        of the recorded positions and walls (``render_frame(extent=...)``)."""
+        of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
+        each moving particle's path drawn behind it, fading (``gif(trail=...)``)."""
         n, dim = rec.positions.shape[1:]
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
@@ -217,6 +221,8 @@ class _Rasteriser:
             _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
         if self.colorbar is not None:
             _draw_colorbar(self.background, self.colorbar, base, levels)
+        self.trail = int(trail)
+        self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
 
@@ -226,6 +232,8 @@ class _Rasteriser:
         buf = self.background.copy()
         s, depth = self.cam.project(rec.positions[k])
         col, row = self.cam.pixels(s)
+        if self.trail and k > 0:
+            self._draw_trail(buf, k)
         springs = rec.pairs is not None and rec.strain is not None
         # Colouring by strain draws the springs over the discs (the picture is the springs).
         on_top = self.color_by == "strain"
@@ -252,3 +260,17 @@ class _Rasteriser:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return buf
+
+    def _draw_trail(self, buf: np.ndarray, k: int) -> None:
+        """The paths of the moving particles over the `trail` frames before k, oldest (palest)
+        first: one segment per particle per frame step, under everything that moves."""
+        rec = self.rec
+        if self._pix is None:
+            self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
+        moving = ~rec.pinned
+        first = max(0, k - self.trail)
+        for f in range(first, k):
+            (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
+            shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
+            colors = np.full(int(moving.sum()), shade, dtype=np.uint8)
+            _draw_lines(buf, c0[moving], r0[moving], c1[moving], r1[moving], colors)
