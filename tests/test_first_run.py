@@ -237,3 +237,23 @@ def test_a_bad_trail_is_refused_by_name(tmp_path, bad, exc):
     with pytest.raises(exc, match="trail"):
         render.gif(scene, tmp_path / "x.gif", frames=2, trail=bad)
     assert not (tmp_path / "x.gif").exists() and scene.step_count == 0  # before stepping
+
+
+def test_size_by_mass_draws_a_star_larger_than_its_planet(tmp_path):
+    """Two bodies at rest, 1 kg and 27 kg: with size_by="mass" the heavy one's disc has 3× the
+    radius (∛27), so about 9× the pixels; with the default one size, the same. Kepler draws its
+    star that way by default."""
+    scene = pc.Scene(2, dt=1e-3)
+    scene.add_particles([[0.0, 0.0], [1.0, 0.0]], masses=[1.0, 27.0])
+    areas = {}
+    for size_by in ("none", "mass"):
+        path = render.gif(scene, tmp_path / f"{size_by}.gif", frames=1, size=(200, 100), color_by="none",
+                          radius=4, size_by=size_by)
+        ink = np.any(_last_frame(path) != 255, axis=2)
+        areas[size_by] = (int(ink[:, :100].sum()), int(ink[:, 100:].sum()))
+    light, heavy = areas["mass"]
+    assert areas["none"][0] == areas["none"][1] == light > 0
+    assert 6 < heavy / light < 12, areas
+    assert pc.scenes.kepler().render_defaults["size_by"] == "mass"
+    with pytest.raises(pc.InvalidInputError, match="size_by"):
+        render.gif(scene, tmp_path / "x.gif", frames=1, size_by="volume")

@@ -318,6 +318,8 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     trail = args.trail if getattr(args, "trail", None) is not None else d.get("trail")
     if trail:
         settings["trail"] = min(int(trail), frames)
+    if d.get("size_by"):
+        settings["size_by"] = d["size_by"]
     view = args.view if args.view is not None else d.get("view")
     if view is not None:
         settings["view"] = tuple(view)

@@ -311,6 +311,7 @@ kepler.render_defaults = {
     "size": (400, 400),
     "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
     "trail": 60,  # one orbit (the 120 frames cover two)
+    "size_by": "mass",  # the star larger than the planet
 }
 
 

@@ -42,6 +42,7 @@ def gif(
     view: tuple[float, float] | None = None,
     progress: bool = False,
     trail: int | None = None,
+    size_by: str | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -128,6 +129,10 @@ def gif(
         Draw each moving particle's path over the previous `trail` frames behind it, fading with
         age (orbits, parabolas, figure-eights). 0: none. Default: the scene's ``render_defaults``
         (Kepler: one orbit; projectiles: the whole flight), else 0.
+    size_by : {"none", "mass"}, optional
+        ``"mass"``: each disc's radius grows as ∛(m / m_min), up to 3× the default radius (a
+        star beside its planet). Default: the scene's ``render_defaults`` (Kepler: "mass"),
+        else ``"none"`` (one size).
 
     Returns
     -------
@@ -167,6 +172,9 @@ def gif(
     size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)
+    size_by = d.get("size_by", "none") if size_by is None else size_by
+    if size_by not in ("none", "mass"):
+        raise InvalidInputError(f"size_by must be 'none' or 'mass'; got {size_by!r}")
     radius = _check_radius(radius)
     view = _check_view(view)
     colorbar = _check.flag("colorbar", colorbar)
@@ -193,7 +201,7 @@ def gif(
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
     trail = min(trail, rec.frames)
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by)
     _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames))
     return path
 

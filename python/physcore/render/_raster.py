@@ -166,6 +166,7 @@ class _Rasteriser:
         colorbar: bool = False,
         fit: np.ndarray | None = None,
         trail: int = 0,
+        size_by: str = "none",
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -196,7 +197,11 @@ class _Rasteriser:
         if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
             self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax, rec.speed_unit))
         self.cam = _Camera(dim, view, size)
-        pad = max(self.radius + 2, int(round(0.05 * min(size))))
+        # Room for the largest disc (size_by="mass" draws up to 3× the radius).
+        grow = 1.0
+        if size_by == "mass" and rec.masses is not None and len(rec.masses):
+            grow = float(min(3.0, np.cbrt(rec.masses.max() / rec.masses.min())))
+        pad = max(int(math.ceil(self.radius * grow)) + 2, int(round(0.05 * min(size))))
         if fit is not None:
             lo, hi, amax = _screen_bounds(self.cam, np.asarray(fit, dtype=np.float32)[None])
         else:
@@ -213,6 +218,13 @@ class _Rasteriser:
             if r_springs is not None:
                 self.radius = min(self.radius, r_springs)
         self.stencil = _disc_stencil(self.radius)
+        # Per-particle disc radii (size_by="mass"): None when every disc has self.radius.
+        self.radii = None
+        if size_by == "mass" and rec.masses is not None and len(rec.masses):
+            rel = np.cbrt(rec.masses / rec.masses.min())
+            radii = np.rint(np.minimum(rel, 3.0) * max(self.radius, 1)).astype(np.int64)
+            if np.any(radii != self.radius):
+                self.radii = radii
         self.background = _background(self.cam, rec.planes, rec.origin)
         if walls is not None:
             # Static: drawn once, under everything that moves.
@@ -255,7 +267,15 @@ class _Rasteriser:
         else:
             order = self.pin_order
         c, r, cs = (col, row, colors) if order is None else (col[order], row[order], colors[order])
-        _draw_discs(buf, c, r, cs, self.stencil)
+        if self.radii is None:
+            _draw_discs(buf, c, r, cs, self.stencil)
+        else:
+            # Largest first, so that a small body next to a big one stays visible (within one
+            # size the painter's order holds).
+            radii = self.radii if order is None else self.radii[order]
+            for rad in np.unique(radii)[::-1]:
+                m = radii == rad
+                _draw_discs(buf, c[m], r[m], cs[m], _disc_stencil(int(rad)))
         if springs and on_top:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))

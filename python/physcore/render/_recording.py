@@ -52,6 +52,8 @@ class Recording(NamedTuple):
         Static boundary points, relative to `origin`.
     times : (F,) float64 or None
         The scene's time at each frame, s.
+    masses : (N,) float64 or None
+        The particles' masses (kg) at frame 0, when the scene has them (for ``size_by="mass"``).
     speed_unit : str
         The unit the colour bar gives speeds in: "m/s", or the scene's ``render_defaults``
         ``speed_unit`` (Kepler: "(G=1)", a scene in units where G = 1).
@@ -68,6 +70,7 @@ class Recording(NamedTuple):
     walls: np.ndarray | None = None
     times: np.ndarray | None = None
     speed_unit: str = "m/s"
+    masses: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -162,7 +165,17 @@ def _simulate(
         walls=None if walls is None else walls - origin,
         times=times,
         speed_unit=str(scene_defaults(scene).get("speed_unit", "m/s")),
+        masses=_masses(scene, n),
     )
+
+
+def _masses(scene: Any, n: int) -> np.ndarray | None:
+    """The scene's (N,) masses if it has finite, positive ones (for ``size_by="mass"``)."""
+    m = getattr(scene, "masses", None)
+    if m is None:
+        return None
+    m = np.asarray(m, dtype=np.float64).reshape(-1)
+    return m.copy() if m.shape == (n,) and np.all(np.isfinite(m) & (m > 0)) else None
 
 
 def scene_defaults(scene: Any) -> dict[str, Any]:
