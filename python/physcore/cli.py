@@ -50,7 +50,7 @@ from typing import Any
 __all__ = ["main"]
 
 # Animation defaults when a scene function has no ``render_defaults`` entry.
-_FALLBACK = {"frames": 90, "steps_per_frame": 10, "fps": 30.0, "size": (480, 360), "color_by": "speed"}
+_FALLBACK = {"frames": 90, "fps": 30.0, "size": (480, 360), "color_by": "speed"}
 
 # Most steps per frame: render.MAX_STEPS (2**53), as a float for the comparison with frame_time/dt.
 _MAX_STEPS = float(2**53)
@@ -272,6 +272,13 @@ def _check_frames_memory(fn: Callable[..., Any], args: argparse.Namespace) -> No
     memory("--frames, --size", 2 * frames * w * h, f"{frames} frames of {w}x{h} pixels")
 
 
+def _too_many_steps(frame_time: float, dt: float) -> _UsageError:
+    return _UsageError(
+        f"--frame-time: {frame_time:.3g} s per frame is {frame_time / dt:.3g} steps of dt = {dt:.3g} s, "
+        f"above {_MAX_STEPS:.3g}; give a shorter --frame-time or a larger --dt"
+    )
+
+
 def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> dict[str, Any]:
     """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
 
@@ -294,24 +301,24 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
             stepping["substeps"] = int(substeps)
     elif args.steps_per_frame is not None:
         stepping = {"steps_per_frame": args.steps_per_frame}
-    elif "steps_per_frame" in d and args.frame_time is None and not auto:
-        stepping = {"steps_per_frame": int(d["steps_per_frame"])}
-    elif frame_time is not None and auto:
+    elif args.frame_time is None:
+        # The scene's defaults, chosen exactly as render.record() chooses them.
+        from .render._recording import default_stepping
+
+        if "frame_time" in d and not auto and not float(d["frame_time"]) / dt <= _MAX_STEPS:
+            raise _too_many_steps(float(d["frame_time"]), dt)
+        spf, ft = default_stepping(d, dt)
+        stepping = {"steps_per_frame": spf} if ft is None else {"frame_time": ft}
+    elif auto:
         stepping = {"frame_time": float(frame_time)}
-    elif frame_time is not None:
+    else:
         # Simulated seconds per frame: keeps the animation's time span whatever dt is (the
         # conversion record() uses for a scene's defaults).
         from .render._recording import steps_for
 
-        ratio = float(frame_time) / dt
-        if not ratio <= _MAX_STEPS:
-            raise _UsageError(
-                f"--frame-time: {float(frame_time):.3g} s per frame is {ratio:.3g} steps of dt = {dt:.3g} s, "
-                f"above {_MAX_STEPS:.3g}; give a shorter --frame-time or a larger --dt"
-            )
+        if not float(frame_time) / dt <= _MAX_STEPS:
+            raise _too_many_steps(float(frame_time), dt)
         stepping = {"steps_per_frame": steps_for(float(frame_time), dt)}
-    else:
-        stepping = {"steps_per_frame": _FALLBACK["steps_per_frame"]}
     fps = args.fps if args.fps is not None else float(d.get("fps", _FALLBACK["fps"]))
     color_by = args.color_by if args.color_by is not None else d.get("color_by", _FALLBACK["color_by"])
     settings = {"frames": frames, **stepping, "fps": fps, "size": tuple(size), "color_by": color_by}

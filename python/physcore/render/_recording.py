@@ -197,18 +197,18 @@ def steps_for(frame_time: float, dt: float) -> int:
     return max(1, int(round(ratio)))
 
 
-def default_stepping(scene: Any, d: dict[str, Any]) -> tuple[int, float | None]:
+def default_stepping(d: dict[str, Any], dt: Any) -> tuple[int, float | None]:
     """(steps_per_frame, frame_time) when the caller gives neither, the same as ``physcore
     render``: the scene's ``render_defaults`` (a fixed step count, or a frame time: in automatic
     substeps if it says ``"substeps": "auto"``, else as the nearest number of steps of dt), and
     for a scene without them one frame per 1/fps of simulated time (real-time playback at the
-    default 30 fps). A scene without a usable ``dt`` takes 10 steps per frame."""
+    default 30 fps). A scene without a usable `dt` takes 10 steps per frame. The CLI calls this
+    too, so both pick the same stepping."""
     if "steps_per_frame" in d:
         return _check_int("steps_per_frame", d["steps_per_frame"], 1, MAX_STEPS), None
     frame_time = float(d.get("frame_time", 1.0 / float(d.get("fps", 30.0))))
     if str(d.get("substeps", "")).lower() == "auto":
         return 1, frame_time
-    dt = getattr(scene, "dt", None)
     if not isinstance(dt, (int, float)) or not (dt > 0 and math.isfinite(dt)):
         return 10, None
     return steps_for(frame_time, dt), None
@@ -238,7 +238,7 @@ def _plan(
         if frame_time is None:
             raise InvalidInputError("substeps needs frame_time (seconds between frames)")
     if steps_per_frame is None and frame_time is None:
-        steps_per_frame, frame_time = default_stepping(scene, d)
+        steps_per_frame, frame_time = default_stepping(d, getattr(scene, "dt", None))
     elif steps_per_frame is None:
         steps_per_frame = 1  # unused: frame_time steps the scene
     elif frame_time is not None:

@@ -260,18 +260,17 @@ impl<V: Vector> Group<V> {
             }
             b.gather_fluids(grid, fluid_of, &visc);
         }
-        let views: Vec<FluidView<F>> =
-            members.iter().map(|m| FluidView::new(&m.p, &m.walls.grid, F::walls(&m.walls))).collect();
+        let views = views::<F>(members);
         let p = &members[0].p;
         let t1 = std::time::Instant::now();
-        passes::density::<V, F>(level, p, grid, &views, b, stop);
+        passes::density::<V, F>(level, p, grid, &views[..members.len()], b, stop);
         let t2 = std::time::Instant::now();
         clock[0] += (t1 - t0).as_secs_f64();
         clock[1] += (t2 - t1).as_secs_f64();
         if stopped() {
             return Sums::default();
         }
-        let sums = passes::forces::<V, F>(level, p, grid, &views, b, out, want_power, stop);
+        let sums = passes::forces::<V, F>(level, p, grid, &views[..members.len()], b, out, want_power, stop);
         clock[2] += t2.elapsed().as_secs_f64();
         sums
     }
@@ -291,10 +290,10 @@ impl<V: Vector> Group<V> {
         if self.several() {
             b.gather_fluids(&grid, &self.fluid_of, &[0.0; MAX_FLUIDS]);
         }
-        let views: Vec<FluidView<f64>> =
-            self.members.iter().map(|m| FluidView::new(&m.p, &m.walls.grid, f64::walls(&m.walls))).collect();
+        let views = views::<f64>(&self.members);
         let never = Stop::default();
-        passes::density::<V, f64>(crate::simd::level(), &self.members[0].p, &grid, &views, &mut b, never.flag());
+        let views = &views[..self.members.len()];
+        passes::density::<V, f64>(crate::simd::level(), &self.members[0].p, &grid, views, &mut b, never.flag());
         let mut rho = vec![0.0; gx.len()];
         for (k, &i) in grid.order.iter().enumerate() {
             rho[i as usize] = b.rho[k];
@@ -307,4 +306,13 @@ impl<V: Vector> Group<V> {
         let m = &self.members[who];
         &a[m.offset..m.offset + m.range.len()]
     }
+}
+
+/// The members as the passes see them, on the stack (an evaluation allocates nothing); slots past
+/// the last member repeat it and are not read: pass `&views[..members.len()]`.
+fn views<F: PassFloat>(members: &[Member]) -> [FluidView<'_, F>; MAX_FLUIDS] {
+    std::array::from_fn(|k| {
+        let m = &members[k.min(members.len() - 1)];
+        FluidView::new(&m.p, &m.walls.grid, F::walls(&m.walls))
+    })
 }
