@@ -72,6 +72,19 @@ impl Sums {
     }
 }
 
+/// Runs the local macro `$go!(Kernel, D)` for the kernel of `$p` and the dimension of `$v`
+/// (compile-time parameters of the passes).
+macro_rules! by_kernel_and_dim {
+    ($p:expr, $v:ty, $go:ident) => {
+        match ($p.kernel, <$v>::DIM) {
+            (KernelKind::CubicSpline, 2) => $go!(CubicSpline, 2),
+            (KernelKind::CubicSpline, _) => $go!(CubicSpline, 3),
+            (KernelKind::WendlandC2, 2) => $go!(WendlandC2, 2),
+            (KernelKind::WendlandC2, _) => $go!(WendlandC2, 3),
+        }
+    };
+}
+
 /// The density pass for the kernel of `p` (its h and kernel; the equations of state are the
 /// fluids') and the dimension of `V`: ρ and p/ρ² of the particles in `grid` into `b.rho`,
 /// `b.pr` (cell order). Several `fluids` take the path that reads `b.fluid`.
@@ -92,12 +105,7 @@ pub(super) fn density<V: Vector, F: Float>(
             }
         };
     }
-    match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => go!(CubicSpline, 2),
-        (KernelKind::CubicSpline, _) => go!(CubicSpline, 3),
-        (KernelKind::WendlandC2, 2) => go!(WendlandC2, 2),
-        (KernelKind::WendlandC2, _) => go!(WendlandC2, 3),
-    }
+    by_kernel_and_dim!(p, V, go)
 }
 
 /// The force pass for the kernel of `p` (its h and kernel; with one fluid also its α and c0)
@@ -124,12 +132,7 @@ pub(super) fn forces<V: Vector, F: Float>(
             }
         };
     }
-    match (p.kernel, V::DIM) {
-        (KernelKind::CubicSpline, 2) => go!(CubicSpline, 2),
-        (KernelKind::CubicSpline, _) => go!(CubicSpline, 3),
-        (KernelKind::WendlandC2, 2) => go!(WendlandC2, 2),
-        (KernelKind::WendlandC2, _) => go!(WendlandC2, 3),
-    }
+    by_kernel_and_dim!(p, V, go)
 }
 
 fn density_pass<F: Float, K: Kernel, const D: usize, const SEVERAL: bool>(
