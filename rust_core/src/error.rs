@@ -15,9 +15,9 @@ pub enum Error {
     /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
     /// `step(n)` call started.
     #[error(
-        "simulation diverged at step {step} (t = {t:.6e} s): particle {particle} {what}. The state was rolled back to step {rolled_back_to}. \
+        "simulation diverged at step {step} (t = {t:.6e} s): {what}. The state was rolled back to step {rolled_back_to}. \
          {advice}",
-        what = describe(quantity),
+        what = describe(quantity, *particle),
         advice = advise(quantity, *dt, *suggested_dt, *explicit_euler)
     )]
     Diverged {
@@ -64,6 +64,8 @@ pub enum Failure {
     /// An adaptive integrator could not bring its local error within the tolerances at any
     /// step size (the state is still finite).
     Error,
+    /// A cell of a grid field is not finite (the index is the cell's, see `crate::grids`).
+    Cell,
 }
 
 impl Failure {
@@ -73,21 +75,29 @@ impl Failure {
             Failure::Position => "position",
             Failure::Velocity => "velocity",
             Failure::Error => "error",
+            Failure::Cell => "cell",
         }
     }
 }
 
-fn describe(quantity: &Failure) -> String {
+fn describe(quantity: &Failure, index: usize) -> String {
     match quantity {
-        Failure::Error => "has a local error that rk45 cannot bring within rtol/atol at any step size \
-                    (its forces are not finite or not smooth there)"
-            .to_string(),
-        q => format!("has a non-finite {}", q.as_str()),
+        Failure::Cell => format!("grid cell {index} has a non-finite value"),
+        Failure::Error => format!(
+            "particle {index} has a local error that rk45 cannot bring within rtol/atol at any \
+             step size (its forces are not finite or not smooth there)"
+        ),
+        q => format!("particle {index} has a non-finite {}", q.as_str()),
     }
 }
 
 fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool) -> String {
     match quantity {
+        // Grids step by their own explicit schemes: their limit is a CFL or diffusion number.
+        Failure::Cell => format!(
+            "Try a smaller dt (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, within the grid's \
+             CFL or diffusion limit (Scene.advance keeps to it)."
+        ),
         // |1 + iω dt| > 1 for every ω > 0: explicit Euler amplifies every undamped oscillation
         // (springs, orbits) by (1 + ω²dt²)^(1/2) a step, so a smaller dt only delays this.
         _ if explicit_euler => format!(

@@ -105,6 +105,11 @@ pub trait System: Send + Sync {
     fn suggest_dt(&self) -> Option<Real>;
     /// The energy books now.
     fn energy(&self) -> EnergyReport;
+    /// Further books that are not energies, by name (a reaction–diffusion system's amounts of
+    /// each species and what its reactions made of them); empty by default.
+    fn books(&self) -> Vec<(String, Real)> {
+        Vec::new()
+    }
     /// The named output fields `names`, one value per element (0 where a field is not defined;
     /// all zeros if the system has no field of that name).
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>>;

@@ -1,0 +1,295 @@
+//! Fields on uniform grids, as systems of a [`World`](crate::world::World): the wave equation
+//! ([`wave`]), Gray–Scott reaction–diffusion ([`gray_scott`]) and an incompressible grid fluid
+//! ([`fluid`], Stam's stable fluids).
+//!
+//! Every grid here is **cell-centred**: cell (i, j, k) has its centre at ((i+½)dx, (j+½)dx,
+//! (k+½)dx) and the domain is [0, nx·dx] × [0, ny·dx] (× [0, nz·dx]). Arrays are row-major with
+//! x fastest: cell (i, j, k) is at `i + nx·(j + ny·k)`. A 2D grid has nz = 1.
+//!
+//! Boundaries are ghost cells one cell outside each face, written as a rule, not stored:
+//! `Fixed` (u = 0 on the face: the ghost is −u of the cell inside, odd reflection), `Free`
+//! (∂u/∂n = 0 on the face: the ghost equals the cell inside, even reflection) and `Periodic`
+//! (the ghost is the cell on the opposite side). With these rules the discrete Laplacian is
+//! symmetric, so the books of the schemes built on it balance to round-off.
+//!
+//! Parallel loops run over rows (fixed j, k) in fixed blocks; reductions add per-row partials
+//! in row order, so results are bit-identical for any thread count.
+pub mod fluid;
+pub mod gray_scott;
+pub mod wave;
+
+use crate::error::{invalid, Result};
+use crate::par;
+use crate::vector::Real;
+use rayon::prelude::*;
+
+/// What lies beyond a face of the grid (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Edge {
+    /// u = 0 on the face (odd reflection).
+    Fixed,
+    /// ∂u/∂n = 0 on the face (even reflection).
+    Free,
+    /// The opposite face (both faces of an axis must say so).
+    Periodic,
+}
+
+impl Edge {
+    pub fn by_name(s: &str) -> Option<Edge> {
+        match s {
+            "fixed" => Some(Edge::Fixed),
+            "free" => Some(Edge::Free),
+            "periodic" => Some(Edge::Periodic),
+            _ => None,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Edge::Fixed => "fixed",
+            Edge::Free => "free",
+            Edge::Periodic => "periodic",
+        }
+    }
+}
+
+/// A uniform cell-centred grid: cell counts, spacing and the rule at each face.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid {
+    /// Cells along x, y, z (z = 1 in 2D).
+    pub n: [usize; 3],
+    /// 2 or 3.
+    pub dim: usize,
+    /// Cell size, m.
+    pub dx: Real,
+    /// Faces: [x−, x+, y−, y+, z−, z+] (z ignored in 2D).
+    pub edges: [Edge; 6],
+}
+
+impl Grid {
+    /// `shape`: 2 or 3 cell counts (x first), each ≥ 3; `dx` > 0 and finite; `edges`: 2·dim faces.
+    pub fn new(shape: &[usize], dx: Real, edges: &[Edge]) -> Result<Self> {
+        let dim = shape.len();
+        if !(2..=3).contains(&dim) {
+            return Err(invalid("shape", format!("must have 2 or 3 cell counts, got {}", shape.len())));
+        }
+        if let Some(&n) = shape.iter().find(|&&n| n < 3) {
+            return Err(invalid("shape", format!("every cell count must be >= 3, got {n}")));
+        }
+        let cells = shape.iter().try_fold(1usize, |a, &n| a.checked_mul(n));
+        if cells.is_none_or(|c| c > (1usize << 40)) {
+            return Err(invalid("shape", format!("{shape:?} has too many cells")));
+        }
+        if !(dx.is_finite() && dx > 0.0) {
+            return Err(invalid("dx", format!("{dx} must be finite and > 0 (m)")));
+        }
+        if edges.len() != 2 * dim {
+            return Err(invalid("edges", format!("needs {} faces (x-, x+, y-, y+[, z-, z+]), got {}", 2 * dim, edges.len())));
+        }
+        for a in 0..dim {
+            if (edges[2 * a] == Edge::Periodic) != (edges[2 * a + 1] == Edge::Periodic) {
+                return Err(invalid("edges", format!("axis {a}: periodic must be on both faces or neither")));
+            }
+        }
+        let mut n = [1; 3];
+        n[..dim].copy_from_slice(shape);
+        let mut e = [Edge::Fixed; 6];
+        e[..2 * dim].copy_from_slice(edges);
+        Ok(Self { n, dim, dx, edges: e })
+    }
+
+    pub fn cells(&self) -> usize {
+        self.n[0] * self.n[1] * self.n[2]
+    }
+    /// Rows along x: ny·nz.
+    pub fn rows(&self) -> usize {
+        self.n[1] * self.n[2]
+    }
+    /// Cell area (2D) or volume (3D), m² or m³.
+    pub fn cell_measure(&self) -> Real {
+        self.dx.powi(self.dim as i32)
+    }
+
+    /// The row across face `side` (0: −, 1: +) of axis `axis` (1: y, 2: z) from row `r`: the
+    /// neighbouring row and the factor its values enter with (−1 for a `Fixed` ghost, which
+    /// is the row itself reflected oddly; 1 otherwise).
+    #[inline]
+    pub fn neighbour_row(&self, r: usize, axis: usize, side: usize) -> (usize, Real) {
+        let (j, k) = (r % self.n[1], r / self.n[1]);
+        let (c, n, stride) = if axis == 1 { (j, self.n[1], 1) } else { (k, self.n[2], self.n[1]) };
+        let inside = if side == 0 { c > 0 } else { c + 1 < n };
+        if inside {
+            return (if side == 0 { r - stride } else { r + stride }, 1.0);
+        }
+        match self.edges[2 * axis + side] {
+            Edge::Fixed => (r, -1.0),
+            Edge::Free => (r, 1.0),
+            Edge::Periodic => (if side == 0 { r + (n - 1) * stride } else { r - (n - 1) * stride }, 1.0),
+        }
+    }
+
+    /// The ghost value beyond x− (side 0) or x+ (side 1) of `row` (one row's cells).
+    #[inline]
+    pub fn ghost_x(&self, row: &[Real], side: usize) -> Real {
+        let n = row.len();
+        let (inside, opposite) = if side == 0 { (row[0], row[n - 1]) } else { (row[n - 1], row[0]) };
+        match self.edges[side] {
+            Edge::Fixed => -inside,
+            Edge::Free => inside,
+            Edge::Periodic => opposite,
+        }
+    }
+
+    /// The 5-point (2D) or 7-point (3D) Laplacian of `u` at every cell of row `r`, times
+    /// `scale`, into `out` (one row): (Σ_neighbours u − 2·dim·u) · scale. `scale` is usually
+    /// 1/dx² times a coefficient.
+    #[inline]
+    pub fn laplacian_row(&self, u: &[Real], r: usize, scale: Real, out: &mut [Real]) {
+        let nx = self.n[0];
+        let row = &u[r * nx..(r + 1) * nx];
+        let centre = -((2 * self.dim) as Real);
+        let (s, fs) = self.neighbour_row(r, 1, 0);
+        let (nn, fn_) = self.neighbour_row(r, 1, 1);
+        let south = &u[s * nx..(s + 1) * nx];
+        let north = &u[nn * nx..(nn + 1) * nx];
+        let out = &mut out[..nx];
+        if self.dim == 2 {
+            for i in 1..nx - 1 {
+                out[i] = (row[i - 1] + row[i + 1] + fs * south[i] + fn_ * north[i] + centre * row[i]) * scale;
+            }
+        } else {
+            let (d, fd) = self.neighbour_row(r, 2, 0);
+            let (up, fu) = self.neighbour_row(r, 2, 1);
+            let down = &u[d * nx..(d + 1) * nx];
+            let up = &u[up * nx..(up + 1) * nx];
+            for i in 1..nx - 1 {
+                out[i] = (row[i - 1] + row[i + 1] + fs * south[i] + fn_ * north[i] + fd * down[i] + fu * up[i]
+                    + centre * row[i])
+                    * scale;
+            }
+        }
+        let (g0, g1) = (self.ghost_x(row, 0), self.ghost_x(row, 1));
+        for (i, left, right) in [(0, g0, row[1]), (nx - 1, row[nx - 2], g1)] {
+            let mut s = left + right + fs * south[i] + fn_ * north[i] + centre * row[i];
+            if self.dim == 3 {
+                let (d, fd) = self.neighbour_row(r, 2, 0);
+                let (up, fu) = self.neighbour_row(r, 2, 1);
+                s += fd * u[d * nx + i] + fu * u[up * nx + i];
+            }
+            out[i] = s * scale;
+        }
+    }
+}
+
+/// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
+const MIN_ROWS: usize = 4;
+
+/// `f(r, row)` for every row `r` of `out` (rows of `row_len` values), in parallel on the pool
+/// of the call in progress; returns Σ f in row order (deterministic for any thread count).
+pub fn rows_sum(out: &mut [Real], row_len: usize, f: impl Fn(usize, &mut [Real]) -> Real + Sync + Send) -> Real {
+    let partials: Option<Vec<Real>> = par::fork_if(out.len(), || {
+        out.par_chunks_mut(row_len).with_min_len(MIN_ROWS).enumerate().map(|(r, row)| f(r, row)).collect()
+    });
+    match partials {
+        Some(p) => p.into_iter().sum(),
+        None => out.chunks_mut(row_len).enumerate().map(|(r, row)| f(r, row)).sum(),
+    }
+}
+
+/// `rows_sum` over two arrays' matching rows.
+pub fn rows2_sum(
+    a: &mut [Real],
+    b: &mut [Real],
+    row_len: usize,
+    f: impl Fn(usize, &mut [Real], &mut [Real]) -> Real + Sync + Send,
+) -> Real {
+    debug_assert_eq!(a.len(), b.len());
+    let partials: Option<Vec<Real>> = par::fork_if(a.len(), || {
+        a.par_chunks_mut(row_len)
+            .zip(b.par_chunks_mut(row_len))
+            .with_min_len(MIN_ROWS)
+            .enumerate()
+            .map(|(r, (a, b))| f(r, a, b))
+            .collect()
+    });
+    match partials {
+        Some(p) => p.into_iter().sum(),
+        None => a.chunks_mut(row_len).zip(b.chunks_mut(row_len)).enumerate().map(|(r, (a, b))| f(r, a, b)).sum(),
+    }
+}
+
+/// Σ f(r) over `rows` rows, in row order, in parallel (read-only passes: energies, norms).
+pub fn sum_rows(rows: usize, cells: usize, f: impl Fn(usize) -> Real + Sync + Send) -> Real {
+    let partials: Option<Vec<Real>> =
+        par::fork_if(cells, || (0..rows).into_par_iter().with_min_len(MIN_ROWS).map(&f).collect());
+    match partials {
+        Some(p) => p.into_iter().sum(),
+        None => (0..rows).map(f).sum(),
+    }
+}
+
+/// The first index of a non-finite value of `a`, if any (the slow path after a row sum came out
+/// non-finite).
+pub fn first_non_finite(a: &[Real]) -> Option<usize> {
+    a.iter().position(|v| !v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(edges: [Edge; 4], n: [usize; 2]) -> Grid {
+        Grid::new(&n, 0.5, &edges).unwrap()
+    }
+
+    /// ⟨a, L b⟩ = ⟨L a, b⟩ for every boundary rule: the symmetry the energy books rest on.
+    #[test]
+    fn laplacian_is_symmetric_for_every_edge_rule() {
+        use Edge::*;
+        for edges in [[Fixed; 4], [Free; 4], [Periodic; 4], [Fixed, Free, Periodic, Periodic], [Free, Fixed, Fixed, Free]]
+        {
+            let g = grid(edges, [7, 5]);
+            let n = g.cells();
+            let a: Vec<Real> = (0..n).map(|i| ((i * 37 % 11) as Real).sin()).collect();
+            let b: Vec<Real> = (0..n).map(|i| ((i * 13 % 7) as Real).cos()).collect();
+            let (mut la, mut lb) = (vec![0.0; n], vec![0.0; n]);
+            for r in 0..g.rows() {
+                g.laplacian_row(&a, r, 1.0, &mut la[r * 7..]);
+                g.laplacian_row(&b, r, 1.0, &mut lb[r * 7..]);
+            }
+            let ab: Real = a.iter().zip(&lb).map(|(x, y)| x * y).sum();
+            let ba: Real = la.iter().zip(&b).map(|(x, y)| x * y).sum();
+            assert!((ab - ba).abs() < 1e-12 * ab.abs().max(1.0), "{edges:?}: {ab} vs {ba}");
+        }
+    }
+
+    /// sin(mπ(i+½)/n) is an eigenvector of the fixed-edge Laplacian with eigenvalue
+    /// −4 sin²(mπ/2n) per axis: the boundary sits on the faces, L = n·dx.
+    #[test]
+    fn fixed_modes_are_eigenvectors() {
+        let (nx, ny, m, k) = (9usize, 6usize, 2.0, 3.0);
+        let g = grid([Edge::Fixed; 4], [nx, ny]);
+        let pi = std::f64::consts::PI;
+        let u: Vec<Real> = (0..nx * ny)
+            .map(|c| {
+                let (i, j) = ((c % nx) as Real, (c / nx) as Real);
+                (m * pi * (i + 0.5) / nx as Real).sin() * (k * pi * (j + 0.5) / ny as Real).sin()
+            })
+            .collect();
+        let lambda = -4.0 * ((m * pi / (2.0 * nx as Real)).sin().powi(2) + (k * pi / (2.0 * ny as Real)).sin().powi(2));
+        let mut lu = vec![0.0; nx * ny];
+        for r in 0..ny {
+            g.laplacian_row(&u, r, 1.0, &mut lu[r * nx..]);
+        }
+        for c in 0..nx * ny {
+            assert!((lu[c] - lambda * u[c]).abs() < 1e-13, "cell {c}");
+        }
+    }
+
+    #[test]
+    fn bad_grids_are_refused() {
+        assert!(Grid::new(&[2, 5], 1.0, &[Edge::Fixed; 4]).is_err());
+        assert!(Grid::new(&[4, 5], 0.0, &[Edge::Fixed; 4]).is_err());
+        assert!(Grid::new(&[4, 5], 1.0, &[Edge::Periodic, Edge::Fixed, Edge::Free, Edge::Free]).is_err());
+        assert!(Grid::new(&[4, 5, 6, 7], 1.0, &[Edge::Fixed; 8]).is_err());
+    }
+}
