@@ -183,16 +183,84 @@ impl Grid {
 /// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
 const MIN_ROWS: usize = 4;
 
-/// `f(r, row)` for every row `r` of `out` (rows of `row_len` values), in parallel on the pool
-/// of the call in progress; returns Σ f in row order (deterministic for any thread count).
-pub fn rows_sum(out: &mut [Real], row_len: usize, f: impl Fn(usize, &mut [Real]) -> Real + Sync + Send) -> Real {
-    let partials: Option<Vec<Real>> = par::fork_if(out.len(), || {
-        out.par_chunks_mut(row_len).with_min_len(MIN_ROWS).enumerate().map(|(r, row)| f(r, row)).collect()
+/// `partials[r] = f(r, row)` for every row `r` of `out` (rows of `row_len` values), in parallel
+/// on the pool of the call in progress. The caller reduces `partials` in row order, so results
+/// are bit-identical for any thread count; `partials` is scratch the caller keeps, so a step
+/// allocates nothing.
+pub fn rows_each<T: Send>(
+    out: &mut [Real],
+    row_len: usize,
+    partials: &mut [T],
+    f: impl Fn(usize, &mut [Real]) -> T + Sync + Send,
+) {
+    debug_assert_eq!(out.len(), row_len * partials.len());
+    let done = par::fork_if(out.len(), || {
+        out.par_chunks_mut(row_len)
+            .zip(partials.par_iter_mut())
+            .with_min_len(MIN_ROWS)
+            .enumerate()
+            .for_each(|(r, (row, p))| *p = f(r, row))
     });
-    match partials {
-        Some(p) => p.into_iter().sum(),
-        None => out.chunks_mut(row_len).enumerate().map(|(r, row)| f(r, row)).sum(),
+    if done.is_none() {
+        out.chunks_mut(row_len).zip(partials.iter_mut()).enumerate().for_each(|(r, (row, p))| *p = f(r, row));
     }
+}
+
+/// `rows_each`, returning Σ f in row order.
+pub fn rows_sum_into(
+    out: &mut [Real],
+    row_len: usize,
+    partials: &mut [Real],
+    f: impl Fn(usize, &mut [Real]) -> Real + Sync + Send,
+) -> Real {
+    rows_each(out, row_len, partials, f);
+    partials.iter().sum()
+}
+
+/// `rows_each` over the matching rows of two arrays.
+pub fn rows2_each<T: Send>(
+    a: &mut [Real],
+    b: &mut [Real],
+    row_len: usize,
+    partials: &mut [T],
+    f: impl Fn(usize, &mut [Real], &mut [Real]) -> T + Sync + Send,
+) {
+    debug_assert_eq!(a.len(), b.len());
+    let done = par::fork_if(a.len(), || {
+        a.par_chunks_mut(row_len)
+            .zip(b.par_chunks_mut(row_len))
+            .zip(partials.par_iter_mut())
+            .with_min_len(MIN_ROWS)
+            .enumerate()
+            .for_each(|(r, ((a, b), p))| *p = f(r, a, b))
+    });
+    if done.is_none() {
+        a.chunks_mut(row_len)
+            .zip(b.chunks_mut(row_len))
+            .zip(partials.iter_mut())
+            .enumerate()
+            .for_each(|(r, ((a, b), p))| *p = f(r, a, b));
+    }
+}
+
+/// `rows2_each`, returning Σ f in row order.
+pub fn rows2_sum_into(
+    a: &mut [Real],
+    b: &mut [Real],
+    row_len: usize,
+    partials: &mut [Real],
+    f: impl Fn(usize, &mut [Real], &mut [Real]) -> Real + Sync + Send,
+) -> Real {
+    rows2_each(a, b, row_len, partials, f);
+    partials.iter().sum()
+}
+
+/// `f(r, row)` for every row `r` of `out` (rows of `row_len` values), in parallel; returns Σ f
+/// in row order (deterministic for any thread count). Allocates one value per row: steps use
+/// `rows_sum_into`.
+pub fn rows_sum(out: &mut [Real], row_len: usize, f: impl Fn(usize, &mut [Real]) -> Real + Sync + Send) -> Real {
+    let mut partials = vec![0.0; out.len() / row_len];
+    rows_sum_into(out, row_len, &mut partials, f)
 }
 
 /// `rows_sum` over two arrays' matching rows.
@@ -202,19 +270,8 @@ pub fn rows2_sum(
     row_len: usize,
     f: impl Fn(usize, &mut [Real], &mut [Real]) -> Real + Sync + Send,
 ) -> Real {
-    debug_assert_eq!(a.len(), b.len());
-    let partials: Option<Vec<Real>> = par::fork_if(a.len(), || {
-        a.par_chunks_mut(row_len)
-            .zip(b.par_chunks_mut(row_len))
-            .with_min_len(MIN_ROWS)
-            .enumerate()
-            .map(|(r, (a, b))| f(r, a, b))
-            .collect()
-    });
-    match partials {
-        Some(p) => p.into_iter().sum(),
-        None => a.chunks_mut(row_len).zip(b.chunks_mut(row_len)).enumerate().map(|(r, (a, b))| f(r, a, b)).sum(),
-    }
+    let mut partials = vec![0.0; a.len() / row_len];
+    rows2_sum_into(a, b, row_len, &mut partials, f)
 }
 
 /// Σ f(r) over `rows` rows, in row order, in parallel (read-only passes: energies, norms).

@@ -289,6 +289,22 @@ pub fn dispatch<K: Kernel>(level: Level, k: K) -> K::Output {
     k.run(pulp::Scalar::new())
 }
 
+/// Runs `f` inside the `#[target_feature]` wrapper of `level`, so that plain loops over slices
+/// in it (stencils) are auto-vectorised for that level. Mark the closure `#[inline(always)]`:
+/// only code inlined into the wrapper gets the level's instructions.
+#[inline]
+pub fn vectorized<R>(level: Level, f: impl FnOnce() -> R) -> R {
+    struct Closure<F>(F);
+    impl<R, F: FnOnce() -> R> Kernel for Closure<F> {
+        type Output = R;
+        #[inline(always)]
+        fn run<S: Simd>(self, _: S) -> R {
+            (self.0)()
+        }
+    }
+    dispatch(level, Closure(f))
+}
+
 /// The precision of a kernel: f32 or f64, with its SIMD vectors for token `S`.
 pub trait Float:
     Copy
