@@ -21,6 +21,7 @@ from ._errors import (
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
+from .grids import Drop, GrayScott, Oscillator, Wave
 from .scene import INTEGRATORS, EnergyReport, Scene
 from .terms import *  # noqa: F403 - every term record, as terms.__all__ lists them
 
@@ -33,6 +34,11 @@ __all__ = [
     *_terms.__all__,
     "Fluid",
     "neighbors",
+    "Wave",
+    "GrayScott",
+    "Drop",
+    "Oscillator",
+    "grids",
     "fluids",
     "PhyscoreError",
     "InvalidInputError",

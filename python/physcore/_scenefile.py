@@ -86,8 +86,14 @@ _META_FIELDS: dict[str, str] = {
     "planes": "list",
 }
 # Absent from files of earlier versions; these are the values those versions used.
-_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": []}
-_META_OPTIONAL: dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list"}
+_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": [], "grids": []}
+_META_OPTIONAL: dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list", "grids": "list"}
+#: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
+#: axis "G" being the grid's cell count.
+_GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
+    "wave": {"u": ("f8", "G"), "u_prev": ("f8", "G"), "clock": ("f8", 5)},
+    "gray_scott": {"u": ("f8", "G"), "v": ("f8", "G"), "made": ("f8", 2)},
+}
 
 
 def check_path(path: object, arg: str = "path") -> Path:
@@ -215,6 +221,10 @@ class _Reader:
             if not isinstance(v, list):
                 raise self.error(field, f"must be a list, got {_kind(v)}")
             return v
+        if kind == "object":
+            if not isinstance(v, dict):
+                raise self.error(field, f"must be an object, got {_kind(v)}")
+            return v
         if kind == "vector":
             if not isinstance(v, list) or len(v) != dim:
                 raise self.error(field, f"must be a list of {dim} numbers (the scene is {dim}D), got {_kind(v)} {_show(v)}")
@@ -283,6 +293,22 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
     meta["terms"] = terms
     for group, spec in COLLIDER_FIELDS.items():
         meta[group] = [r.record(f"meta.{group}[{i}]", c, spec, dim) for i, c in enumerate(meta[group])]
+    grids = []
+    for k, g in enumerate(meta["grids"]):
+        field = f"meta.grids[{k}]"
+        rec = r.record(field, g, {"kind": "str", "name": "str", "record": "object"}, dim)
+        if rec["kind"] not in _GRID_STATE:
+            raise r.error(f"{field}.kind", f"unknown grid kind {_show(rec['kind'])} (expected one of {', '.join(_GRID_STATE)})")
+        if not rec["name"] or rec["name"] in names:
+            raise r.error(f"{field}.name", f"{_show(rec['name'])} is empty or taken")
+        names.add(rec["name"])
+        shape = rec["record"].get("shape")
+        if not (isinstance(shape, list) and len(shape) == dim and all(isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= 1 << 20 for n in shape)):
+            raise r.error(f"{field}.record.shape", f"must be {dim} cell counts in 3..{1 << 20}, got {_show(shape)}")
+        if math.prod(shape) > 1 << 31:
+            raise r.error(f"{field}.record.shape", f"{_show(shape)} has more than 2**31 cells")
+        grids.append(rec)
+    meta["grids"] = grids
     return meta
 
 
@@ -447,6 +473,18 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
                     sizes[f"{a}{k}"] = (t[a], f"meta.terms[{k}].{a}")
                 named.append(f"{a}{k}")
             req[f"term{k}_{f}"] = _Spec(dtype, tuple(named))
+    for k, g in enumerate(meta["grids"]):
+        cells = f"G{k}"
+        sizes[cells] = (math.prod(g["record"]["shape"]), f"meta.grids[{k}].record.shape")
+        for name, (dtype, axis) in _GRID_STATE[g["kind"]].items():
+            if axis != "G":
+                sizes[f"{name}{k}"] = (axis, f"a {g['kind']} grid's {name}")
+            req[f"grid{k}_{name}"] = _Spec(dtype, (cells if axis == "G" else f"{name}{k}",))
+        if g["record"].get("mask"):
+            req[f"grid{k}_mask"] = _Spec("b1", (cells,))
+        for j, o in enumerate(g["record"].get("oscillators", [])):
+            if isinstance(o, list) and len(o) > 2 and o[2] is None:
+                req[f"grid{k}_region{j}"] = _Spec("b1", (cells,))
     opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})

@@ -21,6 +21,7 @@ from . import _check, _core, _scenefile
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SeparateFluidsWarning, ThreadPoolWarning
 from .fluids import Fluid
+from .grids import Grid
 from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -246,6 +247,7 @@ class Scene:
         self._terms: list[Term] = []
         self._planes: list[Plane] = []
         self._boxes: list[Box] = []
+        self._grids: list[Grid] = []
         self._e0: float | None = None
         self._e0_scale: float = 0.0
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
@@ -349,9 +351,14 @@ class Scene:
         self._e0 = None
         return np.arange(first, first + n, dtype=np.int64)
 
-    def add(self, item: Term | Plane | Box) -> Term | Plane | Box:
+    def add(self, item: Any) -> Any:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
-        :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`) or a collider (:class:`Plane`).
+        :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`), a collider (:class:`Plane`,
+        :class:`Box`) or a grid system (:class:`~physcore.grids.Wave`,
+        :class:`~physcore.grids.GrayScott`), stepped with the particles on the scene's clock.
+
+        A grid joins one scene only; its name must be free. It is returned bound to the scene:
+        its fields (``wave.u``) read the scene's state.
 
         A :class:`~physcore.fluids.Fluid` brings its own particles: they are appended, the stored
         fluid records the first index and the resolved ``sound_speed``, and the scene's ``dt`` is
@@ -369,6 +376,19 @@ class Scene:
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
+        if isinstance(item, Grid):
+            if item.dim != dim:
+                raise InvalidInputError(f"item: a {item.dim}D grid cannot join a {dim}D scene")
+            if item._scene is not None:
+                raise InvalidInputError(f"item: grid {item.name!r} is already in a scene (a grid joins one scene)")
+            taken = {g.name for g in self._grids} | {t.name for t in self._terms} | {"particles", "collisions"}
+            if item.name in taken:
+                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the grid another name")
+            self._sim.add_grid(item.kind, item.name, item._params())
+            item._scene = self
+            self._grids.append(item)
+            self._e0 = None
+            return item
         if isinstance(item, Box):
             for arg in ("lower", "upper"):
                 if getattr(item, arg).shape[0] != dim:
@@ -843,6 +863,11 @@ class Scene:
         return np.concatenate(walls) if walls else np.zeros((0, self.dim))
 
     @property
+    def grids(self) -> tuple[Grid, ...]:
+        """The grid systems, as added."""
+        return tuple(self._grids)
+
+    @property
     def fluids(self) -> tuple[Fluid, ...]:
         """The fluids, as added (with ``first`` and ``sound_speed`` resolved)."""
         return tuple(t for t in self._terms if isinstance(t, Fluid))
@@ -890,6 +915,14 @@ class Scene:
             record, members = t._record()
             terms_meta.append({"type": t.kind, "name": t.name, **record})
             arrays.update({f"term{k}_{a}": v for a, v in members.items()})
+        grids_meta = []
+        for k, g in enumerate(self._grids):
+            grids_meta.append({"kind": g.kind, "name": g.name, "record": g._record()})
+            arrays.update({f"grid{k}_{a}": v for a, v in g._record_arrays().items()})
+            for a, v in self._sim.system_save(g.name):
+                if not np.isfinite(v).all():
+                    raise InvalidInputError(f"grid {g.name!r}: its {a} is not finite; a scene file holds finite values only")
+                arrays[f"grid{k}_{a}"] = v
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
@@ -924,6 +957,7 @@ class Scene:
                 {"lower": b.lower.tolist(), "upper": b.upper.tolist(), "restitution": b.restitution, "friction": b.friction}
                 for b in self._boxes
             ],
+            "grids": grids_meta,
         }
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
@@ -1000,6 +1034,15 @@ class Scene:
         for i, b in enumerate(meta["boxes"]):
             with r.api(f"meta.boxes[{i}]"):
                 scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
+        from .grids import _GRID_ARRAYS, _from_record
+
+        for k, g in enumerate(meta["grids"]):
+            ctx = f"meta.grids[{k}]"
+            own = {a[len(f"grid{k}_"):]: z[a] for a in z if a.startswith(f"grid{k}_")}
+            with r.api(f"{ctx}.record"):
+                grid = scene.add(_from_record(g["kind"], g["name"], g["record"], {a: v for a, v in own.items() if a not in _GRID_ARRAYS[g["kind"]]}))
+            with r.api(f"grid{k}"):
+                scene._sim.system_load(grid.name, [(a, v) for a, v in own.items() if a in _GRID_ARRAYS[g["kind"]]])
         with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
             scene._sim.restore(
                 sf.time,
@@ -1019,5 +1062,7 @@ class Scene:
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
             + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
-            + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)})"
+            + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)}"
+            + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")
+            + ")"
         )

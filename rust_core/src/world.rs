@@ -99,6 +99,19 @@ impl<V: Vector> World<V> {
     pub fn others(&self) -> &[Box<dyn System>] {
         &self.others
     }
+    /// The system after the particles named `name`.
+    pub fn other(&self, name: &str) -> Result<&dyn System> {
+        match self.others.iter().find(|s| s.name() == name) {
+            Some(s) => Ok(s.as_ref()),
+            None => Err(invalid("name", format!("no system named {name:?}"))),
+        }
+    }
+    pub fn other_mut(&mut self, name: &str) -> Result<&mut (dyn System + 'static)> {
+        match self.others.iter_mut().find(|s| s.name() == name) {
+            Some(s) => Ok(s.as_mut()),
+            None => Err(invalid("name", format!("no system named {name:?}"))),
+        }
+    }
     /// Adds a system, stepped after those already there; returns its index in `others`.
     pub fn add_system(&mut self, s: Box<dyn System>) -> Result<usize> {
         if s.name() == self.particles.name() || self.others.iter().any(|o| o.name() == s.name()) {
@@ -123,6 +136,10 @@ impl<V: Vector> World<V> {
 
     pub fn n_particles(&self) -> usize {
         self.particles.n_particles()
+    }
+    /// Particles plus the elements of the other systems (grid cells): the work of one step.
+    pub fn elements(&self) -> usize {
+        self.particles.n_particles() + self.others.iter().map(|s| s.size()).sum::<usize>()
     }
     /// Simulated time, s.
     pub fn time(&self) -> Real {

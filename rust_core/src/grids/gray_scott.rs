@@ -206,6 +206,9 @@ impl System for GrayScottSystem {
     fn is_empty(&self) -> bool {
         false
     }
+    fn size(&self) -> usize {
+        self.u.len()
+    }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let nx = self.cfg.grid.n[0];
         let (mut un, mut vn, mut partials) =
@@ -252,6 +255,13 @@ impl System for GrayScottSystem {
             ("u_made".to_string(), self.books.made_u),
             ("v_made".to_string(), self.books.made_v),
         ]
+    }
+    fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
+        match name {
+            "u" => self.set_state(Some(values), None),
+            "v" => self.set_state(None, Some(values)),
+            _ => Err(invalid("field", format!("{name:?}: Gray–Scott's settable fields are \"u\" and \"v\""))),
+        }
     }
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
         names

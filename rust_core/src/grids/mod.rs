@@ -14,6 +14,7 @@
 //!
 //! Parallel loops run over rows (fixed j, k) in fixed blocks; reductions add per-row partials
 //! in row order, so results are bit-identical for any thread count.
+pub mod build;
 pub mod fluid;
 pub mod gray_scott;
 pub mod wave;

@@ -492,6 +492,9 @@ impl System for WaveSystem {
     fn is_empty(&self) -> bool {
         false
     }
+    fn size(&self) -> usize {
+        self.u.len()
+    }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
         if dt != self.clock.dt {
             // Keep the velocity (u − u⁻)/dt across the change of step.
@@ -571,6 +574,17 @@ impl System for WaveSystem {
             dissipated.push((format!("{} sources", self.cfg.name), -self.clock.work));
         }
         EnergyReport { kinetic, potential: vec![(self.cfg.name.clone(), potential)], dissipated }
+    }
+    /// "u" (m; the velocity is kept) or "velocity" (m/s, at the half step before now).
+    fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
+        match name {
+            "u" => self.set_state(values, None),
+            "velocity" => {
+                let u = self.u.clone();
+                self.set_state(&u, Some(values))
+            }
+            _ => Err(invalid("field", format!("{name:?}: a wave's settable fields are \"u\" and \"velocity\""))),
+        }
     }
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
         let n = self.u.len();

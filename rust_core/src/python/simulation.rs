@@ -231,6 +231,49 @@ impl PySimulation {
         .map_err(|e| to_py(py, e))
     }
 
+    /// Adds a grid system (`crate::grids::build`) of `kind` named `name`, built from `params`.
+    fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let p = params_of(py, "add_grid", params)?;
+        let dim = self.dim();
+        let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
+    }
+
+    /// The fields `names` of system `name`, each a flat float64 array (the grid's layout).
+    fn system_fields<'py>(&self, py: Python<'py>, name: &str, names: Vec<String>) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
+        let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
+        let inner = &self.inner;
+        let f = py.detach(|| with_sim!(inner, s => s.other(name).map(|o| s.run(|| o.fields(&names)))));
+        Ok(f.map_err(|e| to_py(py, e))?.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect())
+    }
+
+    /// Sets field `field` of system `name` (checked; nothing changes on error).
+    fn set_system_field(&mut self, py: Python<'_>, name: &str, field: &str, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        let v = slice1(&values, field)?;
+        with_sim!(&mut self.inner, s => s.other_mut(name).and_then(|o| o.set_field(field, v))).map_err(|e| to_py(py, e))
+    }
+
+    /// The books of system `name` that are not energies, as (name, value) pairs.
+    fn system_books(&self, py: Python<'_>, name: &str) -> PyResult<Vec<(String, f64)>> {
+        let inner = &self.inner;
+        py.detach(|| with_sim!(inner, s => s.other(name).map(|o| s.run(|| o.books())))).map_err(|e| to_py(py, e))
+    }
+
+    /// Everything a restart of system `name` needs, as (name, flat float64 array) pairs.
+    fn system_save<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Vec<(String, Bound<'py, PyArray1<f64>>)>> {
+        let a = with_sim!(&self.inner, s => s.other(name).map(|o| o.save())).map_err(|e| to_py(py, e))?;
+        Ok(a.into_iter().map(|(k, v)| (k, Array1::from(v).into_pyarray(py))).collect())
+    }
+
+    /// Loads what `system_save` wrote (every array checked first).
+    fn system_load(&mut self, py: Python<'_>, name: &str, arrays: Vec<(String, PyReadonlyArray1<'_, f64>)>) -> PyResult<()> {
+        let mut a = Vec::with_capacity(arrays.len());
+        for (k, v) in &arrays {
+            a.push((k.clone(), slice1(v, k)?.to_vec()));
+        }
+        with_sim!(&mut self.inner, s => s.other_mut(name).and_then(|o| o.load(&a))).map_err(|e| to_py(py, e))
+    }
+
     fn add_plane(
         &mut self,
         py: Python<'_>,
@@ -266,7 +309,7 @@ impl PySimulation {
     /// state is rolled back to where the call started and KeyboardInterrupt is raised.
     fn step(&mut self, py: Python<'_>, n: u64) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
-            if s.particles().adaptive_stats().is_none() && n.saturating_mul(s.n_particles() as u64) <= SHORT_CALL {
+            if s.particles().adaptive_stats().is_none() && n.saturating_mul(s.elements() as u64) <= SHORT_CALL {
                 let never = Arc::new(AtomicBool::new(false));
                 let cp = py.detach(|| s.step_checkpointed(n, &never)).map_err(|e| to_py(py, e))?;
                 return undo_if_signalled(py, s, ((), cp));

@@ -81,6 +81,10 @@ pub trait System: Send + Sync {
     fn name(&self) -> &str;
     /// Whether there is nothing to step (the world then only advances time).
     fn is_empty(&self) -> bool;
+    /// Elements stepped (particles, grid cells): how long a step takes, roughly. Default 0.
+    fn size(&self) -> usize {
+        0
+    }
     /// Reserves, fallibly, what stepping will need (`Error::OutOfMemory` and no change if it
     /// cannot), so that a step allocates nothing that could abort the process.
     fn prepare(&mut self) -> Result<()> {
@@ -105,6 +109,11 @@ pub trait System: Send + Sync {
     fn suggest_dt(&self) -> Option<Real>;
     /// The energy books now.
     fn energy(&self) -> EnergyReport;
+    /// Sets the named state field `name` (one value per element; checked, nothing changes on
+    /// error). Systems without settable fields refuse every name.
+    fn set_field(&mut self, name: &str, _values: &[Real]) -> Result<()> {
+        Err(crate::error::invalid("field", format!("{name:?} cannot be set on system {:?}", self.name())))
+    }
     /// Further books that are not energies, by name (a reaction–diffusion system's amounts of
     /// each species and what its reactions made of them); empty by default.
     fn books(&self) -> Vec<(String, Real)> {

@@ -1,0 +1,532 @@
+"""Fields on grids: water ripples (:class:`Wave`) and Turing patterns (:class:`GrayScott`), as
+systems of a :class:`~physcore.Scene` stepped with it (same clock, rollback, save/load, energy
+books).
+
+Every grid is cell-centred: cell ``(i, j)`` has its centre at ``((i + ½) dx, (j + ½) dx)`` and the
+domain is ``[0, nx·dx] × [0, ny·dx]``. Fields are float64 arrays of shape ``shape = (nx, ny)``
+(``(nx, ny, nz)`` in 3D), indexed ``u[i, j]`` with i along x. Faces (``edges``): ``"fixed"``
+(u = 0 on the face), ``"free"`` (∂u/∂n = 0) or ``"periodic"``; one rule for all faces or one per
+face in the order x-, x+, y-, y+ (z-, z+).
+
+Examples
+--------
+>>> import numpy as np, physcore as pc
+>>> scene = pc.Scene(dim=2)
+>>> pond = scene.add(pc.Wave((64, 64), dx=0.01, c=0.5, drops=[pc.Drop(0.0, (0.32, 0.32), 0.02, 0.01)]))
+>>> n = scene.advance(0.2)
+>>> pond.u.shape, bool(abs(scene.energy_drift()) < 1e-10)
+((64, 64), True)
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from . import _check
+from ._errors import InvalidInputError, InvalidTypeError
+
+__all__ = ["Wave", "GrayScott", "Drop", "Oscillator", "PRESETS", "Grid"]
+
+_FACES = ("x-", "x+", "y-", "y+", "z-", "z+")
+_EDGE_RULES = ("fixed", "free", "periodic")
+
+
+def _shape(shape: Any) -> tuple[int, ...]:
+    if isinstance(shape, (str, bytes)) or not isinstance(shape, Sequence):
+        raise InvalidTypeError(f"shape: expected a tuple of 2 or 3 cell counts, got {type(shape).__name__}")
+    if len(shape) not in (2, 3):
+        raise InvalidInputError(f"shape: expected 2 or 3 cell counts, got {len(shape)}")
+    out = []
+    for n in shape:
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+            raise InvalidTypeError(f"shape: cell counts must be ints, got {type(n).__name__}")
+        if not 3 <= int(n) <= 1 << 20:
+            raise InvalidInputError(f"shape: every cell count must be in 3..{1 << 20}, got {int(n)}")
+        out.append(int(n))
+    if math.prod(out) > 1 << 31:
+        raise InvalidInputError(f"shape: {tuple(out)} has {math.prod(out):,} cells, more than 2**31")
+    return tuple(out)
+
+
+def _edges(edges: Any, dim: int) -> tuple[str, ...]:
+    if isinstance(edges, str):
+        edges = (edges,) * (2 * dim)
+    if not isinstance(edges, Sequence) or len(edges) != 2 * dim:
+        raise InvalidInputError(f"edges: expected one rule or {2 * dim} (x-, x+, y-, y+{', z-, z+' if dim == 3 else ''}), got {edges!r}")
+    for e in edges:
+        if e not in _EDGE_RULES:
+            raise InvalidInputError(f"edges: unknown rule {e!r}; valid: {', '.join(_EDGE_RULES)}")
+    for a in range(dim):
+        if (edges[2 * a] == "periodic") != (edges[2 * a + 1] == "periodic"):
+            raise InvalidInputError(f"edges: axis {'xyz'[a]}: periodic must be on both faces or neither")
+    return tuple(edges)
+
+
+def _positive(name: str, v: Any, unit: str, allow_zero: bool = False) -> float:
+    x = _check.real(name, v)
+    if not (math.isfinite(x) and (x >= 0 if allow_zero else x > 0)):
+        raise InvalidInputError(f"{name}: must be finite and {'>= 0' if allow_zero else '> 0'} ({unit}), got {x}")
+    return x
+
+
+def _cells_mask(name: str, a: Any, shape: tuple[int, ...]) -> np.ndarray:
+    m = np.asarray(a)
+    if m.shape != shape:
+        raise InvalidInputError(f"{name}: expected shape {shape} (the grid), got {m.shape}")
+    if m.dtype != bool:
+        raise InvalidTypeError(f"{name}: expected a bool array, got dtype {m.dtype}")
+    return m
+
+
+def _layout(a: np.ndarray) -> np.ndarray:
+    """(nx, ny[, nz]) → the core's flat layout (x fastest)."""
+    return np.ascontiguousarray(np.asarray(a, dtype=np.float64).T).reshape(-1)
+
+
+def _unlayout(flat: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    return np.asarray(flat).reshape(shape[::-1]).T
+
+
+@dataclass(frozen=True)
+class Drop:
+    """A stone dropped on a :class:`Wave` at time ``t`` (s): a Gaussian dent of depth
+    ``amplitude`` (m) and standard deviation ``radius`` (m) centred at ``center`` (m), added to the
+    displacement with no change of velocity. Its energy is booked as work done on the wave."""
+
+    t: float
+    center: Sequence[float]
+    radius: float
+    amplitude: float
+
+
+@dataclass(frozen=True)
+class Oscillator:
+    """A driven source on a :class:`Wave`: an acceleration ``amplitude · sin(2π frequency t +
+    phase) · profile(x)`` (m/s², Hz, rad). The profile is a Gaussian of standard deviation
+    ``radius`` (m) at ``center`` (m), or, with ``region`` (a bool array over the grid), 1 on those
+    cells (a line of them makes a plane wave). Its work is booked."""
+
+    amplitude: float
+    frequency: float
+    center: Sequence[float] | None = None
+    radius: float = 0.0
+    region: Any = None
+    phase: float = 0.0
+
+
+class Grid:
+    """Base of the grid systems: geometry, the scene it joined, field access."""
+
+    kind = ""
+
+    def __init__(self, shape: Any, dx: float, edges: Any, name: str) -> None:
+        self.shape = _shape(shape)
+        self.dim = len(self.shape)
+        self.dx = _positive("dx", dx, "m")
+        self.edges = _edges(edges, self.dim)
+        if not isinstance(name, str) or not name:
+            raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
+        self.name = name
+        self._scene: Any = None
+
+    # -- geometry
+    @property
+    def extent(self) -> tuple[float, ...]:
+        """The domain's size along each axis, m: ``shape · dx``."""
+        return tuple(n * self.dx for n in self.shape)
+
+    def centers(self) -> list[np.ndarray]:
+        """Cell-centre coordinates along each axis, m: ``(i + ½) dx``."""
+        return [(np.arange(n) + 0.5) * self.dx for n in self.shape]
+
+    def _gaussian(self, center: Any, radius: float, arg: str) -> tuple[np.ndarray, np.ndarray]:
+        c = np.asarray(center, dtype=np.float64).reshape(-1)
+        if c.shape != (self.dim,) or not np.isfinite(c).all():
+            raise InvalidInputError(f"{arg}: center must be {self.dim} finite coordinates (m), got {center!r}")
+        radius = _positive(f"{arg}.radius", radius, "m")
+        grids = np.meshgrid(*self.centers(), indexing="ij")
+        r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c))
+        w = np.exp(-r2 / (2 * radius * radius))
+        w[r2 > (4 * radius) ** 2] = 0.0
+        flat = _layout(w)
+        cells = np.flatnonzero(flat)
+        if cells.size == 0:
+            raise InvalidInputError(f"{arg}: the Gaussian at {c.tolist()} (radius {radius} m) covers no cell of the grid")
+        return cells.astype(np.uint32), flat[cells]
+
+    # -- bound to a scene
+    def _bound(self) -> Any:
+        if self._scene is None:
+            raise InvalidInputError(f"{type(self).__name__} {self.name!r} is not in a scene yet: scene.add(it) first")
+        return self._scene
+
+    def field(self, name: str) -> np.ndarray:
+        """The field ``name`` now, shape :attr:`shape`, float64 (a copy)."""
+        scene = self._bound()
+        (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, [name]))
+        return _unlayout(flat, self.shape)
+
+    def books(self) -> dict[str, float]:
+        """Books that are not energies (amounts, what reactions made), by name."""
+        scene = self._bound()
+        return dict(scene._exclusive(lambda sim: sim.system_books(self.name)))
+
+    def _set(self, name: str, values: Any) -> None:
+        a = np.asarray(values, dtype=np.float64)
+        if a.shape != self.shape:
+            raise InvalidInputError(f"{name}: expected shape {self.shape} (the grid), got {a.shape}")
+        scene = self._bound()
+        scene._exclusive(lambda sim: sim.set_system_field(self.name, name, _layout(a)))
+        scene._e0 = None
+
+    def _params(self) -> dict[str, Any]:
+        return {"shape": np.asarray(self.shape, dtype=np.float64), "dx": self.dx, "edges": ",".join(self.edges)}
+
+    def _record(self) -> dict[str, Any]:
+        """What a scene file stores to rebuild this grid (JSON-able; arrays: `_record_arrays`)."""
+        raise NotImplementedError
+
+    def _record_arrays(self) -> dict[str, np.ndarray]:
+        """Arrays a scene file stores to rebuild this grid (flat, the core's layout)."""
+        return {}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r}, shape={self.shape}, dx={self.dx:g}, edges={self.edges})"
+
+
+class Wave(Grid):
+    """The damped wave equation ``u_tt = c² ∇²u − γ u_t + f`` on a grid: ripples on a pond, a drum,
+    interference behind slits.
+
+    Stepped by the leapfrog scheme (central differences, second order in time and space;
+    Langtangen & Linge, "Finite Difference Computing with PDEs", 2017, §2.1), stable for
+    ``c·dt/dx ≤ 1/√dim`` (the CFL condition): :meth:`Scene.advance` keeps ``cfl`` of that limit;
+    :meth:`Scene.step` with a larger ``dt`` diverges and raises :class:`SimulationDiverged`.
+
+    Parameters
+    ----------
+    shape : tuple of int
+        Cells along x, y (, z), each >= 3.
+    dx : float
+        Cell size, m.
+    c : float
+        Wave speed, m/s.
+    gamma : float
+        Damping rate γ, 1/s (default 0: the energy books then balance to round-off).
+    edges : str or sequence of str
+        ``"fixed"`` (default), ``"free"`` or ``"periodic"``, for all faces or per face.
+    absorbing : bool or sequence of str
+        Faces with a damping layer that swallows outgoing waves: ``True`` for every non-periodic
+        face, or names from ``"x-", "x+", "y-", "y+", "z-", "z+"``.
+    layer : int
+        Cells in a damping layer (default 24); its γ rises as the square of the depth to
+        ``layer_strength · c/dx`` (default 0.5) at the face.
+    mask : (nx, ny) bool array, optional
+        Obstacle cells, held at u = 0 (walls, slits).
+    drops : sequence of :class:`Drop`
+    oscillators : sequence of :class:`Oscillator`
+    cfl : float
+        Fraction of the CFL limit that :meth:`Scene.advance` steps at (default 0.9).
+    name : str
+
+    Attributes (once added to a scene)
+    ----------------------------------
+    u : (nx, ny) float64
+        Displacement now, m.
+    velocity : (nx, ny) float64
+        ``u_t`` at the half step before now, m/s.
+
+    Energy books (per unit areal density): kinetic ½Σ u_t² dA and potential ½c²|∇u|² (written as
+    the leapfrog-conserved cross term of the two time levels), damping as dissipated, the work of
+    drops and oscillators as a negative dissipated entry ``"<name> sources"``.
+    """
+
+    kind = "wave"
+
+    def __init__(
+        self,
+        shape: Any,
+        dx: float = 1.0,
+        *,
+        c: float = 1.0,
+        gamma: float = 0.0,
+        edges: Any = "fixed",
+        absorbing: Any = (),
+        layer: int = 24,
+        layer_strength: float = 0.5,
+        mask: Any = None,
+        drops: Sequence[Drop] = (),
+        oscillators: Sequence[Oscillator] = (),
+        cfl: float = 0.9,
+        name: str = "wave",
+    ) -> None:
+        super().__init__(shape, dx, edges, name)
+        self.c = _positive("c", c, "m/s")
+        self.gamma = _positive("gamma", gamma, "1/s", allow_zero=True)
+        if absorbing is True:
+            absorbing = tuple(f for f, e in zip(_FACES, self.edges) if e != "periodic")
+        elif absorbing is False or absorbing is None:
+            absorbing = ()
+        if isinstance(absorbing, str) or not isinstance(absorbing, Sequence):
+            raise InvalidTypeError(f"absorbing: expected True or a sequence of face names, got {absorbing!r}")
+        for f in absorbing:
+            if f not in _FACES[: 2 * self.dim]:
+                raise InvalidInputError(f"absorbing: unknown face {f!r}; valid: {', '.join(_FACES[: 2 * self.dim])}")
+        self.absorbing = tuple(absorbing)
+        self.layer = _check.int_in_range("layer", layer, 1, 1 << 20)
+        self.layer_strength = _positive("layer_strength", layer_strength, "c/dx")
+        self.mask = None if mask is None else _cells_mask("mask", mask, self.shape).copy()
+        self.cfl = _positive("cfl", cfl, "fraction of the CFL limit")
+        if self.cfl > 1:
+            raise InvalidInputError(f"cfl: must be in (0, 1], got {self.cfl}")
+        self.drops = tuple(drops)
+        self.oscillators = tuple(oscillators)
+        for k, d in enumerate(self.drops):
+            if not isinstance(d, Drop):
+                raise InvalidTypeError(f"drops[{k}]: expected a physcore.Drop, got {type(d).__name__}")
+        for k, o in enumerate(self.oscillators):
+            if not isinstance(o, Oscillator):
+                raise InvalidTypeError(f"oscillators[{k}]: expected a physcore.Oscillator, got {type(o).__name__}")
+        self._profiles()  # checks every source now, before any scene sees it
+
+    @property
+    def cfl_limit(self) -> float:
+        """The largest stable step dx / (c √dim), s."""
+        return self.dx / (self.c * math.sqrt(self.dim))
+
+    def _profiles(self) -> dict[str, Any]:
+        p: dict[str, Any] = {}
+        cells, weights, counts = [], [], []
+        for k, d in enumerate(self.drops):
+            c, w = self._gaussian(d.center, d.radius, f"drops[{k}]")
+            cells.append(c), weights.append(w), counts.append(c.size)
+        p["drop_t"] = np.array([_check.real(f"drops[{k}].t", d.t) for k, d in enumerate(self.drops)], dtype=np.float64)
+        p["drop_amplitude"] = np.array([_check.real(f"drops[{k}].amplitude", d.amplitude) for k, d in enumerate(self.drops)], dtype=np.float64)
+        p["drop_counts"] = np.array(counts, dtype=np.float64)
+        p["drop_cells"] = np.concatenate(cells) if cells else np.zeros(0, np.uint32)
+        p["drop_weights"] = np.concatenate(weights) if weights else np.zeros(0)
+        cells, weights, counts = [], [], []
+        for k, o in enumerate(self.oscillators):
+            if o.region is not None:
+                flat = _layout(_cells_mask(f"oscillators[{k}].region", o.region, self.shape))
+                c = np.flatnonzero(flat).astype(np.uint32)
+                if c.size == 0:
+                    raise InvalidInputError(f"oscillators[{k}].region: covers no cell")
+                w = np.ones(c.size)
+            else:
+                c, w = self._gaussian(o.center, o.radius, f"oscillators[{k}]")
+            cells.append(c), weights.append(w), counts.append(c.size)
+        for key, attr in (("osc_amplitude", "amplitude"), ("osc_frequency", "frequency"), ("osc_phase", "phase")):
+            p[key] = np.array([_check.real(f"oscillators[{k}].{attr}", getattr(o, attr)) for k, o in enumerate(self.oscillators)], dtype=np.float64)
+        p["osc_counts"] = np.array(counts, dtype=np.float64)
+        p["osc_cells"] = np.concatenate(cells) if cells else np.zeros(0, np.uint32)
+        p["osc_weights"] = np.concatenate(weights) if weights else np.zeros(0)
+        return p
+
+    def _params(self) -> dict[str, Any]:
+        p = super()._params()
+        p.update(
+            c=self.c,
+            gamma=self.gamma,
+            cfl=self.cfl,
+            layer=float(self.layer),
+            layer_strength=self.layer_strength,
+            absorbing=np.array([f in self.absorbing for f in _FACES[: 2 * self.dim]], dtype=np.float64),
+            **self._profiles(),
+        )
+        if self.mask is not None:
+            p["mask"] = _layout(self.mask)
+        return p
+
+    def _record_arrays(self) -> dict[str, np.ndarray]:
+        out = {} if self.mask is None else {"mask": _layout(self.mask).astype(bool)}
+        for k, o in enumerate(self.oscillators):
+            if o.center is None:
+                out[f"region{k}"] = _layout(np.asarray(o.region, dtype=bool)).astype(bool)
+        return out
+
+    @property
+    def u(self) -> np.ndarray:
+        return self.field("u")
+
+    @u.setter
+    def u(self, values: Any) -> None:
+        self._set("u", values)
+
+    @property
+    def velocity(self) -> np.ndarray:
+        return self.field("velocity")
+
+    @velocity.setter
+    def velocity(self, values: Any) -> None:
+        self._set("velocity", values)
+
+    def _record(self) -> dict[str, Any]:
+        return {
+            "shape": list(self.shape), "dx": self.dx, "edges": list(self.edges), "c": self.c, "gamma": self.gamma,
+            "absorbing": list(self.absorbing), "layer": self.layer, "layer_strength": self.layer_strength, "cfl": self.cfl,
+            "mask": self.mask is not None,
+            "drops": [[d.t, list(map(float, d.center)), d.radius, d.amplitude] for d in self.drops],
+            "oscillators": [
+                [o.amplitude, o.frequency, None if o.center is None else list(map(float, o.center)), o.radius, o.phase]
+                for o in self.oscillators
+            ],
+        }
+
+
+#: Named (F, k) of Gray–Scott pattern classes, in Pearson's units (D_u = 2e-5, D_v = 1e-5, time
+#: in the units of F and k). The classes are Pearson's (Science 261 (1993) 189, Fig. 3); the
+#: values are representative points of each class from R. Munafo's catalogue of the (F, k)
+#: plane (mrob.com/pub/comp/xmorphia), checked by the pattern tests in tests/test_grids.py.
+PRESETS: dict[str, tuple[float, float]] = {
+    "spots": (0.030, 0.062),  # solitons that stay put (Pearson's kappa/lambda border)
+    "mitosis": (0.0367, 0.0649),  # spots that grow and split (lambda)
+    "stripes": (0.037, 0.060),  # fingerprint-like stripes (eta/theta)
+    "maze": (0.029, 0.057),  # a labyrinth of connected stripes (theta/kappa)
+    "coral": (0.0545, 0.062),  # branching growth (mu-like)
+    "holes": (0.039, 0.058),  # a sheet with holes (iota)
+    "chaos": (0.026, 0.051),  # turbulent waves that never settle (beta)
+}
+
+
+class GrayScott(Grid):
+    """Gray–Scott reaction–diffusion (Turing patterns):
+    ``u_t = D_u ∇²u − u v² + F (1 − u)``, ``v_t = D_v ∇²v + u v² − (F + k) v``
+    (Pearson, "Complex patterns in a simple system", Science 261 (1993) 189–192, eq. 1–2).
+
+    Forward Euler with the 5-point Laplacian (Pearson's scheme); stable for
+    ``dt ≤ dx² / (2·dim·max(D))`` (dx²/(4D) in 2D): :meth:`Scene.advance` keeps ``cfl`` of it.
+
+    Parameters
+    ----------
+    shape : tuple of int
+    dx : float
+        Cell size (m). Pearson: 2.5/256.
+    du, dv : float
+        Diffusion coefficients, m²/s (Pearson: 2e-5, 1e-5).
+    feed, kill : float
+        F and k, 1/s; or give ``preset`` (a name of :data:`PRESETS`).
+    edges : "periodic" (default) or "free"
+    cfl : float
+        Fraction of the diffusion limit :meth:`Scene.advance` steps at (default 0.8).
+
+    Starts at the homogeneous state u = 1, v = 0: seed it with :meth:`seed` or set ``u``/``v``.
+    Books (:meth:`books`): ``u`` and ``v`` (Σ·dA) and ``u_made``/``v_made`` (what the reactions
+    made); ``u − u_made`` stays at its start value to round-off.
+    """
+
+    kind = "gray_scott"
+
+    def __init__(
+        self,
+        shape: Any,
+        dx: float = 2.5 / 256,
+        *,
+        du: float = 2e-5,
+        dv: float = 1e-5,
+        feed: float | None = None,
+        kill: float | None = None,
+        preset: str | None = None,
+        edges: Any = "periodic",
+        cfl: float = 0.8,
+        name: str = "gray_scott",
+    ) -> None:
+        super().__init__(shape, dx, edges, name)
+        if "fixed" in self.edges:
+            raise InvalidInputError("edges: Gray–Scott takes 'periodic' or 'free' (no-flux) faces, not 'fixed'")
+        if preset is not None:
+            if preset not in PRESETS:
+                raise InvalidInputError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
+            if feed is not None or kill is not None:
+                raise InvalidInputError("preset: give a preset or feed/kill, not both")
+            feed, kill = PRESETS[preset]
+        if feed is None or kill is None:
+            raise InvalidInputError("feed/kill: give both (1/s), or a preset")
+        self.preset = preset
+        self.du = _positive("du", du, "m²/s", allow_zero=True)
+        self.dv = _positive("dv", dv, "m²/s", allow_zero=True)
+        if self.du == 0 and self.dv == 0:
+            raise InvalidInputError("du/dv: both are 0, nothing diffuses")
+        self.feed = _positive("feed", feed, "1/s", allow_zero=True)
+        self.kill = _positive("kill", kill, "1/s", allow_zero=True)
+        self.cfl = _positive("cfl", cfl, "fraction of the diffusion limit")
+        if self.cfl > 1:
+            raise InvalidInputError(f"cfl: must be in (0, 1], got {self.cfl}")
+
+    @property
+    def diffusion_limit(self) -> float:
+        """The largest stable step dx² / (2·dim·max(D_u, D_v)), s."""
+        return self.dx * self.dx / (2 * self.dim * max(self.du, self.dv))
+
+    def _params(self) -> dict[str, Any]:
+        p = super()._params()
+        p.update(du=self.du, dv=self.dv, feed=self.feed, kill=self.kill, cfl=self.cfl)
+        return p
+
+    @property
+    def u(self) -> np.ndarray:
+        return self.field("u")
+
+    @u.setter
+    def u(self, values: Any) -> None:
+        self._set("u", values)
+
+    @property
+    def v(self) -> np.ndarray:
+        return self.field("v")
+
+    @v.setter
+    def v(self, values: Any) -> None:
+        self._set("v", values)
+
+    def seed(self, seed: int = 0, *, squares: int = 1, size: float = 0.08, noise: float = 0.01) -> None:
+        """Pearson's start: u = 1, v = 0, with ``squares`` squares of side ``size`` (a fraction of
+        the domain) set to u = ½, v = ¼, placed at random (seeded; the first one at the centre),
+        and ±``noise`` uniform noise on both (Pearson: 1 %)."""
+        rng = np.random.default_rng(_check.int_in_range("seed", seed, 0))
+        squares = _check.int_in_range("squares", squares, 0, 10_000)
+        u = np.ones(self.shape)
+        v = np.zeros(self.shape)
+        side = [max(1, int(round(size * n))) for n in self.shape]
+        for k in range(squares):
+            lo = [n // 2 - s // 2 if k == 0 else int(rng.integers(0, n - s + 1)) for n, s in zip(self.shape, side)]
+            sl = tuple(slice(a, a + s) for a, s in zip(lo, side))
+            u[sl] = 0.5
+            v[sl] = 0.25
+        u += noise * (2 * rng.random(self.shape) - 1)
+        v += noise * (2 * rng.random(self.shape) - 1)
+        self.u = np.clip(u, 0, None)
+        self.v = np.clip(v, 0, None)
+
+    def _record(self) -> dict[str, Any]:
+        return {"shape": list(self.shape), "dx": self.dx, "edges": list(self.edges), "du": self.du, "dv": self.dv,
+                "feed": self.feed, "kill": self.kill, "cfl": self.cfl}
+
+
+KINDS: dict[str, type[Grid]] = {"wave": Wave, "gray_scott": GrayScott}
+#: The state arrays each kind saves (``System::save`` in the core).
+_GRID_ARRAYS: dict[str, tuple[str, ...]] = {"wave": ("u", "u_prev", "clock"), "gray_scott": ("u", "v", "made")}
+
+
+def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.ndarray]) -> Grid:
+    """Rebuilds a grid from what :meth:`Grid._record` and its arrays wrote."""
+    arrays = {k: _unlayout(a, tuple(r["shape"])) for k, a in arrays.items()}
+    if kind == "wave":
+        return Wave(
+            tuple(r["shape"]), r["dx"], c=r["c"], gamma=r["gamma"], edges=tuple(r["edges"]), absorbing=tuple(r["absorbing"]),
+            layer=r["layer"], layer_strength=r["layer_strength"], cfl=r["cfl"], mask=arrays.get("mask"),
+            drops=[Drop(t, tuple(c), rad, a) for t, c, rad, a in r["drops"]],
+            oscillators=[
+                Oscillator(a, f, None if c is None else tuple(c), rad, arrays.get(f"region{k}") if c is None else None, ph)
+                for k, (a, f, c, rad, ph) in enumerate(r["oscillators"])
+            ],
+            name=name,
+        )
+    if kind == "gray_scott":
+        return GrayScott(tuple(r["shape"]), r["dx"], du=r["du"], dv=r["dv"], feed=r["feed"], kill=r["kill"],
+                         edges=tuple(r["edges"]), cfl=r["cfl"], name=name)
+    raise InvalidInputError(f"kind: unknown grid kind {kind!r}; valid: {', '.join(KINDS)}")

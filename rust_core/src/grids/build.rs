@@ -1,0 +1,95 @@
+//! Grid systems built from named parameters (what the Python bindings pass; plain Rust here).
+//!
+//! Every kind takes `shape` (cell counts, x first), `dx` (m) and `edges` (one rule per face,
+//! "x-,x+,y-,y+[,z-,z+]", each `fixed`, `free` or `periodic`). Arrays over cells are in the
+//! grid's layout (x fastest). Lists of sources come as flat arrays plus a count per source.
+use super::gray_scott::{GrayScottConfig, GrayScottSystem};
+use super::wave::{Drop, Oscillator, WaveConfig, WaveSystem};
+use super::{Edge, Grid};
+use crate::error::{invalid, Result};
+use crate::systems::System;
+use crate::terms::registry::Params;
+use crate::vector::Real;
+
+/// The kinds `build` knows.
+pub const KINDS: [&str; 2] = ["wave", "gray_scott"];
+
+/// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
+pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
+    let grid = grid_of(&mut p, dim)?;
+    match kind {
+        "wave" => {
+            let mut c = WaveConfig::new(name, grid, p.number("c")?);
+            c.gamma = p.number("gamma")?;
+            c.cfl = p.number("cfl")?;
+            c.layer = p.count("layer", 1 << 20)?;
+            c.layer_strength = p.number("layer_strength")?;
+            let absorbing = p.take_floats("absorbing")?;
+            if absorbing.len() != 2 * dim {
+                return Err(invalid("absorbing", format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len())));
+            }
+            for (f, a) in absorbing.iter().enumerate() {
+                c.absorbing[f] = *a != 0.0;
+            }
+            c.mask = p.take_floats("mask").ok().map(|m| m.iter().map(|&x| x != 0.0).collect());
+            let t = p.take_floats("drop_t")?;
+            let amp = p.take_floats("drop_amplitude")?;
+            let shapes = profiles(&mut p, "drop", t.len())?;
+            c.drops = t.iter().zip(&amp).zip(shapes).map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile }).collect();
+            let amp = p.take_floats("osc_amplitude")?;
+            let freq = p.take_floats("osc_frequency")?;
+            let phase = p.take_floats("osc_phase")?;
+            if freq.len() != amp.len() || phase.len() != amp.len() {
+                return Err(invalid("oscillators", "amplitude, frequency and phase must have one entry per oscillator"));
+            }
+            let shapes = profiles(&mut p, "osc", amp.len())?;
+            c.oscillators = (0..amp.len())
+                .zip(shapes)
+                .map(|(k, profile)| Oscillator { amplitude: amp[k], frequency: freq[k], phase: phase[k], profile })
+                .collect();
+            Ok(Box::new(WaveSystem::new(c)?))
+        }
+        "gray_scott" => {
+            let mut c = GrayScottConfig::new(name, grid, p.number("du")?, p.number("dv")?, p.number("feed")?, p.number("kill")?);
+            c.cfl = p.number("cfl")?;
+            Ok(Box::new(GrayScottSystem::new(c)?))
+        }
+        _ => Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
+    }
+}
+
+fn grid_of(p: &mut Params, dim: usize) -> Result<Grid> {
+    let shape = p.take_floats("shape")?;
+    if shape.len() != dim {
+        return Err(invalid("shape", format!("a {dim}D scene needs {dim} cell counts, got {}", shape.len())));
+    }
+    if let Some(n) = shape.iter().find(|n| !(n.fract() == 0.0 && **n >= 0.0 && **n < 1e12)) {
+        return Err(invalid("shape", format!("cell counts must be whole numbers, got {n}")));
+    }
+    let shape: Vec<usize> = shape.iter().map(|&n| n as usize).collect();
+    let edges = p
+        .text("edges")?
+        .split(',')
+        .map(|e| Edge::by_name(e.trim()).ok_or_else(|| invalid("edges", format!("unknown rule {e:?}; valid: fixed, free, periodic"))))
+        .collect::<Result<Vec<_>>>()?;
+    Grid::new(&shape, p.number("dx")?, &edges)
+}
+
+/// `n` profiles from `{prefix}_counts` (cells per source), `{prefix}_cells`, `{prefix}_weights`.
+fn profiles(p: &mut Params, prefix: &str, n: usize) -> Result<Vec<Vec<(usize, Real)>>> {
+    let arg = if prefix == "drop" { "drops" } else { "oscillators" };
+    let counts = p.take_floats(&format!("{prefix}_counts"))?;
+    let cells = p.take_indices(&format!("{prefix}_cells"))?;
+    let weights = p.take_floats(&format!("{prefix}_weights"))?;
+    if counts.len() != n || cells.len() != weights.len() || counts.iter().sum::<Real>() != cells.len() as Real {
+        return Err(invalid(arg, "profile arrays do not match (counts, cells, weights)"));
+    }
+    let mut out = Vec::with_capacity(n);
+    let mut at = 0;
+    for &k in &counts {
+        let k = k as usize;
+        out.push(cells[at..at + k].iter().zip(&weights[at..at + k]).map(|(&c, &w)| (c as usize, w)).collect());
+        at += k;
+    }
+    Ok(out)
+}
