@@ -665,6 +665,106 @@ drop.render_defaults = {
     "size": (480, 480),
 }
 
+def ripple(
+    n: int = 256,
+    drops: int = 6,
+    speed: float = 0.25,
+    damping: float = 0.15,
+    seed: int = 3,
+    threads: int | None = None,
+) -> Scene:
+    """Ripples on a pond: stones dropped one after another on a 1 m × 1 m pond with reflecting
+    (free) banks, on an n × n wave grid (:class:`~physcore.grids.Wave`).
+
+    `drops` Gaussian dents (radius 1.2 cm, depth 4 mm) fall at random places (seeded) every 0.6 s
+    from t = 0; the waves travel at `speed` (m/s) and fade at `damping` (1/s).
+    """
+    from .grids import Drop, Wave
+
+    n = _count(n, "n", 16)
+    drops = _count(drops, "drops", 0)
+    speed = _positive(speed, "speed")
+    damping = _nonneg(damping, "damping")
+    rng = np.random.default_rng(_count(seed, "seed", 0))
+    stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), 0.012, 0.004) for k in range(drops)]
+    scene = Scene(2, dt=1e-3, threads=threads)
+    scene.add(Wave((n, n), 1.0 / n, c=speed, gamma=damping, edges="free", drops=stones, name="pond"))
+    return scene
+
+
+ripple.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (400, 400)}
+
+
+def double_slit(
+    n: int = 256,
+    wavelength: float = 0.05,
+    separation: float = 0.2,
+    width: float = 0.03,
+    speed: float = 0.3,
+    threads: int | None = None,
+) -> Scene:
+    """Interference behind two slits: a plane wave from an oscillating line on the left of a
+    1.5 m × 1 m tank meets a wall with two slits (`width` m wide, centres `separation` m apart);
+    the other faces absorb (damping layers), so the fringes are those of an open field. The
+    grid is (1.5 n) × n; the source's frequency is speed / wavelength.
+    """
+    from .grids import Oscillator, Wave
+
+    n = _count(n, "n", 32)
+    wavelength, separation, width = _positive(wavelength, "wavelength"), _positive(separation, "separation"), _positive(width, "width")
+    speed = _positive(speed, "speed")
+    nx, dx = (3 * n) // 2, 1.0 / n
+    x = (np.arange(nx) + 0.5) * dx
+    y = (np.arange(n) + 0.5) * dx
+    wall = np.zeros((nx, n), dtype=bool)
+    col = int(0.35 / dx)
+    wall[col:col + 2, :] = True
+    for yc in (0.5 - separation / 2, 0.5 + separation / 2):
+        wall[col:col + 2, np.abs(y - yc) < width / 2] = False
+    if wall[col].all():
+        raise InvalidInputError(f"width: {width} m is narrower than a cell ({dx:.3g} m); raise n or the width")
+    line = np.zeros((nx, n), dtype=bool)
+    line[np.argmin(np.abs(x - 0.12)), :] = True
+    source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
+    scene = Scene(2, dt=1e-3, threads=threads)
+    layer = max(4, n // 10)
+    scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
+    return scene
+
+
+double_slit.render_defaults = {"frames": 150, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (480, 320), "style": "signed"}
+
+
+def turing(
+    preset: str = "maze",
+    n: int = 256,
+    duration: float = 12000.0,
+    seeds: int = 12,
+    seed: int = 1,
+    threads: int | None = None,
+) -> Scene:
+    """Turing patterns growing from Pearson's start: Gray–Scott reaction–diffusion
+    (:class:`~physcore.grids.GrayScott`) on Pearson's 2.5 × 2.5 periodic domain (n × n cells,
+    D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
+    (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
+    The animation spans `duration` time units.
+    """
+    from .grids import PRESETS, GrayScott
+
+    if preset not in PRESETS:
+        raise InvalidInputError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
+    n = _count(n, "n", 16)
+    duration = _positive(duration, "duration")
+    scene = Scene(2, dt=1.0, threads=threads)
+    gs = scene.add(GrayScott((n, n), 2.5 / n, preset=preset, name="turing"))
+    gs.seed(_count(seed, "seed", 0), squares=_count(seeds, "seeds", 1), size=0.06)
+    scene.render_defaults = {"frame_time": duration / 119}
+    return scene
+
+
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 100.0, "substeps": "auto", "size": (400, 400)}
+
+
 def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
     """`fn` returning scenes that carry its ``render_defaults`` (so ``render.gif(scene)`` shows
     the motion ``physcore render NAME`` shows); same name, docs, signature and attributes."""
@@ -672,7 +772,8 @@ def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
     @functools.wraps(fn)
     def scene_function(*args: Any, **kwargs: Any) -> Scene:
         scene = fn(*args, **kwargs)
-        scene.render_defaults = dict(fn.render_defaults)  # type: ignore[attr-defined]
+        own = scene.render_defaults or {}  # what the function set from its arguments
+        scene.render_defaults = {**fn.render_defaults, **own}  # type: ignore[attr-defined]
         return scene
 
     return scene_function
@@ -684,6 +785,9 @@ kepler = _stamped(kepler)
 spring_chain = _stamped(spring_chain)
 dam_break = _stamped(dam_break)
 drop = _stamped(drop)
+ripple = _stamped(ripple)
+double_slit = _stamped(double_slit)
+turing = _stamped(turing)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {
@@ -693,5 +797,8 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "spring_chain": spring_chain,
     "dam_break": dam_break,
     "drop": drop,
+    "ripple": ripple,
+    "double_slit": double_slit,
+    "turing": turing,
 }
 DEFAULT_SCENE = "cloth"

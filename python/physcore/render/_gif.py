@@ -200,6 +200,13 @@ def gif(
         _check_writable(path)
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
+    if rec.fields is not None and rec.positions.shape[1] == 0:
+        from ._fields import FieldRasteriser, fit_size, palette
+
+        fsize = fit_size(rec.field_extent, size)
+        fr = FieldRasteriser(rec.fields, rec.field_style, fsize, rec.field_mask, 1.0)
+        _write_gif(path, (fr.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames), palette(rec.field_style))
+        return path
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by)
     _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames))
@@ -215,10 +222,10 @@ def _gif_delays_ms(fps: float, frames: int) -> list[int]:
     return [10 * (b - a) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
-def _write_gif(path: Path, index_frames, duration_ms: list[int]) -> None:
+def _write_gif(path: Path, index_frames, duration_ms: list[int], colours: Any = None) -> None:
     from PIL import Image
 
-    palette = _PALETTE.tobytes()
+    palette = (_PALETTE if colours is None else colours).tobytes()
     images = []
     for buf in index_frames:
         im = Image.fromarray(buf)  # 'L' from the (H, W) uint8 buffer; putpalette makes it 'P'

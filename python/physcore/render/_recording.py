@@ -71,6 +71,13 @@ class Recording(NamedTuple):
     times: np.ndarray | None = None
     speed_unit: str = "m/s"
     masses: np.ndarray | None = None
+    #: (F, nx, ny) float32: a grid field at every frame (the scene's first grid, or the one its
+    #: ``render_defaults`` name; a 3D grid's middle z slice), with the style to draw it in, the
+    #: grid's obstacle mask (nx, ny) and its extent (m).
+    fields: np.ndarray | None = None
+    field_style: str = ""
+    field_mask: np.ndarray | None = None
+    field_extent: tuple[float, float] | None = None
 
     @property
     def frames(self) -> int:
@@ -109,6 +116,18 @@ def _simulate(
     speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
     pressures = np.empty((frames, n), dtype=np.float32) if need_pressure else None
     strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
+    from ._fields import grid_plan
+
+    gp = grid_plan(scene)
+    fields = None
+    if gp is not None:
+        g = gp["grid"]
+
+        def grab() -> np.ndarray:
+            f = g.field(gp["field"])
+            return f[:, :, f.shape[2] // 2] if f.ndim == 3 else f
+
+        fields = np.empty((frames, *g.shape[:2]), dtype=np.float32)
     has_time = hasattr(scene, "time")
     times = np.empty(frames) if has_time else None
     bar = None
@@ -142,6 +161,9 @@ def _simulate(
                     pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
                 if strain is not None:
                     strain[k] = _strain(x, *sp)
+            if fields is not None:
+                with np.errstate(over="ignore"):
+                    fields[k] = grab()
             if times is not None:
                 times[k] = float(scene.time)
             if on_frame is not None:
@@ -166,7 +188,18 @@ def _simulate(
         times=times,
         speed_unit=str(scene_defaults(scene).get("speed_unit", "m/s")),
         masses=_masses(scene, n),
+        fields=fields,
+        field_style=gp["style"] if gp else "",
+        field_mask=_grid_mask(gp),
+        field_extent=tuple(gp["grid"].extent[:2]) if gp else None,
     )
+
+
+def _grid_mask(gp: dict[str, Any] | None) -> np.ndarray | None:
+    m = None if gp is None else getattr(gp["grid"], "mask", None)
+    if m is None:
+        return None
+    return m[:, :, m.shape[2] // 2] if m.ndim == 3 else m
 
 
 def _masses(scene: Any, n: int) -> np.ndarray | None:

@@ -1,0 +1,152 @@
+"""Drawing fields on grids (ripples, Turing patterns, smoke) into palette images.
+
+A field frame is upsampled to the image size with Pillow's bicubic resampling (smooth edges, no
+blocky cells), then mapped through one of the styles below onto a 256-entry palette of its own:
+255 shades of the style's colour map and one colour for obstacle cells.
+
+Styles
+------
+water    a shaded height field: surface normals from the gradient of u, lit by a low light from
+         the upper left (Lambert diffuse plus a Blinn–Phong highlight) over deep-to-shallow blues,
+         so ripples read as water.
+turing   a perceptually uniform dark-to-light map (magma-like) of the concentration, scaled to the
+         run's 1st–99.5th percentiles.
+smoke    density over a dark background (inferno-like), scaled to the run's 99.5th percentile.
+signed   a diverging blue–white–red map, symmetric about 0 at the run's 99th percentile of |u|,
+         through a square-root tone curve so that weak waves far from a source show.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+STYLES = ("water", "turing", "smoke", "signed")
+_OBSTACLE = 255
+_N = 255
+
+
+def _ramp(stops: list[tuple[float, tuple[int, int, int]]]) -> np.ndarray:
+    """(255, 3) uint8: the colours interpolated linearly between (position, RGB) stops."""
+    x = np.linspace(0.0, 1.0, _N)
+    pos = np.array([p for p, _ in stops])
+    rgb = np.array([c for _, c in stops], dtype=np.float64)
+    return np.stack([np.interp(x, pos, rgb[:, k]) for k in range(3)], axis=1).round().astype(np.uint8)
+
+
+# magma and inferno sampled at a few points (their published definitions, van der Walt & Smith
+# for matplotlib, 2015); linear interpolation between them keeps the lightness monotonic.
+_MAGMA = [(0.0, (0, 0, 4)), (0.25, (81, 18, 124)), (0.5, (183, 55, 121)), (0.75, (252, 137, 97)), (1.0, (252, 253, 191))]
+_INFERNO = [(0.0, (0, 0, 4)), (0.25, (87, 16, 110)), (0.5, (188, 55, 84)), (0.75, (249, 142, 9)), (1.0, (252, 255, 164))]
+_WATER = [(0.0, (4, 30, 66)), (0.35, (16, 78, 139)), (0.65, (64, 156, 208)), (0.85, (170, 222, 242)), (1.0, (255, 255, 255))]
+_SIGNED = [(0.0, (33, 102, 172)), (0.5, (247, 247, 247)), (1.0, (178, 24, 43))]
+_MAPS = {"water": _WATER, "turing": _MAGMA, "smoke": _INFERNO, "signed": _SIGNED}
+_OBSTACLE_RGB = {"water": (92, 84, 74), "turing": (128, 128, 128), "smoke": (110, 110, 120), "signed": (60, 60, 60)}
+
+
+def palette(style: str) -> np.ndarray:
+    """(256, 3) uint8: the style's 255 shades, then the obstacle colour."""
+    return np.vstack([_ramp(_MAPS[style]), np.array([_OBSTACLE_RGB[style]], dtype=np.uint8)])
+
+
+def _image(field: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """(nx, ny) field → (H, W) float32 image, y up, bicubic upsampling."""
+    from PIL import Image
+
+    w, h = size
+    img = Image.fromarray(np.ascontiguousarray(field.T[::-1], dtype=np.float32), mode="F")
+    return np.asarray(img.resize((w, h), Image.Resampling.BICUBIC), dtype=np.float32)
+
+
+def _mask_image(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    from PIL import Image
+
+    w, h = size
+    img = Image.fromarray(np.ascontiguousarray(mask.T[::-1]).astype(np.uint8) * 255, mode="L")
+    return np.asarray(img.resize((w, h), Image.Resampling.NEAREST)) > 127
+
+
+def fit_size(extent: tuple[float, ...], size: tuple[int, int]) -> tuple[int, int]:
+    """The largest image within `size` with the domain's aspect ratio (pixels square)."""
+    w, h = size
+    aspect = extent[0] / extent[1]
+    if w / h > aspect:
+        w = max(2, int(round(h * aspect)))
+    else:
+        h = max(2, int(round(w / aspect)))
+    return w, h
+
+
+class FieldRasteriser:
+    """Index images of a recording's field frames in one style, on scales fixed over the run."""
+
+    def __init__(self, fields: np.ndarray, style: str, size: tuple[int, int], mask: np.ndarray | None, dx: float) -> None:
+        self.fields, self.style, self.size, self.dx = fields, style, size, dx
+        self.mask = None if mask is None else _mask_image(mask, size)
+        finite = fields[np.isfinite(fields)]
+        if style == "water":
+            gx, gy = np.gradient(fields.astype(np.float64), axis=(1, 2))
+            slope = np.hypot(gx, gy)
+            top = float(np.percentile(slope, 99.5)) if slope.size else 0.0
+            # Slopes scaled so the run's steepest ripples tilt the surface by ~35°.
+            self.gain = 0.7 / top if top > 0 else 0.0
+        elif style == "signed":
+            top = float(np.percentile(np.abs(finite), 99)) if finite.size else 0.0
+            self.lo, self.hi = -top, top
+        elif style == "turing":
+            self.lo = float(np.percentile(finite, 1)) if finite.size else 0.0
+            self.hi = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+        else:
+            self.lo, self.hi = 0.0, float(np.percentile(finite, 99.5)) if finite.size else 1.0
+        if style != "water" and not self.hi > self.lo:
+            self.hi = self.lo + 1.0
+
+    def frame(self, k: int) -> np.ndarray:
+        f = self.fields[k]
+        if self.style == "water":
+            # Gradients on the grid (per cell), then upsampled: the shading of a smooth surface.
+            gx, gy = np.gradient(f.astype(np.float64))
+            nx, ny = _image(-self.gain * gx, self.size), _image(-self.gain * gy, self.size)
+            # Image rows run down: flip the y slope to screen coordinates.
+            ny = -ny
+            inv = 1.0 / np.sqrt(nx * nx + ny * ny + 1.0)
+            light = np.array([-0.45, -0.55, 0.70])
+            light /= np.linalg.norm(light)
+            half = light + np.array([0.0, 0.0, 1.0])
+            half /= np.linalg.norm(half)
+            diffuse = (nx * light[0] + ny * light[1] + light[2]) * inv
+            spec = np.clip((nx * half[0] + ny * half[1] + half[2]) * inv, 0.0, 1.0) ** 60
+            t = np.clip(0.55 + 1.6 * (diffuse - light[2]) + 0.9 * spec, 0.0, 1.0)
+        elif self.style == "signed":
+            # A square-root tone curve: the weak waves far from a source still show.
+            z = np.clip(_image(f, self.size) / self.hi, -1.0, 1.0)
+            t = 0.5 + 0.5 * np.sign(z) * np.sqrt(np.abs(z))
+        else:
+            t = np.clip((_image(f, self.size) - self.lo) / (self.hi - self.lo), 0.0, 1.0)
+        t = np.nan_to_num(t, nan=0.0)
+        out = (t * (_N - 1)).round().astype(np.uint8)
+        if self.mask is not None:
+            out[self.mask] = _OBSTACLE
+        return out
+
+
+def default_style(kind: str) -> str:
+    return {"wave": "water", "gray_scott": "turing", "fluid": "smoke"}.get(kind, "signed")
+
+
+def default_field(kind: str) -> str:
+    return {"wave": "u", "gray_scott": "v", "fluid": "density"}.get(kind, "u")
+
+
+def grid_plan(scene: Any) -> dict[str, Any] | None:
+    """What to record of the scene's first grid (or the one its ``render_defaults`` names):
+    {"grid", "field", "style"}; None for a scene without grids."""
+    grids = getattr(scene, "grids", ())
+    if not grids:
+        return None
+    d = getattr(scene, "render_defaults", None) or {}
+    grid = next((g for g in grids if g.name == d.get("grid")), grids[0])
+    style = d.get("style", default_style(grid.kind))
+    if style not in STYLES:
+        style = default_style(grid.kind)
+    return {"grid": grid, "field": d.get("field", default_field(grid.kind)), "style": style}
