@@ -1,0 +1,350 @@
+"""Fields on grids (physcore.Wave, physcore.GrayScott): validation against the discrete and the
+continuous theory, books, stability limits, determinism, save/load, bad input."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+import physcore as pc
+
+
+def _mode(n: int, m: int, k: int) -> np.ndarray:
+    x = (np.arange(n) + 0.5) / n
+    return np.outer(np.sin(m * math.pi * x), np.sin(k * math.pi * x))
+
+
+def _measured_omega(n: int, m: int, k: int, courant: float, steps: int) -> tuple[float, float]:
+    """A fixed unit square membrane (c = 1) started in its (m, k) mode at rest (both time levels
+    on the discrete solution): ω measured from the recurrence a⁺ + a⁻ = 2 cos(ω dt) a of its
+    amplitude, and the discrete dispersion relation's ω."""
+    scene = pc.Scene(dim=2)
+    w = scene.add(pc.Wave((n, n), 1.0 / n, c=1.0))
+    dt = courant / n
+    scene.dt = dt
+    s = courant * math.sqrt(math.sin(m * math.pi / (2 * n)) ** 2 + math.sin(k * math.pi / (2 * n)) ** 2)
+    omega_d = 2 * math.asin(s) / dt
+    shape = _mode(n, m, k)
+    w.u = shape
+    w.velocity = shape * (1 - math.cos(omega_d * dt)) / dt  # u⁻ = cos(ω dt) u: at rest at t = 0
+    a = [1.0]
+    norm = float((shape * shape).sum())
+    for _ in range(steps):
+        scene.step(1)
+        a.append(float((w.u * shape).sum()) / norm)
+    a = np.array(a)
+    cos_wdt = (a[1:-1] * (a[2:] + a[:-2])).sum() / (2 * (a[1:-1] ** 2).sum())
+    return math.acos(cos_wdt) / dt, omega_d
+
+
+@pytest.mark.parametrize(("m", "k"), [(1, 1), (2, 3)])
+def test_membrane_mode_follows_the_discrete_dispersion_relation(m, k):
+    omega, omega_d = _measured_omega(32, m, k, 0.5, 300)
+    assert abs(omega - omega_d) / omega_d < 1e-6
+
+
+def test_membrane_frequency_converges_to_the_continuous_one_at_second_order():
+    exact = math.pi * math.sqrt(1 + 4)  # c π √(m² + k²) / L
+    errors = [abs(_measured_omega(n, 1, 2, 0.5, 150)[0] - exact) / exact for n in (16, 32, 64)]
+    orders = [math.log2(a / b) for a, b in zip(errors, errors[1:])]
+    assert all(abs(p - 2) < 0.05 for p in orders), (errors, orders)
+
+
+def _pulse(n: int, width: float = 0.03, at=(0.4, 0.55)) -> np.ndarray:
+    x = (np.arange(n) + 0.5) / n
+    X, Y = np.meshgrid(x, x, indexing="ij")
+    return np.exp(-((X - at[0]) ** 2 + (Y - at[1]) ** 2) / (2 * width**2))
+
+
+@pytest.mark.parametrize("edges", ["fixed", "free", "periodic"])
+def test_undamped_energy_is_conserved_to_round_off(edges):
+    scene = pc.Scene(dim=2)
+    w = scene.add(pc.Wave((64, 64), 1 / 64, c=1.0, edges=edges))
+    w.u = _pulse(64)
+    worst = 0.0
+    for _ in range(10):
+        scene.advance(0.25)
+        worst = max(worst, abs(scene.energy_drift()))
+    assert worst < 1e-12
+
+
+def test_books_balance_with_damping_drops_and_oscillators():
+    mask = np.zeros((48, 48), dtype=bool)
+    mask[24, :20] = True
+    scene = pc.Scene(dim=2)
+    w = scene.add(
+        pc.Wave(
+            (48, 48), 1 / 48, c=1.0, gamma=0.5, edges=("free", "fixed", "free", "free"), absorbing=("x+",), layer=8, mask=mask,
+            drops=[pc.Drop(0.1, (0.3, 0.3), 0.03, 0.2)],
+            oscillators=[pc.Oscillator(30.0, 2.0, center=(0.7, 0.7), radius=0.03)],
+        )
+    )
+    scene.advance(2.0)
+    e = scene.energy()
+    assert e.dissipated["wave damping"] > 0 and e.dissipated["wave sources"] < 0
+    assert abs(scene.energy_drift()) < 1e-12
+    assert np.all(w.u[mask] == 0)
+
+
+def test_just_above_the_cfl_limit_diverges_and_is_rolled_back():
+    scene = pc.Scene(dim=2)
+    w = scene.add(pc.Wave((32, 32), 1 / 32, c=1.0))
+    w.u = _pulse(32, 0.1)
+    scene.dt = 0.99 * w.cfl_limit
+    scene.step(3000)  # just inside: stable
+    assert abs(scene.energy_drift()) < 1e-10
+    before, t0 = w.u, scene.time
+    scene.dt = 1.01 * w.cfl_limit
+    with pytest.raises(pc.SimulationDiverged) as info:
+        scene.step(20000)
+    assert "grid cell" in str(info.value) and "CFL" in str(info.value)
+    assert info.value.suggested_dt < w.cfl_limit
+    assert scene.time == t0 and np.array_equal(w.u, before)
+
+
+def test_absorbing_faces_reflect_little_of_a_pulse():
+    """A pulse in the middle of a box whose four faces absorb (default layers, 24 cells): after
+    it has reached the faces and any reflection has come back, < 0.5 % of its energy is left."""
+    n = 256
+    scene = pc.Scene(dim=2)
+    w = scene.add(pc.Wave((n, n), 1 / n, c=1.0, absorbing=True))
+    w.u = _pulse(n, 0.02, (0.5, 0.5))
+    e0 = scene.energy().total
+    scene.advance(1.5)
+    e = scene.energy()
+    left = (e.kinetic + sum(e.potential.values())) / e0
+    assert left < 5e-3, left
+    assert abs(scene.energy_drift()) < 1e-12  # what left was booked as damping
+
+
+def _run_wave(threads: int) -> np.ndarray:
+    scene = pc.Scene(dim=2, threads=threads)
+    w = scene.add(pc.Wave((300, 200), 1 / 200, c=1.0, gamma=0.2, absorbing=("x-", "y+")))
+    w.u = np.pad(_pulse(200), ((50, 50), (0, 0)))
+    scene.advance(0.3)
+    return w.u
+
+
+def test_wave_is_bit_identical_for_any_thread_count():
+    assert np.array_equal(_run_wave(1), _run_wave(2))
+
+
+def test_wave_save_load_continues_bit_identically(tmp_path):
+    scene = pc.scenes.ripple(n=64, drops=3)
+    scene.advance(0.5)
+    path = scene.save(tmp_path / "pond.npz")
+    again = pc.Scene.load(path)
+    for s in (scene, again):
+        s.advance(1.0)
+    assert np.array_equal(scene.grids[0].u, again.grids[0].u)
+    assert scene.energy() == again.energy()
+
+
+def test_double_slit_mask_and_regions_survive_save_load(tmp_path):
+    scene = pc.scenes.double_slit(n=48)
+    scene.advance(0.2)
+    again = pc.Scene.load(scene.save(tmp_path / "slit.npz"))
+    for s in (scene, again):
+        s.advance(0.2)
+    assert np.array_equal(scene.grids[0].u, again.grids[0].u)
+    assert np.array_equal(again.grids[0].mask, scene.grids[0].mask)
+
+
+def test_wave_in_3d_keeps_its_energy():
+    scene = pc.Scene(dim=3)
+    w = scene.add(pc.Wave((16, 12, 10), 0.1, c=2.0))
+    rng = np.random.default_rng(0)
+    w.u = rng.standard_normal((16, 12, 10))
+    assert math.isclose(w.cfl_limit, 0.1 / (2 * math.sqrt(3)))
+    scene.advance(0.5)
+    assert abs(scene.energy_drift()) < 1e-12
+
+
+# ------------------------------------------------------------------------------- Gray–Scott
+def _gs(n: int = 32, feed: float = 0.025, kill: float = 0.05, **kw) -> tuple[pc.Scene, pc.GrayScott]:
+    scene = pc.Scene(dim=2, dt=1.0)
+    return scene, scene.add(pc.GrayScott((n, n), 2.5 / 256, feed=feed, kill=kill, **kw))
+
+
+def _steady_states(feed: float, kill: float) -> list[tuple[float, float]]:
+    """(u, v) of the homogeneous steady states: (1, 0) and, when F ≥ 4(F + k)², the two roots
+    of (F + k) v² − F v + F (F + k) = 0 with u = (F + k)/v."""
+    out = [(1.0, 0.0)]
+    disc = feed * feed - 4 * feed * (feed + kill) ** 2
+    if disc >= 0:
+        for sign in (1, -1):
+            v = (feed + sign * math.sqrt(disc)) / (2 * (feed + kill))
+            out.append(((feed + kill) / v, v))
+    return out
+
+
+def _jacobian(u: float, v: float, feed: float, kill: float) -> np.ndarray:
+    return np.array([[-v * v - feed, -2 * u * v], [v * v, 2 * u * v - (feed + kill)]])
+
+
+@pytest.mark.parametrize("which", [0, 1, 2])
+def test_homogeneous_steady_states_stay_put(which):
+    feed, kill = 0.025, 0.05
+    u0, v0 = _steady_states(feed, kill)[which]
+    scene, gs = _gs(feed=feed, kill=kill)
+    gs.u, gs.v = np.full((32, 32), u0), np.full((32, 32), v0)
+    scene.step(500)
+    assert np.allclose(gs.u, u0, rtol=0, atol=1e-12) and np.allclose(gs.v, v0, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(("which", "m"), [(0, 0), (0, 3), (1, 2), (2, 0), (2, 4), (2, 9)])
+def test_a_small_mode_grows_at_the_rate_linear_stability_predicts(which, m):
+    """A perturbation ε·(a, b)·cos(2π m x / L) of a steady state evolves, to first order in ε, by
+    the forward-Euler step linearised about it: I + dt·(J − κ·diag(D_u, D_v)) per step, with J
+    the reaction Jacobian and κ = (4/dx²) sin²(π m / n) the discrete Laplacian's eigenvalue
+    (Pearson's linear stability analysis, discretised as physcore steps it)."""
+    feed, kill, n = 0.025, 0.05, 64
+    u0, v0 = _steady_states(feed, kill)[which]
+    scene, gs = _gs(n, feed=feed, kill=kill)
+    dx, dt = gs.dx, 1.0
+    kappa = 4 / dx**2 * math.sin(math.pi * m / n) ** 2
+    step = np.eye(2) + dt * (_jacobian(u0, v0, feed, kill) - kappa * np.diag([gs.du, gs.dv]))
+    # Few enough steps that the mode stays in [1e-2, 1e2] of its start: far above round-off,
+    # far below where the nonlinear terms (O(ε²)) show.
+    rho = max(abs(np.linalg.eigvals(step)))
+    steps = int(np.clip(math.log(100) / max(abs(math.log(rho)), 1e-12), 20, 300))
+    eps, ab = 1e-7, np.array([0.6, 0.8])
+    wave = np.cos(2 * math.pi * m * (np.arange(n) + 0.5) / n)[:, None] * np.ones((1, n))
+    gs.u, gs.v = u0 + eps * ab[0] * wave, v0 + eps * ab[1] * wave
+    scene.step(steps)
+    predicted = np.linalg.matrix_power(step, steps) @ ab
+    norm = float((wave * wave).sum())
+    measured = np.array([((gs.u - u0) * wave).sum(), ((gs.v - v0) * wave).sum()]) / (norm * eps)
+    assert np.linalg.norm(measured - predicted) < 1e-4 * np.linalg.norm(predicted), (measured, predicted)
+    # The growth rate per unit time, as the analysis states it: the largest Re λ of J − κD.
+    growth = max(np.linalg.eigvals(_jacobian(u0, v0, feed, kill) - kappa * np.diag([gs.du, gs.dv])).real)
+    rate = math.log(np.linalg.norm(measured) / np.linalg.norm(ab)) / (steps * dt)
+    assert abs(rate - growth) < 0.01 + 0.05 * abs(growth), (rate, growth)
+
+
+def test_amount_books_balance_what_the_reactions_made():
+    scene, gs = _gs(64, preset=None, feed=0.035, kill=0.065)
+    gs.seed(2, squares=3)
+    b0 = gs.books()
+    scene.step(2000)
+    b = gs.books()
+    assert abs(b["u_made"]) > 1e-3 * b0["u"]
+    assert abs((b["u"] - b["u_made"]) - b0["u"]) < 1e-12 * b0["u"]
+    assert abs((b["v"] - b["v_made"]) - b0["v"]) < 1e-12 * b0["u"]
+
+
+def test_above_the_diffusion_limit_diverges():
+    scene, gs = _gs(32)
+    gs.seed(0)
+    scene.dt = 1.2 * gs.diffusion_limit
+    with pytest.raises(pc.SimulationDiverged, match="grid cell"):
+        scene.step(5000)
+
+
+def _pattern(preset: str, t: float = 8000.0) -> tuple[pc.Scene, pc.GrayScott, np.ndarray]:
+    scene = pc.Scene(dim=2, dt=1.0)
+    gs = scene.add(pc.GrayScott((128, 128), 2.5 / 256, preset=preset))
+    gs.seed(1, squares=4, size=0.1)
+    scene.advance(t)
+    v = gs.v
+    return scene, gs, v > 0.5 * (v.max() + v.min())
+
+
+def _components(mask: np.ndarray) -> np.ndarray:
+    """Sizes (cells) of the connected components of `mask` on the periodic domain."""
+    lab, n = ndimage.label(np.tile(mask, (2, 2)))  # tiling joins components across the edges
+    sizes = np.bincount(lab[: mask.shape[0], : mask.shape[1]].ravel())[1:]
+    return sizes[sizes > 0]
+
+
+def test_spots_preset_makes_separate_round_spots():
+    _, _, on = _pattern("spots")
+    sizes = _components(on)
+    assert len(sizes) >= 30 and sizes.max() < 150, sizes
+    assert 0.1 < on.mean() < 0.4
+
+
+def test_mitosis_preset_spots_multiply():
+    scene, gs, on = _pattern("mitosis", 3000.0)
+    early = len(_components(on))
+    scene.advance(5000.0)
+    v = gs.v
+    late = _components(v > 0.5 * (v.max() + v.min()))
+    assert late.max() < 150 and len(late) > 1.5 * early, (early, len(late))
+
+
+@pytest.mark.parametrize("preset", ["stripes", "maze", "coral"])
+def test_stripe_presets_make_long_connected_stripes(preset):
+    _, _, on = _pattern(preset)
+    sizes = _components(on)
+    assert len(sizes) <= 30 and sizes.max() > 1000 and 0.3 < on.mean() < 0.7, (preset, sizes)
+    # Stripes are thin: three erosions leave little of them.
+    assert ndimage.binary_erosion(on, iterations=3).mean() < 0.25 * on.mean()
+
+
+def test_holes_preset_makes_a_sheet_with_holes():
+    _, _, on = _pattern("holes")
+    assert len(_components(on)) == 1 and on.mean() > 0.6
+    assert len(_components(~on)) >= 10
+
+
+def test_chaos_preset_never_settles_while_spots_do():
+    def change(preset: str) -> float:
+        scene, gs, _ = _pattern(preset, 12000.0)
+        a = gs.v
+        scene.advance(500.0)
+        return float(np.abs(gs.v - a).mean() / np.abs(a).mean())
+
+    # Over 500 time units: chaos moves ~27 % of its v, settled spots ~3 %.
+    assert change("chaos") > 0.15 and change("spots") < 0.05
+
+
+def test_gray_scott_is_bit_identical_for_any_thread_count():
+    out = []
+    for threads in (1, 2):
+        scene = pc.Scene(dim=2, dt=1.0, threads=threads)
+        gs = scene.add(pc.GrayScott((160, 96), 2.5 / 256, preset="coral"))
+        gs.seed(5, squares=3)
+        scene.step(300)
+        out.append(gs.v)
+    assert np.array_equal(*out)
+
+
+# ------------------------------------------------------------------------------- bad input
+def test_bad_grid_input_names_the_argument():
+    with pytest.raises(ValueError, match="shape"):
+        pc.Wave((2, 10))
+    with pytest.raises(TypeError, match="shape"):
+        pc.Wave((10.5, 10))
+    with pytest.raises(ValueError, match="c:"):
+        pc.Wave((10, 10), c=-1.0)
+    with pytest.raises(ValueError, match="edges"):
+        pc.Wave((10, 10), edges=("periodic", "fixed", "free", "free"))
+    with pytest.raises(ValueError, match="mask"):
+        pc.Wave((10, 10), mask=np.zeros((9, 10), dtype=bool))
+    with pytest.raises(ValueError, match=r"drops\[0\]"):
+        pc.Wave((10, 10), drops=[pc.Drop(0.0, (5.0, 5.0), 0.01, 1.0)])
+    with pytest.raises(ValueError, match="absorbing"):
+        pc.Wave((10, 10), absorbing=("x-", "q+"))
+    with pytest.raises(ValueError, match="preset"):
+        pc.GrayScott((10, 10), preset="leopard")
+    with pytest.raises(ValueError, match="edges"):
+        pc.GrayScott((10, 10), preset="spots", edges="fixed")
+    scene = pc.Scene(dim=3)
+    with pytest.raises(ValueError, match="2D grid"):
+        scene.add(pc.Wave((10, 10)))
+    w = pc.Wave((10, 10))
+    with pytest.raises(ValueError, match="not in a scene"):
+        _ = w.u
+    scene2 = pc.Scene(dim=2)
+    scene2.add(w)
+    with pytest.raises(ValueError, match="already in a scene"):
+        pc.Scene(dim=2).add(w)
+    with pytest.raises(ValueError, match="taken"):
+        scene2.add(pc.Wave((10, 10)))
+    with pytest.raises(ValueError, match=r"u: expected shape \(10, 10\)"):
+        w.u = np.zeros((10, 11))
+    with pytest.raises(ValueError, match="not finite"):
+        w.u = np.full((10, 10), np.nan)
