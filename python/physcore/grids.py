@@ -149,7 +149,7 @@ class Grid:
             raise InvalidInputError(f"{arg}: center must be {self.dim} finite coordinates (m), got {center!r}")
         radius = _positive(f"{arg}.radius", radius, "m")
         grids = np.meshgrid(*self.centers(), indexing="ij")
-        r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c))
+        r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c, strict=False))
         w = np.exp(-r2 / (2 * radius * radius))
         w[r2 > (4 * radius) ** 2] = 0.0
         flat = _layout(w)
@@ -268,7 +268,7 @@ class Wave(Grid):
         self.c = _positive("c", c, "m/s")
         self.gamma = _positive("gamma", gamma, "1/s", allow_zero=True)
         if absorbing is True:
-            absorbing = tuple(f for f, e in zip(_FACES, self.edges) if e != "periodic")
+            absorbing = tuple(f for f, e in zip(_FACES, self.edges, strict=False) if e != "periodic")
         elif absorbing is False or absorbing is None:
             absorbing = ()
         if isinstance(absorbing, str) or not isinstance(absorbing, Sequence):
@@ -493,8 +493,8 @@ class GrayScott(Grid):
         v = np.zeros(self.shape)
         side = [max(1, int(round(size * n))) for n in self.shape]
         for k in range(squares):
-            lo = [n // 2 - s // 2 if k == 0 else int(rng.integers(0, n - s + 1)) for n, s in zip(self.shape, side)]
-            sl = tuple(slice(a, a + s) for a, s in zip(lo, side))
+            lo = [n // 2 - s // 2 if k == 0 else int(rng.integers(0, n - s + 1)) for n, s in zip(self.shape, side, strict=False)]
+            sl = tuple(slice(a, a + s) for a, s in zip(lo, side, strict=False))
             u[sl] = 0.5
             v[sl] = 0.25
         u += noise * (2 * rng.random(self.shape) - 1)

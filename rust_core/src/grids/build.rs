@@ -26,7 +26,10 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             c.layer_strength = p.number("layer_strength")?;
             let absorbing = p.take_floats("absorbing")?;
             if absorbing.len() != 2 * dim {
-                return Err(invalid("absorbing", format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len())));
+                return Err(invalid(
+                    "absorbing",
+                    format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len()),
+                ));
             }
             for (f, a) in absorbing.iter().enumerate() {
                 c.absorbing[f] = *a != 0.0;
@@ -35,12 +38,20 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             let t = p.take_floats("drop_t")?;
             let amp = p.take_floats("drop_amplitude")?;
             let shapes = profiles(&mut p, "drop", t.len())?;
-            c.drops = t.iter().zip(&amp).zip(shapes).map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile }).collect();
+            c.drops = t
+                .iter()
+                .zip(&amp)
+                .zip(shapes)
+                .map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile })
+                .collect();
             let amp = p.take_floats("osc_amplitude")?;
             let freq = p.take_floats("osc_frequency")?;
             let phase = p.take_floats("osc_phase")?;
             if freq.len() != amp.len() || phase.len() != amp.len() {
-                return Err(invalid("oscillators", "amplitude, frequency and phase must have one entry per oscillator"));
+                return Err(invalid(
+                    "oscillators",
+                    "amplitude, frequency and phase must have one entry per oscillator",
+                ));
             }
             let shapes = profiles(&mut p, "osc", amp.len())?;
             c.oscillators = (0..amp.len())
@@ -50,7 +61,14 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             Ok(Box::new(WaveSystem::new(c)?))
         }
         "gray_scott" => {
-            let mut c = GrayScottConfig::new(name, grid, p.number("du")?, p.number("dv")?, p.number("feed")?, p.number("kill")?);
+            let mut c = GrayScottConfig::new(
+                name,
+                grid,
+                p.number("du")?,
+                p.number("dv")?,
+                p.number("feed")?,
+                p.number("kill")?,
+            );
             c.cfl = p.number("cfl")?;
             Ok(Box::new(GrayScottSystem::new(c)?))
         }
@@ -70,7 +88,10 @@ fn grid_of(p: &mut Params, dim: usize) -> Result<Grid> {
     let edges = p
         .text("edges")?
         .split(',')
-        .map(|e| Edge::by_name(e.trim()).ok_or_else(|| invalid("edges", format!("unknown rule {e:?}; valid: fixed, free, periodic"))))
+        .map(|e| {
+            Edge::by_name(e.trim())
+                .ok_or_else(|| invalid("edges", format!("unknown rule {e:?}; valid: fixed, free, periodic")))
+        })
         .collect::<Result<Vec<_>>>()?;
     Grid::new(&shape, p.number("dx")?, &edges)
 }

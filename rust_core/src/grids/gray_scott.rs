@@ -60,7 +60,10 @@ impl GrayScottConfig {
         }
         let g = &self.grid;
         if let Some(f) = (0..2 * g.dim).find(|&f| g.edges[f] == Edge::Fixed) {
-            return Err(invalid("edges", format!("face {f} is fixed: Gray–Scott takes periodic or free (no-flux) edges")));
+            return Err(invalid(
+                "edges",
+                format!("face {f} is fixed: Gray–Scott takes periodic or free (no-flux) edges"),
+            ));
         }
         Ok(())
     }
@@ -89,7 +92,8 @@ impl GrayScottSystem {
     pub fn new(cfg: GrayScottConfig) -> Result<Self> {
         cfg.validate()?;
         let n = cfg.grid.cells();
-        let need = Need::new("add_gray_scott", Need::bytes_of::<Real>(4 * n), format!("{} grid cells", count(n as u128)));
+        let need =
+            Need::new("add_gray_scott", Need::bytes_of::<Real>(4 * n), format!("{} grid cells", count(n as u128)));
         need.check()?;
         Ok(Self {
             u: need.filled(n, 1.0)?,
@@ -173,27 +177,50 @@ impl GrayScottSystem {
             simd::level(),
             #[inline(always)]
             || {
-                let (mut mu, mut mv, mut sum) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-                for i in 1..nx - 1 {
-                    let (a, b, ru, rv) = cell(i, uc[i - 1], uc[i + 1], vc[i - 1], vc[i + 1]);
-                    un[i] = a;
-                    vn[i] = b;
-                    mu[i & 3] += ru;
-                    mv[i & 3] += rv;
-                    sum[i & 3] += a + b;
+                // The stencil: one straight loop over slices (vectorised).
+                let m = nx - 2;
+                let (ul, ucc, ur, us_, un2) = (&uc[..m], &uc[1..][..m], &uc[2..][..m], &us[1..][..m], &un_[1..][..m]);
+                let (vl, vcc, vr, vs_, vn2) = (&vc[..m], &vc[1..][..m], &vc[2..][..m], &vs[1..][..m], &vn_[1..][..m]);
+                let (ud_, ut_) = if three { (&ud[1..][..m], &ut[1..][..m]) } else { (us_, us_) };
+                let (vd_, vt_) = if three { (&vd[1..][..m], &vt[1..][..m]) } else { (vs_, vs_) };
+                let (uo, vo) = (&mut un[1..][..m], &mut vn[1..][..m]);
+                for i in 0..m {
+                    let mut lu = ul[i] + ur[i] + us_[i] + un2[i] - centre * ucc[i];
+                    let mut lv = vl[i] + vr[i] + vs_[i] + vn2[i] - centre * vcc[i];
+                    if three {
+                        lu += ud_[i] + ut_[i];
+                        lv += vd_[i] + vt_[i];
+                    }
+                    let uvv = ucc[i] * vcc[i] * vcc[i];
+                    uo[i] = ucc[i] + du * lu + dt * (f * (1.0 - ucc[i]) - uvv);
+                    vo[i] = vcc[i] + dv * lv + dt * (uvv - fk * vcc[i]);
                 }
                 for (i, ul, ur, vl, vr) in
                     [(0, gu[0], uc[1], gv[0], vc[1]), (nx - 1, uc[nx - 2], gu[1], vc[nx - 2], gv[1])]
                 {
-                    let (a, b, ru, rv) = cell(i, ul, ur, vl, vr);
+                    let (a, b, _, _) = cell(i, ul, ur, vl, vr);
                     un[i] = a;
                     vn[i] = b;
-                    mu[0] += ru;
-                    mv[0] += rv;
-                    sum[0] += a + b;
                 }
-                let fold = |x: [Real; 4]| (x[0] + x[1]) + (x[2] + x[3]);
-                [fold(mu), fold(mv), fold(sum)]
+                // What the reactions made, in a second pass over the row (in cache), in 8 lanes.
+                let (mut mu, mut mv) = ([0.0; 8], [0.0; 8]);
+                let (cu, cv) = (uc.chunks_exact(8), vc.chunks_exact(8));
+                let (ru, rv) = (cu.remainder(), cv.remainder());
+                for (a, b) in cu.zip(cv) {
+                    for k in 0..8 {
+                        let uvv = a[k] * b[k] * b[k];
+                        mu[k] += f * (1.0 - a[k]) - uvv;
+                        mv[k] += uvv - fk * b[k];
+                    }
+                }
+                let fold = |x: [Real; 8]| ((x[0] + x[1]) + (x[2] + x[3])) + ((x[4] + x[5]) + (x[6] + x[7]));
+                let (mut su, mut sv) = (fold(mu), fold(mv));
+                for (a, b) in ru.iter().zip(rv) {
+                    let uvv = a * b * b;
+                    su += f * (1.0 - a) - uvv;
+                    sv += uvv - fk * b;
+                }
+                [su, sv, super::lanes_sum(un) + super::lanes_sum(vn)]
             },
         )
     }
@@ -245,10 +272,12 @@ impl System for GrayScottSystem {
     }
     fn books(&self) -> Vec<(String, Real)> {
         let da = self.cfg.grid.cell_measure();
-        let sum = |a: &[Real]| super::sum_rows(self.cfg.grid.rows(), a.len(), |r| {
-            let nx = self.cfg.grid.n[0];
-            a[r * nx..(r + 1) * nx].iter().sum::<Real>()
-        }) * da;
+        let sum = |a: &[Real]| {
+            super::sum_rows(self.cfg.grid.rows(), a.len(), |r| {
+                let nx = self.cfg.grid.n[0];
+                a[r * nx..(r + 1) * nx].iter().sum::<Real>()
+            }) * da
+        };
         vec![
             ("u".to_string(), sum(&self.u)),
             ("v".to_string(), sum(&self.v)),
@@ -275,11 +304,13 @@ impl System for GrayScottSystem {
     }
     fn snapshot(&self) -> Result<Snapshot> {
         let n = self.u.len();
-        let need = Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
+        let need =
+            Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
         Ok(Box::new((need.copy(&self.u)?, need.copy(&self.v)?, self.books)))
     }
     fn restore(&mut self, snapshot: Snapshot) {
-        let (u, v, b) = *snapshot.downcast::<(Vec<Real>, Vec<Real>, Books)>().expect("a snapshot of this Gray–Scott system");
+        let (u, v, b) =
+            *snapshot.downcast::<(Vec<Real>, Vec<Real>, Books)>().expect("a snapshot of this Gray–Scott system");
         (self.u, self.v, self.books) = (u, v, b);
     }
     fn save(&self) -> Arrays {
@@ -389,7 +420,9 @@ mod tests {
     fn fixed_edges_and_bad_rates_are_refused() {
         let g = Grid::new(&[8, 8], 1.0, &[Edge::Fixed; 4]).unwrap();
         let c = GrayScottConfig::new("gs", g.clone(), 0.2, 0.1, 0.03, 0.06);
-        assert!(matches!(GrayScottSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "edges"));
+        assert!(
+            matches!(GrayScottSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "edges")
+        );
         let g = Grid::new(&[8, 8], 1.0, &[Edge::Periodic; 4]).unwrap();
         let c = GrayScottConfig::new("gs", g, 0.2, 0.1, -0.03, 0.06);
         assert!(matches!(GrayScottSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "feed"));

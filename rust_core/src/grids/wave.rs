@@ -119,13 +119,21 @@ impl WaveConfig {
                 if self.layer == 0 || 2 * self.layer > g.n[f / 2] {
                     return Err(invalid(
                         "layer",
-                        format!("{} cells: must be >= 1 and fit twice across axis {} ({} cells)", self.layer, f / 2, g.n[f / 2]),
+                        format!(
+                            "{} cells: must be >= 1 and fit twice across axis {} ({} cells)",
+                            self.layer,
+                            f / 2,
+                            g.n[f / 2]
+                        ),
                     ));
                 }
             }
         }
         if !(self.layer_strength.is_finite() && self.layer_strength > 0.0) {
-            return Err(invalid("layer_strength", format!("{} must be finite and > 0 (units of c/dx)", self.layer_strength)));
+            return Err(invalid(
+                "layer_strength",
+                format!("{} must be finite and > 0 (units of c/dx)", self.layer_strength),
+            ));
         }
         if let Some(m) = &self.mask {
             if m.len() != cells {
@@ -391,14 +399,26 @@ impl WaveSystem {
                 level,
                 #[inline(always)]
                 || match (three, gam, keep) {
-                    (false, None, None) => span::<false, false, false>(&w, up, lo, hi, k, centre, half, gamma, &[], &[]),
+                    (false, None, None) => {
+                        span::<false, false, false>(&w, up, lo, hi, k, centre, half, gamma, &[], &[])
+                    }
                     (true, None, None) => span::<true, false, false>(&w, up, lo, hi, k, centre, half, gamma, &[], &[]),
-                    (false, Some(gc), None) => span::<false, true, false>(&w, up, lo, hi, k, centre, half, gamma, gc, &[]),
-                    (true, Some(gc), None) => span::<true, true, false>(&w, up, lo, hi, k, centre, half, gamma, gc, &[]),
-                    (false, None, Some(m)) => span::<false, false, true>(&w, up, lo, hi, k, centre, half, gamma, &[], m),
+                    (false, Some(gc), None) => {
+                        span::<false, true, false>(&w, up, lo, hi, k, centre, half, gamma, gc, &[])
+                    }
+                    (true, Some(gc), None) => {
+                        span::<true, true, false>(&w, up, lo, hi, k, centre, half, gamma, gc, &[])
+                    }
+                    (false, None, Some(m)) => {
+                        span::<false, false, true>(&w, up, lo, hi, k, centre, half, gamma, &[], m)
+                    }
                     (true, None, Some(m)) => span::<true, false, true>(&w, up, lo, hi, k, centre, half, gamma, &[], m),
-                    (false, Some(gc), Some(m)) => span::<false, true, true>(&w, up, lo, hi, k, centre, half, gamma, gc, m),
-                    (true, Some(gc), Some(m)) => span::<true, true, true>(&w, up, lo, hi, k, centre, half, gamma, gc, m),
+                    (false, Some(gc), Some(m)) => {
+                        span::<false, true, true>(&w, up, lo, hi, k, centre, half, gamma, gc, m)
+                    }
+                    (true, Some(gc), Some(m)) => {
+                        span::<true, true, true>(&w, up, lo, hi, k, centre, half, gamma, gc, m)
+                    }
                 },
             );
             acc.0 += a;
@@ -465,16 +485,34 @@ fn span<const D3: bool, const G: bool, const M: bool>(
         sum += n;
         diss += d;
     }
-    if first < last {
-        let (mut s4, mut d4) = ([0.0; 4], [0.0; 4]);
+    if first < last && !G && gamma == 0.0 {
+        // Undamped: a = 0, so (2u − (1 − a)u⁻ + k·L)/(1 + a) is 2u − u⁻ + k·L bit for bit; one
+        // straight loop over slices that LLVM vectorises.
+        let n = last - first;
+        let (l, c, r) = (&w.u[first - 1..][..n], &w.u[first..][..n], &w.u[first + 1..][..n]);
+        let (s, no) = (&w.south[first..][..n], &w.north[first..][..n]);
+        let (d, t) = if D3 { (&w.down[first..][..n], &w.up[first..][..n]) } else { (s, s) };
+        let km = if M { &keep[first..][..n] } else { c };
+        let out = &mut up[first..][..n];
+        for i in 0..n {
+            let mut lap = l[i] + r[i] + fs * s[i] + fn_ * no[i] - centre * c[i];
+            if D3 {
+                lap += fd * d[i] + fu * t[i];
+            }
+            let mut new = 2.0 * c[i] - out[i] + k * lap;
+            if M {
+                new *= km[i];
+            }
+            out[i] = new;
+        }
+        sum += super::lanes_sum(out);
+    } else if first < last {
         for i in first..last {
             let (n, d) = cell(i, w.u[i - 1], w.u[i + 1], up[i]);
             up[i] = n;
-            s4[i & 3] += n;
-            d4[i & 3] += d;
+            sum += n;
+            diss += d;
         }
-        sum += (s4[0] + s4[1]) + (s4[2] + s4[3]);
-        diss += (d4[0] + d4[1]) + (d4[2] + d4[3]);
     }
     for i in last.max(first)..hi {
         let (n, d) = cell(i, w.u[i - 1], w.ghost[1], up[i]);
@@ -593,18 +631,28 @@ impl System for WaveSystem {
             .map(|name| match *name {
                 "u" => self.u.clone(),
                 "velocity" => self.velocity(),
-                "mask" => self.keep.iter().map(|k| 1.0 - k).collect::<Vec<_>>().into_iter().chain(std::iter::repeat(0.0)).take(n).collect(),
+                "mask" => self
+                    .keep
+                    .iter()
+                    .map(|k| 1.0 - k)
+                    .collect::<Vec<_>>()
+                    .into_iter()
+                    .chain(std::iter::repeat(0.0))
+                    .take(n)
+                    .collect(),
                 _ => vec![0.0; n],
             })
             .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
         let n = self.u.len();
-        let need = Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
+        let need =
+            Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
         Ok(Box::new((need.copy(&self.u)?, need.copy(&self.u_prev)?, self.clock)))
     }
     fn restore(&mut self, snapshot: Snapshot) {
-        let (u, up, clock) = *snapshot.downcast::<(Vec<Real>, Vec<Real>, Clock)>().expect("a snapshot of this wave system");
+        let (u, up, clock) =
+            *snapshot.downcast::<(Vec<Real>, Vec<Real>, Clock)>().expect("a snapshot of this wave system");
         (self.u, self.u_prev, self.clock) = (u, up, clock);
     }
     fn save(&self) -> Arrays {
@@ -629,7 +677,10 @@ impl System for WaveSystem {
             return Err(invalid("clock", format!("dt {} must be > 0", c[1])));
         }
         if !(c[4] >= 0.0 && c[4] <= self.cfg.drops.len() as Real && c[4].fract() == 0.0) {
-            return Err(invalid("clock", format!("drops applied {} must be a count in [0, {}]", c[4], self.cfg.drops.len())));
+            return Err(invalid(
+                "clock",
+                format!("drops applied {} must be a count in [0, {}]", c[4], self.cfg.drops.len()),
+            ));
         }
         self.u.copy_from_slice(u);
         self.u_prev.copy_from_slice(up);
@@ -703,7 +754,8 @@ mod tests {
     #[test]
     fn standing_mode_converges_at_second_order() {
         let exact = PI * (1.0f64 + 4.0).sqrt();
-        let errs: Vec<Real> = [16, 32, 64].iter().map(|&n| (measured(n, 1.0, 2.0, 0.5, 200).0 - exact).abs() / exact).collect();
+        let errs: Vec<Real> =
+            [16, 32, 64].iter().map(|&n| (measured(n, 1.0, 2.0, 0.5, 200).0 - exact).abs() / exact).collect();
         for p in errs.windows(2) {
             let order = (p[0] / p[1]).log2();
             assert!((order - 2.0).abs() < 0.05, "observed order {order} ({errs:?})");
@@ -750,7 +802,8 @@ mod tests {
         cfg.layer = 6;
         cfg.mask = Some((0..1600).map(|c| c % 40 == 20 && !(18..22).contains(&(c / 40))).collect());
         cfg.drops = vec![Drop { t: 0.05, amplitude: 0.3, profile: vec![(410, 1.0), (411, 0.5)] }];
-        cfg.oscillators = vec![Oscillator { amplitude: 40.0, frequency: 3.0, phase: 0.2, profile: vec![(1205, 1.0), (1245, 0.7)] }];
+        cfg.oscillators =
+            vec![Oscillator { amplitude: 40.0, frequency: 3.0, phase: 0.2, profile: vec![(1205, 1.0), (1245, 0.7)] }];
         let mut w = WaveSystem::new(cfg).unwrap();
         let dt = w.auto_dt().unwrap();
         let e0 = total(&w);
@@ -759,7 +812,7 @@ mod tests {
         let scale = e.kinetic.abs() + e.dissipated.iter().map(|d| d.1.abs()).sum::<Real>();
         assert!(scale > 1e-3, "something happened: {e:?}");
         assert!(((e.total() - e0) / scale).abs() < 1e-12, "{e:?}");
-        assert!(w.u.iter().enumerate().all(|(c, &u)| !(c % 40 == 20 && !(18..22).contains(&(c / 40))) || u == 0.0));
+        assert!(w.u.iter().enumerate().all(|(c, &u)| c % 40 != 20 || (18..22).contains(&(c / 40)) || u == 0.0));
     }
 
     #[test]
@@ -846,6 +899,8 @@ mod tests {
         assert!(matches!(WaveSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "layer"));
         let mut c = square(8, 1.0, Edge::Fixed);
         c.oscillators.push(Oscillator { amplitude: 1.0, frequency: 1.0, phase: 0.0, profile: vec![(64, 1.0)] });
-        assert!(matches!(WaveSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "oscillators"));
+        assert!(
+            matches!(WaveSystem::new(c).err(), Some(crate::Error::InvalidInput { arg, .. }) if arg == "oscillators")
+        );
     }
 }

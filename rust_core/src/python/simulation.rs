@@ -240,7 +240,12 @@ impl PySimulation {
     }
 
     /// The fields `names` of system `name`, each a flat float64 array (the grid's layout).
-    fn system_fields<'py>(&self, py: Python<'py>, name: &str, names: Vec<String>) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
+    fn system_fields<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+        names: Vec<String>,
+    ) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
         let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
         let inner = &self.inner;
         let f = py.detach(|| with_sim!(inner, s => s.other(name).map(|o| s.run(|| o.fields(&names)))));
@@ -248,7 +253,13 @@ impl PySimulation {
     }
 
     /// Sets field `field` of system `name` (checked; nothing changes on error).
-    fn set_system_field(&mut self, py: Python<'_>, name: &str, field: &str, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+    fn set_system_field(
+        &mut self,
+        py: Python<'_>,
+        name: &str,
+        field: &str,
+        values: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<()> {
         let v = slice1(&values, field)?;
         with_sim!(&mut self.inner, s => s.other_mut(name).and_then(|o| o.set_field(field, v))).map_err(|e| to_py(py, e))
     }
@@ -266,7 +277,12 @@ impl PySimulation {
     }
 
     /// Loads what `system_save` wrote (every array checked first).
-    fn system_load(&mut self, py: Python<'_>, name: &str, arrays: Vec<(String, PyReadonlyArray1<'_, f64>)>) -> PyResult<()> {
+    fn system_load(
+        &mut self,
+        py: Python<'_>,
+        name: &str,
+        arrays: Vec<(String, PyReadonlyArray1<'_, f64>)>,
+    ) -> PyResult<()> {
         let mut a = Vec::with_capacity(arrays.len());
         for (k, v) in &arrays {
             a.push((k.clone(), slice1(v, k)?.to_vec()));
