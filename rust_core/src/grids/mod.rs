@@ -16,6 +16,7 @@
 //! in row order, so results are bit-identical for any thread count.
 pub mod fluid;
 pub mod gray_scott;
+pub mod poisson;
 pub mod wave;
 
 use crate::error::{invalid, Result};
