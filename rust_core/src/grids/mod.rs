@@ -17,6 +17,7 @@
 pub mod build;
 pub mod fluid;
 pub mod gray_scott;
+pub mod poisson;
 pub mod wave;
 
 use crate::error::{invalid, Result};
