@@ -439,6 +439,8 @@ class GrayScott(Grid):
         if "fixed" in self.edges:
             raise InvalidInputError("edges: Gray–Scott takes 'periodic' or 'free' (no-flux) faces, not 'fixed'")
         if preset is not None:
+            if not isinstance(preset, str):
+                raise InvalidTypeError(f"preset: expected a name ({', '.join(PRESETS)}), got {type(preset).__name__}")
             if preset not in PRESETS:
                 raise InvalidInputError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
             if feed is not None or kill is not None:
@@ -487,7 +489,7 @@ class GrayScott(Grid):
         """Pearson's start: u = 1, v = 0, with ``squares`` squares of side ``size`` (a fraction of
         the domain) set to u = ½, v = ¼, placed at random (seeded; the first one at the centre),
         and ±``noise`` uniform noise on both (Pearson: 1 %)."""
-        rng = np.random.default_rng(_check.int_in_range("seed", seed, 0))
+        rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
         squares = _check.int_in_range("squares", squares, 0, 10_000)
         u = np.ones(self.shape)
         v = np.zeros(self.shape)

@@ -81,6 +81,20 @@ def _particles(args: str, n_particles: float, n_springs: float = 0) -> None:
     )
 
 
+def _cfl_step(wave: Any, arg: str) -> float:
+    """The wave's automatic step, or an error naming `arg` if it is not a usable float step."""
+    dt = wave.cfl * wave.cfl_limit
+    if not (math.isfinite(dt) and dt >= 1e-300):
+        raise InvalidInputError(f"{arg}: the CFL step dx/(c√2) = {dt:.3g} s is beyond float64's usable range")
+    return dt
+
+
+def _cells(args: str, cells: float, arrays: int = 6) -> None:
+    """Refuse, naming ``args``, a grid too large for memory (`arrays` float64 values per cell:
+    state, scratch and a rollback copy)."""
+    _check.memory(args, cells * 8 * arrays, f"{_big(cells)} grid cells")
+
+
 def _big(count: float) -> str:
     if count < 1e15:
         return str(count)
@@ -671,6 +685,8 @@ def ripple(
     speed: float = 0.25,
     damping: float = 0.15,
     seed: int = 3,
+    integrator: str = "verlet",
+    dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
     """Ripples on a pond: stones dropped one after another on a 1 m × 1 m pond with reflecting
@@ -682,13 +698,16 @@ def ripple(
     from .grids import Drop, Wave
 
     n = _count(n, "n", 16)
-    drops = _count(drops, "drops", 0)
+    _cells("n", n * n)
+    drops = _check.int_in_range("drops", drops, 0, 1000)
     speed = _positive(speed, "speed")
     damping = _nonneg(damping, "damping")
-    rng = np.random.default_rng(_count(seed, "seed", 0))
+    rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
     stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), 0.012, 0.004) for k in range(drops)]
-    scene = Scene(2, dt=1e-3, threads=threads)
-    scene.add(Wave((n, n), 1.0 / n, c=speed, gamma=damping, edges="free", drops=stones, name="pond"))
+    scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
+    pond = scene.add(Wave((n, n), 1.0 / n, c=speed, gamma=damping, edges="free", drops=stones, name="pond"))
+    if dt is None:
+        scene.dt = _cfl_step(pond, "speed")
     return scene
 
 
@@ -701,6 +720,8 @@ def double_slit(
     separation: float = 0.2,
     width: float = 0.03,
     speed: float = 0.3,
+    integrator: str = "verlet",
+    dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
     """Interference behind two slits: a plane wave from an oscillating line on the left of a
@@ -711,8 +732,13 @@ def double_slit(
     from .grids import Oscillator, Wave
 
     n = _count(n, "n", 32)
+    _cells("n", 1.5 * n * n)
     wavelength, separation, width = _positive(wavelength, "wavelength"), _positive(separation, "separation"), _positive(width, "width")
     speed = _positive(speed, "speed")
+    if separation + width > 0.8:
+        raise InvalidInputError(f"separation: {separation} m apart, {width} m wide: the slits must fit in the 1 m tank (separation + width <= 0.8)")
+    if width > separation:
+        raise InvalidInputError(f"width: {width} m is wider than the separation {separation} m: the slits would merge")
     nx, dx = (3 * n) // 2, 1.0 / n
     x = (np.arange(nx) + 0.5) * dx
     y = (np.arange(n) + 0.5) * dx
@@ -722,13 +748,15 @@ def double_slit(
     for yc in (0.5 - separation / 2, 0.5 + separation / 2):
         wall[col:col + 2, np.abs(y - yc) < width / 2] = False
     if wall[col].all():
-        raise InvalidInputError(f"width: {width} m is narrower than a cell ({dx:.3g} m); raise n or the width")
+        raise InvalidInputError(f"width, n: the slits ({width} m) are narrower than a cell (1/n = {dx:.3g} m); raise n or the width")
     line = np.zeros((nx, n), dtype=bool)
     line[np.argmin(np.abs(x - 0.12)), :] = True
     source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
-    scene = Scene(2, dt=1e-3, threads=threads)
+    scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
     layer = max(4, n // 10)
-    scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
+    tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
+    if dt is None:
+        scene.dt = _cfl_step(tank, "speed")
     return scene
 
 
@@ -741,6 +769,8 @@ def turing(
     duration: float = 12000.0,
     seeds: int = 12,
     seed: int = 1,
+    integrator: str = "verlet",
+    dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
     """Turing patterns growing from Pearson's start: Gray–Scott reaction–diffusion
@@ -751,13 +781,18 @@ def turing(
     """
     from .grids import PRESETS, GrayScott
 
+    if not isinstance(preset, str):
+        raise InvalidTypeError(f"preset: expected a name ({', '.join(PRESETS)}), got {type(preset).__name__}")
     if preset not in PRESETS:
         raise InvalidInputError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
     n = _count(n, "n", 16)
+    _cells("n", n * n)
     duration = _positive(duration, "duration")
-    scene = Scene(2, dt=1.0, threads=threads)
+    scene = Scene(2, integrator=integrator, dt=1.0 if dt is None else dt, threads=threads)
     gs = scene.add(GrayScott((n, n), 2.5 / n, preset=preset, name="turing"))
-    gs.seed(_count(seed, "seed", 0), squares=_count(seeds, "seeds", 1), size=0.06)
+    if dt is None:
+        scene.dt = gs.cfl * gs.diffusion_limit
+    gs.seed(_check.int_in_range("seed", seed, 0, 2**63 - 1), squares=_check.int_in_range("seeds", seeds, 1, 1000), size=0.06)
     scene.render_defaults = {"frame_time": duration / 119}
     return scene
 

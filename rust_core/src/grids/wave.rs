@@ -330,17 +330,18 @@ impl WaveSystem {
         let g = &self.cfg.grid;
         let (nx, da) = (g.n[0], g.cell_measure());
         let inv_dt = 1.0 / self.clock.dt;
-        let scale = self.cfg.c * self.cfg.c / (g.dx * g.dx);
         let (u, up) = (&self.u, &self.u_prev);
         let kinetic = sum_rows(g.rows(), g.cells(), |r| {
             let s = r * nx..(r + 1) * nx;
             u[s.clone()].iter().zip(&up[s]).map(|(a, b)| ((a - b) * inv_dt).powi(2)).sum::<Real>()
         });
-        let potential = sum_rows(g.rows(), g.cells(), |r| {
+        let stencil = sum_rows(g.rows(), g.cells(), |r| {
             let mut lu = vec![0.0; nx];
-            g.laplacian_row(u, r, scale, &mut lu);
+            g.laplacian_row(u, r, 1.0, &mut lu);
             -up[r * nx..(r + 1) * nx].iter().zip(&lu).map(|(a, b)| a * b).sum::<Real>()
         });
+        // (c/dx)² applied last: a flat surface has no potential even where (c/dx)² overflows.
+        let potential = if stencil == 0.0 { 0.0 } else { stencil * (self.cfg.c / g.dx).powi(2) };
         (0.5 * kinetic * da, 0.5 * potential * da)
     }
 
