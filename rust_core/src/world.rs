@@ -229,7 +229,7 @@ impl<V: Vector> World<V> {
     /// before the call stops it before the first step, and one set during the last step still
     /// rolls the call back.
     pub fn step_interruptible(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<()> {
-        self.step_checkpointed(n, stop).map(drop)
+        self.step_checkpointed(n, stop).map(|cp| self.release(cp))
     }
 
     /// `step_interruptible` that, on success, returns the checkpoint taken at its start, so the
@@ -277,6 +277,14 @@ impl<V: Vector> World<V> {
     fn prepare(&mut self) -> Result<()> {
         let pool = self.pool.clone();
         par::install(pool.as_ref(), || self.systems_mut().try_for_each(|s| s.prepare()))
+    }
+
+    /// Hands a checkpoint that is no longer needed back to the systems, whose buffers then serve
+    /// the next one (`System::recycle`).
+    pub fn release(&mut self, cp: Checkpoint) {
+        for (s, snap) in self.systems_mut().zip(cp.snapshots) {
+            s.recycle(snap);
+        }
     }
 
     /// Restores a checkpoint of this world; returns the step count it restored.
@@ -379,7 +387,10 @@ impl<V: Vector> World<V> {
         substeps: Option<u64>,
         stop: &Arc<AtomicBool>,
     ) -> Result<u64> {
-        self.advance_checkpointed(duration, substeps, stop).map(|(n, _)| n)
+        self.advance_checkpointed(duration, substeps, stop).map(|(n, cp)| {
+            self.release(cp);
+            n
+        })
     }
 
     /// `advance_interruptible` that also returns the checkpoint taken at its start (as

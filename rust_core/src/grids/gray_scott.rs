@@ -85,6 +85,8 @@ pub struct GrayScottSystem {
     books: Books,
     /// Per row: (Σ reaction of u, Σ reaction of v, Σ u⁺ + v⁺ for the finiteness check).
     partials: Vec<[Real; 3]>,
+    /// Buffers of checkpoints that were not needed (see `grids::Spare`).
+    spare: super::Spare,
 }
 
 impl GrayScottSystem {
@@ -102,6 +104,7 @@ impl GrayScottSystem {
             v2: need.filled(n, 0.0)?,
             books: Books { made_u: 0.0, made_v: 0.0 },
             partials: vec![[0.0; 3]; cfg.grid.rows()],
+            spare: super::Spare::default(),
             cfg,
         })
     }
@@ -306,12 +309,19 @@ impl System for GrayScottSystem {
         let n = self.u.len();
         let need =
             Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
-        Ok(Box::new((need.copy(&self.u)?, need.copy(&self.v)?, self.books)))
+        Ok(Box::new((self.spare.copy(&self.u, &need)?, self.spare.copy(&self.v, &need)?, self.books)))
     }
     fn restore(&mut self, snapshot: Snapshot) {
         let (u, v, b) =
             *snapshot.downcast::<(Vec<Real>, Vec<Real>, Books)>().expect("a snapshot of this Gray–Scott system");
         (self.u, self.v, self.books) = (u, v, b);
+    }
+    fn recycle(&mut self, snapshot: Snapshot) {
+        if let Ok(b) = snapshot.downcast::<(Vec<Real>, Vec<Real>, Books)>() {
+            let (x, y, _) = *b;
+            self.spare.keep(x);
+            self.spare.keep(y);
+        }
     }
     fn save(&self) -> Arrays {
         vec![

@@ -190,6 +190,37 @@ impl Grid {
     }
 }
 
+/// Buffers of snapshots that were not needed (`System::recycle`), reused by the next snapshot:
+/// a checkpoint per call then copies into memory already mapped instead of faulting in fresh
+/// pages (measured: 22 % of a 2048² wave's time at 20 steps per call).
+#[derive(Default)]
+pub struct Spare(std::sync::Mutex<Vec<Vec<Real>>>);
+
+impl Spare {
+    /// A copy of `src`, in a spare buffer if one is large enough.
+    pub fn copy(&self, src: &[Real], need: &crate::alloc::Need) -> Result<Vec<Real>> {
+        let spare = {
+            let mut pool = self.0.lock().unwrap_or_else(|e| e.into_inner());
+            pool.iter().position(|b| b.capacity() >= src.len()).map(|i| pool.swap_remove(i))
+        };
+        match spare {
+            Some(mut b) => {
+                b.clear();
+                b.extend_from_slice(src);
+                Ok(b)
+            }
+            None => need.copy(src),
+        }
+    }
+    /// Keeps `b` for a later `copy` (at most four buffers are kept).
+    pub fn keep(&self, b: Vec<Real>) {
+        let mut pool = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        if pool.len() < 4 {
+            pool.push(b);
+        }
+    }
+}
+
 /// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
 const MIN_ROWS: usize = 4;
 

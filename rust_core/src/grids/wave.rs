@@ -202,6 +202,8 @@ pub struct WaveSystem {
     /// u⁻ at the oscillators' cells before a step, and the rows' partial sums (scratch).
     src_prev: Vec<Real>,
     partials: Vec<(Real, Real)>,
+    /// Buffers of checkpoints that were not needed (see `grids::Spare`).
+    spare: super::Spare,
 }
 
 /// One row's update: the neighbour rows and what the leapfrog formula needs.
@@ -274,6 +276,7 @@ impl WaveSystem {
             row_masked,
             src_prev: vec![0.0; src],
             partials: vec![(0.0, 0.0); rows],
+            spare: super::Spare::default(),
             cfg,
         })
     }
@@ -649,12 +652,19 @@ impl System for WaveSystem {
         let n = self.u.len();
         let need =
             Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
-        Ok(Box::new((need.copy(&self.u)?, need.copy(&self.u_prev)?, self.clock)))
+        Ok(Box::new((self.spare.copy(&self.u, &need)?, self.spare.copy(&self.u_prev, &need)?, self.clock)))
     }
     fn restore(&mut self, snapshot: Snapshot) {
         let (u, up, clock) =
             *snapshot.downcast::<(Vec<Real>, Vec<Real>, Clock)>().expect("a snapshot of this wave system");
         (self.u, self.u_prev, self.clock) = (u, up, clock);
+    }
+    fn recycle(&mut self, snapshot: Snapshot) {
+        if let Ok(b) = snapshot.downcast::<(Vec<Real>, Vec<Real>, Clock)>() {
+            let (x, y, _) = *b;
+            self.spare.keep(x);
+            self.spare.keep(y);
+        }
     }
     fn save(&self) -> Arrays {
         let c = &self.clock;

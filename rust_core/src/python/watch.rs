@@ -28,7 +28,10 @@ pub(super) fn undo_if_signalled<V: Vector, T>(
     (v, cp): (T, Checkpoint),
 ) -> PyResult<T> {
     match py.check_signals() {
-        Ok(()) => Ok(v),
+        Ok(()) => {
+            sim.release(cp);
+            Ok(v)
+        }
         Err(e) => {
             sim.rollback(cp);
             Err(e)

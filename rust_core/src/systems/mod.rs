@@ -131,6 +131,9 @@ pub trait System: Send + Sync {
     fn load(&mut self, arrays: &Arrays) -> Result<()>;
     /// Returns to `snapshot`, which this system made.
     fn restore(&mut self, snapshot: Snapshot);
+    /// Takes back a snapshot this system made that was not needed (the call succeeded), so its
+    /// buffers can serve the next `snapshot`. Default: dropped.
+    fn recycle(&mut self, _snapshot: Snapshot) {}
 }
 
 /// An exchange between systems (tracers carried by a grid's velocity, a fluid pushing a body),
