@@ -706,30 +706,61 @@ impl StableFluid {
         pick
     }
 
-    /// Advects density and temperature by the current velocity.
+    /// Advects density and temperature by the current velocity (one backtrace serves both).
     fn advect_scalars(&mut self, dt: Real) {
         let (_, _, lc) = self.lays();
-        let (nx, ny, dx) = (self.nx, self.ny, self.dx);
+        let (nx, dx) = (self.nx, self.dx);
         let amb = self.cfg.ambient_temperature;
-        let mc = self.cfg.advection == Advection::MacCormack;
         let before = self.smoke_amount();
-        for which in 0..2 {
-            let fill = if which == 0 { 0.0 } else { amb };
-            let act = Active { lay: lc, a0: 0, a1: nx, b0: 0, b1: ny, mask: &self.fluid, fill };
-            let vel = self.vel(&self.s.u, &self.s.v);
-            let src = if which == 0 { &self.s.density } else { &self.s.temperature };
-            if mc {
-                sl_pass(&vel, dx, &act, src, dt, &mut self.hat, false);
-                mc_pass(&vel, dx, &act, src, &self.hat, dt, &mut self.c2, false);
-            } else {
-                sl_pass(&vel, dx, &act, src, dt, &mut self.c2, false);
-            }
-            if which == 0 {
-                std::mem::swap(&mut self.s.density, &mut self.c2);
-            } else {
-                std::mem::swap(&mut self.s.temperature, &mut self.c2);
-            }
+        let vel = self.vel(&self.s.u, &self.s.v);
+        let (rho, tem, fl) = (&self.s.density, &self.s.temperature, &self.fluid);
+        let inv = vel.inv_dx;
+        // Semi-Lagrangian into (d_out, t_out); returns Σ density.
+        let sl = |d_out: &mut [Real], t_out: &mut [Real]| {
+            super::rows2_sum(d_out, t_out, nx, |j, d, t| {
+                let y = (j as Real + 0.5) * dx;
+                let f = &fl[nx * j..nx * (j + 1)];
+                for i in 0..nx {
+                    if f[i] > 0.0 {
+                        let (xb, yb) = vel.trace((i as Real + 0.5) * dx, y, dt);
+                        d[i] = lc.sample(rho, xb, yb, inv).0;
+                        t[i] = lc.sample(tem, xb, yb, inv).0;
+                    } else {
+                        d[i] = 0.0;
+                        t[i] = amb;
+                    }
+                }
+                d.iter().sum::<Real>()
+            })
+        };
+        if self.cfg.advection == Advection::MacCormack {
+            sl(&mut self.fx, &mut self.fy);
+            let (dh, th) = (&self.fx, &self.fy);
+            super::rows2_sum(&mut self.c2, &mut self.wz, nx, |j, d, t| {
+                let y = (j as Real + 0.5) * dx;
+                for i in 0..nx {
+                    let k = i + nx * j;
+                    if fl[k] > 0.0 {
+                        let x = (i as Real + 0.5) * dx;
+                        let (xb, yb) = vel.trace(x, y, dt);
+                        let (_, dlo, dhi) = lc.sample(rho, xb, yb, inv);
+                        let (_, tlo, thi) = lc.sample(tem, xb, yb, inv);
+                        let (xf, yf) = vel.trace(x, y, -dt);
+                        let (db, tb) = (lc.sample(dh, xf, yf, inv).0, lc.sample(th, xf, yf, inv).0);
+                        d[i] = (dh[k] + 0.5 * (rho[k] - db)).clamp(dlo, dhi);
+                        t[i] = (th[k] + 0.5 * (tem[k] - tb)).clamp(tlo, thi);
+                    } else {
+                        d[i] = 0.0;
+                        t[i] = amb;
+                    }
+                }
+                d.iter().sum::<Real>()
+            });
+        } else {
+            sl(&mut self.c2, &mut self.wz);
         }
+        std::mem::swap(&mut self.s.density, &mut self.c2);
+        std::mem::swap(&mut self.s.temperature, &mut self.wz);
         self.s.books.smoke_advection += self.smoke_amount() - before;
     }
 
@@ -867,40 +898,42 @@ impl StableFluid {
         let mut iters = 0;
         // u: unknown (i, j), i in 0..=nx, j in 0..ny, at padded (i+1) + (nx+3)(j+1).
         {
-            let (x, b, u) = (&mut self.vx[0], &mut self.vb[0], &mut self.s.u);
-            let w = nx + 3;
-            for j in 0..ny {
-                for i in 0..=nx {
-                    let val = u[i + (nx + 1) * (j + 1)];
-                    x[(i + 1) + w * (j + 1)] = val;
-                    let open = self.u_open[i + (nx + 1) * (j + 1)] > 0.0;
-                    let lid_term = if open && j == ny - 1 && self.cfg.no_slip { 2.0 * s * lid } else { 0.0 };
-                    b[(i + 1) + w * (j + 1)] = val + lid_term;
+            let (x, b, u, open) = (&mut self.vx[0], &mut self.vb[0], &mut self.s.u, &self.u_open);
+            let (w, wu) = (nx + 3, nx + 1);
+            let lid_term = if self.cfg.no_slip { 2.0 * s * lid } else { 0.0 };
+            super::rows2_sum(&mut x[w..w * (ny + 1)], &mut b[w..w * (ny + 1)], w, |j, x, b| {
+                let src = &u[wu * (j + 1)..wu * (j + 2)];
+                x[1..wu + 1].copy_from_slice(src);
+                b[1..wu + 1].copy_from_slice(src);
+                if j == ny - 1 {
+                    let m = &open[wu * (j + 1)..wu * (j + 2)];
+                    for i in 0..wu {
+                        b[i + 1] += m[i] * lid_term;
+                    }
                 }
-            }
+                0.0
+            });
             iters += visc[0].solve(x, b, tol, maxit, stop)?.iterations;
-            for j in 0..ny {
-                for i in 0..=nx {
-                    u[i + (nx + 1) * (j + 1)] = x[(i + 1) + w * (j + 1)];
-                }
-            }
+            rows_sum(&mut u[wu..wu * (ny + 1)], wu, |j, row| {
+                row.copy_from_slice(&x[w * (j + 1) + 1..w * (j + 1) + 1 + wu]);
+                0.0
+            });
         }
+        // v: unknown (i, j), i in 0..nx, j in 0..=ny, at padded (i+1) + (nx+2)(j+1).
         {
             let (x, b, v) = (&mut self.vx[1], &mut self.vb[1], &mut self.s.v);
             let w = nx + 2;
-            for j in 0..=ny {
-                for i in 0..nx {
-                    let val = v[(i + 1) + (nx + 2) * j];
-                    x[(i + 1) + w * (j + 1)] = val;
-                    b[(i + 1) + w * (j + 1)] = val;
-                }
-            }
+            super::rows2_sum(&mut x[w..w * (ny + 2)], &mut b[w..w * (ny + 2)], w, |j, x, b| {
+                let src = &v[w * j + 1..w * j + 1 + nx];
+                x[1..nx + 1].copy_from_slice(src);
+                b[1..nx + 1].copy_from_slice(src);
+                0.0
+            });
             iters += visc[1].solve(x, b, tol, maxit, stop)?.iterations;
-            for j in 0..=ny {
-                for i in 0..nx {
-                    v[(i + 1) + (nx + 2) * j] = x[(i + 1) + w * (j + 1)];
-                }
-            }
+            rows_sum(&mut v[..w * (ny + 1)], w, |j, row| {
+                row[1..nx + 1].copy_from_slice(&x[w * (j + 1) + 1..w * (j + 1) + 1 + nx]);
+                0.0
+            });
         }
         self.s.books.viscosity_iterations = iters;
         self.fill_ghosts_uv();
@@ -1559,6 +1592,30 @@ mod tests {
                 for _ in 0..5 {
                     f.step(f.auto_dt().unwrap(), &stop).unwrap();
                 }
+                let mut t = [0.0; 7];
+                for _ in 0..5 {
+                    let dt = f.auto_dt().unwrap();
+                    let mut c = std::time::Instant::now();
+                    let mut lap = |k: usize| {
+                        t[k] += c.elapsed().as_secs_f64() * 1e3 / 5.0;
+                        c = std::time::Instant::now();
+                    };
+                    f.advect_scalars(dt);
+                    lap(0);
+                    f.apply_sources();
+                    lap(1);
+                    f.apply_forces(dt);
+                    lap(2);
+                    f.advect_velocity(dt);
+                    lap(3);
+                    f.diffuse(dt, &stop);
+                    lap(4);
+                    f.project(dt, &stop);
+                    lap(5);
+                    f.kinetic_energy();
+                    lap(6);
+                }
+                println!("ms: scalars {:.1} sources {:.1} forces {:.1} velocity {:.1} viscosity {:.1} projection {:.1} ke {:.1}", t[0], t[1], t[2], t[3], t[4], t[5], t[6]);
                 let start = std::time::Instant::now();
                 let (n, mut its) = (20, 0);
                 for _ in 0..n {

@@ -168,12 +168,16 @@ impl Stencil {
     /// Sets s (e.g. ν·dt/dx² for viscosity) and the scaled coefficients.
     pub fn set_scale(&mut self, s: Real) {
         self.scale = s;
-        for c in 0..self.open.len() {
-            self.ce[c] = s * self.we[c];
-            self.cn[c] = s * self.wn[c];
-            self.diag[c] = self.d0[c] + s * self.count[c];
-            self.inv_diag[c] = 1.0 / self.diag[c];
-        }
+        let (we, wn, d0, count) = (&self.we, &self.wn, &self.d0, &self.count);
+        crate::par::chunks4(&mut self.ce, &mut self.cn, &mut self.diag, &mut self.inv_diag, |at, ce, cn, dg, inv| {
+            for k in 0..ce.len() {
+                let c = at + k;
+                ce[k] = s * we[c];
+                cn[k] = s * wn[c];
+                dg[k] = d0[c] + s * count[c];
+                inv[k] = 1.0 / dg[k];
+            }
+        });
     }
 
     pub fn len(&self) -> usize {
@@ -306,7 +310,8 @@ pub fn residual(st: &Stencil, x: &[Real], b: &[Real], res: &mut [Real]) -> Real 
 }
 
 /// One damped-Jacobi sweep from `x` into `out`: out = x + ω D⁻¹ (b − A x); `zero`: x = 0.
-fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) {
+/// Returns out·b (the preconditioner's r·z when this is the last sweep of the fine level).
+fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) -> Real {
     let (w, n) = (st.w, st.nx);
     rows_sum(rows_of(out, w, st.ny), w, |j, o| {
         let c = (j + 1) * w + 1;
@@ -323,22 +328,36 @@ fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) {
                 o[i] = xc[i] + OMEGA * id[i] * (bb[i] - o[i]);
             }
         }
-        0.0
-    });
+        dot(&o[1..1 + n], bb)
+    })
 }
 
-/// Coarse right-hand side: the sum of the children's residuals (P^T r).
-fn restrict(fine: &Stencil, r: &[Real], coarse: &Stencil, out: &mut [Real]) {
+/// The coarse right-hand side P^T (b − A x), the fine residual summed over each coarse
+/// cell's children, in one pass (the fine residual is never stored).
+fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, out: &mut [Real]) {
     let (w, fw) = (coarse.w, fine.w);
     let (nx, fnx, fny) = (coarse.nx, fine.nx, fine.ny);
-    rows_sum(rows_of(out, w, coarse.ny), w, |j, o| {
+    rows_sum(rows_of(out, w, coarse.ny), w, |jc, o| {
         let o = &mut o[1..1 + nx];
         o.fill(0.0);
-        for b in 2 * j..(2 * j + 2).min(fny) {
-            let row = &r[(b + 1) * fw + 1..(b + 1) * fw + 1 + fnx];
-            for (i, v) in o.iter_mut().enumerate() {
-                let a = 2 * i;
-                *v += row[a] + if a + 1 < fnx { row[a + 1] } else { 0.0 };
+        for jf in 2 * jc..(2 * jc + 2).min(fny) {
+            let c = (jf + 1) * fw + 1;
+            let n = fnx;
+            let xc = &x[c..c + n];
+            let xw = &x[c - 1..c - 1 + n];
+            let xe = &x[c + 1..c + 1 + n];
+            let xs = &x[c - fw..c - fw + n];
+            let xn = &x[c + fw..c + fw + n];
+            let ce = &fine.ce[c..c + n];
+            let cw = &fine.ce[c - 1..c - 1 + n];
+            let cn = &fine.cn[c..c + n];
+            let cs = &fine.cn[c - fw..c - fw + n];
+            let dg = &fine.diag[c..c + n];
+            let bb = &b[c..c + n];
+            let r = |i: usize| bb[i] - (dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+            for (ic, v) in o.iter_mut().enumerate() {
+                let i = 2 * ic;
+                *v += r(i) + if i + 1 < n { r(i + 1) } else { 0.0 };
             }
         }
         0.0
@@ -364,36 +383,36 @@ struct Level {
     x: Vec<Real>,
     b: Vec<Real>,
     tmp: Vec<Real>,
-    res: Vec<Real>,
 }
 
-/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other buffer.
-fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) {
+/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other
+/// buffer; returns x·b after the last.
+fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) -> Real {
+    let mut xb = 0.0;
     for k in 0..sweeps / 2 {
         jacobi(st, x, b, tmp, zero && k == 0);
-        jacobi(st, tmp, b, x, false);
+        xb = jacobi(st, tmp, b, x, false);
     }
+    xb
 }
 
-/// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0. Symmetric (same smoother before
-/// and after, restriction = interpolationᵀ, Galerkin coarse operators), so it is a valid CG
-/// preconditioner.
-fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) {
+/// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0; returns x·b. Symmetric (same
+/// smoother before and after, restriction = interpolationᵀ, scaled Galerkin coarse
+/// operators), so it is a valid CG preconditioner.
+fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
     let (this, rest) = levels.split_first_mut().expect("at least one level");
     if rest.is_empty() {
-        smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
-        return;
+        return smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
     }
     smooth(&this.st, b, x, &mut this.tmp, SWEEPS, true);
-    residual(&this.st, x, b, &mut this.res);
     let next = &mut rest[0];
     let (mut cb, mut cx) = (std::mem::take(&mut next.b), std::mem::take(&mut next.x));
-    restrict(&this.st, &this.res, &next.st, &mut cb);
+    restrict_residual(&this.st, x, b, &next.st, &mut cb);
     vcycle(rest, &cb, &mut cx);
     prolong_add(&rest[0].st, &cx, &this.st, x);
     rest[0].b = cb;
     rest[0].x = cx;
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false);
+    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false)
 }
 
 /// What a solve did.
@@ -430,7 +449,6 @@ impl Pcg {
                 x: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 b: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 tmp: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
-                res: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
                 st,
             });
             match next {
@@ -462,12 +480,7 @@ impl Pcg {
     fn precondition(&mut self) -> Real {
         let (w, n, ny) = (self.levels[0].st.w, self.levels[0].st.nx, self.levels[0].st.ny);
         if self.multigrid {
-            vcycle(&mut self.levels, &self.r, &mut self.z);
-            let (r, z) = (&self.r, &self.z);
-            sum_rows(ny, r.len(), |j| {
-                let c = (j + 1) * w + 1;
-                dot(&r[c..c + n], &z[c..c + n])
-            })
+            vcycle(&mut self.levels, &self.r, &mut self.z)
         } else {
             let (r, st) = (&self.r, &self.levels[0].st);
             rows_sum(rows_of(&mut self.z, w, ny), w, |j, o| {
