@@ -378,7 +378,16 @@ fn sl_pass(vel: &Vel, dx: Real, act: &Active, src: &[Real], dt: Real, out: &mut 
 /// MacCormack: out = hat + ½(src − back-and-forth), clamped to the min/max of the values of
 /// `src` the backtrace interpolated between; `hat` = sl_pass(src) with ghosts filled.
 #[allow(clippy::too_many_arguments)]
-fn mc_pass(vel: &Vel, dx: Real, act: &Active, src: &[Real], hat: &[Real], dt: Real, out: &mut [Real], sq: bool) -> Real {
+fn mc_pass(
+    vel: &Vel,
+    dx: Real,
+    act: &Active,
+    src: &[Real],
+    hat: &[Real],
+    dt: Real,
+    out: &mut [Real],
+    sq: bool,
+) -> Real {
     let lay = act.lay;
     rows_sum(&mut out[..lay.w * lay.h], lay.w, |b, row| {
         if b < act.b0 || b >= act.b1 {
@@ -587,7 +596,12 @@ impl StableFluid {
             "v" => nx * (ny + 1),
             "density" | "temperature" => nx * ny,
             "tracers" => self.s.tracers.len(),
-            _ => return Err(invalid("name", format!("unknown field {name:?}; valid: u, v, density, temperature, tracers"))),
+            _ => {
+                return Err(invalid(
+                    "name",
+                    format!("unknown field {name:?}; valid: u, v, density, temperature, tracers"),
+                ))
+            }
         };
         if values.len() != len {
             return Err(invalid(name, format!("has {} values, expected {len}", values.len())));
@@ -645,15 +659,7 @@ impl StableFluid {
 
     fn vel<'a>(&self, u: &'a [Real], v: &'a [Real]) -> Vel<'a> {
         let (lu, lv, _) = self.lays();
-        Vel {
-            u,
-            v,
-            lu,
-            lv,
-            inv_dx: 1.0 / self.dx,
-            xmax: self.nx as Real * self.dx,
-            ymax: self.ny as Real * self.dx,
-        }
+        Vel { u, v, lu, lv, inv_dx: 1.0 / self.dx, xmax: self.nx as Real * self.dx, ymax: self.ny as Real * self.dx }
     }
 
     /// Σu² over the u faces, Σv² over the v faces (ghosts left out).
@@ -802,7 +808,8 @@ impl StableFluid {
                 let (j0, j1) = (j.saturating_sub(1), (j + 1).min(ny - 1));
                 for (i, o) in row.iter_mut().enumerate() {
                     let (i0, i1) = (i.saturating_sub(1), (i + 1).min(nx - 1));
-                    *o = (vc(i1, j) - vc(i0, j)) / ((i1 - i0) as Real * dx) - (uc(i, j1) - uc(i, j0)) / ((j1 - j0) as Real * dx);
+                    *o = (vc(i1, j) - vc(i0, j)) / ((i1 - i0) as Real * dx)
+                        - (uc(i, j1) - uc(i, j0)) / ((j1 - j0) as Real * dx);
                 }
                 0.0
             });
@@ -1047,15 +1054,15 @@ impl StableFluid {
         let (u, v) = (&self.s.u, &self.s.v);
         let uc = |i: usize, j: usize| 0.5 * (u[i + (nx + 1) * (j + 1)] + u[i + 1 + (nx + 1) * (j + 1)]);
         let vc = |i: usize, j: usize| 0.5 * (v[(i + 1) + (nx + 2) * j] + v[(i + 1) + (nx + 2) * (j + 1)]);
-        let cells = |f: &dyn Fn(usize, usize) -> Real| -> Vec<Real> {
-            (0..nx * ny).map(|c| f(c % nx, c / nx)).collect()
-        };
+        let cells =
+            |f: &dyn Fn(usize, usize) -> Real| -> Vec<Real> { (0..nx * ny).map(|c| f(c % nx, c / nx)).collect() };
         Some(match name {
             "u" => cells(&uc),
             "v" => cells(&vc),
             "speed" => cells(&|i, j| uc(i, j).hypot(vc(i, j))),
             "vorticity" => cells(&|i, j| {
-                let (i0, i1, j0, j1) = (i.saturating_sub(1), (i + 1).min(nx - 1), j.saturating_sub(1), (j + 1).min(ny - 1));
+                let (i0, i1, j0, j1) =
+                    (i.saturating_sub(1), (i + 1).min(nx - 1), j.saturating_sub(1), (j + 1).min(ny - 1));
                 (vc(i1, j) - vc(i0, j)) / ((i1 - i0) as Real * dx) - (uc(i, j1) - uc(i, j0)) / ((j1 - j0) as Real * dx)
             }),
             "density" => self.s.density.clone(),
@@ -1139,7 +1146,8 @@ impl System for StableFluid {
     /// cause, H the domain height), so that a still fluid that is being driven gets a finite
     /// step. `None` if nothing moves and nothing drives.
     fn auto_dt(&self) -> Option<Real> {
-        let amax = |a: &[Real]| par::reduce(a.len(), 0.0, Real::max, |r| a[r].iter().fold(0.0, |m: Real, x| m.max(x.abs())));
+        let amax =
+            |a: &[Real]| par::reduce(a.len(), 0.0, Real::max, |r| a[r].iter().fold(0.0, |m: Real, x| m.max(x.abs())));
         // Ghost rows of u left out: beside a lid they hold 2U − u.
         let (nx, ny) = (self.nx, self.ny);
         let umax = amax(&self.s.u[nx + 1..(nx + 1) * (ny + 1)]).max(amax(&self.s.v));

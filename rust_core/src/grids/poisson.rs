@@ -81,7 +81,8 @@ impl Stencil {
     ) -> Result<Self> {
         let w = nx + 2;
         let n = padded_len(nx, ny);
-        let need = Need::new("fluid", Need::bytes_of::<Real>(9 * n), format!("a solver of {} unknowns", count(n as u128)));
+        let need =
+            Need::new("fluid", Need::bytes_of::<Real>(9 * n), format!("a solver of {} unknowns", count(n as u128)));
         need.check()?;
         let mut s = Self {
             nx,
@@ -113,9 +114,8 @@ impl Stencil {
                 for (nb, inside) in [(c + 1, i + 1 < nx), (c - 1, i > 0), (c + w, j + 1 < ny), (c - w, j > 0)] {
                     if !inside {
                         k += wall;
-                    } else if s.open[nb] {
-                        k += 1.0;
-                    } else if closed_counts {
+                    } else if s.open[nb] || closed_counts {
+                        // An open neighbour, or a closed one held at 0 (Dirichlet).
                         k += 1.0;
                     }
                 }
@@ -150,7 +150,8 @@ impl Stencil {
             stack.push(c0);
             while let Some(c) = stack.pop() {
                 definite |= self.d0[c] > 0.0;
-                let links = [(c + 1, self.we[c]), (c - 1, self.we[c - 1]), (c + w, self.wn[c]), (c - w, self.wn[c - w])];
+                let links =
+                    [(c + 1, self.we[c]), (c - 1, self.we[c - 1]), (c + w, self.wn[c]), (c - w, self.wn[c - w])];
                 for (nb, wt) in links {
                     if wt > 0.0 && !seen[nb] {
                         seen[nb] = true;
@@ -354,7 +355,8 @@ fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, o
             let cs = &fine.cn[c - fw..c - fw + n];
             let dg = &fine.diag[c..c + n];
             let bb = &b[c..c + n];
-            let r = |i: usize| bb[i] - (dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+            let r =
+                |i: usize| bb[i] - (dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
             for (ic, v) in o.iter_mut().enumerate() {
                 let i = 2 * ic;
                 *v += r(i) + if i + 1 < n { r(i + 1) } else { 0.0 };
@@ -438,7 +440,11 @@ impl Pcg {
     /// `multigrid`: precondition with one V-cycle (else with the diagonal).
     pub fn new(st: Stencil, multigrid: bool) -> Result<Self> {
         let n = st.len();
-        let need = Need::new("fluid", Need::bytes_of::<Real>(8 * n), format!("solver buffers of {} unknowns", count(n as u128)));
+        let need = Need::new(
+            "fluid",
+            Need::bytes_of::<Real>(8 * n),
+            format!("solver buffers of {} unknowns", count(n as u128)),
+        );
         let mut levels = Vec::new();
         let mut st = st;
         loop {
@@ -496,7 +502,14 @@ impl Pcg {
 
     /// Solves A x = b from the `x` given (warm start) until |b − A x| ≤ tol·|b| or
     /// `max_iterations`. `x`, `b`: padded arrays (ghosts 0). `None` if `stop` was seen set.
-    pub fn solve(&mut self, x: &mut [Real], b: &[Real], tol: Real, max_iterations: usize, stop: &AtomicBool) -> Option<Solve> {
+    pub fn solve(
+        &mut self,
+        x: &mut [Real],
+        b: &[Real],
+        tol: Real,
+        max_iterations: usize,
+        stop: &AtomicBool,
+    ) -> Option<Solve> {
         let (w, n, ny) = (self.levels[0].st.w, self.levels[0].st.nx, self.levels[0].st.ny);
         let cells = self.levels[0].st.len();
         let bb = sum_rows(ny, cells, |j| {
