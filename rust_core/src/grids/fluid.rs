@@ -1553,6 +1553,25 @@ mod tests {
         }
     }
 
+    /// An overflowing force makes the state non-finite: the step reports the cell, and a
+    /// restore returns the state from before it bit for bit; a set stop flag halts.
+    #[test]
+    fn an_overflow_is_reported_as_a_diverged_cell() {
+        let mut cfg = plume([32, 40], Advection::SemiLagrangian);
+        cfg.buoyancy_beta = 1e300;
+        cfg.sources[0].temperature = 1e300;
+        let mut f = StableFluid::new(cfg).unwrap();
+        let before = f.save();
+        let snap = f.snapshot().unwrap();
+        match f.step(0.01, &no_stop()) {
+            Err(Halt::Diverged { index, quantity: Failure::Cell }) => assert!(index < 32 * 40),
+            other => panic!("{other:?}"),
+        }
+        f.restore(snap);
+        assert!(f.save() == before);
+        assert_eq!(f.step(0.01, &AtomicBool::new(true)), Err(Halt::Stopped));
+    }
+
     /// Hot smoke rises; the smoke books balance: amount = injected + advection change.
     #[test]
     fn smoke_plume_rises_and_its_books_balance() {
