@@ -349,9 +349,15 @@ impl Vel<'_> {
                 0.5 * (v[(a + 1) + wv * b] + v[(a + 1) + wv * (b + 1)]),
             ),
             // u face at padded (a, b) = (i, j + 1): the four v around it.
-            Node::U => (u[a + wu * b], 0.25 * ((v[a + wv * (b - 1)] + v[a + 1 + wv * (b - 1)]) + (v[a + wv * b] + v[a + 1 + wv * b]))),
+            Node::U => (
+                u[a + wu * b],
+                0.25 * ((v[a + wv * (b - 1)] + v[a + 1 + wv * (b - 1)]) + (v[a + wv * b] + v[a + 1 + wv * b])),
+            ),
             // v face at padded (a, b) = (i + 1, j): the four u around it.
-            Node::V => (0.25 * ((u[a - 1 + wu * b] + u[a + wu * b]) + (u[a - 1 + wu * (b + 1)] + u[a + wu * (b + 1)])), v[a + wv * b]),
+            Node::V => (
+                0.25 * ((u[a - 1 + wu * b] + u[a + wu * b]) + (u[a - 1 + wu * (b + 1)] + u[a + wu * (b + 1)])),
+                v[a + wv * b],
+            ),
         }
     }
     /// Where the point at (x, y), moving at (a, b) now, was dt ago (RK2, midpoint), clamped

@@ -53,9 +53,7 @@ pub struct Stencil {
     /// Unscaled diagonal of the neighbour part, and the identity part.
     count: Vec<Real>,
     d0: Vec<Real>,
-    /// Scaled: s·we, s·wn, d0 + s·count, its inverse.
-    ce: Vec<Real>,
-    cn: Vec<Real>,
+    /// Scaled: d0 + s·count, and its inverse (the links are scaled in the kernels).
     diag: Vec<Real>,
     inv_diag: Vec<Real>,
     scale: Real,
@@ -82,7 +80,7 @@ impl Stencil {
         let w = nx + 2;
         let n = padded_len(nx, ny);
         let need =
-            Need::new("fluid", Need::bytes_of::<Real>(9 * n), format!("a solver of {} unknowns", count(n as u128)));
+            Need::new("fluid", Need::bytes_of::<Real>(7 * n), format!("a solver of {} unknowns", count(n as u128)));
         need.check()?;
         let mut s = Self {
             nx,
@@ -93,8 +91,6 @@ impl Stencil {
             wn: need.filled(n, 0.0)?,
             count: need.filled(n, 0.0)?,
             d0: need.filled(n, 1.0)?,
-            ce: need.filled(n, 0.0)?,
-            cn: need.filled(n, 0.0)?,
             diag: need.filled(n, 1.0)?,
             inv_diag: need.filled(n, 1.0)?,
             scale: 1.0,
@@ -169,13 +165,10 @@ impl Stencil {
     /// Sets s (e.g. ν·dt/dx² for viscosity) and the scaled coefficients.
     pub fn set_scale(&mut self, s: Real) {
         self.scale = s;
-        let (we, wn, d0, count) = (&self.we, &self.wn, &self.d0, &self.count);
-        crate::par::chunks4(&mut self.ce, &mut self.cn, &mut self.diag, &mut self.inv_diag, |at, ce, cn, dg, inv| {
-            for k in 0..ce.len() {
-                let c = at + k;
-                ce[k] = s * we[c];
-                cn[k] = s * wn[c];
-                dg[k] = d0[c] + s * count[c];
+        let (d0, count) = (&self.d0, &self.count);
+        crate::par::chunks2(&mut self.diag, &mut self.inv_diag, |at, dg, inv| {
+            for k in 0..dg.len() {
+                dg[k] = d0[at + k] + s * count[at + k];
                 inv[k] = 1.0 / dg[k];
             }
         });
@@ -275,14 +268,15 @@ fn apply_row(st: &Stencil, x: &[Real], j: usize, o: &mut [Real]) {
     let xe = &x[b + 1..b + 1 + n];
     let xs = &x[b - w..b - w + n];
     let xn = &x[b + w..b + w + n];
-    let ce = &st.ce[b..b + n];
-    let cw = &st.ce[b - 1..b - 1 + n];
-    let cn = &st.cn[b..b + n];
-    let cs = &st.cn[b - w..b - w + n];
+    let ce = &st.we[b..b + n];
+    let cw = &st.we[b - 1..b - 1 + n];
+    let cn = &st.wn[b..b + n];
+    let cs = &st.wn[b - w..b - w + n];
     let dg = &st.diag[b..b + n];
+    let s = st.scale;
     let o = &mut o[1..1 + n];
     for i in 0..n {
-        o[i] = dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]);
+        o[i] = dg[i] * xc[i] - s * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]);
     }
 }
 
@@ -349,10 +343,11 @@ fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, o
             let xe = &x[c + 1..c + 1 + n];
             let xs = &x[c - fw..c - fw + n];
             let xn = &x[c + fw..c + fw + n];
-            let ce = &fine.ce[c..c + n];
-            let cw = &fine.ce[c - 1..c - 1 + n];
-            let cn = &fine.cn[c..c + n];
-            let cs = &fine.cn[c - fw..c - fw + n];
+            let ce = &fine.we[c..c + n];
+            let cw = &fine.we[c - 1..c - 1 + n];
+            let cn = &fine.wn[c..c + n];
+            let cs = &fine.wn[c - fw..c - fw + n];
+            let sc = fine.scale;
             let dg = &fine.diag[c..c + n];
             let bb = &b[c..c + n];
             // The residual in blocks of 64 on the stack (vectorised), then summed in pairs.
@@ -361,7 +356,7 @@ fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, o
                 let m = 64.min(n - s0);
                 for (k, r) in buf[..m].iter_mut().enumerate() {
                     let i = s0 + k;
-                    *r = bb[i] - (dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+                    *r = bb[i] - (dg[i] * xc[i] - sc * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
                 }
                 for (p, v) in buf[..m].chunks(2).zip(&mut o[s0 / 2..]) {
                     *v += p.iter().sum::<Real>();
