@@ -35,6 +35,8 @@ const COARSE_SWEEPS: usize = 32;
 /// correction of a smooth error is half of it; ½ restores it (the correction term stays
 /// positive semi-definite, so the V-cycle is still a valid CG preconditioner).
 const COARSE_SCALE: Real = 0.5;
+/// Iterations without the residual norm falling by 10 % after which a solve gives up.
+const STALLED: usize = 100;
 /// Coarsening stops once a side has at most this many cells.
 const COARSEST: usize = 4;
 
@@ -530,6 +532,9 @@ impl Pcg {
         }
         let mut rz = self.precondition();
         self.p.copy_from_slice(&self.z);
+        // Stagnation guard: a tolerance below what round-off allows (a warm start far larger
+        // than b) would otherwise run to max_iterations every solve.
+        let (mut best, mut since_best) = (rr, 0);
         for k in 1..=max_iterations {
             if stop.load(Ordering::Relaxed) {
                 return None;
@@ -550,7 +555,12 @@ impl Pcg {
                 }
                 dot(rr, rr)
             });
-            if rr.sqrt() <= tol * bnorm || k == max_iterations || !rr.is_finite() {
+            if rr < 0.81 * best {
+                (best, since_best) = (rr, 0);
+            } else {
+                since_best += 1;
+            }
+            if rr.sqrt() <= tol * bnorm || k == max_iterations || !rr.is_finite() || since_best >= STALLED {
                 let r = rr.sqrt() / bnorm;
                 return Some(Solve { iterations: k, residual: r, converged: r <= tol });
             }
