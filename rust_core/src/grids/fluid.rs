@@ -41,6 +41,11 @@
 //! energy went. Smoke: semi-Lagrangian advection does not conserve the amount either; its
 //! measured change is booked as "smoke_advection_change", so amount = injected + that change.
 //!
+//! Tracers start at hashed points of the first source (of the fluid if there is none) and
+//! are re-seeded there, at a point hashed from their index and the step count, when they
+//! leave the domain or enter a solid. Everything a step needs is allocated (fallibly) by
+//! `StableFluid::new`; a step allocates nothing.
+//!
 //! Determinism: every pass runs over rows (or fixed chunks of tracers) and every reduction adds
 //! per-row partials in row order, so runs are bit-identical for any thread count.
 use super::poisson::{Pcg, Solve, Stencil};
