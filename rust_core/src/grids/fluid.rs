@@ -41,6 +41,11 @@
 //! energy went. Smoke: semi-Lagrangian advection does not conserve the amount either; its
 //! measured change is booked as "smoke_advection_change", so amount = injected + that change.
 //!
+//! Tracers start at hashed points of the first source (of the fluid if there is none) and
+//! are re-seeded there, at a point hashed from their index and the step count, when they
+//! leave the domain or enter a solid. Everything a step needs is allocated (fallibly) by
+//! `StableFluid::new`; a step allocates nothing.
+//!
 //! Determinism: every pass runs over rows (or fixed chunks of tracers) and every reduction adds
 //! per-row partials in row order, so runs are bit-identical for any thread count.
 use super::poisson::{Pcg, Solve, Stencil};
@@ -192,7 +197,7 @@ impl FluidConfig {
         if nx < 3 || ny < 3 {
             return Err(invalid("shape", format!("every cell count must be >= 3, got {:?}", self.shape)));
         }
-        if nx.checked_mul(ny).is_none_or(|c| c > (1usize << 34)) {
+        if nx >= (1 << 30) || ny >= (1 << 30) || nx.checked_mul(ny).is_none_or(|c| c > (1usize << 34)) {
             return Err(invalid("shape", format!("{:?} has too many cells", self.shape)));
         }
         if !(self.dx.is_finite() && self.dx > 0.0) {
@@ -290,16 +295,25 @@ struct Lay {
     oy: Real,
 }
 
+/// A grid index as a real. Through u32: u64 → f64 has no single x86 instruction (grid sides
+/// are far below 2³²; `validate` says so).
+#[inline(always)]
+fn re(n: usize) -> Real {
+    n as u32 as Real
+}
+
 impl Lay {
     /// Bilinear interpolation at (x, y) (m, inside the domain), with the four values' min and max.
     #[inline(always)]
     fn sample(&self, a: &[Real], x: Real, y: Real, inv_dx: Real) -> (Real, Real, Real) {
-        let fx = (x * inv_dx - self.ox).clamp(0.0, (self.w - 1) as Real);
-        let fy = (y * inv_dx - self.oy).clamp(0.0, (self.h - 1) as Real);
-        let i = (fx as usize).min(self.w - 2);
-        let j = (fy as usize).min(self.h - 2);
+        // Conversions through i32 (one instruction each way); sides < 2³¹.
+        let (wm, hm) = (self.w as i32 - 1, self.h as i32 - 1);
+        let fx = (x * inv_dx - self.ox).clamp(0.0, wm as Real);
+        let fy = (y * inv_dx - self.oy).clamp(0.0, hm as Real);
+        let i = (fx as i32).min(wm - 1);
+        let j = (fy as i32).min(hm - 1);
         let (tx, ty) = (fx - i as Real, fy - j as Real);
-        let k = i + self.w * j;
+        let k = i as usize + self.w * j as usize;
         let (a00, a10, a01, a11) = (a[k], a[k + 1], a[k + self.w], a[k + self.w + 1]);
         let v = (1.0 - ty) * ((1.0 - tx) * a00 + tx * a10) + ty * ((1.0 - tx) * a01 + tx * a11);
         (v, a00.min(a10).min(a01.min(a11)), a00.max(a10).max(a01.max(a11)))
@@ -327,14 +341,46 @@ impl Vel<'_> {
     fn at(&self, x: Real, y: Real) -> (Real, Real) {
         (self.lu.sample(self.u, x, y, self.inv_dx).0, self.lv.sample(self.v, x, y, self.inv_dx).0)
     }
-    /// Where the point at (x, y) was dt ago (RK2, midpoint), clamped into the domain.
+    /// The velocity at node (a, b) of a layout, read off the faces (what bilinear
+    /// interpolation there gives, without the search).
     #[inline(always)]
-    fn trace(&self, x: Real, y: Real, dt: Real) -> (Real, Real) {
-        let (a, b) = self.at(x, y);
+    fn node(&self, kind: Node, a: usize, b: usize) -> (Real, Real) {
+        let (wu, wv) = (self.lu.w, self.lv.w);
+        let (u, v) = (self.u, self.v);
+        match kind {
+            // Cell (a, b): its four faces.
+            Node::Cell => (
+                0.5 * (u[a + wu * (b + 1)] + u[a + 1 + wu * (b + 1)]),
+                0.5 * (v[(a + 1) + wv * b] + v[(a + 1) + wv * (b + 1)]),
+            ),
+            // u face at padded (a, b) = (i, j + 1): the four v around it.
+            Node::U => (
+                u[a + wu * b],
+                0.25 * ((v[a + wv * (b - 1)] + v[a + 1 + wv * (b - 1)]) + (v[a + wv * b] + v[a + 1 + wv * b])),
+            ),
+            // v face at padded (a, b) = (i + 1, j): the four u around it.
+            Node::V => (
+                0.25 * ((u[a - 1 + wu * b] + u[a + wu * b]) + (u[a - 1 + wu * (b + 1)] + u[a + wu * (b + 1)])),
+                v[a + wv * b],
+            ),
+        }
+    }
+    /// Where the point at (x, y), moving at (a, b) now, was dt ago (RK2, midpoint), clamped
+    /// into the domain.
+    #[inline(always)]
+    fn trace_from(&self, x: Real, y: Real, (a, b): (Real, Real), dt: Real) -> (Real, Real) {
         let (xm, ym) = self.clamp(x - 0.5 * dt * a, y - 0.5 * dt * b);
         let (a, b) = self.at(xm, ym);
         self.clamp(x - dt * a, y - dt * b)
     }
+}
+
+/// What the nodes of a layout are.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Node {
+    Cell,
+    U,
+    V,
 }
 
 /// Which nodes of a layout are advected: columns a0..a1 of rows b0..b1; `mask` (1/0, same
@@ -342,6 +388,7 @@ impl Vel<'_> {
 #[derive(Clone, Copy)]
 struct Active<'a> {
     lay: Lay,
+    kind: Node,
     a0: usize,
     a1: usize,
     b0: usize,
@@ -359,11 +406,11 @@ fn sl_pass(vel: &Vel, dx: Real, act: &Active, src: &[Real], dt: Real, out: &mut 
             return 0.0;
         }
         let mut s = 0.0;
-        let y = (b as Real + lay.oy) * dx;
+        let y = (re(b) + lay.oy) * dx;
         for a in act.a0..act.a1 {
             let m = act.mask[a + lay.w * b];
             let val = if m > 0.0 {
-                let (xb, yb) = vel.trace((a as Real + lay.ox) * dx, y, dt);
+                let (xb, yb) = vel.trace_from((re(a) + lay.ox) * dx, y, vel.node(act.kind, a, b), dt);
                 lay.sample(src, xb, yb, vel.inv_dx).0
             } else {
                 act.fill
@@ -394,14 +441,15 @@ fn mc_pass(
             return 0.0;
         }
         let mut s = 0.0;
-        let y = (b as Real + lay.oy) * dx;
+        let y = (re(b) + lay.oy) * dx;
         for a in act.a0..act.a1 {
             let k = a + lay.w * b;
             let val = if act.mask[k] > 0.0 {
-                let x = (a as Real + lay.ox) * dx;
-                let (xb, yb) = vel.trace(x, y, dt);
+                let x = (re(a) + lay.ox) * dx;
+                let v0 = vel.node(act.kind, a, b);
+                let (xb, yb) = vel.trace_from(x, y, v0, dt);
                 let (_, lo, hi) = lay.sample(src, xb, yb, vel.inv_dx);
-                let (xf, yf) = vel.trace(x, y, -dt);
+                let (xf, yf) = vel.trace_from(x, y, v0, -dt);
                 let back = lay.sample(hat, xf, yf, vel.inv_dx).0;
                 (hat[k] + 0.5 * (src[k] - back)).clamp(lo, hi)
             } else {
@@ -712,30 +760,62 @@ impl StableFluid {
         pick
     }
 
-    /// Advects density and temperature by the current velocity.
+    /// Advects density and temperature by the current velocity (one backtrace serves both).
     fn advect_scalars(&mut self, dt: Real) {
         let (_, _, lc) = self.lays();
-        let (nx, ny, dx) = (self.nx, self.ny, self.dx);
+        let (nx, dx) = (self.nx, self.dx);
         let amb = self.cfg.ambient_temperature;
-        let mc = self.cfg.advection == Advection::MacCormack;
         let before = self.smoke_amount();
-        for which in 0..2 {
-            let fill = if which == 0 { 0.0 } else { amb };
-            let act = Active { lay: lc, a0: 0, a1: nx, b0: 0, b1: ny, mask: &self.fluid, fill };
-            let vel = self.vel(&self.s.u, &self.s.v);
-            let src = if which == 0 { &self.s.density } else { &self.s.temperature };
-            if mc {
-                sl_pass(&vel, dx, &act, src, dt, &mut self.hat, false);
-                mc_pass(&vel, dx, &act, src, &self.hat, dt, &mut self.c2, false);
-            } else {
-                sl_pass(&vel, dx, &act, src, dt, &mut self.c2, false);
-            }
-            if which == 0 {
-                std::mem::swap(&mut self.s.density, &mut self.c2);
-            } else {
-                std::mem::swap(&mut self.s.temperature, &mut self.c2);
-            }
+        let vel = self.vel(&self.s.u, &self.s.v);
+        let (rho, tem, fl) = (&self.s.density, &self.s.temperature, &self.fluid);
+        let inv = vel.inv_dx;
+        // Semi-Lagrangian into (d_out, t_out); returns Σ density.
+        let sl = |d_out: &mut [Real], t_out: &mut [Real]| {
+            super::rows2_sum(d_out, t_out, nx, |j, d, t| {
+                let y = (re(j) + 0.5) * dx;
+                let f = &fl[nx * j..nx * (j + 1)];
+                for i in 0..nx {
+                    if f[i] > 0.0 {
+                        let (xb, yb) = vel.trace_from((re(i) + 0.5) * dx, y, vel.node(Node::Cell, i, j), dt);
+                        d[i] = lc.sample(rho, xb, yb, inv).0;
+                        t[i] = lc.sample(tem, xb, yb, inv).0;
+                    } else {
+                        d[i] = 0.0;
+                        t[i] = amb;
+                    }
+                }
+                d.iter().sum::<Real>()
+            })
+        };
+        if self.cfg.advection == Advection::MacCormack {
+            sl(&mut self.fx, &mut self.fy);
+            let (dh, th) = (&self.fx, &self.fy);
+            super::rows2_sum(&mut self.c2, &mut self.wz, nx, |j, d, t| {
+                let y = (re(j) + 0.5) * dx;
+                for i in 0..nx {
+                    let k = i + nx * j;
+                    if fl[k] > 0.0 {
+                        let x = (re(i) + 0.5) * dx;
+                        let v0 = vel.node(Node::Cell, i, j);
+                        let (xb, yb) = vel.trace_from(x, y, v0, dt);
+                        let (_, dlo, dhi) = lc.sample(rho, xb, yb, inv);
+                        let (_, tlo, thi) = lc.sample(tem, xb, yb, inv);
+                        let (xf, yf) = vel.trace_from(x, y, v0, -dt);
+                        let (db, tb) = (lc.sample(dh, xf, yf, inv).0, lc.sample(th, xf, yf, inv).0);
+                        d[i] = (dh[k] + 0.5 * (rho[k] - db)).clamp(dlo, dhi);
+                        t[i] = (th[k] + 0.5 * (tem[k] - tb)).clamp(tlo, thi);
+                    } else {
+                        d[i] = 0.0;
+                        t[i] = amb;
+                    }
+                }
+                d.iter().sum::<Real>()
+            });
+        } else {
+            sl(&mut self.c2, &mut self.wz);
         }
+        std::mem::swap(&mut self.s.density, &mut self.c2);
+        std::mem::swap(&mut self.s.temperature, &mut self.wz);
         self.s.books.smoke_advection += self.smoke_amount() - before;
     }
 
@@ -838,8 +918,8 @@ impl StableFluid {
         let (nx, ny, dx) = (self.nx, self.ny, self.dx);
         let (ns, lid) = (self.cfg.no_slip, self.lid());
         let mc = self.cfg.advection == Advection::MacCormack;
-        let au = Active { lay: lu, a0: 0, a1: nx + 1, b0: 1, b1: ny + 1, mask: &self.u_open, fill: 0.0 };
-        let av = Active { lay: lv, a0: 1, a1: nx + 1, b0: 0, b1: ny + 1, mask: &self.v_open, fill: 0.0 };
+        let au = Active { lay: lu, kind: Node::U, a0: 0, a1: nx + 1, b0: 1, b1: ny + 1, mask: &self.u_open, fill: 0.0 };
+        let av = Active { lay: lv, kind: Node::V, a0: 1, a1: nx + 1, b0: 0, b1: ny + 1, mask: &self.v_open, fill: 0.0 };
         let vel = self.vel(&self.s.u, &self.s.v);
         if mc {
             let hat = &mut self.hat[..lu.w * lu.h];
@@ -874,40 +954,42 @@ impl StableFluid {
         let mut iters = 0;
         // u: unknown (i, j), i in 0..=nx, j in 0..ny, at padded (i+1) + (nx+3)(j+1).
         {
-            let (x, b, u) = (&mut self.vx[0], &mut self.vb[0], &mut self.s.u);
-            let w = nx + 3;
-            for j in 0..ny {
-                for i in 0..=nx {
-                    let val = u[i + (nx + 1) * (j + 1)];
-                    x[(i + 1) + w * (j + 1)] = val;
-                    let open = self.u_open[i + (nx + 1) * (j + 1)] > 0.0;
-                    let lid_term = if open && j == ny - 1 && self.cfg.no_slip { 2.0 * s * lid } else { 0.0 };
-                    b[(i + 1) + w * (j + 1)] = val + lid_term;
+            let (x, b, u, open) = (&mut self.vx[0], &mut self.vb[0], &mut self.s.u, &self.u_open);
+            let (w, wu) = (nx + 3, nx + 1);
+            let lid_term = if self.cfg.no_slip { 2.0 * s * lid } else { 0.0 };
+            super::rows2_sum(&mut x[w..w * (ny + 1)], &mut b[w..w * (ny + 1)], w, |j, x, b| {
+                let src = &u[wu * (j + 1)..wu * (j + 2)];
+                x[1..wu + 1].copy_from_slice(src);
+                b[1..wu + 1].copy_from_slice(src);
+                if j == ny - 1 {
+                    let m = &open[wu * (j + 1)..wu * (j + 2)];
+                    for i in 0..wu {
+                        b[i + 1] += m[i] * lid_term;
+                    }
                 }
-            }
+                0.0
+            });
             iters += visc[0].solve(x, b, tol, maxit, stop)?.iterations;
-            for j in 0..ny {
-                for i in 0..=nx {
-                    u[i + (nx + 1) * (j + 1)] = x[(i + 1) + w * (j + 1)];
-                }
-            }
+            rows_sum(&mut u[wu..wu * (ny + 1)], wu, |j, row| {
+                row.copy_from_slice(&x[w * (j + 1) + 1..w * (j + 1) + 1 + wu]);
+                0.0
+            });
         }
+        // v: unknown (i, j), i in 0..nx, j in 0..=ny, at padded (i+1) + (nx+2)(j+1).
         {
             let (x, b, v) = (&mut self.vx[1], &mut self.vb[1], &mut self.s.v);
             let w = nx + 2;
-            for j in 0..=ny {
-                for i in 0..nx {
-                    let val = v[(i + 1) + (nx + 2) * j];
-                    x[(i + 1) + w * (j + 1)] = val;
-                    b[(i + 1) + w * (j + 1)] = val;
-                }
-            }
+            super::rows2_sum(&mut x[w..w * (ny + 2)], &mut b[w..w * (ny + 2)], w, |j, x, b| {
+                let src = &v[w * j + 1..w * j + 1 + nx];
+                x[1..nx + 1].copy_from_slice(src);
+                b[1..nx + 1].copy_from_slice(src);
+                0.0
+            });
             iters += visc[1].solve(x, b, tol, maxit, stop)?.iterations;
-            for j in 0..=ny {
-                for i in 0..nx {
-                    v[(i + 1) + (nx + 2) * j] = x[(i + 1) + w * (j + 1)];
-                }
-            }
+            rows_sum(&mut v[..w * (ny + 1)], w, |j, row| {
+                row[1..nx + 1].copy_from_slice(&x[w * (j + 1) + 1..w * (j + 1) + 1 + nx]);
+                0.0
+            });
         }
         self.s.books.viscosity_iterations = iters;
         self.fill_ghosts_uv();
@@ -1520,6 +1602,25 @@ mod tests {
         }
     }
 
+    /// An overflowing force makes the state non-finite: the step reports the cell, and a
+    /// restore returns the state from before it bit for bit; a set stop flag halts.
+    #[test]
+    fn an_overflow_is_reported_as_a_diverged_cell() {
+        let mut cfg = plume([32, 40], Advection::SemiLagrangian);
+        cfg.buoyancy_beta = 1e300;
+        cfg.sources[0].temperature = 1e300;
+        let mut f = StableFluid::new(cfg).unwrap();
+        let before = f.save();
+        let snap = f.snapshot().unwrap();
+        match f.step(0.01, &no_stop()) {
+            Err(Halt::Diverged { index, quantity: Failure::Cell }) => assert!(index < 32 * 40),
+            other => panic!("{other:?}"),
+        }
+        f.restore(snap);
+        assert!(f.save() == before);
+        assert_eq!(f.step(0.01, &AtomicBool::new(true)), Err(Halt::Stopped));
+    }
+
     /// Hot smoke rises; the smoke books balance: amount = injected + advection change.
     #[test]
     fn smoke_plume_rises_and_its_books_balance() {
@@ -1552,6 +1653,39 @@ mod tests {
         assert!(tr.iter().all(|x| (0.0..=1.0).contains(x) || (0.0..=64.0 / 48.0).contains(x)));
     }
 
+    /// Per-pass timings at 512², serial (run with --ignored).
+    #[test]
+    #[ignore]
+    fn bench_parts() {
+        let mut cfg = plume([512, 512], Advection::SemiLagrangian);
+        cfg.n_tracers = 0;
+        let mut f = StableFluid::new(cfg).unwrap();
+        let stop = no_stop();
+        for _ in 0..3 {
+            f.step(f.auto_dt().unwrap(), &stop).unwrap();
+        }
+        let dt = f.auto_dt().unwrap();
+        let time = |name: &str, n: usize, f: &mut dyn FnMut()| {
+            let s = std::time::Instant::now();
+            for _ in 0..n {
+                f();
+            }
+            println!("{name}: {:.3} ms", s.elapsed().as_secs_f64() * 1e3 / n as Real);
+        };
+        time("advect_scalars", 10, &mut || f.advect_scalars(dt));
+        time("advect_velocity", 10, &mut || f.advect_velocity(dt));
+        let st = f.pressure.stencil().clone();
+        let (x, mut out) = (f.q.clone(), vec![0.0; f.q.len()]);
+        time("apply", 50, &mut || {
+            super::super::poisson::apply(&st, &x, &mut out);
+        });
+        time("project", 10, &mut || {
+            f.s.pressure.fill(0.0);
+            f.project(dt, &stop);
+        });
+        println!("iterations from zero: {:?}", f.pressure_solve());
+    }
+
     /// 512² plume: time per step and pressure iterations (run with --ignored).
     #[test]
     #[ignore]
@@ -1567,6 +1701,30 @@ mod tests {
                 for _ in 0..5 {
                     f.step(f.auto_dt().unwrap(), &stop).unwrap();
                 }
+                let mut t = [0.0; 7];
+                for _ in 0..5 {
+                    let dt = f.auto_dt().unwrap();
+                    let mut c = std::time::Instant::now();
+                    let mut lap = |k: usize| {
+                        t[k] += c.elapsed().as_secs_f64() * 1e3 / 5.0;
+                        c = std::time::Instant::now();
+                    };
+                    f.advect_scalars(dt);
+                    lap(0);
+                    f.apply_sources();
+                    lap(1);
+                    f.apply_forces(dt);
+                    lap(2);
+                    f.advect_velocity(dt);
+                    lap(3);
+                    f.diffuse(dt, &stop);
+                    lap(4);
+                    f.project(dt, &stop);
+                    lap(5);
+                    f.kinetic_energy();
+                    lap(6);
+                }
+                println!("ms: scalars {:.1} sources {:.1} forces {:.1} velocity {:.1} viscosity {:.1} projection {:.1} ke {:.1}", t[0], t[1], t[2], t[3], t[4], t[5], t[6]);
                 let start = std::time::Instant::now();
                 let (n, mut its) = (20, 0);
                 for _ in 0..n {

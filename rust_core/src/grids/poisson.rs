@@ -35,6 +35,8 @@ const COARSE_SWEEPS: usize = 32;
 /// correction of a smooth error is half of it; ½ restores it (the correction term stays
 /// positive semi-definite, so the V-cycle is still a valid CG preconditioner).
 const COARSE_SCALE: Real = 0.5;
+/// Iterations without the residual norm falling by 10 % after which a solve gives up.
+const STALLED: usize = 100;
 /// Coarsening stops once a side has at most this many cells.
 const COARSEST: usize = 4;
 
@@ -53,9 +55,7 @@ pub struct Stencil {
     /// Unscaled diagonal of the neighbour part, and the identity part.
     count: Vec<Real>,
     d0: Vec<Real>,
-    /// Scaled: s·we, s·wn, d0 + s·count, its inverse.
-    ce: Vec<Real>,
-    cn: Vec<Real>,
+    /// Scaled: d0 + s·count, and its inverse (the links are scaled in the kernels).
     diag: Vec<Real>,
     inv_diag: Vec<Real>,
     scale: Real,
@@ -82,7 +82,7 @@ impl Stencil {
         let w = nx + 2;
         let n = padded_len(nx, ny);
         let need =
-            Need::new("fluid", Need::bytes_of::<Real>(9 * n), format!("a solver of {} unknowns", count(n as u128)));
+            Need::new("fluid", Need::bytes_of::<Real>(7 * n), format!("a solver of {} unknowns", count(n as u128)));
         need.check()?;
         let mut s = Self {
             nx,
@@ -93,8 +93,6 @@ impl Stencil {
             wn: need.filled(n, 0.0)?,
             count: need.filled(n, 0.0)?,
             d0: need.filled(n, 1.0)?,
-            ce: need.filled(n, 0.0)?,
-            cn: need.filled(n, 0.0)?,
             diag: need.filled(n, 1.0)?,
             inv_diag: need.filled(n, 1.0)?,
             scale: 1.0,
@@ -115,6 +113,7 @@ impl Stencil {
                     if !inside {
                         k += wall;
                     } else if s.open[nb] || closed_counts {
+                        // An open neighbour, or a closed one held at 0 (Dirichlet).
                         k += 1.0;
                     }
                 }
@@ -168,12 +167,13 @@ impl Stencil {
     /// Sets s (e.g. ν·dt/dx² for viscosity) and the scaled coefficients.
     pub fn set_scale(&mut self, s: Real) {
         self.scale = s;
-        for c in 0..self.open.len() {
-            self.ce[c] = s * self.we[c];
-            self.cn[c] = s * self.wn[c];
-            self.diag[c] = self.d0[c] + s * self.count[c];
-            self.inv_diag[c] = 1.0 / self.diag[c];
-        }
+        let (d0, count) = (&self.d0, &self.count);
+        crate::par::chunks2(&mut self.diag, &mut self.inv_diag, |at, dg, inv| {
+            for k in 0..dg.len() {
+                dg[k] = d0[at + k] + s * count[at + k];
+                inv[k] = 1.0 / dg[k];
+            }
+        });
     }
 
     pub fn len(&self) -> usize {
@@ -270,14 +270,15 @@ fn apply_row(st: &Stencil, x: &[Real], j: usize, o: &mut [Real]) {
     let xe = &x[b + 1..b + 1 + n];
     let xs = &x[b - w..b - w + n];
     let xn = &x[b + w..b + w + n];
-    let ce = &st.ce[b..b + n];
-    let cw = &st.ce[b - 1..b - 1 + n];
-    let cn = &st.cn[b..b + n];
-    let cs = &st.cn[b - w..b - w + n];
+    let ce = &st.we[b..b + n];
+    let cw = &st.we[b - 1..b - 1 + n];
+    let cn = &st.wn[b..b + n];
+    let cs = &st.wn[b - w..b - w + n];
     let dg = &st.diag[b..b + n];
+    let s = st.scale;
     let o = &mut o[1..1 + n];
     for i in 0..n {
-        o[i] = dg[i] * xc[i] - (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]);
+        o[i] = dg[i] * xc[i] - s * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]);
     }
 }
 
@@ -306,7 +307,8 @@ pub fn residual(st: &Stencil, x: &[Real], b: &[Real], res: &mut [Real]) -> Real 
 }
 
 /// One damped-Jacobi sweep from `x` into `out`: out = x + ω D⁻¹ (b − A x); `zero`: x = 0.
-fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) {
+/// Returns out·b (the preconditioner's r·z when this is the last sweep of the fine level).
+fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) -> Real {
     let (w, n) = (st.w, st.nx);
     rows_sum(rows_of(out, w, st.ny), w, |j, o| {
         let c = (j + 1) * w + 1;
@@ -323,22 +325,44 @@ fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) {
                 o[i] = xc[i] + OMEGA * id[i] * (bb[i] - o[i]);
             }
         }
-        0.0
-    });
+        dot(&o[1..1 + n], bb)
+    })
 }
 
-/// Coarse right-hand side: the sum of the children's residuals (P^T r).
-fn restrict(fine: &Stencil, r: &[Real], coarse: &Stencil, out: &mut [Real]) {
+/// The coarse right-hand side P^T (b − A x), the fine residual summed over each coarse
+/// cell's children, in one pass (the fine residual is never stored).
+fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, out: &mut [Real]) {
     let (w, fw) = (coarse.w, fine.w);
     let (nx, fnx, fny) = (coarse.nx, fine.nx, fine.ny);
-    rows_sum(rows_of(out, w, coarse.ny), w, |j, o| {
+    rows_sum(rows_of(out, w, coarse.ny), w, |jc, o| {
         let o = &mut o[1..1 + nx];
         o.fill(0.0);
-        for b in 2 * j..(2 * j + 2).min(fny) {
-            let row = &r[(b + 1) * fw + 1..(b + 1) * fw + 1 + fnx];
-            for (i, v) in o.iter_mut().enumerate() {
-                let a = 2 * i;
-                *v += row[a] + if a + 1 < fnx { row[a + 1] } else { 0.0 };
+        for jf in 2 * jc..(2 * jc + 2).min(fny) {
+            let c = (jf + 1) * fw + 1;
+            let n = fnx;
+            let xc = &x[c..c + n];
+            let xw = &x[c - 1..c - 1 + n];
+            let xe = &x[c + 1..c + 1 + n];
+            let xs = &x[c - fw..c - fw + n];
+            let xn = &x[c + fw..c + fw + n];
+            let ce = &fine.we[c..c + n];
+            let cw = &fine.we[c - 1..c - 1 + n];
+            let cn = &fine.wn[c..c + n];
+            let cs = &fine.wn[c - fw..c - fw + n];
+            let sc = fine.scale;
+            let dg = &fine.diag[c..c + n];
+            let bb = &b[c..c + n];
+            // The residual in blocks of 64 on the stack (vectorised), then summed in pairs.
+            let mut buf = [0.0; 64];
+            for s0 in (0..n).step_by(64) {
+                let m = 64.min(n - s0);
+                for (k, r) in buf[..m].iter_mut().enumerate() {
+                    let i = s0 + k;
+                    *r = bb[i] - (dg[i] * xc[i] - sc * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+                }
+                for (p, v) in buf[..m].chunks(2).zip(&mut o[s0 / 2..]) {
+                    *v += p.iter().sum::<Real>();
+                }
             }
         }
         0.0
@@ -352,8 +376,10 @@ fn prolong_add(coarse: &Stencil, e: &[Real], fine: &Stencil, x: &mut [Real]) {
     rows_sum(rows_of(x, w, fine.ny), w, |j, o| {
         let row = &e[(j / 2 + 1) * cw + 1..(j / 2 + 1) * cw + 1 + coarse.nx];
         let o = &mut o[1..1 + n];
-        for (i, v) in o.iter_mut().enumerate() {
-            *v += row[i / 2];
+        for (pair, e) in o.chunks_mut(2).zip(row) {
+            for v in pair {
+                *v += e;
+            }
         }
         0.0
     });
@@ -364,36 +390,36 @@ struct Level {
     x: Vec<Real>,
     b: Vec<Real>,
     tmp: Vec<Real>,
-    res: Vec<Real>,
 }
 
-/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other buffer.
-fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) {
+/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other
+/// buffer; returns x·b after the last.
+fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) -> Real {
+    let mut xb = 0.0;
     for k in 0..sweeps / 2 {
         jacobi(st, x, b, tmp, zero && k == 0);
-        jacobi(st, tmp, b, x, false);
+        xb = jacobi(st, tmp, b, x, false);
     }
+    xb
 }
 
-/// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0. Symmetric (same smoother before
-/// and after, restriction = interpolationᵀ, Galerkin coarse operators), so it is a valid CG
-/// preconditioner.
-fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) {
+/// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0; returns x·b. Symmetric (same
+/// smoother before and after, restriction = interpolationᵀ, scaled Galerkin coarse
+/// operators), so it is a valid CG preconditioner.
+fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
     let (this, rest) = levels.split_first_mut().expect("at least one level");
     if rest.is_empty() {
-        smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
-        return;
+        return smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
     }
     smooth(&this.st, b, x, &mut this.tmp, SWEEPS, true);
-    residual(&this.st, x, b, &mut this.res);
     let next = &mut rest[0];
     let (mut cb, mut cx) = (std::mem::take(&mut next.b), std::mem::take(&mut next.x));
-    restrict(&this.st, &this.res, &next.st, &mut cb);
+    restrict_residual(&this.st, x, b, &next.st, &mut cb);
     vcycle(rest, &cb, &mut cx);
     prolong_add(&rest[0].st, &cx, &this.st, x);
     rest[0].b = cb;
     rest[0].x = cx;
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false);
+    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false)
 }
 
 /// What a solve did.
@@ -434,7 +460,6 @@ impl Pcg {
                 x: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 b: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 tmp: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
-                res: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
                 st,
             });
             match next {
@@ -466,12 +491,7 @@ impl Pcg {
     fn precondition(&mut self) -> Real {
         let (w, n, ny) = (self.levels[0].st.w, self.levels[0].st.nx, self.levels[0].st.ny);
         if self.multigrid {
-            vcycle(&mut self.levels, &self.r, &mut self.z);
-            let (r, z) = (&self.r, &self.z);
-            sum_rows(ny, r.len(), |j| {
-                let c = (j + 1) * w + 1;
-                dot(&r[c..c + n], &z[c..c + n])
-            })
+            vcycle(&mut self.levels, &self.r, &mut self.z)
         } else {
             let (r, st) = (&self.r, &self.levels[0].st);
             rows_sum(rows_of(&mut self.z, w, ny), w, |j, o| {
@@ -512,6 +532,9 @@ impl Pcg {
         }
         let mut rz = self.precondition();
         self.p.copy_from_slice(&self.z);
+        // Stagnation guard: a tolerance below what round-off allows (a warm start far larger
+        // than b) would otherwise run to max_iterations every solve.
+        let (mut best, mut since_best) = (rr, 0);
         for k in 1..=max_iterations {
             if stop.load(Ordering::Relaxed) {
                 return None;
@@ -532,7 +555,12 @@ impl Pcg {
                 }
                 dot(rr, rr)
             });
-            if rr.sqrt() <= tol * bnorm || k == max_iterations || !rr.is_finite() {
+            if rr < 0.81 * best {
+                (best, since_best) = (rr, 0);
+            } else {
+                since_best += 1;
+            }
+            if rr.sqrt() <= tol * bnorm || k == max_iterations || !rr.is_finite() || since_best >= STALLED {
                 let r = rr.sqrt() / bnorm;
                 return Some(Solve { iterations: k, residual: r, converged: r <= tol });
             }
