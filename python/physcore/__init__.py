@@ -21,7 +21,7 @@ from ._errors import (
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .fluids import Fluid, neighbors
-from .grids import Drop, GrayScott, Oscillator, Wave
+from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
 from .scene import INTEGRATORS, EnergyReport, Scene
 from .terms import *  # noqa: F403 - every term record, as terms.__all__ lists them
 
@@ -36,6 +36,8 @@ __all__ = [
     "neighbors",
     "Wave",
     "GrayScott",
+    "StableFluid",
+    "Source",
     "Drop",
     "Oscillator",
     "grids",

@@ -93,6 +93,8 @@ _META_OPTIONAL: dict[str, str] = {"rtol": "number", "atol": "number", "precision
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
     "wave": {"u": ("f8", "G"), "u_prev": ("f8", "G"), "clock": ("f8", 5)},
     "gray_scott": {"u": ("f8", "G"), "v": ("f8", "G"), "made": ("f8", 2)},
+    # The fluid's arrays carry ghost faces: sized by the core, which checks them on load.
+    "fluid": {k: ("f8", None) for k in ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books")},
 }
 
 
@@ -477,13 +479,16 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
         cells = f"G{k}"
         sizes[cells] = (math.prod(g["record"]["shape"]), f"meta.grids[{k}].record.shape")
         for name, (dtype, axis) in _GRID_STATE[g["kind"]].items():
-            if axis != "G":
+            if axis not in ("G", None):
                 sizes[f"{name}{k}"] = (axis, f"a {g['kind']} grid's {name}")
             req[f"grid{k}_{name}"] = _Spec(dtype, (cells if axis == "G" else f"{name}{k}",))
         if g["record"].get("mask"):
             req[f"grid{k}_mask"] = _Spec("b1", (cells,))
         for j, o in enumerate(g["record"].get("oscillators", [])):
             if isinstance(o, list) and len(o) > 2 and o[2] is None:
+                req[f"grid{k}_region{j}"] = _Spec("b1", (cells,))
+        for j, src in enumerate(g["record"].get("sources", [])):
+            if isinstance(src, list) and len(src) > 3 and src[3] is None:
                 req[f"grid{k}_region{j}"] = _Spec("b1", (cells,))
     opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
     # Optional per-particle attributes (charge, radius): one value per particle when set.

@@ -80,8 +80,16 @@ def fit_size(extent: tuple[float, ...], size: tuple[int, int]) -> tuple[int, int
 class FieldRasteriser:
     """Index images of a recording's field frames in one style, on scales fixed over the run."""
 
-    def __init__(self, fields: np.ndarray, style: str, size: tuple[int, int], mask: np.ndarray | None, dx: float) -> None:
-        self.fields, self.style, self.size, self.dx = fields, style, size, dx
+    def __init__(
+        self,
+        fields: np.ndarray,
+        style: str,
+        size: tuple[int, int],
+        mask: np.ndarray | None,
+        extent: tuple[float, float],
+        points: np.ndarray | None = None,
+    ) -> None:
+        self.fields, self.style, self.size, self.extent, self.points = fields, style, size, extent, points
         self.mask = None if mask is None else _mask_image(mask, size)
         finite = fields[np.isfinite(fields)]
         if style == "water":
@@ -125,6 +133,14 @@ class FieldRasteriser:
             t = np.clip((_image(f, self.size) - self.lo) / (self.hi - self.lo), 0.0, 1.0)
         t = np.nan_to_num(t, nan=0.0)
         out = (t * (_N - 1)).round().astype(np.uint8)
+        if self.points is not None:
+            # Tracers: one bright pixel each over the field (a cloud of them reads as streaks).
+            p = self.points[k]
+            w, h = self.size
+            px = np.floor(p[:, 0] / self.extent[0] * w)
+            py = np.floor((1.0 - p[:, 1] / self.extent[1]) * h)
+            ok = np.isfinite(px) & np.isfinite(py) & (px >= 0) & (px < w) & (py >= 0) & (py < h)
+            out[py[ok].astype(np.intp), px[ok].astype(np.intp)] = _N - 1
         if self.mask is not None:
             out[self.mask] = _OBSTACLE
         return out

@@ -78,6 +78,8 @@ class Recording(NamedTuple):
     field_style: str = ""
     field_mask: np.ndarray | None = None
     field_extent: tuple[float, float] | None = None
+    #: (F, T, 2) float32: tracer positions (m) of a grid fluid at every frame, drawn as streaks.
+    field_points: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -128,6 +130,8 @@ def _simulate(
             return f[:, :, f.shape[2] // 2] if f.ndim == 3 else f
 
         fields = np.empty((frames, *g.shape[:2]), dtype=np.float32)
+    n_tracers = int(getattr(gp["grid"], "n_tracers", 0)) if gp is not None else 0
+    points = np.empty((frames, n_tracers, 2), dtype=np.float32) if n_tracers else None
     has_time = hasattr(scene, "time")
     times = np.empty(frames) if has_time else None
     bar = None
@@ -164,6 +168,8 @@ def _simulate(
             if fields is not None:
                 with np.errstate(over="ignore"):
                     fields[k] = grab()
+                    if points is not None:
+                        points[k] = gp["grid"].tracers
             if times is not None:
                 times[k] = float(scene.time)
             if on_frame is not None:
@@ -192,6 +198,7 @@ def _simulate(
         field_style=gp["style"] if gp else "",
         field_mask=_grid_mask(gp),
         field_extent=tuple(gp["grid"].extent[:2]) if gp else None,
+        field_points=points,
     )
 
 

@@ -3,6 +3,7 @@
 //! Every kind takes `shape` (cell counts, x first), `dx` (m) and `edges` (one rule per face,
 //! "x-,x+,y-,y+[,z-,z+]", each `fixed`, `free` or `periodic`). Arrays over cells are in the
 //! grid's layout (x fastest). Lists of sources come as flat arrays plus a count per source.
+use super::fluid::{Advection, FluidConfig, Source, StableFluid};
 use super::gray_scott::{GrayScottConfig, GrayScottSystem};
 use super::wave::{Drop, Oscillator, WaveConfig, WaveSystem};
 use super::{Edge, Grid};
@@ -12,7 +13,7 @@ use crate::terms::registry::Params;
 use crate::vector::Real;
 
 /// The kinds `build` knows.
-pub const KINDS: [&str; 2] = ["wave", "gray_scott"];
+pub const KINDS: [&str; 3] = ["wave", "gray_scott", "fluid"];
 
 /// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
 pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
@@ -72,6 +73,52 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             c.cfl = p.number("cfl")?;
             Ok(Box::new(GrayScottSystem::new(c)?))
         }
+        "fluid" => {
+            if dim != 2 {
+                return Err(invalid("shape", "the grid fluid is 2D only"));
+            }
+            let advection = p.text("advection")?;
+            let mut c = FluidConfig {
+                name: name.to_string(),
+                shape: [grid.n[0], grid.n[1]],
+                dx: grid.dx,
+                viscosity: p.number("viscosity")?,
+                buoyancy_alpha: p.number("buoyancy_alpha")?,
+                buoyancy_beta: p.number("buoyancy_beta")?,
+                ambient_temperature: p.number("ambient_temperature")?,
+                vorticity: p.number("vorticity")?,
+                advection: Advection::by_name(advection)?,
+                tolerance: p.number("tolerance")?,
+                max_iterations: p.count("max_iterations", 1 << 30)?,
+                no_slip: p.flag("no_slip")?,
+                lid: if p.flag("has_lid")? { Some(p.number("lid")?) } else { None },
+                obstacles: p
+                    .take_floats("obstacles")
+                    .map(|m| m.iter().map(|&x| x != 0.0).collect())
+                    .unwrap_or_default(),
+                sources: Vec::new(),
+                n_tracers: p.count("n_tracers", 1 << 26)?,
+                cfl: p.number("cfl")?,
+            };
+            let density = p.take_floats("src_density")?;
+            let temperature = p.take_floats("src_temperature")?;
+            let velocity = p.take_floats("src_velocity")?;
+            if temperature.len() != density.len() || velocity.len() != 2 * density.len() {
+                return Err(invalid("sources", "density, temperature and velocity must have one entry per source"));
+            }
+            let shapes = profiles(&mut p, "src", density.len())?;
+            c.sources = shapes
+                .into_iter()
+                .enumerate()
+                .map(|(k, cells)| Source {
+                    cells,
+                    density: density[k],
+                    temperature: temperature[k],
+                    velocity: [velocity[2 * k], velocity[2 * k + 1]],
+                })
+                .collect();
+            Ok(Box::new(StableFluid::new(c)?))
+        }
         _ => Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
     }
 }
@@ -98,7 +145,11 @@ fn grid_of(p: &mut Params, dim: usize) -> Result<Grid> {
 
 /// `n` profiles from `{prefix}_counts` (cells per source), `{prefix}_cells`, `{prefix}_weights`.
 fn profiles(p: &mut Params, prefix: &str, n: usize) -> Result<Vec<Vec<(usize, Real)>>> {
-    let arg = if prefix == "drop" { "drops" } else { "oscillators" };
+    let arg = match prefix {
+        "drop" => "drops",
+        "osc" => "oscillators",
+        _ => "sources",
+    };
     let counts = p.take_floats(&format!("{prefix}_counts"))?;
     let cells = p.take_indices(&format!("{prefix}_cells"))?;
     let weights = p.take_floats(&format!("{prefix}_weights"))?;
