@@ -224,6 +224,13 @@ impl Spare {
 /// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
 const MIN_ROWS: usize = 4;
 
+/// Rows per task for `rows` rows: a few long runs of consecutive rows per thread, so that each
+/// thread streams through memory (the hardware prefetchers follow long runs; stencils here are
+/// bandwidth-bound), with enough tasks left to balance a noisy machine.
+fn task_rows(rows: usize) -> usize {
+    (rows / (4 * par::threads())).max(MIN_ROWS)
+}
+
 /// `partials[r] = f(r, row)` for every row `r` of `out` (rows of `row_len` values), in parallel
 /// on the pool of the call in progress. The caller reduces `partials` in row order, so results
 /// are bit-identical for any thread count; `partials` is scratch the caller keeps, so a step
@@ -235,10 +242,11 @@ pub fn rows_each<T: Send>(
     f: impl Fn(usize, &mut [Real]) -> T + Sync + Send,
 ) {
     debug_assert_eq!(out.len(), row_len * partials.len());
+    let per_task = task_rows(partials.len());
     let done = par::fork_if(out.len(), || {
         out.par_chunks_mut(row_len)
             .zip(partials.par_iter_mut())
-            .with_min_len(MIN_ROWS)
+            .with_min_len(per_task)
             .enumerate()
             .for_each(|(r, (row, p))| *p = f(r, row))
     });
@@ -267,11 +275,12 @@ pub fn rows2_each<T: Send>(
     f: impl Fn(usize, &mut [Real], &mut [Real]) -> T + Sync + Send,
 ) {
     debug_assert_eq!(a.len(), b.len());
+    let per_task = task_rows(partials.len());
     let done = par::fork_if(a.len(), || {
         a.par_chunks_mut(row_len)
             .zip(b.par_chunks_mut(row_len))
             .zip(partials.par_iter_mut())
-            .with_min_len(MIN_ROWS)
+            .with_min_len(per_task)
             .enumerate()
             .for_each(|(r, ((a, b), p))| *p = f(r, a, b))
     });
