@@ -88,8 +88,12 @@ class FieldRasteriser:
         mask: np.ndarray | None,
         extent: tuple[float, float],
         points: np.ndarray | None = None,
+        times: np.ndarray | None = None,
+        label: str = "",
+        colorbar: bool = True,
     ) -> None:
         self.fields, self.style, self.size, self.extent, self.points = fields, style, size, extent, points
+        self.times, self.label, self.colorbar = times, label, colorbar
         self.mask = None if mask is None else _mask_image(mask, size)
         finite = fields[np.isfinite(fields)]
         if style == "water":
@@ -143,7 +147,48 @@ class FieldRasteriser:
             out[py[ok].astype(np.intp), px[ok].astype(np.intp)] = _N - 1
         if self.mask is not None:
             out[self.mask] = _OBSTACLE
+        self._annotate(out, k)
         return out
+
+    def _annotate(self, out: np.ndarray, k: int) -> None:
+        """The time (bottom left) and, for the colour maps, a colour bar with the scale's ends and
+        the quantity's name (top right); drawn in the map's own end colours, whichever contrasts
+        with the background. Left out where the image is too small to read them."""
+        from ._colorbar import _format_value, _text_mask
+
+        h, w = out.shape
+        if w < 100 or h < 80:
+            return
+        # Ink and a box behind it from the map's own colours: light on dark maps, dark on light.
+        ink, box = {"water": (0, _N - 1), "signed": (0, _N // 2)}.get(self.style, (_N - 1, 0))
+
+        def text(s: str, x: int, y: int) -> None:
+            m = _text_mask(s)
+            out[max(y - 1, 0) : y + m.shape[0], max(x - 2, 0) : x + m.shape[1] + 2] = box
+            region = out[y : y + m.shape[0], x : x + m.shape[1]]
+            region[m[: region.shape[0], : region.shape[1]]] = ink
+
+        if self.times is not None and np.isfinite(self.times[k]):
+            text(f"t = {_format_value(float(self.times[k]))} s", 4, h - 14)
+        if self.colorbar and self.style != "water":
+            lo, hi = (_format_value(self.lo), _format_value(self.hi)) if self.style != "signed" else (f"-{_format_value(self.hi)}", _format_value(self.hi))
+            hi = f"{hi} {self.label}".rstrip()
+            length = max(24, w // 6)
+            hi_w, lo_w = _text_mask(hi).shape[1], _text_mask(lo).shape[1]
+            x_hi = w - 4 - hi_w
+            x_strip = x_hi - 4 - length
+            x_lo = x_strip - 4 - lo_w
+            if x_lo < w // 3:
+                return
+            out[0:13, x_lo - 2 : x_hi + hi_w + 2] = box
+            text(lo, x_lo, 2)
+            text(hi, x_hi, 2)
+            ramp = (np.arange(length) * (_N - 1) / (length - 1)).round().astype(np.uint8)
+            out[3:11, x_strip : x_strip + length] = ramp[None, :]
+            out[2, x_strip - 1 : x_strip + length + 1] = ink
+            out[11, x_strip - 1 : x_strip + length + 1] = ink
+            out[2:12, x_strip - 1] = ink
+            out[2:12, x_strip + length] = ink
 
 
 def default_style(kind: str) -> str:

@@ -204,7 +204,9 @@ def gif(
         from ._fields import FieldRasteriser, fit_size, palette
 
         fsize = fit_size(rec.field_extent, size)
-        fr = FieldRasteriser(rec.fields, rec.field_style, fsize, rec.field_mask, rec.field_extent, rec.field_points)
+        fr = FieldRasteriser(
+            rec.fields, rec.field_style, fsize, rec.field_mask, rec.field_extent, rec.field_points, rec.times, rec.field_label, colorbar
+        )
         _write_gif(path, (fr.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames), palette(rec.field_style))
         return path
     trail = min(trail, rec.frames)

@@ -80,6 +80,8 @@ class Recording(NamedTuple):
     field_extent: tuple[float, float] | None = None
     #: (F, T, 2) float32: tracer positions (m) of a grid fluid at every frame, drawn as streaks.
     field_points: np.ndarray | None = None
+    #: The recorded field's name and unit, for the colour bar ("v", "density", "speed m/s").
+    field_label: str = ""
 
     @property
     def frames(self) -> int:
@@ -199,7 +201,16 @@ def _simulate(
         field_mask=_grid_mask(gp),
         field_extent=tuple(gp["grid"].extent[:2]) if gp else None,
         field_points=points,
+        field_label=_field_label(gp),
     )
+
+
+def _field_label(gp: dict[str, Any] | None) -> str:
+    if gp is None:
+        return ""
+    units = {"u": "m", "velocity": "m/s", "speed": "m/s", "vorticity": "1/s", "temperature": "K"}
+    name = gp["field"]
+    return f"{name} {units[name]}" if name in units and gp["grid"].kind != "gray_scott" else name
 
 
 def _grid_mask(gp: dict[str, Any] | None) -> np.ndarray | None:
