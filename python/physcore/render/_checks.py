@@ -161,10 +161,17 @@ def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool)
     # float32 positions, speed, pressure per particle and strain per spring; the palette-index
     # buffer and its Pillow image per frame.
     per_frame = 4 * n * (dim + 2) + 4 * m + 2 * size[0] * size[1]
+    # A grid's recorded field (float32, one 2D slice) and a fluid's tracers.
+    grids = getattr(scene, "grids", ())
+    cells = 0
+    if grids:
+        g = grids[0]
+        cells = int(g.shape[0]) * int(g.shape[1])
+        per_frame += 4 * cells + 8 * int(getattr(g, "n_tracers", 0))
     _check.memory(
         "frames, size",
         frames * per_frame,
-        f"{_short(frames)} frames of {size[0]}x{size[1]} pixels and {n} particles",
+        f"{_short(frames)} frames of {size[0]}x{size[1]} pixels, {n} particles" + (f" and {cells} grid cells" if cells else ""),
     )
 
 
