@@ -25,7 +25,7 @@
 //! square of the depth into the layer to `layer_strength`·c/dx at the outer face (fixed): the
 //! ramp is gentle enough that little reflects from it, and what crosses it is damped twice.
 //! **Obstacles**: masked cells are held at u = 0 (a rigid wall at their centres).
-use super::{first_non_finite, rows_each, sum_rows, Grid};
+use super::{first_non_finite, rows_each, sum_rows, wave_pair, Grid};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::simd;
@@ -202,6 +202,10 @@ pub struct WaveSystem {
     /// u⁻ at the oscillators' cells before a step, and the rows' partial sums (scratch).
     src_prev: Vec<Real>,
     partials: Vec<(Real, Real)>,
+    /// Fused pairs of steps (`wave_pair`): block starts, edge-row copies and halo rows.
+    pair_starts: Vec<usize>,
+    pair_saved: Vec<Real>,
+    pair_scratch: Vec<Real>,
     /// Buffers of checkpoints that were not needed (see `grids::Spare`).
     spare: super::Spare,
 }
@@ -277,6 +281,9 @@ impl WaveSystem {
             src_prev: vec![0.0; src],
             partials: vec![(0.0, 0.0); rows],
             spare: super::Spare::default(),
+            pair_starts: Vec::new(),
+            pair_saved: Vec::new(),
+            pair_scratch: Vec::new(),
             cfg,
         })
     }
@@ -445,6 +452,81 @@ impl WaveSystem {
     }
 }
 
+impl WaveSystem {
+    /// Whether two steps can be fused (`wave_pair`): 2D, undamped, no layers, obstacles or
+    /// oscillators, y faces not periodic, at least 8 rows.
+    fn fusable(&self) -> bool {
+        let g = &self.cfg.grid;
+        g.dim == 2
+            && self.cfg.gamma == 0.0
+            && self.gamma_cells.is_empty()
+            && self.keep.is_empty()
+            && self.cfg.oscillators.is_empty()
+            && g.edges[2] != super::Edge::Periodic
+            && g.rows() >= 8
+    }
+
+    /// Two steps of `dt` in one sweep; `Err(0 or 1, halt)` names the step that diverged.
+    fn step_pair(&mut self, dt: Real) -> std::result::Result<(), (u64, Halt)> {
+        let g = self.cfg.grid.clone();
+        let (nx, rows) = (g.n[0], g.rows());
+        let k = (self.cfg.c * dt / g.dx).powi(2);
+        // Blocks of consecutive rows, at least 4 each (a block's edge rows are copied).
+        let mut nb = (rows / 8).clamp(1, 4 * crate::par::threads());
+        let mut br = rows.div_ceil(nb);
+        while nb > 1 && rows - (nb - 1) * br < 4 {
+            nb -= 1;
+            br = rows.div_ceil(nb);
+        }
+        nb = rows.div_ceil(br);
+        self.pair_starts.clear();
+        self.pair_starts.extend((0..nb).map(|b| b * br));
+        self.pair_starts.push(rows);
+        self.pair_saved.resize(6 * nx * nb, 0.0);
+        self.pair_scratch.resize(2 * nx * nb, 0.0);
+        wave_pair::save_edges(&self.u, &self.u_prev, nx, &self.pair_starts, &mut self.pair_saved);
+        let (starts, saved) = (&self.pair_starts, &self.pair_saved);
+        let (a, b, scratch) = (&mut self.u, &mut self.u_prev, &mut self.pair_scratch);
+        let level = simd::level();
+        type Block<'a> = (usize, ((&'a mut [Real], &'a mut [Real]), &'a mut [Real]));
+        let job = |(blk, ((a, b), s)): Block| {
+            simd::vectorized(
+                level,
+                #[inline(always)]
+                || wave_pair::block_pair(&g, blk * br, a, b, saved, starts, k, s),
+            )
+        };
+        use rayon::prelude::*;
+        let oks: Vec<(bool, bool)> = crate::par::fork_if(a.len(), || {
+            a.par_chunks_mut(br * nx)
+                .zip(b.par_chunks_mut(br * nx))
+                .zip(scratch.par_chunks_mut(2 * nx))
+                .enumerate()
+                .map(job)
+                .collect()
+        })
+        .unwrap_or_else(|| {
+            a.chunks_mut(br * nx)
+                .zip(b.chunks_mut(br * nx))
+                .zip(scratch.chunks_mut(2 * nx))
+                .enumerate()
+                .map(job)
+                .collect()
+        });
+        self.clock.t += dt;
+        if oks.iter().any(|o| !o.0) {
+            let index = first_non_finite(&self.u_prev).unwrap_or(0);
+            return Err((0, Halt::Diverged { index, quantity: Failure::Cell }));
+        }
+        self.clock.t += dt;
+        if oks.iter().any(|o| !o.1) {
+            let index = first_non_finite(&self.u).unwrap_or(0);
+            return Err((1, Halt::Diverged { index, quantity: Failure::Cell }));
+        }
+        Ok(())
+    }
+}
+
 /// Leapfrog over cells [lo, hi) of one row: `D3` adds the z neighbours, `G` reads γ per cell
 /// (`gc`), `M` zeroes obstacle cells (`keep`). Returns (Σ u⁺, Σ γ (u⁺ − u⁻)²).
 #[inline(always)]
@@ -600,6 +682,30 @@ impl System for WaveSystem {
         if !sum.is_finite() {
             let index = first_non_finite(&self.u).unwrap_or(0);
             return Err(Halt::Diverged { index, quantity: Failure::Cell });
+        }
+        Ok(())
+    }
+    /// Pairs of steps fused into one sweep where `fusable` (same bits as single steps).
+    fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
+        let mut i = 0;
+        while i < n {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err((i, Halt::Stopped));
+            }
+            let pair = i + 1 < n && dt == self.clock.dt && self.fusable();
+            if pair {
+                self.drop_due(dt);
+                // A drop due in the second step needs the steps one by one.
+                let t2 = self.clock.t + dt;
+                let second_drop = self.cfg.drops.get(self.clock.next_drop).is_some_and(|d| d.t < t2 + dt);
+                if !second_drop {
+                    self.step_pair(dt).map_err(|(j, h)| (i + j, h))?;
+                    i += 2;
+                    continue;
+                }
+            }
+            self.step(dt, stop).map_err(|h| (i, h))?;
+            i += 1;
         }
         Ok(())
     }
@@ -882,6 +988,56 @@ mod tests {
         fresh.load(&saved).unwrap();
         steps(&mut fresh, 40, dt);
         assert_eq!(a, fresh.u);
+    }
+
+    /// Fused pairs of steps give the bits of single steps, for every edge rule that fuses, any
+    /// thread count (block split), odd step counts and drops falling between or inside pairs.
+    #[test]
+    fn fused_pairs_give_the_bits_of_single_steps() {
+        for edges in [[Edge::Fixed; 4], [Edge::Free; 4], [Edge::Periodic, Edge::Periodic, Edge::Free, Edge::Fixed]] {
+            for threads in [1, 2, 3] {
+                let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap());
+                crate::par::install(Some(&pool), || {
+                    let mut cfg = WaveConfig::new("w", Grid::new(&[67, 45], 1.0 / 45.0, &edges).unwrap(), 1.0);
+                    cfg.drops = (0..5)
+                        .map(|d| Drop { t: 0.013 * d as Real, amplitude: 0.2, profile: vec![(100 + 300 * d, 1.0)] })
+                        .collect();
+                    let mut one = WaveSystem::new(cfg.clone()).unwrap();
+                    let mut two = WaveSystem::new(cfg).unwrap();
+                    assert!(two.fusable());
+                    bumpy(&mut one);
+                    bumpy(&mut two);
+                    let dt = one.auto_dt().unwrap();
+                    one.clock.dt = dt;
+                    two.clock.dt = dt;
+                    let stop = AtomicBool::new(false);
+                    for _ in 0..41 {
+                        one.step(dt, &stop).unwrap();
+                    }
+                    two.steps(41, dt, &stop).unwrap();
+                    assert!(one.u.iter().zip(&two.u).all(|(a, b)| a.to_bits() == b.to_bits()), "{edges:?} {threads}");
+                    assert!(one.u_prev.iter().zip(&two.u_prev).all(|(a, b)| a.to_bits() == b.to_bits()));
+                    assert_eq!(one.clock, two.clock);
+                });
+            }
+        }
+    }
+
+    #[test]
+    fn fused_pairs_report_the_step_that_diverged() {
+        let mut w = WaveSystem::new(square(32, 1.0, Edge::Fixed)).unwrap();
+        bumpy(&mut w);
+        let dt = 1.01 * w.cfl_limit();
+        w.clock.dt = dt;
+        let mut single = WaveSystem::new(square(32, 1.0, Edge::Fixed)).unwrap();
+        bumpy(&mut single);
+        single.clock.dt = dt;
+        let stop = AtomicBool::new(false);
+        let first = (0..20000u64).find(|_| single.step(dt, &stop).is_err()).unwrap();
+        match w.steps(20000, dt, &stop) {
+            Err((i, Halt::Diverged { quantity: Failure::Cell, .. })) => assert_eq!(i, first),
+            other => panic!("{other:?}"),
+        }
     }
 
     /// A 3D box: the same code, 7-point stencil, CFL 1/√3.

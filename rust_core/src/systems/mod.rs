@@ -95,6 +95,19 @@ pub trait System: Send + Sync {
     fn set_stop(&mut self, _stop: &Stop) {}
     /// Advances by `dt` seconds. On `Err` the world rolls every system back.
     fn step(&mut self, dt: Real, stop: &AtomicBool) -> std::result::Result<(), Halt>;
+    /// `n` steps of `dt`, when this is the world's only system with anything to step and no
+    /// coupling runs between steps (a system may then fuse steps). On a halt, the steps taken
+    /// before it: the world's clock counts those, plus the halted one if it diverged. Reads
+    /// `stop` before every step, as the world does.
+    fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
+        for i in 0..n {
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err((i, Halt::Stopped));
+            }
+            self.step(dt, stop).map_err(|h| (i, h))?;
+        }
+        Ok(())
+    }
     /// Told that the world's dt changed between calls: drop anything predicted with the old one.
     fn dt_changed(&mut self) {}
     /// Whether the system picks its own internal steps (an adaptive integrator): with no stable
