@@ -456,3 +456,15 @@ def test_cli_renders_a_turing_preset(tmp_path):
     out = tmp_path / "spots.gif"
     assert main(["render", "turing", "-o", str(out), "--param", "preset=spots", "--param", "n=32", "--frames", "3", "--size", "64x64", "-q"]) == 0
     assert out.stat().st_size > 0
+
+
+def test_gray_scott_in_3d_balances_its_books():
+    scene = pc.Scene(dim=3, dt=1.0)
+    gs = scene.add(pc.GrayScott((16, 12, 10), 2.5 / 256, preset="spots", edges=("periodic", "periodic", "free", "free", "periodic", "periodic")))
+    assert math.isclose(gs.diffusion_limit, gs.dx**2 / (6 * 2e-5))
+    gs.seed(3, squares=2, size=0.3)
+    b0 = gs.books()
+    scene.advance(300.0)
+    b = gs.books()
+    assert abs(b["u_made"]) > 1e-6 * b0["u"]
+    assert abs((b["u"] - b["u_made"]) - b0["u"]) < 1e-12 * b0["u"]
