@@ -263,13 +263,21 @@ fn rows_of(a: &mut [Real], w: usize, ny: usize) -> &mut [Real] {
 /// (A x) into the interior of `o`'s row j (o is one padded row), returning nothing.
 #[inline(always)]
 fn apply_row(st: &Stencil, x: &[Real], j: usize, o: &mut [Real]) {
+    let w = st.w;
+    let x = &x[j * w..(j + 3) * w];
+    apply_rows(st, &x[..w], &x[w..2 * w], &x[2 * w..], j, o);
+}
+
+/// `apply_row` with x's padded rows j − 1, j, j + 1 (interior numbering) given apart.
+#[inline(always)]
+fn apply_rows(st: &Stencil, below: &[Real], mid: &[Real], above: &[Real], j: usize, o: &mut [Real]) {
     let (n, w) = (st.nx, st.w);
     let b = (j + 1) * w + 1;
-    let xc = &x[b..b + n];
-    let xw = &x[b - 1..b - 1 + n];
-    let xe = &x[b + 1..b + 1 + n];
-    let xs = &x[b - w..b - w + n];
-    let xn = &x[b + w..b + w + n];
+    let xc = &mid[1..1 + n];
+    let xw = &mid[..n];
+    let xe = &mid[2..2 + n];
+    let xs = &below[1..1 + n];
+    let xn = &above[1..1 + n];
     let ce = &st.we[b..b + n];
     let cw = &st.we[b - 1..b - 1 + n];
     let cn = &st.wn[b..b + n];
@@ -306,27 +314,88 @@ pub fn residual(st: &Stencil, x: &[Real], b: &[Real], res: &mut [Real]) -> Real 
     })
 }
 
-/// One damped-Jacobi sweep from `x` into `out`: out = x + ω D⁻¹ (b − A x); `zero`: x = 0.
-/// Returns out·b (the preconditioner's r·z when this is the last sweep of the fine level).
-fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) -> Real {
-    let (w, n) = (st.w, st.nx);
-    rows_sum(rows_of(out, w, st.ny), w, |j, o| {
-        let c = (j + 1) * w + 1;
-        let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
-        if zero {
-            let o = &mut o[1..1 + n];
-            for i in 0..n {
-                o[i] = OMEGA * id[i] * bb[i];
-            }
-        } else {
-            apply_row(st, x, j, o);
-            let (o, xc) = (&mut o[1..1 + n], &x[c..c + n]);
-            for i in 0..n {
-                o[i] = xc[i] + OMEGA * id[i] * (bb[i] - o[i]);
-            }
+/// Rows a task of `jacobi2` takes (fixed, so the work split never depends on the threads).
+const BLOCK: usize = 16;
+
+/// The scratch `jacobi2` needs on a grid of `ny` rows of `w`: three rows per block.
+fn scratch_len(w: usize, ny: usize) -> usize {
+    ny.div_ceil(BLOCK) * 3 * w
+}
+
+/// Two damped-Jacobi sweeps from `x` into `out` in one pass (out ≠ x): each block of rows
+/// keeps the first sweep's rows it needs (its own and one either side, recomputed) in three
+/// rolling rows of `scratch`, so the intermediate never goes through memory. `zero`: x = 0.
+/// Per value the arithmetic is that of two separate sweeps. Returns out·b.
+fn jacobi2(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], scratch: &mut [Real], zero: bool) -> Real {
+    let (w, n, ny) = (st.w, st.nx, st.ny);
+    let level = crate::simd::level();
+    let run = |k: usize, o: &mut [Real], sc: &mut [Real], part: &mut Real| {
+        *part = crate::simd::vectorized(
+            level,
+            #[inline(always)]
+            || {
+                let (r0, r1) = (k * BLOCK, (k * BLOCK + BLOCK).min(ny));
+                // First-sweep row of interior row jj (a ghost row when outside) into slot jj+1 mod 3.
+                let first = |jj: usize, sc: &mut [Real]| {
+                    let t = &mut sc[(jj % 3) * w..(jj % 3 + 1) * w];
+                    if jj == 0 || jj == ny + 1 {
+                        t.fill(0.0);
+                        return;
+                    }
+                    let j = jj - 1;
+                    let c = (j + 1) * w + 1;
+                    let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
+                    if zero {
+                        let t = &mut t[1..1 + n];
+                        for i in 0..n {
+                            t[i] = OMEGA * id[i] * bb[i];
+                        }
+                    } else {
+                        apply_row(st, x, j, t);
+                        let (t, xc) = (&mut t[1..1 + n], &x[c..c + n]);
+                        for i in 0..n {
+                            t[i] = xc[i] + OMEGA * id[i] * (bb[i] - t[i]);
+                        }
+                    }
+                };
+                first(r0, sc);
+                first(r0 + 1, sc);
+                let mut sum = 0.0;
+                for j in r0..r1 {
+                    first(j + 2, sc);
+                    let (s0, s1, s2) = (j % 3, (j + 1) % 3, (j + 2) % 3);
+                    let o = &mut o[(j - r0) * w..(j - r0 + 1) * w];
+                    apply_rows(st, &sc[s0 * w..(s0 + 1) * w], &sc[s1 * w..(s1 + 1) * w], &sc[s2 * w..(s2 + 1) * w], j, o);
+                    let c = (j + 1) * w + 1;
+                    let (bb, id, tc) = (&b[c..c + n], &st.inv_diag[c..c + n], &sc[s1 * w + 1..s1 * w + 1 + n]);
+                    let o = &mut o[1..1 + n];
+                    for i in 0..n {
+                        o[i] = tc[i] + OMEGA * id[i] * (bb[i] - o[i]);
+                    }
+                    sum += dot(o, bb);
+                }
+                sum
+            },
+        );
+    };
+    let blocks = ny.div_ceil(BLOCK);
+    let mut partials = vec![0.0; blocks];
+    let rows = rows_of(out, w, ny);
+    let scratch = &mut scratch[..blocks * 3 * w];
+    let done = crate::par::fork_if(rows.len(), || {
+        use rayon::prelude::*;
+        rows.par_chunks_mut(BLOCK * w)
+            .zip(scratch.par_chunks_mut(3 * w))
+            .zip(partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(k, ((o, sc), p))| run(k, o, sc, p))
+    });
+    if done.is_none() {
+        for (k, ((o, sc), p)) in rows.chunks_mut(BLOCK * w).zip(scratch.chunks_mut(3 * w)).zip(partials.iter_mut()).enumerate() {
+            run(k, o, sc, p);
         }
-        dot(&o[1..1 + n], bb)
-    })
+    }
+    partials.iter().sum()
 }
 
 /// The coarse right-hand side P^T (b − A x), the fine residual summed over each coarse
@@ -390,15 +459,24 @@ struct Level {
     x: Vec<Real>,
     b: Vec<Real>,
     tmp: Vec<Real>,
+    scratch: Vec<Real>,
 }
 
-/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other
-/// buffer; returns x·b after the last.
-fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) -> Real {
+/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), two per pass; `tmp` is the
+/// other buffer (swapped with x). Returns x·b after the last.
+fn smooth(
+    st: &Stencil,
+    b: &[Real],
+    x: &mut Vec<Real>,
+    tmp: &mut Vec<Real>,
+    scratch: &mut [Real],
+    sweeps: usize,
+    zero: bool,
+) -> Real {
     let mut xb = 0.0;
     for k in 0..sweeps / 2 {
-        jacobi(st, x, b, tmp, zero && k == 0);
-        xb = jacobi(st, tmp, b, x, false);
+        xb = jacobi2(st, x, b, tmp, scratch, zero && k == 0);
+        std::mem::swap(x, tmp);
     }
     xb
 }
@@ -406,12 +484,12 @@ fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: us
 /// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0; returns x·b. Symmetric (same
 /// smoother before and after, restriction = interpolationᵀ, scaled Galerkin coarse
 /// operators), so it is a valid CG preconditioner.
-fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
+fn vcycle(levels: &mut [Level], b: &[Real], x: &mut Vec<Real>) -> Real {
     let (this, rest) = levels.split_first_mut().expect("at least one level");
     if rest.is_empty() {
-        return smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
+        return smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, COARSE_SWEEPS, true);
     }
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, true);
+    smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, SWEEPS, true);
     let next = &mut rest[0];
     let (mut cb, mut cx) = (std::mem::take(&mut next.b), std::mem::take(&mut next.x));
     restrict_residual(&this.st, x, b, &next.st, &mut cb);
@@ -419,7 +497,7 @@ fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
     prolong_add(&rest[0].st, &cx, &this.st, x);
     rest[0].b = cb;
     rest[0].x = cx;
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false)
+    smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, SWEEPS, false)
 }
 
 /// What a solve did.
@@ -460,6 +538,7 @@ impl Pcg {
                 x: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 b: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 tmp: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
+                scratch: if multigrid { need.filled(scratch_len(st.w, st.ny), 0.0)? } else { Vec::new() },
                 st,
             });
             match next {
