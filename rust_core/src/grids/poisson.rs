@@ -29,7 +29,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 const OMEGA: Real = 0.8;
 /// Smoothing sweeps before and after the coarse correction (even: sweeps alternate buffers).
 const SWEEPS: usize = 2;
-const _: () = assert!(SWEEPS == 2, "vcycle pre-smooths in one jacobi2 pass");
 /// Sweeps on the coarsest level (even).
 const COARSE_SWEEPS: usize = 32;
 /// The coarse operator is this times the Galerkin one, P^T A P. With piecewise-constant P,
@@ -328,165 +327,145 @@ pub fn residual(st: &Stencil, x: &[Real], b: &[Real], res: &mut [Real]) -> Real 
     })
 }
 
-/// Rows a task of `jacobi2` takes (fixed and even, so the work split never depends on the
-/// threads and a block's coarse rows are its own).
-const BLOCK: usize = 32;
+/// Rows a task of `jacobi2` takes (fixed, so the work split never depends on the threads).
+const BLOCK: usize = 16;
 
-/// The scratch `jacobi2` needs on a grid of `ny` rows of `w`: seven rows per block.
+/// The scratch `jacobi2` needs on a grid of `ny` rows of `w`: three rows per block.
 fn scratch_len(w: usize, ny: usize) -> usize {
-    ny.div_ceil(BLOCK) * 7 * w
+    ny.div_ceil(BLOCK) * 3 * w
 }
 
 /// Two damped-Jacobi sweeps from `x` into `out` in one pass (out ≠ x): each block of rows
-/// keeps the first sweep's rows it needs (its own and those either side, recomputed) in
+/// keeps the first sweep's rows it needs (its own and one either side, recomputed) in three
 /// rolling rows of `scratch`, so the intermediate never goes through memory. `zero`: x = 0.
-/// With `restrict` = (coarse stencil, coarse b), also writes P^T (b − A out) there (the fine
-/// residual summed over each coarse cell's children, never stored), from the block's own
-/// rolling output rows. Per value the arithmetic is that of separate passes. Returns out·b.
-fn jacobi2(
-    st: &Stencil,
-    x: &[Real],
-    b: &[Real],
-    out: &mut [Real],
-    scratch: &mut [Real],
-    zero: bool,
-    restrict: Option<(&Stencil, &mut [Real])>,
-) -> Real {
+/// Per value the arithmetic is that of two separate sweeps. Returns out·b.
+fn jacobi2(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], scratch: &mut [Real], zero: bool) -> Real {
     let (w, n, ny) = (st.w, st.nx, st.ny);
     let level = simd::level();
-    let blocks = ny.div_ceil(BLOCK);
-    // First-sweep row of padded row jj (zeros for a ghost row) into slot jj mod 3 of t.
-    let first = |jj: usize, t: &mut [Real]| {
-        let t = &mut t[(jj % 3) * w..(jj % 3 + 1) * w];
-        if jj == 0 || jj == ny + 1 {
-            t.fill(0.0);
-            return;
-        }
-        let j = jj - 1;
-        let c = (j + 1) * w + 1;
-        let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
-        if zero {
-            let t = &mut t[1..1 + n];
-            for i in 0..n {
-                t[i] = OMEGA * id[i] * bb[i];
-            }
-        } else {
-            apply_row(st, x, j, t);
-            let (t, xc) = (&mut t[1..1 + n], &x[c..c + n]);
-            for i in 0..n {
-                t[i] = xc[i] + OMEGA * id[i] * (bb[i] - t[i]);
-            }
-        }
-    };
-    // Second-sweep row of interior row j from t's slots into o (one padded row).
-    let second = |j: usize, t: &[Real], o: &mut [Real]| {
-        let (s0, s1, s2) = (j % 3, (j + 1) % 3, (j + 2) % 3);
-        apply_rows(st, &t[s0 * w..(s0 + 1) * w], &t[s1 * w..(s1 + 1) * w], &t[s2 * w..(s2 + 1) * w], j, o);
-        let c = (j + 1) * w + 1;
-        let (bb, id, tc) = (&b[c..c + n], &st.inv_diag[c..c + n], &t[s1 * w + 1..s1 * w + 1 + n]);
-        let o = &mut o[1..1 + n];
-        for i in 0..n {
-            o[i] = tc[i] + OMEGA * id[i] * (bb[i] - o[i]);
-        }
-        dot(o, bb)
-    };
-    let cnx = restrict.as_ref().map_or(0, |(c, _)| c.nx);
-    let cw = cnx + 2;
-    // The residual of interior row j from the output slots, summed in pairs into coarse rows.
-    let residual_row = |j: usize, os: &[Real], res: &mut [Real], cr: &mut [Real], r0: usize| {
-        let (s0, s1, s2) = (j % 3, (j + 1) % 3, (j + 2) % 3);
-        apply_rows(st, &os[s0 * w..(s0 + 1) * w], &os[s1 * w..(s1 + 1) * w], &os[s2 * w..(s2 + 1) * w], j, res);
-        let c = (j + 1) * w + 1;
-        let (bb, res) = (&b[c..c + n], &mut res[1..1 + n]);
-        for i in 0..n {
-            res[i] = bb[i] - res[i];
-        }
-        let jc = (j - r0) / 2;
-        let crow = &mut cr[jc * cw + 1..jc * cw + 1 + cnx];
-        if j % 2 == 0 {
-            crow.fill(0.0);
-        }
-        for (p, v) in res.chunks(2).zip(crow) {
-            *v += p.iter().sum::<Real>();
-        }
-    };
-    let run = |k: usize, o: &mut [Real], sc: &mut [Real], cr: &mut Option<&mut [Real]>| -> Real {
-        simd::vectorized(
+    let run = |k: usize, o: &mut [Real], sc: &mut [Real], part: &mut Real| {
+        *part = simd::vectorized(
             level,
             #[inline(always)]
             || {
                 let (r0, r1) = (k * BLOCK, (k * BLOCK + BLOCK).min(ny));
-                let (t, rest) = sc.split_at_mut(3 * w);
-                let (os, res) = rest.split_at_mut(3 * w);
-                let mut sum = 0.0;
-                let Some(cr) = cr else {
-                    first(r0, t);
-                    first(r0 + 1, t);
-                    for j in r0..r1 {
-                        first(j + 2, t);
-                        sum += second(j, t, &mut o[(j - r0) * w..(j - r0 + 1) * w]);
+                // First-sweep row of interior row jj (a ghost row when outside) into slot jj+1 mod 3.
+                let first = |jj: usize, sc: &mut [Real]| {
+                    let t = &mut sc[(jj % 3) * w..(jj % 3 + 1) * w];
+                    if jj == 0 || jj == ny + 1 {
+                        t.fill(0.0);
+                        return;
                     }
-                    return sum;
+                    let j = jj - 1;
+                    let c = (j + 1) * w + 1;
+                    let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
+                    if zero {
+                        let t = &mut t[1..1 + n];
+                        for i in 0..n {
+                            t[i] = OMEGA * id[i] * bb[i];
+                        }
+                    } else {
+                        apply_row(st, x, j, t);
+                        let (t, xc) = (&mut t[1..1 + n], &x[c..c + n]);
+                        for i in 0..n {
+                            t[i] = xc[i] + OMEGA * id[i] * (bb[i] - t[i]);
+                        }
+                    }
                 };
-                // Output rows r0 − 1 ..= r1 (those inside the grid) go through the slots
-                // (padded row p in slot p mod 3); ghost rows are zeros.
-                let (lo, hi) = (r0.saturating_sub(1), (r1 + 1).min(ny));
-                if r0 == 0 {
-                    os[..w].fill(0.0);
-                }
-                first(lo, t);
-                first(lo + 1, t);
-                for j in lo..hi {
-                    first(j + 2, t);
-                    let slot = ((j + 1) % 3) * w;
-                    let v = second(j, t, &mut os[slot..slot + w]);
-                    if (r0..r1).contains(&j) {
-                        o[(j - r0) * w..(j - r0 + 1) * w].copy_from_slice(&os[slot..slot + w]);
-                        sum += v;
+                first(r0, sc);
+                first(r0 + 1, sc);
+                let mut sum = 0.0;
+                for j in r0..r1 {
+                    first(j + 2, sc);
+                    let (s0, s1, s2) = (j % 3, (j + 1) % 3, (j + 2) % 3);
+                    let o = &mut o[(j - r0) * w..(j - r0 + 1) * w];
+                    apply_rows(
+                        st,
+                        &sc[s0 * w..(s0 + 1) * w],
+                        &sc[s1 * w..(s1 + 1) * w],
+                        &sc[s2 * w..(s2 + 1) * w],
+                        j,
+                        o,
+                    );
+                    let c = (j + 1) * w + 1;
+                    let (bb, id, tc) = (&b[c..c + n], &st.inv_diag[c..c + n], &sc[s1 * w + 1..s1 * w + 1 + n]);
+                    let o = &mut o[1..1 + n];
+                    for i in 0..n {
+                        o[i] = tc[i] + OMEGA * id[i] * (bb[i] - o[i]);
                     }
-                    if j > r0 {
-                        residual_row(j - 1, os, &mut res[..w], cr, r0);
-                    }
-                }
-                if hi == r1 {
-                    // r1 = ny: the row above the last is the ghost.
-                    let slot = ((ny + 1) % 3) * w;
-                    os[slot..slot + w].fill(0.0);
-                    residual_row(r1 - 1, os, &mut res[..w], cr, r0);
+                    sum += dot(o, bb);
                 }
                 sum
             },
-        )
+        );
     };
+    let blocks = ny.div_ceil(BLOCK);
     let mut partials = vec![0.0; blocks];
-    let mut coarse: Vec<Option<&mut [Real]>> = match restrict {
-        Some((cs, cb)) => rows_of(cb, cs.w, cs.ny).chunks_mut(BLOCK / 2 * cs.w).map(Some).collect(),
-        None => (0..blocks).map(|_| None).collect(),
-    };
-    debug_assert_eq!(coarse.len(), blocks);
     let rows = rows_of(out, w, ny);
-    let scratch = &mut scratch[..blocks * 7 * w];
+    let scratch = &mut scratch[..blocks * 3 * w];
     let done = crate::par::fork_if(rows.len(), || {
         use rayon::prelude::*;
         rows.par_chunks_mut(BLOCK * w)
-            .zip(scratch.par_chunks_mut(7 * w))
-            .zip(coarse.par_iter_mut())
+            .zip(scratch.par_chunks_mut(3 * w))
             .zip(partials.par_iter_mut())
             .enumerate()
-            .for_each(|(k, (((o, sc), cr), p))| *p = run(k, o, sc, cr))
+            .for_each(|(k, ((o, sc), p))| run(k, o, sc, p))
     });
     if done.is_none() {
-        for (k, (((o, sc), cr), p)) in rows
-            .chunks_mut(BLOCK * w)
-            .zip(scratch.chunks_mut(7 * w))
-            .zip(coarse.iter_mut())
-            .zip(partials.iter_mut())
-            .enumerate()
+        for (k, ((o, sc), p)) in
+            rows.chunks_mut(BLOCK * w).zip(scratch.chunks_mut(3 * w)).zip(partials.iter_mut()).enumerate()
         {
-            *p = run(k, o, sc, cr);
+            run(k, o, sc, p);
         }
     }
     partials.iter().sum()
+}
+
+/// The coarse right-hand side P^T (b − A x), the fine residual summed over each coarse
+/// cell's children, in one pass (the fine residual is never stored).
+fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, out: &mut [Real]) {
+    let (w, fw) = (coarse.w, fine.w);
+    let (nx, fnx, fny) = (coarse.nx, fine.nx, fine.ny);
+    rows_sum(rows_of(out, w, coarse.ny), w, |jc, o| {
+        simd::vectorized(
+            simd::level(),
+            #[inline(always)]
+            || {
+                let o = &mut o[1..1 + nx];
+                o.fill(0.0);
+                for jf in 2 * jc..(2 * jc + 2).min(fny) {
+                    let c = (jf + 1) * fw + 1;
+                    let n = fnx;
+                    let xc = &x[c..c + n];
+                    let xw = &x[c - 1..c - 1 + n];
+                    let xe = &x[c + 1..c + 1 + n];
+                    let xs = &x[c - fw..c - fw + n];
+                    let xn = &x[c + fw..c + fw + n];
+                    let ce = &fine.we[c..c + n];
+                    let cw = &fine.we[c - 1..c - 1 + n];
+                    let cn = &fine.wn[c..c + n];
+                    let cs = &fine.wn[c - fw..c - fw + n];
+                    let sc = fine.scale;
+                    let dg = &fine.diag[c..c + n];
+                    let bb = &b[c..c + n];
+                    // The residual in blocks of 64 on the stack (vectorised), then summed in pairs.
+                    let mut buf = [0.0; 64];
+                    for s0 in (0..n).step_by(64) {
+                        let m = 64.min(n - s0);
+                        for (k, r) in buf[..m].iter_mut().enumerate() {
+                            let i = s0 + k;
+                            *r = bb[i]
+                                - (dg[i] * xc[i]
+                                    - sc * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+                        }
+                        for (p, v) in buf[..m].chunks(2).zip(&mut o[s0 / 2..]) {
+                            *v += p.iter().sum::<Real>();
+                        }
+                    }
+                }
+                0.0
+            },
+        )
+    });
 }
 
 /// x += P e (piecewise-constant interpolation of the coarse correction).
@@ -532,7 +511,7 @@ fn smooth(
 ) -> Real {
     let mut xb = 0.0;
     for k in 0..sweeps / 2 {
-        xb = jacobi2(st, x, b, tmp, scratch, zero && k == 0, None);
+        xb = jacobi2(st, x, b, tmp, scratch, zero && k == 0);
         std::mem::swap(x, tmp);
     }
     xb
@@ -546,11 +525,10 @@ fn vcycle(levels: &mut [Level], b: &[Real], x: &mut Vec<Real>) -> Real {
     if rest.is_empty() {
         return smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, COARSE_SWEEPS, true);
     }
-    // Pre-smoothing (SWEEPS = 2: one pass) and the restriction of its residual, together.
+    smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, SWEEPS, true);
     let next = &mut rest[0];
     let (mut cb, mut cx) = (std::mem::take(&mut next.b), std::mem::take(&mut next.x));
-    jacobi2(&this.st, x, b, &mut this.tmp, &mut this.scratch, true, Some((&next.st, &mut cb)));
-    std::mem::swap(x, &mut this.tmp);
+    restrict_residual(&this.st, x, b, &next.st, &mut cb);
     vcycle(rest, &cb, &mut cx);
     prolong_add(&rest[0].st, &cx, &this.st, x);
     rest[0].b = cb;
