@@ -314,7 +314,9 @@ impl Lay {
         let j = (fy as i32).min(hm - 1);
         let (tx, ty) = (fx - i as Real, fy - j as Real);
         let k = i as usize + self.w * j as usize;
-        let (a00, a10, a01, a11) = (a[k], a[k + 1], a[k + self.w], a[k + self.w + 1]);
+        // One bounds check for the four values (the slice's length proves the other three).
+        let q = &a[k..k + self.w + 2];
+        let (a00, a10, a01, a11) = (q[0], q[1], q[self.w], q[self.w + 1]);
         let v = (1.0 - ty) * ((1.0 - tx) * a00 + tx * a10) + ty * ((1.0 - tx) * a01 + tx * a11);
         (v, a00.min(a10).min(a01.min(a11)), a00.max(a10).max(a01.max(a11)))
     }

@@ -20,6 +20,7 @@
 use super::{rows2_sum, rows_sum, sum_rows};
 use crate::alloc::{count, Need};
 use crate::error::Result;
+use crate::simd;
 use crate::vector::Real;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -263,13 +264,21 @@ fn rows_of(a: &mut [Real], w: usize, ny: usize) -> &mut [Real] {
 /// (A x) into the interior of `o`'s row j (o is one padded row), returning nothing.
 #[inline(always)]
 fn apply_row(st: &Stencil, x: &[Real], j: usize, o: &mut [Real]) {
+    let w = st.w;
+    let x = &x[j * w..(j + 3) * w];
+    apply_rows(st, &x[..w], &x[w..2 * w], &x[2 * w..], j, o);
+}
+
+/// `apply_row` with x's padded rows j − 1, j, j + 1 (interior numbering) given apart.
+#[inline(always)]
+fn apply_rows(st: &Stencil, below: &[Real], mid: &[Real], above: &[Real], j: usize, o: &mut [Real]) {
     let (n, w) = (st.nx, st.w);
     let b = (j + 1) * w + 1;
-    let xc = &x[b..b + n];
-    let xw = &x[b - 1..b - 1 + n];
-    let xe = &x[b + 1..b + 1 + n];
-    let xs = &x[b - w..b - w + n];
-    let xn = &x[b + w..b + w + n];
+    let xc = &mid[1..1 + n];
+    let xw = &mid[..n];
+    let xe = &mid[2..2 + n];
+    let xs = &below[1..1 + n];
+    let xn = &above[1..1 + n];
     let ce = &st.we[b..b + n];
     let cw = &st.we[b - 1..b - 1 + n];
     let cn = &st.wn[b..b + n];
@@ -286,9 +295,15 @@ fn apply_row(st: &Stencil, x: &[Real], j: usize, o: &mut [Real]) {
 pub fn apply(st: &Stencil, x: &[Real], out: &mut [Real]) -> Real {
     let (w, n) = (st.w, st.nx);
     rows_sum(rows_of(out, w, st.ny), w, |j, o| {
-        apply_row(st, x, j, o);
-        let b = (j + 1) * w + 1;
-        dot(&o[1..1 + n], &x[b..b + n])
+        simd::vectorized(
+            simd::level(),
+            #[inline(always)]
+            || {
+                apply_row(st, x, j, o);
+                let b = (j + 1) * w + 1;
+                dot(&o[1..1 + n], &x[b..b + n])
+            },
+        )
     })
 }
 
@@ -296,37 +311,113 @@ pub fn apply(st: &Stencil, x: &[Real], out: &mut [Real]) -> Real {
 pub fn residual(st: &Stencil, x: &[Real], b: &[Real], res: &mut [Real]) -> Real {
     let (w, n) = (st.w, st.nx);
     rows_sum(rows_of(res, w, st.ny), w, |j, o| {
-        apply_row(st, x, j, o);
-        let c = (j + 1) * w + 1;
-        let (o, b) = (&mut o[1..1 + n], &b[c..c + n]);
-        for i in 0..n {
-            o[i] = b[i] - o[i];
-        }
-        dot(o, o)
+        simd::vectorized(
+            simd::level(),
+            #[inline(always)]
+            || {
+                apply_row(st, x, j, o);
+                let c = (j + 1) * w + 1;
+                let (o, b) = (&mut o[1..1 + n], &b[c..c + n]);
+                for i in 0..n {
+                    o[i] = b[i] - o[i];
+                }
+                dot(o, o)
+            },
+        )
     })
 }
 
-/// One damped-Jacobi sweep from `x` into `out`: out = x + ω D⁻¹ (b − A x); `zero`: x = 0.
-/// Returns out·b (the preconditioner's r·z when this is the last sweep of the fine level).
-fn jacobi(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], zero: bool) -> Real {
-    let (w, n) = (st.w, st.nx);
-    rows_sum(rows_of(out, w, st.ny), w, |j, o| {
-        let c = (j + 1) * w + 1;
-        let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
-        if zero {
-            let o = &mut o[1..1 + n];
-            for i in 0..n {
-                o[i] = OMEGA * id[i] * bb[i];
-            }
-        } else {
-            apply_row(st, x, j, o);
-            let (o, xc) = (&mut o[1..1 + n], &x[c..c + n]);
-            for i in 0..n {
-                o[i] = xc[i] + OMEGA * id[i] * (bb[i] - o[i]);
-            }
+/// Rows a task of `jacobi2` takes (fixed, so the work split never depends on the threads).
+const BLOCK: usize = 16;
+
+/// The scratch `jacobi2` needs on a grid of `ny` rows of `w`: three rows per block.
+fn scratch_len(w: usize, ny: usize) -> usize {
+    ny.div_ceil(BLOCK) * 3 * w
+}
+
+/// Two damped-Jacobi sweeps from `x` into `out` in one pass (out ≠ x): each block of rows
+/// keeps the first sweep's rows it needs (its own and one either side, recomputed) in three
+/// rolling rows of `scratch`, so the intermediate never goes through memory. `zero`: x = 0.
+/// Per value the arithmetic is that of two separate sweeps. Returns out·b.
+fn jacobi2(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], scratch: &mut [Real], zero: bool) -> Real {
+    let (w, n, ny) = (st.w, st.nx, st.ny);
+    let level = simd::level();
+    let run = |k: usize, o: &mut [Real], sc: &mut [Real], part: &mut Real| {
+        *part = simd::vectorized(
+            level,
+            #[inline(always)]
+            || {
+                let (r0, r1) = (k * BLOCK, (k * BLOCK + BLOCK).min(ny));
+                // First-sweep row of interior row jj (a ghost row when outside) into slot jj+1 mod 3.
+                let first = |jj: usize, sc: &mut [Real]| {
+                    let t = &mut sc[(jj % 3) * w..(jj % 3 + 1) * w];
+                    if jj == 0 || jj == ny + 1 {
+                        t.fill(0.0);
+                        return;
+                    }
+                    let j = jj - 1;
+                    let c = (j + 1) * w + 1;
+                    let (bb, id) = (&b[c..c + n], &st.inv_diag[c..c + n]);
+                    if zero {
+                        let t = &mut t[1..1 + n];
+                        for i in 0..n {
+                            t[i] = OMEGA * id[i] * bb[i];
+                        }
+                    } else {
+                        apply_row(st, x, j, t);
+                        let (t, xc) = (&mut t[1..1 + n], &x[c..c + n]);
+                        for i in 0..n {
+                            t[i] = xc[i] + OMEGA * id[i] * (bb[i] - t[i]);
+                        }
+                    }
+                };
+                first(r0, sc);
+                first(r0 + 1, sc);
+                let mut sum = 0.0;
+                for j in r0..r1 {
+                    first(j + 2, sc);
+                    let (s0, s1, s2) = (j % 3, (j + 1) % 3, (j + 2) % 3);
+                    let o = &mut o[(j - r0) * w..(j - r0 + 1) * w];
+                    apply_rows(
+                        st,
+                        &sc[s0 * w..(s0 + 1) * w],
+                        &sc[s1 * w..(s1 + 1) * w],
+                        &sc[s2 * w..(s2 + 1) * w],
+                        j,
+                        o,
+                    );
+                    let c = (j + 1) * w + 1;
+                    let (bb, id, tc) = (&b[c..c + n], &st.inv_diag[c..c + n], &sc[s1 * w + 1..s1 * w + 1 + n]);
+                    let o = &mut o[1..1 + n];
+                    for i in 0..n {
+                        o[i] = tc[i] + OMEGA * id[i] * (bb[i] - o[i]);
+                    }
+                    sum += dot(o, bb);
+                }
+                sum
+            },
+        );
+    };
+    let blocks = ny.div_ceil(BLOCK);
+    let mut partials = vec![0.0; blocks];
+    let rows = rows_of(out, w, ny);
+    let scratch = &mut scratch[..blocks * 3 * w];
+    let done = crate::par::fork_if(rows.len(), || {
+        use rayon::prelude::*;
+        rows.par_chunks_mut(BLOCK * w)
+            .zip(scratch.par_chunks_mut(3 * w))
+            .zip(partials.par_iter_mut())
+            .enumerate()
+            .for_each(|(k, ((o, sc), p))| run(k, o, sc, p))
+    });
+    if done.is_none() {
+        for (k, ((o, sc), p)) in
+            rows.chunks_mut(BLOCK * w).zip(scratch.chunks_mut(3 * w)).zip(partials.iter_mut()).enumerate()
+        {
+            run(k, o, sc, p);
         }
-        dot(&o[1..1 + n], bb)
-    })
+    }
+    partials.iter().sum()
 }
 
 /// The coarse right-hand side P^T (b − A x), the fine residual summed over each coarse
@@ -335,37 +426,45 @@ fn restrict_residual(fine: &Stencil, x: &[Real], b: &[Real], coarse: &Stencil, o
     let (w, fw) = (coarse.w, fine.w);
     let (nx, fnx, fny) = (coarse.nx, fine.nx, fine.ny);
     rows_sum(rows_of(out, w, coarse.ny), w, |jc, o| {
-        let o = &mut o[1..1 + nx];
-        o.fill(0.0);
-        for jf in 2 * jc..(2 * jc + 2).min(fny) {
-            let c = (jf + 1) * fw + 1;
-            let n = fnx;
-            let xc = &x[c..c + n];
-            let xw = &x[c - 1..c - 1 + n];
-            let xe = &x[c + 1..c + 1 + n];
-            let xs = &x[c - fw..c - fw + n];
-            let xn = &x[c + fw..c + fw + n];
-            let ce = &fine.we[c..c + n];
-            let cw = &fine.we[c - 1..c - 1 + n];
-            let cn = &fine.wn[c..c + n];
-            let cs = &fine.wn[c - fw..c - fw + n];
-            let sc = fine.scale;
-            let dg = &fine.diag[c..c + n];
-            let bb = &b[c..c + n];
-            // The residual in blocks of 64 on the stack (vectorised), then summed in pairs.
-            let mut buf = [0.0; 64];
-            for s0 in (0..n).step_by(64) {
-                let m = 64.min(n - s0);
-                for (k, r) in buf[..m].iter_mut().enumerate() {
-                    let i = s0 + k;
-                    *r = bb[i] - (dg[i] * xc[i] - sc * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+        simd::vectorized(
+            simd::level(),
+            #[inline(always)]
+            || {
+                let o = &mut o[1..1 + nx];
+                o.fill(0.0);
+                for jf in 2 * jc..(2 * jc + 2).min(fny) {
+                    let c = (jf + 1) * fw + 1;
+                    let n = fnx;
+                    let xc = &x[c..c + n];
+                    let xw = &x[c - 1..c - 1 + n];
+                    let xe = &x[c + 1..c + 1 + n];
+                    let xs = &x[c - fw..c - fw + n];
+                    let xn = &x[c + fw..c + fw + n];
+                    let ce = &fine.we[c..c + n];
+                    let cw = &fine.we[c - 1..c - 1 + n];
+                    let cn = &fine.wn[c..c + n];
+                    let cs = &fine.wn[c - fw..c - fw + n];
+                    let sc = fine.scale;
+                    let dg = &fine.diag[c..c + n];
+                    let bb = &b[c..c + n];
+                    // The residual in blocks of 64 on the stack (vectorised), then summed in pairs.
+                    let mut buf = [0.0; 64];
+                    for s0 in (0..n).step_by(64) {
+                        let m = 64.min(n - s0);
+                        for (k, r) in buf[..m].iter_mut().enumerate() {
+                            let i = s0 + k;
+                            *r = bb[i]
+                                - (dg[i] * xc[i]
+                                    - sc * (ce[i] * xe[i] + cw[i] * xw[i] + cn[i] * xn[i] + cs[i] * xs[i]));
+                        }
+                        for (p, v) in buf[..m].chunks(2).zip(&mut o[s0 / 2..]) {
+                            *v += p.iter().sum::<Real>();
+                        }
+                    }
                 }
-                for (p, v) in buf[..m].chunks(2).zip(&mut o[s0 / 2..]) {
-                    *v += p.iter().sum::<Real>();
-                }
-            }
-        }
-        0.0
+                0.0
+            },
+        )
     });
 }
 
@@ -374,14 +473,20 @@ fn prolong_add(coarse: &Stencil, e: &[Real], fine: &Stencil, x: &mut [Real]) {
     let (w, cw) = (fine.w, coarse.w);
     let n = fine.nx;
     rows_sum(rows_of(x, w, fine.ny), w, |j, o| {
-        let row = &e[(j / 2 + 1) * cw + 1..(j / 2 + 1) * cw + 1 + coarse.nx];
-        let o = &mut o[1..1 + n];
-        for (pair, e) in o.chunks_mut(2).zip(row) {
-            for v in pair {
-                *v += e;
-            }
-        }
-        0.0
+        simd::vectorized(
+            simd::level(),
+            #[inline(always)]
+            || {
+                let row = &e[(j / 2 + 1) * cw + 1..(j / 2 + 1) * cw + 1 + coarse.nx];
+                let o = &mut o[1..1 + n];
+                for (pair, e) in o.chunks_mut(2).zip(row) {
+                    for v in pair {
+                        *v += e;
+                    }
+                }
+                0.0
+            },
+        )
     });
 }
 
@@ -390,15 +495,24 @@ struct Level {
     x: Vec<Real>,
     b: Vec<Real>,
     tmp: Vec<Real>,
+    scratch: Vec<Real>,
 }
 
-/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), with `tmp` as the other
-/// buffer; returns x·b after the last.
-fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: usize, zero: bool) -> Real {
+/// `sweeps` (even) damped-Jacobi sweeps on x (from 0 if `zero`), two per pass; `tmp` is the
+/// other buffer (swapped with x). Returns x·b after the last.
+fn smooth(
+    st: &Stencil,
+    b: &[Real],
+    x: &mut Vec<Real>,
+    tmp: &mut Vec<Real>,
+    scratch: &mut [Real],
+    sweeps: usize,
+    zero: bool,
+) -> Real {
     let mut xb = 0.0;
     for k in 0..sweeps / 2 {
-        jacobi(st, x, b, tmp, zero && k == 0);
-        xb = jacobi(st, tmp, b, x, false);
+        xb = jacobi2(st, x, b, tmp, scratch, zero && k == 0);
+        std::mem::swap(x, tmp);
     }
     xb
 }
@@ -406,12 +520,12 @@ fn smooth(st: &Stencil, b: &[Real], x: &mut [Real], tmp: &mut [Real], sweeps: us
 /// One V-cycle for A x = b on `levels[0]`'s grid, from x = 0; returns x·b. Symmetric (same
 /// smoother before and after, restriction = interpolationᵀ, scaled Galerkin coarse
 /// operators), so it is a valid CG preconditioner.
-fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
+fn vcycle(levels: &mut [Level], b: &[Real], x: &mut Vec<Real>) -> Real {
     let (this, rest) = levels.split_first_mut().expect("at least one level");
     if rest.is_empty() {
-        return smooth(&this.st, b, x, &mut this.tmp, COARSE_SWEEPS, true);
+        return smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, COARSE_SWEEPS, true);
     }
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, true);
+    smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, SWEEPS, true);
     let next = &mut rest[0];
     let (mut cb, mut cx) = (std::mem::take(&mut next.b), std::mem::take(&mut next.x));
     restrict_residual(&this.st, x, b, &next.st, &mut cb);
@@ -419,7 +533,47 @@ fn vcycle(levels: &mut [Level], b: &[Real], x: &mut [Real]) -> Real {
     prolong_add(&rest[0].st, &cx, &this.st, x);
     rest[0].b = cb;
     rest[0].x = cx;
-    smooth(&this.st, b, x, &mut this.tmp, SWEEPS, false)
+    smooth(&this.st, b, x, &mut this.tmp, &mut this.scratch, SWEEPS, false)
+}
+
+/// `f(j, x row, r row, z row)` over the interior rows of three padded arrays, in parallel;
+/// returns the two partial sums of f added in row order (deterministic).
+fn update_xrz(
+    w: usize,
+    ny: usize,
+    x: &mut [Real],
+    r: &mut [Real],
+    z: &mut [Real],
+    f: impl Fn(usize, &mut [Real], &mut [Real], &mut [Real]) -> (Real, Real) + Sync + Send,
+) -> (Real, Real) {
+    let mut partials = vec![(0.0, 0.0); ny];
+    let (x, r, z) = (rows_of(x, w, ny), rows_of(r, w, ny), rows_of(z, w, ny));
+    let level = simd::level();
+    let g = |j: usize, a: &mut [Real], b: &mut [Real], c: &mut [Real]| {
+        simd::vectorized(
+            level,
+            #[inline(always)]
+            || f(j, a, b, c),
+        )
+    };
+    let done = crate::par::fork_if(x.len(), || {
+        use rayon::prelude::*;
+        x.par_chunks_mut(w)
+            .zip(r.par_chunks_mut(w))
+            .zip(z.par_chunks_mut(w))
+            .zip(partials.par_iter_mut())
+            .with_min_len(4)
+            .enumerate()
+            .for_each(|(j, (((a, b), c), p))| *p = g(j, a, b, c))
+    });
+    if done.is_none() {
+        for (j, (((a, b), c), p)) in
+            x.chunks_mut(w).zip(r.chunks_mut(w)).zip(z.chunks_mut(w)).zip(partials.iter_mut()).enumerate()
+        {
+            *p = g(j, a, b, c);
+        }
+    }
+    partials.iter().fold((0.0, 0.0), |(s, t), &(a, b)| (s + a, t + b))
 }
 
 /// What a solve did.
@@ -460,6 +614,7 @@ impl Pcg {
                 x: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 b: if level_zero { Vec::new() } else { need.filled(m, 0.0)? },
                 tmp: if multigrid { need.filled(m, 0.0)? } else { Vec::new() },
+                scratch: if multigrid { need.filled(scratch_len(st.w, st.ny), 0.0)? } else { Vec::new() },
                 st,
             });
             match next {
@@ -495,12 +650,18 @@ impl Pcg {
         } else {
             let (r, st) = (&self.r, &self.levels[0].st);
             rows_sum(rows_of(&mut self.z, w, ny), w, |j, o| {
-                let c = (j + 1) * w + 1;
-                let (o, r, id) = (&mut o[1..1 + n], &r[c..c + n], &st.inv_diag[c..c + n]);
-                for i in 0..n {
-                    o[i] = id[i] * r[i];
-                }
-                dot(o, r)
+                simd::vectorized(
+                    simd::level(),
+                    #[inline(always)]
+                    || {
+                        let c = (j + 1) * w + 1;
+                        let (o, r, id) = (&mut o[1..1 + n], &r[c..c + n], &st.inv_diag[c..c + n]);
+                        for i in 0..n {
+                            o[i] = id[i] * r[i];
+                        }
+                        dot(o, r)
+                    },
+                )
             })
         }
     }
@@ -545,16 +706,39 @@ impl Pcg {
             }
             let alpha = rz / pap;
             let (p, ap) = (&self.p, &self.ap);
-            rr = rows2_sum(rows_of(x, w, ny), rows_of(&mut self.r, w, ny), w, |j, xr, rr| {
-                let c = (j + 1) * w + 1;
-                let (p, ap) = (&p[c..c + n], &ap[c..c + n]);
-                let (xr, rr) = (&mut xr[1..1 + n], &mut rr[1..1 + n]);
-                for i in 0..n {
-                    xr[i] += alpha * p[i];
-                    rr[i] -= alpha * ap[i];
-                }
-                dot(rr, rr)
-            });
+            let mut rz_fused = 0.0;
+            if self.multigrid {
+                rr = rows2_sum(rows_of(x, w, ny), rows_of(&mut self.r, w, ny), w, |j, xr, rr| {
+                    simd::vectorized(
+                        simd::level(),
+                        #[inline(always)]
+                        || {
+                            let c = (j + 1) * w + 1;
+                            let (p, ap) = (&p[c..c + n], &ap[c..c + n]);
+                            let (xr, rr) = (&mut xr[1..1 + n], &mut rr[1..1 + n]);
+                            for i in 0..n {
+                                xr[i] += alpha * p[i];
+                                rr[i] -= alpha * ap[i];
+                            }
+                            dot(rr, rr)
+                        },
+                    )
+                });
+            } else {
+                // The diagonal preconditioner is row-local: z = D⁻¹ r in the same pass.
+                let id = &self.levels[0].st.inv_diag;
+                (rr, rz_fused) = update_xrz(w, ny, x, &mut self.r, &mut self.z, |j, xr, rr, zr| {
+                    let c = (j + 1) * w + 1;
+                    let (p, ap, id) = (&p[c..c + n], &ap[c..c + n], &id[c..c + n]);
+                    let (xr, rr, zr) = (&mut xr[1..1 + n], &mut rr[1..1 + n], &mut zr[1..1 + n]);
+                    for i in 0..n {
+                        xr[i] += alpha * p[i];
+                        rr[i] -= alpha * ap[i];
+                        zr[i] = id[i] * rr[i];
+                    }
+                    (dot(rr, rr), dot(zr, rr))
+                });
+            }
             if rr < 0.81 * best {
                 (best, since_best) = (rr, 0);
             } else {
@@ -564,17 +748,23 @@ impl Pcg {
                 let r = rr.sqrt() / bnorm;
                 return Some(Solve { iterations: k, residual: r, converged: r <= tol });
             }
-            let rz_new = self.precondition();
+            let rz_new = if self.multigrid { self.precondition() } else { rz_fused };
             let beta = rz_new / rz;
             rz = rz_new;
             let z = &self.z;
             rows_sum(rows_of(&mut self.p, w, ny), w, |j, o| {
-                let c = (j + 1) * w + 1;
-                let (o, z) = (&mut o[1..1 + n], &z[c..c + n]);
-                for i in 0..n {
-                    o[i] = z[i] + beta * o[i];
-                }
-                0.0
+                simd::vectorized(
+                    simd::level(),
+                    #[inline(always)]
+                    || {
+                        let c = (j + 1) * w + 1;
+                        let (o, z) = (&mut o[1..1 + n], &z[c..c + n]);
+                        for i in 0..n {
+                            o[i] = z[i] + beta * o[i];
+                        }
+                        0.0
+                    },
+                )
             });
         }
         Some(Solve { iterations: max_iterations, residual: rr.sqrt() / bnorm, converged: false })
