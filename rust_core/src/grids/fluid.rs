@@ -1152,6 +1152,9 @@ impl System for StableFluid {
     fn is_empty(&self) -> bool {
         false
     }
+    fn size(&self) -> usize {
+        self.nx * self.ny
+    }
     /// Everything is allocated (fallibly) by `new`.
     fn prepare(&mut self) -> Result<()> {
         Ok(())
