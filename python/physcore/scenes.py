@@ -689,8 +689,9 @@ def ripple(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Ripples on a pond: stones dropped one after another on a 1 m × 1 m pond with reflecting
-    (free) banks, on an n × n wave grid (:class:`~physcore.grids.Wave`).
+    """Ripples on a pond: stones dropped one after another into a 1 m square pond.
+
+    The banks reflect (free faces); an n × n wave grid (:class:`~physcore.grids.Wave`).
 
     `drops` Gaussian dents (radius 1.2 cm, depth 4 mm) fall at random places (seeded) every 0.6 s
     from t = 0; the waves travel at `speed` (m/s) and fade at `damping` (1/s).
@@ -724,8 +725,10 @@ def double_slit(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Interference behind two slits: a plane wave from an oscillating line on the left of a
-    1.5 m × 1 m tank meets a wall with two slits (`width` m wide, centres `separation` m apart);
+    """Interference behind two slits: a plane wave passes a wall with two openings.
+
+    The wave comes from an oscillating line on the left of a 1.5 m × 1 m tank and meets a wall
+    with two slits (`width` m wide, centres `separation` m apart);
     the other faces absorb (damping layers), so the fringes are those of an open field. The
     grid is (1.5 n) × n; the source's frequency is speed / wavelength.
     """
@@ -773,8 +776,9 @@ def turing(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Turing patterns growing from Pearson's start: Gray–Scott reaction–diffusion
-    (:class:`~physcore.grids.GrayScott`) on Pearson's 2.5 × 2.5 periodic domain (n × n cells,
+    """Turing patterns: Gray–Scott reaction–diffusion grows spots, stripes or mazes.
+
+    :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
     The animation spans `duration` time units.
@@ -810,8 +814,9 @@ def smoke(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """A smoke plume around an obstacle: hot smoke rises from a vent at the bottom of a
-    1 m × 1.5 m box (n × 1.5n cells, free-slip walls), lifted by `buoyancy` (β, m/s² per unit
+    """Smoke: a hot plume rises from a vent and curls around a disc.
+
+    The box is 1 m × 1.5 m (n × 1.5n cells, free-slip walls); the smoke is lifted by `buoyancy` (β, m/s² per unit
     temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
     (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`).
     """
@@ -851,8 +856,10 @@ def cavity(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """The lid-driven cavity: a unit square of fluid whose top wall slides at 1 m/s (no-slip
-    walls), at Reynolds number `reynolds` = U L / ν (:class:`~physcore.grids.StableFluid`). At
+    """The lid-driven cavity: a box of fluid stirred by its sliding top wall.
+
+    A unit square whose top wall slides at 1 m/s (no-slip walls), at Reynolds number
+    `reynolds` = U L / ν (:class:`~physcore.grids.StableFluid`). At
     Re = 100 the steady centreline profile is Ghia, Ghia & Shin (1982), Table I. Drawn as speed,
     with `tracers` (spread over the box) showing the circulation.
     """

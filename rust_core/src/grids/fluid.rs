@@ -742,14 +742,14 @@ impl StableFluid {
     /// A position for tracer `k` at step `step`: a hash of both picks a cell of the first
     /// source (or, without sources or if `anywhere`, of the fluid) and a point in it.
     fn seed(&self, k: usize, step: u64, anywhere: bool) -> (Real, Real) {
-        let (nx, ny, dx) = (self.nx, self.ny, self.dx);
+        let (nx, dx) = (self.nx, self.dx);
         let mut h = hash((k as u64) ^ hash(step));
         let src = self.cfg.sources.first().filter(|s| !s.cells.is_empty() && !anywhere);
         let mut pick = (0.5 * dx, 0.5 * dx);
         for _ in 0..64 {
             let c = match src {
                 Some(s) => s.cells[(h % s.cells.len() as u64) as usize].0,
-                None => (h % (nx * ny) as u64) as usize,
+                None => (h % (nx * self.ny) as u64) as usize,
             };
             let (h1, h2) = (hash(h ^ 1), hash(h ^ 2));
             pick = (((c % nx) as Real + unit(h1)) * dx, ((c / nx) as Real + unit(h2)) * dx);
@@ -758,7 +758,6 @@ impl StableFluid {
             }
             h = hash(h);
         }
-        let _ = ny;
         pick
     }
 

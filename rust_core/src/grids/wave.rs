@@ -741,15 +741,9 @@ impl System for WaveSystem {
             .map(|name| match *name {
                 "u" => self.u.clone(),
                 "velocity" => self.velocity(),
-                "mask" => self
-                    .keep
-                    .iter()
-                    .map(|k| 1.0 - k)
-                    .collect::<Vec<_>>()
-                    .into_iter()
-                    .chain(std::iter::repeat(0.0))
-                    .take(n)
-                    .collect(),
+                // 1 on obstacle cells (`keep` is empty without a mask).
+                "mask" if self.keep.is_empty() => vec![0.0; n],
+                "mask" => self.keep.iter().map(|k| 1.0 - k).collect(),
                 _ => vec![0.0; n],
             })
             .collect()
