@@ -735,7 +735,7 @@ def double_slit(
     from .grids import Oscillator, Wave
 
     n = _count(n, "n", 32)
-    _cells("n", 1.5 * n * n)
+    _cells("n", (3 * n * n) // 2)
     wavelength, separation, width = _positive(wavelength, "wavelength"), _positive(separation, "separation"), _positive(width, "width")
     speed = _positive(speed, "speed")
     if separation + width > 0.8:
@@ -754,6 +754,8 @@ def double_slit(
         raise InvalidInputError(f"width, n: the slits ({width} m) are narrower than a cell (1/n = {dx:.3g} m); raise n or the width")
     line = np.zeros((nx, n), dtype=bool)
     line[np.argmin(np.abs(x - 0.12)), :] = True
+    if not math.isfinite(40.0 * speed / wavelength):
+        raise InvalidInputError(f"wavelength, speed: the source's frequency speed/wavelength = {speed / wavelength:g} Hz is beyond float64")
     source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
     scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
     layer = max(4, n // 10)
@@ -823,7 +825,7 @@ def smoke(
     from .grids import Source, StableFluid
 
     n = _count(n, "n", 16)
-    _cells("n", 1.5 * n * n, arrays=40)
+    _cells("n", (3 * n * n) // 2, arrays=40)
     buoyancy = _nonneg(buoyancy, "buoyancy")
     vorticity = _nonneg(vorticity, "vorticity")
     obstacle = _flag(obstacle, "obstacle")
@@ -868,6 +870,8 @@ def cavity(
     n = _count(n, "n", 8)
     _cells("n", n * n, arrays=40)
     reynolds = _positive(reynolds, "reynolds")
+    if not math.isfinite(1.0 / reynolds):
+        raise InvalidInputError(f"reynolds: {reynolds:g} makes the viscosity 1/Re overflow float64")
     tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
     scene = Scene(2, integrator=integrator, dt=1e-2 if dt is None else dt, threads=threads)
     scene.add(
