@@ -82,6 +82,13 @@ def _cells_mask(name: str, a: Any, shape: tuple[int, ...]) -> np.ndarray:
     return m
 
 
+def _field(name: str, doc: str, settable: bool = True) -> property:
+    """A property reading (and setting) the bound grid's field `name`."""
+    get = lambda self: self.field(name)  # noqa: E731
+    put = (lambda self, values: self._set(name, values)) if settable else None
+    return property(get, put, doc=doc)
+
+
 def _layout(a: np.ndarray) -> np.ndarray:
     """(nx, ny[, nz]) → the core's flat layout (x fastest)."""
     return np.ascontiguousarray(np.asarray(a, dtype=np.float64).T).reshape(-1)
@@ -191,8 +198,14 @@ class Grid:
         raise NotImplementedError
 
     def _record_arrays(self) -> dict[str, np.ndarray]:
-        """Arrays a scene file stores to rebuild this grid (flat, the core's layout)."""
-        return {}
+        """Arrays a scene file stores to rebuild this grid (flat, the core's layout): its
+        obstacle mask and the regions of its sources given by region."""
+        mask = getattr(self, "mask", None)
+        out = {} if mask is None else {"mask": _layout(mask).astype(bool)}
+        for k, src in enumerate(getattr(self, "oscillators", ()) or getattr(self, "sources", ())):
+            if src.center is None:
+                out[f"region{k}"] = _layout(np.asarray(src.region, dtype=bool)).astype(bool)
+        return out
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, shape={self.shape}, dx={self.dx:g}, edges={self.edges})"
@@ -342,28 +355,8 @@ class Wave(Grid):
             p["mask"] = _layout(self.mask)
         return p
 
-    def _record_arrays(self) -> dict[str, np.ndarray]:
-        out = {} if self.mask is None else {"mask": _layout(self.mask).astype(bool)}
-        for k, o in enumerate(self.oscillators):
-            if o.center is None:
-                out[f"region{k}"] = _layout(np.asarray(o.region, dtype=bool)).astype(bool)
-        return out
-
-    @property
-    def u(self) -> np.ndarray:
-        return self.field("u")
-
-    @u.setter
-    def u(self, values: Any) -> None:
-        self._set("u", values)
-
-    @property
-    def velocity(self) -> np.ndarray:
-        return self.field("velocity")
-
-    @velocity.setter
-    def velocity(self, values: Any) -> None:
-        self._set("velocity", values)
+    u = _field("u", "Displacement now, (nx, ny) float64, m; setting it keeps the velocity.")
+    velocity = _field("velocity", "u_t at the half step before now, (nx, ny) float64, m/s.")
 
     def _record(self) -> dict[str, Any]:
         return {
@@ -469,21 +462,8 @@ class GrayScott(Grid):
         p.update(du=self.du, dv=self.dv, feed=self.feed, kill=self.kill, cfl=self.cfl)
         return p
 
-    @property
-    def u(self) -> np.ndarray:
-        return self.field("u")
-
-    @u.setter
-    def u(self, values: Any) -> None:
-        self._set("u", values)
-
-    @property
-    def v(self) -> np.ndarray:
-        return self.field("v")
-
-    @v.setter
-    def v(self, values: Any) -> None:
-        self._set("v", values)
+    u = _field("u", "Concentration of U, (nx, ny) float64.")
+    v = _field("v", "Concentration of V, (nx, ny) float64.")
 
     def seed(self, seed: int = 0, *, squares: int = 1, size: float = 0.08, noise: float = 0.01) -> None:
         """Pearson's start: u = 1, v = 0, with ``squares`` squares of side ``size`` (a fraction of
@@ -663,12 +643,12 @@ class StableFluid(Grid):
             p["obstacles"] = _layout(self.mask)
         return p
 
-    density = property(lambda self: self.field("density"), lambda self, v: self._set("density", v), doc="Smoke density (nx, ny).")
-    temperature = property(lambda self: self.field("temperature"), lambda self, v: self._set("temperature", v), doc="Temperature (nx, ny), K.")
-    pressure = property(lambda self: self.field("pressure"), doc="Pressure of the last projection (nx, ny) (kinematic, m²/s²).")
-    vorticity_field = property(lambda self: self.field("vorticity"), doc="Vorticity ∂v/∂x − ∂u/∂y at cell centres (nx, ny), 1/s.")
-    speed = property(lambda self: self.field("speed"), doc="|u| at cell centres (nx, ny), m/s.")
-    divergence = property(lambda self: self.field("divergence"), doc="Discrete divergence (nx, ny), 1/s.")
+    density = _field("density", "Smoke density (nx, ny).")
+    temperature = _field("temperature", "Temperature (nx, ny), K.")
+    pressure = _field("pressure", "Pressure of the last projection (nx, ny) (kinematic, m²/s²).", False)
+    vorticity_field = _field("vorticity", "Vorticity ∂v/∂x − ∂u/∂y at cell centres (nx, ny), 1/s.", False)
+    speed = _field("speed", "|u| at cell centres (nx, ny), m/s.", False)
+    divergence = _field("divergence", "Discrete divergence (nx, ny), 1/s.", False)
 
     @property
     def velocity(self) -> np.ndarray:
@@ -693,13 +673,6 @@ class StableFluid(Grid):
         scene = self._bound()
         (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, ["tracers"]))
         return np.asarray(flat).reshape(-1, 2)
-
-    def _record_arrays(self) -> dict[str, np.ndarray]:
-        out = {} if self.mask is None else {"mask": _layout(self.mask).astype(bool)}
-        for k, src in enumerate(self.sources):
-            if src.region is not None:
-                out[f"region{k}"] = _layout(np.asarray(src.region, dtype=bool)).astype(bool)
-        return out
 
     def _record(self) -> dict[str, Any]:
         return {

@@ -501,16 +501,7 @@ impl<V: Vector> World<V> {
             return match r {
                 Ok(()) => Ok(()),
                 Err((_, Halt::Stopped)) => interrupted,
-                Err((_, Halt::Diverged { index, quantity })) => Err(Error::Diverged {
-                    step: self.step,
-                    t: self.t,
-                    particle: index,
-                    quantity,
-                    rolled_back_to: 0,
-                    dt,
-                    suggested_dt: 0.0,
-                    explicit_euler: false,
-                }),
+                Err((_, Halt::Diverged { index, quantity })) => Err(self.diverged(index, quantity)),
             };
         }
         for _ in 0..n {
@@ -524,22 +515,27 @@ impl<V: Vector> World<V> {
             self.t += dt;
             self.step += 1;
             if let Some(Halt::Diverged { index, quantity }) = halt {
-                return Err(Error::Diverged {
-                    step: self.step,
-                    t: self.t,
-                    particle: index,
-                    quantity,
-                    rolled_back_to: 0,
-                    dt,
-                    suggested_dt: 0.0,
-                    explicit_euler: false,
-                });
+                return Err(self.diverged(index, quantity));
             }
             for c in &mut self.couplings {
                 c.apply(&mut self.particles, &mut self.others, dt);
             }
         }
         Ok(())
+    }
+
+    /// The error of a divergence at the current step (`fail` completes it once rolled back).
+    fn diverged(&self, index: usize, quantity: crate::error::Failure) -> Error {
+        Error::Diverged {
+            step: self.step,
+            t: self.t,
+            particle: index,
+            quantity,
+            rolled_back_to: 0,
+            dt: self.dt,
+            suggested_dt: 0.0,
+            explicit_euler: false,
+        }
     }
 
     /// A step size (s) safely inside the stability region of every system (the particles:

@@ -306,10 +306,7 @@ impl System for GrayScottSystem {
             .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
-        let n = self.u.len();
-        let need =
-            Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
-        Ok(Box::new((self.spare.copy(&self.u, &need)?, self.spare.copy(&self.v, &need)?, self.books)))
+        self.spare.snapshot2(&self.u, &self.v, self.books)
     }
     fn restore(&mut self, snapshot: Snapshot) {
         let (u, v, b) =
@@ -317,11 +314,7 @@ impl System for GrayScottSystem {
         (self.u, self.v, self.books) = (u, v, b);
     }
     fn recycle(&mut self, snapshot: Snapshot) {
-        if let Ok(b) = snapshot.downcast::<(Vec<Real>, Vec<Real>, Books)>() {
-            let (x, y, _) = *b;
-            self.spare.keep(x);
-            self.spare.keep(y);
-        }
+        self.spare.recycle2::<Books>(snapshot);
     }
     fn save(&self) -> Arrays {
         vec![

@@ -213,6 +213,24 @@ impl Spare {
             None => need.copy(src),
         }
     }
+    /// A snapshot of two arrays and the small state `extra`, copied into spare buffers.
+    pub fn snapshot2<T: Send + 'static>(&self, a: &[Real], b: &[Real], extra: T) -> Result<crate::systems::Snapshot> {
+        let n = a.len() + b.len();
+        let need = crate::alloc::Need::new(
+            "step",
+            crate::alloc::Need::bytes_of::<Real>(n),
+            format!("a copy of {} values", crate::alloc::count(n as u128)),
+        );
+        Ok(Box::new((self.copy(a, &need)?, self.copy(b, &need)?, extra)))
+    }
+    /// Takes back the buffers of a `snapshot2` snapshot (anything else is dropped).
+    pub fn recycle2<T: 'static>(&self, snapshot: crate::systems::Snapshot) {
+        if let Ok(s) = snapshot.downcast::<(Vec<Real>, Vec<Real>, T)>() {
+            let (a, b, _) = *s;
+            self.keep(a);
+            self.keep(b);
+        }
+    }
     /// Keeps `b` for a later `copy` (at most four buffers are kept).
     pub fn keep(&self, b: Vec<Real>) {
         let mut pool = self.0.lock().unwrap_or_else(|e| e.into_inner());

@@ -749,10 +749,7 @@ impl System for WaveSystem {
             .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
-        let n = self.u.len();
-        let need =
-            Need::new("step", Need::bytes_of::<Real>(2 * n), format!("a copy of {} grid cells", count(n as u128)));
-        Ok(Box::new((self.spare.copy(&self.u, &need)?, self.spare.copy(&self.u_prev, &need)?, self.clock)))
+        self.spare.snapshot2(&self.u, &self.u_prev, self.clock)
     }
     fn restore(&mut self, snapshot: Snapshot) {
         let (u, up, clock) =
@@ -760,11 +757,7 @@ impl System for WaveSystem {
         (self.u, self.u_prev, self.clock) = (u, up, clock);
     }
     fn recycle(&mut self, snapshot: Snapshot) {
-        if let Ok(b) = snapshot.downcast::<(Vec<Real>, Vec<Real>, Clock)>() {
-            let (x, y, _) = *b;
-            self.spare.keep(x);
-            self.spare.keep(y);
-        }
+        self.spare.recycle2::<Clock>(snapshot);
     }
     fn save(&self) -> Arrays {
         let c = &self.clock;
