@@ -39,7 +39,7 @@ settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 #: All integrator names, as the library reports them.
 INTEGRATOR_NAMES: tuple[str, ...] = tuple(d["name"] for d in pc.INTEGRATORS)
-SYMPLECTIC: tuple[str, ...] = ("semi_implicit_euler", "verlet")
+SYMPLECTIC: tuple[str, ...] = ("semi_implicit_euler", "verlet", "yoshida4")
 
 EPS = np.finfo(np.float64).eps
 

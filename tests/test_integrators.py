@@ -18,6 +18,7 @@ ORDER_CASES = {
     "euler": (1, [0.02, 0.01, 0.005, 0.0025]),
     "semi_implicit_euler": (1, [0.02, 0.01, 0.005, 0.0025]),
     "verlet": (2, [0.04, 0.02, 0.01, 0.005]),
+    "yoshida4": (4, [0.1, 0.05, 0.025, 0.0125]),
     "rk4": (4, [0.1, 0.05, 0.025, 0.0125]),
     # Tolerances so loose that every output step is one accepted Dormand–Prince step of dt:
     # this measures the order of the tableau itself (its error control is tested below).
@@ -60,6 +61,7 @@ def test_integrator_table():
         "euler": (1, False, 1),
         "semi_implicit_euler": (1, True, 1),
         "verlet": (2, True, 1),
+        "yoshida4": (4, True, 3),
         "rk4": (4, False, 4),
         "rk45": (5, False, 6),
     }
@@ -79,7 +81,7 @@ def test_force_evaluations_per_step(name):
     s.step(1)
     first = s.force_evaluations
     # Velocity Verlet evaluates the force once at the start ("first same as last" afterwards).
-    assert first == per_step + (1 if name == "verlet" else 0)
+    assert first == per_step + (1 if name in ("verlet", "yoshida4") else 0)
     for k in (1, 10, 100):
         before = s.force_evaluations
         s.step(k)
@@ -231,3 +233,50 @@ def test_symplectic_conserves_modified_energy_exactly(name):
     for _ in range(500):
         s.step(1)
         assert shadow() == pytest.approx(q0, rel=1e-11)
+
+
+# ---------------------------------------------------------------------------- Yoshida's composition
+_W1 = 1 / (2 - 2 ** (1 / 3))
+_W0 = 1 - 2 * _W1
+
+
+def _yoshida_matrix(h: float) -> np.ndarray:
+    """The exact one-step map of yoshida4 on x'' = -x: velocity Verlet over w1·h, w0·h, w1·h
+    (Yoshida 1990, eq. 4.14), each kick–drift–kick."""
+
+    def verlet(k: float) -> np.ndarray:
+        kick, drift = np.array([[1, 0], [-k / 2, 1]]), np.array([[1, k], [0, 1]])
+        return kick @ drift @ kick
+
+    return verlet(_W1 * h) @ verlet(_W0 * h) @ verlet(_W1 * h)
+
+
+def test_yoshida_conserves_the_invariant_of_its_map():
+    # A 2×2 symplectic map [[a, b], [c, d]] with |a + d| < 2 keeps Q = c x² + (d − a) x v − b v²
+    # exactly; the map is built from the scheme's definition, so this pins the implementation
+    # (the weights, their order, the backward middle substep), not just its order.
+    h = 0.9
+    (a, b), (c, d) = _yoshida_matrix(h)
+    s = oscillator("yoshida4", h)
+
+    def q():
+        x, v = s.positions[1], s.velocities[1]
+        return c * (x @ x) + (d - a) * (x @ v) - b * (v @ v)
+
+    q0 = q()
+    for _ in range(500):
+        s.step(1)
+        assert q() == pytest.approx(q0, rel=1e-11)
+
+
+def test_yoshida_stability_limit():
+    # The composed map is stable while |trace| < 2: for ω·dt below 1.5734 (root of trace = 2,
+    # from the map above), a shorter interval than Verlet's 2 because the middle substep is
+    # 1.70 dt long. Bounded just below, exponential growth (or a reported divergence) above.
+    assert abs(np.trace(_yoshida_matrix(1.55))) < 2 < abs(np.trace(_yoshida_matrix(1.6)))
+    a = _amplitudes("yoshida4", 1.55, 2000)
+    assert a is not None and np.all(np.isfinite(a))
+    assert a.max() < 20 * a[0]
+    b = _amplitudes("yoshida4", 1.6, 300)
+    if b is not None:
+        assert b[-1] > 1e6 * b[0]

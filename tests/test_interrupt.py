@@ -21,7 +21,7 @@ import physcore as pc
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
-INTEGRATORS = ["euler", "semi_implicit_euler", "verlet", "rk4", "rk45"]
+INTEGRATORS = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45"]
 LATENCY_BOUND = 10.0  # s, from the signal to the exception
 
 

@@ -157,7 +157,9 @@ class Scene:
         Spatial dimension.
     integrator : str
         ``"euler"`` (explicit, 1st order, for contrast), ``"semi_implicit_euler"`` (symplectic,
-        1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"rk4"``
+        1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"yoshida4"``
+        (Yoshida 1990's fourth-order composition of three Verlet substeps, symplectic, 3 force
+        evaluations per step), ``"rk4"``
         (classic Runge–Kutta, 4th order, 4 force evaluations per step) or ``"rk45"`` (adaptive
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
         evaluations each; see `rtol`).

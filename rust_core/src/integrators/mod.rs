@@ -5,6 +5,7 @@ pub mod rk4;
 pub mod rk45;
 pub mod semi_implicit_euler;
 pub mod verlet;
+pub mod yoshida;
 
 use crate::error::{invalid, Result};
 use crate::state::{Model, State};
@@ -18,6 +19,7 @@ pub use rk4::Rk4;
 pub use rk45::Rk45;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
+pub use yoshida::Yoshida4;
 
 /// What a particle system hands its integrator: state, constants and the force terms.
 pub struct Particles<V: Vector> {
@@ -108,13 +110,14 @@ pub trait Integrator<V: Vector>: Send + Sync {
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 5] = ["euler", "semi_implicit_euler", "verlet", "rk4", "rk45"];
+pub const NAMES: [&str; 6] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
         "euler" => Box::new(ExplicitEuler::default()),
         "semi_implicit_euler" => Box::new(SemiImplicitEuler::default()),
         "verlet" => Box::new(VelocityVerlet::default()),
+        "yoshida4" => Box::new(Yoshida4::default()),
         "rk4" => Box::new(Rk4::default()),
         "rk45" => Box::new(Rk45::default()),
         other => {
