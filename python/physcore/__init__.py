@@ -5,7 +5,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 """
 from __future__ import annotations
 
-from . import _core
+from . import _core, flows
 from . import terms as _terms
 from ._errors import (
     InvalidInputError,
@@ -20,6 +20,7 @@ from ._errors import (
     ThreadPoolWarning,
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
+from .flows import Flow
 from .fluids import Fluid, neighbors
 from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
 from .scene import INTEGRATORS, EnergyReport, Scene
@@ -40,6 +41,8 @@ __all__ = [
     "Source",
     "Drop",
     "Oscillator",
+    "Flow",
+    "flows",
     "grids",
     "fluids",
     "PhyscoreError",

@@ -250,6 +250,7 @@ class Scene:
         self._planes: list[Plane] = []
         self._boxes: list[Box] = []
         self._grids: list[Grid] = []
+        self._flows: list[Any] = []
         self._e0: float | None = None
         self._e0_scale: float = 0.0
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
@@ -378,12 +379,26 @@ class Scene:
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
+        from .flows import Flow
+
+        if isinstance(item, Flow):
+            if item.dim != dim:
+                raise InvalidInputError(f"item: the {item.kind} flow is {item.dim}D; it cannot join a {dim}D scene")
+            if item._scene is not None:
+                raise InvalidInputError(f"item: flow {item.name!r} is already in a scene (a flow joins one scene)")
+            taken = {g.name for g in (*self._grids, *self._flows)} | {t.name for t in self._terms} | {"particles", "collisions"}
+            if item.name in taken:
+                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the flow another name")
+            self._sim.add_flow(item.kind, item.name, item._params())
+            item._scene = self
+            self._flows.append(item)
+            return item
         if isinstance(item, Grid):
             if item.dim != dim:
                 raise InvalidInputError(f"item: a {item.dim}D grid cannot join a {dim}D scene")
             if item._scene is not None:
                 raise InvalidInputError(f"item: grid {item.name!r} is already in a scene (a grid joins one scene)")
-            taken = {g.name for g in self._grids} | {t.name for t in self._terms} | {"particles", "collisions"}
+            taken = {g.name for g in (*self._grids, *self._flows)} | {t.name for t in self._terms} | {"particles", "collisions"}
             if item.name in taken:
                 raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the grid another name")
             self._sim.add_grid(item.kind, item.name, item._params())
@@ -868,6 +883,11 @@ class Scene:
     def grids(self) -> tuple[Grid, ...]:
         """The grid systems, as added."""
         return tuple(self._grids)
+
+    @property
+    def flows(self) -> tuple[Any, ...]:
+        """The :class:`~physcore.flows.Flow` systems of the scene, in the order added."""
+        return tuple(self._flows)
 
     @property
     def fluids(self) -> tuple[Fluid, ...]:

@@ -28,7 +28,7 @@ from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .scene import Scene
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "lorenz", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -888,6 +888,45 @@ cavity.render_defaults = {
 }
 
 
+def lorenz(
+    n: int = 40000,
+    kind: str = "lorenz",
+    spread: float = 0.5,
+    seed: int = 7,
+    integrator: str = "rk4",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """A strange attractor painted by a cloud: `n` points start in a ball of radius `spread`
+    near the attractor and chaos stretches them over it (:class:`~physcore.flows.Flow`; the
+    Lorenz system by default, ``kind="rossler"``, ``"thomas"``, ``"aizawa"`` or ``"halvorsen"``
+    for the others). `integrator` is the flow's Runge–Kutta method (``"rk4"``, ``"euler"``,
+    ``"heun"`` or ``"dopri5"``); ``dt=None`` takes the flow's default step.
+    """
+    from .flows import _METHODS, FLOWS, Flow
+
+    n = _count(n, "n", 1)
+    _particles("n", n)
+    if not isinstance(kind, str) or kind not in FLOWS or FLOWS[kind]["dim"] != 3:
+        raise InvalidInputError(f"kind: expected one of {', '.join(k for k, v in FLOWS.items() if v['dim'] == 3)}, got {kind!r}")
+    if integrator not in _METHODS:
+        raise InvalidInputError(f"integrator: the flow's method must be one of {', '.join(_METHODS)}, got {integrator!r}")
+    spread = _nonneg(spread, "spread")
+    seed = _count(seed, "seed", 0)
+    step = FLOWS[kind]["max_dt"] if dt is None else _positive(dt, "dt")
+    scene = Scene(3, integrator="rk4" if integrator == "rk4" else "verlet", dt=step, threads=threads)
+    scene.add(Flow(kind, n, spread=spread, seed=seed, method=integrator))
+    # Frames every 20 steps of the default dt, so the cloud spreads over the whole attractor.
+    scene.render_defaults = {"steps_per_frame": max(1, round(20 * FLOWS[kind]["max_dt"] / step))}
+    return scene
+
+
+lorenz.render_defaults = {
+    "frames": 180, "fps": 30, "steps_per_frame": 20, "size": (480, 400), "view": (-80.0, 8.0), "radius": 0,
+    "speed_unit": "(flow units)",
+}
+
+
 def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
     """`fn` returning scenes that carry its ``render_defaults`` (so ``render.gif(scene)`` shows
     the motion ``physcore render NAME`` shows); same name, docs, signature and attributes."""
@@ -913,6 +952,7 @@ double_slit = _stamped(double_slit)
 turing = _stamped(turing)
 smoke = _stamped(smoke)
 cavity = _stamped(cavity)
+lorenz = _stamped(lorenz)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {
@@ -927,5 +967,6 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "turing": turing,
     "smoke": smoke,
     "cavity": cavity,
+    "lorenz": lorenz,
 }
 DEFAULT_SCENE = "cloth"

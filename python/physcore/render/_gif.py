@@ -175,8 +175,8 @@ def gif(
     size_by = d.get("size_by", "none") if size_by is None else size_by
     if size_by not in ("none", "mass"):
         raise InvalidInputError(f"size_by must be 'none' or 'mass'; got {size_by!r}")
-    radius = _check_radius(radius)
-    view = _check_view(view)
+    radius = _check_radius(d.get("radius") if radius is None else radius)
+    view = _check_view(d.get("view") if view is None else view)
     colorbar = _check.flag("colorbar", colorbar)
     springs = _check.flag("springs", springs)
     progress = _check.flag("progress", progress)
@@ -195,6 +195,7 @@ def gif(
         _check.memory("frames, size", rec.frames * 2 * size[0] * size[1], f"{rec.frames} frames of {size[0]}x{size[1]} pixels")
         _check_writable(path)
     else:
+        scene = _recording.points_view(scene)
         plan = _recording._plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
         _check_memory(scene, plan["frames"], size, springs)
         _check_writable(path)

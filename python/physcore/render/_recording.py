@@ -88,6 +88,44 @@ class Recording(NamedTuple):
         return int(self.positions.shape[0])
 
 
+class _FlowPoints:
+    """A scene without particles whose flows' points (:class:`physcore.Flow`) are drawn as its
+    particles: positions are the points, velocities the flow's u there; every other attribute
+    is the scene's, so stepping goes to it."""
+
+    def __init__(self, scene: Any) -> None:
+        self._scene = scene
+        self._flows = tuple(scene.flows)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._scene, name)
+
+    @property
+    def n_particles(self) -> int:
+        return sum(f.n for f in self._flows)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return np.concatenate([f.points for f in self._flows])
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return np.concatenate([f.velocity for f in self._flows])
+
+    @property
+    def pinned(self) -> np.ndarray:
+        return np.zeros(self.n_particles, dtype=bool)
+
+    masses = None
+
+
+def points_view(scene: Any) -> Any:
+    """`scene`, or for a scene with flows and no particles, a view drawing the flows' points."""
+    if getattr(scene, "flows", ()) and int(getattr(scene, "n_particles", 0)) == 0:
+        return _FlowPoints(scene)
+    return scene
+
+
 def _simulate(
     scene: Any,
     frames: int,
@@ -366,6 +404,7 @@ def record(
     >>> rec.times.round(6).tolist()
     [0.0, 0.02, 0.04, 0.06, 0.08]
     """
+    scene = points_view(scene)
     color_by = _check_color_by(scene_defaults(scene).get("color_by", "speed") if color_by is None else color_by)
     springs = _check.flag("springs", springs)
     progress = _check.flag("progress", progress)

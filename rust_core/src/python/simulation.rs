@@ -239,6 +239,15 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
     }
 
+    /// Adds points advected by a flow (`crate::systems::flows::build`) of `kind` named `name`,
+    /// built from `params`.
+    fn add_flow(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let p = params_of(py, "add_flow", params)?;
+        let dim = self.dim();
+        let sys = crate::systems::flows::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
+    }
+
     /// The fields `names` of system `name`, each a flat float64 array (the grid's layout).
     fn system_fields<'py>(
         &self,

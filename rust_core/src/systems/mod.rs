@@ -8,7 +8,10 @@
 //!   Butcher tableau of [`crate::ode`] (flows such as the Lorenz system; a field discretised in
 //!   space, by the method of lines).
 //!
+//! - [`flows`]: points advected by a first-order flow (Lorenz, Rössler, …), an `OdeSystem`.
+//!
 //! Couplings between systems ([`Coupling`]) run after all systems have stepped.
+pub mod flows;
 pub mod ode;
 pub mod particles;
 

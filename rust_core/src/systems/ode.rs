@@ -90,9 +90,20 @@ impl System for OdeSystem {
         let potential = self.energy.as_ref().map(|e| vec![(self.name.clone(), e(&self.y))]).unwrap_or_default();
         EnergyReport { kinetic: 0.0, potential, dissipated: Vec::new() }
     }
-    /// One field, "y": the state.
+    /// "y": the state; "rate": f(y), its rate of change.
     fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
-        names.iter().map(|n| if *n == "y" { self.y.clone() } else { vec![0.0; self.y.len()] }).collect()
+        names
+            .iter()
+            .map(|n| match *n {
+                "y" => self.y.clone(),
+                "rate" => {
+                    let mut dy = vec![0.0; self.y.len()];
+                    (self.rhs)(&self.y, &mut dy);
+                    dy
+                }
+                _ => vec![0.0; self.y.len()],
+            })
+            .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
         let n = self.y.len();

@@ -51,6 +51,10 @@ impl Params {
     pub fn insert(&mut self, key: &str, value: Value) {
         self.values.insert(key.to_string(), value);
     }
+    /// Whether `key` was given (for optional parameters with defaults).
+    pub fn has(&self, key: &str) -> bool {
+        self.values.contains_key(key)
+    }
     fn get(&self, key: &str) -> Result<&Value> {
         self.values.get(key).ok_or_else(|| invalid(key, "missing"))
     }
