@@ -86,8 +86,10 @@ _META_FIELDS: dict[str, str] = {
     "planes": "list",
 }
 # Absent from files of earlier versions; these are the values those versions used.
-_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": [], "grids": []}
-_META_OPTIONAL: dict[str, str] = {"rtol": "number", "atol": "number", "precision": "str", "boxes": "list", "grids": "list"}
+_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": [], "grids": [], "flows": []}
+_META_OPTIONAL: dict[str, str] = {
+    "rtol": "number", "atol": "number", "precision": "str", "boxes": "list", "grids": "list", "flows": "list",
+}
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
@@ -311,6 +313,22 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
             raise r.error(f"{field}.record.shape", f"{_show(shape)} has more than 2**31 cells")
         grids.append(rec)
     meta["grids"] = grids
+    from .flows import FLOWS
+
+    flows = []
+    for k, f in enumerate(meta["flows"]):
+        field = f"meta.flows[{k}]"
+        rec = r.record(field, f, {"name": "str", "record": "object"}, dim)
+        if not rec["name"] or rec["name"] in names:
+            raise r.error(f"{field}.name", f"{_show(rec['name'])} is empty or taken")
+        names.add(rec["name"])
+        kind, n = rec["record"].get("kind"), rec["record"].get("n")
+        if kind not in FLOWS or FLOWS[kind]["dim"] != dim:
+            raise r.error(f"{field}.record.kind", f"must name a {dim}D flow, got {_show(kind)}")
+        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 1 << 27):
+            raise r.error(f"{field}.record.n", f"must be a point count in 1..{1 << 27}, got {_show(n)}")
+        flows.append(rec)
+    meta["flows"] = flows
     return meta
 
 
@@ -490,6 +508,9 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
         for j, src in enumerate(g["record"].get("sources", [])):
             if isinstance(src, list) and len(src) > 3 and src[3] is None:
                 req[f"grid{k}_region{j}"] = _Spec("b1", (cells,))
+    for k, f in enumerate(meta["flows"]):
+        sizes[f"F{k}"] = (f["record"]["n"] * meta["dim"], f"meta.flows[{k}].record.n")
+        req[f"flow{k}_y"] = _Spec("f8", (f"F{k}",))
     opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})

@@ -20,6 +20,7 @@ import numpy as np
 from . import _check, _core, _scenefile
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SeparateFluidsWarning, ThreadPoolWarning
+from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
 from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
@@ -379,8 +380,6 @@ class Scene:
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
-        from .flows import Flow
-
         if isinstance(item, Flow):
             if item.dim != dim:
                 raise InvalidInputError(f"item: the {item.kind} flow is {item.dim}D; it cannot join a {dim}D scene")
@@ -945,6 +944,11 @@ class Scene:
                 if not np.isfinite(v).all():
                     raise InvalidInputError(f"grid {g.name!r}: its {a} is not finite; a scene file holds finite values only")
                 arrays[f"grid{k}_{a}"] = v
+        flows_meta = []
+        for k, f in enumerate(self._flows):
+            flows_meta.append({"name": f.name, "record": f._record()})
+            ((_, y),) = self._sim.system_save(f.name)
+            arrays[f"flow{k}_y"] = y
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
@@ -980,6 +984,7 @@ class Scene:
                 for b in self._boxes
             ],
             "grids": grids_meta,
+            "flows": flows_meta,
         }
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
@@ -1065,6 +1070,15 @@ class Scene:
                 grid = scene.add(_from_record(g["kind"], g["name"], g["record"], {a: v for a, v in own.items() if a not in _GRID_ARRAYS[g["kind"]]}))
             with r.api(f"grid{k}"):
                 scene._sim.system_load(grid.name, [(a, v) for a, v in own.items() if a in _GRID_ARRAYS[g["kind"]]])
+        for k, f in enumerate(meta["flows"]):
+            rec = f["record"]
+            y = z[f"flow{k}_y"]
+            with r.api(f"meta.flows[{k}].record", {"points": f"flow{k}_y"}):
+                points = y.reshape(meta["dim"], -1).T
+                params = rec.get("params")
+                if not isinstance(params, dict):
+                    raise InvalidInputError(f"params: expected an object, got {type(params).__name__}")
+                scene.add(Flow(rec["kind"], points, method=rec.get("method"), max_dt=rec.get("max_dt"), name=f["name"], **params))
         with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
             scene._sim.restore(
                 sf.time,
