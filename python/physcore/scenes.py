@@ -28,7 +28,7 @@ from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .scene import Scene
 from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "lorenz", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "lorenz", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -326,6 +326,71 @@ kepler.render_defaults = {
     "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
     "trail": 60,  # one orbit (the 120 frames cover two)
     "size_by": "mass",  # the star larger than the planet
+}
+
+
+#: Figure-eight choreography of three equal masses (G = m = 1): Chenciner & Montgomery, Ann.
+#: Math. 152 (2000) 881; initial conditions and period from Simó (2002), as tabulated by
+#: Chenciner & Montgomery's Fig. 1 caption: x₁ = −x₂, x₃ = 0, v₁ = v₂ = −v₃/2.
+FIGURE_EIGHT_X1 = (0.97000436, -0.24308753)
+FIGURE_EIGHT_V3 = (-0.93240737, -0.86473146)
+FIGURE_EIGHT_PERIOD = 6.32591398
+
+
+def figure_eight(
+    steps_per_period: int = 2000,
+    integrator: str = "yoshida4",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Three equal masses chasing each other around one figure-eight curve (G = m = 1): the
+    choreography found by Moore (1993) and proved by Chenciner & Montgomery (2000), with
+    Simó's initial conditions (:data:`FIGURE_EIGHT_X1`, :data:`FIGURE_EIGHT_V3`). Period
+    T = 6.32591398; each body follows the one ahead by T/3. Total momentum 0, energy −1.287.
+    ``dt=None`` uses T / steps_per_period, with Yoshida's fourth-order integrator.
+    """
+    steps_per_period = _count(steps_per_period, "steps_per_period", 1)
+    step = FIGURE_EIGHT_PERIOD / steps_per_period if steps_per_period <= 2**1000 else 0.0
+    if dt is None and not step >= _check.MIN_NORMAL:
+        raise InvalidInputError(f"steps_per_period: the step T / steps_per_period = {step:.3g} is below float64's normal range")
+    x1, v3 = np.array(FIGURE_EIGHT_X1), np.array(FIGURE_EIGHT_V3)
+    scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
+    scene.add_particles(np.stack([x1, -x1, np.zeros(2)]), np.stack([-v3 / 2, -v3 / 2, v3]), masses=1.0)
+    scene.add(PairwiseGravity(G=1.0))
+    return scene
+
+
+figure_eight.render_defaults = {
+    "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (480, 300),
+    "speed_unit": "(G=1)", "trail": 50,  # each trail one third of the curve: the three close it
+}
+
+
+def pythagorean(
+    rtol: float = 1e-10,
+    integrator: str = "rk45",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Burrau's problem (1913): masses 3, 4 and 5 at rest at the corners of a 3-4-5 right
+    triangle, each opposite the side of its length (G = 1), at (1, 3), (−2, −1) and (1, −1).
+    After a long dance of close encounters the lightest body is thrown out near t = 60 and the
+    other two leave as a binary (Szebehely & Peters, Astron. J. 72 (1967) 876). The encounters
+    are far closer than the start, so the adaptive ``"rk45"`` (tolerance `rtol`) is the
+    default; ``dt`` (default 0.1) is then the output interval.
+    """
+    rtol = _check.float_in_range("rtol", rtol, 1e-14, 1.0, hi_open=True)
+    scene = Scene(2, integrator=integrator, dt=0.1 if dt is None else dt, threads=threads, rtol=rtol, atol=rtol * 1e-3)
+    x = np.array([[1.0, 3.0], [-2.0, -1.0], [1.0, -1.0]])
+    scene.add_particles(x, np.zeros((3, 2)), masses=[3.0, 4.0, 5.0])
+    scene.add(PairwiseGravity(G=1.0))
+    return scene
+
+
+pythagorean.render_defaults = {
+    # To t = 61: the ejection has begun (from t ≈ 60) and the dance still fills the frame.
+    "frames": 204, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
+    "radius": 3,
 }
 
 
@@ -944,6 +1009,8 @@ def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
 cloth = _stamped(cloth)
 projectile = _stamped(projectile)
 kepler = _stamped(kepler)
+figure_eight = _stamped(figure_eight)
+pythagorean = _stamped(pythagorean)
 spring_chain = _stamped(spring_chain)
 dam_break = _stamped(dam_break)
 drop = _stamped(drop)
@@ -959,6 +1026,8 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "cloth": cloth,
     "projectile": projectile,
     "kepler": kepler,
+    "figure_eight": figure_eight,
+    "pythagorean": pythagorean,
     "spring_chain": spring_chain,
     "dam_break": dam_break,
     "drop": drop,
