@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import physcore as pc
-from physcore.scenes import FIGURE_EIGHT_PERIOD as T
 
 
 def _pair_energy(s: pc.Scene, i: int, j: int) -> float:
