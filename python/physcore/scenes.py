@@ -343,8 +343,9 @@ def figure_eight(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Three equal masses chasing each other around one figure-eight curve (G = m = 1): the
-    choreography found by Moore (1993) and proved by Chenciner & Montgomery (2000), with
+    """Three equal masses chasing each other around one figure-eight curve.
+
+    G = m = 1: the choreography found by Moore (1993) and proved by Chenciner & Montgomery (2000), with
     Simó's initial conditions (:data:`FIGURE_EIGHT_X1`, :data:`FIGURE_EIGHT_V3`). Period
     T = 6.32591398; each body follows the one ahead by T/3. Total momentum 0, energy −1.287.
     ``dt=None`` uses T / steps_per_period, with Yoshida's fourth-order integrator.
@@ -372,8 +373,9 @@ def pythagorean(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Burrau's problem (1913): masses 3, 4 and 5 at rest at the corners of a 3-4-5 right
-    triangle, each opposite the side of its length (G = 1), at (1, 3), (−2, −1) and (1, −1).
+    """Burrau's three-body problem: masses 3, 4 and 5 released at rest, until one is thrown out.
+
+    The masses start at the corners of a 3-4-5 right triangle (Burrau 1913), each opposite the side of its length (G = 1), at (1, 3), (−2, −1) and (1, −1).
     After a long dance of close encounters the lightest body is thrown out near t = 60 and the
     other two leave as a binary (Szebehely & Peters, Astron. J. 72 (1967) 876). The encounters
     are far closer than the start, so the adaptive ``"rk45"`` (tolerance `rtol`) is the
@@ -392,6 +394,38 @@ pythagorean.render_defaults = {
     "frames": 204, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
     "radius": 3,
 }
+
+
+def plummer_sphere(n: int, *, mass: float = 1.0, a: float = 1.0, G: float = 1.0, seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and velocities, (n, 3) float64 each, of a Plummer sphere in equilibrium: density
+    ρ ∝ (1 + r²/a²)^(−5/2), total mass `mass`, scale radius `a`, in its centre-of-mass frame.
+    Sampled as Aarseth, Hénon & Wielen, Astron. Astrophys. 37 (1974) 183, Appendix: radii by
+    inverting the cumulative mass M(r)/M = r³/(r² + a²)^{3/2}, speeds q·v_esc with
+    g(q) ∝ q²(1 − q²)^{7/2} by rejection, v_esc = √(2GM/√(r² + a²)); isotropic directions.
+    The half-mass radius is ≈ 1.305 a; the virial ratio 2K/|W| is 1 up to sampling noise.
+    """
+    n = _count(n, "n", 1)
+    rng = np.random.default_rng(seed)
+
+    def directions(k: int) -> np.ndarray:
+        d = rng.normal(size=(k, 3))
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    # Mass fractions away from 0 and 1 keep r finite (1 − 1e-3: radii below ~30a).
+    m = rng.uniform(1e-9, 0.999, n)
+    r = a / np.sqrt(m ** (-2.0 / 3.0) - 1.0)
+    q = np.empty(n)
+    filled = 0
+    while filled < n:
+        x = rng.uniform(0.0, 1.0, 2 * (n - filled))
+        y = rng.uniform(0.0, 0.1, x.size)  # max of q²(1 − q²)^{7/2} is 0.0921
+        keep = x[y < x * x * (1 - x * x) ** 3.5][: n - filled]
+        q[filled : filled + keep.size] = keep
+        filled += keep.size
+    v = q * np.sqrt(2.0 * G * mass) * (r * r + a * a) ** -0.25
+    x = r[:, None] * directions(n)
+    u = v[:, None] * directions(n)
+    return x - x.mean(axis=0), u - u.mean(axis=0)
 
 
 def spring_chain(
@@ -962,8 +996,10 @@ def lorenz(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """A strange attractor painted by a cloud: `n` points start in a ball of radius `spread`
-    near the attractor and chaos stretches them over it (:class:`~physcore.flows.Flow`; the
+    """A strange attractor painted by a cloud of points (Lorenz's by default).
+
+    `n` points start in a ball of radius `spread` near the attractor and chaos stretches them
+    over it (:class:`~physcore.flows.Flow`; the
     Lorenz system by default, ``kind="rossler"``, ``"thomas"``, ``"aizawa"`` or ``"halvorsen"``
     for the others). `integrator` is the flow's Runge–Kutta method (``"rk4"``, ``"euler"``,
     ``"heun"`` or ``"dopri5"``); ``dt=None`` takes the flow's default step.
