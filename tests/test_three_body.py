@@ -80,3 +80,19 @@ def test_three_body_scenes_render_with_trails(tmp_path, name):
     path = pc.render.gif(pc.scenes.REGISTRY[name](), tmp_path / "t.gif", frames=8, size=(120, 100))
     with Image.open(path) as im:
         assert im.n_frames >= 2
+
+
+def test_themes_swap_the_palette_only(tmp_path):
+    from PIL import Image
+
+    def corner_and_indices(theme):
+        path = pc.render.gif(pc.scenes.figure_eight(), tmp_path / f"{theme}.gif", frames=3, size=(96, 64), theme=theme)
+        with Image.open(path) as im:
+            idx = np.asarray(im)  # palette indices of frame 0
+            return np.asarray(im.convert("RGB"))[-1, 0], idx
+
+    (light, li), (dark, di) = corner_and_indices("light"), corner_and_indices("dark")
+    assert light.min() > 240 and dark.max() < 40  # white against night blue
+    assert np.array_equal(li, di)  # the same picture, drawn in other colours
+    with pytest.raises(ValueError, match="theme"):
+        pc.render.gif(pc.scenes.figure_eight(), tmp_path / "x.gif", frames=2, theme="neon")

@@ -333,6 +333,9 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     radius = args.radius if args.radius is not None else d.get("radius")
     if radius is not None:
         settings["radius"] = radius
+    theme = getattr(args, "theme", None) or d.get("theme")
+    if theme is not None:
+        settings["theme"] = theme
     return settings
 
 
@@ -579,6 +582,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     )
     r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
+    r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")
     r.add_argument("--trail", type=int, metavar="N",
                    help="draw each particle's path over the last N frames, fading (0: none; default: the scene's)")

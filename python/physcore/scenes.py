@@ -363,7 +363,7 @@ def figure_eight(
 
 figure_eight.render_defaults = {
     "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (480, 300),
-    "speed_unit": "(G=1)", "trail": 50,  # each trail one third of the curve: the three close it
+    "speed_unit": "(G=1)", "trail": 50, "theme": "dark",  # each trail a third of the curve: the three close it
 }
 
 
@@ -392,7 +392,7 @@ def pythagorean(
 pythagorean.render_defaults = {
     # To t = 61: the ejection has begun (from t ≈ 60) and the dance still fills the frame.
     "frames": 204, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
-    "radius": 3,
+    "radius": 3, "theme": "dark",
 }
 
 
@@ -1024,7 +1024,7 @@ def lorenz(
 
 lorenz.render_defaults = {
     "frames": 180, "fps": 30, "steps_per_frame": 20, "size": (480, 400), "view": (-80.0, 8.0), "radius": 0,
-    "speed_unit": "(flow units)",
+    "speed_unit": "(flow units)", "theme": "dark",
 }
 
 

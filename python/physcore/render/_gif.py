@@ -20,8 +20,9 @@ from ._checks import (
     _check_size,
     _check_view,
     _check_writable,
+    _short,
 )
-from ._palette import _PALETTE
+from ._palette import _PALETTE, THEMES, theme_palette
 from ._raster import _Rasteriser
 
 
@@ -43,6 +44,7 @@ def gif(
     progress: bool = False,
     trail: int | None = None,
     size_by: str | None = None,
+    theme: str | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -134,6 +136,11 @@ def gif(
         star beside its planet). Default: the scene's ``render_defaults`` (Kepler: "mass"),
         else ``"none"`` (one size).
 
+    theme : {"light", "dark"}, optional
+        Colours of particle animations: ``"light"`` (white background) or ``"dark"`` (night
+        blue, light text, trails like long exposures). Field animations keep their own maps.
+        Default: the scene's ``render_defaults`` (galaxies, attractors: "dark"), else "light".
+
     Returns
     -------
     pathlib.Path
@@ -175,6 +182,9 @@ def gif(
     size_by = d.get("size_by", "none") if size_by is None else size_by
     if size_by not in ("none", "mass"):
         raise InvalidInputError(f"size_by must be 'none' or 'mass'; got {size_by!r}")
+    theme = d.get("theme", "light") if theme is None else theme
+    if theme not in THEMES:
+        raise InvalidInputError(f"theme must be one of {', '.join(THEMES)}; got {_short(theme)}")
     radius = _check_radius(d.get("radius") if radius is None else radius)
     view = _check_view(d.get("view") if view is None else view)
     colorbar = _check.flag("colorbar", colorbar)
@@ -212,7 +222,7 @@ def gif(
         return path
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by)
-    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames))
+    _write_gif(path, (ras.frame(k) for k in range(rec.frames)), _gif_delays_ms(fps, rec.frames), theme_palette(theme))
     return path
 
 

@@ -90,6 +90,37 @@ def _build_palette() -> np.ndarray:
 
 _PALETTE = _build_palette()
 
+#: Themes: the same indices drawn in other colours (a palette swap, so the raster is the same).
+THEMES = ("light", "dark")
+
+
+def _build_dark_palette() -> np.ndarray:
+    """The palette of ``theme="dark"``: a night-blue background, light text, the full viridis
+    and plasma (their bright ends show on dark), trails fading from the background to pale
+    blue, so orbits and attractors read like long exposures."""
+    pal = _PALETTE.astype(np.float64)
+    night = np.array([12.0, 14.0, 26.0])
+    pal[_BACKGROUND] = night
+    pal[_PLANE_FILL] = (40, 40, 52)
+    pal[_PLANE_LINE] = (150, 150, 170)
+    pal[_PLAIN] = (120, 190, 255)
+    pal[_SPEED0:_STRAIN0] = _sample_map(_VIRIDIS, 1.0, _N_SPEED)
+    pal[_PRESSURE0:_TRAIL0] = _sample_map(_PLASMA, 1.0, _N_PRESSURE)
+    pal[_WALL] = (90, 90, 100)
+    pal[_TEXT] = (225, 225, 235)
+    pale = np.array([150.0, 185.0, 255.0])
+    for k, a in enumerate(np.linspace(0.12, 0.6, _N_TRAIL)):
+        pal[_TRAIL0 + k] = (1 - a) * night + a * pale
+    return np.round(pal).astype(np.uint8)
+
+
+_DARK_PALETTE = _build_dark_palette()
+
+
+def theme_palette(theme: str) -> np.ndarray:
+    """(256 or fewer, 3) uint8 palette of `theme` (one of :data:`THEMES`)."""
+    return _DARK_PALETTE if theme == "dark" else _PALETTE
+
 
 def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> np.ndarray:
     """(N,) values -> (N,) uint8 indices into the sequential map of `levels` entries at `base`.
