@@ -1,7 +1,7 @@
 //! Points advected by a first-order autonomous flow dx/dt = u(x): strange attractors painted by
-//! a cloud of points. Each flow is an [`OdeSystem`] over the points' coordinates, stored by
-//! axis (all x, then all y, then all z) so that the right-hand side runs over contiguous
-//! columns, in parallel chunks of points: bit-identical for any thread count.
+//! a cloud of points. The points are stored by axis (all x, then all y, then all z) and stepped
+//! by an explicit Butcher tableau of the ODE layer (`crate::ode`), one point at a time in
+//! parallel chunks: bit-identical for any thread count.
 //!
 //! The flows and their customary parameters:
 //! - `lorenz` (3D): σ(y − x), x(ρ − z) − y, xy − βz; σ = 10, ρ = 28, β = 8/3 (Lorenz, J.
@@ -17,12 +17,15 @@
 //!   "Chaos and Time-Series Analysis", 2003, Table A.3).
 //! - `van_der_pol` (2D): y, μ(1 − x²)y − x; μ = 1 (van der Pol, Phil. Mag. 2 (1926) 978): a
 //!   limit cycle every start is drawn to.
-use super::ode::{OdeSystem, Rhs};
-use super::System;
-use crate::error::{invalid, Result};
+use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
+use crate::alloc::{count, Need};
+use crate::error::{invalid, Failure, Result};
+use crate::ode::{self, Tableau, MAX_STAGES};
 use crate::par;
+use crate::simd;
 use crate::terms::registry::Params;
 use crate::vector::Real;
+use std::sync::atomic::AtomicBool;
 
 /// One flow: its name, dimension, parameter names with their defaults, and the largest step
 /// `World::advance` takes by default (s: well inside RK4's stability region on the attractor).
@@ -81,7 +84,7 @@ pub fn kind(name: &str) -> Result<&'static FlowKind> {
 /// The velocity u(p) of flow `name` with parameters `c` (in `FlowKind::params` order) at one
 /// point `p` (its first `dim` entries).
 #[inline(always)]
-fn velocity(flow: Flow, c: &[Real], p: [Real; 3]) -> [Real; 3] {
+fn velocity(flow: Flow, c: &[Real; 6], p: [Real; 3]) -> [Real; 3] {
     let [x, y, z] = p;
     match flow {
         Flow::Lorenz => [c[0] * (y - x), x * (c[1] - z) - y, x * y - c[2] * z],
@@ -103,49 +106,173 @@ fn velocity(flow: Flow, c: &[Real], p: [Real; 3]) -> [Real; 3] {
     }
 }
 
-/// The right-hand side over a state stored by axis: `y` = [x₀…x_{n−1}, y₀…, (z₀…)].
-fn rhs(kind: &'static FlowKind, c: Vec<Real>) -> Rhs {
-    // One loop per flow (the match outside it), so that each is compiled with its formula
-    // inlined and vectorises where its arithmetic allows.
-    macro_rules! flow {
-        ($f:expr) => {
-            Box::new(move |y: &[Real], dy: &mut [Real]| sweep(kind.dim, y, dy, |p| velocity($f, &c, p)))
-        };
+/// Points under flow `u`, stored by axis, stepped one point at a time: each point's whole
+/// Runge–Kutta step (every stage) runs in registers, so a step reads and writes each
+/// coordinate once. The stage sums are the ODE layer's (`crate::ode::explicit_step`):
+/// y + h Σ_j a_ij k_j, summed in j order.
+pub struct FlowSystem<F> {
+    name: String,
+    dim: usize,
+    y: Vec<Real>,
+    tableau: &'static Tableau,
+    u: F,
+    max_dt: Real,
+}
+
+/// One explicit RK step of size `h` from `p` under `u`, for a tableau of `S` stages: with `S`
+/// a constant the stage loops unroll and every k stays in registers. Zero coefficients are
+/// not skipped (adding 0·k leaves a finite sum unchanged), so there are no branches.
+#[inline(always)]
+fn rk_point<const S: usize>(t: &Tableau, h: Real, p: [Real; 3], u: &impl Fn([Real; 3]) -> [Real; 3]) -> [Real; 3] {
+    let mut k = [[0.0; 3]; S];
+    let combine = |w: &[Real; MAX_STAGES], k: &[[Real; 3]; S], upto: usize| {
+        let mut acc = [0.0; 3];
+        for j in 0..upto {
+            for c in 0..3 {
+                acc[c] += w[j] * k[j][c];
+            }
+        }
+        [p[0] + h * acc[0], p[1] + h * acc[1], p[2] + h * acc[2]]
+    };
+    k[0] = u(p);
+    for i in 1..S {
+        k[i] = u(combine(&t.a[i], &k, i));
     }
-    match kind.flow {
-        Flow::Lorenz => flow!(Flow::Lorenz),
-        Flow::Rossler => flow!(Flow::Rossler),
-        Flow::Thomas => flow!(Flow::Thomas),
-        Flow::Aizawa => flow!(Flow::Aizawa),
-        Flow::Halvorsen => flow!(Flow::Halvorsen),
-        Flow::VanDerPol => flow!(Flow::VanDerPol),
+    combine(&t.b, &k, S)
+}
+
+/// `rk_point` with the tableau's stage count made a constant.
+#[inline(always)]
+fn sweep<const S: usize>(t: &Tableau, h: Real, d: usize, y: &mut [Real], u: &(impl Fn([Real; 3]) -> [Real; 3] + Sync)) {
+    let n = y.len() / d;
+    let (xs, rest) = y.split_at_mut(n);
+    let (ys, zs) = rest.split_at_mut(n);
+    // Compiled per SIMD level (the loop over points vectorises: 4 or 8 points per instruction).
+    // No fused multiply-adds are formed, so every level gives the same bits.
+    let level = simd::level();
+    if d == 3 {
+        par::chunks3(xs, ys, zs, |_, xs, ys, zs| {
+            simd::vectorized(
+                level,
+                #[inline(always)]
+                || {
+                    for k in 0..xs.len() {
+                        let q = rk_point::<S>(t, h, [xs[k], ys[k], zs[k]], u);
+                        (xs[k], ys[k], zs[k]) = (q[0], q[1], q[2]);
+                    }
+                },
+            )
+        });
+    } else {
+        par::chunks2(xs, ys, |_, xs, ys| {
+            simd::vectorized(
+                level,
+                #[inline(always)]
+                || {
+                    for k in 0..xs.len() {
+                        let q = rk_point::<S>(t, h, [xs[k], ys[k], 0.0], u);
+                        (xs[k], ys[k]) = (q[0], q[1]);
+                    }
+                },
+            )
+        });
     }
 }
 
-/// dy = u(y) over points stored by axis, in parallel chunks of points.
-#[inline(always)]
-fn sweep(d: usize, y: &[Real], dy: &mut [Real], u: impl Fn([Real; 3]) -> [Real; 3] + Sync + Send) {
-    let n = y.len() / d;
-    let (dx, rest) = dy.split_at_mut(n);
-    let (dyy, dz) = rest.split_at_mut(n);
-    let (xs, ys) = (&y[..n], &y[n..2 * n]);
-    if d == 3 {
-        let zs = &y[2 * n..];
-        par::chunks3(dx, dyy, dz, |s, a, b, e| {
-            let (xs, ys, zs) = (&xs[s..s + a.len()], &ys[s..s + a.len()], &zs[s..s + a.len()]);
-            for k in 0..a.len() {
-                let v = u([xs[k], ys[k], zs[k]]);
-                (a[k], b[k], e[k]) = (v[0], v[1], v[2]);
+impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> FlowSystem<F> {
+    fn new(name: &str, dim: usize, y: Vec<Real>, method: &str, u: F, max_dt: Real) -> Result<Self> {
+        let tableau = ode::by_name(method).ok_or_else(|| {
+            let names: Vec<_> = ode::TABLEAUX.iter().map(|t| t.name).collect();
+            invalid("method", format!("unknown tableau {method:?}; valid names: {}", names.join(", ")))
+        })?;
+        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+            return Err(invalid("points", format!("coordinate {i} is not finite: {}", y[i])));
+        }
+        if !(max_dt.is_finite() && max_dt > 0.0) {
+            return Err(invalid("max_dt", format!("{max_dt} must be finite and > 0 (seconds)")));
+        }
+        Ok(Self { name: name.to_string(), dim, y, tableau, u, max_dt })
+    }
+
+    /// The velocity at every point, stored by axis like the points.
+    fn rate(&self) -> Vec<Real> {
+        let n = self.y.len() / self.dim;
+        let mut out = vec![0.0; self.y.len()];
+        for i in 0..n {
+            let v = (self.u)(self.point(i));
+            for c in 0..self.dim {
+                out[c * n + i] = v[c];
             }
-        });
-    } else {
-        par::chunks2(dx, dyy, |s, a, b| {
-            let (xs, ys) = (&xs[s..s + a.len()], &ys[s..s + a.len()]);
-            for k in 0..a.len() {
-                let v = u([xs[k], ys[k], 0.0]);
-                (a[k], b[k]) = (v[0], v[1]);
-            }
-        });
+        }
+        out
+    }
+
+    fn point(&self, i: usize) -> [Real; 3] {
+        let n = self.y.len() / self.dim;
+        [self.y[i], self.y[n + i], if self.dim == 3 { self.y[2 * n + i] } else { 0.0 }]
+    }
+}
+
+impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn is_empty(&self) -> bool {
+        self.y.is_empty()
+    }
+    fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
+        let (t, d, u) = (self.tableau, self.dim, &self.u);
+        match t.stages {
+            1 => sweep::<1>(t, dt, d, &mut self.y, u),
+            2 => sweep::<2>(t, dt, d, &mut self.y, u),
+            4 => sweep::<4>(t, dt, d, &mut self.y, u),
+            7 => sweep::<7>(t, dt, d, &mut self.y, u),
+            s => unreachable!("no tableau of {s} stages in crate::ode"),
+        }
+        match self.y.iter().position(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(index) => Err(Halt::Diverged { index, quantity: Failure::Position }),
+        }
+    }
+    fn auto_dt(&self) -> Option<Real> {
+        Some(self.max_dt)
+    }
+    fn suggest_dt(&self) -> Option<Real> {
+        Some(0.5 * self.max_dt)
+    }
+    /// A flow is not a mechanical system: no energy.
+    fn energy(&self) -> EnergyReport {
+        EnergyReport::default()
+    }
+    /// "y": the points (by axis); "rate": the velocity u there.
+    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+        names
+            .iter()
+            .map(|n| match *n {
+                "y" => self.y.clone(),
+                "rate" => self.rate(),
+                _ => vec![0.0; self.y.len()],
+            })
+            .collect()
+    }
+    fn snapshot(&self) -> Result<Snapshot> {
+        let n = self.y.len();
+        let need = Need::new("step", Need::bytes_of::<Real>(n), format!("a copy of {} values", count(n as u128)));
+        Ok(Box::new(need.copy(&self.y)?))
+    }
+    fn restore(&mut self, snapshot: Snapshot) {
+        self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this flow");
+    }
+    fn save(&self) -> Arrays {
+        vec![("y".to_string(), self.y.clone())]
+    }
+    fn load(&mut self, arrays: &Arrays) -> Result<()> {
+        let y = array(arrays, "y", Some(self.y.len()))?;
+        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+            return Err(invalid("y", format!("entry {i} is not finite: {}", y[i])));
+        }
+        self.y.copy_from_slice(y);
+        Ok(())
     }
 }
 
@@ -161,13 +288,27 @@ pub fn build(kind_name: &str, name: &str, dim: usize, mut p: Params) -> Result<B
     if points.is_empty() || points.len() % dim != 0 {
         return Err(invalid("points", format!("expected n·{dim} > 0 coordinates, got {}", points.len())));
     }
-    let mut c = Vec::with_capacity(kind.params.len());
-    for (key, default) in kind.params {
-        c.push(if p.has(key) { p.number(key)? } else { *default });
+    // A fixed array, not a Vec: no bounds checks in the loop, so it can vectorise.
+    let mut c = [0.0; 6];
+    for (slot, (key, default)) in c.iter_mut().zip(kind.params) {
+        *slot = if p.has(key) { p.number(key)? } else { *default };
     }
     let max_dt = if p.has("max_dt") { p.number("max_dt")? } else { kind.max_dt };
     let method = if p.has("method") { p.text("method")?.to_string() } else { "rk4".to_string() };
-    Ok(Box::new(OdeSystem::new(name, points, &method, rhs(kind, c), Some(max_dt))?))
+    // One system type per flow, so each step loop is compiled with its formula inlined.
+    macro_rules! flow {
+        ($f:expr) => {
+            Box::new(FlowSystem::new(name, dim, points, &method, move |q| velocity($f, &c, q), max_dt)?)
+        };
+    }
+    Ok(match kind.flow {
+        Flow::Lorenz => flow!(Flow::Lorenz),
+        Flow::Rossler => flow!(Flow::Rossler),
+        Flow::Thomas => flow!(Flow::Thomas),
+        Flow::Aizawa => flow!(Flow::Aizawa),
+        Flow::Halvorsen => flow!(Flow::Halvorsen),
+        Flow::VanDerPol => flow!(Flow::VanDerPol),
+    })
 }
 
 #[cfg(test)]
