@@ -330,8 +330,9 @@ def test_a_softened_plasma_conserves_energy_at_second_order_with_verlet(dim):
         s = _plasma(40, dim, dt=dt)
         s.step(round(2.0 / dt))
         drifts.append(abs(s.energy_drift()))
-    assert drifts[0] < 1e-4, drifts
-    assert 2.5 < drifts[0] / drifts[1] < 6.0, drifts
+    # Measured 1.9e-9 (2D) and 3.9e-9 (3D) at dt = 2e-3, ratio 4.00.
+    assert drifts[0] < 1e-8, drifts
+    assert 3.6 < drifts[0] / drifts[1] < 4.4, drifts
 
 
 @pytest.mark.parametrize("dim", [2, 3])
