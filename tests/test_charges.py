@@ -165,7 +165,7 @@ def test_boris_gives_the_exact_e_cross_b_drift(wdt):
         xs.append(s.positions[0].copy())
     xs = np.array(xs)
     t = dt * np.arange(n + 1)
-    centre, r, resid = _circle((xs - np.outer(t, u))[:, :2])
+    _, r, resid = _circle((xs - np.outer(t, u))[:, :2])
     assert resid < 1e-12 * max(r, 1.0)
     # Whole discrete gyrations: the number of steps closest to a multiple of 2π/θ.
     theta = 2 * math.atan(0.5 * wc * dt)
@@ -173,8 +173,8 @@ def test_boris_gives_the_exact_e_cross_b_drift(wdt):
     steps = round(k * 2 * math.pi / theta)
     mean = (xs[steps] - xs[0]) / (steps * dt)
     assert np.linalg.norm(mean - u) <= 2 * r / (steps * dt) + 1e-12
-    # The guiding centre (the circle's centre, moving at u) over the same gyrations: u itself.
-    assert np.allclose(s.positions[0][:2] - u[:2] * s.time - centre, s.positions[0][:2] - u[:2] * s.time - centre)
+    # Along B nothing moves (E ⊥ B, no parallel velocity).
+    assert np.abs(xs[:, 2]).max() == 0.0
 
 
 def test_e_cross_b_drift_of_many_particles_in_2d():
@@ -385,7 +385,8 @@ def test_a_uniform_grid_field_is_the_uniform_field_to_the_bit(dim):
     for grid in (False, True):
         s = _plasma(30, dim, integrator="boris", seed=2)
         if grid:
-            s.add(pc.GridElectricField(np.broadcast_to(E, (*shape, dim)), [-3.0] * dim, 2.0))
+            # Both grids span [-3, 3] on every axis.
+            s.add(pc.GridElectricField(np.broadcast_to(E, (*shape, dim)), [-3.0] * dim, [2.0, 3.0, 1.5][:dim]))
             bv = np.broadcast_to(np.atleast_1d(B), (*shape, 3 if dim == 3 else 1))
             s.add(pc.GridMagneticField(bv, [-3.0] * dim, [2.0, 3.0, 1.5][:dim]))
         else:
@@ -393,7 +394,7 @@ def test_a_uniform_grid_field_is_the_uniform_field_to_the_bit(dim):
             s.add(pc.MagneticField(B))
         s.step(200)
         runs.append(s.positions)
-    assert np.abs(runs[1]).max() < 3.0  # stayed inside the grids
+    assert np.abs(runs[1]).max() < 3.0  # still inside the grids at the end (they move slowly)
     assert np.array_equal(runs[0], runs[1])
 
 

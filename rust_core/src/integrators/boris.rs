@@ -133,6 +133,7 @@ impl<V: Vector> Integrator<V> for Boris<V> {
             bad_any
         })
     }
+    /// The non-magnetic forces (the magnetic force acts through the turn, not as a force).
     fn last_forces(&self) -> &[V] {
         &self.f
     }
