@@ -44,7 +44,7 @@ FAST = settings(max_examples=100, deadline=None, suppress_health_check=list(Heal
 LONG = settings(max_examples=3000, deadline=None, suppress_health_check=list(HealthCheck))
 
 # Term indices in the reference scene (the order they are added).
-GRAVITY, DRAG, SPRINGS, PAIRWISE, FLUID, EFIELD = range(6)
+GRAVITY, DRAG, SPRINGS, PAIRWISE, FLUID, EFIELD, COULOMB, BFIELD, GRID_E, GRID_B = range(10)
 
 
 # ------------------------------------------------------------------------------ the reference
@@ -65,6 +65,10 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.set_attribute("charge", np.linspace(-1e-3, 1e-3, s.n_particles))
     s.set_attribute("radius", np.full(s.n_particles, 0.01))
     s.add(pc.ElectricField([2.0, 1.0]))
+    s.add(pc.Coulomb(1e-3, 0.1))
+    s.add(pc.MagneticField(0.5))
+    s.add(pc.GridElectricField(np.arange(12.0).reshape(2, 3, 2), [-10.0, -10.0], [20.0, 10.0]))
+    s.add(pc.GridMagneticField(np.linspace(0.0, 1.0, 6).reshape(3, 2), [-10.0, -10.0], [10.0, 20.0]))
     s.add(pc.Plane([0.0, -1.0], [0.0, 1.0], restitution=0.4, friction=0.2))
     s.add(pc.Box([-10.0, -10.0], [10.0, 10.0]))
     s.step(4)
@@ -242,7 +246,7 @@ MEMBERS = [
 for _m in (
     "meta", "time_hex", "positions", "velocities", "masses", "pinned", "ledger",
     "term2_i", "term2_j", "term2_stiffness", "term2_damping", "term2_rest_length",
-    "term4_positions", "term4_walls", "term4_wall_volume",
+    "term4_positions", "term4_walls", "term4_wall_volume", "term8_values", "term9_values",
 ):  # fmt: skip
     MEMBERS.append(Case("members", f"missing-{_m}", lambda r, m=_m: rebuilt(r, {m: None}), field=_m))
 
@@ -329,6 +333,13 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("terms", DRAG, "coefficient"), [-1.0, NAN, "x", None, True]),
     (("terms", EFIELD, "E"), [[1.0], [NAN, 0.0], [INF, 0.0], "east", [True, 0.0], None, [1.0, 2.0, 3.0]]),
     (("terms", PAIRWISE, "G"), [0.0, -1.0, INF]),
+    (("terms", COULOMB, "k"), [0.0, -1.0, INF, NAN, "1", None, True]),
+    (("terms", COULOMB, "softening"), [-1.0, NAN, None]),
+    (("terms", BFIELD, "B"), [[1.0, 2.0], [0.0, 0.0, 1.0], [NAN], [INF], "up", [True], None, 0.5]),
+    (("terms", GRID_E, "origin"), [[1.0], [NAN, 0.0], "o", None, [1.0, 2.0, 3.0]]),
+    (("terms", GRID_E, "spacing"), [[0.0, 1.0], [-1.0, 1.0], [INF, 1.0], [1e308, 1e308], [1.0], None]),
+    (("terms", GRID_B, "origin"), [[1.0], [0.0, INF], None]),
+    (("terms", GRID_B, "spacing"), [[1.0, 0.0], [NAN, 1.0], "x"]),
     (("terms", PAIRWISE, "softening"), [-1.0, NAN]),
     (("terms", FLUID, "count"), [-1, 1.5, At("term4_positions", 5), At("term4_positions", 3), 2**63, True]),
     (("terms", FLUID, "first"), [-1, 1.5, 2**64, 10**6, 4, True, None, Either(0), Either(1)]),
@@ -371,7 +382,7 @@ for _path in [("format",), ("dim",), ("integrator",), ("dt",), ("threads",), ("t
 META_FIELDS += [
     Case("meta-fields", "term-unknown-key", lambda r: with_meta(r, lambda m: m["terms"][DRAG].update(power=2)), field=f"meta.terms[{DRAG}]"),
     Case("meta-fields", "plane-unknown-key", lambda r: with_meta(r, lambda m: m["planes"][0].update(k=1)), field="meta.planes[0]"),
-    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{EFIELD + 1}].first"),
+    Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{GRID_B + 1}].first"),
     Case("meta-fields", "second-fluid", lambda r: second_fluid(r, overlap=False), expect="load"),
     # Old files lack these; the defaults of their time apply.
     Case("meta-fields", "no-rtol-atol-precision-boxes", lambda r: with_meta(r, lambda m: [m.pop(k) for k in ("rtol", "atol", "precision", "boxes")]), expect="load"),
@@ -408,7 +419,10 @@ ARRAY_MEMBERS = [
     "positions", "velocities", "masses", "pinned", "ledger", "cache_forces", "cache_power",
     "term2_i", "term2_j", "term2_stiffness", "term2_damping", "term2_rest_length",
     "term4_positions", "term4_walls", "term4_wall_volume", "attr_charge", "attr_radius",
+    "term8_values", "term9_values",
 ]  # fmt: skip
+#: The field maps: one more row of nodes is another valid grid.
+GRID_MEMBERS = ("term8_values", "term9_values")
 
 
 def _array_cases() -> list[Case]:
@@ -433,7 +447,7 @@ def _array_cases() -> list[Case]:
         case("ndim-plus-1", m, lambda a: npy(a[..., None]))
         case("ndim-0", m, lambda a: npy(a.reshape(-1)[:1].reshape(())))
         # The other end of the inconsistency may be the one named (velocities for positions).
-        case("rows-plus-1", m, lambda a: npy(np.concatenate([a, a[:1]])), anywhere=True)
+        case("rows-plus-1", m, lambda a: npy(np.concatenate([a, a[:1]])), "load" if m in GRID_MEMBERS else "refuse", anywhere=True)
         case("rows-0", m, lambda a: npy(a[:0]), anywhere=True)
         case("fortran-order", m, lambda a: npy_raw(hdr(a.dtype.str, a.shape, fortran=True), a.tobytes()))
         case("negative-shape", m, lambda a: npy_raw(hdr(a.dtype.str, (-1,) + a.shape[1:]), a.tobytes()))

@@ -23,6 +23,9 @@ ORDER_CASES = {
     # Tolerances so loose that every output step is one accepted Dormand–Prince step of dt:
     # this measures the order of the tableau itself (its error control is tested below).
     "rk45": (5, [0.4, 0.2, 0.1, 0.05]),
+    # Without a magnetic field the Boris push is velocity Verlet (tests/test_charges.py has its
+    # order with one).
+    "boris": (2, [0.04, 0.02, 0.01, 0.005]),
 }
 T_FINAL = 2.0
 
@@ -64,6 +67,7 @@ def test_integrator_table():
         "yoshida4": (4, True, 3),
         "rk4": (4, False, 4),
         "rk45": (5, False, 6),
+        "boris": (2, False, 1),
     }
     got = {d["name"]: (d["order"], d["symplectic"], d["force_evals_per_step"]) for d in pc.INTEGRATORS}
     assert got == expected
@@ -81,7 +85,7 @@ def test_force_evaluations_per_step(name):
     s.step(1)
     first = s.force_evaluations
     # Velocity Verlet evaluates the force once at the start ("first same as last" afterwards).
-    assert first == per_step + (1 if name in ("verlet", "yoshida4") else 0)
+    assert first == per_step + (1 if name in ("verlet", "yoshida4", "boris") else 0)
     for k in (1, 10, 100):
         before = s.force_evaluations
         s.step(k)

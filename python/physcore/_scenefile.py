@@ -233,6 +233,11 @@ class _Reader:
             if not isinstance(v, list) or len(v) != dim:
                 raise self.error(field, f"must be a list of {dim} numbers (the scene is {dim}D), got {_kind(v)} {_show(v)}")
             return [self.number(f"{field}[{i}]", x) for i, x in enumerate(v)]
+        if kind == "axial":  # a pseudo-vector (magnetic field): B_z in 2D, 3 components in 3D
+            n = 1 if dim == 2 else 3
+            if not isinstance(v, list) or len(v) != n:
+                raise self.error(field, f"must be a list of {n} numbers (the scene is {dim}D), got {_kind(v)} {_show(v)}")
+            return [self.number(f"{field}[{i}]", x) for i, x in enumerate(v)]
         raise AssertionError(kind)  # pragma: no cover - a kind name missing above
 
     def record(self, field: str, v: object, fields: Mapping[str, str], dim: int, required: tuple[str, ...] = ()) -> dict[str, Any]:

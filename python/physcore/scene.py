@@ -161,9 +161,12 @@ class Scene:
         1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"yoshida4"``
         (Yoshida 1990's fourth-order composition of three Verlet substeps, symplectic, 3 force
         evaluations per step), ``"rk4"``
-        (classic Runge–Kutta, 4th order, 4 force evaluations per step) or ``"rk45"`` (adaptive
+        (classic Runge–Kutta, 4th order, 4 force evaluations per step), ``"rk45"`` (adaptive
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
-        evaluations each; see `rtol`).
+        evaluations each; see `rtol`) or ``"boris"`` (the Boris push for charges in magnetic
+        fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
+        speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
+        scene has no magnetic term).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step

@@ -26,6 +26,27 @@ pub trait Vector:
 {
     const DIM: usize;
     const ZERO: Self;
+    /// A pseudo-vector of this dimension (a magnetic field, a rotation axis times an angle): in
+    /// 3D a vector, in 2D its one component out of the plane (z), the only one that turns
+    /// motion within the plane.
+    type Axial: Copy
+        + Send
+        + Sync
+        + Default
+        + PartialEq
+        + Debug
+        + Add<Output = Self::Axial>
+        + Mul<Real, Output = Self::Axial>
+        + 'static;
+    /// Components of an `Axial`: 1 in 2D (z), 3 in 3D.
+    const AXIAL_DIM: usize;
+    const AXIAL_ZERO: Self::Axial;
+    /// An `Axial` from the first `AXIAL_DIM` entries of `s`.
+    fn axial_from_slice(s: &[Real]) -> Self::Axial;
+    /// |b|².
+    fn axial_length_squared(b: Self::Axial) -> Real;
+    /// `self × b` (in 2D, `b` is along z, so the product lies in the plane).
+    fn cross_axial(self, b: Self::Axial) -> Self;
     fn dot(self, other: Self) -> Real;
     #[inline(always)]
     fn length_squared(self) -> Real {
@@ -51,6 +72,22 @@ impl Vector for DVec2 {
     }
     const DIM: usize = 2;
     const ZERO: Self = DVec2::ZERO;
+    type Axial = Real;
+    const AXIAL_DIM: usize = 1;
+    const AXIAL_ZERO: Real = 0.0;
+    #[inline(always)]
+    fn axial_from_slice(s: &[Real]) -> Real {
+        s[0]
+    }
+    #[inline(always)]
+    fn axial_length_squared(b: Real) -> Real {
+        b * b
+    }
+    #[inline(always)]
+    fn cross_axial(self, b: Real) -> Self {
+        // (x, y, 0) × (0, 0, b) = (y b, −x b, 0)
+        DVec2::new(self.y * b, -self.x * b)
+    }
     #[inline(always)]
     fn dot(self, o: Self) -> Real {
         self.x * o.x + self.y * o.y
@@ -84,6 +121,21 @@ impl Vector for DVec3 {
     }
     const DIM: usize = 3;
     const ZERO: Self = DVec3::ZERO;
+    type Axial = DVec3;
+    const AXIAL_DIM: usize = 3;
+    const AXIAL_ZERO: DVec3 = DVec3::ZERO;
+    #[inline(always)]
+    fn axial_from_slice(s: &[Real]) -> DVec3 {
+        DVec3::new(s[0], s[1], s[2])
+    }
+    #[inline(always)]
+    fn axial_length_squared(b: DVec3) -> Real {
+        b.dot(b)
+    }
+    #[inline(always)]
+    fn cross_axial(self, b: DVec3) -> Self {
+        self.cross(b)
+    }
     #[inline(always)]
     fn dot(self, o: Self) -> Real {
         self.x * o.x + self.y * o.y + self.z * o.z

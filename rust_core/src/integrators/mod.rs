@@ -1,5 +1,6 @@
 //! Time integrators behind one trait. Each reports its name, order, whether it is symplectic and
 //! its force evaluations per step, so the speed/accuracy trade can be tabulated honestly.
+pub mod boris;
 pub mod euler;
 pub mod rk4;
 pub mod rk45;
@@ -14,6 +15,7 @@ use crate::vector::{Real, Vector};
 use std::collections::TryReserveError;
 use std::sync::atomic::AtomicBool;
 
+pub use boris::Boris;
 pub use euler::ExplicitEuler;
 pub use rk4::Rk4;
 pub use rk45::Rk45;
@@ -74,6 +76,11 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// velocity-dependent forces or not), so the simulation can reserve them fallibly before
     /// stepping (a refused allocation is then an error, not an abort of the process).
     fn scratch(&mut self, velocity_dependent: bool) -> Vec<&mut Vec<V>>;
+    /// Per-particle scratch of pseudo-vectors (`Vector::Axial`: the Boris integrator's
+    /// magnetic field), reserved like `scratch`.
+    fn axial_scratch(&mut self) -> Vec<&mut Vec<V::Axial>> {
+        Vec::new()
+    }
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
     /// What the integrator carries from one step to the next ("first same as last" forces, the
@@ -110,7 +117,7 @@ pub trait Integrator<V: Vector>: Send + Sync {
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 6] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45"];
+pub const NAMES: [&str; 7] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -120,6 +127,7 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "yoshida4" => Box::new(Yoshida4::default()),
         "rk4" => Box::new(Rk4::default()),
         "rk45" => Box::new(Rk45::default()),
+        "boris" => Box::new(Boris::default()),
         other => {
             return Err(invalid(
                 "integrator",

@@ -1,5 +1,7 @@
 //! Semi-implicit (symplectic) Euler, kick then drift: v' = v + dt a(x, v); x' = x + dt v'.
 //! First order, symplectic: bounded energy error on conservative systems for ω·dt < 2.
+//! Velocity-dependent forces are taken at the step's start (v in a(x, v) is the old one); a
+//! magnetic force q v × B then grows |v|² by (ω_c dt)² a step (use "boris").
 use super::{accel, bad, ensure_len, store, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};

@@ -3,10 +3,11 @@
 //! Second order, symplectic, time-reversible. The force at x' is kept for the next step
 //! ("first same as last"), so it costs one force evaluation per step.
 //!
-//! Velocity-dependent forces (drag, dashpots) at x' are evaluated with the predicted velocity
-//! v + dt a(x, v), whose O(dt²) error keeps the method second order; evaluating them with v½
-//! (a common shortcut) would drop it to first order. Without such forces the prediction is
-//! skipped and the method is exactly the symplectic velocity Verlet.
+//! Velocity-dependent forces (drag, dashpots, the magnetic force q v × B) at x' are evaluated
+//! with the predicted velocity v + dt a(x, v), whose O(dt²) error keeps the method second
+//! order; evaluating them with v½ (a common shortcut) would drop it to first order. Without
+//! such forces the prediction is skipped and the method is exactly the symplectic velocity
+//! Verlet.
 use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};

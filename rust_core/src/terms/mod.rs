@@ -1,7 +1,10 @@
 //! Force terms. A scene holds only the terms it names; each is evaluated only if present.
+pub mod coulomb;
 pub mod drag;
 pub mod electric_field;
 pub mod gravity;
+pub mod grid_fields;
+pub mod magnetic_field;
 pub mod pairwise_gravity;
 pub mod registry;
 pub mod springs;
@@ -16,7 +19,8 @@ use std::ops::Range;
 
 pub use drag::Drag;
 pub use gravity::UniformGravity;
-pub use pairwise_gravity::PairwiseGravity;
+pub use magnetic_field::UniformMagneticField;
+pub use pairwise_gravity::{Pairwise, PairwiseGravity};
 pub use springs::Springs;
 
 /// How a term stores its forces in the buffer of an evaluation: the first term overwrites what
@@ -56,6 +60,23 @@ pub trait Term<V: Vector>: Send + Sync {
     fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
     /// Whether the term can dissipate energy (drag, dashpots).
     fn dissipative(&self) -> bool;
+    /// Whether the forces depend on the velocities: integrators that evaluate forces at
+    /// predicted states (velocity Verlet) then predict the velocities too. Dissipative terms do;
+    /// the magnetic force q v × B does too, though it does no work.
+    fn velocity_dependent(&self) -> bool {
+        self.dissipative()
+    }
+    /// For a magnetic term (F = q v × B): adds the field B (T) at each position of `x` into `b`
+    /// (in 2D its z component) and returns true. The Boris integrator turns the velocities
+    /// through B itself and leaves such terms out of the force sum (`ForceSet::eval_apart`); the
+    /// other integrators take their force from `add_forces`. Other terms return false.
+    fn add_magnetic_field(&self, _x: &[V], _model: &Model, _b: &mut [V::Axial]) -> bool {
+        false
+    }
+    /// Whether `add_magnetic_field` gives this term's whole force (see there).
+    fn magnetic(&self) -> bool {
+        false
+    }
     /// Largest particle index the term refers to, plus one (0 if none).
     fn min_particles(&self) -> usize {
         0
@@ -110,6 +131,11 @@ pub struct ForceSet<V: Vector> {
     power: Vec<Real>,
     /// Whether any term dissipates (else power is never asked for).
     any_dissipative: bool,
+    /// Whether any term's force depends on velocity; and any besides the magnetic terms.
+    any_velocity: bool,
+    any_velocity_apart: bool,
+    /// Whether any term is magnetic (`Term::magnetic`).
+    any_magnetic: bool,
     /// Force evaluations so far (for the work-precision books).
     pub evaluations: u64,
     /// Sum of the uniform acceleration fields (m/s²), applied by the integrators.
@@ -127,6 +153,9 @@ impl<V: Vector> Default for ForceSet<V> {
             dissipated: Vec::new(),
             power: Vec::new(),
             any_dissipative: false,
+            any_velocity: false,
+            any_velocity_apart: false,
+            any_magnetic: false,
             evaluations: 0,
             g: V::ZERO,
             stop: Stop::default(),
@@ -141,6 +170,9 @@ impl<V: Vector> ForceSet<V> {
     pub fn push(&mut self, mut t: Box<dyn Term<V>>) -> Result<()> {
         t.share(&mut self.shared)?;
         self.any_dissipative |= t.dissipative();
+        self.any_velocity |= t.velocity_dependent();
+        self.any_velocity_apart |= t.velocity_dependent() && !t.magnetic();
+        self.any_magnetic |= t.magnetic();
         if let Some(g) = t.uniform_acceleration() {
             self.g += g;
         }
@@ -154,10 +186,20 @@ impl<V: Vector> ForceSet<V> {
     /// term's dissipated power at this state for a following `book_power` call. Once the stop
     /// flag is set the remaining terms are skipped (the step will be rolled back).
     pub fn eval(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
+        self.eval_terms(x, v, model, f, false);
+    }
+
+    /// `eval` without the magnetic terms (the Boris integrator turns the velocities through
+    /// their field itself, `magnetic_field`).
+    pub fn eval_apart(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V]) {
+        self.eval_terms(x, v, model, f, true);
+    }
+
+    fn eval_terms(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], apart: bool) {
         self.evaluations += 1;
         let mut write = Write::Overwrite;
         for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
-            if t.uniform_acceleration().is_some() {
+            if t.uniform_acceleration().is_some() || (apart && t.magnetic()) {
                 continue;
             }
             if self.stop.is_set() {
@@ -190,9 +232,33 @@ impl<V: Vector> ForceSet<V> {
         self.stop = stop.clone();
     }
 
-    /// Whether any term depends on velocity (drag, dashpots).
+    /// Whether any term depends on velocity (drag, dashpots, the magnetic force).
     pub fn velocity_dependent(&self) -> bool {
-        self.any_dissipative
+        self.any_velocity
+    }
+
+    /// Whether any term besides the magnetic ones depends on velocity (what `eval_apart` sums).
+    pub fn velocity_dependent_apart(&self) -> bool {
+        self.any_velocity_apart
+    }
+
+    /// Whether any term is magnetic.
+    pub fn magnetic(&self) -> bool {
+        self.any_magnetic
+    }
+
+    /// The total magnetic field (T) of the magnetic terms at each position of `x` into `b`
+    /// (resized to `x.len()`); false, leaving `b` as it was, if the scene has none.
+    pub fn magnetic_field(&self, x: &[V], model: &Model, b: &mut Vec<V::Axial>) -> bool {
+        if !self.any_magnetic {
+            return false;
+        }
+        b.clear();
+        b.resize(x.len(), V::AXIAL_ZERO);
+        for t in &self.terms {
+            t.add_magnetic_field(x, model, b);
+        }
+        true
     }
 
     /// Power at the last `eval`, per term (W).

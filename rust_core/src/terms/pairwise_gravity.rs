@@ -4,6 +4,11 @@
 //! a_i = G Σ_j m_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2}        (Plummer 1911; Aarseth 2003, eq. 2.4)
 //! U   = −G Σ_{i<j} m_i m_j / (|x_j − x_i|² + ε²)^{1/2}
 //!
+//! The kernel is the softened inverse-square sum S_i = Σ_j w_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2}
+//! of source weights w_j, scaled per receiver: gravity takes w = m and F_i = G m_i S_i; the
+//! Coulomb force (`super::coulomb`) takes w = q and F_i = −k q_i S_i (a `Law` says which). The
+//! weights only change what is packed: the loops are the same for both.
+//!
 //! The inner loop runs over a structure-of-arrays copy of the sources, one SIMD vector of sources
 //! at a time, written once over the portable SIMD layer (`crate::simd`) for f32 and f64 and every
 //! instruction set: 1/r comes from the layer's fast reciprocal square root (hardware estimate plus
@@ -63,7 +68,8 @@ impl<T: Float> Soa<T> {
         Ok(())
     }
 
-    fn pack<V: Vector>(&mut self, x: &[V], model: &Model) {
+    /// The sources `x` with weights `w` (masses for gravity, charges for Coulomb).
+    fn pack<V: Vector>(&mut self, x: &[V], w: &[Real]) {
         let np = x.len().div_ceil(PAD) * PAD;
         for a in [&mut self.xs, &mut self.ys, &mut self.zs, &mut self.ms] {
             a.clear();
@@ -75,15 +81,25 @@ impl<T: Float> Soa<T> {
             if V::DIM == 3 {
                 self.zs[i] = T::of(p.comp(2));
             }
-            self.ms[i] = T::of(model.mass[i]);
+            self.ms[i] = T::of(w[i]);
         }
     }
 }
 
-pub struct PairwiseGravity {
+/// The inverse-square law a `Pairwise` term sums.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Law {
+    /// Newtonian gravity with constant G (m³/(kg·s²)): sources weighted by mass, attractive.
+    Gravity(Real),
+    /// Coulomb's law with constant k (N·m²/C²): sources weighted by the `charge` attribute;
+    /// like charges repel. Without the attribute there is no force.
+    Coulomb(Real),
+}
+
+/// Softened inverse-square forces between every pair of particles (gravity or Coulomb).
+pub struct Pairwise {
     pub name: String,
-    /// Gravitational constant G, m³/(kg·s²).
-    pub g: Real,
+    pub law: Law,
     /// Plummer softening length ε, m.
     pub softening: Real,
     src: Soa<Real>,
@@ -110,11 +126,24 @@ fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term
 }
 crate::register_term!("pairwise_gravity", build);
 
-impl PairwiseGravity {
+/// Pairwise gravity is the `Gravity` law of `Pairwise`.
+pub type PairwiseGravity = Pairwise;
+
+impl Pairwise {
+    /// Gravity with constant `g` and Plummer softening `softening`.
     pub fn new(name: String, g: Real, softening: Real) -> Self {
+        Self::with_law(name, Law::Gravity(g), softening)
+    }
+
+    /// The Coulomb force with constant `k` and Plummer softening `softening`.
+    pub fn coulomb(name: String, k: Real, softening: Real) -> Self {
+        Self::with_law(name, Law::Coulomb(k), softening)
+    }
+
+    fn with_law(name: String, law: Law, softening: Real) -> Self {
         Self {
             name,
-            g,
+            law,
             softening,
             src: Soa::default(),
             single: false,
@@ -472,7 +501,18 @@ fn accelerations_sym<F: Float>(
     });
 }
 
-impl<V: Vector> Term<V> for PairwiseGravity {
+impl Pairwise {
+    /// The source weights (masses or charges); `None`: no source (a Coulomb term in a scene
+    /// without charges), so no force and no potential.
+    fn weights<'a>(&self, model: &'a Model) -> Option<&'a [Real]> {
+        match self.law {
+            Law::Gravity(_) => Some(&model.mass),
+            Law::Coulomb(_) => model.attribute("charge"),
+        }
+    }
+}
+
+impl<V: Vector> Term<V> for Pairwise {
     fn name(&self) -> &str {
         &self.name
     }
@@ -490,7 +530,11 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         let f = if self.single { 4 } else { 8 };
         let cols = if n >= SYM_MIN { 3 * (BLOCKS / 2) * np * f } else { 0 };
         let bytes = (4 * np * f + cols) as u128 + Need::bytes_of::<[Real; 3]>(n);
-        let need = Need::new("step", bytes, format!("pairwise gravity between {} bodies", count(n as u128)));
+        let what = match self.law {
+            Law::Gravity(_) => "pairwise gravity",
+            Law::Coulomb(_) => "Coulomb forces",
+        };
+        let need = Need::new("step", bytes, format!("{what} between {} bodies", count(n as u128)));
         need.check()?;
         need.reserve(&mut self.acc, n)?;
         match (self.single, n >= SYM_MIN) {
@@ -511,6 +555,13 @@ impl<V: Vector> Term<V> for PairwiseGravity {
     }
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
+        let Some(w) = self.weights(model) else {
+            // Uncharged: no force.
+            if write == Write::Overwrite {
+                par::chunks1(f, |_, f| f.fill(V::ZERO));
+            }
+            return 0.0;
+        };
         let eps2 = self.softening * self.softening;
         let level = simd::level();
         let mut acc = std::mem::take(&mut self.acc);
@@ -518,7 +569,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
         let stop = self.stop.flag();
         match (self.single, n >= SYM_MIN) {
             (true, sym) => {
-                self.src32.pack(x, model);
+                self.src32.pack(x, w);
                 if sym {
                     accelerations_sym(&self.src32, n, eps2 as f32, level, stop, &mut self.sym32, &mut acc);
                 } else {
@@ -526,7 +577,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
                 }
             }
             (false, sym) => {
-                self.src.pack(x, model);
+                self.src.pack(x, w);
                 if sym {
                     accelerations_sym(&self.src, n, eps2, level, stop, &mut self.sym, &mut acc);
                 } else {
@@ -534,7 +585,11 @@ impl<V: Vector> Term<V> for PairwiseGravity {
                 }
             }
         }
-        let g = self.g;
+        // F_i = c w_i S_i: c = G for gravity (w = m), −k for Coulomb (w = q).
+        let c = match self.law {
+            Law::Gravity(g) => g,
+            Law::Coulomb(k) => -k,
+        };
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
@@ -545,7 +600,7 @@ impl<V: Vector> Term<V> for PairwiseGravity {
                     }
                     continue;
                 }
-                let (a, gm) = (acc[i], g * model.mass[i]);
+                let (a, gm) = (acc[i], c * w[i]);
                 let fg = V::from_slice(&[a[0] * gm, a[1] * gm, a[2] * gm][..V::DIM]);
                 write.put(fi, fg);
             }
@@ -555,14 +610,20 @@ impl<V: Vector> Term<V> for PairwiseGravity {
     }
 
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
+        let Some(w) = self.weights(model) else {
+            return Some(0.0); // uncharged
+        };
         let mut src = Soa::<Real>::default();
-        src.pack(x, model);
+        src.pack(x, w);
         let (eps2, level, stop) = (self.softening * self.softening, simd::level(), self.stop.flag());
         // Σ_i m_i Σ_{j>i} m_j / r_ij, rows in fixed chunks summed in chunk order (any thread
         // count gives the same bits). O(N²): the stop flag is read per row and, once it is set,
         // the sum is abandoned (the caller discards it).
         let u = par::sum(x.len(), 0.0, |rows| simd::dispatch(level, Potential { src: &src, eps2, rows, stop }));
-        Some(-self.g * u)
+        Some(match self.law {
+            Law::Gravity(g) => -g * u,
+            Law::Coulomb(k) => k * u,
+        })
     }
 
     fn dissipative(&self) -> bool {
@@ -571,7 +632,13 @@ impl<V: Vector> Term<V> for PairwiseGravity {
 
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {
         // O(N²): left out above 2·10⁴ bodies (documented at Scene.suggest_dt).
-        (x.len() <= 20_000).then(|| encounter_time(self.g, self.softening, x, model, self.stop.flag())).flatten()
+        if x.len() > 20_000 {
+            return None;
+        }
+        match self.law {
+            Law::Gravity(g) => encounter_time(g, self.softening, x, model, self.stop.flag()),
+            Law::Coulomb(k) => coulomb_time(k, self.softening, x, model, self.stop.flag()),
+        }
     }
 }
 
@@ -582,37 +649,63 @@ impl<V: Vector> Term<V> for PairwiseGravity {
 /// remaining rows are skipped (the result is then meaningless).
 pub fn encounter_time<V: Vector>(g: Real, softening: Real, x: &[V], model: &Model, stop: &AtomicBool) -> Option<Real> {
     let mut src = Soa::<Real>::default();
-    src.pack(x, model);
+    src.pack(x, &model.mass);
     let (eps2, level, n) = (softening * softening, simd::level(), x.len());
-    let rate =
-        par::reduce(n, 0.0, Real::max, |rows| simd::dispatch(level, Encounter { src: &src, n, eps2, rows, stop }));
+    let rate = par::reduce(n, 0.0, Real::max, |rows| {
+        simd::dispatch(level, Encounter::<false> { src: &src, a: &[], n, eps2, rows, stop })
+    });
     // G = 0 (or no pair with a time scale): none.
     (rate > 0.0).then(|| (1.0 / (g * rate)).sqrt()).filter(|t| t.is_finite())
 }
 
-/// max over rows i and sources j > i of (m_i + m_j) (|x_j − x_i|² + ε²)^{-3/2}: the sources
-/// before the first lane boundary past i and past the last whole vector one by one (the padding
-/// is not a body here: its zero mass would still pair with m_i), whole SIMD vectors between.
-struct Encounter<'a> {
+/// Shortest pairwise Coulomb time sqrt((r² + ε²)^{3/2} / (k |q_i q_j| (1/m_i + 1/m_j))) (s) over
+/// pairs with a free particle (a pinned one's 1/m is 0), the relative motion's time scale; O(N²)
+/// on the SIMD layer like `encounter_time` (the largest |q_i||q_j| (1/m_i + 1/m_j) / (r² + ε²)^{3/2}
+/// as a_i b_j + a_j b_i with a = |q|/m, b = |q|). None without charges.
+fn coulomb_time<V: Vector>(k: Real, softening: Real, x: &[V], model: &Model, stop: &AtomicBool) -> Option<Real> {
+    let q = model.attribute("charge")?;
+    let b: Vec<Real> = q.iter().map(|q| q.abs()).collect();
+    let mut src = Soa::<Real>::default();
+    src.pack(x, &b);
+    let mut a = vec![0.0; src.xs.len()];
+    for (i, ai) in a.iter_mut().enumerate().take(x.len()) {
+        *ai = b[i] * model.inv_mass[i];
+    }
+    let (eps2, level, n) = (softening * softening, simd::level(), x.len());
+    let rate = par::reduce(n, 0.0, Real::max, |rows| {
+        simd::dispatch(level, Encounter::<true> { src: &src, a: &a, n, eps2, rows, stop })
+    });
+    (rate > 0.0).then(|| (1.0 / (k * rate)).sqrt()).filter(|t| t.is_finite())
+}
+
+/// max over rows i and sources j > i of the pair's rate over (|x_j − x_i|² + ε²)^{3/2}: the
+/// sources before the first lane boundary past i and past the last whole vector one by one (the
+/// padding is not a body here: its zero mass would still pair with m_i), whole SIMD vectors
+/// between. The rate is m_i + m_j (`PRODUCT` false, weights `ms` = masses), or
+/// a_i b_j + a_j b_i (`PRODUCT`: b = `ms`, a = `a`, padded like the sources).
+struct Encounter<'a, const PRODUCT: bool> {
     src: &'a Soa<Real>,
+    a: &'a [Real],
     n: usize,
     eps2: Real,
     rows: std::ops::Range<usize>,
     stop: &'a AtomicBool,
 }
 
-impl Kernel for Encounter<'_> {
+impl<const PRODUCT: bool> Kernel for Encounter<'_, PRODUCT> {
     type Output = Real;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> Real {
         let Soa { xs, ys, zs, ms } = self.src;
+        let aw = self.a;
         let (l, n) = (P::<S, Real>::lanes(), self.n);
         let (zero, eps2) = (P::<S, Real>::zero(s), P::splat(s, self.eps2));
         let one = |i: usize, j: usize| {
             let (dx, dy, dz) = (xs[j] - xs[i], ys[j] - ys[i], zs[j] - zs[i]);
             let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, self.eps2)));
+            let w = if PRODUCT { aw[i] * ms[j] + aw[j] * ms[i] } else { ms[i] + ms[j] };
             if r2 > 0.0 {
-                (ms[i] + ms[j]) / (r2 * r2.sqrt())
+                w / (r2 * r2.sqrt())
             } else {
                 0.0
             }
@@ -631,14 +724,21 @@ impl Kernel for Encounter<'_> {
                 continue;
             }
             let (xi, yi, zi, mi) = (P::splat(s, xs[i]), P::splat(s, ys[i]), P::splat(s, zs[i]), P::splat(s, ms[i]));
+            let ai = P::splat(s, if PRODUCT { aw[i] } else { 0.0 });
             let mut acc = zero;
-            for (bx, by, bz, bm) in self.src.vectors(head..body_end, l) {
+            for (k, (bx, by, bz, bm)) in self.src.vectors(head..body_end, l).enumerate() {
                 let dx = P::load(s, bx) - xi;
                 let dy = P::load(s, by) - yi;
                 let dz = P::load(s, bz) - zi;
                 let r2 = dx.mul_add(dx, dy.mul_add(dy, dz.mul_add(dz, eps2)));
                 let y = r2.rsqrt();
-                let rate = r2.gt(zero).select((P::load(s, bm) + mi) * (y * y * y), zero);
+                let w = if PRODUCT {
+                    let j = head + k * l;
+                    ai.mul_add(P::load(s, bm), P::load(s, &aw[j..j + l]) * mi)
+                } else {
+                    P::load(s, bm) + mi
+                };
+                let rate = r2.gt(zero).select(w * (y * y * y), zero);
                 acc = acc.max(rate);
             }
             best = best.max(acc.to_array().into_iter().take(l).fold(0.0, Real::max));
@@ -654,7 +754,7 @@ mod tests {
     /// The sources of `x` in precision `T`, as the term packs them.
     fn packed<T: Float>(x: &[glam::DVec3], model: &Model) -> Soa<T> {
         let mut src = Soa::default();
-        src.pack(x, model);
+        src.pack(x, &model.mass);
         src
     }
 
@@ -756,7 +856,12 @@ mod tests {
                 let never = AtomicBool::new(false);
                 let rate = [0..1, 1..50, 50..200, 200..n]
                     .into_iter()
-                    .map(|rows| simd::dispatch(level, Encounter { src: &src, n, eps2: eps * eps, rows, stop: &never }))
+                    .map(|rows| {
+                        simd::dispatch(
+                            level,
+                            Encounter::<false> { src: &src, a: &[], n, eps2: eps * eps, rows, stop: &never },
+                        )
+                    })
                     .fold(0.0, f64::max);
                 let got = (1.0 / (2.0 * rate)).sqrt();
                 assert!(((got - naive) / naive).abs() < 1e-14, "{level:?} eps {eps}: {got} vs {naive}");

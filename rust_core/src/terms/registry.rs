@@ -95,6 +95,22 @@ impl Params {
             v => Err(Self::wrong(key, "a vector", v)),
         }
     }
+    /// A finite pseudo-vector of the scene's dimension (`Vector::Axial`): 3 components in 3D,
+    /// 1 in 2D (the z component, out of the plane).
+    pub fn axial<V: Vector>(&self, key: &str) -> Result<V::Axial> {
+        let n = V::AXIAL_DIM;
+        let what = if n == 1 {
+            "1 component in 2D (the z component, out of the plane)".to_string()
+        } else {
+            format!("{n} components")
+        };
+        match self.get(key)? {
+            Value::Floats(v) if v.len() == n && v.iter().all(|c| c.is_finite()) => Ok(V::axial_from_slice(v)),
+            Value::Floats(v) if v.len() == n => Err(invalid(key, "must be finite")),
+            Value::Floats(v) => Err(invalid(key, format!("expected {what}, got {}", v.len()))),
+            v => Err(Self::wrong(key, "a vector", v)),
+        }
+    }
     /// Moves out a flat array of numbers (not checked: the term checks what it needs).
     pub fn take_floats(&mut self, key: &str) -> Result<Vec<Real>> {
         match self.values.remove(key) {
