@@ -3,6 +3,7 @@ pub mod drag;
 pub mod electric_field;
 pub mod gravity;
 pub mod pairwise_gravity;
+pub mod potentials;
 pub mod registry;
 pub mod springs;
 
