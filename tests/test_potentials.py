@@ -327,6 +327,19 @@ def test_outside_the_grid_the_normal_force_vanishes_and_the_books_stay_balanced(
     assert np.array_equal(s.velocities, v)
 
 
+def test_advance_moves_no_particle_more_than_one_cell_per_substep():
+    # φ = 3x + 4y (slope 5 m/s²) on cells of 0.1 m, |v| = 2 m/s: |v| dt + ½·5·dt² = 0.1.
+    phi, _, h = _sample(lambda X, Y: 3.0 * X + 4.0 * Y, -10.0, 10.0, 201, 2)
+    s = pc.Scene(dim=2, integrator="verlet", dt=1.0, threads=1)
+    s.add_particles([[0.0, 0.0], [1.0, 1.0]], [[0.0, 2.0], [50.0, 0.0]], masses=[2.0, 1.0], pinned=[False, True])
+    s.add(pc.PotentialGrid(phi, h, origin=-10.0))
+    want = 0.2 / (2.0 + np.sqrt(4.0 + 2 * 5.0 * 0.1))
+    assert 2.0 * want + 2.5 * want**2 == pytest.approx(0.1, rel=1e-15)
+    assert s.auto_dt() == pytest.approx(want, rel=1e-14) and s.suggest_dt() == pytest.approx(want, rel=1e-14)
+    n = s.advance(1.0)
+    assert n == int(np.ceil(1.0 / want)) and s.dt == pytest.approx(1.0 / n, rel=1e-15)
+
+
 def test_charge_coupling_without_charges_does_nothing_and_pinned_particles_are_skipped():
     phi, _, h = _sample(lambda X, Y: 5.0 * X + Y, 0.0, 1.0, 3, 2)
     s = pc.Scene(dim=2, integrator="verlet", dt=1e-3, threads=1)
@@ -341,8 +354,9 @@ def test_charge_coupling_without_charges_does_nothing_and_pinned_particles_are_s
 
 
 def test_the_grid_suggests_a_step_from_its_curvature():
-    # φ = ½ ω² |x|² with ω = 3: the bound from second differences is ω² itself.
-    phi, _, h = _sample(lambda X, Y, Z: 4.5 * (X**2 + Y**2 + Z**2), -1.0, 1.0, 21, 3)
+    # φ = ½ ω² |x|² with ω = 3: the bound from second differences is ω² itself. (Cells of 0.25 m
+    # keep the one-cell-per-step limit, here √(2h/|∇φ|max) = 0.19 s, above 0.5/ω.)
+    phi, _, h = _sample(lambda X, Y, Z: 4.5 * (X**2 + Y**2 + Z**2), -1.0, 1.0, 9, 3)
     s = pc.Scene(dim=3, threads=1)
     s.add_particles([[0.1, 0.2, 0.3]], masses=[1.0])
     s.add(pc.PotentialGrid(phi, h, origin=-1.0))

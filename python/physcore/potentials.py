@@ -343,6 +343,10 @@ class PotentialGrid(Term, kind="potential_grid"):
     continuation is continuous and the force is its exact gradient, so the energy books stay
     balanced for particles that leave (and come back). Make the grid cover where particles go.
 
+    **Steps.** :meth:`Scene.advance` with automatic substeps moves no particle more than one
+    cell per substep (``|v| dt + ½ a dt² ≤ min(spacing)``, ``a`` bounded by the samples'
+    steepest slope); :meth:`Scene.suggest_dt` also keeps to that.
+
     Parameters
     ----------
     phi : array_like, shape (nx, ny) or (nx, ny, nz)

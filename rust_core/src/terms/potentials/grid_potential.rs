@@ -43,8 +43,9 @@ pub struct GridPotential<V: Vector> {
     /// Position of node 0, m.
     origin: [Real; 3],
     pub coupling: Coupling,
-    /// A bound on the interpolant's curvature (s⁻² per unit coupling/mass), computed on first use.
-    curvature: OnceLock<Real>,
+    /// Bounds on the interpolant's curvature (1/s² per unit coupling over mass) and on its
+    /// slope |∇φ̃| (m/s² per unit coupling over mass), computed on first use.
+    bounds: OnceLock<(Real, Real)>,
     _v: std::marker::PhantomData<V>,
 }
 
@@ -113,17 +114,7 @@ impl<V: Vector> GridPotential<V> {
                 return Err(invalid("spacing", format!("axis {a}: the grid's far end {end} is beyond float64")));
             }
         }
-        Ok(Self {
-            name,
-            phi,
-            n,
-            h,
-            inv_h,
-            origin: o,
-            coupling,
-            curvature: OnceLock::new(),
-            _v: std::marker::PhantomData,
-        })
+        Ok(Self { name, phi, n, h, inv_h, origin: o, coupling, bounds: OnceLock::new(), _v: std::marker::PhantomData })
     }
 
     /// φ̃(x) and ∇φ̃(x) (J/kg/m or V/m), the gradient zero along axes on which x is outside.
@@ -165,13 +156,14 @@ impl<V: Vector> GridPotential<V> {
         }
     }
 
-    /// max over axes a of (max |Δ²_a φ| / h_a² + Σ_{b≠a} max |Δ_a Δ_b φ| / (h_a h_b)): a Gershgorin
-    /// bound on the curvature of a smooth potential the grid samples (1/s² per unit coupling
-    /// over mass). O(nodes), once.
-    fn curvature(&self) -> Real {
-        *self.curvature.get_or_init(|| {
+    /// (curvature, slope): max over axes a of (max |Δ²_a φ| / h_a² + Σ_{b≠a} max |Δ_a Δ_b φ| /
+    /// (h_a h_b)), a Gershgorin bound on the curvature of a smooth potential the grid samples, and
+    /// (Σ_a (max |Δ_a φ| / h_a)²)^{1/2} ≥ |∇φ̃| everywhere. O(nodes), once.
+    fn bounds(&self) -> (Real, Real) {
+        *self.bounds.get_or_init(|| {
             let (n, p) = (self.n, &self.phi);
             let stride = [n[1] * n[2], n[2], 1];
+            let mut first = [0.0 as Real; 3];
             let mut second = [0.0 as Real; 3];
             let mut mixed = [[0.0 as Real; 3]; 3];
             for i in 0..n[0] {
@@ -180,6 +172,9 @@ impl<V: Vector> GridPotential<V> {
                         let at = [i, j, k];
                         let r = (i * n[1] + j) * n[2] + k;
                         for a in 0..V::DIM {
+                            if at[a] + 1 < n[a] {
+                                first[a] = first[a].max((p[r + stride[a]] - p[r]).abs());
+                            }
                             if at[a] >= 1 && at[a] + 1 < n[a] {
                                 let d = p[r + stride[a]] - 2.0 * p[r] + p[r - stride[a]];
                                 second[a] = second[a].max(d.abs());
@@ -196,13 +191,15 @@ impl<V: Vector> GridPotential<V> {
                 }
             }
             let h = self.h;
-            (0..V::DIM)
+            let curvature = (0..V::DIM)
                 .map(|a| {
                     let off: Real =
                         (0..V::DIM).filter(|&b| b != a).map(|b| mixed[a.min(b)][a.max(b)] / (h[a] * h[b])).sum();
                     second[a] / (h[a] * h[a]) + off
                 })
-                .fold(0.0, Real::max)
+                .fold(0.0, Real::max);
+            let slope = (0..V::DIM).map(|a| (first[a] / h[a]).powi(2)).sum::<Real>().sqrt();
+            (curvature, slope)
         })
     }
 }
@@ -244,9 +241,24 @@ impl<V: Vector> Term<V> for GridPotential<V> {
         false
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
-        let w2 = self.curvature() * self.coupling.max_ratio(model);
+        let w2 = self.bounds().0 * self.coupling.max_ratio(model);
         let t = 1.0 / w2.sqrt();
         (t.is_finite() && t > 0.0).then_some(t)
+    }
+    fn max_dt(&self, _x: &[V], v: &[V], model: &Model, g: Real) -> Option<Real> {
+        // The interpolant's force is piecewise smooth cell by cell: `advance` keeps every particle
+        // it moves to at most one cell per substep, |v| dt + ½ a dt² ≤ h_min, with a bounded by
+        // the grid's steepest slope (plus the uniform fields).
+        let c = self.coupling.of(model)?;
+        let vmax = par::reduce(v.len(), 0.0, Real::max, |r| {
+            r.filter(|&i| model.inv_mass[i] != 0.0 && c[i] != 0.0).map(|i| v[i].length_squared()).fold(0.0, Real::max)
+        })
+        .sqrt();
+        let a = self.bounds().1 * self.coupling.max_ratio(model) + g;
+        let h = self.h[..V::DIM].iter().copied().fold(Real::INFINITY, Real::min);
+        // The positive root of ½ a t² + vmax t − h, written without cancellation.
+        let dt = 2.0 * h / (vmax + (vmax * vmax + 2.0 * a * h).sqrt());
+        (dt.is_finite() && dt > 0.0).then_some(dt)
     }
 }
 
@@ -378,6 +390,21 @@ mod tests {
         let model = Model { mass: vec![3.0], inv_mass: vec![1.0 / 3.0], ..Default::default() };
         let t = g.time_scale(&[DVec3::ZERO], &model).unwrap();
         assert!((t - 1.0 / 3.0).abs() < 1e-9, "{t}");
+    }
+
+    #[test]
+    fn a_step_may_cross_at_most_one_cell() {
+        // φ = 3x + 4y (slope 5) on cells 0.1 m wide: |v| dt + ½·5·dt² = 0.1.
+        let g = sampled(&[11, 11], DVec2::splat(0.1), DVec2::ZERO, |x| 3.0 * x[0] + 4.0 * x[1]);
+        let model = Model { mass: vec![2.0; 2], inv_mass: vec![0.5, 0.0], ..Default::default() };
+        let v = [DVec2::new(0.0, 2.0), DVec2::new(0.0, 1e9)]; // the pinned particle does not count
+        let dt = g.max_dt(&v, &v, &model, 0.0).unwrap();
+        assert!((2.0 * dt + 2.5 * dt * dt - 0.1).abs() < 1e-15, "{dt}");
+        let at_rest = g.max_dt(&v, &[DVec2::ZERO; 2], &model, 0.0).unwrap();
+        assert!((at_rest - (0.2f64 / 5.0).sqrt()).abs() < 1e-15, "{at_rest}");
+        // A flat grid on particles at rest has no limit.
+        let flat = sampled(&[3, 3], DVec2::ONE, DVec2::ZERO, |_| 1.0);
+        assert_eq!(flat.max_dt(&v, &[DVec2::ZERO; 2], &model, 0.0), None);
     }
 
     #[test]
