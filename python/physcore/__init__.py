@@ -6,6 +6,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 from __future__ import annotations
 
 from . import _core, flows
+from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
     InvalidInputError,
@@ -23,6 +24,7 @@ from ._system import info, set_simd_level, simd_level, simd_levels
 from .flows import Flow
 from .fluids import Fluid, neighbors
 from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
+from .potentials import *  # noqa: F403 - the potential fields, as potentials.__all__ lists them
 from .scene import INTEGRATORS, EnergyReport, Scene
 from .terms import *  # noqa: F403 - every term record, as terms.__all__ lists them
 
@@ -33,6 +35,7 @@ __all__ = [
     "EnergyReport",
     "INTEGRATORS",
     *_terms.__all__,
+    *_potentials.__all__,
     "Fluid",
     "neighbors",
     "Wave",

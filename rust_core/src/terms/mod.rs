@@ -6,6 +6,7 @@ pub mod gravity;
 pub mod grid_fields;
 pub mod magnetic_field;
 pub mod pairwise_gravity;
+pub mod potentials;
 pub mod registry;
 pub mod springs;
 
