@@ -21,9 +21,14 @@ fn observed_order(integrator: &str, dt0: f64) -> f64 {
 
 #[test]
 fn convergence_orders_match_reported_order() {
-    for (name, dt0) in
-        [("euler", 1e-3), ("semi_implicit_euler", 1e-3), ("verlet", 1e-2), ("rk4", 5e-2), ("boris", 1e-2)]
-    {
+    for (name, dt0) in [
+        ("euler", 1e-3),
+        ("semi_implicit_euler", 1e-3),
+        ("verlet", 1e-2),
+        ("yoshida4", 5e-2),
+        ("rk4", 5e-2),
+        ("boris", 1e-2),
+    ] {
         let p = observed_order(name, dt0);
         let reported = by_name::<glam::DVec2>(name).unwrap().info().order as f64;
         assert!((p - reported).abs() < 0.1, "{name}: observed order {p:.3}, reported {reported}");
@@ -40,6 +45,7 @@ fn integrator_table() {
             ("euler", 1, false, 1),
             ("semi_implicit_euler", 1, true, 1),
             ("verlet", 2, true, 1),
+            ("yoshida4", 4, true, 3),
             ("rk4", 4, false, 4),
             ("rk45", 5, false, 6),
             ("boris", 2, false, 1)
