@@ -5,6 +5,7 @@ pub mod gravity;
 pub mod pairwise_gravity;
 pub mod registry;
 pub mod springs;
+pub mod tree_gravity;
 
 use crate::error::Result;
 use crate::neighbors::Shared;
@@ -18,6 +19,7 @@ pub use drag::Drag;
 pub use gravity::UniformGravity;
 pub use pairwise_gravity::PairwiseGravity;
 pub use springs::Springs;
+pub use tree_gravity::TreeGravity;
 
 /// How a term stores its forces in the buffer of an evaluation: the first term overwrites what
 /// the buffer holds (the previous evaluation's forces), which saves a zeroing pass; the others
