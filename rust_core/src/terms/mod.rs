@@ -9,6 +9,7 @@ pub mod pairwise_gravity;
 pub mod potentials;
 pub mod registry;
 pub mod springs;
+pub mod tree_gravity;
 
 use crate::error::Result;
 use crate::neighbors::Shared;
@@ -23,6 +24,7 @@ pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
 pub use springs::Springs;
+pub use tree_gravity::TreeGravity;
 
 /// How a term stores its forces in the buffer of an evaluation: the first term overwrites what
 /// the buffer holds (the previous evaluation's forces), which saves a zeroing pass; the others

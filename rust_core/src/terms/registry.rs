@@ -215,7 +215,7 @@ mod tests {
     #[test]
     fn every_term_type_is_registered_once() {
         let k = kinds();
-        for want in ["drag", "gravity", "pairwise_gravity", "sph", "springs"] {
+        for want in ["drag", "gravity", "pairwise_gravity", "sph", "springs", "tree_gravity"] {
             assert!(k.contains(&want), "{want} missing from {k:?}");
         }
         let mut unique = k.clone();
