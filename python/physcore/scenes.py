@@ -26,9 +26,9 @@ from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .scene import Scene
-from .terms import Drag, Gravity, PairwiseGravity, Plane, Springs
+from .terms import Drag, ElectricField, Gravity, MagneticField, PairwiseGravity, Plane, Springs, TreeGravity
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "lorenz", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -396,23 +396,27 @@ pythagorean.render_defaults = {
 }
 
 
-def plummer_sphere(n: int, *, mass: float = 1.0, a: float = 1.0, G: float = 1.0, seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+def plummer_sphere(
+    n: int, *, mass: float = 1.0, a: float = 1.0, G: float = 1.0, cutoff: float = 0.999, seed: int | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Positions and velocities, (n, 3) float64 each, of a Plummer sphere in equilibrium: density
     ρ ∝ (1 + r²/a²)^(−5/2), total mass `mass`, scale radius `a`, in its centre-of-mass frame.
     Sampled as Aarseth, Hénon & Wielen, Astron. Astrophys. 37 (1974) 183, Appendix: radii by
     inverting the cumulative mass M(r)/M = r³/(r² + a²)^{3/2}, speeds q·v_esc with
     g(q) ∝ q²(1 − q²)^{7/2} by rejection, v_esc = √(2GM/√(r² + a²)); isotropic directions.
     The half-mass radius is ≈ 1.305 a; the virial ratio 2K/|W| is 1 up to sampling noise.
+    `cutoff` (in (0, 1)) is the mass fraction sampled: the sphere ends at the radius holding it
+    (0.999: about 30 a), so no body starts absurdly far out.
     """
     n = _count(n, "n", 1)
+    cutoff = _check.float_in_range("cutoff", cutoff, 0.0, 1.0, lo_open=True, hi_open=True)
     rng = np.random.default_rng(seed)
 
     def directions(k: int) -> np.ndarray:
         d = rng.normal(size=(k, 3))
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
-    # Mass fractions away from 0 and 1 keep r finite (1 − 1e-3: radii below ~30a).
-    m = rng.uniform(1e-9, 0.999, n)
+    m = rng.uniform(1e-9 * cutoff, cutoff, n)  # mass fractions below 1 keep r finite
     r = a / np.sqrt(m ** (-2.0 / 3.0) - 1.0)
     q = np.empty(n)
     filled = 0
@@ -426,6 +430,93 @@ def plummer_sphere(n: int, *, mass: float = 1.0, a: float = 1.0, G: float = 1.0,
     x = r[:, None] * directions(n)
     u = v[:, None] * directions(n)
     return x - x.mean(axis=0), u - u.mean(axis=0)
+
+
+def galaxies(
+    n: int = 12000,
+    theta: float = 0.6,
+    softening: float = 0.05,
+    seed: int = 3,
+    integrator: str = "verlet",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Two star clusters collide: Plummer spheres of n/2 bodies each, under tree gravity.
+
+    G = 1; each sphere has mass 1 and scale radius 0.6 (:func:`plummer_sphere`, cut at 97 % of
+    its mass), in equilibrium. They start 10 apart along x, offset ±1.2 in y, approaching at
+    0.25 each (below the mutual
+    escape speed, so they fall together, pass, throw out tidal streams and merge). Forces by
+    Barnes–Hut (:class:`~physcore.TreeGravity`, opening angle `theta`, Plummer `softening`);
+    ``dt=None`` takes 0.025, a quarter of the softening crossing time ε/σ.
+    """
+    n = _count(n, "n", 2)
+    theta = _nonneg(theta, "theta")
+    softening = _positive(softening, "softening")
+    seed = _count(seed, "seed", 0)
+    _particles("n", n)
+    rng = np.random.default_rng(seed)
+    half = n // 2
+    xa, va = plummer_sphere(half, a=0.6, cutoff=0.97, seed=int(rng.integers(2**31)))
+    xb, vb = plummer_sphere(n - half, a=0.6, cutoff=0.97, seed=int(rng.integers(2**31)))
+    offset, push = np.array([5.0, 1.2, 0.0]), np.array([0.25, 0.0, 0.0])
+    x = np.concatenate([xa - offset, xb + offset])
+    v = np.concatenate([va + push, vb - push])
+    m = np.concatenate([np.full(half, 1.0 / half), np.full(n - half, 1.0 / (n - half))])
+    scene = Scene(3, integrator=integrator, dt=0.025 if dt is None else dt, threads=threads)
+    scene.add_particles(x, v, masses=m)
+    scene.add(TreeGravity(G=1.0, softening=softening, theta=theta))
+    return scene
+
+
+galaxies.render_defaults = {
+    "frames": 150, "fps": 30, "frame_time": 0.2, "size": (480, 400), "view": (-60.0, 55.0), "radius": 0,
+    "speed_unit": "(G=1)", "theme": "dark",
+}
+
+
+def cyclotron(
+    n: int = 12,
+    B: float = 1.0,
+    E: float = 0.3,
+    seed: int = 5,
+    integrator: str = "boris",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Charges gyrating in a magnetic field and drifting together across an electric one.
+
+    2D, B_z = `B` out of the plane and a uniform E = (0, `E`): `n` particles of charge ±1
+    and mass 1, 2 or 4 (units where these are 1) start at speeds 0.3–1. Each turns
+    at its cyclotron frequency ω_c = |q|B/m on a circle of radius m v⊥/(|q|B), positive and
+    negative charges in opposite senses, and every one drifts at E×B/B² = (E/B, 0) whatever
+    its charge and mass (cycloids). Boris push; ``dt=None`` takes 0.02/B (ω_c dt ≤ 0.02).
+    """
+    n = _count(n, "n", 1)
+    B = _positive(B, "B")
+    E = _nonneg(E, "E")
+    seed = _count(seed, "seed", 0)
+    _particles("n", n)
+    rng = np.random.default_rng(seed)
+    q = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    m = np.array([1.0, 2.0, 4.0])[np.arange(n) % 3]
+    speed = rng.uniform(0.3, 1.0, n)
+    angle = rng.uniform(0.0, 2 * np.pi, n)
+    x = np.stack([rng.uniform(-3.0, 3.0, n), rng.uniform(-3.0, 3.0, n)], axis=1)
+    v = speed[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    scene = Scene(2, integrator=integrator, dt=0.02 / B if dt is None else dt, threads=threads)
+    scene.add_particles(x, v, masses=m)
+    scene.set_attribute("charge", q)
+    scene.add(MagneticField(B))
+    if E:
+        scene.add(ElectricField([0.0, E]))
+    return scene
+
+
+cyclotron.render_defaults = {
+    "frames": 180, "fps": 30, "frame_time": 0.25, "size": (480, 360), "speed_unit": "(q=m=B=1)", "trail": 60,
+    "size_by": "mass", "radius": 3, "theme": "dark",
+}
 
 
 def spring_chain(
@@ -1007,14 +1098,16 @@ def lorenz(
     from .flows import _METHODS, FLOWS, Flow
 
     n = _count(n, "n", 1)
-    _particles("n", n)
     if not isinstance(kind, str) or kind not in FLOWS or FLOWS[kind]["dim"] != 3:
         raise InvalidInputError(f"kind: expected one of {', '.join(k for k, v in FLOWS.items() if v['dim'] == 3)}, got {kind!r}")
-    if integrator not in _METHODS:
+    if not isinstance(integrator, str) or integrator not in _METHODS:
         raise InvalidInputError(f"integrator: the flow's method must be one of {', '.join(_METHODS)}, got {integrator!r}")
     spread = _nonneg(spread, "spread")
     seed = _count(seed, "seed", 0)
     step = FLOWS[kind]["max_dt"] if dt is None else _positive(dt, "dt")
+    # Last, once every other argument is checked: a point is 3 float64 coordinates, a snapshot
+    # of them and the rate field read for colouring (about 72 B), not a particle's 512 B.
+    _check.memory("n", 72 * n, f"{_big(n)} flow points")
     scene = Scene(3, integrator="rk4" if integrator == "rk4" else "verlet", dt=step, threads=threads)
     scene.add(Flow(kind, n, spread=spread, seed=seed, method=integrator))
     # Frames every 20 steps of the default dt, so the cloud spreads over the whole attractor.
@@ -1047,6 +1140,8 @@ projectile = _stamped(projectile)
 kepler = _stamped(kepler)
 figure_eight = _stamped(figure_eight)
 pythagorean = _stamped(pythagorean)
+galaxies = _stamped(galaxies)
+cyclotron = _stamped(cyclotron)
 spring_chain = _stamped(spring_chain)
 dam_break = _stamped(dam_break)
 drop = _stamped(drop)
@@ -1064,6 +1159,8 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "kepler": kepler,
     "figure_eight": figure_eight,
     "pythagorean": pythagorean,
+    "galaxies": galaxies,
+    "cyclotron": cyclotron,
     "spring_chain": spring_chain,
     "dam_break": dam_break,
     "drop": drop,

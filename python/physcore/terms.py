@@ -24,6 +24,7 @@ physcore._errors.InvalidInputError: g: must be finite, got [0.0, nan]
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, ClassVar, Union
 
@@ -413,7 +414,8 @@ class TreeGravity(Term, kind="tree_gravity"):
     Raises
     ------
     InvalidInputError
-        ``G`` not finite or ≤ 0, ``softening`` or ``theta`` not finite or < 0, naming it.
+        ``G`` not finite or ≤ 0, ``softening`` or ``theta`` not finite or < 0, or ``softening²``
+        beyond float64, naming it.
 
     Examples
     --------
@@ -436,6 +438,8 @@ class TreeGravity(Term, kind="tree_gravity"):
     def __post_init__(self) -> None:
         object.__setattr__(self, "G", _finite_float(self.G, "G", minimum=0.0, strict=True))
         object.__setattr__(self, "softening", _finite_float(self.softening, "softening", minimum=0.0))
+        if not math.isfinite(self.softening * self.softening):
+            raise InvalidInputError(f"softening: {self.softening} is too large: its square overflows float64")
         object.__setattr__(self, "theta", _finite_float(self.theta, "theta", minimum=0.0))
 
     record_fields: ClassVar[dict[str, str]] = {"G": "number", "softening": "number", "theta": "number"}

@@ -667,6 +667,10 @@ fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term
     if softening < 0.0 {
         return Err(invalid("softening", format!("{softening} must be finite and >= 0")));
     }
+    // ε² enters every pair; an overflowing square would make the books NaN.
+    if !(softening * softening).is_finite() {
+        return Err(invalid("softening", format!("{softening} is too large: its square overflows float64")));
+    }
     if theta < 0.0 {
         return Err(invalid("theta", format!("{theta} must be finite and >= 0")));
     }
