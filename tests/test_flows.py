@@ -204,3 +204,19 @@ def test_lorenz_scene_renders(tmp_path):
     background = first[-1, 0]
     painted = lambda a: int((np.abs(a.astype(int) - background).sum(axis=2) > 60).sum())  # noqa: E731
     assert painted(last) > painted(first)
+
+
+def test_a_tampered_flow_in_a_scene_file_is_refused_by_name(tmp_path):
+    scene = pc.Scene(3, dt=0.005)
+    scene.add(pc.Flow("lorenz", 5, seed=1))
+    path = scene.save(tmp_path / "f.npz")
+    with np.load(path) as z:
+        members = dict(z)
+    members["flow0_y"] = members["flow0_y"][:-3]  # one point short of the record's n
+    np.savez(tmp_path / "bad.npz", **members)
+    with pytest.raises(pc.SceneFileError, match="flow0_y"):
+        pc.Scene.load(tmp_path / "bad.npz")
+    members["flow0_y"] = np.full(15, np.nan)
+    np.savez(tmp_path / "nan.npz", **members)
+    with pytest.raises(pc.SceneFileError):
+        pc.Scene.load(tmp_path / "nan.npz")
