@@ -79,3 +79,9 @@ def test_gallery_scenes_refuse_bad_arguments():
         pc.scenes.cyclotron(B=0.0)
     with pytest.raises(TypeError, match=r"\bn\b"):
         pc.scenes.galaxies(n=2.5)
+    with pytest.raises(ValueError, match=r"\bB\b"):  # found by the long scene fuzz: dt = 0.02/B underflows
+        pc.scenes.cyclotron(B=8.988465674311581e305)
+    with pytest.raises(ValueError, match=r"\bB\b"):  # and overflows
+        pc.scenes.cyclotron(B=5e-324)
+    with pytest.raises(ValueError, match=r"\bE\b"):  # the field's potential q E·x overflows
+        pc.scenes.cyclotron(E=1e308)

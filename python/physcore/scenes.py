@@ -504,13 +504,16 @@ def cyclotron(
     angle = rng.uniform(0.0, 2 * np.pi, n)
     x = np.stack([rng.uniform(-3.0, 3.0, n), rng.uniform(-3.0, 3.0, n)], axis=1)
     v = speed[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
-    scene = Scene(2, integrator=integrator, dt=0.02 / B if dt is None else dt, threads=threads)
+    step = 0.02 / B if B < math.inf else 0.0
+    if dt is None and not _check.MIN_NORMAL <= step < math.inf:
+        raise InvalidInputError(f"B: the step 0.02/B = {step:.3g} s is outside float64's normal range; give another B or a dt")
+    scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
     scene.add_particles(x, v, masses=m)
     scene.set_attribute("charge", q)
     scene.add(MagneticField(B))
     if E:
         scene.add(ElectricField([0.0, E]))
-    return scene
+    return _finite_books(scene, "E")
 
 
 cyclotron.render_defaults = {
