@@ -383,26 +383,21 @@ class Scene:
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
         dim = self.dim
-        if isinstance(item, Flow):
+        if isinstance(item, (Flow, Grid)):
+            # Flows and grids are systems of the world: one scene each, under a free name.
+            what = "flow" if isinstance(item, Flow) else "grid"
             if item.dim != dim:
-                raise InvalidInputError(f"item: the {item.kind} flow is {item.dim}D; it cannot join a {dim}D scene")
+                raise InvalidInputError(f"item: a {item.dim}D {what} ({item.kind}) cannot join a {dim}D scene")
             if item._scene is not None:
-                raise InvalidInputError(f"item: flow {item.name!r} is already in a scene (a flow joins one scene)")
+                raise InvalidInputError(f"item: {what} {item.name!r} is already in a scene (a {what} joins one scene)")
             taken = {g.name for g in (*self._grids, *self._flows)} | {t.name for t in self._terms} | {"particles", "collisions"}
             if item.name in taken:
-                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the flow another name")
-            self._sim.add_flow(item.kind, item.name, item._params())
-            item._scene = self
-            self._flows.append(item)
-            return item
-        if isinstance(item, Grid):
-            if item.dim != dim:
-                raise InvalidInputError(f"item: a {item.dim}D grid cannot join a {dim}D scene")
-            if item._scene is not None:
-                raise InvalidInputError(f"item: grid {item.name!r} is already in a scene (a grid joins one scene)")
-            taken = {g.name for g in (*self._grids, *self._flows)} | {t.name for t in self._terms} | {"particles", "collisions"}
-            if item.name in taken:
-                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the grid another name")
+                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the {what} another name")
+            if isinstance(item, Flow):
+                self._sim.add_flow(item.kind, item.name, item._params())
+                item._scene = self
+                self._flows.append(item)
+                return item
             self._sim.add_grid(item.kind, item.name, item._params())
             item._scene = self
             self._grids.append(item)

@@ -17,8 +17,7 @@
 //!   "Chaos and Time-Series Analysis", 2003, Table A.3).
 //! - `van_der_pol` (2D): y, μ(1 − x²)y − x; μ = 1 (van der Pol, Phil. Mag. 2 (1926) 978): a
 //!   limit cycle every start is drawn to.
-use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
-use crate::alloc::{count, Need};
+use super::{load_flat, snapshot_flat, Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::error::{invalid, Failure, Result};
 use crate::ode::{self, Tableau, MAX_STAGES};
 use crate::par;
@@ -256,9 +255,7 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
             .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
-        let n = self.y.len();
-        let need = Need::new("step", Need::bytes_of::<Real>(n), format!("a copy of {} values", count(n as u128)));
-        Ok(Box::new(need.copy(&self.y)?))
+        snapshot_flat(&self.y)
     }
     fn restore(&mut self, snapshot: Snapshot) {
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this flow");
@@ -267,12 +264,7 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
         vec![("y".to_string(), self.y.clone())]
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
-        let y = array(arrays, "y", Some(self.y.len()))?;
-        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-            return Err(invalid("y", format!("entry {i} is not finite: {}", y[i])));
-        }
-        self.y.copy_from_slice(y);
-        Ok(())
+        load_flat(&mut self.y, arrays)
     }
 }
 

@@ -56,6 +56,29 @@ pub type Snapshot = Box<dyn Any + Send>;
 /// reads it back bit for bit, so a run restarted from it continues exactly as the original.
 pub type Arrays = Vec<(String, Vec<Real>)>;
 
+/// A snapshot of a flat state `y` (its copy, allocated fallibly): what systems whose whole state
+/// is one array of reals (ODE systems, flows) return from `System::snapshot`.
+pub fn snapshot_flat(y: &[Real]) -> Result<Snapshot> {
+    let n = y.len();
+    let need = crate::alloc::Need::new(
+        "step",
+        crate::alloc::Need::bytes_of::<Real>(n),
+        format!("a copy of {} values", crate::alloc::count(n as u128)),
+    );
+    Ok(Box::new(need.copy(y)?))
+}
+
+/// Loads the array "y" of `arrays` into `y` (same length, every value finite; nothing changes
+/// on error): `System::load` of a system whose state is one flat array.
+pub fn load_flat(y: &mut [Real], arrays: &Arrays) -> Result<()> {
+    let a = array(arrays, "y", Some(y.len()))?;
+    if let Some(i) = a.iter().position(|v| !v.is_finite()) {
+        return Err(crate::error::invalid("y", format!("entry {i} is not finite: {}", a[i])));
+    }
+    y.copy_from_slice(a);
+    Ok(())
+}
+
 /// The array `name` of `arrays`, which must hold `len` values (`None`: any length); an
 /// `InvalidInput` naming it otherwise.
 pub fn array<'a>(arrays: &'a Arrays, name: &str, len: Option<usize>) -> Result<&'a [Real]> {

@@ -1,7 +1,7 @@
 //! A system for a first-order ODE y' = f(y) on a flat array of reals, stepped by an explicit
 //! Butcher tableau of the ODE layer (`crate::ode`): a flow such as the Lorenz system (y holds
 //! every tracer's coordinates), or a field discretised in space (method of lines).
-use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
+use super::{load_flat, snapshot_flat, Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::ode::{self, Stages, Tableau};
@@ -106,9 +106,7 @@ impl System for OdeSystem {
             .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
-        let n = self.y.len();
-        let need = Need::new("step", Need::bytes_of::<Real>(n), format!("a copy of {} values", count(n as u128)));
-        Ok(Box::new(need.copy(&self.y)?))
+        snapshot_flat(&self.y)
     }
     fn restore(&mut self, snapshot: Snapshot) {
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this ODE system");
@@ -117,11 +115,6 @@ impl System for OdeSystem {
         vec![("y".to_string(), self.y.clone())]
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
-        let y = array(arrays, "y", Some(self.y.len()))?;
-        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-            return Err(invalid("y", format!("entry {i} is not finite: {}", y[i])));
-        }
-        self.y.copy_from_slice(y);
-        Ok(())
+        load_flat(&mut self.y, arrays)
     }
 }
