@@ -22,7 +22,7 @@
 //! stay balanced for particles that leave and come back (no force pushes them back, unless they
 //! are inside the box along the axes that matter); a particle far outside feels only the
 //! tangential force of the nearest face.
-use super::Coupling;
+use super::{coupled_forces, coupled_potential, Coupling};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -209,33 +209,12 @@ impl<V: Vector> Term<V> for GridPotential<V> {
         &self.name
     }
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
-        let c = self.coupling.of(model);
         let this = &*self;
-        par::chunks1(f, |s, f| {
-            for (k, fi) in f.iter_mut().enumerate() {
-                let i = s + k;
-                let fe = match c {
-                    Some(c) if model.inv_mass[i] != 0.0 && c[i] != 0.0 => this.sample(x[i]).1 * -c[i],
-                    _ => V::ZERO,
-                };
-                write.put(fi, fe);
-            }
-        });
+        coupled_forces(self.coupling, x, model, f, write, |p| -this.sample(p).1);
         0.0
     }
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
-        let Some(c) = self.coupling.of(model) else {
-            return Some(0.0); // coupled to charge in an uncharged scene
-        };
-        Some(par::sum(x.len(), 0.0, |r| {
-            let mut u = 0.0;
-            for i in r {
-                if model.inv_mass[i] != 0.0 && c[i] != 0.0 {
-                    u += c[i] * self.sample(x[i]).0;
-                }
-            }
-            u
-        }))
+        Some(coupled_potential(self.coupling, x, model, |p| self.sample(p).0))
     }
     fn dissipative(&self) -> bool {
         false

@@ -7,9 +7,11 @@ pub mod harmonic_trap;
 pub mod point_sources;
 
 use super::registry::Params;
+use super::Write;
 use crate::error::{invalid, Result};
+use crate::par;
 use crate::state::Model;
-use crate::vector::Real;
+use crate::vector::{Real, Vector};
 
 pub use grid_potential::GridPotential;
 pub use harmonic_trap::HarmonicTrap;
@@ -56,4 +58,51 @@ impl Coupling {
         }
         r
     }
+}
+
+/// Stores `coupling`'s force on every free particle with a nonzero coupling constant c_i (mass
+/// or charge) in `f` as `write` says: c_i · `per_unit(x_i)`, the force per unit of c at x_i;
+/// zero elsewhere. Shared by the fixed fields, which differ only in `per_unit`.
+pub(crate) fn coupled_forces<V: Vector>(
+    coupling: Coupling,
+    x: &[V],
+    model: &Model,
+    f: &mut [V],
+    write: Write,
+    per_unit: impl Fn(V) -> V + Sync + Send,
+) {
+    let c = coupling.of(model);
+    par::chunks1(f, |s, f| {
+        for (k, fi) in f.iter_mut().enumerate() {
+            let i = s + k;
+            let fe = match c {
+                Some(c) if model.inv_mass[i] != 0.0 && c[i] != 0.0 => per_unit(x[i]) * c[i],
+                _ => V::ZERO,
+            };
+            write.put(fi, fe);
+        }
+    });
+}
+
+/// Σ c_i `phi(x_i)` over free particles with a nonzero coupling constant (J): the potential
+/// energy of a fixed field whose potential per unit of c is `phi`. 0 when the scene lacks the
+/// coupled attribute (a charge field in an uncharged scene).
+pub(crate) fn coupled_potential<V: Vector>(
+    coupling: Coupling,
+    x: &[V],
+    model: &Model,
+    phi: impl Fn(V) -> Real + Sync + Send,
+) -> Real {
+    let Some(c) = coupling.of(model) else {
+        return 0.0;
+    };
+    par::sum(x.len(), 0.0, |r| {
+        let mut u = 0.0;
+        for i in r {
+            if model.inv_mass[i] != 0.0 && c[i] != 0.0 {
+                u += c[i] * phi(x[i]);
+            }
+        }
+        u
+    })
 }

@@ -14,7 +14,7 @@
 //! or potential: the direction is undefined (the convention of `PairwiseGravity`). The sources
 //! do not move and feel no reaction, so momentum is not conserved (angular momentum about a
 //! single source is).
-use super::Coupling;
+use super::{coupled_forces, coupled_potential, Coupling};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -111,33 +111,12 @@ impl<V: Vector> Term<V> for PointSources<V> {
         &self.name
     }
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
-        let c = self.coupling.of(model);
         let this = &*self;
-        par::chunks1(f, |s, f| {
-            for (k, fi) in f.iter_mut().enumerate() {
-                let i = s + k;
-                let fe = match c {
-                    Some(c) if model.inv_mass[i] != 0.0 && c[i] != 0.0 => this.field(x[i]).0 * c[i],
-                    _ => V::ZERO,
-                };
-                write.put(fi, fe);
-            }
-        });
+        coupled_forces(self.coupling, x, model, f, write, |p| this.field(p).0);
         0.0
     }
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
-        let Some(c) = self.coupling.of(model) else {
-            return Some(0.0); // coupled to charge in an uncharged scene
-        };
-        Some(par::sum(x.len(), 0.0, |r| {
-            let mut u = 0.0;
-            for i in r {
-                if model.inv_mass[i] != 0.0 && c[i] != 0.0 {
-                    u += c[i] * self.field(x[i]).1;
-                }
-            }
-            u
-        }))
+        Some(coupled_potential(self.coupling, x, model, |p| self.field(p).1))
     }
     fn dissipative(&self) -> bool {
         false
