@@ -5,7 +5,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 """
 from __future__ import annotations
 
-from . import _core, flows
+from . import _core, flows, sweeps
 from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
@@ -26,6 +26,7 @@ from .fluids import Fluid, neighbors
 from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
 from .potentials import *  # noqa: F403 - the potential fields, as potentials.__all__ lists them
 from .scene import INTEGRATORS, EnergyReport, Scene
+from .sweeps import Ensemble, ensemble, sweep
 from .terms import *  # noqa: F403 - every term record, as terms.__all__ lists them
 
 __version__ = _core.__version__
@@ -45,6 +46,10 @@ __all__ = [
     "Drop",
     "Oscillator",
     "Flow",
+    "sweep",
+    "ensemble",
+    "Ensemble",
+    "sweeps",
     "flows",
     "grids",
     "fluids",

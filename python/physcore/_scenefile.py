@@ -23,6 +23,7 @@ Every failure is one :class:`~physcore.SceneFileError` naming the file and the f
 """
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -544,6 +545,19 @@ def read(path: Path) -> SceneFile:
     """
     r = _Reader(str(path))
     fh, size = _open_regular(path, r.name)
+    return _read_archive(r, fh, size)
+
+
+def read_bytes(data: bytes, name: str = "<pickled Scene>") -> SceneFile:
+    """:func:`read` of a scene file held in memory (a pickled :class:`~physcore.Scene`): the
+    same checks, since pickles cross machines too."""
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise SceneFileError(name, "", f"expected the bytes of a scene file, got {type(data).__name__}")
+    data = bytes(data)
+    return _read_archive(_Reader(name), io.BytesIO(data), len(data))
+
+
+def _read_archive(r: _Reader, fh: IO[bytes], size: int) -> SceneFile:
     with fh:
         cd = _central_directory_size(fh, size)
         if cd is not None and cd > MAX_CENTRAL_DIRECTORY:

@@ -5,6 +5,8 @@ all state and steps ``n`` steps per call with the GIL released. Arrays cross in 
 """
 from __future__ import annotations
 
+import contextvars
+import io
 import json
 import math
 import os
@@ -33,6 +35,12 @@ INTEGRATORS: tuple[dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
 #: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
 MAX_THREADS = 65535
+
+#: The thread count of a Scene made with ``threads=None`` in the current context, where a caller
+#: has set one (:func:`physcore.sweep` sets 1 inside each run so that parallel runs do not
+#: oversubscribe the cores); unset: all cores (rayon's global pool, or ``RAYON_NUM_THREADS``).
+#: ``Scene.threads`` still reports what the scene was given (None), and files save None.
+DEFAULT_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("physcore_default_threads", default=None)
 _MIN_DT = _check.MIN_NORMAL
 _MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
@@ -232,7 +240,7 @@ class Scene:
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
-        sim = _core.Simulation(int(dim), integrator, dt, threads)
+        sim = _core.Simulation(int(dim), integrator, dt, DEFAULT_THREADS.get() if threads is None else threads)
         if sim.sequential is not None:
             warnings.warn(
                 f"threads=None: could not start a thread pool ({sim.sequential}); this scene runs on "
@@ -922,6 +930,12 @@ class Scene:
         path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
+        arrays = self._file_arrays()
+        atomic_write(path, lambda fh: np.savez(fh, **arrays))
+        return path
+
+    def _file_arrays(self) -> dict[str, np.ndarray]:
+        """The members of the scene file (see :meth:`save`), ``meta`` included."""
         arrays: dict[str, np.ndarray] = {
             "positions": self.positions,
             "velocities": self.velocities,
@@ -987,9 +1001,17 @@ class Scene:
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
         arrays["time_hex"] = np.array(float(self.time).hex())
-        atomic_write(path, lambda fh: np.savez(fh, **arrays))
-        return path
+        return arrays
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickling goes through the scene file format (:meth:`save`), held in memory: a scene
+        built on one machine continues bit for bit on another (a Dask worker, a process pool),
+        and unpickling checks the bytes as strictly as :meth:`load` checks a file. The saved
+        thread count travels too (``None``: the receiving process's default), and so do the
+        ``render_defaults``. Raises what :meth:`save` raises for books that are not finite."""
+        buf = io.BytesIO()
+        np.savez(buf, **self._file_arrays())
+        return (_unpickle_scene, (buf.getvalue(), self.render_defaults))
     @classmethod
     def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
@@ -1026,7 +1048,10 @@ class Scene:
         path = _scenefile.check_path(path)
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
-        sf = _scenefile.read(path)
+        return cls._from_file(_scenefile.read(path), threads)
+
+    @classmethod
+    def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None) -> Scene:
         meta, z, r = sf.meta, sf.arrays, sf.reader
         if threads is None and meta["threads"] is not None:
             threads = min(meta["threads"], _usable_cpus())
@@ -1100,3 +1125,10 @@ class Scene:
             + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")
             + ")"
         )
+
+
+def _unpickle_scene(data: bytes, render_defaults: dict[str, Any] | None) -> Scene:
+    """Rebuilds a pickled :class:`Scene` (see ``Scene.__reduce__``)."""
+    scene = Scene._from_file(_scenefile.read_bytes(data), None)
+    scene.render_defaults = render_defaults
+    return scene

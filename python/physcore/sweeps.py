@@ -1,0 +1,680 @@
+"""Parameter sweeps and ensembles of scenes, run in parallel on Dask (``dask.distributed``).
+
+One run is one task: ``build(**params)`` makes a :class:`~physcore.Scene`, ``measure(scene)``
+runs it and returns a dict of results. :func:`sweep` runs a grid of parameters that way and
+returns a pandas DataFrame, one row per run; :func:`ensemble` runs one scene from perturbed
+initial conditions and gathers an observable over time (:class:`Ensemble`).
+
+Where the runs go (the ``client`` argument)
+-------------------------------------------
+``None`` (default)
+    A ``distributed.LocalCluster`` of worker *processes*, one per usable core, one thread each,
+    started for the call and closed after it. Each run's scene steps on one core thread
+    (scenes made with ``threads=None`` inside a run get 1, see ``DEFAULT_THREADS``), so runs
+    never oversubscribe the cores: the parallelism is across runs.
+a ``distributed.Client``
+    Whatever cluster it is connected to (a ``LocalCluster`` you keep between sweeps, a
+    scheduler on other machines, ``dask-jobqueue`` on a batch system, ``dask-kubernetes``).
+    Every worker needs physcore installed, and the functions you pass must be importable there
+    or defined in ``__main__`` / a notebook (cloudpickle then ships them by value).
+a str
+    A scheduler address such as ``"tcp://10.0.0.5:8786"``: connected to for the call.
+``"serial"``
+    A plain loop in this process, no Dask needed (debugging, and the reference the parallel
+    runs are tested against: they agree bit for bit, since the core is deterministic for any
+    thread count and every run's seed derives from its parameters, not from its order).
+
+Dask is an optional dependency: ``pip install "physcore[sweep]"`` (dask[distributed], pandas).
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import numbers
+import os
+import pickle
+import socket
+import time
+import traceback
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _check
+from ._atomic import atomic_write
+from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
+from .scene import DEFAULT_THREADS, Scene
+
+__all__ = ["sweep", "ensemble", "Ensemble", "expand", "run_seed", "RESERVED"]
+
+#: Columns every sweep row has besides its parameters and results.
+RESERVED = ("run", "seed", "error", "diverged_step", "wall_s", "worker", "run_key")
+
+_INSTALL = 'pip install "physcore[sweep]"'
+
+
+def _need(module: str) -> Any:
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise ImportError(f"physcore.sweep needs {module.split('.')[0]} for this; install it with: {_INSTALL}") from exc
+
+
+# ------------------------------------------------------------------------------ parameters
+def expand(params: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The runs of a parameter grid: a dict of lists gives their Cartesian product (the first
+    key varies slowest), a list of dicts is taken as it is. Keys must be strings that are valid
+    Python identifiers (they become keyword arguments of ``build``) and not one of
+    :data:`RESERVED`.
+
+    >>> expand({"dt": [0.1, 0.01], "integrator": ["verlet"]})
+    [{'dt': 0.1, 'integrator': 'verlet'}, {'dt': 0.01, 'integrator': 'verlet'}]
+
+    Raises ``TypeError`` / ``ValueError`` naming ``params`` for anything else, and for an empty
+    grid."""
+    if isinstance(params, Mapping):
+        if not params:
+            raise InvalidInputError("params: no runs (an empty grid)")
+        for k, v in params.items():
+            _check_name(k)
+            if isinstance(v, (str, bytes)) or not isinstance(v, (Sequence, np.ndarray, range)):
+                raise InvalidTypeError(f"params[{k!r}]: expected a list of values, got {type(v).__name__}")
+            if len(v) == 0:
+                raise InvalidInputError(f"params[{k!r}]: the list of values is empty")
+        keys = list(params)
+        runs = [dict(zip(keys, combo, strict=True)) for combo in itertools.product(*(list(params[k]) for k in keys))]
+    elif isinstance(params, Sequence) and not isinstance(params, (str, bytes)):
+        runs = []
+        for i, p in enumerate(params):
+            if not isinstance(p, Mapping):
+                raise InvalidTypeError(f"params[{i}]: expected a dict of parameters, got {type(p).__name__}")
+            for k in p:
+                _check_name(k)
+            runs.append(dict(p))
+    else:
+        raise InvalidTypeError(f"params: expected a dict of lists or a list of dicts, got {type(params).__name__}")
+    if not runs:
+        raise InvalidInputError("params: no runs (an empty grid)")
+    return runs
+
+
+def _check_name(k: object) -> None:
+    if not isinstance(k, str) or not k.isidentifier():
+        raise InvalidInputError(f"params: parameter names must be Python identifiers (build's keyword arguments), got {k!r}")
+    if k in RESERVED:
+        raise InvalidInputError(f"params: {k!r} is a column every sweep row has; rename the parameter")
+
+
+def _plain(v: Any) -> Any:
+    """A value as JSON writes it faithfully (numpy scalars and arrays to Python)."""
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    return repr(v)  # anything else: its repr, for the key only
+
+
+def run_key(params: Mapping[str, Any]) -> str:
+    """A run's identity: its parameters as canonical JSON (sorted keys). A resumed sweep skips
+    the rows of the file whose key it finds again; seeds derive from it (:func:`run_seed`)."""
+    return json.dumps(dict(params), sort_keys=True, default=_plain, allow_nan=True)
+
+
+def run_seed(seed: int, params: Mapping[str, Any]) -> int:
+    """The seed of one run: 63 bits of SHA-256 of the sweep's `seed` and the run's key, so it
+    does not depend on the run's place in the grid, on the worker, or on what ran before."""
+    digest = hashlib.sha256(f"{seed}\0{run_key(params)}".encode()).digest()
+    return int.from_bytes(digest[:8], "little") >> 1
+
+
+# ------------------------------------------------------------------------------ one run
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return str(get_worker().address)
+    except (ImportError, ValueError):
+        return f"{socket.gethostname()}:{os.getpid()}"
+
+
+def _error_text(exc: BaseException) -> str:
+    text = f"{type(exc).__name__}: {exc}"
+    return text if len(text) <= 2000 else text[:2000] + " [...]"
+
+
+def _run_one(build: Callable[..., Any], measure: Callable[[Any], Any], params: dict[str, Any], seed: int | None,
+             threads: int | None) -> dict[str, Any]:
+    """One sweep task: never raises for the run's own failures (they become the row's error)."""
+    t0 = time.perf_counter()
+    token = DEFAULT_THREADS.set(threads) if threads is not None else None
+    row: dict[str, Any] = {"error": None, "diverged_step": None}
+    try:
+        kwargs = dict(params)
+        if seed is not None:
+            kwargs["seed"] = seed
+        scene = build(**kwargs)
+        result = measure(scene)
+        if not isinstance(result, Mapping):
+            raise InvalidTypeError(f"measure: must return a dict of results, returned {type(result).__name__}")
+        clash = [k for k in result if not isinstance(k, str) or k in RESERVED or k in params]
+        if clash:
+            raise InvalidInputError(f"measure: result name {clash[0]!r} is a parameter or one of {RESERVED}; rename it")
+        row["results"] = dict(result)
+    except SimulationDiverged as exc:
+        row.update(results={}, error=_error_text(exc), diverged_step=exc.step)
+    except Exception as exc:  # noqa: BLE001 - any failure of a user's run is a row, not a failed sweep
+        tb = traceback.extract_tb(exc.__traceback__)
+        where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+        row.update(results={}, error=_error_text(exc) + where)
+    finally:
+        if token is not None:
+            DEFAULT_THREADS.reset(token)
+    row["wall_s"] = time.perf_counter() - t0
+    row["worker"] = _worker_name()
+    return row
+
+
+# ------------------------------------------------------------------------------ the engine
+def _check_client(client: Any) -> Any:
+    if client is None or client == "serial" or isinstance(client, str):
+        return client
+    if type(client).__name__ == "Client" and hasattr(client, "submit"):
+        return client
+    raise InvalidTypeError(f"client: expected None, 'serial', a scheduler address or a distributed.Client, got {type(client).__name__}")
+
+
+class _Cluster:
+    """The client a call runs on: the caller's, one connected to an address, or a LocalCluster
+    made (and closed) here."""
+
+    def __init__(self, client: Any, workers: int | None) -> None:
+        self.own: list[Any] = []
+        if client is None or isinstance(client, str):
+            distributed = _need("distributed")
+            if client is None:
+                import logging
+
+                n = workers if workers is not None else _usable_cpus()
+                cluster = distributed.LocalCluster(
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
+                )
+                self.own.append(cluster)
+                client = distributed.Client(cluster)
+            else:
+                client = distributed.Client(client)
+            self.own.insert(0, client)
+        self.client = client
+
+    def close(self) -> None:
+        for c in self.own:
+            c.close()
+
+
+def _usable_cpus() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
+
+
+def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, workers: int | None, on_result: Callable[[int, Any], None],
+         shared: tuple[Any, ...] = ()) -> None:
+    """Runs ``fn(*shared, *args[i])`` for every i, on `client`, calling ``on_result(i, value)``
+    as each finishes (in completion order). `shared` is sent to the cluster once. A task whose
+    worker dies (or whose result cannot be sent back) gives ``on_result(i, exc)`` with the
+    exception. Ctrl-C cancels what is still queued."""
+    if client == "serial":
+        for i, a in enumerate(args):
+            on_result(i, fn(*shared, *a))
+        return
+    distributed = _need("distributed")
+    cl = _Cluster(client, workers)
+    futures: list[Any] = []
+    try:
+        c = cl.client
+        shared_f = c.scatter(list(shared), broadcast=False, hash=False) if shared else []
+        futures = [c.submit(fn, *shared_f, *a, pure=False) for a in args]
+        index = {f.key: i for i, f in enumerate(futures)}
+        for fut, value in distributed.as_completed(futures, with_results=True, raise_errors=False):
+            on_result(index[fut.key], value)
+    finally:
+        pending = [f for f in futures if not f.done()]
+        if pending:
+            cl.client.cancel(pending)
+        cl.close()
+
+
+# ------------------------------------------------------------------------------ results file
+def _cell(v: Any) -> Any:
+    """A result as a CSV cell: numbers, strings, bools and None as they are, anything else as
+    its JSON text."""
+    if v is None or isinstance(v, (str, bool, numbers.Number)):
+        return v.item() if isinstance(v, np.generic) else v
+    if isinstance(v, np.generic):
+        return v.item()
+    try:
+        return json.dumps(np.asarray(v).tolist())
+    except (TypeError, ValueError):
+        return repr(v)
+
+
+def _parse(text: str) -> Any:
+    """A CSV cell back as the value pandas wrote: None, bool, int, float or str."""
+    if text == "":
+        return None
+    if text in ("True", "False"):
+        return text == "True"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
+class _ResultsFile:
+    """Results streamed to a CSV file as runs finish, rewritten atomically (temporary file, then
+    rename), so the file is always a complete table. Rewrites are spaced so that they cost at
+    most ~10 % of the sweep's time on long sweeps; the last one happens however the sweep ends."""
+
+    def __init__(self, path: Path | None) -> None:
+        self.path = path
+        self.last = -math.inf
+        self.cost = 0.0
+        self.dirty = False
+
+    def load(self) -> Any:
+        if self.path is None or not self.path.exists():
+            return None
+        # The csv module and Python's own int()/float() rather than a CSV parser's fast float
+        # path: float() is correctly rounded, so every float comes back bit for bit.
+        try:
+            with open(self.path, newline="", encoding="utf-8") as fh:
+                records = list(csv.DictReader(fh))
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise InvalidInputError(f"out: {str(self.path)!r} is not a results file of a sweep ({type(exc).__name__}: {exc})") from None
+        if not records or "run_key" not in records[0] or any(None in r for r in records):
+            raise InvalidInputError(f"out: {str(self.path)!r} has no run_key column or ragged rows (not written by physcore.sweep); give another path")
+        text = ("run_key", "error", "worker")
+        return [{k: (v or None if k in text else _parse(v)) for k, v in r.items()} for r in records]
+
+    def write(self, frame: Callable[[], Any], force: bool = False) -> None:
+        if self.path is None:
+            return
+        self.dirty = True
+        now = time.perf_counter()
+        if not force and now - self.last < 10.0 * self.cost:
+            return
+        df = frame()
+        atomic_write(self.path, lambda fh: df.to_csv(fh, index=False), binary=False)
+        self.last = time.perf_counter()
+        self.cost = self.last - now
+        self.dirty = False
+
+
+# ------------------------------------------------------------------------------ sweep
+def sweep(
+    build: Callable[..., Any],
+    params: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Any]],
+    *,
+    measure: Callable[[Any], Mapping[str, Any]],
+    client: Any = None,
+    workers: int | None = None,
+    out: str | os.PathLike | None = None,
+    seed: int | None = None,
+    threads: int | None = 1,
+    retry_errors: bool = False,
+    progress: bool = True,
+) -> Any:
+    """Run ``measure(build(**p))`` for every parameter set ``p`` of a grid, in parallel on Dask,
+    and return the results as a pandas DataFrame.
+
+    Parameters
+    ----------
+    build : callable
+        ``build(**p)`` returns a :class:`~physcore.Scene` (or anything `measure` accepts). With
+        `seed`, it is also given ``seed=`` (an int, see :func:`run_seed`).
+    params : dict of lists, or list of dicts
+        The runs (see :func:`expand`): ``{"dt": [1e-3, 1e-4], "integrator": ["verlet", "rk4"]}``
+        is four runs.
+    measure : callable
+        ``measure(scene)`` runs the scene and returns a dict of results (names must not repeat
+        a parameter or a :data:`RESERVED` column). Numbers, strings and bools are stored as
+        they are; other values (arrays) go into the file as JSON text.
+    client : None, "serial", str or distributed.Client
+        Where the runs go (module docstring): by default a LocalCluster of `workers` processes.
+    workers : int, optional
+        Worker processes of the default LocalCluster, >= 1; default one per usable core.
+    out : str or os.PathLike, optional
+        A ``.csv`` file the rows stream to as runs finish (rewritten atomically, so it is always
+        a whole table). If it exists, the sweep *resumes*: runs whose key (:func:`run_key`) is
+        in it are not run again and their rows are returned from the file (with
+        `retry_errors`, failed ones are run again).
+    seed : int, optional
+        Base seed: every run gets ``seed=run_seed(seed, p)`` as a keyword of `build`, the same
+        on any worker and in any order, so every run is reproducible alone.
+    threads : int or None, default 1
+        Core threads of each run's scenes made with ``threads=None`` (a scene given its own
+        count keeps it). 1 suits one worker thread per core; None: all cores per run.
+    retry_errors : bool, default False
+        Resuming, run again the rows of `out` that have an error.
+    progress : bool, default True
+        A tqdm bar on stderr: runs done, rate and ETA.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run in the order of `params`: ``run`` (its index), the parameters,
+        ``seed`` (None without `seed`), the results (NaN where a run failed), ``error`` (None
+        or ``"Type: message"``), ``diverged_step`` (the step of a
+        :class:`~physcore.SimulationDiverged`, else None), ``wall_s`` (build + measure, s),
+        ``worker`` (its address) and ``run_key``.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A bad argument, naming it, before anything runs (a run's own failure is its row's
+        ``error``, never an exception here).
+    ImportError
+        Dask or pandas is not installed (``pip install "physcore[sweep]"``).
+    KeyboardInterrupt
+        Ctrl-C: queued runs are cancelled, and the rows finished so far are in `out`.
+
+    Examples
+    --------
+    A ball dropped for 1 s with two steps and two integrators (``client="serial"`` runs them
+    in this process; leave it out to run them on a local cluster):
+
+    >>> import physcore as pc
+    >>> def build(dt, integrator):
+    ...     scene = pc.Scene(dim=2, dt=dt, integrator=integrator)
+    ...     scene.add_particles([[0.0, 0.0]])
+    ...     scene.add(pc.Gravity([0.0, -9.81]))
+    ...     return scene
+    >>> def measure(scene):
+    ...     scene.step(round(1.0 / scene.dt))
+    ...     return {"y": float(scene.positions[0, 1])}
+    >>> df = pc.sweep(build, {"dt": [0.1, 0.01], "integrator": ["euler", "verlet"]},
+    ...               measure=measure, client="serial", progress=False)
+    >>> df[["dt", "integrator", "y"]].round(3).values.tolist()
+    [[0.1, 'euler', -4.415], [0.1, 'verlet', -4.905], [0.01, 'euler', -4.856], [0.01, 'verlet', -4.905]]
+    """
+    if not callable(build):
+        raise InvalidTypeError(f"build: expected a callable returning a Scene, got {type(build).__name__}")
+    if not callable(measure):
+        raise InvalidTypeError(f"measure: expected a callable (scene -> dict of results), got {type(measure).__name__}")
+    runs = expand(params)
+    client = _check_client(client)
+    if workers is not None:
+        workers = _check.int_in_range("workers", workers, 1, 4096)
+    if seed is not None:
+        seed = _check.int_in_range("seed", seed, 0)
+        if any("seed" in p for p in runs):
+            raise InvalidInputError("seed: the parameters already have a 'seed'; give one or the other")
+    if threads is not None:
+        threads = _check.int_in_range("threads", threads, 1, 65535)
+    retry_errors = _check.flag("retry_errors", retry_errors)
+    progress = _check.flag("progress", progress)
+    path: Path | None = None
+    if out is not None:
+        from ._scenefile import check_path
+
+        path = check_path(out, "out")
+        if path.suffix != ".csv":
+            raise InvalidInputError(f"out: must end in .csv, got {str(path)!r}")
+    pd = _need("pandas")
+
+    file = _ResultsFile(path)
+    keys = [run_key(p) for p in runs]
+    if len(set(keys)) != len(keys):
+        dup = next(k for k in keys if keys.count(k) > 1)
+        raise InvalidInputError(f"params: the run {dup} appears twice")
+    seeds = [None if seed is None else run_seed(seed, p) for p in runs]
+    rows: dict[int, dict[str, Any]] = {}
+    old = file.load()
+    kept_old: list[dict[str, Any]] = []  # rows of the file that are not runs of this grid
+    if old is not None:
+        where = {k: i for i, k in enumerate(keys)}
+        for rec in old:
+            i = where.get(rec["run_key"])
+            failed = rec.get("error") is not None
+            if i is None:
+                kept_old.append(rec)
+            elif not (retry_errors and failed):
+                rec["run"] = i
+                rows[i] = rec
+    todo = [i for i in range(len(runs)) if i not in rows]
+
+    def frame() -> Any:
+        recs = [rows[i] for i in sorted(rows)] + kept_old
+        df = pd.DataFrame.from_records(recs)
+        cols = ["run", *dict.fromkeys(k for p in runs for k in p), "seed"]
+        rest = [c for c in df.columns if c not in cols and c not in RESERVED]
+        order = [c for c in cols if c in df.columns] + rest + [c for c in RESERVED[2:] if c in df.columns]
+        return df[order]
+
+    def on_result(j: int, value: Any) -> None:
+        i = todo[j]
+        if isinstance(value, BaseException):  # the worker died, or the result could not come back
+            value = {"results": {}, "error": _error_text(value), "diverged_step": None, "wall_s": math.nan, "worker": None}
+        res = value.pop("results")
+        rows[i] = {"run": i, **runs[i], "seed": seeds[i], **{k: _cell(v) for k, v in res.items()}, **value, "run_key": keys[i]}
+        bar.update(1)
+        file.write(frame)
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=len(runs), initial=len(runs) - len(todo), desc="sweep", unit="run", disable=not progress, leave=False)
+    try:
+        if todo:
+            _map(_run_one, [(runs[i], seeds[i], threads) for i in todo], client, workers, on_result, shared=(build, measure))
+    finally:
+        bar.close()
+        if rows and (file.dirty or (path is not None and not path.exists())):
+            file.write(frame, force=True)
+    df = frame()
+    return df[df["run"].isin(range(len(runs)))].reset_index(drop=True) if kept_old else df
+
+
+# ------------------------------------------------------------------------------ ensembles
+@dataclass(frozen=True)
+class Ensemble:
+    """What :func:`ensemble` returns.
+
+    Attributes
+    ----------
+    times : (T,) float64 ndarray
+        Sample times, s (the scene's time at each sample; the first is its time at the start).
+    values : (M, T, ...) float64 ndarray
+        The observable of each member that finished, at each sample.
+    members : (M,) int ndarray
+        Which members those are (0 is the unperturbed scene).
+    failed : dict of int to str
+        Members that raised (a :class:`~physcore.SimulationDiverged`, say), with the error.
+    """
+
+    times: np.ndarray
+    values: np.ndarray
+    members: np.ndarray
+    failed: dict[int, str]
+
+    def mean(self) -> np.ndarray:
+        """The ensemble mean of the observable, shape (T, ...)."""
+        return self.values.mean(axis=0)
+
+    def spread(self) -> np.ndarray:
+        """The RMS distance of the members from the ensemble mean at each sample, shape (T,):
+        sqrt(mean over members of |v_m(t) - mean(t)|^2), the norm over the observable's own
+        axes. For a chaotic system it grows as exp(λ t) until it saturates (λ: the largest
+        Lyapunov exponent)."""
+        d = self.values - self.mean()[None]
+        return np.sqrt(np.mean(np.sum(d.reshape(d.shape[0], d.shape[1], -1) ** 2, axis=2), axis=0))
+
+    def distance(self) -> np.ndarray:
+        """Each member's distance from the unperturbed member 0, shape (M, T) (needs member 0)."""
+        if not len(self.members) or self.members[0] != 0:
+            raise InvalidInputError("member 0 (the unperturbed run) failed; distance() needs it")
+        d = self.values - self.values[0][None]
+        return np.sqrt(np.sum(d.reshape(d.shape[0], d.shape[1], -1) ** 2, axis=2))
+
+
+def _positions(scene: Any) -> np.ndarray:
+    return np.asarray(scene.positions, dtype=np.float64)
+
+
+def _perturb_positions(scene: Any, rng: np.random.Generator, scale: float) -> None:
+    x = np.asarray(scene.positions, dtype=np.float64)
+    free = ~np.asarray(scene.pinned, dtype=bool)
+    x[free] += scale * rng.standard_normal((int(free.sum()), x.shape[1]))
+    scene.positions = x
+
+
+def _run_member(data: bytes, member: int, seed: int, perturb: Any, observe: Callable[[Any], Any] | None,
+                samples: int, steps: int, threads: int | None) -> tuple[np.ndarray, np.ndarray] | str:
+    """One ensemble member: unpickle the scene, perturb it (member 0 stays as it is), sample
+    the observable `samples` times, `steps` steps apart. An error comes back as its text."""
+    token = DEFAULT_THREADS.set(threads) if threads is not None else None
+    try:
+        scene = pickle.loads(data)
+        if member:
+            rng = np.random.default_rng([seed, member])
+            if callable(perturb):
+                perturb(scene, rng)
+            else:
+                _perturb_positions(scene, rng, perturb)
+        look = observe or _positions
+        times, values = [], []
+        for k in range(samples):
+            if k:
+                scene.step(steps)
+            times.append(scene.time)
+            values.append(np.array(look(scene), dtype=np.float64))
+            if not np.isfinite(values[-1]).all():
+                raise InvalidInputError(f"observe: returned a non-finite value at sample {k}")
+        return np.asarray(times), np.stack(values)
+    except Exception as exc:  # noqa: BLE001 - a member's failure is reported, not raised
+        return _error_text(exc)
+    finally:
+        if token is not None:
+            DEFAULT_THREADS.reset(token)
+
+
+def ensemble(
+    scene: Scene,
+    members: int,
+    *,
+    samples: int,
+    steps_per_sample: int,
+    perturb: float | Callable[[Any, np.random.Generator], None] = 1e-9,
+    observe: Callable[[Any], Any] | None = None,
+    seed: int = 0,
+    client: Any = None,
+    workers: int | None = None,
+    threads: int | None = 1,
+    progress: bool = True,
+) -> Ensemble:
+    """Run `members` copies of `scene` from perturbed initial conditions and gather an
+    observable over time: the spread of an ensemble of chaotic runs, the sensitivity of a
+    measurement to its initial state.
+
+    Member 0 is the scene as given; member m >= 1 has each free particle's position moved by
+    ``perturb`` times a standard normal vector drawn from ``numpy.random.default_rng([seed,
+    m])`` (or ``perturb(scene, rng)`` does it, for any other perturbation). Each member
+    steps ``steps_per_sample`` steps of ``scene.dt`` between samples; the scene itself is not
+    changed (members run on copies, pickled through the scene file format).
+
+    Parameters
+    ----------
+    scene : physcore.Scene
+        The starting state.
+    members : int
+        Ensemble size, >= 1 (member 0 unperturbed).
+    samples : int
+        Samples of the observable, >= 1 (the first at the start).
+    steps_per_sample : int
+        Steps between samples, >= 1.
+    perturb : float or callable, default 1e-9
+        Position perturbation scale, m (>= 0), or ``perturb(scene, rng)``, which changes the
+        copy in place.
+    observe : callable, optional
+        ``observe(scene)`` -> array-like of floats, the same shape at every sample. Default:
+        the positions, (N, dim).
+    seed : int, default 0
+        Seed of the perturbations (>= 0).
+    client, workers, threads, progress
+        As for :func:`sweep` (``client="serial"`` runs the members in this process).
+
+    Returns
+    -------
+    Ensemble
+        Times, values (M, T, ...) and the failures; :meth:`Ensemble.spread` is the RMS spread.
+
+    Raises
+    ------
+    TypeError, ValueError
+        A bad argument, naming it, before anything runs.
+    ImportError
+        Dask is not installed and `client` is not ``"serial"``.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> ens = pc.ensemble(pc.scenes.figure_eight(), 4, samples=3, steps_per_sample=200,
+    ...                   client="serial", progress=False)
+    >>> ens.values.shape
+    (4, 3, 3, 2)
+    >>> bool(ens.spread()[0] < 1e-8)
+    True
+    """
+    if not isinstance(scene, Scene):
+        raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
+    members = _check.int_in_range("members", members, 1, 10**7)
+    samples = _check.int_in_range("samples", samples, 1, 10**7)
+    steps = _check.int_in_range("steps_per_sample", steps_per_sample, 1, 2**53)
+    if not callable(perturb):
+        perturb = _check.nonneg_float("perturb", perturb, unit="m")
+    if observe is not None and not callable(observe):
+        raise InvalidTypeError(f"observe: expected a callable (scene -> array), got {type(observe).__name__}")
+    seed = _check.int_in_range("seed", seed, 0)
+    client = _check_client(client)
+    if workers is not None:
+        workers = _check.int_in_range("workers", workers, 1, 4096)
+    if threads is not None:
+        threads = _check.int_in_range("threads", threads, 1, 65535)
+    progress = _check.flag("progress", progress)
+    data = pickle.dumps(scene)
+
+    got: dict[int, Any] = {}
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=members, desc="ensemble", unit="run", disable=not progress, leave=False)
+
+    def on_result(m: int, value: Any) -> None:
+        got[m] = _error_text(value) if isinstance(value, BaseException) else value
+        bar.update(1)
+
+    try:
+        _map(_run_member, [(m, seed, perturb, observe, samples, steps, threads) for m in range(members)], client, workers,
+             on_result, shared=(data,))
+    finally:
+        bar.close()
+    ok = [m for m in range(members) if not isinstance(got[m], str)]
+    failed = {m: got[m] for m in range(members) if isinstance(got[m], str)}
+    shapes = {got[m][1].shape for m in ok}
+    if len(shapes) > 1:
+        raise InvalidInputError(f"observe: returned different shapes in different members: {sorted(shapes)}")
+    if ok:
+        times = got[ok[0]][0]
+        values = np.stack([got[m][1] for m in ok])
+    else:
+        times, values = np.zeros(0), np.zeros((0, 0))
+    return Ensemble(times=times, values=values, members=np.asarray(ok, dtype=np.int64), failed=failed)
+

@@ -1,0 +1,365 @@
+"""Sweeps and ensembles on Dask (physcore.sweep, physcore.ensemble) and scenes through pickle.
+
+The parallel runs are checked against the same runs in a plain loop in this process
+(``client="serial"``), bit for bit: the core is deterministic for any thread count and each run's
+seed derives from its parameters, so where a run happens must not change a single bit.
+"""
+from __future__ import annotations
+
+import math
+import pickle
+import sys
+
+import numpy as np
+import pytest
+
+import physcore as pc
+from physcore import scene as scene_mod
+from physcore import sweeps
+
+distributed = pytest.importorskip("distributed")
+pd = pytest.importorskip("pandas")
+cloudpickle = pytest.importorskip("cloudpickle")
+# The workers are other processes: ship this module's functions by value, as cloudpickle does
+# for a script's or a notebook's own functions.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
+
+
+@pytest.fixture(scope="module")
+def client():
+    """One LocalCluster of 2 worker processes (1 thread each) for the module: starting one
+    takes seconds."""
+    import logging
+
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=logging.ERROR) as cluster, distributed.Client(cluster) as c:
+        yield c
+
+
+# ------------------------------------------------------------------------------ runs
+def chain(k: float, dt: float, seed: int | None = None) -> pc.Scene:
+    """A hanging spring chain, started from slightly random positions when seeded: nonlinear
+    enough that any change of arithmetic shows in the last bits."""
+    x = np.stack([np.arange(8) * 0.1, np.zeros(8)], axis=1)
+    if seed is not None:
+        x[1:] += 1e-3 * np.random.default_rng(seed).standard_normal((7, 2))
+    s = pc.Scene(dim=2, dt=dt)
+    s.add_particles(x, masses=0.1, pinned=[True] + [False] * 7)
+    s.add(pc.Springs(np.arange(7), np.arange(1, 8), stiffness=k, damping=0.0))
+    s.add(pc.Gravity([0.0, -9.81]))
+    return s
+
+
+def settle(scene: pc.Scene) -> dict:
+    scene.step(400)
+    e = scene.energy()
+    return {"x_end": float(scene.positions[-1, 0]), "y_end": float(scene.positions[-1, 1]), "energy": e.total,
+            "drift": scene.energy_drift()}
+
+
+def results(df) -> list:
+    """The columns a run's physics decides (not its wall time or worker)."""
+    cols = [c for c in df.columns if c not in ("wall_s", "worker")]
+    return df[cols].to_dict("records")
+
+
+GRID = {"k": [500.0, 2000.0, 8000.0], "dt": [1e-4, 2e-4]}
+
+
+def test_expand_grid_and_list():
+    assert sweeps.expand({"a": [1, 2], "b": ["x"]}) == [{"a": 1, "b": "x"}, {"a": 2, "b": "x"}]
+    assert sweeps.expand({"a": [1, 2], "b": [3, 4]})[1] == {"a": 1, "b": 4}  # the last key varies fastest
+    assert sweeps.expand([{"a": 1}, {"a": 2, "b": 3}]) == [{"a": 1}, {"a": 2, "b": 3}]
+    assert len(sweeps.expand({"a": np.linspace(0, 1, 5)})) == 5
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({}, "no runs"),
+        ([], "no runs"),
+        ({"a": []}, r"params\['a'\]: the list of values is empty"),
+        ({"a": "xyz"}, r"params\['a'\]: expected a list"),
+        ({"a": 3}, r"params\['a'\]: expected a list"),
+        ({"not valid": [1]}, "identifiers"),
+        ({"error": [1]}, "'error' is a column"),
+        ([{"a": 1}, 3], r"params\[1\]: expected a dict"),
+        ("a=1", "params: expected a dict of lists"),
+    ],
+)
+def test_expand_refuses(params, match):
+    with pytest.raises((ValueError, TypeError), match=match):
+        sweeps.expand(params)
+
+
+def test_run_seed_depends_on_parameters_not_order():
+    a = sweeps.run_seed(7, {"k": 1.0, "dt": 2.0})
+    assert a == sweeps.run_seed(7, {"dt": 2.0, "k": 1.0})
+    assert a != sweeps.run_seed(8, {"k": 1.0, "dt": 2.0})
+    assert a != sweeps.run_seed(7, {"k": 1.0, "dt": 3.0})
+    assert 0 <= a < 2**63
+
+
+# ------------------------------------------------------------------------------ sweep
+def test_cluster_sweep_equals_plain_loop_bit_for_bit(client):
+    loop = []
+    for p in sweeps.expand(GRID):
+        s = chain(p["k"], p["dt"], seed=sweeps.run_seed(3, p))
+        loop.append({**p, **settle(s)})
+    serial = pc.sweep(chain, GRID, measure=settle, client="serial", seed=3, progress=False)
+    par = pc.sweep(chain, GRID, measure=settle, client=client, seed=3, progress=False)
+    assert results(par) == results(serial)
+    for row, want in zip(serial.to_dict("records"), loop, strict=True):
+        for k, v in want.items():
+            assert row[k] == v, k
+    assert list(par["run"]) == list(range(6))
+    assert set(par["worker"]) <= {w for w in client.scheduler_info()["workers"]}
+    assert par["error"].isna().all()
+    assert (par["wall_s"] > 0).all()
+
+
+def test_default_local_cluster_runs_one_core_thread_per_run():
+    def threads_seen(_scene):
+        return {"default_threads": scene_mod.DEFAULT_THREADS.get()}
+
+    df = pc.sweep(lambda i: None, {"i": [0, 1]}, measure=threads_seen, workers=2, progress=False)
+    assert df["error"].isna().all(), df["error"].tolist()
+    assert list(df["default_threads"]) == [1, 1]
+    assert df["worker"].str.startswith("tcp://").all()
+
+
+def test_default_threads_reach_the_core(monkeypatch):
+    made = []
+    real = scene_mod._core.Simulation
+
+    def spy(dim, integrator, dt, threads=None):
+        made.append(threads)
+        return real(dim, integrator, dt, threads)
+
+    monkeypatch.setattr(scene_mod._core, "Simulation", spy)
+    token = scene_mod.DEFAULT_THREADS.set(1)
+    try:
+        s = pc.Scene(dim=2)
+        pc.Scene(dim=2, threads=2)
+    finally:
+        scene_mod.DEFAULT_THREADS.reset(token)
+    pc.Scene(dim=2)
+    assert made == [1, 2, None]
+    assert s.threads is None  # what the scene was given, and what its file records
+
+
+def explode(k: float, dt: float) -> pc.Scene:
+    if k < 0:
+        raise ValueError("negative stiffness in this build")
+    return chain(k, dt)
+
+
+def test_diverging_and_failing_runs_are_rows(client):
+    params = [{"k": 1000.0, "dt": 1e-4}, {"k": 1e9, "dt": 0.05}, {"k": -1.0, "dt": 1e-4}]
+    for c in ("serial", client):
+        df = pc.sweep(explode, params, measure=settle, client=c, progress=False)
+        ok, diverged, failed = df.to_dict("records")
+        assert ok["error"] is None or (isinstance(ok["error"], float) and math.isnan(ok["error"]))
+        assert np.isfinite(ok["energy"])
+        assert diverged["error"].startswith("SimulationDiverged")
+        assert diverged["diverged_step"] >= 0
+        assert math.isnan(diverged["energy"])  # no value where there is none
+        assert failed["error"].startswith("ValueError: negative stiffness")
+        assert "test_sweep.py" in failed["error"]
+
+
+CALLS: list[float] = []
+
+
+def counted(scene: pc.Scene) -> dict:
+    CALLS.append(scene.dt)
+    if len(CALLS) == STOP_AT[0]:
+        raise KeyboardInterrupt
+    return settle(scene)
+
+
+STOP_AT = [0]
+
+
+def test_interrupted_sweep_resumes_and_skips_finished_rows(tmp_path):
+    out = tmp_path / "runs.csv"
+    full = pc.sweep(chain, GRID, measure=settle, client="serial", seed=1, progress=False)
+    CALLS.clear()
+    STOP_AT[0] = 4  # Ctrl-C during the 4th run
+    with pytest.raises(KeyboardInterrupt):
+        pc.sweep(chain, GRID, measure=counted, client="serial", seed=1, out=out, progress=False)
+    part = pd.read_csv(out)
+    assert len(part) == 3 and list(part["run"]) == [0, 1, 2]
+    assert not list(tmp_path.glob(".physcore-*"))  # no temporary file left behind
+    CALLS.clear()
+    STOP_AT[0] = 0
+    resumed = pc.sweep(chain, GRID, measure=counted, client="serial", seed=1, out=out, progress=False)
+    assert len(CALLS) == 3  # only the runs that had not finished
+    assert results(resumed) == results(full)  # floats survive the CSV bit for bit
+    CALLS.clear()
+    pc.sweep(chain, GRID, measure=counted, client="serial", seed=1, out=out, progress=False)
+    assert CALLS == []
+
+
+def test_resume_can_retry_errors_and_keeps_other_rows(tmp_path):
+    out = tmp_path / "runs.csv"
+    pc.sweep(explode, {"k": [1000.0, -1.0], "dt": [1e-4]}, measure=settle, client="serial", out=out, progress=False)
+    CALLS.clear()
+    df = pc.sweep(explode, {"k": [1000.0, -1.0], "dt": [1e-4]}, measure=counted, client="serial", out=out,
+                  retry_errors=True, progress=False)
+    assert len(CALLS) == 0  # the failing build raised again before measure
+    assert df["error"].iloc[1].startswith("ValueError")
+    # A narrower grid on the same file: its own rows come back, the others stay in the file.
+    df = pc.sweep(explode, {"k": [1000.0], "dt": [1e-4]}, measure=settle, client="serial", out=out, progress=False)
+    assert len(df) == 1 and len(pd.read_csv(out)) == 2
+
+
+def test_seed_reaches_build_and_reproduces_a_run():
+    df = pc.sweep(chain, {"k": [1000.0], "dt": [1e-4, 2e-4]}, measure=settle, client="serial", seed=11, progress=False)
+    row = df.iloc[1]
+    again = settle(chain(1000.0, 2e-4, seed=int(row["seed"])))
+    assert again["x_end"] == row["x_end"] and again["energy"] == row["energy"]
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"build": 3}, TypeError, "build"),
+        ({"measure": None}, TypeError, "measure"),
+        ({"client": 3.5}, TypeError, "client"),
+        ({"workers": 0}, ValueError, "workers"),
+        ({"out": "runs.parquet"}, ValueError, r"out: must end in \.csv"),
+        ({"seed": -1}, ValueError, "seed"),
+        ({"threads": 0}, ValueError, "threads"),
+        ({"params": [{"k": 1.0, "dt": 1.0}, {"dt": 1.0, "k": 1.0}]}, ValueError, "appears twice"),
+        ({"params": {"seed": [1]}, "seed": 1}, ValueError, "seed"),
+        ({"progress": "yes"}, TypeError, "progress"),
+    ],
+)
+def test_sweep_refuses_bad_arguments_before_running(kwargs, error, match):
+    CALLS.clear()
+    args = {"build": chain, "params": GRID, "measure": counted, "client": "serial", "progress": False, **kwargs}
+    build, params = args.pop("build"), args.pop("params")
+    with pytest.raises(error, match=match):
+        pc.sweep(build, params, **args)
+    assert CALLS == []
+
+
+def test_measure_must_return_a_dict_with_new_names():
+    df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: 3.0, client="serial", progress=False)
+    assert "must return a dict" in df["error"][0]
+    df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: {"k": 1.0}, client="serial", progress=False)
+    assert "'k' is a parameter" in df["error"][0]
+
+
+def test_missing_dask_is_a_clear_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ImportError, match=r'pip install "physcore\[sweep\]"'):
+        pc.sweep(chain, GRID, measure=settle, progress=False)
+
+
+def test_an_unreadable_results_file_is_refused(tmp_path):
+    out = tmp_path / "other.csv"
+    out.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="no run_key column"):
+        pc.sweep(chain, GRID, measure=settle, client="serial", out=out, progress=False)
+    assert out.read_text() == "a,b\n1,2\n"
+
+
+# ------------------------------------------------------------------------------ pickle
+@pytest.mark.parametrize("name", ["cloth", "projectile", "kepler", "dam_break", "figure_eight", "galaxies", "cyclotron", "lorenz"])
+def test_scenes_round_trip_through_pickle(name):
+    kw = {"cloth": {"n": 8}, "dam_break": {"n": 10}, "galaxies": {"n": 200}}.get(name, {})
+    a = pc.scenes.REGISTRY[name](**kw)
+    a.step(3)
+    b = pickle.loads(pickle.dumps(a))
+    assert b.render_defaults == a.render_defaults
+    a.step(5)
+    b.step(5)
+    assert b.time == a.time and b.step_count == a.step_count
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
+    assert a.energy().total == b.energy().total
+    for fa, fb in zip(a.flows, b.flows, strict=True):
+        assert np.array_equal(fa.points, fb.points)
+
+
+def test_grid_scene_round_trips_through_pickle():
+    a = pc.scenes.ripple(n=48)
+    a.step(3)
+    b = pickle.loads(pickle.dumps(a))
+    a.step(4)
+    b.step(4)
+    for ga, gb in zip(a.grids, b.grids, strict=True):
+        assert np.array_equal(ga.u, gb.u)
+
+
+def test_damaged_pickle_is_a_scene_file_error():
+    data = pickle.dumps(pc.scenes.kepler())
+    cut = data[: len(data) // 2] + data[len(data) // 2 + 10:]
+    with pytest.raises((pc.SceneFileError, pickle.UnpicklingError)):
+        pickle.loads(cut)
+    with pytest.raises(pc.SceneFileError, match="not a readable zip"):
+        scene_mod._unpickle_scene(b"not a zip at all", None)
+
+
+# ------------------------------------------------------------------------------ ensembles
+def test_ensemble_on_cluster_equals_serial(client):
+    scene = pc.scenes.figure_eight(steps_per_period=400)
+    a = pc.ensemble(scene, 5, samples=4, steps_per_sample=50, perturb=1e-6, seed=2, client="serial", progress=False)
+    b = pc.ensemble(scene, 5, samples=4, steps_per_sample=50, perturb=1e-6, seed=2, client=client, progress=False)
+    assert np.array_equal(a.values, b.values) and np.array_equal(a.times, b.times)
+    assert a.values.shape == (5, 4, 3, 2) and list(a.members) == [0, 1, 2, 3, 4]
+    assert scene.time == 0.0  # the scene itself was not stepped
+    # Member 0 is the scene as given.
+    ref = pickle.loads(pickle.dumps(scene))
+    ref.step(150)
+    assert np.array_equal(a.values[0, -1], ref.positions)
+    # At t = 0 the members differ from member 0 by the perturbation alone: sqrt(6) * 1e-6 RMS.
+    d0 = a.distance()[1:, 0]
+    assert 1e-7 < np.median(d0) < 1e-5
+
+
+def test_ensemble_spread_grows_for_chaos_not_for_a_linear_system():
+    # Pythagorean three-body problem (chaotic) against a harmonic chain (linear: perturbations
+    # stay the size they started, up to the ratio of the normal modes' amplitudes).
+    chaos = pc.ensemble(pc.scenes.pythagorean(), 3, samples=2, steps_per_sample=500, perturb=1e-9, client="serial",
+                        progress=False)
+    lin = pc.Scene(dim=2, dt=1e-3)
+    lin.add_particles([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], pinned=[True, False, False])
+    lin.add(pc.Springs([0, 1], [1, 2], stiffness=50.0))
+    calm = pc.ensemble(lin, 4, samples=4, steps_per_sample=2000, perturb=1e-9, client="serial", progress=False)
+    assert chaos.spread()[-1] > 1e3 * chaos.spread()[0]
+    assert calm.spread()[-1] < 20 * calm.spread()[0]
+
+
+def test_ensemble_records_a_failing_member():
+    def perturb(scene, rng):
+        v = scene.velocities
+        v[1:] += 1e200 * rng.standard_normal(v[1:].shape)
+        scene.velocities = v
+
+    scene = pc.scenes.figure_eight()
+    ens = pc.ensemble(scene, 3, samples=2, steps_per_sample=10, perturb=perturb, client="serial", progress=False)
+    assert list(ens.members) == [0] and set(ens.failed) == {1, 2}
+    assert ens.failed[1].startswith("SimulationDiverged")
+    assert np.isfinite(ens.values).all()
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"scene": "kepler"}, TypeError, "scene"),
+        ({"members": 0}, ValueError, "members"),
+        ({"samples": 0}, ValueError, "samples"),
+        ({"steps_per_sample": 0}, ValueError, "steps_per_sample"),
+        ({"perturb": -1.0}, ValueError, "perturb"),
+        ({"perturb": math.nan}, ValueError, "perturb"),
+        ({"observe": 3}, TypeError, "observe"),
+        ({"client": object()}, TypeError, "client"),
+    ],
+)
+def test_ensemble_refuses_bad_arguments(kwargs, error, match):
+    args = {"scene": pc.scenes.kepler(), "members": 2, "samples": 2, "steps_per_sample": 1, "client": "serial",
+            "progress": False, **kwargs}
+    with pytest.raises(error, match=match):
+        pc.ensemble(**args)
