@@ -363,3 +363,66 @@ def test_ensemble_refuses_bad_arguments(kwargs, error, match):
             "progress": False, **kwargs}
     with pytest.raises(error, match=match):
         pc.ensemble(**args)
+
+
+# ------------------------------------------------------------------------------ contact sheets
+def _frames(path):
+    from PIL import Image, ImageSequence
+
+    with Image.open(path) as im:
+        return [(np.asarray(f.convert("RGB")).astype(int), f.info["duration"]) for f in ImageSequence.Iterator(im)]
+
+
+def test_contact_sheet_tiles_each_scenes_own_gif(tmp_path, client):
+    scenes = {f"e={e}": pc.scenes.kepler(e=e) for e in (0.0, 0.6, 0.9)}
+    out = pc.render.contact_sheet(scenes, tmp_path / "sheet.gif", frames=12, tile=(96, 72), fps=20)
+    assert all(s.time == 0.0 for s in scenes.values())  # drawn from copies
+    sheet = _frames(out)
+    assert sheet[0][0].shape == (2 * 72 + 2, 2 * 96 + 2, 3)  # 2 x 2 grid, 2-pixel gaps
+    assert sum(d for _, d in sheet) == 600  # 12 frames at 20 fps
+    # The third tile (second row, first column) is that scene's own GIF, up to the sheet's palette.
+    pc.render.gif(pc.scenes.kepler(e=0.9), tmp_path / "one.gif", frames=12, size=(96, 72), fps=20)
+    one = _frames(tmp_path / "one.gif")
+    tile = sheet[-1][0][74:, :96]
+    assert np.abs(tile[14:] - one[-1][0][14:]).mean() < 3.0  # below the label band
+    assert not np.array_equal(sheet[0][0][74:, :96], sheet[0][0][:72, :96])  # the tiles differ
+    # Rendered on Dask workers: the same file, byte for byte.
+    again = pc.render.contact_sheet(scenes, tmp_path / "sheet2.gif", frames=12, tile=(96, 72), fps=20, client=client)
+    assert again.read_bytes() == out.read_bytes()
+
+
+def test_contact_sheet_holds_the_last_frame_of_a_shorter_tile(tmp_path):
+    a, b = pc.scenes.kepler(), pc.scenes.kepler(e=0.3)
+    b.render_defaults = {**b.render_defaults, "frames": 4}
+    a.render_defaults = {**a.render_defaults, "frames": 8}
+    out = pc.render.contact_sheet([a, b], tmp_path / "s.gif", tile=(64, 48), fps=10, columns=2)
+    frames = _frames(out)
+    assert sum(d for _, d in frames) == 800
+    right = [f[:, 66:] for f, _ in frames]
+    assert np.array_equal(right[-1], right[-2])  # held
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "error", "match"),
+    [
+        ({"scenes": []}, ValueError, "scenes: no scenes"),
+        ({"scenes": [3]}, TypeError, r"scenes\[0\]"),
+        ({"labels": ["a", "b"]}, ValueError, "labels: 2 labels for 1 scenes"),
+        ({"columns": 0}, ValueError, "columns"),
+        ({"tile": (8, 8)}, ValueError, "size"),
+        ({"size": (64, 64)}, ValueError, "size: set by contact_sheet"),
+        ({"colour": "speed"}, TypeError, "unexpected option 'colour'"),
+        ({"path": "sheet.png"}, ValueError, "gif"),
+    ],
+)
+def test_contact_sheet_refuses_bad_arguments(tmp_path, kwargs, error, match):
+    args = {"scenes": [pc.scenes.kepler()], "path": tmp_path / "s.gif", "frames": 2, **kwargs}
+    with pytest.raises(error, match=match):
+        pc.render.contact_sheet(args.pop("scenes"), args.pop("path"), **args)
+    assert not (tmp_path / "s.gif").exists()
+
+
+def test_contact_sheet_tile_that_diverges_writes_nothing(tmp_path):
+    with pytest.raises(pc.SimulationDiverged):
+        pc.render.contact_sheet([chain(1000.0, 1e-4), chain(1e9, 0.05)], tmp_path / "s.gif", frames=3, steps_per_frame=50)
+    assert list(tmp_path.iterdir()) == []

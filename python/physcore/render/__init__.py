@@ -11,6 +11,7 @@ Public functions
 record(scene, ...)             step a scene and return every frame's state (a Recording).
 gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
+contact_sheet(scenes, path)    several scenes animated side by side in one GIF.
 
 Layout
 ------
@@ -28,6 +29,7 @@ _colorbar       the colour bar: labels, layout and drawing into the background.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images).
 _gif            ``gif()``: record a scene if given one, rasterise, write a palette GIF atomically.
 _frame          ``render_frame()``: one state to an RGB array.
+_sheet          ``contact_sheet()``: several scenes' GIFs tiled on one clock (sweep variants).
 
 Examples
 --------
@@ -68,9 +70,10 @@ from ._recording import MAX_STEPS as MAX_STEPS
 from ._recording import Recording, record
 from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
+from ._sheet import contact_sheet
 
-__all__ = ["record", "Recording", "gif", "render_frame", "COLOR_BY", "STRAIN_SATURATION"]
+__all__ = ["record", "Recording", "gif", "render_frame", "contact_sheet", "COLOR_BY", "STRAIN_SATURATION"]
 
-for _public in (Recording, record, gif, render_frame):
+for _public in (Recording, record, gif, render_frame, contact_sheet):
     _public.__module__ = __name__
 del _public
