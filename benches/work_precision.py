@@ -408,6 +408,46 @@ def sweep(prob: Problem, cap_s: float, guard_s: float, cache: dict[tuple, dict[s
     return rows
 
 
+def _sweep_measure(prob: Problem, p: dict[str, Any]) -> dict[str, Any]:
+    """One run as a physcore.sweep measure (``build`` hands it the parameters themselves)."""
+    row = simulate(prob, p["integrator"], p["precision"], p["m"], p["rtol"], None)  # no signal guard off the main thread
+    if row["status"] == "ok":
+        row["position_error"] = prob.position_error(row["_x"], row["_x0"])
+    return {k: v for k, v in row.items() if not k.startswith("_") and k not in p and k != "threads"}
+
+
+def _sweep_params(**p: Any) -> dict[str, Any]:
+    return p
+
+
+def sweep_on_dask(prob: Problem, client: Any) -> list[dict[str, Any]]:
+    """Every (integrator, precision, step or rtol) of `prob` as one physcore.sweep, each run one
+    task on one core thread; no early stops (the sequential sweep's cost cap and divergence
+    stops need the previous run), so pair it with --quick or a cheap problem."""
+    import functools
+
+    params = []
+    for integ in integrator_names():
+        for prec in ["f64"] + (["f32"] if has_precision() else []):
+            adaptive = integ == "rk45"
+            if adaptive:
+                values = prob.rtols if prec == "f64" else prob.f32_rtols
+            else:
+                values = prob.ms if prec == "f64" else prob.f32_ms
+            params += [{"integrator": integ, "precision": prec, "m": 1 if adaptive else v, "rtol": v if adaptive else None}
+                       for v in values]
+    df = pc.sweep(_sweep_params, params, measure=functools.partial(_sweep_measure, prob), client=client)
+    rows = []
+    for rec in df.to_dict("records"):
+        if rec["error"] is not None and not (isinstance(rec["error"], float) and math.isnan(rec["error"])):
+            print(f"{prob.name}: {rec['integrator']} {rec['precision']} failed: {rec['error']}", file=sys.stderr)
+            continue
+        rec["threads"] = 1
+        rows.append({k: v for k, v in rec.items() if k not in ("run", "m", "seed", "error", "diverged_step", "worker", "run_key")})
+        _progress(rows[-1], prob)
+    return rows
+
+
 # --------------------------------------------------------------------------- outputs
 def _atomic_write(path: Path, write: Callable[[Any], None], binary: bool = False) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -537,6 +577,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--out", default=str(DEFAULT_OUT), help="output directory (default: docs/)")
     ap.add_argument("--cap", type=float, default=None, help="skip runs predicted to take longer than this, s "
                     "(default 15; the guard stops a run at twice this)")
+    ap.add_argument("--dask", nargs="?", const="local", default=None, metavar="ADDRESS",
+                    help="run each problem's whole grid as one physcore.sweep on Dask: a LocalCluster ('local', the "
+                         "default) or a scheduler address; no early stops, so pair it with --quick or one problem")
     args = ap.parse_args(None if argv is None else [str(a) for a in argv])
     if not args.quick:
         require_release()
@@ -555,7 +598,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         cache: dict[tuple, dict[str, Any]] = {}
         if not prob.periodic:
             rows += make_reference(prob, cache)
-        rows += sweep(prob, cap, guard, cache)
+        if args.dask is not None:
+            rows += sweep_on_dask(prob, None if args.dask == "local" else args.dask)
+        else:
+            rows += sweep(prob, cap, guard, cache)
     write_csv(out / "work_precision.csv", rows)
     md = markdown(problems, rows, command)
     md += f"\nTotal time of the command: {time.perf_counter() - t_start:.0f} s.\n"

@@ -29,7 +29,9 @@ def test_readme_has_python_examples():
 @pytest.mark.parametrize("k", range(len(_readme_blocks())))
 def test_readme_python_example_runs(k, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    namespace: dict = {}
+    # Run as a script would be: the sweep example keeps its cluster start under
+    # `if __name__ == "__main__":`, as Dask's worker processes need in a script.
+    namespace: dict = {"__name__": "__main__"}
     exec(compile(_readme_blocks()[k], f"README.md[python block {k}]", "exec"), namespace)
     # Examples that write a GIF must leave a real one behind.
     for gif in tmp_path.glob("*.gif"):
