@@ -3,7 +3,7 @@
 Usage::
 
     physcore scenes
-    physcore render SCENE [-o OUT.gif] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
+    physcore render SCENE [-o OUT.gif|OUT.mp4|OUT.webm|OUT.png] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
                           [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
                           [--color-by speed|pressure|none] [--no-colorbar]
                           [--param key=value ...]
@@ -381,7 +381,15 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     # fluids) and simulated (minutes): the frames buffer's memory, the output paths.
     try:
         _check_frames_memory(fn, args)
-        render._check_path(out)
+        fmt = render.FORMATS.get(out.suffix.lower())
+        if fmt is None:
+            raise _UsageError(f"-o: the output's extension picks the format, one of {', '.join(render.FORMATS)}; got {str(out)!r}")
+        render._check_path(out, fmt)
+        if fmt in ("mp4", "webm"):
+            try:
+                import av  # noqa: F401 - fail before simulating, not after
+            except ImportError:
+                raise _UsageError(f'-o {out.name}: MP4 and WebM output need PyAV: pip install "physcore[video]"') from None
     except _UsageError as e:
         parser.error(str(e))
     except (TypeError, ValueError) as e:
@@ -444,7 +452,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             on_frame=on_frame,
             **{k: v for k, v in settings.items() if k in produce},
         )
-        path = render.gif(
+        written = render.save(
             recording,
             out,
             springs=not args.no_springs,
@@ -481,11 +489,13 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             return 1
     frames, fps, (w, h) = settings["frames"], settings["fps"], settings["size"]
     drift = scene.energy_drift()
-    print(f"wrote {path}")
+    paths = written if isinstance(written, list) else [written]
+    path = paths[0]
+    print(f"wrote {path}" if len(paths) == 1 else f"wrote {len(paths)} frames, {paths[0]} … {paths[-1].name}")
     if recorder is not None:
         print(f"wrote {args.energy_plot} (energy books at {len(recorder)} frames)")
     print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s), {w}x{h} px")
-    print(f"  file size:      {_human_bytes(path.stat().st_size)}")
+    print(f"  file size:      {_human_bytes(sum(p.stat().st_size for p in paths))}")
     if "frame_time" in settings:
         print(
             f"  simulated time: {scene.time - time0:.4g} s ({frames - 1} intervals of "
@@ -552,7 +562,8 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
         "come from the scene (see `physcore scenes`).",
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
-    r.add_argument("-o", "--output", metavar="OUT.gif", help="output file (default: SCENE.gif)")
+    r.add_argument("-o", "--output", metavar="OUT.gif", help="output file (default: SCENE.gif); the extension picks the "
+                   "format: .gif, .mp4 (H.264) or .webm (VP9; both need the video extra), .png (one file per frame)")
     r.add_argument("--frames", type=_positive_int, metavar="N", help="number of frames")
     r.add_argument("--fps", type=_positive_float, metavar="F", help="frames per second of playback")
     r.add_argument("--size", type=_size, metavar="WxH", help="image size in pixels, e.g. 480x360")

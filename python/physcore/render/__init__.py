@@ -10,6 +10,8 @@ Public functions
 ----------------
 record(scene, ...)             step a scene and return every frame's state (a Recording).
 gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
+save(recording, path, ...)     the same in the format of path's extension: .gif, .mp4, .webm, .png.
+frames(recording, ...)         the same frames as an iterator of RGB arrays.
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
 contact_sheet(scenes, path)    several scenes animated side by side in one GIF.
 
@@ -27,7 +29,8 @@ _scene_state    reading a scene's optional parts: springs and strain, planes, pr
 _recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
 _colorbar       the colour bar: labels, layout and drawing into the background.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images).
-_gif            ``gif()``: record a scene if given one, rasterise, write a palette GIF atomically.
+_gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one, rasterise, write a
+                palette GIF, an MP4/WebM video (PyAV) or PNGs atomically, or yield RGB frames.
 _frame          ``render_frame()``: one state to an RGB array.
 _sheet          ``contact_sheet()``: several scenes' GIFs tiled on one clock (sweep variants).
 
@@ -56,7 +59,7 @@ from ._checks import _check_path as _check_path
 from ._checks import _check_writable as _check_writable
 from ._colorbar import _colorbar_labels as _colorbar_labels
 from ._frame import render_frame
-from ._gif import gif
+from ._gif import FORMATS, frames, gif, save
 from ._palette import _N_PRESSURE as _N_PRESSURE
 from ._palette import _N_SPEED as _N_SPEED
 from ._palette import _PALETTE as _PALETTE
@@ -72,8 +75,8 @@ from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
 
-__all__ = ["record", "Recording", "gif", "render_frame", "contact_sheet", "COLOR_BY", "STRAIN_SATURATION"]
+__all__ = ["record", "Recording", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION"]
 
-for _public in (Recording, record, gif, render_frame, contact_sheet):
+for _public in (Recording, record, gif, save, frames, render_frame, contact_sheet):
     _public.__module__ = __name__
 del _public

@@ -110,12 +110,12 @@ def _check_view(view: Any) -> tuple[float, float]:
     return az, el
 
 
-def _check_path(path: Any) -> Path:
+def _check_path(path: Any, fmt: str = "gif") -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
     p = Path(path)
-    if p.suffix.lower() != ".gif":
-        raise InvalidInputError(f"path must end in .gif, got {str(p)!r}")
+    if p.suffix.lower() != f".{fmt}":
+        raise InvalidInputError(f"path must end in .{fmt}, got {str(p)!r}")
     if not p.parent.is_dir():
         raise InvalidInputError(f"path: directory {str(p.parent)!r} does not exist")
     if p.is_dir():

@@ -1,0 +1,101 @@
+"""Output formats beside the GIF: MP4 and WebM video (PyAV), PNG frame sequences, frames as numpy
+arrays, the CLI's format by extension, and a Recording shown inline in a notebook."""
+from __future__ import annotations
+
+import base64
+import io
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from PIL import Image, ImageSequence
+
+import physcore as pc
+
+av = pytest.importorskip("av")
+
+
+def _gif_frames(data: bytes) -> list[np.ndarray]:
+    with Image.open(io.BytesIO(data)) as im:
+        return [np.asarray(f.convert("RGB")) for f in ImageSequence.Iterator(im)]
+
+
+@pytest.fixture(scope="module")
+def rec():
+    """A moving scene's recording (every frame differs, so the GIF keeps all of them)."""
+    return pc.render.record(pc.scenes.kepler(e=0.6), frames=12)
+
+
+def test_frames_are_the_gifs_frames(rec, tmp_path):
+    frames = list(pc.render.frames(rec, size=(96, 72)))
+    assert len(frames) == 12 and frames[0].shape == (72, 96, 3) and frames[0].dtype == np.uint8
+    gif = pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72))
+    decoded = _gif_frames(gif.read_bytes())
+    assert len(decoded) == 12
+    for a, b in zip(frames, decoded, strict=True):
+        assert np.array_equal(a, b)
+
+
+def test_png_sequence_holds_every_frame_exactly(rec, tmp_path):
+    paths = pc.render.save(rec, tmp_path / "orbit.png", size=(64, 48))
+    assert [p.name for p in paths] == [f"orbit_{k:04d}.png" for k in range(12)]
+    frames = list(pc.render.frames(rec, size=(64, 48)))
+    for p, f in zip(paths, frames, strict=True):
+        assert np.array_equal(np.asarray(Image.open(p).convert("RGB")), f)
+
+
+@pytest.mark.parametrize(("ext", "codec"), [("mp4", "h264"), ("webm", "vp9")])
+def test_video_has_the_frames_size_and_duration(rec, tmp_path, ext, codec):
+    out = pc.render.save(rec, tmp_path / f"orbit.{ext}", size=(97, 71), fps=24)  # odd: padded to even
+    with av.open(str(out)) as c:
+        st = c.streams.video[0]
+        assert st.codec_context.name == codec
+        decoded = [f.to_ndarray(format="rgb24") for f in c.decode(st)]
+    assert len(decoded) == 12
+    assert decoded[0].shape == (72, 98, 3)
+    want = list(pc.render.frames(rec, size=(97, 71), fps=24))
+    # Lossy, but the same picture: mean error of a few levels out of 255.
+    for got, ref in zip(decoded, want, strict=True):
+        assert np.abs(got[:71, :97].astype(int) - ref.astype(int)).mean() < 6.0
+    assert np.abs(decoded[0].astype(int) - decoded[-1].astype(int)).mean() > 0.1  # it moves
+
+
+def test_save_refuses_unknown_extensions_and_missing_pyav(tmp_path, monkeypatch):
+    scene = pc.scenes.kepler()
+    with pytest.raises(ValueError, match=r"path must end in one of \.gif, \.mp4, \.webm, \.png"):
+        pc.render.save(scene, tmp_path / "a.bmp", frames=2)
+    monkeypatch.setitem(sys.modules, "av", None)
+    with pytest.raises(ImportError, match=r'pip install "physcore\[video\]"'):
+        pc.render.save(scene, tmp_path / "a.mp4", frames=2)
+    assert scene.time == 0.0  # refused before simulating
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_diverging_video_render_leaves_no_file(tmp_path):
+    scene = pc.Scene(dim=2, dt=0.05)
+    scene.add_particles([[0.0, 0.0], [0.1, 0.0]], [[0.0, 0.0], [1.0, 0.0]], pinned=[True, False])
+    scene.add(pc.Springs([0], [1], stiffness=1e9))
+    with pytest.raises(pc.SimulationDiverged):
+        pc.render.save(scene, tmp_path / "boom.mp4", frames=20, steps_per_frame=50)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_recording_shows_itself_in_a_notebook(rec):
+    html = rec._repr_html_()
+    assert html.startswith('<img src="data:image/gif;base64,') and "12 frames" in html
+    data = base64.b64decode(html.split("base64,", 1)[1].split('"', 1)[0])
+    assert len(_gif_frames(data)) == 12
+
+
+def test_cli_picks_the_format_from_the_extension(tmp_path):
+    run = [sys.executable, "-m", "physcore", "render", "kepler", "--frames", "6", "--size", "64x48"]
+    r = subprocess.run([*run, "-o", str(tmp_path / "k.mp4")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    with av.open(str(tmp_path / "k.mp4")) as c:
+        assert sum(1 for _ in c.decode(video=0)) == 6
+    r = subprocess.run([*run, "-o", str(tmp_path / "k.png")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert len(list(tmp_path.glob("k_*.png"))) == 6 and "wrote 6 frames" in r.stdout
+    r = subprocess.run([*run, "-o", str(tmp_path / "k.bmp")], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "extension picks the format" in r.stderr
