@@ -547,7 +547,26 @@ def test_colorbar_in_the_gif_is_fixed_over_the_animation(tmp_path):
         assert np.all(band(img, cols=150) == TEXT_RGB, axis=-1).sum() > 40
         assert len(colours_of(band(img, cols=150)) & PRESSURE_RGB) >= 20
     for img in off_imgs:
-        assert not np.any(np.all(img == TEXT_RGB, axis=-1))
+        assert not np.any(np.all(band(img, cols=150) == TEXT_RGB, axis=-1))
+
+
+def test_clock_in_the_bottom_left_corner_counts_simulated_time(tmp_path):
+    """Particle animations carry the simulated time ("t = 0.05 s") bottom left, drawn in the
+    text colour over a box of background; it changes as time runs and is the only text there."""
+    out = render.gif(falling_block(), tmp_path / "t.gif", frames=4, frame_time=0.05, size=(240, 180), colorbar=False)
+    imgs = frames_rgb(out)
+    corners = [img[-20:, :90] for img in imgs]
+    for c in corners:
+        assert np.all(c == TEXT_RGB, axis=-1).sum() > 20
+    assert not np.array_equal(corners[1], corners[2])  # t = 0.05 s, then 0.1 s
+    assert not np.any(np.all(imgs[0][:-20] == TEXT_RGB, axis=-1))  # no text elsewhere
+    # The clock reads what the frame's time is: the same text drawn alone matches it.
+    from physcore.render._colorbar import _text_mask
+
+    mask = _text_mask("t = 0.1 s")
+    h = imgs[2].shape[0]
+    ink = np.all(imgs[2][h - 4 - mask.shape[0] : h - 4, 4 : 4 + mask.shape[1]] == TEXT_RGB, axis=-1)
+    assert np.array_equal(ink, mask)
 
 
 def test_boundary_points_are_grey_static_and_in_the_camera_fit(tmp_path):

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ._camera import _Camera, _screen_bounds
-from ._colorbar import _colorbar_labels, _colorbar_layout, _draw_colorbar
+from ._colorbar import _colorbar_labels, _colorbar_layout, _draw_colorbar, _format_value, _text_mask
 from ._palette import (
     _BACKGROUND,
     _N_PRESSURE,
@@ -23,6 +23,7 @@ from ._palette import (
     _PRESSURE0,
     _SPEED0,
     _STRAIN0,
+    _TEXT,
     _TRAIL0,
     _WALL,
     STRAIN_SATURATION,
@@ -279,7 +280,23 @@ class _Rasteriser:
         if springs and on_top:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        self._draw_clock(buf, k)
         return buf
+
+    def _draw_clock(self, buf: np.ndarray, k: int) -> None:
+        """The simulated time in the bottom-left corner ("t = 1.23 s"; no unit in a scene's own
+        units, such as G = 1), on a box of background, over everything. Left out on images too
+        small to read it and for recordings without times."""
+        times = self.rec.times
+        h, w = buf.shape
+        if times is None or w < 100 or h < 80 or not np.isfinite(times[k]):
+            return
+        unit = " s" if self.rec.speed_unit == "m/s" else ""
+        mask = _text_mask(f"t = {_format_value(float(times[k]))}{unit}")
+        y, x = h - 4 - mask.shape[0], 4
+        buf[y - 1 : y + mask.shape[0], x - 2 : x + mask.shape[1] + 2] = _BACKGROUND
+        region = buf[y : y + mask.shape[0], x : x + mask.shape[1]]
+        region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
 
     def _draw_trail(self, buf: np.ndarray, k: int) -> None:
         """The paths of the moving particles over the `trail` frames before k, oldest (palest)
