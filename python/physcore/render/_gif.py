@@ -219,7 +219,7 @@ def _render(
     colorbar = _check.flag("colorbar", colorbar)
     springs = _check.flag("springs", springs)
     progress = _check.flag("progress", progress)
-    path = _check_path(path, fmt) if path is not None else None
+    path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
         given = [a for a, v in (("frames", frames), ("steps_per_frame", steps_per_frame), ("frame_time", frame_time), ("substeps", substeps)) if v is not None]
