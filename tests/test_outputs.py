@@ -99,3 +99,14 @@ def test_cli_picks_the_format_from_the_extension(tmp_path):
     assert len(list(tmp_path.glob("k_*.png"))) == 6 and "wrote 6 frames" in r.stdout
     r = subprocess.run([*run, "-o", str(tmp_path / "k.bmp")], capture_output=True, text=True, timeout=300)
     assert r.returncode == 2 and "extension picks the format" in r.stderr
+
+
+def test_save_and_frames_take_gifs_options_only(tmp_path):
+    scene = pc.scenes.kepler()
+    with pytest.raises(TypeError, match="colour"):
+        pc.render.save(scene, tmp_path / "a.png", colour="speed")
+    with pytest.raises(TypeError, match="colour"):
+        pc.render.frames(scene, colour="speed")
+    with pytest.raises(TypeError, match="path"):
+        pc.render.save(scene, None)
+    assert scene.time == 0.0 and list(tmp_path.iterdir()) == []

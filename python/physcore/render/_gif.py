@@ -179,28 +179,20 @@ def gif(
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme)
 
 
-def _render(
-    scene: Any,
-    path: Path | str | os.PathLike | None,
-    fmt: str,
-    *,
-    frames: int | None = None,
-    steps_per_frame: int | None = None,
-    frame_time: float | None = None,
-    substeps: str | int | None = None,
-    fps: float | None = None,
-    size: tuple[int, int] | None = None,
-    color_by: str | None = None,
-    colorbar: bool = True,
-    radius: int | None = None,
-    springs: bool = True,
-    view: tuple[float, float] | None = None,
-    progress: bool = False,
-    trail: int | None = None,
-    size_by: str | None = None,
-    theme: str | None = None,
-) -> Any:
-    """gif()'s body for every output format (see _emit)."""
+#: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
+_OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
+            "springs", "view", "progress", "trail", "size_by", "theme")
+
+
+def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
+    """gif()'s body for every output format (see _emit). `options`: gif()'s keyword arguments,
+    checked against its signature (an unknown one is a TypeError naming it), defaults applied."""
+    import inspect
+
+    bound = inspect.signature(gif).bind(scene, path, **options)
+    bound.apply_defaults()
+    (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
+     trail, size_by, theme) = (bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
     d = {} if isinstance(scene, _recording.Recording) else _recording.scene_defaults(scene)
