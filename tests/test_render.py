@@ -13,6 +13,7 @@ from PIL import Image
 
 import physcore as pc
 from physcore import render
+from physcore.render import _palette
 
 WHITE = np.array([255, 255, 255])
 
@@ -397,6 +398,7 @@ PRESSURE_RGB = palette_rgb(render._PRESSURE0, render._N_PRESSURE)
 SPEED_RGB = palette_rgb(render._SPEED0, render._N_SPEED)
 WALL_RGB = np.asarray(render._PALETTE[render._WALL])
 TEXT_RGB = np.asarray(render._PALETTE[render._TEXT])
+PLAIN_RGB = np.asarray(render._PALETTE[_palette._PLAIN])  # color_by="none"
 
 
 def colours_of(img: np.ndarray) -> set:
@@ -569,15 +571,44 @@ def test_clock_in_the_bottom_left_corner_counts_simulated_time(tmp_path):
     assert np.array_equal(ink, mask)
 
 
+def test_scale_bar_measures_the_scene(tmp_path):
+    """Two particles 1 m apart: the scale bar (bottom right, a 1, 2 or 5 × 10^k length near a
+    sixth of the width) is as many pixels long as its length is metres times the pixels between
+    the two discs' centres; its label says the length."""
+    scene = pc.Scene(dim=2)
+    scene.add_particles([[0.0, 0.0], [1.0, 0.0]])
+    out = render.gif(scene, tmp_path / "s.gif", frames=1, size=(240, 180), color_by="none", radius=3, colorbar=False)
+    img = frames_rgb(out)[0]
+    h, w = img.shape[:2]
+    discs = np.all(img == PLAIN_RGB, axis=-1)
+    cols = np.nonzero(discs.any(axis=0))[0]
+    left, right = cols[cols < w // 2], cols[cols >= w // 2]
+    metre_px = 0.5 * (right.min() + right.max()) - 0.5 * (left.min() + left.max())
+    bar = np.nonzero(np.all(img[h - 6] == TEXT_RGB, axis=-1))[0]
+    bar_px = bar.max() - bar.min()
+    from physcore.render._raster import _scale_bar_length
+
+    length = _scale_bar_length(metre_px, w / 6.0)
+    assert length in (0.1, 0.2, 0.5, 1.0, 2.0)
+    assert abs(bar_px - length * metre_px) <= 1.5
+    from physcore.render._colorbar import _text_mask
+
+    label = f"{round(length * 100)} cm" if length < 1 else f"{length:g} m"
+    mask = _text_mask(label)
+    band = np.all(img[h - 30 : h - 6] == TEXT_RGB, axis=-1)
+    assert band.sum() >= mask.sum()  # the label's ink is there (plus the ticks)
+
+
 def test_boundary_points_are_grey_static_and_in_the_camera_fit(tmp_path):
     scene = falling_block()
     path = render.gif(scene, tmp_path / "w.gif", frames=4, frame_time=0.05, color_by="none", size=(160, 120))
     imgs = frames_rgb(path)
     walls = [np.all(img == WALL_RGB, axis=-1) for img in imgs]
     for w in walls:
-        # The tank is in view: its two side walls and its floor, near the image's edges.
+        # The tank is in view: its two side walls and its floor, near the image's edges (the
+        # floor above the band kept free at the bottom for the clock and the scale bar).
         r, c = np.nonzero(w)
-        assert c.min() < 20 and c.max() > 140 and r.max() > 100
+        assert c.min() < 20 and c.max() > 140 and r.max() > 90
         assert w[:, :20].sum() > 40 and w[:, -20:].sum() > 40
     # Static: the wall pixels not covered by a particle stay the same.
     assert np.array_equal(walls[0][:, -20:], walls[-1][:, -20:])

@@ -43,19 +43,21 @@ class _Camera:
             return s[:, :2], s[:, 2]
         return s, None
 
-    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0, top_pad: int | None = None) -> None:
+    def fit(self, lo: np.ndarray, hi: np.ndarray, pad: int, tol: float = 0.0, top_pad: int | None = None,
+            bottom_pad: int | None = None) -> None:
         """Fit the screen-plane box [lo, hi] into the image with `pad` pixels spare each side.
 
-        `top_pad` (default `pad`) keeps that many pixels spare at the top instead (room for the
-        colour bar). A box no wider than `tol` (world units) counts as a point and gets a unit box
-        around it.
+        `top_pad` / `bottom_pad` (default `pad`) keep that many pixels spare at the top (room for
+        the colour bar) / bottom (the clock and the scale bar) instead. A box no wider than `tol`
+        (world units) counts as a point and gets a unit box around it.
         """
         top = pad if top_pad is None else top_pad
+        bottom = pad if bottom_pad is None else bottom_pad
         if not (np.isfinite(lo).all() and np.isfinite(hi).all()) or np.any(hi < lo):
             lo, hi = np.full(2, -0.5), np.full(2, 0.5)
         ext = hi - lo
-        avail = np.array([max(self.width - 2 * pad, 1), max(self.height - pad - top, 1)], dtype=float)
-        self.row0 = 0.5 * self.height + 0.5 * (top - pad)
+        avail = np.array([max(self.width - 2 * pad, 1), max(self.height - bottom - top, 1)], dtype=float)
+        self.row0 = 0.5 * self.height + 0.5 * (top - bottom)
         if ext.max() <= tol:
             # A single point (one particle, all at one place, or all on one line of sight).
             self.scale = float(avail.min())

@@ -243,7 +243,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         )
         return _emit(fmt, path, (fr.frame(k) for k in range(rec.frames)), palette(rec.field_style), fps, rec.frames)
     trail = min(trail, rec.frames)
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), theme_palette(theme), fps, rec.frames)
 
 

@@ -151,6 +151,46 @@ def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
         flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
 
 
+def _scale_bar_length(px_per_unit: float, target_px: float) -> float:
+    """The 1, 2 or 5 × 10^k length (in scene units) whose bar is nearest `target_px` pixels."""
+    raw = target_px / px_per_unit
+    k = math.floor(math.log10(raw))
+    return min((m * 10.0**k for m in (1, 2, 5, 10)), key=lambda L: abs(math.log(L / raw)))
+
+
+def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str) -> tuple[float, int] | None:
+    """A scale bar in the bottom-right corner: a round length (1, 2 or 5 × 10^k, about a sixth of
+    the width) as a line with end ticks, labelled ("50 cm", "2 m"; a bare number in a scene's own
+    units), on a box of background. The camera is orthographic, so in 3D it holds at every
+    depth. Returns (length, pixels), or None where it is left out (small images, no scale)."""
+    h, w = buf.shape
+    if w < 100 or h < 80 or not (math.isfinite(px_per_unit) and px_per_unit > 0):
+        return None
+    length = _scale_bar_length(px_per_unit, w / 6.0)
+    px = int(round(length * px_per_unit))
+    if not 8 <= px <= w // 2:
+        return None
+    if unit == "m" and length < 1.0 and length >= 1e-2:
+        label = f"{_format_value(length * 100.0)} cm"
+    elif unit == "m" and length < 1e-2 and length >= 1e-3:
+        label = f"{_format_value(length * 1e3)} mm"
+    else:
+        label = f"{_format_value(length)} {unit}".rstrip()
+    mask = _text_mask(label)
+    x1 = w - 6
+    x0 = x1 - px
+    y = h - 6  # the line's row
+    top = y - 4 - mask.shape[0]
+    buf[top - 1 : y + 3, min(x0, x1 - mask.shape[1]) - 2 : x1 + 2] = _BACKGROUND
+    buf[y - 1 : y + 1, x0 : x1 + 1] = _TEXT
+    buf[y - 4 : y + 2, x0] = _TEXT
+    buf[y - 4 : y + 2, x1] = _TEXT
+    tx = x1 - mask.shape[1] + (mask.shape[1] - px) // 2 if mask.shape[1] < px else x1 - mask.shape[1]
+    region = buf[top : top + mask.shape[0], tx : tx + mask.shape[1]]
+    region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+    return length, px
+
+
 class _Rasteriser:
     """Everything fixed over an animation: camera, background, stencil, colour scale."""
 
@@ -168,10 +208,12 @@ class _Rasteriser:
         fit: np.ndarray | None = None,
         trail: int = 0,
         size_by: str = "none",
+        annotate: bool = False,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
-        each moving particle's path drawn behind it, fading (``gif(trail=...)``)."""
+        each moving particle's path drawn behind it, fading (``gif(trail=...)``). `annotate`:
+        the clock and the scale bar along the bottom, with a band kept free for them (animations)."""
         n, dim = rec.positions.shape[1:]
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
@@ -196,7 +238,9 @@ class _Rasteriser:
         self.strain_scale = self.vmax if color_by == "strain" and self.vmax > 0 else STRAIN_SATURATION
         self.colorbar = None
         if colorbar and values is not None and self.vmax > 0 and math.isfinite(self.vmax):
-            self.colorbar = _colorbar_layout(size, *_colorbar_labels(color_by, self.vmax, rec.speed_unit))
+            lo, hi = _colorbar_labels(color_by, self.vmax, rec.speed_unit)
+            # The quantity named before the scale ("speed 0 [strip] 4.42 m/s"), where it fits.
+            self.colorbar = _colorbar_layout(size, f"{color_by} {lo}", hi) or _colorbar_layout(size, lo, hi)
         self.cam = _Camera(dim, view, size)
         # Room for the largest disc (size_by="mass" draws up to 3× the radius).
         grow = 1.0
@@ -213,7 +257,10 @@ class _Rasteriser:
         # Keep the colour bar's band free: no disc reaches into it.
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         # Positions are float32 relative to the origin: extents below their rounding are zero.
-        self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad)
+        w, h = size
+        self.annotate = annotate and w >= 100 and h >= 80
+        bottom_pad = max(pad, 20 + int(math.ceil(self.radius * grow))) if self.annotate else None
+        self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad, bottom_pad=bottom_pad)
         if radius is None:
             r_springs = _spring_radius(rec, self.cam.scale)
             if r_springs is not None:
@@ -234,6 +281,9 @@ class _Rasteriser:
             _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
         if self.colorbar is not None:
             _draw_colorbar(self.background, self.colorbar, base, levels)
+        self.scale_bar = None
+        if self.annotate:
+            self.scale_bar = _draw_scale_bar(self.background, self.cam.scale, "m" if rec.speed_unit == "m/s" else "")
         self.trail = int(trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
@@ -289,7 +339,7 @@ class _Rasteriser:
         small to read it and for recordings without times."""
         times = self.rec.times
         h, w = buf.shape
-        if times is None or w < 100 or h < 80 or not np.isfinite(times[k]):
+        if not self.annotate or times is None or not np.isfinite(times[k]):
             return
         unit = " s" if self.rec.speed_unit == "m/s" else ""
         mask = _text_mask(f"t = {_format_value(float(times[k]))}{unit}")
