@@ -471,7 +471,7 @@ def galaxies(
 
 galaxies.render_defaults = {
     "frames": 150, "fps": 30, "frame_time": 0.2, "size": (480, 400), "view": (-60.0, 55.0), "radius": 0,
-    "speed_unit": "(G=1)", "theme": "dark",
+    "speed_unit": "(G=1)", "theme": "dark", "color_by": "density",  # glow: stars accumulate like an exposure
 }
 
 
@@ -1120,7 +1120,7 @@ def lorenz(
 
 lorenz.render_defaults = {
     "frames": 180, "fps": 30, "steps_per_frame": 20, "size": (480, 400), "view": (-80.0, 8.0), "radius": 0,
-    "speed_unit": "(flow units)", "theme": "dark",
+    "speed_unit": "(flow units)", "theme": "dark", "color_by": "density",  # glow: the cloud paints the attractor
 }
 
 

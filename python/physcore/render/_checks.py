@@ -15,7 +15,7 @@ from .._errors import InvalidInputError, InvalidTypeError
 from ._camera import DEFAULT_VIEW
 
 #: Valid values of the ``color_by`` argument.
-COLOR_BY = ("speed", "pressure", "strain", "none")
+COLOR_BY = ("speed", "pressure", "strain", "density", "none")
 
 # Most automatic substeps Scene.advance takes in one call (it refuses more, naming duration).
 _MAX_AUTO_SUBSTEPS = 1e12

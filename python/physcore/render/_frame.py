@@ -65,7 +65,7 @@ def render_frame(
     boundary : array_like (B, dim) float, optional
         Static boundary (wall) particles in m, drawn in grey under the particles and included
         in the camera fit.
-    color_by : {"speed", "pressure", "none"}, default "speed"
+    color_by : {"speed", "pressure", "strain", "density", "none"}, default "speed"
     speed_scale : float, optional
         Speed (m/s) at the top of the colour map; default the 99th percentile of the speeds.
     pressure_scale : float, optional

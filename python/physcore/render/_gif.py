@@ -100,7 +100,7 @@ def gif(
         at least 20 ms (fps above 50 play at 50).
     size : (int, int), optional
         Image width and height in pixels, each >= 16.
-    color_by : {"speed", "pressure", "strain", "none"}, optional
+    color_by : {"speed", "pressure", "strain", "density", "none"}, optional
         Particle colouring. ``"strain"``: plain discs under the springs, which are drawn on top
         in a blue (compressed), grey, red (stretched) map whose ends are ± the run's 99th
         percentile of |strain| (the colour bar gives it in %), so small strains show; the scene
@@ -109,6 +109,13 @@ def gif(
         plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
         negative values get the bottom colour). Both scales run from 0 at the bottom to a top
         fixed over the whole animation at the 99th percentile of all frames' values.
+        ``"density"``: glow, for large clouds (galaxies, attractors, fluids as a continuous
+        surface): each free particle is splatted bilinearly into a per-pixel density (so edges
+        are antialiased and sub-pixel motion shows), blurred twice (a tight core of σ ≈ radius/2
+        and a 4× wider bloom at half weight, each three box blurs) and tone-mapped as
+        1 − exp(−3 √(d / d99.5)) onto a ramp from the background to white (dark theme) or near
+        black (light), with d99.5 the 99.5th percentile of three frames' density, fixed over
+        the animation; additive, so 3D needs no depth order. Pinned particles stay discs.
         ``"none"``: one colour. Pinned particles are always orange.
     colorbar : bool, default True
         With ``color_by`` "speed" or "pressure", draw a colour bar in the top-right corner: a

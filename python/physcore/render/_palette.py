@@ -29,7 +29,9 @@ _N_PRESSURE = 64
 _PRESSURE0 = _TEXT + 1
 _N_TRAIL = 8  # trail shades, oldest (palest) first
 _TRAIL0 = _PRESSURE0 + _N_PRESSURE
-_PALETTE_SIZE = _TRAIL0 + _N_TRAIL
+_N_GLOW = 64  # color_by="density": brightness of the accumulated particle density, 0 = background
+_GLOW0 = _TRAIL0 + _N_TRAIL
+_PALETTE_SIZE = _GLOW0 + _N_GLOW
 
 # viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
 # brightest yellow hardly shows on the white background.
@@ -84,6 +86,8 @@ def _build_palette() -> np.ndarray:
     slate = np.array([70.0, 80.0, 100.0])
     for k, a in enumerate(np.linspace(0.1, 0.55, _N_TRAIL)):
         pal[_TRAIL0 + k] = (1 - a) * np.array([255.0, 255.0, 255.0]) + a * slate
+    # Density glow on paper: white through sky and ink blue to near black.
+    pal[_GLOW0:] = _sample_map(np.array([[255.0, 255, 255], [150, 185, 235], [45, 80, 170], [20, 30, 80], [5, 8, 25]]), 1.0, _N_GLOW)
     assert _WALL == _STRAIN0 + 2 * half + 1 and pal.shape[0] <= 256
     return np.round(pal).astype(np.uint8)
 
@@ -111,6 +115,8 @@ def _build_dark_palette() -> np.ndarray:
     pale = np.array([150.0, 185.0, 255.0])
     for k, a in enumerate(np.linspace(0.12, 0.6, _N_TRAIL)):
         pal[_TRAIL0 + k] = (1 - a) * night + a * pale
+    # Density glow at night: from the sky through deep blue and cyan to white, like starlight.
+    pal[_GLOW0:] = _sample_map(np.array([night, [40, 55, 140], [80, 140, 240], [170, 215, 255], [255, 255, 255]]), 1.0, _N_GLOW)
     return np.round(pal).astype(np.uint8)
 
 

@@ -12,6 +12,8 @@ from ._camera import _Camera, _screen_bounds
 from ._colorbar import _colorbar_labels, _colorbar_layout, _draw_colorbar, _format_value, _text_mask
 from ._palette import (
     _BACKGROUND,
+    _GLOW0,
+    _N_GLOW,
     _N_PRESSURE,
     _N_SPEED,
     _N_STRAIN,
@@ -191,6 +193,40 @@ def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str) -> tuple[flo
     return length, px
 
 
+def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
+    """Mean over a window of 2r + 1 along `axis` (zeros beyond the edges), by a cumulative sum."""
+    n = a.shape[axis]
+    c = np.cumsum(a, axis=axis, dtype=np.float64)
+    c = np.concatenate([np.zeros_like(np.take(c, [0], axis=axis)), c], axis=axis)
+    hi = np.minimum(np.arange(n) + r + 1, n)
+    lo = np.maximum(np.arange(n) - r, 0)
+    return ((np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis)) / (2 * r + 1)).astype(np.float32)
+
+
+def _blur(a: np.ndarray, r: int) -> np.ndarray:
+    """Three box blurs each way: close to a Gaussian of σ ≈ r (the central limit), O(1) a pixel."""
+    for _ in range(3):
+        a = _box_blur(_box_blur(a, r, 0), r, 1)
+    return a
+
+
+def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Particle count per pixel, each particle shared bilinearly among the four pixels around its
+    position (sub-pixel motion shows, edges are antialiased)."""
+    h, w = shape
+    fx, fy = col - 0.5, row - 0.5  # pixel k's centre is at k + 0.5
+    ok = np.isfinite(fx) & np.isfinite(fy) & (fx > -1) & (fx < w) & (fy > -1) & (fy < h)
+    fx, fy = fx[ok], fy[ok]
+    x0, y0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+    ax, ay = fx - x0, fy - y0
+    out = np.zeros(h * w, dtype=np.float64)
+    for dx, dy, wgt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+        x, y = x0 + dx, y0 + dy
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        out += np.bincount((y * w + x)[inside], weights=wgt[inside], minlength=h * w)
+    return out.reshape(h, w).astype(np.float32)
+
+
 class _Rasteriser:
     """Everything fixed over an animation: camera, background, stencil, colour scale."""
 
@@ -284,15 +320,51 @@ class _Rasteriser:
         self.scale_bar = None
         if self.annotate:
             self.scale_bar = _draw_scale_bar(self.background, self.cam.scale, "m" if rec.speed_unit == "m/s" else "")
+        self.glow_scale = 0.0
+        if color_by == "density":
+            # One brightness scale for the whole animation, from three frames' density.
+            sample = np.concatenate([d[d > 0] for d in (self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1}))] or [np.zeros(1)])
+            self.glow_scale = float(np.percentile(sample, 99.5)) if sample.size else 1.0
         self.trail = int(trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
 
+    def _density(self, k: int) -> np.ndarray:
+        """Frame k's glow: the free particles' density (per pixel), a tight blur plus a wide
+        bloom. Additive, so it needs no depth order in 3D."""
+        rec = self.rec
+        x = rec.positions[k][~rec.pinned] if rec.pinned.any() else rec.positions[k]
+        s, _ = self.cam.project(x)
+        col, row = self.cam.pixels(s)
+        d = _splat(col, row, self.background.shape)
+        r = max(1, self.radius // 2)
+        return _blur(d, r) + 0.5 * _blur(d, 4 * r)
+
+    def _glow(self, buf: np.ndarray, k: int) -> None:
+        """Tone-maps frame k's density into the glow levels: 1 − exp(−3 √(d / scale)), so the
+        densest 0.5 % saturate towards white while a thin filament or a lone particle, a hundred
+        times fainter, still shows at a quarter of the range (the square root, as in a long
+        exposure's tone curve)."""
+        d = self._density(k)
+        if self.glow_scale <= 0:
+            return
+        level = np.rint((1.0 - np.exp(-3.0 * np.sqrt(d / self.glow_scale))) * (_N_GLOW - 1)).astype(np.int64)
+        lit = level >= 1
+        buf[lit] = (_GLOW0 + level[lit]).astype(np.uint8)
+
     def frame(self, k: int) -> np.ndarray:
         """(H, W) uint8 palette-index image of frame k."""
         rec = self.rec
         buf = self.background.copy()
+        if self.color_by == "density":
+            self._glow(buf, k)
+            if rec.pinned.any():  # pinned particles stay discs on top
+                s, _ = self.cam.project(rec.positions[k][rec.pinned])
+                col, row = self.cam.pixels(s)
+                _draw_discs(buf, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
+            self._draw_clock(buf, k)
+            return buf
         s, depth = self.cam.project(rec.positions[k])
         col, row = self.cam.pixels(s)
         if self.trail and k > 0:

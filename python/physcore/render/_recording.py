@@ -394,7 +394,7 @@ def record(
     ----------
     scene, frames, steps_per_frame, frame_time, substeps, springs, progress
         As for :func:`gif`.
-    color_by : {"speed", "pressure", "none"}, optional
+    color_by : {"speed", "pressure", "strain", "density", "none"}, optional
         Default: the scene's ``render_defaults``, else ``"speed"``. Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
     on_frame : callable, optional
         ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
