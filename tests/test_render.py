@@ -795,3 +795,30 @@ def test_density_glow_shows_sub_pixel_motion():
         return render.render_frame(x, size=(200, 150), color_by="density", extent=([-1.0, -1.0], [11.0, 8.5]))
 
     assert not np.array_equal(frame(3.0), frame(3.0 + 0.02))  # 0.02 m is ~1/3 pixel here
+
+
+@pytest.mark.parametrize("r", [1, 2, 3, 7])
+def test_glow_box_blur_is_a_moving_average(r):
+    """Both ways the box blur is computed (shifted slices for small windows, a cumulative sum for
+    wide ones) give the mean over 2r + 1 pixels with zeros beyond the edges."""
+    from physcore.render._raster import _box_blur
+
+    a = np.random.default_rng(r).random((9, 31)).astype(np.float32)
+    want = np.stack([np.convolve(row, np.ones(2 * r + 1) / (2 * r + 1), mode="same") for row in a])
+    np.testing.assert_allclose(_box_blur(a, r, 1), want, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(_box_blur(a.T.copy(), r, 0), want.T, rtol=1e-5, atol=1e-5)
+
+
+def test_glow_splat_keeps_every_particle_inside_the_image():
+    """Bilinear splatting conserves the count: a particle in the image adds exactly 1 in all
+    (its four weights), one outside adds nothing, a NaN is dropped; the centre of mass of a
+    particle's weights is where it is."""
+    from physcore.render._raster import _splat
+
+    col = np.array([10.5, 3.25, 30.9, -5.0, np.nan, 15.0])
+    row = np.array([4.5, 7.75, 1.2, 3.0, 2.0, 200.0])
+    d = _splat(col, row, (20, 40)).astype(np.float64)
+    assert abs(d.sum() - 3.0) < 1e-6
+    one = _splat(col[1:2], row[1:2], (20, 40)).astype(np.float64)
+    yy, xx = np.mgrid[0:20, 0:40] + 0.5
+    assert abs((one * xx).sum() - 3.25) < 1e-6 and abs((one * yy).sum() - 7.75) < 1e-6

@@ -194,13 +194,28 @@ def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str) -> tuple[flo
 
 
 def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
-    """Mean over a window of 2r + 1 along `axis` (zeros beyond the edges), by a cumulative sum."""
+    """Mean over a window of 2r + 1 along `axis` (zeros beyond the edges). Small windows as sums
+    of shifted slices; wide ones by one cumulative sum and a difference of two slices (O(1) a
+    pixel whatever r is)."""
+    pad = [(0, 0)] * a.ndim
     n = a.shape[axis]
-    c = np.cumsum(a, axis=axis, dtype=np.float64)
-    c = np.concatenate([np.zeros_like(np.take(c, [0], axis=axis)), c], axis=axis)
-    hi = np.minimum(np.arange(n) + r + 1, n)
-    lo = np.maximum(np.arange(n) - r, 0)
-    return ((np.take(c, hi, axis=axis) - np.take(c, lo, axis=axis)) / (2 * r + 1)).astype(np.float32)
+
+    def cut(arr: np.ndarray, start: int, stop: int) -> np.ndarray:
+        sl = [slice(None)] * arr.ndim
+        sl[axis] = slice(start, stop)
+        return arr[tuple(sl)]
+
+    if r <= 2:
+        pad[axis] = (r, r)
+        p = np.pad(a, pad)
+        out = cut(p, 0, n).copy()
+        for k in range(1, 2 * r + 1):
+            out += cut(p, k, k + n)
+        return out * np.float32(1.0 / (2 * r + 1))
+    pad[axis] = (r + 1, r)
+    c = np.cumsum(np.pad(a, pad), axis=axis, dtype=np.float32)
+    m = c.shape[axis]
+    return (cut(c, 2 * r + 1, m) - cut(c, 0, m - 2 * r - 1)) * np.float32(1.0 / (2 * r + 1))
 
 
 def _blur(a: np.ndarray, r: int) -> np.ndarray:
@@ -210,21 +225,32 @@ def _blur(a: np.ndarray, r: int) -> np.ndarray:
     return a
 
 
+def _bloom(a: np.ndarray, r: int) -> np.ndarray:
+    """A wide blur (σ ≈ r) computed at half resolution (a quarter of the work) and brought back
+    by repeating pixels; the result is smooth at that width, so the blocks do not show."""
+    h, w = a.shape
+    he, we = h + h % 2, w + w % 2
+    half = np.pad(a, ((0, he - h), (0, we - w))).reshape(he // 2, 2, we // 2, 2).mean(axis=(1, 3))
+    return np.repeat(np.repeat(_blur(half, max(1, r // 2)), 2, axis=0), 2, axis=1)[:h, :w]
+
+
 def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Particle count per pixel, each particle shared bilinearly among the four pixels around its
-    position (sub-pixel motion shows, edges are antialiased)."""
+    position (sub-pixel motion shows, edges are antialiased). Accumulated on a grid one pixel
+    wider each side, so the four corners need no bounds checks, then cropped."""
     h, w = shape
     fx, fy = col - 0.5, row - 0.5  # pixel k's centre is at k + 0.5
-    ok = np.isfinite(fx) & np.isfinite(fy) & (fx > -1) & (fx < w) & (fy > -1) & (fy < h)
+    ok = (fx > -1) & (fx < w) & (fy > -1) & (fy < h)  # False for NaN too
     fx, fy = fx[ok], fy[ok]
-    x0, y0 = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
-    ax, ay = fx - x0, fy - y0
-    out = np.zeros(h * w, dtype=np.float64)
-    for dx, dy, wgt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
-        x, y = x0 + dx, y0 + dy
-        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-        out += np.bincount((y * w + x)[inside], weights=wgt[inside], minlength=h * w)
-    return out.reshape(h, w).astype(np.float32)
+    x0, y0 = np.floor(fx), np.floor(fy)
+    ax, ay = (fx - x0).astype(np.float32), (fy - y0).astype(np.float32)
+    wp = w + 2
+    base = (y0.astype(np.int64) + 1) * wp + (x0.astype(np.int64) + 1)
+    bx = 1.0 - ax
+    idx = np.concatenate([base, base + 1, base + wp, base + wp + 1])
+    wgt = np.concatenate([bx * (1.0 - ay), ax * (1.0 - ay), bx * ay, ax * ay])
+    out = np.bincount(idx, weights=wgt, minlength=(h + 2) * wp).reshape(h + 2, wp)
+    return out[1 : h + 1, 1 : w + 1].astype(np.float32)
 
 
 class _Rasteriser:
@@ -339,7 +365,7 @@ class _Rasteriser:
         col, row = self.cam.pixels(s)
         d = _splat(col, row, self.background.shape)
         r = max(1, self.radius // 2)
-        return _blur(d, r) + 0.5 * _blur(d, 4 * r)
+        return _blur(d, r) + 0.5 * _bloom(d, 4 * r)
 
     def _glow(self, buf: np.ndarray, k: int) -> None:
         """Tone-maps frame k's density into the glow levels: 1 − exp(−3 √(d / scale)), so the
