@@ -822,3 +822,24 @@ def test_glow_splat_keeps_every_particle_inside_the_image():
     one = _splat(col[1:2], row[1:2], (20, 40)).astype(np.float64)
     yy, xx = np.mgrid[0:20, 0:40] + 0.5
     assert abs((one * xx).sum() - 3.25) < 1e-6 and abs((one * yy).sum() - 7.75) < 1e-6
+
+
+def test_title_top_left_and_checked(tmp_path):
+    """A title is drawn top left in the text colour and kept clear of particles; a long one is
+    cut before the colour bar; a non-str or multi-line title is refused naming it."""
+    from physcore.render._colorbar import _text_mask
+
+    scene = pc.Scene(dim=2)
+    scene.add_particles([[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.0], [0.0, 1.0]])
+    img = frames_rgb(render.gif(scene, tmp_path / "t.gif", frames=1, size=(240, 180), title="Two balls"))[0]
+    mask = _text_mask("Two balls")
+    ink = np.all(img[3 : 3 + mask.shape[0], 4 : 4 + mask.shape[1]] == TEXT_RGB, axis=-1)
+    assert np.array_equal(ink, mask)
+    long = frames_rgb(render.gif(scene, tmp_path / "l.gif", frames=1, size=(240, 180), title="x" * 120))[0]
+    bar = np.nonzero(np.all(long[:14] == TEXT_RGB, axis=-1).any(axis=0))[0]
+    assert bar.max() > 200  # the colour bar is still there, at the right
+    render.gif(scene, tmp_path / "u.gif", frames=1, size=(240, 180), title="σ = 10, ρ = 28")  # drawn as "?"
+    with pytest.raises(TypeError, match="title"):
+        render.gif(scene, tmp_path / "x.gif", frames=1, title=3)
+    with pytest.raises(ValueError, match="title"):
+        render.gif(scene, tmp_path / "x.gif", frames=1, title="a\nb")

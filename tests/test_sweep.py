@@ -391,6 +391,12 @@ def test_contact_sheet_tiles_each_scenes_own_gif(tmp_path, client):
     assert again.read_bytes() == out.read_bytes()
 
 
+def test_contact_sheet_labels_outside_latin1_are_drawn(tmp_path):
+    out = pc.render.contact_sheet({"σ = 10": pc.scenes.kepler(), "ρ = 28": pc.scenes.kepler(e=0.2)}, tmp_path / "s.gif",
+                                  frames=2, tile=(64, 48))
+    assert out.stat().st_size > 0
+
+
 def test_contact_sheet_holds_the_last_frame_of_a_shorter_tile(tmp_path):
     a, b = pc.scenes.kepler(), pc.scenes.kepler(e=0.3)
     b.render_defaults = {**b.render_defaults, "frames": 4}

@@ -336,6 +336,9 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     theme = getattr(args, "theme", None) or d.get("theme")
     if theme is not None:
         settings["theme"] = theme
+    title = getattr(args, "title", None) or d.get("title")
+    if title:
+        settings["title"] = title
     return settings
 
 
@@ -594,6 +597,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
+    r.add_argument("--title", metavar="TEXT", help="a caption in the top-left corner of particle animations")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")
     r.add_argument("--trail", type=int, metavar="N",
                    help="draw each particle's path over the last N frames, fading (0: none; default: the scene's)")

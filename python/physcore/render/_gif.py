@@ -47,6 +47,7 @@ def gif(
     trail: int | None = None,
     size_by: str | None = None,
     theme: str | None = None,
+    title: str | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -149,6 +150,11 @@ def gif(
         Colours of particle animations: ``"light"`` (white background) or ``"dark"`` (night
         blue, light text, trails like long exposures). Field animations keep their own maps.
         Default: the scene's ``render_defaults`` (galaxies, attractors: "dark"), else "light".
+    title : str, optional
+        A caption in the top-left corner of particle animations (one line, up to 200
+        characters; cut with "..." where it would run into the colour bar; the bitmap font has
+        Latin-1 only, other characters show as "?"). Default: the scene's ``render_defaults``,
+        else none.
 
     Returns
     -------
@@ -183,12 +189,13 @@ def gif(
     """
     return _render(scene, path, "gif", frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time,
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
-                   springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme)
+                   springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
+                   title=title)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
-            "springs", "view", "progress", "trail", "size_by", "theme")
+            "springs", "view", "progress", "trail", "size_by", "theme", "title")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -199,7 +206,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme) = (bound.arguments[k] for k in _OPTIONS)
+     trail, size_by, theme, title) = (bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
     d = {} if isinstance(scene, _recording.Recording) else _recording.scene_defaults(scene)
@@ -210,6 +217,11 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     size_by = d.get("size_by", "none") if size_by is None else size_by
     if size_by not in ("none", "mass"):
         raise InvalidInputError(f"size_by must be 'none' or 'mass'; got {size_by!r}")
+    title = d.get("title") if title is None else title
+    if title is not None and not isinstance(title, str):
+        raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")
+    if title is not None and ("\n" in title or len(title) > 200):
+        raise InvalidInputError(f"title must be one line of at most 200 characters, got {_short(title)}")
     theme = d.get("theme", "light") if theme is None else theme
     if theme not in THEMES:
         raise InvalidInputError(f"theme must be one of {', '.join(THEMES)}; got {_short(theme)}")
@@ -250,7 +262,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         )
         return _emit(fmt, path, (fr.frame(k) for k in range(rec.frames)), palette(rec.field_style), fps, rec.frames)
     trail = min(trail, rec.frames)
-    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True)
+    ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
+                      title=title or None)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), theme_palette(theme), fps, rec.frames)
 
 

@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from ._camera import _Camera, _screen_bounds
-from ._colorbar import _colorbar_labels, _colorbar_layout, _draw_colorbar, _format_value, _text_mask
+from ._colorbar import _CB_MARGIN, _colorbar_labels, _colorbar_layout, _draw_colorbar, _format_value, _text_mask
 from ._palette import (
     _BACKGROUND,
     _GLOW0,
@@ -153,6 +153,21 @@ def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
         flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
 
 
+def _draw_title(buf: np.ndarray, title: str, right: int) -> None:
+    """`title` at the top left, in the text colour on a box of background, cut with "..." to end
+    before column `right` (the colour bar's left edge). The bitmap font has Latin-1 only: other
+    characters are drawn as "?"."""
+    text = title.encode("latin-1", "replace").decode("latin-1")
+    mask = _text_mask(text)
+    while mask.shape[1] > right - _CB_MARGIN and len(text) > 1:
+        text = text[: max(1, len(text) - max(1, len(text) // 8))]
+        mask = _text_mask(text.rstrip() + "...")
+    y, x = _CB_MARGIN - 1, _CB_MARGIN
+    buf[max(y - 1, 0) : y + mask.shape[0] + 1, max(x - 2, 0) : x + mask.shape[1] + 2] = _BACKGROUND
+    region = buf[y : y + mask.shape[0], x : x + mask.shape[1]]
+    region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+
+
 def _scale_bar_length(px_per_unit: float, target_px: float) -> float:
     """The 1, 2 or 5 × 10^k length (in scene units) whose bar is nearest `target_px` pixels."""
     raw = target_px / px_per_unit
@@ -271,6 +286,7 @@ class _Rasteriser:
         trail: int = 0,
         size_by: str = "none",
         annotate: bool = False,
+        title: str | None = None,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -316,10 +332,13 @@ class _Rasteriser:
             if walls is not None:
                 wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
                 lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
-        # Keep the colour bar's band free: no disc reaches into it.
+        # Keep the colour bar's band free: no disc reaches into it (nor into the title's).
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
-        # Positions are float32 relative to the origin: extents below their rounding are zero.
         w, h = size
+        self.title = title if title and w >= 100 and h >= 80 else None
+        if self.title is not None:
+            top_pad = max(top_pad or pad, _CB_MARGIN + 12 + int(math.ceil(self.radius * grow)) + 1)
+        # Positions are float32 relative to the origin: extents below their rounding are zero.
         self.annotate = annotate and w >= 100 and h >= 80
         bottom_pad = max(pad, 20 + int(math.ceil(self.radius * grow))) if self.annotate else None
         self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad, bottom_pad=bottom_pad)
@@ -343,6 +362,8 @@ class _Rasteriser:
             _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
         if self.colorbar is not None:
             _draw_colorbar(self.background, self.colorbar, base, levels)
+        if self.title is not None:
+            _draw_title(self.background, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8)
         self.scale_bar = None
         if self.annotate:
             self.scale_bar = _draw_scale_bar(self.background, self.cam.scale, "m" if rec.speed_unit == "m/s" else "")

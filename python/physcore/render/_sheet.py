@@ -79,7 +79,8 @@ def contact_sheet(
     path : str or os.PathLike
         Output ``.gif``, written atomically (its directory is checked before rendering).
     labels : sequence of str, optional
-        A caption per tile (top left); default: the dict's keys, else none.
+        A caption per tile (top left); default: the dict's keys, else none. Characters outside
+        Latin-1 (the bitmap font's) are drawn as "?".
     columns : int, optional
         Tiles per row, >= 1; default ``ceil(sqrt(len(scenes)))``.
     tile : (int, int), default (240, 180)
@@ -136,7 +137,8 @@ def contact_sheet(
     if labels is not None:
         if isinstance(labels, (str, bytes)) or not isinstance(labels, Sequence):
             raise InvalidTypeError(f"labels: expected a list of str, got {type(labels).__name__}")
-        labels = [str(x) for x in labels]
+        # The bitmap font has Latin-1 only: other characters are drawn as "?".
+        labels = [str(x).encode("latin-1", "replace").decode("latin-1") for x in labels]
         if len(labels) != len(scenes):
             raise InvalidInputError(f"labels: {len(labels)} labels for {len(scenes)} scenes")
     n = len(scenes)
