@@ -114,7 +114,7 @@ def gif(
         surface): each free particle is splatted bilinearly into a per-pixel density (so edges
         are antialiased and sub-pixel motion shows), blurred twice (a tight core of σ ≈ radius/2
         and a 4× wider bloom at half weight, each three box blurs) and tone-mapped as
-        1 − exp(−3 √(d / d99.5)) onto a ramp from the background to white (dark theme) or near
+        1 − exp(−2.5 (d / d99.5)^0.75) onto a 32-level ramp from the background to white (dark theme) or near
         black (light), with d99.5 the 99.5th percentile of three frames' density, fixed over
         the animation; additive, so 3D needs no depth order. Pinned particles stay discs.
         ``"none"``: one colour. Pinned particles are always orange.

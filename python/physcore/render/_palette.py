@@ -29,7 +29,7 @@ _N_PRESSURE = 64
 _PRESSURE0 = _TEXT + 1
 _N_TRAIL = 8  # trail shades, oldest (palest) first
 _TRAIL0 = _PRESSURE0 + _N_PRESSURE
-_N_GLOW = 64  # color_by="density": brightness of the accumulated particle density, 0 = background
+_N_GLOW = 32  # color_by="density": brightness of the accumulated particle density, 0 = background (32: half the GIF bytes of 64, no visible banding under the blur)
 _GLOW0 = _TRAIL0 + _N_TRAIL
 _PALETTE_SIZE = _GLOW0 + _N_GLOW
 

@@ -389,14 +389,14 @@ class _Rasteriser:
         return _blur(d, r) + 0.5 * _bloom(d, 4 * r)
 
     def _glow(self, buf: np.ndarray, k: int) -> None:
-        """Tone-maps frame k's density into the glow levels: 1 − exp(−3 √(d / scale)), so the
-        densest 0.5 % saturate towards white while a thin filament or a lone particle, a hundred
-        times fainter, still shows at a quarter of the range (the square root, as in a long
-        exposure's tone curve)."""
+        """Tone-maps frame k's density into the glow levels: 1 − exp(−2.5 (d / scale)^0.75), so
+        the densest 0.5 % saturate towards white while a filament a hundred times fainter still
+        shows at a seventh of the range (a long exposure's compressive curve; the square root
+        washed a whole attractor out to white, a linear curve lost its filaments)."""
         d = self._density(k)
         if self.glow_scale <= 0:
             return
-        level = np.rint((1.0 - np.exp(-3.0 * np.sqrt(d / self.glow_scale))) * (_N_GLOW - 1)).astype(np.int64)
+        level = np.rint((1.0 - np.exp(-2.5 * (d / self.glow_scale) ** 0.75)) * (_N_GLOW - 1)).astype(np.int64)
         lit = level >= 1
         buf[lit] = (_GLOW0 + level[lit]).astype(np.uint8)
 
