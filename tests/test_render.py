@@ -843,3 +843,17 @@ def test_title_top_left_and_checked(tmp_path):
         render.gif(scene, tmp_path / "x.gif", frames=1, title=3)
     with pytest.raises(ValueError, match="title"):
         render.gif(scene, tmp_path / "x.gif", frames=1, title="a\nb")
+
+
+def test_a_recording_draws_as_its_scene_would(tmp_path):
+    """record() keeps the colouring it recorded and the scene's render_defaults, so gif(rec)
+    with no options draws what gif(scene) would: the galaxies' glow on the dark theme (a
+    recording without speeds used to be refused for the default colour_by='speed')."""
+    rec = render.record(pc.scenes.galaxies(n=400), frames=3)
+    assert rec.color_by == "density" and rec.speeds is None and rec.defaults["theme"] == "dark"
+    img = frames_rgb(render.gif(rec, tmp_path / "g.gif"))[0]
+    dark = tuple(int(v) for v in render._palette._DARK_PALETTE[_palette._BACKGROUND])
+    assert tuple(int(v) for v in img[2, 2]) == dark
+    assert img.shape[:2] == (400, 480)  # the scene's size, (480, 400)
+    none = render.record(pc.scenes.kepler(), frames=2, color_by="none")
+    render.gif(none, tmp_path / "k.gif")  # draws with one colour, as recorded

@@ -209,7 +209,13 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
      trail, size_by, theme, title) = (bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
-    d = {} if isinstance(scene, _recording.Recording) else _recording.scene_defaults(scene)
+    if isinstance(scene, _recording.Recording):
+        # A recording draws as its scene would: the scene's defaults and the colouring recorded.
+        d = dict(scene.defaults or {})
+        if scene.color_by is not None:
+            d["color_by"] = scene.color_by
+    else:
+        d = _recording.scene_defaults(scene)
     fps = _check_fps(d.get("fps", 30.0) if fps is None else fps)
     size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)

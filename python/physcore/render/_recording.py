@@ -82,6 +82,11 @@ class Recording(NamedTuple):
     field_points: np.ndarray | None = None
     #: The recorded field's name and unit, for the colour bar ("v", "density", "speed m/s").
     field_label: str = ""
+    #: The colouring :func:`record` was asked for (what :func:`gif` then draws by default), and
+    #: the scene's ``render_defaults`` at the time (fps, size, theme, trail, ...), so that a
+    #: recording draws as its scene would.
+    color_by: str | None = None
+    defaults: dict | None = None
 
     @property
     def frames(self) -> int:
@@ -427,4 +432,6 @@ def record(
         raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
     plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
     _check_memory(scene, plan["frames"], (0, 0), springs)
-    return _simulate(scene, progress=progress, on_frame=on_frame, **plan)
+    defaults = dict(scene_defaults(scene))
+    rec = _simulate(scene, progress=progress, on_frame=on_frame, **plan)
+    return rec._replace(color_by=color_by, defaults=defaults)
