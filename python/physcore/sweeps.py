@@ -49,7 +49,7 @@ import numpy as np
 from . import _check
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
-from .scene import DEFAULT_THREADS, Scene
+from .scene import DEFAULT_THREADS, Scene, _usable_cpus
 
 __all__ = ["sweep", "ensemble", "Ensemble", "expand", "run_seed", "RESERVED"]
 
@@ -216,13 +216,6 @@ class _Cluster:
     def close(self) -> None:
         for c in self.own:
             c.close()
-
-
-def _usable_cpus() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # macOS, Windows
-        return os.cpu_count() or 1
 
 
 def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, workers: int | None, on_result: Callable[[int, Any], None],

@@ -45,6 +45,16 @@ def _text_mask(text: str) -> np.ndarray:
     return np.asarray(im) > 127
 
 
+def _draw_text(buf: np.ndarray, text: str, x: int, y: int, ink: int, box: int, below: int = 0) -> None:
+    """`text` with its top-left corner at (x, y) in palette index `ink`, on a box of index `box`
+    two pixels wider each side and one above (`below` rows more underneath): the clock, the
+    title and the field labels all read on any background this way."""
+    m = _text_mask(text)
+    buf[max(y - 1, 0) : y + m.shape[0] + below, max(x - 2, 0) : x + m.shape[1] + 2] = box
+    region = buf[y : y + m.shape[0], x : x + m.shape[1]]
+    region[m[: region.shape[0], : region.shape[1]]] = ink
+
+
 def _format_value(v: float) -> str:
     """Three significant digits; plain digits (no exponent) from 1000 up to 10^6."""
     return f"{v:.0f}" if 1000 <= v < 1e6 else f"{v:.3g}"

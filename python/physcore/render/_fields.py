@@ -158,7 +158,7 @@ class FieldRasteriser:
         """The time (bottom left) and, for the colour maps, a colour bar with the scale's ends and
         the quantity's name (top right); drawn in the map's own end colours, whichever contrasts
         with the background. Left out where the image is too small to read them."""
-        from ._colorbar import _format_value, _text_mask
+        from ._colorbar import _draw_text, _format_value, _text_mask
 
         h, w = out.shape
         if w < 100 or h < 80:
@@ -167,10 +167,7 @@ class FieldRasteriser:
         ink, box = {"water": (0, _N - 1), "signed": (0, _N // 2)}.get(self.style, (_N - 1, 0))
 
         def text(s: str, x: int, y: int) -> None:
-            m = _text_mask(s)
-            out[max(y - 1, 0) : y + m.shape[0], max(x - 2, 0) : x + m.shape[1] + 2] = box
-            region = out[y : y + m.shape[0], x : x + m.shape[1]]
-            region[m[: region.shape[0], : region.shape[1]]] = ink
+            _draw_text(out, s, x, y, ink, box)
 
         if self.times is not None and np.isfinite(self.times[k]):
             text(f"t = {_format_value(float(self.times[k]))} s", 4, h - 14)

@@ -309,7 +309,7 @@ def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
 
 
 def _write_video(path: Path, rgb: Any, fps: float, fmt: str) -> None:
-    """H.264 in MP4 (yuv420p, CRF 26: plays everywhere; the default 4 s cloth is ~0.45 MB) or VP9 in WebM (CRF 32), through PyAV
+    """H.264 in MP4 (yuv420p, CRF 26: plays everywhere; the default 4 s cloth is ~0.4 MB) or VP9 in WebM (CRF 32), through PyAV
     (FFmpeg's libraries in its wheel), written atomically. Odd sizes are padded by one pixel
     (4:2:0 chroma needs even ones)."""
     from fractions import Fraction

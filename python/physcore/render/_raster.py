@@ -9,7 +9,15 @@ import math
 import numpy as np
 
 from ._camera import _Camera, _screen_bounds
-from ._colorbar import _CB_MARGIN, _colorbar_labels, _colorbar_layout, _draw_colorbar, _format_value, _text_mask
+from ._colorbar import (
+    _CB_MARGIN,
+    _colorbar_labels,
+    _colorbar_layout,
+    _draw_colorbar,
+    _draw_text,
+    _format_value,
+    _text_mask,
+)
 from ._palette import (
     _BACKGROUND,
     _GLOW0,
@@ -157,15 +165,11 @@ def _draw_title(buf: np.ndarray, title: str, right: int) -> None:
     """`title` at the top left, in the text colour on a box of background, cut with "..." to end
     before column `right` (the colour bar's left edge). The bitmap font has Latin-1 only: other
     characters are drawn as "?"."""
-    text = title.encode("latin-1", "replace").decode("latin-1")
-    mask = _text_mask(text)
-    while mask.shape[1] > right - _CB_MARGIN and len(text) > 1:
+    text = shown = title.encode("latin-1", "replace").decode("latin-1")
+    while _text_mask(shown).shape[1] > right - _CB_MARGIN and len(text) > 1:
         text = text[: max(1, len(text) - max(1, len(text) // 8))]
-        mask = _text_mask(text.rstrip() + "...")
-    y, x = _CB_MARGIN - 1, _CB_MARGIN
-    buf[max(y - 1, 0) : y + mask.shape[0] + 1, max(x - 2, 0) : x + mask.shape[1] + 2] = _BACKGROUND
-    region = buf[y : y + mask.shape[0], x : x + mask.shape[1]]
-    region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+        shown = text.rstrip() + "..."
+    _draw_text(buf, shown, _CB_MARGIN, _CB_MARGIN - 1, _TEXT, _BACKGROUND, below=1)
 
 
 def _scale_bar_length(px_per_unit: float, target_px: float) -> float:
@@ -461,11 +465,8 @@ class _Rasteriser:
         if not self.annotate or times is None or not np.isfinite(times[k]):
             return
         unit = " s" if self.rec.speed_unit == "m/s" else ""
-        mask = _text_mask(f"t = {_format_value(float(times[k]))}{unit}")
-        y, x = h - 4 - mask.shape[0], 4
-        buf[y - 1 : y + mask.shape[0], x - 2 : x + mask.shape[1] + 2] = _BACKGROUND
-        region = buf[y : y + mask.shape[0], x : x + mask.shape[1]]
-        region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+        text = f"t = {_format_value(float(times[k]))}{unit}"
+        _draw_text(buf, text, 4, h - 4 - _text_mask(text).shape[0], _TEXT, _BACKGROUND)
 
     def _draw_trail(self, buf: np.ndarray, k: int) -> None:
         """The paths of the moving particles over the `trail` frames before k, oldest (palest)

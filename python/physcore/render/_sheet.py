@@ -22,7 +22,7 @@ from .._atomic import atomic_write
 from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import _check_fps, _check_path, _check_size, _check_writable
 from ._colorbar import _font
-from ._gif import _gif_delays_ms, gif
+from ._gif import _OPTIONS, _gif_delays_ms, gif
 from ._recording import scene_defaults
 
 #: Pixels between tiles.
@@ -149,9 +149,7 @@ def contact_sheet(
     for bad in ("size", "fps", "progress"):
         if bad in options:
             raise InvalidInputError(f"{bad}: set by contact_sheet for every tile (use tile= / fps=)")
-    import inspect
-
-    known = set(inspect.signature(gif).parameters) - {"scene", "path"}
+    known = set(_OPTIONS)
     for k in options:
         if k not in known:
             raise InvalidTypeError(f"contact_sheet() got an unexpected option {k!r} (gif() takes {', '.join(sorted(known))})")
