@@ -26,7 +26,11 @@ from physcore import render
 
 def test_library_defaults_are_the_clis_for_a_ready_made_scene():
     scene = pc.scenes.cloth(n=8)
-    assert scene.render_defaults == pc.scenes.cloth.render_defaults
+    # The function's defaults, plus what this sheet's size decides: its grid mesh.
+    fn_defaults = pc.scenes.cloth.render_defaults
+    assert {k: scene.render_defaults[k] for k in fn_defaults} == fn_defaults
+    assert set(scene.render_defaults) - set(fn_defaults) == {"mesh"}
+    assert np.array_equal(scene.render_defaults["mesh"].faces, render.Mesh.grid(8, 8).faces)
     rec = render.record(scene, frames=3)
     frame_time = pc.scenes.cloth.render_defaults["frame_time"]
     step = np.diff(rec.times)

@@ -28,13 +28,27 @@ def rec():
 
 
 def test_frames_are_the_gifs_frames(rec, tmp_path):
-    frames = list(pc.render.frames(rec, size=(96, 72)))
+    # Hard-edged discs: the fixed palette, so the GIF holds the frames exactly.
+    frames = list(pc.render.frames(rec, size=(96, 72), antialias=False))
     assert len(frames) == 12 and frames[0].shape == (72, 96, 3) and frames[0].dtype == np.uint8
-    gif = pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72))
+    gif = pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72), antialias=False)
     decoded = _gif_frames(gif.read_bytes())
     assert len(decoded) == 12
     for a, b in zip(frames, decoded, strict=True):
         assert np.array_equal(a, b)
+
+
+def test_soft_disc_frames_are_the_gifs_up_to_its_palette(rec, tmp_path):
+    # Soft discs (Kepler's default): full colour, one 256-colour palette for the GIF; the
+    # frequent flat colours (background, text, trail) exact, the rest within a few levels.
+    frames = list(pc.render.frames(rec, size=(96, 72)))
+    decoded = _gif_frames(pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72)).read_bytes())
+    assert len(decoded) == 12
+    for a, b in zip(frames, decoded, strict=True):
+        a, b = a.astype(int), b.astype(int)
+        assert np.abs(a - b).mean() < 1.0
+        background = np.all(a == a[0, 0], axis=2)
+        assert background.mean() > 0.5 and np.all(b[background] == a[0, 0])
 
 
 def test_png_sequence_holds_every_frame_exactly(rec, tmp_path):

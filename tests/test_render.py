@@ -504,8 +504,11 @@ def test_colorbar_is_drawn_when_on_and_absent_when_off():
     assert not ink(band(off)).any()
     assert not ink(band(none)).any()
     # The particles are drawn either way, and none of them inside the bar's band, even where the
-    # usual margin is narrower than the band.
-    assert ink(on[16:]).sum() == ink(off).sum() > 0
+    # usual margin is narrower than the band (19 rows at this size: a 13-pixel font).
+    from physcore.render._colorbar import _colorbar_layout
+
+    top = _colorbar_layout((480, 360), "speed 0", "3.2 m/s").band
+    assert ink(on[top:]).sum() == ink(off).sum() > 0
     corner = np.array([[0.0, 0.0], [1.0, 0.5], [0.5, 0.25]])
     vel = np.array([[1.0, 0.0], [2.0, 0.0], [0.0, 0.0]])
     on = render.render_frame(corner, velocities=vel, radius=2, size=(200, 100))

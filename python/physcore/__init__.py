@@ -73,7 +73,7 @@ __all__ = [
 ]
 
 
-_LAZY = ("scenes", "render", "cli")
+_LAZY = ("scenes", "render", "cli", "viewer")
 
 
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap

@@ -14,6 +14,9 @@ __all__ = [
     "set_simd_level",
     "cpu_name",
     "particle_attributes",
+    "mesh_normals",
+    "draw_discs",
+    "rasterise_mesh",
     "neighbors",
     "build_profile",
     "__version__",
@@ -30,6 +33,24 @@ def set_simd_level(level: str | None = None) -> None: ...
 def cpu_name() -> str: ...
 def particle_attributes() -> list[tuple[str, str]]: ...
 def neighbors(points: npt.NDArray[np.float64], radius: float) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]: ...
+def draw_discs(
+    image: npt.NDArray[np.uint8],
+    col: npt.NDArray[np.float32],
+    row: npt.NDArray[np.float32],
+    radius: npt.NDArray[np.float32],
+    colours: npt.NDArray[np.uint8],
+) -> None: ...
+def mesh_normals(x: npt.NDArray[np.float64], faces: npt.NDArray[np.uint32]) -> npt.NDArray[np.float64]: ...
+def rasterise_mesh(
+    verts: npt.NDArray[np.float32],
+    faces: npt.NDArray[np.uint32],
+    front: npt.NDArray[np.float32],
+    back: npt.NDArray[np.float32],
+    background: npt.NDArray[np.uint8],
+    ss: int,
+    uv: npt.NDArray[np.float32] | None = None,
+    texture: npt.NDArray[np.float32] | None = None,
+) -> None: ...
 
 @final
 class Simulation:

@@ -6,7 +6,12 @@ Usage::
     physcore render SCENE [-o OUT.gif|OUT.mp4|OUT.webm|OUT.png] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
                           [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
                           [--color-by speed|pressure|none] [--no-colorbar]
+                          [--camera fit|follow|orbit] [--arrows velocity|acceleration]
+                          [--no-mesh] [--texture IMAGE] [--[no-]antialias]
                           [--param key=value ...]
+    physcore view SCENE [--param key=value ...] [--size WxH] [--fps F] [--seconds S] [--screenshot OUT.png]
+
+``physcore view`` runs a scene live in a window (:mod:`physcore.viewer`; needs pygame-ce).
 
 A scene function's ``render_defaults`` dict gives its animation defaults: ``frames``, ``fps``,
 ``size``, ``color_by``, ``view``, ``radius``, and either ``steps_per_frame`` or ``frame_time``
@@ -110,6 +115,23 @@ def _view(text: str) -> tuple[float, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected AZIMUTH,ELEVATION in degrees, e.g. -60,25; got {text!r}") from None
     return az, el
+
+
+def _camera_arg(text: str) -> Any:
+    """--camera: fit, follow, orbit, follow:INDEX (a particle) or orbit:DEG_PER_S."""
+    mode, sep, param = text.partition(":")
+    if mode in ("fit", "follow", "orbit") and not sep:
+        return mode
+    try:
+        if mode == "follow" and sep:
+            return ("follow", int(param))
+        if mode == "orbit" and sep:
+            return ("orbit", float(param))
+    except ValueError:
+        pass
+    raise argparse.ArgumentTypeError(
+        f"expected fit, follow, orbit, follow:INDEX or orbit:DEGREES_PER_SECOND; got {text!r}"
+    )
 
 
 def _key_value(text: str) -> tuple[str, str]:
@@ -339,6 +361,18 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     title = getattr(args, "title", None) or d.get("title")
     if title:
         settings["title"] = title
+    camera = getattr(args, "camera", None) or d.get("camera")
+    if camera is not None:
+        settings["camera"] = camera
+    arrows = getattr(args, "arrows", None) or d.get("arrows")
+    if arrows is not None:
+        settings["arrows"] = arrows
+    if getattr(args, "no_mesh", False):
+        settings["mesh"] = False
+    if getattr(args, "texture", None) is not None:
+        settings["texture"] = args.texture
+    if getattr(args, "antialias", None) is not None:
+        settings["antialias"] = args.antialias
     return settings
 
 
@@ -423,7 +457,19 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             parser.error(str(e))
     try:
         settings = _render_settings(fn, args, scene.dt)
+        if "camera" in settings:  # before simulating: orbit needs 3D, follow:I a particle I
+            from .render._checks import _check_camera
+            from .render._recording import points_view
+
+            _check_camera(settings["camera"], int(getattr(scene, "dim", 0)), int(getattr(points_view(scene), "n_particles", 0)))
+        if "texture" in settings:  # before simulating: the image must load onto a mesh with uv
+            from .render._mesh import check_mesh, check_texture
+
+            mesh = settings.get("mesh", (getattr(scene, "render_defaults", None) or {}).get("mesh"))
+            check_texture(settings["texture"], check_mesh(mesh, int(getattr(scene, "n_particles", 0))))
     except _UsageError as e:
+        parser.error(str(e))
+    except (TypeError, ValueError) as e:
         parser.error(str(e))
     time0 = scene.time
     counts: list[Any] = []  # substeps taken per frame (frame_time with automatic substeps)
@@ -453,6 +499,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             springs=not args.no_springs,
             progress=not args.quiet,
             on_frame=on_frame,
+            velocities=settings.get("arrows", "none") != "none",
             **{k: v for k, v in settings.items() if k in produce},
         )
         written = render.save(
@@ -598,12 +645,46 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
     r.add_argument("--title", metavar="TEXT", help="a caption in the top-left corner of particle animations")
+    r.add_argument("--camera", type=_camera_arg, metavar="MODE",
+                   help="fit (still, the default), follow (the moving particles' centre of mass; follow:I "
+                   "particle I), orbit (3D: one turn over the animation; orbit:D at D degrees a second)")
+    r.add_argument("--arrows", choices=("none", "velocity", "acceleration"),
+                   help="arrows on up to 300 moving particles (default: the scene's, else none)")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")
+    r.add_argument("--no-mesh", action="store_true",
+                   help="draw a cloth's particles and springs rather than its shaded surface")
+    r.add_argument("--antialias", action=argparse.BooleanOptionalAction, default=None,
+                   help="soft-edged discs (default: the scene's; the ready-made particle scenes have them)")
+    r.add_argument("--texture", metavar="IMAGE",
+                   help="an image (PNG, JPEG, ...) mapped onto the scene's shaded surface (cloth)")
     r.add_argument("--trail", type=int, metavar="N",
                    help="draw each particle's path over the last N frames, fading (0: none; default: the scene's)")
     r.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
                    help="scene parameter, repeatable (e.g. --param n=48 --param ground=true)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+    from .viewer import keys_text
+
+    v = sub.add_parser(
+        "view",
+        help="run a scene live in a window: drag particles, change parameters",
+        description="Run a ready-made scene live in a window (needs pygame-ce: pip install \"physcore[view]\"),\n"
+        "stepped as `physcore render` steps it and drawn as its GIF, at the GIF's speed.",
+        epilog="keys:\n" + keys_text(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    v.set_defaults(view_parser=v)
+    v.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
+    v.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
+                   help="scene parameter, repeatable (e.g. --param n=24)")
+    v.add_argument("--integrator", choices=integrators, metavar="NAME", help="integrator")
+    v.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
+    v.add_argument("--size", type=_size, metavar="WxH", help="window size in pixels (default: the scene's GIF size)")
+    v.add_argument("--fps", type=_positive_float, metavar="F",
+                   help="ticks (GIF frames) per second of wall time (default: the scene's fps: the GIF's speed)")
+    v.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
+    v.add_argument("--seconds", type=_positive_float, metavar="S", help="close after S seconds of wall time")
+    v.add_argument("--screenshot", metavar="PNG", help="write the last frame as a PNG when the window closes")
     return parser, r
 
 
@@ -628,6 +709,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_scenes(args)
         if args.command == "info":
             return _cmd_info()
+        if args.command == "view":
+            from .viewer import _main as _cmd_view
+
+            return _cmd_view(args, args.view_parser)
         return _cmd_render(args, render_parser)
     except SystemExit as e:  # argparse errors (2) and --help/--version (0)
         return e.code if isinstance(e.code, int) else (0 if e.code is None else 1)

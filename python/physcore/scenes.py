@@ -25,6 +25,7 @@ import numpy as np
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
+from .render._mesh import Mesh
 from .scene import Scene
 from .terms import Drag, ElectricField, Gravity, MagneticField, PairwiseGravity, Plane, Springs, TreeGravity
 
@@ -211,10 +212,13 @@ def cloth(
         # suggest_dt() is half the fastest time scale (1/ω_max or the dashpot's 1/λ_max); twice
         # that is still well inside velocity Verlet's limits (2/ω_max; 2/λ_max with dashpots).
         _set_stable_dt(scene, 2.0, "stiffness, damping, air_drag, mass")
+    # Drawn as a shaded sheet over its grid (render.Mesh.grid: rows of n, index row·n + col).
+    scene.render_defaults = {"mesh": Mesh.grid(n, n)}
     return _finite_books(scene, "size, mass")
 
 
-cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360)}
+# A plain fabric colour: the shading is the picture (--color-by speed or strain colours the sheet).
+cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none"}
 
 
 def projectile(
@@ -256,7 +260,7 @@ def projectile(
     return _finite_books(scene, "speed")
 
 
-projectile.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320), "trail": 120}
+projectile.render_defaults = {"antialias": True, "frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320), "trail": 120}
 
 
 #: Range of a Kepler orbit's separations a(1 ∓ e), m: keeps r², 1/r³ and v² = GM/r inside float64.
@@ -318,7 +322,7 @@ def kepler(
     return scene
 
 
-kepler.render_defaults = {
+kepler.render_defaults = {"antialias": True,
     "frames": 120,
     "fps": 30,
     "frame_time": 4 * math.pi / 120,
@@ -361,7 +365,7 @@ def figure_eight(
     return scene
 
 
-figure_eight.render_defaults = {
+figure_eight.render_defaults = {"antialias": True,
     "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (480, 300),
     "speed_unit": "(G=1)", "trail": 50, "theme": "dark",  # each trail a third of the curve: the three close it
 }
@@ -389,7 +393,7 @@ def pythagorean(
     return scene
 
 
-pythagorean.render_defaults = {
+pythagorean.render_defaults = {"antialias": True,
     # To t = 61: the ejection has begun (from t ≈ 60) and the dance still fills the frame.
     "frames": 204, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
     "radius": 3, "theme": "dark",
@@ -516,7 +520,7 @@ def cyclotron(
     return _finite_books(scene, "E")
 
 
-cyclotron.render_defaults = {
+cyclotron.render_defaults = {"antialias": True,
     "frames": 180, "fps": 30, "frame_time": 0.25, "size": (480, 360), "speed_unit": "(q=m=B=1)", "trail": 60,
     "size_by": "mass", "radius": 3, "theme": "dark",
 }
@@ -568,7 +572,7 @@ def spring_chain(
     return _finite_books(scene, "length, mass")
 
 
-spring_chain.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (400, 400)}
+spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (400, 400)}
 
 # --------------------------------------------------------------------------- SPH fluid scenes
 _G = 9.81  # m/s², gravity of the fluid scenes
@@ -741,7 +745,7 @@ def dam_break(
 # run-up. About 27 000 CFL substeps for the default 41 472 particles (each substep ≈ 7–11 ms on
 # 2 cores); the animation covers T = 120 · frame_time · √(2g/width), so --frame-time 0.01505
 # shows T = 0..8 (the jet reaching the lid and falling back) in twice the time.
-dam_break.render_defaults = {
+dam_break.render_defaults = {"antialias": True,
     "frames": 120,
     "fps": 30,
     "frame_time": 4.0 / math.sqrt(2.0 * _G / 1.0) / 120,
@@ -863,7 +867,7 @@ def drop(
 
 
 # 120 frames, 2 s: the fall (0.35 s), the splash and the waves' first return from the walls.
-drop.render_defaults = {
+drop.render_defaults = {"antialias": True,
     "frames": 120,
     "fps": 30,
     "frame_time": 2.0 / 120,
@@ -1121,6 +1125,7 @@ def lorenz(
 lorenz.render_defaults = {
     "frames": 180, "fps": 30, "steps_per_frame": 20, "size": (480, 400), "view": (-80.0, 8.0), "radius": 0,
     "speed_unit": "(flow units)", "theme": "dark", "color_by": "density",  # glow: the cloud paints the attractor
+    "camera": "orbit",  # one turn about the vertical, back to the classic view: the attractor's depth shows
 }
 
 

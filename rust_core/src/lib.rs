@@ -7,7 +7,8 @@
 //! (`constraints`). Fields on grids (`grids`: waves, reaction–diffusion, a grid fluid) are
 //! further systems. Shared services: the neighbour search (`neighbors`), the SIMD layer
 //! (`simd`), deterministic parallel loops (`par`), fallible allocation (`alloc`), the stop flag
-//! (`stop`) and typed errors (`error`).
+//! (`stop`) and typed errors (`error`). Outside the physics, `raster` draws the renderer's
+//! shaded triangle meshes (per pixel, per frame: too slow in numpy).
 
 // Two lints the numerics disagree with, allowed for the whole crate on purpose:
 // - `!(x > 0.0)` is the NaN-catching test (a NaN fails every comparison); `partial_cmp` would
@@ -23,6 +24,7 @@ pub mod integrators;
 pub mod neighbors;
 pub mod ode;
 pub mod par;
+pub mod raster;
 pub mod simd;
 pub mod sph;
 pub mod state;

@@ -28,7 +28,9 @@ _checks         argument checks of the public functions, ``COLOR_BY``.
 _scene_state    reading a scene's optional parts: springs and strain, planes, pressures, walls.
 _recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
 _colorbar       the colour bar: labels, layout and drawing into the background.
-_raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images).
+_mesh           ``Mesh`` (triangles over the particles) and its shading; the core rasterises it.
+_raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
+                or RGB with a shaded mesh).
 _gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one, rasterise, write a
                 palette GIF, an MP4/WebM video (PyAV) or PNGs atomically, or yield RGB frames.
 _frame          ``render_frame()``: one state to an RGB array.
@@ -60,6 +62,7 @@ from ._checks import _check_writable as _check_writable
 from ._colorbar import _colorbar_labels as _colorbar_labels
 from ._frame import render_frame
 from ._gif import FORMATS, frames, gif, save
+from ._mesh import Mesh
 from ._palette import _N_PRESSURE as _N_PRESSURE
 from ._palette import _N_SPEED as _N_SPEED
 from ._palette import _PALETTE as _PALETTE
@@ -75,8 +78,8 @@ from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
 
-__all__ = ["record", "Recording", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION"]
+__all__ = ["record", "Recording", "Mesh", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION"]
 
-for _public in (Recording, record, gif, save, frames, render_frame, contact_sheet):
+for _public in (Recording, Mesh, record, gif, save, frames, render_frame, contact_sheet):
     _public.__module__ = __name__
 del _public

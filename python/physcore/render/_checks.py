@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
-from ._camera import DEFAULT_VIEW
+from ._camera import CAMERAS, DEFAULT_VIEW
 
 #: Valid values of the ``color_by`` argument.
 COLOR_BY = ("speed", "pressure", "strain", "density", "none")
@@ -110,6 +110,53 @@ def _check_view(view: Any) -> tuple[float, float]:
     return az, el
 
 
+#: Valid values of the ``arrows`` argument.
+ARROWS = ("none", "velocity", "acceleration")
+
+_CAMERA_FORMS = "'fit', 'follow', 'orbit', ('follow', particle_index) or ('orbit', degrees_per_second)"
+
+
+def _check_camera(camera: Any, dim: int, n: int) -> tuple[str, Any]:
+    """(mode, parameter): ("fit", None), ("follow", None or a particle index in [0, n)),
+    ("orbit", None or finite degrees per second of playback); orbit needs a 3D scene (`dim`)."""
+    if isinstance(camera, str):
+        mode, param = camera, None
+    elif isinstance(camera, (tuple, list)) and len(camera) == 2 and isinstance(camera[0], str):
+        mode, param = camera
+    elif isinstance(camera, (tuple, list)):
+        raise InvalidInputError(f"camera must be {_CAMERA_FORMS}; got {_short(camera)}")
+    else:
+        raise InvalidTypeError(f"camera must be a str or a (str, number) pair, got {type(camera).__name__} {_short(camera)}")
+    if mode not in CAMERAS or (mode == "fit" and not isinstance(camera, str)):
+        raise InvalidInputError(f"camera must be {_CAMERA_FORMS}; got {_short(camera)}")
+    if mode == "orbit" and dim != 3:
+        raise InvalidInputError(f"camera='orbit' turns a 3D view; this scene is {dim}D (use 'fit' or 'follow')")
+    if param is None:
+        return mode, None
+    if mode == "follow":
+        index = _check_int("camera's particle index", param, 0)
+        if index >= n:
+            raise InvalidInputError(f"camera: particle index {index} is out of range for {n} particles")
+        return mode, index
+    if isinstance(param, (bool, np.bool_)) or not isinstance(param, (int, float, np.integer, np.floating)):
+        raise InvalidTypeError(f"camera: ('orbit', degrees_per_second) needs a number, got {_short(param)}")
+    rate = _check.real("camera", param)
+    if not math.isfinite(rate):
+        raise InvalidInputError(f"camera: the orbit's degrees per second must be finite, got {_short(param)}")
+    return mode, rate
+
+
+def _check_arrows(arrows: Any) -> str | None:
+    """None (no arrows) or "velocity" / "acceleration"."""
+    if arrows is None:
+        return None
+    if not isinstance(arrows, str):
+        raise InvalidTypeError(f"arrows must be a str or None, got {type(arrows).__name__} {_short(arrows)}")
+    if arrows not in ARROWS:
+        raise InvalidInputError(f"arrows must be one of {', '.join(repr(a) for a in ARROWS)} or None; got {_short(arrows)}")
+    return None if arrows == "none" else arrows
+
+
 def _check_path(path: Any, fmt: str = "gif") -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
@@ -150,9 +197,10 @@ def _check_auto_substeps(scene: Any, frame_time: float) -> None:
         )
 
 
-def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool) -> None:
+def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool, velocities: bool = False) -> None:
     """Refuse, before simulating, an animation whose recording and frames would not fit in
-    memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size."""
+    memory (:func:`physcore._check.memory_limit`). InvalidInputError naming frames and size.
+    `velocities`: the recording holds them too (arrows)."""
     n = int(getattr(scene, "n_particles", 0))
     m = 0
     if springs and callable(getattr(scene, "spring_pairs", None)):
@@ -160,7 +208,7 @@ def _check_memory(scene: Any, frames: int, size: tuple[int, int], springs: bool)
     dim = int(getattr(scene, "dim", 3))
     # float32 positions, speed, pressure per particle and strain per spring; the palette-index
     # buffer and its Pillow image per frame.
-    per_frame = 4 * n * (dim + 2) + 4 * m + 2 * size[0] * size[1]
+    per_frame = 4 * n * (dim + 2) + 4 * m + 2 * size[0] * size[1] + (4 * n * dim if velocities else 0)
     # A grid's recorded field (float32, one 2D slice) and a fluid's tracers.
     grids = getattr(scene, "grids", ())
     cells = 0

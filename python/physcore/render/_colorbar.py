@@ -3,7 +3,9 @@ The camera keeps a band at the top free of particles for it, so it never hides a
 scale is fixed over the animation it is drawn once, into the background."""
 from __future__ import annotations
 
-from typing import NamedTuple
+import functools
+import math
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -24,6 +26,7 @@ class _ColorBarLayout(NamedTuple):
     hi_x: int  # left pixel column of `hi`
     text_y: int  # top row of the labels' text cell
     band: int  # rows [0, band) hold the colour bar
+    px: int | None = None  # the labels' font size (None: the bitmap font), see _text_mask
 
 
 def _font():
@@ -34,22 +37,128 @@ def _font():
     return load() if load is not None else ImageFont.load_default()
 
 
-def _text_mask(text: str) -> np.ndarray:
-    """(11, width) bool pixels of `text` in the default bitmap font."""
+#: Label font size (px) at 480x360 (:func:`_label_px`); smaller ones than _MIN_LABEL_PX use the
+#: bitmap font, whose digits are about as tall.
+_LABEL_PX = 13
+_MIN_LABEL_PX = 11
+
+
+@functools.cache
+def _freetype(px: int) -> Any:
+    """Pillow's default FreeType font at `px` pixels, or None without FreeType (Pillow built
+    without it, or older than 10.1: ``load_default`` takes no size)."""
+    from PIL import ImageFont, features
+
+    try:
+        if not features.check_module("freetype2"):
+            return None
+        font = ImageFont.load_default(size=px)
+    except (TypeError, OSError, ImportError, ValueError):
+        return None
+    return font if isinstance(font, ImageFont.FreeTypeFont) else None
+
+
+def _label_px(size: tuple[int, int]) -> int | None:
+    """Font size of the labels (colour bar, clock, title, scale bar) in an image of `size`
+    (width, height): 13 px at 480x360, growing as the square root of the shorter side (15 at
+    640x480, 23 at 1920x1080); None, the bitmap font, where that is below 11 px (a shorter side
+    under about 235 px) or FreeType is missing."""
+    px = int(round(_LABEL_PX * math.sqrt(min(size) / 360.0)))
+    return px if px >= _MIN_LABEL_PX and _freetype(px) is not None else None
+
+
+@functools.lru_cache(maxsize=1024)
+def _text_mask(text: str, px: int | None = None) -> np.ndarray:
+    """(rows, width) bool pixels of `text`, read-only (cached per string and size): the bitmap
+    font's 11-row cell (`px` None), or Pillow's default FreeType font at `px` pixels rendered
+    without antialiasing (hinted monochrome glyphs: crisp in a palette image) on a line cell
+    cut like the bitmap one, digits starting on row 2 (see :func:`_digit_rows`). Every string
+    of one font has the same number of rows. The FreeType font has ASCII and a few more (°,
+    ±): other letters lose their accents (É as E), and what is left shows as "?"; nothing
+    raises."""
     from PIL import Image, ImageDraw
 
-    font = _font()
-    x0, y0, x1, y1 = font.getbbox(text)
-    im = Image.new("L", (max(int(x1), 1), max(int(y1), 1)), 0)
-    ImageDraw.Draw(im).text((0, 0), text, fill=255, font=font)
-    return np.asarray(im) > 127
+    font = _font() if px is None else _freetype(px)
+    if font is None:
+        return _text_mask(text, None)
+    if px is None:
+        x0, y0, x1, y1 = font.getbbox(text)
+        im = Image.new("L", (max(int(x1), 1), max(int(y1), 1)), 0)
+        ImageDraw.Draw(im).text((0, 0), text, fill=255, font=font)
+        mask = np.asarray(im) > 127
+    else:
+        text = _folded(text, px)
+        x0, y0, x1, y1 = font.getbbox(text)
+        ascent, descent = font.getmetrics()
+        top = max(int(font.getbbox("0")[1]) - 2, 0)  # two blank rows above the digits
+        left = max(-int(x0), 0)  # a glyph hanging left of the origin (a "t" at some sizes)
+        # Hinted monochrome glyphs can be wider than the bounding box Pillow reports: drawn on
+        # a wider canvas, then cut after the last inked column.
+        im = Image.new("L", (int(x1) + left + 2 * px + 2 * len(text), ascent + descent - top), 0)
+        draw = ImageDraw.Draw(im)
+        draw.fontmode = "1"  # no antialiasing
+        draw.text((left, -top), text, fill=255, font=font)
+        mask = np.asarray(im) > 127
+        cols = np.nonzero(mask.any(axis=0))[0]
+        mask = mask[:, : cols[-1] + 1 if cols.size else 1]
+    mask.flags.writeable = False
+    return mask
 
 
-def _draw_text(buf: np.ndarray, text: str, x: int, y: int, ink: int, box: int, below: int = 0) -> None:
-    """`text` with its top-left corner at (x, y) in palette index `ink`, on a box of index `box`
-    two pixels wider each side and one above (`below` rows more underneath): the clock, the
-    title and the field labels all read on any background this way."""
-    m = _text_mask(text)
+@functools.cache
+def _glyphs(px: int) -> frozenset:
+    """The characters up to U+00FF that the FreeType font of `px` pixels draws (not as its box
+    glyph, the one of U+FFFF)."""
+    from PIL import Image, ImageDraw
+
+    font = _freetype(px)
+
+    def ink(c: str) -> bytes:
+        im = Image.new("1", (3 * px, 2 * px), 0)
+        ImageDraw.Draw(im).text((px // 2, 0), c, fill=1, font=font)
+        return im.tobytes()
+
+    box = ink("\uffff")
+    return frozenset(c for c in map(chr, range(32, 256)) if c.isprintable() and (c == " " or ink(c) != box))
+
+
+_FOLD = {"ß": "ss", "æ": "ae", "Æ": "AE", "ø": "o", "Ø": "O", "œ": "oe", "Œ": "OE", "ð": "d", "Ð": "D", "þ": "th", "Þ": "Th"}
+
+
+def _folded(text: str, px: int) -> str:
+    """`text` in the characters the FreeType font of `px` pixels has: accents dropped
+    (Unicode's compatibility decomposition), a few letters spelt out (ß as ss), anything else
+    as "?"."""
+    import unicodedata
+
+    have = _glyphs(px)
+    if all(c in have for c in text):
+        return text
+    out = []
+    for c in text:
+        if c in have:
+            out.append(c)
+            continue
+        base = _FOLD.get(c) or "".join(b for b in unicodedata.normalize("NFKD", c) if not unicodedata.combining(b))
+        out.append(base if base and all(b in have for b in base) else "?")
+    return "".join(out)
+
+
+@functools.cache
+def _digit_rows(px: int | None = None) -> tuple[int, int]:
+    """First and last row of a digit's ink in :func:`_text_mask` cells of font `px` (the
+    bitmap font: rows 2 to 8)."""
+    rows = np.nonzero(_text_mask("0", px).any(axis=1))[0]
+    return int(rows[0]), int(rows[-1])
+
+
+def _draw_text(buf: np.ndarray, text: str, x: int, y: int, ink: int, box: int, below: int = 0,
+               px: int | None = None) -> None:
+    """`text` (font `px`, see :func:`_text_mask`) with its top-left corner at (x, y) in palette
+    index `ink`, on a box of index `box` two pixels wider each side and one above (`below` rows
+    more underneath): the clock, the title and the field labels all read on any background
+    this way."""
+    m = _text_mask(text, px)
     buf[max(y - 1, 0) : y + m.shape[0] + below, max(x - 2, 0) : x + m.shape[1] + 2] = box
     region = buf[y : y + m.shape[0], x : x + m.shape[1]]
     region[m[: region.shape[0], : region.shape[1]]] = ink
@@ -77,7 +186,8 @@ def _colorbar_labels(color_by: str, vmax: float, speed_unit: str = "m/s") -> tup
 def _colorbar_layout(size: tuple[int, int], lo: str, hi: str) -> _ColorBarLayout | None:
     """Where the colour bar goes in an image of `size`, or None if it would not fit legibly."""
     w, h = size
-    lo_mask, hi_mask = _text_mask(lo), _text_mask(hi)
+    px = _label_px(size)
+    lo_mask, hi_mask = _text_mask(lo, px), _text_mask(hi, px)
     lo_w, hi_w = lo_mask.shape[1], hi_mask.shape[1]
     text_y = _CB_MARGIN - 1  # the font's cell has 2 blank rows above the digits
     band = text_y + max(lo_mask.shape[0], hi_mask.shape[0]) + 2
@@ -91,7 +201,7 @@ def _colorbar_layout(size: tuple[int, int], lo: str, hi: str) -> _ColorBarLayout
     hi_x = w - _CB_MARGIN - hi_w
     strip_x = hi_x - _CB_GAP - 1 - length
     lo_x = strip_x - 1 - _CB_GAP - lo_w
-    return _ColorBarLayout(lo, hi, lo_x, strip_x, length, hi_x, text_y, band)
+    return _ColorBarLayout(lo, hi, lo_x, strip_x, length, hi_x, text_y, band, px)
 
 
 def _draw_colorbar(buf: np.ndarray, bar: _ColorBarLayout, base: int, levels: int) -> None:
@@ -99,11 +209,12 @@ def _draw_colorbar(buf: np.ndarray, bar: _ColorBarLayout, base: int, levels: int
     # Clear its box (a collider's shading may reach the top of the image).
     buf[: bar.band, max(bar.lo_x - 2, 0) :] = _BACKGROUND
     for text, x in ((bar.lo, bar.lo_x), (bar.hi, bar.hi_x)):
-        mask = _text_mask(text)
+        mask = _text_mask(text, bar.px)
         region = buf[bar.text_y : bar.text_y + mask.shape[0], x : x + mask.shape[1]]
         region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
-    # Strip over the digits' rows (2..8 of the font cell), outlined.
-    top, bottom = bar.text_y + 1, bar.text_y + 9  # outline rows
+    # Strip over the digits' rows (2..8 of the bitmap font's cell), outlined.
+    d0, d1 = _digit_rows(bar.px)
+    top, bottom = bar.text_y + d0 - 1, bar.text_y + d1 + 1  # outline rows
     x0, x1 = bar.strip_x - 1, bar.strip_x + bar.length  # outline columns
     buf[top : bottom + 1, x0 : x1 + 1] = _TEXT
     c = np.arange(bar.length)

@@ -13,6 +13,8 @@ from .._atomic import atomic_write
 from .._errors import InvalidInputError, InvalidTypeError
 from . import _recording
 from ._checks import (
+    _check_arrows,
+    _check_camera,
     _check_color_by,
     _check_fps,
     _check_int,
@@ -24,6 +26,7 @@ from ._checks import (
     _check_writable,
     _short,
 )
+from ._mesh import check_mesh, check_texture
 from ._palette import _PALETTE, THEMES, theme_palette
 from ._raster import _Rasteriser
 
@@ -48,6 +51,11 @@ def gif(
     size_by: str | None = None,
     theme: str | None = None,
     title: str | None = None,
+    camera: str | tuple | None = None,
+    arrows: str | None = None,
+    mesh: Any = None,
+    texture: Any = None,
+    antialias: bool | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -61,7 +69,8 @@ def gif(
     1/30 s of simulated time per frame, so it plays in real time. `frames`, `fps`, `size` and
     `color_by` default to the scene's ``render_defaults`` too (else 90, 30, (480, 360), "speed"). The scene is left at the last frame's state. The whole
     run is simulated before anything is drawn, and a single camera is fitted to all frames (and to
-    the scene's boundary particles), so the view does not move.
+    the scene's boundary particles), so the view does not move (``camera="fit"``; ``"follow"``
+    and ``"orbit"`` move it, see `camera`).
 
     Parameters
     ----------
@@ -152,9 +161,56 @@ def gif(
         Default: the scene's ``render_defaults`` (galaxies, attractors: "dark"), else "light".
     title : str, optional
         A caption in the top-left corner of particle animations (one line, up to 200
-        characters; cut with "..." where it would run into the colour bar; the bitmap font has
-        Latin-1 only, other characters show as "?"). Default: the scene's ``render_defaults``,
-        else none.
+        characters; cut with "..." where it would run into the colour bar; Latin-1 only, other
+        characters show as "?", and the font of images 235 pixels and more on their shorter side
+        shows accented letters without their accents). Default: the scene's
+        ``render_defaults``, else none.
+    camera : str or tuple, optional
+        How the view moves. ``"fit"``: one camera fitted to every frame, still. ``"follow"``:
+        the view's centre tracks the centre of mass of the moving (non-pinned) particles, or
+        with ``("follow", i)`` particle ``i``, along that target's projected path smoothed by
+        a Gaussian of σ = ``FOLLOW_SMOOTHING`` (0.1) s of playback: centred, so there is no lag
+        on straight or steady motion, and each frame's step is a weighted mean of the target's
+        steps, so the view never jumps further in a frame than the target does (a jump of the
+        target is spread over about half a second). The scale is fixed, zoomed in on the
+        fitted view (up to ``FOLLOW_MAX_ZOOM``, 4×) until the moving particles' spread around
+        the target fits (95 % of them above 20 particles); colliders and boundary particles
+        pass by behind, the labels stay put over everything. ``"orbit"`` (3D only): the
+        azimuth turns by 360°/`frames` a frame from ``view``'s (one full turn over the
+        animation, looping), or with ``("orbit", degrees_per_second)`` at that rate of
+        playback, about the vertical axis through the middle of the scene, at one scale that
+        holds every point at every azimuth. Default: the scene's ``render_defaults``, else
+        ``"fit"``.
+    arrows : {"none", "velocity", "acceleration"}, optional
+        Draw arrows on the moving particles (every one up to 64; else a fixed subset of at
+        most ``MAX_ARROWS``, 300, one per square of an arrow's length of the image, so they
+        seldom overlap): their velocity, or their acceleration (the net force per unit mass), which is the central difference of the recorded velocities,
+        (v[k+1] − v[k−1]) / (t[k+1] − t[k−1]), one-sided at the first and last frame. Arrows
+        show the projection onto the image, in one colour, with lengths proportional to the
+        magnitude, fixed over the animation: the run's 95th percentile is 1/12 of the image's
+        shorter side (longer ones stop at three times that; under 2 pixels none is drawn).
+        The recording needs velocities (``record(..., velocities=True)``); a scene records
+        them. Default: the scene's ``render_defaults``, else none.
+    mesh : physcore.render.Mesh, (T, 3) int array, or False, optional
+        Draw these triangles over the particles as a shaded surface: per-vertex normals,
+        Lambert diffuse plus a Blinn–Phong highlight from a light at the viewer's upper left,
+        interpolated over each triangle (Gouraud shading), the back side in a second colour,
+        nearer surfaces in front (a depth buffer), edges antialiased with 2×2 samples per
+        pixel. Springs between mesh particles are not drawn; pinned particles stay discs on
+        top. ``color_by`` "speed", "pressure" or "strain" (each vertex the mean strain of its
+        springs) colours the surface; "none" gives a plain fabric colour. Default: the scene's
+        ``render_defaults`` (``scenes.cloth`` has its grid, :meth:`Mesh.grid`); False: none.
+        Not with ``color_by="density"``. Frames with a mesh are drawn in full colour; a GIF then
+        gets one adaptive 256-colour palette for the whole animation.
+    texture : str, os.PathLike or (H, W, 3) uint8 array, optional
+        An image mapped onto the mesh by its texture coordinates (``Mesh.uv``; a grid mesh has
+        them), shaded like the plain surface. Needs a mesh with uv.
+    antialias : bool, optional
+        Draw the discs with soft edges: each pixel blended by the fraction of it the disc
+        covers (the discs in full colour; a GIF then gets one adaptive 256-colour palette).
+        Default: the scene's ``render_defaults`` (the ready-made particle scenes have it on),
+        else False: hard-edged discs in the fixed palette, the smallest GIFs. Glow and shaded
+        surfaces are antialiased whatever this says.
 
     Returns
     -------
@@ -170,8 +226,9 @@ def gif(
         (a ``ValueError``) An invalid value, naming it, including an animation too large for
         memory (naming frames and size). Raised before the scene is stepped or a file is made.
         ValueError also covers ``color_by="pressure"`` on a scene without ``pressure()`` (or
-        whose ``pressure()`` raises AttributeError), and `frame_time` on a scene without
-        ``advance``.
+        whose ``pressure()`` raises AttributeError), `frame_time` on a scene without
+        ``advance``, ``camera="orbit"`` on a 2D scene, a followed particle index out of range,
+        `arrows` on a recording without velocities and ``arrows="acceleration"`` with one frame.
     physcore.SimulationDiverged
         If the simulation diverges; no file is written (the scene is rolled back to the last
         good state of the failing ``step``/``advance`` call by the scene itself).
@@ -190,12 +247,13 @@ def gif(
     return _render(scene, path, "gif", frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time,
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
-                   title=title)
+                   title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
-            "springs", "view", "progress", "trail", "size_by", "theme", "title")
+            "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
+            "antialias")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -206,7 +264,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title) = (bound.arguments[k] for k in _OPTIONS)
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias) = (bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
     if isinstance(scene, _recording.Recording):
@@ -236,9 +294,30 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     colorbar = _check.flag("colorbar", colorbar)
     springs = _check.flag("springs", springs)
     progress = _check.flag("progress", progress)
+    arrows_given = arrows is not None
+    arrows = _check_arrows(d.get("arrows") if arrows is None else arrows)
+    camera = d.get("camera", "fit") if camera is None else camera
+    mesh_given = mesh is not None
+    mesh = d.get("mesh") if mesh is None else mesh
+    if color_by == "density" and mesh is not None and mesh is not False:
+        if mesh_given:
+            raise InvalidInputError("mesh: color_by='density' (glow) draws no surface; give another color_by or mesh=False")
+        mesh = None  # the scene's default surface gives way to a requested glow
+    texture = d.get("texture") if texture is None else texture
+    n_points = scene.positions.shape[1] if isinstance(scene, _recording.Recording) else int(getattr(scene, "n_particles", 0))
+    mesh = check_mesh(mesh, n_points)
+    texture = check_texture(texture, mesh)
+    antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
+        camera = _check_camera(camera, rec.positions.shape[2], rec.positions.shape[1])
+        if arrows is not None and rec.velocities is None:
+            if arrows_given:
+                raise InvalidInputError(f"arrows={arrows!r}: the recording holds no velocities; record(..., velocities=True)")
+            arrows = None  # the scene's default, which this recording was made without
+        if arrows == "acceleration" and rec.frames < 2:
+            raise InvalidInputError("arrows='acceleration' differences the velocities of two frames or more; this recording has 1")
         given = [a for a, v in (("frames", frames), ("steps_per_frame", steps_per_frame), ("frame_time", frame_time), ("substeps", substeps)) if v is not None]
         if given:
             raise InvalidInputError(f"{given[0]}: a Recording is already simulated; give it to record() instead")
@@ -253,8 +332,11 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             _check_writable(path)
     else:
         scene = _recording.points_view(scene)
-        plan = _recording._plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
-        _check_memory(scene, plan["frames"], size, springs)
+        camera = _check_camera(camera, int(getattr(scene, "dim", 0)), int(getattr(scene, "n_particles", 0)))
+        plan = _recording._plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, arrows is not None)
+        if arrows == "acceleration" and plan["frames"] < 2:
+            raise InvalidInputError("arrows='acceleration' differences the velocities of two frames or more; give frames >= 2")
+        _check_memory(scene, plan["frames"], size, springs, arrows is not None)
         if path is not None:
             _check_writable(path)
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
@@ -269,7 +351,12 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         return _emit(fmt, path, (fr.frame(k) for k in range(rec.frames)), palette(rec.field_style), fps, rec.frames)
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
-                      title=title or None)
+                      title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
+                      antialias=antialias)
+    if mesh is not None or ras.antialias:
+        if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
+            _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
+        return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), theme_palette(theme), fps, rec.frames)
 
 
@@ -278,13 +365,18 @@ FORMATS = {".gif": "gif", ".mp4": "mp4", ".webm": "webm", ".png": "png"}
 _VIDEO_INSTALL = 'pip install "physcore[video]"'
 
 
-def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray, fps: float, count: int) -> Any:
+def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | None, fps: float, count: int) -> Any:
     """Writes (or yields) the palette-index frames in `fmt`: "gif", "mp4", "webm", "png" (one
-    file per frame) or "frames" (an iterator of RGB arrays)."""
+    file per frame) or "frames" (an iterator of RGB arrays). `colours` None: the frames are
+    (H, W, 3) uint8 RGB already (shaded meshes)."""
     if fmt == "gif":
-        _write_gif(path, index_frames, _gif_delays_ms(fps, count), colours)
+        if colours is None:
+            _write_gif_rgb(path, list(index_frames), _gif_delays_ms(fps, count))
+        else:
+            _write_gif(path, index_frames, _gif_delays_ms(fps, count), colours)
         return path
-    rgb = (colours[idx] for idx in index_frames)  # (H, W) uint8 indices -> (H, W, 3) uint8
+    # (H, W) uint8 indices -> (H, W, 3) uint8
+    rgb = index_frames if colours is None else (colours[idx] for idx in index_frames)
     if fmt == "frames":
         return rgb
     if fmt == "png":
@@ -402,6 +494,56 @@ def _gif_delays_ms(fps: float, frames: int) -> list[int]:
     step = min(max(100.0 / fps, 2.0), 65535.0)  # before rounding: 100/fps is inf for a subnormal fps
     starts = [round(k * step) for k in range(frames + 1)]
     return [10 * (b - a) for a, b in zip(starts[:-1], starts[1:], strict=True)]
+
+
+def _palette_frames(rgb: list[np.ndarray]) -> tuple[list[Any], bytes]:
+    """Full-colour (H, W, 3) uint8 frames as 'P' images on one palette of 256 colours for the
+    whole animation (so that colours do not flicker from frame to frame), made from up to 8
+    frames spread through it: their 16 most frequent colours exactly (the background, text and
+    other flat colours stay exact) and 240 by median cut. Each frame is mapped to its nearest
+    colours without dithering (dither noise would change every frame and cost bytes). Returns
+    the images and the palette's 768 bytes."""
+    from PIL import Image
+
+    weights = np.array([65536, 256, 1], dtype=np.int64)
+    picks = np.unique(np.linspace(0, len(rgb) - 1, min(8, len(rgb))).round().astype(int))
+    sample = np.concatenate([rgb[k] for k in picks], axis=0)
+    values, counts = np.unique(sample.reshape(-1, 3).astype(np.int64) @ weights, return_counts=True)
+    top = values[np.argsort(counts, kind="stable")[::-1][:16]]
+    exact = np.stack([top >> 16, (top >> 8) & 255, top & 255], axis=1).astype(np.uint8)
+    adaptive = Image.fromarray(sample).quantize(256 - len(exact), method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    colours = exact.tobytes() + bytes(adaptive.getpalette()[: 3 * (256 - len(exact))])
+    colours += bytes(768 - len(colours))
+    palette_image = Image.new("P", (1, 1))
+    palette_image.putpalette(colours)
+    # Pillow maps to a palette through a coarse colour cache (a near-white background can come
+    # out as a neighbouring entry), so the exact colours are put back by their packed value.
+    order = np.argsort(top)
+    top_sorted = top[order]
+
+    def mapped(frame: np.ndarray) -> Any:
+        q = np.array(Image.fromarray(frame).quantize(palette=palette_image, dither=Image.Dither.NONE))
+        key = frame.astype(np.int64) @ weights
+        pos = np.minimum(np.searchsorted(top_sorted, key), len(top_sorted) - 1)
+        hit = top_sorted[pos] == key
+        q[hit] = order[pos[hit]]
+        im = Image.fromarray(q)  # 'L' from the uint8 indices; putpalette makes it 'P'
+        im.putpalette(colours)
+        return im
+
+    return [mapped(f) for f in rgb], colours
+
+
+def _write_gif_rgb(path: Path, rgb: list[np.ndarray], duration_ms: list[int]) -> None:
+    """A GIF of full-colour frames (shaded surfaces, soft discs) on one palette (see
+    :func:`_palette_frames`), written atomically."""
+    images, colours = _palette_frames(rgb)
+    atomic_write(
+        path,
+        lambda fh: images[0].save(
+            fh, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0, palette=colours
+        ),
+    )
 
 
 def _write_gif(path: Path, index_frames, duration_ms: list[int], colours: Any = None) -> None:

@@ -31,7 +31,8 @@ _N_TRAIL = 8  # trail shades, oldest (palest) first
 _TRAIL0 = _PRESSURE0 + _N_PRESSURE
 _N_GLOW = 32  # color_by="density": brightness of the accumulated particle density, 0 = background (32: half the GIF bytes of 64, no visible banding under the blur)
 _GLOW0 = _TRAIL0 + _N_TRAIL
-_PALETTE_SIZE = _GLOW0 + _N_GLOW
+_ARROW = _GLOW0 + _N_GLOW  # gif(arrows=...): velocity or acceleration arrows
+_PALETTE_SIZE = _ARROW + 1
 
 # viridis sampled at 9 points in [0, 1]; interpolated linearly and cut at 0.9 because its
 # brightest yellow hardly shows on the white background.
@@ -87,7 +88,8 @@ def _build_palette() -> np.ndarray:
     for k, a in enumerate(np.linspace(0.1, 0.55, _N_TRAIL)):
         pal[_TRAIL0 + k] = (1 - a) * np.array([255.0, 255.0, 255.0]) + a * slate
     # Density glow on paper: white through sky and ink blue to near black.
-    pal[_GLOW0:] = _sample_map(np.array([[255.0, 255, 255], [150, 185, 235], [45, 80, 170], [20, 30, 80], [5, 8, 25]]), 1.0, _N_GLOW)
+    pal[_GLOW0 : _GLOW0 + _N_GLOW] = _sample_map(np.array([[255.0, 255, 255], [150, 185, 235], [45, 80, 170], [20, 30, 80], [5, 8, 25]]), 1.0, _N_GLOW)
+    pal[_ARROW] = (200, 0, 110)  # a deep magenta: apart from the speed, pressure and strain maps
     assert _WALL == _STRAIN0 + 2 * half + 1 and pal.shape[0] <= 256
     return np.round(pal).astype(np.uint8)
 
@@ -116,7 +118,8 @@ def _build_dark_palette() -> np.ndarray:
     for k, a in enumerate(np.linspace(0.12, 0.6, _N_TRAIL)):
         pal[_TRAIL0 + k] = (1 - a) * night + a * pale
     # Density glow at night: from the sky through deep blue and cyan to white, like starlight.
-    pal[_GLOW0:] = _sample_map(np.array([night, [40, 55, 140], [80, 140, 240], [170, 215, 255], [255, 255, 255]]), 1.0, _N_GLOW)
+    pal[_GLOW0 : _GLOW0 + _N_GLOW] = _sample_map(np.array([night, [40, 55, 140], [80, 140, 240], [170, 215, 255], [255, 255, 255]]), 1.0, _N_GLOW)
+    pal[_ARROW] = (255, 110, 200)
     return np.round(pal).astype(np.uint8)
 
 

@@ -5,10 +5,19 @@ animation."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
-from ._camera import _Camera, _screen_bounds
+from ._camera import (
+    FOLLOW_MAX_ZOOM,
+    FOLLOW_SMOOTHING,
+    _Camera,
+    _follow_centres,
+    _orbit_bounds,
+    _screen_bounds,
+    _view_basis,
+)
 from ._colorbar import (
     _CB_MARGIN,
     _colorbar_labels,
@@ -16,9 +25,12 @@ from ._colorbar import (
     _draw_colorbar,
     _draw_text,
     _format_value,
+    _label_px,
     _text_mask,
 )
+from ._mesh import Mesh, _MeshShader
 from ._palette import (
+    _ARROW,
     _BACKGROUND,
     _GLOW0,
     _N_GLOW,
@@ -39,6 +51,7 @@ from ._palette import (
     STRAIN_SATURATION,
     _scalar_levels,
     _strain_levels,
+    theme_palette,
 )
 from ._recording import Recording
 from ._rows import _row_norms
@@ -161,15 +174,116 @@ def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
         flat[(rr * w + cc)[inside]] = np.broadcast_to(colors[edge][:, None], rr.shape)[inside]
 
 
-def _draw_title(buf: np.ndarray, title: str, right: int) -> None:
+#: ``gif(arrows=...)``: at most this many arrows a frame, on a fixed, evenly spread subset of the
+#: moving particles (all of them up to _ALL_ARROWS).
+MAX_ARROWS = 300
+_ALL_ARROWS = 64
+
+
+def _acceleration(v: np.ndarray, times: np.ndarray | None) -> np.ndarray:
+    """(F, K, dim) accelerations from (F, K, dim) velocities recorded at (F,) `times`: central
+    differences (v[k+1] − v[k−1]) / (t[k+1] − t[k−1]) (the scenes have no force read-out),
+    one-sided at the first and last frame. Frame numbers stand in for missing or non-increasing
+    times (arrows need only directions and ratios). Zeros for a single frame."""
+    f = len(v)
+    if f < 2:
+        return np.zeros_like(v)
+    t = np.arange(f, dtype=np.float64)
+    if times is not None and np.isfinite(times).all() and np.all(np.diff(times) > 0):
+        t = np.asarray(times, dtype=np.float64)
+    a = np.empty_like(v)
+    with np.errstate(over="ignore", invalid="ignore"):
+        a[1:-1] = (v[2:] - v[:-2]) / (t[2:] - t[:-2])[:, None, None]
+        a[0] = (v[1] - v[0]) / (t[1] - t[0])
+        a[-1] = (v[-1] - v[-2]) / (t[-1] - t[-2])
+    return a
+
+
+def _arrow_subset(rec: Recording, cams: Any, cell: float) -> np.ndarray:
+    """(K,) sorted indices of the particles that carry arrows, the same in every frame: every
+    moving one up to _ALL_ARROWS; else one per `cell`-pixel square of the image (the nearest its
+    middle), at whichever of the first, middle and last frame (seen through ``cams(k)``) that
+    covers the most squares, so that arrows about `cell` long seldom overlap; at most
+    MAX_ARROWS, thinned evenly."""
+    moving = np.flatnonzero(~rec.pinned)
+    if moving.size <= _ALL_ARROWS:
+        return moving
+    best = moving[:0]
+    for k in sorted({0, rec.frames // 2, rec.frames - 1}):
+        cam = cams(k)
+        col, row = cam.pixels(cam.project(rec.positions[k][moving])[0])
+        ok = (col >= 0) & (col < cam.width) & (row >= 0) & (row < cam.height)  # False for NaN
+        cx, cy = np.floor(col[ok] / cell), np.floor(row[ok] / cell)
+        square = cy * (cam.width // cell + 1) + cx
+        off = (col[ok] / cell - cx - 0.5) ** 2 + (row[ok] / cell - cy - 0.5) ** 2
+        order = np.lexsort((off, square))  # by square, nearest its middle first
+        first = order[np.r_[True, square[order][1:] != square[order][:-1]]] if order.size else order
+        if first.size > best.size:
+            best = moving[ok][first]
+    if best.size > MAX_ARROWS:
+        best = best[np.unique(np.linspace(0, best.size - 1, MAX_ARROWS).round().astype(np.int64))]
+    return np.sort(best)
+
+
+def _arrow_vectors(rec: Recording, arrows: str, ref_px: float, pick: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """What ``arrows`` draws, fixed over the animation: the (K,) particles `pick` carrying them,
+    their (F, K, dim) float32 velocities or accelerations in pixels (the run's 95th-percentile
+    magnitude is `ref_px` long), and the longest arrow drawn (3 `ref_px`). None when nothing
+    moves or no velocities were recorded."""
+    if rec.velocities is None or pick.size == 0:
+        return None
+    vec = rec.velocities[:, pick].astype(np.float64)
+    if arrows == "acceleration":
+        vec = _acceleration(vec, rec.times)
+    with np.errstate(over="ignore", invalid="ignore"):
+        mag = _row_norms(vec.reshape(-1, vec.shape[-1]))
+    mag = mag[np.isfinite(mag)]
+    ref = float(np.percentile(mag, 95)) if mag.size else 0.0
+    if not (ref > 0 and math.isfinite(ref)):
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):
+        return pick, (vec * (ref_px / ref)).astype(np.float32), 3.0 * ref_px
+
+
+_HEAD_COS, _HEAD_SIN = math.cos(math.radians(25.0)), math.sin(math.radians(25.0))
+
+
+def _draw_arrows(buf: np.ndarray, cam: _Camera, x: np.ndarray, vec: np.ndarray, cap: float) -> None:
+    """Arrows from the (K, dim) points `x` along their (K, dim) vectors `vec` (in pixels) as
+    `cam` projects them: a shaft from the point and a head of two strokes at ±25°, in the arrow
+    colour. Longer than `cap` pixels: drawn `cap` long; shorter than 2 pixels: left out."""
+    s, _ = cam.project(x)
+    c0, r0 = cam.pixels(s)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        d = vec.astype(np.float64) @ cam.basis[:, :2]
+        dc, dr = d[:, 0], -d[:, 1]  # rows grow downwards
+        length = np.hypot(dc, dr)
+        shrink = np.minimum(1.0, cap / length)
+    ok = np.isfinite(c0) & np.isfinite(r0) & np.isfinite(length) & (length >= 2.0)
+    if not ok.any():
+        return
+    c0, r0, length, shrink = c0[ok], r0[ok], length[ok], shrink[ok]
+    dc, dr = dc[ok] * shrink, dr[ok] * shrink
+    length = length * shrink
+    c1, r1 = c0 + dc, r0 + dr
+    head = np.minimum(np.clip(0.3 * length, 3.0, 8.0), length)
+    bx, by = -dc / length * head, -dr / length * head  # back along the shaft, head long
+    hc = np.concatenate([c1 + bx * _HEAD_COS - by * _HEAD_SIN, c1 + bx * _HEAD_COS + by * _HEAD_SIN])
+    hr = np.concatenate([r1 + bx * _HEAD_SIN + by * _HEAD_COS, r1 - bx * _HEAD_SIN + by * _HEAD_COS])
+    starts_c, starts_r = np.concatenate([c0, c1, c1]), np.concatenate([r0, r1, r1])
+    ends_c, ends_r = np.concatenate([c1, hc]), np.concatenate([r1, hr])
+    _draw_lines(buf, starts_c, starts_r, ends_c, ends_r, np.full(starts_c.shape, _ARROW, dtype=np.uint8))
+
+
+def _draw_title(buf: np.ndarray, title: str, right: int, font_px: int | None = None) -> None:
     """`title` at the top left, in the text colour on a box of background, cut with "..." to end
-    before column `right` (the colour bar's left edge). The bitmap font has Latin-1 only: other
-    characters are drawn as "?"."""
+    before column `right` (the colour bar's left edge); font `font_px` (see :func:`_text_mask`).
+    Latin-1 only: other characters are drawn as "?"."""
     text = shown = title.encode("latin-1", "replace").decode("latin-1")
-    while _text_mask(shown).shape[1] > right - _CB_MARGIN and len(text) > 1:
+    while _text_mask(shown, font_px).shape[1] > right - _CB_MARGIN and len(text) > 1:
         text = text[: max(1, len(text) - max(1, len(text) // 8))]
         shown = text.rstrip() + "..."
-    _draw_text(buf, shown, _CB_MARGIN, _CB_MARGIN - 1, _TEXT, _BACKGROUND, below=1)
+    _draw_text(buf, shown, _CB_MARGIN, _CB_MARGIN - 1, _TEXT, _BACKGROUND, below=1, px=font_px)
 
 
 def _scale_bar_length(px_per_unit: float, target_px: float) -> float:
@@ -179,11 +293,12 @@ def _scale_bar_length(px_per_unit: float, target_px: float) -> float:
     return min((m * 10.0**k for m in (1, 2, 5, 10)), key=lambda L: abs(math.log(L / raw)))
 
 
-def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str) -> tuple[float, int] | None:
+def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str, font_px: int | None = None) -> tuple[float, int] | None:
     """A scale bar in the bottom-right corner: a round length (1, 2 or 5 × 10^k, about a sixth of
     the width) as a line with end ticks, labelled ("50 cm", "2 m"; a bare number in a scene's own
-    units), on a box of background. The camera is orthographic, so in 3D it holds at every
-    depth. Returns (length, pixels), or None where it is left out (small images, no scale)."""
+    units; font `font_px`), on a box of background. The camera is orthographic, so in 3D it
+    holds at every depth. Returns (length, pixels), or None where it is left out (small images,
+    no scale)."""
     h, w = buf.shape
     if w < 100 or h < 80 or not (math.isfinite(px_per_unit) and px_per_unit > 0):
         return None
@@ -197,7 +312,7 @@ def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str) -> tuple[flo
         label = f"{_format_value(length * 1e3)} mm"
     else:
         label = f"{_format_value(length)} {unit}".rstrip()
-    mask = _text_mask(label)
+    mask = _text_mask(label, font_px)
     x1 = w - 6
     x0 = x1 - px
     y = h - 6  # the line's row
@@ -291,12 +406,27 @@ class _Rasteriser:
         size_by: str = "none",
         annotate: bool = False,
         title: str | None = None,
+        camera: tuple[str, Any] = ("fit", None),
+        arrows: str | None = None,
+        fps: float = 30.0,
+        mesh: Mesh | None = None,
+        texture: np.ndarray | None = None,
+        theme: str = "light",
+        antialias: bool = False,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
         each moving particle's path drawn behind it, fading (``gif(trail=...)``). `annotate`:
-        the clock and the scale bar along the bottom, with a band kept free for them (animations)."""
+        the clock and the scale bar along the bottom, with a band kept free for them (animations).
+        `camera`: (mode, parameter) as ``_check_camera`` returns it; `arrows`: None, "velocity"
+        or "acceleration" (needs ``rec.velocities``); `fps`: playback rate, which the follow
+        camera's smoothing and the orbit's turn rate are timed in (``gif(camera=..., arrows=...)``).
+        `mesh`, `texture`: a checked :class:`Mesh` drawn as a shaded surface by
+        :meth:`frame_rgb` (:meth:`frame` draws its particles as discs and springs), and its
+        (H', W', 3) float32 texture; `theme`: the palette (and surface colours) of frame_rgb;
+        `antialias`: frame_rgb draws the discs with soft edges (coverage-blended, in the core)."""
         n, dim = rec.positions.shape[1:]
+        mode, cam_param = camera
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
         self.radius = _auto_radius(n + (0 if walls is None else len(walls)), size) if radius is None else radius
@@ -329,7 +459,10 @@ class _Rasteriser:
         if size_by == "mass" and rec.masses is not None and len(rec.masses):
             grow = float(min(3.0, np.cbrt(rec.masses.max() / rec.masses.min())))
         pad = max(int(math.ceil(self.radius * grow)) + 2, int(round(0.05 * min(size))))
-        if fit is not None:
+        if mode == "orbit":
+            # One scale for every azimuth: the box that holds the scene however it turns.
+            axis, lo, hi, amax = _orbit_bounds(rec.positions, walls, view[1])
+        elif fit is not None:
             lo, hi, amax = _screen_bounds(self.cam, np.asarray(fit, dtype=np.float32)[None])
         else:
             lo, hi, amax = _screen_bounds(self.cam, rec.positions)
@@ -339,13 +472,32 @@ class _Rasteriser:
         # Keep the colour bar's band free: no disc reaches into it (nor into the title's).
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         w, h = size
+        self.font_px = _label_px(size)  # the labels' font (None: the small bitmap one)
+        line = _text_mask("0", self.font_px).shape[0]  # rows of a line of text (11: bitmap)
         self.title = title if title and w >= 100 and h >= 80 else None
         if self.title is not None:
-            top_pad = max(top_pad or pad, _CB_MARGIN + 12 + int(math.ceil(self.radius * grow)) + 1)
+            top_pad = max(top_pad or pad, _CB_MARGIN + line + 1 + int(math.ceil(self.radius * grow)) + 1)
         # Positions are float32 relative to the origin: extents below their rounding are zero.
         self.annotate = annotate and w >= 100 and h >= 80
-        bottom_pad = max(pad, 20 + int(math.ceil(self.radius * grow))) if self.annotate else None
+        bottom_pad = max(pad, line + 9 + int(math.ceil(self.radius * grow))) if self.annotate else None
         self.cam.fit(lo, hi, pad, tol=1e-6 * amax, top_pad=top_pad, bottom_pad=bottom_pad)
+        # Per-frame cameras (follow, orbit): (F, 2) screen-plane centres and, orbiting, (F, 3, 3)
+        # bases; None for the one fitted camera. The scale stays fixed, so the scale bar holds.
+        self._centres: np.ndarray | None = None
+        self._bases: np.ndarray | None = None
+        if mode == "follow":
+            centres, spread = _follow_centres(self.cam, rec.positions, rec.pinned, rec.masses, cam_param,
+                                              FOLLOW_SMOOTHING * fps)
+            avail = np.array([max(w - 2 * pad, 1), max(h - (bottom_pad or pad) - (top_pad or pad), 1)], dtype=float)
+            wide = spread > 1e-6 * amax
+            # Zoom in (never out: the fitted view holds everything) until the spread fits.
+            zoom = float(np.min(avail[wide] / (2.0 * spread[wide]))) / self.cam.scale if wide.any() else math.inf
+            self.cam.scale *= min(max(zoom, 1.0), FOLLOW_MAX_ZOOM)
+            self._centres = centres
+        elif mode == "orbit":
+            turn = np.arange(rec.frames) * (360.0 / rec.frames if cam_param is None else cam_param / fps)
+            self._bases = np.stack([_view_basis(view[0] + a, view[1]) for a in turn])
+            self._centres = (axis @ self._bases)[:, :2] + self.cam.centre
         if radius is None:
             r_springs = _spring_radius(rec, self.cam.scale)
             if r_springs is not None:
@@ -358,46 +510,104 @@ class _Rasteriser:
             radii = np.rint(np.minimum(rel, 3.0) * max(self.radius, 1)).astype(np.int64)
             if np.any(radii != self.radius):
                 self.radii = radii
-        self.background = _background(self.cam, rec.planes, rec.origin)
-        if walls is not None:
-            # Static: drawn once, under everything that moves.
-            s, _ = self.cam.project(walls)
-            col, row = self.cam.pixels(s)
-            _draw_discs(self.background, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
-        if self.colorbar is not None:
-            _draw_colorbar(self.background, self.colorbar, base, levels)
-        if self.title is not None:
-            _draw_title(self.background, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8)
+        self.walls = walls
+        self.background = self._scene_background(self.cam)
+        # The fitted camera draws the labels once, into the background. Moving cameras draw the
+        # colliders and walls per frame and paste the labels over everything (a followed scene
+        # may pass under them): the pixels they set are those drawn alike over 0s and over 1s.
+        labels = [self.background] if self._centres is None else [np.zeros((h, w), np.uint8), np.ones((h, w), np.uint8)]
         self.scale_bar = None
-        if self.annotate:
-            self.scale_bar = _draw_scale_bar(self.background, self.cam.scale, "m" if rec.speed_unit == "m/s" else "")
+        for img in labels:
+            if self.colorbar is not None:
+                _draw_colorbar(img, self.colorbar, base, levels)
+            if self.title is not None:
+                _draw_title(img, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8, self.font_px)
+            if self.annotate:
+                self.scale_bar = _draw_scale_bar(img, self.cam.scale, "m" if rec.speed_unit == "m/s" else "", self.font_px)
+        self._labels: tuple[np.ndarray, np.ndarray] | None = None
+        if self._centres is not None:
+            idx = np.flatnonzero(labels[0] == labels[1])
+            self._labels = (idx, labels[0].reshape(-1)[idx])
+        self._arrows = None
+        if arrows is not None and rec.velocities is not None:
+            pick = _arrow_subset(rec, self.cam_at, min(size) / 12.0)
+            self._arrows = _arrow_vectors(rec, arrows, min(size) / 12.0, pick)
         self.glow_scale = 0.0
         if color_by == "density":
             # One brightness scale for the whole animation, from three frames' density.
             sample = np.concatenate([d[d > 0] for d in (self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1}))] or [np.zeros(1)])
             self.glow_scale = float(np.percentile(sample, 99.5)) if sample.size else 1.0
         self.trail = int(trail)
+        self._glow_history: tuple[int, np.ndarray] | None = None  # (frame, glow with trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
+        self.palette = theme_palette(theme)
+        self.antialias = bool(antialias) and color_by != "density"  # glow is smooth already
+        self.mesh = mesh
+        self._shader = None if mesh is None else _MeshShader(mesh, size, theme, texture)
+        if mesh is not None:
+            on_mesh = np.zeros(n, dtype=bool)
+            on_mesh[mesh.faces.ravel()] = True
+            self._off_mesh = ~on_mesh & ~rec.pinned  # drawn as discs under the surface
+            self._pinned_idx = np.flatnonzero(rec.pinned)  # drawn as discs over it
+
+    def cam_at(self, k: int) -> _Camera:
+        """The camera of frame k: the fitted one, or that frame's follow or orbit camera (the
+        same scale and image, its own centre and, orbiting, its own basis)."""
+        if self._centres is None:
+            return self.cam
+        return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k])
+
+    def _scene_background(self, cam: _Camera) -> np.ndarray:
+        """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
+        and the boundary particles, under everything that moves."""
+        img = _background(cam, self.rec.planes, self.rec.origin)
+        if self.walls is not None:
+            s, _ = cam.project(self.walls)
+            col, row = cam.pixels(s)
+            _draw_discs(img, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
+        return img
 
     def _density(self, k: int) -> np.ndarray:
         """Frame k's glow: the free particles' density (per pixel), a tight blur plus a wide
         bloom. Additive, so it needs no depth order in 3D."""
         rec = self.rec
+        cam = self.cam_at(k)
         x = rec.positions[k][~rec.pinned] if rec.pinned.any() else rec.positions[k]
-        s, _ = self.cam.project(x)
-        col, row = self.cam.pixels(s)
+        s, _ = cam.project(x)
+        col, row = cam.pixels(s)
         d = _splat(col, row, self.background.shape)
         r = max(1, self.radius // 2)
         return _blur(d, r) + 0.5 * _bloom(d, 4 * r)
+
+    def _glow_density(self, k: int) -> np.ndarray:
+        """Frame k's density, or with a `trail` its fading history: max(d_k, decay · h_{k−1}),
+        decay = 0.05^(1/trail), a phosphor's persistence: the particles shine at full
+        brightness and their paths fade to 5 % over `trail` frames. The history is carried
+        from frame to frame when they are drawn in order, else rebuilt from `trail` frames.
+        With a following or orbiting camera the history would smear across the image: the glow
+        then has no trail."""
+        if not self.trail or self._centres is not None:
+            # A moving camera would smear a history kept in pixels: no glow trail there.
+            return self._density(k)
+        decay = 0.05 ** (1.0 / self.trail)
+        if self._glow_history is not None and self._glow_history[0] == k - 1:
+            h = np.maximum(self._density(k), decay * self._glow_history[1])
+        else:
+            h = self._density(max(0, k - self.trail))
+            for f in range(max(0, k - self.trail) + 1, k + 1):
+                h = np.maximum(self._density(f), decay * h)
+        self._glow_history = (k, h)
+        return h
 
     def _glow(self, buf: np.ndarray, k: int) -> None:
         """Tone-maps frame k's density into the glow levels: 1 − exp(−2.5 (d / scale)^0.75), so
         the densest 0.5 % saturate towards white while a filament a hundred times fainter still
         shows at a seventh of the range (a long exposure's compressive curve; the square root
-        washed a whole attractor out to white, a linear curve lost its filaments)."""
-        d = self._density(k)
+        washed a whole attractor out to white, a linear curve lost its filaments). With a
+        `trail`, the glow persists and fades (see _glow_density)."""
+        d = self._glow_density(k)
         if self.glow_scale <= 0:
             return
         level = np.rint((1.0 - np.exp(-2.5 * (d / self.glow_scale) ** 0.75)) * (_N_GLOW - 1)).astype(np.int64)
@@ -407,19 +617,21 @@ class _Rasteriser:
     def frame(self, k: int) -> np.ndarray:
         """(H, W) uint8 palette-index image of frame k."""
         rec = self.rec
-        buf = self.background.copy()
+        cam = self.cam_at(k)
+        buf = self.background.copy() if self._centres is None else self._scene_background(cam)
         if self.color_by == "density":
             self._glow(buf, k)
             if rec.pinned.any():  # pinned particles stay discs on top
-                s, _ = self.cam.project(rec.positions[k][rec.pinned])
-                col, row = self.cam.pixels(s)
+                s, _ = cam.project(rec.positions[k][rec.pinned])
+                col, row = cam.pixels(s)
                 _draw_discs(buf, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
+            self._draw_overlays(buf, k, cam)
             self._draw_clock(buf, k)
             return buf
-        s, depth = self.cam.project(rec.positions[k])
-        col, row = self.cam.pixels(s)
+        s, depth = cam.project(rec.positions[k])
+        col, row = cam.pixels(s)
         if self.trail and k > 0:
-            self._draw_trail(buf, k)
+            self._draw_trail(buf, k, cam)
         springs = rec.pairs is not None and rec.strain is not None
         # Colouring by strain draws the springs over the discs (the picture is the springs).
         on_top = self.color_by == "strain"
@@ -427,6 +639,7 @@ class _Rasteriser:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         if col.size == 0:
+            self._draw_overlays(buf, k, cam)
             return buf
         if self.color_by == "speed" and rec.speeds is not None:
             colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
@@ -453,8 +666,120 @@ class _Rasteriser:
         if springs and on_top:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        self._draw_overlays(buf, k, cam)
         self._draw_clock(buf, k)
         return buf
+
+    def frame_rgb(self, k: int) -> np.ndarray:
+        """(H, W, 3) uint8 RGB image of frame k: :meth:`frame` in the theme's colours or, with a
+        mesh, the shaded surface (antialiased) over the background, trails and the particles
+        that are not part of it, under the pinned particles, arrows and labels."""
+        if self.mesh is None:
+            return self._frame_rgb_discs(k) if self.antialias else self.palette[self.frame(k)]
+        rec = self.rec
+        cam = self.cam_at(k)
+        under = self.background.copy() if self._centres is None else self._scene_background(cam)
+        if self.trail and k > 0:
+            self._draw_trail(under, k, cam)
+        free = np.flatnonzero(self._off_mesh)
+        if free.size:
+            s, depth = cam.project(rec.positions[k][free])
+            col, row = cam.pixels(s)
+            order = slice(None) if depth is None else np.argsort(depth, kind="stable")
+            colors = self._disc_colors(k, rec.positions.shape[1])[free]
+            _draw_discs(under, col[order], row[order], colors[order], self.stencil)
+        out = self.palette[under]  # a new C-contiguous (H, W, 3) uint8 array
+        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k))
+        # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
+        over = np.full(under.shape, -1, dtype=np.int16)
+        if self._pinned_idx.size:
+            col, row = cam.pixels(cam.project(rec.positions[k][self._pinned_idx])[0])
+            _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
+        self._draw_overlays(over, k, cam)
+        self._draw_clock(over, k)
+        drawn = over >= 0
+        out[drawn] = self.palette[over[drawn]]
+        return out
+
+    def _frame_rgb_discs(self, k: int) -> np.ndarray:
+        """:meth:`frame` with antialiased discs: the background, trails and springs as palette
+        indices, the discs blended by coverage over them in the core (the painter's order of
+        frame()), then the overlays (strain springs, arrows, labels) on top."""
+        from .. import _core
+
+        rec = self.rec
+        cam = self.cam_at(k)
+        under = self.background.copy() if self._centres is None else self._scene_background(cam)
+        s, depth = cam.project(rec.positions[k])
+        col, row = cam.pixels(s)
+        if self.trail and k > 0:
+            self._draw_trail(under, k, cam)
+        springs = rec.pairs is not None and rec.strain is not None
+        on_top = self.color_by == "strain"
+        if springs and not on_top:
+            i, j = rec.pairs
+            _draw_lines(under, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        out = self.palette[under]
+        if col.size:
+            colors = self._disc_colors(k, col.size)
+            order = np.argsort(depth, kind="stable") if depth is not None else self.pin_order
+            if order is None:
+                order = np.arange(col.size)
+            # The stencil's reach, sqrt(r² + r/2) (see _disc_stencil), as the soft disc's radius.
+            r = np.full(col.size, float(self.radius)) if self.radii is None else self.radii.astype(np.float64)
+            rad = np.maximum(np.sqrt(r * r + 0.5 * r), 0.6)
+            if self.radii is not None:  # largest first, the painter's order within one size
+                order = order[np.argsort(-rad[order], kind="stable")]
+            _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
+                             rad[order].astype(np.float32), np.ascontiguousarray(self.palette[colors[order]]))
+        over = np.full(under.shape, -1, dtype=np.int16)
+        if springs and on_top:
+            i, j = rec.pairs
+            _draw_lines(over, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        self._draw_overlays(over, k, cam)
+        self._draw_clock(over, k)
+        drawn = over >= 0
+        out[drawn] = self.palette[over[drawn]]
+        return out
+
+    def _disc_colors(self, k: int, n: int) -> np.ndarray:
+        """(n,) uint8 palette indices of frame k's discs by `color_by` (pinned: their own colour)."""
+        rec = self.rec
+        if self.color_by == "speed" and rec.speeds is not None:
+            colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
+        elif self.color_by == "pressure" and rec.pressures is not None:
+            colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
+        else:
+            colors = np.full(n, _WALL if self.color_by == "strain" else _PLAIN, dtype=np.uint8)
+        colors[rec.pinned] = _PINNED
+        return colors
+
+    def _mesh_colors(self, k: int) -> np.ndarray | None:
+        """(N, 3) float32 per-vertex surface colours in [0, 1] from `color_by` (speed, pressure,
+        or strain: each vertex the mean strain of its springs), or None for the plain surface."""
+        rec = self.rec
+        if self.color_by == "strain" and rec.strain is not None and rec.pairs is not None:
+            i, j = rec.pairs
+            n = rec.positions.shape[1]
+            strain = np.nan_to_num(rec.strain[k].astype(np.float64), nan=0.0)
+            total = np.bincount(i, weights=strain, minlength=n) + np.bincount(j, weights=strain, minlength=n)
+            count = np.bincount(i, minlength=n) + np.bincount(j, minlength=n)
+            idx = _strain_levels(total / np.maximum(count, 1), self.strain_scale)
+        elif self.color_by == "speed" and rec.speeds is not None:
+            idx = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
+        elif self.color_by == "pressure" and rec.pressures is not None:
+            idx = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
+        else:
+            return None
+        return self.palette[idx].astype(np.float32) * np.float32(1 / 255)
+
+    def _draw_overlays(self, buf: np.ndarray, k: int, cam: _Camera) -> None:
+        """Over everything that moves, under the clock: frame k's arrows, then (moving cameras)
+        the colour bar, title and scale bar."""
+        if self._arrows is not None:
+            _draw_arrows(buf, cam, self.rec.positions[k][self._arrows[0]], self._arrows[1][k], self._arrows[2])
+        if self._labels is not None:
+            buf.reshape(-1)[self._labels[0]] = self._labels[1]
 
     def _draw_clock(self, buf: np.ndarray, k: int) -> None:
         """The simulated time in the bottom-left corner ("t = 1.23 s"; no unit in a scene's own
@@ -466,18 +791,29 @@ class _Rasteriser:
             return
         unit = " s" if self.rec.speed_unit == "m/s" else ""
         text = f"t = {_format_value(float(times[k]))}{unit}"
-        _draw_text(buf, text, 4, h - 4 - _text_mask(text).shape[0], _TEXT, _BACKGROUND)
+        _draw_text(buf, text, 4, h - 4 - _text_mask(text, self.font_px).shape[0], _TEXT, _BACKGROUND, px=self.font_px)
 
-    def _draw_trail(self, buf: np.ndarray, k: int) -> None:
+    def _draw_trail(self, buf: np.ndarray, k: int, cam: _Camera) -> None:
         """The paths of the moving particles over the `trail` frames before k, oldest (palest)
-        first: one segment per particle per frame step, under everything that moves."""
+        first: one segment per particle per frame step, under everything that moves; seen
+        through frame k's camera `cam`."""
         rec = self.rec
-        if self._pix is None:
-            self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
         moving = ~rec.pinned
         first = max(0, k - self.trail)
+        if self._centres is None:
+            if self._pix is None:
+                self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
+            pix = self._pix
+        elif self._bases is None:
+            # Following: the paths' screen-plane points are fixed, only the centre moves.
+            if self._pix is None:
+                self._pix = [self.cam.project(rec.positions[f])[0] for f in range(rec.frames)]
+            pix = {f: cam.pixels(self._pix[f]) for f in range(first, k + 1)}
+        else:
+            # Orbiting: the paths turn with the view, so they are projected again.
+            pix = {f: cam.pixels(cam.project(rec.positions[f])[0]) for f in range(first, k + 1)}
         for f in range(first, k):
-            (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
+            (c0, r0), (c1, r1) = pix[f], pix[f + 1]
             shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
             colors = np.full(int(moving.sum()), shade, dtype=np.uint8)
             _draw_lines(buf, c0[moving], r0[moving], c1[moving], r1[moving], colors)

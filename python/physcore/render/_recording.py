@@ -57,6 +57,9 @@ class Recording(NamedTuple):
     speed_unit : str
         The unit the colour bar gives speeds in: "m/s", or the scene's ``render_defaults``
         ``speed_unit`` (Kepler: "(G=1)", a scene in units where G = 1).
+    velocities : (F, N, dim) float32 or None
+        Velocities, m/s (recorded when asked for: ``record(..., velocities=True)``, which
+        arrows need).
     """
 
     positions: np.ndarray
@@ -87,6 +90,7 @@ class Recording(NamedTuple):
     #: recording draws as its scene would.
     color_by: str | None = None
     defaults: dict | None = None
+    velocities: np.ndarray | None = None
 
     @property
     def frames(self) -> int:
@@ -157,6 +161,7 @@ def _simulate(
     frame_time: float | None = None,
     substeps: str | int = "auto",
     on_frame: Any = None,
+    need_velocity: bool = False,
 ) -> Recording:
     """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
 
@@ -176,6 +181,7 @@ def _simulate(
     origin = _finite_mean(x) if n else (_finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim))
     pos = np.empty((frames, n, dim), dtype=np.float32)
     speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
+    vels = np.empty((frames, n, dim), dtype=np.float32) if need_velocity else None
     pressures = np.empty((frames, n), dtype=np.float32) if need_pressure else None
     strain = np.empty((frames, sp[0].size), dtype=np.float32) if sp is not None else None
     from ._fields import grid_plan
@@ -218,9 +224,12 @@ def _simulate(
             # particle is then left out of the drawing like any non-finite one.
             with np.errstate(over="ignore", invalid="ignore"):
                 pos[k] = x - origin
-                if speeds is not None:
+                if speeds is not None or vels is not None:
                     v = np.asarray(scene.velocities, dtype=np.float64).reshape(n, dim)
-                    speeds[k] = _row_norms(v)
+                    if speeds is not None:
+                        speeds[k] = _row_norms(v)
+                    if vels is not None:
+                        vels[k] = v
                 if pressures is not None:
                     pressures[k] = p0 if k == 0 else _pressure_array(scene.pressure(), n)
                 if strain is not None:
@@ -260,6 +269,7 @@ def _simulate(
         field_extent=tuple(gp["grid"].extent[:2]) if gp else None,
         field_points=points,
         field_label=_field_label(gp),
+        velocities=vels,
     )
 
 
@@ -331,9 +341,11 @@ def _plan(
     substeps: str | int | None,
     color_by: str,
     springs: bool,
+    velocities: bool = False,
 ) -> dict[str, Any]:
     """The checked simulation arguments of :func:`record` (and :func:`gif` of a scene), as
-    keyword arguments of ``_simulate``. Raises before anything is stepped."""
+    keyword arguments of ``_simulate``; `velocities`: record them too (arrows). Raises before
+    anything is stepped."""
     d = scene_defaults(scene)
     frames = _check_int("frames", d.get("frames", 90) if frames is None else frames, 1)
     frame_time = _check_frame_time(frame_time)
@@ -371,6 +383,7 @@ def _plan(
         "need_pressure": color_by == "pressure",
         "frame_time": frame_time,
         "substeps": substeps,
+        "need_velocity": bool(velocities),
     }
 
 
@@ -385,6 +398,7 @@ def record(
     springs: bool = True,
     progress: bool = False,
     on_frame: Any = None,
+    velocities: bool | None = None,
 ) -> Recording:
     """Step `scene` and return every frame's state as data: the producing half of :func:`gif`.
 
@@ -405,6 +419,10 @@ def record(
         ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
         ``scene.advance`` returned for that frame (None for frame 0 and for fixed steps). For
         progress reports and probes (energy books, counters); it must not change the scene.
+    velocities : bool, optional
+        Also record every frame's (N, dim) velocities (``Recording.velocities``, float32), which
+        :func:`gif`'s `arrows` draw; 4·N·dim bytes a frame more. Default: only when the
+        scene's ``render_defaults`` ask for arrows.
 
     Returns
     -------
@@ -430,8 +448,11 @@ def record(
     progress = _check.flag("progress", progress)
     if on_frame is not None and not callable(on_frame):
         raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
-    plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs)
-    _check_memory(scene, plan["frames"], (0, 0), springs)
+    if velocities is None:
+        velocities = scene_defaults(scene).get("arrows") not in (None, "none")
+    velocities = _check.flag("velocities", velocities)
+    plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, velocities)
+    _check_memory(scene, plan["frames"], (0, 0), springs, velocities)
     defaults = dict(scene_defaults(scene))
     rec = _simulate(scene, progress=progress, on_frame=on_frame, **plan)
     return rec._replace(color_by=color_by, defaults=defaults)

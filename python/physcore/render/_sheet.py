@@ -22,7 +22,7 @@ from .._atomic import atomic_write
 from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import _check_fps, _check_path, _check_size, _check_writable
 from ._colorbar import _font
-from ._gif import _OPTIONS, _gif_delays_ms, gif
+from ._gif import _OPTIONS, _gif_delays_ms, _palette_frames, gif
 from ._recording import scene_defaults
 
 #: Pixels between tiles.
@@ -211,12 +211,10 @@ def contact_sheet(
                 draw.rectangle((bbox[0] - 2, bbox[1] - 1, bbox[2] + 2, bbox[3] + 1), fill=(20, 20, 30))
                 draw.text((x, y), text, fill=(235, 235, 240), font=font)
         frames.append(im)
-    # One palette for the whole sheet, fitted to a few frames; no dithering (flat colours).
-    sample = Image.fromarray(np.concatenate([np.asarray(frames[j]) for j in sorted({0, len(frames) // 2, len(frames) - 1})]))
-    pal = sample.quantize(colors=256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
-    images = [f.quantize(palette=pal, dither=Image.Dither.NONE) for f in frames]
+    # One palette for the whole sheet (its flat colours exact); no dithering.
+    images, colours = _palette_frames([np.asarray(f) for f in frames])
     atomic_write(path, lambda fh: images[0].save(fh, format="GIF", save_all=True, append_images=images[1:],
-                                                 duration=delays, loop=0))
+                                                 duration=delays, loop=0, palette=colours))
     return path
 
 

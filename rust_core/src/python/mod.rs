@@ -51,6 +51,113 @@ fn neighbors<'py>(py: Python<'py>, points: PyReadonlyArray2<'py, f64>, radius: f
     Ok((i.into_pyarray(py), j.into_pyarray(py)))
 }
 
+/// A shaded triangle mesh drawn over `background` (height, width, 3) uint8, in place (see
+/// `crate::raster`): `verts` (V, 3) float32 pixel column, row, depth (larger = nearer); `faces`
+/// (T, 3) uint32; `front`, `back` (V, 4) float32 colour multiplier and highlight per vertex;
+/// `ss` supersamples per pixel and axis; `uv` (V, 2) and `texture` (H', W', 3) float32, both
+/// or neither. InvalidInputError for inconsistent shapes or face indices out of range.
+#[pyfunction]
+#[pyo3(signature = (verts, faces, front, back, background, ss, uv=None, texture=None))]
+#[allow(clippy::too_many_arguments)]
+fn rasterise_mesh<'py>(
+    py: Python<'py>,
+    verts: PyReadonlyArray2<'py, f32>,
+    faces: PyReadonlyArray2<'py, u32>,
+    front: PyReadonlyArray2<'py, f32>,
+    back: PyReadonlyArray2<'py, f32>,
+    mut background: numpy::PyReadwriteArray3<'py, u8>,
+    ss: usize,
+    uv: Option<PyReadonlyArray2<'py, f32>>,
+    texture: Option<numpy::PyReadonlyArray3<'py, f32>>,
+) -> PyResult<()> {
+    let contiguous = |name: &str| err(crate::error::invalid(name, "array must be C-contiguous"));
+    let v = verts.as_slice().map_err(|_| contiguous("verts"))?;
+    let f = faces.as_slice().map_err(|_| contiguous("faces"))?;
+    let fr = front.as_slice().map_err(|_| contiguous("front"))?;
+    let bk = back.as_slice().map_err(|_| contiguous("back"))?;
+    let uv_s = match &uv {
+        Some(a) => Some(a.as_slice().map_err(|_| contiguous("uv"))?),
+        None => None,
+    };
+    let tex = match &texture {
+        Some(t) => {
+            let shape = t.shape();
+            if shape[2] != 3 {
+                return Err(err(crate::error::invalid("texture", "texture must be (H, W, 3)")));
+            }
+            Some(crate::raster::Texture {
+                rgb: t.as_slice().map_err(|_| contiguous("texture"))?,
+                width: shape[1],
+                height: shape[0],
+            })
+        }
+        None => None,
+    };
+    if verts.shape()[1] != 3 || faces.shape()[1] != 3 || front.shape()[1] != 4 || back.shape()[1] != 4 {
+        return Err(err(crate::error::invalid("verts", "verts, faces: (N, 3); front, back: (N, 4)")));
+    }
+    let shape = background.shape().to_vec();
+    if shape[2] != 3 || !(1..=4).contains(&ss) {
+        return Err(err(crate::error::invalid("background", "background must be (H, W, 3) and ss in 1..=4")));
+    }
+    let (height, width) = (shape[0], shape[1]);
+    let bg = background.as_slice_mut().map_err(|_| contiguous("background"))?;
+    let mesh = crate::raster::Mesh { verts: v, faces: f, front: fr, back: bk, uv: uv_s, texture: tex };
+    let pool = crate::par::default_pool().ok();
+    py.detach(|| {
+        let mut rgb = vec![0f32; 3 * width * height];
+        let mut cover = vec![0f32; width * height];
+        crate::par::install(pool.as_ref(), || {
+            crate::raster::rasterise(&mesh, width, height, ss, &mut rgb, &mut cover)
+        })?;
+        crate::raster::composite(bg, &rgb, &cover);
+        Ok(())
+    })
+    .map_err(|e| to_py(py, e))
+}
+
+/// Antialiased discs drawn over `image` (H, W, 3) uint8 in place, in the order given (see
+/// `crate::raster::draw_discs`): centres `col`, `row` (N,) float32 in pixels, `radius` (N,)
+/// float32 in pixels, `colours` (N, 3) uint8. InvalidInputError for inconsistent shapes.
+#[pyfunction]
+fn draw_discs<'py>(
+    py: Python<'py>,
+    mut image: numpy::PyReadwriteArray3<'py, u8>,
+    col: numpy::PyReadonlyArray1<'py, f32>,
+    row: numpy::PyReadonlyArray1<'py, f32>,
+    radius: numpy::PyReadonlyArray1<'py, f32>,
+    colours: PyReadonlyArray2<'py, u8>,
+) -> PyResult<()> {
+    let contiguous = |name: &str| err(crate::error::invalid(name, "array must be C-contiguous"));
+    let shape = image.shape().to_vec();
+    if shape[2] != 3 {
+        return Err(err(crate::error::invalid("image", "image must be (H, W, 3)")));
+    }
+    let img = image.as_slice_mut().map_err(|_| contiguous("image"))?;
+    let (c, r, rad) = (slice1(&col, "col")?, slice1(&row, "row")?, slice1(&radius, "radius")?);
+    let cs = colours.as_slice().map_err(|_| contiguous("colours"))?;
+    py.detach(|| crate::raster::draw_discs(img, shape[1], shape[0], c, r, rad, cs)).map_err(|e| to_py(py, e))
+}
+
+/// Unit vertex normals (V, 3) float64 of the mesh `faces` (T, 3) uint32 over `x` (V, 3) float64
+/// (area-weighted face normals; see `crate::raster::vertex_normals`). InvalidInputError for an
+/// index out of range or a non-contiguous array.
+#[pyfunction]
+fn mesh_normals<'py>(
+    py: Python<'py>,
+    x: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, u32>,
+) -> PyResult<Bound<'py, numpy::PyArray2<f64>>> {
+    let xs = flat2(&x, 3, "x")?;
+    if faces.shape()[1] != 3 {
+        return Err(err(crate::error::invalid("faces", "faces must be (T, 3)")));
+    }
+    let f = faces.as_slice().map_err(|_| err(crate::error::invalid("faces", "array must be C-contiguous")))?;
+    let mut out = vec![0f64; xs.len()];
+    py.detach(|| crate::raster::vertex_normals(xs, f, &mut out)).map_err(|e| to_py(py, e))?;
+    Ok(numpy::ndarray::Array2::from_shape_vec((xs.len() / 3, 3), out).expect("shape matches").into_pyarray(py))
+}
+
 /// Name, order, symplectic flag and force evaluations per step of every integrator.
 #[pyfunction]
 fn integrator_table<'py>(py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
@@ -118,6 +225,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cpu_name, m)?)?;
     m.add_function(wrap_pyfunction!(particle_attributes, m)?)?;
     m.add_function(wrap_pyfunction!(neighbors, m)?)?;
+    m.add_function(wrap_pyfunction!(rasterise_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -1,0 +1,222 @@
+"""Shaded triangle meshes: cloth and soft bodies drawn as surfaces rather than discs and lines.
+
+A :class:`Mesh` names triangles over a scene's particles (and optionally texture coordinates).
+:class:`_MeshShader` lights the mesh every frame (Gouraud shading: per-vertex normals, Lambert
+diffuse plus a Blinn–Phong highlight, back faces in a darker colour) and rasterises it with
+the core (``_core.rasterise_mesh``: a depth buffer, 2×2 supersamples per pixel so that the
+edges are antialiased, blended by coverage over the caller's RGB image of the background).
+
+Sources: H. Gouraud, "Continuous shading of curved surfaces", IEEE Trans. Computers C-20 (1971)
+623–629 (per-vertex intensities, interpolated); J. F. Blinn, "Models of light reflection for
+computer synthesized pictures", SIGGRAPH 1977 (the half-vector highlight); J. Pineda, "A parallel
+algorithm for polygon rasterization", SIGGRAPH 1988 (edge functions, in the core).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .._errors import InvalidInputError, InvalidTypeError
+
+
+class Mesh(NamedTuple):
+    """Triangles over a scene's particles, drawn as a lit surface.
+
+    Attributes
+    ----------
+    faces : (T, 3) int64
+        Particle indices of each triangle's corners (any winding: both sides are drawn, the
+        back side darker).
+    uv : (N, 2) float64 or None
+        Texture coordinates of each particle in [0, 1]² (u to the right, v up the image), for
+        ``texture=``; None draws the mesh in one colour.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> m = pc.render.Mesh.grid(3, 2)
+    >>> m.faces.shape, m.uv.shape
+    ((4, 3), (6, 2))
+    """
+
+    faces: np.ndarray
+    uv: np.ndarray | None = None
+
+    def __eq__(self, other: object) -> bool:
+        """Equal faces and uv, element by element (a tuple's == would compare arrays)."""
+        if not isinstance(other, Mesh):
+            return NotImplemented
+        same_uv = (self.uv is None and other.uv is None) or (
+            self.uv is not None and other.uv is not None and np.array_equal(self.uv, other.uv)
+        )
+        return bool(same_uv and np.array_equal(self.faces, other.faces))
+
+    def __ne__(self, other: object) -> bool:
+        eq = self.__eq__(other)
+        return eq if eq is NotImplemented else not eq
+
+    __hash__ = None  # type: ignore[assignment]  # arrays: not hashable
+
+    @classmethod
+    def grid(cls, nx: int, ny: int) -> Mesh:
+        """The mesh of an `nx` × `ny` particle grid indexed ``row · nx + col`` (as
+        :func:`physcore.scenes.cloth` lays out its sheet, with nx = ny = n): two triangles per
+        cell, and uv running 0 → 1 along the columns (u) and the rows (v).
+
+        Raises InvalidInputError (ValueError) if nx or ny is below 2, InvalidTypeError
+        (TypeError) if either is not an integer.
+        """
+        for name, v in (("nx", nx), ("ny", ny)):
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise InvalidTypeError(f"{name} must be an int, got {type(v).__name__}")
+            if v < 2:
+                raise InvalidInputError(f"{name} must be at least 2, got {v}")
+        nx, ny = int(nx), int(ny)
+        idx = np.arange(nx * ny, dtype=np.int64).reshape(ny, nx)
+        a, b, c, d = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+        # Alternate the diagonal cell by cell, so a sheet folding along a diagonal stays symmetric.
+        flip = ((np.arange(ny - 1)[:, None] + np.arange(nx - 1)[None, :]) % 2).ravel().astype(bool)
+        t1 = np.where(flip[:, None], np.stack([a, b, d], 1), np.stack([a, b, c], 1))
+        t2 = np.where(flip[:, None], np.stack([a, d, c], 1), np.stack([b, d, c], 1))
+        faces = np.concatenate([t1, t2])
+        u, v = np.meshgrid(np.linspace(0.0, 1.0, nx), np.linspace(0.0, 1.0, ny))
+        return cls(faces, np.stack([u.ravel(), v.ravel()], axis=1))
+
+
+def check_mesh(mesh: Any, n: int) -> Mesh | None:
+    """`mesh` (a Mesh, a (T, 3) integer array of faces, None or False) checked against a scene of
+    `n` particles; None or False -> None."""
+    if mesh is None or mesh is False:
+        return None
+    if isinstance(mesh, Mesh):
+        faces, uv = mesh.faces, mesh.uv
+    else:
+        faces, uv = mesh, None
+    if not isinstance(faces, (np.ndarray, list, tuple)):
+        raise InvalidTypeError(f"mesh must be a physcore.render.Mesh or a (T, 3) integer array, got {type(mesh).__name__}")
+    try:
+        f = np.asarray(faces)
+    except ValueError:  # ragged nested lists
+        raise InvalidInputError("mesh: faces must have shape (T, 3)") from None
+    if f.dtype == bool or not np.issubdtype(f.dtype, np.integer):
+        raise InvalidTypeError(f"mesh: faces must be integers, got dtype {f.dtype}")
+    if f.ndim != 2 or f.shape[1] != 3 or f.shape[0] == 0:
+        raise InvalidInputError(f"mesh: faces must have shape (T, 3) with T >= 1, got {f.shape}")
+    if f.min() < 0 or f.max() >= n:
+        raise InvalidInputError(f"mesh: face indices must lie in [0, {n}) (the scene's particles), got [{f.min()}, {f.max()}]")
+    if uv is not None:
+        uv = np.asarray(uv, dtype=np.float64)
+        if uv.shape != (n, 2) or not np.isfinite(uv).all():
+            raise InvalidInputError(f"mesh: uv must be a finite ({n}, 2) array, got shape {uv.shape}")
+    return Mesh(f.astype(np.int64), uv)
+
+
+def check_texture(texture: Any, mesh: Mesh | None) -> np.ndarray | None:
+    """`texture` (None, an image path, or an (H, W, 3) uint8 array) -> (H, W, 3) float32 in [0, 1]."""
+    if texture is None:
+        return None
+    if mesh is None or mesh.uv is None:
+        raise InvalidInputError("texture: needs a mesh with texture coordinates (mesh=Mesh(faces, uv), or a scene with a grid mesh)")
+    if isinstance(texture, (str, os.PathLike)):
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(Path(texture)) as im:
+                arr = np.asarray(im.convert("RGB"))
+        except (OSError, UnidentifiedImageError) as e:
+            raise InvalidInputError(f"texture: cannot read the image {str(texture)!r}: {e}") from None
+    elif isinstance(texture, np.ndarray):
+        arr = texture
+        if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
+            raise InvalidInputError(f"texture: an array must be (H, W, 3) uint8, got {arr.shape} {arr.dtype}")
+    else:
+        raise InvalidTypeError(f"texture must be an image path or an (H, W, 3) uint8 array, got {type(texture).__name__}")
+    return arr.astype(np.float32) / 255.0
+
+
+#: Surface colours (RGB in [0, 1]) by theme: the front of the sheet, and its back, the same
+#: fabric a shade darker (a second hue read as a second material, and a hanging cloth shows
+#: mostly its back).
+_FRONT = {"light": (0.86, 0.38, 0.26), "dark": (0.95, 0.52, 0.32)}
+_BACK = {"light": (0.64, 0.26, 0.19), "dark": (0.74, 0.38, 0.24)}
+#: Lighting: ambient floor, diffuse weight with "wrap" (n·l + w)/(1 + w), which lets light
+#: reach a little past the terminator so that folds facing away do not go black, and a
+#: Blinn–Phong highlight.
+_AMBIENT, _DIFFUSE, _WRAP, _SPECULAR, _SHININESS = 0.30, 0.70, 0.3, 0.30, 24.0
+_SS = 2  # supersampling factor per axis (antialiased edges)
+
+
+def _pow24(a: np.ndarray) -> np.ndarray:
+    """a ** _SHININESS (24) by five multiplications: a float power of 6·10⁴ values cost more
+    than the rest of the lighting."""
+    a2 = a * a
+    a8 = (a2 * a2) ** 2
+    return a8 * a8 * a8
+
+
+class _MeshShader:
+    """Lights and rasterises a mesh frame by frame for a fixed camera and image size."""
+
+    def __init__(self, mesh: Mesh, size: tuple[int, int], theme: str, texture: np.ndarray | None = None):
+        self.faces = mesh.faces
+        self.faces_u32 = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
+        self.uv = None if mesh.uv is None else np.ascontiguousarray(mesh.uv, dtype=np.float32)
+        self.texture = texture
+        self.size = size
+        self.front = np.array(_FRONT.get(theme, _FRONT["light"]), dtype=np.float32)
+        self.back = np.array(_BACK.get(theme, _BACK["light"]), dtype=np.float32)
+
+    def draw(self, out: np.ndarray, x: np.ndarray, cam: Any, base: np.ndarray | None = None) -> None:
+        """Frame `x` ((N, dim) positions relative to the recording's origin) lit, rasterised and
+        blended by coverage over `out`, an (H, W, 3) uint8 C-contiguous RGB image, in place.
+
+        `base`: optional (N, 3) per-vertex colours in [0, 1] (a colour map), replacing the front
+        colour.
+        """
+        from .. import _core
+
+        s, depth = cam.project(x)
+        col, row = cam.pixels(s)
+        xs = np.asarray(x, dtype=np.float64)
+        if not np.isfinite(xs).all():  # a diverged vertex: its triangles are skipped, its normal 0
+            xs = np.nan_to_num(xs, nan=0.0, posinf=0.0, neginf=0.0)
+        # Light from the viewer's upper left, in world coordinates: the camera basis columns are
+        # right, up and toward the viewer (a 2D scene lies in its screen plane, lit head-on).
+        if xs.shape[1] == 3:
+            right, up, toward = cam.basis[:, 0], cam.basis[:, 1], cam.basis[:, 2]
+        else:
+            xs = np.concatenate([xs, np.zeros((xs.shape[0], 1))], axis=1)
+            right, up, toward = np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
+        light = -0.35 * right + 0.45 * up + 0.82 * toward
+        light /= np.linalg.norm(light)
+        half = light + toward
+        half /= np.linalg.norm(half)
+        n = _core.mesh_normals(np.ascontiguousarray(xs), self.faces_u32)
+        nl, nh = n @ light, n @ half
+        # Each vertex lit on both sides: the front along n, the back along -n; the rasteriser
+        # uses the side each triangle shows.
+        front = np.empty((xs.shape[0], 4), dtype=np.float32)
+        back = np.empty_like(front)
+        diff_f = (_AMBIENT + _DIFFUSE * np.maximum((nl + _WRAP) / (1.0 + _WRAP), 0.0))[:, None]
+        diff_b = (_AMBIENT + _DIFFUSE * np.maximum((_WRAP - nl) / (1.0 + _WRAP), 0.0))[:, None]
+        if self.texture is not None:
+            front[:, :3] = diff_f
+            back[:, :3] = diff_b * (0.55 + 0.45 * self.back)  # the texture, seen through, tinted
+        elif base is not None:
+            front[:, :3] = diff_f * base
+            back[:, :3] = diff_b * (0.55 * base + 0.45 * self.back)
+        else:
+            front[:, :3] = diff_f * self.front
+            back[:, :3] = diff_b * self.back
+        front[:, 3] = _SPECULAR * _pow24(np.maximum(nh, 0.0))
+        back[:, 3] = _SPECULAR * _pow24(np.maximum(-nh, 0.0))
+        verts = np.empty((xs.shape[0], 3), dtype=np.float32)
+        verts[:, 0], verts[:, 1] = col, row
+        verts[:, 2] = 0.0 if depth is None else depth
+        _core.rasterise_mesh(
+            verts, self.faces_u32, front, back, out, _SS,
+            uv=self.uv if self.texture is not None else None, texture=self.texture,
+        )

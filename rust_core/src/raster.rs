@@ -1,0 +1,585 @@
+//! Triangle rasterisation for the renderer's shaded meshes (`physcore.render.Mesh`: cloth and
+//! soft bodies drawn as lit surfaces). Not physics, but per pixel and per frame: numpy took
+//! 180–300 ms a frame for a 40² or 256² cloth (fragment arrays of a million entries), and no
+//! library draws 10⁵ Gouraud triangles from arrays without a Python object per vertex
+//! (skia-python's `Vertices` needs `Point` objects: 0.44 s for 4·10⁵ of them).
+//!
+//! Method: edge functions over each triangle's bounding box (J. Pineda, "A parallel algorithm
+//! for polygon rasterization", SIGGRAPH 1988), barycentric interpolation of per-vertex colours
+//! (Gouraud shading; the lighting itself is computed per vertex by the caller), a depth buffer,
+//! and `ss × ss` supersamples per pixel averaged into colour and coverage (antialiased edges).
+//! The image is cut into bands of rows, each drawn by one task from the triangles binned to it
+//! in their given order: bit-identical for any thread count.
+use crate::error::{invalid, Result};
+use rayon::prelude::*;
+
+/// Output rows per band (one task each).
+const BAND: usize = 8;
+
+/// A texture: `rgb` is `height × width` texels of 3 floats, row 0 at the top (v = 1).
+pub struct Texture<'a> {
+    pub rgb: &'a [f32],
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Triangles to draw. Per vertex `i`: `verts[3i..3i+3]` = pixel column, pixel row (pixel k spans
+/// [k, k+1)) and depth (larger = nearer); `front`/`back[4i..4i+4]` = a colour multiplier
+/// (r, g, b) and an additive highlight, used on the side the triangle shows (front: its
+/// corners turn counter-clockwise on screen, i.e. its normal (p1 − p0) × (p2 − p0) faces the
+/// viewer of a right-handed view). A sample's colour is `base · (r, g, b) + highlight`, base = the texture
+/// at the interpolated `uv[2i..2i+2]` (u right, v up the texture) or 1.
+pub struct Mesh<'a> {
+    pub verts: &'a [f32],
+    pub faces: &'a [u32],
+    pub front: &'a [f32],
+    pub back: &'a [f32],
+    pub uv: Option<&'a [f32]>,
+    pub texture: Option<Texture<'a>>,
+}
+
+/// Antialiased discs over `image` (`height × width × 3` bytes), in the order given (later ones
+/// over earlier ones): disc i centred at (`col[i]`, `row[i]`) in pixels (pixel k spans
+/// [k, k+1)), of radius `radius[i]` pixels, in colour `colours[3i..3i+3]`. A pixel's coverage is
+/// clamp(r + ½ − d, 0, 1), d the distance from its centre to the disc's (the area of a
+/// one-pixel-wide ramp across the edge; exact for a straight edge through the pixel), and its
+/// colour is blended by it. Discs with a non-finite centre or radius, or none, are skipped.
+/// Serial: the painter's order is the drawing order (about 5 ms for 10⁵ discs of radius 2).
+pub fn draw_discs(
+    image: &mut [u8],
+    width: usize,
+    height: usize,
+    col: &[f32],
+    row: &[f32],
+    radius: &[f32],
+    colours: &[u8],
+) -> Result<()> {
+    let n = col.len();
+    if row.len() != n || radius.len() != n || colours.len() != 3 * n {
+        return Err(invalid("col", "col, row, radius and colours must describe the same discs"));
+    }
+    if image.len() != 3 * width * height {
+        return Err(invalid("image", "image must be height × width × 3"));
+    }
+    for i in 0..n {
+        let (cx, cy, r) = (col[i], row[i], radius[i]);
+        if !(cx.is_finite() && cy.is_finite() && r.is_finite() && r > 0.0) {
+            continue;
+        }
+        let reach = r + 0.5;
+        let c0 = floor_i(cx - reach).max(0);
+        let c1 = ceil_i(cx + reach).min(width as i64 - 1);
+        let r0 = floor_i(cy - reach).max(0);
+        let r1 = ceil_i(cy + reach).min(height as i64 - 1);
+        let rgb = [colours[3 * i] as f32, colours[3 * i + 1] as f32, colours[3 * i + 2] as f32];
+        for y in r0..=r1 {
+            let dy = y as f32 + 0.5 - cy;
+            for x in c0..=c1 {
+                let dx = x as f32 + 0.5 - cx;
+                let a = (reach - (dx * dx + dy * dy).sqrt()).clamp(0.0, 1.0);
+                if a > 0.0 {
+                    let p = 3 * (y as usize * width + x as usize);
+                    for ch in 0..3 {
+                        let v = image[p + ch] as f32 * (1.0 - a) + rgb[ch] * a;
+                        image[p + ch] = (v + 0.5) as u8;
+                    }
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Unit vertex normals of a triangle mesh: each vertex the normalised sum of its faces'
+/// (p1 − p0) × (p2 − p0), which weights them by area. `x`: N × 3 positions; `faces`: T × 3
+/// indices, checked by the caller (InvalidInput otherwise); `out`: N × 3, zero where the sum
+/// vanishes or is not finite. Sequential: the scatter-add order is the face order, so the
+/// result is the same for any thread count (about 1 ms for 1.3·10⁵ faces).
+pub fn vertex_normals(x: &[f64], faces: &[u32], out: &mut [f64]) -> Result<()> {
+    let n = x.len() / 3;
+    if x.len() != 3 * n || out.len() != 3 * n || !faces.len().is_multiple_of(3) {
+        return Err(invalid("x", "x and out must be N × 3, faces T × 3"));
+    }
+    if faces.iter().any(|&i| i as usize >= n) {
+        return Err(invalid("faces", format!("face indices must lie in [0, {n})")));
+    }
+    out.fill(0.0);
+    let p = |i: usize| [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
+    for f in faces.chunks_exact(3) {
+        let (a, b, c) = (p(f[0] as usize), p(f[1] as usize), p(f[2] as usize));
+        let (u, v) = ([b[0] - a[0], b[1] - a[1], b[2] - a[2]], [c[0] - a[0], c[1] - a[1], c[2] - a[2]]);
+        let nrm = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        for &i in f {
+            for k in 0..3 {
+                out[3 * i as usize + k] += nrm[k];
+            }
+        }
+    }
+    for v in out.chunks_exact_mut(3) {
+        let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if len > 0.0 && len.is_finite() {
+            v.iter_mut().for_each(|c| *c /= len);
+        } else {
+            v.fill(0.0);
+        }
+    }
+    Ok(())
+}
+
+/// One triangle, set up in sample coordinates.
+struct Setup {
+    face: usize,
+    /// Barycentric weights w0, w1 as affine functions of the sample centre: (a, b, c) each.
+    w0: [f32; 3],
+    w1: [f32; 3],
+    bbox: [usize; 4], // col0, col1, row0, row1 (inclusive), clipped to the image
+    front: bool,
+}
+
+/// Draws `mesh` into `rgb` (`height × width × 3`, linear colour, 0 where uncovered) and `cover`
+/// (`height × width`, the covered fraction of each pixel's `ss²` samples). InvalidInput if the
+/// arrays' lengths disagree or a face names a vertex that does not exist. Triangles with a
+/// non-finite corner or no area are skipped.
+pub fn rasterise(
+    mesh: &Mesh,
+    width: usize,
+    height: usize,
+    ss: usize,
+    rgb: &mut [f32],
+    cover: &mut [f32],
+) -> Result<()> {
+    let nv = mesh.verts.len() / 3;
+    if mesh.verts.len() != 3 * nv || mesh.front.len() != 4 * nv || mesh.back.len() != 4 * nv {
+        return Err(invalid("verts", "verts, front and back must describe the same vertices"));
+    }
+    if !mesh.faces.len().is_multiple_of(3) || mesh.faces.iter().any(|&i| i as usize >= nv) {
+        return Err(invalid("faces", format!("face indices must lie in [0, {nv})")));
+    }
+    if let Some(uv) = mesh.uv {
+        if uv.len() != 2 * nv {
+            return Err(invalid("uv", "uv must have one (u, v) per vertex"));
+        }
+    }
+    if let Some(t) = &mesh.texture {
+        if t.width == 0 || t.height == 0 || t.rgb.len() != 3 * t.width * t.height || mesh.uv.is_none() {
+            return Err(invalid("texture", "texture must be height × width × 3, with uv given"));
+        }
+    }
+    if ss == 0 || rgb.len() != 3 * width * height || cover.len() != width * height {
+        return Err(invalid("ss", "ss must be >= 1 and the images width × height"));
+    }
+    let tris = setup(mesh, width, height, ss);
+    // Bin the triangles to bands, keeping their order (a counting sort).
+    let bands = height.div_ceil(BAND);
+    let band_rows = BAND * ss;
+    let mut start = vec![0usize; bands + 1];
+    for t in &tris {
+        for b in t.bbox[2] / band_rows..=t.bbox[3] / band_rows {
+            start[b + 1] += 1;
+        }
+    }
+    for b in 0..bands {
+        start[b + 1] += start[b];
+    }
+    let mut fill = start.clone();
+    let mut binned = vec![0u32; start[bands]];
+    for (k, t) in tris.iter().enumerate() {
+        for b in t.bbox[2] / band_rows..=t.bbox[3] / band_rows {
+            binned[fill[b]] = k as u32;
+            fill[b] += 1;
+        }
+    }
+    let draw = |b: usize, rgb: &mut [f32], cover: &mut [f32]| {
+        let list = &binned[start[b]..start[b + 1]];
+        draw_band(mesh, &tris, list, b * BAND, width, ss, rgb, cover);
+    };
+    let chunk = BAND * width;
+    if width * height * ss * ss < 1 << 16
+        || crate::par::fork(|| {
+            rgb.par_chunks_mut(3 * chunk)
+                .zip(cover.par_chunks_mut(chunk))
+                .enumerate()
+                .for_each(|(b, (c, v))| draw(b, c, v))
+        })
+        .is_none()
+    {
+        rgb.chunks_mut(3 * chunk).zip(cover.chunks_mut(chunk)).enumerate().for_each(|(b, (c, v))| draw(b, c, v));
+    }
+    Ok(())
+}
+
+/// Blends a drawn mesh over `background` (height × width × 3 bytes, sRGB as stored) in place:
+/// each pixel `round(background · (1 − cover) + 255 · rgb · cover)`, the colour clamped to
+/// [0, 1] (highlights may exceed 1). Lengths as `rasterise` wrote them.
+pub fn composite(background: &mut [u8], rgb: &[f32], cover: &[f32]) {
+    for ((px, c), &a) in background.chunks_exact_mut(3).zip(rgb.chunks_exact(3)).zip(cover) {
+        if a > 0.0 {
+            for ch in 0..3 {
+                let v = px[ch] as f32 * (1.0 - a) + 255.0 * c[ch].clamp(0.0, 1.0) * a;
+                px[ch] = (v + 0.5).clamp(0.0, 255.0) as u8; // round half up; v >= 0
+            }
+        }
+    }
+}
+
+/// ⌈x⌉ and ⌊x⌋ as integers without `f32::ceil`/`floor`, which are libm calls on baseline
+/// x86-64 (no SSE4.1 `roundps`) and were most of the set-up's time. `as` saturates.
+#[inline]
+fn ceil_i(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) < x {
+        t + 1
+    } else {
+        t
+    }
+}
+
+#[inline]
+fn floor_i(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x {
+        t - 1
+    } else {
+        t
+    }
+}
+
+/// Per-triangle set-up in sample coordinates (pixel coordinates × `ss`), in face order; in
+/// parallel on the pool of the call (rayon's ordered collect: the same list for any count).
+fn setup(mesh: &Mesh, width: usize, height: usize, ss: usize) -> Vec<Setup> {
+    let one = |face: usize| one_setup(mesh, face, width * ss, height * ss, ss as f32);
+    let n = mesh.faces.len() / 3;
+    if n >= crate::par::PAR_MIN {
+        if let Some(v) = crate::par::fork(|| (0..n).into_par_iter().filter_map(one).collect()) {
+            return v;
+        }
+    }
+    (0..n).filter_map(one).collect()
+}
+
+fn one_setup(mesh: &Mesh, face: usize, sw: usize, sh: usize, scale: f32) -> Option<Setup> {
+    let f = &mesh.faces[3 * face..3 * face + 3];
+    let s = |i: usize, k: usize| if k < 2 { mesh.verts[3 * i + k] * scale } else { mesh.verts[3 * i + k] };
+    let (i0, i1, i2) = (f[0] as usize, f[1] as usize, f[2] as usize);
+    let (x0, y0, x1, y1, x2, y2) = (s(i0, 0), s(i0, 1), s(i1, 0), s(i1, 1), s(i2, 0), s(i2, 1));
+    if ![x0, y0, x1, y1, x2, y2, s(i0, 2), s(i1, 2), s(i2, 2)].iter().all(|v| v.is_finite()) {
+        return None;
+    }
+    // Twice the signed area in (column, row) coordinates, computed in f64: thin slivers of a
+    // large image cancel badly in f32.
+    let (x0d, y0d, x1d, y1d, x2d, y2d) = (x0 as f64, y0 as f64, x1 as f64, y1 as f64, x2 as f64, y2 as f64);
+    let area = (x1d - x0d) * (y2d - y0d) - (x2d - x0d) * (y1d - y0d);
+    if !(area.abs() > 1e-12) {
+        return None;
+    }
+    // Sample centres k + 0.5 inside the box, clipped to the image.
+    let c0 = ceil_i(x0.min(x1).min(x2) - 0.5).max(0);
+    let c1 = floor_i(x0.max(x1).max(x2) - 0.5).min(sw as i64 - 1);
+    let r0 = ceil_i(y0.min(y1).min(y2) - 0.5).max(0);
+    let r1 = floor_i(y0.max(y1).max(y2) - 0.5).min(sh as i64 - 1);
+    if c1 < c0 || r1 < r0 {
+        return None;
+    }
+    let inv = 1.0 / area;
+    let w0 = [((y1d - y2d) * inv) as f32, ((x2d - x1d) * inv) as f32, ((x1d * y2d - x2d * y1d) * inv) as f32];
+    let w1 = [((y2d - y0d) * inv) as f32, ((x0d - x2d) * inv) as f32, ((x2d * y0d - x0d * y2d) * inv) as f32];
+    Some(Setup {
+        face,
+        w0,
+        w1,
+        bbox: [c0 as usize, c1 as usize, r0 as usize, r1 as usize],
+        // Rows grow downwards: a counter-clockwise turn on screen has a negative area here.
+        front: area < 0.0,
+    })
+}
+
+/// Draws band `row0 / BAND` (output rows `row0..`) from the triangles `list` (indices into
+/// `tris`, in drawing order), then resolves its samples into `rgb` / `cover`.
+#[allow(clippy::too_many_arguments)]
+fn draw_band(
+    mesh: &Mesh,
+    tris: &[Setup],
+    list: &[u32],
+    row0: usize,
+    width: usize,
+    ss: usize,
+    rgb: &mut [f32],
+    cover: &mut [f32],
+) {
+    let rows = cover.len() / width; // output rows in this band (the last band may be short)
+    if list.is_empty() {
+        rgb.fill(0.0);
+        cover.fill(0.0);
+        return;
+    }
+    let (sw, srows, srow0) = (width * ss, rows * ss, row0 * ss);
+    let mut depth = vec![f32::NEG_INFINITY; sw * srows];
+    let mut col = vec![0f32; 3 * sw * srows];
+    let mut hit = vec![false; sw * srows];
+    for &k in list {
+        let t = &tris[k as usize];
+        let f = &mesh.faces[3 * t.face..3 * t.face + 3];
+        let (i0, i1, i2) = (f[0] as usize, f[1] as usize, f[2] as usize);
+        let attr = if t.front { mesh.front } else { mesh.back };
+        // The corners' attributes, loaded once per triangle rather than per sample.
+        let load = |i: usize| [attr[4 * i], attr[4 * i + 1], attr[4 * i + 2], attr[4 * i + 3]];
+        let (a0, a1, a2) = (load(i0), load(i1), load(i2));
+        let (z0, z1, z2) = (mesh.verts[3 * i0 + 2], mesh.verts[3 * i1 + 2], mesh.verts[3 * i2 + 2]);
+        let tex_uv = match (&mesh.texture, mesh.uv) {
+            (Some(tex), Some(uv)) => {
+                Some((tex, [uv[2 * i0], uv[2 * i0 + 1], uv[2 * i1], uv[2 * i1 + 1], uv[2 * i2], uv[2 * i2 + 1]]))
+            }
+            _ => None,
+        };
+        let r_lo = t.bbox[2].max(srow0);
+        let r_hi = t.bbox[3].min(srow0 + srows - 1);
+        for r in r_lo..=r_hi {
+            let py = r as f32 + 0.5;
+            let row_base = (r - srow0) * sw;
+            for c in t.bbox[0]..=t.bbox[1] {
+                let px = c as f32 + 0.5;
+                let w0 = t.w0[0] * px + t.w0[1] * py + t.w0[2];
+                let w1 = t.w1[0] * px + t.w1[1] * py + t.w1[2];
+                let w2 = 1.0 - w0 - w1;
+                // A sample on a shared edge goes to both triangles; the depth test (ties to
+                // the later one) picks.
+                const EPS: f32 = -1e-5;
+                if w0 < EPS || w1 < EPS || w2 < EPS {
+                    continue;
+                }
+                let zz = w0 * z0 + w1 * z1 + w2 * z2;
+                let p = row_base + c;
+                if zz < depth[p] {
+                    continue;
+                }
+                depth[p] = zz;
+                hit[p] = true;
+                let base = match &tex_uv {
+                    Some((tex, uv)) => {
+                        let u = w0 * uv[0] + w1 * uv[2] + w2 * uv[4];
+                        let v = w0 * uv[1] + w1 * uv[3] + w2 * uv[5];
+                        // Nearest texel; + 0.5 then truncation rounds these non-negative values.
+                        let tx = (u.clamp(0.0, 1.0) * (tex.width - 1) as f32 + 0.5) as usize;
+                        let ty = ((1.0 - v.clamp(0.0, 1.0)) * (tex.height - 1) as f32 + 0.5) as usize;
+                        let q = 3 * (ty * tex.width + tx);
+                        [tex.rgb[q], tex.rgb[q + 1], tex.rgb[q + 2]]
+                    }
+                    None => [1.0; 3],
+                };
+                let spec = w0 * a0[3] + w1 * a1[3] + w2 * a2[3];
+                let out = &mut col[3 * p..3 * p + 3];
+                for ch in 0..3 {
+                    out[ch] = base[ch] * (w0 * a0[ch] + w1 * a1[ch] + w2 * a2[ch]) + spec;
+                }
+            }
+        }
+    }
+    // Resolve: the mean colour of the covered samples and the covered fraction.
+    let norm = 1.0 / (ss * ss) as f32;
+    for r in 0..rows {
+        for c in 0..width {
+            let mut acc = [0f32; 3];
+            let mut n = 0u32;
+            for dy in 0..ss {
+                for dx in 0..ss {
+                    let p = (r * ss + dy) * sw + c * ss + dx;
+                    if hit[p] {
+                        n += 1;
+                        for ch in 0..3 {
+                            acc[ch] += col[3 * p + ch];
+                        }
+                    }
+                }
+            }
+            let o = r * width + c;
+            cover[o] = n as f32 * norm;
+            if n > 0 {
+                for ch in 0..3 {
+                    rgb[3 * o + ch] = acc[ch] / n as f32;
+                }
+            } else {
+                for ch in 0..3 {
+                    rgb[3 * o + ch] = 0.0;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn draw(
+        verts: &[f32],
+        faces: &[u32],
+        front: &[f32],
+        back: &[f32],
+        w: usize,
+        h: usize,
+        ss: usize,
+    ) -> (Vec<f32>, Vec<f32>) {
+        let mut rgb = vec![0.0; 3 * w * h];
+        let mut cover = vec![0.0; w * h];
+        let mesh = Mesh { verts, faces, front, back, uv: None, texture: None };
+        rasterise(&mesh, w, h, ss, &mut rgb, &mut cover).unwrap();
+        (rgb, cover)
+    }
+
+    /// Per-vertex attributes: every vertex the same colour multiplier and no highlight.
+    fn flat(n: usize, c: [f32; 3]) -> Vec<f32> {
+        (0..n).flat_map(|_| [c[0], c[1], c[2], 0.0]).collect()
+    }
+
+    #[test]
+    fn a_square_covers_its_area_and_edges_are_fractional() {
+        // Two triangles making the square [2.25, 7.75] × [1.5, 6.5] (pixel units).
+        let v = [2.25, 1.5, 0.0, 7.75, 1.5, 0.0, 2.25, 6.5, 0.0, 7.75, 6.5, 0.0];
+        let f = [0, 1, 2, 1, 3, 2];
+        let (_, cover) = draw(&v, &f, &flat(4, [1.0; 3]), &flat(4, [1.0; 3]), 10, 8, 4);
+        let total: f32 = cover.iter().sum();
+        assert!((total - 5.5 * 5.0).abs() < 0.3, "covered area {total}");
+        // Interior pixels fully covered, a pixel cut by the left edge a quarter or more uncovered.
+        assert_eq!(cover[3 * 10 + 4], 1.0);
+        assert!(cover[3 * 10 + 2] > 0.6 && cover[3 * 10 + 2] < 0.9, "{}", cover[3 * 10 + 2]);
+        assert_eq!(cover[0], 0.0);
+    }
+
+    #[test]
+    fn gouraud_interpolates_linearly() {
+        // One big triangle with red 0 at x = 0 and 1 at x = 40: the middle pixel reads ~0.5.
+        let v = [0.0, 0.0, 0.0, 40.0, 0.0, 0.0, 0.0, 40.0, 0.0];
+        let attrs = [0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let (rgb, _) = draw(&v, &[0, 1, 2], &attrs, &attrs, 40, 40, 1);
+        let red = |c: usize, r: usize| rgb[3 * (r * 40 + c)];
+        assert!((red(20, 5) - 20.5 / 40.0).abs() < 1e-5, "{}", red(20, 5));
+        assert!((red(10, 5) - 10.5 / 40.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn nearer_triangle_wins_whatever_the_order_and_sides_pick_their_colours() {
+        // Two overlapping triangles at depths 1 (red) and 2 (green), both orders.
+        let tri = |x: f32, z: f32| [x, 0.0, z, x + 20.0, 0.0, z, x, 20.0, z];
+        let mut v = tri(0.0, 1.0).to_vec();
+        v.extend(tri(2.0, 2.0));
+        let mut front = flat(3, [1.0, 0.0, 0.0]);
+        front.extend(flat(3, [0.0, 1.0, 0.0]));
+        let back = flat(6, [0.0, 0.0, 1.0]);
+        for faces in [[0u32, 1, 2, 3, 4, 5], [3, 4, 5, 0, 1, 2]] {
+            let (rgb, _) = draw(&v, &faces, &back, &front, 20, 20, 1);
+            // These corners turn clockwise on screen, so their back side (red, green) shows;
+            // the pixel at (5, 5) is covered by both triangles and the nearer, green, wins.
+            let p = 3 * (5 * 20 + 5);
+            assert_eq!(&rgb[p..p + 3], &[0.0, 1.0, 0.0], "order {faces:?}");
+        }
+        // Reversing the winding shows the front side's colour.
+        let (rgb, _) = draw(&v[..9], &[0, 2, 1], &back[..12], &front[..12], 20, 20, 1);
+        assert_eq!(&rgb[3 * (5 * 20 + 5)..3 * (5 * 20 + 5) + 3], &[0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn same_result_for_any_thread_count() {
+        // A fan of many small triangles over a large image.
+        let (w, h) = (300, 200);
+        let mut v = Vec::new();
+        let mut f = Vec::new();
+        for k in 0..2000u32 {
+            let (x, y) = ((k * 37 % 290) as f32 + 0.3, (k * 53 % 190) as f32 + 0.7);
+            v.extend([x, y, (k % 7) as f32, x + 9.5, y + 1.0, 0.0, x + 2.0, y + 8.25, 1.0]);
+            f.extend([3 * k, 3 * k + 1, 3 * k + 2]);
+        }
+        let attrs: Vec<f32> = (0..6000).flat_map(|i| [(i % 5) as f32 * 0.2, 0.5, 0.25, 0.1]).collect();
+        let mesh = Mesh { verts: &v, faces: &f, front: &attrs, back: &attrs, uv: None, texture: None };
+        let run = |threads: usize| {
+            let pool = std::sync::Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap());
+            let mut rgb = vec![0.0; 3 * w * h];
+            let mut cover = vec![0.0; w * h];
+            crate::par::install(Some(&pool), || rasterise(&mesh, w, h, 2, &mut rgb, &mut cover)).unwrap();
+            (rgb, cover)
+        };
+        let (a, ca) = run(1);
+        let (b, cb) = run(3);
+        assert!(ca.iter().sum::<f32>() > 1000.0);
+        assert_eq!(
+            a.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            b.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(ca, cb);
+    }
+
+    #[test]
+    fn bad_input_is_refused_and_non_finite_triangles_skipped() {
+        let v = [0.0, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0, 0.0];
+        let a = flat(3, [1.0; 3]);
+        let mut rgb = vec![0.0; 3 * 16];
+        let mut cover = vec![0.0; 16];
+        let bad = Mesh { verts: &v, faces: &[0, 1, 3], front: &a, back: &a, uv: None, texture: None };
+        assert!(rasterise(&bad, 4, 4, 1, &mut rgb, &mut cover).is_err());
+        let nan = [f32::NAN, 0.0, 0.0, 4.0, 0.0, 0.0, 0.0, 4.0, 0.0];
+        let skip = Mesh { verts: &nan, faces: &[0, 1, 2], front: &a, back: &a, uv: None, texture: None };
+        rasterise(&skip, 4, 4, 1, &mut rgb, &mut cover).unwrap();
+        assert!(cover.iter().all(|&c| c == 0.0) && rgb.iter().all(|x| x.is_finite()));
+    }
+
+    #[test]
+    fn discs_cover_their_area_with_soft_edges() {
+        // A white disc of radius 5.3 on black: the summed coverage is its area, interior pixels
+        // are white, edge pixels grey, far ones black; a later disc covers an earlier one.
+        let (w, h) = (24usize, 24usize);
+        let mut img = vec![0u8; 3 * w * h];
+        draw_discs(&mut img, w, h, &[12.2], &[11.7], &[5.3], &[255, 255, 255]).unwrap();
+        let total: f32 = img.chunks_exact(3).map(|p| p[0] as f32 / 255.0).sum();
+        assert!((total - std::f32::consts::PI * 5.3 * 5.3).abs() < 0.5, "{total}");
+        assert_eq!(img[3 * (11 * w + 12)], 255);
+        assert!(img.chunks_exact(3).any(|p| p[0] > 30 && p[0] < 225));
+        assert_eq!(img[0], 0);
+        draw_discs(&mut img, w, h, &[12.2, f32::NAN], &[11.7, 0.0], &[2.0, 3.0], &[255, 0, 0, 0, 255, 0]).unwrap();
+        assert_eq!(&img[3 * (11 * w + 12)..3 * (11 * w + 12) + 3], &[255, 0, 0]);
+        assert!(draw_discs(&mut img, w, h, &[1.0], &[1.0], &[1.0], &[0, 0]).is_err());
+    }
+
+    #[test]
+    fn composite_blends_by_coverage() {
+        let mut bg = [200u8, 100, 0, 50, 50, 50];
+        composite(&mut bg, &[0.0, 0.0, 1.0, 2.0, 0.5, 0.0], &[0.5, 0.0]);
+        assert_eq!(bg, [100, 50, 128, 50, 50, 50]);
+    }
+
+    #[test]
+    fn vertex_normals_of_a_folded_sheet() {
+        // Two triangles folded 90° along the shared edge (0,0,0)-(0,1,0): one in z = 0, one in
+        // x = 0. The shared vertices' normal is the bisector; the others' are their faces'.
+        let x = [0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+        let faces = [0, 2, 1, 0, 1, 3];
+        let mut n = [0.0; 12];
+        vertex_normals(&x, &faces, &mut n).unwrap();
+        let h = 0.5f64.sqrt();
+        let expect = [h, 0.0, h, h, 0.0, h, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0];
+        for (a, b) in n.iter().zip(expect) {
+            assert!((a - b).abs() < 1e-12, "{n:?}");
+        }
+        assert!(vertex_normals(&x, &[0, 1, 4], &mut n).is_err());
+    }
+
+    #[test]
+    fn texture_is_sampled_at_the_interpolated_uv() {
+        // A 2×1 texture (left red, right blue) over a square: left half red, right half blue.
+        let v = [0.0, 0.0, 0.0, 20.0, 0.0, 0.0, 0.0, 20.0, 0.0, 20.0, 20.0, 0.0];
+        let uv = [0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0];
+        let tex = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+        let a = flat(4, [1.0; 3]);
+        let mesh = Mesh {
+            verts: &v,
+            faces: &[0, 1, 2, 1, 3, 2],
+            front: &a,
+            back: &a,
+            uv: Some(&uv),
+            texture: Some(Texture { rgb: &tex, width: 2, height: 1 }),
+        };
+        let mut rgb = vec![0.0; 3 * 400];
+        let mut cover = vec![0.0; 400];
+        rasterise(&mesh, 20, 20, 1, &mut rgb, &mut cover).unwrap();
+        assert_eq!(&rgb[3 * (10 * 20 + 3)..3 * (10 * 20 + 3) + 3], &[1.0, 0.0, 0.0]);
+        assert_eq!(&rgb[3 * (10 * 20 + 16)..3 * (10 * 20 + 16) + 3], &[0.0, 0.0, 1.0]);
+    }
+}
