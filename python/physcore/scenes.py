@@ -745,7 +745,7 @@ def dam_break(
 # run-up. About 27 000 CFL substeps for the default 41 472 particles (each substep ≈ 7–11 ms on
 # 2 cores); the animation covers T = 120 · frame_time · √(2g/width), so --frame-time 0.01505
 # shows T = 0..8 (the jet reaching the lid and falling back) in twice the time.
-dam_break.render_defaults = {"antialias": True,
+dam_break.render_defaults = {
     "frames": 120,
     "fps": 30,
     "frame_time": 4.0 / math.sqrt(2.0 * _G / 1.0) / 120,
@@ -867,7 +867,7 @@ def drop(
 
 
 # 120 frames, 2 s: the fall (0.35 s), the splash and the waves' first return from the walls.
-drop.render_defaults = {"antialias": True,
+drop.render_defaults = {
     "frames": 120,
     "fps": 30,
     "frame_time": 2.0 / 120,
