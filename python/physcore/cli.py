@@ -396,10 +396,10 @@ def _substeps_text(counts: Sequence[Any]) -> str:
     )
 
 
-def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    from . import render
-    from ._errors import SimulationDiverged
-
+def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tuple[str, Callable[..., Any], dict[str, Any]]:
+    """The scene named on the command line (``render``, ``view``): its name, its function and
+    the keyword arguments from ``--param``, ``--integrator`` and ``--dt``; usage errors exit
+    through ``parser.error``."""
     registry = _registry()
     name = args.scene
     if name not in registry:
@@ -413,6 +413,14 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         kwargs["integrator"] = args.integrator
     if args.dt is not None:
         kwargs["dt"] = args.dt
+    return name, fn, kwargs
+
+
+def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    from . import render
+    from ._errors import SimulationDiverged
+
+    name, fn, kwargs = _scene_call(args, parser)
     out = Path(args.output if args.output is not None else f"{name}.gif")
     # Everything that can be checked without the scene is, before it is built (seconds for big
     # fluids) and simulated (minutes): the frames buffer's memory, the output paths.

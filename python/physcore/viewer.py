@@ -1077,21 +1077,9 @@ def view(
 def _main(args: Any, parser: Any) -> int:
     """``physcore view``'s body (the parser lives in :mod:`physcore.cli`)."""
     from . import render
-    from .cli import _registry, _scene_kwargs, _UsageError
+    from .cli import _scene_call
 
-    registry = _registry()
-    name = args.scene
-    if name not in registry:
-        parser.error(f"unknown scene {name!r}; valid scenes: {', '.join(registry)}")
-    fn = registry[name]
-    try:
-        kwargs = _scene_kwargs(name, fn, args.param or [])
-    except _UsageError as e:
-        parser.error(str(e))
-    if args.integrator is not None:
-        kwargs["integrator"] = args.integrator
-    if args.dt is not None:
-        kwargs["dt"] = args.dt
+    name, fn, kwargs = _scene_call(args, parser)
     shot = None
     if args.screenshot is not None:
         try:

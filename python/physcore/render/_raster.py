@@ -630,25 +630,11 @@ class _Rasteriser:
             return buf
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
-        if self.trail and k > 0:
-            self._draw_trail(buf, k, cam)
-        springs = rec.pairs is not None and rec.strain is not None
-        # Colouring by strain draws the springs over the discs (the picture is the springs).
-        on_top = self.color_by == "strain"
-        if springs and not on_top:
-            i, j = rec.pairs
-            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        on_top = self._draw_behind(buf, k, cam, col, row)
         if col.size == 0:
             self._draw_overlays(buf, k, cam)
             return buf
-        if self.color_by == "speed" and rec.speeds is not None:
-            colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
-        elif self.color_by == "pressure" and rec.pressures is not None:
-            colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
-        else:
-            # Strain: grey discs, so that blue reads as compressed springs only.
-            colors = np.full(col.shape, _WALL if on_top else _PLAIN, dtype=np.uint8)
-        colors[rec.pinned] = _PINNED
+        colors = self._disc_colors(k, col.size)
         if depth is not None:
             order = np.argsort(depth, kind="stable")  # painter's algorithm: far ones first
         else:
@@ -663,7 +649,7 @@ class _Rasteriser:
             for rad in np.unique(radii)[::-1]:
                 m = radii == rad
                 _draw_discs(buf, c[m], r[m], cs[m], _disc_stencil(int(rad)))
-        if springs and on_top:
+        if on_top:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         self._draw_overlays(buf, k, cam)
@@ -712,13 +698,7 @@ class _Rasteriser:
         under = self.background.copy() if self._centres is None else self._scene_background(cam)
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
-        if self.trail and k > 0:
-            self._draw_trail(under, k, cam)
-        springs = rec.pairs is not None and rec.strain is not None
-        on_top = self.color_by == "strain"
-        if springs and not on_top:
-            i, j = rec.pairs
-            _draw_lines(under, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        on_top = self._draw_behind(under, k, cam, col, row)
         out = self.palette[under]
         if col.size:
             colors = self._disc_colors(k, col.size)
@@ -733,7 +713,7 @@ class _Rasteriser:
             _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
                              rad[order].astype(np.float32), np.ascontiguousarray(self.palette[colors[order]]))
         over = np.full(under.shape, -1, dtype=np.int16)
-        if springs and on_top:
+        if on_top:
             i, j = rec.pairs
             _draw_lines(over, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         self._draw_overlays(over, k, cam)
@@ -742,8 +722,22 @@ class _Rasteriser:
         out[drawn] = self.palette[over[drawn]]
         return out
 
+    def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> bool:
+        """What frame k draws under its discs: the trails, and the springs unless colouring by
+        strain, which draws them over the discs (the picture is the springs). `col`, `row`:
+        the particles' pixel positions. Returns whether the springs still go on top."""
+        rec = self.rec
+        if self.trail and k > 0:
+            self._draw_trail(buf, k, cam)
+        springs = rec.pairs is not None and rec.strain is not None
+        if springs and self.color_by != "strain":
+            i, j = rec.pairs
+            _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        return springs and self.color_by == "strain"
+
     def _disc_colors(self, k: int, n: int) -> np.ndarray:
-        """(n,) uint8 palette indices of frame k's discs by `color_by` (pinned: their own colour)."""
+        """(n,) uint8 palette indices of frame k's discs by `color_by` (pinned: their own
+        colour; strain: grey discs, so that blue reads as compressed springs only)."""
         rec = self.rec
         if self.color_by == "speed" and rec.speeds is not None:
             colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
