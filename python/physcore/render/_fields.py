@@ -158,40 +158,47 @@ class FieldRasteriser:
         """The time (bottom left) and, for the colour maps, a colour bar with the scale's ends and
         the quantity's name (top right); drawn in the map's own end colours, whichever contrasts
         with the background. Left out where the image is too small to read them."""
-        from ._colorbar import _draw_text, _format_value, _text_mask
+        from ._colorbar import _digit_rows, _draw_text, _format_value, _label_px, _text_mask
 
         h, w = out.shape
         if w < 100 or h < 80:
             return
         # Ink and a box behind it from the map's own colours: light on dark maps, dark on light.
         ink, box = {"water": (0, _N - 1), "signed": (0, _N // 2)}.get(self.style, (_N - 1, 0))
+        # The particle animations' label font: larger on larger images (the bitmap one below).
+        px = _label_px((w, h))
+        cell = _text_mask("0", px).shape[0]
 
         def text(s: str, x: int, y: int) -> None:
-            _draw_text(out, s, x, y, ink, box)
+            _draw_text(out, s, x, y, ink, box, px=px)
 
         if self.times is not None and np.isfinite(self.times[k]):
-            text(f"t = {_format_value(float(self.times[k]))} s", 4, h - 14)
+            text(f"t = {_format_value(float(self.times[k]))} s", 4, h - 3 - cell)
         if self.colorbar and self.style != "water":
             # A bottom at round-off from 0 (a percentile of a field at rest) reads as 0.
             low = 0.0 if abs(self.lo) < 1e-9 * abs(self.hi) else self.lo
             lo, hi = (_format_value(low), _format_value(self.hi)) if self.style != "signed" else (f"-{_format_value(self.hi)}", _format_value(self.hi))
             hi = f"{hi} {self.label}".rstrip()
             length = max(24, w // 6)
-            hi_w, lo_w = _text_mask(hi).shape[1], _text_mask(lo).shape[1]
+            hi_w, lo_w = _text_mask(hi, px).shape[1], _text_mask(lo, px).shape[1]
             x_hi = w - 4 - hi_w
             x_strip = x_hi - 4 - length
             x_lo = x_strip - 4 - lo_w
             if x_lo < w // 3:
                 return
-            out[0:13, x_lo - 2 : x_hi + hi_w + 2] = box
-            text(lo, x_lo, 2)
-            text(hi, x_hi, 2)
+            y = 2
+            out[0 : y + cell, x_lo - 2 : x_hi + hi_w + 2] = box
+            text(lo, x_lo, y)
+            text(hi, x_hi, y)
+            # The strip spans the digits' height: outline a row above and below them.
+            d0, d1 = _digit_rows(px)
+            top, bottom = y + d0 - 2, y + d1 + 1
             ramp = (np.arange(length) * (_N - 1) / (length - 1)).round().astype(np.uint8)
-            out[3:11, x_strip : x_strip + length] = ramp[None, :]
-            out[2, x_strip - 1 : x_strip + length + 1] = ink
-            out[11, x_strip - 1 : x_strip + length + 1] = ink
-            out[2:12, x_strip - 1] = ink
-            out[2:12, x_strip + length] = ink
+            out[top + 1 : bottom, x_strip : x_strip + length] = ramp[None, :]
+            out[top, x_strip - 1 : x_strip + length + 1] = ink
+            out[bottom, x_strip - 1 : x_strip + length + 1] = ink
+            out[top : bottom + 1, x_strip - 1] = ink
+            out[top : bottom + 1, x_strip + length] = ink
 
 
 def default_style(kind: str) -> str:
