@@ -516,7 +516,6 @@ class _Painter:
     one camera and colour scale fitted once to a preview run."""
 
     def __init__(self, scene: Any, settings: dict[str, Any], preview: float, hud: bool) -> None:
-        from .render._palette import theme_palette
         from .render._raster import _Rasteriser
         from .render._recording import _simulate, default_stepping, scene_defaults
         from .render._scene_state import _scene_springs
@@ -579,7 +578,6 @@ class _Painter:
         kw.update(mesh=mesh, texture=check_texture(d.get("texture"), mesh), theme=settings["theme"],
                   antialias=bool(d.get("antialias", False)))
         self.ras = _Rasteriser(rec, self.size, color_by, settings["radius"], settings["view"], **kw)
-        self.palette = theme_palette(settings["theme"])
         self.hud = hud and self.ras.title is not None
         # The live recording: the trail's history of ticks, then the drawn state, last.
         f = trail + 1 if trail and hasattr(self.ras, "_pix") else 1
@@ -618,7 +616,7 @@ class _Painter:
         """(H, W, 3) uint8 RGB image of the state, with the HUD."""
         from .render._colorbar import _CB_MARGIN, _draw_text, _text_mask
         from .render._palette import _BACKGROUND, _TEXT
-        from .render._raster import _draw_title
+        from .render._raster import _draw_title, _overlay, _paste
         from .render._rows import _row_norms
         from .render._scene_state import _strain
 
@@ -635,25 +633,20 @@ class _Painter:
         if self.frames > 1:
             self.ras._pix = None  # the history moved: project it again
         # Full colour where the renderer has it (a shaded mesh), else the palette image.
-        rgb = np.ascontiguousarray(self.ras.frame_rgb(k))
+        rgb = self.ras.frame_rgb(k)  # a new C-contiguous array
         if self.hud:
             # Drawn as palette indices on an overlay (-1: nothing), in the labels' font of this
             # image size where the renderer has several (else the bitmap font).
-            px = getattr(self.ras, "font_px", None)
-            font = {} if px is None else {"px": px}
-            line = _text_mask("0", **font).shape[0]
+            px = self.ras.font_px
+            line = _text_mask("0", px).shape[0]
             h, w = rgb.shape[:2]
-            over = np.full((h, w), -1, dtype=np.int16)
+            over = _overlay((h, w))
             right = w - 8 if self.ras.colorbar is None else self.ras.colorbar.lo_x - 8
             over[: _CB_MARGIN + line + 1, : max(right, 0)] = _BACKGROUND
-            if px is None:
-                _draw_title(over, params or " ", right)
-            else:
-                _draw_title(over, params or " ", right, px)
+            _draw_title(over, params or " ", right, px)
             if status:
-                _draw_text(over, status, min(8 * line, w // 4), h - 4 - line, _TEXT, _BACKGROUND, **font)
-            drawn = over >= 0
-            rgb[drawn] = self.palette[over[drawn]]
+                _draw_text(over, status, min(8 * line, w // 4), h - 4 - line, _TEXT, _BACKGROUND, px=px)
+            _paste(rgb, over, self.ras.palette)
         return rgb
 
 

@@ -27,7 +27,7 @@ from ._checks import (
     _short,
 )
 from ._mesh import check_mesh, check_texture
-from ._palette import _PALETTE, THEMES, theme_palette
+from ._palette import _PALETTE, THEMES
 from ._raster import _Rasteriser
 
 
@@ -357,7 +357,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
         return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)
-    return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), theme_palette(theme), fps, rec.frames)
+    return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), ras.palette, fps, rec.frames)
 
 
 #: Output formats by file extension: what :func:`save` and ``physcore render -o`` write.

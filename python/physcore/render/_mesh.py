@@ -158,14 +158,13 @@ def _pow24(a: np.ndarray) -> np.ndarray:
 
 
 class _MeshShader:
-    """Lights and rasterises a mesh frame by frame for a fixed camera and image size."""
+    """Lights and rasterises a mesh frame by frame (into the caller's image, at its size)."""
 
-    def __init__(self, mesh: Mesh, size: tuple[int, int], theme: str, texture: np.ndarray | None = None):
+    def __init__(self, mesh: Mesh, theme: str, texture: np.ndarray | None = None):
         self.faces = mesh.faces
         self.faces_u32 = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
         self.uv = None if mesh.uv is None else np.ascontiguousarray(mesh.uv, dtype=np.float32)
         self.texture = texture
-        self.size = size
         self.front = np.array(_FRONT.get(theme, _FRONT["light"]), dtype=np.float32)
         self.back = np.array(_BACK.get(theme, _BACK["light"]), dtype=np.float32)
 

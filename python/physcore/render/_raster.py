@@ -387,6 +387,18 @@ def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarr
     return out[1 : h + 1, 1 : w + 1].astype(np.float32)
 
 
+def _overlay(shape: tuple[int, int]) -> np.ndarray:
+    """An (H, W) int16 layer of palette indices to draw over a full-colour image: −1 (nothing)
+    until drawn on (the drawing functions take it as they take an index image)."""
+    return np.full(shape, -1, dtype=np.int16)
+
+
+def _paste(out: np.ndarray, over: np.ndarray, palette: np.ndarray) -> None:
+    """The drawn pixels of the `over` layer (see _overlay) onto the (H, W, 3) image `out`."""
+    drawn = over >= 0
+    out[drawn] = palette[over[drawn]]
+
+
 class _Rasteriser:
     """Everything fixed over an animation: camera, background, stencil, colour scale."""
 
@@ -545,7 +557,7 @@ class _Rasteriser:
         self.palette = theme_palette(theme)
         self.antialias = bool(antialias) and color_by != "density"  # glow is smooth already
         self.mesh = mesh
-        self._shader = None if mesh is None else _MeshShader(mesh, size, theme, texture)
+        self._shader = None if mesh is None else _MeshShader(mesh, theme, texture)
         if mesh is not None:
             on_mesh = np.zeros(n, dtype=bool)
             on_mesh[mesh.faces.ravel()] = True
@@ -558,6 +570,10 @@ class _Rasteriser:
         if self._centres is None:
             return self.cam
         return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k])
+
+    def _under(self, cam: _Camera) -> np.ndarray:
+        """A fresh copy of what frame drawing starts from, seen through `cam`: the background."""
+        return self.background.copy() if self._centres is None else self._scene_background(cam)
 
     def _scene_background(self, cam: _Camera) -> np.ndarray:
         """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
@@ -618,7 +634,7 @@ class _Rasteriser:
         """(H, W) uint8 palette-index image of frame k."""
         rec = self.rec
         cam = self.cam_at(k)
-        buf = self.background.copy() if self._centres is None else self._scene_background(cam)
+        buf = self._under(cam)
         if self.color_by == "density":
             self._glow(buf, k)
             if rec.pinned.any():  # pinned particles stay discs on top
@@ -664,7 +680,7 @@ class _Rasteriser:
             return self._frame_rgb_discs(k) if self.antialias else self.palette[self.frame(k)]
         rec = self.rec
         cam = self.cam_at(k)
-        under = self.background.copy() if self._centres is None else self._scene_background(cam)
+        under = self._under(cam)
         if self.trail and k > 0:
             self._draw_trail(under, k, cam)
         free = np.flatnonzero(self._off_mesh)
@@ -677,15 +693,11 @@ class _Rasteriser:
         out = self.palette[under]  # a new C-contiguous (H, W, 3) uint8 array
         self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k))
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
-        over = np.full(under.shape, -1, dtype=np.int16)
+        over = _overlay(under.shape)
         if self._pinned_idx.size:
             col, row = cam.pixels(cam.project(rec.positions[k][self._pinned_idx])[0])
             _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
-        self._draw_overlays(over, k, cam)
-        self._draw_clock(over, k)
-        drawn = over >= 0
-        out[drawn] = self.palette[over[drawn]]
-        return out
+        return self._finish_rgb(out, over, k, cam)
 
     def _frame_rgb_discs(self, k: int) -> np.ndarray:
         """:meth:`frame` with antialiased discs: the background, trails and springs as palette
@@ -695,7 +707,7 @@ class _Rasteriser:
 
         rec = self.rec
         cam = self.cam_at(k)
-        under = self.background.copy() if self._centres is None else self._scene_background(cam)
+        under = self._under(cam)
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
         on_top = self._draw_behind(under, k, cam, col, row)
@@ -712,14 +724,18 @@ class _Rasteriser:
                 order = order[np.argsort(-rad[order], kind="stable")]
             _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
                              rad[order].astype(np.float32), np.ascontiguousarray(self.palette[colors[order]]))
-        over = np.full(under.shape, -1, dtype=np.int16)
+        over = _overlay(under.shape)
         if on_top:
             i, j = rec.pairs
             _draw_lines(over, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
+        return self._finish_rgb(out, over, k, cam)
+
+    def _finish_rgb(self, out: np.ndarray, over: np.ndarray, k: int, cam: _Camera) -> np.ndarray:
+        """A full-colour frame's last layer: the arrows and labels drawn on the `over` layer
+        (which may hold more already), pasted onto `out`, which is returned."""
         self._draw_overlays(over, k, cam)
         self._draw_clock(over, k)
-        drawn = over >= 0
-        out[drawn] = self.palette[over[drawn]]
+        _paste(out, over, self.palette)
         return out
 
     def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> bool:
@@ -735,17 +751,23 @@ class _Rasteriser:
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return springs and self.color_by == "strain"
 
+    def _value_levels(self, k: int) -> np.ndarray | None:
+        """(N,) uint8 palette indices of frame k's speeds or pressures on their colour map, or
+        None when `color_by` is neither (or they were not recorded)."""
+        rec = self.rec
+        if self.color_by == "speed" and rec.speeds is not None:
+            return _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
+        if self.color_by == "pressure" and rec.pressures is not None:
+            return _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
+        return None
+
     def _disc_colors(self, k: int, n: int) -> np.ndarray:
         """(n,) uint8 palette indices of frame k's discs by `color_by` (pinned: their own
         colour; strain: grey discs, so that blue reads as compressed springs only)."""
-        rec = self.rec
-        if self.color_by == "speed" and rec.speeds is not None:
-            colors = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
-        elif self.color_by == "pressure" and rec.pressures is not None:
-            colors = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
-        else:
+        colors = self._value_levels(k)
+        if colors is None:
             colors = np.full(n, _WALL if self.color_by == "strain" else _PLAIN, dtype=np.uint8)
-        colors[rec.pinned] = _PINNED
+        colors[self.rec.pinned] = _PINNED
         return colors
 
     def _mesh_colors(self, k: int) -> np.ndarray | None:
@@ -759,12 +781,10 @@ class _Rasteriser:
             total = np.bincount(i, weights=strain, minlength=n) + np.bincount(j, weights=strain, minlength=n)
             count = np.bincount(i, minlength=n) + np.bincount(j, minlength=n)
             idx = _strain_levels(total / np.maximum(count, 1), self.strain_scale)
-        elif self.color_by == "speed" and rec.speeds is not None:
-            idx = _scalar_levels(rec.speeds[k], self.vmax, _SPEED0, _N_SPEED)
-        elif self.color_by == "pressure" and rec.pressures is not None:
-            idx = _scalar_levels(rec.pressures[k], self.vmax, _PRESSURE0, _N_PRESSURE)
         else:
-            return None
+            idx = self._value_levels(k)
+            if idx is None:
+                return None
         return self.palette[idx].astype(np.float32) * np.float32(1 / 255)
 
     def _draw_overlays(self, buf: np.ndarray, k: int, cam: _Camera) -> None:
