@@ -21,6 +21,7 @@ from ._errors import (
     ThreadPoolWarning,
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
+from .contacts import Contacts
 from .flows import Flow
 from .fluids import Fluid, neighbors
 from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
@@ -37,6 +38,7 @@ __all__ = [
     "INTEGRATORS",
     *_terms.__all__,
     *_potentials.__all__,
+    "Contacts",
     "Fluid",
     "neighbors",
     "Wave",

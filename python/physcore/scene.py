@@ -864,10 +864,35 @@ class Scene:
         return self._sim.momentum()
 
     def angular_momentum(self) -> float | np.ndarray:
-        """Angular momentum ``Σ m x × v`` about the origin of free particles, kg·m²/s:
-        a float (the z component) in 2D, a (3,) float64 array in 3D."""
+        """Angular momentum ``Σ m x × v`` about the origin of free particles, plus the spins of
+        grains under :class:`~physcore.Contacts` (``Σ I ω``), kg·m²/s: a float (the z
+        component) in 2D, a (3,) float64 array in 3D."""
         am = self._sim.angular_momentum()
         return float(am[2]) if self.dim == 2 else am
+
+    def contact_count(self) -> int:
+        """Contacts between grains (pairs counted once) and between grains and walls at the
+        last force evaluation, over every :class:`~physcore.Contacts` term (0 without one)."""
+        return int(sum(v for _, key, v in self._sim.term_counts() if key == "contacts"))
+
+    def particle_field(self, name: str) -> np.ndarray:
+        """A per-particle quantity a term computes, ``(N,)`` float64 (0 for particles the term
+        does not cover): the :class:`~physcore.Contacts` term's ``"angular_velocity"`` (rad/s,
+        2D; ``"angular_velocity_x"``, ``"_y"``, ``"_z"`` in 3D), ``"angle"`` (rad, 2D) and
+        ``"coordination"`` (contacts per grain); a fluid's ``"density"`` and ``"pressure"``.
+
+        Raises
+        ------
+        ValueError
+            ``name`` is not a field of any term of this scene (the message lists those that are).
+        """
+        known: list[str] = []
+        for t in self._terms:
+            names = ("density", "pressure") if isinstance(t, Fluid) else getattr(t, "particle_fields", lambda dim: ())(self.dim)
+            known.extend(f for f in names if f not in known)
+        if not isinstance(name, str) or name not in known:
+            raise InvalidInputError(f"name: {name!r} is not a field of this scene's terms; known: {', '.join(known) or 'none'}")
+        return self._exclusive(lambda sim: sim.particle_fields([name]))[0]
 
     def density(self) -> np.ndarray:
         """SPH density of every particle now, kg/m³ (kg/m² in 2D): ``(N,)`` float64, 0 for
@@ -948,6 +973,9 @@ class Scene:
             record, members = t._record()
             terms_meta.append({"type": t.kind, "name": t.name, **record})
             arrays.update({f"term{k}_{a}": v for a, v in members.items()})
+            history = self._sim.term_history(t.name)
+            if history is not None:  # a term's own state (contacts: spins and springs)
+                arrays[f"term{k}_history"] = history
         grids_meta = []
         for k, g in enumerate(self._grids):
             grids_meta.append({"kind": g.kind, "name": g.name, "record": g._record()})

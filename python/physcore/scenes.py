@@ -24,12 +24,13 @@ import numpy as np
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
+from .contacts import Contacts
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .render._mesh import Mesh
 from .scene import Scene
-from .terms import Drag, ElectricField, Gravity, MagneticField, PairwiseGravity, Plane, Springs, TreeGravity
+from .terms import Box, Drag, ElectricField, Gravity, MagneticField, PairwiseGravity, Plane, Springs, TreeGravity
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -1129,6 +1130,233 @@ lorenz.render_defaults = {
 }
 
 
+# --------------------------------------------------------------------------- grains (DEM)
+def _grain_scene(dt: float | None, integrator: str | None, threads: int | None) -> Scene:
+    if integrator not in (None, "semi_implicit_euler"):
+        raise InvalidInputError(f"integrator: the grain scenes step with 'semi_implicit_euler' (the DEM scheme), got {integrator!r}")
+    return Scene(2, integrator="semi_implicit_euler", dt=1e-4 if dt is None else dt, threads=threads)
+
+
+def _auto_grain_dt(scene: Scene, dt: float | None) -> Scene:
+    """The scene with dt = its contacts' automatic step (a 50th of the contact duration) unless
+    `dt` was given."""
+    if dt is None:
+        scene.dt = scene.suggest_dt()
+    return scene
+
+
+def galton_board(
+    balls: int = 240,
+    rows: int = 10,
+    restitution: float = 0.4,
+    friction: float = 0.2,
+    seed: int = 0,
+    outlet: float = 2.6,
+    integrator: str | None = None,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Galton board: balls pour from a hopper through `rows` staggered rows of pegs into bins.
+
+    2D, steel-like balls of radius 2 mm on pegs of radius 1.5 mm spaced 12 mm (rows 10.4 mm
+    apart), linear contacts (:class:`~physcore.Contacts`, k = 5·10³ N/m) with the
+    given restitution and friction; the pegs, the hopper's sides and the bins' dividers are
+    pinned grains. A ball that meets a peg goes left or right, so after `rows` rows its bin is
+    the number of right turns: the bin counts approach the binomial distribution
+    B(rows, ½) (Galton, *Natural Inheritance*, 1889), tested statistically in the test suite.
+    ``seed`` jitters the balls' start. Particles: the balls first (indices 0..balls-1), then the
+    fixed ones; :func:`galton_bins` counts the balls per bin.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
+    """
+    balls = _count(balls, "balls", 1)
+    rows = _count(rows, "rows", 1)
+    if rows > 40:
+        raise InvalidInputError(f"rows: at most 40, got {rows}")
+    _particles("balls, rows", balls + 40 * rows * rows)
+    restitution = _check.float_in_range("restitution", restitution, 0.0, 1.0)
+    if restitution == 0.0:
+        raise InvalidInputError("restitution: must be > 0 (a dashpot cannot stop a ball dead)")
+    friction = _nonneg(friction, "friction")
+    seed = _count(seed, "seed", 0)
+    dt = _optional(dt, "dt")
+    rb, rp, s = 0.002, 0.0015, 0.012
+    h = s * math.sqrt(3.0) / 2.0
+    half = 0.5 * (rows + 1) * s  # the board spans x in [-half, half]
+    fixed: list[tuple[float, float, float]] = []
+    # Staggered rows across the whole width (a ball never leaves the lattice): row k has pegs
+    # at x = (j − k/2)·s, so a ball above peg 0 of row 0 is shifted by ±s/2 a row.
+    for k in range(rows):
+        y = -k * h
+        for j in range(-rows - 2, rows + 3):
+            x = (j - 0.5 * k) * s
+            if abs(x) <= half + 1e-9:  # up to the side walls: no channel down the sides
+                fixed.append((x, y, rp))
+    # Bins: dividers (columns of touching small grains) between the landing places (m − rows/2)s.
+    r_div = 0.0008
+    y_top_bins = -rows * h + 0.5 * h
+    bin_depth = max(0.06, 4.5 * rb * 2 * math.sqrt(balls / (rows + 1)) * 0.9)
+    y_floor = y_top_bins - bin_depth
+    for m in range(rows + 2):
+        x = (m - 0.5 * rows - 0.5) * s
+        for y in np.arange(y_floor + r_div, y_top_bins, 2 * r_div):
+            fixed.append((x, float(y), r_div))
+    # Hopper: two slanted walls of grains down to an opening of 4.5 ball diameters above peg 0.
+    outlet = _check.float_in_range("outlet", outlet, 2.05, 20.0)
+    opening = outlet * 2 * rb
+    y_out = 1.5 * h
+    width = max(half, 0.5 * opening + 0.05)
+    top = y_out + 0.07
+    for sign in (-1.0, 1.0):
+        x0, x1 = sign * 0.5 * opening, sign * width
+        length = math.hypot(x1 - x0, top - y_out)
+        for t in np.arange(0.0, length, 2 * r_div):
+            fixed.append((x0 + (x1 - x0) * t / length, y_out + (top - y_out) * t / length, r_div))
+    # Balls: a loose block in the hopper (rows of balls 2.3 rb apart, the top ones higher).
+    rng = np.random.default_rng(seed)
+    per_row = max(1, int((2 * width - 4 * rb) / (2.3 * rb)) - 2)
+    k = np.arange(balls)
+    bx = ((k % per_row) - 0.5 * (per_row - 1)) * 2.3 * rb + rng.uniform(-0.2, 0.2, balls) * rb
+    by = top + rb + (k // per_row) * 2.3 * rb + rng.uniform(-0.1, 0.1, balls) * rb
+    # Inside the hopper's slant: squeeze each row to the hopper's width at its height.
+    wide_at = 0.5 * opening + (np.minimum(by, top) - y_out) / (top - y_out) * (width - 0.5 * opening)
+    bx = np.clip(bx, -wide_at + 1.5 * rb, wide_at - 1.5 * rb)
+    f = np.array(fixed)
+    x = np.concatenate([np.column_stack([bx, by]), f[:, :2]])
+    radius = np.concatenate([np.full(balls, rb), f[:, 2]])
+    pinned = np.arange(len(x)) >= balls
+    scene = _grain_scene(dt, integrator, threads)
+    scene.add_particles(x, masses=2.6e-4, pinned=pinned)
+    scene.set_attribute("radius", radius)
+    scene.add(Gravity([0.0, -9.81]))
+    scene.add(Contacts(stiffness=5e3, restitution=restitution, friction=friction,
+                       walls=[Plane([0.0, y_floor], [0.0, 1.0], restitution, friction),
+                              Plane([-half, 0.0], [1.0, 0.0], restitution, friction),
+                              Plane([half, 0.0], [-1.0, 0.0], restitution, friction)]))
+    scene.render_defaults = {"galton": {"balls": balls, "rows": rows, "pitch": s}}
+    return _auto_grain_dt(scene, dt)
+
+
+galton_board.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (360, 480),
+                                "size_by": "radius", "color_by": "speed"}
+
+
+def galton_bins(scene: Scene) -> np.ndarray:
+    """Balls per bin of a :func:`galton_board` scene now: (rows + 1,) int64, bin m holding the
+    balls that turned right m times (below the last row of pegs); balls still above are not
+    counted."""
+    g = (getattr(scene, "render_defaults", None) or {}).get("galton")
+    if not g:
+        raise InvalidInputError("scene: not a galton_board scene")
+    x = scene.positions[: g["balls"]]
+    rows, s = g["rows"], g["pitch"]
+    below = x[:, 1] < -rows * s * math.sqrt(3.0) / 2.0 + 0.25 * s
+    m = np.clip(np.rint(x[below, 0] / s + 0.5 * rows), 0, rows).astype(np.int64)
+    return np.bincount(m, minlength=rows + 1)
+
+
+def billiards(
+    speed: float = 6.0,
+    restitution: float = 0.93,
+    cushion: float = 0.75,
+    seed: int = 0,
+    integrator: str | None = None,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Billiards break: a cue ball at `speed` (m/s) into a rack of 15 balls, seen from above.
+
+    Pool balls (radius 28.6 mm, 170 g) on a 2.54 × 1.27 m table, Hertz contacts
+    (:class:`~physcore.Contacts`, so the touching rack passes the impulse through like a real
+    one) with ball–ball `restitution` and friction 0.05, cushions of restitution `cushion`;
+    the cloth's rolling resistance as linear drag (the balls stop in a few seconds). `seed`
+    offsets the cue by a fraction of a millimetre, so each seed breaks differently.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
+    """
+    speed = _positive(speed, "speed")
+    if speed > 50:
+        raise InvalidInputError(f"speed: at most 50 m/s (a cue ball's record is about 15), got {speed}")
+    restitution = _check.float_in_range("restitution", restitution, 1e-3, 1.0)
+    cushion = _check.float_in_range("cushion", cushion, 1e-3, 1.0)
+    seed = _count(seed, "seed", 0)
+    dt = _optional(dt, "dt")
+    r, m, L, W = 0.028575, 0.17, 2.54, 1.27
+    rack = []
+    apex = np.array([0.75 * L, 0.5 * W])
+    for row in range(5):
+        for k in range(row + 1):
+            rack.append(apex + [row * 2 * r * math.sqrt(3) / 2 * 1.0005, (k - row / 2) * 2 * r * 1.0005])
+    rng = np.random.default_rng(seed)
+    cue = np.array([0.25 * L, 0.5 * W + rng.uniform(-5e-4, 5e-4)])
+    x = np.array([cue, *rack])
+    v = np.zeros_like(x)
+    v[0, 0] = speed
+    scene = _grain_scene(dt, integrator, threads)
+    scene.add_particles(x, v, masses=m)
+    scene.set_attribute("radius", np.full(len(x), r))
+    scene.add(Drag(0.12))
+    scene.add(Contacts(stiffness=5e9, restitution=restitution, friction=0.05, law="hertz",
+                       walls=Box([0.0, 0.0], [L, W], cushion, 0.2)))
+    return _auto_grain_dt(scene, dt)
+
+
+billiards.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (480, 260),
+                             "size_by": "radius", "trail": 12}
+
+
+def newtons_cradle(
+    balls: int = 5,
+    lift: int = 1,
+    angle: float = 30.0,
+    law: str = "hertz",
+    integrator: str | None = None,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Newton's cradle: `balls` steel balls (radius 2 cm, 0.26 kg) hanging touching on 40 cm
+    strings, the first `lift` pulled out by `angle` degrees and let go.
+
+    The strings are stiff springs (stretch 0.01 % under a ball's weight) from pinned anchors
+    (radius 0: they collide with nothing); the balls touch through :class:`~physcore.Contacts`
+    with the `law` given and restitution 0.999. With ``law="hertz"`` the impulse runs through
+    the row as a solitary wave and as many balls leave the far end as were let go; the linear
+    law spreads it (try ``--param law=linear``).
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
+    """
+    balls = _count(balls, "balls", 2)
+    if balls > 50:
+        raise InvalidInputError(f"balls: at most 50, got {balls}")
+    lift = _count(lift, "lift", 1)
+    if lift >= balls:
+        raise InvalidInputError(f"lift: must be less than balls ({balls}), got {lift}")
+    angle = _check.float_in_range("angle", angle, 0.0, 80.0)
+    if law not in ("hertz", "linear"):
+        raise InvalidInputError(f"law: 'hertz' or 'linear', got {law!r}")
+    dt = _optional(dt, "dt")
+    r, m, L = 0.02, 0.26, 0.4
+    k_string = m * 9.81 / (1e-4 * L)
+    th = math.radians(angle)
+    anchors = np.array([[2 * r * i, 0.0] for i in range(balls)])
+    hang = anchors + [0.0, -L]
+    for i in range(lift):  # the lifted ones swing out together, still touching
+        hang[i] = anchors[i] + L * np.array([-math.sin(th), -math.cos(th)])
+    x = np.concatenate([hang, anchors])
+    scene = _grain_scene(dt, integrator, threads)
+    scene.add_particles(x, masses=m, pinned=np.arange(2 * balls) >= balls)
+    scene.set_attribute("radius", np.concatenate([np.full(balls, r), np.zeros(balls)]))
+    scene.add(Gravity([0.0, -9.81]))
+    scene.add(Springs(np.arange(balls), np.arange(balls, 2 * balls), stiffness=k_string, damping=0.0, rest_length=L))
+    stiffness = 5e9 if law == "hertz" else 1e6
+    scene.add(Contacts(stiffness=stiffness, restitution=0.999, friction=0.0, law=law))
+    return _auto_grain_dt(scene, dt)
+
+
+newtons_cradle.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (400, 360),
+                                  "size_by": "radius"}
+
+
 def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
     """`fn` returning scenes that carry its ``render_defaults`` (so ``render.gif(scene)`` shows
     the motion ``physcore render NAME`` shows); same name, docs, signature and attributes."""
@@ -1159,6 +1387,9 @@ turing = _stamped(turing)
 smoke = _stamped(smoke)
 cavity = _stamped(cavity)
 lorenz = _stamped(lorenz)
+galton_board = _stamped(galton_board)
+billiards = _stamped(billiards)
+newtons_cradle = _stamped(newtons_cradle)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {
@@ -1178,5 +1409,8 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "smoke": smoke,
     "cavity": cavity,
     "lorenz": lorenz,
+    "galton_board": galton_board,
+    "billiards": billiards,
+    "newtons_cradle": newtons_cradle,
 }
 DEFAULT_SCENE = "cloth"

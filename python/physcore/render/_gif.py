@@ -150,10 +150,12 @@ def gif(
         Draw each moving particle's path over the previous `trail` frames behind it, fading with
         age (orbits, parabolas, figure-eights). 0: none. Default: the scene's ``render_defaults``
         (Kepler: one orbit; projectiles: the whole flight), else 0.
-    size_by : {"none", "mass"}, optional
+    size_by : {"none", "mass", "radius"}, optional
         ``"mass"``: each disc's radius grows as ∛(m / m_min), up to 3× the default radius (a
-        star beside its planet). Default: the scene's ``render_defaults`` (Kepler: "mass"),
-        else ``"none"`` (one size).
+        star beside its planet). ``"radius"``: each disc at the true size of the scene's
+        ``"radius"`` attribute (grains under :class:`~physcore.Contacts`). Default: the scene's
+        ``render_defaults`` (Kepler: "mass", the grain scenes: "radius"), else ``"none"`` (one
+        size).
 
     theme : {"light", "dark"}, optional
         Colours of particle animations: ``"light"`` (white background) or ``"dark"`` (night
@@ -279,8 +281,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)
     size_by = d.get("size_by", "none") if size_by is None else size_by
-    if size_by not in ("none", "mass"):
-        raise InvalidInputError(f"size_by must be 'none' or 'mass'; got {size_by!r}")
+    if size_by not in ("none", "mass", "radius"):
+        raise InvalidInputError(f"size_by must be 'none', 'mass' or 'radius'; got {size_by!r}")
     title = d.get("title") if title is None else title
     if title is not None and not isinstance(title, str):
         raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")

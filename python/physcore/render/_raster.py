@@ -478,6 +478,8 @@ class _Rasteriser:
             lo, hi, amax = _screen_bounds(self.cam, np.asarray(fit, dtype=np.float32)[None])
         else:
             lo, hi, amax = _screen_bounds(self.cam, rec.positions)
+            if size_by == "radius" and rec.radii is not None and rec.radii.size:
+                lo, hi = lo - rec.radii.max(), hi + rec.radii.max()  # whole grains in view
             if walls is not None:
                 wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
                 lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
@@ -522,6 +524,10 @@ class _Rasteriser:
             radii = np.rint(np.minimum(rel, 3.0) * max(self.radius, 1)).astype(np.int64)
             if np.any(radii != self.radius):
                 self.radii = radii
+        elif size_by == "radius" and rec.radii is not None and len(rec.radii):
+            # Grains at their true size (m → pixels), at least one pixel; no radius: the default.
+            px = np.where(rec.radii > 0, rec.radii * self.cam.scale, self.radius)
+            self.radii = np.maximum(np.rint(px), 1).astype(np.int64)
         self.walls = walls
         self.background = self._scene_background(self.cam)
         # The fitted camera draws the labels once, into the background. Moving cameras draw the

@@ -74,6 +74,8 @@ class Recording(NamedTuple):
     times: np.ndarray | None = None
     speed_unit: str = "m/s"
     masses: np.ndarray | None = None
+    #: (N,) float64: the scene's "radius" attribute (m) when it has one (``size_by="radius"``).
+    radii: np.ndarray | None = None
     #: (F, nx, ny) float32: a grid field at every frame (the scene's first grid, or the one its
     #: ``render_defaults`` name; a 3D grid's middle z slice), with the style to draw it in, the
     #: grid's obstacle mask (nx, ny) and its extent (m).
@@ -257,12 +259,13 @@ def _simulate(
         pairs,
         strain,
         pinned,
-        _planes(getattr(scene, "planes", None), dim),
+        _planes(_drawn_planes(scene), dim),
         pressures=pressures,
         walls=None if walls is None else walls - origin,
         times=times,
         speed_unit=str(scene_defaults(scene).get("speed_unit", "m/s")),
         masses=_masses(scene, n),
+        radii=_radii(scene, n),
         fields=fields,
         field_style=gp["style"] if gp else "",
         field_mask=_grid_mask(gp),
@@ -295,6 +298,26 @@ def _masses(scene: Any, n: int) -> np.ndarray | None:
         return None
     m = np.asarray(m, dtype=np.float64).reshape(-1)
     return m.copy() if m.shape == (n,) and np.all(np.isfinite(m) & (m > 0)) else None
+
+
+def _drawn_planes(scene: Any) -> list | None:
+    """The scene's plane colliders plus the walls of its contact terms (drawn alike)."""
+    from ..terms import Plane
+
+    planes = getattr(scene, "planes", None)
+    own = [getattr(t, "walls", None) for t in getattr(scene, "terms", ())]
+    walls = [w for ws in own if isinstance(ws, tuple) for w in ws if isinstance(w, Plane)]
+    return planes if not walls else [*(planes or []), *walls]
+
+
+def _radii(scene: Any, n: int) -> np.ndarray | None:
+    """The scene's (N,) "radius" attribute (m) if it has finite, non-negative ones."""
+    a = getattr(scene, "attributes", None)
+    r = a.get("radius") if isinstance(a, dict) else None
+    if r is None:
+        return None
+    r = np.asarray(r, dtype=np.float64).reshape(-1)
+    return r.copy() if r.shape == (n,) and np.all(np.isfinite(r) & (r >= 0)) else None
 
 
 def scene_defaults(scene: Any) -> dict[str, Any]:

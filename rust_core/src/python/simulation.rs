@@ -383,6 +383,33 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.suggest_dt())))
     }
 
+    /// The per-particle output fields `names` of the terms (`Term::fields`), (N,) float64 each;
+    /// 0 where a field is not defined.
+    fn particle_fields<'py>(&self, py: Python<'py>, names: Vec<String>) -> Vec<Bound<'py, PyArray1<f64>>> {
+        let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
+        let inner = &self.inner;
+        let f = py.detach(|| with_sim!(inner, s => s.fields(&names)));
+        f.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect()
+    }
+
+    /// Each term's counters (`Term::counts`): (term name, counter, value).
+    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
+        with_sim!(&self.inner, s => s.particles().term_counts())
+    }
+
+    /// The own state of term `name` (contacts: spins and springs) as a flat float64 array, or
+    /// None if it keeps none.
+    fn term_history<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        let h = with_sim!(&self.inner, s => s.particles().term_history(name)).map_err(|e| to_py(py, e))?;
+        Ok(h.map(|h| Array1::from(h).into_pyarray(py)))
+    }
+
+    /// Restores what `term_history` returned (checked; nothing changes on error).
+    fn set_term_history(&mut self, py: Python<'_>, name: &str, history: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        let h = slice1(&history, "history")?;
+        with_sim!(&mut self.inner, s => s.particles_mut().set_term_history(name, h)).map_err(|e| to_py(py, e))
+    }
+
     /// (per-term dissipated energy in term order, collisions), J.
     fn ledger(&self) -> (Vec<f64>, f64) {
         with_sim!(&self.inner, s => (s.particles().forces().dissipated.clone(), s.particles().constraints_dissipated()))

@@ -31,6 +31,8 @@ struct ParticleSnapshot<V: Vector> {
     cache: Option<Cache<V>>,
     /// rk45's (accepted, rejected, next h): the counts are restored too.
     adaptive: Option<(u64, u64, Real)>,
+    /// The terms' own states (`Term::history`), in term order.
+    histories: Vec<Option<Vec<Real>>>,
 }
 
 impl<V: Vector> ParticleSystem<V> {
@@ -77,6 +79,9 @@ impl<V: Vector> ParticleSystem<V> {
         self.integrator.info()
     }
     pub fn set_integrator(&mut self, name: &str) -> Result<()> {
+        for t in &self.sys.forces.terms {
+            check_integrator(t.as_ref(), name)?;
+        }
         let mut it = integrators::by_name(name)?;
         it.set_tolerances(self.rtol, self.atol);
         self.integrator = it;
@@ -224,6 +229,7 @@ impl<V: Vector> ParticleSystem<V> {
                 format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles()),
             ));
         }
+        check_integrator(t.as_ref(), self.integrator.info().name)?;
         let mut t = t;
         t.set_single(self.sys.single);
         self.sys.forces.push(t)?;
@@ -331,6 +337,31 @@ impl<V: Vector> ParticleSystem<V> {
         (c, bytes)
     }
 
+    /// Each term's counters (`Term::counts`): (term name, counter, value).
+    pub fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
+        let mut out = Vec::new();
+        for t in &self.sys.forces.terms {
+            out.extend(t.counts().into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
+        }
+        out
+    }
+
+    /// The own state (`Term::history`) of the term named `name`, `None` if it keeps none.
+    pub fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
+        Ok(self.term_named(name)?.history())
+    }
+
+    /// Restores a term's own state (checked; nothing changes on error).
+    pub fn set_term_history(&mut self, name: &str, h: &[Real]) -> Result<()> {
+        let n = self.n_particles();
+        let k = self.sys.forces.terms.iter().position(|t| t.name() == name).ok_or_else(|| invalid("name", format!("no term named {name:?}")))?;
+        self.sys.forces.terms[k].set_history(h, n)
+    }
+
+    fn term_named(&self, name: &str) -> Result<&dyn Term<V>> {
+        self.sys.forces.terms.iter().find(|t| t.name() == name).map(|t| t.as_ref()).ok_or_else(|| invalid("name", format!("no term named {name:?}")))
+    }
+
     /// The first particle (by index) with a non-finite position or velocity.
     fn first_non_finite(&self) -> Option<(usize, Failure)> {
         let (x, v) = (&self.sys.state.x, &self.sys.state.v);
@@ -370,7 +401,8 @@ impl<V: Vector> ParticleSystem<V> {
         })
     }
 
-    /// Σ m x × v about the origin over free particles, kg·m²/s (2D: only z is non-zero).
+    /// Σ m x × v about the origin over free particles, plus the spins terms carry (contacts:
+    /// Σ Iω), kg·m²/s (2D: only z is non-zero).
     pub fn angular_momentum(&self) -> [Real; 3] {
         let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
         let l = par::sum(x.len(), glam::DVec3::ZERO, |r: Range<usize>| {
@@ -383,7 +415,14 @@ impl<V: Vector> ParticleSystem<V> {
             }
             l
         });
-        l.to_array()
+        let mut l = l.to_array();
+        for t in &self.sys.forces.terms {
+            let s = t.extra_angular_momentum(m);
+            for k in 0..3 {
+                l[k] += s[k];
+            }
+        }
+        l
     }
 }
 
@@ -427,6 +466,9 @@ impl<V: Vector> System for ParticleSystem<V> {
         if self.is_empty() {
             return Ok(());
         }
+        for t in &mut self.sys.forces.terms {
+            t.begin_step(dt);
+        }
         let Ok(non_finite) = self.integrator.step_interruptible(&mut self.sys, dt, stop) else {
             return Err(Halt::Stopped);
         };
@@ -437,6 +479,12 @@ impl<V: Vector> System for ParticleSystem<V> {
             let (f, g) = (self.integrator.last_forces(), self.sys.forces.g);
             if self.constraints.apply(&mut self.sys.state, &self.sys.model, f, g, self.sys.single) {
                 self.integrator.reset();
+            }
+        }
+        if !non_finite {
+            let sys = &mut self.sys;
+            for t in &mut sys.forces.terms {
+                t.end_step(&sys.state.x, &sys.state.v, &sys.model, dt);
             }
         }
         if non_finite {
@@ -483,7 +531,9 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     fn energy(&self) -> EnergyReport {
         let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
-        let kinetic = 0.5
+        let spin: Real = self.sys.forces.terms.iter().map(|t| t.extra_kinetic(m)).sum();
+        let kinetic = spin
+            + 0.5
             * par::sum(x.len(), 0.0, |r| {
                 let mut k = 0.0;
                 for i in r {
@@ -501,6 +551,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             .filter(|(t, _)| t.dissipative())
             .map(|(t, d)| (t.name().to_string(), *d))
             .collect();
+        dissipated.extend(terms.iter().flat_map(|t| t.own_books()));
         if !self.constraints.is_empty() {
             dissipated.push(("collisions".to_string(), self.constraints.dissipated));
         }
@@ -537,6 +588,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             collisions: self.constraints.dissipated,
             cache: self.integrator.try_cache().map_err(|_| need.error())?,
             adaptive: self.integrator.adaptive_stats(),
+            histories: self.sys.forces.terms.iter().map(|t| t.history()).collect(),
         }))
     }
 
@@ -554,6 +606,11 @@ impl<V: Vector> System for ParticleSystem<V> {
         if let Some((f, p)) = self.integrator.cache() {
             out.push(("cache_forces".to_string(), flat(&f)));
             out.push(("cache_power".to_string(), p));
+        }
+        for t in &self.sys.forces.terms {
+            if let Some(h) = t.history() {
+                out.push((format!("history:{}", t.name()), h));
+            }
         }
         if let Some((accepted, rejected, _)) = self.integrator.adaptive_stats() {
             // Counts below 2^53 are exact in a float64.
@@ -594,10 +651,19 @@ impl<V: Vector> System for ParticleSystem<V> {
             false => None,
         };
         self.check_books(dissipated, collisions, &cache)?;
+        let mut histories = Vec::new();
+        for (k, t) in self.sys.forces.terms.iter().enumerate() {
+            if t.history().is_some() {
+                histories.push((k, array(arrays, &format!("history:{}", t.name()), None)?));
+            }
+        }
         // The cache can only be checked against the integrator once the state is in: on a
         // refusal everything returns to the snapshot.
         let before = self.snapshot()?;
         let r = self.set_state(Some(x), Some(v)).and_then(|()| self.restore_books(dissipated, collisions, cache));
+        let r = r.and_then(|()| {
+            histories.iter().try_for_each(|&(k, h)| self.sys.forces.terms[k].set_history(h, n))
+        });
         if r.is_err() {
             self.restore(before);
         } else if let Some((accepted, rejected)) = counts {
@@ -607,10 +673,17 @@ impl<V: Vector> System for ParticleSystem<V> {
     }
 
     fn restore(&mut self, snapshot: Snapshot) {
-        let ParticleSnapshot { state, dissipated, collisions, cache, adaptive } =
+        let ParticleSnapshot { state, dissipated, collisions, cache, adaptive, histories } =
             *snapshot.downcast::<ParticleSnapshot<V>>().expect("a snapshot of this particle system");
         if let Some((accepted, rejected, _)) = adaptive {
             self.integrator.set_adaptive_counts(accepted, rejected);
+        }
+        let n = state.x.len();
+        for (t, h) in self.sys.forces.terms.iter_mut().zip(&histories) {
+            if let Some(h) = h {
+                // A snapshot this system made: it fits.
+                t.set_history(h, n).expect("a term's own snapshot restores");
+            }
         }
         self.sys.state = state;
         self.sys.forces.dissipated = dissipated;
@@ -623,5 +696,16 @@ impl<V: Vector> System for ParticleSystem<V> {
         if !restored {
             self.integrator.reset();
         }
+    }
+}
+
+/// `InvalidInput` naming the integrator if term `t` cannot be stepped by integrator `name`.
+fn check_integrator<V: Vector>(t: &dyn Term<V>, name: &str) -> Result<()> {
+    match t.integrators() {
+        Some(ok) if !ok.contains(&name) => Err(invalid(
+            "integrator",
+            format!("term {:?} needs integrator {} (this scene uses {name:?})", t.name(), ok.iter().map(|o| format!("{o:?}")).collect::<Vec<_>>().join(" or ")),
+        )),
+        _ => Ok(()),
     }
 }

@@ -1,4 +1,5 @@
 //! Force terms. A scene holds only the terms it names; each is evaluated only if present.
+pub mod contacts;
 pub mod coulomb;
 pub mod drag;
 pub mod electric_field;
@@ -117,6 +118,43 @@ pub trait Term<V: Vector>: Send + Sync {
     fn reserve(&mut self, _n: usize) -> Result<()> {
         Ok(())
     }
+    // ---- Terms with a state of their own (contacts: spins and tangential springs) ----------
+    /// Called before each integrator step with its dt (s).
+    fn begin_step(&mut self, _dt: Real) {}
+    /// Called after each accepted integrator step (and the constraint stage) with the new state:
+    /// a term with a state of its own advances it here (contacts: spins and springs).
+    fn end_step(&mut self, _x: &[V], _v: &[V], _model: &Model, _dt: Real) {}
+    /// Kinetic energy the term's own state carries (contacts: rotation, ½Iω²), J.
+    fn extra_kinetic(&self, _model: &Model) -> Real {
+        0.0
+    }
+    /// Angular momentum the term's own state carries (contacts: spins, Σ Iω), kg·m²/s.
+    fn extra_angular_momentum(&self, _model: &Model) -> [Real; 3] {
+        [0.0; 3]
+    }
+    /// Energy books the term keeps itself (dissipated energies by cause, J), for terms whose
+    /// `dissipative()` is false because they do not book through the integrator.
+    fn own_books(&self) -> Vec<(String, Real)> {
+        Vec::new()
+    }
+    /// The integrators the term can be stepped by (`None`: any).
+    fn integrators(&self) -> Option<&'static [&'static str]> {
+        None
+    }
+    /// Counters to report (contacts now), by name.
+    fn counts(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+    /// The term's own state as reals (rollback, save/load), `None` if it has none.
+    fn history(&self) -> Option<Vec<Real>> {
+        None
+    }
+    /// Restores what `history` returned, for a scene of `n_particles`; checked, nothing
+    /// changes on error.
+    fn set_history(&mut self, _h: &[Real], _n_particles: usize) -> Result<()> {
+        Ok(())
+    }
+
     /// Called once when the term is added to a system, before it is evaluated: a term that
     /// needs neighbours joins a search that terms of its kind already share in this system, or
     /// registers its own (see `neighbors::Shared`). Terms without neighbours need not implement

@@ -1,0 +1,242 @@
+"""Grains that collide: the discrete element method (DEM) for discs (2D) and spheres (3D).
+
+A :class:`Contacts` term makes the scene's particles solid grains of the radii in the scene's
+``"radius"`` attribute (:meth:`~physcore.Scene.set_attribute`): overlapping grains push apart
+through a spring–dashpot whose damping gives the chosen coefficient of restitution, rub through
+Coulomb friction with a tangential spring (Cundall & Strack 1979), and roll, each grain carrying
+an angular velocity. Pinned particles are fixed obstacles (pegs); walls are half-spaces.
+
+Examples
+--------
+Two discs collide head-on with e = 0.5: they separate at half their approach speed.
+
+>>> import numpy as np, physcore as pc
+>>> s = pc.Scene(dim=2, integrator="semi_implicit_euler", threads=1)
+>>> _ = s.add_particles([[0.0, 0.0], [0.03, 0.0]], [[1.0, 0.0], [-1.0, 0.0]], masses=0.01)
+>>> s.set_attribute("radius", [0.01, 0.01])
+>>> _ = s.add(pc.Contacts(stiffness=1e4, restitution=0.5))
+>>> _ = s.advance(0.05)
+>>> round(float(s.velocities[1, 0] - s.velocities[0, 0]) / 2.0, 2)   # separation / approach speed
+0.5
+>>> s.contact_count()
+0
+"""
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+
+from ._errors import InvalidInputError, InvalidTypeError
+from .terms import Box, Plane, Term, _finite_float
+
+if TYPE_CHECKING:
+    from .scene import Scene
+
+__all__ = ["Contacts"]
+
+_LAWS = ("linear", "hertz")
+
+
+def _walls(walls: Any) -> tuple[Plane, ...]:
+    if walls is None:
+        return ()
+    if isinstance(walls, (Plane, Box)):
+        walls = [walls]
+    if isinstance(walls, (str, bytes)) or not isinstance(walls, Sequence):
+        raise InvalidTypeError(f"walls: expected a Plane, a Box or a list of them, got {type(walls).__name__}")
+    out: list[Plane] = []
+    for k, w in enumerate(walls):
+        if isinstance(w, Box):
+            out.extend(w.faces())
+        elif isinstance(w, Plane):
+            out.append(w)
+        else:
+            raise InvalidTypeError(f"walls: entry {k} is a {type(w).__name__}, expected a Plane or a Box")
+    return tuple(out)
+
+
+def _restitution(arg: str, e: Any) -> float:
+    x = _finite_float(e, arg)
+    if not 0.0 < x <= 1.0:
+        raise InvalidInputError(
+            f"{arg}: must be in (0, 1], got {x} (a dashpot that never pulls cannot stop a grain dead; use e.g. 0.05)"
+        )
+    return x
+
+
+@dataclass(frozen=True, eq=False)
+class Contacts(Term, kind="contacts"):
+    """Contacts between grains (DEM): spring–dashpot normal force, Coulomb friction with a
+    tangential spring, rolling.
+
+    For grains i, j of radii r (the scene's ``"radius"`` attribute, m) at distance
+    ``d < r_i + r_j``: overlap ``δ = r_i + r_j − d``, normal ``n`` from i to j, effective mass
+    ``m* = 1/(1/m_i + 1/m_j)``, contact-point relative velocity ``v_c`` (including each grain's
+    spin times its lever ``r − δ/2``), ``v_n = v_c·n``.
+
+    * normal force, never attractive: ``f_n = max(0, k δ + γ v_n)`` (``law="linear"``) or
+      ``max(0, k δ^{3/2} + γ v_n)`` with ``γ ∝ δ^{1/4}`` (``law="hertz"``, Tsuji, Tanaka &
+      Ishida, Powder Technol. 71 (1992) 239, eq. 9); ``γ = 2ζ√(k m*)`` with the damping ratio ζ
+      solved so that a head-on collision of this clamped model returns exactly ``restitution``
+      (Schwager & Pöschel, Phys. Rev. E 78 (2008) 051304, for the linear law; integrated
+      numerically for Hertz);
+    * tangential force ``f_t = −k_t ξ − γ_t v_t`` with ``|f_t| ≤ μ f_n`` (Cundall & Strack,
+      Géotechnique 29 (1979) 47–65): ξ is a spring stretched by the sliding of the contact point,
+      which slips when the cap is reached, so a grain can rest on a slope and roll without
+      slipping; ``k_t = tangential_ratio · k``;
+    * torque ``τ = (r − δ/2) n × f_t`` on an angular velocity per grain, moment of inertia
+      ``I = inertia_factor · m r²``.
+
+    The scene must use ``integrator="semi_implicit_euler"`` (the usual DEM scheme: forces at
+    the step's start, then v, ω, x, then each spring with the new velocities). The automatic
+    step (:meth:`~physcore.Scene.advance`) is a 50th of the contact duration ``π√(m*/k)``, at
+    which the measured restitution is within 1 % of ``restitution``. Pinned particles with a
+    radius are fixed obstacles; particles of radius 0 do not collide.
+
+    Energy books (:meth:`~physcore.Scene.energy`): the kinetic energy includes rotation; the
+    term's potential is the springs' energy (``½kδ²`` or ``⅖kδ^{5/2}``, plus ``½k_t|ξ|²``);
+    ``"<name> (normal damping)"`` and ``"<name> (friction)"`` are the energy the dashpots and
+    slipping have dissipated. :meth:`~physcore.Scene.angular_momentum` includes the spins
+    ``Σ I ω``. :meth:`~physcore.Scene.particle_field` gives ``"angular_velocity"`` (2D, rad/s;
+    ``"angular_velocity_x|y|z"`` in 3D), ``"angle"`` (2D, rad) and ``"coordination"`` (contacts
+    per grain); :meth:`~physcore.Scene.contact_count` the contacts now.
+
+    Parameters
+    ----------
+    stiffness : float
+        Normal stiffness ``k`` > 0: N/m (linear) or N/m^{3/2} (Hertz). Pick it so that the
+        largest overlap, about ``v √(m*/k)`` at impact speed v, is a few percent of a radius.
+    restitution : float
+        Coefficient of restitution ``e`` in (0, 1] of grain–grain collisions. Default 0.9.
+    friction : float
+        Coulomb friction coefficient ``μ`` ≥ 0. Default 0.5.
+    walls : Plane, Box or sequence of them, optional
+        Walls, each with its own restitution and friction (a :class:`Box` is its faces). They
+        use the same contact law with ``m* = m``.
+    tangential_ratio : float
+        ``k_t / k`` ≥ 0 (Hertz: over the normal contact stiffness ``(3/2)k√δ``). Default 2/7,
+        which gives spheres equal normal and tangential periods (Silbert et al., Phys. Rev. E 64
+        (2001) 051302).
+    law : {"linear", "hertz"}
+        Normal force law. Default ``"linear"``. Hertz passes impulses through chains of touching
+        balls (Newton's cradle) far better.
+    inertia_factor : float, optional
+        β in ``I = β m r²``: default ½ (a disc) in 2D, ⅖ (a solid sphere) in 3D.
+    name : str
+        Key of this term in the energy books. Default ``"contacts"``.
+
+    Raises
+    ------
+    TypeError
+        A wall that is not a Plane or Box; non-numeric parameters.
+    ValueError
+        Parameters out of range (named); at :meth:`~physcore.Scene.add`: a scene whose
+        integrator is not ``"semi_implicit_euler"``, walls of the wrong dimension, or no
+        ``"radius"`` attribute.
+    """
+
+    stiffness: float
+    restitution: float = 0.9
+    friction: float = 0.5
+    walls: Any = ()
+    tangential_ratio: float = 2.0 / 7.0
+    law: str = "linear"
+    inertia_factor: float | None = None
+    name: str = field(default="contacts", kw_only=True)
+    _dim: int = field(default=0, init=False, repr=False, compare=False)
+
+    record_fields: ClassVar[dict[str, str]] = {
+        "stiffness": "number",
+        "restitution": "number",
+        "friction": "number",
+        "tangential_ratio": "number",
+        "law": "str",
+        "inertia_factor": "optional_number",
+    }
+    record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
+        "wall_points": ("f8", ("W", "D")),
+        "wall_normals": ("f8", ("W", "D")),
+        "wall_restitution": ("f8", ("W",)),
+        "wall_friction": ("f8", ("W",)),
+        "history": ("f8", ("H",)),
+    }
+
+    def __post_init__(self) -> None:
+        k = _finite_float(self.stiffness, "stiffness")
+        if not k > 0:
+            raise InvalidInputError(f"stiffness: must be > 0 (N/m, or N/m^1.5 for Hertz), got {k}")
+        object.__setattr__(self, "stiffness", k)
+        object.__setattr__(self, "restitution", _restitution("restitution", self.restitution))
+        object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
+        object.__setattr__(self, "tangential_ratio", _finite_float(self.tangential_ratio, "tangential_ratio", minimum=0.0))
+        if not isinstance(self.law, str):
+            raise InvalidTypeError(f"law: expected one of {', '.join(_LAWS)}, got {type(self.law).__name__}")
+        if self.law not in _LAWS:
+            raise InvalidInputError(f"law: unknown law {self.law!r}; valid: {', '.join(_LAWS)}")
+        if self.inertia_factor is not None:
+            b = _finite_float(self.inertia_factor, "inertia_factor")
+            if not b > 0:
+                raise InvalidInputError(f"inertia_factor: must be > 0 (I = β m r²), got {b}")
+            object.__setattr__(self, "inertia_factor", b)
+        walls = _walls(self.walls)
+        for w in walls:
+            _restitution("walls", w.restitution)
+        object.__setattr__(self, "walls", walls)
+
+    def _wall_arrays(self, dim: int) -> dict[str, np.ndarray]:
+        for k, w in enumerate(self.walls):
+            if w.point.shape[0] != dim:
+                raise InvalidInputError(f"walls: wall {k} has {w.point.shape[0]} components, the scene is {dim}D")
+        return {
+            "wall_points": np.array([w.point for w in self.walls], dtype=np.float64).reshape(-1, dim),
+            "wall_normals": np.array([w.normal for w in self.walls], dtype=np.float64).reshape(-1, dim),
+            "wall_restitution": np.array([w.restitution for w in self.walls], dtype=np.float64),
+            "wall_friction": np.array([w.friction for w in self.walls], dtype=np.float64),
+        }
+
+    def _attach(self, scene: Scene, name: str) -> Contacts:
+        if scene.integrator != "semi_implicit_euler":
+            raise InvalidInputError(
+                f"integrator: Contacts need integrator='semi_implicit_euler' (the scene uses {scene.integrator!r}); "
+                "build the scene with pc.Scene(..., integrator='semi_implicit_euler') or set scene.integrator first"
+            )
+        if "radius" not in scene.attributes:
+            raise InvalidInputError('radius: Contacts need the scene\'s "radius" attribute: scene.set_attribute("radius", r) first')
+        params: dict[str, Any] = {
+            "stiffness": self.stiffness,
+            "restitution": self.restitution,
+            "friction": self.friction,
+            "tangential_ratio": self.tangential_ratio,
+            "law": self.law,
+            **{k: np.ascontiguousarray(v).reshape(-1) for k, v in self._wall_arrays(scene.dim).items()},
+        }
+        if self.inertia_factor is not None:
+            params["inertia_factor"] = self.inertia_factor
+        scene._sim.add_term("contacts", name, params)
+        stored = dataclasses.replace(self, name=name)
+        object.__setattr__(stored, "_dim", scene.dim)
+        return stored
+
+    def particle_fields(self, dim: int) -> tuple[str, ...]:
+        """The names :meth:`~physcore.Scene.particle_field` accepts for this term."""
+        spin = ("angular_velocity", "angle") if dim == 2 else tuple(f"angular_velocity_{c}" for c in "xyz")
+        return (*spin, "coordination")
+
+    def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        meta = {f: getattr(self, f) for f in self.record_fields}
+        dim = self.walls[0].point.shape[0] if self.walls else self._dim
+        return meta, self._wall_arrays(dim)  # the scene adds "history" (the spins and springs) from the core
+
+    @classmethod
+    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        walls = [
+            Plane(p, n, float(e), float(mu))
+            for p, n, e, mu in zip(arrays["wall_points"], arrays["wall_normals"], arrays["wall_restitution"], arrays["wall_friction"], strict=True)
+        ]
+        fields = {f: meta[f] for f in cls.record_fields}
+        term = scene.add(cls(**fields, walls=walls, name=meta["name"]))
+        scene._sim.set_term_history(term.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
