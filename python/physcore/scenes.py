@@ -1148,24 +1148,30 @@ def _auto_grain_dt(scene: Scene, dt: float | None) -> Scene:
 def galton_board(
     balls: int = 240,
     rows: int = 10,
-    restitution: float = 0.4,
-    friction: float = 0.2,
+    restitution: float = 0.5,
+    friction: float = 0.0,
     seed: int = 0,
-    outlet: float = 2.6,
+    outlet: float = 3.2,
+    drag: float = 0.0,
     integrator: str | None = None,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Galton board: balls pour from a hopper through `rows` staggered rows of pegs into bins.
+    """Galton board: balls pour from a hopper through a chute onto `rows` staggered rows of
+    pegs and into bins.
 
-    2D, steel-like balls of radius 2 mm on pegs of radius 1.5 mm spaced 12 mm (rows 10.4 mm
-    apart), linear contacts (:class:`~physcore.Contacts`, k = 5·10³ N/m) with the
-    given restitution and friction; the pegs, the hopper's sides and the bins' dividers are
-    pinned grains. A ball that meets a peg goes left or right, so after `rows` rows its bin is
-    the number of right turns: the bin counts approach the binomial distribution
-    B(rows, ½) (Galton, *Natural Inheritance*, 1889), tested statistically in the test suite.
-    ``seed`` jitters the balls' start. Particles: the balls first (indices 0..balls-1), then the
-    fixed ones; :func:`galton_bins` counts the balls per bin.
+    2D; balls of radius 1.8–2.2 mm (mixed, so they do not crystallise and arch over the
+    hopper's outlet) and 0.26 g, pegs of radius 2.25 mm spaced 12 mm (rows 10.4 mm apart),
+    linear contacts (:class:`~physcore.Contacts`, k = 5·10³ N/m) with the given restitution
+    and friction; the pegs, the hopper, the chute (`outlet` ball diameters wide) and the bins'
+    dividers are pinned grains, the floor and sides are walls; optional linear `drag` (kg/s).
+    An ideal board sends each ball left or right at every row, so its bin is
+    Binomial(rows, ½) (Galton, *Natural Inheritance*, 1889). This one is a dense stream of
+    bouncing balls that knock each other sideways: at the defaults its bins are bell-shaped
+    but about twice as wide (6 rows: variance 2.9 bins² against 1.5; the test suite measures
+    it). With friction the balls arch across the gaps and the flow stops. Particles: the
+    balls first (indices 0..balls-1), then the fixed ones; :func:`galton_bins` counts the
+    balls per bin.
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
@@ -1180,7 +1186,10 @@ def galton_board(
     friction = _nonneg(friction, "friction")
     seed = _count(seed, "seed", 0)
     dt = _optional(dt, "dt")
-    rb, rp, s = 0.002, 0.0015, 0.012
+    # Big pegs: the gap between two of a row is 1.5 ball diameters, so a ball that leaves a
+    # peg can only drop into the gap beside it and meets the peg of the next row below that
+    # gap (with small pegs, balls skipped rows and crossed columns, and the bins filled evenly).
+    rb, rp, s = 0.002, 0.00225, 0.012
     h = s * math.sqrt(3.0) / 2.0
     half = 0.5 * (rows + 1) * s  # the board spans x in [-half, half]
     fixed: list[tuple[float, float, float]] = []
@@ -1201,20 +1210,26 @@ def galton_board(
         x = (m - 0.5 * rows - 0.5) * s
         for y in np.arange(y_floor + r_div, y_top_bins, 2 * r_div):
             fixed.append((x, float(y), r_div))
-    # Hopper: two slanted walls of grains down to an opening of 4.5 ball diameters above peg 0.
+    # Hopper: two slanted walls of grains down to an opening of `outlet` ball diameters, then a
+    # vertical chute of that width down to just above peg 0. Without the chute, balls sliding
+    # off the hopper's slopes crossed the pegs diagonally and piled into the outer bins.
     outlet = _check.float_in_range("outlet", outlet, 2.05, 20.0)
+    drag = _nonneg(drag, "drag")
     opening = outlet * 2 * rb
-    y_out = 1.5 * h
+    y_chute = rp + 1.2 * rb + 2 * r_div  # the chute's lower end, just above peg 0
+    y_out = y_chute + 2.5 * h
     width = max(half, 0.5 * opening + 0.05)
     top = y_out + 0.07
     for sign in (-1.0, 1.0):
-        x0, x1 = sign * 0.5 * opening, sign * width
+        x0, x1 = sign * (0.5 * opening + r_div), sign * width
         length = math.hypot(x1 - x0, top - y_out)
         for t in np.arange(0.0, length, 2 * r_div):
             fixed.append((x0 + (x1 - x0) * t / length, y_out + (top - y_out) * t / length, r_div))
+        for y in np.arange(y_chute, y_out, 2 * r_div):
+            fixed.append((x0, float(y), r_div))
     # Balls: a loose block in the hopper (rows of balls 2.3 rb apart, the top ones higher).
     rng = np.random.default_rng(seed)
-    per_row = max(1, int((2 * width - 4 * rb) / (2.3 * rb)) - 2)
+    per_row = max(1, int((2 * width - 8 * rb) / (2.3 * rb)) - 2)
     k = np.arange(balls)
     bx = ((k % per_row) - 0.5 * (per_row - 1)) * 2.3 * rb + rng.uniform(-0.2, 0.2, balls) * rb
     by = top + rb + (k // per_row) * 2.3 * rb + rng.uniform(-0.1, 0.1, balls) * rb
@@ -1223,12 +1238,15 @@ def galton_board(
     bx = np.clip(bx, -wide_at + 1.5 * rb, wide_at - 1.5 * rb)
     f = np.array(fixed)
     x = np.concatenate([np.column_stack([bx, by]), f[:, :2]])
-    radius = np.concatenate([np.full(balls, rb), f[:, 2]])
+    # Radii 1.8–2.2 mm: equal discs crystallise in a 2D hopper and arch over its outlet.
+    radius = np.concatenate([rb * rng.uniform(0.9, 1.1, balls), f[:, 2]])
     pinned = np.arange(len(x)) >= balls
     scene = _grain_scene(dt, integrator, threads)
     scene.add_particles(x, masses=2.6e-4, pinned=pinned)
     scene.set_attribute("radius", radius)
     scene.add(Gravity([0.0, -9.81]))
+    if drag:
+        scene.add(Drag(drag))
     scene.add(Contacts(stiffness=5e3, restitution=restitution, friction=friction,
                        walls=[Plane([0.0, y_floor], [0.0, 1.0], restitution, friction),
                               Plane([-half, 0.0], [1.0, 0.0], restitution, friction),

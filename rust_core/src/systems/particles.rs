@@ -354,12 +354,24 @@ impl<V: Vector> ParticleSystem<V> {
     /// Restores a term's own state (checked; nothing changes on error).
     pub fn set_term_history(&mut self, name: &str, h: &[Real]) -> Result<()> {
         let n = self.n_particles();
-        let k = self.sys.forces.terms.iter().position(|t| t.name() == name).ok_or_else(|| invalid("name", format!("no term named {name:?}")))?;
+        let k = self
+            .sys
+            .forces
+            .terms
+            .iter()
+            .position(|t| t.name() == name)
+            .ok_or_else(|| invalid("name", format!("no term named {name:?}")))?;
         self.sys.forces.terms[k].set_history(h, n)
     }
 
     fn term_named(&self, name: &str) -> Result<&dyn Term<V>> {
-        self.sys.forces.terms.iter().find(|t| t.name() == name).map(|t| t.as_ref()).ok_or_else(|| invalid("name", format!("no term named {name:?}")))
+        self.sys
+            .forces
+            .terms
+            .iter()
+            .find(|t| t.name() == name)
+            .map(|t| t.as_ref())
+            .ok_or_else(|| invalid("name", format!("no term named {name:?}")))
     }
 
     /// The first particle (by index) with a non-finite position or velocity.
@@ -534,15 +546,15 @@ impl<V: Vector> System for ParticleSystem<V> {
         let spin: Real = self.sys.forces.terms.iter().map(|t| t.extra_kinetic(m)).sum();
         let kinetic = spin
             + 0.5
-            * par::sum(x.len(), 0.0, |r| {
-                let mut k = 0.0;
-                for i in r {
-                    if m.inv_mass[i] != 0.0 {
-                        k += m.mass[i] * v[i].length_squared();
+                * par::sum(x.len(), 0.0, |r| {
+                    let mut k = 0.0;
+                    for i in r {
+                        if m.inv_mass[i] != 0.0 {
+                            k += m.mass[i] * v[i].length_squared();
+                        }
                     }
-                }
-                k
-            });
+                    k
+                });
         let terms = &self.sys.forces.terms;
         let potential = terms.iter().filter_map(|t| t.potential(x, m).map(|u| (t.name().to_string(), u))).collect();
         let mut dissipated: Vec<(String, Real)> = terms
@@ -661,9 +673,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         // refusal everything returns to the snapshot.
         let before = self.snapshot()?;
         let r = self.set_state(Some(x), Some(v)).and_then(|()| self.restore_books(dissipated, collisions, cache));
-        let r = r.and_then(|()| {
-            histories.iter().try_for_each(|&(k, h)| self.sys.forces.terms[k].set_history(h, n))
-        });
+        let r = r.and_then(|()| histories.iter().try_for_each(|&(k, h)| self.sys.forces.terms[k].set_history(h, n)));
         if r.is_err() {
             self.restore(before);
         } else if let Some((accepted, rejected)) = counts {
@@ -704,7 +714,11 @@ fn check_integrator<V: Vector>(t: &dyn Term<V>, name: &str) -> Result<()> {
     match t.integrators() {
         Some(ok) if !ok.contains(&name) => Err(invalid(
             "integrator",
-            format!("term {:?} needs integrator {} (this scene uses {name:?})", t.name(), ok.iter().map(|o| format!("{o:?}")).collect::<Vec<_>>().join(" or ")),
+            format!(
+                "term {:?} needs integrator {} (this scene uses {name:?})",
+                t.name(),
+                ok.iter().map(|o| format!("{o:?}")).collect::<Vec<_>>().join(" or ")
+            ),
         )),
         _ => Ok(()),
     }

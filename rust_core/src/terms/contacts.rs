@@ -183,7 +183,19 @@ impl Material {
     /// `dt`: the step; `new`: whether the contact formed during the last step.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn pair<V: Vector>(&self, n: V, d: Real, vc: V, m: Real, sqrt_km: Real, xi: V, zeta: Real, mu: Real, dt: Real, new: bool) -> PairOut<V> {
+    fn pair<V: Vector>(
+        &self,
+        n: V,
+        d: Real,
+        vc: V,
+        m: Real,
+        sqrt_km: Real,
+        xi: V,
+        zeta: Real,
+        mu: Real,
+        dt: Real,
+        new: bool,
+    ) -> PairOut<V> {
         let vn = vc.dot(n);
         let (mut fn_, el) = self.normal(d, vn, m, zeta, sqrt_km, dt);
         let onset = if new { dt } else { 0.0 };
@@ -228,10 +240,13 @@ impl Material {
             }
         }
         // γ_t = 2ζ√(k_t m*), from √(k_n m*).
-        let gt = 2.0 * zeta * sqrt_km * match self.law {
-            Law::Linear => self.tangential_ratio.sqrt(),
-            Law::Hertz => (1.5 * self.tangential_ratio).sqrt() * d.sqrt().sqrt(),
-        };
+        let gt = 2.0
+            * zeta
+            * sqrt_km
+            * match self.law {
+                Law::Linear => self.tangential_ratio.sqrt(),
+                Law::Hertz => (1.5 * self.tangential_ratio).sqrt() * d.sqrt().sqrt(),
+            };
         let mut ft = xi_p * (-kt) - vt * gt;
         let cap = mu * fn_;
         let f2 = ft.length_squared();
@@ -306,7 +321,7 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     let mut walls = Vec::with_capacity(w);
     for k in 0..w {
         let l2 = normals[k].length_squared();
-        if !(l2.is_finite() && l2 > 0.0) || !points[k].is_finite() {
+        if !(l2.is_finite() && l2 > 0.0 && points[k].is_finite()) {
             return Err(invalid("walls", format!("wall {k}: the point must be finite and the normal non-zero")));
         }
         let e = restitution_arg("walls", e[k])?;
@@ -381,7 +396,8 @@ pub fn restitution_hertz(zeta: Real) -> Real {
         let (k2u, k2w) = (w + 0.5 * h * k1w, acc(u + 0.5 * h * k1u, w + 0.5 * h * k1w));
         let (k3u, k3w) = (w + 0.5 * h * k2w, acc(u + 0.5 * h * k2u, w + 0.5 * h * k2w));
         let (k4u, k4w) = (w + h * k3w, acc(u + h * k3u, w + h * k3w));
-        let (u1, w1) = (u + h / 6.0 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u), w + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w));
+        let (u1, w1) =
+            (u + h / 6.0 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u), w + h / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w));
         let f1 = -acc(u1, w1);
         if step > 0 && (f1 <= 0.0 || u1 <= 0.0) {
             // Linear interpolation of the velocity to the force's zero.
@@ -462,8 +478,10 @@ impl<V: Vector> Contacts<V> {
             self.torque.resize(n, V::AXIAL_ZERO);
         }
         let chunks = n.div_ceil(CHUNK);
-        if self.hist.len() != chunks || self.hist.iter().enumerate().any(|(c, h)| h.start.len() != chunk_len(n, c) + 1) {
-            self.hist = (0..chunks).map(|c| Chunk { start: vec![0; chunk_len(n, c) + 1], entries: Vec::new() }).collect();
+        if self.hist.len() != chunks || self.hist.iter().enumerate().any(|(c, h)| h.start.len() != chunk_len(n, c) + 1)
+        {
+            self.hist =
+                (0..chunks).map(|c| Chunk { start: vec![0; chunk_len(n, c) + 1], entries: Vec::new() }).collect();
             self.pend = self.hist.clone();
         }
     }
@@ -579,7 +597,6 @@ impl<V: Vector> Term<V> for Contacts<V> {
                     &h.entries[h.start[k] as usize..h.start[k + 1] as usize]
                 };
                 let mut o = 0;
-                let mut matched = 0;
                 let mut force = V::ZERO;
                 let mut torque = V::AXIAL_ZERO;
                 let mi = model.mass[i];
@@ -590,7 +607,6 @@ impl<V: Vector> Term<V> for Contacts<V> {
                     let known = o < old.len() && old[o].partner == j;
                     let (xi, u_old) = if known { (old[o].xi, old[o].u) } else { (V::ZERO, 0.0) };
                     if known {
-                        matched += 1;
                         sums.broken -= if j < nw { 0.5 } else { 1.0 } * u_old;
                     }
                     let ai = ri - 0.5 * d;
@@ -629,7 +645,6 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 }
                 // Springs of contacts that ended release their energy (the matched ones were
                 // subtracted above).
-                let _ = matched;
                 sums.broken += old.iter().map(|e| if e.partner < nw { 0.5 } else { 1.0 } * e.u).sum::<Real>();
                 write.put(fi, force);
                 *ti = torque;
@@ -709,7 +724,11 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // Tangential springs as stored (each pair's spring is held by both sides: half each).
         if self.hist.len() == n.div_ceil(CHUNK) {
             for i in 0..n {
-                u += self.committed(i).iter().map(|e| if (e.partner as usize) < n { 0.5 } else { 1.0 } * e.u).sum::<Real>();
+                u += self
+                    .committed(i)
+                    .iter()
+                    .map(|e| if (e.partner as usize) < n { 0.5 } else { 1.0 } * e.u)
+                    .sum::<Real>();
             }
         }
         Some(u)
@@ -772,7 +791,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
             out.push(("angular_velocity", 0..n, self.omega[..n].iter().map(|w| axial_z::<V>(*w)).collect()));
             out.push(("angle", 0..n, self.angle[..n].to_vec()));
         } else {
-            for (k, name) in ["angular_velocity_x", "angular_velocity_y", "angular_velocity_z"].into_iter().enumerate() {
+            for (k, name) in ["angular_velocity_x", "angular_velocity_y", "angular_velocity_z"].into_iter().enumerate()
+            {
                 out.push((name, 0..n, self.omega[..n].iter().map(|w| axial_comp::<V>(*w, k)).collect()));
             }
         }
@@ -862,10 +882,11 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let lost: Real = {
             use rayon::prelude::*;
             let pend = &mut self.pend;
-            let parts: Vec<Real> = match par::fork_if(n, || pend.par_iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect()) {
-                Some(p) => p,
-                None => pend.iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect(),
-            };
+            let parts: Vec<Real> =
+                match par::fork_if(n, || pend.par_iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect()) {
+                    Some(p) => p,
+                    None => pend.iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect(),
+                };
             parts.into_iter().sum()
         };
         std::mem::swap(&mut self.hist, &mut self.pend);
@@ -950,7 +971,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
         }
         let a = V::AXIAL_DIM;
         let head = 1 + n * (a + 1) + 2;
-        if h.len() < head || (h.len() - head) % (3 + V::DIM) != 0 {
+        if h.len() < head || !(h.len() - head).is_multiple_of(3 + V::DIM) {
             return Err(bad("has the wrong length"));
         }
         let omega: Vec<V::Axial> = (0..n).map(|i| V::axial_from_slice(&h[1 + i * a..1 + (i + 1) * a])).collect();
@@ -963,7 +984,12 @@ impl<V: Vector> Term<V> for Contacts<V> {
             if i < 0.0 || i.fract() != 0.0 || i as usize >= n || j < 0.0 || j.fract() != 0.0 || j as usize >= n + nw {
                 return Err(bad("names a particle or wall that does not exist"));
             }
-            per[i as usize].push(Entry { partner: j as u32, xi: V::from_slice(&rec[2..2 + V::DIM]), u: rec[2 + V::DIM], ft: V::ZERO });
+            per[i as usize].push(Entry {
+                partner: j as u32,
+                xi: V::from_slice(&rec[2..2 + V::DIM]),
+                u: rec[2 + V::DIM],
+                ft: V::ZERO,
+            });
         }
         for (i, p) in per.iter_mut().enumerate() {
             p.sort_by_key(|e| e.partner);
