@@ -1218,7 +1218,7 @@ def galton_board(
     opening = outlet * 2 * rb
     y_chute = rp + 1.2 * rb + 2 * r_div  # the chute's lower end, just above peg 0
     y_out = y_chute + 2.5 * h
-    width = max(half, 0.5 * opening + 0.05)
+    width = half  # the side walls are half-planes: nothing may start outside them
     top = y_out + 0.07
     for sign in (-1.0, 1.0):
         x0, x1 = sign * (0.5 * opening + r_div), sign * width
@@ -1229,10 +1229,10 @@ def galton_board(
             fixed.append((x0, float(y), r_div))
     # Balls: a loose block in the hopper (rows of balls 2.3 rb apart, the top ones higher).
     rng = np.random.default_rng(seed)
-    per_row = max(1, int((2 * width - 8 * rb) / (2.3 * rb)) - 2)
+    per_row = max(1, int((2 * width - 8 * rb) / (2.6 * rb)) - 1)
     k = np.arange(balls)
-    bx = ((k % per_row) - 0.5 * (per_row - 1)) * 2.3 * rb + rng.uniform(-0.2, 0.2, balls) * rb
-    by = top + rb + (k // per_row) * 2.3 * rb + rng.uniform(-0.1, 0.1, balls) * rb
+    bx = ((k % per_row) - 0.5 * (per_row - 1)) * 2.6 * rb + rng.uniform(-0.1, 0.1, balls) * rb
+    by = top + rb + (k // per_row) * 2.6 * rb + rng.uniform(-0.1, 0.1, balls) * rb
     # Inside the hopper's slant: squeeze each row to the hopper's width at its height.
     wide_at = 0.5 * opening + (np.minimum(by, top) - y_out) / (top - y_out) * (width - 0.5 * opening)
     bx = np.clip(bx, -wide_at + 1.5 * rb, wide_at - 1.5 * rb)

@@ -80,6 +80,12 @@ struct Entry<V> {
     xi: V,
     u: Real,
     ft: V,
+    /// The normal force of the step (N), the normal spring's energy at its start (J), and the
+    /// power both forces drew from the motion at the step's start (W).
+    fn_: Real,
+    un: Real,
+    wn0: Real,
+    wt0: Real,
 }
 
 /// The contacts of one chunk of `CHUNK` particles: particle s + k owns
@@ -95,7 +101,6 @@ struct Chunk<V> {
 /// contacts counted once (pairs halved, walls whole).
 #[derive(Clone, Copy, Debug, Default)]
 struct Sums {
-    p_normal: Real,
     broken: Real,
     max_overlap: Real,
     half_pairs: u64,
@@ -105,7 +110,6 @@ struct Sums {
 impl Sums {
     fn add(self, o: Sums) -> Sums {
         Sums {
-            p_normal: self.p_normal + o.p_normal,
             broken: self.broken + o.broken,
             max_overlap: self.max_overlap.max(o.max_overlap),
             half_pairs: self.half_pairs + o.half_pairs,
@@ -134,7 +138,10 @@ struct PairOut<V> {
     force: V,
     ft: V,
     xi: V,
-    p_normal: Real,
+    fn_: Real,
+    /// Power the normal and tangential forces draw from the relative motion now (W).
+    wn0: Real,
+    wt0: Real,
 }
 
 impl Material {
@@ -197,10 +204,8 @@ impl Material {
         new: bool,
     ) -> PairOut<V> {
         let vn = vc.dot(n);
-        let (mut fn_, el) = self.normal(d, vn, m, zeta, sqrt_km, dt);
+        let (mut fn_, _) = self.normal(d, vn, m, zeta, sqrt_km, dt);
         let onset = if new { dt } else { 0.0 };
-        // The clamped force does work fn·vn; the spring stores el·vn of it.
-        let mut p_normal = (fn_ - el) * vn;
         if onset > 0.0 && vn > 0.0 && d <= 1.5 * vn * onset {
             // A contact that began τ = δ/v_n before this step. Semi-implicit Euler is leapfrog:
             // this step's kick f(x)·dt stands for the force over [t − dt/2, t + dt/2], but the
@@ -225,7 +230,6 @@ impl Material {
                 }
             };
             fn_ = (fn_ + (el_j + damp_j) / onset).max(0.0);
-            p_normal += damp_j * vn / onset;
         }
         let vt = vc - n * vn;
         let kt = self.kt(d);
@@ -255,7 +259,7 @@ impl Material {
             ft = ft * (cap / f2.sqrt());
             xi_c = if kt > 0.0 { (ft + vt * gt) * (-1.0 / kt) } else { V::ZERO };
         }
-        PairOut { force: ft - n * fn_, ft, xi: xi_c, p_normal }
+        PairOut { force: ft - n * fn_, ft, xi: xi_c, fn_, wn0: fn_ * vn, wt0: -ft.dot(vt) }
     }
 }
 
@@ -549,6 +553,9 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let kn = self.material.stiffness;
         let pair_root = uniform.map(|m0| ((kn * m0 * 0.5).sqrt(), (kn * m0).sqrt()));
         let nw = n as u32;
+        // Each side books its share of a pair: half when both are free (the other side books
+        // the rest), all of it against a pinned grain (which computes nothing) or a wall.
+        let share = |j: u32| if j < nw && model.inv_mass[j as usize] != 0.0 { 0.5 } else { 1.0 };
         let mut pend = std::mem::take(&mut self.pend);
         let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], out: &mut Chunk<V>| -> Sums {
             let s0 = c * CHUNK;
@@ -607,7 +614,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
                     let known = o < old.len() && old[o].partner == j;
                     let (xi, u_old) = if known { (old[o].xi, old[o].u) } else { (V::ZERO, 0.0) };
                     if known {
-                        sums.broken -= if j < nw { 0.5 } else { 1.0 } * u_old;
+                        sums.broken -= share(j) * u_old;
                     }
                     let ai = ri - 0.5 * d;
                     let (out_pair, half) = if j < nw {
@@ -625,7 +632,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
                             None => (kn * m).sqrt(),
                         };
                         let vc = v[i] - v[j] + spin::<V>(omega[i] * ai + omega[j] * aj, nrm);
-                        (mat.pair(nrm, d, vc, m, root, xi, mat.zeta, mat.friction, dt, !known), 0.5)
+                        (mat.pair(nrm, d, vc, m, root, xi, mat.zeta, mat.friction, dt, !known), share(j as u32))
                     } else {
                         let wall = &walls[(j - nw) as usize];
                         let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
@@ -634,18 +641,27 @@ impl<V: Vector> Term<V> for Contacts<V> {
                     };
                     force += out_pair.force;
                     torque = torque + moment(nrm, out_pair.ft) * ai;
-                    sums.p_normal += half * out_pair.p_normal;
                     sums.max_overlap = sums.max_overlap.max(d);
                     if j < nw {
-                        sums.half_pairs += 1;
+                        // Half a pair from each free side; a pinned partner has no side.
+                        sums.half_pairs += if half == 0.5 { 1 } else { 2 };
                     } else {
                         sums.walls += 1;
                     }
-                    out.entries.push(Entry { partner: j, xi: out_pair.xi, u: u_old, ft: out_pair.ft });
+                    out.entries.push(Entry {
+                        partner: j,
+                        xi: out_pair.xi,
+                        u: u_old,
+                        ft: out_pair.ft,
+                        fn_: out_pair.fn_,
+                        un: mat.normal_energy(d),
+                        wn0: out_pair.wn0,
+                        wt0: out_pair.wt0,
+                    });
                 }
                 // Springs of contacts that ended release their energy (the matched ones were
                 // subtracted above).
-                sums.broken += old.iter().map(|e| if e.partner < nw { 0.5 } else { 1.0 } * e.u).sum::<Real>();
+                sums.broken += old.iter().map(|e| share(e.partner) * e.u).sum::<Real>();
                 write.put(fi, force);
                 *ti = torque;
                 out.start.push(out.entries.len() as u32);
@@ -727,7 +743,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 u += self
                     .committed(i)
                     .iter()
-                    .map(|e| if (e.partner as usize) < n { 0.5 } else { 1.0 } * e.u)
+                    .map(|e| if (e.partner as usize) < n && model.inv_mass[e.partner as usize] != 0.0 { 0.5 } else { 1.0 } * e.u)
                     .sum::<Real>();
             }
         }
@@ -844,9 +860,9 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // removed, slipping and the tangential dashpot together.
         let (omega, walls, mat) = (&self.omega, &self.walls, &self.material);
         let nw = n as u32;
-        let advance = |c: usize, out: &mut Chunk<V>| -> Real {
+        let advance = |c: usize, out: &mut Chunk<V>| -> (Real, Real) {
             let s0 = c * CHUNK;
-            let mut lost = 0.0;
+            let (mut lost, mut lost_n) = (0.0, 0.0);
             for k in 0..out.start.len().saturating_sub(1) {
                 let i = s0 + k;
                 let (a, b) = (out.start[k] as usize, out.start[k + 1] as usize);
@@ -861,7 +877,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
                         let nrm = dx / dist;
                         let d = r[i] + r[j] - dist;
                         let w = omega[i] * (r[i] - 0.5 * d) + omega[j] * (r[j] - 0.5 * d);
-                        (nrm, d, v[i] - v[j] + spin::<V>(w, nrm), mat.friction, 0.5)
+                        let half = if model.inv_mass[j] != 0.0 { 0.5 } else { 1.0 };
+                        (nrm, d, v[i] - v[j] + spin::<V>(w, nrm), mat.friction, half)
                     } else {
                         let wall = &walls[(e.partner - nw) as usize];
                         let d = r[i] - (x[i] - wall.point).dot(wall.normal);
@@ -872,25 +889,30 @@ impl<V: Vector> Term<V> for Contacts<V> {
                     // Frictionless contacts hold no spring (it could never push).
                     e.xi = if mu > 0.0 { e.xi + vt * dt } else { V::ZERO };
                     let u = 0.5 * mat.kt(d.max(0.0)) * e.xi.length_squared();
-                    lost += half * (-e.ft.dot(vt) * dt - (u - e.u));
+                    // Semi-implicit Euler changes the kinetic energy by exactly F·(v + v')/2 dt, so
+                    // each force drew the mean of its power at the step's two ends; less what its
+                    // spring now stores more, that is what it dissipated.
+                    lost += half * (0.5 * (e.wt0 - e.ft.dot(vt)) * dt - (u - e.u));
+                    let un = mat.normal_energy(d.max(0.0));
+                    lost_n += half * (0.5 * (e.wn0 + e.fn_ * vc.dot(nrm)) * dt - (un - e.un));
                     e.u = u;
                     e.ft = V::ZERO;
                 }
             }
-            lost
+            (lost, lost_n)
         };
-        let lost: Real = {
+        let (lost, lost_n): (Real, Real) = {
             use rayon::prelude::*;
             let pend = &mut self.pend;
-            let parts: Vec<Real> =
+            let parts: Vec<(Real, Real)> =
                 match par::fork_if(n, || pend.par_iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect()) {
                     Some(p) => p,
                     None => pend.iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect(),
                 };
-            parts.into_iter().sum()
+            parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
         };
         std::mem::swap(&mut self.hist, &mut self.pend);
-        self.dissipated[0] += dt * self.last.p_normal;
+        self.dissipated[0] += lost_n;
         self.dissipated[1] += lost + self.last.broken;
     }
 
@@ -989,6 +1011,10 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 xi: V::from_slice(&rec[2..2 + V::DIM]),
                 u: rec[2 + V::DIM],
                 ft: V::ZERO,
+                fn_: 0.0,
+                un: 0.0,
+                wn0: 0.0,
+                wt0: 0.0,
             });
         }
         for (i, p) in per.iter_mut().enumerate() {
