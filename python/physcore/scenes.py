@@ -27,7 +27,17 @@ from ._errors import InvalidInputError, InvalidTypeError
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
 from .render._mesh import Mesh
 from .scene import Scene
-from .terms import Drag, ElectricField, Gravity, MagneticField, PairwiseGravity, Plane, Springs, TreeGravity, XpbdConstraints
+from .terms import (
+    Drag,
+    ElectricField,
+    Gravity,
+    MagneticField,
+    PairwiseGravity,
+    Plane,
+    Springs,
+    TreeGravity,
+    XpbdConstraints,
+)
 
 __all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "xpbd_cloth", "tumbling_boxes", "REGISTRY"]
 
@@ -231,7 +241,7 @@ def mesh_edges_and_hinges(faces: np.typing.ArrayLike) -> tuple[np.ndarray, np.nd
     """
     f = np.asarray(faces, dtype=np.int64)
     owner: dict[tuple[int, int], list[int]] = {}
-    for t, (a, b, c) in enumerate(f.tolist()):
+    for a, b, c in f.tolist():
         for u, v, w in ((a, b, c), (b, c, a), (c, a, b)):
             owner.setdefault((min(u, v), max(u, v)), []).append(w)
     edges = np.array(sorted(owner), dtype=np.int64).reshape(-1, 2)
@@ -248,6 +258,7 @@ def xpbd_cloth(
     air_drag: float = 0.2,
     pin: str = "corners",
     substeps: int = 20,
+    integrator: str = "xpbd",
     dt: float = 1 / 60,
     threads: int | None = None,
 ) -> Scene:
@@ -260,7 +271,8 @@ def xpbd_cloth(
     ``bending_compliance`` (rad²/J), both at the flat sheet's rest values. Gravity (0, 0, -9.81)
     m/s², linear air drag ``air_drag · m`` per particle (1/s). Integrator ``"xpbd"`` with
     ``substeps`` substeps of one iteration per step of ``dt`` (s): unconditionally stable, so one
-    step per 60 Hz frame.
+    step per 60 Hz frame. Another ``integrator`` leaves the constraints inert (the sheet falls
+    freely).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
@@ -270,6 +282,10 @@ def xpbd_cloth(
     compliance, bending_compliance = _nonneg(compliance, "compliance"), _nonneg(bending_compliance, "bending_compliance")
     air_drag = _nonneg(air_drag, "air_drag")
     pin = _check.choice("pin", pin, ("edge", "corners"))
+    substeps = _check.int_in_range("substeps", substeps, 1, 100_000)
+    dt = _positive(dt, "dt")
+    if not math.isfinite(air_drag * mass):
+        raise InvalidInputError(f"air_drag: the drag coefficient air_drag · m = {air_drag * mass} kg/s overflows float64")
     s = size / (n - 1)
     if not (s >= _check.MIN_NORMAL and math.isfinite(8 * s * s)):
         raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside float64's usable range")
@@ -281,7 +297,7 @@ def xpbd_cloth(
         pinned[:n] = True
     else:
         pinned[[0, n - 1]] = True
-    scene = Scene(3, integrator="xpbd", dt=dt, threads=threads, xpbd_substeps=substeps)
+    scene = Scene(3, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
     scene.add_particles(x, masses=m, pinned=pinned)
     mesh = Mesh.grid(n, n)
     edges, hinges = mesh_edges_and_hinges(mesh.faces)
@@ -308,6 +324,7 @@ def tumbling_boxes(
     restitution: float = 0.3,
     friction: float = 0.5,
     substeps: int = 20,
+    integrator: str = "xpbd",
     dt: float = 1 / 60,
     threads: int | None = None,
 ) -> Scene:
@@ -318,7 +335,8 @@ def tumbling_boxes(
     side by side at different heights and angles, spinning, and fall under gravity (0, -9.81)
     m/s² onto the floor y = 0 (a :class:`Plane` with ``restitution`` and ``friction``, which acts
     on the particles after each step). Boxes do not collide with each other (that needs a
-    contact term). Integrator ``"xpbd"`` with ``substeps`` per step of ``dt`` s.
+    contact term). Integrator ``"xpbd"`` with ``substeps`` per step of ``dt`` s (another
+    ``integrator`` leaves the shapes inert: the particles fall apart).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
@@ -328,6 +346,10 @@ def tumbling_boxes(
     size, mass = _positive(size, "size"), _positive(mass, "mass")
     restitution = _check.float_in_range("restitution", restitution, 0.0, 1.0)
     friction = _nonneg(friction, "friction")
+    substeps = _check.int_in_range("substeps", substeps, 1, 100_000)
+    dt = _positive(dt, "dt")
+    if not math.isfinite(4.0 * size * n_boxes):
+        raise InvalidInputError(f"size: {n_boxes} boxes of {size:g} m do not fit float64")
     m = _particle_mass(mass / (k * k), "mass, particles_per_side")
     g = (np.arange(k) / (k - 1) - 0.5) * size
     gx, gy = np.meshgrid(g, g)
@@ -342,7 +364,7 @@ def tumbling_boxes(
         xs.append(centre + r)
         vs.append(omega * np.stack([-r[:, 1], r[:, 0]], axis=1) + np.array([0.3 * (1 - b), 0.0]))
         shapes.append(np.arange(b * k * k, (b + 1) * k * k))
-    scene = Scene(2, integrator="xpbd", dt=dt, threads=threads, xpbd_substeps=substeps)
+    scene = Scene(2, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
     scene.add_particles(np.concatenate(xs), np.concatenate(vs), masses=m)
     scene.add(Gravity([0.0, -9.81]))
     scene.add(XpbdConstraints(shapes=shapes, name="boxes"))

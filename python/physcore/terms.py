@@ -876,8 +876,13 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         (:class:`InvalidInputError`) Wrong shapes, negative indices, a particle named twice in
         one constraint, negative or non-finite compliances, a shape stiffness outside (0, 1], a
         shape of fewer than 2 particles; on :meth:`Scene.add`: an index out of range, area in 3D
-        or volume in 2D, a degenerate rest triangle, tetrahedron or shape, a scene whose
-        integrator is not ``"xpbd"``. Named by argument; nothing changes.
+        or volume in 2D, a degenerate rest triangle, tetrahedron or shape. Named by argument;
+        nothing changes.
+
+    Notes
+    -----
+    Only ``Scene(integrator="xpbd")`` projects the constraints; under any other integrator the
+    term is inert (no force, no projection) and only reports its potential.
 
     Examples
     --------
@@ -969,7 +974,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
             raise InvalidInputError(f"shapes: cluster {k} has {int(sizes[k])} particles (a shape needs at least 2)")
         if members.size and members.min() < 0:
             raise InvalidInputError(f"shapes: indices must be >= 0, got {int(members.min())}")
-        for k, (a, b) in enumerate(zip(np.r_[0, np.cumsum(sizes)[:-1]], np.cumsum(sizes))):
+        for k, (a, b) in enumerate(zip(np.r_[0, np.cumsum(sizes)[:-1]], np.cumsum(sizes), strict=True)):
             if np.unique(members[a:b]).size != b - a:
                 raise InvalidInputError(f"shapes: cluster {k} names a particle twice")
         members.setflags(write=False)
@@ -1026,15 +1031,12 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
 
     def _attach(self, scene: Scene, name: str) -> XpbdConstraints:
         dim, n = scene.dim, scene.n_particles
-        if scene.integrator != "xpbd":
-            raise InvalidInputError(
-                f"item: XpbdConstraints are projected only by the 'xpbd' integrator, this scene uses {scene.integrator!r}; "
-                "build it with pc.Scene(..., integrator='xpbd')"
-            )
         for arg in ("distance", "bending", "pins", "area", "volume", "shapes"):
             a = getattr(self, arg)
             if a.size and a.max() >= n:
                 raise InvalidInputError(f"{arg}: index {int(a.max())} is out of range for {n} particles")
+        if self.bending.size == 0:
+            object.__setattr__(self, "bending", np.zeros((0, 3 if dim == 2 else 4), np.int64))
         if self.bending.size and self.bending.shape[1] != (3 if dim == 2 else 4):
             raise InvalidInputError(f"bending: rows of {3 if dim == 2 else 4} indices in {dim}D, got {self.bending.shape[1]}")
         if dim == 3 and self.area.size:
@@ -1080,7 +1082,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         if self.pin_targets is None:
             resolved["pin_targets"] = x[self.pins].reshape(-1, dim)
         srest = self.shape_rest if self.shape_rest is not None else x[self.shapes].reshape(-1, dim)
-        for k, (a0, b0) in enumerate(zip(np.r_[0, np.cumsum(self.shape_sizes)[:-1]], np.cumsum(self.shape_sizes))):
+        for k, (a0, b0) in enumerate(zip(np.r_[0, np.cumsum(self.shape_sizes)[:-1]], np.cumsum(self.shape_sizes), strict=True)):
             if np.all(srest[a0:b0] == srest[a0]):
                 raise InvalidInputError(f"shapes: cluster {k}'s rest positions all coincide (a degenerate rest shape)")
         resolved["shape_rest"] = srest
