@@ -114,14 +114,17 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                     }
                 }
             }
-            let xp = &self.x_prev;
+            // Without constraints the predicted velocity stands (recomputing it from the
+            // positions would only add round-off): the substep is semi-implicit Euler.
+            let (xp, moved) = (&self.x_prev, !projecting.is_empty());
             any_bad |= par::chunks2_any(&mut sys.state.x, &mut sys.state.v, |s, x, v| {
                 let mut b = false;
                 for k in 0..x.len() {
                     let i = s + k;
-                    if im[i] != 0.0 {
-                        v[k] = store((x[k] - xp[i]) / h, single);
+                    if moved && im[i] != 0.0 {
+                        v[k] = (x[k] - xp[i]) / h;
                     }
+                    v[k] = store(v[k], single);
                     x[k] = store(x[k], single);
                     b |= bad(x[k], v[k]);
                 }
