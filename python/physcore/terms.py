@@ -974,7 +974,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
             raise InvalidInputError(f"shapes: cluster {k} has {int(sizes[k])} particles (a shape needs at least 2)")
         if members.size and members.min() < 0:
             raise InvalidInputError(f"shapes: indices must be >= 0, got {int(members.min())}")
-        for k, (a, b) in enumerate(zip(np.r_[0, np.cumsum(sizes)[:-1]], np.cumsum(sizes), strict=True)):
+        for k, (a, b) in enumerate(zip(np.cumsum(sizes) - sizes, np.cumsum(sizes), strict=True)):
             if np.unique(members[a:b]).size != b - a:
                 raise InvalidInputError(f"shapes: cluster {k} names a particle twice")
         members.setflags(write=False)
@@ -1082,7 +1082,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         if self.pin_targets is None:
             resolved["pin_targets"] = x[self.pins].reshape(-1, dim)
         srest = self.shape_rest if self.shape_rest is not None else x[self.shapes].reshape(-1, dim)
-        for k, (a0, b0) in enumerate(zip(np.r_[0, np.cumsum(self.shape_sizes)[:-1]], np.cumsum(self.shape_sizes), strict=True)):
+        for k, (a0, b0) in enumerate(zip(np.cumsum(self.shape_sizes) - self.shape_sizes, np.cumsum(self.shape_sizes), strict=True)):
             if np.all(srest[a0:b0] == srest[a0]):
                 raise InvalidInputError(f"shapes: cluster {k}'s rest positions all coincide (a degenerate rest shape)")
         resolved["shape_rest"] = srest

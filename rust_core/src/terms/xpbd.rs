@@ -264,16 +264,30 @@ fn each(ids: &[u32], f: impl Fn(usize) + Sync + Send) {
     );
 }
 
-/// The rotation of `a` (A_pq) by Müller et al. 2016's iteration from `q`.
+/// The rotation of `a` (A_pq), from the warm start `q`: the fixed point of Müller et al. 2016's
+/// iteration, R ← exp(ω) R with Σ_i r_i × a_i = 0 (r_i, a_i the columns of R and A; then RᵀA is
+/// symmetric: R is the polar factor). Their step ω = Σ r_i × a_i / tr(R Aᵀ) converges only
+/// linearly, slowly for elongated clusters (measured: 1.5e-8 rad left after 64 iterations);
+/// here ω solves the Newton system (tr(M) I − M) ω = Σ r_i × a_i with M the symmetric part of
+/// R Aᵀ (the derivative of the residual), which converges quadratically, and falls back to
+/// their step where that matrix is not positive definite (far from the solution, or a straight
+/// cluster whose turn about its own axis is undetermined).
 fn rotation3(a: DMat3, mut q: DQuat) -> DQuat {
-    for _ in 0..64 {
+    for _ in 0..50 {
         let r = DMat3::from_quat(q);
         let num = r.x_axis.cross(a.x_axis) + r.y_axis.cross(a.y_axis) + r.z_axis.cross(a.z_axis);
-        let den = (r.x_axis.dot(a.x_axis) + r.y_axis.dot(a.y_axis) + r.z_axis.dot(a.z_axis)).abs();
-        if !(den > 0.0) {
+        let m = r * a.transpose();
+        let ms = (m + m.transpose()) * 0.5;
+        let t = ms.x_axis.x + ms.y_axis.y + ms.z_axis.z;
+        if !(t.abs() > 0.0) {
             break;
         }
-        let omega = num / den;
+        let b = DMat3::from_diagonal(DVec3::splat(t)) - ms;
+        // Positive definite (Sylvester): leading minors > 0, relative to the scale t.
+        let m1 = b.x_axis.x;
+        let m2 = b.x_axis.x * b.y_axis.y - b.x_axis.y * b.y_axis.x;
+        let newton = m1 > 1e-9 * t && m2 > 1e-9 * t * t && b.determinant() > 1e-9 * t * t * t;
+        let omega = if newton { b.inverse() * num } else { num / t.abs() };
         let w = omega.length();
         if !(w > 1e-15) {
             break;
@@ -674,6 +688,19 @@ mod tests {
         // A flat pair of triangles across the edge has dihedral angle 0.
         let flat_pair = [DVec3::ZERO, DVec3::X, DVec3::new(0.5, 1.0, 0.0), DVec3::new(0.5, -1.0, 0.0)];
         assert!(eval(Kind::Bending3, &flat_pair, 0.0, DVec3::ZERO).unwrap().0.abs() < 1e-15);
+    }
+
+    #[test]
+    fn xpbd_rotation_is_the_polar_factor_for_elongated_and_flat_clusters() {
+        let r0 = DQuat::from_axis_angle(DVec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        for s in [DVec3::new(0.25, 0.09, 0.04), DVec3::new(3.0, 1.0, 0.05), DVec3::new(1.0, 0.5, 0.0)] {
+            let sym = DMat3::from_quat(DQuat::from_rotation_x(0.4)) * DMat3::from_diagonal(s);
+            let sym = sym * DMat3::from_quat(DQuat::from_rotation_x(0.4)).transpose();
+            let a = DMat3::from_quat(r0) * sym;
+            let q = rotation3(a, DQuat::from_axis_angle(DVec3::new(0.3, -0.2, 0.9).normalize(), 0.9));
+            let err = (DMat3::from_quat(q) - DMat3::from_quat(r0)).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(err < 1e-13, "S = {s:?}: |R − R0| = {err:e}");
+        }
     }
 
     #[test]
