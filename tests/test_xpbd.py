@@ -54,7 +54,7 @@ def settled_cloths(n: int = 8, k: float = 2000.0, dt: float = 1e-2, substeps: in
     bend springs, stiffness k) and with XPBD distance constraints on the same pairs (compliance
     1/k, the same rest lengths), each settled by drag."""
     springs = pc.scenes.cloth(n=n, stiffness=k, damping=0.5, air_drag=2.0, threads=1)
-    springs.step(int(round(10.0 / springs.dt)))
+    springs.step(int(round(30.0 / springs.dt)))
     x0 = pc.scenes.cloth(n=n, threads=1).positions
     xp = pc.Scene(3, integrator="xpbd", dt=dt, xpbd_substeps=substeps, threads=1)
     mass = 1.0 / (n * n)
@@ -63,7 +63,7 @@ def settled_cloths(n: int = 8, k: float = 2000.0, dt: float = 1e-2, substeps: in
     xp.add(pc.Drag(2.0 * mass))
     i, j = cloth_springs(n)
     xp.add(pc.XpbdConstraints(distance=np.stack([i, j], 1), distance_compliance=1.0 / k))
-    xp.step(int(round(10.0 / dt)))
+    xp.step(int(round(30.0 / dt)))
     return springs, xp
 
 
@@ -83,6 +83,11 @@ def test_xpbd_cloth_sags_like_the_spring_cloth():
     bound = (n - 1) * G * h * h
     print(f"sag: springs {sag_springs:.6f} m, xpbd {sag_xpbd:.6f} m; max |Δx| {diff:.2e} m, bound (n-1) g h² = {bound:.2e} m")
     assert diff < bound
+    # ... and that difference is the substep's: it shrinks as h² (to a quarter at half the h).
+    _, finer = settled_cloths(n, k, dt, 2 * substeps)
+    diff2 = np.abs(springs.positions - finer.positions).max()
+    print(f"at h/2: max |Δx| {diff2:.2e} m (ratio {diff / diff2:.2f})")
+    assert 3.0 < diff / diff2 < 5.0
 
 
 def test_pins_hold_exactly_and_compliant_pins_stretch_by_m_g_alpha():
@@ -124,31 +129,35 @@ def square_mesh(k: int, size: float):
 
 
 def test_area_constraints_keep_a_soft_squares_area_while_it_squashes():
+    # A soft square (distance constraints of compliance 0.1 m/N on every triangle edge, exact
+    # area constraints on every triangle) thrown together: its particles start converging on
+    # its centre at up to 2 m/s and spinning, so the edges compress and shear.
     x, tri = square_mesh(6, 0.4)
-    x = x + [0.0, 0.2]
+    c0 = x.mean(0)
+    r = x - c0
+    v = -5.0 * r + 3.0 * np.stack([-r[:, 1], r[:, 0]], 1)
     s = pc.Scene(2, integrator="xpbd", dt=1 / 60, xpbd_substeps=20, threads=1)
-    s.add_particles(x, [[0.0, -3.0]] * len(x), masses=0.01)
-    s.add(pc.Gravity([0.0, -G]))
+    s.add_particles(x, v, masses=0.01)
     edges, _ = pc.scenes.mesh_edges_and_hinges(tri)
-    c = s.add(pc.XpbdConstraints(distance=edges, distance_compliance=1e-2, area=tri))
-    s.add(pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=0.0, friction=0.5))
+    c = s.add(pc.XpbdConstraints(distance=edges, distance_compliance=0.1, area=tri))
 
     def area(p):
         a, b, d = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
         return 0.5 * ((b - a)[:, 0] * (d - a)[:, 1] - (b - a)[:, 1] * (d - a)[:, 0])
 
-    a0 = area(x).sum()
-    worst_area, worst_shape = 0.0, 0.0
-    for _ in range(90):
+    a0 = area(x)
+    worst_total, worst_tri, worst_shape = 0.0, 0.0, 0.0
+    for _ in range(120):
         s.step(1)
         p = s.positions
-        worst_area = max(worst_area, abs(area(p).sum() / a0 - 1))
+        worst_total = max(worst_total, abs(area(p).sum() / a0.sum() - 1))
+        worst_tri = max(worst_tri, np.abs(area(p) / a0 - 1).max())
         # How much it deforms: the largest change of an edge's length.
         ln = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1) / c.rest_length
         worst_shape = max(worst_shape, np.abs(ln - 1).max())
-    print(f"2D area error max {worst_area:.2e} while edges stretch by up to {worst_shape:.1%}")
-    assert worst_shape > 0.02  # it does deform
-    assert worst_area < 1e-3
+    print(f"2D area error: total {worst_total:.2e}, worst triangle {worst_tri:.2e}, while edges change length by up to {worst_shape:.1%}")
+    assert worst_shape > 0.1  # it does deform
+    assert worst_total < 1e-3 and worst_tri < 1e-2
 
 
 def cube_tets(k: int, size: float):
@@ -173,31 +182,32 @@ def cube_tets(k: int, size: float):
 
 
 def test_volume_constraints_keep_a_soft_cubes_volume_while_it_squashes():
+    # The 3D analogue: a soft cube of 162 tetrahedra thrown together, spinning.
     x, tets = cube_tets(4, 0.3)
-    x = x + [0.0, 0.0, 0.2]
+    r = x - x.mean(0)
+    v = -5.0 * r + np.cross([0.0, 1.0, 3.0], r)
     s = pc.Scene(3, integrator="xpbd", dt=1 / 60, xpbd_substeps=20, threads=1)
-    s.add_particles(x, [[0.0, 0.0, -3.0]] * len(x), masses=0.01)
-    s.add(pc.Gravity([0.0, 0.0, -G]))
+    s.add_particles(x, v, masses=0.01)
     pairs = {(min(a, b), max(a, b)) for t in tets.tolist() for a in t for b in t if a != b}
     edges = np.array(sorted(pairs))
-    c = s.add(pc.XpbdConstraints(distance=edges, distance_compliance=1e-2, volume=tets))
-    s.add(pc.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], restitution=0.0, friction=0.5))
+    c = s.add(pc.XpbdConstraints(distance=edges, distance_compliance=0.1, volume=tets))
 
     def volume(p):
         e1, e2, e3 = (p[tets[:, i]] - p[tets[:, 0]] for i in (1, 2, 3))
         return np.einsum("ij,ij->i", e1, np.cross(e2, e3)) / 6
 
-    v0 = volume(x).sum()
-    worst_volume, worst_shape = 0.0, 0.0
-    for _ in range(90):
+    v0 = volume(x)
+    worst_total, worst_tet, worst_shape = 0.0, 0.0, 0.0
+    for _ in range(120):
         s.step(1)
         p = s.positions
-        worst_volume = max(worst_volume, abs(volume(p).sum() / v0 - 1))
+        worst_total = max(worst_total, abs(volume(p).sum() / v0.sum() - 1))
+        worst_tet = max(worst_tet, np.abs(volume(p) / v0 - 1).max())
         ln = np.linalg.norm(p[edges[:, 0]] - p[edges[:, 1]], axis=1) / c.rest_length
         worst_shape = max(worst_shape, np.abs(ln - 1).max())
-    print(f"3D volume error max {worst_volume:.2e} while edges stretch by up to {worst_shape:.1%}")
-    assert worst_shape > 0.02
-    assert worst_volume < 1e-3
+    print(f"3D volume error: total {worst_total:.2e}, worst tetrahedron {worst_tet:.2e}, while edges change length by up to {worst_shape:.1%}")
+    assert worst_shape > 0.05
+    assert worst_total < 1e-3 and worst_tet < 1e-2
 
 
 def test_one_and_two_threads_agree_bit_for_bit():
@@ -224,25 +234,38 @@ def rigid_cluster(dim: int, n: int = 12, seed: int = 3):
     return x, v, m
 
 
-@pytest.mark.parametrize("dim", [2, 3])
-def test_torque_free_rigid_cluster_keeps_its_angular_momentum(dim):
+def spin(dim: int, substeps: int, seconds: float = 2.0, dt: float = 1e-2):
+    """A free rigid cluster (shape matching) spinning for `seconds`: relative change of L, the
+    turn of its direction (rad), the largest change of a pair distance (m)."""
     x, v, m = rigid_cluster(dim)
-    s = pc.Scene(dim, integrator="xpbd", dt=1e-2, xpbd_substeps=10, threads=1)
+    s = pc.Scene(dim, integrator="xpbd", dt=dt, xpbd_substeps=substeps, threads=1)
     s.add_particles(x, v, masses=m)
     s.add(pc.XpbdConstraints(shapes=[np.arange(len(x))]))
     l0 = np.atleast_1d(s.angular_momentum()).astype(float)
-    s.step(1000)  # 10 s: several turns
+    s.step(int(round(seconds / dt)))
     l1 = np.atleast_1d(s.angular_momentum()).astype(float)
     drift = np.linalg.norm(l1 - l0) / np.linalg.norm(l0)
-    # Still rigid: every pair distance as at rest.
+    turn = math.acos(min(1.0, float(l0 @ l1) / (np.linalg.norm(l0) * np.linalg.norm(l1))))
     d0 = np.linalg.norm(x[:, None] - x[None], axis=-1)
     d1 = np.linalg.norm(s.positions[:, None] - s.positions[None], axis=-1)
-    print(f"{dim}D: |ΔL|/|L| = {drift:.1e} over 10 s, rigidity error {np.abs(d1 - d0).max():.1e} m")
-    # The rotation of A_pq makes Σ m p × (R q) = 0 (R^T A_pq is symmetric), so the projection
-    # exerts no torque about the centre of mass: L is kept to round-off (3D: to the rotation
-    # iteration's convergence, 1e-15 rad per step).
-    assert drift < 1e-9
-    assert np.abs(d1 - d0).max() < 1e-9
+    return drift, turn, np.abs(d1 - d0).max()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_torque_free_rigid_cluster_keeps_its_angular_momentum(dim):
+    # The projection onto the rigid shape exerts no torque at the predicted positions (R^T A_pq
+    # is symmetric, so Σ m p × (R q) = 0), but XPBD's velocity (x − x_prev)/h is a chord: each
+    # substep pulls the straight-line prediction back onto the circle and loses about (ω h)² of
+    # L. That is XPBD's first-order damping: |ΔL|/|L| ≈ ω² h T (ω ≈ 3 to 4 rad/s here, T = 2 s),
+    # halving with h, while the direction of L and the shape are kept.
+    coarse, _, _ = spin(dim, 50)
+    drift, turn, shape = spin(dim, 100)
+    h = 1e-2 / 100
+    print(f"{dim}D: |ΔL|/|L| = {drift:.2e} at h = {h:g} s ({coarse:.2e} at 2h, ratio {coarse / drift:.2f}); L turned {turn:.1e} rad; rigidity error {shape:.1e} m")
+    assert drift < 16 * h * 2.0  # ω² h T with ω² ≤ 16 (rad/s)²
+    assert 1.8 < coarse / drift < 2.2
+    assert turn < 1e-3
+    assert shape < 1e-9
 
 
 def test_physical_pendulum_period():

@@ -698,7 +698,8 @@ mod tests {
             let sym = sym * DMat3::from_quat(DQuat::from_rotation_x(0.4)).transpose();
             let a = DMat3::from_quat(r0) * sym;
             let q = rotation3(a, DQuat::from_axis_angle(DVec3::new(0.3, -0.2, 0.9).normalize(), 0.9));
-            let err = (DMat3::from_quat(q) - DMat3::from_quat(r0)).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            let err =
+                (DMat3::from_quat(q) - DMat3::from_quat(r0)).to_cols_array().iter().fold(0.0f64, |m, x| m.max(x.abs()));
             assert!(err < 1e-13, "S = {s:?}: |R − R0| = {err:e}");
         }
     }
