@@ -298,8 +298,11 @@ def test_physical_pendulum_period():
     expected = t0 * (1 + theta0**2 / 16)
     err = period / expected - 1
     print(f"pendulum: period {period:.6f} s, 2π√(I/mgd)·(1+θ0²/16) = {expected:.6f} s, relative error {err:.1e}")
-    # First order in h = dt/substeps: the period's error is O(ω h) = 4e-4 here; allow 1e-3.
-    assert abs(err) < 1e-3
+    # The pivot is exact (the cluster turns about its pinned particle) and the bar rigid to
+    # round-off, so what is left is XPBD's first-order damping, which shrinks the amplitude
+    # (shortening the period by θ²/16, a few 1e-7 here) but changes the period itself only at
+    # second order: measured 5e-7. Allow 1e-5.
+    assert abs(err) < 1e-5
 
 
 def test_bad_input_raises_value_error_naming_the_argument_before_anything_changes():

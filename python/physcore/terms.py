@@ -894,7 +894,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
     >>> _ = s.add(pc.XpbdConstraints(distance=[[0, 1]], distance_compliance=1e-3))
     >>> s.step(2000)
     >>> stretch = -s.positions[1, 1] - 1.0
-    >>> round(stretch / (0.5 * 9.81 * 1e-3), 6)      # m g α
+    >>> float(round(stretch / (0.5 * 9.81 * 1e-3), 6))      # m g α
     1.0
     """
 
