@@ -98,9 +98,9 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
             par::chunks3(&mut sys.state.x, &mut sys.state.v, &mut self.x_prev, |s, x, v, xp| {
                 for k in 0..x.len() {
                     let i = s + k;
-                    v[k] = v[k] + accel(f[i], im[i], g) * h;
+                    v[k] += accel(f[i], im[i], g) * h;
                     xp[k] = x[k];
-                    x[k] = x[k] + v[k] * h;
+                    x[k] += v[k] * h;
                 }
             });
             if !projecting.is_empty() {
