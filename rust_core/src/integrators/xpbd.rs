@@ -96,10 +96,10 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
             sys.forces.book_power(h);
             let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
             par::chunks3(&mut sys.state.x, &mut sys.state.v, &mut self.x_prev, |s, x, v, xp| {
+                xp.copy_from_slice(x);
                 for k in 0..x.len() {
                     let i = s + k;
                     v[k] += accel(f[i], im[i], g) * h;
-                    xp[k] = x[k];
                     x[k] += v[k] * h;
                 }
             });
