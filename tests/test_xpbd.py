@@ -317,6 +317,7 @@ def test_bad_input_raises_value_error_naming_the_argument_before_anything_change
         (dict(pins=[1], pin_compliance=-1e-3), "pin_compliance"),
         (dict(shapes=[[1]]), "shapes"),
         (dict(shapes=[[0, 1]], shape_stiffness=1.5), "shape_stiffness"),
+        (dict(shapes=[[0, 1]], shape_rest=[[1.0, 1.0], [1.0, 1.0]]), "shapes"),  # degenerate rest shape
         (dict(volume=[[0, 1, 2, 3]]), "volume"),  # 2D scene
     ]
     for kwargs, arg in cases:
@@ -327,6 +328,9 @@ def test_bad_input_raises_value_error_naming_the_argument_before_anything_change
     t.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
     with pytest.raises(ValueError, match="^volume:"):
         t.add(pc.XpbdConstraints(volume=[[0, 1, 2, 3]]))  # flat: zero rest volume
+    t.add_particles([[2.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="^bending:"):
+        t.add(pc.XpbdConstraints(bending=[[0, 1, 4, 2]]))  # wing 4 lies on the edge 0-1: no dihedral angle
     with pytest.raises(ValueError, match="^xpbd_substeps:"):
         pc.Scene(2, integrator="xpbd", xpbd_substeps=0)
     assert t.terms == ()
