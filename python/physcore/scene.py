@@ -174,7 +174,10 @@ class Scene:
         evaluations each; see `rtol`) or ``"boris"`` (the Boris push for charges in magnetic
         fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
         speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
-        scene has no magnetic term).
+        scene has no magnetic term) or ``"xpbd"`` (position-based dynamics with substeps,
+        Macklin et al. 2016/2019: each step is ``xpbd_substeps`` substeps of semi-implicit Euler
+        under the force terms, each followed by ``xpbd_iterations`` projections of the
+        :class:`XpbdConstraints`; 1st order, damped by the projection).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
@@ -196,6 +199,12 @@ class Scene:
         ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
         for any thread count. If no thread can be started (a limit on threads), ``None`` runs on
         the calling thread with a :class:`ThreadPoolWarning`.
+
+    xpbd_substeps, xpbd_iterations : int
+        Substeps per step (1 to 100000, default 10) and constraint iterations per substep (1 to
+        10000, default 1) of ``"xpbd"``; kept, and ignored, by the other integrators. Many
+        substeps of one iteration each converge faster than few substeps of many iterations
+        ("Small steps in physics simulation", Macklin et al., SCA 2019).
 
     Raises
     ------
@@ -229,6 +238,8 @@ class Scene:
         atol: float = 1e-9,
         precision: str = "f64",
         threads: int | None = None,
+        xpbd_substeps: int = 10,
+        xpbd_iterations: int = 1,
     ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
@@ -251,6 +262,7 @@ class Scene:
                 stacklevel=2,
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
+        sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
         sim.single = precision == "f32"
         # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
         # that release the GIL for long, and _busy names the thread inside one.
@@ -703,6 +715,24 @@ class Scene:
         self._sim.set_tolerances(self.rtol, _check_tol(value, "atol"))
 
     @property
+    def xpbd_substeps(self) -> int:
+        """Substeps per step of ``"xpbd"`` (see the class docstring). Settable."""
+        return int(self._sim.substeps[0])
+
+    @xpbd_substeps.setter
+    def xpbd_substeps(self, value: int) -> None:
+        self._sim.set_substeps(_check_int(value, "xpbd_substeps", 1, 100_000), self.xpbd_iterations)
+
+    @property
+    def xpbd_iterations(self) -> int:
+        """Constraint iterations per substep of ``"xpbd"``. Settable."""
+        return int(self._sim.substeps[1])
+
+    @xpbd_iterations.setter
+    def xpbd_iterations(self, value: int) -> None:
+        self._sim.set_substeps(self.xpbd_substeps, _check_int(value, "xpbd_iterations", 1, 10_000))
+
+    @property
     def precision(self) -> str:
         """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor)."""
         return "f32" if self._sim.single else "f64"
@@ -1008,6 +1038,8 @@ class Scene:
             "rtol": self.rtol,
             "atol": self.atol,
             "precision": self.precision,
+            "xpbd_substeps": self.xpbd_substeps,
+            "xpbd_iterations": self.xpbd_iterations,
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,
@@ -1092,6 +1124,8 @@ class Scene:
                 atol=meta["atol"],
                 precision=meta["precision"],
                 threads=threads,
+                xpbd_substeps=meta["xpbd_substeps"],
+                xpbd_iterations=meta["xpbd_iterations"],
             )
         if z["positions"].shape[0]:
             with r.api(""):  # the API's argument names are the members' names

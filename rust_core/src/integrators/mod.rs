@@ -6,6 +6,7 @@ pub mod rk4;
 pub mod rk45;
 pub mod semi_implicit_euler;
 pub mod verlet;
+pub mod xpbd;
 pub mod yoshida;
 
 use crate::error::{invalid, Result};
@@ -21,6 +22,7 @@ pub use rk4::Rk4;
 pub use rk45::Rk45;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
+pub use xpbd::Xpbd;
 pub use yoshida::Yoshida4;
 
 /// What a particle system hands its integrator: state, constants and the force terms.
@@ -114,10 +116,13 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn failure(&self) -> Option<(usize, crate::error::Failure)> {
         None
     }
+    /// Sets the substeps per step and the constraint iterations per substep of "xpbd" (both
+    /// ≥ 1, checked by the caller); the other integrators ignore them.
+    fn set_substeps(&mut self, _substeps: u32, _iterations: u32) {}
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 7] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris"];
+pub const NAMES: [&str; 8] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris", "xpbd"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -128,6 +133,7 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "rk4" => Box::new(Rk4::default()),
         "rk45" => Box::new(Rk45::default()),
         "boris" => Box::new(Boris::default()),
+        "xpbd" => Box::new(Xpbd::default()),
         other => {
             return Err(invalid(
                 "integrator",

@@ -94,6 +94,16 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.particles_mut().set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
     }
 
+    /// (substeps per step, iterations per substep) of "xpbd".
+    #[getter]
+    fn substeps(&self) -> (u32, u32) {
+        with_sim!(&self.inner, s => s.particles().substeps())
+    }
+
+    fn set_substeps(&mut self, py: Python<'_>, substeps: u32, iterations: u32) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.particles_mut().set_substeps(substeps, iterations)).map_err(|e| to_py(py, e))
+    }
+
     /// (accepted, rejected, next internal step s) for "rk45", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
         with_sim!(&self.inner, s => s.particles().adaptive_stats())

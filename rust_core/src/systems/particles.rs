@@ -21,6 +21,8 @@ pub struct ParticleSystem<V: Vector> {
     /// Tolerances of the adaptive integrator ("rk45"); kept when switching integrators.
     rtol: Real,
     atol: Real,
+    /// Substeps per step and iterations per substep of "xpbd"; kept when switching integrators.
+    xpbd: (u32, u32),
 }
 
 /// What `ParticleSystem::restore` returns to (see `System::snapshot`).
@@ -49,6 +51,7 @@ impl<V: Vector> ParticleSystem<V> {
             constraints: Constraints::default(),
             rtol: 1e-6,
             atol: 1e-9,
+            xpbd: (10, 1),
         })
     }
 
@@ -84,8 +87,27 @@ impl<V: Vector> ParticleSystem<V> {
         }
         let mut it = integrators::by_name(name)?;
         it.set_tolerances(self.rtol, self.atol);
+        it.set_substeps(self.xpbd.0, self.xpbd.1);
         self.integrator = it;
         Ok(())
+    }
+
+    /// Substeps per step (1..=100000) and constraint iterations per substep (1..=10000) of the
+    /// "xpbd" integrator; stored for any integrator. Defaults 10 and 1.
+    pub fn set_substeps(&mut self, substeps: u32, iterations: u32) -> Result<()> {
+        if !(1..=100_000).contains(&substeps) {
+            return Err(invalid("substeps", format!("{substeps} must be in 1..=100000")));
+        }
+        if !(1..=10_000).contains(&iterations) {
+            return Err(invalid("iterations", format!("{iterations} must be in 1..=10000")));
+        }
+        self.xpbd = (substeps, iterations);
+        self.integrator.set_substeps(substeps, iterations);
+        Ok(())
+    }
+    /// (substeps per step, iterations per substep) of "xpbd".
+    pub fn substeps(&self) -> (u32, u32) {
+        self.xpbd
     }
 
     /// Relative and absolute (m, m/s) tolerances of the adaptive integrator; stored for any

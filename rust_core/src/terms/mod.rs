@@ -11,6 +11,7 @@ pub mod potentials;
 pub mod registry;
 pub mod springs;
 pub mod tree_gravity;
+pub mod xpbd;
 
 use crate::error::Result;
 use crate::neighbors::Shared;
@@ -162,6 +163,20 @@ pub trait Term<V: Vector>: Send + Sync {
     fn share(&mut self, _shared: &mut Shared) -> Result<()> {
         Ok(())
     }
+
+    // ---- XPBD: position-based constraints, projected by the "xpbd" integrator --------------
+    // (`integrators/xpbd.rs`; Macklin, Müller & Chentanez 2016). Terms without constraints
+    // keep these defaults; `terms/xpbd.rs` implements them.
+    /// Whether the term holds position-based constraints that the "xpbd" integrator projects
+    /// (its `add_forces` then adds no force). Other integrators ignore them.
+    fn xpbd_constraints(&self) -> bool {
+        false
+    }
+    /// Starts an XPBD substep: the accumulated Lagrange multipliers λ return to 0.
+    fn xpbd_begin(&mut self) {}
+    /// One Gauss–Seidel iteration over the term's constraints in a substep of `h` seconds,
+    /// moving the positions `x` (m) of free particles (compliance scaled as α/h²).
+    fn xpbd_project(&mut self, _x: &mut [V], _model: &Model, _h: Real) {}
 }
 
 /// The terms of a scene plus their dissipation ledger.
