@@ -124,6 +124,30 @@ pub trait Term<V: Vector>: Send + Sync {
     fn share(&mut self, _shared: &mut Shared) -> Result<()> {
         Ok(())
     }
+
+    // ---- Jacobians, for implicit integrators ("implicit_euler"). Keep this block last. ----
+    // A term with a Jacobian is taken implicitly (linearised at the step's start); a term without
+    // one is taken explicitly at the step's start. Uniform fields (gravity) are constant and need
+    // none.
+
+    /// Whether `jacobian_product` and `jacobian_diagonal` are implemented (they add something
+    /// and return true).
+    fn has_jacobian(&self) -> bool {
+        false
+    }
+    /// Adds `(cx ∂f/∂x + cv ∂f/∂v)·w` at `(x, v)` into `out`, one vector per particle, matrix-free
+    /// (`c = (cx, cv)`; ∂f/∂x in N/m, ∂f/∂v in N·s/m), gathered per particle so that results are
+    /// bit-identical for any thread count. Rows of pinned particles may be non-zero (the solver
+    /// filters them). Returns false, adding nothing, if the term has no Jacobian.
+    fn jacobian_product(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _w: &[V], _out: &mut [V]) -> bool {
+        false
+    }
+    /// Adds the diagonal of `cx ∂f/∂x + cv ∂f/∂v` at `(x, v)` into `out` (component k of
+    /// `out[i]` gets the entry of row and column (i, k)): the Jacobi preconditioner. Returns
+    /// false, adding nothing, if the term has no Jacobian.
+    fn jacobian_diagonal(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _out: &mut [V]) -> bool {
+        false
+    }
 }
 
 /// The terms of a scene plus their dissipation ledger.

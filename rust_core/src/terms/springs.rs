@@ -15,6 +15,15 @@
 //! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so one SIMD
 //! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
 //! written once over `crate::simd`, for every instruction set).
+//!
+//! Jacobian (for implicit integrators, matrix-free, gathered per particle like the force):
+//! ∂f_i/∂x_j = K = k n nᵀ + k (1 − L0/L)(I − n nᵀ), ∂f_i/∂x_i = −K; ∂f_i/∂v_j = c n nᵀ,
+//! ∂f_i/∂v_i = −c n nᵀ (Baraff & Witkin 1998, §4.1–4.2). Two standard simplifications keep the
+//! system matrix M − h ∂f/∂v − h² ∂f/∂x symmetric positive definite: the transverse term
+//! k (1 − L0/L)(I − n nᵀ) is dropped for compressed springs (L < L0, where it is negative: the
+//! definiteness fix of Choi & Ko 2002, "Stable but responsive cloth", §4), and the dashpot's
+//! derivative with respect to positions (not symmetric) is left out. Both change only the
+//! linearisation, not the force: the step stays consistent, first order.
 use super::registry::{Context, Params};
 use super::{Term, Write};
 use crate::alloc::{count, Need};
@@ -365,6 +374,55 @@ impl<V: Vector> Springs<V> {
     }
 }
 
+impl<V: Vector> Springs<V> {
+    /// Row `p` of `(cx ∂f/∂x + cv ∂f/∂v)·w` (`with_w`) or of its diagonal (not `with_w`): the
+    /// springs of `p` in their fixed slot order. Per spring, the block applied to u = w_o − w_p
+    /// is a n nᵀ + b (I − n nᵀ) with a = cx k + cv c and b = cx k max(0, 1 − L0/L).
+    #[inline]
+    fn jacobian_row(&self, p: usize, x: &[V], c: (Real, Real), w: &[V], with_w: bool) -> V {
+        let (cx, cv) = c;
+        let g = p / SLICE;
+        let slots = (self.start[g + 1] - self.start[g]) as usize / SLICE;
+        let base = self.start[g] as usize + p % SLICE;
+        let xp = x[p];
+        let mut acc = V::ZERO;
+        for slot in 0..slots {
+            let e = base + SLICE * slot;
+            let o = self.other[e] as usize;
+            if o == p {
+                continue; // padding (a real spring never joins a particle to itself)
+            }
+            let (k, damp) = self.kc(e);
+            let rest = self.e_rest[e];
+            let d = x[o] - xp;
+            let l2 = d.length_squared();
+            let (a, b, n) = if l2 > 0.0 {
+                let l = l2.sqrt();
+                let t = if l > rest { 1.0 - rest / l } else { 0.0 };
+                (cx * k + cv * damp, cx * k * t, d * (1.0 / l))
+            } else if rest == 0.0 {
+                // Coincident ends of a zero-length spring: K = k I whatever the axis; the
+                // dashpot's axis is undefined (its force is zero there too).
+                (cx * k, cx * k, V::ZERO)
+            } else {
+                continue; // no axis, no force (as in the force kernel)
+            };
+            if with_w {
+                let u = w[o] - w[p];
+                acc += n * ((a - b) * u.dot(n)) + u * b;
+            } else {
+                let mut diag = [0.0; 3];
+                for (q, dq) in diag.iter_mut().enumerate().take(V::DIM) {
+                    let nq = n.comp(q);
+                    *dq = -(a * nq * nq + b * (1.0 - nq * nq));
+                }
+                acc += V::from_slice(&diag[..V::DIM]);
+            }
+        }
+        acc
+    }
+}
+
 impl<V: Vector> Term<V> for Springs<V> {
     fn name(&self) -> &str {
         &self.name
@@ -414,6 +472,26 @@ impl<V: Vector> Term<V> for Springs<V> {
         }
         let t = (1.0 / w2.sqrt()).min(1.0 / lam);
         t.is_finite().then_some(t)
+    }
+
+    fn has_jacobian(&self) -> bool {
+        true
+    }
+    fn jacobian_product(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+        par::chunks1(&mut out[..self.n_cov], |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += self.jacobian_row(p0 + k, x, c, w, true);
+            }
+        });
+        true
+    }
+    fn jacobian_diagonal(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+        par::chunks1(&mut out[..self.n_cov], |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += self.jacobian_row(p0 + k, x, c, x, false);
+            }
+        });
+        true
     }
 }
 
@@ -470,6 +548,101 @@ mod tests {
                 );
             }
             assert!((p - pw).abs() <= 1e-12 * pw, "{level:?} power {p} vs {pw}");
+        }
+    }
+
+    /// The Jacobian products against central differences of the force, on a random stretched
+    /// network (every spring longer than its rest length: no definiteness fix applies) without
+    /// dashpots for ∂f/∂x (their positional derivative is left out by design) and with them for
+    /// ∂f/∂v (the force is linear in v: the difference is exact up to round-off).
+    fn check_jacobian<V: Vector>() {
+        let n = 37;
+        let mut s = 11;
+        let x: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let v: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let w: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let (mut i, mut j) = (vec![], vec![]);
+        for a in 0..n as u32 {
+            for b in [(a + 1) % n as u32, (a + 5) % n as u32] {
+                i.push(a);
+                j.push(b);
+            }
+        }
+        let m = i.len();
+        let rest: Vec<f64> =
+            (0..m).map(|q| 0.5 * (x[i[q] as usize] - x[j[q] as usize]).length_squared().sqrt()).collect();
+        let k: Vec<f64> = (0..m).map(|q| 10.0 + q as f64).collect();
+        let model = Model { mass: vec![1.0; n], inv_mass: vec![1.0; n], ..Default::default() };
+        for (damping, c, h) in [(0.0, (1.0, 0.0), 1e-6), (0.7, (0.0, 1.0), 1.0)] {
+            let sp = Springs::<V>::new("s".into(), i.clone(), j.clone(), k.clone(), vec![damping; m], rest.clone(), n)
+                .unwrap();
+            let shifted = |sign: f64| {
+                let (mut xs, mut vs) = (x.clone(), v.clone());
+                let z = if c.0 != 0.0 { &mut xs } else { &mut vs };
+                for (a, b) in z.iter_mut().zip(&w) {
+                    *a += *b * (sign * h);
+                }
+                let mut f = vec![V::ZERO; n];
+                for p in 0..n {
+                    f[p] = sp.particle_force(p, &xs, &vs, false).0;
+                }
+                f
+            };
+            let (fp, fm) = (shifted(1.0), shifted(-1.0));
+            let mut jw = vec![V::ZERO; n];
+            assert!(Term::jacobian_product(&sp, &x, &v, &model, c, &w, &mut jw));
+            let scale = jw.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+            for p in 0..n {
+                let fd = (fp[p] - fm[p]) * (0.5 / h);
+                assert!(
+                    (fd - jw[p]).length_squared().sqrt() <= 1e-7 * scale,
+                    "{c:?} particle {p}: {fd:?} vs {:?}",
+                    jw[p]
+                );
+            }
+            // The diagonal: row (p, q) of the product with unit vectors on component q of
+            // particle p alone.
+            let mut diag = vec![V::ZERO; n];
+            assert!(Term::jacobian_diagonal(&sp, &x, &v, &model, c, &mut diag));
+            for p in [0, 7, n - 1] {
+                for q in 0..V::DIM {
+                    let mut e = vec![V::ZERO; n];
+                    let mut unit = [0.0; 3];
+                    unit[q] = 1.0;
+                    e[p] = V::from_slice(&unit[..V::DIM]);
+                    let mut col = vec![V::ZERO; n];
+                    Term::jacobian_product(&sp, &x, &v, &model, c, &e, &mut col);
+                    let (a, b) = (col[p].comp(q), diag[p].comp(q));
+                    assert!((a - b).abs() <= 1e-12 * a.abs(), "diagonal ({p}, {q}): {b} vs {a}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn jacobian_products_match_finite_differences() {
+        check_jacobian::<DVec2>();
+        check_jacobian::<DVec3>();
+    }
+
+    /// Compressed springs lose their transverse stiffness (Choi & Ko's fix), so −∂f/∂x stays
+    /// positive semi-definite: wᵀ(−J)w ≥ 0 for random w on a network squeezed to half its
+    /// rest lengths.
+    #[test]
+    fn compressed_springs_keep_the_jacobian_semidefinite() {
+        let n = 20;
+        let mut s = 3;
+        let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))).collect();
+        let (i, j): (Vec<u32>, Vec<u32>) = (0..n as u32).map(|a| (a, (a + 3) % n as u32)).unzip();
+        let rest: Vec<f64> = i.iter().zip(&j).map(|(&a, &b)| 2.0 * (x[a as usize] - x[b as usize]).length()).collect();
+        let sp = Springs::<DVec3>::new("s".into(), i, j, vec![100.0; n], vec![0.0; n], rest, n).unwrap();
+        let model = Model { mass: vec![1.0; n], inv_mass: vec![1.0; n], ..Default::default() };
+        for _ in 0..50 {
+            let w: Vec<DVec3> = (0..n).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) - 0.5).collect();
+            let mut jw = vec![DVec3::ZERO; n];
+            Term::jacobian_product(&sp, &x, &x, &model, (1.0, 0.0), &w, &mut jw);
+            let q: f64 = w.iter().zip(&jw).map(|(a, b)| a.dot(*b)).sum();
+            assert!(q <= 1e-12, "wᵀJw = {q} > 0");
         }
     }
 
