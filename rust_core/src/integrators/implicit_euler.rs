@@ -354,7 +354,9 @@ mod tests {
                 let a0 = amplitude(&p, w);
                 assert!(!it.step(&mut p, wh / w));
                 let ratio = amplitude(&p, w) / a0;
-                assert!((ratio / theory - 1.0).abs() < 1e-12, "ωh {wh}: ratio {ratio} vs {theory}");
+                // Round-off: x' = x + h v' cancels all but 1/(1 + ω²h²) of x.
+                let tol = 50.0 * f64::EPSILON * (1.0 + wh * wh);
+                assert!((ratio / theory - 1.0).abs() < tol, "ωh {wh}: ratio {ratio} vs {theory}");
             }
             // One particle: the Jacobi preconditioner is the inverse, CG converges at once.
             assert_eq!(it.solver_stats().unwrap().unconverged, 0);
