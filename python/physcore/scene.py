@@ -608,7 +608,9 @@ class Scene:
         integrator at the start of the call: a quarter of its stability interval on the
         imaginary axis over the fastest angular frequency ω_max in the scene (ω·dt = 0.5 for
         semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
-        above a term's own limit (the fluid CFL condition). ``"rk45"`` controls its own internal
+        above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
+        step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
+        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others. ``"rk45"`` controls its own internal
         steps, so it takes one substep per call unless a CFL limit asks for more. An int gives
         that many substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
 
