@@ -141,6 +141,11 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
         if stop.load(Ordering::Relaxed) {
             return Err(Stopped);
         }
+        for t in sys.forces.terms.iter_mut() {
+            if t.uniform_acceleration().is_none() {
+                t.jacobian_prepare(&sys.state.x, &sys.state.v, &sys.model);
+            }
+        }
         let (im, g) = (&sys.model.inv_mass, sys.forces.g);
         // rhs = h (f0 + m g) + h² (∂f/∂x) v0, filtered (0 on pinned particles); into r.
         Self::apply(sys, (h * h, 0.0), &sys.state.v, &mut self.q);

@@ -135,6 +135,14 @@ pub trait Term<V: Vector>: Send + Sync {
     fn has_jacobian(&self) -> bool {
         false
     }
+    /// Called once per step, before the Jacobian products at `(x, v)`: a term may keep the
+    /// state-dependent part of its Jacobian (springs: each axis and transverse factor, so that
+    /// a CG iteration needs no square root or division) for the products that follow, which
+    /// are then made at these same `x` and `v` until the next call. Returns whether it kept
+    /// anything (a term that cannot, or need not, computes its products directly).
+    fn jacobian_prepare(&mut self, _x: &[V], _v: &[V], _model: &Model) -> bool {
+        false
+    }
     /// Adds `(cx ∂f/∂x + cv ∂f/∂v)·w` at `(x, v)` into `out`, one vector per particle, matrix-free
     /// (`c = (cx, cv)`; ∂f/∂x in N/m, ∂f/∂v in N·s/m), gathered per particle so that results are
     /// bit-identical for any thread count. Rows of pinned particles may be non-zero (the solver

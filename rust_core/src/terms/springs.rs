@@ -59,7 +59,13 @@ pub struct Springs<V: Vector> {
     /// `Some((k, c))` when every spring has the same stiffness and damping (a cloth, a chain):
     /// the kernels then stream no per-spring k and c.
     uniform: Option<(Real, Real)>,
-    _v: std::marker::PhantomData<V>,
+    /// The Jacobian's state-dependent part per SELL-8 entry at the positions `jac_at` (their
+    /// address and length) given to `jacobian_prepare`: the axis n and the transverse factor
+    /// max(0, 1 − L0/L) (both 0 for padding and undefined axes; n = 0, factor 1 for a
+    /// zero-length spring with coincident ends).
+    jac_n: Vec<V>,
+    jac_t: Vec<Real>,
+    jac_at: Option<(usize, usize)>,
 }
 
 const SLICE: usize = 8;
@@ -202,7 +208,9 @@ impl<V: Vector> Springs<V> {
             n_cov: n,
             any_damping,
             uniform,
-            _v: std::marker::PhantomData,
+            jac_n: Vec::new(),
+            jac_t: Vec::new(),
+            jac_at: None,
         })
     }
 
@@ -375,38 +383,54 @@ impl<V: Vector> Springs<V> {
 }
 
 impl<V: Vector> Springs<V> {
+    /// The axis n and transverse factor t = max(0, 1 − L0/L) of entry `e` of particle `p`:
+    /// (0, 0) for padding and for an undefined axis (coincident ends of a spring of positive rest
+    /// length: no force, as in the force kernel); (0, 1) for coincident ends of a zero-length
+    /// spring, whose K = k I whatever the axis (its dashpot's axis is undefined and its force 0).
+    #[inline(always)]
+    fn axis(&self, e: usize, p: usize, x: &[V]) -> (V, Real) {
+        let o = self.other[e] as usize;
+        if o == p {
+            return (V::ZERO, 0.0); // padding (a real spring never joins a particle to itself)
+        }
+        let rest = self.e_rest[e];
+        let d = x[o] - x[p];
+        let l2 = d.length_squared();
+        if l2 > 0.0 {
+            let inv = 1.0 / l2.sqrt();
+            (d * inv, (1.0 - rest * inv).max(0.0))
+        } else if rest == 0.0 {
+            (V::ZERO, 1.0)
+        } else {
+            (V::ZERO, 0.0)
+        }
+    }
+
+    /// Whether `jacobian_prepare` kept the axes for these positions.
+    fn prepared(&self, x: &[V]) -> bool {
+        self.jac_at == Some((x.as_ptr() as usize, x.len())) && self.jac_t.len() == self.other.len()
+    }
+
     /// Row `p` of `(cx ∂f/∂x + cv ∂f/∂v)·w` (`with_w`) or of its diagonal (not `with_w`): the
     /// springs of `p` in their fixed slot order. Per spring, the block applied to u = w_o − w_p
-    /// is a n nᵀ + b (I − n nᵀ) with a = cx k + cv c and b = cx k max(0, 1 − L0/L).
+    /// is a n nᵀ + b (I − n nᵀ) with a = cx k + cv c and b = cx k max(0, 1 − L0/L). The axes come
+    /// from `jacobian_prepare` when `prepared` (the same values, computed once a step).
     #[inline]
-    fn jacobian_row(&self, p: usize, x: &[V], c: (Real, Real), w: &[V], with_w: bool) -> V {
+    fn jacobian_row(&self, p: usize, x: &[V], c: (Real, Real), w: &[V], with_w: bool, prepared: bool) -> V {
         let (cx, cv) = c;
         let g = p / SLICE;
         let slots = (self.start[g + 1] - self.start[g]) as usize / SLICE;
         let base = self.start[g] as usize + p % SLICE;
-        let xp = x[p];
         let mut acc = V::ZERO;
         for slot in 0..slots {
             let e = base + SLICE * slot;
             let o = self.other[e] as usize;
-            if o == p {
-                continue; // padding (a real spring never joins a particle to itself)
+            let (n, t) = if prepared { (self.jac_n[e], self.jac_t[e]) } else { self.axis(e, p, x) };
+            if t == 0.0 && n == V::ZERO {
+                continue; // padding, or no axis
             }
             let (k, damp) = self.kc(e);
-            let rest = self.e_rest[e];
-            let d = x[o] - xp;
-            let l2 = d.length_squared();
-            let (a, b, n) = if l2 > 0.0 {
-                let l = l2.sqrt();
-                let t = if l > rest { 1.0 - rest / l } else { 0.0 };
-                (cx * k + cv * damp, cx * k * t, d * (1.0 / l))
-            } else if rest == 0.0 {
-                // Coincident ends of a zero-length spring: K = k I whatever the axis; the
-                // dashpot's axis is undefined (its force is zero there too).
-                (cx * k, cx * k, V::ZERO)
-            } else {
-                continue; // no axis, no force (as in the force kernel)
-            };
+            let (a, b) = (cx * k + cv * damp, cx * k * t);
             if with_w {
                 let u = w[o] - w[p];
                 acc += n * ((a - b) * u.dot(n)) + u * b;
@@ -477,18 +501,53 @@ impl<V: Vector> Term<V> for Springs<V> {
     fn has_jacobian(&self) -> bool {
         true
     }
+    fn jacobian_prepare(&mut self, x: &[V], _v: &[V], _model: &Model) -> bool {
+        let m = self.other.len();
+        if self.jac_t.len() != m {
+            // Fallible: without room the products compute their axes themselves.
+            let (mut n, mut t) = (Vec::new(), Vec::new());
+            if n.try_reserve_exact(m).is_err() || t.try_reserve_exact(m).is_err() {
+                self.jac_at = None;
+                return false;
+            }
+            n.resize(m, V::ZERO);
+            t.resize(m, 0.0);
+            (self.jac_n, self.jac_t) = (n, t);
+        }
+        let (mut jn, mut jt) = (std::mem::take(&mut self.jac_n), std::mem::take(&mut self.jac_t));
+        let start = &self.start;
+        // One chunk of entries per slice range: entries of slices g0.. are start[g0]..; computed
+        // per entry, so any split gives the same values.
+        par::chunks2(&mut jn, &mut jt, |e0, n, t| {
+            // The slice of entry e0 (start is sorted; a chunk may begin mid-slice).
+            let mut g = start.partition_point(|&s| (s as usize) <= e0) - 1;
+            for k in 0..n.len() {
+                let e = e0 + k;
+                while start[g + 1] as usize <= e {
+                    g += 1;
+                }
+                let p = g * SLICE + (e - start[g] as usize) % SLICE;
+                (n[k], t[k]) = if p < self.n_cov { self.axis(e, p, x) } else { (V::ZERO, 0.0) };
+            }
+        });
+        (self.jac_n, self.jac_t) = (jn, jt);
+        self.jac_at = Some((x.as_ptr() as usize, x.len()));
+        true
+    }
     fn jacobian_product(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+        let prepared = self.prepared(x);
         par::chunks1(&mut out[..self.n_cov], |p0, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                *o += self.jacobian_row(p0 + k, x, c, w, true);
+                *o += self.jacobian_row(p0 + k, x, c, w, true, prepared);
             }
         });
         true
     }
     fn jacobian_diagonal(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+        let prepared = self.prepared(x);
         par::chunks1(&mut out[..self.n_cov], |p0, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                *o += self.jacobian_row(p0 + k, x, c, x, false);
+                *o += self.jacobian_row(p0 + k, x, c, x, false, prepared);
             }
         });
         true
@@ -591,6 +650,15 @@ mod tests {
             let (fp, fm) = (shifted(1.0), shifted(-1.0));
             let mut jw = vec![V::ZERO; n];
             assert!(Term::jacobian_product(&sp, &x, &v, &model, c, &w, &mut jw));
+            // The axes kept by jacobian_prepare give the same bits.
+            let mut sp2 =
+                Springs::<V>::new("s".into(), i.clone(), j.clone(), k.clone(), vec![damping; m], rest.clone(), n)
+                    .unwrap();
+            assert!(Term::jacobian_prepare(&mut sp2, &x, &v, &model));
+            assert!(sp2.prepared(&x));
+            let mut jw2 = vec![V::ZERO; n];
+            Term::jacobian_product(&sp2, &x, &v, &model, c, &w, &mut jw2);
+            assert_eq!(jw, jw2);
             let scale = jw.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
             for p in 0..n {
                 let fd = (fp[p] - fm[p]) * (0.5 / h);
