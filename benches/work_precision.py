@@ -111,7 +111,7 @@ def _f32(x: Any) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- stiff cloth
-STIFF_CLOTH_CASES = ((32, 10), (32, 100), (64, 10))  # (n, stiffness / the cloth scene's default)
+STIFF_CLOTH_CASES = ((16, 10), (32, 10))  # (n, stiffness / the cloth scene's default)
 
 
 def stiff_cloth(cases: Sequence[tuple[int, int]] = STIFF_CLOTH_CASES, repeats: int = 3) -> str:
@@ -150,6 +150,7 @@ def stiff_cloth(cases: Sequence[tuple[int, int]] = STIFF_CLOTH_CASES, repeats: i
         for r in rows[-4:]:
             x = runs[r[2]].positions[free]
             r[-1] = "–" if r[2] == "semi_implicit_euler" else f"{float(np.sqrt(np.mean(np.sum((x - ref.positions[free]) ** 2, axis=1)))):.1e}"
+            print(" | ".join(str(c) for c in r), file=sys.stderr, flush=True)  # progress
     headers = ["n", "k N/m", "integrator", "dt s", "ω_max·dt", "steps", "wall s (median of 3)", "CG it./step", "energy drift", "RMS Δx vs semi m"]
     return header() + "\n\n" + table(headers, rows)
 
