@@ -314,6 +314,8 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("dt",), [NAN, INF, -INF, 0, -1e-3, "abc", True, None, f"{RAW}1e400", 10**400]),
     (("rtol",), [NAN, -1.0, 2.0, "x", None]),
     (("atol",), [NAN, -1.0, "x", True]),
+    (("cg_tol",), [NAN, 0.0, 1.0, -1e-8, "x", None, True]),
+    (("cg_max_iter",), [0, -1, 1.5, True, "3", None, 10**7, 2**64]),
     (("precision",), ["f16", 32, None]),
     (("xpbd_substeps",), [0, -1, 1.5, True, "2", 10**6, None]),
     (("xpbd_iterations",), [0, -1, 1.5, True, "2", 10**5, None]),
@@ -391,6 +393,7 @@ META_FIELDS += [
     Case("meta-fields", "second-fluid", lambda r: second_fluid(r, overlap=False), expect="load"),
     # Old files lack these; the defaults of their time apply.
     Case("meta-fields", "no-rtol-atol-precision-boxes", lambda r: with_meta(r, lambda m: [m.pop(k) for k in ("rtol", "atol", "precision", "boxes")]), expect="load"),
+    Case("meta-fields", "no-cg-options", lambda r: with_meta(r, lambda m: [m.pop(k) for k in ("cg_tol", "cg_max_iter")]), expect="load"),
     Case("meta-fields", "threads-3000", lambda r: with_meta(r, lambda m: m.update(threads=3000)), expect="load"),
     Case("meta-fields", "threads-null", lambda r: with_meta(r, lambda m: m.update(threads=None)), expect="load"),
     Case("meta-fields", "step-max", lambda r: with_meta(r, lambda m: m.update(step=2**63 - 1)), expect="load"),

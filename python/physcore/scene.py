@@ -174,10 +174,15 @@ class Scene:
         evaluations each; see `rtol`) or ``"boris"`` (the Boris push for charges in magnetic
         fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
         speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
-        scene has no magnetic term) or ``"xpbd"`` (position-based dynamics with substeps,
+        scene has no magnetic term), ``"xpbd"`` (position-based dynamics with substeps,
         Macklin et al. 2016/2019: each step is ``xpbd_substeps`` substeps of semi-implicit Euler
         under the force terms, each followed by ``xpbd_iterations`` projections of the
-        :class:`XpbdConstraints`; 1st order, damped by the projection).
+        :class:`XpbdConstraints`; 1st order, damped by the projection) or
+        ``"implicit_euler"`` (linearised backward Euler, Baraff &
+        Witkin 1998: springs and drag implicit, solved by conjugate gradients each step; 1st
+        order, unconditionally stable on springs, so stiff cloth may take steps 10–100× the
+        explicit limit, at the price of numerical damping that the energy books show as a
+        residual; see `cg_tol`).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
@@ -188,6 +193,12 @@ class Scene:
         accepted when every position and velocity component i has a local error estimate below
         ``atol + rtol · |y_i|`` (atol in m for positions and m/s for velocities; max norm over
         all particles). ``rtol`` in [1e-14, 1), default 1e-6; ``atol`` >= 0, default 1e-9.
+    cg_tol, cg_max_iter : float, int
+        The linear solve of ``"implicit_euler"`` (kept, and ignored, by the other integrators):
+        conjugate gradients stop once the residual is below ``cg_tol`` times the right-hand
+        side's norm, or after ``cg_max_iter`` iterations. ``cg_tol`` in [1e-14, 1), default
+        1e-8; ``cg_max_iter`` in 1..1000000, default 200. A solve stopped by the limit keeps its
+        last iterate and is counted in :attr:`integrator_stats` (``"cg_unconverged"``).
     precision : {"f64", "f32"}
         ``"f64"`` (default) keeps positions and velocities in double precision. ``"f32"`` keeps
         them in single precision: every stored value is rounded to the nearest float32 after
@@ -236,6 +247,8 @@ class Scene:
         dt: float = 1e-3,
         rtol: float = 1e-6,
         atol: float = 1e-9,
+        cg_tol: float = 1e-8,
+        cg_max_iter: int = 200,
         precision: str = "f64",
         threads: int | None = None,
         xpbd_substeps: int = 10,
@@ -248,6 +261,7 @@ class Scene:
         integrator = _check_integrator(integrator)
         dt = _check_dt(dt)
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
+        cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), _check_int(cg_max_iter, "cg_max_iter", 1, 1_000_000)
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
@@ -263,6 +277,7 @@ class Scene:
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
+        sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
         # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
         # that release the GIL for long, and _busy names the thread inside one.
@@ -606,7 +621,9 @@ class Scene:
         integrator at the start of the call: a quarter of its stability interval on the
         imaginary axis over the fastest angular frequency ω_max in the scene (ω·dt = 0.5 for
         semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
-        above a term's own limit (the fluid CFL condition). ``"rk45"`` controls its own internal
+        above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
+        step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
+        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others. ``"rk45"`` controls its own internal
         steps, so it takes one substep per call unless a CFL limit asks for more. An int gives
         that many substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
 
@@ -738,10 +755,45 @@ class Scene:
         return "f32" if self._sim.single else "f64"
 
     @property
+    def cg_tol(self) -> float:
+        """Relative residual at which ``"implicit_euler"``'s conjugate gradients stop, in [1e-14, 1)."""
+        return float(self._sim.solver_options[0])
+
+    @cg_tol.setter
+    def cg_tol(self, value: float) -> None:
+        self._sim.set_solver_options(_check_tol(value, "cg_tol"), self.cg_max_iter)
+
+    @property
+    def cg_max_iter(self) -> int:
+        """Iteration limit of ``"implicit_euler"``'s conjugate gradients, 1..1000000."""
+        return int(self._sim.solver_options[1])
+
+    @cg_max_iter.setter
+    def cg_max_iter(self, value: int) -> None:
+        self._sim.set_solver_options(self.cg_tol, _check_int(value, "cg_max_iter", 1, 1_000_000))
+
+    @property
     def integrator_stats(self) -> dict[str, Any] | None:
         """For ``"rk45"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
         rejected so far by the step-size controller, and the internal step (s) it will try next.
-        ``None`` for the fixed-step integrators."""
+
+        For ``"implicit_euler"``: ``{"cg_solves", "cg_iterations", "cg_max_iterations",
+        "cg_unconverged", "cg_worst_residual"}`` — linear solves (one per step), conjugate-gradient
+        iterations in all (one Jacobian product each), the most in one solve, the solves that
+        stopped at ``cg_max_iter`` above ``cg_tol`` (their step keeps the last iterate), and the
+        largest relative residual a solve ended with. They count every solve since the integrator
+        was set, including those of calls later rolled back (divergence, Ctrl-C).
+
+        ``None`` for the other integrators."""
+        cg = self._sim.solver_stats()
+        if cg is not None:
+            return {
+                "cg_solves": int(cg[0]),
+                "cg_iterations": int(cg[1]),
+                "cg_max_iterations": int(cg[2]),
+                "cg_unconverged": int(cg[3]),
+                "cg_worst_residual": float(cg[4]),
+            }
         st = self._sim.adaptive_stats()
         if st is None:
             return None
@@ -1037,6 +1089,8 @@ class Scene:
             "dt": self.dt,
             "rtol": self.rtol,
             "atol": self.atol,
+            "cg_tol": self.cg_tol,
+            "cg_max_iter": self.cg_max_iter,
             "precision": self.precision,
             "xpbd_substeps": self.xpbd_substeps,
             "xpbd_iterations": self.xpbd_iterations,
@@ -1122,6 +1176,8 @@ class Scene:
                 dt=meta["dt"],
                 rtol=meta["rtol"],
                 atol=meta["atol"],
+                cg_tol=meta["cg_tol"],
+                cg_max_iter=meta["cg_max_iter"],
                 precision=meta["precision"],
                 threads=threads,
                 xpbd_substeps=meta["xpbd_substeps"],
@@ -1182,6 +1238,7 @@ class Scene:
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
             + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
+            + (f"cg_tol={self.cg_tol:g}, cg_max_iter={self.cg_max_iter}, " if self.integrator == "implicit_euler" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
             + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)}"
             + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")
