@@ -26,6 +26,9 @@ ORDER_CASES = {
     # Without a magnetic field the Boris push is velocity Verlet (tests/test_charges.py has its
     # order with one).
     "boris": (2, [0.04, 0.02, 0.01, 0.005]),
+    # Without constraints each of its 10 substeps is semi-implicit Euler.
+    "xpbd": (1, [0.02, 0.01, 0.005, 0.0025]),
+    "implicit_euler": (1, [0.02, 0.01, 0.005, 0.0025]),
 }
 T_FINAL = 2.0
 
@@ -68,6 +71,8 @@ def test_integrator_table():
         "rk4": (4, False, 4),
         "rk45": (5, False, 6),
         "boris": (2, False, 1),
+        "xpbd": (1, False, 10),
+        "implicit_euler": (1, False, 1),
     }
     got = {d["name"]: (d["order"], d["symplectic"], d["force_evals_per_step"]) for d in pc.INTEGRATORS}
     assert got == expected

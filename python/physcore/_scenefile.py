@@ -87,10 +87,16 @@ _META_FIELDS: dict[str, str] = {
     "planes": "list",
 }
 # Absent from files of earlier versions; these are the values those versions used.
-_META_DEFAULTS: dict[str, Any] = {"rtol": 1e-6, "atol": 1e-9, "precision": "f64", "boxes": [], "grids": [], "flows": []}
-_META_OPTIONAL: dict[str, str] = {
-    "rtol": "number", "atol": "number", "precision": "str", "boxes": "list", "grids": "list", "flows": "list",
+_META_DEFAULTS: dict[str, Any] = {
+    "rtol": 1e-6, "atol": 1e-9, "cg_tol": 1e-8, "cg_max_iter": 200, "precision": "f64", "boxes": [], "grids": [], "flows": [],
 }
+_META_OPTIONAL: dict[str, str] = {
+    "rtol": "number", "atol": "number", "cg_tol": "number", "cg_max_iter": "int", "precision": "str", "boxes": "list",
+    "grids": "list", "flows": "list",
+}
+# The "xpbd" integrator's options (absent from files written before it).
+_META_DEFAULTS.update({"xpbd_substeps": 10, "xpbd_iterations": 1})
+_META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {

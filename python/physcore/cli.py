@@ -570,7 +570,14 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             f"{settings['steps_per_frame']} per frame, {scene.integrator})"
         )
     stats = getattr(scene, "integrator_stats", None)
-    if stats:
+    if stats and "cg_solves" in stats:
+        print(
+            f"  implicit_euler: {stats['cg_iterations']} CG iterations in {stats['cg_solves']} solves "
+            f"(at most {stats['cg_max_iterations']}), {stats['cg_unconverged']} stopped unconverged at "
+            f"cg_max_iter {scene.cg_max_iter} (cg_tol {scene.cg_tol:g}); the energy drift below is "
+            "mostly the method's numerical damping"
+        )
+    elif stats:
         print(
             f"  rk45:           {stats['accepted']} internal steps accepted, {stats['rejected']} rejected "
             f"(rtol {scene.rtol:g}, atol {scene.atol:g})"

@@ -174,7 +174,15 @@ class Scene:
         evaluations each; see `rtol`) or ``"boris"`` (the Boris push for charges in magnetic
         fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
         speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
-        scene has no magnetic term).
+        scene has no magnetic term), ``"xpbd"`` (position-based dynamics with substeps,
+        Macklin et al. 2016/2019: each step is ``xpbd_substeps`` substeps of semi-implicit Euler
+        under the force terms, each followed by ``xpbd_iterations`` projections of the
+        :class:`XpbdConstraints`; 1st order, damped by the projection) or
+        ``"implicit_euler"`` (linearised backward Euler, Baraff &
+        Witkin 1998: springs and drag implicit, solved by conjugate gradients each step; 1st
+        order, unconditionally stable on springs, so stiff cloth may take steps 10–100× the
+        explicit limit, at the price of numerical damping that the energy books show as a
+        residual; see `cg_tol`).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
@@ -185,6 +193,12 @@ class Scene:
         accepted when every position and velocity component i has a local error estimate below
         ``atol + rtol · |y_i|`` (atol in m for positions and m/s for velocities; max norm over
         all particles). ``rtol`` in [1e-14, 1), default 1e-6; ``atol`` >= 0, default 1e-9.
+    cg_tol, cg_max_iter : float, int
+        The linear solve of ``"implicit_euler"`` (kept, and ignored, by the other integrators):
+        conjugate gradients stop once the residual is below ``cg_tol`` times the right-hand
+        side's norm, or after ``cg_max_iter`` iterations. ``cg_tol`` in [1e-14, 1), default
+        1e-8; ``cg_max_iter`` in 1..1000000, default 200. A solve stopped by the limit keeps its
+        last iterate and is counted in :attr:`integrator_stats` (``"cg_unconverged"``).
     precision : {"f64", "f32"}
         ``"f64"`` (default) keeps positions and velocities in double precision. ``"f32"`` keeps
         them in single precision: every stored value is rounded to the nearest float32 after
@@ -196,6 +210,12 @@ class Scene:
         ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
         for any thread count. If no thread can be started (a limit on threads), ``None`` runs on
         the calling thread with a :class:`ThreadPoolWarning`.
+
+    xpbd_substeps, xpbd_iterations : int
+        Substeps per step (1 to 100000, default 10) and constraint iterations per substep (1 to
+        10000, default 1) of ``"xpbd"``; kept, and ignored, by the other integrators. Many
+        substeps of one iteration each converge faster than few substeps of many iterations
+        ("Small steps in physics simulation", Macklin et al., SCA 2019).
 
     Raises
     ------
@@ -227,8 +247,12 @@ class Scene:
         dt: float = 1e-3,
         rtol: float = 1e-6,
         atol: float = 1e-9,
+        cg_tol: float = 1e-8,
+        cg_max_iter: int = 200,
         precision: str = "f64",
         threads: int | None = None,
+        xpbd_substeps: int = 10,
+        xpbd_iterations: int = 1,
     ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
@@ -237,6 +261,7 @@ class Scene:
         integrator = _check_integrator(integrator)
         dt = _check_dt(dt)
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
+        cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), _check_int(cg_max_iter, "cg_max_iter", 1, 1_000_000)
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
@@ -251,6 +276,8 @@ class Scene:
                 stacklevel=2,
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
+        sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
+        sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
         # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
         # that release the GIL for long, and _busy names the thread inside one.
@@ -594,7 +621,9 @@ class Scene:
         integrator at the start of the call: a quarter of its stability interval on the
         imaginary axis over the fastest angular frequency ω_max in the scene (ω·dt = 0.5 for
         semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
-        above a term's own limit (the fluid CFL condition). ``"rk45"`` controls its own internal
+        above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
+        step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
+        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others. ``"rk45"`` controls its own internal
         steps, so it takes one substep per call unless a CFL limit asks for more. An int gives
         that many substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
 
@@ -703,15 +732,68 @@ class Scene:
         self._sim.set_tolerances(self.rtol, _check_tol(value, "atol"))
 
     @property
+    def xpbd_substeps(self) -> int:
+        """Substeps per step of ``"xpbd"`` (see the class docstring). Settable."""
+        return int(self._sim.substeps[0])
+
+    @xpbd_substeps.setter
+    def xpbd_substeps(self, value: int) -> None:
+        self._sim.set_substeps(_check_int(value, "xpbd_substeps", 1, 100_000), self.xpbd_iterations)
+
+    @property
+    def xpbd_iterations(self) -> int:
+        """Constraint iterations per substep of ``"xpbd"``. Settable."""
+        return int(self._sim.substeps[1])
+
+    @xpbd_iterations.setter
+    def xpbd_iterations(self, value: int) -> None:
+        self._sim.set_substeps(self.xpbd_substeps, _check_int(value, "xpbd_iterations", 1, 10_000))
+
+    @property
     def precision(self) -> str:
         """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor)."""
         return "f32" if self._sim.single else "f64"
 
     @property
+    def cg_tol(self) -> float:
+        """Relative residual at which ``"implicit_euler"``'s conjugate gradients stop, in [1e-14, 1)."""
+        return float(self._sim.solver_options[0])
+
+    @cg_tol.setter
+    def cg_tol(self, value: float) -> None:
+        self._sim.set_solver_options(_check_tol(value, "cg_tol"), self.cg_max_iter)
+
+    @property
+    def cg_max_iter(self) -> int:
+        """Iteration limit of ``"implicit_euler"``'s conjugate gradients, 1..1000000."""
+        return int(self._sim.solver_options[1])
+
+    @cg_max_iter.setter
+    def cg_max_iter(self, value: int) -> None:
+        self._sim.set_solver_options(self.cg_tol, _check_int(value, "cg_max_iter", 1, 1_000_000))
+
+    @property
     def integrator_stats(self) -> dict[str, Any] | None:
         """For ``"rk45"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
         rejected so far by the step-size controller, and the internal step (s) it will try next.
-        ``None`` for the fixed-step integrators."""
+
+        For ``"implicit_euler"``: ``{"cg_solves", "cg_iterations", "cg_max_iterations",
+        "cg_unconverged", "cg_worst_residual"}`` — linear solves (one per step), conjugate-gradient
+        iterations in all (one Jacobian product each), the most in one solve, the solves that
+        stopped at ``cg_max_iter`` above ``cg_tol`` (their step keeps the last iterate), and the
+        largest relative residual a solve ended with. They count every solve since the integrator
+        was set, including those of calls later rolled back (divergence, Ctrl-C).
+
+        ``None`` for the other integrators."""
+        cg = self._sim.solver_stats()
+        if cg is not None:
+            return {
+                "cg_solves": int(cg[0]),
+                "cg_iterations": int(cg[1]),
+                "cg_max_iterations": int(cg[2]),
+                "cg_unconverged": int(cg[3]),
+                "cg_worst_residual": float(cg[4]),
+            }
         st = self._sim.adaptive_stats()
         if st is None:
             return None
@@ -1007,7 +1089,11 @@ class Scene:
             "dt": self.dt,
             "rtol": self.rtol,
             "atol": self.atol,
+            "cg_tol": self.cg_tol,
+            "cg_max_iter": self.cg_max_iter,
             "precision": self.precision,
+            "xpbd_substeps": self.xpbd_substeps,
+            "xpbd_iterations": self.xpbd_iterations,
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,
@@ -1090,8 +1176,12 @@ class Scene:
                 dt=meta["dt"],
                 rtol=meta["rtol"],
                 atol=meta["atol"],
+                cg_tol=meta["cg_tol"],
+                cg_max_iter=meta["cg_max_iter"],
                 precision=meta["precision"],
                 threads=threads,
+                xpbd_substeps=meta["xpbd_substeps"],
+                xpbd_iterations=meta["xpbd_iterations"],
             )
         if z["positions"].shape[0]:
             with r.api(""):  # the API's argument names are the members' names
@@ -1148,6 +1238,7 @@ class Scene:
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
             + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
+            + (f"cg_tol={self.cg_tol:g}, cg_max_iter={self.cg_max_iter}, " if self.integrator == "implicit_euler" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
             + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)}"
             + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")

@@ -48,7 +48,8 @@ fn integrator_table() {
             ("yoshida4", 4, true, 3),
             ("rk4", 4, false, 4),
             ("rk45", 5, false, 6),
-            ("boris", 2, false, 1)
+            ("boris", 2, false, 1),
+            ("xpbd", 1, false, 10)
         ]
     );
     assert!(by_name::<glam::DVec2>("leapfrogg").is_err());

@@ -2,10 +2,12 @@
 //! its force evaluations per step, so the speed/accuracy trade can be tabulated honestly.
 pub mod boris;
 pub mod euler;
+pub mod implicit_euler;
 pub mod rk4;
 pub mod rk45;
 pub mod semi_implicit_euler;
 pub mod verlet;
+pub mod xpbd;
 pub mod yoshida;
 
 use crate::error::{invalid, Result};
@@ -17,10 +19,12 @@ use std::sync::atomic::AtomicBool;
 
 pub use boris::Boris;
 pub use euler::ExplicitEuler;
+pub use implicit_euler::ImplicitEuler;
 pub use rk4::Rk4;
 pub use rk45::Rk45;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
+pub use xpbd::Xpbd;
 pub use yoshida::Yoshida4;
 
 /// What a particle system hands its integrator: state, constants and the force terms.
@@ -114,10 +118,57 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn failure(&self) -> Option<(usize, crate::error::Failure)> {
         None
     }
+    /// Sets the substeps per step and the constraint iterations per substep of "xpbd" (both
+    /// ≥ 1, checked by the caller); the other integrators ignore them.
+    fn set_substeps(&mut self, _substeps: u32, _iterations: u32) {}
+    /// Whether the terms with Jacobians (`Term::has_jacobian`) are taken implicitly, so that
+    /// their time scales no longer limit the step for stability (`ParticleSystem::auto_dt`).
+    fn implicit(&self) -> bool {
+        false
+    }
+    /// Sets the linear solver's relative tolerance and iteration limit (validated by the
+    /// caller); false if the integrator has no solver.
+    fn set_solver_options(&mut self, _tol: Real, _max_iter: u32) -> bool {
+        false
+    }
+    /// The linear solver's books, for an integrator that has one.
+    fn solver_stats(&self) -> Option<SolverStats> {
+        None
+    }
+}
+
+/// Books of an implicit integrator's linear solves (CG), over every solve run since the
+/// integrator was made, including those of steps later rolled back (divergence, Ctrl-C).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SolverStats {
+    /// Linear solves (one per step).
+    pub solves: u64,
+    /// CG iterations over all solves (one Jacobian product each).
+    pub iterations: u64,
+    /// Most iterations one solve took.
+    pub max_iterations: u32,
+    /// Solves that stopped at the iteration limit (or broke down) above the tolerance.
+    pub unconverged: u64,
+    /// Largest relative residual ‖r‖/‖rhs‖ a solve ended with.
+    pub worst_residual: Real,
+}
+
+impl SolverStats {
+    pub fn record(&mut self, iterations: u32, converged: bool, residual: Real) {
+        self.solves += 1;
+        self.iterations += iterations as u64;
+        self.max_iterations = self.max_iterations.max(iterations);
+        self.unconverged += !converged as u64;
+        // NaN (a non-finite state) counts as worst.
+        if !(residual <= self.worst_residual) {
+            self.worst_residual = residual;
+        }
+    }
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 7] = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris"];
+pub const NAMES: [&str; 9] =
+    ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris", "xpbd", "implicit_euler"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -128,6 +179,8 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "rk4" => Box::new(Rk4::default()),
         "rk45" => Box::new(Rk45::default()),
         "boris" => Box::new(Boris::default()),
+        "xpbd" => Box::new(Xpbd::default()),
+        "implicit_euler" => Box::new(ImplicitEuler::default()),
         other => {
             return Err(invalid(
                 "integrator",

@@ -94,9 +94,35 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.particles_mut().set_tolerances(rtol, atol)).map_err(|e| to_py(py, e))
     }
 
+    /// (substeps per step, iterations per substep) of "xpbd".
+    #[getter]
+    fn substeps(&self) -> (u32, u32) {
+        with_sim!(&self.inner, s => s.particles().substeps())
+    }
+
+    fn set_substeps(&mut self, py: Python<'_>, substeps: u32, iterations: u32) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.particles_mut().set_substeps(substeps, iterations)).map_err(|e| to_py(py, e))
+    }
+
     /// (accepted, rejected, next internal step s) for "rk45", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
         with_sim!(&self.inner, s => s.particles().adaptive_stats())
+    }
+
+    /// (cg_tol, cg_max_iter) of the implicit integrator's linear solve.
+    #[getter]
+    fn solver_options(&self) -> (f64, u32) {
+        with_sim!(&self.inner, s => s.particles().solver_options())
+    }
+
+    fn set_solver_options(&mut self, py: Python<'_>, tol: f64, max_iter: u32) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.particles_mut().set_solver_options(tol, max_iter)).map_err(|e| to_py(py, e))
+    }
+
+    /// (solves, iterations, most iterations in one solve, unconverged solves, worst relative
+    /// residual) of the implicit integrator's linear solves, else None.
+    fn solver_stats(&self) -> Option<(u64, u64, u32, u64, f64)> {
+        with_sim!(&self.inner, s => s.particles().solver_stats().map(|t| (t.solves, t.iterations, t.max_iterations, t.unconverged, t.worst_residual)))
     }
 
     /// Whether the state is kept in single precision.

@@ -1,4 +1,5 @@
-//! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|².
+//! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|². Jacobian: ∂f/∂v = −b I,
+//! ∂f/∂x = 0 (for implicit integrators).
 use super::registry::{Context, Params};
 use super::{Term, Write};
 use crate::error::{invalid, Result};
@@ -62,5 +63,33 @@ impl<V: Vector> Term<V> for Drag {
             .map(|(m, _)| *m)
             .fold(f64::INFINITY, f64::min);
         (self.b > 0.0 && m.is_finite()).then(|| m / self.b)
+    }
+
+    fn has_jacobian(&self) -> bool {
+        true
+    }
+    /// Adds cv (−b) w_i on free particles (∂f/∂v = −b I; ∂f/∂x = 0).
+    fn jacobian_product(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+        let s = -self.b * c.1;
+        par::chunks1(out, |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                if model.inv_mass[p0 + k] != 0.0 {
+                    *o += w[p0 + k] * s;
+                }
+            }
+        });
+        true
+    }
+    fn jacobian_diagonal(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+        let s = -self.b * c.1;
+        let d = V::from_slice(&[s; 3][..V::DIM]);
+        par::chunks1(out, |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                if model.inv_mass[p0 + k] != 0.0 {
+                    *o += d;
+                }
+            }
+        });
+        true
     }
 }

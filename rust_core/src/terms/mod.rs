@@ -11,6 +11,7 @@ pub mod potentials;
 pub mod registry;
 pub mod springs;
 pub mod tree_gravity;
+pub mod xpbd;
 
 use crate::error::Result;
 use crate::neighbors::Shared;
@@ -161,6 +162,51 @@ pub trait Term<V: Vector>: Send + Sync {
     /// it.
     fn share(&mut self, _shared: &mut Shared) -> Result<()> {
         Ok(())
+    }
+
+    // ---- XPBD: position-based constraints, projected by the "xpbd" integrator --------------
+    // (`integrators/xpbd.rs`; Macklin, Müller & Chentanez 2016). Terms without constraints
+    // keep these defaults; `terms/xpbd.rs` implements them.
+    /// Whether the term holds position-based constraints that the "xpbd" integrator projects
+    /// (its `add_forces` then adds no force). Other integrators ignore them.
+    fn xpbd_constraints(&self) -> bool {
+        false
+    }
+    /// Starts an XPBD substep: the accumulated Lagrange multipliers λ return to 0.
+    fn xpbd_begin(&mut self) {}
+    /// One Gauss–Seidel iteration over the term's constraints in a substep of `h` seconds,
+    /// moving the positions `x` (m) of free particles (compliance scaled as α/h²).
+    fn xpbd_project(&mut self, _x: &mut [V], _model: &Model, _h: Real) {}
+    // ---- Jacobians, for implicit integrators ("implicit_euler"). Keep this block last. ----
+    // A term with a Jacobian is taken implicitly (linearised at the step's start); a term without
+    // one is taken explicitly at the step's start. Uniform fields (gravity) are constant and need
+    // none.
+
+    /// Whether `jacobian_product` and `jacobian_diagonal` are implemented (they add something
+    /// and return true).
+    fn has_jacobian(&self) -> bool {
+        false
+    }
+    /// Called once per step, before the Jacobian products at `(x, v)`: a term may keep the
+    /// state-dependent part of its Jacobian (springs: each axis and transverse factor, so that
+    /// a CG iteration needs no square root or division) for the products that follow, which
+    /// are then made at these same `x` and `v` until the next call. Returns whether it kept
+    /// anything (a term that cannot, or need not, computes its products directly).
+    fn jacobian_prepare(&mut self, _x: &[V], _v: &[V], _model: &Model) -> bool {
+        false
+    }
+    /// Adds `(cx ∂f/∂x + cv ∂f/∂v)·w` at `(x, v)` into `out`, one vector per particle, matrix-free
+    /// (`c = (cx, cv)`; ∂f/∂x in N/m, ∂f/∂v in N·s/m), gathered per particle so that results are
+    /// bit-identical for any thread count. Rows of pinned particles may be non-zero (the solver
+    /// filters them). Returns false, adding nothing, if the term has no Jacobian.
+    fn jacobian_product(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _w: &[V], _out: &mut [V]) -> bool {
+        false
+    }
+    /// Adds the diagonal of `cx ∂f/∂x + cv ∂f/∂v` at `(x, v)` into `out` (component k of
+    /// `out[i]` gets the entry of row and column (i, k)): the Jacobi preconditioner. Returns
+    /// false, adding nothing, if the term has no Jacobian.
+    fn jacobian_diagonal(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _out: &mut [V]) -> bool {
+        false
     }
 }
 

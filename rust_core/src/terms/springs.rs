@@ -15,6 +15,15 @@
 //! Comput. 36, C401): slot s of the 8 particles of a slice is 8 consecutive entries, so one SIMD
 //! vector handles up to 8 particles with contiguous loads of the spring data (the kernel is
 //! written once over `crate::simd`, for every instruction set).
+//!
+//! Jacobian (for implicit integrators, matrix-free, gathered per particle like the force):
+//! ∂f_i/∂x_j = K = k n nᵀ + k (1 − L0/L)(I − n nᵀ), ∂f_i/∂x_i = −K; ∂f_i/∂v_j = c n nᵀ,
+//! ∂f_i/∂v_i = −c n nᵀ (Baraff & Witkin 1998, §4.1–4.2). Two standard simplifications keep the
+//! system matrix M − h ∂f/∂v − h² ∂f/∂x symmetric positive definite: the transverse term
+//! k (1 − L0/L)(I − n nᵀ) is dropped for compressed springs (L < L0, where it is negative: the
+//! definiteness fix of Choi & Ko 2002, "Stable but responsive cloth", §4), and the dashpot's
+//! derivative with respect to positions (not symmetric) is left out. Both change only the
+//! linearisation, not the force: the step stays consistent, first order.
 use super::registry::{Context, Params};
 use super::{Term, Write};
 use crate::alloc::{count, Need};
@@ -50,7 +59,13 @@ pub struct Springs<V: Vector> {
     /// `Some((k, c))` when every spring has the same stiffness and damping (a cloth, a chain):
     /// the kernels then stream no per-spring k and c.
     uniform: Option<(Real, Real)>,
-    _v: std::marker::PhantomData<V>,
+    /// The Jacobian's state-dependent part per SELL-8 entry at the positions `jac_at` (their
+    /// address and length) given to `jacobian_prepare`: the axis n and the transverse factor
+    /// max(0, 1 − L0/L) (both 0 for padding and undefined axes; n = 0, factor 1 for a
+    /// zero-length spring with coincident ends).
+    jac_n: Vec<V>,
+    jac_t: Vec<Real>,
+    jac_at: Option<(usize, usize)>,
 }
 
 const SLICE: usize = 8;
@@ -193,7 +208,9 @@ impl<V: Vector> Springs<V> {
             n_cov: n,
             any_damping,
             uniform,
-            _v: std::marker::PhantomData,
+            jac_n: Vec::new(),
+            jac_t: Vec::new(),
+            jac_at: None,
         })
     }
 
@@ -365,6 +382,71 @@ impl<V: Vector> Springs<V> {
     }
 }
 
+impl<V: Vector> Springs<V> {
+    /// The axis n and transverse factor t = max(0, 1 − L0/L) of entry `e` of particle `p`:
+    /// (0, 0) for padding and for an undefined axis (coincident ends of a spring of positive rest
+    /// length: no force, as in the force kernel); (0, 1) for coincident ends of a zero-length
+    /// spring, whose K = k I whatever the axis (its dashpot's axis is undefined and its force 0).
+    #[inline(always)]
+    fn axis(&self, e: usize, p: usize, x: &[V]) -> (V, Real) {
+        let o = self.other[e] as usize;
+        if o == p {
+            return (V::ZERO, 0.0); // padding (a real spring never joins a particle to itself)
+        }
+        let rest = self.e_rest[e];
+        let d = x[o] - x[p];
+        let l2 = d.length_squared();
+        if l2 > 0.0 {
+            let inv = 1.0 / l2.sqrt();
+            (d * inv, (1.0 - rest * inv).max(0.0))
+        } else if rest == 0.0 {
+            (V::ZERO, 1.0)
+        } else {
+            (V::ZERO, 0.0)
+        }
+    }
+
+    /// Whether `jacobian_prepare` kept the axes for these positions.
+    fn prepared(&self, x: &[V]) -> bool {
+        self.jac_at == Some((x.as_ptr() as usize, x.len())) && self.jac_t.len() == self.other.len()
+    }
+
+    /// Row `p` of `(cx ∂f/∂x + cv ∂f/∂v)·w` (`with_w`) or of its diagonal (not `with_w`): the
+    /// springs of `p` in their fixed slot order. Per spring, the block applied to u = w_o − w_p
+    /// is a n nᵀ + b (I − n nᵀ) with a = cx k + cv c and b = cx k max(0, 1 − L0/L). The axes come
+    /// from `jacobian_prepare` when `prepared` (the same values, computed once a step).
+    #[inline]
+    fn jacobian_row(&self, p: usize, x: &[V], c: (Real, Real), w: &[V], with_w: bool, prepared: bool) -> V {
+        let (cx, cv) = c;
+        let g = p / SLICE;
+        let slots = (self.start[g + 1] - self.start[g]) as usize / SLICE;
+        let base = self.start[g] as usize + p % SLICE;
+        let mut acc = V::ZERO;
+        for slot in 0..slots {
+            let e = base + SLICE * slot;
+            let o = self.other[e] as usize;
+            let (n, t) = if prepared { (self.jac_n[e], self.jac_t[e]) } else { self.axis(e, p, x) };
+            if t == 0.0 && n == V::ZERO {
+                continue; // padding, or no axis
+            }
+            let (k, damp) = self.kc(e);
+            let (a, b) = (cx * k + cv * damp, cx * k * t);
+            if with_w {
+                let u = w[o] - w[p];
+                acc += n * ((a - b) * u.dot(n)) + u * b;
+            } else {
+                let mut diag = [0.0; 3];
+                for (q, dq) in diag.iter_mut().enumerate().take(V::DIM) {
+                    let nq = n.comp(q);
+                    *dq = -(a * nq * nq + b * (1.0 - nq * nq));
+                }
+                acc += V::from_slice(&diag[..V::DIM]);
+            }
+        }
+        acc
+    }
+}
+
 impl<V: Vector> Term<V> for Springs<V> {
     fn name(&self) -> &str {
         &self.name
@@ -414,6 +496,61 @@ impl<V: Vector> Term<V> for Springs<V> {
         }
         let t = (1.0 / w2.sqrt()).min(1.0 / lam);
         t.is_finite().then_some(t)
+    }
+
+    fn has_jacobian(&self) -> bool {
+        true
+    }
+    fn jacobian_prepare(&mut self, x: &[V], _v: &[V], _model: &Model) -> bool {
+        let m = self.other.len();
+        if self.jac_t.len() != m {
+            // Fallible: without room the products compute their axes themselves.
+            let (mut n, mut t) = (Vec::new(), Vec::new());
+            if n.try_reserve_exact(m).is_err() || t.try_reserve_exact(m).is_err() {
+                self.jac_at = None;
+                return false;
+            }
+            n.resize(m, V::ZERO);
+            t.resize(m, 0.0);
+            (self.jac_n, self.jac_t) = (n, t);
+        }
+        let (mut jn, mut jt) = (std::mem::take(&mut self.jac_n), std::mem::take(&mut self.jac_t));
+        let start = &self.start;
+        // One chunk of entries per slice range: entries of slices g0.. are start[g0]..; computed
+        // per entry, so any split gives the same values.
+        par::chunks2(&mut jn, &mut jt, |e0, n, t| {
+            // The slice of entry e0 (start is sorted; a chunk may begin mid-slice).
+            let mut g = start.partition_point(|&s| (s as usize) <= e0) - 1;
+            for k in 0..n.len() {
+                let e = e0 + k;
+                while start[g + 1] as usize <= e {
+                    g += 1;
+                }
+                let p = g * SLICE + (e - start[g] as usize) % SLICE;
+                (n[k], t[k]) = if p < self.n_cov { self.axis(e, p, x) } else { (V::ZERO, 0.0) };
+            }
+        });
+        (self.jac_n, self.jac_t) = (jn, jt);
+        self.jac_at = Some((x.as_ptr() as usize, x.len()));
+        true
+    }
+    fn jacobian_product(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+        let prepared = self.prepared(x);
+        par::chunks1(&mut out[..self.n_cov], |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += self.jacobian_row(p0 + k, x, c, w, true, prepared);
+            }
+        });
+        true
+    }
+    fn jacobian_diagonal(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+        let prepared = self.prepared(x);
+        par::chunks1(&mut out[..self.n_cov], |p0, out| {
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += self.jacobian_row(p0 + k, x, c, x, false, prepared);
+            }
+        });
+        true
     }
 }
 
@@ -470,6 +607,110 @@ mod tests {
                 );
             }
             assert!((p - pw).abs() <= 1e-12 * pw, "{level:?} power {p} vs {pw}");
+        }
+    }
+
+    /// The Jacobian products against central differences of the force, on a random stretched
+    /// network (every spring longer than its rest length: no definiteness fix applies) without
+    /// dashpots for ∂f/∂x (their positional derivative is left out by design) and with them for
+    /// ∂f/∂v (the force is linear in v: the difference is exact up to round-off).
+    fn check_jacobian<V: Vector>() {
+        let n = 37;
+        let mut s = 11;
+        let x: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let v: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let w: Vec<V> = (0..n).map(|_| V::from_slice(&[lcg(&mut s), lcg(&mut s), lcg(&mut s)][..V::DIM])).collect();
+        let (mut i, mut j) = (vec![], vec![]);
+        for a in 0..n as u32 {
+            for b in [(a + 1) % n as u32, (a + 5) % n as u32] {
+                i.push(a);
+                j.push(b);
+            }
+        }
+        let m = i.len();
+        let rest: Vec<f64> =
+            (0..m).map(|q| 0.5 * (x[i[q] as usize] - x[j[q] as usize]).length_squared().sqrt()).collect();
+        let k: Vec<f64> = (0..m).map(|q| 10.0 + q as f64).collect();
+        let model = Model { mass: vec![1.0; n], inv_mass: vec![1.0; n], ..Default::default() };
+        for (damping, c, h) in [(0.0, (1.0, 0.0), 1e-6), (0.7, (0.0, 1.0), 1.0)] {
+            let sp = Springs::<V>::new("s".into(), i.clone(), j.clone(), k.clone(), vec![damping; m], rest.clone(), n)
+                .unwrap();
+            let shifted = |sign: f64| {
+                let (mut xs, mut vs) = (x.clone(), v.clone());
+                let z = if c.0 != 0.0 { &mut xs } else { &mut vs };
+                for (a, b) in z.iter_mut().zip(&w) {
+                    *a += *b * (sign * h);
+                }
+                let mut f = vec![V::ZERO; n];
+                for p in 0..n {
+                    f[p] = sp.particle_force(p, &xs, &vs, false).0;
+                }
+                f
+            };
+            let (fp, fm) = (shifted(1.0), shifted(-1.0));
+            let mut jw = vec![V::ZERO; n];
+            assert!(Term::jacobian_product(&sp, &x, &v, &model, c, &w, &mut jw));
+            // The axes kept by jacobian_prepare give the same bits.
+            let mut sp2 =
+                Springs::<V>::new("s".into(), i.clone(), j.clone(), k.clone(), vec![damping; m], rest.clone(), n)
+                    .unwrap();
+            assert!(Term::jacobian_prepare(&mut sp2, &x, &v, &model));
+            assert!(sp2.prepared(&x));
+            let mut jw2 = vec![V::ZERO; n];
+            Term::jacobian_product(&sp2, &x, &v, &model, c, &w, &mut jw2);
+            assert_eq!(jw, jw2);
+            let scale = jw.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
+            for p in 0..n {
+                let fd = (fp[p] - fm[p]) * (0.5 / h);
+                assert!(
+                    (fd - jw[p]).length_squared().sqrt() <= 1e-7 * scale,
+                    "{c:?} particle {p}: {fd:?} vs {:?}",
+                    jw[p]
+                );
+            }
+            // The diagonal: row (p, q) of the product with unit vectors on component q of
+            // particle p alone.
+            let mut diag = vec![V::ZERO; n];
+            assert!(Term::jacobian_diagonal(&sp, &x, &v, &model, c, &mut diag));
+            for p in [0, 7, n - 1] {
+                for q in 0..V::DIM {
+                    let mut e = vec![V::ZERO; n];
+                    let mut unit = [0.0; 3];
+                    unit[q] = 1.0;
+                    e[p] = V::from_slice(&unit[..V::DIM]);
+                    let mut col = vec![V::ZERO; n];
+                    Term::jacobian_product(&sp, &x, &v, &model, c, &e, &mut col);
+                    let (a, b) = (col[p].comp(q), diag[p].comp(q));
+                    assert!((a - b).abs() <= 1e-12 * a.abs(), "diagonal ({p}, {q}): {b} vs {a}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn jacobian_products_match_finite_differences() {
+        check_jacobian::<DVec2>();
+        check_jacobian::<DVec3>();
+    }
+
+    /// Compressed springs lose their transverse stiffness (Choi & Ko's fix), so −∂f/∂x stays
+    /// positive semi-definite: wᵀ(−J)w ≥ 0 for random w on a network squeezed to half its
+    /// rest lengths.
+    #[test]
+    fn compressed_springs_keep_the_jacobian_semidefinite() {
+        let n = 20;
+        let mut s = 3;
+        let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))).collect();
+        let (i, j): (Vec<u32>, Vec<u32>) = (0..n as u32).map(|a| (a, (a + 3) % n as u32)).unzip();
+        let rest: Vec<f64> = i.iter().zip(&j).map(|(&a, &b)| 2.0 * (x[a as usize] - x[b as usize]).length()).collect();
+        let sp = Springs::<DVec3>::new("s".into(), i, j, vec![100.0; n], vec![0.0; n], rest, n).unwrap();
+        let model = Model { mass: vec![1.0; n], inv_mass: vec![1.0; n], ..Default::default() };
+        for _ in 0..50 {
+            let w: Vec<DVec3> = (0..n).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) - 0.5).collect();
+            let mut jw = vec![DVec3::ZERO; n];
+            Term::jacobian_product(&sp, &x, &x, &model, (1.0, 0.0), &w, &mut jw);
+            let q: f64 = w.iter().zip(&jw).map(|(a, b)| a.dot(*b)).sum();
+            assert!(q <= 1e-12, "wᵀJw = {q} > 0");
         }
     }
 
