@@ -28,6 +28,7 @@ fn convergence_orders_match_reported_order() {
         ("yoshida4", 5e-2),
         ("rk4", 5e-2),
         ("boris", 1e-2),
+        ("implicit_euler", 1e-3),
     ] {
         let p = observed_order(name, dt0);
         let reported = by_name::<glam::DVec2>(name).unwrap().info().order as f64;
@@ -49,7 +50,8 @@ fn integrator_table() {
             ("rk4", 4, false, 4),
             ("rk45", 5, false, 6),
             ("boris", 2, false, 1),
-            ("xpbd", 1, false, 10)
+            ("xpbd", 1, false, 10),
+            ("implicit_euler", 1, false, 1),
         ]
     );
     assert!(by_name::<glam::DVec2>("leapfrogg").is_err());
