@@ -25,7 +25,7 @@ def test_default_scene_keeps_energy_books_balanced(name):
     elif name == "galton_board":
         # A small board (its steps are a 50th of a ball's contact: 3 s is 3·10⁵ of them).
         scene = pc.scenes.galton_board(balls=40, rows=4)
-        scene.advance(1.0)
+        scene.step(int(round(1.0 / scene.dt)))
     else:
         scene = pc.scenes.REGISTRY[name]()
         scene.step(int(round(3.0 / scene.dt)))
