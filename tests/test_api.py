@@ -283,7 +283,7 @@ def test_readme_style_example():
     assert abs(scene.energy_drift()) < 1e-3
 
 
-GRAIN_SCENES = ("galton_board", "billiards", "newtons_cradle")
+GRAIN_SCENES = ("galton_board", "billiards", "newtons_cradle", "jelly")
 
 
 @pytest.mark.parametrize("name", sorted(pc.scenes.REGISTRY))

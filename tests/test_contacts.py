@@ -332,3 +332,22 @@ def test_the_galton_board_fills_its_bins_binomially():
     chi2 = float(np.sum((np.array(obs) - np.array(exp)) ** 2 / np.array(exp)))
     p = stats.chi2.sf(chi2, len(obs) - 1)
     assert p > 1e-3, (counts.tolist(), np.round(expected, 1).tolist(), chi2, p)
+
+
+def test_the_jelly_lands_squashes_and_keeps_its_shape():
+    # A spring body whose particles are grains: it stops on the floor (nothing passes it), its
+    # springs stretch on impact and it comes back to its size (the contacts between its own
+    # particles keep it from folding through itself).
+    from physcore.scenes import jelly
+
+    s = jelly(threads=1)
+    r = s.attributes["radius"]
+    worst = 0.0
+    for _ in range(30):
+        s.advance(0.1)
+        worst = max(worst, float(np.abs(s.velocities).max()))
+        assert np.all(s.positions[:, 1] - r > -0.05 * r)  # never through the floor (y = 0)
+    x = s.positions
+    extent = np.sort(x.max(axis=0) - x.min(axis=0))
+    assert np.all(extent > 0.9 * 0.3) and np.all(extent < 0.3 * 1.5), extent
+    assert float(np.abs(s.velocities).max()) < 0.05 * worst  # it came to rest
