@@ -40,9 +40,12 @@
 //! conserved to round-off. Each side keeps its own copy of the pair's spring (exact negatives).
 //!
 //! Energy books: kinetic energy includes rotation (½Iω²); potential: the springs' energy,
-//! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|²; dissipated: "normal damping" (the dashpot's power,
-//! and the spring energy left in an overlap when the clamped force lets go) and "friction"
-//! (the tangential dashpot plus the spring energy released when a contact slips).
+//! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|²; dissipated: "normal damping" and "friction". Each
+//! is booked per contact and step as the work its force drew from the motion, the mean of its
+//! power at the step's two ends (semi-implicit Euler changes the kinetic energy by exactly
+//! F·(v + v')/2 dt), less what its spring gained; so the dashpots, the clamp letting go of an
+//! overlap, slipping, and a tangential spring dropped when its contact ends are all in the
+//! books, which balance to the scheme's first-order error.
 use super::registry::{Context, Params};
 use super::{Term, Write};
 use crate::error::{invalid, Result};
@@ -96,9 +99,8 @@ struct Chunk<V> {
     entries: Vec<Entry<V>>,
 }
 
-/// What one chunk's evaluation sums: the normal dashpots' dissipated power (W), the spring
-/// energy of tangential springs whose contact ended (J), the largest overlap (m) and the
-/// contacts counted once (pairs halved, walls whole).
+/// What one chunk's evaluation sums: the energy of tangential springs whose contact ended
+/// (J), the largest overlap (m) and the contacts counted once (pairs halved, walls whole).
 #[derive(Clone, Copy, Debug, Default)]
 struct Sums {
     broken: Real,
