@@ -9,6 +9,7 @@ from . import _core, flows, sweeps
 from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
+    ContactStepWarning,
     InvalidInputError,
     InvalidTypeError,
     OutOfMemoryError,
@@ -64,6 +65,7 @@ __all__ = [
     "OutOfMemoryError",
     "ThreadPoolError",
     "ThreadPoolWarning",
+    "ContactStepWarning",
     "SeparateFluidsWarning",
     "scenes",
     "render",

@@ -81,6 +81,14 @@ class SeparateFluidsWarning(UserWarning):
     precision, up to 8 per search; give the fluids that should meet the same three."""
 
 
+class ContactStepWarning(UserWarning):
+    """A scene with :class:`~physcore.Contacts` was stepped with :meth:`~physcore.Scene.step` at
+    a ``dt`` more than twice its automatic step (a 50th of a contact's duration, or less where
+    other forces need it): collisions then lose or gain energy and the restitution is wrong.
+    :meth:`~physcore.Scene.advance` picks the step itself; or set
+    ``scene.dt = scene.suggest_dt()``."""
+
+
 class SimulationDiverged(PhyscoreError, RuntimeError):
     """NaN or infinity appeared while stepping.
 

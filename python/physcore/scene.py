@@ -21,7 +21,14 @@ import numpy as np
 
 from . import _check, _core, _scenefile
 from ._atomic import atomic_write
-from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SeparateFluidsWarning, ThreadPoolWarning
+from ._errors import (
+    ContactStepWarning,
+    InvalidInputError,
+    InvalidTypeError,
+    SceneBusyError,
+    SeparateFluidsWarning,
+    ThreadPoolWarning,
+)
 from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
@@ -291,6 +298,7 @@ class Scene:
         self._grids: list[Grid] = []
         self._flows: list[Any] = []
         self._e0: float | None = None
+        self._step_checked: float | None = None  # the dt last checked against the contacts' step
         self._e0_scale: float = 0.0
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
@@ -604,13 +612,38 @@ class Scene:
             20 ms plus one force evaluation: between steps and between rk45's internal steps;
             the scene is rolled back likewise. A call of at most 4096 particle-steps with a
             fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
+
+        Warns
+        -----
+        ContactStepWarning
+            The scene has :class:`~physcore.Contacts` and ``dt`` is more than twice
+            :meth:`auto_dt` (checked once per ``dt`` value): the collisions would be wrong.
         """
         n = _check_int(n, "n", 0)
         if n > _MAX_STEPS - self.step_count:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
+        self._warn_contact_step()
         self._exclusive(lambda sim: sim.step(n))
+
+    def _warn_contact_step(self) -> None:
+        """Warn (once per dt value) when a scene with contacts steps at more than twice its
+        automatic step: ``Scene``'s default dt is far too long for stiff contacts."""
+        from .contacts import Contacts
+
+        if self._step_checked == self.dt or not any(isinstance(t, Contacts) for t in self._terms):
+            return
+        self._step_checked = self.dt
+        limit = self._exclusive(lambda sim: sim.auto_dt())
+        if limit is not None and self.dt > 2.0 * limit:
+            warnings.warn(
+                f"dt: {self.dt:.3g} s is {self.dt / limit:.0f}x the step this scene's contacts need "
+                f"({limit:.3g} s, a 50th of a contact): collisions will be wrong; use scene.advance(), "
+                "or scene.dt = scene.suggest_dt()",
+                ContactStepWarning,
+                stacklevel=3,
+            )
 
     def advance(self, duration: float, *, substeps: str | int = "auto") -> int:
         """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
