@@ -1043,12 +1043,11 @@ impl<V: Vector> Term<V> for Contacts<V> {
     }
 }
 
-/// z component of a 2D axial (the axial itself), or component k of a 3D one.
+/// Component k of an axial vector (2D: k = 0 is its z component); no allocation (it runs per
+/// particle per step).
 #[inline(always)]
 fn axial_comp<V: Vector>(w: V::Axial, k: usize) -> Real {
-    let mut buf = Vec::with_capacity(3);
-    push_axial::<V>(&mut buf, w);
-    buf.get(k).copied().unwrap_or(0.0)
+    axial_components::<V>(w)[k]
 }
 
 #[inline(always)]
@@ -1058,20 +1057,23 @@ fn axial_z<V: Vector>(w: V::Axial) -> Real {
 
 /// Appends the components of an axial vector.
 fn push_axial<V: Vector>(out: &mut Vec<Real>, w: V::Axial) {
-    // An axial's components: recover them through its action on the unit axes (x × w, y × w).
-    // 2D: w = (0, 0, wz): e_x × w = (0, −wz) → wz = −(e_x × w)_y.
+    out.extend_from_slice(&axial_components::<V>(w)[..V::AXIAL_DIM]);
+}
+
+/// The components of an axial vector (the first `AXIAL_DIM` entries; the rest 0), recovered
+/// through its action on the unit axes.
+#[inline(always)]
+fn axial_components<V: Vector>(w: V::Axial) -> [Real; 3] {
     if V::AXIAL_DIM == 1 {
+        // 2D: w = (0, 0, wz): e_x × w = (0, −wz) → wz = −(e_x × w)_y.
         let ex = V::from_slice(&[1.0, 0.0, 0.0][..V::DIM]);
-        out.push(-ex.cross_axial(w).comp(1));
+        [-ex.cross_axial(w).comp(1), 0.0, 0.0]
     } else {
         // 3D: e_y × w = (wz, 0, −wx), e_z × w = (−wy, wx, 0).
         let ey = V::from_slice(&[0.0, 1.0, 0.0]);
         let ez = V::from_slice(&[0.0, 0.0, 1.0]);
-        let a = ey.cross_axial(w);
-        let b = ez.cross_axial(w);
-        out.push(-a.comp(2));
-        out.push(-b.comp(0));
-        out.push(a.comp(0));
+        let (a, b) = (ey.cross_axial(w), ez.cross_axial(w));
+        [-a.comp(2), -b.comp(0), a.comp(0)]
     }
 }
 
