@@ -287,7 +287,7 @@ pub struct Contacts<V: Vector> {
     cells: Option<CellList>,
     /// The step in progress (s), told by `begin_step`.
     dt: Real,
-    /// Stopped evaluating since the last step ended (so `end_step` may commit).
+    /// Whether forces were evaluated since the last step ended (only then may `end_step` commit).
     evaluated: bool,
 }
 
