@@ -483,6 +483,16 @@ impl<V: Vector> World<V> {
 
     /// `n` steps of every system, then the couplings; the clock advances after each.
     fn step_inner(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
+        let r = self.step_loop(n, stop);
+        if r.is_ok() {
+            // (On an error the call is rolled back to a settled checkpoint.)
+            self.systems_mut().for_each(|s| s.settle());
+        }
+        r
+    }
+
+    /// The steps of `step_inner`.
+    fn step_loop(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
         let dt = self.dt;
         let interrupted = Err(Error::Interrupted { rolled_back_to: 0 });
         // One system alone, nothing between its steps: it takes all n at once (and may fuse
@@ -516,6 +526,9 @@ impl<V: Vector> World<V> {
             self.step += 1;
             if let Some(Halt::Diverged { index, quantity }) = halt {
                 return Err(self.diverged(index, quantity));
+            }
+            if !self.couplings.is_empty() {
+                self.systems_mut().for_each(|s| s.settle());
             }
             for c in &mut self.couplings {
                 c.apply(&mut self.particles, &mut self.others, dt);

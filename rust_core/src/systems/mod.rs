@@ -134,6 +134,10 @@ pub trait System: Send + Sync {
         }
         Ok(())
     }
+    /// Completes what the last steps deferred (see `Term::settle`): the world calls it when a
+    /// call of steps ends and before couplings run, so that nothing outside a step sees a
+    /// state half-committed. Default: nothing deferred.
+    fn settle(&mut self) {}
     /// Told that the world's dt changed between calls: drop anything predicted with the old one.
     fn dt_changed(&mut self) {}
     /// Whether the system picks its own internal steps (an adaptive integrator): with no stable

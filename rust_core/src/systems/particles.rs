@@ -579,6 +579,13 @@ impl<V: Vector> System for ParticleSystem<V> {
         Ok(())
     }
 
+    fn settle(&mut self) {
+        let sys = &mut self.sys;
+        for t in &mut sys.forces.terms {
+            t.settle(&sys.state.x, &sys.state.v, &sys.model);
+        }
+    }
+
     /// A cached force is still valid; a velocity predicted with the old dt is not.
     fn dt_changed(&mut self) {
         if self.sys.forces.velocity_dependent() {

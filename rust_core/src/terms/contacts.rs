@@ -28,16 +28,25 @@
 //!
 //! Stepping: semi-implicit Euler over the whole state (the usual DEM scheme). The forces and
 //! torques are taken at the step's start from (x, v, ω, ξ); the integrator updates v then x;
-//! `end_step` updates ω then each contact's spring with the NEW velocities,
-//! ξ ← ξ_capped + dt·v_t(new): the spring follows the contact point as the positions do, so a
-//! resting contact does not pump energy. The step is chosen by `max_dt`: a 50th of the contact
-//! duration (the measured restitution then agrees with e to well under 1 %).
+//! `end_step` updates ω; then each contact's spring follows the contact point with the NEW
+//! velocities, ξ ← ξ_capped + dt·v_t(new), so a resting contact does not pump energy. That
+//! update needs the contact's geometry at the new positions, which the next evaluation computes
+//! anyway: it is deferred to it (the numba peer does the same) and done there first, with the
+//! same arithmetic, or by `settle` when a call of steps ends. The step is chosen by `max_dt`: a
+//! 50th of the contact duration (the measured restitution then agrees with e to well under 1 %).
 //!
-//! Determinism and conservation: each particle gathers its own contacts (found through a cell
-//! list of side 2 r_max, sorted by partner, summed in that order), so results are bit-identical
-//! for any thread count; both sides of a pair compute exactly negated forces (x_i − x_j is
-//! exactly −(x_j − x_i) in IEEE arithmetic, and every other step is symmetric), so momentum is
-//! conserved to round-off. Each side keeps its own copy of the pair's spring (exact negatives).
+//! Contact search: Verlet lists (Verlet, Phys. Rev. 159 (1967) 98; Allen & Tildesley,
+//! *Computer Simulation of Liquids*, §5.3). Candidates are the pairs i < j closer than
+//! r_i + r_j + s (skin s = `SKIN`·r_max), found through a cell list of side 2 r_max + s, and the
+//! grain–wall pairs closer than r_i + s; they are rebuilt once a grain has moved s/2 since the
+//! last build (no contact can then form unseen), or the radii change. Each candidate carries its
+//! contact's state (`Link`), carried over by partner when the lists are rebuilt.
+//!
+//! Determinism and conservation: each pair is evaluated once, from its lower index, into its
+//! own slot; each particle then gathers its pairs' forces in a fixed order (its pairs as the
+//! first grain, then as the second, then its walls), so results are bit-identical for any
+//! thread count, and the two grains get exactly negated forces, so momentum is conserved to
+//! round-off.
 //!
 //! Energy books: kinetic energy includes rotation (½Iω²); potential: the springs' energy,
 //! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|²; dissipated: "normal damping" and "friction". Each
@@ -53,9 +62,14 @@ use crate::neighbors::CellList;
 use crate::par::{self, CHUNK};
 use crate::state::Model;
 use crate::vector::{Real, Vector};
+use rayon::prelude::*;
 
 /// Steps per contact duration (`max_dt`).
 const STEPS_PER_CONTACT: Real = 50.0;
+
+/// Verlet skin over the largest radius. Larger means rarer rebuilds and more candidates; at 0.2
+/// a packing of equal discs (neighbours 2r apart, the next ones 2√2 r) has no extra candidates.
+const SKIN: Real = 0.2;
 
 /// The normal force law.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -74,47 +88,90 @@ pub struct Wall<V> {
     pub friction: Real,
 }
 
-/// One side's record of a contact: the partner (a particle index, or n + wall index), the
-/// tangential spring ξ (m) and the energy it stores (J); while a step is in progress also the
-/// tangential force the step applies (N), for the books.
+/// A candidate contact (a pair i < j, or a grain and a wall) and the state of its contact,
+/// seen from the first grain.
 #[derive(Clone, Copy, Debug, Default)]
-struct Entry<V> {
-    partner: u32,
+struct Link<V> {
+    /// Tangential spring ξ (m): committed after a step, capped after an evaluation.
+    xi: V,
+    /// The energy the committed spring stores (J).
+    u: Real,
+    /// Of the last evaluation, for the books: the tangential force on the first grain (N), the
+    /// normal force (N), and for each its start-of-step book term, ½dt·(the power it drew from
+    /// the motion) + the energy its spring stored (J).
+    ft: V,
+    fn_: Real,
+    bt: Real,
+    bn: Real,
+    /// In contact at the last evaluation (the spring lives).
+    live: bool,
+}
+
+/// What a pair's evaluation hands the gather: the force on the first grain (the second gets
+/// its negative) and the torques on both.
+#[derive(Clone, Copy, Debug)]
+struct PairForce<V: Vector> {
+    f: V,
+    ti: V::Axial,
+    tj: V::Axial,
+}
+
+impl<V: Vector> PairForce<V> {
+    const ZERO: Self = Self { f: V::ZERO, ti: V::AXIAL_ZERO, tj: V::AXIAL_ZERO };
+}
+
+/// A contact carried from one set of lists to the next (or loaded): first grain, partner (a
+/// grain > i, or a wall index if `wall`), spring and its energy.
+#[derive(Clone, Copy, Debug)]
+struct Carry<V> {
+    i: u32,
+    j: u32,
+    wall: bool,
     xi: V,
     u: Real,
-    ft: V,
-    /// The normal force of the step (N), the normal spring's energy at its start (J), and the
-    /// power both forces drew from the motion at the step's start (W).
-    fn_: Real,
-    un: Real,
-    wn0: Real,
-    wt0: Real,
 }
 
-/// The contacts of one chunk of `CHUNK` particles: particle s + k owns
-/// `entries[start[k]..start[k + 1]]`, sorted by partner.
+/// The candidate lists: pairs (i, pj[p]) for p in pstart[i]..pstart[i + 1], partners sorted;
+/// the same pairs by second grain (rpair[rstart[j]..rstart[j + 1]], pair indices ascending);
+/// the walls near grain i, wall[wstart[i]..wstart[i + 1]].
 #[derive(Clone, Debug, Default)]
-struct Chunk<V> {
-    start: Vec<u32>,
-    entries: Vec<Entry<V>>,
+struct Lists<V: Vector> {
+    pj: Vec<u32>,
+    pstart: Vec<u32>,
+    rpair: Vec<u32>,
+    rstart: Vec<u32>,
+    wall: Vec<u32>,
+    wstart: Vec<u32>,
+    links: Vec<Link<V>>,
+    wlinks: Vec<Link<V>>,
+    forces: Vec<PairForce<V>>,
+    /// Positions and radii at the build.
+    x: Vec<V>,
+    r: Vec<Real>,
+    skin: Real,
 }
 
-/// What one chunk's evaluation sums: the energy of tangential springs whose contact ended
-/// (J), the largest overlap (m) and the contacts counted once (pairs halved, walls whole).
+/// What a pass sums: the energies dissipated by the tangential and normal forces in the step
+/// being committed and the energy of tangential springs whose contact ended (J), the largest
+/// overlap (m) and the contacts (pairs and grain–wall).
 #[derive(Clone, Copy, Debug, Default)]
 struct Sums {
+    lost_t: Real,
+    lost_n: Real,
     broken: Real,
     max_overlap: Real,
-    half_pairs: u64,
+    pairs: u64,
     walls: u64,
 }
 
 impl Sums {
     fn add(self, o: Sums) -> Sums {
         Sums {
+            lost_t: self.lost_t + o.lost_t,
+            lost_n: self.lost_n + o.lost_n,
             broken: self.broken + o.broken,
             max_overlap: self.max_overlap.max(o.max_overlap),
-            half_pairs: self.half_pairs + o.half_pairs,
+            pairs: self.pairs + o.pairs,
             walls: self.walls + o.walls,
         }
     }
@@ -133,6 +190,22 @@ pub struct Material {
     pub friction: Real,
     /// β in I = β m r².
     pub inertia_factor: Real,
+    /// γ_t / (2ζ√(k_n m*)): √ratio (linear), or √(1.5 ratio) to be times δ^{1/4} (Hertz).
+    pub tangential_damping: Real,
+}
+
+/// The coefficients of one kind of contact for one step (`Material::coef`).
+#[derive(Clone, Copy, Debug)]
+struct Coef {
+    /// ½dt/m* (s/kg).
+    h: Real,
+    /// The normal and tangential dashpots 2ζ√(k m*) (kg/s; Hertz: to be times δ^{1/4}).
+    gn: Real,
+    gt: Real,
+    /// 1/(1 + h·gn) (the linear law's mid-step speed).
+    inv_den: Real,
+    /// Friction coefficient.
+    mu: Real,
 }
 
 /// Everything one pair evaluation returns (from side i).
@@ -147,8 +220,16 @@ struct PairOut<V> {
 }
 
 impl Material {
+    /// The coefficients of a contact between masses with 1/m* = `inv_m` (`sqrt_km` = √(k_n m*))
+    /// with damping ratio `zeta` and friction `mu`, for steps of `dt`.
+    fn coef(&self, inv_m: Real, sqrt_km: Real, zeta: Real, mu: Real, dt: Real) -> Coef {
+        let gn = 2.0 * zeta * sqrt_km;
+        let h = 0.5 * dt * inv_m;
+        Coef { h, gn, gt: gn * self.tangential_damping, inv_den: 1.0 / (1.0 + h * gn), mu }
+    }
+
     /// Normal force magnitude (clamped at 0) and its elastic part, at overlap `d` and approach
-    /// speed `vn`, for effective mass `m` and damping ratio `zeta`.
+    /// speed `vn`.
     ///
     /// The dashpot takes the approach speed at the middle of the step, v_n − ½dt·f/m*, with f
     /// this contact's force (solved in closed form, Crank–Nicolson for the pair): semi-implicit
@@ -156,16 +237,18 @@ impl Material {
     /// speed damps too much to first order (e = 0.1 came out 5.7 % low at a 50th of the
     /// contact; now 0.2 %).
     #[inline(always)]
-    fn normal(&self, d: Real, vn: Real, m: Real, zeta: Real, sqrt_km: Real, dt: Real) -> (Real, Real) {
-        let (el, g) = match self.law {
-            Law::Linear => (self.stiffness * d, 2.0 * zeta * sqrt_km),
+    fn normal(&self, d: Real, vn: Real, c: &Coef) -> (Real, Real) {
+        let (el, g, v_mid) = match self.law {
+            Law::Linear => {
+                let el = self.stiffness * d;
+                (el, c.gn, (vn - c.h * el) * c.inv_den)
+            }
             Law::Hertz => {
                 let sd = d.sqrt();
-                (self.stiffness * d * sd, 2.0 * zeta * sqrt_km * sd.sqrt())
+                let (el, g) = (self.stiffness * d * sd, c.gn * sd.sqrt());
+                (el, g, (vn - c.h * el) / (1.0 + c.h * g))
             }
         };
-        let h = 0.5 * dt / m;
-        let v_mid = (vn - h * el) / (1.0 + h * g);
         ((el + g * v_mid).max(0.0), el)
     }
 
@@ -187,26 +270,14 @@ impl Material {
     }
 
     /// One contact seen from side i: normal `n` (towards the partner), overlap `d`,
-    /// contact-point relative velocity `vc`, effective mass `m` (`sqrt_km` = √(k_n m)), the
+    /// contact-point relative velocity `vc`, coefficients `c`, the
     /// spring `xi` as stored;
     /// `dt`: the step; `new`: whether the contact formed during the last step.
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
-    fn pair<V: Vector>(
-        &self,
-        n: V,
-        d: Real,
-        vc: V,
-        m: Real,
-        sqrt_km: Real,
-        xi: V,
-        zeta: Real,
-        mu: Real,
-        dt: Real,
-        new: bool,
-    ) -> PairOut<V> {
+    fn pair<V: Vector>(&self, n: V, d: Real, vc: V, c: &Coef, xi: V, dt: Real, new: bool) -> PairOut<V> {
         let vn = vc.dot(n);
-        let (mut fn_, _) = self.normal(d, vn, m, zeta, sqrt_km, dt);
+        let (mut fn_, _) = self.normal(d, vn, c);
         let onset = if new { dt } else { 0.0 };
         if onset > 0.0 && vn > 0.0 && d <= 1.5 * vn * onset {
             // A contact that began τ = δ/v_n before this step. Semi-implicit Euler is leapfrog:
@@ -216,8 +287,7 @@ impl Material {
             // touch no longer matters: uncorrected, e = 0.1 came out 2–3 % off at random.
             let tau = (d / vn).min(onset);
             let t = tau + 0.5 * onset;
-            let c = 2.0 * zeta * sqrt_km;
-            let k = self.stiffness;
+            let (c, k) = (c.gn, self.stiffness);
             let (el_j, damp_j) = match self.law {
                 // ∫₀ᵀ (k v u + c v) du − (k v τ + c v) dt
                 Law::Linear => (k * vn * (0.5 * t * t - tau * onset), c * vn * (t - onset)),
@@ -235,26 +305,30 @@ impl Material {
         }
         let vt = vc - n * vn;
         let kt = self.kt(d);
+        // Rotate the spring into the tangent plane, keeping its length.
         let mut xi_p = xi;
         let xn = xi.dot(n);
-        if xn != 0.0 {
-            // Rotate the spring into the tangent plane, keeping its length.
+        if V::DIM == 2 {
+            // The tangent line is along t = n × ẑ: ξ' = ±|ξ| t, with no division.
+            let t = n.cross_axial(V::axial_from_slice(&[1.0]));
+            let s = xi.dot(t);
+            if xn != 0.0 {
+                xi_p = if s != 0.0 { t * xi.length_squared().sqrt().copysign(s) } else { V::ZERO };
+            }
+        } else if xn != 0.0 {
             xi_p = xi - n * xn;
             let (l0, l1) = (xi.length_squared(), xi_p.length_squared());
             if l1 > 0.0 {
                 xi_p = xi_p * (l0 / l1).sqrt();
             }
         }
-        // γ_t = 2ζ√(k_t m*), from √(k_n m*).
-        let gt = 2.0
-            * zeta
-            * sqrt_km
-            * match self.law {
-                Law::Linear => self.tangential_ratio.sqrt(),
-                Law::Hertz => (1.5 * self.tangential_ratio).sqrt() * d.sqrt().sqrt(),
-            };
+        // γ_t = 2ζ√(k_t m*).
+        let gt = match self.law {
+            Law::Linear => c.gt,
+            Law::Hertz => c.gt * d.sqrt().sqrt(),
+        };
         let mut ft = xi_p * (-kt) - vt * gt;
-        let cap = mu * fn_;
+        let cap = c.mu * fn_;
         let f2 = ft.length_squared();
         let mut xi_c = xi_p;
         if f2 > cap * cap {
@@ -262,6 +336,38 @@ impl Material {
             xi_c = if kt > 0.0 { (ft + vt * gt) * (-1.0 / kt) } else { V::ZERO };
         }
         PairOut { force: ft - n * fn_, ft, xi: xi_c, fn_, wn0: fn_ * vn, wt0: -ft.dot(vt) }
+    }
+
+    /// Commits a live contact's step with the state at the step's end (normal `n`, overlap
+    /// `d`, contact-point velocity `vc`): the spring follows the contact point,
+    /// ξ ← ξ + dt·v_t (frictionless contacts hold none: it could never push), and the books take
+    /// what each force drew over the step (the mean of its power at the two ends) less what its
+    /// spring now stores more. Adds the dissipated energies to `s`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn commit<V: Vector>(&self, l: &mut Link<V>, n: V, d: Real, vc: V, mu: Real, dt: Real, s: &mut Sums) {
+        let vn = vc.dot(n);
+        let vt = vc - n * vn;
+        l.xi = if mu > 0.0 { l.xi + vt * dt } else { V::ZERO };
+        let d = d.max(0.0);
+        l.u = 0.5 * self.kt(d) * l.xi.length_squared();
+        s.lost_t += l.bt - 0.5 * dt * l.ft.dot(vt) - l.u;
+        s.lost_n += l.bn + 0.5 * dt * l.fn_ * vn - self.normal_energy(d);
+    }
+
+    /// Evaluates a contact at the step's start into its link (spring capped, book terms set);
+    /// returns the force on the first grain and the tangential force.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn evaluate<V: Vector>(&self, l: &mut Link<V>, n: V, d: Real, vc: V, c: &Coef, dt: Real) -> (V, V) {
+        let o = self.pair(n, d, vc, c, l.xi, dt, !l.live);
+        l.xi = o.xi;
+        l.ft = o.ft;
+        l.fn_ = o.fn_;
+        l.bt = 0.5 * dt * o.wt0 + l.u;
+        l.bn = 0.5 * dt * o.wn0 + self.normal_energy(d);
+        l.live = true;
+        (o.force, o.ft)
     }
 }
 
@@ -276,11 +382,12 @@ pub struct Contacts<V: Vector> {
     angle: Vec<Real>,
     /// Torques of the last evaluation, N·m.
     torque: Vec<V::Axial>,
-    /// The springs as committed at the end of the last step, and those the last evaluation
-    /// produced (capped, not yet advanced).
-    hist: Vec<Chunk<V>>,
-    pend: Vec<Chunk<V>>,
-    /// The last evaluation's sums (booked by `end_step`).
+    /// The candidate lists and the contacts' states; `None` until built (and after a change
+    /// that invalidates them).
+    lists: Option<Lists<V>>,
+    /// Contacts loaded by `set_history`, waiting for the next build.
+    seed: Option<Vec<Carry<V>>>,
+    /// The last evaluation's sums.
     last: Sums,
     /// Energy dissipated so far by normal damping and by friction, J.
     dissipated: [Real; 2],
@@ -289,6 +396,10 @@ pub struct Contacts<V: Vector> {
     dt: Real,
     /// Whether forces were evaluated since the last step ended (only then may `end_step` commit).
     evaluated: bool,
+    /// The step (s) whose springs and books await their commit (see the module docs).
+    pending: Option<Real>,
+    /// `uniform_mass` of the evaluation in progress.
+    uniform: Option<(Real, Real)>,
 }
 
 fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
@@ -315,7 +426,12 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     let inertia_factor = if p.has("inertia_factor") { p.number("inertia_factor")? } else { default_beta };
     let inertia_factor = positive("inertia_factor", inertia_factor)?;
     let zeta = damping_ratio(law, restitution);
-    let material = Material { law, stiffness, tangential_ratio, restitution, zeta, friction, inertia_factor };
+    let tangential_damping = match law {
+        Law::Linear => tangential_ratio.sqrt(),
+        Law::Hertz => (1.5 * tangential_ratio).sqrt(),
+    };
+    let material =
+        Material { law, stiffness, tangential_ratio, restitution, zeta, friction, inertia_factor, tangential_damping };
     let points: Vec<V> = p.take_vectors("wall_points")?;
     let normals: Vec<V> = p.take_vectors("wall_normals")?;
     let e = p.take_floats("wall_restitution")?;
@@ -466,52 +582,473 @@ impl<V: Vector> Contacts<V> {
             omega: Vec::new(),
             angle: Vec::new(),
             torque: Vec::new(),
-            hist: Vec::new(),
-            pend: Vec::new(),
+            lists: None,
+            seed: None,
             last: Sums::default(),
             dissipated: [0.0; 2],
             cells: None,
             dt: 0.0,
             evaluated: false,
+            pending: None,
+            uniform: None,
         }
     }
 
-    /// Sizes the per-particle state for `n` particles (new particles at rest, no contacts).
+    /// Sizes the per-particle state for `n` particles (new particles at rest); the contacts
+    /// among the particles that remain are carried over.
     fn fit(&mut self, n: usize) {
         if self.omega.len() != n {
+            let mut carry = self.carry();
+            carry.retain(|k| (k.i as usize) < n && (k.wall || (k.j as usize) < n));
+            self.seed = Some(carry);
+            self.lists = None;
             self.omega.resize(n, V::AXIAL_ZERO);
             self.angle.resize(n, 0.0);
             self.torque.resize(n, V::AXIAL_ZERO);
         }
-        let chunks = n.div_ceil(CHUNK);
-        if self.hist.len() != chunks || self.hist.iter().enumerate().any(|(c, h)| h.start.len() != chunk_len(n, c) + 1)
-        {
-            self.hist =
-                (0..chunks).map(|c| Chunk { start: vec![0; chunk_len(n, c) + 1], entries: Vec::new() }).collect();
-            self.pend = self.hist.clone();
-        }
-    }
-
-    /// The committed contacts of particle i.
-    #[inline(always)]
-    fn committed(&self, i: usize) -> &[Entry<V>] {
-        let h = &self.hist[i / CHUNK];
-        let k = i % CHUNK;
-        &h.entries[h.start[k] as usize..h.start[k + 1] as usize]
     }
 
     /// Contacts counted once at the last evaluation (pairs + wall contacts).
     pub fn count(&self) -> u64 {
-        self.last.half_pairs / 2 + self.last.walls
+        self.last.pairs + self.last.walls
     }
 
     fn inertia(&self, m: Real, r: Real) -> Real {
         self.material.inertia_factor * m * r * r
     }
+
+    /// The live contacts, sorted by first grain, then pairs before walls, then partner.
+    fn carry(&self) -> Vec<Carry<V>> {
+        if let Some(s) = &self.seed {
+            return s.clone();
+        }
+        let Some(l) = &self.lists else { return Vec::new() };
+        let mut out = Vec::new();
+        for i in 0..l.pstart.len().saturating_sub(1) {
+            let live = |j: u32, k: &Link<V>, wall: bool| Carry { i: i as u32, j, wall, xi: k.xi, u: k.u };
+            let (a, b) = (l.pstart[i] as usize, l.pstart[i + 1] as usize);
+            out.extend((a..b).filter(|&p| l.links[p].live).map(|p| live(l.pj[p], &l.links[p], false)));
+            let (a, b) = (l.wstart[i] as usize, l.wstart[i + 1] as usize);
+            out.extend((a..b).filter(|&q| l.wlinks[q].live).map(|q| live(l.wall[q], &l.wlinks[q], true)));
+        }
+        out
+    }
+
+    /// Whether the lists must be rebuilt: none yet, another particle count, radii changed, or
+    /// a grain moved more than half the skin since the build.
+    fn stale(&self, x: &[V], r: &[Real]) -> bool {
+        let Some(l) = &self.lists else { return true };
+        if l.x.len() != x.len() {
+            return true;
+        }
+        let lim = 0.25 * l.skin * l.skin;
+        par::reduce(
+            x.len(),
+            false,
+            |a, b| a || b,
+            |range| range.into_iter().any(|i| (x[i] - l.x[i]).length_squared() > lim || r[i] != l.r[i]),
+        )
+    }
+
+    /// Builds the candidate lists at `x` and carries the live contacts (or the loaded ones)
+    /// over; returns the energy of springs whose pair is no longer a candidate (moved apart
+    /// since the last build by more than the skin: the grains were placed by hand).
+    fn rebuild(&mut self, x: &[V], r: &[Real]) -> Real {
+        let n = x.len();
+        let carry = match self.seed.take() {
+            Some(s) => s,
+            None => self.carry(),
+        };
+        let r_max = r.iter().fold(0.0, |a: Real, &b| a.max(b));
+        let skin = SKIN * r_max;
+        let reach = 2.0 * r_max + skin;
+        if r_max > 0.0 && self.cells.as_ref().is_none_or(|c| c.cell_size() != reach) {
+            self.cells = CellList::new(reach, V::DIM).ok();
+        }
+        if let Some(c) = self.cells.as_mut() {
+            c.build(x);
+        }
+        let (cells, walls) = (self.cells.as_ref().filter(|_| r_max > 0.0), &self.walls);
+        let carry = &carry;
+        let part = |c: usize| -> Part<V> {
+            let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let lo = carry.partition_point(|k| (k.i as usize) < s0);
+            let hi = carry.partition_point(|k| (k.i as usize) < s1);
+            let mut carried = carry[lo..hi].iter().peekable();
+            let mut out = Part::default();
+            let mut cand: Vec<u32> = Vec::with_capacity(32);
+            for i in s0..s1 {
+                let ri = r[i];
+                cand.clear();
+                if let Some(cl) = cells.filter(|_| ri > 0.0) {
+                    for range in cl.query(cl.cell_of(x[i])).iter() {
+                        for &j in &cl.order[range] {
+                            let ju = j as usize;
+                            if ju <= i || r[ju] <= 0.0 {
+                                continue;
+                            }
+                            let s = ri + r[ju] + skin;
+                            if (x[ju] - x[i]).length_squared() < s * s {
+                                cand.push(j);
+                            }
+                        }
+                    }
+                }
+                cand.sort_unstable();
+                let p0 = out.pj.len();
+                out.pj.extend_from_slice(&cand);
+                out.links.resize(out.pj.len(), Link::default());
+                out.pcount.push(cand.len() as u32);
+                let w0 = out.wall.len();
+                if ri > 0.0 {
+                    for (w, wall) in walls.iter().enumerate() {
+                        if (x[i] - wall.point).dot(wall.normal) < ri + skin {
+                            out.wall.push(w as u32);
+                        }
+                    }
+                }
+                out.wlinks.resize(out.wall.len(), Link::default());
+                out.wcount.push((out.wall.len() - w0) as u32);
+                while let Some(k) = carried.next_if(|k| k.i as usize == i) {
+                    let (ids, links, at) = if k.wall {
+                        (&out.wall[w0..], &mut out.wlinks, w0)
+                    } else {
+                        (&out.pj[p0..], &mut out.links, p0)
+                    };
+                    match ids.binary_search(&k.j) {
+                        Ok(q) => links[at + q] = Link { xi: k.xi, u: k.u, live: true, ..Link::default() },
+                        Err(_) => out.dropped += k.u,
+                    }
+                }
+            }
+            out
+        };
+        let chunks = n.div_ceil(CHUNK);
+        let parts: Vec<Part<V>> = match par::fork_if(n, || (0..chunks).into_par_iter().map(part).collect()) {
+            Some(p) => p,
+            None => (0..chunks).map(part).collect(),
+        };
+        let mut l = self.lists.take().unwrap_or_default();
+        for v in [&mut l.pj, &mut l.pstart, &mut l.rpair, &mut l.rstart, &mut l.wall, &mut l.wstart] {
+            v.clear();
+        }
+        l.links.clear();
+        l.wlinks.clear();
+        l.pstart.push(0);
+        l.wstart.push(0);
+        let mut dropped = 0.0;
+        for p in &parts {
+            for &k in &p.pcount {
+                l.pstart.push(l.pstart.last().copied().unwrap_or(0) + k);
+            }
+            for &k in &p.wcount {
+                l.wstart.push(l.wstart.last().copied().unwrap_or(0) + k);
+            }
+            l.pj.extend_from_slice(&p.pj);
+            l.links.extend_from_slice(&p.links);
+            l.wall.extend_from_slice(&p.wall);
+            l.wlinks.extend_from_slice(&p.wlinks);
+            dropped += p.dropped;
+        }
+        // The pairs by second grain, in pair order (a counting sort).
+        l.rstart.resize(n + 1, 0);
+        for &j in &l.pj {
+            l.rstart[j as usize + 1] += 1;
+        }
+        for j in 0..n {
+            l.rstart[j + 1] += l.rstart[j];
+        }
+        let mut fill = l.rstart[..n].to_vec();
+        l.rpair.resize(l.pj.len(), 0);
+        for (p, &j) in l.pj.iter().enumerate() {
+            l.rpair[fill[j as usize] as usize] = p as u32;
+            fill[j as usize] += 1;
+        }
+        l.forces.clear();
+        l.forces.resize(l.pj.len(), PairForce::ZERO);
+        l.x.clear();
+        l.x.extend_from_slice(x);
+        l.r.clear();
+        l.r.extend_from_slice(r);
+        l.skin = skin;
+        self.lists = Some(l);
+        dropped
+    }
+
+    /// The pass over pairs: commits the last step's live contacts if `commit` (its dt) is set,
+    /// then, if `eval`, evaluates every touching pair into its force slot (else only commits).
+    #[allow(clippy::too_many_arguments)]
+    fn pair_pass(&mut self, x: &[V], v: &[V], model: &Model, r: &[Real], commit: Option<Real>, eval: bool) -> Sums {
+        let n = x.len();
+        let Some(l) = self.lists.as_mut() else { return Sums::default() };
+        let (mat, omega, dt) = (&self.material, &self.omega, self.dt);
+        let (pj, pstart) = (&l.pj, &l.pstart);
+        let kn = mat.stiffness;
+        // Equal masses (the usual case): the coefficients of a free pair and of a grain
+        // against a pinned one, once.
+        let uniform = self.uniform.map(|(m, im0)| {
+            let c = |inv_m: Real, m_eff: Real| mat.coef(inv_m, (kn * m_eff).sqrt(), mat.zeta, mat.friction, dt);
+            (c(im0 + im0, 0.5 * m), c(im0, m))
+        });
+        let im = &model.inv_mass;
+        let body = |c: usize, links: &mut [Link<V>], forces: &mut [PairForce<V>]| -> Sums {
+            let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let base = pstart[s0] as usize;
+            let mut sums = Sums::default();
+            for i in s0..s1 {
+                let (a, b) = (pstart[i] as usize, pstart[i + 1] as usize);
+                let (xi, vi, wi, ri, imi) = (x[i], v[i], omega[i], r[i], im[i]);
+                for p in a..b {
+                    let j = pj[p] as usize;
+                    let (l, pf) = (&mut links[p - base], &mut forces[p - base]);
+                    let dx = x[j] - xi;
+                    let d2 = dx.length_squared();
+                    let s = ri + r[j];
+                    let touching = eval && d2 < s * s && d2 > 0.0 && imi + im[j] != 0.0;
+                    let committing = commit.is_some() && l.live;
+                    if !(touching || committing) || d2 == 0.0 {
+                        if eval {
+                            end_contact(l, &mut sums);
+                            *pf = PairForce::ZERO;
+                        }
+                        continue;
+                    }
+                    let dist = d2.sqrt();
+                    let nrm = dx * (1.0 / dist);
+                    let d = s - dist;
+                    let (ai, aj) = (ri - 0.5 * d, r[j] - 0.5 * d);
+                    let vc = vi - v[j] + spin::<V>(wi * ai + omega[j] * aj, nrm);
+                    if let (Some(pdt), true) = (commit, l.live) {
+                        mat.commit(l, nrm, d, vc, mat.friction, pdt, &mut sums);
+                    }
+                    if touching {
+                        let c = match &uniform {
+                            Some((free, pinned)) => {
+                                if imi != 0.0 && im[j] != 0.0 {
+                                    *free
+                                } else {
+                                    *pinned
+                                }
+                            }
+                            None => {
+                                let inv_m = imi + im[j];
+                                mat.coef(inv_m, (kn / inv_m).sqrt(), mat.zeta, mat.friction, dt)
+                            }
+                        };
+                        let (f, ft) = mat.evaluate(l, nrm, d, vc, &c, dt);
+                        let t = moment(nrm, ft);
+                        *pf = PairForce { f, ti: t * ai, tj: t * aj };
+                        sums.pairs += 1;
+                        sums.max_overlap = sums.max_overlap.max(d);
+                    } else if eval {
+                        end_contact(l, &mut sums);
+                        *pf = PairForce::ZERO;
+                    }
+                }
+            }
+            sums
+        };
+        let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| pstart[(c * CHUNK).min(n)] as usize).collect();
+        let links = split_at(&mut l.links, &bounds);
+        let forces = split_at(&mut l.forces, &bounds);
+        let parts: Vec<Sums> = match par::fork_if(n, || {
+            links.into_par_iter().zip(forces).enumerate().map(|(c, (a, b))| body(c, a, b)).collect()
+        }) {
+            Some(p) => p,
+            None => {
+                let links = split_at(&mut l.links, &bounds);
+                let forces = split_at(&mut l.forces, &bounds);
+                links.into_iter().zip(forces).enumerate().map(|(c, (a, b))| body(c, a, b)).collect()
+            }
+        };
+        parts.into_iter().fold(Sums::default(), Sums::add)
+    }
+
+    /// The pass over grains: commits the last step's live wall contacts if `commit` is set;
+    /// then, if `eval`, evaluates the wall contacts and gathers each grain's force into `f`
+    /// and torque (its pairs as the first grain, then as the second, then its walls).
+    #[allow(clippy::too_many_arguments)]
+    fn grain_pass(
+        &mut self,
+        x: &[V],
+        v: &[V],
+        model: &Model,
+        r: &[Real],
+        commit: Option<Real>,
+        f: &mut [V],
+        write: Write,
+        eval: bool,
+    ) -> Sums {
+        let n = x.len();
+        let Some(l) = self.lists.as_mut() else { return Sums::default() };
+        let (mat, omega, walls, dt) = (&self.material, &self.omega, &self.walls, self.dt);
+        let (pstart, rstart, rpair, wall, wstart, forces) =
+            (&l.pstart, &l.rstart, &l.rpair, &l.wall, &l.wstart, &l.forces);
+        let kn = mat.stiffness;
+        let wall_coef: Option<Vec<Coef>> = self
+            .uniform
+            .map(|(m, im0)| walls.iter().map(|w| mat.coef(im0, (kn * m).sqrt(), w.zeta, w.friction, dt)).collect());
+        let im = &model.inv_mass;
+        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], wl: &mut [Link<V>]| -> Sums {
+            let s0 = c * CHUNK;
+            let base = wstart[s0] as usize;
+            let mut sums = Sums::default();
+            for k in 0..tq.len() {
+                let i = s0 + k;
+                let ri = r[i];
+                let (a, b) = (wstart[i] as usize, wstart[i + 1] as usize);
+                if im[i] == 0.0 || ri <= 0.0 {
+                    if eval {
+                        write.put(&mut f[k], V::ZERO);
+                        tq[k] = V::AXIAL_ZERO;
+                        wl[a - base..b - base].iter_mut().for_each(|l| end_contact(l, &mut sums));
+                    }
+                    continue;
+                }
+                let mut force = V::ZERO;
+                let mut torque = V::AXIAL_ZERO;
+                if eval {
+                    for q in &forces[pstart[i] as usize..pstart[i + 1] as usize] {
+                        force += q.f;
+                        torque = torque + q.ti;
+                    }
+                    for &p in &rpair[rstart[i] as usize..rstart[i + 1] as usize] {
+                        let q = &forces[p as usize];
+                        force -= q.f;
+                        torque = torque + q.tj;
+                    }
+                }
+                for q in a..b {
+                    let w = &walls[wall[q] as usize];
+                    let l = &mut wl[q - base];
+                    let sd = (x[i] - w.point).dot(w.normal);
+                    let touching = eval && sd < ri;
+                    if !(touching || (commit.is_some() && l.live)) {
+                        if eval {
+                            end_contact(l, &mut sums);
+                        }
+                        continue;
+                    }
+                    let nrm = -w.normal;
+                    let d = ri - sd;
+                    let ai = ri - 0.5 * d;
+                    let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
+                    if let (Some(pdt), true) = (commit, l.live) {
+                        mat.commit(l, nrm, d, vc, w.friction, pdt, &mut sums);
+                    }
+                    if touching {
+                        let c = match &wall_coef {
+                            Some(c) => c[wall[q] as usize],
+                            None => mat.coef(im[i], (kn * model.mass[i]).sqrt(), w.zeta, w.friction, dt),
+                        };
+                        let (fw, ft) = mat.evaluate(l, nrm, d, vc, &c, dt);
+                        force += fw;
+                        torque = torque + moment(nrm, ft) * ai;
+                        sums.walls += 1;
+                        sums.max_overlap = sums.max_overlap.max(d);
+                    } else if eval {
+                        end_contact(l, &mut sums);
+                    }
+                }
+                if eval {
+                    write.put(&mut f[k], force);
+                    tq[k] = torque;
+                }
+            }
+            sums
+        };
+        let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| wstart[(c * CHUNK).min(n)] as usize).collect();
+        let torque = &mut self.torque;
+        let wls = split_at(&mut l.wlinks, &bounds);
+        let parts: Vec<Sums> = match par::fork_if(n, || {
+            f.par_chunks_mut(CHUNK)
+                .zip(torque.par_chunks_mut(CHUNK))
+                .zip(wls.into_par_iter())
+                .enumerate()
+                .map(|(c, ((f, t), w))| body(c, f, t, w))
+                .collect()
+        }) {
+            Some(p) => p,
+            None => {
+                let wls = split_at(&mut l.wlinks, &bounds);
+                f.chunks_mut(CHUNK)
+                    .zip(torque.chunks_mut(CHUNK))
+                    .zip(wls)
+                    .enumerate()
+                    .map(|(c, ((f, t), w))| body(c, f, t, w))
+                    .collect()
+            }
+        };
+        parts.into_iter().fold(Sums::default(), Sums::add)
+    }
+
+    /// Commits the last step's contacts now (the deferred part of `end_step`).
+    fn settle_now(&mut self, x: &[V], v: &[V], model: &Model) {
+        let Some(pdt) = self.pending.take() else { return };
+        let Some(r) = radii(model) else { return };
+        if self.lists.as_ref().is_none_or(|l| l.x.len() != x.len()) {
+            return;
+        }
+        // Nothing is evaluated: the forces go to a scratch that is not written.
+        let mut scratch = vec![V::ZERO; x.len()];
+        let s = self.pair_pass(x, v, model, r, Some(pdt), false);
+        let s = s.add(self.grain_pass(x, v, model, r, Some(pdt), &mut scratch, Write::Overwrite, false));
+        self.dissipated[0] += s.lost_n;
+        self.dissipated[1] += s.lost_t;
+    }
 }
 
-fn chunk_len(n: usize, c: usize) -> usize {
-    CHUNK.min(n - c * CHUNK)
+/// What one chunk's rebuild makes (see `Contacts::rebuild`).
+struct Part<V> {
+    pj: Vec<u32>,
+    pcount: Vec<u32>,
+    links: Vec<Link<V>>,
+    wall: Vec<u32>,
+    wcount: Vec<u32>,
+    wlinks: Vec<Link<V>>,
+    dropped: Real,
+}
+
+impl<V> Default for Part<V> {
+    fn default() -> Self {
+        Self {
+            pj: Vec::new(),
+            pcount: Vec::new(),
+            links: Vec::new(),
+            wall: Vec::new(),
+            wcount: Vec::new(),
+            wlinks: Vec::new(),
+            dropped: 0.0,
+        }
+    }
+}
+
+/// A contact that ended: its spring's energy goes to the books, the link is cleared.
+#[inline(always)]
+fn end_contact<V: Vector>(l: &mut Link<V>, sums: &mut Sums) {
+    if l.live {
+        sums.broken += l.u;
+        *l = Link::default();
+    }
+}
+
+/// Splits `a` at `bounds` (ascending, first 0, last `a.len()`).
+fn split_at<'a, T>(mut a: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(bounds.len().saturating_sub(1));
+    for w in bounds.windows(2) {
+        let (head, tail) = std::mem::take(&mut a).split_at_mut(w[1] - w[0]);
+        out.push(head);
+        a = tail;
+    }
+    out
+}
+
+/// The mass and inverse mass every free grain has, if they are all equal (the usual case).
+fn uniform_mass(model: &Model, r: &[Real]) -> Option<(Real, Real)> {
+    let n = r.len();
+    let i0 = (0..n).find(|&i| model.inv_mass[i] != 0.0 && r[i] > 0.0)?;
+    let (m0, im0) = (model.mass[i0], model.inv_mass[i0]);
+    (0..n).all(|i| model.inv_mass[i] == 0.0 || r[i] <= 0.0 || model.mass[i] == m0).then_some((m0, im0))
 }
 
 /// Reads the radius attribute (zeros if unset).
@@ -531,170 +1068,29 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let Some(r) = radii(model) else {
             par::chunks1(f, |_, f| f.iter_mut().for_each(|fi| write.put(fi, V::ZERO)));
             self.torque.iter_mut().for_each(|t| *t = V::AXIAL_ZERO);
-            self.pend.iter_mut().for_each(|c| {
-                c.entries.clear();
-                c.start.iter_mut().for_each(|s| *s = 0);
-            });
+            (self.lists, self.seed, self.pending) = (None, None, None);
             self.last = Sums::default();
             return 0.0;
         };
-        let r_max = r.iter().fold(0.0, |a: Real, &b| a.max(b));
-        let cell = 2.0 * r_max;
-        if r_max > 0.0 && self.cells.as_ref().is_none_or(|c| c.cell_size() != cell) {
-            self.cells = CellList::new(cell, V::DIM).ok();
-        }
-        if let Some(c) = self.cells.as_mut() {
-            c.build(x);
-        }
-        let cells = self.cells.as_ref();
-        let (mat, walls) = (&self.material, &self.walls);
-        let (omega, hist, dt) = (&self.omega, &self.hist, self.dt);
-        // Equal masses (the usual case): one √(k m*) for every pair and one for the walls.
-        let m0 = (0..n).find(|&i| model.inv_mass[i] != 0.0 && r[i] > 0.0).map(|i| model.mass[i]);
-        let uniform = m0.filter(|&m0| (0..n).all(|i| model.inv_mass[i] == 0.0 || r[i] <= 0.0 || model.mass[i] == m0));
-        let kn = self.material.stiffness;
-        let pair_root = uniform.map(|m0| ((kn * m0 * 0.5).sqrt(), (kn * m0).sqrt()));
-        let nw = n as u32;
-        // Each side books its share of a pair: half when both are free (the other side books
-        // the rest), all of it against a pinned grain (which computes nothing) or a wall.
-        let share = |j: u32| if j < nw && model.inv_mass[j as usize] != 0.0 { 0.5 } else { 1.0 };
-        let mut pend = std::mem::take(&mut self.pend);
-        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], out: &mut Chunk<V>| -> Sums {
-            let s0 = c * CHUNK;
-            let mut sums = Sums::default();
-            out.entries.clear();
-            out.start.clear();
-            out.start.push(0);
-            let mut found: Vec<(u32, V, Real)> = Vec::with_capacity(16);
-            for (k, (fi, ti)) in f.iter_mut().zip(tq.iter_mut()).enumerate() {
-                let i = s0 + k;
-                let ri = r[i];
-                if model.inv_mass[i] == 0.0 || ri <= 0.0 {
-                    write.put(fi, V::ZERO);
-                    *ti = V::AXIAL_ZERO;
-                    out.start.push(out.entries.len() as u32);
-                    continue;
-                }
-                found.clear();
-                if let Some(cl) = cells {
-                    for range in cl.query(cl.cell_of(x[i])).iter() {
-                        for &j in &cl.order[range] {
-                            let j = j as usize;
-                            let rj = r[j];
-                            if j == i || rj <= 0.0 {
-                                continue;
-                            }
-                            let dx = x[j] - x[i];
-                            let d2 = dx.length_squared();
-                            let s = ri + rj;
-                            if d2 < s * s && d2 > 0.0 {
-                                let d = d2.sqrt();
-                                found.push((j as u32, dx / d, s - d));
-                            }
-                        }
-                    }
-                }
-                for (w, wall) in walls.iter().enumerate() {
-                    let s = (x[i] - wall.point).dot(wall.normal);
-                    if s < ri {
-                        found.push((nw + w as u32, -wall.normal, ri - s));
-                    }
-                }
-                found.sort_unstable_by_key(|e| e.0);
-                let old = {
-                    let h = &hist[c];
-                    &h.entries[h.start[k] as usize..h.start[k + 1] as usize]
-                };
-                let mut o = 0;
-                let mut force = V::ZERO;
-                let mut torque = V::AXIAL_ZERO;
-                let mi = model.mass[i];
-                for &(j, nrm, d) in &found {
-                    while o < old.len() && old[o].partner < j {
-                        o += 1;
-                    }
-                    let known = o < old.len() && old[o].partner == j;
-                    let (xi, u_old) = if known { (old[o].xi, old[o].u) } else { (V::ZERO, 0.0) };
-                    if known {
-                        sums.broken -= share(j) * u_old;
-                    }
-                    let ai = ri - 0.5 * d;
-                    let (out_pair, half) = if j < nw {
-                        let j = j as usize;
-                        let aj = r[j] - 0.5 * d;
-                        let m = 1.0 / (model.inv_mass[i] + model.inv_mass[j]);
-                        let root = match pair_root {
-                            Some((p, w)) => {
-                                if model.inv_mass[j] != 0.0 {
-                                    p
-                                } else {
-                                    w
-                                }
-                            }
-                            None => (kn * m).sqrt(),
-                        };
-                        let vc = v[i] - v[j] + spin::<V>(omega[i] * ai + omega[j] * aj, nrm);
-                        (mat.pair(nrm, d, vc, m, root, xi, mat.zeta, mat.friction, dt, !known), share(j as u32))
-                    } else {
-                        let wall = &walls[(j - nw) as usize];
-                        let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
-                        let root = pair_root.map_or_else(|| (kn * mi).sqrt(), |(_, w)| w);
-                        (mat.pair(nrm, d, vc, mi, root, xi, wall.zeta, wall.friction, dt, !known), 1.0)
-                    };
-                    force += out_pair.force;
-                    torque = torque + moment(nrm, out_pair.ft) * ai;
-                    sums.max_overlap = sums.max_overlap.max(d);
-                    if j < nw {
-                        // Half a pair from each free side; a pinned partner has no side.
-                        sums.half_pairs += if half == 0.5 { 1 } else { 2 };
-                    } else {
-                        sums.walls += 1;
-                    }
-                    out.entries.push(Entry {
-                        partner: j,
-                        xi: out_pair.xi,
-                        u: u_old,
-                        ft: out_pair.ft,
-                        fn_: out_pair.fn_,
-                        un: mat.normal_energy(d),
-                        wn0: out_pair.wn0,
-                        wt0: out_pair.wt0,
-                    });
-                }
-                // Springs of contacts that ended release their energy (the matched ones were
-                // subtracted above).
-                sums.broken += old.iter().map(|e| share(e.partner) * e.u).sum::<Real>();
-                write.put(fi, force);
-                *ti = torque;
-                out.start.push(out.entries.len() as u32);
+        let mut commit = self.pending.take();
+        let mut dropped = 0.0;
+        if self.stale(x, r) {
+            if let Some(pdt) = commit.take() {
+                self.pending = Some(pdt);
+                self.settle_now(x, v, model);
             }
-            sums
-        };
-        let mut torque = std::mem::take(&mut self.torque);
-        let sums = {
-            use rayon::prelude::*;
-            let run = || -> Vec<Sums> {
-                f.par_chunks_mut(CHUNK)
-                    .zip(torque.par_chunks_mut(CHUNK))
-                    .zip(pend.par_iter_mut())
-                    .enumerate()
-                    .map(|(c, ((f, t), o))| body(c, f, t, o))
-                    .collect()
-            };
-            match par::fork_if(n, run) {
-                Some(s) => s,
-                None => f
-                    .chunks_mut(CHUNK)
-                    .zip(torque.chunks_mut(CHUNK))
-                    .zip(pend.iter_mut())
-                    .enumerate()
-                    .map(|(c, ((f, t), o))| body(c, f, t, o))
-                    .collect(),
-            }
-        };
-        self.torque = torque;
-        self.pend = pend;
-        self.last = sums.into_iter().fold(Sums::default(), Sums::add);
+            dropped = self.rebuild(x, r);
+        }
+        self.uniform = uniform_mass(model, r);
+        let s = self.pair_pass(x, v, model, r, commit, true);
+        let mut s = s.add(self.grain_pass(x, v, model, r, commit, f, write, true));
+        s.broken += dropped;
+        // In the order `settle_now` and the next evaluation would book them: the same bits
+        // whether a call of steps ends here or not.
+        self.dissipated[0] += s.lost_n;
+        self.dissipated[1] += s.lost_t;
+        self.dissipated[1] += s.broken;
+        self.last = s;
         0.0
     }
 
@@ -703,7 +1099,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let n = x.len();
         let mat = &self.material;
         let mut u = 0.0;
-        // Normal springs at x (a fresh search: the stored contacts are those of the step's start).
+        // Normal springs at x (a fresh search: the lists may be stale for these positions).
         let r_max = r.iter().fold(0.0, |a: Real, &b| a.max(b));
         if r_max > 0.0 {
             if let Ok(mut cl) = CellList::new(2.0 * r_max, V::DIM) {
@@ -739,27 +1135,17 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 }
             }
         }
-        // Tangential springs as stored (each pair's spring is held by both sides: half each).
-        if self.hist.len() == n.div_ceil(CHUNK) {
-            for i in 0..n {
-                u += self
-                    .committed(i)
-                    .iter()
-                    .map(|e| if (e.partner as usize) < n && model.inv_mass[e.partner as usize] != 0.0 { 0.5 } else { 1.0 } * e.u)
-                    .sum::<Real>();
-            }
-        }
-        Some(u)
+        // Tangential springs as committed.
+        Some(u + self.carry().iter().map(|k| k.u).sum::<Real>())
     }
 
     fn dissipative(&self) -> bool {
-        // Books its own dissipation (two ledgers, at the step's end): see `own_books`.
+        // Books its own dissipation (two ledgers): see `own_books`.
         false
     }
     fn velocity_dependent(&self) -> bool {
         true
     }
-
     fn max_dt(&self, _x: &[V], v: &[V], model: &Model, g: Real) -> Option<Real> {
         let r = radii(model)?;
         let (mut m_min, mut r_min) = (Real::INFINITY, Real::INFINITY);
@@ -814,10 +1200,14 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 out.push((name, 0..n, self.omega[..n].iter().map(|w| axial_comp::<V>(*w, k)).collect()));
             }
         }
-        if self.hist.len() == n.div_ceil(CHUNK) {
-            let coordination = (0..n).map(|i| self.committed(i).len() as Real).collect();
-            out.push(("coordination", 0..n, coordination));
+        let mut coordination = vec![0.0; n];
+        for k in self.carry() {
+            coordination[k.i as usize] += 1.0;
+            if !k.wall {
+                coordination[k.j as usize] += 1.0;
+            }
         }
+        out.push(("coordination", 0..n, coordination));
         out
     }
 
@@ -833,12 +1223,11 @@ impl<V: Vector> Term<V> for Contacts<V> {
         self.dt = dt;
     }
 
-    fn end_step(&mut self, x: &[V], v: &[V], model: &Model, dt: Real) {
+    fn end_step(&mut self, _x: &[V], _v: &[V], model: &Model, dt: Real) {
         if !self.evaluated {
             return;
         }
         self.evaluated = false;
-        let n = x.len();
         let Some(r) = radii(model) else { return };
         let beta = self.material.inertia_factor;
         // ω ← ω + dt τ/I, then the angle with the new ω (semi-implicit, like v and x).
@@ -856,68 +1245,15 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 }
             }
         });
-        // Each surviving spring follows the contact point with the new velocities, and the
-        // books take what the tangential force did over the step (−f_t·v_t dt, the particles'
-        // work against it) less what the spring now stores more: exactly the energy friction
-        // removed, slipping and the tangential dashpot together.
-        let (omega, walls, mat) = (&self.omega, &self.walls, &self.material);
-        let nw = n as u32;
-        let advance = |c: usize, out: &mut Chunk<V>| -> (Real, Real) {
-            let s0 = c * CHUNK;
-            let (mut lost, mut lost_n) = (0.0, 0.0);
-            for k in 0..out.start.len().saturating_sub(1) {
-                let i = s0 + k;
-                let (a, b) = (out.start[k] as usize, out.start[k + 1] as usize);
-                for e in &mut out.entries[a..b] {
-                    let (nrm, d, vc, mu, half) = if e.partner < nw {
-                        let j = e.partner as usize;
-                        let dx = x[j] - x[i];
-                        let dist = dx.length_squared().sqrt();
-                        if dist == 0.0 {
-                            continue;
-                        }
-                        let nrm = dx / dist;
-                        let d = r[i] + r[j] - dist;
-                        let w = omega[i] * (r[i] - 0.5 * d) + omega[j] * (r[j] - 0.5 * d);
-                        let half = if model.inv_mass[j] != 0.0 { 0.5 } else { 1.0 };
-                        (nrm, d, v[i] - v[j] + spin::<V>(w, nrm), mat.friction, half)
-                    } else {
-                        let wall = &walls[(e.partner - nw) as usize];
-                        let d = r[i] - (x[i] - wall.point).dot(wall.normal);
-                        let nrm = -wall.normal;
-                        (nrm, d, v[i] + spin::<V>(omega[i] * (r[i] - 0.5 * d), nrm), wall.friction, 1.0)
-                    };
-                    let vt = vc - nrm * vc.dot(nrm);
-                    // Frictionless contacts hold no spring (it could never push).
-                    e.xi = if mu > 0.0 { e.xi + vt * dt } else { V::ZERO };
-                    let u = 0.5 * mat.kt(d.max(0.0)) * e.xi.length_squared();
-                    // Semi-implicit Euler changes the kinetic energy by exactly F·(v + v')/2 dt, so
-                    // each force drew the mean of its power at the step's two ends; less what its
-                    // spring now stores more, that is what it dissipated.
-                    lost += half * (0.5 * (e.wt0 - e.ft.dot(vt)) * dt - (u - e.u));
-                    let un = mat.normal_energy(d.max(0.0));
-                    lost_n += half * (0.5 * (e.wn0 + e.fn_ * vc.dot(nrm)) * dt - (un - e.un));
-                    e.u = u;
-                    e.ft = V::ZERO;
-                }
-            }
-            (lost, lost_n)
-        };
-        let (lost, lost_n): (Real, Real) = {
-            use rayon::prelude::*;
-            let pend = &mut self.pend;
-            let parts: Vec<(Real, Real)> =
-                match par::fork_if(n, || pend.par_iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect()) {
-                    Some(p) => p,
-                    None => pend.iter_mut().enumerate().map(|(c, o)| advance(c, o)).collect(),
-                };
-            parts.into_iter().fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
-        };
-        std::mem::swap(&mut self.hist, &mut self.pend);
-        self.dissipated[0] += lost_n;
-        self.dissipated[1] += lost + self.last.broken;
+        // The springs follow the contact points with the new velocities: deferred to the next
+        // evaluation, which computes each contact's geometry at these positions anyway, or to
+        // `settle` (see the module docs).
+        self.pending = Some(dt);
     }
 
+    fn settle(&mut self, x: &[V], v: &[V], model: &Model) {
+        self.settle_now(x, v, model);
+    }
     fn extra_kinetic(&self, model: &Model) -> Real {
         let Some(r) = radii(model) else { return 0.0 };
         let mut k = 0.0;
@@ -961,7 +1297,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
         vec![("contacts", self.count())]
     }
 
-    /// [n, ω (n·axial), angle (n), dissipated (2), then per spring: owner, partner, ξ (dim), energy].
+    /// [n, ω (n·axial), angle (n), dissipated (2), then per live contact: first grain, partner
+    /// (a grain, or n + wall index), ξ (dim) seen from the first grain, spring energy].
     fn history(&self) -> Option<Vec<Real>> {
         let n = self.omega.len();
         let mut h = Vec::with_capacity(3 + n * (V::AXIAL_DIM + 1));
@@ -971,19 +1308,18 @@ impl<V: Vector> Term<V> for Contacts<V> {
         }
         h.extend_from_slice(&self.angle);
         h.extend_from_slice(&self.dissipated);
-        if self.hist.len() == n.div_ceil(CHUNK) {
-            for i in 0..n {
-                for e in self.committed(i) {
-                    h.push(i as Real);
-                    h.push(e.partner as Real);
-                    h.extend_from_slice(&V::flat(std::slice::from_ref(&e.xi))[..V::DIM]);
-                    h.push(e.u);
-                }
-            }
+        for k in self.carry() {
+            h.push(k.i as Real);
+            h.push(if k.wall { (n + k.j as usize) as Real } else { k.j as Real });
+            h.extend_from_slice(&V::flat(std::slice::from_ref(&k.xi))[..V::DIM]);
+            h.push(k.u);
         }
         Some(h)
     }
 
+    /// Loads `history`. A pair may also be given from its higher index (ξ seen from that
+    /// grain), or from both sides (files of physcore before the Verlet lists): the record from
+    /// the lower index is kept.
     fn set_history(&mut self, h: &[Real], n_particles: usize) -> Result<()> {
         let bad = |why: &str| invalid("history", format!("contact term {:?}: {why}", self.name));
         if h.is_empty() || h.iter().any(|v| !v.is_finite()) {
@@ -1002,42 +1338,48 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let angle = h[1 + n * a..1 + n * (a + 1)].to_vec();
         let dissipated = [h[head - 2], h[head - 1]];
         let nw = self.walls.len();
-        let mut per: Vec<Vec<Entry<V>>> = vec![Vec::new(); n];
+        // (record, whether it was given from the higher index)
+        let mut seed: Vec<(Carry<V>, bool)> = Vec::new();
         for rec in h[head..].chunks_exact(3 + V::DIM) {
             let (i, j) = (rec[0], rec[1]);
             if i < 0.0 || i.fract() != 0.0 || i as usize >= n || j < 0.0 || j.fract() != 0.0 || j as usize >= n + nw {
                 return Err(bad("names a particle or wall that does not exist"));
             }
-            per[i as usize].push(Entry {
-                partner: j as u32,
-                xi: V::from_slice(&rec[2..2 + V::DIM]),
-                u: rec[2 + V::DIM],
-                ft: V::ZERO,
-                fn_: 0.0,
-                un: 0.0,
-                wn0: 0.0,
-                wt0: 0.0,
-            });
-        }
-        for (i, p) in per.iter_mut().enumerate() {
-            p.sort_by_key(|e| e.partner);
-            if p.windows(2).any(|w| w[0].partner == w[1].partner) || p.iter().any(|e| e.partner as usize == i) {
-                return Err(bad("has a repeated or self contact"));
+            let (i, j) = (i as usize, j as usize);
+            let (xi, u) = (V::from_slice(&rec[2..2 + V::DIM]), rec[2 + V::DIM]);
+            if j >= n {
+                seed.push((Carry { i: i as u32, j: (j - n) as u32, wall: true, xi, u }, false));
+            } else if i < j {
+                seed.push((Carry { i: i as u32, j: j as u32, wall: false, xi, u }, false));
+            } else if i > j {
+                seed.push((Carry { i: j as u32, j: i as u32, wall: false, xi: -xi, u }, true));
+            } else {
+                return Err(bad("has a self contact"));
             }
         }
-        self.fit(n);
-        for (c, chunk) in self.hist.iter_mut().enumerate() {
-            chunk.entries.clear();
-            chunk.start.clear();
-            chunk.start.push(0);
-            for p in &per[c * CHUNK..c * CHUNK + chunk_len(n, c)] {
-                chunk.entries.extend_from_slice(p);
-                chunk.start.push(chunk.entries.len() as u32);
+        seed.sort_by_key(|(k, swapped)| (k.i, k.wall, k.j, *swapped));
+        let mut kept: Vec<Carry<V>> = Vec::with_capacity(seed.len());
+        let mut last: Option<(u32, bool, u32, bool)> = None;
+        for (k, swapped) in seed {
+            let key = (k.i, k.wall, k.j, swapped);
+            if let Some(p) = last {
+                if (p.0, p.1, p.2) == (key.0, key.1, key.2) {
+                    if p.3 == key.3 {
+                        return Err(bad("has a repeated contact"));
+                    }
+                    continue;
+                }
             }
+            last = Some(key);
+            kept.push(k);
         }
         self.omega = omega;
         self.angle = angle;
+        self.torque.resize(n, V::AXIAL_ZERO);
         self.dissipated = dissipated;
+        self.seed = Some(kept);
+        self.lists = None;
+        self.pending = None;
         self.evaluated = false;
         Ok(())
     }

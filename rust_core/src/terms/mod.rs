@@ -125,6 +125,9 @@ pub trait Term<V: Vector>: Send + Sync {
     /// Called after each accepted integrator step (and the constraint stage) with the new state:
     /// a term with a state of its own advances it here (contacts: spins and springs).
     fn end_step(&mut self, _x: &[V], _v: &[V], _model: &Model, _dt: Real) {}
+    /// Completes what `end_step` deferred to the next evaluation (the contacts' springs), when
+    /// a call of steps ends or before something else changes the state; idempotent.
+    fn settle(&mut self, _x: &[V], _v: &[V], _model: &Model) {}
     /// Kinetic energy the term's own state carries (contacts: rotation, ½Iω²), J.
     fn extra_kinetic(&self, _model: &Model) -> Real {
         0.0
