@@ -89,22 +89,37 @@ pub struct Wall<V> {
 }
 
 /// A candidate contact (a pair i < j, or a grain and a wall) and the state of its contact,
-/// seen from the first grain.
-#[derive(Clone, Copy, Debug, Default)]
+/// seen from the first grain. Kept to 56 bytes in 2D: streaming these is a good part of a step.
+#[derive(Clone, Copy, Debug)]
 struct Link<V> {
     /// Tangential spring ξ (m): committed after a step, capped after an evaluation.
     xi: V,
-    /// The energy the committed spring stores (J).
-    u: Real,
-    /// Of the last evaluation, for the books: the tangential force on the first grain (N), the
-    /// normal force (N), and for each its start-of-step book term, ½dt·(the power it drew from
-    /// the motion) + the energy its spring stored (J).
+    /// The tangential force on the first grain at the last evaluation (N), for the books.
     ft: V,
+    /// The normal force at the last evaluation (N, ≥ 0); negative when not in contact (no
+    /// spring: the link is `live` only while its grains touch).
     fn_: Real,
+    /// The tangential book: once a step is committed (or loaded), the energy the spring stores
+    /// (J); after an evaluation, ½dt·(the power the tangential force draws from the motion)
+    /// plus that energy.
     bt: Real,
+    /// The normal book after an evaluation: ½dt·(the power the normal force draws) plus the
+    /// energy the normal spring stores (J).
     bn: Real,
-    /// In contact at the last evaluation (the spring lives).
-    live: bool,
+}
+
+impl<V: Vector> Link<V> {
+    const NONE: Self = Self { xi: V::ZERO, ft: V::ZERO, fn_: -1.0, bt: 0.0, bn: 0.0 };
+
+    /// A contact carried over with spring `xi` storing `u`.
+    fn carried(xi: V, u: Real) -> Self {
+        Self { xi, ft: V::ZERO, fn_: 0.0, bt: u, bn: 0.0 }
+    }
+
+    #[inline(always)]
+    fn live(&self) -> bool {
+        self.fn_ >= 0.0
+    }
 }
 
 /// What a pair's evaluation hands the gather: the force on the first grain (the second gets
@@ -202,8 +217,9 @@ struct Coef {
     /// The normal and tangential dashpots 2ζ√(k m*) (kg/s; Hertz: to be times δ^{1/4}).
     gn: Real,
     gt: Real,
-    /// 1/(1 + h·gn) (the linear law's mid-step speed).
+    /// 1/(1 + h·gn) (the linear law's mid-step speed) and 1/k_t (0 if k_t = 0), linear law.
     inv_den: Real,
+    inv_kt: Real,
     /// Friction coefficient.
     mu: Real,
 }
@@ -225,7 +241,9 @@ impl Material {
     fn coef(&self, inv_m: Real, sqrt_km: Real, zeta: Real, mu: Real, dt: Real) -> Coef {
         let gn = 2.0 * zeta * sqrt_km;
         let h = 0.5 * dt * inv_m;
-        Coef { h, gn, gt: gn * self.tangential_damping, inv_den: 1.0 / (1.0 + h * gn), mu }
+        let kt = self.tangential_ratio * self.stiffness;
+        let inv_kt = if kt > 0.0 { 1.0 / kt } else { 0.0 };
+        Coef { h, gn, gt: gn * self.tangential_damping, inv_den: 1.0 / (1.0 + h * gn), inv_kt, mu }
     }
 
     /// Normal force magnitude (clamped at 0) and its elastic part, at overlap `d` and approach
@@ -333,7 +351,17 @@ impl Material {
         let mut xi_c = xi_p;
         if f2 > cap * cap {
             ft = ft * (cap / f2.sqrt());
-            xi_c = if kt > 0.0 { (ft + vt * gt) * (-1.0 / kt) } else { V::ZERO };
+            let inv_kt = match self.law {
+                Law::Linear => c.inv_kt,
+                Law::Hertz => {
+                    if kt > 0.0 {
+                        1.0 / kt
+                    } else {
+                        0.0
+                    }
+                }
+            };
+            xi_c = (ft + vt * gt) * (-inv_kt);
         }
         PairOut { force: ft - n * fn_, ft, xi: xi_c, fn_, wn0: fn_ * vn, wt0: -ft.dot(vt) }
     }
@@ -350,8 +378,9 @@ impl Material {
         let vt = vc - n * vn;
         l.xi = if mu > 0.0 { l.xi + vt * dt } else { V::ZERO };
         let d = d.max(0.0);
-        l.u = 0.5 * self.kt(d) * l.xi.length_squared();
-        s.lost_t += l.bt - 0.5 * dt * l.ft.dot(vt) - l.u;
+        let u = 0.5 * self.kt(d) * l.xi.length_squared();
+        s.lost_t += l.bt - 0.5 * dt * l.ft.dot(vt) - u;
+        l.bt = u;
         s.lost_n += l.bn + 0.5 * dt * l.fn_ * vn - self.normal_energy(d);
     }
 
@@ -360,13 +389,12 @@ impl Material {
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn evaluate<V: Vector>(&self, l: &mut Link<V>, n: V, d: Real, vc: V, c: &Coef, dt: Real) -> (V, V) {
-        let o = self.pair(n, d, vc, c, l.xi, dt, !l.live);
+        let o = self.pair(n, d, vc, c, l.xi, dt, !l.live());
         l.xi = o.xi;
         l.ft = o.ft;
         l.fn_ = o.fn_;
-        l.bt = 0.5 * dt * o.wt0 + l.u;
+        l.bt += 0.5 * dt * o.wt0;
         l.bn = 0.5 * dt * o.wn0 + self.normal_energy(d);
-        l.live = true;
         (o.force, o.ft)
     }
 }
@@ -625,11 +653,11 @@ impl<V: Vector> Contacts<V> {
         let Some(l) = &self.lists else { return Vec::new() };
         let mut out = Vec::new();
         for i in 0..l.pstart.len().saturating_sub(1) {
-            let live = |j: u32, k: &Link<V>, wall: bool| Carry { i: i as u32, j, wall, xi: k.xi, u: k.u };
+            let live = |j: u32, k: &Link<V>, wall: bool| Carry { i: i as u32, j, wall, xi: k.xi, u: k.bt };
             let (a, b) = (l.pstart[i] as usize, l.pstart[i + 1] as usize);
-            out.extend((a..b).filter(|&p| l.links[p].live).map(|p| live(l.pj[p], &l.links[p], false)));
+            out.extend((a..b).filter(|&p| l.links[p].live()).map(|p| live(l.pj[p], &l.links[p], false)));
             let (a, b) = (l.wstart[i] as usize, l.wstart[i + 1] as usize);
-            out.extend((a..b).filter(|&q| l.wlinks[q].live).map(|q| live(l.wall[q], &l.wlinks[q], true)));
+            out.extend((a..b).filter(|&q| l.wlinks[q].live()).map(|q| live(l.wall[q], &l.wlinks[q], true)));
         }
         out
     }
@@ -697,7 +725,7 @@ impl<V: Vector> Contacts<V> {
                 cand.sort_unstable();
                 let p0 = out.pj.len();
                 out.pj.extend_from_slice(&cand);
-                out.links.resize(out.pj.len(), Link::default());
+                out.links.resize(out.pj.len(), Link::NONE);
                 out.pcount.push(cand.len() as u32);
                 let w0 = out.wall.len();
                 if ri > 0.0 {
@@ -707,7 +735,7 @@ impl<V: Vector> Contacts<V> {
                         }
                     }
                 }
-                out.wlinks.resize(out.wall.len(), Link::default());
+                out.wlinks.resize(out.wall.len(), Link::NONE);
                 out.wcount.push((out.wall.len() - w0) as u32);
                 while let Some(k) = carried.next_if(|k| k.i as usize == i) {
                     let (ids, links, at) = if k.wall {
@@ -716,7 +744,7 @@ impl<V: Vector> Contacts<V> {
                         (&out.pj[p0..], &mut out.links, p0)
                     };
                     match ids.binary_search(&k.j) {
-                        Ok(q) => links[at + q] = Link { xi: k.xi, u: k.u, live: true, ..Link::default() },
+                        Ok(q) => links[at + q] = Link::carried(k.xi, k.u),
                         Err(_) => out.dropped += k.u,
                     }
                 }
@@ -805,7 +833,7 @@ impl<V: Vector> Contacts<V> {
                     let d2 = dx.length_squared();
                     let s = ri + r[j];
                     let touching = eval && d2 < s * s && d2 > 0.0 && imi + im[j] != 0.0;
-                    let committing = commit.is_some() && l.live;
+                    let committing = commit.is_some() && l.live();
                     if !(touching || committing) || d2 == 0.0 {
                         if eval {
                             end_contact(l, &mut sums);
@@ -818,7 +846,7 @@ impl<V: Vector> Contacts<V> {
                     let d = s - dist;
                     let (ai, aj) = (ri - 0.5 * d, r[j] - 0.5 * d);
                     let vc = vi - v[j] + spin::<V>(wi * ai + omega[j] * aj, nrm);
-                    if let (Some(pdt), true) = (commit, l.live) {
+                    if let (Some(pdt), true) = (commit, l.live()) {
                         mat.commit(l, nrm, d, vc, mat.friction, pdt, &mut sums);
                     }
                     if touching {
@@ -923,7 +951,7 @@ impl<V: Vector> Contacts<V> {
                     let l = &mut wl[q - base];
                     let sd = (x[i] - w.point).dot(w.normal);
                     let touching = eval && sd < ri;
-                    if !(touching || (commit.is_some() && l.live)) {
+                    if !(touching || (commit.is_some() && l.live())) {
                         if eval {
                             end_contact(l, &mut sums);
                         }
@@ -933,7 +961,7 @@ impl<V: Vector> Contacts<V> {
                     let d = ri - sd;
                     let ai = ri - 0.5 * d;
                     let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
-                    if let (Some(pdt), true) = (commit, l.live) {
+                    if let (Some(pdt), true) = (commit, l.live()) {
                         mat.commit(l, nrm, d, vc, w.friction, pdt, &mut sums);
                     }
                     if touching {
@@ -1026,9 +1054,9 @@ impl<V> Default for Part<V> {
 /// A contact that ended: its spring's energy goes to the books, the link is cleared.
 #[inline(always)]
 fn end_contact<V: Vector>(l: &mut Link<V>, sums: &mut Sums) {
-    if l.live {
-        sums.broken += l.u;
-        *l = Link::default();
+    if l.live() {
+        sums.broken += l.bt;
+        *l = Link::NONE;
     }
 }
 
@@ -1045,10 +1073,22 @@ fn split_at<'a, T>(mut a: &'a mut [T], bounds: &[usize]) -> Vec<&'a mut [T]> {
 
 /// The mass and inverse mass every free grain has, if they are all equal (the usual case).
 fn uniform_mass(model: &Model, r: &[Real]) -> Option<(Real, Real)> {
-    let n = r.len();
-    let i0 = (0..n).find(|&i| model.inv_mass[i] != 0.0 && r[i] > 0.0)?;
-    let (m0, im0) = (model.mass[i0], model.inv_mass[i0]);
-    (0..n).all(|i| model.inv_mass[i] == 0.0 || r[i] <= 0.0 || model.mass[i] == m0).then_some((m0, im0))
+    // The lightest and heaviest free grain (parallel: it runs every step).
+    let (lo, hi) = par::reduce(
+        r.len(),
+        (Real::INFINITY, Real::NEG_INFINITY),
+        |a, b| (a.0.min(b.0), a.1.max(b.1)),
+        |range| {
+            range
+                .into_iter()
+                .filter(|&i| model.inv_mass[i] != 0.0 && r[i] > 0.0)
+                .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), i| {
+                    (lo.min(model.mass[i]), hi.max(model.mass[i]))
+                })
+        },
+    );
+    let i0 = (0..r.len()).find(|&i| model.inv_mass[i] != 0.0 && r[i] > 0.0 && model.mass[i] == lo)?;
+    (lo == hi).then_some((lo, model.inv_mass[i0]))
 }
 
 /// Reads the radius attribute (zeros if unset).
