@@ -92,7 +92,9 @@ class Contacts(Term, kind="contacts"):
       ``I = inertia_factor · m r²``.
 
     The scene must use ``integrator="semi_implicit_euler"`` (the usual DEM scheme: forces at
-    the step's start, then v, ω, x, then each spring with the new velocities). The automatic
+    the step's start, then v, ω, x, then each spring with the new velocities) or ``"xpbd"``
+    (the same in each substep, whose projections then hold shape-matched bodies and other
+    constraints: the contacts are its external forces; see ``tumbling_boxes``). The automatic
     step (:meth:`~physcore.Scene.advance`) is a 50th of the contact duration ``π√(m*/k)``, at
     which the measured restitution is within 1 % of ``restitution``. Pinned particles with a
     radius are fixed obstacles; particles of radius 0 do not collide.
@@ -135,7 +137,7 @@ class Contacts(Term, kind="contacts"):
         A wall that is not a Plane or Box; non-numeric parameters.
     ValueError
         Parameters out of range (named); at :meth:`~physcore.Scene.add`: a scene whose
-        integrator is not ``"semi_implicit_euler"``, walls of the wrong dimension, or no
+        integrator is neither ``"semi_implicit_euler"`` nor ``"xpbd"``, walls of the wrong dimension, or no
         ``"radius"`` attribute.
     """
 
@@ -199,9 +201,9 @@ class Contacts(Term, kind="contacts"):
         }
 
     def _attach(self, scene: Scene, name: str) -> Contacts:
-        if scene.integrator != "semi_implicit_euler":
+        if scene.integrator not in ("semi_implicit_euler", "xpbd"):
             raise InvalidInputError(
-                f"integrator: Contacts need integrator='semi_implicit_euler' (the scene uses {scene.integrator!r}); "
+                f"integrator: Contacts need integrator='semi_implicit_euler' or 'xpbd' (the scene uses {scene.integrator!r}); "
                 "build the scene with pc.Scene(..., integrator='semi_implicit_euler') or set scene.integrator first"
             )
         if "radius" not in scene.attributes:

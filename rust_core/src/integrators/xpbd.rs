@@ -9,8 +9,9 @@
 //! v = (x − x_prev)/h
 //! ```
 //!
-//! External forces come from the scene's force terms (gravity, drag, springs, ...), evaluated
-//! once per substep; the constraints are the terms with `Term::xpbd_constraints` (terms/xpbd.rs).
+//! External forces come from the scene's force terms (gravity, drag, springs, contacts, ...),
+//! evaluated once per substep (terms with a state of their own get `begin_step` / `end_step`
+//! per substep, and the step limits of the force terms hold per substep); the constraints are the terms with `Term::xpbd_constraints` (terms/xpbd.rs).
 //! The paper's choice is many substeps with one iteration each (the default here: 10 and 1).
 //! Without constraints a substep is exactly semi-implicit Euler at h.
 //!
@@ -92,6 +93,10 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
             for (u, &k) in u_start.iter_mut().zip(&projecting) {
                 *u = sys.forces.terms[k].potential(&sys.state.x, &sys.model).unwrap_or(0.0);
             }
+            // Terms with a state of their own (contacts) step with the substeps.
+            for t in &mut sys.forces.terms {
+                t.begin_step(h);
+            }
             sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
             sys.forces.book_power(h);
             let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
@@ -104,6 +109,9 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 }
             });
             if !projecting.is_empty() {
+                for t in &mut sys.forces.terms {
+                    t.after_predict(&sys.state.x, &sys.state.v, &sys.model, h);
+                }
                 for &k in &projecting {
                     sys.forces.terms[k].xpbd_begin();
                 }
@@ -143,6 +151,9 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 }
                 b
             });
+            for t in &mut sys.forces.terms {
+                t.end_step(&sys.state.x, &sys.state.v, &sys.model, h);
+            }
         }
         any_bad
     }

@@ -453,7 +453,10 @@ impl<V: Vector> ParticleSystem<V> {
         };
         let g = self.sys.forces.g.length_squared().sqrt();
         let limit = terms.iter().filter_map(|t| t.max_dt(x, v, m, g)).fold(f64::INFINITY, f64::min);
-        (scale(false), limit, scale(true))
+        // "xpbd" steps the force terms in substeps of semi-implicit Euler: their limits are
+        // the substep's, and a step may be `substeps` times longer.
+        let sub = if self.integrator.info().name == "xpbd" { self.xpbd.0 as Real } else { 1.0 };
+        (sub * scale(false), sub * limit, sub * scale(true))
     }
 
     /// `time_scales_split(false)` without the third.

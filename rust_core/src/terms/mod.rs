@@ -128,6 +128,9 @@ pub trait Term<V: Vector>: Send + Sync {
     /// Completes what `end_step` deferred to the next evaluation (the contacts' springs), when
     /// a call of steps ends or before something else changes the state; idempotent.
     fn settle(&mut self, _x: &[V], _v: &[V], _model: &Model) {}
+    /// "xpbd" only: the state a substep of `h` predicted, before its projections move it (a term
+    /// with a state of its own may close its books here; see contacts).
+    fn after_predict(&mut self, _x: &[V], _v: &[V], _model: &Model, _h: Real) {}
     /// Kinetic energy the term's own state carries (contacts: rotation, ½Iω²), J.
     fn extra_kinetic(&self, _model: &Model) -> Real {
         0.0
