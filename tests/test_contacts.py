@@ -301,8 +301,8 @@ def test_bad_scenes_are_refused_before_anything_changes():
         s.particle_field("density")
 
 
-@pytest.mark.xfail(strict=True, reason="the dense stream of bouncing balls spreads the bins about twice as wide "
-                   "as Binomial(rows, 1/2) (6 rows: variance 2.9 against 1.5); see scenes.galton_board")
+@pytest.mark.xfail(strict=True, reason="the peg lattice spreads the bins about twice as wide as Binomial(rows, 1/2) "
+                   "(6 rows: variance 2.9 against 1.5; isolated balls too); see scenes.galton_board")
 def test_the_galton_board_fills_its_bins_binomially():
     # Each ball turns left or right at every row, so its bin is Binomial(rows, ½) (Galton 1889).
     # Pearson's χ² test of the bin counts against B(rows, ½), bins with fewer than 5 expected
