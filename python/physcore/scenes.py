@@ -387,7 +387,8 @@ def tumbling_boxes(
     scene.add(XpbdConstraints(shapes=shapes, name="boxes"))
     # A contact of two grains (m* = m/2) lasts π√(m*/k) = 60 substeps.
     h = dt / substeps if integrator == "xpbd" else dt
-    stiffness = 0.5 * m * (math.pi / (60.0 * h)) ** 2
+    w = math.pi / (60.0 * h) if h > 0.0 else math.inf
+    stiffness = 0.5 * m * w * w if w < 1e150 else math.inf  # (** would raise OverflowError)
     if not (math.isfinite(stiffness) and stiffness > 0.0):
         raise InvalidInputError(f"dt, substeps: give a contact stiffness out of float64's range ({stiffness})")
     if integrator in ("xpbd", "semi_implicit_euler"):
@@ -1312,6 +1313,8 @@ lorenz.render_defaults = {
 
 # --------------------------------------------------------------------------- grains (DEM)
 def _grain_scene(dt: float | None, integrator: str | None, threads: int | None) -> Scene:
+    if integrator is not None and not isinstance(integrator, str):
+        raise InvalidTypeError(f"integrator: expected a string or None, got {type(integrator).__name__}")
     if integrator not in (None, "semi_implicit_euler"):
         raise InvalidInputError(f"integrator: the grain scenes step with 'semi_implicit_euler' (the DEM scheme), got {integrator!r}")
     return Scene(2, integrator="semi_implicit_euler", dt=1e-4 if dt is None else dt, threads=threads)
