@@ -403,17 +403,25 @@ def test_the_jelly_lands_squashes_and_keeps_its_shape():
     # particles keep it from folding through itself).
     from physcore.scenes import jelly
 
+    # How long it rocks on the floor is chaotic: the SIMD levels round the springs differently,
+    # and on one level (avx2, AMD Zen 3) it still rocked at 3 s (|v| 0.22 m/s, books balanced,
+    # mechanical energy falling) where another had come to rest by 2.5 s. Both rest well before
+    # 8 s (|v| 4e-3 and 9e-3 against the bound 0.17).
     s = jelly(threads=1)
     r = s.attributes["radius"]
     worst = 0.0
-    for _ in range(30):
+    mech = []
+    for _ in range(80):
         s.advance(0.1)
         worst = max(worst, float(np.abs(s.velocities).max()))
+        mech.append(s.energy().mechanical)
         assert np.all(s.positions[:, 1] - r > -0.05 * r)  # never through the floor (y = 0)
     x = s.positions
     extent = np.sort(x.max(axis=0) - x.min(axis=0))
     assert np.all(extent > 0.9 * 0.3) and np.all(extent < 0.3 * 1.5), extent
     assert float(np.abs(s.velocities).max()) < 0.05 * worst  # it came to rest
+    # The dampers only take energy: measured, it never rose over any 0.1 s on either level.
+    assert np.all(np.diff(mech) <= 1e-9 * mech[0])
 
 
 def test_stepping_contacts_at_a_long_fixed_dt_warns_once():

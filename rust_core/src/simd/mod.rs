@@ -246,6 +246,21 @@ pub(crate) fn newton_rsqrt_f32<S: pulp::Simd>(s: S, h: S::f32s, y: S::f32s) -> S
     s.mul_f32s(y, s.negate_mul_add_f32s(s.mul_f32s(h, y), y, s.splat_f32s(1.5)))
 }
 
+/// The refined 1/√x where it is a number, else the hardware estimate `y0`: the refinement turns
+/// x = 0 and x = +inf into NaN (0·inf), where the estimate is already exact (+inf and 0), as
+/// 1/√x is on the scalar level. Without this a force at an overflowing distance (r² = inf) was 0
+/// on the scalar and AVX2 f64 levels but NaN on AVX-512, and an ensemble member "diverged" only
+/// on AVX-512 machines. Negative and NaN x stay NaN (the estimate is NaN there).
+#[inline(always)]
+pub(crate) fn rsqrt_specials_f64<S: pulp::Simd>(s: S, y0: S::f64s, y: S::f64s) -> S::f64s {
+    s.select_f64s(s.equal_f64s(y, y), y, y0)
+}
+/// The float32 twin of `rsqrt_specials_f64`.
+#[inline(always)]
+pub(crate) fn rsqrt_specials_f32<S: pulp::Simd>(s: S, y0: S::f32s, y: S::f32s) -> S::f32s {
+    s.select_f32s(s.equal_f32s(y, y), y, y0)
+}
+
 /// A kernel, generic over the SIMD token. `run` and everything it calls must be
 /// `#[inline(always)]` so that it is compiled inside the level's `#[target_feature]` wrapper.
 pub trait Kernel {
@@ -681,6 +696,18 @@ mod tests {
     #[test]
     fn rsqrt_is_accurate_on_every_available_level() {
         for level in Level::available() {
+            // 1/√0 = inf and 1/√inf = 0 at every level, as on the scalar one (forces at overflowing
+            // distances are then 0 everywhere, not NaN on some levels).
+            let mut x = vec![0.0, f64::INFINITY, 4.0, 0.25];
+            x.resize(16, 1.0);
+            let mut y = vec![0.0; x.len()];
+            dispatch(level, Rsqrt(&x, &mut y));
+            assert_eq!(y[..4], [f64::INFINITY, 0.0, 0.5, 2.0], "{level:?} f64 special values");
+            let mut x = vec![0.0f32, f32::INFINITY, 4.0, 0.25];
+            x.resize(16, 1.0);
+            let mut y = vec![0.0f32; x.len()];
+            dispatch(level, Rsqrt(&x, &mut y));
+            assert_eq!(y[..4], [f32::INFINITY, 0.0, 0.5, 2.0], "{level:?} f32 special values");
             let x = inputs::<f64>(-300, 300);
             let mut y = vec![0.0; x.len()];
             dispatch(level, Rsqrt(&x, &mut y));

@@ -1,6 +1,6 @@
 //! The fast reciprocal square root and gathers on x86-64 (the only ISA-specific code of the
 //! kernels).
-use super::{newton_rsqrt_f32, Simd};
+use super::{newton_rsqrt_f32, rsqrt_specials_f32, rsqrt_specials_f64, Simd};
 use pulp::x86::{V3, V4};
 use pulp::{cast, Simd as _};
 
@@ -58,7 +58,7 @@ impl Simd for V3 {
     #[inline(always)]
     fn rsqrt_f32s(self, x: F32s3) -> F32s3 {
         let y = self.approx_reciprocal_sqrt_f32x8(x);
-        newton_rsqrt_f32(self, self.mul_f32s(x, self.splat_f32s(0.5)), y)
+        rsqrt_specials_f32(self, y, newton_rsqrt_f32(self, self.mul_f32s(x, self.splat_f32s(0.5)), y))
     }
 }
 
@@ -94,12 +94,12 @@ impl Simd for V4 {
         let e = self.negate_mul_add_f64s(self.mul_f64s(x, y), y, self.splat_f64s(1.0));
         let p = self.mul_add_f64s(e, self.splat_f64s(0.3125), self.splat_f64s(0.375));
         let p = self.mul_add_f64s(e, p, self.splat_f64s(0.5));
-        self.mul_add_f64s(self.mul_f64s(y, e), p, y)
+        rsqrt_specials_f64(self, y, self.mul_add_f64s(self.mul_f64s(y, e), p, y))
     }
 
     #[inline(always)]
     fn rsqrt_f32s(self, x: F32s4) -> F32s4 {
         let y = cast(self.avx512f._mm512_rsqrt14_ps(cast(x)));
-        newton_rsqrt_f32(self, self.mul_f32s(x, self.splat_f32s(0.5)), y)
+        rsqrt_specials_f32(self, y, newton_rsqrt_f32(self, self.mul_f32s(x, self.splat_f32s(0.5)), y))
     }
 }
