@@ -698,16 +698,17 @@ mod tests {
         for level in Level::available() {
             // 1/√0 = inf and 1/√inf = 0 at every level, as on the scalar one (forces at overflowing
             // distances are then 0 everywhere, not NaN on some levels).
-            let mut x = vec![0.0, f64::INFINITY, 4.0, 0.25];
-            x.resize(16, 1.0);
-            let mut y = vec![0.0; x.len()];
+            // (The other lanes are finite: the accuracy checks below cover them.)
+            let mut x = vec![0.0, f64::INFINITY];
+            x.resize(16, 4.0);
+            let mut y = vec![1.0; x.len()];
             dispatch(level, Rsqrt(&x, &mut y));
-            assert_eq!(y[..4], [f64::INFINITY, 0.0, 0.5, 2.0], "{level:?} f64 special values");
-            let mut x = vec![0.0f32, f32::INFINITY, 4.0, 0.25];
-            x.resize(16, 1.0);
-            let mut y = vec![0.0f32; x.len()];
+            assert_eq!(y[..2], [f64::INFINITY, 0.0], "{level:?} f64 special values");
+            let mut x = vec![0.0f32, f32::INFINITY];
+            x.resize(16, 4.0);
+            let mut y = vec![1.0f32; x.len()];
             dispatch(level, Rsqrt(&x, &mut y));
-            assert_eq!(y[..4], [f32::INFINITY, 0.0, 0.5, 2.0], "{level:?} f32 special values");
+            assert_eq!(y[..2], [f32::INFINITY, 0.0], "{level:?} f32 special values");
             let x = inputs::<f64>(-300, 300);
             let mut y = vec![0.0; x.len()];
             dispatch(level, Rsqrt(&x, &mut y));
