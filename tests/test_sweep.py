@@ -338,8 +338,9 @@ def test_ensemble_records_a_failing_member():
         v[1:] += 1e200 * rng.standard_normal(v[1:].shape)
         scene.velocities = v
 
-    # A spring chain at an explicit step 10x its stability limit (2/ω): any motion grows about
-    # 100× a step and overflows within a few, on every SIMD level; unperturbed, the chain rests
+    # A spring chain at an explicit step about 9× its stability limit (2/ω): any motion grows by
+    # two orders of magnitude a step and overflows within a few, on every SIMD level (measured:
+    # at step 2 on scalar and avx2); unperturbed, the chain rests
     # at its rest lengths, feels no force and stays. (This test used huge velocities in the
     # figure-eight, whose bodies then fly apart with finite positions: physically right, since
     # gravity at 1e198 m is 0, and no divergence at all once every level computed 1/√inf as 0.)
