@@ -340,10 +340,10 @@ def test_ensemble_records_a_failing_member():
 
     # A spring chain at an explicit step about 9× its stability limit (2/ω): any motion grows by
     # two orders of magnitude a step and overflows within a few, on every SIMD level (measured:
-    # at step 2 on scalar and avx2); unperturbed, the chain rests
-    # at its rest lengths, feels no force and stays. (This test used huge velocities in the
-    # figure-eight, whose bodies then fly apart with finite positions: physically right, since
-    # gravity at 1e198 m is 0, and no divergence at all once every level computed 1/√inf as 0.)
+    # at step 2 on scalar and avx2); unperturbed, the chain rests at its rest lengths, feels no
+    # force and stays. (This test used huge velocities in the figure-eight, whose bodies then fly
+    # apart with finite positions: physically right, since gravity at 1e198 m is 0, and no
+    # divergence at all once every level computed 1/√inf as 0.)
     scene = pc.Scene(dim=2, dt=1.0)
     scene.add_particles([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
     scene.add(pc.Springs([0, 1], [1, 2], stiffness=100.0))
