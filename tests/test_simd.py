@@ -95,6 +95,26 @@ def _fluid(threads, precision, dim):
     return pc.scenes.dam_break(dim=dim, n=40 if dim == 2 else 10, precision=precision, threads=threads)
 
 
+def _grains(threads, dim):
+    """A pile of grains in a box: every branch of the contact pair pass (contacts that form, slip,
+    end; pinned partners; walls); 2D linear with equal masses, 3D Hertz with unequal ones."""
+    rng = np.random.default_rng(5 + dim)
+    n = 4500 if dim == 2 else 1500  # past the parallel threshold in 2D
+    size = 0.25 if dim == 2 else 0.06
+    x = rng.uniform(0.0, size, (n, dim))
+    r = np.full(n, 0.002) if dim == 2 else rng.uniform(0.002, 0.003, n)
+    s = pc.Scene(dim, integrator="semi_implicit_euler", dt=1e-5, threads=threads)
+    s.add_particles(x, rng.normal(0.0, 0.2, (n, dim)), masses=1e-3 * (r / 0.002) ** dim,
+                    pinned=rng.uniform(size=n) < 0.03)
+    s.set_attribute("radius", r)
+    s.add(pc.Gravity([0.0] * (dim - 1) + [-9.81]))
+    s.add(pc.Contacts(stiffness=1e4 if dim == 2 else 1e6, restitution=0.5, friction=0.4,
+                      law="linear" if dim == 2 else "hertz",
+                      walls=pc.Box([0.0] * dim, [size] * dim, restitution=0.7, friction=0.3)))
+    s.dt = s.suggest_dt()
+    return s
+
+
 SCENES = {
     "cloth-springs-f64": (lambda t: _cloth(t), 20, 1e-12),
     "nbody-f64": (lambda t: _nbody(t, "f64"), 20, 1e-12),
@@ -102,6 +122,9 @@ SCENES = {
     "sph2d-f32": (lambda t: _fluid(t, "f32", 2), 10, 1e-4),
     "sph2d-f64": (lambda t: _fluid(t, "f64", 2), 10, 1e-11),
     "sph3d-f32": (lambda t: _fluid(t, "f32", 3), 5, 1e-4),
+    # The contact pair pass does the scalar operations lane by lane: the same bits at every level.
+    "grains2d-linear": (lambda t: _grains(t, 2), 60, 0.0),
+    "grains3d-hertz": (lambda t: _grains(t, 3), 60, 0.0),
 }
 
 

@@ -63,12 +63,18 @@ pub trait Vector:
     fn round_f32(self) -> Self;
     /// The vectors as a flat row-major `(N, DIM)` slice of reals (no copy).
     fn flat(v: &[Self]) -> &[Real];
+    /// Axial vectors as a flat row-major `(N, AXIAL_DIM)` slice of reals (no copy).
+    fn axial_flat(b: &[Self::Axial]) -> &[Real];
 }
 
 impl Vector for DVec2 {
     #[inline(always)]
     fn flat(v: &[Self]) -> &[Real] {
         bytemuck::cast_slice(v)
+    }
+    #[inline(always)]
+    fn axial_flat(b: &[Real]) -> &[Real] {
+        b
     }
     const DIM: usize = 2;
     const ZERO: Self = DVec2::ZERO;
@@ -118,6 +124,10 @@ impl Vector for DVec3 {
     #[inline(always)]
     fn flat(v: &[Self]) -> &[Real] {
         bytemuck::cast_slice(v)
+    }
+    #[inline(always)]
+    fn axial_flat(b: &[DVec3]) -> &[Real] {
+        bytemuck::cast_slice(b)
     }
     const DIM: usize = 3;
     const ZERO: Self = DVec3::ZERO;

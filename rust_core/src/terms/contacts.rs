@@ -62,9 +62,12 @@ use super::{Term, Write};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
 use crate::par::{self, CHUNK};
+use crate::simd;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
+
+mod lanes;
 
 /// Steps per contact duration (`max_dt`).
 const STEPS_PER_CONTACT: Real = 50.0;
@@ -153,6 +156,8 @@ struct Carry<V> {
 /// the walls near grain i, wall[wstart[i]..wstart[i + 1]].
 #[derive(Clone, Debug, Default)]
 struct Lists<V: Vector> {
+    /// The first grain of each pair (for the lane-wise pass).
+    pi: Vec<u32>,
     pj: Vec<u32>,
     pstart: Vec<u32>,
     rpair: Vec<u32>,
@@ -317,28 +322,7 @@ impl Material {
         let (mut fn_, _) = self.normal(d, vn, c);
         let onset = if new { dt } else { 0.0 };
         if onset > 0.0 && vn > 0.0 && d <= 1.5 * vn * onset {
-            // A contact that began τ = δ/v_n before this step. Semi-implicit Euler is leapfrog:
-            // this step's kick f(x)·dt stands for the force over [t − dt/2, t + dt/2], but the
-            // contact pushed over [t − τ, t + dt/2]. Add the difference, exact for the force
-            // law along δ = v_n u (u: time in contact), so that where in a step grains first
-            // touch no longer matters: uncorrected, e = 0.1 came out 2–3 % off at random.
-            let tau = (d / vn).min(onset);
-            let t = tau + 0.5 * onset;
-            let (c, k) = (c.gn, self.stiffness);
-            let (el_j, damp_j) = match self.law {
-                // ∫₀ᵀ (k v u + c v) du − (k v τ + c v) dt
-                Law::Linear => (k * vn * (0.5 * t * t - tau * onset), c * vn * (t - onset)),
-                // ∫₀ᵀ (k (v u)^{3/2} + c (v u)^{1/4} v) du − f(τ) dt
-                Law::Hertz => {
-                    let v15 = vn * vn.sqrt();
-                    let v125 = vn * vn.sqrt().sqrt();
-                    (
-                        k * v15 * (t * t * t.sqrt() / 2.5 - tau * tau.sqrt() * onset),
-                        c * v125 * (t * t.sqrt().sqrt() / 1.25 - tau.sqrt().sqrt() * onset),
-                    )
-                }
-            };
-            fn_ = (fn_ + (el_j + damp_j) / onset).max(0.0);
+            fn_ = self.onset(fn_, d, vn, c.gn, onset);
         }
         let vt = vc - n * vn;
         let kt = self.kt(d);
@@ -383,6 +367,35 @@ impl Material {
             xi_c = (ft + vt * gt) * (-inv_kt);
         }
         PairOut { force: ft - n * fn_, ft, xi: xi_c, fn_, wn0: fn_ * vn, wt0: -ft.dot(vt) }
+    }
+
+    /// The normal force `fn_` of a contact that began during the last step (of `onset`, s), at
+    /// overlap `d` approaching at `vn` > 0 with d ≤ 1.5 vn·onset (dashpot coefficient `gn`),
+    /// corrected for when it began. The scalar and the lane-wise pair passes share it.
+    #[inline(never)]
+    fn onset(&self, fn_: Real, d: Real, vn: Real, gn: Real, onset: Real) -> Real {
+        // A contact that began τ = δ/v_n before this step. Semi-implicit Euler is leapfrog:
+        // this step's kick f(x)·dt stands for the force over [t − dt/2, t + dt/2], but the
+        // contact pushed over [t − τ, t + dt/2]. Add the difference, exact for the force
+        // law along δ = v_n u (u: time in contact), so that where in a step grains first
+        // touch no longer matters: uncorrected, e = 0.1 came out 2–3 % off at random.
+        let tau = (d / vn).min(onset);
+        let t = tau + 0.5 * onset;
+        let (c, k) = (gn, self.stiffness);
+        let (el_j, damp_j) = match self.law {
+            // ∫₀ᵀ (k v u + c v) du − (k v τ + c v) dt
+            Law::Linear => (k * vn * (0.5 * t * t - tau * onset), c * vn * (t - onset)),
+            // ∫₀ᵀ (k (v u)^{3/2} + c (v u)^{1/4} v) du − f(τ) dt
+            Law::Hertz => {
+                let v15 = vn * vn.sqrt();
+                let v125 = vn * vn.sqrt().sqrt();
+                (
+                    k * v15 * (t * t * t.sqrt() / 2.5 - tau * tau.sqrt() * onset),
+                    c * v125 * (t * t.sqrt().sqrt() / 1.25 - tau.sqrt().sqrt() * onset),
+                )
+            }
+        };
+        (fn_ + (el_j + damp_j) / onset).max(0.0)
     }
 
     /// Commits a live contact's step with the state at the step's end (normal `n`, overlap
@@ -484,6 +497,22 @@ pub struct Contacts<V: Vector> {
     prebooked: bool,
     /// `uniform_mass` of the evaluation in progress.
     uniform: Option<(Real, Real)>,
+    /// How pair passes run: tests force a path to compare them.
+    path: PairPath,
+    /// The unwritten force buffer of `commit_pass`.
+    scratch: Vec<V>,
+}
+
+/// The code a pair pass runs (see `lanes`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum PairPath {
+    /// The lanes at the process's level for the semi-implicit steps, else the loop.
+    Auto,
+    /// The branchy scalar loop always.
+    Loop,
+    /// As `Auto`, at this level.
+    #[cfg_attr(not(test), allow(dead_code))]
+    Lanes(simd::Level),
 }
 
 fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
@@ -676,6 +705,8 @@ impl<V: Vector> Contacts<V> {
             pending: None,
             prebooked: false,
             uniform: None,
+            path: PairPath::Auto,
+            scratch: Vec::new(),
         }
     }
 
@@ -727,11 +758,27 @@ impl<V: Vector> Contacts<V> {
             return true;
         }
         let lim = 0.25 * l.skin * l.skin;
+        let level = simd::level();
+        // Branch-free (the largest move, any radius changed) so that it vectorises.
         par::reduce(
             x.len(),
             false,
             |a, b| a || b,
-            |range| range.into_iter().any(|i| (x[i] - l.x[i]).length_squared() > lim || r[i] != l.r[i]),
+            |range| {
+                simd::vectorized(
+                    level,
+                    #[inline(always)]
+                    || {
+                        let (mut far, mut changed) = (0.0, false);
+                        for i in range {
+                            let d = (x[i] - l.x[i]).length_squared();
+                            far = if d > far { d } else { far };
+                            changed |= r[i] != l.r[i];
+                        }
+                        far > lim || changed
+                    },
+                )
+            },
         )
     }
 
@@ -814,7 +861,7 @@ impl<V: Vector> Contacts<V> {
             None => (0..chunks).map(part).collect(),
         };
         let mut l = self.lists.take().unwrap_or_default();
-        for v in [&mut l.pj, &mut l.pstart, &mut l.rpair, &mut l.rstart, &mut l.wall, &mut l.wstart] {
+        for v in [&mut l.pi, &mut l.pj, &mut l.pstart, &mut l.rpair, &mut l.rstart, &mut l.wall, &mut l.wstart] {
             v.clear();
         }
         l.links.clear();
@@ -834,6 +881,10 @@ impl<V: Vector> Contacts<V> {
             l.wall.extend_from_slice(&p.wall);
             l.wlinks.extend_from_slice(&p.wlinks);
             dropped += p.dropped;
+        }
+        for i in 0..n {
+            let k = (l.pstart[i + 1] - l.pstart[i]) as usize;
+            l.pi.extend(std::iter::repeat_n(i as u32, k));
         }
         // The pairs by second grain, in pair order (a counting sort).
         l.rstart.resize(n + 1, 0);
@@ -876,9 +927,41 @@ impl<V: Vector> Contacts<V> {
             (c(im0 + im0, 0.5 * m), c(im0, m))
         });
         let im = &model.inv_mass;
+        // The semi-implicit steps go lane by lane (`lanes`: the same bits as the loop below).
+        let level = match self.path {
+            PairPath::Lanes(l) => l,
+            _ => simd::level(),
+        };
+        let full = match commit {
+            None => Some(None),
+            Some(Commit::Full(dt)) => Some(Some(dt)),
+            Some(_) => None,
+        }
+        .filter(|_| self.path != PairPath::Loop);
+        let (xf, vf, wf, pi) = (V::flat(x), V::flat(v), V::axial_flat(omega), &l.pi);
         let body = |c: usize, links: &mut [Link<V>], forces: &mut [PairForce<V>]| -> Sums {
             let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
             let base = pstart[s0] as usize;
+            if let Some(commit) = full {
+                let (a, b) = (base, pstart[s1] as usize);
+                let k = lanes::Lanes {
+                    x: xf,
+                    v: vf,
+                    omega: wf,
+                    r,
+                    im,
+                    pi: &pi[a..b],
+                    pj: &pj[a..b],
+                    links,
+                    forces,
+                    mat,
+                    uniform,
+                    dt,
+                    commit,
+                    eval,
+                };
+                return simd::dispatch(level, k);
+            }
             let mut sums = Sums::default();
             for i in s0..s1 {
                 let (a, b) = (pstart[i] as usize, pstart[i + 1] as usize);
@@ -1087,10 +1170,13 @@ impl<V: Vector> Contacts<V> {
         if self.lists.as_ref().is_none_or(|l| l.x.len() != x.len()) {
             return;
         }
-        // Nothing is evaluated: the forces go to a scratch that is not written.
-        let mut scratch = vec![V::ZERO; x.len()];
+        // Nothing is evaluated: the forces go to a scratch that is not written (kept: "xpbd"
+        // commits twice per substep).
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.resize(x.len(), V::ZERO);
         let s = self.pair_pass(x, v, model, r, Some(c), false);
         let s = s.add(self.grain_pass(x, v, model, r, Some(c), &mut scratch, Write::Overwrite, false));
+        self.scratch = scratch;
         self.dissipated[0] += s.lost_n;
         self.dissipated[1] += s.lost_t;
     }
@@ -1341,18 +1427,26 @@ impl<V: Vector> Term<V> for Contacts<V> {
         let beta = self.material.inertia_factor;
         // ω ← ω + dt τ/I, then the angle with the new ω (semi-implicit, like v and x).
         let torque = &self.torque;
+        let level = simd::level();
         par::chunks2(&mut self.omega, &mut self.angle, |s, w, a| {
-            for k in 0..w.len() {
-                let i = s + k;
-                if model.inv_mass[i] == 0.0 || r[i] <= 0.0 {
-                    continue;
-                }
-                let inv_i = 1.0 / (beta * model.mass[i] * r[i] * r[i]);
-                w[k] = w[k] + torque[i] * (dt * inv_i);
-                if V::DIM == 2 {
-                    a[k] += dt * axial_z::<V>(w[k]);
-                }
-            }
+            // Selects, not branches, so that the divisions vectorise.
+            simd::vectorized(
+                level,
+                #[inline(always)]
+                || {
+                    for k in 0..w.len() {
+                        let i = s + k;
+                        let turns = model.inv_mass[i] != 0.0 && r[i] > 0.0;
+                        let inv_i = 1.0 / (beta * model.mass[i] * r[i] * r[i]);
+                        let wk = w[k] + torque[i] * (dt * inv_i);
+                        w[k] = if turns { wk } else { w[k] };
+                        if V::DIM == 2 {
+                            let ak = a[k] + dt * axial_z::<V>(w[k]);
+                            a[k] = if turns { ak } else { a[k] };
+                        }
+                    }
+                },
+            )
         });
         // The springs follow the contact points with the new velocities: deferred to the next
         // evaluation, which computes each contact's geometry at these positions anyway, or to
@@ -1559,6 +1653,122 @@ mod tests {
         let e: Real = 0.3;
         let textbook = -e.ln() / (std::f64::consts::PI.powi(2) + e.ln().powi(2)).sqrt();
         assert!((damping_ratio(Law::Linear, e) - textbook).abs() > 1e-3);
+    }
+
+    /// A pile of `n` grains with random radii, some pinned, some overlapping, moving at random;
+    /// unequal masses unless `uniform`.
+    fn pile<V: Vector>(n: usize, uniform: bool, seed: u64) -> (Vec<V>, Vec<V>, Model) {
+        let mut state = seed;
+        let mut rnd = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as Real / (1u64 << 53) as Real
+        };
+        let side = (n as Real).powf(1.0 / V::DIM as Real) * 2.0e-3;
+        let (mut x, mut v, mut mass, mut inv, mut r) = (vec![], vec![], vec![], vec![], vec![]);
+        for _ in 0..n {
+            let c: Vec<Real> = (0..V::DIM).map(|_| rnd() * side).collect();
+            let u: Vec<Real> = (0..V::DIM).map(|_| rnd() - 0.5).collect();
+            x.push(V::from_slice(&c));
+            v.push(V::from_slice(&u) * 0.3);
+            let ri = if uniform { 1e-3 } else { 1e-3 * (0.8 + 0.4 * rnd()) };
+            let m = if uniform { 1e-3 } else { 1e-3 * (ri / 1e-3).powi(V::DIM as i32) };
+            r.push(ri);
+            mass.push(m);
+            inv.push(if rnd() < 0.05 { 0.0 } else { 1.0 / m });
+        }
+        let mut attributes = std::collections::BTreeMap::new();
+        attributes.insert("radius", r);
+        (x, v, Model { mass, inv_mass: inv, attributes })
+    }
+
+    /// Semi-implicit Euler steps of `c` alone under gravity; the forces and torques of every step.
+    fn run<V: Vector>(
+        c: &mut Contacts<V>,
+        x: &mut [V],
+        v: &mut [V],
+        model: &Model,
+        dt: Real,
+        steps: usize,
+    ) -> Vec<Real> {
+        let mut out = Vec::new();
+        let mut f = vec![V::ZERO; x.len()];
+        let mut g = [0.0; 3];
+        g[V::DIM - 1] = -9.81;
+        let g = V::from_slice(&g);
+        for _ in 0..steps {
+            c.begin_step(dt);
+            c.add_forces(x, v, model, &mut f, Write::Overwrite);
+            for i in 0..x.len() {
+                if model.inv_mass[i] != 0.0 {
+                    v[i] += (f[i] * model.inv_mass[i] + g) * dt;
+                    x[i] += v[i] * dt;
+                }
+                out.extend((0..V::DIM).map(|k| f[i].comp(k)));
+            }
+            c.end_step(x, v, model, dt);
+            let mut t = Vec::new();
+            c.torque.iter().for_each(|&w| push_axial::<V>(&mut t, w));
+            out.extend(t);
+        }
+        c.settle(x, v, model);
+        out.extend(c.dissipated);
+        out
+    }
+
+    fn lanes_match_the_loop<V: Vector>() {
+        for law in [Law::Linear, Law::Hertz] {
+            for uniform in [true, false] {
+                let e = 0.5;
+                let ratio: Real = 2.0 / 7.0;
+                let material = Material {
+                    law,
+                    stiffness: if law == Law::Linear { 1e3 } else { 1e6 },
+                    tangential_ratio: ratio,
+                    restitution: e,
+                    zeta: damping_ratio(law, e),
+                    friction: 0.3,
+                    inertia_factor: 0.5,
+                    tangential_damping: if law == Law::Linear { ratio.sqrt() } else { (1.5 * ratio).sqrt() },
+                };
+                let mut normal = [0.0; 3];
+                normal[V::DIM - 1] = 1.0;
+                let wall = Wall {
+                    point: V::ZERO,
+                    normal: V::from_slice(&normal),
+                    zeta: damping_ratio(law, 0.7),
+                    friction: 0.4,
+                };
+                let (x0, v0, model) = pile::<V>(300, uniform, 7);
+                let mut reference = None;
+                let paths =
+                    std::iter::once(PairPath::Loop).chain(simd::Level::available().into_iter().map(PairPath::Lanes));
+                for path in paths {
+                    let mut c = Contacts::new("c".into(), material, vec![wall]);
+                    c.path = path;
+                    let (mut x, mut v) = (x0.clone(), v0.clone());
+                    let out = run(&mut c, &mut x, &mut v, &model, 2e-5, 60);
+                    assert!(c.count() > 0 && out.iter().all(|a| a.is_finite()));
+                    let bits: Vec<u64> = x.iter().flat_map(|p| (0..V::DIM).map(|k| p.comp(k).to_bits())).collect();
+                    let got = (bits, out.len(), out[..out.len() - 2].iter().map(|a| a.to_bits()).collect::<Vec<_>>());
+                    match &reference {
+                        None => reference = Some(got),
+                        Some(r) => {
+                            let what = format!("{}D {law:?} uniform={uniform}, {path:?}", V::DIM);
+                            assert!(r.0 == got.0, "{what}: positions differ from the scalar loop's");
+                            assert!(r.2 == got.2, "{what}: forces or torques differ from the scalar loop's");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_match_the_scalar_pair_pass() {
+        // Same bits (positions, every step's forces and torques) as the branchy loop, at every
+        // level this CPU has; the books only to round-off (the lanes sum in another order).
+        lanes_match_the_loop::<glam::DVec2>();
+        lanes_match_the_loop::<glam::DVec3>();
     }
 
     #[test]

@@ -1,8 +1,8 @@
 //! The stop flag of `step_interruptible`: read between steps and between rk45's internal step
 //! attempts, it rolls everything back, and reading it never changes a result; `run_watched`
 //! leaves the calling thread free to set it.
-mod common;
-use common::cloth;
+
+use crate::common::cloth;
 use glam::DVec3;
 use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;

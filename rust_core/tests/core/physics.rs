@@ -1,6 +1,6 @@
 //! Terms, colliders, energy books, conservation laws, determinism and error handling.
-mod common;
-use common::{cloth, cloud, Rng};
+
+use crate::common::{cloth, cloud, Rng};
 use glam::{DVec2, DVec3};
 use physcore_core::constraints::{Aabb, Plane};
 use physcore_core::terms::{Drag, Springs, UniformGravity};

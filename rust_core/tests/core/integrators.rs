@@ -1,6 +1,6 @@
 //! Integrator numerics: convergence orders, stability, energy behaviour.
-mod common;
-use common::oscillator;
+
+use crate::common::oscillator;
 use physcore_core::integrators::{by_name, NAMES};
 
 fn error_at(integrator: &str, dt: f64, t_end: f64) -> f64 {

@@ -1,8 +1,8 @@
 //! The world: several systems stepped together with one clock, atomic rollback across all of
 //! them, couplings after every step, and the ODE layer's tableaux shared with the particle
 //! integrators.
-mod common;
-use common::oscillator;
+
+use crate::common::oscillator;
 use glam::DVec2;
 use physcore_core::error::Error;
 use physcore_core::systems::ode::OdeSystem;
@@ -135,7 +135,7 @@ fn an_ode_system_is_bit_identical_for_1_and_2_threads() {
 /// A damped cloth falling onto a floor (constraint books), plus an ODE system.
 fn restartable(integrator: &str) -> World<glam::DVec3> {
     use physcore_core::constraints::Plane;
-    let mut w = common::cloth(6, integrator, 2, 0.05);
+    let mut w = crate::common::cloth(6, integrator, 2, 0.05);
     let floor = Plane::new(glam::DVec3::new(0.0, 0.0, -0.05), glam::DVec3::Z, 0.5, 0.3).unwrap();
     w.particles_mut().add_constraint(Box::new(floor));
     w.add_system(Box::new(harmonic("dopri5", None))).unwrap();
