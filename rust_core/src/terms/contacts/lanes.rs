@@ -135,24 +135,10 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
             for c in 0..dim {
                 xi[c] = g(x, &ii, dim, c);
                 xj[c] = g(x, &jj, dim, c);
-                vi[c] = g(v, &ii, dim, c);
-                vj[c] = g(v, &jj, dim, c);
-            }
-            let (mut wi, mut wj) = ([zero; 3], [zero; 3]);
-            for a in 0..ad {
-                wi[a] = g(omega, &ii, ad, a);
-                wj[a] = g(omega, &jj, ad, a);
             }
             let (ri, rj, imi, imj) = (g(r, &ii, 1, 0), g(r, &jj, 1, 0), g(im, &ii, 1, 0), g(im, &jj, 1, 0));
             let lk = |k: usize| &links[p + k.min(cnt - 1)];
-            let (mut lxi, mut lft) = ([zero; 3], [zero; 3]);
-            for c in 0..dim {
-                lxi[c] = F::<S>::from_fn(s, |k| lk(k).xi.comp(c));
-                lft[c] = F::<S>::from_fn(s, |k| lk(k).ft.comp(c));
-            }
             let lfn = F::<S>::from_fn(s, |k| lk(k).fn_);
-            let mut lbt = F::<S>::from_fn(s, |k| lk(k).bt);
-            let lbn = F::<S>::from_fn(s, |k| lk(k).bn);
 
             // Geometry, as the scalar loop.
             let mut dx = [zero; 3];
@@ -165,9 +151,33 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
             let touching = and(s, and(s, m_eval, d2.lt(sr * sr)), and(s, d2.gt(zero), ne(imi + imj, zero)));
             let touching = and(s, touching, valid);
             let live = ge(lfn, zero);
+            if !any(s, and(s, valid, or(s, touching, live))) {
+                // Candidates apart and without a contact (most of them in a sparse scene).
+                if eval {
+                    forces[p..p + cnt].iter_mut().for_each(|f| *f = PairForce::ZERO);
+                }
+                p += l;
+                continue;
+            }
             let committing = and(s, m_commit, live);
             let active = and(s, or(s, touching, committing), ne(d2, zero));
             let active = and(s, active, valid);
+            for c in 0..dim {
+                vi[c] = g(v, &ii, dim, c);
+                vj[c] = g(v, &jj, dim, c);
+            }
+            let (mut wi, mut wj) = ([zero; 3], [zero; 3]);
+            for a in 0..ad {
+                wi[a] = g(omega, &ii, ad, a);
+                wj[a] = g(omega, &jj, ad, a);
+            }
+            let (mut lxi, mut lft) = ([zero; 3], [zero; 3]);
+            for c in 0..dim {
+                lxi[c] = F::<S>::from_fn(s, |k| lk(k).xi.comp(c));
+                lft[c] = F::<S>::from_fn(s, |k| lk(k).ft.comp(c));
+            }
+            let mut lbt = F::<S>::from_fn(s, |k| lk(k).bt);
+            let lbn = F::<S>::from_fn(s, |k| lk(k).bn);
             let dist = sqrt(d2);
             let inv = splat(1.0) / dist;
             let mut nrm = [zero; 3];
