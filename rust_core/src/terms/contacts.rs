@@ -48,7 +48,9 @@
 //! own slot; each particle then gathers its pairs' forces in a fixed order (its pairs as the
 //! first grain, then as the second, then its walls), so results are bit-identical for any
 //! thread count, and the two grains get exactly negated forces, so momentum is conserved to
-//! round-off.
+//! round-off. The pair pass of the semi-implicit steps runs several pairs per SIMD vector
+//! (`contacts/lanes.rs`), with the scalar loop's operations in its order: the same bits at
+//! every level.
 //!
 //! Energy books: kinetic energy includes rotation (½Iω²); potential: the springs' energy,
 //! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|²; dissipated: "normal damping" and "friction". Each
