@@ -34,17 +34,30 @@ def _max_error_bound(integrator: str) -> float:
     return H_NET ** (2 if integrator == "verlet" else 1)
 
 
+def _grows(d: np.ndarray) -> bool:
+    """Whether the error in the last quarter of the run exceeds 3x that of the first quarter (a
+    secular drift c·t gives 4x; a bounded quasi-periodic error does not grow)."""
+    q = len(d) // 4
+    return bool(np.abs(d[-q:]).max() >= 3 * np.abs(d[1 : q + 1]).max() + 1e-12)
+
+
 @pytest.mark.parametrize("integrator", SYMPLECTIC)
 @given(seed=seeds, n=st.integers(3, 8), n_pinned=st.integers(0, 2), dim=st.sampled_from([2, 3]))
 def test_symplectic_energy_error_bounded_without_drift(integrator, seed, n, n_pinned, dim):
-    # Small oscillations (near-linear, quasi-periodic motion): the first quarter of the run is
-    # representative, so a secular drift would show as a larger error in the last quarter.
-    d = _network_drift(seed, n, min(n_pinned, n - 2), dim, integrator, speed=0.05)
+    # Small oscillations (near-linear, quasi-periodic motion): a secular drift would show as a
+    # larger error in the last quarter of the run than in the first.
+    args = (seed, n, min(n_pinned, n - 2), dim, integrator)
+    d = _network_drift(*args, speed=0.05)
     assert np.all(np.isfinite(d))
     assert np.abs(d).max() < _max_error_bound(integrator)
-    q = len(d) // 4
-    first, last = np.abs(d[1 : q + 1]).max(), np.abs(d[-q:]).max()
-    assert last < 3 * first + 1e-12
+    if _grows(d):
+        # Two modes of nearly equal frequency beat more slowly than the run: the error's envelope
+        # can then rise through the whole run (seed 108986615, n = 6, 1 pinned, 2D, yoshida4:
+        # first quarter 3.5e-8, last 1.3e-7), and fall again later (over a run 4x as long its
+        # largest error is in the first quarter). A drift keeps growing over the longer run.
+        d = _network_drift(*args, speed=0.05, n_steps=48_000)
+        assert np.abs(d).max() < _max_error_bound(integrator)
+        assert not _grows(d)
 
 
 def test_drift_criterion_detects_explicit_euler():
@@ -54,8 +67,7 @@ def test_drift_criterion_detects_explicit_euler():
     s.dt = H_NET * 2 * s.suggest_dt()
     e = np.array(sample(s, 4000, 10, total_energy))
     d = (e - e[0]) / e[0]
-    q = len(d) // 4
-    assert np.abs(d[-q:]).max() > 3 * np.abs(d[1 : q + 1]).max()
+    assert _grows(d)
     assert d[-1] > 0
 
 
