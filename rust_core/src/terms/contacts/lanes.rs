@@ -351,7 +351,7 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 out_fn = ev.select(fnv, out_fn);
                 out_bt = ev.select(lbt + splat(0.5 * dt) * wt0, out_bt);
                 out_bn = ev.select(splat(0.5 * dt) * wn0 + normal_energy(mat, d), out_bn);
-                // The torque lever arms: moment(n, f_t) = n × f_t.
+                // moment(n, f_t) = n × f_t; each grain's torque is it times its lever.
                 let t: [F<S>; 3] = if dim == 2 {
                     [nrm[0] * ft[1] - nrm[1] * ft[0], zero, zero]
                 } else {
