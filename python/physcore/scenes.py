@@ -289,8 +289,10 @@ def xpbd_cloth(
     if not math.isfinite(air_drag * mass):
         raise InvalidInputError(f"air_drag: the drag coefficient air_drag · m = {air_drag * mass} kg/s overflows float64")
     s = size / (n - 1)
-    if not (s >= _check.MIN_NORMAL and math.isfinite(8 * s * s)):
-        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside float64's usable range")
+    # The dihedral bending angles take products of five spacings ((n1 × n2)·e): they must stay
+    # normal floats (size = 1e-300 made every rest angle NaN, refused under the wrong name).
+    if not 1e-60 <= s <= 1e60:
+        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside 1e-60 to 1e60 m (bending angles take its fifth power)")
     m = _particle_mass(mass / (n * n), "mass, n")
     gx, gy = np.meshgrid(np.arange(n) * s, np.arange(n) * s)
     x = np.stack([gx.ravel(), gy.ravel(), np.zeros(n * n)], axis=1)
