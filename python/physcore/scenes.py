@@ -1639,7 +1639,8 @@ def jelly(
     size = _check.float_in_range("size", size, 0.01, 10.0)
     mass = _check.float_in_range("mass", mass, 1e-6, 1e6)
     stiffness = _check.float_in_range("stiffness", stiffness, 1e-3, 1e7)
-    damping = _nonneg(damping, "damping")
+    # Bounded like the stiffness: the automatic step falls as 1/damping (3e303 gave dt = 2e-308).
+    damping = _check.float_in_range("damping", damping, 0.0, 1e6)
     height = _check.float_in_range("height", height, 0.0, 100.0)
     spin = _check.float_in_range("spin", spin, -100.0, 100.0)
     s = size / (n - 1)
