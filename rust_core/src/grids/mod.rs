@@ -19,7 +19,7 @@ pub mod fluid;
 pub mod gray_scott;
 pub mod poisson;
 pub mod wave;
-mod wave_pair;
+mod wave_fused;
 
 use crate::error::{invalid, Result};
 use crate::par;

@@ -25,7 +25,7 @@
 //! square of the depth into the layer to `layer_strength`·c/dx at the outer face (fixed): the
 //! ramp is gentle enough that little reflects from it, and what crosses it is damped twice.
 //! **Obstacles**: masked cells are held at u = 0 (a rigid wall at their centres).
-use super::{first_non_finite, rows_each, sum_rows, wave_pair, Grid};
+use super::{first_non_finite, rows_each, sum_rows, wave_fused, Grid};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::simd;
@@ -202,10 +202,8 @@ pub struct WaveSystem {
     /// u⁻ at the oscillators' cells before a step, and the rows' partial sums (scratch).
     src_prev: Vec<Real>,
     partials: Vec<(Real, Real)>,
-    /// Fused pairs of steps (`wave_pair`): block starts, edge-row copies and halo rows.
-    pair_starts: Vec<usize>,
-    pair_saved: Vec<Real>,
-    pair_scratch: Vec<Real>,
+    /// Scratch of the fused steps (`wave_fused`).
+    fused: wave_fused::Scratch,
     /// Buffers of checkpoints that were not needed (see `grids::Spare`).
     spare: super::Spare,
 }
@@ -281,9 +279,7 @@ impl WaveSystem {
             src_prev: vec![0.0; src],
             partials: vec![(0.0, 0.0); rows],
             spare: super::Spare::default(),
-            pair_starts: Vec::new(),
-            pair_saved: Vec::new(),
-            pair_scratch: Vec::new(),
+            fused: wave_fused::Scratch::default(),
             cfg,
         })
     }
@@ -453,7 +449,7 @@ impl WaveSystem {
 }
 
 impl WaveSystem {
-    /// Whether two steps can be fused (`wave_pair`): 2D, undamped, no layers, obstacles or
+    /// Whether steps can be fused (`wave_fused`): 2D, undamped, no layers, obstacles or
     /// oscillators, y faces not periodic, at least 8 rows.
     fn fusable(&self) -> bool {
         let g = &self.cfg.grid;
@@ -466,64 +462,23 @@ impl WaveSystem {
             && g.rows() >= 8
     }
 
-    /// Two steps of `dt` in one sweep; `Err(0 or 1, halt)` names the step that diverged.
-    fn step_pair(&mut self, dt: Real) -> std::result::Result<(), (u64, Halt)> {
-        let g = self.cfg.grid.clone();
-        let (nx, rows) = (g.n[0], g.rows());
-        let k = (self.cfg.c * dt / g.dx).powi(2);
-        // Blocks of consecutive rows, at least 4 each (a block's edge rows are copied).
-        let mut nb = (rows / 8).clamp(1, 4 * crate::par::threads());
-        let mut br = rows.div_ceil(nb);
-        while nb > 1 && rows - (nb - 1) * br < 4 {
-            nb -= 1;
-            br = rows.div_ceil(nb);
-        }
-        nb = rows.div_ceil(br);
-        self.pair_starts.clear();
-        self.pair_starts.extend((0..nb).map(|b| b * br));
-        self.pair_starts.push(rows);
-        self.pair_saved.resize(6 * nx * nb, 0.0);
-        self.pair_scratch.resize(2 * nx * nb, 0.0);
-        wave_pair::save_edges(&self.u, &self.u_prev, nx, &self.pair_starts, &mut self.pair_saved);
-        let (starts, saved) = (&self.pair_starts, &self.pair_saved);
-        let (a, b, scratch) = (&mut self.u, &mut self.u_prev, &mut self.pair_scratch);
-        let level = simd::level();
-        type Block<'a> = (usize, ((&'a mut [Real], &'a mut [Real]), &'a mut [Real]));
-        let job = |(blk, ((a, b), s)): Block| {
-            simd::vectorized(
-                level,
-                #[inline(always)]
-                || wave_pair::block_pair(&g, blk * br, a, b, saved, starts, k, s),
-            )
+    /// `k` steps of `dt` in one sweep (`wave_fused`); `Err(j, halt)` names the step that
+    /// diverged, j from 0. `Ok(false)`, with nothing changed, if the scratch cannot be had.
+    fn step_fused(&mut self, dt: Real, k: usize) -> std::result::Result<bool, (u64, Halt)> {
+        let kc = (self.cfg.c * dt / self.cfg.grid.dx).powi(2);
+        let Some(ok) = wave_fused::sweep(&self.cfg.grid, kc, k, &mut self.u, &mut self.u_prev, &mut self.fused) else {
+            return Ok(false);
         };
-        use rayon::prelude::*;
-        let oks: Vec<(bool, bool)> = crate::par::fork_if(a.len(), || {
-            a.par_chunks_mut(br * nx)
-                .zip(b.par_chunks_mut(br * nx))
-                .zip(scratch.par_chunks_mut(2 * nx))
-                .enumerate()
-                .map(job)
-                .collect()
-        })
-        .unwrap_or_else(|| {
-            a.chunks_mut(br * nx)
-                .zip(b.chunks_mut(br * nx))
-                .zip(scratch.chunks_mut(2 * nx))
-                .enumerate()
-                .map(job)
-                .collect()
-        });
-        self.clock.t += dt;
-        if oks.iter().any(|o| !o.0) {
-            let index = first_non_finite(&self.u_prev).unwrap_or(0);
-            return Err((0, Halt::Diverged { index, quantity: Failure::Cell }));
+        // u_prev holds uⁿ⁺ᵏ and u uⁿ⁺ᵏ⁻¹.
+        std::mem::swap(&mut self.u, &mut self.u_prev);
+        for (j, fine) in ok[..k].iter().enumerate() {
+            self.clock.t += dt;
+            if !fine {
+                let index = first_non_finite(&self.u).or_else(|| first_non_finite(&self.u_prev)).unwrap_or(0);
+                return Err((j as u64, Halt::Diverged { index, quantity: Failure::Cell }));
+            }
         }
-        self.clock.t += dt;
-        if oks.iter().any(|o| !o.1) {
-            let index = first_non_finite(&self.u).unwrap_or(0);
-            return Err((1, Halt::Diverged { index, quantity: Failure::Cell }));
-        }
-        Ok(())
+        Ok(true)
     }
 }
 
@@ -679,28 +634,37 @@ impl System for WaveSystem {
             }
         }
         self.clock.t += dt;
+        // Σ u⁺ can overflow where no cell does: a cell that is not finite halts, as in `steps`.
         if !sum.is_finite() {
-            let index = first_non_finite(&self.u).unwrap_or(0);
-            return Err(Halt::Diverged { index, quantity: Failure::Cell });
+            if let Some(index) = first_non_finite(&self.u) {
+                return Err(Halt::Diverged { index, quantity: Failure::Cell });
+            }
         }
         Ok(())
     }
-    /// Pairs of steps fused into one sweep where `fusable` (same bits as single steps).
+    /// Up to `wave_fused::FUSE` steps per sweep over memory where `fusable`, with the bits of
+    /// single steps; a drop that falls due ends a sweep.
     fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
         let mut i = 0;
         while i < n {
             if stop.load(std::sync::atomic::Ordering::Relaxed) {
                 return Err((i, Halt::Stopped));
             }
-            let pair = i + 1 < n && dt == self.clock.dt && self.fusable();
-            if pair {
+            if i + 1 < n && dt == self.clock.dt && self.fusable() {
                 self.drop_due(dt);
-                // A drop due in the second step needs the steps one by one.
-                let t2 = self.clock.t + dt;
-                let second_drop = self.cfg.drops.get(self.clock.next_drop).is_some_and(|d| d.t < t2 + dt);
-                if !second_drop {
-                    self.step_pair(dt).map_err(|(j, h)| (i + j, h))?;
-                    i += 2;
+                // Steps before the next drop falls due (as `drop_due` would see it at each).
+                let cap = (n - i).min(wave_fused::FUSE as u64) as usize;
+                let next = self.cfg.drops.get(self.clock.next_drop).map(|d| d.t);
+                let (mut k, mut t) = (1, self.clock.t);
+                while k < cap {
+                    t += dt;
+                    if next.is_some_and(|d| d < t + dt) {
+                        break;
+                    }
+                    k += 1;
+                }
+                if k >= 2 && self.step_fused(dt, k).map_err(|(j, h)| (i + j, h))? {
+                    i += k as u64;
                     continue;
                 }
             }
@@ -977,15 +941,22 @@ mod tests {
         assert_eq!(a, fresh.u);
     }
 
-    /// Fused pairs of steps give the bits of single steps, for every edge rule that fuses, any
-    /// thread count (block split), odd step counts and drops falling between or inside pairs.
+    /// Fused steps give the bits of single steps, for every edge rule that fuses, any thread
+    /// count (band split), step counts that are not a multiple of the fusion and drops falling
+    /// between or inside sweeps.
     #[test]
-    fn fused_pairs_give_the_bits_of_single_steps() {
-        for edges in [[Edge::Fixed; 4], [Edge::Free; 4], [Edge::Periodic, Edge::Periodic, Edge::Free, Edge::Fixed]] {
+    fn fused_steps_give_the_bits_of_single_steps() {
+        let shapes = [[67, 45], [40, 300]]; // one band; four with 3 threads
+        for (edges, shape) in
+            [[Edge::Fixed; 4], [Edge::Free; 4], [Edge::Periodic, Edge::Periodic, Edge::Free, Edge::Fixed]]
+                .into_iter()
+                .flat_map(|e| shapes.map(|s| (e, s)))
+        {
             for threads in [1, 2, 3] {
                 let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap());
                 crate::par::install(Some(&pool), || {
-                    let mut cfg = WaveConfig::new("w", Grid::new(&[67, 45], 1.0 / 45.0, &edges).unwrap(), 1.0);
+                    let dx = 1.0 / shape[1] as Real;
+                    let mut cfg = WaveConfig::new("w", Grid::new(&shape, dx, &edges).unwrap(), 1.0);
                     cfg.drops = (0..5)
                         .map(|d| Drop { t: 0.013 * d as Real, amplitude: 0.2, profile: vec![(100 + 300 * d, 1.0)] })
                         .collect();
@@ -1002,7 +973,10 @@ mod tests {
                         one.step(dt, &stop).unwrap();
                     }
                     two.steps(41, dt, &stop).unwrap();
-                    assert!(one.u.iter().zip(&two.u).all(|(a, b)| a.to_bits() == b.to_bits()), "{edges:?} {threads}");
+                    assert!(
+                        one.u.iter().zip(&two.u).all(|(a, b)| a.to_bits() == b.to_bits()),
+                        "{edges:?} {shape:?} {threads}"
+                    );
                     assert!(one.u_prev.iter().zip(&two.u_prev).all(|(a, b)| a.to_bits() == b.to_bits()));
                     assert_eq!(one.clock, two.clock);
                 });
@@ -1010,8 +984,33 @@ mod tests {
         }
     }
 
+    /// Each sweep length on its own, over four bands.
     #[test]
-    fn fused_pairs_report_the_step_that_diverged() {
+    fn every_sweep_length_gives_the_bits_of_single_steps() {
+        let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap());
+        crate::par::install(Some(&pool), || {
+            for k in 2..=wave_fused::FUSE {
+                let cfg = WaveConfig::new("w", Grid::new(&[50, 290], 1.0 / 290.0, &[Edge::Fixed; 4]).unwrap(), 1.0);
+                let (mut one, mut two) = (WaveSystem::new(cfg.clone()).unwrap(), WaveSystem::new(cfg).unwrap());
+                bumpy(&mut one);
+                bumpy(&mut two);
+                let dt = one.auto_dt().unwrap();
+                one.clock.dt = dt;
+                two.clock.dt = dt;
+                let stop = AtomicBool::new(false);
+                for _ in 0..k {
+                    one.step(dt, &stop).unwrap();
+                }
+                assert_eq!(two.step_fused(dt, k), Ok(true));
+                let same = |a: &[Real], b: &[Real]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+                assert!(same(&one.u, &two.u) && same(&one.u_prev, &two.u_prev), "{k} steps");
+                assert_eq!(one.clock, two.clock);
+            }
+        });
+    }
+
+    #[test]
+    fn fused_steps_report_the_step_that_diverged() {
         let mut w = WaveSystem::new(square(32, 1.0, Edge::Fixed)).unwrap();
         bumpy(&mut w);
         let dt = 1.01 * w.cfl_limit();
