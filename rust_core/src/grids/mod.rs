@@ -240,6 +240,26 @@ impl Spare {
     }
 }
 
+/// Grows `v` to at least `n` values, fallibly (the fused sweeps' scratch: a step allocates
+/// nothing that could abort the process).
+pub(super) fn grow<T: Clone + Default>(v: &mut Vec<T>, n: usize) -> bool {
+    if v.len() < n {
+        if v.try_reserve_exact(n - v.len()).is_err() {
+            return false;
+        }
+        v.resize(n, T::default());
+    }
+    true
+}
+
+/// The bands of a fused sweep over `rows` rows: (rows per band, bands). About 4 bands per
+/// thread, none shorter than 64 rows (the overlapped halo costs (K − 1)/rows of a band's work).
+pub(super) fn fused_bands(rows: usize) -> (usize, usize) {
+    let bands = (4 * par::threads()).min(rows / 64).max(1);
+    let band = rows.div_ceil(bands);
+    (band, rows.div_ceil(band))
+}
+
 /// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
 const MIN_ROWS: usize = 4;
 

@@ -21,8 +21,6 @@ use crate::vector::Real;
 /// Steps per sweep. A band's rings hold 3 rows per level between: (K − 1)·3·nx values, 240 KiB
 /// at nx = 2048 — inside a core's L2.
 pub(super) const FUSE: usize = 6;
-/// Bands no shorter than this (the halo overhead is (K − 1)/rows), and about 4 per thread.
-const BAND_ROWS: usize = 64;
 
 /// uⁿ⁺¹ of one row into `out` from uⁿ's rows `c`, `s`, `n` (south and north, with their
 /// edge factors) and uⁿ⁻¹'s row `um`: 2c − um + k·(l + r + fs·s + fn·n − 4c), the single
@@ -93,17 +91,6 @@ pub(super) struct Scratch {
     rings: Vec<Real>,
 }
 
-/// Grows `v` to at least `n` values, fallibly.
-fn grow(v: &mut Vec<Real>, n: usize) -> bool {
-    if v.len() < n {
-        if v.try_reserve_exact(n - v.len()).is_err() {
-            return false;
-        }
-        v.resize(n, 0.0);
-    }
-    true
-}
-
 /// `k` steps (2 ≤ k ≤ `FUSE`) of A = uⁿ, B = uⁿ⁻¹ with coefficient `kc` = (c·dt/dx)²: on
 /// return B holds uⁿ⁺ᵏ and A uⁿ⁺ᵏ⁻¹. Returns whether each level came out finite (`None` if
 /// the scratch could not be allocated; nothing has changed then).
@@ -118,11 +105,9 @@ pub(super) fn sweep(
     use rayon::prelude::*;
     debug_assert!((2..=FUSE).contains(&k));
     let (nx, rows) = (g.n[0], g.rows());
-    let bands = (4 * crate::par::threads()).min(rows / BAND_ROWS).max(1);
-    let band = rows.div_ceil(bands);
-    let bands = rows.div_ceil(band);
+    let (band, bands) = super::fused_bands(rows);
     let (saved_len, ring_len) = (4 * k * nx, (k - 1) * 3 * nx);
-    if !(grow(&mut scratch.saved, bands * saved_len) && grow(&mut scratch.rings, bands * ring_len)) {
+    if !(super::grow(&mut scratch.saved, bands * saved_len) && super::grow(&mut scratch.rings, bands * ring_len)) {
         return None;
     }
     let saved = &mut scratch.saved[..bands * saved_len];

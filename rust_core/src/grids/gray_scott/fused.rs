@@ -22,25 +22,12 @@ use rayon::prelude::*;
 /// (K − 1)·6·nx values, 240 KiB at nx = 1024 — inside a core's L2 (512 KiB or more on the CPUs
 /// we measure), above which the rings would spill and each step would cost memory traffic again.
 pub(super) const FUSE: usize = 6;
-/// Bands no shorter than this (the halo overhead is (K − 1)/rows), and about 4 per thread.
-const BAND_ROWS: usize = 64;
 
 /// Scratch of the fused sweep, kept between calls so that a sweep allocates nothing.
 #[derive(Default)]
 pub(super) struct Scratch {
     rings: Vec<Real>,
     partials: Vec<[Real; 3]>,
-}
-
-/// Grows `v` to at least `n` values, fallibly.
-fn grow<T: Clone + Default>(v: &mut Vec<T>, n: usize) -> bool {
-    if v.len() < n {
-        if v.try_reserve_exact(n - v.len()).is_err() {
-            return false;
-        }
-        v.resize(n, T::default());
-    }
-    true
 }
 
 impl GrayScottSystem {
@@ -57,12 +44,11 @@ impl GrayScottSystem {
         debug_assert!((2..=FUSE).contains(&k) && self.fusable());
         let g = &self.cfg.grid;
         let (nx, ny) = (g.n[0], g.n[1]);
-        let bands = (4 * par::threads()).min(ny / BAND_ROWS).max(1);
-        let band = ny.div_ceil(bands);
-        let bands = ny.div_ceil(band);
+        let (band, bands) = crate::grids::fused_bands(ny);
         let ring = (k - 1) * 6 * nx;
         let mut scratch = std::mem::take(&mut self.fused);
-        if !(grow(&mut scratch.rings, bands * ring) && grow(&mut scratch.partials, ny * k)) {
+        if !(crate::grids::grow(&mut scratch.rings, bands * ring) && crate::grids::grow(&mut scratch.partials, ny * k))
+        {
             self.fused = scratch;
             return false;
         }
