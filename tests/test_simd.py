@@ -180,3 +180,28 @@ def test_gray_scott_has_the_same_bits_at_every_level_thread_count_and_fusion(sim
         assert books == runs[0][2], f"Gray–Scott books at {simd_level} differ between runs: {books}"
         for key, x in ref[2].items():
             assert abs(books[key] - x) <= 1e-13 * max(abs(x), 1.0), f"{key} at {simd_level}: {books[key]} vs {x}"
+
+
+def _wave(threads, fused):
+    """A plain wave (fused sweeps of up to 6 steps by `step(n)`) past the parallel threshold."""
+    s = pc.Scene(dim=2, threads=threads)
+    w = s.add(pc.Wave((300, 260), 1.0 / 300, c=1.0))
+    x, y = (np.arange(300) + 0.5) / 300, (np.arange(260) + 0.5) / 300
+    w.u = np.exp(-((x[:, None] - 0.4) ** 2 + (y[None, :] - 0.5) ** 2) / 0.003)
+    s.dt = 0.9 * w.cfl_limit
+    if fused:
+        s.step(23)
+    else:
+        for _ in range(23):
+            s.step()
+    return w.u.copy(), w.velocity.copy()
+
+
+def test_the_wave_has_the_same_bits_at_every_level_thread_count_and_fusion(simd_level):
+    runs = [_wave(t, f) for t in (1, 2) for f in (True, False)]
+    pc.set_simd_level("scalar")
+    ref = _wave(1, False)
+    pc.set_simd_level(simd_level)
+    assert np.abs(ref[1]).max() > 0.1  # the pulse moves
+    for u, v in runs:
+        assert np.array_equal(u, ref[0]) and np.array_equal(v, ref[1]), f"wave at {simd_level}"
