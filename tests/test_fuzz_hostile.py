@@ -349,6 +349,7 @@ def _check_scene_function(case):
 @example(("xpbd_cloth", "size", 1e-300))  # found by this fuzz: NaN rest angles, refused as rest_angle
 @example(("xpbd_cloth", "size", 1e100))
 @example(("jelly", "damping", 3.2510364852110764e303))  # found by this fuzz: dt underflowed
+@example(("galton_board", "drag", 2.921251344151264e303))  # found by this fuzz: dt underflowed
 def test_fuzz_scene_functions(case):
     assert _check_scene_function(case), f"{case}: the scene's dt is not a usable step"
 

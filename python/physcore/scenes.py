@@ -1349,7 +1349,8 @@ def galton_board(
     2D; balls of radius 2 mm and 0.26 g, pegs of radius 2.3 mm spaced 9 mm (rows 7.8 mm apart,
     gaps of 1.1 ball diameters), linear contacts (:class:`~physcore.Contacts`, k = 5·10³ N/m)
     with the given restitution and friction; the pegs, the run, the chute and the bins'
-    dividers are pinned grains, the floor and sides are walls; optional linear `drag` (kg/s).
+    dividers are pinned grains, the floor and sides are walls; optional linear `drag` (kg/s,
+    at most 1).
     The board is `width` metres wide (at least rows + 1 pitches).
 
     The balls start at rest on the run, `spacing` ball diameters apart, each on top of a grain
@@ -1384,7 +1385,9 @@ def galton_board(
     seed = _count(seed, "seed", 0)
     spacing = _check.float_in_range("spacing", spacing, 1.5, 50.0)
     width = _check.float_in_range("width", width, 0.02, 10.0)
-    drag = _nonneg(drag, "drag")
+    # Up to 1 kg/s: the balls' speed then relaxes in m/b = 0.26 ms, still 50 steps; beyond, the
+    # automatic step would follow the drag down (1e303 kg/s made it subnormal).
+    drag = _check.float_in_range("drag", drag, 0.0, 1.0)
     dt = _optional(dt, "dt")
     # A tight lattice: gaps of 1.1 ball diameters, so a ball leaving a peg drops into the gap
     # beside it onto the peg below (with wider gaps, 1.9 d, balls skipped columns: isolated
