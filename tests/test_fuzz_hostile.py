@@ -350,6 +350,9 @@ def _check_scene_function(case):
 @example(("xpbd_cloth", "size", 1e100))
 @example(("jelly", "damping", 3.2510364852110764e303))  # found by this fuzz: dt underflowed
 @example(("galton_board", "drag", 2.921251344151264e303))  # found by this fuzz: dt underflowed
+@example(("newtons_cradle", "law", np.array([0.5, 1.0])))  # found by this fuzz: ValueError, not naming law
+@example(("tumbling_boxes", "mass", 1.6190612999995960e303))  # found by this fuzz: refused as dt, substeps
+@example(("galton_board", "balls", 10**400))  # found by this fuzz: OverflowError
 def test_fuzz_scene_functions(case):
     assert _check_scene_function(case), f"{case}: the scene's dt is not a usable step"
 

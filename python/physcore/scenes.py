@@ -392,7 +392,7 @@ def tumbling_boxes(
     w = math.pi / (60.0 * h) if h > 0.0 else math.inf
     stiffness = 0.5 * m * w * w if w < 1e150 else math.inf  # (** would raise OverflowError)
     if not (math.isfinite(stiffness) and stiffness > 0.0):
-        raise InvalidInputError(f"dt, substeps: give a contact stiffness out of float64's range ({stiffness})")
+        raise InvalidInputError(f"mass, dt, substeps: give a contact stiffness (m·w²/2) out of float64's range ({stiffness})")
     if integrator in ("xpbd", "semi_implicit_euler"):
         scene.add(Contacts(stiffness=stiffness, restitution=restitution, friction=friction, inertia_factor=1e6,
                            walls=[Plane([0.0, 0.0], [0.0, 1.0], restitution=restitution, friction=friction)]))
@@ -1374,7 +1374,7 @@ def galton_board(
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
-    balls = _count(balls, "balls", 1)
+    balls = _check.int_in_range("balls", balls, 1, 1 << 40)  # the particle count is then checked in float
     rows = _count(rows, "rows", 1)
     if rows > 40:
         raise InvalidInputError(f"rows: at most 40, got {rows}")
@@ -1587,8 +1587,7 @@ def newtons_cradle(
     if lift >= balls:
         raise InvalidInputError(f"lift: must be less than balls ({balls}), got {lift}")
     angle = _check.float_in_range("angle", angle, 0.0, 80.0)
-    if law not in ("hertz", "linear"):
-        raise InvalidInputError(f"law: 'hertz' or 'linear', got {law!r}")
+    law = _check.choice("law", law, ("hertz", "linear"))
     dt = _optional(dt, "dt")
     r, m, L = 0.02, 0.26, 0.4
     k_string = m * 9.81 / (1e-4 * L)
