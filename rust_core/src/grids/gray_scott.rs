@@ -226,7 +226,8 @@ impl<const THREE: bool> Kernel for Stencil<'_, THREE> {
         let [uc, us, un_, ud, ut] = u;
         let [vc, vs, vn_, vd, vt] = v;
         let centre = (2 * g.dim) as Real;
-        // One cell, scalar: the edges (ghosts from `ghost_x`) and the cells past the last 8.
+        // One cell, scalar: the edges (ghosts from `ghost_x`) and the cells past the last full
+        // vector.
         let cell = |i: usize, ul: Real, ur: Real, vl: Real, vr: Real| -> [Real; 4] {
             let mut lu = ul + ur + us[i] + un_[i] - centre * uc[i];
             let mut lv = vl + vr + vs[i] + vn_[i] - centre * vc[i];
@@ -247,11 +248,11 @@ impl<const THREE: bool> Kernel for Stencil<'_, THREE> {
         let blocks = m / l;
         // Interior cell j + 1 for j in 0..m. Windows of l + 2 cells, so that the loads need no
         // bounds checks.
+        fn window(a: &[Real], j: usize, l: usize) -> &[Real] {
+            &a[j..j + l + 2]
+        }
         for b in 0..blocks {
             let j = b * l;
-            fn window(a: &[Real], j: usize, l: usize) -> &[Real] {
-                &a[j..j + l + 2]
-            }
             let w = |a| window(a, j, l);
             let (uw, vw, usw, unw, vsw, vnw) = (w(uc), w(vc), w(us), w(un_), w(vs), w(vn_));
             let ld = |a: &[Real], o: usize| P::<S, Real>::load(s, &a[o..]);

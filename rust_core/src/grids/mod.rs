@@ -260,6 +260,20 @@ pub(super) fn fused_bands(rows: usize) -> (usize, usize) {
     (band, rows.div_ceil(band))
 }
 
+/// What a fused sweep's wavefront makes at time `e` of a band: step j (1..=k) of row
+/// e − (j − 1), for the rows step j makes (`range(j)` = [lo, hi)). In that order, step j's
+/// inputs — step j − 1 of the rows around — were made before it.
+pub(super) fn wavefront(
+    k: isize,
+    e: isize,
+    range: impl Fn(isize) -> (isize, isize),
+) -> impl Iterator<Item = (isize, isize)> {
+    (1..=k).map(move |j| (j, e - (j - 1))).filter(move |&(j, s)| {
+        let (lo, hi) = range(j);
+        (lo..hi).contains(&s)
+    })
+}
+
 /// Rows a parallel task takes at least (a 2048-cell row is ~16 kB per array).
 const MIN_ROWS: usize = 4;
 

@@ -941,6 +941,17 @@ mod tests {
         assert_eq!(a, fresh.u);
     }
 
+    /// Two equal systems of `cfg`, bumpy, and the automatic step they are set to.
+    fn twins(cfg: WaveConfig) -> (WaveSystem, WaveSystem, Real) {
+        let (mut one, mut two) = (WaveSystem::new(cfg.clone()).unwrap(), WaveSystem::new(cfg).unwrap());
+        bumpy(&mut one);
+        bumpy(&mut two);
+        let dt = one.auto_dt().unwrap();
+        one.clock.dt = dt;
+        two.clock.dt = dt;
+        (one, two, dt)
+    }
+
     /// Fused steps give the bits of single steps, for every edge rule that fuses, any thread
     /// count (band split), step counts that are not a multiple of the fusion and drops falling
     /// between or inside sweeps.
@@ -960,14 +971,8 @@ mod tests {
                     cfg.drops = (0..5)
                         .map(|d| Drop { t: 0.013 * d as Real, amplitude: 0.2, profile: vec![(100 + 300 * d, 1.0)] })
                         .collect();
-                    let mut one = WaveSystem::new(cfg.clone()).unwrap();
-                    let mut two = WaveSystem::new(cfg).unwrap();
+                    let (mut one, mut two, dt) = twins(cfg);
                     assert!(two.fusable());
-                    bumpy(&mut one);
-                    bumpy(&mut two);
-                    let dt = one.auto_dt().unwrap();
-                    one.clock.dt = dt;
-                    two.clock.dt = dt;
                     let stop = AtomicBool::new(false);
                     for _ in 0..41 {
                         one.step(dt, &stop).unwrap();
@@ -991,12 +996,7 @@ mod tests {
         crate::par::install(Some(&pool), || {
             for k in 2..=wave_fused::FUSE {
                 let cfg = WaveConfig::new("w", Grid::new(&[50, 290], 1.0 / 290.0, &[Edge::Fixed; 4]).unwrap(), 1.0);
-                let (mut one, mut two) = (WaveSystem::new(cfg.clone()).unwrap(), WaveSystem::new(cfg).unwrap());
-                bumpy(&mut one);
-                bumpy(&mut two);
-                let dt = one.auto_dt().unwrap();
-                one.clock.dt = dt;
-                two.clock.dt = dt;
+                let (mut one, mut two, dt) = twins(cfg);
                 let stop = AtomicBool::new(false);
                 for _ in 0..k {
                     one.step(dt, &stop).unwrap();

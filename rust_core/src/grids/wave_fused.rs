@@ -89,6 +89,8 @@ pub(super) struct Scratch {
     saved: Vec<Real>,
     /// Per band, the rings of levels 1..K − 1 ((K − 1)·3·nx values).
     rings: Vec<Real>,
+    /// Per band, whether each level's rows came out finite.
+    oks: Vec<[bool; FUSE]>,
 }
 
 /// `k` steps (2 ≤ k ≤ `FUSE`) of A = uⁿ, B = uⁿ⁻¹ with coefficient `kc` = (c·dt/dx)²: on
@@ -107,7 +109,10 @@ pub(super) fn sweep(
     let (nx, rows) = (g.n[0], g.rows());
     let (band, bands) = super::fused_bands(rows);
     let (saved_len, ring_len) = (4 * k * nx, (k - 1) * 3 * nx);
-    if !(super::grow(&mut scratch.saved, bands * saved_len) && super::grow(&mut scratch.rings, bands * ring_len)) {
+    if !(super::grow(&mut scratch.saved, bands * saved_len)
+        && super::grow(&mut scratch.rings, bands * ring_len)
+        && super::grow(&mut scratch.oks, bands))
+    {
         return None;
     }
     let saved = &mut scratch.saved[..bands * saved_len];
@@ -123,31 +128,31 @@ pub(super) fn sweep(
         }
     }
     let saved = &*saved;
-    let rings = &mut scratch.rings[..bands * ring_len];
+    let (rings, oks) = (&mut scratch.rings[..bands * ring_len], &mut scratch.oks[..bands]);
     let level = crate::simd::level();
-    type Job<'x> = (usize, ((&'x mut [Real], &'x mut [Real]), &'x mut [Real]));
-    let job = |(i, ((own_a, own_b), ring)): Job| {
+    type Job<'x> = (usize, (((&'x mut [Real], &'x mut [Real]), &'x mut [Real]), &'x mut [bool; FUSE]));
+    let job = |(i, (((own_a, own_b), ring), ok)): Job| {
         let saved = &saved[i * saved_len..][..saved_len];
-        crate::simd::dispatch(level, Band { g, kc, k, r0: i * band, own_a, own_b, saved, ring })
+        *ok = crate::simd::dispatch(level, Band { g, kc, k, r0: i * band, own_a, own_b, saved, ring });
     };
-    let oks: Vec<[bool; FUSE]> = crate::par::fork_if(a.len(), || {
+    let forked = crate::par::fork_if(a.len(), || {
         a.par_chunks_mut(band * nx)
             .zip(b.par_chunks_mut(band * nx))
             .zip(rings.par_chunks_mut(ring_len))
+            .zip(oks.par_iter_mut())
             .enumerate()
-            .map(job)
-            .collect()
-    })
-    .unwrap_or_else(|| {
+            .for_each(job)
+    });
+    if forked.is_none() {
         a.chunks_mut(band * nx)
             .zip(b.chunks_mut(band * nx))
             .zip(rings.chunks_mut(ring_len))
+            .zip(oks.iter_mut())
             .enumerate()
-            .map(job)
-            .collect()
-    });
+            .for_each(job);
+    }
     let mut ok = [true; FUSE];
-    for o in &oks {
+    for o in oks.iter() {
         for j in 0..FUSE {
             ok[j] &= o[j];
         }
@@ -227,12 +232,7 @@ fn run_band<S: Simd>(
     let range = |j: isize| ((a - (kk - j)).max(0), (b + (kk - j)).min(rows));
     let last = |s: isize| ((((kk - 2) * 3 + s.rem_euclid(3)) as usize) * nx, ((s - a) as usize) * nx);
     for e in range(1).0..b + kk - 1 {
-        for j in 1..=kk {
-            let s = e - (j - 1);
-            let (lo, hi) = range(j);
-            if s < lo || s >= hi {
-                continue;
-            }
+        for (j, s) in super::wavefront(kk, e, &range) {
             let (sr, fs) = g.neighbour_row(s as usize, 1, 0);
             let (nr, fn_) = g.neighbour_row(s as usize, 1, 1);
             let (lower, upper) = ring.split_at_mut(((j - 1) * 3) as usize * nx);
@@ -260,9 +260,8 @@ fn run_band<S: Simd>(
             own_a[to..][..nx].copy_from_slice(&ring[from..][..nx]);
         }
     }
-    if b > a {
-        let (from, to) = last(b - 1);
-        own_a[to..][..nx].copy_from_slice(&ring[from..][..nx]);
-    }
+    // The band's last row, whose time to be written comes after the loop.
+    let (from, to) = last(b - 1);
+    own_a[to..][..nx].copy_from_slice(&ring[from..][..nx]);
     ok
 }

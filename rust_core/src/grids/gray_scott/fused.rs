@@ -144,15 +144,10 @@ impl GrayScottSystem {
             (&self.u[o..o + nx], &self.v[o..o + nx])
         };
         for e in range(1).0..b + kk - 1 {
-            for j in 1..=kk {
-                let s = e - (j - 1);
-                let (lo, hi) = range(j);
-                if s < lo || s >= hi {
-                    continue;
-                }
+            for (j, s) in crate::grids::wavefront(kk, e, &range) {
                 let (south, north) = around(s);
                 // Step j − 1 of rows south, s, north, and where step j of row s goes.
-                let (done, next) = ring.split_at_mut(((j - 1).max(0) * 6) as usize * nx);
+                let (done, next) = ring.split_at_mut(((j - 1) * 6) as usize * nx);
                 let get = |s: isize| {
                     if j == 1 {
                         main(s)
@@ -166,9 +161,9 @@ impl GrayScottSystem {
                     let o = (s - a) as usize * nx;
                     (&mut ou[o..o + nx], &mut ov[o..o + nx])
                 } else {
-                    let o = slot(j, s) - (j - 1) as usize * 6 * nx;
-                    let (x, y) = next[o..o + 2 * nx].split_at_mut(nx);
-                    (x, y)
+                    // `next` starts at step j's ring.
+                    let o = slot(1, s);
+                    next[o..o + 2 * nx].split_at_mut(nx)
                 };
                 let p = advance(g, rates, [uc, us, un, uc, uc], [vc, vs, vn, vc, vc], out_u, out_v);
                 if (a..b).contains(&s) {
