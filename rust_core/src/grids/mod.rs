@@ -198,11 +198,16 @@ impl Grid {
 pub struct Spare(std::sync::Mutex<Vec<Vec<Real>>>);
 
 impl Spare {
-    /// A copy of `src`, in a spare buffer if one is large enough.
+    /// A copy of `src`, in the smallest spare buffer that is large enough (so that arrays of
+    /// different sizes each find theirs).
     pub fn copy(&self, src: &[Real], need: &crate::alloc::Need) -> Result<Vec<Real>> {
+        if src.is_empty() {
+            return Ok(Vec::new());
+        }
         let spare = {
             let mut pool = self.0.lock().unwrap_or_else(|e| e.into_inner());
-            pool.iter().position(|b| b.capacity() >= src.len()).map(|i| pool.swap_remove(i))
+            let fits = pool.iter().enumerate().filter(|(_, b)| b.capacity() >= src.len());
+            fits.min_by_key(|(_, b)| b.capacity()).map(|(i, _)| i).map(|i| pool.swap_remove(i))
         };
         match spare {
             Some(mut b) => {
@@ -231,10 +236,11 @@ impl Spare {
             self.keep(b);
         }
     }
-    /// Keeps `b` for a later `copy` (at most four buffers are kept).
+    /// Keeps `b` for a later `copy` (at most eight buffers are kept: a fluid's checkpoint has
+    /// six).
     pub fn keep(&self, b: Vec<Real>) {
         let mut pool = self.0.lock().unwrap_or_else(|e| e.into_inner());
-        if pool.len() < 4 {
+        if b.capacity() > 0 && pool.len() < 8 {
             pool.push(b);
         }
     }
