@@ -43,8 +43,9 @@
 //!
 //! Tracers start at hashed points of the first source (of the fluid if there is none) and
 //! are re-seeded there, at a point hashed from their index and the step count, when they
-//! leave the domain or enter a solid. Everything a step needs is allocated (fallibly) by
-//! `StableFluid::new`; a step allocates nothing.
+//! leave the domain or enter a solid. The buffers a step works in are allocated (fallibly) by
+//! `StableFluid::new`; a step itself allocates only per-row partial sums (one value per row),
+//! and a checkpoint reuses the buffers of the last one (`System::recycle`).
 //!
 //! Determinism: every pass runs over rows (or fixed chunks of tracers) and every reduction adds
 //! per-row partials in row order, so runs are bit-identical for any thread count.

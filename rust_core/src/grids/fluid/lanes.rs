@@ -10,7 +10,7 @@
 //! Every value is the scalar expression's, operation for operation (the same clamps, no fused
 //! multiply–adds), so the fields have the same bits at every SIMD level and for any thread
 //! count. Conversions to grid indices go through ⌊x⌋ made with 2⁵² (exact for 0 ≤ x < 2⁵¹) and
-//! the index read off the bits of k + 2⁵² (exact for k < 2³²): pulp has no float-to-integer
+//! the index read off the bits of k + 2⁵² (exact for k < 2⁵²): pulp has no float-to-integer
 //! conversion. A lane whose position is NaN reads a valid cell (its index is clamped into the
 //! array) and gives NaN, as the scalar expression does.
 use super::{Active, Lay, Node, Vel};
@@ -21,6 +21,8 @@ type V<S> = P<S, Real>;
 
 /// 2⁵²: x + 2⁵² − 2⁵² rounds x ≥ 0 to an integer.
 const MAGIC: Real = 4_503_599_627_370_496.0;
+/// The mantissa bits of an f64.
+const MANTISSA: u64 = (1 << 52) - 1;
 /// Most lanes of any level (AVX-512, f64).
 const MAX_LANES: usize = 8;
 
@@ -92,7 +94,8 @@ impl<S: Simd> LaneLay<S> {
         let k = ((i + self.wf * j) + V::splat(s, MAGIC)).to_array();
         let mut at = [0; MAX_LANES];
         for (a, k) in at.iter_mut().zip(&k[..V::<S>::lanes()]) {
-            *a = (k.to_bits() as u32 as usize).min(self.kmax);
+            // k + 2⁵² has k in its mantissa bits (exact below 2⁵²; `validate` caps cells at 2³⁴).
+            *a = ((k.to_bits() & MANTISSA) as usize).min(self.kmax);
         }
         Taps { at, tx: fx - i, ty: fy - j }
     }
