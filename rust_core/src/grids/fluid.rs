@@ -1696,6 +1696,28 @@ mod tests {
         assert_eq!(f.step(0.01, &AtomicBool::new(true)), Err(Halt::Stopped));
     }
 
+    /// A checkpoint made in the buffers of recycled ones (`grids::Spare`) holds what it saved,
+    /// whatever the fluid does after.
+    #[test]
+    fn recycled_checkpoints_restore_what_they_saved() {
+        let mut f = StableFluid::new(plume([24, 32], Advection::MacCormack)).unwrap();
+        let stop = no_stop();
+        for _ in 0..3 {
+            let snap = f.snapshot().unwrap();
+            f.step(0.01, &stop).unwrap();
+            f.recycle(snap);
+        }
+        assert!(f.spare.0.lock().unwrap().len() >= 6, "the recycled buffers are kept");
+        let before = f.save();
+        let snap = f.snapshot().unwrap();
+        assert!(f.spare.0.lock().unwrap().is_empty(), "the checkpoint reused them");
+        f.step(0.01, &stop).unwrap();
+        f.step(0.01, &stop).unwrap();
+        assert!(f.save() != before);
+        f.restore(snap);
+        assert!(f.save() == before);
+    }
+
     /// Hot smoke rises; the smoke books balance: amount = injected + advection change.
     #[test]
     fn smoke_plume_rises_and_its_books_balance() {
