@@ -407,6 +407,40 @@ def test_cavity_centreline_matches_ghia_at_re_100():
     assert worst < 0.03, worst
 
 
+def test_fluid_set_velocity_sets_the_open_faces_and_a_step_projects_them():
+    nx, ny = 12, 10
+    obstacle = np.zeros((nx, ny), dtype=bool)
+    obstacle[5:7, 4:6] = True
+    scene = pc.Scene(dim=2, dt=0.01)
+    f = scene.add(pc.StableFluid((nx, ny), 1.0 / nx, obstacles=obstacle, tolerance=1e-10))
+    rng = np.random.default_rng(3)
+    u, v = rng.normal(size=(nx + 1, ny)), rng.normal(size=(nx, ny + 1))
+    f.set_velocity(u, v)
+    # Faces on the walls and on the obstacle are closed: set to 0.
+    uo, vo = u.copy(), v.copy()
+    uo[[0, nx]] = 0.0
+    vo[:, [0, ny]] = 0.0
+    uo[5:8, 4:6] = 0.0
+    vo[5:7, 4:7] = 0.0
+    centres = np.stack([0.5 * (uo[:-1] + uo[1:]), 0.5 * (vo[:, :-1] + vo[:, 1:])], axis=-1)
+    assert np.array_equal(f.velocity, centres)
+    assert np.abs(f.divergence).max() > 1.0  # a random field is far from divergence-free
+    scene.step()
+    assert np.abs(f.divergence)[~obstacle].max() < 1e-8 * np.abs(centres).max() / f.dx
+    before = f.velocity
+    with pytest.raises(ValueError, match=r"u: expected shape \(13, 10\)"):
+        f.set_velocity(np.zeros((nx, ny)), v)
+    with pytest.raises(ValueError, match="u: entry .* not finite"):
+        f.set_velocity(np.full((nx + 1, ny), np.nan), v)
+    with pytest.raises(ValueError, match=r"v: entry \(2, 3\) is not finite"):
+        bad = v.copy()
+        bad[2, 3] = np.inf
+        f.set_velocity(2.0 * u, bad)  # u is valid, but nothing is set
+    with pytest.raises(TypeError, match="v: expected real numbers"):
+        f.set_velocity(u, v.astype(str))
+    assert np.array_equal(f.velocity, before)
+
+
 def test_bad_fluid_input_names_the_argument():
     with pytest.raises(ValueError, match="lid"):
         pc.StableFluid((8, 8), lid=1.0)

@@ -183,7 +183,7 @@ class Grid:
         return dict(scene._exclusive(lambda sim: sim.system_books(self.name)))
 
     def _set(self, name: str, values: Any) -> None:
-        a = np.asarray(values, dtype=np.float64)
+        a = _check.real_array(name, values).astype(np.float64)
         if a.shape != self.shape:
             raise InvalidInputError(f"{name}: expected shape {self.shape} (the grid), got {a.shape}")
         scene = self._bound()
@@ -657,15 +657,24 @@ class StableFluid(Grid):
 
     def set_velocity(self, u: Any, v: Any) -> None:
         """Sets the face velocities: ``u`` (nx+1, ny) on the x faces, ``v`` (nx, ny+1) on the y
-        faces, m/s (faces of solid cells are set to 0; not projected)."""
+        faces, m/s (faces of solid cells are set to 0; not projected).
+
+        Raises InvalidInputError / InvalidTypeError naming ``u`` or ``v`` (shape, dtype, a
+        non-finite entry) before either is set."""
         nx, ny = self.shape
+        checked = []
         for name, a, shape in (("u", u, (nx + 1, ny)), ("v", v, (nx, ny + 1))):
-            arr = np.asarray(a, dtype=np.float64)
+            arr = _check.real_array(name, a).astype(np.float64)
             if arr.shape != shape:
                 raise InvalidInputError(f"{name}: expected shape {shape} (faces), got {arr.shape}")
-            scene = self._bound()
+            bad = np.argwhere(~np.isfinite(arr))
+            if len(bad):
+                raise InvalidInputError(f"{name}: entry {tuple(int(k) for k in bad[0])} is not finite")
+            checked.append((name, arr))
+        scene = self._bound()
+        for name, arr in checked:
             scene._exclusive(lambda sim, name=name, arr=arr: sim.set_system_field(self.name, name, _layout(arr)))
-        self._bound()._e0 = None
+        scene._e0 = None
 
     @property
     def tracers(self) -> np.ndarray:

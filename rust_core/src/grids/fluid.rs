@@ -568,58 +568,6 @@ impl StableFluid {
         self.s.books.pressure
     }
 
-    /// Sets a field: "u" ((nx+1)·ny face values, i fastest, m/s), "v" (nx·(ny+1)), "density",
-    /// "temperature" (nx·ny), "tracers" (2·n_tracers, x and y in m). Closed faces are set to
-    /// 0 and smoke in solid cells is dropped. The velocity is not projected (see `project`).
-    pub fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
-        let (nx, ny) = (self.nx, self.ny);
-        let len = match name {
-            "u" => (nx + 1) * ny,
-            "v" => nx * (ny + 1),
-            "density" | "temperature" => nx * ny,
-            "tracers" => self.s.tracers.len(),
-            _ => {
-                return Err(invalid(
-                    "name",
-                    format!("unknown field {name:?}; valid: u, v, density, temperature, tracers"),
-                ))
-            }
-        };
-        if values.len() != len {
-            return Err(invalid(name, format!("has {} values, expected {len}", values.len())));
-        }
-        if let Some(i) = values.iter().position(|x| !x.is_finite()) {
-            return Err(invalid(name, format!("entry {i} is not finite: {}", values[i])));
-        }
-        match name {
-            "u" => {
-                for j in 0..ny {
-                    for i in 0..=nx {
-                        let k = i + (nx + 1) * (j + 1);
-                        self.s.u[k] = self.u_open[k] * values[i + (nx + 1) * j];
-                    }
-                }
-            }
-            "v" => {
-                for j in 0..=ny {
-                    for i in 0..nx {
-                        let k = (i + 1) + (nx + 2) * j;
-                        self.s.v[k] = self.v_open[k] * values[i + nx * j];
-                    }
-                }
-            }
-            "density" => {
-                for (c, d) in self.s.density.iter_mut().enumerate() {
-                    *d = self.fluid[c] * values[c];
-                }
-            }
-            "temperature" => self.s.temperature.copy_from_slice(values),
-            _ => self.s.tracers.copy_from_slice(values),
-        }
-        self.fill_ghosts_uv();
-        Ok(())
-    }
-
     fn lid(&self) -> Real {
         self.cfg.lid.unwrap_or(0.0)
     }
@@ -1176,6 +1124,59 @@ impl System for StableFluid {
             steps: s.steps,
             books: s.books,
         }))
+    }
+    /// Sets a field: "u" ((nx+1)·ny face values, i fastest, m/s), "v" (nx·(ny+1)), "density",
+    /// "temperature" (nx·ny), "tracers" (2·n_tracers, x and y in m). Closed faces are set to
+    /// 0 and smoke in solid cells is dropped. The velocity is not projected (see `project`).
+    /// A method of `System`, so the world reaches it (an inherent `set_field` left the world
+    /// with the trait's default, which refused every field).
+    fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
+        let (nx, ny) = (self.nx, self.ny);
+        let len = match name {
+            "u" => (nx + 1) * ny,
+            "v" => nx * (ny + 1),
+            "density" | "temperature" => nx * ny,
+            "tracers" => self.s.tracers.len(),
+            _ => {
+                return Err(invalid(
+                    "name",
+                    format!("unknown field {name:?}; valid: u, v, density, temperature, tracers"),
+                ))
+            }
+        };
+        if values.len() != len {
+            return Err(invalid(name, format!("has {} values, expected {len}", values.len())));
+        }
+        if let Some(i) = values.iter().position(|x| !x.is_finite()) {
+            return Err(invalid(name, format!("entry {i} is not finite: {}", values[i])));
+        }
+        match name {
+            "u" => {
+                for j in 0..ny {
+                    for i in 0..=nx {
+                        let k = i + (nx + 1) * (j + 1);
+                        self.s.u[k] = self.u_open[k] * values[i + (nx + 1) * j];
+                    }
+                }
+            }
+            "v" => {
+                for j in 0..=ny {
+                    for i in 0..nx {
+                        let k = (i + 1) + (nx + 2) * j;
+                        self.s.v[k] = self.v_open[k] * values[i + nx * j];
+                    }
+                }
+            }
+            "density" => {
+                for (c, d) in self.s.density.iter_mut().enumerate() {
+                    *d = self.fluid[c] * values[c];
+                }
+            }
+            "temperature" => self.s.temperature.copy_from_slice(values),
+            _ => self.s.tracers.copy_from_slice(values),
+        }
+        self.fill_ghosts_uv();
+        Ok(())
     }
     fn restore(&mut self, snapshot: Snapshot) {
         self.s = *snapshot.downcast::<State>().expect("a snapshot of this fluid");
