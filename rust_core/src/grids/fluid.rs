@@ -393,6 +393,12 @@ fn each_row(out: &mut [Real], w: usize, f: impl Fn(usize, &mut [Real]) + Sync + 
     super::rows_each(out, w, &mut none, f);
 }
 
+/// `each_row` over the matching rows of two arrays.
+fn each_row2(a: &mut [Real], b: &mut [Real], w: usize, f: impl Fn(usize, &mut [Real], &mut [Real]) + Sync + Send) {
+    let mut none = vec![(); a.len() / w];
+    super::rows2_each(a, b, w, &mut none, f);
+}
+
 /// Ghost rows of u (below y = 0, above y = ny·dx): free slip copies the row inside, no slip
 /// reflects it oddly about the wall's speed (0, or the lid's).
 fn fill_u_ghosts(u: &mut [Real], nx: usize, ny: usize, no_slip: bool, lid: Real) {
@@ -650,17 +656,16 @@ impl StableFluid {
         let vel = self.vel(&self.s.u, &self.s.v);
         let src = [&self.s.density[..], &self.s.temperature[..]];
         let fluid = &self.fluid;
-        let mut none = vec![(); self.ny];
-        let pass = |hat: Option<[&[Real]; 2]>, d: &mut [Real], t: &mut [Real], none: &mut [()]| {
-            super::rows2_each(d, t, nx, none, |j, d, t| {
+        let pass = |hat: Option<[&[Real]; 2]>, d: &mut [Real], t: &mut [Real]| {
+            each_row2(d, t, nx, |j, d, t| {
                 lanes::run(lanes::SmokeRow { vel: &vel, dx, lay, fluid, ambient, src, hat, dt, j, out: [d, t] })
             })
         };
         if self.cfg.advection == Advection::MacCormack {
-            pass(None, &mut self.fx, &mut self.fy, &mut none);
-            pass(Some([&self.fx, &self.fy]), &mut self.c2, &mut self.wz, &mut none);
+            pass(None, &mut self.fx, &mut self.fy);
+            pass(Some([&self.fx, &self.fy]), &mut self.c2, &mut self.wz);
         } else {
-            pass(None, &mut self.c2, &mut self.wz, &mut none);
+            pass(None, &mut self.c2, &mut self.wz);
         }
         std::mem::swap(&mut self.s.density, &mut self.c2);
         std::mem::swap(&mut self.s.temperature, &mut self.wz);
@@ -701,27 +706,26 @@ impl StableFluid {
             let (u, v) = (&self.s.u, &self.s.v);
             let uc = |i: usize, j: usize| 0.5 * (u[i + (nx + 1) * (j + 1)] + u[i + 1 + (nx + 1) * (j + 1)]);
             let vc = |i: usize, j: usize| 0.5 * (v[(i + 1) + (nx + 2) * j] + v[(i + 1) + (nx + 2) * (j + 1)]);
-            // Centred differences inside, one-sided at the walls; reciprocals, not divisions
-            // (the divider bounded these loops).
-            let inv = |d: usize| if d == 2 { 0.5 / dx } else { 1.0 / dx };
+            // Centred differences inside, one-sided at the walls (nx, ny ≥ 3: `validate`);
+            // reciprocals, not divisions (the divider bounded these loops).
+            let (centred, one_sided) = (0.5 / dx, 1.0 / dx);
+            let inv = |d: usize| if d == 2 { centred } else { one_sided };
+            let last = nx - 1;
             each_row(&mut self.wz, nx, |j, row| {
                 let (j0, j1) = (j.saturating_sub(1), (j + 1).min(ny - 1));
                 let hy = inv(j1 - j0);
                 let cell = |i: usize, i0: usize, i1: usize, hx: Real| {
                     (vc(i1, j) - vc(i0, j)) * hx - (uc(i, j1) - uc(i, j0)) * hy
                 };
-                let last = nx - 1;
-                row[0] = cell(0, 0, 1.min(last), inv(1.min(last)));
+                row[0] = cell(0, 0, 1, one_sided);
                 for i in 1..last {
-                    row[i] = cell(i, i - 1, i + 1, 0.5 / dx);
+                    row[i] = cell(i, i - 1, i + 1, centred);
                 }
-                if last > 0 {
-                    row[last] = cell(last, last - 1, last, 1.0 / dx);
-                }
+                row[last] = cell(last, last - 1, last, one_sided);
             });
             let wz = &self.wz;
             let fy = &mut self.fy;
-            super::rows2_sum(&mut self.fx, fy, nx, |j, fx, fy| {
+            each_row2(&mut self.fx, fy, nx, |j, fx, fy| {
                 let (j0, j1) = (j.saturating_sub(1), (j + 1).min(ny - 1));
                 let hy = inv(j1 - j0);
                 let (w0, wc, w1) =
@@ -732,15 +736,11 @@ impl StableFluid {
                     let k = eps * dx * wc[i] / ((ex * ex + ey * ey).sqrt() + 1e-300);
                     (k * ey, -k * ex)
                 };
-                let last = nx - 1;
-                (fx[0], fy[0]) = force(0, 0, 1.min(last), inv(1.min(last)));
+                (fx[0], fy[0]) = force(0, 0, 1, one_sided);
                 for i in 1..last {
-                    (fx[i], fy[i]) = force(i, i - 1, i + 1, 0.5 / dx);
+                    (fx[i], fy[i]) = force(i, i - 1, i + 1, centred);
                 }
-                if last > 0 {
-                    (fx[last], fy[last]) = force(last, last - 1, last, 1.0 / dx);
-                }
-                0.0
+                (fx[last], fy[last]) = force(last, last - 1, last, one_sided);
             });
             let (fx, open) = (&self.fx, &self.u_open);
             rows_sum(&mut self.s.u[nx + 1..(nx + 1) * (ny + 1)], nx + 1, |j, row| {

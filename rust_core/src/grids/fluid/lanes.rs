@@ -104,7 +104,7 @@ impl<S: Simd> LaneLay<S> {
     #[inline(always)]
     fn corners(&self, s: S, t: &Taps<S>, a: &[Real]) -> [V<S>; 4] {
         let w = self.w;
-        let mut c = [[0.0; 16]; 4];
+        let mut c = [[0.0; MAX_LANES]; 4];
         for l in 0..V::<S>::lanes() {
             let q = &a[t.at[l]..t.at[l] + w + 2];
             c[0][l] = q[0];
@@ -133,6 +133,13 @@ fn bounds<S: Simd>([a00, a10, a01, a11]: [V<S>; 4]) -> (V<S>, V<S>) {
     let min = |a: V<S>, b: V<S>| a.lt(b).select(a, b);
     let max = |a: V<S>, b: V<S>| a.gt(b).select(a, b);
     (min(min(a00, a10), min(a01, a11)), max(max(a00, a10), max(a01, a11)))
+}
+
+/// MacCormack's corrected value: hat + ½(src − back), clamped to (lo, hi), the min and max of
+/// the values the backtrace interpolated between.
+#[inline(always)]
+fn maccormack<S: Simd>(hat: V<S>, src: V<S>, back: V<S>, (lo, hi): (V<S>, V<S>)) -> V<S> {
+    clamp(hat + V::splat(hat.s, 0.5) * (src - back), lo, hi)
 }
 
 /// The velocity field (`Vel`) as lane constants.
@@ -223,8 +230,8 @@ fn groups(a0: usize, a1: usize, l: usize) -> impl Iterator<Item = usize> {
     (0..full).map(move |g| a0 + g * l).chain(tail)
 }
 
-/// One row b of `super::sl_pass` (`hat` = None) or `super::mc_pass` (`hat` = the
-/// semi-Lagrangian result with ghosts filled), into `row`.
+/// One row b of `super::advect_faces`: semi-Lagrangian (`hat` = None) or MacCormack (`hat` =
+/// the semi-Lagrangian result with ghosts filled), into `row`.
 pub(super) struct FaceRow<'a> {
     pub vel: &'a Vel<'a>,
     pub dx: Real,
@@ -248,7 +255,7 @@ impl Kernel for FaceRow<'_> {
         }
         let lay = act.lay;
         let (lv, ll) = (LaneVel::new(s, vel), LaneLay::new(s, lay));
-        let (half, fill) = (V::splat(s, 0.5), V::splat(s, act.fill));
+        let fill = V::splat(s, act.fill);
         let mask = &act.mask[lay.w * b..lay.w * (b + 1)];
         for a in groups(act.a0, act.a1, l) {
             let p = positions(s, lay, dx, a, b);
@@ -259,12 +266,11 @@ impl Kernel for FaceRow<'_> {
             let val = match hat {
                 None => tb.lerp(cb),
                 Some(hat) => {
-                    let (lo, hi) = bounds(cb);
                     let fwd = lv.trace(s, p, v0, -dt);
                     let tf = ll.taps(fwd.0, fwd.1, lv.inv_dx);
-                    let there = tf.lerp(ll.corners(s, &tf, hat));
+                    let back = tf.lerp(ll.corners(s, &tf, hat));
                     let k = lay.w * b + a;
-                    clamp(V::load(s, &hat[k..]) + half * (V::load(s, &src[k..]) - there), lo, hi)
+                    maccormack(V::load(s, &hat[k..]), V::load(s, &src[k..]), back, bounds(cb))
                 }
             };
             V::load(s, &mask[a..]).gt(V::zero(s)).select(val, fill).store(&mut row[a..]);
@@ -299,7 +305,7 @@ impl Kernel for SmokeRow<'_> {
         }
         let (lv, lc) = (LaneVel::new(s, vel), LaneLay::new(s, lay));
         let [d, t] = out;
-        let (half, zero, amb) = (V::splat(s, 0.5), V::zero(s), V::splat(s, ambient));
+        let (zero, amb) = (V::zero(s), V::splat(s, ambient));
         let f = &fluid[nx * j..nx * (j + 1)];
         for i in groups(0, nx, l) {
             let p = positions(s, lay, dx, i, j);
@@ -310,16 +316,12 @@ impl Kernel for SmokeRow<'_> {
             let (dv, tv) = match hat {
                 None => (tb.lerp(cd), tb.lerp(ct)),
                 Some([dh, th]) => {
-                    let ((dlo, dhi), (tlo, thi)) = (bounds(cd), bounds(ct));
                     let fwd = lv.trace(s, p, v0, -dt);
                     let tf = lc.taps(fwd.0, fwd.1, lv.inv_dx);
                     let (db, tb) = (tf.lerp(lc.corners(s, &tf, dh)), tf.lerp(lc.corners(s, &tf, th)));
                     let k = nx * j + i;
                     let ld = |a: &[Real]| V::load(s, &a[k..]);
-                    (
-                        clamp(ld(dh) + half * (ld(src[0]) - db), dlo, dhi),
-                        clamp(ld(th) + half * (ld(src[1]) - tb), tlo, thi),
-                    )
+                    (maccormack(ld(dh), ld(src[0]), db, bounds(cd)), maccormack(ld(th), ld(src[1]), tb, bounds(ct)))
                 }
             };
             let m = V::load(s, &f[i..]).gt(zero);
