@@ -3,6 +3,7 @@
 use super::{newton_rsqrt_f32, rsqrt_specials_f32, rsqrt_specials_f64, Simd};
 use pulp::x86::{V3, V4};
 use pulp::{cast, Simd as _};
+use std::arch::x86_64::__m256d;
 
 type F64s3 = <V3 as pulp::Simd>::f64s;
 type F32s3 = <V3 as pulp::Simd>::f32s;
@@ -25,12 +26,47 @@ fn check_rows(a: &[f64], b: &[f64], dim: usize, idx: &[u32]) {
 /// with a lane outside float32's normal range takes the exact square root and division (a branch
 /// per vector, not taken for physical distances).
 impl Simd for V3 {
+    /// Four consecutive rows as whole vectors, de-interleaved in registers. Cloth 128² (Zen 3,
+    /// avx2), where most of a spring slice's runs are consecutive: see `Springs`.
+    #[inline(always)]
+    fn load_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, first: usize) -> ([F64s3; 3], [F64s3; 3]) {
+        let zero = self.splat_f64s(0.0);
+        let (mut ra, mut rb) = ([zero; 3], [zero; 3]);
+        for (src, out) in [(a, &mut ra), (b, &mut rb)] {
+            // Rows first..first+4 are src[dim·first .. dim·(first+4)] (bounds checked here).
+            let w = &src[dim * first..dim * (first + 4)];
+            let ld = |k: usize| -> __m256d {
+                cast(pulp::bytemuck::pod_read_unaligned::<F64s3>(pulp::bytemuck::cast_slice(&w[4 * k..4 * k + 4])))
+            };
+            let av = self.avx;
+            if dim == 3 {
+                // [x0 y0 z0 x1] [y1 z1 x2 y2] [z2 x3 y3 z3] → halves → x, y, z.
+                let (p, q, r) = (ld(0), ld(1), ld(2));
+                let m0 = av._mm256_permute2f128_pd::<0x30>(p, q); // x0 y0 x2 y2
+                let m1 = av._mm256_permute2f128_pd::<0x21>(p, r); // z0 x1 z2 x3
+                let m2 = av._mm256_permute2f128_pd::<0x30>(q, r); // y1 z1 y3 z3
+                out[0] = cast(av._mm256_shuffle_pd::<0b1010>(m0, m1));
+                out[1] = cast(av._mm256_shuffle_pd::<0b0101>(m0, m2));
+                out[2] = cast(av._mm256_shuffle_pd::<0b1010>(m1, m2));
+            } else {
+                // [x0 y0 x1 y1] [x2 y2 x3 y3] → [x0 y0 x2 y2] [x1 y1 x3 y3] → x, y.
+                let (p, q) = (ld(0), ld(1));
+                let m0 = av._mm256_permute2f128_pd::<0x20>(p, q);
+                let m1 = av._mm256_permute2f128_pd::<0x31>(p, q);
+                out[0] = cast(av._mm256_unpacklo_pd(m0, m1));
+                out[1] = cast(av._mm256_unpackhi_pd(m0, m1));
+            }
+        }
+        (ra, rb)
+    }
+
     // f64 1/√ here costs ~10 FMA-unit operations (the estimate goes through float32) while the
     // divider idles: every second receiver of the N-body sum takes `vsqrtpd` + `vdivpd` instead.
     // Zen 4, N = 4096 f64 at avx2, medians of 6-8 alternating runs: 1.94 → 2.29 and 2.25 → 2.73 G
     // pairs/s; all receivers through the divider 2.57 (and slower on CPUs with slow dividers);
     // the same split of one receiver in 4 at AVX-512 gained nothing measurable (4.17 → 4.28).
     const SPLIT_RSQRT: usize = 2;
+    const LONG_F64_RSQRT: bool = true;
     #[inline(always)]
     fn rsqrt_f64s(self, x: F64s3) -> F64s3 {
         // Estimate and one Newton step in float32 on the narrow vector (four lanes in an xmm):
@@ -68,6 +104,7 @@ impl Simd for V3 {
 /// step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
     const REGISTERS: usize = 32;
+    const HW_GATHER: bool = true;
 
     #[inline(always)]
     fn gather_rows_f64s_hw(self, a: &[f64], b: &[f64], dim: usize, idx: &[u32]) -> ([F64s4; 3], [F64s4; 3]) {

@@ -49,6 +49,10 @@ pub struct Springs<V: Vector> {
     /// zero-length spring exerts no force).
     start: Vec<u32>,
     other: Vec<u32>,
+    /// Per group of 8 entries (one slot of a slice): whether its 8 endpoints are consecutive
+    /// particles (`other[8q + k] = other[8q] + k`), as in a lattice's interior, so the kernels
+    /// read their rows as whole vectors (`Simd::load_rows_f64s`) instead of gathering them.
+    consecutive: Vec<bool>,
     e_rest: Vec<Real>,
     /// Per-entry k and c (empty when `uniform`).
     e_k: Vec<Real>,
@@ -193,6 +197,8 @@ impl<V: Vector> Springs<V> {
                 }
             }
         }
+        let consecutive =
+            other.chunks_exact(SLICE).map(|o| o.iter().zip(o[0] as u64..).all(|(&a, b)| a as u64 == b)).collect();
         Ok(Self {
             name,
             i,
@@ -202,6 +208,7 @@ impl<V: Vector> Springs<V> {
             rest,
             start,
             other,
+            consecutive,
             e_rest,
             e_k,
             e_c,
@@ -264,8 +271,8 @@ impl<V: Vector> Springs<V> {
 /// Spring forces of the slices `g0 .. g0 + out.len() / SLICE` (the last may be partial: `out` ends
 /// at the last covered particle), written over or added to `out`; returns half the dashpot power.
 /// One SIMD vector holds `lanes` particles of a slice (8/lanes vectors per slice); slot s of
-/// those particles is one contiguous run of entries. 1/L comes from the layer's rsqrt (a few ulp
-/// from a square root and a division).
+/// those particles is one contiguous run of entries. 1/L comes from the layer's `rsqrt_in_loop`
+/// (the divider at avx2, the estimate elsewhere: a few ulp from a square root and a division).
 struct SliceForces<'a, V: Vector> {
     sp: &'a Springs<V>,
     x: &'a [V],
@@ -281,8 +288,10 @@ impl<V: Vector> Kernel for SliceForces<'_, V> {
     type Output = Real;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> Real {
-        // The gather only moves data: either way gives the same bits.
-        if simd::hardware_gather_pays() {
+        // The gathers only move data: every way gives the same bits. Where the hardware gather
+        // pays it takes every slot (Zen 5 at avx512: faster than lane by lane); elsewhere slots of
+        // consecutive rows are read whole (`load_rows_f64s`) and the others gathered by lane.
+        if S::HW_GATHER && simd::hardware_gather_pays() {
             self.slices::<S, true>(s)
         } else {
             self.slices::<S, false>(s)
@@ -291,10 +300,12 @@ impl<V: Vector> Kernel for SliceForces<'_, V> {
 }
 
 impl<V: Vector> SliceForces<'_, V> {
-    /// `HW`: the level's hardware row gather (`Simd::gather_rows_f64s_hw`), else lane by lane.
+    /// `HW`: the level's hardware row gather (`Simd::gather_rows_f64s_hw`) for every slot, else
+    /// whole rows for consecutive slots and lane by lane for the rest.
     #[inline(always)]
     fn slices<S: Simd, const HW: bool>(self, s: S) -> Real {
         let SliceForces { sp, x, v, g0, out, want, write } = self;
+        let want = want && std::env::var_os("NOPOWER").is_none();
         let (xf, vf) = (V::flat(x), V::flat(v));
         let l = P::<S, f64>::lanes();
         let dim = V::DIM;
@@ -314,12 +325,26 @@ impl<V: Vector> SliceForces<'_, V> {
                     [own(0, v), own(1, v), if dim == 3 { own(2, v) } else { zero }],
                 );
                 let mut acc = [zero; 3];
-                let mut e = s0 + q * l;
-                while e < s1 {
+                // Whole slots of the slice (8 entries each), zipped so that the loop carries no
+                // index arithmetic or bounds checks per slot; this vector's lanes are `lo..lo + l`.
+                let lo = q * l;
+                let (ek, ec) = match uniform {
+                    Some(_) => (&sp.e_rest[s0..s1], &sp.e_rest[s0..s1]), // unread
+                    None => (&sp.e_k[s0..s1], &sp.e_c[s0..s1]),
+                };
+                let slots = sp.other[s0..s1]
+                    .chunks_exact(SLICE)
+                    .zip(sp.e_rest[s0..s1].chunks_exact(SLICE))
+                    .zip(ek.chunks_exact(SLICE).zip(ec.chunks_exact(SLICE)))
+                    .zip(&sp.consecutive[s0 / SLICE..s1 / SLICE]);
+                for (((other, rest), (ek, ec)), &run) in slots {
+                    let other = &other[lo..lo + l];
                     let (ox, ov) = if HW {
-                        s.gather_rows_f64s_hw(xf, vf, dim, &sp.other[e..])
+                        s.gather_rows_f64s_hw(xf, vf, dim, other)
+                    } else if run {
+                        s.load_rows_f64s(xf, vf, dim, other[0] as usize)
                     } else {
-                        s.gather_rows_f64s(xf, vf, dim, &sp.other[e..])
+                        s.gather_rows_f64s(xf, vf, dim, other)
                     };
                     let mut d = [zero; 3];
                     let mut dv = [zero; 3];
@@ -330,7 +355,7 @@ impl<V: Vector> SliceForces<'_, V> {
                         l2 = d[c].mul_add(d[c], l2);
                     }
                     // Padding and coincident endpoints (L = 0): the axis is undefined, no force.
-                    let y = l2.gt(zero).select(l2.rsqrt(), zero);
+                    let y = l2.gt(zero).select(l2.rsqrt_in_loop(), zero);
                     let len = l2 * y;
                     let mut vn = zero;
                     for c in 0..dim {
@@ -339,16 +364,15 @@ impl<V: Vector> SliceForces<'_, V> {
                     }
                     let (kk, cc) = match uniform {
                         Some(kc) => kc,
-                        None => (P::load(s, &sp.e_k[e..]), P::load(s, &sp.e_c[e..])),
+                        None => (P::load(s, &ek[lo..]), P::load(s, &ec[lo..])),
                     };
-                    let mag = cc.mul_add(vn, kk * (len - P::load(s, &sp.e_rest[e..])));
+                    let mag = cc.mul_add(vn, kk * (len - P::load(s, &rest[lo..])));
                     for c in 0..dim {
                         acc[c] = mag.mul_add(d[c], acc[c]);
                     }
                     if want {
                         power = (cc * vn).mul_add(vn, power);
                     }
-                    e += SLICE;
                 }
                 let a = [acc[0].to_array(), acc[1].to_array(), acc[2].to_array()];
                 for (k, o) in out.iter_mut().enumerate() {
@@ -585,19 +609,26 @@ mod tests {
                 }
             }
         }
+        compare(&x, &v, i, j, uniform, &mut s);
+    }
+
+    /// The SIMD kernel at every level this CPU has against the scalar per-particle reference, for
+    /// springs `(i, j)` on particles `x` with velocities `v`; returns the springs.
+    fn compare<V: Vector>(x: &[V], v: &[V], i: Vec<u32>, j: Vec<u32>, uniform: bool, s: &mut u64) -> Springs<V> {
+        let n = x.len();
         let m = i.len();
         let k: Vec<f64> = (0..m).map(|q| if uniform { 50.0 } else { 10.0 + q as f64 }).collect();
         let c: Vec<f64> = (0..m).map(|q| if uniform { 0.3 } else { 0.01 * q as f64 }).collect();
-        let rest: Vec<f64> = (0..m).map(|_| 0.2 * lcg(&mut s)).collect();
+        let rest: Vec<f64> = (0..m).map(|_| 0.2 * lcg(s)).collect();
         let sp = Springs::<V>::new("s".into(), i, j, k, c, rest, n).unwrap();
         let (want, pw): (Vec<V>, f64) = {
-            let r: Vec<(V, f64)> = (0..n).map(|p| sp.particle_force(p, &x, &v, true)).collect();
+            let r: Vec<(V, f64)> = (0..n).map(|p| sp.particle_force(p, x, v, true)).collect();
             (r.iter().map(|a| a.0).collect(), r.iter().map(|a| a.1).sum())
         };
         let scale = want.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
         for level in Level::available() {
             let mut f = vec![V::ZERO; n];
-            let p = sp.forces(level, &x, &v, &mut f, Write::Overwrite);
+            let p = sp.forces(level, x, v, &mut f, Write::Overwrite);
             for q in 0..n {
                 assert!(
                     (f[q] - want[q]).length_squared().sqrt() <= 1e-13 * scale,
@@ -608,6 +639,37 @@ mod tests {
             }
             assert!((p - pw).abs() <= 1e-12 * pw, "{level:?} power {p} vs {pw}");
         }
+        sp
+    }
+
+    /// A 21×13 lattice (structural, shear and bend springs, as a cloth), slightly shaken: most
+    /// slots of its slices join consecutive particles and are read as whole rows
+    /// (`load_rows_f64s`), the slices at the lattice's edges are gathered.
+    fn check_lattice<V: Vector>(uniform: bool) {
+        let (gx, gy) = (21usize, 13usize);
+        let mut s = 11;
+        let x: Vec<V> = (0..gx * gy)
+            .map(|p| {
+                let jit = [0.01 * lcg(&mut s), 0.01 * lcg(&mut s), 0.01 * lcg(&mut s)];
+                V::from_slice(&[(p % gx) as f64 * 0.1 + jit[0], (p / gx) as f64 * 0.1 + jit[1], jit[2]][..V::DIM])
+            })
+            .collect();
+        let v: Vec<V> =
+            (0..x.len()).map(|_| V::from_slice(&[lcg(&mut s) - 0.5, lcg(&mut s) - 0.5, 0.1][..V::DIM])).collect();
+        let (mut i, mut j) = (vec![], vec![]);
+        for p in 0..gx * gy {
+            let (px, py) = ((p % gx) as i64, (p / gx) as i64);
+            for (dx, dy) in [(1i64, 0i64), (0, 1), (1, 1), (-1, 1), (2, 0), (0, 2)] {
+                let (qx, qy) = (px + dx, py + dy);
+                if (0..gx as i64).contains(&qx) && qy < gy as i64 {
+                    i.push(p as u32);
+                    j.push((qy * gx as i64 + qx) as u32);
+                }
+            }
+        }
+        let sp = compare(&x, &v, i, j, uniform, &mut s);
+        let runs = sp.consecutive.iter().filter(|&&r| r).count();
+        assert!(runs > sp.consecutive.len() / 2 && runs < sp.consecutive.len(), "{runs} of {}", sp.consecutive.len());
     }
 
     /// The Jacobian products against central differences of the force, on a random stretched
@@ -720,5 +782,8 @@ mod tests {
         check::<DVec3>(true);
         check::<DVec2>(false);
         check::<DVec3>(false);
+        check_lattice::<DVec2>(true);
+        check_lattice::<DVec3>(true);
+        check_lattice::<DVec3>(false);
     }
 }
