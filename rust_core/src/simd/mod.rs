@@ -190,11 +190,13 @@ pub trait Simd: pulp::Simd {
     /// units and the divider work (AVX2: k = 2, see `x86.rs`). The choice is fixed per receiver
     /// index, so results do not depend on the thread count or the tiling.
     const SPLIT_RSQRT: usize = 0;
-    /// Whether f64 1/√x by estimate is a long chain of instructions on this level (AVX2 builds it
-    /// through float32: ~17 instructions against a square root and a division). Loops that do
-    /// much else per 1/√ and leave the divider idle take the divider there instead
-    /// (`P::rsqrt_in_loop`).
-    const LONG_F64_RSQRT: bool = false;
+    /// Whether loops that do much else per 1/√ or √ (and so leave the divider idle) take them
+    /// from the divider (`P::rsqrt_in_loop` and its twins) instead of the estimate. AVX2: its
+    /// f64 estimate goes through float32 (~17 instructions against a square root and a
+    /// division), its f32 one needs a Newton step and a special-value select (6 against 1–2);
+    /// measured on Zen 3, cloth 128² 39 → 48 M particle-steps/s, SPH-2D 160k +7 % (both with
+    /// their other changes in place). Other levels keep the estimate (not measured here).
+    const DIVIDER_IN_LOOPS: bool = false;
     /// Whether `gather_rows_f64s_hw` is the level's hardware gather (AVX-512), not the default.
     const HW_GATHER: bool = false;
 
@@ -397,6 +399,10 @@ pub trait Float:
     fn vgt<S: Simd>(s: S, a: Self::V<S>, b: Self::V<S>) -> Self::M<S>;
     /// `m ? a : b` lane by lane.
     fn select<S: Simd>(s: S, m: Self::M<S>, a: Self::V<S>, b: Self::V<S>) -> Self::V<S>;
+    /// Lanes set in both masks.
+    fn mand<S: Simd>(s: S, a: Self::M<S>, b: Self::M<S>) -> Self::M<S>;
+    /// Whether any lane of the mask is set.
+    fn many<S: Simd>(s: S, m: Self::M<S>) -> bool;
     fn rsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
     /// The correctly rounded square root.
     fn vsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
@@ -436,7 +442,7 @@ macro_rules! float_impl {
     };
     (@ops $t:ty, $v:ident, $m:ident, splat = $splat:ident, add = $add:ident, sub = $sub:ident, mul = $mul:ident,
      div = $div:ident, fma = $fma:ident, fnma = $fnma:ident, max = $max:ident, min = $min:ident, lt = $lt:ident,
-     gt = $gt:ident, select = $sel:ident, rsqrt = $rsqrt:ident, sqrt = $sqrt:ident, sum = $sum:ident) => {
+     gt = $gt:ident, select = $sel:ident, and = $and:ident, first = $first:ident, rsqrt = $rsqrt:ident, sqrt = $sqrt:ident, sum = $sum:ident) => {
         #[inline(always)]
         fn splat<S: Simd>(s: S, x: Self) -> S::$v {
             s.$splat(x)
@@ -486,6 +492,14 @@ macro_rules! float_impl {
             s.$sel(m, a, b)
         }
         #[inline(always)]
+        fn mand<S: Simd>(s: S, a: S::$m, b: S::$m) -> S::$m {
+            s.$and(a, b)
+        }
+        #[inline(always)]
+        fn many<S: Simd>(s: S, m: S::$m) -> bool {
+            s.$first(m) < <Self as Float>::lanes::<S>()
+        }
+        #[inline(always)]
         fn rsqrt<S: Simd>(s: S, x: S::$v) -> S::$v {
             s.$rsqrt(x)
         }
@@ -517,6 +531,8 @@ float_impl!(
     lt = less_than_f64s,
     gt = greater_than_f64s,
     select = select_f64s,
+    and = and_m64s,
+    first = first_true_m64s,
     rsqrt = rsqrt_f64s,
     sqrt = sqrt_f64s,
     sum = reduce_sum_f64s
@@ -538,6 +554,8 @@ float_impl!(
     lt = less_than_f32s,
     gt = greater_than_f32s,
     select = select_f32s,
+    and = and_m32s,
+    first = first_true_m32s,
     rsqrt = rsqrt_f32s,
     sqrt = sqrt_f32s,
     sum = reduce_sum_f32s
@@ -643,17 +661,43 @@ impl<S: Simd, F: Float> P<S, F> {
         P { s: self.s, v: F::rsqrt(self.s, self.v) }
     }
     /// 1/√self for a loop that does much else per value and leaves the divider idle (spring
-    /// forces: gathers, projections, dashpots): the square root and division where the level's
-    /// f64 estimate is a long chain (`Simd::LONG_F64_RSQRT`), else the estimate. Cloth 128² on
-    /// Zen 3 at avx2: 39 → 48 M particle-steps/s (3 alternating runs each); the divider's ~13
-    /// cycles per vector stay under the ~40 the rest of a spring slot takes.
+    /// forces: gathers, projections, dashpots): the square root and division where the level
+    /// asks for it (`Simd::DIVIDER_IN_LOOPS`), else the estimate. Cloth 128² on Zen 3 at avx2:
+    /// 39 → 48 M particle-steps/s (3 alternating runs each); the divider's ~13 cycles per vector
+    /// stay under the ~40 the rest of a spring slot takes.
     #[inline(always)]
     pub fn rsqrt_in_loop(self) -> Self {
-        if S::LONG_F64_RSQRT && std::mem::size_of::<F>() == 8 {
+        if S::DIVIDER_IN_LOOPS {
             self.rsqrt_exact()
         } else {
             self.rsqrt()
         }
+    }
+    /// √self in such a loop: the square root where the level asks for it, else self · 1/√self.
+    #[inline(always)]
+    pub fn sqrt_in_loop(self) -> Self {
+        if S::DIVIDER_IN_LOOPS {
+            self.sqrt()
+        } else {
+            self * self.rsqrt()
+        }
+    }
+    /// (√self, 1/√self) in such a loop: a square root and a division where the level asks for
+    /// it, else the estimate y and (self · y, y).
+    #[inline(always)]
+    pub fn sqrt_and_rsqrt_in_loop(self) -> (Self, Self) {
+        if S::DIVIDER_IN_LOOPS {
+            let r = self.sqrt();
+            (r, Self::splat(self.s, F::ONE) / r)
+        } else {
+            let y = self.rsqrt();
+            (self * y, y)
+        }
+    }
+    /// The correctly rounded square root.
+    #[inline(always)]
+    pub fn sqrt(self) -> Self {
+        P { s: self.s, v: F::vsqrt(self.s, self.v) }
     }
     /// 1/√self as a correctly rounded square root and a division: the divider, not the FMA
     /// units (see `Simd::SPLIT_RSQRT`).
@@ -668,6 +712,16 @@ impl<S: Simd, F: Float> P<S, F> {
 }
 
 impl<S: Simd, F: Float> Mask<S, F> {
+    /// Lanes set in both.
+    #[inline(always)]
+    pub fn and(self, s: S, o: Self) -> Self {
+        Mask(F::mand(s, self.0, o.0))
+    }
+    /// Whether any lane is set.
+    #[inline(always)]
+    pub fn any(self, s: S) -> bool {
+        F::many(s, self.0)
+    }
     /// `self ? a : b`.
     #[inline(always)]
     pub fn select(self, a: P<S, F>, b: P<S, F>) -> P<S, F> {

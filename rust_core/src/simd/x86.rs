@@ -66,7 +66,7 @@ impl Simd for V3 {
     // pairs/s; all receivers through the divider 2.57 (and slower on CPUs with slow dividers);
     // the same split of one receiver in 4 at AVX-512 gained nothing measurable (4.17 → 4.28).
     const SPLIT_RSQRT: usize = 2;
-    const LONG_F64_RSQRT: bool = true;
+    const DIVIDER_IN_LOOPS: bool = true;
     #[inline(always)]
     fn rsqrt_f64s(self, x: F64s3) -> F64s3 {
         // Estimate and one Newton step in float32 on the narrow vector (four lanes in an xmm):

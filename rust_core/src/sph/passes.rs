@@ -293,6 +293,9 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
         let l = P::<S, F>::lanes();
         let (zero, lanes, tiny) = (P::<S, F>::zero(s), iota::<S, F>(s), P::splat(s, tiny::<F>()));
         let inv_h = P::splat(s, F::of(1.0 / p.h));
+        // Vectors with no candidate within the support (q < 2 for both kernels) are skipped: their
+        // terms are exactly 0 (the margin keeps rounding from dropping a q just under 2).
+        let reach = P::splat(s, F::of(4.0001 * p.h * p.h));
         let sigma = F::of(K::sigma(p.h, D));
         let z = if D == 3 { 2 } else { 0 };
         let mut nb = Neighbours::new(grid, fluids);
@@ -317,11 +320,15 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
                             let dz = xi[2] - P::load(s, cz);
                             r2 = dz.mul_add(dz, r2);
                         }
-                        let x = r2.max(tiny);
-                        let q = x * x.rsqrt() * inv_h;
-                        let w = K::wv(q) * P::load(s, cm);
-                        acc = acc + lanes.lt(left).select(w, zero);
+                        let live = lanes.lt(left);
                         left = left - P::splat(s, F::of(l as f64));
+                        if !live.and(s, r2.lt(reach)).any(s) {
+                            continue;
+                        }
+                        let x = r2.max(tiny);
+                        let q = x.sqrt_in_loop() * inv_h;
+                        let w = K::wv(q) * P::load(s, cm);
+                        acc = acc + live.select(w, zero);
                     }
                 }
             }
@@ -362,6 +369,9 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
         // One fluid: 2 α c0 h for every pair. Several: (α c0 h)_i + (α c0 h)_j.
         let visc = P::splat(s, F::of(2.0 * p.alpha * p.c0 * p.h));
         let eps_h2 = P::splat(s, F::of(0.01 * p.h * p.h));
+        // Vectors with no candidate within the support (q < 2 for both kernels) are skipped: their
+        // terms are exactly 0 (the margin keeps rounding from dropping a q just under 2).
+        let reach = P::splat(s, F::of(4.0001 * p.h * p.h));
         let step = P::splat(s, F::of(l as f64));
         let z = if D == 3 { 2 } else { 0 };
         let mut nb = Neighbours::new(grid, fluids);
@@ -403,9 +413,17 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                         r2 = dx[2].mul_add(dx[2], r2);
                         vr = (vi[2] - P::load(s, uz)).mul_add(dx[2], vr);
                     }
+                    let live = lanes.lt(left);
+                    left = left - step;
+                    if !live.and(s, r2.lt(reach)).any(s) {
+                        if SEVERAL {
+                            visc_j.next();
+                        }
+                        continue;
+                    }
                     let x = r2.max(tiny);
-                    let inv_r = x.rsqrt();
-                    let gq = K::gv(x * inv_r * inv_h, h * inv_r);
+                    let (rr, inv_r) = x.sqrt_and_rsqrt_in_loop();
+                    let gq = K::gv(rr * inv_h, h * inv_r);
                     // Π_ij = 2 (α c0)_ij h max(−v·r, 0) / ((r² + 0.01h²)(ρ_i + ρ_j)) ≥ 0.
                     let approach = (zero - vr).max(zero);
                     let vij = if SEVERAL {
@@ -415,7 +433,7 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                         visc
                     };
                     let pi = vij * approach / ((r2 + eps_h2) * (rho_i + P::load(s, rho)));
-                    let mg = lanes.lt(left).select(P::load(s, m) * gq, zero);
+                    let mg = live.select(P::load(s, m) * gq, zero);
                     let cf = mg * (pr_i + P::load(s, pr) + pi);
                     for d in 0..D {
                         acc[d] = cf.mul_add(dx[d], acc[d]);
@@ -423,7 +441,6 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                     if POWER {
                         pacc = (mg * pi).mul_add(vr, pacc);
                     }
-                    left = left - step;
                 }
             }
             let mut wacc = [zero; 3];
@@ -440,14 +457,18 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
                         dx[2] = xi[2] - P::load(s, pz);
                         r2 = dx[2].mul_add(dx[2], r2);
                     }
+                    let live = lanes.lt(left);
+                    left = left - step;
+                    if !live.and(s, r2.lt(reach)).any(s) {
+                        continue;
+                    }
                     let x = r2.max(tiny);
-                    let inv_r = x.rsqrt();
-                    let gq = K::gv(x * inv_r * inv_h, h * inv_r);
-                    let cf = lanes.lt(left).select(P::load(s, psi) * gq, zero);
+                    let (rr, inv_r) = x.sqrt_and_rsqrt_in_loop();
+                    let gq = K::gv(rr * inv_h, h * inv_r);
+                    let cf = live.select(P::load(s, psi) * gq, zero);
                     for d in 0..D {
                         wacc[d] = cf.mul_add(dx[d], wacc[d]);
                     }
-                    left = left - step;
                 }
             }
             let mi = b.m[k].f64();
