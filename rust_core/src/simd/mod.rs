@@ -497,6 +497,7 @@ macro_rules! float_impl {
         }
         #[inline(always)]
         fn many<S: Simd>(s: S, m: S::$m) -> bool {
+            // pulp's first-true index is the lane count exactly when no lane is set (every level).
             s.$first(m) < <Self as Float>::lanes::<S>()
         }
         #[inline(always)]

@@ -305,7 +305,6 @@ impl<V: Vector> SliceForces<'_, V> {
     #[inline(always)]
     fn slices<S: Simd, const HW: bool>(self, s: S) -> Real {
         let SliceForces { sp, x, v, g0, out, want, write } = self;
-        let want = want && std::env::var_os("NOPOWER").is_none();
         let (xf, vf) = (V::flat(x), V::flat(v));
         let l = P::<S, f64>::lanes();
         let dim = V::DIM;
