@@ -704,7 +704,7 @@ impl<S: Simd, F: Float> P<S, F> {
     /// units (see `Simd::SPLIT_RSQRT`).
     #[inline(always)]
     pub fn rsqrt_exact(self) -> Self {
-        Self::splat(self.s, F::ONE) / P { s: self.s, v: F::vsqrt(self.s, self.v) }
+        Self::splat(self.s, F::ONE) / self.sqrt()
     }
     #[inline(always)]
     pub fn sum(self) -> F {
