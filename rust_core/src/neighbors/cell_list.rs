@@ -236,12 +236,27 @@ impl CellList {
         self.order.resize(n, 0);
         let out = SyncPtr(self.order.as_mut_ptr());
         let scatter = |(p, off): (usize, &mut [u32])| {
-            for i in (p * per).min(n)..((p + 1) * per).min(n) {
-                let b = keys[i] as usize;
-                // SAFETY: the scan gives every (part, bucket) a disjoint slot range within 0..n.
-                unsafe { *out.get().add(off[b] as usize) = i as u32 };
-                off[b] += 1;
+            // Consecutive points mostly share a bucket: keep its next slot in a register while
+            // they do (a store and a reload of the counter per point had made this the slowest
+            // stage of the build: 0.38 of 1.1 ms for SPH-2D 160k, 2 threads).
+            let (a, e) = ((p * per).min(n), ((p + 1) * per).min(n));
+            if a == e {
+                return;
             }
+            let mut b = keys[a] as usize;
+            let mut slot = off[b];
+            for i in a..e {
+                let k = keys[i] as usize;
+                if k != b {
+                    off[b] = slot;
+                    b = k;
+                    slot = off[b];
+                }
+                // SAFETY: the scan gives every (part, bucket) a disjoint slot range within 0..n.
+                unsafe { *out.get().add(slot as usize) = i as u32 };
+                slot += 1;
+            }
+            off[b] = slot;
         };
         let h = &mut self.hist;
         if parts == 1 || crate::par::fork(|| h.par_chunks_mut(nb).enumerate().for_each(scatter)).is_none() {
@@ -365,6 +380,38 @@ pub(super) mod tests {
     pub(in crate::neighbors) fn lcg(s: &mut u64) -> f64 {
         *s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (*s >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// The build is a stable counting sort: buckets ascending, original indices ascending within
+    /// a bucket, every point once; in both numberings, for points that come in runs sharing a
+    /// cell (the scatter's fast path) and for scattered ones.
+    #[test]
+    fn order_is_the_stable_sort_by_bucket() {
+        for (runs, far) in [(true, false), (false, false), (true, true), (false, true)] {
+            let mut s = 11;
+            let mut x: Vec<DVec3> = (0..20000)
+                .map(|i| {
+                    let c = if runs { (i / 5) as f64 } else { i as f64 };
+                    let base = DVec3::new((c * 0.37) % 1.0, (c * 0.61) % 1.0, (c * 0.13) % 1.0);
+                    base + 0.001 * DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s))
+                })
+                .collect();
+            if far {
+                x.push(DVec3::splat(1e12));
+            }
+            let mut g = CellList::new(0.05, 3).unwrap();
+            g.build(&x);
+            assert_eq!(g.is_dense(), !far);
+            let key = |i: u32| bucket(g.mode, g.cell_of(x[i as usize]));
+            let mut seen = vec![false; x.len()];
+            for w in g.order.windows(2) {
+                assert!((key(w[0]), w[0]) < (key(w[1]), w[1]), "not a stable sort at {w:?}");
+            }
+            for &i in &g.order {
+                assert!(!std::mem::replace(&mut seen[i as usize], true));
+            }
+            assert!(seen.iter().all(|&v| v));
+        }
     }
 
     #[test]
