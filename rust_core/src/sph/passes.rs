@@ -302,16 +302,56 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
         let mut nb = Neighbours::new(grid, fluids);
         let base = ks.start;
         let first = &fluids[0];
-        for k in ks {
+        // Two particles of a cell at a time (they share its candidate runs): each candidate
+        // vector is loaded and tested once for both, and the two sums are independent chains
+        // (the loop over one particle was bound by its chain of latencies, not by throughput).
+        // Each particle adds the same terms in the same order as alone: a term out of its reach
+        // is exactly 0. A cell's odd particle goes alone (as the pair (k, k), stored once).
+        let mut k = ks.start;
+        while k < ks.end {
             let f = fluid_of::<F, SEVERAL>(b, k);
             nb.at::<SEVERAL>(k, f);
             let fl = if SEVERAL { &fluids[f] } else { first };
-            let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
-            let mut acc = zero;
-            for (pos, mass, ranges) in [(&b.pos, &b.m, &nb.fluid), (&fl.w.pos, &fl.w.psi, &nb.wall)] {
-                for r in ranges.iter() {
+            let pair = k + 1 < ks.end
+                && grid.cells[k + 1] == grid.cells[k]
+                && (!SEVERAL || fluid_of::<F, SEVERAL>(b, k + 1) == f);
+            let k2 = if pair { k + 1 } else { k };
+            let xa: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
+            let xb: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k2]) } else { zero });
+            let (mut acc_a, mut acc_b) = (zero, zero);
+            for r in nb.fluid.iter() {
+                let cols = run(&b.pos[0], &r, l).chunks_exact(l).zip(run(&b.pos[1], &r, l).chunks_exact(l));
+                let cols = cols.zip(run(&b.pos[z], &r, l).chunks_exact(l)).zip(run(&b.m, &r, l).chunks_exact(l));
+                let mut left = P::splat(s, F::of((r.end - r.start) as f64));
+                for (((cx, cy), cz), cm) in cols {
+                    let (cx, cy) = (P::load(s, cx), P::load(s, cy));
+                    let (dxa, dya) = (xa[0] - cx, xa[1] - cy);
+                    let (dxb, dyb) = (xb[0] - cx, xb[1] - cy);
+                    let mut r2a = dxa.mul_add(dxa, dya * dya);
+                    let mut r2b = dxb.mul_add(dxb, dyb * dyb);
+                    if D == 3 {
+                        let cz = P::load(s, cz);
+                        let (dza, dzb) = (xa[2] - cz, xb[2] - cz);
+                        r2a = dza.mul_add(dza, r2a);
+                        r2b = dzb.mul_add(dzb, r2b);
+                    }
+                    let live = lanes.lt(left);
+                    left = left - P::splat(s, F::of(l as f64));
+                    if !live.and(s, r2a.min(r2b).lt(reach)).any(s) {
+                        continue;
+                    }
+                    let m = P::load(s, cm);
+                    let wa = K::wv(r2a.max(tiny).sqrt_in_loop() * inv_h) * m;
+                    let wb = K::wv(r2b.max(tiny).sqrt_in_loop() * inv_h) * m;
+                    acc_a = acc_a + live.select(wa, zero);
+                    acc_b = acc_b + live.select(wb, zero);
+                }
+            }
+            for (xi, acc) in [(xa, &mut acc_a), (xb, &mut acc_b)].into_iter().take(1 + pair as usize) {
+                for r in nb.wall.iter() {
+                    let (pos, psi) = (&fl.w.pos, &fl.w.psi);
                     let cols = run(&pos[0], &r, l).chunks_exact(l).zip(run(&pos[1], &r, l).chunks_exact(l));
-                    let cols = cols.zip(run(&pos[z], &r, l).chunks_exact(l)).zip(run(mass, &r, l).chunks_exact(l));
+                    let cols = cols.zip(run(&pos[z], &r, l).chunks_exact(l)).zip(run(psi, &r, l).chunks_exact(l));
                     let mut left = P::splat(s, F::of((r.end - r.start) as f64));
                     for (((cx, cy), cz), cm) in cols {
                         let dx = xi[0] - P::load(s, cx);
@@ -329,11 +369,15 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
                         let x = r2.max(tiny);
                         let q = x.sqrt_in_loop() * inv_h;
                         let w = K::wv(q) * P::load(s, cm);
-                        acc = acc + live.select(w, zero);
+                        *acc = *acc + live.select(w, zero);
                     }
                 }
             }
-            rho[k - base] = sigma * acc.sum();
+            rho[k - base] = sigma * acc_a.sum();
+            if pair {
+                rho[k2 - base] = sigma * acc_b.sum();
+            }
+            k = k2 + 1;
         }
         // The equation of state in a loop of its own: its chain of multiplications and a
         // division per particle, at the end of each neighbour loop, had held up the next
