@@ -1,8 +1,9 @@
 //! The density and force passes, written once over the portable SIMD layer (`crate::simd`) for
 //! f32 and f64, 2D and 3D, both kernels and every instruction set.
 //!
-//! Each particle (in cell order) visits the contiguous candidate runs of its 3^dim neighbour
-//! cells one SIMD vector of candidates at a time; lanes past a run's end read padding and are
+//! Each particle (in cell order; in the density pass, two particles of a cell together) visits
+//! the contiguous candidate runs of its 3^dim neighbour cells one SIMD vector of candidates at a
+//! time; lanes past a run's end read padding and are
 //! masked; a vector with no live candidate within the support is skipped (its terms are 0). r and
 //! 1/r come from `P::sqrt_in_loop` / `P::sqrt_and_rsqrt_in_loop`: the divider at avx2 (these
 //! loops leave it idle), the fast reciprocal square root elsewhere. Forces are gathered per
