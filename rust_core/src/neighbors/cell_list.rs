@@ -48,8 +48,6 @@ pub struct CellList {
     start: Vec<u32>,
     keys: Vec<u32>,
     hist: Vec<u32>,
-    /// Scratch: cell coordinates of each point in input order.
-    coords: Vec<[i64; 3]>,
 }
 
 /// Candidate ranges of one query (into the sorted order).
@@ -104,7 +102,6 @@ impl CellList {
             start: vec![0, 0],
             keys: Vec::new(),
             hist: Vec::new(),
-            coords: Vec::new(),
         })
     }
 
@@ -142,30 +139,29 @@ impl CellList {
         assert!(n < u32::MAX as usize, "cell list: too many points");
         let inv = self.inv_cell;
 
-        // 1. Cell coordinates of every point, once (the bounding box, the keys and the sorted
-        //    cells all read them).
-        let mut coords = std::mem::take(&mut self.coords);
-        coords.resize(n, [0; 3]);
-        crate::par::chunks1(&mut coords, |s, out| {
-            for (k, o) in out.iter_mut().enumerate() {
-                let p = x[s + k];
-                for (a, oa) in o.iter_mut().enumerate().take(V::DIM) {
-                    *oa = cell_coord(p.comp(a), inv);
-                }
+        let coord = |p: V| {
+            let mut c = [0i64; 3];
+            for (a, ca) in c.iter_mut().enumerate().take(V::DIM) {
+                *ca = cell_coord(p.comp(a), inv);
             }
-        });
+            c
+        };
+
+        // 1. The bounding box in cells: the cells of the points' coordinate-wise extremes (the
+        //    floor is monotone). Cell coordinates are recomputed where needed rather than stored:
+        //    a point's two floors cost less than writing and reading 24 bytes twice.
         let bbox = |r: Range<usize>| {
-            let mut lo = [i64::MAX; 3];
-            let mut hi = [i64::MIN; 3];
-            for c in &coords[r] {
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for p in &x[r] {
                 for k in 0..V::DIM {
-                    lo[k] = lo[k].min(c[k]);
-                    hi[k] = hi[k].max(c[k]);
+                    lo[k] = lo[k].min(p.comp(k));
+                    hi[k] = hi[k].max(p.comp(k));
                 }
             }
             (lo, hi)
         };
-        let merge = |a: ([i64; 3], [i64; 3]), b: ([i64; 3], [i64; 3])| {
+        let merge = |a: ([f64; 3], [f64; 3]), b: ([f64; 3], [f64; 3])| {
             let mut o = a;
             for k in 0..3 {
                 o.0[k] = a.0[k].min(b.0[k]);
@@ -173,7 +169,12 @@ impl CellList {
             }
             o
         };
-        let (lo, hi) = crate::par::reduce(n, ([i64::MAX; 3], [i64::MIN; 3]), merge, bbox);
+        let (xlo, xhi) = crate::par::reduce(n, ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), merge, bbox);
+        let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
+        for k in 0..V::DIM {
+            lo[k] = cell_coord(xlo[k], inv);
+            hi[k] = cell_coord(xhi[k], inv);
+        }
         let mut dims = [1i64; 3];
         let mut cells: i128 = 1;
         for k in 0..V::DIM {
@@ -201,7 +202,7 @@ impl CellList {
         let mode = self.mode;
         crate::par::chunks1(&mut self.keys, |s, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                *o = bucket(mode, coords[s + k]) as u32;
+                *o = bucket(mode, coord(x[s + k])) as u32;
             }
         });
 
@@ -268,10 +269,9 @@ impl CellList {
         let order = &self.order;
         crate::par::chunks1(&mut self.cells, |s, out| {
             for (k, o) in out.iter_mut().enumerate() {
-                *o = coords[order[s + k] as usize];
+                *o = coord(x[order[s + k] as usize]);
             }
         });
-        self.coords = coords;
     }
 
     /// Candidate ranges (into the sorted order) holding every point closer than the cell size to
@@ -341,10 +341,9 @@ impl CellList {
         let parts = crate::par::threads().clamp(1, 16);
         // Buckets: dense ≤ 4n + 4096 cells; hashed: a power of two ≤ 4n (≥ 1024).
         let nb = (4 * n + 4096).max((2 * n).next_power_of_two().max(1024));
-        let bytes = Need::bytes_of::<[i64; 3]>(2 * n) + Need::bytes_of::<u32>(2 * n + (parts + 1) * nb + 1);
+        let bytes = Need::bytes_of::<[i64; 3]>(n) + Need::bytes_of::<u32>(2 * n + (parts + 1) * nb + 1);
         let need = Need::new(what, bytes, format!("the cell list of {} points", count(n as u128)));
         need.check()?;
-        need.reserve(&mut self.coords, n)?;
         need.reserve(&mut self.cells, n)?;
         need.reserve(&mut self.keys, n)?;
         need.reserve(&mut self.order, n)?;
@@ -359,7 +358,6 @@ impl CellList {
             + self.start.capacity() * 4
             + self.keys.capacity() * 4
             + self.hist.capacity() * 4
-            + self.coords.capacity() * 24
     }
 }
 
