@@ -148,8 +148,8 @@ impl CellList {
         };
 
         // 1. The bounding box in cells: the cells of the points' coordinate-wise extremes (the
-        //    floor is monotone). Cell coordinates are recomputed where needed rather than stored:
-        //    a point's two floors cost less than writing and reading 24 bytes twice.
+        //    floor is monotone). A point's cell coordinates are recomputed for its key and its
+        //    sorted entry rather than stored: as fast (SPH-2D 160k), 24 bytes per point less.
         let bbox = |r: Range<usize>| {
             let mut lo = [f64::INFINITY; 3];
             let mut hi = [f64::NEG_INFINITY; 3];
