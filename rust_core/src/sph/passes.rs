@@ -3,11 +3,11 @@
 //!
 //! Each particle (in cell order; in the density pass, two particles of a cell together) visits
 //! the contiguous candidate runs of its 3^dim neighbour cells one SIMD vector of candidates at a
-//! time; lanes past a run's end read padding and are
-//! masked; a vector with no live candidate within the support is skipped (its terms are 0). r and
-//! 1/r come from `P::sqrt_in_loop` / `P::sqrt_and_rsqrt_in_loop`: the divider at avx2 (these
-//! loops leave it idle), the fast reciprocal square root elsewhere. Forces are gathered per
-//! particle: no atomics, bit-identical for any thread count; levels differ by a few ulp.
+//! time; lanes past a run's end read padding and are masked; a vector with no live candidate
+//! within the support is skipped (its terms are 0). r and 1/r come from `P::sqrt_in_loop` /
+//! `P::sqrt_and_rsqrt_in_loop`: the divider at avx2 (these loops leave it idle), the fast
+//! reciprocal square root elsewhere. Forces are gathered per particle: no atomics, bit-identical
+//! for any thread count; levels differ by a few ulp.
 //!
 //! The particles may belong to several fluids that share the passes (one cell list over all of
 //! them, so they push on each other; see `group`): each particle then takes its own fluid's
