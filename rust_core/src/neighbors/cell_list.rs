@@ -69,9 +69,11 @@ fn cell_coord(x: Real, inv: Real) -> i64 {
     // `as` truncates and saturates (NaN → 0, which callers have rejected): a monotone map, so
     // points within one cell width stay in the same or adjacent cells and nothing is missed.
     // floor by hand: the baseline x86-64 target has no rounding instruction and `floor` is a call.
+    // Saturating: below i64::MIN (a huge negative coordinate, or the empty set's bounding box
+    // of ±inf) the truncation is already i64::MIN, and 1 less would wrap to the top.
     let t = x * inv;
     let c = t as i64;
-    c - ((c as f64) > t) as i64
+    c.saturating_sub(((c as f64) > t) as i64)
 }
 
 #[inline(always)]
@@ -409,6 +411,23 @@ pub(super) mod tests {
                 assert!(!std::mem::replace(&mut seen[i as usize], true));
             }
             assert!(seen.iter().all(|&v| v));
+        }
+    }
+
+    /// Cells at the ends of the i64 range: a point far below it saturates to i64::MIN (not past
+    /// it to the top), so the map stays monotone; an empty set builds.
+    #[test]
+    fn cells_saturate_at_the_ends_of_the_range() {
+        let mut g = CellList::new(1.0, 3).unwrap();
+        assert_eq!(g.cell_of(DVec3::new(-1e300, 0.5, 1e300)), [i64::MIN, 0, i64::MAX]);
+        assert_eq!(g.cell_of(DVec3::new(-1.5, -0.0, 2.5)), [-2, 0, 2]);
+        g.build::<DVec3>(&[]);
+        assert!(g.is_empty() && g.query([0; 3]).len == 0);
+        let x = [DVec3::new(-1e300, 0.0, 0.0), DVec3::ZERO, DVec3::new(1e300, 0.0, 0.0)];
+        g.build(&x);
+        assert!(!g.is_dense());
+        for (k, &i) in g.order.iter().enumerate() {
+            assert_eq!(g.cells[k], g.cell_of(x[i as usize]));
         }
     }
 
