@@ -76,6 +76,16 @@ fn cell_coord(x: Real, inv: Real) -> i64 {
     c.saturating_sub(((c as f64) > t) as i64)
 }
 
+/// Cell coordinates of `p` for cells of side 1/`inv` (unused axes 0).
+#[inline(always)]
+fn cell_coords<V: Vector>(p: V, inv: Real) -> [i64; 3] {
+    let mut c = [0i64; 3];
+    for (k, ck) in c.iter_mut().enumerate().take(V::DIM) {
+        *ck = cell_coord(p.comp(k), inv);
+    }
+    c
+}
+
 #[inline(always)]
 fn hash(c: [i64; 3], mask: u64) -> usize {
     // Large odd multipliers then a xor-shift mix: neighbouring cells land far apart.
@@ -127,11 +137,7 @@ impl CellList {
     /// Cell coordinates of point `p` (unused axes 0).
     #[inline(always)]
     pub fn cell_of<V: Vector>(&self, p: V) -> [i64; 3] {
-        let mut c = [0i64; 3];
-        for (k, ck) in c.iter_mut().enumerate().take(V::DIM) {
-            *ck = cell_coord(p.comp(k), self.inv_cell);
-        }
-        c
+        cell_coords(p, self.inv_cell)
     }
 
     /// Sorts `x` (finite points; at most u32::MAX − 1) into cells. Parallel when `x` is large.
@@ -141,13 +147,7 @@ impl CellList {
         assert!(n < u32::MAX as usize, "cell list: too many points");
         let inv = self.inv_cell;
 
-        let coord = |p: V| {
-            let mut c = [0i64; 3];
-            for (a, ca) in c.iter_mut().enumerate().take(V::DIM) {
-                *ca = cell_coord(p.comp(a), inv);
-            }
-            c
-        };
+        let coord = |p: V| cell_coords(p, inv);
 
         // 1. The bounding box in cells: the cells of the points' coordinate-wise extremes (the
         //    floor is monotone). A point's cell coordinates are recomputed for its key and its

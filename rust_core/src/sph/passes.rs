@@ -305,7 +305,8 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
         let first = &fluids[0];
         // Two particles of a cell at a time (they share its candidate runs): each candidate
         // vector is loaded and tested once for both, and the two sums are independent chains
-        // (the loop over one particle was bound by its chain of latencies, not by throughput).
+        // (profiled one particle at a time, the loop's samples sat on the kernel's chain of
+        // dependent multiplications after the square root).
         // Each particle adds the same terms in the same order as alone: a term out of its reach
         // is exactly 0. A cell's odd particle goes alone (as the pair (k, k), stored once).
         let mut k = ks.start;
@@ -348,9 +349,9 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
                     acc_b = acc_b + live.select(wb, zero);
                 }
             }
+            let (pos, psi) = (&fl.w.pos, &fl.w.psi);
             for (xi, acc) in [(xa, &mut acc_a), (xb, &mut acc_b)].into_iter().take(1 + pair as usize) {
                 for r in nb.wall.iter() {
-                    let (pos, psi) = (&fl.w.pos, &fl.w.psi);
                     let cols = run(&pos[0], &r, l).chunks_exact(l).zip(run(&pos[1], &r, l).chunks_exact(l));
                     let cols = cols.zip(run(&pos[z], &r, l).chunks_exact(l)).zip(run(psi, &r, l).chunks_exact(l));
                     let mut left = P::splat(s, F::of((r.end - r.start) as f64));
