@@ -496,6 +496,23 @@ class Scene:
         assert fluid.first is not None
         return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
 
+    def _check_fluid_method(self, fluid: Fluid) -> None:
+        """Refuse, before anything is added, a DFSPH fluid this scene cannot step: DFSPH runs
+        inside "semi_implicit_euler" steps, and one DFSPH fluid cannot push on another fluid
+        (it has no shared search), so it must be the scene's only fluid."""
+        others = [t for t in self._terms if isinstance(t, Fluid)]
+        if fluid.method == "dfsph":
+            if self.integrator != "semi_implicit_euler":
+                raise InvalidInputError(
+                    f"method: DFSPH steps with integrator='semi_implicit_euler' only (this scene uses {self.integrator!r})"
+                )
+            if others:
+                raise InvalidInputError(
+                    f"method: a DFSPH fluid must be the scene's only fluid (it would pass through {others[0].name!r})"
+                )
+        elif any(t.method == "dfsph" for t in others):
+            raise InvalidInputError("method: this scene has a DFSPH fluid, which must be its only fluid")
+
     def _warn_separate_fluids(self, fluid: Fluid, name: str) -> None:
         """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
         already in the scene. Fluids share one neighbour search, and so push on each other, when
@@ -561,28 +578,40 @@ class Scene:
             )
         m = fluid.particle_mass()
         if first is None:
+            self._check_fluid_method(fluid)
             self._warn_separate_fluids(fluid, name)
         if first is None:
             n = len(fluid)
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
-        self._sim.add_term(
-            "sph",
-            name,
-            {
-                "first": first,
-                "n": len(fluid),
-                "h": fluid.h,
-                "density": fluid.density,
-                "sound_speed": c0,
-                "gamma": int(fluid.gamma),
-                "viscosity": fluid.viscosity,
-                "clamp_pressure": bool(fluid.clamp_pressure),
-                "kernel": fluid.kernel,
-                "precision": fluid.precision,
-                "walls": np.ascontiguousarray(walls, dtype=np.float64),
-                "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
-            },
-        )
+        common = {
+            "first": first,
+            "n": len(fluid),
+            "h": fluid.h,
+            "density": fluid.density,
+            "sound_speed": c0,
+            "viscosity": fluid.viscosity,
+            "kernel": fluid.kernel,
+            "walls": np.ascontiguousarray(walls, dtype=np.float64),
+            "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
+        }
+        if fluid.method == "dfsph":
+            self._sim.add_term(
+                "dfsph",
+                name,
+                common
+                | {
+                    "density_error": fluid.density_error,
+                    "divergence_error": fluid.divergence_error,
+                    "max_iterations": int(fluid.max_iterations),
+                    "cfl": fluid.cfl,
+                },
+            )
+        else:
+            self._sim.add_term(
+                "sph",
+                name,
+                common | {"gamma": int(fluid.gamma), "clamp_pressure": bool(fluid.clamp_pressure), "precision": fluid.precision},
+            )
         fluid = dataclasses.replace(fluid, first=first)
         # A step above the fluid's CFL limit would blow up on the first step.
         self._sim.dt = min(self.dt, max_dt)
@@ -1018,6 +1047,30 @@ class Scene:
         """Equation-of-state pressure of every particle now, Pa: ``(N,)`` float64, 0 for
         particles in no fluid (computed in float64)."""
         return self._exclusive(lambda sim: sim.fluid_fields())[1]
+
+    def solver_stats(self, name: str | None = None) -> dict[str, float]:
+        """The pressure solvers' books of a DFSPH fluid (``Fluid(method="dfsph")``), over every step
+        since it was added (including steps later rolled back by a divergence or Ctrl-C).
+
+        Keys: ``steps``; ``density_iterations`` and ``divergence_iterations`` (totals);
+        ``unconverged`` (solves stopped at ``max_iterations`` above tolerance); ``density_error``
+        and ``divergence_error`` (the last solves' final mean errors, relative, as the tolerances
+        define them) and their ``*_max`` over all steps; ``measured_density_error`` (the mean
+        compression ``mean((ρ − ρ0)₊)/ρ0`` by summation at the start of the last step, i.e. what
+        the previous density solve achieved) and its max; ``dissipated_density_solver`` and
+        ``dissipated_divergence_solver`` (J, kinetic energy each projection removed).
+
+        Raises
+        ------
+        ValueError
+            No DFSPH fluid named ``name`` (by default the scene's DFSPH fluid).
+        """
+        dfsph = [t.name for t in self._terms if isinstance(t, Fluid) and t.method == "dfsph"]
+        if name is None and dfsph:
+            name = dfsph[0]
+        if name not in dfsph:
+            raise InvalidInputError(f"name: {name!r} is not a DFSPH fluid of this scene; DFSPH fluids: {dfsph or 'none'}")
+        return {k: float(v) for t, k, v in self._sim.term_stats() if t == name}
 
     def boundary_points(self) -> np.ndarray:
         """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""

@@ -811,7 +811,9 @@ def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: t
     return [x[0], depth[0], height[0]], [x[1], depth[1], height[1]]
 
 
-def _water_in_tank(positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads) -> Scene:
+def _water_in_tank(
+    positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads, method="wcsph"
+) -> Scene:
     """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers."""
     scene = _fluid_scene(dim, integrator, dt, threads)
     scene.add_fluid(
@@ -822,6 +824,7 @@ def _water_in_tank(positions, dx, tlo, thi, *, dim, lid, precision, kernel, visc
         kernel=kernel,
         viscosity=viscosity,
         sound_speed=sound_speed,
+        method=method,
         name="water",
     )
     if dt is not None:
@@ -845,6 +848,7 @@ def dam_break(
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
     threads: int | None = None,
+    method: str = "wcsph",
 ) -> Scene:
     """Dam break: a water column collapses in a tank, surges along the floor and splashes back.
 
@@ -884,6 +888,10 @@ def dam_break(
     dt : float, optional
         Fixed time step, s. Default: the fluid's CFL limit (renders use automatic substeps).
     threads : int, optional
+    method : {"wcsph", "dfsph"}
+        The fluid's pressure (:class:`~physcore.fluids.Fluid`): ``"dfsph"`` solves for an
+        incompressible pressure (0.1 % mean compression) and steps at the flow's CFL limit
+        instead of the speed of sound's; ``sound_speed`` then only scales the viscosity.
 
     Returns
     -------
@@ -920,7 +928,7 @@ def dam_break(
     _particles("n, width, height, depth, tank", _lattice_size(lo, hi, dx) + _walls_size(tlo, thi, dx))
     return _water_in_tank(
         lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
-        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads,
+        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
     )
 
 

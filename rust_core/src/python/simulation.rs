@@ -418,6 +418,11 @@ impl PySimulation {
         f.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect()
     }
 
+    /// Each term's real-valued statistics (`Term::stats`): (term name, statistic, value).
+    fn term_stats(&self) -> Vec<(String, &'static str, f64)> {
+        with_sim!(&self.inner, s => s.particles().term_stats())
+    }
+
     /// Each term's counters (`Term::counts`): (term name, counter, value).
     fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
         with_sim!(&self.inner, s => s.particles().term_counts())

@@ -35,16 +35,20 @@
 //! - `passes`: the density and force passes (SIMD, parallel over chunks of sorted particles).
 //! - `group`: `Group`, the fluids that share one search, and one evaluation of them (cell list,
 //!   gather, passes), written once for both pass precisions.
+//! - `dfsph`: `Dfsph`, the divergence-free (incompressible) fluid, registered as "dfsph": its
+//!   pressure comes from two velocity projections per step, not from an equation of state.
 //! - `fluid`: `Sph`, the force term itself (one fluid): construction, joining a group, the
 //!   `Term` implementation (its share of the forces, its own books and fields), and its
 //!   registration as "sph".
 pub mod kernels;
 
 mod buffers;
+mod dfsph;
 mod fluid;
 mod group;
 mod params;
 mod passes;
 
+pub use dfsph::{Dfsph, DfsphParams};
 pub use fluid::Sph;
 pub use params::{KernelKind, Precision, SphParams};

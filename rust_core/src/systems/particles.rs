@@ -387,6 +387,15 @@ impl<V: Vector> ParticleSystem<V> {
         (c, bytes)
     }
 
+    /// Each term's real-valued statistics (`Term::stats`): (term name, statistic, value).
+    pub fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
+        let mut out = Vec::new();
+        for t in &self.sys.forces.terms {
+            out.extend(t.stats().into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
+        }
+        out
+    }
+
     /// Each term's counters (`Term::counts`): (term name, counter, value).
     pub fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
         let mut out = Vec::new();

@@ -37,6 +37,15 @@ pub enum Write {
     Add,
 }
 
+/// The stage of a step at which `Term::project_velocities` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Projection {
+    /// The step's start, before the forces: the velocities are made divergence free.
+    Divergence,
+    /// After the kick, before the drift: the predicted velocities are made to keep the density.
+    Density,
+}
+
 impl Write {
     /// Stores force `f` into `slot` (`=` or `+=`).
     #[inline(always)]
@@ -183,6 +192,25 @@ pub trait Term<V: Vector>: Send + Sync {
     /// One Gauss–Seidel iteration over the term's constraints in a substep of `h` seconds,
     /// moving the positions `x` (m) of free particles (compliance scaled as α/h²).
     fn xpbd_project(&mut self, _x: &mut [V], _model: &Model, _h: Real) {}
+    // ---- Velocity projections, run by "semi_implicit_euler" (DFSPH: `sph/dfsph.rs`) --------
+    /// Whether the term projects velocities inside a step (`project_velocities`) instead of, or
+    /// besides, adding forces. Only "semi_implicit_euler" runs projections, so such a term lists
+    /// it alone in `integrators()`.
+    fn projects_velocities(&self) -> bool {
+        false
+    }
+    /// Projects the velocities `v` (m/s) of the particles the term covers at positions `x`, in a
+    /// step of `dt` (s): `Projection::Divergence` at the step's start, before the forces are
+    /// evaluated, and `Projection::Density` after the kick, before the drift (positions are the
+    /// step's start in both). Returns the kinetic energy the projection removed (J; negative if
+    /// it added some), which the integrator books as the term's dissipation.
+    fn project_velocities(&mut self, _stage: Projection, _x: &[V], _v: &mut [V], _model: &Model, _dt: Real) -> Real {
+        0.0
+    }
+    /// Real-valued statistics the term keeps (a solver's iterations and residuals), by name.
+    fn stats(&self) -> Vec<(&'static str, Real)> {
+        Vec::new()
+    }
     // ---- Jacobians, for implicit integrators ("implicit_euler"). Keep this block last. ----
     // A term with a Jacobian is taken implicitly (linearised at the step's start); a term without
     // one is taken explicitly at the step's start. Uniform fields (gravity) are constant and need
