@@ -492,19 +492,21 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
         "pinned": _Spec("b1", ("N",)),
         "ledger": _Spec("f8", ("T",)),
     }
+    opt: dict[str, _Spec] = {}
     types = _term_types()
     for k, t in enumerate(meta["terms"]):
         cls = types[t["type"]]
-        for f, (dtype, axes) in cls.record_arrays.items():
-            named = []
-            for a in axes:
-                if a == "D":
-                    named.append(d)
-                    continue
-                if a in cls.record_fields:  # sized by the record: e.g. a fluid's count
-                    sizes[f"{a}{k}"] = (t[a], f"meta.terms[{k}].{a}")
-                named.append(f"{a}{k}")
-            req[f"term{k}_{f}"] = _Spec(dtype, tuple(named))
+        for optional, arrays in ((False, cls.record_arrays), (True, cls.record_optional)):
+            for f, (dtype, axes) in arrays.items():
+                named = []
+                for a in axes:
+                    if a == "D":
+                        named.append(d)
+                        continue
+                    if a in cls.record_fields:  # sized by the record: e.g. a fluid's count
+                        sizes[f"{a}{k}"] = (t[a], f"meta.terms[{k}].{a}")
+                    named.append(f"{a}{k}")
+                (opt if optional else req)[f"term{k}_{f}"] = _Spec(dtype, tuple(named))
     for k, g in enumerate(meta["grids"]):
         cells = f"G{k}"
         sizes[cells] = (math.prod(g["record"]["shape"]), f"meta.grids[{k}].record.shape")
@@ -523,7 +525,7 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, f in enumerate(meta["flows"]):
         sizes[f"F{k}"] = (f["record"]["n"] * meta["dim"], f"meta.flows[{k}].record.n")
         req[f"flow{k}_y"] = _Spec("f8", (f"F{k}",))
-    opt = {"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))}
+    opt.update({"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))})
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})
     return req, opt, sizes

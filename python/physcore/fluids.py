@@ -432,6 +432,8 @@ class Fluid(Term, kind="fluid"):
         "walls": ("f8", ("W", "D")),
         "wall_volume": ("f8", ("W",)),
     }
+    #: DFSPH: the solvers' warm starts (2 per particle; the scene adds them from the core).
+    record_optional: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {"history": ("f8", ("H",))}
     owns_particles: ClassVar[bool] = True
 
     def _attach(self, scene: Scene, name: str) -> Fluid:
@@ -479,7 +481,10 @@ class Fluid(Term, kind="fluid"):
             name=meta["name"],
         )
         dt_saved = scene.dt  # the file's dt, which adding lowers to the fluid's CFL limit
-        scene._terms.append(scene._add_fluid(fluid, scene._unique_name(fluid.name), first=meta["first"]))
+        added = scene._add_fluid(fluid, scene._unique_name(fluid.name), first=meta["first"])
+        scene._terms.append(added)
+        if "history" in arrays:
+            scene._sim.set_term_history(added.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
         scene._sim.dt = dt_saved
 
     @property

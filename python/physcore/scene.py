@@ -686,8 +686,11 @@ class Scene:
         above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
         step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
         ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others. ``"rk45"`` controls its own internal
-        steps, so it takes one substep per call unless a CFL limit asks for more. An int gives
-        that many substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
+        steps, so it takes one substep per call unless a CFL limit asks for more. With a DFSPH
+        fluid (``Fluid(method="dfsph")``) the limit follows the flow's speed, not a sound speed,
+        so it is taken anew before every substep: the substeps are then unequal (the last ends
+        the duration exactly) and ``dt`` is left at the last one. An int gives that many
+        substeps. The count chosen is returned (the CLI and ``render.gif`` show it).
 
         Raises
         ------
@@ -1280,6 +1283,7 @@ class Scene:
             ctx = f"meta.terms[{k}]"
             cls = REGISTRY[t["type"]]
             members = {a: f"term{k}_{a}" for a in cls.record_arrays}
+            members.update({a: f"term{k}_{a}" for a in cls.record_optional if f"term{k}_{a}" in z})
             with r.api(ctx, {**members, **cls.record_api_names(k, ctx)}):
                 cls._load(scene, t, {a: z[m] for a, m in members.items()})
         for i, p in enumerate(meta["planes"]):

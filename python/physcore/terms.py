@@ -127,6 +127,9 @@ class Term:
     #: after a record field takes its size from it, ``"D"`` is the dimension, and any other name
     #: is a size the term's arrays share.
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
+    #: Array members a file may hold or not, as ``record_arrays`` (a DFSPH fluid's warm starts,
+    #: which files from before DFSPH and WCSPH fluids do not have).
+    record_optional: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
     #: True when the term owns a run of the scene's particles (``first``, ``count`` in its record).
     owns_particles: ClassVar[bool] = False
 

@@ -409,6 +409,13 @@ impl<V: Vector> World<V> {
         }
         self.prepare()?;
         let cp = self.checkpoint()?;
+        if substeps.is_none() && self.systems().any(|s| s.limit_follows_flow()) {
+            let r = self.with_stop(stop, |s| s.advance_following(duration, stop));
+            return match r {
+                Ok(n) => Ok((n, cp)),
+                Err(e) => Err(self.fail(cp, e)),
+            };
+        }
         let r = self.with_stop(stop, |s| {
             let n = match substeps {
                 Some(n) => n,
@@ -466,6 +473,32 @@ impl<V: Vector> World<V> {
             Ok(n) => Ok((n, cp)),
             Err(e) => Err(self.fail(cp, e)),
         }
+    }
+
+    /// `advance` of `duration` for a world whose step limit follows the flow
+    /// (`System::limit_follows_flow`): before each substep the limit is taken anew and the
+    /// rest of the duration cut into equal parts within it (the last substep ends the duration
+    /// exactly); returns the substeps taken. `dt` is left at the last substep.
+    fn advance_following(&mut self, duration: Real, stop: &AtomicBool) -> Result<u64> {
+        let (mut left, mut n) = (duration, 0u64);
+        while left > 0.0 {
+            let limit = self.auto_dt().unwrap_or(left);
+            // The rest in equal parts within the limit: steady where the limit is (the
+            // solvers' pressure, Σκ/ρ a step, reads high after a step shorter than the last).
+            let parts = (left / limit).ceil().max(1.0);
+            let dt = if parts <= 1.0 { left } else { left / parts };
+            if !(dt >= Real::MIN_POSITIVE) || n >= MAX_STEPS - self.step {
+                return Err(invalid("duration", format!("{duration:.3e} s cannot be advanced in steps of {dt:.3e} s")));
+            }
+            if dt != self.dt {
+                self.dt = dt;
+                self.systems_mut().for_each(|s| s.dt_changed());
+            }
+            self.step_inner(1, stop)?;
+            left = if dt == left { 0.0 } else { left - dt };
+            n += 1;
+        }
+        Ok(n)
     }
 
     /// The particle system's named output fields (see `Term::fields`), one value per particle

@@ -184,11 +184,11 @@ pub struct Dfsph<V: Vector> {
     /// Whether the sorted data are those of the current step's positions (set by the
     /// divergence stage, cleared by the density stage).
     built: bool,
-    /// Warm starts, particle order: dt² Σκ/ρ of the last density solve and dt Σκ^v/ρ of the last
-    /// divergence solve.
+    /// Warm starts, particle order: Σκ/ρ of the last density solve and Σκ^v/ρ of the last
+    /// divergence solve (m^(dim+2)/(kg s²), dt-free).
     kappa: Vec<Real>,
     kappa_v: Vec<Real>,
-    /// Pressure p_i = ρ_i² Σκ_i/ρ_i of the last density solve, Pa, particle order.
+    /// Pressure p_i = ρ_i² (Σκ_i + Σκ^v_i)/ρ_i of the last step's solves, Pa, particle order.
     pressure: Vec<Real>,
     /// Neighbours per particle below which the divergence solve leaves it out.
     n_min: u32,
@@ -532,19 +532,19 @@ impl<V: Vector> Dfsph<V> {
         };
         // Keep the sum for the next step's warm start (particle order). κ/ρ = p/ρ² does not
         // scale with dt: a steady flow needs the same pressure whatever the step.
-        let back = 1.0;
         let (order, ksum) = (&self.grid.order, &self.ksum);
         let out = match stage {
             Projection::Density => &mut self.kappa,
             Projection::Divergence => &mut self.kappa_v,
         };
         for (k, &i) in order.iter().enumerate() {
-            out[i as usize] = ksum[k] * back;
+            out[i as usize] = ksum[k];
         }
         if stage == Projection::Density {
+            // Both solves push with the same form: the step's pressure is their sum.
             for (k, &i) in order.iter().enumerate() {
-                let rho = self.sites[k].rho;
-                self.pressure[i as usize] = ksum[k] * rho * rho;
+                let (i, rho) = (i as usize, self.sites[k].rho);
+                self.pressure[i] = (self.kappa[i] + self.kappa_v[i]) * rho * rho;
             }
         }
         let e1 = self.scatter_v(v);

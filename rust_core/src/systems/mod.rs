@@ -145,6 +145,11 @@ pub trait System: Send + Sync {
     fn adaptive(&self) -> bool {
         false
     }
+    /// Whether `auto_dt` follows the flow so closely (a DFSPH fluid's CFL limit, with no speed
+    /// of sound under it) that `World::advance` must take it again before every substep.
+    fn limit_follows_flow(&self) -> bool {
+        false
+    }
     /// The largest step (s) `World::advance` should take now, `None` if the system sets none.
     fn auto_dt(&self) -> Option<Real>;
     /// A step (s) safely inside the stability region, to suggest after a divergence; `None` if

@@ -609,6 +609,10 @@ impl<V: Vector> System for ParticleSystem<V> {
         self.integrator.adaptive_stats().is_some()
     }
 
+    fn limit_follows_flow(&self) -> bool {
+        self.sys.forces.terms.iter().any(|t| t.projects_velocities())
+    }
+
     /// The largest substep with the current integrator: ω_max·dt = 0.5 with ω_max = 1/τ bounded
     /// from above (Gershgorin), i.e. a quarter of the stability interval of semi-implicit Euler
     /// and Verlet (ω·dt < 2) and under a fifth of RK4's (2√2), and no more than a term's own
