@@ -410,7 +410,7 @@ def test_dam_break_scene():
     assert s.n_particles == 2 * 12 * 12
     assert s.integrator == "semi_implicit_euler"
     f = s.fluids[0]
-    assert f.precision == "f32" and f.kernel == "cubic_spline"
+    assert f.precision == "f32" and f.kernel == "cubic_spline" and f.method == "dfsph"
     assert math.isclose(f.sound_speed, 10 * math.sqrt(2 * G * 2.0), rel_tol=1e-12)
     walls = s.boundary_points()
     assert walls[:, 0].min() < 0 and walls[:, 0].max() > 4.0 and walls[:, 1].min() < 0
@@ -438,7 +438,7 @@ def test_dam_break_scene_3d_and_options():
     assert s.positions[:, 1].max() < 0.5
     s.advance(0.05)
     assert np.isfinite(s.positions).all()
-    s2 = pc.scenes.dam_break(n=8, dt=1e-5, integrator="verlet", sound_speed=30.0)
+    s2 = pc.scenes.dam_break(n=8, dt=1e-5, integrator="verlet", sound_speed=30.0, method="wcsph")
     assert s2.dt == 1e-5 and s2.integrator == "verlet" and s2.fluids[0].sound_speed == 30.0
 
 

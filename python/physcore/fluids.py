@@ -26,9 +26,11 @@ SPH for incompressible and viscous fluids", IEEE TVCG 23, 2017, Algorithms 1–3
 for the pressure twice, a divergence solve that makes the velocities divergence free and a
 density solve that keeps the mean compression below ``density_error`` (0.1 % by default), both
 warm-started from the previous step. The same density summation, walls, kernels and viscosity
-(with the same ``α c0``) as WCSPH; ``c0`` enters only the viscosity. Its step follows the flow:
-CFL ``cfl · h/(|v|max + 0.6 α c0)`` (``cfl = 0.4``) and ``0.25 √(h/|g|)``, not the speed of
-sound, so a dam break takes about ten times fewer steps. The projections are inelastic: the
+(with the same ``α c0``) as WCSPH; ``c0`` enters only the viscosity; the walls push with the
+particle's pressure mirrored (``p_b = p_i``), without which the hydrostatic push drives corner
+particles through the walls. Its step follows the flow: CFL ``cfl · h/|v|max`` (``cfl = 0.4``),
+the viscous limit ``0.125 h²/ν`` (``ν = α c0 h/(2(d+2))``) and ``0.25 √(h/|g|)``, not the speed of
+sound, so a dam break takes ten to twenty times fewer steps. The projections are inelastic: the
 kinetic energy each removes is booked as the fluid's dissipation (with the viscosity's), and
 :meth:`Scene.solver_stats` reports each solver's share, iterations and residuals. DFSPH steps with
 ``integrator="semi_implicit_euler"`` only, in float64, one DFSPH fluid per scene.
@@ -287,7 +289,7 @@ class Fluid(Term, kind="fluid"):
     max_iterations : int
         DFSPH: most iterations of each solve (1..100000). Default 100.
     cfl : float
-        DFSPH: the CFL number λ of the step limit ``λ h/(|v|max + 0.6 α c0)``, in (0, 1]. Default 0.4.
+        DFSPH: the CFL number λ of the step limit ``λ h/|v|max``, in (0, 1]. Default 0.4.
     name : str
         Key of the fluid in the energy books.
 
@@ -523,10 +525,11 @@ class Fluid(Term, kind="fluid"):
 
     def max_dt(self) -> float:
         """CFL limit at rest, s (needs ``sound_speed``): WCSPH ``0.25 h / (c0 (1 + 0.6 α))``;
-        DFSPH ``cfl · h / (0.6 α c0)`` (infinite without viscosity: the flow's speed sets it)."""
+        DFSPH: the viscous limit ``0.125 h²/ν = (d + 2) h/(4 α c0)`` (infinite without viscosity: the
+        flow's speed sets it)."""
         if self.sound_speed is None:
             raise InvalidInputError("sound_speed: not set yet (it is estimated when the fluid is added to a scene)")
         if self.method == "dfsph":
-            visc = 0.6 * self.viscosity * self.sound_speed
-            return self.cfl * self.h / visc if visc > 0 else math.inf
+            visc = self.viscosity * self.sound_speed
+            return (self.dim + 2) * self.h / (4.0 * visc) if visc > 0 else math.inf
         return 0.25 * self.h / (self.sound_speed * (1.0 + 0.6 * self.viscosity))
