@@ -16,7 +16,8 @@ Physics (float64 storage and arithmetic):
 * non-pressure acceleration: gravity (0, −9.81) + Monaghan viscosity a_i = −Σ_j m Π_ij ∇_iW_ij,
   Π_ij = −α c0 μ_ij / ρ̄_ij, μ_ij = h v_ij·r_ij / (r_ij² + 0.01h²) for v_ij·r_ij < 0 (else Π = 0),
   ρ̄_ij = (ρ_i + ρ_j)/2, α = 0.05, c0 = 10 √(2gH) = 62.64 m/s.
-* dt = min(0.4 h / (v_max + 0.6 α c0), 0.25 √(h/g)), v_max = max |v| at the start of the step.
+* dt = min(0.4 h / v_max, 0.125 h²/ν, 0.25 √(h/g)), ν = α c0 h/(2(d+2)) (Monaghan's), v_max = max |v|
+  at the start of the step (physcore's limit).
 
 One DFSPH step (everything at the positions x_n, one neighbour search per step):
 
@@ -412,7 +413,8 @@ def _advance(x, y, vx, vy, ids, kv, kd, xs, ys, vxs, vys, idss, kvs, kds, ks, tk
         _sort(x, y, vx, vy, ids, kv, kd, xs, ys, vxs, vys, idss, kvs, kds, ks, tkey, counts, cellstart, v2max,
               c, ncx1, ncy1, gx, u1)
         vmax = np.sqrt(v2max.max())
-        dt = min(c[C_DT_H] / (vmax + c[C_DT_V]), c[C_DT_CAP])
+        speed = vmax + c[C_DT_V]
+        dt = min(c[C_DT_H] / speed, c[C_DT_CAP]) if speed > 0.0 else c[C_DT_CAP]
         left = t_end - acc[A_TIME]
         steps_left = np.ceil(left / dt)  # inf for step(n)
         if steps_left < np.inf:
@@ -547,9 +549,10 @@ class NumbaDFSPH2D:
         c[C_GY] = -GRAV
         c[C_XMAX] = TANK_X
         c[C_YMAX] = TANK_Y
-        c[C_DT_V] = 0.6 * ALPHA * C0
+        c[C_DT_V] = 0.0  # physcore's limit: λh/|v|max, no viscous term in the CFL ...
         c[C_DT_H] = 0.4 * h
-        c[C_DT_CAP] = 0.25 * math.sqrt(h / GRAV)
+        # ... the explicit viscosity's limit 0.125 h²/ν, ν = α c0 h/(2(d + 2)), and the force criterion.
+        c[C_DT_CAP] = min(0.25 * math.sqrt(h / GRAV), 0.125 * 2.0 * (2 + 2) * h / (ALPHA * C0))
         c[C_TOL_DEN] = tol
         c[C_TOL_DIV] = tol_div
         self.c = c

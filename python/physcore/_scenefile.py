@@ -298,7 +298,9 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         types = _term_types()
         if not isinstance(kind, str) or kind not in types:
             raise r.error(f"{field}.type", f"unknown term type {_show(kind)} (expected one of {', '.join(types)})")
-        rec = r.record(field, t, types[kind].record_fields, dim, required=("type", "name"))
+        cls = types[kind]
+        fields = {**cls.record_fields, **{f: fk for f, fk in cls.record_fields_optional.items() if f in t}}
+        rec = r.record(field, t, fields, dim, required=("type", "name"))
         name = rec.get("name")
         if not isinstance(name, str) or not name:
             raise r.error(f"{field}.name", f"must be a non-empty string, got {_kind(name)} {_show(name)}")

@@ -423,6 +423,9 @@ class Fluid(Term, kind="fluid"):
         "clamp_pressure": "bool",
         "precision": "str",
         "mass": "number",
+    }
+    #: DFSPH's fields: files written before it have none (their fluids are WCSPH).
+    record_fields_optional: ClassVar[dict[str, str]] = {
         "method": "str",
         "density_error": "number",
         "divergence_error": "number",

@@ -675,8 +675,8 @@ class Scene:
             )
 
     def advance(self, duration: float, *, substeps: str | int = "auto") -> int:
-        """Advance ``duration`` seconds in ``n`` equal substeps and return ``n``; sets :attr:`dt`
-        to ``duration / n``.
+        """Advance ``duration`` seconds in ``n`` substeps and return ``n``; sets :attr:`dt` to
+        ``duration / n`` (equal substeps; with a DFSPH fluid, see below, the last substep).
 
         With ``substeps="auto"`` (default) ``n = ⌈duration / auto_dt⌉``, where ``auto_dt``
         (:meth:`auto_dt`) keeps every substep inside the stability region of the scene's

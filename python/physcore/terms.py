@@ -123,6 +123,9 @@ class Term:
     #: Scalar fields a scene file holds in ``meta.terms[k]`` (besides ``type`` and ``name``), by
     #: the kind of value the loader checks (``"number"``, ``"vector"``, ``"int"``, ...).
     record_fields: ClassVar[dict[str, str]] = {}
+    #: Record fields a file may lack (written by an older physcore): name -> kind, as
+    #: ``record_fields``; the term's ``_load`` supplies the default.
+    record_fields_optional: ClassVar[dict[str, str]] = {}
     #: Array members ``term{k}_{field}`` of a scene file: field -> (dtype, axes). An axis named
     #: after a record field takes its size from it, ``"D"`` is the dimension, and any other name
     #: is a size the term's arrays share.

@@ -377,7 +377,8 @@ impl<V: Vector> World<V> {
 
     /// Advances by `duration` seconds in `n` equal substeps, n = ⌈duration / auto_dt()⌉, so
     /// every substep is inside the stability region of every system at the start of the call
-    /// (and the CFL limit for fluids).
+    /// (and the CFL limit for fluids); with a system whose limit follows the flow (DFSPH) the
+    /// substeps are unequal instead (`advance_following`).
     /// `substeps = Some(n)` fixes n instead. Sets `dt` to duration / n and returns n. On
     /// divergence or interrupt everything, dt included, is rolled back as in `step`.
     /// `stop` as in `step_interruptible`.
@@ -483,6 +484,13 @@ impl<V: Vector> World<V> {
         let (mut left, mut n) = (duration, 0u64);
         while left > 0.0 {
             let limit = self.auto_dt().unwrap_or(left);
+            // As the equal-substep path: refuse what would never end.
+            if left / limit > 1e12 {
+                return Err(invalid(
+                    "duration",
+                    format!("{left:.3e} s left would take over 1e12 substeps of {limit:.3e} s"),
+                ));
+            }
             // The rest in equal parts within the limit: steady where the limit is (the
             // solvers' pressure, Σκ/ρ a step, reads high after a step shorter than the last).
             let parts = (left / limit).ceil().max(1.0);
@@ -495,7 +503,11 @@ impl<V: Vector> World<V> {
                 self.systems_mut().for_each(|s| s.dt_changed());
             }
             self.step_inner(1, stop)?;
-            left = if dt == left { 0.0 } else { left - dt };
+            let rest = if dt == left { 0.0 } else { left - dt };
+            if rest >= left {
+                return Err(invalid("duration", format!("{duration:.3e} s: steps of {dt:.3e} s no longer shorten it")));
+            }
+            left = rest;
             n += 1;
         }
         Ok(n)

@@ -177,6 +177,9 @@ pub struct Dfsph<V: Vector> {
     /// iteration and its sum over the solve.
     xs: Vec<V>,
     m: Vec<Real>,
+    /// Whether the particle is free (pinned ones, inverse mass 0, keep their velocity: the
+    /// solves push on them as on a wall that moves).
+    free: Vec<bool>,
     sites: Vec<Site<V>>,
     vs: Vec<V>,
     k: Vec<Real>,
@@ -251,6 +254,7 @@ impl<V: Vector> Dfsph<V> {
             grid: CellList::new(2.0 * p.h, V::DIM)?,
             xs: Vec::new(),
             m: Vec::new(),
+            free: Vec::new(),
             sites: Vec::new(),
             vs: Vec::new(),
             k: Vec::new(),
@@ -289,16 +293,18 @@ impl<V: Vector> Dfsph<V> {
 
     fn build_with<K: Kernel>(&mut self, x: &[V], model: &Model) {
         let (n, r) = (self.n, self.range());
-        let (xr, mr) = (&x[r.clone()], &model.mass[r]);
+        let (xr, mr, im) = (&x[r.clone()], &model.mass[r.clone()], &model.inv_mass[r]);
         self.grid.build(xr);
         let order = &self.grid.order;
         self.xs.resize(n, V::ZERO);
         self.m.resize(n, 0.0);
-        par::chunks2(&mut self.xs, &mut self.m, |s, xs, m| {
+        self.free.resize(n, true);
+        par::chunks3(&mut self.xs, &mut self.m, &mut self.free, |s, xs, m, free| {
             for k in 0..xs.len() {
                 let i = order[s + k] as usize;
                 xs[k] = xr[i];
                 m[k] = mr[i];
+                free[k] = im[i] != 0.0;
             }
         });
         let h = self.p.h;
@@ -407,13 +413,16 @@ impl<V: Vector> Dfsph<V> {
 
     /// Sorted velocities from the scene's `v`, and their kinetic energy (J).
     fn gather_v(&mut self, v: &[V]) -> Real {
-        let (order, vr, m) = (&self.grid.order, &v[self.range()], &self.m);
+        let (order, vr, m, free) = (&self.grid.order, &v[self.range()], &self.m, &self.free);
         self.vs.resize(self.n, V::ZERO);
         par::chunks1_sum(&mut self.vs, |s, vs| {
             let mut e = 0.0;
             for (k, vk) in vs.iter_mut().enumerate() {
                 *vk = vr[order[s + k] as usize];
-                e += 0.5 * m[s + k] * vk.length_squared();
+                // Pinned particles carry no kinetic energy in the books (`ParticleSystem::energy`).
+                if free[s + k] {
+                    e += 0.5 * m[s + k] * vk.length_squared();
+                }
             }
             e
         })
@@ -423,13 +432,15 @@ impl<V: Vector> Dfsph<V> {
     fn scatter_v(&self, v: &mut [V]) -> Real {
         let r = self.range();
         let out = SyncPtr(v[r].as_mut_ptr());
-        let (order, vs, m) = (&self.grid.order, &self.vs, &self.m);
+        let (order, vs, m, free) = (&self.grid.order, &self.vs, &self.m, &self.free);
         par::sum(self.n, 0.0, |ks| {
             let mut e = 0.0;
             for k in ks {
                 // SAFETY: `order` is a permutation: each particle is written by one sorted slot.
                 unsafe { *out.get().add(order[k] as usize) = vs[k] };
-                e += 0.5 * m[k] * vs[k].length_squared();
+                if free[k] {
+                    e += 0.5 * m[k] * vs[k].length_squared();
+                }
             }
             e
         })
@@ -468,7 +479,7 @@ impl<V: Vector> Dfsph<V> {
 
     /// One velocity update with κ/ρ in `k` (module doc), adding `k` into `ksum`.
     fn apply(&mut self, dt: Real) {
-        let (pairs, sites, k) = (&self.pairs, &self.sites, &self.k);
+        let (pairs, sites, k, free) = (&self.pairs, &self.sites, &self.k, &self.free);
         par::chunks2(&mut self.vs, &mut self.ksum, |s, vs, ksum| {
             let p = &pairs[s / CHUNK];
             for kk in 0..vs.len() {
@@ -483,7 +494,9 @@ impl<V: Vector> Dfsph<V> {
                 for q in p.start[kk] as usize..p.start[kk + 1] as usize {
                     a += p.g[q] * (ki + k[p.j[q] as usize]);
                 }
-                vs[kk] -= a * dt;
+                if free[i] {
+                    vs[kk] -= a * dt;
+                }
                 ksum[kk] += ki;
             }
         });
@@ -495,7 +508,7 @@ impl<V: Vector> Dfsph<V> {
         let t0 = Instant::now();
         let n = self.n;
         let e0 = self.gather_v(v);
-        // Warm start: last step's sum, rescaled to this dt (module doc).
+        // Warm start: half the last step's sum (module doc; κ/ρ does not scale with dt).
         let f = WARM_START;
         self.k.resize(n, 0.0);
         self.ksum.clear();
@@ -808,25 +821,26 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         ]
     }
 
+    /// The warm starts and the last step's pressure: 3 values per particle.
     fn history(&self) -> Option<Vec<Real>> {
-        let mut h = Vec::with_capacity(2 * self.n);
+        let mut h = Vec::with_capacity(3 * self.n);
         h.extend_from_slice(&self.kappa);
         h.extend_from_slice(&self.kappa_v);
+        h.extend_from_slice(&self.pressure);
         Some(h)
     }
 
     fn set_history(&mut self, h: &[Real], _n_particles: usize) -> Result<()> {
-        if h.len() != 2 * self.n {
-            return Err(invalid(
-                "history",
-                format!("expected {} values (2 per particle), got {}", 2 * self.n, h.len()),
-            ));
+        let n = self.n;
+        if h.len() != 3 * n {
+            return Err(invalid("history", format!("expected {} values (3 per particle), got {}", 3 * n, h.len())));
         }
         if let Some(i) = h.iter().position(|x| !x.is_finite()) {
             return Err(invalid("history", format!("entry {i} is not finite")));
         }
-        self.kappa.copy_from_slice(&h[..self.n]);
-        self.kappa_v.copy_from_slice(&h[self.n..]);
+        self.kappa.copy_from_slice(&h[..n]);
+        self.kappa_v.copy_from_slice(&h[n..2 * n]);
+        self.pressure.copy_from_slice(&h[2 * n..]);
         self.built = false;
         Ok(())
     }
