@@ -6,7 +6,7 @@
 //! allocation-free.
 use super::kernels::Float;
 use crate::alloc::{count, Need};
-use crate::error::Result;
+use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
 use crate::par::{self, SyncPtr};
 use crate::vector::{Real, Vector};
@@ -80,6 +80,21 @@ impl PassFloat for f64 {
 }
 
 impl Walls {
+    /// `new` after checking the arguments as a fluid term receives them (errors name
+    /// `walls` and `wall_volume`, the Python API's arguments).
+    pub(super) fn checked<V: Vector>(walls: &[V], psi: &[Real], support: Real) -> Result<Self> {
+        if walls.len() != psi.len() {
+            return Err(invalid("wall_volume", format!("has {} entries, walls has {}", psi.len(), walls.len())));
+        }
+        if let Some(i) = walls.iter().position(|w| !w.is_finite()) {
+            return Err(invalid("walls", format!("row {i} is not finite")));
+        }
+        if let Some(i) = psi.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
+            return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
+        }
+        Self::new(walls, psi, support)
+    }
+
     /// The wall particles `walls` (finite) with their Ψ (`psi`, one each) sorted into cells of
     /// side `support`, with their arrays in both precisions.
     pub(super) fn new<V: Vector>(walls: &[V], psi: &[Real], support: Real) -> Result<Self> {

@@ -41,7 +41,7 @@
 //! every pass is a gather over stored pairs: no atomics, bit-identical for any thread count.
 use super::buffers::{PassFloat, Walls};
 use super::kernels::{CubicSpline, Kernel, WendlandC2};
-use super::params::KernelKind;
+use super::params::{positive, KernelKind};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
@@ -85,13 +85,7 @@ pub struct DfsphParams {
 
 impl DfsphParams {
     pub fn validate(&self) -> Result<()> {
-        let pos = |v: Real, a: &'static str| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(invalid(a, format!("{v} must be finite and > 0")))
-            }
-        };
+        let pos = positive;
         pos(self.h, "h")?;
         pos(self.rho0, "density")?;
         pos(self.c0, "sound_speed")?;
@@ -235,16 +229,7 @@ impl<V: Vector> Dfsph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.
     pub fn new(name: &str, first: usize, n: usize, p: DfsphParams, walls: Vec<V>, psi: Vec<Real>) -> Result<Self> {
         p.validate()?;
-        if walls.len() != psi.len() {
-            return Err(invalid("wall_volume", format!("has {} entries, walls has {}", psi.len(), walls.len())));
-        }
-        if let Some(i) = walls.iter().position(|w| !w.is_finite()) {
-            return Err(invalid("walls", format!("row {i} is not finite")));
-        }
-        if let Some(i) = psi.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
-            return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
-        }
-        let walls = Walls::new(&walls, &psi, 2.0 * p.h)?;
+        let walls = Walls::checked(&walls, &psi, 2.0 * p.h)?;
         Ok(Self {
             name: name.to_string(),
             first,

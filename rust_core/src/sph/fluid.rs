@@ -69,16 +69,7 @@ impl<V: Vector> Sph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.
     pub fn new(name: &str, first: usize, n: usize, p: SphParams, walls: Vec<V>, psi: Vec<Real>) -> Result<Self> {
         p.validate()?;
-        if walls.len() != psi.len() {
-            return Err(invalid("wall_volume", format!("has {} entries, walls has {}", psi.len(), walls.len())));
-        }
-        if let Some(i) = walls.iter().position(|w| !w.is_finite()) {
-            return Err(invalid("walls", format!("row {i} is not finite")));
-        }
-        if let Some(i) = psi.iter().position(|w| !(w.is_finite() && *w > 0.0)) {
-            return Err(invalid("wall_volume", format!("entry {i} is {} (must be finite and > 0)", psi[i])));
-        }
-        let walls = Walls::new(&walls, &psi, 2.0 * p.h)?;
+        let walls = Walls::checked(&walls, &psi, 2.0 * p.h)?;
         let group = Group::new(first..first + n, p, walls)?;
         Ok(Self {
             name: name.to_string(),

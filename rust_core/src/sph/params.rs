@@ -56,15 +56,18 @@ pub struct SphParams {
     pub precision: Precision,
 }
 
+/// `Ok` if `v` is finite and > 0, else the error naming argument `arg`.
+pub(super) fn positive(v: Real, arg: &'static str) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(arg, format!("{v} must be finite and > 0")))
+    }
+}
+
 impl SphParams {
     pub fn validate(&self) -> Result<()> {
-        let pos = |v: Real, a: &'static str| {
-            if v.is_finite() && v > 0.0 {
-                Ok(())
-            } else {
-                Err(invalid(a, format!("{v} must be finite and > 0")))
-            }
-        };
+        let pos = positive;
         pos(self.h, "h")?;
         pos(self.rho0, "density")?;
         pos(self.c0, "sound_speed")?;
