@@ -319,3 +319,26 @@ def test_pinned_fluid_particles_stay_and_the_books_balance():
     assert np.array_equal(scene.positions[5], x5)
     assert np.array_equal(scene.velocities[5], np.zeros(2))
     assert abs(scene.energy_drift()) < 0.01
+
+
+def test_3d_dam_break_converges_keeps_its_walls_and_its_books():
+    """The 3D dam break (``dam_break(dim=3, n=8, depth=0.5)``, 512 particles, T = 0..3): every
+    solve converges (none stopped at max_iterations, the density error at most 0.1 % every step),
+    nothing goes a spacing past a wall (measured 0.34 dx), and the books balance to the
+    integrator's error (measured drift 0.19 %). Here the two solves together put kinetic energy
+    in (measured: the density solve's warm starts −575 J, the divergence solve +375 J): at 8
+    particles across the warm starts push harder than in 2D; the books show it."""
+    scene = pc.scenes.dam_break(dim=3, n=8, depth=0.5)
+    assert scene.fluids[0].method == "dfsph"
+    dx, scale = 1.0 / 8, math.sqrt(2 * G)
+    worst = 0.0
+    while scene.time * scale < 3.0:
+        scene.advance(0.05 / scale)
+        worst = max(worst, scene.solver_stats()["density_error"])
+        x = scene.positions
+        past = max((-x).max(), (x[:, 0] - 4.0).max(), (x[:, 1] - 0.5).max(), (x[:, 2] - 3.0).max())
+        assert past < dx, past / dx
+    st = scene.solver_stats()
+    assert st["unconverged"] == 0 and st["density_error_max"] <= 1e-3
+    assert scene.positions[:, 0].max() > 3.0  # the surge crossed the tank
+    assert abs(scene.energy_drift()) < 0.01, scene.energy_drift()
