@@ -53,7 +53,7 @@ def run(nx: int, method: str, threads: int | None) -> dict:
     h = scene.fluids[0].h
     scale = math.sqrt(2.0 * G / 1.0)
     frame = 4.0 / 120 / scale
-    steps, wall, fronts, t_next = 0, 0.0, {}, 0.0
+    steps, wall, fronts = 0, 0.0, {}
     for mark in MARKS:
         t0 = time.perf_counter()
         while scene.time * scale < mark - 1e-9:
@@ -61,15 +61,13 @@ def run(nx: int, method: str, threads: int | None) -> dict:
             steps += scene.advance(max(t_next - scene.time, 1e-12))
         wall += time.perf_counter() - t0
         fronts[mark] = front(scene.positions, h)
-    (nb, solve, rest), _ = scene._sim.fluid_profile()
+    (nb, solve, _), _ = scene._sim.fluid_profile()
     out = dict(method=method, N=scene.n_particles, steps=steps, wall=wall, fronts=fronts,
                nb=nb / steps, solve=solve / steps, rest=(wall - nb - solve) / steps)
     if method == "dfsph":
         st = scene.solver_stats()
         out.update(it_d=st["density_iterations"] / st["steps"], it_v=st["divergence_iterations"] / st["steps"],
                    err=st["density_error_max"], measured=st["measured_density_error_max"])
-    else:  # WCSPH's profile: (cell list + gather, density pass, force pass)
-        out.update(solve=solve / steps, rest=(wall - nb - solve) / steps)
     return out
 
 

@@ -39,7 +39,7 @@
 //! 2 × (iterations) times a step, so each pair's m_j ∇W_ij is computed once (with the density
 //! and the factor) and kept with j, chunk by chunk of the sorted particles (`par::CHUNK`), so
 //! every pass is a gather over stored pairs: no atomics, bit-identical for any thread count.
-use super::buffers::{PassFloat, Walls};
+use super::buffers::{PassFloat, WallArrays, Walls};
 use super::kernels::{CubicSpline, Kernel, WendlandC2};
 use super::params::{positive, KernelKind};
 use crate::alloc::{count, Need};
@@ -197,13 +197,7 @@ pub struct Dfsph<V: Vector> {
 }
 
 fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
-    let (first, n) = (p.count("first", ctx.n_particles)?, p.count("n", ctx.n_particles)?);
-    if first + n > ctx.n_particles {
-        return Err(invalid(
-            "n",
-            format!("particles {first}..{} are not all in the scene ({})", first + n, ctx.n_particles),
-        ));
-    }
+    let (first, n) = super::fluid::particles(&p, ctx)?;
     let iters = p.number("max_iterations")?;
     if iters.fract() != 0.0 || !(1.0..=100_000.0).contains(&iters) {
         return Err(invalid("max_iterations", format!("expected a whole number in 1..=100000, got {iters}")));
@@ -224,6 +218,16 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     Ok(Box::new(Dfsph::new(&name, first, n, params, walls, psi)?))
 }
 crate::register_term!("dfsph", build);
+
+/// Wall particle `b`'s position (the wall arrays are by component).
+#[inline(always)]
+fn wall_at<V: Vector>(w: &WallArrays<f64>, b: usize) -> V {
+    let mut c = [0.0; 3];
+    for (d, cd) in c.iter_mut().enumerate().take(V::DIM) {
+        *cd = w.pos[d][b];
+    }
+    V::from_slice(&c[..V::DIM])
+}
 
 impl<V: Vector> Dfsph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.
@@ -254,10 +258,6 @@ impl<V: Vector> Dfsph<V> {
             clock: [0.0; 3],
             stop: Stop::default(),
         })
-    }
-
-    pub fn params(&self) -> &DfsphParams {
-        &self.p
     }
 
     pub fn range(&self) -> Range<usize> {
@@ -357,11 +357,7 @@ impl<V: Vector> Dfsph<V> {
                 let mut gw = V::ZERO;
                 for run in wall.iter() {
                     for b in run {
-                        let mut c = [0.0; 3];
-                        for (dd, cd) in c.iter_mut().enumerate().take(V::DIM) {
-                            *cd = w.pos[dd][b];
-                        }
-                        let d = xk - V::from_slice(&c[..V::DIM]);
+                        let d = xk - wall_at::<V>(w, b);
                         let r2 = d.length_squared();
                         if r2 < reach {
                             let q = r2.sqrt() / h;
@@ -514,9 +510,10 @@ impl<V: Vector> Dfsph<V> {
             });
             self.apply(dt);
         }
-        let (tol, rho0) = match stage {
-            Projection::Density => (self.p.density_tol, self.p.rho0),
-            Projection::Divergence => (self.p.divergence_tol, self.p.rho0),
+        let rho0 = self.p.rho0;
+        let tol = match stage {
+            Projection::Density => self.p.density_tol,
+            Projection::Divergence => self.p.divergence_tol,
         };
         let norm = match stage {
             Projection::Density => 1.0 / (n.max(1) as Real * rho0),
@@ -617,11 +614,7 @@ impl<V: Vector> Dfsph<V> {
                     }
                     for run in self.walls.grid.query(c).iter() {
                         for b in run {
-                            let mut cb = [0.0; 3];
-                            for (d, cd) in cb.iter_mut().enumerate().take(V::DIM) {
-                                *cd = w.pos[d][b];
-                            }
-                            let r2 = (xr[i] - V::from_slice(&cb[..V::DIM])).length_squared();
+                            let r2 = (xr[i] - wall_at::<V>(w, b)).length_squared();
                             if r2 < reach {
                                 s += w.psi[b] * sigma * K::w(r2.sqrt() / h);
                             }

@@ -35,9 +35,9 @@ pub struct Sph<V: Vector> {
     stop: Stop,
 }
 
-/// The registered builder: the fluid's particles `first..first + n` must already be in the
-/// scene; parameters as in `SphParams` under the Python API's names.
-fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
+/// A fluid term's particles `first .. first + n` from its parameters, all in the scene (shared
+/// by the "sph" and "dfsph" builders).
+pub(super) fn particles(p: &Params, ctx: &Context) -> Result<(usize, usize)> {
     let (first, n) = (p.count("first", ctx.n_particles)?, p.count("n", ctx.n_particles)?);
     if first + n > ctx.n_particles {
         return Err(invalid(
@@ -45,6 +45,13 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
             format!("particles {first}..{} are not all in the scene ({})", first + n, ctx.n_particles),
         ));
     }
+    Ok((first, n))
+}
+
+/// The registered builder: the fluid's particles `first..first + n` must already be in the
+/// scene; parameters as in `SphParams` under the Python API's names.
+fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
+    let (first, n) = particles(&p, ctx)?;
     let gamma = p.number("gamma")?;
     if gamma.fract() != 0.0 || gamma.abs() > 1e3 {
         return Err(invalid("gamma", format!("expected a whole number, got {gamma}")));
