@@ -284,6 +284,8 @@ def test_readme_style_example():
 
 
 GRAIN_SCENES = ("galton_board", "billiards", "newtons_cradle", "jelly")
+# Surface tension is DFSPH's, which steps with semi-implicit Euler only (tests/test_surface_tension.py).
+SEMI_IMPLICIT_ONLY = GRAIN_SCENES + ("droplets", "crown")
 
 
 @pytest.mark.parametrize("name", sorted(pc.scenes.REGISTRY))
@@ -300,8 +302,9 @@ def test_every_registered_scene_builds_and_steps(name):
     assert np.all(np.isfinite(s.positions)) and np.all(np.isfinite(s.velocities))
     assert abs(s.energy_drift()) < 1e-2
     # Every scene also accepts integrator= and threads= (grains step only with the DEM
-    # scheme, semi-implicit Euler, and refuse others by name: tests/test_contacts.py).
-    integrator = "semi_implicit_euler" if name in GRAIN_SCENES else "rk4"
+    # scheme, semi-implicit Euler, and refuse others by name: tests/test_contacts.py; so do
+    # the surface-tension scenes, DFSPH's).
+    integrator = "semi_implicit_euler" if name in SEMI_IMPLICIT_ONLY else "rk4"
     s2 = pc.scenes.REGISTRY[name](integrator=integrator, threads=1)
     assert s2.integrator == integrator and s2.threads == 1
     s2.step(10)

@@ -604,6 +604,8 @@ class Scene:
                     "divergence_error": fluid.divergence_error,
                     "max_iterations": int(fluid.max_iterations),
                     "cfl": fluid.cfl,
+                    "surface_tension": fluid.surface_tension,
+                    "adhesion": fluid.adhesion,
                 },
             )
         else:

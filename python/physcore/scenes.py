@@ -41,7 +41,7 @@ from .terms import (
     XpbdConstraints,
 )
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly", "xpbd_cloth", "tumbling_boxes", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly", "xpbd_cloth", "tumbling_boxes", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -812,12 +812,16 @@ def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: t
 
 
 def _water_in_tank(
-    positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads, method="wcsph"
+    positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads, method="wcsph",
+    velocities=None, **surface: float,
 ) -> Scene:
-    """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers."""
+    """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers
+    (``surface``: DFSPH's ``surface_tension`` and ``adhesion``)."""
     scene = _fluid_scene(dim, integrator, dt, threads)
     scene.add_fluid(
         positions,
+        velocities=velocities,
+        **surface,
         spacing=dx,
         walls=tank_walls(tlo, thi, dx, layers=3, top=lid),
         precision=precision,
@@ -1074,6 +1078,249 @@ drop.render_defaults = {
     "color_by": "pressure",
     "size": (480, 480),
 }
+
+def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, viscosity):
+    """The checks the two surface-tension scenes share: (dim, n, σ, adhesion, α)."""
+    dim = _dim(dim)
+    n = _count(n3 if dim == 3 and n is None else n2 if n is None else n, "n", 8)
+    if integrator != "semi_implicit_euler":
+        raise InvalidInputError(
+            f"integrator: surface tension is DFSPH's (Fluid(method='dfsph')), which steps with 'semi_implicit_euler' only, got {integrator!r}"
+        )
+    return dim, n, _nonneg(surface_tension, "surface_tension"), _nonneg(adhesion, "adhesion"), _nonneg(viscosity, "viscosity")
+
+
+def _ball(centre, radius, dx, dim):
+    """Lattice points (spacing ``dx``, on the tank's lattice) within ``radius`` of ``centre``."""
+    c = np.asarray(centre, dtype=np.float64)
+    pts = lattice(c - radius, c + radius, dx)
+    return pts[np.linalg.norm(pts - c, axis=1) <= radius]
+
+
+def droplets(
+    *,
+    dim: int = 2,
+    n: int | None = None,
+    drops: int = 3,
+    radius: float = 0.003,
+    speed: float = 1.5,
+    tank: tuple[float, float] = (0.06, 0.03),
+    depth: float = 0.02,
+    surface_tension: float = 0.072,
+    adhesion: float = 0.02,
+    viscosity: float = 0.02,
+    lid: bool = True,
+    integrator: str = "semi_implicit_euler",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Droplets: water drops hit a floor, spread into sheets, and surface tension pulls the
+    sheets' rims back into round drops (a splash with surface tension).
+
+    ``drops`` drops of ``radius`` (m) start in a row across the tank at staggered heights, moving
+    down at ``speed`` (m/s), under gravity 9.81 m/s². Water at millimetre scale: DFSPH
+    (ρ0 = 1000 kg/m³) with Akinci et al. (2013) surface tension σ = 0.072 N/m (N in 2D) and a
+    little adhesion to the walls (:class:`~physcore.fluids.Fluid`); the capillary length
+    √(σ/(ρ0 g)) = 2.7 mm is the drops' size, so both gravity and surface tension shape them. The
+    default impact (Weber number ρ0 v² 2R/σ ≈ 190) spreads each drop into a thin sheet whose rim
+    gathers and breaks into droplets.
+
+    Parameters
+    ----------
+    dim : {2, 3}
+        In 3D the tank has a ``depth`` (along y) and the drops are centred in it.
+    n : int, optional
+        Particles across the tank length (spacing ``tank[0] / n``). Default 240 in 2D (about
+        1 400 water particles, 12 across a drop's radius) and 60 in 3D.
+    drops : int
+        Number of drops (1..20).
+    radius : float
+        Drop radius, m (> 0, at least 2 spacings).
+    speed : float
+        Initial downward speed, m/s (≥ 0).
+    tank : (float, float)
+        Tank length (along x) and height, m.
+    depth : float
+        3D only: tank depth, m.
+    surface_tension, adhesion : float
+        σ and the walls' adhesion, N/m (N in 2D), ≥ 0 (:class:`~physcore.fluids.Fluid`).
+    viscosity : float
+        Monaghan artificial viscosity α (≥ 0).
+    lid : bool
+        Close the tank with a lid (default).
+    integrator : str
+        ``"semi_implicit_euler"`` only (DFSPH); others are refused, naming ``integrator``.
+    dt : float, optional
+        Fixed time step, s. Default: the fluid's limit (renders use automatic substeps).
+    threads : int, optional
+
+    Returns
+    -------
+    Scene
+        One fluid, ``"water"``, the drops' particles in order.
+
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> scene = pc.scenes.droplets(n=80, drops=2)
+    >>> scene.n_particles
+    94
+    """
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 60, integrator, surface_tension, adhesion, viscosity)
+    drops = _check.int_in_range("drops", drops, 1, 20)
+    radius, speed = _positive(radius, "radius"), _nonneg(speed, "speed")
+    length, top = _pair(tank, "tank")
+    depth = _positive(depth, "depth")
+    lid = _flag(lid, "lid")
+    dx = _spacing(_per(length, n), "n, tank")
+    if not radius >= 2 * dx:
+        raise InvalidInputError(f"n, radius: n = {n} gives spacing {dx:.3g} m, too coarse for drops of radius {radius} m")
+    if not (2 * radius * drops < length and 4 * radius < top and (dim == 2 or 2 * radius < depth)):
+        raise InvalidInputError(f"radius, drops, tank: {drops} drops of radius {radius} m do not fit in the tank {length} × {top} m")
+    tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
+    _particles("n, tank, depth", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
+
+    def snap(v):  # on the walls' lattice
+        return (math.floor(v / dx) + 0.5) * dx
+
+    parts = []
+    for k in range(drops):
+        x = snap(length * (k + 1) / (drops + 1))
+        z = snap(top - radius - 2 * dx - (k % 2) * (top - 4 * radius - 4 * dx) * 0.5)
+        centre = [x, z] if dim == 2 else [x, snap(0.5 * depth), z]
+        parts.append(_ball(centre, radius, dx, dim))
+    pos = np.concatenate(parts)
+    vel = np.zeros_like(pos)
+    vel[:, -1] = -speed
+    return _water_in_tank(
+        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
+        sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
+        surface_tension=sigma, adhesion=adh,
+    )
+
+
+# 120 frames over 0.3 s: the fall, the impacts (the first at ≈ 6 ms), the sheets and the rims
+# pulling back into drops.
+droplets.render_defaults = {
+    "frames": 120,
+    "fps": 30,
+    "frame_time": 0.3 / 120,
+    "substeps": "auto",
+    "color_by": "speed",
+    "size": (480, 240),
+}
+
+
+def crown(
+    *,
+    dim: int = 2,
+    n: int | None = None,
+    tank: tuple[float, float] = (0.04, 0.03),
+    depth: float = 0.04,
+    pool: float = 0.002,
+    radius: float = 0.002,
+    speed: float = 2.5,
+    surface_tension: float = 0.072,
+    adhesion: float = 0.05,
+    viscosity: float = 0.02,
+    lid: bool = True,
+    integrator: str = "semi_implicit_euler",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Crown: a water drop hits a shallow pool and throws up a crown-shaped sheet (in 2D, two
+    sheets) whose rim breaks into droplets (Worthington's splash; Yarin, Annu. Rev. Fluid Mech.
+    38, 2006).
+
+    A drop of ``radius`` (m) just above a pool of depth ``pool`` (m), moving down at ``speed``
+    (m/s), under gravity. DFSPH water with Akinci et al. (2013) surface tension, as
+    :func:`droplets`. The default impact: Weber number ρ0 v² 2R/σ ≈ 350, pool depth half the
+    drop's diameter, the regime of crown splashes.
+
+    Parameters
+    ----------
+    dim : {2, 3}
+        In 3D the tank has a ``depth`` (along y).
+    n : int, optional
+        Particles across the tank length (spacing ``tank[0] / n``). Default 300 in 2D (about
+        5 200 particles, 15 across the drop's radius) and 80 in 3D.
+    tank : (float, float)
+        Tank length (along x) and height, m.
+    depth : float
+        3D only: tank depth, m.
+    pool : float
+        Pool depth, m (> 0, at least 2 spacings).
+    radius : float
+        Drop radius, m (at least 2 spacings).
+    speed : float
+        The drop's initial downward speed, m/s (≥ 0).
+    surface_tension, adhesion, viscosity, lid, integrator, dt, threads
+        As for :func:`droplets`.
+
+    Returns
+    -------
+    Scene
+        One fluid, ``"water"``: the pool's particles, then the drop's.
+
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> scene = pc.scenes.crown(n=80)
+    >>> scene.n_particles
+    184
+    """
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 300, 80, integrator, surface_tension, adhesion, viscosity)
+    length, top = _pair(tank, "tank")
+    depth = _positive(depth, "depth")
+    pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _nonneg(speed, "speed")
+    lid = _flag(lid, "lid")
+    dx = _spacing(_per(length, n), "n, tank")
+    if not (pool >= 2 * dx and radius >= 2 * dx):
+        raise InvalidInputError(f"n, pool, radius: n = {n} gives spacing {dx:.3g} m, too coarse for the pool or the drop")
+    if not (2 * radius < length and pool + 2 * radius + 2 * dx < top and (dim == 2 or 2 * radius < depth)):
+        raise InvalidInputError(f"pool, radius, tank: the pool and a drop of radius {radius} m do not fit in the tank")
+    tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
+    _particles("n, tank, depth, pool", _walls_size(tlo, thi, dx) + _lattice_size(tlo, _box(dim, (0.0, length), (0.0, pool), (0.0, depth))[1], dx)
+               + _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
+
+    def snap(v):
+        return (math.floor(v / dx) + 0.5) * dx
+
+    lo, hi = _box(dim, (0.0, length), (0.0, pool), (0.0, depth))
+    water = lattice(lo, hi, dx)
+    z = snap(water[:, -1].max() + radius + 1.5 * dx)
+    centre = [snap(0.5 * length), z] if dim == 2 else [snap(0.5 * length), snap(0.5 * depth), z]
+    ball = _ball(centre, radius, dx, dim)
+    pos = np.concatenate([water, ball])
+    vel = np.zeros_like(pos)
+    vel[len(water):, -1] = -speed
+    return _water_in_tank(
+        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
+        sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
+        surface_tension=sigma, adhesion=adh,
+    )
+
+
+# 120 frames over 30 ms: the impact, the crown rising and its rim breaking up.
+crown.render_defaults = {
+    "frames": 120,
+    "fps": 30,
+    "frame_time": 0.03 / 120,
+    "substeps": "auto",
+    "color_by": "speed",
+    "size": (480, 360),
+}
+
 
 def ripple(
     n: int = 256,
@@ -1712,6 +1959,8 @@ cyclotron = _stamped(cyclotron)
 spring_chain = _stamped(spring_chain)
 dam_break = _stamped(dam_break)
 drop = _stamped(drop)
+droplets = _stamped(droplets)
+crown = _stamped(crown)
 ripple = _stamped(ripple)
 double_slit = _stamped(double_slit)
 turing = _stamped(turing)
@@ -1737,6 +1986,8 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "spring_chain": spring_chain,
     "dam_break": dam_break,
     "drop": drop,
+    "droplets": droplets,
+    "crown": crown,
     "ripple": ripple,
     "double_slit": double_slit,
     "turing": turing,

@@ -28,7 +28,13 @@
 //!
 //! Non-pressure force: Monaghan (1992) artificial viscosity with the fluid's α and c0 (the same
 //! term and coefficient as WCSPH, eq. in `sph/mod.rs`), which dissipates
-//! ½ Σ_ij m_i m_j Π_ij v_ij·∇W_ij ≥ 0.
+//! ½ Σ_ij m_i m_j Π_ij v_ij·∇W_ij ≥ 0 at the velocities v.
+//!
+//! Surface tension and adhesion (optional): Akinci, Akinci & Teschner (2013), `sph::surface`,
+//! from the stored pairs and the step's normals; their work on the fluid (surface energy
+//! released, or stored when negative) is booked with the dissipation, so the books balance.
+//! The term books its forces' work over the kick, −Σ_i F_i·(v_i + dt a_i/2): the kick's exact
+//! change of kinetic energy, which the density solve's books then see.
 //!
 //! Energy books: an incompressible fluid stores no internal energy (`potential` is 0). The
 //! projections remove kinetic energy (they are inelastic: the velocity components that would
@@ -42,6 +48,7 @@
 use super::buffers::{PassFloat, WallArrays, Walls};
 use super::kernels::{CubicSpline, Kernel, WendlandC2};
 use super::params::{positive, KernelKind};
+use super::surface::Surface;
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
@@ -81,6 +88,10 @@ pub struct DfsphParams {
     pub max_iterations: u32,
     /// CFL number λ of the step limit λ h / |v|max.
     pub cfl: Real,
+    /// Surface tension σ, N/m (N in 2D), ≥ 0 (Akinci et al. 2013, `sph::surface`).
+    pub surface_tension: Real,
+    /// Adhesion to the walls, half the work of adhesion, σ's units, ≥ 0.
+    pub adhesion: Real,
 }
 
 impl DfsphParams {
@@ -102,6 +113,11 @@ impl DfsphParams {
         }
         if !(self.cfl.is_finite() && self.cfl > 0.0 && self.cfl <= 1.0) {
             return Err(invalid("cfl", format!("{} must be in (0, 1]", self.cfl)));
+        }
+        for (v, a) in [(self.surface_tension, "surface_tension"), (self.adhesion, "adhesion")] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(a, format!("{v} must be finite and >= 0")));
+            }
         }
         Ok(())
     }
@@ -186,10 +202,18 @@ pub struct Dfsph<V: Vector> {
     /// divergence solve (m^(dim+2)/(kg s²), dt-free).
     kappa: Vec<Real>,
     kappa_v: Vec<Real>,
-    /// Pressure p_i = ρ_i² (Σκ_i + Σκ^v_i)/ρ_i of the last step's solves, Pa, particle order.
+    /// Pressure p_i = ρ_i² (Σκ_i + Σκ^v_i) of the last step's solves, plus with surface tension
+    /// the surface forces' virial (`surface_acceleration`), Pa, particle order.
     pressure: Vec<Real>,
     /// Neighbours per particle below which the divergence solve leaves it out.
     n_min: u32,
+    /// Surface tension and adhesion (Akinci 2013), the normals n_i of the step and the virial
+    /// pressure of the surface forces (Pa, added to `pressure`), sorted.
+    surface: Surface,
+    normals: Vec<V>,
+    surface_p: Vec<Real>,
+    /// The step of the kick that follows the divergence solve (set by it), s.
+    kick_dt: Real,
     books: Books,
     /// Wall time (neighbours + pairs, solver iterations, the rest), s.
     clock: [f64; 3],
@@ -212,6 +236,8 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
         divergence_tol: p.number("divergence_error")?,
         max_iterations: iters as u32,
         cfl: p.number("cfl")?,
+        surface_tension: p.number("surface_tension")?,
+        adhesion: p.number("adhesion")?,
     };
     let walls = p.take_vectors::<V>("walls")?;
     let psi = p.take_floats("wall_psi")?;
@@ -254,6 +280,10 @@ impl<V: Vector> Dfsph<V> {
             kappa_v: vec![0.0; n],
             pressure: vec![0.0; n],
             n_min: 0,
+            surface: Surface::new(p.surface_tension, p.adhesion, p.h, p.rho0, V::DIM),
+            normals: Vec::new(),
+            surface_p: Vec::new(),
+            kick_dt: 0.0,
             books: Books::default(),
             clock: [0.0; 3],
             stop: Stop::default(),
@@ -548,9 +578,12 @@ impl<V: Vector> Dfsph<V> {
         }
         if stage == Projection::Density {
             // Both solves push with the same form: the step's pressure is their sum.
+            // With surface tension, plus the surface forces' virial (`surface_acceleration`):
+            // the mechanical pressure.
+            let sp = &self.surface_p;
             for (k, &i) in order.iter().enumerate() {
                 let (i, rho) = (i as usize, self.sites[k].rho);
-                self.pressure[i] = (self.kappa[i] + self.kappa_v[i]) * rho * rho;
+                self.pressure[i] = (self.kappa[i] + self.kappa_v[i]) * rho * rho + sp.get(k).copied().unwrap_or(0.0);
             }
         }
         let e1 = self.scatter_v(v);
@@ -573,6 +606,81 @@ impl<V: Vector> Dfsph<V> {
         }
         self.clock[1] += t0.elapsed().as_secs_f64();
         e0 - e1
+    }
+
+    /// The step's surface normals n_i = H Σ_j m_j/ρ_j ∇W_ij (Akinci 2013, eq. 4; fluid
+    /// neighbours only), sorted order, from the stored pairs (g = m_j ∇W_ij).
+    fn compute_normals(&mut self) {
+        let (pairs, sites, big_h) = (&self.pairs, &self.sites, self.surface.big_h);
+        self.normals.resize(self.n, V::ZERO);
+        par::chunks1(&mut self.normals, |s, out| {
+            let p = &pairs[s / CHUNK];
+            for (kk, n) in out.iter_mut().enumerate() {
+                let mut sum = V::ZERO;
+                for q in p.start[kk] as usize..p.start[kk + 1] as usize {
+                    sum += p.g[q] * (1.0 / sites[p.j[q] as usize].rho);
+                }
+                *n = sum * big_h;
+            }
+        });
+    }
+
+    /// Sorted particle i's acceleration by surface tension and adhesion (`sph::surface`):
+    /// −γ Σ_j K_ij [m_j C(r) x̂_ij + c (n_i − n_j)] − β Σ_b Ψ_b A(r) x̂_ib, m/s²; and the virial
+    /// pressure of its fluid pairs' surface forces, ρ_i/(2d) Σ_j x_ij·a_ij, Pa (Irving &
+    /// Kirkwood 1950: each pair's x_ij·F_ij shared half and half, over the particle's volume
+    /// m_i/ρ_i). The cohesion holds the fluid together with a bulk tension of its own (about
+    /// −(π/2)ρ0²γ∫C r² dr in 2D, tens of times σ/R): the solvers' pressure carries it, and only
+    /// the sum of the two, the mechanical pressure, shows a droplet's Laplace pressure.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn surface_acceleration(
+        &self,
+        i: usize,
+        xi: V,
+        ri: Real,
+        normals: &[V],
+        cells: &[[i64; 3]],
+        walls: &Walls,
+        w: &WallArrays<f64>,
+        rho0: Real,
+    ) -> (V, Real) {
+        let surf = &self.surface;
+        let (p, kk) = (&self.pairs[i / CHUNK], i % CHUNK);
+        let (mut a, mut virial) = (V::ZERO, 0.0);
+        if surf.tension() {
+            let (xs, m, sites) = (&self.xs, &self.m, &self.sites);
+            let ni = normals[i];
+            let (mut st, mut vir) = (V::ZERO, 0.0);
+            for q in p.start[kk] as usize..p.start[kk + 1] as usize {
+                let j = p.j[q] as usize;
+                let d = xi - xs[j];
+                let r = d.length_squared().sqrt();
+                let k_ij = 2.0 * rho0 / (ri + sites[j].rho);
+                // Coincident particles have no direction: no cohesion (the curvature term stays).
+                let coh = if r > 0.0 { d * (m[j] * surf.cohesion(r) / r) } else { V::ZERO };
+                let pair = (coh + (ni - normals[j]) * (surf.curvature / surf.gamma)) * k_ij;
+                st += pair;
+                vir += d.dot(pair);
+            }
+            a -= st * surf.gamma;
+            virial = -surf.gamma * vir * ri / (2.0 * V::DIM as Real);
+        }
+        if surf.adhesion() {
+            let mut ad = V::ZERO;
+            for run in walls.grid.query(cells[i]).iter() {
+                for b in run {
+                    let d = xi - wall_at::<V>(w, b);
+                    let r = d.length_squared().sqrt();
+                    let k = super::surface::adhesion_kernel(r, surf.big_h);
+                    if k > 0.0 {
+                        ad += d * (w.psi[b] * k / r);
+                    }
+                }
+            }
+            a -= ad * surf.beta;
+        }
+        (a, virial)
     }
 
     /// Density (kg/m^dim) of each particle of the fluid at `x`, particle order, computed now
@@ -653,7 +761,14 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         let t0 = Instant::now();
         self.gather_v(v);
         let visc = self.p.alpha * self.p.c0;
-        let power = if visc == 0.0 {
+        let surf = self.surface;
+        if surf.tension() {
+            self.compute_normals();
+        }
+        self.surface_p.clear();
+        self.surface_p.resize(self.n, 0.0);
+        let sp = SyncPtr(self.surface_p.as_mut_ptr());
+        let power = if visc == 0.0 && !surf.tension() && !surf.adhesion() {
             if write == Write::Overwrite {
                 f[r].fill(V::ZERO);
             }
@@ -661,7 +776,10 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         } else {
             let (pairs, sites, xs, vs, m, h) = (&self.pairs, &self.sites, &self.xs, &self.vs, &self.m, self.p.h);
             let (order, out) = (&self.grid.order, SyncPtr(f[r].as_mut_ptr()));
+            let (normals, walls, cells, rho0) = (&self.normals, &self.walls, &self.grid.cells, self.p.rho0);
+            let w = f64::walls(walls);
             let eps = 0.01 * h * h;
+            let kick_dt = self.kick_dt;
             par::sum(self.n, 0.0, |ks| {
                 let mut power = 0.0;
                 for i in ks {
@@ -676,9 +794,23 @@ impl<V: Vector> Term<V> for Dfsph<V> {
                         // approaching pairs, else 0 (without a branch: half the pairs approach).
                         let vr = vij.dot(d).min(0.0);
                         let pi = -visc * h * vr / ((d.length_squared() + eps) * 0.5 * (ri + sites[j].rho));
-                        let g = p.g[q];
-                        a -= g * pi;
-                        power += 0.5 * m[i] * pi * g.dot(vij);
+                        a -= p.g[q] * pi;
+                    }
+                    if surf.tension() || surf.adhesion() {
+                        let (s, virial) = self.surface_acceleration(i, xi, ri, normals, cells, walls, w, rho0);
+                        // SAFETY: each sorted slot i is written by this one iteration.
+                        unsafe { *sp.get().add(i) = virial };
+                        a += s;
+                    }
+                    // The work of the term's forces over the kick that follows, F·(v + dt a/2)
+                    // (the kick's exact change of ½ m|v|²), booked as dissipation when taken
+                    // out: the viscosity's, and the surface's, which releases energy (< 0) or
+                    // stores it. (The viscosity alone, at v, is ½ Σ_ij m_i m_j Π_ij v_ij·∇W_ij;
+                    // at v alone the kick's ½ m dt² |a|², which the density solve then takes
+                    // out and books, went unbooked: a drop held by its surface tension drifted
+                    // its books by 1.5 % per ms, 2D, 2 400 particles.)
+                    if self.free[i] {
+                        power -= m[i] * a.dot(vi + a * (0.5 * kick_dt));
                     }
                     // SAFETY: `order` is a permutation: each particle is written by one slot.
                     unsafe { write.put(&mut *out.get().add(order[i] as usize), a * m[i]) };
@@ -714,14 +846,16 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         let vmax = v[self.range()].iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
         // The flow's CFL condition λ h/|v|max, the explicit viscosity's limit 0.125 h²/ν with
         // Monaghan's ν = α c0 h/(2(d + 2)) (Monaghan 2005, §4.3), and the force criterion of the
-        // uniform fields (a fluid falling from rest has no speed yet). (WCSPH's form
+        // uniform fields (a fluid falling from rest has no speed yet), and with surface tension
+        // the capillary limit (`Surface::max_dt`). (WCSPH's form
         // λ h/(|v|max + 0.6 α c0) took 2199 steps to T* = 4 on the 41k dam break.)
         let (h, d) = (self.p.h, V::DIM as Real);
         let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
         let visc = self.p.alpha * self.p.c0;
         let viscous = if visc > 0.0 { 0.125 * 2.0 * (d + 2.0) * h / visc } else { f64::INFINITY };
         let force = if g > 0.0 { 0.25 * (h / g).sqrt() } else { f64::INFINITY };
-        let dt = cfl.min(viscous).min(force);
+        let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
+        let dt = cfl.min(viscous).min(force).min(capillary);
         dt.is_finite().then_some(dt)
     }
 
@@ -733,9 +867,9 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         let bytes = self.grid.bytes()
             + self.walls.bytes()
             + self.pairs.iter().map(Pairs::bytes).sum::<usize>()
-            + (self.xs.capacity() + self.vs.capacity()) * std::mem::size_of::<V>()
+            + (self.xs.capacity() + self.vs.capacity() + self.normals.capacity()) * std::mem::size_of::<V>()
             + self.sites.capacity() * std::mem::size_of::<Site<V>>()
-            + (self.m.capacity() + self.k.capacity() + self.ksum.capacity()) * 8
+            + (self.m.capacity() + self.k.capacity() + self.ksum.capacity() + self.surface_p.capacity()) * 8
             + (self.kappa.capacity() + self.kappa_v.capacity() + self.pressure.capacity()) * 8;
         Some((self.clock, bytes))
     }
@@ -773,6 +907,9 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         }
         if stage == Projection::Divergence || !self.built {
             self.build(x, model);
+        }
+        if stage == Projection::Divergence {
+            self.kick_dt = dt;
         }
         let e = self.solve(stage, v, dt);
         if stage == Projection::Density {
@@ -862,6 +999,8 @@ mod tests {
             divergence_tol: 1e-3,
             max_iterations: 100,
             cfl: 0.4,
+            surface_tension: 0.0,
+            adhesion: 0.0,
         }
     }
 

@@ -37,6 +37,8 @@
 //!   gather, passes), written once for both pass precisions.
 //! - `dfsph`: `Dfsph`, the divergence-free (incompressible) fluid, registered as "dfsph": its
 //!   pressure comes from two velocity projections per step, not from an equation of state.
+//! - `surface`: Akinci et al. (2013) surface tension and adhesion (kernels, σ → coefficients),
+//!   used by `dfsph`.
 //! - `fluid`: `Sph`, the force term itself (one fluid): construction, joining a group, the
 //!   `Term` implementation (its share of the forces, its own books and fields), and its
 //!   registration as "sph".
@@ -48,6 +50,7 @@ mod fluid;
 mod group;
 mod params;
 mod passes;
+pub mod surface;
 
 pub use dfsph::{Dfsph, DfsphParams};
 pub use fluid::Sph;
