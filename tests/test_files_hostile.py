@@ -365,6 +365,9 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("terms", FLUID, "divergence_error"), [-1.0, INF, True]),
     (("terms", FLUID, "max_iterations"), [0, 1.5, True, 10**6, None]),
     (("terms", FLUID, "cfl"), [0.0, 2.0, NAN]),
+    # The corpus fluid is WCSPH, which has no surface tension: a positive value is refused too.
+    (("terms", FLUID, "surface_tension"), [-1.0, NAN, "x", 0.5]),
+    (("terms", FLUID, "adhesion"), [-0.1, INF, None, 0.5]),
     (("planes", 0, "point"), [[0.0], [0.0, NAN], None]),
     (("planes", 0, "normal"), [[0.0, 0.0], [0.0, "up"], Either([1e300, 1e300]), Either([5e-324, 0.0])]),
     (("planes", 0, "restitution"), [2.0, -0.1, NAN]),

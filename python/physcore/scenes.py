@@ -1169,7 +1169,7 @@ def droplets(
     >>> import physcore as pc
     >>> scene = pc.scenes.droplets(n=80, drops=2)
     >>> scene.n_particles
-    94
+    104
     """
     dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 60, integrator, surface_tension, adhesion, viscosity)
     drops = _check.int_in_range("drops", drops, 1, 20)
@@ -1275,9 +1275,9 @@ def crown(
     Examples
     --------
     >>> import physcore as pc
-    >>> scene = pc.scenes.crown(n=80)
+    >>> scene = pc.scenes.crown(n=80)   # 320 in the pool, 52 in the drop
     >>> scene.n_particles
-    184
+    372
     """
     dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 300, 80, integrator, surface_tension, adhesion, viscosity)
     length, top = _pair(tank, "tank")
