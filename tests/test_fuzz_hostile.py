@@ -353,6 +353,10 @@ def _check_scene_function(case):
 @example(("newtons_cradle", "law", np.array([0.5, 1.0])))  # found by this fuzz: ValueError, not naming law
 @example(("tumbling_boxes", "mass", 1.6190612999995960e303))  # found by this fuzz: refused as dt, substeps
 @example(("galton_board", "balls", 10**400))  # found by this fuzz: OverflowError
+@example(("droplets", "speed", 4.24e151))  # found by this fuzz: refused as sound_speed
+@example(("crown", "tank", (1.0, 2.0)))  # found by this fuzz: refused as n, pool, radius
+@example(("crown", "adhesion", 2.8611174857570283e307))  # found by this fuzz: refused without naming adhesion
+@example(("dam_break", "integrator", np.array([0.5, 1.0])))  # found by this fuzz: ValueError of numpy's, not naming it
 def test_fuzz_scene_functions(case):
     assert _check_scene_function(case), f"{case}: the scene's dt is not a usable step"
 

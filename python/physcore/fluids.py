@@ -549,11 +549,16 @@ class Fluid(Term, kind="fluid"):
 
     def max_dt(self) -> float:
         """CFL limit at rest, s (needs ``sound_speed``): WCSPH ``0.25 h / (c0 (1 + 0.6 α))``;
-        DFSPH: the viscous limit ``0.125 h²/ν = (d + 2) h/(4 α c0)`` (infinite without viscosity: the
+        DFSPH: the viscous limit ``0.125 h²/ν = (d + 2) h/(4 α c0)`` and, with surface tension, the
+        capillary limit ``0.25 √(ρ0 h³/(2π max(σ, adhesion)))`` (infinite without either: the
         flow's speed sets it)."""
         if self.sound_speed is None:
             raise InvalidInputError("sound_speed: not set yet (it is estimated when the fluid is added to a scene)")
         if self.method == "dfsph":
             visc = self.viscosity * self.sound_speed
-            return (self.dim + 2) * self.h / (4.0 * visc) if visc > 0 else math.inf
+            limit = (self.dim + 2) * self.h / (4.0 * visc) if visc > 0 else math.inf
+            s = max(self.surface_tension, self.adhesion)
+            if s > 0:
+                limit = min(limit, 0.25 * math.sqrt(self.density * self.h**3 / (2.0 * math.pi * s)))
+            return limit
         return 0.25 * self.h / (self.sound_speed * (1.0 + 0.6 * self.viscosity))

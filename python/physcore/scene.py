@@ -572,10 +572,13 @@ class Scene:
         max_dt = fluid.max_dt()
         # The scene's dt is lowered to this; a subnormal or zero step would never advance.
         if not max_dt >= _MIN_DT:
-            raise InvalidInputError(
-                f"sound_speed, viscosity, spacing: the fluid's CFL step 0.25 h / (c0 (1 + 0.6 α)) = {max_dt:.3g} s "
-                "is below float64's normal range"
+            what = (
+                "step limit (viscous (d + 2) h/(4 α c0), capillary 0.25 √(ρ0 h³/(2π max(σ, adhesion))))"
+                if fluid.method == "dfsph"
+                else "CFL step 0.25 h / (c0 (1 + 0.6 α))"
             )
+            args = "sound_speed, viscosity, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
+            raise InvalidInputError(f"{args}: the fluid's {what} = {max_dt:.3g} s is below float64's normal range")
         m = fluid.particle_mass()
         if first is None:
             self._check_fluid_method(fluid)

@@ -933,7 +933,8 @@ def dam_break(
         raise InvalidInputError(f"tank, height: the tank's height {top} must be at least the column height {height}")
     dx = _spacing(_per(width, n), "n, width")
     if method is None:
-        method = "dfsph" if integrator == "semi_implicit_euler" else "wcsph"
+        # (Any other integrator, a bad one included, goes to Scene, which names it.)
+        method = "dfsph" if isinstance(integrator, str) and integrator == "semi_implicit_euler" else "wcsph"
     lo, hi = _box(dim, (0.0, width), (0.0, height), (0.0, depth))
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("n, width, height, depth, tank", _lattice_size(lo, hi, dx) + _walls_size(tlo, thi, dx))
@@ -1083,11 +1084,20 @@ def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, v
     """The checks the two surface-tension scenes share: (dim, n, σ, adhesion, α)."""
     dim = _dim(dim)
     n = _count(n3 if dim == 3 and n is None else n2 if n is None else n, "n", 8)
-    if integrator != "semi_implicit_euler":
+    if not (isinstance(integrator, str) and integrator == "semi_implicit_euler"):
         raise InvalidInputError(
-            f"integrator: surface tension is DFSPH's (Fluid(method='dfsph')), which steps with 'semi_implicit_euler' only, got {integrator!r}"
+            f"integrator: surface tension is DFSPH's (Fluid(method='dfsph')), which steps with 'semi_implicit_euler' only, got {integrator!r:.80}"
         )
     return dim, n, _nonneg(surface_tension, "surface_tension"), _nonneg(adhesion, "adhesion"), _nonneg(viscosity, "viscosity")
+
+
+def _speed(value: object) -> float:
+    """A drop's initial speed, m/s: ≥ 0 and at most 1e150 (the fluid's estimated sound speed,
+    10 × it, must keep ρ0 c0² finite)."""
+    speed = _nonneg(value, "speed")
+    if not speed <= 1e150:
+        raise InvalidInputError(f"speed: at most 1e150 m/s (the fluid's sound speed is estimated as 10 × it), got {speed}")
+    return speed
 
 
 def _ball(centre, radius, dx, dim):
@@ -1131,7 +1141,7 @@ def droplets(
         In 3D the tank has a ``depth`` (along y) and the drops are centred in it.
     n : int, optional
         Particles across the tank length (spacing ``tank[0] / n``). Default 240 in 2D (about
-        1 400 water particles, 12 across a drop's radius) and 60 in 3D.
+        1 400 water particles, 12 across a drop's radius) and 120 in 3D (about 2 700, 6 across).
     drops : int
         Number of drops (1..20).
     radius : float
@@ -1171,19 +1181,19 @@ def droplets(
     >>> scene.n_particles
     104
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 60, integrator, surface_tension, adhesion, viscosity)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 120, integrator, surface_tension, adhesion, viscosity)
     drops = _check.int_in_range("drops", drops, 1, 20)
-    radius, speed = _positive(radius, "radius"), _nonneg(speed, "speed")
+    radius, speed = _positive(radius, "radius"), _speed(speed)
     length, top = _pair(tank, "tank")
     depth = _positive(depth, "depth")
     lid = _flag(lid, "lid")
     dx = _spacing(_per(length, n), "n, tank")
     if not radius >= 2 * dx:
-        raise InvalidInputError(f"n, radius: n = {n} gives spacing {dx:.3g} m, too coarse for drops of radius {radius} m")
+        raise InvalidInputError(f"n, tank, radius: n = {n} across the tank gives spacing {dx:.3g} m, too coarse for drops of radius {radius} m")
     if not (2 * radius * drops < length and 4 * radius < top and (dim == 2 or 2 * radius < depth)):
         raise InvalidInputError(f"radius, drops, tank: {drops} drops of radius {radius} m do not fit in the tank {length} × {top} m")
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
-    _particles("n, tank, depth", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
+    _particles("dim, n, tank, depth, drops", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
     def snap(v):  # on the walls' lattice
         return (math.floor(v / dx) + 0.5) * dx
@@ -1248,7 +1258,7 @@ def crown(
         In 3D the tank has a ``depth`` (along y).
     n : int, optional
         Particles across the tank length (spacing ``tank[0] / n``). Default 300 in 2D (about
-        5 200 particles, 15 across the drop's radius) and 80 in 3D.
+        5 200 particles, 15 across the drop's radius) and 80 in 3D (about 26 000, 4 across).
     tank : (float, float)
         Tank length (along x) and height, m.
     depth : float
@@ -1282,15 +1292,15 @@ def crown(
     dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 300, 80, integrator, surface_tension, adhesion, viscosity)
     length, top = _pair(tank, "tank")
     depth = _positive(depth, "depth")
-    pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _nonneg(speed, "speed")
+    pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _speed(speed)
     lid = _flag(lid, "lid")
     dx = _spacing(_per(length, n), "n, tank")
     if not (pool >= 2 * dx and radius >= 2 * dx):
-        raise InvalidInputError(f"n, pool, radius: n = {n} gives spacing {dx:.3g} m, too coarse for the pool or the drop")
+        raise InvalidInputError(f"n, tank, pool, radius: n = {n} across the tank gives spacing {dx:.3g} m, too coarse for the pool or the drop")
     if not (2 * radius < length and pool + 2 * radius + 2 * dx < top and (dim == 2 or 2 * radius < depth)):
         raise InvalidInputError(f"pool, radius, tank: the pool and a drop of radius {radius} m do not fit in the tank")
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
-    _particles("n, tank, depth, pool", _walls_size(tlo, thi, dx) + _lattice_size(tlo, _box(dim, (0.0, length), (0.0, pool), (0.0, depth))[1], dx)
+    _particles("dim, n, tank, depth, pool", _walls_size(tlo, thi, dx) + _lattice_size(tlo, _box(dim, (0.0, length), (0.0, pool), (0.0, depth))[1], dx)
                + _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
     def snap(v):

@@ -766,7 +766,10 @@ impl<V: Vector> Term<V> for Dfsph<V> {
             self.compute_normals();
         }
         self.surface_p.clear();
-        self.surface_p.resize(self.n, 0.0);
+        if surf.tension() || surf.adhesion() {
+            self.surface_p.resize(self.n, 0.0);
+        }
+        // Written below only where the surface forces are on (then it holds n values).
         let sp = SyncPtr(self.surface_p.as_mut_ptr());
         let power = if visc == 0.0 && !surf.tension() && !surf.adhesion() {
             if write == Write::Overwrite {
