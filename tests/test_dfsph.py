@@ -167,10 +167,12 @@ def test_dfsph_takes_far_fewer_steps_than_wcsph():
 
 def test_energy_books_balance_and_the_solvers_dissipate():
     """Dam break to T = 2 (16 particles across): E_kin + E_grav + dissipated is conserved to the
-    integrator's error (first order, CFL steps: measured drift 0.05 % of the initial energy), the
-    fluid stores no internal energy, and the two projections together remove kinetic energy (they
-    are inelastic). Each solve's share is booked as measured: the density solve's warm start puts
-    some in (measured −1.9 J) that the next divergence solve takes out (+3.3 J)."""
+    integrator's error (first order, CFL steps: measured drift −1.6e-5 of the initial energy since
+    the fluid books its forces' work over the kick, 6.9e-4 when it booked them at the kick's
+    start), the fluid stores no internal energy, and the two projections together remove
+    kinetic energy (they are inelastic). Each solve's share is booked as measured: 2.18 J by the
+    density solve, 2.16 J by the divergence solve (an earlier note's −1.9 J and +3.3 J were
+    stale: the same run at the previous commit gives these figures, bit for bit)."""
     scene, _, _ = column(16)
     tscale = math.sqrt(2 * G / 0.25)
     scene.advance(2.0 / tscale)
@@ -187,7 +189,8 @@ def test_energy_books_balance_and_the_solvers_dissipate():
 def test_the_drift_of_the_default_dam_break_converges_with_the_step():
     """``dam_break(n=12)`` (DFSPH, its default) for 1 s, advanced per frame as a render does, at
     CFL numbers 0.4 (default), 0.2, 0.1: the energy drift is semi-implicit Euler's error at
-    those steps, not the books' (measured 1.7e-2, 5.6e-3, 1.7e-3: ×3.1 and ×3.3 a halving)."""
+    those steps, not the books' (measured 1.46e-2, 4.0e-3, 8.2e-4: ×3.6 and ×4.9 a halving;
+    1.7e-2, 5.6e-3, 1.7e-3 when the fluid booked its forces' work at the kick's start)."""
     import dataclasses
 
     drifts = []
@@ -325,7 +328,8 @@ def test_3d_dam_break_converges_keeps_its_walls_and_its_books():
     """The 3D dam break (``dam_break(dim=3, n=8, depth=0.5)``, 512 particles, T = 0..3): every
     solve converges (none stopped at max_iterations, the density error at most 0.1 % every step),
     nothing goes a spacing past a wall (measured 0.34 dx), and the books balance to the
-    integrator's error (measured drift 0.19 %). Here the two solves together put kinetic energy
+    integrator's error (measured drift −1.6e-5; 0.19 % when the fluid booked its forces' work at
+    the kick's start). Here the two solves together put kinetic energy
     in (measured: the density solve's warm starts −575 J, the divergence solve +375 J): at 8
     particles across the warm starts push harder than in 2D; the books show it."""
     scene = pc.scenes.dam_break(dim=3, n=8, depth=0.5)

@@ -60,7 +60,7 @@ def shape(scene):
 def test_a_square_relaxes_to_a_circle_and_a_cube_to_a_sphere(dim, n):
     """A 20 × 20 square (10³ cube) of water, 1 mm spacing, σ = 0.072, α = 0.5 (to damp the
     oscillation): its corners stick out by 41 % (73 %) of the inscribed radius at the start, a
-    spread of 0.30 (0.67) of the outermost particles' distance over 16 (26) directions. At 0.8 s
+    spread of 0.30 (0.50) of the outermost particles' distance over 16 (26) directions. At 0.8 s
     (about four capillary times √(ρ0 R³/σ)) the spread is below 4 % (measured 1.9 % and 1.7 %)
     and the principal second moments within 6 % (measured 3.8 % and 2.0 %: the drops freeze a
     little elongated, axes within 2 %). The energy the surface releases is booked (the surface
@@ -114,7 +114,7 @@ def test_laplace_pressure_of_a_droplet(dim, ns):
     2σ/R (3D). The stated tolerance is a factor of 3 for one droplet (sph/surface.rs: 2D droplets
     of R = 3–8.5 H read 0.38–2.19, geometric mean 0.94; 3D of R = 1.7–2.5 H 1.4–2.75; each
     freezes into a differently stressed packing). Measured here: 1.42 and 0.70 (2D, R = 4.6
-    and 8.5 H), 2.14 (3D, R = 2.2 H). (Without the surface forces' virial, the solvers' pressure
+    and 8.5 H), 2.16 (3D, R = 2.2 H). (Without the surface forces' virial, the solvers' pressure
     alone reads 30 to 70 times σ/R: the cohesion's bulk tension, which the solvers carry.)"""
     sigma, dx, rho0 = 0.03, 5e-4, 800.0
     k = 1 if dim == 2 else 2
