@@ -242,3 +242,16 @@ def test_surface_tension_scenes(name):
         fn(n=80, integrator="rk4")
     with pytest.raises(ValueError, match="radius"):
         fn(n=80, radius=1.0)
+
+
+def test_a_drop_at_rest_without_gravity_needs_no_sound_speed():
+    """With surface tension a fluid at rest still moves (capillary speed √(σ/(ρ0 h))): the sound
+    speed, which a DFSPH fluid uses only to scale its viscosity, is estimated from it as
+    10 × that speed, where without surface tension it must be given."""
+    x = lattice([0, 0], [0.01, 0.01], 5e-4)
+    scene = pc.Scene(2, integrator="semi_implicit_euler")
+    scene.add_fluid(x, spacing=5e-4, method="dfsph", surface_tension=0.072)
+    h = 1.3 * 5e-4
+    assert scene.fluids[0].sound_speed == pytest.approx(10 * math.sqrt(0.072 / (RHO0 * h)), rel=1e-12)
+    with pytest.raises(ValueError, match="sound_speed"):
+        pc.Scene(2, integrator="semi_implicit_euler").add_fluid(x, spacing=5e-4, method="dfsph")

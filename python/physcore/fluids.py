@@ -253,7 +253,8 @@ class Fluid(Term, kind="fluid"):
     sound_speed : float, optional
         Numerical speed of sound ``c0``, m/s. Default ``10 × v_max`` with
         ``v_max = max(√(2|g|H), max |v0|)``, ``H`` the fluid's extent along the scene's gravity when
-        it is added: density then varies by about 1 % (Monaghan 1994).
+        it is added: density then varies by about 1 % (Monaghan 1994); with surface tension also
+        at least the capillary speed ``√(σ/(ρ0 h))``. (DFSPH: c0 only scales the viscosity.)
     viscosity : float
         Artificial viscosity ``α`` ≥ 0 (Monaghan 1992). Default 0.05.
     smoothing : float

@@ -552,6 +552,11 @@ class Scene:
                 height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
                 v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
             vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
+            s = max(fluid.surface_tension, fluid.adhesion)
+            if s > 0:
+                # Surface tension moves a fluid at rest too: the capillary speed √(σ/(ρ0 h)).
+                with np.errstate(over="ignore"):
+                    vmax = max(vmax, math.sqrt(s / (fluid.density * fluid.h)))
             if not vmax > 0:
                 raise InvalidInputError(
                     "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
