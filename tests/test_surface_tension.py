@@ -242,6 +242,9 @@ def test_surface_tension_scenes(name):
         fn(n=80, integrator="rk4")
     with pytest.raises(ValueError, match="radius"):
         fn(n=80, radius=1.0)
+    if name == "droplets":  # drops side by side that would overlap (a reviewer's case)
+        with pytest.raises(ValueError, match="drops"):
+            fn(drops=20, radius=0.00145, tank=(0.06, 0.0059))
 
 
 def test_a_drop_at_rest_without_gravity_needs_no_sound_speed():

@@ -564,9 +564,11 @@ class Scene:
                 )
             c0 = 10.0 * vmax
             if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
+                surface = ", surface_tension, adhesion" if s > 0 else ""
                 raise InvalidInputError(
-                    f"sound_speed: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions "
-                    "and the velocities, makes the Tait stiffness density · c0² overflow float64; give sound_speed= (m/s)"
+                    f"sound_speed{surface}: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions, "
+                    f"the velocities{' and the capillary speed' if s > 0 else ''}, makes the Tait stiffness density · c0² "
+                    "overflow float64; give sound_speed= (m/s)"
                 )
         fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
         walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))

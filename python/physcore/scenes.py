@@ -1190,8 +1190,11 @@ def droplets(
     dx = _spacing(_per(length, n), "n, tank")
     if not radius >= 2 * dx:
         raise InvalidInputError(f"n, tank, radius: n = {n} across the tank gives spacing {dx:.3g} m, too coarse for drops of radius {radius} m")
-    if not (2 * radius * drops < length and 4 * radius < top and (dim == 2 or 2 * radius < depth)):
-        raise InvalidInputError(f"radius, drops, tank: {drops} drops of radius {radius} m do not fit in the tank {length} × {top} m")
+    # Drops side by side (centres length/(drops + 1) apart) must not touch, whatever their heights.
+    if not (2 * radius + 2 * dx <= length / (drops + 1) and 4 * radius < top and (dim == 2 or 2 * radius < depth)):
+        raise InvalidInputError(
+            f"radius, drops, tank: {drops} drops of radius {radius} m do not fit side by side in the tank {length} × {top} m"
+        )
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("dim, n, tank, depth, drops", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 

@@ -33,8 +33,10 @@
 //! Surface tension and adhesion (optional): Akinci, Akinci & Teschner (2013), `sph::surface`,
 //! from the stored pairs and the step's normals; their work on the fluid (surface energy
 //! released, or stored when negative) is booked with the dissipation, so the books balance.
-//! The term books its forces' work over the kick, −Σ_i F_i·(v_i + dt a_i/2): the kick's exact
-//! change of kinetic energy, which the density solve's books then see.
+//! The term books its forces' work over the kick, −Σ_i F_i·(v_i + dt a_i/2) with a_i its own
+//! acceleration: the kick's change of kinetic energy by these forces, which the density solve's
+//! books then see (exact but for the cross terms m dt² a_i·a_other with the kick's other
+//! forces, which vanish for pair forces under uniform gravity).
 //!
 //! Energy books: an incompressible fluid stores no internal energy (`potential` is 0). The
 //! projections remove kinetic energy (they are inelastic: the velocity components that would
@@ -806,7 +808,7 @@ impl<V: Vector> Term<V> for Dfsph<V> {
                         a += s;
                     }
                     // The work of the term's forces over the kick that follows, F·(v + dt a/2)
-                    // (the kick's exact change of ½ m|v|²), booked as dissipation when taken
+                    // (their share of the kick's change of ½ m|v|²), booked as dissipation when taken
                     // out: the viscosity's, and the surface's, which releases energy (< 0) or
                     // stores it. (The viscosity alone, at v, is ½ Σ_ij m_i m_j Π_ij v_ij·∇W_ij;
                     // at v alone the kick's ½ m dt² |a|², which the density solve then takes

@@ -82,7 +82,8 @@ pub fn adhesion_kernel(r: Real, big_h: Real) -> Real {
 }
 
 /// ∫₀^H f(r) r^p dr by the midpoint rule, 4096 panels each side of H/2 (the splines' joint):
-/// relative error below 1e-7 for these polynomials.
+/// relative error below 1e-7 for the cohesion's polynomials, 7e-6 for the adhesion spline (its
+/// quarter root at the ends).
 fn moment(f: impl Fn(Real) -> Real, big_h: Real, p: i32) -> Real {
     let n = 4096;
     let half = 0.5 * big_h;
@@ -110,7 +111,7 @@ pub struct Surface {
     pub gamma: Real,
     /// γ c: the curvature term's coefficient, m/s².
     pub curvature: Real,
-    /// β, m^(d+1)/(kg s²) (0: no adhesion).
+    /// β, m⁴/(kg s²) in 2D and 3D (A is 1/m³ in both) (0: no adhesion).
     pub beta: Real,
 }
 
