@@ -1100,6 +1100,21 @@ def _speed(value: object) -> float:
     return speed
 
 
+def _on_lattice(v: float, dx: float) -> float:
+    """``v`` moved to the nearest particle centre of the walls' lattice (centres at (i + ½) dx)."""
+    return (math.floor(v / dx) + 0.5) * dx
+
+
+def _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads) -> Scene:
+    """The surface-tension scenes' water: DFSPH (float64, cubic spline) with σ and adhesion, at
+    ``pos`` moving at ``vel``, in a tank lined with 3 wall layers, sound speed estimated."""
+    return _water_in_tank(
+        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
+        sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
+        surface_tension=sigma, adhesion=adh,
+    )
+
+
 def _ball(centre, radius, dx, dim):
     """Lattice points (spacing ``dx``, on the tank's lattice) within ``radius`` of ``centre``."""
     c = np.asarray(centre, dtype=np.float64)
@@ -1198,8 +1213,8 @@ def droplets(
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("dim, n, tank, depth, drops", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
-    def snap(v):  # on the walls' lattice
-        return (math.floor(v / dx) + 0.5) * dx
+    def snap(v):
+        return _on_lattice(v, dx)
 
     parts = []
     for k in range(drops):
@@ -1210,11 +1225,7 @@ def droplets(
     pos = np.concatenate(parts)
     vel = np.zeros_like(pos)
     vel[:, -1] = -speed
-    return _water_in_tank(
-        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
-        sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
-        surface_tension=sigma, adhesion=adh,
-    )
+    return _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads)
 
 
 # 120 frames over 0.3 s: the fall, the impacts (the first at ≈ 6 ms), the sheets and the rims
@@ -1307,7 +1318,7 @@ def crown(
                + _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
     def snap(v):
-        return (math.floor(v / dx) + 0.5) * dx
+        return _on_lattice(v, dx)
 
     lo, hi = _box(dim, (0.0, length), (0.0, pool), (0.0, depth))
     water = lattice(lo, hi, dx)
@@ -1317,11 +1328,7 @@ def crown(
     pos = np.concatenate([water, ball])
     vel = np.zeros_like(pos)
     vel[len(water):, -1] = -speed
-    return _water_in_tank(
-        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
-        sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
-        surface_tension=sigma, adhesion=adh,
-    )
+    return _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads)
 
 
 # 120 frames over 30 ms: the impact, the crown rising and its rim breaking up.
