@@ -1244,7 +1244,7 @@ def crown(
     *,
     dim: int = 2,
     n: int | None = None,
-    tank: tuple[float, float] = (0.04, 0.03),
+    tank: tuple[float, float] = (0.05, 0.03),
     depth: float = 0.04,
     pool: float = 0.002,
     radius: float = 0.002,
@@ -1271,8 +1271,8 @@ def crown(
     dim : {2, 3}
         In 3D the tank has a ``depth`` (along y).
     n : int, optional
-        Particles across the tank length (spacing ``tank[0] / n``). Default 300 in 2D (about
-        5 200 particles, 15 across the drop's radius) and 80 in 3D (about 26 000, 4 across).
+        Particles across the tank length (spacing ``tank[0] / n``). Default 375 in 2D (about
+        6 300 particles, 15 across the drop's radius) and 100 in 3D (about 32 000, 4 across).
     tank : (float, float)
         Tank length (along x) and height, m.
     depth : float
@@ -1299,11 +1299,11 @@ def crown(
     Examples
     --------
     >>> import physcore as pc
-    >>> scene = pc.scenes.crown(n=80)   # 320 in the pool, 52 in the drop
+    >>> scene = pc.scenes.crown(n=80)   # 240 in the pool, 32 in the drop
     >>> scene.n_particles
-    372
+    272
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 300, 80, integrator, surface_tension, adhesion, viscosity)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 375, 100, integrator, surface_tension, adhesion, viscosity)
     length, top = _pair(tank, "tank")
     depth = _positive(depth, "depth")
     pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _speed(speed)
