@@ -634,20 +634,9 @@ impl<V: Vector> Dfsph<V> {
     /// m_i/ρ_i). The cohesion holds the fluid together with a bulk tension of its own (about
     /// −(π/2)ρ0²γ∫C r² dr in 2D, tens of times σ/R): the solvers' pressure carries it, and only
     /// the sum of the two, the mechanical pressure, shows a droplet's Laplace pressure.
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn surface_acceleration(
-        &self,
-        i: usize,
-        xi: V,
-        ri: Real,
-        normals: &[V],
-        cells: &[[i64; 3]],
-        walls: &Walls,
-        w: &WallArrays<f64>,
-        rho0: Real,
-    ) -> (V, Real) {
-        let surf = &self.surface;
+    fn surface_acceleration(&self, i: usize, xi: V, ri: Real) -> (V, Real) {
+        let (surf, normals, rho0) = (&self.surface, &self.normals, self.p.rho0);
         let (p, kk) = (&self.pairs[i / CHUNK], i % CHUNK);
         let (mut a, mut virial) = (V::ZERO, 0.0);
         if surf.tension() {
@@ -661,7 +650,7 @@ impl<V: Vector> Dfsph<V> {
                 let k_ij = 2.0 * rho0 / (ri + sites[j].rho);
                 // Coincident particles have no direction: no cohesion (the curvature term stays).
                 let coh = if r > 0.0 { d * (m[j] * surf.cohesion(r) / r) } else { V::ZERO };
-                let pair = (coh + (ni - normals[j]) * (surf.curvature / surf.gamma)) * k_ij;
+                let pair = (coh + (ni - normals[j]) * surf.c) * k_ij;
                 st += pair;
                 vir += d.dot(pair);
             }
@@ -670,7 +659,8 @@ impl<V: Vector> Dfsph<V> {
         }
         if surf.adhesion() {
             let mut ad = V::ZERO;
-            for run in walls.grid.query(cells[i]).iter() {
+            let w = f64::walls(&self.walls);
+            for run in self.walls.grid.query(self.grid.cells[i]).iter() {
                 for b in run {
                     let d = xi - wall_at::<V>(w, b);
                     let r = d.length_squared().sqrt();
@@ -781,8 +771,6 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         } else {
             let (pairs, sites, xs, vs, m, h) = (&self.pairs, &self.sites, &self.xs, &self.vs, &self.m, self.p.h);
             let (order, out) = (&self.grid.order, SyncPtr(f[r].as_mut_ptr()));
-            let (normals, walls, cells, rho0) = (&self.normals, &self.walls, &self.grid.cells, self.p.rho0);
-            let w = f64::walls(walls);
             let eps = 0.01 * h * h;
             let kick_dt = self.kick_dt;
             par::sum(self.n, 0.0, |ks| {
@@ -802,7 +790,7 @@ impl<V: Vector> Term<V> for Dfsph<V> {
                         a -= p.g[q] * pi;
                     }
                     if surf.tension() || surf.adhesion() {
-                        let (s, virial) = self.surface_acceleration(i, xi, ri, normals, cells, walls, w, rho0);
+                        let (s, virial) = self.surface_acceleration(i, xi, ri);
                         // SAFETY: each sorted slot i is written by this one iteration.
                         unsafe { *sp.get().add(i) = virial };
                         a += s;
@@ -1009,18 +997,32 @@ mod tests {
         }
     }
 
+    /// The particle mass of spacing dx, the model of n such particles and a fresh term over
+    /// them with walls `w` of the same mass.
+    fn term(n: usize, w: &[DVec2], dx: f64) -> (f64, Model, Dfsph<DVec2>) {
+        let m = 1000.0 * dx * dx;
+        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
+        (m, model, Dfsph::new("f", 0, n, params(dx), w.to_vec(), vec![m; w.len()]).unwrap())
+    }
+
+    /// ∇W and W of the cubic spline at smoothing length h, for the brute-force sums.
+    fn kernel(h: f64) -> (impl Fn(DVec2) -> DVec2, impl Fn(DVec2) -> f64) {
+        let sigma = CubicSpline::sigma(h, 2);
+        (
+            move |d: DVec2| d * (sigma / (h * h) * CubicSpline::g(d.length() / h)),
+            move |d: DVec2| sigma * CubicSpline::w(d.length() / h),
+        )
+    }
+
     /// Density, D_i and the wall gradient sums of the stored pairs against an O(N²) sum.
     #[test]
     fn the_build_matches_a_brute_force_sum() {
         let dx = 0.01;
         let (x, _, w) = scene(30, dx, 0.97);
-        let (n, m, p) = (x.len(), 1000.0 * dx * dx, params(dx));
-        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
-        let mut t = Dfsph::new("f", 0, n, p, w.clone(), vec![m; w.len()]).unwrap();
+        let n = x.len();
+        let (m, model, mut t) = term(n, &w, dx);
         t.build(&x, &model);
-        let (h, sigma) = (p.h, CubicSpline::sigma(p.h, 2));
-        let grad = |d: DVec2| d * (sigma / (h * h) * CubicSpline::g(d.length() / h));
-        let wk = |d: DVec2| sigma * CubicSpline::w(d.length() / h);
+        let (grad, wk) = kernel(t.p.h);
         for (k, &i) in t.grid.order.iter().enumerate() {
             let i = i as usize;
             let (mut rho, mut sum, mut sq, mut gw) = (0.0, DVec2::ZERO, 0.0, DVec2::ZERO);
@@ -1052,12 +1054,11 @@ mod tests {
     fn a_density_solve_reaches_its_tolerance() {
         let dx = 0.01;
         let (x, v0, w) = scene(24, dx, 0.985);
-        let (n, m, p) = (x.len(), 1000.0 * dx * dx, params(dx));
-        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
+        let (n, p) = (x.len(), params(dx));
         let dt = 1e-3;
         let mut runs = vec![];
         for _ in 0..2 {
-            let mut t = Dfsph::new("f", 0, n, p, w.clone(), vec![m; w.len()]).unwrap();
+            let (m, model, mut t) = term(n, &w, dx);
             let mut v = v0.clone();
             t.build(&x, &model);
             let removed = t.project_velocities(Projection::Density, &x, &mut v, &model, dt);
@@ -1065,9 +1066,7 @@ mod tests {
             assert!((removed - (ke(&v0) - ke(&v))).abs() <= 1e-9 * ke(&v0).max(1e-9));
             assert!(t.books.density_iterations >= 2 && t.books.unconverged == 0);
             // The predicted density by brute force at the new velocities.
-            let (h, sigma) = (p.h, CubicSpline::sigma(p.h, 2));
-            let grad = |d: DVec2| d * (sigma / (h * h) * CubicSpline::g(d.length() / h));
-            let wk = |d: DVec2| sigma * CubicSpline::w(d.length() / h);
+            let (grad, wk) = kernel(p.h);
             let mut err = 0.0;
             for i in 0..n {
                 let mut rho = w.iter().map(|b| m * wk(x[i] - *b)).sum::<f64>();

@@ -109,8 +109,8 @@ pub struct Surface {
     norm: Real,
     /// γ, m^(d+1)/(kg s²) (0: no surface tension).
     pub gamma: Real,
-    /// γ c: the curvature term's coefficient, m/s².
-    pub curvature: Real,
+    /// c = ρ0 / `CURVATURE_RHO`: the curvature term's weight against the cohesion's.
+    pub c: Real,
     /// β, m⁴/(kg s²) in 2D and 3D (A is 1/m³ in both) (0: no adhesion).
     pub beta: Real,
 }
@@ -125,7 +125,7 @@ impl Surface {
         let unit_adhesion = rho0 * rho0 * kirkwood_buff(|r| adhesion_kernel(r, big_h), big_h, dim);
         let gamma = if sigma > 0.0 { sigma / (LAPLACE_FACTOR * unit_sigma) } else { 0.0 };
         let beta = if adhesion > 0.0 { adhesion / unit_adhesion } else { 0.0 };
-        Self { big_h, norm, gamma, curvature: gamma * rho0 / CURVATURE_RHO, beta }
+        Self { big_h, norm, gamma, c: rho0 / CURVATURE_RHO, beta }
     }
 
     pub fn tension(&self) -> bool {
