@@ -458,6 +458,19 @@ def test_drop_scene():
     assert s3.dim == 3 and s3.n_particles > 0
     dry = pc.scenes.drop(n=20, pool=0.0)
     assert dry.n_particles == 4 * 4
+    # method="dfsph": the same water, incompressible; the block hits the pool as it does in
+    # WCSPH (it falls freely: within a spacing of the same lowest point at 0.3 s), in fewer steps.
+    assert s.fluids[0].method == "wcsph"
+    w, d = pc.scenes.drop(n=40), pc.scenes.drop(n=40, method="dfsph")
+    assert d.fluids[0].method == "dfsph" and d.n_particles == w.n_particles
+    steps = [sc.advance(0.3) for sc in (w, d)]
+    assert steps[1] < steps[0] / 4
+    block = np.arange(w.n_particles) >= 40 * 12
+    assert abs(w.positions[block, 1].min() - d.positions[block, 1].min()) < dx
+    with pytest.raises(ValueError, match="method"):
+        pc.scenes.drop(n=20, method="iisph")
+    with pytest.raises(ValueError, match="semi_implicit_euler"):
+        pc.scenes.drop(n=20, method="dfsph", integrator="verlet")
 
 
 def test_fluid_scenes_are_registered_and_their_examples_run():

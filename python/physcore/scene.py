@@ -587,8 +587,9 @@ class Scene:
             args = "sound_speed, viscosity, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
             raise InvalidInputError(f"{args}: the fluid's {what} = {max_dt:.3g} s is below float64's normal range")
         m = fluid.particle_mass()
+        # Also for a fluid loaded from a file (`first` given): a file may pair DFSPH with another fluid.
+        self._check_fluid_method(fluid)
         if first is None:
-            self._check_fluid_method(fluid)
             self._warn_separate_fluids(fluid, name)
         if first is None:
             n = len(fluid)

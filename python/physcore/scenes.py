@@ -976,6 +976,7 @@ def drop(
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
     threads: int | None = None,
+    method: str = "wcsph",
 ) -> Scene:
     """Drop: a block of water falls into a pool at rest in a tank and splashes.
 
@@ -1009,6 +1010,11 @@ def drop(
         As for :func:`dam_break`.
     sound_speed : float, optional
         m/s. Default: 10·√(2 g (pool + fall + block)), ten times the fastest fall.
+    method : {"wcsph", "dfsph"}
+        The fluid's pressure (:class:`~physcore.fluids.Fluid`), as for :func:`dam_break`; the
+        default stays ``"wcsph"`` here (the gallery's drop was made with it). ``"dfsph"`` steps
+        with ``"semi_implicit_euler"`` only and computes in float64 (``precision`` does not
+        apply).
 
     Returns
     -------
@@ -1066,7 +1072,7 @@ def drop(
         sound_speed = 10.0 * math.sqrt(2.0 * _G * (pool + fall + block))
     return _water_in_tank(
         np.concatenate(parts), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
-        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads,
+        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
     )
 
 
