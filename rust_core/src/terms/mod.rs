@@ -62,8 +62,10 @@ pub trait Term<V: Vector>: Send + Sync {
     /// Stable name used as the key of the energy books (unique within a scene).
     fn name(&self) -> &str;
     /// Stores this term's forces (N) at `(x, v)` in `f` as `write` says, one per particle (0 for
-    /// particles it does not act on). Returns the power it dissipates at this state (W, ≥ 0)
-    /// if it is `dissipative()`, else 0 (conservative terms skip that sum).
+    /// particles it does not act on). Returns the power it dissipates at this state (W) if it
+    /// is `dissipative()`, else 0 (conservative terms skip that sum). Usually ≥ 0; a term whose
+    /// non-conservative forces also release stored energy books that as negative dissipation
+    /// (DFSPH with surface tension: the surface energy a drop releases as it rounds).
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real;
     /// `Some(g)` for a uniform acceleration field (uniform gravity): integrators then add `g` to
     /// every free particle's acceleration directly and `add_forces` is never called.
