@@ -165,7 +165,12 @@ def test_diverging_and_failing_runs_are_rows(client):
         assert diverged["diverged_step"] >= 0
         assert math.isnan(diverged["energy"])  # no value where there is none
         assert failed["error"].startswith("ValueError: negative stiffness")
-        assert "test_sweep.py" in failed["error"]
+        # Where it was raised: the function and its line, and the file where the worker has it
+        # (a Dask worker given the function by value has only "<dynamic-code>").
+        line = explode.__code__.co_firstlineno + 2
+        assert f"explode, line {line}" in failed["error"] or f"test_sweep.py:{line} in explode" in failed["error"]
+        if c == "serial":
+            assert f"test_sweep.py:{line} in explode" in failed["error"]
 
 
 CALLS: list[float] = []

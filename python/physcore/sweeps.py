@@ -172,7 +172,13 @@ def _run_one(build: Callable[..., Any], measure: Callable[[Any], Any], params: d
         row.update(results={}, error=_error_text(exc), diverged_step=exc.step)
     except Exception as exc:  # noqa: BLE001 - any failure of a user's run is a row, not a failed sweep
         tb = traceback.extract_tb(exc.__traceback__)
-        where = f" (at {Path(tb[-1].filename).name}:{tb[-1].lineno})" if tb else ""
+        where = ""
+        if tb:
+            f = tb[-1]
+            # A function shipped to a worker by value (distributed 2026.8 does so for a test's
+            # or a script's functions) has a synthetic file name, "<dynamic-code>": its name
+            # and line still say where.
+            where = f" (in {f.name}, line {f.lineno})" if f.filename.startswith("<") else f" (at {Path(f.filename).name}:{f.lineno} in {f.name})"
         row.update(results={}, error=_error_text(exc) + where)
     finally:
         if token is not None:
