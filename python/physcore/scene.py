@@ -591,7 +591,6 @@ class Scene:
         self._check_fluid_method(fluid)
         if first is None:
             self._warn_separate_fluids(fluid, name)
-        if first is None:
             n = len(fluid)
             first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
         common = {

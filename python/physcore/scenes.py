@@ -1219,8 +1219,7 @@ def droplets(
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("dim, n, tank, depth, drops", _walls_size(tlo, thi, dx) + drops * _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
-    def snap(v):
-        return _on_lattice(v, dx)
+    snap = functools.partial(_on_lattice, dx=dx)
 
     parts = []
     for k in range(drops):
@@ -1323,8 +1322,7 @@ def crown(
     _particles("dim, n, tank, depth, pool", _walls_size(tlo, thi, dx) + _lattice_size(tlo, _box(dim, (0.0, length), (0.0, pool), (0.0, depth))[1], dx)
                + _lattice_size([0.0] * dim, [2 * radius] * dim, dx))
 
-    def snap(v):
-        return _on_lattice(v, dx)
+    snap = functools.partial(_on_lattice, dx=dx)
 
     lo, hi = _box(dim, (0.0, length), (0.0, pool), (0.0, depth))
     water = lattice(lo, hi, dx)

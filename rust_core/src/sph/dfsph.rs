@@ -141,15 +141,15 @@ struct Site<V: Vector> {
 /// The stored pairs of one chunk of sorted particles: particle `s + k`'s are
 /// `j[start[k]..start[k + 1]]` with `g` = m_j ∇W_ij.
 ///
-/// Tried and not kept (SPH-2D 41k, 2 threads): `g` in f32 (Zen 3: solver passes no faster, 8.3–11.1
-/// against 8.0–8.5 ms a step); on Zen 4 (medians of 9 alternating runs of the build and passes):
-/// one factor s_ij with g = (x_i − x_j) s_ij (12 bytes a pair, not 20) and four partial sums, the
-/// same time (16.0 against 16.2 ms); the build and both solver passes on the SIMD layer, pairs
-/// padded to whole vectors, the neighbours' v and κ gathered lane by lane or built in registers
-/// (2–13 % slower: a gathered lane costs a load and an insert, what the scalar loop spends on the
-/// whole pair); a SIMD distance test with the kernel on the stored pairs only (build 6 % faster).
-/// A pass costs about 1 ns a pair whether the pairs fit in cache or not: it is bound by the
-/// per-pair loads of x_j, v_j, κ_j, not by memory.
+/// Tried and not kept (SPH-2D 41k, 2 threads): `g` in f32 (Zen 3: solver passes no faster,
+/// 8.3–11.1 against 8.0–8.5 ms a step); on Zen 4 at avx512 (medians of 9 alternating runs of
+/// the build and passes): one factor s_ij with g = (x_i − x_j) s_ij (12 bytes a pair, not 20)
+/// and four partial sums, the same time (16.0 against 16.2 ms); the build and both solver
+/// passes on the SIMD layer, pairs padded to whole vectors, the neighbours' v and κ gathered
+/// lane by lane or built in registers (2–13 % slower: a gathered lane costs a load and an
+/// insert, what the scalar loop spends on the whole pair); a SIMD distance test with the kernel
+/// on the stored pairs only (build 6 % faster). A pass costs about 1 ns a pair whether the pairs
+/// fit in cache or not: it is bound by the per-pair loads of x_j, v_j, κ_j, not by memory.
 #[derive(Clone, Debug, Default)]
 struct Pairs<V: Vector> {
     start: Vec<u32>,
