@@ -92,8 +92,14 @@ def _nbody(threads, precision):
 
 
 def _fluid(threads, precision, dim):
-    # WCSPH: its passes are the SIMD ones (DFSPH, the scene's default, is scalar f64).
+    # WCSPH: its passes are the SIMD f32/f64 ones (agreement to rounding; DFSPH is below).
     return pc.scenes.dam_break(dim=dim, n=40 if dim == 2 else 10, precision=precision, threads=threads, method="wcsph")
+
+
+def _dfsph(threads, dim):
+    # DFSPH's pair build runs on the SIMD layer with the scalar operations lane by lane, its
+    # passes are scalar: the same bits at every level (2D past the parallel threshold).
+    return pc.scenes.dam_break(dim=dim, n=48 if dim == 2 else 10, threads=threads, method="dfsph")
 
 
 def _grains(threads, dim):
@@ -123,6 +129,8 @@ SCENES = {
     "sph2d-f32": (lambda t: _fluid(t, "f32", 2), 10, 1e-4),
     "sph2d-f64": (lambda t: _fluid(t, "f64", 2), 10, 1e-11),
     "sph3d-f32": (lambda t: _fluid(t, "f32", 3), 5, 1e-4),
+    "dfsph2d": (lambda t: _dfsph(t, 2), 10, 0.0),
+    "dfsph3d": (lambda t: _dfsph(t, 3), 5, 0.0),
     # The contact pair pass does the scalar operations lane by lane: the same bits at every level.
     "grains2d-linear": (lambda t: _grains(t, 2), 60, 0.0),
     "grains3d-hertz": (lambda t: _grains(t, 3), 60, 0.0),

@@ -18,6 +18,7 @@ pub trait Vector:
     + Add<Output = Self>
     + Sub<Output = Self>
     + Mul<Real, Output = Self>
+    + Mul<Self, Output = Self>
     + Div<Real, Output = Self>
     + Neg<Output = Self>
     + AddAssign

@@ -240,6 +240,38 @@ pub trait Simd: pulp::Simd {
         self.gather_rows_f64s(a, b, dim, idx)
     }
 
+    /// Bit l set where lane l of the f64 mask `m` is set. The default reads the mask's lanes
+    /// (all ones or zero) or, where the level's mask is already bits (AVX-512), the bits.
+    #[inline(always)]
+    fn mask_bits_m64s(self, m: Self::m64s) -> u64 {
+        if const { std::mem::size_of::<Self::m64s>() == std::mem::size_of::<Self::u64s>() } {
+            let lanes: Self::u64s = pulp::bytemuck::cast(m);
+            let lanes = pulp::bytemuck::cast_slice::<Self::u64s, u64>(std::slice::from_ref(&lanes));
+            lanes.iter().enumerate().fold(0, |b, (l, &x)| b | (((x != 0) as u64) << l))
+        } else if const { std::mem::size_of::<Self::m64s>() == 1 } {
+            pulp::bytemuck::cast::<Self::m64s, u8>(m) as u64
+        } else if const { std::mem::size_of::<Self::m64s>() == 2 } {
+            pulp::bytemuck::cast::<Self::m64s, u16>(m) as u64
+        } else {
+            unreachable!("no SIMD level has such an f64 mask")
+        }
+    }
+    /// The float32 twin of `mask_bits_m64s`.
+    #[inline(always)]
+    fn mask_bits_m32s(self, m: Self::m32s) -> u64 {
+        if const { std::mem::size_of::<Self::m32s>() == std::mem::size_of::<Self::u32s>() } {
+            let lanes: Self::u32s = pulp::bytemuck::cast(m);
+            let lanes = pulp::bytemuck::cast_slice::<Self::u32s, u32>(std::slice::from_ref(&lanes));
+            lanes.iter().enumerate().fold(0, |b, (l, &x)| b | (((x != 0) as u64) << l))
+        } else if const { std::mem::size_of::<Self::m32s>() == 1 } {
+            pulp::bytemuck::cast::<Self::m32s, u8>(m) as u64
+        } else if const { std::mem::size_of::<Self::m32s>() == 2 } {
+            pulp::bytemuck::cast::<Self::m32s, u16>(m) as u64
+        } else {
+            unreachable!("no SIMD level has such an f32 mask")
+        }
+    }
+
     #[inline(always)]
     fn rsqrt_f64s(self, x: Self::f64s) -> Self::f64s {
         self.div_f64s(self.splat_f64s(1.0), self.sqrt_f64s(x))
@@ -339,6 +371,19 @@ pub fn vectorized<R>(level: Level, f: impl FnOnce() -> R) -> R {
     dispatch(level, Closure(f))
 }
 
+/// `x`, hidden from the optimiser (no instruction is emitted), so that a bit mask stays a mask:
+/// LLVM recognises `(a & m) | (b & !m)` as a select and turns a select of a division into a
+/// branch.
+#[inline(always)]
+pub fn opaque(mut x: u64) -> u64 {
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
+    // SAFETY: an empty asm block that only names a register: it reads and writes nothing.
+    unsafe {
+        core::arch::asm!("/* {0} */", inout(reg) x, options(pure, nomem, nostack, preserves_flags));
+    }
+    x
+}
+
 /// The precision of a kernel: f32 or f64, with its SIMD vectors for token `S`.
 pub trait Float:
     Copy
@@ -360,6 +405,10 @@ pub trait Float:
     fn of(x: f64) -> Self;
     fn f64(self) -> f64;
     fn sqrt(self) -> Self;
+    /// `a` if `c` else `b`, by masking the bits: no branch, even where one side is a division
+    /// (LLVM turns a select of an expensive value into a branch, which mispredicts when the
+    /// condition is random: the cubic spline's q < 1 over a particle's neighbours).
+    fn pick(c: bool, a: Self, b: Self) -> Self;
     /// Plain compare (not IEEE maxNum): vectorises to one instruction.
     #[inline(always)]
     fn max(self, o: Self) -> Self {
@@ -403,6 +452,8 @@ pub trait Float:
     fn mand<S: Simd>(s: S, a: Self::M<S>, b: Self::M<S>) -> Self::M<S>;
     /// Whether any lane of the mask is set.
     fn many<S: Simd>(s: S, m: Self::M<S>) -> bool;
+    /// The mask as bits, lane l at bit l.
+    fn mbits<S: Simd>(s: S, m: Self::M<S>) -> u64;
     fn rsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
     /// The correctly rounded square root.
     fn vsqrt<S: Simd>(s: S, x: Self::V<S>) -> Self::V<S>;
@@ -427,6 +478,11 @@ macro_rules! float_impl {
             fn sqrt(self) -> Self {
                 <$t>::sqrt(self)
             }
+            #[inline(always)]
+            fn pick(c: bool, a: Self, b: Self) -> Self {
+                let m = opaque((c as u64).wrapping_neg());
+                <$t>::from_bits((((a.to_bits() as u64) & m) | ((b.to_bits() as u64) & !m)) as _)
+            }
             type V<S: Simd> = S::$v;
             type M<S: Simd> = S::$m;
             #[inline(always)]
@@ -442,7 +498,7 @@ macro_rules! float_impl {
     };
     (@ops $t:ty, $v:ident, $m:ident, splat = $splat:ident, add = $add:ident, sub = $sub:ident, mul = $mul:ident,
      div = $div:ident, fma = $fma:ident, fnma = $fnma:ident, max = $max:ident, min = $min:ident, lt = $lt:ident,
-     gt = $gt:ident, select = $sel:ident, and = $and:ident, first = $first:ident, rsqrt = $rsqrt:ident, sqrt = $sqrt:ident, sum = $sum:ident) => {
+     gt = $gt:ident, select = $sel:ident, and = $and:ident, first = $first:ident, bits = $bits:ident, rsqrt = $rsqrt:ident, sqrt = $sqrt:ident, sum = $sum:ident) => {
         #[inline(always)]
         fn splat<S: Simd>(s: S, x: Self) -> S::$v {
             s.$splat(x)
@@ -496,6 +552,10 @@ macro_rules! float_impl {
             s.$and(a, b)
         }
         #[inline(always)]
+        fn mbits<S: Simd>(s: S, m: S::$m) -> u64 {
+            s.$bits(m)
+        }
+        #[inline(always)]
         fn many<S: Simd>(s: S, m: S::$m) -> bool {
             // pulp's first-true index is the lane count exactly when no lane is set (every level).
             s.$first(m) < <Self as Float>::lanes::<S>()
@@ -534,6 +594,7 @@ float_impl!(
     select = select_f64s,
     and = and_m64s,
     first = first_true_m64s,
+    bits = mask_bits_m64s,
     rsqrt = rsqrt_f64s,
     sqrt = sqrt_f64s,
     sum = reduce_sum_f64s
@@ -557,6 +618,7 @@ float_impl!(
     select = select_f32s,
     and = and_m32s,
     first = first_true_m32s,
+    bits = mask_bits_m32s,
     rsqrt = rsqrt_f32s,
     sqrt = sqrt_f32s,
     sum = reduce_sum_f32s
@@ -723,6 +785,11 @@ impl<S: Simd, F: Float> Mask<S, F> {
     pub fn any(self, s: S) -> bool {
         F::many(s, self.0)
     }
+    /// The lanes as bits: lane l at bit l.
+    #[inline(always)]
+    pub fn bits(self, s: S) -> u64 {
+        F::mbits(s, self.0)
+    }
     /// `self ? a : b`.
     #[inline(always)]
     pub fn select(self, a: P<S, F>, b: P<S, F>) -> P<S, F> {
@@ -865,6 +932,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `Mask::bits` of `a < b` lane by lane, for f32 and f64.
+    struct Bits<'a, F: Float>(&'a [F], &'a [F]);
+    impl<F: Float> Kernel for Bits<'_, F> {
+        type Output = Vec<u64>;
+        #[inline(always)]
+        fn run<S: Simd>(self, s: S) -> Vec<u64> {
+            let l = P::<S, F>::lanes();
+            let chunks = self.0.chunks_exact(l).zip(self.1.chunks_exact(l));
+            chunks.map(|(a, b)| P::<S, F>::load(s, a).lt(P::load(s, b)).bits(s)).collect()
+        }
+    }
+
+    /// Every level's mask bits are the lanes' comparisons, lane l at bit l, and no bit past the
+    /// last lane is set (f64 and f32, random and all-set and none-set vectors).
+    #[test]
+    fn mask_bits_are_the_lanes_at_every_level() {
+        fn check<F: Float>() {
+            let mut seed = 11u64;
+            let mut rnd = || {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                F::of((seed >> 11) as f64 / (1u64 << 53) as f64)
+            };
+            let mut a: Vec<F> = (0..16 * 40).map(|_| rnd()).collect();
+            let mut b: Vec<F> = (0..16 * 40).map(|_| rnd()).collect();
+            a[..16].fill(F::ZERO); // all set
+            b[..16].fill(F::ONE);
+            a[16..32].fill(F::ONE); // none set
+            b[16..32].fill(F::ZERO);
+            for level in Level::available() {
+                let bits = dispatch(level, Bits(&a, &b));
+                let l = a.len() / bits.len();
+                for (v, &m) in bits.iter().enumerate() {
+                    let want = (0..l).fold(0u64, |w, t| w | (((a[v * l + t] < b[v * l + t]) as u64) << t));
+                    assert_eq!(m, want, "{level:?} vector {v} ({l} lanes)");
+                }
+            }
+        }
+        check::<f64>();
+        check::<f32>();
     }
 
     #[test]

@@ -102,9 +102,12 @@ impl Walls {
         let bytes = ((nw + PAD) * (V::DIM + 1) * (4 + 8)) as u128;
         let need = Need::new("add_fluid", bytes, format!("{} wall particles", count(nw as u128)));
         need.check()?;
-        let mut grid = CellList::new(support, V::DIM)?;
+        // Built once, queried for every particle's cell each step: dense up to 1M cells (4 MB
+        // of cell starts kept; the build's scratch is freed).
+        let mut grid = CellList::new(support, V::DIM)?.with_dense_floor(1 << 20);
         grid.reserve(nw, "add_fluid")?;
         grid.build(walls);
+        grid.release_scratch();
         let w32 = WallArrays::sorted(&grid, walls, psi, &need)?;
         let w64 = WallArrays::sorted(&grid, walls, psi, &need)?;
         Ok(Self { grid, w32, w64 })

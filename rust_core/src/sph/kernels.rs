@@ -21,6 +21,10 @@ pub trait Kernel: Copy + Send + Sync + Default + 'static {
     fn wv<S: Simd, F: Float>(q: P<S, F>) -> P<S, F>;
     /// `g` on a SIMD vector of q, given 1/q (finite: q is kept above a tiny floor).
     fn gv<S: Simd, F: Float>(q: P<S, F>, inv_q: P<S, F>) -> P<S, F>;
+    /// (`w`, `g`) on a SIMD vector of q by the scalar forms' own operations in their order (no
+    /// FMA, no reciprocal): bit for bit the scalar values at every level, so a pass that takes
+    /// them (DFSPH's pair build) gives the same numbers on every CPU.
+    fn wg_exact<S: Simd>(q: P<S, f64>) -> (P<S, f64>, P<S, f64>);
 }
 
 /// Cubic spline (M4), Monaghan & Lattanzio (1985), eq. 21:
@@ -51,11 +55,7 @@ impl Kernel for CubicSpline {
         let a = (F::of(2.0) - q).max(F::ZERO);
         let inner = F::of(-3.0) + F::of(2.25) * q;
         let outer = F::of(-0.75) * a * a / q.max(F::ONE);
-        if q < F::ONE {
-            inner
-        } else {
-            outer
-        }
+        F::pick(q < F::ONE, inner, outer)
     }
     #[inline(always)]
     fn wv<S: Simd, F: Float>(q: P<S, F>) -> P<S, F> {
@@ -71,6 +71,17 @@ impl Kernel for CubicSpline {
         let inner = P::splat(s, F::of(2.25)).mul_add(q, P::splat(s, F::of(-3.0)));
         let outer = P::splat(s, F::of(-0.75)) * (a * a) * inv_q;
         q.lt(P::splat(s, F::ONE)).select(inner, outer)
+    }
+    #[inline(always)]
+    fn wg_exact<S: Simd>(q: P<S, f64>) -> (P<S, f64>, P<S, f64>) {
+        let (z, s) = (P::zero(q.s), q.s);
+        let c = |x: f64| P::splat(s, x);
+        let a = (c(2.0) - q).max(z);
+        let b = (c(1.0) - q).max(z);
+        let w = c(0.25) * a * a * a - b * b * b;
+        let inner = c(-3.0) + c(2.25) * q;
+        let outer = c(-0.75) * a * a / q.max(c(1.0));
+        (w, q.lt(c(1.0)).select(inner, outer))
     }
 }
 
@@ -113,6 +124,14 @@ impl Kernel for WendlandC2 {
         let s = q.s;
         let t = P::splat(s, F::of(0.5)).neg_mul_add(q, P::splat(s, F::ONE)).max(P::zero(s));
         P::splat(s, F::of(-5.0)) * (t * t * t)
+    }
+    #[inline(always)]
+    fn wg_exact<S: Simd>(q: P<S, f64>) -> (P<S, f64>, P<S, f64>) {
+        let s = q.s;
+        let c = |x: f64| P::splat(s, x);
+        let t = (c(1.0) - c(0.5) * q).max(P::zero(s));
+        let t2 = t * t;
+        (t2 * t2 * (c(2.0) * q + c(1.0)), c(-5.0) * t * t * t)
     }
 }
 
@@ -161,6 +180,40 @@ mod tests {
                     assert!((g[k] - K::g(qk)).abs() <= 1e-13 * K::g(qk).abs().max(1.0), "{} g({qk})", K::NAME);
                 }
             }
+        }
+    }
+
+    /// `wg_exact` equals the scalar forms bit for bit at every level, over q in [0, 2.5] (the
+    /// branch points 1 and 2 included) and at random q.
+    struct Exact<K>(std::marker::PhantomData<K>);
+    impl<K: Kernel> crate::simd::Kernel for Exact<K> {
+        type Output = ();
+        #[inline(always)]
+        fn run<S: Simd>(self, s: S) {
+            let mut seed = 3u64;
+            let mut qs: Vec<f64> = (0..=640).map(|k| k as f64 / 256.0).collect();
+            qs.extend((0..2000).map(|_| {
+                seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                2.2 * (seed >> 11) as f64 / (1u64 << 53) as f64
+            }));
+            let l = P::<S, f64>::lanes();
+            for c in qs.chunks(l) {
+                let q = P::<S, f64>::from_fn(s, |k| c.get(k).copied().unwrap_or(1.0));
+                let (w, g) = K::wg_exact(q);
+                let (w, g) = (w.to_array(), g.to_array());
+                for (k, &qk) in c.iter().enumerate() {
+                    assert_eq!(w[k].to_bits(), K::w(qk).to_bits(), "{} w({qk})", K::NAME);
+                    assert_eq!(g[k].to_bits(), K::g(qk).to_bits(), "{} g({qk})", K::NAME);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn exact_lane_forms_are_the_scalar_forms_bit_for_bit_at_every_level() {
+        for level in crate::simd::Level::available() {
+            crate::simd::dispatch(level, Exact::<CubicSpline>(std::marker::PhantomData));
+            crate::simd::dispatch(level, Exact::<WendlandC2>(std::marker::PhantomData));
         }
     }
 
