@@ -103,9 +103,11 @@ def test_hydrostatic_layer_pressure():
     off, as in the WCSPH test), over an ensemble of LAYERS realizations: the solvers' pressure
     ρ² (Σκ + Σκ^v)/ρ follows ρ0 g (surface − y), every two-row bin from 4h above the floor to
     3h below the surface within 8 % and the slope dp/dy within 6 % of −ρ0 g. Measured over four
-    ensembles of 8 (seeds 0–7, 8–15, 16–23, 24–31): worst bins 4.3, 4.8, 6.9, 4.7 %, always the
-    top one (it reads 4–7 % low: the one-sided solves near the free surface), the others within
-    3.8 %; slopes +1.5, +2.3, −1.9, +1.9 %.
+    ensembles of 8 (seeds 0–7, 8–15, 16–23, 24–31): worst bins −1.9, −2.7, −2.8, −3.1 %, always
+    the top one (it reads low: the one-sided solves near the free surface), the others within
+    1.3–3.1 %; slopes +1.3, +0.3, +0.2, −0.5 %. (Before the solver passes summed
+    v_i·Σ∇W − Σ v_j·∇W instead of Σ (v_i − v_j)·∇W, the same ensembles read 4.3, 4.8, 6.9, 4.7 %:
+    a rounding change that the layer's chaos turns into other packings; README.)
 
     Why an ensemble: one realization's reading depends on its chaos. A 1e-9 m change of the
     start (or numpy's AVX-512 kernels making the inputs differ by an ulp) moves its worst bin

@@ -47,6 +47,8 @@
 //! 2 × (iterations) times a step, so each pair's m_j ∇W_ij is computed once (with the density
 //! and the factor) and kept with j, chunk by chunk of the sorted particles (`par::CHUNK`), so
 //! every pass is a gather over stored pairs: no atomics, bit-identical for any thread count.
+//! The build runs on the SIMD layer (`BuildChunk`) with the scalar operations lane by lane, and
+//! the passes are scalar, so the results are also the same bits at every SIMD level.
 use super::buffers::{PassFloat, WallArrays, Walls, PAD};
 use super::kernels::{CubicSpline, Kernel, WendlandC2};
 use super::params::{positive, KernelKind};
