@@ -1310,7 +1310,11 @@ mod bench {
     use std::sync::Arc;
 
     /// Development timing (not a test of record): `cargo test --release -p physcore-core
-    /// dfsph::bench -- --ignored --nocapture`.
+    /// dfsph::bench -- --ignored --nocapture` times one build and one of each pass (min and
+    /// median of 31) on a jittered 204 × 204 block, or with `BENCH_DAM=DIR` on a saved state of
+    /// the 144-across dam break (spacing 1/144 m): `x.bin`, `v.bin`, `w.bin` in DIR, float64
+    /// (N, 2) row-major positions, velocities and wall points (numpy's `tofile` of
+    /// `scene.positions`, `scene.velocities`, `scene.boundary_points()`). `BENCH_THREADS` (2).
     #[test]
     #[ignore]
     fn time_the_passes() {
@@ -1342,8 +1346,9 @@ mod bench {
                 })
                 .collect()
         };
-        let dx = if std::env::var("BENCH_DAM").is_ok() {
-            (x, v, w) = (read("/tmp/dam_x.bin"), read("/tmp/dam_v.bin"), read("/tmp/dam_w.bin"));
+        let dx = if let Ok(dir) = std::env::var("BENCH_DAM") {
+            let at = |f: &str| read(&format!("{dir}/{f}"));
+            (x, v, w) = (at("x.bin"), at("v.bin"), at("w.bin"));
             1.0 / 144.0
         } else {
             dx
