@@ -240,36 +240,15 @@ pub trait Simd: pulp::Simd {
         self.gather_rows_f64s(a, b, dim, idx)
     }
 
-    /// Bit l set where lane l of the f64 mask `m` is set. The default reads the mask's lanes
-    /// (all ones or zero) or, where the level's mask is already bits (AVX-512), the bits.
+    /// Bit l set where lane l of the f64 mask `m` is set (`mask_to_bits`).
     #[inline(always)]
     fn mask_bits_m64s(self, m: Self::m64s) -> u64 {
-        if const { std::mem::size_of::<Self::m64s>() == std::mem::size_of::<Self::u64s>() } {
-            let lanes: Self::u64s = pulp::bytemuck::cast(m);
-            let lanes = pulp::bytemuck::cast_slice::<Self::u64s, u64>(std::slice::from_ref(&lanes));
-            lanes.iter().enumerate().fold(0, |b, (l, &x)| b | (((x != 0) as u64) << l))
-        } else if const { std::mem::size_of::<Self::m64s>() == 1 } {
-            pulp::bytemuck::cast::<Self::m64s, u8>(m) as u64
-        } else if const { std::mem::size_of::<Self::m64s>() == 2 } {
-            pulp::bytemuck::cast::<Self::m64s, u16>(m) as u64
-        } else {
-            unreachable!("no SIMD level has such an f64 mask")
-        }
+        mask_to_bits::<_, Self::u64s, u64>(m)
     }
     /// The float32 twin of `mask_bits_m64s`.
     #[inline(always)]
     fn mask_bits_m32s(self, m: Self::m32s) -> u64 {
-        if const { std::mem::size_of::<Self::m32s>() == std::mem::size_of::<Self::u32s>() } {
-            let lanes: Self::u32s = pulp::bytemuck::cast(m);
-            let lanes = pulp::bytemuck::cast_slice::<Self::u32s, u32>(std::slice::from_ref(&lanes));
-            lanes.iter().enumerate().fold(0, |b, (l, &x)| b | (((x != 0) as u64) << l))
-        } else if const { std::mem::size_of::<Self::m32s>() == 1 } {
-            pulp::bytemuck::cast::<Self::m32s, u8>(m) as u64
-        } else if const { std::mem::size_of::<Self::m32s>() == 2 } {
-            pulp::bytemuck::cast::<Self::m32s, u16>(m) as u64
-        } else {
-            unreachable!("no SIMD level has such an f32 mask")
-        }
+        mask_to_bits::<_, Self::u32s, u32>(m)
     }
 
     #[inline(always)]
@@ -279,6 +258,27 @@ pub trait Simd: pulp::Simd {
     #[inline(always)]
     fn rsqrt_f32s(self, x: Self::f32s) -> Self::f32s {
         self.div_f32s(self.splat_f32s(1.0), self.sqrt_f32s(x))
+    }
+}
+
+/// A mask `m` as bits, lane l at bit l: its lanes (all ones or zero) read as the unsigned
+/// vector `U` of lanes `E` where it has that size (AVX2, NEON), or the bits themselves where the
+/// level's mask is already a bit field (AVX-512's `b8`/`b16`, the scalar level's `bool`).
+#[inline(always)]
+fn mask_to_bits<M: pulp::bytemuck::NoUninit, U: pulp::bytemuck::Pod, E: pulp::bytemuck::Pod + Default + PartialEq>(
+    m: M,
+) -> u64 {
+    use std::mem::size_of;
+    if const { size_of::<M>() == size_of::<U>() } {
+        let lanes: U = pulp::bytemuck::cast(m);
+        let lanes = pulp::bytemuck::cast_slice::<U, E>(std::slice::from_ref(&lanes));
+        lanes.iter().enumerate().fold(0, |b, (l, x)| b | (((*x != E::default()) as u64) << l))
+    } else if const { size_of::<M>() == 1 } {
+        pulp::bytemuck::cast::<M, u8>(m) as u64
+    } else if const { size_of::<M>() == 2 } {
+        pulp::bytemuck::cast::<M, u16>(m) as u64
+    } else {
+        unreachable!("no SIMD level has such a mask")
     }
 }
 

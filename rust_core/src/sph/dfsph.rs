@@ -640,7 +640,8 @@ impl<V: Vector> Dfsph<V> {
                 let (site, vi) = (&sites[i], vs[i]);
                 // Σ_j (v_i − v_j)·g_ij = v_i·Σ_j g_ij − Σ_j v_j·g_ij: per pair only the
                 // neighbour's part, in two independent sums (SPH-2D 41k, 2 threads: 0.62 →
-                // 0.48 ms a pass against the pairwise form).
+                // 0.48 ms a pass beside the pairwise form in one process; between separate
+                // binaries within noise; the whole run's solver share 11.7 → 8.0 ms a step).
                 let acc = pair_sum(p, kk, |j, g| g * vs[j]);
                 let div = vi.dot(site.gw + site.gs) - components_sum(acc);
                 let e = match stage {
@@ -1301,41 +1302,18 @@ mod tests {
         }
         assert_eq!(runs[0], runs[1]);
     }
-}
-
-#[cfg(test)]
-mod bench {
-    use super::*;
-    use glam::DVec2;
-    use std::sync::Arc;
 
     /// Development timing (not a test of record): `cargo test --release -p physcore-core
-    /// dfsph::bench -- --ignored --nocapture` times one build and one of each pass (min and
-    /// median of 31) on a jittered 204 × 204 block, or with `BENCH_DAM=DIR` on a saved state of
-    /// the 144-across dam break (spacing 1/144 m): `x.bin`, `v.bin`, `w.bin` in DIR, float64
+    /// dfsph::tests::time_the_passes -- --ignored --nocapture` times one build and one of each
+    /// pass (min and median of 31) on `scene(204, ..)`, or with `BENCH_DAM=DIR` on a saved state
+    /// of the 144-across dam break (spacing 1/144 m): `x.bin`, `v.bin`, `w.bin` in DIR, float64
     /// (N, 2) row-major positions, velocities and wall points (numpy's `tofile` of
-    /// `scene.positions`, `scene.velocities`, `scene.boundary_points()`). `BENCH_THREADS` (2).
+    /// `scene.positions`, `scene.velocities`, `scene.boundary_points()`); `BENCH_THREADS` (2).
+    /// Prints a hash of the build's bits, to compare levels (`PHYSCORE_SIMD`) and binaries.
     #[test]
     #[ignore]
     fn time_the_passes() {
-        let (nx, ny, dx) = (204usize, 204usize, 0.01);
-        let mut s = 7u64;
-        let mut rnd = || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
-        let (mut x, mut v, mut w) = (vec![], vec![], vec![]);
-        for k in 0..nx * ny {
-            let (i, j) = ((k % nx) as f64, (k / nx) as f64);
-            x.push(DVec2::new((i + 0.5 + 0.2 * rnd()) * dx, (j + 0.5 + 0.2 * rnd()) * dx));
-            v.push(DVec2::new(0.1 * rnd(), 0.1 * rnd()));
-        }
-        for i in 0..nx + 6 {
-            for layer in 0..3 {
-                w.push(DVec2::new((i as f64 - 2.5) * dx, -(layer as f64 + 0.5) * dx));
-            }
-        }
-        let read = |p: &str| -> Vec<DVec2> {
+        let read = |p: String| -> Vec<DVec2> {
             let b = std::fs::read(p).unwrap();
             b.chunks(16)
                 .map(|c| {
@@ -1346,71 +1324,47 @@ mod bench {
                 })
                 .collect()
         };
-        let dx = if let Ok(dir) = std::env::var("BENCH_DAM") {
-            let at = |f: &str| read(&format!("{dir}/{f}"));
-            (x, v, w) = (at("x.bin"), at("v.bin"), at("w.bin"));
-            1.0 / 144.0
-        } else {
-            dx
+        let ((x, v, w), dx) = match std::env::var("BENCH_DAM") {
+            Ok(dir) => (
+                (read(format!("{dir}/x.bin")), read(format!("{dir}/v.bin")), read(format!("{dir}/w.bin"))),
+                1.0 / 144.0,
+            ),
+            Err(_) => (scene(204, 0.01, 1.0), 0.01),
         };
         let n = x.len();
-        let m = 1000.0 * dx * dx;
-        let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
-        let p = DfsphParams {
-            h: 1.3 * dx,
-            rho0: 1000.0,
-            alpha: 0.05,
-            c0: 20.0,
-            kernel: KernelKind::CubicSpline,
-            density_tol: 1e-3,
-            divergence_tol: 1e-3,
-            max_iterations: 100,
-            cfl: 0.4,
-            surface_tension: 0.0,
-            adhesion: 0.0,
-        };
-        p.validate().unwrap();
-        let mut t = Dfsph::new("f", 0, n, p, w.clone(), vec![m; w.len()]).unwrap();
+        let (_, model, mut t) = term(n, &w, dx);
         let threads = std::env::var("BENCH_THREADS").map_or(2, |s| s.parse().unwrap());
-        let pool = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap());
+        let pool = std::sync::Arc::new(rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap());
         let mut f = vec![DVec2::ZERO; n];
         let reps = 31;
         let mut tm = vec![[0.0f64; 4]; reps];
         par::install(Some(&pool), || {
-            for r in 0..reps {
+            for r in tm.iter_mut() {
                 let c = Instant::now();
                 t.build(&x, &model);
-                tm[r][0] = c.elapsed().as_secs_f64() * 1e3;
+                r[0] = c.elapsed().as_secs_f64() * 1e3;
                 t.gather_v(&v);
                 t.k.resize(n, 0.0);
                 t.ksum.resize(n, 0.0);
                 let c = Instant::now();
                 t.errors(Projection::Density, 1e-3);
-                tm[r][1] = c.elapsed().as_secs_f64() * 1e3;
+                r[1] = c.elapsed().as_secs_f64() * 1e3;
                 let c = Instant::now();
                 t.apply(1e-3);
-                tm[r][2] = c.elapsed().as_secs_f64() * 1e3;
+                r[2] = c.elapsed().as_secs_f64() * 1e3;
                 let c = Instant::now();
                 t.add_forces(&x, &v, &model, &mut f, Write::Overwrite);
-                tm[r][3] = c.elapsed().as_secs_f64() * 1e3;
+                r[3] = c.elapsed().as_secs_f64() * 1e3;
             }
         });
         let pairs: usize = t.pairs.iter().map(|p| *p.start.last().unwrap() as usize).sum();
-        let mut hash = 0u64;
-        for p in &t.pairs {
-            for g in &p.g[..*p.start.last().unwrap() as usize] {
-                hash = hash.rotate_left(5) ^ g.x.to_bits() ^ g.y.to_bits().rotate_left(17);
-            }
-        }
-        for st in &t.sites {
-            hash = hash.rotate_left(5) ^ st.dinv.to_bits().rotate_left(23);
-        }
-        println!("hash {hash:016x} level {:?}", crate::simd::level());
+        let hash = build_bits(&mut t, &x, &model, simd::level()).iter().fold(0u64, |h, b| h.rotate_left(5) ^ b);
         let med = |k: usize| {
             let mut a: Vec<f64> = tm.iter().map(|r| r[k]).collect();
             a.sort_by(|a, b| a.partial_cmp(b).unwrap());
             (a[0], a[a.len() / 2])
         };
+        println!("hash {hash:016x} level {:?}", simd::level());
         println!(
             "n {n} pairs {pairs}: build {:.3?} errors {:.3?} apply {:.3?} forces {:.3?} ms (min, median of {reps})",
             med(0),
