@@ -2,8 +2,9 @@
 Akinci, Akinci & Teschner, ACM TOG 32(6) 182, 2013; ``rust_core/src/sph/surface.rs``):
 
 * a square blob relaxes to a circle (2D), a cube to a sphere (3D), with the books balanced;
-* the Laplace pressure at the centre of droplets at rest against σ/R (2D) and 2σ/R (3D), within
-  the stated 30 %, at a σ, ρ0 and spacing other than those the model's factor was measured at;
+* the Laplace pressure at the centre of droplets at rest against σ/R (2D) and 2σ/R (3D), at a σ,
+  ρ0 and spacing other than those the model's factor was measured at: 2D droplets of R = 6 H
+  within a factor of 2 each and 30 % on average, a 3D droplet of R = 2.9 H within 50 %;
 * adhesion makes a drop spread on the floor; nothing goes through the walls;
 * determinism for 1 and 2 threads, save/load, bad input, and the two scenes.
 
@@ -56,23 +57,29 @@ def shape(scene):
 
 
 # --------------------------------------------------------------------------- shapes
-@pytest.mark.parametrize("dim, n", [(2, 20), (3, 10)])
+@pytest.mark.parametrize("dim, n", [(2, 20), (3, 12)])
 def test_a_square_relaxes_to_a_circle_and_a_cube_to_a_sphere(dim, n):
-    """A 20 × 20 square (10³ cube) of water, 1 mm spacing, σ = 0.072, α = 0.5 (to damp the
+    """A 20 × 20 square (12³ cube) of water, 1 mm spacing, σ = 0.072, α = 0.5 (to damp the
     oscillation): its corners stick out by 41 % (73 %) of the inscribed radius at the start, a
-    spread of 0.30 (0.50) of the outermost particles' distance over 16 (26) directions. At 0.8 s
-    (about four capillary times √(ρ0 R³/σ)) the spread is below 4 % (measured 1.9 % and 1.7 %)
-    and the principal second moments within 6 % (measured 3.8 % and 2.0 %: the drops freeze a
-    little elongated, axes within 2 %). The energy the surface releases is booked (the surface
-    forces' work against the solvers' and the viscosity's dissipation): the books balance to
-    round-off, as there is no potential here for semi-implicit Euler to miss (measured 1e-13)."""
+    spread of 0.30 (0.47) of the outermost particles' distance over 16 (26) directions. Averaged
+    over 0.5, 0.6, …, 1.0 s (one instant's spread moves by a particle's jitter: the 10³ cube
+    this test first took read 2.0–4.5 % from one 0.1 s to the next) the spread is below 4 %
+    (measured 2.0 % and 2.4 %) and the principal second moments within 6 % (measured 2.4 % and
+    1.8 %: the drops freeze a little elongated). The energy the surface releases is booked (the
+    surface forces' work against the solvers' and the viscosity's dissipation): the books
+    balance to round-off, as there is no potential here for semi-implicit Euler to miss
+    (measured 1e-13)."""
     scene, r = blob(n, dim=dim, alpha=0.5)
     _, spread0 = shape(scene)
     assert spread0 > 0.25  # the corners stick out
-    while scene.time < 0.8 - 1e-9:
+    shapes = []
+    while scene.time < 1.0 - 1e-9:
         scene.advance(0.1)
-    aniso, spread = shape(scene)
-    assert aniso < 1.06 and spread < 0.04, (aniso, spread)
+        if scene.time > 0.5 - 1e-9:
+            shapes.append(shape(scene))
+    assert len(shapes) == 6
+    aniso, spread = np.mean(shapes, axis=0)
+    assert aniso < 1.06 and spread < 0.04, shapes
     assert abs(scene.energy_drift()) < 1e-9, scene.energy_drift()
     st = scene.solver_stats()
     assert st["unconverged"] == 0 and st["density_error_max"] <= 1e-3
@@ -107,33 +114,51 @@ def core_pressure(scene, r, t_settle, t_end):
     return float(np.mean(ps))
 
 
-@pytest.mark.parametrize("dim, ns", [(2, (24, 44)), (3, (11,))])
-def test_laplace_pressure_of_a_droplet(dim, ns):
-    """Droplets at rest, no gravity, σ = 0.03, 0.5 mm spacing, ρ0 = 800: the pressure at the
-    centre, averaged from 4 to 10 capillary times √(ρ0 R³/σ), against Laplace's σ/R (2D) and
-    2σ/R (3D). The stated tolerance is a factor of 3 for one droplet (sph/surface.rs: 2D droplets
-    of R = 3–8.5 H read 0.38–2.19, geometric mean 0.94; 3D of R = 1.7–2.5 H 1.4–2.75; each
-    freezes into a differently stressed packing). Measured here: 1.42 and 0.70 (2D, R = 4.6
-    and 8.5 H), 2.16 (3D, R = 2.2 H). (Without the surface forces' virial, the solvers' pressure
-    alone reads 30 to 70 times σ/R: the cohesion's bulk tension, which the solvers carry.)"""
-    sigma, dx, rho0 = 0.03, 5e-4, 800.0
-    k = 1 if dim == 2 else 2
-    readings = []
-    for n in ns:
-        side = n * dx
-        x = lattice([0.0] * dim, [side] * dim, dx) - side / 2
-        x = x[np.linalg.norm(x, axis=1) <= side / 2]
-        scene = pc.Scene(dim, integrator="semi_implicit_euler")
-        scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=0.5, viscosity=0.1, method="dfsph",
-                        surface_tension=sigma)
-        vol = len(x) * dx**dim
-        r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
-        tc = math.sqrt(rho0 * r**3 / sigma)  # capillary time
-        p = core_pressure(scene, r, 4 * tc, 10 * tc)
-        readings.append(p * r / (k * sigma))
-    assert all(1 / 3 < q < 3 for q in readings), readings
-    if dim == 2:  # on average about right: the two droplets' geometric mean within a factor of 2
-        assert 0.5 < math.exp(np.mean(np.log(readings))) < 2.0, readings
+def droplet_reading(dim, n, seed, *, sigma=0.03, dx=5e-4, rho0=800.0):
+    """The disc (ball) inside a square (cube) of n particles a side, at rest, no gravity (the
+    lattice start moved by 1e-9 m at random with ``seed``; 0: not moved): the pressure at its
+    centre averaged from 4 to 10 capillary times √(ρ0 R³/σ), over Laplace's σ/R (2D) or 2σ/R
+    (3D); and R/H (H = 2h = 2.6 Δx)."""
+    side = n * dx
+    x = lattice([0.0] * dim, [side] * dim, dx) - side / 2
+    x = x[np.linalg.norm(x, axis=1) <= side / 2]
+    if seed:
+        x = x + np.random.default_rng(seed).normal(0.0, 1e-9, x.shape)
+    scene = pc.Scene(dim, integrator="semi_implicit_euler")
+    scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=0.5, viscosity=0.1, method="dfsph",
+                    surface_tension=sigma)
+    vol = len(x) * dx**dim
+    r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
+    tc = math.sqrt(rho0 * r**3 / sigma)  # capillary time
+    p = core_pressure(scene, r, 4 * tc, 10 * tc)
+    return p * r / ((1 if dim == 2 else 2) * sigma), r / (2.6 * dx)
+
+
+def test_laplace_pressure_of_2d_droplets():
+    """Six 2D droplets of R = 6.2 H (32 particles across; σ = 0.03 N, 0.5 mm spacing, ρ0 = 800,
+    a σ, ρ0 and spacing other than those `LAPLACE_FACTOR` was measured at), started 1e-9 m
+    apart: each reads σ/R within a factor of 2 and their geometric mean within 30 %.
+
+    Measured: seeds 0–5 read 1.10, 1.14, 0.89, 1.05, 1.05, 0.86 (geometric mean 1.01); 13
+    droplets of this size 0.66–1.34, mean 1.06; 4 of R = 8.5 H 0.84–1.11. Each droplet freezes
+    into its own packing, whose stress the reading carries: the Laplace pressure is the small
+    difference of the solvers' pressure and the surface forces' virial, each 30 to 70 times
+    σ/R (the cohesion's bulk tension), so a packing that changes either by 1 % moves the reading
+    by half σ/R. Smaller droplets read high: R = 4.6 H 0.79–1.74 (16 droplets, mean 1.18),
+    R = 3.1 H 0.80–2.54 (6, mean 1.60)."""
+    readings = [droplet_reading(2, 32, seed)[0] for seed in range(6)]
+    assert all(0.5 < q < 2.0 for q in readings), readings
+    assert 1 / 1.3 < math.exp(np.mean(np.log(readings))) < 1.3, readings
+
+
+def test_laplace_pressure_of_a_3d_droplet():
+    """A 3D droplet of R = 2.9 H (15 particles across, the 2D test's σ, ρ0 and spacing): 2σ/R
+    within a factor of 1.5 (measured 1.13; 3D has its own `LAPLACE_FACTOR`, measured on a
+    droplet of R = 5.6 H). Smaller 3D droplets read high, as small 2D ones do: R = 2.2 H 1.49,
+    R = 3.7 H 1.02. Two 3D droplets started 1e-9 m apart read within 1 % of each other (1.64
+    and 1.65 with the 2D factor): a 3D droplet's core averages many more particles."""
+    q, _ = droplet_reading(3, 15, 0)
+    assert 1 / 1.5 < q < 1.5, q
 
 
 # --------------------------------------------------------------------------- adhesion and walls
