@@ -118,8 +118,9 @@ def test_hydrostatic_layer_pressure():
     −1.86 %, always the top one (3h–5h deep), which reads low: the pressure's zero, extrapolated
     from the bulk, lies 0.14 Δx below H (the rows within 2h of the free surface have deficient
     kernel sums and carry the pressure unevenly: the top three rows read 0.64, 1.12 and 0.88 of
-    ρ0 g (H − y)); the other bins within 1.3 %; slopes −0.34 to −0.70 %. Per realization the top bin reads −1.7 ± 1.0 % (64 realizations), the worst bin of
-    one realization 0.7–4.1 %: each settles into its own packing. (Against the highest
+    ρ0 g (H − y)); the other bins within 1.3 %; slopes −0.34 to −0.70 %. Per realization the
+    top bin reads −1.7 ± 1.0 % (64 realizations), the worst bin of one realization 0.7–4.1 %:
+    each settles into its own packing. (Against the highest
     particle + Δx/2 instead of H the bins read 1.3 % lower: the top row is rough, and its highest
     particle sits 0.16 Δx above the row's mean.)"""
     W, H, n = 0.5, 0.5, 24

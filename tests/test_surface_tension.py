@@ -23,16 +23,20 @@ from physcore.fluids import lattice, tank_walls
 RHO0 = 1000.0
 
 
-def blob(n, *, dim=2, dx=1e-3, sigma=0.072, round_=False, threads=None, alpha=0.1, **fluid):
+def blob(n, *, dim=2, dx=1e-3, sigma=0.072, round_=False, threads=None, alpha=0.1, rho0=RHO0, c0=1.0,
+         seed=0, **fluid):
     """A square (cube) of n particles a side, or the disc (ball) inside it, centred at 0, at rest,
-    no gravity. Returns (scene, equivalent radius R)."""
+    no gravity; the lattice moved by 1e-9 m at random with ``seed`` (0: not moved). Returns
+    (scene, equivalent radius R)."""
     side = n * dx
     x = lattice([0.0] * dim, [side] * dim, dx) - side / 2
     if round_:
         x = x[np.linalg.norm(x, axis=1) <= side / 2]
+    if seed:
+        x = x + np.random.default_rng(seed).normal(0.0, 1e-9, x.shape)
     scene = pc.Scene(dim, integrator="semi_implicit_euler", threads=threads)
     # c0 only scales the viscosity (α c0 h) of a DFSPH fluid: 1 m/s gives ν ≈ 1.6e-5 m²/s.
-    scene.add_fluid(x, spacing=dx, density=RHO0, sound_speed=1.0, viscosity=alpha, method="dfsph",
+    scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=c0, viscosity=alpha, method="dfsph",
                     surface_tension=sigma, **fluid)
     vol = len(x) * dx**dim
     r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
@@ -115,20 +119,10 @@ def core_pressure(scene, r, t_settle, t_end):
 
 
 def droplet_reading(dim, n, seed, *, sigma=0.03, dx=5e-4, rho0=800.0):
-    """The disc (ball) inside a square (cube) of n particles a side, at rest, no gravity (the
-    lattice start moved by 1e-9 m at random with ``seed``; 0: not moved): the pressure at its
-    centre averaged from 4 to 10 capillary times √(ρ0 R³/σ), over Laplace's σ/R (2D) or 2σ/R
-    (3D); and R/H (H = 2h = 2.6 Δx)."""
-    side = n * dx
-    x = lattice([0.0] * dim, [side] * dim, dx) - side / 2
-    x = x[np.linalg.norm(x, axis=1) <= side / 2]
-    if seed:
-        x = x + np.random.default_rng(seed).normal(0.0, 1e-9, x.shape)
-    scene = pc.Scene(dim, integrator="semi_implicit_euler")
-    scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=0.5, viscosity=0.1, method="dfsph",
-                    surface_tension=sigma)
-    vol = len(x) * dx**dim
-    r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
+    """The disc (ball) of ``blob(n, round_=True, seed=seed)`` at rest, no gravity: the pressure
+    at its centre averaged from 4 to 10 capillary times √(ρ0 R³/σ), over Laplace's σ/R (2D) or
+    2σ/R (3D); and R/H (H = 2h = 2.6 Δx)."""
+    scene, r = blob(n, dim=dim, dx=dx, sigma=sigma, round_=True, rho0=rho0, c0=0.5, seed=seed)
     tc = math.sqrt(rho0 * r**3 / sigma)  # capillary time
     p = core_pressure(scene, r, 4 * tc, 10 * tc)
     return p * r / ((1 if dim == 2 else 2) * sigma), r / (2.6 * dx)
