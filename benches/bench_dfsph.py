@@ -4,7 +4,8 @@ Workload: ``physcore.scenes.dam_break(n=nx)``: water column 1 m × 2 m at rest i
 4 m × 3 m tank with a lid, 3 layers of wall particles, cubic spline h = 1.3 dx, Monaghan
 viscosity α = 0.05 with c0 = 10 √(2gH) = 62.6 m/s, gravity, semi-implicit Euler. WCSPH: Tait
 γ = 7, f32 passes, steps at its CFL limit (the sound speed's). DFSPH (``method="dfsph"``): f64,
-density and divergence tolerances 0.1 %, steps at the flow's CFL limit 0.4 h / (|v|max + 0.6 α c0).
+density and divergence tolerances 0.1 %, steps at the flow's CFL limit 0.4 h / |v|max (and the
+viscous and force limits, which bind only near rest).
 Both are advanced as a render does it, ``Scene.advance`` per frame of T* = 4/120, from rest to
 T* = t √(2g/W) = 4 (t = 0.903 s: the collapse, the surge and its impact on the far wall).
 

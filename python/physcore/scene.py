@@ -1067,11 +1067,10 @@ class Scene:
         the surface forces' virial with surface tension: a Lagrange multiplier of the
         incompressibility, not a function of the density, and it swings from step to step
         (a resting 24 × 24 layer at the default ``density_error`` 0.1 %: a bin's mean goes from 0
-        to 4.8 times the hydrostatic value and back over about 16 steps; at 0.01 %, 0.2–1.8
-        times; at 0.001 %, within 6 %). Average it over every step, not every few steps (which
-        aliases the cycle): so averaged, and pooled over 16 realizations, the layer's two-row bins
-        are within 1.9 % of ρ0 g (H − y), one realization's within 0.7–4.1 %
-        (``tests/test_dfsph.py``)."""
+        to 6 times the hydrostatic value and back, a cycle of about 15 steps; at 0.01 %,
+        0.35–1.74 times; at 0.001 %, within 8 %). Average it over every step, not every few
+        steps (which aliases the cycle): so averaged, and pooled over 16 realizations, the
+        layer's two-row bins are within 1.6 % of ρ0 g (H − y) (``tests/test_dfsph.py``)."""
         return self._exclusive(lambda sim: sim.fluid_fields())[1]
 
     def solver_stats(self, name: str | None = None) -> dict[str, float]:
