@@ -90,12 +90,15 @@ class ContactStepWarning(UserWarning):
 
 
 class SimulationDiverged(PhyscoreError, RuntimeError):
-    """NaN or infinity appeared while stepping.
+    """NaN or infinity appeared while stepping, or the flow ran away.
 
-    The scene is rolled back to where the failing ``step(n)`` call started, so it never holds
-    non-finite values. Attributes: ``step`` (the step at which the non-finite value appeared),
-    ``time`` (s), ``particle`` (index of the first bad particle), ``quantity`` (``"position"`` or
-    ``"velocity"``), ``suggested_dt`` (s) and ``rolled_back_to`` (step count after the rollback).
+    The scene is rolled back to where the failing ``step(n)`` or ``advance`` call started, so it
+    never holds non-finite values. Attributes: ``step`` (the step at which it happened), ``time``
+    (s), ``particle`` (index of the first bad particle), ``quantity`` (``"position"`` or
+    ``"velocity"``: not finite; ``"cell"``: a grid cell, ``particle`` is its index; ``"error"``:
+    rk45 could not meet its tolerances; ``"speed"``: within one ``advance`` the flow sped up
+    until its step limit fell over a millionfold, ``particle`` the fastest), ``suggested_dt``
+    (s) and ``rolled_back_to`` (step count after the rollback).
     """
 
     def __init__(

@@ -66,6 +66,9 @@ pub enum Failure {
     Error,
     /// A cell of a grid field is not finite (the index is the cell's, see `crate::grids`).
     Cell,
+    /// The flow sped up until its step limit (CFL) fell a millionfold within one `advance`:
+    /// a runaway with finite values (the index is the fastest particle's).
+    Speed,
 }
 
 impl Failure {
@@ -76,6 +79,7 @@ impl Failure {
             Failure::Velocity => "velocity",
             Failure::Error => "error",
             Failure::Cell => "cell",
+            Failure::Speed => "speed",
         }
     }
 }
@@ -86,6 +90,10 @@ fn describe(quantity: &Failure, index: usize) -> String {
         Failure::Error => format!(
             "particle {index} has a local error that rk45 cannot bring within rtol/atol at any \
              step size (its forces are not finite or not smooth there)"
+        ),
+        Failure::Speed => format!(
+            "the flow ran away: its step limit fell over a millionfold within one advance \
+             (particle {index} is the fastest)"
         ),
         q => format!("particle {index} has a non-finite {}", q.as_str()),
     }
@@ -104,6 +112,11 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool) 
             "Explicit Euler amplifies every undamped oscillation (springs, orbits) at any dt: a \
              smaller dt (now {dt:.3e} s; the fastest time scale asks for {suggested_dt:.3e} s) \
              only delays this. Use semi_implicit_euler, verlet or rk4."
+        ),
+        // The step already follows the flow: a smaller one is what failed to keep up.
+        Failure::Speed => format!(
+            "The step follows the flow (last {dt:.3e} s), so a smaller dt does not help: try a \
+             smaller cfl, more viscosity or a tighter density_error."
         ),
         // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
         Failure::Error => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \

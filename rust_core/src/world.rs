@@ -484,6 +484,12 @@ impl<V: Vector> World<V> {
         let (mut left, mut n) = (duration, 0u64);
         while left > 0.0 {
             let limit = self.auto_dt().unwrap_or(left);
+            // The limit passed this check at the call's start: if it fails after steps of this
+            // call, the flow itself sped up a millionfold or more: a runaway, not a duration
+            // too long (finite velocities, so no other check catches it).
+            if n > 0 && left / limit > 1e12 {
+                return Err(self.diverged(self.fastest(), crate::error::Failure::Speed));
+            }
             // As the equal-substep path: refuse what would never end.
             if left / limit > 1e12 {
                 return Err(invalid(
@@ -580,6 +586,13 @@ impl<V: Vector> World<V> {
             }
         }
         Ok(())
+    }
+
+    /// The index of the fastest particle (the first of equals; 0 if there are none).
+    fn fastest(&self) -> usize {
+        let v = &self.particles.state().v;
+        let speeds = v.iter().map(|u| u.length_squared());
+        speeds.enumerate().fold((0, -1.0), |(i, m), (k, s)| if s > m { (k, s) } else { (i, m) }).0
     }
 
     /// The error of a divergence at the current step (`fail` completes it once rolled back).
@@ -679,4 +692,79 @@ fn check_dt(dt: Real) -> Result<()> {
         return Err(invalid("dt", format!("{dt} must be finite and > 0 (seconds)")));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec2;
+
+    /// A system whose flow limit falls a billionfold a step (what a runaway's CFL limit does).
+    struct Runaway {
+        limit: Real,
+    }
+
+    impl System for Runaway {
+        fn name(&self) -> &str {
+            "runaway"
+        }
+        fn is_empty(&self) -> bool {
+            false
+        }
+        fn step(&mut self, _dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
+            self.limit *= 1e-9;
+            Ok(())
+        }
+        fn limit_follows_flow(&self) -> bool {
+            true
+        }
+        fn auto_dt(&self) -> Option<Real> {
+            Some(self.limit)
+        }
+        fn suggest_dt(&self) -> Option<Real> {
+            Some(self.limit)
+        }
+        fn energy(&self) -> EnergyReport {
+            EnergyReport::default()
+        }
+        fn fields(&self, _names: &[&str]) -> Vec<Vec<Real>> {
+            vec![]
+        }
+        fn snapshot(&self) -> Result<Snapshot> {
+            Ok(Box::new(self.limit))
+        }
+        fn save(&self) -> Arrays {
+            vec![("limit".into(), vec![self.limit])]
+        }
+        fn load(&mut self, arrays: &Arrays) -> Result<()> {
+            self.limit = arrays[0].1[0];
+            Ok(())
+        }
+        fn restore(&mut self, snapshot: Snapshot) {
+            self.limit = *snapshot.downcast::<Real>().unwrap();
+        }
+    }
+
+    #[test]
+    fn a_flow_limit_that_collapses_within_an_advance_is_a_divergence_not_bad_input() {
+        let mut w = World::<DVec2>::new("semi_implicit_euler", 1e-3, Some(1)).unwrap();
+        w.add_system(Box::new(Runaway { limit: 1e-3 })).unwrap();
+        let stop = Arc::new(AtomicBool::new(false));
+        // Two substeps (under limits of 1e-3 and 1e-12 s), then the limit is 1e-21 s with 9e-3 s left.
+        match w.advance_interruptible(0.01, None, &stop) {
+            Err(Error::Diverged { quantity: crate::error::Failure::Speed, step, rolled_back_to, .. }) => {
+                assert_eq!((step, rolled_back_to), (2, 0));
+            }
+            r => panic!("{r:?}"),
+        }
+        // Rolled back: the same limit as before the call.
+        assert_eq!(w.time(), 0.0);
+        // A duration too long for the limit at the call's start stays the caller's error.
+        let mut w = World::<DVec2>::new("semi_implicit_euler", 1e-3, Some(1)).unwrap();
+        w.add_system(Box::new(Runaway { limit: 1e-15 })).unwrap();
+        match w.advance_interruptible(10.0, None, &stop) {
+            Err(Error::InvalidInput { arg, .. }) => assert_eq!(arg, "duration"),
+            r => panic!("{r:?}"),
+        }
+    }
 }
