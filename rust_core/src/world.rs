@@ -484,14 +484,14 @@ impl<V: Vector> World<V> {
         let (mut left, mut n) = (duration, 0u64);
         while left > 0.0 {
             let limit = self.auto_dt().unwrap_or(left);
-            // The limit passed this check at the call's start: if it fails after steps of this
-            // call, the flow itself sped up a millionfold or more: a runaway, not a duration
-            // too long (finite velocities, so no other check catches it).
-            if n > 0 && left / limit > 1e12 {
-                return Err(self.diverged(self.fastest(), crate::error::Failure::Speed));
-            }
-            // As the equal-substep path: refuse what would never end.
+            // As the equal-substep path: refuse what would never end. After steps of this call
+            // (whose start passed this check) the flow itself sped up a millionfold or more: a
+            // runaway with finite velocities, which no other check catches, not a duration too
+            // long.
             if left / limit > 1e12 {
+                if n > 0 {
+                    return Err(self.diverged(self.fastest(), crate::error::Failure::Speed));
+                }
                 return Err(invalid(
                     "duration",
                     format!("{left:.3e} s left would take over 1e12 substeps of {limit:.3e} s"),
@@ -757,7 +757,7 @@ mod tests {
             }
             r => panic!("{r:?}"),
         }
-        // Rolled back: the same limit as before the call.
+        // Rolled back to the call's start.
         assert_eq!(w.time(), 0.0);
         // A duration too long for the limit at the call's start stays the caller's error.
         let mut w = World::<DVec2>::new("semi_implicit_euler", 1e-3, Some(1)).unwrap();

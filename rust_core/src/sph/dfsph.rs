@@ -91,7 +91,6 @@ const WARM_START: Real = 0.5;
 /// spread: the density solve keeps the paper's form.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
 enum WarmStart {
-    None,
     Before,
     FirstIteration,
 }
@@ -728,7 +727,6 @@ impl<V: Vector> Dfsph<V> {
         // applies it before its iterations (paper, Algorithm 2); the divergence solve folds it
         // into its first iteration (`WarmStart`).
         let warm = match stage {
-            _ if WARM_START == 0.0 => WarmStart::None,
             Projection::Density => WarmStart::Before,
             Projection::Divergence => WarmStart::FirstIteration,
         };
