@@ -68,7 +68,7 @@ def resample(frames: list[np.ndarray], durations: list[float]) -> tuple[list[np.
     frame Pillow merged from identical ones shows for as many ticks as it lasted."""
     tick = max(0.02, min(durations))
     out = []
-    for f, d in zip(frames, durations):
+    for f, d in zip(frames, durations, strict=True):
         out.extend([f] * max(1, round(d / tick)))
     return out, tick
 
@@ -127,8 +127,10 @@ def verdict(row: dict) -> list[str]:
         miss.append(f"{row['bytes'] / 1e6:.1f} MB")
     if row["active"] < BUDGET_ACTIVE:
         miss.append(f"active {row['active']:.0%}")
-    if row["motion_end"] < BUDGET_MOTION and row["still_tail_s"] > BUDGET_TAIL:
-        miss.append(f"frozen end (motion {row['motion_end']:.2f}, still {row['still_tail_s']:.1f} s)")
+    # Motion to the end, or a scene that comes to rest (a still tail) and ends within 0.5 s of it.
+    if row["motion_end"] < BUDGET_MOTION and not 0 < row["still_tail_s"] <= BUDGET_TAIL:
+        what = "frozen end" if row["still_tail_s"] > BUDGET_TAIL else "fading end"
+        miss.append(f"{what} (motion {row['motion_end']:.2f}, still {row['still_tail_s']:.1f} s)")
     return miss
 
 

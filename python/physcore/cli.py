@@ -7,7 +7,7 @@ Usage::
                           [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
                           [--color-by speed|pressure|none] [--no-colorbar]
                           [--camera fit|follow|orbit] [--arrows velocity|acceleration]
-                          [--no-mesh] [--texture IMAGE] [--[no-]antialias]
+                          [--no-mesh] [--texture IMAGE] [--[no-]antialias] [--cmap NAME] [--background #RRGGBB]
                           [--param key=value ...]
     physcore view SCENE [--param key=value ...] [--size WxH] [--fps F] [--seconds S] [--screenshot OUT.png]
 
@@ -355,6 +355,9 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     radius = args.radius if args.radius is not None else d.get("radius")
     if radius is not None:
         settings["radius"] = radius
+    for key in ("cmap", "background"):  # checked in _cmd_render before anything is simulated
+        if getattr(args, key, None) is not None:
+            settings[key] = getattr(args, key)
     theme = getattr(args, "theme", None) or d.get("theme")
     if theme is not None:
         settings["theme"] = theme
@@ -470,6 +473,11 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             from .render._recording import points_view
 
             _check_camera(settings["camera"], int(getattr(scene, "dim", 0)), int(getattr(points_view(scene), "n_particles", 0)))
+        if "cmap" in settings or "background" in settings:  # before simulating
+            from .render._checks import _check_background, _check_cmap
+
+            _check_cmap(settings.get("cmap"))
+            _check_background(settings.get("background"))
         if "texture" in settings:  # before simulating: the image must load onto a mesh with uv
             from .render._mesh import check_mesh, check_texture
 
@@ -660,6 +668,9 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
     r.add_argument("--title", metavar="TEXT", help="a caption in the top-left corner of particle animations")
+    r.add_argument("--cmap", metavar="NAME",
+                   help="colour map of speed and pressure: viridis, plasma, magma, inferno, cividis or turbo")
+    r.add_argument("--background", metavar="#RRGGBB", help="background colour of particle animations (default: the theme's)")
     r.add_argument("--camera", type=_camera_arg, metavar="MODE",
                    help="fit (still, the default), follow (the moving particles' centre of mass; follow:I "
                    "particle I), orbit (3D: one turn over the animation; orbit:D at D degrees a second)")

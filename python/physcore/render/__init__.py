@@ -70,7 +70,7 @@ from ._palette import _PRESSURE0 as _PRESSURE0
 from ._palette import _SPEED0 as _SPEED0
 from ._palette import _TEXT as _TEXT
 from ._palette import _WALL as _WALL
-from ._palette import STRAIN_SATURATION
+from ._palette import CMAPS, GROUP_COLORS, STRAIN_SATURATION
 from ._raster import _Rasteriser as _Rasteriser
 from ._recording import MAX_STEPS as MAX_STEPS
 from ._recording import Recording, record
@@ -78,7 +78,7 @@ from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
 
-__all__ = ["record", "Recording", "Mesh", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION"]
+__all__ = ["record", "Recording", "Mesh", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
 
 for _public in (Recording, Mesh, record, gif, save, frames, render_frame, contact_sheet):
     _public.__module__ = __name__

@@ -13,6 +13,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ._camera import CAMERAS, DEFAULT_VIEW
+from ._palette import CMAPS, GROUP_COLORS
 
 #: Valid values of the ``color_by`` argument.
 COLOR_BY = ("speed", "pressure", "strain", "density", "none")
@@ -84,6 +85,78 @@ def _check_color_by(color_by: Any) -> str:
         valid = ", ".join(repr(c) for c in COLOR_BY)
         raise InvalidInputError(f"color_by must be one of {valid}; got {_short(color_by)}")
     return str(color_by)
+
+
+def _check_cmap(cmap: Any) -> str | None:
+    """None, or the name of one of :data:`CMAPS` (InvalidInputError / InvalidTypeError naming cmap)."""
+    if cmap is None:
+        return None
+    if not isinstance(cmap, str):
+        raise InvalidTypeError(f"cmap must be a str naming a colour map, got {type(cmap).__name__}")
+    if cmap not in CMAPS:
+        raise InvalidInputError(f"cmap must be one of {', '.join(CMAPS)}; got {_short(cmap)}")
+    return cmap
+
+
+def _rgb_rows(value: Any, arg: str, count: int | None) -> np.ndarray:
+    """(K, 3) uint8 from RGB rows (uint8 or ints 0–255, or floats in [0, 1]) or "#rrggbb"
+    strings; `count`: K required (None: any)."""
+    arr = np.asarray(value)
+    if arr.dtype.kind in "US":
+        flat = arr.reshape(-1)
+        rows = []
+        for text in flat:
+            t = str(text)
+            if len(t) != 7 or t[0] != "#" or any(ch not in "0123456789abcdefABCDEF" for ch in t[1:]):
+                raise InvalidInputError(f"{arg}: colours as text must be '#rrggbb', got {_short(t)}")
+            rows.append([int(t[1:3], 16), int(t[3:5], 16), int(t[5:7], 16)])
+        arr = np.array(rows, dtype=np.int64).reshape(-1, 3)
+    elif arr.dtype == bool or arr.dtype.kind not in "uif":
+        raise InvalidTypeError(f"{arg} must hold numbers (RGB) or '#rrggbb' strings, got dtype {arr.dtype}")
+    if arr.ndim != 2 or arr.shape[1] != 3 or (count is not None and arr.shape[0] != count):
+        want = f"({count}, 3)" if count is not None else "(K, 3)"
+        raise InvalidInputError(f"{arg} must have shape {want} (RGB per particle), got {arr.shape}")
+    if arr.dtype.kind == "f":
+        if not np.isfinite(arr).all() or arr.min(initial=0.0) < 0 or arr.max(initial=0.0) > 1:
+            raise InvalidInputError(f"{arg}: float colours must be finite and in [0, 1] (or give uint8 0–255)")
+        return np.rint(arr * 255).astype(np.uint8)
+    if arr.size and (arr.min() < 0 or arr.max() > 255):
+        raise InvalidInputError(f"{arg}: integer colours must be 0–255, got {int(arr.min())} to {int(arr.max())}")
+    return arr.astype(np.uint8)
+
+
+def _check_colors(colors: Any, n: int) -> np.ndarray | None:
+    """None, or (n, 3) uint8 RGB from `colors` as ``gif(colors=...)`` takes it: RGB rows,
+    "#rrggbb" strings, or (n,) integer group labels (≥ 0) in :data:`GROUP_COLORS`."""
+    if colors is None:
+        return None
+    arr = np.asarray(colors) if not isinstance(colors, (str, bytes)) else None
+    if arr is None or arr.dtype == object:
+        raise InvalidTypeError(f"colors must be an array of RGB rows, '#rrggbb' strings or group labels, got {type(colors).__name__}")
+    if arr.ndim == 1 and arr.dtype.kind in "US":
+        arr = arr.reshape(-1, 1)
+        if arr.shape[0] != n:
+            raise InvalidInputError(f"colors must give one colour per particle ({n}), got {arr.shape[0]}")
+        return _rgb_rows(arr.reshape(-1), "colors", None)
+    if arr.ndim == 1:
+        if arr.dtype.kind not in "iu" or arr.dtype == bool:
+            raise InvalidTypeError(f"colors as group labels must be integers, got dtype {arr.dtype}")
+        if arr.shape[0] != n:
+            raise InvalidInputError(f"colors must give one group label per particle ({n}), got {arr.shape[0]}")
+        if arr.size and arr.min() < 0:
+            raise InvalidInputError(f"colors: group labels must be >= 0, got {int(arr.min())}")
+        return GROUP_COLORS[arr.astype(np.int64) % len(GROUP_COLORS)]
+    return _rgb_rows(arr, "colors", n)
+
+
+def _check_background(background: Any) -> tuple[int, int, int] | None:
+    """None, or an RGB triple of ints 0–255 (a "#rrggbb" string, or floats in [0, 1], too)."""
+    if background is None:
+        return None
+    if isinstance(background, (str, bytes)):
+        background = [background]
+    row = _rgb_rows([background] if np.asarray(background).ndim == 1 and np.asarray(background).dtype.kind not in "US" else background, "background", 1)
+    return (int(row[0, 0]), int(row[0, 1]), int(row[0, 2]))
 
 
 def _check_radius(radius: Any) -> int | None:

@@ -14,8 +14,11 @@ from .._errors import InvalidInputError, InvalidTypeError
 from . import _recording
 from ._checks import (
     _check_arrows,
+    _check_background,
     _check_camera,
+    _check_cmap,
     _check_color_by,
+    _check_colors,
     _check_fps,
     _check_int,
     _check_memory,
@@ -56,6 +59,9 @@ def gif(
     mesh: Any = None,
     texture: Any = None,
     antialias: bool | None = None,
+    colors: Any = None,
+    cmap: str | None = None,
+    background: Any = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -213,6 +219,24 @@ def gif(
         Default: the scene's ``render_defaults`` (the ready-made particle scenes have it on),
         else False: hard-edged discs in the fixed palette, the smallest GIFs. Glow and shaded
         surfaces are antialiased whatever this says.
+    colors : array_like, optional
+        Each particle's own colour, for bodies meant to read as objects (billiard balls, two
+        galaxies, a star and its planet): an (N, 3) array of RGB, uint8 0–255 or floats in
+        [0, 1], or "#rrggbb" strings (N,), or (N,) integer group labels, drawn in matplotlib's
+        "tab10" colours (:data:`physcore.render.GROUP_COLORS`, cycling). Used with
+        ``color_by="none"`` (discs in these colours, soft-edged, pinned ones too) and
+        ``"density"`` (each particle glows in its colour; where colours mix, the glow takes their
+        density-weighted mean, whitening towards the densest cores); the other colourings show
+        their quantity and ignore it. Default: the scene's ``render_defaults``, else none.
+    cmap : str, optional
+        The colour map of ``color_by`` "speed" and "pressure": one of
+        :data:`physcore.render.CMAPS` ("viridis", "plasma", "magma", "inferno", "cividis",
+        "turbo"). Default: the scene's ``render_defaults``, else viridis for speed and plasma
+        for pressure.
+    background : (int, int, int), optional
+        The background's RGB colour, 0–255 each (a billiard table's felt); trails fade into it,
+        and labels turn light on a dark one. Default: the scene's ``render_defaults``, else the
+        theme's.
 
     Returns
     -------
@@ -249,13 +273,14 @@ def gif(
     return _render(scene, path, "gif", frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time,
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
-                   title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias)
+                   title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
+                   colors=colors, cmap=cmap, background=background)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias")
+            "antialias", "colors", "cmap", "background")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -266,7 +291,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias) = (bound.arguments[k] for k in _OPTIONS)
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background) = (
+        bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
     if isinstance(scene, _recording.Recording):
@@ -310,6 +336,10 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     mesh = check_mesh(mesh, n_points)
     texture = check_texture(texture, mesh)
     antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
+    cmap = _check_cmap(d.get("cmap") if cmap is None else cmap)
+    background = _check_background(d.get("background") if background is None else background)
+    n_colors = scene.positions.shape[1] if isinstance(scene, _recording.Recording) else n_points
+    colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
@@ -354,8 +384,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
-                      antialias=antialias)
-    if mesh is not None or ras.antialias:
+                      antialias=antialias, colors=colors, cmap=cmap, background=background)
+    if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
         return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)

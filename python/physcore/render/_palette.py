@@ -131,6 +131,53 @@ def theme_palette(theme: str) -> np.ndarray:
     return _DARK_PALETTE if theme == "dark" else _PALETTE
 
 
+# Perceptual colour maps (Smith & van der Walt's matplotlib maps, 2015; cividis: Nuñez, Anderton
+# & Renslow 2018; turbo: Mikhailov 2019), sampled at 9 points in [0, 1] and interpolated linearly.
+_CMAPS = {
+    "viridis": _VIRIDIS,
+    "plasma": _PLASMA,
+    "magma": np.array([[0, 0, 4], [29, 17, 71], [81, 18, 124], [131, 38, 129], [183, 55, 121], [231, 82, 99],
+                       [252, 137, 97], [254, 196, 136], [252, 253, 191]], dtype=np.float64),
+    "inferno": np.array([[0, 0, 4], [33, 12, 74], [87, 16, 110], [138, 34, 106], [188, 55, 84], [228, 90, 49],
+                         [249, 142, 9], [249, 203, 53], [252, 255, 164]], dtype=np.float64),
+    "cividis": np.array([[0, 34, 78], [26, 56, 111], [67, 78, 108], [97, 101, 111], [125, 124, 120], [155, 148, 118],
+                         [188, 174, 108], [222, 201, 88], [254, 232, 56]], dtype=np.float64),
+    "turbo": np.array([[48, 18, 59], [70, 107, 227], [40, 188, 235], [50, 242, 152], [164, 252, 60], [238, 207, 58],
+                       [251, 126, 33], [208, 47, 5], [122, 4, 3]], dtype=np.float64),
+}
+#: Names of the colour maps ``gif(cmap=...)`` takes for speed and pressure.
+CMAPS = tuple(_CMAPS)
+
+#: Colours of ``gif(colors=...)`` given as group labels: matplotlib's "tab10", in its order.
+GROUP_COLORS = np.array([[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189],
+                         [140, 86, 75], [227, 119, 194], [127, 127, 127], [188, 189, 34], [23, 190, 207]], dtype=np.uint8)
+
+
+def styled_palette(theme: str, cmap: str | None = None, background: tuple[int, int, int] | None = None) -> np.ndarray:
+    """The palette of `theme` with the speed and pressure maps replaced by `cmap` (one of
+    :data:`CMAPS`; its bright end cut at 0.9 on the light theme, where near-white hardly shows)
+    and the background by the RGB triple `background` (trails then fade into it)."""
+    pal = theme_palette(theme).astype(np.float64)
+    if cmap is not None:
+        top = 1.0 if theme == "dark" else 0.9
+        ramp = _sample_map(_CMAPS[cmap], top, _N_SPEED)
+        pal[_SPEED0:_STRAIN0] = ramp
+        pal[_PRESSURE0:_TRAIL0] = _sample_map(_CMAPS[cmap], top, _N_PRESSURE)
+    if background is not None:
+        bg = np.asarray(background, dtype=np.float64)
+        old = pal[_BACKGROUND].copy()
+        pal[_BACKGROUND] = bg
+        # Trails keep their contrast: each shade is re-blended from the new background.
+        ink = np.array([70.0, 80.0, 100.0]) if theme != "dark" else np.array([150.0, 185.0, 255.0])
+        if bg.mean() < 128 and theme != "dark":
+            ink = np.array([235.0, 240.0, 225.0])  # a dark background of a light theme (felt): pale trails
+        for k, a in enumerate(np.linspace(0.12, 0.6, _N_TRAIL)):
+            pal[_TRAIL0 + k] = (1 - a) * bg + a * ink
+        if np.abs(old - bg).sum() > 0 and bg.mean() < 128 and theme != "dark":
+            pal[_TEXT] = (235, 235, 235)  # labels stay legible on a dark background
+    return np.round(pal).astype(np.uint8)
+
+
 def _scalar_levels(values: np.ndarray, vmax: float, base: int, levels: int) -> np.ndarray:
     """(N,) values -> (N,) uint8 indices into the sequential map of `levels` entries at `base`.
 

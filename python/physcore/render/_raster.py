@@ -51,7 +51,7 @@ from ._palette import (
     STRAIN_SATURATION,
     _scalar_levels,
     _strain_levels,
-    theme_palette,
+    styled_palette,
 )
 from ._recording import Recording
 from ._rows import _row_norms
@@ -368,14 +368,17 @@ def _bloom(a: np.ndarray, r: int) -> np.ndarray:
     return np.repeat(np.repeat(_blur(half, max(1, r // 2)), 2, axis=0), 2, axis=1)[:h, :w]
 
 
-def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int], weights: np.ndarray | None = None) -> np.ndarray:
     """Particle count per pixel, each particle shared bilinearly among the four pixels around its
     position (sub-pixel motion shows, edges are antialiased). Accumulated on a grid one pixel
-    wider each side, so the four corners need no bounds checks, then cropped."""
+    wider each side, so the four corners need no bounds checks, then cropped. `weights`: (N,)
+    per-particle weights instead of counts (the glow's colour channels)."""
     h, w = shape
     fx, fy = col - 0.5, row - 0.5  # pixel k's centre is at k + 0.5
     ok = (fx > -1) & (fx < w) & (fy > -1) & (fy < h)  # False for NaN too
     fx, fy = fx[ok], fy[ok]
+    if weights is not None:
+        weights = weights[ok]
     x0, y0 = np.floor(fx), np.floor(fy)
     ax, ay = (fx - x0).astype(np.float32), (fy - y0).astype(np.float32)
     wp = w + 2
@@ -383,6 +386,8 @@ def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarr
     bx = 1.0 - ax
     idx = np.concatenate([base, base + 1, base + wp, base + wp + 1])
     wgt = np.concatenate([bx * (1.0 - ay), ax * (1.0 - ay), bx * ay, ax * ay])
+    if weights is not None:
+        wgt = wgt * np.tile(weights.astype(np.float32), 4)
     out = np.bincount(idx, weights=wgt, minlength=(h + 2) * wp).reshape(h + 2, wp)
     return out[1 : h + 1, 1 : w + 1].astype(np.float32)
 
@@ -425,6 +430,9 @@ class _Rasteriser:
         texture: np.ndarray | None = None,
         theme: str = "light",
         antialias: bool = False,
+        colors: np.ndarray | None = None,
+        cmap: str | None = None,
+        background: tuple[int, int, int] | None = None,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -436,7 +444,10 @@ class _Rasteriser:
         `mesh`, `texture`: a checked :class:`Mesh` drawn as a shaded surface by
         :meth:`frame_rgb` (:meth:`frame` draws its particles as discs and springs), and its
         (H', W', 3) float32 texture; `theme`: the palette (and surface colours) of frame_rgb;
-        `antialias`: frame_rgb draws the discs with soft edges (coverage-blended, in the core)."""
+        `antialias`: frame_rgb draws the discs with soft edges (coverage-blended, in the core).
+        `colors`: (N, 3) uint8 RGB per particle, used by ``color_by`` "none" (discs, drawn in
+        full colour by frame_rgb) and "density" (each particle's glow in its colour); `cmap`:
+        the speed and pressure maps' name; `background`: an RGB triple for the background."""
         n, dim = rec.positions.shape[1:]
         mode, cam_param = camera
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
@@ -560,8 +571,15 @@ class _Rasteriser:
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
-        self.palette = theme_palette(theme)
-        self.antialias = bool(antialias) and color_by != "density"  # glow is smooth already
+        self.palette = styled_palette(theme, cmap, background)
+        # Own colours apply where no quantity is coloured: plain discs and the glow.
+        self.colors = colors if colors is not None and color_by in ("none", "density") else None
+        # Discs in their own colours are drawn in full colour (soft-edged): any number of hues.
+        self.antialias = (bool(antialias) or self.colors is not None) and color_by != "density"  # glow is smooth already
+        #: frame_rgb is the frame (full colour): shaded meshes, soft discs, glow in own colours.
+        self.full_colour = mesh is not None or self.antialias or (self.colors is not None and color_by == "density")
+        # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
+        self.trail_px = 2 if min(size) >= 300 else 1
         self.mesh = mesh
         self._shader = None if mesh is None else _MeshShader(mesh, theme, texture)
         if mesh is not None:
@@ -623,6 +641,56 @@ class _Rasteriser:
         self._glow_history = (k, h)
         return h
 
+    def _density_rgb(self, k: int) -> np.ndarray:
+        """(4, H, W): frame k's glow density (as _density) and its sums of the particles' own
+        colours (red, green, blue in [0, 1], each weighted by the particle's density)."""
+        rec = self.rec
+        cam = self.cam_at(k)
+        free = ~rec.pinned
+        s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
+        col, row = cam.pixels(s)
+        c = (self.colors[free] if rec.pinned.any() else self.colors).astype(np.float32) / 255.0
+        r = max(1, self.radius // 2)
+        out = []
+        for w in (None, c[:, 0], c[:, 1], c[:, 2]):
+            d = _splat(col, row, self.background.shape, w)
+            out.append(_blur(d, r) + 0.5 * _bloom(d, 4 * r))
+        return np.stack(out)
+
+    def _frame_rgb_glow(self, k: int) -> np.ndarray:
+        """Frame k of ``color_by="density"`` with own colours: each pixel's glow is tone-mapped as
+        :meth:`_glow` does, in the density-weighted mean of the colours there, whitening towards
+        the densest cores (as an exposure saturates); trails persist as :meth:`_glow_density`."""
+        if not self.trail or self._centres is not None:
+            h = self._density_rgb(k)
+        else:
+            decay = 0.05 ** (1.0 / self.trail)
+            if self._glow_history is not None and self._glow_history[0] == k - 1:
+                h = np.maximum(self._density_rgb(k), decay * self._glow_history[1])
+            else:
+                h = self._density_rgb(max(0, k - self.trail))
+                for f in range(max(0, k - self.trail) + 1, k + 1):
+                    h = np.maximum(self._density_rgb(f), decay * h)
+            self._glow_history = (k, h)
+        cam = self.cam_at(k)
+        under = self._under(cam)
+        out = self.palette[under].astype(np.float32)
+        d = h[0]
+        if self.glow_scale > 0:
+            t = (1.0 - np.exp(-2.5 * (np.maximum(d, 0) / self.glow_scale) ** 0.75))[..., None]
+            hue = np.moveaxis(h[1:], 0, -1) / np.maximum(d, 1e-30)[..., None]
+            hue = np.clip(hue, 0.0, 1.0) * 255.0
+            white = np.float32(0.6) * t * t
+            lit = hue * (1 - white) + 255.0 * white
+            out = out * (1 - t) + lit * t
+        out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
+        over = _overlay(under.shape)
+        if self.rec.pinned.any():  # pinned particles stay discs on top
+            s, _ = cam.project(self.rec.positions[k][self.rec.pinned])
+            col, row = cam.pixels(s)
+            _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
+        return self._finish_rgb(out, over, k, cam)
+
     def _glow(self, buf: np.ndarray, k: int) -> None:
         """Tone-maps frame k's density into the glow levels: 1 − exp(−2.5 (d / scale)^0.75), so
         the densest 0.5 % saturate towards white while a filament a hundred times fainter still
@@ -683,6 +751,8 @@ class _Rasteriser:
         mesh, the shaded surface (antialiased) over the background, trails and the particles
         that are not part of it, under the pinned particles, arrows and labels."""
         if self.mesh is None:
+            if self.color_by == "density" and self.colors is not None:
+                return self._frame_rgb_glow(k)
             return self._frame_rgb_discs(k) if self.antialias else self.palette[self.frame(k)]
         rec = self.rec
         cam = self.cam_at(k)
@@ -728,8 +798,9 @@ class _Rasteriser:
             rad = np.maximum(np.sqrt(r * r + 0.5 * r), 0.6)
             if self.radii is not None:  # largest first, the painter's order within one size
                 order = order[np.argsort(-rad[order], kind="stable")]
+            rgb = self.palette[colors[order]] if self.colors is None else self.colors[order]
             _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
-                             rad[order].astype(np.float32), np.ascontiguousarray(self.palette[colors[order]]))
+                             rad[order].astype(np.float32), np.ascontiguousarray(rgb))
         over = _overlay(under.shape)
         if on_top:
             i, j = rec.pairs
@@ -836,4 +907,5 @@ class _Rasteriser:
             (c0, r0), (c1, r1) = pix[f], pix[f + 1]
             shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
             colors = np.full(int(moving.sum()), shade, dtype=np.uint8)
-            _draw_lines(buf, c0[moving], r0[moving], c1[moving], r1[moving], colors)
+            for dc, dr in ((0, 0), (1, 0), (0, 1))[: 1 if self.trail_px < 2 else 3]:
+                _draw_lines(buf, c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, colors)

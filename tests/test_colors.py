@@ -1,0 +1,112 @@
+"""Colour that serves the picture: per-particle colours (``colors=``), named colour maps
+(``cmap=``) and a background of one's own (``background=``), in discs and in the glow."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import physcore as pc
+from physcore.render import _palette
+
+
+def _two_balls(separation: float = 4.0) -> pc.Scene:
+    s = pc.Scene(2)
+    s.add_particles([[0.0, 0.0], [separation, 0.0]], masses=1.0)
+    return s
+
+
+def _pixel_at(img: np.ndarray, scene_x: float, xs: tuple[float, float]) -> np.ndarray:
+    """The RGB at the image row through the particles' centre, at the column of `scene_x`
+    between the two particles' columns (found as the extreme non-background columns)."""
+    bg = img[0, 0]
+    mask = (img != bg).any(axis=2)
+    rows, cols = np.nonzero(mask[: int(img.shape[0] * 0.8)])  # above the clock and scale bar
+    r = int(np.median(rows))
+    c0, c1 = cols.min(), cols.max()
+    frac = (scene_x - xs[0]) / (xs[1] - xs[0])
+    return img[r, int(round(c0 + 4 + frac * (c1 - c0 - 8)))]
+
+
+def test_each_particle_is_drawn_in_its_own_colour():
+    s = _two_balls()
+    img = next(pc.render.frames(s, frames=1, size=(200, 120), radius=6, color_by="none", colors=["#d62728", "#1f77b4"]))
+    np.testing.assert_array_equal(_pixel_at(img, 0.0, (0.0, 4.0)), [0xD6, 0x27, 0x28])
+    np.testing.assert_array_equal(_pixel_at(img, 4.0, (0.0, 4.0)), [0x1F, 0x77, 0xB4])
+
+
+def test_colors_forms_agree():
+    s = _two_balls()
+    opts = dict(frames=1, size=(200, 120), radius=6, color_by="none")
+    as_text = next(pc.render.frames(s, colors=["#ff7f0e", "#2ca02c"], **opts))
+    as_ints = next(pc.render.frames(s, colors=np.array([[255, 127, 14], [44, 160, 44]], np.uint8), **opts))
+    as_floats = next(pc.render.frames(s, colors=np.array([[255, 127, 14], [44, 160, 44]]) / 255.0, **opts))
+    as_groups = next(pc.render.frames(s, colors=[1, 2], **opts))  # tab10's orange and green
+    np.testing.assert_array_equal(as_text, as_ints)
+    np.testing.assert_array_equal(as_text, as_floats)
+    np.testing.assert_array_equal(as_text, as_groups)
+
+
+def test_colors_give_way_to_a_coloured_quantity():
+    # color_by="speed" shows the speed: own colours are for bodies read as objects.
+    s = _two_balls()
+    s.velocities = [[1.0, 0.0], [0.0, 0.0]]
+    opts = dict(frames=1, size=(200, 120), radius=6, color_by="speed", antialias=True)
+    with_colors = next(pc.render.frames(s, colors=["#ff0000", "#00ff00"], **opts))
+    without = next(pc.render.frames(s, **opts))
+    np.testing.assert_array_equal(with_colors, without)
+
+
+def test_glow_takes_each_particles_colour():
+    # Two clouds glowing: the blue cloud's pixels are blue-dominant, the gold one's red-dominant.
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(400, 2)) * 0.3
+    b = rng.normal(size=(400, 2)) * 0.3 + [4.0, 0.0]
+    s = pc.Scene(2)
+    s.add_particles(np.concatenate([a, b]), masses=1.0)
+    colors = np.repeat(np.array([[90, 150, 255], [255, 180, 60]], np.uint8), 400, axis=0)
+    img = next(pc.render.frames(s, frames=1, size=(240, 120), color_by="density", theme="dark", colors=colors)).astype(int)
+    top = img[: int(0.75 * img.shape[0])]  # above the clock and scale bar
+    lit = top.sum(axis=2) > top[0, 0].sum() + 150
+    half = np.arange(top.shape[1]) < top.shape[1] // 2
+    blue, gold = top[lit & half].mean(axis=0), top[lit & ~half].mean(axis=0)
+    assert blue[2] > blue[0] and gold[0] > gold[2]
+
+
+def test_cmap_replaces_the_speed_map():
+    pal = _palette.styled_palette("dark", "magma")
+    np.testing.assert_array_equal(pal[_palette._SPEED0], [0, 0, 4])  # magma's first stop
+    np.testing.assert_array_equal(pal[_palette._SPEED0 + _palette._N_SPEED - 1], [252, 253, 191])  # its last
+    assert set(pc.render.CMAPS) >= {"viridis", "magma", "inferno", "plasma", "cividis"}
+    s = _two_balls()
+    s.velocities = [[1.0, 0.0], [0.0, 0.0]]
+    opts = dict(frames=1, size=(200, 120), radius=6, color_by="speed")
+    assert not np.array_equal(next(pc.render.frames(s, cmap="magma", **opts)), next(pc.render.frames(s, **opts)))
+
+
+def test_background_colours_the_image():
+    img = next(pc.render.frames(_two_balls(), frames=1, size=(200, 120), color_by="none", background=(28, 110, 60)))
+    np.testing.assert_array_equal(img[2, 100], [28, 110, 60])
+
+
+@pytest.mark.parametrize(
+    "options, error, name",
+    [
+        ({"colors": [[255, 0, 0]]}, ValueError, "colors"),  # one colour for two particles
+        ({"colors": [[300, 0, 0], [0, 0, 0]]}, ValueError, "colors"),
+        ({"colors": [[0.5, np.nan, 0], [0, 0, 0]]}, ValueError, "colors"),
+        ({"colors": ["red", "blue"]}, ValueError, "colors"),
+        ({"colors": [True, False]}, TypeError, "colors"),
+        ({"colors": [-1, 0]}, ValueError, "colors"),
+        ({"colors": "red"}, TypeError, "colors"),
+        ({"cmap": "jet"}, ValueError, "cmap"),
+        ({"cmap": 3}, TypeError, "cmap"),
+        ({"background": (0, 0, 256)}, ValueError, "background"),
+        ({"background": (0, 0)}, ValueError, "background"),
+    ],
+)
+def test_bad_colours_are_refused_before_stepping(tmp_path, options, error, name):
+    s = _two_balls()
+    s.velocities = [[1.0, 0.0], [0.0, 0.0]]
+    with pytest.raises(error, match=name):
+        pc.render.gif(s, tmp_path / "x.gif", frames=3, **options)
+    assert s.time == 0.0 and not (tmp_path / "x.gif").exists()
