@@ -76,7 +76,7 @@ def test_cmap_replaces_the_speed_map():
     pal = _palette.styled_palette("dark", "magma")
     np.testing.assert_array_equal(pal[_palette._SPEED0], [0, 0, 4])  # magma's first stop
     np.testing.assert_array_equal(pal[_palette._SPEED0 + _palette._N_SPEED - 1], [252, 253, 191])  # its last
-    assert set(pc.render.CMAPS) >= {"viridis", "magma", "inferno", "plasma", "cividis"}
+    assert set(pc.render.CMAPS) >= {"viridis", "magma", "inferno", "plasma", "cividis", "turbo", "ice"}
     s = _two_balls()
     s.velocities = [[1.0, 0.0], [0.0, 0.0]]
     opts = dict(frames=1, size=(200, 120), radius=6, color_by="speed")

@@ -669,7 +669,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
     r.add_argument("--title", metavar="TEXT", help="a caption in the top-left corner of particle animations")
     r.add_argument("--cmap", metavar="NAME",
-                   help="colour map of speed and pressure: viridis, plasma, magma, inferno, cividis or turbo")
+                   help="colour map of speed and pressure: viridis, plasma, magma, inferno, cividis, turbo or ice")
     r.add_argument("--background", metavar="#RRGGBB", help="background colour of particle animations (default: the theme's)")
     r.add_argument("--camera", type=_camera_arg, metavar="MODE",
                    help="fit (still, the default), follow (the moving particles' centre of mass; follow:I "

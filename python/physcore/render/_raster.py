@@ -433,6 +433,7 @@ class _Rasteriser:
         colors: np.ndarray | None = None,
         cmap: str | None = None,
         background: tuple[int, int, int] | None = None,
+        surface: bool = False,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -447,7 +448,9 @@ class _Rasteriser:
         `antialias`: frame_rgb draws the discs with soft edges (coverage-blended, in the core).
         `colors`: (N, 3) uint8 RGB per particle, used by ``color_by`` "none" (discs, drawn in
         full colour by frame_rgb) and "density" (each particle's glow in its colour); `cmap`:
-        the speed and pressure maps' name; `background`: an RGB triple for the background."""
+        the speed and pressure maps' name; `background`: an RGB triple for the background.
+        `surface`: frame_rgb draws the free particles as one continuous surface (a liquid),
+        coloured by `color_by` (see :meth:`_frame_rgb_surface`)."""
         n, dim = rec.positions.shape[1:]
         mode, cam_param = camera
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
@@ -576,8 +579,12 @@ class _Rasteriser:
         self.colors = colors if colors is not None and color_by in ("none", "density") else None
         # Discs in their own colours are drawn in full colour (soft-edged): any number of hues.
         self.antialias = (bool(antialias) or self.colors is not None) and color_by != "density"  # glow is smooth already
+        self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
+        if self.surface:
+            self._surface_setup()
         #: frame_rgb is the frame (full colour): shaded meshes, soft discs, glow in own colours.
-        self.full_colour = mesh is not None or self.antialias or (self.colors is not None and color_by == "density")
+        self.full_colour = (mesh is not None or self.antialias or self.surface
+                            or (self.colors is not None and color_by == "density"))
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
         self.trail_px = 2 if min(size) >= 300 else 1
         self.mesh = mesh
@@ -691,6 +698,84 @@ class _Rasteriser:
             _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
 
+    def _surface_setup(self) -> None:
+        """The surface's fixed scales: the particle spacing in pixels, from frame 0's projected
+        free particles (the area of the cells they occupy, over their count, refined twice
+        with cells of twice the spacing), the blur that closes the gaps between neighbours
+        (σ ≈ 0.7 spacing) and the density of a filled interior (one particle per spacing²)."""
+        rec = self.rec
+        free = ~rec.pinned
+        s, _ = self.cam.project(rec.positions[0][free])
+        col, row = self.cam.pixels(s)
+        ok = np.isfinite(col) & np.isfinite(row)
+        col, row = col[ok], row[ok]
+        n = max(int(col.size), 1)
+        span = max(float(np.ptp(col)) if col.size else 1.0, 1.0) * max(float(np.ptp(row)) if row.size else 1.0, 1.0)
+        spacing = math.sqrt(span / n)
+        for _ in range(3):
+            c = max(2.0 * spacing, 1e-3)
+            cells = np.unique(np.stack([np.floor(col / c), np.floor(row / c)], axis=1), axis=0).shape[0] if col.size else 1
+            spacing = math.sqrt(cells * c * c / n)
+        self._surf_spacing = max(spacing, 0.5)
+        target = 0.7 * self._surf_spacing  # σ of three box blurs of radius r is √(r(r+1))
+        self._surf_r = max(1, int(round(math.sqrt(target * target + 0.25) - 0.5)))
+        self._surf_ref = 1.0 / (self._surf_spacing**2)
+
+    def _frame_rgb_surface(self, k: int) -> np.ndarray:
+        """Frame k with the free particles as a continuous liquid: their count and their values
+        (speed or pressure) splatted per pixel and blurred (σ ≈ 0.7 spacing), so gaps between
+        neighbours close; a pixel is inside where the density passes 45 % of a filled
+        interior's, with a soft edge over 30–60 %, coloured by the density-weighted mean value
+        on the colour map, lit along the surface's edge (the density's gradient as a normal,
+        light from the upper left) so a wave's crest reads as a surface. Spray thinner than
+        the threshold still shows, fainter. Walls and colliders stay as drawn underneath."""
+        rec = self.rec
+        cam = self.cam_at(k)
+        under = self._under(cam)
+        if self.trail and k > 0:
+            self._draw_trail(under, k, cam)
+        out = self.palette[under].astype(np.float32)
+        free = ~rec.pinned
+        s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
+        col, row = cam.pixels(s)
+        r = self._surf_r
+        dens = _blur(_splat(col, row, under.shape), r) / self._surf_ref
+        values = None
+        if self.color_by == "speed" and rec.speeds is not None:
+            values = rec.speeds[k]
+        elif self.color_by == "pressure" and rec.pressures is not None:
+            values = rec.pressures[k]
+        if values is not None:
+            v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0)
+            wsum = _blur(_splat(col, row, under.shape, v.astype(np.float32)), r) / self._surf_ref
+            mean = wsum / np.maximum(dens, 1e-12)
+            idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
+            colour = self.palette[idx].astype(np.float32)
+        else:
+            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
+        alpha = np.clip((dens - 0.3) / 0.3, 0.0, 1.0)
+        alpha = alpha * alpha * (3 - 2 * alpha)  # smoothstep: a soft, antialiased edge
+        # Edge light: the density's gradient is the surface normal in the image plane.
+        gy, gx = np.gradient(np.minimum(dens, 1.0))
+        lit = np.clip(-(gx + gy) * (0.7 * self._surf_spacing), -1.0, 1.0)  # light from the upper left
+        shade = (1.0 + 0.35 * lit)[..., None]
+        colour = np.clip(colour * shade + 60.0 * np.maximum(lit, 0)[..., None], 0, 255)
+        a = alpha[..., None]
+        out = out * (1 - a) + colour * a
+        out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
+        over = _overlay(under.shape)
+        if rec.pinned.any():
+            s, _ = cam.project(rec.positions[k][rec.pinned])
+            col, row = cam.pixels(s)
+            _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
+        return self._finish_rgb(out, over, k, cam)
+
+    def _value_levels_of(self, values: np.ndarray) -> np.ndarray:
+        """Palette indices of `values` on the map of `color_by` (speed or pressure)."""
+        if self.color_by == "pressure":
+            return _scalar_levels(values, self.vmax, _PRESSURE0, _N_PRESSURE)
+        return _scalar_levels(values, self.vmax, _SPEED0, _N_SPEED)
+
     def _glow(self, buf: np.ndarray, k: int) -> None:
         """Tone-maps frame k's density into the glow levels: 1 − exp(−2.5 (d / scale)^0.75), so
         the densest 0.5 % saturate towards white while a filament a hundred times fainter still
@@ -751,6 +836,8 @@ class _Rasteriser:
         mesh, the shaded surface (antialiased) over the background, trails and the particles
         that are not part of it, under the pinned particles, arrows and labels."""
         if self.mesh is None:
+            if self.surface:
+                return self._frame_rgb_surface(k)
             if self.color_by == "density" and self.colors is not None:
                 return self._frame_rgb_glow(k)
             return self._frame_rgb_discs(k) if self.antialias else self.palette[self.frame(k)]
