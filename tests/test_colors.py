@@ -110,3 +110,42 @@ def test_bad_colours_are_refused_before_stepping(tmp_path, options, error, name)
     with pytest.raises(error, match=name):
         pc.render.gif(s, tmp_path / "x.gif", frames=3, **options)
     assert s.time == 0.0 and not (tmp_path / "x.gif").exists()
+
+
+def _block(n: int = 40, spacing: float = 0.05) -> pc.Scene:
+    g = np.arange(n) * spacing
+    x = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    s = pc.Scene(2)
+    s.add_particles(x, masses=1.0)
+    return s
+
+
+def test_surface_closes_the_gaps_between_particles():
+    # A 40 × 40 lattice drawn 4 pixels apart: as discs of radius 1 the background shows between
+    # them; as a surface the interior is filled, with no background pixel inside the block.
+    s = _block()
+    opts = dict(frames=1, size=(240, 240), color_by="none", colorbar=False)
+    discs = next(pc.render.frames(s, radius=1, **opts))
+    surf = next(pc.render.frames(s, surface=True, **opts))
+    bg = surf[0, 0]
+    mask = (surf != bg).any(axis=2)
+    rows, cols = np.nonzero(mask[: int(0.8 * mask.shape[0])])
+    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    inner = (slice(r0 + 4, r1 - 3), slice(c0 + 4, c1 - 3))
+    assert mask[inner].all()
+    assert not (discs[inner] != discs[0, 0]).any(axis=2).all()
+
+
+def test_surface_colours_by_the_local_mean_speed():
+    # Left half at rest, right half moving: the surface's colour follows the speed map.
+    s = _block()
+    v = np.zeros((s.n_particles, 2))
+    v[s.positions[:, 0] > 1.0, 0] = 1.0
+    s.velocities = v
+    img = next(pc.render.frames(s, surface=True, frames=1, size=(240, 240), color_by="speed", colorbar=False))
+    pal = _palette.styled_palette("light")
+    row = img[img.shape[0] // 2]
+    slow, fast = pal[_palette._SPEED0], pal[_palette._SPEED0 + _palette._N_SPEED - 1]
+    left, right = row[img.shape[1] // 3].astype(int), row[2 * img.shape[1] // 3].astype(int)
+    assert np.abs(left - slow).sum() < np.abs(left - fast).sum()
+    assert np.abs(right - fast).sum() < np.abs(right - slow).sum()
