@@ -393,3 +393,19 @@ def test_energy_books_and_save_load():
     s.step(10)
     t.step(10)
     assert np.array_equal(s.positions, t.positions)
+
+
+def test_xpbd_rods_are_drawn_like_springs():
+    # A pendulum of two XPBD rods: the recording holds its rods as lines (with their strain), and
+    # the image shows ink between the bobs, not floating balls.
+    s = pc.Scene(2, integrator="xpbd", dt=1e-3)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], masses=1.0, pinned=[True, False, False])
+    s.add(pc.XpbdConstraints(distance=[[0, 1], [1, 2]]))
+    rec = pc.render.record(s, frames=2)
+    np.testing.assert_array_equal(rec.pairs[0], [0, 1])
+    np.testing.assert_array_equal(rec.pairs[1], [1, 2])
+    img = next(pc.render.frames(s, frames=1, size=(200, 120), radius=2, color_by="none", colorbar=False))
+    row = img[np.argmax((img != img[0, 0]).any(axis=2).sum(axis=1))]  # the row through the rods
+    ink = (row != img[0, 0]).any(axis=1)
+    c = np.flatnonzero(ink)
+    assert ink[c.min() : c.max() + 1].mean() > 0.95  # a continuous line from pivot to tip

@@ -111,9 +111,10 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
 def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
     """Draw segments between (M,) float pixel endpoints, sampling about one point per pixel.
 
-    colors is (M,) uint8. Samples falling outside buf are dropped.
+    colors is (M,) uint8, or (M, C) for an (H, W, C) image. Samples falling outside buf are
+    dropped.
     """
-    h, w = buf.shape
+    h, w = buf.shape[:2]
     ok = np.isfinite(c0) & np.isfinite(r0) & np.isfinite(c1) & np.isfinite(r1)
     # Segments wholly outside the image cost nothing.
     ok &= (np.maximum(c0, c1) >= 0) & (np.minimum(c0, c1) < w)
@@ -133,11 +134,11 @@ def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
     t = k.astype(np.float32) * np.repeat((1.0 / np.maximum(n - 1, 1)).astype(np.float32), n)
     cc = np.floor(np.repeat(c0, n) + t * np.repeat(dc, n)).astype(np.int64)
     rr = np.floor(np.repeat(r0, n) + t * np.repeat(dr, n)).astype(np.int64)
-    vals = np.repeat(colors, n)
+    vals = np.repeat(colors, n, axis=0)
     inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
     if not inside.all():
         cc, rr, vals = cc[inside], rr[inside], vals[inside]
-    buf.reshape(-1)[rr * w + cc] = vals
+    buf.reshape(h * w, -1)[rr * w + cc] = vals.reshape(vals.shape[0], -1)
 
 
 def _draw_discs(buf: np.ndarray, col, row, colors: np.ndarray, stencil) -> None:
@@ -873,8 +874,13 @@ class _Rasteriser:
         under = self._under(cam)
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
-        on_top = self._draw_behind(under, k, cam, col, row)
-        out = self.palette[under]
+        if self.colors is None:
+            on_top = self._draw_behind(under, k, cam, col, row)
+            out = self.palette[under]
+        else:  # own colours: trails and springs in the particles' colours, in full colour
+            on_top = False
+            out = self.palette[under]
+            self._draw_behind_rgb(out, k, cam, col, row)
         if col.size:
             colors = self._disc_colors(k, col.size)
             order = np.argsort(depth, kind="stable") if depth is not None else self.pin_order
@@ -914,6 +920,36 @@ class _Rasteriser:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return springs and self.color_by == "strain"
+
+    def _draw_behind_rgb(self, out: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> None:
+        """What frame k draws under its discs in their own colours (``colors``), onto the RGB
+        image `out`: each moving particle's trail in its colour, fading into the background
+        with age (from 15 % to 75 % of the colour), then the springs (rods, strings) in the
+        colour of their moving end (the pinned end is a pivot), 2 px wide from 300 px on."""
+        rec = self.rec
+        bg = self.palette[_BACKGROUND].astype(np.float32)
+        rgb = self.colors.astype(np.float32)
+        passes = ((0, 0), (1, 0), (0, 1))[: 1 if self.trail_px < 2 else 3]
+        if self.trail and k > 0:
+            moving = ~rec.pinned
+            first = max(0, k - self.trail)
+            if self._centres is None and self._pix is None:
+                self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
+            for f in range(first, k):
+                if self._centres is None:
+                    (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
+                else:
+                    (c0, r0), (c1, r1) = (cam.pixels(cam.project(rec.positions[g])[0]) for g in (f, f + 1))
+                a = 0.15 + 0.6 * (f - first + 1) / max(1, k - first)
+                shade = np.rint(bg * (1 - a) + rgb[moving] * a).astype(np.uint8)
+                for dc, dr in passes:
+                    _draw_lines(out, c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, shade)
+        if rec.pairs is not None and rec.strain is not None:
+            i, j = rec.pairs
+            end = np.where(rec.pinned[j], i, j)
+            shade = np.rint(0.2 * bg + 0.8 * rgb[end]).astype(np.uint8)
+            for dc, dr in passes:
+                _draw_lines(out, col[i] + dc, row[i] + dr, col[j] + dc, row[j] + dr, shade)
 
     def _value_levels(self, k: int) -> np.ndarray | None:
         """(N,) uint8 palette indices of frame k's speeds or pressures on their colour map, or

@@ -30,11 +30,22 @@ def _planes(planes: Any, dim: int) -> list:
 
 
 def _scene_springs(scene: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """(i, j, rest length) of every line the scene draws: its springs (``spring_pairs()``) and,
+    on a physcore Scene, the rods of its XPBD distance constraints (a pendulum's rods, a rope),
+    drawn alike."""
+    from ..terms import XpbdConstraints  # here: the terms module imports the renderer's package lazily too
+
     i, j, rest = scene.spring_pairs()
-    i = np.asarray(i, dtype=np.intp)
+    parts = [(np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64))]
+    for t in getattr(scene, "terms", ()):
+        if isinstance(t, XpbdConstraints) and np.asarray(t.distance).size:
+            d = np.asarray(t.distance, dtype=np.intp).reshape(-1, 2)
+            r = np.full(len(d), np.nan) if t.rest_length is None else np.asarray(t.rest_length, dtype=np.float64).reshape(-1)
+            parts.append((d[:, 0], d[:, 1], r))
+    i = np.concatenate([p[0] for p in parts])
     if i.size == 0:
         return None
-    return i, np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64)
+    return i, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts])
 
 
 def _pressure_array(p: Any, n: int) -> np.ndarray:
