@@ -149,3 +149,12 @@ def test_surface_colours_by_the_local_mean_speed():
     left, right = row[img.shape[1] // 3].astype(int), row[2 * img.shape[1] // 3].astype(int)
     assert np.abs(left - slow).sum() < np.abs(left - fast).sum()
     assert np.abs(right - fast).sum() < np.abs(right - slow).sum()
+
+
+def test_a_shaded_surface_takes_the_particles_colours():
+    # The cloth's sheet in its particles' own colour: red-dominant pixels where it was fabric.
+    s = pc.scenes.cloth(n=8)
+    red = np.tile(np.array([[220, 30, 40]], np.uint8), (s.n_particles, 1))
+    img = next(pc.render.frames(s, frames=1, size=(160, 120), color_by="none", colors=red)).astype(int)
+    sheet = (img != img[0, 0]).any(axis=2) & (img[..., 0] > img[..., 1] + 60)
+    assert sheet.mean() > 0.05

@@ -972,8 +972,12 @@ class _Rasteriser:
 
     def _mesh_colors(self, k: int) -> np.ndarray | None:
         """(N, 3) float32 per-vertex surface colours in [0, 1] from `color_by` (speed, pressure,
-        or strain: each vertex the mean strain of its springs), or None for the plain surface."""
+        or strain: each vertex the mean strain of its springs), the particles' own colours
+        (``colors`` with color_by "none": a jelly's, a flag's stripes), or None for the plain
+        surface."""
         rec = self.rec
+        if self.colors is not None:
+            return self.colors.astype(np.float32) * np.float32(1 / 255)
         if self.color_by == "strain" and rec.strain is not None and rec.pairs is not None:
             i, j = rec.pairs
             n = rec.positions.shape[1]
