@@ -118,6 +118,35 @@ def contact_sheet(path: Path, out: Path) -> None:
     Image.fromarray(sheet).save(out)
 
 
+def thumbnail(path: Path, out: Path, width: int = 240, max_bytes: int = 200_000) -> int:
+    """A small copy of the GIF at `path` for the README's gallery, at most `max_bytes`: the
+    first of these that fits, `width` pixels wide with 255 then 64 colours (one palette fitted
+    to the whole animation), every frame or every 2nd or 3rd at the same playing time, then
+    narrower (5/6, 2/3, 1/2 of `width`) and sparser. Returns its size in bytes."""
+    from PIL import Image
+
+    frames, durations = read_gif(path)
+    h, w, _ = frames[0].shape
+    tries = [(width, c, k) for c in (255, 64) for k in (1, 2, 3)]
+    tries += [(width * 5 // 6, 64, k) for k in (2, 3, 4)] + [(width * 2 // 3, 32, k) for k in (3, 4, 6, 8)]
+    tries += [(width // 2, 32, 4), (width // 2, 16, 8)]
+    cache: dict[int, list[np.ndarray]] = {}
+    for wide, colours, stride in tries:
+        if wide not in cache:
+            size = (wide, max(16, round(h * wide / w)))
+            cache[wide] = [np.asarray(Image.fromarray(f).resize(size, Image.Resampling.LANCZOS)) for f in frames]
+        small = cache[wide]
+        picks = list(range(0, len(small), stride))
+        mosaic = Image.fromarray(np.concatenate([small[k] for k in picks[:: max(1, len(picks) // 12)]], axis=0))
+        pal = mosaic.quantize(colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        seq = [Image.fromarray(small[k]).quantize(palette=pal, dither=Image.Dither.NONE) for k in picks]
+        dur = [round(1000 * sum(durations[k : k + stride])) for k in picks]
+        seq[0].save(out, save_all=True, append_images=seq[1:], duration=dur, loop=0, optimize=False, disposal=1)
+        if out.stat().st_size <= max_bytes:
+            break
+    return out.stat().st_size
+
+
 def verdict(row: dict) -> list[str]:
     """The budgets `row` misses, as short phrases (empty: within every budget)."""
     miss = []
@@ -190,6 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", help="scene names (default: every registered scene)")
     ap.add_argument("--out", default="gallery", help="output folder (default ./gallery)")
+    ap.add_argument("--thumbs", metavar="DIR", help="also write README thumbnails (240 px, <= 200 kB) into DIR")
     args = ap.parse_args(argv)
     names = args.scenes or list(pc.scenes.REGISTRY)
     unknown = [n for n in names if n not in pc.scenes.REGISTRY]
@@ -205,6 +235,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name:16s} " + ("error" if "error" in row else f"{row['wall_s']:6.1f} s  {row['bytes'] / 1e6:5.2f} MB  "
               f"motion {row['motion_end']:.2f}  active {row['active']:.0%}  coverage {row['coverage']:.0%}  "
               f"{'ok' if not row['misses'] else '; '.join(row['misses'])}"), flush=True)
+    if args.thumbs:
+        thumbs = Path(args.thumbs)
+        thumbs.mkdir(parents=True, exist_ok=True)
+        for r in rows:
+            if "error" not in r:
+                r["thumb_bytes"] = thumbnail(out / f"{r['scene']}.gif", thumbs / f"{r['scene']}.gif")
+        print(f"thumbnails: {sum(r.get('thumb_bytes', 0) for r in rows) / 1e6:.2f} MB in {thumbs}")
     text = table(rows)
     ok = sum(1 for r in rows if "error" not in r and not r["misses"])
     summary = f"{ok} of {len(rows)} scenes within every budget"
