@@ -164,3 +164,15 @@ def test_a_shaded_surface_takes_the_particles_colours():
     opts = dict(frames=1, size=(160, 120), color_by="none")
     assert bluish(next(pc.render.frames(s, colors=blue, **opts))) > 0.05
     assert bluish(next(pc.render.frames(s, **opts))) == 0.0
+
+
+def test_the_back_of_a_white_texture_stays_neutral():
+    # A white texture seen from behind (from below the flat sheet) is a darker grey, not tinted
+    # towards the fabric's back: it read salmon pink (R − B = 23 on every pixel), now R = G = B.
+    white = np.full((2, 2, 3), 255, np.uint8)
+    s = pc.scenes.cloth(n=12)
+    img = next(pc.render.frames(s, frames=1, size=(160, 120), texture=white, view=(-60, -25))).astype(int)
+    sheet = (img != img[0, 0]).any(axis=2)
+    pinned = np.abs(img - [255, 127, 14]).sum(axis=2) < 200  # the orange discs of the pinned edge
+    tint = np.abs(img[..., 0] - img[..., 2])[sheet & ~pinned]
+    assert tint.size > 1000 and np.percentile(tint, 90) <= 2

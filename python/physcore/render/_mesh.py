@@ -146,6 +146,8 @@ _BACK = {"light": (0.64, 0.26, 0.19), "dark": (0.74, 0.38, 0.24)}
 #: reach a little past the terminator so that folds facing away do not go black, and a
 #: Blinn–Phong highlight.
 _AMBIENT, _DIFFUSE, _WRAP, _SPECULAR, _SHININESS = 0.30, 0.70, 0.3, 0.30, 24.0
+#: The back of a textured or coloured sheet: its own colours, this much darker.
+_BACK_SHADE = 0.8
 _SS = 2  # supersampling factor per axis (antialiased edges)
 
 
@@ -201,12 +203,14 @@ class _MeshShader:
         back = np.empty_like(front)
         diff_f = (_AMBIENT + _DIFFUSE * np.maximum((nl + _WRAP) / (1.0 + _WRAP), 0.0))[:, None]
         diff_b = (_AMBIENT + _DIFFUSE * np.maximum((_WRAP - nl) / (1.0 + _WRAP), 0.0))[:, None]
+        # A texture or colours of one's own: the back is the same colour a shade darker (a tint
+        # towards the fabric's back turned a flag's white stripe salmon pink).
         if self.texture is not None:
             front[:, :3] = diff_f
-            back[:, :3] = diff_b * (0.55 + 0.45 * self.back)  # the texture, seen through, tinted
+            back[:, :3] = diff_b * _BACK_SHADE
         elif base is not None:
             front[:, :3] = diff_f * base
-            back[:, :3] = diff_b * (0.55 * base + 0.45 * self.back)
+            back[:, :3] = diff_b * _BACK_SHADE * base
         else:
             front[:, :3] = diff_f * self.front
             back[:, :3] = diff_b * self.back
