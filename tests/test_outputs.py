@@ -24,14 +24,15 @@ def _gif_frames(data: bytes) -> list[np.ndarray]:
 @pytest.fixture(scope="module")
 def rec():
     """A moving scene's recording (every frame differs, so the GIF keeps all of them)."""
-    return pc.render.record(pc.scenes.kepler(e=0.6), frames=12)
+    return pc.render.record(pc.scenes.kepler(e=0.6), frames=12, frame_time=0.5)  # a twelfth of an orbit a frame
 
 
 def test_frames_are_the_gifs_frames(rec, tmp_path):
     # Hard-edged discs: the fixed palette, so the GIF holds the frames exactly.
-    frames = list(pc.render.frames(rec, size=(96, 72), antialias=False))
+    # radius=3: the scene's default discs (12 px, for its 380 × 320) would fill a 96 × 72 image.
+    frames = list(pc.render.frames(rec, size=(96, 72), antialias=False, radius=3))
     assert len(frames) == 12 and frames[0].shape == (72, 96, 3) and frames[0].dtype == np.uint8
-    gif = pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72), antialias=False)
+    gif = pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72), antialias=False, radius=3)
     decoded = _gif_frames(gif.read_bytes())
     assert len(decoded) == 12
     for a, b in zip(frames, decoded, strict=True):
@@ -41,8 +42,8 @@ def test_frames_are_the_gifs_frames(rec, tmp_path):
 def test_soft_disc_frames_are_the_gifs_up_to_its_palette(rec, tmp_path):
     # Soft discs (Kepler's default): full colour, one 256-colour palette for the GIF; the
     # frequent flat colours (background, text, trail) exact, the rest within a few levels.
-    frames = list(pc.render.frames(rec, size=(96, 72)))
-    decoded = _gif_frames(pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72)).read_bytes())
+    frames = list(pc.render.frames(rec, size=(96, 72), radius=3))
+    decoded = _gif_frames(pc.render.gif(rec, tmp_path / "a.gif", size=(96, 72), radius=3).read_bytes())
     assert len(decoded) == 12
     for a, b in zip(frames, decoded, strict=True):
         a, b = a.astype(int), b.astype(int)

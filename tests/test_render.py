@@ -312,12 +312,16 @@ def test_existing_file_is_replaced(tmp_path):
 
 
 def test_failure_while_writing_removes_the_temporary_file(tmp_path, monkeypatch):
-    from PIL import Image as PILImage
+    from physcore.render import _gif
 
-    def broken_save(self, *args, **kwargs):
-        raise OSError("disk full")
+    real = _gif._lzw
 
-    monkeypatch.setattr(PILImage.Image, "save", broken_save)
+    def broken_lzw(pixels):  # the GIF writer's frame data: fails once the temporary file is open
+        if any(tmp_path.iterdir()):
+            raise OSError("disk full")
+        return real(pixels)
+
+    monkeypatch.setattr(_gif, "_lzw", broken_lzw)
     with pytest.raises(OSError, match="disk full"):
         render.gif(pendulum_pair(), tmp_path / "x.gif", frames=2, size=(32, 32))
     assert list(tmp_path.iterdir()) == []
@@ -860,3 +864,100 @@ def test_a_recording_draws_as_its_scene_would(tmp_path):
     assert img.shape[:2] == (400, 480)  # the scene's size, (480, 400)
     none = render.record(pc.scenes.kepler(), frames=2, color_by="none")
     render.gif(none, tmp_path / "k.gif")  # draws with one colour, as recorded
+
+
+# ----------------------------------------------------------- GIF writer: frame differences
+def _decoded_gif(path, tick_ms=None):
+    """The GIF's frames as int RGB arrays; with `tick_ms`, each repeated for as many ticks as it
+    shows (a frame without change lengthens the previous one instead of being stored)."""
+    from PIL import Image, ImageSequence
+
+    with Image.open(path) as im:
+        out = [(np.asarray(f.convert("RGB")).astype(int), f.info["duration"]) for f in ImageSequence.Iterator(im)]
+    if tick_ms is None:
+        return [f for f, _ in out]
+    return [f for f, ms in out for _ in range(round(ms / tick_ms))]
+
+
+def _moving_square_frames(n=10, size=(80, 64)):
+    """A static ramp (every column its own index) with two 6-pixel squares moving over it in
+    opposite corners (so the box of each frame's changes is most of the frame)."""
+    w, h = size
+    base = np.tile((np.arange(w) * 200 // w).astype(np.uint8), (h, 1))
+    out = []
+    for k in range(n):
+        f = base.copy()
+        f[2:8, 2 + k : 8 + k] = 250
+        f[h - 8 : h - 2, w - 8 - k : w - 2 - k] = 251
+        out.append(f)
+    return out
+
+
+def test_gif_writer_stores_frame_differences_and_decodes_to_the_frames(tmp_path, monkeypatch):
+    from physcore.render import _gif
+
+    colours = np.stack([np.arange(256), 255 - np.arange(256), np.full(256, 90)], axis=1).astype(np.uint8)
+    frames = _moving_square_frames()
+    _gif._write_gif(tmp_path / "diff.gif", iter(frames), [40] * len(frames), colours, tolerance=0)
+    decoded = _decoded_gif(tmp_path / "diff.gif")
+    assert len(decoded) == len(frames)
+    for f, d in zip(frames, decoded, strict=True):
+        assert np.array_equal(colours[f].astype(int), d)  # exactly the frames drawn
+    # No free index for the transparent pixels: each frame stored whole in the box of its
+    # changes (as before frame differences), the same pictures in more bytes.
+    monkeypatch.setattr(_gif, "_transparent_slot", lambda frames, colours: None)
+    _gif._write_gif(tmp_path / "whole.gif", iter(frames), [40] * len(frames), colours, tolerance=0)
+    assert all(np.array_equal(a, b) for a, b in zip(decoded, _decoded_gif(tmp_path / "whole.gif"), strict=True))
+    assert (tmp_path / "diff.gif").stat().st_size < 0.6 * (tmp_path / "whole.gif").stat().st_size
+
+
+def test_gif_writer_tolerance_bounds_the_error_and_never_accumulates(tmp_path):
+    from physcore.render import _gif
+
+    grey = np.repeat(np.arange(256, dtype=np.uint8)[:, None], 3, axis=1)
+    rng = np.random.default_rng(4)
+    # A field creeping up by one or two levels a frame, with one-level flicker: each step is
+    # within the tolerance of 4, the drift over the run far beyond it.
+    frames = [np.clip(100 + 2 * k + rng.integers(-1, 2, (40, 48)), 0, 255).astype(np.uint8) for k in range(20)]
+    _gif._write_gif(tmp_path / "t.gif", iter(frames), [40] * len(frames), grey, tolerance=4)
+    decoded = _decoded_gif(tmp_path / "t.gif", tick_ms=40)
+    assert len(decoded) == len(frames)
+    errors = [np.abs(grey[f].astype(int) - d).max() for f, d in zip(frames, decoded, strict=True)]
+    assert max(errors) <= 4 and max(errors) > 0  # lagging by up to the tolerance, never more
+    assert np.abs(decoded[-1] - decoded[0]).mean() > 30  # the drift shows
+
+
+def test_full_colour_gif_keeps_a_transparent_slot_and_the_frames(tmp_path):
+    # Soft discs: an adaptive palette of 255 colours, the 256th transparent; the decoded frames
+    # are those drawn up to that palette (as before), every frame kept.
+    rec = pc.render.record(pc.scenes.kepler(e=0.6), frames=10)
+    drawn = list(pc.render.frames(rec, size=(96, 72)))
+    decoded = _decoded_gif(pc.render.gif(rec, tmp_path / "k.gif", size=(96, 72)))
+    assert len(decoded) == len(drawn)
+    for a, b in zip(drawn, decoded, strict=True):
+        assert np.abs(a.astype(int) - b).mean() < 1.0
+
+
+def test_field_gif_is_its_frames_up_to_the_field_tolerance(tmp_path):
+    from physcore.render._gif import FIELD_GIF_TOLERANCE
+
+    rec = pc.render.record(pc.scenes.ripple(n=48), frames=10, frame_time=0.04)
+    drawn = list(pc.render.frames(rec, size=(96, 96), fps=25))
+    decoded = _decoded_gif(pc.render.gif(rec, tmp_path / "t.gif", size=(96, 96), fps=25), tick_ms=40)
+    assert len(decoded) == len(drawn)
+    assert np.abs(decoded[-1] - decoded[0]).max() > 50  # the ripples move
+    for a, b in zip(drawn, decoded, strict=True):
+        assert np.abs(a.astype(int) - b).max() <= FIELD_GIF_TOLERANCE
+
+
+def test_field_labels_dimensionless_clock_and_a_scale_from_zero():
+    from physcore.render._fields import FieldRasteriser
+
+    f = np.random.default_rng(0).random((3, 16, 16)).astype(np.float32) * 0.9 + 0.001  # >= 0, low end ~0
+    times = np.array([0.0, 1.0, 2.0])
+    gs = FieldRasteriser(f, "turing", (100, 100), None, (1.0, 1.0), times=times, label="v")
+    assert gs.time_unit == "" and gs.lo == 0.0  # Gray–Scott: no unit; a non-negative field from 0
+    speed = FieldRasteriser(f, "turing", (100, 100), None, (1.0, 1.0), times=times, label="speed m/s")
+    assert speed.time_unit == "s" and speed.lo == 0.0
+    shifted = FieldRasteriser(f + 5.0, "turing", (100, 100), None, (1.0, 1.0), times=times, label="T")
+    assert shifted.lo > 5.0  # far from 0: the scale keeps its low percentile

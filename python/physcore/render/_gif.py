@@ -62,6 +62,7 @@ def gif(
     colors: Any = None,
     cmap: str | None = None,
     background: Any = None,
+    surface: bool | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -231,12 +232,21 @@ def gif(
     cmap : str, optional
         The colour map of ``color_by`` "speed" and "pressure": one of
         :data:`physcore.render.CMAPS` ("viridis", "plasma", "magma", "inferno", "cividis",
-        "turbo"). Default: the scene's ``render_defaults``, else viridis for speed and plasma
+        "turbo", and "ice", water from deep navy to foam white). Default: the scene's ``render_defaults``, else viridis for speed and plasma
         for pressure.
     background : (int, int, int), optional
         The background's RGB colour, 0–255 each (a billiard table's felt); trails fade into it,
         and labels turn light on a dark one. Default: the scene's ``render_defaults``, else the
         theme's.
+    surface : bool, optional
+        Draw the moving particles as one continuous surface, for liquids: each particle's count
+        and value (``color_by`` "speed" or "pressure", else one colour) splatted per pixel and
+        blurred with σ ≈ 0.7 particle spacings (the spacing read off the first frame), inside
+        where the density passes 45 % of a filled interior's, with a soft edge and a light on
+        the surface's upper-left rim; each pixel takes the density-weighted mean value. Walls
+        and colliders are drawn as usual. Not with a mesh or ``color_by`` "density"/"strain"
+        (then ignored). Default: the scene's ``render_defaults`` (the fluid scenes have it on),
+        else False.
 
     Returns
     -------
@@ -274,13 +284,13 @@ def gif(
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
-                   colors=colors, cmap=cmap, background=background)
+                   colors=colors, cmap=cmap, background=background, surface=surface)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background")
+            "antialias", "colors", "cmap", "background", "surface")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -291,7 +301,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background) = (
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -337,6 +347,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     texture = check_texture(texture, mesh)
     antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
     cmap = _check_cmap(d.get("cmap") if cmap is None else cmap)
+    surface = _check.flag("surface", bool(d.get("surface", False)) if surface is None else surface)
     background = _check_background(d.get("background") if background is None else background)
     n_colors = scene.positions.shape[1] if isinstance(scene, _recording.Recording) else n_points
     colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
@@ -384,7 +395,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
-                      antialias=antialias, colors=colors, cmap=cmap, background=background)
+                      antialias=antialias, colors=colors, cmap=cmap, background=background,
+                      surface=surface)
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
@@ -528,13 +540,14 @@ def _gif_delays_ms(fps: float, frames: int) -> list[int]:
     return [10 * (b - a) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
-def _palette_frames(rgb: list[np.ndarray]) -> tuple[list[Any], bytes]:
-    """Full-colour (H, W, 3) uint8 frames as 'P' images on one palette of 256 colours for the
-    whole animation (so that colours do not flicker from frame to frame), made from up to 8
-    frames spread through it: their 16 most frequent colours exactly (the background, text and
-    other flat colours stay exact) and 240 by median cut. Each frame is mapped to its nearest
-    colours without dithering (dither noise would change every frame and cost bytes). Returns
-    the images and the palette's 768 bytes."""
+def _palette_frames(rgb: list[np.ndarray], n_colours: int = 256) -> tuple[list[Any], bytes]:
+    """Full-colour (H, W, 3) uint8 frames as 'P' images on one palette of `n_colours` (at most
+    256) for the whole animation (so that colours do not flicker from frame to frame), made from
+    up to 8 frames spread through it: their 16 most frequent colours exactly (the background,
+    text and other flat colours stay exact) and the rest (240 of 256) by median cut. Each frame
+    is mapped to its nearest colours without dithering (dither noise would change every frame
+    and cost bytes). Returns the images and the palette's 768 bytes (entries from `n_colours`
+    on are black and unused: the GIF writer keeps one for its transparent pixels)."""
     from PIL import Image
 
     weights = np.array([65536, 256, 1], dtype=np.int64)
@@ -543,11 +556,12 @@ def _palette_frames(rgb: list[np.ndarray]) -> tuple[list[Any], bytes]:
     values, counts = np.unique(sample.reshape(-1, 3).astype(np.int64) @ weights, return_counts=True)
     top = values[np.argsort(counts, kind="stable")[::-1][:16]]
     exact = np.stack([top >> 16, (top >> 8) & 255, top & 255], axis=1).astype(np.uint8)
-    adaptive = Image.fromarray(sample).quantize(256 - len(exact), method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
-    colours = exact.tobytes() + bytes(adaptive.getpalette()[: 3 * (256 - len(exact))])
+    adaptive = Image.fromarray(sample).quantize(n_colours - len(exact), method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    colours = exact.tobytes() + bytes(adaptive.getpalette()[: 3 * (n_colours - len(exact))])
     colours += bytes(768 - len(colours))
     palette_image = Image.new("P", (1, 1))
-    palette_image.putpalette(colours)
+    # Only the palette's first n_colours entries: Pillow must map no pixel to the unused rest.
+    palette_image.putpalette(colours[: 3 * n_colours])
     # Pillow maps to a palette through a coarse colour cache (a near-white background can come
     # out as a neighbouring entry), so the exact colours are put back by their packed value.
     order = np.argsort(top)
@@ -566,32 +580,140 @@ def _palette_frames(rgb: list[np.ndarray]) -> tuple[list[Any], bytes]:
     return [mapped(f) for f in rgb], colours
 
 
+#: The GIF writer stores a pixel of a frame only where its colour differs from the one the
+#: viewer already shows there by more than this, in any of R, G and B (0-255); the other pixels
+#: are transparent and the previous frame shows through (frame-difference transparency). 0:
+#: every change is stored, so the decoded GIF shows exactly the frames drawn (particle scenes:
+#: their flat colours and hard edges would show any error).
+GIF_TOLERANCE = 0
+#: The same for fields (palettes of smooth colour maps, :mod:`._fields`): a pixel may lag its
+#: frame by about one shade of the map (8 of 255, 3 %), which does not show, while the pattern
+#: settling by a shade here and there no longer rewrites it (Turing, 120 frames of 400²:
+#: 6.3 MB with 0, 4.2 MB with 8).
+FIELD_GIF_TOLERANCE = 8
+
+
 def _write_gif_rgb(path: Path, rgb: list[np.ndarray], duration_ms: list[int]) -> None:
-    """A GIF of full-colour frames (shaded surfaces, soft discs) on one palette (see
-    :func:`_palette_frames`), written atomically."""
-    images, colours = _palette_frames(rgb)
-    atomic_write(
-        path,
-        lambda fh: images[0].save(
-            fh, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0, palette=colours
-        ),
-    )
+    """A GIF of full-colour frames (shaded surfaces, soft discs) on one palette of 255 colours
+    (see :func:`_palette_frames`; the 256th is the transparent one of :func:`_write_indexed`),
+    written atomically."""
+    images, colours = _palette_frames(rgb, n_colours=255)
+    _write_indexed(path, [np.asarray(im) for im in images], duration_ms, np.frombuffer(colours, np.uint8).reshape(-1, 3))
 
 
-def _write_gif(path: Path, index_frames, duration_ms: list[int], colours: Any = None) -> None:
+def _write_gif(path: Path, index_frames, duration_ms: list[int], colours: Any = None, tolerance: int | None = None) -> None:
+    """A GIF of (H, W) uint8 palette-index frames on `colours` ((K <= 256, 3) uint8; the fixed
+    particle palette when None), written atomically (see :func:`_write_indexed`) with
+    `tolerance`, by default :data:`FIELD_GIF_TOLERANCE` on the fields' colour maps
+    (:func:`._fields.palette`) and :data:`GIF_TOLERANCE` on any other."""
+    frames = [np.asarray(buf, dtype=np.uint8) for buf in index_frames]
+    if tolerance is None:
+        from ._fields import STYLES, palette
+
+        field = colours is not None and any(np.array_equal(colours, palette(s)) for s in STYLES)
+        tolerance = FIELD_GIF_TOLERANCE if field else GIF_TOLERANCE
+    _write_indexed(path, frames, duration_ms, np.asarray(_PALETTE if colours is None else colours, dtype=np.uint8), tolerance)
+
+
+def _transparent_slot(frames: list[np.ndarray], colours: np.ndarray) -> int | None:
+    """A palette index no frame uses (the last such), for the transparent pixels; None if the
+    frames use all 256."""
+    used = np.zeros(256, dtype=bool)
+    for f in frames:
+        used |= np.bincount(f.ravel(), minlength=256)[:256] > 0
+    free = np.flatnonzero(~used)
+    return int(free[-1]) if free.size else None
+
+
+#: The shortest run of unchanged pixels (in the order GIF stores them, row after row) made
+#: transparent; shorter ones keep their colour, so that a run of a smoothly varying field is not
+#: broken into pieces that each cost LZW codes.
+_MIN_RUN = 16
+
+
+def _short_runs_filled(changed: np.ndarray, min_run: int) -> np.ndarray:
+    """`changed` (H, W) bool with every run of False shorter than `min_run` (in row-major order)
+    set True: the pixels a frame stores."""
+    flat = changed.ravel()
+    edges = np.flatnonzero(np.diff(np.concatenate(([True], flat, [True])).astype(np.int8)))
+    starts, ends = edges[0::2], edges[1::2]  # runs of False: [start, end)
+    short = (ends - starts) < min_run
+    if not short.any():
+        return changed
+    delta = np.zeros(flat.size + 1, dtype=np.int32)
+    np.add.at(delta, starts[short], 1)
+    np.add.at(delta, ends[short], -1)
+    return (flat | (np.cumsum(delta[:-1]) > 0)).reshape(changed.shape)
+
+
+def _box(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """(top, bottom, left, right), the ends exclusive, of the True pixels of `mask`; None if none."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if not rows.size:
+        return None
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+def _lzw(pixels: np.ndarray) -> bytes:
+    """GIF's LZW code of (h, w) uint8 indices (8-bit codes, not interlaced) in its data
+    sub-blocks, as Pillow's GIF encoder writes them, without the terminating empty block."""
     from PIL import Image
 
-    palette = (_PALETTE if colours is None else colours).tobytes()
-    images = []
-    for buf in index_frames:
-        im = Image.fromarray(buf)  # 'L' from the (H, W) uint8 buffer; putpalette makes it 'P'
-        im.putpalette(palette)
-        images.append(im)
-    # Passing the palette writes it once as the global colour table and keeps Pillow from
-    # re-optimising it per frame (smaller files, and faster).
-    atomic_write(
-        path,
-        lambda fh: images[0].save(
-            fh, format="GIF", save_all=True, append_images=images[1:], duration=duration_ms, loop=0, palette=palette
-        ),
-    )
+    return Image.fromarray(np.ascontiguousarray(pixels)).tobytes("gif", "L", 8, 0)
+
+
+def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int], colours: np.ndarray, tolerance: int = 0) -> None:
+    """Write palette-index frames as an animated GIF with one global colour table (looping),
+    storing each frame after the first as its difference from what is on screen: pixels whose
+    colour is within `tolerance` (any channel, 0-255) of the colour shown there become the
+    transparent index (an index no frame uses), the frame is cropped to the box of what it
+    stores and kept on screen under the next (disposal 1, "do not dispose"); a frame with no
+    change lengthens the previous one. Per frame, whichever LZW-codes shortest is stored: the
+    changed pixels only, those and the short unchanged runs between them (see
+    :data:`_MIN_RUN`), or the whole box of the changes (a field on the move compresses best
+    whole). What is shown is tracked exactly, so no pixel ever strays from its frame's colour by
+    more than `tolerance` (0: the frames exactly). Where the frames use all 256 indices, each is
+    stored whole, cropped to the box of its changes."""
+    import struct
+
+    pal = np.zeros((256, 3), dtype=np.uint8)
+    pal[: min(256, len(colours))] = colours[:256]
+    slot = _transparent_slot(frames, pal)
+    h, w = frames[0].shape
+    rgb = pal.astype(np.int16)
+    shown = rgb[frames[0]]
+    stored: list[list[Any]] = [[frames[0], 0, 0, int(duration_ms[0])]]  # pixels, x, y, ms
+    for f, ms in zip(frames[1:], duration_ms[1:], strict=True):
+        now = rgb[f]
+        changed = np.abs(now - shown).max(axis=2) > tolerance
+        box = _box(changed)
+        if box is None:
+            stored[-1][3] += int(ms)
+            continue
+        top, bottom, left, right = box
+        whole = np.zeros_like(changed)
+        whole[top:bottom, left:right] = True
+        masks = [whole] if slot is None else [changed, _short_runs_filled(changed, _MIN_RUN), whole]
+        best = None
+        for mask in masks:
+            top, bottom, left, right = _box(mask)
+            cand = np.where(mask, f, np.uint8(0 if slot is None else slot))[top:bottom, left:right]
+            code = _lzw(cand)
+            if best is None or len(code) < len(best[0]):
+                best = (code, mask, cand, left, top)
+        _, mask, cand, x, y = best
+        shown[mask] = now[mask]
+        stored.append([cand, x, y, int(ms)])
+    head = b"GIF89a" + struct.pack("<HHBBB", w, h, 0xF7, 0, 0) + pal.tobytes()
+    head += b"!\xff\x0bNETSCAPE2.0\x03\x01" + struct.pack("<H", 0) + b"\x00"  # loop for ever
+    flags = (1 << 2) | (0 if slot is None else 1)  # do not dispose; transparent index given
+
+    def write(fh: Any) -> None:
+        fh.write(head)
+        for pixels, x, y, ms in stored:
+            ph, pw = pixels.shape
+            fh.write(b"!\xf9\x04" + struct.pack("<BHBB", flags, min(65535, round(ms / 10)), slot or 0, 0))
+            fh.write(b"," + struct.pack("<HHHHB", x, y, pw, ph, 0) + b"\x08" + _lzw(pixels) + b"\x00")
+        fh.write(b";")
+
+    atomic_write(path, write)

@@ -578,8 +578,17 @@ class _Rasteriser:
         self.palette = styled_palette(theme, cmap, background)
         # Own colours apply where no quantity is coloured: plain discs and the glow.
         self.colors = colors if colors is not None and color_by in ("none", "density") else None
-        # Discs in their own colours are drawn in full colour (soft-edged): any number of hues.
-        self.antialias = (bool(antialias) or self.colors is not None) and color_by != "density"  # glow is smooth already
+        # Own colours: hard-edged discs take palette entries of their own while they fit beside
+        # the fixed palette (one entry kept free for the GIF writer's transparency); more hues,
+        # or soft edges, are drawn in full colour.
+        self._color_idx: np.ndarray | None = None
+        own = self.colors is not None and color_by == "none" and mesh is None
+        if own and not antialias:
+            hues, which = np.unique(self.colors, axis=0, return_inverse=True)
+            if len(self.palette) + len(hues) <= 255:
+                self._color_idx = (len(self.palette) + which.reshape(-1)).astype(np.uint8)
+                self.palette = np.concatenate([self.palette, hues.astype(np.uint8)])
+        self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)) and color_by != "density"
         self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
         if self.surface:
             self._surface_setup()
@@ -964,6 +973,8 @@ class _Rasteriser:
     def _disc_colors(self, k: int, n: int) -> np.ndarray:
         """(n,) uint8 palette indices of frame k's discs by `color_by` (pinned: their own
         colour; strain: grey discs, so that blue reads as compressed springs only)."""
+        if self._color_idx is not None:  # own colours, pinned ones too
+            return self._color_idx.copy()
         colors = self._value_levels(k)
         if colors is None:
             colors = np.full(n, _WALL if self.color_by == "strain" else _PLAIN, dtype=np.uint8)
