@@ -176,3 +176,19 @@ def test_the_back_of_a_white_texture_stays_neutral():
     pinned = np.abs(img - [255, 127, 14]).sum(axis=2) < 200  # the orange discs of the pinned edge
     tint = np.abs(img[..., 0] - img[..., 2])[sheet & ~pinned]
     assert tint.size > 1000 and np.percentile(tint, 90) <= 2
+
+
+def test_glow_trails_are_continuous_streaks():
+    # One particle crossing the image at ~10 pixels a frame, drawn as glow with a trail: the
+    # history is a continuous streak along its path, not one dot a frame.
+    s = pc.Scene(2, dt=0.01)
+    s.add_particles([[0.0, 0.0], [20.0, 0.0]], masses=1.0)  # the second, at rest, widens the view
+    s.velocities = [[10.0, 0.0], [0.0, 0.0]]
+    frames = list(pc.render.frames(s, frames=10, steps_per_frame=10, size=(240, 80), color_by="density",
+                                   trail=10, theme="dark", colorbar=False))
+    last = frames[-1].astype(int).sum(axis=2)
+    row = last[np.argmax(last.max(axis=1))]
+    path = row[: int(0.4 * row.size)]  # x from 0 to 8 m of the 0–20 m view: the path so far
+    lit = np.flatnonzero(path > last[0, 0] + 30)
+    assert lit.size > 60  # the streak spans the path
+    assert np.diff(lit).max() == 1  # without a gap (one dot a frame left gaps of ~10 px)

@@ -349,7 +349,9 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     cmap = _check_cmap(d.get("cmap") if cmap is None else cmap)
     surface = _check.flag("surface", bool(d.get("surface", False)) if surface is None else surface)
     background = _check_background(d.get("background") if background is None else background)
-    n_colors = scene.positions.shape[1] if isinstance(scene, _recording.Recording) else n_points
+    # One colour per drawn point: a recording's, or the scene's particles (a flow's points).
+    n_colors = (scene.positions.shape[1] if isinstance(scene, _recording.Recording)
+                else int(getattr(_recording.points_view(scene), "n_particles", 0)))
     colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):

@@ -90,11 +90,12 @@ def _disc_stencil(radius: int) -> tuple[np.ndarray, np.ndarray]:
     return dy[keep].astype(np.intp), dx[keep].astype(np.intp)
 
 
-def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
-    """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line."""
+def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = ()) -> np.ndarray:
+    """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line
+    (a sphere collider is a disc: filled, or with ``inside`` its outside filled, a bowl)."""
     w, h = cam.width, cam.height
     img = np.full((h, w), _BACKGROUND, dtype=np.uint8)
-    if cam.dim != 2 or not planes:
+    if cam.dim != 2 or not (planes or spheres):
         return img
     # World coordinates (relative to origin) of the pixel centres.
     xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
@@ -103,6 +104,13 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray) -> np.ndarray:
         p = p - origin
         # Signed distance in pixels; > 0 on the allowed side.
         d = ((xs[None, :] - p[0]) * n[0] + (ys[:, None] - p[1]) * n[1]) * cam.scale
+        img[d < 0] = _PLANE_FILL
+        img[np.abs(d) <= 0.75] = _PLANE_LINE
+    for c, r, inside in spheres:
+        c = c - origin
+        # Distance from the circle in pixels; > 0 on the allowed side.
+        d = (np.hypot(xs[None, :] - c[0], ys[:, None] - c[1]) - r) * cam.scale
+        d = -d if inside else d
         img[d < 0] = _PLANE_FILL
         img[np.abs(d) <= 0.75] = _PLANE_LINE
     return img
@@ -458,6 +466,7 @@ class _Rasteriser:
         self.rec = rec
         self.radius = _auto_radius(n + (0 if walls is None else len(walls)), size) if radius is None else radius
         self.color_by = color_by
+        self.trail = int(trail)
         # The colour scale: 0 at the bottom, the top fixed over the animation.
         self.vmax = 0.0
         values, scale, base, levels = {
@@ -498,6 +507,13 @@ class _Rasteriser:
             if walls is not None:
                 wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
                 lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
+            balls = [(c - rec.origin, r) for c, r, inside in rec.spheres if not inside]
+            if balls:  # sphere colliders (balls) whole in view: a sphere's outline is ±r about its centre
+                c = np.array([b[0] for b in balls])
+                r = np.array([b[1] for b in balls])[:, None]
+                s, _ = self.cam.project(c)
+                lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
+                amax = max(amax, float(np.abs(c).max() + r.max()))
         # Keep the colour bar's band free: no disc reaches into it (nor into the title's).
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         w, h = size
@@ -598,7 +614,7 @@ class _Rasteriser:
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
         self.trail_px = 2 if min(size) >= 300 else 1
         self.mesh = mesh
-        self._shader = None if mesh is None else _MeshShader(mesh, theme, texture)
+        self._shader = None if mesh is None else _MeshShader(mesh, theme, texture, rec.spheres, rec.origin)
         if mesh is not None:
             on_mesh = np.zeros(n, dtype=bool)
             on_mesh[mesh.faces.ravel()] = True
@@ -619,7 +635,7 @@ class _Rasteriser:
     def _scene_background(self, cam: _Camera) -> np.ndarray:
         """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
         and the boundary particles, under everything that moves."""
-        img = _background(cam, self.rec.planes, self.rec.origin)
+        img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres)
         if self.walls is not None:
             s, _ = cam.project(self.walls)
             col, row = cam.pixels(s)
@@ -629,14 +645,34 @@ class _Rasteriser:
     def _density(self, k: int) -> np.ndarray:
         """Frame k's glow: the free particles' density (per pixel), a tight blur plus a wide
         bloom. Additive, so it needs no depth order in 3D."""
-        rec = self.rec
-        cam = self.cam_at(k)
-        x = rec.positions[k][~rec.pinned] if rec.pinned.any() else rec.positions[k]
-        s, _ = cam.project(x)
-        col, row = cam.pixels(s)
-        d = _splat(col, row, self.background.shape)
+        col, row, w = self._streak(k)
+        d = _splat(col, row, self.background.shape, w)
         r = max(1, self.radius // 2)
         return _blur(d, r) + 0.5 * _bloom(d, 4 * r)
+
+    def _streak(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Pixel positions (and weights) to splat for frame k's glow: the free particles where
+        they are or, with a `trail` and a still camera, sampled along the straight path from
+        frame k − 1 (one sample a pixel of the longest move, at most 16, each weighing 1/m), so
+        the glow's history draws continuous streaks rather than one dot a frame."""
+        rec = self.rec
+        cam = self.cam_at(k)
+        free = ~rec.pinned
+        x = rec.positions[k][free] if rec.pinned.any() else rec.positions[k]
+        col, row = cam.pixels(cam.project(x)[0])
+        if not self.trail or k == 0 or self._centres is not None:
+            return col, row, None
+        x0 = rec.positions[k - 1][free] if rec.pinned.any() else rec.positions[k - 1]
+        c0, r0 = cam.pixels(cam.project(x0)[0])
+        with np.errstate(invalid="ignore"):
+            reach = np.nanmax(np.maximum(np.abs(col - c0), np.abs(row - r0)), initial=0.0)
+        m = int(min(16, max(1, math.ceil(reach))))
+        if m == 1:
+            return col, row, None
+        t = (np.arange(1, m + 1) / m)[:, None]
+        cs = (c0[None] + t * (col - c0)[None]).reshape(-1)
+        rs = (r0[None] + t * (row - r0)[None]).reshape(-1)
+        return cs, rs, np.full(cs.shape, 1.0 / m, dtype=np.float32)
 
     def _glow_density(self, k: int) -> np.ndarray:
         """Frame k's density, or with a `trail` its fading history: max(d_k, decay · h_{k−1}),
@@ -662,14 +698,17 @@ class _Rasteriser:
         """(4, H, W): frame k's glow density (as _density) and its sums of the particles' own
         colours (red, green, blue in [0, 1], each weighted by the particle's density)."""
         rec = self.rec
-        cam = self.cam_at(k)
         free = ~rec.pinned
-        s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
-        col, row = cam.pixels(s)
+        col, row, wt = self._streak(k)
         c = (self.colors[free] if rec.pinned.any() else self.colors).astype(np.float32) / 255.0
+        m = col.size // max(1, c.shape[0])
+        if m > 1:
+            c = np.tile(c, (m, 1))
         r = max(1, self.radius // 2)
         out = []
-        for w in (None, c[:, 0], c[:, 1], c[:, 2]):
+        for w in (wt, c[:, 0], c[:, 1], c[:, 2]):
+            if w is not None and wt is not None and w is not wt:
+                w = w * wt
             d = _splat(col, row, self.background.shape, w)
             out.append(_blur(d, r) + 0.5 * _bloom(d, 4 * r))
         return np.stack(out)
