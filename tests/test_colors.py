@@ -192,3 +192,18 @@ def test_glow_trails_are_continuous_streaks():
     lit = np.flatnonzero(path > last[0, 0] + 30)
     assert lit.size > 60  # the streak spans the path
     assert np.diff(lit).max() == 1  # without a gap (one dot a frame left gaps of ~10 px)
+
+
+def test_extent_fixes_the_view_and_is_checked_before_stepping(tmp_path):
+    # A box around the first particle only: the second, 20 m away, is out of the picture.
+    s = pc.Scene(2, dt=0.01)
+    s.add_particles([[0.0, 0.0], [20.0, 0.0]], masses=1.0)
+    opts = dict(frames=1, size=(200, 100), colorbar=False, color_by="none", radius=4)
+    fitted = next(pc.render.frames(s, extent=([-1, -1], [1, 1]), **opts))
+    assert (fitted != fitted[0, 0]).any(axis=2)[:60, 150:].sum() == 0  # nothing right of the first one's box (above the scale bar)
+    whole = next(pc.render.frames(s, **opts))
+    assert (whole != whole[0, 0]).any(axis=2)[:60, 150:].sum() > 0  # the second particle, fitted in
+    for bad in ([1.0, 2.0], ([0, 0], [-1, 1]), ([0, np.nan], [1, 1])):
+        with pytest.raises(ValueError, match="extent"):
+            pc.render.gif(s, tmp_path / "x.gif", frames=3, extent=bad)
+    assert s.time == 0.0

@@ -63,6 +63,7 @@ def gif(
     cmap: str | None = None,
     background: Any = None,
     surface: bool | None = None,
+    extent: Any = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -247,6 +248,11 @@ def gif(
         and colliders are drawn as usual. Not with a mesh or ``color_by`` "density"/"strain"
         (then ignored). Default: the scene's ``render_defaults`` (the fluid scenes have it on),
         else False.
+    extent : (array_like (dim,), array_like (dim,)), optional
+        (lower, upper) corners of the box, m, the still camera is fitted to instead of every
+        frame's particles: what lies outside is not drawn (a queue of balls above a Galton
+        board enters the picture one by one). Default: the scene's ``render_defaults``, else
+        the fit to everything.
 
     Returns
     -------
@@ -284,13 +290,13 @@ def gif(
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
-                   colors=colors, cmap=cmap, background=background, surface=surface)
+                   colors=colors, cmap=cmap, background=background, surface=surface, extent=extent)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background", "surface")
+            "antialias", "colors", "cmap", "background", "surface", "extent")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -301,7 +307,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface) = (
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -353,6 +359,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     n_colors = (scene.positions.shape[1] if isinstance(scene, _recording.Recording)
                 else int(getattr(_recording.points_view(scene), "n_particles", 0)))
     colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
+    dim = scene.positions.shape[2] if isinstance(scene, _recording.Recording) else int(getattr(_recording.points_view(scene), "dim", 0))
+    box = _extent_box(d.get("extent") if extent is None else extent, dim)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
@@ -398,12 +406,27 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
                       antialias=antialias, colors=colors, cmap=cmap, background=background,
-                      surface=surface)
+                      surface=surface, fit=None if box is None else box - rec.origin)
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
         return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), ras.palette, fps, rec.frames)
+
+
+def _extent_box(extent: Any, dim: int) -> np.ndarray | None:
+    """The 2**dim corners (float64) of the box `extent` = (lower, upper), or None."""
+    if extent is None:
+        return None
+    try:
+        lo_hi = np.asarray(extent, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"extent: expected (lower, upper), two points of {dim} coordinates") from None
+    if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
+        raise InvalidInputError(
+            f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, got shape {lo_hi.shape}"
+        )
+    return np.array([[lo_hi[(k >> a) & 1, a] for a in range(dim)] for k in range(2**dim)])
 
 
 #: Output formats by file extension: what :func:`save` and ``physcore render -o`` write.
