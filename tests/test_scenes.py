@@ -21,12 +21,12 @@ SURFACE_SCENES = {"droplets": 0.3, "crown": 0.03}
 @pytest.mark.parametrize("name", list(pc.scenes.REGISTRY))
 def test_default_scene_keeps_energy_books_balanced(name):
     if name in FLUID_SCENES:
-        # Default fluid scenes take minutes (41k particles); same parameters at coarse resolution,
-        # 1 s through the wall impact, with the automatic (CFL) substeps the renderer uses.
-        # dam_break's default DFSPH steps at the flow's CFL limit, 20× WCSPH's step: its
-        # drift is semi-implicit Euler's error at that step (1.7e-2 here, converging with the
-        # step: tests/test_dfsph.py); this checks the books at WCSPH's step.
-        scene = pc.scenes.REGISTRY[name](n=12, **({"method": "wcsph"} if name == "dam_break" else {}))
+        # Same parameters at coarse resolution, 1 s through the wall impact, with the automatic
+        # (CFL) substeps the renderer uses. Their default DFSPH steps at the flow's CFL limit,
+        # 20× WCSPH's step: its drift is semi-implicit Euler's error at that step (1.7e-2 for
+        # dam_break here, converging with the step: tests/test_dfsph.py); this checks the books
+        # at WCSPH's step.
+        scene = pc.scenes.REGISTRY[name](n=12, method="wcsph")
         for _ in range(30):
             scene.advance(1.0 / 30)
     elif name in SURFACE_SCENES:

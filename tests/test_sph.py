@@ -453,15 +453,15 @@ def test_drop_scene():
     s.advance(0.45)  # the block has fallen 0.6 m and hit the pool
     assert s.positions[:, 1].max() < 1.6
     assert s.pressure().max() > 0
-    assert pc.scenes.drop.render_defaults["color_by"] == "pressure"
+    assert pc.scenes.drop.render_defaults["surface"]  # the water drawn as one surface
     s3 = pc.scenes.drop(dim=3, n=12)
     assert s3.dim == 3 and s3.n_particles > 0
     dry = pc.scenes.drop(n=20, pool=0.0)
     assert dry.n_particles == 4 * 4
     # method="dfsph": the same water, incompressible; the block hits the pool as it does in
     # WCSPH (it falls freely: within a spacing of the same lowest point at 0.3 s), in fewer steps.
-    assert s.fluids[0].method == "wcsph"
-    w, d = pc.scenes.drop(n=40), pc.scenes.drop(n=40, method="dfsph")
+    assert s.fluids[0].method == "dfsph"  # the default with the default integrator
+    w, d = pc.scenes.drop(n=40, method="wcsph"), pc.scenes.drop(n=40)
     assert d.fluids[0].method == "dfsph" and d.n_particles == w.n_particles
     steps = [sc.advance(0.3) for sc in (w, d)]
     assert steps[1] < steps[0] / 4

@@ -73,6 +73,28 @@ def test_pythagorean_problem_ejects_the_lightest_body():
     np.testing.assert_allclose(s.momentum(), 0.0, atol=1e-8)
 
 
+def test_pythagorean_render_ends_with_the_ejection_inside_the_dance():
+    # The default animation (physcore render pythagorean) must show the ejection yet keep the
+    # camera, fitted to every frame, on the dance: at its last frame the mass-3 body is already
+    # unbound from the 4-5 pair (two-body energy > 0, moving away) and no farther from the
+    # centre of mass than the bodies went during the dance before t = 58 (5.41).
+    s = pc.scenes.pythagorean()
+    d = pc.scenes.pythagorean.render_defaults
+    t_end = (d["frames"] - 1) * d["frame_time"]
+    far = 0.0
+    while s.time < 58.0 - 1e-9:
+        s.step(1)
+        far = max(far, float(np.linalg.norm(s.positions, axis=1).max()))
+    while s.time < t_end - 1e-9:
+        s.step(1)
+    x, v = s.positions, s.velocities
+    xb, vb = (4 * x[1] + 5 * x[2]) / 9, (4 * v[1] + 5 * v[2]) / 9
+    r = float(np.linalg.norm(x[0] - xb))
+    assert 0.5 * (3 * 9 / 12) * float(np.sum((v[0] - vb) ** 2)) - 3 * 9 / r > 0  # measured +39.6
+    assert float(np.dot(x[0] - xb, v[0] - vb)) > 0
+    assert float(np.linalg.norm(x[0])) < far  # measured 4.73 against 5.41
+
+
 @pytest.mark.parametrize("name", ["figure_eight", "pythagorean"])
 def test_three_body_scenes_render_with_trails(tmp_path, name):
     from PIL import Image
@@ -86,9 +108,10 @@ def test_themes_swap_the_palette_only(tmp_path):
     from PIL import Image
 
     def corner_and_indices(theme):
-        # Hard-edged discs: the fixed palette's indices (soft ones are mapped to a fitted palette).
+        # Hard-edged discs coloured by speed: the fixed palette's indices (soft ones, and the scene's
+        # own per-body colours, are mapped to a fitted palette).
         path = pc.render.gif(pc.scenes.figure_eight(), tmp_path / f"{theme}.gif", frames=3, size=(96, 64), theme=theme,
-                             antialias=False)
+                             antialias=False, color_by="speed")
         with Image.open(path) as im:
             idx = np.asarray(im)  # palette indices of frame 0
             return np.asarray(im.convert("RGB"))[-1, 0], idx

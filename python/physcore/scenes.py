@@ -321,7 +321,7 @@ xpbd_cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "s
 
 
 def tumbling_boxes(
-    n_boxes: int = 3,
+    n_boxes: int = 5,
     particles_per_side: int = 4,
     size: float = 0.4,
     mass: float = 1.0,
@@ -334,7 +334,7 @@ def tumbling_boxes(
 ) -> Scene:
     """Rigid 2D boxes of particles dropped, spinning, onto a floor and onto each other.
 
-    Each box is a square of ``particles_per_side``² particles, ``size`` m across and ``mass`` kg,
+    Each of the ``n_boxes`` boxes is a square of ``particles_per_side``² particles, ``size`` m across and ``mass`` kg,
     held rigid by shape matching (:class:`XpbdConstraints` ``shapes``, stiffness 1); they start
     side by side at different heights and angles, spinning, and fall under gravity (0, -9.81)
     m/s² onto the floor y = 0 and onto each other. Their particles are grains
@@ -348,7 +348,7 @@ def tumbling_boxes(
     shapes are projected (another ``integrator`` leaves the shapes inert: the particles fall
     apart; then the floor is a :class:`Plane` collider and the boxes pass through each other).
     The contacts close their books at each substep's predicted state, before the projections,
-    whose work the shapes book: the books balance to 3e-5 of the energy over 2 s at the
+    whose work the shapes book: the books balance to 3.5e-5 of the energy over 2 s at the
     defaults (closing them after the projections mixed the two: 2.6e-2).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
@@ -393,6 +393,8 @@ def tumbling_boxes(
     stiffness = 0.5 * m * w * w if w < 1e150 else math.inf  # (** would raise OverflowError)
     if not (math.isfinite(stiffness) and stiffness > 0.0):
         raise InvalidInputError(f"mass, dt, substeps: give a contact stiffness (m·w²/2) out of float64's range ({stiffness})")
+    # Each box its own colour (tab10's), so the boxes read as objects.
+    scene.render_defaults = {"colors": np.repeat(np.arange(n_boxes), k * k).tolist()}  # plain lists: render_defaults compare with ==
     if integrator in ("xpbd", "semi_implicit_euler"):
         scene.add(Contacts(stiffness=stiffness, restitution=restitution, friction=friction, inertia_factor=1e6,
                            walls=[Plane([0.0, 0.0], [0.0, 1.0], restitution=restitution, friction=friction)]))
@@ -401,12 +403,13 @@ def tumbling_boxes(
     return _finite_books(scene, "size, mass")
 
 
-tumbling_boxes.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360),
-                                 "size_by": "radius"}
+# 3 s: five boxes fall, tumble over each other and come to rest at about 2.7 s.
+tumbling_boxes.render_defaults = {"frames": 90, "fps": 30, "frame_time": 1 / 30, "size": (480, 360),
+                                 "size_by": "radius", "color_by": "none", "antialias": True}
 
 
 def projectile(
-    n: int = 5,
+    n: int = 7,
     speed: float = 20.0,
     drag: float = 0.0,
     restitution: float = 0.6,
@@ -419,7 +422,8 @@ def projectile(
 
     2D, gravity (0, -9.81) m/s², optional linear drag (kg/s), a ground plane y = 0 with the given
     restitution and friction 0.2. Without drag and ground the closed form is
-    x = v0 cos θ t, y = v0 sin θ t - g t²/2.
+    x = v0 cos θ t, y = v0 sin θ t - g t²/2. The render gives each ball its own colour (the
+    "tab10" group colours, by launch angle from the lowest).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring), e.g.
     for a speed whose kinetic energy overflows float64.
@@ -441,14 +445,21 @@ def projectile(
         scene.add(Drag(drag))
     if ground:
         scene.add(Plane([0.0, 0.0], [0.0, 1.0], restitution=restitution, friction=0.2))
+    scene.render_defaults = {"colors": list(range(n))}  # one colour per ball: the angles read apart
     return _finite_books(scene, "speed")
 
 
-projectile.render_defaults = {"antialias": True, "frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 320), "trail": 120}
+# 4 s: the flights (up to 3.9 s at 70°) and the first bounces; the whole paths stay drawn. Wide:
+# the 45° range (40.8 m) is 2.2 times the 70° apex (18.0 m).
+projectile.render_defaults = {"antialias": True, "frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (560, 300), "trail": 120,
+                              "radius": 8, "color_by": "none"}
 
 
 #: Range of a Kepler orbit's separations a(1 ∓ e), m: keeps r², 1/r³ and v² = GM/r inside float64.
 KEPLER_RANGE = (1e-100, 1e100)
+
+#: ``kepler``: colours of the star (warm yellow-white) and the planet (blue), RGB.
+KEPLER_COLORS = ((255, 214, 120), (100, 175, 255))
 
 
 def kepler(
@@ -466,7 +477,8 @@ def kepler(
     sqrt(G M (1 + e) / (a (1 - e))); bodies are placed in the centre-of-mass frame. Period
     P = 2π sqrt(a³ / (G M)); total energy -G m1 m2 / (2a). ``mass_ratio = 0`` pins a unit-mass
     star at the origin and makes the planet (mass 1) a test particle: then E = -1/(2a) exactly.
-    ``dt=None`` uses P / steps_per_orbit.
+    ``dt=None`` uses P / steps_per_orbit. Particle 0 is the star, 1 the planet; the render
+    draws them in their own colours (:data:`KEPLER_COLORS`: warm yellow, blue).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring); the
     separations a(1 - e) and a(1 + e) must lie in :data:`KEPLER_RANGE` (1e-100 to 1e100 m) so
@@ -503,6 +515,7 @@ def kepler(
         v = np.array([[0.0, -m2 * vp], [0.0, m1 * vp]])
         scene.add_particles(x, v, masses=[m1, m2])
     scene.add(PairwiseGravity(G=1.0))
+    scene.render_defaults = {"colors": list(KEPLER_COLORS)}  # plain lists: render_defaults compare with ==
     return scene
 
 
@@ -510,10 +523,14 @@ kepler.render_defaults = {"antialias": True,
     "frames": 120,
     "fps": 30,
     "frame_time": 4 * math.pi / 120,
-    "size": (400, 400),
+    "size": (380, 320),  # the e = 0.5 ellipse is 2a wide and 1.73a high
     "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
-    "trail": 60,  # one orbit (the 120 frames cover two)
-    "size_by": "mass",  # the star larger than the planet
+    "trail": 90,  # three quarters of an orbit (the 120 frames cover two): the ellipse stays drawn
+    "size_by": "mass",  # the star (3× the planet's 12 px) larger than the planet
+    "radius": 12,
+    # Bodies as objects (a sun, a planet: KEPLER_COLORS), not a speed map that turns the star at
+    # rest into the map's darkest end; the night sky.
+    "color_by": "none", "theme": "dark",
 }
 
 
@@ -546,12 +563,15 @@ def figure_eight(
     scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
     scene.add_particles(np.stack([x1, -x1, np.zeros(2)]), np.stack([-v3 / 2, -v3 / 2, v3]), masses=1.0)
     scene.add(PairwiseGravity(G=1.0))
+    scene.render_defaults = {"colors": [0, 1, 3]}  # tab10 blue, orange, red: three bodies, three hues
     return scene
 
 
+# One period; the curve is 2.2 wide and 0.7 high, hence the wide frame.
 figure_eight.render_defaults = {"antialias": True,
-    "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (480, 300),
+    "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (560, 300), "radius": 10,
     "speed_unit": "(G=1)", "trail": 50, "theme": "dark",  # each trail a third of the curve: the three close it
+    "color_by": "none",  # equal speeds at equal phases: the bodies as objects, each its own colour
 }
 
 
@@ -574,13 +594,18 @@ def pythagorean(
     x = np.array([[1.0, 3.0], [-2.0, -1.0], [1.0, -1.0]])
     scene.add_particles(x, np.zeros((3, 2)), masses=[3.0, 4.0, 5.0])
     scene.add(PairwiseGravity(G=1.0))
+    scene.render_defaults = {"colors": [3, 0, 1]}  # masses 3, 4, 5: tab10 red, blue, orange
     return scene
 
 
 pythagorean.render_defaults = {"antialias": True,
-    # To t = 61: the ejection has begun (from t ≈ 60) and the dance still fills the frame.
-    "frames": 204, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
-    "radius": 3, "theme": "dark",
+    # To t = 60.2: the last close encounter (t ≈ 59) has flung the lightest body out and it is
+    # 5–6 from the centre, no farther than its excursion at t ≈ 53, so the camera still fits
+    # the dance (|x| ≤ 3.2, |y| ≤ 4.5 before); a second later it is 8.4 out and the dance would
+    # shrink. Frames 0.2 apart (two output intervals of rk45's default dt) keep the trails of the
+    # close encounters smooth; trails of 20 time units; the masses as objects, each its own colour.
+    "frames": 302, "fps": 50, "frame_time": 0.2, "size": (400, 440), "speed_unit": "(G=1)", "trail": 100, "size_by": "mass",
+    "radius": 6, "theme": "dark", "color_by": "none",
 }
 
 
@@ -620,8 +645,14 @@ def plummer_sphere(
     return x - x.mean(axis=0), u - u.mean(axis=0)
 
 
+#: ``galaxies``: colours of the two galaxies' stars (pale blue, warm gold), RGB.
+GALAXY_COLORS = ((150, 190, 255), (255, 196, 110))
+
+
 def galaxies(
-    n: int = 12000,
+    n: int = 10000,
+    pericentre: float = 1.6,
+    prograde: bool = True,
     theta: float = 0.6,
     softening: float = 0.05,
     seed: int = 3,
@@ -629,42 +660,94 @@ def galaxies(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Two star clusters collide: Plummer spheres of n/2 bodies each, under tree gravity.
+    """Two disk galaxies pass on a parabolic orbit and throw out tidal tails and a bridge.
 
-    G = 1; each sphere has mass 1 and scale radius 0.6 (:func:`plummer_sphere`, cut at 97 % of
-    its mass), in equilibrium. They start 10 apart along x, offset ±1.2 in y, approaching at
-    0.25 each (below the mutual
-    escape speed, so they fall together, pass, throw out tidal streams and merge). Forces by
-    Barnes–Hut (:class:`~physcore.TreeGravity`, opening angle `theta`, Plummer `softening`);
-    ``dt=None`` takes 0.025, a quarter of the softening crossing time ε/σ.
+    The set-up of Toomre & Toomre, Astrophys. J. 178 (1972) 623: each galaxy is a central mass
+    with a cold disk of stars on circular orbits around it, and the two centres fall towards
+    each other on a parabola. G = 1. Each galaxy: a central body of mass 1 (one particle, the
+    bulge and halo in one) and a disk of (n − 2)/2 stars of total mass 0.05 (near test
+    particles, as Toomre's), spread with uniform surface density between radii 0.15 and 1
+    (r = √U(0.15², 1)) at random azimuths, each on the circular orbit of the softened central
+    mass plus the disk mass inside its radius taken as spherical,
+    v_c² = G M_c r² / (r² + ε²)^{3/2} + G M_d(< r) / r (→ G M(< r)/r for r ≫ ε; the thin
+    disk's own field departs from the spherical one by about M_d/M_c).
+
+    The orbit of the centres is the Kepler parabola (eccentricity 1) r = 2q / (1 + cos f) of
+    pericentre q = `pericentre` in the xy-plane about the total mass μ = 2 × 1.05 (radial and
+    tangential speeds √(μ/2q) sin f and √(μ/2q)(1 + cos f), so the relative speed is the escape
+    speed √(2μ/r) and the orbital energy 0), started at separation 4.5 (f ≈ −107° for q = 1.6);
+    by Barker's equation (Kepler's equation for e = 1) the pericentre comes at
+    t = √(2q³/μ)(τ + τ³/3), τ = tan(|f|/2): 4.27 for q = 1.6. The disks are tilted 15° and 45°
+    about the x-axis from the orbital plane; with `prograde` both spin the way the orbit turns,
+    which, Toomre & Toomre found, makes the long tails; ``prograde=False`` (both retrograde)
+    leaves the disks nearly undisturbed. Everything is placed in the centre-of-mass frame.
+
+    Forces by Barnes–Hut (:class:`~physcore.TreeGravity`, opening angle `theta`, Plummer
+    `softening` ε). ``dt=None`` takes 0.0125: 32 steps per orbit at the inner edge of the disks
+    (angular speed √(G M_c / (r² + ε²)^{3/2}) there), and the few stars that plunge through the
+    other galaxy's centre (accelerations up to 0.385 G M_c/ε² ≈ 150) keep the energy to 1e-5 of
+    the initial kinetic energy over the render (measured at n = 10 000; 0.025 gives 2.5e-2, from
+    those plunges). The render colours each galaxy's stars by origin (:data:`GALAXY_COLORS`:
+    first blue, then gold). Particle order: centre A, its stars, centre B, its stars.
+    :func:`plummer_sphere` samples a spherical cluster instead.
     """
-    n = _count(n, "n", 2)
+    n = _count(n, "n", 4)
+    q = _positive(pericentre, "pericentre")
+    prograde = _flag(prograde, "prograde")
     theta = _nonneg(theta, "theta")
     softening = _positive(softening, "softening")
     seed = _count(seed, "seed", 0)
     _particles("n", n)
+    if not q < 2.25:  # the start at separation 4.5 must come before the pericentre
+        raise InvalidInputError(f"pericentre: must be below 2.25 (half the starting separation 4.5), got {q:.3g}")
     rng = np.random.default_rng(seed)
-    half = n // 2
-    xa, va = plummer_sphere(half, a=0.6, cutoff=0.97, seed=int(rng.integers(2**31)))
-    xb, vb = plummer_sphere(n - half, a=0.6, cutoff=0.97, seed=int(rng.integers(2**31)))
-    offset, push = np.array([5.0, 1.2, 0.0]), np.array([0.25, 0.0, 0.0])
-    x = np.concatenate([xa - offset, xb + offset])
-    v = np.concatenate([va + push, vb - push])
-    m = np.concatenate([np.full(half, 1.0 / half), np.full(n - half, 1.0 / (n - half))])
-    scene = Scene(3, integrator=integrator, dt=0.025 if dt is None else dt, threads=threads)
+    m_centre, m_disk, r_in, r_out, sep = 1.0, 0.05, 0.15, 1.0, 4.5
+    mu = 2.0 * (m_centre + m_disk)
+    f = -math.acos(2.0 * q / sep - 1.0)  # true anomaly at the start: r = 2q / (1 + cos f)
+    k = math.sqrt(mu / (2.0 * q))
+    rhat = np.array([math.cos(f), math.sin(f), 0.0])
+    rel = sep * rhat
+    vrel = k * math.sin(f) * rhat + k * (1.0 + math.cos(f)) * np.array([-rhat[1], rhat[0], 0.0])
+    spin = 1.0 if prograde else -1.0  # the orbit turns counter-clockwise (about +z)
+    half = (n - 2) // 2
+    xs, vs, ms = [], [], []
+    for stars, side, tilt in ((half, -0.5, 15.0), (n - 2 - half, 0.5, 45.0)):
+        r = np.sqrt(rng.uniform(r_in**2, r_out**2, stars))
+        phi = rng.uniform(0.0, 2.0 * np.pi, stars)
+        inside = m_disk * (np.argsort(np.argsort(r)) + 1) / stars  # M_d(≤ r)
+        vc = spin * np.sqrt(m_centre * r * r / (r * r + softening**2) ** 1.5 + inside / r)
+        c, s = math.cos(math.radians(tilt)), math.sin(math.radians(tilt))
+        tilt_x = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+        p = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros(stars)], axis=1) @ tilt_x.T
+        u = np.stack([-vc * np.sin(phi), vc * np.cos(phi), np.zeros(stars)], axis=1) @ tilt_x.T
+        xs += [np.zeros((1, 3)), p]
+        vs += [np.zeros((1, 3)), u]
+        ms += [[m_centre], np.full(stars, m_disk / stars)]
+        xs[-2:] = [a + side * rel for a in xs[-2:]]
+        vs[-2:] = [a + side * vrel for a in vs[-2:]]
+    x, v, m = np.concatenate(xs), np.concatenate(vs), np.concatenate(ms)
+    x -= m @ x / m.sum()  # the random disks' own small centre-of-mass offsets and momenta
+    v -= m @ v / m.sum()
+    scene = Scene(3, integrator=integrator, dt=0.0125 if dt is None else dt, threads=threads)
     scene.add_particles(x, v, masses=m)
     scene.add(TreeGravity(G=1.0, softening=softening, theta=theta))
+    scene.render_defaults = {"colors": [GALAXY_COLORS[0]] * (half + 1) + [GALAXY_COLORS[1]] * (n - 1 - half)}
     return scene
 
 
+# 120 frames of 8 steps (t = 0 to 11.9) played in 5 s: the approach, the pericentre at t ≈ 4.3,
+# and the tails and bridge growing for about one orbit of the disks' edges (2π) after it. The view looks down
+# on the orbital plane at 70°, with the separating pair across the frame; "follow" frames 95 % of
+# the stars (the centre of mass stays put), so a few stars flung far do not shrink the picture.
 galaxies.render_defaults = {
-    "frames": 150, "fps": 30, "frame_time": 0.2, "size": (480, 400), "view": (-60.0, 55.0), "radius": 0,
+    "frames": 120, "fps": 24, "frame_time": 0.1, "size": (480, 400), "view": (30.0, 70.0), "radius": 0,
     "speed_unit": "(G=1)", "theme": "dark", "color_by": "density",  # glow: stars accumulate like an exposure
+    "camera": "follow",
 }
 
 
 def cyclotron(
-    n: int = 12,
+    n: int = 6,
     B: float = 1.0,
     E: float = 0.3,
     seed: int = 5,
@@ -675,38 +758,55 @@ def cyclotron(
     """Charges gyrating in a magnetic field and drifting together across an electric one.
 
     2D, B_z = `B` out of the plane and a uniform E = (0, `E`): `n` particles of charge ±1
-    and mass 1, 2 or 4 (units where these are 1) start at speeds 0.3–1. Each turns
-    at its cyclotron frequency ω_c = |q|B/m on a circle of radius m v⊥/(|q|B), positive and
-    negative charges in opposite senses, and every one drifts at E×B/B² = (E/B, 0) whatever
-    its charge and mass (cycloids). Boris push; ``dt=None`` takes 0.02/B (ω_c dt ≤ 0.02).
+    (alternating, first +1) and mass 1, 2 or 4 (cycling; units where these are 1). Each turns
+    at its cyclotron frequency ω_c = |q|B/m on a circle of radius m w/(|q|B) (w its speed in the
+    frame drifting at E×B/B² = (E/B, 0)), positive and negative charges in opposite senses, and
+    every one drifts at E/B along x whatever its charge and mass: trochoids (Jackson,
+    *Classical Electrodynamics*, 3rd ed., §12.3). Each starts at x = 0 moving along x at
+    E/B − w, w drawn uniformly in [0.15, 0.6] (`seed`): w < E/B gives a wave, w = E/B a
+    cycloid with cusps, w > E/B loops. Each is at the edge of its gyration circle, so it
+    sweeps a band 2 m w/(|q|B) high (above its start if positive, below if negative); the
+    bands are stacked 0.6/B apart, in index order from the bottom, centred on y = 0. Boris push;
+    ``dt=None`` takes 0.02/B (ω_c dt ≤ 0.02). The render colours positive charges red and
+    negative blue (:data:`CHARGE_COLORS`).
     """
     n = _count(n, "n", 1)
     B = _positive(B, "B")
     E = _nonneg(E, "E")
     seed = _count(seed, "seed", 0)
     _particles("n", n)
-    rng = np.random.default_rng(seed)
-    q = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
-    m = np.array([1.0, 2.0, 4.0])[np.arange(n) % 3]
-    speed = rng.uniform(0.3, 1.0, n)
-    angle = rng.uniform(0.0, 2 * np.pi, n)
-    x = np.stack([rng.uniform(-3.0, 3.0, n), rng.uniform(-3.0, 3.0, n)], axis=1)
-    v = speed[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1)
     step = 0.02 / B if B < math.inf else 0.0
     if dt is None and not _check.MIN_NORMAL <= step < math.inf:
         raise InvalidInputError(f"B: the step 0.02/B = {step:.3g} s is outside float64's normal range; give another B or a dt")
+    rng = np.random.default_rng(seed)
+    q = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
+    m = np.array([1.0, 2.0, 4.0])[np.arange(n) % 3]
+    w = rng.uniform(0.15, 0.6, n)
+    with np.errstate(over="ignore"):  # E/B beyond float64 is refused by _finite_books below
+        height = 2.0 * m * w / B  # each band: the gyration circle's diameter
+        top = np.cumsum(height + 0.6 / B)
+        y = np.where(q > 0, top - height, top)  # a positive charge turns up first (q v×B)
+        y -= 0.5 * (top[0] - height[0] + top[-1])  # the stack's bottom and top about y = 0
+        x = np.stack([np.zeros(n), y], axis=1)
+        v = np.stack([E / B - w, np.zeros(n)], axis=1)
     scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
     scene.add_particles(x, v, masses=m)
     scene.set_attribute("charge", q)
     scene.add(MagneticField(B))
     if E:
         scene.add(ElectricField([0.0, E]))
+    scene.render_defaults = {"colors": [CHARGE_COLORS[0] if c > 0 else CHARGE_COLORS[1] for c in q]}
     return _finite_books(scene, "E")
 
 
+#: ``cyclotron``: colours of positive (red) and negative (blue) charges, RGB.
+CHARGE_COLORS = ((235, 85, 70), (80, 150, 255))
+
+# 45 (q=m=B=1) time units: about seven turns of the lightest charges, two of the heaviest, and a
+# drift of 13.5 (E = 0.3); the trails draw the whole trochoids, band by band.
 cyclotron.render_defaults = {"antialias": True,
-    "frames": 180, "fps": 30, "frame_time": 0.25, "size": (480, 360), "speed_unit": "(q=m=B=1)", "trail": 60,
-    "size_by": "mass", "radius": 3, "theme": "dark",
+    "frames": 150, "fps": 30, "frame_time": 0.3, "size": (480, 400), "speed_unit": "(q=m=B=1)", "trail": 150,
+    "size_by": "mass", "radius": 4, "theme": "dark", "color_by": "none",
 }
 
 
@@ -756,7 +856,10 @@ def spring_chain(
     return _finite_books(scene, "length, mass")
 
 
-spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (400, 400)}
+# The swing spans the chain's length either side of the pivot and one below it: a wide frame.
+# Beads 7 px wide (the links hidden under them) and short trails for the whip of the free end.
+spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (480, 320),
+                                "radius": 7, "trail": 4}
 
 # --------------------------------------------------------------------------- SPH fluid scenes
 _G = 9.81  # m/s², gravity of the fluid scenes
@@ -870,8 +973,10 @@ def dam_break(
     dim : {2, 3}
         In 3D the tank has a ``depth`` (along y) and the column spans it.
     n : int, optional
-        Particles across the column width (spacing ``width / n``). Default 144 in 2D
-        (N = 2n² ≈ 41 000 particles) and 24 in 3D (N = 2n³·depth/width ≈ 27 600).
+        Particles across the column width (spacing ``width / n``). Default 72 in 2D
+        (N = 2n² = 10 368 particles; the default render to T = 8 then takes seconds, and the
+        surface drawing shows no grain at 480 × 360) and 24 in 3D (N = 2n³·depth/width ≈
+        27 600). The README's speed and Martin & Moyce tables use n = 144 (41 472).
     width, height : float
         The water column, m (> 0).
     tank : (float, float)
@@ -924,7 +1029,7 @@ def dam_break(
     """
     dim = _dim(dim)
     lid = _flag(lid, "lid")
-    n = _count(24 if dim == 3 and n is None else 144 if n is None else n, "n", 2)
+    n = _count(24 if dim == 3 and n is None else 72 if n is None else n, "n", 2)
     width, height, depth = _positive(width, "width"), _positive(height, "height"), _positive(depth, "depth")
     length, top = _pair(tank, "tank")
     if not width < length:
@@ -944,18 +1049,19 @@ def dam_break(
     )
 
 
-# 120 frames (4 s at 30 fps) over T = t·√(2g/width) = 0..4 for the default width (1 m): the
-# collapse, the surge along the floor, its impact on the far wall (T ≈ 3.3) and the start of the
-# run-up. About 2 000 DFSPH substeps for the default 41 472 particles (each ≈ 20 ms on 2 cores;
-# WCSPH: 29 000 of 4.5 ms); the animation covers T = 120 · frame_time · √(2g/width), so --frame-time 0.01505
-# shows T = 0..8 (the jet reaching the lid and falling back) in twice the time.
+# 120 frames (4 s at 30 fps) over T = t·√(2g/width) = 0..8 for the default width (1 m): the
+# collapse, the surge along the floor, its impact on the far wall (T ≈ 3.3), the jet up to the
+# lid (T ≈ 5) and the plunging wave falling back (T ≈ 6–8), played 2.2× slower than real time.
+# The water is drawn as one surface (render.gif(surface=...)), by speed from deep navy to foam.
 dam_break.render_defaults = {
     "frames": 120,
     "fps": 30,
-    "frame_time": 4.0 / math.sqrt(2.0 * _G / 1.0) / 120,
+    "frame_time": 8.0 / math.sqrt(2.0 * _G / 1.0) / 120,
     "substeps": "auto",
     "color_by": "speed",
     "size": (480, 360),
+    "surface": True,
+    "cmap": "ice",
 }
 
 
@@ -976,7 +1082,7 @@ def drop(
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
     threads: int | None = None,
-    method: str = "wcsph",
+    method: str | None = None,
 ) -> Scene:
     """Drop: a block of water falls into a pool at rest in a tank and splashes.
 
@@ -1010,9 +1116,10 @@ def drop(
         As for :func:`dam_break`.
     sound_speed : float, optional
         m/s. Default: 10·√(2 g (pool + fall + block)), ten times the fastest fall.
-    method : {"wcsph", "dfsph"}
-        The fluid's pressure (:class:`~physcore.fluids.Fluid`), as for :func:`dam_break`; the
-        default stays ``"wcsph"`` here (the gallery's drop was made with it). ``"dfsph"`` steps
+    method : {"dfsph", "wcsph"}, optional
+        The fluid's pressure (:class:`~physcore.fluids.Fluid`), as for :func:`dam_break`:
+        default ``"dfsph"`` with the default integrator (the default render then takes seconds:
+        WCSPH's sound-speed step made it 44 s), ``"wcsph"`` with any other. ``"dfsph"`` steps
         with ``"semi_implicit_euler"`` only and computes in float64 (``precision`` does not
         apply).
 
@@ -1050,6 +1157,8 @@ def drop(
             f"tank, pool, fall, block: the tank's height {top} must be at least pool + fall + block = {pool + fall + block}"
         )
     dx = _spacing(_per(length, n), "n, tank")
+    if method is None:
+        method = "dfsph" if isinstance(integrator, str) and integrator == "semi_implicit_euler" else "wcsph"
     if not block >= 2 * dx:
         raise InvalidInputError(f"n, block, tank: n = {n} gives spacing {dx:.3g} m, too coarse for a block of {block} m")
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
@@ -1076,14 +1185,17 @@ def drop(
     )
 
 
-# 120 frames, 2 s: the fall (0.35 s), the splash and the waves' first return from the walls.
+# 120 frames, 2 s: the fall (0.35 s), the splash and the waves' first return from the walls;
+# the water as one surface, by speed.
 drop.render_defaults = {
     "frames": 120,
     "fps": 30,
     "frame_time": 2.0 / 120,
     "substeps": "auto",
-    "color_by": "pressure",
+    "color_by": "speed",
     "size": (480, 480),
+    "surface": True,
+    "cmap": "ice",
 }
 
 def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, viscosity):
@@ -1138,7 +1250,7 @@ def droplets(
     tank: tuple[float, float] = (0.06, 0.03),
     depth: float = 0.02,
     surface_tension: float = 0.072,
-    adhesion: float = 0.02,
+    adhesion: float = 0.0,
     viscosity: float = 0.02,
     lid: bool = True,
     integrator: str = "semi_implicit_euler",
@@ -1150,8 +1262,9 @@ def droplets(
 
     ``drops`` drops of ``radius`` (m) start in a row across the tank at staggered heights, moving
     down at ``speed`` (m/s), under gravity 9.81 m/s². Water at millimetre scale: DFSPH
-    (ρ0 = 1000 kg/m³) with Akinci et al. (2013) surface tension σ = 0.072 N/m (N in 2D) and a
-    little adhesion to the walls (:class:`~physcore.fluids.Fluid`); the capillary length
+    (ρ0 = 1000 kg/m³) with Akinci et al. (2013) surface tension σ = 0.072 N/m (N in 2D) and no
+    adhesion to the walls by default (:class:`~physcore.fluids.Fluid`; with the 0.02 N/m of earlier
+    versions the spray thrown up hung from the lid for the rest of the animation); the capillary length
     √(σ/(ρ0 g)) = 2.7 mm is the drops' size, so both gravity and surface tension shape them. The
     default impact (Weber number ρ0 v² 2R/σ ≈ 190) spreads each drop into a thin sheet whose rim
     gathers and breaks into droplets.
@@ -1233,15 +1346,18 @@ def droplets(
     return _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads)
 
 
-# 120 frames over 0.3 s: the fall, the impacts (the first at ≈ 6 ms), the sheets and the rims
-# pulling back into drops.
+# 120 frames over 0.15 s: the fall, the impacts (the first at ≈ 6 ms), the sheets and the rims
+# pulling back into drops, and the spray raining back from the lid (after 0.15 s the puddles
+# only wobble).
 droplets.render_defaults = {
     "frames": 120,
     "fps": 30,
-    "frame_time": 0.3 / 120,
+    "frame_time": 0.15 / 120,
     "substeps": "auto",
     "color_by": "speed",
     "size": (480, 240),
+    "surface": True,
+    "cmap": "ice",
 }
 
 
@@ -1249,7 +1365,7 @@ def crown(
     *,
     dim: int = 2,
     n: int | None = None,
-    tank: tuple[float, float] = (0.05, 0.03),
+    tank: tuple[float, float] = (0.07, 0.03),
     depth: float = 0.04,
     pool: float = 0.002,
     radius: float = 0.002,
@@ -1276,8 +1392,8 @@ def crown(
     dim : {2, 3}
         In 3D the tank has a ``depth`` (along y).
     n : int, optional
-        Particles across the tank length (spacing ``tank[0] / n``). Default 375 in 2D (about
-        6 300 particles, 15 across the drop's radius) and 100 in 3D (about 32 000, 4 across).
+        Particles across the tank length (spacing ``tank[0] / n``). Default 525 in 2D (8 591
+        particles, 15 across the drop's radius) and 140 in 3D (45 080, 4 across).
     tank : (float, float)
         Tank length (along x) and height, m.
     depth : float
@@ -1304,11 +1420,11 @@ def crown(
     Examples
     --------
     >>> import physcore as pc
-    >>> scene = pc.scenes.crown(n=80)   # 240 in the pool, 32 in the drop
+    >>> scene = pc.scenes.crown(n=80)   # 160 in the pool, 17 in the drop
     >>> scene.n_particles
-    272
+    177
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 375, 100, integrator, surface_tension, adhesion, viscosity)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 525, 140, integrator, surface_tension, adhesion, viscosity)
     length, top = _pair(tank, "tank")
     depth = _positive(depth, "depth")
     pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _speed(speed)
@@ -1335,14 +1451,17 @@ def crown(
     return _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads)
 
 
-# 120 frames over 30 ms: the impact, the crown rising and its rim breaking up.
+# 120 frames over 25 ms: the impact, the crown rising and its rim breaking up; the tank (7 cm)
+# is wide enough that the sheets never reach its walls in that time.
 crown.render_defaults = {
     "frames": 120,
     "fps": 30,
-    "frame_time": 0.03 / 120,
+    "frame_time": 0.025 / 120,
     "substeps": "auto",
     "color_by": "speed",
-    "size": (480, 360),
+    "size": (480, 240),
+    "surface": True,
+    "cmap": "ice",
 }
 
 
@@ -1379,7 +1498,8 @@ def ripple(
     return scene
 
 
-ripple.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (400, 400)}
+# 25 fps: waves move everywhere, so each frame costs its whole picture; 4 s in 100 frames.
+ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (400, 400)}
 
 
 def double_slit(
@@ -1432,14 +1552,14 @@ def double_slit(
     return scene
 
 
-double_slit.render_defaults = {"frames": 150, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (480, 320), "style": "signed"}
+double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (480, 320), "style": "signed"}
 
 
 def turing(
     preset: str = "maze",
     n: int = 256,
-    duration: float = 12000.0,
-    seeds: int = 12,
+    duration: float = 4500.0,
+    seeds: int = 2,
     seed: int = 1,
     integrator: str = "verlet",
     dt: float | None = None,
@@ -1450,7 +1570,9 @@ def turing(
     :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
-    The animation spans `duration` time units.
+    The animation spans `duration` time units: by default the maze grows from two seeds until
+    it fills the domain, at about 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    Pearson's step) and within the diffusion limit, so coarse grids stay stable.
     """
     from .grids import PRESETS, GrayScott
 
@@ -1462,7 +1584,12 @@ def turing(
     _cells("n", n * n)
     duration = _positive(duration, "duration")
     scene = Scene(2, integrator=integrator, dt=1.0 if dt is None else dt, threads=threads)
-    gs = scene.add(GrayScott((n, n), 2.5 / n, preset=preset, name="turing"))
+    dx = 2.5 / n
+    # The automatic step keeps a fraction of the diffusion limit dx²/(4 D_u), which grows as dx²:
+    # on coarse grids (n <= 64: 76 time units at n = 32) it would step straight over the
+    # reactions (rates ~1) and diverge; cap the step at 1, the reaction's accuracy.
+    cfl = min(0.8, 1.0 / (dx * dx / (4 * 2e-5)))
+    gs = scene.add(GrayScott((n, n), dx, preset=preset, cfl=cfl, name="turing"))
     if dt is None:
         scene.dt = gs.cfl * gs.diffusion_limit
     gs.seed(_check.int_in_range("seed", seed, 0, 2**63 - 1), squares=_check.int_in_range("seeds", seeds, 1, 1000), size=0.06)
@@ -1470,7 +1597,8 @@ def turing(
     return scene
 
 
-turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 100.0, "substeps": "auto", "size": (400, 400)}
+# The default duration (4500) over 119 frame steps: the maze grows until the last frame.
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
 
 
 def smoke(
@@ -1478,7 +1606,7 @@ def smoke(
     buoyancy: float = 4.0,
     vorticity: float = 0.3,
     obstacle: bool = True,
-    tracers: int = 3000,
+    tracers: int = 0,
     integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
@@ -1487,7 +1615,8 @@ def smoke(
 
     The box is 1 m × 1.5 m (n × 1.5n cells, free-slip walls); the smoke is lifted by `buoyancy` (β, m/s² per unit
     temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
-    (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`).
+    (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`; none by
+    default: drawn as single pixels over the smoke they read as noise).
     """
     from .grids import Source, StableFluid
 
@@ -1514,13 +1643,14 @@ def smoke(
     return scene
 
 
-smoke.render_defaults = {"frames": 150, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (320, 480)}
+smoke.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (320, 480)}
 
 
 def cavity(
     n: int = 64,
     reynolds: float = 100.0,
-    tracers: int = 2000,
+    tracers: int = 0,
+    dye: int = 6,
     integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
@@ -1529,8 +1659,10 @@ def cavity(
 
     A unit square whose top wall slides at 1 m/s (no-slip walls), at Reynolds number
     `reynolds` = U L / ν (:class:`~physcore.grids.StableFluid`). At
-    Re = 100 the steady centreline profile is Ghia, Ghia & Shin (1982), Table I. Drawn as speed,
-    with `tracers` (spread over the box) showing the circulation.
+    Re = 100 the steady centreline profile is Ghia, Ghia & Shin (1982), Table I. The fluid starts
+    at rest with `dye` horizontal bands of dye (its ``density``, 0 or 1; 0: none), which the
+    vortex winds into a spiral as it spins up; drawn as that dye. `tracers` passive particles
+    (spread over the box) can show the circulation too.
     """
     from .grids import StableFluid
 
@@ -1540,23 +1672,29 @@ def cavity(
     if not math.isfinite(1.0 / reynolds):
         raise InvalidInputError(f"reynolds: {reynolds:g} makes the viscosity 1/Re overflow float64")
     tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
+    dye = _check.int_in_range("dye", dye, 0, n)
     scene = Scene(2, integrator=integrator, dt=1e-2 if dt is None else dt, threads=threads)
-    scene.add(
+    box = scene.add(
         StableFluid(
             (n, n), 1.0 / n, viscosity=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
             tracers=tracers, tolerance=1e-8, name="cavity",
         )
     )
+    if dye:
+        y = (np.arange(n) + 0.5) / n
+        band = np.floor(y * (2 * dye)) % 2 == 1  # 2·dye equal layers, every other one dyed
+        box.density = np.broadcast_to(band.astype(np.float64)[None, :], (n, n)).copy()
     return scene
 
 
+# 12 s of the spin-up from rest in 3.6 s: the dye winds into the vortex to the last frame.
 cavity.render_defaults = {
-    "frames": 150, "fps": 30, "frame_time": 0.1, "substeps": "auto", "size": (400, 400), "field": "speed", "style": "turing",
+    "frames": 90, "fps": 25, "frame_time": 0.135, "substeps": "auto", "size": (400, 400), "field": "density", "style": "turing",
 }
 
 
 def lorenz(
-    n: int = 40000,
+    n: int = 600,
     kind: str = "lorenz",
     spread: float = 0.5,
     seed: int = 7,
@@ -1567,7 +1705,9 @@ def lorenz(
     """A strange attractor painted by a cloud of points (Lorenz's by default).
 
     `n` points start in a ball of radius `spread` near the attractor and chaos stretches them
-    over it (:class:`~physcore.flows.Flow`; the
+    over it, each drawn as a glowing streak that fades (the render's ``trail``: 600 streaks draw
+    the butterfly's sheets and holes, where 40 000 dots blurred into one fuzzy blob)
+    (:class:`~physcore.flows.Flow`; the
     Lorenz system by default, ``kind="rossler"``, ``"thomas"``, ``"aizawa"`` or ``"halvorsen"``
     for the others). `integrator` is the flow's Runge–Kutta method (``"rk4"``, ``"euler"``,
     ``"heun"`` or ``"dopri5"``); ``dt=None`` takes the flow's default step.
@@ -1587,15 +1727,16 @@ def lorenz(
     _check.memory("n", 72 * n, f"{_big(n)} flow points")
     scene = Scene(3, integrator="rk4" if integrator == "rk4" else "verlet", dt=step, threads=threads)
     scene.add(Flow(kind, n, spread=spread, seed=seed, method=integrator))
-    # Frames every 20 steps of the default dt, so the cloud spreads over the whole attractor.
-    scene.render_defaults = {"steps_per_frame": max(1, round(20 * FLOWS[kind]["max_dt"] / step))}
+    # Frames every 6 steps of the default dt (0.03 time units for Lorenz): the streaks stay smooth
+    # and the 150 frames reach t = 4.5, when the cloud has spread over the whole attractor.
+    scene.render_defaults = {"steps_per_frame": max(1, round(6 * FLOWS[kind]["max_dt"] / step))}
     return scene
 
 
 lorenz.render_defaults = {
-    "frames": 180, "fps": 30, "steps_per_frame": 20, "size": (480, 400), "view": (-80.0, 8.0), "radius": 0,
+    "frames": 150, "fps": 30, "steps_per_frame": 6, "size": (480, 400), "view": (-80.0, 8.0), "radius": 1,
     "speed_unit": "(flow units)", "theme": "dark", "color_by": "density",  # glow: the cloud paints the attractor
-    "camera": "orbit",  # one turn about the vertical, back to the classic view: the attractor's depth shows
+    "trail": 30,  # a second of fading streaks behind each point (a still camera: a turning one would smear them)
 }
 
 
@@ -1810,7 +1951,9 @@ def billiards(
     Pool balls (radius 28.6 mm, 170 g) on a 2.54 × 1.27 m table, Hertz contacts
     (:class:`~physcore.Contacts`, so the touching rack passes the impulse through like a real
     one) with ball–ball `restitution` and friction 0.05, cushions of restitution `cushion`;
-    the cloth's rolling resistance as linear drag (the balls stop in a few seconds). `seed`
+    the cloth's rolling resistance as linear drag 0.05 kg/s (speeds decay over m/b = 3.4 s,
+    so the balls still roll at the end of the 5 s animation). No pockets. Drawn on felt, each
+    ball in its colour (stripes in a lighter shade of their solid). `seed`
     offsets the cue by a fraction of a millimetre, so each seed breaks differently.
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
@@ -1836,14 +1979,25 @@ def billiards(
     scene = _grain_scene(dt, integrator, threads)
     scene.add_particles(x, v, masses=m)
     scene.set_attribute("radius", np.full(len(x), r))
-    scene.add(Drag(0.12))
+    scene.add(Drag(0.05))
     scene.add(Contacts(stiffness=5e9, restitution=restitution, friction=0.05, law="hertz",
                        walls=Box([0.0, 0.0], [L, W], cushion, 0.2)))
+    # Drawn as the table is: each ball its own colour (the cue white; the 1 ball at the apex,
+    # the 8 in the middle of the third row), on felt.
+    scene.render_defaults = {"colors": [_POOL_COLORS[k] for k in (0, 1, 9, 2, 10, 8, 3, 11, 4, 12, 5, 6, 13, 14, 7, 15)],
+                             "background": (28, 110, 60)}
     return _auto_grain_dt(scene, dt)
 
 
+#: Pool balls' colours (RGB) by number, 0 the cue ball: the solids 1–7, the 8 and the stripes
+#: 9–15 drawn in their solid's colour, lightened (a disc has no stripe).
+_POOL_COLORS = {0: (246, 244, 236), 1: (250, 200, 30), 2: (30, 70, 190), 3: (215, 35, 35), 4: (120, 50, 160),
+                5: (245, 125, 25), 6: (20, 150, 80), 7: (140, 35, 30), 8: (18, 18, 18)}
+_POOL_COLORS.update({k + 8: tuple(int(c + 0.35 * (255 - c)) for c in _POOL_COLORS[k]) for k in range(1, 8)})
+
+
 billiards.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (480, 260),
-                             "size_by": "radius", "trail": 12}
+                             "size_by": "radius", "trail": 12, "color_by": "none"}
 
 
 def newtons_cradle(
@@ -1859,7 +2013,7 @@ def newtons_cradle(
     strings, the first `lift` pulled out by `angle` degrees and let go.
 
     The strings are stiff springs (stretch 0.01 % under a ball's weight) from pinned anchors
-    (radius 0: they collide with nothing); the balls touch through :class:`~physcore.Contacts`
+    (radius 2.5 mm, 40 cm above the balls: they touch nothing); the balls touch through :class:`~physcore.Contacts`
     with the `law` given and restitution 0.999. With ``law="hertz"`` the impulse runs through
     the row as a solitary wave and as many balls leave the far end as were let go; the linear
     law spreads it (try ``--param law=linear``).
@@ -1885,16 +2039,20 @@ def newtons_cradle(
     x = np.concatenate([hang, anchors])
     scene = _grain_scene(dt, integrator, threads)
     scene.add_particles(x, masses=m, pinned=np.arange(2 * balls) >= balls)
-    scene.set_attribute("radius", np.concatenate([np.full(balls, r), np.zeros(balls)]))
+    # The anchors are small pivots (2.5 mm, drawn as marks): 4 cm apart and 40 cm above the
+    # balls, they touch nothing.
+    scene.set_attribute("radius", np.concatenate([np.full(balls, r), np.full(balls, 0.125 * r)]))
     scene.add(Gravity([0.0, -9.81]))
     scene.add(Springs(np.arange(balls), np.arange(balls, 2 * balls), stiffness=k_string, damping=0.0, rest_length=L))
     stiffness = 5e9 if law == "hertz" else 1e6
     scene.add(Contacts(stiffness=stiffness, restitution=0.999, friction=0.0, law=law))
+    # Steel balls on dark pivots (the impulse shows in the balls' motion, not in a colour map).
+    scene.render_defaults = {"colors": [(140, 148, 162)] * balls + [(60, 60, 66)] * balls}
     return _auto_grain_dt(scene, dt)
 
 
 newtons_cradle.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (400, 360),
-                                  "size_by": "radius"}
+                                  "size_by": "radius", "color_by": "none"}
 
 
 def jelly(
@@ -1949,14 +2107,107 @@ def jelly(
     scene.add(Gravity([0.0, -9.81]))
     scene.add(Contacts(stiffness=4e4, restitution=0.3, friction=0.6,
                        walls=Box([-2.0 * size, 0.0], [2.0 * size, height + 3.0 * size], 0.3, 0.6)))
-    scene.render_defaults = {"mesh": Mesh.grid(n, n)}
+    # A raspberry jelly: its own colour on the shaded sheet (--color-by strain shows the strain).
+    scene.render_defaults = {"mesh": Mesh.grid(n, n), "colors": [(214, 40, 90)] * (n * n)}
     # A 100th of a contact: the dashpots' rectangle-rule books then stay within 1e-3 of the
     # energy over the fall and the bounces (1.2e-3 at a 50th).
     return _auto_grain_dt(scene, dt, 0.5)
 
 
-jelly.render_defaults = {"antialias": True, "frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (400, 320),
-                         "color_by": "strain"}
+# 1.9 s: the fall, the landing and the roll to the wall, cut while it still rocks (it is at rest
+# by about 3 s; the strain colours flicker on, so a GIF to rest would end on a long fade).
+jelly.render_defaults = {"antialias": True, "frames": 57, "fps": 30, "frame_time": 1 / 30, "size": (400, 320),
+                         "color_by": "none"}
+
+
+def double_pendulum(
+    *,
+    n: int = 100,
+    angles: tuple[float, float] = (2.2, 2.2),
+    spread: float = 1e-6,
+    length: float = 1.0,
+    mass: float = 1.0,
+    stiffness: float | None = None,
+    integrator: str = "verlet",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """A fan of double pendulums started almost alike: chaos pulls them apart.
+
+    2D, gravity (0, −9.81) m/s². `n` double pendulums hang from one pivot at the origin (a
+    pinned particle), each of two bobs of `mass` (kg) on two rods of `length` (m), released at
+    rest at angles ``angles = (θ1, θ2)`` (rad, from the downward vertical: the upper rod's and
+    the lower rod's), pendulum k with θ2 + k·`spread`. Until the spread has grown by about
+    e^(λt) to a visible angle they move as one; then they fan out into a rainbow (the largest
+    Lyapunov exponent of this start is of order 1/s, so 1e-6 rad becomes a radian in ~15 s).
+
+    The rods are stiff springs: `stiffness` (N/m) defaults to 2·10⁵ m g / length, so the
+    largest tension of a swing (about 15 m g) stretches a rod by under 0.1 %, and the motion
+    is the rigid double pendulum's to that order. For small angles its normal modes are
+    ω² = (g/l)(2 ∓ √2) with θ2/θ1 = ±√2 (equal masses and lengths; e.g. Goldstein, Classical
+    Mechanics, 3rd ed., §6.4; Landau & Lifshitz, Mechanics, §23, problem 1), which the tests
+    check. Velocity Verlet; ``dt=None`` takes 0.2/ω_rod, ω_rod = √(2 stiffness/mass), so the
+    energy error is bounded and second order.
+
+    Returns
+    -------
+    Scene
+        Particle 0 is the pivot; pendulum k's upper and lower bobs are 1 + 2k and 2 + 2k.
+
+    Raises
+    ------
+    TypeError, InvalidInputError
+        As every scene function (module docstring), naming the argument.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> scene = pc.scenes.double_pendulum(n=3)
+    >>> scene.n_particles
+    7
+    """
+    n = _check.int_in_range("n", n, 1, 100_000)
+    _particles("n", 2 * n + 1, 2 * n)
+    a1, a2 = _pair_any(angles, "angles")
+    spread = _nonneg(spread, "spread")
+    length, mass = _positive(length, "length"), _positive(mass, "mass")
+    if not (length >= 1e-100 and length <= 1e100 and mass >= 1e-100 and mass <= 1e100):
+        raise InvalidInputError("length, mass: must lie in [1e-100, 1e100] (m, kg)")
+    k = 2e5 * mass * 9.81 / length if stiffness is None else _positive(stiffness, "stiffness")
+    dt = _optional(dt, "dt")
+    th1 = np.full(n, a1)
+    th2 = a2 + spread * np.arange(n)
+    p1 = length * np.stack([np.sin(th1), -np.cos(th1)], axis=1)
+    p2 = p1 + length * np.stack([np.sin(th2), -np.cos(th2)], axis=1)
+    x = np.concatenate([np.zeros((1, 2)), np.stack([p1, p2], axis=1).reshape(-1, 2)])
+    pinned = np.zeros(2 * n + 1, dtype=bool)
+    pinned[0] = True
+    upper = 1 + 2 * np.arange(n)
+    scene = Scene(2, integrator=integrator, dt=0.2 / math.sqrt(2 * k / mass) if dt is None else dt, threads=threads)
+    scene.add_particles(x, masses=mass, pinned=pinned)
+    scene.add(Springs(np.concatenate([np.zeros(n, dtype=np.int64), upper]), np.concatenate([upper, upper + 1]),
+                      stiffness=k, rest_length=length))
+    scene.add(Gravity([0.0, -9.81]))
+    # Each pendulum its own hue (rods and bobs), around the colour wheel; the pivot a grey mark.
+    hue = np.arange(n) / max(n, 1)
+    rgb = np.clip(np.stack([np.abs(hue * 6 - 3) - 1, 2 - np.abs(hue * 6 - 2), 2 - np.abs(hue * 6 - 4)], axis=1), 0, 1)
+    rgb = 0.25 + 0.75 * rgb  # pastel enough to glow on the night background
+    colors = np.concatenate([[[0.6, 0.6, 0.65]], np.repeat(rgb, 2, axis=0)])
+    scene.render_defaults = {"colors": np.rint(colors * 255).astype(np.uint8).tolist()}  # plain lists: compared with ==
+    return _finite_books(scene, "length, mass")
+
+
+def _pair_any(value: object, arg: str) -> tuple[float, float]:
+    """A pair of finite floats (any sign), naming `arg`."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
+        raise InvalidTypeError(f"{arg}: expected a pair of numbers, got {type(value).__name__}")
+    out = tuple(_check.finite(arg, v) for v in value)
+    return out[0], out[1]
+
+
+# 10 s at 30 fps, one simulated second a second: together for 3–4 s, then the fan.
+double_pendulum.render_defaults = {"antialias": True, "frames": 300, "fps": 30, "frame_time": 1 / 30,
+                                   "size": (400, 400), "color_by": "none", "theme": "dark", "radius": 3}
 
 
 def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
@@ -1997,6 +2248,7 @@ newtons_cradle = _stamped(newtons_cradle)
 jelly = _stamped(jelly)
 xpbd_cloth = _stamped(xpbd_cloth)
 tumbling_boxes = _stamped(tumbling_boxes)
+double_pendulum = _stamped(double_pendulum)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {
@@ -2024,5 +2276,6 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "jelly": jelly,
     "xpbd_cloth": xpbd_cloth,
     "tumbling_boxes": tumbling_boxes,
+    "double_pendulum": double_pendulum,
 }
 DEFAULT_SCENE = "cloth"
