@@ -207,3 +207,23 @@ def test_extent_fixes_the_view_and_is_checked_before_stepping(tmp_path):
         with pytest.raises(ValueError, match="extent"):
             pc.render.gif(s, tmp_path / "x.gif", frames=3, extent=bad)
     assert s.time == 0.0
+
+
+def test_halo_glows_around_its_particle_only(tmp_path):
+    s = _two_balls()
+    opts = dict(frames=1, size=(200, 120), radius=6, color_by="none", colors=["#ffd000", "#0060ff"], theme="dark",
+                colorbar=False, antialias=True)
+    plain = next(pc.render.frames(s, **opts)).astype(int)
+    glow = next(pc.render.frames(s, halo=[0], **opts)).astype(int)
+    diff = np.abs(glow - plain).sum(axis=2)
+    lit = np.nonzero(diff > 10)
+    # Around the first (yellow) ball only: the halo's pixels are left of the image's middle,
+    # reach beyond its disc (6 px), and are tinted yellow (red and green over blue).
+    assert lit[1].size and lit[1].max() < 100 and np.ptp(lit[1]) > 2 * 6 + 4
+    tint = (glow - plain)[lit]
+    assert (tint[:, 0] > tint[:, 2]).mean() > 0.9
+    with pytest.raises(ValueError, match="halo"):
+        pc.render.gif(s, tmp_path / "x.gif", frames=2, halo=[5])
+    with pytest.raises(TypeError, match="halo"):
+        pc.render.gif(s, tmp_path / "x.gif", frames=2, halo=[0.5])
+    assert s.time == 0.0

@@ -64,6 +64,7 @@ def gif(
     background: Any = None,
     surface: bool | None = None,
     extent: Any = None,
+    halo: Any = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -253,6 +254,10 @@ def gif(
         frame's particles: what lies outside is not drawn (a queue of balls above a Galton
         board enters the picture one by one). Default: the scene's ``render_defaults``, else
         the fit to everything.
+    halo : array_like of bool (N,) or of int, optional
+        Particles drawn with a soft halo of their own colour around the disc (a star): a mask,
+        or particle indices. Discs are then drawn in full colour. Default: the scene's
+        ``render_defaults`` (Kepler's star), else none.
 
     Returns
     -------
@@ -290,13 +295,14 @@ def gif(
                    substeps=substeps, fps=fps, size=size, color_by=color_by, colorbar=colorbar, radius=radius,
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
-                   colors=colors, cmap=cmap, background=background, surface=surface, extent=extent)
+                   colors=colors, cmap=cmap, background=background, surface=surface, extent=extent,
+                   halo=halo)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background", "surface", "extent")
+            "antialias", "colors", "cmap", "background", "surface", "extent", "halo")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -307,7 +313,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent) = (
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent, halo) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -361,6 +367,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
     dim = scene.positions.shape[2] if isinstance(scene, _recording.Recording) else int(getattr(_recording.points_view(scene), "dim", 0))
     box = _extent_box(d.get("extent") if extent is None else extent, dim)
+    halo = _check_halo(d.get("halo") if halo is None else halo, n_colors)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
@@ -406,12 +413,30 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
                       antialias=antialias, colors=colors, cmap=cmap, background=background,
-                      surface=surface, fit=None if box is None else box - rec.origin)
+                      surface=surface, fit=None if box is None else box - rec.origin, halo=halo)
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
         return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), ras.palette, fps, rec.frames)
+
+
+def _check_halo(halo: Any, n: int) -> np.ndarray | None:
+    """None, or an (n,) bool mask from a mask or particle indices (errors name `halo`)."""
+    if halo is None:
+        return None
+    arr = np.asarray(halo)
+    if arr.dtype == bool:
+        if arr.shape != (n,):
+            raise InvalidInputError(f"halo: a mask must have shape ({n},), got {arr.shape}")
+        return arr
+    if arr.dtype.kind not in "iu" or arr.ndim != 1:
+        raise InvalidTypeError(f"halo must be a bool mask or a 1-D array of particle indices, got dtype {arr.dtype}")
+    if arr.size and (arr.min() < 0 or arr.max() >= n):
+        raise InvalidInputError(f"halo: particle indices must be in [0, {n}), got {int(arr.min())} to {int(arr.max())}")
+    mask = np.zeros(n, dtype=bool)
+    mask[arr] = True
+    return mask
 
 
 def _extent_box(extent: Any, dim: int) -> np.ndarray | None:

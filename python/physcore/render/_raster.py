@@ -443,6 +443,7 @@ class _Rasteriser:
         cmap: str | None = None,
         background: tuple[int, int, int] | None = None,
         surface: bool = False,
+        halo: np.ndarray | None = None,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -458,6 +459,7 @@ class _Rasteriser:
         `colors`: (N, 3) uint8 RGB per particle, used by ``color_by`` "none" (discs, drawn in
         full colour by frame_rgb) and "density" (each particle's glow in its colour); `cmap`:
         the speed and pressure maps' name; `background`: an RGB triple for the background.
+        `halo`: (N,) bool, particles frame_rgb draws with a soft halo of their colour (a star).
         `surface`: frame_rgb draws the free particles as one continuous surface (a liquid),
         coloured by `color_by` (see :meth:`_frame_rgb_surface`)."""
         n, dim = rec.positions.shape[1:]
@@ -604,7 +606,9 @@ class _Rasteriser:
             if len(self.palette) + len(hues) <= 255:
                 self._color_idx = (len(self.palette) + which.reshape(-1)).astype(np.uint8)
                 self.palette = np.concatenate([self.palette, hues.astype(np.uint8)])
-        self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)) and color_by != "density"
+        self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)
+                          or (halo is not None and bool(np.any(halo)))) and color_by != "density"
+        self.halo = halo if halo is not None and halo.any() and mesh is None and color_by != "density" else None
         self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
         if self.surface:
             self._surface_setup()
@@ -939,6 +943,8 @@ class _Rasteriser:
             rad = np.maximum(np.sqrt(r * r + 0.5 * r), 0.6)
             if self.radii is not None:  # largest first, the painter's order within one size
                 order = order[np.argsort(-rad[order], kind="stable")]
+            if self.halo is not None:
+                self._draw_halos(out, col, row, rad, colors)
             rgb = self.palette[colors[order]] if self.colors is None else self.colors[order]
             _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
                              rad[order].astype(np.float32), np.ascontiguousarray(rgb))
@@ -968,6 +974,26 @@ class _Rasteriser:
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return springs and self.color_by == "strain"
+
+    def _draw_halos(self, out: np.ndarray, col: np.ndarray, row: np.ndarray, rad: np.ndarray, colors: np.ndarray) -> None:
+        """A soft halo around each `halo` particle, onto the RGB image `out`: its colour blended
+        in with weight 0.85 exp(−d²/2σ²), σ = 1.3 disc radii, out to 4σ (a star's glow)."""
+        h, w = out.shape[:2]
+        for i in np.flatnonzero(self.halo):
+            c, r = col[i], row[i]
+            if not (np.isfinite(c) and np.isfinite(r)):
+                continue
+            sigma = 1.3 * float(rad[i])
+            reach = int(math.ceil(4 * sigma))
+            c0, c1 = max(0, int(c) - reach), min(w, int(c) + reach + 1)
+            r0, r1 = max(0, int(r) - reach), min(h, int(r) + reach + 1)
+            if c0 >= c1 or r0 >= r1:
+                continue
+            yy, xx = np.mgrid[r0:r1, c0:c1]
+            a = (0.85 * np.exp(-((xx + 0.5 - c) ** 2 + (yy + 0.5 - r) ** 2) / (2 * sigma * sigma)))[..., None]
+            tint = (self.palette[colors[i]] if self.colors is None else self.colors[i]).astype(np.float32)
+            patch = out[r0:r1, c0:c1].astype(np.float32)
+            out[r0:r1, c0:c1] = np.rint(patch * (1 - a) + tint * a).astype(np.uint8)
 
     def _draw_behind_rgb(self, out: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> None:
         """What frame k draws under its discs in their own colours (``colors``), onto the RGB
