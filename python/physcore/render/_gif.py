@@ -256,8 +256,8 @@ def gif(
         the fit to everything.
     halo : array_like of bool (N,) or of int, optional
         Particles drawn with a soft halo of their own colour around the disc (a star): a mask,
-        or particle indices. Discs are then drawn in full colour. Default: the scene's
-        ``render_defaults`` (Kepler's star), else none.
+        or particle indices (``[]``: none). Drawn with soft discs only (``antialias=False``
+        leaves it out). Default: the scene's ``render_defaults`` (Kepler's star), else none.
 
     Returns
     -------
@@ -426,6 +426,8 @@ def _check_halo(halo: Any, n: int) -> np.ndarray | None:
     if halo is None:
         return None
     arr = np.asarray(halo)
+    if arr.size == 0 and arr.ndim == 1:
+        return None
     if arr.dtype == bool:
         if arr.shape != (n,):
             raise InvalidInputError(f"halo: a mask must have shape ({n},), got {arr.shape}")

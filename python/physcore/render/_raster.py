@@ -606,9 +606,9 @@ class _Rasteriser:
             if len(self.palette) + len(hues) <= 255:
                 self._color_idx = (len(self.palette) + which.reshape(-1)).astype(np.uint8)
                 self.palette = np.concatenate([self.palette, hues.astype(np.uint8)])
-        self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)
-                          or (halo is not None and bool(np.any(halo)))) and color_by != "density"
-        self.halo = halo if halo is not None and halo.any() and mesh is None and color_by != "density" else None
+        self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)) and color_by != "density"
+        # A halo needs full colour: hard-edged discs (antialias=False) go without.
+        self.halo = halo if halo is not None and halo.any() and mesh is None and color_by != "density" and antialias else None
         self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
         if self.surface:
             self._surface_setup()
