@@ -71,6 +71,7 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.add(pc.GridMagneticField(np.linspace(0.0, 1.0, 6).reshape(3, 2), [-10.0, -10.0], [10.0, 20.0]))
     s.add(pc.Plane([0.0, -1.0], [0.0, 1.0], restitution=0.4, friction=0.2))
     s.add(pc.Box([-10.0, -10.0], [10.0, 10.0]))
+    s.add(pc.Sphere([-5.0, -5.0], 0.5, restitution=0.3, friction=0.1))
     s.step(4)
     return s
 
@@ -374,6 +375,12 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("planes", 0, "friction"), [-1.0, INF]),
     (("boxes", 0, "upper"), [[-20.0, 10.0], [10.0]]),
     (("boxes", 0, "lower"), [At("meta.boxes[0].upper", [10.0, 10.0]), [NAN, 0.0]]),
+    (("spheres",), ["x", [[]], None, [1]]),
+    (("spheres", 0, "center"), [[0.0], [0.0, NAN], [INF, 0.0], None, "c"]),
+    (("spheres", 0, "radius"), [0.0, -1.0, NAN, INF, 1e200, None, "1", True]),
+    (("spheres", 0, "restitution"), [2.0, -0.1, NAN]),
+    (("spheres", 0, "friction"), [-1.0, INF, None]),
+    (("spheres", 0, "inside"), [1, 0, "true", None]),
 ]
 META_FIELDS: list[Case] = []
 for _path, _values in BAD_FIELDS:
@@ -397,6 +404,10 @@ for _path in [("format",), ("dim",), ("integrator",), ("dt",), ("threads",), ("t
 META_FIELDS += [
     Case("meta-fields", "term-unknown-key", lambda r: with_meta(r, lambda m: m["terms"][DRAG].update(power=2)), field=f"meta.terms[{DRAG}]"),
     Case("meta-fields", "plane-unknown-key", lambda r: with_meta(r, lambda m: m["planes"][0].update(k=1)), field="meta.planes[0]"),
+    Case("meta-fields", "sphere-unknown-key", lambda r: with_meta(r, lambda m: m["spheres"][0].update(k=1)), field="meta.spheres[0]"),
+    Case("meta-fields", "sphere-missing-inside", lambda r: with_meta(r, lambda m: m["spheres"][0].pop("inside")), field="meta.spheres[0].inside"),
+    # Files written before sphere colliders have no "spheres": none.
+    Case("meta-fields", "no-spheres", lambda r: with_meta(r, lambda m: m.pop("spheres")), expect="load"),
     Case("meta-fields", "fluids-overlap", lambda r: second_fluid(r, overlap=True), field=f"meta.terms[{GRID_B + 1}].first"),
     Case("meta-fields", "second-fluid", lambda r: second_fluid(r, overlap=False), expect="load"),
     # Old files lack these; the defaults of their time apply.
@@ -668,7 +679,7 @@ def test_corpus_covers_every_meta_field(ref):
         for key in t:
             if key not in ("name", "type"):
                 assert ("terms", k, key) in covered, (t["type"], key)
-    for group in ("planes", "boxes"):
+    for group in ("planes", "boxes", "spheres"):
         assert any(p[0] == group and len(p) == 3 for p in covered)
     for m in ref.members:
         assert m in ARRAY_MEMBERS + ["meta", "time_hex"], m

@@ -71,6 +71,7 @@ def _term_types() -> dict[str, type]:
 COLLIDER_FIELDS: dict[str, dict[str, str]] = {
     "planes": {"point": "vector", "normal": "vector", "restitution": "number", "friction": "number"},
     "boxes": {"lower": "vector", "upper": "vector", "restitution": "number", "friction": "number"},
+    "spheres": {"center": "vector", "radius": "number", "restitution": "number", "friction": "number", "inside": "bool"},
 }
 _META_FIELDS: dict[str, str] = {
     "format": "int",
@@ -89,10 +90,11 @@ _META_FIELDS: dict[str, str] = {
 # Absent from files of earlier versions; these are the values those versions used.
 _META_DEFAULTS: dict[str, Any] = {
     "rtol": 1e-6, "atol": 1e-9, "cg_tol": 1e-8, "cg_max_iter": 200, "precision": "f64", "boxes": [], "grids": [], "flows": [],
+    "spheres": [],
 }
 _META_OPTIONAL: dict[str, str] = {
     "rtol": "number", "atol": "number", "cg_tol": "number", "cg_max_iter": "int", "precision": "str", "boxes": "list",
-    "grids": "list", "flows": "list",
+    "grids": "list", "flows": "list", "spheres": "list",
 }
 # The "xpbd" integrator's options (absent from files written before it).
 _META_DEFAULTS.update({"xpbd_substeps": 10, "xpbd_iterations": 1})

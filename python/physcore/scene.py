@@ -32,7 +32,7 @@ from ._errors import (
 from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
-from .terms import REGISTRY, Box, Gravity, Plane, Springs, Term
+from .terms import REGISTRY, Box, Gravity, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
@@ -295,6 +295,7 @@ class Scene:
         self._terms: list[Term] = []
         self._planes: list[Plane] = []
         self._boxes: list[Box] = []
+        self._spheres: list[Sphere] = []
         self._grids: list[Grid] = []
         self._flows: list[Any] = []
         self._e0: float | None = None
@@ -404,7 +405,7 @@ class Scene:
     def add(self, item: Any) -> Any:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
         :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`), a collider (:class:`Plane`,
-        :class:`Box`) or a grid system (:class:`~physcore.grids.Wave`,
+        :class:`Box`, :class:`Sphere`) or a grid system (:class:`~physcore.grids.Wave`,
         :class:`~physcore.grids.GrayScott`), stepped with the particles on the scene's clock.
 
         A grid joins one scene only; its name must be free. It is returned bound to the scene:
@@ -462,8 +463,15 @@ class Scene:
             self._planes.append(item)
             self._e0 = None
             return item
+        if isinstance(item, Sphere):
+            if item.center.shape[0] != dim:
+                raise InvalidInputError(f"center: has {item.center.shape[0]} components, the scene is {dim}D")
+            self._sim.add_sphere(item.center.tolist(), item.radius, item.inside, item.restitution, item.friction)
+            self._spheres.append(item)
+            self._e0 = None
+            return item
         if not isinstance(item, Term) or REGISTRY.get(type(item).kind) is not type(item):
-            raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane or Box, got {type(item).__name__}")
+            raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane, Box or Sphere, got {type(item).__name__}")
         item = item._attach(self, self._unique_name(item.name))
         self._terms.append(item)
         self._e0 = None
@@ -974,6 +982,11 @@ class Scene:
         """The box colliders (a copy of the list)."""
         return list(self._boxes)
 
+    @property
+    def spheres(self) -> list[Sphere]:
+        """The sphere colliders (a copy of the list)."""
+        return list(self._spheres)
+
     def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),
         int64 (M,), float64 (M,) in m."""
@@ -1220,6 +1233,10 @@ class Scene:
                 {"lower": b.lower.tolist(), "upper": b.upper.tolist(), "restitution": b.restitution, "friction": b.friction}
                 for b in self._boxes
             ],
+            "spheres": [
+                {"center": c.center.tolist(), "radius": c.radius, "restitution": c.restitution, "friction": c.friction, "inside": c.inside}
+                for c in self._spheres
+            ],
             "grids": grids_meta,
             "flows": flows_meta,
         }
@@ -1314,6 +1331,9 @@ class Scene:
         for i, b in enumerate(meta["boxes"]):
             with r.api(f"meta.boxes[{i}]"):
                 scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
+        for i, c in enumerate(meta["spheres"]):
+            with r.api(f"meta.spheres[{i}]"):
+                scene.add(Sphere(c["center"], c["radius"], c["restitution"], c["friction"], inside=c["inside"]))
         from .grids import _GRID_ARRAYS, _from_record
 
         for k, g in enumerate(meta["grids"]):
@@ -1353,6 +1373,7 @@ class Scene:
             + (f"cg_tol={self.cg_tol:g}, cg_max_iter={self.cg_max_iter}, " if self.integrator == "implicit_euler" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
             + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)}"
+            + (f", spheres: {len(self._spheres)}" if self._spheres else "")
             + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")
             + ")"
         )

@@ -36,12 +36,13 @@ from .terms import (
     MagneticField,
     PairwiseGravity,
     Plane,
+    Sphere,
     Springs,
     TreeGravity,
     XpbdConstraints,
 )
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly", "xpbd_cloth", "tumbling_boxes", "REGISTRY"]
+__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly", "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "REGISTRY"]
 
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
@@ -231,6 +232,74 @@ def cloth(
 
 # A plain fabric colour: the shading is the picture (--color-by speed or strain colours the sheet).
 cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none"}
+
+
+def cloth_on_ball(
+    n: int = 36,
+    size: float = 1.0,
+    mass: float = 1.0,
+    stiffness: float = 2000.0,
+    damping: float = 0.1,
+    air_drag: float = 0.3,
+    radius: float = 0.3,
+    offset: float = 0.12,
+    height: float = 0.25,
+    friction: float = 0.3,
+    integrator: str = "verlet",
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Cloth on a ball: an n×n mass-spring sheet dropped flat onto a ball, draping over it and
+    sliding off onto the floor.
+
+    The sheet (the springs, masses and air drag of :func:`cloth`, nothing pinned) starts at rest
+    and flat, centred over the origin at z = 2·radius + height (m). The ball, a :class:`Sphere`
+    collider of `radius` m (restitution 0.1, Coulomb `friction`), rests on the floor z = 0
+    (restitution 0.1, friction 0.5) with its centre `offset` m along x: off-centre, the heavier
+    side of the sheet pulls it off. Gravity is (0, 0, -9.81) m/s²; ``dt=None`` uses twice
+    :meth:`Scene.suggest_dt`, as :func:`cloth` does.
+
+    Raises TypeError / InvalidInputError naming the argument (see the module docstring).
+    """
+    n = _count(n, "n", 2)
+    _particles("n", n * n, 6 * n * n)
+    size, mass, stiffness = _positive(size, "size"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
+    damping, air_drag = _nonneg(damping, "damping"), _nonneg(air_drag, "air_drag")
+    radius, height, friction = _positive(radius, "radius"), _nonneg(height, "height"), _nonneg(friction, "friction")
+    offset = _check.real("offset", offset)
+    if not math.isfinite(offset):
+        raise InvalidInputError(f"offset: must be finite, got {offset}")
+    dt = _optional(dt, "dt")
+    s = size / (n - 1)
+    if not (s >= _check.MIN_NORMAL and math.isfinite(8 * s * s)):
+        raise InvalidInputError(f"size: a grid spacing of size/(n - 1) = {s:.3g} m is outside float64's usable range")
+    top = 2.0 * radius + height
+    if not math.isfinite(top * top + size * size + offset * offset):
+        raise InvalidInputError(f"radius, height, size, offset: a scene {top:.3g} m high does not fit float64")
+    m = _particle_mass(mass / (n * n), "mass, n")
+    b = air_drag * mass / (n * n)
+    if not math.isfinite(b):
+        raise InvalidInputError(f"air_drag: the drag coefficient air_drag · m = {b} kg/s overflows float64")
+    gx, gy = np.meshgrid(np.arange(n) * s - 0.5 * size, np.arange(n) * s - 0.5 * size)
+    x = np.stack([gx.ravel(), gy.ravel(), np.full(n * n, top)], axis=1)
+    scene = Scene(3, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
+    scene.add_particles(x, masses=m)
+    i, j = cloth_springs(n)
+    scene.add(Springs(i, j, stiffness=stiffness, damping=damping))
+    scene.add(Gravity([0.0, 0.0, -9.81]))
+    if air_drag:
+        scene.add(Drag(b))
+    # The floor before the ball: a saved scene reloads planes before spheres, in this order.
+    scene.add(Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], restitution=0.1, friction=0.5))
+    scene.add(Sphere([offset, 0.0, radius], radius, restitution=0.1, friction=friction))
+    if dt is None:
+        _set_stable_dt(scene, 2.0, "stiffness, damping, air_drag, mass")
+    scene.render_defaults = {"mesh": Mesh.grid(n, n)}
+    return _finite_books(scene, "size, mass")
+
+
+cloth_on_ball.render_defaults = {"frames": 69, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
+                                 "view": (-60.0, 25.0)}
 
 
 def mesh_edges_and_hinges(faces: np.typing.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -515,7 +584,8 @@ def kepler(
         v = np.array([[0.0, -m2 * vp], [0.0, m1 * vp]])
         scene.add_particles(x, v, masses=[m1, m2])
     scene.add(PairwiseGravity(G=1.0))
-    scene.render_defaults = {"colors": list(KEPLER_COLORS)}  # plain lists: render_defaults compare with ==
+    # Plain lists: render_defaults compare with ==. The star (particle 0) glows.
+    scene.render_defaults = {"colors": list(KEPLER_COLORS), "halo": [0]}
     return scene
 
 
@@ -2248,6 +2318,7 @@ newtons_cradle = _stamped(newtons_cradle)
 jelly = _stamped(jelly)
 xpbd_cloth = _stamped(xpbd_cloth)
 tumbling_boxes = _stamped(tumbling_boxes)
+cloth_on_ball = _stamped(cloth_on_ball)
 double_pendulum = _stamped(double_pendulum)
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
@@ -2276,6 +2347,7 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "jelly": jelly,
     "xpbd_cloth": xpbd_cloth,
     "tumbling_boxes": tumbling_boxes,
+    "cloth_on_ball": cloth_on_ball,
     "double_pendulum": double_pendulum,
 }
 DEFAULT_SCENE = "cloth"

@@ -51,6 +51,7 @@ __all__ = [
     "XpbdConstraints",
     "Plane",
     "Box",
+    "Sphere",
 ]
 
 #: Every force term by its type key (``Term.kind``), filled as the term classes are defined.
@@ -1233,3 +1234,68 @@ class Box:
             out.append(Plane(self.lower, n, self.restitution, self.friction))
             out.append(Plane(self.upper, -n, self.restitution, self.friction))
         return out
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """Sphere collider (a disc in a 2D scene) that keeps particles outside it, a ball they land on
+    and slide off, or with ``inside=True`` inside it, a bowl.
+
+    After each step a particle found on the wrong side of the surface (``|x - center| <
+    radius``; inside: ``>``) is projected onto it along the radius; if it is moving into the
+    sphere (out of the bowl) its normal velocity becomes ``-e v_n`` and its tangential speed
+    drops by ``μ (1 + e) |v_n|`` (Coulomb friction on the collision impulse, never reversing it),
+    as at a :class:`Plane` tangent there. The energy removed is booked under ``"collisions"`` in
+    :meth:`Scene.energy`.
+
+    Parameters
+    ----------
+    center : array_like, shape (dim,)
+        Centre, m.
+    radius : float
+        Radius, m; > 0, with a square that fits float64.
+    restitution : float
+        Coefficient of restitution ``e`` in [0, 1]. Default 0.5.
+    friction : float
+        Coulomb friction coefficient ``μ`` ≥ 0. Default 0.
+    inside : bool
+        Keep particles inside the sphere instead of outside. Default False.
+
+    Raises
+    ------
+    TypeError
+        A non-numeric ``center``, ``radius``, ``restitution`` or ``friction`` (bool, str, None);
+        ``inside`` not a bool.
+    InvalidInputError
+        (a ``ValueError``) naming the argument: ``center`` not 2 or 3 finite numbers, ``radius``
+        not finite and > 0 (or its square beyond float64), ``restitution`` outside [0, 1],
+        ``friction`` < 0 or not finite.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> pc.Sphere([0.0, 0.0, 0.3], 0.3, friction=0.4).radius
+    0.3
+    """
+
+    center: np.ndarray
+    radius: float
+    restitution: float = 0.5
+    friction: float = 0.0
+    inside: bool = False
+
+    def __post_init__(self) -> None:
+        center = _vector(self.center, "center")
+        r = _finite_float(self.radius, "radius", minimum=0.0, strict=True)
+        if not math.isfinite(r * r):
+            raise InvalidInputError(f"radius: {r} m has a square beyond float64")
+        if not isinstance(self.inside, (bool, np.bool_)):
+            raise InvalidTypeError(f"inside: expected True or False, got {type(self.inside).__name__}")
+        object.__setattr__(self, "center", center)
+        object.__setattr__(self, "radius", r)
+        e = _finite_float(self.restitution, "restitution", minimum=0.0)
+        if e > 1.0:
+            raise InvalidInputError(f"restitution: must be in [0, 1], got {e}")
+        object.__setattr__(self, "restitution", e)
+        object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
+        object.__setattr__(self, "inside", bool(self.inside))

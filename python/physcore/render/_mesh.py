@@ -149,6 +149,42 @@ _AMBIENT, _DIFFUSE, _WRAP, _SPECULAR, _SHININESS = 0.30, 0.70, 0.3, 0.30, 24.0
 #: The back of a textured or coloured sheet: its own colours, this much darker.
 _BACK_SHADE = 0.8
 _SS = 2  # supersampling factor per axis (antialiased edges)
+#: Sphere colliders (a ball under a cloth) by theme: a neutral grey-blue, a second material that
+#: the warm fabric reads against; and the rings and meridians of their triangulation.
+_BALL = {"light": (0.50, 0.58, 0.68), "dark": (0.52, 0.60, 0.72)}
+_BALL_RINGS, _BALL_MERIDIANS = 32, 64
+#: A ball is drawn this fraction of its radius inside the collider: a sheet lying on it has its
+#: vertices on the surface and its triangles a chord below it (s²/8r: 0.4 mm for 3 cm cells on a
+#: 30 cm ball), which would otherwise let the ball show through in speckles.
+_BALL_INSET = 0.015
+
+
+def _ball_geometry(spheres: Any, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The 3D sphere colliders that keep particles out, ``(centre, radius, inside)`` in m, as one
+    static UV-sphere mesh relative to `origin`: vertices (V, 3) float64 m, their outward unit
+    normals (V, 3), faces (T, 3) int64 (fans at the poles, two triangles per quad between the
+    rings); None if there is none."""
+    parts = [(np.asarray(c, dtype=np.float64) - origin, float(r)) for c, r, inside in spheres or () if not inside]
+    if not parts or len(origin) != 3:
+        return None
+    nr, nm = _BALL_RINGS, _BALL_MERIDIANS
+    theta = np.linspace(0.0, np.pi, nr + 1)[1:-1]  # polar angles of the rings, poles apart
+    phi = np.arange(nm) * (2.0 * np.pi / nm)
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    ring = np.stack([st * np.cos(phi), st * np.sin(phi), np.broadcast_to(ct, (nr - 1, nm))], -1)
+    unit = np.concatenate([[[0.0, 0.0, 1.0]], ring.reshape(-1, 3), [[0.0, 0.0, -1.0]]])
+    idx = 1 + np.arange((nr - 1) * nm).reshape(nr - 1, nm)
+    nxt = np.roll(idx, -1, axis=1)
+    south = len(unit) - 1
+    faces = np.concatenate([
+        np.stack([np.zeros(nm, np.int64), idx[0], nxt[0]], 1),  # north fan
+        np.stack([idx[:-1].ravel(), idx[1:].ravel(), nxt[1:].ravel()], 1),
+        np.stack([idx[:-1].ravel(), nxt[1:].ravel(), nxt[:-1].ravel()], 1),
+        np.stack([np.full(nm, south), nxt[-1], idx[-1]], 1),  # south fan
+    ]).astype(np.int64)
+    k = len(unit)
+    verts = np.concatenate([c + (1.0 - _BALL_INSET) * r * unit for c, r in parts])
+    return verts, np.tile(unit, (len(parts), 1)), np.concatenate([faces + j * k for j in range(len(parts))])
 
 
 def _pow24(a: np.ndarray) -> np.ndarray:
@@ -162,13 +198,31 @@ def _pow24(a: np.ndarray) -> np.ndarray:
 class _MeshShader:
     """Lights and rasterises a mesh frame by frame (into the caller's image, at its size)."""
 
-    def __init__(self, mesh: Mesh, theme: str, texture: np.ndarray | None = None):
+    def __init__(self, mesh: Mesh, theme: str, texture: np.ndarray | None = None, spheres: Any = (),
+                 origin: np.ndarray | None = None):
+        """`spheres`: the recording's sphere colliders ``(centre, radius, inside)``, m; in 3D the
+        balls (not the bowls) are drawn with the mesh, shaded alike and in the same depth
+        buffer, in their own colour; `origin`: the recording's origin (the mesh's positions
+        are relative to it)."""
         self.faces = mesh.faces
         self.faces_u32 = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
         self.uv = None if mesh.uv is None else np.ascontiguousarray(mesh.uv, dtype=np.float32)
         self.texture = texture
         self.front = np.array(_FRONT.get(theme, _FRONT["light"]), dtype=np.float32)
         self.back = np.array(_BACK.get(theme, _BACK["light"]), dtype=np.float32)
+        self.ball = None if origin is None else _ball_geometry(spheres, np.asarray(origin, dtype=np.float64))
+        ball = np.array(_BALL.get(theme, _BALL["light"]), dtype=np.float32)
+        self.ball_rgb, self.ball_uv = ball, None
+        if self.ball is not None and texture is not None:
+            # The rasteriser multiplies by the texel at each vertex's uv: the balls' vertices
+            # all sample the brightest texel, and their colour is divided by it (exact unless a
+            # channel of it is nearly 0).
+            h, w = texture.shape[:2]
+            ty, tx = np.unravel_index(int(np.argmax(texture.sum(axis=2))), (h, w))
+            uv = (tx / max(w - 1, 1), 1.0 - ty / max(h - 1, 1))
+            self.ball_rgb = ball / np.maximum(texture[ty, tx], 0.05)
+            self.ball_uv = np.tile(np.array(uv, dtype=np.float32), (len(self.ball[0]), 1))
+        self._joined: tuple[int, np.ndarray, np.ndarray | None] | None = None  # (N, faces, uv) with the balls
 
     def draw(self, out: np.ndarray, x: np.ndarray, cam: Any, base: np.ndarray | None = None) -> None:
         """Frame `x` ((N, dim) positions relative to the recording's origin) lit, rasterised and
@@ -219,7 +273,26 @@ class _MeshShader:
         verts = np.empty((xs.shape[0], 3), dtype=np.float32)
         verts[:, 0], verts[:, 1] = col, row
         verts[:, 2] = 0.0 if depth is None else depth
+        faces, uv = self.faces_u32, self.uv if self.texture is not None else None
+        if self.ball is not None and depth is not None:
+            # The balls: static vertices, lit like the sheet's front, appended to the one draw
+            # call so that the depth buffer sorts sheet and balls per sample.
+            bx, bn, bf = self.ball
+            nb = len(bx)
+            bs, bd = cam.project(bx)
+            bc, br = cam.pixels(bs)
+            bl = np.empty((nb, 4), dtype=np.float32)
+            bl[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((bn @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * self.ball_rgb
+            bl[:, 3] = _SPECULAR * _pow24(np.maximum(bn @ half, 0.0))
+            bv = np.empty((nb, 3), dtype=np.float32)
+            bv[:, 0], bv[:, 1], bv[:, 2] = bc, br, bd
+            n = xs.shape[0]
+            if self._joined is None or self._joined[0] != n:
+                joined_uv = None if uv is None else np.ascontiguousarray(np.concatenate([uv, self.ball_uv]))
+                self._joined = (n, np.ascontiguousarray(np.concatenate([faces, (bf + n).astype(np.uint32)])), joined_uv)
+            _, faces, uv = self._joined
+            verts, front, back = (np.concatenate([a, b]) for a, b in ((verts, bv), (front, bl), (back, bl)))
         _core.rasterise_mesh(
-            verts, self.faces_u32, front, back, out, _SS,
-            uv=self.uv if self.texture is not None else None, texture=self.texture,
+            verts, faces, front, back, out, _SS,
+            uv=uv, texture=self.texture,
         )

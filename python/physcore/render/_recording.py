@@ -21,7 +21,7 @@ from ._checks import (
     _short,
 )
 from ._rows import _finite_mean, _row_norms
-from ._scene_state import _planes, _pressure_array, _scene_boundary, _scene_pressure, _scene_springs, _strain
+from ._scene_state import _planes, _pressure_array, _scene_boundary, _scene_pressure, _scene_springs, _spheres, _strain
 
 #: Largest ``steps_per_frame`` and ``substeps``: 2**53, beyond which step counts and the time
 #: ``n · dt`` are no longer exact in float64 (and no run would finish anyway).
@@ -93,6 +93,9 @@ class Recording(NamedTuple):
     color_by: str | None = None
     defaults: dict | None = None
     velocities: np.ndarray | None = None
+    #: The scene's sphere colliders as (centre (dim,) float64 m, radius m, inside) tuples (a
+    #: sphere is drawn shaded in 3D, a disc in 2D).
+    spheres: tuple = ()
 
     @property
     def frames(self) -> int:
@@ -273,6 +276,7 @@ def _simulate(
         field_points=points,
         field_label=_field_label(gp),
         velocities=vels,
+        spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
     )
 
 

@@ -1,5 +1,5 @@
-"""Reading a scene's state into checked float64 arrays: springs and their strain, collider planes,
-pressures and static boundary points (the optional parts a scene may or may not have)."""
+"""Reading a scene's state into checked float64 arrays: springs and their strain, collider planes
+and spheres, pressures and static boundary points (the optional parts a scene may or may not have)."""
 from __future__ import annotations
 
 import math
@@ -26,6 +26,18 @@ def _planes(planes: Any, dim: int) -> list:
         nn = float(np.sqrt(n @ n)) if n.shape == (dim,) else 0.0
         if p.shape == (dim,) and nn > 0 and np.isfinite(p).all() and math.isfinite(nn):
             out.append((p, n / nn))
+    return out
+
+
+def _spheres(spheres: Any, dim: int) -> list:
+    """Sphere colliders (.center, .radius, .inside) -> [(centre (dim,), radius, inside)] in m;
+    degenerate ones are skipped."""
+    out = []
+    for sp in spheres or []:
+        c = np.asarray(sp.center, dtype=np.float64).reshape(-1)
+        r = float(sp.radius)
+        if c.shape == (dim,) and np.isfinite(c).all() and math.isfinite(r) and r > 0:
+            out.append((c, r, bool(getattr(sp, "inside", False))))
     return out
 
 

@@ -1,11 +1,13 @@
 //! The constraint (projection) stage: run after each integration step, it moves particles back
-//! into the allowed set and corrects their velocities. Today's walls (`Plane`, `Aabb`) live
+//! into the allowed set and corrects their velocities. Today's walls (`Plane`, `Aabb`, `Sphere`) live
 //! here; position-based constraints (XPBD, Macklin, Müller & Chentanez 2016) will join them.
 //! The energy a projection removes goes into one book, "collisions".
 pub mod aabb;
 pub mod plane;
+pub mod sphere;
 pub use aabb::Aabb;
 pub use plane::Plane;
+pub use sphere::Sphere;
 
 use crate::error::{invalid, Result};
 use crate::par;

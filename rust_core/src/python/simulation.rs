@@ -1,7 +1,7 @@
 //! The `_core.Simulation` class: a handle on one 2D or 3D `crate::World`.
 use super::{convert::*, errors::*, watch::*, Inner};
 use crate::alloc::{count, Need};
-use crate::constraints::{Aabb, Plane};
+use crate::constraints::{Aabb, Plane, Sphere};
 use crate::error::{invalid, Error};
 use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
@@ -350,6 +350,24 @@ impl PySimulation {
     ) -> PyResult<()> {
         with_sim!(&mut self.inner, s => {
             let b = Aabb::new(vec_of(&lower, "lower")?, vec_of(&upper, "upper")?, restitution, friction);
+            b.map(|b| s.particles_mut().add_constraint(Box::new(b)))
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// Appends a sphere collider (a disc in 2D) of `radius` (m) about `center` (m): particles
+    /// are kept outside it, or in it with `inside` (checked; nothing changes on error).
+    fn add_sphere(
+        &mut self,
+        py: Python<'_>,
+        center: Vec<f64>,
+        radius: f64,
+        inside: bool,
+        restitution: f64,
+        friction: f64,
+    ) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => {
+            let b = Sphere::new(vec_of(&center, "center")?, radius, inside, restitution, friction);
             b.map(|b| s.particles_mut().add_constraint(Box::new(b)))
         })
         .map_err(|e| to_py(py, e))

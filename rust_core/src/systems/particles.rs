@@ -287,7 +287,7 @@ impl<V: Vector> ParticleSystem<V> {
         Ok(())
     }
 
-    /// Appends a constraint to the projection stage (walls: `constraints::{Plane, Aabb}`, built
+    /// Appends a constraint to the projection stage (walls: `constraints::{Plane, Aabb, Sphere}`, built
     /// validated by their `new`).
     pub fn add_constraint(&mut self, c: Box<dyn Constraint<V>>) {
         self.constraints.push(c);

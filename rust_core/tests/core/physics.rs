@@ -2,7 +2,7 @@
 
 use crate::common::{cloth, cloud, Rng};
 use glam::{DVec2, DVec3};
-use physcore_core::constraints::{Aabb, Plane};
+use physcore_core::constraints::{Aabb, Plane, Sphere};
 use physcore_core::terms::{Drag, Springs, UniformGravity};
 use physcore_core::{Error, World};
 
@@ -96,6 +96,56 @@ fn plane_bounce_follows_restitution() {
     let coll = en.dissipated.iter().find(|p| p.0 == "collisions").unwrap().1;
     assert!(coll > 0.0);
     assert!((en.total() - 2.0 * 9.81).abs() < 2e-3 * 2.0 * 9.81, "books {:?}", en);
+}
+
+#[test]
+fn sphere_bounce_follows_restitution_and_books_balance() {
+    // A particle dropped from 1 m above the top of a sphere bounces straight up to e², then e⁴.
+    let (e, r) = (0.8, 0.5);
+    let mut s = World::new("verlet", 1e-4, Some(1)).unwrap();
+    s.particles_mut()
+        .add_particles(vec![DVec3::new(0.0, 0.0, r + 1.0)], vec![DVec3::ZERO], vec![2.0], vec![false])
+        .unwrap();
+    s.particles_mut()
+        .add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec3::new(0.0, 0.0, -9.81) }))
+        .unwrap();
+    s.particles_mut().add_constraint(Box::new(Sphere::new(DVec3::ZERO, r, false, e, 0.0).unwrap()));
+    let mut apex = Vec::new();
+    let mut prev_vz = 0.0;
+    for _ in 0..40_000 {
+        s.step(1).unwrap();
+        let (x, v) = (s.particles().state().x[0], s.particles().state().v[0]);
+        if prev_vz > 0.0 && v.z <= 0.0 {
+            apex.push(x.z - r);
+        }
+        prev_vz = v.z;
+        assert!(x.length() >= r * (1.0 - 1e-15), "inside the sphere: {x:?}");
+        assert!(x.x == 0.0 && x.y == 0.0, "a bounce on the top stays on the axis: {x:?}");
+    }
+    assert!(apex.len() >= 2);
+    assert!((apex[0] - e * e).abs() < 5e-3, "first apex {} vs {}", apex[0], e * e);
+    assert!((apex[1] - e.powi(4)).abs() < 5e-3, "second apex {} vs {}", apex[1], e.powi(4));
+    let en = s.energy();
+    let coll = en.dissipated.iter().find(|p| p.0 == "collisions").unwrap().1;
+    assert!(coll > 0.5 * 2.0 * 9.81 * (1.0 - e.powi(4)), "collisions booked {coll}");
+    assert!((en.total() - 2.0 * 9.81 * (r + 1.0)).abs() < 2e-3 * 2.0 * 9.81, "books {:?}", en);
+}
+
+#[test]
+fn sphere_collider_is_bit_identical_for_1_and_2_threads() {
+    let run = |threads| {
+        let mut w = cloth(80, "verlet", threads, 0.01);
+        w.particles_mut()
+            .add_constraint(Box::new(Sphere::new(DVec3::new(0.5, 0.5, 0.1), 0.3, false, 0.3, 0.4).unwrap()));
+        w.step(50).unwrap();
+        w
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.particles().state().x, b.particles().state().x);
+    assert_eq!(a.particles().state().v, b.particles().state().v);
+    assert_eq!(a.energy(), b.energy());
+    let c = DVec3::new(0.5, 0.5, 0.1);
+    assert!(a.particles().state().x.iter().all(|x| (*x - c).length() >= 0.3 * (1.0 - 1e-12)));
 }
 
 #[test]
