@@ -196,3 +196,23 @@ def test_the_ball_is_drawn_shaded_and_hidden_by_the_cloth_in_front():
             assert not lit_ball.any(), lit_ball.sum()
         else:
             assert lit_ball.mean() > 0.02, lit_ball.mean()
+
+
+def test_a_3d_floor_is_drawn_under_the_mesh_with_a_shadow_under_the_ball():
+    # The floor plane shows as a checked patch (two shades, not the background) in the same depth
+    # pass as the cloth and ball, darker just under the ball (its contact shadow).
+    from physcore.render._mesh import _FLOOR, _floor_geometry
+
+    s = pc.scenes.cloth_on_ball(n=8)
+    img = next(pc.render.frames(s, frames=1, size=(240, 180))).astype(int)
+    bg = np.array([255, 255, 255])
+    assert (np.abs(img - bg).sum(axis=2) > 30).mean() > 0.5  # most of the picture is floor, ball, cloth
+    lo, hi = np.array([-0.5, -0.5, 0.0]), np.array([0.5, 0.5, 1.0])
+    v, n, f, rgb = _floor_geometry([(np.zeros(3), np.array([0.0, 0.0, 1.0]))], lo, hi, "light",
+                                   [(np.array([0.0, 0.0, 0.3]), 0.3)])
+    assert np.all(v[:, 2] < 0) and np.allclose(n, [0.0, 0.0, 1.0]) and f.max() < len(v)
+    light = np.array(_FLOOR["light"])
+    near = np.linalg.norm(v[:, :2], axis=1) < 0.15
+    far = np.linalg.norm(v[:, :2], axis=1) > 1.0
+    assert rgb[near].sum(axis=1).max() < light.sum(axis=1).min() * 0.8  # shadowed
+    assert np.allclose(np.sort(np.unique(rgb[far].round(4), axis=0).sum(axis=1)), np.sort(light.sum(axis=1)), atol=1e-3)

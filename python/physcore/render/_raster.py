@@ -618,7 +618,16 @@ class _Rasteriser:
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
         self.trail_px = 2 if min(size) >= 300 else 1
         self.mesh = mesh
-        self._shader = None if mesh is None else _MeshShader(mesh, theme, texture, rec.spheres, rec.origin)
+        self._shader = None
+        if mesh is not None:
+            bounds = None
+            if dim == 3 and rec.planes:
+                pts = rec.positions.reshape(-1, 3)
+                pts = pts[np.isfinite(pts).all(axis=1)]
+                if len(pts):
+                    bounds = (pts.min(axis=0).astype(np.float64), pts.max(axis=0).astype(np.float64))
+            planes = [(np.asarray(p, np.float64) - rec.origin, np.asarray(nrm, np.float64)) for p, nrm in rec.planes]
+            self._shader = _MeshShader(mesh, theme, texture, rec.spheres, rec.origin, planes, bounds)
         if mesh is not None:
             on_mesh = np.zeros(n, dtype=bool)
             on_mesh[mesh.faces.ravel()] = True
