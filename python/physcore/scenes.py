@@ -855,6 +855,9 @@ def cyclotron(
     with np.errstate(over="ignore"):  # E/B beyond float64 is refused by _finite_books below
         height = 2.0 * m * w / B  # each band: the gyration circle's diameter
         top = np.cumsum(height + 0.6 / B)
+    if not (np.isfinite(top[-1]) and top[-1] < 1e300):
+        raise InvalidInputError(f"B: the gyration bands, 2 m w/(|q| B) each, span {top[-1]:.3g} m at B = {B:.3g}: beyond float64")
+    with np.errstate(over="ignore"):
         y = np.where(q > 0, top - height, top)  # a positive charge turns up first (q v×B)
         y -= 0.5 * (top[0] - height[0] + top[-1])  # the stack's bottom and top about y = 0
         x = np.stack([np.zeros(n), y], axis=1)
@@ -866,7 +869,7 @@ def cyclotron(
     if E:
         scene.add(ElectricField([0.0, E]))
     scene.render_defaults = {"colors": [CHARGE_COLORS[0] if c > 0 else CHARGE_COLORS[1] for c in q]}
-    return _finite_books(scene, "E")
+    return _finite_books(scene, "E, B")  # the drift E/B: a huge E or a tiny B
 
 
 #: ``cyclotron``: colours of positive (red) and negative (blue) charges, RGB.
