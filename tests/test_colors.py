@@ -227,3 +227,20 @@ def test_halo_glows_around_its_particle_only(tmp_path):
     with pytest.raises(TypeError, match="halo"):
         pc.render.gif(s, tmp_path / "x.gif", frames=2, halo=[0.5])
     assert s.time == 0.0
+
+
+def test_loop_runs_the_trail_on_from_the_end():
+    # A bob on a circle (a zero-length spring to a pinned centre: an isotropic oscillator, one
+    # period over the recording): with loop the first frame already shows the trail that the
+    # last frames drew; without it the first frame has none.
+    s = pc.Scene(2, dt=1e-3)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 1.0]], masses=1.0, pinned=[True, False])
+    s.add(pc.Springs([0], [1], stiffness=1.0, rest_length=0.0))  # ω = 1: the period is 2π
+    rec = pc.render.record(s, frames=60, frame_time=2 * np.pi / 60)
+    opts = dict(size=(320, 320), trail=20, color_by="none", colors=["#808080", "#ff4000"], springs=False, colorbar=False)
+    first = next(iter(pc.render.frames(rec, loop=True, **opts))).astype(int)
+    plain = next(iter(pc.render.frames(rec, **opts))).astype(int)
+    trail_px = lambda img: int(((img - img[0, 0]) != 0).any(axis=2)[:260].sum())  # noqa: E731 - above the labels
+    assert trail_px(first) > trail_px(plain) + 200  # a third of the circle, 2 px wide
+    with pytest.raises(TypeError, match="loop"):
+        pc.render.gif(rec, "x.gif", loop="yes")

@@ -65,6 +65,7 @@ def gif(
     surface: bool | None = None,
     extent: Any = None,
     halo: Any = None,
+    loop: bool | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -258,6 +259,11 @@ def gif(
         Particles drawn with a soft halo of their own colour around the disc (a star): a mask,
         or particle indices (``[]``: none). Drawn with soft discs only (``antialias=False``
         leaves it out). Default: the scene's ``render_defaults`` (Kepler's star), else none.
+    loop : bool, optional
+        The animation is periodic (the frame after the last would be the first: an orbit, a
+        choreography), so each trail at the start runs on from the end and the GIF loops
+        without a seam (with the still camera). Default: the scene's ``render_defaults``
+        (Kepler, the figure-eight), else False.
 
     Returns
     -------
@@ -296,13 +302,13 @@ def gif(
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
                    colors=colors, cmap=cmap, background=background, surface=surface, extent=extent,
-                   halo=halo)
+                   halo=halo, loop=loop)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background", "surface", "extent", "halo")
+            "antialias", "colors", "cmap", "background", "surface", "extent", "halo", "loop")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -313,7 +319,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound = inspect.signature(gif).bind(scene, path, **options)
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
-     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent, halo) = (
+     trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent, halo, loop) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -368,6 +374,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     dim = scene.positions.shape[2] if isinstance(scene, _recording.Recording) else int(getattr(_recording.points_view(scene), "dim", 0))
     box = _extent_box(d.get("extent") if extent is None else extent, dim)
     halo = _check_halo(d.get("halo") if halo is None else halo, n_colors)
+    loop = _check.flag("loop", bool(d.get("loop", False)) if loop is None else loop)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
@@ -413,7 +420,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
                       antialias=antialias, colors=colors, cmap=cmap, background=background,
-                      surface=surface, fit=None if box is None else box - rec.origin, halo=halo)
+                      surface=surface, fit=None if box is None else box - rec.origin, halo=halo, loop=loop)
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")

@@ -444,6 +444,7 @@ class _Rasteriser:
         background: tuple[int, int, int] | None = None,
         surface: bool = False,
         halo: np.ndarray | None = None,
+        loop: bool = False,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -460,6 +461,8 @@ class _Rasteriser:
         full colour by frame_rgb) and "density" (each particle's glow in its colour); `cmap`:
         the speed and pressure maps' name; `background`: an RGB triple for the background.
         `halo`: (N,) bool, particles frame_rgb draws with a soft halo of their colour (a star).
+        `loop`: the recording is periodic (its last frame runs on into its first), so trails
+        at the start continue from the end and the GIF loops without a seam.
         `surface`: frame_rgb draws the free particles as one continuous surface (a liquid),
         coloured by `color_by` (see :meth:`_frame_rgb_surface`)."""
         n, dim = rec.positions.shape[1:]
@@ -469,6 +472,7 @@ class _Rasteriser:
         self.radius = _auto_radius(n + (0 if walls is None else len(walls)), size) if radius is None else radius
         self.color_by = color_by
         self.trail = int(trail)
+        self.loop = bool(loop)
         # The colour scale: 0 at the bottom, the top fixed over the animation.
         self.vmax = 0.0
         values, scale, base, levels = {
@@ -794,7 +798,7 @@ class _Rasteriser:
         rec = self.rec
         cam = self.cam_at(k)
         under = self._under(cam)
-        if self.trail and k > 0:
+        if self.trail and (k > 0 or self.loop):
             self._draw_trail(under, k, cam)
         out = self.palette[under].astype(np.float32)
         free = ~rec.pinned
@@ -906,7 +910,7 @@ class _Rasteriser:
         rec = self.rec
         cam = self.cam_at(k)
         under = self._under(cam)
-        if self.trail and k > 0:
+        if self.trail and (k > 0 or self.loop):
             self._draw_trail(under, k, cam)
         free = np.flatnonzero(self._off_mesh)
         if free.size:
@@ -976,7 +980,7 @@ class _Rasteriser:
         strain, which draws them over the discs (the picture is the springs). `col`, `row`:
         the particles' pixel positions. Returns whether the springs still go on top."""
         rec = self.rec
-        if self.trail and k > 0:
+        if self.trail and (k > 0 or self.loop):
             self._draw_trail(buf, k, cam)
         springs = rec.pairs is not None and rec.strain is not None
         if springs and self.color_by != "strain":
@@ -1013,11 +1017,13 @@ class _Rasteriser:
         bg = self.palette[_BACKGROUND].astype(np.float32)
         rgb = self.colors.astype(np.float32)
         passes = ((0, 0), (1, 0), (0, 1))[: 1 if self.trail_px < 2 else 3]
-        if self.trail and k > 0:
+        if self.trail and (k > 0 or self.loop):
             moving = ~rec.pinned
             first = max(0, k - self.trail)
             if self._centres is None and self._pix is None:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
+            if self.loop and self._centres is None:  # periodic: the trail runs on from the end
+                first = k - self.trail
             for f in range(first, k):
                 if self._centres is None:
                     (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
@@ -1107,6 +1113,8 @@ class _Rasteriser:
             if self._pix is None:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
             pix = self._pix
+            if self.loop:  # a periodic recording: the trail runs on from the end (pix[-1] ...)
+                first = k - self.trail
         elif self._bases is None:
             # Following: the paths' screen-plane points are fixed, only the centre moves.
             if self._pix is None:
