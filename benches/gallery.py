@@ -147,6 +147,32 @@ def thumbnail(path: Path, out: Path, width: int = 240, max_bytes: int = 200_000)
     return out.stat().st_size
 
 
+#: The README's gallery order: the showcase first.
+README_ORDER = ("galaxies", "dam_break", "double_pendulum", "cloth_on_ball", "vortex_street", "drop", "lorenz", "turing",
+                "smoke", "crown", "kepler", "figure_eight", "pythagorean", "cyclotron", "billiards", "newtons_cradle",
+                "galton_board", "cloth", "xpbd_cloth", "projectile", "droplets", "jelly", "tumbling_boxes", "spring_chain",
+                "ripple", "double_slit", "cavity")
+
+
+def readme_block(names: list[str], columns: int = 3) -> str:
+    """The README's gallery: an HTML table of thumbnails (docs/gallery/NAME.gif), each over the
+    one command that makes it, `columns` to a row."""
+    order = [n for n in README_ORDER if n in names] + [n for n in names if n not in README_ORDER]
+    rows = []
+    for k in range(0, len(order), columns):
+        cells = "".join(f'<td align="center"><img src="docs/gallery/{n}.gif" width="240" alt="{n}"><br>'
+                        f"<code>physcore render {n}</code></td>" for n in order[k : k + columns])
+        rows.append(f"<tr>{cells}</tr>")
+    return "<table>\n" + "\n".join(rows) + "\n</table>"
+
+
+def write_readme(readme: Path, names: list[str]) -> None:
+    """Replace the README's gallery (between ``<!-- gallery -->`` and ``<!-- /gallery -->``)."""
+    text = readme.read_text()
+    a, b = text.index("<!-- gallery -->") + len("<!-- gallery -->"), text.index("<!-- /gallery -->")
+    readme.write_text(text[:a] + "\n" + readme_block(names) + "\n" + text[b:])
+
+
 def verdict(row: dict) -> list[str]:
     """The budgets `row` misses, as short phrases (empty: within every budget)."""
     miss = []
@@ -220,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("scenes", nargs="*", help="scene names (default: every registered scene)")
     ap.add_argument("--out", default="gallery", help="output folder (default ./gallery)")
     ap.add_argument("--thumbs", metavar="DIR", help="also write README thumbnails (240 px, <= 200 kB) into DIR")
+    ap.add_argument("--readme", metavar="README", help="with --thumbs: rewrite README's gallery table (between its markers)")
     args = ap.parse_args(argv)
     names = args.scenes or list(pc.scenes.REGISTRY)
     unknown = [n for n in names if n not in pc.scenes.REGISTRY]
@@ -242,6 +269,8 @@ def main(argv: list[str] | None = None) -> int:
             if "error" not in r:
                 r["thumb_bytes"] = thumbnail(out / f"{r['scene']}.gif", thumbs / f"{r['scene']}.gif")
         print(f"thumbnails: {sum(r.get('thumb_bytes', 0) for r in rows) / 1e6:.2f} MB in {thumbs}")
+        if args.readme:
+            write_readme(Path(args.readme), [r["scene"] for r in rows if "thumb_bytes" in r])
     text = table(rows)
     ok = sum(1 for r in rows if "error" not in r and not r["misses"])
     summary = f"{ok} of {len(rows)} scenes within every budget"

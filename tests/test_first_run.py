@@ -226,13 +226,16 @@ def test_trails_show_the_paths(tmp_path):
         img = _last_frame(path)
         return sum(int(np.all(img == np.asarray(c), axis=2).sum()) for c in shades)
 
+    # color_by="speed": the fixed palette's trail shades (own colours draw trails in each
+    # particle's colour instead, tests/test_colors.py).
     counts = {}
     for t in (0, 10, 40):
         s = pc.scenes.projectile(n=3)
-        counts[t] = trail_pixels(render.gif(s, tmp_path / f"t{t}.gif", frames=41, size=(160, 120), trail=t))
+        counts[t] = trail_pixels(render.gif(s, tmp_path / f"t{t}.gif", frames=41, size=(160, 120), trail=t, color_by="speed"))
     assert counts[0] == 0 and 0 < counts[10] < counts[40], counts
-    assert pc.scenes.kepler().render_defaults["trail"] == 60
-    assert trail_pixels(render.gif(pc.scenes.kepler(), tmp_path / "k.gif", frames=40, size=(120, 120))) > 0
+    assert pc.scenes.kepler().render_defaults["trail"] > 0
+    k = render.gif(pc.scenes.kepler(), tmp_path / "k.gif", frames=40, size=(120, 120), color_by="speed", halo=[], theme="light", radius=3)
+    assert trail_pixels(k) > 0
 
 
 @pytest.mark.parametrize("bad, exc", [(-1, ValueError), (1.5, TypeError), ("3", TypeError)])

@@ -600,7 +600,7 @@ kepler.render_defaults = {"antialias": True,
     "radius": 12,
     # Bodies as objects (a sun, a planet: KEPLER_COLORS), not a speed map that turns the star at
     # rest into the map's darkest end; the night sky.
-    "color_by": "none", "theme": "dark",
+    "color_by": "none", "theme": "dark", "loop": True,  # two whole orbits: the GIF loops seamlessly
 }
 
 
@@ -642,6 +642,7 @@ figure_eight.render_defaults = {"antialias": True,
     "frames": 150, "fps": 30, "frame_time": FIGURE_EIGHT_PERIOD / 150, "size": (560, 300), "radius": 10,
     "speed_unit": "(G=1)", "trail": 50, "theme": "dark",  # each trail a third of the curve: the three close it
     "color_by": "none",  # equal speeds at equal phases: the bodies as objects, each its own colour
+    "loop": True,  # one whole period: the trails run on across the GIF's loop
 }
 
 
@@ -765,11 +766,13 @@ def galaxies(
     q = _positive(pericentre, "pericentre")
     prograde = _flag(prograde, "prograde")
     theta = _nonneg(theta, "theta")
-    softening = _positive(softening, "softening")
+    # Beyond the disks' size (1) a softening only blurs the galaxies into each other; the bound
+    # also keeps (r² + ε²)^{3/2} inside float64.
+    softening = _check.float_in_range("softening", softening, 0.0, 10.0, lo_open=True)
     seed = _count(seed, "seed", 0)
     _particles("n", n)
-    if not q < 2.25:  # the start at separation 4.5 must come before the pericentre
-        raise InvalidInputError(f"pericentre: must be below 2.25 (half the starting separation 4.5), got {q:.3g}")
+    if not 1e-3 <= q < 2.25:  # the start at separation 4.5 must come before the pericentre
+        raise InvalidInputError(f"pericentre: must be in [0.001, 2.25) (half the starting separation 4.5), got {q:.3g}")
     rng = np.random.default_rng(seed)
     m_centre, m_disk, r_in, r_out, sep = 1.0, 0.05, 0.15, 1.0, 4.5
     mu = 2.0 * (m_centre + m_disk)
@@ -1833,43 +1836,45 @@ def _auto_grain_dt(scene: Scene, dt: float | None, factor: float = 1.0) -> Scene
 def galton_board(
     balls: int = 120,
     rows: int = 8,
-    restitution: float = 0.75,
+    restitution: float = 0.69,
     friction: float = 0.0,
     seed: int = 0,
-    spacing: float = 3.0,
+    spacing: float = 12.0,
     width: float = 0.1,
-    drag: float = 0.0,
+    drag: float = 4e-3,
     integrator: str | None = None,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Galton board: balls roll one by one down a zig-zag marble run onto `rows` staggered rows
-    of pegs and into bins.
+    """Galton board in a viscous liquid: a queue of balls sinks at terminal speed onto `rows`
+    staggered rows of pegs and piles up in bins.
 
     2D; balls of radius 2 mm and 0.26 g, pegs of radius 2.3 mm spaced 9 mm (rows 7.8 mm apart,
-    gaps of 1.1 ball diameters), linear contacts (:class:`~physcore.Contacts`, k = 5·10³ N/m)
-    with the given restitution and friction; the pegs, the run, the chute and the bins'
-    dividers are pinned grains, the floor and sides are walls; optional linear `drag` (kg/s,
-    at most 1).
-    The board is `width` metres wide (at least rows + 1 pitches).
+    gaps of 1.1 ball diameters), linear contacts (:class:`~physcore.Contacts`, k = 10³ N/m)
+    with the given restitution and friction; the pegs and the bins' dividers (columns of
+    grains of radius 0.8 mm, 2.4 mm apart) are pinned grains, the floor and sides are walls.
+    The board is `width` metres wide (at least rows + 1 pitches); the bins are deep enough for
+    the binomial's fullest bin plus three of its standard deviations.
 
-    The balls start at rest on the run, `spacing` ball diameters apart, each on top of a grain
-    of its lane. The lanes are rows of touching grains of radius 0.8 mm sloping 4°: on that
-    washboard a ball neither stops nor speeds up, it hops along at about 0.05–0.1 m/s, so the
-    balls leave the run one after another at a steady rate (about 10 a second at spacing 3)
-    whatever their start. At each end a ball drops onto a short 20° ramp, the head of the next
-    lane running back, and the last lane ends in a 30° ramp that throws it into a vertical
-    chute 1.4 diameters wide above the top peg, where it bounces from wall to wall (the side it
-    leaves on is random). Nothing narrows: with friction 0 two balls arch over any narrowing
-    with sloped walls and stop a hopper's flow. An ideal board sends each ball left or right at
-    every row, so its bin is Binomial(rows, ½) (Galton, *Natural Inheritance*, 1889).
-    Measured (6 rows, 100 balls, seeds 0–4, 16 s): 94–99 balls in the bins (the rest still on
-    the run or the pegs), bin variance 1.61–2.13 bins² against the binomial's 1.5, Pearson χ²
-    p = 0.026–0.96: a little wider than binomial, but the test suite's χ² test (80 balls,
-    significance 0.001) passes. A ball takes about 0.6 s through the pegs, so several are on
-    them at once. (A hopper feeding this lattice at 50 balls/s jammed pairs across its gaps
-    and widened the bins to 2.2–2.8; isolated balls on it spread like the binomial, 1.48.)
-    With friction the balls stop on the run. Particles: the balls first (indices
+    The balls start at rest in one vertical column above the top peg, `spacing` ball diameters
+    apart (a hair off the axis, by up to 0.02 radii, from `seed`). The board stands in a liquid,
+    modelled as linear `drag` b (kg/s; a sphere's Stokes drag 6πηr at η ≈ 0.1 Pa·s, a
+    water–glycerol mix; buoyancy left out): every ball sinks at the same terminal speed
+    v = m g / b (0.64 m/s by default), so none catches up with the one below and they reach
+    the pegs one by one, every spacing·2r / v (75 ms by default), all at that speed. Glycerine
+    Galton boards are classroom demonstrations.
+
+    An ideal board sends each ball left or right at every row, so its bin is
+    Binomial(rows, ½) (Galton, *Natural Inheritance*, 1889), of variance rows/4 bins². This one
+    comes close only by calibration: the spread depends steeply on restitution and drag
+    (isolated balls, 8 rows, v = 0.64 m/s: variance 0.55 / 2.5 / 2.6 bins² at restitution
+    0.6 / 0.75 / 0.9; at v = 1 m/s balls hop across columns, 4–6 bins²). The default stream (8 rows, 120 balls,
+    seeds 0–3) gives variance 1.52–1.97 bins² (mean 1.72) at restitution 0.69, 1.75–2.65
+    (mean 2.23, seeds 0–5) at 0.70 and 1.59–2.06 at 0.68, against the binomial's 2.0; the
+    test suite's variance and Pearson χ² tests (160 balls, significance 0.001) pass at the
+    default. A ball takes about 0.9 s through the pegs, so several are on the board at once.
+    Other restitutions, drags and spacings give other spreads. With friction balls can rest
+    on the pegs. Particles: the balls first (indices
     0..balls-1), then the fixed ones; :func:`galton_bins` counts the balls per bin.
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
@@ -1887,21 +1892,22 @@ def galton_board(
     width = _check.float_in_range("width", width, 0.02, 10.0)
     # Up to 1 kg/s: the balls' speed then relaxes in m/b = 0.26 ms, still 50 steps; beyond, the
     # automatic step would follow the drag down (1e303 kg/s made it subnormal).
-    drag = _check.float_in_range("drag", drag, 0.0, 1.0)
+    # > 0: the queue sinks at the terminal speed m g / drag.
+    drag = _check.float_in_range("drag", drag, 0.0, 1.0, lo_open=True)
     dt = _optional(dt, "dt")
     # A tight lattice: gaps of 1.1 ball diameters, so a ball leaving a peg drops into the gap
-    # beside it onto the peg below (with wider gaps, 1.9 d, balls skipped columns: isolated
-    # balls spread over a variance 3.6 bins² on 6 rows against the binomial's 1.5).
-    rb, s = 0.002, 0.009
+    # beside it onto the peg below (with wider gaps, 1.9 d, balls skipped columns).
+    rb, s, mass = 0.002, 0.009, 2.6e-4
     d = 2 * rb
     rp = 0.5 * (s - 1.1 * d)
     h = s * math.sqrt(3.0) / 2.0
     half = max(0.5 * (rows + 1) * s, 0.5 * width)  # the board spans x in [-half, half]
-    r_g = 0.0008  # the run's, the chute's and the dividers' grains
-    p = 2 * r_g  # touching grains
-    n_lane = int(2 * half / p)
-    _particles("balls, rows, width", balls + (2 * half / s + 1) * rows + n_lane * (balls * spacing * d / (2 * half) + 2)
-               + (rows + 2) * 0.1 / p)
+    r_g, p = 0.0008, 0.0024  # the dividers' grains, 0.8 mm gaps (a ball cannot pass)
+    # The fullest bin of Binomial(rows, ½) plus 3 standard deviations, about 1.5 mm a ball (two
+    # abreast in the 7.4 mm between dividers; measured), and a margin.
+    full = balls * math.comb(rows, rows // 2) / 2.0**rows
+    bin_depth = max(0.03, 0.0018 * (full + 3 * math.sqrt(full) + 3))
+    _particles("balls, rows, width", balls + (2 * half / s + 1) * rows + (2 * half / s + 1) * bin_depth / p)
     fixed: list[tuple[float, float, float]] = []
     # Staggered rows across the whole width: row k has pegs at x = (j − k/2)·s, so a ball above
     # peg 0 of row 0 is shifted by ±s/2 a row.
@@ -1911,89 +1917,47 @@ def galton_board(
             x = (j - 0.5 * k) * s
             if abs(x) <= half + 1e-9:
                 fixed.append((x, -k * h, rp))
-    # Bins: dividers (columns of touching grains) between the landing places (m − rows/2)s.
+    # Bins: dividers between the landing places (m − rows/2)s, from just under the last row.
     y_top_bins = -rows * h + 0.5 * h
-    bin_depth = max(0.04, 4.05 * d * math.sqrt(balls / (rows + 1)))
     y_floor = y_top_bins - bin_depth
     for m in range(-n_across, n_across + 1):
         x = (m - 0.5 * rows - 0.5) * s
         if abs(x) < half - r_g:
-            fixed.extend((x, float(y), r_g) for y in np.arange(y_floor + r_g, y_top_bins, p))
-    # The chute: a vertical slot 1.4 d wide ending just above peg 0; its right wall stands 4 d
-    # above its top to catch the balls thrown in from the left.
-    y_chute = rp + 1.2 * rb + 2 * r_g
-    y_top = y_chute + 6 * d
-    xl, xr = -(0.7 * d + r_g), 0.7 * d + r_g
-    fixed.extend((xl, float(y), r_g) for y in np.arange(y_chute, y_top + 1e-9, p))
-    fixed.extend((xr, float(y), r_g) for y in np.arange(y_chute, y_top + 4 * d, p))
-    wall = half - r_g
-    c4, s4 = math.cos(math.radians(4.0)), math.sin(math.radians(4.0))
-    c20, s20 = math.cos(math.radians(20.0)), math.sin(math.radians(20.0))
-    c30, s30 = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
-
-    def line(x0: float, y0: float, dx: float, dy: float, n: int) -> list[tuple[float, float]]:
-        return [(x0 + i * p * dx, y0 + i * p * dy) for i in range(n)]
-
-    # The run, from its exit up; each lane's grains listed downhill, with the index of its first
-    # gentle (4°) grain. The last lane runs right from the left wall down to a 30° ramp (3 d long)
-    # that ends at the chute's left wall.
-    ramp = line(xl, y_top, -c30, s30, int(3 * d / p) + 1)[::-1]
-    x0, y0 = ramp[0]
-    gentle = line(x0 - c4 * p, y0 + s4 * p, -c4, s4, int((x0 + wall) / (p * c4)))[::-1]
-    lanes = [(gentle + ramp, 0, len(gentle))]
-    starts: list[tuple[float, float]] = []
-    step = max(1, round(spacing * d / p))
-    while True:
-        pts, g0, g1 = lanes[-1]
-        right = pts[-1][0] > pts[0][0]
-        # Balls on the gentle grains from the downhill end up, each at rest on top of its grain,
-        # a hair downhill (a ball in a dip between grains would stay there).
-        for i in range(g1 - 3, g0 + 1, -step):
-            gx, gy = pts[i]
-            a = 0.03 if right else -0.03
-            starts.append((gx + (rb + r_g) * math.sin(a), gy + (rb + r_g) * math.cos(a)))
-            if len(starts) == balls:
-                break
-        if len(starts) == balls:
-            break
-        # The lane above runs the other way: its gentle part ends 2 d short of the wall above
-        # this lane's head (the balls drop off there), 1.7 d above it; it starts with a 20°
-        # ramp (1.5 d long) from the other wall, where the balls land.
-        side = -1.0 if right else 1.0  # this lane's head is at x = side·wall
-        x_end, y_end = side * (wall - 2 * d), pts[0][1] + 1.7 * d
-        n_g = int((2 * wall - 2 * d - 1.5 * d) / (p * c4))
-        gentle = line(x_end, y_end, -side * c4, s4, n_g + 1)[::-1]
-        gx, gy = gentle[0]
-        head = line(gx - side * c20 * p, gy + s20 * p, -side * c20, s20, int((wall - abs(gx)) / (p * c20)))[::-1]
-        lanes.append((head + gentle, len(head), len(head) + len(gentle)))
-    for pts, _, _ in lanes:
-        fixed.extend((x, y, r_g) for x, y in pts)
+            fixed.extend((x, float(y), r_g) for y in np.arange(y_top_bins - r_g, y_floor, -p))
+    # The queue: ball i at rest 3 d above the top peg plus i spacings.
     rng = np.random.default_rng(seed)
-    b = np.array(starts)
-    b[:, 0] += rng.uniform(-0.02, 0.02, balls) * rb
+    b = np.zeros((balls, 2))
+    b[:, 0] = rng.uniform(-0.02, 0.02, balls) * rb
+    b[:, 1] = rp + rb + 3 * d + spacing * d * np.arange(balls)
     f = np.array(fixed)
     x = np.concatenate([b, f[:, :2]])
     radius = np.concatenate([np.full(balls, rb), f[:, 2]])
     pinned = np.arange(len(x)) >= balls
     scene = _grain_scene(dt, integrator, threads)
-    scene.add_particles(x, masses=2.6e-4, pinned=pinned)
+    scene.add_particles(x, masses=mass, pinned=pinned)
     scene.set_attribute("radius", radius)
     scene.add(Gravity([0.0, -9.81]))
-    if drag:
-        scene.add(Drag(drag))
-    scene.add(Contacts(stiffness=5e3, restitution=restitution, friction=friction,
+    scene.add(Drag(drag))
+    scene.add(Contacts(stiffness=1e3, restitution=restitution, friction=friction,
                        walls=[Plane([0.0, y_floor], [0.0, 1.0], restitution, friction),
                               Plane([-half, 0.0], [1.0, 0.0], restitution, friction),
                               Plane([half, 0.0], [-1.0, 0.0], restitution, friction)]))
-    scene.render_defaults = {"galton": {"balls": balls, "rows": rows, "pitch": s}}
-    # A 100th of a contact: the stream of impacts piles up semi-implicit Euler's first-order
-    # error, 1.2e-3 of the energy in the first second at a 50th.
-    return _auto_grain_dt(scene, dt, 0.5)
+    # Drawn as a diagram: grey pegs and dividers, balls in four warm hues, a pale liquid; the
+    # camera holds the board (from the floor to 3 pitches above the top peg), so the queue
+    # enters the picture ball by ball.
+    hues = np.array(GALTON_COLORS, dtype=np.uint8)
+    colors = np.concatenate([hues[np.arange(balls) % len(hues)], np.full((len(f), 3), 125, np.uint8)])
+    scene.render_defaults = {"galton": {"balls": balls, "rows": rows, "pitch": s},
+                             "colors": colors.tolist(),  # plain lists: render_defaults compare with ==
+                             "extent": ((-half, y_floor), (half, rp + 3 * s))}
+    return _auto_grain_dt(scene, dt)
 
 
-# A time-lapse (0.1 s a frame): the run empties in about 12 s.
-galton_board.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 0.1, "size": (240, 720),
-                                "size_by": "radius", "color_by": "speed"}
+GALTON_COLORS = ((230, 120, 30), (214, 62, 48), (240, 175, 40), (190, 80, 120))  # RGB: amber, red, gold, plum
+
+# 10.2 s of simulated time at 1.6× speed: the default queue's last ball lands at about 10 s.
+galton_board.render_defaults = {"antialias": True, "frames": 154, "fps": 25, "frame_time": 1 / 15, "size": (300, 560),
+                                "size_by": "radius", "color_by": "none", "background": (226, 236, 244)}
 
 
 def galton_bins(scene: Scene) -> np.ndarray:
@@ -2248,6 +2212,10 @@ def double_pendulum(
         raise InvalidInputError("length, mass: must lie in [1e-100, 1e100] (m, kg)")
     k = 2e5 * mass * 9.81 / length if stiffness is None else _positive(stiffness, "stiffness")
     dt = _optional(dt, "dt")
+    with np.errstate(over="ignore", divide="ignore"):
+        step = 0.2 / math.sqrt(2 * k / mass) if math.isfinite(2 * k / mass) else 0.0
+    if dt is None and not _check.MIN_NORMAL <= step < math.inf:
+        raise InvalidInputError(f"stiffness, mass: the step 0.2/√(2 k/m) = {step:.3g} s is outside float64's normal range; give a dt")
     th1 = np.full(n, a1)
     th2 = a2 + spread * np.arange(n)
     p1 = length * np.stack([np.sin(th1), -np.cos(th1)], axis=1)
@@ -2256,7 +2224,7 @@ def double_pendulum(
     pinned = np.zeros(2 * n + 1, dtype=bool)
     pinned[0] = True
     upper = 1 + 2 * np.arange(n)
-    scene = Scene(2, integrator=integrator, dt=0.2 / math.sqrt(2 * k / mass) if dt is None else dt, threads=threads)
+    scene = Scene(2, integrator=integrator, dt=step if dt is None else dt, threads=threads)
     scene.add_particles(x, masses=mass, pinned=pinned)
     scene.add(Springs(np.concatenate([np.zeros(n, dtype=np.int64), upper]), np.concatenate([upper, upper + 1]),
                       stiffness=k, rest_length=length))
