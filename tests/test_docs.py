@@ -83,3 +83,23 @@ def test_stub_check_catches_a_wrong_signature(tmp_path):
     assert wrong != stub
     result = _stubtest(wrong, tmp_path)
     assert result.returncode != 0 and "simd_levels" in result.stdout, result.stdout + result.stderr
+
+
+def test_readme_opens_with_the_gallery():
+    # Every ready-made scene has a thumbnail in the README's gallery, with the command that makes
+    # it, before the first word about solvers; thumbnails stay small (≤ 200 kB each, ≤ 5 MB in
+    # all) so the repository stays light (issue "A gallery people share").
+    import re
+
+    import physcore as pc
+
+    text = (ROOT / "README.md").read_text()
+    gallery = text[: text.index("## Quick start")]
+    shown = re.findall(r'<img src="docs/gallery/(\w+)\.gif"', gallery)
+    assert set(shown) == set(pc.scenes.REGISTRY), set(pc.scenes.REGISTRY) ^ set(shown)
+    for name in shown:
+        assert f"physcore render {name}</code>" in gallery, name
+    sizes = {name: (ROOT / "docs" / "gallery" / f"{name}.gif").stat().st_size for name in shown}
+    assert max(sizes.values()) <= 200_000, max(sizes.items(), key=lambda kv: kv[1])
+    assert sum(sizes.values()) <= 5_000_000
+    assert "solver" not in gallery.lower()
