@@ -1078,7 +1078,7 @@ def dam_break(
         The fluid's pressure (:class:`~physcore.fluids.Fluid`). Default ``"dfsph"`` with the
         default integrator, ``"wcsph"`` with any other (DFSPH steps with
         ``"semi_implicit_euler"`` only). ``"dfsph"`` solves for an incompressible pressure (0.1 % mean compression) and steps at the flow's CFL limit
-        instead of the speed of sound's: the default render to T = 4 takes about 1,800 steps instead
+        instead of the speed of sound's: a render at n = 144 to T = 4 takes about 1,800 steps instead
         of 29,000, three times faster (README, "Fluids (DFSPH)"), with the Martin & Moyce
         front as close; ``sound_speed`` then only scales the viscosity and ``precision`` does
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
