@@ -532,9 +532,15 @@ class StableFluid(Grid):
         Relative residual of the pressure solve (default 1e-8).
     max_iterations : int
     walls : {"free_slip", "no_slip"}
-        The domain's walls (all four are solid).
+        The domain's walls (all four are solid unless ``inflow`` opens the x faces).
     lid : float, optional
         Speed (m/s, +x) of the top wall: a lid-driven cavity (needs ``walls="no_slip"``).
+    inflow : float, optional
+        Speed U (m/s, > 0) of a uniform inflow through the left face (x = 0): u = U, v = 0 there
+        (U beside fluid cells, 0 beside obstacles). The right face (x = nx·dx) is then an open
+        outflow: pressure 0 (Dirichlet) and velocity and smoke leaving with zero normal gradient,
+        so fluid passes through the box; the bottom and top stay ``walls``. Smoke (``density``)
+        enters only where sources or the initial field put it. None (default): a closed box.
     obstacles : (nx, ny) bool array, optional
     sources : sequence of :class:`Source`
     tracers : int
@@ -564,6 +570,7 @@ class StableFluid(Grid):
         max_iterations: int = 500,
         walls: str = "free_slip",
         lid: float | None = None,
+        inflow: float | None = None,
         obstacles: Any = None,
         sources: Sequence[Source] = (),
         tracers: int = 0,
@@ -588,6 +595,7 @@ class StableFluid(Grid):
         self.lid = None if lid is None else _check.finite("lid", lid)
         if self.lid is not None and self.walls != "no_slip":
             raise InvalidInputError("lid: a moving lid needs walls='no_slip' (free-slip walls do not feel it)")
+        self.inflow = None if inflow is None else _positive("inflow", inflow, "m/s, +x")
         self.mask = None if obstacles is None else _cells_mask("obstacles", obstacles, self.shape).copy()
         self.sources = tuple(sources)
         for k, src in enumerate(self.sources):
@@ -636,7 +644,8 @@ class StableFluid(Grid):
             viscosity=self.viscosity, buoyancy_alpha=self.buoyancy[0], buoyancy_beta=self.buoyancy[1],
             ambient_temperature=self.ambient_temperature, vorticity=self.vorticity, advection=self.advection,
             tolerance=self.tolerance, max_iterations=float(self.max_iterations), no_slip=self.walls == "no_slip",
-            has_lid=self.lid is not None, lid=0.0 if self.lid is None else self.lid, n_tracers=float(self.n_tracers),
+            has_lid=self.lid is not None, lid=0.0 if self.lid is None else self.lid,
+            has_inflow=self.inflow is not None, inflow=0.0 if self.inflow is None else self.inflow, n_tracers=float(self.n_tracers),
             cfl=self.cfl, **self._source_params(),
         )
         if self.mask is not None:
@@ -688,7 +697,7 @@ class StableFluid(Grid):
             "shape": list(self.shape), "dx": self.dx, "viscosity": self.viscosity, "buoyancy": list(self.buoyancy),
             "ambient_temperature": self.ambient_temperature, "vorticity": self.vorticity, "advection": self.advection,
             "tolerance": self.tolerance, "max_iterations": self.max_iterations, "walls": self.walls, "lid": self.lid,
-            "mask": self.mask is not None, "tracers": self.n_tracers, "cfl": self.cfl,
+            "inflow": self.inflow, "mask": self.mask is not None, "tracers": self.n_tracers, "cfl": self.cfl,
             "sources": [
                 [s.density, s.temperature, list(map(float, s.velocity)), None if s.center is None else list(map(float, s.center)), s.radius]
                 for s in self.sources
@@ -727,7 +736,7 @@ def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.n
             tuple(r["shape"]), r["dx"], viscosity=r["viscosity"], buoyancy=tuple(r["buoyancy"]),
             ambient_temperature=r["ambient_temperature"], vorticity=r["vorticity"], advection=r["advection"],
             tolerance=r["tolerance"], max_iterations=r["max_iterations"], walls=r["walls"], lid=r["lid"],
-            obstacles=arrays.get("mask"), tracers=r["tracers"], cfl=r["cfl"], name=name,
+            inflow=r.get("inflow"), obstacles=arrays.get("mask"), tracers=r["tracers"], cfl=r["cfl"], name=name,
             sources=[
                 Source(d, t, tuple(v), None if c is None else tuple(c), rad, arrays.get(f"region{k}") if c is None else None)
                 for k, (d, t, v, c, rad) in enumerate(r["sources"])

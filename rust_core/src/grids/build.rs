@@ -92,6 +92,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
                 max_iterations: p.count("max_iterations", 1 << 30)?,
                 no_slip: p.flag("no_slip")?,
                 lid: if p.flag("has_lid")? { Some(p.number("lid")?) } else { None },
+                inflow: if p.flag("has_inflow")? { Some(p.number("inflow")?) } else { None },
                 obstacles: p
                     .take_floats("obstacles")
                     .map(|m| m.iter().map(|&x| x != 0.0).collect())

@@ -68,15 +68,17 @@ fn padded_len(nx: usize, ny: usize) -> usize {
 
 impl Stencil {
     /// A stencil on `nx × ny` unknowns. `open(i, j)`: whether unknown (i, j) is free.
-    /// `wall(i, j)`: what the count of an open unknown gains for each of its sides beyond the
-    /// grid (0: Neumann / free slip; 2: a no-slip ghost −u). `closed_counts`: whether a closed
-    /// neighbour (held at 0) adds 1 to the count (Dirichlet) or nothing (Neumann). `d0_open`:
-    /// the identity part of open unknowns (closed ones get 1).
+    /// `wall`: what the count of an open unknown gains for a side beyond the grid, per side
+    /// [east (x+), west (x−), north (y+), south (y−)] (0: Neumann / free slip / zero gradient;
+    /// 1: Dirichlet 0 one cell beyond, e.g. an open boundary's pressure; 2: a no-slip ghost
+    /// −u). `closed_counts`: whether a closed neighbour (held at 0) adds 1 to the count
+    /// (Dirichlet) or nothing (Neumann). `d0_open`: the identity part of open unknowns (closed
+    /// ones get 1).
     pub fn build(
         nx: usize,
         ny: usize,
         open: &dyn Fn(usize, usize) -> bool,
-        wall: Real,
+        wall: [Real; 4],
         closed_counts: bool,
         d0_open: Real,
     ) -> Result<Self> {
@@ -110,9 +112,10 @@ impl Stencil {
                     continue;
                 }
                 let mut k = 0.0;
-                for (nb, inside) in [(c + 1, i + 1 < nx), (c - 1, i > 0), (c + w, j + 1 < ny), (c - w, j > 0)] {
+                let sides = [(c + 1, i + 1 < nx), (c - 1, i > 0), (c + w, j + 1 < ny), (c - w, j > 0)];
+                for ((nb, inside), beyond) in sides.into_iter().zip(wall) {
                     if !inside {
-                        k += wall;
+                        k += beyond;
                     } else if s.open[nb] || closed_counts {
                         // An open neighbour, or a closed one held at 0 (Dirichlet).
                         k += 1.0;
@@ -132,10 +135,17 @@ impl Stencil {
         Ok(s)
     }
 
-    /// Pins one unknown of every connected component of open unknowns that has no identity
-    /// part (adds 1 to its d0), making a pure-Neumann operator definite. If the right-hand
-    /// side sums to zero over the component (a compatible Poisson problem), the solution is
-    /// unchanged: summing the rows of the component gives x_pin = 0.
+    /// The part of unknown c's count that no link carries: what Dirichlet sides (an open
+    /// boundary, a counted closed neighbour) add to the diagonal. 0 for a pure-Neumann row.
+    fn held(&self, c: usize) -> Real {
+        let w = self.w;
+        self.count[c] - (self.we[c] + self.we[c - 1] + self.wn[c] + self.wn[c - w])
+    }
+
+    /// Pins one unknown of every connected component of open unknowns that has neither an
+    /// identity part nor a Dirichlet side (adds 1 to its d0), making a pure-Neumann operator
+    /// definite. If the right-hand side sums to zero over the component (a compatible Poisson
+    /// problem), the solution is unchanged: summing the rows of the component gives x_pin = 0.
     pub fn pin(&mut self) {
         let w = self.w;
         let mut seen = vec![false; self.open.len()];
@@ -148,7 +158,7 @@ impl Stencil {
             seen[c0] = true;
             stack.push(c0);
             while let Some(c) = stack.pop() {
-                definite |= self.d0[c] > 0.0;
+                definite |= self.d0[c] > 0.0 || self.held(c) > 0.0;
                 let links =
                     [(c + 1, self.we[c]), (c - 1, self.we[c - 1]), (c + w, self.wn[c]), (c - w, self.wn[c - w])];
                 for (nb, wt) in links {
@@ -186,7 +196,8 @@ impl Stencil {
 
     /// The coarse operator of piecewise-constant interpolation, `COARSE_SCALE`·P^T A P: a
     /// coarse cell is open if any child is; the weight of a coarse link is the sum of the fine
-    /// links crossing it, times the scale.
+    /// links crossing it, and its identity part the sum of its children's identity and
+    /// Dirichlet parts (`held`), times the scale.
     fn coarsen(&self) -> Result<Self> {
         let (nx, ny) = (self.nx.div_ceil(2), self.ny.div_ceil(2));
         let (w, fw) = (nx + 2, self.w);
@@ -200,7 +211,7 @@ impl Stencil {
             }
             any
         };
-        let mut s = Self::build(nx, ny, &fluid, 0.0, false, 0.0)?;
+        let mut s = Self::build(nx, ny, &fluid, [0.0; 4], false, 0.0)?;
         for j in 0..ny {
             for i in 0..nx {
                 let c = (i + 1) + w * (j + 1);
@@ -215,7 +226,7 @@ impl Stencil {
                 for b in 2 * j..(2 * j + 2).min(self.ny) {
                     for a in 2 * i..(2 * i + 2).min(self.nx) {
                         if self.open[f(a, b)] {
-                            d0 += self.d0[f(a, b)];
+                            d0 += self.d0[f(a, b)] + self.held(f(a, b));
                         }
                     }
                 }
@@ -776,7 +787,7 @@ mod tests {
     use super::*;
 
     fn poisson(nx: usize, ny: usize, solid: impl Fn(usize, usize) -> bool) -> Stencil {
-        let mut s = Stencil::build(nx, ny, &|i, j| !solid(i, j), 0.0, false, 0.0).unwrap();
+        let mut s = Stencil::build(nx, ny, &|i, j| !solid(i, j), [0.0; 4], false, 0.0).unwrap();
         s.pin();
         s
     }
