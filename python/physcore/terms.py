@@ -395,7 +395,7 @@ class TreeGravity(Term, kind="tree_gravity"):
     which guards against the failure of the plain ``l/d < θ`` test found by Salmon & Warren,
     *J. Comput. Phys.* 111 (1994) 136; a node containing the receiver is always opened).
     ``theta=0`` opens every node: the direct sum, to round-off. Receivers share one tree walk per
-    group of up to 64 neighbours (Barnes, *J. Comput. Phys.* 87 (1990) 161), so the error is at
+    group of up to 128 neighbours (Barnes, *J. Comput. Phys.* 87 (1990) 161), so the error is at
     most that of the per-particle walk. The tree is rebuilt in parallel every evaluation and the
     results are bit-identical for any thread count. Pinned particles attract but do not move.
 
