@@ -1067,3 +1067,160 @@ def test_corpus_on_other_integrators(tmp_path, integrator):
             assert scene is not None, f"{case.family}:{case.name}: refused a valid file"
         if scene is not None:
             check_loaded(scene, path)
+
+
+# ------------------------------------------------------------------------------ grids and flows
+def grid_scene() -> pc.Scene:
+    """Every grid kind (each source kind: a Gaussian, a region) and a flow, stepped."""
+    s = pc.Scene(2, dt=1e-3, threads=1)
+    band = np.zeros((8, 8), dtype=bool)
+    band[2, :] = True
+    s.add(pc.Wave((8, 8), dx=0.1, c=0.5, gamma=0.1, absorbing=["x+"], layer=2, mask=~band & (np.arange(8)[:, None] == 6),
+                  drops=[pc.Drop(0.0, (0.4, 0.4), 0.1, 0.01)],
+                  oscillators=[pc.Oscillator(1.0, 2.0, center=(0.3, 0.3), radius=0.1), pc.Oscillator(0.5, 1.0, region=band)]))
+    s.add(pc.GrayScott((8, 8), preset="spots", edges="free"))
+    s.add(pc.StableFluid((8, 6), dx=0.1, viscosity=1e-3, buoyancy=(0.1, 0.2), vorticity=0.1, tracers=3, walls="no_slip", lid=0.5,
+                         obstacles=band[:, :6] & (np.arange(8)[:, None] == 2),
+                         sources=[pc.Source(1.0, 0.5, (0.0, 0.1), center=(0.45, 0.15), radius=0.15), pc.Source(region=np.eye(8, 6, dtype=bool))]))
+    s.add(pc.Flow("van_der_pol", 3, seed=2, mu=1.5))
+    s.step(3)
+    return s
+
+
+@pytest.fixture(scope="module")
+def grid_ref(tmp_path_factory) -> Ref:
+    path = grid_scene().save(tmp_path_factory.mktemp("grid_ref") / "grids.npz")
+    data = path.read_bytes()
+    with zipfile.ZipFile(io.BytesIO(data)) as zf:
+        members = {i.filename[:-4]: zf.read(i) for i in zf.infolist()}
+    meta = json.loads(str(np.lib.format.read_array(io.BytesIO(members["meta"]))))
+    return Ref(data, members, meta)
+
+
+def _record_paths(meta: dict[str, Any]) -> list[tuple]:
+    """Every path inside the grids' and flows' entries of a meta."""
+    return [("grids",) + p for p in _meta_paths(meta["grids"])] + [("flows",) + p for p in _meta_paths(meta["flows"])]
+
+
+HOSTILE_VALUES: list[Any] = [None, 5, -1, 0, 1.5, 1e300, "x", True, [], [1], [[[]]], {}, {"a": 1}, [None, None, None, None, None]]
+
+
+def test_grid_reference_round_trips(grid_ref, tmp_path):
+    f = tmp_path / "g.npz"
+    f.write_bytes(grid_ref.data)
+    scene = pc.Scene.load(f)
+    assert [g.kind for g in scene.grids] == ["wave", "gray_scott", "fluid"] and len(scene.flows) == 1
+    check_loaded(scene, f)
+
+
+@pytest.mark.parametrize(
+    "path, value, field",
+    [
+        (("grids", 0, "record", "oscillators"), 5, "meta.grids[0].record.oscillators"),
+        (("grids", 0, "record", "oscillators", 1), [1.0, 2.0], "meta.grids[0].record.oscillators[1]"),
+        (("grids", 0, "record", "drops", 0, 1), {"a": 1}, "meta.grids[0].record.drops[0].center"),
+        (("grids", 0, "record", "edges"), [1, 2, 3, 4], "meta.grids[0].record.edges"),
+        (("grids", 1, "record", "feed"), None, "meta.grids[1].record.feed"),
+        (("grids", 2, "record", "sources"), None, "meta.grids[2].record.sources"),
+        (("grids", 2, "record", "sources", 0, 2), [0.0], "meta.grids[2].record.sources[0].velocity"),
+        (("grids", 2, "record", "buoyancy"), [1.0, "x"], "meta.grids[2].record.buoyancy[1]"),
+        (("grids", 2, "record", "tracers"), 4, "grid2_tracers"),
+        (("flows", 0, "record", "kind"), [1], "meta.flows[0].record.kind"),
+        (("flows", 0, "record", "kind"), "lorenz", "meta.flows[0].record.kind"),
+        (("flows", 0, "record", "params"), None, "meta.flows[0].record.params"),
+        (("flows", 0, "record", "params", "mu"), [1], "meta.flows[0].record.params.mu"),
+        (("flows", 0, "record", "n"), 1.5, "meta.flows[0].record.n"),
+    ],
+)
+def test_grid_and_flow_records_name_the_field(grid_ref, tmp_path, path, value, field):
+    f = tmp_path / "g.npz"
+    f.write_bytes(with_meta(grid_ref, lambda m: set_at(m, path, value)))
+    with pytest.raises(pc.SceneFileError) as ei:
+        pc.Scene.load(f)
+    assert ei.value.field == field or ei.value.field.startswith(field + "["), str(ei.value)
+
+
+def test_every_grid_and_flow_key_missing_is_refused_by_name(grid_ref, fuzz_dir):
+    paths = [p for p in _record_paths(grid_ref.meta) if isinstance(p[-1], str) and p[-2] != "params"]
+    assert len(paths) > 40
+    path = fuzz_dir / "g.npz"
+    for p in paths:
+        if p[-1] == "inflow":
+            continue  # optional: files written before it lack it
+        path.write_bytes(with_meta(grid_ref, lambda m, p=p: del_at(m, p)))
+        with pytest.raises(pc.SceneFileError) as ei:
+            pc.Scene.load(path)
+        assert ei.value.field == field_name(p) and "missing" in str(ei.value), (p, str(ei.value))
+
+
+def test_every_grid_and_flow_value_hostile_is_refused_or_loads(grid_ref, fuzz_dir):
+    # Every value inside a grid's or a flow's entry replaced by each hostile JSON value: the file
+    # loads (and round-trips) or is refused by a SceneFileError; nothing else escapes.
+    path = fuzz_dir / "g.npz"
+    outcomes = {"loaded": 0, "refused": 0}
+    for p in _record_paths(grid_ref.meta):
+        for value in HOSTILE_VALUES:
+            path.write_bytes(with_meta(grid_ref, lambda m, p=p, value=value: set_at(m, p, value)))
+            scene = load_or_refuse(path, max_bytes=4 * path.stat().st_size + (32 << 20))
+            outcomes["refused" if scene is None else "loaded"] += 1
+            if scene is not None:
+                check_loaded(scene, path)
+    assert outcomes["refused"] > 500, outcomes
+
+
+def test_a_fluid_shape_larger_than_its_arrays_is_refused_before_allocating(grid_ref, tmp_path):
+    # Item 4 of issue 44: an 18 kB file whose fluid record claims a huge grid made the core
+    # allocate it (24 GB) before the arrays' sizes were compared. Under an address-space cap of
+    # 512 MiB above the baseline, a 4096 x 4096 fluid (~2 GB of fields) cannot be built: the
+    # loader must refuse from the sizes alone.
+    f = tmp_path / "big.npz"
+    meta = json.loads(json.dumps(grid_ref.meta))
+    rec = meta["grids"][2]["record"]
+    rec.update(shape=[4096, 4096], mask=False, sources=rec["sources"][:1])  # no mask or region member to size the cells
+    f.write_bytes(rebuilt(grid_ref, {"meta": npy(np.array(meta_text(meta))), "grid2_mask": None, "grid2_region1": None}))
+    assert f.stat().st_size < 100_000
+    code = f"""
+import re, resource
+import physcore as pc
+vm = int(re.search(r"VmSize:\\s+(\\d+) kB", open("/proc/self/status").read()).group(1)) * 1024
+resource.setrlimit(resource.RLIMIT_AS, (vm + (512 << 20), resource.getrlimit(resource.RLIMIT_AS)[1]))
+try:
+    pc.Scene.load({str(f)!r})
+except pc.SceneFileError as e:
+    print(e.field, "|", e)
+"""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.path.dirname(os.path.dirname(os.path.abspath(pc.__file__))) + os.pathsep + env.get("PYTHONPATH", "")
+    import subprocess
+
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    field, _, message = proc.stdout.strip().partition(" | ")
+    assert field == "grid2_u" and "meta.grids[2].record.shape" in message, proc.stdout
+
+
+def test_a_grid_beyond_the_memory_limit_is_refused_by_shape(grid_ref, tmp_path, monkeypatch):
+    monkeypatch.setattr(pc._check, "memory_limit", lambda: 1 << 20)  # 1 MB: the 8 x 6 fluid needs ~12 kB
+    f = tmp_path / "g.npz"
+    f.write_bytes(with_meta(grid_ref, lambda m: set_at(m, ("grids", 2, "record", "shape"), [100, 60])))
+    with pytest.raises(pc.SceneFileError, match=r"meta\.grids\[2\]\.record\.shape: a fluid grid of \[100, 60\] cells would need about 1\.5 MB") as ei:
+        pc.Scene.load(f)
+    assert ei.value.field == "meta.grids[2].record.shape"
+
+
+@pytest.mark.parametrize("kind", ["wave", "fluid"])
+def test_a_source_with_both_region_and_center_round_trips(tmp_path, kind):
+    # The region wins (as the constructor uses it); the file used to record the center instead,
+    # so Scene.load refused what Scene.save wrote (the radius, 0, is no Gaussian's).
+    band = np.zeros((8, 8), dtype=bool)
+    band[2, :] = True
+    s = pc.Scene(2, dt=1e-3, threads=1)
+    if kind == "wave":
+        g = s.add(pc.Wave((8, 8), dx=0.1, oscillators=[pc.Oscillator(1.0, 2.0, center=(0.4, 0.4), region=band)]))
+    else:
+        g = s.add(pc.StableFluid((8, 8), dx=0.1, sources=[pc.Source(center=(0.4, 0.4), region=band)]))
+    s.step(2)
+    back = pc.Scene.load(s.save(tmp_path / "s.npz"))
+    s.step(3)
+    back.step(3)
+    assert np.array_equal(back.grids[0].field("u"), g.field("u"))

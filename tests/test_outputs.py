@@ -3,6 +3,7 @@ arrays, the CLI's format by extension, and a Recording shown inline in a noteboo
 from __future__ import annotations
 
 import base64
+import errno
 import io
 import subprocess
 import sys
@@ -59,6 +60,32 @@ def test_png_sequence_holds_every_frame_exactly(rec, tmp_path):
     frames = list(pc.render.frames(rec, size=(64, 48)))
     for p, f in zip(paths, frames, strict=True):
         assert np.array_equal(np.asarray(Image.open(p).convert("RGB")), f)
+
+
+def test_png_sequence_on_a_full_disk_leaves_the_old_sequence_whole(rec, tmp_path, monkeypatch):
+    # Issue 44, item 12: the disk fills while frame 5 is written, over an older sequence of 20
+    # frames of the same name. Every old frame stays as it was (none of the new render's), and
+    # no temporary file is left.
+    old = {}
+    for k in range(20):
+        p = tmp_path / f"orbit_{k:04d}.png"
+        Image.fromarray(np.full((8, 8, 3), k, dtype=np.uint8)).save(p)
+        old[p.name] = p.read_bytes()
+    real_save = Image.Image.save
+    calls = []
+
+    def save(self, fp, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 6:  # frames 0..4 written, frame 5 fails
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_save(self, fp, *args, **kwargs)
+
+    monkeypatch.setattr(Image.Image, "save", save)
+    with pytest.raises(OSError, match="No space left"):
+        pc.render.save(rec, tmp_path / "orbit.png", size=(64, 48))
+    assert len(calls) == 6
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(old)
+    assert all((tmp_path / name).read_bytes() == data for name, data in old.items())
 
 
 @pytest.mark.parametrize(("ext", "codec"), [("mp4", "h264"), ("webm", "vp9")])

@@ -6,9 +6,12 @@ seed derives from its parameters, so where a run happens must not change a singl
 """
 from __future__ import annotations
 
+import errno
 import math
 import pickle
 import sys
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -269,6 +272,91 @@ def test_an_unreadable_results_file_is_refused(tmp_path):
     with pytest.raises(ValueError, match="no run_key column"):
         pc.sweep(chain, GRID, measure=settle, client="serial", out=out, progress=False)
     assert out.read_text() == "a,b\n1,2\n"
+
+
+SMALL = {"k": [500.0, 2000.0], "dt": [1e-4, 2e-4]}
+
+
+def _quick(scene: pc.Scene) -> dict:
+    CALLS.append(scene.dt)
+    scene.step(20)
+    return {"y_end": float(scene.positions[-1, 1])}
+
+
+@pytest.mark.parametrize("cut", [1, 10, 40])
+def test_resume_of_a_file_cut_inside_its_last_row_runs_that_row_once(tmp_path, cut):
+    # Issue 44, item 11: a file cut inside its last row gave a duplicate row (runs 0, 1, 2, 3, 3).
+    out = tmp_path / "runs.csv"
+    full = pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    text = out.read_text()
+    assert text.endswith("\n")
+    out.write_text(text[: len(text) - cut])  # the machine died while the last row was written
+    CALLS.clear()
+    resumed = pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    assert len(CALLS) == 1  # the cut row's run, once
+    assert list(resumed["run"]) == [0, 1, 2, 3] and list(pd.read_csv(out)["run"]) == [0, 1, 2, 3]
+    assert results(resumed) == results(full)
+
+
+def test_a_damaged_row_before_the_last_is_refused_naming_file_and_row(tmp_path):
+    out = tmp_path / "runs.csv"
+    pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    lines = out.read_text().splitlines(keepends=True)
+    lines[2] = lines[2][:20] + "\n"  # data row 2 of 4 cut short, the rest whole
+    out.write_text("".join(lines))
+    before = out.read_text()
+    CALLS.clear()
+    with pytest.raises(ValueError, match=r"out: '.*runs\.csv': data row 2 of 4 .* lacks .*damaged"):
+        pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    assert CALLS == [] and out.read_text() == before
+
+
+@pytest.mark.parametrize("how", ["missing", "unwritable"])
+def test_an_unwritable_out_directory_fails_before_the_first_run(tmp_path, monkeypatch, how):
+    if how == "missing":
+        out = tmp_path / "no_such_dir" / "runs.csv"
+    else:  # a read-only directory (simulated: root may write anywhere)
+        out = tmp_path / "runs.csv"
+        real = tempfile.mkstemp
+
+        def mkstemp(*args, **kwargs):
+            if Path(kwargs.get("dir", "")) == tmp_path:
+                raise PermissionError(errno.EACCES, "Permission denied")
+            return real(*args, **kwargs)
+
+        monkeypatch.setattr(tempfile, "mkstemp", mkstemp)
+    CALLS.clear()
+    with pytest.raises(OSError, match=r"out: cannot create files in"):
+        pc.sweep(chain, SMALL, measure=_quick, client="serial", out=out, progress=False)
+    assert CALLS == []
+
+
+def test_a_full_disk_keeps_every_computed_row(tmp_path, monkeypatch):
+    # The disk fills after the first row is written: the sweep runs on, the file keeps its last
+    # whole table, and the final error names the file and carries every row.
+    out = tmp_path / "runs.csv"
+    full = pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, progress=False)
+    real = sweeps.atomic_write
+    writes = []
+
+    def atomic_write(path, write, **kw):
+        writes.append(path)
+        if len(writes) > 1:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, write, **kw)
+
+    monkeypatch.setattr(sweeps, "atomic_write", atomic_write)
+    CALLS.clear()
+    with pytest.raises(OSError, match=r"out: could not write .*runs\.csv.*No space left") as ei:
+        pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    assert len(CALLS) == 4  # every run ran
+    assert results(ei.value.results) == results(full)
+    assert list(pd.read_csv(out)["run"]) == [0]  # the last whole table written
+    assert not list(tmp_path.glob(".physcore-*"))
+    monkeypatch.setattr(sweeps, "atomic_write", real)  # space freed: the resume runs the 3 others
+    CALLS.clear()
+    resumed = pc.sweep(chain, SMALL, measure=_quick, client="serial", seed=1, out=out, progress=False)
+    assert len(CALLS) == 3 and results(resumed) == results(full)
 
 
 # ------------------------------------------------------------------------------ pickle

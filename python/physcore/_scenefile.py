@@ -40,7 +40,7 @@ from typing import IO, Any
 
 import numpy as np
 
-from . import _core
+from . import _check, _core
 from ._errors import InvalidInputError, InvalidTypeError, SceneFileError
 
 __all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
@@ -104,9 +104,38 @@ _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
     "wave": {"u": ("f8", "G"), "u_prev": ("f8", "G"), "clock": ("f8", 5)},
     "gray_scott": {"u": ("f8", "G"), "v": ("f8", "G"), "made": ("f8", 2)},
-    # The fluid's arrays carry ghost faces: sized by the core, which checks them on load.
+    # The fluid's arrays carry ghost faces; their sizes follow from the record (_fluid_sizes).
     "fluid": {k: ("f8", None) for k in ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books")},
 }
+#: Each grid kind's record (what ``Grid._record`` writes): key -> kind of value. The kinds beyond
+#: :meth:`_Reader.value`'s are checked by :func:`_grid_record`. ``_GRID_RECORD_OPTIONAL`` keys may
+#: be absent (files written before them).
+_GRID_RECORD: dict[str, dict[str, str]] = {
+    "wave": {
+        "shape": "cells", "dx": "number", "edges": "strs", "c": "number", "gamma": "number", "absorbing": "strs",
+        "layer": "int", "layer_strength": "number", "cfl": "number", "mask": "bool", "drops": "drops",
+        "oscillators": "oscillators",
+    },
+    "gray_scott": {
+        "shape": "cells", "dx": "number", "edges": "strs", "du": "number", "dv": "number", "feed": "number",
+        "kill": "number", "cfl": "number",
+    },
+    "fluid": {
+        "shape": "cells", "dx": "number", "viscosity": "number", "buoyancy": "pair", "ambient_temperature": "number",
+        "vorticity": "number", "advection": "str", "tolerance": "number", "max_iterations": "int", "walls": "str",
+        "lid": "optional_number", "mask": "bool", "tracers": "int", "cfl": "number", "sources": "sources",
+    },
+}
+_GRID_RECORD_OPTIONAL: dict[str, dict[str, str]] = {"fluid": {"inflow": "optional_number"}}
+#: Entries of a grid's lists of sources, by position: kind of value (see _grid_record).
+_GRID_ENTRIES: dict[str, tuple[tuple[str, str], ...]] = {
+    "drops": (("t", "number"), ("center", "vector"), ("radius", "number"), ("amplitude", "number")),
+    "oscillators": (("amplitude", "number"), ("frequency", "number"), ("center", "optional_vector"), ("radius", "number"), ("phase", "number")),
+    "sources": (("density", "number"), ("temperature", "number"), ("velocity", "vector"), ("center", "optional_vector"), ("radius", "number")),
+}
+#: Bytes the core holds per cell of each grid kind (its fields and scratch, float64): a generous
+#: estimate (not a measurement) for the memory check before a file's grid is built.
+_GRID_BYTES_PER_CELL = {"wave": 8 * 8, "gray_scott": 8 * 8, "fluid": 8 * 32}
 
 
 def check_path(path: object, arg: str = "path") -> Path:
@@ -322,11 +351,7 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         if not rec["name"] or rec["name"] in names:
             raise r.error(f"{field}.name", f"{_show(rec['name'])} is empty or taken")
         names.add(rec["name"])
-        shape = rec["record"].get("shape")
-        if not (isinstance(shape, list) and len(shape) == dim and all(isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= 1 << 20 for n in shape)):
-            raise r.error(f"{field}.record.shape", f"must be {dim} cell counts in 3..{1 << 20}, got {_show(shape)}")
-        if math.prod(shape) > 1 << 31:
-            raise r.error(f"{field}.record.shape", f"{_show(shape)} has more than 2**31 cells")
+        rec["record"] = _grid_record(r, f"{field}.record", rec["kind"], rec["record"], dim)
         grids.append(rec)
     meta["grids"] = grids
     from .flows import FLOWS
@@ -338,14 +363,70 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         if not rec["name"] or rec["name"] in names:
             raise r.error(f"{field}.name", f"{_show(rec['name'])} is empty or taken")
         names.add(rec["name"])
-        kind, n = rec["record"].get("kind"), rec["record"].get("n")
+        fr = r.record(f"{field}.record", rec["record"], {"kind": "str", "params": "object", "method": "str", "max_dt": "number", "n": "int"}, dim)
+        kind, n = fr["kind"], fr["n"]
         if kind not in FLOWS or FLOWS[kind]["dim"] != dim:
-            raise r.error(f"{field}.record.kind", f"must name a {dim}D flow, got {_show(kind)}")
-        if not (isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= 1 << 27):
+            flows_here = ", ".join(name for name, spec in FLOWS.items() if spec["dim"] == dim)
+            raise r.error(f"{field}.record.kind", f"must name a {dim}D flow ({flows_here}), got {_show(kind)}")
+        if not 1 <= n <= 1 << 27:
             raise r.error(f"{field}.record.n", f"must be a point count in 1..{1 << 27}, got {_show(n)}")
+        for p, v in fr["params"].items():
+            r.number(f"{field}.record.params.{p}", v)
+        rec["record"] = fr
         flows.append(rec)
     meta["flows"] = flows
     return meta
+
+
+def _grid_record(r: _Reader, field: str, kind: str, v: object, dim: int) -> dict[str, Any]:
+    """A grid's record, every key present and of its type (lists of sources entry by entry), its
+    shape in range and within the memory limit; the values are checked again by the grid's
+    constructor."""
+    optional = _GRID_RECORD_OPTIONAL.get(kind, {})
+    fields = {**_GRID_RECORD[kind], **({k: t for k, t in optional.items() if k in v} if isinstance(v, dict) else {})}
+    plain = {k: t for k, t in fields.items() if t in ("number", "int", "str", "bool", "optional_number")}
+    rec = r.record(field, v, plain, dim, required=tuple(k for k in fields if k not in plain))
+    shape = rec["shape"]
+    if not (isinstance(shape, list) and len(shape) == dim and all(isinstance(n, int) and not isinstance(n, bool) and 3 <= n <= 1 << 20 for n in shape)):
+        raise r.error(f"{field}.shape", f"must be {dim} cell counts in 3..{1 << 20}, got {_show(shape)}")
+    cells = math.prod(shape)
+    if cells > 1 << 31:
+        raise r.error(f"{field}.shape", f"{_show(shape)} has more than 2**31 cells")
+    try:
+        _check.memory("shape", cells * _GRID_BYTES_PER_CELL[kind], f"a {kind} grid of {_show(shape)} cells")
+    except InvalidInputError as exc:
+        raise r.error(f"{field}.shape", str(exc)[len("shape: "):]) from None
+    if kind == "fluid":
+        if dim != 2:
+            raise r.error(f"{field}.shape", f"the grid fluid is 2D, got {_show(shape)}")
+        r.integer(f"{field}.tracers", rec["tracers"], 0, (1 << 24) + 1, "2**24 + 1")  # it sizes the tracers member
+    for k, t in fields.items():
+        if k in plain or k == "shape":
+            continue
+        x, at = rec[k], f"{field}.{k}"
+        if t == "strs":
+            if not isinstance(x, list) or not all(isinstance(e, str) for e in x):
+                raise r.error(at, f"must be a list of strings, got {_kind(x)} {_show(x)}")
+        elif t == "pair":
+            if not isinstance(x, list) or len(x) != 2:
+                raise r.error(at, f"must be a list of 2 numbers, got {_kind(x)} {_show(x)}")
+            rec[k] = [r.number(f"{at}[{i}]", e) for i, e in enumerate(x)]
+        else:  # a list of sources: each a list of values by position (_GRID_ENTRIES)
+            entries = _GRID_ENTRIES[t]
+            if not isinstance(x, list):
+                raise r.error(at, f"must be a list, got {_kind(x)} {_show(x)}")
+            for j, e in enumerate(x):
+                if not isinstance(e, list) or len(e) != len(entries):
+                    names = ", ".join(n for n, _ in entries)
+                    raise r.error(f"{at}[{j}]", f"must be a list of {len(entries)} values ({names}), got {_kind(e)} {_show(e)}")
+                for i, (name, ek) in enumerate(entries):
+                    n_vec = 2 if t == "sources" else dim  # a fluid's vectors are 2D
+                    if ek == "optional_vector":
+                        if e[i] is not None:
+                            r.value(f"{at}[{j}].{name}", "vector", e[i], n_vec)
+                    else:
+                        r.value(f"{at}[{j}].{name}", ek, e[i], n_vec)
+    return rec
 
 
 # ---------------------------------------------------------------------------------- the archive
@@ -514,6 +595,12 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, g in enumerate(meta["grids"]):
         cells = f"G{k}"
         sizes[cells] = (math.prod(g["record"]["shape"]), f"meta.grids[{k}].record.shape")
+        if g["kind"] == "fluid":
+            rec = g["record"]
+            for name, n in _fluid_sizes(rec).items():
+                origin = (f"meta.grids[{k}].record.tracers (x and y of {rec['tracers']} tracers)" if name == "tracers"
+                          else f"meta.grids[{k}].record.shape ({name} of a {rec['shape'][0]} x {rec['shape'][1]} fluid)")
+                sizes[f"{name}{k}"] = (n, origin)
         for name, (dtype, axis) in _GRID_STATE[g["kind"]].items():
             if axis not in ("G", None):
                 sizes[f"{name}{k}"] = (axis, f"a {g['kind']} grid's {name}")
@@ -533,6 +620,16 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})
     return req, opt, sizes
+
+
+def _fluid_sizes(record: dict[str, Any]) -> dict[str, int]:
+    """Entries of a grid fluid's state members, fixed by its record: the MAC grid's face
+    velocities and pressure carry a ring of ghost cells (``StableFluid`` in the core)."""
+    nx, ny = record["shape"]
+    return {
+        "u": (nx + 1) * (ny + 2), "v": (nx + 2) * (ny + 1), "density": nx * ny, "temperature": nx * ny,
+        "pressure": (nx + 2) * (ny + 2), "tracers": 2 * record["tracers"],
+    }
 
 
 @dataclass

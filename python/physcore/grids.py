@@ -156,9 +156,10 @@ class Grid:
             raise InvalidInputError(f"{arg}: center must be {self.dim} finite coordinates (m), got {center!r}")
         radius = _positive(f"{arg}.radius", radius, "m")
         grids = np.meshgrid(*self.centers(), indexing="ij")
-        r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c, strict=False))
-        w = np.exp(-r2 / (2 * radius * radius))
-        w[r2 > (4 * radius) ** 2] = 0.0
+        with np.errstate(over="ignore"):  # a far centre or a huge radius: inf distances, no overflow warning
+            r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c, strict=False))
+            w = np.exp(-r2 / (2 * np.float64(radius) ** 2))
+            w[r2 > (4 * np.float64(radius)) ** 2] = 0.0
         flat = _layout(w)
         cells = np.flatnonzero(flat)
         if cells.size == 0:
@@ -203,7 +204,7 @@ class Grid:
         mask = getattr(self, "mask", None)
         out = {} if mask is None else {"mask": _layout(mask).astype(bool)}
         for k, src in enumerate(getattr(self, "oscillators", ()) or getattr(self, "sources", ())):
-            if src.center is None:
+            if src.region is not None:  # the region wins over a center given too (see _profiles)
                 out[f"region{k}"] = _layout(np.asarray(src.region, dtype=bool)).astype(bool)
         return out
 
@@ -365,7 +366,7 @@ class Wave(Grid):
             "mask": self.mask is not None,
             "drops": [[d.t, list(map(float, d.center)), d.radius, d.amplitude] for d in self.drops],
             "oscillators": [
-                [o.amplitude, o.frequency, None if o.center is None else list(map(float, o.center)), o.radius, o.phase]
+                [o.amplitude, o.frequency, None if o.region is not None else list(map(float, o.center)), o.radius, o.phase]
                 for o in self.oscillators
             ],
         }
@@ -618,7 +619,8 @@ class StableFluid(Grid):
                     raise InvalidInputError(f"sources[{k}]: give a region, or a center of 2 finite coordinates (m)")
                 r = _positive(f"sources[{k}].radius", src.radius, "m")
                 X, Y = np.meshgrid(*self.centers(), indexing="ij")
-                flat = _layout(((X - c0[0]) ** 2 + (Y - c0[1]) ** 2 <= r * r).astype(np.float64))
+                with np.errstate(over="ignore"):  # a far centre: inf distances, no cell
+                    flat = _layout(((X - c0[0]) ** 2 + (Y - c0[1]) ** 2 <= np.float64(r) ** 2).astype(np.float64))
                 c = np.flatnonzero(flat).astype(np.uint32)
                 w = np.ones(c.size)
             if c.size == 0:
@@ -699,7 +701,7 @@ class StableFluid(Grid):
             "tolerance": self.tolerance, "max_iterations": self.max_iterations, "walls": self.walls, "lid": self.lid,
             "inflow": self.inflow, "mask": self.mask is not None, "tracers": self.n_tracers, "cfl": self.cfl,
             "sources": [
-                [s.density, s.temperature, list(map(float, s.velocity)), None if s.center is None else list(map(float, s.center)), s.radius]
+                [s.density, s.temperature, list(map(float, s.velocity)), None if s.region is not None else list(map(float, s.center)), s.radius]
                 for s in self.sources
             ],
         }

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import itertools
 import json
 import math
@@ -37,6 +38,7 @@ import numbers
 import os
 import pickle
 import socket
+import tempfile
 import time
 import traceback
 from collections.abc import Callable, Mapping, Sequence
@@ -47,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from . import _check
-from ._atomic import atomic_write
+from ._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
 from .scene import DEFAULT_THREADS, Scene, _usable_cpus
 
@@ -297,6 +299,7 @@ class _ResultsFile:
         self.last = -math.inf
         self.cost = 0.0
         self.dirty = False
+        self.failed: OSError | None = None
 
     def load(self) -> Any:
         if self.path is None or not self.path.exists():
@@ -305,13 +308,39 @@ class _ResultsFile:
         # path: float() is correctly rounded, so every float comes back bit for bit.
         try:
             with open(self.path, newline="", encoding="utf-8") as fh:
-                records = list(csv.DictReader(fh))
+                data = fh.read()
+            records = list(csv.DictReader(io.StringIO(data, newline="")))
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InvalidInputError(f"out: {str(self.path)!r} is not a results file of a sweep ({type(exc).__name__}: {exc})") from None
+        if records and not data.endswith("\n"):
+            # Every row the sweep writes ends with a newline: a file cut short (a crash of the
+            # machine, a copy interrupted) ends inside its last row, which is dropped and run again.
+            records.pop()
         if not records or "run_key" not in records[0] or any(None in r for r in records):
             raise InvalidInputError(f"out: {str(self.path)!r} has no run_key column or ragged rows (not written by physcore.sweep); give another path")
+        for n, r in enumerate(records):
+            if any(v is None for v in r.values()):
+                missing = [k for k, v in r.items() if v is None]
+                raise InvalidInputError(
+                    f"out: {str(self.path)!r}: data row {n + 1} of {len(records)} (run_key {(r.get('run_key') or '?')[:80]!r}) lacks "
+                    f"{', '.join(missing)}: the file is damaged; repair or remove that row, or give another path"
+                )
         text = ("run_key", "error", "worker")
         return [{k: (v or None if k in text else _parse(v)) for k, v in r.items()} for r in records]
+
+    def check_writable(self) -> None:
+        """Create and remove a file in the directory of `path`, as every write will: an
+        unwritable directory then fails before the first run, not after it. Raises OSError
+        naming ``out``."""
+        if self.path is None:
+            return
+        directory = self.path.parent if str(self.path.parent) else Path(".")
+        try:
+            fd, probe = tempfile.mkstemp(dir=directory, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+        except OSError as exc:
+            raise type(exc)(exc.errno, f"out: cannot create files in {str(directory)!r} ({exc.strerror}); give a writable directory") from None
+        os.close(fd)
+        os.unlink(probe)
 
     def write(self, frame: Callable[[], Any], force: bool = False) -> None:
         if self.path is None:
@@ -325,6 +354,29 @@ class _ResultsFile:
         self.last = time.perf_counter()
         self.cost = self.last - now
         self.dirty = False
+        self.failed = None
+
+    def write_soon(self, frame: Callable[[], Any]) -> None:
+        """:meth:`write`, but a failure (a full disk) does not stop the sweep: the file keeps
+        its last whole table, the rows stay in memory, and the next write (the next row's, the
+        last one) tries again."""
+        try:
+            self.write(frame)
+        except OSError as exc:
+            self.failed = exc
+
+
+def _unwritten(exc: OSError, path: Path | None, df: Any, n_runs: int) -> OSError:
+    """The OSError :func:`sweep` raises when its last write of `out` fails (a full disk): it
+    names the file, and its ``results`` attribute holds every row computed (nothing is lost)."""
+    err = type(exc)(
+        exc.errno,
+        f"out: could not write {str(path)!r} ({exc.strerror or exc}); every run finished and its row is kept: this "
+        f"exception's .results holds the {n_runs} rows (DataFrame), and the file keeps its last whole table; free "
+        f"space and run the sweep again with the same out= (runs already in the file are not run again)",
+    )
+    err.results = df  # type: ignore[attr-defined]
+    return err
 
 
 # ------------------------------------------------------------------------------ sweep
@@ -364,7 +416,10 @@ def sweep(
         A ``.csv`` file the rows stream to as runs finish (rewritten atomically, so it is always
         a whole table). If it exists, the sweep *resumes*: runs whose key (:func:`run_key`) is
         in it are not run again and their rows are returned from the file (with
-        `retry_errors`, failed ones are run again).
+        `retry_errors`, failed ones are run again). A file cut short inside its last row (a
+        crash) loses that row, whose run is run again. Its directory is checked writable
+        before the first run. If a write fails on the way (a full disk), the runs go on, the
+        file keeps its last whole table and the next write tries again.
     seed : int, optional
         Base seed: every run gets ``seed=run_seed(seed, p)`` as a keyword of `build`, the same
         on any worker and in any order, so every run is reproducible alone.
@@ -389,9 +444,13 @@ def sweep(
     ------
     TypeError, ValueError
         A bad argument, naming it, before anything runs (a run's own failure is its row's
-        ``error``, never an exception here).
+        ``error``, never an exception here); an `out` file that is not a sweep's or has a
+        damaged row before its last (naming the file and the row).
     ImportError
         Dask or pandas is not installed (``pip install "physcore[sweep]"``).
+    OSError
+        `out`'s directory is not writable (before any run); or its last write failed (a full
+        disk): the exception names the file and its ``results`` attribute holds every row.
     KeyboardInterrupt
         Ctrl-C: queued runs are cancelled, and the rows finished so far are in `out`.
 
@@ -442,6 +501,7 @@ def sweep(
     pd = _need("pandas")
 
     file = _ResultsFile(path)
+    file.check_writable()
     keys = [run_key(p) for p in runs]
     if len(set(keys)) != len(keys):
         dup = next(k for k in keys if keys.count(k) > 1)
@@ -477,18 +537,24 @@ def sweep(
         res = value.pop("results")
         rows[i] = {"run": i, **runs[i], "seed": seeds[i], **{k: _cell(v) for k, v in res.items()}, **value, "run_key": keys[i]}
         bar.update(1)
-        file.write(frame)
+        file.write_soon(frame)
 
     from tqdm.auto import tqdm
 
     bar = tqdm(total=len(runs), initial=len(runs) - len(todo), desc="sweep", unit="run", disable=not progress, leave=False)
+    finished = False
     try:
         if todo:
             _map(_run_one, [(runs[i], seeds[i], threads) for i in todo], client, workers, on_result, shared=(build, measure))
+        finished = True
     finally:
         bar.close()
         if rows and (file.dirty or (path is not None and not path.exists())):
-            file.write(frame, force=True)
+            try:
+                file.write(frame, force=True)
+            except OSError as exc:
+                if finished:  # else the interruption propagates; the file keeps its last whole table
+                    raise _unwritten(exc, path, frame(), len(runs)) from exc
     df = frame()
     return df[df["run"].isin(range(len(runs)))].reset_index(drop=True) if kept_old else df
 

@@ -3,13 +3,14 @@ frame with the one fixed palette, atomically."""
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .. import _check
-from .._atomic import atomic_write
+from .._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write
 from .._errors import InvalidInputError, InvalidTypeError
 from . import _recording
 from ._checks import (
@@ -490,17 +491,37 @@ def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | 
 
 def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
     """One PNG per frame beside `path`: ``stem_0000.png``, ``stem_0001.png``, … (as many digits as
-    the count needs, at least 4), each written atomically."""
+    the count needs, at least 4), written as a whole: every frame goes to a temporary file in the
+    same directory first, and only when all are written are they renamed into place. On any
+    failure (a full disk, Ctrl-C) the temporaries are removed and no frame file is touched, so an
+    older sequence of the same name stays whole."""
     from PIL import Image
 
     digits = max(4, len(str(count - 1)))
-    out = []
-    for k, frame in enumerate(rgb):
-        target = path.with_name(f"{path.stem}_{k:0{digits}d}.png")
-        image = Image.fromarray(frame)
-        atomic_write(target, lambda fh, im=image: im.save(fh, format="PNG", optimize=False))
-        out.append(target)
-    return out
+    directory = path.parent if str(path.parent) else Path(".")
+    done: list[tuple[str, Path]] = []  # (temporary, target) not renamed yet
+    targets: list[Path] = []
+    try:
+        for k, frame in enumerate(rgb):
+            target = path.with_name(f"{path.stem}_{k:0{digits}d}.png")
+            fd, tmp = tempfile.mkstemp(dir=directory, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+            done.append((tmp, target))
+            targets.append(target)
+            with os.fdopen(fd, "wb") as fh:
+                Image.fromarray(frame).save(fh, format="PNG", optimize=False)
+        umask = os.umask(0)
+        os.umask(umask)
+        for tmp, _ in done:
+            os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an ordinary new file's mode
+        while done:
+            tmp, target = done[0]
+            os.replace(tmp, target)
+            done.pop(0)
+    except BaseException:
+        for tmp, _ in done:
+            Path(tmp).unlink(missing_ok=True)
+        raise
+    return targets
 
 
 def _write_video(path: Path, rgb: Any, fps: float, fmt: str) -> None:
@@ -547,7 +568,8 @@ def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
     ``.gif``: :func:`gif`. ``.mp4``: H.264 video (CRF 26, yuv420p; plays in browsers, phones and
     slides). ``.webm``: VP9 video. Both through PyAV, an optional extra (``pip install
     "physcore[video]"``; its wheel brings FFmpeg's libraries). ``.png``: one PNG per frame,
-    ``stem_0000.png``, ``stem_0001.png``, … beside `path`. Every file is written atomically.
+    ``stem_0000.png``, ``stem_0001.png``, … beside `path`, renamed into place only once all are
+    written. Every file is written atomically.
 
     Parameters
     ----------
