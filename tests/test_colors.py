@@ -244,3 +244,25 @@ def test_loop_runs_the_trail_on_from_the_end():
     assert trail_px(first) > trail_px(plain) + 200  # a third of the circle, 2 px wide
     with pytest.raises(TypeError, match="loop"):
         pc.render.gif(rec, "x.gif", loop="yes")
+
+
+def test_a_decompression_bomb_texture_is_refused_by_name(tmp_path, monkeypatch):
+    # A PNG whose header claims more pixels than Pillow's bomb limit: one clear error naming
+    # texture, at the CLI one line with exit code 2 (issue 44 item 9: a 20-line traceback).
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    bomb = tmp_path / "bomb.png"
+    Image.new("RGB", (4000, 4000)).save(bomb)  # 16 Mpx: over a limit of 1 Mpx set below
+    code = (
+        "import sys; from PIL import Image; Image.MAX_IMAGE_PIXELS = 500_000;"
+        "from physcore.cli import main; sys.exit(main(sys.argv[1:]))"
+    )
+    out = subprocess.run([sys.executable, "-c", code, "render", "cloth", "--param", "n=6", "--frames", "2",
+                          "--texture", str(bomb), "-o", str(tmp_path / "x.gif")], capture_output=True, text=True)
+    assert out.returncode == 2 and "texture" in out.stderr and "Traceback" not in out.stderr, out.stderr
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 500_000)
+    with pytest.raises(ValueError, match="texture"):
+        pc.render.gif(pc.scenes.cloth(n=6), tmp_path / "y.gif", frames=2, texture=bomb)

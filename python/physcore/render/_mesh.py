@@ -128,6 +128,8 @@ def check_texture(texture: Any, mesh: Mesh | None) -> np.ndarray | None:
                 arr = np.asarray(im.convert("RGB"))
         except (OSError, UnidentifiedImageError) as e:
             raise InvalidInputError(f"texture: cannot read the image {str(texture)!r}: {e}") from None
+        except Image.DecompressionBombError as e:  # a hostile image: its size alone would fill memory
+            raise InvalidInputError(f"texture: the image {str(texture)!r} is too large to load safely: {e}") from None
     elif isinstance(texture, np.ndarray):
         arr = texture
         if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
