@@ -417,3 +417,19 @@ def test_cli_view_writes_a_screenshot(display, tmp_path, capsys):
     assert image.size == (200, 160)
     px = np.asarray(image.convert("RGB"))
     assert (px != px[80, 2]).any(axis=2).mean() > 0.002  # something drawn besides the background
+
+
+def test_parameter_keys_stay_within_a_range_of_the_start():
+    # 110 presses of ] once stiffened a cloth 4e10 times: dt fell with it and the window froze
+    # for 4 s a frame (issue 44 item 7). The keys now stop at PARAM_RANGE times the start value,
+    # so the steps per tick grow by at most √PARAM_RANGE.
+    live = _Live(pc.scenes.cloth(n=6), "none")
+    k0, steps0 = param_value(live.scene, "stiffness"), live.steps
+    changed = [live.scale("stiffness", viewer.STEP_FACTOR) for _ in range(110)]
+    k = param_value(live.scene, "stiffness")
+    assert k <= k0 * viewer.PARAM_RANGE * (1 + 1e-12) and k > k0 * viewer.PARAM_RANGE / viewer.STEP_FACTOR
+    assert changed.count(True) == 20 and not any(changed[20:])
+    assert live.steps <= steps0 * math.sqrt(viewer.PARAM_RANGE) * 1.5
+    for _ in range(60):  # and back down, to 1/100 of the start
+        live.scale("stiffness", 1 / viewer.STEP_FACTOR)
+    assert param_value(live.scene, "stiffness") >= k0 / viewer.PARAM_RANGE * (1 - 1e-12)

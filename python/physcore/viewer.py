@@ -78,7 +78,7 @@ from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
 
 __all__ = [
     "view", "Viewer", "ViewResult", "FixedStep", "interpolate", "pick", "screen_to_world", "param_value",
-    "scale_param", "keys_text", "KEYS", "MAX_TICKS_PER_DRAW", "STEP_FACTOR", "INSTALL",
+    "scale_param", "keys_text", "KEYS", "MAX_TICKS_PER_DRAW", "STEP_FACTOR", "PARAM_RANGE", "INSTALL",
 ]
 
 #: What to install when pygame is missing.
@@ -92,7 +92,7 @@ KEYS: tuple[tuple[str, str], ...] = (
     ("mouse", "drag a particle (left button)"),
     ("space", "pause / run"),
     (". or Right", "one tick (one GIF frame) while paused"),
-    ("[ / ]", "spring stiffness ÷ 1.25 / × 1.25"),
+    ("[ / ]", "spring stiffness ÷ 1.25 / × 1.25 (each key within 100× of the start)"),
     ("- / =", "spring damping ÷ 1.25 / × 1.25 (from 0: 1 % of critical)"),
     ("g / G", "gravity ÷ 1.25 / × 1.25"),
     ("d / D", "drag coefficient ÷ 1.25 / × 1.25"),
@@ -103,6 +103,9 @@ KEYS: tuple[tuple[str, str], ...] = (
 
 #: Factor of one parameter key press.
 STEP_FACTOR = 1.25
+#: The keys keep each parameter within this factor of its start value either way (20 presses):
+#: 110 presses of ] once stiffened a cloth 4·10¹⁰ times and froze the window for 4 s a frame.
+PARAM_RANGE = 100.0
 #: Largest display rate, Hz.
 _MAX_DRAW_RATE = 60
 #: Wall seconds of ticks before a frame is drawn anyway (the ticks still due are dropped), so
@@ -350,6 +353,7 @@ class _Live:
         self.steps = spf
         self.dt0 = float(scene.dt)
         self.suggest0 = self._suggest(scene)
+        self.params0: dict[str, float] = {}
         self.pressure = color_by == "pressure"
         self.pinned = np.asarray(scene.pinned, dtype=bool).copy()
         self.grabbed: int | None = None
@@ -357,6 +361,7 @@ class _Live:
         self.held: np.ndarray | None = None  # where the last tick left it
         self.vel: np.ndarray | None = None  # the pointer's velocity over the last tick, m/s
         self.ticks = 0
+        self.params0 = self.params()  # the start values the keys stay within PARAM_RANGE of
         self._read()
         self._snap()
 
@@ -486,9 +491,15 @@ class _Live:
                 out[p.name] = value
         return out
 
-    def scale(self, name: str, factor: float) -> None:
+    def scale(self, name: str, factor: float) -> bool:
+        """Multiply parameter `name` by `factor`, unless that takes it beyond
+        :data:`PARAM_RANGE` times its start value either way; returns whether it changed."""
+        start, now = self.params0.get(name), param_value(self.scene, name)
+        if start and now and not (start / PARAM_RANGE <= now * factor <= start * PARAM_RANGE):
+            return False
         self.scene = scale_param(self.scene, name, factor)
         self._restep()
+        return True
 
     def _restep(self) -> None:
         """Fixed steps: dt shrinks with the stability limit, never above its start value."""
