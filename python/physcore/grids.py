@@ -547,7 +547,10 @@ class StableFluid(Grid):
     tracers : int
         Passive tracer particles (drawn as streaks by the renderer).
     cfl : float
-        ``Scene.advance`` steps at ``cfl · dx / max|u|``.
+        ``Scene.advance`` steps at ``cfl · dx / max|u|``. Default 1: the advection error is
+        then set by the step, not the grid (Taylor–Green at 256² decays 5.4 % too fast at
+        cfl 1; 2 % needs cfl ≈ 0.37, and the README's Taylor–Green figures were measured at
+        0.25): lower it where decay rates matter, at proportionally more steps.
 
     Attributes (in a scene): ``density``, ``temperature``, ``pressure``, ``vorticity``, ``speed``
     (nx, ny) float64; ``velocity`` (nx, ny, 2) at cell centres; ``tracers`` (T, 2) m.
