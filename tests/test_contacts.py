@@ -509,3 +509,86 @@ def test_stepping_contacts_at_a_long_fixed_dt_warns_once():
         s.step(10)
     assert [type(w.message) for w in caught] == [pc.ContactStepWarning], [str(w.message) for w in caught]
     assert str(caught[0].message).startswith("dt: ")
+
+
+def _diverging_pile(dim: int) -> pc.Scene:
+    # 30 grains dropped overlapping into a box, stepped at 0.05 s: over a thousand times the
+    # step their contacts need (4.4e-5 s), so the pile blows up within a few dozen steps.
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0.0, 0.2, (30, dim))
+    s = pc.Scene(dim=dim, integrator="semi_implicit_euler", dt=0.05, threads=1)
+    s.add_particles(x, np.zeros_like(x), masses=0.01)
+    s.set_attribute("radius", np.full(30, 0.02))
+    s.add(pc.Gravity([0.0, -G] + [0.0] * (dim - 2)))
+    s.add(pc.Contacts(stiffness=1e4, restitution=0.5, friction=0.5, walls=pc.Box([0.0] * dim, [0.2] * dim)))
+    return s
+
+
+@pytest.mark.filterwarnings("ignore::physcore.ContactStepWarning")
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_diverging_pile_stepped_one_step_a_call_rolls_each_call_back(dim, tmp_path):
+    # Issue 44 item 1: stepped one step a call, the pile's energy books overflowed (NaN) at
+    # step 58 while the positions stayed finite until step 114; the call that started with those
+    # books could not restore them (a history must be finite), so the rollback panicked
+    # (PanicException), the scene kept NaN positions and every later call panicked. A term's own
+    # snapshot now restores as it was, and non-finite books or spins are a divergence where
+    # they start, so every call size stops there and leaves a finite, loadable scene.
+    whole = _diverging_pile(dim)
+    with pytest.raises(pc.SimulationDiverged) as one_call:
+        whole.step(300)
+    assert whole.step_count == 0 and one_call.value.rolled_back_to == 0
+
+    s = _diverging_pile(dim)
+    for _ in range(300):
+        k, x, v, t, books = s.step_count, s.positions.copy(), s.velocities.copy(), s.time, s.energy().dissipated
+        try:
+            s.step(1)
+        except pc.SimulationDiverged as e:
+            diverged = e
+            break
+    else:
+        pytest.fail("the pile did not diverge")
+    # The contacts' books of a step are closed at the next evaluation, or when the call ends:
+    # one step a call sees an overflow there one step before one call does.
+    assert diverged.step == k + 1 and one_call.value.step - diverged.step in (0, 1)
+    assert diverged.rolled_back_to == s.step_count == k
+    assert np.array_equal(s.positions, x) and np.array_equal(s.velocities, v)
+    assert s.time == t and s.energy().dissipated == books
+    spin = s.particle_field("angular_velocity" if dim == 2 else "angular_velocity_z")
+    assert np.isfinite(list(books.values())).all() and np.isfinite(spin).all()
+    # The same step fails again, as cleanly, and the scene saved there loads.
+    with pytest.raises(pc.SimulationDiverged):
+        s.step(1)
+    assert s.step_count == k and np.array_equal(s.positions, x)
+    loaded = pc.Scene.load(s.save(tmp_path / "pile.npz"))
+    assert np.array_equal(loaded.positions, x)
+    # Its grains flew off at some 1e150 m/s: put back at rest, at a step the contacts can take,
+    # the scene goes on.
+    s.positions = _diverging_pile(dim).positions
+    s.velocities = np.zeros_like(v)
+    s.dt = s.suggest_dt()
+    s.step(20)
+    assert s.step_count == k + 20 and np.isfinite(s.positions).all()
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_grain_scene_saved_or_pickled_before_its_first_step_continues_bit_for_bit(dim, tmp_path):
+    # Issue 44 item 2: before its first step the contact term holds no per-particle state, so
+    # its history was for 0 particles and load refused it ("is for 0 particles"); pickling (and
+    # with it ensemble and contact_sheet) failed the same way.
+    import pickle
+
+    s = _gas(100 if dim == 2 else 64, seed=13, friction=0.5, e=0.7, dim=dim)
+    s.add(pc.Gravity([0.0, -G] + [0.0] * (dim - 2)))
+    loaded = pc.Scene.load(s.save(tmp_path / "fresh.npz"))
+    unpickled = pickle.loads(pickle.dumps(s))
+    spin = "angular_velocity" if dim == 2 else "angular_velocity_z"
+    for t in (s, loaded, unpickled):
+        t.step(400)
+    assert s.contact_count() > 0 and np.abs(s.particle_field(spin)).max() > 0.0
+    for t in (loaded, unpickled):
+        assert np.array_equal(s.positions, t.positions)
+        assert np.array_equal(s.velocities, t.velocities)
+        assert np.array_equal(s.particle_field(spin), t.particle_field(spin))
+        assert s.energy().total == t.energy().total and s.energy().dissipated == t.energy().dissipated
+        assert s.contact_count() == t.contact_count()

@@ -870,17 +870,19 @@ def test_overflowed_energy_baseline_is_not_saved(tmp_path):
     assert t.energy_drift() == 0.0 and np.array_equal(t.positions, s.positions)
 
 
-def test_overflowed_books_are_refused_at_save(tmp_path):
-    # Drag at 1e160 m/s dissipates more than float64 holds; saving says so instead of writing a
-    # file that load would refuse.
+def test_overflowed_books_stop_the_step_and_the_scene_still_saves(tmp_path):
+    # Drag at 1e160 m/s dissipates more than float64 holds: the step that overflows the books is
+    # a divergence (quantity "books", rolled back to the call's start), so no file ever holds an
+    # overflowed ledger, and the rolled-back scene saves and loads.
     s = pc.Scene(2, threads=1)
     s.add_particles([[0.0, 0.0]], [[1e160, 0.0]])
     s.add(pc.Drag(1.0))
-    s.step(1)
-    assert s.energy().dissipated["drag"] == math.inf
-    with pytest.raises(pc.InvalidInputError, match=r"^ledger: \[inf\] overflowed float64"):
-        s.save(tmp_path / "d.npz")
-    assert os.listdir(tmp_path) == []
+    with pytest.raises(pc.SimulationDiverged) as err:
+        s.step(1)
+    assert err.value.quantity == "books" and s.step_count == 0 and s.time == 0.0
+    assert math.isfinite(s.energy().dissipated["drag"])
+    t = pc.Scene.load(s.save(tmp_path / "d.npz"))
+    assert np.array_equal(t.velocities, s.velocities)
 
 
 def test_round_trip_is_bit_identical_for_every_integrator(tmp_path):

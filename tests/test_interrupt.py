@@ -204,3 +204,20 @@ def test_long_calls_release_the_gil(query):
     wall, pause = _longest_pause_of_another_thread(call)
     assert wall > 0.01, f"{query} took {wall:.4f} s, too short to tell"
     assert pause < 0.5 * wall, f"another thread was paused {pause:.3f} s of {query}'s {wall:.3f} s"
+
+
+def test_keyboard_interrupt_stops_a_flow_only_scene_at_once():
+    # Issue 44 item 5: flow points did not count toward the short-call rule (a call of at most
+    # 4096 element-steps runs unwatched on the calling thread), so a flow-only scene's every
+    # call ran to its end before Ctrl-C was seen; `step(10**9)` on a Lorenz cloud ran on. A call
+    # timed to take about 3 s unwatched now stops within the 20 ms polls, and is rolled back.
+    scene = pc.Scene(dim=3, dt=0.005)
+    cloud = scene.add(pc.Flow("lorenz", points=1000, seed=1))
+    t0 = time.perf_counter()
+    scene.step(200)
+    per_step = (time.perf_counter() - t0) / 200
+    points, step, t = cloud.points.copy(), scene.step_count, scene.time
+    latency = _interrupt(lambda: scene.step(max(int(3.0 / per_step), 1000)), 0.3)
+    assert latency < 1.0, f"Ctrl-C took {latency:.2f} s to stop the call"
+    assert np.array_equal(cloud.points, points)
+    assert scene.step_count == step and scene.time == t

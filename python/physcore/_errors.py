@@ -97,7 +97,9 @@ class SimulationDiverged(PhyscoreError, RuntimeError):
     (s), ``particle`` (index of the first bad particle), ``quantity`` (``"position"`` or
     ``"velocity"``: not finite; ``"cell"``: a grid cell, ``particle`` is its index; ``"error"``:
     rk45 could not meet its tolerances; ``"speed"``: within one ``advance`` the flow sped up
-    until its step limit fell over a millionfold, ``particle`` the fastest), ``suggested_dt``
+    until its step limit fell over a millionfold, ``particle`` the fastest; ``"spin"``: a
+    grain's spin, rotation or contact spring (:class:`~physcore.Contacts`) is not finite;
+    ``"books"``: a dissipated energy overflowed, ``particle`` the fastest), ``suggested_dt``
     (s) and ``rolled_back_to`` (step count after the rollback).
     """
 

@@ -69,6 +69,12 @@ pub enum Failure {
     /// The flow sped up until its step limit (CFL) fell a millionfold within one `advance`:
     /// a runaway with finite values (the index is the fastest particle's).
     Speed,
+    /// State a force term keeps for a particle is not finite: a grain's spin or rotation
+    /// angle, or the tangential spring of one of its contacts (`Term::non_finite`).
+    Spin,
+    /// The energy books overflowed: a dissipated energy is not finite while the state still is
+    /// (the index is the fastest particle's).
+    Books,
 }
 
 impl Failure {
@@ -80,6 +86,8 @@ impl Failure {
             Failure::Error => "error",
             Failure::Cell => "cell",
             Failure::Speed => "speed",
+            Failure::Spin => "spin",
+            Failure::Books => "books",
         }
     }
 }
@@ -95,6 +103,10 @@ fn describe(quantity: &Failure, index: usize) -> String {
             "the flow ran away: its step limit fell over a millionfold within one advance \
              (particle {index} is the fastest)"
         ),
+        Failure::Spin => format!("particle {index} has a non-finite spin, rotation or contact spring"),
+        Failure::Books => {
+            format!("the dissipated energy overflowed the energy books (particle {index} is the fastest)")
+        }
         q => format!("particle {index} has a non-finite {}", q.as_str()),
     }
 }

@@ -137,9 +137,11 @@ impl<V: Vector> World<V> {
     pub fn n_particles(&self) -> usize {
         self.particles.n_particles()
     }
-    /// Particles plus the elements of the other systems (grid cells): the work of one step.
+    /// Particles plus the elements of the other systems (grid cells, flow points, an ODE's
+    /// values): the work of one step. A system that has something to step counts at least 1.
     pub fn elements(&self) -> usize {
-        self.particles.n_particles() + self.others.iter().map(|s| s.size()).sum::<usize>()
+        let others = self.others.iter().filter(|s| !s.is_empty()).map(|s| s.size().max(1));
+        self.particles.n_particles() + others.sum::<usize>()
     }
     /// Simulated time, s.
     pub fn time(&self) -> Real {
@@ -534,12 +536,19 @@ impl<V: Vector> World<V> {
 
     /// `n` steps of every system, then the couplings; the clock advances after each.
     fn step_inner(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
-        let r = self.step_loop(n, stop);
-        if r.is_ok() {
-            // (On an error the call is rolled back to a settled checkpoint.)
-            self.systems_mut().for_each(|s| s.settle());
+        // (On an error the call is rolled back to a settled checkpoint.)
+        self.step_loop(n, stop)?;
+        self.settle()
+    }
+
+    /// Completes what the last step deferred (`System::settle`); a non-finite value that this
+    /// produced is a divergence at that step.
+    fn settle(&mut self) -> Result<()> {
+        self.systems_mut().for_each(|s| s.settle());
+        match self.systems().find_map(|s| s.settled_fault()) {
+            Some((index, quantity)) => Err(self.diverged(index, quantity)),
+            None => Ok(()),
         }
-        r
     }
 
     /// The steps of `step_inner`.
@@ -579,7 +588,7 @@ impl<V: Vector> World<V> {
                 return Err(self.diverged(index, quantity));
             }
             if !self.couplings.is_empty() {
-                self.systems_mut().for_each(|s| s.settle());
+                self.settle()?;
             }
             for c in &mut self.couplings {
                 c.apply(&mut self.particles, &mut self.others, dt);

@@ -12,9 +12,10 @@ use std::time::Duration;
 /// How often the calling thread runs Python's signal handlers while a step runs.
 pub(super) const SIGNAL_POLL: Duration = Duration::from_millis(20);
 
-/// Calls of at most this many particle-steps with a fixed-step integrator run on the calling
-/// thread, unwatched: even pairwise gravity (N² per step) keeps them to milliseconds, and the
-/// hand-off to a pool thread (~20 µs) would cost more than a small scene's step. A signal that
+/// Calls of at most this many element-steps (`World::elements`: particles, grid cells, flow
+/// points) with a fixed-step integrator run on the calling thread, unwatched: even pairwise
+/// gravity (N² per step) keeps them to milliseconds, and the hand-off to a pool thread (~20 µs)
+/// would cost more than a small scene's step. A signal that
 /// came during such a call is handled right after it, and the call is undone as if it had been
 /// interrupted (`undo_if_signalled`).
 pub(super) const SHORT_CALL: u64 = 4096;

@@ -1154,6 +1154,16 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         self.built = false;
         Ok(())
     }
+
+    /// A snapshot of this term, non-finite values (a rollback of a diverged call) included.
+    fn restore_history(&mut self, h: &[Real], _n_particles: usize) {
+        let n = self.n;
+        assert_eq!(h.len(), 3 * n, "a DFSPH term's own history restores");
+        self.kappa.copy_from_slice(&h[..n]);
+        self.kappa_v.copy_from_slice(&h[n..2 * n]);
+        self.pressure.copy_from_slice(&h[2 * n..]);
+        self.built = false;
+    }
 }
 
 #[cfg(test)]

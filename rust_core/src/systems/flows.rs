@@ -219,6 +219,10 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
     fn is_empty(&self) -> bool {
         self.y.is_empty()
     }
+    /// The points (a step's work is a few velocity evaluations per point).
+    fn size(&self) -> usize {
+        self.y.len() / self.dim
+    }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let (t, d, u) = (self.tableau, self.dim, &self.u);
         match t.stages {

@@ -138,6 +138,11 @@ pub trait System: Send + Sync {
     /// call of steps ends and before couplings run, so that nothing outside a step sees a
     /// state half-committed. Default: nothing deferred.
     fn settle(&mut self) {}
+    /// After `settle`: the first non-finite value the steps could not see (what a commit that
+    /// `settle` completed produced: a term's own state, the energy books), as a divergence.
+    fn settled_fault(&self) -> Option<(usize, Failure)> {
+        None
+    }
     /// Told that the world's dt changed between calls: drop anything predicted with the old one.
     fn dt_changed(&mut self) {}
     /// Whether the system picks its own internal steps (an adaptive integrator): with no stable

@@ -63,6 +63,10 @@ impl System for OdeSystem {
     fn is_empty(&self) -> bool {
         self.y.is_empty()
     }
+    /// The state's values.
+    fn size(&self) -> usize {
+        self.y.len()
+    }
     fn prepare(&mut self) -> Result<()> {
         let n = self.y.len();
         let s = self.tableau.stages;

@@ -433,6 +433,20 @@ impl<V: Vector> ParticleSystem<V> {
             .ok_or_else(|| invalid("name", format!("no term named {name:?}")))
     }
 
+    /// Whether every dissipated energy (the force terms', the colliders', the terms' own) is
+    /// finite.
+    fn books_finite(&self) -> bool {
+        let f = &self.sys.forces;
+        f.dissipated.iter().chain([&self.constraints.dissipated]).all(|d| d.is_finite())
+            && f.terms.iter().all(|t| t.books_finite())
+    }
+
+    /// The fastest particle (the first of equals; 0 if none is).
+    fn fastest(&self) -> usize {
+        let speeds = self.sys.state.v.iter().map(|u| u.length_squared());
+        speeds.enumerate().fold((0, -1.0), |(i, m), (k, s)| if s > m { (k, s) } else { (i, m) }).0
+    }
+
     /// The first particle (by index) with a non-finite position or velocity.
     fn first_non_finite(&self) -> Option<(usize, Failure)> {
         let (x, v) = (&self.sys.state.x, &self.sys.state.v);
@@ -588,7 +602,13 @@ impl<V: Vector> System for ParticleSystem<V> {
                 self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, Failure::Position));
             return Err(Halt::Diverged { index, quantity });
         }
-        Ok(())
+        // What the integrator does not see: the state terms keep (a grain's spin) and the
+        // books, which overflow while the state is still finite (a call that started then
+        // could not be saved, nor loaded back).
+        match self.settled_fault() {
+            Some((index, quantity)) => Err(Halt::Diverged { index, quantity }),
+            None => Ok(()),
+        }
     }
 
     fn settle(&mut self) {
@@ -596,6 +616,15 @@ impl<V: Vector> System for ParticleSystem<V> {
         for t in &mut sys.forces.terms {
             t.settle(&sys.state.x, &sys.state.v, &sys.model);
         }
+    }
+
+    /// A term's own state (`Term::non_finite`), then the books. Also run after every step: a
+    /// commit deferred to the next evaluation then shows there.
+    fn settled_fault(&self) -> Option<(usize, Failure)> {
+        if let Some(index) = self.sys.forces.terms.iter().find_map(|t| t.non_finite()) {
+            return Some((index, Failure::Spin));
+        }
+        (!self.books_finite()).then(|| (self.fastest(), Failure::Books))
     }
 
     /// A cached force is still valid; a velocity predicted with the old dt is not.
@@ -792,8 +821,9 @@ impl<V: Vector> System for ParticleSystem<V> {
         let n = state.x.len();
         for (t, h) in self.sys.forces.terms.iter_mut().zip(&histories) {
             if let Some(h) = h {
-                // A snapshot this system made: it fits.
-                t.set_history(h, n).expect("a term's own snapshot restores");
+                // A snapshot this system made: it fits, and may hold the non-finite values of
+                // a state that had started to diverge.
+                t.restore_history(h, n);
             }
         }
         self.sys.state = state;

@@ -713,6 +713,75 @@ impl<V: Vector> Contacts<V> {
         }
     }
 
+    /// `set_history`; `checked`: refuse non-finite values (what a file or a caller gives), else
+    /// take them as they are (the term's own snapshot, see `restore_history`).
+    fn load_history(&mut self, h: &[Real], n_particles: usize, checked: bool) -> Result<()> {
+        let bad = |why: &str| invalid("history", format!("contact term {:?}: {why}", self.name));
+        if h.is_empty() || (checked && h.iter().any(|v| !v.is_finite())) {
+            return Err(bad("must be a non-empty array of finite numbers"));
+        }
+        let n = h[0] as usize;
+        // Before its first step the term holds no per-particle state: its history is for 0
+        // particles whatever the scene's count, and is restored as such (`fit` sizes it).
+        if h[0] != n as Real || (n != n_particles && n != 0) {
+            return Err(bad(&format!("is for {} particles, the scene has {n_particles}", h[0])));
+        }
+        let a = V::AXIAL_DIM;
+        let head = 1 + n * (a + 1) + 2;
+        if h.len() < head || !(h.len() - head).is_multiple_of(3 + V::DIM) {
+            return Err(bad("has the wrong length"));
+        }
+        let omega: Vec<V::Axial> = (0..n).map(|i| V::axial_from_slice(&h[1 + i * a..1 + (i + 1) * a])).collect();
+        let angle = h[1 + n * a..1 + n * (a + 1)].to_vec();
+        let dissipated = [h[head - 2], h[head - 1]];
+        let nw = self.walls.len();
+        // (record, whether it was given from the higher index)
+        let mut seed: Vec<(Carry<V>, bool)> = Vec::new();
+        for rec in h[head..].chunks_exact(3 + V::DIM) {
+            let (i, j) = (rec[0], rec[1]);
+            if i < 0.0 || i.fract() != 0.0 || i as usize >= n || j < 0.0 || j.fract() != 0.0 || j as usize >= n + nw {
+                return Err(bad("names a particle or wall that does not exist"));
+            }
+            let (i, j) = (i as usize, j as usize);
+            let (xi, u) = (V::from_slice(&rec[2..2 + V::DIM]), rec[2 + V::DIM]);
+            if j >= n {
+                seed.push((Carry { i: i as u32, j: (j - n) as u32, wall: true, xi, u }, false));
+            } else if i < j {
+                seed.push((Carry { i: i as u32, j: j as u32, wall: false, xi, u }, false));
+            } else if i > j {
+                seed.push((Carry { i: j as u32, j: i as u32, wall: false, xi: -xi, u }, true));
+            } else {
+                return Err(bad("has a self contact"));
+            }
+        }
+        seed.sort_by_key(|(k, swapped)| (k.i, k.wall, k.j, *swapped));
+        let mut kept: Vec<Carry<V>> = Vec::with_capacity(seed.len());
+        let mut last: Option<(u32, bool, u32, bool)> = None;
+        for (k, swapped) in seed {
+            let key = (k.i, k.wall, k.j, swapped);
+            if let Some(p) = last {
+                if (p.0, p.1, p.2) == (key.0, key.1, key.2) {
+                    if p.3 == key.3 {
+                        return Err(bad("has a repeated contact"));
+                    }
+                    continue;
+                }
+            }
+            last = Some(key);
+            kept.push(k);
+        }
+        self.omega = omega;
+        self.angle = angle;
+        self.torque.resize(n, V::AXIAL_ZERO);
+        self.dissipated = dissipated;
+        self.seed = Some(kept);
+        self.lists = None;
+        self.pending = None;
+        self.prebooked = false;
+        self.evaluated = false;
+        Ok(())
+    }
+
     /// Sizes the per-particle state for `n` particles (new particles at rest); the contacts
     /// among the particles that remain are carried over.
     fn fit(&mut self, n: usize) {
@@ -1502,6 +1571,10 @@ impl<V: Vector> Term<V> for Contacts<V> {
         ]
     }
 
+    fn books_finite(&self) -> bool {
+        self.dissipated.iter().all(|d| d.is_finite())
+    }
+
     fn integrators(&self) -> Option<&'static [&'static str]> {
         // "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
         Some(&["semi_implicit_euler", "xpbd"])
@@ -1533,70 +1606,32 @@ impl<V: Vector> Term<V> for Contacts<V> {
 
     /// Loads `history`. A pair may also be given from its higher index (ξ seen from that
     /// grain), or from both sides (files of physcore before the Verlet lists): the record from
-    /// the lower index is kept.
+    /// the lower index is kept. A history for 0 particles is that of a term that never stepped
+    /// (it sizes itself to the scene at its first step), and fits any scene.
     fn set_history(&mut self, h: &[Real], n_particles: usize) -> Result<()> {
-        let bad = |why: &str| invalid("history", format!("contact term {:?}: {why}", self.name));
-        if h.is_empty() || h.iter().any(|v| !v.is_finite()) {
-            return Err(bad("must be a non-empty array of finite numbers"));
-        }
-        let n = h[0] as usize;
-        if h[0] != n as Real || n != n_particles {
-            return Err(bad(&format!("is for {} particles, the scene has {n_particles}", h[0])));
-        }
-        let a = V::AXIAL_DIM;
-        let head = 1 + n * (a + 1) + 2;
-        if h.len() < head || !(h.len() - head).is_multiple_of(3 + V::DIM) {
-            return Err(bad("has the wrong length"));
-        }
-        let omega: Vec<V::Axial> = (0..n).map(|i| V::axial_from_slice(&h[1 + i * a..1 + (i + 1) * a])).collect();
-        let angle = h[1 + n * a..1 + n * (a + 1)].to_vec();
-        let dissipated = [h[head - 2], h[head - 1]];
-        let nw = self.walls.len();
-        // (record, whether it was given from the higher index)
-        let mut seed: Vec<(Carry<V>, bool)> = Vec::new();
-        for rec in h[head..].chunks_exact(3 + V::DIM) {
-            let (i, j) = (rec[0], rec[1]);
-            if i < 0.0 || i.fract() != 0.0 || i as usize >= n || j < 0.0 || j.fract() != 0.0 || j as usize >= n + nw {
-                return Err(bad("names a particle or wall that does not exist"));
-            }
-            let (i, j) = (i as usize, j as usize);
-            let (xi, u) = (V::from_slice(&rec[2..2 + V::DIM]), rec[2 + V::DIM]);
-            if j >= n {
-                seed.push((Carry { i: i as u32, j: (j - n) as u32, wall: true, xi, u }, false));
-            } else if i < j {
-                seed.push((Carry { i: i as u32, j: j as u32, wall: false, xi, u }, false));
-            } else if i > j {
-                seed.push((Carry { i: j as u32, j: i as u32, wall: false, xi: -xi, u }, true));
-            } else {
-                return Err(bad("has a self contact"));
-            }
-        }
-        seed.sort_by_key(|(k, swapped)| (k.i, k.wall, k.j, *swapped));
-        let mut kept: Vec<Carry<V>> = Vec::with_capacity(seed.len());
-        let mut last: Option<(u32, bool, u32, bool)> = None;
-        for (k, swapped) in seed {
-            let key = (k.i, k.wall, k.j, swapped);
-            if let Some(p) = last {
-                if (p.0, p.1, p.2) == (key.0, key.1, key.2) {
-                    if p.3 == key.3 {
-                        return Err(bad("has a repeated contact"));
-                    }
-                    continue;
-                }
-            }
-            last = Some(key);
-            kept.push(k);
-        }
-        self.omega = omega;
-        self.angle = angle;
-        self.torque.resize(n, V::AXIAL_ZERO);
-        self.dissipated = dissipated;
-        self.seed = Some(kept);
-        self.lists = None;
-        self.pending = None;
-        self.prebooked = false;
-        self.evaluated = false;
-        Ok(())
+        self.load_history(h, n_particles, true)
+    }
+
+    /// A snapshot of this term: non-finite spins and springs (a rollback of a diverged call)
+    /// are restored as they were.
+    fn restore_history(&mut self, h: &[Real], n_particles: usize) {
+        self.load_history(h, n_particles, false).expect("a contact term's own history restores");
+    }
+
+    /// Spins, angles and the springs of live contacts.
+    fn non_finite(&self) -> Option<usize> {
+        let grain = (0..self.omega.len()).find(|&i| {
+            !axial_components::<V>(self.omega[i]).iter().all(|c| c.is_finite()) || !self.angle[i].is_finite()
+        });
+        let spring = |l: &Link<V>| l.live() && !(l.xi.is_finite() && l.bt.is_finite());
+        let pair = self.lists.as_ref().and_then(|lists| {
+            (0..lists.pstart.len().saturating_sub(1)).find(|&i| {
+                let (a, b) = (lists.pstart[i] as usize, lists.pstart[i + 1] as usize);
+                let (c, d) = (lists.wstart[i] as usize, lists.wstart[i + 1] as usize);
+                lists.links[a..b].iter().any(spring) || lists.wlinks[c..d].iter().any(spring)
+            })
+        });
+        grain.into_iter().chain(pair).min()
     }
 }
 
@@ -1783,5 +1818,40 @@ mod tests {
         b.clear();
         push_axial::<glam::DVec3>(&mut b, glam::DVec3::new(1.0, -2.0, 3.0));
         assert_eq!(b, vec![1.0, -2.0, 3.0]);
+    }
+
+    /// Issue 44 items 1–2: a term that never stepped holds no per-particle state, and its
+    /// history (for 0 particles) loads into a scene of any size; a snapshot holding a diverged
+    /// spin is refused from outside but restores as it was, and `non_finite` names the grain.
+    #[test]
+    fn an_unstepped_history_loads_and_a_diverged_snapshot_restores() {
+        let e = 0.5;
+        let material = Material {
+            law: Law::Linear,
+            stiffness: 1e3,
+            tangential_ratio: 2.0 / 7.0,
+            restitution: e,
+            zeta: damping_ratio(Law::Linear, e),
+            friction: 0.3,
+            inertia_factor: 0.5,
+            tangential_damping: Real::sqrt(2.0 / 7.0),
+        };
+        let mut c = Contacts::<glam::DVec2>::new("grains".into(), material, Vec::new());
+        let fresh = c.history().unwrap();
+        assert_eq!(fresh, vec![0.0, 0.0, 0.0]);
+        c.set_history(&fresh, 5).unwrap();
+        assert_eq!(c.history().unwrap(), fresh);
+        assert!(c.set_history(&[3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 5).is_err());
+        c.fit(3);
+        assert_eq!(c.non_finite(), None);
+        c.omega[1] = Real::NAN;
+        c.dissipated[0] = Real::INFINITY;
+        assert_eq!(c.non_finite(), Some(1));
+        assert!(!c.books_finite());
+        let diverged = c.history().unwrap();
+        assert!(c.set_history(&diverged, 3).is_err());
+        c.fit(0);
+        c.restore_history(&diverged, 3);
+        assert!(c.omega[1].is_nan() && c.dissipated[0] == Real::INFINITY && c.omega.len() == 3);
     }
 }

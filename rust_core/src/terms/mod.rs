@@ -172,6 +172,22 @@ pub trait Term<V: Vector>: Send + Sync {
     fn set_history(&mut self, _h: &[Real], _n_particles: usize) -> Result<()> {
         Ok(())
     }
+    /// Restores what `history` returned on this very term (a rollback to a snapshot its system
+    /// took): the values are taken as they are, non-finite ones included, so it cannot fail. A
+    /// term whose history can hold non-finite values overrides it.
+    fn restore_history(&mut self, h: &[Real], n_particles: usize) {
+        self.set_history(h, n_particles).expect("a term's own history restores");
+    }
+    /// The first particle whose state kept by this term (not its books) is not finite, if any:
+    /// checked after every step, so that a divergence is caught where it starts.
+    fn non_finite(&self) -> Option<usize> {
+        None
+    }
+    /// Whether the books the term keeps itself (`own_books`) are finite; checked after every
+    /// step, without the allocations of `own_books`.
+    fn books_finite(&self) -> bool {
+        true
+    }
 
     /// Called once when the term is added to a system, before it is evaluated: a term that
     /// needs neighbours joins a search that terms of its kind already share in this system, or
