@@ -1620,7 +1620,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
 
     /// Spins, angles and the springs of live contacts.
     fn non_finite(&self) -> Option<usize> {
-        // It runs after every step: first one streaming, branch-free pass (x − x is 0 for a
+        // It runs after every step: first one streaming, branch-free pass (0·x is 0 for a
         // finite x and NaN otherwise, and NaN survives a sum), in parallel; the search for the
         // first bad grain only when that pass finds something. (The search alone cost 23 % of a
         // 25k-disc pile's step.)
@@ -1650,7 +1650,7 @@ impl<V: Vector> Contacts<V> {
         let grains = par::sum(omega.len(), 0.0, |r| {
             r.map(|i| {
                 let w = axial_components::<V>(omega[i]);
-                (w[0] - w[0]) + (w[1] - w[1]) + (w[2] - w[2]) + (angle[i] - angle[i])
+                (w[0] + w[1] + w[2] + angle[i]) * 0.0
             })
             .sum::<Real>()
         });
@@ -1658,7 +1658,7 @@ impl<V: Vector> Contacts<V> {
             par::sum(ls.len(), 0.0, |r| {
                 r.map(|k| {
                     let l = &ls[k];
-                    let d = (l.xi - l.xi).length_squared() + (l.bt - l.bt);
+                    let d = (l.xi.length_squared() + l.bt) * 0.0;
                     if l.live() {
                         d
                     } else {
