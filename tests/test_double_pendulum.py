@@ -103,6 +103,10 @@ def test_double_pendulum_refuses_bad_arguments():
         pc.scenes.double_pendulum(length=0.0)
     with pytest.raises(ValueError, match="stiffness"):
         pc.scenes.double_pendulum(stiffness=-5.0)
+    with pytest.raises(ValueError, match="spread"):  # found by a fuzz: the angles overflowed
+        pc.scenes.double_pendulum(spread=1e308)
+    with pytest.raises(ValueError, match="stiffness"):  # the step 0.2/√(2k/m) underflows
+        pc.scenes.double_pendulum(stiffness=8.98846567431158e307)
 
 
 def test_double_pendulum_renders_with_rods_in_each_pendulums_colour(tmp_path):

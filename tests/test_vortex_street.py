@@ -140,3 +140,11 @@ def test_a_closed_box_is_unchanged_by_the_open_boundary_option():
     fluid = scene.grids[0]
     assert fluid.inflow is None
     assert np.abs(fluid.velocity[:, :, 0].sum(axis=1)).max() < 1e-6
+
+
+def test_a_channel_beyond_float64_is_refused_by_name():
+    # Found by the CI's scene fuzz: 1.8e307 diameters overflowed the cell count's int().
+    with pytest.raises(ValueError, match="length"):
+        pc.scenes.vortex_street(length=1.797693134862316e307)
+    with pytest.raises(ValueError, match="height"):
+        pc.scenes.vortex_street(height=1e308)

@@ -2207,6 +2207,8 @@ def double_pendulum(
     _particles("n", 2 * n + 1, 2 * n)
     a1, a2 = _pair_any(angles, "angles")
     spread = _nonneg(spread, "spread")
+    if not spread * n < 1e6:  # angles far beyond a turn only lose precision in sin and cos
+        raise InvalidInputError(f"spread: the fan spans spread · n = {spread * n:.3g} rad; give at most 1e6 rad in all")
     length, mass = _positive(length, "length"), _positive(mass, "mass")
     if not (length >= 1e-100 and length <= 1e100 and mass >= 1e-100 and mass <= 1e100):
         raise InvalidInputError("length, mass: must lie in [1e-100, 1e100] (m, kg)")
@@ -2304,8 +2306,10 @@ def vortex_street(
         raise InvalidInputError(f"length: the channel must be at least 8 diameters long (5 D of inlet), got {length:g}")
     if height < 3.0:
         raise InvalidInputError(f"height: the channel must be at least 3 diameters high, got {height:g}")
+    # Checked in float before any int(): length · n beyond float64 is refused by name (found by
+    # the scene fuzz: 1.8e307 diameters overflowed the conversion).
+    _cells("n, length, height", length * n * height * n, arrays=40)
     nx, ny = int(round(length * n)), int(round(height * n))
-    _cells("n, length, height", nx * ny, arrays=40)
     D, U = 0.01, 0.01
     dx = D / n
     nu = U * D / reynolds
