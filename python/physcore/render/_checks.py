@@ -302,3 +302,18 @@ def _check_advance(scene: Any) -> None:
             "frame_time needs a scene with an advance(duration) method (automatic substeps); "
             "this one has none: use steps_per_frame instead"
         )
+
+
+def _extent_box(extent: Any, dim: int) -> np.ndarray | None:
+    """The 2**dim corners (float64) of the box `extent` = (lower, upper), or None."""
+    if extent is None:
+        return None
+    try:
+        lo_hi = np.asarray(extent, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"extent: expected (lower, upper), two points of {dim} coordinates") from None
+    if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
+        raise InvalidInputError(
+            f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, got shape {lo_hi.shape}"
+        )
+    return np.array([[lo_hi[(k >> a) & 1, a] for a in range(dim)] for k in range(2**dim)])

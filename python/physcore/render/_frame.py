@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from .._errors import InvalidInputError
-from ._checks import _check_color_by, _check_radius, _check_size, _check_view
+from ._checks import _check_color_by, _check_radius, _check_size, _check_view, _extent_box
 from ._palette import _PALETTE
 from ._raster import _Rasteriser
 from ._recording import Recording
@@ -157,19 +157,7 @@ def render_frame(
     speed_scale = None if speed_scale is None else float(speed_scale)
     pressure_scale = None if pressure_scale is None else float(pressure_scale)
 
-    box = None
-    if extent is not None:
-        try:
-            lo_hi = np.asarray(extent, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise InvalidInputError(f"extent: expected (lower, upper), two points of {dim} coordinates") from None
-        if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
-            raise InvalidInputError(
-                f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, "
-                f"got shape {lo_hi.shape}"
-            )
-        # The box's corners: every combination of lower/upper per axis.
-        box = np.array([[lo_hi[(k >> d) & 1, d] for d in range(dim)] for k in range(2**dim)])
+    box = _extent_box(extent, dim)  # the box's corners: every combination of lower/upper per axis
     if box is not None:
         origin = box.mean(axis=0)
     elif n:

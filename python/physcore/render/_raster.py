@@ -691,23 +691,24 @@ class _Rasteriser:
         rs = (r0[None] + t * (row - r0)[None]).reshape(-1)
         return cs, rs, np.full(cs.shape, 1.0 / m, dtype=np.float32)
 
-    def _glow_density(self, k: int) -> np.ndarray:
+    def _glow_density(self, k: int, density: Any = None) -> np.ndarray:
         """Frame k's density, or with a `trail` its fading history: max(d_k, decay · h_{k−1}),
         decay = 0.05^(1/trail), a phosphor's persistence: the particles shine at full
         brightness and their paths fade to 5 % over `trail` frames. The history is carried
         from frame to frame when they are drawn in order, else rebuilt from `trail` frames.
         With a following or orbiting camera the history would smear across the image: the glow
         then has no trail."""
+        density = self._density if density is None else density  # or _density_rgb: own colours
         if not self.trail or self._centres is not None:
             # A moving camera would smear a history kept in pixels: no glow trail there.
-            return self._density(k)
+            return density(k)
         decay = 0.05 ** (1.0 / self.trail)
         if self._glow_history is not None and self._glow_history[0] == k - 1:
-            h = np.maximum(self._density(k), decay * self._glow_history[1])
+            h = np.maximum(density(k), decay * self._glow_history[1])
         else:
-            h = self._density(max(0, k - self.trail))
+            h = density(max(0, k - self.trail))
             for f in range(max(0, k - self.trail) + 1, k + 1):
-                h = np.maximum(self._density(f), decay * h)
+                h = np.maximum(density(f), decay * h)
         self._glow_history = (k, h)
         return h
 
@@ -734,17 +735,7 @@ class _Rasteriser:
         """Frame k of ``color_by="density"`` with own colours: each pixel's glow is tone-mapped as
         :meth:`_glow` does, in the density-weighted mean of the colours there, whitening towards
         the densest cores (as an exposure saturates); trails persist as :meth:`_glow_density`."""
-        if not self.trail or self._centres is not None:
-            h = self._density_rgb(k)
-        else:
-            decay = 0.05 ** (1.0 / self.trail)
-            if self._glow_history is not None and self._glow_history[0] == k - 1:
-                h = np.maximum(self._density_rgb(k), decay * self._glow_history[1])
-            else:
-                h = self._density_rgb(max(0, k - self.trail))
-                for f in range(max(0, k - self.trail) + 1, k + 1):
-                    h = np.maximum(self._density_rgb(f), decay * h)
-            self._glow_history = (k, h)
+        h = self._glow_density(k, self._density_rgb)
         cam = self.cam_at(k)
         under = self._under(cam)
         out = self.palette[under].astype(np.float32)
