@@ -87,4 +87,26 @@ impl Contact {
         }
         Ok(Self { restitution, friction })
     }
+
+    /// The velocity after a collision with a wall of unit normal `n` (into the allowed side):
+    /// if `v` moves into the wall, its normal part becomes −e v_n and its tangential speed drops
+    /// by μ(1 + e)|v_n| (Coulomb friction on the impulse), never past zero; else `v` unchanged.
+    #[inline(always)]
+    pub fn bounce<V: Vector>(&self, v: V, n: V) -> V {
+        let (e, mu) = (self.restitution, self.friction);
+        let vn = v.dot(n);
+        if !(vn < 0.0) {
+            return v; // moving away or along (or NaN: left for the divergence check)
+        }
+        let vt = v - n * vn;
+        let vt2 = vt.length_squared();
+        let dvn = (1.0 + e) * (-vn);
+        let vt_new = if mu > 0.0 && vt2 > 0.0 {
+            let vtl = vt2.sqrt();
+            vt * ((vtl - mu * dvn).max(0.0) / vtl)
+        } else {
+            vt
+        };
+        vt_new + n * (-e * vn)
+    }
 }

@@ -39,7 +39,7 @@ impl<V: Vector> Plane<V> {
 
 impl<V: Vector> Constraint<V> for Plane<V> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let (p, n, Contact { restitution: e, friction: mu }) = (self.point, self.normal, self.contact);
+        let (p, n, contact) = (self.point, self.normal, self.contact);
         par::chunks2_fold(
             x,
             v,
@@ -62,19 +62,7 @@ impl<V: Vector> Constraint<V> for Plane<V> {
                     let ke0 = 0.5 * m * v[k].length_squared();
                     let dx = n * (-depth);
                     x[k] += dx;
-                    let vn = v[k].dot(n);
-                    if vn < 0.0 {
-                        let vt = v[k] - n * vn;
-                        let vt2 = vt.length_squared();
-                        let dvn = (1.0 + e) * (-vn);
-                        let vt_new = if mu > 0.0 && vt2 > 0.0 {
-                            let vtl = vt2.sqrt();
-                            vt * ((vtl - mu * dvn).max(0.0) / vtl)
-                        } else {
-                            vt
-                        };
-                        v[k] = vt_new + n * (-e * vn);
-                    }
+                    v[k] = contact.bounce(v[k], n);
                     let ke1 = 0.5 * m * v[k].length_squared();
                     // Projection work: ΔU ≈ −F·Δx.
                     let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;

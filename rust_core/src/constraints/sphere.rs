@@ -52,8 +52,7 @@ fn up<V: Vector>() -> V {
 
 impl<V: Vector> Constraint<V> for Sphere<V> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let (c, r, inside, Contact { restitution: e, friction: mu }) =
-            (self.center, self.radius, self.inside, self.contact);
+        let (c, r, inside, contact) = (self.center, self.radius, self.inside, self.contact);
         let r2 = r * r;
         par::chunks2_fold(
             x,
@@ -92,19 +91,7 @@ impl<V: Vector> Constraint<V> for Sphere<V> {
                     let n = if inside { -radial } else { radial };
                     let x0 = x[k];
                     x[k] = c + radial * r;
-                    let vn = v[k].dot(n);
-                    if vn < 0.0 {
-                        let vt = v[k] - n * vn;
-                        let vt2 = vt.length_squared();
-                        let dvn = (1.0 + e) * (-vn);
-                        let vt_new = if mu > 0.0 && vt2 > 0.0 {
-                            let vtl = vt2.sqrt();
-                            vt * ((vtl - mu * dvn).max(0.0) / vtl)
-                        } else {
-                            vt
-                        };
-                        v[k] = vt_new + n * (-e * vn);
-                    }
+                    v[k] = contact.bounce(v[k], n);
                     let ke1 = 0.5 * m * v[k].length_squared();
                     // Projection work: ΔU ≈ −F·Δx.
                     let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
