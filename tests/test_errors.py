@@ -410,3 +410,17 @@ def test_every_user_error_is_a_physcore_error_and_a_value_or_type_error(name, tm
         assert isinstance(info.value, pc.InvalidTypeError)
     else:
         assert isinstance(info.value, pc.InvalidInputError)
+
+
+def test_spring_divergence_advice_names_only_remedies_the_scene_has():
+    # Issue 44 item 17: a spring scene was told to try "softening" (no term has one) and read
+    # "t = 1.026640e0 s". Springs are taken implicitly by implicit_euler: that is offered.
+    s = _stiff_scene("verlet")
+    s.dt = 1e-3
+    with pytest.raises(pc.SimulationDiverged) as info:
+        s.step(100_000)
+    msg = str(info.value)
+    assert "softening" not in msg and "implicit_euler" in msg, msg
+    t = re.search(r"\(t = ([^)]*)\)", msg).group(1)
+    assert re.fullmatch(r"\d+(\.\d+)? s", t), msg  # e.g. "0.002 s", never "2.000000e-3 s"
+    assert float(t[:-2]) == pytest.approx(info.value.time, rel=1e-3)

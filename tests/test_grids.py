@@ -534,3 +534,18 @@ def test_cavity_dye_is_wound_by_the_spinning_vortex():
     d = f.density
     assert np.abs(d - d0).mean() > 0.05  # the lid has dragged the layers along
     assert abs(d.mean() - d0.mean()) < 0.05  # advected, not made or lost (to a few %)
+
+
+@pytest.mark.parametrize("n", [16, 32, 64])
+def test_gray_scott_automatic_step_keeps_within_the_reactions_on_coarse_grids(n):
+    # Issue 44 item 6: the automatic step was cfl × the diffusion limit dx²/(4 D_u) alone, 15 to
+    # 240 time units on these grids, over the reactions' time scale (~1): advance diverged within
+    # 13 steps. It now keeps 2 / (4·dim·D/dx² + ρ_R), ρ_R ≥ 1 + F + k (a Gershgorin bound).
+    feed, kill = 0.0545, 0.062
+    scene = pc.Scene(2, dt=1.0)
+    gs = scene.add(pc.GrayScott((n, n), 2.5 / n, feed=feed, kill=kill))
+    gs.seed(0, squares=3, size=0.06)
+    scene.advance(2000.0)
+    assert scene.dt * (1.0 + feed + kill) <= 2 * gs.cfl
+    assert np.all(np.isfinite(gs.u)) and np.all(np.isfinite(gs.v))
+    assert 0.0 <= gs.v.min() and gs.v.max() < 1.0  # a pattern, not a blow-up

@@ -252,3 +252,28 @@ def test_keyboard_interrupt_inside_one_long_solve():
     assert s.integrator_stats["cg_solves"] == 2
     assert np.array_equal(s.positions, x0) and np.array_equal(s.velocities, v0)
     assert s.step_count == 2
+
+
+@pytest.mark.parametrize("dt", [1.35e154, 1e155, 1e300])
+def test_a_step_whose_square_overflows_is_refused_naming_dt(dt):
+    # Issue 44 item 6: the solve scales the Jacobians by h². With h² = inf every diagonal of A
+    # was infinite (the preconditioner 0) and the right-hand side NaN (inf · J v0 with v0 = 0),
+    # so CG stopped at Δv = 0 and a body at rest silently stayed where it was.
+    s = oscillator(NAME, 1.0, omega=40.0, v0=(0.0, 0.0))
+    x0 = s.positions
+    s.dt = dt
+    with pytest.raises(pc.InvalidInputError, match=r"^dt: .*dt² overflows float64"):
+        s.step(1)
+    assert s.step_count == 0 and np.array_equal(s.positions, x0)
+    # Just inside the range the step works: backward Euler puts the spring at rest length 0.
+    s.dt = 1e150
+    s.step(1)
+    assert np.all(np.isfinite(s.positions)) and np.linalg.norm(s.positions[1]) < 1e-6
+
+
+def test_a_step_whose_square_underflows_is_refused_naming_dt():
+    # Below √(smallest normal) ≈ 1.49e-154 s the Jacobians drop out of A: not implicit any more.
+    s = oscillator(NAME, 1e-160, omega=40.0)
+    with pytest.raises(pc.InvalidInputError, match=r"^dt: .*dt² underflows"):
+        s.step(1)
+    assert s.step_count == 0

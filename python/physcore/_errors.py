@@ -1,6 +1,9 @@
 """physcore's exception hierarchy (raised from Rust through ``physcore._core`` as well)."""
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 __all__ = [
     "PhyscoreError",
     "InvalidInputError",
@@ -61,6 +64,39 @@ class OutOfMemoryError(PhyscoreError, MemoryError):
     def __init__(self, message: str, bytes: int = -1) -> None:
         super().__init__(message)
         self.bytes = bytes
+
+
+def _human(nbytes: int) -> str:
+    """Bytes in decimal units, three significant digits, as the core writes them: "72.0 MB"."""
+    units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"]
+    x, u = float(nbytes), 0
+    while x >= 999.5 and u + 1 < len(units):
+        x, u = x / 1000.0, u + 1
+    if u == 0:
+        return f"{nbytes} bytes"
+    return f"{x:.0f} {units[u]}" if x >= 99.95 else f"{x:.1f} {units[u]}" if x >= 9.995 else f"{x:.2f} {units[u]}"
+
+
+@contextmanager
+def allocating(what: str, context: str) -> Iterator[None]:
+    """Turns a bare ``MemoryError`` raised in the block (numpy's, for an array the facade
+    allocates) into :class:`OutOfMemoryError` naming the call ``what``, the array and
+    ``context``, so that every refusal of memory reads the same as the core's. Usable as a
+    decorator."""
+    try:
+        yield
+    except OutOfMemoryError:
+        raise
+    except MemoryError as e:
+        nbytes = getattr(e, "_total_size", -1)  # numpy's _ArrayMemoryError knows the size
+        shape, dtype = getattr(e, "shape", None), getattr(e, "dtype", None)
+        array = f"an array of shape {tuple(shape)}, {dtype}" if shape is not None else "an array"
+        size = _human(nbytes) if nbytes >= 0 else "more memory"
+        raise OutOfMemoryError(
+            f"{what}: needs {size} for {array} ({context}), more than can be allocated now. "
+            "Free memory, or make the input smaller",
+            nbytes,
+        ) from e
 
 
 class ThreadPoolError(PhyscoreError, RuntimeError):

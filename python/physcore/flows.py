@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, allocating
 
 __all__ = ["Flow", "FLOWS", "lyapunov"]
 
@@ -105,6 +105,7 @@ class Flow:
         A parameter that is not a real number.
     """
 
+    @allocating("Flow", "its starting points")
     def __init__(
         self,
         kind: str = "lorenz",
@@ -126,9 +127,7 @@ class Flow:
             if key not in spec["params"]:
                 raise InvalidInputError(f"{key}: not a parameter of the {kind} flow (it has {', '.join(spec['params'])})")
         self.params = {k: _finite(k, params.get(k, v)) for k, v in spec["params"].items()}
-        if method not in _METHODS:
-            raise InvalidInputError(f"method: unknown method {method!r}; valid names: {', '.join(_METHODS)}")
-        self.method = method
+        self.method = _check.choice("method", method, _METHODS)
         self.max_dt = float(spec["max_dt"]) if max_dt is None else _finite("max_dt", max_dt)
         if not self.max_dt > 0:
             raise InvalidInputError(f"max_dt: must be > 0 (s), got {self.max_dt}")
@@ -146,6 +145,8 @@ class Flow:
             spread = _finite("spread", spread)
             if spread < 0:
                 raise InvalidInputError(f"spread: must be >= 0, got {spread}")
+            if seed is not None:
+                seed = _check.int_in_range("seed", seed, 0)
             rng = np.random.default_rng(seed)
             d = rng.normal(size=(n, self.dim))
             d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
@@ -153,10 +154,7 @@ class Flow:
             return np.asarray(FLOWS[self.kind]["start"], dtype=np.float64) + d * r[:, None]
         if isinstance(points, bool):
             raise InvalidTypeError("points: expected a count or an (N, dim) array, got bool")
-        try:
-            a = np.array(points, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise InvalidTypeError(f"points: expected a count or an (N, {self.dim}) array of numbers ({e})") from None
+        a = _check.real_array("points", points).astype(np.float64)
         if a.ndim != 2 or a.shape[1] != self.dim or a.shape[0] < 1:
             raise InvalidInputError(f"points: expected shape (N, {self.dim}) with N >= 1, got {a.shape}")
         if not np.isfinite(a).all():
@@ -183,6 +181,7 @@ class Flow:
             raise InvalidInputError(f"Flow {self.name!r} is not in a scene yet: scene.add(it) first")
         return self._scene
 
+    @allocating("field", "the flow's points by row")
     def _field(self, name: str) -> np.ndarray:
         scene = self._bound()
         (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, [name]))
@@ -288,7 +287,7 @@ def lyapunov(
     dt = float(spec["max_dt"]) if dt is None else _finite("dt", dt)
     if not dt > 0:
         raise InvalidInputError(f"dt: must be > 0, got {dt}")
-    x0 = np.asarray(spec["start"] if start is None else start, dtype=np.float64).reshape(-1)
+    x0 = _check.real_array("start", spec["start"] if start is None else start).astype(np.float64).reshape(-1)
     if x0.shape != (spec["dim"],) or not np.isfinite(x0).all():
         raise InvalidInputError(f"start: expected {spec['dim']} finite coordinates, got {start!r}")
     scene = Scene(dim=spec["dim"], dt=dt, threads=1)

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, allocating
 
 __all__ = ["Wave", "GrayScott", "StableFluid", "Drop", "Oscillator", "Source", "PRESETS", "Grid"]
 
@@ -74,12 +74,30 @@ def _positive(name: str, v: Any, unit: str, allow_zero: bool = False) -> float:
 
 
 def _cells_mask(name: str, a: Any, shape: tuple[int, ...]) -> np.ndarray:
-    m = np.asarray(a)
+    m = _check.array(name, a)
     if m.shape != shape:
         raise InvalidInputError(f"{name}: expected shape {shape} (the grid), got {m.shape}")
     if m.dtype != bool:
         raise InvalidTypeError(f"{name}: expected a bool array, got dtype {m.dtype}")
     return m
+
+
+def _point(name: str, value: Any, dim: int, unit: str = "m") -> np.ndarray:
+    """`dim` finite real coordinates (a center, a velocity), as float64 (dim,), refused by name."""
+    a = _check.real_array(name, value).astype(np.float64).reshape(-1)
+    if a.shape != (dim,) or not np.isfinite(a).all():
+        raise InvalidInputError(f"{name}: must be {dim} finite coordinates ({unit}), got {value!r:.60}")
+    return a
+
+
+def _records(name: str, value: Any, kind: type) -> tuple[Any, ...]:
+    """A sequence of `kind` records (drops, oscillators, sources), refused by name."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise InvalidTypeError(f"{name}: expected a list of physcore.{kind.__name__}, got {type(value).__name__}")
+    for k, r in enumerate(value):
+        if not isinstance(r, kind):
+            raise InvalidTypeError(f"{name}[{k}]: expected a physcore.{kind.__name__}, got {type(r).__name__}")
+    return tuple(value)
 
 
 def _field(name: str, doc: str, settable: bool = True) -> property:
@@ -151,19 +169,21 @@ class Grid:
         return [(np.arange(n) + 0.5) * self.dx for n in self.shape]
 
     def _gaussian(self, center: Any, radius: float, arg: str) -> tuple[np.ndarray, np.ndarray]:
-        c = np.asarray(center, dtype=np.float64).reshape(-1)
-        if c.shape != (self.dim,) or not np.isfinite(c).all():
-            raise InvalidInputError(f"{arg}: center must be {self.dim} finite coordinates (m), got {center!r}")
+        if center is None:
+            raise InvalidInputError(f"{arg}.center: give a center of {self.dim} coordinates (m), or a region")
+        c = _point(f"{arg}.center", center, self.dim)
         radius = _positive(f"{arg}.radius", radius, "m")
         grids = np.meshgrid(*self.centers(), indexing="ij")
-        with np.errstate(over="ignore"):  # a far centre or a huge radius: inf distances, no overflow warning
+        # A far centre, a huge or a subnormal radius: inf distances, weights 0, no warning.
+        # (r/radius)² rather than r²/radius², whose denominator underflows to 0 (0/0 at the centre).
+        with np.errstate(over="ignore", under="ignore"):
             r2 = sum((g - ci) ** 2 for g, ci in zip(grids, c, strict=False))
-            w = np.exp(-r2 / (2 * np.float64(radius) ** 2))
+            w = np.exp(-0.5 * (np.sqrt(r2) / np.float64(radius)) ** 2)
             w[r2 > (4 * np.float64(radius)) ** 2] = 0.0
         flat = _layout(w)
         cells = np.flatnonzero(flat)
         if cells.size == 0:
-            raise InvalidInputError(f"{arg}: the Gaussian at {c.tolist()} (radius {radius} m) covers no cell of the grid")
+            raise InvalidInputError(f"{arg}: the Gaussian at center {c.tolist()} (radius {radius} m) covers no cell of the grid")
         return cells.astype(np.uint32), flat[cells]
 
     # -- bound to a scene
@@ -172,6 +192,7 @@ class Grid:
             raise InvalidInputError(f"{type(self).__name__} {self.name!r} is not in a scene yet: scene.add(it) first")
         return self._scene
 
+    @allocating("field", "a field of the grid")
     def field(self, name: str) -> np.ndarray:
         """The field ``name`` now, shape :attr:`shape`, float64 (a copy)."""
         scene = self._bound()
@@ -261,6 +282,7 @@ class Wave(Grid):
 
     kind = "wave"
 
+    @allocating("Wave", "a copy of its mask or regions")
     def __init__(
         self,
         shape: Any,
@@ -297,14 +319,8 @@ class Wave(Grid):
         self.cfl = _positive("cfl", cfl, "fraction of the CFL limit")
         if self.cfl > 1:
             raise InvalidInputError(f"cfl: must be in (0, 1], got {self.cfl}")
-        self.drops = tuple(drops)
-        self.oscillators = tuple(oscillators)
-        for k, d in enumerate(self.drops):
-            if not isinstance(d, Drop):
-                raise InvalidTypeError(f"drops[{k}]: expected a physcore.Drop, got {type(d).__name__}")
-        for k, o in enumerate(self.oscillators):
-            if not isinstance(o, Oscillator):
-                raise InvalidTypeError(f"oscillators[{k}]: expected a physcore.Oscillator, got {type(o).__name__}")
+        self.drops = _records("drops", drops, Drop)
+        self.oscillators = _records("oscillators", oscillators, Oscillator)
         self._profiles()  # checks every source now, before any scene sees it
 
     @property
@@ -392,8 +408,10 @@ class GrayScott(Grid):
     ``u_t = D_u ∇²u − u v² + F (1 − u)``, ``v_t = D_v ∇²v + u v² − (F + k) v``
     (Pearson, "Complex patterns in a simple system", Science 261 (1993) 189–192, eq. 1–2).
 
-    Forward Euler with the 5-point Laplacian (Pearson's scheme); stable for
-    ``dt ≤ dx² / (2·dim·max(D))`` (dx²/(4D) in 2D): :meth:`Scene.advance` keeps ``cfl`` of it.
+    Forward Euler with the 5-point Laplacian (Pearson's scheme); diffusion alone is stable for
+    ``dt ≤ dx² / (2·dim·max(D))`` (dx²/(4D) in 2D, :attr:`diffusion_limit`), the reactions
+    bound the step too: :meth:`Scene.advance` keeps ``cfl`` of ``2 / (4·dim·max(D)/dx² + ρ_R)``,
+    ρ_R = F + k + max(1, max v(v + 2u)) (a Gershgorin bound on the reactions' Jacobian).
 
     Parameters
     ----------
@@ -560,6 +578,7 @@ class StableFluid(Grid):
 
     kind = "fluid"
 
+    @allocating("StableFluid", "a copy of its obstacles or regions")
     def __init__(
         self,
         shape: Any,
@@ -601,10 +620,7 @@ class StableFluid(Grid):
             raise InvalidInputError("lid: a moving lid needs walls='no_slip' (free-slip walls do not feel it)")
         self.inflow = None if inflow is None else _positive("inflow", inflow, "m/s, +x")
         self.mask = None if obstacles is None else _cells_mask("obstacles", obstacles, self.shape).copy()
-        self.sources = tuple(sources)
-        for k, src in enumerate(self.sources):
-            if not isinstance(src, Source):
-                raise InvalidTypeError(f"sources[{k}]: expected a physcore.Source, got {type(src).__name__}")
+        self.sources = _records("sources", sources, Source)
         self.n_tracers = _check.int_in_range("tracers", tracers, 0, 1 << 24)
         self.cfl = _positive("cfl", cfl, "advection CFL number")
         self._source_params()
@@ -617,9 +633,9 @@ class StableFluid(Grid):
                 c = np.flatnonzero(flat).astype(np.uint32)
                 w = np.ones(c.size)
             else:
-                c0 = np.asarray(src.center, dtype=np.float64).reshape(-1) if src.center is not None else None
-                if c0 is None or c0.shape != (2,) or not np.isfinite(c0).all():
-                    raise InvalidInputError(f"sources[{k}]: give a region, or a center of 2 finite coordinates (m)")
+                if src.center is None:
+                    raise InvalidInputError(f"sources[{k}].center: give a region, or a center of 2 finite coordinates (m)")
+                c0 = _point(f"sources[{k}].center", src.center, 2)
                 r = _positive(f"sources[{k}].radius", src.radius, "m")
                 X, Y = np.meshgrid(*self.centers(), indexing="ij")
                 with np.errstate(over="ignore"):  # a far centre: inf distances, no cell
@@ -627,10 +643,9 @@ class StableFluid(Grid):
                 c = np.flatnonzero(flat).astype(np.uint32)
                 w = np.ones(c.size)
             if c.size == 0:
-                raise InvalidInputError(f"sources[{k}]: covers no cell of the grid")
-            v = np.asarray(src.velocity, dtype=np.float64).reshape(-1)
-            if v.shape != (2,) or not np.isfinite(v).all():
-                raise InvalidInputError(f"sources[{k}].velocity: expected 2 finite components (m/s)")
+                where = "region covers" if src.region is not None else "center and radius cover"
+                raise InvalidInputError(f"sources[{k}]: its {where} no cell of the grid")
+            _point(f"sources[{k}].velocity", src.velocity, 2, "m/s")
             _check.finite(f"sources[{k}].density", src.density)
             _check.finite(f"sources[{k}].temperature", src.temperature)
             cells.append(c), weights.append(w), counts.append(c.size)
@@ -665,6 +680,7 @@ class StableFluid(Grid):
     divergence = _field("divergence", "Discrete divergence (nx, ny), 1/s.", False)
 
     @property
+    @allocating("velocity", "the cell-centred velocity")
     def velocity(self) -> np.ndarray:
         """Velocity at cell centres (averaged from the faces), (nx, ny, 2) float64, m/s."""
         return np.stack([self.field("u"), self.field("v")], axis=-1)

@@ -28,6 +28,7 @@ from ._errors import (
     SceneBusyError,
     SeparateFluidsWarning,
     ThreadPoolWarning,
+    allocating,
 )
 from .flows import Flow
 from .fluids import Fluid
@@ -402,6 +403,7 @@ class Scene:
         self._e0 = None
         return np.arange(first, first + n, dtype=np.int64)
 
+    @allocating("add", "a copy of the item's arrays for the core")
     def add(self, item: Any) -> Any:
         """Add a force term (:class:`Gravity`, :class:`Drag`, :class:`Springs`,
         :class:`PairwiseGravity`, :class:`~physcore.fluids.Fluid`), a collider (:class:`Plane`,
@@ -477,6 +479,7 @@ class Scene:
         self._e0 = None
         return item
 
+    @allocating("add_fluid", "a copy of the fluid's arrays")
     def add_fluid(self, positions: np.typing.ArrayLike, **params: Any) -> np.ndarray:
         """Add a WCSPH fluid block: ``scene.add(Fluid(positions, **params))``.
 

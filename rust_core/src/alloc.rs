@@ -20,6 +20,13 @@ impl Need {
         Self { what, bytes: u64::try_from(bytes).unwrap_or(u64::MAX), of: of.to_string() }
     }
 
+    /// A read of the fields `names` of `n` values each (float64) of `elements` ("grid cells"):
+    /// call "field", as the facade's `Grid.field` and flows' properties are.
+    pub fn fields(names: &[&str], n: usize, elements: &str) -> Self {
+        let bytes = Self::bytes_of::<f64>(n) * names.len() as u128;
+        Self::new("field", bytes, format!("{} of {} {elements}", names.join(", "), count(n as u128)))
+    }
+
     /// `n` items of type `T`, in bytes (saturating).
     pub fn bytes_of<T>(n: usize) -> u128 {
         n as u128 * std::mem::size_of::<T>() as u128
@@ -43,6 +50,13 @@ impl Need {
             v.try_reserve_exact(len - v.len()).map_err(|_| self.error())?;
         }
         Ok(())
+    }
+
+    /// Checks that `bytes` more can be had now (reserved and freed at once, never touched), for
+    /// transient buffers allocated where a refusal cannot be reported (inside parallel parts).
+    pub fn room(&self, bytes: u128) -> Result<()> {
+        let b = usize::try_from(bytes).map_err(|_| self.error())?;
+        Vec::<u8>::new().try_reserve_exact(b).map_err(|_| self.error())
     }
 
     /// `vec![value; n]`.

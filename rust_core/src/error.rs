@@ -15,10 +15,11 @@ pub enum Error {
     /// NaN or infinity appeared while stepping. The state is rolled back to where the failing
     /// `step(n)` call started.
     #[error(
-        "simulation diverged at step {step} (t = {t:.6e} s): {what}. The state was rolled back to step {rolled_back_to}. \
+        "simulation diverged at step {step} (t = {time}): {what}. The state was rolled back to step {rolled_back_to}. \
          {advice}",
+        time = seconds(*t),
         what = describe(quantity, *particle),
-        advice = advise(quantity, *dt, *suggested_dt, *explicit_euler)
+        advice = advise(quantity, *dt, *suggested_dt, *explicit_euler, *remedies)
     )]
     Diverged {
         step: u64,
@@ -31,6 +32,8 @@ pub enum Error {
         /// The particles were stepped by explicit Euler, which no smaller dt makes stable for an
         /// undamped oscillation.
         explicit_euler: bool,
+        /// What else the scene offers to try (the advice names only these).
+        remedies: Remedies,
     },
 
     /// `step_interruptible` was asked to stop (Ctrl-C); the state was rolled back.
@@ -52,6 +55,33 @@ pub enum Error {
         size = crate::alloc::human(*bytes)
     )]
     OutOfMemory { what: String, bytes: u64, of: String },
+}
+
+/// The remedies for a divergence that exist for the scene's terms and integrator, so that the
+/// advice never names one the scene does not have (softening in a spring scene).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Remedies {
+    /// A term has a softening length (pairwise or tree gravity, Coulomb, point masses).
+    pub softening: bool,
+    /// A term has a Jacobian (springs, drag) and the integrator does not yet take it
+    /// implicitly: integrator='implicit_euler' would.
+    pub implicit: bool,
+}
+
+/// A time for a message: four significant digits, plain from 1 ms to 1e5 s ("1.027 s",
+/// "0.3 s", "484.8 s"), scientific outside ("2.500e-7 s"), as people read them.
+pub fn seconds(t: f64) -> String {
+    let a = t.abs();
+    if t == 0.0 || !a.is_finite() {
+        return format!("{t} s");
+    }
+    if !(1e-3..1e5).contains(&a) {
+        return format!("{t:.3e} s");
+    }
+    let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+    let s = format!("{t:.decimals$}");
+    let s = if s.contains('.') { s.trim_end_matches('0').trim_end_matches('.') } else { &s };
+    format!("{s} s")
 }
 
 /// What went wrong with the particle of a diverged step.
@@ -111,40 +141,44 @@ fn describe(quantity: &Failure, index: usize) -> String {
     }
 }
 
-fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool) -> String {
+fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, remedies: Remedies) -> String {
+    let (now, then) = (seconds(dt), seconds(suggested_dt));
+    let softening = if remedies.softening { ", a larger softening" } else { "" };
     match quantity {
         // Grids step by their own explicit schemes: their limit is a CFL or diffusion number.
         Failure::Cell => format!(
-            "Try a smaller dt (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, within the grid's \
-             CFL or diffusion limit (Scene.advance keeps to it)."
+            "Try a smaller dt (now {now}), e.g. {then}, within the grid's CFL or diffusion limit \
+             (Scene.advance keeps to it)."
         ),
         // |1 + iω dt| > 1 for every ω > 0: explicit Euler amplifies every undamped oscillation
         // (springs, orbits) by (1 + ω²dt²)^(1/2) a step, so a smaller dt only delays this.
         _ if explicit_euler => format!(
             "Explicit Euler amplifies every undamped oscillation (springs, orbits) at any dt: a \
-             smaller dt (now {dt:.3e} s; the fastest time scale asks for {suggested_dt:.3e} s) \
-             only delays this. Use semi_implicit_euler, verlet or rk4."
+             smaller dt (now {now}; the fastest time scale asks for {then}) only delays this. Use \
+             semi_implicit_euler, verlet or rk4."
         ),
         // The step already follows the flow: a smaller one is what failed to keep up.
         Failure::Speed => format!(
-            "The step follows the flow (last {dt:.3e} s), so a smaller dt does not help: try a \
+            "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
         // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
-        Failure::Error => "Try a tighter rtol (a loose one can let an orbit decay into a collision), \
-                    softening, or a fixed-step integrator."
-            .to_string(),
+        Failure::Error => format!(
+            "Try a tighter rtol (a loose one can let an orbit decay into a collision){softening} \
+             or a fixed-step integrator."
+        ),
         // A suggestion that is not a usable step (0, subnormal, NaN) would read "try dt = 0":
         // the forces themselves are the problem (overflowing masses, coincident particles).
         _ if !(suggested_dt >= f64::MIN_POSITIVE && suggested_dt.is_finite()) => format!(
-            "No stable dt exists for this state (the fastest time scale is {suggested_dt:.3e} s): \
-             check for coincident particles, overflowing masses or stiffnesses; softening helps \
-             with gravity (dt now {dt:.3e} s)."
+            "No stable dt exists for this state (the fastest time scale is {then}): check for \
+             coincident particles, overflowing masses or stiffnesses{} (dt now {now}).",
+            if remedies.softening { "; a larger softening helps with gravity" } else { "" }
         ),
-        _ => format!(
-            "Try a smaller dt (now {dt:.3e} s), e.g. {suggested_dt:.3e} s, a stiffer-stable \
-             integrator, or softening."
-        ),
+        _ => {
+            let implicit =
+                if remedies.implicit { ", integrator='implicit_euler' (springs and drag implicitly)" } else { "" };
+            format!("Try a smaller dt (now {now}), e.g. {then}{implicit}{softening}.")
+        }
     }
 }
 
@@ -168,13 +202,14 @@ mod tests {
             dt: 0.1,
             suggested_dt,
             explicit_euler: false,
+            remedies: Remedies::default(),
         }
         .to_string()
     }
 
     #[test]
     fn advice_never_suggests_an_unusable_dt() {
-        assert!(diverged(1e-3).contains("e.g. 1.000e-3 s"));
+        assert!(diverged(1e-3).contains("e.g. 0.001 s"), "{}", diverged(1e-3));
         for bad in [0.0, 1e-310, f64::NAN, f64::INFINITY] {
             let m = diverged(bad);
             assert!(m.contains("No stable dt exists"), "{bad:e}: {m}");
@@ -193,9 +228,35 @@ mod tests {
             dt: 0.1,
             suggested_dt: 1e-3,
             explicit_euler: true,
+            remedies: Remedies::default(),
         };
         let m = e.to_string();
         assert!(m.contains("at any dt") && m.contains("verlet"), "{m}");
         assert!(!m.contains("e.g."), "{m}");
+    }
+
+    #[test]
+    fn times_read_as_people_write_them() {
+        let cases = [(1.026640, "1.027 s"), (0.3, "0.3 s"), (484.8485, "484.8 s"), (1555.556, "1556 s"), (0.0, "0 s")];
+        for (t, want) in cases {
+            assert_eq!(seconds(t), want);
+        }
+        assert_eq!(seconds(2.5e-7), "2.500e-7 s");
+        assert_eq!(seconds(3.2e9), "3.200e9 s");
+    }
+
+    #[test]
+    fn advice_names_only_the_remedies_the_scene_has() {
+        let e = |remedies| {
+            let (quantity, dt, t) = (Failure::Position, 0.1, 1.026640);
+            let (particle, step, rolled_back_to, explicit_euler, suggested_dt) = (1, 3, 0, false, 1e-3);
+            Error::Diverged { step, t, particle, quantity, rolled_back_to, dt, suggested_dt, explicit_euler, remedies }
+                .to_string()
+        };
+        let springs = e(Remedies { softening: false, implicit: true });
+        assert!(springs.contains("t = 1.027 s") && springs.contains("implicit_euler"), "{springs}");
+        assert!(!springs.contains("softening") && !springs.contains("e0 s"), "{springs}");
+        let gravity = e(Remedies { softening: true, implicit: false });
+        assert!(gravity.contains("softening") && !gravity.contains("implicit_euler"), "{gravity}");
     }
 }

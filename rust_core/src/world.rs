@@ -13,6 +13,7 @@
 //!
 //! One call (`step`, `advance`) is atomic: it takes a checkpoint of every system first, and a
 //! divergence or an interrupt anywhere restores all of them.
+use crate::alloc::Need;
 use crate::error::{invalid, Error, Result};
 use crate::par;
 use crate::stop::Stop;
@@ -246,6 +247,10 @@ impl<V: Vector> World<V> {
         }
         self.prepare()?;
         let cp = self.checkpoint()?;
+        if let Err(e) = self.room() {
+            self.release(cp);
+            return Err(e);
+        }
         if n == 0 || self.is_empty() {
             let t = self.t + n as Real * self.dt;
             if !t.is_finite() {
@@ -279,6 +284,15 @@ impl<V: Vector> World<V> {
     fn prepare(&mut self) -> Result<()> {
         let pool = self.pool.clone();
         par::install(pool.as_ref(), || self.systems_mut().try_for_each(|s| s.prepare()))
+    }
+
+    /// Checks, once the checkpoint is taken, that the step's small buffers allocated on the fly
+    /// (the terms' `transient_bytes`, and 1 MB for per-chunk lists and the thread pool's jobs)
+    /// can still be had: under memory pressure a refused one would abort the process, this
+    /// check is an `Error::OutOfMemory` instead.
+    fn room(&self) -> Result<()> {
+        let bytes = self.particles.transient_bytes() + (1 << 20);
+        Need::new("step", bytes, "the step's transient buffers").room(bytes)
     }
 
     /// Hands a checkpoint that is no longer needed back to the systems, whose buffers then serve
@@ -318,6 +332,7 @@ impl<V: Vector> World<V> {
                 // The dt that failed: `advance` ran substeps shorter than the saved dt.
                 let suggested_dt = self.suggest_dt().min(0.5 * self.dt);
                 let explicit_euler = self.particles.integrator_info().name == "euler";
+                let remedies = self.particles.remedies();
                 Error::Diverged {
                     step,
                     t,
@@ -327,6 +342,7 @@ impl<V: Vector> World<V> {
                     dt: self.dt,
                     suggested_dt,
                     explicit_euler,
+                    remedies,
                 }
             }
             Error::Interrupted { .. } => Error::Interrupted { rolled_back_to },
@@ -412,6 +428,10 @@ impl<V: Vector> World<V> {
         }
         self.prepare()?;
         let cp = self.checkpoint()?;
+        if let Err(e) = self.room() {
+            self.release(cp);
+            return Err(e);
+        }
         if substeps.is_none() && self.systems().any(|s| s.limit_follows_flow()) {
             let r = self.with_stop(stop, |s| s.advance_following(duration, stop));
             return match r {
@@ -523,20 +543,23 @@ impl<V: Vector> World<V> {
 
     /// The particle system's named output fields (see `Term::fields`), one value per particle
     /// (0 for particles a field does not cover); `names` fixes which and in what order.
-    pub fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    pub fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
         self.run(|| self.particles.fields(names))
     }
 
     /// Density (kg/m^dim) and pressure (Pa) of every particle, from the fluid terms (0 for
     /// particles that are in no fluid).
-    pub fn fluid_fields(&self) -> (Vec<Real>, Vec<Real>) {
-        let mut f = self.fields(&["density", "pressure"]).into_iter();
-        (f.next().expect("asked for two"), f.next().expect("asked for two"))
+    pub fn fluid_fields(&self) -> Result<(Vec<Real>, Vec<Real>)> {
+        let mut f = self.fields(&["density", "pressure"])?.into_iter();
+        Ok((f.next().expect("asked for two"), f.next().expect("asked for two")))
     }
 
     /// `n` steps of every system, then the couplings; the clock advances after each.
     fn step_inner(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
         // (On an error the call is rolled back to a settled checkpoint.)
+        if !self.particles.is_empty() {
+            self.particles.check_dt(self.dt)?;
+        }
         self.step_loop(n, stop)?;
         self.settle()
     }
@@ -615,6 +638,7 @@ impl<V: Vector> World<V> {
             dt: self.dt,
             suggested_dt: 0.0,
             explicit_euler: false,
+            remedies: Default::default(),
         }
     }
 
@@ -654,6 +678,13 @@ impl<V: Vector> World<V> {
             }
             Ok(r)
         })
+    }
+
+    /// Reserves, fallibly, what reading the energy books needs (a refusal is
+    /// `Error::OutOfMemory`, not an abort); `energy` then allocates nothing sized by the input.
+    pub fn prepare_energy(&mut self) -> Result<()> {
+        let pool = self.pool.clone();
+        par::install(pool.as_ref(), || self.particles.reserve_potential())
     }
 
     /// The energy books of every system, the particles' first.
@@ -736,8 +767,8 @@ mod tests {
         fn energy(&self) -> EnergyReport {
             EnergyReport::default()
         }
-        fn fields(&self, _names: &[&str]) -> Vec<Vec<Real>> {
-            vec![]
+        fn fields(&self, _names: &[&str]) -> Result<Vec<Vec<Real>>> {
+            Ok(vec![])
         }
         fn snapshot(&self) -> Result<Snapshot> {
             Ok(Box::new(self.limit))

@@ -1020,13 +1020,12 @@ impl StableFluid {
         super::first_non_finite(&self.s.density).or_else(|| super::first_non_finite(&self.s.temperature))
     }
 
-    fn field_cells(&self, name: &str) -> Option<Vec<Real>> {
+    fn field_cells(&self, name: &str, need: &Need) -> Option<Result<Vec<Real>>> {
         let (nx, ny, dx) = (self.nx, self.ny, self.dx);
         let (u, v) = (&self.s.u, &self.s.v);
         let uc = |i: usize, j: usize| 0.5 * (u[i + (nx + 1) * (j + 1)] + u[i + 1 + (nx + 1) * (j + 1)]);
         let vc = |i: usize, j: usize| 0.5 * (v[(i + 1) + (nx + 2) * j] + v[(i + 1) + (nx + 2) * (j + 1)]);
-        let cells =
-            |f: &dyn Fn(usize, usize) -> Real| -> Vec<Real> { (0..nx * ny).map(|c| f(c % nx, c / nx)).collect() };
+        let cells = |f: &dyn Fn(usize, usize) -> Real| need.collect((0..nx * ny).map(|c| f(c % nx, c / nx)));
         Some(match name {
             "u" => cells(&uc),
             "v" => cells(&vc),
@@ -1036,8 +1035,8 @@ impl StableFluid {
                     (i.saturating_sub(1), (i + 1).min(nx - 1), j.saturating_sub(1), (j + 1).min(ny - 1));
                 (vc(i1, j) - vc(i0, j)) / ((i1 - i0) as Real * dx) - (uc(i, j1) - uc(i, j0)) / ((j1 - j0) as Real * dx)
             }),
-            "density" => self.s.density.clone(),
-            "temperature" => self.s.temperature.clone(),
+            "density" => need.copy(&self.s.density),
+            "temperature" => need.copy(&self.s.temperature),
             "pressure" => cells(&|i, j| self.s.pressure[(i + 1) + (nx + 2) * (j + 1)]),
             "divergence" => cells(&|i, j| {
                 self.fluid[i + nx * j]
@@ -1045,8 +1044,8 @@ impl StableFluid {
                         + (v[(i + 1) + (nx + 2) * (j + 1)] - v[(i + 1) + (nx + 2) * j]))
                     / dx
             }),
-            "solid" => self.fluid.iter().map(|f| 1.0 - f).collect(),
-            "tracers" => self.s.tracers.clone(),
+            "solid" => need.collect(self.fluid.iter().map(|f| 1.0 - f)),
+            "tracers" => need.copy(&self.s.tracers),
             _ => return None,
         })
     }
@@ -1163,8 +1162,12 @@ impl System for StableFluid {
     /// Cell-centred "u", "v" (face averages, m/s), "speed", "vorticity" (1/s), "density",
     /// "temperature", "pressure" (m²/s²), "divergence" (1/s), "solid" (1/0); and "tracers"
     /// (2·n_tracers: x0, y0, x1, … in m).
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
-        names.iter().map(|n| self.field_cells(n).unwrap_or_else(|| vec![0.0; self.nx * self.ny])).collect()
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let need = Need::fields(names, self.nx * self.ny, "grid cells");
+        names
+            .iter()
+            .map(|n| self.field_cells(n, &need).unwrap_or_else(|| need.filled(self.nx * self.ny, 0.0)))
+            .collect()
     }
     fn snapshot(&self) -> Result<Snapshot> {
         let s = &self.s;
@@ -1558,14 +1561,14 @@ mod tests {
         let v: Vec<Real> = (0..nx * (ny + 1)).map(|k| noise(k, 2)).collect();
         f.set_field("u", &u).unwrap();
         f.set_field("v", &v).unwrap();
-        let before = f.fields(&["divergence"])[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
+        let before = f.fields(&["divergence"]).unwrap()[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
         let s = f.project(0.01, &no_stop()).unwrap();
-        let after = f.fields(&["divergence"])[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
+        let after = f.fields(&["divergence"]).unwrap()[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
         let bound = 1e-8 * 1.0 / 0.01;
         println!("projection {nx}x{ny}: max|div| {before:.3e} -> {after:.3e} 1/s (bound {bound:.1e}); {s:?}");
         assert!(s.converged && after < bound, "{after:e} {s:?}");
         // Solid faces carry nothing.
-        let solid = f.fields(&["solid", "speed"]);
+        let solid = f.fields(&["solid", "speed"]).unwrap();
         assert!(solid[0].iter().zip(&solid[1]).all(|(s, v)| *s == 0.0 || *v == 0.0));
     }
 
@@ -1594,7 +1597,7 @@ mod tests {
             let dt = f.auto_dt().unwrap();
             assert!((dt - 0.01 / speed).abs() < 1e-15, "the inflow drives a still fluid: dt {dt}");
             run(&mut f, 40, dt);
-            let uv = f.fields(&["u", "v", "divergence"]);
+            let uv = f.fields(&["u", "v", "divergence"]).unwrap();
             let du = uv[0].iter().fold(0.0, |m: Real, u| m.max((u - speed).abs()));
             let v = uv[1].iter().fold(0.0, |m: Real, v| m.max(v.abs()));
             let div = uv[2].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
@@ -1627,9 +1630,9 @@ mod tests {
         let v: Vec<Real> = (0..nx * (ny + 1)).map(|k| noise(k, 4)).collect();
         f.set_field("u", &u).unwrap();
         f.set_field("v", &v).unwrap();
-        let before = f.fields(&["divergence"])[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
+        let before = f.fields(&["divergence"]).unwrap()[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
         let s = f.project(0.01, &no_stop()).unwrap();
-        let after = f.fields(&["divergence"])[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
+        let after = f.fields(&["divergence"]).unwrap()[0].iter().fold(0.0, |m: Real, d| m.max(d.abs()));
         let bound = 1e-8 * speed / 0.01;
         let (fin, fout) = (column_flux(&f, 0), column_flux(&f, nx));
         println!("open projection: max|div| {before:.3e} -> {after:.3e} (bound {bound:.1e}); flux in {fin}, out {fout}; {s:?}");
@@ -1637,7 +1640,7 @@ mod tests {
         assert_eq!(fin, speed * ny as Real, "the inflow face is held at U");
         assert!((fout - fin).abs() < 1e-8 * fin, "in {fin} out {fout}");
         // Solid faces carry nothing.
-        let solid = f.fields(&["solid", "speed"]);
+        let solid = f.fields(&["solid", "speed"]).unwrap();
         assert!(solid[0].iter().zip(&solid[1]).all(|(s, v)| *s == 0.0 || *v == 0.0));
     }
 
@@ -1806,7 +1809,7 @@ mod tests {
             let out = crate::par::install(Some(&pool), || {
                 let mut f = StableFluid::new(plume([64, 80], Advection::MacCormack)).unwrap();
                 run(&mut f, 15, 0.01);
-                (f.save(), f.fields(&["vorticity", "speed", "pressure"]))
+                (f.save(), f.fields(&["vorticity", "speed", "pressure"]).unwrap())
             });
             saved.push(out);
         }
@@ -1842,7 +1845,7 @@ mod tests {
             let mut f = StableFluid::new(plume([32, 40], adv)).unwrap();
             let dt = 1000.0 * f.auto_dt().unwrap();
             run(&mut f, 3, dt);
-            for field in f.fields(&["u", "v", "density", "temperature", "pressure"]) {
+            for field in f.fields(&["u", "v", "density", "temperature", "pressure"]).unwrap() {
                 assert!(field.iter().all(|x| x.is_finite()));
             }
         }
@@ -1895,7 +1898,7 @@ mod tests {
         let mut f = StableFluid::new(plume([48, 64], Advection::SemiLagrangian)).unwrap();
         let stop = no_stop();
         let centre = |f: &StableFluid| {
-            let d = &f.fields(&["density"])[0];
+            let d = &f.fields(&["density"]).unwrap()[0];
             let (m, my) = d.iter().enumerate().fold((0.0, 0.0), |(m, my), (c, r)| (m + r, my + r * (c / 48) as Real));
             (my / m + 0.5) * f.dx
         };
@@ -1916,7 +1919,7 @@ mod tests {
         let e = f.energy();
         println!("energy {e:?}");
         assert!(e.dissipated.iter().find(|d| d.0 == "forces").unwrap().1 < 0.0, "buoyancy does work");
-        let tr = &f.fields(&["tracers"])[0];
+        let tr = &f.fields(&["tracers"]).unwrap()[0];
         assert_eq!(tr.len(), 6000);
         assert!(tr.iter().all(|x| (0.0..=1.0).contains(x) || (0.0..=64.0 / 48.0).contains(x)));
     }

@@ -5,10 +5,12 @@
 //! ```
 //! (Pearson, "Complex patterns in a simple system", Science 261 (1993) 189–192, eq. 1–2),
 //! stepped by forward Euler with the 5-point (7-point in 3D) Laplacian, the scheme Pearson used.
-//! Explicit diffusion is stable for dt ≤ dx²/(2·dim·D) (dx²/(4D) in 2D); `auto_dt` keeps `cfl`
-//! (default 0.8) of the limit for the faster species. An implicit or spectral step was not
-//! added: at Pearson's parameters the diffusion limit (1.19 time units) is already above the
-//! step the reaction's accuracy asks for (~1), so it would buy nothing.
+//! Explicit diffusion is stable for dt ≤ dx²/(2·dim·D) (dx²/(4D) in 2D). The reactions bound the
+//! step too: `auto_dt` keeps `cfl` (default 0.8) of `stability_limit`, which includes both (see
+//! there). The diffusion limit alone grows as dx² and, on coarse grids (16–64 cells a side at
+//! Pearson's domain), stepped straight over the reactions' time scale (~1) and diverged. An
+//! implicit or spectral step was not added: at Pearson's parameters the two limits are of the
+//! same order as the step the reactions' accuracy asks for (~1), so it would buy little.
 //!
 //! **Books** (`System::books`): the amounts Σu dA and Σv dA and what the reactions made of each
 //! so far (dt Σ (−uv² + F(1 − u)) dA per step for u, dt Σ (uv² − (F + k)v) dA for v). Diffusion
@@ -37,7 +39,8 @@ pub struct GrayScottConfig {
     /// Feed rate F and kill rate k, 1/s (≥ 0).
     pub feed: Real,
     pub kill: Real,
-    /// The step `auto_dt` proposes, as a fraction of the diffusion limit. Default 0.8.
+    /// The step `auto_dt` proposes, as a fraction of `stability_limit` (diffusion and
+    /// reactions). Default 0.8.
     pub cfl: Real,
 }
 
@@ -128,6 +131,28 @@ impl GrayScottSystem {
     pub fn diffusion_limit(&self) -> Real {
         let g = &self.cfg.grid;
         g.dx * g.dx / (2.0 * g.dim as Real * self.cfg.du.max(self.cfg.dv))
+    }
+
+    /// A bound ρ_R (1/s) on the spectral radius of the reactions' Jacobian
+    /// [[−v² − F, −2uv], [v², 2uv − (F + k)]] over the cells, by Gershgorin's theorem (each row's
+    /// |diagonal| + |off-diagonal|): ρ_R ≤ max_cells v(v + 2u) + F + k. In the region the
+    /// reactions keep (u, v ≥ 0, u + v ≤ 1: on u + v = 1 they change u + v by −kv ≤ 0)
+    /// v(v + 2u) ≤ v(2 − v) ≤ 1; the bound takes at least that 1, so a pattern that grows within
+    /// one `advance` (seeds start at v ≈ 0.25) stays inside the limit taken at its start.
+    pub fn reaction_rate(&self) -> Real {
+        let m = self.u.iter().zip(&self.v).fold(0.0, |m: Real, (u, v)| m.max(v.abs() * (v.abs() + 2.0 * u.abs())));
+        self.cfg.feed + self.cfg.kill + m.max(1.0)
+    }
+
+    /// The step (s) within forward Euler's stability region for diffusion and reactions
+    /// together: |1 + dt λ| ≤ 1 holds for real λ ∈ [−2/dt, 0] (Hairer & Wanner, "Solving
+    /// Ordinary Differential Equations II", §IV.2), and by Gershgorin the linearised step's
+    /// eigenvalues have |λ| ≤ 4·dim·D/dx² + ρ_R (the Laplacian's rows: 2·dim/dx² on and off the
+    /// diagonal). So dt ≤ 2 / (4·dim·D/dx² + ρ_R) = t_D / (1 + ρ_R t_D / 2), with t_D the
+    /// diffusion limit and ρ_R `reaction_rate`. At Pearson's grid (t_D = 1.19) it is 0.72.
+    pub fn stability_limit(&self) -> Real {
+        let t_d = self.diffusion_limit();
+        t_d / (1.0 + 0.5 * self.reaction_rate() * t_d)
     }
 
     pub fn set_state(&mut self, u: Option<&[Real]>, v: Option<&[Real]>) -> Result<()> {
@@ -351,10 +376,10 @@ impl System for GrayScottSystem {
         Ok(())
     }
     fn auto_dt(&self) -> Option<Real> {
-        Some(self.cfg.cfl * self.diffusion_limit())
+        Some(self.cfg.cfl * self.stability_limit())
     }
     fn suggest_dt(&self) -> Option<Real> {
-        Some(self.cfg.cfl * self.diffusion_limit())
+        Some(self.cfg.cfl * self.stability_limit())
     }
     /// No energy: the books are amounts (`books`).
     fn energy(&self) -> EnergyReport {
@@ -382,13 +407,14 @@ impl System for GrayScottSystem {
             _ => Err(invalid("field", format!("{name:?}: Gray–Scott's settable fields are \"u\" and \"v\""))),
         }
     }
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let need = Need::fields(names, self.u.len(), "grid cells");
         names
             .iter()
             .map(|n| match *n {
-                "u" => self.u.clone(),
-                "v" => self.v.clone(),
-                _ => vec![0.0; self.u.len()],
+                "u" => need.copy(&self.u),
+                "v" => need.copy(&self.v),
+                _ => need.filled(self.u.len(), 0.0),
             })
             .collect()
     }
@@ -531,6 +557,33 @@ mod tests {
         let (taken, halt) = many.steps(5000, dt, &stop).unwrap_err();
         assert_eq!(taken, first);
         assert!(matches!(halt, Halt::Diverged { quantity: Failure::Cell, .. }), "{halt:?}");
+    }
+
+    #[test]
+    fn the_automatic_step_keeps_coarse_grids_within_the_reactions() {
+        // Pearson's domain (2.5) on 16–64 cells a side: the diffusion limit alone is 15–240
+        // time units, over the reactions' scale (~1), and its automatic step diverged within
+        // 13 steps (issue 44). The reactions' bound keeps it below 2/ρ_R.
+        let stop = AtomicBool::new(false);
+        for n in [16, 32, 64] {
+            let g = Grid::new(&[n, n], 2.5 / n as Real, &[Edge::Periodic; 4]).unwrap();
+            let mut s = GrayScottSystem::new(GrayScottConfig::new("gs", g, 2e-5, 1e-5, 0.0545, 0.062)).unwrap();
+            let (mut u, mut v) = (vec![1.0; n * n], vec![0.0; n * n]);
+            for c in (0..n * n).filter(|c| (c % n).abs_diff(n / 2) < n / 8 && (c / n).abs_diff(n / 2) < n / 8) {
+                (u[c], v[c]) = (0.5, 0.25);
+            }
+            s.set_state(Some(&u), Some(&v)).unwrap();
+            let dt = s.auto_dt().unwrap();
+            assert!(dt * s.reaction_rate() <= 2.0 * s.cfg.cfl, "n = {n}: dt {dt}");
+            for k in 0..(2000.0 / dt) as usize {
+                s.step(dt, &stop).unwrap_or_else(|h| panic!("n = {n}: step {k} of {dt}: {h:?}"));
+            }
+            assert!(s.v.iter().chain(&s.u).all(|x| (-1e-9..=1.0 + 1e-9).contains(x)), "n = {n}");
+        }
+        // Pearson's grid: t_D / (1 + ρ_R t_D / 2) with ρ_R = 1 + F + k (seeds have v(v + 2u) < 1).
+        let s = pearson(256);
+        let (t_d, rho) = (s.diffusion_limit(), 1.0 + 0.035 + 0.065);
+        assert!((s.stability_limit() - t_d / (1.0 + 0.5 * rho * t_d)).abs() < 1e-15);
     }
 
     #[test]

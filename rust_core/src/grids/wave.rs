@@ -326,9 +326,9 @@ impl WaveSystem {
     }
 
     /// The velocity at the half step before now, m/s.
-    pub fn velocity(&self) -> Vec<Real> {
+    pub fn velocity(&self, need: &Need) -> Result<Vec<Real>> {
         let dt = self.clock.dt;
-        self.u.iter().zip(&self.u_prev).map(|(a, b)| (a - b) / dt).collect()
+        need.collect(self.u.iter().zip(&self.u_prev).map(|(a, b)| (a - b) / dt))
     }
 
     /// Kinetic and potential energy (per unit density) of the current pair of time levels.
@@ -698,17 +698,18 @@ impl System for WaveSystem {
             _ => Err(invalid("field", format!("{name:?}: a wave's settable fields are \"u\" and \"velocity\""))),
         }
     }
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
         let n = self.u.len();
+        let need = Need::fields(names, n, "grid cells");
         names
             .iter()
             .map(|name| match *name {
-                "u" => self.u.clone(),
-                "velocity" => self.velocity(),
+                "u" => need.copy(&self.u),
+                "velocity" => self.velocity(&need),
                 // 1 on obstacle cells (`keep` is empty without a mask).
-                "mask" if self.keep.is_empty() => vec![0.0; n],
-                "mask" => self.keep.iter().map(|k| 1.0 - k).collect(),
-                _ => vec![0.0; n],
+                "mask" if self.keep.is_empty() => need.filled(n, 0.0),
+                "mask" => need.collect(self.keep.iter().map(|k| 1.0 - k)),
+                _ => need.filled(n, 0.0),
             })
             .collect()
     }

@@ -270,6 +270,26 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
     fn implicit(&self) -> bool {
         true
     }
+    /// The solve scales the Jacobians by h². Where h² overflows (h ≥ √MAX ≈ 1.34e154 s) every
+    /// diagonal of A is infinite, the preconditioner 0 and the right-hand side NaN (∞·0 for a
+    /// body at rest), so CG stops at once with Δv = 0: the step silently did nothing. Where h²
+    /// falls below the normal range (h < √MIN_POSITIVE ≈ 1.49e-154 s) the Jacobians vanish
+    /// from A and the step is no longer implicit. Both are refused.
+    fn check_dt(&self, h: Real) -> crate::error::Result<()> {
+        use crate::error::{invalid, seconds};
+        let (big, small) = (seconds(Real::MAX.sqrt()), seconds(Real::MIN_POSITIVE.sqrt()));
+        if !(h * h).is_finite() {
+            let msg =
+                format!("{} is too large for implicit_euler: dt² overflows float64 (take dt < {big})", seconds(h));
+            return Err(invalid("dt", msg));
+        }
+        if h * h < Real::MIN_POSITIVE {
+            let msg =
+                format!("{} is too small for implicit_euler: dt² underflows float64 (take dt ≥ {small})", seconds(h));
+            return Err(invalid("dt", msg));
+        }
+        Ok(())
+    }
     fn set_solver_options(&mut self, tol: Real, max_iter: u32) -> bool {
         self.tol = tol;
         self.max_iter = max_iter;
@@ -447,6 +467,24 @@ mod tests {
         for s in 1..n {
             y -= l0 + (n - s) as f64 * m * g / k;
             assert!((p.state.x[s].y - y).abs() < 1e-9, "mass {s}: {} vs {y}", p.state.x[s].y);
+        }
+    }
+
+    #[test]
+    fn a_step_whose_square_overflows_did_nothing_and_is_refused() {
+        // What `check_dt` refuses: at h = 1e155 (h² = inf) a body at rest, pulled by a spring,
+        // did not move and no error was raised (issue 44); at 1e150 it moves.
+        let ie = ImplicitEuler::<DVec2>::default();
+        for h in [1e155, 1e300] {
+            let (mut sys, mut ie) = (oscillator(4.0, 1.0, DVec2::new(1.0, 0.0), DVec2::ZERO), ImplicitEuler::default());
+            assert!(!ie.step(&mut sys, h), "no non-finite value: the failure was silent");
+            assert_eq!(sys.state.x[1], DVec2::new(1.0, 0.0), "h = {h:e}: a no-op");
+        }
+        let (mut sys, mut ok) = (oscillator(4.0, 1.0, DVec2::new(1.0, 0.0), DVec2::ZERO), ImplicitEuler::default());
+        assert!(!ok.step(&mut sys, 1e150) && sys.state.x[1].length() < 1e-6, "{:?}", sys.state.x[1]);
+        assert!(ie.check_dt(1e150).is_ok() && ie.check_dt(1e-150).is_ok());
+        for h in [1e155, 1e300, 1e-155] {
+            assert!(matches!(ie.check_dt(h), Err(crate::Error::InvalidInput { arg, .. }) if arg == "dt"), "{h:e}");
         }
     }
 }

@@ -126,6 +126,11 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn implicit(&self) -> bool {
         false
     }
+    /// Refuses a step `dt` (s) this integrator cannot take (already finite and > 0), with an
+    /// `InvalidInput` naming `dt`; every step size is fine by default.
+    fn check_dt(&self, _dt: Real) -> Result<()> {
+        Ok(())
+    }
     /// Sets the linear solver's relative tolerance and iteration limit (validated by the
     /// caller); false if the integrator has no solver.
     fn set_solver_options(&mut self, _tol: Real, _max_iter: u32) -> bool {

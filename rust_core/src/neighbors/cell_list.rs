@@ -123,6 +123,17 @@ impl CellList {
         })
     }
 
+    /// Changes the cell size (> 0, finite), keeping the buffers and the room `reserve` made, so
+    /// that a list reserved before its size is known (the contacts' radii) builds without
+    /// allocating.
+    pub fn set_cell_size(&mut self, cell: Real) -> Result<()> {
+        if !(cell.is_finite() && cell > 0.0) {
+            return Err(invalid("radius", format!("{cell} must be finite and > 0")));
+        }
+        (self.cell, self.inv_cell) = (cell, 1.0 / cell);
+        Ok(())
+    }
+
     /// Lets a dense numbering take up to `cells` cells whatever the point count (4 bytes a cell
     /// kept, as much again while built: such a sparse numbering is counted in one histogram),
     /// for a list built once and queried every step: the walls of an SPH tank, whose 6,000

@@ -191,14 +191,22 @@ impl PySimulation {
         with_sim!(&self.inner, s => to_array2(py, &s.particles().state().v, "velocities"))
     }
 
+    /// Masses, kg: a new (N,) float64 array (a copy).
     #[getter]
-    fn masses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        with_sim!(&self.inner, s => Array1::from_vec(s.particles().model().mass.clone()).into_pyarray(py))
+    fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let m = with_sim!(&self.inner, s => copy_of(&s.particles().model().mass, "masses", "masses"));
+        Ok(Array1::from_vec(m.map_err(|e| to_py(py, e))?).into_pyarray(py))
     }
 
+    /// Which particles are pinned: a new (N,) bool array.
     #[getter]
-    fn pinned<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<bool>> {
-        with_sim!(&self.inner, s => Array1::from_vec(s.particles().model().inv_mass.iter().map(|&im| im == 0.0).collect()).into_pyarray(py))
+    fn pinned<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let p = with_sim!(&self.inner, s => {
+            let im = &s.particles().model().inv_mass;
+            Need::new("pinned", Need::bytes_of::<bool>(im.len()), format!("{} particles", count(im.len() as u128)))
+                .collect(im.iter().map(|&im| im == 0.0))
+        });
+        Ok(Array1::from_vec(p.map_err(|e| to_py(py, e))?).into_pyarray(py))
     }
 
     #[pyo3(signature = (positions=None, velocities=None))]
@@ -232,7 +240,7 @@ impl PySimulation {
         let d = PyDict::new(py);
         with_sim!(&self.inner, s => {
             for (k, a) in &s.particles().model().attributes {
-                d.set_item(*k, a.clone().into_pyarray(py))?;
+                d.set_item(*k, copy_of(a, "attributes", k).map_err(|e| to_py(py, e))?.into_pyarray(py))?;
             }
         });
         Ok(d)
@@ -283,7 +291,7 @@ impl PySimulation {
     ) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
         let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
         let inner = &self.inner;
-        let f = py.detach(|| with_sim!(inner, s => s.other(name).map(|o| s.run(|| o.fields(&names)))));
+        let f = py.detach(|| with_sim!(inner, s => s.other(name).and_then(|o| s.run(|| o.fields(&names)))));
         Ok(f.map_err(|e| to_py(py, e))?.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect())
     }
 
@@ -400,14 +408,15 @@ impl PySimulation {
     }
 
     /// (density, pressure) of every particle, (N,) float64 each; 0 outside fluids.
-    fn fluid_fields<'py>(&self, py: Python<'py>) -> (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>) {
+    fn fluid_fields<'py>(&self, py: Python<'py>) -> PyResult<Columns<'py>> {
         let inner = &self.inner;
-        let (r, p) = py.detach(|| with_sim!(inner, s => s.fluid_fields()));
-        (Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py))
+        let (r, p) = py.detach(|| with_sim!(inner, s => s.fluid_fields())).map_err(|e| to_py(py, e))?;
+        Ok((Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py)))
     }
 
     /// The energy books; O(N²) with pairwise gravity, so Ctrl-C interrupts it (nothing changes).
     fn energy<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        with_sim!(&mut self.inner, s => s.prepare_energy()).map_err(|e| to_py(py, e))?;
         let e = with_sim!(&mut self.inner, s => interruptible_read(py, s, |s, stop| s.query_interruptible(stop, |s| s.energy())))?;
         energy_dict(py, e)
     }
@@ -429,11 +438,11 @@ impl PySimulation {
 
     /// The per-particle output fields `names` of the terms (`Term::fields`), (N,) float64 each;
     /// 0 where a field is not defined.
-    fn particle_fields<'py>(&self, py: Python<'py>, names: Vec<String>) -> Vec<Bound<'py, PyArray1<f64>>> {
+    fn particle_fields<'py>(&self, py: Python<'py>, names: Vec<String>) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
         let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
         let inner = &self.inner;
-        let f = py.detach(|| with_sim!(inner, s => s.fields(&names)));
-        f.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect()
+        let f = py.detach(|| with_sim!(inner, s => s.fields(&names))).map_err(|e| to_py(py, e))?;
+        Ok(f.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect())
     }
 
     /// Each term's real-valued statistics (`Term::stats`): (term name, statistic, value).
@@ -496,4 +505,13 @@ impl PySimulation {
 
 fn p_dim<V: Vector>(_: &V) -> usize {
     V::DIM
+}
+
+/// Two (N,) float64 arrays (density and pressure).
+type Columns<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
+/// A fallible copy of the (N,) array `a`, for the getter `what` (`of`: which array).
+fn copy_of(a: &[f64], what: &'static str, of: &str) -> crate::error::Result<Vec<f64>> {
+    Need::new(what, Need::bytes_of::<f64>(a.len()), format!("a copy of {of} ({} values)", count(a.len() as u128)))
+        .copy(a)
 }

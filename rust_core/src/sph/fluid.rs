@@ -9,6 +9,7 @@
 use super::buffers::Walls;
 use super::group::Group;
 use super::params::{KernelKind, Precision, SphParams};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::Shared;
 use crate::par;
@@ -153,6 +154,14 @@ impl<V: Vector> Term<V> for Sph<V> {
         let (rho, _) = self.fields(x, model);
         let m = &model.mass[self.range()];
         Some(par::sum(self.n, 0.0, |r| r.map(|i| m[i] * self.p.internal_energy(rho[i])).sum::<Real>()))
+    }
+
+    /// The books' densities are computed afresh by `potential` (the group's points copied and
+    /// sorted into a new cell list, a density pass, copies out: under 256 bytes a particle),
+    /// which cannot report a refused allocation: check that much room is there first.
+    fn reserve_potential(&mut self, n: usize) -> Result<()> {
+        let bytes = 256 * n as u128;
+        Need::new("energy", bytes, format!("the SPH densities of {} particles", count(n as u128))).room(bytes)
     }
 
     fn dissipative(&self) -> bool {

@@ -18,6 +18,7 @@
 //! - `van_der_pol` (2D): y, μ(1 − x²)y − x; μ = 1 (van der Pol, Phil. Mag. 2 (1926) 978): a
 //!   limit cycle every start is drawn to.
 use super::{load_flat, snapshot_flat, Arrays, EnergyReport, Halt, Snapshot, System};
+use crate::alloc::Need;
 use crate::error::{invalid, Failure, Result};
 use crate::ode::{self, Tableau, MAX_STAGES};
 use crate::par;
@@ -194,16 +195,16 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> FlowSystem<F> {
     }
 
     /// The velocity at every point, stored by axis like the points.
-    fn rate(&self) -> Vec<Real> {
+    fn rate(&self, need: &Need) -> Result<Vec<Real>> {
         let n = self.y.len() / self.dim;
-        let mut out = vec![0.0; self.y.len()];
+        let mut out = need.filled(self.y.len(), 0.0)?;
         for i in 0..n {
             let v = (self.u)(self.point(i));
             for c in 0..self.dim {
                 out[c * n + i] = v[c];
             }
         }
-        out
+        Ok(out)
     }
 
     fn point(&self, i: usize) -> [Real; 3] {
@@ -248,13 +249,14 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
         EnergyReport::default()
     }
     /// "y": the points (by axis); "rate": the velocity u there.
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let need = Need::fields(names, self.y.len(), "values (points by axis)");
         names
             .iter()
             .map(|n| match *n {
-                "y" => self.y.clone(),
-                "rate" => self.rate(),
-                _ => vec![0.0; self.y.len()],
+                "y" => need.copy(&self.y),
+                "rate" => self.rate(&need),
+                _ => need.filled(self.y.len(), 0.0),
             })
             .collect()
     }
@@ -327,7 +329,7 @@ mod tests {
         for _ in 0..100 {
             s.step(0.005, &stop).unwrap();
         }
-        let y = &s.fields(&["y"])[0];
+        let y = &s.fields(&["y"]).unwrap()[0];
         let want = [q, -q, 0.0, q, -q, 0.0, 27.0, 27.0, 0.0];
         for (a, b) in y.iter().zip(want) {
             assert!((a - b).abs() < 1e-12, "{a} vs {b}");

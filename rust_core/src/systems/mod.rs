@@ -173,8 +173,9 @@ pub trait System: Send + Sync {
         Vec::new()
     }
     /// The named output fields `names`, one value per element (0 where a field is not defined;
-    /// all zeros if the system has no field of that name).
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>>;
+    /// all zeros if the system has no field of that name), allocated fallibly: a field read
+    /// of a large grid must not abort the process (see `crate::alloc`).
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>>;
     /// A copy of everything `step` changes, allocated fallibly.
     fn snapshot(&self) -> Result<Snapshot>;
     /// Everything a restart needs (state, books, caches), as named arrays.

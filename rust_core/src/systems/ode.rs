@@ -95,17 +95,18 @@ impl System for OdeSystem {
         EnergyReport { kinetic: 0.0, potential, dissipated: Vec::new() }
     }
     /// "y": the state; "rate": f(y), its rate of change.
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let need = Need::fields(names, self.y.len(), "values");
         names
             .iter()
             .map(|n| match *n {
-                "y" => self.y.clone(),
+                "y" => need.copy(&self.y),
                 "rate" => {
-                    let mut dy = vec![0.0; self.y.len()];
+                    let mut dy = need.filled(self.y.len(), 0.0)?;
                     (self.rhs)(&self.y, &mut dy);
-                    dy
+                    Ok(dy)
                 }
-                _ => vec![0.0; self.y.len()],
+                _ => need.filled(self.y.len(), 0.0),
             })
             .collect()
     }

@@ -81,6 +81,32 @@ impl<V: Vector> ParticleSystem<V> {
         self.constraints.len()
     }
 
+    /// The divergence remedies the terms and the integrator offer (for the error's advice).
+    pub fn remedies(&self) -> crate::error::Remedies {
+        let terms = &self.sys.forces.terms;
+        crate::error::Remedies {
+            softening: terms.iter().any(|t| t.softened()),
+            implicit: !self.integrator.implicit() && terms.iter().any(|t| t.has_jacobian()),
+        }
+    }
+
+    /// Bytes the terms allocate on the fly in a step (`Term::transient_bytes`).
+    pub fn transient_bytes(&self) -> u128 {
+        let n = self.n_particles();
+        self.sys.forces.terms.iter().map(|t| t.transient_bytes(n)).sum()
+    }
+
+    /// Refuses a step `dt` the integrator cannot take (`Integrator::check_dt`).
+    pub fn check_dt(&self, dt: Real) -> Result<()> {
+        self.integrator.check_dt(dt)
+    }
+
+    /// Reserves, fallibly, the scratch the terms' potentials need (`Term::reserve_potential`).
+    pub fn reserve_potential(&mut self) -> Result<()> {
+        let n = self.n_particles();
+        self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve_potential(n))
+    }
+
     pub fn n_particles(&self) -> usize {
         self.sys.state.x.len()
     }
@@ -702,9 +728,14 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     /// The named output fields of every term (see `Term::fields`), one value per particle (0
     /// for particles a field does not cover); `names` fixes which and in what order.
-    fn fields(&self, names: &[&str]) -> Vec<Vec<Real>> {
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
         let n = self.n_particles();
-        let mut out = vec![vec![0.0; n]; names.len()];
+        let need = Need::new(
+            "fields",
+            Need::bytes_of::<Real>(n) * names.len() as u128,
+            format!("{} of {} particles", names.join(" and "), count(n as u128)),
+        );
+        let mut out = names.iter().map(|_| need.filled(n, 0.0)).collect::<Result<Vec<_>>>()?;
         for t in &self.sys.forces.terms {
             for (name, range, values) in t.fields(&self.sys.state.x, &self.sys.model) {
                 if let Some(k) = names.iter().position(|m| *m == name) {
@@ -712,7 +743,7 @@ impl<V: Vector> System for ParticleSystem<V> {
                 }
             }
         }
-        out
+        Ok(out)
     }
 
     /// A copy of the positions and velocities (and cached forces), allocated fallibly.

@@ -61,6 +61,7 @@
 //! books, which balance to the scheme's first-order error.
 use super::registry::{Context, Params};
 use super::{Term, Write};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
 use crate::par::{self, CHUNK};
@@ -174,6 +175,8 @@ struct Lists<V: Vector> {
     x: Vec<V>,
     r: Vec<Real>,
     skin: Real,
+    /// (`crate::alloc`) The counting sort's cursors, kept so that their room (`reserve`) is reused.
+    fill: Vec<u32>,
 }
 
 /// What a pass sums: the energies dissipated by the tangential and normal forces in the step
@@ -483,6 +486,12 @@ pub struct Contacts<V: Vector> {
     /// The candidate lists and the contacts' states; `None` until built (and after a change
     /// that invalidates them).
     lists: Option<Lists<V>>,
+    /// (`crate::alloc`) Empty lists with room for the next build's per-grain arrays, made fallibly by
+    /// `reserve` while `lists` is `None` (whose presence means "built").
+    room: Option<Lists<V>>,
+    /// (`crate::alloc`) The energy books' cell list (`potential` takes `&self`), with room
+    /// made fallibly by `reserve_potential`.
+    books: std::sync::Mutex<Option<CellList>>,
     /// Contacts loaded by `set_history`, waiting for the next build.
     seed: Option<Vec<Carry<V>>>,
     /// The last evaluation's sums.
@@ -699,6 +708,8 @@ impl<V: Vector> Contacts<V> {
             angle: Vec::new(),
             torque: Vec::new(),
             lists: None,
+            room: None,
+            books: std::sync::Mutex::new(None),
             seed: None,
             last: Sums::default(),
             dissipated: [0.0; 2],
@@ -867,9 +878,12 @@ impl<V: Vector> Contacts<V> {
         let skin = SKIN * r_max;
         let reach = 2.0 * r_max + skin;
         if r_max > 0.0 && self.cells.as_ref().is_none_or(|c| c.cell_size() != reach) {
-            self.cells = CellList::new(reach, V::DIM).ok();
+            // [alloc] The list `reserve` made room in keeps that room at its new size.
+            if self.cells.as_mut().is_none_or(|c| c.set_cell_size(reach).is_err()) {
+                self.cells = CellList::new(reach, V::DIM).ok();
+            }
         }
-        if let Some(c) = self.cells.as_mut() {
+        if let Some(c) = self.cells.as_mut().filter(|_| r_max > 0.0) {
             c.build(x);
         }
         let (cells, walls) = (self.cells.as_ref().filter(|_| r_max > 0.0), &self.walls);
@@ -932,7 +946,7 @@ impl<V: Vector> Contacts<V> {
             Some(p) => p,
             None => (0..chunks).map(part).collect(),
         };
-        let mut l = self.lists.take().unwrap_or_default();
+        let mut l = self.lists.take().or_else(|| self.room.take()).unwrap_or_default();
         for v in [&mut l.pi, &mut l.pj, &mut l.pstart, &mut l.rpair, &mut l.rstart, &mut l.wall, &mut l.wstart] {
             v.clear();
         }
@@ -966,12 +980,15 @@ impl<V: Vector> Contacts<V> {
         for j in 0..n {
             l.rstart[j + 1] += l.rstart[j];
         }
-        let mut fill = l.rstart[..n].to_vec();
+        let mut fill = std::mem::take(&mut l.fill);
+        fill.clear();
+        fill.extend_from_slice(&l.rstart[..n]);
         l.rpair.resize(l.pj.len(), 0);
         for (p, &j) in l.pj.iter().enumerate() {
             l.rpair[fill[j as usize] as usize] = p as u32;
             fill[j as usize] += 1;
         }
+        l.fill = fill;
         l.forces.clear();
         l.forces.resize(l.pj.len(), PairForce::ZERO);
         l.x.clear();
@@ -1369,7 +1386,10 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // Normal springs at x (a fresh search: the lists may be stale for these positions).
         let r_max = r.iter().fold(0.0, |a: Real, &b| a.max(b));
         if r_max > 0.0 {
-            if let Ok(mut cl) = CellList::new(2.0 * r_max, V::DIM) {
+            // [alloc] The list `reserve_potential` made room in, at this size.
+            let mut books = self.books.lock().unwrap_or_else(|e| e.into_inner());
+            let cl = books.take().map_or_else(|| CellList::new(1.0, V::DIM), Ok);
+            if let Ok(mut cl) = cl.and_then(|mut c| c.set_cell_size(2.0 * r_max).map(|()| c)) {
                 cl.build(x);
                 for i in 0..n {
                     if r[i] <= 0.0 {
@@ -1389,6 +1409,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
                         }
                     }
                 }
+                *books = Some(cl);
             }
         }
         for i in 0..n {
@@ -1479,11 +1500,49 @@ impl<V: Vector> Term<V> for Contacts<V> {
     }
 
     fn reserve(&mut self, n: usize) -> Result<()> {
+        // [alloc] Room for the spins (`fit`) and the cell list before the first step builds
+        // them: their infallible growth aborted the process under memory pressure. The list's
+        // size is set by the radii at its first build (`rebuild`); 1 m until then.
+        let bytes = Need::bytes_of::<V::Axial>(2 * n) + Need::bytes_of::<Real>(n);
+        let need = Need::new("step", bytes, format!("the spins of {} grains", count(n as u128)));
+        need.reserve(&mut self.omega, n)?;
+        need.reserve(&mut self.angle, n)?;
+        need.reserve(&mut self.torque, n)?;
         self.fit(n);
+        if self.lists.is_none() {
+            let l = self.room.get_or_insert_with(Lists::default);
+            let bytes = Need::bytes_of::<u32>(4 * n + 3) + Need::bytes_of::<V>(n) + Need::bytes_of::<Real>(n);
+            let need = Need::new("step", bytes, format!("the contact lists of {} grains", count(n as u128)));
+            for v in [&mut l.pstart, &mut l.wstart, &mut l.rstart] {
+                need.reserve(v, n + 1)?;
+            }
+            need.reserve(&mut l.fill, n)?;
+            need.reserve(&mut l.x, n)?;
+            need.reserve(&mut l.r, n)?;
+        }
+        if self.cells.is_none() {
+            self.cells = CellList::new(1.0, V::DIM).ok();
+        }
         if let Some(c) = self.cells.as_mut() {
             c.reserve(n, "step")?;
         }
         Ok(())
+    }
+
+    fn reserve_potential(&mut self, n: usize) -> Result<()> {
+        let books = self.books.get_mut().unwrap_or_else(|e| e.into_inner());
+        if books.is_none() {
+            *books = CellList::new(1.0, V::DIM).ok();
+        }
+        books.as_mut().map_or(Ok(()), |c| c.reserve(n, "energy"))
+    }
+
+    /// (`crate::alloc`) The build's per-chunk parts (two counts a grain, the last build's pairs again)
+    /// are allocated in parallel where a refusal cannot be reported; the world checks this much
+    /// room is left once the step's checkpoint is taken.
+    fn transient_bytes(&self, n: usize) -> u128 {
+        let pairs = self.lists.as_ref().map_or(0, |l| l.pj.len() + l.wall.len());
+        Need::bytes_of::<u32>(2 * n) + Need::bytes_of::<(u32, Link<V>)>(pairs)
     }
 
     fn begin_step(&mut self, dt: Real) {

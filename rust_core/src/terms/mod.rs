@@ -130,6 +130,20 @@ pub trait Term<V: Vector>: Send + Sync {
     fn reserve(&mut self, _n: usize) -> Result<()> {
         Ok(())
     }
+    /// Reserves, fallibly, the scratch `potential` over `n` particles needs (the energy books
+    /// are read through `&self`), so that reading them allocates nothing sized by `n`.
+    fn reserve_potential(&mut self, _n: usize) -> Result<()> {
+        Ok(())
+    }
+    /// Bytes an evaluation over `n` particles allocates on the fly, where a refusal cannot be
+    /// reported (inside parallel parts); the world checks they can be had before stepping.
+    fn transient_bytes(&self, _n: usize) -> u128 {
+        0
+    }
+    /// Whether the term has a softening length (so that a divergence's advice may name it).
+    fn softened(&self) -> bool {
+        false
+    }
     // ---- Terms with a state of their own (contacts: spins and tangential springs) ----------
     /// Called before each integrator step with its dt (s).
     fn begin_step(&mut self, _dt: Real) {}

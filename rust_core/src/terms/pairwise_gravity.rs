@@ -516,6 +516,9 @@ impl<V: Vector> Term<V> for Pairwise {
     fn name(&self) -> &str {
         &self.name
     }
+    fn softened(&self) -> bool {
+        true
+    }
 
     fn set_single(&mut self, single: bool) {
         self.single = single;

@@ -59,6 +59,7 @@ use crate::stop::Stop;
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
 
 /// A node of at most this many particles is a leaf.
 const LEAF: usize = 16;
@@ -656,6 +657,9 @@ pub struct TreeGravity {
     tree: Tree,
     /// Accelerations / G in sorted order.
     acc: Vec<[Real; 3]>,
+    /// The energy books' own tree and potentials (`potential` takes `&self`), reserved by
+    /// `reserve_potential` so that reading the books allocates nothing.
+    books: Mutex<(Tree, Vec<[Real; 3]>)>,
     stop: Stop,
 }
 
@@ -680,13 +684,17 @@ crate::register_term!("tree_gravity", build);
 
 impl TreeGravity {
     pub fn new(name: String, g: Real, softening: Real, theta: Real) -> Self {
-        Self { name, g, softening, theta, tree: Tree::default(), acc: Vec::new(), stop: Stop::default() }
+        let books = Mutex::new((Tree::default(), Vec::new()));
+        Self { name, g, softening, theta, tree: Tree::default(), acc: Vec::new(), books, stop: Stop::default() }
     }
 }
 
 impl<V: Vector> Term<V> for TreeGravity {
     fn name(&self) -> &str {
         &self.name
+    }
+    fn softened(&self) -> bool {
+        true
     }
 
     fn set_stop(&mut self, stop: Stop) {
@@ -702,6 +710,18 @@ impl<V: Vector> Term<V> for TreeGravity {
         }
         self.tree.reserve(n, &need)?;
         need.reserve(&mut self.acc, n)
+    }
+
+    fn reserve_potential(&mut self, n: usize) -> Result<()> {
+        let bytes = Tree::bytes(n) + Need::bytes_of::<[Real; 3]>(n);
+        let need = Need::new("energy", bytes, format!("tree gravity's potential of {} bodies", count(n as u128)));
+        need.check()?;
+        if n > u32::MAX as usize {
+            return Err(need.error());
+        }
+        let (tree, phi) = self.books.get_mut().unwrap_or_else(|e| e.into_inner());
+        tree.reserve(n, &need)?;
+        need.reserve(phi, n)
     }
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
@@ -744,11 +764,11 @@ impl<V: Vector> Term<V> for TreeGravity {
         if n == 0 {
             return Some(0.0);
         }
-        let mut tree = Tree::default();
+        let mut books = self.books.lock().unwrap_or_else(|e| e.into_inner());
+        let (tree, phi) = &mut *books;
         tree.build(x, &model.mass, self.theta);
-        let mut phi = Vec::new();
         let eps2 = self.softening * self.softening;
-        walk_all(&tree, eps2, Sum::Potential, simd::level(), self.stop.flag(), &mut phi);
+        walk_all(tree, eps2, Sum::Potential, simd::level(), self.stop.flag(), phi);
         // ½ Σ_i m_i φ_i in fixed chunks of the sorted order (any thread count: the same bits).
         let u = par::sum(n, 0.0, |r| r.map(|k| tree.pos[k][3] * phi[k][0]).sum::<Real>());
         Some(-0.5 * self.g * u)

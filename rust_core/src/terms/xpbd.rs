@@ -51,6 +51,7 @@
 //! Macklin et al. 2019) Gauss–Seidel's faster propagation matters most.
 use super::registry::{Context, Params};
 use super::{Term, Write};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::{self, SyncPtr};
 use crate::state::Model;
@@ -212,11 +213,12 @@ fn eval(kind: Kind, p: &[DVec3; 4], rest: Real, target: DVec3) -> Option<(Real, 
 
 /// Greedy colouring of `m` constraints whose particles are `members(c)`: each takes the smallest
 /// colour not yet held by a constraint sharing a particle. Returns the constraints sorted by
-/// colour (stable: input order within a colour) and each colour's start in that list.
-fn colour<'a>(m: usize, n: usize, members: impl Fn(usize) -> &'a [u32]) -> (Vec<u32>, Vec<usize>) {
-    let mut used: Vec<Vec<u32>> = vec![Vec::new(); n];
+/// colour (stable: input order within a colour) and each colour's start in that list. Sized by
+/// the input, so allocated fallibly (`need`): a refusal is `Error::OutOfMemory`, not an abort.
+fn colour<'a>(m: usize, n: usize, need: &Need, members: impl Fn(usize) -> &'a [u32]) -> Result<(Vec<u32>, Vec<usize>)> {
+    let mut used: Vec<Vec<u32>> = need.filled(n, Vec::new())?;
     let mut seen: Vec<usize> = Vec::new(); // seen[k] = c + 1: colour k is taken around c
-    let mut col = vec![0u32; m];
+    let mut col = need.filled(m, 0u32)?;
     for c in 0..m {
         for &p in members(c) {
             for &k in &used[p as usize] {
@@ -229,7 +231,13 @@ fn colour<'a>(m: usize, n: usize, members: impl Fn(usize) -> &'a [u32]) -> (Vec<
         }
         col[c] = k as u32;
         for &p in members(c) {
-            used[p as usize].push(k as u32);
+            let u = &mut used[p as usize];
+            if u.try_reserve(1).is_err() {
+                // Free the many small lists first: the error's own strings need room too.
+                drop(used);
+                return Err(need.error());
+            }
+            u.push(k as u32);
         }
     }
     let nc = seen.len();
@@ -241,12 +249,13 @@ fn colour<'a>(m: usize, n: usize, members: impl Fn(usize) -> &'a [u32]) -> (Vec<
         start[k + 1] += start[k];
     }
     let mut fill = start.clone();
-    let mut order = vec![0u32; m];
+    drop(used);
+    let mut order = need.filled(m, 0u32)?;
     for (c, &k) in col.iter().enumerate() {
         order[fill[k as usize]] = c as u32;
         fill[k as usize] += 1;
     }
-    (order, start)
+    Ok((order, start))
 }
 
 /// Runs `f(id)` for every id of `ids`, in parallel over fixed chunks when there are many. The
@@ -299,6 +308,15 @@ fn rotation3(a: DMat3, mut q: DQuat) -> DQuat {
 
 fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
     let n = ctx.n_particles;
+    // The colouring's scratch (a list per particle) and each set's arrays, per set of m rows.
+    let need = |m: usize| {
+        let bytes = Need::bytes_of::<Vec<u32>>(n) + Need::bytes_of::<u32>(6 * m) + Need::bytes_of::<DVec3>(m);
+        Need::new(
+            "xpbd_constraints",
+            bytes,
+            format!("{} constraints over {} particles", count(m as u128), count(n as u128)),
+        )
+    };
     let mut sets = Vec::new();
     let kinds: [(&str, Kind); 5] = [
         ("distance", Kind::Distance),
@@ -349,7 +367,7 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
             if let Some(c) = t.iter().position(|x| !x.is_finite()) {
                 return Err(invalid("pins_target", format!("row {c} is not finite")));
             }
-            (vec![0.0; m], t.into_iter().map(to3).collect())
+            (need(m).filled(m, 0.0)?, need(m).collect(t.into_iter().map(to3))?)
         } else {
             let rkey = format!("{key}_rest");
             let rest = p.take_floats(&rkey)?;
@@ -372,8 +390,9 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
             }
             (rest, Vec::new())
         };
-        let (order, start) = colour(m, n, |c| &idx[c * a..(c + 1) * a]);
-        sets.push(Set { kind, idx, rest, alpha, target, lambda: vec![0.0; m], order, start });
+        let (order, start) = colour(m, n, &need(m), |c| &idx[c * a..(c + 1) * a])?;
+        let lambda = need(m).filled(m, 0.0)?;
+        sets.push(Set { kind, idx, rest, alpha, target, lambda, order, start });
     }
     let mut shapes = Shapes {
         first: vec![0],
@@ -438,7 +457,7 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
             first.push(b);
         }
         let ns = sizes.len();
-        let (order, start) = colour(ns, n, |s| &members[first[s]..first[s + 1]]);
+        let (order, start) = colour(ns, n, &need(ns), |s| &members[first[s]..first[s + 1]])?;
         shapes = Shapes {
             first,
             members,
@@ -708,7 +727,7 @@ mod tests {
     fn xpbd_colouring_gives_disjoint_colours() {
         // A chain 0-1-2-3-4 and a triangle fan: no colour holds two constraints sharing a particle.
         let idx: Vec<u32> = vec![0, 1, 1, 2, 2, 3, 3, 4, 0, 2, 1, 3];
-        let (order, start) = colour(6, 5, |c| &idx[2 * c..2 * c + 2]);
+        let (order, start) = colour(6, 5, &Need::new("test", 0, ""), |c| &idx[2 * c..2 * c + 2]).unwrap();
         assert_eq!(order.len(), 6);
         for c in 0..start.len() - 1 {
             let mut seen = std::collections::HashSet::new();

@@ -110,6 +110,9 @@ impl<V: Vector> Term<V> for PointSources<V> {
     fn name(&self) -> &str {
         &self.name
     }
+    fn softened(&self) -> bool {
+        true
+    }
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let this = &*self;
         coupled_forces(self.coupling, x, model, f, write, |p| this.field(p).0);
