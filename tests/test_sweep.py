@@ -176,6 +176,52 @@ def test_diverging_and_failing_runs_are_rows(client):
             assert f"test_sweep.py:{line} in explode" in failed["error"]
 
 
+class Unpicklable:
+    """A result that cannot travel between processes (like a generator or a lock)."""
+
+    def __reduce__(self):
+        raise TypeError("cannot pickle 'Unpicklable' object")
+
+    def __repr__(self) -> str:
+        return "Unpicklable()"
+
+
+class UnpicklableNumber(float):
+    """A number (kept as it is in a row) that cannot travel between processes."""
+
+    def __reduce__(self):
+        raise TypeError("cannot pickle 'UnpicklableNumber' object")
+
+
+def odd_result(scene: pc.Scene) -> dict:
+    k = scene.terms[0].stiffness[0]
+    out = {"n": scene.n_particles}
+    if k == 2000.0:
+        out["odd"] = Unpicklable()
+    if k == 8000.0:
+        out["odd"] = UnpicklableNumber(1.5)
+    return out
+
+
+def test_an_unpicklable_result_is_a_row_and_keeps_the_others(client):
+    # Issue 44: one result that did not pickle failed the whole batch's gather on Dask, raising
+    # "Could not serialize object" and dropping the rows not yet written.
+    grid = {"k": [500.0, 2000.0, 8000.0, 1000.0], "dt": [1e-4, 2e-4]}
+    serial = pc.sweep(chain, grid, measure=odd_result, client="serial", progress=False)
+    par = pc.sweep(chain, grid, measure=odd_result, client=client, progress=False)
+    assert list(par["run"]) == list(range(8)) and list(par["k"]) == list(serial["k"])
+    # A value with no cell of its own is its repr on a worker as in this process.
+    for df in (serial, par):
+        assert list(df.loc[df["k"] == 2000.0, "odd"]) == ["Unpicklable()"] * 2
+    kept = par["k"] != 8000.0
+    for col in ("n", "odd"):
+        assert par.loc[kept, col].fillna("-").tolist() == serial.loc[kept, col].fillna("-").tolist()
+    # A number that cannot come back from its worker fails that run alone, as its row's error.
+    bad = par[par["k"] == 8000.0]
+    assert bad["error"].str.contains("serialize|pickle").all() and bad["n"].isna().all()
+    assert par.loc[par["k"] != 8000.0, "error"].isna().all()
+
+
 CALLS: list[float] = []
 
 

@@ -433,3 +433,147 @@ def test_parameter_keys_stay_within_a_range_of_the_start():
     for _ in range(60):  # and back down, to 1/100 of the start
         live.scale("stiffness", 1 / viewer.STEP_FACTOR)
     assert param_value(live.scene, "stiffness") >= k0 / viewer.PARAM_RANGE * (1 - 1e-12)
+
+
+# --------------------------------------------------------------------------- hostile events
+# Issue 44 item 7: hostile events reached numpy and Python errors (a pointer at NaN or 1e308, a
+# key code beyond C's long, an event without its attributes, a screenshot key before the window
+# opened or after it closed). Every one is now ignored or reported as a PhyscoreError.
+def _hostile_events():
+    pg = pygame
+    nan, inf = math.nan, math.inf
+    keys = [None, -1, 0, 10**30, -(10**30), nan, "]", True, 2**31, pg.K_RIGHTBRACKET]
+    events = [pg.event.Event(pg.KEYDOWN, key=k, unicode=u, mod=m)
+              for k in keys for u in ("", None, 5, "]", "ab", "\x00") for m in (0, None, -1, 10**30)]
+    events += [pg.event.Event(pg.KEYDOWN), pg.event.Event(pg.KEYUP, key=None), pg.event.Event(pg.KEYDOWN, key=np.int64(93))]
+    points = [None, (nan, nan), (inf, -inf), (1e308, 1e308), (-1e308, 0), (10**30, 0), (10**400, 0), (0,), (1, 2, 3),
+              "ab", (None, None), np.array([[1, 2]]), np.array([1 + 1j, 2]), np.array(["1", "2"]), (-5, -5), (10**6, 10**6),
+              (True, False), {}, (object(), 0), np.array([np.nan, 0.0])]
+    for p in points:
+        for b in (1, None, np.array([1, 1]), 10**30, True, "1"):
+            events += [pg.event.Event(pg.MOUSEBUTTONDOWN, pos=p, button=b), pg.event.Event(pg.MOUSEMOTION, pos=p, buttons=(1, 0, 0)),
+                       pg.event.Event(pg.MOUSEBUTTONUP, pos=p, button=b)]
+    events += [pg.event.Event(pg.MOUSEBUTTONDOWN), pg.event.Event(pg.MOUSEMOTION), pg.event.Event(pg.MOUSEBUTTONUP)]
+    events += [pg.event.Event(pg.VIDEORESIZE, size=s, w=s[0], h=s[1]) for s in ((0, 0), (-5, -5), (10**30, 1))]
+    events += [pg.event.Event(pg.VIDEORESIZE), pg.event.Event(pg.WINDOWRESIZED, x=-1, y=0), pg.event.Event(pg.WINDOWRESIZED, x=0, y=0)]
+    return events
+
+
+def _handle(v, event) -> None:
+    """What the loop does with one event (Viewer.run's dispatch)."""
+    v._handle(event)
+
+
+def _chain():
+    """A hanging chain whose springs start undamped, with gravity and drag: every parameter key."""
+    scene = pc.Scene(2, threads=1)
+    scene.add_particles(np.stack([np.arange(5) * 0.1, np.zeros(5)], axis=1), pinned=[True] + [False] * 4)
+    scene.add(pc.Springs(np.arange(4), np.arange(1, 5), stiffness=100.0, damping=0.0))
+    scene.add(pc.Gravity([0.0, -9.81]))
+    scene.add(pc.Drag(0.01))
+    return scene
+
+
+def _headless_viewer(scene=None):
+    import io
+
+    scene = _cloth(6) if scene is None else scene
+    return viewer.Viewer(scene, name="cloth", settings=viewer._settings(scene, (64, 48), None), fps=30.0, preview=0.0,
+                         hud=True, out=io.StringIO())
+
+
+def _escapes(v, events) -> list[str]:
+    """The events whose handling raised anything but a PhyscoreError."""
+    bad = []
+    for e in events:
+        try:
+            _handle(v, e)
+        except pc.PhyscoreError:
+            pass
+        except Exception as exc:  # noqa: BLE001 - counting escapes
+            bad.append(f"{e}: {type(exc).__name__}: {exc}")
+    return bad
+
+
+@needs_pygame
+def test_hostile_events_before_the_first_frame_are_ignored_or_reported(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    v = _headless_viewer()
+    start = v.scene.positions.copy()
+    events = _hostile_events()
+    # Grabbed and paused too: a pointer at NaN or 1e308 must not reach the particle.
+    i = v.scene.n_particles - 1
+    v.live.grab(i)
+    v.clock.pause(True)
+    bad = _escapes(v, events)
+    v.clock.pause(False)
+    v.live.release()
+    bad += _escapes(v, events)
+    assert not bad, f"{len(bad)} escapes:\n" + "\n".join(bad[:20])
+    assert np.isfinite(v.scene.positions).all() and v.scene.positions.shape == start.shape
+    # The screenshot key with no window is reported, and writes nothing.
+    v._on_key("p")
+    assert "screenshot not written" in v.out.getvalue() and not list(tmp_path.iterdir())
+    with pytest.raises(pc.PhyscoreError, match="window"):
+        v.read_screen()
+    for i in (None, -1, 10**30, 1.5, "0", np.array([0, 1])):
+        with pytest.raises((pc.InvalidInputError, pc.InvalidTypeError), match=r"\bi\b"):
+            v.pixel_of(i)
+
+
+@needs_pygame
+def test_key_repeat_floods_stay_within_the_parameter_range():
+    v = _headless_viewer(_chain())
+    p0 = v.params
+    for ch in "]=gGdD-[":
+        for _ in range(300):
+            v._on_key(ch)
+    p = v.params
+    for name, value in p.items():
+        assert np.isfinite(value), name
+    assert p0["stiffness"] / viewer.PARAM_RANGE * (1 - 1e-12) <= p["stiffness"] <= p0["stiffness"] * viewer.PARAM_RANGE * (1 + 1e-12)
+    for ch in " ." * 50 + "r" * 20:
+        v._on_key(ch)
+    # Damping that starts at 0 is raised to 1 % of critical, then kept within PARAM_RANGE of that
+    # (a flood of = once made it grow without bound, and dt shrink with it).
+    v = _headless_viewer(_chain())
+    assert v.params["damping"] == 0.0
+    v._on_key("=")
+    kicked = v.params["damping"]
+    assert kicked > 0.0
+    steps = v.live.steps
+    for _ in range(300):
+        v._on_key("=")
+    assert kicked * viewer.PARAM_RANGE / viewer.STEP_FACTOR < v.params["damping"] <= kicked * viewer.PARAM_RANGE * (1 + 1e-12)
+    assert v.live.steps <= steps * viewer.PARAM_RANGE
+    for _ in range(600):
+        v._on_key("-")
+    assert v.params["damping"] >= kicked / viewer.PARAM_RANGE * (1 - 1e-12)
+
+
+def test_hostile_events_through_the_window_and_after_it_closed(display, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    events = _hostile_events()
+    seen = {}
+
+    def keep(v):
+        seen["viewer"] = v
+
+    # Before the first frame is drawn (frame 0), while running, and paused.
+    script = [(0, keep), (0, events), (2, events[::-1]), (3, _key(" ")), (4, events)]
+    result = viewer.view(_cloth(6), name="cloth", draws=6, preview=0.0, script=script, out=sys.stderr)
+    assert result.draws == 6 and np.isfinite(result.scene.positions).all()
+    v = seen["viewer"]
+    bad = _escapes(v, events + [_key("p"), _key("."), _key(" ")])
+    assert not bad, f"{len(bad)} escapes:\n" + "\n".join(bad[:20])
+    assert not list(tmp_path.glob("*.png"))
+    with pytest.raises(pc.PhyscoreError, match="window"):
+        v.save_screenshot(tmp_path / "late.png")
+
+
+@pytest.mark.parametrize("item", [3, "x", [None], ["not an event"], [[]]])
+@pytest.mark.parametrize("returned", [False, True])
+def test_a_script_item_that_is_not_an_event_is_refused_naming_script(display, item, returned):
+    # pygame's queue refused these with a bare TypeError, out of the window's loop.
+    with pytest.raises(pc.InvalidTypeError, match="script"):
+        viewer.view(_cloth(4), name="cloth", draws=3, preview=0.0, script=[(1, (lambda v: item) if returned else item)])

@@ -135,14 +135,23 @@ def kernel_w(q: np.ndarray, h: float, dim: int, kernel: str = "cubic_spline") ->
     Cubic spline: ``w = ¼(2−q)₊³ − (1−q)₊³``, ``σ₂ = 10/(7πh²)``, ``σ₃ = 1/(πh³)``.
     Wendland C2: ``w = (1 − q/2)₊⁴ (2q + 1)``, ``σ₂ = 7/(4πh²)``, ``σ₃ = 21/(16πh³)``.
     """
-    q = np.asarray(q, dtype=np.float64)
+    q = _check.real_array("q", q).astype(np.float64)
+    h = _finite_float(h, "h", minimum=0.0, strict=True)
+    dim = _check.int_in_range("dim", dim, 2, 3)
+    kernel = _check.choice("kernel", kernel, KERNELS)
+    if not np.isfinite(q).all() or (q.size and q.min() < 0):
+        raise InvalidInputError("q: must be finite and >= 0 (r/h)")
+    with np.errstate(over="ignore", under="ignore", divide="ignore"):
+        inv = 1.0 / np.float64(h) ** dim  # the normalisation's 1/h^dim
+    if not (math.isfinite(inv) and inv > 0):
+        raise InvalidInputError(f"h: {h} m has no h^{dim} and 1/h^{dim} inside float64")
     if kernel == "cubic_spline":
-        s = 10.0 / (7.0 * math.pi * h * h) if dim == 2 else 1.0 / (math.pi * h**3)
+        s = float(inv) * (10.0 / (7.0 * math.pi) if dim == 2 else 1.0 / math.pi)
         return s * (0.25 * np.clip(2.0 - q, 0, None) ** 3 - np.clip(1.0 - q, 0, None) ** 3)
     if kernel == "wendland_c2":
-        s = 7.0 / (4.0 * math.pi * h * h) if dim == 2 else 21.0 / (16.0 * math.pi * h**3)
+        s = float(inv) * (7.0 / (4.0 * math.pi) if dim == 2 else 21.0 / (16.0 * math.pi))
         t = np.clip(1.0 - 0.5 * q, 0, None)
-        return s * t**4 * (2.0 * q + 1.0)
+        return s * t**4 * (2.0 * np.minimum(q, 2.0) + 1.0)  # t = 0 beyond q = 2: no inf · 0 there
     raise InvalidInputError(f"kernel: unknown kernel {kernel!r}; valid: {', '.join(KERNELS)}")
 
 
@@ -210,10 +219,14 @@ def tank_walls(
     least ``⌈2h/spacing⌉`` layers for full kernel support (3 for h = 1.3 spacing).
 
     Returns ``(M, dim)`` float64, m."""
+    lattice_counts(lower, upper, spacing)  # checks lower, upper and spacing, naming them
     lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
     s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
     layers = _check.int_in_range("layers", layers, 1, 1000)
+    top = _check.flag("top", top)
     pad = layers * s
+    if not (math.isfinite(pad) and np.isfinite(lo - pad).all() and np.isfinite(hi + pad).all()):
+        raise InvalidInputError(f"spacing: {layers} layers of {s} m reach beyond float64's range")
     outer_hi = hi.copy() + pad
     if not top:
         outer_hi[-1] = hi[-1]  # open top: walls only up to the rim
@@ -300,6 +313,25 @@ class Fluid(Term, kind="fluid"):
         and adhesion for SPH fluids", ACM TOG 32(6) 182, 2013, eq. 1–6, with the paper's γ set
         from σ by the Kirkwood–Buff integral of the cohesion force (module docstring). Adds
         the capillary step limit ``0.25 √(ρ0 h³/(2π σ))`` (Brackbill et al. 1992).
+        Limit of the model, measured (``benches/droplet_oscillation.py``,
+        ``docs/surface_tension.md``; water, drops released as ellipses of axes R(1 ± 0.1)): drops
+        ring near Rayleigh's frequency but damp several times faster than their viscosity
+        explains. 2D, ν = 1.6e-5 m²/s (``ν = α c0 h/8``): ω/ω_Rayleigh 0.96–0.99 at 24 particles
+        across (R = 9.2 h) and 0.98–1.07 at 40 (R = 15.4 h); the mode-2 decay rate over the
+        viscous ``4ν/R²`` (Lamb's calculation, §355, for a cylinder) 5.2–6.7 at 24 across, 11–26
+        at 40 and 28 at 64, where the drop keeps a fifth of its deformation: refining makes it
+        worse, so it is the model's, not a resolution error. At α = 0 the mode still decays
+        (1.2–1.6 s⁻¹ at 24 across, 3–4 times the viscous rate of ν = 1.6e-5) and rings 11–28 %
+        slow (24 and 40 across). 3D, 12 and 16 across (R = 4.6 h, 6.1 h): ω/ω_Rayleigh
+        1.05–1.08, decay 2.8–2.9 times ``5ν/R²`` (Lamb 1932, §355). Cause, as far as measured:
+        the viscosity's own work on the drop's mode-2 flow is half the continuum's ``2ρ0ν∫e:e``
+        (0.46–0.52 at 24 across; the Monaghan term acts on approaching pairs only), under a tenth
+        of the 2D decay at ν = 1.6e-5 (a sixth in 3D). The rest leaves through the fluid's only
+        other forces, the surface forces and the pressure projections: the drop carries a
+        particle-scale jitter of 4–15 times the mode's kinetic energy (2D, 24 and 40 across),
+        which the surface forces drive and the projections remove (2,300–7,300 times the mode's
+        peak kinetic energy over two periods). Use the model for the shapes and the Laplace
+        pressure of drops, not for their damping.
     adhesion : float
         DFSPH: attraction of the fluid to the walls (Akinci et al. 2013, eq. 7), in σ's units:
         half the work of adhesion, so ``adhesion = surface_tension`` makes a wall attract like

@@ -94,7 +94,7 @@ def _sources(positions: object, strengths: object, pos_arg: str, str_arg: str, *
     if q.ndim == 0:
         q = q.reshape(1)
     if q.shape != (x.shape[0],):
-        raise InvalidInputError(f"{str_arg}: expected shape ({x.shape[0]},), one per source, got {q.shape}")
+        raise InvalidInputError(f"{str_arg}: expected shape ({x.shape[0]},), one per source (row of {pos_arg}), got {q.shape}")
     bad = ~np.isfinite(q) | ((q < 0) if nonnegative else False)
     if bad.any():
         s = int(np.flatnonzero(bad)[0])

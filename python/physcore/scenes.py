@@ -2299,7 +2299,9 @@ def vortex_street(
     """
     from .grids import Source, StableFluid
 
-    n = _count(n, "n", 4)
+    # A grid has at most 2**20 cells a side: a larger n is refused here, by name, before
+    # length · n overflows float64 (n = 10**400 raised OverflowError).
+    n = _check.int_in_range("n", n, 4, 1 << 20)
     reynolds = _positive(reynolds, "reynolds")
     length, height = _positive(length, "length"), _positive(height, "height")
     if length < 8.0:

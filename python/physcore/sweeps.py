@@ -169,7 +169,9 @@ def _run_one(build: Callable[..., Any], measure: Callable[[Any], Any], params: d
         clash = [k for k in result if not isinstance(k, str) or k in RESERVED or k in params]
         if clash:
             raise InvalidInputError(f"measure: result name {clash[0]!r} is a parameter or one of {RESERVED}; rename it")
-        row["results"] = dict(result)
+        # Cells are made here, on the worker: the row then holds only plain values that can
+        # travel back (a generator or a lock becomes its repr, as in a serial run).
+        row["results"] = {k: _cell(v) for k, v in result.items()}
     except SimulationDiverged as exc:
         row.update(results={}, error=_error_text(exc), diverged_step=exc.step)
     except Exception as exc:  # noqa: BLE001 - any failure of a user's run is a row, not a failed sweep
@@ -248,7 +250,7 @@ def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, worke
         # gather per batch, not one per task as as_completed(with_results=True) does.
         for batch in distributed.as_completed(futures).batches():
             done = [f for f in batch if f.status == "finished"]
-            for f, value in zip(done, c.gather(done) if done else [], strict=True):
+            for f, value in zip(done, _gather(c, done), strict=True):
                 on_result(index[f.key], value)
             for f in batch:
                 if f.status != "finished":
@@ -259,6 +261,23 @@ def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, worke
         if pending:
             cl.client.cancel(pending)
         cl.close()
+
+
+def _gather(client: Any, done: list[Any]) -> list[Any]:
+    """The results of finished futures; one that cannot come back (it does not pickle) is its
+    exception instead, so that it fails alone rather than the whole batch with it."""
+    if not done:
+        return []
+    try:
+        return list(client.gather(done))
+    except Exception:  # noqa: BLE001 - find which ones failed, one at a time
+        out: list[Any] = []
+        for f in done:
+            try:
+                out.append(client.gather(f))
+            except Exception as exc:  # noqa: BLE001 - becomes that run's row
+                out.append(exc)
+        return out
 
 
 # ------------------------------------------------------------------------------ results file
@@ -407,7 +426,10 @@ def sweep(
     measure : callable
         ``measure(scene)`` runs the scene and returns a dict of results (names must not repeat
         a parameter or a :data:`RESERVED` column). Numbers, strings and bools are stored as
-        they are; other values (arrays) go into the file as JSON text.
+        they are; other values (arrays) go into the file as JSON text, and what has none (a
+        generator, a lock) as its repr, made where the run ran, as in a serial run. A result
+        that still cannot come back from its worker is that run's ``error``; the other rows
+        are kept.
     client : None, "serial", str or distributed.Client
         Where the runs go (module docstring): by default a LocalCluster of `workers` processes.
     workers : int, optional
@@ -535,7 +557,7 @@ def sweep(
         if isinstance(value, BaseException):  # the worker died, or the result could not come back
             value = {"results": {}, "error": _error_text(value), "diverged_step": None, "wall_s": math.nan, "worker": None}
         res = value.pop("results")
-        rows[i] = {"run": i, **runs[i], "seed": seeds[i], **{k: _cell(v) for k, v in res.items()}, **value, "run_key": keys[i]}
+        rows[i] = {"run": i, **runs[i], "seed": seeds[i], **res, **value, "run_key": keys[i]}
         bar.update(1)
         file.write_soon(frame)
 

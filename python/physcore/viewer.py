@@ -74,7 +74,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
+from ._errors import InvalidInputError, InvalidTypeError, PhyscoreError, SimulationDiverged
 
 __all__ = [
     "view", "Viewer", "ViewResult", "FixedStep", "interpolate", "pick", "screen_to_world", "param_value",
@@ -223,6 +223,21 @@ def screen_to_world(cam: Any, origin: np.ndarray, point: tuple[float, float], th
         return np.array([s0, s1]) + origin
     depth = float((np.asarray(through, dtype=np.float64) - origin) @ cam.basis[:, 2])
     return cam.basis @ np.array([s0, s1, depth]) + origin
+
+
+def _pointer(event: Any) -> tuple[float, float] | None:
+    """An event's ``pos`` as two finite floats, or None: a synthetic event may carry anything."""
+    try:
+        c, r = getattr(event, "pos", None)  # type: ignore[misc]
+        return _check.finite("pos", c), _check.finite("pos", r)
+    except (TypeError, ValueError):  # not two real numbers (PhyscoreError's are ValueError/TypeError)
+        return None
+
+
+def _int_attr(event: Any, name: str) -> int | None:
+    """An event's int attribute (``key``, ``button``, ``mod``), or None for anything else."""
+    v = getattr(event, name, None)
+    return None if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) else int(v)
 
 
 def _parts(k: int, m: int) -> list[int]:
@@ -498,6 +513,10 @@ class _Live:
         if start and now and not (start / PARAM_RANGE <= now * factor <= start * PARAM_RANGE):
             return False
         self.scene = scale_param(self.scene, name, factor)
+        if not start:
+            # From 0 (damping's 1 % of critical) the range is about the first value above 0:
+            # else a held = key raised it without bound, and dt shrank with it.
+            self.params0[name] = param_value(self.scene, name) or 0.0
         self._restep()
         return True
 
@@ -755,26 +774,43 @@ class Viewer:
         return self.live.params()
 
     def pixel_of(self, i: int) -> tuple[int, int]:
-        """The pixel (column, row) where particle `i` is drawn now (its interpolated position)."""
+        """The pixel (column, row) where particle `i` is drawn now (its interpolated position).
+
+        Raises InvalidTypeError / InvalidInputError naming `i` for a bad index, or a particle
+        so far away that it is at no finite pixel."""
         x, _, _, _ = self.live.drawn(self.alpha)
-        col, row, _ = self.painter.pixels(x[i : i + 1])
+        i = _check.int_in_range("i", i, 0, len(x) - 1)
+        with np.errstate(over="ignore", invalid="ignore"):
+            col, row, _ = self.painter.pixels(x[i : i + 1])
+        if not (math.isfinite(col[0]) and math.isfinite(row[0])):
+            raise InvalidInputError(f"i: particle {i} at {x[i].tolist()} m is at no finite pixel of this camera")
         return int(math.floor(col[0])), int(math.floor(row[0]))
 
     # -------------------------------------------------------------- input
     def _key(self, event: Any) -> str:
+        """The key's character, or "" (ignored) for an event naming no key pygame knows."""
         pg = self.pygame
+        key = _int_attr(event, "key")
+        if key is None:
+            return ""
         special = {pg.K_ESCAPE: "esc", pg.K_SPACE: " ", pg.K_RIGHT: "."}
-        if event.key in special:
-            return special[event.key]
-        ch = getattr(event, "unicode", "") or ""
+        if key in special:
+            return special[key]
+        ch = getattr(event, "unicode", "")
+        ch = ch if isinstance(ch, str) else ""
         if not ch:
-            ch = pg.key.name(event.key)
-            if len(ch) == 1 and getattr(event, "mod", 0) & pg.KMOD_SHIFT:
+            try:
+                ch = pg.key.name(key)
+            except (OverflowError, ValueError, TypeError, pg.error):  # beyond SDL's key codes
+                return ""
+            if len(ch) == 1 and (_int_attr(event, "mod") or 0) & pg.KMOD_SHIFT:
                 ch = ch.upper()
         return ch
 
     def _on_key(self, ch: str) -> None:
         live = self.live
+        if not isinstance(ch, str):
+            return
         ch = {"+": "=", "_": "-"}.get(ch, ch)
         if ch in ("q", "esc"):
             self.quit = True
@@ -792,7 +828,7 @@ class Viewer:
         elif ch == "p":
             try:
                 self.screenshots.append(self.save_screenshot(self._next_name()))
-            except OSError as e:
+            except (OSError, PhyscoreError) as e:  # a full disk; no window (before run, after close)
                 print(f"screenshot not written: {e}", file=self.out)
         elif ch == "r":
             live.reset()
@@ -816,20 +852,43 @@ class Viewer:
                     print(f"{p.name}: {p.label} = {value:.4g} {p.unit}{extra}", file=self.out)
                     return
 
+    def _handle(self, event: Any) -> None:
+        """One event from the queue: quit, a key or the mouse; any other is ignored."""
+        pg = self.pygame
+        kind = getattr(event, "type", None)
+        if kind == pg.QUIT:
+            self.quit = True
+        elif kind == pg.KEYDOWN:
+            self._on_key(self._key(event))
+        elif kind in (pg.MOUSEBUTTONDOWN, pg.MOUSEMOTION, pg.MOUSEBUTTONUP):
+            self._on_mouse(event)
+
     def _on_mouse(self, event: Any) -> None:
         pg, live = self.pygame, self.live
-        if event.type == pg.MOUSEBUTTONDOWN and getattr(event, "button", 1) == 1:
+        kind, pos = getattr(event, "type", None), _pointer(event)
+        left = not hasattr(event, "button") or _int_attr(event, "button") == 1
+        w, h = self.painter.size
+        if kind == pg.MOUSEBUTTONDOWN and left:
+            if pos is None or not (0 <= pos[0] < w and 0 <= pos[1] < h):
+                return  # a press outside the window (or at no point) grabs nothing
             x, _, _, _ = live.drawn(self.alpha)
-            col, row, depth = self.painter.pixels(x)
             radius = max(8.0, 3.0 * self.painter.ras.radius + 2.0)
-            i = pick(col, row, event.pos, radius, ~live.pinned, depth)
+            with np.errstate(over="ignore", invalid="ignore"):  # a particle far off screen: no pixel
+                col, row, depth = self.painter.pixels(x)
+                i = pick(col, row, pos, radius, ~live.pinned, depth)
             if i is not None:
                 live.grab(i)
                 self.status = f"dragging particle {i}"
-        elif event.type == pg.MOUSEMOTION and live.grabbed is not None:
+        elif kind == pg.MOUSEMOTION and live.grabbed is not None and pos is not None:
+            # A held pointer may leave the window (SDL captures it), but not to 1e308: the
+            # particle follows it at most 10 window sizes beyond the edge.
+            pos = (min(max(pos[0], -10.0 * w), 11.0 * w), min(max(pos[1], -10.0 * h), 11.0 * h))
             through = live.x[live.grabbed]
-            live.move(screen_to_world(self.painter.cam, self.painter.origin, event.pos, through), self.clock.paused)
-        elif event.type == pg.MOUSEBUTTONUP and getattr(event, "button", 1) == 1 and live.grabbed is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                target = screen_to_world(self.painter.cam, self.painter.origin, pos, through)
+            if np.isfinite(target).all():
+                live.move(target, self.clock.paused)
+        elif kind == pg.MOUSEBUTTONUP and left and live.grabbed is not None:
             live.release()
             self.status = ""
 
@@ -871,7 +930,12 @@ class Viewer:
     def read_screen(self) -> np.ndarray:
         """(H, W, 3) uint8: the window's pixels, read back from the display surface."""
         pg = self.pygame
-        surface = pg.display.get_surface()
+        try:
+            surface = pg.display.get_surface()
+        except pg.error:
+            surface = None
+        if surface is None:
+            raise PhyscoreError("read_screen: the viewer's window is not open (before run() or after it closed)")
         w, h = surface.get_size()
         return np.frombuffer(pg.image.tobytes(surface, "RGB"), dtype=np.uint8).reshape(h, w, 3).copy()
 
@@ -902,17 +966,12 @@ class Viewer:
             due = self.clock.advance(now - last)
             last = now
             while pending and pending[0][0] <= self.draws:
-                _, item = pending.pop(0)
+                k, item = pending.pop(0)
                 made = item(self) if callable(item) else item
-                for event in [] if made is None else (made if isinstance(made, (list, tuple)) else [made]):
+                for event in _script_events(pg, k, made):
                     pg.event.post(event)
             for event in pg.event.get():
-                if event.type == pg.QUIT:
-                    self.quit = True
-                elif event.type == pg.KEYDOWN:
-                    self._on_key(self._key(event))
-                elif event.type in (pg.MOUSEBUTTONDOWN, pg.MOUSEMOTION, pg.MOUSEBUTTONUP):
-                    self._on_mouse(event)
+                self._handle(event)
             t0 = time.perf_counter()
             ran = 0
             while ran < due and not self.clock.paused:
@@ -941,6 +1000,16 @@ class Viewer:
         if screenshot is not None:
             self.screenshots.append(self.save_screenshot(screenshot))
         return ViewResult(self.live.scene, self.live.ticks, self.draws, wall, list(self.screenshots), image)
+
+
+def _script_events(pg: Any, k: int, made: Any) -> list[Any]:
+    """The events of a script item (an event, a list of them, or None); InvalidTypeError naming
+    ``script`` for anything else, which pygame's queue would refuse with a bare TypeError."""
+    events = [] if made is None else list(made) if isinstance(made, (list, tuple)) else [made]
+    for e in events:
+        if not isinstance(e, pg.event.EventType):
+            raise InvalidTypeError(f"script: the item for frame {k} gave {type(e).__name__} {e!r:.40}, expected a pygame event, a list of them or None")
+    return events
 
 
 def _settings(scene: Any, size: Any, view_angles: Any) -> dict[str, Any]:
@@ -1009,8 +1078,10 @@ def view(
     script : sequence of (int, item)
         Input for scripted runs and tests: before drawn frame ``k`` each item given with ``k``
         is posted to pygame's event queue, and so goes through the same handling as the user's
-        input. An item is a ``pygame.event.Event``, or a callable taking the :class:`Viewer`
-        and returning an event, a list of them or None (it may also just look).
+        input. An item is a ``pygame.event.Event`` (or a list of them), or a callable taking
+        the :class:`Viewer` and returning an event, a list of them or None (it may also just
+        look); anything else is an InvalidTypeError naming ``script``. Events the viewer cannot
+        use (unknown keys, a pointer at no finite point, resizes) are ignored.
     preview : float, default 1.0
         Wall seconds to spend at the start simulating a copy of the scene, to fit the camera and
         the colour scale to its motion (0: to the start state alone).
@@ -1029,7 +1100,8 @@ def view(
     ImportError
         pygame-ce is not installed (the message says ``pip install "physcore[view]"``).
     InvalidTypeError, InvalidInputError
-        A bad argument, naming it, or a scene without particles; before any window opens.
+        A bad argument, naming it, or a scene without particles; before any window opens (a
+        script callable's bad return: when it runs).
     pygame.error
         No display to open a window on (set DISPLAY, or run under ``xvfb-run``).
     """
@@ -1068,6 +1140,9 @@ def view(
             raise InvalidInputError(f"script: expected (frame, event or callable) pairs, got {item!r}")
     out = sys.stdout if out is None else out
     pg = _import_pygame()
+    for k, item in script:
+        if not callable(item):
+            _script_events(pg, k, item)
     pg.display.init()  # no display: pygame.error now, before the preview's simulation
     try:
         print(f"physcore view: {name}\n{keys_text()}", file=out)

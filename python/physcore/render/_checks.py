@@ -50,8 +50,12 @@ def _check_size(size: Any) -> tuple[int, int]:
         raise InvalidTypeError(f"size must be a pair of ints (width, height), got {_short(size)}")
     if count != 2:
         raise InvalidInputError(f"size must be a pair of ints (width, height), got {_short(size)}")
-    w = _check_int("size[0] (width)", size[0], 16)
-    h = _check_int("size[1] (height)", size[1], 16)
+    try:
+        w0, h0 = size[0], size[1]
+    except (TypeError, KeyError, IndexError):  # a set or a dict: two things, but no pair
+        raise InvalidTypeError(f"size must be a pair of ints (width, height), got {_short(size)}") from None
+    w = _check_int("size[0] (width)", w0, 16)
+    h = _check_int("size[1] (height)", h0, 16)
     if w > 65535 or h > 65535:
         raise InvalidInputError(f"size must be at most 65535 x 65535 (the GIF limit), got {_short(w)}x{_short(h)}")
     return w, h
@@ -101,7 +105,7 @@ def _check_cmap(cmap: Any) -> str | None:
 def _rgb_rows(value: Any, arg: str, count: int | None) -> np.ndarray:
     """(K, 3) uint8 from RGB rows (uint8 or ints 0–255, or floats in [0, 1]) or "#rrggbb"
     strings; `count`: K required (None: any)."""
-    arr = np.asarray(value)
+    arr = _check.array(arg, value)
     if arr.dtype.kind in "US":
         flat = arr.reshape(-1)
         rows = []
@@ -130,7 +134,7 @@ def _check_colors(colors: Any, n: int) -> np.ndarray | None:
     "#rrggbb" strings, or (n,) integer group labels (≥ 0) in :data:`GROUP_COLORS`."""
     if colors is None:
         return None
-    arr = np.asarray(colors) if not isinstance(colors, (str, bytes)) else None
+    arr = _check.array("colors", colors) if not isinstance(colors, (str, bytes)) else None
     if arr is None or arr.dtype == object:
         raise InvalidTypeError(f"colors must be an array of RGB rows, '#rrggbb' strings or group labels, got {type(colors).__name__}")
     if arr.ndim == 1 and arr.dtype.kind in "US":
@@ -155,7 +159,8 @@ def _check_background(background: Any) -> tuple[int, int, int] | None:
         return None
     if isinstance(background, (str, bytes)):
         background = [background]
-    row = _rgb_rows([background] if np.asarray(background).ndim == 1 and np.asarray(background).dtype.kind not in "US" else background, "background", 1)
+    a = _check.array("background", background)
+    row = _rgb_rows([background] if a.ndim == 1 and a.dtype.kind not in "US" else background, "background", 1)
     return (int(row[0, 0]), int(row[0, 1]), int(row[0, 2]))
 
 
@@ -308,10 +313,7 @@ def _extent_box(extent: Any, dim: int) -> np.ndarray | None:
     """The 2**dim corners (float64) of the box `extent` = (lower, upper), or None."""
     if extent is None:
         return None
-    try:
-        lo_hi = np.asarray(extent, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"extent: expected (lower, upper), two points of {dim} coordinates") from None
+    lo_hi = _check.real_array("extent", extent).astype(np.float64)
     if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
         raise InvalidInputError(
             f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, got shape {lo_hi.shape}"

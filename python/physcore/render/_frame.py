@@ -2,12 +2,12 @@
 camera fitted to that state."""
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from .._errors import InvalidInputError
+from .. import _check
+from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import _check_color_by, _check_radius, _check_size, _check_view, _extent_box
 from ._palette import _PALETTE
 from ._raster import _Rasteriser
@@ -102,10 +102,7 @@ def render_frame(
     elif springs is None or springs is True:
         sp = None
     else:
-        i, j, rest = springs
-        sp = (np.asarray(i, dtype=np.intp), np.asarray(j, dtype=np.intp), np.asarray(rest, dtype=np.float64))
-        if not (sp[0].shape == sp[1].shape == sp[2].shape and sp[0].ndim == 1):
-            raise InvalidInputError("springs: i, j and rest must be 1-D arrays of equal length")
+        sp = _springs(springs)
     if hasattr(positions, "positions"):
         scene = positions
         positions = scene.positions
@@ -118,7 +115,7 @@ def render_frame(
         if boundary is None:
             boundary = _scene_boundary(scene, dim)
 
-    x = np.asarray(positions, dtype=np.float64)
+    x = _check.real_array("positions", positions).astype(np.float64)
     if x.ndim != 2 or x.shape[1] not in (2, 3):
         raise InvalidInputError(f"positions must have shape (N, 2) or (N, 3), got {x.shape}")
     n, dim = x.shape
@@ -126,12 +123,12 @@ def render_frame(
         min(sp[0].min(), sp[1].min()) < 0 or max(sp[0].max(), sp[1].max()) >= n
     ):
         raise InvalidInputError(f"springs: particle index out of range for {n} particles")
-    pin = np.zeros(n, dtype=bool) if pinned is None else np.asarray(pinned, dtype=bool)
+    pin = np.zeros(n, dtype=bool) if pinned is None else _pinned(pinned)
     if pin.shape != (n,):
         raise InvalidInputError(f"pinned must have shape ({n},), got {pin.shape}")
     speeds = None
     if color_by == "speed" and velocities is not None:
-        v = np.asarray(velocities, dtype=np.float64)
+        v = _check.real_array("velocities", velocities).astype(np.float64)
         if v.shape != x.shape:
             raise InvalidInputError(f"velocities must have shape {x.shape}, got {v.shape}")
         speeds = _row_norms(v).astype(np.float32)[None]
@@ -139,23 +136,19 @@ def render_frame(
     if color_by == "pressure":
         if pressures is None:
             raise InvalidInputError("color_by='pressure' needs pressures= (or a scene with a pressure() method)")
-        p = np.asarray(pressures, dtype=np.float64)
+        p = _check.real_array("pressures", pressures).astype(np.float64)
         if p.shape != (n,):
             raise InvalidInputError(f"pressures must have shape ({n},), got {p.shape}")
         pres = p.astype(np.float32)[None]
     walls = None
     if boundary is not None:
         try:
-            walls = _boundary_array(boundary, dim)
-        except ValueError as e:
+            walls = _boundary_array(_check.real_array("boundary", boundary), dim)
+        except InvalidInputError as e:
             raise InvalidInputError(f"boundary: {e}") from None
-    for name, value in (("speed_scale", speed_scale), ("pressure_scale", pressure_scale)):
-        if value is not None:
-            v = float(value)
-            if not (v > 0 and math.isfinite(v)):
-                raise InvalidInputError(f"{name} must be a finite number > 0, got {value!r}")
-    speed_scale = None if speed_scale is None else float(speed_scale)
-    pressure_scale = None if pressure_scale is None else float(pressure_scale)
+    speed_scale = None if speed_scale is None else _check.positive_float("speed_scale", speed_scale, unit="m/s")
+    pressure_scale = None if pressure_scale is None else _check.positive_float("pressure_scale", pressure_scale, unit="Pa")
+    colorbar = _check.flag("colorbar", colorbar)
 
     box = _extent_box(extent, dim)  # the box's corners: every combination of lower/upper per axis
     if box is not None:
@@ -171,12 +164,58 @@ def render_frame(
         pairs=(sp[0], sp[1]) if sp is not None else None,
         strain=_strain(x, *sp).astype(np.float32)[None] if sp is not None else None,
         pinned=pin,
-        planes=_planes(planes, dim),
+        planes=_planes(_check_planes(planes), dim),
         pressures=pres,
         walls=None if walls is None else walls - origin,
     )
     ras = _Rasteriser(
         rec, size, color_by, radius, view, speed_scale=speed_scale, pressure_scale=pressure_scale,
-        colorbar=bool(colorbar), fit=None if box is None else box - origin,
+        colorbar=colorbar, fit=None if box is None else box - origin,
     )
     return _PALETTE[ras.frame(0)]
+
+
+def _springs(springs: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``springs=(i, j, rest)``: two int index arrays and the rest lengths (m), 1-D, one length."""
+    try:
+        count = -1 if isinstance(springs, (str, bytes)) else len(springs)
+    except TypeError:  # no len(), or a 0-d array
+        count = -1
+    if count != 3:
+        raise InvalidTypeError(f"springs: expected None, a bool or (i, j, rest), got {type(springs).__name__} {springs!r:.40}")
+    i, j, rest = (_check.real_array("springs", a) for a in springs)
+    for a in (i, j):
+        # An index must be a whole number well inside intp (a float index is allowed if whole).
+        f = a.astype(np.float64)
+        if f.size and not (np.all(np.isfinite(f)) and np.all(f == np.floor(f)) and np.all(np.abs(f) < 2.0**62)):
+            raise InvalidInputError("springs: i and j must be whole particle indices")
+    sp = (i.astype(np.intp), j.astype(np.intp), rest.astype(np.float64))
+    if not (sp[0].shape == sp[1].shape == sp[2].shape and sp[0].ndim == 1):
+        raise InvalidInputError("springs: i, j and rest must be 1-D arrays of equal length")
+    return sp
+
+
+def _check_planes(planes: Any) -> list:
+    """``planes``: a list of objects with ``.point`` and ``.normal`` of real numbers."""
+    if planes is None:
+        return []
+    try:
+        out = None if isinstance(planes, (str, bytes)) else list(planes)
+    except TypeError:  # not iterable, or a 0-d array
+        out = None
+    if out is None:
+        raise InvalidTypeError(f"planes: expected a list of planes (.point, .normal), got {type(planes).__name__}")
+    for k, pl in enumerate(out):
+        if not (hasattr(pl, "point") and hasattr(pl, "normal")):
+            raise InvalidTypeError(f"planes[{k}]: expected a plane (.point, .normal), got {type(pl).__name__}")
+        _check.real_array(f"planes[{k}].point", pl.point)
+        _check.real_array(f"planes[{k}].normal", pl.normal)
+    return out
+
+
+def _pinned(pinned: Any) -> np.ndarray:
+    """``pinned``: bools (or 0/1 numbers) as a bool array."""
+    a = _check.array("pinned", pinned)
+    if a.dtype.kind not in "biuf":
+        raise InvalidTypeError(f"pinned: expected bools, got dtype {a.dtype}")
+    return a.astype(bool)

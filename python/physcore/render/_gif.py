@@ -337,16 +337,14 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)
     size_by = d.get("size_by", "none") if size_by is None else size_by
-    if size_by not in ("none", "mass", "radius"):
-        raise InvalidInputError(f"size_by must be 'none', 'mass' or 'radius'; got {size_by!r}")
+    size_by = _check.choice("size_by", size_by, ("none", "mass", "radius"))
     title = d.get("title") if title is None else title
     if title is not None and not isinstance(title, str):
         raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")
     if title is not None and ("\n" in title or len(title) > 200):
         raise InvalidInputError(f"title must be one line of at most 200 characters, got {_short(title)}")
     theme = d.get("theme", "light") if theme is None else theme
-    if theme not in THEMES:
-        raise InvalidInputError(f"theme must be one of {', '.join(THEMES)}; got {_short(theme)}")
+    theme = _check.choice("theme", theme, THEMES)
     radius = _check_radius(d.get("radius") if radius is None else radius)
     view = _check_view(d.get("view") if view is None else view)
     colorbar = _check.flag("colorbar", colorbar)
@@ -434,7 +432,7 @@ def _check_halo(halo: Any, n: int) -> np.ndarray | None:
     """None, or an (n,) bool mask from a mask or particle indices (errors name `halo`)."""
     if halo is None:
         return None
-    arr = np.asarray(halo)
+    arr = _check.array("halo", halo)
     if arr.size == 0 and arr.ndim == 1:
         return None
     if arr.dtype == bool:
