@@ -409,3 +409,20 @@ def test_xpbd_rods_are_drawn_like_springs():
     ink = (row != img[0, 0]).any(axis=1)
     c = np.flatnonzero(ink)
     assert ink[c.min() : c.max() + 1].mean() > 0.95  # a continuous line from pivot to tip
+
+
+@pytest.mark.parametrize("substeps", [1, 10, 100])
+def test_a_compliant_constraint_damps_exactly_as_implicit_euler(substeps):
+    # The docstring's figure: XPBD's numerical damping of a mode ω = 1/√(α m) is implicit
+    # Euler's, amplitude decay γ = ln(1 + ω²h²)/(2h) per second (0.4975, 0.05, 0.005 at ω = 10).
+    alpha, a, dt = 1e-2, 0.01, 1e-2
+    s = pc.Scene(dim=2, integrator="xpbd", dt=dt, xpbd_substeps=substeps)
+    s.add_particles([[0.0, 0.0], [1.0 + a, 0.0]], [[0.0, 0.0], [0.0, 0.0]], masses=[1.0, 1.0], pinned=[True, False])
+    s.add(pc.XpbdConstraints(distance=[[0, 1]], distance_compliance=alpha, rest_length=[1.0]))
+    omega, h = 1.0 / np.sqrt(alpha), dt / substeps
+    n = int(round(20 * 2 * np.pi / omega / dt))  # 20 periods
+    s.step(n)
+    x, v = s.positions[1], s.velocities[1]
+    energy = 0.5 * v @ v + 0.5 / alpha * (np.linalg.norm(x) - 1.0) ** 2
+    gamma = -np.log(energy / (0.5 / alpha * a * a)) / (2 * n * dt)
+    assert gamma == pytest.approx(np.log1p((omega * h) ** 2) / (2 * h), rel=1e-3)
