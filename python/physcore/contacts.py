@@ -68,6 +68,13 @@ def _restitution(arg: str, e: Any) -> float:
     return x
 
 
+def _equal_periods(dim: int) -> float:
+    """The default ``tangential_ratio``: β/(1 + β) for the dimension's solid grain (β = ½, a disc,
+    in 2D; ⅖, a sphere, in 3D), which equalises the normal and tangential periods (see
+    :class:`Contacts`)."""
+    return 1.0 / 3.0 if dim == 2 else 2.0 / 7.0
+
+
 @dataclass(frozen=True, eq=False)
 class Contacts(Term, kind="contacts"):
     """Contacts between grains (DEM): spring–dashpot normal force, Coulomb friction with a
@@ -89,7 +96,22 @@ class Contacts(Term, kind="contacts"):
       which slips when the cap is reached, so a grain can rest on a slope and roll without
       slipping; ``k_t = tangential_ratio · k``;
     * torque ``τ = (r − δ/2) n × f_t`` on an angular velocity per grain, moment of inertia
-      ``I = inertia_factor · m r²``.
+      ``I = inertia_factor · m r²``;
+    * rolling resistance (``rolling_friction`` μ_r > 0): the elastic–plastic spring–dashpot,
+      model C of Ai, Chen, Rotter & Ooi (Powder Technol. 206 (2011) 269–282; chosen over
+      their constant-torque model A, which chatters about ω_r = 0 and cannot hold a grain at
+      rest). Relative rolling velocity ``ω_r = ω_i − ω_j`` less its twist about n (3D; for a
+      wall ``ω_j = 0``), rolling radius ``R* = r_i r_j/(r_i + r_j)`` (a wall: ``r_i``). A rolling
+      spring ``θ_r`` follows ``ω_r`` (``θ_r ← θ_r + ω_r dt``, turned with the contact like ξ)
+      with stiffness ``k_r = 2.25 k_c μ_r² R*²`` (their ``k_r`` after Iwashita & Oda 1998;
+      ``k_c`` = k, or ``(3/2)k√δ`` for Hertz); its torque ``−k_r θ_r`` is capped at the limiting
+      torque ``μ_r R* f_n`` (full mobilisation: the spring slips and the dashpot is off, their
+      ``f = 0``); below the cap a dashpot ``−η_r 2√(I_r k_r) ω_r`` acts, ``η_r`` =
+      ``rolling_damping``, ``I_r = 1/(1/(I_i + m_i r_i²) + 1/(I_j + m_j r_j²))``, and the sum is
+      again capped at ``μ_r R* f_n``. The torque acts on grain i and its opposite on j: momentum
+      and angular momentum are conserved. A grain rolling on a floor at v₀ then stops after
+      ``s = (1 + β) v₀² / (2 μ_r g)`` (its kinetic energy ``½(1 + β) m v²`` spent at the rate
+      ``μ_r r m g · v/r``), plus the spring's give, about ``m g /(2.25 k μ_r)``.
 
     The scene must use ``integrator="semi_implicit_euler"`` (the usual DEM scheme: forces at
     the step's start, then v, ω, x, then each spring with the new velocities) or ``"xpbd"``
@@ -100,9 +122,10 @@ class Contacts(Term, kind="contacts"):
     radius are fixed obstacles; particles of radius 0 do not collide.
 
     Energy books (:meth:`~physcore.Scene.energy`): the kinetic energy includes rotation; the
-    term's potential is the springs' energy (``½kδ²`` or ``⅖kδ^{5/2}``, plus ``½k_t|ξ|²``);
-    ``"<name> (normal damping)"`` and ``"<name> (friction)"`` are the energy the dashpots and
-    slipping have dissipated. :meth:`~physcore.Scene.angular_momentum` includes the spins
+    term's potential is the springs' energy (``½kδ²`` or ``⅖kδ^{5/2}``, plus ``½k_t|ξ|²`` and
+    ``½k_r|θ_r|²``); ``"<name> (normal damping)"`` and ``"<name> (friction)"`` are the energy the
+    dashpots and slipping (sliding and rolling) have dissipated.
+    :meth:`~physcore.Scene.angular_momentum` includes the spins
     ``Σ I ω``. :meth:`~physcore.Scene.particle_field` gives ``"angular_velocity"`` (2D, rad/s;
     ``"angular_velocity_x|y|z"`` in 3D), ``"angle"`` (2D, rad) and ``"coordination"`` (contacts
     per grain); :meth:`~physcore.Scene.contact_count` the contacts now.
@@ -119,15 +142,32 @@ class Contacts(Term, kind="contacts"):
     walls : Plane, Box or sequence of them, optional
         Walls, each with its own restitution and friction (a :class:`Box` is its faces). They
         use the same contact law with ``m* = m``.
-    tangential_ratio : float
-        ``k_t / k`` ≥ 0 (Hertz: over the normal contact stiffness ``(3/2)k√δ``). Default 2/7,
-        which gives spheres equal normal and tangential periods (Silbert et al., Phys. Rev. E 64
-        (2001) 051302).
+    tangential_ratio : float, optional
+        ``k_t / k`` > 0 (Hertz: over the normal contact stiffness ``(3/2)k√δ``). Default (None):
+        the ratio that gives the scene's solid grains equal normal and tangential periods, 1/3
+        for discs (2D) and 2/7 for spheres (3D; Silbert et al., Phys. Rev. E 64 (2001) 051302).
+        Derivation: a grain of mass m on a wall; the normal mode has ``ω_n² = k/m``; the
+        tangential spring stretches with the contact point, which moves by ``dx + a dθ``, and
+        ``m ẍ = f``, ``I θ̈ = a f`` give an effective mass ``1/m_t = 1/m + a²/I = (1 + 1/β)/m``
+        (a ≈ r, ``I = β m r²``), so ``ω_t² = k_t (1 + 1/β)/m``: equal when
+        ``k_t/k = β/(1 + β)``, 2/7 for β = 2/5 (sphere), 1/3 for β = 1/2 (disc). (The same holds
+        for a pair, both masses halved.) For another ``inertia_factor`` pass β/(1 + β) yourself.
+        0 is refused: to turn friction off, set ``friction=0``.
     law : {"linear", "hertz"}
         Normal force law. Default ``"linear"``. Hertz passes impulses through chains of touching
         balls (Newton's cradle) far better.
     inertia_factor : float, optional
         β in ``I = β m r²``: default ½ (a disc) in 2D, ⅖ (a solid sphere) in 3D.
+    rolling_friction : float
+        Coefficient of rolling friction μ_r ≥ 0 (dimensionless: the limiting rolling torque over
+        ``R* f_n``). Default 0: no rolling resistance, the contacts of physcore before it bit
+        for bit (at the same ``tangential_ratio``). Round grains have none; μ_r stands for their
+        shape and roughness and is calibrated per material: see ``docs/granular.md``, where
+        0.2–0.3 brings a 2D column's collapse into the experiments' band.
+    rolling_damping : float
+        η_r ≥ 0: the rolling dashpot over its critical value ``2√(I_r k_r)`` (Ai et al. 2011).
+        Default 0.3: under-damped, so a grain at rest stops rocking within a few periods of its
+        rolling spring. Used only when ``rolling_friction`` > 0.
     name : str
         Key of this term in the energy books. Default ``"contacts"``.
 
@@ -145,9 +185,11 @@ class Contacts(Term, kind="contacts"):
     restitution: float = 0.9
     friction: float = 0.5
     walls: Any = ()
-    tangential_ratio: float = 2.0 / 7.0
+    tangential_ratio: float | None = None
     law: str = "linear"
     inertia_factor: float | None = None
+    rolling_friction: float = 0.0
+    rolling_damping: float = 0.3
     name: str = field(default="contacts", kw_only=True)
     _dim: int = field(default=0, init=False, repr=False, compare=False)
 
@@ -158,6 +200,10 @@ class Contacts(Term, kind="contacts"):
         "tangential_ratio": "number",
         "law": "str",
         "inertia_factor": "optional_number",
+    }
+    record_fields_optional: ClassVar[dict[str, str]] = {
+        "rolling_friction": "number",
+        "rolling_damping": "number",
     }
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
         "wall_points": ("f8", ("W", "D")),
@@ -174,7 +220,16 @@ class Contacts(Term, kind="contacts"):
         object.__setattr__(self, "stiffness", k)
         object.__setattr__(self, "restitution", _restitution("restitution", self.restitution))
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
-        object.__setattr__(self, "tangential_ratio", _finite_float(self.tangential_ratio, "tangential_ratio", minimum=0.0))
+        if self.tangential_ratio is not None:
+            ratio = _finite_float(self.tangential_ratio, "tangential_ratio")
+            if not ratio > 0:
+                raise InvalidInputError(
+                    f"tangential_ratio: must be > 0, got {ratio} (a tangential spring of stiffness 0 holds nothing; "
+                    "to turn friction off, set friction=0)"
+                )
+            object.__setattr__(self, "tangential_ratio", ratio)
+        object.__setattr__(self, "rolling_friction", _finite_float(self.rolling_friction, "rolling_friction", minimum=0.0))
+        object.__setattr__(self, "rolling_damping", _finite_float(self.rolling_damping, "rolling_damping", minimum=0.0))
         if not isinstance(self.law, str):
             raise InvalidTypeError(f"law: expected one of {', '.join(_LAWS)}, got {type(self.law).__name__}")
         if self.law not in _LAWS:
@@ -208,18 +263,21 @@ class Contacts(Term, kind="contacts"):
             )
         if "radius" not in scene.attributes:
             raise InvalidInputError('radius: Contacts need the scene\'s "radius" attribute: scene.set_attribute("radius", r) first')
+        ratio = self.tangential_ratio if self.tangential_ratio is not None else _equal_periods(scene.dim)
         params: dict[str, Any] = {
             "stiffness": self.stiffness,
             "restitution": self.restitution,
             "friction": self.friction,
-            "tangential_ratio": self.tangential_ratio,
+            "tangential_ratio": ratio,
+            "rolling_friction": self.rolling_friction,
+            "rolling_damping": self.rolling_damping,
             "law": self.law,
             **{k: np.ascontiguousarray(v).reshape(-1) for k, v in self._wall_arrays(scene.dim).items()},
         }
         if self.inertia_factor is not None:
             params["inertia_factor"] = self.inertia_factor
         scene._sim.add_term("contacts", name, params)
-        stored = dataclasses.replace(self, name=name)
+        stored = dataclasses.replace(self, name=name, tangential_ratio=ratio)
         object.__setattr__(stored, "_dim", scene.dim)
         return stored
 
@@ -229,7 +287,7 @@ class Contacts(Term, kind="contacts"):
         return (*spin, "coordination")
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        meta = {f: getattr(self, f) for f in self.record_fields}
+        meta = {f: getattr(self, f) for f in (*self.record_fields, *self.record_fields_optional)}
         dim = self.walls[0].point.shape[0] if self.walls else self._dim
         return meta, self._wall_arrays(dim)  # the scene adds "history" (the spins and springs) from the core
 
@@ -240,5 +298,7 @@ class Contacts(Term, kind="contacts"):
             for p, n, e, mu in zip(arrays["wall_points"], arrays["wall_normals"], arrays["wall_restitution"], arrays["wall_friction"], strict=True)
         ]
         fields = {f: meta[f] for f in cls.record_fields}
+        # Files from before rolling resistance hold none: the old contacts, bit for bit.
+        fields.update({f: meta[f] for f in cls.record_fields_optional if f in meta})
         term = scene.add(cls(**fields, walls=walls, name=meta["name"]))
         scene._sim.set_term_history(term.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))

@@ -20,11 +20,24 @@
 //! - Tangential force: Cundall & Strack, Géotechnique 29 (1979) 47, a tangential spring ξ per
 //!   contact (zero when the contact forms, rotated into the current tangent plane each step)
 //!   with f_t = −k_t ξ − γ_t v_t, capped by Coulomb's law |f_t| ≤ μ f_n (the spring then slips to
-//!   the cap). k_t = ratio·k_n (2/7 by default: equal normal and tangential periods for spheres,
-//!   Silbert et al., Phys. Rev. E 64 (2001) 051302); for Hertz k_t = ratio·(3/2)k_n√δ, the
-//!   normal contact stiffness (Mindlin's no-slip tangential stiffness in the same ratio).
+//!   the cap). k_t = ratio·k_n, ratio > 0 (the facade's default β/(1 + β): equal normal and
+//!   tangential periods, 2/7 for spheres, Silbert et al., Phys. Rev. E 64 (2001) 051302, and 1/3
+//!   for discs); for Hertz k_t = ratio·(3/2)k_n√δ, the normal contact stiffness (Mindlin's
+//!   no-slip tangential stiffness in the same ratio).
 //! - Rolling: the tangential force turns each grain, τ_i = a_i n × f_t, on an angular velocity
 //!   per particle with moment of inertia I = β m r² (disc β = ½, sphere β = ⅖).
+//! - Rolling resistance (μ_r > 0 only; off, nothing of it runs and the bits are those without
+//!   it): Ai, Chen, Rotter & Ooi, Powder Technol. 206 (2011) 269, model C (their
+//!   elastic–plastic spring–dashpot; model A, a constant torque against ω_r, chatters about
+//!   ω_r = 0 and holds nothing at rest). Per contact a rolling spring θ_r (axial) follows the
+//!   relative rolling velocity ω_r = (ω_i − ω_j) less its twist about n (3D; ω_j = 0 for a
+//!   wall), committed like ξ; torque −k_r θ_r with k_r = 2.25 k_c μ_r² R*² (k_c the normal
+//!   contact stiffness, R* = r_i r_j/(r_i + r_j), r_i for a wall), capped at μ_r R* f_n, where
+//!   the spring slips and the dashpot is off (their f = 0); below it a dashpot
+//!   −η_r 2√(I_r k_r) ω_r with I_r = 1/(1/(I_i + m_i r_i²) + 1/(I_j + m_j r_j²)), the sum capped
+//!   at μ_r R* f_n again. +M on i and −M on j: a couple, so momentum and angular momentum stay
+//!   conserved. Its state sits beside the links (`Roll`), its pass after the pair and grain
+//!   passes (`roll_pass`), its books in "friction".
 //!
 //! Stepping: semi-implicit Euler over the whole state (the usual DEM scheme). The forces and
 //! torques are taken at the step's start from (x, v, ω, ξ); the integrator updates v then x;
@@ -53,7 +66,8 @@
 //! every level.
 //!
 //! Energy books: kinetic energy includes rotation (½Iω²); potential: the springs' energy,
-//! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|²; dissipated: "normal damping" and "friction". Each
+//! ½k_n δ² (Hertz ⅖k_n δ^{5/2}) + ½k_t|ξ|² (+ ½k_r|θ_r|²); dissipated: "normal damping" and
+//! "friction" (sliding and rolling). Each
 //! is booked per contact and step as the work its force drew from the motion, the mean of its
 //! power at the step's two ends (semi-implicit Euler changes the kinetic energy by exactly
 //! F·(v + v')/2 dt), less what its spring gained; so the dashpots, the clamp letting go of an
@@ -130,6 +144,25 @@ impl<V: Vector> Link<V> {
     }
 }
 
+/// A contact's rolling spring (Ai, Chen, Rotter & Ooi, Powder Technol. 206 (2011) 269, model C),
+/// seen from the first grain; kept beside the links, and only when μ_r > 0.
+#[derive(Clone, Copy, Debug)]
+struct Roll<V: Vector> {
+    /// Rolling spring θ_r (rad, axial): its torque on the first grain is −k_r θ_r. Committed
+    /// after a step, capped after an evaluation (as `Link::xi`).
+    theta: V::Axial,
+    /// The rolling torque on the first grain at the last evaluation (N·m), for the books.
+    m: V::Axial,
+    /// The book, as `Link::bt`: the energy the spring stores (J), after an evaluation plus
+    /// ½dt·(the power the torque draws from the relative rotation).
+    b: Real,
+    live: bool,
+}
+
+impl<V: Vector> Roll<V> {
+    const NONE: Self = Self { theta: V::AXIAL_ZERO, m: V::AXIAL_ZERO, b: 0.0, live: false };
+}
+
 /// What a pair's evaluation hands the gather: the force on the first grain (the second gets
 /// its negative) and the torques on both.
 #[derive(Clone, Copy, Debug)]
@@ -146,12 +179,15 @@ impl<V: Vector> PairForce<V> {
 /// A contact carried from one set of lists to the next (or loaded): first grain, partner (a
 /// grain > i, or a wall index if `wall`), spring and its energy.
 #[derive(Clone, Copy, Debug)]
-struct Carry<V> {
+struct Carry<V: Vector> {
     i: u32,
     j: u32,
     wall: bool,
     xi: V,
     u: Real,
+    /// The rolling spring and its energy (0 without rolling resistance).
+    theta: V::Axial,
+    ur: Real,
 }
 
 /// The candidate lists: pairs (i, pj[p]) for p in pstart[i]..pstart[i + 1], partners sorted;
@@ -171,6 +207,11 @@ struct Lists<V: Vector> {
     links: Vec<Link<V>>,
     wlinks: Vec<Link<V>>,
     forces: Vec<PairForce<V>>,
+    /// The rolling springs beside `links` and `wlinks`, and each pair's rolling torque on its
+    /// first grain (N·m; the second gets its negative); empty without rolling resistance.
+    roll: Vec<Roll<V>>,
+    wroll: Vec<Roll<V>>,
+    rt: Vec<V::Axial>,
     /// Positions and radii at the build.
     x: Vec<V>,
     r: Vec<Real>,
@@ -220,6 +261,10 @@ pub struct Material {
     pub inertia_factor: Real,
     /// γ_t / (2ζ√(k_n m*)): √ratio (linear), or √(1.5 ratio) to be times δ^{1/4} (Hertz).
     pub tangential_damping: Real,
+    /// Coefficient of rolling friction μ_r (dimensionless; 0: no rolling resistance).
+    pub rolling_friction: Real,
+    /// η_r: the rolling dashpot over its critical value 2√(I_r k_r) (dimensionless).
+    pub rolling_damping: Real,
 }
 
 /// How a pass treats the live contacts of the last step (or substep).
@@ -470,6 +515,105 @@ impl Material {
         l.bn = 0.5 * dt * o.wn0 + self.normal_energy(d);
         (o.force, o.ft)
     }
+
+    /// Rolling stiffness k_r = 2.25 k_c μ_r² R*² at overlap `d` for rolling radius `reff`
+    /// (Ai et al. 2011, model C, after Iwashita & Oda 1998), k_c the normal contact stiffness:
+    /// k_n (linear), (3/2)k_n√δ (Hertz).
+    #[inline(always)]
+    fn kr(&self, d: Real, reff: Real) -> Real {
+        let kc = match self.law {
+            Law::Linear => self.stiffness,
+            Law::Hertz => 1.5 * self.stiffness * d.sqrt(),
+        };
+        2.25 * kc * self.rolling_friction * self.rolling_friction * reff * reff
+    }
+
+    /// Evaluates a contact's rolling resistance (Ai et al. 2011, model C) at the step's start
+    /// into `rl`: normal `n`, overlap `d`, relative rolling velocity `wr` (rad/s, tangential),
+    /// normal force `fn_`, rolling radius `reff`, 1/I_r = `inv_ir`; returns the torque on the
+    /// first grain. The spring −k_r θ_r is capped at μ_r R* f_n (full mobilisation: it slips,
+    /// and the dashpot is off, Ai's f = 0); below the cap the dashpot −η_r·2√(I_r k_r) ω_r is
+    /// added, the sum again capped at μ_r R* f_n (so a contact never resists rolling with more
+    /// than the limiting torque).
+    #[allow(clippy::too_many_arguments)]
+    fn roll_evaluate<V: Vector>(
+        &self,
+        rl: &mut Roll<V>,
+        n: V,
+        d: Real,
+        wr: V::Axial,
+        fn_: Real,
+        reff: Real,
+        inv_ir: Real,
+        dt: Real,
+    ) -> V::Axial {
+        let kr = self.kr(d, reff);
+        let theta = tangent_spring::<V>(rl.theta, n);
+        let ms = theta * (-kr);
+        let cap = self.rolling_friction * reff * fn_;
+        let m2 = V::axial_length_squared(ms);
+        let (theta, m) = if m2 > cap * cap {
+            let k = cap / m2.sqrt();
+            (theta * k, ms * k)
+        } else {
+            let cr = 2.0 * self.rolling_damping * (kr / inv_ir).sqrt();
+            let m = ms + wr * (-cr);
+            let t2 = V::axial_length_squared(m);
+            (theta, if t2 > cap * cap { m * (cap / t2.sqrt()) } else { m })
+        };
+        rl.theta = theta;
+        rl.m = m;
+        rl.b -= 0.5 * dt * axial_dot::<V>(m, wr);
+        m
+    }
+
+    /// Commits a live rolling spring's step (of `dt`) at the step's end (overlap `d`, relative
+    /// rolling velocity `wr`): θ_r ← θ_r + dt·ω_r, and the books take what the torque drew
+    /// over the step (the mean of its power at the two ends) less what the spring now stores
+    /// more, into `s.lost_t`.
+    #[inline(always)]
+    fn roll_commit<V: Vector>(&self, rl: &mut Roll<V>, d: Real, reff: Real, wr: V::Axial, dt: Real, s: &mut Sums) {
+        rl.theta = rl.theta + wr * dt;
+        let u = 0.5 * self.kr(d.max(0.0), reff) * V::axial_length_squared(rl.theta);
+        s.lost_t += rl.b - 0.5 * dt * axial_dot::<V>(rl.m, wr) - u;
+        rl.b = u;
+    }
+}
+
+/// `a·b` for axial vectors.
+#[inline(always)]
+fn axial_dot<V: Vector>(a: V::Axial, b: V::Axial) -> Real {
+    let (a, b) = (axial_components::<V>(a), axial_components::<V>(b));
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The rolling part of a relative angular velocity `w` at a contact of normal `n`: `w` in 2D
+/// (about z, which is perpendicular to every normal in the plane), `w − (w·n)n` in 3D (the
+/// twist about the normal, which rolls nothing, removed).
+#[inline(always)]
+fn rolling_part<V: Vector>(w: V::Axial, n: V) -> V::Axial {
+    if V::AXIAL_DIM == 1 {
+        return w;
+    }
+    let c = axial_components::<V>(w);
+    let k = c[0] * n.comp(0) + c[1] * n.comp(1) + c[2] * n.comp(2);
+    V::axial_from_slice(&[c[0] - k * n.comp(0), c[1] - k * n.comp(1), c[2] - k * n.comp(2)])
+}
+
+/// A rolling spring turned into the tangent plane of normal `n`, keeping its length (3D; in 2D
+/// it is always there).
+#[inline(always)]
+fn tangent_spring<V: Vector>(theta: V::Axial, n: V) -> V::Axial {
+    if V::AXIAL_DIM == 1 {
+        return theta;
+    }
+    let p = rolling_part::<V>(theta, n);
+    let (l0, l1) = (V::axial_length_squared(theta), V::axial_length_squared(p));
+    if l1 > 0.0 && l1 != l0 {
+        p * (l0 / l1).sqrt()
+    } else {
+        p
+    }
 }
 
 /// The contact term (see the module docs).
@@ -542,9 +686,17 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     };
     let stiffness = positive("stiffness", p.number("stiffness")?)?;
     let tangential_ratio = p.number("tangential_ratio")?;
-    if tangential_ratio < 0.0 {
-        return Err(invalid("tangential_ratio", format!("{tangential_ratio} must be >= 0")));
+    if !(tangential_ratio > 0.0) {
+        return Err(invalid(
+            "tangential_ratio",
+            format!("{tangential_ratio} must be > 0 (a tangential spring of stiffness 0 holds nothing: to turn friction off, set friction=0)"),
+        ));
     }
+    // Absent: no rolling resistance (the facade always passes both).
+    let rolling_friction = if p.has("rolling_friction") { p.number("rolling_friction")? } else { 0.0 };
+    let rolling_friction = non_negative("rolling_friction", rolling_friction)?;
+    let rolling_damping = if p.has("rolling_damping") { p.number("rolling_damping")? } else { 0.0 };
+    let rolling_damping = non_negative("rolling_damping", rolling_damping)?;
     let restitution = restitution_arg("restitution", p.number("restitution")?)?;
     let friction = friction_arg("friction", p.number("friction")?)?;
     let default_beta = if V::DIM == 2 { 0.5 } else { 0.4 };
@@ -555,8 +707,18 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
         Law::Linear => tangential_ratio.sqrt(),
         Law::Hertz => (1.5 * tangential_ratio).sqrt(),
     };
-    let material =
-        Material { law, stiffness, tangential_ratio, restitution, zeta, friction, inertia_factor, tangential_damping };
+    let material = Material {
+        law,
+        stiffness,
+        tangential_ratio,
+        restitution,
+        zeta,
+        friction,
+        inertia_factor,
+        tangential_damping,
+        rolling_friction,
+        rolling_damping,
+    };
     let points: Vec<V> = p.take_vectors("wall_points")?;
     let normals: Vec<V> = p.take_vectors("wall_normals")?;
     let e = p.take_floats("wall_restitution")?;
@@ -594,6 +756,13 @@ fn restitution_arg(key: &str, e: Real) -> Result<Real> {
         ));
     }
     Ok(e)
+}
+
+fn non_negative(key: &str, v: Real) -> Result<Real> {
+    if !(v.is_finite() && v >= 0.0) {
+        return Err(invalid(key, format!("{v} must be finite and >= 0")));
+    }
+    Ok(v)
 }
 
 fn friction_arg(key: &str, mu: Real) -> Result<Real> {
@@ -739,7 +908,8 @@ impl<V: Vector> Contacts<V> {
         }
         let a = V::AXIAL_DIM;
         let head = 1 + n * (a + 1) + 2;
-        if h.len() < head || !(h.len() - head).is_multiple_of(3 + V::DIM) {
+        let width = self.record_width();
+        if h.len() < head || !(h.len() - head).is_multiple_of(width) {
             return Err(bad("has the wrong length"));
         }
         let omega: Vec<V::Axial> = (0..n).map(|i| V::axial_from_slice(&h[1 + i * a..1 + (i + 1) * a])).collect();
@@ -748,19 +918,26 @@ impl<V: Vector> Contacts<V> {
         let nw = self.walls.len();
         // (record, whether it was given from the higher index)
         let mut seed: Vec<(Carry<V>, bool)> = Vec::new();
-        for rec in h[head..].chunks_exact(3 + V::DIM) {
+        for rec in h[head..].chunks_exact(width) {
             let (i, j) = (rec[0], rec[1]);
             if i < 0.0 || i.fract() != 0.0 || i as usize >= n || j < 0.0 || j.fract() != 0.0 || j as usize >= n + nw {
                 return Err(bad("names a particle or wall that does not exist"));
             }
             let (i, j) = (i as usize, j as usize);
             let (xi, u) = (V::from_slice(&rec[2..2 + V::DIM]), rec[2 + V::DIM]);
+            let (theta, ur) = if width > 3 + V::DIM {
+                let at = 3 + V::DIM;
+                (V::axial_from_slice(&rec[at..at + a]), rec[at + a])
+            } else {
+                (V::AXIAL_ZERO, 0.0)
+            };
             if j >= n {
-                seed.push((Carry { i: i as u32, j: (j - n) as u32, wall: true, xi, u }, false));
+                seed.push((Carry { i: i as u32, j: (j - n) as u32, wall: true, xi, u, theta, ur }, false));
             } else if i < j {
-                seed.push((Carry { i: i as u32, j: j as u32, wall: false, xi, u }, false));
+                seed.push((Carry { i: i as u32, j: j as u32, wall: false, xi, u, theta, ur }, false));
             } else if i > j {
-                seed.push((Carry { i: j as u32, j: i as u32, wall: false, xi: -xi, u }, true));
+                let theta = theta * -1.0;
+                seed.push((Carry { i: j as u32, j: i as u32, wall: false, xi: -xi, u, theta, ur }, true));
             } else {
                 return Err(bad("has a self contact"));
             }
@@ -823,12 +1000,29 @@ impl<V: Vector> Contacts<V> {
         }
         let Some(l) = &self.lists else { return Vec::new() };
         let mut out = Vec::new();
+        let rolled = |rolls: &[Roll<V>], p: usize| {
+            rolls.get(p).filter(|r| r.live).map_or((V::AXIAL_ZERO, 0.0), |r| (r.theta, r.b))
+        };
         for i in 0..l.pstart.len().saturating_sub(1) {
-            let live = |j: u32, k: &Link<V>, wall: bool| Carry { i: i as u32, j, wall, xi: k.xi, u: k.bt };
+            let live = |j: u32, k: &Link<V>, wall: bool, (theta, ur): (V::Axial, Real)| Carry {
+                i: i as u32,
+                j,
+                wall,
+                xi: k.xi,
+                u: k.bt,
+                theta,
+                ur,
+            };
             let (a, b) = (l.pstart[i] as usize, l.pstart[i + 1] as usize);
-            out.extend((a..b).filter(|&p| l.links[p].live()).map(|p| live(l.pj[p], &l.links[p], false)));
+            out.extend(
+                (a..b).filter(|&p| l.links[p].live()).map(|p| live(l.pj[p], &l.links[p], false, rolled(&l.roll, p))),
+            );
             let (a, b) = (l.wstart[i] as usize, l.wstart[i + 1] as usize);
-            out.extend((a..b).filter(|&q| l.wlinks[q].live()).map(|q| live(l.wall[q], &l.wlinks[q], true)));
+            out.extend(
+                (a..b)
+                    .filter(|&q| l.wlinks[q].live())
+                    .map(|q| live(l.wall[q], &l.wlinks[q], true, rolled(&l.wroll, q))),
+            );
         }
         out
     }
@@ -888,6 +1082,7 @@ impl<V: Vector> Contacts<V> {
         }
         let (cells, walls) = (self.cells.as_ref().filter(|_| r_max > 0.0), &self.walls);
         let carry = &carry;
+        let rolling = self.material.rolling_friction > 0.0;
         let part = |c: usize| -> Part<V> {
             let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
             let lo = carry.partition_point(|k| (k.i as usize) < s0);
@@ -916,6 +1111,9 @@ impl<V: Vector> Contacts<V> {
                 let p0 = out.pj.len();
                 out.pj.extend_from_slice(&cand);
                 out.links.resize(out.pj.len(), Link::NONE);
+                if rolling {
+                    out.roll.resize(out.pj.len(), Roll::NONE);
+                }
                 out.pcount.push(cand.len() as u32);
                 let w0 = out.wall.len();
                 if ri > 0.0 {
@@ -926,16 +1124,24 @@ impl<V: Vector> Contacts<V> {
                     }
                 }
                 out.wlinks.resize(out.wall.len(), Link::NONE);
+                if rolling {
+                    out.wroll.resize(out.wall.len(), Roll::NONE);
+                }
                 out.wcount.push((out.wall.len() - w0) as u32);
                 while let Some(k) = carried.next_if(|k| k.i as usize == i) {
-                    let (ids, links, at) = if k.wall {
-                        (&out.wall[w0..], &mut out.wlinks, w0)
+                    let (ids, links, rolls, at) = if k.wall {
+                        (&out.wall[w0..], &mut out.wlinks, &mut out.wroll, w0)
                     } else {
-                        (&out.pj[p0..], &mut out.links, p0)
+                        (&out.pj[p0..], &mut out.links, &mut out.roll, p0)
                     };
                     match ids.binary_search(&k.j) {
-                        Ok(q) => links[at + q] = Link::carried(k.xi, k.u),
-                        Err(_) => out.dropped += k.u,
+                        Ok(q) => {
+                            links[at + q] = Link::carried(k.xi, k.u);
+                            if rolling {
+                                rolls[at + q] = Roll { theta: k.theta, m: V::AXIAL_ZERO, b: k.ur, live: true };
+                            }
+                        }
+                        Err(_) => out.dropped += k.u + k.ur,
                     }
                 }
             }
@@ -952,6 +1158,8 @@ impl<V: Vector> Contacts<V> {
         }
         l.links.clear();
         l.wlinks.clear();
+        l.roll.clear();
+        l.wroll.clear();
         l.pstart.push(0);
         l.wstart.push(0);
         let mut dropped = 0.0;
@@ -966,6 +1174,8 @@ impl<V: Vector> Contacts<V> {
             l.links.extend_from_slice(&p.links);
             l.wall.extend_from_slice(&p.wall);
             l.wlinks.extend_from_slice(&p.wlinks);
+            l.roll.extend_from_slice(&p.roll);
+            l.wroll.extend_from_slice(&p.wroll);
             dropped += p.dropped;
         }
         for i in 0..n {
@@ -991,6 +1201,10 @@ impl<V: Vector> Contacts<V> {
         l.fill = fill;
         l.forces.clear();
         l.forces.resize(l.pj.len(), PairForce::ZERO);
+        l.rt.clear();
+        if rolling {
+            l.rt.resize(l.pj.len(), V::AXIAL_ZERO);
+        }
         l.x.clear();
         l.x.extend_from_slice(x);
         l.r.clear();
@@ -1241,6 +1455,142 @@ impl<V: Vector> Contacts<V> {
         parts.into_iter().fold(Sums::default(), Sums::add)
     }
 
+    /// Entries per live contact in `history`: first grain, partner, ξ, its energy, and with
+    /// rolling resistance θ_r and its energy.
+    fn record_width(&self) -> usize {
+        3 + V::DIM + if self.material.rolling_friction > 0.0 { V::AXIAL_DIM + 1 } else { 0 }
+    }
+
+    /// The rolling resistance pass (only with μ_r > 0), after the pair and grain passes: commits
+    /// the last step's live rolling springs if `commit` (its dt) is set, then, if `eval`,
+    /// evaluates each touching contact's rolling torque (the pair and grain passes have set
+    /// its normal force) and adds it to the grains' torques, each grain gathering in the fixed
+    /// order of `grain_pass`. A contact's relative rolling velocity is the tangential part of
+    /// ω_i − ω_j (Ai et al. 2011; ω_j = 0 for a wall), its rolling radius
+    /// R* = r_i r_j/(r_i + r_j) (r_i for a wall), and I_r = 1/(1/(I_i + m_i r_i²) +
+    /// 1/(I_j + m_j r_j²)) the moment of inertia of its dashpot (a pinned grain or a wall: ∞).
+    fn roll_pass(&mut self, x: &[V], model: &Model, r: &[Real], commit: Option<Real>, eval: bool) -> Sums {
+        let n = x.len();
+        let Some(l) = self.lists.as_mut() else { return Sums::default() };
+        let (mat, omega, walls, dt) = (&self.material, &self.omega, &self.walls, self.dt);
+        let Lists { pj, pstart, rstart, rpair, wall, wstart, links, wlinks, roll, wroll, rt, .. } = l;
+        let (pj, pstart, rstart, rpair, wall, wstart, links, wlinks) =
+            (&*pj, &*pstart, &*rstart, &*rpair, &*wall, &*wstart, &*links, &*wlinks);
+        let im = &model.inv_mass;
+        let spin_in = 1.0 / (mat.inertia_factor + 1.0);
+        // 1/(I + m r²) of grain i (0: pinned).
+        let inv_ic = |i: usize| im[i] * spin_in / (r[i] * r[i]);
+        // The pairs: their springs and torques.
+        let pairs = |c: usize, rolls: &mut [Roll<V>], rts: &mut [V::Axial]| -> Sums {
+            let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let base = pstart[s0] as usize;
+            let mut sums = Sums::default();
+            for i in s0..s1 {
+                for p in pstart[i] as usize..pstart[i + 1] as usize {
+                    let (lk, rl, rtp) = (&links[p], &mut rolls[p - base], &mut rts[p - base]);
+                    let on = eval && lk.live();
+                    if !(rl.live || on) {
+                        continue;
+                    }
+                    let j = pj[p] as usize;
+                    let dx = x[j] - x[i];
+                    let d2 = dx.length_squared();
+                    let nrm = if d2 > 0.0 { dx * (1.0 / d2.sqrt()) } else { dx };
+                    let d = r[i] + r[j] - d2.sqrt();
+                    let reff = r[i] * r[j] / (r[i] + r[j]);
+                    let wr = rolling_part::<V>(omega[i] + omega[j] * -1.0, nrm);
+                    if let (Some(h), true) = (commit, rl.live) {
+                        mat.roll_commit(rl, d, reff, wr, h, &mut sums);
+                    }
+                    if on {
+                        if !rl.live {
+                            *rl = Roll { live: true, ..Roll::NONE };
+                        }
+                        let inv_ir = inv_ic(i) + inv_ic(j);
+                        *rtp = mat.roll_evaluate(rl, nrm, d, wr, lk.fn_, reff, inv_ir, dt);
+                    } else if eval {
+                        sums.broken += rl.b;
+                        *rl = Roll::NONE;
+                        *rtp = V::AXIAL_ZERO;
+                    }
+                }
+            }
+            sums
+        };
+        let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| pstart[(c * CHUNK).min(n)] as usize).collect();
+        let parts: Vec<Sums> = match par::fork_if(n, || {
+            let (a, b) = (split_at(roll, &bounds), split_at(rt, &bounds));
+            a.into_par_iter().zip(b).enumerate().map(|(c, (a, b))| pairs(c, a, b)).collect()
+        }) {
+            Some(p) => p,
+            None => {
+                let (a, b) = (split_at(roll, &bounds), split_at(rt, &bounds));
+                a.into_iter().zip(b).enumerate().map(|(c, (a, b))| pairs(c, a, b)).collect()
+            }
+        };
+        let mut sums = parts.into_iter().fold(Sums::default(), Sums::add);
+        // The grains: their walls' springs, and each grain's rolling torques gathered.
+        let rt = &*rt;
+        let grains = |c: usize, tq: &mut [V::Axial], wr_: &mut [Roll<V>]| -> Sums {
+            let s0 = c * CHUNK;
+            let base = wstart[s0] as usize;
+            let mut sums = Sums::default();
+            for k in 0..tq.len() {
+                let i = s0 + k;
+                let mut t = V::AXIAL_ZERO;
+                if eval {
+                    for q in &rt[pstart[i] as usize..pstart[i + 1] as usize] {
+                        t = t + *q;
+                    }
+                    for &p in &rpair[rstart[i] as usize..rstart[i + 1] as usize] {
+                        t = t + rt[p as usize] * -1.0;
+                    }
+                }
+                for q in wstart[i] as usize..wstart[i + 1] as usize {
+                    let (lk, rl) = (&wlinks[q], &mut wr_[q - base]);
+                    let on = eval && lk.live();
+                    if !(rl.live || on) {
+                        continue;
+                    }
+                    let w = &walls[wall[q] as usize];
+                    let nrm = -w.normal;
+                    let d = r[i] - (x[i] - w.point).dot(w.normal);
+                    let wr = rolling_part::<V>(omega[i], nrm);
+                    if let (Some(h), true) = (commit, rl.live) {
+                        mat.roll_commit(rl, d, r[i], wr, h, &mut sums);
+                    }
+                    if on {
+                        if !rl.live {
+                            *rl = Roll { live: true, ..Roll::NONE };
+                        }
+                        t = t + mat.roll_evaluate(rl, nrm, d, wr, lk.fn_, r[i], inv_ic(i), dt);
+                    } else if eval {
+                        sums.broken += rl.b;
+                        *rl = Roll::NONE;
+                    }
+                }
+                if eval && im[i] != 0.0 && r[i] > 0.0 {
+                    tq[k] = tq[k] + t;
+                }
+            }
+            sums
+        };
+        let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| wstart[(c * CHUNK).min(n)] as usize).collect();
+        let torque = &mut self.torque;
+        let parts: Vec<Sums> = match par::fork_if(n, || {
+            let w = split_at(wroll, &bounds);
+            torque.par_chunks_mut(CHUNK).zip(w.into_par_iter()).enumerate().map(|(c, (t, w))| grains(c, t, w)).collect()
+        }) {
+            Some(p) => p,
+            None => {
+                let w = split_at(wroll, &bounds);
+                torque.chunks_mut(CHUNK).zip(w).enumerate().map(|(c, (t, w))| grains(c, t, w)).collect()
+            }
+        };
+        sums = sums.add(parts.into_iter().fold(Sums::default(), Sums::add));
+        sums
+    }
+
     /// Commits the last step's contacts now (the deferred part of `end_step`).
     fn settle_now(&mut self, x: &[V], v: &[V], model: &Model) {
         let Some(c) = self.take_pending() else { return };
@@ -1264,33 +1614,50 @@ impl<V: Vector> Contacts<V> {
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.resize(x.len(), V::ZERO);
         let s = self.pair_pass(x, v, model, r, Some(c), false);
-        let s = s.add(self.grain_pass(x, v, model, r, Some(c), &mut scratch, Write::Overwrite, false));
+        let mut s = s.add(self.grain_pass(x, v, model, r, Some(c), &mut scratch, Write::Overwrite, false));
         self.scratch = scratch;
+        if let (true, Some(h)) = (self.material.rolling_friction > 0.0, roll_step(c)) {
+            s = s.add(self.roll_pass(x, model, r, Some(h), false));
+        }
         self.dissipated[0] += s.lost_n;
         self.dissipated[1] += s.lost_t;
     }
 }
 
+/// The step a commit closes for the rolling springs: θ_r follows ω, which only `end_step`
+/// changes, so "xpbd" commits them once, after the projections (`Springs`), not at its
+/// predicted state (`Books`, before `end_step` turned the grains).
+fn roll_step(c: Commit) -> Option<Real> {
+    match c {
+        Commit::Full(dt) | Commit::Springs(dt) => Some(dt),
+        Commit::Books(_) => None,
+    }
+}
+
 /// What one chunk's rebuild makes (see `Contacts::rebuild`).
-struct Part<V> {
+struct Part<V: Vector> {
     pj: Vec<u32>,
     pcount: Vec<u32>,
     links: Vec<Link<V>>,
+    roll: Vec<Roll<V>>,
     wall: Vec<u32>,
     wcount: Vec<u32>,
     wlinks: Vec<Link<V>>,
+    wroll: Vec<Roll<V>>,
     dropped: Real,
 }
 
-impl<V> Default for Part<V> {
+impl<V: Vector> Default for Part<V> {
     fn default() -> Self {
         Self {
             pj: Vec::new(),
             pcount: Vec::new(),
             links: Vec::new(),
+            roll: Vec::new(),
             wall: Vec::new(),
             wcount: Vec::new(),
             wlinks: Vec::new(),
+            wroll: Vec::new(),
             dropped: 0.0,
         }
     }
@@ -1368,6 +1735,9 @@ impl<V: Vector> Term<V> for Contacts<V> {
         self.uniform = uniform_mass(model, r);
         let s = self.pair_pass(x, v, model, r, commit, true);
         let mut s = s.add(self.grain_pass(x, v, model, r, commit, f, write, true));
+        if self.material.rolling_friction > 0.0 {
+            s = s.add(self.roll_pass(x, model, r, commit.and_then(roll_step), true));
+        }
         s.broken += dropped;
         // In the order `settle_now` and the next evaluation would book them: the same bits
         // whether a call of steps ends here or not.
@@ -1423,8 +1793,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 }
             }
         }
-        // Tangential springs as committed.
-        Some(u + self.carry().iter().map(|k| k.u).sum::<Real>())
+        // Tangential (and rolling) springs as committed.
+        Some(u + self.carry().iter().map(|k| k.u + k.ur).sum::<Real>())
     }
 
     fn dissipative(&self) -> bool {
@@ -1453,9 +1823,14 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // 1/m*_t = 2/m + 2a²/I = (2/m)(1 + 1/β).
         let m_eff = 0.5 * m_min;
         let tangential = mat.tangential_ratio * (2.0 / m_min) * (1.0 + 1.0 / mat.inertia_factor);
+        // The rolling spring's mode, k_r/I_r, fastest against a wall: 2.25 μ_r² k_c/((1 + β) m).
+        let rolling = 2.25 * mat.rolling_friction * mat.rolling_friction / ((1.0 + mat.inertia_factor) * m_min);
         let duration = match mat.law {
             Law::Linear => {
-                let w2 = (mat.stiffness / m_eff).max(tangential * mat.stiffness);
+                let mut w2 = (mat.stiffness / m_eff).max(tangential * mat.stiffness);
+                if rolling > 0.0 {
+                    w2 = w2.max(rolling * mat.stiffness);
+                }
                 std::f64::consts::PI / w2.sqrt()
             }
             Law::Hertz => {
@@ -1465,7 +1840,10 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 let vr = (2.0 * v_max.sqrt()).max((2.0 * g * r_min).sqrt()).max(1e-12);
                 let t_impact = 3.21 * (m_eff / mat.stiffness).powf(0.4) * vr.powf(-0.2);
                 let k_deep = 1.5 * mat.stiffness * self.last.max_overlap.sqrt();
-                let w2 = k_deep / m_eff * (1.0 + mat.tangential_ratio * (1.0 + 1.0 / mat.inertia_factor));
+                let mut w2 = k_deep / m_eff * (1.0 + mat.tangential_ratio * (1.0 + 1.0 / mat.inertia_factor));
+                if rolling > 0.0 {
+                    w2 = w2.max(rolling * k_deep);
+                }
                 if w2 > 0.0 {
                     t_impact.min(std::f64::consts::PI / w2.sqrt())
                 } else {
@@ -1644,7 +2022,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
     }
 
     /// [n, ω (n·axial), angle (n), dissipated (2), then per live contact: first grain, partner
-    /// (a grain, or n + wall index), ξ (dim) seen from the first grain, spring energy].
+    /// (a grain, or n + wall index), ξ (dim) seen from the first grain, spring energy, and with
+    /// rolling resistance θ_r (axial) seen from the first grain and its energy].
     fn history(&self) -> Option<Vec<Real>> {
         let n = self.omega.len();
         let mut h = Vec::with_capacity(3 + n * (V::AXIAL_DIM + 1));
@@ -1659,6 +2038,10 @@ impl<V: Vector> Term<V> for Contacts<V> {
             h.push(if k.wall { (n + k.j as usize) as Real } else { k.j as Real });
             h.extend_from_slice(&V::flat(std::slice::from_ref(&k.xi))[..V::DIM]);
             h.push(k.u);
+            if self.material.rolling_friction > 0.0 {
+                push_axial::<V>(&mut h, k.theta);
+                h.push(k.ur);
+            }
         }
         Some(h)
     }
@@ -1864,6 +2247,8 @@ mod tests {
                     friction: 0.3,
                     inertia_factor: 0.5,
                     tangential_damping: if law == Law::Linear { ratio.sqrt() } else { (1.5 * ratio).sqrt() },
+                    rolling_friction: 0.0,
+                    rolling_damping: 0.0,
                 };
                 let mut normal = [0.0; 3];
                 normal[V::DIM - 1] = 1.0;
@@ -1907,6 +2292,52 @@ mod tests {
         lanes_match_the_loop::<glam::DVec3>();
     }
 
+    /// A disc rolling without slipping on a floor at v0 with rolling resistance μ_r (Ai et al.
+    /// model C) spends its kinetic energy ½(1 + β) m v² at the rate μ_r r m g · v/r: it stops
+    /// after (1 + β) v0²/(2 μ_r g), to the lever's δ/r (1e-3 here) and the spring's give; the
+    /// friction book takes its kinetic energy.
+    #[test]
+    fn a_disc_rolling_on_a_floor_stops_where_its_rolling_friction_says() {
+        let (m, r, k, mu_r, v0, g) = (0.01, 0.01, 1e4, 0.1, 0.5, 9.81);
+        let ratio: Real = 1.0 / 3.0;
+        let material = Material {
+            law: Law::Linear,
+            stiffness: k,
+            tangential_ratio: ratio,
+            restitution: 0.5,
+            zeta: damping_ratio(Law::Linear, 0.5),
+            friction: 0.5,
+            inertia_factor: 0.5,
+            tangential_damping: ratio.sqrt(),
+            rolling_friction: mu_r,
+            rolling_damping: 0.3,
+        };
+        let floor = Wall {
+            point: glam::DVec2::ZERO,
+            normal: glam::DVec2::Y,
+            zeta: damping_ratio(Law::Linear, 0.5),
+            friction: 0.5,
+        };
+        let d0 = m * g / k;
+        let mut x = vec![glam::DVec2::new(0.0, r - d0)];
+        let mut v = vec![glam::DVec2::new(v0, 0.0)];
+        let mut attributes = std::collections::BTreeMap::new();
+        attributes.insert("radius", vec![r]);
+        let model = Model { mass: vec![m], inv_mass: vec![1.0 / m], attributes };
+        let mut c = Contacts::new("c".into(), material, vec![floor]);
+        c.fit(1);
+        c.omega[0] = -v0 / (r - 0.5 * d0);
+        let ke0 = 0.5 * m * v0 * v0 + 0.5 * 0.5 * m * r * r * c.omega[0] * c.omega[0];
+        let dt = std::f64::consts::PI * (m / k).sqrt() / STEPS_PER_CONTACT;
+        let out = run(&mut c, &mut x, &mut v, &model, dt, (1.2 / dt) as usize);
+        assert!(out.iter().all(|a| a.is_finite()));
+        let want = 1.5 * v0 * v0 / (2.0 * mu_r * g);
+        assert!((x[0].x - want).abs() < 2e-3 * want, "stopped at {} m, want {want} m", x[0].x);
+        assert!(v[0].length() < 1e-3 * v0 && c.omega[0].abs() * r < 1e-3 * v0);
+        // What it lost is booked as friction (less what the springs at rest still store).
+        assert!((c.dissipated[1] - ke0).abs() < 1e-6 * ke0, "friction book {} J, kinetic {ke0} J", c.dissipated[1]);
+    }
+
     #[test]
     fn axial_components_round_trip() {
         let mut b = Vec::new();
@@ -1932,6 +2363,8 @@ mod tests {
             friction: 0.3,
             inertia_factor: 0.5,
             tangential_damping: Real::sqrt(2.0 / 7.0),
+            rolling_friction: 0.0,
+            rolling_damping: 0.0,
         };
         let mut c = Contacts::<glam::DVec2>::new("grains".into(), material, Vec::new());
         let fresh = c.history().unwrap();
