@@ -708,7 +708,10 @@ class Scene:
         semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
         above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
         step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
-        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others. ``"rk45"`` controls its own internal
+        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others;
+        ``"xpbd"`` takes its compliant distance and pin constraints alike, ω_max·h = 10 per
+        substep ``h = dt/xpbd_substeps`` (XPBD damps them as implicit Euler would: see
+        :class:`XpbdConstraints`). ``"rk45"`` controls its own internal
         steps, so it takes one substep per call unless a CFL limit asks for more. With a DFSPH
         fluid (``Fluid(method="dfsph")``) the limit follows the flow's speed, not a sound speed,
         so it is taken anew before every substep: the substeps are then unequal (the last ends

@@ -490,13 +490,17 @@ impl<V: Vector> ParticleSystem<V> {
     /// (fastest time scale τ = 1/ω_max over the terms, smallest term step limit such as the
     /// SPH CFL), each infinite if no term has one. `implicit`: leave out the terms an implicit
     /// integrator takes implicitly (`Term::has_jacobian`), returning their τ apart, as a third.
+    /// Under "xpbd" the XPBD constraints are in that third too (projected like implicit Euler
+    /// steps a spring); under other integrators they are inert and set no time scale.
     fn time_scales_split(&self, implicit: bool) -> (Real, Real, Real) {
         let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
         let terms = &self.sys.forces.terms;
+        let xpbd = self.integrator.info().name == "xpbd";
         let scale = |implicitly: bool| {
             terms
                 .iter()
-                .filter(|t| (implicit && t.has_jacobian()) == implicitly)
+                .filter(|t| xpbd || !t.xpbd_constraints())
+                .filter(|t| ((implicit && t.has_jacobian()) || t.xpbd_constraints()) == implicitly)
                 .filter_map(|t| t.time_scale(x, m))
                 .fold(f64::INFINITY, f64::min)
         };
@@ -680,7 +684,9 @@ impl<V: Vector> System for ParticleSystem<V> {
     /// An implicit integrator ("implicit_euler") is unconditionally stable on the terms it takes
     /// implicitly (springs, drag), so their time scale τ_J sets its step through accuracy, not
     /// stability: dt = IMPLICIT_DT_FACTOR · 0.5 τ_J = 10/ω_max (see there), within 0.5 τ of the
-    /// terms it takes explicitly and every term's own limit.
+    /// terms it takes explicitly and every term's own limit. "xpbd" takes its compliant
+    /// constraints the same way, per substep (ω_max h = 10): without them a cloth's step was
+    /// set by its drag alone (50 s for `xpbd_cloth`, one substep per `advance` call).
     fn auto_dt(&self) -> Option<Real> {
         let implicit = self.integrator.implicit();
         let (ts, limit, ts_implicit) = self.time_scales_split(implicit);

@@ -650,6 +650,31 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
     fn xpbd_constraints(&self) -> bool {
         true
     }
+    /// 1/ω_max of the compliant distance and pin constraints, ω_max² ≤ max_p (2/m_p) Σ_{c ∋ p}
+    /// 1/α_c (Gershgorin, as for springs: compliance α is a spring of stiffness 1/α). Stiff
+    /// constraints (α = 0, no oscillation to resolve), bending, area, volume and shapes set
+    /// none. The "xpbd" integrator's `auto_dt` takes it as implicit Euler takes its springs
+    /// (ω_max h = 10 per substep): XPBD damps such a mode exactly as implicit Euler does.
+    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
+        let n = model.inv_mass.len();
+        // A query must not abort under a memory cap: no time scale is the safe answer.
+        let mut k: Vec<Real> = Vec::new();
+        k.try_reserve_exact(n).ok()?;
+        k.resize(n, 0.0);
+        for s in self.sets.iter().filter(|s| matches!(s.kind, Kind::Distance | Kind::Pin)) {
+            let a = s.kind.arity();
+            for (c, &alpha) in s.alpha.iter().enumerate() {
+                if alpha > 0.0 {
+                    for &p in &s.idx[c * a..(c + 1) * a] {
+                        k[p as usize] += 1.0 / alpha;
+                    }
+                }
+            }
+        }
+        let w2 = k.iter().zip(&model.inv_mass).map(|(k, im)| 2.0 * im * k).fold(0.0, Real::max);
+        let t = 1.0 / w2.sqrt();
+        (t.is_finite() && t > 0.0).then_some(t)
+    }
     fn xpbd_begin(&mut self) {
         for s in &mut self.sets {
             s.lambda.iter_mut().for_each(|l| *l = 0.0);
