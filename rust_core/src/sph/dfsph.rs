@@ -931,6 +931,24 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         &self.name
     }
 
+    /// (`crate::alloc`) The build grows its pair lists inside parallel kernels, where a refusal
+    /// cannot be reported; the world checks this much room is left once the step's checkpoint
+    /// is taken. After a build: what it held again (a list that must grow reallocates beside
+    /// the old one). Before the first: 64 neighbours a particle in 2D, 160 in 3D (a full
+    /// neighbourhood is about 21 and 74 at h = 1.3 Δx; the rest covers a longer h), and the
+    /// per-particle arrays.
+    fn transient_bytes(&self, _n: usize) -> u128 {
+        let held: u128 = self.pairs.iter().map(|p| p.bytes() as u128).sum();
+        if held > 0 {
+            return held;
+        }
+        let per_pair = Need::bytes_of::<u32>(1) + Need::bytes_of::<V>(1);
+        let neighbours: u128 = if V::DIM == 2 { 64 } else { 160 };
+        let n = self.n as u128;
+        n * neighbours * per_pair
+            + n * (Need::bytes_of::<Site<V>>(1) + Need::bytes_of::<V>(2) + Need::bytes_of::<Real>(4))
+    }
+
     /// The viscous forces at (x, v) (module doc); pressure is the projections'.
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let r = self.range();
@@ -1085,7 +1103,12 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         for xc in self.xc.iter_mut().take(V::DIM) {
             need.reserve(xc, n + PAD)?;
         }
-        self.grid.reserve(n, "step")
+        self.grid.reserve(n, "step")?;
+        // The step's checkpoint copies the state (fallibly) and then this term's history, which
+        // `Term::history` cannot refuse: check now that both still fit (3 reals and 3 vectors a
+        // particle), so that a refusal is an error here rather than an abort there.
+        let snapshot = Need::bytes_of::<Real>(3 * n) + Need::bytes_of::<V>(3 * n);
+        Need::new("step", snapshot, format!("a copy of the DFSPH state of {} particles", count(n as u128))).room(snapshot)
     }
 
     fn integrators(&self) -> Option<&'static [&'static str]> {
