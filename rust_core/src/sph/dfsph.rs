@@ -1108,7 +1108,8 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         // `Term::history` cannot refuse: check now that both still fit (3 reals and 3 vectors a
         // particle), so that a refusal is an error here rather than an abort there.
         let snapshot = Need::bytes_of::<Real>(3 * n) + Need::bytes_of::<V>(3 * n);
-        Need::new("step", snapshot, format!("a copy of the DFSPH state of {} particles", count(n as u128))).room(snapshot)
+        Need::new("step", snapshot, format!("a copy of the DFSPH state of {} particles", count(n as u128)))
+            .room(snapshot)
     }
 
     fn integrators(&self) -> Option<&'static [&'static str]> {
