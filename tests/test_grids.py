@@ -407,6 +407,37 @@ def test_cavity_centreline_matches_ghia_at_re_100():
     assert worst < 0.03, worst
 
 
+def _taylor_green_error(n: int, cfl: float, t_end: float = 1.0, nu: float = 0.05) -> float:
+    """Relative error of KE(t)/KE(0) against exp(−4νt) for the Taylor–Green vortex u = sin x
+    cos y, v = −cos x sin y (peak speed 1 m/s) in the free-slip box [0, π]², an exact
+    Navier–Stokes solution there, stepped as a user would: ``advance`` at ``cfl``."""
+    dx = math.pi / n
+    scene = pc.Scene(dim=2)
+    f = scene.add(pc.StableFluid((n, n), dx, viscosity=nu, cfl=cfl))
+    xf, xc = np.arange(n + 1) * dx, (np.arange(n) + 0.5) * dx
+    f.set_velocity(np.outer(np.sin(xf), np.cos(xc)), -np.outer(np.cos(xc), np.sin(xf)))
+    e0 = scene.energy().kinetic
+    scene.advance(t_end)
+    exact = math.exp(-4 * nu * t_end)
+    return (scene.energy().kinetic / e0 - exact) / exact
+
+
+def test_taylor_green_error_is_set_by_the_step_as_the_cfl_docstring_says():
+    """Issue 44 item 15: ``StableFluid(cfl=...)`` states what its default costs. Measured (t = 1):
+    64²: −2.07 % / −1.07 % / −0.53 % at cfl 1 / 0.5 / 0.25; 128² at cfl 1: −1.07 %; 256² at cfl 1:
+    −0.54 % (and −2.4 % by t = 10). The vortex decays too fast, first order in dt and
+    the same at the same dt on grids 2× apart: the step, not the grid, sets the error."""
+    e1, e05, e025 = (_taylor_green_error(64, c) for c in (1.0, 0.5, 0.25))
+    assert e1 < e05 < e025 < 0  # too fast, less so at smaller steps
+    for coarse, fine in ((e1, e05), (e05, e025)):
+        assert 1.8 < coarse / fine < 2.2, (coarse, fine)  # first order in dt
+    same_dt = _taylor_green_error(128, 1.0)  # dt = π/128: as 64² at cfl 0.5
+    assert abs(same_dt / e05 - 1) < 0.05, (same_dt, e05)
+    # The docstring's figure: at dt = π/256 (256² at the default cfl 1, or 64² at 0.25) the
+    # kinetic energy at t = 1 is 0.54 % low.
+    assert 0.0049 < -e025 < 0.0059, e025
+
+
 def test_fluid_set_velocity_sets_the_open_faces_and_a_step_projects_them():
     nx, ny = 12, 10
     obstacle = np.zeros((nx, ny), dtype=bool)
