@@ -419,6 +419,49 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
     return name, fn, kwargs
 
 
+def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """``physcore view``: the named scene live in a window (:func:`physcore.viewer.view`)."""
+    from . import render
+    from .viewer import _import_pygame, view
+
+    name, fn, kwargs = _scene_call(args, parser)
+    shot = None
+    if args.screenshot is not None:
+        try:
+            shot = render._check_path(args.screenshot, "png")
+        except (TypeError, ValueError) as e:
+            parser.error(f"--screenshot: {e}")
+        try:
+            render._check_writable(shot)
+        except OSError as e:
+            print(f"physcore view: error: cannot write {shot}: {e}", file=sys.stderr)
+            return 1
+    try:
+        pygame = _import_pygame()
+    except ImportError as e:
+        parser.error(str(e))
+    try:
+        scene = fn(**kwargs)
+    except (TypeError, ValueError, OverflowError) as e:
+        parser.error(f"scene {name!r}: {e}")
+    if int(scene.n_particles) == 0:
+        parser.error(f"scene {name!r} has no particles to drag; the live viewer shows particle scenes (try: physcore render {name})")
+    try:
+        result = view(scene, name=name, size=args.size, fps=args.fps, view=args.view, seconds=args.seconds,
+                      screenshot=shot)
+    except (TypeError, ValueError) as e:
+        parser.error(str(e))
+    except OSError as e:
+        print(f"physcore view: error: cannot write the screenshot: {e}", file=sys.stderr)
+        return 1
+    except pygame.error as e:
+        print(f"physcore view: error: cannot open a window ({e}); set DISPLAY, or run under xvfb-run", file=sys.stderr)
+        return 1
+    print(f"  ticks:          {result.ticks} ({result.draws} frames drawn in {result.wall:.1f} s)")
+    print(f"  simulated time: {result.scene.time:.4g} s")
+    return 0
+
+
 def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from . import render
     from ._errors import SimulationDiverged
@@ -736,8 +779,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "info":
             return _cmd_info()
         if args.command == "view":
-            from .viewer import _main as _cmd_view
-
             return _cmd_view(args, args.view_parser)
         return _cmd_render(args, render_parser)
     except SystemExit as e:  # argparse errors (2) and --help/--version (0)

@@ -103,25 +103,9 @@ pub fn count(n: u128) -> String {
     out
 }
 
-/// Bytes in decimal units, three significant digits: "800 MB", "1.92 GB".
-pub fn human(bytes: u64) -> String {
-    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut x = bytes as f64;
-    let mut u = 0;
-    while x >= 999.5 && u + 1 < units.len() {
-        x /= 1000.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} bytes")
-    } else if x >= 99.95 {
-        format!("{x:.0} {}", units[u])
-    } else if x >= 9.995 {
-        format!("{x:.1} {}", units[u])
-    } else {
-        format!("{x:.2} {}", units[u])
-    }
-}
+/// Bytes in decimal units (lives with the error that prints it, so that `error` needs nothing of
+/// this module).
+pub use crate::error::human;
 
 #[cfg(test)]
 mod tests {

@@ -32,7 +32,8 @@ _mesh           ``Mesh`` (triangles over the particles) and its shading; the cor
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
                 or RGB with a shaded mesh).
 _gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one, rasterise, write a
-                palette GIF, an MP4/WebM video (PyAV) or PNGs atomically, or yield RGB frames.
+                palette GIF, an MP4/WebM video (PyAV) or PNGs atomically, or yield RGB frames;
+                the notebook display (``Recording._repr_html_``: its GIF as a data URL).
 _frame          ``render_frame()``: one state to an RGB array.
 _sheet          ``contact_sheet()``: several scenes' GIFs tiled on one clock (sweep variants).
 
@@ -61,7 +62,7 @@ from ._checks import _check_path as _check_path
 from ._checks import _check_writable as _check_writable
 from ._colorbar import _colorbar_labels as _colorbar_labels
 from ._frame import render_frame
-from ._gif import FORMATS, frames, gif, save
+from ._gif import FORMATS, frames, gif, recording_html, save
 from ._mesh import Mesh
 from ._palette import _N_PRESSURE as _N_PRESSURE
 from ._palette import _N_SPEED as _N_SPEED
@@ -77,6 +78,9 @@ from ._recording import Recording, record
 from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
+
+# The notebook display lives with the GIF writer: _recording sits below _gif and cannot import it.
+Recording._repr_html_ = recording_html  # type: ignore[attr-defined]
 
 __all__ = ["record", "Recording", "Mesh", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
 

@@ -782,3 +782,17 @@ def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int],
         fh.write(b";")
 
     atomic_write(path, write)
+
+
+def recording_html(rec: _recording.Recording) -> str:
+    """Jupyter and IPython show a Recording inline: its GIF as :func:`gif` draws it with the
+    defaults, embedded as a data URL (``IPython.display.display(rec)``; it is also what a
+    notebook cell ending in a recording shows). It is ``Recording._repr_html_``, set by the
+    package (``render/__init__.py``): the display lives with the GIF writer, since the
+    recording's module sits below the writer and cannot import it."""
+    import base64
+
+    with tempfile.TemporaryDirectory(prefix="physcore-") as tmp:
+        data = gif(rec, os.path.join(tmp, "recording.gif")).read_bytes()
+    b64 = base64.b64encode(data).decode("ascii")
+    return f'<img src="data:image/gif;base64,{b64}" alt="physcore recording: {rec.frames} frames"/>'

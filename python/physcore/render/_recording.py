@@ -101,21 +101,6 @@ class Recording(NamedTuple):
     def frames(self) -> int:
         return int(self.positions.shape[0])
 
-    def _repr_html_(self) -> str:
-        """Jupyter and IPython show a Recording inline: its GIF as :func:`gif` draws it with
-        the defaults, embedded as a data URL (``IPython.display.display(rec)``; it is also what
-        a notebook cell ending in a recording shows)."""
-        import base64
-        import os
-        import tempfile
-
-        from ._gif import gif
-
-        with tempfile.TemporaryDirectory(prefix="physcore-") as tmp:
-            data = gif(self, os.path.join(tmp, "recording.gif")).read_bytes()
-        b64 = base64.b64encode(data).decode("ascii")
-        return f'<img src="data:image/gif;base64,{b64}" alt="physcore recording: {self.frames} frames"/>'
-
 
 class _FlowPoints:
     """A scene without particles whose flows' points (:class:`physcore.Flow`) are drawn as its
