@@ -47,7 +47,7 @@ This module imports nothing from the part modules or from ``scene.py``.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Protocol
@@ -98,8 +98,6 @@ class AttachContext:
     sim: Any
     #: The parts already in the scene, as stored, in the order added.
     parts: tuple[Part, ...]
-    #: The scene's time step now, s.
-    dt: float
     #: ``read_positions()``: the particles' positions now, (N, dim) (a copy; only some parts need it).
     read_positions: Callable[[], np.ndarray]
     #: ``read_attributes()``: the names of the per-particle attributes set so far.
@@ -222,8 +220,10 @@ def section_kinds(section: str) -> dict[str, type[Part]]:
 def part_class(item: object) -> type[Part] | None:
     """The registered class of ``item``, or None: it is not a part, or its class is not the one
     registered under its key (an unregistered subclass, which files could not name)."""
+    if not isinstance(item, Part):
+        return None
     cls = type(item)
-    if not (isinstance(item, Part) and cls.section and cls.part_kind):
+    if not (cls.section and cls.part_kind):
         return None
     return cls if PARTS.get(part_key(cls.section, cls.part_kind)) is cls else None
 
@@ -257,7 +257,3 @@ def check_system(ctx: AttachContext, item: Any, what: str) -> None:
     taken = ctx.names["grids"] | ctx.names["flows"] | ctx.names["terms"] | RESERVED_SYSTEM_NAMES
     if item.name in taken:
         raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the {what} another name")
-
-
-def by_section(parts: Iterator[Part] | tuple[Part, ...] | list[Part], section: str) -> list[Part]:
-    return [p for p in parts if p.section == section]

@@ -658,7 +658,9 @@ def _warn_separate_fluids(ctx: AttachContext, fluid: Fluid, name: str) -> None:
         warnings.warn(
             f"{name!r} does not interact with the scene's fluid(s) {shown} and will pass through them: {why}",
             SeparateFluidsWarning,
-            stacklevel=6,  # Scene.add's caller's caller, as before the part protocol (one frame more now)
+            # The frame it named before the part protocol (Scene.add's decorator): one more
+            # frame (Scene._add) lies between now.
+            stacklevel=6,
         )
 
 

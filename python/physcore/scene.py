@@ -418,6 +418,10 @@ class Scene:
         A term whose name is already taken gets ``_2``, ``_3``, ... appended. Returns the term as
         stored (for :class:`Springs` with ``rest_length=None``, with the rest lengths resolved).
 
+        Whatever is added is a *part* (``physcore/_parts.py``): its class is registered by its
+        kind and attaches itself through a small context, so this method has no case per kind,
+        and a new kind of part needs no change here.
+
         Raises
         ------
         TypeError
@@ -452,7 +456,6 @@ class Scene:
             n_particles=sim.n_particles,
             sim=sim,
             parts=tuple(self._parts),
-            dt=sim.dt,
             read_positions=lambda: self.positions,
             read_attributes=lambda: frozenset(self.attributes),
             add_particles=self.add_particles,
