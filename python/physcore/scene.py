@@ -1150,13 +1150,15 @@ class Scene:
             if f"attr_{a}" in z:
                 with r.api("", {a: f"attr_{a}"}):
                     scene.set_attribute(a, z[f"attr_{a}"])
-        # One loop over the sections, in the order written; each entry is read by its part class.
+        # One loop over the sections, in the order written; each entry is read by its part class,
+        # which adds it as Scene.add does (a MemoryError named as Scene.add names it).
+        add = allocating("add", "a copy of the item's arrays for the core")(scene._add)
         for section in SECTIONS:
             for k, entry in enumerate(meta[section]):
                 part = entry_class(section, entry)
                 prefix = f"{MEMBER_PREFIX[section]}{k}_"
                 own = {a[len(prefix):]: z[a] for a in z if a.startswith(prefix)}
-                ctx = LoadContext(dim=scene.dim, sim=scene._sim, index=k, field=f"meta.{section}[{k}]", add=scene._add, api=r.api)
+                ctx = LoadContext(dim=scene.dim, sim=scene._sim, index=k, field=f"meta.{section}[{k}]", add=add, api=r.api)
                 with r.api(*part._load_names(ctx, own)):
                     part._load(ctx, entry, own)
         with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
