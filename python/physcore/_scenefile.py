@@ -42,6 +42,7 @@ import numpy as np
 
 from . import _check, _core
 from ._errors import InvalidInputError, InvalidTypeError, SceneFileError
+from ._parts import section_kinds
 
 __all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
 
@@ -58,13 +59,18 @@ MAX_NPY_HEADER = 10_000
 STEP_LIMIT = 2**63
 _CHUNK = 1 << 20
 
-def _term_types() -> dict[str, type]:
-    """Every registered term type by its key: each describes its own record (``record_fields``,
-    ``record_arrays``; see :class:`physcore.terms.Term`)."""
-    from . import fluids  # noqa: F401 - registers Fluid
-    from .terms import REGISTRY
+def _term_types() -> dict[str, Any]:
+    """Every registered term type by its key (the parts of the ``"terms"`` section in
+    :data:`physcore._parts.PARTS`): each describes its own record (``record_fields``,
+    ``record_arrays``; see :class:`physcore.terms.Term`). The part modules register themselves
+    when imported, which ``physcore.scene`` (this module's only user) does."""
+    return section_kinds("terms")
 
-    return REGISTRY
+
+def _flow_kinds() -> dict[str, dict[str, Any]]:
+    """Every flow kind and its spec (dimension, parameters): the flow part's catalog."""
+    (flow,) = section_kinds("flows").values()
+    return flow.catalog  # type: ignore[attr-defined,no-any-return]
 
 
 # Fields of each collider, by kind of value (see _Reader.value).
@@ -354,8 +360,7 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         rec["record"] = _grid_record(r, f"{field}.record", rec["kind"], rec["record"], dim)
         grids.append(rec)
     meta["grids"] = grids
-    from .flows import FLOWS
-
+    FLOWS = _flow_kinds()
     flows = []
     for k, f in enumerate(meta["flows"]):
         field = f"meta.flows[{k}]"

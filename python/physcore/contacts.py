@@ -26,15 +26,13 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ._errors import InvalidInputError, InvalidTypeError
+from ._parts import AttachContext, LoadContext
 from .terms import Box, Plane, Term, _finite_float
-
-if TYPE_CHECKING:
-    from .scene import Scene
 
 __all__ = ["Contacts"]
 
@@ -255,15 +253,15 @@ class Contacts(Term, kind="contacts"):
             "wall_friction": np.array([w.friction for w in self.walls], dtype=np.float64),
         }
 
-    def _attach(self, scene: Scene, name: str) -> Contacts:
-        if scene.integrator not in ("semi_implicit_euler", "xpbd"):
+    def _attach(self, ctx: AttachContext, name: str) -> Contacts:
+        if ctx.integrator not in ("semi_implicit_euler", "xpbd"):
             raise InvalidInputError(
-                f"integrator: Contacts need integrator='semi_implicit_euler' or 'xpbd' (the scene uses {scene.integrator!r}); "
+                f"integrator: Contacts need integrator='semi_implicit_euler' or 'xpbd' (the scene uses {ctx.integrator!r}); "
                 "build the scene with pc.Scene(..., integrator='semi_implicit_euler') or set scene.integrator first"
             )
-        if "radius" not in scene.attributes:
+        if "radius" not in ctx.attributes:
             raise InvalidInputError('radius: Contacts need the scene\'s "radius" attribute: scene.set_attribute("radius", r) first')
-        ratio = self.tangential_ratio if self.tangential_ratio is not None else _equal_periods(scene.dim)
+        ratio = self.tangential_ratio if self.tangential_ratio is not None else _equal_periods(ctx.dim)
         params: dict[str, Any] = {
             "stiffness": self.stiffness,
             "restitution": self.restitution,
@@ -272,13 +270,13 @@ class Contacts(Term, kind="contacts"):
             "rolling_friction": self.rolling_friction,
             "rolling_damping": self.rolling_damping,
             "law": self.law,
-            **{k: np.ascontiguousarray(v).reshape(-1) for k, v in self._wall_arrays(scene.dim).items()},
+            **{k: np.ascontiguousarray(v).reshape(-1) for k, v in self._wall_arrays(ctx.dim).items()},
         }
         if self.inertia_factor is not None:
             params["inertia_factor"] = self.inertia_factor
-        scene._sim.add_term("contacts", name, params)
+        ctx.sim.add_term("contacts", name, params)
         stored = dataclasses.replace(self, name=name, tangential_ratio=ratio)
-        object.__setattr__(stored, "_dim", scene.dim)
+        object.__setattr__(stored, "_dim", ctx.dim)
         return stored
 
     def particle_fields(self, dim: int) -> tuple[str, ...]:
@@ -292,7 +290,7 @@ class Contacts(Term, kind="contacts"):
         return meta, self._wall_arrays(dim)  # the scene adds "history" (the spins and springs) from the core
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         walls = [
             Plane(p, n, float(e), float(mu))
             for p, n, e, mu in zip(arrays["wall_points"], arrays["wall_normals"], arrays["wall_restitution"], arrays["wall_friction"], strict=True)
@@ -300,5 +298,5 @@ class Contacts(Term, kind="contacts"):
         fields = {f: meta[f] for f in cls.record_fields}
         # Files from before rolling resistance hold none: the old contacts, bit for bit.
         fields.update({f: meta[f] for f in cls.record_fields_optional if f in meta})
-        term = scene.add(cls(**fields, walls=walls, name=meta["name"]))
-        scene._sim.set_term_history(term.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
+        term = ctx.add(cls(**fields, walls=walls, name=meta["name"]))
+        ctx.sim.set_term_history(term.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))

@@ -38,12 +38,13 @@ Examples
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-from . import _check
+from . import _check, _core
 from ._errors import InvalidInputError, InvalidTypeError, allocating
+from ._parts import AttachContext, Host, LoadContext, Part, check_system
 
 __all__ = ["Flow", "FLOWS", "lyapunov"]
 
@@ -65,7 +66,7 @@ FLOWS: dict[str, dict[str, Any]] = {
 _METHODS = ("euler", "heun", "rk4", "dopri5")
 
 
-class Flow:
+class Flow(Part):
     """Points advected by a first-order autonomous flow ``dx/dt = u(x)`` (see the module table).
 
     Parameters
@@ -105,6 +106,12 @@ class Flow:
         A parameter that is not a real number.
     """
 
+    section: ClassVar[str] = "flows"
+    part_kind: ClassVar[str] = "flow"
+    changes_energy: ClassVar[bool] = False  # a flow is not in the energy books
+    #: Every flow kind (:data:`FLOWS`), for the scene file reader.
+    catalog: ClassVar[dict[str, dict[str, Any]]] = FLOWS
+
     @allocating("Flow", "its starting points")
     def __init__(
         self,
@@ -137,7 +144,7 @@ class Flow:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
         self.name = name
         self.start = self._points(points, spread, seed)
-        self._scene: Any = None
+        self._host: Host | None = None
 
     def _points(self, points: Any, spread: float, seed: int | None) -> np.ndarray:
         if isinstance(points, (int, np.integer)) and not isinstance(points, bool):
@@ -176,15 +183,15 @@ class Flow:
         }
 
     # -- bound to a scene
-    def _bound(self) -> Any:
-        if self._scene is None:
+    def _bound(self) -> Host:
+        if self._host is None:
             raise InvalidInputError(f"Flow {self.name!r} is not in a scene yet: scene.add(it) first")
-        return self._scene
+        return self._host
 
     @allocating("field", "the flow's points by row")
     def _field(self, name: str) -> np.ndarray:
-        scene = self._bound()
-        (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, [name]))
+        host = self._bound()
+        (flat,) = host.exclusive(lambda sim: sim.system_fields(self.name, [name]))
         return np.asarray(flat).reshape(self.dim, -1).T.copy()
 
     @property
@@ -199,9 +206,9 @@ class Flow:
             raise InvalidInputError(f"points: expected shape {(self.n, self.dim)}, got {a.shape}")
         if not np.isfinite(a).all():
             raise InvalidInputError("points: must be finite")
-        scene = self._bound()
+        host = self._bound()
         flat = np.ascontiguousarray(a.T).reshape(-1)
-        scene._exclusive(lambda sim: sim.system_load(self.name, [("y", flat)]))
+        host.exclusive(lambda sim: sim.system_load(self.name, [("y", flat)]))
 
     @property
     def velocity(self) -> np.ndarray:
@@ -210,6 +217,35 @@ class Flow:
 
     def _record(self) -> dict[str, Any]:
         return {"kind": self.kind, "params": dict(self.params), "method": self.method, "max_dt": self.max_dt, "n": self.n}
+
+    # -- the part protocol
+    def _claim_name(self, ctx: AttachContext) -> str:
+        return self.name  # checked by _attach, after the dimension
+
+    def _attach(self, ctx: AttachContext, name: str) -> Flow:
+        """Joins the scene: one scene only, under a free name; returns the flow itself, bound."""
+        check_system(ctx, self, "flow")
+        ctx.sim.add_flow(self.kind, self.name, self._params())
+        self._host = ctx.host
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """``{"name", "record"}`` and the points now, ``y`` (the core's layout)."""
+        ((_, y),) = sim.system_save(self.name)
+        return {"name": self.name, "record": self._record()}, {"y": y}
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {"points": f"flow{ctx.index}_y"}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        rec = entry["record"]
+        points = arrays["y"].reshape(ctx.dim, -1).T
+        params = rec.get("params")
+        if not isinstance(params, dict):
+            raise InvalidInputError(f"params: expected an object, got {type(params).__name__}")
+        ctx.add(cls(rec["kind"], points, method=rec.get("method"), max_dt=rec.get("max_dt"), name=entry["name"], **params))
 
     def __repr__(self) -> str:
         return f"Flow({self.kind!r}, points={self.n}, name={self.name!r}, {', '.join(f'{k}={v:g}' for k, v in self.params.items())})"
@@ -267,8 +303,6 @@ def lyapunov(
     InvalidInputError
         Bad arguments (named); :class:`physcore.SimulationDiverged` if the flow blows up.
     """
-    from .scene import Scene
-
     if not isinstance(kind, str) or kind not in FLOWS:
         raise InvalidInputError(f"kind: unknown flow {kind!r}; valid names: {', '.join(FLOWS)}")
     spec = FLOWS[kind]
@@ -287,23 +321,23 @@ def lyapunov(
     dt = float(spec["max_dt"]) if dt is None else _finite("dt", dt)
     if not dt > 0:
         raise InvalidInputError(f"dt: must be > 0, got {dt}")
+    if not dt >= _check.MIN_NORMAL:  # as Scene(dt=...) refuses it
+        raise InvalidInputError(f"dt: must be finite and >= {_check.MIN_NORMAL:.3g} (seconds), got {dt}")
     x0 = _check.real_array("start", spec["start"] if start is None else start).astype(np.float64).reshape(-1)
     if x0.shape != (spec["dim"],) or not np.isfinite(x0).all():
         raise InvalidInputError(f"start: expected {spec['dim']} finite coordinates, got {start!r}")
-    scene = Scene(dim=spec["dim"], dt=dt, threads=1)
-    flow = scene.add(Flow(kind, x0[None, :], method=method, **params))
-    scene.step(max(0, round(transient / dt)))
+    sim, flow = _alone(Flow(kind, x0[None, :], method=method, **params), dt)
+    sim.step(max(0, round(transient / dt)))
     k = max(1, round(renormalize / dt))
     rounds = max(1, round(t / (k * dt)))
     direction = np.zeros(spec["dim"])
     direction[0] = 1.0
     p = flow.points[0]
     flow_pair = Flow(kind, np.stack([p, p + d0 * direction]), method=method, name="pair", **params)
-    scene = Scene(dim=spec["dim"], dt=dt, threads=1)
-    pair = scene.add(flow_pair)
+    sim, pair = _alone(flow_pair, dt)
     total = 0.0
     for _ in range(rounds):
-        scene.step(k)
+        sim.step(k)
         a, b = pair.points
         sep = b - a
         d = float(np.linalg.norm(sep))
@@ -312,3 +346,26 @@ def lyapunov(
         total += math.log(d / d0)
         pair.points = np.stack([a, a + sep * (d0 / d)])
     return total / (rounds * k * dt)
+
+
+class _Alone:
+    """The host of a flow stepped on its own clock (:func:`lyapunov`): the core alone, no scene."""
+
+    def __init__(self, sim: Any) -> None:
+        self.sim = sim
+
+    def exclusive(self, call: Any) -> Any:
+        return call(self.sim)
+
+    def energy_changed(self) -> None:
+        pass
+
+
+def _alone(flow: Flow, dt: float) -> tuple[Any, Flow]:
+    """A core Simulation (one thread, step ``dt``) holding only ``flow``, bound to it. A flow
+    needs no scene around it: this is what ``Scene(dim, dt=dt, threads=1).add(flow)`` sets up,
+    with no import of the scene module (flows.py is a part module, below it)."""
+    sim = _core.Simulation(flow.dim, "verlet", dt, 1)
+    sim.add_flow(flow.kind, flow.name, flow._params())
+    flow._host = _Alone(sim)
+    return sim, flow

@@ -37,18 +37,18 @@ kinetic energy each removes is booked as the fluid's dissipation (with the visco
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import warnings
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from . import _check, _core
-from ._errors import InvalidInputError, InvalidTypeError
-from .terms import Term, _finite_float
-
-if TYPE_CHECKING:
-    from .scene import Scene
+from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning
+from ._parts import AttachContext, LoadContext
+from .terms import Gravity, Term, _finite_float
 
 __all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
 
@@ -496,8 +496,8 @@ class Fluid(Term, kind="fluid"):
     record_optional: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {"history": ("f8", ("H",))}
     owns_particles: ClassVar[bool] = True
 
-    def _attach(self, scene: Scene, name: str) -> Fluid:
-        return scene._add_fluid(self, name)
+    def _attach(self, ctx: AttachContext, name: str) -> Fluid:
+        return _add_fluid(ctx, self, name, ctx.restoring.get("first"))
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         meta: dict[str, Any] = {"count": len(self), "first": self.first}
@@ -516,7 +516,7 @@ class Fluid(Term, kind="fluid"):
         return {"n": f"{ctx}.first"}
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         walls = arrays["walls"]
         fluid = cls(
             arrays["positions"],
@@ -542,12 +542,12 @@ class Fluid(Term, kind="fluid"):
             adhesion=meta.get("adhesion", 0.0),
             name=meta["name"],
         )
-        dt_saved = scene.dt  # the file's dt, which adding lowers to the fluid's CFL limit
-        added = scene._add_fluid(fluid, scene._unique_name(fluid.name), first=meta["first"])
-        scene._terms.append(added)
+        dt_saved = ctx.sim.dt  # the file's dt, which adding lowers to the fluid's CFL limit
+        # Its particles are in the scene already (the file's positions): the fluid is added over them.
+        added = ctx.add(fluid, first=meta["first"])
         if "history" in arrays:
-            scene._sim.set_term_history(added.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
-        scene._sim.dt = dt_saved
+            ctx.sim.set_term_history(added.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
+        ctx.sim.dt = dt_saved
 
     @property
     def dim(self) -> int:
@@ -598,3 +598,160 @@ class Fluid(Term, kind="fluid"):
                 limit = min(limit, 0.25 * math.sqrt(self.density * self.h**3 / (2.0 * math.pi * s)))
             return limit
         return 0.25 * self.h / (self.sound_speed * (1.0 + 0.6 * self.viscosity))
+
+
+# ----------------------------------------------------------------------------- joining a scene
+#: Most fluids that share one neighbour search (the core's MAX_FLUIDS).
+_FLUIDS_PER_SEARCH = 8
+
+
+def _norm(v: np.typing.ArrayLike) -> float:
+    """Euclidean norm without overflow warnings: inf when it is beyond float64."""
+    try:
+        return math.hypot(*(float(c) for c in np.ravel(v)))
+    except OverflowError:
+        return math.inf
+
+
+def _max_row_norm(a: np.ndarray) -> float:
+    """Largest row norm of a finite (N, d) array, scaled so that squaring cannot overflow."""
+    top = float(np.max(np.abs(a))) if a.size else 0.0
+    if top == 0.0:
+        return 0.0
+    return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
+
+
+def _check_fluid_method(ctx: AttachContext, fluid: Fluid) -> None:
+    """Refuse, before anything is added, a DFSPH fluid this scene cannot step: DFSPH runs
+    inside "semi_implicit_euler" steps, and one DFSPH fluid cannot push on another fluid
+    (it has no shared search), so it must be the scene's only fluid."""
+    others = [t for t in ctx.parts if isinstance(t, Fluid)]
+    if fluid.method == "dfsph":
+        if ctx.integrator != "semi_implicit_euler":
+            raise InvalidInputError(
+                f"method: DFSPH steps with integrator='semi_implicit_euler' only (this scene uses {ctx.integrator!r})"
+            )
+        if others:
+            raise InvalidInputError(
+                f"method: a DFSPH fluid must be the scene's only fluid (it would pass through {others[0].name!r})"
+            )
+    elif any(t.method == "dfsph" for t in others):
+        raise InvalidInputError("method: this scene has a DFSPH fluid, which must be its only fluid")
+
+
+def _warn_separate_fluids(ctx: AttachContext, fluid: Fluid, name: str) -> None:
+    """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
+    already in the scene. Fluids share one neighbour search, and so push on each other, when
+    they have the same ``h``, kernel and precision, up to 8 per search (the core's rule; a
+    9th starts a new search, which the next ones join)."""
+    fluids = [t for t in ctx.parts if isinstance(t, Fluid)]
+    alike = [f for f in fluids if (f.h, f.kernel, f.precision) == (fluid.h, fluid.kernel, fluid.precision)]
+    together = alike[len(alike) - len(alike) % _FLUIDS_PER_SEARCH :]
+    apart = [f.name for f in fluids if all(f is not g for g in together)]
+    if apart:
+        why = (
+            f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
+            if len(together) < len(alike)
+            else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and precision"
+        )
+        shown = ", ".join(repr(a) for a in apart[:5]) + (", ..." if len(apart) > 5 else "")
+        warnings.warn(
+            f"{name!r} does not interact with the scene's fluid(s) {shown} and will pass through them: {why}",
+            SeparateFluidsWarning,
+            # The frame it named before the part protocol (Scene.add's decorator): one more
+            # frame (Scene._add) lies between now.
+            stacklevel=6,
+        )
+
+
+def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = None) -> Fluid:
+    """Append the fluid's particles (unless ``first`` says they exist: a fluid loaded from a
+    file) and its SPH term; returns the fluid as stored."""
+    dim = ctx.dim
+    if fluid.dim != dim:
+        raise InvalidInputError(f"positions: the fluid is {fluid.dim}D, the scene is {dim}D")
+    c0 = fluid.sound_speed
+    if c0 is None:
+        g = sum((t.g for t in ctx.parts if isinstance(t, Gravity)), np.zeros(dim))
+        gn = _norm(g)
+        # Overflow (huge g, positions or velocities) gives inf here, refused below by name.
+        with np.errstate(over="ignore", invalid="ignore"):
+            height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
+            v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
+        vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
+        s = max(fluid.surface_tension, fluid.adhesion)
+        if s > 0:
+            # Surface tension moves a fluid at rest too: the capillary speed √(σ/(ρ0 h)).
+            with np.errstate(over="ignore"):
+                vmax = max(vmax, math.sqrt(s / (fluid.density * fluid.h)))
+        if not vmax > 0:
+            raise InvalidInputError(
+                "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
+                "positions spread along it; give sound_speed= (m/s)"
+            )
+        c0 = 10.0 * vmax
+        if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
+            surface = ", surface_tension, adhesion" if s > 0 else ""
+            raise InvalidInputError(
+                f"sound_speed{surface}: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions, "
+                f"the velocities{' and the capillary speed' if s > 0 else ''}, makes the Tait stiffness density · c0² "
+                "overflow float64; give sound_speed= (m/s)"
+            )
+    fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
+    walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
+    with np.errstate(over="ignore"):
+        psi = fluid.wall_psi()
+    if not np.all(np.isfinite(psi) & (psi > 0)):
+        raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
+    max_dt = fluid.max_dt()
+    # The scene's dt is lowered to this; a subnormal or zero step would never advance.
+    if not max_dt >= _check.MIN_NORMAL:
+        what = (
+            "step limit (viscous (d + 2) h/(4 α c0), capillary 0.25 √(ρ0 h³/(2π max(σ, adhesion))))"
+            if fluid.method == "dfsph"
+            else "CFL step 0.25 h / (c0 (1 + 0.6 α))"
+        )
+        args = "sound_speed, viscosity, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
+        raise InvalidInputError(f"{args}: the fluid's {what} = {max_dt:.3g} s is below float64's normal range")
+    m = fluid.particle_mass()
+    # Also for a fluid loaded from a file (`first` given): a file may pair DFSPH with another fluid.
+    _check_fluid_method(ctx, fluid)
+    if first is None:
+        _warn_separate_fluids(ctx, fluid, name)
+        n = len(fluid)
+        first = int(ctx.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else ctx.n_particles
+    common = {
+        "first": first,
+        "n": len(fluid),
+        "h": fluid.h,
+        "density": fluid.density,
+        "sound_speed": c0,
+        "viscosity": fluid.viscosity,
+        "kernel": fluid.kernel,
+        "walls": np.ascontiguousarray(walls, dtype=np.float64),
+        "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
+    }
+    if fluid.method == "dfsph":
+        ctx.sim.add_term(
+            "dfsph",
+            name,
+            common
+            | {
+                "density_error": fluid.density_error,
+                "divergence_error": fluid.divergence_error,
+                "max_iterations": int(fluid.max_iterations),
+                "cfl": fluid.cfl,
+                "surface_tension": fluid.surface_tension,
+                "adhesion": fluid.adhesion,
+            },
+        )
+    else:
+        ctx.sim.add_term(
+            "sph",
+            name,
+            common | {"gamma": int(fluid.gamma), "clamp_pressure": bool(fluid.clamp_pressure), "precision": fluid.precision},
+        )
+    fluid = dataclasses.replace(fluid, first=first)
+    # A step above the fluid's CFL limit would blow up on the first step.
+    ctx.lower_dt(max_dt)
+    return fluid

@@ -22,12 +22,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError, allocating
+from ._parts import AttachContext, Host, LoadContext, Part, check_system
 
 __all__ = ["Wave", "GrayScott", "StableFluid", "Drop", "Oscillator", "Source", "PRESETS", "Grid"]
 
@@ -143,10 +144,19 @@ class Oscillator:
     phase: float = 0.0
 
 
-class Grid:
-    """Base of the grid systems: geometry, the scene it joined, field access."""
+class Grid(Part):
+    """Base of the grid systems: geometry, the scene it joined, field access. A part of the
+    ``"grids"`` section of scene files (see :mod:`physcore._parts`), registered by its ``kind``;
+    a live handle: once added, its fields read the scene's state through the scene's
+    :class:`~physcore._parts.Host`."""
 
     kind = ""
+    section: ClassVar[str] = "grids"
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        if cls.__dict__.get("kind"):
+            cls.part_kind = cls.kind  # Part.__init_subclass__ registers it in physcore._parts.PARTS
+        super().__init_subclass__(**kwargs)
 
     def __init__(self, shape: Any, dx: float, edges: Any, name: str) -> None:
         self.shape = _shape(shape)
@@ -156,7 +166,7 @@ class Grid:
         if not isinstance(name, str) or not name:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
         self.name = name
-        self._scene: Any = None
+        self._host: Host | None = None
 
     # -- geometry
     @property
@@ -187,30 +197,30 @@ class Grid:
         return cells.astype(np.uint32), flat[cells]
 
     # -- bound to a scene
-    def _bound(self) -> Any:
-        if self._scene is None:
+    def _bound(self) -> Host:
+        if self._host is None:
             raise InvalidInputError(f"{type(self).__name__} {self.name!r} is not in a scene yet: scene.add(it) first")
-        return self._scene
+        return self._host
 
     @allocating("field", "a field of the grid")
     def field(self, name: str) -> np.ndarray:
         """The field ``name`` now, shape :attr:`shape`, float64 (a copy)."""
-        scene = self._bound()
-        (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, [name]))
+        host = self._bound()
+        (flat,) = host.exclusive(lambda sim: sim.system_fields(self.name, [name]))
         return _unlayout(flat, self.shape)
 
     def books(self) -> dict[str, float]:
         """Books that are not energies (amounts, what reactions made), by name."""
-        scene = self._bound()
-        return dict(scene._exclusive(lambda sim: sim.system_books(self.name)))
+        host = self._bound()
+        return dict(host.exclusive(lambda sim: sim.system_books(self.name)))
 
     def _set(self, name: str, values: Any) -> None:
         a = _check.real_array(name, values).astype(np.float64)
         if a.shape != self.shape:
             raise InvalidInputError(f"{name}: expected shape {self.shape} (the grid), got {a.shape}")
-        scene = self._bound()
-        scene._exclusive(lambda sim: sim.set_system_field(self.name, name, _layout(a)))
-        scene._e0 = None
+        host = self._bound()
+        host.exclusive(lambda sim: sim.set_system_field(self.name, name, _layout(a)))
+        host.energy_changed()
 
     def _params(self) -> dict[str, Any]:
         return {"shape": np.asarray(self.shape, dtype=np.float64), "dx": self.dx, "edges": ",".join(self.edges)}
@@ -228,6 +238,38 @@ class Grid:
             if src.region is not None:  # the region wins over a center given too (see _profiles)
                 out[f"region{k}"] = _layout(np.asarray(src.region, dtype=bool)).astype(bool)
         return out
+
+    # -- the part protocol
+    def _claim_name(self, ctx: AttachContext) -> str:
+        return self.name  # checked by _attach, after the dimension
+
+    def _attach(self, ctx: AttachContext, name: str) -> Grid:
+        """Joins the scene: one scene only, under a free name; returns the grid itself, bound."""
+        check_system(ctx, self, "grid")
+        ctx.sim.add_grid(self.kind, self.name, self._params())
+        self._host = ctx.host
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """``{"kind", "name", "record"}`` and the record's arrays, then the state the core saves."""
+        members = self._record_arrays()
+        for a, v in sim.system_save(self.name):
+            if not np.isfinite(v).all():
+                raise InvalidInputError(f"grid {self.name!r}: its {a} is not finite; a scene file holds finite values only")
+            members[a] = v
+        return {"kind": self.kind, "name": self.name, "record": self._record()}, members
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        kind = entry["kind"]
+        state = _GRID_ARRAYS[kind]
+        grid = ctx.add(_from_record(kind, entry["name"], entry["record"], {a: v for a, v in arrays.items() if a not in state}))
+        with ctx.api(f"grid{ctx.index}"):
+            ctx.sim.system_load(grid.name, [(a, v) for a, v in arrays.items() if a in state])
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r}, shape={self.shape}, dx={self.dx:g}, edges={self.edges})"
@@ -703,16 +745,16 @@ class StableFluid(Grid):
             if len(bad):
                 raise InvalidInputError(f"{name}: entry {tuple(int(k) for k in bad[0])} is not finite")
             checked.append((name, arr))
-        scene = self._bound()
+        host = self._bound()
         for name, arr in checked:
-            scene._exclusive(lambda sim, name=name, arr=arr: sim.set_system_field(self.name, name, _layout(arr)))
-        scene._e0 = None
+            host.exclusive(lambda sim, name=name, arr=arr: sim.set_system_field(self.name, name, _layout(arr)))
+        host.energy_changed()
 
     @property
     def tracers(self) -> np.ndarray:
         """Tracer positions, (T, 2) float64, m."""
-        scene = self._bound()
-        (flat,) = scene._exclusive(lambda sim: sim.system_fields(self.name, ["tracers"]))
+        host = self._bound()
+        (flat,) = host.exclusive(lambda sim: sim.system_fields(self.name, ["tracers"]))
         return np.asarray(flat).reshape(-1, 2)
 
     def _record(self) -> dict[str, Any]:

@@ -30,16 +30,14 @@ import copy
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar, Union
+from typing import Any, ClassVar, Union
 
 import numpy as np
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
+from ._parts import AttachContext, LoadContext
 from .terms import Term, _finite_float
-
-if TYPE_CHECKING:
-    from .scene import Scene
 
 __all__ = ["PointMasses", "PointCharges", "HarmonicTrap", "PotentialGrid"]
 
@@ -117,12 +115,12 @@ def _check_product(constant: float, strengths: np.ndarray, const_arg: str, str_a
         raise InvalidInputError(f"{str_arg}: source {s}: {strengths[s]} times {const_arg} = {constant} overflows float64")
 
 
-def _add_sources(scene: Scene, name: str, record: Term, strengths: np.ndarray, constant: float, coupling: str) -> Term:
+def _add_sources(ctx: AttachContext, name: str, record: Term, strengths: np.ndarray, constant: float, coupling: str) -> Term:
     x = record.positions  # type: ignore[attr-defined]
-    if x.shape[1] != scene.dim:
-        raise InvalidInputError(f"positions: has {x.shape[1]} columns, the scene is {scene.dim}D")
+    if x.shape[1] != ctx.dim:
+        raise InvalidInputError(f"positions: has {x.shape[1]} columns, the scene is {ctx.dim}D")
     params = {"positions": x, "strengths": strengths, "constant": constant, "softening": record.softening, "coupling": coupling}  # type: ignore[attr-defined]
-    scene._sim.add_term("point_sources", name, params)
+    ctx.sim.add_term("point_sources", name, params)
     return _named(record, name)
 
 
@@ -187,8 +185,8 @@ class PointMasses(Term, kind="point_masses"):
     def __len__(self) -> int:
         return int(self.positions.shape[0])
 
-    def _attach(self, scene: Scene, name: str) -> PointMasses:
-        return _add_sources(scene, name, self, self.masses, self.G, "mass")  # type: ignore[return-value,arg-type]
+    def _attach(self, ctx: AttachContext, name: str) -> PointMasses:
+        return _add_sources(ctx, name, self, self.masses, self.G, "mass")  # type: ignore[return-value,arg-type]
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,8 +255,8 @@ class PointCharges(Term, kind="point_charges"):
     def __len__(self) -> int:
         return int(self.positions.shape[0])
 
-    def _attach(self, scene: Scene, name: str) -> PointCharges:
-        return _add_sources(scene, name, self, self.charges, self.k, "charge")  # type: ignore[return-value,arg-type]
+    def _attach(self, ctx: AttachContext, name: str) -> PointCharges:
+        return _add_sources(ctx, name, self, self.charges, self.k, "charge")  # type: ignore[return-value,arg-type]
 
 
 @dataclass(frozen=True, eq=False)
@@ -303,10 +301,10 @@ class HarmonicTrap(Term, kind="harmonic_trap"):
         object.__setattr__(self, "k", k)
         object.__setattr__(self, "center", c)
 
-    def _attach(self, scene: Scene, name: str) -> HarmonicTrap:
-        k = _per_axis(self.k, scene.dim, "k")  # type: ignore[arg-type]
-        c = _per_axis(self.center, scene.dim, "center")  # type: ignore[arg-type]
-        scene._sim.add_term("harmonic_trap", name, {"k": k, "center": c})
+    def _attach(self, ctx: AttachContext, name: str) -> HarmonicTrap:
+        k = _per_axis(self.k, ctx.dim, "k")  # type: ignore[arg-type]
+        c = _per_axis(self.center, ctx.dim, "center")  # type: ignore[arg-type]
+        ctx.sim.add_term("harmonic_trap", name, {"k": k, "center": c})
         return dataclasses.replace(self, k=k, center=c, name=name)
 
 
@@ -431,9 +429,9 @@ class PotentialGrid(Term, kind="potential_grid"):
         """The far corner of the grid's box, ``origin + (shape - 1) * spacing``, m."""
         return self.origin + (np.array(self.shape) - 1) * self.spacing  # type: ignore[operator]
 
-    def _attach(self, scene: Scene, name: str) -> PotentialGrid:
-        if self.phi.ndim != scene.dim:
-            raise InvalidInputError(f"phi: a {self.phi.ndim}D grid (shape {self.shape}) cannot act in a {scene.dim}D scene")
+    def _attach(self, ctx: AttachContext, name: str) -> PotentialGrid:
+        if self.phi.ndim != ctx.dim:
+            raise InvalidInputError(f"phi: a {self.phi.ndim}D grid (shape {self.shape}) cannot act in a {ctx.dim}D scene")
         params = {
             "phi": self.phi,
             "shape": np.array(self.shape, dtype=np.float64),
@@ -441,7 +439,7 @@ class PotentialGrid(Term, kind="potential_grid"):
             "origin": self.origin,
             "coupling": self.coupling,
         }
-        scene._sim.add_term("grid_potential", name, params)
+        ctx.sim.add_term("grid_potential", name, params)
         return _named(self, name)  # type: ignore[return-value]
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -449,7 +447,7 @@ class PotentialGrid(Term, kind="potential_grid"):
         return meta, {"phi": self.phi.reshape(-1)}
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         shape = meta["shape"]
         if not all(float(n).is_integer() and 2 <= n <= 2**40 for n in shape):
             raise InvalidInputError(f"shape: must be whole numbers of nodes >= 2, got {shape}")
@@ -459,4 +457,4 @@ class PotentialGrid(Term, kind="potential_grid"):
             raise InvalidInputError(f"phi: holds {phi.size} values, the shape {shape} needs {math.prod(shape)}")
         if not isinstance(meta["coupling"], str):  # pragma: no cover - the reader checked it
             raise InvalidTypeError("coupling: expected a string")
-        scene.add(cls(phi.reshape(shape), meta["spacing"], meta["origin"], meta["coupling"], name=meta["name"]))
+        ctx.add(cls(phi.reshape(shape), meta["spacing"], meta["origin"], meta["coupling"], name=meta["name"]))

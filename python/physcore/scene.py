@@ -26,14 +26,19 @@ from ._errors import (
     InvalidInputError,
     InvalidTypeError,
     SceneBusyError,
-    SeparateFluidsWarning,
     ThreadPoolWarning,
     allocating,
 )
+from ._parts import MEMBER_PREFIX, SECTIONS, AttachContext, LoadContext, Part, entry_class, part_class
+
+# The part modules register their classes in physcore._parts.PARTS when imported: the scene
+# file reader finds every part kind there. (They import nothing from this module.)
+from .contacts import Contacts
 from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
-from .terms import REGISTRY, Box, Gravity, Plane, Sphere, Springs, Term
+from .potentials import PointMasses  # noqa: F401 - registers the potential terms
+from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
@@ -145,24 +150,20 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     return a
 
 
-def _norm(v: np.typing.ArrayLike) -> float:
-    """Euclidean norm without overflow warnings: inf when it is beyond float64."""
-    try:
-        return math.hypot(*(float(c) for c in np.ravel(v)))
-    except OverflowError:
-        return math.inf
+class _SceneHost:
+    """What a live handle (a grid, a flow) holds of the scene it joined: exactly the calls it
+    makes later (see :class:`physcore._parts.Host`)."""
 
+    __slots__ = ("_scene",)
 
-def _max_row_norm(a: np.ndarray) -> float:
-    """Largest row norm of a finite (N, d) array, scaled so that squaring cannot overflow."""
-    top = float(np.max(np.abs(a))) if a.size else 0.0
-    if top == 0.0:
-        return 0.0
-    return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
+    def __init__(self, scene: Scene) -> None:
+        self._scene = scene
 
+    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
+        return self._scene._exclusive(call)
 
-#: Most fluids that share one neighbour search (the core's MAX_FLUIDS).
-_FLUIDS_PER_SEARCH = 8
+    def energy_changed(self) -> None:
+        self._scene._e0 = None
 
 
 class Scene:
@@ -293,12 +294,9 @@ class Scene:
         self._busy: int | None = None
         self._sim = sim
         self._threads = threads
-        self._terms: list[Term] = []
-        self._planes: list[Plane] = []
-        self._boxes: list[Box] = []
-        self._spheres: list[Sphere] = []
-        self._grids: list[Grid] = []
-        self._flows: list[Any] = []
+        #: Everything the scene holds, as stored, in the order added (see physcore._parts).
+        self._parts: list[Part] = []
+        self._host = _SceneHost(self)
         self._e0: float | None = None
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
         self._e0_scale: float = 0.0
@@ -420,6 +418,10 @@ class Scene:
         A term whose name is already taken gets ``_2``, ``_3``, ... appended. Returns the term as
         stored (for :class:`Springs` with ``rest_length=None``, with the rest lengths resolved).
 
+        Whatever is added is a *part* (``physcore/_parts.py``): its class is registered by its
+        kind and attaches itself through a small context, so this method has no case per kind,
+        and a new kind of part needs no change here.
+
         Raises
         ------
         TypeError
@@ -428,56 +430,42 @@ class Scene:
             (a ``ValueError``) Vector length differs from ``dim``; spring index out of range; a
             spring's current length (for ``rest_length=None``) beyond float64. Nothing is added.
         """
-        dim = self.dim
-        if isinstance(item, (Flow, Grid)):
-            # Flows and grids are systems of the world: one scene each, under a free name.
-            what = "flow" if isinstance(item, Flow) else "grid"
-            if item.dim != dim:
-                raise InvalidInputError(f"item: a {item.dim}D {what} ({item.kind}) cannot join a {dim}D scene")
-            if item._scene is not None:
-                raise InvalidInputError(f"item: {what} {item.name!r} is already in a scene (a {what} joins one scene)")
-            taken = {g.name for g in (*self._grids, *self._flows)} | {t.name for t in self._terms} | {"particles", "collisions"}
-            if item.name in taken:
-                raise InvalidInputError(f"name: {item.name!r} is taken in this scene; give the {what} another name")
-            if isinstance(item, Flow):
-                self._sim.add_flow(item.kind, item.name, item._params())
-                item._scene = self
-                self._flows.append(item)
-                return item
-            self._sim.add_grid(item.kind, item.name, item._params())
-            item._scene = self
-            self._grids.append(item)
-            self._e0 = None
-            return item
-        if isinstance(item, Box):
-            for arg in ("lower", "upper"):
-                if getattr(item, arg).shape[0] != dim:
-                    raise InvalidInputError(f"{arg}: has {getattr(item, arg).shape[0]} components, the scene is {dim}D")
-            self._sim.add_box(item.lower.tolist(), item.upper.tolist(), item.restitution, item.friction)
-            self._boxes.append(item)
-            self._e0 = None
-            return item
-        if isinstance(item, Plane):
-            for arg in ("point", "normal"):
-                if getattr(item, arg).shape[0] != dim:
-                    raise InvalidInputError(f"{arg}: has {getattr(item, arg).shape[0]} components, the scene is {dim}D")
-            self._sim.add_plane(item.point.tolist(), item.normal.tolist(), item.restitution, item.friction)
-            self._planes.append(item)
-            self._e0 = None
-            return item
-        if isinstance(item, Sphere):
-            if item.center.shape[0] != dim:
-                raise InvalidInputError(f"center: has {item.center.shape[0]} components, the scene is {dim}D")
-            self._sim.add_sphere(item.center.tolist(), item.radius, item.inside, item.restitution, item.friction)
-            self._spheres.append(item)
-            self._e0 = None
-            return item
-        if not isinstance(item, Term) or REGISTRY.get(type(item).kind) is not type(item):
+        return self._add(item)
+
+    def _add(self, item: Any, **restoring: Any) -> Any:
+        """:meth:`add`; ``restoring``: what a scene file says the part holds in the scene already
+        (a loaded fluid's ``first`` particle)."""
+        cls = part_class(item)
+        if cls is None:
             raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane, Box or Sphere, got {type(item).__name__}")
-        item = item._attach(self, self._unique_name(item.name))
-        self._terms.append(item)
-        self._e0 = None
-        return item
+        ctx = self._context(restoring)
+        stored = item._attach(ctx, item._claim_name(ctx))
+        self._parts.append(stored)
+        if cls.changes_energy:
+            self._e0 = None
+        return stored
+
+    def _context(self, restoring: dict[str, Any]) -> AttachContext:
+        """What a part sees of this scene as it joins (see :class:`physcore._parts.AttachContext`)."""
+        sim = self._sim
+        names = {s: frozenset(getattr(p, "name", "") for p in self._parts if p.section == s) for s in ("terms", "grids", "flows")}
+        return AttachContext(
+            dim=sim.dim,
+            names=names,
+            integrator=sim.integrator,
+            n_particles=sim.n_particles,
+            sim=sim,
+            parts=tuple(self._parts),
+            read_positions=lambda: self.positions,
+            read_attributes=lambda: frozenset(self.attributes),
+            add_particles=self.add_particles,
+            lower_dt=self._lower_dt,
+            host=self._host,
+            restoring=restoring,
+        )
+
+    def _lower_dt(self, limit: float) -> None:
+        self._sim.dt = min(self.dt, limit)
 
     @allocating("add_fluid", "a copy of the fluid's arrays")
     def add_fluid(self, positions: np.typing.ArrayLike, **params: Any) -> np.ndarray:
@@ -506,149 +494,6 @@ class Scene:
         fluid = self.add(Fluid(positions, **params))
         assert fluid.first is not None
         return np.arange(fluid.first, fluid.first + len(fluid), dtype=np.int64)
-
-    def _check_fluid_method(self, fluid: Fluid) -> None:
-        """Refuse, before anything is added, a DFSPH fluid this scene cannot step: DFSPH runs
-        inside "semi_implicit_euler" steps, and one DFSPH fluid cannot push on another fluid
-        (it has no shared search), so it must be the scene's only fluid."""
-        others = [t for t in self._terms if isinstance(t, Fluid)]
-        if fluid.method == "dfsph":
-            if self.integrator != "semi_implicit_euler":
-                raise InvalidInputError(
-                    f"method: DFSPH steps with integrator='semi_implicit_euler' only (this scene uses {self.integrator!r})"
-                )
-            if others:
-                raise InvalidInputError(
-                    f"method: a DFSPH fluid must be the scene's only fluid (it would pass through {others[0].name!r})"
-                )
-        elif any(t.method == "dfsph" for t in others):
-            raise InvalidInputError("method: this scene has a DFSPH fluid, which must be its only fluid")
-
-    def _warn_separate_fluids(self, fluid: Fluid, name: str) -> None:
-        """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
-        already in the scene. Fluids share one neighbour search, and so push on each other, when
-        they have the same ``h``, kernel and precision, up to 8 per search (the core's rule; a
-        9th starts a new search, which the next ones join)."""
-        fluids = [t for t in self._terms if isinstance(t, Fluid)]
-        alike = [f for f in fluids if (f.h, f.kernel, f.precision) == (fluid.h, fluid.kernel, fluid.precision)]
-        together = alike[len(alike) - len(alike) % _FLUIDS_PER_SEARCH :]
-        apart = [f.name for f in fluids if all(f is not g for g in together)]
-        if apart:
-            why = (
-                f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
-                if len(together) < len(alike)
-                else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and precision"
-            )
-            shown = ", ".join(repr(a) for a in apart[:5]) + (", ..." if len(apart) > 5 else "")
-            warnings.warn(
-                f"{name!r} does not interact with the scene's fluid(s) {shown} and will pass through them: {why}",
-                SeparateFluidsWarning,
-                stacklevel=5,
-            )
-
-    def _add_fluid(self, fluid: Fluid, name: str, first: int | None = None) -> Fluid:
-        """Append the fluid's particles (unless ``first`` says they exist) and its SPH term
-        (:meth:`Fluid._attach`); returns the fluid as stored, for the caller to append."""
-        import dataclasses
-
-        dim = self.dim
-        if fluid.dim != dim:
-            raise InvalidInputError(f"positions: the fluid is {fluid.dim}D, the scene is {dim}D")
-        c0 = fluid.sound_speed
-        if c0 is None:
-            g = sum((t.g for t in self._terms if isinstance(t, Gravity)), np.zeros(dim))
-            gn = _norm(g)
-            # Overflow (huge g, positions or velocities) gives inf here, refused below by name.
-            with np.errstate(over="ignore", invalid="ignore"):
-                height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
-                v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
-            vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
-            s = max(fluid.surface_tension, fluid.adhesion)
-            if s > 0:
-                # Surface tension moves a fluid at rest too: the capillary speed √(σ/(ρ0 h)).
-                with np.errstate(over="ignore"):
-                    vmax = max(vmax, math.sqrt(s / (fluid.density * fluid.h)))
-            if not vmax > 0:
-                raise InvalidInputError(
-                    "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
-                    "positions spread along it; give sound_speed= (m/s)"
-                )
-            c0 = 10.0 * vmax
-            if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
-                surface = ", surface_tension, adhesion" if s > 0 else ""
-                raise InvalidInputError(
-                    f"sound_speed{surface}: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions, "
-                    f"the velocities{' and the capillary speed' if s > 0 else ''}, makes the Tait stiffness density · c0² "
-                    "overflow float64; give sound_speed= (m/s)"
-                )
-        fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
-        walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
-        with np.errstate(over="ignore"):
-            psi = fluid.wall_psi()
-        if not np.all(np.isfinite(psi) & (psi > 0)):
-            raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
-        max_dt = fluid.max_dt()
-        # The scene's dt is lowered to this; a subnormal or zero step would never advance.
-        if not max_dt >= _MIN_DT:
-            what = (
-                "step limit (viscous (d + 2) h/(4 α c0), capillary 0.25 √(ρ0 h³/(2π max(σ, adhesion))))"
-                if fluid.method == "dfsph"
-                else "CFL step 0.25 h / (c0 (1 + 0.6 α))"
-            )
-            args = "sound_speed, viscosity, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
-            raise InvalidInputError(f"{args}: the fluid's {what} = {max_dt:.3g} s is below float64's normal range")
-        m = fluid.particle_mass()
-        # Also for a fluid loaded from a file (`first` given): a file may pair DFSPH with another fluid.
-        self._check_fluid_method(fluid)
-        if first is None:
-            self._warn_separate_fluids(fluid, name)
-            n = len(fluid)
-            first = int(self.add_particles(fluid.positions, fluid.velocities, np.full(n, m))[0]) if n else self.n_particles
-        common = {
-            "first": first,
-            "n": len(fluid),
-            "h": fluid.h,
-            "density": fluid.density,
-            "sound_speed": c0,
-            "viscosity": fluid.viscosity,
-            "kernel": fluid.kernel,
-            "walls": np.ascontiguousarray(walls, dtype=np.float64),
-            "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
-        }
-        if fluid.method == "dfsph":
-            self._sim.add_term(
-                "dfsph",
-                name,
-                common
-                | {
-                    "density_error": fluid.density_error,
-                    "divergence_error": fluid.divergence_error,
-                    "max_iterations": int(fluid.max_iterations),
-                    "cfl": fluid.cfl,
-                    "surface_tension": fluid.surface_tension,
-                    "adhesion": fluid.adhesion,
-                },
-            )
-        else:
-            self._sim.add_term(
-                "sph",
-                name,
-                common | {"gamma": int(fluid.gamma), "clamp_pressure": bool(fluid.clamp_pressure), "precision": fluid.precision},
-            )
-        fluid = dataclasses.replace(fluid, first=first)
-        # A step above the fluid's CFL limit would blow up on the first step.
-        self._sim.dt = min(self.dt, max_dt)
-        self._e0 = None
-        return fluid
-
-    def _unique_name(self, base: str) -> str:
-        if not isinstance(base, str) or not base:
-            raise InvalidTypeError("name: expected a non-empty str")
-        taken = {t.name for t in self._terms} | {"collisions"}
-        name, k = base, 2
-        while name in taken:
-            name, k = f"{base}_{k}", k + 1
-        return name
 
     # ---------------------------------------------------------------- stepping
     def step(self, n: int = 1) -> None:
@@ -682,9 +527,7 @@ class Scene:
     def _warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
         automatic step: ``Scene``'s default dt is far too long for stiff contacts."""
-        from .contacts import Contacts
-
-        if self._step_checked == self.dt or not any(isinstance(t, Contacts) for t in self._terms):
+        if self._step_checked == self.dt or not any(isinstance(t, Contacts) for t in self.terms):
             return
         self._step_checked = self.dt
         limit = self._exclusive(lambda sim: sim.auto_dt())
@@ -973,30 +816,34 @@ class Scene:
         self._exclusive(lambda sim: sim.set_attribute(name, np.ascontiguousarray(a, dtype=np.float64)))
         self._e0 = None  # the potential of charge-dependent terms changed
 
+    def _section(self, section: str) -> list[Any]:
+        """The parts of one section of the scene file, in the order added."""
+        return [p for p in self._parts if p.section == section]
+
     @property
     def terms(self) -> tuple[Term, ...]:
         """The force terms, in the order added (names resolved)."""
-        return tuple(self._terms)
+        return tuple(self._section("terms"))
 
     @property
     def planes(self) -> list[Plane]:
         """The plane colliders, with the faces of :class:`Box` colliders as planes (a new list)."""
-        return list(self._planes) + [f for b in self._boxes for f in b.faces()]
+        return self._section("planes") + [f for b in self._section("boxes") for f in b.faces()]
 
     @property
     def boxes(self) -> list[Box]:
         """The box colliders (a copy of the list)."""
-        return list(self._boxes)
+        return self._section("boxes")
 
     @property
     def spheres(self) -> list[Sphere]:
         """The sphere colliders (a copy of the list)."""
-        return list(self._spheres)
+        return self._section("spheres")
 
     def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),
         int64 (M,), float64 (M,) in m."""
-        springs = [t for t in self._terms if isinstance(t, Springs)]
+        springs = [t for t in self.terms if isinstance(t, Springs)]
         if not springs:
             return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0)
         return (
@@ -1065,7 +912,7 @@ class Scene:
             ``name`` is not a field of any term of this scene (the message lists those that are).
         """
         known: list[str] = []
-        for t in self._terms:
+        for t in self.terms:
             names = ("density", "pressure") if isinstance(t, Fluid) else getattr(t, "particle_fields", lambda dim: ())(self.dim)
             known.extend(f for f in names if f not in known)
         if not isinstance(name, str) or name not in known:
@@ -1109,7 +956,7 @@ class Scene:
         ValueError
             No DFSPH fluid named ``name`` (by default the scene's DFSPH fluid).
         """
-        dfsph = [t.name for t in self._terms if isinstance(t, Fluid) and t.method == "dfsph"]
+        dfsph = [t.name for t in self.fluids if t.method == "dfsph"]
         if name is None and dfsph:
             name = dfsph[0]
         if name not in dfsph:
@@ -1118,23 +965,24 @@ class Scene:
 
     def boundary_points(self) -> np.ndarray:
         """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""
-        walls = [t.walls for t in self._terms if isinstance(t, Fluid) and t.walls is not None]
+        walls = [t.walls for t in self.fluids if t.walls is not None]
         return np.concatenate(walls) if walls else np.zeros((0, self.dim))
 
     @property
     def grids(self) -> tuple[Grid, ...]:
         """The grid systems, as added."""
-        return tuple(self._grids)
+        return tuple(self._section("grids"))
 
     @property
-    def flows(self) -> tuple[Any, ...]:
+    def flows(self) -> tuple[Flow, ...]:
         """The :class:`~physcore.flows.Flow` systems of the scene, in the order added."""
-        return tuple(self._flows)
+        return tuple(self._section("flows"))
 
     @property
     def fluids(self) -> tuple[Fluid, ...]:
-        """The fluids, as added (with ``first`` and ``sound_speed`` resolved)."""
-        return tuple(t for t in self._terms if isinstance(t, Fluid))
+        """The fluids, as added (with ``first`` and ``sound_speed`` resolved): the terms that
+        own a run of the scene's particles."""
+        return tuple(t for t in self._section("terms") if type(t).owns_particles)
 
     def suggest_dt(self) -> float:
         """Half of the fastest time scale of the scene's terms, s (springs: 1/ω_max and, with
@@ -1180,27 +1028,19 @@ class Scene:
             "pinned": self.pinned,
             **{f"attr_{a}": v for a, v in self.attributes.items()},
         }
-        terms_meta = []
-        for k, t in enumerate(self._terms):
-            record, members = t._record()
-            terms_meta.append({"type": t.kind, "name": t.name, **record})
-            arrays.update({f"term{k}_{a}": v for a, v in members.items()})
-            history = self._sim.term_history(t.name)
-            if history is not None:  # a term's own state (contacts: spins and springs)
-                arrays[f"term{k}_history"] = history
-        grids_meta = []
-        for k, g in enumerate(self._grids):
-            grids_meta.append({"kind": g.kind, "name": g.name, "record": g._record()})
-            arrays.update({f"grid{k}_{a}": v for a, v in g._record_arrays().items()})
-            for a, v in self._sim.system_save(g.name):
-                if not np.isfinite(v).all():
-                    raise InvalidInputError(f"grid {g.name!r}: its {a} is not finite; a scene file holds finite values only")
-                arrays[f"grid{k}_{a}"] = v
-        flows_meta = []
-        for k, f in enumerate(self._flows):
-            flows_meta.append({"name": f.name, "record": f._record()})
-            ((_, y),) = self._sim.system_save(f.name)
-            arrays[f"flow{k}_y"] = y
+        # One loop over the parts: each gives its entry and members (physcore._parts); they are
+        # grouped by section, each section's members named {prefix}{k}_{member}, in the order
+        # of SECTIONS.
+        sim = self._sim
+        entries: dict[str, list[dict[str, Any]]] = {s: [] for s in SECTIONS}
+        members: dict[str, dict[str, np.ndarray]] = {s: {} for s in SECTIONS}
+        for part in self._parts:
+            entry, own = part._entry(sim)
+            k = len(entries[part.section])
+            entries[part.section].append(entry)
+            members[part.section].update({f"{MEMBER_PREFIX[part.section]}{k}_{a}": v for a, v in own.items()})
+        for section in SECTIONS:
+            arrays.update(members[section])
         ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
@@ -1230,21 +1070,7 @@ class Scene:
             "collisions": collisions,
             "e0": self._e0 if e0_finite else None,
             "e0_scale": self._e0_scale if e0_finite else 0.0,
-            "terms": terms_meta,
-            "planes": [
-                {"point": p.point.tolist(), "normal": p.normal.tolist(), "restitution": p.restitution, "friction": p.friction}
-                for p in self._planes
-            ],
-            "boxes": [
-                {"lower": b.lower.tolist(), "upper": b.upper.tolist(), "restitution": b.restitution, "friction": b.friction}
-                for b in self._boxes
-            ],
-            "spheres": [
-                {"center": c.center.tolist(), "radius": c.radius, "restitution": c.restitution, "friction": c.friction, "inside": c.inside}
-                for c in self._spheres
-            ],
-            "grids": grids_meta,
-            "flows": flows_meta,
+            **entries,  # "terms", "planes", "boxes", "spheres", "grids", "flows"
         }
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
@@ -1324,40 +1150,17 @@ class Scene:
             if f"attr_{a}" in z:
                 with r.api("", {a: f"attr_{a}"}):
                     scene.set_attribute(a, z[f"attr_{a}"])
-        for k, t in enumerate(meta["terms"]):
-            ctx = f"meta.terms[{k}]"
-            cls = REGISTRY[t["type"]]
-            members = {a: f"term{k}_{a}" for a in cls.record_arrays}
-            members.update({a: f"term{k}_{a}" for a in cls.record_optional if f"term{k}_{a}" in z})
-            with r.api(ctx, {**members, **cls.record_api_names(k, ctx)}):
-                cls._load(scene, t, {a: z[m] for a, m in members.items()})
-        for i, p in enumerate(meta["planes"]):
-            with r.api(f"meta.planes[{i}]"):
-                scene.add(Plane(p["point"], p["normal"], p["restitution"], p["friction"]))
-        for i, b in enumerate(meta["boxes"]):
-            with r.api(f"meta.boxes[{i}]"):
-                scene.add(Box(b["lower"], b["upper"], b["restitution"], b["friction"]))
-        for i, c in enumerate(meta["spheres"]):
-            with r.api(f"meta.spheres[{i}]"):
-                scene.add(Sphere(c["center"], c["radius"], c["restitution"], c["friction"], inside=c["inside"]))
-        from .grids import _GRID_ARRAYS, _from_record
-
-        for k, g in enumerate(meta["grids"]):
-            ctx = f"meta.grids[{k}]"
-            own = {a[len(f"grid{k}_"):]: z[a] for a in z if a.startswith(f"grid{k}_")}
-            with r.api(f"{ctx}.record"):
-                grid = scene.add(_from_record(g["kind"], g["name"], g["record"], {a: v for a, v in own.items() if a not in _GRID_ARRAYS[g["kind"]]}))
-            with r.api(f"grid{k}"):
-                scene._sim.system_load(grid.name, [(a, v) for a, v in own.items() if a in _GRID_ARRAYS[g["kind"]]])
-        for k, f in enumerate(meta["flows"]):
-            rec = f["record"]
-            y = z[f"flow{k}_y"]
-            with r.api(f"meta.flows[{k}].record", {"points": f"flow{k}_y"}):
-                points = y.reshape(meta["dim"], -1).T
-                params = rec.get("params")
-                if not isinstance(params, dict):
-                    raise InvalidInputError(f"params: expected an object, got {type(params).__name__}")
-                scene.add(Flow(rec["kind"], points, method=rec.get("method"), max_dt=rec.get("max_dt"), name=f["name"], **params))
+        # One loop over the sections, in the order written; each entry is read by its part class,
+        # which adds it as Scene.add does (a MemoryError named as Scene.add names it).
+        add = allocating("add", "a copy of the item's arrays for the core")(scene._add)
+        for section in SECTIONS:
+            for k, entry in enumerate(meta[section]):
+                part = entry_class(section, entry)
+                prefix = f"{MEMBER_PREFIX[section]}{k}_"
+                own = {a[len(prefix):]: z[a] for a in z if a.startswith(prefix)}
+                ctx = LoadContext(dim=scene.dim, sim=scene._sim, index=k, field=f"meta.{section}[{k}]", add=add, api=r.api)
+                with r.api(*part._load_names(ctx, own)):
+                    part._load(ctx, entry, own)
         with r.api("", {"dissipated": "ledger", "cache": "cache_forces/cache_power"}):
             scene._sim.restore(
                 sf.time,
@@ -1372,15 +1175,16 @@ class Scene:
         return scene
 
     def __repr__(self) -> str:
-        terms = ", ".join(t.name for t in self._terms) or "no terms"
+        terms = ", ".join(t.name for t in self.terms) or "no terms"
+        boxes, spheres, grids = self.boxes, self.spheres, self.grids
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
             + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
             + (f"cg_tol={self.cg_tol:g}, cg_max_iter={self.cg_max_iter}, " if self.integrator == "implicit_euler" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
-            + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._planes)}, boxes: {len(self._boxes)}"
-            + (f", spheres: {len(self._spheres)}" if self._spheres else "")
-            + (f", grids: {', '.join(g.name for g in self._grids)}" if self._grids else "")
+            + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._section('planes'))}, boxes: {len(boxes)}"
+            + (f", spheres: {len(spheres)}" if spheres else "")
+            + (f", grids: {', '.join(g.name for g in grids)}" if grids else "")
             + ")"
         )
 

@@ -27,15 +27,13 @@ import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, ClassVar, Union
+from typing import Any, ClassVar, Union
 
 import numpy as np
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
-
-if TYPE_CHECKING:
-    from .scene import Scene
+from ._parts import RESERVED_NAMES, AttachContext, LoadContext, Part, unique_name
 
 __all__ = [
     "Term",
@@ -123,14 +121,18 @@ def _hashable(v: object) -> object:
     return (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
 
 
-class Term:
-    """Base of the force-term records. A subclass registers itself by its type key
+class Term(Part):
+    """Base of the force-term records: the parts of the ``"terms"`` section of a scene file (see
+    :mod:`physcore._parts`). A subclass registers itself by its type key
     (``class Gravity(Term, kind="gravity")``) and describes itself completely, so that adding a
-    term to physcore touches only its own files: how it attaches to a scene (:meth:`_attach`),
-    what a scene file holds of it (:attr:`record_fields`, :attr:`record_arrays`,
-    :meth:`_record`) and how it is rebuilt from a file (:meth:`_load`). Records compare by
-    value (arrays element-wise) and are immutable.
+    term to physcore touches only its own files: how it attaches to a scene (:meth:`_attach`,
+    given an :class:`~physcore._parts.AttachContext` and the name it joins under), what a scene
+    file holds of it (:attr:`record_fields`, :attr:`record_arrays`, :meth:`_record`) and how it
+    is rebuilt from a file (:meth:`_load`, given a :class:`~physcore._parts.LoadContext`).
+    Records compare by value (arrays element-wise) and are immutable.
     """
+
+    section: ClassVar[str] = "terms"
 
     #: The term's type key in scene files, unique across terms.
     kind: ClassVar[str] = ""
@@ -153,12 +155,13 @@ class Term:
     name: str
 
     def __init_subclass__(cls, kind: str = "", **kwargs: Any) -> None:
-        super().__init_subclass__(**kwargs)
         if kind:
             if kind in REGISTRY:
                 raise InvalidTypeError(f"kind: {kind!r} is already the key of {REGISTRY[kind].__name__}")
             cls.kind = kind
+            cls.part_kind = kind  # Part.__init_subclass__ registers it in physcore._parts.PARTS
             REGISTRY[kind] = cls
+        super().__init_subclass__(**kwargs)
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
@@ -171,19 +174,34 @@ class Term:
         return hash((type(self), *(_hashable(getattr(self, f.name)) for f in dataclasses.fields(self) if f.compare)))
 
     # ------------------------------------------------------------ the protocol of a term type
-    def _attach(self, scene: Scene, name: str) -> Term:
-        """Check the term against ``scene``, add it to the core under ``name`` and return the
-        record as stored. Raises before changing anything. By default the core term of the same
-        ``kind`` gets the ``record_fields`` as its parameters, each ``"vector"`` one checked
-        against the scene's dimension; terms with more to check (indices, particles) override it."""
+    def _claim_name(self, ctx: AttachContext) -> str:
+        """A term whose name is taken (by another term, or reserved) gets ``_2``, ``_3``, ..."""
+        return unique_name(self.name, ctx.names["terms"] | RESERVED_NAMES)
+
+    def _attach(self, ctx: AttachContext, name: str) -> Term:
+        """Check the term against the scene (``ctx``), add it to the core under ``name`` and
+        return the record as stored. Raises before changing anything. By default the core term
+        of the same ``kind`` gets the ``record_fields`` as its parameters, each ``"vector"`` one
+        checked against the scene's dimension; terms with more to check (indices, particles)
+        override it."""
         params = {}
         for f, kind in self.record_fields.items():
             value = getattr(self, f)
             if kind == "vector":
-                _same_dim(scene, f, value)
+                _same_dim(ctx, f, value)
             params[f] = value
-        scene._sim.add_term(self.kind, name, params)
+        ctx.sim.add_term(self.kind, name, params)
         return dataclasses.replace(self, name=name)
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        """``{"type", "name", **record_fields}`` and the record's arrays, plus ``history``: the
+        term's own state in the core, where it keeps one (contacts: spins and springs; DFSPH:
+        the solvers' warm starts)."""
+        record, members = self._record()
+        history = sim.term_history(self.name)
+        if history is not None:
+            members = {**members, "history": history}
+        return {"type": self.kind, "name": self.name, **record}, members
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """What a scene file holds of this term: the ``record_fields`` (JSON values) and the
@@ -201,15 +219,20 @@ class Term:
         return {}
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        """Rebuild the term from its checked record and add it to ``scene``."""
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        members = {a: f"term{ctx.index}_{a}" for a in arrays}
+        return ctx.field, {**members, **cls.record_api_names(ctx.index, ctx.field)}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        """Rebuild the term from its checked record and add it to the scene (``ctx.add``)."""
         fields = {f: meta[f] for f in cls.record_fields}
-        scene.add(cls(**fields, **arrays, name=meta["name"]))
+        ctx.add(cls(**fields, **arrays, name=meta["name"]))
 
 
-def _same_dim(scene: Scene, arg: str, v: np.ndarray) -> None:
-    if v.shape[0] != scene.dim:
-        raise InvalidInputError(f"{arg}: has {v.shape[0]} components, the scene is {scene.dim}D")
+def _same_dim(ctx: AttachContext, arg: str, v: np.ndarray) -> None:
+    if v.shape[0] != ctx.dim:
+        raise InvalidInputError(f"{arg}: has {v.shape[0]} components, the scene is {ctx.dim}D")
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,15 +355,15 @@ class Springs(Term, kind="springs"):
     def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
         return {"i/j": f"term{k}_i"}
 
-    def _attach(self, scene: Scene, name: str) -> Springs:
-        n = scene.n_particles
+    def _attach(self, ctx: AttachContext, name: str) -> Springs:
+        n = ctx.n_particles
         for arg in ("i", "j"):
             a = getattr(self, arg)
             if a.size and a.max() >= n:
                 raise InvalidInputError(f"{arg}: index {int(a.max())} is out of range for {n} particles")
         rest = self.rest_length
         if rest is None:
-            x = scene.positions
+            x = ctx.positions
             with np.errstate(over="ignore", invalid="ignore"):  # refused by name just below
                 rest = np.linalg.norm(x[self.j] - x[self.i], axis=1) if len(self) else np.zeros(0)
             if not np.all(np.isfinite(rest)):
@@ -349,7 +372,7 @@ class Springs(Term, kind="springs"):
                     f"rest_length: spring {k}'s current length is beyond float64; give rest_length= (m)"
                 )
         stored = dataclasses.replace(self, rest_length=rest, name=name)
-        scene._sim.add_term(
+        ctx.sim.add_term(
             "springs",
             name,
             {
@@ -564,9 +587,9 @@ def _axial(value: object, arg: str) -> np.ndarray:
     return a
 
 
-def _axial_for(scene: Scene, arg: str, b: np.ndarray) -> np.ndarray:
+def _axial_for(ctx: AttachContext, arg: str, b: np.ndarray) -> np.ndarray:
     """``b`` as the scene's dimension takes it: shape (1,) (B_z) in 2D, (3,) in 3D."""
-    if scene.dim == 3:
+    if ctx.dim == 3:
         if b.shape != (3,):
             raise InvalidInputError(f"{arg}: has {b.shape[0]} component, the scene is 3D (give [Bx, By, Bz])")
         return b
@@ -622,9 +645,9 @@ class MagneticField(Term, kind="uniform_magnetic_field"):
     def __post_init__(self) -> None:
         object.__setattr__(self, "B", _axial(self.B, "B"))
 
-    def _attach(self, scene: Scene, name: str) -> MagneticField:
-        b = _axial_for(scene, "B", self.B)  # type: ignore[arg-type]
-        scene._sim.add_term(self.kind, name, {"B": b})
+    def _attach(self, ctx: AttachContext, name: str) -> MagneticField:
+        b = _axial_for(ctx, "B", self.B)  # type: ignore[arg-type]
+        ctx.sim.add_term(self.kind, name, {"B": b})
         return dataclasses.replace(self, B=b, name=name)
 
 
@@ -675,8 +698,8 @@ class _GridField(Term):
     def dim(self) -> int:
         return int(self.origin.shape[0])
 
-    def _attach(self, scene: Scene, name: str) -> Term:
-        _same_dim(scene, "origin", self.origin)
+    def _attach(self, ctx: AttachContext, name: str) -> Term:
+        _same_dim(ctx, "origin", self.origin)
         v = getattr(self, self._field)
         params = {
             "origin": self.origin,
@@ -684,7 +707,7 @@ class _GridField(Term):
             "shape": np.asarray(v.shape[:-1], dtype=np.float64),
             "values": v.reshape(-1),
         }
-        scene._sim.add_term(self.kind, name, params)
+        ctx.sim.add_term(self.kind, name, params)
         return dataclasses.replace(self, name=name)  # type: ignore[type-var]
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -697,13 +720,13 @@ class _GridField(Term):
         return {cls._field: f"term{k}_values"}
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         v = arrays["values"]
-        if scene.dim == 2:
+        if ctx.dim == 2:
             if v.shape[2] != 1:
                 raise InvalidInputError(f"{cls._field}: a 2D grid is saved with one node along z, got shape {v.shape}")
             v = v[:, :, 0, :]
-        scene.add(cls(v, meta["origin"], meta["spacing"], name=meta["name"]))  # type: ignore[call-arg]
+        ctx.add(cls(v, meta["origin"], meta["spacing"], name=meta["name"]))  # type: ignore[call-arg]
 
 
 @dataclass(frozen=True, eq=False)
@@ -1050,17 +1073,17 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         return {}, {a: np.asarray(getattr(self, a)).reshape(-1) if a in ("distance", "bending", "area", "volume") else np.asarray(getattr(self, a)) for a in self.record_arrays}
 
     @classmethod
-    def _load(cls, scene: Scene, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+    def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         a = dict(arrays)
-        widths = {"distance": 2, "bending": 3 if scene.dim == 2 else 4, "area": 3, "volume": 4}
+        widths = {"distance": 2, "bending": 3 if ctx.dim == 2 else 4, "area": 3, "volume": 4}
         for k, w in widths.items():
             if a[k].size % w:
                 raise InvalidInputError(f"{k}: {a[k].size} indices are not rows of {w}")
             a[k] = a[k].reshape(-1, w)
-        scene.add(cls(**a, name=meta["name"]))
+        ctx.add(cls(**a, name=meta["name"]))
 
-    def _attach(self, scene: Scene, name: str) -> XpbdConstraints:
-        dim, n = scene.dim, scene.n_particles
+    def _attach(self, ctx: AttachContext, name: str) -> XpbdConstraints:
+        dim, n = ctx.dim, ctx.n_particles
         for arg in ("distance", "bending", "pins", "area", "volume", "shapes"):
             a = getattr(self, arg)
             if a.size and a.max() >= n:
@@ -1077,7 +1100,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
             v = getattr(self, arg)
             if v is not None and v.shape[1] != dim:
                 raise InvalidInputError(f"{arg}: has {v.shape[1]} components, the scene is {dim}D")
-        x = scene.positions.astype(np.float64)
+        x = ctx.positions.astype(np.float64)
         rest = {}
         with np.errstate(all="ignore"):
             d, b, ar, vo = self.distance, self.bending, self.area, self.volume
@@ -1137,7 +1160,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
             params["shapes_size"] = u32(stored.shape_sizes)
             params["shapes_rest"] = f64(stored.shape_rest)
             params["shapes_stiffness"] = f64(stored.shape_stiffness)
-        scene._sim.add_term(self.kind, name, params)
+        ctx.sim.add_term(self.kind, name, params)
         return stored
 
 
@@ -1160,7 +1183,7 @@ def _angles(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Plane:
+class Plane(Part):
     """Half-space collider ``{x : (x - point)·normal ≥ 0}`` with restitution and friction.
 
     After each step a particle below the plane is projected onto it; if moving into the plane its
@@ -1208,9 +1231,26 @@ class Plane:
         object.__setattr__(self, "restitution", e)
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
 
+    # ------------------------------------------------------------ the part protocol
+    section: ClassVar[str] = "planes"
+    part_kind: ClassVar[str] = "plane"
+
+    def _attach(self, ctx: AttachContext, name: None) -> Plane:
+        for arg in ("point", "normal"):
+            _same_dim(ctx, arg, getattr(self, arg))
+        ctx.sim.add_plane(self.point.tolist(), self.normal.tolist(), self.restitution, self.friction)
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {"point": self.point.tolist(), "normal": self.normal.tolist(), "restitution": self.restitution, "friction": self.friction}, {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ctx.add(cls(entry["point"], entry["normal"], entry["restitution"], entry["friction"]))
+
 
 @dataclass(frozen=True)
-class Box:
+class Box(Part):
     """Axis-aligned box collider that keeps particles inside ``[lower, upper]`` (a tank or room).
 
     One pass over the particles handles all faces; each face acts like a :class:`Plane` with
@@ -1258,9 +1298,26 @@ class Box:
             out.append(Plane(self.upper, -n, self.restitution, self.friction))
         return out
 
+    # ------------------------------------------------------------ the part protocol
+    section: ClassVar[str] = "boxes"
+    part_kind: ClassVar[str] = "box"
+
+    def _attach(self, ctx: AttachContext, name: None) -> Box:
+        for arg in ("lower", "upper"):
+            _same_dim(ctx, arg, getattr(self, arg))
+        ctx.sim.add_box(self.lower.tolist(), self.upper.tolist(), self.restitution, self.friction)
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return {"lower": self.lower.tolist(), "upper": self.upper.tolist(), "restitution": self.restitution, "friction": self.friction}, {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ctx.add(cls(entry["lower"], entry["upper"], entry["restitution"], entry["friction"]))
+
 
 @dataclass(frozen=True)
-class Sphere:
+class Sphere(Part):
     """Sphere collider (a disc in a 2D scene) that keeps particles outside it, a ball they land on
     and slide off, or with ``inside=True`` inside it, a bowl.
 
@@ -1322,3 +1379,20 @@ class Sphere:
         object.__setattr__(self, "restitution", e)
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
         object.__setattr__(self, "inside", bool(self.inside))
+
+    # ------------------------------------------------------------ the part protocol
+    section: ClassVar[str] = "spheres"
+    part_kind: ClassVar[str] = "sphere"
+
+    def _attach(self, ctx: AttachContext, name: None) -> Sphere:
+        _same_dim(ctx, "center", self.center)
+        ctx.sim.add_sphere(self.center.tolist(), self.radius, self.inside, self.restitution, self.friction)
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        record = {"center": self.center.tolist(), "radius": self.radius, "restitution": self.restitution, "friction": self.friction, "inside": self.inside}
+        return record, {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ctx.add(cls(entry["center"], entry["radius"], entry["restitution"], entry["friction"], inside=entry["inside"]))
