@@ -103,6 +103,35 @@ def _resting_layer(seed: int):
     return np.mean(ps, axis=0), np.mean(xs, axis=0), float(np.mean(ke))
 
 
+@pytest.mark.xfail(strict=True, reason="known bug: at the default viscosity (α = 0.05) a DFSPH resting layer keeps boiling; the density solve puts energy in (see the docstring)")
+def test_a_resting_layer_comes_to_rest_at_default_settings():
+    """The layer of ``_resting_layer`` (0.5 × 0.5 m, 24 × 24 particles, lattice start) at the
+    default settings (α = 0.05) should settle as WCSPH's does: rms speed below 0.05 m/s by
+    t = 4 s (WCSPH, same scene and settings: rms 0.020, 0.036, 0.026 m/s at t = 1, 2, 4 s, max
+    0.06 m/s, books closed to 0.01 J). DFSPH today: rms 0.185, 0.209, 0.232 m/s, max 0.62–1.03
+    m/s, kinetic energy 4.3 → 6.7 J and rising (the same at cfl 0.1–0.2, density_error and
+    divergence_error 1e-4, a fixed dt = 0.002). Measured while diagnosing (env-var switches in
+    a scratch build, not kept): none of these settles it: no warm starts (0), a full density
+    warm start (explodes), the warm start on every particle, no divergence solve, walls
+    pushing with κ_i once (Akinci 2012, worse: rms 0.66), an under-relaxed (ω = 0.5) or
+    projected (signed, Σκ ≥ 0) Jacobi, a per-particle cap on the stop, no position term in the
+    density error. With the density solve booked as minus its impulse's work over the step's
+    mean velocity (zero at rest), the density solve is a net source of energy: −313 J over
+    these 4 s at α = 0.05, and even at α = 0.5 (where the layer does settle) −195 J, which
+    the divergence solve (+121 J) and the viscosity take out. Marked xfail (strict): when a
+    fix lands this test passes and the mark must go."""
+    W, H, n = 0.5, 0.5, 24
+    dx = H / n
+    scene = pc.Scene(2, integrator="semi_implicit_euler")
+    scene.add(pc.Gravity([0.0, -G]))
+    scene.add_fluid(lattice([0, 0], [W, H], dx), spacing=dx, walls=tank_walls([0, 0], [W, H + 0.1], dx), method="dfsph")
+    for t in (1.0, 2.0, 4.0):
+        scene.advance(t - scene.time)
+    v = np.linalg.norm(scene.velocities, axis=1)
+    rms = float(np.sqrt((v**2).mean()))
+    assert rms < 0.05, rms
+
+
 LAYERS = 16
 
 
