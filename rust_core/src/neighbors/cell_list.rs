@@ -167,7 +167,9 @@ impl CellList {
         cell_coords(p, self.inv_cell)
     }
 
-    /// Sorts `x` (finite points; at most u32::MAX − 1) into cells. Parallel when `x` is large.
+    /// Sorts `x` (at most u32::MAX − 1 points) into cells. Parallel when `x` is large. Points
+    /// should be finite; a NaN coordinate is sorted into some cell (never a panic), since a
+    /// diverging step may build once before its finiteness check rolls it back.
     pub fn build<V: Vector>(&mut self, x: &[V]) {
         debug_assert_eq!(V::DIM, self.dim);
         let n = x.len();
@@ -403,7 +405,13 @@ impl CellList {
 #[inline(always)]
 fn bucket(mode: Mode, c: [i64; 3]) -> usize {
     match mode {
-        Mode::Dense { lo, n } => (((c[2] - lo[2]) * n[1] + (c[1] - lo[1])) * n[0] + (c[0] - lo[0])) as usize,
+        Mode::Dense { lo, n } => {
+            // Clamped into the box: a no-op for finite points (the box holds them all), and a
+            // valid bucket for a NaN coordinate (cell 0, which the NaN-skipping bounding box need
+            // not contain) that a diverging step's drift can make before its check rolls it back.
+            let at = |k: usize| c[k].clamp(lo[k], lo[k] + n[k] - 1) - lo[k];
+            ((at(2) * n[1] + at(1)) * n[0] + at(0)) as usize
+        }
         Mode::Hash { mask } => hash(c, mask),
     }
 }
@@ -481,5 +489,22 @@ pub(super) mod tests {
             })
         };
         assert_eq!(build(1), build(3));
+    }
+
+    /// A NaN among finite points (a diverging drift before the step's check) is sorted into a
+    /// cell, not out of bounds (the fuzz's dam of points at ±1e308 panicked here), and the finite
+    /// points keep their order.
+    #[test]
+    fn a_nan_point_is_sorted_without_a_panic() {
+        let mut x: Vec<DVec3> = (0..6).map(|i| DVec3::new(5.0 + 0.01 * i as f64, 5.0, 5.0)).collect();
+        let mut list = CellList::new(1.0, 3).unwrap();
+        list.build(&x);
+        assert!(list.is_dense());
+        let before = list.order.clone();
+        x.push(DVec3::new(f64::NAN, 5.0, 5.0));
+        list.build(&x);
+        assert!(list.is_dense());
+        assert_eq!(list.order.len(), 7);
+        assert_eq!(&list.order.iter().copied().filter(|&i| i < 6).collect::<Vec<_>>(), &before);
     }
 }
