@@ -115,8 +115,20 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
         let no = Mask(s.less_than_f64s(s.splat_f64s(0.0), s.splat_f64s(0.0)));
         let (m_commit, m_eval) = (if commit.is_some() { yes } else { no }, if eval { yes } else { no });
         let dtc = commit.unwrap_or(0.0);
-        // Per-lane sums: lost_t, lost_n, broken, max overlap, pairs.
-        let (mut s_lt, mut s_ln, mut s_br, mut s_mo, mut s_np) = (zero, zero, zero, zero, zero);
+        // Per-lane max overlap and pair count. The books (lost_t, lost_n, broken) are added
+        // lane by lane in pair order, as the scalar loop adds them: a per-lane sum would depend
+        // on which candidates share a block with a contact, and a restart rebuilds the Verlet
+        // lists with other candidates (its books then differed in the last bit at avx2).
+        let (mut s_mo, mut s_np) = (zero, zero);
+        let (mut b_lt, mut b_ln, mut b_br): (Real, Real, Real) = (0.0, 0.0, 0.0);
+        let in_order = |acc: &mut Real, m: M<S>, v: F<S>, cnt: usize| {
+            let (on, val) = (m.select(splat(1.0), zero).to_array(), v.to_array());
+            for k in 0..cnt {
+                if on[k] != 0.0 {
+                    *acc += val[k];
+                }
+            }
+        };
 
         let mut p = 0;
         while p < n_pairs {
@@ -230,8 +242,8 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 let u = half * kt(mat, dcl) * dot(&xn, &xn);
                 let lost_t = lbt - splat(0.5 * dtc) * dot(&lft, &vt) - u;
                 let lost_n = lbn + splat(0.5 * dtc) * lfn * vn - normal_energy(mat, dcl);
-                s_lt = s_lt + cm.select(lost_t, zero);
-                s_ln = s_ln + cm.select(lost_n, zero);
+                in_order(&mut b_lt, cm, lost_t, cnt);
+                in_order(&mut b_ln, cm, lost_n, cnt);
                 lxi = sel3(cm, xn, lxi, dim);
                 lbt = cm.select(u, lbt);
             }
@@ -370,7 +382,7 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
             // Contacts that ended: the spring's energy to the books, the link cleared.
             let gone = and(s, en, live);
             if any(s, gone) {
-                s_br = s_br + gone.select(lbt, zero);
+                in_order(&mut b_br, gone, lbt, cnt);
                 out_xi = sel3(gone, [zero; 3], out_xi, dim);
                 out_ft = sel3(gone, [zero; 3], out_ft, dim);
                 out_fn = gone.select(splat(Link::<V>::NONE.fn_), out_fn);
@@ -417,13 +429,9 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
             }
             p += l;
         }
-        let (lt, ln, br, mo, np) =
-            (s_lt.to_array(), s_ln.to_array(), s_br.to_array(), s_mo.to_array(), s_np.to_array());
-        let mut out = Sums::default();
+        let (mo, np) = (s_mo.to_array(), s_np.to_array());
+        let mut out = Sums { lost_t: b_lt, lost_n: b_ln, broken: b_br, ..Sums::default() };
         for k in 0..l {
-            out.lost_t += lt[k];
-            out.lost_n += ln[k];
-            out.broken += br[k];
             out.max_overlap = out.max_overlap.max(mo[k]);
             out.pairs += np[k] as u64;
         }
