@@ -157,9 +157,18 @@ def test_render_frame_in_a_loop_keeps_one_view_with_an_extent():
     assert len(set(centres["fitted"])) > 1, centres["fitted"]
 
 
-@pytest.mark.parametrize("bad", [[0.0, 1.0], ([0, 0], [1]), ([0, 0], [-1, 1]), ([0, np.nan], [1, 1]), "box"])
-def test_render_frame_refuses_a_bad_extent(bad):
-    with pytest.raises(pc.InvalidInputError, match="extent"):
+@pytest.mark.parametrize(
+    ("bad", "error"),
+    [
+        ([0.0, 1.0], pc.InvalidInputError),
+        (([0, 0], [1]), pc.InvalidInputError),
+        (([0, 0], [-1, 1]), pc.InvalidInputError),
+        (([0, np.nan], [1, 1]), pc.InvalidInputError),
+        ("box", pc.InvalidTypeError),  # not numbers at all: a TypeError, as everywhere else
+    ],
+)
+def test_render_frame_refuses_a_bad_extent(bad, error):
+    with pytest.raises(error, match="extent"):
         render.render_frame(np.zeros((2, 2)), extent=bad, size=(32, 32))
 
 
