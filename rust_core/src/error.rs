@@ -188,6 +188,26 @@ pub fn invalid(arg: &str, msg: impl Into<String>) -> Error {
     Error::InvalidInput { arg: arg.to_string(), msg: msg.into() }
 }
 
+/// Bytes in decimal units, three significant digits: "800 MB", "1.92 GB".
+pub fn human(bytes: u64) -> String {
+    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut x = bytes as f64;
+    let mut u = 0;
+    while x >= 999.5 && u + 1 < units.len() {
+        x /= 1000.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{bytes} bytes")
+    } else if x >= 99.95 {
+        format!("{x:.0} {}", units[u])
+    } else if x >= 9.995 {
+        format!("{x:.1} {}", units[u])
+    } else {
+        format!("{x:.2} {}", units[u])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -258,25 +278,5 @@ mod tests {
         assert!(!springs.contains("softening") && !springs.contains("e0 s"), "{springs}");
         let gravity = e(Remedies { softening: true, implicit: false });
         assert!(gravity.contains("softening") && !gravity.contains("implicit_euler"), "{gravity}");
-    }
-}
-
-/// Bytes in decimal units, three significant digits: "800 MB", "1.92 GB".
-pub fn human(bytes: u64) -> String {
-    let units = ["bytes", "kB", "MB", "GB", "TB", "PB", "EB"];
-    let mut x = bytes as f64;
-    let mut u = 0;
-    while x >= 999.5 && u + 1 < units.len() {
-        x /= 1000.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} bytes")
-    } else if x >= 99.95 {
-        format!("{x:.0} {}", units[u])
-    } else if x >= 9.995 {
-        format!("{x:.1} {}", units[u])
-    } else {
-        format!("{x:.2} {}", units[u])
     }
 }
