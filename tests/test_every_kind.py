@@ -16,11 +16,12 @@ import subprocess
 import sys
 import textwrap
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from test_interrupt import _interrupt
+from test_resources import NPROC_LIMIT
 
 import physcore as pc
 from physcore.scenes import REGISTRY
@@ -37,27 +38,6 @@ STEP_BOUND = 10.0  # s for one step of a scene loaded from a damaged file (its o
 
 def _same(a: dict, b: dict) -> bool:
     return BENCH.difference(a, b) == 0.0
-
-
-def _interrupt(call, delay: float) -> float:
-    """Runs ``call()`` with SIGINT sent ``delay`` s into it; it must raise KeyboardInterrupt.
-    Returns the latency from the signal to the exception."""
-    sent: list[float] = []
-
-    def fire():
-        sent.append(time.perf_counter())
-        os.kill(os.getpid(), signal.SIGINT)
-
-    timer = threading.Timer(delay, fire)
-    timer.start()
-    try:
-        with pytest.raises(KeyboardInterrupt):
-            call()
-        caught = time.perf_counter()
-    finally:
-        timer.cancel()
-    assert sent, "the call ended before the signal was sent"
-    return caught - sent[0]
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
@@ -124,24 +104,7 @@ def run(name, threads=None):
 # unprivileged user below may not read the interpreter's site-packages).
 reference = {name: run(name, 1) for name in sorted(REGISTRY)}
 
-# Root is exempt from RLIMIT_NPROC: drop to nobody (modules above are loaded already).
-if os.geteuid() == 0:
-    try:
-        os.setgid(65534)
-        os.setuid(65534)
-    except OSError as e:
-        print(f"SKIP: cannot drop root privileges ({e})")
-        sys.exit(0)
-soft, hard = resource.getrlimit(resource.RLIMIT_NPROC)
-resource.setrlimit(resource.RLIMIT_NPROC, (1, hard))
-try:
-    threading.Thread(target=lambda: None).start()
-except RuntimeError:
-    pass
-else:
-    print("SKIP: RLIMIT_NPROC does not stop threads here")
-    sys.exit(0)
-
+""" + NPROC_LIMIT + """
 limited = {}
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")

@@ -331,7 +331,7 @@ def test_fuzz_parts_long(case):
 def test_every_hostile_value_on_every_part(key):
     """Every value of the hostile list on this argument (cheap: about 3 s for all of them)."""
     for value in HOSTILE:
-        _check_part((key, value))
+        assert _check_part((key, value)) in ("built", "refused")
 
 
 # --------------------------------------------------------------------------- render_frame
@@ -384,30 +384,32 @@ _gif_value = st.one_of(hostile, st.sampled_from(["mass", "dark", "light", "orbit
 _gif_case = st.tuples(st.sampled_from(GIF_OPTIONS), _gif_value)
 
 
-def _check_gif_option(case):
+def _check_gif_option(case) -> bool:
+    """True when the option drew a GIF (one file) or was refused (none), as it must."""
     arg, value = case
     outcome, files = _check_gif(case)
     assert len(files) == (outcome == "written"), f"{arg}={value!r}: {outcome}, files left: {files}"
+    return len(files) == (outcome == "written")
 
 
 @settings(max_examples=FAST, derandomize=True, deadline=None)
 @given(_gif_case)
 @example(("trail", 10**30))
 def test_fuzz_gif_options(case):
-    _check_gif_option(case)
+    assert _check_gif_option(case)
 
 
 @pytest.mark.fuzz
 @settings(max_examples=LONG, deadline=None)
 @given(_gif_case)
 def test_fuzz_gif_options_long(case):
-    _check_gif_option(case)
+    assert _check_gif_option(case)
 
 
 @pytest.mark.parametrize("arg", GIF_OPTIONS)
 def test_every_hostile_value_on_gif_options(arg):
     for value in HOSTILE:
-        _check_gif_option((arg, value))
+        assert _check_gif_option((arg, value))
 
 
 def test_gif_option_fuzz_draws_a_scene():

@@ -130,12 +130,9 @@ print("ok")
     assert out.strip() == "ok"
 
 
-NPROC = """
-import os, resource, sys, threading, warnings
-import numpy as np
-import numpy.random
-import physcore as pc
-
+#: Child-script lines that limit the process to one thread (RLIMIT_NPROC = 1, as nobody: root is
+#: exempt), or exit printing SKIP where that cannot be done; `soft, hard` keep the old limits.
+NPROC_LIMIT = """
 # Root is exempt from RLIMIT_NPROC: drop to nobody (modules above are loaded already).
 if os.geteuid() == 0:
     try:
@@ -153,7 +150,16 @@ except RuntimeError:
 else:
     print("SKIP: RLIMIT_NPROC does not stop threads here")
     sys.exit(0)
+"""
 
+
+NPROC = """
+import os, resource, sys, threading, warnings
+import numpy as np
+import numpy.random
+import physcore as pc
+
+""" + NPROC_LIMIT + """
 def run(threads):
     scene = pc.Scene(3, integrator="rk4", dt=1e-3, threads=threads)
     rng = np.random.default_rng(0)
