@@ -50,7 +50,7 @@ def test_the_hertz_restitution_does_not_depend_on_the_impact_speed(law):
     assert max(got) - min(got) < 0.004, got
 
 
-def _gas(n: int, seed: int, friction: float, e: float, dim: int = 2, threads: int = 1) -> pc.Scene:
+def _gas(n: int, seed: int, friction: float, e: float, dim: int = 2, threads: int = 1, rolling_friction: float = 0.0) -> pc.Scene:
     rng = np.random.default_rng(seed)
     side = int(math.ceil(n ** (1 / dim)))
     grid = np.stack(np.meshgrid(*[np.arange(side)] * dim, indexing="ij"), -1).reshape(-1, dim)[:n]
@@ -59,7 +59,7 @@ def _gas(n: int, seed: int, friction: float, e: float, dim: int = 2, threads: in
     s = pc.Scene(dim=dim, integrator="semi_implicit_euler", threads=threads)
     s.add_particles(x, v, masses=rng.uniform(0.005, 0.02, n))
     s.set_attribute("radius", rng.uniform(0.008, 0.0105, n))
-    s.add(pc.Contacts(stiffness=2e3, restitution=e, friction=friction))
+    s.add(pc.Contacts(stiffness=2e3, restitution=e, friction=friction, rolling_friction=rolling_friction))
     s.dt = s.suggest_dt()  # a 50th of the contact duration
     return s
 

@@ -17,6 +17,7 @@ import math
 
 import numpy as np
 import pytest
+from test_contacts import _gas as _contacts_gas
 
 import physcore as pc
 
@@ -165,17 +166,8 @@ def test_past_its_angle_a_grain_rolls_down_slowed_by_rolling_friction(dim):
 
 
 def _gas(n: int, seed: int, mu_r: float, dim: int = 2, threads: int = 1) -> pc.Scene:
-    rng = np.random.default_rng(seed)
-    side = int(math.ceil(n ** (1 / dim)))
-    grid = np.stack(np.meshgrid(*[np.arange(side)] * dim, indexing="ij"), -1).reshape(-1, dim)[:n]
-    x = grid * 0.021 + rng.uniform(-0.0005, 0.0005, (n, dim))
-    v = rng.normal(0.0, 0.5, (n, dim))
-    s = pc.Scene(dim=dim, integrator="semi_implicit_euler", threads=threads)
-    s.add_particles(x, v, masses=rng.uniform(0.005, 0.02, n))
-    s.set_attribute("radius", rng.uniform(0.008, 0.0105, n))
-    s.add(pc.Contacts(stiffness=2e3, restitution=0.7, friction=0.5, rolling_friction=mu_r))
-    s.dt = s.suggest_dt()
-    return s
+    """test_contacts' granular gas (friction 0.5, restitution 0.7) with rolling resistance μ_r."""
+    return _contacts_gas(n, seed, 0.5, 0.7, dim, threads, rolling_friction=mu_r)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
