@@ -30,6 +30,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from . import _core
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, LoadContext
 from .terms import Box, Plane, Term, _finite_float
@@ -254,11 +255,7 @@ class Contacts(Term, kind="contacts"):
         }
 
     def _attach(self, ctx: AttachContext, name: str) -> Contacts:
-        if ctx.integrator not in ("semi_implicit_euler", "xpbd"):
-            raise InvalidInputError(
-                f"integrator: Contacts need integrator='semi_implicit_euler' or 'xpbd' (the scene uses {ctx.integrator!r}); "
-                "build the scene with pc.Scene(..., integrator='semi_implicit_euler') or set scene.integrator first"
-            )
+        _core.check_integrator("contacts", ctx.integrator)  # the core's part–integrator rule
         if "radius" not in ctx.attributes:
             raise InvalidInputError('radius: Contacts need the scene\'s "radius" attribute: scene.set_attribute("radius", r) first')
         ratio = self.tangential_ratio if self.tangential_ratio is not None else _equal_periods(ctx.dim)

@@ -130,39 +130,30 @@ def neighbors(points: np.typing.ArrayLike, radius: float) -> tuple[np.ndarray, n
 
 
 def kernel_w(q: np.ndarray, h: float, dim: int, kernel: str = "cubic_spline") -> np.ndarray:
-    """The smoothing kernel ``W(r) = σ_d w(q)``, ``q = r/h``, support ``2h`` (1/m^dim).
+    """The smoothing kernel ``W(r) = σ_d w(q)``, ``q = r/h``, support ``2h`` (1/m^dim): an array
+    of q's shape, float64. The core's formula (``sph::resolve``), which also gives the fluid's
+    particle mass and wall volumes.
 
-    Cubic spline: ``w = ¼(2−q)₊³ − (1−q)₊³``, ``σ₂ = 10/(7πh²)``, ``σ₃ = 1/(πh³)``.
-    Wendland C2: ``w = (1 − q/2)₊⁴ (2q + 1)``, ``σ₂ = 7/(4πh²)``, ``σ₃ = 21/(16πh³)``.
+    Cubic spline (Monaghan & Lattanzio 1985, eq. 21): ``w = ¼(2−q)₊³ − (1−q)₊³``,
+    ``σ₂ = 10/(7πh²)``, ``σ₃ = 1/(πh³)``.
+    Wendland C2 (Wendland 1995): ``w = (1 − q/2)₊⁴ (2q + 1)``, ``σ₂ = 7/(4πh²)``, ``σ₃ = 21/(16πh³)``.
+
+    Raises InvalidInputError naming ``q`` (negative or not finite), ``h`` (not finite and > 0,
+    or without ``h^dim`` in float64), ``dim`` or ``kernel``.
     """
     q = _check.real_array("q", q).astype(np.float64)
     h = _finite_float(h, "h", minimum=0.0, strict=True)
     dim = _check.int_in_range("dim", dim, 2, 3)
     kernel = _check.choice("kernel", kernel, KERNELS)
-    if not np.isfinite(q).all() or (q.size and q.min() < 0):
-        raise InvalidInputError("q: must be finite and >= 0 (r/h)")
-    with np.errstate(over="ignore", under="ignore", divide="ignore"):
-        inv = 1.0 / np.float64(h) ** dim  # the normalisation's 1/h^dim
-    if not (math.isfinite(inv) and inv > 0):
-        raise InvalidInputError(f"h: {h} m has no h^{dim} and 1/h^{dim} inside float64")
-    if kernel == "cubic_spline":
-        s = float(inv) * (10.0 / (7.0 * math.pi) if dim == 2 else 1.0 / math.pi)
-        return s * (0.25 * np.clip(2.0 - q, 0, None) ** 3 - np.clip(1.0 - q, 0, None) ** 3)
-    if kernel == "wendland_c2":
-        s = float(inv) * (7.0 / (4.0 * math.pi) if dim == 2 else 21.0 / (16.0 * math.pi))
-        t = np.clip(1.0 - 0.5 * q, 0, None)
-        return s * t**4 * (2.0 * np.minimum(q, 2.0) + 1.0)  # t = 0 beyond q = 2: no inf · 0 there
-    raise InvalidInputError(f"kernel: unknown kernel {kernel!r}; valid: {', '.join(KERNELS)}")
+    flat = np.ascontiguousarray(q.reshape(-1))
+    return _core.sph_kernel(flat, h, dim, kernel).reshape(q.shape)
 
 
 def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> float:
     """``Σ_j W(x_i − x_j)`` over an infinite cubic lattice of the given spacing (1/m^dim): a fluid
-    particle's mass ``ρ0 / sum`` makes a lattice at rest have exactly the rest density."""
-    k = int(math.ceil(2.0 * h / spacing)) + 1
-    ax = np.arange(-k, k + 1) * spacing
-    grids = np.meshgrid(*([ax] * dim), indexing="ij")
-    r = np.sqrt(sum(g**2 for g in grids))
-    return float(kernel_w(r / h, h, dim, kernel).sum())
+    particle's mass ``ρ0 / sum`` makes a lattice at rest have exactly the rest density (the
+    core's formula, ``sph::resolve``)."""
+    return float(_core.sph_lattice_sum(float(spacing), float(h), int(dim), str(kernel)))
 
 
 def _corner(value: object, arg: str) -> np.ndarray:
@@ -350,6 +341,9 @@ class Fluid(Term, kind="fluid"):
         (a ``ValueError``) A value out of range, naming it, including a density and spacing
         whose particle mass ``≈ ρ0 Δx^dim`` or Tait stiffness ``ρ0 c0²`` float64 cannot hold.
     """
+
+    #: Not replaceable by :meth:`Scene.replace`: it owns particles and a neighbour search.
+    replaceable: ClassVar[bool] = False
 
     positions: np.ndarray
     spacing: float
@@ -568,39 +562,32 @@ class Fluid(Term, kind="fluid"):
         """Mass of each particle, kg (see ``mass``)."""
         if self.mass is not None:
             return self.mass
-        return self.density / lattice_density_sum(self.spacing, self.h, self.dim, self.kernel)
+        return float(_core.sph_particle_mass(self.density, self.spacing, self.h, self.dim, self.kernel))
 
     def wall_psi(self) -> np.ndarray:
-        """``Ψ_b = ρ0 V_b`` of each wall particle, kg: (M,) float64."""
+        """``Ψ_b = ρ0 V_b`` of each wall particle, kg: (M,) float64 (the core's formula,
+        ``sph::resolve``; Akinci et al. 2012, eq. 4–5). Raises InvalidInputError naming
+        ``wall_volume, density`` where one is not a finite number > 0."""
         if self.walls is None or len(self.walls) == 0:
             return np.zeros(0)
         wv = self.wall_volume
+        walls = np.ascontiguousarray(self.walls, dtype=np.float64)
         if isinstance(wv, np.ndarray):
-            return self.density * wv
-        if wv == "lattice":
-            return np.full(len(self.walls), self.particle_mass())
-        i, j = neighbors(self.walls, 2.0 * self.h)
-        r = np.linalg.norm(self.walls[i] - self.walls[j], axis=1)
-        w = kernel_w(r / self.h, self.h, self.dim, self.kernel)
-        total = np.full(len(self.walls), float(kernel_w(np.zeros(1), self.h, self.dim, self.kernel)[0]))
-        total += np.bincount(i, w, len(self.walls)) + np.bincount(j, w, len(self.walls))
-        return self.density / total
+            given = np.ascontiguousarray(wv, dtype=np.float64).reshape(-1)
+            return _core.sph_wall_psi(walls, self.density, self.h, self.kernel, "given", 0.0, given)
+        mass = self.particle_mass() if wv == "lattice" else 0.0
+        return _core.sph_wall_psi(walls, self.density, self.h, self.kernel, wv, mass)
 
     def max_dt(self) -> float:
-        """CFL limit at rest, s (needs ``sound_speed``): WCSPH ``0.25 h / (c0 (1 + 0.6 α))``;
-        DFSPH: the viscous limit ``0.125 h²/ν = (d + 2) h/(4 α c0)`` and, with surface tension, the
-        capillary limit ``0.25 √(ρ0 h³/(2π max(σ, adhesion)))`` (infinite without either: the
-        flow's speed sets it)."""
+        """The step limit at rest, s (needs ``sound_speed``; the core's formula, ``sph::resolve``):
+        WCSPH ``0.25 h / (c0 (1 + 0.6 α))`` (Monaghan 1992, §5); DFSPH: the viscous limit
+        ``0.125 h²/ν = (d + 2) h/(4 α c0)`` (Monaghan 2005, §4.3) and, with surface tension, the
+        capillary limit ``0.25 √(ρ0 h³/(2π max(σ, adhesion)))`` (Brackbill et al. 1992, eq. 61)
+        (infinite without either: the flow's speed sets it)."""
         if self.sound_speed is None:
             raise InvalidInputError("sound_speed: not set yet (it is estimated when the fluid is added to a scene)")
-        if self.method == "dfsph":
-            visc = self.viscosity * self.sound_speed
-            limit = (self.dim + 2) * self.h / (4.0 * visc) if visc > 0 else math.inf
-            s = max(self.surface_tension, self.adhesion)
-            if s > 0:
-                limit = min(limit, 0.25 * math.sqrt(self.density * self.h**3 / (2.0 * math.pi * s)))
-            return limit
-        return 0.25 * self.h / (self.sound_speed * (1.0 + 0.6 * self.viscosity))
+        return float(_core.sph_max_dt(self.method, self.dim, self.h, self.sound_speed, self.viscosity,
+                                      self.density, self.surface_tension, self.adhesion))
 
 
 # ----------------------------------------------------------------------------- joining a scene
@@ -608,32 +595,13 @@ class Fluid(Term, kind="fluid"):
 _FLUIDS_PER_SEARCH = 8
 
 
-def _norm(v: np.typing.ArrayLike) -> float:
-    """Euclidean norm without overflow warnings: inf when it is beyond float64."""
-    try:
-        return math.hypot(*(float(c) for c in np.ravel(v)))
-    except OverflowError:
-        return math.inf
-
-
-def _max_row_norm(a: np.ndarray) -> float:
-    """Largest row norm of a finite (N, d) array, scaled so that squaring cannot overflow."""
-    top = float(np.max(np.abs(a))) if a.size else 0.0
-    if top == 0.0:
-        return 0.0
-    return top * float(np.sqrt(np.max(np.einsum("ij,ij->i", a / top, a / top))))
-
-
 def _check_fluid_method(ctx: AttachContext, fluid: Fluid) -> None:
-    """Refuse, before anything is added, a DFSPH fluid this scene cannot step: DFSPH runs
-    inside "semi_implicit_euler" steps, and one DFSPH fluid cannot push on another fluid
-    (it has no shared search), so it must be the scene's only fluid."""
+    """Refuse, before anything is added, a DFSPH fluid this scene cannot step: the core's
+    part–integrator rule (DFSPH runs inside "semi_implicit_euler" steps), and one DFSPH fluid
+    cannot push on another fluid (it has no shared search), so it must be the scene's only fluid."""
     others = [t for t in ctx.parts if isinstance(t, Fluid)]
     if fluid.method == "dfsph":
-        if ctx.integrator != "semi_implicit_euler":
-            raise InvalidInputError(
-                f"method: DFSPH steps with integrator='semi_implicit_euler' only (this scene uses {ctx.integrator!r})"
-            )
+        _core.check_integrator("dfsph", ctx.integrator)
         if others:
             raise InvalidInputError(
                 f"method: a DFSPH fluid must be the scene's only fluid (it would pass through {others[0].name!r})"
@@ -675,37 +643,15 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
         raise InvalidInputError(f"positions: the fluid is {fluid.dim}D, the scene is {dim}D")
     c0 = fluid.sound_speed
     if c0 is None:
+        # The core estimates it (``sph::resolve::sound_speed``) from the scene's gravity.
         g = sum((t.g for t in ctx.parts if isinstance(t, Gravity)), np.zeros(dim))
-        gn = _norm(g)
-        # Overflow (huge g, positions or velocities) gives inf here, refused below by name.
-        with np.errstate(over="ignore", invalid="ignore"):
-            height = float(np.ptp(fluid.positions @ (g / gn))) + fluid.spacing if 0 < gn < math.inf and len(fluid) else 0.0
-            v0 = 0.0 if fluid.velocities is None or not len(fluid) else _max_row_norm(fluid.velocities)
-        vmax = max(math.sqrt(2.0 * gn * height) if gn < math.inf else math.inf, v0)
-        s = max(fluid.surface_tension, fluid.adhesion)
-        if s > 0:
-            # Surface tension moves a fluid at rest too: the capillary speed √(σ/(ρ0 h)).
-            with np.errstate(over="ignore"):
-                vmax = max(vmax, math.sqrt(s / (fluid.density * fluid.h)))
-        if not vmax > 0:
-            raise InvalidInputError(
-                "sound_speed: cannot be estimated for a fluid at rest (velocities) without gravity or without "
-                "positions spread along it; give sound_speed= (m/s)"
-            )
-        c0 = 10.0 * vmax
-        if not (math.isfinite(c0) and math.isfinite(fluid.density * c0 * c0)):
-            surface = ", surface_tension, adhesion" if s > 0 else ""
-            raise InvalidInputError(
-                f"sound_speed{surface}: the estimate 10·v_max = {c0:.3g} m/s, from gravity, the height of the positions, "
-                f"the velocities{' and the capillary speed' if s > 0 else ''}, makes the Tait stiffness density · c0² "
-                "overflow float64; give sound_speed= (m/s)"
-            )
+        pos = np.ascontiguousarray(fluid.positions, dtype=np.float64)
+        vel = None if fluid.velocities is None else np.ascontiguousarray(fluid.velocities, dtype=np.float64)
+        c0 = float(_core.sph_sound_speed(pos, vel, np.ascontiguousarray(g, dtype=np.float64), fluid.spacing,
+                                         fluid.density, fluid.h, max(fluid.surface_tension, fluid.adhesion)))
     fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
     walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
-    with np.errstate(over="ignore"):
-        psi = fluid.wall_psi()
-    if not np.all(np.isfinite(psi) & (psi > 0)):
-        raise InvalidInputError("wall_volume, density: density · wall volume is not a finite number > 0 (kg) for every wall particle")
+    psi = fluid.wall_psi()
     max_dt = fluid.max_dt()
     # The scene's dt is lowered to this; a subnormal or zero step would never advance.
     if not max_dt >= _check.MIN_NORMAL:

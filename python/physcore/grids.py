@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from . import _check
+from . import _check, _core
 from ._errors import InvalidInputError, InvalidTypeError, allocating
 from ._parts import AttachContext, Host, LoadContext, Part, check_system
 
@@ -367,8 +367,8 @@ class Wave(Grid):
 
     @property
     def cfl_limit(self) -> float:
-        """The largest stable step dx / (c √dim), s."""
-        return self.dx / (self.c * math.sqrt(self.dim))
+        """The largest stable step dx / (c √dim), s (the core's formula)."""
+        return float(_core.grid_limits(self.kind, self.dim, {**Grid._params(self), "c": self.c})["cfl_limit"])
 
     def _profiles(self) -> dict[str, Any]:
         p: dict[str, Any] = {}
@@ -515,8 +515,9 @@ class GrayScott(Grid):
 
     @property
     def diffusion_limit(self) -> float:
-        """The largest stable step dx² / (2·dim·max(D_u, D_v)), s."""
-        return self.dx * self.dx / (2 * self.dim * max(self.du, self.dv))
+        """The largest stable step dx² / (2·dim·max(D_u, D_v)), s (the core's formula)."""
+        params = {**Grid._params(self), "du": self.du, "dv": self.dv}
+        return float(_core.grid_limits(self.kind, self.dim, params)["diffusion_limit"])
 
     def _params(self) -> dict[str, Any]:
         p = super()._params()

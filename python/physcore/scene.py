@@ -6,6 +6,7 @@ all state and steps ``n`` steps per call with the GIL released. Arrays cross in 
 from __future__ import annotations
 
 import contextvars
+import dataclasses
 import io
 import json
 import math
@@ -104,11 +105,27 @@ def _usable_cpus() -> int:
 
 
 def _check_dt(dt: object) -> float:
-    dt = _check.real("dt", dt)
-    # A subnormal step has no usable reciprocal (rates, CFL ratios) and would never advance time.
-    if not (math.isfinite(dt) and dt >= _MIN_DT):
-        raise InvalidInputError(f"dt: must be finite and >= {_MIN_DT:.3g} (seconds), got {dt}")
-    return dt
+    """``dt`` as a float; its range (finite, >= the smallest normal float64) is the core's rule
+    (``world::check_dt``), checked when the core takes it."""
+    return _check.real("dt", dt)
+
+
+class _Replacing:
+    """The core simulation as a part sees it while it replaces a term (:meth:`Scene.replace`):
+    its ``add_term`` becomes the core's ``replace_term``."""
+
+    def __init__(self, sim: Any) -> None:
+        self._sim = sim
+
+    def add_term(self, kind: str, name: str, params: dict[str, Any]) -> None:
+        self._sim.replace_term(kind, name, params)
+
+    def __getattr__(self, attr: str) -> Any:
+        return getattr(self._sim, attr)
+
+
+def _no_particles(*_args: Any, **_kw: Any) -> Any:
+    raise InvalidInputError("item: a part that brings particles (a fluid) cannot replace a term")
 
 
 def _check_integrator(name: object) -> str:
@@ -443,6 +460,40 @@ class Scene:
         self._parts.append(stored)
         if cls.changes_energy:
             self._e0 = None
+        return stored
+
+    def replace(self, name: str, item: Any) -> Any:
+        """Put force term ``item`` in place of the term called ``name``, keeping the scene's state,
+        time, books and the term's place in the evaluation order (the core's ``replace_term``):
+        what the viewer's parameter keys do. ``item`` must be of the same class as the term it
+        replaces; it takes that term's name. The integrator's cached forces are dropped and the
+        energy-drift reference restarts (the energy's definition may have changed).
+
+        Returns the term as stored. Raises InvalidInputError naming ``name`` (no such term),
+        ``item`` (another class, or a fluid, whose particles and neighbour search it owns) or
+        the record's field, and InvalidTypeError for an ``item`` that is not a term; nothing
+        changes then.
+        """
+        if not isinstance(name, str):
+            raise InvalidTypeError(f"name: expected a term name (str), got {type(name).__name__}")
+        terms = [k for k, p in enumerate(self._parts) if p.section == "terms" and p.name == name]
+        if not terms:
+            raise InvalidInputError(f"name: the scene has no term named {name!r}")
+        at = terms[0]
+        old = self._parts[at]
+        if part_class(item) is None or not isinstance(item, Term):
+            raise InvalidTypeError(f"item: expected a physcore term, got {type(item).__name__}")
+        if not getattr(type(old), "replaceable", True):
+            raise InvalidInputError(f"item: {name!r} is a {type(old).__name__}, which owns particles and cannot be replaced")
+        if type(item) is not type(old):
+            raise InvalidInputError(f"item: {name!r} is a {type(old).__name__}; a {type(item).__name__} cannot replace it")
+        ctx = self._context({})
+        sim = _Replacing(self._sim)
+        ctx = dataclasses.replace(ctx, sim=sim, parts=tuple(p for p in self._parts if p is not old),
+                                  names={**ctx.names, "terms": ctx.names["terms"] - {name}}, add_particles=_no_particles)
+        stored = item._attach(ctx, name)
+        self._parts[at] = stored
+        self._e0 = None
         return stored
 
     def _context(self, restoring: dict[str, Any]) -> AttachContext:

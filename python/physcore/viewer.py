@@ -39,12 +39,11 @@ and every write of the state restarts the scene's energy-drift reference
 (:attr:`physcore.Scene.positions`), so :meth:`~physcore.Scene.energy_drift` afterwards measures
 from the last write.
 
-Terms are immutable records (:mod:`physcore.terms`) and a scene cannot swap one in place, so a
-parameter key rebuilds the scene through its own saved form (the in-memory scene file of
-:meth:`physcore.Scene.save`, read back by the loader's checks) with the one term's record
-changed: positions, velocities, time, step count and the dissipated-energy ledger carry over;
-the integrator's force cache is dropped (the forces are recomputed with the new parameter), and
-the energy-drift reference restarts (the potential changed with the parameter). A fixed-step
+Terms are immutable records (:mod:`physcore.terms`); a parameter key puts a new record in place
+of the old one with :meth:`physcore.Scene.replace` (the core's ``replace_term``: no scene file is
+written): positions, velocities, time, step count and the dissipated-energy ledger stay; the
+integrator's force cache is dropped (the forces are recomputed with the new parameter), and the
+energy-drift reference restarts (the potential changed with the parameter). A fixed-step
 scene whose change shortens its stability limit (:meth:`physcore.Scene.suggest_dt`) gets a
 proportionally smaller dt, never a larger one than it started with, so stiffening stays stable.
 
@@ -61,6 +60,7 @@ Run the hanging cloth for 2 s of wall time and keep a screenshot (needs a displa
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -314,12 +314,13 @@ def _rebuild(scene: Any, edit: Callable[[dict, dict], None], like: Any = None) -
 
 
 def scale_param(scene: Any, name: str, factor: float) -> Any:
-    """A copy of `scene` (same state, time and books) with parameter `name` (see
-    :func:`param_value`) multiplied by `factor` in every term that has it. Damping at 0 that is
+    """Multiply parameter `name` (see :func:`param_value`) by `factor` in every term of `scene`
+    that has it, in place (:meth:`physcore.Scene.replace`: the core swaps the terms, the state,
+    time and books stay; no scene file is written), and return `scene`. Damping at 0 that is
     increased starts at 1 % of the critical damping 2 √(k m) of the mean spring and particle.
 
     Raises InvalidInputError naming `name` where the scene has no such term, or `factor` is not
-    a finite number > 0.
+    a finite number > 0; nothing changes then.
     """
     factor = _check.real("factor", factor)
     if not (factor > 0 and math.isfinite(factor)):
@@ -335,19 +336,16 @@ def scale_param(scene: Any, name: str, factor: float) -> Any:
     if kick:
         k, m = param_value(scene, "stiffness") or 0.0, float(np.mean(scene.masses)) if scene.n_particles else 0.0
         base = 0.01 * 2.0 * math.sqrt(max(k * m, 0.0))
-
-    def edit(meta: dict, arrays: dict) -> None:
-        for k, _ in terms:
-            rec = meta["terms"][k]
-            if name in ("stiffness", "damping"):
-                a = arrays[f"term{k}_{name}"]
-                arrays[f"term{k}_{name}"] = np.full_like(a, base) if kick else a * factor
-            elif name == "gravity":
-                rec["g"] = [factor * float(c) for c in rec["g"]]
-            else:
-                rec["coefficient"] = factor * float(rec["coefficient"])
-
-    return _rebuild(scene, edit)
+    for _, t in terms:
+        if name in ("stiffness", "damping"):
+            a = np.asarray(getattr(t, name), dtype=np.float64)
+            new = dataclasses.replace(t, **{name: np.full_like(a, base) if kick else a * factor})
+        elif name == "gravity":
+            new = dataclasses.replace(t, g=np.array([factor * float(c) for c in t.g]))
+        else:
+            new = dataclasses.replace(t, coefficient=factor * float(t.coefficient))
+        scene.replace(t.name, new)
+    return scene
 
 
 # --------------------------------------------------------------------------- the live state
@@ -358,6 +356,7 @@ class _Live:
     def __init__(self, scene: Any, color_by: str) -> None:
         from .render._recording import default_stepping, scene_defaults
 
+        # Stepped in place, and parameter keys replace its terms in place (Scene.replace).
         self.scene = scene
         self.start = _rebuild(scene, lambda meta, arrays: None)  # the state to reset to
         d = scene_defaults(scene)
@@ -687,8 +686,8 @@ class ViewResult(NamedTuple):
     Attributes
     ----------
     scene : physcore.Scene
-        The scene as the viewer left it (a parameter key or a reset replaces the scene given:
-        this is the one running at the end).
+        The scene as the viewer left it: the scene given, stepped and with its parameter keys'
+        terms replaced in place, unless a reset replaced it by a copy of its start.
     ticks : int
         Ticks run (each the scene's GIF frame: ``frame_time`` simulated seconds).
     draws : int
@@ -1058,8 +1057,9 @@ def view(
     ----------
     scene : physcore.Scene
         A scene with particles (2D or 3D); its ``render_defaults`` give the stepping (as
-        ``physcore render``), colours, size and playback rate. It is stepped in place until a
-        parameter key or a reset replaces it (the result's ``scene`` is the last one).
+        ``physcore render``), colours, size and playback rate. It is stepped, and its terms
+        changed by parameter keys, in place until a reset replaces it by a copy of its start
+        (the result's ``scene`` is the last one).
     name : str, default "scene"
         For the window's title and the screenshots' names (``NAME-001.png``).
     size : (int, int), optional

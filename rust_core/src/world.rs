@@ -727,9 +727,15 @@ fn spawn_watched<'s>(
     });
 }
 
-fn check_dt(dt: Real) -> Result<()> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(invalid("dt", format!("{dt} must be finite and > 0 (seconds)")));
+/// The one rule for a step: finite and at least the smallest normal float64 (a subnormal step
+/// has no usable reciprocal for rates and CFL ratios, and would never advance time). The facade
+/// checks only that `dt` is a real number and shows this message.
+pub fn check_dt(dt: Real) -> Result<()> {
+    if !(dt.is_finite() && dt >= Real::MIN_POSITIVE) {
+        return Err(invalid(
+            "dt",
+            format!("must be finite and >= {:.3e} s, got {}", Real::MIN_POSITIVE, crate::error::seconds(dt)),
+        ));
     }
     Ok(())
 }

@@ -124,6 +124,25 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
     }
 }
 
+/// The step limits of a grid of `kind` from the same parameters `build` takes (only the grid and
+/// the numbers a limit needs are read; nothing is allocated): `("cfl_limit", s)` for "wave",
+/// `("diffusion_limit", s)` for "gray_scott", none for "fluid" (its limit follows the flow).
+pub fn limits(kind: &str, dim: usize, mut p: Params) -> Result<Vec<(&'static str, Real)>> {
+    let grid = grid_of(&mut p, dim)?;
+    Ok(match kind {
+        "wave" => {
+            let c = WaveConfig::new("limits", grid, p.number("c")?);
+            vec![("cfl_limit", c.cfl_limit())]
+        }
+        "gray_scott" => {
+            let c = GrayScottConfig::new("limits", grid, p.number("du")?, p.number("dv")?, 0.0, 0.0);
+            vec![("diffusion_limit", c.diffusion_limit())]
+        }
+        "fluid" => Vec::new(),
+        _ => return Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
+    })
+}
+
 fn grid_of(p: &mut Params, dim: usize) -> Result<Grid> {
     let shape = p.take_floats("shape")?;
     if shape.len() != dim {

@@ -45,6 +45,13 @@ pub struct GrayScottConfig {
 }
 
 impl GrayScottConfig {
+    /// The diffusion limit dx²/(2·dim·max(D_u, D_v)), s: forward Euler on the 5- (7-) point
+    /// Laplacian is stable for diffusion alone below it (von Neumann analysis).
+    pub fn diffusion_limit(&self) -> Real {
+        let g = &self.grid;
+        g.dx * g.dx / (2.0 * g.dim as Real * self.du.max(self.dv))
+    }
+
     pub fn new(name: &str, grid: Grid, du: Real, dv: Real, feed: Real, kill: Real) -> Self {
         Self { name: name.to_string(), grid, du, dv, feed, kill, cfl: 0.8 }
     }
@@ -127,10 +134,9 @@ impl GrayScottSystem {
         &self.v
     }
 
-    /// The diffusion limit dx²/(2·dim·max(D_u, D_v)), s.
+    /// The diffusion limit dx²/(2·dim·max(D_u, D_v)), s (`GrayScottConfig::diffusion_limit`).
     pub fn diffusion_limit(&self) -> Real {
-        let g = &self.cfg.grid;
-        g.dx * g.dx / (2.0 * g.dim as Real * self.cfg.du.max(self.cfg.dv))
+        self.cfg.diffusion_limit()
     }
 
     /// A bound ρ_R (1/s) on the spectral radius of the reactions' Jacobian

@@ -83,6 +83,12 @@ pub struct WaveConfig {
 }
 
 impl WaveConfig {
+    /// The CFL limit dx/(c√dim), s: the leapfrog scheme is stable for c·dt/dx ≤ 1/√dim
+    /// (Langtangen & Linge 2017, §2.1).
+    pub fn cfl_limit(&self) -> Real {
+        self.grid.dx / (self.c * (self.grid.dim as Real).sqrt())
+    }
+
     pub fn new(name: &str, grid: Grid, c: Real) -> Self {
         Self {
             name: name.to_string(),
@@ -295,9 +301,9 @@ impl WaveSystem {
         self.clock.t
     }
 
-    /// The CFL limit dx/(c√dim), s.
+    /// The CFL limit dx/(c√dim), s (`WaveConfig::cfl_limit`).
     pub fn cfl_limit(&self) -> Real {
-        self.cfg.grid.dx / (self.cfg.c * (self.cfg.grid.dim as Real).sqrt())
+        self.cfg.cfl_limit()
     }
 
     /// Sets the displacement u (m) and the velocity u_t (m/s) at the half step before now

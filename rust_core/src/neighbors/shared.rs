@@ -19,6 +19,11 @@ pub struct Shared {
 }
 
 impl Shared {
+    /// Whether no search is registered.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
     /// The search registered under `key`, if there is one of type `T`.
     pub fn find<T: Any + Send + Sync>(&self, key: &str) -> Option<Arc<T>> {
         let (_, e) = self.entries.iter().find(|(k, _)| k == key)?;

@@ -19,6 +19,7 @@ macro_rules! with_sim {
 
 mod convert;
 mod errors;
+mod formulas;
 mod simulation;
 mod watch;
 
@@ -228,6 +229,14 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterise_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;
     m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_kernel, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_lattice_sum, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_particle_mass, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_wall_psi, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_sound_speed, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::sph_max_dt, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::grid_limits, m)?)?;
+    m.add_function(wrap_pyfunction!(formulas::check_integrator, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -265,6 +265,25 @@ impl PySimulation {
         .map_err(|e| to_py(py, e))
     }
 
+    /// Replaces the force term `name` by one of registered type `kind` built from `params`
+    /// (`ParticleSystem::replace_term`): same place, books kept, state untouched; nothing changes
+    /// on error. What the viewer's parameter keys use.
+    fn replace_term(&mut self, py: Python<'_>, kind: &str, name: String, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
+        let p = params_of(py, ty.kind, params)?;
+        match &mut self.inner {
+            Inner::D2(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec2>(name, p, &ctx).and_then(|t| s.particles_mut().replace_term(t))
+            }
+            Inner::D3(s) => {
+                let ctx = Context { n_particles: s.n_particles() };
+                ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.particles_mut().replace_term(t))
+            }
+        }
+        .map_err(|e| to_py(py, e))
+    }
+
     /// Adds a grid system (`crate::grids::build`) of `kind` named `name`, built from `params`.
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;

@@ -1057,10 +1057,9 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         // uniform fields (a fluid falling from rest has no speed yet), and with surface tension
         // the capillary limit (`Surface::max_dt`). (WCSPH's form
         // λ h/(|v|max + 0.6 α c0) took 2199 steps to T* = 4 on the 41k dam break.)
-        let (h, d) = (self.p.h, V::DIM as Real);
+        let h = self.p.h;
         let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
-        let visc = self.p.alpha * self.p.c0;
-        let viscous = if visc > 0.0 { 0.125 * 2.0 * (d + 2.0) * h / visc } else { f64::INFINITY };
+        let viscous = super::resolve::dfsph_viscous(h, V::DIM, self.p.alpha, self.p.c0);
         let force = if g > 0.0 { 0.25 * (h / g).sqrt() } else { f64::INFINITY };
         let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
         let dt = cfl.min(viscous).min(force).min(capillary);
@@ -1113,7 +1112,7 @@ impl<V: Vector> Term<V> for Dfsph<V> {
     }
 
     fn integrators(&self) -> Option<&'static [&'static str]> {
-        Some(&["semi_implicit_euler"])
+        crate::terms::registry::integrator_rule("dfsph").map(|r| r.0)
     }
 
     fn projects_velocities(&self) -> bool {

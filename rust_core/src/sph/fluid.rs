@@ -224,7 +224,7 @@ impl<V: Vector> Term<V> for Sph<V> {
         let vs = &v[self.range()];
         let vmax = vs.iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
         // CFL (Monaghan 1992, §5, with the viscous term) and force criterion.
-        let cfl = 0.25 * self.p.h / (self.p.c0 * (1.0 + 0.6 * self.p.alpha) + vmax);
+        let cfl = super::resolve::wcsph_cfl(self.p.h, self.p.c0, self.p.alpha, vmax);
         let a = self.group().sums.amax[self.who].sqrt() + g;
         let force = if a > 0.0 { 0.25 * (self.p.h / a).sqrt() } else { f64::INFINITY };
         Some(cfl.min(force))

@@ -50,6 +50,7 @@ mod fluid;
 mod group;
 mod params;
 mod passes;
+pub mod resolve;
 pub mod surface;
 
 pub use dfsph::{Dfsph, DfsphParams};

@@ -160,7 +160,8 @@ impl Surface {
     pub fn max_dt(sigma: Real, adhesion: Real, rho0: Real, h: Real) -> Real {
         let s = sigma.max(adhesion);
         if s > 0.0 {
-            0.25 * (rho0 * h * h * h / (2.0 * PI * s)).sqrt()
+            // h³ by `pow`, as the facade computed the limit at rest before the core owned it.
+            0.25 * (rho0 * h.powf(3.0) / (2.0 * PI * s)).sqrt()
         } else {
             Real::INFINITY
         }

@@ -313,6 +313,26 @@ impl<V: Vector> ParticleSystem<V> {
         Ok(())
     }
 
+    /// Replaces the term named as `t` is by `t` (`ForceSet::replace`), checked as `add_term`
+    /// checks a new one; nothing changes on error. The integrator's cached forces are dropped.
+    pub fn replace_term(&mut self, t: Box<dyn Term<V>>) -> Result<()> {
+        let Some(at) = self.sys.forces.terms.iter().position(|o| o.name() == t.name()) else {
+            return Err(invalid("name", format!("the scene has no term named {:?}", t.name())));
+        };
+        if t.min_particles() > self.n_particles() {
+            return Err(invalid(
+                "term",
+                format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles()),
+            ));
+        }
+        check_integrator(t.as_ref(), self.integrator.info().name)?;
+        let mut t = t;
+        t.set_single(self.sys.single);
+        self.sys.forces.replace(at, t)?;
+        self.integrator.reset();
+        Ok(())
+    }
+
     /// Appends a constraint to the projection stage (walls: `constraints::{Plane, Aabb, Sphere}`, built
     /// validated by their `new`).
     pub fn add_constraint(&mut self, c: Box<dyn Constraint<V>>) {

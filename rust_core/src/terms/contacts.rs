@@ -2013,8 +2013,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
     }
 
     fn integrators(&self) -> Option<&'static [&'static str]> {
-        // "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
-        Some(&["semi_implicit_euler", "xpbd"])
+        crate::terms::registry::integrator_rule("contacts").map(|r| r.0)
     }
 
     fn counts(&self) -> Vec<(&'static str, u64)> {

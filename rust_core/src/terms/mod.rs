@@ -335,6 +335,30 @@ impl<V: Vector> ForceSet<V> {
         Ok(())
     }
 
+    /// Puts `t` in place of term `at` (same place in the evaluation order), keeping the energy
+    /// the old one dissipated in its books; the aggregates are summed again in term order, so
+    /// they are what adding the terms afresh would give. A term that shares a neighbour search
+    /// (a fluid) cannot be replaced: its search holds its particles.
+    pub fn replace(&mut self, at: usize, mut t: Box<dyn Term<V>>) -> Result<()> {
+        let mut probe = Shared::default();
+        t.share(&mut probe)?;
+        if !probe.is_empty() {
+            return Err(crate::error::invalid(
+                "item",
+                format!("term {:?} shares a neighbour search and cannot be replaced", t.name()),
+            ));
+        }
+        t.set_stop(self.stop.clone());
+        self.terms[at] = t;
+        self.any_dissipative = self.terms.iter().any(|t| t.dissipative());
+        self.any_velocity = self.terms.iter().any(|t| t.velocity_dependent());
+        self.any_velocity_apart = self.terms.iter().any(|t| t.velocity_dependent() && !t.magnetic());
+        self.any_magnetic = self.terms.iter().any(|t| t.magnetic());
+        self.g = self.terms.iter().filter_map(|t| t.uniform_acceleration()).fold(V::ZERO, |g, a| g + a);
+        self.power[at] = 0.0;
+        Ok(())
+    }
+
     /// Total force (N) at `(x, v)` into `f`, uniform fields excluded (see `g`). Remembers each
     /// term's dissipated power at this state for a following `book_power` call. Once the stop
     /// flag is set the remaining terms are skipped (the step will be rolled back).

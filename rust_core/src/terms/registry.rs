@@ -182,6 +182,39 @@ impl TermType {
 
 inventory::collect!(TermType);
 
+/// The integrators a part of `kind` can be stepped by (`None`: any), with the argument a refusal
+/// names and what the part is called in it. The one table of these rules: the terms'
+/// `Term::integrators` read it, and so does the facade (`check_integrator`) before it adds
+/// anything of the part.
+pub fn integrator_rule(kind: &str) -> Option<(&'static [&'static str], &'static str, &'static str)> {
+    match kind {
+        // "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
+        "contacts" => Some((&["semi_implicit_euler", "xpbd"], "integrator", "Contacts need")),
+        // DFSPH's projections run inside semi-implicit Euler's step (velocity, then position).
+        "dfsph" => Some((&["semi_implicit_euler"], "method", "DFSPH steps with")),
+        _ => None,
+    }
+}
+
+/// `InvalidInput` if a part of `kind` cannot be stepped by `integrator`.
+pub fn check_integrator(kind: &str, integrator: &str) -> Result<()> {
+    match integrator_rule(kind) {
+        Some((ok, arg, who)) if !ok.contains(&integrator) => {
+            let names = ok.iter().map(|o| format!("integrator='{o}'")).collect::<Vec<_>>().join(" or ");
+            let only = if ok.len() == 1 { " only" } else { "" };
+            Err(invalid(
+                arg,
+                format!(
+                    "{who} {names}{only} (the scene uses '{integrator}'); build the scene with \
+                     pc.Scene(..., integrator='{}') or set scene.integrator first",
+                    ok[0]
+                ),
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The registered type `kind`.
 pub fn lookup(kind: &str) -> Result<&'static TermType> {
     inventory::iter::<TermType>
