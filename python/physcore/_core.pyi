@@ -18,6 +18,14 @@ __all__ = [
     "draw_discs",
     "rasterise_mesh",
     "neighbors",
+    "sph_kernel",
+    "sph_lattice_sum",
+    "sph_particle_mass",
+    "sph_wall_psi",
+    "sph_sound_speed",
+    "sph_max_dt",
+    "grid_limits",
+    "check_integrator",
     "build_profile",
     "__version__",
 ]
@@ -40,6 +48,39 @@ def draw_discs(
     radius: npt.NDArray[np.float32],
     colours: npt.NDArray[np.uint8],
 ) -> None: ...
+def sph_kernel(q: npt.NDArray[np.float64], h: float, dim: int, kernel: str) -> npt.NDArray[np.float64]: ...
+def sph_lattice_sum(spacing: float, h: float, dim: int, kernel: str) -> float: ...
+def sph_particle_mass(density: float, spacing: float, h: float, dim: int, kernel: str) -> float: ...
+def sph_wall_psi(
+    walls: npt.NDArray[np.float64],
+    density: float,
+    h: float,
+    kernel: str,
+    volume: str,
+    mass: float,
+    given: npt.NDArray[np.float64] | None = None,
+) -> npt.NDArray[np.float64]: ...
+def sph_sound_speed(
+    positions: npt.NDArray[np.float64],
+    velocities: npt.NDArray[np.float64] | None,
+    gravity: npt.NDArray[np.float64],
+    spacing: float,
+    density: float,
+    h: float,
+    surface: float,
+) -> float: ...
+def sph_max_dt(
+    method: str,
+    dim: int,
+    h: float,
+    sound_speed: float,
+    viscosity: float,
+    density: float,
+    surface_tension: float,
+    adhesion: float,
+) -> float: ...
+def grid_limits(kind: str, dim: int, params: dict[str, Any]) -> dict[str, float]: ...
+def check_integrator(kind: str, integrator: str) -> None: ...
 def mesh_normals(x: npt.NDArray[np.float64], faces: npt.NDArray[np.uint32]) -> npt.NDArray[np.float64]: ...
 def rasterise_mesh(
     verts: npt.NDArray[np.float32],
@@ -104,6 +145,9 @@ class Simulation:
     def set_attribute(self, name: str, values: npt.NDArray[np.float64]) -> None: ...
     def attributes(self) -> dict[str, npt.NDArray[np.float64]]: ...
     def add_term(
+        self, kind: str, name: str, params: dict[str, float | bool | str | npt.NDArray[np.float64] | npt.NDArray[np.uint32]]
+    ) -> None: ...
+    def replace_term(
         self, kind: str, name: str, params: dict[str, float | bool | str | npt.NDArray[np.float64] | npt.NDArray[np.uint32]]
     ) -> None: ...
     def add_grid(
