@@ -5,8 +5,8 @@
 //!
 //! one Newton iteration of backward Euler, with f0 and the Jacobians at the step's start. The
 //! system is solved matrix-free by the conjugate gradient method with a Jacobi (diagonal)
-//! preconditioner; the terms supply the products (∂f/∂x)·w and (∂f/∂v)·w (`Term::
-//! jacobian_product`), gathered per particle, and the dot products are summed over fixed chunks
+//! preconditioner; the terms supply the products (∂f/∂x)·w and (∂f/∂v)·w (the `Jacobian`
+//! role), gathered per particle, and the dot products are summed over fixed chunks
 //! in chunk order (`par`), so results are bit-identical for any thread count. Pinned particles
 //! (inverse mass 0) are filtered out of the system as in B&W's modified PCG (§5.3): their rows
 //! of the residual, the search directions and Δv are held at zero, so they never move.
@@ -107,10 +107,8 @@ impl<V: Vector> ImplicitEuler<V> {
                 *ok = w[s + k] * m[s + k];
             }
         });
-        for t in &sys.forces.terms {
-            if t.uniform_acceleration().is_none() {
-                t.jacobian_product(&sys.state.x, &sys.state.v, &sys.model, c, w, out);
-            }
+        for j in sys.forces.terms.iter().filter_map(|t| t.as_jacobian()) {
+            j.product(&sys.state.x, &sys.state.v, &sys.model, c, w, out);
         }
     }
 }
@@ -141,10 +139,8 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
         if stop.load(Ordering::Relaxed) {
             return Err(Stopped);
         }
-        for t in sys.forces.terms.iter_mut() {
-            if t.uniform_acceleration().is_none() {
-                t.jacobian_prepare(&sys.state.x, &sys.state.v, &sys.model);
-            }
+        for j in sys.forces.terms.iter_mut().filter_map(|t| t.as_jacobian_mut()) {
+            j.prepare(&sys.state.x, &sys.state.v, &sys.model);
         }
         let (im, g) = (&sys.model.inv_mass, sys.forces.g);
         // rhs = h (f0 + m g) + h² (∂f/∂x) v0, filtered (0 on pinned particles); into r.
@@ -169,10 +165,8 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
                 }
             });
         }
-        for t in &sys.forces.terms {
-            if t.uniform_acceleration().is_none() {
-                t.jacobian_diagonal(&sys.state.x, &sys.state.v, &sys.model, c, &mut self.pinv);
-            }
+        for j in sys.forces.terms.iter().filter_map(|t| t.as_jacobian()) {
+            j.diagonal(&sys.state.x, &sys.state.v, &sys.model, c, &mut self.pinv);
         }
         par::chunks1(&mut self.pinv, |s, d| {
             for (k, dk) in d.iter_mut().enumerate() {
@@ -290,10 +284,9 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
         }
         Ok(())
     }
-    fn set_solver_options(&mut self, tol: Real, max_iter: u32) -> bool {
-        self.tol = tol;
-        self.max_iter = max_iter;
-        true
+    fn configure(&mut self, o: &super::IntegratorOptions) {
+        self.tol = o.cg_tol;
+        self.max_iter = o.cg_max_iter;
     }
     fn solver_stats(&self) -> Option<SolverStats> {
         Some(self.stats)
@@ -418,7 +411,7 @@ mod tests {
         // spring, which has no transverse stiffness at its rest length: CG converges at once).
         assert!(!it.step(&mut p, 25.0 * tau));
         assert_eq!(it.solver_stats().unwrap().iterations, 1);
-        it.set_solver_options(1e-10, 2);
+        it.configure(&crate::integrators::IntegratorOptions { cg_tol: 1e-10, cg_max_iter: 2, ..Default::default() });
         assert!(!it.step(&mut p, 25.0 * tau));
         let st = it.solver_stats().unwrap();
         assert_eq!((st.solves, st.iterations, st.max_iterations, st.unconverged), (2, 3, 2, 1));

@@ -55,6 +55,68 @@ pub struct IntegratorInfo {
     pub force_evals_per_step: u32,
 }
 
+/// The integrators' options: one struct, its defaults and its validation. The system keeps one
+/// (kept when the scene switches integrators) and hands it to its integrator
+/// (`Integrator::configure`), which reads the fields it uses.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IntegratorOptions {
+    /// "rk45": relative tolerance of the error estimate, in [1e-14, 1). Default 1e-6.
+    pub rtol: Real,
+    /// "rk45": absolute tolerance (m for positions, m/s for velocities), ≥ 0. Default 1e-9.
+    pub atol: Real,
+    /// "implicit_euler": relative residual at which CG stops, in [1e-14, 1). Default 1e-8.
+    pub cg_tol: Real,
+    /// "implicit_euler": CG iteration limit, 1..=1000000. Default 200.
+    pub cg_max_iter: u32,
+    /// "xpbd": substeps per step, 1..=100000. Default 10.
+    pub xpbd_substeps: u32,
+    /// "xpbd": constraint iterations per substep, 1..=10000. Default 1.
+    pub xpbd_iterations: u32,
+}
+
+impl Default for IntegratorOptions {
+    fn default() -> Self {
+        Self {
+            rtol: 1e-6,
+            atol: 1e-9,
+            cg_tol: implicit_euler::DEFAULT_TOL,
+            cg_max_iter: implicit_euler::DEFAULT_MAX_ITER,
+            xpbd_substeps: 10,
+            xpbd_iterations: 1,
+        }
+    }
+}
+
+impl IntegratorOptions {
+    /// `InvalidInput` naming the first field out of its range (see the fields).
+    pub fn validate(&self) -> Result<()> {
+        use crate::error::invalid;
+        let resolvable = |v: Real| v.is_finite() && (1e-14..1.0).contains(&v);
+        if !resolvable(self.rtol) {
+            return Err(invalid("rtol", format!("{} must be in [1e-14, 1) (float64 cannot resolve less)", self.rtol)));
+        }
+        if !(self.atol.is_finite() && self.atol >= 0.0) {
+            return Err(invalid("atol", format!("{} must be finite and >= 0 (m and m/s)", self.atol)));
+        }
+        if !resolvable(self.cg_tol) {
+            return Err(invalid(
+                "cg_tol",
+                format!("{} must be in [1e-14, 1) (float64 cannot resolve less)", self.cg_tol),
+            ));
+        }
+        if !(1..=1_000_000).contains(&self.cg_max_iter) {
+            return Err(invalid("cg_max_iter", format!("{} must be in 1..=1000000", self.cg_max_iter)));
+        }
+        if !(1..=100_000).contains(&self.xpbd_substeps) {
+            return Err(invalid("substeps", format!("{} must be in 1..=100000", self.xpbd_substeps)));
+        }
+        if !(1..=10_000).contains(&self.xpbd_iterations) {
+            return Err(invalid("iterations", format!("{} must be in 1..=10000", self.xpbd_iterations)));
+        }
+        Ok(())
+    }
+}
+
 pub trait Integrator<V: Vector>: Send + Sync {
     fn info(&self) -> IntegratorInfo;
     /// Advances `sys.state` by `dt` (x, v only; the caller advances time) and books the energy
@@ -102,10 +164,9 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn set_cache(&mut self, _f: Vec<V>, _p: Vec<Real>, _v: &[V], _n_terms: usize) -> bool {
         false
     }
-    /// Sets the tolerances of an adaptive integrator; false if it has none.
-    fn set_tolerances(&mut self, _rtol: Real, _atol: Real) -> bool {
-        false
-    }
+    /// Takes the options it uses from `o` (validated by `IntegratorOptions::validate`); the
+    /// others it leaves for the integrators that use them.
+    fn configure(&mut self, _o: &IntegratorOptions) {}
     /// (accepted, rejected internal steps, next internal step in s) of an adaptive integrator.
     fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
         None
@@ -118,10 +179,7 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn failure(&self) -> Option<(usize, crate::error::Failure)> {
         None
     }
-    /// Sets the substeps per step and the constraint iterations per substep of "xpbd" (both
-    /// ≥ 1, checked by the caller); the other integrators ignore them.
-    fn set_substeps(&mut self, _substeps: u32, _iterations: u32) {}
-    /// Whether the terms with Jacobians (`Term::has_jacobian`) are taken implicitly, so that
+    /// Whether the terms with Jacobians (the `Jacobian` role) are taken implicitly, so that
     /// their time scales no longer limit the step for stability (`ParticleSystem::auto_dt`).
     fn implicit(&self) -> bool {
         false
@@ -130,11 +188,6 @@ pub trait Integrator<V: Vector>: Send + Sync {
     /// `InvalidInput` naming `dt`; every step size is fine by default.
     fn check_dt(&self, _dt: Real) -> Result<()> {
         Ok(())
-    }
-    /// Sets the linear solver's relative tolerance and iteration limit (validated by the
-    /// caller); false if the integrator has no solver.
-    fn set_solver_options(&mut self, _tol: Real, _max_iter: u32) -> bool {
-        false
     }
     /// The linear solver's books, for an integrator that has one.
     fn solver_stats(&self) -> Option<SolverStats> {

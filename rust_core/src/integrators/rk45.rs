@@ -395,10 +395,9 @@ impl<V: Vector> Integrator<V> for Rk45<V> {
         self.fsal = false;
     }
 
-    fn set_tolerances(&mut self, rtol: Real, atol: Real) -> bool {
-        self.rtol = rtol;
-        self.atol = atol;
-        true
+    fn configure(&mut self, o: &super::IntegratorOptions) {
+        self.rtol = o.rtol;
+        self.atol = o.atol;
     }
 
     fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {

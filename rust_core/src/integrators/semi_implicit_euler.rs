@@ -3,7 +3,7 @@
 //! Velocity-dependent forces are taken at the step's start (v in a(x, v) is the old one); a
 //! magnetic force q v × B then grows |v|² by (ω_c dt)² a step (use "boris").
 //!
-//! Terms that project velocities (`Term::projects_velocities`: DFSPH, Bender & Koschier 2017,
+//! Terms that project velocities (the `VelocityProjection` role: DFSPH, Bender & Koschier 2017,
 //! Algorithm 1) get the step in three parts, all at the step's start positions x:
 //! v ← P_div(v) (divergence solve); v' = v + dt a(x, v); v' ← P_ρ(v') (density solve); x' = x + dt v'.
 //! This is the paper's loop with its divergence solve moved from the end of one step to the
@@ -24,11 +24,7 @@ impl<V: Vector> SemiImplicitEuler<V> {
     fn step_projected(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let project = |sys: &mut Particles<V>, stage: Projection| {
             let Particles { state, model, forces, .. } = sys;
-            for (t, d) in forces.terms.iter_mut().zip(forces.dissipated.iter_mut()) {
-                if t.projects_velocities() {
-                    *d += t.project_velocities(stage, &state.x, &mut state.v, model, dt);
-                }
-            }
+            forces.project_velocities(stage, &state.x, &mut state.v, model, dt);
         };
         project(sys, Projection::Divergence);
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
@@ -60,7 +56,7 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
     fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
         let n = sys.state.x.len();
         ensure_len(&mut self.f, n);
-        if sys.forces.terms.iter().any(|t| t.projects_velocities()) {
+        if sys.forces.projects_velocities() {
             return self.step_projected(sys, dt);
         }
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);

@@ -84,8 +84,7 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
         ensure_len(&mut self.f, n);
         ensure_len(&mut self.x_prev, n);
         let h = dt / self.substeps as Real;
-        let projecting: Vec<usize> =
-            (0..sys.forces.terms.len()).filter(|&k| sys.forces.terms[k].xpbd_constraints()).collect();
+        let projecting: Vec<usize> = sys.forces.constraint_terms().to_vec();
         let mut any_bad = false;
         let mut u_start = vec![0.0; projecting.len()];
         for _ in 0..self.substeps {
@@ -94,8 +93,8 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 *u = sys.forces.terms[k].potential(&sys.state.x, &sys.model).unwrap_or(0.0);
             }
             // Terms with a state of their own (contacts) step with the substeps.
-            for t in &mut sys.forces.terms {
-                t.begin_step(h);
+            for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+                s.begin_step(h);
             }
             sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
             sys.forces.book_power(h);
@@ -109,11 +108,13 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 }
             });
             if !projecting.is_empty() {
-                for t in &mut sys.forces.terms {
-                    t.after_predict(&sys.state.x, &sys.state.v, &sys.model, h);
+                for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+                    s.after_predict(&sys.state.x, &sys.state.v, &sys.model, h);
                 }
                 for &k in &projecting {
-                    sys.forces.terms[k].xpbd_begin();
+                    if let Some(c) = sys.forces.terms[k].as_constraints() {
+                        c.begin();
+                    }
                 }
                 let mut e = energy(sys, &sys.state.x, &self.x_prev, &self.f, h);
                 // The predict changed the constraints' potential with no constraint force acting:
@@ -124,11 +125,12 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 }
                 for _it in 0..self.iterations {
                     for &k in &projecting {
+                        let Some(c) = sys.forces.terms[k].as_constraints() else { continue };
                         #[cfg(test)]
                         if self.reset_each_iteration && _it > 0 {
-                            sys.forces.terms[k].xpbd_begin();
+                            c.begin();
                         }
-                        sys.forces.terms[k].xpbd_project(&mut sys.state.x, &sys.model, h);
+                        c.project(&mut sys.state.x, &sys.model, h);
                         let e2 = energy(sys, &sys.state.x, &self.x_prev, &self.f, h);
                         sys.forces.dissipated[k] += e - e2;
                         e = e2;
@@ -151,8 +153,8 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
                 }
                 b
             });
-            for t in &mut sys.forces.terms {
-                t.end_step(&sys.state.x, &sys.state.v, &sys.model, h);
+            for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+                s.end_step(&sys.state.x, &sys.state.v, &sys.model, h);
             }
         }
         any_bad
@@ -163,9 +165,9 @@ impl<V: Vector> Integrator<V> for Xpbd<V> {
     fn scratch(&mut self, _velocity_dependent: bool) -> Vec<&mut Vec<V>> {
         vec![&mut self.f, &mut self.x_prev]
     }
-    fn set_substeps(&mut self, substeps: u32, iterations: u32) {
-        self.substeps = substeps.max(1);
-        self.iterations = iterations.max(1);
+    fn configure(&mut self, o: &super::IntegratorOptions) {
+        self.substeps = o.xpbd_substeps.max(1);
+        self.iterations = o.xpbd_iterations.max(1);
     }
 }
 
@@ -199,7 +201,11 @@ mod tests {
         let t = lookup("xpbd_constraints").unwrap().build::<DVec2>("c".into(), p, &Context { n_particles: 2 }).unwrap();
         sys.forces.push(t).unwrap();
         let mut it = Xpbd::default();
-        it.set_substeps(substeps, iterations);
+        it.configure(&crate::integrators::IntegratorOptions {
+            xpbd_substeps: substeps,
+            xpbd_iterations: iterations,
+            ..Default::default()
+        });
         it.reset_each_iteration = reset;
         // A damped settle: XPBD's own damping brings the bob to rest.
         for _ in 0..(60.0 / dt) as usize {

@@ -63,7 +63,7 @@ use crate::simd::{self, Kernel as SimdKernel, Simd, P};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{Projection, Term, Write};
+use crate::terms::{OwnState, Projection, Term, VelocityProjection, Write};
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::marker::PhantomData;
@@ -1115,27 +1115,6 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         crate::terms::registry::integrator_rule("dfsph").map(|r| r.0)
     }
 
-    fn projects_velocities(&self) -> bool {
-        true
-    }
-
-    fn project_velocities(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
-        if self.n == 0 || self.stop.is_set() {
-            return 0.0;
-        }
-        if stage == Projection::Divergence || !self.built {
-            self.build(x, model);
-        }
-        if stage == Projection::Divergence {
-            self.kick_dt = dt;
-        }
-        let e = self.solve(stage, v, dt);
-        if stage == Projection::Density {
-            self.built = false;
-        }
-        e
-    }
-
     fn stats(&self) -> Vec<(&'static str, Real)> {
         let b = &self.books;
         vec![
@@ -1154,15 +1133,26 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         ]
     }
 
+    fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
+        Some(self)
+    }
+    fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
+        Some(self)
+    }
+    fn as_own_state_mut(&mut self) -> Option<&mut dyn OwnState<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> OwnState<V> for Dfsph<V> {
     /// The warm starts and the last step's pressure: 3 values per particle.
-    fn history(&self) -> Option<Vec<Real>> {
+    fn history(&self) -> Vec<Real> {
         let mut h = Vec::with_capacity(3 * self.n);
         h.extend_from_slice(&self.kappa);
         h.extend_from_slice(&self.kappa_v);
         h.extend_from_slice(&self.pressure);
-        Some(h)
+        h
     }
-
     fn set_history(&mut self, h: &[Real], _n_particles: usize) -> Result<()> {
         let n = self.n;
         if h.len() != 3 * n {
@@ -1177,7 +1167,6 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         self.built = false;
         Ok(())
     }
-
     /// A snapshot of this term, non-finite values (a rollback of a diverged call) included.
     fn restore_history(&mut self, h: &[Real], _n_particles: usize) {
         let n = self.n;
@@ -1186,6 +1175,25 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         self.kappa_v.copy_from_slice(&h[n..2 * n]);
         self.pressure.copy_from_slice(&h[2 * n..]);
         self.built = false;
+    }
+}
+
+impl<V: Vector> VelocityProjection<V> for Dfsph<V> {
+    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
+        if self.n == 0 || self.stop.is_set() {
+            return 0.0;
+        }
+        if stage == Projection::Divergence || !self.built {
+            self.build(x, model);
+        }
+        if stage == Projection::Divergence {
+            self.kick_dt = dt;
+        }
+        let e = self.solve(stage, v, dt);
+        if stage == Projection::Density {
+            self.built = false;
+        }
+        e
     }
 }
 
@@ -1347,7 +1355,7 @@ mod tests {
             let (m, model, mut t) = term(n, &w, dx);
             let mut v = v0.clone();
             t.build(&x, &model);
-            let removed = t.project_velocities(Projection::Density, &x, &mut v, &model, dt);
+            let removed = VelocityProjection::project(&mut t, Projection::Density, &x, &mut v, &model, dt);
             let ke = |v: &[DVec2]| v.iter().map(|u| 0.5 * m * u.length_squared()).sum::<f64>();
             assert!((removed - (ke(&v0) - ke(&v))).abs() <= 1e-9 * ke(&v0).max(1e-9));
             assert!(t.books.density_iterations >= 2 && t.books.unconverged == 0);

@@ -5,7 +5,7 @@ use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::alloc::{count, Need};
 use crate::constraints::{Constraint, Constraints};
 use crate::error::{invalid, Failure, Result};
-use crate::integrators::{self, Cache, Integrator, IntegratorInfo, Particles, SolverStats};
+use crate::integrators::{self, Cache, Integrator, IntegratorInfo, IntegratorOptions, Particles, SolverStats};
 use crate::par;
 use crate::state::{Model, State};
 use crate::stop::Stop;
@@ -18,15 +18,8 @@ pub struct ParticleSystem<V: Vector> {
     sys: Particles<V>,
     integrator: Box<dyn Integrator<V>>,
     constraints: Constraints<V>,
-    /// Tolerances of the adaptive integrator ("rk45"); kept when switching integrators.
-    rtol: Real,
-    atol: Real,
-    /// Substeps per step and iterations per substep of "xpbd"; kept when switching integrators.
-    xpbd: (u32, u32),
-    /// Relative tolerance and iteration limit of an implicit integrator's linear solve (CG);
-    /// kept when switching integrators.
-    cg_tol: Real,
-    cg_max_iter: u32,
+    /// The integrators' options (`IntegratorOptions`), kept when switching integrators.
+    options: IntegratorOptions,
 }
 
 /// What `ParticleSystem::restore` returns to (see `System::snapshot`).
@@ -37,7 +30,7 @@ struct ParticleSnapshot<V: Vector> {
     cache: Option<Cache<V>>,
     /// rk45's (accepted, rejected, next h): the counts are restored too.
     adaptive: Option<(u64, u64, Real)>,
-    /// The terms' own states (`Term::history`), in term order.
+    /// The terms' own states (`OwnState::history`), in term order.
     histories: Vec<Option<Vec<Real>>>,
 }
 
@@ -51,13 +44,13 @@ impl<V: Vector> ParticleSystem<V> {
                 forces: ForceSet::default(),
                 single: false,
             },
-            integrator: integrators::by_name(integrator)?,
+            integrator: {
+                let mut it = integrators::by_name(integrator)?;
+                it.configure(&IntegratorOptions::default());
+                it
+            },
             constraints: Constraints::default(),
-            rtol: 1e-6,
-            atol: 1e-9,
-            xpbd: (10, 1),
-            cg_tol: integrators::implicit_euler::DEFAULT_TOL,
-            cg_max_iter: integrators::implicit_euler::DEFAULT_MAX_ITER,
+            options: IntegratorOptions::default(),
         })
     }
 
@@ -86,7 +79,7 @@ impl<V: Vector> ParticleSystem<V> {
         let terms = &self.sys.forces.terms;
         crate::error::Remedies {
             softening: terms.iter().any(|t| t.softened()),
-            implicit: !self.integrator.implicit() && terms.iter().any(|t| t.has_jacobian()),
+            implicit: !self.integrator.implicit() && self.sys.forces.has_jacobian(),
         }
     }
 
@@ -118,64 +111,48 @@ impl<V: Vector> ParticleSystem<V> {
             check_integrator(t.as_ref(), name)?;
         }
         let mut it = integrators::by_name(name)?;
-        it.set_tolerances(self.rtol, self.atol);
-        it.set_substeps(self.xpbd.0, self.xpbd.1);
-        it.set_solver_options(self.cg_tol, self.cg_max_iter);
+        it.configure(&self.options);
         self.integrator = it;
         Ok(())
+    }
+
+    /// Sets the integrators' options (validated; nothing changes on error).
+    pub fn set_options(&mut self, o: IntegratorOptions) -> Result<()> {
+        o.validate()?;
+        self.options = o;
+        self.integrator.configure(&o);
+        Ok(())
+    }
+    /// The integrators' options.
+    pub fn options(&self) -> IntegratorOptions {
+        self.options
     }
 
     /// Substeps per step (1..=100000) and constraint iterations per substep (1..=10000) of the
     /// "xpbd" integrator; stored for any integrator. Defaults 10 and 1.
     pub fn set_substeps(&mut self, substeps: u32, iterations: u32) -> Result<()> {
-        if !(1..=100_000).contains(&substeps) {
-            return Err(invalid("substeps", format!("{substeps} must be in 1..=100000")));
-        }
-        if !(1..=10_000).contains(&iterations) {
-            return Err(invalid("iterations", format!("{iterations} must be in 1..=10000")));
-        }
-        self.xpbd = (substeps, iterations);
-        self.integrator.set_substeps(substeps, iterations);
-        Ok(())
+        self.set_options(IntegratorOptions { xpbd_substeps: substeps, xpbd_iterations: iterations, ..self.options })
     }
     /// (substeps per step, iterations per substep) of "xpbd".
     pub fn substeps(&self) -> (u32, u32) {
-        self.xpbd
+        (self.options.xpbd_substeps, self.options.xpbd_iterations)
     }
 
     /// Relative and absolute (m, m/s) tolerances of the adaptive integrator; stored for any
     /// integrator, used by "rk45". rtol in [1e-14, 1), atol >= 0.
     pub fn set_tolerances(&mut self, rtol: Real, atol: Real) -> Result<()> {
-        if !(rtol.is_finite() && (1e-14..1.0).contains(&rtol)) {
-            return Err(invalid("rtol", format!("{rtol} must be in [1e-14, 1) (float64 cannot resolve less)")));
-        }
-        if !(atol.is_finite() && atol >= 0.0) {
-            return Err(invalid("atol", format!("{atol} must be finite and >= 0 (m and m/s)")));
-        }
-        self.rtol = rtol;
-        self.atol = atol;
-        self.integrator.set_tolerances(rtol, atol);
-        Ok(())
+        self.set_options(IntegratorOptions { rtol, atol, ..self.options })
     }
     pub fn tolerances(&self) -> (Real, Real) {
-        (self.rtol, self.atol)
+        (self.options.rtol, self.options.atol)
     }
     /// Relative residual (in [1e-14, 1)) and iteration limit (in 1..=1e6) of the linear solve of
     /// an implicit integrator ("implicit_euler"); stored for any integrator.
     pub fn set_solver_options(&mut self, tol: Real, max_iter: u32) -> Result<()> {
-        if !(tol.is_finite() && (1e-14..1.0).contains(&tol)) {
-            return Err(invalid("cg_tol", format!("{tol} must be in [1e-14, 1) (float64 cannot resolve less)")));
-        }
-        if !(1..=1_000_000).contains(&max_iter) {
-            return Err(invalid("cg_max_iter", format!("{max_iter} must be in 1..=1000000")));
-        }
-        self.cg_tol = tol;
-        self.cg_max_iter = max_iter;
-        self.integrator.set_solver_options(tol, max_iter);
-        Ok(())
+        self.set_options(IntegratorOptions { cg_tol: tol, cg_max_iter: max_iter, ..self.options })
     }
     pub fn solver_options(&self) -> (Real, u32) {
-        (self.cg_tol, self.cg_max_iter)
+        (self.options.cg_tol, self.options.cg_max_iter)
     }
     /// The linear solver's books of an implicit integrator (see `SolverStats`).
     pub fn solver_stats(&self) -> Option<SolverStats> {
@@ -451,9 +428,9 @@ impl<V: Vector> ParticleSystem<V> {
         out
     }
 
-    /// The own state (`Term::history`) of the term named `name`, `None` if it keeps none.
+    /// The own state (`OwnState::history`) of the term named `name`, `None` if it keeps none.
     pub fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
-        Ok(self.term_named(name)?.history())
+        Ok(self.term_named(name)?.as_own_state().map(|s| s.history()))
     }
 
     /// Restores a term's own state (checked; nothing changes on error).
@@ -466,7 +443,10 @@ impl<V: Vector> ParticleSystem<V> {
             .iter()
             .position(|t| t.name() == name)
             .ok_or_else(|| invalid("name", format!("no term named {name:?}")))?;
-        self.sys.forces.terms[k].set_history(h, n)
+        match self.sys.forces.terms[k].as_own_state_mut() {
+            Some(s) => s.set_history(h, n),
+            None => Err(invalid("history", format!("term {name:?} keeps no state of its own"))),
+        }
     }
 
     fn term_named(&self, name: &str) -> Result<&dyn Term<V>> {
@@ -484,7 +464,7 @@ impl<V: Vector> ParticleSystem<V> {
     fn books_finite(&self) -> bool {
         let f = &self.sys.forces;
         f.dissipated.iter().chain([&self.constraints.dissipated]).all(|d| d.is_finite())
-            && f.terms.iter().all(|t| t.books_finite())
+            && f.terms.iter().filter_map(|t| t.as_own_state()).all(|s| s.books_finite())
     }
 
     /// The fastest particle (the first of equals; 0 if none is).
@@ -509,7 +489,7 @@ impl<V: Vector> ParticleSystem<V> {
 
     /// (fastest time scale τ = 1/ω_max over the terms, smallest term step limit such as the
     /// SPH CFL), each infinite if no term has one. `implicit`: leave out the terms an implicit
-    /// integrator takes implicitly (`Term::has_jacobian`), returning their τ apart, as a third.
+    /// integrator takes implicitly (the `Jacobian` role), returning their τ apart, as a third.
     /// Under "xpbd" the XPBD constraints are in that third too (projected like implicit Euler
     /// steps a spring); under other integrators they are inert and set no time scale.
     fn time_scales_split(&self, implicit: bool) -> (Real, Real, Real) {
@@ -517,18 +497,20 @@ impl<V: Vector> ParticleSystem<V> {
         let terms = &self.sys.forces.terms;
         let xpbd = self.integrator.info().name == "xpbd";
         let scale = |implicitly: bool| {
+            let forces = &self.sys.forces;
             terms
                 .iter()
-                .filter(|t| xpbd || !t.xpbd_constraints())
-                .filter(|t| ((implicit && t.has_jacobian()) || t.xpbd_constraints()) == implicitly)
-                .filter_map(|t| t.time_scale(x, m))
+                .enumerate()
+                .filter(|&(k, _)| xpbd || !forces.is_constraint(k))
+                .filter(|&(k, t)| ((implicit && t.as_jacobian().is_some()) || forces.is_constraint(k)) == implicitly)
+                .filter_map(|(_, t)| t.time_scale(x, m))
                 .fold(f64::INFINITY, f64::min)
         };
         let g = self.sys.forces.g.length_squared().sqrt();
         let limit = terms.iter().filter_map(|t| t.max_dt(x, v, m, g)).fold(f64::INFINITY, f64::min);
         // "xpbd" steps the force terms in substeps of semi-implicit Euler: their limits are
         // the substep's, and a step may be `substeps` times longer.
-        let sub = if self.integrator.info().name == "xpbd" { self.xpbd.0 as Real } else { 1.0 };
+        let sub = if self.integrator.info().name == "xpbd" { self.options.xpbd_substeps as Real } else { 1.0 };
         (sub * scale(false), sub * limit, sub * scale(true))
     }
 
@@ -567,8 +549,8 @@ impl<V: Vector> ParticleSystem<V> {
             l
         });
         let mut l = l.to_array();
-        for t in &self.sys.forces.terms {
-            let s = t.extra_angular_momentum(m);
+        for t in self.sys.forces.terms.iter().filter_map(|t| t.as_own_state()) {
+            let s = t.angular_momentum(m);
             for k in 0..3 {
                 l[k] += s[k];
             }
@@ -626,8 +608,8 @@ impl<V: Vector> System for ParticleSystem<V> {
         if self.is_empty() {
             return Ok(());
         }
-        for t in &mut self.sys.forces.terms {
-            t.begin_step(dt);
+        for s in self.sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+            s.begin_step(dt);
         }
         let Ok(non_finite) = self.integrator.step_interruptible(&mut self.sys, dt, stop) else {
             return Err(Halt::Stopped);
@@ -643,8 +625,8 @@ impl<V: Vector> System for ParticleSystem<V> {
         }
         if !non_finite {
             let sys = &mut self.sys;
-            for t in &mut sys.forces.terms {
-                t.end_step(&sys.state.x, &sys.state.v, &sys.model, dt);
+            for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+                s.end_step(&sys.state.x, &sys.state.v, &sys.model, dt);
             }
         }
         if non_finite {
@@ -663,15 +645,16 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     fn settle(&mut self) {
         let sys = &mut self.sys;
-        for t in &mut sys.forces.terms {
-            t.settle(&sys.state.x, &sys.state.v, &sys.model);
+        for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+            s.settle(&sys.state.x, &sys.state.v, &sys.model);
         }
     }
 
     /// A term's own state (`Term::non_finite`), then the books. Also run after every step: a
     /// commit deferred to the next evaluation then shows there.
     fn settled_fault(&self) -> Option<(usize, Failure)> {
-        if let Some(index) = self.sys.forces.terms.iter().find_map(|t| t.non_finite()) {
+        if let Some(index) = self.sys.forces.terms.iter().filter_map(|t| t.as_own_state()).find_map(|s| s.non_finite())
+        {
             return Some((index, Failure::Spin));
         }
         (!self.books_finite()).then(|| (self.fastest(), Failure::Books))
@@ -689,7 +672,7 @@ impl<V: Vector> System for ParticleSystem<V> {
     }
 
     fn limit_follows_flow(&self) -> bool {
-        self.sys.forces.terms.iter().any(|t| t.projects_velocities())
+        self.sys.forces.projects_velocities()
     }
 
     /// The largest substep with the current integrator: ω_max·dt = 0.5 with ω_max = 1/τ bounded
@@ -725,7 +708,7 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     fn energy(&self) -> EnergyReport {
         let (x, v, m) = (&self.sys.state.x, &self.sys.state.v, &self.sys.model);
-        let spin: Real = self.sys.forces.terms.iter().map(|t| t.extra_kinetic(m)).sum();
+        let spin: Real = self.sys.forces.terms.iter().filter_map(|t| t.as_own_state()).map(|s| s.kinetic(m)).sum();
         let kinetic = spin
             + 0.5
                 * par::sum(x.len(), 0.0, |r| {
@@ -745,7 +728,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             .filter(|(t, _)| t.dissipative())
             .map(|(t, d)| (t.name().to_string(), *d))
             .collect();
-        dissipated.extend(terms.iter().flat_map(|t| t.own_books()));
+        dissipated.extend(terms.iter().filter_map(|t| t.as_own_state()).flat_map(|s| s.books()));
         if !self.constraints.is_empty() {
             dissipated.push(("collisions".to_string(), self.constraints.dissipated));
         }
@@ -787,7 +770,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             collisions: self.constraints.dissipated,
             cache: self.integrator.try_cache().map_err(|_| need.error())?,
             adaptive: self.integrator.adaptive_stats(),
-            histories: self.sys.forces.terms.iter().map(|t| t.history()).collect(),
+            histories: self.sys.forces.terms.iter().map(|t| t.as_own_state().map(|s| s.history())).collect(),
         }))
     }
 
@@ -807,8 +790,8 @@ impl<V: Vector> System for ParticleSystem<V> {
             out.push(("cache_power".to_string(), p));
         }
         for t in &self.sys.forces.terms {
-            if let Some(h) = t.history() {
-                out.push((format!("history:{}", t.name()), h));
+            if let Some(s) = t.as_own_state() {
+                out.push((format!("history:{}", t.name()), s.history()));
             }
         }
         if let Some((accepted, rejected, _)) = self.integrator.adaptive_stats() {
@@ -852,7 +835,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         self.check_books(dissipated, collisions, &cache)?;
         let mut histories = Vec::new();
         for (k, t) in self.sys.forces.terms.iter().enumerate() {
-            if t.history().is_some() {
+            if t.as_own_state().is_some() {
                 histories.push((k, array(arrays, &format!("history:{}", t.name()), None)?));
             }
         }
@@ -860,7 +843,12 @@ impl<V: Vector> System for ParticleSystem<V> {
         // refusal everything returns to the snapshot.
         let before = self.snapshot()?;
         let r = self.set_state(Some(x), Some(v)).and_then(|()| self.restore_books(dissipated, collisions, cache));
-        let r = r.and_then(|()| histories.iter().try_for_each(|&(k, h)| self.sys.forces.terms[k].set_history(h, n)));
+        let r = r.and_then(|()| {
+            histories.iter().try_for_each(|&(k, h)| match self.sys.forces.terms[k].as_own_state_mut() {
+                Some(s) => s.set_history(h, n),
+                None => Ok(()),
+            })
+        });
         if r.is_err() {
             self.restore(before);
         } else if let Some((accepted, rejected)) = counts {
@@ -880,7 +868,9 @@ impl<V: Vector> System for ParticleSystem<V> {
             if let Some(h) = h {
                 // A snapshot this system made: it fits, and may hold the non-finite values of
                 // a state that had started to diverge.
-                t.restore_history(h, n);
+                if let Some(s) = t.as_own_state_mut() {
+                    s.restore_history(h, n);
+                }
             }
         }
         self.sys.state = state;

@@ -74,7 +74,7 @@
 //! overlap, slipping, and a tangential spring dropped when its contact ends are all in the
 //! books, which balance to the scheme's first-order error.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{OwnState, Term, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
@@ -1798,7 +1798,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
     }
 
     fn dissipative(&self) -> bool {
-        // Books its own dissipation (two ledgers): see `own_books`.
+        // Books its own dissipation (two ledgers): see `OwnState::books`.
         false
     }
     fn velocity_dependent(&self) -> bool {
@@ -1923,10 +1923,26 @@ impl<V: Vector> Term<V> for Contacts<V> {
         Need::bytes_of::<u32>(2 * n) + Need::bytes_of::<(u32, Link<V>)>(pairs)
     }
 
+    fn integrators(&self) -> Option<&'static [&'static str]> {
+        crate::terms::registry::integrator_rule("contacts").map(|r| r.0)
+    }
+
+    fn counts(&self) -> Vec<(&'static str, u64)> {
+        vec![("contacts", self.count())]
+    }
+
+    fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
+        Some(self)
+    }
+    fn as_own_state_mut(&mut self) -> Option<&mut dyn OwnState<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> OwnState<V> for Contacts<V> {
     fn begin_step(&mut self, dt: Real) {
         self.dt = dt;
     }
-
     fn end_step(&mut self, _x: &[V], _v: &[V], model: &Model, dt: Real) {
         if !self.evaluated {
             return;
@@ -1962,18 +1978,16 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // `settle` (see the module docs).
         self.pending = Some(dt);
     }
-
     fn settle(&mut self, x: &[V], v: &[V], model: &Model) {
         self.settle_now(x, v, model);
     }
-
     fn after_predict(&mut self, x: &[V], v: &[V], model: &Model, h: Real) {
         if self.evaluated && !self.prebooked {
             self.commit_pass(x, v, model, Commit::Books(h));
             self.prebooked = true;
         }
     }
-    fn extra_kinetic(&self, model: &Model) -> Real {
+    fn kinetic(&self, model: &Model) -> Real {
         let Some(r) = radii(model) else { return 0.0 };
         let mut k = 0.0;
         for (i, w) in self.omega.iter().enumerate().take(model.len()) {
@@ -1983,8 +1997,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
         }
         k
     }
-
-    fn extra_angular_momentum(&self, model: &Model) -> [Real; 3] {
+    fn angular_momentum(&self, model: &Model) -> [Real; 3] {
         let mut l = [0.0; 3];
         let Some(r) = radii(model) else { return l };
         let mut buf = Vec::with_capacity(3);
@@ -2000,30 +2013,19 @@ impl<V: Vector> Term<V> for Contacts<V> {
         }
         l
     }
-
-    fn own_books(&self) -> Vec<(String, Real)> {
+    fn books(&self) -> Vec<(String, Real)> {
         vec![
             (format!("{} (normal damping)", self.name), self.dissipated[0]),
             (format!("{} (friction)", self.name), self.dissipated[1]),
         ]
     }
-
     fn books_finite(&self) -> bool {
         self.dissipated.iter().all(|d| d.is_finite())
     }
-
-    fn integrators(&self) -> Option<&'static [&'static str]> {
-        crate::terms::registry::integrator_rule("contacts").map(|r| r.0)
-    }
-
-    fn counts(&self) -> Vec<(&'static str, u64)> {
-        vec![("contacts", self.count())]
-    }
-
     /// [n, ω (n·axial), angle (n), dissipated (2), then per live contact: first grain, partner
     /// (a grain, or n + wall index), ξ (dim) seen from the first grain, spring energy, and with
     /// rolling resistance θ_r (axial) seen from the first grain and its energy].
-    fn history(&self) -> Option<Vec<Real>> {
+    fn history(&self) -> Vec<Real> {
         let n = self.omega.len();
         let mut h = Vec::with_capacity(3 + n * (V::AXIAL_DIM + 1));
         h.push(n as Real);
@@ -2042,9 +2044,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 h.push(k.ur);
             }
         }
-        Some(h)
+        h
     }
-
     /// Loads `history`. A pair may also be given from its higher index (ξ seen from that
     /// grain), or from both sides (files of physcore before the Verlet lists): the record from
     /// the lower index is kept. A history for 0 particles is that of a term that never stepped
@@ -2052,13 +2053,11 @@ impl<V: Vector> Term<V> for Contacts<V> {
     fn set_history(&mut self, h: &[Real], n_particles: usize) -> Result<()> {
         self.load_history(h, n_particles, true)
     }
-
     /// A snapshot of this term: non-finite spins and springs (a rollback of a diverged call)
     /// are restored as they were.
     fn restore_history(&mut self, h: &[Real], n_particles: usize) {
         self.load_history(h, n_particles, false).expect("a contact term's own history restores");
     }
-
     /// Spins, angles and the springs of live contacts.
     fn non_finite(&self) -> Option<usize> {
         // It runs after every step: first one streaming, branch-free pass (0·x is 0 for a
@@ -2366,10 +2365,10 @@ mod tests {
             rolling_damping: 0.0,
         };
         let mut c = Contacts::<glam::DVec2>::new("grains".into(), material, Vec::new());
-        let fresh = c.history().unwrap();
+        let fresh = c.history();
         assert_eq!(fresh, vec![0.0, 0.0, 0.0]);
         c.set_history(&fresh, 5).unwrap();
-        assert_eq!(c.history().unwrap(), fresh);
+        assert_eq!(c.history(), fresh);
         assert!(c.set_history(&[3.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 5).is_err());
         c.fit(3);
         assert_eq!(c.non_finite(), None);
@@ -2377,7 +2376,7 @@ mod tests {
         c.dissipated[0] = Real::INFINITY;
         assert_eq!(c.non_finite(), Some(1));
         assert!(!c.books_finite());
-        let diverged = c.history().unwrap();
+        let diverged = c.history();
         assert!(c.set_history(&diverged, 3).is_err());
         c.fit(0);
         c.restore_history(&diverged, 3);

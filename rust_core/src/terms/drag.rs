@@ -1,7 +1,7 @@
 //! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|². Jacobian: ∂f/∂v = −b I,
 //! ∂f/∂x = 0 (for implicit integrators).
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Jacobian, Term, Write};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -65,11 +65,17 @@ impl<V: Vector> Term<V> for Drag {
         (self.b > 0.0 && m.is_finite()).then(|| m / self.b)
     }
 
-    fn has_jacobian(&self) -> bool {
-        true
+    fn as_jacobian(&self) -> Option<&dyn Jacobian<V>> {
+        Some(self)
     }
+    fn as_jacobian_mut(&mut self) -> Option<&mut dyn Jacobian<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Jacobian<V> for Drag {
     /// Adds cv (−b) w_i on free particles (∂f/∂v = −b I; ∂f/∂x = 0).
-    fn jacobian_product(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+    fn product(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) {
         let s = -self.b * c.1;
         par::chunks1(out, |p0, out| {
             for (k, o) in out.iter_mut().enumerate() {
@@ -78,9 +84,8 @@ impl<V: Vector> Term<V> for Drag {
                 }
             }
         });
-        true
     }
-    fn jacobian_diagonal(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+    fn diagonal(&self, _x: &[V], _v: &[V], model: &Model, c: (Real, Real), out: &mut [V]) {
         let s = -self.b * c.1;
         let d = V::from_slice(&[s; 3][..V::DIM]);
         par::chunks1(out, |p0, out| {
@@ -90,6 +95,5 @@ impl<V: Vector> Term<V> for Drag {
                 }
             }
         });
-        true
     }
 }

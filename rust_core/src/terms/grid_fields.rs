@@ -16,7 +16,7 @@
 //! `uniform_magnetic_field`. q is the `charge` attribute (C); without it neither acts.
 use super::magnetic_field::{gyration_time, lorentz_forces};
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Magnetic, Term, Write};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -210,20 +210,22 @@ impl<V: Vector> Term<V> for GridMagneticField {
     fn velocity_dependent(&self) -> bool {
         true
     }
-    fn magnetic(&self) -> bool {
-        true
+    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
+        gyration_time(model, self.grid.max_norm())
     }
-    fn add_magnetic_field(&self, x: &[V], _model: &Model, b: &mut [V::Axial]) -> bool {
+    fn as_magnetic(&self) -> Option<&dyn Magnetic<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Magnetic<V> for GridMagneticField {
+    fn add_field(&self, x: &[V], _model: &Model, b: &mut [V::Axial]) {
         let grid = &self.grid;
         par::chunks1(b, |s, b| {
             for (k, bi) in b.iter_mut().enumerate() {
                 *bi = *bi + V::axial_from_slice(&grid.sample(x[s + k]));
             }
         });
-        true
-    }
-    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
-        gyration_time(model, self.grid.max_norm())
     }
 }
 

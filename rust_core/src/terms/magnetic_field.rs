@@ -5,10 +5,10 @@
 //!
 //! The force does no work (F·v = 0), so the term has no potential and dissipates nothing, but it
 //! depends on the velocities (`Term::velocity_dependent`). Its field is handed to the Boris
-//! integrator (`Term::add_magnetic_field`), which turns each velocity through it exactly,
+//! integrator (the `Magnetic` role), which turns each velocity through it exactly,
 //! keeping |v| to round-off for any step; the other integrators take the force from `add_forces`.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Magnetic, Term, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -74,20 +74,22 @@ impl<V: Vector> Term<V> for UniformMagneticField<V> {
     fn velocity_dependent(&self) -> bool {
         true
     }
-    fn magnetic(&self) -> bool {
-        true
+    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
+        gyration_time(model, V::axial_length_squared(self.b).sqrt())
     }
-    fn add_magnetic_field(&self, _x: &[V], _model: &Model, b: &mut [V::Axial]) -> bool {
+    fn as_magnetic(&self) -> Option<&dyn Magnetic<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Magnetic<V> for UniformMagneticField<V> {
+    fn add_field(&self, _x: &[V], _model: &Model, b: &mut [V::Axial]) {
         let field = self.b;
         par::chunks1(b, |_, b| {
             for bi in b {
                 *bi = *bi + field;
             }
         });
-        true
-    }
-    fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
-        gyration_time(model, V::axial_length_squared(self.b).sqrt())
     }
 }
 
@@ -112,7 +114,7 @@ mod tests {
         assert_eq!(Term::<DVec3>::potential(&t, &v, &model), None);
         assert!(Term::<DVec3>::velocity_dependent(&t) && !Term::<DVec3>::dissipative(&t));
         let mut b = vec![DVec3::X; 3];
-        assert!(t.add_magnetic_field(&v, &model, &mut b));
+        Magnetic::add_field(&t, &v, &model, &mut b);
         assert_eq!(b, vec![DVec3::X + t.b; 3]);
         // Fastest gyration: |q|/m = 2 (particle 0; 1 is pinned, 2 has 1.5), |B| = sqrt(5.25).
         let ts = Term::<DVec3>::time_scale(&t, &v, &model).unwrap();

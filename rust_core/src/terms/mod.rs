@@ -9,6 +9,7 @@ pub mod magnetic_field;
 pub mod pairwise_gravity;
 pub mod potentials;
 pub mod registry;
+pub mod roles;
 pub mod springs;
 pub mod tree_gravity;
 pub mod xpbd;
@@ -25,6 +26,7 @@ pub use drag::Drag;
 pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
+pub use roles::{Constraints, Jacobian, Magnetic, OwnState, VelocityProjection};
 pub use springs::Springs;
 pub use tree_gravity::TreeGravity;
 
@@ -37,7 +39,7 @@ pub enum Write {
     Add,
 }
 
-/// The stage of a step at which `Term::project_velocities` runs.
+/// The stage of a step at which a `VelocityProjection` runs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Projection {
     /// The step's start, before the forces: the velocities are made divergence free.
@@ -81,17 +83,6 @@ pub trait Term<V: Vector>: Send + Sync {
     /// the magnetic force q v × B does too, though it does no work.
     fn velocity_dependent(&self) -> bool {
         self.dissipative()
-    }
-    /// For a magnetic term (F = q v × B): adds the field B (T) at each position of `x` into `b`
-    /// (in 2D its z component) and returns true. The Boris integrator turns the velocities
-    /// through B itself and leaves such terms out of the force sum (`ForceSet::eval_apart`); the
-    /// other integrators take their force from `add_forces`. Other terms return false.
-    fn add_magnetic_field(&self, _x: &[V], _model: &Model, _b: &mut [V::Axial]) -> bool {
-        false
-    }
-    /// Whether `add_magnetic_field` gives this term's whole force (see there).
-    fn magnetic(&self) -> bool {
-        false
     }
     /// Largest particle index the term refers to, plus one (0 if none).
     fn min_particles(&self) -> usize {
@@ -144,31 +135,6 @@ pub trait Term<V: Vector>: Send + Sync {
     fn softened(&self) -> bool {
         false
     }
-    // ---- Terms with a state of their own (contacts: spins and tangential springs) ----------
-    /// Called before each integrator step with its dt (s).
-    fn begin_step(&mut self, _dt: Real) {}
-    /// Called after each accepted integrator step (and the constraint stage) with the new state:
-    /// a term with a state of its own advances it here (contacts: spins and springs).
-    fn end_step(&mut self, _x: &[V], _v: &[V], _model: &Model, _dt: Real) {}
-    /// Completes what `end_step` deferred to the next evaluation (the contacts' springs), when
-    /// a call of steps ends or before something else changes the state; idempotent.
-    fn settle(&mut self, _x: &[V], _v: &[V], _model: &Model) {}
-    /// "xpbd" only: the state a substep of `h` predicted, before its projections move it (a term
-    /// with a state of its own may close its books here; see contacts).
-    fn after_predict(&mut self, _x: &[V], _v: &[V], _model: &Model, _h: Real) {}
-    /// Kinetic energy the term's own state carries (contacts: rotation, ½Iω²), J.
-    fn extra_kinetic(&self, _model: &Model) -> Real {
-        0.0
-    }
-    /// Angular momentum the term's own state carries (contacts: spins, Σ Iω), kg·m²/s.
-    fn extra_angular_momentum(&self, _model: &Model) -> [Real; 3] {
-        [0.0; 3]
-    }
-    /// Energy books the term keeps itself (dissipated energies by cause, J), for terms whose
-    /// `dissipative()` is false because they do not book through the integrator.
-    fn own_books(&self) -> Vec<(String, Real)> {
-        Vec::new()
-    }
     /// The integrators the term can be stepped by (`None`: any).
     fn integrators(&self) -> Option<&'static [&'static str]> {
         None
@@ -176,31 +142,6 @@ pub trait Term<V: Vector>: Send + Sync {
     /// Counters to report (contacts now), by name.
     fn counts(&self) -> Vec<(&'static str, u64)> {
         Vec::new()
-    }
-    /// The term's own state as reals (rollback, save/load), `None` if it has none.
-    fn history(&self) -> Option<Vec<Real>> {
-        None
-    }
-    /// Restores what `history` returned, for a scene of `n_particles`; checked, nothing
-    /// changes on error.
-    fn set_history(&mut self, _h: &[Real], _n_particles: usize) -> Result<()> {
-        Ok(())
-    }
-    /// Restores what `history` returned on this very term (a rollback to a snapshot its system
-    /// took): the values are taken as they are, non-finite ones included, so it cannot fail. A
-    /// term whose history can hold non-finite values overrides it.
-    fn restore_history(&mut self, h: &[Real], n_particles: usize) {
-        self.set_history(h, n_particles).expect("a term's own history restores");
-    }
-    /// The first particle whose state kept by this term (not its books) is not finite, if any:
-    /// checked after every step, so that a divergence is caught where it starts.
-    fn non_finite(&self) -> Option<usize> {
-        None
-    }
-    /// Whether the books the term keeps itself (`own_books`) are finite; checked after every
-    /// step, without the allocations of `own_books`.
-    fn books_finite(&self) -> bool {
-        true
     }
 
     /// Called once when the term is added to a system, before it is evaluated: a term that
@@ -211,68 +152,39 @@ pub trait Term<V: Vector>: Send + Sync {
         Ok(())
     }
 
-    // ---- XPBD: position-based constraints, projected by the "xpbd" integrator --------------
-    // (`integrators/xpbd.rs`; Macklin, Müller & Chentanez 2016). Terms without constraints
-    // keep these defaults; `terms/xpbd.rs` implements them.
-    /// Whether the term holds position-based constraints that the "xpbd" integrator projects
-    /// (its `add_forces` then adds no force). Other integrators ignore them.
-    fn xpbd_constraints(&self) -> bool {
-        false
-    }
-    /// Starts an XPBD substep: the accumulated Lagrange multipliers λ return to 0.
-    fn xpbd_begin(&mut self) {}
-    /// One Gauss–Seidel iteration over the term's constraints in a substep of `h` seconds,
-    /// moving the positions `x` (m) of free particles (compliance scaled as α/h²).
-    fn xpbd_project(&mut self, _x: &mut [V], _model: &Model, _h: Real) {}
-    // ---- Velocity projections, run by "semi_implicit_euler" (DFSPH: `sph/dfsph.rs`) --------
-    /// Whether the term projects velocities inside a step (`project_velocities`) instead of, or
-    /// besides, adding forces. Only "semi_implicit_euler" runs projections, so such a term lists
-    /// it alone in `integrators()`.
-    fn projects_velocities(&self) -> bool {
-        false
-    }
-    /// Projects the velocities `v` (m/s) of the particles the term covers at positions `x`, in a
-    /// step of `dt` (s): `Projection::Divergence` at the step's start, before the forces are
-    /// evaluated, and `Projection::Density` after the kick, before the drift (positions are the
-    /// step's start in both). Returns the kinetic energy the projection removed (J; negative if
-    /// it added some), which the integrator books as the term's dissipation.
-    fn project_velocities(&mut self, _stage: Projection, _x: &[V], _v: &mut [V], _model: &Model, _dt: Real) -> Real {
-        0.0
-    }
     /// Real-valued statistics the term keeps (a solver's iterations and residuals), by name.
     fn stats(&self) -> Vec<(&'static str, Real)> {
         Vec::new()
     }
-    // ---- Jacobians, for implicit integrators ("implicit_euler"). Keep this block last. ----
-    // A term with a Jacobian is taken implicitly (linearised at the step's start); a term without
-    // one is taken explicitly at the step's start. Uniform fields (gravity) are constant and need
-    // none.
-
-    /// Whether `jacobian_product` and `jacobian_diagonal` are implemented (they add something
-    /// and return true).
-    fn has_jacobian(&self) -> bool {
-        false
+    // ---- Roles besides giving forces (`roles`): each stage asks for the one it runs. ------
+    /// The term as a magnetic field, for the Boris push (`None`: not one).
+    fn as_magnetic(&self) -> Option<&dyn Magnetic<V>> {
+        None
     }
-    /// Called once per step, before the Jacobian products at `(x, v)`: a term may keep the
-    /// state-dependent part of its Jacobian (springs: each axis and transverse factor, so that
-    /// a CG iteration needs no square root or division) for the products that follow, which
-    /// are then made at these same `x` and `v` until the next call. Returns whether it kept
-    /// anything (a term that cannot, or need not, computes its products directly).
-    fn jacobian_prepare(&mut self, _x: &[V], _v: &[V], _model: &Model) -> bool {
-        false
+    /// The term as XPBD constraints, for the "xpbd" integrator (`None`: not one).
+    fn as_constraints(&mut self) -> Option<&mut dyn Constraints<V>> {
+        None
     }
-    /// Adds `(cx ∂f/∂x + cv ∂f/∂v)·w` at `(x, v)` into `out`, one vector per particle, matrix-free
-    /// (`c = (cx, cv)`; ∂f/∂x in N/m, ∂f/∂v in N·s/m), gathered per particle so that results are
-    /// bit-identical for any thread count. Rows of pinned particles may be non-zero (the solver
-    /// filters them). Returns false, adding nothing, if the term has no Jacobian.
-    fn jacobian_product(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _w: &[V], _out: &mut [V]) -> bool {
-        false
+    /// The term as a velocity projection (DFSPH's pressure solve), for "semi_implicit_euler".
+    fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
+        None
     }
-    /// Adds the diagonal of `cx ∂f/∂x + cv ∂f/∂v` at `(x, v)` into `out` (component k of
-    /// `out[i]` gets the entry of row and column (i, k)): the Jacobi preconditioner. Returns
-    /// false, adding nothing, if the term has no Jacobian.
-    fn jacobian_diagonal(&self, _x: &[V], _v: &[V], _model: &Model, _c: (Real, Real), _out: &mut [V]) -> bool {
-        false
+    /// The term's Jacobians, for implicit integrators (`None`: taken explicitly).
+    fn as_jacobian(&self) -> Option<&dyn Jacobian<V>> {
+        None
+    }
+    /// `as_jacobian`, to prepare the products of a step.
+    fn as_jacobian_mut(&mut self) -> Option<&mut dyn Jacobian<V>> {
+        None
+    }
+    /// The term's own state (contacts' spins and springs, DFSPH's warm starts), `None` if it
+    /// has none besides the particles'.
+    fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
+        None
+    }
+    /// `as_own_state`, to step or restore it.
+    fn as_own_state_mut(&mut self) -> Option<&mut dyn OwnState<V>> {
+        None
     }
 }
 
@@ -287,8 +199,14 @@ pub struct ForceSet<V: Vector> {
     /// Whether any term's force depends on velocity; and any besides the magnetic terms.
     any_velocity: bool,
     any_velocity_apart: bool,
-    /// Whether any term is magnetic (`Term::magnetic`).
+    /// Whether any term is magnetic (`Term::as_magnetic`).
     any_magnetic: bool,
+    /// Whether any term has Jacobians (`Term::as_jacobian`).
+    any_jacobian: bool,
+    /// The terms that hold XPBD constraints (`Term::as_constraints`), in term order.
+    constraints: Vec<usize>,
+    /// The terms that project velocities (`Term::as_projection`), in term order.
+    projections: Vec<usize>,
     /// Force evaluations so far (for the work-precision books).
     pub evaluations: u64,
     /// Sum of the uniform acceleration fields (m/s²), applied by the integrators.
@@ -309,6 +227,9 @@ impl<V: Vector> Default for ForceSet<V> {
             any_velocity: false,
             any_velocity_apart: false,
             any_magnetic: false,
+            any_jacobian: false,
+            constraints: Vec::new(),
+            projections: Vec::new(),
             evaluations: 0,
             g: V::ZERO,
             stop: Stop::default(),
@@ -322,17 +243,55 @@ impl<V: Vector> ForceSet<V> {
     /// neighbour searches the terms share.
     pub fn push(&mut self, mut t: Box<dyn Term<V>>) -> Result<()> {
         t.share(&mut self.shared)?;
-        self.any_dissipative |= t.dissipative();
-        self.any_velocity |= t.velocity_dependent();
-        self.any_velocity_apart |= t.velocity_dependent() && !t.magnetic();
-        self.any_magnetic |= t.magnetic();
-        if let Some(g) = t.uniform_acceleration() {
-            self.g += g;
-        }
         self.terms.push(t);
         self.dissipated.push(0.0);
         self.power.push(0.0);
+        self.refresh();
         Ok(())
+    }
+
+    /// The aggregates over the terms, summed again in term order: what adding them one by one
+    /// gives (the uniform fields' sum included, bit for bit).
+    fn refresh(&mut self) {
+        let terms = &mut self.terms;
+        self.any_dissipative = terms.iter().any(|t| t.dissipative());
+        self.any_velocity = terms.iter().any(|t| t.velocity_dependent());
+        self.any_velocity_apart = terms.iter().any(|t| t.velocity_dependent() && t.as_magnetic().is_none());
+        self.any_magnetic = terms.iter().any(|t| t.as_magnetic().is_some());
+        self.any_jacobian = terms.iter().any(|t| t.as_jacobian().is_some());
+        self.g = terms.iter().filter_map(|t| t.uniform_acceleration()).fold(V::ZERO, |g, a| g + a);
+        self.constraints = (0..terms.len()).filter(|&k| terms[k].as_constraints().is_some()).collect();
+        self.projections = (0..terms.len()).filter(|&k| terms[k].as_projection().is_some()).collect();
+    }
+
+    /// The terms that hold XPBD constraints, by index (what the "xpbd" integrator projects).
+    pub fn constraint_terms(&self) -> &[usize] {
+        &self.constraints
+    }
+
+    /// Whether term `k` holds XPBD constraints.
+    pub fn is_constraint(&self, k: usize) -> bool {
+        self.constraints.contains(&k)
+    }
+
+    /// Whether any term projects velocities (DFSPH).
+    pub fn projects_velocities(&self) -> bool {
+        !self.projections.is_empty()
+    }
+
+    /// Runs the velocity projections at `stage` (`VelocityProjection::project`), in term order,
+    /// booking the kinetic energy each removes as its term's dissipation.
+    pub fn project_velocities(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) {
+        for &k in &self.projections {
+            if let Some(p) = self.terms[k].as_projection() {
+                self.dissipated[k] += p.project(stage, x, v, model, dt);
+            }
+        }
+    }
+
+    /// Whether any term has Jacobians (an implicit integrator would take it implicitly).
+    pub fn has_jacobian(&self) -> bool {
+        self.any_jacobian
     }
 
     /// Puts `t` in place of term `at` (same place in the evaluation order), keeping the energy
@@ -350,11 +309,7 @@ impl<V: Vector> ForceSet<V> {
         }
         t.set_stop(self.stop.clone());
         self.terms[at] = t;
-        self.any_dissipative = self.terms.iter().any(|t| t.dissipative());
-        self.any_velocity = self.terms.iter().any(|t| t.velocity_dependent());
-        self.any_velocity_apart = self.terms.iter().any(|t| t.velocity_dependent() && !t.magnetic());
-        self.any_magnetic = self.terms.iter().any(|t| t.magnetic());
-        self.g = self.terms.iter().filter_map(|t| t.uniform_acceleration()).fold(V::ZERO, |g, a| g + a);
+        self.refresh();
         self.power[at] = 0.0;
         Ok(())
     }
@@ -376,7 +331,7 @@ impl<V: Vector> ForceSet<V> {
         self.evaluations += 1;
         let mut write = Write::Overwrite;
         for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
-            if t.uniform_acceleration().is_some() || (apart && t.magnetic()) {
+            if t.uniform_acceleration().is_some() || (apart && t.as_magnetic().is_some()) {
                 continue;
             }
             if self.stop.is_set() {
@@ -432,8 +387,8 @@ impl<V: Vector> ForceSet<V> {
         }
         b.clear();
         b.resize(x.len(), V::AXIAL_ZERO);
-        for t in &self.terms {
-            t.add_magnetic_field(x, model, b);
+        for m in self.terms.iter().filter_map(|t| t.as_magnetic()) {
+            m.add_field(x, model, b);
         }
         true
     }

@@ -25,7 +25,7 @@
 //! derivative with respect to positions (not symmetric) is left out. Both change only the
 //! linearisation, not the force: the step stays consistent, first order.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Jacobian, Term, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
@@ -521,10 +521,16 @@ impl<V: Vector> Term<V> for Springs<V> {
         t.is_finite().then_some(t)
     }
 
-    fn has_jacobian(&self) -> bool {
-        true
+    fn as_jacobian(&self) -> Option<&dyn Jacobian<V>> {
+        Some(self)
     }
-    fn jacobian_prepare(&mut self, x: &[V], _v: &[V], _model: &Model) -> bool {
+    fn as_jacobian_mut(&mut self) -> Option<&mut dyn Jacobian<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Jacobian<V> for Springs<V> {
+    fn prepare(&mut self, x: &[V], _v: &[V], _model: &Model) -> bool {
         let m = self.other.len();
         if self.jac_t.len() != m {
             // Fallible: without room the products compute their axes themselves.
@@ -557,23 +563,21 @@ impl<V: Vector> Term<V> for Springs<V> {
         self.jac_at = Some((x.as_ptr() as usize, x.len()));
         true
     }
-    fn jacobian_product(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) -> bool {
+    fn product(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), w: &[V], out: &mut [V]) {
         let prepared = self.prepared(x);
         par::chunks1(&mut out[..self.n_cov], |p0, out| {
             for (k, o) in out.iter_mut().enumerate() {
                 *o += self.jacobian_row(p0 + k, x, c, w, true, prepared);
             }
         });
-        true
     }
-    fn jacobian_diagonal(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), out: &mut [V]) -> bool {
+    fn diagonal(&self, x: &[V], _v: &[V], _model: &Model, c: (Real, Real), out: &mut [V]) {
         let prepared = self.prepared(x);
         par::chunks1(&mut out[..self.n_cov], |p0, out| {
             for (k, o) in out.iter_mut().enumerate() {
                 *o += self.jacobian_row(p0 + k, x, c, x, false, prepared);
             }
         });
-        true
     }
 }
 
@@ -710,15 +714,15 @@ mod tests {
             };
             let (fp, fm) = (shifted(1.0), shifted(-1.0));
             let mut jw = vec![V::ZERO; n];
-            assert!(Term::jacobian_product(&sp, &x, &v, &model, c, &w, &mut jw));
+            Jacobian::product(&sp, &x, &v, &model, c, &w, &mut jw);
             // The axes kept by jacobian_prepare give the same bits.
             let mut sp2 =
                 Springs::<V>::new("s".into(), i.clone(), j.clone(), k.clone(), vec![damping; m], rest.clone(), n)
                     .unwrap();
-            assert!(Term::jacobian_prepare(&mut sp2, &x, &v, &model));
+            assert!(Jacobian::prepare(&mut sp2, &x, &v, &model));
             assert!(sp2.prepared(&x));
             let mut jw2 = vec![V::ZERO; n];
-            Term::jacobian_product(&sp2, &x, &v, &model, c, &w, &mut jw2);
+            Jacobian::product(&sp2, &x, &v, &model, c, &w, &mut jw2);
             assert_eq!(jw, jw2);
             let scale = jw.iter().map(|f| f.length_squared()).fold(0.0, f64::max).sqrt();
             for p in 0..n {
@@ -732,7 +736,7 @@ mod tests {
             // The diagonal: row (p, q) of the product with unit vectors on component q of
             // particle p alone.
             let mut diag = vec![V::ZERO; n];
-            assert!(Term::jacobian_diagonal(&sp, &x, &v, &model, c, &mut diag));
+            Jacobian::diagonal(&sp, &x, &v, &model, c, &mut diag);
             for p in [0, 7, n - 1] {
                 for q in 0..V::DIM {
                     let mut e = vec![V::ZERO; n];
@@ -740,7 +744,7 @@ mod tests {
                     unit[q] = 1.0;
                     e[p] = V::from_slice(&unit[..V::DIM]);
                     let mut col = vec![V::ZERO; n];
-                    Term::jacobian_product(&sp, &x, &v, &model, c, &e, &mut col);
+                    Jacobian::product(&sp, &x, &v, &model, c, &e, &mut col);
                     let (a, b) = (col[p].comp(q), diag[p].comp(q));
                     assert!((a - b).abs() <= 1e-12 * a.abs(), "diagonal ({p}, {q}): {b} vs {a}");
                 }
@@ -769,7 +773,7 @@ mod tests {
         for _ in 0..50 {
             let w: Vec<DVec3> = (0..n).map(|_| DVec3::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) - 0.5).collect();
             let mut jw = vec![DVec3::ZERO; n];
-            Term::jacobian_product(&sp, &x, &x, &model, (1.0, 0.0), &w, &mut jw);
+            Jacobian::product(&sp, &x, &x, &model, (1.0, 0.0), &w, &mut jw);
             let q: f64 = w.iter().zip(&jw).map(|(a, b)| a.dot(*b)).sum();
             assert!(q <= 1e-12, "wᵀJw = {q} > 0");
         }

@@ -50,7 +50,7 @@
 //! and converges more slowly per iteration; with one iteration per substep ("Small steps",
 //! Macklin et al. 2019) Gauss–Seidel's faster propagation matters most.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Constraints, Term, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::{self, SyncPtr};
@@ -647,9 +647,6 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
         )
     }
 
-    fn xpbd_constraints(&self) -> bool {
-        true
-    }
     /// 1/ω_max of the compliant distance and pin constraints, ω_max² ≤ max_p (2/m_p) Σ_{c ∋ p}
     /// 1/α_c (Gershgorin, as for springs: compliance α is a spring of stiffness 1/α). Stiff
     /// constraints (α = 0, no oscillation to resolve), bending, area, volume and shapes set
@@ -675,12 +672,18 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
         let t = 1.0 / w2.sqrt();
         (t.is_finite() && t > 0.0).then_some(t)
     }
-    fn xpbd_begin(&mut self) {
+    fn as_constraints(&mut self) -> Option<&mut dyn Constraints<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Constraints<V> for XpbdConstraints<V> {
+    fn begin(&mut self) {
         for s in &mut self.sets {
             s.lambda.iter_mut().for_each(|l| *l = 0.0);
         }
     }
-    fn xpbd_project(&mut self, x: &mut [V], model: &Model, h: Real) {
+    fn project(&mut self, x: &mut [V], model: &Model, h: Real) {
         for s in &mut self.sets {
             Self::project_set(s, x, &model.inv_mass, h);
         }
