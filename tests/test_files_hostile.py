@@ -1077,11 +1077,11 @@ def grid_scene() -> pc.Scene:
     s = pc.Scene(2, dt=1e-3, threads=1)
     band = np.zeros((8, 8), dtype=bool)
     band[2, :] = True
-    s.add(pc.Wave((8, 8), dx=0.1, c=0.5, gamma=0.1, absorbing=["x+"], layer=2, mask=~band & (np.arange(8)[:, None] == 6),
+    s.add(pc.Wave((8, 8), spacing=0.1, c=0.5, damping=0.1, absorbing=["x+"], layer=2, mask=~band & (np.arange(8)[:, None] == 6),
                   drops=[pc.Drop(0.0, (0.4, 0.4), 0.1, 0.01)],
                   oscillators=[pc.Oscillator(1.0, 2.0, center=(0.3, 0.3), radius=0.1), pc.Oscillator(0.5, 1.0, region=band)]))
     s.add(pc.GrayScott((8, 8), preset="spots", edges="free"))
-    s.add(pc.StableFluid((8, 6), dx=0.1, viscosity=1e-3, buoyancy=(0.1, 0.2), vorticity=0.1, tracers=3, walls="no_slip", lid=0.5,
+    s.add(pc.StableFluid((8, 6), spacing=0.1, nu=1e-3, buoyancy=(0.1, 0.2), vorticity=0.1, tracers=3, walls="no_slip", lid=0.5,
                          obstacles=band[:, :6] & (np.arange(8)[:, None] == 2),
                          sources=[pc.Source(1.0, 0.5, (0.0, 0.1), center=(0.45, 0.15), radius=0.15), pc.Source(region=np.eye(8, 6, dtype=bool))]))
     s.add(pc.Flow("van_der_pol", 3, seed=2, mu=1.5))
@@ -1111,7 +1111,7 @@ def test_grid_reference_round_trips(grid_ref, tmp_path):
     f = tmp_path / "g.npz"
     f.write_bytes(grid_ref.data)
     scene = pc.Scene.load(f)
-    assert [g.kind for g in scene.grids] == ["wave", "gray_scott", "fluid"] and len(scene.flows) == 1
+    assert [g.kind for g in scene.grids] == ["wave", "gray_scott", "stable_fluid"] and len(scene.flows) == 1
     check_loaded(scene, f)
 
 
@@ -1205,12 +1205,12 @@ def test_a_grid_beyond_the_memory_limit_is_refused_by_shape(grid_ref, tmp_path, 
     monkeypatch.setattr(pc._check, "memory_limit", lambda: 1 << 20)  # 1 MB: the 8 x 6 fluid needs ~12 kB
     f = tmp_path / "g.npz"
     f.write_bytes(with_meta(grid_ref, lambda m: set_at(m, ("grids", 2, "record", "shape"), [100, 60])))
-    with pytest.raises(pc.SceneFileError, match=r"meta\.grids\[2\]\.record\.shape: a fluid grid of \[100, 60\] cells would need about 1\.5 MB") as ei:
+    with pytest.raises(pc.SceneFileError, match=r"meta\.grids\[2\]\.record\.shape: a stable_fluid grid of \[100, 60\] cells would need about 1\.5 MB") as ei:
         pc.Scene.load(f)
     assert ei.value.field == "meta.grids[2].record.shape"
 
 
-@pytest.mark.parametrize("kind", ["wave", "fluid"])
+@pytest.mark.parametrize("kind", ["wave", "stable_fluid"])
 def test_a_source_with_both_region_and_center_round_trips(tmp_path, kind):
     # The region wins (as the constructor uses it); the file used to record the center instead,
     # so Scene.load refused what Scene.save wrote (the radius, 0, is no Gaussian's).
@@ -1218,9 +1218,9 @@ def test_a_source_with_both_region_and_center_round_trips(tmp_path, kind):
     band[2, :] = True
     s = pc.Scene(2, dt=1e-3, threads=1)
     if kind == "wave":
-        g = s.add(pc.Wave((8, 8), dx=0.1, oscillators=[pc.Oscillator(1.0, 2.0, center=(0.4, 0.4), region=band)]))
+        g = s.add(pc.Wave((8, 8), spacing=0.1, oscillators=[pc.Oscillator(1.0, 2.0, center=(0.4, 0.4), region=band)]))
     else:
-        g = s.add(pc.StableFluid((8, 8), dx=0.1, sources=[pc.Source(center=(0.4, 0.4), region=band)]))
+        g = s.add(pc.StableFluid((8, 8), spacing=0.1, sources=[pc.Source(center=(0.4, 0.4), region=band)]))
     s.step(2)
     back = pc.Scene.load(s.save(tmp_path / "s.npz"))
     s.step(3)

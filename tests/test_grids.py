@@ -76,7 +76,7 @@ def test_books_balance_with_damping_drops_and_oscillators():
     scene = pc.Scene(dim=2)
     w = scene.add(
         pc.Wave(
-            (48, 48), 1 / 48, c=1.0, gamma=0.5, edges=("free", "fixed", "free", "free"), absorbing=("x+",), layer=8, mask=mask,
+            (48, 48), 1 / 48, c=1.0, damping=0.5, edges=("free", "fixed", "free", "free"), absorbing=("x+",), layer=8, mask=mask,
             drops=[pc.Drop(0.1, (0.3, 0.3), 0.03, 0.2)],
             oscillators=[pc.Oscillator(30.0, 2.0, center=(0.7, 0.7), radius=0.03)],
         )
@@ -121,7 +121,7 @@ def test_absorbing_faces_reflect_little_of_a_pulse():
 
 def _run_wave(threads: int) -> np.ndarray:
     scene = pc.Scene(dim=2, threads=threads)
-    w = scene.add(pc.Wave((300, 200), 1 / 200, c=1.0, gamma=0.2, absorbing=("x-", "y+")))
+    w = scene.add(pc.Wave((300, 200), 1 / 200, c=1.0, damping=0.2, absorbing=("x-", "y+")))
     w.u = np.pad(_pulse(200), ((50, 50), (0, 0)))
     scene.advance(0.3)
     return w.u
@@ -203,7 +203,7 @@ def test_a_small_mode_grows_at_the_rate_linear_stability_predicts(which, m):
     feed, kill, n = 0.025, 0.05, 64
     u0, v0 = _steady_states(feed, kill)[which]
     scene, gs = _gs(n, feed=feed, kill=kill)
-    dx, dt = gs.dx, 1.0
+    dx, dt = gs.spacing, 1.0
     kappa = 4 / dx**2 * math.sin(math.pi * m / n) ** 2
     step = np.eye(2) + dt * (_jacobian(u0, v0, feed, kill) - kappa * np.diag([gs.du, gs.dv]))
     # Few enough steps that the mode stays in [1e-2, 1e2] of its start: far above round-off,
@@ -360,7 +360,7 @@ def test_fluid_projection_leaves_no_divergence_and_is_deterministic():
         speed_scale = float(np.abs(f.velocity).max())
         assert speed_scale > 0.05  # the plume moves
         div = np.abs(f.divergence)[~f.mask]
-        assert div.max() < 1e-4 * speed_scale / f.dx  # tolerance 1e-6 of the projection
+        assert div.max() < 1e-4 * speed_scale / f.spacing  # tolerance 1e-6 of the projection
         out.append((f.density, f.tracers, scene.energy()))
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
     assert out[0][2] == out[1][2]
@@ -369,7 +369,7 @@ def test_fluid_projection_leaves_no_divergence_and_is_deterministic():
 def test_fluid_smoke_rises_and_its_books_balance():
     scene = pc.scenes.smoke(n=32, tracers=0, obstacle=False)
     f = scene.grids[0]
-    y = (np.arange(f.shape[1]) + 0.5) * f.dx
+    y = (np.arange(f.shape[1]) + 0.5) * f.spacing
     heights = []
     for _ in range(3):
         scene.advance(0.3)
@@ -413,7 +413,7 @@ def _taylor_green_error(n: int, cfl: float, t_end: float = 1.0, nu: float = 0.05
     Navier–Stokes solution there, stepped as a user would: ``advance`` at ``cfl``."""
     dx = math.pi / n
     scene = pc.Scene(dim=2)
-    f = scene.add(pc.StableFluid((n, n), dx, viscosity=nu, cfl=cfl))
+    f = scene.add(pc.StableFluid((n, n), dx, nu=nu, cfl=cfl))
     xf, xc = np.arange(n + 1) * dx, (np.arange(n) + 0.5) * dx
     f.set_velocity(np.outer(np.sin(xf), np.cos(xc)), -np.outer(np.cos(xc), np.sin(xf)))
     e0 = scene.energy().kinetic
@@ -457,7 +457,7 @@ def test_fluid_set_velocity_sets_the_open_faces_and_a_step_projects_them():
     assert np.array_equal(f.velocity, centres)
     assert np.abs(f.divergence).max() > 1.0  # a random field is far from divergence-free
     scene.step()
-    assert np.abs(f.divergence)[~obstacle].max() < 1e-8 * np.abs(centres).max() / f.dx
+    assert np.abs(f.divergence)[~obstacle].max() < 1e-8 * np.abs(centres).max() / f.spacing
     before = f.velocity
     with pytest.raises(ValueError, match=r"u: expected shape \(13, 10\)"):
         f.set_velocity(np.zeros((nx, ny)), v)
@@ -526,7 +526,7 @@ def test_cli_renders_a_turing_preset(tmp_path):
 def test_gray_scott_in_3d_balances_its_books():
     scene = pc.Scene(dim=3, dt=1.0)
     gs = scene.add(pc.GrayScott((16, 12, 10), 2.5 / 256, preset="spots", edges=("periodic", "periodic", "free", "free", "periodic", "periodic")))
-    assert math.isclose(gs.diffusion_limit, gs.dx**2 / (6 * 2e-5))
+    assert math.isclose(gs.diffusion_limit, gs.spacing**2 / (6 * 2e-5))
     gs.seed(3, squares=2, size=0.3)
     b0 = gs.books()
     scene.advance(300.0)

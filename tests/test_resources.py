@@ -310,20 +310,20 @@ scene.add(pc.Gravity([0.0, -9.81]))
       ("scene.pressure", ("fields",))]),
     "stable_fluid": ("""
 scene = pc.Scene(2)
-g = pc.StableFluid((1500, 1500), dx=1 / 1500, sources=[pc.Source(density=1.0, velocity=(0.0, 1.0), center=(0.5, 0.1), radius=0.05)])
+g = pc.StableFluid((1500, 1500), spacing=1 / 1500, sources=[pc.Source(density=1.0, velocity=(0.0, 1.0), center=(0.5, 0.1), radius=0.05)])
 """, [("scene.add(g)", ("add", "fluid")), ("scene.step(1)", ("step",)), ("g.density", ("field",)),
       ("g.velocity", ("field", "velocity"))]),
     "wave_mask": ("""
 scene = pc.Scene(2)
 mask = np.zeros((3000, 3000), bool)
 mask[1000:1100, :1400] = True
-w = pc.Wave((3000, 3000), dx=0.01, mask=mask, drops=[pc.Drop(0.0, (15.0, 15.0), 0.2, 0.01)])
+w = pc.Wave((3000, 3000), spacing=0.01, mask=mask, drops=[pc.Drop(0.0, (15.0, 15.0), 0.2, 0.01)])
 """, [("scene.add(w)", ("add", "add_wave")), ("scene.step(1)", ("step",)), ("w.u", ("field",)),
       ("w.velocity", ("field",))]),
     "wave_3d": ("""
 scene = pc.Scene(3)
-w = pc.Wave((200, 200, 200), dx=0.01, drops=[pc.Drop(0.0, (1.0, 1.0, 1.0), 0.1, 0.01)])
-""", [("scene.add(w)", ("add", "add_wave")), ("scene.advance(w.dx)", ("advance", "step")), ("w.u", ("field",))]),
+w = pc.Wave((200, 200, 200), spacing=0.01, drops=[pc.Drop(0.0, (1.0, 1.0, 1.0), 0.1, 0.01)])
+""", [("scene.add(w)", ("add", "add_wave")), ("scene.advance(w.spacing)", ("advance", "step")), ("w.u", ("field",))]),
     "gray_scott": ("""
 scene = pc.Scene(2)
 gs = pc.GrayScott((2500, 2500), preset="coral")

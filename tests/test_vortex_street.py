@@ -78,10 +78,10 @@ def test_inflow_is_uniform_ahead_of_the_cylinder_and_mass_is_conserved():
     assert np.abs(ahead[:, 1]).max() < 0.04, ahead[:, 1]
     # Every column carries the inflow's flux U·H (the cell-centred u of a column averages two
     # face columns, each carrying it): in = out, to the pressure solve's tolerance (1e-6).
-    flux = vel[:, :, 0].sum(axis=1) * fluid.dx
-    inflow = U * ny * fluid.dx
+    flux = vel[:, :, 0].sum(axis=1) * fluid.spacing
+    inflow = U * ny * fluid.spacing
     assert np.abs(flux / inflow - 1.0).max() < 1e-5, np.abs(flux / inflow - 1.0).max()
-    assert np.abs(fluid.divergence).max() * fluid.dx < 1e-5 * U
+    assert np.abs(fluid.divergence).max() * fluid.spacing < 1e-5 * U
 
 
 def test_vortex_street_books_balance_and_dye_stays_in_range():

@@ -10,8 +10,10 @@ Force terms (:class:`~physcore.terms.Term`, fluids included), colliders (:class:
   the order they are written and read, so files stay byte-identical) and :attr:`Part.part_kind`,
   its key within the section (a term's type key, a grid's kind; one-class sections use the
   singular, ``"plane"``, ``"flow"``). The registry key is ``"{section}/{part_kind}"``: a section
-  qualifies the kind because the kinds of different sections were chosen independently (the
-  term ``"fluid"`` and the grid ``"fluid"`` are two parts).
+  qualifies the kind because the kinds of different sections were chosen independently. Since
+  issue 45 no kind means two things: the SPH term is ``"terms/fluid"``, the grid fluid
+  ``"grids/stable_fluid"``; :data:`PART_ALIASES` maps the old key ``"grids/fluid"`` (scene files
+  written before) onto it.
 * :meth:`Part._claim_name` and :meth:`Part._attach` — how it joins a scene, given an
   :class:`AttachContext`: the scene's dimension, the names taken, its integrator, attribute names
   and particle count, and the few operations a part may perform (register with the core
@@ -56,7 +58,7 @@ import numpy as np
 
 from ._errors import InvalidInputError, InvalidTypeError
 
-__all__ = ["Part", "PARTS", "SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
+__all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
 
 #: The sections of a scene file's ``meta``, in the order they are written and read.
 SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows")
@@ -70,6 +72,8 @@ RESERVED_SYSTEM_NAMES: frozenset[str] = frozenset({"particles", "collisions"})
 
 #: Every part class by its key ``"{section}/{part_kind}"``, filled as the classes are defined.
 PARTS: dict[str, type[Part]] = {}
+#: Old keys that scene files may hold -> the key now (docs/naming.md).
+PART_ALIASES: dict[str, str] = {"grids/fluid": "grids/stable_fluid"}
 
 
 class Host(Protocol):
@@ -234,7 +238,8 @@ def entry_class(section: str, entry: Mapping[str, Any]) -> type[Part]:
     if key is None:
         (cls,) = section_kinds(section).values()
         return cls
-    return PARTS[part_key(section, entry[key])]
+    k = part_key(section, entry[key])
+    return PARTS[PART_ALIASES.get(k, k)]
 
 
 def unique_name(base: object, taken: frozenset[str] | set[str]) -> str:

@@ -42,7 +42,7 @@ import numpy as np
 
 from . import _check, _core
 from ._errors import InvalidInputError, InvalidTypeError, SceneFileError
-from ._parts import section_kinds
+from ._parts import PART_ALIASES, section_kinds
 
 __all__ = ["FORMAT_VERSION", "check_path", "read", "SceneFile"]
 
@@ -111,7 +111,7 @@ _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
     "wave": {"u": ("f8", "G"), "u_prev": ("f8", "G"), "clock": ("f8", 5)},
     "gray_scott": {"u": ("f8", "G"), "v": ("f8", "G"), "made": ("f8", 2)},
     # The fluid's arrays carry ghost faces; their sizes follow from the record (_fluid_sizes).
-    "fluid": {k: ("f8", None) for k in ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books")},
+    "stable_fluid": {k: ("f8", None) for k in ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books")},
 }
 #: Each grid kind's record (what ``Grid._record`` writes): key -> kind of value. The kinds beyond
 #: :meth:`_Reader.value`'s are checked by :func:`_grid_record`. ``_GRID_RECORD_OPTIONAL`` keys may
@@ -126,13 +126,13 @@ _GRID_RECORD: dict[str, dict[str, str]] = {
         "shape": "cells", "dx": "number", "edges": "strs", "du": "number", "dv": "number", "feed": "number",
         "kill": "number", "cfl": "number",
     },
-    "fluid": {
+    "stable_fluid": {
         "shape": "cells", "dx": "number", "viscosity": "number", "buoyancy": "pair", "ambient_temperature": "number",
         "vorticity": "number", "advection": "str", "tolerance": "number", "max_iterations": "int", "walls": "str",
         "lid": "optional_number", "mask": "bool", "tracers": "int", "cfl": "number", "sources": "sources",
     },
 }
-_GRID_RECORD_OPTIONAL: dict[str, dict[str, str]] = {"fluid": {"inflow": "optional_number"}}
+_GRID_RECORD_OPTIONAL: dict[str, dict[str, str]] = {"stable_fluid": {"inflow": "optional_number"}}
 #: Entries of a grid's lists of sources, by position: kind of value (see _grid_record).
 _GRID_ENTRIES: dict[str, tuple[tuple[str, str], ...]] = {
     "drops": (("t", "number"), ("center", "vector"), ("radius", "number"), ("amplitude", "number")),
@@ -141,7 +141,7 @@ _GRID_ENTRIES: dict[str, tuple[tuple[str, str], ...]] = {
 }
 #: Bytes the core holds per cell of each grid kind (its fields and scratch, float64): a generous
 #: estimate (not a measurement) for the memory check before a file's grid is built.
-_GRID_BYTES_PER_CELL = {"wave": 8 * 8, "gray_scott": 8 * 8, "fluid": 8 * 32}
+_GRID_BYTES_PER_CELL = {"wave": 8 * 8, "gray_scott": 8 * 8, "stable_fluid": 8 * 32}
 
 
 def check_path(path: object, arg: str = "path") -> Path:
@@ -352,6 +352,7 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
     for k, g in enumerate(meta["grids"]):
         field = f"meta.grids[{k}]"
         rec = r.record(field, g, {"kind": "str", "name": "str", "record": "object"}, dim)
+        rec["kind"] = PART_ALIASES.get(f"grids/{rec['kind']}", f"grids/{rec['kind']}")[len("grids/"):]  # "fluid": the old name
         if rec["kind"] not in _GRID_STATE:
             raise r.error(f"{field}.kind", f"unknown grid kind {_show(rec['kind'])} (expected one of {', '.join(_GRID_STATE)})")
         if not rec["name"] or rec["name"] in names:
@@ -401,7 +402,7 @@ def _grid_record(r: _Reader, field: str, kind: str, v: object, dim: int) -> dict
         _check.memory("shape", cells * _GRID_BYTES_PER_CELL[kind], f"a {kind} grid of {_show(shape)} cells")
     except InvalidInputError as exc:
         raise r.error(f"{field}.shape", str(exc)[len("shape: "):]) from None
-    if kind == "fluid":
+    if kind == "stable_fluid":
         if dim != 2:
             raise r.error(f"{field}.shape", f"the grid fluid is 2D, got {_show(shape)}")
         r.integer(f"{field}.tracers", rec["tracers"], 0, (1 << 24) + 1, "2**24 + 1")  # it sizes the tracers member
@@ -600,7 +601,7 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, g in enumerate(meta["grids"]):
         cells = f"G{k}"
         sizes[cells] = (math.prod(g["record"]["shape"]), f"meta.grids[{k}].record.shape")
-        if g["kind"] == "fluid":
+        if g["kind"] == "stable_fluid":
             rec = g["record"]
             for name, n in _fluid_sizes(rec).items():
                 origin = (f"meta.grids[{k}].record.tracers (x and y of {rec['tracers']} tracers)" if name == "tracers"

@@ -2,8 +2,9 @@
 systems of a :class:`~physcore.Scene` stepped with it (same clock, rollback, save/load, energy
 books).
 
-Every grid is cell-centred: cell ``(i, j)`` has its centre at ``((i + ½) dx, (j + ½) dx)`` and the
-domain is ``[0, nx·dx] × [0, ny·dx]``. Fields are float64 arrays of shape ``shape = (nx, ny)``
+Every grid is cell-centred: with the cell size ``spacing`` (m; ``dx`` in the formulas below, the
+name of the keyword before issue 45, still accepted with a DeprecationWarning), cell ``(i, j)``
+has its centre at ``((i + ½) dx, (j + ½) dx)`` and the domain is ``[0, nx·dx] × [0, ny·dx]``. Fields are float64 arrays of shape ``shape = (nx, ny)``
 (``(nx, ny, nz)`` in 3D), indexed ``u[i, j]`` with i along x. Faces (``edges``): ``"fixed"``
 (u = 0 on the face), ``"free"`` (∂u/∂n = 0) or ``"periodic"``; one rule for all faces or one per
 face in the order x-, x+, y-, y+ (z-, z+).
@@ -12,7 +13,7 @@ Examples
 --------
 >>> import numpy as np, physcore as pc
 >>> scene = pc.Scene(dim=2)
->>> pond = scene.add(pc.Wave((64, 64), dx=0.01, c=0.5, drops=[pc.Drop(0.0, (0.32, 0.32), 0.02, 0.01)]))
+>>> pond = scene.add(pc.Wave((64, 64), spacing=0.01, c=0.5, drops=[pc.Drop(0.0, (0.32, 0.32), 0.02, 0.01)]))
 >>> n = scene.advance(0.2)
 >>> pond.u.shape, bool(abs(scene.energy_drift()) < 1e-10)
 ((64, 64), True)
@@ -26,7 +27,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from . import _check, _core
+from . import _check, _core, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError, allocating
 from ._parts import AttachContext, Host, LoadContext, Part, check_system
 
@@ -151,6 +152,8 @@ class Grid(Part):
     :class:`~physcore._parts.Host`."""
 
     kind = ""
+    #: The kind the core's ``add_grid`` and ``grid_limits`` take (the kind itself unless renamed).
+    core_kind: ClassVar[str] = ""
     section: ClassVar[str] = "grids"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -158,25 +161,28 @@ class Grid(Part):
             cls.part_kind = cls.kind  # Part.__init_subclass__ registers it in physcore._parts.PARTS
         super().__init_subclass__(**kwargs)
 
-    def __init__(self, shape: Any, dx: float, edges: Any, name: str) -> None:
+    def __init__(self, shape: Any, spacing: float, edges: Any, name: str) -> None:
         self.shape = _shape(shape)
         self.dim = len(self.shape)
-        self.dx = _positive("dx", dx, "m")
+        self.spacing = _positive("spacing", spacing, "m")
         self.edges = _edges(edges, self.dim)
         if not isinstance(name, str) or not name:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
         self.name = name
         self._host: Host | None = None
 
+    #: Deprecated alias of :attr:`spacing` (the cell size, m).
+    dx = _deprecate.alias("spacing", "dx")
+
     # -- geometry
     @property
     def extent(self) -> tuple[float, ...]:
-        """The domain's size along each axis, m: ``shape · dx``."""
-        return tuple(n * self.dx for n in self.shape)
+        """The domain's size along each axis, m: ``shape · spacing``."""
+        return tuple(n * self.spacing for n in self.shape)
 
     def centers(self) -> list[np.ndarray]:
-        """Cell-centre coordinates along each axis, m: ``(i + ½) dx``."""
-        return [(np.arange(n) + 0.5) * self.dx for n in self.shape]
+        """Cell-centre coordinates along each axis, m: ``(i + ½) spacing``."""
+        return [(np.arange(n) + 0.5) * self.spacing for n in self.shape]
 
     def _gaussian(self, center: Any, radius: float, arg: str) -> tuple[np.ndarray, np.ndarray]:
         if center is None:
@@ -223,7 +229,8 @@ class Grid(Part):
         host.energy_changed()
 
     def _params(self) -> dict[str, Any]:
-        return {"shape": np.asarray(self.shape, dtype=np.float64), "dx": self.dx, "edges": ",".join(self.edges)}
+        # The core's key for the cell size is "dx".
+        return {"shape": np.asarray(self.shape, dtype=np.float64), "dx": self.spacing, "edges": ",".join(self.edges)}
 
     def _record(self) -> dict[str, Any]:
         """What a scene file stores to rebuild this grid (JSON-able; arrays: `_record_arrays`)."""
@@ -246,7 +253,7 @@ class Grid(Part):
     def _attach(self, ctx: AttachContext, name: str) -> Grid:
         """Joins the scene: one scene only, under a free name; returns the grid itself, bound."""
         check_system(ctx, self, "grid")
-        ctx.sim.add_grid(self.kind, self.name, self._params())
+        ctx.sim.add_grid(self.core_kind or self.kind, self.name, self._params())
         self._host = ctx.host
         return self
 
@@ -265,14 +272,14 @@ class Grid(Part):
 
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        kind = entry["kind"]
+        kind = KIND_ALIASES.get(entry["kind"], entry["kind"])
         state = _GRID_ARRAYS[kind]
         grid = ctx.add(_from_record(kind, entry["name"], entry["record"], {a: v for a, v in arrays.items() if a not in state}))
         with ctx.api(f"grid{ctx.index}"):
             ctx.sim.system_load(grid.name, [(a, v) for a, v in arrays.items() if a in state])
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}(name={self.name!r}, shape={self.shape}, dx={self.dx:g}, edges={self.edges})"
+        return f"{type(self).__name__}(name={self.name!r}, shape={self.shape}, spacing={self.spacing:g}, edges={self.edges})"
 
 
 class Wave(Grid):
@@ -288,12 +295,13 @@ class Wave(Grid):
     ----------
     shape : tuple of int
         Cells along x, y (, z), each >= 3.
-    dx : float
-        Cell size, m.
+    spacing : float
+        Cell size dx, m (old name ``dx``, deprecated).
     c : float
         Wave speed, m/s.
-    gamma : float
-        Damping rate γ, 1/s (default 0: the energy books then balance to round-off).
+    damping : float
+        Damping rate γ, 1/s (default 0: the energy books then balance to round-off). Old name
+        ``gamma`` (deprecated: in physcore γ is the Tait exponent of :class:`~physcore.Fluid`).
     edges : str or sequence of str
         ``"fixed"`` (default), ``"free"`` or ``"periodic"``, for all faces or per face.
     absorbing : bool or sequence of str
@@ -324,14 +332,18 @@ class Wave(Grid):
 
     kind = "wave"
 
+    #: Deprecated alias of :attr:`damping` (1/s).
+    gamma = _deprecate.alias("damping", "gamma")
+
+    @_deprecate.args(("shape", "spacing"), keep=2, renames={"dx": "spacing", "gamma": "damping"}, skip_self=True, name="Wave")
     @allocating("Wave", "a copy of its mask or regions")
     def __init__(
         self,
         shape: Any,
-        dx: float = 1.0,
+        spacing: float = 1.0,
         *,
         c: float = 1.0,
-        gamma: float = 0.0,
+        damping: float = 0.0,
         edges: Any = "fixed",
         absorbing: Any = (),
         layer: int = 24,
@@ -342,9 +354,9 @@ class Wave(Grid):
         cfl: float = 0.9,
         name: str = "wave",
     ) -> None:
-        super().__init__(shape, dx, edges, name)
+        super().__init__(shape, spacing, edges, name)
         self.c = _positive("c", c, "m/s")
-        self.gamma = _positive("gamma", gamma, "1/s", allow_zero=True)
+        self.damping = _positive("damping", damping, "1/s", allow_zero=True)
         if absorbing is True:
             absorbing = tuple(f for f, e in zip(_FACES, self.edges, strict=False) if e != "periodic")
         elif absorbing is False or absorbing is None:
@@ -367,8 +379,8 @@ class Wave(Grid):
 
     @property
     def cfl_limit(self) -> float:
-        """The largest stable step dx / (c √dim), s (the core's formula)."""
-        return float(_core.grid_limits(self.kind, self.dim, {**Grid._params(self), "c": self.c})["cfl_limit"])
+        """The largest stable step spacing / (c √dim), s (the core's formula)."""
+        return float(_core.grid_limits(self.core_kind or self.kind, self.dim, {**Grid._params(self), "c": self.c})["cfl_limit"])
 
     def _profiles(self) -> dict[str, Any]:
         p: dict[str, Any] = {}
@@ -403,7 +415,7 @@ class Wave(Grid):
         p = super()._params()
         p.update(
             c=self.c,
-            gamma=self.gamma,
+            gamma=self.damping,  # the core's key for the damping rate
             cfl=self.cfl,
             layer=float(self.layer),
             layer_strength=self.layer_strength,
@@ -419,7 +431,8 @@ class Wave(Grid):
 
     def _record(self) -> dict[str, Any]:
         return {
-            "shape": list(self.shape), "dx": self.dx, "edges": list(self.edges), "c": self.c, "gamma": self.gamma,
+            # Scene files keep the keys they have always had ("dx", "gamma"): see docs/naming.md.
+            "shape": list(self.shape), "dx": self.spacing, "edges": list(self.edges), "c": self.c, "gamma": self.damping,
             "absorbing": list(self.absorbing), "layer": self.layer, "layer_strength": self.layer_strength, "cfl": self.cfl,
             "mask": self.mask is not None,
             "drops": [[d.t, list(map(float, d.center)), d.radius, d.amplitude] for d in self.drops],
@@ -458,8 +471,8 @@ class GrayScott(Grid):
     Parameters
     ----------
     shape : tuple of int
-    dx : float
-        Cell size (m). Pearson: 2.5/256.
+    spacing : float
+        Cell size dx (m). Pearson: 2.5/256. Old name ``dx`` (deprecated).
     du, dv : float
         Diffusion coefficients, m²/s (Pearson: 2e-5, 1e-5).
     feed, kill : float
@@ -475,10 +488,11 @@ class GrayScott(Grid):
 
     kind = "gray_scott"
 
+    @_deprecate.args(("shape", "spacing"), keep=2, renames={"dx": "spacing"}, skip_self=True, name="GrayScott")
     def __init__(
         self,
         shape: Any,
-        dx: float = 2.5 / 256,
+        spacing: float = 2.5 / 256,
         *,
         du: float = 2e-5,
         dv: float = 1e-5,
@@ -489,7 +503,7 @@ class GrayScott(Grid):
         cfl: float = 0.8,
         name: str = "gray_scott",
     ) -> None:
-        super().__init__(shape, dx, edges, name)
+        super().__init__(shape, spacing, edges, name)
         if "fixed" in self.edges:
             raise InvalidInputError("edges: Gray–Scott takes 'periodic' or 'free' (no-flux) faces, not 'fixed'")
         if preset is not None:
@@ -517,7 +531,7 @@ class GrayScott(Grid):
     def diffusion_limit(self) -> float:
         """The largest stable step dx² / (2·dim·max(D_u, D_v)), s (the core's formula)."""
         params = {**Grid._params(self), "du": self.du, "dv": self.dv}
-        return float(_core.grid_limits(self.kind, self.dim, params)["diffusion_limit"])
+        return float(_core.grid_limits(self.core_kind or self.kind, self.dim, params)["diffusion_limit"])
 
     def _params(self) -> dict[str, Any]:
         p = super()._params()
@@ -547,7 +561,7 @@ class GrayScott(Grid):
         self.v = np.clip(v, 0, None)
 
     def _record(self) -> dict[str, Any]:
-        return {"shape": list(self.shape), "dx": self.dx, "edges": list(self.edges), "du": self.du, "dv": self.dv,
+        return {"shape": list(self.shape), "dx": self.spacing, "edges": list(self.edges), "du": self.du, "dv": self.dv,
                 "feed": self.feed, "kill": self.kill, "cfl": self.cfl}
 
 
@@ -580,10 +594,11 @@ class StableFluid(Grid):
     Parameters
     ----------
     shape : (nx, ny)
-    dx : float
-        Cell size, m.
-    viscosity : float
-        Kinematic viscosity ν, m²/s (0: none).
+    spacing : float
+        Cell size dx, m (old name ``dx``, deprecated).
+    nu : float
+        Kinematic viscosity ν, m²/s (0: none). Old name ``viscosity`` (deprecated: in physcore
+        the SPH :class:`~physcore.Fluid`'s artificial viscosity is ``alpha``).
     buoyancy : (alpha, beta)
         α (m/s² per unit smoke density, pulls down), β (m/s² per kelvin above ambient, lifts).
     ambient_temperature : float
@@ -621,15 +636,22 @@ class StableFluid(Grid):
     added) as dissipated; :meth:`books`: smoke amount and injection, solver iterations.
     """
 
-    kind = "fluid"
+    #: Its kind in scene files and in :data:`physcore._parts.PARTS` (``"grids/stable_fluid"``); files
+    #: that say ``"fluid"`` (before issue 45) still load (:data:`KIND_ALIASES`).
+    kind = "stable_fluid"
+    core_kind = "fluid"
 
+    #: Deprecated alias of :attr:`nu` (m²/s).
+    viscosity = _deprecate.alias("nu", "viscosity")
+
+    @_deprecate.args(("shape", "spacing"), keep=2, renames={"dx": "spacing", "viscosity": "nu"}, skip_self=True, name="StableFluid")
     @allocating("StableFluid", "a copy of its obstacles or regions")
     def __init__(
         self,
         shape: Any,
-        dx: float = 1 / 64,
+        spacing: float = 1 / 64,
         *,
-        viscosity: float = 0.0,
+        nu: float = 0.0,
         buoyancy: Sequence[float] = (0.0, 0.0),
         ambient_temperature: float = 0.0,
         vorticity: float = 0.0,
@@ -645,10 +667,10 @@ class StableFluid(Grid):
         cfl: float = 1.0,
         name: str = "fluid",
     ) -> None:
-        super().__init__(shape, dx, "fixed", name)
+        super().__init__(shape, spacing, "fixed", name)
         if self.dim != 2:
             raise InvalidInputError(f"shape: the grid fluid is 2D, got {len(self.shape)} cell counts")
-        self.viscosity = _positive("viscosity", viscosity, "m²/s", allow_zero=True)
+        self.nu = _positive("nu", nu, "m²/s", allow_zero=True)
         if isinstance(buoyancy, (str, bytes)) or not isinstance(buoyancy, Sequence) or len(buoyancy) != 2:
             raise InvalidInputError(f"buoyancy: expected (alpha, beta), got {buoyancy!r}")
         self.buoyancy = tuple(_check.finite(f"buoyancy[{k}]", b) for k, b in enumerate(buoyancy))
@@ -706,7 +728,7 @@ class StableFluid(Grid):
     def _params(self) -> dict[str, Any]:
         p = super()._params()
         p.update(
-            viscosity=self.viscosity, buoyancy_alpha=self.buoyancy[0], buoyancy_beta=self.buoyancy[1],
+            viscosity=self.nu, buoyancy_alpha=self.buoyancy[0], buoyancy_beta=self.buoyancy[1],
             ambient_temperature=self.ambient_temperature, vorticity=self.vorticity, advection=self.advection,
             tolerance=self.tolerance, max_iterations=float(self.max_iterations), no_slip=self.walls == "no_slip",
             has_lid=self.lid is not None, lid=0.0 if self.lid is None else self.lid,
@@ -760,7 +782,7 @@ class StableFluid(Grid):
 
     def _record(self) -> dict[str, Any]:
         return {
-            "shape": list(self.shape), "dx": self.dx, "viscosity": self.viscosity, "buoyancy": list(self.buoyancy),
+            "shape": list(self.shape), "dx": self.spacing, "viscosity": self.nu, "buoyancy": list(self.buoyancy),
             "ambient_temperature": self.ambient_temperature, "vorticity": self.vorticity, "advection": self.advection,
             "tolerance": self.tolerance, "max_iterations": self.max_iterations, "walls": self.walls, "lid": self.lid,
             "inflow": self.inflow, "mask": self.mask is not None, "tracers": self.n_tracers, "cfl": self.cfl,
@@ -771,21 +793,24 @@ class StableFluid(Grid):
         }
 
 
-KINDS: dict[str, type[Grid]] = {"wave": Wave, "gray_scott": GrayScott, "fluid": StableFluid}
+KINDS: dict[str, type[Grid]] = {"wave": Wave, "gray_scott": GrayScott, "stable_fluid": StableFluid}
+#: Old kind names scene files may hold: ``"fluid"`` (the grid fluid before issue 45).
+KIND_ALIASES: dict[str, str] = {"fluid": "stable_fluid"}
 #: The state arrays each kind saves (``System::save`` in the core).
 _GRID_ARRAYS: dict[str, tuple[str, ...]] = {
     "wave": ("u", "u_prev", "clock"),
     "gray_scott": ("u", "v", "made"),
-    "fluid": ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books"),
+    "stable_fluid": ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books"),
 }
 
 
 def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.ndarray]) -> Grid:
-    """Rebuilds a grid from what :meth:`Grid._record` and its arrays wrote."""
+    """Rebuilds a grid from what :meth:`Grid._record` and its arrays wrote (old kinds too)."""
+    kind = KIND_ALIASES.get(kind, kind)
     arrays = {k: _unlayout(a, tuple(r["shape"])) for k, a in arrays.items()}
     if kind == "wave":
         return Wave(
-            tuple(r["shape"]), r["dx"], c=r["c"], gamma=r["gamma"], edges=tuple(r["edges"]), absorbing=tuple(r["absorbing"]),
+            tuple(r["shape"]), r["dx"], c=r["c"], damping=r["gamma"], edges=tuple(r["edges"]), absorbing=tuple(r["absorbing"]),
             layer=r["layer"], layer_strength=r["layer_strength"], cfl=r["cfl"], mask=arrays.get("mask"),
             drops=[Drop(t, tuple(c), rad, a) for t, c, rad, a in r["drops"]],
             oscillators=[
@@ -797,9 +822,9 @@ def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.n
     if kind == "gray_scott":
         return GrayScott(tuple(r["shape"]), r["dx"], du=r["du"], dv=r["dv"], feed=r["feed"], kill=r["kill"],
                          edges=tuple(r["edges"]), cfl=r["cfl"], name=name)
-    if kind == "fluid":
+    if kind == "stable_fluid":
         return StableFluid(
-            tuple(r["shape"]), r["dx"], viscosity=r["viscosity"], buoyancy=tuple(r["buoyancy"]),
+            tuple(r["shape"]), r["dx"], nu=r["viscosity"], buoyancy=tuple(r["buoyancy"]),
             ambient_temperature=r["ambient_temperature"], vorticity=r["vorticity"], advection=r["advection"],
             tolerance=r["tolerance"], max_iterations=r["max_iterations"], walls=r["walls"], lid=r["lid"],
             inflow=r.get("inflow"), obstacles=arrays.get("mask"), tracers=r["tracers"], cfl=r["cfl"], name=name,

@@ -1573,7 +1573,7 @@ def ripple(
     rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
     stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), 0.012, 0.004) for k in range(drops)]
     scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
-    pond = scene.add(Wave((n, n), 1.0 / n, c=speed, gamma=damping, edges="free", drops=stones, name="pond"))
+    pond = scene.add(Wave((n, n), 1.0 / n, c=speed, damping=damping, edges="free", drops=stones, name="pond"))
     if dt is None:
         scene.dt = _cfl_step(pond, "speed")
     return scene
@@ -1757,7 +1757,7 @@ def cavity(
     scene = Scene(2, integrator=integrator, dt=1e-2 if dt is None else dt, threads=threads)
     box = scene.add(
         StableFluid(
-            (n, n), 1.0 / n, viscosity=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
+            (n, n), 1.0 / n, nu=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
             tracers=tracers, tolerance=1e-8, name="cavity",
         )
     )
@@ -2339,7 +2339,7 @@ def vortex_street(
     scene = Scene(2, integrator=integrator, dt=0.5 * dx / U if dt is None else dt, threads=threads)
     fluid = scene.add(
         StableFluid(
-            (nx, ny), dx, viscosity=nu, advection="maccormack", inflow=U, obstacles=cylinder, sources=sources,
+            (nx, ny), dx, nu=nu, advection="maccormack", inflow=U, obstacles=cylinder, sources=sources,
             tolerance=1e-6, name="channel",
         )
     )

@@ -218,11 +218,11 @@ _DIMENSIONLESS = ("u", "v")
 
 
 def default_style(kind: str) -> str:
-    return {"wave": "water", "gray_scott": "turing", "fluid": "smoke"}.get(kind, "signed")
+    return {"wave": "water", "gray_scott": "turing", "stable_fluid": "smoke"}.get(kind, "signed")
 
 
 def default_field(kind: str) -> str:
-    return {"wave": "u", "gray_scott": "v", "fluid": "density"}.get(kind, "u")
+    return {"wave": "u", "gray_scott": "v", "stable_fluid": "density"}.get(kind, "u")
 
 
 def grid_plan(scene: Any) -> dict[str, Any] | None:
