@@ -50,7 +50,7 @@ def front(x, h: float) -> float:
 def run(nx: int, method: str, threads: int | None) -> dict:
     """From rest to T* = 4, one advance per frame of T* = 4/120; returns the figures."""
     precision = "f32" if method == "wcsph" else "f64"
-    scene = pc.scenes.dam_break(n=nx, method=method, precision=precision, threads=threads)
+    scene = pc.scenes.dam_break(n=nx, method=method, pass_precision=precision, threads=threads)
     h = scene.fluids[0].h
     scale = math.sqrt(2.0 * G / 1.0)
     frame = 4.0 / 120 / scale

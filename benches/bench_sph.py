@@ -56,7 +56,7 @@ def build(nx: int, precision: str = "f32", threads=None, dim: int = 2) -> pc.Sce
         scene.add(pc.Gravity([0.0, -G, 0.0]))
         block, tank = ([0, 0, 0], [1, 2, 0.5]), ([0.0, 0.0, 0.0], [4.0, 3.0, 0.5])
     x = lattice(*block, dx)
-    scene.add_fluid(x, spacing=dx, mass=1000.0 * dx**dim, sound_speed=c0, viscosity=0.05, precision=precision)
+    scene.add_fluid(x, spacing=dx, mass=1000.0 * dx**dim, sound_speed=c0, alpha=0.05, pass_precision=precision)
     scene.add(pc.Box(*tank, restitution=0.5))
     scene.dt = 0.2 * h / c0
     return scene

@@ -74,7 +74,7 @@ def drop(dim: int, n: int, nu: float, eps: float, threads: int | None, seed: int
     alpha = ALPHA if nu > 0 else 0.0
     c0 = 2 * (dim + 2) * nu / (ALPHA * h) if nu > 0 else 1.0
     scene = pc.Scene(dim, integrator="semi_implicit_euler", threads=threads)
-    scene.add_fluid(x, spacing=dx, density=RHO0, sound_speed=c0, viscosity=alpha, method="dfsph",
+    scene.add_fluid(x, spacing=dx, density=RHO0, sound_speed=c0, alpha=alpha, method="dfsph",
                     surface_tension=SIGMA)
     vol = len(x) * dx**dim
     r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
@@ -123,7 +123,7 @@ def viscous_work_on_mode(scene: pc.Scene, v_aff: np.ndarray) -> float:
     """Power of the fluid's artificial viscosity (the Monaghan term of ``fluids.py``, approaching
     pairs only, densities by summation) on the affine part ``v_aff`` of the velocities, W."""
     f = scene.fluids[0]
-    h, m, visc = f.h, f.particle_mass(), f.viscosity * f.sound_speed
+    h, m, visc = f.h, f.particle_mass(), f.alpha * f.sound_speed
     x, v = scene.positions, scene.velocities
     i, j = pc.neighbors(x, 2.0 * h)
     d = x[i] - x[j]

@@ -64,13 +64,13 @@ def test_wall_volumes_come_from_the_core_by_akinci_lattice_or_given():
     # wall the outer layer's particles have fewer neighbours than the inner layer's.
     line = np.column_stack([np.linspace(-0.1, 0.2, 31), np.full(31, -0.005)])
     m = Fluid(x, 0.01).particle_mass()
-    assert np.all(Fluid(x, 0.01, walls=line, wall_volume="akinci").wall_psi() > 1.5 * m)
+    assert np.all(Fluid(x, 0.01, boundary=line, boundary_volume="akinci").boundary_psi() > 1.5 * m)
     w = tank_walls([0, 0], [0.2, 0.2], 0.01)
-    akinci = Fluid(x, 0.01, walls=w, wall_volume="akinci").wall_psi()
+    akinci = Fluid(x, 0.01, boundary=w, boundary_volume="akinci").boundary_psi()
     assert m < akinci.min() < 1.05 * m and akinci.max() > 1.5 * m
-    np.testing.assert_array_equal(Fluid(x, 0.01, walls=w, wall_volume="lattice").wall_psi(),
+    np.testing.assert_array_equal(Fluid(x, 0.01, boundary=w, boundary_volume="lattice").boundary_psi(),
                                   Fluid(x, 0.01).particle_mass())
-    np.testing.assert_array_equal(Fluid(x, 0.01, walls=w, wall_volume=2e-5).wall_psi(), 1000.0 * 2e-5)
+    np.testing.assert_array_equal(Fluid(x, 0.01, boundary=w, boundary_volume=2e-5).boundary_psi(), 1000.0 * 2e-5)
 
 
 def test_the_sound_speed_is_ten_times_the_free_fall_speed_over_the_fluids_height():
@@ -80,7 +80,7 @@ def test_the_sound_speed_is_ten_times_the_free_fall_speed_over_the_fluids_height
     f = s.add(Fluid(x, 0.01, method="wcsph"))
     height = np.ptp(x[:, 1]) + 0.01
     assert f.sound_speed == pytest.approx(10 * math.sqrt(2 * 9.81 * height), rel=1e-15)
-    assert f.max_dt() == pytest.approx(0.25 * f.h / (f.sound_speed * (1 + 0.6 * f.viscosity)), rel=1e-15)
+    assert f.max_dt() == pytest.approx(0.25 * f.h / (f.sound_speed * (1 + 0.6 * f.alpha)), rel=1e-15)
     assert s.dt <= f.max_dt()
     with pytest.raises(pc.InvalidInputError, match="sound_speed"):
         pc.Scene(2, threads=1).add(Fluid(x, 0.01))  # at rest, no gravity: nothing to estimate from

@@ -23,7 +23,7 @@ G = 9.81
 RHO0 = 1000.0
 
 
-def column(n, *, a=0.25, tank=(5.0, 2.5), top=False, threads=None, viscosity=0.05, **fluid):
+def column(n, *, a=0.25, tank=(5.0, 2.5), top=False, threads=None, alpha=0.05, **fluid):
     """Martin & Moyce's column a × 2a in the corner of a tank tank[0]·a × tank[1]·a, n particles
     across, as a DFSPH fluid. Returns (scene, dx, upper corner)."""
     dx = a / n
@@ -31,8 +31,8 @@ def column(n, *, a=0.25, tank=(5.0, 2.5), top=False, threads=None, viscosity=0.0
     scene.add(pc.Gravity([0.0, -G]))
     up = [tank[0] * a, tank[1] * a]
     scene.add_fluid(
-        lattice([0, 0], [a, 2 * a], dx), spacing=dx, walls=tank_walls([0, 0], up, dx, layers=3, top=top),
-        method="dfsph", viscosity=viscosity, **fluid,
+        lattice([0, 0], [a, 2 * a], dx), spacing=dx, boundary=tank_walls([0, 0], up, dx, layers=3, top=top),
+        method="dfsph", alpha=alpha, **fluid,
     )
     return scene, dx, np.array(up)
 
@@ -90,7 +90,7 @@ def _resting_layer(seed: int):
         x0 = x0 + np.random.default_rng(seed).normal(0.0, 1e-9, x0.shape)
     scene = pc.Scene(2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -G]))
-    scene.add_fluid(x0, spacing=dx, walls=tank_walls([0, 0], [W, H + 0.1], dx), viscosity=0.5, method="dfsph")
+    scene.add_fluid(x0, spacing=dx, boundary=tank_walls([0, 0], [W, H + 0.1], dx), alpha=0.5, method="dfsph")
     scene.advance(0.5)
     ps, xs, ke = [], [], []
     t_end = scene.time + 1.0
@@ -124,7 +124,7 @@ def test_a_resting_layer_comes_to_rest_at_default_settings():
     dx = H / n
     scene = pc.Scene(2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -G]))
-    scene.add_fluid(lattice([0, 0], [W, H], dx), spacing=dx, walls=tank_walls([0, 0], [W, H + 0.1], dx), method="dfsph")
+    scene.add_fluid(lattice([0, 0], [W, H], dx), spacing=dx, boundary=tank_walls([0, 0], [W, H + 0.1], dx), method="dfsph")
     for t in (1.0, 2.0, 4.0):
         scene.advance(t - scene.time)
     v = np.linalg.norm(scene.velocities, axis=1)
@@ -218,7 +218,7 @@ def test_dfsph_takes_far_fewer_steps_than_wcsph():
         scene = pc.Scene(2, integrator="semi_implicit_euler")
         scene.add(pc.Gravity([0.0, -G]))
         dx = 0.25 / 16
-        scene.add_fluid(lattice([0, 0], [0.25, 0.5], dx), spacing=dx, walls=tank_walls([0, 0], [1.25, 0.625], dx), method=method)
+        scene.add_fluid(lattice([0, 0], [0.25, 0.5], dx), spacing=dx, boundary=tank_walls([0, 0], [1.25, 0.625], dx), method=method)
         counts[method] = sum(scene.advance(0.1 / tscale) for _ in range(10))
     print(f"\nsteps to T = 1: {counts}")
     assert counts["dfsph"] * 5 < counts["wcsph"], counts
@@ -453,7 +453,7 @@ def test_the_density_tolerance_bounds_the_mean_of_the_predicted_state():
     x0 = lattice([0, 0], [W, H], dx) + np.random.default_rng(1).normal(0.0, 1e-9, (n * n, 2))
     scene = pc.Scene(2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -G]))
-    scene.add_fluid(x0, spacing=dx, walls=tank_walls([0, 0], [W, H + 0.1], dx), viscosity=0.5, method="dfsph")
+    scene.add_fluid(x0, spacing=dx, boundary=tank_walls([0, 0], [W, H + 0.1], dx), alpha=0.5, method="dfsph")
     tol = scene.fluids[0].density_error
     assert tol == 1e-3
     scene.advance(0.5)

@@ -41,7 +41,7 @@ def test_coincident_particles_and_zero_length_springs_give_no_nan():
     f = pc.Scene(2, integrator="semi_implicit_euler")
     f.add(pc.Gravity([0.0, -9.81]))
     x = pc.fluids.lattice([0, 0], [0.1, 0.1], 0.01)
-    f.add_fluid(np.vstack([x, x[:10]]), spacing=0.01, walls=pc.fluids.tank_walls([0, 0], [0.3, 0.3], 0.01))
+    f.add_fluid(np.vstack([x, x[:10]]), spacing=0.01, boundary=pc.fluids.tank_walls([0, 0], [0.3, 0.3], 0.01))
     f.advance(0.01)
     assert np.isfinite(f.positions).all()
 

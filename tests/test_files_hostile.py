@@ -61,7 +61,7 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.add(pc.Drag(0.05))
     s.add(pc.Springs([0, 1], [1, 2], stiffness=[50.0, 80.0], damping=0.1))
     s.add(pc.PairwiseGravity(0.5, 0.1))
-    s.add_fluid(lattice([5.0, 0.0], [5.02, 0.02], 0.01), spacing=0.01, walls=tank_walls([5.0, 0.0], [5.02, 0.02], 0.01, layers=1))
+    s.add_fluid(lattice([5.0, 0.0], [5.02, 0.02], 0.01), spacing=0.01, boundary=tank_walls([5.0, 0.0], [5.02, 0.02], 0.01, layers=1))
     s.set_attribute("charge", np.linspace(-1e-3, 1e-3, s.n_particles))
     s.set_attribute("radius", np.full(s.n_particles, 0.01))
     s.add(pc.ElectricField([2.0, 1.0]))

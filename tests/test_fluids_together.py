@@ -66,7 +66,7 @@ def test_a_fluid_split_in_two_is_the_same_simulation_bit_for_bit():
     dx = 0.02
     col = lattice([0, 0], [0.3, 0.6], dx)
     walls = tank_walls([0, 0], [1.0, 0.8], dx)
-    kw = dict(sound_speed=30.0, walls=walls, precision="f32", mass=0.4)
+    kw = dict(sound_speed=30.0, boundary=walls, pass_precision="f32", mass=0.4)
 
     def build(cuts):
         s = pc.Scene(2, integrator="verlet")
@@ -96,9 +96,9 @@ def _two_fluid_tank(integrator: str, refine: int):
     s = pc.Scene(2, integrator=integrator)
     s.add(pc.Gravity([0.0, -G]))
     walls = tank_walls([0, 0], [1.0, 0.7], dx)
-    s.add(Fluid(lattice([0, 0], [0.25, 0.5], dx), dx, walls=walls, precision="f64", name="water"))
-    s.add(Fluid(lattice([0.75, 0], [1.0, 0.4], dx), dx, walls=walls, precision="f64", density=700.0,
-                sound_speed=25.0, viscosity=0.2, gamma=3, name="oil"))
+    s.add(Fluid(lattice([0, 0], [0.25, 0.5], dx), dx, boundary=walls, pass_precision="f64", name="water"))
+    s.add(Fluid(lattice([0.75, 0], [1.0, 0.4], dx), dx, boundary=walls, pass_precision="f64", density=700.0,
+                sound_speed=25.0, alpha=0.2, gamma=3, name="oil"))
     s.dt = s.dt / refine
     return s
 
@@ -147,7 +147,7 @@ def test_a_light_layer_over_a_heavy_one_is_hydrostatic():
     s = pc.Scene(2, integrator="semi_implicit_euler")
     s.add(pc.Gravity([0.0, -G]))
     walls = tank_walls([0, 0], [W, hw + ho + 0.1], dx)
-    kw = dict(walls=walls, viscosity=0.5, precision="f32", sound_speed=25.0)
+    kw = dict(boundary=walls, alpha=0.5, pass_precision="f32", sound_speed=25.0)
     s.add(Fluid(lattice([0, 0], [W, hw], dx), dx, name="water", **kw))
     s.add(Fluid(lattice([0, hw], [W, hw + ho], dx), dx, density=700.0, name="oil", **kw))
     nw = int(s.terms[2].first)  # the oil's first particle: the water is 0 … nw − 1

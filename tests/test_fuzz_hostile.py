@@ -261,15 +261,15 @@ FLUID_ARGS = {
     "velocities": hostile_points,
     "density": hostile,
     "sound_speed": hostile,
-    "viscosity": hostile,
+    "alpha": hostile,
     "smoothing": hostile,
     "kernel": st.one_of(hostile, st.sampled_from(["wendland_c2", "gaussian"])),
     "gamma": hostile,
     "clamp_pressure": hostile,
     "mass": hostile,
-    "walls": hostile_points,
-    "wall_volume": st.one_of(hostile, st.sampled_from(["akinci", "mirror", np.full(4, 1e308), np.zeros(4)])),
-    "precision": st.one_of(hostile, st.sampled_from(["f32", "f16", np.array(["f32"])])),
+    "boundary": hostile_points,
+    "boundary_volume": st.one_of(hostile, st.sampled_from(["akinci", "mirror", np.full(4, 1e308), np.zeros(4)])),
+    "pass_precision": st.one_of(hostile, st.sampled_from(["f32", "f16", np.array(["f32"])])),
     "name": st.one_of(hostile, st.sampled_from(["water", "gravity"])),
 }
 _fluid_case = st.sampled_from(sorted(FLUID_ARGS)).flatmap(lambda a: st.tuples(st.just(a), FLUID_ARGS[a]))
@@ -279,7 +279,7 @@ def _check_add_fluid(case):
     arg, value = case
     s = _base_scene()
     before = _state(s)
-    kwargs = {"spacing": 0.1, "walls": [[0.0, -0.1], [0.1, -0.1], [0.2, -0.1], [0.3, -0.1]], arg: value}
+    kwargs = {"spacing": 0.1, "boundary": [[0.0, -0.1], [0.1, -0.1], [0.2, -0.1], [0.3, -0.1]], arg: value}
     positions = kwargs.pop("positions", lattice([0.0, 0.0], [0.4, 0.2], 0.1))
     with _memory_limit(64 << 20):
         added = _call(arg, lambda: s.add_fluid(positions, **kwargs)) is not None
@@ -317,7 +317,7 @@ def _scene_value(fn: str, arg: str):
         return st.one_of(st.sampled_from([-1, 0, 1, 2, 65536, 2**64, 10**400]), st.sampled_from(NOT_NUMBERS))
     if arg == "tank":
         return pair
-    if arg in ("integrator", "pin", "precision", "kernel"):
+    if arg in ("integrator", "pin", "precision", "pass_precision", "kernel"):
         return st.one_of(hostile, st.sampled_from(["rk4", "leapfrog", "corners", "f32", "wendland_c2"]))
     return hostile
 

@@ -170,7 +170,7 @@ def _every_kind() -> list[pc.Scene]:
     b.add(pc.Contacts(1e3))
     c = pc.Scene(2, integrator="semi_implicit_euler", threads=1)
     c.add(pc.Gravity([0.0, -9.81]))
-    c.add_fluid(lattice([0, 0], [0.05, 0.05], 0.01), spacing=0.01, walls=tank_walls([0, 0], [0.1, 0.1], 0.01))
+    c.add_fluid(lattice([0, 0], [0.05, 0.05], 0.01), spacing=0.01, boundary=tank_walls([0, 0], [0.1, 0.1], 0.01))
     d = pc.Scene(2, integrator="semi_implicit_euler", threads=1)
     d.add(pc.Gravity([0.0, -9.81]))
     d.add(Fluid(lattice([0, 0], [0.05, 0.05], 0.01), 0.01, method="dfsph"))

@@ -93,7 +93,7 @@ def _nbody(threads, precision):
 
 def _fluid(threads, precision, dim):
     # WCSPH: its passes are the SIMD f32/f64 ones (agreement to rounding; DFSPH is below).
-    return pc.scenes.dam_break(dim=dim, n=40 if dim == 2 else 10, precision=precision, threads=threads, method="wcsph")
+    return pc.scenes.dam_break(dim=dim, n=40 if dim == 2 else 10, pass_precision=precision, threads=threads, method="wcsph")
 
 
 def _dfsph(threads, dim):

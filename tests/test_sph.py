@@ -75,10 +75,10 @@ def column_scene(
     scene.add_fluid(
         lattice(lo, hi, dx),
         spacing=dx,
-        walls=tank_walls([0.0] * dim, up, dx, layers=3, top=top),
-        precision=precision,
+        boundary=tank_walls([0.0] * dim, up, dx, layers=3, top=top),
+        pass_precision=precision,
         kernel=kernel,
-        viscosity=viscosity,
+        alpha=viscosity,
     )
     return scene, dx, np.array(up, dtype=float)
 
@@ -124,8 +124,8 @@ def test_hydrostatic_layer_pressure_and_density():
     scene = pc.Scene(2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -G]))
     scene.add_fluid(
-        lattice([0, 0], [W, H], dx), spacing=dx, walls=tank_walls([0, 0], [W, H + 0.1], dx),
-        viscosity=0.5, precision="f32",
+        lattice([0, 0], [W, H], dx), spacing=dx, boundary=tank_walls([0, 0], [W, H + 0.1], dx),
+        alpha=0.5, pass_precision="f32",
     )
     mass0 = scene.masses.sum()
     scene.advance(1.0)
@@ -253,7 +253,7 @@ def _blob(dim, precision, viscosity, *, gravity=False, seed=1, integrator="semi_
         g = [0.0] * dim
         g[-1] = -G
         scene.add(pc.Gravity(g))
-    scene.add_fluid(x, velocities=v, spacing=dx, sound_speed=10.0, viscosity=viscosity, precision=precision)
+    scene.add_fluid(x, velocities=v, spacing=dx, sound_speed=10.0, alpha=viscosity, pass_precision=precision)
     return scene
 
 
@@ -410,7 +410,7 @@ def test_dam_break_scene():
     assert s.n_particles == 2 * 12 * 12
     assert s.integrator == "semi_implicit_euler"
     f = s.fluids[0]
-    assert f.precision == "f32" and f.kernel == "cubic_spline" and f.method == "dfsph"
+    assert f.pass_precision == "f32" and f.kernel == "cubic_spline" and f.method == "dfsph"
     assert math.isclose(f.sound_speed, 10 * math.sqrt(2 * G * 2.0), rel_tol=1e-12)
     walls = s.boundary_points()
     assert walls[:, 0].min() < 0 and walls[:, 0].max() > 4.0 and walls[:, 1].min() < 0
@@ -432,7 +432,7 @@ def test_dam_break_scene():
 
 
 def test_dam_break_scene_3d_and_options():
-    s = pc.scenes.dam_break(dim=3, n=6, depth=0.5, kernel="wendland_c2", precision="f64", threads=1)
+    s = pc.scenes.dam_break(dim=3, n=6, depth=0.5, kernel="wendland_c2", pass_precision="f64", threads=1)
     assert s.dim == 3 and s.n_particles == 6 * 3 * 12
     assert s.fluids[0].kernel == "wendland_c2" and s.threads == 1
     assert s.positions[:, 1].max() < 0.5
@@ -497,9 +497,9 @@ def test_fluid_scenes_are_registered_and_their_examples_run():
         ("dam_break", {"tank": "wide"}, TypeError, "tank"),
         ("dam_break", {"tank": (4.0, float("nan"))}, ValueError, "tank"),
         ("dam_break", {"dim": 3, "depth": 0.0}, ValueError, "depth"),
-        ("dam_break", {"n": 4, "precision": "f16"}, ValueError, "precision"),
+        ("dam_break", {"n": 4, "pass_precision": "f16"}, ValueError, "pass_precision"),
         ("dam_break", {"n": 4, "kernel": "gauss"}, ValueError, "kernel"),
-        ("dam_break", {"n": 4, "viscosity": -1.0}, ValueError, "viscosity"),
+        ("dam_break", {"n": 4, "alpha": -1.0}, ValueError, "alpha"),
         ("dam_break", {"n": 4, "sound_speed": 0.0}, ValueError, "sound_speed"),
         ("dam_break", {"n": 4, "integrator": "leapfrog"}, ValueError, "integrator"),
         ("dam_break", {"lid": "yes"}, TypeError, "lid"),
@@ -520,7 +520,7 @@ def test_fluid_scene_arguments_are_validated(fn, kwargs, exc, arg):
 def _tank_scene():
     s = pc.Scene(2, integrator="semi_implicit_euler", dt=1e-3)
     s.add(pc.Gravity([0.0, -G]))
-    s.add_fluid(lattice([0, 0], [0.1, 0.1], 0.01), spacing=0.01, walls=tank_walls([0, 0], [0.2, 0.2], 0.01))
+    s.add_fluid(lattice([0, 0], [0.1, 0.1], 0.01), spacing=0.01, boundary=tank_walls([0, 0], [0.2, 0.2], 0.01))
     s.step(3)
     return s
 
@@ -551,8 +551,8 @@ GOOD = {"positions": lattice([0.0, 0.12], [0.05, 0.17], 0.01), "spacing": 0.01}
         ({"density": np.nan}, ValueError, "density"),
         ({"sound_speed": -5.0}, ValueError, "sound_speed"),
         ({"sound_speed": "fast"}, TypeError, "sound_speed"),
-        ({"viscosity": -0.1}, ValueError, "viscosity"),
-        ({"viscosity": None}, TypeError, "viscosity"),
+        ({"alpha": -0.1}, ValueError, "alpha"),
+        ({"alpha": None}, TypeError, "alpha"),
         ({"smoothing": 0.0}, ValueError, "smoothing"),
         ({"kernel": "gaussian"}, ValueError, "kernel"),
         ({"kernel": 3}, ValueError, "kernel"),
@@ -561,13 +561,13 @@ GOOD = {"positions": lattice([0.0, 0.12], [0.05, 0.17], 0.01), "spacing": 0.01}
         ({"gamma": 7.0}, TypeError, "gamma"),
         ({"clamp_pressure": "yes"}, TypeError, "clamp_pressure"),
         ({"mass": 0.0}, ValueError, "mass"),
-        ({"walls": np.zeros((4, 3))}, ValueError, "walls"),
-        ({"walls": [[0.0, np.inf]]}, ValueError, "walls"),
-        ({"walls": np.zeros((4, 2)), "wall_volume": "mirror"}, ValueError, "wall_volume"),
-        ({"walls": np.zeros((4, 2)), "wall_volume": -1.0}, ValueError, "wall_volume"),
-        ({"walls": np.zeros((4, 2)), "wall_volume": np.ones(3)}, ValueError, "wall_volume"),
-        ({"walls": np.zeros((4, 2)), "wall_volume": ["a"] * 4}, TypeError, "wall_volume"),
-        ({"precision": "f16"}, ValueError, "precision"),
+        ({"boundary": np.zeros((4, 3))}, ValueError, "boundary"),
+        ({"boundary": [[0.0, np.inf]]}, ValueError, "boundary"),
+        ({"boundary": np.zeros((4, 2)), "boundary_volume": "mirror"}, ValueError, "boundary_volume"),
+        ({"boundary": np.zeros((4, 2)), "boundary_volume": -1.0}, ValueError, "boundary_volume"),
+        ({"boundary": np.zeros((4, 2)), "boundary_volume": np.ones(3)}, ValueError, "boundary_volume"),
+        ({"boundary": np.zeros((4, 2)), "boundary_volume": ["a"] * 4}, TypeError, "boundary_volume"),
+        ({"pass_precision": "f16"}, ValueError, "pass_precision"),
         ({"name": ""}, TypeError, "name"),
         ({"bogus": 1}, TypeError, "bogus"),
     ],

@@ -38,7 +38,7 @@ def blob(n, *, dim=2, dx=1e-3, sigma=0.072, round_=False, threads=None, alpha=0.
         x = x + np.random.default_rng(seed).normal(0.0, 1e-9, x.shape)
     scene = pc.Scene(dim, integrator="semi_implicit_euler", threads=threads)
     # c0 only scales the viscosity (α c0 h) of a DFSPH fluid: 1 m/s gives ν ≈ 1.6e-5 m²/s.
-    scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=c0, viscosity=alpha, method="dfsph",
+    scene.add_fluid(x, spacing=dx, density=rho0, sound_speed=c0, alpha=alpha, method="dfsph",
                     surface_tension=sigma, **fluid)
     vol = len(x) * dx**dim
     r = math.sqrt(vol / math.pi) if dim == 2 else (3 * vol / (4 * math.pi)) ** (1 / 3)
@@ -167,8 +167,8 @@ def drop_on_floor(adhesion, n=12, dx=2.5e-4):
     x = x[np.linalg.norm(x - centre, axis=1) <= n / 2 * dx]
     scene = pc.Scene(2, integrator="semi_implicit_euler")
     scene.add(pc.Gravity([0.0, -9.81]))
-    scene.add_fluid(x, spacing=dx, walls=tank_walls([0, 0], box, dx, layers=3, top=True), method="dfsph",
-                    viscosity=0.1, sound_speed=0.5, surface_tension=0.072, adhesion=adhesion)
+    scene.add_fluid(x, spacing=dx, boundary=tank_walls([0, 0], box, dx, layers=3, top=True), method="dfsph",
+                    alpha=0.1, sound_speed=0.5, surface_tension=0.072, adhesion=adhesion)
     scene.advance(0.15)
     p = scene.positions
     bottom = p[p[:, 1] < p[:, 1].min() + 0.5 * dx]
@@ -316,7 +316,7 @@ def oscillating_drop(n, *, eps=0.1, seed=0, periods=2.0, alpha=0.1, c0=1.0, dx=1
     if seed:
         x = x + np.random.default_rng(seed).normal(0.0, 1e-9, x.shape)
     scene = pc.Scene(2, integrator="semi_implicit_euler")
-    scene.add_fluid(x, spacing=dx, density=RHO0, sound_speed=c0, viscosity=alpha, method="dfsph",
+    scene.add_fluid(x, spacing=dx, density=RHO0, sound_speed=c0, alpha=alpha, method="dfsph",
                     surface_tension=sigma)
     r = math.sqrt(len(x) * dx**2 / math.pi)
     omega_r = math.sqrt(6 * sigma / (RHO0 * r**3))

@@ -104,3 +104,21 @@ def alias(new: str, old: str, settable: bool = False, where: str = "") -> proper
         setattr(self, new, value)
 
     return property(get, put if settable else None, doc=f"Deprecated alias of :attr:`{new}`.")
+
+
+def record(positional: Sequence[str] = (), keep: int = 0, renames: Mapping[str, str] | None = None) -> Callable[[type], type]:
+    """Class decorator (above ``@dataclass``) for a record whose fields after the first ``keep``
+    became keyword-only (``positional``: its fields in their old positional order, new names) and
+    whose fields ``renames`` (old -> new) were renamed: the old calls and the old attribute names
+    keep working one release, with a DeprecationWarning naming the new spelling."""
+    renames = dict(renames or {})
+
+    def wrap(cls: type) -> type:
+        init = cls.__init__
+        cls.__init__ = args(positional, keep=keep, renames=renames, skip_self=True, name=cls.__name__)(init)  # type: ignore[misc]
+        for old, new in renames.items():
+            if old not in cls.__dict__:
+                setattr(cls, old, alias(new, old, where=cls.__name__))
+        return cls
+
+    return wrap

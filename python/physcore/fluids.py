@@ -40,12 +40,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
-from . import _check, _core
+from . import _check, _core, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning
 from ._parts import AttachContext, LoadContext
 from .terms import Gravity, Term, _finite_float
@@ -226,22 +226,38 @@ def tank_walls(
     return np.ascontiguousarray(pts[~inside])
 
 
+#: Fluid's fields in their positional order before issue 45 (new names), and its renames.
+_FLUID_ORDER = (
+    "positions", "spacing", "velocities", "density", "sound_speed", "alpha", "smoothing", "kernel", "gamma",
+    "clamp_pressure", "mass", "boundary", "boundary_volume", "pass_precision", "method", "density_error",
+    "divergence_error", "max_iterations", "cfl", "surface_tension", "adhesion",
+)
+_FLUID_RENAMES = {"viscosity": "alpha", "walls": "boundary", "wall_volume": "boundary_volume", "precision": "pass_precision"}
+
+
+@_deprecate.record(_FLUID_ORDER, keep=2, renames=_FLUID_RENAMES)
 @dataclass(frozen=True, eq=False)
 class Fluid(Term, kind="fluid"):
     """A WCSPH fluid: its particles and parameters, SI units. Add it with :meth:`Scene.add`
     (or :meth:`Scene.add_fluid`), which appends the particles and the force term.
 
     Several fluids in one scene push on each other when they have the same ``h``
-    (``smoothing · spacing``), ``kernel`` and ``precision`` (up to 8 such fluids): they share one
+    (``smoothing · spacing``), ``kernel`` and ``pass_precision`` (up to 8 such fluids): they share one
     neighbour search and one pair of SPH passes, in which each particle keeps its own fluid's
-    equation of state, viscosity and walls (a pair's viscosity uses the mean of the two fluids'
-    ``α c0``), and each fluid keeps its own energy books. Fluids that differ in one of the three
+    equation of state, artificial viscosity and boundary (a pair's viscosity uses the mean of the
+    two fluids' ``α c0``), and each fluid keeps its own energy books. Fluids that differ in one of the three
     pass through each other, and adding such a fluid warns
     (:class:`~physcore.SeparateFluidsWarning`). Density is by summation over both fluids, so
     across a large density jump it is smeared over the kernel support (a light layer on water at
     ρ0 700 vs 1000: the rows at the interface are 5–15 % off their hydrostatic pressure, the
-    bulk within 1 %); keep density ratios moderate. Walls act on the fluid that has them: give
-    every fluid the tank's walls.
+    bulk within 1 %); keep density ratios moderate. Boundary particles act on the fluid that has
+    them: give every fluid the tank's walls (``boundary=tank_walls(...)``).
+
+    ``positions`` and ``spacing`` may be given by position, the rest by keyword (positionally,
+    in the old order, they still work this release with a DeprecationWarning). Renamed in issue 45
+    (docs/naming.md; the old keywords and attributes still work this release, deprecated):
+    ``viscosity`` → ``alpha``, ``walls`` → ``boundary``, ``wall_volume`` → ``boundary_volume``,
+    ``precision`` → ``pass_precision``. Scene files keep the old keys.
 
     Parameters
     ----------
@@ -259,8 +275,9 @@ class Fluid(Term, kind="fluid"):
         ``v_max = max(√(2|g|H), max |v0|)``, ``H`` the fluid's extent along the scene's gravity when
         it is added: density then varies by about 1 % (Monaghan 1994); with surface tension also
         at least the capillary speed ``√(σ/(ρ0 h))``. (DFSPH: c0 only scales the viscosity.)
-    viscosity : float
-        Artificial viscosity ``α`` ≥ 0 (Monaghan 1992). Default 0.05.
+    alpha : float
+        Artificial viscosity ``α`` ≥ 0, dimensionless (Monaghan 1992, eq. 4.1–4.2). Default 0.05.
+        (Not a kinematic viscosity ν: the one of :class:`~physcore.StableFluid` is ``nu``.)
     smoothing : float
         ``h / Δx`` > 0. Default 1.3.
     kernel : {"cubic_spline", "wendland_c2"}
@@ -272,22 +289,25 @@ class Fluid(Term, kind="fluid"):
     mass : float, optional
         Particle mass, kg (at least 2.2e-308, so that 1/m is finite). Default ``ρ0 / Σ_j W_ij`` over the initial lattice, so a fluid at rest
         starts exactly at the rest density (``≈ ρ0 Δx^dim``).
-    walls : array_like, shape (M, dim), optional
-        Static wall (boundary) particle positions, e.g. from :func:`tank_walls`.
-    wall_volume : "lattice", "akinci", float or array_like shape (M,)
-        Volume ``V_b`` of each wall particle (``Ψ_b = ρ0 V_b``). ``"lattice"`` (default): walls
-        sampled on the fluid's lattice with full kernel support, ``Ψ_b = mass``. ``"akinci"``:
-        ``V_b = 1/Σ_k W_bk`` over the walls (Akinci et al. 2012, eq. 4), for thin or irregular walls.
-    precision : {"f64", "f32"}
-        Arithmetic of the density and force passes (positions and velocities stay float64).
-        ``"f32"`` is about twice as fast. Default ``"f64"``. WCSPH only: DFSPH computes in
-        float64 whatever this says.
+    boundary : array_like, shape (M, dim), optional
+        Static boundary (wall) particle positions, m (Akinci et al. 2012), e.g. from
+        :func:`tank_walls`.
+    boundary_volume : "lattice", "akinci", float or array_like shape (M,)
+        Volume ``V_b`` of each boundary particle, m³ (m² in 2D) (``Ψ_b = ρ0 V_b``).
+        ``"lattice"`` (default): walls sampled on the fluid's lattice with full kernel support,
+        ``Ψ_b = mass``. ``"akinci"``: ``V_b = 1/Σ_k W_bk`` over the boundary (Akinci et al.
+        2012, eq. 4), for thin or irregular walls.
+    pass_precision : {"f64", "f32"}
+        Arithmetic of the density and force passes (positions and velocities stay float64:
+        not the scene's ``Scene(precision=)``, which is how the state is stored). ``"f32"`` is
+        about twice as fast. Default ``"f64"``. WCSPH only: DFSPH computes in float64 whatever
+        this says.
     method : {"wcsph", "dfsph"}
         ``"wcsph"`` (default): Tait equation of state. ``"dfsph"``: divergence-free SPH (module
-        docstring); ``gamma``, ``clamp_pressure`` and ``precision`` then do not apply. Known
-        bug: a DFSPH fluid at rest does not settle at the default ``viscosity`` (a layer 24
+        docstring); ``gamma``, ``clamp_pressure`` and ``pass_precision`` then do not apply. Known
+        bug: a DFSPH fluid at rest does not settle at the default ``alpha`` (a layer 24
         particles deep keeps an rms speed of about 0.2 m/s; WCSPH's settles to 0.03 m/s); use
-        ``viscosity=0.5`` where a tank must come to rest (README, "Fluids (DFSPH)").
+        ``alpha=0.5`` where a tank must come to rest (README, "Fluids (DFSPH)").
     density_error : float
         DFSPH: the density solver iterates until the mean compression ``mean((ρ − ρ0)₊)/ρ0`` of
         the predicted state is at most this, in (0, 1). Default 1e-3 (0.1 %); 1e-4 is the
@@ -347,18 +367,19 @@ class Fluid(Term, kind="fluid"):
 
     positions: np.ndarray
     spacing: float
+    _: KW_ONLY
     velocities: np.ndarray | None = None
     density: float = 1000.0
     sound_speed: float | None = None
-    viscosity: float = 0.05
+    alpha: float = 0.05
     smoothing: float = 1.3
     kernel: str = "cubic_spline"
     gamma: int = 7
     clamp_pressure: bool = True
     mass: float | None = None
-    walls: np.ndarray | None = None
-    wall_volume: str | float | np.ndarray = "lattice"
-    precision: str = "f64"
+    boundary: np.ndarray | None = None
+    boundary_volume: str | float | np.ndarray = "lattice"
+    pass_precision: str = "f64"
     method: str = "wcsph"
     density_error: float = 1e-3
     divergence_error: float = 1e-3
@@ -366,9 +387,9 @@ class Fluid(Term, kind="fluid"):
     cfl: float = 0.4
     surface_tension: float = 0.0
     adhesion: float = 0.0
-    name: str = field(default="fluid", kw_only=True)
+    name: str = "fluid"
     #: Index of the first particle once added to a scene (set by :meth:`Scene.add`).
-    first: int | None = field(default=None, compare=False, kw_only=True)
+    first: int | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
         x = _array2(self.positions, "positions")
@@ -383,7 +404,7 @@ class Fluid(Term, kind="fluid"):
         object.__setattr__(self, "density", _finite_float(self.density, "density", minimum=0.0, strict=True))
         if self.sound_speed is not None:
             object.__setattr__(self, "sound_speed", _finite_float(self.sound_speed, "sound_speed", minimum=0.0, strict=True))
-        object.__setattr__(self, "viscosity", _finite_float(self.viscosity, "viscosity", minimum=0.0))
+        object.__setattr__(self, "alpha", _finite_float(self.alpha, "alpha", minimum=0.0))
         object.__setattr__(self, "smoothing", _finite_float(self.smoothing, "smoothing", minimum=0.0, strict=True))
         if not 0.5 <= self.smoothing <= 4.0:
             raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")
@@ -402,28 +423,28 @@ class Fluid(Term, kind="fluid"):
             raise InvalidTypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
         if self.mass is not None:
             object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
-        if self.walls is not None:
-            w = _array2(self.walls, "walls")
+        if self.boundary is not None:
+            w = _array2(self.boundary, "boundary")
             if w.shape[1] != dim:
-                raise InvalidInputError(f"walls: expected shape (M, {dim}) (the positions are {dim}D), got {w.shape}")
-            object.__setattr__(self, "walls", w)
-        wv = self.wall_volume
+                raise InvalidInputError(f"boundary: expected shape (M, {dim}) (the positions are {dim}D), got {w.shape}")
+            object.__setattr__(self, "boundary", w)
+        wv = self.boundary_volume
         if isinstance(wv, str):
             if wv not in ("lattice", "akinci"):
-                raise InvalidInputError(f"wall_volume: expected 'lattice', 'akinci', a float or an array, got {wv!r}")
+                raise InvalidInputError(f"boundary_volume: expected 'lattice', 'akinci', a float or an array, got {wv!r}")
         else:
-            a = _check.array("wall_volume", wv)
+            a = _check.array("boundary_volume", wv)
             if a.dtype.kind not in "iuf" or a.dtype == bool:
-                raise InvalidTypeError(f"wall_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
-            m = 0 if self.walls is None else self.walls.shape[0]
+                raise InvalidTypeError(f"boundary_volume: expected 'lattice', 'akinci' or real numbers, got dtype {a.dtype}")
+            m = 0 if self.boundary is None else self.boundary.shape[0]
             a = np.full(m, float(a)) if a.ndim == 0 else a.astype(np.float64)
             if a.shape != (m,) or not np.all(np.isfinite(a) & (a > 0)):
-                raise InvalidInputError(f"wall_volume: expected finite values > 0, scalar or shape ({m},)")
+                raise InvalidInputError(f"boundary_volume: expected finite values > 0, scalar or shape ({m},)")
             with np.errstate(over="ignore", under="ignore"):
                 psi = a * self.density
             if not np.all(np.isfinite(psi) & (psi > 0)):
-                raise InvalidInputError("wall_volume: the wall masses density·wall_volume are outside float64 range")
-            object.__setattr__(self, "wall_volume", a)
+                raise InvalidInputError("boundary_volume: the boundary masses density·boundary_volume are outside float64 range")
+            object.__setattr__(self, "boundary_volume", a)
         if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
         if self.mass is None:
@@ -435,10 +456,10 @@ class Fluid(Term, kind="fluid"):
                     f"density: {self.density} kg/m^{dim} with spacing {self.spacing} m gives a particle mass of {m:.3g} kg, "
                     f"outside float64's usable range [{_check.MIN_MASS:.3g}, max]"
                 )
-        if isinstance(self.wall_volume, np.ndarray) and not np.all(np.isfinite(_scaled(self.wall_volume, self.density))):
-            raise InvalidInputError("wall_volume: density · wall volume overflows float64")
-        if not isinstance(self.precision, str) or self.precision not in ("f32", "f64"):
-            raise InvalidInputError(f"precision: expected 'f32' or 'f64', got {self.precision!r}")
+        if isinstance(self.boundary_volume, np.ndarray) and not np.all(np.isfinite(_scaled(self.boundary_volume, self.density))):
+            raise InvalidInputError("boundary_volume: density · boundary volume overflows float64")
+        if not isinstance(self.pass_precision, str) or self.pass_precision not in ("f32", "f64"):
+            raise InvalidInputError(f"pass_precision: expected 'f32' or 'f64', got {self.pass_precision!r}")
         if not isinstance(self.method, str) or self.method not in METHODS:
             raise InvalidInputError(f"method: expected one of {', '.join(map(repr, METHODS))}, got {self.method!r}")
         for arg in ("density_error", "divergence_error"):
@@ -460,6 +481,8 @@ class Fluid(Term, kind="fluid"):
             raise InvalidTypeError("name: expected a non-empty str")
 
     # ------------------------------------------------------------ the term protocol (see Term)
+    #: Scene files keep the keys they had before issue 45 (``viscosity``, ``precision``,
+    #: ``walls``, ``wall_volume``: the record's own names, like the core's keys; docs/naming.md).
     record_fields: ClassVar[dict[str, str]] = {
         "count": "count",
         "first": "count",
@@ -498,19 +521,22 @@ class Fluid(Term, kind="fluid"):
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         meta: dict[str, Any] = {"count": len(self), "first": self.first}
+        stored = {"viscosity": "alpha", "precision": "pass_precision"}  # file key -> attribute
         for f in ("spacing", "density", "sound_speed", "viscosity", "smoothing", "kernel", "precision", "method",
                   "density_error", "divergence_error", "cfl", "surface_tension", "adhesion"):
-            meta[f] = getattr(self, f)
+            meta[f] = getattr(self, stored.get(f, f))
         meta["max_iterations"] = int(self.max_iterations)
         meta["gamma"] = int(self.gamma)
         meta["clamp_pressure"] = bool(self.clamp_pressure)
         meta["mass"] = self.particle_mass()
-        walls = self.walls if self.walls is not None else np.zeros((0, self.dim))
-        return meta, {"positions": self.positions, "walls": walls, "wall_volume": self.wall_psi() / self.density}
+        walls = self.boundary if self.boundary is not None else np.zeros((0, self.dim))
+        return meta, {"positions": self.positions, "walls": walls, "wall_volume": self.boundary_psi() / self.density}
 
     @classmethod
     def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
-        return {"n": f"{ctx}.first"}
+        # The arguments renamed in issue 45 stand for the file's old keys.
+        return {"n": f"{ctx}.first", "alpha": f"{ctx}.viscosity", "pass_precision": f"{ctx}.precision",
+                "boundary": f"term{k}_walls", "boundary_volume": f"term{k}_wall_volume"}
 
     @classmethod
     def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
@@ -520,15 +546,15 @@ class Fluid(Term, kind="fluid"):
             meta["spacing"],
             density=meta["density"],
             sound_speed=meta["sound_speed"],
-            viscosity=meta["viscosity"],
+            alpha=meta["viscosity"],
             smoothing=meta["smoothing"],
             kernel=meta["kernel"],
             gamma=meta["gamma"],
             clamp_pressure=meta["clamp_pressure"],
             mass=meta["mass"],
-            walls=walls if len(walls) else None,
-            wall_volume=arrays["wall_volume"] if len(walls) else "lattice",
-            precision=meta["precision"],
+            boundary=walls if len(walls) else None,
+            boundary_volume=arrays["wall_volume"] if len(walls) else "lattice",
+            pass_precision=meta["precision"],
             # Files written before DFSPH have no method: they are WCSPH.
             method=meta.get("method", "wcsph"),
             density_error=meta.get("density_error", 1e-3),
@@ -564,19 +590,24 @@ class Fluid(Term, kind="fluid"):
             return self.mass
         return float(_core.sph_particle_mass(self.density, self.spacing, self.h, self.dim, self.kernel))
 
-    def wall_psi(self) -> np.ndarray:
-        """``Ψ_b = ρ0 V_b`` of each wall particle, kg: (M,) float64 (the core's formula,
+    def boundary_psi(self) -> np.ndarray:
+        """``Ψ_b = ρ0 V_b`` of each boundary particle, kg: (M,) float64 (the core's formula,
         ``sph::resolve``; Akinci et al. 2012, eq. 4–5). Raises InvalidInputError naming
-        ``wall_volume, density`` where one is not a finite number > 0."""
-        if self.walls is None or len(self.walls) == 0:
+        ``wall_volume, density`` where one is not a finite number > 0 (the core's names)."""
+        if self.boundary is None or len(self.boundary) == 0:
             return np.zeros(0)
-        wv = self.wall_volume
-        walls = np.ascontiguousarray(self.walls, dtype=np.float64)
+        wv = self.boundary_volume
+        walls = np.ascontiguousarray(self.boundary, dtype=np.float64)
         if isinstance(wv, np.ndarray):
             given = np.ascontiguousarray(wv, dtype=np.float64).reshape(-1)
             return _core.sph_wall_psi(walls, self.density, self.h, self.kernel, "given", 0.0, given)
         mass = self.particle_mass() if wv == "lattice" else 0.0
         return _core.sph_wall_psi(walls, self.density, self.h, self.kernel, wv, mass)
+
+    def wall_psi(self) -> np.ndarray:
+        """Deprecated alias of :meth:`boundary_psi`."""
+        _deprecate.warn("Fluid.wall_psi() is now .boundary_psi()")
+        return self.boundary_psi()
 
     def max_dt(self) -> float:
         """The step limit at rest, s (needs ``sound_speed``; the core's formula, ``sph::resolve``):
@@ -586,7 +617,7 @@ class Fluid(Term, kind="fluid"):
         (infinite without either: the flow's speed sets it)."""
         if self.sound_speed is None:
             raise InvalidInputError("sound_speed: not set yet (it is estimated when the fluid is added to a scene)")
-        return float(_core.sph_max_dt(self.method, self.dim, self.h, self.sound_speed, self.viscosity,
+        return float(_core.sph_max_dt(self.method, self.dim, self.h, self.sound_speed, self.alpha,
                                       self.density, self.surface_tension, self.adhesion))
 
 
@@ -613,17 +644,17 @@ def _check_fluid_method(ctx: AttachContext, fluid: Fluid) -> None:
 def _warn_separate_fluids(ctx: AttachContext, fluid: Fluid, name: str) -> None:
     """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
     already in the scene. Fluids share one neighbour search, and so push on each other, when
-    they have the same ``h``, kernel and precision, up to 8 per search (the core's rule; a
+    they have the same ``h``, kernel and pass precision, up to 8 per search (the core's rule; a
     9th starts a new search, which the next ones join)."""
     fluids = [t for t in ctx.parts if isinstance(t, Fluid)]
-    alike = [f for f in fluids if (f.h, f.kernel, f.precision) == (fluid.h, fluid.kernel, fluid.precision)]
+    alike = [f for f in fluids if (f.h, f.kernel, f.pass_precision) == (fluid.h, fluid.kernel, fluid.pass_precision)]
     together = alike[len(alike) - len(alike) % _FLUIDS_PER_SEARCH :]
     apart = [f.name for f in fluids if all(f is not g for g in together)]
     if apart:
         why = (
             f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
             if len(together) < len(alike)
-            else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and precision"
+            else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and pass_precision"
         )
         shown = ", ".join(repr(a) for a in apart[:5]) + (", ..." if len(apart) > 5 else "")
         warnings.warn(
@@ -650,8 +681,8 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
         c0 = float(_core.sph_sound_speed(pos, vel, np.ascontiguousarray(g, dtype=np.float64), fluid.spacing,
                                          fluid.density, fluid.h, max(fluid.surface_tension, fluid.adhesion)))
     fluid = dataclasses.replace(fluid, sound_speed=c0, name=name)
-    walls = fluid.walls if fluid.walls is not None else np.zeros((0, dim))
-    psi = fluid.wall_psi()
+    walls = fluid.boundary if fluid.boundary is not None else np.zeros((0, dim))
+    psi = fluid.boundary_psi()
     max_dt = fluid.max_dt()
     # The scene's dt is lowered to this; a subnormal or zero step would never advance.
     if not max_dt >= _check.MIN_NORMAL:
@@ -660,7 +691,7 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
             if fluid.method == "dfsph"
             else "CFL step 0.25 h / (c0 (1 + 0.6 α))"
         )
-        args = "sound_speed, viscosity, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
+        args = "sound_speed, alpha, spacing" + (", surface_tension, adhesion" if fluid.method == "dfsph" else "")
         raise InvalidInputError(f"{args}: the fluid's {what} = {max_dt:.3g} s is below float64's normal range")
     m = fluid.particle_mass()
     # Also for a fluid loaded from a file (`first` given): a file may pair DFSPH with another fluid.
@@ -675,7 +706,7 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
         "h": fluid.h,
         "density": fluid.density,
         "sound_speed": c0,
-        "viscosity": fluid.viscosity,
+        "viscosity": fluid.alpha,  # the core's key for α
         "kernel": fluid.kernel,
         "walls": np.ascontiguousarray(walls, dtype=np.float64),
         "wall_psi": np.ascontiguousarray(psi, dtype=np.float64),
@@ -698,7 +729,7 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
         ctx.sim.add_term(
             "sph",
             name,
-            common | {"gamma": int(fluid.gamma), "clamp_pressure": bool(fluid.clamp_pressure), "precision": fluid.precision},
+            common | {"gamma": int(fluid.gamma), "clamp_pressure": bool(fluid.clamp_pressure), "precision": fluid.pass_precision},
         )
     fluid = dataclasses.replace(fluid, first=first)
     # A step above the fluid's CFL limit would blow up on the first step.

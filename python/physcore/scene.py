@@ -537,7 +537,7 @@ class Scene:
         >>> scene = pc.Scene(dim=2, integrator="semi_implicit_euler")
         >>> _ = scene.add(pc.Gravity([0.0, -9.81]))
         >>> ids = scene.add_fluid(lattice([0, 0], [0.2, 0.1], 0.01), spacing=0.01,
-        ...                       walls=tank_walls([0, 0], [0.4, 0.3], 0.01))
+        ...                       boundary=tank_walls([0, 0], [0.4, 0.3], 0.01))
         >>> len(ids), scene.dt < 1e-3
         (200, True)
         >>> substeps = scene.advance(0.01)   # CFL-limited substeps
@@ -1016,7 +1016,7 @@ class Scene:
 
     def boundary_points(self) -> np.ndarray:
         """Static wall particles of all fluids, m: ``(M, dim)`` float64 (M may be 0)."""
-        walls = [t.walls for t in self.fluids if t.walls is not None]
+        walls = [t.boundary for t in self.fluids if t.boundary is not None]
         return np.concatenate(walls) if walls else np.zeros((0, self.dim))
 
     @property

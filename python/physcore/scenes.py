@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _check
+from . import _check, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError
 from .contacts import Contacts
 from .fluids import SPACING_RANGE, lattice, lattice_counts, tank_walls
@@ -996,7 +996,7 @@ def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: t
 
 
 def _water_in_tank(
-    positions, dx, tlo, thi, *, dim, lid, precision, kernel, viscosity, sound_speed, integrator, dt, threads, method="wcsph",
+    positions, dx, tlo, thi, *, dim, lid, pass_precision, kernel, alpha, sound_speed, integrator, dt, threads, method="wcsph",
     velocities=None, **surface: float,
 ) -> Scene:
     """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers
@@ -1007,10 +1007,10 @@ def _water_in_tank(
         velocities=velocities,
         **surface,
         spacing=dx,
-        walls=tank_walls(tlo, thi, dx, layers=3, top=lid),
-        precision=precision,
+        boundary=tank_walls(tlo, thi, dx, layers=3, top=lid),
+        pass_precision=pass_precision,
         kernel=kernel,
-        viscosity=viscosity,
+        alpha=alpha,
         sound_speed=sound_speed,
         method=method,
         name="water",
@@ -1029,9 +1029,9 @@ def dam_break(
     tank: tuple[float, float] = (4.0, 3.0),
     depth: float = 1.0,
     lid: bool = True,
-    precision: str = "f32",
+    pass_precision: str = "f32",
     kernel: str = "cubic_spline",
-    viscosity: float = 0.05,
+    alpha: float = 0.05,
     sound_speed: float | None = None,
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
@@ -1067,11 +1067,13 @@ def dam_break(
     lid : bool
         Close the tank with a lid of wall particles (default), so the jet and the spray thrown up
         by the impact on the far wall stay in the tank; ``False``: an open tank.
-    precision : {"f32", "f64"}
-        Arithmetic of the SPH passes; f32 is about twice as fast. Default "f32".
+    pass_precision : {"f32", "f64"}
+        Arithmetic of the SPH passes; f32 is about twice as fast. Default "f32". (Old name
+        ``precision``, deprecated.)
     kernel : {"cubic_spline", "wendland_c2"}
-    viscosity : float
-        Monaghan artificial viscosity α (≥ 0). Default 0.05.
+    alpha : float
+        Monaghan artificial viscosity α (≥ 0, dimensionless). Default 0.05. (Old name
+        ``viscosity``, deprecated.)
     sound_speed : float, optional
         Numerical speed of sound, m/s. Default: 10·√(2 g height) (about 1 % density variation).
     integrator : str
@@ -1085,7 +1087,7 @@ def dam_break(
         ``"semi_implicit_euler"`` only). ``"dfsph"`` solves for an incompressible pressure (0.1 % mean compression) and steps at the flow's CFL limit
         instead of the speed of sound's: a render at n = 144 to T = 4 takes about 1,800 steps instead
         of 29,000, three times faster (README, "Fluids (DFSPH)"), with the Martin & Moyce
-        front as close; ``sound_speed`` then only scales the viscosity and ``precision`` does
+        front as close; ``sound_speed`` then only scales the viscosity and ``pass_precision`` does
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
 
     Returns
@@ -1125,8 +1127,8 @@ def dam_break(
     tlo, thi = _box(dim, (0.0, length), (0.0, top), (0.0, depth))
     _particles("n, width, height, depth, tank", _lattice_size(lo, hi, dx) + _walls_size(tlo, thi, dx))
     return _water_in_tank(
-        lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
-        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
+        lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, pass_precision=pass_precision, kernel=kernel,
+        alpha=alpha, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
     )
 
 
@@ -1156,9 +1158,9 @@ def drop(
     pool: float = 0.6,
     block: float = 0.4,
     fall: float = 0.6,
-    precision: str = "f32",
+    pass_precision: str = "f32",
     kernel: str = "cubic_spline",
-    viscosity: float = 0.05,
+    alpha: float = 0.05,
     sound_speed: float | None = None,
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
@@ -1193,7 +1195,7 @@ def drop(
         Side of the falling block, m (> 0, narrower than the tank, at least 2 spacings).
     fall : float
         Gap between the pool surface and the block's bottom, m (≥ 0).
-    precision, kernel, viscosity, integrator, dt, threads
+    pass_precision, kernel, alpha, integrator, dt, threads
         As for :func:`dam_break`.
     sound_speed : float, optional
         m/s. Default: 10·√(2 g (pool + fall + block)), ten times the fastest fall.
@@ -1201,7 +1203,7 @@ def drop(
         The fluid's pressure (:class:`~physcore.fluids.Fluid`), as for :func:`dam_break`:
         default ``"dfsph"`` with the default integrator (the default render then takes seconds:
         WCSPH's sound-speed step made it 44 s), ``"wcsph"`` with any other. ``"dfsph"`` steps
-        with ``"semi_implicit_euler"`` only and computes in float64 (``precision`` does not
+        with ``"semi_implicit_euler"`` only and computes in float64 (``pass_precision`` does not
         apply).
 
     Returns
@@ -1261,8 +1263,8 @@ def drop(
         # own estimate would miss the fall of a block into an empty tank).
         sound_speed = 10.0 * math.sqrt(2.0 * _G * (pool + fall + block))
     return _water_in_tank(
-        np.concatenate(parts), dx, tlo, thi, dim=dim, lid=lid, precision=precision, kernel=kernel,
-        viscosity=viscosity, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
+        np.concatenate(parts), dx, tlo, thi, dim=dim, lid=lid, pass_precision=pass_precision, kernel=kernel,
+        alpha=alpha, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
     )
 
 
@@ -1279,7 +1281,7 @@ drop.render_defaults = {
     "cmap": "ice",
 }
 
-def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, viscosity):
+def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, alpha):
     """The checks the two surface-tension scenes share: (dim, n, σ, adhesion, α)."""
     dim = _dim(dim)
     n = _count(n3 if dim == 3 and n is None else n2 if n is None else n, "n", 8)
@@ -1287,7 +1289,7 @@ def _surface_scene_args(dim, n, n2, n3, integrator, surface_tension, adhesion, v
         raise InvalidInputError(
             f"integrator: surface tension is DFSPH's (Fluid(method='dfsph')), which steps with 'semi_implicit_euler' only, got {integrator!r:.80}"
         )
-    return dim, n, _nonneg(surface_tension, "surface_tension"), _nonneg(adhesion, "adhesion"), _nonneg(viscosity, "viscosity")
+    return dim, n, _nonneg(surface_tension, "surface_tension"), _nonneg(adhesion, "adhesion"), _nonneg(alpha, "alpha")
 
 
 def _speed(value: object) -> float:
@@ -1308,7 +1310,7 @@ def _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrat
     """The surface-tension scenes' water: DFSPH (float64, cubic spline) with σ and adhesion, at
     ``pos`` moving at ``vel``, in a tank lined with 3 wall layers, sound speed estimated."""
     return _water_in_tank(
-        pos, dx, tlo, thi, dim=dim, lid=lid, precision="f64", kernel="cubic_spline", viscosity=alpha,
+        pos, dx, tlo, thi, dim=dim, lid=lid, pass_precision="f64", kernel="cubic_spline", alpha=alpha,
         sound_speed=None, integrator=integrator, dt=dt, threads=threads, method="dfsph", velocities=vel,
         surface_tension=sigma, adhesion=adh,
     )
@@ -1332,7 +1334,7 @@ def droplets(
     depth: float = 0.02,
     surface_tension: float = 0.072,
     adhesion: float = 0.0,
-    viscosity: float = 0.02,
+    alpha: float = 0.02,
     lid: bool = True,
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
@@ -1369,8 +1371,8 @@ def droplets(
         3D only: tank depth, m.
     surface_tension, adhesion : float
         σ and the walls' adhesion, N/m (N in 2D), ≥ 0 (:class:`~physcore.fluids.Fluid`).
-    viscosity : float
-        Monaghan artificial viscosity α (≥ 0).
+    alpha : float
+        Monaghan artificial viscosity α (≥ 0, dimensionless). (Old name ``viscosity``, deprecated.)
     lid : bool
         Close the tank with a lid (default).
     integrator : str
@@ -1396,7 +1398,7 @@ def droplets(
     >>> scene.n_particles
     104
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 120, integrator, surface_tension, adhesion, viscosity)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 120, integrator, surface_tension, adhesion, alpha)
     drops = _check.int_in_range("drops", drops, 1, 20)
     radius, speed = _positive(radius, "radius"), _speed(speed)
     length, top = _pair(tank, "tank")
@@ -1453,7 +1455,7 @@ def crown(
     speed: float = 2.5,
     surface_tension: float = 0.072,
     adhesion: float = 0.05,
-    viscosity: float = 0.02,
+    alpha: float = 0.02,
     lid: bool = True,
     integrator: str = "semi_implicit_euler",
     dt: float | None = None,
@@ -1485,7 +1487,7 @@ def crown(
         Drop radius, m (at least 2 spacings).
     speed : float
         The drop's initial downward speed, m/s (≥ 0).
-    surface_tension, adhesion, viscosity, lid, integrator, dt, threads
+    surface_tension, adhesion, alpha, lid, integrator, dt, threads
         As for :func:`droplets`.
 
     Returns
@@ -1505,7 +1507,7 @@ def crown(
     >>> scene.n_particles
     177
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 525, 140, integrator, surface_tension, adhesion, viscosity)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 525, 140, integrator, surface_tension, adhesion, alpha)
     length, top = _pair(tank, "tank")
     depth = _positive(depth, "depth")
     pool, radius, speed = _positive(pool, "pool"), _positive(radius, "radius"), _speed(speed)
@@ -2355,9 +2357,12 @@ vortex_street.render_defaults = {
 }
 
 
-def _stamped(fn: Callable[..., Scene]) -> Callable[..., Scene]:
+def _stamped(fn: Callable[..., Scene], **deprecated: Any) -> Callable[..., Scene]:
     """`fn` returning scenes that carry its ``render_defaults`` (so ``render.gif(scene)`` shows
-    the motion ``physcore render NAME`` shows); same name, docs, signature and attributes."""
+    the motion ``physcore render NAME`` shows); same name, docs, signature and attributes.
+    ``deprecated``: the old spellings it still takes this release (see :func:`_deprecate.args`)."""
+    if deprecated:
+        fn = functools.wraps(fn)(_deprecate.args(name=fn.__name__, **deprecated)(fn))
 
     @functools.wraps(fn)
     def scene_function(*args: Any, **kwargs: Any) -> Scene:
@@ -2377,10 +2382,11 @@ pythagorean = _stamped(pythagorean)
 galaxies = _stamped(galaxies)
 cyclotron = _stamped(cyclotron)
 spring_chain = _stamped(spring_chain)
-dam_break = _stamped(dam_break)
-drop = _stamped(drop)
-droplets = _stamped(droplets)
-crown = _stamped(crown)
+_SPH_RENAMES = {"viscosity": "alpha", "precision": "pass_precision"}
+dam_break = _stamped(dam_break, renames=_SPH_RENAMES)
+drop = _stamped(drop, renames=_SPH_RENAMES)
+droplets = _stamped(droplets, renames={"viscosity": "alpha"})
+crown = _stamped(crown, renames={"viscosity": "alpha"})
 ripple = _stamped(ripple)
 double_slit = _stamped(double_slit)
 turing = _stamped(turing)

@@ -294,7 +294,10 @@ def _drawn_planes(scene: Any) -> list | None:
     from ..terms import Plane
 
     planes = getattr(scene, "planes", None)
-    own = [getattr(t, "walls", None) for t in getattr(scene, "terms", ())]
+    from ..fluids import Fluid
+
+    # A fluid's boundary particles are not planes (and Fluid.walls is a deprecated alias).
+    own = [getattr(t, "walls", None) for t in getattr(scene, "terms", ()) if not isinstance(t, Fluid)]
     walls = [w for ws in own if isinstance(ws, tuple) for w in ws if isinstance(w, Plane)]
     return planes if not walls else [*(planes or []), *walls]
 
