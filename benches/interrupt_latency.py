@@ -2,7 +2,7 @@
 max of --repeats tries.
 
 Cases: (a) 2·10^5 particles under uniform gravity, step(10^7), every integrator; (b) the stiff
-rk45 cloth of tests/test_interrupt.py (48², dt = 0.5 s, rtol = 1e-10), whose every output step is
+dopri5 cloth of tests/test_interrupt.py (48², dt = 0.5 s, rtol = 1e-10), whose every output step is
 thousands of internal steps; (d) every integrator × term: pairwise gravity (N = 2·10^4, one
 evaluation ~2·10^8 pair interactions), a springs cloth (1000², 10^6 particles) and an SPH fluid
 (the 2D dam break of bench_sph.py at 10^6 particles, f64), where one force evaluation is a
@@ -68,7 +68,7 @@ def gravity_scene(integrator: str, threads, n: int):
 
 
 def cloth_scene(threads):
-    scene = pc.scenes.cloth(n=48, integrator="rk45", dt=0.5, threads=threads)
+    scene = pc.scenes.cloth(n=48, integrator="dopri5", dt=0.5, threads=threads)
     scene.rtol = 1e-10
     return scene
 
@@ -125,7 +125,7 @@ def main() -> None:
             probe.dt = 0.01
             t = step_time(probe)
             st = probe.integrator_stats
-            measure("(b) rk45 cloth 48²", "rk45", threads, scene, lambda s: s.step(200), t / (st["accepted"] + st["rejected"]))
+            measure("(b) dopri5 cloth 48²", "dopri5", threads, scene, lambda s: s.step(200), t / (st["accepted"] + st["rejected"]))
     if "d" in args.cases:
         terms = [
             (f"(d) pairwise N={args.n_nbody}", lambda: nbody_scene(None, args.n_nbody)),

@@ -1,4 +1,4 @@
-"""WORKLOADS.md §4 (Kepler work-precision), adaptive references: physcore's ``"rk45"`` against
+"""WORKLOADS.md §4 (Kepler work-precision), adaptive references: physcore's ``"dopri5"`` against
 scipy's ``solve_ivp`` with ``RK45`` (the same Dormand–Prince 5(4) pair) and ``DOP853`` at equal
 tolerances, on the e = 0.5 orbit (GM = 1, a = 1, test particle around a pinned unit mass) over
 100 orbits. Energy sampled 20× per orbit (physcore's output interval, scipy's ``t_eval``);
@@ -23,7 +23,7 @@ P = 2 * math.pi
 def energy(x, v): return 0.5 * (v @ v) - 1 / math.sqrt(x @ x)
 def run_pc(rtol, atol):
     def go(sample):
-        s = pc.Scene(2, integrator="rk45", dt=P / 20, rtol=rtol, atol=atol, threads=1)
+        s = pc.Scene(2, integrator="dopri5", dt=P / 20, rtol=rtol, atol=atol, threads=1)
         s.add_particles([[0, 0], [0.5, 0]], [[0, 0], [0, math.sqrt(3)]], masses=[1.0, 1e-300], pinned=[True, False])
         s.add(pc.PairwiseGravity(G=1.0, softening=0.0))
         errs = []
@@ -59,7 +59,7 @@ def main() -> None:
     print("|---|---|---:|---:|---:|---:|---:|---:|")
     for rtol, atol in [(1e-6, 1e-9), (1e-10, 1e-12)]:
         w, e, d, n = run_pc(rtol, atol)
-        print(f"| physcore | rk45 | {rtol:g} / {atol:g} | {e:.2e} | {d:.2e} | {n} | {w:.4f} | |")
+        print(f"| physcore | dopri5 | {rtol:g} / {atol:g} | {e:.2e} | {d:.2e} | {n} | {w:.4f} | |")
         for m in ("RK45", "DOP853"):
             ws, es, ds, ns = run_scipy(m, rtol, atol)
             print(f"| scipy {scipy.__version__} | {m} | {rtol:g} / {atol:g} | {es:.2e} | {ds:.2e} | {ns} | {ws:.4f} | {ws / w:.0f}× |")

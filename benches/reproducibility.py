@@ -69,7 +69,7 @@ def cases() -> dict[str, tuple[Callable[[int | None], pc.Scene], int]]:
     out: dict[str, tuple[Callable[[int | None], pc.Scene], int]] = {}
     for name, fn in REGISTRY.items():
         out[name] = ((lambda t, fn=fn: fn(threads=t)), FEWER.get(name, STEPS))
-    for integ in ("euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "implicit_euler"):
+    for integ in ("euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5", "implicit_euler"):
         out[f"spring_chain/{integ}"] = ((lambda t, i=integ: pc.scenes.spring_chain(integrator=i, threads=t)), STEPS)
     for integ in ("verlet", "rk4"):
         # 5184 particles: past the springs' parallel threshold.

@@ -38,7 +38,7 @@ with status ``reference`` in the CSV). Their energy at t = 0 is zero (rest, zero
 references), so the energy error is max |E(t) − E(0)| over samples every 5 ms (chain) / 10 ms
 (cloth) divided by the energy scale in play, as ``Scene.energy_drift`` does: the largest
 kinetic + Σ |potential| + Σ |dissipated| of the reference run (a fixed scale, so that a blow-up
-shows as errors > 1). ``rk45`` sweeps rtol (atol = 1e-3 · rtol · length scale) with dt = the
+shows as errors > 1). ``dopri5`` sweeps rtol (atol = 1e-3 · rtol · length scale) with dt = the
 sampling interval (its output interval). f32 runs (precision column) use a subset of the sweep.
 
 Cost: force evaluations (``scene.force_evaluations``) and wall time of the stepping alone
@@ -162,7 +162,7 @@ class Problem:
     family: str
     title: str
     build: Callable[..., pc.Scene]  # keyword arguments of pc.Scene
-    n_samples: int  # energy samples (= rk45 output steps) over the run
+    n_samples: int  # energy samples (= dopri5 output steps) over the run
     sample: float  # sampling interval, s; dt = sample / m
     ms: Sequence[int]  # fixed-step sweep: steps per sampling interval
     f32_ms: Sequence[int]
@@ -398,7 +398,7 @@ def _progress(row: dict[str, Any], prob: Problem) -> None:
 def make_reference(prob: Problem, cache: dict[tuple, dict[str, Any]]) -> list[dict[str, Any]]:
     """rk4 (float64) at half the smallest dt of the sweep; error estimate from the smallest dt."""
     names = integrator_names()
-    ref_integ = "rk4" if "rk4" in names else max(pc.INTEGRATORS, key=lambda d: (d["order"], d["name"] != "rk45"))["name"]
+    ref_integ = "rk4" if "rk4" in names else max(pc.INTEGRATORS, key=lambda d: (d["order"], d["name"] != "dopri5"))["name"]
     m = 2 * max(prob.ms)
     fine = simulate(prob, ref_integ, "f64", m, None, None)
     prob.energy_scale = fine["_scale"]
@@ -424,7 +424,7 @@ def sweep(prob: Problem, cap_s: float, guard_s: float, cache: dict[tuple, dict[s
     precisions = ["f64"] + (["f32"] if has_precision() else [])
     for integ in integrator_names():
         for prec in precisions:
-            adaptive = integ == "rk45"
+            adaptive = integ == "dopri5"
             if adaptive:
                 values = prob.rtols if prec == "f64" else prob.f32_rtols
             else:
@@ -477,7 +477,7 @@ def sweep_on_dask(prob: Problem, client: Any) -> list[dict[str, Any]]:
     params = []
     for integ in integrator_names():
         for prec in ["f64"] + (["f32"] if has_precision() else []):
-            adaptive = integ == "rk45"
+            adaptive = integ == "dopri5"
             if adaptive:
                 values = prob.rtols if prec == "f64" else prob.f32_rtols
             else:

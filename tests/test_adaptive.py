@@ -1,5 +1,5 @@
 """Automatic step choice: ``advance(duration, substeps="auto")`` per integrator, and the
-adaptive ``"rk45"`` integrator's tolerances, failure report and determinism."""
+adaptive ``"dopri5"`` integrator's tolerances, failure report and determinism."""
 from __future__ import annotations
 
 import math
@@ -17,7 +17,7 @@ def _stiff_chain(integrator: str, k: float = 1e4) -> pc.Scene:
 
 def test_auto_substeps_follow_each_integrators_stability_interval():
     # ω_max·dt = 0.5 with ω_max from a safe (Gershgorin) bound, inside the stability interval of
-    # every fixed-step method (2 for semi-implicit Euler and Verlet, 2√2 for RK4); rk45 takes one
+    # every fixed-step method (2 for semi-implicit Euler and Verlet, 2√2 for RK4); dopri5 takes one
     # substep per call and controls its own internal steps.
     dts = {name: _stiff_chain(name).auto_dt() for name in ("semi_implicit_euler", "verlet", "rk4", "euler")}
     assert dts["verlet"] == dts["semi_implicit_euler"] == dts["euler"] == dts["rk4"]
@@ -26,20 +26,20 @@ def test_auto_substeps_follow_each_integrators_stability_interval():
     assert dts["verlet"] * omega_max == pytest.approx(0.5, rel=1e-12)
     s = _stiff_chain("verlet")
     assert dts["verlet"] == pytest.approx(s.suggest_dt(), rel=1e-12)
-    assert _stiff_chain("rk45").auto_dt() == math.inf
+    assert _stiff_chain("dopri5").auto_dt() == math.inf
     frame = 1 / 30
     counts = {}
-    for name in ("verlet", "rk4", "rk45"):
+    for name in ("verlet", "rk4", "dopri5"):
         s = _stiff_chain(name)
         counts[name] = s.advance(frame)
         assert s.time == pytest.approx(frame, rel=1e-14)
         assert s.dt == pytest.approx(frame / counts[name], rel=1e-14)
     assert counts["verlet"] == math.ceil(frame / dts["verlet"])
     assert counts["rk4"] == counts["verlet"]
-    assert counts["rk45"] == 1
+    assert counts["dopri5"] == 1
 
 
-@pytest.mark.parametrize("integrator", ["semi_implicit_euler", "verlet", "rk4", "rk45"])
+@pytest.mark.parametrize("integrator", ["semi_implicit_euler", "verlet", "rk4", "dopri5"])
 @pytest.mark.parametrize("k", [1e2, 1e6, 1e10])
 def test_auto_substeps_stay_stable_over_stiffness(integrator, k):
     # Over 8 orders of magnitude of stiffness the automatic substeps keep the undamped chain
@@ -47,9 +47,9 @@ def test_auto_substeps_stay_stable_over_stiffness(integrator, k):
     # is chaotic later, and its links then fold through zero length, where the force direction
     # jumps). Bounds from each method's linear theory at ω·dt ≤ 0.5: semi-implicit Euler's
     # modified energy differs from H by up to ω·dt/2 = 0.25, Verlet's by (ω·dt)²/8 ≈ 0.03; RK4
-    # loses at most (ω·dt)⁶/72 ≈ 2e-4 of a mode's energy per step, rk45 is held to its rtol.
+    # loses at most (ω·dt)⁶/72 ≈ 2e-4 of a mode's energy per step, dopri5 is held to its rtol.
     s = _stiff_chain(integrator, k)
-    if integrator == "rk45":
+    if integrator == "dopri5":
         s.rtol, s.atol = 1e-5, 1e-9
     period = 2 * math.pi * math.sqrt(s.masses[1] / k)
     frame = min(20 * period, 0.2)
@@ -69,26 +69,26 @@ def test_fixed_substeps():
     assert s.step_count == 40 and s.dt == 1.0 / 40
 
 
-def test_rk45_tolerance_validation():
-    s = pc.Scene(2, integrator="rk45", rtol=1e-8, atol=1e-12)
+def test_dopri5_tolerance_validation():
+    s = pc.Scene(2, integrator="dopri5", rtol=1e-8, atol=1e-12)
     assert (s.rtol, s.atol) == (1e-8, 1e-12)
     for kw, exc in [({"rtol": 0.0}, ValueError), ({"rtol": 1.0}, ValueError), ({"rtol": 1e-16}, ValueError),
                     ({"atol": -1.0}, ValueError), ({"atol": math.nan}, ValueError), ({"rtol": "1e-6"}, TypeError)]:
         with pytest.raises(exc, match=next(iter(kw))):
-            pc.Scene(2, integrator="rk45", **kw)
+            pc.Scene(2, integrator="dopri5", **kw)
     with pytest.raises(ValueError, match="rtol"):
         s.rtol = -1e-3
     assert s.rtol == 1e-8
     # Tolerances survive a change of integrator.
     s.integrator = "verlet"
-    s.integrator = "rk45"
+    s.integrator = "dopri5"
     assert (s.rtol, s.atol) == (1e-8, 1e-12)
 
 
-def test_rk45_gives_up_with_a_named_particle_and_rolls_back():
+def test_dopri5_gives_up_with_a_named_particle_and_rolls_back():
     # Unsoftened gravity between coincident-ish particles: infinite forces that no step size
     # can control. The scene must say so, name a particle, and roll back.
-    s = pc.Scene(2, integrator="rk45", dt=0.1)
+    s = pc.Scene(2, integrator="dopri5", dt=0.1)
     s.add_particles([[0.0, 0.0], [1e-160, 0.0], [5.0, 0.0]], masses=[1.0, 1.0, 1.0])
     s.add(pc.PairwiseGravity(G=1.0, softening=0.0))
     x0 = s.positions
@@ -102,8 +102,8 @@ def test_rk45_gives_up_with_a_named_particle_and_rolls_back():
     assert s.integrator_stats == {"accepted": 0, "rejected": 0, "next_step": 0.0}
 
 
-def test_rk45_rollback_keeps_the_counts_of_earlier_calls():
-    s = pc.Scene(2, integrator="rk45", dt=0.1)
+def test_dopri5_rollback_keeps_the_counts_of_earlier_calls():
+    s = pc.Scene(2, integrator="dopri5", dt=0.1)
     s.add_particles([[0.0, 0.0], [1.0, 0.0], [5.0, 0.0]], masses=[1.0, 1.0, 1.0])
     s.add(pc.PairwiseGravity(G=1.0, softening=0.0))
     s.step(2)
@@ -117,15 +117,15 @@ def test_rk45_rollback_keeps_the_counts_of_earlier_calls():
 
 
 @pytest.mark.parametrize("when", ["fresh", "step0", "switched"])
-def test_rk45_scene_saved_before_its_first_step_loads(tmp_path, when):
-    # Saved before rk45 has taken a step (no derivative cached yet), the file must load and the
+def test_dopri5_scene_saved_before_its_first_step_loads(tmp_path, when):
+    # Saved before dopri5 has taken a step (no derivative cached yet), the file must load and the
     # loaded scene continue exactly as the original.
     if when == "switched":
         s = pc.scenes.kepler()
         s.step(10)
-        s.integrator = "rk45"
+        s.integrator = "dopri5"
     else:
-        s = pc.scenes.kepler(integrator="rk45")
+        s = pc.scenes.kepler(integrator="dopri5")
         if when == "step0":
             s.step(0)
     path = s.save(tmp_path / "k.npz")
@@ -136,10 +136,10 @@ def test_rk45_scene_saved_before_its_first_step_loads(tmp_path, when):
     assert s.integrator_stats == t.integrator_stats
 
 
-def test_rk45_is_thread_count_independent():
+def test_dopri5_is_thread_count_independent():
     runs = []
     for threads in (1, 2):
-        s = pc.scenes.cloth(n=64, threads=threads, integrator="rk45", dt=1 / 60)
+        s = pc.scenes.cloth(n=64, threads=threads, integrator="dopri5", dt=1 / 60)
         s.rtol, s.atol = 1e-5, 1e-8
         s.step(3)
         runs.append(s)
@@ -149,9 +149,9 @@ def test_rk45_is_thread_count_independent():
     assert runs[0].energy() == runs[1].energy()
 
 
-def test_rk45_books_dissipation():
+def test_dopri5_books_dissipation():
     # A damped chain: kinetic + potential + dissipated stays at its start value to about rtol.
-    s = pc.scenes.spring_chain(n=10, damping=0.5, integrator="rk45", dt=0.02, threads=1)
+    s = pc.scenes.spring_chain(n=10, damping=0.5, integrator="dopri5", dt=0.02, threads=1)
     s.rtol, s.atol = 1e-9, 1e-12
     s.step(100)
     assert s.energy().dissipated["springs"] > 0
@@ -159,16 +159,16 @@ def test_rk45_books_dissipation():
 
 
 def test_repr_names_tolerances_and_precision():
-    r = repr(pc.Scene(2, integrator="rk45", rtol=1e-8, precision="f32"))
+    r = repr(pc.Scene(2, integrator="dopri5", rtol=1e-8, precision="f32"))
     assert "rtol=1e-08" in r and "precision='f32'" in r
     r = repr(pc.Scene(2))
     assert "rtol" not in r and "precision" not in r
 
 
-def test_rk45_pure_relative_tolerance_with_pinned_particles():
+def test_dopri5_pure_relative_tolerance_with_pinned_particles():
     # atol = 0: components that stay exactly 0 (a pinned anchor, the unused axis) have a zero
     # error, which must pass a zero tolerance rather than divide 0 by 0.
-    s = oscillator("rk45", 0.5)
+    s = oscillator("dopri5", 0.5)
     s.rtol, s.atol = 1e-8, 0.0
     s.step(20)
     assert s.integrator_stats["accepted"] >= 20

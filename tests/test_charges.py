@@ -219,8 +219,8 @@ def test_every_integrator_converges_to_the_gyration_at_its_order(integrator, ord
     assert abs(slope - order) < 0.2, (integrator, slope, errs)
 
 
-def test_rk45_follows_the_gyration_to_its_tolerance():
-    s = _one(3, 1.0, 1.0, [1.0, 0.0, 0.2], integrator="rk45", dt=0.5)
+def test_dopri5_follows_the_gyration_to_its_tolerance():
+    s = _one(3, 1.0, 1.0, [1.0, 0.0, 0.2], integrator="dopri5", dt=0.5)
     s.rtol, s.atol = 1e-10, 1e-12
     s.add(pc.MagneticField([0.0, 0.0, 1.0]))
     s.step(round(4 * math.pi / 0.5))

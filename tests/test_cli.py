@@ -318,18 +318,18 @@ def test_divergence_with_auto_substeps_exit_1_and_no_file(tmp_path, capsys, tank
     assert list(tmp_path.iterdir()) == []
 
 
-def test_render_rk45_with_tolerances(tmp_path, capsys):
+def test_render_dopri5_with_tolerances(tmp_path, capsys):
     out = tmp_path / "k.gif"
-    args = ["render", "kepler", "-o", str(out), "--integrator", "rk45", "--rtol", "1e-9", "--atol", "1e-12", "-q"]
+    args = ["render", "kepler", "-o", str(out), "--integrator", "dopri5", "--rtol", "1e-9", "--atol", "1e-12", "-q"]
     assert main(args + SMALL) == 0
     stdout = capsys.readouterr().out
-    assert "rk45:" in stdout and "internal steps accepted" in stdout and "rtol 1e-09" in stdout
+    assert "dopri5:" in stdout and "internal steps accepted" in stdout and "rtol 1e-09" in stdout
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--rtol", "1e-6"], "--integrator rk45"),
-    (["--integrator", "rk45", "--rtol", "2"], "rtol"),
-    (["--integrator", "rk45", "--atol", "-1"], "atol"),
+    (["--rtol", "1e-6"], "--integrator dopri5"),
+    (["--integrator", "dopri5", "--rtol", "2"], "rtol"),
+    (["--integrator", "dopri5", "--atol", "-1"], "atol"),
 ])
 def test_render_tolerance_errors(tmp_path, capsys, extra, message):
     out = tmp_path / "k.gif"

@@ -48,7 +48,7 @@ def test_ctrl_c_stops_every_scene_promptly_and_loses_nothing(name, call):
     scene.step(2)
     before = BENCH.state(scene)
     # advance refuses a duration of over 1e12 substeps up front; 1e9 of them run for hours.
-    substep = min(scene.auto_dt(), scene.dt)  # auto_dt is inf where nothing limits the step (rk45)
+    substep = min(scene.auto_dt(), scene.dt)  # auto_dt is inf where nothing limits the step (dopri5)
     run = (lambda: scene.step(10**9)) if call == "step" else (lambda: scene.advance(1e9 * substep))
     latency = _interrupt(run, 0.25)
     assert latency < LATENCY_BOUND, f"{name}: Ctrl-C took {latency:.2f} s"

@@ -886,7 +886,7 @@ def test_overflowed_books_stop_the_step_and_the_scene_still_saves(tmp_path):
 
 
 def test_round_trip_is_bit_identical_for_every_integrator(tmp_path):
-    for integ in ("euler", "semi_implicit_euler", "verlet", "rk4", "rk45"):
+    for integ in ("euler", "semi_implicit_euler", "verlet", "rk4", "dopri5"):
         a, b = reference_scene(integ), reference_scene(integ)
         b = pc.Scene.load(b.save(tmp_path / f"{integ}.npz"))
         for s in (a, b):
@@ -958,7 +958,7 @@ JSON_VALUES = st.recursive(
     | st.floats()
     | st.sampled_from([NAN, INF, -INF, 0.0, -0.0, 1e-320, 1e308, 0.5, 1.5])
     | st.text(max_size=10)
-    | st.sampled_from(["verlet", "rk45", "f32", "f64", "fluid", "springs", "gravity", "wendland_c2", "collisions"]),
+    | st.sampled_from(["verlet", "dopri5", "f32", "f64", "fluid", "springs", "gravity", "wendland_c2", "collisions"]),
     lambda children: st.lists(children, max_size=4) | st.dictionaries(st.text(max_size=8), children, max_size=4),
     max_leaves=8,
 )
@@ -1047,9 +1047,9 @@ def test_fuzz_array_members_long(fuzz_dir, member, a):
 
 
 @pytest.mark.fuzz
-@pytest.mark.parametrize("integrator", ["euler", "rk45"])
+@pytest.mark.parametrize("integrator", ["euler", "dopri5"])
 def test_corpus_on_other_integrators(tmp_path, integrator):
-    # The corpus again on references without a Verlet cache (euler) and with rk45's controller.
+    # The corpus again on references without a Verlet cache (euler) and with dopri5's controller.
     r = make_ref(tmp_path, integrator)
     for case in CORPUS:
         if "cache" in case.name and integrator == "euler":
@@ -1061,7 +1061,7 @@ def test_corpus_on_other_integrators(tmp_path, integrator):
             continue
         path.write_bytes(data)
         scene = load_or_refuse(path, max_bytes=4 * len(data) + (32 << 20))
-        # The cache cases were written against Verlet's force cache; rk45 keeps a controller
+        # The cache cases were written against Verlet's force cache; dopri5 keeps a controller
         # instead (an empty force cache is valid there), so only their loading is checked.
         if case.expect == "refuse" and "cache" not in case.name:
             assert scene is None, f"{case.family}:{case.name}: loaded a file that must be refused"

@@ -227,10 +227,10 @@ def test_a_ninth_fluid_alike_starts_a_new_search_and_warns():
     assert "'f0'" in message and "'f8'" not in message, message
 
 
-@pytest.mark.parametrize("integrator", ["rk4", "rk45"])
+@pytest.mark.parametrize("integrator", ["rk4", "dopri5"])
 def test_fluids_apart_in_the_particle_order_meet_in_3d(integrator):
     """Two 3D blocks head-on with other particles added between them (the fluids' particle ranges
-    are not contiguous), under RK4 (four evaluations a step) and rk45 (trial stages): they stop
+    are not contiguous), under RK4 (four evaluations a step) and dopri5 (trial stages): they stop
     each other, the free particles feel no SPH force, and the fluids' momentum is conserved to
     round-off."""
     dx = 0.025

@@ -22,7 +22,7 @@ ORDER_CASES = {
     "rk4": (4, [0.1, 0.05, 0.025, 0.0125]),
     # Tolerances so loose that every output step is one accepted Dormand–Prince step of dt:
     # this measures the order of the tableau itself (its error control is tested below).
-    "rk45": (5, [0.4, 0.2, 0.1, 0.05]),
+    "dopri5": (5, [0.4, 0.2, 0.1, 0.05]),
     # Without a magnetic field the Boris push is velocity Verlet (tests/test_charges.py has its
     # order with one).
     "boris": (2, [0.04, 0.02, 0.01, 0.005]),
@@ -35,7 +35,7 @@ T_FINAL = 2.0
 
 def _error_at(integrator: str, dt: float) -> float:
     s = oscillator(integrator, dt)
-    if integrator == "rk45":
+    if integrator == "dopri5":
         s.rtol, s.atol = 0.5, 1e6
     n = round(T_FINAL / dt)
     s.step(n)
@@ -69,7 +69,7 @@ def test_integrator_table():
         "verlet": (2, True, 1),
         "yoshida4": (4, True, 3),
         "rk4": (4, False, 4),
-        "rk45": (5, False, 6),
+        "dopri5": (5, False, 6),
         "boris": (2, False, 1),
         "xpbd": (1, False, 10),
         "implicit_euler": (1, False, 1),
@@ -82,7 +82,7 @@ def test_integrator_table():
         assert s.integrator_info == d
 
 
-@pytest.mark.parametrize("name", [n for n in INTEGRATOR_NAMES if n != "rk45"])
+@pytest.mark.parametrize("name", [n for n in INTEGRATOR_NAMES if n != "dopri5"])
 def test_force_evaluations_per_step(name):
     per_step = next(d["force_evals_per_step"] for d in pc.INTEGRATORS if d["name"] == name)
     s = oscillator(name, 0.01)
@@ -97,8 +97,8 @@ def test_force_evaluations_per_step(name):
         assert s.force_evaluations - before == per_step * k
 
 
-def test_rk45_force_evaluations_are_six_per_internal_step():
-    s = oscillator("rk45", 0.5)
+def test_dopri5_force_evaluations_are_six_per_internal_step():
+    s = oscillator("dopri5", 0.5)
     s.step(1)
     st = s.integrator_stats
     # One evaluation at the start (first same as last afterwards) and one for the starting step.
@@ -113,10 +113,10 @@ def test_rk45_force_evaluations_are_six_per_internal_step():
 
 
 @pytest.mark.parametrize("rtol", [1e-4, 1e-6, 1e-8, 1e-10])
-def test_rk45_error_is_proportional_to_tolerance(rtol):
+def test_dopri5_error_is_proportional_to_tolerance(rtol):
     # Global error over 5 periods within a small multiple of rtol (tolerance proportionality,
     # Hairer, Nørsett & Wanner I, §II.4), and well above it would mean the control is slack.
-    s = oscillator("rk45", 0.25)
+    s = oscillator("dopri5", 0.25)
     s.rtol, s.atol = rtol, rtol * 1e-3
     n = round(10 * math.pi / 0.25)
     s.step(n)
@@ -126,10 +126,10 @@ def test_rk45_error_is_proportional_to_tolerance(rtol):
     assert s.time == n * 0.25
 
 
-def test_rk45_lands_on_output_times_and_adapts():
+def test_dopri5_lands_on_output_times_and_adapts():
     # A Kepler orbit with e = 0.9: the internal step near pericentre is far below the output
     # step, and the controller rejects only a few percent of its attempts.
-    s = pc.scenes.kepler(e=0.9, mass_ratio=0.0, integrator="rk45", dt=2 * math.pi / 8)
+    s = pc.scenes.kepler(e=0.9, mass_ratio=0.0, integrator="dopri5", dt=2 * math.pi / 8)
     s.rtol, s.atol = 1e-9, 1e-12
     s.step(8 * 5)
     st = s.integrator_stats

@@ -1,7 +1,7 @@
 """Ctrl-C during a long step(n) stops it promptly and leaves the scene as it was before the call.
 
 The stepping runs on a pool thread while the calling (main) thread runs Python's signal handlers
-every 20 ms and sets a stop flag that the core reads between steps, between rk45's internal
+every 20 ms and sets a stop flag that the core reads between steps, between dopri5's internal
 step attempts and inside long force evaluations (pairwise gravity per block of receivers, SPH per
 chunk). Typical latency is tens of milliseconds (benches/interrupt_latency.py); the bounds
 asserted here are generous because the tests may run on slow, loaded hardware.
@@ -21,7 +21,7 @@ import physcore as pc
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
-INTEGRATORS = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45"]
+INTEGRATORS = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5"]
 LATENCY_BOUND = 10.0  # s, from the signal to the exception
 
 
@@ -77,10 +77,10 @@ def test_keyboard_interrupt_rolls_back_long_step(integrator, threads):
 
 
 @pytest.mark.parametrize("threads", [None, 2])
-def test_keyboard_interrupt_reaches_rk45_internal_steps(threads):
-    # Few output steps, each of many internal rk45 steps (a stiff cloth with a long dt): the
+def test_keyboard_interrupt_reaches_dopri5_internal_steps(threads):
+    # Few output steps, each of many internal dopri5 steps (a stiff cloth with a long dt): the
     # flag is read between internal steps, not only between output steps.
-    scene = pc.scenes.cloth(n=48, integrator="rk45", dt=0.5, threads=threads)
+    scene = pc.scenes.cloth(n=48, integrator="dopri5", dt=0.5, threads=threads)
     scene.rtol = 1e-10
     before = _snapshot(scene)
     latency = _interrupt(lambda: scene.step(200), 0.5)  # minutes of work if not interrupted
@@ -90,8 +90,8 @@ def test_keyboard_interrupt_reaches_rk45_internal_steps(threads):
 
 @pytest.mark.parametrize("threads", [None, 2])
 def test_keyboard_interrupt_rolls_back_advance_and_dt(threads):
-    # rk45 without a CFL limit takes one substep of the whole duration: one long output step.
-    scene = pc.scenes.cloth(n=32, integrator="rk45", dt=0.01, threads=threads)
+    # dopri5 without a CFL limit takes one substep of the whole duration: one long output step.
+    scene = pc.scenes.cloth(n=32, integrator="dopri5", dt=0.01, threads=threads)
     scene.rtol = 1e-10
     scene.step(1)
     before = _snapshot(scene)
@@ -156,7 +156,7 @@ def test_exception_of_a_signal_handler_is_raised_after_the_rollback():
 
     old = signal.signal(signal.SIGUSR1, handler)
     try:
-        scene = pc.scenes.cloth(n=48, integrator="rk45", dt=0.5)
+        scene = pc.scenes.cloth(n=48, integrator="dopri5", dt=0.5)
         scene.rtol = 1e-10
         before = _snapshot(scene)
         latency = _interrupt(lambda: scene.step(200), 0.3, signal.SIGUSR1, _Stop)

@@ -55,7 +55,7 @@ def test_quick_sweep(tmp_path, capsys):
             mine = [r for r in rows if r["problem"] == problem and r["integrator"] == name and r["status"] != "reference"]
             assert mine, f"no run of {name} on {problem}"
             assert all(int(r["force_evals"]) > 0 and float(r["wall_s"]) >= 0 for r in mine)
-            if name == "rk45":
+            if name == "dopri5":
                 assert all(r["rtol"] for r in mine)
             else:
                 assert not any(r["rtol"] for r in mine)

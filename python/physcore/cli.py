@@ -500,8 +500,8 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         # OverflowError: an argument beyond float64 that a scene function did not name itself.
         parser.error(f"scene {name!r}: {e}")
     if args.rtol is not None or args.atol is not None:
-        if scene.integrator != "rk45":
-            parser.error("--rtol/--atol apply to the adaptive integrator: add --integrator rk45")
+        if scene.integrator != "dopri5":
+            parser.error("--rtol/--atol apply to the adaptive integrator: add --integrator dopri5")
         try:
             if args.rtol is not None:
                 scene.rtol = args.rtol
@@ -630,7 +630,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         )
     elif stats:
         print(
-            f"  rk45:           {stats['accepted']} internal steps accepted, {stats['rejected']} rejected "
+            f"  dopri5:         {stats['accepted']} internal steps accepted, {stats['rejected']} rejected "
             f"(rtol {scene.rtol:g}, atol {scene.atol:g})"
         )
     print(f"  energy drift:   {drift:+.1e} (relative)")
@@ -644,11 +644,13 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     from . import render
 
     try:
-        from .scene import INTEGRATORS
+        from .scene import INTEGRATOR_ALIASES, INTEGRATORS
 
         integrators: list[str] | None = [d["name"] for d in INTEGRATORS]
+        # Old names stay valid choices this release (the Scene warns); the help lists the new ones.
+        accepted: list[str] | None = [*integrators, *INTEGRATOR_ALIASES]
     except Exception:  # noqa: BLE001 - the extension failed to load: let the scene call report it
-        integrators = None
+        integrators = accepted = None
     try:
         from importlib.metadata import version
 
@@ -693,11 +695,11 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--substeps", type=_substeps_arg, metavar="auto|N",
                    help="with the frame time: 'auto' picks each frame's substeps inside the integrator's "
                    "stability region (and reports them), N fixes them")
-    r.add_argument("--integrator", choices=integrators, metavar="NAME",
+    r.add_argument("--integrator", choices=accepted, metavar="NAME",
                    help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
-    r.add_argument("--rtol", type=_positive_float, metavar="R", help="relative tolerance of --integrator rk45 (default 1e-6)")
-    r.add_argument("--atol", type=float, metavar="A", help="absolute tolerance of --integrator rk45 (default 1e-9)")
+    r.add_argument("--rtol", type=_positive_float, metavar="R", help="relative tolerance of --integrator dopri5 (default 1e-6)")
+    r.add_argument("--atol", type=float, metavar="A", help="absolute tolerance of --integrator dopri5 (default 1e-9)")
     r.add_argument("--color-by", choices=render.COLOR_BY,
                    help="particle colouring (default: the scene's, else speed)")
     r.add_argument("--no-colorbar", action="store_true", help="do not draw the colour bar")
@@ -746,7 +748,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     v.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
     v.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
                    help="scene parameter, repeatable (e.g. --param n=24)")
-    v.add_argument("--integrator", choices=integrators, metavar="NAME", help="integrator")
+    v.add_argument("--integrator", choices=accepted, metavar="NAME", help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
     v.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
     v.add_argument("--size", type=_size, metavar="WxH", help="window size in pixels (default: the scene's GIF size)")
     v.add_argument("--fps", type=_positive_float, metavar="F",

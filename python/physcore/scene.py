@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from . import _check, _core, _scenefile
+from . import _check, _core, _deprecate, _scenefile
 from ._atomic import atomic_write
 from ._errors import (
     ContactStepWarning,
@@ -43,9 +43,22 @@ from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 
+#: Old integrator names (still accepted this release, with a DeprecationWarning; scene files that
+#: hold them load silently) -> the name now. ``"rk45"`` could be Fehlberg's pair; physcore's is
+#: Dormand–Prince 5(4), and the flows call the same tableau ``"dopri5"`` (docs/naming.md).
+INTEGRATOR_ALIASES: dict[str, str] = {"rk45": "dopri5"}
+#: The core's name of each integrator whose Python name differs (rust_core keeps ``"rk45"``).
+_CORE_INTEGRATOR: dict[str, str] = {"dopri5": "rk45"}
+_PY_INTEGRATOR: dict[str, str] = {v: k for k, v in _CORE_INTEGRATOR.items()}
+
+
+def _py_integrator(core_name: str) -> str:
+    return _PY_INTEGRATOR.get(core_name, core_name)
+
+
 #: Integrator names accepted by ``Scene(integrator=...)``, with order, symplecticity and force
-#: evaluations per step, as reported by the core.
-INTEGRATORS: tuple[dict[str, Any], ...] = tuple(_core.integrator_table())
+#: evaluations per step, as reported by the core (under the Python names).
+INTEGRATORS: tuple[dict[str, Any], ...] = tuple({**d, "name": _py_integrator(d["name"])} for d in _core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
 #: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
 MAX_THREADS = 65535
@@ -128,12 +141,22 @@ def _no_particles(*_args: Any, **_kw: Any) -> Any:
     raise InvalidInputError("item: a part that brings particles (a fluid) cannot replace a term")
 
 
-def _check_integrator(name: object) -> str:
+def _check_integrator(name: object, warn: bool = True) -> str:
+    """The integrator's Python name; an old name (:data:`INTEGRATOR_ALIASES`) warns unless
+    ``warn`` is False (a scene file's)."""
     if not isinstance(name, str):
         raise InvalidTypeError(f"integrator: expected a name (str), got {type(name).__name__}")
+    if name in INTEGRATOR_ALIASES:
+        if warn:
+            _deprecate.warn(f"integrator: {name!r} is now {INTEGRATOR_ALIASES[name]!r}", stacklevel=4)
+        name = INTEGRATOR_ALIASES[name]
     if name not in _INTEGRATOR_NAMES:
         raise InvalidInputError(f"integrator: unknown integrator {name!r}; valid names: {', '.join(_INTEGRATOR_NAMES)}")
     return name
+
+
+def _core_integrator(name: str) -> str:
+    return _CORE_INTEGRATOR.get(name, name)
 
 
 def _check_tol(value: object, arg: str) -> float:
@@ -195,9 +218,9 @@ class Scene:
         1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"yoshida4"``
         (Yoshida 1990's fourth-order composition of three Verlet substeps, symplectic, 3 force
         evaluations per step), ``"rk4"``
-        (classic Runge–Kutta, 4th order, 4 force evaluations per step), ``"rk45"`` (adaptive
+        (classic Runge–Kutta, 4th order, 4 force evaluations per step), ``"dopri5"`` (adaptive
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
-        evaluations each; see `rtol`) or ``"boris"`` (the Boris push for charges in magnetic
+        evaluations each; see `rtol`; old name ``"rk45"``, deprecated) or ``"boris"`` (the Boris push for charges in magnetic
         fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
         speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
         scene has no magnetic term), ``"xpbd"`` (position-based dynamics with substeps,
@@ -211,11 +234,11 @@ class Scene:
         residual; see `cg_tol`).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
-        step has no finite reciprocal). Default 1e-3. For ``"rk45"`` it is the output interval: each step
+        step has no finite reciprocal). Default 1e-3. For ``"dopri5"`` it is the output interval: each step
         of ``dt`` is integrated in as many internal steps as the tolerances need and lands
         exactly on its end.
     rtol, atol : float
-        Tolerances of ``"rk45"`` (kept, and ignored, by the fixed-step integrators). A step is
+        Tolerances of ``"dopri5"`` (kept, and ignored, by the fixed-step integrators). A step is
         accepted when every position and velocity component i has a local error estimate below
         ``atol + rtol · |y_i|`` (atol in m for positions and m/s for velocities; max norm over
         all particles). ``rtol`` in [1e-14, 1), default 1e-6; ``atol`` >= 0, default 1e-9.
@@ -291,7 +314,7 @@ class Scene:
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
-        sim = _core.Simulation(int(dim), integrator, dt, DEFAULT_THREADS.get() if threads is None else threads)
+        sim = _core.Simulation(int(dim), _core_integrator(integrator), dt, DEFAULT_THREADS.get() if threads is None else threads)
         if sim.sequential is not None:
             warnings.warn(
                 f"threads=None: could not start a thread pool ({sim.sequential}); this scene runs on "
@@ -503,7 +526,7 @@ class Scene:
         return AttachContext(
             dim=sim.dim,
             names=names,
-            integrator=sim.integrator,
+            integrator=sim.integrator,  # the core's name: parts pass it to the core's rules
             n_particles=sim.n_particles,
             sim=sim,
             parts=tuple(self._parts),
@@ -557,7 +580,7 @@ class Scene:
             exception names the step, the particle and a suggested dt.
         KeyboardInterrupt
             Ctrl-C (or any exception raised by a Python signal handler), noticed within about
-            20 ms plus one force evaluation: between steps and between rk45's internal steps;
+            20 ms plus one force evaluation: between steps and between dopri5's internal steps;
             the scene is rolled back likewise. A call of at most 4096 particle-steps with a
             fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
 
@@ -605,7 +628,7 @@ class Scene:
         ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others;
         ``"xpbd"`` takes its compliant distance and pin constraints alike, ω_max·h = 10 per
         substep ``h = dt/xpbd_substeps`` (XPBD damps them as implicit Euler would: see
-        :class:`XpbdConstraints`). ``"rk45"`` controls its own internal
+        :class:`XpbdConstraints`). ``"dopri5"`` controls its own internal
         steps, so it takes one substep per call unless a CFL limit asks for more. With a DFSPH
         fluid (``Fluid(method="dfsph")``) the limit follows the flow's speed, not a sound speed,
         so it is taken anew before every substep: the substeps are then unequal (the last ends
@@ -648,12 +671,12 @@ class Scene:
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before
         rounding to a whole number of substeps per call): see :meth:`advance`. ``inf`` for
-        ``"rk45"`` without a CFL limit; the current :attr:`dt` for a scene with no time scale
+        ``"dopri5"`` without a CFL limit; the current :attr:`dt` for a scene with no time scale
         (free flight, uniform gravity only)."""
         d = self._exclusive(lambda sim: sim.auto_dt())
         if d is not None:
             return float(d)
-        return math.inf if self.integrator == "rk45" else self.dt
+        return math.inf if self.integrator == "dopri5" else self.dt
 
     def _set_reference_energy(self) -> None:
         e = self.energy()
@@ -691,16 +714,17 @@ class Scene:
 
     @property
     def integrator(self) -> str:
-        """Integrator name. Settable (see :data:`INTEGRATORS`)."""
-        return self._sim.integrator
+        """Integrator name. Settable (see :data:`INTEGRATORS`; an old name, ``"rk45"``, is
+        taken with a DeprecationWarning and reads back as the new one, ``"dopri5"``)."""
+        return _py_integrator(self._sim.integrator)
 
     @integrator.setter
     def integrator(self, name: str) -> None:
-        self._sim.integrator = _check_integrator(name)
+        self._sim.integrator = _core_integrator(_check_integrator(name))
 
     @property
     def rtol(self) -> float:
-        """Relative tolerance of ``"rk45"``. Settable; see the class docstring."""
+        """Relative tolerance of ``"dopri5"``. Settable; see the class docstring."""
         return self._sim.tolerances[0]
 
     @rtol.setter
@@ -709,7 +733,7 @@ class Scene:
 
     @property
     def atol(self) -> float:
-        """Absolute tolerance of ``"rk45"`` (m for positions, m/s for velocities). Settable."""
+        """Absolute tolerance of ``"dopri5"`` (m for positions, m/s for velocities). Settable."""
         return self._sim.tolerances[1]
 
     @atol.setter
@@ -759,7 +783,7 @@ class Scene:
 
     @property
     def integrator_stats(self) -> dict[str, Any] | None:
-        """For ``"rk45"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
+        """For ``"dopri5"``: ``{"accepted", "rejected", "next_step"}`` — internal steps accepted and
         rejected so far by the step-size controller, and the internal step (s) it will try next.
 
         For ``"implicit_euler"``: ``{"cg_solves", "cg_iterations", "cg_max_iterations",
@@ -787,7 +811,9 @@ class Scene:
     @property
     def integrator_info(self) -> dict[str, Any]:
         """``{"name", "order", "symplectic", "force_evals_per_step"}`` of the current integrator."""
-        return dict(self._sim.integrator_info())
+        info = dict(self._sim.integrator_info())
+        info["name"] = _py_integrator(info["name"])
+        return info
 
     @property
     def threads(self) -> int | None:
@@ -1048,7 +1074,7 @@ class Scene:
         """Write the whole scene to a ``.npz`` file, atomically (temporary file, then rename).
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
-        Verlet force cache, the rk45 step-size controller and the energy books are saved too).
+        Verlet force cache, the dopri5 step-size controller and the energy books are saved too).
         The layout is described in ``physcore/_scenefile.py``. An energy-drift baseline that
         overflowed float64 is not saved (the loaded scene takes a new one at its next step).
 
@@ -1183,7 +1209,7 @@ class Scene:
         with r.api("meta"):
             scene = cls(
                 meta["dim"],
-                integrator=meta["integrator"],
+                integrator=_check_integrator(meta["integrator"], warn=False),  # old files: "rk45"
                 dt=meta["dt"],
                 rtol=meta["rtol"],
                 atol=meta["atol"],
@@ -1230,7 +1256,7 @@ class Scene:
         boxes, spheres, grids = self.boxes, self.spheres, self.grids
         return (
             f"Scene(dim={self.dim}, n_particles={self.n_particles}, integrator={self.integrator!r}, "
-            + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "rk45" else "")
+            + (f"rtol={self.rtol:g}, atol={self.atol:g}, " if self.integrator == "dopri5" else "")
             + (f"cg_tol={self.cg_tol:g}, cg_max_iter={self.cg_max_iter}, " if self.integrator == "implicit_euler" else "")
             + ("precision='f32', " if self.precision == "f32" else "")
             + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._section('planes'))}, boxes: {len(boxes)}"

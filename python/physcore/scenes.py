@@ -653,7 +653,7 @@ figure_eight.render_defaults = {"antialias": True,
 
 def pythagorean(
     rtol: float = 1e-10,
-    integrator: str = "rk45",
+    integrator: str = "dopri5",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -662,7 +662,7 @@ def pythagorean(
     The masses start at the corners of a 3-4-5 right triangle (Burrau 1913), each opposite the side of its length (G = 1), at (1, 3), (−2, −1) and (1, −1).
     After a long dance of close encounters the lightest body is thrown out near t = 60 and the
     other two leave as a binary (Szebehely & Peters, Astron. J. 72 (1967) 876). The encounters
-    are far closer than the start, so the adaptive ``"rk45"`` (tolerance `rtol`) is the
+    are far closer than the start, so the adaptive ``"dopri5"`` (tolerance `rtol`) is the
     default; ``dt`` (default 0.1) is then the output interval.
     """
     rtol = _check.float_in_range("rtol", rtol, 1e-14, 1.0, hi_open=True)
@@ -678,7 +678,7 @@ pythagorean.render_defaults = {"antialias": True,
     # To t = 60.2: the last close encounter (t ≈ 59) has flung the lightest body out and it is
     # 5–6 from the centre, no farther than its excursion at t ≈ 53, so the camera still fits
     # the dance (|x| ≤ 3.2, |y| ≤ 4.5 before); a second later it is 8.4 out and the dance would
-    # shrink. Frames 0.2 apart (two output intervals of rk45's default dt) keep the trails of the
+    # shrink. Frames 0.2 apart (two output intervals of dopri5's default dt) keep the trails of the
     # close encounters smooth; trails of 20 time units; the masses as objects, each its own colour.
     "frames": 302, "fps": 50, "frame_time": 0.2, "size": (400, 440), "speed_unit": "(G=1)", "trail": 100, "size_by": "mass",
     "radius": 6, "theme": "dark", "color_by": "none",
