@@ -63,9 +63,9 @@ def _mass(r: np.ndarray) -> np.ndarray:
 
 
 def _walls(gate: float | None) -> list[pc.Plane]:
-    walls = [pc.Plane([0.0, 0.0], [0.0, 1.0], E, MU), pc.Plane([0.0, 0.0], [1.0, 0.0], E, MU)]
+    walls = [pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=E, friction=MU), pc.Plane([0.0, 0.0], [1.0, 0.0], restitution=E, friction=MU)]
     if gate is not None:
-        walls.append(pc.Plane([gate, 0.0], [-1.0, 0.0], E, MU))
+        walls.append(pc.Plane([gate, 0.0], [-1.0, 0.0], restitution=E, friction=MU))
     return walls
 
 

@@ -259,7 +259,7 @@ def test_uncharged_particles_ignore_every_field():
     s.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     s.add(pc.MagneticField([0.0, 0.0, 5.0]))
     s.add(pc.Coulomb(k=1.0))
-    s.add(pc.GridElectricField(np.ones((2, 2, 2, 3)), [-5.0, -5.0, -5.0], 10.0))
+    s.add(pc.GridElectricField(np.ones((2, 2, 2, 3)), [-5.0, -5.0, -5.0], spacing=10.0))
     s.step(100)
     assert np.allclose(s.positions, [[0.1, 0.0, 0.0], [1.0, 0.1, 0.0]], rtol=0, atol=1e-15)
     assert s.energy().potential["coulomb"] == 0.0
@@ -280,7 +280,7 @@ def test_two_charges_feel_coulombs_law(dim, q1, q2):
     s = pc.Scene(dim=dim, integrator="euler", dt=DT_EXACT, threads=1)
     s.add_particles([x1, x2], masses=[m1, m2])
     s.set_attribute("charge", [q1, q2])
-    s.add(pc.Coulomb(k, eps))
+    s.add(pc.Coulomb(k, softening=eps))
     d = x1 - x2
     r2 = d @ d + eps**2
     f1 = k * q1 * q2 * d / r2**1.5
@@ -354,8 +354,8 @@ def test_results_do_not_depend_on_the_thread_count(integrator):
         s.add(pc.MagneticField([0.2, 0.0, 1.0]))
         b = np.zeros((3, 3, 3, 3))
         b[..., 2] = np.linspace(0.0, 1.0, 3)[:, None, None]
-        s.add(pc.GridMagneticField(b, [-2.0, -2.0, -2.0], 2.0))
-        s.add(pc.GridElectricField(np.ones((2, 3, 2, 3)), [-2.0, -2.0, -2.0], [4.0, 2.0, 4.0]))
+        s.add(pc.GridMagneticField(b, [-2.0, -2.0, -2.0], spacing=2.0))
+        s.add(pc.GridElectricField(np.ones((2, 3, 2, 3)), [-2.0, -2.0, -2.0], spacing=[4.0, 2.0, 4.0]))
         s.step(5)
         runs.append((s.positions, s.velocities, s.energy().total))
     for other in runs[1:]:
@@ -386,9 +386,9 @@ def test_a_uniform_grid_field_is_the_uniform_field_to_the_bit(dim):
         s = _plasma(30, dim, integrator="boris", seed=2)
         if grid:
             # Both grids span [-3, 3] on every axis.
-            s.add(pc.GridElectricField(np.broadcast_to(E, (*shape, dim)), [-3.0] * dim, [2.0, 3.0, 1.5][:dim]))
+            s.add(pc.GridElectricField(np.broadcast_to(E, (*shape, dim)), [-3.0] * dim, spacing=[2.0, 3.0, 1.5][:dim]))
             bv = np.broadcast_to(np.atleast_1d(B), (*shape, 3 if dim == 3 else 1))
-            s.add(pc.GridMagneticField(bv, [-3.0] * dim, [2.0, 3.0, 1.5][:dim]))
+            s.add(pc.GridMagneticField(bv, [-3.0] * dim, spacing=[2.0, 3.0, 1.5][:dim]))
         else:
             s.add(pc.ElectricField(E))
             s.add(pc.MagneticField(B))
@@ -415,7 +415,7 @@ def test_a_linear_grid_field_is_interpolated_exactly_and_is_zero_outside(dim):
     s = pc.Scene(dim=dim, integrator="euler", dt=DT_EXACT, threads=1)
     s.add_particles(x, masses=np.ones(len(x)))
     s.set_attribute("charge", np.ones(len(x)))
-    s.add(pc.GridElectricField(E, origin, spacing))
+    s.add(pc.GridElectricField(E, origin, spacing=spacing))
     s.step()
     got = s.velocities / DT_EXACT  # q = m = 1: a = E(x)
     want = x @ A.T + c
@@ -429,7 +429,7 @@ def test_a_charge_leaving_the_magnetic_grid_flies_straight():
     # B_z = 1 on [0, 1]²: a charge starting inside circles only while inside; outside the
     # field is zero and it flies straight at its (kept) speed.
     s = _one(2, 1.0, 1.0, [2.0, 0.0], dt=1e-3, x=[0.5, 0.5])
-    s.add(pc.GridMagneticField(np.ones((3, 3)), [0.0, 0.0], 0.5))
+    s.add(pc.GridMagneticField(np.ones((3, 3)), [0.0, 0.0], spacing=0.5))
     s.step(3000)
     v1 = s.velocities[0].copy()
     x1 = s.positions[0].copy()
@@ -446,7 +446,7 @@ def test_nonuniform_magnetic_field_keeps_the_speed_under_boris():
     X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
     B = np.stack([-0.5 * X * Z / 4, -0.5 * Y * Z / 4, 1 + Z**2 / 4], axis=-1)
     s = _one(3, 1.0, 1.0, [0.5, 0.0, 0.3], dt=0.05, x=[0.3, 0.0, 0.0])
-    s.add(pc.GridMagneticField(B, [-2.0, -2.0, -2.0], 0.5))
+    s.add(pc.GridMagneticField(B, [-2.0, -2.0, -2.0], spacing=0.5))
     k0 = s.energy().kinetic
     s.step(2000)
     assert np.all(np.abs(s.positions[0]) < 2)
@@ -467,19 +467,19 @@ def test_nonuniform_magnetic_field_keeps_the_speed_under_boris():
         (lambda: pc.MagneticField(float("nan")), pc.InvalidInputError, "B: must be finite"),
         (lambda: pc.MagneticField([0.0, float("inf"), 1.0]), pc.InvalidInputError, "B: must be finite"),
         (lambda: pc.MagneticField("strong"), pc.InvalidTypeError, "B"),
-        (lambda: pc.GridElectricField(np.zeros((3, 3, 3)), [0.0, 0.0], 1.0), pc.InvalidInputError, r"E: expected shape \(nx, ny, 2\)"),
-        (lambda: pc.GridElectricField(np.zeros((3, 3, 2)), [0.0, 0.0, 0.0], 1.0), pc.InvalidInputError, r"E: expected shape \(nx, ny, nz, 3\)"),
-        (lambda: pc.GridElectricField(np.zeros((1, 3, 2)), [0.0, 0.0], 1.0), pc.InvalidInputError, "E: a grid needs at least 2 nodes"),
-        (lambda: pc.GridElectricField(np.full((2, 2, 2), np.nan), [0.0, 0.0], 1.0), pc.InvalidInputError, r"E: entry \(0, 0, 0\) is nan"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], 0.0), pc.InvalidInputError, "spacing: must be finite and > 0"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], [1.0, -1.0]), pc.InvalidInputError, "spacing: must be finite and > 0"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], [1.0, 1.0, 1.0]), pc.InvalidInputError, "spacing: expected a number or shape"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, np.nan], 1.0), pc.InvalidInputError, "origin: must be finite"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0], 1.0), pc.InvalidInputError, "origin: expected shape"),
-        (lambda: pc.GridElectricField(np.zeros((2, 2, 2), dtype=complex), [0.0, 0.0], 1.0), pc.InvalidTypeError, "E"),
-        (lambda: pc.GridMagneticField(np.zeros((3, 3, 2)), [0.0, 0.0], 1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, 1\)"),
-        (lambda: pc.GridMagneticField(np.zeros((3, 3, 3, 1)), [0.0, 0.0, 0.0], 1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, nz, 3\)"),
-        (lambda: pc.GridMagneticField(np.zeros((3, 3, 3)), [0.0, 0.0, 0.0], 1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, nz, 3\)"),
+        (lambda: pc.GridElectricField(np.zeros((3, 3, 3)), [0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"E: expected shape \(nx, ny, 2\)"),
+        (lambda: pc.GridElectricField(np.zeros((3, 3, 2)), [0.0, 0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"E: expected shape \(nx, ny, nz, 3\)"),
+        (lambda: pc.GridElectricField(np.zeros((1, 3, 2)), [0.0, 0.0], spacing=1.0), pc.InvalidInputError, "E: a grid needs at least 2 nodes"),
+        (lambda: pc.GridElectricField(np.full((2, 2, 2), np.nan), [0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"E: entry \(0, 0, 0\) is nan"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], spacing=0.0), pc.InvalidInputError, "spacing: must be finite and > 0"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], spacing=[1.0, -1.0]), pc.InvalidInputError, "spacing: must be finite and > 0"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, 0.0], spacing=[1.0, 1.0, 1.0]), pc.InvalidInputError, "spacing: expected a number or shape"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0, np.nan], spacing=1.0), pc.InvalidInputError, "origin: must be finite"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2)), [0.0], spacing=1.0), pc.InvalidInputError, "origin: expected shape"),
+        (lambda: pc.GridElectricField(np.zeros((2, 2, 2), dtype=complex), [0.0, 0.0], spacing=1.0), pc.InvalidTypeError, "E"),
+        (lambda: pc.GridMagneticField(np.zeros((3, 3, 2)), [0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, 1\)"),
+        (lambda: pc.GridMagneticField(np.zeros((3, 3, 3, 1)), [0.0, 0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, nz, 3\)"),
+        (lambda: pc.GridMagneticField(np.zeros((3, 3, 3)), [0.0, 0.0, 0.0], spacing=1.0), pc.InvalidInputError, r"B: expected shape \(nx, ny, nz, 3\)"),
     ],
 )
 def test_bad_arguments_are_refused_by_name(make, err, match):
@@ -495,12 +495,12 @@ def test_the_scene_checks_what_depends_on_its_dimension():
     with pytest.raises(pc.InvalidInputError, match="B: has 1 component, the scene is 3D"):
         s3.add(pc.MagneticField(2.0))
     with pytest.raises(pc.InvalidInputError, match="origin: has 3 components, the scene is 2D"):
-        s2.add(pc.GridElectricField(np.zeros((2, 2, 2, 3)), [0.0, 0.0, 0.0], 1.0))
+        s2.add(pc.GridElectricField(np.zeros((2, 2, 2, 3)), [0.0, 0.0, 0.0], spacing=1.0))
     with pytest.raises(pc.InvalidInputError, match="origin: has 2 components, the scene is 3D"):
-        s3.add(pc.GridMagneticField(np.zeros((2, 2)), [0.0, 0.0], 1.0))
+        s3.add(pc.GridMagneticField(np.zeros((2, 2)), [0.0, 0.0], spacing=1.0))
     # A grid whose far corner overflows float64 is refused by the core, naming spacing.
     with pytest.raises(pc.InvalidInputError, match="spacing: the grid's far corner"):
-        s2.add(pc.GridElectricField(np.zeros((3, 2, 2)), [1e308, 0.0], [1e308, 1.0]))
+        s2.add(pc.GridElectricField(np.zeros((3, 2, 2)), [1e308, 0.0], spacing=[1e308, 1.0]))
     assert s2.terms == () and s3.terms == ()
     # [0, 0, Bz] in 2D is B_z.
     assert s2.add(pc.MagneticField([0.0, 0.0, 2.0])) == pc.MagneticField(2.0, name="magnetic_field")
@@ -508,9 +508,9 @@ def test_the_scene_checks_what_depends_on_its_dimension():
 
 def test_records_compare_by_value_and_names_are_keyword_only():
     E = np.ones((2, 3, 2))
-    assert pc.GridElectricField(E, [0, 0], 1) == pc.GridElectricField(E.copy(), [0.0, 0.0], [1.0, 1.0])
-    assert pc.GridElectricField(E, [0, 0], 1) != pc.GridElectricField(2 * E, [0, 0], 1)
-    assert hash(pc.Coulomb(1.0, 0.1)) == hash(pc.Coulomb(1.0, 0.1)) and pc.Coulomb(1.0) != pc.Coulomb(2.0)
+    assert pc.GridElectricField(E, [0, 0], spacing=1) == pc.GridElectricField(E.copy(), [0.0, 0.0], spacing=[1.0, 1.0])
+    assert pc.GridElectricField(E, [0, 0], spacing=1) != pc.GridElectricField(2 * E, [0, 0], spacing=1)
+    assert hash(pc.Coulomb(1.0, softening=0.1)) == hash(pc.Coulomb(1.0, softening=0.1)) and pc.Coulomb(1.0) != pc.Coulomb(2.0)
     assert pc.MagneticField(2) == pc.MagneticField([2.0])
     for make in (
         lambda: pc.Coulomb(1.0, 0.0, "c"),
@@ -531,9 +531,9 @@ def test_save_and_load_continue_the_run_bit_for_bit(tmp_path, dim):
         s.add(pc.Drag(0.01))
         shape = (3, 4, 2)[:dim]
         e = np.random.default_rng(4).normal(size=(*shape, dim))
-        s.add(pc.GridElectricField(e, [-2.0] * dim, [2.0, 4 / 3, 4.0][:dim], name="ge"))
+        s.add(pc.GridElectricField(e, [-2.0] * dim, spacing=[2.0, 4 / 3, 4.0][:dim], name="ge"))
         b = np.random.default_rng(5).normal(size=(*shape, 3)) if dim == 3 else np.random.default_rng(5).normal(size=shape)
-        s.add(pc.GridMagneticField(b, [-2.0] * dim, 2.0, name="gb"))
+        s.add(pc.GridMagneticField(b, [-2.0] * dim, spacing=2.0, name="gb"))
         return s
 
     a, b = build(), build()

@@ -123,7 +123,7 @@ def _incline(theta_deg: float, mu: float, dim: int = 2, beta: float | None = Non
     g = np.zeros(dim)
     g[1] = -G
     s.add(pc.Gravity(g))
-    s.add(pc.Contacts(stiffness=k, restitution=0.5, friction=mu, inertia_factor=beta, walls=pc.Plane(np.zeros(dim), normal, 0.5, mu)))
+    s.add(pc.Contacts(stiffness=k, restitution=0.5, friction=mu, inertia_factor=beta, walls=pc.Plane(np.zeros(dim), normal, restitution=0.5, friction=mu)))
     return s, down
 
 
@@ -217,7 +217,7 @@ def test_a_pile_comes_to_rest():
     s.set_attribute("radius", r)
     # Keep them from overlapping at the start: spread the ones that do upward.
     s.add(pc.Gravity([0.0, -G]))
-    s.add(pc.Contacts(stiffness=1e4, restitution=0.5, friction=0.5, walls=pc.Box([0.0, 0.0], [0.3, 10.0], 0.5, 0.5)))
+    s.add(pc.Contacts(stiffness=1e4, restitution=0.5, friction=0.5, walls=pc.Box([0.0, 0.0], [0.3, 10.0], restitution=0.5, friction=0.5)))
     drop = float(np.sum(0.01 * G * x[:, 1]))
     s.advance(4.0)
     ke = 0.5 * float(np.sum(0.01 * np.sum(s.velocities**2, axis=1)))

@@ -60,15 +60,15 @@ def reference_scene(integrator: str = "verlet", precision: str = "f64") -> pc.Sc
     s.add(pc.Gravity([0.0, -9.81]))
     s.add(pc.Drag(0.05))
     s.add(pc.Springs([0, 1], [1, 2], stiffness=[50.0, 80.0], damping=0.1))
-    s.add(pc.PairwiseGravity(0.5, 0.1))
+    s.add(pc.PairwiseGravity(0.5, softening=0.1))
     s.add_fluid(lattice([5.0, 0.0], [5.02, 0.02], 0.01), spacing=0.01, boundary=tank_walls([5.0, 0.0], [5.02, 0.02], 0.01, layers=1))
     s.set_attribute("charge", np.linspace(-1e-3, 1e-3, s.n_particles))
     s.set_attribute("radius", np.full(s.n_particles, 0.01))
     s.add(pc.ElectricField([2.0, 1.0]))
-    s.add(pc.Coulomb(1e-3, 0.1))
+    s.add(pc.Coulomb(1e-3, softening=0.1))
     s.add(pc.MagneticField(0.5))
-    s.add(pc.GridElectricField(np.arange(12.0).reshape(2, 3, 2), [-10.0, -10.0], [20.0, 10.0]))
-    s.add(pc.GridMagneticField(np.linspace(0.0, 1.0, 6).reshape(3, 2), [-10.0, -10.0], [10.0, 20.0]))
+    s.add(pc.GridElectricField(np.arange(12.0).reshape(2, 3, 2), [-10.0, -10.0], spacing=[20.0, 10.0]))
+    s.add(pc.GridMagneticField(np.linspace(0.0, 1.0, 6).reshape(3, 2), [-10.0, -10.0], spacing=[10.0, 20.0]))
     s.add(pc.Plane([0.0, -1.0], [0.0, 1.0], restitution=0.4, friction=0.2))
     s.add(pc.Box([-10.0, -10.0], [10.0, 10.0]))
     s.add(pc.Sphere([-5.0, -5.0], 0.5, restitution=0.3, friction=0.1))
@@ -1078,12 +1078,12 @@ def grid_scene() -> pc.Scene:
     band = np.zeros((8, 8), dtype=bool)
     band[2, :] = True
     s.add(pc.Wave((8, 8), spacing=0.1, c=0.5, damping=0.1, absorbing=["x+"], layer=2, mask=~band & (np.arange(8)[:, None] == 6),
-                  drops=[pc.Drop(0.0, (0.4, 0.4), 0.1, 0.01)],
+                  drops=[pc.Drop(0.0, (0.4, 0.4), radius=0.1, amplitude=0.01)],
                   oscillators=[pc.Oscillator(1.0, 2.0, center=(0.3, 0.3), radius=0.1), pc.Oscillator(0.5, 1.0, region=band)]))
     s.add(pc.GrayScott((8, 8), preset="spots", edges="free"))
     s.add(pc.StableFluid((8, 6), spacing=0.1, nu=1e-3, buoyancy=(0.1, 0.2), vorticity=0.1, tracers=3, walls="no_slip", lid=0.5,
                          obstacles=band[:, :6] & (np.arange(8)[:, None] == 2),
-                         sources=[pc.Source(1.0, 0.5, (0.0, 0.1), center=(0.45, 0.15), radius=0.15), pc.Source(region=np.eye(8, 6, dtype=bool))]))
+                         sources=[pc.Source(density=1.0, temperature=0.5, velocity=(0.0, 0.1), center=(0.45, 0.15), radius=0.15), pc.Source(region=np.eye(8, 6, dtype=bool))]))
     s.add(pc.Flow("van_der_pol", 3, seed=2, mu=1.5))
     s.step(3)
     return s

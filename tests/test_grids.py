@@ -77,7 +77,7 @@ def test_books_balance_with_damping_drops_and_oscillators():
     w = scene.add(
         pc.Wave(
             (48, 48), 1 / 48, c=1.0, damping=0.5, edges=("free", "fixed", "free", "free"), absorbing=("x+",), layer=8, mask=mask,
-            drops=[pc.Drop(0.1, (0.3, 0.3), 0.03, 0.2)],
+            drops=[pc.Drop(0.1, (0.3, 0.3), radius=0.03, amplitude=0.2)],
             oscillators=[pc.Oscillator(30.0, 2.0, center=(0.7, 0.7), radius=0.03)],
         )
     )
@@ -325,7 +325,7 @@ def test_bad_grid_input_names_the_argument():
     with pytest.raises(ValueError, match="mask"):
         pc.Wave((10, 10), mask=np.zeros((9, 10), dtype=bool))
     with pytest.raises(ValueError, match=r"drops\[0\]"):
-        pc.Wave((10, 10), drops=[pc.Drop(0.0, (5.0, 5.0), 0.01, 1.0)])
+        pc.Wave((10, 10), drops=[pc.Drop(0.0, (5.0, 5.0), radius=0.01, amplitude=1.0)])
     with pytest.raises(ValueError, match="absorbing"):
         pc.Wave((10, 10), absorbing=("x-", "q+"))
     with pytest.raises(ValueError, match="preset"):

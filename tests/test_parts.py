@@ -155,11 +155,11 @@ def _every_kind() -> list[pc.Scene]:
     for t in (
         pc.Gravity([0.0, -9.81]), pc.Drag(0.1), pc.Springs([0], [1]), pc.PairwiseGravity(G=1e-3), pc.TreeGravity(G=1e-3),
         pc.ElectricField([1.0, 0.0]), pc.Coulomb(softening=0.1), pc.MagneticField(0.5),
-        pc.GridElectricField(np.ones((3, 3, 2)), [-1.0, -1.0], 1.0), pc.GridMagneticField(np.ones((3, 3)), [-1.0, -1.0], 1.0),
+        pc.GridElectricField(np.ones((3, 3, 2)), [-1.0, -1.0], spacing=1.0), pc.GridMagneticField(np.ones((3, 3)), [-1.0, -1.0], spacing=1.0),
         pc.PointMasses([[5.0, 5.0]], [1.0]), pc.PointCharges([[5.0, -5.0]], [1e-9]), pc.HarmonicTrap(0.5),
         pc.PotentialGrid(np.zeros((4, 4)), 0.5, origin=[-1.0, -1.0]),
         pc.Plane([0.0, -1.0], [0.0, 1.0]), pc.Box([-3.0, -3.0], [3.0, 3.0]), pc.Sphere([0.0, 0.0], 9.0, inside=True),
-        pc.Wave((8, 8), 0.1, drops=[pc.Drop(0.0, (0.4, 0.4), 0.1, 0.01)]), pc.GrayScott((8, 8), preset="spots"),
+        pc.Wave((8, 8), 0.1, drops=[pc.Drop(0.0, (0.4, 0.4), radius=0.1, amplitude=0.01)]), pc.GrayScott((8, 8), preset="spots"),
         pc.StableFluid((8, 8), 0.1, tracers=4), pc.Flow("van_der_pol", 3, seed=1),
     ):
         a.add(t)

@@ -78,7 +78,7 @@ def test_trap_books_and_suggested_step():
     s = pc.Scene(dim=2, integrator="verlet", dt=1e-3, threads=1)
     s.add_particles([[3.0, 1.0], [0.0, 0.0], [5.0, 5.0]], masses=[2.0, 0.5, 1.0], pinned=[False, False, True])
     trap = s.add(pc.HarmonicTrap([2.0, 8.0], center=[1.0, 0.0], name="trap"))
-    assert trap == pc.HarmonicTrap([2.0, 8.0], [1.0, 0.0], name="trap")
+    assert trap == pc.HarmonicTrap([2.0, 8.0], center=[1.0, 0.0], name="trap")
     # The pinned particle holds no potential energy.
     assert s.energy().potential["trap"] == pytest.approx(0.5 * (2.0 * 4.0 + 8.0 * 1.0) + 0.5 * 2.0 * 1.0)
     # 0.5 / ω_max with ω_max² = k_max / m_min = 8 / 0.5.

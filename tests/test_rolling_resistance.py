@@ -41,7 +41,7 @@ def _floor(dim: int, mu_r: float, v0: float, *, law: str = "linear", threads: in
     g[1] = -G
     s.add(pc.Gravity(g))
     s.add(pc.Contacts(stiffness=k, restitution=0.5, friction=0.5, law=law, rolling_friction=mu_r,
-                      walls=pc.Plane(np.zeros(dim), np.eye(dim)[1], 0.5, 0.5)))
+                      walls=pc.Plane(np.zeros(dim), np.eye(dim)[1], restitution=0.5, friction=0.5)))
     # Rolling without slipping along +x: ω = −v0/a about z, a = r − δ/2 the lever to the
     # contact point (the term's history: n, ω, angle, the two books).
     a = R - 0.5 * d0
@@ -129,7 +129,7 @@ def _slope(theta_deg: float, mu_r: float, dim: int = 2) -> tuple[pc.Scene, np.nd
     g[1] = -G
     s.add(pc.Gravity(g))
     s.add(pc.Contacts(stiffness=k, restitution=0.5, friction=0.8, rolling_friction=mu_r,
-                      walls=pc.Plane(np.zeros(dim), normal, 0.5, 0.8)))
+                      walls=pc.Plane(np.zeros(dim), normal, restitution=0.5, friction=0.8)))
     return s, down
 
 

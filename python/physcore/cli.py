@@ -205,7 +205,14 @@ def _convert(name: str, text: str, kind: type | None, default: Any) -> Any:
 def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[tuple[str, str]]) -> dict[str, Any]:
     params = _scene_params(fn)
     kwargs: dict[str, Any] = {}
+    old_names = getattr(fn, "deprecated_params", {})
     for key, text in pairs:
+        if key in old_names and key not in params:
+            new = old_names[key]
+            print(f"physcore: --param {key} is deprecated: " + (f"it is now {new}" if new else "it did nothing and is ignored"), file=sys.stderr)
+            if new is None:
+                continue
+            key = new
         if key in _OWN_OPTION:
             raise _UsageError(f"--param {key}: use the {_OWN_OPTION[key]} option instead")
         if key not in params:

@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
-from . import _core
+from . import _core, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, LoadContext
 from .terms import Box, Plane, Term, _finite_float
@@ -74,6 +74,7 @@ def _equal_periods(dim: int) -> float:
     return 1.0 / 3.0 if dim == 2 else 2.0 / 7.0
 
 
+@_deprecate.record(('stiffness', 'restitution', 'friction', 'walls', 'tangential_ratio', 'law', 'inertia_factor', 'rolling_friction', 'rolling_damping'), keep=1)
 @dataclass(frozen=True, eq=False)
 class Contacts(Term, kind="contacts"):
     """Contacts between grains (DEM): spring–dashpot normal force, Coulomb friction with a
@@ -181,6 +182,7 @@ class Contacts(Term, kind="contacts"):
     """
 
     stiffness: float
+    _: KW_ONLY
     restitution: float = 0.9
     friction: float = 0.5
     walls: Any = ()
@@ -289,7 +291,7 @@ class Contacts(Term, kind="contacts"):
     @classmethod
     def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         walls = [
-            Plane(p, n, float(e), float(mu))
+            Plane(p, n, restitution=float(e), friction=float(mu))
             for p, n, e, mu in zip(arrays["wall_points"], arrays["wall_normals"], arrays["wall_restitution"], arrays["wall_friction"], strict=True)
         ]
         fields = {f: meta[f] for f in cls.record_fields}

@@ -13,7 +13,7 @@ Examples
 --------
 >>> import numpy as np, physcore as pc
 >>> scene = pc.Scene(dim=2)
->>> pond = scene.add(pc.Wave((64, 64), spacing=0.01, c=0.5, drops=[pc.Drop(0.0, (0.32, 0.32), 0.02, 0.01)]))
+>>> pond = scene.add(pc.Wave((64, 64), spacing=0.01, c=0.5, drops=[pc.Drop(0.0, (0.32, 0.32), radius=0.02, amplitude=0.01)]))
 >>> n = scene.advance(0.2)
 >>> pond.u.shape, bool(abs(scene.energy_drift()) < 1e-10)
 ((64, 64), True)
@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import KW_ONLY, dataclass
 from typing import Any, ClassVar
 
 import numpy as np
@@ -118,6 +118,7 @@ def _unlayout(flat: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return np.asarray(flat).reshape(shape[::-1]).T
 
 
+@_deprecate.record(('t', 'center', 'radius', 'amplitude'), keep=2)
 @dataclass(frozen=True)
 class Drop:
     """A stone dropped on a :class:`Wave` at time ``t`` (s): a Gaussian dent of depth
@@ -126,10 +127,12 @@ class Drop:
 
     t: float
     center: Sequence[float]
+    _: KW_ONLY
     radius: float
     amplitude: float
 
 
+@_deprecate.record(('amplitude', 'frequency', 'center', 'radius', 'region', 'phase'), keep=2)
 @dataclass(frozen=True)
 class Oscillator:
     """A driven source on a :class:`Wave`: an acceleration ``amplitude · sin(2π frequency t +
@@ -139,6 +142,7 @@ class Oscillator:
 
     amplitude: float
     frequency: float
+    _: KW_ONLY
     center: Sequence[float] | None = None
     radius: float = 0.0
     region: Any = None
@@ -565,6 +569,7 @@ class GrayScott(Grid):
                 "feed": self.feed, "kill": self.kill, "cfl": self.cfl}
 
 
+@_deprecate.record(('density', 'temperature', 'velocity', 'center', 'radius', 'region'), keep=0)
 @dataclass(frozen=True)
 class Source:
     """An inflow of a :class:`StableFluid`: on its cells, every step, the smoke density and the
@@ -572,6 +577,7 @@ class Source:
     (m/s). The cells are a disc of ``radius`` (m) at ``center`` (m), or ``region`` (a bool array
     over the grid)."""
 
+    _: KW_ONLY
     density: float = 1.0
     temperature: float = 0.0
     velocity: Sequence[float] = (0.0, 0.0)
@@ -812,9 +818,9 @@ def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.n
         return Wave(
             tuple(r["shape"]), r["dx"], c=r["c"], damping=r["gamma"], edges=tuple(r["edges"]), absorbing=tuple(r["absorbing"]),
             layer=r["layer"], layer_strength=r["layer_strength"], cfl=r["cfl"], mask=arrays.get("mask"),
-            drops=[Drop(t, tuple(c), rad, a) for t, c, rad, a in r["drops"]],
+            drops=[Drop(t, tuple(c), radius=rad, amplitude=a) for t, c, rad, a in r["drops"]],
             oscillators=[
-                Oscillator(a, f, None if c is None else tuple(c), rad, arrays.get(f"region{k}") if c is None else None, ph)
+                Oscillator(a, f, center=None if c is None else tuple(c), radius=rad, region=arrays.get(f"region{k}") if c is None else None, phase=ph)
                 for k, (a, f, c, rad, ph) in enumerate(r["oscillators"])
             ],
             name=name,
@@ -829,7 +835,7 @@ def _from_record(kind: str, name: str, r: dict[str, Any], arrays: dict[str, np.n
             tolerance=r["tolerance"], max_iterations=r["max_iterations"], walls=r["walls"], lid=r["lid"],
             inflow=r.get("inflow"), obstacles=arrays.get("mask"), tracers=r["tracers"], cfl=r["cfl"], name=name,
             sources=[
-                Source(d, t, tuple(v), None if c is None else tuple(c), rad, arrays.get(f"region{k}") if c is None else None)
+                Source(density=d, temperature=t, velocity=tuple(v), center=None if c is None else tuple(c), radius=rad, region=arrays.get(f"region{k}") if c is None else None)
                 for k, (d, t, v, c, rad) in enumerate(r["sources"])
             ],
         )

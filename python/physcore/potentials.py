@@ -29,12 +29,12 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Any, ClassVar, Union
 
 import numpy as np
 
-from . import _check
+from . import _check, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, LoadContext
 from .terms import Term, _finite_float
@@ -124,6 +124,7 @@ def _add_sources(ctx: AttachContext, name: str, record: Term, strengths: np.ndar
     return _named(record, name)
 
 
+@_deprecate.record(('positions', 'masses', 'G', 'softening'), keep=2)
 @dataclass(frozen=True, eq=False)
 class PointMasses(Term, kind="point_masses"):
     """Point masses fixed in space that attract every free particle by Newton's law, with
@@ -164,6 +165,7 @@ class PointMasses(Term, kind="point_masses"):
 
     positions: np.ndarray
     masses: ArrayLike
+    _: KW_ONLY
     G: float = 1.0
     softening: float = 0.0
     name: str = field(default="point_masses", kw_only=True)
@@ -189,6 +191,7 @@ class PointMasses(Term, kind="point_masses"):
         return _add_sources(ctx, name, self, self.masses, self.G, "mass")  # type: ignore[return-value,arg-type]
 
 
+@_deprecate.record(('positions', 'charges', 'k', 'softening'), keep=2)
 @dataclass(frozen=True, eq=False)
 class PointCharges(Term, kind="point_charges"):
     """Point charges fixed in space acting on the particles' ``"charge"`` attribute by Coulomb's
@@ -234,6 +237,7 @@ class PointCharges(Term, kind="point_charges"):
 
     positions: np.ndarray
     charges: ArrayLike
+    _: KW_ONLY
     k: float = COULOMB_K
     softening: float = 0.0
     name: str = field(default="point_charges", kw_only=True)
@@ -259,6 +263,7 @@ class PointCharges(Term, kind="point_charges"):
         return _add_sources(ctx, name, self, self.charges, self.k, "charge")  # type: ignore[return-value,arg-type]
 
 
+@_deprecate.record(('k', 'center'), keep=1)
 @dataclass(frozen=True, eq=False)
 class HarmonicTrap(Term, kind="harmonic_trap"):
     """A harmonic trap: every free particle is pulled towards ``center`` by a spring of
@@ -288,6 +293,7 @@ class HarmonicTrap(Term, kind="harmonic_trap"):
     """
 
     k: ArrayLike
+    _: KW_ONLY
     center: ArrayLike = 0.0
     name: str = field(default="harmonic_trap", kw_only=True)
 
@@ -311,6 +317,7 @@ class HarmonicTrap(Term, kind="harmonic_trap"):
 COUPLINGS = ("mass", "charge")
 
 
+@_deprecate.record(('phi', 'spacing', 'origin', 'coupling'), keep=2)
 @dataclass(frozen=True, eq=False)
 class PotentialGrid(Term, kind="potential_grid"):
     """A potential sampled on a regular grid, interpolated bilinearly (2D) or trilinearly (3D),
@@ -374,6 +381,7 @@ class PotentialGrid(Term, kind="potential_grid"):
 
     phi: np.ndarray
     spacing: ArrayLike
+    _: KW_ONLY
     origin: ArrayLike = 0.0
     coupling: str = "mass"
     name: str = field(default="potential_grid", kw_only=True)
@@ -457,4 +465,4 @@ class PotentialGrid(Term, kind="potential_grid"):
             raise InvalidInputError(f"phi: holds {phi.size} values, the shape {shape} needs {math.prod(shape)}")
         if not isinstance(meta["coupling"], str):  # pragma: no cover - the reader checked it
             raise InvalidTypeError("coupling: expected a string")
-        ctx.add(cls(phi.reshape(shape), meta["spacing"], meta["origin"], meta["coupling"], name=meta["name"]))
+        ctx.add(cls(phi.reshape(shape), meta["spacing"], origin=meta["origin"], coupling=meta["coupling"], name=meta["name"]))

@@ -168,6 +168,7 @@ def cloth_springs(n: int):
 
 def cloth(
     n: int = 40,
+    *,
     size: float = 1.0,
     mass: float = 1.0,
     stiffness: float = 2000.0,
@@ -236,6 +237,7 @@ cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size":
 
 def cloth_on_ball(
     n: int = 36,
+    *,
     size: float = 1.0,
     mass: float = 1.0,
     stiffness: float = 2000.0,
@@ -322,6 +324,7 @@ def mesh_edges_and_hinges(faces: np.typing.ArrayLike) -> tuple[np.ndarray, np.nd
 
 def xpbd_cloth(
     n: int = 32,
+    *,
     size: float = 1.0,
     mass: float = 1.0,
     compliance: float = 5e-4,
@@ -391,6 +394,7 @@ xpbd_cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "s
 
 def tumbling_boxes(
     n_boxes: int = 5,
+    *,
     particles_per_side: int = 4,
     size: float = 0.4,
     mass: float = 1.0,
@@ -484,6 +488,7 @@ tumbling_boxes.render_defaults = {"frames": 90, "fps": 30, "frame_time": 1 / 30,
 
 def projectile(
     n: int = 7,
+    *,
     speed: float = 20.0,
     drag: float = 0.0,
     restitution: float = 0.6,
@@ -538,6 +543,7 @@ KEPLER_COLORS = ((255, 214, 120), (100, 175, 255))
 
 def kepler(
     e: float = 0.5,
+    *,
     a: float = 1.0,
     mass_ratio: float = 1e-3,
     steps_per_orbit: int = 1000,
@@ -618,6 +624,7 @@ FIGURE_EIGHT_PERIOD = 6.32591398
 
 
 def figure_eight(
+    *,
     steps_per_period: int = 2000,
     integrator: str = "yoshida4",
     dt: float | None = None,
@@ -652,6 +659,7 @@ figure_eight.render_defaults = {"antialias": True,
 
 
 def pythagorean(
+    *,
     rtol: float = 1e-10,
     integrator: str = "dopri5",
     dt: float | None = None,
@@ -727,6 +735,7 @@ GALAXY_COLORS = ((150, 190, 255), (255, 196, 110))
 
 def galaxies(
     n: int = 10000,
+    *,
     pericentre: float = 1.6,
     prograde: bool = True,
     theta: float = 0.6,
@@ -826,6 +835,7 @@ galaxies.render_defaults = {
 
 def cyclotron(
     n: int = 6,
+    *,
     B: float = 1.0,
     E: float = 0.3,
     seed: int = 5,
@@ -893,6 +903,7 @@ cyclotron.render_defaults = {"antialias": True,
 
 def spring_chain(
     n: int = 24,
+    *,
     length: float = 1.0,
     mass: float = 1.0,
     stiffness: float = 2000.0,
@@ -1550,11 +1561,11 @@ crown.render_defaults = {
 
 def ripple(
     n: int = 256,
+    *,
     drops: int = 6,
     speed: float = 0.25,
     damping: float = 0.15,
     seed: int = 3,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -1573,8 +1584,8 @@ def ripple(
     speed = _positive(speed, "speed")
     damping = _nonneg(damping, "damping")
     rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
-    stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), 0.012, 0.004) for k in range(drops)]
-    scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
+    stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), radius=0.012, amplitude=0.004) for k in range(drops)]
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
     pond = scene.add(Wave((n, n), 1.0 / n, c=speed, damping=damping, edges="free", drops=stones, name="pond"))
     if dt is None:
         scene.dt = _cfl_step(pond, "speed")
@@ -1587,11 +1598,11 @@ ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "subst
 
 def double_slit(
     n: int = 256,
+    *,
     wavelength: float = 0.05,
     separation: float = 0.2,
     width: float = 0.03,
     speed: float = 0.3,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -1627,7 +1638,7 @@ def double_slit(
     if not math.isfinite(40.0 * speed / wavelength):
         raise InvalidInputError(f"wavelength, speed: the source's frequency speed/wavelength = {speed / wavelength:g} Hz is beyond float64")
     source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
-    scene = Scene(2, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
     layer = max(4, n // 10)
     tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
     if dt is None:
@@ -1640,11 +1651,11 @@ double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "
 
 def turing(
     preset: str = "maze",
+    *,
     n: int = 256,
     duration: float = 4500.0,
     seeds: int = 2,
     seed: int = 1,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -1666,7 +1677,7 @@ def turing(
     n = _count(n, "n", 16)
     _cells("n", n * n)
     duration = _positive(duration, "duration")
-    scene = Scene(2, integrator=integrator, dt=1.0 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1.0 if dt is None else dt, threads=threads)
     dx = 2.5 / n
     # The automatic step keeps a fraction of the diffusion limit dx²/(4 D_u), which grows as dx²:
     # on coarse grids (n <= 64: 76 time units at n = 32) it would step straight over the
@@ -1686,11 +1697,11 @@ turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, 
 
 def smoke(
     n: int = 128,
+    *,
     buoyancy: float = 4.0,
     vorticity: float = 0.3,
     obstacle: bool = True,
     tracers: int = 0,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -1716,7 +1727,7 @@ def smoke(
         y = (np.arange(ny) + 0.5) * dx
         mask = (x[:, None] - 0.45) ** 2 + (y[None, :] - 0.55) ** 2 < 0.09**2
     vent = Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.08), radius=0.06)
-    scene = Scene(2, integrator=integrator, dt=1e-2 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
     scene.add(
         StableFluid(
             (n, ny), dx, buoyancy=(0.0, buoyancy), vorticity=vorticity, obstacles=mask, sources=[vent], tracers=tracers,
@@ -1731,10 +1742,10 @@ smoke.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "subste
 
 def cavity(
     n: int = 64,
+    *,
     reynolds: float = 100.0,
     tracers: int = 0,
     dye: int = 6,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -1756,7 +1767,7 @@ def cavity(
         raise InvalidInputError(f"reynolds: {reynolds:g} makes the viscosity 1/Re overflow float64")
     tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
     dye = _check.int_in_range("dye", dye, 0, n)
-    scene = Scene(2, integrator=integrator, dt=1e-2 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
     box = scene.add(
         StableFluid(
             (n, n), 1.0 / n, nu=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
@@ -1778,6 +1789,7 @@ cavity.render_defaults = {
 
 def lorenz(
     n: int = 600,
+    *,
     kind: str = "lorenz",
     spread: float = 0.5,
     seed: int = 7,
@@ -1842,6 +1854,7 @@ def _auto_grain_dt(scene: Scene, dt: float | None, factor: float = 1.0) -> Scene
 
 def galton_board(
     balls: int = 120,
+    *,
     rows: int = 8,
     restitution: float = 0.69,
     friction: float = 0.0,
@@ -1946,9 +1959,9 @@ def galton_board(
     scene.add(Gravity([0.0, -9.81]))
     scene.add(Drag(drag))
     scene.add(Contacts(stiffness=1e3, restitution=restitution, friction=friction,
-                       walls=[Plane([0.0, y_floor], [0.0, 1.0], restitution, friction),
-                              Plane([-half, 0.0], [1.0, 0.0], restitution, friction),
-                              Plane([half, 0.0], [-1.0, 0.0], restitution, friction)]))
+                       walls=[Plane([0.0, y_floor], [0.0, 1.0], restitution=restitution, friction=friction),
+                              Plane([-half, 0.0], [1.0, 0.0], restitution=restitution, friction=friction),
+                              Plane([half, 0.0], [-1.0, 0.0], restitution=restitution, friction=friction)]))
     # Drawn as a diagram: grey pegs and dividers, balls in four warm hues, a pale liquid; the
     # camera holds the board (from the floor to 3 pitches above the top peg), so the queue
     # enters the picture ball by ball.
@@ -1982,6 +1995,7 @@ def galton_bins(scene: Scene) -> np.ndarray:
 
 
 def billiards(
+    *,
     speed: float = 6.0,
     restitution: float = 0.93,
     cushion: float = 0.75,
@@ -2025,7 +2039,7 @@ def billiards(
     scene.set_attribute("radius", np.full(len(x), r))
     scene.add(Drag(0.05))
     scene.add(Contacts(stiffness=5e9, restitution=restitution, friction=0.05, law="hertz",
-                       walls=Box([0.0, 0.0], [L, W], cushion, 0.2)))
+                       walls=Box([0.0, 0.0], [L, W], restitution=cushion, friction=0.2)))
     # Drawn as the table is: each ball its own colour (the cue white; the 1 ball at the apex,
     # the 8 in the middle of the third row), on felt.
     scene.render_defaults = {"colors": [_POOL_COLORS[k] for k in (0, 1, 9, 2, 10, 8, 3, 11, 4, 12, 5, 6, 13, 14, 7, 15)],
@@ -2046,6 +2060,7 @@ billiards.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame
 
 def newtons_cradle(
     balls: int = 5,
+    *,
     lift: int = 1,
     angle: float = 30.0,
     law: str = "hertz",
@@ -2101,6 +2116,7 @@ newtons_cradle.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "
 
 def jelly(
     n: int = 12,
+    *,
     size: float = 0.3,
     mass: float = 1.0,
     stiffness: float = 60.0,
@@ -2153,7 +2169,7 @@ def jelly(
     # rolling discs, and at 1/3 its wobble faded to 0.20 of the motion by the end (gallery budget
     # 0.3); 2/7 keeps the look the gallery was measured with.
     scene.add(Contacts(stiffness=4e4, restitution=0.3, friction=0.6, tangential_ratio=2.0 / 7.0,
-                       walls=Box([-2.0 * size, 0.0], [2.0 * size, height + 3.0 * size], 0.3, 0.6)))
+                       walls=Box([-2.0 * size, 0.0], [2.0 * size, height + 3.0 * size], restitution=0.3, friction=0.6)))
     # A raspberry jelly: its own colour on the shaded sheet (--color-by strain shows the strain).
     scene.render_defaults = {"mesh": Mesh.grid(n, n), "colors": [(214, 40, 90)] * (n * n)}
     # A 100th of a contact: the dashpots' rectangle-rule books then stay within 1e-3 of the
@@ -2265,10 +2281,10 @@ double_pendulum.render_defaults = {"antialias": True, "frames": 300, "fps": 30, 
 
 def vortex_street(
     n: int = 10,
+    *,
     reynolds: float = 120.0,
     length: float = 22.0,
     height: float = 10.0,
-    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -2338,7 +2354,7 @@ def vortex_street(
     inlet[0] = True
     dyed, clear = inlet & streak[None, :], inlet & ~streak[None, :]
     sources = [Source(density=1.0, velocity=(U, 0.0), region=dyed), Source(density=0.0, velocity=(U, 0.0), region=clear)]
-    scene = Scene(2, integrator=integrator, dt=0.5 * dx / U if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=0.5 * dx / U if dt is None else dt, threads=threads)
     fluid = scene.add(
         StableFluid(
             (nx, ny), dx, nu=nu, advection="maccormack", inflow=U, obstacles=cylinder, sources=sources,
@@ -2362,7 +2378,7 @@ def _stamped(fn: Callable[..., Scene], **deprecated: Any) -> Callable[..., Scene
     the motion ``physcore render NAME`` shows); same name, docs, signature and attributes.
     ``deprecated``: the old spellings it still takes this release (see :func:`_deprecate.args`)."""
     if deprecated:
-        fn = functools.wraps(fn)(_deprecate.args(name=fn.__name__, **deprecated)(fn))
+        fn = _deprecate.args(name=fn.__name__, **deprecated)(fn)
 
     @functools.wraps(fn)
     def scene_function(*args: Any, **kwargs: Any) -> Scene:
@@ -2371,37 +2387,41 @@ def _stamped(fn: Callable[..., Scene], **deprecated: Any) -> Callable[..., Scene
         scene.render_defaults = {**fn.render_defaults, **own}  # type: ignore[attr-defined]
         return scene
 
+    # Old keyword names the CLI's --param still takes this release (old -> new; new None: ignored).
+    scene_function.deprecated_params = {  # type: ignore[attr-defined]
+        **deprecated.get("renames", {}), **dict.fromkeys(deprecated.get("ignored", ()))
+    }
     return scene_function
 
 
-cloth = _stamped(cloth)
-projectile = _stamped(projectile)
-kepler = _stamped(kepler)
-figure_eight = _stamped(figure_eight)
-pythagorean = _stamped(pythagorean)
-galaxies = _stamped(galaxies)
-cyclotron = _stamped(cyclotron)
-spring_chain = _stamped(spring_chain)
+cloth = _stamped(cloth, old_order=('n', 'size', 'mass', 'stiffness', 'damping', 'air_drag', 'pin', 'ground', 'integrator', 'dt', 'threads'), keep=1)
+projectile = _stamped(projectile, old_order=('n', 'speed', 'drag', 'restitution', 'ground', 'integrator', 'dt', 'threads'), keep=1)
+kepler = _stamped(kepler, old_order=('e', 'a', 'mass_ratio', 'steps_per_orbit', 'integrator', 'dt', 'threads'), keep=1)
+figure_eight = _stamped(figure_eight, old_order=('steps_per_period', 'integrator', 'dt', 'threads'), keep=0)
+pythagorean = _stamped(pythagorean, old_order=('rtol', 'integrator', 'dt', 'threads'), keep=0)
+galaxies = _stamped(galaxies, old_order=('n', 'pericentre', 'prograde', 'theta', 'softening', 'seed', 'integrator', 'dt', 'threads'), keep=1)
+cyclotron = _stamped(cyclotron, old_order=('n', 'B', 'E', 'seed', 'integrator', 'dt', 'threads'), keep=1)
+spring_chain = _stamped(spring_chain, old_order=('n', 'length', 'mass', 'stiffness', 'damping', 'dim', 'integrator', 'dt', 'threads'), keep=1)
 _SPH_RENAMES = {"viscosity": "alpha", "precision": "pass_precision"}
 dam_break = _stamped(dam_break, renames=_SPH_RENAMES)
 drop = _stamped(drop, renames=_SPH_RENAMES)
 droplets = _stamped(droplets, renames={"viscosity": "alpha"})
 crown = _stamped(crown, renames={"viscosity": "alpha"})
-ripple = _stamped(ripple)
-double_slit = _stamped(double_slit)
-turing = _stamped(turing)
-smoke = _stamped(smoke)
-cavity = _stamped(cavity)
-lorenz = _stamped(lorenz)
-galton_board = _stamped(galton_board)
-billiards = _stamped(billiards)
-newtons_cradle = _stamped(newtons_cradle)
-jelly = _stamped(jelly)
-xpbd_cloth = _stamped(xpbd_cloth)
-tumbling_boxes = _stamped(tumbling_boxes)
-cloth_on_ball = _stamped(cloth_on_ball)
+ripple = _stamped(ripple, old_order=('n', 'drops', 'speed', 'damping', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+double_slit = _stamped(double_slit, old_order=('n', 'wavelength', 'separation', 'width', 'speed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+smoke = _stamped(smoke, old_order=('n', 'buoyancy', 'vorticity', 'obstacle', 'tracers', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+cavity = _stamped(cavity, old_order=('n', 'reynolds', 'tracers', 'dye', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+lorenz = _stamped(lorenz, old_order=('n', 'kind', 'spread', 'seed', 'integrator', 'dt', 'threads'), keep=1)
+galton_board = _stamped(galton_board, old_order=('balls', 'rows', 'restitution', 'friction', 'seed', 'spacing', 'width', 'drag', 'integrator', 'dt', 'threads'), keep=1)
+billiards = _stamped(billiards, old_order=('speed', 'restitution', 'cushion', 'seed', 'integrator', 'dt', 'threads'), keep=0)
+newtons_cradle = _stamped(newtons_cradle, old_order=('balls', 'lift', 'angle', 'law', 'integrator', 'dt', 'threads'), keep=1)
+jelly = _stamped(jelly, old_order=('n', 'size', 'mass', 'stiffness', 'damping', 'height', 'spin', 'integrator', 'dt', 'threads'), keep=1)
+xpbd_cloth = _stamped(xpbd_cloth, old_order=('n', 'size', 'mass', 'compliance', 'bending_compliance', 'air_drag', 'pin', 'substeps', 'integrator', 'dt', 'threads'), keep=1)
+tumbling_boxes = _stamped(tumbling_boxes, old_order=('n_boxes', 'particles_per_side', 'size', 'mass', 'restitution', 'friction', 'substeps', 'integrator', 'dt', 'threads'), keep=1)
+cloth_on_ball = _stamped(cloth_on_ball, old_order=('n', 'size', 'mass', 'stiffness', 'damping', 'air_drag', 'radius', 'offset', 'height', 'friction', 'integrator', 'dt', 'threads'), keep=1)
 double_pendulum = _stamped(double_pendulum)
-vortex_street = _stamped(vortex_street)
+vortex_street = _stamped(vortex_street, old_order=('n', 'reynolds', 'length', 'height', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {

@@ -26,12 +26,12 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 from typing import Any, ClassVar, Union
 
 import numpy as np
 
-from . import _check
+from . import _check, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import RESERVED_NAMES, AttachContext, LoadContext, Part, unique_name
 
@@ -277,6 +277,7 @@ class Drag(Term, kind="drag"):
         object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))
 
 
+@_deprecate.record(('i', 'j', 'stiffness', 'damping', 'rest_length'), keep=2)
 @dataclass(frozen=True, eq=False)
 class Springs(Term, kind="springs"):
     """Hookean springs with dashpot damping along the spring axis.
@@ -308,6 +309,7 @@ class Springs(Term, kind="springs"):
 
     i: np.ndarray
     j: np.ndarray
+    _: KW_ONLY
     stiffness: ArrayLike = field(default=1.0)
     damping: ArrayLike = 0.0
     rest_length: ArrayLike | None = None
@@ -386,6 +388,7 @@ class Springs(Term, kind="springs"):
         return stored
 
 
+@_deprecate.record(('G', 'softening'), keep=1)
 @dataclass(frozen=True, eq=False)
 class PairwiseGravity(Term, kind="pairwise_gravity"):
     """Newtonian gravity between every pair of particles, with Plummer softening.
@@ -406,6 +409,7 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
     """
 
     G: float = 1.0
+    _: KW_ONLY
     softening: float = 0.0
     name: str = field(default="pairwise_gravity", kw_only=True)
 
@@ -416,6 +420,7 @@ class PairwiseGravity(Term, kind="pairwise_gravity"):
     record_fields: ClassVar[dict[str, str]] = {"G": "number", "softening": "number"}
 
 
+@_deprecate.record(('G', 'softening', 'theta'), keep=1)
 @dataclass(frozen=True, eq=False)
 class TreeGravity(Term, kind="tree_gravity"):
     """Newtonian gravity with Plummer softening by a Barnes–Hut tree (an octree in 3D, a quadtree
@@ -475,6 +480,7 @@ class TreeGravity(Term, kind="tree_gravity"):
     """
 
     G: float = 1.0
+    _: KW_ONLY
     softening: float = 0.0
     theta: float = 0.5
     name: str = field(default="tree_gravity", kw_only=True)
@@ -528,6 +534,7 @@ class ElectricField(Term, kind="uniform_electric_field"):
 COULOMB_K = 8.9875517923e9
 
 
+@_deprecate.record(('k', 'softening'), keep=1)
 @dataclass(frozen=True, eq=False)
 class Coulomb(Term, kind="coulomb"):
     """The Coulomb force between every pair of charged particles, with Plummer softening.
@@ -564,6 +571,7 @@ class Coulomb(Term, kind="coulomb"):
     """
 
     k: float = COULOMB_K
+    _: KW_ONLY
     softening: float = 0.0
     name: str = field(default="coulomb", kw_only=True)
 
@@ -726,9 +734,10 @@ class _GridField(Term):
             if v.shape[2] != 1:
                 raise InvalidInputError(f"{cls._field}: a 2D grid is saved with one node along z, got shape {v.shape}")
             v = v[:, :, 0, :]
-        ctx.add(cls(v, meta["origin"], meta["spacing"], name=meta["name"]))  # type: ignore[call-arg]
+        ctx.add(cls(v, meta["origin"], spacing=meta["spacing"], name=meta["name"]))  # type: ignore[call-arg]
 
 
+@_deprecate.record(('E', 'origin', 'spacing'), keep=2)
 @dataclass(frozen=True, eq=False)
 class GridElectricField(_GridField, kind="grid_electric_field"):
     """An electric field given on a regular grid (a field map): force ``q E(x)`` on every free
@@ -755,6 +764,7 @@ class GridElectricField(_GridField, kind="grid_electric_field"):
 
     E: np.ndarray
     origin: np.ndarray
+    _: KW_ONLY
     spacing: ArrayLike
     name: str = field(default="grid_electric_field", kw_only=True)
 
@@ -768,6 +778,7 @@ class GridElectricField(_GridField, kind="grid_electric_field"):
         object.__setattr__(self, "E", _grid_values("E", self.E, o.shape[0], o.shape[0], alone=False))
 
 
+@_deprecate.record(('B', 'origin', 'spacing'), keep=2)
 @dataclass(frozen=True, eq=False)
 class GridMagneticField(_GridField, kind="grid_magnetic_field"):
     """A magnetic field given on a regular grid (a field map): the Lorentz force
@@ -790,6 +801,7 @@ class GridMagneticField(_GridField, kind="grid_magnetic_field"):
 
     B: np.ndarray
     origin: np.ndarray
+    _: KW_ONLY
     spacing: ArrayLike
     name: str = field(default="grid_magnetic_field", kw_only=True)
 
@@ -841,6 +853,7 @@ def _per_row(value: object, m: int, arg: str, *, signed: bool = False) -> np.nda
     return _per_spring(value, m, arg)
 
 
+@_deprecate.record(('distance', 'distance_compliance', 'rest_length', 'bending', 'bending_compliance', 'rest_angle', 'pins', 'pin_targets', 'pin_compliance', 'area', 'area_compliance', 'rest_area', 'volume', 'volume_compliance', 'rest_volume', 'shapes', 'shape_sizes', 'shape_rest', 'shape_stiffness'), keep=0)
 @dataclass(frozen=True, eq=False)
 class XpbdConstraints(Term, kind="xpbd_constraints"):
     """Position-based constraints with compliance (XPBD), projected by ``Scene(integrator="xpbd")``.
@@ -949,6 +962,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
     1.0
     """
 
+    _: KW_ONLY
     distance: Any = None
     distance_compliance: ArrayLike = 0.0
     rest_length: ArrayLike | None = None
@@ -1182,6 +1196,7 @@ def _angles(x: np.ndarray, rows: np.ndarray) -> np.ndarray:
     return np.arctan2(s, np.einsum("ij,ij->i", n1, n2))
 
 
+@_deprecate.record(('point', 'normal', 'restitution', 'friction'), keep=2)
 @dataclass(frozen=True)
 class Plane(Part):
     """Half-space collider ``{x : (x - point)·normal ≥ 0}`` with restitution and friction.
@@ -1205,6 +1220,7 @@ class Plane(Part):
 
     point: np.ndarray
     normal: np.ndarray
+    _: KW_ONLY
     restitution: float = 0.5
     friction: float = 0.0
 
@@ -1246,9 +1262,10 @@ class Plane(Part):
 
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        ctx.add(cls(entry["point"], entry["normal"], entry["restitution"], entry["friction"]))
+        ctx.add(cls(entry["point"], entry["normal"], restitution=entry["restitution"], friction=entry["friction"]))
 
 
+@_deprecate.record(('lower', 'upper', 'restitution', 'friction'), keep=2)
 @dataclass(frozen=True)
 class Box(Part):
     """Axis-aligned box collider that keeps particles inside ``[lower, upper]`` (a tank or room).
@@ -1270,6 +1287,7 @@ class Box(Part):
 
     lower: np.ndarray
     upper: np.ndarray
+    _: KW_ONLY
     restitution: float = 0.5
     friction: float = 0.0
 
@@ -1294,8 +1312,8 @@ class Box(Part):
         for k in range(self.lower.shape[0]):
             n = np.zeros(self.lower.shape[0])
             n[k] = 1.0
-            out.append(Plane(self.lower, n, self.restitution, self.friction))
-            out.append(Plane(self.upper, -n, self.restitution, self.friction))
+            out.append(Plane(self.lower, n, restitution=self.restitution, friction=self.friction))
+            out.append(Plane(self.upper, -n, restitution=self.restitution, friction=self.friction))
         return out
 
     # ------------------------------------------------------------ the part protocol
@@ -1313,9 +1331,10 @@ class Box(Part):
 
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        ctx.add(cls(entry["lower"], entry["upper"], entry["restitution"], entry["friction"]))
+        ctx.add(cls(entry["lower"], entry["upper"], restitution=entry["restitution"], friction=entry["friction"]))
 
 
+@_deprecate.record(('center', 'radius', 'restitution', 'friction', 'inside'), keep=2)
 @dataclass(frozen=True)
 class Sphere(Part):
     """Sphere collider (a disc in a 2D scene) that keeps particles outside it, a ball they land on
@@ -1360,6 +1379,7 @@ class Sphere(Part):
 
     center: np.ndarray
     radius: float
+    _: KW_ONLY
     restitution: float = 0.5
     friction: float = 0.0
     inside: bool = False
@@ -1395,4 +1415,4 @@ class Sphere(Part):
 
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        ctx.add(cls(entry["center"], entry["radius"], entry["restitution"], entry["friction"], inside=entry["inside"]))
+        ctx.add(cls(entry["center"], entry["radius"], restitution=entry["restitution"], friction=entry["friction"], inside=entry["inside"]))

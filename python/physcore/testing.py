@@ -114,7 +114,7 @@ def nbody_systems(*, dim: int = 3, max_bodies: int = 8, integrator: str = "verle
         m = np.asarray(draw(st.lists(st.floats(0.1, 1.0), min_size=n, max_size=n)))
         scene = Scene(dim, integrator=integrator)
         scene.add_particles(x, v, m)
-        scene.add(PairwiseGravity(1.0, softening))
+        scene.add(PairwiseGravity(1.0, softening=softening))
         scene.dt = min(scene.suggest_dt(), 0.05 * np.sqrt(softening**3 / m.sum())) / 4
         return scene
 
