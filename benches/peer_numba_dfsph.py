@@ -40,7 +40,7 @@ One DFSPH step (everything at the positions x_n, one neighbour search per step):
 5. x_{n+1} = x_n + dt v*, v_{n+1} = v*; a particle that left the tank is clamped back into
    [0, 4] × [0, 3] and counted.
 
-The warm start and the fewest iterations are physcore's (rust_core/src/sph/dfsph.rs): half the
+The warm start and the fewest iterations are physcore's (rust_core/src/sph/dfsph/): half the
 last step's k total (k = κ/ρ = p/ρ², which does not scale with dt, so the total is kept as is),
 only where the particle compresses at the solve's start. Iterations are counted as velocity
 updates, the warm start not counted. (With D_i the exact diagonal, k_i = e_i/(dt² D_i) removes
@@ -107,7 +107,7 @@ C0 = 10.0 * math.sqrt(2.0 * GRAV * COL_H)
 WALL_LAYERS = 3
 NMIN = 12  # divergence solve: particles with fewer neighbours (free surface) are left alone
 # Warm start: each solve first applies this share of the particle's k total of the last step, and
-# only where the particle compresses at the solve's start (physcore's rust_core/src/sph/dfsph.rs,
+# only where the particle compresses at the solve's start (physcore's rust_core/src/sph/dfsph/,
 # WARM_START). Both solves are one-sided (they only remove compression), so a warm-start push that
 # over-expands is never taken back. Applied everywhere with the whole total (rescaled by the dt
 # ratio²), a total can only grow, and the dam break blew up within 10 steps (nx = 24); with the mask

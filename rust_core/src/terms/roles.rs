@@ -27,7 +27,7 @@ pub trait Constraints<V: Vector> {
     fn project(&mut self, x: &mut [V], model: &Model, h: Real);
 }
 
-/// A velocity projection or pressure solver (DFSPH, `sph/dfsph.rs`), run by
+/// A velocity projection or pressure solver (DFSPH, `sph/dfsph/`), run by
 /// "semi_implicit_euler" inside its step; a term playing it lists that integrator alone
 /// (`registry::integrator_rule`).
 pub trait VelocityProjection<V: Vector> {

@@ -1,0 +1,322 @@
+//! DFSPH's solves (the module's steps 2–4): the velocities gathered into cell order, the
+//! divergence and density errors, the warm starts, the Jacobi iterations and the surface
+//! forces, and the densities the term reports.
+use super::*;
+
+impl<V: Vector> Dfsph<V> {
+    /// Sorted velocities from the scene's `v`, and their kinetic energy (J).
+    pub(super) fn gather_v(&mut self, v: &[V]) -> Real {
+        let (order, vr, m, free) = (&self.grid.order, &v[self.range()], &self.m, &self.free);
+        self.vs.resize(self.n, V::ZERO);
+        par::chunks1_sum(&mut self.vs, |s, vs| {
+            let mut e = 0.0;
+            for (k, vk) in vs.iter_mut().enumerate() {
+                *vk = vr[order[s + k] as usize];
+                // Pinned particles carry no kinetic energy in the books (`ParticleSystem::energy`).
+                if free[s + k] {
+                    e += 0.5 * m[s + k] * vk.length_squared();
+                }
+            }
+            e
+        })
+    }
+
+    /// Writes the sorted velocities back into the scene's `v`; returns their kinetic energy.
+    pub(super) fn scatter_v(&self, v: &mut [V]) -> Real {
+        let r = self.range();
+        let out = SyncPtr(v[r].as_mut_ptr());
+        let (order, vs, m, free) = (&self.grid.order, &self.vs, &self.m, &self.free);
+        par::sum(self.n, 0.0, |ks| {
+            let mut e = 0.0;
+            for k in ks {
+                // SAFETY: `order` is a permutation: each particle is written by one sorted slot.
+                unsafe { *out.get().add(order[k] as usize) = vs[k] };
+                if free[k] {
+                    e += 0.5 * m[k] * vs[k].length_squared();
+                }
+            }
+            e
+        })
+    }
+
+    /// One error pass: per sorted particle the error e_i of `stage` at the sorted velocities
+    /// (density: (ρ*_i − ρ0)₊, kg/m^dim; divergence: (Dρ_i/Dt)₊, kg/(m^dim s)), turned into
+    /// κ_i/ρ_i = e_i / (dt^p D_i) in `k`; returns Σ e_i.
+    pub(super) fn errors(&mut self, stage: Projection, dt: Real) -> Real {
+        let (pairs, sites, rho, vs, rho0) = (&self.pairs, &self.sites, &self.rho, &self.vs, self.p.rho0);
+        let scale = match stage {
+            Projection::Density => 1.0 / (dt * dt),
+            Projection::Divergence => 1.0 / dt,
+        };
+        par::chunks1_sum(&mut self.k, |s, k| {
+            let p = &pairs[s / CHUNK];
+            let mut total = 0.0;
+            for (kk, kout) in k.iter_mut().enumerate() {
+                let i = s + kk;
+                let (site, vi) = (&sites[i], vs[i]);
+                // Σ_j (v_i − v_j)·g_ij = v_i·Σ_j g_ij − Σ_j v_j·g_ij: per pair only the
+                // neighbour's part, in two independent sums (SPH-2D 41k, 2 threads: 0.62 →
+                // 0.48 ms a pass beside the pairwise form in one process; between separate
+                // binaries within noise; the whole run's solver share 11.7 → 8.0 ms a step).
+                let acc = pair_sum(p, kk, |j, g| g * vs[j]);
+                let div = vi.dot(site.gw + site.gs) - components_sum(acc);
+                let e = match stage {
+                    Projection::Density => (rho[i] + dt * div - rho0).max(0.0),
+                    Projection::Divergence if site.inner => div.max(0.0),
+                    Projection::Divergence => 0.0,
+                };
+                *kout = e * site.dinv * scale;
+                total += e;
+            }
+            total
+        })
+    }
+
+    /// One velocity update with κ/ρ in `k` (module doc), adding `k` into `ksum`.
+    pub(super) fn apply(&mut self, dt: Real) {
+        let (pairs, sites, k, free) = (&self.pairs, &self.sites, &self.k, &self.free);
+        par::chunks2(&mut self.vs, &mut self.ksum, |s, vs, ksum| {
+            let p = &pairs[s / CHUNK];
+            for kk in 0..vs.len() {
+                let i = s + kk;
+                let ki = k[i];
+                // Walls mirror the particle's pressure (p_b = p_i: (κ_i + κ_i)/ρ_i), so a wall
+                // layer balances the fluid's push; with κ_i alone (Akinci 2012, eq. 10, as in
+                // WCSPH) the hydrostatic push drove the corner particles of a 2 m column through
+                // the walls (144 particles across, T* = 0.15), their own pressure pushing
+                // nothing where the fluid's and the walls' gradients cancel.
+                // Σ_j (κ_i + κ_j) g_ij = κ_i Σ_j g_ij + Σ_j κ_j g_ij (as in `errors`).
+                let a = (sites[i].gw * 2.0 + sites[i].gs) * ki + pair_sum(p, kk, |j, g| g * k[j]);
+                if free[i] {
+                    vs[kk] -= a * dt;
+                }
+                ksum[kk] += ki;
+            }
+        });
+    }
+
+    /// Turns the κ/ρ of an error pass in `k` into `pick(κ/ρ, w)` with w = `WARM_START` times
+    /// the particle's last summed κ/ρ of `stage`, where it compresses (κ/ρ > 0), else 0.
+    pub(super) fn warm_start(&mut self, stage: Projection, pick: impl Fn(Real, Real) -> Real + Sync) {
+        let (order, k) = (&self.grid.order, &mut self.k);
+        let hist = match stage {
+            Projection::Density => &self.kappa,
+            Projection::Divergence => &self.kappa_v,
+        };
+        par::chunks1(k, |s, k| {
+            for (kk, ko) in k.iter_mut().enumerate() {
+                *ko = if *ko > 0.0 { pick(*ko, hist[order[s + kk] as usize] * WARM_START) } else { 0.0 };
+            }
+        });
+    }
+
+    /// One solve (module doc, steps 2 and 4) on the scene's velocities `v`; returns the kinetic
+    /// energy it removed (J).
+    pub(super) fn solve(&mut self, stage: Projection, v: &mut [V], dt: Real) -> Real {
+        let t0 = Instant::now();
+        let n = self.n;
+        let e0 = self.gather_v(v);
+        // Warm start: half the last step's sum (module doc; κ/ρ does not scale with dt), only
+        // where the state compresses now (a push where it no longer does would expand it,
+        // which the one-sided solve never takes back: energy put in). The density solve
+        // applies it before its iterations (paper, Algorithm 2); the divergence solve folds it
+        // into its first iteration (`WarmStart`).
+        let warm = match stage {
+            Projection::Density => WarmStart::Before,
+            Projection::Divergence => WarmStart::FirstIteration,
+        };
+        self.k.resize(n, 0.0);
+        self.ksum.clear();
+        self.ksum.resize(n, 0.0);
+        if warm == WarmStart::Before {
+            self.errors(stage, dt);
+            self.warm_start(stage, |_, w| w);
+            self.apply(dt);
+        }
+        let rho0 = self.p.rho0;
+        let tol = match stage {
+            Projection::Density => self.p.density_tol,
+            Projection::Divergence => self.p.divergence_tol,
+        };
+        let norm = match stage {
+            Projection::Density => 1.0 / (n.max(1) as Real * rho0),
+            Projection::Divergence => dt / (n.max(1) as Real * rho0),
+        };
+        // At least 2 density iterations and 1 divergence iteration a step (paper, Algorithms 2
+        // and 3): a mean below the tolerance can hide a deep layer's growing compression (a 2 m
+        // column, 144 particles across, blew up at step 13 when the solve first had to act).
+        let least = match stage {
+            Projection::Density => 2,
+            Projection::Divergence => 1,
+        };
+        let mut iterations = 0u32;
+        let err = loop {
+            let err = self.errors(stage, dt) * norm;
+            let done = err <= tol && iterations >= least.min(self.p.max_iterations);
+            if done || iterations >= self.p.max_iterations || self.stop.is_set() {
+                break err;
+            }
+            if iterations == 0 && warm == WarmStart::FirstIteration {
+                self.warm_start(stage, Real::max);
+            }
+            self.apply(dt);
+            iterations += 1;
+        };
+        // Keep the sum for the next step's warm start (particle order). κ/ρ = p/ρ² does not
+        // scale with dt: a steady flow needs the same pressure whatever the step.
+        let (order, ksum) = (&self.grid.order, &self.ksum);
+        let out = match stage {
+            Projection::Density => &mut self.kappa,
+            Projection::Divergence => &mut self.kappa_v,
+        };
+        unsort(order, out, |k| ksum[k]);
+        if stage == Projection::Density {
+            // Both solves push with the same form: the step's pressure is their sum.
+            // With surface tension, plus the surface forces' virial (`surface_acceleration`):
+            // the mechanical pressure.
+            let (sp, rho, kappa, kappa_v) = (&self.surface_p, &self.rho, &self.kappa, &self.kappa_v);
+            unsort(order, &mut self.pressure, |k| {
+                let i = order[k] as usize;
+                (kappa[i] + kappa_v[i]) * rho[k] * rho[k] + sp.get(k).copied().unwrap_or(0.0)
+            });
+        }
+        let e1 = self.scatter_v(v);
+        let b = &mut self.books;
+        b.unconverged += (err > tol) as u64;
+        match stage {
+            Projection::Density => {
+                b.steps += 1;
+                b.density_iterations += iterations as u64;
+                b.density_error = err;
+                b.density_error_max = b.density_error_max.max(err);
+                b.dissipated_density += e0 - e1;
+            }
+            Projection::Divergence => {
+                b.divergence_iterations += iterations as u64;
+                b.divergence_error = err;
+                b.divergence_error_max = b.divergence_error_max.max(err);
+                b.dissipated_divergence += e0 - e1;
+            }
+        }
+        self.clock[1] += t0.elapsed().as_secs_f64();
+        e0 - e1
+    }
+
+    /// The step's surface normals n_i = H Σ_j m_j/ρ_j ∇W_ij (Akinci 2013, eq. 4; fluid
+    /// neighbours only), sorted order, from the stored pairs (g = m_j ∇W_ij).
+    pub(super) fn compute_normals(&mut self) {
+        let (pairs, rho, big_h) = (&self.pairs, &self.rho, self.surface.big_h);
+        self.normals.resize(self.n, V::ZERO);
+        par::chunks1(&mut self.normals, |s, out| {
+            let p = &pairs[s / CHUNK];
+            for (kk, n) in out.iter_mut().enumerate() {
+                let mut sum = V::ZERO;
+                for q in p.start[kk] as usize..p.start[kk + 1] as usize {
+                    sum += p.g[q] * (1.0 / rho[p.j[q] as usize]);
+                }
+                *n = sum * big_h;
+            }
+        });
+    }
+
+    /// Sorted particle i's acceleration by surface tension and adhesion (`sph::surface`):
+    /// −γ Σ_j K_ij [m_j C(r) x̂_ij + c (n_i − n_j)] − β Σ_b Ψ_b A(r) x̂_ib, m/s²; and the virial
+    /// pressure of its fluid pairs' surface forces, ρ_i/(2d) Σ_j x_ij·a_ij, Pa (Irving &
+    /// Kirkwood 1950: each pair's x_ij·F_ij shared half and half, over the particle's volume
+    /// m_i/ρ_i). The cohesion holds the fluid together with a bulk tension of its own (about
+    /// −(π/2)ρ0²γ∫C r² dr in 2D, tens of times σ/R): the solvers' pressure carries it, and only
+    /// the sum of the two, the mechanical pressure, shows a droplet's Laplace pressure.
+    #[inline(always)]
+    pub(super) fn surface_acceleration(&self, i: usize, xi: V, ri: Real) -> (V, Real) {
+        let (surf, normals, rho0) = (&self.surface, &self.normals, self.p.rho0);
+        let (p, kk) = (&self.pairs[i / CHUNK], i % CHUNK);
+        let (mut a, mut virial) = (V::ZERO, 0.0);
+        if surf.tension() {
+            let (xs, m, rho) = (&self.xs, &self.m, &self.rho);
+            let ni = normals[i];
+            let (mut st, mut vir) = (V::ZERO, 0.0);
+            for q in p.start[kk] as usize..p.start[kk + 1] as usize {
+                let j = p.j[q] as usize;
+                let d = xi - xs[j];
+                let r = d.length_squared().sqrt();
+                let k_ij = 2.0 * rho0 / (ri + rho[j]);
+                // Coincident particles have no direction: no cohesion (the curvature term stays).
+                let coh = if r > 0.0 { d * (m[j] * surf.cohesion(r) / r) } else { V::ZERO };
+                let pair = (coh + (ni - normals[j]) * surf.c) * k_ij;
+                st += pair;
+                vir += d.dot(pair);
+            }
+            a -= st * surf.gamma;
+            virial = -surf.gamma * vir * ri / (2.0 * V::DIM as Real);
+        }
+        if surf.adhesion() {
+            let mut ad = V::ZERO;
+            let w = f64::walls(&self.walls);
+            for run in self.walls.grid.query(self.grid.cells[i]).iter() {
+                for b in run {
+                    let d = xi - wall_at::<V>(w, b);
+                    let r = d.length_squared().sqrt();
+                    let k = crate::sph::surface::adhesion_kernel(r, surf.big_h);
+                    if k > 0.0 {
+                        ad += d * (w.psi[b] * k / r);
+                    }
+                }
+            }
+            a -= ad * surf.beta;
+        }
+        (a, virial)
+    }
+
+    /// Density (kg/m^dim) of each particle of the fluid at `x`, particle order, computed now
+    /// (scratch of its own).
+    pub fn densities(&self, x: &[V], model: &Model) -> Vec<Real> {
+        match self.p.kernel {
+            KernelKind::CubicSpline => self.densities_with::<CubicSpline>(x, model),
+            KernelKind::WendlandC2 => self.densities_with::<WendlandC2>(x, model),
+        }
+    }
+
+    pub(super) fn densities_with<K: Kernel>(&self, x: &[V], model: &Model) -> Vec<Real> {
+        let r = self.range();
+        let (xr, mr) = (&x[r.clone()], &model.mass[r]);
+        let mut grid = CellList::new(self.grid.cell_size(), V::DIM).expect("valid cell size");
+        grid.build(xr);
+        let (h, w) = (self.p.h, f64::walls(&self.walls));
+        let (sigma, reach) = (K::sigma(h, V::DIM), 4.0 * h * h);
+        let mut rho = vec![0.0; self.n];
+        let out = SyncPtr(rho.as_mut_ptr());
+        let grid = &grid;
+        par::reduce(
+            self.n,
+            (),
+            |_, _| (),
+            |ks| {
+                for k in ks {
+                    let i = grid.order[k] as usize;
+                    let c = grid.cells[k];
+                    let mut s = 0.0;
+                    for run in grid.query(c).iter() {
+                        for j in run {
+                            let jj = grid.order[j] as usize;
+                            let r2 = (xr[i] - xr[jj]).length_squared();
+                            if r2 < reach {
+                                s += mr[jj] * sigma * K::w(r2.sqrt() / h);
+                            }
+                        }
+                    }
+                    for run in self.walls.grid.query(c).iter() {
+                        for b in run {
+                            let r2 = (xr[i] - wall_at::<V>(w, b)).length_squared();
+                            if r2 < reach {
+                                s += w.psi[b] * sigma * K::w(r2.sqrt() / h);
+                            }
+                        }
+                    }
+                    // SAFETY: each particle i is written by its one sorted slot k.
+                    unsafe { *out.get().add(i) = s };
+                }
+            },
+        );
+        rho
+    }
+}
