@@ -7,7 +7,7 @@ across the column grows, one run per task on a Dask LocalCluster (or any schedul
 For each resolution n (particles across the column width a = 1 m): the front Z = x/a (the
 largest x among particles with >= 4 neighbours within 2h, so lone spray does not count) at
 T = t·√(2g/a) = 0.41 … 2.98, compared with the measurements shifted by the gate's delay
-ΔT = 0.175 (see tests/test_sph.py), and the wall time of the run. With --out the rows stream to
+ΔT = 0.175 (see tests/fluids/test_sph.py), and the wall time of the run. With --out the rows stream to
 a CSV and an interrupted study resumes where it stopped.
 """
 from __future__ import annotations

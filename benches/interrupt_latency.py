@@ -2,7 +2,7 @@
 max of --repeats tries.
 
 Cases: (a) 2·10^5 particles under uniform gravity, step(10^7), every integrator; (b) the stiff
-dopri5 cloth of tests/test_interrupt.py (48², dt = 0.5 s, rtol = 1e-10), whose every output step is
+dopri5 cloth of tests/robustness/test_interrupt.py (48², dt = 0.5 s, rtol = 1e-10), whose every output step is
 thousands of internal steps; (d) every integrator × term: pairwise gravity (N = 2·10^4, one
 evaluation ~2·10^8 pair interactions), a springs cloth (1000², 10^6 particles) and an SPH fluid
 (the 2D dam break of bench_sph.py at 10^6 particles, f64), where one force evaluation is a

@@ -9,7 +9,7 @@ is the whole scene file (:meth:`physcore.Scene.save`'s arrays: positions, veloci
 fields, flow points, contact springs, energy books, clock), so a difference anywhere shows.
 
 A cell reads ``=`` when every array is bit-identical, else the largest relative difference
-``max |a - b| / max |b|`` over the state's arrays. ``tests/test_reproducibility.py`` holds the
+``max |a - b| / max |b|`` over the state's arrays. ``tests/robustness/test_reproducibility.py`` holds the
 published table to what the library does: ``=`` exactly, a figure within 10× (another CPU of the
 same level runs the same instructions; the slack covers a different libm).
 """

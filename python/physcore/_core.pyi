@@ -1,5 +1,5 @@
 # Type stubs for the compiled module physcore._core, checked against it (names, signatures,
-# defaults, class flags) by mypy's stubtest in tests/test_docs.py.
+# defaults, class flags) by mypy's stubtest in tests/scenes/test_docs.py.
 from typing import Any, final
 
 import numpy as np

@@ -450,7 +450,7 @@ class Wave(Grid):
 #: Named (F, k) of Gray–Scott pattern classes, in Pearson's units (D_u = 2e-5, D_v = 1e-5, time
 #: in the units of F and k). The classes are Pearson's (Science 261 (1993) 189, Fig. 3); the
 #: values are representative points of each class from R. Munafo's catalogue of the (F, k)
-#: plane (mrob.com/pub/comp/xmorphia), checked by the pattern tests in tests/test_grids.py.
+#: plane (mrob.com/pub/comp/xmorphia), checked by the pattern tests in tests/grids/test_grids.py.
 PRESETS: dict[str, tuple[float, float]] = {
     "spots": (0.030, 0.062),  # solitons that stay put (Pearson's kappa/lambda border)
     "mitosis": (0.0367, 0.0649),  # spots that grow and split (lambda)

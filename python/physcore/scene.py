@@ -1013,7 +1013,7 @@ class Scene:
         to 6 times the hydrostatic value and back, a cycle of about 15 steps; at 0.01 %,
         0.35–1.74 times; at 0.001 %, within 8 %). Average it over every step, not every few
         steps (which aliases the cycle): so averaged, and pooled over 16 realizations, the
-        layer's two-row bins are within 1.6 % of ρ0 g (H − y) (``tests/test_dfsph.py``)."""
+        layer's two-row bins are within 1.6 % of ρ0 g (H − y) (``tests/fluids/test_dfsph.py``)."""
         return self._exclusive(lambda sim: sim.fluid_fields())[1]
 
     def solver_stats(self, name: str | None = None) -> dict[str, float]:

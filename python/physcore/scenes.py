@@ -471,7 +471,7 @@ def tumbling_boxes(
     if integrator in ("xpbd", "semi_implicit_euler"):
         # tangential_ratio 2/7 (the default before it became 1/3 for discs): the grains of a box do
         # not turn (inertia_factor 1e6), so no ratio equalises their periods, and the boxes'
-        # landings were tuned at 2/7 (at 1/3, a box dropped on another in tests/test_xpbd.py
+        # landings were tuned at 2/7 (at 1/3, a box dropped on another in tests/constraints/test_xpbd.py
         # slides off it).
         scene.add(Contacts(stiffness=stiffness, restitution=restitution, friction=friction, inertia_factor=1e6,
                            tangential_ratio=2.0 / 7.0,
@@ -2305,7 +2305,7 @@ def vortex_street(
     St = f D / U, which Roshko (1954, NACA Report 1191) measured as
     St = 0.212 (1 − 21.2 / Re) for 50 < Re < 150 (reviewed by Williamson 1996, Annu. Rev.
     Fluid Mech. 28, 477). The walls confine the flow: the blockage D/H = 1 / `height`
-    (0.1 by default) raises St slightly above the unbounded value; tests/test_vortex_street.py
+    (0.1 by default) raises St slightly above the unbounded value; tests/grids/test_vortex_street.py
     measures St against Roshko's curve at the default blockage and at 1/16.
 
     Parameters

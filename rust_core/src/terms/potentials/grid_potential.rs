@@ -13,7 +13,7 @@
 //! jumps (φ̃ is continuous, its gradient is not), by O(h |∂²φ/∂x_a²|) for a smooth φ. A
 //! symplectic integrator therefore keeps no exact shadow energy over cell crossings: each crossing
 //! costs an energy error of order |jump|·|v|·dt, of either sign (measured in
-//! `tests/test_potentials.py` and `docs/potentials.md`).
+//! `tests/forces/test_potentials.py` and `docs/potentials.md`).
 //!
 //! **Outside the grid** φ̃ is continued by its value at the nearest point of the box (each
 //! coordinate clamped to the box): φ̃(x) = φ̃(clamp(x)). This continuation is continuous, and the

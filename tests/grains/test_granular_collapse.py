@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benches" / "collapse.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "collapse.py"
 
 
 def _load():

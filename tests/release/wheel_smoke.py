@@ -1,4 +1,4 @@
-"""Smoke test of an installed physcore, run by tests/test_wheels.py in a fresh environment (and
+"""Smoke test of an installed physcore, run by tests/release/test_wheels.py in a fresh environment (and
 under qemu for the aarch64 wheel): every part family is built, stepped and checked for a
 physical property, the scene file round-trips, and the metadata agrees with the package.
 

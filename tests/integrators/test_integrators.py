@@ -23,7 +23,7 @@ ORDER_CASES = {
     # Tolerances so loose that every output step is one accepted Dormand–Prince step of dt:
     # this measures the order of the tableau itself (its error control is tested below).
     "dopri5": (5, [0.4, 0.2, 0.1, 0.05]),
-    # Without a magnetic field the Boris push is velocity Verlet (tests/test_charges.py has its
+    # Without a magnetic field the Boris push is velocity Verlet (tests/forces/test_charges.py has its
     # order with one).
     "boris": (2, [0.04, 0.02, 0.01, 0.005]),
     # Without constraints each of its 10 substeps is semi-implicit Euler.

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import physcore as pc
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benches" / "work_precision.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "work_precision.py"
 PROBLEMS = ("kepler_e0", "kepler_e0.5", "kepler_e0.9", "chain", "cloth")
 
 

@@ -63,6 +63,7 @@ def shape(scene):
 
 
 # --------------------------------------------------------------------------- shapes
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 @pytest.mark.parametrize("dim, n", [(2, 20), (3, 12)])
 def test_a_square_relaxes_to_a_circle_and_a_cube_to_a_sphere(dim, n):
     """A 20 × 20 square (12³ cube) of water, 1 mm spacing, σ = 0.072, α = 0.5 (to damp the
@@ -130,6 +131,7 @@ def droplet_reading(dim, n, seed, *, sigma=0.03, dx=5e-4, rho0=800.0):
     return p * r / ((1 if dim == 2 else 2) * sigma), r / (2.6 * dx)
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_laplace_pressure_of_2d_droplets():
     """Six 2D droplets of R = 6.2 H (32 particles across; σ = 0.03 N, 0.5 mm spacing, ρ0 = 800,
     a σ, ρ0 and spacing other than those `LAPLACE_FACTOR` was measured at), started 1e-9 m
@@ -147,6 +149,7 @@ def test_laplace_pressure_of_2d_droplets():
     assert 1 / 1.3 < math.exp(np.mean(np.log(readings))) < 1.3, readings
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_laplace_pressure_of_a_3d_droplet():
     """A 3D droplet of R = 2.9 H (15 particles across, the 2D test's σ, ρ0 and spacing): 2σ/R
     within a factor of 1.5 (measured 1.13; 3D has its own `LAPLACE_FACTOR`, measured on a

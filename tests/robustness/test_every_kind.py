@@ -26,7 +26,7 @@ from test_resources import NPROC_LIMIT
 import physcore as pc
 from physcore.scenes import REGISTRY
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("reproducibility_bench", ROOT / "benches" / "reproducibility.py")
 BENCH = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(BENCH)

@@ -12,7 +12,7 @@ import pytest
 
 import physcore as pc
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "reproducibility.md"
 
 

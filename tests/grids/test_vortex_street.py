@@ -54,6 +54,7 @@ def test_strouhal_number_matches_roshko(re):
     assert abs(st / roshko(re) - 1.0) < 0.05
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_blockage_raises_the_strouhal_number():
     """Walls closer to the cylinder speed the flow past it: D/H = 0.1 sheds faster than 1/16
     (both within 5 % of Roshko's unbounded fit at this grid)."""

@@ -2,7 +2,7 @@
 and continue as files written with the new ones, and every deprecated alias warns with a
 DeprecationWarning that names the new spelling and builds the same thing as the new name.
 
-tests/data/old_names.npz and old_names_fluid.npz were written by physcore before the renames
+tests/scenes/data/old_names.npz and old_names_fluid.npz were written by physcore before the renames
 (commit 72f6db1) with the old spellings: ``Scene(integrator="rk45")``, ``Wave(dx=, gamma=)``,
 ``GrayScott(dx=)``, ``StableFluid(dx=, viscosity=)`` (grid kind ``"fluid"`` in the file) and
 ``Fluid(viscosity=, walls=, wall_volume=, precision=)``; see the builders below, which make the
@@ -34,7 +34,7 @@ def _members(path: Path) -> dict[str, np.ndarray]:
 
 
 def _grids_scene() -> pc.Scene:
-    """tests/data/old_names.npz's scene, in the new names."""
+    """tests/scenes/data/old_names.npz's scene, in the new names."""
     s = pc.Scene(2, integrator="dopri5", dt=1e-3, threads=1, rtol=1e-8, atol=1e-11)
     s.add_particles([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.1], [0.0, -0.1]], masses=[1.0, 2.0])
     s.add(pc.Springs([0], [1], stiffness=10.0, damping=0.1))
@@ -47,7 +47,7 @@ def _grids_scene() -> pc.Scene:
 
 
 def _fluid_scene() -> pc.Scene:
-    """tests/data/old_names_fluid.npz's scene, in the new names."""
+    """tests/scenes/data/old_names_fluid.npz's scene, in the new names."""
     f = pc.Scene(2, integrator="semi_implicit_euler", threads=1)
     f.add(pc.Gravity([0.0, -9.81]))
     f.add(Fluid(lattice([0, 0], [0.04, 0.03], 0.01), 0.01, alpha=0.1, boundary=tank_walls([0, 0], [0.06, 0.05], 0.01),

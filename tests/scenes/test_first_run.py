@@ -239,7 +239,7 @@ def test_trails_show_the_paths(tmp_path):
         return sum(int(np.all(img == np.asarray(c), axis=2).sum()) for c in shades)
 
     # color_by="speed": the fixed palette's trail shades (own colours draw trails in each
-    # particle's colour instead, tests/test_colors.py).
+    # particle's colour instead, tests/render/test_colors.py).
     counts = {}
     for t in (0, 10, 40):
         s = pc.scenes.projectile(n=3)

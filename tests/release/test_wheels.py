@@ -27,7 +27,7 @@ import pytest
 
 pytestmark = pytest.mark.release
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 WHEELS = Path(os.environ.get("PHYSCORE_WHEELS", ROOT / "dist"))
 SMOKE = Path(__file__).resolve().parent / "wheel_smoke.py"
 ARM64 = Path(os.environ.get("PHYSCORE_ARM64_ROOT", "/opt/physcore-arm64"))

@@ -14,7 +14,7 @@ import physcore as pc
 FLUID_SCENES = ("dam_break", "drop")
 # DFSPH with surface tension (no WCSPH form): their books' drift is semi-implicit Euler's error
 # at the flow's step, gravity's kick that the density solve takes out (converging with the step:
-# tests/test_dfsph.py); coarse forms (n = 80) over the rendered time measured 5.3e-3 and 3.7e-3.
+# tests/fluids/test_dfsph.py); coarse forms (n = 80) over the rendered time measured 5.3e-3 and 3.7e-3.
 SURFACE_SCENES = {"droplets": 0.3, "crown": 0.03}
 
 
@@ -24,7 +24,7 @@ def test_default_scene_keeps_energy_books_balanced(name):
         # Same parameters at coarse resolution, 1 s through the wall impact, with the automatic
         # (CFL) substeps the renderer uses. Their default DFSPH steps at the flow's CFL limit,
         # 20× WCSPH's step: its drift is semi-implicit Euler's error at that step (1.7e-2 for
-        # dam_break here, converging with the step: tests/test_dfsph.py); this checks the books
+        # dam_break here, converging with the step: tests/fluids/test_dfsph.py); this checks the books
         # at WCSPH's step.
         scene = pc.scenes.REGISTRY[name](n=12, method="wcsph")
         for _ in range(30):
@@ -39,7 +39,7 @@ def test_default_scene_keeps_energy_books_balanced(name):
     elif name == "cloth_on_ball":
         # The collider projections book their work to first order in dt (−F·Δx with the last
         # evaluated force): 4.9e-3 over 3 s at the default dt, converging (1.6e-3 at dt/2, 5e-4
-        # at dt/4: tests/test_cloth_on_ball.py); an unstable default would drift by O(1).
+        # at dt/4: tests/constraints/test_cloth_on_ball.py); an unstable default would drift by O(1).
         scene = pc.scenes.cloth_on_ball()
         scene.step(int(round(3.0 / scene.dt)))
         assert np.isfinite(scene.positions).all()

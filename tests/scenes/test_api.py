@@ -285,7 +285,7 @@ def test_readme_style_example():
 
 
 GRAIN_SCENES = ("galton_board", "billiards", "newtons_cradle", "jelly")
-# Surface tension is DFSPH's, which steps with semi-implicit Euler only (tests/test_surface_tension.py).
+# Surface tension is DFSPH's, which steps with semi-implicit Euler only (tests/fluids/test_surface_tension.py).
 SEMI_IMPLICIT_ONLY = GRAIN_SCENES + ("droplets", "crown")
 
 
@@ -306,7 +306,7 @@ def test_every_registered_scene_builds_and_steps(name):
     assert np.all(np.isfinite(s.positions)) and np.all(np.isfinite(s.velocities))
     assert abs(s.energy_drift()) < 1e-2
     # Every scene also accepts integrator= and threads= (grains step only with the DEM
-    # scheme, semi-implicit Euler, and refuse others by name: tests/test_contacts.py; so do
+    # scheme, semi-implicit Euler, and refuse others by name: tests/grains/test_contacts.py; so do
     # the surface-tension scenes, DFSPH's). The grid scenes' integrator= did nothing: since
     # issue 45 it is deprecated and ignored (their grids step with their own schemes).
     integrator = "semi_implicit_euler" if name in SEMI_IMPLICIT_ONLY else "rk4"

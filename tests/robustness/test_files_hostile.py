@@ -1155,6 +1155,7 @@ def test_every_grid_and_flow_key_missing_is_refused_by_name(grid_ref, fuzz_dir):
         assert ei.value.field == field_name(p) and "missing" in str(ei.value), (p, str(ei.value))
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_every_grid_and_flow_value_hostile_is_refused_or_loads(grid_ref, fuzz_dir):
     # Every value inside a grid's or a flow's entry replaced by each hostile JSON value: the file
     # loads (and round-trips) or is refused by a SceneFileError; nothing else escapes.

@@ -378,6 +378,7 @@ def galton_run():
     return s, balls, rows, e0
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_the_galton_board_fills_its_bins_binomially(galton_run):
     # An ideal board sends each ball left or right with probability ½ at every row, so its bin
     # is Binomial(rows, ½) (Galton 1889). This board is calibrated to it (see galton_board):

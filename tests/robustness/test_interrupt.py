@@ -124,6 +124,7 @@ def test_keyboard_interrupt_inside_one_force_evaluation():
     _assert_unchanged(scene, before)
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_keyboard_interrupt_inside_the_gravity_potential():
     # energy() with pairwise gravity is an O(N²) sum (5·10^9 pairs at N = 100,000): Ctrl-C stops
     # it within a fraction of one sum, and it changes nothing.

@@ -4,7 +4,7 @@
   (0.1 %, and 0.01 % as an option, which also holds the density measured by summation after
   the step below 0.1 %); the divergence solve ends below its own tolerance;
 * hydrostatics: a settled layer's pressure against ρ0 g (surface − y);
-* the Martin & Moyce (1952) surge front, as the WCSPH test (tests/test_sph.py) checks it;
+* the Martin & Moyce (1952) surge front, as the WCSPH test (tests/fluids/test_sph.py) checks it;
 * what a step costs: far fewer steps than WCSPH for the same dam break;
 * energy books (the solvers' dissipation), thread-count determinism, save/load, bad input.
 """
@@ -135,6 +135,7 @@ def test_a_resting_layer_comes_to_rest_at_default_settings():
 LAYERS = 16
 
 
+@pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_hydrostatic_layer_pressure():
     """A resting layer (``_resting_layer``; α = 0.5 to damp the sloshing the lattice start sets
     off, as in the WCSPH test), over an ensemble of LAYERS realizations: the solvers' pressure
