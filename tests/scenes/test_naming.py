@@ -238,9 +238,10 @@ def test_the_cli_takes_the_old_param_names_with_a_note(capsys):
 
 
 def test_no_warning_from_the_new_names():
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         _grids_scene()
         _fluid_scene()
         scenes.smoke(n=16)
         scenes.pythagorean()
+    assert [str(w.message) for w in caught] == []

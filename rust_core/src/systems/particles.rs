@@ -276,6 +276,15 @@ impl<V: Vector> ParticleSystem<V> {
         if self.sys.forces.terms.iter().any(|o| o.name() == t.name()) {
             return Err(invalid("name", format!("the scene already has a term named {:?}", t.name())));
         }
+        let t = self.admit(t)?;
+        self.sys.forces.push(t)?;
+        self.integrator.reset();
+        Ok(())
+    }
+
+    /// The checks a term joining the system passes, new or replacing one (its particles exist,
+    /// the integrator can step it), and the scene's precision handed to it.
+    fn admit(&self, mut t: Box<dyn Term<V>>) -> Result<Box<dyn Term<V>>> {
         if t.min_particles() > self.n_particles() {
             return Err(invalid(
                 "term",
@@ -283,11 +292,8 @@ impl<V: Vector> ParticleSystem<V> {
             ));
         }
         check_integrator(t.as_ref(), self.integrator.info().name)?;
-        let mut t = t;
         t.set_single(self.sys.single);
-        self.sys.forces.push(t)?;
-        self.integrator.reset();
-        Ok(())
+        Ok(t)
     }
 
     /// Replaces the term named as `t` is by `t` (`ForceSet::replace`), checked as `add_term`
@@ -296,15 +302,7 @@ impl<V: Vector> ParticleSystem<V> {
         let Some(at) = self.sys.forces.terms.iter().position(|o| o.name() == t.name()) else {
             return Err(invalid("name", format!("the scene has no term named {:?}", t.name())));
         };
-        if t.min_particles() > self.n_particles() {
-            return Err(invalid(
-                "term",
-                format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles()),
-            ));
-        }
-        check_integrator(t.as_ref(), self.integrator.info().name)?;
-        let mut t = t;
-        t.set_single(self.sys.single);
+        let t = self.admit(t)?;
         self.sys.forces.replace(at, t)?;
         self.integrator.reset();
         Ok(())
