@@ -33,7 +33,10 @@ the viscous limit ``0.125 h²/ν`` (``ν = α c0 h/(2(d+2))``) and ``0.25 √(h/
 sound, so a dam break takes ten to twenty times fewer steps. The projections are inelastic: the
 kinetic energy each removes is booked as the fluid's dissipation (with the viscosity's), and
 :meth:`Scene.solver_stats` reports each solver's share, iterations and residuals. DFSPH steps with
-``integrator="semi_implicit_euler"`` only, in float64, one DFSPH fluid per scene.
+``integrator="semi_implicit_euler"`` only, in float64. Several DFSPH fluids with the same ``h``,
+kernel, rest density and solver settings are solved as one (a drop falling into a pool): one
+neighbour search and one pair of projections over all their particles, each particle seeing the
+walls of all of them; the solve's first fluid keeps the solve's books.
 """
 from __future__ import annotations
 
@@ -628,34 +631,41 @@ _FLUIDS_PER_SEARCH = 8
 
 def _check_fluid_method(ctx: AttachContext, fluid: Fluid) -> None:
     """Refuse, before anything is added, a DFSPH fluid this scene cannot step: the core's
-    part–integrator rule (DFSPH runs inside "semi_implicit_euler" steps), and one DFSPH fluid
-    cannot push on another fluid (it has no shared search), so it must be the scene's only fluid."""
-    others = [t for t in ctx.parts if isinstance(t, Fluid)]
+    part–integrator rule (DFSPH runs inside "semi_implicit_euler" steps)."""
     if fluid.method == "dfsph":
         _core.check_integrator("dfsph", ctx.integrator)
-        if others:
-            raise InvalidInputError(
-                f"method: a DFSPH fluid must be the scene's only fluid (it would pass through {others[0].name!r})"
-            )
-    elif any(t.method == "dfsph" for t in others):
-        raise InvalidInputError("method: this scene has a DFSPH fluid, which must be its only fluid")
+
+
+def _search_key(fluid: Fluid) -> tuple[Any, ...]:
+    """What two fluids must share to push on each other (the core's rule): WCSPH fluids share a
+    neighbour search when ``h``, kernel and pass precision agree (up to 8 a search); DFSPH fluids
+    share one solve when ``h``, kernel, rest density and the solver's settings (tolerances,
+    iterations, surface tension, adhesion) agree. A WCSPH and a DFSPH fluid never do."""
+    if fluid.method == "dfsph":
+        return ("dfsph", fluid.h, fluid.kernel, fluid.density, fluid.density_error, fluid.divergence_error,
+                int(fluid.max_iterations), fluid.surface_tension, fluid.adhesion)
+    return ("wcsph", fluid.h, fluid.kernel, fluid.pass_precision)
 
 
 def _warn_separate_fluids(ctx: AttachContext, fluid: Fluid, name: str) -> None:
     """Warn (:class:`SeparateFluidsWarning`) if ``fluid`` will not interact with some fluid
-    already in the scene. Fluids share one neighbour search, and so push on each other, when
-    they have the same ``h``, kernel and pass precision, up to 8 per search (the core's rule; a
-    9th starts a new search, which the next ones join)."""
+    already in the scene (see :func:`_search_key`; a 9th WCSPH fluid starts a new search, which
+    the next ones join)."""
     fluids = [t for t in ctx.parts if isinstance(t, Fluid)]
-    alike = [f for f in fluids if (f.h, f.kernel, f.pass_precision) == (fluid.h, fluid.kernel, fluid.pass_precision)]
-    together = alike[len(alike) - len(alike) % _FLUIDS_PER_SEARCH :]
+    key = _search_key(fluid)
+    alike = [f for f in fluids if _search_key(f) == key]
+    per = _FLUIDS_PER_SEARCH if fluid.method == "wcsph" else len(alike) + 1
+    together = alike[len(alike) - len(alike) % per :]
     apart = [f.name for f in fluids if all(f is not g for g in together)]
     if apart:
-        why = (
-            f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
-            if len(together) < len(alike)
-            else "fluids push on each other only when they have the same h (smoothing · spacing), kernel and pass_precision"
-        )
+        if len(together) < len(alike):
+            why = f"{_FLUIDS_PER_SEARCH} fluids already share its neighbour search"
+        elif fluid.method == "dfsph":
+            why = ("a DFSPH fluid pushes only on DFSPH fluids with the same h (smoothing · spacing), kernel, density, "
+                   "density_error, divergence_error, max_iterations, surface_tension and adhesion")
+        else:
+            why = ("a WCSPH fluid pushes only on WCSPH fluids with the same h (smoothing · spacing), kernel and "
+                   "pass_precision")
         shown = ", ".join(repr(a) for a in apart[:5]) + (", ..." if len(apart) > 5 else "")
         warnings.warn(
             f"{name!r} does not interact with the scene's fluid(s) {shown} and will pass through them: {why}",

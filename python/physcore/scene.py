@@ -1026,7 +1026,9 @@ class Scene:
         define them) and their ``*_max`` over all steps; ``measured_density_error`` (the mean
         compression ``mean((ρ − ρ0)₊)/ρ0`` by summation at the start of the last step, i.e. what
         the previous density solve achieved) and its max; ``dissipated_density_solver`` and
-        ``dissipated_divergence_solver`` (J, kinetic energy each projection removed).
+        ``dissipated_divergence_solver`` (J, kinetic energy each projection removed). DFSPH fluids
+        solved together (same ``h``, kernel, density and solver settings) report the same books:
+        those of their one solve.
 
         Raises
         ------

@@ -26,6 +26,23 @@ from physcore.fluids import Fluid, lattice, tank_walls
 from physcore.grids import KIND_ALIASES
 
 DATA = Path(__file__).parent / "data"
+#: The SIMD level the files in DATA were written at (x86-64, AVX2). Every level computes the same
+#: physics to a few ulp, not bit for bit (``physcore.set_simd_level``), and these tests compare
+#: bits: a file stepped here must be stepped at the level that wrote it.
+WRITTEN_AT = "avx2"
+
+
+@pytest.fixture
+def written_level():
+    """Run the test at the level DATA was written at (skipped where the CPU lacks it)."""
+    if WRITTEN_AT not in pc.simd_levels():
+        pytest.skip(f"the files were written at {WRITTEN_AT!r}, which this CPU lacks; other levels differ in the last bits")
+    before = pc.simd_level()
+    pc.set_simd_level(WRITTEN_AT)
+    yield
+    pc.set_simd_level(None)  # the process default (PHYSCORE_SIMD or the best level) ...
+    if pc.simd_level() != before:
+        pc.set_simd_level(before)  # ... unless another test had forced one
 
 
 def _members(path: Path) -> dict[str, np.ndarray]:
@@ -57,7 +74,7 @@ def _fluid_scene() -> pc.Scene:
 
 
 # --------------------------------------------------------------------------- old files
-def test_an_old_grid_and_dopri5_file_loads_under_the_new_names_and_continues_bit_for_bit(tmp_path):
+def test_an_old_grid_and_dopri5_file_loads_under_the_new_names_and_continues_bit_for_bit(tmp_path, written_level):
     old = DATA / "old_names.npz"
     meta = json.loads(str(_members(old)["meta"][()]))
     assert meta["integrator"] == "rk45" and [g["kind"] for g in meta["grids"]] == ["wave", "gray_scott", "fluid"]
@@ -84,7 +101,7 @@ def test_an_old_grid_and_dopri5_file_loads_under_the_new_names_and_continues_bit
         assert g.field("u").tobytes() == h.field("u").tobytes()
 
 
-def test_an_old_sph_fluid_file_loads_under_the_new_names(tmp_path):
+def test_an_old_sph_fluid_file_loads_under_the_new_names(tmp_path, written_level):
     old = DATA / "old_names_fluid.npz"
     assert {"term1_walls", "term1_wall_volume"} <= _members(old).keys()  # the file keeps these keys
     loaded = pc.Scene.load(old)

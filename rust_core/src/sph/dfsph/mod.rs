@@ -52,6 +52,19 @@
 //! The build runs on the SIMD layer (`BuildChunk`) with the scalar operations lane by lane, and
 //! the passes are scalar, so the results are also the same bits at every SIMD level.
 //!
+//! Several fluids: DFSPH fluids of one system whose smoothing length, kernel, rest density and
+//! solver settings agree are one `Solver` (they find each other through `neighbors::Shared`, as
+//! WCSPH fluids do): their particles are gathered into one order (member after member), sorted
+//! into one cell list, and solved together, so they push on each other as one incompressible
+//! fluid. Each particle sees the walls of every member (the union, a position given twice
+//! counted once: a tank given to a pool and a drop is one tank); a pair's viscosity takes the
+//! mean of the two fluids' α c0 (symmetric, so momentum is kept); each fluid limits the step by
+//! its own CFL number, α c0 and surface tension. The solve's first fluid (the first added, so
+//! the first the system evaluates) runs the build, forces and projections for all of them and
+//! books their work; the others add nothing, and report the solve's `stats`. One fluid alone
+//! reads the scene's arrays in place (no gather), and a column split into several fluids over
+//! the same particles steps bit for bit as one.
+//!
 //! Layout, one stage a file: this file holds the parameters, the term and its roles (`Term`,
 //! `VelocityProjection`, `OwnState`); `pairs` the pair build (step 1, on the SIMD layer);
 //! `solve` the two solves and the surface forces (steps 2–4); `tests` the tests.
@@ -62,6 +75,7 @@ use super::surface::Surface;
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
+use crate::neighbors::Shared;
 use crate::par::{self, SyncPtr, CHUNK};
 use crate::simd::{self, Kernel as SimdKernel, Simd, P};
 use crate::state::Model;
@@ -72,6 +86,7 @@ use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::marker::PhantomData;
 use std::ops::Range;
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 mod pairs;
@@ -221,12 +236,34 @@ struct Books {
     dissipated_divergence: Real,
 }
 
-/// The DFSPH fluid over particles `first .. first + n` of a scene.
-pub struct Dfsph<V: Vector> {
-    name: String,
+/// One fluid of a solve: its particles in the scene, where they start in the solve's order
+/// (the members' particles, member after member), its walls as given and its α c0.
+struct Member<V: Vector> {
+    range: Range<usize>,
+    offset: usize,
+    walls: Vec<V>,
+    psi: Vec<Real>,
+    visc: Real,
+}
+
+/// The solve of the DFSPH fluids of one system that share a neighbour search (module doc,
+/// "Several fluids"): one fluid alone, or several whose particles are gathered into one order.
+pub(super) struct Solver<V: Vector> {
+    members: Vec<Member<V>>,
+    /// The first member's first particle in the scene, and the particles of all members.
     first: usize,
     n: usize,
+    /// The parameters the members share (each keeps its own CFL number, α and c0 for its
+    /// step limit).
     p: DfsphParams,
+    /// Several members: the scene index of each particle in the solve's order, the positions
+    /// and masses gathered in that order, and each sorted particle's α c0 (empty for one).
+    to_scene: Vec<u32>,
+    xg: Vec<V>,
+    mg: Vec<Real>,
+    img: Vec<Real>,
+    visc: Vec<Real>,
+    /// The walls of all members (each position once).
     walls: Walls,
     grid: CellList,
     /// Sorted order: positions, masses, per-particle quantities, velocities, κ/ρ of the
@@ -271,6 +308,20 @@ pub struct Dfsph<V: Vector> {
     stop: Stop,
 }
 
+/// The DFSPH fluid over particles `first .. first + n` of a scene: a member of a `Solver`,
+/// alone in it by default, and when added to a system that already has a DFSPH fluid with the
+/// same smoothing length, kernel, rest density and solver settings (`Term::share`), a member of
+/// that fluid's solve.
+pub struct Dfsph<V: Vector> {
+    name: String,
+    range: Range<usize>,
+    /// Its own parameters (its step limit: CFL number, α, c0, surface tension).
+    p: DfsphParams,
+    /// Its index in the solve (0: the solve's first fluid, which runs it and keeps its books).
+    who: usize,
+    solver: Arc<Mutex<Solver<V>>>,
+}
+
 fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>> {
     let (first, n) = super::fluid::particles(&p, ctx)?;
     let iters = p.number("max_iterations")?;
@@ -299,14 +350,59 @@ crate::register_term!("dfsph", build);
 impl<V: Vector> Dfsph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.
     pub fn new(name: &str, first: usize, n: usize, p: DfsphParams, walls: Vec<V>, psi: Vec<Real>) -> Result<Self> {
+        let solver = Solver::new(first, n, p, walls, psi)?;
+        Ok(Self { name: name.to_string(), range: first..first + n, p, who: 0, solver: Arc::new(Mutex::new(solver)) })
+    }
+
+    pub fn range(&self) -> Range<usize> {
+        self.range.clone()
+    }
+
+    /// The solve (a poisoned lock only means a panic elsewhere: the solver's scratch is rebuilt
+    /// by the next build).
+    fn solver(&self) -> MutexGuard<'_, Solver<V>> {
+        self.solver.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The number of fluids in its solve.
+    pub fn solve_size(&self) -> usize {
+        self.solver().members.len()
+    }
+
+    /// The key under which solves register (`neighbors::Shared`): fluids share one solve when
+    /// everything but their particles, walls, CFL number and α c0 agrees.
+    fn key(p: &DfsphParams) -> String {
+        let b = |x: Real| x.to_bits();
+        format!(
+            "dfsph h={:#x} {:?} rho0={:#x} tol={:#x},{:#x} it={} st={:#x} ad={:#x}",
+            b(p.h),
+            p.kernel,
+            b(p.rho0),
+            b(p.density_tol),
+            b(p.divergence_tol),
+            p.max_iterations,
+            b(p.surface_tension),
+            b(p.adhesion)
+        )
+    }
+}
+
+impl<V: Vector> Solver<V> {
+    fn new(first: usize, n: usize, p: DfsphParams, walls: Vec<V>, psi: Vec<Real>) -> Result<Self> {
         p.validate()?;
-        let walls = Walls::checked(&walls, &psi, 2.0 * p.h)?;
+        let checked = Walls::checked(&walls, &psi, 2.0 * p.h)?;
+        let visc = p.alpha * p.c0;
         Ok(Self {
-            name: name.to_string(),
+            members: vec![Member { range: first..first + n, offset: 0, walls, psi, visc }],
             first,
             n,
             p,
-            walls,
+            to_scene: Vec::new(),
+            xg: Vec::new(),
+            mg: Vec::new(),
+            img: Vec::new(),
+            visc: Vec::new(),
+            walls: checked,
             grid: CellList::new(2.0 * p.h, V::DIM)?,
             xs: Vec::new(),
             xc: Default::default(),
@@ -333,41 +429,62 @@ impl<V: Vector> Dfsph<V> {
         })
     }
 
-    pub fn range(&self) -> Range<usize> {
-        self.first..self.first + self.n
+    /// Whether a fluid over `range` can join: no particle in two fluids, and every particle
+    /// addressable by the `u32` of the sorted order.
+    fn admits(&self, range: &Range<usize>) -> bool {
+        self.members.iter().all(|m| m.range.end <= range.start || range.end <= m.range.start)
+            && (self.n + range.len()) < u32::MAX as usize
+    }
+
+    /// Adds the only member of `other` as the last member; returns its index. The walls become
+    /// the union of the members' (a position given twice, the same tank, counted once).
+    fn join(&mut self, other: Solver<V>) -> Result<usize> {
+        let m = other.members.into_iter().next().expect("a solve has a member");
+        let mut seen: std::collections::HashSet<Vec<u64>> = std::collections::HashSet::new();
+        let (mut walls, mut psi) = (Vec::new(), Vec::new());
+        for mm in self.members.iter().chain(std::iter::once(&m)) {
+            for (w, &p) in mm.walls.iter().zip(&mm.psi) {
+                if seen.insert((0..V::DIM).map(|c| w.comp(c).to_bits()).collect()) {
+                    walls.push(*w);
+                    psi.push(p);
+                }
+            }
+        }
+        self.walls = Walls::checked(&walls, &psi, 2.0 * self.p.h)?;
+        self.members.push(Member { offset: self.n, ..m });
+        self.n += self.members.last().map_or(0, |m| m.range.len());
+        self.to_scene = self.members.iter().flat_map(|m| m.range.clone().map(|i| i as u32)).collect();
+        // The warm starts and pressures, particle order, member after member.
+        for a in [&mut self.kappa, &mut self.kappa_v, &mut self.pressure] {
+            a.resize(self.n, 0.0);
+        }
+        self.built = false;
+        Ok(self.members.len() - 1)
+    }
+
+    /// The scene index of particle `u` of the solve's order.
+    #[inline(always)]
+    fn at(first: usize, to_scene: &[u32], u: usize) -> usize {
+        if to_scene.is_empty() {
+            first + u
+        } else {
+            to_scene[u] as usize
+        }
     }
 }
 
-impl<V: Vector> Term<V> for Dfsph<V> {
-    fn name(&self) -> &str {
-        &self.name
-    }
-
-    /// (`crate::alloc`) The build grows its pair lists inside parallel kernels, where a refusal
-    /// cannot be reported; the world checks this much room is left once the step's checkpoint
-    /// is taken. After a build: what it held again (a list that must grow reallocates beside
-    /// the old one). Before the first: 64 neighbours a particle in 2D, 160 in 3D (a full
-    /// neighbourhood is about 21 and 74 at h = 1.3 Δx; the rest covers a longer h), and the
-    /// per-particle arrays.
-    fn transient_bytes(&self, _n: usize) -> u128 {
-        let held: u128 = self.pairs.iter().map(|p| p.bytes() as u128).sum();
-        if held > 0 {
-            return held;
-        }
-        let per_pair = Need::bytes_of::<u32>(1) + Need::bytes_of::<V>(1);
-        let neighbours: u128 = if V::DIM == 2 { 64 } else { 160 };
-        let n = self.n as u128;
-        n * neighbours * per_pair
-            + n * (Need::bytes_of::<Site<V>>(1) + Need::bytes_of::<V>(2) + Need::bytes_of::<Real>(4))
-    }
-
-    /// The viscous forces at (x, v) (module doc); pressure is the projections'.
+impl<V: Vector> Solver<V> {
+    /// The viscous and surface forces at (x, v) on every member's particles (module doc).
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
-        let r = self.range();
         if write == Write::Overwrite {
-            let (head, rest) = f.split_at_mut(r.start);
-            head.fill(V::ZERO);
-            rest[r.len()..].fill(V::ZERO);
+            if self.to_scene.is_empty() {
+                let (head, rest) = f.split_at_mut(self.first);
+                head.fill(V::ZERO);
+                rest[self.n..].fill(V::ZERO);
+            } else {
+                // Every particle is zeroed, and each member's then overwritten.
+                f.fill(V::ZERO);
+            }
         }
         if self.n == 0 {
             return 0.0;
@@ -392,12 +509,15 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         let sp = SyncPtr(self.surface_p.as_mut_ptr());
         let power = if visc == 0.0 && !surf.tension() && !surf.adhesion() {
             if write == Write::Overwrite {
-                f[r].fill(V::ZERO);
+                for m in &self.members {
+                    f[m.range.clone()].fill(V::ZERO);
+                }
             }
             0.0
         } else {
             let (pairs, rho, xs, vs, m, h) = (&self.pairs, &self.rho, &self.xs, &self.vs, &self.m, self.p.h);
-            let (order, out) = (&self.grid.order, SyncPtr(f[r].as_mut_ptr()));
+            let (order, out) = (&self.grid.order, SyncPtr(f.as_mut_ptr()));
+            let (first, to_scene, vc) = (self.first, &self.to_scene, &self.visc);
             let eps = 0.01 * h * h;
             let kick_dt = self.kick_dt;
             par::sum(self.n, 0.0, |ks| {
@@ -413,7 +533,9 @@ impl<V: Vector> Term<V> for Dfsph<V> {
                         // Π_ij = −α c0 μ_ij / ρ̄_ij, μ_ij = h v_ij·r_ij / (r² + 0.01 h²) for
                         // approaching pairs, else 0 (without a branch: half the pairs approach).
                         let vr = vij.dot(d).min(0.0);
-                        let pi = -visc * h * vr / ((d.length_squared() + eps) * 0.5 * (ri + rho[j]));
+                        // Several fluids: the pair's mean α c0 (symmetric: momentum is kept).
+                        let c = if vc.is_empty() { visc } else { 0.5 * (vc[i] + vc[j]) };
+                        let pi = -c * h * vr / ((d.length_squared() + eps) * 0.5 * (ri + rho[j]));
                         a -= p.g[q] * pi;
                     }
                     if surf.tension() || surf.adhesion() {
@@ -433,7 +555,8 @@ impl<V: Vector> Term<V> for Dfsph<V> {
                         power -= m[i] * a.dot(vi + a * (0.5 * kick_dt));
                     }
                     // SAFETY: `order` is a permutation: each particle is written by one slot.
-                    unsafe { write.put(&mut *out.get().add(order[i] as usize), a * m[i]) };
+                    let at = Self::at(first, to_scene, order[i] as usize);
+                    unsafe { write.put(&mut *out.get().add(at), a * m[i]) };
                 }
                 power
             })
@@ -442,66 +565,33 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         power
     }
 
-    fn potential(&self, _x: &[V], _model: &Model) -> Option<Real> {
-        // Incompressible: no internal energy (module doc).
-        Some(0.0)
+    /// Density (kg/m^dim) of each particle of member `who`, particle order, computed now.
+    fn member_densities(&self, who: usize, x: &[V], model: &Model) -> Vec<Real> {
+        let all = self.densities(x, model);
+        let m = &self.members[who];
+        all[m.offset..m.offset + m.range.len()].to_vec()
     }
 
-    fn dissipative(&self) -> bool {
-        true
-    }
-
-    fn velocity_dependent(&self) -> bool {
-        true
-    }
-
-    fn min_particles(&self) -> usize {
-        self.first + self.n
-    }
-
-    fn max_dt(&self, _x: &[V], v: &[V], _model: &Model, g: Real) -> Option<Real> {
-        if self.n == 0 {
-            return None;
-        }
-        let vmax = v[self.range()].iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
-        // The flow's CFL condition λ h/|v|max, the explicit viscosity's limit 0.125 h²/ν with
-        // Monaghan's ν = α c0 h/(2(d + 2)) (Monaghan 2005, §4.3), and the force criterion of the
-        // uniform fields (a fluid falling from rest has no speed yet), and with surface tension
-        // the capillary limit (`Surface::max_dt`). (WCSPH's form
-        // λ h/(|v|max + 0.6 α c0) took 2199 steps to T* = 4 on the 41k dam break.)
-        let h = self.p.h;
-        let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
-        let viscous = super::resolve::dfsph_viscous(h, V::DIM, self.p.alpha, self.p.c0);
-        let force = if g > 0.0 { 0.25 * (h / g).sqrt() } else { f64::INFINITY };
-        let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
-        let dt = cfl.min(viscous).min(force).min(capillary);
-        dt.is_finite().then_some(dt)
-    }
-
-    fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
-        vec![("density", self.range(), self.densities(x, model)), ("pressure", self.range(), self.pressure.clone())]
-    }
-
-    fn profile(&self) -> Option<([f64; 3], usize)> {
-        let bytes = self.grid.bytes()
+    fn bytes(&self) -> usize {
+        self.grid.bytes()
             + self.walls.bytes()
             + self.pairs.iter().map(Pairs::bytes).sum::<usize>()
-            + (self.xs.capacity() + self.vs.capacity() + self.normals.capacity()) * std::mem::size_of::<V>()
+            + (self.xs.capacity() + self.vs.capacity() + self.normals.capacity() + self.xg.capacity())
+                * std::mem::size_of::<V>()
             + self.sites.capacity() * std::mem::size_of::<Site<V>>()
             + (self.m.capacity() + self.k.capacity() + self.ksum.capacity() + self.surface_p.capacity()) * 8
             + (self.rho.capacity() + self.xc.iter().map(Vec::capacity).sum::<usize>()) * 8
-            + (self.kappa.capacity() + self.kappa_v.capacity() + self.pressure.capacity()) * 8;
-        Some((self.clock, bytes))
+            + (self.kappa.capacity() + self.kappa_v.capacity() + self.pressure.capacity()) * 8
+            + (self.mg.capacity() + self.img.capacity() + self.visc.capacity()) * 8
+            + self.to_scene.capacity() * 4
     }
 
-    fn set_stop(&mut self, stop: Stop) {
-        self.stop = stop;
-    }
-
-    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
+    fn reserve(&mut self) -> Result<()> {
         let n = self.n;
         let vb = std::mem::size_of::<V>();
-        let per = 2 * vb + std::mem::size_of::<Site<V>>() + (4 + V::DIM) * 8;
+        let several = !self.to_scene.is_empty();
+        // Several members: the gathered positions, masses and α c0 too.
+        let per = 2 * vb + std::mem::size_of::<Site<V>>() + (4 + V::DIM) * 8 + if several { vb + 24 } else { 0 };
         let bytes = (n as u128) * per as u128 + (V::DIM * PAD * 8) as u128;
         let need = Need::new("step", bytes, format!("the DFSPH buffers of {} particles", count(n as u128)));
         need.check()?;
@@ -511,20 +601,22 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         for a in [&mut self.m, &mut self.k, &mut self.ksum, &mut self.rho] {
             need.reserve(a, n)?;
         }
+        if several {
+            need.reserve(&mut self.xg, n)?;
+            for a in [&mut self.mg, &mut self.img, &mut self.visc] {
+                need.reserve(a, n)?;
+            }
+        }
         for xc in self.xc.iter_mut().take(V::DIM) {
             need.reserve(xc, n + PAD)?;
         }
         self.grid.reserve(n, "step")?;
-        // The step's checkpoint copies the state (fallibly) and then this term's history, which
+        // The step's checkpoint copies the state (fallibly) and then the terms' histories, which
         // `Term::history` cannot refuse: check now that both still fit (3 reals and 3 vectors a
         // particle), so that a refusal is an error here rather than an abort there.
         let snapshot = Need::bytes_of::<Real>(3 * n) + Need::bytes_of::<V>(3 * n);
         Need::new("step", snapshot, format!("a copy of the DFSPH state of {} particles", count(n as u128)))
             .room(snapshot)
-    }
-
-    fn integrators(&self) -> Option<&'static [&'static str]> {
-        crate::terms::registry::integrator_rule("dfsph").map(|r| r.0)
     }
 
     fn stats(&self) -> Vec<(&'static str, Real)> {
@@ -545,52 +637,26 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         ]
     }
 
-    fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
-        Some(self)
-    }
-    fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
-        Some(self)
-    }
-    fn as_own_state_mut(&mut self) -> Option<&mut dyn OwnState<V>> {
-        Some(self)
-    }
-}
-
-impl<V: Vector> OwnState<V> for Dfsph<V> {
-    /// The warm starts and the last step's pressure: 3 values per particle.
-    fn history(&self) -> Vec<Real> {
-        let mut h = Vec::with_capacity(3 * self.n);
-        h.extend_from_slice(&self.kappa);
-        h.extend_from_slice(&self.kappa_v);
-        h.extend_from_slice(&self.pressure);
+    /// Member `who`'s slices of the warm starts and pressures.
+    fn history_of(&self, who: usize) -> Vec<Real> {
+        let m = &self.members[who];
+        let r = m.offset..m.offset + m.range.len();
+        let mut h = Vec::with_capacity(3 * r.len());
+        h.extend_from_slice(&self.kappa[r.clone()]);
+        h.extend_from_slice(&self.kappa_v[r.clone()]);
+        h.extend_from_slice(&self.pressure[r]);
         h
     }
-    fn set_history(&mut self, h: &[Real], _n_particles: usize) -> Result<()> {
-        let n = self.n;
-        if h.len() != 3 * n {
-            return Err(invalid("history", format!("expected {} values (3 per particle), got {}", 3 * n, h.len())));
-        }
-        if let Some(i) = h.iter().position(|x| !x.is_finite()) {
-            return Err(invalid("history", format!("entry {i} is not finite")));
-        }
-        self.kappa.copy_from_slice(&h[..n]);
-        self.kappa_v.copy_from_slice(&h[n..2 * n]);
-        self.pressure.copy_from_slice(&h[2 * n..]);
-        self.built = false;
-        Ok(())
-    }
-    /// A snapshot of this term, non-finite values (a rollback of a diverged call) included.
-    fn restore_history(&mut self, h: &[Real], _n_particles: usize) {
-        let n = self.n;
-        assert_eq!(h.len(), 3 * n, "a DFSPH term's own history restores");
-        self.kappa.copy_from_slice(&h[..n]);
-        self.kappa_v.copy_from_slice(&h[n..2 * n]);
-        self.pressure.copy_from_slice(&h[2 * n..]);
-        self.built = false;
-    }
-}
 
-impl<V: Vector> VelocityProjection<V> for Dfsph<V> {
+    fn set_history_of(&mut self, who: usize, h: &[Real]) {
+        let m = &self.members[who];
+        let (o, n) = (m.offset, m.range.len());
+        self.kappa[o..o + n].copy_from_slice(&h[..n]);
+        self.kappa_v[o..o + n].copy_from_slice(&h[n..2 * n]);
+        self.pressure[o..o + n].copy_from_slice(&h[2 * n..]);
+        self.built = false;
+    }
+
     fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
         if self.n == 0 || self.stop.is_set() {
             return 0.0;
@@ -606,6 +672,184 @@ impl<V: Vector> VelocityProjection<V> for Dfsph<V> {
             self.built = false;
         }
         e
+    }
+}
+
+impl<V: Vector> Term<V> for Dfsph<V> {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// (`crate::alloc`) The build grows its pair lists inside parallel kernels, where a refusal
+    /// cannot be reported; the world checks this much room is left once the step's checkpoint
+    /// is taken. After a build: what it held again (a list that must grow reallocates beside
+    /// the old one). Before the first: 64 neighbours a particle in 2D, 160 in 3D (a full
+    /// neighbourhood is about 21 and 74 at h = 1.3 Δx; the rest covers a longer h), and the
+    /// per-particle arrays. The solve's first fluid answers for all of it.
+    fn transient_bytes(&self, _n: usize) -> u128 {
+        if self.who != 0 {
+            return 0;
+        }
+        let s = self.solver();
+        let held: u128 = s.pairs.iter().map(|p| p.bytes() as u128).sum();
+        if held > 0 {
+            return held;
+        }
+        let per_pair = Need::bytes_of::<u32>(1) + Need::bytes_of::<V>(1);
+        let neighbours: u128 = if V::DIM == 2 { 64 } else { 160 };
+        let n = s.n as u128;
+        n * neighbours * per_pair
+            + n * (Need::bytes_of::<Site<V>>(1) + Need::bytes_of::<V>(2) + Need::bytes_of::<Real>(4))
+    }
+
+    /// The viscous and surface forces at (x, v) (module doc); pressure is the projections'.
+    /// The solve's first fluid adds them for every fluid of the solve, and books their work.
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
+        if self.who != 0 {
+            // The first fluid is always evaluated before (the system evaluates terms in the
+            // order they were added) and wrote this fluid's forces.
+            if write == Write::Overwrite {
+                f.fill(V::ZERO);
+            }
+            return 0.0;
+        }
+        self.solver().add_forces(x, v, model, f, write)
+    }
+
+    fn potential(&self, _x: &[V], _model: &Model) -> Option<Real> {
+        // Incompressible: no internal energy (module doc).
+        Some(0.0)
+    }
+
+    fn dissipative(&self) -> bool {
+        true
+    }
+
+    fn velocity_dependent(&self) -> bool {
+        true
+    }
+
+    fn min_particles(&self) -> usize {
+        self.range.end
+    }
+
+    fn max_dt(&self, _x: &[V], v: &[V], _model: &Model, g: Real) -> Option<Real> {
+        if self.range.is_empty() {
+            return None;
+        }
+        let vmax = v[self.range()].iter().map(|u| u.length_squared()).fold(0.0, f64::max).sqrt();
+        // The flow's CFL condition λ h/|v|max, the explicit viscosity's limit 0.125 h²/ν with
+        // Monaghan's ν = α c0 h/(2(d + 2)) (Monaghan 2005, §4.3), and the force criterion of the
+        // uniform fields (a fluid falling from rest has no speed yet), and with surface tension
+        // the capillary limit (`Surface::max_dt`). (WCSPH's form
+        // λ h/(|v|max + 0.6 α c0) took 2199 steps to T* = 4 on the 41k dam break.) Each fluid
+        // of a solve limits the step by its own: a pair's α c0, their mean, is within them.
+        let h = self.p.h;
+        let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
+        let viscous = super::resolve::dfsph_viscous(h, V::DIM, self.p.alpha, self.p.c0);
+        let force = if g > 0.0 { 0.25 * (h / g).sqrt() } else { f64::INFINITY };
+        let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
+        let dt = cfl.min(viscous).min(force).min(capillary);
+        dt.is_finite().then_some(dt)
+    }
+
+    fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
+        let s = self.solver();
+        let pressure = s.history_of(self.who)[2 * self.range.len()..].to_vec();
+        vec![("density", self.range(), s.member_densities(self.who, x, model)), ("pressure", self.range(), pressure)]
+    }
+
+    fn profile(&self) -> Option<([f64; 3], usize)> {
+        // The solve's clock and buffers are booked once, by its first fluid.
+        let s = self.solver();
+        Some(if self.who == 0 { (s.clock, s.bytes()) } else { ([0.0; 3], 0) })
+    }
+
+    fn set_stop(&mut self, stop: Stop) {
+        self.solver().stop = stop;
+    }
+
+    fn share(&mut self, shared: &mut Shared) -> Result<()> {
+        let key = Self::key(&self.p);
+        if let Some(other) = shared.find::<Mutex<Solver<V>>>(&key) {
+            if Arc::ptr_eq(&other, &self.solver) {
+                return Ok(());
+            }
+            let mut g = other.lock().unwrap_or_else(|e| e.into_inner());
+            if g.admits(&self.range) {
+                // Move this fluid (alone in its solve until now) into the other solve.
+                let mine = std::mem::replace(&mut self.solver, other.clone());
+                match Arc::try_unwrap(mine) {
+                    Ok(m) => {
+                        let stop = g.stop.clone();
+                        self.who = g.join(m.into_inner().unwrap_or_else(|e| e.into_inner()))?;
+                        g.stop = stop;
+                    }
+                    Err(mine) => self.solver = mine, // shared already: stay alone
+                }
+                return Ok(());
+            }
+            // Its particles overlap a member's: it stays alone, and the solve stays registered.
+            return Ok(());
+        }
+        shared.register(key, self.solver.clone());
+        Ok(())
+    }
+
+    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
+        self.solver().reserve()
+    }
+
+    fn integrators(&self) -> Option<&'static [&'static str]> {
+        crate::terms::registry::integrator_rule("dfsph").map(|r| r.0)
+    }
+
+    /// The solve's totals (a solve of several fluids: each reports the same).
+    fn stats(&self) -> Vec<(&'static str, Real)> {
+        self.solver().stats()
+    }
+
+    fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
+        Some(self)
+    }
+    fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
+        Some(self)
+    }
+    fn as_own_state_mut(&mut self) -> Option<&mut dyn OwnState<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> OwnState<V> for Dfsph<V> {
+    /// The warm starts and the last step's pressure: 3 values per particle.
+    fn history(&self) -> Vec<Real> {
+        self.solver().history_of(self.who)
+    }
+    fn set_history(&mut self, h: &[Real], _n_particles: usize) -> Result<()> {
+        let n = self.range.len();
+        if h.len() != 3 * n {
+            return Err(invalid("history", format!("expected {} values (3 per particle), got {}", 3 * n, h.len())));
+        }
+        if let Some(i) = h.iter().position(|x| !x.is_finite()) {
+            return Err(invalid("history", format!("entry {i} is not finite")));
+        }
+        self.solver().set_history_of(self.who, h);
+        Ok(())
+    }
+    /// A snapshot of this term, non-finite values (a rollback of a diverged call) included.
+    fn restore_history(&mut self, h: &[Real], _n_particles: usize) {
+        assert_eq!(h.len(), 3 * self.range.len(), "a DFSPH term's own history restores");
+        self.solver().set_history_of(self.who, h);
+    }
+}
+
+impl<V: Vector> VelocityProjection<V> for Dfsph<V> {
+    /// The solve's first fluid runs the solve for all its fluids, and books what it removes.
+    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
+        if self.who != 0 {
+            return 0.0;
+        }
+        self.solver().project(stage, x, v, model, dt)
     }
 }
 

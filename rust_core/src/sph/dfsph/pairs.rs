@@ -207,7 +207,7 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
     }
 }
 
-impl<V: Vector> Dfsph<V> {
+impl<V: Vector> Solver<V> {
     /// Sorts the fluid at `x` into cells and computes, per sorted particle, its density, factor,
     /// wall gradient sum and stored pairs (module doc, step 1).
     pub(super) fn build(&mut self, x: &[V], model: &Model) {
@@ -226,8 +226,23 @@ impl<V: Vector> Dfsph<V> {
     }
 
     pub(super) fn build_with<K: Kernel>(&mut self, x: &[V], model: &Model, level: simd::Level) {
-        let (n, r) = (self.n, self.range());
-        let (xr, mr, im) = (&x[r.clone()], &model.mass[r.clone()], &model.inv_mass[r]);
+        let n = self.n;
+        if !self.to_scene.is_empty() {
+            // Several fluids: their particles gathered into the solve's order, and α c0.
+            let ts = &self.to_scene;
+            self.xg.clear();
+            self.xg.extend(ts.iter().map(|&i| x[i as usize]));
+            self.mg.clear();
+            self.mg.extend(ts.iter().map(|&i| model.mass[i as usize]));
+            self.img.clear();
+            self.img.extend(ts.iter().map(|&i| model.inv_mass[i as usize]));
+        }
+        let r = self.first..self.first + n;
+        let (xr, mr, im) = if self.to_scene.is_empty() {
+            (&x[r.clone()], &model.mass[r.clone()], &model.inv_mass[r])
+        } else {
+            (&self.xg[..], &self.mg[..], &self.img[..])
+        };
         self.grid.build(xr);
         let order = &self.grid.order;
         self.xs.resize(n, V::ZERO);
@@ -241,6 +256,12 @@ impl<V: Vector> Dfsph<V> {
                 free[k] = im[i] != 0.0;
             }
         });
+        if !self.to_scene.is_empty() {
+            let visc_of: Vec<Real> =
+                self.members.iter().flat_map(|m| std::iter::repeat_n(m.visc, m.range.len())).collect();
+            self.visc.clear();
+            self.visc.extend(order.iter().map(|&u| visc_of[u as usize]));
+        }
         for (c, xc) in self.xc.iter_mut().enumerate().take(V::DIM) {
             xc.clear();
             xc.extend(self.xs.iter().map(|x| x.comp(c)));

@@ -3,15 +3,16 @@
 //! forces, and the densities the term reports.
 use super::*;
 
-impl<V: Vector> Dfsph<V> {
+impl<V: Vector> Solver<V> {
     /// Sorted velocities from the scene's `v`, and their kinetic energy (J).
     pub(super) fn gather_v(&mut self, v: &[V]) -> Real {
-        let (order, vr, m, free) = (&self.grid.order, &v[self.range()], &self.m, &self.free);
+        let (order, m, free) = (&self.grid.order, &self.m, &self.free);
+        let (first, ts) = (self.first, &self.to_scene);
         self.vs.resize(self.n, V::ZERO);
         par::chunks1_sum(&mut self.vs, |s, vs| {
             let mut e = 0.0;
             for (k, vk) in vs.iter_mut().enumerate() {
-                *vk = vr[order[s + k] as usize];
+                *vk = v[Self::at(first, ts, order[s + k] as usize)];
                 // Pinned particles carry no kinetic energy in the books (`ParticleSystem::energy`).
                 if free[s + k] {
                     e += 0.5 * m[s + k] * vk.length_squared();
@@ -23,14 +24,14 @@ impl<V: Vector> Dfsph<V> {
 
     /// Writes the sorted velocities back into the scene's `v`; returns their kinetic energy.
     pub(super) fn scatter_v(&self, v: &mut [V]) -> Real {
-        let r = self.range();
-        let out = SyncPtr(v[r].as_mut_ptr());
+        let out = SyncPtr(v.as_mut_ptr());
         let (order, vs, m, free) = (&self.grid.order, &self.vs, &self.m, &self.free);
+        let (first, ts) = (self.first, &self.to_scene);
         par::sum(self.n, 0.0, |ks| {
             let mut e = 0.0;
             for k in ks {
                 // SAFETY: `order` is a permutation: each particle is written by one sorted slot.
-                unsafe { *out.get().add(order[k] as usize) = vs[k] };
+                unsafe { *out.get().add(Self::at(first, ts, order[k] as usize)) = vs[k] };
                 if free[k] {
                     e += 0.5 * m[k] * vs[k].length_squared();
                 }
@@ -277,8 +278,16 @@ impl<V: Vector> Dfsph<V> {
     }
 
     pub(super) fn densities_with<K: Kernel>(&self, x: &[V], model: &Model) -> Vec<Real> {
-        let r = self.range();
-        let (xr, mr) = (&x[r.clone()], &model.mass[r]);
+        let r = self.first..self.first + self.n;
+        let gathered: (Vec<V>, Vec<Real>);
+        let (xr, mr) = if self.to_scene.is_empty() {
+            (&x[r.clone()], &model.mass[r])
+        } else {
+            let ts = &self.to_scene;
+            gathered =
+                (ts.iter().map(|&i| x[i as usize]).collect(), ts.iter().map(|&i| model.mass[i as usize]).collect());
+            (&gathered.0[..], &gathered.1[..])
+        };
         let mut grid = CellList::new(self.grid.cell_size(), V::DIM).expect("valid cell size");
         grid.build(xr);
         let (h, w) = (self.p.h, f64::walls(&self.walls));

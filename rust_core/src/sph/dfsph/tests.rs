@@ -39,12 +39,12 @@ fn params(dx: f64) -> DfsphParams {
     }
 }
 
-/// The particle mass of spacing dx, the model of n such particles and a fresh term over
-/// them with walls `w` of the same mass.
-fn term(n: usize, w: &[DVec2], dx: f64) -> (f64, Model, Dfsph<DVec2>) {
+/// The particle mass of spacing dx, the model of n such particles and a fresh solve of one
+/// fluid over them with walls `w` of the same mass.
+fn term(n: usize, w: &[DVec2], dx: f64) -> (f64, Model, Solver<DVec2>) {
     let m = 1000.0 * dx * dx;
     let model = Model { mass: vec![m; n], inv_mass: vec![1.0 / m; n], ..Default::default() };
-    (m, model, Dfsph::new("f", 0, n, params(dx), w.to_vec(), vec![m; w.len()]).unwrap())
+    (m, model, Solver::new(0, n, params(dx), w.to_vec(), vec![m; w.len()]).unwrap())
 }
 
 /// ∇W and W of the cubic spline at smoothing length h, for the brute-force sums.
@@ -90,7 +90,7 @@ fn the_build_matches_a_brute_force_sum() {
 }
 
 /// The stored pairs, densities and factors of one build at `level`, as bits.
-fn build_bits<V: Vector>(t: &mut Dfsph<V>, x: &[V], model: &Model, level: simd::Level) -> Vec<u64> {
+fn build_bits<V: Vector>(t: &mut Solver<V>, x: &[V], model: &Model, level: simd::Level) -> Vec<u64> {
     t.build_at(x, model, level);
     let mut out = vec![];
     for p in &t.pairs {
@@ -132,7 +132,7 @@ fn the_build_is_the_same_at_every_level() {
         .collect();
     let m = 1000.0 * dx * dx * dx;
     let model3 = Model { mass: vec![m; x3.len()], inv_mass: vec![1.0 / m; x3.len()], ..Default::default() };
-    let mut t3 = Dfsph::new("f", 0, x3.len(), params(dx), vec![], vec![]).unwrap();
+    let mut t3 = Solver::new(0, x3.len(), params(dx), vec![], vec![]).unwrap();
     let want = build_bits(&mut t3, &x3, &model3, simd::Level::Scalar);
     for level in simd::Level::available() {
         assert!(build_bits(&mut t3, &x3, &model3, level) == want, "3D {level:?}");
@@ -154,7 +154,7 @@ fn a_density_solve_reaches_its_tolerance() {
         let (m, model, mut t) = term(n, &w, dx);
         let mut v = v0.clone();
         t.build(&x, &model);
-        let removed = VelocityProjection::project(&mut t, Projection::Density, &x, &mut v, &model, dt);
+        let removed = t.project(Projection::Density, &x, &mut v, &model, dt);
         let ke = |v: &[DVec2]| v.iter().map(|u| 0.5 * m * u.length_squared()).sum::<f64>();
         assert!((removed - (ke(&v0) - ke(&v))).abs() <= 1e-9 * ke(&v0).max(1e-9));
         assert!(t.books.density_iterations >= 2 && t.books.unconverged == 0);
@@ -246,4 +246,55 @@ fn time_the_passes() {
         med(2),
         med(3)
     );
+}
+
+/// Fluids with the same settings join one solve through `Shared` (walls given to both counted
+/// once); another rest density, or overlapping particles, stay apart; one step of the split
+/// solve is the same bits as one fluid over the same particles.
+#[test]
+fn fluids_with_the_same_settings_join_one_solve() {
+    let dx = 0.01;
+    let (x, v0, w) = scene(16, dx, 0.985);
+    let n = x.len();
+    let (m, model, _) = term(n, &w, dx);
+    let psi = vec![m; w.len()];
+    let mut shared = Shared::default();
+    let half = n / 2;
+    let mut a = Dfsph::new("a", 0, half, params(dx), w.clone(), psi.clone()).unwrap();
+    let mut b = Dfsph::new("b", half, n - half, params(dx), w.clone(), psi.clone()).unwrap();
+    a.share(&mut shared).unwrap();
+    b.share(&mut shared).unwrap();
+    assert_eq!((a.solve_size(), b.who), (2, 1));
+    assert_eq!(a.solver().walls.grid.len(), w.len(), "the same tank counted once");
+    let mut other = Dfsph::<DVec2>::new("c", n, 10, DfsphParams { rho0: 999.0, ..params(dx) }, vec![], vec![]).unwrap();
+    other.share(&mut shared).unwrap();
+    assert_eq!(other.solve_size(), 1);
+    let mut overlap = Dfsph::<DVec2>::new("d", half - 1, 2, params(dx), vec![], vec![]).unwrap();
+    overlap.share(&mut shared).unwrap();
+    assert_eq!((overlap.solve_size(), a.solve_size()), (1, 2));
+
+    let mut one = Dfsph::new("one", 0, n, params(dx), w.clone(), psi).unwrap();
+    let dt = 1e-3;
+    let run = |terms: &mut [&mut Dfsph<DVec2>]| {
+        let mut v = v0.clone();
+        let mut f = vec![DVec2::ZERO; n];
+        let mut e = 0.0;
+        for t in terms.iter_mut() {
+            e += VelocityProjection::project(*t, Projection::Divergence, &x, &mut v, &model, dt);
+        }
+        for (k, t) in terms.iter_mut().enumerate() {
+            let write = if k == 0 { Write::Overwrite } else { Write::Add };
+            e += t.add_forces(&x, &v, &model, &mut f, write);
+        }
+        for (vi, fi) in v.iter_mut().zip(&f) {
+            *vi += *fi * (dt / m);
+        }
+        for t in terms.iter_mut() {
+            e += VelocityProjection::project(*t, Projection::Density, &x, &mut v, &model, dt);
+        }
+        (v, f, e)
+    };
+    let split = run(&mut [&mut a, &mut b]);
+    let whole = run(&mut [&mut one]);
+    assert_eq!(split, whole);
 }
