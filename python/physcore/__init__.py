@@ -5,7 +5,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 """
 from __future__ import annotations
 
-from . import _core, flows, sweeps
+from . import _core, flows, shapes, sweeps
 from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
@@ -56,6 +56,7 @@ __all__ = [
     "flows",
     "grids",
     "fluids",
+    "shapes",
     "PhyscoreError",
     "InvalidInputError",
     "InvalidTypeError",

@@ -51,6 +51,8 @@ import numpy as np
 from . import _check, _core, _deprecate
 from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning
 from ._parts import AttachContext, LoadContext
+from .shapes import lattice, tank_walls  # the lattice and tank builders, still importable from here
+from .shapes import lattice_counts as lattice_counts
 from .terms import Gravity, Term, _finite_float
 
 __all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
@@ -157,76 +159,6 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
     particle's mass ``ρ0 / sum`` makes a lattice at rest have exactly the rest density (the
     core's formula, ``sph::resolve``)."""
     return float(_core.sph_lattice_sum(float(spacing), float(h), int(dim), str(kernel)))
-
-
-def _corner(value: object, arg: str) -> np.ndarray:
-    a = _check.real_array(arg, value)
-    return a.astype(np.float64)
-
-
-def lattice_counts(lower: np.typing.ArrayLike, upper: np.typing.ArrayLike, spacing: float) -> list[int]:
-    """Cells along each axis of :func:`lattice` (Python ints, never overflowing; the box sides
-    are rounded to whole cells, at least one)."""
-    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
-    s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
-    if lo.shape != hi.shape or lo.ndim != 1 or lo.shape[0] not in (2, 3):
-        raise InvalidInputError(f"lower/upper: expected two vectors of length 2 or 3, got {lo.shape} and {hi.shape}")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(hi > lo)):
-        raise InvalidInputError("upper: must be finite and > lower on every axis")
-    counts = []
-    for d in range(lo.shape[0]):
-        cells = (float(hi[d]) - float(lo[d])) / s  # Python floats: overflow gives inf, no warning
-        counts.append(max(round(cells), 1) if math.isfinite(cells) else -1)
-    return counts
-
-
-def lattice(lower: np.typing.ArrayLike, upper: np.typing.ArrayLike, spacing: float) -> np.ndarray:
-    """Particle centres filling the box ``[lower, upper]`` on a cubic lattice: positions
-    ``lower + (i + ½) spacing`` for every cell of the box (the box sides are rounded to whole
-    cells). Returns ``(N, dim)`` float64, m. Ordered with the first axis fastest.
-
-    Raises TypeError / InvalidInputError naming the argument, and InvalidInputError naming
-    ``spacing`` when the lattice would not fit in memory (:func:`physcore._check.memory_limit`)."""
-    counts = lattice_counts(lower, upper, spacing)
-    lo = _corner(lower, "lower")  # upper was checked by lattice_counts
-    s = float(spacing)
-    total = math.prod(counts) if min(counts) > 0 else math.inf
-    # meshgrid, stack and the result: about three copies of (N, dim) float64.
-    _check.memory("spacing", 3 * 8 * len(counts) * total, f"a lattice of {total} points")
-    n = np.array(counts, dtype=np.int64)
-    axes = [lo[d] + (np.arange(n[d]) + 0.5) * s for d in range(lo.shape[0])]
-    grids = np.meshgrid(*axes[::-1], indexing="ij")[::-1]
-    return np.ascontiguousarray(np.stack([g.ravel() for g in grids], axis=1))
-
-
-def tank_walls(
-    lower: np.typing.ArrayLike,
-    upper: np.typing.ArrayLike,
-    spacing: float,
-    layers: int = 3,
-    *,
-    top: bool = False,
-) -> np.ndarray:
-    """Static wall particles lining the inside box ``[lower, upper]`` (an open tank unless
-    ``top``): ``layers`` lattice layers outside each face, on the same lattice as
-    :func:`lattice` (so a fluid filled with :func:`lattice` continues into the wall). Use at
-    least ``⌈2h/spacing⌉`` layers for full kernel support (3 for h = 1.3 spacing).
-
-    Returns ``(M, dim)`` float64, m."""
-    lattice_counts(lower, upper, spacing)  # checks lower, upper and spacing, naming them
-    lo, hi = _corner(lower, "lower"), _corner(upper, "upper")
-    s = _finite_float(spacing, "spacing", minimum=0.0, strict=True)
-    layers = _check.int_in_range("layers", layers, 1, 1000)
-    top = _check.flag("top", top)
-    pad = layers * s
-    if not (math.isfinite(pad) and np.isfinite(lo - pad).all() and np.isfinite(hi + pad).all()):
-        raise InvalidInputError(f"spacing: {layers} layers of {s} m reach beyond float64's range")
-    outer_hi = hi.copy() + pad
-    if not top:
-        outer_hi[-1] = hi[-1]  # open top: walls only up to the rim
-    pts = lattice(lo - pad, outer_hi, s)
-    inside = np.all((pts > lo) & (pts < hi), axis=1)
-    return np.ascontiguousarray(pts[~inside])
 
 
 #: Fluid's fields in their positional order before issue 45 (new names), and its renames.

@@ -1,0 +1,340 @@
+"""Grid scenes: waves (ripple, double_slit), reaction-diffusion (turing) and stable fluids
+(smoke, cavity, vortex_street)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .. import _check
+from .._errors import InvalidInputError, InvalidTypeError
+from ..scene import Scene
+from ._common import _cells, _cfl_step, _count, _flag, _nonneg, _positive, _stamped
+
+
+def ripple(
+    n: int = 256,
+    *,
+    drops: int = 6,
+    speed: float = 0.25,
+    damping: float = 0.15,
+    seed: int = 3,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Ripples on a pond: stones dropped one after another into a 1 m square pond.
+
+    The banks reflect (free faces); an n × n wave grid (:class:`~physcore.grids.Wave`).
+
+    `drops` Gaussian dents (radius 1.2 cm, depth 4 mm) fall at random places (seeded) every 0.6 s
+    from t = 0; the waves travel at `speed` (m/s) and fade at `damping` (1/s).
+    """
+    from ..grids import Drop, Wave
+
+    n = _count(n, "n", 16)
+    _cells("n", n * n)
+    drops = _check.int_in_range("drops", drops, 0, 1000)
+    speed = _positive(speed, "speed")
+    damping = _nonneg(damping, "damping")
+    rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
+    stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), radius=0.012, amplitude=0.004) for k in range(drops)]
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
+    pond = scene.add(Wave((n, n), 1.0 / n, c=speed, damping=damping, edges="free", drops=stones, name="pond"))
+    if dt is None:
+        scene.dt = _cfl_step(pond, "speed")
+    return scene
+
+
+# 25 fps: waves move everywhere, so each frame costs its whole picture; 4 s in 100 frames.
+ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (400, 400)}
+ripple = _stamped(ripple, old_order=('n', 'drops', 'speed', 'damping', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+
+
+def double_slit(
+    n: int = 256,
+    *,
+    wavelength: float = 0.05,
+    separation: float = 0.2,
+    width: float = 0.03,
+    speed: float = 0.3,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Interference behind two slits: a plane wave passes a wall with two openings.
+
+    The wave comes from an oscillating line on the left of a 1.5 m × 1 m tank and meets a wall
+    with two slits (`width` m wide, centres `separation` m apart);
+    the other faces absorb (damping layers), so the fringes are those of an open field. The
+    grid is (1.5 n) × n; the source's frequency is speed / wavelength.
+    """
+    from ..grids import Oscillator, Wave
+
+    n = _count(n, "n", 32)
+    _cells("n", (3 * n * n) // 2)
+    wavelength, separation, width = _positive(wavelength, "wavelength"), _positive(separation, "separation"), _positive(width, "width")
+    speed = _positive(speed, "speed")
+    if separation + width > 0.8:
+        raise InvalidInputError(f"separation: {separation} m apart, {width} m wide: the slits must fit in the 1 m tank (separation + width <= 0.8)")
+    if width > separation:
+        raise InvalidInputError(f"width: {width} m is wider than the separation {separation} m: the slits would merge")
+    nx, dx = (3 * n) // 2, 1.0 / n
+    x = (np.arange(nx) + 0.5) * dx
+    y = (np.arange(n) + 0.5) * dx
+    wall = np.zeros((nx, n), dtype=bool)
+    col = int(0.35 / dx)
+    wall[col:col + 2, :] = True
+    for yc in (0.5 - separation / 2, 0.5 + separation / 2):
+        wall[col:col + 2, np.abs(y - yc) < width / 2] = False
+    if wall[col].all():
+        raise InvalidInputError(f"width, n: the slits ({width} m) are narrower than a cell (1/n = {dx:.3g} m); raise n or the width")
+    line = np.zeros((nx, n), dtype=bool)
+    line[np.argmin(np.abs(x - 0.12)), :] = True
+    if not math.isfinite(40.0 * speed / wavelength):
+        raise InvalidInputError(f"wavelength, speed: the source's frequency speed/wavelength = {speed / wavelength:g} Hz is beyond float64")
+    source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
+    layer = max(4, n // 10)
+    tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
+    if dt is None:
+        scene.dt = _cfl_step(tank, "speed")
+    return scene
+
+
+double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (480, 320), "style": "signed"}
+double_slit = _stamped(double_slit, old_order=('n', 'wavelength', 'separation', 'width', 'speed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+
+
+def turing(
+    preset: str = "maze",
+    *,
+    n: int = 256,
+    duration: float = 4500.0,
+    seeds: int = 2,
+    seed: int = 1,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Turing patterns: Gray–Scott reaction–diffusion grows spots, stripes or mazes.
+
+    :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
+    D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
+    (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
+    The animation spans `duration` time units: by default the maze grows from two seeds until
+    it fills the domain, at about 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    Pearson's step) and within the diffusion limit, so coarse grids stay stable.
+    """
+    from ..grids import PRESETS, GrayScott
+
+    if not isinstance(preset, str):
+        raise InvalidTypeError(f"preset: expected a name ({', '.join(PRESETS)}), got {type(preset).__name__}")
+    if preset not in PRESETS:
+        raise InvalidInputError(f"preset: unknown {preset!r}; valid: {', '.join(PRESETS)}")
+    n = _count(n, "n", 16)
+    _cells("n", n * n)
+    duration = _positive(duration, "duration")
+    scene = Scene(2, dt=1.0 if dt is None else dt, threads=threads)
+    dx = 2.5 / n
+    # The automatic step keeps a fraction of the diffusion limit dx²/(4 D_u), which grows as dx²:
+    # on coarse grids (n <= 64: 76 time units at n = 32) it would step straight over the
+    # reactions (rates ~1) and diverge; cap the step at 1, the reaction's accuracy.
+    cfl = min(0.8, 1.0 / (dx * dx / (4 * 2e-5)))
+    gs = scene.add(GrayScott((n, n), dx, preset=preset, cfl=cfl, name="turing"))
+    if dt is None:
+        scene.dt = gs.cfl * gs.diffusion_limit
+    gs.seed(_check.int_in_range("seed", seed, 0, 2**63 - 1), squares=_check.int_in_range("seeds", seeds, 1, 1000), size=0.06)
+    scene.render_defaults = {"frame_time": duration / 119}
+    return scene
+
+
+# The default duration (4500) over 119 frame steps: the maze grows until the last frame.
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
+turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+
+
+def smoke(
+    n: int = 128,
+    *,
+    buoyancy: float = 4.0,
+    vorticity: float = 0.3,
+    obstacle: bool = True,
+    tracers: int = 0,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """Smoke: a hot plume rises from a vent and curls around a disc.
+
+    The box is 1 m × 1.5 m (n × 1.5n cells, free-slip walls); the smoke is lifted by `buoyancy` (β, m/s² per unit
+    temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
+    (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`; none by
+    default: drawn as single pixels over the smoke they read as noise).
+    """
+    from ..grids import Source, StableFluid
+
+    n = _count(n, "n", 16)
+    _cells("n", (3 * n * n) // 2, arrays=40)
+    buoyancy = _nonneg(buoyancy, "buoyancy")
+    vorticity = _nonneg(vorticity, "vorticity")
+    obstacle = _flag(obstacle, "obstacle")
+    tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
+    ny, dx = (3 * n) // 2, 1.0 / n
+    mask = None
+    if obstacle:
+        x = (np.arange(n) + 0.5) * dx
+        y = (np.arange(ny) + 0.5) * dx
+        mask = (x[:, None] - 0.45) ** 2 + (y[None, :] - 0.55) ** 2 < 0.09**2
+    vent = Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.08), radius=0.06)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
+    scene.add(
+        StableFluid(
+            (n, ny), dx, buoyancy=(0.0, buoyancy), vorticity=vorticity, obstacles=mask, sources=[vent], tracers=tracers,
+            tolerance=1e-6, name="smoke",
+        )
+    )
+    return scene
+
+
+smoke.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (320, 480)}
+smoke = _stamped(smoke, old_order=('n', 'buoyancy', 'vorticity', 'obstacle', 'tracers', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+
+
+def cavity(
+    n: int = 64,
+    *,
+    reynolds: float = 100.0,
+    tracers: int = 0,
+    dye: int = 6,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """The lid-driven cavity: a box of fluid stirred by its sliding top wall.
+
+    A unit square whose top wall slides at 1 m/s (no-slip walls), at Reynolds number
+    `reynolds` = U L / ν (:class:`~physcore.grids.StableFluid`). At
+    Re = 100 the steady centreline profile is Ghia, Ghia & Shin (1982), Table I. The fluid starts
+    at rest with `dye` horizontal bands of dye (its ``density``, 0 or 1; 0: none), which the
+    vortex winds into a spiral as it spins up; drawn as that dye. `tracers` passive particles
+    (spread over the box) can show the circulation too.
+    """
+    from ..grids import StableFluid
+
+    n = _count(n, "n", 8)
+    _cells("n", n * n, arrays=40)
+    reynolds = _positive(reynolds, "reynolds")
+    if not math.isfinite(1.0 / reynolds):
+        raise InvalidInputError(f"reynolds: {reynolds:g} makes the viscosity 1/Re overflow float64")
+    tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
+    dye = _check.int_in_range("dye", dye, 0, n)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
+    box = scene.add(
+        StableFluid(
+            (n, n), 1.0 / n, nu=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
+            tracers=tracers, tolerance=1e-8, name="cavity",
+        )
+    )
+    if dye:
+        y = (np.arange(n) + 0.5) / n
+        band = np.floor(y * (2 * dye)) % 2 == 1  # 2·dye equal layers, every other one dyed
+        box.density = np.broadcast_to(band.astype(np.float64)[None, :], (n, n)).copy()
+    return scene
+
+
+# 12 s of the spin-up from rest in 3.6 s: the dye winds into the vortex to the last frame.
+cavity.render_defaults = {
+    "frames": 90, "fps": 25, "frame_time": 0.135, "substeps": "auto", "size": (400, 400), "field": "density", "style": "turing",
+}
+cavity = _stamped(cavity, old_order=('n', 'reynolds', 'tracers', 'dye', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
+
+
+def vortex_street(
+    n: int = 10,
+    *,
+    reynolds: float = 120.0,
+    length: float = 22.0,
+    height: float = 10.0,
+    dt: float | None = None,
+    threads: int | None = None,
+) -> Scene:
+    """A von Kármán vortex street: water flowing past a cylinder sheds vortices, drawn by dye.
+
+    A channel `length` × `height` cylinder diameters (D = 1 cm) with a uniform inflow U = 1 cm/s
+    on the left and an open outflow on the right (``StableFluid(inflow=U)``: pressure 0, zero
+    normal gradient), free-slip top and bottom walls, and a no-slip cylinder (a disc of solid
+    cells, `n` cells across) 5 D downstream of the inlet on the centre line. The viscosity is
+    ν = U D / `reynolds` (m²/s; Re = 100 is water's 1e-6 m²/s), so times are in units of
+    D/U = 1 s. Streaks of dye (the fluid's ``density``, 0 or 1, in bands D/4 wide)
+    enter through the inlet within 2.5 D of the centre line and start laid through the whole
+    channel; a small asymmetric puff of transverse velocity behind the cylinder at t = 0
+    (v ≤ U/2, a Gaussian of width D/2, 1.5 D downstream) starts the shedding within a few
+    periods instead of waiting for round-off.
+
+    Above Re ≈ 47 the wake sheds vortices alternately from either side at the Strouhal number
+    St = f D / U, which Roshko (1954, NACA Report 1191) measured as
+    St = 0.212 (1 − 21.2 / Re) for 50 < Re < 150 (reviewed by Williamson 1996, Annu. Rev.
+    Fluid Mech. 28, 477). The walls confine the flow: the blockage D/H = 1 / `height`
+    (0.1 by default) raises St slightly above the unbounded value; tests/grids/test_vortex_street.py
+    measures St against Roshko's curve at the default blockage and at 1/16.
+
+    Parameters
+    ----------
+    n : int
+        Cells per cylinder diameter (≥ 4; the channel is round(length·n) × round(height·n)).
+    reynolds : float
+        Re = U D / ν (> 0; the street forms for 47 ≲ Re ≲ 190, where the 2D flow is laminar).
+    length, height : float
+        The channel in diameters (length ≥ 8, height ≥ 3).
+
+    Raises
+    ------
+    TypeError, InvalidInputError
+        Naming the argument (a non-integer `n`, a non-positive `reynolds`, a channel too short
+        or too low for the cylinder, or a grid too large for memory).
+    """
+    from ..grids import Source, StableFluid
+
+    # A grid has at most 2**20 cells a side: a larger n is refused here, by name, before
+    # length · n overflows float64 (n = 10**400 raised OverflowError).
+    n = _check.int_in_range("n", n, 4, 1 << 20)
+    reynolds = _positive(reynolds, "reynolds")
+    length, height = _positive(length, "length"), _positive(height, "height")
+    if length < 8.0:
+        raise InvalidInputError(f"length: the channel must be at least 8 diameters long (5 D of inlet), got {length:g}")
+    if height < 3.0:
+        raise InvalidInputError(f"height: the channel must be at least 3 diameters high, got {height:g}")
+    # Checked in float before any int(): length · n beyond float64 is refused by name (found by
+    # the scene fuzz: 1.8e307 diameters overflowed the conversion).
+    _cells("n, length, height", length * n * height * n, arrays=40)
+    nx, ny = int(round(length * n)), int(round(height * n))
+    D, U = 0.01, 0.01
+    dx = D / n
+    nu = U * D / reynolds
+    if not (math.isfinite(nu) and nu > 0):
+        raise InvalidInputError(f"reynolds: {reynolds:g} gives no finite viscosity U·D/Re > 0")
+    xc, yc = 5.0 * D, 0.5 * ny * dx
+    x = (np.arange(nx) + 0.5) * dx
+    y = (np.arange(ny) + 0.5) * dx
+    cylinder = (x[:, None] - xc) ** 2 + (y[None, :] - yc) ** 2 < (0.5 * D) ** 2
+    # Streaks: bands D/4 wide, every other one dyed, within 2.5 D of the centre line.
+    yy = y - yc
+    streak = (np.abs(yy) < 2.5 * D) & (np.floor(yy / (0.25 * D)) % 2 == 0)
+    inlet = np.zeros((nx, ny), bool)
+    inlet[0] = True
+    dyed, clear = inlet & streak[None, :], inlet & ~streak[None, :]
+    sources = [Source(density=1.0, velocity=(U, 0.0), region=dyed), Source(density=0.0, velocity=(U, 0.0), region=clear)]
+    scene = Scene(2, dt=0.5 * dx / U if dt is None else dt, threads=threads)
+    fluid = scene.add(
+        StableFluid(
+            (nx, ny), dx, nu=nu, advection="maccormack", inflow=U, obstacles=cylinder, sources=sources,
+            tolerance=1e-6, name="channel",
+        )
+    )
+    X, Y = np.meshgrid(x, np.arange(ny + 1) * dx, indexing="ij")
+    kick = 0.5 * U * np.exp(-((X - xc - 1.5 * D) ** 2 + (Y - yc) ** 2) / (2 * (0.5 * D) ** 2))
+    fluid.set_velocity(np.full((nx + 1, ny), U), kick)
+    fluid.density = np.broadcast_to(streak[None, :].astype(np.float64), (nx, ny)) * ~cylinder
+    return scene
+
+
+vortex_street.render_defaults = {
+    "frames": 100, "fps": 25, "frame_time": 0.6, "substeps": "auto", "size": (528, 240), "field": "density", "style": "smoke",
+}
+vortex_street = _stamped(vortex_street, old_order=('n', 'reynolds', 'length', 'height', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
