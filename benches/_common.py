@@ -12,8 +12,16 @@ import platform
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import physcore as pc
+
+# The benches sit in one folder per capability (README.md) and import each other by module name
+# (levels.py every folder's workload, interrupt_latency.py the SPH dam break): every folder is on
+# the path once a bench has imported this module.
+for _folder in sorted(Path(__file__).resolve().parent.iterdir()):
+    if _folder.is_dir() and not _folder.name.startswith(("_", ".")) and str(_folder) not in sys.path:
+        sys.path.append(str(_folder))
 
 
 def require_release() -> None:

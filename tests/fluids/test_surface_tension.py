@@ -309,7 +309,7 @@ def oscillating_drop(n, *, eps=0.1, seed=0, periods=2.0, alpha=0.1, c0=1.0, dx=1
     rest, no gravity; its mode-2 amplitude ``(I_xx − I_yy)/(I_xx + I_yy)`` sampled 40 times a
     Rayleigh period over ``periods`` and fitted (`fit_damped`). Returns (ω over Rayleigh's
     ``√(6σ/(ρ0 R³))``, γ over the viscous ``4ν/R²``), R the equivalent radius. See
-    ``benches/droplet_oscillation.py`` and ``docs/surface_tension.md``."""
+    ``benches/fluids/droplet_oscillation.py`` and ``docs/surface_tension.md``."""
     r0 = n * dx / 2
     axes = np.array([r0 * (1 + eps), r0 / (1 + eps)])
     half = axes[0] + 2 * dx

@@ -1,4 +1,4 @@
-"""The granular column collapse of benches/collapse.py, at one aspect ratio and a small size
+"""The granular column collapse of benches/grains/collapse.py, at one aspect ratio and a small size
 (issue 44, item 16): with rolling resistance a 2D column of discs runs out as far as the planar
 experiments say, (L∞ − L0)/L0 = λ a with λ between 1.2 and 1.8 (Lube et al. 2005; Lajeunesse,
 Monnier & Homsy 2005: see docs/granular.md); without it, further.
@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "collapse.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "grains" / "collapse.py"
 
 
 def _load():

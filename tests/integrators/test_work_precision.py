@@ -1,4 +1,4 @@
-"""Smoke test of benches/work_precision.py: its --quick sweep runs in-process (a few seconds, any
+"""Smoke test of benches/integrators/work_precision.py: its --quick sweep runs in-process (a few seconds, any
 build), writes the CSV, markdown and PNG, covers every integrator on every problem, and shows the
 expected convergence orders on the circular Kepler orbit."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import physcore as pc
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "work_precision.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benches" / "integrators" / "work_precision.py"
 PROBLEMS = ("kepler_e0", "kepler_e0.5", "kepler_e0.9", "chain", "cloth")
 
 

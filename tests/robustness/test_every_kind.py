@@ -27,7 +27,7 @@ import physcore as pc
 from physcore.scenes import REGISTRY
 
 ROOT = Path(__file__).resolve().parents[2]
-_spec = importlib.util.spec_from_file_location("reproducibility_bench", ROOT / "benches" / "reproducibility.py")
+_spec = importlib.util.spec_from_file_location("reproducibility_bench", ROOT / "benches" / "robustness" / "reproducibility.py")
 BENCH = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(BENCH)
 

@@ -3,7 +3,7 @@
 The stepping runs on a pool thread while the calling (main) thread runs Python's signal handlers
 every 20 ms and sets a stop flag that the core reads between steps, between dopri5's internal
 step attempts and inside long force evaluations (pairwise gravity per block of receivers, SPH per
-chunk). Typical latency is tens of milliseconds (benches/interrupt_latency.py); the bounds
+chunk). Typical latency is tens of milliseconds (benches/robustness/interrupt_latency.py); the bounds
 asserted here are generous because the tests may run on slow, loaded hardware.
 """
 from __future__ import annotations

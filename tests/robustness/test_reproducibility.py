@@ -17,7 +17,7 @@ DOC = ROOT / "docs" / "reproducibility.md"
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("reproducibility_bench", ROOT / "benches" / "reproducibility.py")
+    spec = importlib.util.spec_from_file_location("reproducibility_bench", ROOT / "benches" / "robustness" / "reproducibility.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -29,7 +29,7 @@ TABLE = BENCH.parse(TEXT[TEXT.index(BENCH.BEGIN) : TEXT.index(BENCH.END)])
 
 
 def test_the_table_covers_every_gallery_scene_and_integrator():
-    assert set(TABLE) == set(BENCH.cases()), "rerun: python benches/reproducibility.py --against DUMP --write docs/reproducibility.md"
+    assert set(TABLE) == set(BENCH.cases()), "rerun: python benches/robustness/reproducibility.py --against DUMP --write docs/reproducibility.md"
     integrators = {name.split("/", 1)[1] for name in TABLE if name.startswith("spring_chain/")}
     # boris and xpbd have their own gallery scenes (cyclotron, xpbd_cloth).
     assert integrators | {"boris", "xpbd"} == {d["name"] for d in pc.INTEGRATORS}

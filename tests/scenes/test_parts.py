@@ -264,15 +264,18 @@ PART_MODULES = ("terms", "contacts", "flows", "fluids", "grids", "potentials", "
 
 
 def _imports(module: str) -> set[str]:
-    """physcore modules imported by ``module`` anywhere in it (functions and TYPE_CHECKING too)."""
-    tree = ast.parse((PKG / f"{module}.py").read_text())
+    """physcore modules imported by ``module`` anywhere in it (functions and TYPE_CHECKING too);
+    a package's (terms/) by any of its files, which reach physcore's modules as ``..``."""
+    package = (PKG / module).is_dir()
+    level = 2 if package else 1
     out = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.level == 1:
-            if node.module:
-                out.add(node.module.split(".")[0])
-            else:
-                out.update(a.name for a in node.names)
+    for path in sorted((PKG / module).glob("*.py")) if package else [PKG / f"{module}.py"]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.level == level:
+                if node.module:
+                    out.add(node.module.split(".")[0])
+                else:
+                    out.update(a.name for a in node.names)
     return out
 
 

@@ -55,7 +55,7 @@ from __future__ import annotations
 # Names outside __all__ are re-exported with a redundant alias: DEFAULT_VIEW and MAX_STEPS are
 # documented constants; the private ones, none of them API, are reached through this package by
 # the CLI (_check_path, _check_writable), the tests (palette indices, _colorbar_labels) and
-# benches/bench_render.py (_Rasteriser, _row_norms, _strain).
+# benches/render/bench_render.py (_Rasteriser, _row_norms, _strain).
 from ._camera import DEFAULT_VIEW as DEFAULT_VIEW
 from ._checks import COLOR_BY
 from ._checks import _check_path as _check_path
