@@ -7,7 +7,8 @@ Force terms (:class:`~physcore.terms.Term`, fluids included), colliders (:class:
 
 * :attr:`Part.section` — the list of the scene file it is written in (``"terms"``, ``"planes"``,
   ``"boxes"``, ``"spheres"``, ``"grids"``, ``"flows"``: the sections files have always had, in
-  the order they are written and read, so files stay byte-identical) and :attr:`Part.part_kind`,
+  the order they are written and read, so files stay byte-identical; then ``"colliders"``, for
+  colliders registered by key, written only when it holds one) and :attr:`Part.part_kind`,
   its key within the section (a term's type key, a grid's kind; one-class sections use the
   singular, ``"plane"``, ``"flow"``). The registry key is ``"{section}/{part_kind}"``: a section
   qualifies the kind because the kinds of different sections were chosen independently. Since
@@ -58,14 +59,22 @@ import numpy as np
 
 from ._errors import InvalidInputError, InvalidTypeError
 
-__all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
+__all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "OPTIONAL_SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
 
 #: The sections of a scene file's ``meta``, in the order they are written and read.
-SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows")
+SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows", "colliders")
 #: The prefix of each section's array members: ``term{k}_positions``, ``grid{k}_u``, ...
-MEMBER_PREFIX: dict[str, str] = {"terms": "term", "planes": "plane", "boxes": "box", "spheres": "sphere", "grids": "grid", "flows": "flow"}
+MEMBER_PREFIX: dict[str, str] = {
+    "terms": "term", "planes": "plane", "boxes": "box", "spheres": "sphere", "grids": "grid", "flows": "flow",
+    "colliders": "collider",
+}
 #: The field of a section's entries that names the part's kind (sections of one class have none).
-SECTION_KEY: dict[str, str] = {"terms": "type", "grids": "kind"}
+SECTION_KEY: dict[str, str] = {"terms": "type", "grids": "kind", "colliders": "type"}
+#: Sections written only when they hold a part: those added after files of this format were
+#: first written, so a scene without one saves the same bytes as before. ``"colliders"`` holds
+#: the colliders registered by key (:class:`physcore.terms.Collider`: the capsule, and the next
+#: ones); the plane, box and sphere keep their own sections.
+OPTIONAL_SECTIONS: frozenset[str] = frozenset({"colliders"})
 #: Names no part may take: the energy books' entry of the colliders, and of the particles.
 RESERVED_NAMES: frozenset[str] = frozenset({"collisions"})
 RESERVED_SYSTEM_NAMES: frozenset[str] = frozenset({"particles", "collisions"})

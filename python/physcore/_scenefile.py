@@ -104,6 +104,9 @@ _META_OPTIONAL: dict[str, str] = {
 }
 # The "xpbd" integrator's options (absent from files written before it).
 _META_DEFAULTS.update({"xpbd_substeps": 10, "xpbd_iterations": 1})
+# The keyed colliders' section (physcore._parts.OPTIONAL_SECTIONS): written only when it holds one.
+_META_DEFAULTS["colliders"] = []
+_META_OPTIONAL["colliders"] = "list"
 _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
@@ -348,6 +351,17 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
     meta["terms"] = terms
     for group, spec in COLLIDER_FIELDS.items():
         meta[group] = [r.record(f"meta.{group}[{i}]", c, spec, dim) for i, c in enumerate(meta[group])]
+    keyed = section_kinds("colliders")
+    colliders = []
+    for k, c in enumerate(meta["colliders"]):
+        field = f"meta.colliders[{k}]"
+        if not isinstance(c, dict):
+            raise r.error(field, f"must be an object, got {_kind(c)}")
+        kind = c.get("type")
+        if not isinstance(kind, str) or kind not in keyed:
+            raise r.error(f"{field}.type", f"unknown collider type {_show(kind)} (expected one of {', '.join(keyed)})")
+        colliders.append(r.record(field, c, {"type": "str", **keyed[kind].record_fields}, dim))
+    meta["colliders"] = colliders
     grids = []
     for k, g in enumerate(meta["grids"]):
         field = f"meta.grids[{k}]"

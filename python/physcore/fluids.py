@@ -262,7 +262,7 @@ class Fluid(Term, kind="fluid"):
         and adhesion for SPH fluids", ACM TOG 32(6) 182, 2013, eq. 1–6, with the paper's γ set
         from σ by the Kirkwood–Buff integral of the cohesion force (module docstring). Adds
         the capillary step limit ``0.25 √(ρ0 h³/(2π σ))`` (Brackbill et al. 1992).
-        Limit of the model, measured (``benches/droplet_oscillation.py``,
+        Limit of the model, measured (``benches/fluids/droplet_oscillation.py``,
         ``docs/surface_tension.md``; water, drops released as ellipses of axes R(1 ± 0.1)): drops
         ring near Rayleigh's frequency but damp several times faster than their viscosity
         explains. 2D, ν = 1.6e-5 m²/s (``ν = α c0 h/8``): ω/ω_Rayleigh 0.96–0.99 at 24 particles

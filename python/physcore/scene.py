@@ -30,7 +30,7 @@ from ._errors import (
     ThreadPoolWarning,
     allocating,
 )
-from ._parts import MEMBER_PREFIX, SECTIONS, AttachContext, LoadContext, Part, entry_class, part_class
+from ._parts import MEMBER_PREFIX, OPTIONAL_SECTIONS, SECTIONS, AttachContext, LoadContext, Part, entry_class, part_class
 
 # The part modules register their classes in physcore._parts.PARTS when imported: the scene
 # file reader finds every part kind there. (They import nothing from this module.)
@@ -917,6 +917,12 @@ class Scene:
         """The sphere colliders (a copy of the list)."""
         return self._section("spheres")
 
+    @property
+    def colliders(self) -> list[Any]:
+        """The colliders registered by key (:class:`~physcore.Capsule`, ...; not the planes, boxes
+        and spheres above), in the order added (a new list)."""
+        return self._section("colliders")
+
     def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),
         int64 (M,), float64 (M,) in m."""
@@ -1149,7 +1155,8 @@ class Scene:
             "collisions": collisions,
             "e0": self._e0 if e0_finite else None,
             "e0_scale": self._e0_scale if e0_finite else 0.0,
-            **entries,  # "terms", "planes", "boxes", "spheres", "grids", "flows"
+            # "terms", "planes", "boxes", "spheres", "grids", "flows"; "colliders" if it holds one
+            **{s: e for s, e in entries.items() if e or s not in OPTIONAL_SECTIONS},
         }
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
@@ -1233,7 +1240,7 @@ class Scene:
         # which adds it as Scene.add does (a MemoryError named as Scene.add names it).
         add = allocating("add", "a copy of the item's arrays for the core")(scene._add)
         for section in SECTIONS:
-            for k, entry in enumerate(meta[section]):
+            for k, entry in enumerate(meta.get(section, ())):
                 part = entry_class(section, entry)
                 prefix = f"{MEMBER_PREFIX[section]}{k}_"
                 own = {a[len(prefix):]: z[a] for a in z if a.startswith(prefix)}

@@ -261,8 +261,15 @@ def _simulate(
         field_points=points,
         field_label=_field_label(gp),
         velocities=vels,
-        spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
+        spheres=tuple(_spheres(_drawn_spheres(scene), dim)),
     )
+
+
+def _drawn_spheres(scene: Any) -> list[Any]:
+    """The sphere colliders, and the spheres that draw each keyed collider (its
+    ``drawn_spheres()``: a capsule is a row of overlapping balls along its axis)."""
+    keyed = [s for c in getattr(scene, "colliders", ()) for s in c.drawn_spheres()]
+    return list(getattr(scene, "spheres", None) or ()) + keyed
 
 
 def _field_label(gp: dict[str, Any] | None) -> str:

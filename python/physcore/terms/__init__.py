@@ -41,7 +41,7 @@ import numpy as np  # noqa: F401
 #   xpbd        XpbdConstraints
 #   colliders   Plane, Box, Sphere
 # isort: off
-from . import _base, fields, springs, nbody, charges, xpbd, colliders  # noqa: F401 - in this order
+from . import _base, fields, springs, nbody, charges, xpbd, colliders, capsule  # noqa: F401 - in this order
 # isort: on
 from ._base import REGISTRY as REGISTRY
 from ._base import ArrayLike as ArrayLike
@@ -60,7 +60,8 @@ from .charges import _axial_for as _axial_for
 from .charges import _grid_frame as _grid_frame
 from .charges import _grid_values as _grid_values
 from .charges import _GridField as _GridField
-from .colliders import Box, Plane, Sphere
+from .capsule import Capsule
+from .colliders import Box, Collider, Plane, Sphere
 from .fields import Drag, Gravity
 from .nbody import PairwiseGravity, TreeGravity
 from .springs import Springs
@@ -86,11 +87,13 @@ __all__ = [
     "Plane",
     "Box",
     "Sphere",
+    "Collider",
+    "Capsule",
 ]
 
 
 # Pickles record a class by its module path: the records keep the path they had as one module
 # (physcore.terms), so old pickles load and new ones are byte-identical.
-for _public in (Term, Gravity, Drag, Springs, PairwiseGravity, TreeGravity, ElectricField, Coulomb, MagneticField, GridElectricField, GridMagneticField, XpbdConstraints, Plane, Box, Sphere):
+for _public in (Term, Gravity, Drag, Springs, PairwiseGravity, TreeGravity, ElectricField, Coulomb, MagneticField, GridElectricField, GridMagneticField, XpbdConstraints, Plane, Box, Sphere, Collider, Capsule):
     _public.__module__ = __name__
 del _public

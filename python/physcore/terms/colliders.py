@@ -1,4 +1,5 @@
-"""Colliders: :class:`Plane`, :class:`Box` and :class:`Sphere`."""
+"""Colliders: :class:`Plane`, :class:`Box` and :class:`Sphere`, and :class:`Collider`, the base of
+the colliders registered by key (:class:`~physcore.Capsule`)."""
 from __future__ import annotations
 
 import math
@@ -10,7 +11,7 @@ import numpy as np
 from .. import _deprecate
 from .._errors import InvalidInputError, InvalidTypeError
 from .._parts import AttachContext, LoadContext, Part
-from ._base import _finite_float, _same_dim, _vector
+from ._base import _finite_float, _hashable, _same, _same_dim, _vector
 
 
 @_deprecate.record(('point', 'normal', 'restitution', 'friction'), keep=2)
@@ -71,7 +72,7 @@ class Plane(Part):
     def _attach(self, ctx: AttachContext, name: None) -> Plane:
         for arg in ("point", "normal"):
             _same_dim(ctx, arg, getattr(self, arg))
-        ctx.sim.add_plane(self.point.tolist(), self.normal.tolist(), self.restitution, self.friction)
+        ctx.sim.add_collider("plane", {"point": self.point, "normal": self.normal, "restitution": self.restitution, "friction": self.friction})
         return self
 
     def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -140,7 +141,7 @@ class Box(Part):
     def _attach(self, ctx: AttachContext, name: None) -> Box:
         for arg in ("lower", "upper"):
             _same_dim(ctx, arg, getattr(self, arg))
-        ctx.sim.add_box(self.lower.tolist(), self.upper.tolist(), self.restitution, self.friction)
+        ctx.sim.add_collider("box", {"lower": self.lower, "upper": self.upper, "restitution": self.restitution, "friction": self.friction})
         return self
 
     def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -223,7 +224,7 @@ class Sphere(Part):
 
     def _attach(self, ctx: AttachContext, name: None) -> Sphere:
         _same_dim(ctx, "center", self.center)
-        ctx.sim.add_sphere(self.center.tolist(), self.radius, self.inside, self.restitution, self.friction)
+        ctx.sim.add_collider("sphere", {"center": self.center, "radius": self.radius, "inside": self.inside, "restitution": self.restitution, "friction": self.friction})
         return self
 
     def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -233,3 +234,49 @@ class Sphere(Part):
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         ctx.add(cls(entry["center"], entry["radius"], restitution=entry["restitution"], friction=entry["friction"], inside=entry["inside"]))
+
+
+class Collider(Part):
+    """Base of the colliders registered by key, in the core (``constraints::registry``, one Rust
+    file each with ``register_collider!``) and here: a subclass is a frozen dataclass that sets
+    ``part_kind`` (the core's key) and ``record_fields`` (its fields by kind of value:
+    ``"vector"``, ``"number"``, ``"bool"``), checks them in ``__post_init__``, and may draw itself
+    (:meth:`drawn_spheres`). Adding, saving, loading, the hostile-file checks and the energy books
+    ("collisions") then need nothing else: a new collider touches its own files only
+    (:class:`~physcore.Capsule` is one)."""
+
+    section: ClassVar[str] = "colliders"
+    #: Its fields, in order, by kind of value (``_scenefile._Reader.value``).
+    record_fields: ClassVar[dict[str, str]] = {}
+
+    # By value, as terms compare (subclasses are dataclasses with ``eq=False``, which keep these).
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(_same(getattr(self, f), getattr(other, f)) for f in self.record_fields)
+
+    def __hash__(self) -> int:
+        return hash((type(self), *(_hashable(getattr(self, f)) for f in self.record_fields)))
+
+    def _attach(self, ctx: AttachContext, name: None) -> Collider:
+        for f, kind in self.record_fields.items():
+            if kind == "vector":
+                _same_dim(ctx, f, getattr(self, f))
+        ctx.sim.add_collider(self.part_kind, {f: getattr(self, f) for f in self.record_fields})
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        record: dict[str, Any] = {"type": self.part_kind}
+        for f, kind in self.record_fields.items():
+            v = getattr(self, f)
+            record[f] = v.tolist() if kind == "vector" else v
+        return record, {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        ctx.add(cls(**{f: entry[f] for f in cls.record_fields}))
+
+    def drawn_spheres(self) -> list[Sphere]:
+        """Spheres that draw the collider in a render (none by default)."""
+        return []
+

@@ -111,3 +111,9 @@ impl<V: Vector> Constraint<V> for Aabb<V> {
         )
     }
 }
+
+fn build<V: Vector>(p: &crate::terms::registry::Params) -> Result<Box<dyn Constraint<V>>> {
+    let b = Aabb::new(p.vector("lower")?, p.vector("upper")?, p.number("restitution")?, p.number("friction")?)?;
+    Ok(Box::new(b))
+}
+crate::register_collider!("box", build);

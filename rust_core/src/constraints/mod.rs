@@ -1,11 +1,15 @@
 //! The constraint (projection) stage: run after each integration step, it moves particles back
 //! into the allowed set and corrects their velocities. Today's walls (`Plane`, `Aabb`, `Sphere`) live
-//! here; position-based constraints (XPBD, Macklin, Müller & Chentanez 2016) will join them.
+//! here, with `Capsule`, each registered by key in its own file (`registry`, as force terms
+//! are); position-based constraints (XPBD) are the "xpbd" integrator's.
 //! The energy a projection removes goes into one book, "collisions".
 pub mod aabb;
+pub mod capsule;
 pub mod plane;
+pub mod registry;
 pub mod sphere;
 pub use aabb::Aabb;
+pub use capsule::Capsule;
 pub use plane::Plane;
 pub use sphere::Sphere;
 

@@ -74,3 +74,9 @@ impl<V: Vector> Constraint<V> for Plane<V> {
         )
     }
 }
+
+fn build<V: Vector>(p: &crate::terms::registry::Params) -> Result<Box<dyn Constraint<V>>> {
+    let plane = Plane::new(p.vector("point")?, p.vector("normal")?, p.number("restitution")?, p.number("friction")?)?;
+    Ok(Box::new(plane))
+}
+crate::register_collider!("plane", build);

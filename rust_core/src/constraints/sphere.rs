@@ -52,57 +52,83 @@ fn up<V: Vector>() -> V {
 
 impl<V: Vector> Constraint<V> for Sphere<V> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let (c, r, inside, contact) = (self.center, self.radius, self.inside, self.contact);
-        let r2 = r * r;
-        par::chunks2_fold(
-            x,
-            v,
-            (0.0, false),
-            |a, b| (a.0 + b.0, a.1 | b.1),
-            |s, x, v| {
-                let mut d = 0.0;
-                let mut touched = false;
-                for k in 0..x.len() {
-                    let rel = x[k] - c;
-                    let l2 = rel.length_squared();
-                    // NaN positions compare false and are left alone, as the plane leaves them.
-                    let wrong = if inside { l2 > r2 } else { l2 < r2 };
-                    if !wrong {
-                        continue;
-                    }
-                    let i = s + k;
-                    if model.inv_mass[i] == 0.0 {
-                        continue;
-                    }
-                    touched = true;
-                    let m = model.mass[i];
-                    let ke0 = 0.5 * m * v[k].length_squared();
-                    // Outward radial unit vector; a particle exactly at the centre goes back the
-                    // way it came (or up, at rest).
-                    let l = l2.sqrt();
-                    let radial = if l > 0.0 {
-                        rel / l
-                    } else if v[k].length_squared() > 0.0 {
-                        -v[k] / v[k].length_squared().sqrt()
-                    } else {
-                        up::<V>()
-                    };
-                    // Unit normal into the allowed side.
-                    let n = if inside { -radial } else { radial };
-                    let x0 = x[k];
-                    x[k] = c + radial * r;
-                    v[k] = contact.bounce(v[k], n);
-                    let ke1 = 0.5 * m * v[k].length_squared();
-                    // Projection work: ΔU ≈ −F·Δx.
-                    let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
-                    let du = -f.dot(x[k] - x0);
-                    d += (ke0 - ke1) - du;
-                }
-                (d, touched)
-            },
-        )
+        let c = self.center;
+        project_round(x, v, model, f_last, g, self.radius, self.inside, self.contact, |_| c)
     }
 }
+
+/// The rule of a round surface (module doc), shared by the sphere and the capsule: the surface
+/// is at distance `r` from `centre_of(x)` (the sphere's centre; the nearest point of a capsule's
+/// axis), particles kept outside (or with `inside`, within). Returns (energy removed, J;
+/// whether any particle was moved).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn project_round<V: Vector>(
+    x: &mut [V],
+    v: &mut [V],
+    model: &Model,
+    f_last: &[V],
+    g: V,
+    r: Real,
+    inside: bool,
+    contact: Contact,
+    centre_of: impl Fn(V) -> V + Sync,
+) -> (Real, bool) {
+    let r2 = r * r;
+    par::chunks2_fold(
+        x,
+        v,
+        (0.0, false),
+        |a, b| (a.0 + b.0, a.1 | b.1),
+        |s, x, v| {
+            let mut d = 0.0;
+            let mut touched = false;
+            for k in 0..x.len() {
+                let c = centre_of(x[k]);
+                let rel = x[k] - c;
+                let l2 = rel.length_squared();
+                // NaN positions compare false and are left alone, as the plane leaves them.
+                let wrong = if inside { l2 > r2 } else { l2 < r2 };
+                if !wrong {
+                    continue;
+                }
+                let i = s + k;
+                if model.inv_mass[i] == 0.0 {
+                    continue;
+                }
+                touched = true;
+                let m = model.mass[i];
+                let ke0 = 0.5 * m * v[k].length_squared();
+                // Outward radial unit vector; a particle exactly at the centre goes back the
+                // way it came (or up, at rest).
+                let l = l2.sqrt();
+                let radial = if l > 0.0 {
+                    rel / l
+                } else if v[k].length_squared() > 0.0 {
+                    -v[k] / v[k].length_squared().sqrt()
+                } else {
+                    up::<V>()
+                };
+                // Unit normal into the allowed side.
+                let n = if inside { -radial } else { radial };
+                let x0 = x[k];
+                x[k] = c + radial * r;
+                v[k] = contact.bounce(v[k], n);
+                let ke1 = 0.5 * m * v[k].length_squared();
+                // Projection work: ΔU ≈ −F·Δx.
+                let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
+                let du = -f.dot(x[k] - x0);
+                d += (ke0 - ke1) - du;
+            }
+            (d, touched)
+        },
+    )
+}
+
+fn build<V: Vector>(p: &crate::terms::registry::Params) -> Result<Box<dyn Constraint<V>>> {
+    let (r, e, mu) = (p.number("radius")?, p.number("restitution")?, p.number("friction")?);
+    Ok(Box::new(Sphere::new(p.vector("center")?, r, p.flag("inside")?, e, mu)?))
+}
+crate::register_collider!("sphere", build);
 
 #[cfg(test)]
 mod tests {

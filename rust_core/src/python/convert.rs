@@ -26,13 +26,6 @@ pub(super) fn slice1<'a, T: numpy::Element>(a: &'a PyReadonlyArray1<'_, T>, arg:
     a.as_slice().map_err(|_| err(invalid(arg, "array must be contiguous")))
 }
 
-pub(super) fn vec_of<V: Vector>(v: &[f64], arg: &str) -> PyResult<V> {
-    if v.len() != V::DIM {
-        return Err(err(invalid(arg, format!("expected {} components, got {}", V::DIM, v.len()))));
-    }
-    Ok(V::from_slice(v))
-}
-
 /// Cached forces (N, dim) and term powers.
 pub(super) type CacheArrays<'py> = (Bound<'py, PyArray2<f64>>, Vec<f64>);
 /// Neighbour pairs (i, j), (M,) int64 each.

@@ -1,7 +1,7 @@
 //! The `_core.Simulation` class: a handle on one 2D or 3D `crate::World`.
 use super::{convert::*, errors::*, watch::*, Inner};
 use crate::alloc::{count, Need};
-use crate::constraints::{Aabb, Plane, Sphere};
+use crate::constraints;
 use crate::error::{invalid, Error};
 use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
@@ -352,52 +352,14 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.other_mut(name).and_then(|o| o.load(&a))).map_err(|e| to_py(py, e))
     }
 
-    fn add_plane(
-        &mut self,
-        py: Python<'_>,
-        point: Vec<f64>,
-        normal: Vec<f64>,
-        restitution: f64,
-        friction: f64,
-    ) -> PyResult<()> {
-        with_sim!(&mut self.inner, s => {
-            let p = Plane::new(vec_of(&point, "point")?, vec_of(&normal, "normal")?, restitution, friction);
-            p.map(|p| s.particles_mut().add_constraint(Box::new(p)))
-        })
-        .map_err(|e| to_py(py, e))
-    }
-
-    fn add_box(
-        &mut self,
-        py: Python<'_>,
-        lower: Vec<f64>,
-        upper: Vec<f64>,
-        restitution: f64,
-        friction: f64,
-    ) -> PyResult<()> {
-        with_sim!(&mut self.inner, s => {
-            let b = Aabb::new(vec_of(&lower, "lower")?, vec_of(&upper, "upper")?, restitution, friction);
-            b.map(|b| s.particles_mut().add_constraint(Box::new(b)))
-        })
-        .map_err(|e| to_py(py, e))
-    }
-
-    /// Appends a sphere collider (a disc in 2D) of `radius` (m) about `center` (m): particles
-    /// are kept outside it, or in it with `inside` (checked; nothing changes on error).
-    fn add_sphere(
-        &mut self,
-        py: Python<'_>,
-        center: Vec<f64>,
-        radius: f64,
-        inside: bool,
-        restitution: f64,
-        friction: f64,
-    ) -> PyResult<()> {
-        with_sim!(&mut self.inner, s => {
-            let b = Sphere::new(vec_of(&center, "center")?, radius, inside, restitution, friction);
-            b.map(|b| s.particles_mut().add_constraint(Box::new(b)))
-        })
-        .map_err(|e| to_py(py, e))
+    /// Appends a collider of registered type `kind` (`constraints::registry`: "plane", "box",
+    /// "sphere", "capsule") built from `params` to the projection stage (checked; nothing changes
+    /// on error).
+    fn add_collider(&mut self, py: Python<'_>, kind: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let ty = constraints::registry::lookup(kind).map_err(|e| to_py(py, e))?;
+        let p = params_of(py, ty.kind, params)?;
+        with_sim!(&mut self.inner, s => ty.build(&p).map(|c| s.particles_mut().add_constraint(c)))
+            .map_err(|e| to_py(py, e))
     }
 
     /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed within about
