@@ -30,7 +30,16 @@ from ._errors import (
     ThreadPoolWarning,
     allocating,
 )
-from ._parts import MEMBER_PREFIX, OPTIONAL_SECTIONS, SECTIONS, AttachContext, LoadContext, Part, entry_class, part_class
+from ._parts import (
+    MEMBER_PREFIX,
+    OPTIONAL_SECTIONS,
+    SECTIONS,
+    AttachContext,
+    LoadContext,
+    Part,
+    entry_class,
+    part_class,
+)
 
 # The part modules register their classes in physcore._parts.PARTS when imported: the scene
 # file reader finds every part kind there. (They import nothing from this module.)

@@ -53,6 +53,7 @@ from ._base import _per_spring as _per_spring
 from ._base import _same as _same
 from ._base import _same_dim as _same_dim
 from ._base import _vector as _vector
+from .capsule import Capsule
 from .charges import COULOMB_K as COULOMB_K
 from .charges import Coulomb, ElectricField, GridElectricField, GridMagneticField, MagneticField
 from .charges import _axial as _axial
@@ -60,7 +61,6 @@ from .charges import _axial_for as _axial_for
 from .charges import _grid_frame as _grid_frame
 from .charges import _grid_values as _grid_values
 from .charges import _GridField as _GridField
-from .capsule import Capsule
 from .colliders import Box, Collider, Plane, Sphere
 from .fields import Drag, Gravity
 from .nbody import PairwiseGravity, TreeGravity
