@@ -165,13 +165,23 @@ def test_a_file_with_an_unknown_or_broken_collider_is_refused_naming_the_field(t
 
 
 def test_a_capsule_is_drawn():
-    """The render draws it as its balls (``drawn_spheres``): in a 2D frame the pixels along the
-    axis are the collider's colour, and the balls' union is the capsule to r/128."""
+    """The render draws what ``drawn_rods()`` gives, the capsule itself: in a 2D frame the pixels
+    on its axis are the colliders' fill, those a radius and more away are not; a 3D recording
+    holds the rod for the shaded surface's depth pass."""
+    from physcore.render._raster import _PLANE_FILL, _background, _Camera
+
     rod = pc.Capsule([-0.5, 0.0], [0.5, 0.0], 0.1)
-    balls = rod.drawn_spheres()
-    d = np.diff([b.center[0] for b in balls])
-    assert balls[0].center.tolist() == [-0.5, 0.0] and balls[-1].center.tolist() == [0.5, 0.0]
-    assert d.max() <= 0.1 / 4 + 1e-12 and all(b.radius == 0.1 for b in balls)
+    assert [tuple(map(np.ndarray.tolist, r[:2])) + (r[2],) for r in rod.drawn_rods()] == [([-0.5, 0.0], [0.5, 0.0], 0.1)]
     s = _drop([0.0, 0.5], [0.0, 0.0], rod, dim=2)
     rec = pc.render.record(s, frames=1, frame_time=0.01)
-    assert len(rec.spheres) == len(balls)
+    assert len(rec.rods) == 1 and rec.spheres == ()
+    cam = _Camera(2, (0.0, 0.0), (200, 200))
+    cam.fit(np.array([-1.0, -1.0]), np.array([1.0, 1.0]), pad=0)  # 100 px/m, the origin centred
+    img = _background(cam, [], np.zeros(2), (), rec.rods)
+
+    def at(x, y):
+        col, row = cam.pixels(np.array([[x, y]]))
+        return img[int(row[0]), int(col[0])]
+
+    assert at(0.0, 0.0) == _PLANE_FILL and at(0.55, 0.0) == _PLANE_FILL  # on the axis, in a cap
+    assert at(0.0, 0.15) != _PLANE_FILL and at(0.65, 0.0) != _PLANE_FILL

@@ -90,12 +90,13 @@ def _disc_stencil(radius: int) -> tuple[np.ndarray, np.ndarray]:
     return dy[keep].astype(np.intp), dx[keep].astype(np.intp)
 
 
-def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = ()) -> np.ndarray:
+def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = (), rods: Any = ()) -> np.ndarray:
     """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line
-    (a sphere collider is a disc: filled, or with ``inside`` its outside filled, a bowl)."""
+    (a sphere collider is a disc: filled, or with ``inside`` its outside filled, a bowl; a rod
+    ``(a, b, radius)`` a stadium)."""
     w, h = cam.width, cam.height
     img = np.full((h, w), _BACKGROUND, dtype=np.uint8)
-    if cam.dim != 2 or not (planes or spheres):
+    if cam.dim != 2 or not (planes or spheres or rods):
         return img
     # World coordinates (relative to origin) of the pixel centres.
     xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
@@ -111,6 +112,15 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = (
         # Distance from the circle in pixels; > 0 on the allowed side.
         d = (np.hypot(xs[None, :] - c[0], ys[:, None] - c[1]) - r) * cam.scale
         d = -d if inside else d
+        img[d < 0] = _PLANE_FILL
+        img[np.abs(d) <= 0.75] = _PLANE_LINE
+    for a, b, r in rods:
+        a, ab = a - origin, b - a
+        # Distance from the segment's nearest point, less r, in pixels.
+        px, py = xs[None, :] - a[0], ys[:, None] - a[1]
+        l2 = float(ab @ ab)
+        t = np.clip((px * ab[0] + py * ab[1]) / l2, 0.0, 1.0) if l2 > 0 else 0.0
+        d = (np.hypot(px - t * ab[0], py - t * ab[1]) - r) * cam.scale
         img[d < 0] = _PLANE_FILL
         img[np.abs(d) <= 0.75] = _PLANE_LINE
     return img
@@ -514,6 +524,7 @@ class _Rasteriser:
                 wlo, whi, wmax = _screen_bounds(self.cam, walls[None])
                 lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
             balls = [(c - rec.origin, r) for c, r, inside in rec.spheres if not inside]
+            balls += [(e - rec.origin, r) for a, b, r in rec.rods for e in (a, b)]  # a rod: its two end balls
             if balls:  # sphere colliders (balls) whole in view: a sphere's outline is ±r about its centre
                 c = np.array([b[0] for b in balls])
                 r = np.array([b[1] for b in balls])[:, None]
@@ -631,7 +642,11 @@ class _Rasteriser:
                 if len(pts):
                     bounds = (pts.min(axis=0).astype(np.float64), pts.max(axis=0).astype(np.float64))
             planes = [(np.asarray(p, np.float64) - rec.origin, np.asarray(nrm, np.float64)) for p, nrm in rec.planes]
-            self._shader = _MeshShader(mesh, theme, texture, rec.spheres, rec.origin, planes, bounds)
+            edge = 0.0
+            if rec.rods and len(mesh.faces) and rec.positions.shape[-1] == 3:
+                x0 = rec.positions[0]
+                edge = float(np.median(np.linalg.norm(x0[mesh.faces[:, 0]] - x0[mesh.faces[:, 1]], axis=1)))
+            self._shader = _MeshShader(mesh, theme, texture, rec.spheres, rec.origin, planes, bounds, rec.rods, edge)
         if mesh is not None:
             on_mesh = np.zeros(n, dtype=bool)
             on_mesh[mesh.faces.ravel()] = True
@@ -652,7 +667,7 @@ class _Rasteriser:
     def _scene_background(self, cam: _Camera) -> np.ndarray:
         """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
         and the boundary particles, under everything that moves."""
-        img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres)
+        img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres, self.rec.rods)
         if self.walls is not None:
             s, _ = cam.project(self.walls)
             col, row = cam.pixels(s)

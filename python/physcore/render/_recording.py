@@ -96,6 +96,8 @@ class Recording(NamedTuple):
     #: The scene's sphere colliders as (centre (dim,) float64 m, radius m, inside) tuples (a
     #: sphere is drawn shaded in 3D, a disc in 2D).
     spheres: tuple = ()
+    #: Rods ``(a, b, radius)`` (m) drawing the keyed colliders (a capsule), as the balls draw.
+    rods: tuple = ()
 
     @property
     def frames(self) -> int:
@@ -261,15 +263,21 @@ def _simulate(
         field_points=points,
         field_label=_field_label(gp),
         velocities=vels,
-        spheres=tuple(_spheres(_drawn_spheres(scene), dim)),
+        spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
+        rods=tuple(_drawn_rods(scene, dim)),
     )
 
 
-def _drawn_spheres(scene: Any) -> list[Any]:
-    """The sphere colliders, and the spheres that draw each keyed collider (its
-    ``drawn_spheres()``: a capsule is a row of overlapping balls along its axis)."""
-    keyed = [s for c in getattr(scene, "colliders", ()) for s in c.drawn_spheres()]
-    return list(getattr(scene, "spheres", None) or ()) + keyed
+def _drawn_rods(scene: Any, dim: int) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The rods ``(a, b, radius)`` (m) that draw the scene's keyed colliders (their
+    ``drawn_rods()``: a capsule is one); degenerate ones are skipped."""
+    out = []
+    for c in getattr(scene, "colliders", ()):
+        for a, b, r in c.drawn_rods():
+            a, b, r = np.asarray(a, np.float64).reshape(-1), np.asarray(b, np.float64).reshape(-1), float(r)
+            if a.shape == b.shape == (dim,) and np.isfinite(a).all() and np.isfinite(b).all() and math.isfinite(r) and r > 0:
+                out.append((a, b, r))
+    return out
 
 
 def _field_label(gp: dict[str, Any] | None) -> str:

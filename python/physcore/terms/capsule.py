@@ -9,7 +9,7 @@ import numpy as np
 
 from .._errors import InvalidInputError
 from ._base import _finite_float, _vector
-from .colliders import Collider, Sphere
+from .colliders import Collider
 
 
 @dataclass(frozen=True, eq=False)
@@ -23,7 +23,7 @@ class Capsule(Collider):
     1)`` (Ericson, *Real-Time Collision Detection*, 2005, §5.1.2); if it is moving in, its normal
     velocity becomes ``-e v_n`` and its tangential speed drops by ``μ (1 + e) |v_n|``, as at a
     :class:`Sphere` (which it is with ``a == b``). The energy removed is booked under
-    ``"collisions"`` in :meth:`Scene.energy`. Drawn as a row of balls along its axis.
+    ``"collisions"`` in :meth:`Scene.energy`.
 
     Parameters
     ----------
@@ -88,8 +88,6 @@ class Capsule(Collider):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "friction", _finite_float(self.friction, "friction", minimum=0.0))
 
-    def drawn_spheres(self) -> list[Sphere]:
-        """Balls a quarter radius apart along the axis: their union is the capsule to r/128."""
-        length = float(np.sqrt(np.sum((self.b - self.a) ** 2)))
-        n = int(min(4096, math.ceil(4.0 * length / self.radius))) + 1
-        return [Sphere(self.a + (self.b - self.a) * (k / max(n - 1, 1)), self.radius) for k in range(n)]
+    def drawn_rods(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """Drawn as itself: one rod ``(a, b, radius)``."""
+        return [(self.a, self.b, self.radius)]

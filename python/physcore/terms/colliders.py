@@ -241,7 +241,7 @@ class Collider(Part):
     file each with ``register_collider!``) and here: a subclass is a frozen dataclass that sets
     ``part_kind`` (the core's key) and ``record_fields`` (its fields by kind of value:
     ``"vector"``, ``"number"``, ``"bool"``), checks them in ``__post_init__``, and may draw itself
-    (:meth:`drawn_spheres`). Adding, saving, loading, the hostile-file checks and the energy books
+    (:meth:`drawn_rods`). Adding, saving, loading, the hostile-file checks and the energy books
     ("collisions") then need nothing else: a new collider touches its own files only
     (:class:`~physcore.Capsule` is one)."""
 
@@ -276,7 +276,8 @@ class Collider(Part):
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         ctx.add(cls(**{f: entry[f] for f in cls.record_fields}))
 
-    def drawn_spheres(self) -> list[Sphere]:
-        """Spheres that draw the collider in a render (none by default)."""
+    def drawn_rods(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
+        """What draws the collider in a render: rods ``(a, b, radius)``, the points within
+        ``radius`` of the segment a–b, m (a ball where a == b); none by default."""
         return []
 
