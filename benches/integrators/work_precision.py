@@ -53,7 +53,7 @@ Outputs: ``work_precision.csv`` (every run), ``work_precision.md`` (tables; also
 ``work_precision.png`` (position and energy error against wall time, one column per problem,
 f32 dashed).
 
-Which integrator when: see the README section "Work-precision: which integrator when", written
+Which integrator when: see "Work-precision: which integrator when" in docs/guide/integrators.md, written
 from the results of this script.
 """
 from __future__ import annotations

@@ -242,7 +242,7 @@ class Fluid(Term, kind="fluid"):
         docstring); ``gamma``, ``clamp_pressure`` and ``pass_precision`` then do not apply. Known
         bug: a DFSPH fluid at rest does not settle at the default ``alpha`` (a layer 24
         particles deep keeps an rms speed of about 0.2 m/s; WCSPH's settles to 0.03 m/s); use
-        ``alpha=0.5`` where a tank must come to rest (README, "Fluids (DFSPH)").
+        ``alpha=0.5`` where a tank must come to rest (docs/guide/fluids_dfsph.md).
     density_error : float
         DFSPH: the density solver iterates until the mean compression ``mean((ρ − ρ0)₊)/ρ0`` of
         the predicted state is at most this, in (0, 1). Default 1e-3 (0.1 %); 1e-4 is the

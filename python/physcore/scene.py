@@ -262,7 +262,7 @@ class Scene:
         them in single precision: every stored value is rounded to the nearest float32 after
         each step (the arithmetic within a step stays float64), as a float32 state array would
         hold them; ``positions``/``velocities`` are then returned as float32. It shows what
-        single precision costs in accuracy (see the work-precision table in the README).
+        single precision costs in accuracy (see the work-precision table in docs/guide/integrators.md).
     threads : int or None
         Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
         ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
@@ -634,7 +634,7 @@ class Scene:
         semi-implicit Euler and Verlet, stable to 2; 0.71 for RK4, stable to 2√2), and never
         above a term's own limit (the fluid CFL condition). ``"implicit_euler"`` is stable at any
         step on the terms it takes implicitly (springs, drag): on those it gets 20× that step,
-        ω_max·dt = 10, a choice of accuracy (see the README), and 0.5 on the others;
+        ω_max·dt = 10, a choice of accuracy (see docs/guide/integrators.md), and 0.5 on the others;
         ``"xpbd"`` takes its compliant distance and pin constraints alike, ω_max·h = 10 per
         substep ``h = dt/xpbd_substeps`` (XPBD damps them as implicit Euler would: see
         :class:`XpbdConstraints`). ``"dopri5"`` controls its own internal

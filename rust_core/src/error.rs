@@ -126,7 +126,7 @@ fn describe(quantity: &Failure, index: usize) -> String {
     match quantity {
         Failure::Cell => format!("grid cell {index} has a non-finite value"),
         Failure::Error => format!(
-            "particle {index} has a local error that rk45 cannot bring within rtol/atol at any \
+            "particle {index} has a local error that dopri5 (Dormand–Prince) cannot bring within rtol/atol at any \
              step size (its forces are not finite or not smooth there)"
         ),
         Failure::Speed => format!(

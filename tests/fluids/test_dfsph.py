@@ -424,7 +424,7 @@ def test_a_dfsph_drop_lands_on_a_dfsph_pool_instead_of_passing_through():
     0.069 against 0.044 m, the drop's lowest particle 4 cm above the floor), the compression
     stays at the tolerance, and the books drift as those of the same particles in one fluid
     (0.310 against 0.316 of the initial energy: the known energy the density solve puts into a
-    resting DFSPH layer, README "Known bug"). The drop has no walls of its own: in the solve it
+    resting DFSPH layer, docs/guide/fluids_dfsph.md, "Known bug"). The drop has no walls of its own: in the solve it
     sees the pool's. As fluids with different tolerances (two solves, which the scene warns
     about) it falls through the pool, and the floor."""
     dx = 0.01

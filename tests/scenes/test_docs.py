@@ -1,4 +1,5 @@
-"""The README's Python example, the docstring examples, and the _core.pyi stub are checked."""
+"""The README's and the guide's Python examples, their links, the docstring examples, and the _core.pyi
+stub are checked."""
 from __future__ import annotations
 
 import doctest
@@ -17,25 +18,73 @@ import physcore
 ROOT = Path(__file__).resolve().parents[2]
 
 
+#: The pages whose Python blocks run here: the README and the guide (docs/guide/).
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs" / "guide").glob("*.md"))]
+
+
+def _blocks(path: Path) -> list[str]:
+    return re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.S)
+
+
 def _readme_blocks():
-    text = (ROOT / "README.md").read_text()
-    return re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    return _blocks(ROOT / "README.md")
+
+
+#: Every Python block of every page, by (page, index).
+BLOCKS = [(p.relative_to(ROOT).as_posix(), k) for p in PAGES for k in range(len(_blocks(p)))]
 
 
 def test_readme_has_python_examples():
     assert _readme_blocks(), "README.md must contain a ```python example"
+    assert len(BLOCKS) >= 20, "the guide's examples are collected"
 
 
-@pytest.mark.parametrize("k", range(len(_readme_blocks())))
-def test_readme_python_example_runs(k, tmp_path, monkeypatch):
+@pytest.mark.parametrize(("page", "k"), BLOCKS)
+def test_python_example_runs(page, k, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     # Run as a script would be: the sweep example keeps its cluster start under
     # `if __name__ == "__main__":`, as Dask's worker processes need in a script.
     namespace: dict = {"__name__": "__main__"}
-    exec(compile(_readme_blocks()[k], f"README.md[python block {k}]", "exec"), namespace)
+    exec(compile(_blocks(ROOT / page)[k], f"{page}[python block {k}]", "exec"), namespace)
     # Examples that write a GIF must leave a real one behind.
     for gif in tmp_path.glob("*.gif"):
         assert gif.stat().st_size > 1000
+
+
+def _anchor(heading: str) -> str:
+    """GitHub's anchor of a Markdown heading."""
+    h = re.sub(r"[^\w\- ]", "", heading.strip().lower())
+    return h.replace(" ", "-")
+
+
+def _anchors(path: Path) -> set[str]:
+    out, fence = set(), False
+    for line in path.read_text().splitlines():
+        if line.startswith("```"):
+            fence = not fence
+        m = re.match(r"^#+ (.*)", line)
+        if m and not fence:
+            out.add(_anchor(m.group(1)))
+    return out
+
+
+@pytest.mark.parametrize("page", [p.relative_to(ROOT).as_posix() for p in [*PAGES, *sorted((ROOT / "docs").glob("*.md"))]])
+def test_every_internal_link_resolves(page):
+    """Every relative link of the README, the guide and the docs names a file of the checkout,
+    and every #anchor a heading of the page it names."""
+    path = ROOT / page
+    text = re.sub(r"```.*?```", "", path.read_text(), flags=re.S)
+    targets = re.findall(r"\]\(([^)\s]+)\)", text) + re.findall(r'<img src="([^"]+)"', text)
+    if "/guide/" in page:  # each chapter leads back to the guide's contents
+        assert "../../README.md#the-guide" in targets, f"{page}: no link back to the README's guide"
+    for t in targets:
+        if re.match(r"^[a-z]+:", t):
+            continue
+        file, _, anchor = t.partition("#")
+        dest = (path.parent / file).resolve() if file else path
+        assert dest.exists(), f"{page}: {t} (no such file)"
+        if anchor and dest.suffix == ".md":
+            assert anchor in _anchors(dest), f"{page}: {t} (no such heading)"
 
 
 PUBLIC_MODULES = sorted(m.name for m in pkgutil.iter_modules(physcore.__path__) if not m.name.startswith("_"))

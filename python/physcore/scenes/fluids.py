@@ -128,7 +128,7 @@ def dam_break(
         Particles across the column width (spacing ``width / n``). Default 72 in 2D
         (N = 2n² = 10 368 particles; the default render to T = 8 then takes seconds, and the
         surface drawing shows no grain at 480 × 360) and 24 in 3D (N = 2n³·depth/width ≈
-        27 600). The README's speed and Martin & Moyce tables use n = 144 (41 472).
+        27 600). The guide's speed and Martin & Moyce tables (docs/guide/fluids_dfsph.md) use n = 144 (41 472).
     width, height : float
         The water column, m (> 0).
     tank : (float, float)
@@ -157,7 +157,7 @@ def dam_break(
         default integrator, ``"wcsph"`` with any other (DFSPH steps with
         ``"semi_implicit_euler"`` only). ``"dfsph"`` solves for an incompressible pressure (0.1 % mean compression) and steps at the flow's CFL limit
         instead of the speed of sound's: a render at n = 144 to T = 4 takes about 1,800 steps instead
-        of 29,000, three times faster (README, "Fluids (DFSPH)"), with the Martin & Moyce
+        of 29,000, three times faster (docs/guide/fluids_dfsph.md), with the Martin & Moyce
         front as close; ``sound_speed`` then only scales the viscosity and ``pass_precision`` does
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
 

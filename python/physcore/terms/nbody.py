@@ -66,7 +66,7 @@ class TreeGravity(Term, kind="tree_gravity"):
     The potential in the energy books is the tree's approximation of
     ``U = -G Σ_{i<j} m_i m_j / (|x_j - x_i|² + ε²)^{1/2}``, as accurate as the forces (exact at
     ``theta=0``). Tree forces are not exactly equal and opposite, so momentum and energy are
-    conserved only to the force error (see "Tree gravity" in the README for measured errors per
+    conserved only to the force error (see docs/guide/tree_gravity.md for measured errors per
     ``theta``: on a 3D Plummer sphere of 10⁴ bodies the median relative force error is about 6e-4
     at ``theta=0.5``; in 2D about ten times more at the same ``theta``). Computes in float64
     whatever the scene's precision.

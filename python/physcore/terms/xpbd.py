@@ -121,7 +121,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
 
     Energy books: potential ``Σ C²/(2α)`` over the compliant constraints (J; α = 0 and shapes
     store none); the energy each projection removes is measured and booked as this term's
-    dissipated energy (see the README's XPBD section).
+    dissipated energy (see docs/guide/constraints.md).
 
     Numerical damping: a compliant constraint oscillates as implicit Euler would step it. A
     mode of angular frequency ``ω = 1/√(α m)`` loses amplitude at ``γ = ln(1 + ω²h²)/(2h) ≈
