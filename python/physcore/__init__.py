@@ -22,6 +22,7 @@ from ._errors import (
     ThreadPoolWarning,
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
+from .batch import Batch
 from .contacts import Contacts
 from .flows import Flow
 from .fluids import Fluid, neighbors
@@ -52,6 +53,7 @@ __all__ = [
     "sweep",
     "ensemble",
     "Ensemble",
+    "Batch",
     "sweeps",
     "flows",
     "grids",

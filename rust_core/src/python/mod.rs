@@ -17,6 +17,7 @@ macro_rules! with_sim {
     };
 }
 
+mod batch;
 mod convert;
 mod errors;
 mod formulas;
@@ -237,6 +238,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(formulas::sph_max_dt, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::grid_limits, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::check_integrator, m)?)?;
+    m.add_function(wrap_pyfunction!(batch::step_batch, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())

@@ -21,6 +21,13 @@ pub struct PySimulation {
     inner: Inner,
 }
 
+impl PySimulation {
+    /// The world it holds (the batch steps several at once).
+    pub(super) fn inner_mut(&mut self) -> &mut Inner {
+        &mut self.inner
+    }
+}
+
 #[pymethods]
 impl PySimulation {
     #[new]

@@ -1,0 +1,70 @@
+"""physcore.Batch against a Python loop over the same scenes (issue "Many small worlds at once").
+
+Each workload is M members of one ready-made scene, perturbed (positions scaled by 1 + 1e-3 k),
+stepped S steps: as a Python loop (``for s in scenes: s.step(S)``: one call per member, each
+member's own pool) and as one ``Batch.step(S)`` at 1 and 2 threads. Wall time, median of
+``--repeats`` (modes alternated so that load on a shared machine hits all alike), on fresh
+copies each time; member-steps per second and the ratio to the loop.
+
+    python benches/scenes/bench_batch.py [--repeats 3] [--quick]
+
+Workloads: 10,000 three-body problems (figure_eight, 4th-order Yoshida) for 1,000 steps; 1,000
+double pendulums (XPBD rods) for 1,000 steps; 256 cloths of 16×16 for 200 steps.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benches/: _common
+
+import _common
+
+import argparse
+import pickle
+import statistics
+import time
+
+import physcore as pc
+
+
+def members(make, m: int) -> list[pc.Scene]:
+    return list(pc.Batch.from_scene(make(), m, positions=lambda k, x: x * (1 + 1e-3 * k)).members)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--quick", action="store_true", help="a tenth of the members: checks the script works")
+    a = ap.parse_args()
+    _common.require_release()
+    q = 10 if a.quick else 1
+    workloads = [
+        ("three-body (figure_eight, yoshida4)", lambda: pc.scenes.figure_eight(integrator="yoshida4"), 10_000 // q, 1000),
+        ("double pendulum (XPBD)", pc.scenes.double_pendulum, 1000 // q, 1000),
+        ("cloth 16x16", lambda: pc.scenes.cloth(n=16), 256 // q, 200),
+    ]
+    print(_common.header(threads=2))
+    print("| workload | M × steps | loop | batch 1 thread | batch 2 threads | batch 2 / loop |")
+    print("|---|---|---|---|---|---|")
+    for name, make, m, steps in workloads:
+        blob = pickle.dumps(members(make, m))
+        times: dict[str, list[float]] = {"loop": [], "b1": [], "b2": []}
+        for _ in range(a.repeats):
+            for mode in times:
+                scenes = pickle.loads(blob)
+                t0 = time.perf_counter()
+                if mode == "loop":
+                    for s in scenes:
+                        s.step(steps)
+                else:
+                    pc.Batch(scenes, threads=1 if mode == "b1" else 2).step(steps)
+                times[mode].append(time.perf_counter() - t0)
+        med = {k: statistics.median(v) for k, v in times.items()}
+        rate = {k: m * steps / v for k, v in med.items()}
+        print(f"| {name} | {m} × {steps} | {med['loop']:.2f} s ({rate['loop']:.3g}/s) | {med['b1']:.2f} s "
+              f"({rate['b1']:.3g}/s) | {med['b2']:.2f} s ({rate['b2']:.3g}/s) | {med['loop'] / med['b2']:.2f}× |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,300 @@
+"""Many small scenes stepped in one call: :class:`Batch`.
+
+A batch holds M scenes of the same structure (the same dimension, particle count and parts, in
+the same order; their parameters, initial states and step sizes may differ) and steps all of
+them with one call into the core, the GIL released, in parallel over members. Each member
+steps exactly as it would alone: bit for bit, for any thread count (every member is its own
+world; nothing is shared). A member that diverges is rolled back to where the call started and
+retired (it is not stepped again; :attr:`Batch.diverged` keeps its exception); the others go on.
+Ctrl-C rolls every member back to where the call started and raises ``KeyboardInterrupt``.
+
+The state reads back as arrays over members: :attr:`Batch.positions` ``(M, N, dim)``,
+:attr:`Batch.time` ``(M,)``, :meth:`Batch.energy_drift` ``(M,)``. :meth:`Batch.save` writes one
+file holding every member's scene file, which :meth:`Batch.load` reads back; a loaded batch
+continues bit for bit.
+
+What it saves: one crossing of the boundary per call instead of one per member, and the
+members run side by side on the cores (MuJoCo's ``rollout``, Genesis's ``n_envs`` are the
+model). Each member's step is still the general one; ``benches/scenes/bench_batch.py`` measures
+the batch against a Python loop over the same scenes.
+
+>>> import numpy as np
+>>> import physcore as pc
+>>> fan = pc.Batch.from_scene(pc.scenes.figure_eight(), 4, positions=lambda k, x: x * (1 + 1e-3 * k))
+>>> fan.step(100)
+>>> fan.positions.shape, fan.time.shape
+((4, 3, 2), (4,))
+>>> alone = pc.scenes.figure_eight()
+>>> alone.positions = alone.positions * (1 + 1e-3 * 2)
+>>> alone.step(100)
+>>> bool(np.array_equal(fan.positions[2], alone.positions))  # the same bits as alone
+True
+"""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import zipfile
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import _check, _core
+from ._atomic import atomic_write
+from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SceneFileError, SimulationDiverged
+from .scene import Scene, _unpickle_scene
+
+__all__ = ["Batch"]
+
+#: The batch file's format version (``Batch.save``).
+FORMAT_VERSION = 1
+
+
+def _structure(scene: Scene) -> tuple[Any, ...]:
+    """What members must share: dimension, particle count, and each part's section and kind."""
+    return (scene.dim, scene.n_particles, tuple((p.section, p.part_kind) for p in scene._parts))
+
+
+class Batch:
+    """M scenes of the same structure, stepped together (see the module docstring).
+
+    Parameters
+    ----------
+    scenes : sequence of Scene
+        The members, at least one, each once; they must have the same dimension, particle count
+        and parts (kinds, in order). The batch steps these very scenes: a member read or stepped
+        on its own afterwards is the same object.
+    threads : int or None
+        Threads stepping members side by side (``None``: all cores, or ``RAYON_NUM_THREADS``).
+        Results do not depend on it.
+
+    Raises
+    ------
+    TypeError
+        ``scenes`` is not a sequence of :class:`~physcore.Scene`; ``threads`` not an int.
+    InvalidInputError
+        (a ``ValueError``) No scene, a scene given twice, or a member whose structure differs
+        from the first's (the message names its index and what differs).
+    """
+
+    def __init__(self, scenes: Sequence[Scene], *, threads: int | None = None) -> None:
+        if isinstance(scenes, Scene) or not isinstance(scenes, Sequence):
+            raise InvalidTypeError(f"scenes: expected a sequence of Scene, got {type(scenes).__name__}")
+        members = list(scenes)
+        if not members:
+            raise InvalidInputError("scenes: a batch needs at least one scene")
+        for k, s in enumerate(members):
+            if not isinstance(s, Scene):
+                raise InvalidTypeError(f"scenes: entry {k} is a {type(s).__name__}, not a Scene")
+        seen: dict[int, int] = {}
+        for k, s in enumerate(members):
+            if id(s) in seen:
+                raise InvalidInputError(f"scenes: entry {k} is entry {seen[id(s)]} again (each scene once)")
+            seen[id(s)] = k
+        first = _structure(members[0])
+        for k, s in enumerate(members[1:], start=1):
+            other = _structure(s)
+            if other != first:
+                i = next(i for i in range(3) if other[i] != first[i])
+                what = ("dimension", "particle count", "parts")[i]
+                raise InvalidInputError(f"scenes: entry {k} differs from entry 0 in its {what}: {other[i]} vs {first[i]}")
+        self._threads = None if threads is None else _check.int_in_range("threads", threads, 1, 1 << 16)
+        self._members: tuple[Scene, ...] = tuple(members)
+        #: Retired members: index -> the :class:`~physcore.SimulationDiverged` it raised.
+        self.diverged: dict[int, SimulationDiverged] = {}
+
+    # ------------------------------------------------------------------------ building
+    @classmethod
+    def from_scene(
+        cls,
+        scene: Scene,
+        m: int,
+        *,
+        positions: Callable[[int, np.ndarray], Any] | None = None,
+        velocities: Callable[[int, np.ndarray], Any] | None = None,
+        threads: int | None = None,
+    ) -> Batch:
+        """``m`` copies of ``scene`` (bit-exact, through its scene file), member ``k``'s positions
+        and velocities set to ``positions(k, x)`` and ``velocities(k, v)`` where given (``x``,
+        ``v``: the scene's, (N, dim) float64 m and m/s).
+
+        Raises TypeError / InvalidInputError naming ``scene``, ``m`` (an int ≥ 1) or the array a
+        callable returned (as :attr:`Scene.positions` would)."""
+        if not isinstance(scene, Scene):
+            raise InvalidTypeError(f"scene: expected a Scene, got {type(scene).__name__}")
+        m = _check.int_in_range("m", m, 1, 1 << 24)
+        data = pickle.dumps(scene)
+        members = []
+        for k in range(m):
+            s = pickle.loads(data)
+            if positions is not None:
+                s.positions = positions(k, s.positions)
+            if velocities is not None:
+                s.velocities = velocities(k, s.velocities)
+            members.append(s)
+        return cls(members, threads=threads)
+
+    # ------------------------------------------------------------------------ members
+    @property
+    def members(self) -> tuple[Scene, ...]:
+        """The scenes, in order."""
+        return self._members
+
+    def __len__(self) -> int:
+        return len(self._members)
+
+    def __getitem__(self, k: int) -> Scene:
+        return self._members[k]
+
+    def __repr__(self) -> str:
+        s = self._members[0]
+        return f"Batch({len(self)} × {s.dim}D scenes of {s.n_particles} particles, {len(self.diverged)} diverged)"
+
+    # ------------------------------------------------------------------------ stepping
+    def step(self, n: int = 1) -> None:
+        """Advance every member that has not diverged ``n`` steps of its own ``dt``, in one call
+        into the core (GIL released), members in parallel.
+
+        A member that diverges is rolled back to where this call started and retired: it is in
+        :attr:`diverged` with its :class:`~physcore.SimulationDiverged` (step, time, particle,
+        suggested dt) and is not stepped again; the others finish their ``n`` steps.
+
+        Raises
+        ------
+        KeyboardInterrupt
+            Ctrl-C: every member is rolled back to where this call started.
+        SceneBusyError
+            A member is being stepped by another thread (nothing is stepped).
+        InvalidInputError
+            ``n`` not an int ≥ 0, or it would take a member's step count past 2**63 - 1.
+        """
+        n = _check.int_in_range("n", n, 0, (1 << 63) - 1)
+        live = [k for k in range(len(self)) if k not in self.diverged]
+        scenes = [self._members[k] for k in live]
+        for s in scenes:
+            if n > (1 << 63) - 1 - s.step_count:
+                raise InvalidInputError(f"n: {n} more steps would take a member's step count past 2**63 - 1")
+        for s in scenes:
+            if s._e0 is None:  # the books' reference, as a member's first step alone takes it
+                s._set_reference_energy()
+        taken = []
+        try:
+            for s in scenes:
+                if not s._lock.acquire(blocking=False):
+                    raise SceneBusyError("a member of this Batch is being stepped by another thread")
+                taken.append(s)
+            errors = _core.step_batch([s._sim for s in scenes], n, self._threads)
+        finally:
+            for s in taken:
+                s._lock.release()
+        for k, e in zip(live, errors, strict=True):
+            if e is not None:
+                if not isinstance(e, SimulationDiverged):
+                    raise e
+                self.diverged[k] = e
+
+    # ------------------------------------------------------------------------ state
+    @property
+    def positions(self) -> np.ndarray:
+        """Every member's positions, m: ``(M, N, dim)`` float64 (a new array)."""
+        return np.stack([s.positions for s in self._members])
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Every member's velocities, m/s: ``(M, N, dim)`` float64 (a new array)."""
+        return np.stack([s.velocities for s in self._members])
+
+    @property
+    def time(self) -> np.ndarray:
+        """Every member's simulated time, s: ``(M,)`` float64."""
+        return np.array([s.time for s in self._members], dtype=np.float64)
+
+    @property
+    def step_count(self) -> np.ndarray:
+        """Every member's step count: ``(M,)`` int64."""
+        return np.array([s.step_count for s in self._members], dtype=np.int64)
+
+    def energy_total(self) -> np.ndarray:
+        """Every member's energy books' total now, J: ``(M,)`` float64 (kinetic + potential +
+        dissipated, :meth:`Scene.energy`)."""
+        return np.array([s.energy().total for s in self._members], dtype=np.float64)
+
+    def energy_drift(self) -> np.ndarray:
+        """Every member's relative energy drift since its first step (:meth:`Scene.energy_drift`):
+        ``(M,)`` float64."""
+        return np.array([s.energy_drift() for s in self._members], dtype=np.float64)
+
+    # ------------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the batch to one file, atomically: a zip of every member's scene file
+        (``member{k}.npz``, as :meth:`Scene.save` writes it) and ``batch.json`` (the format,
+        the thread count, and the retired members' messages). Returns the path."""
+        blobs = [s.__reduce__()[1][0] for s in self._members]
+        meta = {
+            "format": FORMAT_VERSION,
+            "members": len(blobs),
+            "threads": self._threads,
+            "diverged": {str(k): str(e) for k, e in self.diverged.items()},
+        }
+
+        def write(fh: Any) -> None:
+            with zipfile.ZipFile(fh, "w", zipfile.ZIP_STORED) as z:
+                z.writestr("batch.json", json.dumps(meta))
+                for k, b in enumerate(blobs):
+                    z.writestr(f"member{k}.npz", b)
+
+        return atomic_write(path, write)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Batch:
+        """Read a file :meth:`save` wrote; each member is checked as :meth:`Scene.load` checks a
+        file. A retired member comes back retired (its exception rebuilt from its message).
+
+        Raises
+        ------
+        SceneFileError
+            Not a batch file, an unknown format, a member missing or failing its checks (the
+            message names the member).
+        """
+        where = str(path)
+        try:
+            with zipfile.ZipFile(path) as z:
+                try:
+                    meta = json.loads(z.read("batch.json"))
+                except (KeyError, ValueError) as e:
+                    raise SceneFileError(where, "batch.json", f"missing or not JSON ({type(e).__name__})") from None
+                if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION:
+                    fmt = meta.get("format") if isinstance(meta, dict) else meta
+                    raise SceneFileError(where, "batch.json.format", f"unsupported batch format {fmt!r} (this physcore reads {FORMAT_VERSION})")
+                count = meta.get("members")
+                if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= 1 << 24:
+                    raise SceneFileError(where, "batch.json.members", f"must be a count >= 1, got {count!r}")
+                blobs = []
+                for k in range(count):
+                    try:
+                        blobs.append(z.read(f"member{k}.npz"))
+                    except KeyError:
+                        raise SceneFileError(where, f"member{k}.npz", "missing") from None
+        except (OSError, zipfile.BadZipFile) as e:
+            raise SceneFileError(where, "", f"not a batch file ({type(e).__name__}: {e})") from None
+        members = []
+        for k, b in enumerate(blobs):
+            try:
+                members.append(_unpickle_scene(b, None))
+            except SceneFileError as e:
+                raise SceneFileError(where, f"member{k}.npz", e.problem if e.field == "" else f"{e.field}: {e.problem}") from None
+        threads = meta.get("threads")
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise SceneFileError(where, "batch.json.threads", f"must be null or a count >= 1, got {threads!r}")
+        batch = cls(members, threads=threads)
+        diverged = meta.get("diverged") or {}
+        if not isinstance(diverged, dict):
+            raise SceneFileError(where, "batch.json.diverged", "must be an object")
+        for k, msg in diverged.items():
+            if not (k.isdigit() and int(k) < count):
+                raise SceneFileError(where, "batch.json.diverged", f"names no member ({k!r})")
+            batch.diverged[int(k)] = SimulationDiverged(str(msg))
+        return batch

@@ -1,0 +1,109 @@
+//! Many scenes stepped in one call (the `Batch` of the facade): every member's `step(n)` as it
+//! would run alone, members in parallel on one pool with the GIL released, Ctrl-C rolling back
+//! the whole call, and a member that diverges rolled back alone while the others go on.
+//!
+//! Each member is its own `World`: nothing is shared between members, and a world's results do
+//! not depend on the thread that steps it or on its pool's size (`par`), so each member is
+//! bit-identical to stepping it alone, for any thread count. A member's own parallel loops fork
+//! onto its own pool (`World::with_stop` installs it on the stepping thread), which only the
+//! large members reach (`par::PAR_MIN`).
+use super::errors::*;
+use super::simulation::PySimulation;
+use super::watch::SIGNAL_POLL;
+use super::Inner;
+use crate::error::{invalid, Error};
+use crate::par::SyncPtr;
+use crate::world::Checkpoint;
+use pyo3::prelude::*;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// One member's outcome: its checkpoint (it stepped), or its error (it rolled itself back).
+type Outcome = Result<Checkpoint, Error>;
+
+/// Steps each of `sims` `n` steps (`Simulation.step`), in parallel over members on a pool of
+/// `threads` threads (`None`: all cores). Returns per member `None`, or the exception it would
+/// have raised alone (a `SimulationDiverged`: that member is back where the call started).
+/// Ctrl-C (any exception a signal handler raises) rolls every member back and is raised.
+/// `InvalidInputError` naming `sims` if one simulation is given twice, before anything runs.
+#[pyfunction]
+#[pyo3(signature = (sims, n, threads=None))]
+pub(super) fn step_batch(
+    py: Python<'_>,
+    sims: Vec<Bound<'_, PySimulation>>,
+    n: u64,
+    threads: Option<usize>,
+) -> PyResult<Vec<Option<Py<PyAny>>>> {
+    let mut refs = Vec::with_capacity(sims.len());
+    for (k, s) in sims.iter().enumerate() {
+        let r = s.try_borrow_mut().map_err(|_| {
+            to_py(py, invalid("sims", format!("entry {k} is in use (given twice, or being stepped by another thread)")))
+        })?;
+        refs.push(r);
+    }
+    let threads_err = |threads: usize, reason: String| to_py(py, Error::Threads { threads, reason });
+    let pool = match threads {
+        Some(t) => Arc::new(
+            rayon::ThreadPoolBuilder::new().num_threads(t.max(1)).build().map_err(|e| threads_err(t, e.to_string()))?,
+        ),
+        None => crate::par::default_pool().map_err(|e| threads_err(0, e))?,
+    };
+    let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut pending: Option<PyErr> = None;
+    let outcomes: Vec<Outcome> = py.detach(|| {
+        let caller = std::thread::current();
+        std::thread::scope(|scope| {
+            let job = scope.spawn(|| {
+                let out = pool.install(|| {
+                    ptrs.par_iter()
+                        .map(|p| {
+                            // SAFETY: each pointer is a distinct simulation (each was borrowed
+                            // mutably above, and the borrows outlive this call), stepped by one task.
+                            let inner = unsafe { &mut *p.0 };
+                            with_sim!(inner, s => s.step_checkpointed(n, &stop))
+                        })
+                        .collect::<Vec<_>>()
+                });
+                caller.unpark(); // the caller's wait ends now, not at its next poll
+                out
+            });
+            // The calling thread runs Python's signal handlers meanwhile (`watch::watched`).
+            while !job.is_finished() {
+                std::thread::park_timeout(SIGNAL_POLL);
+                if pending.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        pending = Some(e);
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                }
+            }
+            job.join().unwrap_or_else(|p| std::panic::resume_unwind(p))
+        })
+    });
+    // A signal during the call, or right after it: every member goes back to where it started
+    // (those that stopped on the flag, or diverged, already are).
+    if pending.is_none() {
+        pending = py.check_signals().err();
+    }
+    if let Some(e) = pending {
+        for (r, o) in refs.iter_mut().zip(outcomes) {
+            if let Ok(cp) = o {
+                with_sim!(r.inner_mut(), s => { s.rollback(cp); });
+            }
+        }
+        return Err(e);
+    }
+    let mut out = Vec::with_capacity(refs.len());
+    for (r, o) in refs.iter_mut().zip(outcomes) {
+        out.push(match o {
+            Ok(cp) => {
+                with_sim!(r.inner_mut(), s => s.release(cp));
+                None
+            }
+            Err(e) => Some(to_py(py, e).into_value(py).into_any()),
+        });
+    }
+    Ok(out)
+}
