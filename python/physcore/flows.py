@@ -8,16 +8,16 @@ have no mass and no energy: a flow is not a mechanical system.
 
 Flows (``kind``), with their parameters and customary values:
 
-================  ====  =====================================================  =================================
-kind              dim   u(x, y, z)                                             parameters (defaults)
-================  ====  =====================================================  =================================
-``lorenz``        3     σ(y − x), x(ρ − z) − y, xy − βz                        sigma=10, rho=28, beta=8/3
-``rossler``       3     −y − z, x + ay, b + z(x − c)                           a=0.2, b=0.2, c=5.7
-``thomas``        3     sin y − bx, sin z − by, sin x − bz                      b=0.208186
-``aizawa``        3     (z−b)x − dy, dx + (z−b)y, c + az − z³/3 − (x²+y²)(1+ez) + fzx³   a=0.95, b=0.7, c=0.6, d=3.5, e=0.25, f=0.1
-``halvorsen``     3     −ax − 4y − 4z − y², and cyclically                     a=1.89
-``van_der_pol``   2     y, μ(1 − x²)y − x                                      mu=1
-================  ====  =====================================================  =================================
+================  ===  ==============================================================  ==========================================
+kind              dim  u(x, y, z)                                                      parameters (defaults)
+================  ===  ==============================================================  ==========================================
+``lorenz``        3    σ(y − x), x(ρ − z) − y, xy − βz                                 sigma=10, rho=28, beta=8/3
+``rossler``       3    −y − z, x + ay, b + z(x − c)                                    a=0.2, b=0.2, c=5.7
+``thomas``        3    sin y − bx, sin z − by, sin x − bz                              b=0.208186
+``aizawa``        3    (z−b)x − dy, dx + (z−b)y, c + az − z³/3 − (x²+y²)(1+ez) + fzx³  a=0.95, b=0.7, c=0.6, d=3.5, e=0.25, f=0.1
+``halvorsen``     3    −ax − 4y − 4z − y², and cyclically                              a=1.89
+``van_der_pol``   2    y, μ(1 − x²)y − x                                               mu=1
+================  ===  ==============================================================  ==========================================
 
 Sources: Lorenz, J. Atmos. Sci. 20 (1963) 130, eqs. 25–27; Rössler, Phys. Lett. A 57 (1976)
 397; Thomas, Int. J. Bifurcation Chaos 9 (1999) 1889; Sprott, "Chaos and Time-Series
@@ -91,12 +91,12 @@ class Flow(Part):
     **params : float
         The flow's parameters (e.g. ``rho=28``); the others keep their defaults.
 
-    Attributes (once added to a scene)
-    ----------------------------------
+    Attributes
+    ----------
     points : (N, dim) float64
-        The points now (settable, same shape).
+        Once added to a scene: the points now (settable, same shape).
     velocity : (N, dim) float64
-        u at each point now.
+        Once added to a scene: u at each point now.
 
     Raises
     ------

@@ -322,12 +322,12 @@ class Wave(Grid):
         Fraction of the CFL limit that :meth:`Scene.advance` steps at (default 0.9).
     name : str
 
-    Attributes (once added to a scene)
-    ----------------------------------
+    Attributes
+    ----------
     u : (nx, ny) float64
-        Displacement now, m.
+        Once added to a scene: the displacement now, m.
     velocity : (nx, ny) float64
-        ``u_t`` at the half step before now, m/s.
+        Once added to a scene: ``u_t`` at the half step before now, m/s.
 
     Energy books (per unit areal density): kinetic ½Σ u_t² dA and potential ½c²|∇u|² (written as
     the leapfrog-conserved cross term of the two time levels), damping as dissipated, the work of
@@ -749,7 +749,7 @@ class StableFluid(Grid):
     temperature = _field("temperature", "Temperature (nx, ny), K.")
     pressure = _field("pressure", "Pressure of the last projection (nx, ny) (kinematic, m²/s²).", False)
     vorticity_field = _field("vorticity", "Vorticity ∂v/∂x − ∂u/∂y at cell centres (nx, ny), 1/s.", False)
-    speed = _field("speed", "|u| at cell centres (nx, ny), m/s.", False)
+    speed = _field("speed", "``|u|`` at cell centres (nx, ny), m/s.", False)
     divergence = _field("divergence", "Discrete divergence (nx, ny), 1/s.", False)
 
     @property

@@ -16,7 +16,7 @@ A particle in a harmonic trap oscillates at ω = √(k/m):
 >>> s.positions.round(4)                         # back near where it started
 array([[1., 0.]])
 
-A potential sampled on a grid: φ = ½ ω² |x|² (J/kg) on nodes 0.05 m apart, trilinear in between:
+A potential sampled on a grid: ``φ = ½ ω² |x|²`` (J/kg) on nodes 0.05 m apart, trilinear in between:
 
 >>> ax = np.linspace(-1.0, 1.0, 41)
 >>> X, Y, Z = np.meshgrid(ax, ax, ax, indexing="ij")
@@ -337,7 +337,7 @@ class PotentialGrid(Term, kind="potential_grid"):
     **Force.** The force is minus the exact gradient of the same interpolant the energy books
     use, so the field is conservative with respect to the booked potential. A linear φ is
     reproduced exactly (a uniform force). The interpolant is continuous but its gradient jumps
-    across cell faces (by O(h |∂²φ|) for a smooth φ): each cell crossing costs a symplectic
+    across cell faces (by ``O(h |∂²φ|)`` for a smooth φ): each cell crossing costs a symplectic
     integrator an energy error of order ``|jump| |v| dt`` of either sign, so Verlet's energy
     error over many crossings is small but not bounded as for a smooth force (see
     ``docs/potentials.md`` for the measured orders).

@@ -157,7 +157,7 @@ def plummer_sphere(
     Sampled as Aarseth, Hénon & Wielen, Astron. Astrophys. 37 (1974) 183, Appendix: radii by
     inverting the cumulative mass M(r)/M = r³/(r² + a²)^{3/2}, speeds q·v_esc with
     g(q) ∝ q²(1 − q²)^{7/2} by rejection, v_esc = √(2GM/√(r² + a²)); isotropic directions.
-    The half-mass radius is ≈ 1.305 a; the virial ratio 2K/|W| is 1 up to sampling noise.
+    The half-mass radius is ≈ 1.305 a; the virial ratio ``2K/|W|`` is 1 up to sampling noise.
     `cutoff` (in (0, 1)) is the mass fraction sampled: the sphere ends at the radius holding it
     (0.999: about 30 a), so no body starts absurdly far out. Units are any consistent set (G = 1
     by default: N-body units); `seed` (an int or None) makes the draw repeatable.

@@ -609,7 +609,7 @@ class Ensemble:
 
     def spread(self) -> np.ndarray:
         """The RMS distance of the members from the ensemble mean at each sample, shape (T,):
-        sqrt(mean over members of |v_m(t) - mean(t)|^2), the norm over the observable's own
+        ``sqrt(mean over members of |v_m(t) - mean(t)|^2)``, the norm over the observable's own
         axes. For a chaotic system it grows as exp(λ t) until it saturates (λ: the largest
         Lyapunov exponent)."""
         d = self.values - self.mean()[None]

@@ -57,7 +57,7 @@ def spring_networks(*, dim: int | None = None, max_particles: int = 12, integrat
     Springs never join a particle to itself, and no spring can pass near zero length (where its
     direction, hence the force, turns arbitrarily fast): the velocities are scaled so that the
     kinetic energy E ≤ k L_min²/8, and since a spring's potential ½ k ΔL² never exceeds the
-    energy of the (conservative or damped) network, every spring keeps |ΔL| ≤ L_min/2.
+    energy of the (conservative or damped) network, every spring keeps ``|ΔL| ≤ L_min/2``.
     """
     st = _st()
 
@@ -148,7 +148,7 @@ def particle_clouds(*, dim: int | None = None, max_particles: int = 50, gravity:
 def assert_energy_conserved(scene: Scene, steps: int, rtol: float, *, samples: int = 10) -> float:
     """Step ``scene`` ``steps`` times and assert that the energy books balance:
     ``|scene.energy_drift()| <= rtol`` at ``samples`` evenly spaced checks (so a transient
-    excursion is caught, not only the end value). Returns the largest |drift| seen.
+    excursion is caught, not only the end value). Returns the largest ``|drift|`` seen.
 
     Raises
     ------

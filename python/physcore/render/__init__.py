@@ -8,12 +8,14 @@ The frames are written as a palette GIF with one fixed palette, atomically.
 
 Public functions
 ----------------
+============================== ======================================================================
 record(scene, ...)             step a scene and return every frame's state (a Recording).
 gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
 save(recording, path, ...)     the same in the format of path's extension: .gif, .mp4, .webm, .png.
 frames(recording, ...)         the same frames as an iterator of RGB arrays.
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
 contact_sheet(scenes, path)    several scenes animated side by side in one GIF.
+============================== ======================================================================
 
 Layout
 ------
@@ -21,6 +23,7 @@ A package of private modules, one idea each; a module imports only from those li
 The public names are defined there and re-exported here (with ``__module__`` set to this
 package, so that they read, pickle and document as ``physcore.render.NAME``).
 
+=============== ====================================================================================
 _rows           row-wise numpy helpers on (N, d) point arrays: finite rows, norms, finite mean.
 _palette        the one fixed palette, and the colour maps onto it (speed, pressure, strain).
 _camera         orthographic camera (projection, fit to every frame), ``DEFAULT_VIEW``.
@@ -36,6 +39,7 @@ _gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one
                 the notebook display (``Recording._repr_html_``: its GIF as a data URL).
 _frame          ``render_frame()``: one state to an RGB array.
 _sheet          ``contact_sheet()``: several scenes' GIFs tiled on one clock (sweep variants).
+=============== ====================================================================================
 
 Examples
 --------

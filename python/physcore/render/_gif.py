@@ -125,9 +125,9 @@ def gif(
     color_by : {"speed", "pressure", "strain", "density", "none"}, optional
         Particle colouring. ``"strain"``: plain discs under the springs, which are drawn on top
         in a blue (compressed), grey, red (stretched) map whose ends are ± the run's 99th
-        percentile of |strain| (the colour bar gives it in %), so small strains show; the scene
+        percentile of ``|strain|`` (the colour bar gives it in %), so small strains show; the scene
         needs springs. Otherwise springs are drawn under the discs and saturate at
-        ``STRAIN_SATURATION``. ``"speed"``: a viridis-like map of |v| (m/s). ``"pressure"``: a
+        ``STRAIN_SATURATION``. ``"speed"``: a viridis-like map of ``|v|`` (m/s). ``"pressure"``: a
         plasma-like map of ``scene.pressure()`` (Pa; 0 for particles that are not fluid,
         negative values get the bottom colour). Both scales run from 0 at the bottom to a top
         fixed over the whole animation at the 99th percentile of all frames' values.

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-#: Spring strain |(L - L0) / L0| at which the strain colours saturate (fully red or blue).
+#: Spring strain ``|(L - L0) / L0|`` at which the strain colours saturate (fully red or blue).
 STRAIN_SATURATION = 0.1
 
 

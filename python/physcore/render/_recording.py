@@ -38,7 +38,7 @@ class Recording(NamedTuple):
     origin : (dim,) float64
         Centroid of the first frame, m; absolute positions are ``positions + origin``.
     speeds : (F, N) float32 or None
-        |v|, m/s (recorded when asked for).
+        ``|v|``, m/s (recorded when asked for).
     pairs : ((M,), (M,)) intp or None
         Spring endpoints, when springs were recorded.
     strain : (F, M) float32 or None
@@ -444,7 +444,7 @@ def record(
     scene, frames, steps_per_frame, frame_time, substeps, springs, progress
         As for :func:`gif`.
     color_by : {"speed", "pressure", "strain", "density", "none"}, optional
-        Default: the scene's ``render_defaults``, else ``"speed"``. Which per-particle scalar to record (|v| or ``scene.pressure()``) for colouring later.
+        Default: the scene's ``render_defaults``, else ``"speed"``. Which per-particle scalar to record (``|v|`` or ``scene.pressure()``) for colouring later.
     on_frame : callable, optional
         ``on_frame(k, scene, substeps)`` after frame ``k`` is recorded; ``substeps`` is what
         ``scene.advance`` returned for that frame (None for frame 0 and for fixed steps). For

@@ -26,13 +26,13 @@ def cyclotron(
 
     2D, B_z = `B` out of the plane and a uniform E = (0, `E`): `n` particles of charge ±1
     (alternating, first +1) and mass 1, 2 or 4 (cycling; units where these are 1). Each turns
-    at its cyclotron frequency ω_c = |q|B/m on a circle of radius m w/(|q|B) (w its speed in the
+    at its cyclotron frequency ``ω_c = |q|B/m`` on a circle of radius ``m w/(|q|B)`` (w its speed in the
     frame drifting at E×B/B² = (E/B, 0)), positive and negative charges in opposite senses, and
     every one drifts at E/B along x whatever its charge and mass: trochoids (Jackson,
     *Classical Electrodynamics*, 3rd ed., §12.3). Each starts at x = 0 moving along x at
     E/B − w, w drawn uniformly in [0.15, 0.6] (`seed`): w < E/B gives a wave, w = E/B a
     cycloid with cusps, w > E/B loops. Each is at the edge of its gyration circle, so it
-    sweeps a band 2 m w/(|q|B) high (above its start if positive, below if negative); the
+    sweeps a band ``2 m w/(|q|B)`` high (above its start if positive, below if negative); the
     bands are stacked 0.6/B apart, in index order from the bottom, centred on y = 0. Boris push;
     ``dt=None`` takes 0.02/B (ω_c dt ≤ 0.02). The render colours positive charges red and
     negative blue (:data:`CHARGE_COLORS`).

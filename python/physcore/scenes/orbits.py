@@ -257,7 +257,7 @@ def galaxies(
     tangential speeds √(μ/2q) sin f and √(μ/2q)(1 + cos f), so the relative speed is the escape
     speed √(2μ/r) and the orbital energy 0), started at separation 4.5 (f ≈ −107° for q = 1.6);
     by Barker's equation (Kepler's equation for e = 1) the pericentre comes at
-    t = √(2q³/μ)(τ + τ³/3), τ = tan(|f|/2): 4.27 for q = 1.6. The disks are tilted 15° and 45°
+    t = √(2q³/μ)(τ + τ³/3), ``τ = tan(|f|/2)``: 4.27 for q = 1.6. The disks are tilted 15° and 45°
     about the x-axis from the orbital plane; with `prograde` both spin the way the orbit turns,
     which, Toomre & Toomre found, makes the long tails; ``prograde=False`` (both retrograde)
     leaves the disks nearly undisturbed. Everything is placed in the centre-of-mass frame.

@@ -1,0 +1,118 @@
+"""The documentation site (issue 47): ``docs/`` builds with Sphinx, warnings as errors, into a
+temporary folder, with a gallery page per ready-made scene (its GIF copied into the build), the
+user guide in the README's order, and an API page for every public name."""
+from __future__ import annotations
+
+import html
+import importlib
+import inspect
+import re
+import subprocess
+import sys
+import zlib
+from pathlib import Path
+
+import pytest
+
+import physcore as pc
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+MODULES = ["render", "scenes", "shapes", "testing", "sweeps", "fluids", "grids", "flows", "potentials"]
+
+
+def _text(page: Path) -> str:
+    """A page's text, tags stripped (code blocks are split into highlighted spans)."""
+    return html.unescape(re.sub(r"<[^>]+>", "", page.read_text()))
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Path:
+    for module in ("sphinx", "myst_parser", "numpydoc", "furo"):
+        pytest.importorskip(module, reason=f'the docs extra is not installed (pip install ".[docs]"): no {module}')
+    out = tmp_path_factory.mktemp("site")
+    # The documented command, into a temporary folder: -W makes any warning fail the build.
+    result = subprocess.run(
+        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(DOCS), str(out / "html"),
+         "-d", str(out / "doctrees")],
+        capture_output=True, text=True, cwd=ROOT, check=False,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    return out / "html"
+
+
+@pytest.mark.slow
+def test_site_builds_with_the_main_pages(site):
+    for page in ["index.html", "gallery_pages/index.html", "gallery_pages/cloth.html", "api/index.html",
+                 "api/physcore.html", "api/scenes.html", "api/generated/physcore.Scene.html", "guide/install.html",
+                 "naming.html", "reproducibility.html"]:
+        assert (site / page).is_file(), page
+    assert "Scene.step" in _text(site / "api/generated/physcore.Scene.html")
+
+
+@pytest.mark.slow
+def test_every_scene_has_a_gallery_page_with_its_gif(site):
+    index = (site / "gallery_pages" / "index.html").read_text()
+    for name, fn in pc.scenes.REGISTRY.items():
+        page = site / "gallery_pages" / f"{name}.html"
+        assert page.is_file(), name
+        source = page.read_text()
+        assert f'src="../_images/{name}.gif"' in source, name
+        text = _text(page)
+        assert f"physcore render {name}" in text, name
+        assert f'pc.render.gif(pc.scenes.{name}(), "{name}.gif")' in text, name
+        for param in list(inspect.signature(fn).parameters)[:3]:
+            assert param in text, (name, param)
+        # The GIF is copied into the build, byte for byte.
+        gif = site / "_images" / f"{name}.gif"
+        assert gif.read_bytes() == (DOCS / "gallery" / f"{name}.gif").read_bytes(), name
+        # The index shows its thumbnail and links to its page.
+        assert f'href="{name}.html"' in index and f'src="../_images/{name}.gif"' in index, name
+
+
+def _inventory(site: Path) -> set[str]:
+    """The Python objects the site documents (from its objects.inv)."""
+    data = (site / "objects.inv").read_bytes()
+    body = zlib.decompress(data.split(b"\n", 4)[4]).decode()
+    return {line.split(" ", 1)[0] for line in body.splitlines() if re.match(r"^\S+ py:", line)}
+
+
+@pytest.mark.slow
+def test_every_public_name_has_an_api_entry(site):
+    documented = _inventory(site)
+    missing = [f"physcore.{n}" for n in pc.__all__ if f"physcore.{n}" not in documented]
+    for modname in MODULES:
+        module = importlib.import_module(f"physcore.{modname}")
+        assert f"physcore.{modname}" in documented, modname
+        for n in module.__all__:
+            obj = getattr(module, n)
+            # Documented under its module, or once where physcore or physcore.shapes re-exports it.
+            homes = {f"physcore.{modname}.{n}"}
+            if getattr(pc, n, None) is obj:
+                homes.add(f"physcore.{n}")
+            if getattr(pc.shapes, n, None) is obj:
+                homes.add(f"physcore.shapes.{n}")
+            if not homes & documented:
+                missing.append(f"physcore.{modname}.{n}")
+    assert not missing, missing
+
+
+def _toctree(text: str, caption: str) -> list[str]:
+    block = re.search(r"```\{toctree\}\n:caption: " + re.escape(caption) + r"\n(.*?)```", text, flags=re.S)
+    assert block, caption
+    return [line.strip() for line in block.group(1).splitlines() if line.strip() and not line.startswith(":")]
+
+
+def test_guide_toctree_follows_the_readme():
+    # Cheap, no Sphinx needed: the site's user guide lists the chapters in the README's order, and
+    # every other page of docs/ is in the reference notes (or is the vocabulary).
+    index = (DOCS / "index.md").read_text()
+    readme = (ROOT / "README.md").read_text()
+    guide = readme[readme.index("## The guide"): readme.index("## Development")]
+    chapters = [f"guide/{m}" for m in re.findall(r"\]\(docs/guide/(\w+)\.md\)", guide)]
+    assert chapters and _toctree(index, "User guide") == chapters
+    assert sorted(_toctree(index, "User guide")) == sorted(f"guide/{p.stem}" for p in (DOCS / "guide").glob("*.md"))
+    notes = _toctree(index, "Reference notes")
+    assert _toctree(index, "Vocabulary") == ["naming"]
+    others = {p.stem for p in DOCS.glob("*.md")} - {"index", "naming"}
+    assert set(notes) == others, set(notes) ^ others
