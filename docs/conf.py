@@ -69,6 +69,8 @@ numpydoc_validation_checks: set[str] = set()
 html_theme = "furo"
 html_title = f"physcore {release}"
 html_static_path = ["_static"]
+# A tab icon (a frame of the galaxies scene): without one, browsers ask for /favicon.ico and log a 404.
+html_favicon = "_static/favicon.png"
 html_show_sourcelink = False
 html_copy_source = False
 

@@ -116,3 +116,87 @@ def test_guide_toctree_follows_the_readme():
     assert _toctree(index, "Vocabulary") == ["naming"]
     others = {p.stem for p in DOCS.glob("*.md")} - {"index", "naming"}
     assert set(notes) == others, set(notes) ^ others
+
+
+# --------------------------------------------------------------------------- as a reader sees it
+def test_every_internal_link_of_the_site_resolves(site):
+    """Every relative href and src of every built page names a file of the build, and every
+    #fragment an id on the page it names (Sphinx's own pages and the generated ones)."""
+    ids: dict[Path, set[str]] = {}
+
+    def ids_of(page: Path) -> set[str]:
+        if page not in ids:
+            ids[page] = set(re.findall(r'\bid="([^"]+)"', page.read_text(errors="replace")))
+        return ids[page]
+
+    pages = sorted(site.rglob("*.html"))
+    assert len(pages) > 100
+    bad = []
+    for page in pages:
+        for target in re.findall(r'(?:href|src)="([^"]+)"', page.read_text(errors="replace")):
+            target = html.unescape(target)
+            if re.match(r"^[a-z]+:", target) or target.startswith("//"):
+                continue
+            file, _, fragment = target.partition("#")
+            dest = (page.parent / file.split("?")[0]).resolve() if file else page
+            if dest.is_dir():
+                dest = dest / "index.html"
+            if not dest.exists():
+                bad.append(f"{page.relative_to(site)}: {target}")
+            elif fragment and dest.suffix == ".html" and fragment not in ids_of(dest):
+                bad.append(f"{page.relative_to(site)}: {target} (no such id)")
+    assert not bad, bad[:20]
+
+
+def _browser():
+    import shutil
+
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install playwright)")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("no Chromium on the PATH (apt-get install chromium)")
+    return sync_api, chromium
+
+
+@pytest.mark.slow  # 10 s or more (tests/README.md), with the site's build
+def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
+    """The index, a gallery page and an API page, served over HTTP and opened in Chromium
+    (Debian's, driven by Playwright): no console error and no page error, every image of the
+    gallery page loaded (its GIF: natural width > 0), and the gallery index shows every scene's
+    thumbnail. Screenshots land in the test's tmp folder."""
+    import functools
+    import http.server
+    import threading
+
+    sync_api, chromium = _browser()
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *args):  # no request log in the test output
+            pass
+
+    handler = functools.partial(Quiet, directory=str(site))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    base = f"http://127.0.0.1:{server.server_address[1]}/"
+    try:
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1200, "height": 900})
+            problems: list[str] = []
+            page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
+            page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+            for path in ("index.html", "gallery_pages/kepler.html", "api/generated/physcore.Scene.html", "gallery_pages/index.html"):
+                response = page.goto(base + path, wait_until="load")
+                assert response is not None and response.ok, path
+                page.screenshot(path=str(tmp_path / (path.replace("/", "_") + ".png")))
+                broken = page.evaluate("[...document.images].filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.src)")
+                assert not broken, (path, broken)
+                if path == "gallery_pages/kepler.html":
+                    assert page.evaluate("[...document.images].some(i => i.src.endsWith('kepler.gif'))")
+                if path == "gallery_pages/index.html":
+                    shown = page.evaluate("[...document.images].map(i => i.src.split('/').pop())")
+                    assert {f"{n}.gif" for n in pc.scenes.REGISTRY} <= set(shown)
+            browser.close()
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert not problems, problems
