@@ -664,6 +664,68 @@ def _run_member(data: bytes, member: int, seed: int, perturb: Any, observe: Call
             DEFAULT_THREADS.reset(token)
 
 
+def _run_members(data: bytes, chunk: list[int], seed: int, perturb: Any, observe: Callable[[Any], Any] | None,
+                 samples: int, steps: int, threads: int | None) -> list[tuple[np.ndarray, np.ndarray] | str]:
+    """Ensemble members ``chunk`` as one task, stepped together as a :class:`~physcore.Batch`
+    (one call into the core per sample, members side by side on ``threads`` threads, each
+    member's own stepping single-threaded): every member's values are the bits
+    :func:`_run_member` gives it alone. Members a ``perturb`` made of another structure than
+    the first run one by one instead. A member's error comes back as its text."""
+    from .batch import Batch
+
+    out: dict[int, Any] = {}
+    token = DEFAULT_THREADS.set(1)
+    try:
+        scenes: dict[int, Scene] = {}
+        for m in chunk:
+            try:
+                scene = pickle.loads(data)
+                if m:
+                    rng = np.random.default_rng([seed, m])
+                    if callable(perturb):
+                        perturb(scene, rng)
+                    else:
+                        _perturb_positions(scene, rng, perturb)
+                scenes[m] = scene
+            except Exception as exc:  # noqa: BLE001 - a member's failure is reported, not raised
+                out[m] = _error_text(exc)
+        live = list(scenes)
+        try:
+            batch = Batch([scenes[m] for m in live], threads=threads) if live else None
+        except (InvalidInputError, InvalidTypeError):
+            batch = None  # members of different structures: one at a time
+        if batch is None and live:
+            for m in live:
+                out[m] = _run_member(data, m, seed, perturb, observe, samples, steps, threads)
+            return [out[m] for m in chunk]
+        look = observe or _positions
+        times: dict[int, list[float]] = {m: [] for m in live}
+        values: dict[int, list[np.ndarray]] = {m: [] for m in live}
+        for k in range(samples):
+            if k and batch is not None:
+                batch.step(steps)
+                for i, e in batch.diverged.items():
+                    out.setdefault(live[i], _error_text(e))
+            for m in live:
+                if m in out:
+                    continue
+                try:
+                    v = np.array(look(scenes[m]), dtype=np.float64)
+                    if not np.isfinite(v).all():
+                        raise InvalidInputError(f"observe: returned a non-finite value at sample {k}")
+                except Exception as exc:  # noqa: BLE001 - a member's failure is reported, not raised
+                    out[m] = _error_text(exc)
+                    continue
+                times[m].append(scenes[m].time)
+                values[m].append(v)
+        for m in live:
+            if m not in out:
+                out[m] = (np.asarray(times[m]), np.stack(values[m]))
+        return [out[m] for m in chunk]
+    finally:
+        DEFAULT_THREADS.reset(token)
+
+
 def ensemble(
     scene: Scene,
     members: int,
@@ -754,12 +816,25 @@ def ensemble(
 
     bar = tqdm(total=members, desc="ensemble", unit="run", disable=not progress, leave=False)
 
-    def on_result(m: int, value: Any) -> None:
-        got[m] = _error_text(value) if isinstance(value, BaseException) else value
-        bar.update(1)
+    # Members go in chunks, each chunk one task stepped as a Batch (one call into the core per
+    # sample for the whole chunk): all of them in one chunk in this process, about four chunks
+    # a worker on Dask (so that small members stop paying a task each).
+    if client == "serial":
+        size = members
+    else:
+        size = max(1, math.ceil(members / (4 * (workers or _usable_cpus()))))
+    chunks = [list(range(a, min(a + size, members))) for a in range(0, members, size)]
+
+    def on_result(c: int, value: Any) -> None:
+        for i, m in enumerate(chunks[c]):
+            if isinstance(value, BaseException):
+                got[m] = _error_text(value)
+            else:
+                got[m] = _error_text(value[i]) if isinstance(value[i], BaseException) else value[i]
+        bar.update(len(chunks[c]))
 
     try:
-        _map(_run_member, [(m, seed, perturb, observe, samples, steps, threads) for m in range(members)], client, workers,
+        _map(_run_members, [(chunk, seed, perturb, observe, samples, steps, threads) for chunk in chunks], client, workers,
              on_result, shared=(data,))
     finally:
         bar.close()

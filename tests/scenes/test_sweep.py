@@ -579,3 +579,26 @@ def test_contact_sheet_tile_that_diverges_writes_nothing(tmp_path):
     with pytest.raises(pc.SimulationDiverged):
         pc.render.contact_sheet([chain(1000.0, 1e-4), chain(1e9, 0.05)], tmp_path / "s.gif", frames=3, steps_per_frame=50)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_ensemble_members_run_as_one_batch_give_the_bits_of_each_alone():
+    """The serial ensemble steps its members together as one Batch; every member's samples are
+    the bits of that member run alone (the one-by-one path, ``_run_member``), and a member that
+    diverges fails alone."""
+    import pickle
+
+    from physcore.sweeps import _run_member
+
+    scene = pc.scenes.spring_chain()
+    ens = pc.ensemble(scene, 5, samples=4, steps_per_sample=50, perturb=1e-3, client="serial", progress=False)
+    data = pickle.dumps(scene)
+    for k, m in enumerate(ens.members):
+        times, values = _run_member(data, int(m), 0, 1e-3, None, 4, 50, 1)
+        assert np.array_equal(ens.values[k], values) and np.array_equal(ens.times, times)
+
+    def blow_up(s, rng):  # member 3 only: a step far past the chain's stability limit
+        if rng.bit_generator.state == np.random.default_rng([0, 3]).bit_generator.state:
+            s.dt = 1.0
+
+    ens = pc.ensemble(scene, 5, samples=3, steps_per_sample=50, perturb=blow_up, client="serial", progress=False)
+    assert list(ens.members) == [0, 1, 2, 4] and list(ens.failed) == [3] and "diverged" in ens.failed[3]
