@@ -170,6 +170,11 @@ class Batch:
             A member is being stepped by another thread (nothing is stepped).
         InvalidInputError
             ``n`` not an int ≥ 0, or it would take a member's step count past 2**63 - 1.
+
+        Warns
+        -----
+        ContactStepWarning
+            As :meth:`Scene.step` warns, for a member with contacts stepping far past their step.
         """
         n = _check.int_in_range("n", n, 0, (1 << 63) - 1)
         live = [k for k in range(len(self)) if k not in self.diverged]
@@ -180,6 +185,7 @@ class Batch:
         for s in scenes:
             if s._e0 is None:  # the books' reference, as a member's first step alone takes it
                 s._set_reference_energy()
+            s._warn_contact_step()  # as Scene.step warns (ContactStepWarning)
         taken = []
         try:
             for s in scenes:
