@@ -194,8 +194,9 @@ def double_pendulum(
 
 def _pair_any(value: object, arg: str) -> tuple[float, float]:
     """A pair of finite floats (any sign), naming `arg`."""
-    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 2:
-        raise InvalidTypeError(f"{arg}: expected a pair of numbers, got {type(value).__name__}")
+    # (A 0-d array has no len(): it is refused here too, by name.)
+    if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list, np.ndarray)) or np.ndim(value) != 1 or len(value) != 2:
+        raise InvalidTypeError(f"{arg}: expected a pair of numbers, got {type(value).__name__} of shape {np.shape(value)}")
     out = tuple(_check.finite(arg, v) for v in value)
     return out[0], out[1]
 
