@@ -6,10 +6,12 @@ Build (offline, warnings as errors), from the repository root::
 
 The pages are the Markdown of ``docs/`` as they are (MyST), the API from the docstrings
 (autodoc + autosummary, numpydoc sections), and the gallery, one page per ready-made scene,
-written at build time by ``docs/_ext/physcore_gallery.py`` into ``docs/gallery_pages/``.
+written at build time by ``docs/_ext/physcore_gallery.py`` into ``docs/gallery_pages/``, with
+the examples of ``examples/`` run by sphinx-gallery into ``docs/gallery_pages/examples/``.
 """
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -32,6 +34,9 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "numpydoc",  # the docstrings' Parameters / Returns / Raises / Examples sections
+    # Before physcore_gallery: both write pages on builder-inited, and the gallery index lists
+    # the examples' index when it exists.
+    "sphinx_gallery.gen_gallery",  # docs/gallery_pages/examples/: examples/plot_*.py, executed
     "physcore_gallery",  # docs/gallery_pages/: one page per scene of physcore.scenes.REGISTRY
 ]
 
@@ -59,6 +64,32 @@ numpydoc_show_class_members = False  # autosummary's class template lists the me
 numpydoc_class_members_toctree = False
 numpydoc_xref_param_type = False  # types like "(N, dim) float64" are prose, not references
 numpydoc_validation_checks: set[str] = set()
+
+# --- Examples: sphinx-gallery -------------------------------------------------------------------
+# examples/plot_*.py run at build time, each in a few seconds (small frames and sizes, which
+# each example says); their GIFs and videos are collected by docs/_ext/physcore_scraper.py,
+# their matplotlib figures by sphinx-gallery's own scraper. An example that fails fails the
+# build. An unchanged example is not run again (sphinx-gallery keeps an MD5 of each) unless
+# PHYSCORE_DOCS_RERUN=1 (as tests/scenes/test_docs_site.py sets): physcore itself may have changed.
+sphinx_gallery_conf = {
+    "examples_dirs": "../examples",
+    "gallery_dirs": "gallery_pages/examples",  # where physcore_gallery looks for them
+    "filename_pattern": r"/plot_",  # run every plot_*.py
+    "image_scrapers": ("matplotlib", "physcore_scraper.scraper"),
+    "abort_on_example_error": True,
+    "run_stale_examples": os.environ.get("PHYSCORE_DOCS_RERUN", "") not in ("", "0"),
+    # `sphinx-build -j N` runs the examples on N processes too (needs joblib); serial otherwise.
+    "parallel": True,
+    "within_subsection_order": "physcore_scraper.example_order",
+    "download_all_examples": False,  # each page keeps its .py / .ipynb download; no zip of all, no Binder
+    "binder": {},
+    "jupyterlite": {},
+    "show_signature": False,
+    "show_memory": False,
+    "remove_config_comments": True,
+    "write_computation_times": False,  # no sg_execution_times page written into docs/
+    "min_reported_time": 0,
+}
 
 # --- HTML ---------------------------------------------------------------------------------------
 # Furo rather than pydata-sphinx-theme: physcore's site is mostly long-form prose (19 guide

@@ -13,10 +13,11 @@ A file is rewritten only when its text changes, so an unchanged scene does not m
 its page again; pages of scenes no longer in the registry are removed. The folder is generated
 (ignored by git): edit this file or the scene's docstring, never a page.
 
-Room for sphinx-gallery (issue 47, item 2, the executed part): its examples would go to
-``gallery_pages/examples/`` (``sphinx_gallery_conf["gallery_dirs"]``); when that folder's
-``index.rst`` exists, the gallery index below lists it in its toctree, and each scene page links
-to ``examples/plot_<name>`` when that page exists. Nothing here executes a scene.
+The executed examples (issue 47, item 2): sphinx-gallery runs ``examples/plot_*.py`` into
+``gallery_pages/examples/`` (``sphinx_gallery_conf["gallery_dirs"]`` in docs/conf.py, connected
+before this extension so that its pages exist when these are written); when that folder's
+``index.rst`` exists, the gallery index below links it and lists it in its toctree, and each
+scene page links to ``examples/plot_<name>`` when that page exists. Nothing here executes a scene.
 """
 from __future__ import annotations
 
@@ -145,6 +146,11 @@ def index_page(order: list[str], registry: dict, examples: bool = False) -> str:
         "its Python, its parameters and its physics. What each costs to render is measured in "
         ":doc:`../gallery` (the gallery's budgets).",
         "",
+    ]
+    if examples:
+        lines += ["Runnable examples, run when this site is built (a scene of your own, a force of your own, "
+                  "a video, a parameter sweep, a batch): :doc:`examples/index`.", ""]
+    lines += [
         ".. container:: pc-gallery",
         "",
     ]

@@ -1,11 +1,13 @@
 """The documentation site (issue 47): ``docs/`` builds with Sphinx, warnings as errors, into a
 temporary folder, with a gallery page per ready-made scene (its GIF copied into the build), the
-user guide in the README's order, and an API page for every public name."""
+examples of ``examples/`` run by sphinx-gallery (each page embedding the GIF, video or figure its
+run wrote), the user guide in the README's order, and an API page for every public name."""
 from __future__ import annotations
 
 import html
 import importlib
 import inspect
+import os
 import re
 import subprocess
 import sys
@@ -19,6 +21,9 @@ import physcore as pc
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
 MODULES = ["render", "scenes", "shapes", "testing", "sweeps", "fluids", "grids", "flows", "potentials"]
+# Each example of examples/ and what its run puts on its page (sphinx-gallery's name for it).
+EXAMPLES = {"plot_own_scene": ".gif", "plot_custom_force": ".gif", "plot_video": ".mp4", "plot_sweep": ".png",
+            "plot_batch": ".png"}
 
 
 def _text(page: Path) -> str:
@@ -28,14 +33,16 @@ def _text(page: Path) -> str:
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> Path:
-    for module in ("sphinx", "myst_parser", "numpydoc", "furo"):
+    for module in ("sphinx", "myst_parser", "numpydoc", "furo", "sphinx_gallery", "matplotlib", "pandas", "av"):
         pytest.importorskip(module, reason=f'the docs extra is not installed (pip install ".[docs]"): no {module}')
     out = tmp_path_factory.mktemp("site")
     # The documented command, into a temporary folder: -W makes any warning fail the build.
+    # PHYSCORE_DOCS_RERUN=1: every example runs, even one unchanged since the last build in this
+    # checkout (sphinx-gallery would keep its old output): this physcore is the one tested.
     result = subprocess.run(
         [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(DOCS), str(out / "html"),
          "-d", str(out / "doctrees")],
-        capture_output=True, text=True, cwd=ROOT, check=False,
+        capture_output=True, text=True, cwd=ROOT, check=False, env={**os.environ, "PHYSCORE_DOCS_RERUN": "1"},
     )
     assert result.returncode == 0, result.stdout + result.stderr
     return out / "html"
@@ -68,6 +75,32 @@ def test_every_scene_has_a_gallery_page_with_its_gif(site):
         assert gif.read_bytes() == (DOCS / "gallery" / f"{name}.gif").read_bytes(), name
         # The index shows its thumbnail and links to its page.
         assert f'href="{name}.html"' in index and f'src="../_images/{name}.gif"' in index, name
+
+
+@pytest.mark.slow
+def test_every_example_runs_into_its_page(site):
+    """Each examples/plot_*.py has a page (linked from the examples' index, which the gallery's
+    index links) showing its code and embedding what its run wrote: the GIF as an <img>, the MP4
+    as a <video>, a matplotlib figure as a PNG, each copied into the build's _images/; the
+    sweep's table is on its page; nothing is left behind in examples/."""
+    assert sorted(p.stem for p in (ROOT / "examples").glob("plot_*.py")) == sorted(EXAMPLES)
+    assert 'href="examples/index.html"' in (site / "gallery_pages" / "index.html").read_text()
+    index = (site / "gallery_pages" / "examples" / "index.html").read_text()
+    signature = {".gif": b"GIF89a", ".mp4": b"ftyp", ".png": b"\x89PNG"}
+    for name, ext in EXAMPLES.items():
+        assert f'href="{name}.html"' in index, name
+        source = (site / "gallery_pages" / "examples" / f"{name}.html").read_text()
+        image = f"sphx_glr_{name}_001{ext}"
+        tag = "video" if ext == ".mp4" else "img"
+        assert re.search(rf'<{tag}\b[^>]*\bsrc="../../_images/{re.escape(image)}"', source), (name, tag, image)
+        built = (site / "_images" / image).read_bytes()
+        assert signature[ext] in built[:16], (name, built[:16])
+        assert built == (DOCS / "gallery_pages" / "examples" / "images" / image).read_bytes(), name
+        code = (ROOT / "examples" / f"{name}.py").read_text()
+        assert "import physcore as pc" in code and "import physcore as pc" in _text(site / "gallery_pages" / "examples" / f"{name}.html")
+    assert "yoshida4" in _text(site / "gallery_pages" / "examples" / "plot_sweep.html")  # the printed table
+    left = [p.name for p in (ROOT / "examples").iterdir() if p.suffix in (".gif", ".mp4", ".webm")]
+    assert not left, left
 
 
 def _inventory(site: Path) -> set[str]:
@@ -184,7 +217,8 @@ def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
             problems: list[str] = []
             page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
             page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
-            for path in ("index.html", "gallery_pages/kepler.html", "api/generated/physcore.Scene.html", "gallery_pages/index.html"):
+            for path in ("index.html", "gallery_pages/kepler.html", "api/generated/physcore.Scene.html", "gallery_pages/index.html",
+                         "gallery_pages/examples/plot_own_scene.html", "gallery_pages/examples/plot_video.html"):
                 response = page.goto(base + path, wait_until="load")
                 assert response is not None and response.ok, path
                 page.screenshot(path=str(tmp_path / (path.replace("/", "_") + ".png")))
@@ -192,6 +226,13 @@ def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
                 assert not broken, (path, broken)
                 if path == "gallery_pages/kepler.html":
                     assert page.evaluate("[...document.images].some(i => i.src.endsWith('kepler.gif'))")
+                if path == "gallery_pages/examples/plot_own_scene.html":
+                    assert page.evaluate("[...document.images].some(i => i.src.endsWith('sphx_glr_plot_own_scene_001.gif'))")
+                if path == "gallery_pages/examples/plot_video.html":
+                    # The video's metadata loads (readyState >= 1, HAVE_METADATA): its file is served
+                    # and Chromium reads its H.264 stream (duration: 90 frames at 30 fps).
+                    page.wait_for_function("document.querySelector('video').readyState >= 1", timeout=10_000)
+                    assert abs(page.evaluate("document.querySelector('video').duration") - 3.0) < 0.1
                 if path == "gallery_pages/index.html":
                     shown = page.evaluate("[...document.images].map(i => i.src.split('/').pop())")
                     assert {f"{n}.gif" for n in pc.scenes.REGISTRY} <= set(shown)
