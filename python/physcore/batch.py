@@ -233,6 +233,18 @@ class Batch:
         ``(M,)`` float64."""
         return np.array([s.energy_drift() for s in self._members], dtype=np.float64)
 
+    # ------------------------------------------------------------------------ drawing
+    @property
+    def render_defaults(self) -> dict[str, Any]:
+        """What a render of the batch uses by default: member 0's ``render_defaults``, with each
+        member its own hue (``colors``, ``color_by="none"``) and no mesh."""
+        return _Overlay(self).render_defaults
+
+    def _render_view(self) -> _Overlay:
+        """What :func:`physcore.render.record` and :func:`~physcore.render.gif` draw for a batch:
+        every member's particles in one frame, each member its own hue (see :class:`_Overlay`)."""
+        return _Overlay(self)
+
     # ------------------------------------------------------------------------ files
     def save(self, path: str | os.PathLike) -> Path:
         """Write the batch to one file, atomically: a zip of every member's scene file
@@ -304,3 +316,76 @@ class Batch:
                 raise SceneFileError(where, "batch.json.diverged", f"names no member ({k!r})")
             batch.diverged[int(k)] = SimulationDiverged(str(msg))
         return batch
+
+
+class _Overlay:
+    """A batch as the renderer reads a scene: the members overlaid, their particles one after the
+    other (member k's particle i is particle k·N + i), each member its own hue around the colour
+    wheel (its springs drawn too), over member 0's colliders and walls, with member 0's clock.
+    Stepping it steps the batch: ``step(n)`` is ``batch.step(n)``; ``advance(duration)`` takes
+    the steps of member 0's ``dt`` nearest ``duration`` (members keep their own ``dt``; the
+    render's automatic CFL substeps of a fluid scene do not apply). A retired member stays
+    where it diverged. Grids and flows are not drawn."""
+
+    def __init__(self, batch: Batch) -> None:
+        self._batch = batch
+        self._first = batch.members[0]
+        m, n = len(batch), self._first.n_particles
+        hue = np.arange(m) / max(m, 1)
+        rgb = np.clip(np.stack([np.abs(hue * 6 - 3) - 1, 2 - np.abs(hue * 6 - 2), 2 - np.abs(hue * 6 - 4)], axis=1), 0, 1)
+        rgb = np.rint((0.25 + 0.75 * rgb) * 255).astype(np.uint8)
+        defaults = dict(self._first.render_defaults or {})
+        defaults.pop("mesh", None)  # one member's mesh does not fit M members' particles
+        defaults["colors"] = np.repeat(rgb, n, axis=0).tolist()
+        defaults["color_by"] = "none"  # the hues tell the members apart (a speed scale would not)
+        self.render_defaults = defaults
+        self.dim = self._first.dim
+        self.n_particles = m * n
+
+    def _cat(self, name: str) -> np.ndarray:
+        return np.concatenate([getattr(s, name) for s in self._batch.members])
+
+    positions = property(lambda self: self._cat("positions"))
+    velocities = property(lambda self: self._cat("velocities"))
+    masses = property(lambda self: self._cat("masses"))
+    pinned = property(lambda self: self._cat("pinned"))
+    time = property(lambda self: self._first.time)
+    dt = property(lambda self: self._first.dt)
+    planes = property(lambda self: self._first.planes)
+    spheres = property(lambda self: self._first.spheres)
+    colliders = property(lambda self: self._first.colliders)
+    terms = property(lambda self: self._first.terms)
+    fluids = property(lambda self: self._first.fluids)
+    grids = property(lambda self: ())
+    flows = property(lambda self: ())
+
+    @property
+    def attributes(self) -> dict[str, np.ndarray]:
+        return {a: np.concatenate([s.attributes[a] for s in self._batch.members]) for a in self._first.attributes}
+
+    def boundary_points(self) -> np.ndarray:
+        return self._first.boundary_points()
+
+    def pressure(self) -> np.ndarray:
+        return self._cat_call("pressure")
+
+    def _cat_call(self, name: str) -> np.ndarray:
+        return np.concatenate([getattr(s, name)() for s in self._batch.members])
+
+    def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i, j, rest = self._first.spring_pairs()
+        n, m = self._first.n_particles, len(self._batch)
+        off = (np.arange(m) * n).repeat(len(i))
+        return np.tile(i, m) + off, np.tile(j, m) + off, np.tile(rest, m)
+
+    def auto_dt(self) -> float | None:
+        return self._first.auto_dt()
+
+    def step(self, n: int = 1) -> None:
+        self._batch.step(n)
+
+    def advance(self, duration: float, substeps: Any = "auto") -> int:
+        n = max(1, int(round(float(duration) / self._first.dt))) if substeps == "auto" else int(substeps)
+        self._batch.step(n)
+        return n
+

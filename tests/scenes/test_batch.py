@@ -155,3 +155,19 @@ def test_bad_input_is_refused_by_name_before_anything_steps():
     with pytest.raises(TypeError, match="threads"):
         pc.Batch([a, b], threads="2")
     assert a.step_count == 0 and b.step_count == 0
+
+
+def test_a_batch_renders_as_one_animation_of_its_members_overlaid(tmp_path):
+    """``render.record``/``render.gif`` take a batch: every frame holds every member's particles
+    (member k's particle i at k·N + i, equal to the member's own positions), each member its own
+    hue; stepping the recording stepped the batch."""
+    fan = pc.Batch.from_scene(pc.scenes.figure_eight(), 6, positions=lambda k, x: x * (1 + 2e-3 * k))
+    rec = pc.render.record(fan, frames=5, steps_per_frame=40)
+    assert rec.positions.shape == (5, 18, 2) and (fan.step_count == 160).all()
+    last = rec.positions[-1].astype(np.float64) + rec.origin
+    assert np.allclose(last, fan.positions.reshape(18, 2), atol=1e-6)
+    colors = np.array(fan.render_defaults["colors"])
+    assert colors.shape == (18, 3) and len({tuple(c) for c in colors}) == 6
+    assert fan.render_defaults["color_by"] == "none"
+    path = pc.render.gif(fan, tmp_path / "fan.gif", frames=8, steps_per_frame=20, size=(160, 120))
+    assert path.read_bytes()[:6] == b"GIF89a"

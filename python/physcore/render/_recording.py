@@ -136,7 +136,11 @@ class _FlowPoints:
 
 
 def points_view(scene: Any) -> Any:
-    """`scene`, or for a scene with flows and no particles, a view drawing the flows' points."""
+    """`scene`, or for a scene with flows and no particles, a view drawing the flows' points, or
+    for what offers one (a :class:`~physcore.Batch`: its members overlaid) its ``_render_view()``."""
+    view = getattr(scene, "_render_view", None)
+    if callable(view):
+        return view()
     if getattr(scene, "flows", ()) and int(getattr(scene, "n_particles", 0)) == 0:
         return _FlowPoints(scene)
     return scene
