@@ -64,3 +64,8 @@ def test_cloth_with_ground_rests_on_it():
     floor = scene.planes[0].point[2]
     assert scene.positions[:, 2].min() >= floor
     assert scene.energy().dissipated["collisions"] > 0
+
+
+def test_every_ready_made_scene_is_public():
+    """``physcore.scenes.__all__`` names every scene of the registry (seven were missing)."""
+    assert set(pc.scenes.REGISTRY) <= set(pc.scenes.__all__)

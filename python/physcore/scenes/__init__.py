@@ -58,7 +58,12 @@ from .orbits import KEPLER_RANGE as KEPLER_RANGE
 from .orbits import figure_eight, galaxies, kepler, projectile, pythagorean
 from .springs import spring_chain
 
-__all__ = ["cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean", "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly", "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "REGISTRY"]
+__all__ = [
+    "cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean",
+    "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly",
+    "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street",
+    "double_pendulum", "REGISTRY", "DEFAULT_SCENE",
+]
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
 REGISTRY: dict[str, Callable[..., Scene]] = {
