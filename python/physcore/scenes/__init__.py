@@ -95,6 +95,7 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "double_pendulum": double_pendulum,
     "vortex_street": vortex_street,
 }
+#: The scene `physcore render` and `physcore view` show when none is named.
 DEFAULT_SCENE = "cloth"
 
 # Defined in the family modules, public here: they read, pickle and document as physcore.scenes.NAME.
