@@ -17,8 +17,11 @@ from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
-# This checkout's package first (an installed physcore otherwise); the gallery extension.
-sys.path.insert(0, str(ROOT / "python"))
+# This checkout's package when it holds the compiled core (an in-place build: `pip install -e .`,
+# `maturin develop`), else the installed one (`pip install ".[docs]"` from this checkout): the
+# source tree without its `_core` cannot be imported. Then the gallery extension.
+if any((ROOT / "python" / "physcore").glob("_core*")):
+    sys.path.insert(0, str(ROOT / "python"))
 sys.path.insert(0, str(DOCS / "_ext"))
 
 import physcore  # noqa: E402
