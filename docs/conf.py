@@ -20,7 +20,7 @@ ROOT = DOCS.parent
 # This checkout's package when it holds the compiled core (an in-place build: `pip install -e .`,
 # `maturin develop`), else the installed one (`pip install ".[docs]"` from this checkout): the
 # source tree without its `_core` cannot be imported. Then the gallery extension.
-if any((ROOT / "python" / "physcore").glob("_core*")):
+if any(p.suffix in (".so", ".pyd") for p in (ROOT / "python" / "physcore").glob("_core*")):
     sys.path.insert(0, str(ROOT / "python"))
 sys.path.insert(0, str(DOCS / "_ext"))
 
