@@ -121,12 +121,9 @@ suppress_warnings = [
 def _site_links(app, docname, source):
     """The guide's chapters link back to the README's contents (``../../README.md#the-guide``),
     which is not a page of the site (it lies outside docs/): on the site that link leads to the
-    front page, which holds the guide's contents, instead; a link to the README's gallery leads
-    to the site's gallery. The files are unchanged."""
+    front page, which holds the guide's contents, instead. The files are unchanged."""
     if docname.startswith("guide/"):
         source[0] = source[0].replace("](../../README.md#the-guide)", "](../index.md)")
-        # The README's gallery is the site's gallery index.
-        source[0] = source[0].replace("](../../README.md#gallery)", "](../gallery_pages/index.md)")
 
 
 def _data_docs(app, what, name, obj, options, lines):
