@@ -263,6 +263,8 @@ pub(super) struct Solver<V: Vector> {
     mg: Vec<Real>,
     img: Vec<Real>,
     visc: Vec<Real>,
+    /// Several members: each particle's α c0 in the solve's order (set when a member joins).
+    visc_u: Vec<Real>,
     /// The walls of all members (each position once).
     walls: Walls,
     grid: CellList,
@@ -402,6 +404,7 @@ impl<V: Vector> Solver<V> {
             mg: Vec::new(),
             img: Vec::new(),
             visc: Vec::new(),
+            visc_u: Vec::new(),
             walls: checked,
             grid: CellList::new(2.0 * p.h, V::DIM)?,
             xs: Vec::new(),
@@ -454,6 +457,7 @@ impl<V: Vector> Solver<V> {
         self.members.push(Member { offset: self.n, ..m });
         self.n += self.members.last().map_or(0, |m| m.range.len());
         self.to_scene = self.members.iter().flat_map(|m| m.range.clone().map(|i| i as u32)).collect();
+        self.visc_u = self.members.iter().flat_map(|m| std::iter::repeat_n(m.visc, m.range.len())).collect();
         // The warm starts and pressures, particle order, member after member.
         for a in [&mut self.kappa, &mut self.kappa_v, &mut self.pressure] {
             a.resize(self.n, 0.0);
@@ -582,7 +586,7 @@ impl<V: Vector> Solver<V> {
             + (self.m.capacity() + self.k.capacity() + self.ksum.capacity() + self.surface_p.capacity()) * 8
             + (self.rho.capacity() + self.xc.iter().map(Vec::capacity).sum::<usize>()) * 8
             + (self.kappa.capacity() + self.kappa_v.capacity() + self.pressure.capacity()) * 8
-            + (self.mg.capacity() + self.img.capacity() + self.visc.capacity()) * 8
+            + (self.mg.capacity() + self.img.capacity() + self.visc.capacity() + self.visc_u.capacity()) * 8
             + self.to_scene.capacity() * 4
     }
 
@@ -755,7 +759,8 @@ impl<V: Vector> Term<V> for Dfsph<V> {
 
     fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
         let s = self.solver();
-        let pressure = s.history_of(self.who)[2 * self.range.len()..].to_vec();
+        let m = &s.members[self.who];
+        let pressure = s.pressure[m.offset..m.offset + m.range.len()].to_vec();
         vec![("density", self.range(), s.member_densities(self.who, x, model)), ("pressure", self.range(), pressure)]
     }
 

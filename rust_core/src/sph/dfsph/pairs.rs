@@ -257,10 +257,9 @@ impl<V: Vector> Solver<V> {
             }
         });
         if !self.to_scene.is_empty() {
-            let visc_of: Vec<Real> =
-                self.members.iter().flat_map(|m| std::iter::repeat_n(m.visc, m.range.len())).collect();
+            let visc_u = &self.visc_u;
             self.visc.clear();
-            self.visc.extend(order.iter().map(|&u| visc_of[u as usize]));
+            self.visc.extend(order.iter().map(|&u| visc_u[u as usize]));
         }
         for (c, xc) in self.xc.iter_mut().enumerate().take(V::DIM) {
             xc.clear();
