@@ -62,19 +62,19 @@ from ._errors import InvalidInputError, InvalidTypeError
 __all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "OPTIONAL_SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
 
 #: The sections of a scene file's ``meta``, in the order they are written and read.
-SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows", "colliders")
+SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows", "colliders", "bodies")
 #: The prefix of each section's array members: ``term{k}_positions``, ``grid{k}_u``, ...
 MEMBER_PREFIX: dict[str, str] = {
     "terms": "term", "planes": "plane", "boxes": "box", "spheres": "sphere", "grids": "grid", "flows": "flow",
-    "colliders": "collider",
+    "colliders": "collider", "bodies": "body",
 }
 #: The field of a section's entries that names the part's kind (sections of one class have none).
-SECTION_KEY: dict[str, str] = {"terms": "type", "grids": "kind", "colliders": "type"}
+SECTION_KEY: dict[str, str] = {"terms": "type", "grids": "kind", "colliders": "type", "bodies": "part"}
 #: Sections written only when they hold a part: those added after files of this format were
 #: first written, so a scene without one saves the same bytes as before. ``"colliders"`` holds
 #: the colliders registered by key (:class:`physcore.terms.Collider`: the capsule, and the next
 #: ones); the plane, box and sphere keep their own sections.
-OPTIONAL_SECTIONS: frozenset[str] = frozenset({"colliders"})
+OPTIONAL_SECTIONS: frozenset[str] = frozenset({"colliders", "bodies"})
 #: Names no part may take: the energy books' entry of the colliders, and of the particles.
 RESERVED_NAMES: frozenset[str] = frozenset({"collisions"})
 RESERVED_SYSTEM_NAMES: frozenset[str] = frozenset({"particles", "collisions"})

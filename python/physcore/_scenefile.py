@@ -107,6 +107,9 @@ _META_DEFAULTS.update({"xpbd_substeps": 10, "xpbd_iterations": 1})
 # The keyed colliders' section (physcore._parts.OPTIONAL_SECTIONS): written only when it holds one.
 _META_DEFAULTS["colliders"] = []
 _META_OPTIONAL["colliders"] = "list"
+# The rigid bodies' section (physcore.bodies): groups and joints, written only when it holds one.
+_META_DEFAULTS["bodies"] = []
+_META_OPTIONAL["bodies"] = "list"
 _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
@@ -362,6 +365,23 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
             raise r.error(f"{field}.type", f"unknown collider type {_show(kind)} (expected one of {', '.join(keyed)})")
         colliders.append(r.record(field, c, {"type": "str", **keyed[kind].record_fields}, dim))
     meta["colliders"] = colliders
+    bodies = []
+    for k, b in enumerate(meta["bodies"]):
+        field = f"meta.bodies[{k}]"
+        if not isinstance(b, dict):
+            raise r.error(field, f"must be an object, got {_kind(b)}")
+        if b.get("part") not in ("group", "joints"):
+            raise r.error(f"{field}.part", f"must be \"group\" or \"joints\", got {_show(b.get('part'))}")
+        fields = {"part": "str", "record": "object", **({"name": "str"} if b["part"] == "group" else {})}
+        rec = r.record(field, b, fields, dim)
+        count = "n" if b["part"] == "group" else "m"
+        v = rec["record"].get(count)
+        if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1 << 24:
+            raise r.error(f"{field}.record.{count}", f"must be a count in 1..{1 << 24}, got {_show(v)}")
+        if b["part"] == "group" and rec["record"].get("shape") not in ("ball", "box", "capsule", "polygon"):
+            raise r.error(f"{field}.record.shape", f"must be ball, box, capsule or polygon, got {_show(rec['record'].get('shape'))}")
+        bodies.append(rec)
+    meta["bodies"] = bodies
     grids = []
     for k, g in enumerate(meta["grids"]):
         field = f"meta.grids[{k}]"
@@ -636,6 +656,24 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, f in enumerate(meta["flows"]):
         sizes[f"F{k}"] = (f["record"]["n"] * meta["dim"], f"meta.flows[{k}].record.n")
         req[f"flow{k}_y"] = _Spec("f8", (f"F{k}",))
+    for k, b in enumerate(meta.get("bodies", ())):
+        rec, field = b["record"], f"meta.bodies[{k}].record"
+        if b["part"] == "group":
+            n, w = rec["n"], {"ball": 1, "box": 2, "capsule": 2, "polygon": 0}[rec["shape"]]
+            sizes[f"B{k}"] = (n, f"{field}.n")
+            sizes[f"BS{k}"] = (n * w, f"{field}.n (and its shape)")
+            for name, axes in (("positions", (f"B{k}", d)), ("angles", (f"B{k}",)), ("velocities", (f"B{k}", d)),
+                               ("angular_velocities", (f"B{k}",)), ("size", (f"BS{k}",))):
+                req[f"body{k}_{name}"] = _Spec("f8", axes)
+            opt[f"body{k}_vertices"] = _Spec("f8", (f"BV{k}", d))
+            opt[f"body{k}_state"] = _Spec("f8", (f"BX{k}",))
+            opt[f"body{k}_state_bytes"] = _Spec("f8", (f"BY{k}",))
+        else:
+            sizes[f"J{k}"] = (rec["m"], f"{field}.m")
+            for name, axes in (("a", (f"J{k}",)), ("b", (f"J{k}",)), ("anchor", (f"J{k}", d))):
+                req[f"body{k}_{name}"] = _Spec("f8", axes)
+            for name, axes in (("anchor_b", (f"J{k}", d)), ("axis", (f"J{k}", d)), ("limits", (f"J{k}", d)), ("length", (f"J{k}",))):
+                opt[f"body{k}_{name}"] = _Spec("f8", axes)
     opt.update({"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))})
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})

@@ -1068,6 +1068,13 @@ class Scene:
         return tuple(self._section("grids"))
 
     @property
+    def bodies(self) -> tuple[Any, ...]:
+        """The :class:`~physcore.Bodies` groups of the scene (rigid bodies), in the order added."""
+        from .bodies import Bodies
+
+        return tuple(p for p in self._section("bodies") if isinstance(p, Bodies))
+
+    @property
     def flows(self) -> tuple[Flow, ...]:
         """The :class:`~physcore.flows.Flow` systems of the scene, in the order added."""
         return tuple(self._section("flows"))

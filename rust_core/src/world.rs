@@ -574,9 +574,20 @@ impl<V: Vector> World<V> {
         }
     }
 
+    /// Gives every other system the particles' uniform gravity (`System::set_gravity`): the
+    /// rigid bodies fall under the scene's `Gravity` terms, and their books use the same g.
+    fn sync_gravity(&mut self) {
+        if !self.others.is_empty() {
+            let g = self.particles.forces().g;
+            let g = [g.comp(0), g.comp(1), if V::DIM == 3 { g.comp(2) } else { 0.0 }];
+            self.others.iter_mut().for_each(|s| s.set_gravity(g));
+        }
+    }
+
     /// The steps of `step_inner`.
     fn step_loop(&mut self, n: u64, stop: &AtomicBool) -> Result<()> {
         let dt = self.dt;
+        self.sync_gravity();
         let interrupted = Err(Error::Interrupted { rolled_back_to: 0 });
         // One system alone, nothing between its steps: it takes all n at once (and may fuse
         // them); the clock then counts them one by one, as below, for the same bits.
@@ -683,6 +694,7 @@ impl<V: Vector> World<V> {
     /// Reserves, fallibly, what reading the energy books needs (a refusal is
     /// `Error::OutOfMemory`, not an abort); `energy` then allocates nothing sized by the input.
     pub fn prepare_energy(&mut self) -> Result<()> {
+        self.sync_gravity();
         let pool = self.pool.clone();
         par::install(pool.as_ref(), || self.particles.reserve_potential())
     }

@@ -531,6 +531,16 @@ class _Rasteriser:
                 s, _ = self.cam.project(c)
                 lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
                 amax = max(amax, float(np.abs(c).max() + r.max()))
+        if rec.bodies is not None and fit is None and mode != "orbit":
+            from ._bodies import body_bounds
+
+            blo, bhi = body_bounds(rec.bodies)
+            if np.isfinite(blo).all() and np.isfinite(bhi).all():
+                if rec.positions.shape[1] == 0:
+                    lo, hi = blo, bhi
+                else:
+                    lo, hi = np.minimum(lo, blo), np.maximum(hi, bhi)
+                amax = max(amax, float(np.abs(np.concatenate([blo, bhi])).max()))
         # Keep the colour bar's band free: no disc reaches into it (nor into the title's).
         top_pad = None if self.colorbar is None else max(pad, self.colorbar.band + self.radius + 1)
         w, h = size
@@ -912,7 +922,11 @@ class _Rasteriser:
                 return self._frame_rgb_surface(k)
             if self.color_by == "density" and self.colors is not None:
                 return self._frame_rgb_glow(k)
-            return self._frame_rgb_discs(k) if self.antialias else self.palette[self.frame(k)]
+            if self.antialias:
+                return self._frame_rgb_discs(k)
+            out = self.palette[self.frame(k)]
+            self._draw_bodies(out, k, self.cam_at(k))
+            return out
         rec = self.rec
         cam = self.cam_at(k)
         under = self._under(cam)
@@ -976,10 +990,18 @@ class _Rasteriser:
     def _finish_rgb(self, out: np.ndarray, over: np.ndarray, k: int, cam: _Camera) -> np.ndarray:
         """A full-colour frame's last layer: the arrows and labels drawn on the `over` layer
         (which may hold more already), pasted onto `out`, which is returned."""
+        self._draw_bodies(out, k, cam)
         self._draw_overlays(over, k, cam)
         self._draw_clock(over, k)
         _paste(out, over, self.palette)
         return out
+
+    def _draw_bodies(self, out: np.ndarray, k: int, cam: _Camera) -> None:
+        """Frame k's rigid bodies, filled and shaded, on the RGB image `out` (2D)."""
+        if self.rec.bodies is not None and cam.dim == 2:
+            from ._bodies import draw_bodies
+
+            draw_bodies(out, cam, self.rec.bodies, k)
 
     def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> bool:
         """What frame k draws under its discs: the trails, and the springs unless colouring by

@@ -98,6 +98,9 @@ class Recording(NamedTuple):
     spheres: tuple = ()
     #: Rods ``(a, b, radius)`` (m) drawing the keyed colliders (a capsule), as the balls draw.
     rods: tuple = ()
+    #: The scene's rigid bodies (``render._bodies.BodyTrack``: outlines, colours, poses per
+    #: frame), or None.
+    bodies: Any = None
 
     @property
     def frames(self) -> int:
@@ -173,8 +176,19 @@ def _simulate(
     x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
     p0 = _scene_pressure(scene, n) if need_pressure else None
     walls = _scene_boundary(scene, dim)
+    from ._bodies import body_track
+
+    track, grab_bodies = body_track(scene, frames)
+    b0 = grab_bodies() if track is not None else None
     # Store positions relative to the start centroid so float32 keeps its precision far from 0.
-    origin = _finite_mean(x) if n else (_finite_mean(walls) if walls is not None and len(walls) else np.zeros(dim))
+    if n:
+        origin = _finite_mean(x)
+    elif walls is not None and len(walls):
+        origin = _finite_mean(walls)
+    elif b0 is not None:
+        origin = _finite_mean(b0[:, :2])
+    else:
+        origin = np.zeros(dim)
     pos = np.empty((frames, n, dim), dtype=np.float32)
     speeds = np.empty((frames, n), dtype=np.float32) if need_speed else None
     vels = np.empty((frames, n, dim), dtype=np.float32) if need_velocity else None
@@ -237,6 +251,11 @@ def _simulate(
                         points[k] = gp["grid"].tracers
             if times is not None:
                 times[k] = float(scene.time)
+            if track is not None:
+                b = b0 if k == 0 else grab_bodies()
+                with np.errstate(over="ignore", invalid="ignore"):
+                    track.poses[k, :, :2] = b[:, :2] - origin[:2]
+                    track.poses[k, :, 2] = b[:, 2]
             if on_frame is not None:
                 on_frame(k, scene, taken)
             if bar is not None:
@@ -269,6 +288,7 @@ def _simulate(
         velocities=vels,
         spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
         rods=tuple(_drawn_rods(scene, dim)),
+        bodies=track,
     )
 
 

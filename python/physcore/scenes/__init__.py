@@ -43,6 +43,7 @@ from ..shapes import plummer_sphere
 from .charges import CHARGE_COLORS as CHARGE_COLORS
 from .charges import cyclotron
 from .cloth import cloth, cloth_on_ball, xpbd_cloth
+from .bodies import dominoes, floating, pyramid
 from .constraints import double_pendulum, tumbling_boxes
 from .flows import lorenz
 from .fluids import crown, dam_break, drop, droplets
@@ -62,7 +63,7 @@ __all__ = [
     "cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean",
     "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly",
     "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street",
-    "double_pendulum", "REGISTRY", "DEFAULT_SCENE",
+    "double_pendulum", "dominoes", "pyramid", "floating", "REGISTRY", "DEFAULT_SCENE",
 ]
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
@@ -94,6 +95,9 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "cloth_on_ball": cloth_on_ball,
     "double_pendulum": double_pendulum,
     "vortex_street": vortex_street,
+    "dominoes": dominoes,
+    "pyramid": pyramid,
+    "floating": floating,
 }
 #: The scene `physcore render` and `physcore view` show when none is named.
 DEFAULT_SCENE = "cloth"

@@ -308,6 +308,34 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
     }
 
+    /// Adds a group of rigid bodies (`systems::bodies`, 2D) to the system "bodies" (made, with
+    /// its coupling to the particles, at the first group); returns the number of its first body.
+    fn add_bodies(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<usize> {
+        let p = params_of(py, "add_bodies", params)?;
+        let Inner::D2(s) = &mut self.inner else {
+            return Err(err(invalid(
+                "dim",
+                "rigid bodies are two-dimensional in this version: make the scene with dim=2",
+            )));
+        };
+        bodies_system(s).map_err(|e| to_py(py, e))?;
+        let b = s.other_mut("bodies").map_err(|e| to_py(py, e))?.as_bodies().expect("the bodies system");
+        b.add_group(p).map_err(|e| to_py(py, e))
+    }
+
+    /// Adds joints between rigid bodies (`systems::bodies::Bodies2::add_joints`).
+    fn add_joints(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let p = params_of(py, "add_joints", params)?;
+        let Inner::D2(s) = &mut self.inner else {
+            return Err(err(invalid(
+                "dim",
+                "rigid bodies are two-dimensional in this version: make the scene with dim=2",
+            )));
+        };
+        let b = s.other_mut("bodies").map_err(|e| to_py(py, e))?.as_bodies().expect("the bodies system");
+        b.add_joints(p).map_err(|e| to_py(py, e))
+    }
+
     /// The fields `names` of system `name`, each a flat float64 array (the grid's layout).
     fn system_fields<'py>(
         &self,
@@ -502,4 +530,14 @@ type Columns<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
 fn copy_of(a: &[f64], what: &'static str, of: &str) -> crate::error::Result<Vec<f64>> {
     Need::new(what, Need::bytes_of::<f64>(a.len()), format!("a copy of {of} ({} values)", count(a.len() as u128)))
         .copy(a)
+}
+
+/// The index of the world's "bodies" system, made (with its particle coupling) if missing.
+fn bodies_system(s: &mut World<DVec2>) -> crate::error::Result<usize> {
+    if let Some(k) = s.others().iter().position(|o| o.name() == "bodies") {
+        return Ok(k);
+    }
+    let k = s.add_system(Box::new(crate::systems::bodies::Bodies2::new("bodies")))?;
+    s.add_coupling(Box::new(crate::systems::bodies::BodyContacts::new(k)));
+    Ok(k)
 }

@@ -11,6 +11,7 @@
 //! - [`flows`]: points advected by a first-order flow (Lorenz, Rössler, …), an `OdeSystem`.
 //!
 //! Couplings between systems ([`Coupling`]) run after all systems have stepped.
+pub mod bodies;
 pub mod flows;
 pub mod ode;
 pub mod particles;
@@ -115,6 +116,14 @@ pub trait System: Send + Sync {
     /// cannot), so that a step allocates nothing that could abort the process.
     fn prepare(&mut self) -> Result<()> {
         Ok(())
+    }
+    /// The uniform acceleration of the particles' fields (their `Gravity` terms summed, m/s²),
+    /// given at the start of every call of steps: systems with mass under gravity (rigid
+    /// bodies) follow the scene's gravity. Default: ignored.
+    fn set_gravity(&mut self, _g: [Real; 3]) {}
+    /// The rigid bodies, for the coupling that reaches them (`bodies::BodyContacts`).
+    fn as_bodies(&mut self) -> Option<&mut bodies::Bodies2> {
+        None
     }
     /// Hands the system the stop flag of the call in progress (`Stop::default()` after it),
     /// for evaluations long enough to poll it (see `crate::stop`).

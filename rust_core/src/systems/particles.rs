@@ -58,6 +58,11 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn state(&self) -> &State<V> {
         &self.sys.state
     }
+    /// Positions and velocities to change, with the masses and attributes beside them (a
+    /// coupling's exchange with another system, run between steps).
+    pub fn state_model_mut(&mut self) -> (&mut State<V>, &Model) {
+        (&mut self.sys.state, &self.sys.model)
+    }
     /// Masses and optional attributes.
     pub fn model(&self) -> &Model {
         &self.sys.model

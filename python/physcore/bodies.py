@@ -1,0 +1,602 @@
+"""Rigid bodies in 2D: balls, boxes, capsules and convex polygons that fall, stack, topple and
+roll, joined by revolute, fixed, prismatic and rope joints, and coupled both ways with the
+scene's particles (grains, cloth, fluids).
+
+Contacts and joints are solved by rapier (dimforge's ``rapier2d-f64``, double precision, its
+deterministic build): the field's well-kept library, a sequential-impulse (soft PGS) solver with
+warm starting (Catto, "Iterative Dynamics with Temporal Coherence", GDC 2005). physcore adds the
+coupling with its particles, the energy books, rollback on divergence and on Ctrl-C, and
+restarts that continue bit for bit (the solver's whole state, contacts and warm-start impulses
+included, is saved in the scene file).
+
+A :class:`Bodies` part is a group of bodies of one shape; every body of the scene gets a
+number in the order added, and a :class:`Joints` part joins bodies by reference
+(``bodies[i]``, ``bodies[a:b]``). Bodies fall under the scene's :class:`~physcore.Gravity`
+terms (their sum), like the particles.
+
+The particles (with their ``radius`` attribute, else as points) are kept out of every body: a
+particle found inside or touching a body after a step is put back on its surface, and the
+impulse that stops its approach (the body's restitution, Coulomb friction with the body's
+coefficient) is applied to both, equal and opposite, at the contact point. So grains push
+boxes, a box ploughs through grains, cloth drapes on a table, and fluid particles hold a box
+up (a particle-impulse coupling, not Akinci et al.'s boundary particles: a floating body's
+draft is approximate).
+
+Energy books (:meth:`Scene.energy`): the bodies' kinetic energy (translation and rotation) is
+in ``kinetic``, the potential of gravity under ``"bodies: gravity"``; rapier does not report
+what contacts, friction, restitution and joints take out, so their sum (with the solver's
+error) is booked as the residual ``"bodies: contacts and joints"``, and the kinetic energy the
+particle coupling removes as ``"bodies ⇄ particles"``.
+
+Examples
+--------
+>>> import physcore as pc
+>>> scene = pc.Scene(dim=2, dt=1 / 240)
+>>> _ = scene.add(pc.Gravity([0.0, -9.81]))
+>>> ground = scene.add(pc.Bodies("box", size=[(5.0, 0.1)], positions=[(0.0, -0.1)], kind="fixed"))
+>>> crate = scene.add(pc.Bodies("box", size=[(0.2, 0.2)], positions=[(0.0, 1.0)]))
+>>> scene.step(480)
+>>> round(float(crate.positions[0, 1]), 2)  # resting on the ground: its half-height up
+0.2
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+from . import _check
+from ._errors import InvalidInputError, InvalidTypeError
+from ._parts import AttachContext, Host, LoadContext, Part
+
+__all__ = ["Bodies", "Joints", "BodyRef", "SHAPES", "JOINTS"]
+
+#: The shapes of a :class:`Bodies` group and what ``size`` gives per body.
+SHAPES: dict[str, str] = {
+    "ball": "radius r (m)",
+    "box": "half extents (hx, hy) (m)",
+    "capsule": "half length of the axis and radius (l, r) (m), axis along the body's x",
+    "polygon": "none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
+}
+#: The joints of :class:`Joints`.
+JOINTS: tuple[str, ...] = ("revolute", "fixed", "prismatic", "rope")
+_KINDS = ("dynamic", "fixed", "kinematic")
+#: The name of the core's system that holds every body.
+SYSTEM = "bodies"
+
+
+def _rows(arg: str, value: Any, n: int | None, width: int) -> np.ndarray:
+    a = _check.real_array(arg, value).astype(np.float64)
+    if width == 1:
+        if a.ndim == 0 or a.shape == (1,):
+            a = np.full(n if n is not None else 1, float(a.reshape(-1)[0]))
+        if a.ndim != 1 or (n is not None and a.shape[0] != n):
+            raise InvalidInputError(f"{arg}: expected shape ({n if n is not None else 'N'},), got {a.shape}")
+    else:
+        if a.shape in ((width,), (1, width)):
+            a = np.tile(a.reshape(1, width), (n if n is not None else 1, 1))
+        if a.ndim != 2 or a.shape[1] != width or (n is not None and a.shape[0] != n):
+            raise InvalidInputError(f"{arg}: expected shape ({n if n is not None else 'N'}, {width}), got {a.shape}")
+    if not np.isfinite(a).all():
+        raise InvalidInputError(f"{arg}: every value must be finite")
+    return np.ascontiguousarray(a)
+
+
+def _number(arg: str, value: Any, lo: float, hi: float = math.inf, *, open_lo: bool = False) -> float:
+    x = _check.real(arg, value)
+    if not math.isfinite(x) or x < lo or x > hi or (open_lo and x == lo):
+        lo_s = f"> {lo:g}" if open_lo else f">= {lo:g}"
+        raise InvalidInputError(f"{arg}: must be {lo_s}" + (f" and <= {hi:g}" if math.isfinite(hi) else "") + f", got {value!r}")
+    return x
+
+
+class BodyRef:
+    """Some bodies of a :class:`Bodies` group, by index within it: ``bodies[3]``,
+    ``bodies[:-1]``, ``bodies[[0, 2]]`` (what :class:`Joints` joins)."""
+
+    def __init__(self, group: Bodies, index: np.ndarray) -> None:
+        self.group = group
+        self.index = index
+
+    def __len__(self) -> int:
+        return int(self.index.size)
+
+    def __repr__(self) -> str:
+        return f"BodyRef({self.group.name!r}, {self.index.tolist()})"
+
+
+class Bodies(Part):
+    """A group of rigid bodies of one shape (2D).
+
+    Parameters
+    ----------
+    shape : str
+        ``"ball"``, ``"box"``, ``"capsule"`` or ``"polygon"`` (:data:`SHAPES`).
+    size : array_like of float
+        Per body (or one value for all): a ball's radius, shape (N,); a box's half extents
+        ``(hx, hy)`` or a capsule's ``(half_length, radius)``, shape (N, 2); m, > 0. Not used by
+        polygons. Its length sets N when ``positions`` is not given.
+    positions : (N, 2) array_like of float, default all at the origin
+        Centres, m.
+    angles : (N,) array_like of float or float, default 0
+        Orientations, rad (counter-clockwise).
+    velocities : (N, 2) array_like of float, default 0
+        Linear velocities, m/s.
+    angular_velocities : (N,) array_like of float or float, default 0
+        rad/s.
+    vertices : (K, 2) array_like of float, polygon only
+        The polygon's vertices in the body's frame, m (their convex hull is the shape).
+    density : float, default 1000
+        kg/m² (2D): the mass and moment of inertia follow from it and the shape.
+    friction : float, default 0.5
+        Coulomb friction coefficient μ ≥ 0 (a contact uses the mean of its two bodies').
+    restitution : float, default 0.1
+        Coefficient of restitution e in [0, 1] (a contact uses the larger of its two bodies').
+    kind : str, default "dynamic"
+        ``"dynamic"`` (moves under forces and contacts), ``"fixed"`` (never moves: the ground,
+        walls, a table), ``"kinematic"`` (moves at its set velocity, unmoved by contacts).
+    color : str, (3,) or (N, 3) int, optional
+        The drawing colour (a matplotlib name, or RGB 0–255 for all or per body); default by shape.
+    name : str, optional
+        Unique among the scene's bodies; default ``"bodies"``, ``"bodies_2"``, ...
+
+    Attributes
+    ----------
+    positions, angles, velocities, angular_velocities : float64 arrays
+        Once in a scene: the state now, shapes (N, 2), (N,), (N, 2), (N,) (copies; settable).
+    masses, inertia : (N,) float64
+        kg and kg·m².
+
+    Raises
+    ------
+    InvalidInputError
+        (a ``ValueError``) naming the argument: an unknown shape or kind, wrong shapes,
+        non-finite values, sizes ≤ 0, density ≤ 0, friction < 0, restitution outside [0, 1],
+        fewer than 3 polygon vertices or all on a line; adding to a 3D scene.
+    InvalidTypeError
+        (a ``TypeError``) a non-numeric argument.
+    """
+
+    section: ClassVar[str] = "bodies"
+    part_kind: ClassVar[str] = "group"
+
+    def __init__(
+        self,
+        shape: str = "box",
+        size: Any = None,
+        positions: Any = None,
+        *,
+        angles: Any = 0.0,
+        velocities: Any = 0.0,
+        angular_velocities: Any = 0.0,
+        vertices: Any = None,
+        density: float = 1000.0,
+        friction: float = 0.5,
+        restitution: float = 0.1,
+        kind: str = "dynamic",
+        color: Any = None,
+        name: str | None = None,
+    ) -> None:
+        self.shape = _check.choice("shape", shape, tuple(SHAPES))
+        self.kind = _check.choice("kind", kind, _KINDS)
+        width = 1 if self.shape == "ball" else 2
+        if positions is not None:
+            x = _rows("positions", positions, None, 2)
+            n = x.shape[0]
+        elif size is not None and self.shape != "polygon":
+            n = _rows("size", size, None, width).shape[0]
+            x = np.zeros((n, 2))
+        else:
+            n, x = 1, np.zeros((1, 2))
+        if n < 1:
+            raise InvalidInputError("positions: a group needs at least one body")
+        self.n = n
+        self.start = x
+        if self.shape == "polygon":
+            if vertices is None:
+                raise InvalidInputError("vertices: a polygon group needs its vertices, shape (K, 2)")
+            v = _rows("vertices", vertices, None, 2)
+            if v.shape[0] < 3:
+                raise InvalidInputError(f"vertices: a polygon needs at least 3, got {v.shape[0]}")
+            e = v - v.mean(axis=0)
+            if np.linalg.matrix_rank(e, tol=1e-12 * max(1e-300, float(np.abs(e).max()))) < 2:
+                raise InvalidInputError("vertices: all on one line (the polygon has no area)")
+            self.vertices = v
+            self.size = np.zeros((n, 0))
+        else:
+            if vertices is not None:
+                raise InvalidInputError(f"vertices: only polygons have vertices, not a {self.shape}")
+            if size is None:
+                size = {"ball": 0.1, "box": (0.1, 0.1), "capsule": (0.1, 0.05)}[self.shape]
+            s = _rows("size", size, n, width)
+            if not (s > 0).all():
+                raise InvalidInputError("size: every size must be > 0 (m)")
+            self.size = s if width == 2 else s.reshape(n)
+            self.vertices = None
+        self.start_angles = _rows("angles", angles, n, 1)
+        self.start_velocities = _rows("velocities", velocities if np.ndim(velocities) else np.full((n, 2), float(_check.real("velocities", velocities))), n, 2)
+        self.start_angular = _rows("angular_velocities", angular_velocities, n, 1)
+        self.density = _number("density", density, 0.0, open_lo=True)
+        self.friction = _number("friction", friction, 0.0)
+        self.restitution = _number("restitution", restitution, 0.0, 1.0)
+        self.color = _color(color, self.shape)
+        if self.color.ndim == 2 and self.color.shape[0] != n:
+            raise InvalidInputError(f"color: {self.color.shape[0]} colours for {n} bodies")
+        if name is not None and (not isinstance(name, str) or not name):
+            raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
+        self.name = name
+        self.first: int | None = None
+        self._host: Host | None = None
+
+    # -- referring to bodies
+    def __len__(self) -> int:
+        return self.n
+
+    def __getitem__(self, key: Any) -> BodyRef:
+        idx = np.arange(self.n)
+        try:
+            sel = np.atleast_1d(idx[key])
+        except (IndexError, TypeError) as e:
+            raise InvalidInputError(f"key: {key!r} does not select bodies of this group of {self.n} ({e})") from None
+        return BodyRef(self, sel.astype(np.int64))
+
+    # -- state
+    def _bound(self) -> Host:
+        if self._host is None:
+            raise InvalidInputError(f"Bodies {self.name!r} are not in a scene yet: scene.add(them) first")
+        return self._host
+
+    def _fields(self, names: list[str]) -> list[np.ndarray]:
+        host = self._bound()
+        out = host.exclusive(lambda sim: sim.system_fields(SYSTEM, names))
+        a, b = self.first, self.first + self.n  # type: ignore[operator]
+        return [np.asarray(f)[a:b].copy() for f in out]
+
+    def _set(self, names: list[str], values: list[np.ndarray]) -> None:
+        host = self._bound()
+
+        def write(sim: Any) -> None:
+            full = sim.system_fields(SYSTEM, names)
+            for name, f, v in zip(names, full, values):
+                f = np.array(f)
+                f[self.first:self.first + self.n] = v  # type: ignore[operator]
+                sim.set_system_field(SYSTEM, name, f)
+
+        host.exclusive(write)
+        host.energy_changed()
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Centres now, (N, 2) float64, m (a copy). Settable."""
+        x, y = self._fields(["x", "y"])
+        return np.stack([x, y], axis=1)
+
+    @positions.setter
+    def positions(self, value: Any) -> None:
+        a = _rows("positions", value, self.n, 2)
+        self._set(["x", "y"], [a[:, 0], a[:, 1]])
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Orientations now, (N,) float64, rad in (−π, π]. Settable."""
+        return self._fields(["angle"])[0]
+
+    @angles.setter
+    def angles(self, value: Any) -> None:
+        self._set(["angle"], [_rows("angles", value, self.n, 1)])
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """Linear velocities now, (N, 2) float64, m/s. Settable."""
+        vx, vy = self._fields(["vx", "vy"])
+        return np.stack([vx, vy], axis=1)
+
+    @velocities.setter
+    def velocities(self, value: Any) -> None:
+        a = _rows("velocities", value, self.n, 2)
+        self._set(["vx", "vy"], [a[:, 0], a[:, 1]])
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """Angular velocities now, (N,) float64, rad/s (counter-clockwise). Settable."""
+        return self._fields(["omega"])[0]
+
+    @angular_velocities.setter
+    def angular_velocities(self, value: Any) -> None:
+        self._set(["omega"], [_rows("angular_velocities", value, self.n, 1)])
+
+    @property
+    def masses(self) -> np.ndarray:
+        """(N,) float64, kg (0 for fixed and kinematic bodies)."""
+        return self._fields(["mass"])[0]
+
+    @property
+    def inertia(self) -> np.ndarray:
+        """Moments of inertia about the centres of mass, (N,) float64, kg·m²."""
+        return self._fields(["inertia"])[0]
+
+    def outline(self) -> np.ndarray:
+        """The shape of each body as a polygon in its own frame, (V, 2) float64 m (a ball and a
+        capsule's caps as 32-gons): what the renderer fills."""
+        return _outline(self.shape, self.size, self.vertices)
+
+    # -- the part protocol
+    def _params(self, x: np.ndarray, angles: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, Any]:
+        p: dict[str, Any] = {
+            "shape": self.shape, "kind": self.kind, "n": self.n,
+            "positions": np.ascontiguousarray(x).reshape(-1), "angles": np.ascontiguousarray(angles),
+            "velocities": np.ascontiguousarray(v).reshape(-1), "angular_velocities": np.ascontiguousarray(w),
+            "size": np.ascontiguousarray(self.size, dtype=np.float64).reshape(-1),
+            "density": self.density, "friction": self.friction, "restitution": self.restitution,
+        }
+        if self.vertices is not None:
+            p["vertices"] = np.ascontiguousarray(self.vertices).reshape(-1)
+            p["n_vertices"] = int(self.vertices.shape[0])
+        return p
+
+    def _claim_name(self, ctx: AttachContext) -> str:
+        taken = {p.name for p in ctx.parts if isinstance(p, Bodies)}
+        if self.name is not None:
+            if self.name in taken:
+                raise InvalidInputError(f"name: {self.name!r} is taken by other bodies of this scene")
+            return self.name
+        name, k = "bodies", 2
+        while name in taken:
+            name, k = f"bodies_{k}", k + 1
+        return name
+
+    def _attach(self, ctx: AttachContext, name: str) -> Bodies:
+        if ctx.dim != 2:
+            raise InvalidInputError("item: rigid bodies are two-dimensional in this version (make the scene with dim=2)")
+        if self._host is not None:
+            raise InvalidInputError(f"item: bodies {self.name!r} are already in a scene (a group joins one scene)")
+        self.first = int(ctx.sim.add_bodies(self._params(self.start, self.start_angles, self.start_velocities, self.start_angular)))
+        self.name = name
+        self._host = ctx.host
+        return self
+
+    def _record(self) -> dict[str, Any]:
+        return {"shape": self.shape, "kind": self.kind, "n": self.n, "density": self.density, "friction": self.friction,
+                "restitution": self.restitution, "color": np.asarray(self.color).astype(int).tolist()}
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        a, b = self.first, self.first + self.n  # type: ignore[operator]
+        f = [np.asarray(v)[a:b] for v in sim.system_fields(SYSTEM, ["x", "y", "angle", "vx", "vy", "omega"])]
+        arrays = {"positions": np.stack(f[:2], 1), "angles": f[2], "velocities": np.stack(f[3:5], 1),
+                  "angular_velocities": f[5], "size": np.asarray(self.size, np.float64).reshape(-1)}
+        if self.vertices is not None:
+            arrays["vertices"] = self.vertices
+        if self.first == 0:
+            # The solver's whole state (contacts, warm starts), once, with the first group.
+            state = dict(sim.system_save(SYSTEM))
+            arrays["state"], arrays["state_bytes"] = state["state"], state["bytes"]
+        return {"name": self.name, "part": "group", "record": self._record()}, arrays
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        rec = entry["record"]
+        if not isinstance(rec, dict):
+            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        need = ["positions", "angles", "velocities", "angular_velocities", "size"]
+        missing = [k for k in need if k not in arrays]
+        if missing:
+            raise InvalidInputError(f"arrays: missing {', '.join(missing)}")
+        shape = rec.get("shape")
+        size = arrays["size"].reshape(-1, 2) if shape in ("box", "capsule") else arrays["size"]
+        part = cls(shape, size=size if shape != "polygon" else None, positions=arrays["positions"], angles=arrays["angles"],
+                   velocities=arrays["velocities"], angular_velocities=arrays["angular_velocities"],
+                   vertices=arrays.get("vertices"), density=rec.get("density"), friction=rec.get("friction"),
+                   restitution=rec.get("restitution"), kind=rec.get("kind"), color=rec.get("color"), name=entry.get("name"))
+        ctx.add(part)
+        if "state" in arrays:
+            ctx.sim.system_load(SYSTEM, [("state", np.asarray(arrays["state"], np.float64)),
+                                         ("bytes", np.asarray(arrays["state_bytes"], np.float64).reshape(-1))])
+
+    def __repr__(self) -> str:
+        return f"Bodies({self.shape!r}, n={self.n}, kind={self.kind!r}, name={self.name!r})"
+
+
+class Joints(Part):
+    """Joints between rigid bodies (2D), one per pair ``(a[k], b[k])``.
+
+    Parameters
+    ----------
+    kind : str
+        ``"revolute"`` (a hinge: the bodies share the anchor point and turn freely about it),
+        ``"fixed"`` (welded as they are now), ``"prismatic"`` (a slider along ``axis``, no
+        turning), ``"rope"`` (the anchors at most ``length`` apart; slack below it).
+    a, b : BodyRef or None
+        The bodies joined, as ``group[i]`` or ``group[i:j]`` (equal counts M); ``None`` for one
+        of them: the fixed world (a pendulum's pivot).
+    anchors : (M, 2) or (2,) array_like of float
+        The joints' points in the world now, m (on body ``a``; for a rope, its end on ``a``).
+    anchors_b : (M, 2) or (2,) array_like of float, optional
+        A rope's end on body ``b`` (default: ``anchors``).
+    axis : (2,) or (M, 2) array_like, prismatic only
+        The sliding direction in the world now (default x).
+    limits : (2,) or (M, 2) array_like, optional
+        Revolute: the relative angle's range, rad; prismatic: the travel along the axis, m.
+    length : float or (M,) array_like, rope only
+        The rope's longest length, m (default: the anchors' distance now).
+
+    Raises
+    ------
+    InvalidInputError
+        Unknown kind; `a` and `b` of different lengths, both None, or joining a body to itself;
+        bodies of another scene or not yet added; wrong shapes; a zero axis; lower > upper limit.
+    """
+
+    section: ClassVar[str] = "bodies"
+    part_kind: ClassVar[str] = "joints"
+
+    def __init__(self, kind: str, a: BodyRef | Bodies | None, b: BodyRef | Bodies | None, anchors: Any, *,
+                 anchors_b: Any = None, axis: Any = None, limits: Any = None, length: Any = None) -> None:
+        self.kind = _check.choice("kind", kind, JOINTS)
+        ra, rb = _ref("a", a), _ref("b", b)
+        if ra is None and rb is None:
+            raise InvalidInputError("a: a joint needs at least one body (a and b are both None)")
+        m = len(ra) if ra is not None else len(rb)  # type: ignore[arg-type]
+        if ra is not None and rb is not None and len(ra) != len(rb):
+            raise InvalidInputError(f"b: joins {len(rb)} bodies to {len(ra)} (a and b must have equal counts)")
+        self.m = m
+        self.a, self.b = ra, rb
+        self.anchors = _rows("anchors", anchors, m, 2)
+        self.anchors_b = None if anchors_b is None else _rows("anchors_b", anchors_b, m, 2)
+        if axis is not None and self.kind != "prismatic":
+            raise InvalidInputError(f"axis: only prismatic joints have one, not {self.kind}")
+        self.axis = None if axis is None else _rows("axis", axis, m, 2)
+        if self.axis is not None and (np.hypot(self.axis[:, 0], self.axis[:, 1]) == 0).any():
+            raise InvalidInputError("axis: must not be zero")
+        if limits is not None and self.kind not in ("revolute", "prismatic"):
+            raise InvalidInputError(f"limits: only revolute and prismatic joints have them, not {self.kind}")
+        self.limits = None if limits is None else _rows("limits", limits, m, 2)
+        if self.limits is not None and (self.limits[:, 0] > self.limits[:, 1]).any():
+            raise InvalidInputError("limits: lower > upper")
+        if length is not None and self.kind != "rope":
+            raise InvalidInputError(f"length: only ropes have one, not {self.kind}")
+        self.length = None if length is None else _rows("length", length, m, 1)
+        if self.length is not None and (self.length < 0).any():
+            raise InvalidInputError("length: must be >= 0 (m)")
+        self._host: Host | None = None
+        self._loaded: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _numbers(self, ref: BodyRef | None, ctx_parts: tuple[Part, ...] | None, arg: str) -> np.ndarray:
+        """The core's numbers of the bodies `ref` (−1: the world)."""
+        if self._loaded is not None:  # read from a scene file: the numbers it holds
+            return self._loaded[0 if arg == "a" else 1]
+        if ref is None:
+            return np.full(self.m, -1.0)
+        g = ref.group
+        if g.first is None or (ctx_parts is not None and not any(p is g for p in ctx_parts)):
+            raise InvalidInputError(f"{arg}: bodies {g.name!r} are not in this scene (add them before their joints)")
+        return (g.first + ref.index).astype(np.float64)
+
+    def _params(self, parts: tuple[Part, ...] | None) -> dict[str, Any]:
+        p: dict[str, Any] = {"kind": self.kind, "m": self.m, "a": self._numbers(self.a, parts, "a"),
+                             "b": self._numbers(self.b, parts, "b"), "anchor": self.anchors.reshape(-1)}
+        for key, v in (("anchor_b", self.anchors_b), ("axis", self.axis), ("limits", self.limits), ("length", self.length)):
+            if v is not None:
+                p[key] = np.ascontiguousarray(v).reshape(-1)
+        return p
+
+    def _attach(self, ctx: AttachContext, name: Any) -> Joints:
+        if ctx.dim != 2:
+            raise InvalidInputError("item: rigid bodies are two-dimensional in this version (make the scene with dim=2)")
+        if self._host is not None:
+            raise InvalidInputError("item: these joints are already in a scene")
+        ctx.sim.add_joints(self._params(ctx.parts))
+        self._host = ctx.host
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        p = self._params(None)
+        arrays = {k: np.asarray(p[k], np.float64) for k in ("a", "b", "length") if k in p}
+        for key, v in (("anchor", self.anchors), ("anchor_b", self.anchors_b), ("axis", self.axis), ("limits", self.limits)):
+            if v is not None:
+                arrays[key] = np.asarray(v, np.float64)
+        return {"part": "joints", "record": {"kind": self.kind, "m": self.m}}, arrays
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        rec = entry["record"]
+        if not isinstance(rec, dict):
+            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        j = cls.__new__(cls)
+        j.kind = _check.choice("kind", rec.get("kind"), JOINTS)
+        j.m = _check.int_in_range("m", rec.get("m"), 1, 1 << 24)
+        j.a = j.b = None
+        j.anchors = _rows("anchor", arrays.get("anchor"), j.m, 2)
+        j.anchors_b = None if "anchor_b" not in arrays else _rows("anchor_b", arrays["anchor_b"], j.m, 2)
+        j.axis = None if "axis" not in arrays else _rows("axis", arrays["axis"], j.m, 2)
+        j.limits = None if "limits" not in arrays else _rows("limits", arrays["limits"], j.m, 2)
+        j.length = None if "length" not in arrays else _rows("length", arrays["length"], j.m, 1)
+        j._host = None
+        j._loaded = (_rows("a", arrays.get("a"), j.m, 1), _rows("b", arrays.get("b"), j.m, 1))
+        ctx.add(j)
+
+    def __repr__(self) -> str:
+        return f"Joints({self.kind!r}, m={self.m})"
+
+
+def _ref(arg: str, value: Any) -> BodyRef | None:
+    if value is None:
+        return None
+    if isinstance(value, Bodies):
+        return value[:]
+    if isinstance(value, BodyRef):
+        return value
+    raise InvalidTypeError(f"{arg}: expected bodies[i] (a BodyRef), a Bodies group or None, got {type(value).__name__}")
+
+
+_DEFAULT_COLORS = {"ball": (214, 96, 77), "box": (222, 160, 87), "capsule": (95, 158, 160), "polygon": (130, 120, 190)}
+
+
+def _color(value: Any, shape: str) -> np.ndarray:
+    if value is None:
+        return np.array(_DEFAULT_COLORS[shape], dtype=np.uint8)
+    if isinstance(value, str):
+        try:
+            from matplotlib.colors import to_rgb
+        except ImportError:  # pragma: no cover - matplotlib is optional
+            raise InvalidInputError("color: a colour name needs matplotlib; give RGB 0-255 instead") from None
+        try:
+            return np.array([round(255 * c) for c in to_rgb(value)], dtype=np.uint8)
+        except ValueError:
+            raise InvalidInputError(f"color: unknown colour {value!r}") from None
+    a = _check.real_array("color", value)
+    if a.ndim == 2 and a.shape[1] == 3 and np.isfinite(a).all() and (a >= 0).all() and (a <= 255).all():
+        return a.astype(np.uint8)
+    if a.shape != (3,) or not np.isfinite(a).all() or (a < 0).any() or (a > 255).any():
+        raise InvalidInputError(f"color: expected a name or 3 values in 0..255, got {value!r}")
+    return a.astype(np.uint8)
+
+
+def _outline(shape: str, size: np.ndarray, vertices: np.ndarray | None) -> list[np.ndarray]:
+    """Each body's polygon in its own frame (see :meth:`Bodies.outline`)."""
+    t = np.linspace(0.0, 2 * np.pi, 32, endpoint=False)
+    circle = np.stack([np.cos(t), np.sin(t)], axis=1)
+    out = []
+    for i in range(size.shape[0]):
+        if shape == "ball":
+            out.append(circle * float(size[i]))
+        elif shape == "box":
+            hx, hy = (float(s) for s in size[i])
+            out.append(np.array([(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]))
+        elif shape == "capsule":
+            half, r = (float(s) for s in size[i])
+            h = np.linspace(-np.pi / 2, np.pi / 2, 17)
+            right = np.stack([half + r * np.cos(h), r * np.sin(h)], 1)
+            left = np.stack([-half - r * np.cos(h), -r * np.sin(h)], 1)
+            out.append(np.concatenate([right, left]))
+        else:
+            out.append(_hull(vertices))  # type: ignore[arg-type]
+    return out
+
+
+def _hull(v: np.ndarray) -> np.ndarray:
+    """The convex hull of 2D points, counter-clockwise (Andrew's monotone chain)."""
+    pts = sorted(map(tuple, np.asarray(v, np.float64)))
+
+    def cross(o: tuple, a: tuple, b: tuple) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list[tuple] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    upper: list[tuple] = []
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1], dtype=np.float64)

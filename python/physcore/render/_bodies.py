@@ -1,0 +1,127 @@
+"""Rigid bodies in a recording and on the image: each body's outline (a convex polygon in its own
+frame) and colour, its pose every frame, and the drawing: a filled, shaded, antialiased polygon
+with a darker rim (a ball also gets a spoke, so its rolling shows)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["BodyTrack", "body_track", "draw_bodies", "body_bounds"]
+
+
+class BodyTrack:
+    """The bodies of a scene as recorded: ``outlines`` (B,) of (V, 2) float64 polygons (m, body
+    frame, convex), ``colors`` (B, 3) uint8, ``balls`` (B,) bool (draw a spoke), ``poses``
+    (F, B, 3) float32 ``(x, y, angle)`` with x, y relative to the recording's origin."""
+
+    def __init__(self, outlines: list[np.ndarray], colors: np.ndarray, balls: np.ndarray, frames: int) -> None:
+        self.outlines = outlines
+        self.colors = colors
+        self.balls = balls
+        self.poses = np.zeros((frames, len(outlines), 3), dtype=np.float32)
+        self.reach = np.array([float(np.hypot(o[:, 0], o[:, 1]).max()) for o in outlines])
+
+
+def body_track(scene: Any, frames: int) -> tuple[BodyTrack | None, Any]:
+    """The scene's bodies (None if it has none) and ``grab()``: their poses now, (B, 3) float64."""
+    groups = [g for g in getattr(scene, "bodies", ()) if getattr(g, "first", None) is not None]
+    if not groups:
+        return None, None
+    outlines: list[np.ndarray] = []
+    colors, balls = [], []
+    for g in groups:
+        outs = g.outline()
+        outlines += outs
+        c = np.asarray(g.color, dtype=np.uint8)
+        colors.append(np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c)
+        balls.append(np.full(g.n, g.shape == "ball"))
+    track = BodyTrack(outlines, np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames)
+    spans = [(g.first, g.first + g.n) for g in groups]
+    host = groups[0]._bound()
+
+    def grab() -> np.ndarray:
+        x, y, a = host.exclusive(lambda sim: sim.system_fields("bodies", ["x", "y", "angle"]))
+        full = np.stack([np.asarray(x), np.asarray(y), np.asarray(a)], axis=1)
+        return np.concatenate([full[s:e] for s, e in spans])
+
+    return track, grab
+
+
+def body_bounds(track: BodyTrack) -> tuple[np.ndarray, np.ndarray]:
+    """The (2,) lower and upper corners of every body's outline over every frame (m, relative
+    to the origin); non-finite poses are skipped."""
+    lo, hi = np.full(2, np.inf), np.full(2, -np.inf)
+    poses = track.poses.astype(np.float64)
+    for b, outline in enumerate(track.outlines):
+        p = poses[:, b]
+        p = p[np.isfinite(p).all(axis=1)]
+        if not len(p):
+            continue
+        c, s = np.cos(p[:, 2])[:, None], np.sin(p[:, 2])[:, None]
+        x = p[:, :1] + c * outline[None, :, 0] - s * outline[None, :, 1]
+        y = p[:, 1:2] + s * outline[None, :, 0] + c * outline[None, :, 1]
+        lo = np.minimum(lo, [x.min(), y.min()])
+        hi = np.maximum(hi, [x.max(), y.max()])
+    return lo, hi
+
+
+def _fill(out: np.ndarray, poly: np.ndarray, color: np.ndarray) -> None:
+    """Fills the convex polygon `poly` ((V, 2) pixel coordinates col, row) on the RGB image
+    `out`: antialiased by the signed distance to its edges, lit from above (lighter at its top,
+    darker at its foot) and rimmed darker."""
+    h, w = out.shape[:2]
+    c0, r0 = np.floor(poly.min(axis=0) - 1).astype(int)
+    c1, r1 = np.ceil(poly.max(axis=0) + 1).astype(int)
+    c0, r0, c1, r1 = max(c0, 0), max(r0, 0), min(c1, w), min(r1, h)
+    if c0 >= c1 or r0 >= r1:
+        return
+    cols = np.arange(c0, c1) + 0.5
+    rows = np.arange(r0, r1) + 0.5
+    centre = poly.mean(axis=0)
+    nxt = np.roll(poly, -1, axis=0)
+    e = nxt - poly
+    length = np.hypot(e[:, 0], e[:, 1])
+    keep = length > 1e-9
+    poly, e, length = poly[keep], e[keep], length[keep]
+    if len(poly) < 3:
+        return
+    n = np.stack([e[:, 1], -e[:, 0]], axis=1) / length[:, None]
+    flip = ((centre - poly) * n).sum(axis=1) > 0  # point outward, whatever the winding
+    n[flip] *= -1
+    # Signed distance (px), > 0 outside: the largest of the edges' half-plane distances.
+    d = np.full((rows.size, cols.size), -np.inf)
+    for (px, py), (nx, ny) in zip(poly, n):
+        d = np.maximum(d, (cols[None, :] - px) * nx + (rows[:, None] - py) * ny)
+    cover = np.clip(0.5 - d, 0.0, 1.0)[..., None]
+    if not cover.any():
+        return
+    top, foot = poly[:, 1].min(), poly[:, 1].max()
+    t = ((rows - top) / max(foot - top, 1.0)).clip(0, 1)[:, None, None]
+    base = color.astype(np.float32)[None, None, :]
+    lit = base * (1.18 - 0.33 * t)
+    rim = np.clip(-d, 0, None)[..., None]
+    shade = np.where(rim < 1.6, base * 0.55, lit)
+    region = out[r0:r1, c0:c1].astype(np.float32)
+    out[r0:r1, c0:c1] = np.clip(region * (1 - cover) + shade * cover, 0, 255).astype(np.uint8)
+
+
+def draw_bodies(out: np.ndarray, cam: Any, track: BodyTrack, k: int) -> None:
+    """Draws frame k's bodies on the RGB image `out` through the 2D camera `cam`."""
+    poses = track.poses[k].astype(np.float64)
+    for b, (outline, (x, y, a)) in enumerate(zip(track.outlines, poses)):
+        if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(a)):
+            continue
+        c, s = np.cos(a), np.sin(a)
+        world = np.stack([x + c * outline[:, 0] - s * outline[:, 1], y + s * outline[:, 0] + c * outline[:, 1]], axis=1)
+        col, row = cam.pixels(cam.project(world)[0])
+        poly = np.stack([col, row], axis=1).astype(np.float64)
+        _fill(out, poly, track.colors[b])
+        if track.balls[b]:
+            from ._raster import _draw_lines
+
+            r = float(np.hypot(outline[:, 0], outline[:, 1]).max())
+            ends = np.array([[x, y], [x + 0.8 * r * c, y + 0.8 * r * s]])
+            ec, er = cam.pixels(cam.project(ends)[0])
+            dark = (track.colors[b].astype(np.float32) * 0.55).astype(np.uint8)[None, :]
+            _draw_lines(out, ec[:1], er[:1], ec[1:], er[1:], dark)
