@@ -5,7 +5,7 @@ energy books, and render it to an animated GIF with :func:`physcore.render.gif`.
 """
 from __future__ import annotations
 
-from . import _core, flows, shapes, sweeps
+from . import _core, bodies, flows, shapes, sweeps
 from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
@@ -55,6 +55,9 @@ __all__ = [
     "ensemble",
     "Ensemble",
     "Batch",
+    "Bodies",
+    "Joints",
+    "bodies",
     "sweeps",
     "flows",
     "grids",

@@ -25,8 +25,9 @@ draft is approximate).
 Energy books (:meth:`Scene.energy`): the bodies' kinetic energy (translation and rotation) is
 in ``kinetic``, the potential of gravity under ``"bodies: gravity"``; rapier does not report
 what contacts, friction, restitution and joints take out, so their sum (with the solver's
-error) is booked as the residual ``"bodies: contacts and joints"``, and the kinetic energy the
-particle coupling removes as ``"bodies ⇄ particles"``.
+error) is booked as the residual ``"bodies: contacts and joints"``, and what the particle
+coupling removes (kinetic energy, less the particles' potential in gravity that its moves raise)
+as ``"bodies ⇄ particles"``.
 
 Examples
 --------
@@ -218,6 +219,12 @@ class Bodies(Part):
         self.start_velocities = _rows("velocities", velocities if np.ndim(velocities) else np.full((n, 2), float(_check.real("velocities", velocities))), n, 2)
         self.start_angular = _rows("angular_velocities", angular_velocities, n, 1)
         self.density = _number("density", density, 0.0, open_lo=True)
+        with np.errstate(all="ignore"):
+            reach = float(np.abs(self.size).max()) if self.vertices is None else float(np.abs(self.vertices).max())
+            mass = self.density * 4 * reach * reach
+            if not (np.isfinite(mass * reach * reach) and np.isfinite(np.abs(x).max() + 2 * reach)):
+                raise InvalidInputError(f"size, density: a body of {reach:g} m at {self.density:g} kg/m² has a mass or moment "
+                                        "of inertia beyond float64")
         self.friction = _number("friction", friction, 0.0)
         self.restitution = _number("restitution", restitution, 0.0, 1.0)
         self.color = _color(color, self.shape)
@@ -258,7 +265,7 @@ class Bodies(Part):
 
         def write(sim: Any) -> None:
             full = sim.system_fields(SYSTEM, names)
-            for name, f, v in zip(names, full, values):
+            for name, f, v in zip(names, full, values, strict=True):
                 f = np.array(f)
                 f[self.first:self.first + self.n] = v  # type: ignore[operator]
                 sim.set_system_field(SYSTEM, name, f)

@@ -138,7 +138,7 @@ def test_bit_identical_for_one_and_two_threads():
     a, b = _falling_pile(1), _falling_pile(2)
     a.step(400)
     b.step(400)
-    for ga, gb in zip(a.bodies, b.bodies):
+    for ga, gb in zip(a.bodies, b.bodies, strict=True):
         assert np.array_equal(ga.positions, gb.positions) and np.array_equal(ga.angles, gb.angles)
 
 
@@ -149,7 +149,7 @@ def test_save_and_load_continue_bit_for_bit(tmp_path):
     r = pc.Scene.load(tmp_path / "pile.npz")
     s.step(200)
     r.step(200)
-    for ga, gb in zip(s.bodies, r.bodies):
+    for ga, gb in zip(s.bodies, r.bodies, strict=True):
         assert np.array_equal(ga.positions, gb.positions) and np.array_equal(ga.velocities, gb.velocities)
     assert s.energy().total == r.energy().total
 
@@ -161,7 +161,7 @@ def test_save_and_load_with_joints_continue_bit_for_bit(tmp_path):
     r = pc.Scene.load(tmp_path / "p.npz")
     s.step(100)
     r.step(100)
-    for ga, gb in zip(s.bodies, r.bodies):
+    for ga, gb in zip(s.bodies, r.bodies, strict=True):
         assert np.array_equal(ga.positions, gb.positions)
 
 
@@ -207,7 +207,7 @@ def test_rollback_on_divergence_restores_the_bodies():
     before = [(g.positions, g.velocities) for g in s.bodies]
     with pytest.raises(pc.SimulationDiverged):
         s.step(600)  # x overflows after about 430 steps
-    for g, (x, v) in zip(s.bodies, before):
+    for g, (x, v) in zip(s.bodies, before, strict=True):
         assert np.array_equal(g.positions, x) and np.array_equal(g.velocities, v)
 
 

@@ -306,7 +306,7 @@ def test_fuzz_add_fluid_long(case):
 
 # --------------------------------------------------------------------------- physcore.scenes
 #: Small but valid base arguments, so a hostile value that is accepted builds quickly.
-SCENE_BASE = {"dam_break": {"n": 4}, "drop": {"n": 10}, "droplets": {"n": 40, "drops": 1}, "crown": {"n": 70}, "cloth": {"n": 6}, "ripple": {"n": 16}, "double_slit": {"n": 64}, "turing": {"n": 16}}
+SCENE_BASE = {"dam_break": {"n": 4}, "floating": {"n": 4}, "drop": {"n": 10}, "droplets": {"n": 40, "drops": 1}, "crown": {"n": 70}, "cloth": {"n": 6}, "ripple": {"n": 16}, "double_slit": {"n": 64}, "turing": {"n": 16}}
 pair = st.one_of(hostile, st.tuples(hostile, hostile), st.sampled_from([(4.0, 3.0, 1.0), "4,3", [1e308, 1e308]]))
 
 

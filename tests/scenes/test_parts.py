@@ -177,7 +177,13 @@ def _every_kind() -> list[pc.Scene]:
     d.add(Fluid(lattice([0, 0], [0.05, 0.05], 0.01), 0.01, method="dfsph"))
     e = pc.Scene(3, threads=1)
     e.add(pc.Flow("lorenz", 4, seed=2))
-    return [a, b, c, d, e]
+    f = pc.Scene(2, integrator="semi_implicit_euler", threads=1)
+    f.add(pc.Gravity([0.0, -9.81]))
+    f.add(pc.Bodies("box", size=[(2.0, 0.1)], positions=[(0.0, -0.1)], kind="fixed"))
+    tri = f.add(pc.Bodies("polygon", positions=[(0.0, 0.5), (0.3, 0.9)], vertices=[(0, 0), (0.2, 0), (0, 0.2)]))
+    f.add(pc.Joints("rope", tri[0], tri[1], anchors=(0.0, 0.5), anchors_b=(0.3, 0.9), length=0.6))
+    f.add_particles([[0.5, 1.0]])
+    return [a, b, c, d, e, f]
 
 
 def test_the_scene_file_round_trips_every_part_kind(tmp_path):

@@ -91,7 +91,7 @@ def _fill(out: np.ndarray, poly: np.ndarray, color: np.ndarray) -> None:
     n[flip] *= -1
     # Signed distance (px), > 0 outside: the largest of the edges' half-plane distances.
     d = np.full((rows.size, cols.size), -np.inf)
-    for (px, py), (nx, ny) in zip(poly, n):
+    for (px, py), (nx, ny) in zip(poly, n, strict=True):
         d = np.maximum(d, (cols[None, :] - px) * nx + (rows[:, None] - py) * ny)
     cover = np.clip(0.5 - d, 0.0, 1.0)[..., None]
     if not cover.any():
@@ -109,7 +109,7 @@ def _fill(out: np.ndarray, poly: np.ndarray, color: np.ndarray) -> None:
 def draw_bodies(out: np.ndarray, cam: Any, track: BodyTrack, k: int) -> None:
     """Draws frame k's bodies on the RGB image `out` through the 2D camera `cam`."""
     poses = track.poses[k].astype(np.float64)
-    for b, (outline, (x, y, a)) in enumerate(zip(track.outlines, poses)):
+    for b, (outline, (x, y, a)) in enumerate(zip(track.outlines, poses, strict=True)):
         if not (np.isfinite(x) and np.isfinite(y) and np.isfinite(a)):
             continue
         c, s = np.cos(a), np.sin(a)

@@ -26,11 +26,12 @@ cloth        cloth, cloth_on_ball, xpbd_cloth
 orbits       projectile, kepler, figure_eight, pythagorean, galaxies
 charges      cyclotron
 springs      spring_chain
-fluids       dam_break, drop, droplets, crown (SPH)
+fluids       dam_break, drop, droplets, crown (SPH), floating (with rigid bodies)
 grids        ripple, double_slit, turing, smoke, cavity, vortex_street
 flows        lorenz
 grains       galton_board, galton_bins, billiards, newtons_cradle, jelly (DEM)
 constraints  tumbling_boxes (XPBD shape matching), double_pendulum (stiff rods)
+bodies       dominoes, pyramid (rigid bodies, rapier)
 """
 from __future__ import annotations
 
@@ -40,13 +41,13 @@ from ..scene import Scene
 from ..shapes import cloth_springs as cloth_springs
 from ..shapes import mesh_edges_and_hinges as mesh_edges_and_hinges
 from ..shapes import plummer_sphere
+from .bodies import dominoes, pyramid
 from .charges import CHARGE_COLORS as CHARGE_COLORS
 from .charges import cyclotron
 from .cloth import cloth, cloth_on_ball, xpbd_cloth
-from .bodies import dominoes, floating, pyramid
 from .constraints import double_pendulum, tumbling_boxes
 from .flows import lorenz
-from .fluids import crown, dam_break, drop, droplets
+from .fluids import crown, dam_break, drop, droplets, floating
 from .grains import GALTON_COLORS as GALTON_COLORS
 from .grains import billiards, galton_bins, galton_board, jelly, newtons_cradle
 from .grids import cavity, double_slit, ripple, smoke, turing, vortex_street

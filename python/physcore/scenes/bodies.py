@@ -6,10 +6,21 @@ import math
 
 import numpy as np
 
+from .._errors import InvalidInputError
 from ..bodies import Bodies, Joints
 from ..scene import Scene
 from ..terms import Gravity
 from ._common import _count, _nonneg, _positive, _stamped
+
+
+def _named(args: str, build):
+    """``build()``, with what the bodies refuse (a size derived from the arguments that came out
+    ≤ 0 or beyond float64) named by the scene's arguments `args`."""
+    try:
+        return build()
+    except InvalidInputError as e:
+        raise InvalidInputError(f"{args}: give bodies the core refuses ({e})") from None
+
 
 # Warm wood, one tone a domino (so the wave reads as it runs), and the crates' pine.
 _WOOD = np.array([[196, 132, 78], [214, 156, 96], [176, 112, 64], [226, 172, 110]], dtype=np.uint8)
@@ -50,6 +61,12 @@ def dominoes(
     w0 = _nonneg(push, "push")
     scene = Scene(2, integrator="semi_implicit_euler", dt=_positive(dt, "dt"), threads=threads)
     scene.add(Gravity([0.0, -9.81]))
+    with np.errstate(all="ignore"):
+        return _named("n, height, growth, spacing_ratio, thickness_ratio, push",
+                      lambda: _dominoes(scene, n, h0, k, gap, ratio, mu, w0))
+
+
+def _dominoes(scene: Scene, n: int, h0: float, k: float, gap: float, ratio: float, mu: float, w0: float) -> Scene:
     h = h0 * k ** np.arange(n)
     t = ratio * h
     x = np.concatenate([[0.0], np.cumsum(t[:-1] / 2 + gap * h[:-1] + t[1:] / 2)])
@@ -100,6 +117,11 @@ def pyramid(
     rho = _positive(ball_density, "ball_density")
     scene = Scene(2, integrator="semi_implicit_euler", dt=_positive(dt, "dt"), threads=threads)
     scene.add(Gravity([0.0, -9.81]))
+    with np.errstate(all="ignore"):
+        return _named("rows, box, chain, ball_radius, ball_density", lambda: _pyramid(scene, rows, b, links, r, rho))
+
+
+def _pyramid(scene: Scene, rows: int, b: float, links: int, r: float, rho: float) -> Scene:
     width = rows * b
     # A floor between two low walls, so that nothing leaves the picture.
     lo, hi = -1.6 * width, 1.9 * width
@@ -136,39 +158,3 @@ def pyramid(
 pyramid.render_defaults = {"frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none", "antialias": True}
 pyramid = _stamped(pyramid)
 
-
-def floating(
-    n: int = 6000,
-    *,
-    density: float = 500.0,
-    integrator: str = "semi_implicit_euler",
-    threads: int | None = None,
-) -> Scene:
-    """Crates and balls riding a dam break: a water column (the :func:`dam_break` scene's, WCSPH,
-    ``n`` particles, 1 m wide and 2 m high in a 4 × 3 m tank) collapses with two crates and a
-    ball (``density`` kg/m², lighter than the water's 1000) resting on its top; they sink with
-    it, ride the surge to the far wall and back. The tank is both the fluid's walls and fixed
-    bodies; bodies and fluid particles meet through the particle coupling (:mod:`physcore.bodies`:
-    an impulse exchange, so the bodies float approximately, not by Akinci et al.'s boundary
-    particles). ``integrator`` steps the fluid (see :func:`dam_break`).
-
-    Raises TypeError / InvalidInputError naming the argument.
-    """
-    from .fluids import dam_break
-
-    rho = _positive(density, "density")
-    scene = dam_break(n=n, integrator=integrator, threads=threads)
-    wall, w, h = 0.1, 4.0, 3.0
-    scene.add(Bodies("box", size=[(w / 2 + 2 * wall, wall), (wall, h / 2 + wall), (wall, h / 2 + wall)],
-                     positions=[(w / 2, -wall), (-wall, h / 2), (w + wall, h / 2)], kind="fixed", color=_GROUND, name="tank"))
-    scene.add(Bodies("box", size=[(0.15, 0.1), (0.12, 0.12)], positions=[(0.25, 2.15), (0.7, 2.5)], angles=[0.0, 0.3],
-                     density=rho, friction=0.4, restitution=0.1, color=_WOOD[[1, 3]], name="crates"))
-    scene.add(Bodies("ball", size=[0.1], positions=[(0.5, 2.9)], density=rho, friction=0.4, restitution=0.1,
-                     color=(214, 96, 77), name="ball"))
-    scene.render_defaults = None
-    return scene
-
-
-floating.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 50, "substeps": "auto", "color_by": "speed",
-                            "size": (480, 360), "surface": True, "cmap": "ice"}
-floating = _stamped(floating)

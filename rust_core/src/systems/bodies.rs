@@ -552,8 +552,9 @@ fn unpack(packed: &[Real], len: Real) -> Option<Vec<u8>> {
 /// its approach (the body's restitution, Coulomb friction with the body's coefficient) is applied to both,
 /// equal and opposite, at the contact point: grains push bodies, a body pushes grains, cloth
 /// drapes over a body, fluid particles hold a body up. Particles are visited in order (the
-/// bodies' velocities change as they go): deterministic. The kinetic energy this removes is
-/// booked in the bodies' "bodies ⇄ particles".
+/// bodies' velocities change as they go): deterministic. The energy this removes (kinetic, and
+/// the particles' potential in gravity raised by the moves) is booked in the bodies' "bodies ⇄
+/// particles".
 pub struct BodyContacts {
     system: usize,
 }
@@ -592,6 +593,8 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         let boxes: Vec<_> =
             bodies.colliders.iter().map(|&c| bodies.d.r.colliders[c].compute_aabb().loosened(r_max)).collect();
         let e_before = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
+        let gravity = bodies.gravity;
+        let mut lifted = 0.0;
         for i in 0..n {
             let im = model.inv_mass[i];
             if im == 0.0 {
@@ -625,9 +628,11 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 let vi = Vector::new(state.v[i].comp(0), state.v[i].comp(1));
                 let vb = body.velocity_at_point(c);
                 let vn = (vi - vb).dot(normal);
-                // The particle goes back to the surface (plus its radius) along the normal.
+                // The particle goes back to the surface (plus its radius) along the normal; the
+                // work gravity does against that move, −m g·Δx, is booked with the exchange.
                 let pn = p + normal * depth;
                 state.x[i] = V::from_slice(&[pn.x, pn.y, 0.0]);
+                lifted -= model.mass[i] * gravity.dot(normal * depth);
                 if vn >= 0.0 {
                     continue;
                 }
@@ -660,7 +665,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
             }
         }
         let e_after = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
-        bodies.d.coupling += e_before - e_after;
+        bodies.d.coupling += e_before - e_after - lifted;
     }
 }
 
