@@ -234,7 +234,7 @@ impl Bodies2 {
         let b = take_len(&mut p, "b", m)?;
         let anchor = take_len(&mut p, "anchor", 2 * m)?;
         let anchor_b = if p.has("anchor_b") { take_len(&mut p, "anchor_b", 2 * m)? } else { anchor.clone() };
-        let axis = if p.has("axis") { take_len(&mut p, "axis", 2 * m)? } else { vec![1.0, 0.0].repeat(m) };
+        let axis = if p.has("axis") { take_len(&mut p, "axis", 2 * m)? } else { [1.0, 0.0].repeat(m) };
         let limits = if p.has("limits") { Some(take_len(&mut p, "limits", 2 * m)?) } else { None };
         let length = if p.has("length") { Some(take_len(&mut p, "length", m)?) } else { None };
         let n = self.handles.len() as Real;
@@ -677,4 +677,67 @@ fn particle_kinetic<V: PVector>(v: &[V], mass: &[Real], inv_mass: &[Real]) -> Re
         }
     }
     k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terms::registry::Value;
+
+    fn group(shape: &str, x: &[Real], size: &[Real]) -> Params {
+        let n = x.len() / 2;
+        Params::new()
+            .with("shape", Value::Text(shape.into()))
+            .with("kind", Value::Text("dynamic".into()))
+            .with("n", Value::Number(n as Real))
+            .with("positions", Value::Floats(x.to_vec()))
+            .with("angles", Value::Floats(vec![0.0; n]))
+            .with("velocities", Value::Floats(vec![0.0; 2 * n]))
+            .with("angular_velocities", Value::Floats(vec![0.0; n]))
+            .with("size", Value::Floats(size.to_vec()))
+            .with("density", Value::Number(1000.0))
+            .with("friction", Value::Number(0.5))
+            .with("restitution", Value::Number(0.1))
+    }
+
+    #[test]
+    fn bytes_pack_into_reals_and_back() {
+        let bytes: Vec<u8> = (0..=255u8).chain(0..7).collect();
+        let packed = pack(&bytes);
+        assert!(packed.iter().all(|w| w.is_finite() && w.fract() == 0.0));
+        assert_eq!(unpack(&packed, bytes.len() as Real).unwrap(), bytes);
+        assert!(unpack(&packed, (bytes.len() + 100) as Real).is_none());
+        assert!(unpack(&[0.5], 1.0).is_none());
+    }
+
+    #[test]
+    fn a_ball_falls_freely_and_a_restore_returns_bit_for_bit() {
+        let mut b = Bodies2::new("bodies");
+        b.add_group(group("ball", &[0.0, 10.0], &[0.1])).unwrap();
+        b.set_gravity([0.0, -9.81, 0.0]);
+        let stop = AtomicBool::new(false);
+        let snap = b.snapshot().unwrap();
+        let dt = 1e-3;
+        for _ in 0..1000 {
+            b.step(dt, &stop).unwrap();
+        }
+        let y = b.fields(&["y"]).unwrap()[0][0];
+        // Free fall, y0 − g t²/2 at t = 1 s, to the first order in dt of rapier's integrator.
+        assert!((y - (10.0 - 9.81 / 2.0)).abs() < 9.81 * dt, "{y}");
+        // The books balance: kinetic + potential + residual as at the start.
+        let e = b.energy();
+        assert!((e.total() - 1000.0 * std::f64::consts::PI * 0.01 * 9.81 * 10.0).abs() < 1e-6, "{e:?}");
+        b.restore(snap);
+        assert_eq!(b.fields(&["y"]).unwrap()[0][0], 10.0);
+    }
+
+    #[test]
+    fn bad_groups_are_refused_by_name() {
+        let mut b = Bodies2::new("bodies");
+        let e = b.add_group(group("blob", &[0.0, 0.0], &[0.1])).unwrap_err();
+        assert!(e.to_string().contains("shape"), "{e}");
+        let e = b.add_group(group("ball", &[0.0, 0.0], &[-1.0])).unwrap_err();
+        assert!(e.to_string().contains("size"), "{e}");
+        assert!(b.is_empty());
+    }
 }
