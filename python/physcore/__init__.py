@@ -80,10 +80,14 @@ __all__ = [
 ]
 
 
-_LAZY = ("scenes", "render", "cli", "viewer")
+_LAZY = ("scenes", "render", "cli", "viewer", "notebook")
 
 
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
+    if name == "widget":  # the notebook widget (physcore.notebook.widget), imported on first use
+        from .notebook import widget
+
+        return widget
     if name in _LAZY:
         import importlib
 
