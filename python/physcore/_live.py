@@ -284,6 +284,7 @@ class _Live:
         self.held: np.ndarray | None = None  # where the last tick left it
         self.vel: np.ndarray | None = None  # the pointer's velocity over the last tick, m/s
         self.ticks = 0
+        self._params: dict[str, float] | None = None  # the parameters, read once per change
         self.params0 = self.params()  # the start values the keys stay within PARAM_RANGE of
         self._read()
         self._snap()
@@ -325,7 +326,12 @@ class _Live:
     def tick(self) -> None:
         """One tick (the GIF's frame): raises SimulationDiverged with the scene rolled back to
         the start of the failing call."""
-        self.px, self.pv, self.pt, self.pp = self.x, self.v, self.t, self.p
+        self._advance()
+        self._advanced()
+
+    def _advance(self) -> None:
+        """A tick's stepping: the scene only (no state of this object that drawing reads), so
+        that a background thread may run it while the last states are drawn."""
         s = self.scene
         if self.grabbed is None:
             if self.advance:
@@ -346,6 +352,10 @@ class _Live:
                     s.step(n)
             self._place(i, b)
             self.held = b.copy()
+
+    def _advanced(self) -> None:
+        """A tick's end: the new state read back, the one before kept to interpolate from."""
+        self.px, self.pv, self.pt, self.pp = self.x, self.v, self.t, self.p
         self.ticks += 1
         self._read()
 
@@ -406,13 +416,16 @@ class _Live:
 
     # -------------------------------------------------------------- parameters and reset
     def params(self) -> dict[str, float]:
-        """The parameters the scene has: name -> value (see :func:`param_value`)."""
-        out = {}
-        for p in _PARAMS:
-            value = param_value(self.scene, p.name)
-            if value is not None:
-                out[p.name] = value
-        return out
+        """The parameters the scene has: name -> value (see :func:`param_value`); read from
+        the terms once after each change (:meth:`scale`, :meth:`set`)."""
+        if self._params is None:
+            out = {}
+            for p in _PARAMS:
+                value = param_value(self.scene, p.name)
+                if value is not None:
+                    out[p.name] = value
+            self._params = out
+        return dict(self._params)
 
     def scale(self, name: str, factor: float) -> bool:
         """Multiply parameter `name` by `factor`, unless that takes it beyond
@@ -421,6 +434,7 @@ class _Live:
         if start and now and not (start / PARAM_RANGE <= now * factor <= start * PARAM_RANGE):
             return False
         self.scene = scale_param(self.scene, name, factor)
+        self._params = None
         if not start:
             # From 0 (damping's 1 % of critical) the range is about the first value above 0:
             # else a held = key raised it without bound, and dt shrank with it.
@@ -467,6 +481,7 @@ class _Live:
             raise InvalidInputError(f"value: must be a finite number, got {value!r}")
         value = min(max(value, lo), hi)
         self.scene = set_param(self.scene, name, value)
+        self._params = None
         self._restep()
         return float(param_value(self.scene, name) or 0.0)
 
@@ -706,9 +721,16 @@ class _Session:
         Wall seconds of preview run to fit the camera and the colour scale (:class:`_Painter`).
     hud : bool
         Draw the parameter line and the state on the frames.
+    background : bool, default False
+        Step in a background thread (the core releases the GIL while it steps), one tick at a
+        time, while the frames draw the last two states interpolated over the time states have
+        lately taken to come: frames then come as fast as they are drawn even where one tick
+        takes longer than a frame (a 10⁴-particle fluid), and the motion stays smooth. Every
+        call that touches the scene first waits for the tick in flight (:meth:`settle`).
     """
 
-    def __init__(self, scene: Any, *, settings: dict[str, Any], fps: float, preview: float, hud: bool) -> None:
+    def __init__(self, scene: Any, *, settings: dict[str, Any], fps: float, preview: float, hud: bool,
+                 background: bool = False) -> None:
         self.live = _Live(scene, settings["color_by"])
         self.painter = _Painter(scene, settings, preview, hud)
         self.clock = FixedStep(1.0 / fps)
@@ -716,11 +738,53 @@ class _Session:
         self.alpha = 1.0
         #: How often ticks fell behind lately (a moving average of 0/1 per frame).
         self.slow = 0.0
+        self._pool: Any = None
+        if background:
+            from concurrent.futures import ThreadPoolExecutor
+
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="physcore-tick")
+        self._job: Any = None  # the tick running in the background
+        self._backlog = 0  # ticks due and not yet started (background)
+        self._since = time.perf_counter()  # when the latest state came (background)
+        self._period = self.clock.tick  # wall seconds between states lately (background)
+
+    @property
+    def background(self) -> bool:
+        """Whether ticks run in a background thread."""
+        return self._pool is not None
+
+    def close(self) -> None:
+        """Wait for a tick in flight and stop the background thread (if any)."""
+        self.settle()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def settle(self) -> str | None:
+        """Wait for the tick running in the background (if any) and take its state; a
+        divergence's message, else None."""
+        job, self._job = self._job, None
+        if job is None:
+            return None
+        try:
+            job.result()
+        except SimulationDiverged as e:
+            return self._diverged(e)
+        self.live._advanced()
+        self.painter.push(self.live.x)
+        now = time.perf_counter()
+        self._period = 0.7 * self._period + 0.3 * max(now - self._since, self.clock.tick)
+        self._since = now
+        return None
 
     # -------------------------------------------------------------- the clock
     def run(self, due: int) -> str | None:
         """Run up to `due` ticks (as many as fit :data:`_TICK_BUDGET` wall seconds; the rest
-        are dropped) and set the drawing fraction; a divergence's message, else None."""
+        are dropped) and set the drawing fraction; a divergence's message, else None. In the
+        background: take a finished tick's state, start the next tick due (at most
+        :data:`MAX_TICKS_PER_DRAW` wait; the rest are dropped), and return at once."""
+        if self._pool is not None:
+            return self._run_background(due)
         t0 = time.perf_counter()
         ran, message = 0, None
         while ran < due and not self.clock.paused:
@@ -735,26 +799,55 @@ class _Session:
         self.alpha = self.clock.alpha
         return message
 
+    def _run_background(self, due: int) -> str | None:
+        message = None
+        if self._job is not None and self._job.done():
+            message = self.settle()
+        if not self.clock.paused:
+            self._backlog += due
+            if self._backlog > MAX_TICKS_PER_DRAW:
+                self.clock.dropped += (self._backlog - MAX_TICKS_PER_DRAW) * self.clock.tick
+                self._backlog = MAX_TICKS_PER_DRAW
+            if self._job is None and self._backlog > 0:
+                self._backlog -= 1
+                self._job = self._pool.submit(self.live._advance)
+        self.slow = 0.9 * self.slow + 0.1 * (1.0 if self._backlog > 1 else 0.0)
+        # Between the last two states, over the time states have lately taken to come.
+        self.alpha = 1.0 if self.clock.paused else min(1.0, (time.perf_counter() - self._since) / self._period)
+        return message
+
     def tick(self) -> str | None:
-        """One tick; a divergence pauses, lets go of a held particle at rest, keeps the state
-        rolled back to the start of the failing call, and returns its message."""
+        """One tick, now (after any tick in the background); a divergence pauses, lets go of a
+        held particle at rest, keeps the state rolled back to the start of the failing call,
+        and returns its message."""
+        message = self.settle()
+        if message:
+            return message
         live = self.live
         try:
             live.tick()
         except SimulationDiverged as e:
-            self.clock.pause(True)
-            if live.grabbed is not None:
-                live.vel = np.zeros_like(live.vel)  # let go at rest
-                live.release()
-            live._read()
-            live._snap()
-            self.status = "diverged: r resets"
-            return f"simulation diverged, paused (r resets): {e}"
+            return self._diverged(e)
         self.painter.push(live.x)
         return None
 
+    def _diverged(self, e: SimulationDiverged) -> str:
+        live = self.live
+        self.clock.pause(True)
+        self._backlog = 0
+        if live.grabbed is not None:
+            live.vel = np.zeros_like(live.vel)  # let go at rest
+            live.release()
+        live._read()
+        live._snap()
+        self.status = "diverged: r resets"
+        return f"simulation diverged, paused (r resets): {e}"
+
     def set_paused(self, paused: bool) -> None:
         """Pause or run; the drawn state is the latest tick's from here on."""
+        self.settle()
+        self._backlog = 0
+        self._since = time.perf_counter()
         self.clock.pause(bool(paused))
         self.live._snap()
         if not self.clock.paused:
@@ -770,6 +863,8 @@ class _Session:
 
     def reset(self) -> str:
         """Back to the start state, keeping the parameters."""
+        self.settle()
+        self._backlog = 0
         self.live.reset()
         self.painter.push(self.live.x)
         self.status = ""
@@ -792,6 +887,7 @@ class _Session:
         p = _param(name)
         if p.name not in self.live.params():
             return f"{p.name}: this scene has none"
+        self.settle()
         try:
             self.live.scale(p.name, factor)
         except (ValueError, TypeError) as e:
@@ -804,6 +900,7 @@ class _Session:
         p = _param(name)
         if p.name not in self.live.params():
             return f"{p.name}: this scene has none"
+        self.settle()
         try:
             self.live.set(p.name, value)
         except (ValueError, TypeError) as e:
@@ -813,6 +910,7 @@ class _Session:
     def sliders(self) -> list[dict[str, Any]]:
         """One slider per parameter the scene's terms have, in :data:`_PARAMS` order: name,
         label, unit, value now, and the range (lo may be 0: a damping or drag that starts at 0)."""
+        self.settle()
         out = []
         for p in _PARAMS:
             value = self.live.params().get(p.name)
@@ -830,6 +928,7 @@ class _Session:
         w, h = painter.size
         if not (0 <= pos[0] < w and 0 <= pos[1] < h):
             return None  # a press outside the image grabs nothing
+        self.settle()
         x, _, _, _ = live.drawn(self.alpha)
         radius = max(8.0, 3.0 * painter.ras.radius + 2.0)
         with np.errstate(over="ignore", invalid="ignore"):  # a particle far off screen: no pixel
@@ -854,11 +953,14 @@ class _Session:
         with np.errstate(over="ignore", invalid="ignore"):
             target = screen_to_world(self.painter.cam, self.painter.origin, pos, through)
         if np.isfinite(target).all():
+            if self.clock.paused:
+                self.settle()  # paused, it is put there now: the scene is written
             live.move(target, self.clock.paused)
 
     def release(self) -> None:
         """Let go of the grabbed particle (with the pointer's velocity), if any."""
         if self.live.grabbed is not None:
+            self.settle()
             self.live.release()
             self.status = ""
 

@@ -3,9 +3,9 @@
 // The kernel runs the scene (physcore._live, the viewer's loop) and sends frames as images in
 // binary buffers; this module draws them on a canvas and sends back what the user does. Flow
 // control: the kernel sends a frame only against a credit; "ready" grants two, and each frame
-// drawn gives one back ("ack", on the next animation frame), so that frames never pile up
-// beyond what the browser draws (at most the display's rate, and slower when the kernel or the
-// link is slower). Pointer moves are coalesced to one message per animation frame.
+// drawn gives one back ("ack", on the next animation frame, at most max_fps a second), so that
+// frames never pile up beyond what the browser draws (at most the display's rate, and slower
+// when the kernel or the link is slower). Pointer moves are coalesced to one message per animation frame.
 
 function el(tag, cls, text) {
   const e = document.createElement(tag);
@@ -42,6 +42,7 @@ function render({ model, el: root }) {
   root.append(box);
 
   let frames = 0;
+  let lastAck = 0;
   let closed = false;
   const labels = {};
   const inputs = {};
@@ -136,9 +137,14 @@ function render({ model, el: root }) {
       for (const [name, v] of Object.entries(msg.params || {})) {
         if (labels[name]) labels[name][0].textContent = `${fmt(v)} ${labels[name][1]}`;
       }
-      requestAnimationFrame(() => {
-        if (!closed) model.send({ type: "ack", seq: msg.seq });
-      });
+      // The credit goes back on the next animation frame, and no sooner than 1 / max_fps
+      // after the last one.
+      const wait = Math.max(0, lastAck + 1000 / model.get("max_fps") - performance.now());
+      setTimeout(() => requestAnimationFrame(() => {
+        if (closed) return;
+        lastAck = performance.now();
+        model.send({ type: "ack", seq: msg.seq });
+      }), wait);
     }
   };
   model.on("msg:custom", onMessage);

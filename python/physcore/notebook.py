@@ -15,11 +15,16 @@ Frames and flow control
 Each frame is encoded as JPEG (default, quality 85) or PNG by Pillow and sent in a binary
 buffer of a custom widget message (no base64), with the time, the parameters and the state.
 The kernel sends a frame only against a credit from the front end: it grants two when a view
-opens and gives one back each time it has drawn a frame (on the browser's next animation
-frame). Frames therefore come as fast as the kernel makes them and the browser draws them,
-never faster than the display (60 Hz) and never piling up in a slow link; paused, a frame is
-sent only after something changed (a step, a drag, a slider, a reset). The kernel makes frames
-between cells: a long cell in the same kernel holds the widget still until it ends.
+opens and gives one back each time it has drawn a frame (on the browser's next animation frame,
+and at most ``max_fps`` times a second, default 30). Frames therefore come as fast as the kernel
+makes them and the browser draws them, never faster than ``max_fps`` or the display, and never
+piling up in a slow link; paused, a frame is sent only after something changed (a step, a drag,
+a slider, a reset). By default the scene steps in a background thread (the core releases the
+GIL), one tick at a time, while frames draw the last two states interpolated: a scene whose
+tick takes longer than a frame (a 10⁴-particle fluid) still gets frames at the drawing's rate,
+moving smoothly at the simulation's own pace (``background=False``: each frame runs the ticks
+due first, as the window does). The kernel makes frames between cells: a long cell in the
+same kernel holds the widget still until it ends.
 
 Where no kernel runs (a notebook saved and exported to static HTML, a viewer of notebooks),
 the widget's output carries a ``text/html`` fallback: the scene's GIF from its start, as
@@ -132,12 +137,14 @@ class Widget(anywidget.AnyWidget):
     playing = traitlets.Bool(True).tag(sync=True)
     #: (width, height) of the frames, pixels.
     size = traitlets.List(traitlets.Int(), [480, 360]).tag(sync=True)
+    #: Most frames a second the front end asks for (it gives a credit back no sooner).
+    max_fps = traitlets.Float(30.0).tag(sync=True)
     #: One slider per parameter the scene's terms have (:meth:`physcore._live._Session.sliders`,
     #: with ``position`` and ``positions``).
     sliders = traitlets.List(traitlets.Dict()).tag(sync=True)
 
     def __init__(self, session: _Session, *, name: str, image_format: str, quality: int, playing: bool,
-                 fallback: bool) -> None:
+                 fallback: bool, max_fps: float) -> None:
         self._session = session
         self._name = name
         self._format = image_format
@@ -151,13 +158,15 @@ class Widget(anywidget.AnyWidget):
         self._message = ""
         session.set_paused(not playing)
         w, h = session.painter.size
-        super().__init__(playing=playing, size=[int(w), int(h)], sliders=self._slider_specs())
+        super().__init__(playing=playing, size=[int(w), int(h)], sliders=self._slider_specs(), max_fps=max_fps)
         self.on_msg(self._on_msg)
 
     # -------------------------------------------------------------- read
     @property
     def scene(self) -> Any:
-        """The live :class:`physcore.Scene` (a new one after a drag or a reset: read it again)."""
+        """The live :class:`physcore.Scene` (a new one after a drag or a reset: read it again),
+        once any tick running in the background has ended."""
+        self._say(self._session.settle())
         return self._session.live.scene
 
     @property
@@ -275,7 +284,9 @@ class Widget(anywidget.AnyWidget):
         Image.fromarray(rgb).save(buf, format=fmt, **options)
         self._seq += 1
         self._dirty = False
-        content = {"type": "frame", "seq": self._seq, "time": session.live.t, "ticks": session.live.ticks,
+        live = session.live
+        drawn_time = live.pt + session.alpha * (live.t - live.pt)
+        content = {"type": "frame", "seq": self._seq, "time": drawn_time, "ticks": session.live.ticks,
                    "status": self.status, "params": self.params, "playing": bool(self.playing), "mime": mime}
         return content, buf.getvalue()
 
@@ -343,6 +354,11 @@ class Widget(anywidget.AnyWidget):
             self._dirty = True
         self._pump()
 
+    def close(self) -> None:
+        """Close the widget (its views go) and stop its background thread."""
+        self._session.close()
+        super().close()
+
     # -------------------------------------------------------------- where no kernel runs
     def fallback_html(self) -> str:
         """An ``<img>`` of the scene's GIF from its start (as :func:`physcore.render.gif` draws
@@ -379,6 +395,8 @@ def widget(
     quality: int = 85,
     playing: bool = True,
     fallback: bool = True,
+    background: bool = True,
+    max_fps: float = 30.0,
 ) -> Widget:
     """A live notebook widget running `scene` (see the module docstring); display it as a cell's
     last value or with ``IPython.display.display``.
@@ -414,6 +432,13 @@ def widget(
     fallback : bool, default True
         Put the scene's GIF in the output for pages without a kernel (rendered when the widget
         is first displayed; see :meth:`Widget.fallback_html`).
+    background : bool, default True
+        Step in a background thread, one tick at a time, while frames draw the last two states
+        interpolated: frames keep coming, and the motion stays smooth, where a tick takes
+        longer than a frame. False: each frame runs the ticks due first, as the window does.
+    max_fps : float, default 30
+        Most frames a second the front end asks for, > 0 (the kernel's and the browser's
+        share of a small machine; the display's rate caps it too).
 
     Returns
     -------
@@ -447,8 +472,13 @@ def widget(
     quality = _check.int_in_range("quality", quality, 1, 95)
     playing = _check.flag("playing", playing)
     fallback = _check.flag("fallback", fallback)
-    session = _Session(scene, settings=settings, fps=fps, preview=preview, hud=hud)
-    return Widget(session, name=name, image_format=image_format, quality=quality, playing=playing, fallback=fallback)
+    background = _check.flag("background", background)
+    max_fps = _check.real("max_fps", max_fps)
+    if not (max_fps > 0 and math.isfinite(max_fps)):
+        raise InvalidInputError(f"max_fps: must be a finite number > 0, got {max_fps!r}")
+    session = _Session(scene, settings=settings, fps=fps, preview=preview, hud=hud, background=background)
+    return Widget(session, name=name, image_format=image_format, quality=quality, playing=playing, fallback=fallback,
+                  max_fps=max_fps)
 
 
 def _frames_per_second(w: Widget, seconds: float) -> float:

@@ -68,7 +68,8 @@ def test_paused_frame_is_the_gif_frame():
 
 # --------------------------------------------------------------------------- ticking
 def test_ticks_follow_wall_time_and_stop_on_pause():
-    w = pc.widget(pc.scenes.spring_chain(n=6), fps=30.0, preview=0.0, fallback=False)
+    # In the foreground, as the window runs them: each frame runs the ticks due first.
+    w = pc.widget(pc.scenes.spring_chain(n=6), fps=30.0, preview=0.0, fallback=False, background=False)
     w.produce_frame()
     w._last -= 0.1  # 0.1 s of wall time since the last frame: 3 ticks at 30 per second
     info, _ = w.produce_frame()
@@ -88,11 +89,61 @@ def test_ticks_follow_wall_time_and_stop_on_pause():
 
 
 def test_a_slow_scene_drops_ticks_beyond_the_budget():
-    w = pc.widget(pc.scenes.spring_chain(n=6), fps=30.0, preview=0.0, fallback=False)
+    w = pc.widget(pc.scenes.spring_chain(n=6), fps=30.0, preview=0.0, fallback=False, background=False)
     w._last -= 100.0  # the tab was hidden for 100 s: at most MAX_TICKS_PER_DRAW run, the rest dropped
     w.produce_frame()
     assert 1 <= w.ticks <= _live.MAX_TICKS_PER_DRAW
     assert w._session.clock.dropped > 99.0
+
+
+def test_background_ticks_run_one_at_a_time_while_frames_are_drawn():
+    w = pc.widget(_cloth(16), fps=30.0, preview=0.0, fallback=False)
+    session = w._session
+    assert session.background
+    w.produce_frame()
+    w._last -= 0.1  # 3 ticks due: one starts in the background, two wait
+    w.produce_frame()
+    assert w.ticks == 0 and session._job is not None and session._backlog == 2
+    session.settle()
+    assert w.ticks == 1 and session._job is None
+    for _ in range(4):  # the rest start frame by frame (no wall time more), each once the one before has ended
+        session.run(0)
+        session.frame()
+        if session._job is not None:
+            session._job.result()
+    assert w.ticks == 3 and session._backlog == 0
+    assert w.time == pytest.approx(3 * w.tick_time, rel=1e-9)
+    # Every call that writes the scene waits for the tick in flight (a Scene belongs to one
+    # thread at a time: no SceneBusyError).
+    w._last -= 0.1
+    w.produce_frame()
+    assert session._job is not None
+    w.set_param("stiffness", 3000.0)
+    w._last -= 0.1
+    w.produce_frame()
+    w.press(*w.pixel_of(16 * 16 - 1))
+    w.release()
+    w._last -= 0.1
+    w.produce_frame()
+    w.reset()
+    assert w.time == 0.0 and np.isfinite(w.scene.positions).all()
+    w.close()
+    assert session._pool is None
+
+
+def test_background_and_foreground_ticks_agree():
+    # The same ticks, bit for bit: the background thread runs the window's stepping.
+    a = pc.widget(_cloth(8), preview=0.0, fallback=False, playing=False)
+    b = pc.widget(_cloth(8), preview=0.0, fallback=False, playing=False, background=False)
+    a.play()
+    b.play()
+    for w in (a, b):
+        while w.ticks < 3:
+            w._session.run(1)
+            w._session.settle()
+        w.pause()
+    assert a.ticks == b.ticks
+    np.testing.assert_array_equal(a.scene.positions, b.scene.positions)
 
 
 def test_frames_are_sent_only_against_credits():
