@@ -29,6 +29,7 @@ same kernel holds the widget still until it ends.
 Where no kernel runs (a notebook saved and exported to static HTML, a viewer of notebooks),
 the widget's output carries a ``text/html`` fallback: the scene's GIF from its start, as
 :func:`physcore.render.gif` draws it (``fallback=False`` leaves it out, saving its render).
+nbconvert's HTML shows it for a notebook saved without its widget state (JupyterLab's default).
 
 Examples
 --------

@@ -354,3 +354,44 @@ def test_frames_per_second_of_the_kernels_side():
     # the helper runs and counts.
     w = pc.widget(pc.scenes.spring_chain(n=5), preview=0.0, fallback=False)
     assert notebook._frames_per_second(w, 0.2) > 0
+
+
+def test_hud_draws_the_viewers_parameter_line():
+    plain = pc.widget(_cloth(8), preview=0.0, fallback=False, playing=False, image_format="png")
+    hud = pc.widget(_cloth(8), preview=0.0, fallback=False, playing=False, image_format="png", hud=True)
+    a, b = _decode(plain.produce_frame()[1]), _decode(hud.produce_frame()[1])
+    assert a.shape == b.shape == (360, 480, 3)
+    # The parameter line at the top (the title's place, which also makes room for it) and the
+    # state line at the bottom ("paused").
+    differ = (a != b).any(axis=2)
+    assert differ[:20].any() and differ[-20:].any()
+    assert hud.status == "paused"
+
+
+@pytest.mark.slow  # a kernel starts
+def test_a_static_html_export_shows_the_gif(tmp_path):
+    """A notebook run by nbclient (a real kernel) and exported to HTML by nbconvert, as a page
+    without a kernel: the widget's output carries the GIF, which the page shows. (A notebook
+    saved with its widget state, which JupyterLab does not do by default, is drawn by the
+    exporter's widget manager instead.)"""
+    nbformat = pytest.importorskip("nbformat", reason="nbformat is not installed (JupyterLab brings it)")
+    nbclient = pytest.importorskip("nbclient", reason="nbclient is not installed (JupyterLab brings it)")
+    nbconvert = pytest.importorskip("nbconvert", reason="nbconvert is not installed (JupyterLab brings it)")
+    import os
+    from pathlib import Path
+
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(
+        "import physcore as pc\nw = pc.widget(pc.scenes.spring_chain(n=6), preview=0.0)\nw")])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3", "language": "python"}
+    package_root = str(Path(pc.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([package_root, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+           "JUPYTER_RUNTIME_DIR": str(tmp_path), "IPYTHONDIR": str(tmp_path / "ipython")}
+    client = nbclient.NotebookClient(nb, timeout=120, kernel_name="python3", store_widget_state=False, resources={"metadata": {"path": str(tmp_path)}})
+    from unittest import mock
+
+    with mock.patch.dict(os.environ, env):
+        client.execute()
+    (out,) = nb.cells[0].outputs
+    assert {"application/vnd.jupyter.widget-view+json", "text/html"} <= set(out["data"])
+    html, _ = nbconvert.HTMLExporter().from_notebook_node(nb)
+    assert 'src="data:image/gif;base64,R0lGOD' in html
