@@ -285,6 +285,7 @@ class _Live:
         self.vel: np.ndarray | None = None  # the pointer's velocity over the last tick, m/s
         self.ticks = 0
         self._params: dict[str, float] | None = None  # the parameters, read once per change
+        self._ranges: dict[str, tuple[float, float] | None] = {}  # the sliders' ranges
         self.params0 = self.params()  # the start values the keys stay within PARAM_RANGE of
         self._read()
         self._snap()
@@ -454,28 +455,38 @@ class _Live:
 
         self.steps = steps_for(self.frame_time, s.dt)
 
-    def param_range(self, name: str) -> tuple[float, float]:
-        """The values parameter `name` may take from a slider: within :data:`PARAM_RANGE` times
-        its start value either way; a damping or drag that starts at 0 from 0 up to
-        PARAM_RANGE times 1 % of critical (damping) or PARAM_RANGE kg/s × the mean mass / s
-        (drag: 1/s as its unit rate)."""
+    def param_range(self, name: str) -> tuple[float, float] | None:
+        """The values parameter `name` may take from a slider, fixed at its first use: within
+        :data:`PARAM_RANGE` times its start value either way. One that starts at 0: a damping
+        from 0 to PARAM_RANGE times 1 % of critical, a drag from 0 to PARAM_RANGE times the
+        mean particle mass per second (kg/s); a stiffness or gravity, None (no slider: a
+        gravity of 0 has no direction to grow along).
+
+        Raises InvalidInputError naming `name` where the scene has no such term."""
+        if name in self._ranges:
+            return self._ranges[name]
         start = self.params0.get(name)
         if start is None:
             raise InvalidInputError(f"name: the scene has no term with a {name!r} parameter")
+        r: tuple[float, float] | None = None
         if start > 0:
-            return start / PARAM_RANGE, start * PARAM_RANGE
-        if name == "damping":
-            base = _critical_percent(self.scene) or 1.0
-        else:
-            base = float(np.mean(self.scene.masses)) if self.scene.n_particles else 1.0
-        return 0.0, base * PARAM_RANGE
+            r = (start / PARAM_RANGE, start * PARAM_RANGE)
+        elif name == "damping":
+            r = (0.0, (_critical_percent(self.scene) or 1.0) * PARAM_RANGE)
+        elif name == "drag":
+            r = (0.0, (float(np.mean(self.scene.masses)) if self.scene.n_particles else 1.0) * PARAM_RANGE)
+        self._ranges[name] = r
+        return r
 
     def set(self, name: str, value: float) -> float:
         """Set parameter `name` to `value` clipped to :meth:`param_range` (stiffening shortens
         a fixed dt as a key does); returns the value set.
 
         Raises InvalidInputError naming `name` (no such term) or `value` (not a finite number)."""
-        lo, hi = self.param_range(name)
+        r = self.param_range(name)
+        if r is None:
+            raise InvalidInputError(f"name: the scene's {name} starts at 0; a slider scales it from there, and cannot")
+        lo, hi = r
         value = _check.real("value", value)
         if not math.isfinite(value):
             raise InvalidInputError(f"value: must be a finite number, got {value!r}")
@@ -894,29 +905,38 @@ class _Session:
             return f"{p.name}: not changed ({e})"
         return self._said(p)
 
-    def set(self, name: str, value: float) -> str:
+    def set(self, name: str, value: float, *, strict: bool = False) -> str:
         """Set parameter `name` to `value` as a slider does (clipped to its range); what changed,
-        or why not, as a line to show."""
+        or why not, as a line to show (`strict`: why not is raised instead, an
+        InvalidInputError or InvalidTypeError naming `name` or `value`)."""
         p = _param(name)
         if p.name not in self.live.params():
+            if strict:
+                raise InvalidInputError(f"name: the scene has no {name!r} parameter; it has {', '.join(self.live.params()) or 'none'}")
             return f"{p.name}: this scene has none"
         self.settle()
         try:
             self.live.set(p.name, value)
         except (ValueError, TypeError) as e:
+            if strict:
+                raise
             return f"{p.name}: not changed ({e})"
         return self._said(p)
 
     def sliders(self) -> list[dict[str, Any]]:
         """One slider per parameter the scene's terms have, in :data:`_PARAMS` order: name,
-        label, unit, value now, and the range (lo may be 0: a damping or drag that starts at 0)."""
+        label, unit, value now, and the range (lo may be 0: a damping or drag that starts at 0;
+        a stiffness or gravity that starts at 0 has none)."""
         self.settle()
         out = []
         for p in _PARAMS:
             value = self.live.params().get(p.name)
             if value is None:
                 continue
-            lo, hi = self.live.param_range(p.name)
+            r = self.live.param_range(p.name)
+            if r is None:
+                continue
+            lo, hi = r
             out.append({"name": p.name, "label": p.label, "unit": p.unit, "value": value, "lo": lo, "hi": hi})
         return out
 

@@ -233,14 +233,10 @@ class Widget(anywidget.AnyWidget):
         way), in every term that has it; the value set. A fixed dt shrinks with a stiffer
         scene's stability limit, as with the viewer's keys.
 
-        Raises InvalidInputError naming `name` where the scene has no such term, or `value`
-        where it is not a finite number."""
-        if name not in self.params:
-            raise InvalidInputError(f"name: the scene has no {name!r} parameter; it has {', '.join(self.params) or 'none'}")
-        value = _check.real("value", value)
-        if not math.isfinite(value):
-            raise InvalidInputError(f"value: must be a finite number, got {value!r}")
-        self._say(self._session.set(name, value))
+        Raises InvalidInputError naming `name` where the scene has no such term (or a stiffness
+        or gravity that starts at 0, which no slider scales), InvalidTypeError /
+        InvalidInputError naming `value` where it is not a finite number."""
+        self._say(self._session.set(name, value, strict=True))
         self.sliders = self._slider_specs()
         self._changed()
         return self.params[name]

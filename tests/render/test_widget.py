@@ -395,3 +395,14 @@ def test_a_static_html_export_shows_the_gif(tmp_path):
     assert {"application/vnd.jupyter.widget-view+json", "text/html"} <= set(out["data"])
     html, _ = nbconvert.HTMLExporter().from_notebook_node(nb)
     assert 'src="data:image/gif;base64,R0lGOD' in html
+
+
+def test_a_gravity_of_zero_gets_no_slider():
+    scene = pc.Scene(2, threads=1)
+    scene.add_particles(np.array([[0.0, 0.0], [0.1, 0.0]]), pinned=[True, False])
+    scene.add(pc.Springs([0], [1], stiffness=100.0, damping=0.0))
+    scene.add(pc.Gravity([0.0, 0.0]))
+    w = pc.widget(scene, preview=0.0, fallback=False)
+    assert [s["name"] for s in w.sliders] == ["stiffness", "damping"]
+    with pytest.raises(pc.InvalidInputError, match="gravity"):
+        w.set_param("gravity", 9.81)
