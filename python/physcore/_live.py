@@ -545,6 +545,8 @@ class _Painter:
             rec = _simulate(_rebuild(scene, lambda meta, arrays: None), 1, spf, color_by == "speed",
                             settings["springs"], False, need_pressure=color_by == "pressure", frame_time=ft)
         self.complete = rec.frames >= frames
+        #: The preview's recording: the scene's first GIF frames (the widget's fallback draws it).
+        self.preview = rec._replace(color_by=color_by, defaults=dict(d))
         fit = None
         if not self.complete:
             pts = rec.positions.reshape(-1, rec.positions.shape[-1]).astype(np.float64)

@@ -27,8 +27,9 @@ due first, as the window does). The kernel makes frames between cells: a long ce
 same kernel holds the widget still until it ends.
 
 Where no kernel runs (a notebook saved and exported to static HTML, a viewer of notebooks),
-the widget's output carries a ``text/html`` fallback: the scene's GIF from its start, as
-:func:`physcore.render.gif` draws it (``fallback=False`` leaves it out, saving its render).
+the widget's output carries a ``text/html`` fallback: the scene's GIF over the preview run (its
+first frames from the start, as :func:`physcore.render.gif` draws them; the frames are the
+preview's, so only the encoding costs; ``fallback=False`` leaves it out).
 nbconvert's HTML shows it for a notebook saved without its widget state (JupyterLab's default).
 
 Examples
@@ -49,11 +50,8 @@ Build a widget without displaying it (a notebook shows it as a cell's last value
 """
 from __future__ import annotations
 
-import base64
 import io
 import math
-import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -358,17 +356,14 @@ class Widget(anywidget.AnyWidget):
 
     # -------------------------------------------------------------- where no kernel runs
     def fallback_html(self) -> str:
-        """An ``<img>`` of the scene's GIF from its start (as :func:`physcore.render.gif` draws
-        it with the scene's defaults), as a data URL: what a page without a kernel shows."""
+        """An ``<img>`` of the scene's GIF over the preview run (its first frames from the start,
+        drawn as :func:`physcore.render.gif` draws them, with the widget's camera), as a data
+        URL: what a page without a kernel shows. Only the GIF's encoding costs: the frames are
+        the preview's; ``preview=0`` gives the start alone."""
         if self._fallback_html is None:
-            from .render import gif
+            from .render import recording_html
 
-            start = self._session.live.start
-            with tempfile.TemporaryDirectory(prefix="physcore-") as tmp:
-                data = gif(start, os.path.join(tmp, "scene.gif")).read_bytes()
-            b64 = base64.b64encode(data).decode("ascii")
-            self._fallback_html = (f'<img src="data:image/gif;base64,{b64}" '
-                                   f'alt="physcore {self._name}: its GIF (no live kernel)"/>')
+            self._fallback_html = recording_html(self._session.painter.preview)
         return self._fallback_html
 
     def _repr_mimebundle_(self, **kwargs: Any) -> Any:
@@ -427,8 +422,8 @@ def widget(
     playing : bool, default True
         Start running (False: paused, showing the start).
     fallback : bool, default True
-        Put the scene's GIF in the output for pages without a kernel (rendered when the widget
-        is first displayed; see :meth:`Widget.fallback_html`).
+        Put the scene's GIF over the preview run in the output, for pages without a kernel
+        (encoded when the widget is first displayed; see :meth:`Widget.fallback_html`).
     background : bool, default True
         Step in a background thread, one tick at a time, while frames draw the last two states
         interpolated: frames keep coming, and the motion stays smooth, where a tick takes
