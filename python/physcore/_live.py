@@ -1016,7 +1016,10 @@ class _Session:
         it (with the HUD where the painter has one)."""
         x, v, t, p = self.live.drawn(self.alpha)
         params, status = self.hud(name)
-        return self.painter.draw(x, v, t, p, params, status)
+        # A scene blowing up (before the core calls it diverged) puts particles at pixels beyond
+        # int64: they are drawn nowhere, without a warning per frame.
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self.painter.draw(x, v, t, p, params, status)
 
 
 def _param(name: str) -> _Param:

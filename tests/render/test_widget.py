@@ -406,3 +406,30 @@ def test_a_gravity_of_zero_gets_no_slider():
     assert [s["name"] for s in w.sliders] == ["stiffness", "damping"]
     with pytest.raises(pc.InvalidInputError, match="gravity"):
         w.set_param("gravity", 9.81)
+
+
+@pytest.mark.parametrize("background", [True, False])
+def test_a_diverging_scene_pauses_with_its_message(background):
+    from concurrent.futures import wait
+
+    # Springs so stiff for this dt that the first tick overflows (a state that grows huge but
+    # stays finite over several ticks first trips a bug of the line rasteriser; see the note
+    # on the branch).
+    scene = pc.Scene(2, threads=1, dt=0.01)
+    scene.add_particles(np.array([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]]), pinned=[True, False, False])
+    scene.add(pc.Springs([0, 1], [1, 2], stiffness=1e300, damping=0.0))
+    scene.add(pc.Gravity([0.0, -9.81]))
+    w = pc.widget(scene, preview=0.0, fallback=False, background=background)
+    for _ in range(60):
+        w._last -= 0.05
+        info, _ = w.produce_frame()  # the pixels of a blown-up state: no warning
+        if w._session._job is not None:
+            wait([w._session._job])
+        if not w.playing:
+            break
+    assert not w.playing and "diverged" in w.status
+    info, _ = w.produce_frame()
+    assert "simulation diverged" in info["status"] and not info["playing"]
+    assert np.isfinite(w.scene.positions).all()  # rolled back to the last good step
+    w.reset()
+    assert w.time == 0.0
