@@ -97,4 +97,4 @@ def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
 
 def __dir__() -> list[str]:
     # The lazy submodules are part of the package's surface (tab completion, dir()).
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | {"widget"})
