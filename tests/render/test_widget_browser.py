@@ -183,7 +183,10 @@ def test_widget_plays_pauses_drags_and_turns_a_knob_in_jupyterlab(lab, tmp_path)
             pixel, before, ticks = _output(page, 1, "PIXEL").split(" ", 2)
             col, row = json.loads(pixel)
             before = json.loads(before)
-            box = page.locator(".physcore-widget canvas").bounding_box()
+            canvas = page.locator(".physcore-widget canvas").first
+            canvas.evaluate("e => e.scrollIntoView({block: 'center'})")  # in view, clear of pop-ups
+            time.sleep(0.3)
+            box = canvas.bounding_box()
             size = page.evaluate("[document.querySelector('.physcore-widget canvas').width, document.querySelector('.physcore-widget canvas').height]")
             sx, sy = box["width"] / size[0], box["height"] / size[1]
             start = (box["x"] + (col + 0.5) * sx, box["y"] + (row + 0.5) * sy)
