@@ -883,6 +883,26 @@ class _Session:
         self.status = ""
         return "reset to the start"
 
+    def key(self, ch: str) -> str | None:
+        """What the viewer's keys (``physcore.viewer.KEYS``) do to the loop, shared by the
+        window and the widget: space pauses or runs, ``.`` runs one tick, ``r`` resets, the
+        parameter keys scale their parameter by :data:`STEP_FACTOR` (``+`` and ``_`` are ``=``
+        and ``-``); any other key nothing. The line to show, if any."""
+        if not isinstance(ch, str):
+            return None
+        ch = {"+": "=", "_": "-"}.get(ch, ch)
+        if ch == " ":
+            self.set_paused(not self.clock.paused)
+            return None
+        if ch == ".":
+            return self.step_once()
+        if ch == "r":
+            return self.reset()
+        for p in _PARAMS:
+            if ch in p.keys:
+                return self.scale(p.name, STEP_FACTOR if ch == p.keys[1] else 1.0 / STEP_FACTOR)
+        return None
+
     # -------------------------------------------------------------- parameters
     def params(self) -> dict[str, float]:
         """The parameters the scene has: name -> value (see :func:`param_value`)."""

@@ -95,6 +95,7 @@ function render({ model, el: root }) {
   canvas.addEventListener("pointerdown", (e) => {
     if (e.button !== 0) return;
     held = true;
+    canvas.focus();
     canvas.setPointerCapture(e.pointerId);
     model.send({ type: "down", ...pixel(e) });
   });
@@ -117,6 +118,17 @@ function render({ model, el: root }) {
     }
     model.send({ type: "up", ...pixel(e) });
   };
+  // The viewer's keys on the focused picture (physcore.viewer.KEYS, less quit and screenshot);
+  // JupyterLab's own shortcuts stand aside there.
+  canvas.tabIndex = 0;
+  box.dataset.lmSuppressShortcuts = "true";
+  const KEYS = [" ", ".", "ArrowRight", "r", "[", "]", "-", "=", "+", "_", "g", "G", "d", "D"];
+  canvas.addEventListener("keydown", (e) => {
+    if (e.ctrlKey || e.metaKey || e.altKey || !KEYS.includes(e.key)) return;
+    e.preventDefault();
+    e.stopPropagation();
+    model.send({ type: "key", key: e.key });
+  });
   canvas.addEventListener("pointerup", up);
   canvas.addEventListener("pointercancel", up);
 

@@ -1,6 +1,6 @@
 """Live in the notebook: a scene running in a Jupyter widget, drawn as its GIF would be, with
 play/pause, one tick, reset, a time read-out, dragging with the pointer and a slider for each
-parameter the viewer's keys change. ``physcore.widget(scene)`` makes one, ``scene.show()``
+parameter the viewer's keys change (the keys work too, on the focused picture). ``physcore.widget(scene)`` makes one, ``scene.show()``
 displays one.
 
 The kernel runs the scene exactly as the live window does (:mod:`physcore.viewer`): one loop
@@ -316,6 +316,22 @@ class Widget(anywidget.AnyWidget):
             out.append({**spec, "positions": SLIDER_POSITIONS, "position": slider_position(spec, spec["value"])})
         return out
 
+    def _key(self, ch: Any) -> None:
+        """A key pressed on the picture: the viewer's keys (``physcore.viewer.KEYS``), but for
+        quit and screenshot; Right is ``.``."""
+        if not isinstance(ch, str) or ch in ("q", "p", "Escape"):
+            return
+        ch = "." if ch == "ArrowRight" else ch
+        if ch == " ":
+            self.playing = not self.playing
+            return
+        before = self.params
+        self._say(self._session.key(ch))
+        self.playing = not self._session.clock.paused
+        if self.params != before:
+            self.sliders = self._slider_specs()
+        self._dirty = True
+
     def _on_msg(self, _widget: Any, content: Any, buffers: Any) -> None:
         """A message from the front end (see ``_widget.js``); anything malformed is ignored."""
         kind = content.get("type") if isinstance(content, dict) else None
@@ -335,6 +351,8 @@ class Widget(anywidget.AnyWidget):
                 elif kind == "up":
                     session.release()
                 self._dirty = True
+            elif kind == "key":
+                self._key(content.get("key"))
             elif kind == "step":
                 self.step()
             elif kind == "reset":

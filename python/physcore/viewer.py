@@ -76,7 +76,6 @@ import numpy as np
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError, PhyscoreError
 from ._live import (
-    _PARAMS,
     MAX_TICKS_PER_DRAW,
     PARAM_RANGE,
     STEP_FACTOR,
@@ -277,25 +276,15 @@ class Viewer:
         session = self.session
         if not isinstance(ch, str):
             return
-        ch = {"+": "=", "_": "-"}.get(ch, ch)
         if ch in ("q", "esc"):
             self.quit = True
-        elif ch == " ":
-            session.set_paused(not self.clock.paused)
-        elif ch == ".":
-            self._say(session.step_once())
         elif ch == "p":
             try:
                 self.screenshots.append(self.save_screenshot(self._next_name()))
             except (OSError, PhyscoreError) as e:  # a full disk; no window (before run, after close)
                 print(f"screenshot not written: {e}", file=self.out)
-        elif ch == "r":
-            self._say(session.reset())
         else:
-            for p in _PARAMS:
-                if ch in p.keys:
-                    self._say(session.scale(p.name, STEP_FACTOR if ch == p.keys[1] else 1.0 / STEP_FACTOR))
-                    return
+            self._say(session.key(ch))
 
     def _handle(self, event: Any) -> None:
         """One event from the queue: quit, a key or the mouse; any other is ignored."""

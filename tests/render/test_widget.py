@@ -433,3 +433,24 @@ def test_a_diverging_scene_pauses_with_its_message(background):
     assert np.isfinite(w.scene.positions).all()  # rolled back to the last good step
     w.reset()
     assert w.time == 0.0
+
+
+def test_the_viewers_keys_work_on_the_picture():
+    w = pc.widget(_cloth(6), preview=0.0, fallback=False, background=False)
+    _wired(w)
+    w._on_msg(w, {"type": "ready"}, [])
+    g0 = w.params["gravity"]
+    w._on_msg(w, {"type": "key", "key": "g"}, [])
+    assert w.params["gravity"] == pytest.approx(g0 / viewer.STEP_FACTOR)
+    spec = next(s for s in w.sliders if s["name"] == "gravity")
+    assert spec["value"] == pytest.approx(g0 / viewer.STEP_FACTOR) and spec["position"] < notebook.SLIDER_POSITIONS // 2
+    w._on_msg(w, {"type": "key", "key": " "}, [])
+    assert not w.playing
+    ticks = w.ticks
+    w._on_msg(w, {"type": "key", "key": "ArrowRight"}, [])
+    assert w.ticks == ticks + 1 and not w.playing
+    w._on_msg(w, {"type": "key", "key": "r"}, [])
+    assert w.time == 0.0
+    for junk in ("q", "p", "Escape", None, 3, "x", "\x00"):
+        w._on_msg(w, {"type": "key", "key": junk}, [])
+    assert w.grabbed is None and np.isfinite(w.scene.positions).all()

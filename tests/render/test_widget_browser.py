@@ -2,7 +2,7 @@
 generated notebook, opened in Debian's Chromium (driven by Playwright, headless; no browser
 download), the cells run as a user runs them (Shift+Enter). Checked: frames arrive and change
 while playing, stop on pause, a drag with the mouse moves the particle in the kernel, a slider
-changes the term. Skips, saying why, only where Chromium, JupyterLab or anywidget is missing.
+changes the term, a key on the picture works as the viewer's. Skips, saying why, only where Chromium, JupyterLab or anywidget is missing.
 
 The frame rate the browser drew (the default cloth at 480 × 360) is printed (``pytest -s``)
 and must be live (>= 5 frames/s even on a busy 2-core machine; the closing note of issue 49
@@ -215,6 +215,14 @@ def test_widget_plays_pauses_drags_and_turns_a_knob_in_jupyterlab(lab, tmp_path)
             params, springs = _output(page, 3, "PARAMS").split(" ", 1)
             assert json.loads(params)["stiffness"] == pytest.approx(20000.0, rel=1e-6)
             assert json.loads(springs) == pytest.approx([20000.0], rel=1e-6)
+
+            # The viewer's key g on the focused picture: gravity ÷ 1.25 (JupyterLab's own
+            # shortcuts stand aside there).
+            page.locator(".physcore-widget canvas").first.focus()
+            page.keyboard.press("g")
+            page.wait_for_function("document.querySelector('.physcore-widget .pc-slider[data-name=gravity] .pc-value').textContent.startsWith('7.848')",
+                                   timeout=30_000)
+            assert page.locator(".jp-Notebook .jp-Cell").count() == 5  # no cell was added or changed by the key
 
             # Play again: frames flow again.
             page.click(".physcore-widget .pc-play")
