@@ -286,12 +286,13 @@ class Widget(anywidget.AnyWidget):
         return content, buf.getvalue()
 
     def _pump(self) -> None:
-        """Send a frame if the front end has a credit and there is something new to draw."""
-        if self._credits <= 0 or not (self.playing or self._dirty):
-            return
-        content, data = self.produce_frame()
-        self._credits -= 1
-        self.send(content, [data])
+        """Send frames while the front end has credits and there is something new to draw:
+        running, two frames are in flight (one drawn while the next is made); paused, one
+        after each change."""
+        while self._credits > 0 and (self.playing or self._dirty):
+            content, data = self.produce_frame()
+            self._credits -= 1
+            self.send(content, [data])
 
     def _changed(self) -> None:
         self._dirty = True

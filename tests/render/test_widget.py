@@ -152,12 +152,12 @@ def test_frames_are_sent_only_against_credits():
     w._pump()
     assert sent == []  # no view has opened: nothing to send to
     w._on_msg(w, {"type": "ready"}, [])
-    assert len(sent) == 1  # one frame at once; one credit kept for a change
+    assert len(sent) == 2  # running: two frames in flight, one drawn while the next is made
     content, buffers = sent[0]
     assert content["type"] == "frame" and content["seq"] == 1 and isinstance(buffers[0], bytes)
     w._on_msg(w, {"type": "ack", "seq": 1}, [])
     w._on_msg(w, {"type": "ack", "seq": 2}, [])
-    assert [c["seq"] for c, _ in sent] == [1, 2, 3]
+    assert [c["seq"] for c, _ in sent] == [1, 2, 3, 4]  # one for each drawn
     # Credits never exceed two, however many acks come: a front end cannot flood the kernel.
     for _ in range(10):
         w._on_msg(w, {"type": "ack"}, [])
@@ -184,6 +184,7 @@ def test_drag_through_messages_moves_the_particle_in_the_kernel():
     col, row = w.pixel_of(corner)
     start = w.scene.positions[corner].copy()
     w._on_msg(w, {"type": "down", "x": col + 0.5, "y": row + 0.5}, [])
+    w._on_msg(w, {"type": "ack"}, [])  # both credits were in flight: the next frame shows it
     assert w.grabbed == corner and "dragging" in sent[-1][0]["status"]
     session = w._session
     target_px = (col + 40.0, row)
