@@ -94,10 +94,13 @@ function render({ model, el: root }) {
   let pending = null;
   canvas.addEventListener("pointerdown", (e) => {
     if (e.button !== 0) return;
+    // Where it was pressed, before anything moves: focusing, or the notebook making this cell
+    // the active one, may scroll the page.
+    const at = pixel(e);
     held = true;
-    canvas.focus();
+    canvas.focus({ preventScroll: true });
     canvas.setPointerCapture(e.pointerId);
-    model.send({ type: "down", ...pixel(e) });
+    model.send({ type: "down", ...at });
   });
   canvas.addEventListener("pointermove", (e) => {
     if (!held) return;

@@ -64,11 +64,19 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-@pytest.fixture
-def lab(tmp_path):
-    """A JupyterLab server on 127.0.0.1 serving a generated notebook, with its own config, data
-    and runtime folders (nothing of the user's), and physcore importable in its kernels."""
+#: The front ends: JupyterLab (the test extra has it), and Notebook 7 where it is installed.
+FRONT_ENDS = {"lab": ("jupyterlab", "/lab/tree/widget.ipynb"), "notebook": ("notebook", "/notebooks/widget.ipynb")}
+
+
+@pytest.fixture(params=list(FRONT_ENDS))
+def lab(request, tmp_path):
+    """A JupyterLab (or Notebook 7) server on 127.0.0.1 serving a generated notebook, with its
+    own config, data and runtime folders (nothing of the user's), and physcore importable in
+    its kernels."""
     _needs()
+    module, path = FRONT_ENDS[request.param]
+    if request.param == "notebook":
+        pytest.importorskip("notebook", minversion="7", reason="Notebook 7 is not installed (pip install notebook); JupyterLab's run covers the widget")
     work = tmp_path / "work"
     work.mkdir()
     _notebook(work / "widget.ipynb")
@@ -81,7 +89,7 @@ def lab(tmp_path):
            "PYTHONPATH": os.pathsep.join([package_root, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
     log = open(tmp_path / "lab.log", "w")  # noqa: SIM115 - closed below
     proc = subprocess.Popen(
-        [sys.executable, "-m", "jupyterlab", "--no-browser", "--ip=127.0.0.1", f"--port={port}", "--port-retries=0",
+        [sys.executable, "-m", module, "--no-browser", "--ip=127.0.0.1", f"--port={port}", "--port-retries=0",
          f"--ServerApp.token={token}", f"--ServerApp.root_dir={work}", "--ServerApp.open_browser=False",
          f"--LabApp.workspaces_dir={tmp_path / 'workspaces'}", "--LabApp.news_url=None",
          "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate", "--allow-root"],
@@ -101,7 +109,7 @@ def lab(tmp_path):
                 log.flush()
                 pytest.fail("JupyterLab did not start:\n" + (tmp_path / "lab.log").read_text()[-3000:])
             time.sleep(0.3)
-        yield f"{base}/lab/tree/widget.ipynb?token={token}"
+        yield {"url": f"{base}{path}?token={token}", "sessions": f"{base}/api/sessions?token={token}"}
     finally:
         proc.terminate()
         try:
@@ -110,6 +118,26 @@ def lab(tmp_path):
             proc.kill()
             proc.wait()
         log.close()
+
+
+def _known_front_end_error(error) -> bool:
+    """Notebook 7.6 throws this in its own core bundle on opening any notebook with a fresh
+    config (no physcore widget needed to see it): not ours to fail on."""
+    stack = getattr(error, "stack", "") or ""
+    return "reading 'schema'" in str(error) and "/static/notebook/notebook_core." in stack.split("\n", 2)[1]
+
+
+def _wait_for_an_idle_kernel(sessions: str, timeout: float = 60.0) -> None:
+    """Until the server says the notebook's kernel is idle (its REST API: the same for every
+    front end)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with urllib.request.urlopen(sessions, timeout=5) as r:
+            states = [s["kernel"]["execution_state"] for s in json.load(r)]
+        if "idle" in states:
+            return
+        time.sleep(0.3)
+    raise AssertionError(f"no idle kernel after {timeout} s")
 
 
 def _run_cell(page, k: int) -> None:
@@ -140,19 +168,18 @@ def _pixels(page) -> str:
     return page.evaluate("document.querySelector('.physcore-widget canvas').toDataURL()")
 
 
-def test_widget_plays_pauses_drags_and_turns_a_knob_in_jupyterlab(lab, tmp_path):
+def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
     sync_api, chromium = _needs()
     problems: list[str] = []
     with sync_api.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 1000})
-            page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+            page.on("pageerror", lambda e: None if _known_front_end_error(e) else problems.append(f"page error: {e}"))
             page.on("console", lambda m: problems.append(f"console: {m.text}") if m.type == "error" and "physcore" in m.text else None)
-            page.goto(lab, wait_until="domcontentloaded")
+            page.goto(lab["url"], wait_until="domcontentloaded")
             page.wait_for_selector(".jp-Notebook .jp-Cell .jp-InputArea-editor", timeout=60_000)
-            # The kernel is up when the toolbar's kernel status reads idle.
-            page.wait_for_function("document.body.innerText.includes('Idle')", timeout=60_000)
+            _wait_for_an_idle_kernel(lab["sessions"])
             _run_cell(page, 0)
             page.wait_for_selector(".physcore-widget canvas", timeout=90_000)
 
