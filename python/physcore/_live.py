@@ -1,5 +1,5 @@
 """The live scene, shared by the window (:mod:`physcore.viewer`) and the notebook widget
-(:mod:`physcore.widget`): one loop, one state, one painter, no display.
+(:mod:`physcore.notebook`): one loop, one state, one painter, no display.
 
 The loop (Fiedler, "Fix your timestep!", 2004)
 ----------------------------------------------
@@ -12,7 +12,11 @@ that are due (at most :data:`MAX_TICKS_PER_DRAW`, and stopping once they have ta
 two ticks. :class:`_Session` holds that loop with the live state (:class:`_Live`: the scene, its
 drag and its parameters) and the painter (:class:`_Painter`: :mod:`physcore.render`'s rasteriser
 with one camera and colour scale fitted to a preview). The window feeds it pygame's events and
-wall clock; the widget feeds it the browser's messages, and sends its frames as images.
+wall clock; the widget feeds it the browser's messages, and sends its frames as images. The
+widget steps in the background by default (``_Session(..., background=True)``): one tick at a
+time on a worker thread (the core releases the GIL), the frames drawing the last two states
+interpolated meanwhile, every scene write waiting for the tick in flight (:meth:`_Session.settle`).
+The keys of both (:meth:`_Session.key`) are the viewer's.
 
 See :mod:`physcore.viewer` for the drag (a pinned, kinematic particle) and the parameter keys.
 """

@@ -15,7 +15,7 @@ also stop for a frame to be drawn once they have taken 50 ms, so that a slow sce
 and follows the pointer at about 20 Hz (the HUD then says "slower than real time"). The
 simulation itself never sees the display rate: its steps are those of the GIF.
 The loop, the live state and the painter live in ``physcore._live`` (its ``_Session``), shared
-with the notebook widget (:mod:`physcore.widget`); this module adds the window, the keys and the
+with the notebook widget (:mod:`physcore.notebook`); this module adds the window, the keys and the
 mouse.
 
 Drawing
