@@ -84,10 +84,14 @@ __all__ = [
 ]
 
 
-_LAZY = ("scenes", "render", "cli", "viewer")
+_LAZY = ("scenes", "render", "cli", "viewer", "notebook")
 
 
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
+    if name == "widget":  # the notebook widget (physcore.notebook.widget), imported on first use
+        from .notebook import widget
+
+        return widget
     if name in _LAZY:
         import importlib
 
@@ -97,4 +101,4 @@ def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
 
 def __dir__() -> list[str]:
     # The lazy submodules are part of the package's surface (tab completion, dir()).
-    return sorted(set(globals()) | set(_LAZY))
+    return sorted(set(globals()) | set(_LAZY) | {"widget"})

@@ -1,0 +1,274 @@
+"""The notebook widget in a real browser (issue 49): a JupyterLab server on loopback with a
+generated notebook, opened in Debian's Chromium (driven by Playwright, headless; no browser
+download), the cells run as a user runs them (Shift+Enter). Checked: frames arrive and change
+while playing, stop on pause, a drag with the mouse moves the particle in the kernel, a slider
+changes the term, a key on the picture works as the viewer's. Skips, saying why, only where Chromium, JupyterLab or anywidget is missing.
+
+The frame rate the browser drew (the default cloth at 480 × 360) is printed (``pytest -s``)
+and must be live (>= 5 frames/s even on a busy 2-core machine; the closing note of issue 49
+has the measured numbers).
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+pytestmark = pytest.mark.slow  # a server, a kernel and a browser: 10 s or more
+
+CORNER = 40 * 40 - 1  # the default cloth's free corner (its top row is pinned)
+
+
+def _needs():
+    pytest.importorskip("anywidget", reason='anywidget is not installed (pip install "physcore[notebook]")')
+    pytest.importorskip("jupyterlab", reason="JupyterLab is not installed (pip install jupyterlab; the test extra has it)")
+    pytest.importorskip("ipykernel", reason="ipykernel is not installed (JupyterLab brings it)")
+    sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install playwright)")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("no Chromium on the PATH (apt-get install chromium)")
+    return sync_api, chromium
+
+
+def _cell(source: str) -> dict:
+    return {"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": source}
+
+
+def _notebook(path: Path) -> None:
+    cells = [
+        _cell("import json\nimport physcore as pc\n\n\ndef j(x):\n    return json.dumps(x, separators=(',', ':'))\n\n\n"
+              "w = pc.widget(pc.scenes.cloth(), preview=0.5, fallback=False)\nw"),
+        _cell(f"print('PIXEL', j(w.pixel_of({CORNER})), j(w.scene.positions[{CORNER}].tolist()), w.ticks)"),
+        _cell(f"print('AFTER', j(w.scene.positions[{CORNER}].tolist()), w.grabbed, w.ticks)"),
+        _cell("print('PARAMS', j(w.params), j([float(t.stiffness.mean()) for t in w.scene.terms if isinstance(t, pc.Springs)]))"),
+        _cell("w.pause()\nf = pc.widget(pc.scenes.dam_break(), preview=0.5, fallback=False)\nf"),
+    ]
+    nb = {"cells": cells, "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"}},
+          "nbformat": 4, "nbformat_minor": 5}
+    path.write_text(json.dumps(nb))
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+#: The front ends: JupyterLab (the test extra has it), and Notebook 7 where it is installed.
+FRONT_ENDS = {"lab": ("jupyterlab", "/lab/tree/widget.ipynb"), "notebook": ("notebook", "/notebooks/widget.ipynb")}
+
+
+@pytest.fixture(params=list(FRONT_ENDS))
+def lab(request, tmp_path):
+    """A JupyterLab (or Notebook 7) server on 127.0.0.1 serving a generated notebook, with its
+    own config, data and runtime folders (nothing of the user's), and physcore importable in
+    its kernels."""
+    _needs()
+    module, path = FRONT_ENDS[request.param]
+    if request.param == "notebook":
+        pytest.importorskip("notebook", minversion="7", reason="Notebook 7 is not installed (pip install notebook); JupyterLab's run covers the widget")
+    work = tmp_path / "work"
+    work.mkdir()
+    _notebook(work / "widget.ipynb")
+    port, token = _free_port(), "physcore-test"
+    import physcore
+
+    package_root = str(Path(physcore.__file__).resolve().parents[1])
+    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(tmp_path / "config"), "JUPYTER_RUNTIME_DIR": str(tmp_path / "runtime"),
+           "IPYTHONDIR": str(tmp_path / "ipython"), "JUPYTER_PLATFORM_DIRS": "1",
+           "PYTHONPATH": os.pathsep.join([package_root, os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
+    log = open(tmp_path / "lab.log", "w")  # noqa: SIM115 - closed below
+    proc = subprocess.Popen(
+        [sys.executable, "-m", module, "--no-browser", "--ip=127.0.0.1", f"--port={port}", "--port-retries=0",
+         f"--ServerApp.token={token}", f"--ServerApp.root_dir={work}", "--ServerApp.open_browser=False",
+         f"--LabApp.workspaces_dir={tmp_path / 'workspaces'}", "--LabApp.news_url=None",
+         "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate", "--allow-root"],
+        env=env, stdout=log, stderr=subprocess.STDOUT, cwd=work,
+    )
+    base = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 60
+        while True:
+            try:
+                with urllib.request.urlopen(f"{base}/api/status?token={token}", timeout=2) as r:
+                    if r.status == 200:
+                        break
+            except OSError:
+                pass
+            if proc.poll() is not None or time.monotonic() > deadline:
+                log.flush()
+                pytest.fail("JupyterLab did not start:\n" + (tmp_path / "lab.log").read_text()[-3000:])
+            time.sleep(0.3)
+        yield {"url": f"{base}{path}?token={token}", "sessions": f"{base}/api/sessions?token={token}"}
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        log.close()
+
+
+def _known_front_end_error(error) -> bool:
+    """Notebook 7.6 throws this in its own core bundle on opening any notebook with a fresh
+    config (no physcore widget needed to see it): not ours to fail on."""
+    stack = getattr(error, "stack", "") or ""
+    return "reading 'schema'" in str(error) and "/static/notebook/notebook_core." in stack.split("\n", 2)[1]
+
+
+def _wait_for_an_idle_kernel(sessions: str, timeout: float = 60.0) -> None:
+    """Until the server says the notebook's kernel is idle (its REST API: the same for every
+    front end)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        with urllib.request.urlopen(sessions, timeout=5) as r:
+            states = [s["kernel"]["execution_state"] for s in json.load(r)]
+        if "idle" in states:
+            return
+        time.sleep(0.3)
+    raise AssertionError(f"no idle kernel after {timeout} s")
+
+
+def _run_cell(page, k: int) -> None:
+    """Select cell `k` of the notebook and run it (Shift+Enter), as a user does."""
+    cell = page.locator(".jp-Notebook .jp-Cell").nth(k)
+    cell.locator(".jp-InputArea-editor").click()
+    page.keyboard.press("Shift+Enter")
+
+
+def _output(page, k: int, tag: str, timeout: float = 60.0) -> str:
+    """The printed line of cell `k` that starts with `tag`."""
+    out = page.locator(".jp-Notebook .jp-Cell").nth(k).locator(".jp-OutputArea-output")
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if out.count():
+            m = re.search(rf"^{tag} (.*)$", out.first.inner_text(), flags=re.M)
+            if m:
+                return m.group(1)
+        time.sleep(0.2)
+    raise AssertionError(f"cell {k} printed no {tag} line")
+
+
+def _frames(page, k: int = 0) -> int:
+    return int(page.locator(".physcore-widget").nth(k).get_attribute("data-frames") or 0)
+
+
+def _pixels(page) -> str:
+    return page.evaluate("document.querySelector('.physcore-widget canvas').toDataURL()")
+
+
+def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
+    sync_api, chromium = _needs()
+    problems: list[str] = []
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 1000})
+            page.on("pageerror", lambda e: None if _known_front_end_error(e) else problems.append(f"page error: {e}"))
+            page.on("console", lambda m: problems.append(f"console: {m.text}") if m.type == "error" and "physcore" in m.text else None)
+            page.goto(lab["url"], wait_until="domcontentloaded")
+            page.wait_for_selector(".jp-Notebook .jp-Cell .jp-InputArea-editor", timeout=60_000)
+            _wait_for_an_idle_kernel(lab["sessions"])
+            _run_cell(page, 0)
+            page.wait_for_selector(".physcore-widget canvas", timeout=90_000)
+
+            # Playing: frames arrive and the picture changes.
+            page.wait_for_function("Number(document.querySelector('.physcore-widget').dataset.frames) > 3", timeout=60_000)
+            n0, t0, first = _frames(page), time.monotonic(), _pixels(page)
+            time.sleep(3.0)
+            n1, t1 = _frames(page), time.monotonic()
+            rate = (n1 - n0) / (t1 - t0)
+            print(f"\nbrowser: {rate:.1f} frames/s drawn (default cloth, {page.evaluate('navigator.hardwareConcurrency')} CPUs)")
+            assert rate >= 5.0, rate
+            assert _pixels(page) != first
+            assert float(page.get_attribute(".physcore-widget", "data-time")) > 0.5
+            page.screenshot(path=str(tmp_path / "playing.png"))
+
+            # Pause: frames stop (one in flight may still land), the picture stands.
+            page.click(".physcore-widget .pc-play")
+            page.wait_for_function("document.querySelector('.physcore-widget').dataset.playing === '0'")
+            time.sleep(0.5)
+            n2, still = _frames(page), _pixels(page)
+            time.sleep(1.5)
+            assert _frames(page) <= n2 + 1
+            assert _pixels(page) == still
+
+            # Drag the free corner 60 pixels to the right with the mouse: in the kernel it
+            # moves there (paused, a dragged particle is put under the pointer at once).
+            _run_cell(page, 1)
+            pixel, before, ticks = _output(page, 1, "PIXEL").split(" ", 2)
+            col, row = json.loads(pixel)
+            before = json.loads(before)
+            canvas = page.locator(".physcore-widget canvas").first
+            canvas.evaluate("e => e.scrollIntoView({block: 'center'})")  # in view, clear of pop-ups
+            time.sleep(0.3)
+            box = canvas.bounding_box()
+            size = page.evaluate("[document.querySelector('.physcore-widget canvas').width, document.querySelector('.physcore-widget canvas').height]")
+            sx, sy = box["width"] / size[0], box["height"] / size[1]
+            start = (box["x"] + (col + 0.5) * sx, box["y"] + (row + 0.5) * sy)
+            page.mouse.move(*start)
+            page.mouse.down()
+            for k in range(1, 11):
+                page.mouse.move(start[0] + 6 * k * sx, start[1])
+                time.sleep(0.05)
+            time.sleep(0.5)
+            page.mouse.up()
+            time.sleep(0.5)
+            _run_cell(page, 2)
+            after, grabbed, ticks_after = _output(page, 2, "AFTER").split(" ")
+            after = json.loads(after)
+            moved = sum((a - b) ** 2 for a, b in zip(after, before, strict=True)) ** 0.5
+            assert moved > 0.05, (before, after)
+            assert grabbed == "None" and ticks_after == ticks  # let go; paused: no tick ran
+
+            # A slider: stiffness to position 750 of 1000 (log scale over 100× either way of
+            # its start, so × 10), through an input event as the mouse would make.
+            page.evaluate("""() => { const e = document.querySelector('.physcore-widget input[name=stiffness]');
+                                     e.value = '750'; e.dispatchEvent(new Event('input', {bubbles: true})); }""")
+            page.wait_for_function("document.querySelector('.physcore-widget .pc-slider[data-name=stiffness] .pc-value').textContent.startsWith('2.000e+4')",
+                                   timeout=30_000)
+            _run_cell(page, 3)
+            params, springs = _output(page, 3, "PARAMS").split(" ", 1)
+            assert json.loads(params)["stiffness"] == pytest.approx(20000.0, rel=1e-6)
+            assert json.loads(springs) == pytest.approx([20000.0], rel=1e-6)
+
+            # The viewer's key g on the focused picture: gravity ÷ 1.25 (JupyterLab's own
+            # shortcuts stand aside there).
+            page.locator(".physcore-widget canvas").first.focus()
+            page.keyboard.press("g")
+            page.wait_for_function("document.querySelector('.physcore-widget .pc-slider[data-name=gravity] .pc-value').textContent.startsWith('7.848')",
+                                   timeout=30_000)
+            assert page.locator(".jp-Notebook .jp-Cell").count() == 5  # no cell was added or changed by the key
+
+            # Play again: frames flow again.
+            page.click(".physcore-widget .pc-play")
+            n3 = _frames(page)
+            page.wait_for_function(f"Number(document.querySelector('.physcore-widget').dataset.frames) > {n3 + 5}", timeout=30_000)
+            page.screenshot(path=str(tmp_path / "after.png"))
+
+            # A 10⁴-particle fluid (the default dam break, 10 368 particles), the cloth paused:
+            # frames keep coming while its ticks run in the background.
+            _run_cell(page, 4)
+            page.wait_for_function("document.querySelectorAll('.physcore-widget').length === 2 && "
+                                   "Number(document.querySelectorAll('.physcore-widget')[1].dataset.frames) > 3", timeout=90_000)
+            n4, t4 = _frames(page, 1), time.monotonic()
+            time.sleep(3.0)
+            fluid = (_frames(page, 1) - n4) / (time.monotonic() - t4)
+            print(f"browser: {fluid:.1f} frames/s drawn (dam break, 10 368 particles)")
+            assert fluid >= 5.0, fluid
+            page.locator(".physcore-widget").nth(1).scroll_into_view_if_needed()
+            page.screenshot(path=str(tmp_path / "fluid.png"))
+        finally:
+            browser.close()
+    assert not problems, problems
