@@ -961,3 +961,20 @@ def test_field_labels_dimensionless_clock_and_a_scale_from_zero():
     assert speed.time_unit == "s" and speed.lo == 0.0
     shifted = FieldRasteriser(f + 5.0, "turing", (100, 100), None, (1.0, 1.0), times=times, label="T")
     assert shifted.lo > 5.0  # far from 0: the scale keeps its low percentile
+
+
+def test_a_segment_wholly_outside_the_image_draws_nothing():
+    """A line from inside the image to a point beyond float32's pixels (a scene about to diverge)
+    draws its part inside; one wholly outside draws nothing (neither fails)."""
+    from physcore.render._raster import _draw_lines
+
+    buf = np.zeros((360, 480), np.uint8)
+    _draw_lines(buf, np.array([38.0]), np.array([173.0]), np.array([3.1e39]), np.array([1.6e38]), np.array([3], np.uint8))
+    rows, cols = np.nonzero(buf)
+    # What is drawn is the part inside the image: from (38, 173) towards the far point (its
+    # direction, slope 1.6/31), one pixel a column.
+    assert set(np.unique(buf)) == {0, 3} and cols.min() <= 39 and cols.max() >= 478
+    assert np.allclose(rows, 173 + (cols - 38) * 1.6e38 / 3.1e39, atol=1.5)
+    rgb = np.zeros((20, 20, 3), np.uint8)
+    _draw_lines(rgb, np.array([-50.0]), np.array([-50.0]), np.array([-40.0]), np.array([-60.0]), np.array([[255, 0, 0]], np.uint8))
+    assert not rgb.any()

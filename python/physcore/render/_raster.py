@@ -141,6 +141,26 @@ def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
         c0, r0, c1, r1, colors = c0[ok], r0[ok], c1[ok], r1[ok], colors[ok]
     if c0.size == 0:
         return
+    # Clip each segment to the image (grown by a pixel) first, in float64 (Liang & Barsky, ACM
+    # TOG 3 (1984) 1): an end far beyond float32 (a scene about to diverge) then costs nothing.
+    c0, r0, c1, r1 = (np.asarray(a, np.float64) for a in (c0, r0, c1, r1))
+    dc, dr = c1 - c0, r1 - r0
+    t0, t1 = np.zeros(c0.shape), np.ones(c0.shape)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for p, q in ((-dc, c0 + 1.0), (dc, w + 1.0 - c0), (-dr, r0 + 1.0), (dr, h + 1.0 - r0)):
+            ratio = q / p
+            t0 = np.where(p < 0, np.maximum(t0, ratio), t0)
+            t1 = np.where(p > 0, np.minimum(t1, ratio), t1)
+            t1 = np.where((p == 0) & (q < 0), -1.0, t1)
+    keep = t0 <= t1
+    if not keep.all():
+        c0, r0, c1, r1, dc, dr = c0[keep], r0[keep], c1[keep], r1[keep], dc[keep], dr[keep]
+        t0, t1, colors = t0[keep], t1[keep], colors[keep]
+    if c0.size == 0:
+        return
+    # (Segments inside keep their own ends, bit for bit.)
+    c1, r1 = np.where(t1 < 1, c0 + t1 * dc, c1), np.where(t1 < 1, r0 + t1 * dr, r1)
+    c0, r0 = np.where(t0 > 0, c0 + t0 * dc, c0), np.where(t0 > 0, r0 + t0 * dr, r0)
     c0, r0 = c0.astype(np.float32), r0.astype(np.float32)
     dc, dr = c1.astype(np.float32) - c0, r1.astype(np.float32) - r0
     # One sample per pixel along the longer axis, capped (a segment crossing the image from far
@@ -156,6 +176,8 @@ def _draw_lines(buf: np.ndarray, c0, r0, c1, r1, colors: np.ndarray) -> None:
     inside = (cc >= 0) & (cc < w) & (rr >= 0) & (rr < h)
     if not inside.all():
         cc, rr, vals = cc[inside], rr[inside], vals[inside]
+    if cc.size == 0:  # no sample in the image (reshape(0, -1) of the colours cannot be formed)
+        return
     buf.reshape(h * w, -1)[rr * w + cc] = vals.reshape(vals.shape[0], -1)
 
 
