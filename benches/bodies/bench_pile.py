@@ -13,12 +13,15 @@ threads here (its deterministic build); physcore's thread count does not change 
 """
 from __future__ import annotations
 
+import os
 import statistics
 import sys
 import time
 
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benches/: _common
+
+from _common import header, require_release  # first: sets up the environment before numpy loads
 import numpy as np
-from _common import header, require_release
 
 import physcore as pc
 
