@@ -11,7 +11,7 @@ import pytest
 
 import physcore as pc
 
-FLUID_SCENES = ("dam_break", "drop")
+FLUID_SCENES = ("dam_break", "drop", "floating")
 # DFSPH with surface tension (no WCSPH form): their books' drift is semi-implicit Euler's error
 # at the flow's step, gravity's kick that the density solve takes out (converging with the step:
 # tests/fluids/test_dfsph.py); coarse forms (n = 80) over the rendered time measured 5.3e-3 and 3.7e-3.

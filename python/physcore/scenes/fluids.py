@@ -622,6 +622,7 @@ def floating(
     n: int = 56,
     *,
     density: float = 500.0,
+    method: str | None = None,
     integrator: str = "semi_implicit_euler",
     threads: int | None = None,
 ) -> Scene:
@@ -631,12 +632,12 @@ def floating(
     it, ride the surge to the far wall and back. The tank is both the fluid's walls and fixed
     bodies; bodies and fluid particles meet through the particle coupling (:mod:`physcore.bodies`:
     an impulse exchange, so the bodies float approximately, not by Akinci et al.'s boundary
-    particles). ``integrator`` steps the fluid (see :func:`dam_break`).
+    particles). ``method`` and ``integrator`` step the fluid (see :func:`dam_break`).
 
     Raises TypeError / InvalidInputError naming the argument.
     """
     rho = _positive(density, "density")
-    scene = dam_break(n=n, integrator=integrator, threads=threads)
+    scene = dam_break(n=n, integrator=integrator, threads=threads, method=method)
     wall, w, h = 0.1, 4.0, 3.0
     scene.add(Bodies("box", size=[(w / 2 + 2 * wall, wall), (wall, h / 2 + wall), (wall, h / 2 + wall)],
                      positions=[(w / 2, -wall), (-wall, h / 2), (w + wall, h / 2)], kind="fixed", color=(84, 92, 104), name="tank"))
