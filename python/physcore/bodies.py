@@ -399,6 +399,8 @@ class Bodies(Part):
                    velocities=arrays["velocities"], angular_velocities=arrays["angular_velocities"],
                    vertices=arrays.get("vertices"), density=rec.get("density"), friction=rec.get("friction"),
                    restitution=rec.get("restitution"), kind=rec.get("kind"), color=rec.get("color"), name=entry.get("name"))
+        if ("state" in arrays) != ("state_bytes" in arrays):
+            raise InvalidInputError("state, state_bytes: the bodies' solver state needs both (its packed bytes and their count)")
         ctx.add(part)
         if "state" in arrays:
             ctx.sim.system_load(SYSTEM, [("state", np.asarray(arrays["state"], np.float64)),

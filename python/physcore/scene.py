@@ -1297,6 +1297,7 @@ class Scene:
             + f"dt={self.dt:g}, t={self.time:g}, terms: {terms}, planes: {len(self._section('planes'))}, boxes: {len(boxes)}"
             + (f", spheres: {len(spheres)}" if spheres else "")
             + (f", grids: {', '.join(g.name for g in grids)}" if grids else "")
+            + (f", bodies: {', '.join(f'{g.name} ({g.n} {g.shape})' for g in self.bodies)}" if self.bodies else "")
             + ")"
         )
 

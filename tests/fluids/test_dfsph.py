@@ -461,7 +461,7 @@ def test_a_dfsph_drop_lands_on_a_dfsph_pool_instead_of_passing_through():
 def test_pinned_fluid_particles_stay_and_the_books_balance():
     """A pinned particle of a DFSPH fluid (the viewer pins the one it drags) keeps its velocity
     through the solves, which push on it as on a wall; the energy books still balance."""
-    from physcore.viewer import _rebuild
+    from physcore._live import _rebuild
 
     def pin(meta, arrays):
         arrays["pinned"] = arrays["pinned"].copy()

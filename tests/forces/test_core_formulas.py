@@ -16,7 +16,7 @@ import pytest
 import physcore as pc
 from physcore import _core
 from physcore.fluids import Fluid, kernel_w, lattice, lattice_density_sum, tank_walls
-from physcore.viewer import _rebuild
+from physcore._live import _rebuild
 
 PKG = Path(pc.__file__).resolve().parent
 

@@ -516,6 +516,11 @@ impl System for Bodies2 {
     }
     fn restore(&mut self, snapshot: Snapshot) {
         self.d = *snapshot.downcast::<Dynamic>().expect("a snapshot of the bodies");
+        // rapier's pipeline and CCD solver keep working buffers from the steps undone; fresh ones
+        // step on exactly as after a load (where they are fresh too, and a restart continues bit
+        // for bit), so a rolled-back run matches one never interrupted.
+        self.pipeline = PhysicsPipeline::new();
+        self.ccd = CCDSolver::new();
     }
 }
 
