@@ -20,7 +20,7 @@ import physcore as pc
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
-MODULES = ["render", "scenes", "shapes", "testing", "sweeps", "fluids", "grids", "flows", "potentials"]
+MODULES = ["render", "scenes", "shapes", "testing", "sweeps", "fluids", "grids", "flows", "potentials", "bodies"]
 # Each example of examples/ and what its run puts on its page (sphinx-gallery's name for it).
 EXAMPLES = {"plot_own_scene": ".gif", "plot_custom_force": ".gif", "plot_video": ".mp4", "plot_sweep": ".png",
             "plot_batch": ".png"}
