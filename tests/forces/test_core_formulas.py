@@ -15,8 +15,8 @@ import pytest
 
 import physcore as pc
 from physcore import _core
-from physcore.fluids import Fluid, kernel_w, lattice, lattice_density_sum, tank_walls
 from physcore._live import _rebuild
+from physcore.fluids import Fluid, kernel_w, lattice, lattice_density_sum, tank_walls
 
 PKG = Path(pc.__file__).resolve().parent
 
