@@ -65,6 +65,9 @@ JOINTS: tuple[str, ...] = ("revolute", "fixed", "prismatic", "rope")
 _KINDS = ("dynamic", "fixed", "kinematic")
 #: The name of the core's system that holds every body.
 SYSTEM = "bodies"
+#: Bytes one body costs, about (rapier's body, collider, broad-phase and island entries, and
+#: physcore's arrays of it): what a group is refused by before anything is allocated.
+BODY_BYTES = 2048
 
 
 def _rows(arg: str, value: Any, n: int | None, width: int) -> np.ndarray:
@@ -192,6 +195,7 @@ class Bodies(Part):
             n, x = 1, np.zeros((1, 2))
         if n < 1:
             raise InvalidInputError("positions: a group needs at least one body")
+        _check.memory("positions", n * BODY_BYTES, f"{n} rigid bodies")
         self.n = n
         self.start = x
         if self.shape == "polygon":

@@ -6,8 +6,9 @@ import math
 
 import numpy as np
 
+from .. import _check
 from .._errors import InvalidInputError
-from ..bodies import Bodies, Joints
+from ..bodies import BODY_BYTES, Bodies, Joints
 from ..scene import Scene
 from ..terms import Gravity
 from ._common import _count, _nonneg, _positive, _stamped
@@ -53,6 +54,7 @@ def dominoes(
     Raises TypeError / InvalidInputError naming the argument.
     """
     n = _count(n, "n", 2)
+    _check.memory("n", n * BODY_BYTES, f"{n} dominoes")
     h0 = _positive(height, "height")
     k = _positive(growth, "growth")
     gap = _positive(spacing_ratio, "spacing_ratio")
@@ -113,6 +115,7 @@ def pyramid(
     rows = _count(rows, "rows", 1)
     b = _positive(box, "box")
     links = _count(chain, "chain", 1)
+    _check.memory("rows, chain", (rows * (rows + 1) // 2 + links) * BODY_BYTES, "the crates and the chain's links")
     r = _positive(ball_radius, "ball_radius")
     rho = _positive(ball_density, "ball_density")
     scene = Scene(2, integrator="semi_implicit_euler", dt=_positive(dt, "dt"), threads=threads)
