@@ -333,11 +333,13 @@ class Bodies(Part):
         return _outline(self.shape, self.size, self.vertices)
 
     # -- the part protocol
-    def _params(self, x: np.ndarray, angles: np.ndarray, v: np.ndarray, w: np.ndarray) -> dict[str, Any]:
+    def _params(self) -> dict[str, Any]:
+        """The core's parameters of the group, at its starting state."""
         p: dict[str, Any] = {
             "shape": self.shape, "kind": self.kind, "n": self.n,
-            "positions": np.ascontiguousarray(x).reshape(-1), "angles": np.ascontiguousarray(angles),
-            "velocities": np.ascontiguousarray(v).reshape(-1), "angular_velocities": np.ascontiguousarray(w),
+            "positions": np.ascontiguousarray(self.start).reshape(-1), "angles": np.ascontiguousarray(self.start_angles),
+            "velocities": np.ascontiguousarray(self.start_velocities).reshape(-1),
+            "angular_velocities": np.ascontiguousarray(self.start_angular),
             "size": np.ascontiguousarray(self.size, dtype=np.float64).reshape(-1),
             "density": self.density, "friction": self.friction, "restitution": self.restitution,
         }
@@ -362,7 +364,7 @@ class Bodies(Part):
             raise InvalidInputError("item: rigid bodies are two-dimensional in this version (make the scene with dim=2)")
         if self._host is not None:
             raise InvalidInputError(f"item: bodies {self.name!r} are already in a scene (a group joins one scene)")
-        self.first = int(ctx.sim.add_bodies(self._params(self.start, self.start_angles, self.start_velocities, self.start_angular)))
+        self.first = int(ctx.sim.add_bodies(self._params()))
         self.name = name
         self._host = ctx.host
         return self
