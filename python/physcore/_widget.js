@@ -149,6 +149,10 @@ function render({ model, el: root }) {
       box.dataset.seq = String(msg.seq);
       clock.textContent = `t = ${msg.time.toFixed(3)} s`;
       status.textContent = msg.status || "";
+      // The kernel's answer to a press: the particle it holds ("" for none).
+      const grabbed = Number.isInteger(msg.grabbed) ? String(msg.grabbed) : "";
+      box.dataset.grabbed = grabbed;
+      canvas.classList.toggle("pc-holding", grabbed !== "");
       for (const [name, v] of Object.entries(msg.params || {})) {
         if (labels[name]) labels[name][0].textContent = `${fmt(v)} ${labels[name][1]}`;
       }

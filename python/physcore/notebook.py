@@ -261,7 +261,8 @@ class Widget(anywidget.AnyWidget):
     def produce_frame(self) -> tuple[dict[str, Any], bytes]:
         """Run the ticks due since the last frame (wall time; none while paused), draw the state
         and encode it: the message's content (``type``, ``seq``, ``time`` s, ``ticks``,
-        ``status``, ``params``, ``playing``, ``mime``) and the image's bytes. This is what the
+        ``status``, ``params``, ``playing``, ``grabbed`` (the held particle or None), ``mime``) and
+        the image's bytes. This is what the
         widget sends against each credit of the front end."""
         session = self._session
         now = time.perf_counter()
@@ -282,7 +283,8 @@ class Widget(anywidget.AnyWidget):
         live = session.live
         drawn_time = live.pt + session.alpha * (live.t - live.pt)
         content = {"type": "frame", "seq": self._seq, "time": drawn_time, "ticks": session.live.ticks,
-                   "status": self.status, "params": self.params, "playing": bool(self.playing), "mime": mime}
+                   "status": self.status, "params": self.params, "playing": bool(self.playing),
+                   "grabbed": live.grabbed, "mime": mime}
         return content, buf.getvalue()
 
     def _pump(self) -> None:

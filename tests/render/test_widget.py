@@ -185,7 +185,7 @@ def test_drag_through_messages_moves_the_particle_in_the_kernel():
     start = w.scene.positions[corner].copy()
     w._on_msg(w, {"type": "down", "x": col + 0.5, "y": row + 0.5}, [])
     w._on_msg(w, {"type": "ack"}, [])  # both credits were in flight: the next frame shows it
-    assert w.grabbed == corner and "dragging" in sent[-1][0]["status"]
+    assert w.grabbed == corner and "dragging" in sent[-1][0]["status"] and sent[-1][0]["grabbed"] == corner
     session = w._session
     target_px = (col + 40.0, row)
     goal = viewer.screen_to_world(session.painter.cam, session.painter.origin, target_px, w.scene.positions[corner])
@@ -196,7 +196,8 @@ def test_drag_through_messages_moves_the_particle_in_the_kernel():
     np.testing.assert_allclose(w.scene.positions[corner], goal, atol=1e-9)
     assert np.linalg.norm(w.scene.positions[corner] - start) > 0.1
     w._on_msg(w, {"type": "up", "x": target_px[0], "y": target_px[1]}, [])
-    assert w.grabbed is None
+    w._on_msg(w, {"type": "ack"}, [])
+    assert w.grabbed is None and sent[-1][0]["grabbed"] is None
     # Paused, a drag puts the particle there at once.
     w.pause()
     w.press(*w.pixel_of(corner))
