@@ -17,6 +17,7 @@
 //   the papers write them; an iterator over one of them would make the others look different.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 pub mod alloc;
+pub mod batch;
 pub mod constraints;
 pub mod error;
 pub mod grids;

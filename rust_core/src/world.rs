@@ -29,6 +29,14 @@ use std::time::Duration;
 pub const MAX_STEPS: u64 = i64::MAX as u64;
 
 /// What `World::rollback` restores (see `World::checkpoint`).
+/// How `World::begin_steps` left a call.
+pub(crate) enum Begun {
+    /// Nothing to step: the call is done.
+    Done(Checkpoint),
+    /// Steps to run, from this checkpoint.
+    Run(Checkpoint),
+}
+
 pub struct Checkpoint {
     snapshots: Vec<Snapshot>,
     t: Real,
@@ -239,6 +247,20 @@ impl<V: Vector> World<V> {
     /// caller can still undo the call (`rollback`): the Python binding does when a signal
     /// arrived while the call was finishing.
     pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint> {
+        match self.begin_steps(n)? {
+            Begun::Done(cp) => Ok(cp),
+            Begun::Run(cp) => match self.with_stop(stop, |s| s.step_inner(n, stop)) {
+                Ok(()) => Ok(cp),
+                Err(e) => Err(self.fail(cp, e)),
+            },
+        }
+    }
+
+    /// The start of `step_checkpointed(n)`: the call's checks, the reservations and the
+    /// checkpoint. `Done` where nothing is left to step (n = 0, or nothing to step: the clock
+    /// has advanced already), else `Run`: the caller steps `n` steps, and rolls back to the
+    /// checkpoint (`fail`) on an error.
+    pub(crate) fn begin_steps(&mut self, n: u64) -> Result<Begun> {
         if n > MAX_STEPS - self.step {
             return Err(invalid(
                 "n",
@@ -258,12 +280,34 @@ impl<V: Vector> World<V> {
             }
             self.t = t;
             self.step += n;
-            return Ok(cp);
+            return Ok(Begun::Done(cp));
         }
-        match self.with_stop(stop, |s| s.step_inner(n, stop)) {
-            Ok(()) => Ok(cp),
-            Err(e) => Err(self.fail(cp, e)),
+        Ok(Begun::Run(cp))
+    }
+
+    /// The shape of this world for the batch's fused kernel (`crate::batch`): particles alone
+    /// (no other system, no coupling) that the kernel can step with the same bits.
+    pub(crate) fn fused_shape(&self) -> Option<crate::batch::Shape> {
+        (self.others.is_empty() && self.couplings.is_empty()).then(|| self.particles.fused_shape()).flatten()
+    }
+
+    /// `step_inner`'s check of dt, for a caller that steps the particles itself (`crate::batch`).
+    pub(crate) fn check_particles_dt(&self) -> Result<()> {
+        self.particles.check_dt(self.dt)
+    }
+
+    /// The end of a fused run of `n` steps (`crate::batch`): the clock counts them one by one,
+    /// as `step_loop` does, for the same bits.
+    pub(crate) fn count_steps(&mut self, n: u64) {
+        for _ in 0..n {
+            self.t += self.dt;
+            self.step += 1;
         }
+    }
+
+    /// Rolls a failed call back to `cp` (`fail`, for `crate::batch`).
+    pub(crate) fn fail_call(&mut self, cp: Checkpoint, e: Error) -> Error {
+        self.fail(cp, e)
     }
 
     /// Whether no system has anything to step.

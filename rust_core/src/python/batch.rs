@@ -6,7 +6,8 @@
 //! not depend on the thread that steps it or on its pool's size (`par`), so each member is
 //! bit-identical to stepping it alone, for any thread count. A member's own parallel loops fork
 //! onto its own pool (`World::with_stop` installs it on the stepping thread), which only the
-//! large members reach (`par::PAR_MIN`).
+//! large members reach (`par::PAR_MIN`). Small N-body members are stepped by the core's fused
+//! kernel instead, one member per SIMD lane (`crate::batch`), with the same bits.
 use super::errors::*;
 use super::simulation::PySimulation;
 use super::watch::SIGNAL_POLL;
@@ -21,6 +22,22 @@ use std::sync::Arc;
 
 /// One member's outcome: its checkpoint (it stepped), or its error (it rolled itself back).
 type Outcome = Result<Checkpoint, Error>;
+
+/// Steps every member `n` steps on the current pool: through `crate::batch::step_worlds` (its
+/// fused kernel for small N-body members) where all have one dimension, else one by one.
+fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Vec<Outcome> {
+    let d2 = inners.iter().all(|i| matches!(i, Inner::D2(_)));
+    let d3 = inners.iter().all(|i| matches!(i, Inner::D3(_)));
+    if d2 {
+        let worlds = inners.into_iter().filter_map(|i| if let Inner::D2(w) = i { Some(w) } else { None }).collect();
+        crate::batch::step_worlds(worlds, n, stop)
+    } else if d3 {
+        let worlds = inners.into_iter().filter_map(|i| if let Inner::D3(w) = i { Some(w) } else { None }).collect();
+        crate::batch::step_worlds(worlds, n, stop)
+    } else {
+        inners.into_par_iter().map(|inner| with_sim!(inner, s => s.step_checkpointed(n, stop))).collect()
+    }
+}
 
 /// Steps each of `sims` `n` steps (`Simulation.step`), in parallel over members on a pool of
 /// `threads` threads (`None`: all cores). Returns per member `None`, or the exception it would
@@ -57,14 +74,10 @@ pub(super) fn step_batch(
         std::thread::scope(|scope| {
             let job = scope.spawn(|| {
                 let out = pool.install(|| {
-                    ptrs.par_iter()
-                        .map(|p| {
-                            // SAFETY: each pointer is a distinct simulation (each was borrowed
-                            // mutably above, and the borrows outlive this call), stepped by one task.
-                            let inner = unsafe { &mut *p.0 };
-                            with_sim!(inner, s => s.step_checkpointed(n, &stop))
-                        })
-                        .collect::<Vec<_>>()
+                    // SAFETY: each pointer is a distinct simulation (each was borrowed mutably
+                    // above, and the borrows outlive this call), used by one task at a time.
+                    let inners: Vec<&mut Inner> = ptrs.iter().map(|p| unsafe { &mut *p.0 }).collect();
+                    step_members(inners, n, &stop)
                 });
                 caller.unpark(); // the caller's wait ends now, not at its next poll
                 out

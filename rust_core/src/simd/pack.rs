@@ -135,6 +135,11 @@ impl<S: Simd, F: Float> P<S, F> {
             (self * y, y)
         }
     }
+    /// `a` in the lanes where `self > 0`, `b` elsewhere (NaN lanes too).
+    #[inline(always)]
+    pub fn if_positive(self, a: Self, b: Self) -> Self {
+        self.gt(Self::zero(self.s)).select(a, b)
+    }
     /// The correctly rounded square root.
     #[inline(always)]
     pub fn sqrt(self) -> Self {

@@ -105,6 +105,38 @@ impl<V: Vector> ParticleSystem<V> {
         self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve_potential(n))
     }
 
+    /// The shape of these particles for the batch's fused kernel (`crate::batch`), where it
+    /// steps them with the same bits: float64, 1..=`pairwise_small::SMALL` particles, velocity
+    /// Verlet or Yoshida's fourth order, no constraints or colliders, and terms that are
+    /// uniform fields or one small pairwise sum (gravity or Coulomb), nothing else.
+    pub(crate) fn fused_shape(&self) -> Option<crate::batch::Shape> {
+        use crate::batch::{Scheme, Shape};
+        let (sys, n) = (&self.sys, self.sys.state.x.len());
+        let scheme = match self.integrator.info().name {
+            "verlet" => Scheme::Verlet,
+            "yoshida4" => Scheme::Yoshida4,
+            _ => return None,
+        };
+        if sys.single || n == 0 || !self.constraints.is_empty() || sys.forces.velocity_dependent() {
+            return None;
+        }
+        let mut pairwise = 0;
+        for t in &sys.forces.terms {
+            if t.small_pairwise(&sys.model, n).is_some() && t.as_own_state().is_none() {
+                pairwise += 1;
+            } else if t.uniform_acceleration().is_none() {
+                return None;
+            }
+        }
+        (pairwise == 1).then_some(Shape { n, dim: V::DIM, scheme })
+    }
+
+    /// What the fused kernel reads and writes (`crate::batch`): the particles and the
+    /// integrator (its force cache).
+    pub(crate) fn fused_parts(&mut self) -> (&mut Particles<V>, &mut dyn Integrator<V>) {
+        (&mut self.sys, self.integrator.as_mut())
+    }
+
     pub fn n_particles(&self) -> usize {
         self.sys.state.x.len()
     }

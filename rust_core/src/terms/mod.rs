@@ -7,6 +7,7 @@ pub mod gravity;
 pub mod grid_fields;
 pub mod magnetic_field;
 pub mod pairwise_gravity;
+pub mod pairwise_small;
 pub mod potentials;
 pub mod registry;
 pub mod roles;
@@ -72,6 +73,12 @@ pub trait Term<V: Vector>: Send + Sync {
     /// `Some(g)` for a uniform acceleration field (uniform gravity): integrators then add `g` to
     /// every free particle's acceleration directly and `add_forces` is never called.
     fn uniform_acceleration(&self) -> Option<V> {
+        None
+    }
+    /// `Some((c, ε², weights))` where the term is the small pairwise sum
+    /// (`pairwise_small`): F_i = c w_i S_i at this scene's `n` particles, float64. The batch's
+    /// fused kernel (`crate::batch`) then steps it with the same bits.
+    fn small_pairwise<'a>(&self, _model: &'a Model, _n: usize) -> Option<(Real, Real, &'a [Real])> {
         None
     }
     /// Potential energy (J) if the term is conservative (or has a conservative part).

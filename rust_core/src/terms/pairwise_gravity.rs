@@ -15,6 +15,10 @@
 //! Newton steps), not a square root and a division, which would bound the loop at several cycles
 //! per pair. Results never depend on the thread count; levels differ by a few ulp.
 //!
+//! Up to `pairwise_small::SMALL` bodies in float64 the sum is `pairwise_small`'s instead: each
+//! pair once, in plain IEEE operations, the same bits on every SIMD level (and the same bits as
+//! a batch's fused kernel, `crate::batch`).
+//!
 //! With a single-precision state the sum runs in float32 (twice the lanes per instruction). The
 //! positions are then float32 values already, so differences lose nothing more.
 //!
@@ -22,6 +26,7 @@
 //! (`crate::stop`) before every block of 16 receivers (direct sum) or every tile of 2–4 receivers
 //! (symmetric sum, whose blocks are N/32), i.e. every ~N·16 pairs at most, and skip the rest once
 //! it is set.
+use super::pairwise_small::{small_sum, SMALL};
 use super::registry::{Context, Params};
 use super::{Term, Write};
 use crate::alloc::{count, Need};
@@ -504,6 +509,14 @@ fn accelerations_sym<F: Float>(
 impl Pairwise {
     /// The source weights (masses or charges); `None`: no source (a Coulomb term in a scene
     /// without charges), so no force and no potential.
+    /// F_i = c w_i S_i: c = G for gravity (w = m), −k for Coulomb (w = q).
+    fn law_constant(&self) -> Real {
+        match self.law {
+            Law::Gravity(g) => g,
+            Law::Coulomb(k) => -k,
+        }
+    }
+
     fn weights<'a>(&self, model: &'a Model) -> Option<&'a [Real]> {
         match self.law {
             Law::Gravity(_) => Some(&model.mass),
@@ -571,6 +584,18 @@ impl<V: Vector> Term<V> for Pairwise {
         let n = x.len();
         let stop = self.stop.flag();
         match (self.single, n >= SYM_MIN) {
+            (false, _) if n <= SMALL => {
+                // Few bodies: the lane-by-lane IEEE sum (`pairwise_small`, module docs there).
+                let mut xs = [[0.0; 3]; SMALL];
+                for (xs, xi) in xs.iter_mut().zip(x) {
+                    for (c, v) in xs.iter_mut().enumerate().take(V::DIM) {
+                        *v = xi.comp(c);
+                    }
+                }
+                acc.clear();
+                acc.resize(n, [0.0; 3]);
+                small_sum(&xs[..n], &w[..n], eps2, V::DIM, 0.0, 1.0, &mut acc);
+            }
             (true, sym) => {
                 self.src32.pack(x, w);
                 if sym {
@@ -588,11 +613,7 @@ impl<V: Vector> Term<V> for Pairwise {
                 }
             }
         }
-        // F_i = c w_i S_i: c = G for gravity (w = m), −k for Coulomb (w = q).
-        let c = match self.law {
-            Law::Gravity(g) => g,
-            Law::Coulomb(k) => -k,
-        };
+        let c = self.law_constant();
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
@@ -610,6 +631,11 @@ impl<V: Vector> Term<V> for Pairwise {
         });
         self.acc = acc;
         0.0
+    }
+
+    fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])> {
+        let w = self.weights(model)?;
+        (!self.single && n <= SMALL).then_some((self.law_constant(), self.softening * self.softening, w))
     }
 
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {

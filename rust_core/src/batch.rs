@@ -1,0 +1,558 @@
+//! Many small worlds stepped together: the fused kernel of a batch (the `Batch` of the facade).
+//!
+//! A batch of three-body problems spends almost all of its time in what a general step does
+//! around the physics (dispatch over terms, the SIMD sum's padding to 16 sources, the books'
+//! bookkeeping, the parallel loops' set-up): ~0.45 µs a step for ~100 floating-point operations.
+//! Members that are plain small N-body problems (`World::fused_shape`: float64, at most
+//! `pairwise_small::SMALL` bodies, gravity or Coulomb by the small pairwise sum plus uniform
+//! fields, velocity Verlet or Yoshida's fourth order, nothing else) are instead stepped here,
+//! one member per SIMD lane (MuJoCo's `rollout` and JAX's `vmap` over a batch are the model):
+//! a chunk of 1, 2, 4 or 8 members (the level's float64 lanes) runs all its steps in registers.
+//!
+//! Every member keeps the bits it has alone, for any thread count and chunking: the kernel runs
+//! the very operations of `VelocityVerlet::step` (`accel`, the kick, the drift) and of the force
+//! evaluation (`pairwise_small::small_sum`, written once over a `Lane` for both), each an IEEE
+//! `+ − × ÷ √` done lane by lane, never fused, so a lane computes what the scalar code computes.
+//! The rest of a step (the clock, the force cache, the count of force evaluations) is written
+//! back as the general step leaves it. A member that ends non-finite (a non-finite position or
+//! velocity stays non-finite: no operation of the step makes it finite again) is stepped again
+//! alone from the call's start by the general step, which reports its divergence and rolls it
+//! back as it would alone. The stop flag is read every `POLL` steps; once set, the chunk stops
+//! and its members are rolled back (`Error::Interrupted`).
+use crate::error::{Error, Result};
+use crate::integrators::yoshida::{W0, W1};
+use crate::simd::{self, Kernel, Simd, P};
+use crate::terms::pairwise_small::{small_sum, Lane, SMALL};
+use crate::vector::{Real, Vector};
+use crate::world::{Begun, Checkpoint, World};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The integrators the fused kernel runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Scheme {
+    /// Velocity Verlet (`integrators::VelocityVerlet`).
+    Verlet,
+    /// Yoshida's fourth order: three velocity Verlet substeps (`integrators::Yoshida4`).
+    Yoshida4,
+}
+
+impl Scheme {
+    fn evals_per_step(self) -> u64 {
+        match self {
+            Scheme::Verlet => 1,
+            Scheme::Yoshida4 => 3,
+        }
+    }
+}
+
+/// What members of one fused chunk share: particle count, dimension and integrator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Shape {
+    pub n: usize,
+    pub dim: usize,
+    pub scheme: Scheme,
+}
+
+/// Steps between two reads of the stop flag.
+const POLL: u64 = 256;
+
+/// Steps each of `worlds` `n` steps, as `World::step_checkpointed` does, in parallel on the
+/// current rayon pool: the members `World::fused_shape` admits through the fused kernel, the
+/// others by their general step. Per world, its outcome: the checkpoint at the call's start
+/// (it stepped) or its error (it rolled itself back). Results do not depend on the pool's size.
+pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<AtomicBool>) -> Vec<Result<Checkpoint>> {
+    let count = worlds.len();
+    let mut out: Vec<Option<Result<Checkpoint>>> = (0..count).map(|_| None).collect();
+    let mut general = Vec::new();
+    let mut groups: BTreeMap<Shape, Vec<(usize, &mut World<V>)>> = BTreeMap::new();
+    for (k, w) in worlds.into_iter().enumerate() {
+        match w.fused_shape() {
+            Some(shape) => groups.entry(shape).or_default().push((k, w)),
+            None => general.push((k, w)),
+        }
+    }
+    let lanes = simd::dispatch(simd::level(), Lanes);
+    // Chunks of `lanes` members of one shape, each begun (checks, checkpoint) on its own task.
+    let mut chunks: Vec<(Shape, Vec<(usize, &mut World<V>)>)> = Vec::new();
+    for (shape, members) in groups {
+        let mut it = members.into_iter().peekable();
+        while it.peek().is_some() {
+            chunks.push((shape, it.by_ref().take(lanes).collect()));
+        }
+    }
+    let general_out: Vec<(usize, Result<Checkpoint>)> =
+        general.into_par_iter().map(|(k, w)| (k, w.step_checkpointed(n, stop))).collect();
+    let fused_out: Vec<Vec<(usize, Result<Checkpoint>)>> =
+        chunks.into_par_iter().map(|(shape, members)| step_chunk(shape, members, n, stop)).collect();
+    for (k, r) in general_out.into_iter().chain(fused_out.into_iter().flatten()) {
+        out[k] = Some(r);
+    }
+    out.into_iter().map(|r| r.expect("every world has an outcome")).collect()
+}
+
+/// The float64 lanes of the level (1, 2, 4 or 8).
+struct Lanes;
+impl Kernel for Lanes {
+    type Output = usize;
+    #[inline(always)]
+    fn run<S: Simd>(self, _s: S) -> usize {
+        P::<S, f64>::lanes()
+    }
+}
+
+/// One chunk: each member begun, the fused kernel over those that run, then each written back
+/// (or stepped again alone where it ended non-finite, or rolled back where the call stopped).
+fn step_chunk<V: Vector>(
+    shape: Shape,
+    members: Vec<(usize, &mut World<V>)>,
+    n: u64,
+    stop: &Arc<AtomicBool>,
+) -> Vec<(usize, Result<Checkpoint>)> {
+    let mut out = Vec::with_capacity(members.len());
+    let mut running: Vec<(usize, &mut World<V>, Checkpoint)> = Vec::with_capacity(members.len());
+    for (k, w) in members {
+        match w.begin_steps(n) {
+            Err(e) => out.push((k, Err(e))),
+            Ok(Begun::Done(cp)) => out.push((k, Ok(cp))),
+            Ok(Begun::Run(cp)) => match w.check_particles_dt() {
+                Err(e) => out.push((k, Err(w.fail_call(cp, e)))),
+                Ok(()) => running.push((k, w, cp)),
+            },
+        }
+    }
+    if running.is_empty() {
+        return out;
+    }
+    let mut pack = Pack::gather(shape, running.iter_mut().map(|(_, w, _)| &mut **w));
+    let finished = simd::dispatch(simd::level(), Run { pack: &mut pack, steps: n, stop });
+    for (lane, (k, w, cp)) in running.into_iter().enumerate() {
+        if !finished {
+            let rolled_back_to = w.rollback(cp);
+            out.push((k, Err(Error::Interrupted { rolled_back_to })));
+        } else if pack.finite(lane) {
+            pack.scatter(lane, w, n);
+            out.push((k, Ok(cp)));
+        } else {
+            // Diverged in the kernel: the general step finds where, and rolls it back, as alone.
+            w.release(cp);
+            out.push((k, w.step_checkpointed(n, stop)));
+        }
+    }
+    out
+}
+
+/// A chunk's members in structure-of-arrays form, member `l` in lane `l` of every vector
+/// (lanes past the members repeat member 0; nothing is read back from them). Vectors are
+/// stored lane-minor: component c of particle i is `x[(3 i + c) L .. (3 i + c + 1) L]`.
+struct Pack {
+    shape: Shape,
+    lanes: usize,
+    x: Vec<f64>,
+    v: Vec<f64>,
+    /// The force at x (N): the integrator's cache where it had one.
+    f: Vec<f64>,
+    /// 1 where the member's cache holds f, 0 where the kernel evaluates it first.
+    cached: Vec<f64>,
+    /// Source weights (masses or charges), the receivers' c·w_i, inverse masses.
+    w: Vec<f64>,
+    cw: Vec<f64>,
+    im: Vec<f64>,
+    g: Vec<f64>,
+    eps2: Vec<f64>,
+    dt: Vec<f64>,
+    /// Force evaluations the kernel adds to each member's count.
+    evals: Vec<u64>,
+}
+
+impl Pack {
+    fn gather<'a, V: Vector + 'a>(shape: Shape, worlds: impl Iterator<Item = &'a mut World<V>>) -> Pack {
+        let lanes = simd::dispatch(simd::level(), Lanes);
+        let n = shape.n;
+        let mut p = Pack {
+            shape,
+            lanes,
+            x: vec![0.0; 3 * n * lanes],
+            v: vec![0.0; 3 * n * lanes],
+            f: vec![0.0; 3 * n * lanes],
+            cached: vec![0.0; lanes],
+            w: vec![0.0; n * lanes],
+            cw: vec![0.0; n * lanes],
+            im: vec![0.0; n * lanes],
+            g: vec![0.0; 3 * lanes],
+            eps2: vec![0.0; lanes],
+            dt: vec![0.0; lanes],
+            evals: Vec::new(),
+        };
+        let mut members = 0;
+        for (l, world) in worlds.enumerate() {
+            let dt = world.dt;
+            let (sys, integrator) = world.particles_mut().fused_parts();
+            let (c, eps2, w) = sys
+                .forces
+                .terms
+                .iter()
+                .find_map(|t| t.small_pairwise(&sys.model, n))
+                .expect("a fused member has its small pairwise sum");
+            let cache = integrator.cache();
+            for i in 0..n {
+                for k in 0..V::DIM {
+                    let at = (3 * i + k) * lanes + l;
+                    p.x[at] = sys.state.x[i].comp(k);
+                    p.v[at] = sys.state.v[i].comp(k);
+                    if let Some((f, _)) = &cache {
+                        p.f[at] = f[i].comp(k);
+                    }
+                }
+                p.w[i * lanes + l] = w[i];
+                p.cw[i * lanes + l] = c * w[i];
+                p.im[i * lanes + l] = sys.model.inv_mass[i];
+            }
+            for k in 0..V::DIM {
+                p.g[k * lanes + l] = sys.forces.g.comp(k);
+            }
+            p.cached[l] = if cache.is_some() { 1.0 } else { 0.0 };
+            p.eps2[l] = eps2;
+            p.dt[l] = dt;
+            p.evals.push(u64::from(cache.is_none()));
+            members += 1;
+        }
+        // Idle lanes repeat member 0 (finite, so the kernel's arithmetic stays ordinary).
+        for l in members..lanes {
+            for a in [&mut p.x, &mut p.v, &mut p.f, &mut p.w, &mut p.cw, &mut p.im, &mut p.g] {
+                for row in a.chunks_exact_mut(lanes) {
+                    row[l] = row[0];
+                }
+            }
+            p.cached[l] = p.cached[0];
+            p.eps2[l] = p.eps2[0];
+            p.dt[l] = p.dt[0];
+        }
+        p
+    }
+
+    /// Whether lane `lane`'s positions and velocities are all finite.
+    fn finite(&self, lane: usize) -> bool {
+        let dim = self.shape.dim;
+        (0..self.shape.n).all(|i| {
+            (0..dim).all(|k| {
+                let at = (3 * i + k) * self.lanes + lane;
+                self.x[at].is_finite() && self.v[at].is_finite()
+            })
+        })
+    }
+
+    /// Writes lane `lane` back into its world, as `n` general steps leave it: state, the
+    /// integrator's force cache (with the terms' last powers, which conservative terms leave
+    /// as they were), the count of force evaluations, the clock.
+    fn scatter<V: Vector>(&self, lane: usize, world: &mut World<V>, n: u64) {
+        let (sys, integrator) = world.particles_mut().fused_parts();
+        let at = |i: usize, k: usize| (3 * i + k) * self.lanes + lane;
+        let comps = |a: &[f64], i: usize| -> V {
+            let c: [f64; 3] = std::array::from_fn(|k| if k < V::DIM { a[at(i, k)] } else { 0.0 });
+            V::from_slice(&c[..V::DIM])
+        };
+        for i in 0..self.shape.n {
+            sys.state.x[i] = comps(&self.x, i);
+            sys.state.v[i] = comps(&self.v, i);
+        }
+        let f: Vec<V> = (0..self.shape.n).map(|i| comps(&self.f, i)).collect();
+        let p = sys.forces.last_power().to_vec();
+        let n_terms = sys.forces.terms.len();
+        let ok = integrator.set_cache(f, p, &sys.state.v, n_terms);
+        debug_assert!(ok, "the fused cache fits its integrator");
+        sys.forces.evaluations += self.evals[lane] + n * self.shape.scheme.evals_per_step();
+        world.count_steps(n);
+    }
+}
+
+/// The fused kernel over one chunk: `steps` steps of every lane, in registers; false if the
+/// stop flag ended it (the pack is then partly stepped and must not be written back).
+struct Run<'a> {
+    pack: &'a mut Pack,
+    steps: u64,
+    stop: &'a AtomicBool,
+}
+
+/// One chunk's state and constants as vectors.
+struct Lanes3<L> {
+    n: usize,
+    dim: usize,
+    x: [[L; 3]; SMALL],
+    v: [[L; 3]; SMALL],
+    f: [[L; 3]; SMALL],
+    w: [L; SMALL],
+    cw: [L; SMALL],
+    im: [L; SMALL],
+    g: [L; 3],
+    eps2: L,
+    zero: L,
+    one: L,
+}
+
+impl<L: Lane> Lanes3<L> {
+    /// `ForceSet::eval` of the fused terms: `Pairwise::add_forces`'s small sum, overwriting
+    /// (F_i = c w_i S_i; 0 for a pinned particle).
+    #[inline(always)]
+    fn forces(&self, f: &mut [[L; 3]; SMALL]) {
+        let (n, dim, zero) = (self.n, self.dim, self.zero);
+        let mut s = [[zero; 3]; SMALL];
+        small_sum(&self.x[..n], &self.w[..n], self.eps2, dim, zero, self.one, &mut s[..n]);
+        for i in 0..n {
+            for k in 0..dim {
+                f[i][k] = self.im[i].if_positive(s[i][k] * self.cw[i], zero);
+            }
+        }
+    }
+
+    /// `integrators::accel`: f/m + g, 0 for a pinned particle.
+    #[inline(always)]
+    fn accel(&self, i: usize, k: usize) -> L {
+        self.im[i].if_positive(self.f[i][k] * self.im[i] + self.g[k], self.zero)
+    }
+
+    /// `VelocityVerlet::step` of `dt` (`half` = 0.5 dt) without velocity-dependent forces.
+    #[inline(always)]
+    fn verlet(&mut self, dt: L, half: L) {
+        let (n, dim) = (self.n, self.dim);
+        for i in 0..n {
+            for k in 0..dim {
+                self.v[i][k] = self.v[i][k] + self.accel(i, k) * half;
+                self.x[i][k] = self.x[i][k] + self.v[i][k] * dt;
+            }
+        }
+        let mut f = self.f;
+        self.forces(&mut f);
+        self.f = f;
+        for i in 0..n {
+            for k in 0..dim {
+                self.v[i][k] = self.v[i][k] + self.accel(i, k) * half;
+            }
+        }
+    }
+}
+
+impl Kernel for Run<'_> {
+    type Output = bool;
+    #[inline(always)]
+    fn run<S: Simd>(self, s: S) -> bool {
+        let p = self.pack;
+        let Shape { n, dim, scheme } = p.shape;
+        let lanes = P::<S, f64>::lanes();
+        debug_assert_eq!(lanes, p.lanes);
+        let zero = P::<S, f64>::zero(s);
+        let ld = |a: &[f64], row: usize| P::<S, f64>::load(s, &a[row * lanes..(row + 1) * lanes]);
+        let mut st = Lanes3 {
+            n,
+            dim,
+            x: [[zero; 3]; SMALL],
+            v: [[zero; 3]; SMALL],
+            f: [[zero; 3]; SMALL],
+            w: [zero; SMALL],
+            cw: [zero; SMALL],
+            im: [zero; SMALL],
+            g: [zero; 3],
+            eps2: ld(&p.eps2, 0),
+            zero,
+            one: P::splat(s, 1.0),
+        };
+        for i in 0..n {
+            for k in 0..dim {
+                st.x[i][k] = ld(&p.x, 3 * i + k);
+                st.v[i][k] = ld(&p.v, 3 * i + k);
+                st.f[i][k] = ld(&p.f, 3 * i + k);
+            }
+            st.w[i] = ld(&p.w, i);
+            st.cw[i] = ld(&p.cw, i);
+            st.im[i] = ld(&p.im, i);
+        }
+        for k in 0..dim {
+            st.g[k] = ld(&p.g, k);
+        }
+        // The force at the start where a member had none cached (VelocityVerlet's first step).
+        let cached = ld(&p.cached, 0);
+        let mut f = st.f;
+        st.forces(&mut f);
+        for i in 0..n {
+            for k in 0..dim {
+                st.f[i][k] = cached.if_positive(st.f[i][k], f[i][k]);
+            }
+        }
+        let dt = ld(&p.dt, 0);
+        let half = P::splat(s, 0.5);
+        // Yoshida's substeps: w dt, and 0.5 (w dt), as `Yoshida4::step` and `VelocityVerlet::step`.
+        let (d1, d0) = (P::splat(s, W1) * dt, P::splat(s, W0) * dt);
+        let (h1, h0, hv) = (half * d1, half * d0, half * dt);
+        let mut done = 0;
+        while done < self.steps {
+            if self.stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            let run = POLL.min(self.steps - done);
+            match scheme {
+                Scheme::Verlet => {
+                    for _ in 0..run {
+                        st.verlet(dt, hv);
+                    }
+                }
+                Scheme::Yoshida4 => {
+                    for _ in 0..run {
+                        st.verlet(d1, h1);
+                        st.verlet(d0, h0);
+                        st.verlet(d1, h1);
+                    }
+                }
+            }
+            done += run;
+        }
+        if self.stop.load(Ordering::Relaxed) {
+            return false;
+        }
+        for i in 0..n {
+            for k in 0..dim {
+                st.x[i][k].store(&mut p.x[(3 * i + k) * lanes..]);
+                st.v[i][k].store(&mut p.v[(3 * i + k) * lanes..]);
+                st.f[i][k].store(&mut p.f[(3 * i + k) * lanes..]);
+            }
+        }
+        true
+    }
+}
+
+/// `Real` is float64 throughout this module.
+const _: () = assert!(std::mem::size_of::<Real>() == 8);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::terms::{PairwiseGravity, UniformGravity};
+    use glam::{DVec2, DVec3};
+
+    /// A three-body world (figure-eight-like, perturbed by `eps`), optionally with uniform
+    /// gravity and a pinned body.
+    fn three<V: Vector>(integrator: &str, eps: f64, softening: f64, extra: bool) -> World<V> {
+        let mut w = World::<V>::new(integrator, 1e-3 * (1.0 + eps), Some(1)).unwrap();
+        let c = |a: [f64; 3]| V::from_slice(&a[..V::DIM]);
+        let x = vec![c([0.97000436 + eps, -0.24308753, 0.1]), c([-0.97000436, 0.24308753, -0.1]), c([0.0, 0.0, 0.0])];
+        let v = vec![
+            c([0.466203685, 0.43236573, 0.0]),
+            c([0.466203685, 0.43236573, 0.0]),
+            c([-0.93240737, -0.86473146, 0.01]),
+        ];
+        let p = w.particles_mut();
+        p.add_particles(x, v, vec![1.0, 1.0 + eps, 1.0], vec![false, false, extra]).unwrap();
+        p.add_term(Box::new(PairwiseGravity::new("g".into(), 1.0, softening))).unwrap();
+        if extra {
+            p.add_term(Box::new(UniformGravity { name: "u".into(), g: c([0.0, -0.5, 0.25]) })).unwrap();
+        }
+        w
+    }
+
+    fn bits<V: Vector>(w: &World<V>) -> Vec<u64> {
+        let s = w.particles().state();
+        let mut b: Vec<u64> =
+            s.x.iter().chain(&s.v).flat_map(|p| (0..V::DIM).map(move |k| p.comp(k).to_bits())).collect();
+        b.push(w.time().to_bits());
+        b.push(w.steps());
+        b.push(w.force_evaluations());
+        b
+    }
+
+    /// Every member of a fused batch ends with the bits it has stepped alone (state, clock,
+    /// force evaluations), at every level this CPU has, 2D and 3D, both schemes, with and
+    /// without softening, uniform gravity and a pinned body; and again after a second call
+    /// (the written-back force cache).
+    fn same_bits_as_alone<V: Vector>() {
+        for level in simd::Level::available() {
+            simd::set_level(Some(level)).unwrap();
+            for integrator in ["verlet", "yoshida4"] {
+                for (softening, extra) in [(0.0, false), (0.05, true)] {
+                    let make = |k: usize| three::<V>(integrator, 1e-3 * k as f64, softening, extra);
+                    let mut alone: Vec<World<V>> = (0..7).map(make).collect();
+                    let mut batch: Vec<World<V>> = (0..7).map(make).collect();
+                    assert!(batch[0].fused_shape().is_some());
+                    let stop = Arc::new(AtomicBool::new(false));
+                    for n in [100, 37] {
+                        for w in &mut alone {
+                            w.step(n).unwrap();
+                        }
+                        let out = step_worlds(batch.iter_mut().collect(), n, &stop);
+                        for (w, o) in batch.iter_mut().zip(out) {
+                            w.release(o.unwrap());
+                        }
+                        for (k, (a, b)) in alone.iter().zip(&batch).enumerate() {
+                            assert_eq!(bits(a), bits(b), "{level:?} {integrator} softening {softening} member {k}");
+                        }
+                    }
+                }
+            }
+        }
+        simd::set_level(None).unwrap();
+    }
+
+    #[test]
+    fn fused_members_have_their_bits_alone_2d() {
+        same_bits_as_alone::<DVec2>();
+    }
+
+    #[test]
+    fn fused_members_have_their_bits_alone_3d() {
+        same_bits_as_alone::<DVec3>();
+    }
+
+    /// A member that diverges inside the kernel (a body flying past the largest float) is
+    /// stepped again alone and rolled back with its error; the others are written back.
+    #[test]
+    fn a_diverging_member_fails_alone() {
+        let make = |k: usize| {
+            let mut w = three::<DVec2>("yoshida4", 1e-3 * k as f64, 0.0, false);
+            if k == 3 {
+                let state = w.particles_mut().state_model_mut().0;
+                (state.x[0], state.v[0]) = (DVec2::new(1.79e308, 0.0), DVec2::new(1e308, 0.0));
+                // overflows in ~8 steps
+            }
+            w
+        };
+        let mut ws: Vec<World<DVec2>> = (0..5).map(make).collect();
+        let mut twin = make(3);
+        let alone = twin.step(50);
+        assert!(matches!(alone, Err(Error::Diverged { .. })));
+        let stop = Arc::new(AtomicBool::new(false));
+        let out = step_worlds(ws.iter_mut().collect(), 50, &stop);
+        for (k, o) in out.into_iter().enumerate() {
+            if k == 3 {
+                assert_eq!(format!("{:?}", o.err()), format!("{:?}", alone.as_ref().err()));
+            } else {
+                ws[k].release(o.unwrap());
+                assert_eq!(ws[k].steps(), 50);
+            }
+        }
+        assert_eq!(bits(&ws[3]), bits(&twin));
+    }
+
+    /// A stop flag set before the call stops every fused member, rolled back.
+    #[test]
+    fn a_set_stop_flag_rolls_every_member_back() {
+        let mut ws: Vec<World<DVec3>> = (0..3).map(|k| three("verlet", 1e-3 * k as f64, 0.0, false)).collect();
+        let before: Vec<_> = ws.iter().map(bits).collect();
+        let stop = Arc::new(AtomicBool::new(true));
+        let out = step_worlds(ws.iter_mut().collect(), 1000, &stop);
+        assert!(out.iter().all(|o| matches!(o, Err(Error::Interrupted { .. }))));
+        assert_eq!(ws.iter().map(bits).collect::<Vec<_>>(), before);
+    }
+
+    /// What the kernel does not fuse: other integrators, drag, single precision, too many bodies.
+    #[test]
+    fn only_plain_small_nbody_worlds_are_fused() {
+        assert!(three::<DVec2>("rk4", 0.0, 0.0, false).fused_shape().is_none());
+        let mut big = World::<DVec2>::new("verlet", 1e-3, Some(1)).unwrap();
+        let x: Vec<DVec2> = (0..SMALL + 1).map(|k| DVec2::new(k as f64, 0.5 * k as f64)).collect();
+        big.particles_mut()
+            .add_particles(x, vec![DVec2::ZERO; SMALL + 1], vec![1.0; SMALL + 1], vec![false; SMALL + 1])
+            .unwrap();
+        big.particles_mut().add_term(Box::new(PairwiseGravity::new("g".into(), 1.0, 0.0))).unwrap();
+        assert!(big.fused_shape().is_none());
+    }
+}
