@@ -743,3 +743,28 @@ def test_a_steps_callable_that_fails_fails_its_own_run():
     assert df["error"].isna().tolist() == [True, True, False, False]
     assert df.loc[2, "error"].startswith("InvalidTypeError: steps: expected an int, got float 2.5")
     assert list(df.loc[:1, "steps_taken"]) == [10, 10]
+
+
+def counted_look(scene) -> dict:
+    CALLS.append(getattr(scene, "scene", scene).dt)
+    if len(CALLS) == STOP_AT[0]:
+        raise KeyboardInterrupt
+    return looked(scene)
+
+
+def test_an_interrupted_sweep_that_steps_keeps_the_rows_made_and_resumes(tmp_path):
+    # In this process the rows of a sweep with steps= arrive one by one: Ctrl-C during the 4th
+    # run's measure keeps the three before it in `out`, and the resume runs only the others.
+    out = tmp_path / "runs.csv"
+    ref = pc.sweep(varied, VARIED, measure=stepped_then_looked, client="serial", seed=5, progress=False)
+    CALLS.clear()
+    STOP_AT[0] = 4
+    with pytest.raises(KeyboardInterrupt):
+        pc.sweep(varied, VARIED, measure=counted_look, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    assert list(pd.read_csv(out)["run"]) == [0, 1, 2]
+    CALLS.clear()
+    STOP_AT[0] = 0
+    BUILDS.clear()
+    got = pc.sweep(varied, VARIED, measure=counted_look, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    assert len(BUILDS) == len(VARIED) - 3
+    pd.testing.assert_frame_equal(physics(got), physics(ref), check_exact=True)
