@@ -4,7 +4,14 @@ and the overhead per task against the plain loop. Median of 3 repeats, alternati
 that load on a shared machine hits all alike; the clusters are started (and warmed with one
 sweep) before the clock starts, and their start-up time is reported on its own.
 
-    python benches/scenes/bench_sweep.py [--runs 64] [--repeats 3]
+    python benches/scenes/bench_sweep.py [--runs 64] [--repeats 3] [--part tasks|steps|both]
+
+The second part (``--part steps``) times a sweep that steps its runs itself (``steps=``, small
+runs of one structure stepped together as a Batch, many runs a task) against today's sweep
+where ``measure`` steps: 1,000 three-body runs (figure_eight, positions scaled by 1 + 1e-6 i),
+1,000 steps each, in this process (``client="serial"``, also with ``threads=2``: a batch's
+members side by side on 2 cores) and on a LocalCluster of 2 workers; all give the same rows bit
+for bit (checked).
 
 Three workloads: "medium" runs (a 32x32 spring cloth, 1500 steps: ~0.1 s each), "short" runs
 (24x24, 300 steps: ~10 ms, the size of a quick dt or stiffness study) and "tiny" runs (10 steps
@@ -56,6 +63,24 @@ def measure_tiny(scene: pc.Scene) -> dict:
     return {"x": float(scene.positions[0, 0])}
 
 
+THREE_BODY_STEPS = 1000
+
+
+def build_three(i: int, seed: int | None = None) -> pc.Scene:
+    s = pc.scenes.figure_eight()
+    s.positions = s.positions * (1 + 1e-6 * i)
+    return s
+
+
+def look_three(scene: pc.Scene) -> dict:
+    return {"x": float(scene.positions[0, 0]), "drift": scene.energy_drift()}
+
+
+def step_look_three(scene: pc.Scene) -> dict:
+    scene.step(THREE_BODY_STEPS)
+    return look_three(scene)
+
+
 WORKLOADS = {"medium": (build_medium, measure_medium, lambda i: 1000.0 + 10.0 * i),
              "short": (build_short, measure_short, lambda i: 1000.0 + 10.0 * i),
              "tiny": (build_tiny, measure_tiny, lambda i: 1000.0 + i)}
@@ -65,8 +90,64 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=64)
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--part", choices=["tasks", "steps", "both"], default="both")
+    ap.add_argument("--steps-runs", type=int, default=1000, help="runs of the steps= part")
     args = ap.parse_args()
     _common.require_release()
+    if args.part in ("tasks", "both"):
+        tasks(args)
+    if args.part in ("steps", "both"):
+        steps_part(args)
+
+
+def _cluster(workers: int):
+    import distributed
+
+    t0 = time.perf_counter()
+    cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                       silence_logs=logging.ERROR)
+    client = distributed.Client(cluster)
+    return client, cluster, time.perf_counter() - t0
+
+
+def steps_part(args) -> None:
+    """Today's sweep (measure steps, one task a run) against steps= (the sweep steps, batched)."""
+    params = {"i": list(range(args.steps_runs))}
+    client, cluster, start = _cluster(2)
+    pc.sweep(build_three, {"i": [0, 1]}, measure=look_three, steps=1, client=client, progress=False)  # warm the workers
+    n = THREE_BODY_STEPS
+    modes = [("serial", "measure steps", "serial", None, 1), ("serial", "steps=", "serial", n, 1),
+             ("serial", "steps=, threads=2", "serial", n, 2),
+             ("dask, 2 workers", "measure steps", client, None, 1), ("dask, 2 workers", "steps=", client, n, 1)]
+    walls: dict[tuple[str, str], list[float]] = {(w, h): [] for w, h, *_ in modes}
+    frames = {}
+    for _ in range(args.repeats):
+        for where, how, c, steps, threads in modes:
+            measure = step_look_three if steps is None else look_three
+            t0 = time.perf_counter()
+            df = pc.sweep(build_three, params, measure=measure, steps=steps, client=c, threads=threads, progress=False)
+            walls[(where, how)].append(time.perf_counter() - t0)
+            print(f"{where:16s} {how:14s} {walls[(where, how)][-1]:.3f} s", file=sys.stderr, flush=True)
+            assert df["error"].isna().all(), df["error"].dropna().tolist()
+            frames[(where, how)] = df[["x", "drift"]]
+    ref = frames[("serial", "measure steps")]
+    for k, df in frames.items():
+        assert df.equals(ref), f"{k}: rows differ from the serial sweep where measure steps"
+    print(_common.header(threads="1, 2"))
+    print(f"\n{args.steps_runs} three-body runs (figure_eight, {THREE_BODY_STEPS} steps) per sweep, median of "
+          f"{args.repeats}; LocalCluster start {start:.2f} s, not counted; every mode gives the same rows bit for bit\n")
+    rows = []
+    for where, how, *_ in modes:
+        base = statistics.median(walls[(where, "measure steps")])
+        wall = statistics.median(walls[(where, how)])
+        rows.append([where, how, f"{wall:.3f}", f"{args.steps_runs / wall:.0f}", f"{base / wall:.2f}×"])
+    print(_common.table(["where", "who steps", "sweep wall, s", "runs/s", "vs measure steps"], rows))
+    client.close()
+    cluster.close()
+    sys.stdout.flush()
+
+
+def tasks(args) -> None:
     import distributed
 
     clients = {}

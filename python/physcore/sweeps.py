@@ -1,7 +1,9 @@
 """Parameter sweeps and ensembles of scenes, run in parallel on Dask (``dask.distributed``).
 
 One run is one task: ``build(**params)`` makes a :class:`~physcore.Scene`, ``measure(scene)``
-runs it and returns a dict of results. :func:`sweep` runs a grid of parameters that way and
+runs it and returns a dict of results (or, with ``steps=``, the sweep steps the scenes itself,
+many runs a task, those of one structure together as a :class:`~physcore.Batch`, and
+``measure`` reads them). :func:`sweep` runs a grid of parameters that way and
 returns a pandas DataFrame, one row per run; :func:`ensemble` runs one scene from perturbed
 initial conditions and gathers an observable over time (:class:`Ensemble`).
 
@@ -152,6 +154,37 @@ def _error_text(exc: BaseException) -> str:
     return text if len(text) <= 2000 else text[:2000] + " [...]"
 
 
+def _where(exc: BaseException) -> str:
+    """Where `exc` was raised: the last frame of its traceback, as a row's error names it."""
+    tb = traceback.extract_tb(exc.__traceback__)
+    if not tb:
+        return ""
+    f = tb[-1]
+    # A function shipped to a worker by value (distributed 2026.8 does so for a test's or a
+    # script's functions) has a synthetic file name, "<dynamic-code>": its name and line still
+    # say where.
+    return f" (in {f.name}, line {f.lineno})" if f.filename.startswith("<") else f" (at {Path(f.filename).name}:{f.lineno} in {f.name})"
+
+
+def _failed(exc: BaseException) -> dict[str, Any]:
+    """The row fields of a run that raised `exc` (a divergence keeps its step)."""
+    if isinstance(exc, SimulationDiverged):
+        return {"results": {}, "error": _error_text(exc), "diverged_step": exc.step}
+    return {"results": {}, "error": _error_text(exc) + _where(exc), "diverged_step": None}
+
+
+def _cells(result: Any, params: Mapping[str, Any]) -> dict[str, Any]:
+    """A run's results as row cells; raises for what `measure` must not return."""
+    if not isinstance(result, Mapping):
+        raise InvalidTypeError(f"measure: must return a dict of results, returned {type(result).__name__}")
+    clash = [k for k in result if not isinstance(k, str) or k in RESERVED or k in params]
+    if clash:
+        raise InvalidInputError(f"measure: result name {clash[0]!r} is a parameter or one of {RESERVED}; rename it")
+    # Cells are made here, on the worker: the row then holds only plain values that can travel
+    # back (a generator or a lock becomes its repr, as in a serial run).
+    return {k: _cell(v) for k, v in result.items()}
+
+
 def _run_one(build: Callable[..., Any], measure: Callable[[Any], Any], params: dict[str, Any], seed: int | None,
              threads: int | None) -> dict[str, Any]:
     """One sweep task: never raises for the run's own failures (they become the row's error)."""
@@ -163,33 +196,128 @@ def _run_one(build: Callable[..., Any], measure: Callable[[Any], Any], params: d
         if seed is not None:
             kwargs["seed"] = seed
         scene = build(**kwargs)
-        result = measure(scene)
-        if not isinstance(result, Mapping):
-            raise InvalidTypeError(f"measure: must return a dict of results, returned {type(result).__name__}")
-        clash = [k for k in result if not isinstance(k, str) or k in RESERVED or k in params]
-        if clash:
-            raise InvalidInputError(f"measure: result name {clash[0]!r} is a parameter or one of {RESERVED}; rename it")
-        # Cells are made here, on the worker: the row then holds only plain values that can
-        # travel back (a generator or a lock becomes its repr, as in a serial run).
-        row["results"] = {k: _cell(v) for k, v in result.items()}
-    except SimulationDiverged as exc:
-        row.update(results={}, error=_error_text(exc), diverged_step=exc.step)
+        row["results"] = _cells(measure(scene), params)
     except Exception as exc:  # noqa: BLE001 - any failure of a user's run is a row, not a failed sweep
-        tb = traceback.extract_tb(exc.__traceback__)
-        where = ""
-        if tb:
-            f = tb[-1]
-            # A function shipped to a worker by value (distributed 2026.8 does so for a test's
-            # or a script's functions) has a synthetic file name, "<dynamic-code>": its name
-            # and line still say where.
-            where = f" (in {f.name}, line {f.lineno})" if f.filename.startswith("<") else f" (at {Path(f.filename).name}:{f.lineno} in {f.name})"
-        row.update(results={}, error=_error_text(exc) + where)
+        row.update(_failed(exc))
     finally:
         if token is not None:
             DEFAULT_THREADS.reset(token)
     row["wall_s"] = time.perf_counter() - t0
     row["worker"] = _worker_name()
     return row
+
+
+#: Runs a task holds built at once when the sweep steps them (``steps=``): they are built, stepped
+#: and measured a wave at a time, so that memory stays bounded whatever the chunk's size.
+_WAVE_RUNS = 64
+#: ... and particles (about 0.5 GB of scenes at :data:`physcore._check.PARTICLE_BYTES` each).
+_WAVE_PARTICLES = 1 << 20
+
+
+def _run_chunk(build: Callable[..., Any], measure: Callable[[Any], Any], steps: int | Callable[[Any], Any],
+               chunk: list[tuple[dict[str, Any], int | None]], threads: int | None,
+               emit: Callable[[int, dict[str, Any]], None] | None = None) -> list[dict[str, Any]]:
+    """The runs ``chunk`` (parameters, seed) of a sweep with ``steps=``, as one task: each run's
+    scene is built, then the sweep steps it (scenes of the same structure and step count
+    together, as one :class:`~physcore.Batch`), then it is measured. Every row is the one
+    :func:`_run_one` gives for a `measure` that steps the scene itself first: a run's failure
+    (in build, steps, stepping or measure) is its own row's error. `emit(j, row)`, where given,
+    gets each row as soon as it is made (the serial sweep's progress); the rows are returned
+    in the order of `chunk`."""
+    from .batch import Batch, _structure
+
+    worker = _worker_name()
+    rows: list[dict[str, Any] | None] = [None] * len(chunk)
+    token = DEFAULT_THREADS.set(threads) if threads is not None else None
+    try:
+        start = 0
+        while start < len(chunk):
+            built: dict[int, Any] = {}  # run -> its scene, built and not failed
+            counts: dict[int, int] = {}  # run -> the steps the sweep takes
+            wall: dict[int, float] = {}  # run -> seconds spent on it alone so far
+            failed: dict[int, dict[str, Any]] = {}
+            particles = 0
+            j = start
+            while j < len(chunk) and j - start < _WAVE_RUNS and particles < _WAVE_PARTICLES:
+                params, seed = chunk[j]
+                t0 = time.perf_counter()
+                try:
+                    kwargs = dict(params)
+                    if seed is not None:
+                        kwargs["seed"] = seed
+                    scene = build(**kwargs)
+                    n = _check.int_in_range("steps", steps(scene) if callable(steps) else steps, 0, (1 << 63) - 1)
+                    built[j], counts[j] = scene, n
+                    particles += scene.n_particles if isinstance(scene, Scene) else 0
+                except Exception as exc:  # noqa: BLE001 - a run's failure is its row
+                    failed[j] = _failed(exc)
+                wall[j] = time.perf_counter() - t0
+                j += 1
+            stop = j
+            # Groups that step together: Scenes of one structure and one step count, each scene
+            # once, whose step count stays below 2**63 (else Scene.step refuses it, alone).
+            groups: dict[Any, list[int]] = {}
+            alone: list[int] = []
+            seen: set[int] = set()
+            for j, scene in built.items():
+                n = counts[j]
+                if isinstance(scene, Scene) and id(scene) not in seen and n <= (1 << 63) - 1 - scene.step_count:
+                    seen.add(id(scene))
+                    groups.setdefault((_structure(scene), n), []).append(j)
+                else:
+                    alone.append(j)
+            for (_, n), members in groups.items():
+                if len(members) == 1:
+                    alone.extend(members)
+                    continue
+                t0 = time.perf_counter()
+                diverged: dict[int, SimulationDiverged] = {}
+                try:
+                    batch = Batch([built[j] for j in members], threads=threads)
+                    diverged = batch.diverged
+                    batch.step(n)
+                except Exception as exc:  # noqa: BLE001 - the batch call itself failed: every run left in it
+                    for k, j in enumerate(members):
+                        if k not in diverged:
+                            failed[j] = _failed(exc)
+                for k, exc in diverged.items():
+                    failed[members[k]] = _failed(exc)
+                share = (time.perf_counter() - t0) / len(members)
+                for j in members:
+                    wall[j] += share
+            for j in sorted(alone):
+                t0 = time.perf_counter()
+                try:
+                    built[j].step(counts[j])
+                except Exception as exc:  # noqa: BLE001 - a run's failure is its row
+                    failed[j] = _failed(exc)
+                wall[j] += time.perf_counter() - t0
+            for j in range(start, stop):
+                t0 = time.perf_counter()
+                row: dict[str, Any] = {"error": None, "diverged_step": None}
+                if j in failed:
+                    row.update(failed[j])
+                else:
+                    try:
+                        row["results"] = _cells(measure(built[j]), chunk[j][0])
+                    except Exception as exc:  # noqa: BLE001 - a run's failure is its row
+                        row.update(_failed(exc))
+                    if emit is None:  # on a worker: a result that cannot travel fails its run alone, not the chunk
+                        try:
+                            pickle.dumps(row["results"])
+                        except Exception as exc:  # noqa: BLE001 - becomes that run's row
+                            row.update(results={}, error=f"{_error_text(exc)} (its results could not be serialized to come back from the worker)")
+                built.pop(j, None)
+                row["wall_s"] = wall[j] + (time.perf_counter() - t0)
+                row["worker"] = worker
+                rows[j] = row
+                if emit is not None:
+                    emit(j, dict(row))
+            start = stop
+    finally:
+        if token is not None:
+            DEFAULT_THREADS.reset(token)
+    return rows  # type: ignore[return-value]
 
 
 # ------------------------------------------------------------------------------ the engine
@@ -207,6 +335,7 @@ class _Cluster:
 
     def __init__(self, client: Any, workers: int | None) -> None:
         self.own: list[Any] = []
+        self.started: int | None = None  # workers of a LocalCluster started here
         if client is None or isinstance(client, str):
             distributed = _need("distributed")
             if client is None:
@@ -217,25 +346,37 @@ class _Cluster:
                     n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
                 )
                 self.own.append(cluster)
+                self.started = n
                 client = distributed.Client(cluster)
             else:
                 client = distributed.Client(client)
             self.own.insert(0, client)
         self.client = client
 
+    def slots(self) -> int:
+        """Tasks the cluster runs side by side: the workers started here (one thread each), else
+        its workers' threads now (at least 1)."""
+        if self.started is not None:
+            return self.started
+        try:
+            return max(1, sum(self.client.nthreads().values()))
+        except Exception:  # noqa: BLE001 - a client that cannot say: one
+            return 1
+
     def close(self) -> None:
         for c in self.own:
             c.close()
 
 
-def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, workers: int | None, on_result: Callable[[int, Any], None],
-         shared: tuple[Any, ...] = ()) -> None:
+def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]] | Callable[[int], list[tuple[Any, ...]]], client: Any,
+         workers: int | None, on_result: Callable[[int, Any], None], shared: tuple[Any, ...] = ()) -> None:
     """Runs ``fn(*shared, *args[i])`` for every i, on `client`, calling ``on_result(i, value)``
-    as each finishes (in completion order). `shared` is sent to the cluster once. A task whose
-    worker dies (or whose result cannot be sent back) gives ``on_result(i, exc)`` with the
-    exception. Ctrl-C cancels what is still queued."""
+    as each finishes (in completion order). `args` may be a function of the number of tasks the
+    cluster runs side by side (1 in this process) that returns the list. `shared` is sent to the
+    cluster once. A task whose worker dies (or whose result cannot be sent back) gives
+    ``on_result(i, exc)`` with the exception. Ctrl-C cancels what is still queued."""
     if client == "serial":
-        for i, a in enumerate(args):
+        for i, a in enumerate(args(1) if callable(args) else args):
             on_result(i, fn(*shared, *a))
         return
     distributed = _need("distributed")
@@ -243,6 +384,8 @@ def _map(fn: Callable[..., Any], args: list[tuple[Any, ...]], client: Any, worke
     futures: list[Any] = []
     try:
         c = cl.client
+        if callable(args):
+            args = args(cl.slots())
         shared_f = c.scatter(list(shared), broadcast=False, hash=False) if shared else []
         futures = [c.submit(fn, *shared_f, *a, pure=False) for a in args]
         index = {f.key: i for i, f in enumerate(futures)}
@@ -404,6 +547,7 @@ def sweep(
     params: Mapping[str, Sequence[Any]] | Sequence[Mapping[str, Any]],
     *,
     measure: Callable[[Any], Mapping[str, Any]],
+    steps: int | Callable[[Any], int] | None = None,
     client: Any = None,
     workers: int | None = None,
     out: str | os.PathLike | None = None,
@@ -430,6 +574,26 @@ def sweep(
         generator, a lock) as its repr, made where the run ran, as in a serial run. A result
         that still cannot come back from its worker is that run's ``error``; the other rows
         are kept.
+    steps : int or callable, optional
+        Steps the sweep itself takes on each run's scene, of the scene's own ``dt``, between
+        ``build`` and ``measure`` (which then only reads the stepped scene): an int >= 0, or
+        ``steps(scene)`` -> int for a count that depends on the run (a fixed duration over a
+        ``dt`` sweep: ``lambda s: round(2.0 / s.dt)``). Without it (default), ``measure`` steps
+        the scene and every run is its own task. With it, the runs go in chunks, about four
+        chunks a worker on Dask (one task each) and one in this process with
+        ``client="serial"``; in a chunk, the scenes of the same structure (dimension, particle
+        count, parts) and step count are stepped together as one :class:`~physcore.Batch` (one
+        call into the core, on `threads` threads), so small runs stop paying a task and a call
+        each. Every row is the one a `measure` that calls ``scene.step(n)`` first gives, bit for
+        bit in every result, error and ``diverged_step``: a member that diverges fails its own
+        run, the others go on. Anything `build` returns that is not a Scene (it needs a
+        ``step(n)`` method) is stepped alone, in the same task. A chunk is built, stepped and
+        measured in waves of at most 64 runs (and about 10^6 particles), which bounds the
+        memory it holds; on Dask a chunk's rows come back when the whole chunk is done (the
+        progress bar moves a chunk at a time, and Ctrl-C loses the chunks under way), in this
+        process a row at a time. `build` and `measure` must not depend on running one after
+        the other for the same run (a wave builds all its runs first), as on Dask they must
+        not depend on other runs.
     client : None, "serial", str or distributed.Client
         Where the runs go (module docstring): by default a LocalCluster of `workers` processes.
     workers : int, optional
@@ -459,15 +623,18 @@ def sweep(
         One row per run in the order of `params`: ``run`` (its index), the parameters,
         ``seed`` (None without `seed`), the results (NaN where a run failed), ``error`` (None
         or ``"Type: message"``), ``diverged_step`` (the step of a
-        :class:`~physcore.SimulationDiverged`, else None), ``wall_s`` (build + measure, s),
+        :class:`~physcore.SimulationDiverged`, else None), ``wall_s`` (build + measure, s;
+        with `steps`, build + its share of its batch's step, that call's wall time over the
+        batch's runs, + measure, so that the rows of a chunk add up to the chunk's time),
         ``worker`` (its address) and ``run_key``.
 
     Raises
     ------
     TypeError, ValueError
         A bad argument, naming it, before anything runs (a run's own failure is its row's
-        ``error``, never an exception here); an `out` file that is not a sweep's or has a
-        damaged row before its last (naming the file and the row).
+        ``error``, never an exception here; so is a count a `steps` callable returns that is
+        not an int >= 0); an `out` file that is not a sweep's or has a damaged row before its
+        last (naming the file and the row). Both are :class:`~physcore.PhyscoreError`.
     ImportError
         Dask or pandas is not installed (``pip install "physcore[sweep]"``).
     OSError
@@ -496,6 +663,21 @@ def sweep(
     True
     >>> (df["y"] + 9.81 / 2).abs().round(5).tolist()  # against y = -g t²/2: Euler 1st order, Verlet exact
     [0.4905, 0.0, 0.04905, 0.0]
+
+    The same runs with the sweep stepping them (``steps``: here a duration of 1 s in each run's
+    own dt), the runs of one dt stepped together as a Batch; `measure` only reads:
+
+    >>> df2 = pc.sweep(build, {"dt": [0.1, 0.01], "integrator": ["euler", "verlet"]},
+    ...                measure=lambda s: {"y": float(s.positions[0, 1])}, steps=lambda s: round(1.0 / s.dt),
+    ...                client="serial", progress=False)
+    >>> df2["y"].tolist() == df["y"].tolist()  # bit for bit
+    True
+
+    Why a step count and not a `measure` that is batched as it is: `measure` is any code, and
+    may step, read, step again; the sweep can step runs together only where it does the
+    stepping itself. Why not ``duration`` (seconds): :meth:`Scene.advance` picks its own
+    substeps and changes ``dt`` per scene, which a batch does not; a duration in the run's own
+    ``dt`` is the callable above.
     """
     if not callable(build):
         raise InvalidTypeError(f"build: expected a callable returning a Scene, got {type(build).__name__}")
@@ -513,6 +695,8 @@ def sweep(
         threads = _check.int_in_range("threads", threads, 1, 65535)
     retry_errors = _check.flag("retry_errors", retry_errors)
     progress = _check.flag("progress", progress)
+    if steps is not None and not callable(steps):
+        steps = _check.int_in_range("steps", steps, 0, (1 << 63) - 1)
     path: Path | None = None
     if out is not None:
         from ._scenefile import check_path
@@ -566,8 +750,27 @@ def sweep(
     bar = tqdm(total=len(runs), initial=len(runs) - len(todo), desc="sweep", unit="run", disable=not progress, leave=False)
     finished = False
     try:
-        if todo:
+        if todo and steps is None:
             _map(_run_one, [(runs[i], seeds[i], threads) for i in todo], client, workers, on_result, shared=(build, measure))
+        elif todo and client == "serial":
+            # One task holding every run (built, stepped and measured a wave at a time), its
+            # rows reported as they are made: the bar and `out` move run by run.
+            _run_chunk(build, measure, steps, [(runs[i], seeds[i]) for i in todo], threads, emit=on_result)
+        elif todo:
+            chunks: list[range] = []
+
+            def plan(slots: int) -> list[tuple[Any, ...]]:
+                # About four chunks a worker: few enough that a run stops paying a task, enough
+                # that the workers stay busy to the end when chunks take unequal times.
+                size = max(1, math.ceil(len(todo) / (4 * slots)))
+                chunks.extend(range(a, min(a + size, len(todo))) for a in range(0, len(todo), size))
+                return [([(runs[todo[j]], seeds[todo[j]]) for j in c], threads) for c in chunks]
+
+            def on_chunk(c: int, value: Any) -> None:
+                for k, j in enumerate(chunks[c]):  # a chunk whose task failed (its worker died): each of its runs
+                    on_result(j, value if isinstance(value, BaseException) else value[k])
+
+            _map(_run_chunk, plan, client, workers, on_chunk, shared=(build, measure, steps))
         finished = True
     finally:
         bar.close()

@@ -203,12 +203,14 @@ def odd_result(scene: pc.Scene) -> dict:
     return out
 
 
-def test_an_unpicklable_result_is_a_row_and_keeps_the_others(client):
+@pytest.mark.parametrize("steps", [None, 5])
+def test_an_unpicklable_result_is_a_row_and_keeps_the_others(client, steps):
     # Issue 44: one result that did not pickle failed the whole batch's gather on Dask, raising
-    # "Could not serialize object" and dropping the rows not yet written.
+    # "Could not serialize object" and dropping the rows not yet written. With steps=, several
+    # runs come back from one task: such a result still fails its own run alone.
     grid = {"k": [500.0, 2000.0, 8000.0, 1000.0], "dt": [1e-4, 2e-4]}
-    serial = pc.sweep(chain, grid, measure=odd_result, client="serial", progress=False)
-    par = pc.sweep(chain, grid, measure=odd_result, client=client, progress=False)
+    serial = pc.sweep(chain, grid, measure=odd_result, steps=steps, client="serial", progress=False)
+    par = pc.sweep(chain, grid, measure=odd_result, steps=steps, client=client, progress=False)
     assert list(par["run"]) == list(range(8)) and list(par["k"]) == list(serial["k"])
     # A value with no cell of its own is its repr on a worker as in this process.
     for df in (serial, par):
@@ -602,3 +604,167 @@ def test_ensemble_members_run_as_one_batch_give_the_bits_of_each_alone():
 
     ens = pc.ensemble(scene, 5, samples=3, steps_per_sample=50, perturb=blow_up, client="serial", progress=False)
     assert list(ens.members) == [0, 1, 2, 4] and list(ens.failed) == [3] and "diverged" in ens.failed[3]
+
+
+# ------------------------------------------------------------------------------ sweeps that step (steps=)
+BUILDS: list[tuple] = []
+
+
+class Wrapped:
+    """Not a Scene, but steps like one: such a run is stepped alone, in the same task."""
+
+    def __init__(self, scene: pc.Scene) -> None:
+        self.scene = scene
+
+    def step(self, n: int) -> None:
+        self.scene.step(n)
+
+
+def varied(k: float, dt: float, n: int, seed: int | None = None):
+    """A chain of `n` particles (`n` changes the structure); k < 0 raises, n == 3 is wrapped."""
+    BUILDS.append((k, dt, n))
+    if k < 0:
+        raise ValueError("negative stiffness in this build")
+    x = np.stack([np.arange(n) * 0.1, np.zeros(n)], axis=1)
+    if seed is not None:
+        x[1:] += 1e-3 * np.random.default_rng(seed).standard_normal((n - 1, 2))
+    s = pc.Scene(dim=2, dt=dt)
+    s.add_particles(x, masses=0.1, pinned=[True] + [False] * (n - 1))
+    s.add(pc.Springs(np.arange(n - 1), np.arange(1, n), stiffness=k, damping=0.0))
+    s.add(pc.Gravity([0.0, -9.81]))
+    return Wrapped(s) if n == 3 else s
+
+
+STEPS = 300
+
+
+def looked(scene) -> dict:
+    s = getattr(scene, "scene", scene)
+    return {"x_end": float(s.positions[-1, 0]), "y_end": float(s.positions[-1, 1]), "energy": s.energy().total,
+            "drift": s.energy_drift(), "steps_taken": s.step_count, "t": s.time}
+
+
+def stepped_then_looked(scene) -> dict:
+    scene.step(STEPS)
+    return looked(scene)
+
+
+def steps_for(scene) -> int:
+    """A fixed duration, 0.03 s, in each run's own dt."""
+    return round(0.03 / getattr(scene, "scene", scene).dt)
+
+
+def stepped_for_then_looked(scene) -> dict:
+    scene.step(steps_for(scene))
+    return looked(scene)
+
+
+# Three structures (8, 5 and 3 particles, the last not a Scene), a diverging run among the 8s, two
+# dt (so two step counts under steps_for), a build that raises.
+VARIED = ([{"k": k, "dt": dt, "n": 8} for k in (500.0, 2000.0, 8000.0) for dt in (1e-4, 2e-4)]
+          + [{"k": 1e12, "dt": 5e-4, "n": 8}, {"k": -1.0, "dt": 1e-4, "n": 8}]
+          + [{"k": k, "dt": 1e-4, "n": 5} for k in (700.0, 900.0, 1100.0)]
+          + [{"k": 600.0, "dt": 1e-4, "n": 3}, {"k": 1200.0, "dt": 1e-4, "n": 8}])
+
+
+def physics(df):
+    """The columns a run's physics decides, as a frame (NaN where a run failed)."""
+    return df[[c for c in df.columns if c not in ("wall_s", "worker")]]
+
+
+@pytest.mark.parametrize("how", ["int", "callable"])
+@pytest.mark.parametrize("where", ["serial", "cluster"])
+def test_a_sweep_that_steps_gives_the_rows_of_measure_stepping_alone(how, where, request, monkeypatch):
+    """``steps=`` (the sweep builds, steps the scenes of one structure together as a Batch, then
+    measures) gives every row, bit for bit, that a `measure` stepping the scene itself gives:
+    the results, the error of the diverging run and of the build that raises, the rest."""
+    c = "serial" if where == "serial" else request.getfixturevalue("client")
+    steps, alone = (STEPS, stepped_then_looked) if how == "int" else (steps_for, stepped_for_then_looked)
+    sizes: list[int] = []
+    real = pc.Batch.step
+
+    def spy(self, n=1):
+        sizes.append(len(self))
+        return real(self, n)
+
+    monkeypatch.setattr(pc.Batch, "step", spy)
+    ref = pc.sweep(varied, VARIED, measure=alone, client=c, seed=5, progress=False)
+    assert sizes == []
+    got = pc.sweep(varied, VARIED, measure=looked, steps=steps, client=c, seed=5, progress=False)
+    pd.testing.assert_frame_equal(physics(got), physics(ref), check_exact=True)
+    assert got["error"].notna().sum() == 2
+    assert got.loc[6, "error"].startswith("SimulationDiverged") and got.loc[6, "diverged_step"] >= 0
+    assert got.loc[7, "error"].startswith("ValueError: negative stiffness")
+    assert (got.loc[got["error"].isna(), "steps_taken"] > 0).all()
+    assert (got["wall_s"] > 0).all()
+    if where == "serial":
+        # Batches in this process: with steps=300, the eight 8-particle runs that built and the
+        # three 5-particle runs; with a duration, one batch per (structure, step count): 4 runs
+        # at dt 1e-4, 3 at 2e-4 and the 5-particle ones (the one at 5e-4 and the wrapped
+        # 3-particle run step alone).
+        assert sorted(sizes) == ([3, 8] if how == "int" else [3, 3, 4])
+        assert set(got["worker"]) == set(ref["worker"])
+    else:
+        assert set(got["worker"]) <= set(c.scheduler_info()["workers"])
+
+
+def test_a_sweep_that_steps_resumes_running_only_the_missing_runs(tmp_path):
+    out = tmp_path / "runs.csv"
+    ref = pc.sweep(varied, VARIED, measure=stepped_then_looked, client="serial", seed=5, progress=False)
+    pc.sweep(varied, VARIED, measure=looked, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    lines = out.read_text().splitlines(keepends=True)
+    out.write_text("".join(lines[:5]))  # the header and the first four rows
+    BUILDS.clear()
+    got = pc.sweep(varied, VARIED, measure=looked, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    assert len(BUILDS) == len(VARIED) - 4
+    pd.testing.assert_frame_equal(physics(got), physics(ref), check_exact=True)
+    BUILDS.clear()
+    pc.sweep(varied, VARIED, measure=looked, steps=STEPS, client="serial", seed=5, out=out, retry_errors=True, progress=False)
+    assert len(BUILDS) == 2  # the diverged run and the failing build, again
+
+
+@pytest.mark.parametrize(("steps", "error"), [(-1, ValueError), (2**63, ValueError), (2.0, TypeError), (True, TypeError),
+                                              ("300", TypeError), (np.float64(3.0), TypeError)])
+def test_bad_steps_are_refused_by_name_before_anything_runs(steps, error):
+    BUILDS.clear()
+    with pytest.raises(error, match="^steps: ") as ei:
+        pc.sweep(varied, VARIED, measure=looked, steps=steps, client="serial", progress=False)
+    assert isinstance(ei.value, pc.PhyscoreError)
+    assert BUILDS == []
+
+
+def test_a_steps_callable_that_fails_fails_its_own_run():
+    def steps(scene):
+        if scene.n_particles == 5:
+            return 2.5
+        return 10
+
+    df = pc.sweep(varied, VARIED[:2] + VARIED[8:10], measure=looked, steps=steps, client="serial", progress=False)
+    assert df["error"].isna().tolist() == [True, True, False, False]
+    assert df.loc[2, "error"].startswith("InvalidTypeError: steps: expected an int, got float 2.5")
+    assert list(df.loc[:1, "steps_taken"]) == [10, 10]
+
+
+def counted_look(scene) -> dict:
+    CALLS.append(getattr(scene, "scene", scene).dt)
+    if len(CALLS) == STOP_AT[0]:
+        raise KeyboardInterrupt
+    return looked(scene)
+
+
+def test_an_interrupted_sweep_that_steps_keeps_the_rows_made_and_resumes(tmp_path):
+    # In this process the rows of a sweep with steps= arrive one by one: Ctrl-C during the 4th
+    # run's measure keeps the three before it in `out`, and the resume runs only the others.
+    out = tmp_path / "runs.csv"
+    ref = pc.sweep(varied, VARIED, measure=stepped_then_looked, client="serial", seed=5, progress=False)
+    CALLS.clear()
+    STOP_AT[0] = 4
+    with pytest.raises(KeyboardInterrupt):
+        pc.sweep(varied, VARIED, measure=counted_look, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    assert list(pd.read_csv(out)["run"]) == [0, 1, 2]
+    CALLS.clear()
+    STOP_AT[0] = 0
+    BUILDS.clear()
+    got = pc.sweep(varied, VARIED, measure=counted_look, steps=STEPS, client="serial", seed=5, out=out, progress=False)
+    assert len(BUILDS) == len(VARIED) - 3
+    pd.testing.assert_frame_equal(physics(got), physics(ref), check_exact=True)
