@@ -185,17 +185,17 @@ def tumbling_boxes(
     onto the top of ``ramps`` fixed ramps that alternate in direction between two walls; they
     slide down each ramp, tip over its end onto the next and pile up on the floor.
 
-    The ramps are 3.6 m wide, inclined at ``slope`` rad (default 0.45, 26°: steeper than the
-    friction angle atan(``friction``), 17° at the default 0.3, so a box slides; a body stops on
-    a ramp only in a jam), each ramp's low end 1.05 m short of the facing wall and 0.6 m above
-    the next ramp. Every body but each 8th from the 4th (a capsule) and each 8th from the 7th (a
-    hexagon) is a box of half-width ``box`` m times 0.75–1.15 and aspect 0.55–1 (drawn from
+    The walls stand 4.2 m apart; the ramps are inclined at ``slope`` rad (default 0.5, 29°:
+    steeper than the friction angle atan(``friction``), 17° at the default 0.3, so a box slides;
+    a body stops on a ramp only in a jam), each ramp's low end 1.1 m short of the facing wall
+    and 0.9 m above the next ramp (the last one's 1.8 m above the floor of the bin).
+    Every body but each 8th from the 4th (a capsule) and each 8th from the 7th (a hexagon) is a box of half-width ``box`` m times 0.75–1.15 and aspect 0.55–1 (drawn from
     ``seed``), turned at random and spinning at up to 4 rad/s; all of density ``density`` kg/m²
     (2D), friction ``friction`` and restitution ``restitution`` at every contact (the ramps,
     walls and floor: restitution 0.1). Their shapes and speeds spread them out down the ramps, so
-    the cascade lasts: at the defaults the first bodies reach the floor at about 3 s and the last
-    are still tumbling at 6 s (the default GIF's end). Gravity (0, −9.81) m/s²; rigid bodies by
-    rapier, dt ``dt`` s. Energy books: see :mod:`physcore.bodies` (what the contacts take out is
+    the cascade lasts: at the defaults the first bodies reach the floor at about 4 s and the last
+    are still tumbling at 6 s (the default GIF's end; all rest by about 6.5 s).
+    Gravity (0, −9.81) m/s²; rigid bodies by rapier, dt ``dt`` s. Energy books: see :mod:`physcore.bodies` (what the contacts take out is
     ``"bodies: contacts and joints"``).
 
     Returns
