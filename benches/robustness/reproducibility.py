@@ -33,7 +33,7 @@ from physcore.scenes import REGISTRY
 
 STEPS = 60
 #: Gallery scenes whose steps are slow get fewer (the per-step cost is in the docs' gallery table).
-FEWER = {"xpbd_cloth": 15, "tumbling_boxes": 20}
+FEWER = {"xpbd_cloth": 15, "shape_matched_boxes": 20}
 
 
 def _grains(dim: int, threads: int | None) -> pc.Scene:

@@ -116,7 +116,7 @@ class Contacts(Term, kind="contacts"):
     The scene must use ``integrator="semi_implicit_euler"`` (the usual DEM scheme: forces at
     the step's start, then v, ω, x, then each spring with the new velocities) or ``"xpbd"``
     (the same in each substep, whose projections then hold shape-matched bodies and other
-    constraints: the contacts are its external forces; see ``tumbling_boxes``). The automatic
+    constraints: the contacts are its external forces; see ``shape_matched_boxes``). The automatic
     step (:meth:`~physcore.Scene.advance`) is a 50th of the contact duration ``π√(m*/k)``, at
     which the measured restitution is within 1 % of ``restitution``. Pinned particles with a
     radius are fixed obstacles; particles of radius 0 do not collide.

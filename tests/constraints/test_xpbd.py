@@ -310,7 +310,7 @@ def test_rigid_boxes_collide_through_their_grains_and_stack():
     assert np.abs(s.velocities).max() < 0.05
     assert x[:, 1].min() > 0.9 * r  # nothing sank through the floor
     # The contacts close their books before each substep's projections (which the shapes book):
-    # measured 2.4e-5 of the energy here (tumbling_boxes: 3e-5; closing after them: 2.6e-2).
+    # measured 2.4e-5 of the energy here (shape_matched_boxes: 3e-5; closing after them: 2.6e-2).
     print(f"energy drift {s.energy_drift():.1e}")
     assert abs(s.energy_drift()) < 1e-3
 

@@ -291,7 +291,7 @@ SEMI_IMPLICIT_ONLY = GRAIN_SCENES + ("droplets", "crown")
 
 GRID_SCENES = {"ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street"}
 #: Scenes of rigid bodies only: rapier steps them with its own scheme, so they take no integrator.
-BODY_SCENES = {"dominoes", "pyramid"}
+BODY_SCENES = {"dominoes", "pyramid", "tumbling_boxes"}
 
 
 @pytest.mark.parametrize("name", sorted(pc.scenes.REGISTRY))

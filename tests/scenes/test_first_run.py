@@ -58,7 +58,8 @@ def test_the_ready_made_scenes_carry_their_defaults_and_the_functions_keep_their
         # Every scene with particles or flows takes an integrator; the grid scenes do not (their
         # grids step with their own schemes: issue 45 dropped the integrator= that did nothing),
         # nor do the scenes of rigid bodies only (rapier's scheme).
-        grid = name in ("ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street", "dominoes", "pyramid")
+        grid = name in ("ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street", "dominoes", "pyramid",
+                        "tumbling_boxes")
         assert ("integrator" in inspect.signature(fn).parameters) != grid, name
 
 

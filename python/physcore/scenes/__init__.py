@@ -30,8 +30,8 @@ fluids       dam_break, drop, droplets, crown (SPH), floating (with rigid bodies
 grids        ripple, double_slit, turing, smoke, cavity, vortex_street
 flows        lorenz
 grains       galton_board, galton_bins, billiards, newtons_cradle, jelly (DEM)
-constraints  tumbling_boxes (XPBD shape matching), double_pendulum (stiff rods)
-bodies       dominoes, pyramid (rigid bodies, rapier)
+constraints  shape_matched_boxes (XPBD shape matching), double_pendulum (stiff rods)
+bodies       dominoes, pyramid, tumbling_boxes (rigid bodies, rapier)
 """
 from __future__ import annotations
 
@@ -41,11 +41,11 @@ from ..scene import Scene
 from ..shapes import cloth_springs as cloth_springs
 from ..shapes import mesh_edges_and_hinges as mesh_edges_and_hinges
 from ..shapes import plummer_sphere
-from .bodies import dominoes, pyramid
+from .bodies import dominoes, pyramid, tumbling_boxes
 from .charges import CHARGE_COLORS as CHARGE_COLORS
 from .charges import cyclotron
 from .cloth import cloth, cloth_on_ball, xpbd_cloth
-from .constraints import double_pendulum, tumbling_boxes
+from .constraints import double_pendulum, shape_matched_boxes
 from .flows import lorenz
 from .fluids import crown, dam_break, drop, droplets, floating
 from .grains import GALTON_COLORS as GALTON_COLORS
@@ -64,7 +64,7 @@ __all__ = [
     "cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean",
     "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly",
     "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street",
-    "double_pendulum", "dominoes", "pyramid", "floating", "REGISTRY", "DEFAULT_SCENE",
+    "double_pendulum", "dominoes", "pyramid", "floating", "shape_matched_boxes", "REGISTRY", "DEFAULT_SCENE",
 ]
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
@@ -99,6 +99,7 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "dominoes": dominoes,
     "pyramid": pyramid,
     "floating": floating,
+    "shape_matched_boxes": shape_matched_boxes,
 }
 #: The scene `physcore render` and `physcore view` show when none is named.
 DEFAULT_SCENE = "cloth"

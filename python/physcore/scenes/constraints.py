@@ -1,4 +1,4 @@
-"""Constrained bodies: rigid boxes held by XPBD shape matching (tumbling_boxes) and double
+"""Constrained bodies: rigid boxes held by XPBD shape matching (shape_matched_boxes) and double
 pendulums on stiff rods (double_pendulum)."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from ..terms import Gravity, Plane, Springs, XpbdConstraints
 from ._common import _count, _finite_books, _nonneg, _optional, _particle_mass, _particles, _positive, _stamped
 
 
-def tumbling_boxes(
+def shape_matched_boxes(
     n_boxes: int = 5,
     *,
     particles_per_side: int = 4,
@@ -28,6 +28,9 @@ def tumbling_boxes(
     threads: int | None = None,
 ) -> Scene:
     """Rigid 2D boxes of particles dropped, spinning, onto a floor and onto each other.
+
+    (Until issue 46 this was ``tumbling_boxes``, which is now made of rapier's rigid bodies:
+    :func:`tumbling_boxes`.)
 
     Each of the ``n_boxes`` boxes is a square of ``particles_per_side``² particles, ``size`` m across and ``mass`` kg,
     held rigid by shape matching (:class:`XpbdConstraints` ``shapes``, stiffness 1); they start
@@ -104,9 +107,9 @@ def tumbling_boxes(
 
 
 # 3 s: five boxes fall, tumble over each other and come to rest at about 2.7 s.
-tumbling_boxes.render_defaults = {"frames": 90, "fps": 30, "frame_time": 1 / 30, "size": (480, 360),
+shape_matched_boxes.render_defaults = {"frames": 90, "fps": 30, "frame_time": 1 / 30, "size": (480, 360),
                                  "size_by": "radius", "color_by": "none", "antialias": True}
-tumbling_boxes = _stamped(tumbling_boxes, old_order=('n_boxes', 'particles_per_side', 'size', 'mass', 'restitution', 'friction', 'substeps', 'integrator', 'dt', 'threads'), keep=1)
+shape_matched_boxes = _stamped(shape_matched_boxes)
 
 
 def double_pendulum(
