@@ -6,7 +6,12 @@ member's own pool) and as one ``Batch.step(S)`` at 1 and 2 threads. Wall time, m
 ``--repeats`` (modes alternated so that load on a shared machine hits all alike), on fresh
 copies each time; member-steps per second and the ratio to the loop.
 
-    python benches/scenes/bench_batch.py [--repeats 3] [--quick]
+    python benches/scenes/bench_batch.py [--repeats 3] [--quick] [--dask]
+
+With ``--dask`` the three-body workload also runs as today's sweep on Dask (``pc.sweep`` over
+the member index, ``measure`` stepping the scene, a LocalCluster of 2 workers, one run a task)
+and as the sweep stepping the runs itself (``steps=``: batches on each worker), once each (the
+cluster's start is not counted). Run it once per SIMD level (``PHYSCORE_SIMD=scalar`` ...).
 
 Workloads: 10,000 three-body problems (figure_eight, 4th-order Yoshida) for 1,000 steps; 1,000
 double pendulums (XPBD rods) for 1,000 steps; 256 cloths of 16×16 for 200 steps.
@@ -36,6 +41,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="a tenth of the members: checks the script works")
+    ap.add_argument("--dask", action="store_true", help="the three-body workload through pc.sweep on Dask too")
     a = ap.parse_args()
     _common.require_release()
     q = 10 if a.quick else 1
@@ -64,6 +70,40 @@ def main() -> None:
         rate = {k: m * steps / v for k, v in med.items()}
         print(f"| {name} | {m} × {steps} | {med['loop']:.2f} s ({rate['loop']:.3g}/s) | {med['b1']:.2f} s "
               f"({rate['b1']:.3g}/s) | {med['b2']:.2f} s ({rate['b2']:.3g}/s) | {med['loop'] / med['b2']:.2f}× |", flush=True)
+        if a.dask and name.startswith("three-body"):
+            dask_rows(m, steps, med["b2"])
+
+
+def _three_body(k: int) -> pc.Scene:
+    s = pc.scenes.figure_eight(integrator="yoshida4")
+    s.positions = s.positions * (1 + 1e-3 * k)
+    return s
+
+
+def _energy(scene: pc.Scene, steps: int = 0) -> dict:
+    if steps:
+        scene.step(steps)
+    return {"e": scene.energy()["total"]}
+
+
+def dask_rows(m: int, steps: int, batch2: float) -> None:
+    """The three-body workload as today's Dask sweep and as the sweep stepping runs itself."""
+    import functools
+
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, Client(cluster) as client:
+        client.run(lambda: __import__("physcore"))  # workers warm
+        params = {"k": list(range(m))}
+        t0 = time.perf_counter()
+        pc.sweep(_three_body, params, measure=functools.partial(_energy, steps=steps), client=client, progress=False)
+        per_task = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        pc.sweep(_three_body, params, measure=_energy, steps=steps, client=client, progress=False)
+        batched = time.perf_counter() - t0
+    print(f"| three-body through pc.sweep on Dask (2 workers) | {m} × {steps} | one run a task: {per_task:.2f} s "
+          f"| steps= (batches a worker): {batched:.2f} s | batch 2 threads in-process is {per_task / batch2:.0f}× "
+          f"the one-run-a-task sweep |", flush=True)
 
 
 if __name__ == "__main__":

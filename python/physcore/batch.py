@@ -45,9 +45,14 @@ import numpy as np
 from . import _check, _core
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SceneFileError, SimulationDiverged
+from .contacts import Contacts
 from .scene import Scene, _unpickle_scene
 
 __all__ = ["Batch"]
+
+#: Members of at most this many particles take their energy reference in one call into the core
+#: (not interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
+_REFERENCE_AT_ONCE = 4096
 
 #: The batch file's format version (``Batch.save``).
 FORMAT_VERSION = 1
@@ -154,6 +159,20 @@ class Batch:
         return f"Batch({len(self)} × {s.dim}D scenes of {s.n_particles} particles, {len(self.diverged)} diverged)"
 
     # ------------------------------------------------------------------------ stepping
+    def _set_reference_energies(self, fresh: list[Scene]) -> list[Scene]:
+        """The books' reference of each member before its first step, as its first step alone
+        takes it (:meth:`Scene._set_reference_energy`), for members whose locks the caller
+        holds: all at once in the core (the same additions, in parallel, the GIL released). The
+        members whose books could not be prepared are returned, their reference not taken."""
+        refs = _core.reference_energies([s._sim for s in fresh], self._threads)
+        missing = []
+        for s, r in zip(fresh, refs, strict=True):
+            if r is None:  # its books could not be prepared (memory): read alone, which says why
+                missing.append(s)
+            else:
+                s._e0, s._e0_scale = r
+        return missing
+
     def step(self, n: int = 1) -> None:
         """Advance every member that has not diverged ``n`` steps of its own ``dt``, in one call
         into the core (GIL released), members in parallel.
@@ -182,20 +201,30 @@ class Batch:
         for s in scenes:
             if n > (1 << 63) - 1 - s.step_count:
                 raise InvalidInputError(f"n: {n} more steps would take a member's step count past 2**63 - 1")
-        for s in scenes:
-            if s._e0 is None:  # the books' reference, as a member's first step alone takes it
+        # The books' reference, as a member's first step alone takes it: large members one by
+        # one (interruptible: their potential is O(N²)), the others in one call below.
+        fresh = [s for s in scenes if s._e0 is None]
+        for s in fresh:
+            if s.n_particles > _REFERENCE_AT_ONCE:
                 s._set_reference_energy()
-            s._warn_contact_step()  # as Scene.step warns (ContactStepWarning)
+        if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
+            for s in scenes:
+                s._warn_contact_step()  # as Scene.step warns (ContactStepWarning)
         taken = []
         try:
             for s in scenes:
                 if not s._lock.acquire(blocking=False):
                     raise SceneBusyError("a member of this Batch is being stepped by another thread")
                 taken.append(s)
-            errors = _core.step_batch([s._sim for s in scenes], n, self._threads)
+            missing = self._set_reference_energies([s for s in fresh if s._e0 is None])
+            errors = None if missing else _core.step_batch([s._sim for s in scenes], n, self._threads)
         finally:
             for s in taken:
                 s._lock.release()
+        if errors is None:  # nothing stepped: read those books alone (raising what alone raises)
+            for s in missing:
+                s._set_reference_energy()
+            return self.step(n)
         for k, e in zip(live, errors, strict=True):
             if e is not None:
                 if not isinstance(e, SimulationDiverged):

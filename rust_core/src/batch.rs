@@ -7,7 +7,8 @@
 //! `pairwise_small::SMALL` bodies, gravity or Coulomb by the small pairwise sum plus uniform
 //! fields, velocity Verlet or Yoshida's fourth order, nothing else) are instead stepped here,
 //! one member per SIMD lane (MuJoCo's `rollout` and JAX's `vmap` over a batch are the model):
-//! a chunk of 1, 2, 4 or 8 members (the level's float64 lanes) runs all its steps in registers.
+//! a chunk of 2, 4, 8 or 16 members (two vectors of the level's float64 lanes, two dependency
+//! chains in flight) runs all its steps in registers.
 //!
 //! Every member keeps the bits it has alone, for any thread count and chunking: the kernel runs
 //! the very operations of `VelocityVerlet::step` (`accel`, the kick, the drift) and of the force
@@ -74,7 +75,7 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
             None => general.push((k, w)),
         }
     }
-    let lanes = simd::dispatch(simd::level(), Lanes);
+    let lanes = chunk_width();
     // Chunks of `lanes` members of one shape, each begun (checks, checkpoint) on its own task.
     let mut chunks: Vec<(Shape, Vec<(usize, &mut World<V>)>)> = Vec::new();
     for (shape, members) in groups {
@@ -91,6 +92,11 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
         out[k] = Some(r);
     }
     out.into_iter().map(|r| r.expect("every world has an outcome")).collect()
+}
+
+/// Members a chunk steps together: two vectors of the level's float64 lanes (`Two`).
+fn chunk_width() -> usize {
+    2 * simd::dispatch(simd::level(), Lanes)
 }
 
 /// The float64 lanes of the level (1, 2, 4 or 8).
@@ -114,7 +120,7 @@ fn step_chunk<V: Vector>(
     let mut out = Vec::with_capacity(members.len());
     let mut running: Vec<(usize, &mut World<V>, Checkpoint)> = Vec::with_capacity(members.len());
     for (k, w) in members {
-        match w.begin_steps(n) {
+        match w.begin_steps(n, false) {
             Err(e) => out.push((k, Err(e))),
             Ok(Begun::Done(cp)) => out.push((k, Ok(cp))),
             Ok(Begun::Run(cp)) => match w.check_particles_dt() {
@@ -144,7 +150,7 @@ fn step_chunk<V: Vector>(
     out
 }
 
-/// A chunk's members in structure-of-arrays form, member `l` in lane `l` of every vector
+/// A chunk's members in structure-of-arrays form, member `l` in lane `l` of every row
 /// (lanes past the members repeat member 0; nothing is read back from them). Vectors are
 /// stored lane-minor: component c of particle i is `x[(3 i + c) L .. (3 i + c + 1) L]`.
 struct Pack {
@@ -169,7 +175,7 @@ struct Pack {
 
 impl Pack {
     fn gather<'a, V: Vector + 'a>(shape: Shape, worlds: impl Iterator<Item = &'a mut World<V>>) -> Pack {
-        let lanes = simd::dispatch(simd::level(), Lanes);
+        let lanes = chunk_width();
         let n = shape.n;
         let mut p = Pack {
             shape,
@@ -276,13 +282,44 @@ struct Run<'a> {
     stop: &'a AtomicBool,
 }
 
-/// One chunk's state and constants as vectors.
-struct Lanes3<L> {
+/// Two vectors of lanes stepped side by side: two independent dependency chains (a step is a
+/// chain of square roots and divisions ~70 cycles long per substep; with two in flight the
+/// core overlaps them). Every operation applies to both halves alike, lane by lane.
+#[derive(Clone, Copy)]
+struct Two<L>(L, L);
+
+macro_rules! two_op {
+    ($tr:ident, $m:ident) => {
+        impl<L: Lane> std::ops::$tr for Two<L> {
+            type Output = Self;
+            #[inline(always)]
+            fn $m(self, o: Self) -> Self {
+                Two(self.0.$m(o.0), self.1.$m(o.1))
+            }
+        }
+    };
+}
+two_op!(Add, add);
+two_op!(Sub, sub);
+two_op!(Mul, mul);
+two_op!(Div, div);
+
+impl<L: Lane> Lane for Two<L> {
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        Two(self.0.sqrt(), self.1.sqrt())
+    }
+    #[inline(always)]
+    fn if_positive(self, a: Self, b: Self) -> Self {
+        Two(self.0.if_positive(a.0, b.0), self.1.if_positive(a.1, b.1))
+    }
+}
+
+/// What stays fixed through a chunk's steps, as vectors. `N`: the particle count where it is
+/// known at compile time (2, 3, 4: the loops unroll and the state stays in registers), else 0
+/// (then `n`).
+struct Fixed<L, const D: usize, const N: usize> {
     n: usize,
-    dim: usize,
-    x: [[L; 3]; SMALL],
-    v: [[L; 3]; SMALL],
-    f: [[L; 3]; SMALL],
     w: [L; SMALL],
     cw: [L; SMALL],
     im: [L; SMALL],
@@ -292,45 +329,85 @@ struct Lanes3<L> {
     one: L,
 }
 
-impl<L: Lane> Lanes3<L> {
-    /// `ForceSet::eval` of the fused terms: `Pairwise::add_forces`'s small sum, overwriting
-    /// (F_i = c w_i S_i; 0 for a pinned particle).
+/// A chunk's state: positions, velocities, the force at x.
+#[derive(Clone, Copy)]
+struct Moving<L> {
+    x: [[L; 3]; SMALL],
+    v: [[L; 3]; SMALL],
+    f: [[L; 3]; SMALL],
+}
+
+impl<L: Lane, const D: usize, const N: usize> Fixed<L, D, N> {
     #[inline(always)]
-    fn forces(&self, f: &mut [[L; 3]; SMALL]) {
-        let (n, dim, zero) = (self.n, self.dim, self.zero);
-        let mut s = [[zero; 3]; SMALL];
-        small_sum(&self.x[..n], &self.w[..n], self.eps2, dim, zero, self.one, &mut s[..n]);
+    fn n(&self) -> usize {
+        if N > 0 {
+            N
+        } else {
+            self.n
+        }
+    }
+
+    /// `ForceSet::eval` of the fused terms into `f`: `Pairwise::add_forces`'s small sum,
+    /// overwriting (F_i = c w_i S_i; 0 for a pinned particle).
+    #[inline(always)]
+    fn forces(&self, x: &[[L; 3]; SMALL], f: &mut [[L; 3]; SMALL]) {
+        let n = self.n();
+        small_sum(&x[..n], &self.w[..n], self.eps2, D, self.zero, self.one, &mut f[..n]);
         for i in 0..n {
-            for k in 0..dim {
-                f[i][k] = self.im[i].if_positive(s[i][k] * self.cw[i], zero);
+            for k in 0..D {
+                f[i][k] = self.im[i].if_positive(f[i][k] * self.cw[i], self.zero);
             }
         }
     }
 
-    /// `integrators::accel`: f/m + g, 0 for a pinned particle.
+    /// `integrators::accel`: f/m + g, 0 for a pinned particle. `G0`: every lane's g is zero,
+    /// and then f/m + g is already 0 for a pinned particle (its f is +0, its 1/m 0: +0·0 + 0 =
+    /// +0), so the select is skipped with the same bits.
     #[inline(always)]
-    fn accel(&self, i: usize, k: usize) -> L {
-        self.im[i].if_positive(self.f[i][k] * self.im[i] + self.g[k], self.zero)
+    fn accel<const G0: bool>(&self, f: L, i: usize, k: usize) -> L {
+        let a = f * self.im[i] + self.g[k];
+        if G0 {
+            a
+        } else {
+            self.im[i].if_positive(a, self.zero)
+        }
     }
 
     /// `VelocityVerlet::step` of `dt` (`half` = 0.5 dt) without velocity-dependent forces.
     #[inline(always)]
-    fn verlet(&mut self, dt: L, half: L) {
-        let (n, dim) = (self.n, self.dim);
-        for i in 0..n {
-            for k in 0..dim {
-                self.v[i][k] = self.v[i][k] + self.accel(i, k) * half;
-                self.x[i][k] = self.x[i][k] + self.v[i][k] * dt;
+    fn verlet<const G0: bool>(&self, m: &mut Moving<L>, dt: L, half: L) {
+        for i in 0..self.n() {
+            for k in 0..D {
+                m.v[i][k] = m.v[i][k] + self.accel::<G0>(m.f[i][k], i, k) * half;
+                m.x[i][k] = m.x[i][k] + m.v[i][k] * dt;
             }
         }
-        let mut f = self.f;
-        self.forces(&mut f);
-        self.f = f;
-        for i in 0..n {
-            for k in 0..dim {
-                self.v[i][k] = self.v[i][k] + self.accel(i, k) * half;
+        self.forces(&m.x, &mut m.f);
+        for i in 0..self.n() {
+            for k in 0..D {
+                m.v[i][k] = m.v[i][k] + self.accel::<G0>(m.f[i][k], i, k) * half;
             }
         }
+    }
+
+    /// `steps` steps of `scheme` (`subs`: each velocity Verlet substep's dt and 0.5 dt), reading
+    /// `stop` every `POLL` steps; false if it was set.
+    #[inline(always)]
+    fn run<const G0: bool>(&self, m: &mut Moving<L>, subs: &[(L, L)], steps: u64, stop: &AtomicBool) -> bool {
+        let mut done = 0;
+        while done < steps {
+            if stop.load(Ordering::Relaxed) {
+                return false;
+            }
+            let run = POLL.min(steps - done);
+            for _ in 0..run {
+                for &(dt, half) in subs {
+                    self.verlet::<G0>(m, dt, half);
+                }
+            }
+            done += run;
+        }
+        !stop.load(Ordering::Relaxed)
     }
 }
 
@@ -338,83 +415,97 @@ impl Kernel for Run<'_> {
     type Output = bool;
     #[inline(always)]
     fn run<S: Simd>(self, s: S) -> bool {
+        match self.pack.shape.dim {
+            2 => self.run_dim::<S, 2>(s),
+            _ => self.run_dim::<S, 3>(s),
+        }
+    }
+}
+
+impl Run<'_> {
+    #[inline(always)]
+    fn run_dim<S: Simd, const D: usize>(self, s: S) -> bool {
+        match self.pack.shape.n {
+            2 => self.run_n::<S, D, 2>(s),
+            3 => self.run_n::<S, D, 3>(s),
+            4 => self.run_n::<S, D, 4>(s),
+            _ => self.run_n::<S, D, 0>(s),
+        }
+    }
+
+    #[inline(always)]
+    fn run_n<S: Simd, const D: usize, const N: usize>(self, s: S) -> bool {
         let p = self.pack;
-        let Shape { n, dim, scheme } = p.shape;
-        let lanes = P::<S, f64>::lanes();
-        debug_assert_eq!(lanes, p.lanes);
-        let zero = P::<S, f64>::zero(s);
-        let ld = |a: &[f64], row: usize| P::<S, f64>::load(s, &a[row * lanes..(row + 1) * lanes]);
-        let mut st = Lanes3 {
+        let l = P::<S, f64>::lanes();
+        debug_assert_eq!(2 * l, p.lanes);
+        // Row `row` of a pack array: its first l lanes and its second l lanes.
+        let ld = |a: &[f64], row: usize| {
+            let r = &a[row * 2 * l..(row + 1) * 2 * l];
+            Two(P::<S, f64>::load(s, &r[..l]), P::<S, f64>::load(s, &r[l..]))
+        };
+        let zero = Two(P::<S, f64>::zero(s), P::zero(s));
+        let splat = |v: f64| Two(P::<S, f64>::splat(s, v), P::splat(s, v));
+        let n = p.shape.n;
+        let mut fixed = Fixed::<_, D, N> {
             n,
-            dim,
-            x: [[zero; 3]; SMALL],
-            v: [[zero; 3]; SMALL],
-            f: [[zero; 3]; SMALL],
             w: [zero; SMALL],
             cw: [zero; SMALL],
             im: [zero; SMALL],
             g: [zero; 3],
             eps2: ld(&p.eps2, 0),
             zero,
-            one: P::splat(s, 1.0),
+            one: splat(1.0),
         };
+        let mut m = Moving { x: [[zero; 3]; SMALL], v: [[zero; 3]; SMALL], f: [[zero; 3]; SMALL] };
         for i in 0..n {
-            for k in 0..dim {
-                st.x[i][k] = ld(&p.x, 3 * i + k);
-                st.v[i][k] = ld(&p.v, 3 * i + k);
-                st.f[i][k] = ld(&p.f, 3 * i + k);
+            for k in 0..D {
+                m.x[i][k] = ld(&p.x, 3 * i + k);
+                m.v[i][k] = ld(&p.v, 3 * i + k);
+                m.f[i][k] = ld(&p.f, 3 * i + k);
             }
-            st.w[i] = ld(&p.w, i);
-            st.cw[i] = ld(&p.cw, i);
-            st.im[i] = ld(&p.im, i);
+            fixed.w[i] = ld(&p.w, i);
+            fixed.cw[i] = ld(&p.cw, i);
+            fixed.im[i] = ld(&p.im, i);
         }
-        for k in 0..dim {
-            st.g[k] = ld(&p.g, k);
+        for k in 0..D {
+            fixed.g[k] = ld(&p.g, k);
         }
         // The force at the start where a member had none cached (VelocityVerlet's first step).
         let cached = ld(&p.cached, 0);
-        let mut f = st.f;
-        st.forces(&mut f);
+        let mut f = m.f;
+        fixed.forces(&m.x, &mut f);
         for i in 0..n {
-            for k in 0..dim {
-                st.f[i][k] = cached.if_positive(st.f[i][k], f[i][k]);
+            for k in 0..D {
+                m.f[i][k] = cached.if_positive(m.f[i][k], f[i][k]);
             }
         }
-        let dt = ld(&p.dt, 0);
-        let half = P::splat(s, 0.5);
-        // Yoshida's substeps: w dt, and 0.5 (w dt), as `Yoshida4::step` and `VelocityVerlet::step`.
-        let (d1, d0) = (P::splat(s, W1) * dt, P::splat(s, W0) * dt);
-        let (h1, h0, hv) = (half * d1, half * d0, half * dt);
-        let mut done = 0;
-        while done < self.steps {
-            if self.stop.load(Ordering::Relaxed) {
-                return false;
-            }
-            let run = POLL.min(self.steps - done);
-            match scheme {
-                Scheme::Verlet => {
-                    for _ in 0..run {
-                        st.verlet(dt, hv);
-                    }
-                }
-                Scheme::Yoshida4 => {
-                    for _ in 0..run {
-                        st.verlet(d1, h1);
-                        st.verlet(d0, h0);
-                        st.verlet(d1, h1);
-                    }
-                }
-            }
-            done += run;
-        }
-        if self.stop.load(Ordering::Relaxed) {
+        let (dt, half) = (ld(&p.dt, 0), splat(0.5));
+        // Each velocity Verlet substep's dt and 0.5 dt: Yoshida's w dt, as `Yoshida4::step`
+        // and `VelocityVerlet::step` compute them.
+        let (d1, d0) = (splat(W1) * dt, splat(W0) * dt);
+        let subs = match p.shape.scheme {
+            Scheme::Verlet => vec![(dt, half * dt)],
+            Scheme::Yoshida4 => vec![(d1, half * d1), (d0, half * d0), (d1, half * d1)],
+        };
+        let g_zero = p.g.iter().all(|&g| g == 0.0);
+        let finished = if g_zero {
+            fixed.run::<true>(&mut m, &subs, self.steps, self.stop)
+        } else {
+            fixed.run::<false>(&mut m, &subs, self.steps, self.stop)
+        };
+        if !finished {
             return false;
         }
+        let st = |a: &mut [f64], row: usize, v: Two<P<S, f64>>| {
+            let r = &mut a[row * 2 * l..(row + 1) * 2 * l];
+            v.0.store(&mut r[..l]);
+            v.1.store(&mut r[l..]);
+        };
         for i in 0..n {
-            for k in 0..dim {
-                st.x[i][k].store(&mut p.x[(3 * i + k) * lanes..]);
-                st.v[i][k].store(&mut p.v[(3 * i + k) * lanes..]);
-                st.f[i][k].store(&mut p.f[(3 * i + k) * lanes..]);
+            for k in 0..D {
+                st(&mut p.x, 3 * i + k, m.x[i][k]);
+                st(&mut p.v, 3 * i + k, m.v[i][k]);
+                st(&mut p.f, 3 * i + k, m.f[i][k]);
             }
         }
         true

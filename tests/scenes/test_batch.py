@@ -6,6 +6,7 @@ a saved batch continues bit for bit; bad input is refused by name before anythin
 from __future__ import annotations
 
 import os
+import pickle
 import signal
 import sys
 import threading
@@ -24,8 +25,6 @@ def _fan(m: int, scene=None) -> list[pc.Scene]:
 
 
 def _alone(scenes: list[pc.Scene], n: int) -> list[pc.Scene]:
-    import pickle
-
     copies = [pickle.loads(pickle.dumps(s)) for s in scenes]
     for c in copies:
         c.step(n)
@@ -51,9 +50,49 @@ def test_members_step_bit_for_bit_as_they_would_alone(threads):
     batch.step(400)
     assert not batch.diverged
     assert all(_same(b, a) for b, a in zip(batch.members, alone, strict=True))
+    # The books' reference each member took at its first step (in one call for all members).
+    assert all(b.energy_drift() == a.energy_drift() for b, a in zip(batch.members, alone, strict=True))
     assert batch.positions.shape == (24, 3, 2) and batch.time.shape == (24,) and (batch.step_count == 700).all()
     # The members differ (a fan, not copies).
     assert not np.array_equal(batch.positions[0], batch.positions[1])
+
+
+def _small_nbody(dim: int) -> pc.Scene:
+    """Five bodies, one pinned, under pairwise and uniform gravity: what the fused kernel of
+    small N-body members steps (rust_core/src/batch.rs)."""
+    rng = np.random.default_rng(7)
+    scene = pc.Scene(dim, integrator="yoshida4", dt=2e-3)
+    scene.add_particles(rng.normal(size=(5, dim)), 0.3 * rng.normal(size=(5, dim)), masses=rng.uniform(0.5, 2.0, 5),
+                        pinned=[False, False, True, False, False])
+    scene.add(pc.PairwiseGravity(G=1.0, softening=0.05))
+    scene.add(pc.Gravity(g=[0.0, -0.5, 0.1][:dim]))
+    return scene
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_small_nbody_members_of_mixed_integrators_and_steps_keep_their_bits_at_every_simd_level(dim):
+    """Small N-body members go through the fused kernel (one member per SIMD lane), the others
+    (rk4 here) through the general step, in one batch: every member has its bits alone, at
+    every SIMD level this CPU has, with 1 and 2 threads, across two calls (the force cache the
+    kernel leaves behind), its force evaluations counted as alone."""
+    try:
+        for level in pc.simd_levels():
+            pc.set_simd_level(level)
+            members = _fan(11, _small_nbody(dim))
+            for k, m in enumerate(members):
+                m.integrator = ("verlet", "yoshida4", "rk4")[k % 3]
+                m.dt = 2e-3 * (1 + 0.1 * k)
+            alone = _alone(members, 130)
+            for threads in (1, 2):
+                batch = pc.Batch([pickle.loads(pickle.dumps(m)) for m in members], threads=threads)
+                batch.step(90)
+                batch.step(40)
+                assert not batch.diverged
+                for b, a in zip(batch.members, alone, strict=True):
+                    assert _same(b, a), (level, threads, b.integrator)
+                    assert b.force_evaluations == a.force_evaluations and b.energy_drift() == a.energy_drift()
+    finally:
+        pc.set_simd_level(None)
 
 
 def test_large_members_that_fork_inside_agree_too():
@@ -86,9 +125,29 @@ def test_a_diverging_member_is_rolled_back_and_retired_alone():
     assert members[2].step_count == 0 and members[0].step_count == 210
 
 
+def test_a_small_nbody_member_that_diverges_in_the_fused_kernel_fails_alone():
+    """A fused member flying past the largest float is stepped again alone, which reports its
+    divergence and rolls it back; the other members of its SIMD chunk are written back."""
+    members = _fan(6)
+    members[3].positions = members[3].positions * 1.79e308  # past the largest float in ~20 steps
+    members[3].velocities = members[3].velocities * 1e308
+    alone = _alone([m for k, m in enumerate(members) if k != 3], 200)
+    twin = pickle.loads(pickle.dumps(members[3]))
+    with pytest.raises(pc.SimulationDiverged) as alone_error:
+        twin.step(200)
+    before = members[3].positions
+    batch = pc.Batch(members)
+    batch.step(200)
+    assert list(batch.diverged) == [3]
+    assert batch.diverged[3].step == alone_error.value.step and batch.diverged[3].rolled_back_to == 0
+    assert np.array_equal(members[3].positions, before)
+    assert all(_same(b, a) for b, a in zip([m for k, m in enumerate(members) if k != 3], alone, strict=True))
+
+
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
-def test_ctrl_c_rolls_every_member_back():
-    members = _fan(64, pc.scenes.figure_eight(integrator="dopri5"))
+@pytest.mark.parametrize("integrator", ["dopri5", "yoshida4"])  # the general step, the fused kernel
+def test_ctrl_c_rolls_every_member_back(integrator):
+    members = _fan(64, pc.scenes.figure_eight(integrator=integrator))
     before = [(m.positions, m.velocities, m.step_count, m.time) for m in members]
     batch = pc.Batch(members, threads=2)
     timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
@@ -106,9 +165,19 @@ def test_ctrl_c_rolls_every_member_back():
     assert not batch.diverged
 
 
-def test_save_and_load_continue_bit_for_bit(tmp_path):
-    members = _fan(5, pc.scenes.spring_chain())
-    members[4].dt = 1.0
+def _blow_up_chain(s: pc.Scene) -> None:
+    s.dt = 1.0  # far past the chain's stability limit
+
+
+def _blow_up_orbit(s: pc.Scene) -> None:
+    s.positions, s.velocities = s.positions * 1.79e308, s.velocities * 1e308  # past the largest float in ~20 steps
+
+
+@pytest.mark.parametrize("make, blow_up", [(pc.scenes.spring_chain, _blow_up_chain), (pc.scenes.figure_eight, _blow_up_orbit)],
+                         ids=["general", "fused"])
+def test_save_and_load_continue_bit_for_bit(tmp_path, make, blow_up):
+    members = _fan(5, make())
+    blow_up(members[4])
     batch = pc.Batch(members, threads=2)
     batch.step(100)
     path = batch.save(tmp_path / "fan.batch")

@@ -120,3 +120,76 @@ pub(super) fn step_batch(
     }
     Ok(out)
 }
+
+/// Each of `sims`' energy books reduced as `Scene._set_reference_energy` reduces them in Python
+/// (the same additions in the same order, a repeated name counted once as a dict keeps it):
+/// `(total, scale)` with total = (kinetic + Σ potential) + Σ dissipated and scale = (|kinetic|
+/// + Σ |potential|) + Σ |dissipated|; `None` for a member whose books could not be prepared
+/// (out of memory), which the caller then reads alone. In parallel on a pool of `threads`
+/// threads with the GIL released: the batch's first step takes every member's reference at
+/// once instead of one Python call each. Not interruptible: the caller passes small members.
+#[pyfunction]
+#[pyo3(signature = (sims, threads=None))]
+pub(super) fn reference_energies(
+    py: Python<'_>,
+    sims: Vec<Bound<'_, PySimulation>>,
+    threads: Option<usize>,
+) -> PyResult<Vec<Option<(f64, f64)>>> {
+    let mut refs = Vec::with_capacity(sims.len());
+    for (k, s) in sims.iter().enumerate() {
+        let r = s.try_borrow_mut().map_err(|_| {
+            to_py(py, invalid("sims", format!("entry {k} is in use (given twice, or being stepped by another thread)")))
+        })?;
+        refs.push(r);
+    }
+    let pool = match threads {
+        Some(t) => Arc::new(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(t.max(1))
+                .build()
+                .map_err(|e| to_py(py, Error::Threads { threads: t, reason: e.to_string() }))?,
+        ),
+        None => crate::par::default_pool().map_err(|e| to_py(py, Error::Threads { threads: 0, reason: e }))?,
+    };
+    let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
+    Ok(py.detach(|| {
+        pool.install(|| {
+            ptrs.par_iter()
+                .map(|p| {
+                    // SAFETY: distinct simulations, each borrowed mutably above for this call.
+                    let inner = unsafe { &mut *p.0 };
+                    with_sim!(inner, s => {
+                        s.prepare_energy().ok()?;
+                        let e = s.energy();
+                        let (pot, dis) = (as_dict(&e.potential), as_dict(&e.dissipated));
+                        let total = (e.kinetic + sum(pot.iter().copied())) + sum(dis.iter().copied());
+                        let scale = (e.kinetic.abs() + sum(pot.iter().map(|u| u.abs()))) + sum(dis.iter().map(|d| d.abs()));
+                        Some((total, scale))
+                    })
+                })
+                .collect()
+        })
+    }))
+}
+
+/// The values of `(name, value)` pairs as a Python dict built from them holds them: in order of
+/// first appearance, a repeated name keeping its last value.
+fn as_dict(pairs: &[(String, f64)]) -> Vec<f64> {
+    let mut names: Vec<&str> = Vec::with_capacity(pairs.len());
+    let mut values: Vec<f64> = Vec::with_capacity(pairs.len());
+    for (k, v) in pairs {
+        match names.iter().position(|n| n == k) {
+            Some(i) => values[i] = *v,
+            None => {
+                names.push(k);
+                values.push(*v);
+            }
+        }
+    }
+    values
+}
+
+/// Python's `sum` of floats: from 0, left to right.
+fn sum(values: impl Iterator<Item = f64>) -> f64 {
+    values.fold(0.0, |s, v| s + v)
+}

@@ -618,16 +618,22 @@ impl<V: Vector> System for ParticleSystem<V> {
         let name = self.integrator.info().name;
         let bufs = self.integrator.scratch(self.sys.forces.velocity_dependent());
         let missing = bufs.iter().filter(|b| b.capacity() < n).count();
-        let of = format!("the {name} integrator's scratch for {} particles", count(n as u128));
-        let need = Need::new("step", Need::bytes_of::<V>(n) * missing as u128, of.clone());
-        for b in bufs {
-            need.reserve(b, n)?;
+        let of = || format!("the {name} integrator's scratch for {} particles", count(n as u128));
+        // (Described only when something is missing: a batch prepares thousands of small
+        // members per call.)
+        if missing > 0 {
+            let need = Need::new("step", Need::bytes_of::<V>(n) * missing as u128, of());
+            for b in bufs {
+                need.reserve(b, n)?;
+            }
         }
         let axial = self.integrator.axial_scratch();
         let missing = axial.iter().filter(|b| b.capacity() < n).count();
-        let need = Need::new("step", Need::bytes_of::<V::Axial>(n) * missing as u128, of);
-        for b in axial {
-            need.reserve(b, n)?;
+        if missing > 0 {
+            let need = Need::new("step", Need::bytes_of::<V::Axial>(n) * missing as u128, of());
+            for b in axial {
+                need.reserve(b, n)?;
+            }
         }
         // On the world's pool: the cell lists size their histograms by its thread count.
         self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve(n))

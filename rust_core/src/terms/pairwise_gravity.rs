@@ -542,6 +542,9 @@ impl<V: Vector> Term<V> for Pairwise {
     }
 
     fn reserve(&mut self, n: usize) -> Result<()> {
+        if n <= SMALL && !self.single && self.acc.capacity() >= n {
+            return Ok(()); // the small sum needs only `acc` (a batch prepares thousands of these per call)
+        }
         let np = n.div_ceil(PAD) * PAD;
         let f = if self.single { 4 } else { 8 };
         let cols = if n >= SYM_MIN { 3 * (BLOCKS / 2) * np * f } else { 0 };

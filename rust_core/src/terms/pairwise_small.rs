@@ -73,9 +73,10 @@ pub fn small_sum<L: Lane>(x: &[[L; 3]], w: &[L], eps2: L, dim: usize, zero: L, o
             // 1/(r² √r²): one square root and one division for both receivers.
             let inv3 = r2.if_positive(one / (r2 * r2.sqrt()), zero);
             let (wi, wj) = (w[j] * inv3, w[i] * inv3);
+            // Receiver j's term w_i (x_i − x_j)/r³ is −w_i d/r³: subtracted (x − y ≡ x + (−y)).
             for c in 0..dim {
                 out[i][c] = out[i][c] + wi * d[c];
-                out[j][c] = out[j][c] + wj * (x[i][c] - x[j][c]);
+                out[j][c] = out[j][c] - wj * d[c];
             }
         }
     }
