@@ -57,6 +57,9 @@ pub struct Shape {
     pub scheme: Scheme,
 }
 
+/// Worlds with their index in the call.
+type Members<'a, V> = Vec<(usize, &'a mut World<V>)>;
+
 /// Steps between two reads of the stop flag.
 const POLL: u64 = 256;
 
@@ -68,7 +71,7 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
     let count = worlds.len();
     let mut out: Vec<Option<Result<Checkpoint>>> = (0..count).map(|_| None).collect();
     let mut general = Vec::new();
-    let mut groups: BTreeMap<Shape, Vec<(usize, &mut World<V>)>> = BTreeMap::new();
+    let mut groups: BTreeMap<Shape, Members<'_, V>> = BTreeMap::new();
     for (k, w) in worlds.into_iter().enumerate() {
         match w.fused_shape() {
             Some(shape) => groups.entry(shape).or_default().push((k, w)),
@@ -77,7 +80,7 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
     }
     let lanes = chunk_width();
     // Chunks of `lanes` members of one shape, each begun (checks, checkpoint) on its own task.
-    let mut chunks: Vec<(Shape, Vec<(usize, &mut World<V>)>)> = Vec::new();
+    let mut chunks: Vec<(Shape, Members<'_, V>)> = Vec::new();
     for (shape, members) in groups {
         let mut it = members.into_iter().peekable();
         while it.peek().is_some() {
@@ -113,7 +116,7 @@ impl Kernel for Lanes {
 /// (or stepped again alone where it ended non-finite, or rolled back where the call stopped).
 fn step_chunk<V: Vector>(
     shape: Shape,
-    members: Vec<(usize, &mut World<V>)>,
+    members: Members<'_, V>,
     n: u64,
     stop: &Arc<AtomicBool>,
 ) -> Vec<(usize, Result<Checkpoint>)> {
