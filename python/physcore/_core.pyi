@@ -28,6 +28,7 @@ __all__ = [
     "check_integrator",
     "build_profile",
     "__version__",
+    "reference_energies",
     "step_batch",
 ]
 
