@@ -204,7 +204,10 @@ class Bodies(Part):
             v = _rows("vertices", vertices, None, 2)
             if v.shape[0] < 3:
                 raise InvalidInputError(f"vertices: a polygon needs at least 3, got {v.shape[0]}")
-            e = v - v.mean(axis=0)
+            with np.errstate(all="ignore"):
+                e = v - v.mean(axis=0)
+            if not np.isfinite(e).all():
+                raise InvalidInputError("vertices: beyond float64 (their centre overflows); give them in m, near the body's origin")
             if np.linalg.matrix_rank(e, tol=1e-12 * max(1e-300, float(np.abs(e).max()))) < 2:
                 raise InvalidInputError("vertices: all on one line (the polygon has no area)")
             self.vertices = v

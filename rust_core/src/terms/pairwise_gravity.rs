@@ -117,6 +117,9 @@ pub struct Pairwise {
     sym32: SymScratch<f32>,
     /// The stop flag of the call in progress.
     stop: Stop,
+    /// The potential's sources (the energy books are read through `&self`), reserved by
+    /// `reserve_potential` so that reading them allocates nothing sized by N.
+    pot: std::sync::Mutex<Soa<Real>>,
 }
 
 fn build<V: Vector>(name: String, p: Params, _: &Context) -> Result<Box<dyn Term<V>>> {
@@ -157,6 +160,7 @@ impl Pairwise {
             sym: SymScratch::default(),
             sym32: SymScratch::default(),
             stop: Stop::default(),
+            pot: std::sync::Mutex::new(Soa::default()),
         }
     }
 }
@@ -636,6 +640,17 @@ impl<V: Vector> Term<V> for Pairwise {
         0.0
     }
 
+    fn reserve_potential(&mut self, n: usize) -> Result<()> {
+        let np = n.div_ceil(PAD) * PAD;
+        let need = Need::new(
+            "energy",
+            4 * Need::bytes_of::<Real>(np),
+            format!("the potential of {} bodies", count(n as u128)),
+        );
+        need.check()?;
+        self.pot.get_mut().unwrap_or_else(|e| e.into_inner()).reserve(n, &need)
+    }
+
     fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])> {
         let w = self.weights(model)?;
         (!self.single && n <= SMALL).then_some((self.law_constant(), self.softening * self.softening, w))
@@ -645,13 +660,14 @@ impl<V: Vector> Term<V> for Pairwise {
         let Some(w) = self.weights(model) else {
             return Some(0.0); // uncharged
         };
-        let mut src = Soa::<Real>::default();
+        let mut src = self.pot.lock().unwrap_or_else(|e| e.into_inner());
         src.pack(x, w);
+        let src = &*src;
         let (eps2, level, stop) = (self.softening * self.softening, simd::level(), self.stop.flag());
         // Σ_i m_i Σ_{j>i} m_j / r_ij, rows in fixed chunks summed in chunk order (any thread
         // count gives the same bits). O(N²): the stop flag is read per row and, once it is set,
         // the sum is abandoned (the caller discards it).
-        let u = par::sum(x.len(), 0.0, |rows| simd::dispatch(level, Potential { src: &src, eps2, rows, stop }));
+        let u = par::sum(x.len(), 0.0, |rows| simd::dispatch(level, Potential { src, eps2, rows, stop }));
         Some(match self.law {
             Law::Gravity(g) => -g * u,
             Law::Coulomb(k) => k * u,
