@@ -23,6 +23,33 @@ use std::sync::Arc;
 /// One member's outcome: its checkpoint (it stepped), or its error (it rolled itself back).
 type Outcome = Result<Checkpoint, Error>;
 
+/// Every simulation of `sims` borrowed mutably for the call; `InvalidInputError` naming `sims`
+/// (its entry) if one is in use (given twice, or being stepped by another thread).
+fn borrow_all<'py>(py: Python<'py>, sims: &[Bound<'py, PySimulation>]) -> PyResult<Vec<PyRefMut<'py, PySimulation>>> {
+    sims.iter()
+        .enumerate()
+        .map(|(k, s)| {
+            s.try_borrow_mut().map_err(|_| {
+                to_py(
+                    py,
+                    invalid("sims", format!("entry {k} is in use (given twice, or being stepped by another thread)")),
+                )
+            })
+        })
+        .collect()
+}
+
+/// The pool a batch call runs on: `threads` threads of its own, or the default pool (`None`).
+fn batch_pool(py: Python<'_>, threads: Option<usize>) -> PyResult<Arc<rayon::ThreadPool>> {
+    let err = |threads: usize, reason: String| to_py(py, Error::Threads { threads, reason });
+    Ok(match threads {
+        Some(t) => {
+            Arc::new(rayon::ThreadPoolBuilder::new().num_threads(t.max(1)).build().map_err(|e| err(t, e.to_string()))?)
+        }
+        None => crate::par::default_pool().map_err(|e| err(0, e))?,
+    })
+}
+
 /// Steps every member `n` steps on the current pool: through `crate::batch::step_worlds` (its
 /// fused kernel for small N-body members) where all have one dimension, else one by one.
 fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Vec<Outcome> {
@@ -52,20 +79,8 @@ pub(super) fn step_batch(
     n: u64,
     threads: Option<usize>,
 ) -> PyResult<Vec<Option<Py<PyAny>>>> {
-    let mut refs = Vec::with_capacity(sims.len());
-    for (k, s) in sims.iter().enumerate() {
-        let r = s.try_borrow_mut().map_err(|_| {
-            to_py(py, invalid("sims", format!("entry {k} is in use (given twice, or being stepped by another thread)")))
-        })?;
-        refs.push(r);
-    }
-    let threads_err = |threads: usize, reason: String| to_py(py, Error::Threads { threads, reason });
-    let pool = match threads {
-        Some(t) => Arc::new(
-            rayon::ThreadPoolBuilder::new().num_threads(t.max(1)).build().map_err(|e| threads_err(t, e.to_string()))?,
-        ),
-        None => crate::par::default_pool().map_err(|e| threads_err(0, e))?,
-    };
+    let mut refs = borrow_all(py, &sims)?;
+    let pool = batch_pool(py, threads)?;
     let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
     let stop = Arc::new(AtomicBool::new(false));
     let mut pending: Option<PyErr> = None;
@@ -135,22 +150,8 @@ pub(super) fn reference_energies(
     sims: Vec<Bound<'_, PySimulation>>,
     threads: Option<usize>,
 ) -> PyResult<Vec<Option<(f64, f64)>>> {
-    let mut refs = Vec::with_capacity(sims.len());
-    for (k, s) in sims.iter().enumerate() {
-        let r = s.try_borrow_mut().map_err(|_| {
-            to_py(py, invalid("sims", format!("entry {k} is in use (given twice, or being stepped by another thread)")))
-        })?;
-        refs.push(r);
-    }
-    let pool = match threads {
-        Some(t) => Arc::new(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(t.max(1))
-                .build()
-                .map_err(|e| to_py(py, Error::Threads { threads: t, reason: e.to_string() }))?,
-        ),
-        None => crate::par::default_pool().map_err(|e| to_py(py, Error::Threads { threads: 0, reason: e }))?,
-    };
+    let mut refs = borrow_all(py, &sims)?;
+    let pool = batch_pool(py, threads)?;
     let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
     Ok(py.detach(|| {
         pool.install(|| {
