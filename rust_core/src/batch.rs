@@ -22,7 +22,7 @@
 //! and its members are rolled back (`Error::Interrupted`).
 use crate::error::{Error, Result};
 use crate::integrators::yoshida::{W0, W1};
-use crate::simd::{self, Kernel, Simd, P};
+use crate::simd::{self, Kernel, Level, Simd, P};
 use crate::terms::pairwise_small::{small_sum, Lane, SMALL};
 use crate::vector::{Real, Vector};
 use crate::world::{Begun, Checkpoint, World};
@@ -64,10 +64,18 @@ type Members<'a, V> = Vec<(usize, &'a mut World<V>)>;
 const POLL: u64 = 256;
 
 /// Steps each of `worlds` `n` steps, as `World::step_checkpointed` does, in parallel on the
-/// current rayon pool: the members `World::fused_shape` admits through the fused kernel, the
-/// others by their general step. Per world, its outcome: the checkpoint at the call's start
-/// (it stepped) or its error (it rolled itself back). Results do not depend on the pool's size.
-pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<AtomicBool>) -> Vec<Result<Checkpoint>> {
+/// current rayon pool: the members `World::fused_shape` admits through the fused kernel at
+/// `level`, the others by their general step. Per world, its outcome: the checkpoint at the
+/// call's start (it stepped) or its error (it rolled itself back). Results do not depend on the
+/// pool's size. The level is an argument, read once by the caller: the chunks' width, the packs
+/// and the kernel must agree on it, and the process-wide level may be changed meanwhile (by
+/// another thread, or a test of another level running beside this one).
+pub fn step_worlds<V: Vector>(
+    worlds: Vec<&mut World<V>>,
+    n: u64,
+    stop: &Arc<AtomicBool>,
+    level: Level,
+) -> Vec<Result<Checkpoint>> {
     let count = worlds.len();
     let mut out: Vec<Option<Result<Checkpoint>>> = (0..count).map(|_| None).collect();
     let mut general = Vec::new();
@@ -78,7 +86,7 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
             None => general.push((k, w)),
         }
     }
-    let lanes = chunk_width();
+    let lanes = chunk_width(level);
     // Chunks of `lanes` members of one shape, each begun (checks, checkpoint) on its own task.
     let mut chunks: Vec<(Shape, Members<'_, V>)> = Vec::new();
     for (shape, members) in groups {
@@ -90,7 +98,7 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
     let general_out: Vec<(usize, Result<Checkpoint>)> =
         general.into_par_iter().map(|(k, w)| (k, w.step_checkpointed(n, stop))).collect();
     let fused_out: Vec<Vec<(usize, Result<Checkpoint>)>> =
-        chunks.into_par_iter().map(|(shape, members)| step_chunk(shape, members, n, stop)).collect();
+        chunks.into_par_iter().map(|(shape, members)| step_chunk(shape, members, n, stop, level)).collect();
     for (k, r) in general_out.into_iter().chain(fused_out.into_iter().flatten()) {
         out[k] = Some(r);
     }
@@ -98,8 +106,8 @@ pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<Ato
 }
 
 /// Members a chunk steps together: two vectors of the level's float64 lanes (`Two`).
-fn chunk_width() -> usize {
-    2 * simd::dispatch(simd::level(), Lanes)
+fn chunk_width(level: Level) -> usize {
+    2 * simd::dispatch(level, Lanes)
 }
 
 /// The float64 lanes of the level (1, 2, 4 or 8).
@@ -119,6 +127,7 @@ fn step_chunk<V: Vector>(
     members: Members<'_, V>,
     n: u64,
     stop: &Arc<AtomicBool>,
+    level: Level,
 ) -> Vec<(usize, Result<Checkpoint>)> {
     let mut out = Vec::with_capacity(members.len());
     let mut running: Vec<(usize, &mut World<V>, Checkpoint)> = Vec::with_capacity(members.len());
@@ -135,8 +144,8 @@ fn step_chunk<V: Vector>(
     if running.is_empty() {
         return out;
     }
-    let mut pack = Pack::gather(shape, running.iter_mut().map(|(_, w, _)| &mut **w));
-    let finished = simd::dispatch(simd::level(), Run { pack: &mut pack, steps: n, stop });
+    let mut pack = Pack::gather(shape, level, running.iter_mut().map(|(_, w, _)| &mut **w));
+    let finished = simd::dispatch(level, Run { pack: &mut pack, steps: n, stop });
     for (lane, (k, w, cp)) in running.into_iter().enumerate() {
         if !finished {
             let rolled_back_to = w.rollback(cp);
@@ -177,8 +186,8 @@ struct Pack {
 }
 
 impl Pack {
-    fn gather<'a, V: Vector + 'a>(shape: Shape, worlds: impl Iterator<Item = &'a mut World<V>>) -> Pack {
-        let lanes = chunk_width();
+    fn gather<'a, V: Vector + 'a>(shape: Shape, level: Level, worlds: impl Iterator<Item = &'a mut World<V>>) -> Pack {
+        let lanes = chunk_width(level);
         let n = shape.n;
         let mut p = Pack {
             shape,
@@ -559,8 +568,8 @@ mod tests {
     /// without softening, uniform gravity and a pinned body; and again after a second call
     /// (the written-back force cache).
     fn same_bits_as_alone<V: Vector>() {
+        // Each level is passed to the call, never set process-wide: tests run side by side.
         for level in simd::Level::available() {
-            simd::set_level(Some(level)).unwrap();
             for integrator in ["verlet", "yoshida4"] {
                 for (softening, extra) in [(0.0, false), (0.05, true)] {
                     let make = |k: usize| three::<V>(integrator, 1e-3 * k as f64, softening, extra);
@@ -572,7 +581,7 @@ mod tests {
                         for w in &mut alone {
                             w.step(n).unwrap();
                         }
-                        let out = step_worlds(batch.iter_mut().collect(), n, &stop);
+                        let out = step_worlds(batch.iter_mut().collect(), n, &stop, level);
                         for (w, o) in batch.iter_mut().zip(out) {
                             w.release(o.unwrap());
                         }
@@ -583,7 +592,6 @@ mod tests {
                 }
             }
         }
-        simd::set_level(None).unwrap();
     }
 
     #[test]
@@ -614,7 +622,7 @@ mod tests {
         let alone = twin.step(50);
         assert!(matches!(alone, Err(Error::Diverged { .. })));
         let stop = Arc::new(AtomicBool::new(false));
-        let out = step_worlds(ws.iter_mut().collect(), 50, &stop);
+        let out = step_worlds(ws.iter_mut().collect(), 50, &stop, simd::level());
         for (k, o) in out.into_iter().enumerate() {
             if k == 3 {
                 assert_eq!(format!("{:?}", o.err()), format!("{:?}", alone.as_ref().err()));
@@ -626,15 +634,17 @@ mod tests {
         assert_eq!(bits(&ws[3]), bits(&twin));
     }
 
-    /// A stop flag set before the call stops every fused member, rolled back.
+    /// A stop flag set before the call stops every fused member, rolled back, at every level.
     #[test]
     fn a_set_stop_flag_rolls_every_member_back() {
-        let mut ws: Vec<World<DVec3>> = (0..3).map(|k| three("verlet", 1e-3 * k as f64, 0.0, false)).collect();
-        let before: Vec<_> = ws.iter().map(bits).collect();
-        let stop = Arc::new(AtomicBool::new(true));
-        let out = step_worlds(ws.iter_mut().collect(), 1000, &stop);
-        assert!(out.iter().all(|o| matches!(o, Err(Error::Interrupted { .. }))));
-        assert_eq!(ws.iter().map(bits).collect::<Vec<_>>(), before);
+        for level in simd::Level::available() {
+            let mut ws: Vec<World<DVec3>> = (0..3).map(|k| three("verlet", 1e-3 * k as f64, 0.0, false)).collect();
+            let before: Vec<_> = ws.iter().map(bits).collect();
+            let stop = Arc::new(AtomicBool::new(true));
+            let out = step_worlds(ws.iter_mut().collect(), 1000, &stop, level);
+            assert!(out.iter().all(|o| matches!(o, Err(Error::Interrupted { .. }))), "{level:?}");
+            assert_eq!(ws.iter().map(bits).collect::<Vec<_>>(), before, "{level:?}");
+        }
     }
 
     /// What the kernel does not fuse: other integrators, drag, single precision, too many bodies.

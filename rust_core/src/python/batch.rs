@@ -57,10 +57,10 @@ fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Vec<
     let d3 = inners.iter().all(|i| matches!(i, Inner::D3(_)));
     if d2 {
         let worlds = inners.into_iter().filter_map(|i| if let Inner::D2(w) = i { Some(w) } else { None }).collect();
-        crate::batch::step_worlds(worlds, n, stop)
+        crate::batch::step_worlds(worlds, n, stop, crate::simd::level())
     } else if d3 {
         let worlds = inners.into_iter().filter_map(|i| if let Inner::D3(w) = i { Some(w) } else { None }).collect();
-        crate::batch::step_worlds(worlds, n, stop)
+        crate::batch::step_worlds(worlds, n, stop, crate::simd::level())
     } else {
         inners.into_par_iter().map(|inner| with_sim!(inner, s => s.step_checkpointed(n, stop))).collect()
     }
