@@ -110,6 +110,10 @@ class Batch:
         self._members: tuple[Scene, ...] = tuple(members)
         #: Retired members: index -> the :class:`~physcore.SimulationDiverged` it raised.
         self.diverged: dict[int, SimulationDiverged] = {}
+        # What a call reads of every member, gathered once (a scene keeps its core simulation
+        # and its lock for life): a call's Python work per member is then a few list steps.
+        self._sims = [s._raw_sim for s in members]
+        self._locks = [s._lock for s in members]
 
     # ------------------------------------------------------------------------ building
     @classmethod
@@ -164,7 +168,7 @@ class Batch:
         takes it (:meth:`Scene._set_reference_energy`), for members whose locks the caller
         holds: all at once in the core (the same additions, in parallel, the GIL released). The
         members whose books could not be prepared are returned, their reference not taken."""
-        refs = _core.reference_energies([s._sim for s in fresh], self._threads)
+        refs = _core.reference_energies([s._raw_sim for s in fresh], self._threads)
         missing = []
         for s, r in zip(fresh, refs, strict=True):
             if r is None:  # its books could not be prepared (memory): read alone, which says why
@@ -196,11 +200,12 @@ class Batch:
             As :meth:`Scene.step` warns, for a member with contacts stepping far past their step.
         """
         n = _check.int_in_range("n", n, 0, (1 << 63) - 1)
-        live = [k for k in range(len(self)) if k not in self.diverged]
-        scenes = [self._members[k] for k in live]
-        for s in scenes:
-            if n > (1 << 63) - 1 - s.step_count:
-                raise InvalidInputError(f"n: {n} more steps would take a member's step count past 2**63 - 1")
+        if self.diverged:
+            live = [k for k in range(len(self)) if k not in self.diverged]
+            scenes = [self._members[k] for k in live]
+            sims, locks = [self._sims[k] for k in live], [self._locks[k] for k in live]
+        else:
+            live, scenes, sims, locks = None, self._members, self._sims, self._locks
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
         fresh = [s for s in scenes if s._e0 is None]
@@ -210,26 +215,26 @@ class Batch:
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
                 s._warn_contact_step()  # as Scene.step warns (ContactStepWarning)
-        taken = []
+        taken = 0
         try:
-            for s in scenes:
-                if not s._lock.acquire(blocking=False):
+            for lock in locks:
+                if not lock.acquire(blocking=False):
                     raise SceneBusyError("a member of this Batch is being stepped by another thread")
-                taken.append(s)
+                taken += 1
             missing = self._set_reference_energies([s for s in fresh if s._e0 is None])
-            errors = None if missing else _core.step_batch([s._sim for s in scenes], n, self._threads)
+            # The core checks n against every member's step count before stepping any.
+            failed = None if missing else _core.step_batch(sims, n, self._threads)
         finally:
-            for s in taken:
-                s._lock.release()
-        if errors is None:  # nothing stepped: read those books alone (raising what alone raises)
+            for lock in locks[:taken]:
+                lock.release()
+        if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
                 s._set_reference_energy()
             return self.step(n)
-        for k, e in zip(live, errors, strict=True):
-            if e is not None:
-                if not isinstance(e, SimulationDiverged):
-                    raise e
-                self.diverged[k] = e
+        for j, e in failed:
+            if not isinstance(e, SimulationDiverged):
+                raise e
+            self.diverged[j if live is None else live[j]] = e
 
     # ------------------------------------------------------------------------ state
     @property

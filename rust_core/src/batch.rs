@@ -25,7 +25,7 @@ use crate::integrators::yoshida::{W0, W1};
 use crate::simd::{self, Kernel, Level, Simd, P};
 use crate::terms::pairwise_small::{small_sum, Lane, SMALL};
 use crate::vector::{Real, Vector};
-use crate::world::{Begun, Checkpoint, World};
+use crate::world::{Checkpoint, World};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -63,31 +63,88 @@ type Members<'a, V> = Vec<(usize, &'a mut World<V>)>;
 /// Steps between two reads of the stop flag.
 const POLL: u64 = 256;
 
+/// What one world's part of a call came to.
+enum Outcome {
+    /// Its general step ran: the checkpoint at the call's start.
+    Stepped(Checkpoint),
+    /// The fused kernel stepped it in lane `lane` of `Call::packs[pack]`; nothing of it has
+    /// been written to the world yet (`Call::end`).
+    Fused { pack: usize, lane: usize },
+    /// It failed as it would alone, and is back where the call started (or was never changed).
+    Failed(Error),
+    /// `Call::end` has run for it.
+    Ended,
+}
+
+/// A call of `step_worlds`, not yet ended: each world's part is ended with `Call::end`, kept
+/// (a fused member written back, a checkpoint released) or undone (back where the call
+/// started). So a fused member needs no checkpoint: it is not touched until it is kept, and a
+/// call undone after the kernel ran (a signal arriving as it finished) just drops its packs.
+pub struct Call {
+    outcomes: Vec<Outcome>,
+    packs: Vec<Pack>,
+    n: u64,
+}
+
+impl Call {
+    /// A call whose worlds all took their general step (`World::step_checkpointed`).
+    pub fn general(outcomes: Vec<Result<Checkpoint>>, n: u64) -> Call {
+        let outcomes = outcomes.into_iter().map(|o| o.map_or_else(Outcome::Failed, Outcome::Stepped)).collect();
+        Call { outcomes, packs: Vec::new(), n }
+    }
+
+    /// The number of worlds in the call.
+    pub fn len(&self) -> usize {
+        self.outcomes.len()
+    }
+
+    /// Whether the call has no world.
+    pub fn is_empty(&self) -> bool {
+        self.outcomes.is_empty()
+    }
+
+    /// Ends world `k`'s part (`world` is the call's world `k`). `keep`: its `n` steps stay
+    /// (a fused member is written back as its general step would have left it) and this is
+    /// `Ok`, or the error it failed with (it is back where the call started). Not `keep`: it is
+    /// back where the call started, and this is `Ok`. A second end of the same world does
+    /// nothing.
+    pub fn end<V: Vector>(&mut self, k: usize, world: &mut World<V>, keep: bool) -> Result<()> {
+        match std::mem::replace(&mut self.outcomes[k], Outcome::Ended) {
+            Outcome::Stepped(cp) if keep => world.release(cp),
+            Outcome::Stepped(cp) => {
+                world.rollback(cp);
+            }
+            Outcome::Fused { pack, lane } if keep => self.packs[pack].scatter(lane, world, self.n),
+            Outcome::Failed(e) if keep => return Err(e),
+            Outcome::Fused { .. } | Outcome::Failed(_) | Outcome::Ended => {}
+        }
+        Ok(())
+    }
+
+    /// Ends every world's part, keeping it (`end`): per world, `Ok` or its error.
+    pub fn keep_all<V: Vector>(mut self, worlds: Vec<&mut World<V>>) -> Vec<Result<()>> {
+        worlds.into_iter().enumerate().map(|(k, w)| self.end(k, w, true)).collect()
+    }
+}
+
 /// Steps each of `worlds` `n` steps, as `World::step_checkpointed` does, in parallel on the
 /// current rayon pool: the members `World::fused_shape` admits through the fused kernel at
-/// `level`, the others by their general step. Per world, its outcome: the checkpoint at the
-/// call's start (it stepped) or its error (it rolled itself back). Results do not depend on the
-/// pool's size. The level is an argument, read once by the caller: the chunks' width, the packs
-/// and the kernel must agree on it, and the process-wide level may be changed meanwhile (by
-/// another thread, or a test of another level running beside this one).
-pub fn step_worlds<V: Vector>(
-    worlds: Vec<&mut World<V>>,
-    n: u64,
-    stop: &Arc<AtomicBool>,
-    level: Level,
-) -> Vec<Result<Checkpoint>> {
+/// `level`, the others by their general step; the caller ends the call (`Call::end`). Results
+/// do not depend on the pool's size. The level is an argument, read once by the caller: the
+/// chunks' width, the packs and the kernel must agree on it, and the process-wide level may
+/// be changed meanwhile (by another thread, or a test of another level running beside this one).
+pub fn step_worlds<V: Vector>(worlds: Vec<&mut World<V>>, n: u64, stop: &Arc<AtomicBool>, level: Level) -> Call {
     let count = worlds.len();
-    let mut out: Vec<Option<Result<Checkpoint>>> = (0..count).map(|_| None).collect();
     let mut general = Vec::new();
     let mut groups: BTreeMap<Shape, Members<'_, V>> = BTreeMap::new();
     for (k, w) in worlds.into_iter().enumerate() {
-        match w.fused_shape() {
+        // (No steps: nothing for the kernel; the general step's bookkeeping is all there is.)
+        match w.fused_shape().filter(|_| n > 0) {
             Some(shape) => groups.entry(shape).or_default().push((k, w)),
             None => general.push((k, w)),
         }
     }
     let lanes = chunk_width(level);
-    // Chunks of `lanes` members of one shape, each begun (checks, checkpoint) on its own task.
     let mut chunks: Vec<(Shape, Members<'_, V>)> = Vec::new();
     for (shape, members) in groups {
         let mut it = members.into_iter().peekable();
@@ -97,12 +154,24 @@ pub fn step_worlds<V: Vector>(
     }
     let general_out: Vec<(usize, Result<Checkpoint>)> =
         general.into_par_iter().map(|(k, w)| (k, w.step_checkpointed(n, stop))).collect();
-    let fused_out: Vec<Vec<(usize, Result<Checkpoint>)>> =
+    let fused_out: Vec<Chunk> =
         chunks.into_par_iter().map(|(shape, members)| step_chunk(shape, members, n, stop, level)).collect();
-    for (k, r) in general_out.into_iter().chain(fused_out.into_iter().flatten()) {
-        out[k] = Some(r);
+    let mut outcomes: Vec<Outcome> = (0..count).map(|_| Outcome::Ended).collect();
+    for (k, r) in general_out {
+        outcomes[k] = r.map_or_else(Outcome::Failed, Outcome::Stepped);
     }
-    out.into_iter().map(|r| r.expect("every world has an outcome")).collect()
+    let mut packs = Vec::with_capacity(fused_out.len());
+    for chunk in fused_out {
+        for (k, o) in chunk.outcomes {
+            // A fused outcome's pack is this chunk's, numbered here.
+            outcomes[k] = match o {
+                Outcome::Fused { lane, .. } => Outcome::Fused { pack: packs.len(), lane },
+                o => o,
+            };
+        }
+        packs.extend(chunk.pack);
+    }
+    Call { outcomes, packs, n }
 }
 
 /// Members a chunk steps together: two vectors of the level's float64 lanes (`Two`).
@@ -120,46 +189,46 @@ impl Kernel for Lanes {
     }
 }
 
-/// One chunk: each member begun, the fused kernel over those that run, then each written back
-/// (or stepped again alone where it ended non-finite, or rolled back where the call stopped).
-fn step_chunk<V: Vector>(
-    shape: Shape,
-    members: Members<'_, V>,
-    n: u64,
-    stop: &Arc<AtomicBool>,
-    level: Level,
-) -> Vec<(usize, Result<Checkpoint>)> {
-    let mut out = Vec::with_capacity(members.len());
-    let mut running: Vec<(usize, &mut World<V>, Checkpoint)> = Vec::with_capacity(members.len());
+/// One chunk's part of a call: each member's outcome (a fused one names its lane of `pack`).
+struct Chunk {
+    outcomes: Vec<(usize, Outcome)>,
+    pack: Option<Pack>,
+}
+
+/// One chunk: each member checked (`World::begin_fused`), the fused kernel over those that run,
+/// into a pack that `Call::end` writes back; a member that ended non-finite is stepped again
+/// alone by its general step (which finds the step, and rolls it back, as alone).
+fn step_chunk<V: Vector>(shape: Shape, members: Members<'_, V>, n: u64, stop: &Arc<AtomicBool>, level: Level) -> Chunk {
+    let mut outcomes = Vec::with_capacity(members.len());
+    let mut running: Vec<(usize, &mut World<V>)> = Vec::with_capacity(members.len());
     for (k, w) in members {
-        match w.begin_steps(n, false) {
-            Err(e) => out.push((k, Err(e))),
-            Ok(Begun::Done(cp)) => out.push((k, Ok(cp))),
-            Ok(Begun::Run(cp)) => match w.check_particles_dt() {
-                Err(e) => out.push((k, Err(w.fail_call(cp, e)))),
-                Ok(()) => running.push((k, w, cp)),
-            },
+        match w.begin_fused(n) {
+            Err(e) => outcomes.push((k, Outcome::Failed(e))),
+            Ok(()) => running.push((k, w)),
         }
     }
     if running.is_empty() {
-        return out;
+        return Chunk { outcomes, pack: None };
     }
-    let mut pack = Pack::gather(shape, level, running.iter_mut().map(|(_, w, _)| &mut **w));
-    let finished = simd::dispatch(level, Run { pack: &mut pack, steps: n, stop });
-    for (lane, (k, w, cp)) in running.into_iter().enumerate() {
-        if !finished {
-            let rolled_back_to = w.rollback(cp);
-            out.push((k, Err(Error::Interrupted { rolled_back_to })));
-        } else if pack.finite(lane) {
-            pack.scatter(lane, w, n);
-            out.push((k, Ok(cp)));
-        } else {
-            // Diverged in the kernel: the general step finds where, and rolls it back, as alone.
-            w.release(cp);
-            out.push((k, w.step_checkpointed(n, stop)));
+    let mut pack = Pack::gather(shape, level, running.iter_mut().map(|(_, w)| &mut **w));
+    if !simd::dispatch(level, Run { pack: &mut pack, steps: n, stop }) {
+        // Stopped: nothing was written to the members.
+        for (k, w) in running {
+            outcomes.push((k, Outcome::Failed(Error::Interrupted { rolled_back_to: w.steps() })));
         }
+        return Chunk { outcomes, pack: None };
     }
-    out
+    for (lane, (k, w)) in running.into_iter().enumerate() {
+        outcomes.push((
+            k,
+            if pack.finite(lane) {
+                Outcome::Fused { pack: 0, lane }
+            } else {
+                w.step_checkpointed(n, stop).map_or_else(Outcome::Failed, Outcome::Stepped)
+            },
+        ));
+    }
+    Chunk { outcomes, pack: Some(pack) }
 }
 
 /// A chunk's members in structure-of-arrays form, member `l` in lane `l` of every row
@@ -181,6 +250,8 @@ struct Pack {
     g: Vec<f64>,
     eps2: Vec<f64>,
     dt: Vec<f64>,
+    /// Each member's clock, advanced by dt a step (the general step's `t += dt`).
+    t: Vec<f64>,
     /// Force evaluations the kernel adds to each member's count.
     evals: Vec<u64>,
 }
@@ -202,11 +273,12 @@ impl Pack {
             g: vec![0.0; 3 * lanes],
             eps2: vec![0.0; lanes],
             dt: vec![0.0; lanes],
+            t: vec![0.0; lanes],
             evals: Vec::new(),
         };
         let mut members = 0;
         for (l, world) in worlds.enumerate() {
-            let dt = world.dt;
+            let (dt, t) = (world.dt, world.time());
             let (sys, integrator) = world.particles_mut().fused_parts();
             let (c, eps2, w) = sys
                 .forces
@@ -214,13 +286,14 @@ impl Pack {
                 .iter()
                 .find_map(|t| t.small_pairwise(&sys.model, n))
                 .expect("a fused member has its small pairwise sum");
-            let cache = integrator.cache();
+            // The force cache, read in place (a fused member's integrator keeps one).
+            let cache = integrator.cache_ref().map(|(f, _)| f);
             for i in 0..n {
                 for k in 0..V::DIM {
                     let at = (3 * i + k) * lanes + l;
                     p.x[at] = sys.state.x[i].comp(k);
                     p.v[at] = sys.state.v[i].comp(k);
-                    if let Some((f, _)) = &cache {
+                    if let Some(f) = cache {
                         p.f[at] = f[i].comp(k);
                     }
                 }
@@ -234,6 +307,7 @@ impl Pack {
             p.cached[l] = if cache.is_some() { 1.0 } else { 0.0 };
             p.eps2[l] = eps2;
             p.dt[l] = dt;
+            p.t[l] = t;
             p.evals.push(u64::from(cache.is_none()));
             members += 1;
         }
@@ -247,6 +321,7 @@ impl Pack {
             p.cached[l] = p.cached[0];
             p.eps2[l] = p.eps2[0];
             p.dt[l] = p.dt[0];
+            p.t[l] = p.t[0];
         }
         p
     }
@@ -276,13 +351,15 @@ impl Pack {
             sys.state.x[i] = comps(&self.x, i);
             sys.state.v[i] = comps(&self.v, i);
         }
-        let f: Vec<V> = (0..self.shape.n).map(|i| comps(&self.f, i)).collect();
-        let p = sys.forces.last_power().to_vec();
-        let n_terms = sys.forces.terms.len();
-        let ok = integrator.set_cache(f, p, &sys.state.v, n_terms);
-        debug_assert!(ok, "the fused cache fits its integrator");
+        // Into the integrator's own buffers: they allocate only the first time.
+        let (f, p, valid) = integrator.cache_parts().expect("a fused member's integrator keeps a force cache");
+        f.clear();
+        f.extend((0..self.shape.n).map(|i| comps(&self.f, i)));
+        p.clear();
+        p.extend_from_slice(sys.forces.last_power());
+        *valid = true;
         sys.forces.evaluations += self.evals[lane] + n * self.shape.scheme.evals_per_step();
-        world.count_steps(n);
+        world.end_fused(self.t[lane], n);
     }
 }
 
@@ -405,7 +482,14 @@ impl<L: Lane, const D: usize, const N: usize> Fixed<L, D, N> {
     /// `steps` steps of `scheme` (`subs`: each velocity Verlet substep's dt and 0.5 dt), reading
     /// `stop` every `POLL` steps; false if it was set.
     #[inline(always)]
-    fn run<const G0: bool>(&self, m: &mut Moving<L>, subs: &[(L, L)], steps: u64, stop: &AtomicBool) -> bool {
+    fn run<const G0: bool>(
+        &self,
+        m: &mut Moving<L>,
+        clock: &mut (L, L),
+        subs: &[(L, L)],
+        steps: u64,
+        stop: &AtomicBool,
+    ) -> bool {
         let mut done = 0;
         while done < steps {
             if stop.load(Ordering::Relaxed) {
@@ -416,6 +500,7 @@ impl<L: Lane, const D: usize, const N: usize> Fixed<L, D, N> {
                 for &(dt, half) in subs {
                     self.verlet::<G0>(m, dt, half);
                 }
+                clock.0 = clock.0 + clock.1;
             }
             done += run;
         }
@@ -500,10 +585,11 @@ impl Run<'_> {
             Scheme::Yoshida4 => vec![(d1, half * d1), (d0, half * d0), (d1, half * d1)],
         };
         let g_zero = p.g.iter().all(|&g| g == 0.0);
+        let mut clock = (ld(&p.t, 0), dt);
         let finished = if g_zero {
-            fixed.run::<true>(&mut m, &subs, self.steps, self.stop)
+            fixed.run::<true>(&mut m, &mut clock, &subs, self.steps, self.stop)
         } else {
-            fixed.run::<false>(&mut m, &subs, self.steps, self.stop)
+            fixed.run::<false>(&mut m, &mut clock, &subs, self.steps, self.stop)
         };
         if !finished {
             return false;
@@ -513,6 +599,7 @@ impl Run<'_> {
             v.0.store(&mut r[..l]);
             v.1.store(&mut r[l..]);
         };
+        st(&mut p.t, 0, clock.0);
         for i in 0..n {
             for k in 0..D {
                 st(&mut p.x, 3 * i + k, m.x[i][k]);
@@ -536,7 +623,7 @@ mod tests {
     /// A three-body world (figure-eight-like, perturbed by `eps`), optionally with uniform
     /// gravity and a pinned body.
     fn three<V: Vector>(integrator: &str, eps: f64, softening: f64, extra: bool) -> World<V> {
-        let mut w = World::<V>::new(integrator, 1e-3 * (1.0 + eps), Some(1)).unwrap();
+        let mut w = World::<V>::new(integrator, 1e-3 * (1.0 + eps), None).unwrap();
         let c = |a: [f64; 3]| V::from_slice(&a[..V::DIM]);
         let x = vec![c([0.97000436 + eps, -0.24308753, 0.1]), c([-0.97000436, 0.24308753, -0.1]), c([0.0, 0.0, 0.0])];
         let v = vec![
@@ -581,9 +668,9 @@ mod tests {
                         for w in &mut alone {
                             w.step(n).unwrap();
                         }
-                        let out = step_worlds(batch.iter_mut().collect(), n, &stop, level);
-                        for (w, o) in batch.iter_mut().zip(out) {
-                            w.release(o.unwrap());
+                        let call = step_worlds(batch.iter_mut().collect(), n, &stop, level);
+                        for r in call.keep_all(batch.iter_mut().collect()) {
+                            r.unwrap();
                         }
                         for (k, (a, b)) in alone.iter().zip(&batch).enumerate() {
                             assert_eq!(bits(a), bits(b), "{level:?} {integrator} softening {softening} member {k}");
@@ -622,12 +709,12 @@ mod tests {
         let alone = twin.step(50);
         assert!(matches!(alone, Err(Error::Diverged { .. })));
         let stop = Arc::new(AtomicBool::new(false));
-        let out = step_worlds(ws.iter_mut().collect(), 50, &stop, simd::level());
-        for (k, o) in out.into_iter().enumerate() {
+        let call = step_worlds(ws.iter_mut().collect(), 50, &stop, simd::level());
+        for (k, o) in call.keep_all(ws.iter_mut().collect()).into_iter().enumerate() {
             if k == 3 {
                 assert_eq!(format!("{:?}", o.err()), format!("{:?}", alone.as_ref().err()));
             } else {
-                ws[k].release(o.unwrap());
+                o.unwrap();
                 assert_eq!(ws[k].steps(), 50);
             }
         }
@@ -641,10 +728,98 @@ mod tests {
             let mut ws: Vec<World<DVec3>> = (0..3).map(|k| three("verlet", 1e-3 * k as f64, 0.0, false)).collect();
             let before: Vec<_> = ws.iter().map(bits).collect();
             let stop = Arc::new(AtomicBool::new(true));
-            let out = step_worlds(ws.iter_mut().collect(), 1000, &stop, level);
+            let call = step_worlds(ws.iter_mut().collect(), 1000, &stop, level);
+            let out = call.keep_all(ws.iter_mut().collect());
             assert!(out.iter().all(|o| matches!(o, Err(Error::Interrupted { .. }))), "{level:?}");
             assert_eq!(ws.iter().map(bits).collect::<Vec<_>>(), before, "{level:?}");
         }
+    }
+
+    /// A call undone after it ran (a signal as it finished) leaves every member where it
+    /// started, fused (never written) or general (rolled back to its checkpoint); the next
+    /// call then gives the bits of stepping alone, force cache included. (The general step's
+    /// count of force evaluations keeps the work of an undone call, as an interrupted
+    /// `World::step` does; a fused member's, never written, stays its count alone.)
+    #[test]
+    fn an_undone_call_leaves_every_member_as_it_was() {
+        let make = |k: usize| three::<DVec2>(if k == 2 { "rk4" } else { "yoshida4" }, 1e-3 * k as f64, 0.0, false);
+        let mut ws: Vec<World<DVec2>> = (0..5).map(make).collect();
+        let mut alone: Vec<World<DVec2>> = (0..5).map(make).collect();
+        let stop = Arc::new(AtomicBool::new(false));
+        for w in ws.iter_mut().chain(alone.iter_mut()) {
+            w.step(10).unwrap(); // a force cache to keep
+        }
+        let before: Vec<_> = ws.iter().map(bits).collect();
+        let mut call = step_worlds(ws.iter_mut().collect(), 100, &stop, simd::level());
+        assert_eq!(call.len(), 5);
+        for (k, w) in ws.iter_mut().enumerate() {
+            call.end(k, w, false).unwrap();
+            call.end(k, w, true).unwrap(); // a second end does nothing
+        }
+        let mut after: Vec<_> = ws.iter().map(bits).collect();
+        assert_eq!(after[2].pop(), before[2].last().map(|e| e + 400)); // rk4: 4 evaluations a step
+        after[2].push(before[2][before[2].len() - 1]);
+        assert_eq!(after, before);
+        for w in &mut alone {
+            w.step(100).unwrap();
+        }
+        let call = step_worlds(ws.iter_mut().collect(), 100, &stop, simd::level());
+        for r in call.keep_all(ws.iter_mut().collect()) {
+            r.unwrap();
+        }
+        let (mut got, want): (Vec<_>, Vec<_>) = (ws.iter().map(bits).collect(), alone.iter().map(bits).collect());
+        *got[2].last_mut().unwrap() -= 400;
+        assert_eq!(got, want);
+    }
+
+    /// Where a call's time goes around the kernel, per member (10,000 three-body members):
+    /// `cargo test --release -p physcore-core time_the_members -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn time_the_members() {
+        use std::time::Instant;
+        let m = 10_000;
+        let mut ws: Vec<World<DVec2>> = (0..m).map(|k| three("yoshida4", 1e-7 * k as f64, 0.0, false)).collect();
+        let stop = Arc::new(AtomicBool::new(false));
+        let level = simd::level();
+        let call = |ws: &mut Vec<World<DVec2>>, n: u64| {
+            let t = Instant::now();
+            let call = step_worlds(ws.iter_mut().collect(), n, &stop, level);
+            let dt = t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            for r in call.keep_all(ws.iter_mut().collect()) {
+                r.unwrap();
+            }
+            (dt, t.elapsed().as_secs_f64())
+        };
+        call(&mut ws, 1);
+        for n in [0, 1, 1, 100] {
+            let (dt, keep) = call(&mut ws, n);
+            println!(
+                "step_worlds n = {n}: {:.2} us a member, keep_all {:.2} us",
+                dt * 1e6 / m as f64,
+                keep * 1e6 / m as f64
+            );
+        }
+        let t = Instant::now();
+        let shapes = ws.iter().filter(|w| w.fused_shape().is_some()).count();
+        println!("fused_shape: {:.3} us ({shapes})", t.elapsed().as_secs_f64() * 1e6 / m as f64);
+        let t = Instant::now();
+        for w in ws.iter_mut() {
+            let cp = w.checkpoint().unwrap();
+            w.release(cp);
+        }
+        println!("checkpoint + release: {:.3} us", t.elapsed().as_secs_f64() * 1e6 / m as f64);
+        let shape = ws[0].fused_shape().unwrap();
+        let lanes = chunk_width(level);
+        let t = Instant::now();
+        for chunk in ws.chunks_mut(lanes) {
+            let pack = Pack::gather(shape, level, chunk.iter_mut());
+            for (l, w) in chunk.iter_mut().enumerate() {
+                pack.scatter(l, w, 0);
+            }
+        }
+        println!("gather + scatter: {:.3} us", t.elapsed().as_secs_f64() * 1e6 / m as f64);
     }
 
     /// What the kernel does not fuse: other integrators, drag, single precision, too many bodies.

@@ -28,15 +28,15 @@ use std::time::Duration;
 /// The largest step count: files store it as an int64, and it must never wrap.
 pub const MAX_STEPS: u64 = i64::MAX as u64;
 
-/// What `World::rollback` restores (see `World::checkpoint`).
 /// How `World::begin_steps` left a call.
-pub(crate) enum Begun {
+enum Begun {
     /// Nothing to step: the call is done.
     Done(Checkpoint),
     /// Steps to run, from this checkpoint.
     Run(Checkpoint),
 }
 
+/// What `World::rollback` restores (see `World::checkpoint`).
 pub struct Checkpoint {
     snapshots: Vec<Snapshot>,
     t: Real,
@@ -247,7 +247,7 @@ impl<V: Vector> World<V> {
     /// caller can still undo the call (`rollback`): the Python binding does when a signal
     /// arrived while the call was finishing.
     pub fn step_checkpointed(&mut self, n: u64, stop: &Arc<AtomicBool>) -> Result<Checkpoint> {
-        match self.begin_steps(n, true)? {
+        match self.begin_steps(n)? {
             Begun::Done(cp) => Ok(cp),
             Begun::Run(cp) => match self.with_stop(stop, |s| s.step_inner(n, stop)) {
                 Ok(()) => Ok(cp),
@@ -259,19 +259,13 @@ impl<V: Vector> World<V> {
     /// The start of `step_checkpointed(n)`: the call's checks, the reservations and the
     /// checkpoint. `Done` where nothing is left to step (n = 0, or nothing to step: the clock
     /// has advanced already), else `Run`: the caller steps `n` steps, and rolls back to the
-    /// checkpoint (`fail`) on an error. `room`: check that the general step's transient buffers
-    /// can be had (`room`; a 1 MB trial allocation, which a caller that allocates nothing per
-    /// step, the batch's fused kernel, skips: it costs more than a fused member's whole call).
-    pub(crate) fn begin_steps(&mut self, n: u64, room: bool) -> Result<Begun> {
-        if n > MAX_STEPS - self.step {
-            return Err(invalid(
-                "n",
-                format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.step),
-            ));
-        }
+    /// checkpoint (`fail`) on an error. (The batch's fused kernel allocates nothing per step
+    /// and writes nothing before it keeps its result: it begins with `begin_fused` instead.)
+    fn begin_steps(&mut self, n: u64) -> Result<Begun> {
+        self.check_n(n)?;
         self.prepare()?;
         let cp = self.checkpoint()?;
-        if let Err(e) = if room { self.room() } else { Ok(()) } {
+        if let Err(e) = self.room() {
             self.release(cp);
             return Err(e);
         }
@@ -293,23 +287,30 @@ impl<V: Vector> World<V> {
         (self.others.is_empty() && self.couplings.is_empty()).then(|| self.particles.fused_shape()).flatten()
     }
 
-    /// `step_inner`'s check of dt, for a caller that steps the particles itself (`crate::batch`).
-    pub(crate) fn check_particles_dt(&self) -> Result<()> {
+    /// The checks `step_checkpointed(n)` makes before its first step, for a caller that steps
+    /// the particles itself and writes nothing to the world until it keeps the result
+    /// (`crate::batch`): the step count, the particles' dt. No checkpoint: nothing changes here.
+    pub(crate) fn begin_fused(&self, n: u64) -> Result<()> {
+        self.check_n(n)?;
         self.particles.check_dt(self.dt)
     }
 
-    /// The end of a fused run of `n` steps (`crate::batch`): the clock counts them one by one,
-    /// as `step_loop` does, for the same bits.
-    pub(crate) fn count_steps(&mut self, n: u64) {
-        for _ in 0..n {
-            self.t += self.dt;
-            self.step += 1;
+    /// `n` more steps keep the step count within 2**63 - 1.
+    fn check_n(&self, n: u64) -> Result<()> {
+        if n > MAX_STEPS - self.step {
+            return Err(invalid(
+                "n",
+                format!("{n} more steps would take the step count past 2**63 - 1 (it is {})", self.step),
+            ));
         }
+        Ok(())
     }
 
-    /// Rolls a failed call back to `cp` (`fail`, for `crate::batch`).
-    pub(crate) fn fail_call(&mut self, cp: Checkpoint, e: Error) -> Error {
-        self.fail(cp, e)
+    /// The end of a fused run of `n` steps (`crate::batch`): the clock `t`, which the kernel
+    /// advanced by dt a step as `step_loop` does (the same bits), and the step count.
+    pub(crate) fn end_fused(&mut self, t: Real, n: u64) {
+        self.t = t;
+        self.step += n;
     }
 
     /// Whether no system has anything to step.

@@ -168,6 +168,19 @@ def _pixels(page) -> str:
     return page.evaluate("document.querySelector('.physcore-widget canvas').toDataURL()")
 
 
+def _settled_box(locator, timeout: float = 15.0) -> dict:
+    """The element's bounding box once it has stood still for 1 s (4 reads 0.25 s apart)."""
+    deadline, last, same = time.monotonic() + timeout, None, 0
+    while time.monotonic() < deadline:
+        box = locator.bounding_box()
+        same = same + 1 if box == last else 0
+        if same >= 4:
+            return box
+        last = box
+        time.sleep(0.25)
+    raise AssertionError(f"the canvas kept moving for {timeout} s (last box {last})")
+
+
 def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
     sync_api, chromium = _needs()
     problems: list[str] = []
@@ -213,19 +226,26 @@ def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
             canvas = page.locator(".physcore-widget canvas").first
             size = page.evaluate("[document.querySelector('.physcore-widget canvas').width, document.querySelector('.physcore-widget canvas').height]")
             # The press is made where the canvas is on the page; the test then waits for the
-            # kernel's answer (each frame carries the held particle, shown as data-grabbed). A
-            # notebook that scrolls between measuring and pressing (JupyterLab re-lays out a
-            # cell when an output lands) moves the canvas under a still pointer: then the box
-            # is measured again and the press made again (a race in this harness, not in the
-            # widget; twice at most, and each box is in the failure message).
-            boxes = []
+            # kernel's answer (each frame carries the held particle, shown as data-grabbed).
+            # JupyterLab re-lays out the notebook while outputs land (the widget widens, a
+            # scroll bar comes and goes): a press measured before such a shift lands beside the
+            # canvas (a CI run's landed on the damping slider). So the box is measured until it
+            # stands still, the point is checked to be the canvas's (elementFromPoint) just
+            # before the press, and a press that grabbed nothing is released and made again
+            # (twice at most; every box and what was at the point are in the failure message).
+            boxes: list = []
             for _attempt in range(3):
                 canvas.evaluate("e => e.scrollIntoView({block: 'center'})")  # in view, clear of pop-ups
-                time.sleep(0.3)
-                box = canvas.bounding_box()
+                box = _settled_box(canvas)
                 boxes.append(box)
                 sx, sy = box["width"] / size[0], box["height"] / size[1]
                 start = (box["x"] + (col + 0.5) * sx, box["y"] + (row + 0.5) * sy)
+                there = page.evaluate("""([x, y]) => { const e = document.elementFromPoint(x, y);
+                    return e === document.querySelector('.physcore-widget canvas') ? 'canvas' : String(e && e.outerHTML).slice(0, 120); }""",
+                                      list(start))
+                if there != "canvas":
+                    boxes.append(f"at the point: {there}")
+                    continue
                 page.mouse.move(*start)
                 page.mouse.down()
                 try:
@@ -233,14 +253,10 @@ def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
                     break
                 except sync_api.TimeoutError:
                     page.mouse.up()
-                    moved_box = canvas.bounding_box()
-                    boxes.append(moved_box)
-                    if moved_box == box:  # the canvas stood still: the press itself missed
-                        raise AssertionError(f"the press at pixel {(col, row)} grabbed nothing; boxes {boxes}, "
-                                             f"status {page.text_content('.physcore-widget .pc-status')!r}") from None
-                    time.sleep(0.5)
+                    boxes.append(canvas.bounding_box())
             else:
-                raise AssertionError(f"the canvas kept moving under the pointer: boxes {boxes}")
+                raise AssertionError(f"the press at pixel {(col, row)} grabbed nothing; boxes {boxes}, "
+                                     f"status {page.text_content('.physcore-widget .pc-status')!r}")
             for k in range(1, 11):
                 page.mouse.move(start[0] + 6 * k * sx, start[1])
                 time.sleep(0.05)

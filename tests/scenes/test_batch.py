@@ -5,6 +5,7 @@ member is rolled back alone and retired while the others go on; Ctrl-C rolls eve
 a saved batch continues bit for bit; bad input is refused by name before anything steps."""
 from __future__ import annotations
 
+import json
 import os
 import pickle
 import signal
@@ -224,6 +225,27 @@ def test_bad_input_is_refused_by_name_before_anything_steps():
     with pytest.raises(TypeError, match="threads"):
         pc.Batch([a, b], threads="2")
     assert a.step_count == 0 and b.step_count == 0
+
+
+def test_n_past_a_members_largest_step_count_is_refused_before_any_member_steps(tmp_path):
+    """The core checks ``n`` against every member's step count before stepping any: a member
+    whose count is near 2**63 - 1 (a scene file may hold one) stops the whole call."""
+    a, b = _fan(2)
+    path = a.save(tmp_path / "a.npz")
+    with np.load(path, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    meta["step"] = 2**63 - 10
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "late.npz", **arrays)
+    late = pc.Scene.load(tmp_path / "late.npz")
+    batch = pc.Batch([b, late])
+    before = batch.positions
+    with pytest.raises(pc.InvalidInputError, match=r"^n: 20 more steps .* 2\*\*63 - 1"):
+        batch.step(20)
+    assert np.array_equal(batch.positions, before) and list(batch.step_count) == [0, 2**63 - 10]
+    batch.step(9)  # up to the largest count: allowed
+    assert list(batch.step_count) == [9, 2**63 - 1]
 
 
 def test_a_batch_renders_as_one_animation_of_its_members_overlaid(tmp_path):

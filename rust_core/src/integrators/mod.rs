@@ -159,6 +159,17 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn try_cache(&self) -> std::result::Result<Option<Cache<V>>, TryReserveError> {
         Ok(self.cache())
     }
+    /// `cache()` borrowed, where the integrator can lend it (`None` also where it has none): a
+    /// checkpoint copies it into buffers it already has instead of allocating two.
+    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
+        None
+    }
+    /// The cache in place, for a caller that steps the particles itself with the same bits
+    /// (the batch's fused kernel): the per-particle forces, the terms' powers there, and
+    /// whether they are valid (the caller sets the three together). `None` if it keeps none.
+    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
+        None
+    }
     /// Restores `cache()`'s output at the state whose velocities are `v`, for a scene with
     /// `n_terms` terms; returns false (and changes nothing) if it does not fit.
     fn set_cache(&mut self, _f: Vec<V>, _p: Vec<Real>, _v: &[V], _n_terms: usize) -> bool {

@@ -95,6 +95,12 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
     }
+    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
+        self.valid.then_some((&self.f[..], &self.p[..]))
+    }
+    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
+        Some((&mut self.f, &mut self.p, &mut self.valid))
+    }
     fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
         if f.len() != v.len() || p.len() != n_terms {
             return false;

@@ -50,6 +50,12 @@ impl<V: Vector> Integrator<V> for Yoshida4<V> {
     fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         self.verlet.try_cache()
     }
+    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
+        self.verlet.cache_ref()
+    }
+    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
+        self.verlet.cache_parts()
+    }
     fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
         self.verlet.set_cache(f, p, v, n_terms)
     }

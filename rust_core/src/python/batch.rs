@@ -12,16 +12,13 @@ use super::errors::*;
 use super::simulation::PySimulation;
 use super::watch::SIGNAL_POLL;
 use super::Inner;
+use crate::batch::Call;
 use crate::error::{invalid, Error};
 use crate::par::SyncPtr;
-use crate::world::Checkpoint;
 use pyo3::prelude::*;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// One member's outcome: its checkpoint (it stepped), or its error (it rolled itself back).
-type Outcome = Result<Checkpoint, Error>;
 
 /// Every simulation of `sims` borrowed mutably for the call; `InvalidInputError` naming `sims`
 /// (its entry) if one is in use (given twice, or being stepped by another thread).
@@ -52,7 +49,7 @@ fn batch_pool(py: Python<'_>, threads: Option<usize>) -> PyResult<Arc<rayon::Thr
 
 /// Steps every member `n` steps on the current pool: through `crate::batch::step_worlds` (its
 /// fused kernel for small N-body members) where all have one dimension, else one by one.
-fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Vec<Outcome> {
+fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Call {
     let d2 = inners.iter().all(|i| matches!(i, Inner::D2(_)));
     let d3 = inners.iter().all(|i| matches!(i, Inner::D3(_)));
     if d2 {
@@ -62,15 +59,19 @@ fn step_members(inners: Vec<&mut Inner>, n: u64, stop: &Arc<AtomicBool>) -> Vec<
         let worlds = inners.into_iter().filter_map(|i| if let Inner::D3(w) = i { Some(w) } else { None }).collect();
         crate::batch::step_worlds(worlds, n, stop, crate::simd::level())
     } else {
-        inners.into_par_iter().map(|inner| with_sim!(inner, s => s.step_checkpointed(n, stop))).collect()
+        Call::general(
+            inners.into_par_iter().map(|inner| with_sim!(inner, s => s.step_checkpointed(n, stop))).collect(),
+            n,
+        )
     }
 }
 
 /// Steps each of `sims` `n` steps (`Simulation.step`), in parallel over members on a pool of
-/// `threads` threads (`None`: all cores). Returns per member `None`, or the exception it would
-/// have raised alone (a `SimulationDiverged`: that member is back where the call started).
-/// Ctrl-C (any exception a signal handler raises) rolls every member back and is raised.
-/// `InvalidInputError` naming `sims` if one simulation is given twice, before anything runs.
+/// `threads` threads (`None`: all cores). Returns `(index, exception)` for each member that
+/// failed as it would have alone (a `SimulationDiverged`: that member is back where the call
+/// started); the others stepped. Ctrl-C (any exception a signal handler raises) rolls every
+/// member back and is raised. Before anything runs: `InvalidInputError` naming `sims` if one
+/// simulation is given twice, naming `n` if it would take a member's step count past 2**63 - 1.
 #[pyfunction]
 #[pyo3(signature = (sims, n, threads=None))]
 pub(super) fn step_batch(
@@ -78,13 +79,17 @@ pub(super) fn step_batch(
     sims: Vec<Bound<'_, PySimulation>>,
     n: u64,
     threads: Option<usize>,
-) -> PyResult<Vec<Option<Py<PyAny>>>> {
+) -> PyResult<Vec<(usize, Py<PyAny>)>> {
     let mut refs = borrow_all(py, &sims)?;
+    if refs.iter_mut().any(|r| n > crate::world::MAX_STEPS - with_sim!(r.inner_mut(), s => s.steps())) {
+        let e = invalid("n", format!("{n} more steps would take a member's step count past 2**63 - 1"));
+        return Err(to_py(py, e));
+    }
     let pool = batch_pool(py, threads)?;
     let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
     let stop = Arc::new(AtomicBool::new(false));
     let mut pending: Option<PyErr> = None;
-    let outcomes: Vec<Outcome> = py.detach(|| {
+    let mut call: Call = py.detach(|| {
         let caller = std::thread::current();
         std::thread::scope(|scope| {
             let job = scope.spawn(|| {
@@ -111,29 +116,22 @@ pub(super) fn step_batch(
         })
     });
     // A signal during the call, or right after it: every member goes back to where it started
-    // (those that stopped on the flag, or diverged, already are).
+    // (those that stopped on the flag, or diverged, already are; a fused member was never
+    // written). Else each member's steps are kept: a fused member written back now.
     if pending.is_none() {
         pending = py.check_signals().err();
     }
-    if let Some(e) = pending {
-        for (r, o) in refs.iter_mut().zip(outcomes) {
-            if let Ok(cp) = o {
-                with_sim!(r.inner_mut(), s => { s.rollback(cp); });
-            }
+    let keep = pending.is_none();
+    let mut failed = Vec::new();
+    for (k, r) in refs.iter_mut().enumerate() {
+        if let Err(e) = with_sim!(r.inner_mut(), s => call.end(k, s, keep)) {
+            failed.push((k, to_py(py, e).into_value(py).into_any()));
         }
-        return Err(e);
     }
-    let mut out = Vec::with_capacity(refs.len());
-    for (r, o) in refs.iter_mut().zip(outcomes) {
-        out.push(match o {
-            Ok(cp) => {
-                with_sim!(r.inner_mut(), s => s.release(cp));
-                None
-            }
-            Err(e) => Some(to_py(py, e).into_value(py).into_any()),
-        });
+    match pending {
+        Some(e) => Err(e),
+        None => Ok(failed),
     }
-    Ok(out)
 }
 
 /// Each of `sims`' energy books reduced as `Scene._set_reference_energy` reduces them in Python
