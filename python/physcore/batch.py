@@ -209,8 +209,8 @@ class Batch:
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
         fresh = [s for s in scenes if s._e0 is None]
-        for s in fresh:
-            if s.n_particles > _REFERENCE_AT_ONCE:
+        if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
+            for s in fresh:
                 s._set_reference_energy()
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
