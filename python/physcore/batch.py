@@ -15,8 +15,12 @@ continues bit for bit.
 
 What it saves: one crossing of the boundary per call instead of one per member, and the
 members run side by side on the cores (MuJoCo's ``rollout``, Genesis's ``n_envs`` are the
-model). Each member's step is still the general one; ``benches/scenes/bench_batch.py`` measures
-the batch against a Python loop over the same scenes.
+model). Members that are plain small N-body problems (float64, at most 16 bodies, pairwise
+gravity or Coulomb plus uniform fields, velocity Verlet or Yoshida 4) are stepped by a fused
+kernel, one member per SIMD lane, with the same bits; the others take their general step.
+``benches/scenes/bench_batch.py`` measures the batch against a Python loop over the same scenes
+(10,000 three-body problems × 1,000 steps: 23× the loop on 2 cores at avx2; see the sweeps
+guide).
 
 >>> import numpy as np
 >>> import physcore as pc
