@@ -20,9 +20,9 @@ pub struct ParticleSystem<V: Vector> {
     constraints: Constraints<V>,
     /// The integrators' options (`IntegratorOptions`), kept when switching integrators.
     options: IntegratorOptions,
-    /// The last checkpoint's snapshot, handed back unused (`System::recycle`): the next
-    /// snapshot copies into its buffers instead of allocating ~7 (a batch takes one per member
-    /// per call, thousands a call).
+    /// The last checkpoint's snapshot, handed back unused (`System::recycle`), of a system of at
+    /// most `SPARE_MAX` particles: the next snapshot copies into its buffers instead of
+    /// allocating ~7 (a batch of small members takes one per general member per call).
     spare: std::sync::Mutex<Option<Box<ParticleSnapshot<V>>>>,
 }
 
@@ -37,6 +37,9 @@ struct ParticleSnapshot<V: Vector> {
     /// The terms' own states (`OwnState::history`), in term order.
     histories: Vec<Option<Vec<Real>>>,
 }
+
+/// The most particles a system keeps a spare snapshot for (`System::recycle`).
+const SPARE_MAX: usize = 4096;
 
 /// `dst` becomes a copy of `src`, in `dst`'s buffer where it is large enough; a refused
 /// allocation is an error.
@@ -854,6 +857,12 @@ impl<V: Vector> System for ParticleSystem<V> {
     }
 
     fn recycle(&mut self, snapshot: Snapshot) {
+        // Kept for small systems only: there the allocations are a visible part of a call (a
+        // batch's members), while a large system would hold a copy of its state between calls
+        // for nothing (an allocation is nothing beside its step).
+        if self.n_particles() > SPARE_MAX {
+            return;
+        }
         if let (Ok(snap), Ok(spare)) = (snapshot.downcast::<ParticleSnapshot<V>>(), self.spare.get_mut()) {
             *spare = Some(snap);
         }
@@ -984,5 +993,41 @@ fn check_integrator<V: Vector>(t: &dyn Term<V>, name: &str) -> Result<()> {
             ),
         )),
         _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::terms::PairwiseGravity;
+    use crate::world::World;
+    use glam::DVec2;
+
+    fn bits(w: &World<DVec2>) -> Vec<u64> {
+        let s = w.particles().state();
+        s.x.iter().chain(&s.v).flat_map(|p| [p.x.to_bits(), p.y.to_bits()]).collect()
+    }
+
+    /// A checkpoint made in a recycled snapshot's buffers restores its own state, also after
+    /// the particle count grew past what the buffers held, and past `SPARE_MAX`.
+    #[test]
+    fn a_recycled_snapshot_restores_the_state_it_was_taken_at() {
+        let mut w = World::<DVec2>::new("verlet", 1e-3, None).unwrap();
+        let add = |w: &mut World<DVec2>, n: usize, at: f64| {
+            let x = (0..n).map(|k| DVec2::new(at + k as f64, 0.5 * k as f64)).collect();
+            w.particles_mut().add_particles(x, vec![DVec2::new(0.0, 0.1); n], vec![1.0; n], vec![false; n]).unwrap();
+        };
+        add(&mut w, 3, 0.0);
+        w.particles_mut().add_term(Box::new(PairwiseGravity::new("g".into(), 1.0, 0.01))).unwrap();
+        for more in [0, 2, super::SPARE_MAX] {
+            let at = 10.0 + w.particles().state().x.len() as f64;
+            add(&mut w, more, at);
+            w.step(3).unwrap(); // its checkpoint is recycled
+            let before = bits(&w);
+            let cp = w.checkpoint().unwrap(); // made in the recycled buffers (if kept)
+            w.step(4).unwrap();
+            assert_ne!(bits(&w), before);
+            w.rollback(cp);
+            assert_eq!(bits(&w), before, "after adding {more}");
+        }
     }
 }
