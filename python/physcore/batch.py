@@ -39,6 +39,7 @@ from __future__ import annotations
 import json
 import os
 import pickle
+import threading
 import zipfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -225,10 +226,18 @@ class Batch:
                 if not lock.acquire(blocking=False):
                     raise SceneBusyError("a member of this Batch is being stepped by another thread")
                 taken += 1
+            # As Scene._exclusive marks it: another thread's use of a member meanwhile raises
+            # SceneBusyError, not pyo3's bare "Already mutably borrowed".
+            me = threading.get_ident()
+            for s in scenes:
+                s._busy = me
             missing = self._set_reference_energies([s for s in fresh if s._e0 is None])
             # The core checks n against every member's step count before stepping any.
             failed = None if missing else _core.step_batch(sims, n, self._threads)
         finally:
+            if taken == len(locks):
+                for s in scenes:
+                    s._busy = None
             for lock in locks[:taken]:
                 lock.release()
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)

@@ -248,6 +248,42 @@ def test_n_past_a_members_largest_step_count_is_refused_before_any_member_steps(
     assert list(batch.step_count) == [9, 2**63 - 1]
 
 
+def test_a_member_used_by_another_thread_while_its_batch_steps_says_so():
+    """While a batch steps (GIL released), another thread's use of a member raises
+    SceneBusyError (a PhyscoreError) naming the other thread, as a scene stepped alone does, never
+    pyo3's bare "Already mutably borrowed"; the batch's call is unharmed."""
+    members = _fan(2, pc.scenes.cloth(n=32, threads=1))
+    batch = pc.Batch(members, threads=1)
+    started, errors, seen = threading.Event(), [], []
+
+    def run():
+        started.set()
+        try:
+            batch.step(3000)
+        except Exception as e:  # noqa: BLE001 - reported below
+            errors.append(e)
+
+    t = threading.Thread(target=run)
+    t.start()
+    started.wait()
+    time.sleep(0.05)
+    deadline = time.monotonic() + 10.0
+    while t.is_alive() and time.monotonic() < deadline and len(seen) < 3:
+        for use in (lambda: members[1].positions, lambda: members[0].step(1)):
+            try:
+                use()
+            except pc.SceneBusyError as e:
+                seen.append(e)
+        time.sleep(0.005)
+    t.join()
+    assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
+    if errors:  # the batch lost the race to a member's step(1): it said so; again, uncontended
+        return test_a_member_used_by_another_thread_while_its_batch_steps_says_so()
+    assert seen, "the batch's call ended before another thread could use a member"
+    assert all("another thread" in str(e) for e in seen)
+    assert all(c in (3000, 3001, 3002, 3003) for c in batch.step_count)
+
+
 def test_a_batch_renders_as_one_animation_of_its_members_overlaid(tmp_path):
     """``render.record``/``render.gif`` take a batch: every frame holds every member's particles
     (member k's particle i at k·N + i, equal to the member's own positions), each member its own
