@@ -261,6 +261,11 @@ def scale_param(scene: Any, name: str, factor: float) -> Any:
     return scene
 
 
+def _has_bodies(scene: Any) -> bool:
+    """Whether the scene holds rigid bodies (drawn live like its particles)."""
+    return any(getattr(g, "first", None) is not None and g.n for g in getattr(scene, "bodies", ()))
+
+
 # --------------------------------------------------------------------------- the live state
 class _Live:
     """The running scene and the two latest ticks' states (for interpolation), the drag and the
@@ -291,6 +296,10 @@ class _Live:
         self._params: dict[str, float] | None = None  # the parameters, read once per change
         self._ranges: dict[str, tuple[float, float] | None] = {}  # the sliders' ranges
         self.params0 = self.params()  # the start values the keys stay within PARAM_RANGE of
+        # The rigid bodies' poses reader, for the scene it was made for (drag, reset and the
+        # parameter keys rebuild the scene: then it is made again).
+        self._poses: Any = None
+        self._poses_of: Any = None
         self._read()
         self._snap()
 
@@ -316,16 +325,33 @@ class _Live:
         self.p = np.asarray(s.pressure(), dtype=np.float64).copy() if self.pressure else None
         if self.grabbed is not None:  # pinned while held: its velocity is the pointer's
             self.v[self.grabbed] = self.vel
+        if self._poses_of is not s:
+            from .render._bodies import body_track
+
+            self._poses, self._poses_of = body_track(s, 1)[1], s
+        #: The rigid bodies' poses (B, 3) float64 ``(x, y, angle)``, m and rad; None without bodies.
+        self.b = None if self._poses is None else np.asarray(self._poses(), dtype=np.float64)
 
     def _snap(self) -> None:
         """The previous state := the current one (nothing to interpolate)."""
         self.px, self.pv, self.pt = self.x, self.v, self.t
-        self.pp = self.p
+        self.pp, self.pb = self.p, self.b
 
     def drawn(self, alpha: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
         """Positions, velocities, time and pressures interpolated by `alpha` between ticks."""
         p = None if self.p is None else interpolate(self.pp, self.p, alpha)
         return interpolate(self.px, self.x, alpha), interpolate(self.pv, self.v, alpha), self.pt + alpha * (self.t - self.pt), p
+
+    def drawn_bodies(self, alpha: float) -> np.ndarray | None:
+        """The rigid bodies' poses (B, 3) interpolated by `alpha` between ticks (each angle the
+        short way round), or None without bodies."""
+        b, pb = self.b, self.pb
+        if b is None or pb is None or pb.shape != b.shape:
+            return b
+        turn = np.remainder(b[:, 2] - pb[:, 2] + np.pi, 2 * np.pi) - np.pi
+        out = interpolate(pb, b, alpha)
+        out[:, 2] = pb[:, 2] + alpha * turn
+        return out
 
     # -------------------------------------------------------------- stepping
     def tick(self) -> None:
@@ -360,7 +386,7 @@ class _Live:
 
     def _advanced(self) -> None:
         """A tick's end: the new state read back, the one before kept to interpolate from."""
-        self.px, self.pv, self.pt, self.pp = self.x, self.v, self.t, self.p
+        self.px, self.pv, self.pt, self.pp, self.pb = self.x, self.v, self.t, self.p, self.b
         self.ticks += 1
         self._read()
 
@@ -585,7 +611,15 @@ class _Painter:
         self.origin = rec.origin
         m = 0 if rec.pairs is None else rec.pairs[0].size
         self.springs = None if rec.pairs is None else _scene_springs(scene)
+        bodies = None
+        if rec.bodies is not None:  # the live poses go in its last frame, as the particles'
+            from .render._bodies import BodyTrack
+
+            b = rec.bodies
+            bodies = BodyTrack(b.outlines, b.colors, b.balls, f)
+            bodies.poses[:] = b.poses[:1]
         self.live = rec._replace(
+            bodies=bodies,
             positions=np.repeat(rec.positions[:1], f, axis=0),
             speeds=None if rec.speeds is None else np.zeros((f, n), np.float32),
             strain=None if rec.strain is None else np.zeros((f, m), np.float32),
@@ -612,8 +646,10 @@ class _Painter:
         col, row = self.cam.pixels(s)
         return col, row, depth
 
-    def draw(self, x: np.ndarray, v: np.ndarray, t: float, p: np.ndarray | None, params: str, status: str) -> np.ndarray:
-        """(H, W, 3) uint8 RGB image of the state, with the HUD."""
+    def draw(self, x: np.ndarray, v: np.ndarray, t: float, p: np.ndarray | None, params: str, status: str,
+             bodies: np.ndarray | None = None) -> np.ndarray:
+        """(H, W, 3) uint8 RGB image of the state (with the rigid bodies' poses `bodies`, (B, 3)
+        ``(x, y, angle)``, where the scene has them), with the HUD."""
         from .render._colorbar import _CB_MARGIN, _draw_text, _text_mask
         from .render._palette import _BACKGROUND, _TEXT
         from .render._raster import _draw_title, _overlay, _paste
@@ -629,6 +665,9 @@ class _Painter:
                 live.strain[k] = _strain(x, *self.springs)
             if live.pressures is not None and p is not None:
                 live.pressures[k] = p
+            if live.bodies is not None and bodies is not None and bodies.shape == live.bodies.poses[k].shape:
+                live.bodies.poses[k, :, :2] = bodies[:, :2] - self.origin[:2]
+                live.bodies.poses[k, :, 2] = bodies[:, 2]
         live.times[k] = t
         if self.frames > 1:
             self.ras._pix = None  # the history moved: project it again
@@ -1039,11 +1078,12 @@ class _Session:
         """(H, W, 3) uint8 RGB: the state interpolated by the clock's fraction, as the GIF draws
         it (with the HUD where the painter has one)."""
         x, v, t, p = self.live.drawn(self.alpha)
+        bodies = self.live.drawn_bodies(self.alpha)
         params, status = self.hud(name)
         # A scene blowing up (before the core calls it diverged) puts particles at pixels beyond
         # int64: they are drawn nowhere, without a warning per frame.
         with np.errstate(over="ignore", invalid="ignore"):
-            return self.painter.draw(x, v, t, p, params, status)
+            return self.painter.draw(x, v, t, p, params, status, bodies)
 
 
 def _param(name: str) -> _Param:

@@ -429,6 +429,7 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
 def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """``physcore view``: the named scene live in a window (:func:`physcore.viewer.view`)."""
     from . import render
+    from ._live import _has_bodies
     from .viewer import _import_pygame, view
 
     name, fn, kwargs = _scene_call(args, parser)
@@ -451,8 +452,8 @@ def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         scene = fn(**kwargs)
     except (TypeError, ValueError, OverflowError) as e:
         parser.error(f"scene {name!r}: {e}")
-    if int(scene.n_particles) == 0:
-        parser.error(f"scene {name!r} has no particles to drag; the live viewer shows particle scenes (try: physcore render {name})")
+    if int(scene.n_particles) == 0 and not _has_bodies(scene):
+        parser.error(f"scene {name!r} has no particles or rigid bodies; the live viewer shows those (try: physcore render {name})")
     try:
         result = view(scene, name=name, size=args.size, fps=args.fps, view=args.view, seconds=args.seconds,
                       screenshot=shot)

@@ -58,7 +58,7 @@ from typing import Any
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError, PhyscoreError
-from ._live import PARAM_RANGE, _Session, _settings
+from ._live import PARAM_RANGE, _has_bodies, _Session, _settings
 
 try:
     import anywidget
@@ -470,8 +470,8 @@ def widget(
 
     if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "_file_arrays")):
         raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
-    if int(scene.n_particles) == 0:
-        raise InvalidInputError("scene: it has no particles; the widget shows particle scenes (render grids and flows with physcore.render.gif)")
+    if int(scene.n_particles) == 0 and not _has_bodies(scene):
+        raise InvalidInputError("scene: it has no particles or rigid bodies; the widget shows those (render grids and flows with physcore.render.gif)")
     if not isinstance(name, str) or not name:
         raise InvalidTypeError(f"name: expected a non-empty str, got {name!r}")
     settings = _settings(scene, size, view)

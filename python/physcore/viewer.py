@@ -80,6 +80,7 @@ from ._live import (
     PARAM_RANGE,
     STEP_FACTOR,
     FixedStep,
+    _has_bodies,
     _Session,
     _settings,
     interpolate,
@@ -463,8 +464,8 @@ def view(
 
     if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "_file_arrays")):
         raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
-    if int(scene.n_particles) == 0:
-        raise InvalidInputError("scene: it has no particles; the live viewer shows particle scenes (render grids and flows with physcore render)")
+    if int(scene.n_particles) == 0 and not _has_bodies(scene):
+        raise InvalidInputError("scene: it has no particles or rigid bodies; the live viewer shows those (render grids and flows with physcore render)")
     if not isinstance(name, str) or not name:
         raise InvalidTypeError(f"name: expected a non-empty str, got {name!r}")
     settings = _settings(scene, size, view)

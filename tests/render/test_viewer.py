@@ -236,7 +236,7 @@ def test_view_refuses_bad_arguments_before_a_window():
         viewer.view(scene, seconds=-1)
     with pytest.raises(ValueError, match="path must end in .png"):
         viewer.view(scene, screenshot="x.jpg")
-    with pytest.raises(ValueError, match="no particles"):
+    with pytest.raises(ValueError, match="no particles or rigid bodies"):
         viewer.view(pc.Scene(2))
 
 

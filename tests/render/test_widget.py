@@ -66,6 +66,32 @@ def test_paused_frame_is_the_gif_frame():
     assert np.abs(_decode(data).astype(int) - next(pc.render.frames(_cloth(10))).astype(int)).mean() < 3.0
 
 
+def test_rigid_bodies_are_drawn_live_as_the_gif_draws_them():
+    """A scene of rigid bodies only (the dominoes): paused after 40 ticks, the widget's frame is
+    exactly frame 40 of the scene's GIF (the bodies drawn where the scene has them now, not where
+    the preview started them)."""
+    import itertools
+
+    w = pc.widget(pc.scenes.dominoes(), preview=60.0, playing=False, image_format="png", fallback=False)
+    first = _decode(w.produce_frame()[1])
+    for _ in range(40):
+        w.step()
+    info, data = w.produce_frame()
+    assert info["ticks"] == 40
+    gif40 = next(itertools.islice(pc.render.frames(pc.scenes.dominoes()), 40, None))
+    np.testing.assert_array_equal(_decode(data), gif40)
+    assert (np.abs(gif40.astype(int) - first.astype(int)).sum(axis=2) > 30).sum() > 500  # they fell
+
+
+def test_body_poses_interpolate_the_short_way_round():
+    live = _live._Live(pc.scenes.dominoes(), "none")
+    live.pb = np.array([[0.0, 0.0, 3.1]])
+    live.b = np.array([[1.0, 2.0, -3.1]])
+    mid = live.drawn_bodies(0.5)
+    np.testing.assert_allclose(mid[0, :2], [0.5, 1.0])
+    assert abs(abs(mid[0, 2]) - math.pi) < 0.01  # through ±π, not through 0
+
+
 # --------------------------------------------------------------------------- ticking
 def test_ticks_follow_wall_time_and_stop_on_pause():
     # In the foreground, as the window runs them: each frame runs the ticks due first.
@@ -337,7 +363,7 @@ def test_bad_arguments_are_refused_naming_them():
     scene = pc.scenes.spring_chain(n=4)
     with pytest.raises(pc.InvalidTypeError, match="scene"):
         pc.widget(np.zeros((3, 3)))
-    with pytest.raises(pc.InvalidInputError, match="no particles"):
+    with pytest.raises(pc.InvalidInputError, match="no particles or rigid bodies"):
         pc.widget(pc.Scene(2))
     with pytest.raises(pc.InvalidInputError, match="image_format"):
         pc.widget(scene, image_format="gif")
