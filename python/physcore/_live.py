@@ -603,6 +603,15 @@ class _Painter:
         mesh = None if color_by == "density" else check_mesh(d.get("mesh"), rec.positions.shape[1])
         kw.update(mesh=mesh, texture=check_texture(d.get("texture"), mesh), theme=settings["theme"],
                   antialias=bool(d.get("antialias", False)))
+        # The rest of what gif() takes from the scene's defaults: the colour map, a fluid's
+        # surface, the background, each particle's own colour and halo.
+        from .render._checks import _check_background, _check_cmap, _check_colors
+        from .render._gif import _check_halo
+
+        n = rec.positions.shape[1]
+        kw.update(cmap=_check_cmap(d.get("cmap")), surface=bool(d.get("surface", False)),
+                  background=_check_background(d.get("background")), colors=_check_colors(d.get("colors"), n),
+                  halo=_check_halo(d.get("halo"), n))
         self.ras = _Rasteriser(rec, self.size, color_by, settings["radius"], settings["view"], **kw)
         self.hud = hud and self.ras.title is not None
         # The live recording: the trail's history of ticks, then the drawn state, last.

@@ -66,21 +66,28 @@ def test_paused_frame_is_the_gif_frame():
     assert np.abs(_decode(data).astype(int) - next(pc.render.frames(_cloth(10))).astype(int)).mean() < 3.0
 
 
-def test_rigid_bodies_are_drawn_live_as_the_gif_draws_them():
-    """A scene of rigid bodies only (the dominoes): paused after 40 ticks, the widget's frame is
-    exactly frame 40 of the scene's GIF (the bodies drawn where the scene has them now, not where
-    the preview started them)."""
+@pytest.mark.parametrize(("name", "ticks"), [("dominoes", 40), ("floating", 8)])
+def test_rigid_bodies_and_fluid_surfaces_are_drawn_live_as_the_gif_draws_them(name, ticks):
+    """Rigid bodies alone (the dominoes) and with a fluid drawn as a surface in the ice colour map
+    (floating): paused after some ticks, the widget's frame is exactly that frame of the scene's
+    GIF (the bodies where the scene has them now, not where the preview started them; the
+    scene's own colour map and surface)."""
     import itertools
 
-    w = pc.widget(pc.scenes.dominoes(), preview=60.0, playing=False, image_format="png", fallback=False)
+    def make():  # a GIF of ticks + 2 frames: the preview (the whole GIF) fits the same camera
+        scene = getattr(pc.scenes, name)()
+        scene.render_defaults = {**scene.render_defaults, "frames": ticks + 2}
+        return scene
+
+    w = pc.widget(make(), preview=60.0, playing=False, image_format="png", fallback=False)
     first = _decode(w.produce_frame()[1])
-    for _ in range(40):
+    for _ in range(ticks):
         w.step()
     info, data = w.produce_frame()
-    assert info["ticks"] == 40
-    gif40 = next(itertools.islice(pc.render.frames(pc.scenes.dominoes()), 40, None))
-    np.testing.assert_array_equal(_decode(data), gif40)
-    assert (np.abs(gif40.astype(int) - first.astype(int)).sum(axis=2) > 30).sum() > 500  # they fell
+    assert info["ticks"] == ticks
+    want = next(itertools.islice(pc.render.frames(make()), ticks, None))
+    np.testing.assert_array_equal(_decode(data), want)
+    assert (np.abs(want.astype(int) - first.astype(int)).sum(axis=2) > 30).sum() > 500  # it moved
 
 
 def test_body_poses_interpolate_the_short_way_round():
