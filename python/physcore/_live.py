@@ -261,6 +261,19 @@ def scale_param(scene: Any, name: str, factor: float) -> Any:
     return scene
 
 
+def _turn(p: np.ndarray, angle: float) -> np.ndarray:
+    """`p` (2,) rotated by `angle` rad (counter-clockwise)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return np.array([c * p[0] - s * p[1], s * p[0] + c * p[1]])
+
+
+def _inside(outline: np.ndarray, p: np.ndarray) -> bool:
+    """Whether the point `p` (2,) is inside the convex polygon `outline` (V, 2), either winding."""
+    e = np.roll(outline, -1, axis=0) - outline
+    cross = e[:, 0] * (p[1] - outline[:, 1]) - e[:, 1] * (p[0] - outline[:, 0])
+    return bool((cross >= 0).all() or (cross <= 0).all())
+
+
 def _has_bodies(scene: Any) -> bool:
     """Whether the scene holds rigid bodies (drawn live like its particles)."""
     return any(getattr(g, "first", None) is not None and g.n for g in getattr(scene, "bodies", ()))
@@ -296,10 +309,16 @@ class _Live:
         self._params: dict[str, float] | None = None  # the parameters, read once per change
         self._ranges: dict[str, tuple[float, float] | None] = {}  # the sliders' ranges
         self.params0 = self.params()  # the start values the keys stay within PARAM_RANGE of
-        # The rigid bodies' poses reader, for the scene it was made for (drag, reset and the
-        # parameter keys rebuild the scene: then it is made again).
+        # The rigid bodies' poses reader and outlines, for the scene they were made for (drag,
+        # reset and the parameter keys rebuild the scene: then they are made again).
         self._poses: Any = None
         self._poses_of: Any = None
+        self.outlines: list[np.ndarray] = []
+        #: The body held by the pointer (its number in the scene), the point of it held (m, in
+        #: its own frame) and where the pointer holds that point (m); None: no body held.
+        self.body: int | None = None
+        self.body_anchor: np.ndarray | None = None
+        self.body_target: np.ndarray | None = None
         self._read()
         self._snap()
 
@@ -328,7 +347,8 @@ class _Live:
         if self._poses_of is not s:
             from .render._bodies import body_track
 
-            self._poses, self._poses_of = body_track(s, 1)[1], s
+            track, self._poses = body_track(s, 1)
+            self._poses_of, self.outlines = s, ([] if track is None else list(track.outlines))
         #: The rigid bodies' poses (B, 3) float64 ``(x, y, angle)``, m and rad; None without bodies.
         self.b = None if self._poses is None else np.asarray(self._poses(), dtype=np.float64)
 
@@ -364,7 +384,24 @@ class _Live:
         """A tick's stepping: the scene only (no state of this object that drawing reads), so
         that a background thread may run it while the last states are drawn."""
         s = self.scene
-        if self.grabbed is None:
+        if self.body is not None:
+            # The held body is pulled: before each part of the tick its velocity is set so that
+            # the held point reaches the pointer by the part's end (a velocity-level mouse
+            # joint); contacts and gravity act on it as on any body.
+            parts = [1] * _DRAG_PARTS if self.advance else _parts(self.steps, _DRAG_PARTS)
+            for n in parts:
+                part = self.frame_time / len(parts) if self.advance else n * float(s.dt)
+                group, j = self._body_group(self.body)
+                x, a = group.positions[j], float(group.angles[j])
+                held = x + _turn(self.body_anchor, a)
+                v = group.velocities
+                v[j] = (self.body_target - held) / part
+                group.velocities = v
+                if self.advance:
+                    s.advance(self.frame_time / len(parts))
+                else:
+                    s.step(n)
+        elif self.grabbed is None:
             if self.advance:
                 s.advance(self.frame_time)
             else:
@@ -401,6 +438,7 @@ class _Live:
         pinned, so that it goes exactly where the pointer puts it."""
         if self.pinned[i]:
             raise InvalidInputError(f"i: particle {i} is pinned and cannot be dragged")
+        self.release_body()
         if self.grabbed is not None:
             self.release()
 
@@ -444,6 +482,53 @@ class _Live:
 
     def _forget(self) -> None:
         self.grabbed = self.target = self.held = self.vel = None
+        self.body = self.body_anchor = self.body_target = None
+
+    # -------------------------------------------------------------- body drag (2D)
+    def _body_group(self, b: int) -> tuple[Any, int]:
+        """The Bodies part holding body `b` (numbered in the scene) and its index there."""
+        for g in getattr(self.scene, "bodies", ()):
+            if g.first is not None and g.first <= b < g.first + g.n:
+                return g, b - g.first
+        raise InvalidInputError(f"b: the scene has no body {b}")
+
+    def body_at(self, point: np.ndarray) -> int | None:
+        """The dynamic body whose outline holds the world point `point` (2,) m (the topmost
+        drawn: the last), or None."""
+        if self.b is None or len(point) != 2:
+            return None
+        for b in range(len(self.outlines) - 1, -1, -1):
+            x, y, a = self.b[b]
+            local = _turn(np.asarray(point, dtype=np.float64) - [x, y], -a)
+            if _inside(self.outlines[b], local) and self._body_group(b)[0].kind == "dynamic":
+                return b
+        return None
+
+    def grab_body(self, b: int, point: np.ndarray) -> None:
+        """Hold body `b` by its point now at `point` (2,) m (world)."""
+        self.release()
+        x, y, a = self.b[b]
+        self.body, self.body_anchor = int(b), _turn(np.asarray(point, dtype=np.float64) - [x, y], -a)
+        self.body_target = np.asarray(point, dtype=np.float64).copy()
+
+    def move_body(self, target: np.ndarray, paused: bool) -> None:
+        """Pull the held body's point to `target` (2,) m; paused, the body is put there at once
+        (at rest)."""
+        if self.body is None:
+            return
+        self.body_target = np.asarray(target, dtype=np.float64).copy()
+        if paused:
+            group, j = self._body_group(self.body)
+            pos, v = group.positions, group.velocities
+            pos[j] = self.body_target - _turn(self.body_anchor, float(group.angles[j]))
+            v[j] = 0.0
+            group.positions, group.velocities = pos, v
+            self._read()
+            self._snap()
+
+    def release_body(self) -> None:
+        """Let go of the held body (it keeps the velocity the pull gave it)."""
+        self.body = self.body_anchor = self.body_target = None
 
     # -------------------------------------------------------------- parameters and reset
     def params(self) -> dict[str, float]:
@@ -1031,18 +1116,35 @@ class _Session:
         if i is not None:
             live.grab(i)
             self.status = f"dragging particle {i}"
-        return i
+            return i
+        # No particle there: a dynamic rigid body under the pointer (2D) is held instead.
+        if live.b is not None and painter.cam.dim == 2:
+            with np.errstate(over="ignore", invalid="ignore"):
+                point = screen_to_world(painter.cam, painter.origin, pos, np.zeros(2))
+            b = live.body_at(point) if np.isfinite(point).all() else None
+            if b is not None:
+                live.grab_body(b, point)
+                self.status = f"dragging body {b}"
+        return None
 
     def drag(self, pos: tuple[float, float]) -> None:
         """Hold the grabbed particle under the pixel `pos` (in 3D in the plane through it
         parallel to the screen); paused, it is put there at once. Nothing held: nothing."""
         live = self.live
-        if live.grabbed is None:
+        if live.grabbed is None and live.body is None:
             return
         # The pointer may leave the image, but not to 1e308: the particle follows it at most 10
         # image sizes beyond the edge.
         w, h = self.painter.size
         pos = (min(max(pos[0], -10.0 * w), 11.0 * w), min(max(pos[1], -10.0 * h), 11.0 * h))
+        if live.body is not None:
+            with np.errstate(over="ignore", invalid="ignore"):
+                target = screen_to_world(self.painter.cam, self.painter.origin, pos, np.zeros(2))
+            if np.isfinite(target).all():
+                if self.clock.paused:
+                    self.settle()
+                live.move_body(target, self.clock.paused)
+            return
         through = live.x[live.grabbed]
         with np.errstate(over="ignore", invalid="ignore"):
             target = screen_to_world(self.painter.cam, self.painter.origin, pos, through)
@@ -1052,10 +1154,11 @@ class _Session:
             live.move(target, self.clock.paused)
 
     def release(self) -> None:
-        """Let go of the grabbed particle (with the pointer's velocity), if any."""
-        if self.live.grabbed is not None:
+        """Let go of the grabbed particle (with the pointer's velocity) or body, if any."""
+        if self.live.grabbed is not None or self.live.body is not None:
             self.settle()
             self.live.release()
+            self.live.release_body()
             self.status = ""
 
     def pixel_of(self, i: int) -> tuple[int, int]:

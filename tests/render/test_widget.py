@@ -90,6 +90,35 @@ def test_rigid_bodies_and_fluid_surfaces_are_drawn_live_as_the_gif_draws_them(na
     assert (np.abs(want.astype(int) - first.astype(int)).sum(axis=2) > 30).sum() > 500  # it moved
 
 
+def test_a_body_is_dragged_by_the_pointer_and_a_fixed_one_is_not():
+    """No particle under the pointer: a dynamic body there is held. Paused, it is put under the
+    pointer at once (at rest); playing, its velocity pulls the held point to the pointer each
+    part of a tick; let go, it is free. The fixed floor is not grabbed."""
+    w = pc.widget(pc.scenes.dominoes(), preview=0.0, playing=False, fallback=False)
+    sess = w._session
+    row = w.scene.bodies[1]
+    j = row.n - 1  # the tallest domino
+    x0 = row.positions[j].copy()
+    col, r, _ = sess.painter.pixels(x0[None, :])
+    assert w.press(float(col[0]), float(r[0])) is None  # no particle: a body is held
+    assert sess.live.body == row.first + j and "dragging body" in sess.status
+    w.drag(float(col[0]) + 40, float(r[0]))
+    moved = w.scene.bodies[1].positions[j] - x0
+    assert moved[0] == pytest.approx(40 / sess.painter.cam.scale, rel=1e-6) and abs(moved[1]) < 1e-9
+    w.play()
+    for _ in range(5):
+        sess.live.tick()
+    held = w.scene.bodies[1].positions[j] - x0
+    assert np.abs(held - moved).max() < 1e-3  # held where the pointer is
+    w.release()
+    assert sess.live.body is None
+    floor = w.scene.bodies[0]
+    fc, fr, _ = sess.painter.pixels(floor.positions[:1])
+    w.pause()
+    w.press(float(fc[0]), float(fr[0]))  # the floor's centre: inside it, below the dominoes
+    assert sess.live.body is None  # fixed: not held
+
+
 def test_body_poses_interpolate_the_short_way_round():
     live = _live._Live(pc.scenes.dominoes(), "none")
     live.pb = np.array([[0.0, 0.0, 3.1]])
