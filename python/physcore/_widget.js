@@ -152,7 +152,8 @@ function render({ model, el: root }) {
       // The kernel's answer to a press: the particle it holds ("" for none).
       const grabbed = Number.isInteger(msg.grabbed) ? String(msg.grabbed) : "";
       box.dataset.grabbed = grabbed;
-      canvas.classList.toggle("pc-holding", grabbed !== "");
+      box.dataset.body = Number.isInteger(msg.body) ? String(msg.body) : "";
+      canvas.classList.toggle("pc-holding", grabbed !== "" || box.dataset.body !== "");
       for (const [name, v] of Object.entries(msg.params || {})) {
         if (labels[name]) labels[name][0].textContent = `${fmt(v)} ${labels[name][1]}`;
       }

@@ -261,9 +261,9 @@ class Widget(anywidget.AnyWidget):
     def produce_frame(self) -> tuple[dict[str, Any], bytes]:
         """Run the ticks due since the last frame (wall time; none while paused), draw the state
         and encode it: the message's content (``type``, ``seq``, ``time`` s, ``ticks``,
-        ``status``, ``params``, ``playing``, ``grabbed`` (the held particle or None), ``mime``) and
-        the image's bytes. This is what the
-        widget sends against each credit of the front end."""
+        ``status``, ``params``, ``playing``, ``grabbed`` (the held particle or None), ``body``
+        (the held rigid body or None), ``mime``) and the image's bytes. This is what the widget
+        sends against each credit of the front end."""
         session = self._session
         now = time.perf_counter()
         due = session.clock.advance(now - self._last)
@@ -284,7 +284,7 @@ class Widget(anywidget.AnyWidget):
         drawn_time = live.pt + session.alpha * (live.t - live.pt)
         content = {"type": "frame", "seq": self._seq, "time": drawn_time, "ticks": session.live.ticks,
                    "status": self.status, "params": self.params, "playing": bool(self.playing),
-                   "grabbed": live.grabbed, "mime": mime}
+                   "grabbed": live.grabbed, "body": live.body, "mime": mime}
         return content, buf.getvalue()
 
     def _pump(self) -> None:

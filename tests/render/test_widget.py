@@ -102,6 +102,7 @@ def test_a_body_is_dragged_by_the_pointer_and_a_fixed_one_is_not():
     col, r, _ = sess.painter.pixels(x0[None, :])
     assert w.press(float(col[0]), float(r[0])) is None  # no particle: a body is held
     assert sess.live.body == row.first + j and "dragging body" in sess.status
+    assert w.produce_frame()[0]["body"] == row.first + j  # the front end shows a grabbing cursor
     w.drag(float(col[0]) + 40, float(r[0]))
     moved = w.scene.bodies[1].positions[j] - x0
     assert moved[0] == pytest.approx(40 / sess.painter.cam.scale, rel=1e-6) and abs(moved[1]) < 1e-9
