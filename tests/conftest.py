@@ -191,3 +191,37 @@ def phase_norm(scene: pc.Scene, particle: int = 1, omega: float = 1.0) -> float:
 def fit_slope(xs: Sequence[float], ys: Sequence[float]) -> float:
     """Least-squares slope of ys against xs."""
     return float(np.polyfit(np.asarray(xs, float), np.asarray(ys, float), 1)[0])
+
+
+def busy_uses(run: Callable[[], None], uses: Sequence[Callable[[], object]], tries: int = 3) -> tuple[list, list]:
+    """Runs `run` (a long stepping call) on a thread and meanwhile calls each of `uses` from this
+    one until `tries` of them raised SceneBusyError or `run` ended: (the SceneBusyErrors seen here,
+    the exceptions `run` raised)."""
+    import threading
+    import time
+
+    started = threading.Event()
+    errors: list = []
+
+    def target() -> None:
+        started.set()
+        try:
+            run()
+        except Exception as e:  # noqa: BLE001 - returned to the caller
+            errors.append(e)
+
+    t = threading.Thread(target=target)
+    t.start()
+    started.wait()
+    time.sleep(0.05)  # let the call begin (if it loses the race, it reports SceneBusyError)
+    seen: list = []
+    deadline = time.monotonic() + 10.0
+    while t.is_alive() and time.monotonic() < deadline and len(seen) < tries:
+        for use in uses:
+            try:
+                use()
+            except pc.SceneBusyError as e:
+                seen.append(e)
+        time.sleep(0.005)
+    t.join()
+    return seen, errors

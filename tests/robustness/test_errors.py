@@ -332,34 +332,10 @@ def test_a_scene_stepped_by_another_thread_says_so():
     # While one thread steps a scene (GIL released), any use from another thread raises
     # SceneBusyError (a PhyscoreError), never pyo3's bare "Already mutably borrowed"; a step that
     # starts while the other thread is inside energy() is the one refused. Nothing is harmed.
-    import threading
-    import time
+    from conftest import busy_uses
 
     s = pc.scenes.cloth(n=48, threads=1)
-    started = threading.Event()
-    errors = []
-
-    def run():
-        started.set()
-        try:
-            s.step(4000)
-        except Exception as e:  # noqa: BLE001 - reported below
-            errors.append(e)
-
-    t = threading.Thread(target=run)
-    t.start()
-    started.wait()
-    time.sleep(0.05)  # let the step begin (if it loses the race, it reports SceneBusyError)
-    seen = []
-    deadline = time.monotonic() + 10.0
-    while t.is_alive() and time.monotonic() < deadline and len(seen) < 3:
-        for use in (lambda: s.positions, lambda: s.step(1), lambda: s.energy()):
-            try:
-                use()
-            except pc.SceneBusyError as e:
-                seen.append(e)
-        time.sleep(0.005)
-    t.join()
+    seen, errors = busy_uses(lambda: s.step(4000), (lambda: s.positions, lambda: s.step(1), lambda: s.energy()))
     assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
     if errors:  # the step lost the race to energy(): try once more, now uncontended
         return test_a_scene_stepped_by_another_thread_says_so()

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import busy_uses
 
 import physcore as pc
 
@@ -254,28 +255,7 @@ def test_a_member_used_by_another_thread_while_its_batch_steps_says_so():
     pyo3's bare "Already mutably borrowed"; the batch's call is unharmed."""
     members = _fan(2, pc.scenes.cloth(n=32, threads=1))
     batch = pc.Batch(members, threads=1)
-    started, errors, seen = threading.Event(), [], []
-
-    def run():
-        started.set()
-        try:
-            batch.step(3000)
-        except Exception as e:  # noqa: BLE001 - reported below
-            errors.append(e)
-
-    t = threading.Thread(target=run)
-    t.start()
-    started.wait()
-    time.sleep(0.05)
-    deadline = time.monotonic() + 10.0
-    while t.is_alive() and time.monotonic() < deadline and len(seen) < 3:
-        for use in (lambda: members[1].positions, lambda: members[0].step(1)):
-            try:
-                use()
-            except pc.SceneBusyError as e:
-                seen.append(e)
-        time.sleep(0.005)
-    t.join()
+    seen, errors = busy_uses(lambda: batch.step(3000), (lambda: members[1].positions, lambda: members[0].step(1)))
     assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
     if errors:  # the batch lost the race to a member's step(1): it said so; again, uncontended
         return test_a_member_used_by_another_thread_while_its_batch_steps_says_so()
