@@ -23,7 +23,7 @@ from ._errors import (
 )
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .batch import Batch
-from .bodies import Bodies, Joints
+from .bodies import Bodies, Joints, Pins
 from .contacts import Contacts
 from .flows import Flow
 from .fluids import Fluid, neighbors
@@ -57,6 +57,7 @@ __all__ = [
     "Batch",
     "Bodies",
     "Joints",
+    "Pins",
     "bodies",
     "sweeps",
     "flows",

@@ -275,8 +275,9 @@ def _inside(outline: np.ndarray, p: np.ndarray) -> bool:
 
 
 def _has_bodies(scene: Any) -> bool:
-    """Whether the scene holds rigid bodies (drawn live like its particles)."""
-    return any(getattr(g, "first", None) is not None and g.n for g in getattr(scene, "bodies", ()))
+    """Whether the scene holds rigid bodies drawn live like its particles (2D ones: 3D bodies
+    are drawn in renders, not live)."""
+    return any(getattr(g, "first", None) is not None and g.n and g.dim == 2 for g in getattr(scene, "bodies", ()))
 
 
 # --------------------------------------------------------------------------- the live state
@@ -347,7 +348,7 @@ class _Live:
         if self._poses_of is not s:
             from .render._bodies import body_track
 
-            track, self._poses = body_track(s, 1)
+            track, self._poses = body_track(s, 1) if _has_bodies(s) else (None, None)
             self._poses_of, self.outlines = s, ([] if track is None else list(track.outlines))
         #: The rigid bodies' poses (B, 3) float64 ``(x, y, angle)``, m and rad; None without bodies.
         self.b = None if self._poses is None else np.asarray(self._poses(), dtype=np.float64)

@@ -370,16 +370,17 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         field = f"meta.bodies[{k}]"
         if not isinstance(b, dict):
             raise r.error(field, f"must be an object, got {_kind(b)}")
-        if b.get("part") not in ("group", "joints"):
-            raise r.error(f"{field}.part", f"must be \"group\" or \"joints\", got {_show(b.get('part'))}")
+        if b.get("part") not in ("group", "joints", "pins"):
+            raise r.error(f"{field}.part", f"must be \"group\", \"joints\" or \"pins\", got {_show(b.get('part'))}")
         fields = {"part": "str", "record": "object", **({"name": "str"} if b["part"] == "group" else {})}
         rec = r.record(field, b, fields, dim)
         count = "n" if b["part"] == "group" else "m"
         v = rec["record"].get(count)
         if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1 << 24:
             raise r.error(f"{field}.record.{count}", f"must be a count in 1..{1 << 24}, got {_show(v)}")
-        if b["part"] == "group" and rec["record"].get("shape") not in ("ball", "box", "capsule", "polygon"):
-            raise r.error(f"{field}.record.shape", f"must be ball, box, capsule or polygon, got {_show(rec['record'].get('shape'))}")
+        shapes = ("ball", "box", "capsule", "polygon") if dim == 2 else ("ball", "box", "capsule", "hull", "mesh")
+        if b["part"] == "group" and rec["record"].get("shape") not in shapes:
+            raise r.error(f"{field}.record.shape", f"must be one of {', '.join(shapes)} in {dim}D, got {_show(rec['record'].get('shape'))}")
         bodies.append(rec)
     meta["bodies"] = bodies
     grids = []
@@ -608,7 +609,8 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     """(required, optional) members of a file with this meta, in reading order, and the sizes
     the meta fixes (axis name -> (size, field))."""
     d = "D"
-    sizes = {"D": (meta["dim"], "meta.dim"), "T": (len(meta["terms"]), "the number of meta.terms")}
+    sizes = {"D": (meta["dim"], "meta.dim"), "T": (len(meta["terms"]), "the number of meta.terms"),
+             "Q4": (4, "a quaternion"), "A3": (3, "a 3D angular velocity (or a triangle)"), "L2": (2, "a range (lower, upper)")}
     fx = "f4" if meta["precision"] == "f32" else "f8"  # positions/velocities as the scene holds them
     req = {
         "positions": _Spec(fx, ("N", d)),
@@ -659,20 +661,26 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, b in enumerate(meta.get("bodies", ())):
         rec, field = b["record"], f"meta.bodies[{k}].record"
         if b["part"] == "group":
-            n, w = rec["n"], {"ball": 1, "box": 2, "capsule": 2, "polygon": 0}[rec["shape"]]
+            n, w = rec["n"], {"ball": 1, "box": meta["dim"], "capsule": 2, "polygon": 0, "hull": 0, "mesh": 0}[rec["shape"]]
             sizes[f"B{k}"] = (n, f"{field}.n")
             sizes[f"BS{k}"] = (n * w, f"{field}.n (and its shape)")
-            for name, axes in (("positions", (f"B{k}", d)), ("angles", (f"B{k}",)), ("velocities", (f"B{k}", d)),
-                               ("angular_velocities", (f"B{k}",)), ("size", (f"BS{k}",))):
+            turn = (("angles", (f"B{k}",)), ("angular_velocities", (f"B{k}",))) if meta["dim"] == 2 else (
+                ("orientations", (f"B{k}", "Q4")), ("angular_velocities", (f"B{k}", "A3")))
+            for name, axes in (("positions", (f"B{k}", d)), ("velocities", (f"B{k}", d)), ("size", (f"BS{k}",)), *turn):
                 req[f"body{k}_{name}"] = _Spec("f8", axes)
             opt[f"body{k}_vertices"] = _Spec("f8", (f"BV{k}", d))
+            opt[f"body{k}_triangles"] = _Spec("f8", (f"BT{k}", "A3"))
             opt[f"body{k}_state"] = _Spec("f8", (f"BX{k}",))
             opt[f"body{k}_state_bytes"] = _Spec("f8", (f"BY{k}",))
+        elif b["part"] == "pins":
+            sizes[f"P{k}"] = (rec["m"], f"{field}.m")
+            for name, axes in (("particles", (f"P{k}",)), ("body", (f"P{k}",)), ("points", (f"P{k}", d))):
+                req[f"body{k}_{name}"] = _Spec("f8", axes)
         else:
             sizes[f"J{k}"] = (rec["m"], f"{field}.m")
             for name, axes in (("a", (f"J{k}",)), ("b", (f"J{k}",)), ("anchor", (f"J{k}", d))):
                 req[f"body{k}_{name}"] = _Spec("f8", axes)
-            for name, axes in (("anchor_b", (f"J{k}", d)), ("axis", (f"J{k}", d)), ("limits", (f"J{k}", d)), ("length", (f"J{k}",))):
+            for name, axes in (("anchor_b", (f"J{k}", d)), ("axis", (f"J{k}", d)), ("limits", (f"J{k}", "L2")), ("length", (f"J{k}",))):
                 opt[f"body{k}_{name}"] = _Spec("f8", axes)
     opt.update({"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))})
     # Optional per-particle attributes (charge, radius): one value per particle when set.

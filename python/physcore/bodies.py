@@ -51,17 +51,22 @@ from . import _check
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, Host, LoadContext, Part
 
-__all__ = ["Bodies", "Joints", "BodyRef", "SHAPES", "JOINTS"]
+__all__ = ["Bodies", "Joints", "Pins", "BodyRef", "SHAPES", "JOINTS"]
 
 #: The shapes of a :class:`Bodies` group and what ``size`` gives per body.
 SHAPES: dict[str, str] = {
     "ball": "radius r (m)",
-    "box": "half extents (hx, hy) (m)",
+    "box": "half extents (hx, hy) in 2D, (hx, hy, hz) in 3D (m)",
     "capsule": "half length of the axis and radius (l, r) (m), axis along the body's x",
-    "polygon": "none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
+    "polygon": "2D; none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
+    "hull": "3D; none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
+    "mesh": "3D, fixed bodies only; none: the group's ``vertices`` and ``triangles``",
 }
+_SHAPES_2D = ("ball", "box", "capsule", "polygon")
+_SHAPES_2D_ONLY = ("polygon",)
+_SHAPES_3D = ("hull", "mesh")
 #: The joints of :class:`Joints`.
-JOINTS: tuple[str, ...] = ("revolute", "fixed", "prismatic", "rope")
+JOINTS: tuple[str, ...] = ("revolute", "fixed", "prismatic", "spherical", "rope")
 _KINDS = ("dynamic", "fixed", "kinematic")
 #: The name of the core's system that holds every body.
 SYSTEM = "bodies"
@@ -95,6 +100,33 @@ def _number(arg: str, value: Any, lo: float, hi: float = math.inf, *, open_lo: b
     return x
 
 
+def _width(value: Any) -> int | None:
+    """The last axis of an array argument, if it says a dimension (2 or 3)."""
+    try:
+        a = np.asarray(value)
+    except Exception:  # noqa: BLE001 - checked by name later
+        return None
+    return int(a.shape[-1]) if a.ndim >= 1 and a.shape[-1] in (2, 3) and a.dtype != object else None
+
+
+def _dim_of(shape: str, positions: Any, size: Any, orientations: Any, angles: Any, vertices: Any) -> int | None:
+    """The dimension the arguments give (None: they do not say; the scene's then)."""
+    if positions is not None:
+        w = _width(positions)
+        if w is None:
+            raise InvalidInputError(f"positions: expected shape (N, 2) or (N, 3), got {np.shape(positions)}")
+        return w
+    if shape in _SHAPES_3D or orientations is not None:
+        return 3
+    if shape in _SHAPES_2D_ONLY or angles is not None:
+        return 2
+    if vertices is not None:
+        return _width(vertices)
+    if shape == "box" and size is not None:
+        return _width(size)
+    return None
+
+
 class BodyRef:
     """Some bodies of a :class:`Bodies` group, by index within it: ``bodies[3]``,
     ``bodies[:-1]``, ``bodies[[0, 2]]`` (what :class:`Joints` joins)."""
@@ -111,28 +143,38 @@ class BodyRef:
 
 
 class Bodies(Part):
-    """A group of rigid bodies of one shape (2D).
+    """A group of rigid bodies of one shape, in 2D or 3D (the dimension of the positions).
 
     Parameters
     ----------
     shape : str
-        ``"ball"``, ``"box"``, ``"capsule"`` or ``"polygon"`` (:data:`SHAPES`).
+        2D: ``"ball"``, ``"box"``, ``"capsule"`` or ``"polygon"``; 3D: ``"ball"``, ``"box"``,
+        ``"capsule"``, ``"hull"`` or ``"mesh"`` (:data:`SHAPES`).
     size : array_like of float
         Per body (or one value for all): a ball's radius, shape (N,); a box's half extents
-        ``(hx, hy)`` or a capsule's ``(half_length, radius)``, shape (N, 2); m, > 0. Not used by
-        polygons. Its length sets N when ``positions`` is not given.
-    positions : (N, 2) array_like of float, default all at the origin
-        Centres, m.
-    angles : (N,) array_like of float or float, default 0
+        ``(hx, hy)`` in 2D or ``(hx, hy, hz)`` in 3D, (N, dim); a capsule's ``(half_length,
+        radius)``, (N, 2), its axis along the body's x; m, > 0. Not used by polygons, hulls and
+        meshes. Its length sets N when ``positions`` is not given.
+    positions : (N, 2) or (N, 3) array_like of float, default one body at the origin
+        Centres, m. Their width sets the dimension (else the size's, the shape's, or the
+        scene's when the group is added).
+    angles : (N,) array_like of float or float, default 0, 2D only
         Orientations, rad (counter-clockwise).
-    velocities : (N, 2) array_like of float, default 0
+    orientations : (N, 4) or (4,) array_like of float, default identity, 3D only
+        Unit quaternions ``(x, y, z, w)``, scalar last as ``scipy.spatial.transform.Rotation``
+        reads them (normalised here; a zero one is refused).
+    velocities : (N, dim) array_like of float, default 0
         Linear velocities, m/s.
-    angular_velocities : (N,) array_like of float or float, default 0
-        rad/s.
-    vertices : (K, 2) array_like of float, polygon only
-        The polygon's vertices in the body's frame, m (their convex hull is the shape).
+    angular_velocities : default 0
+        rad/s: (N,) in 2D (counter-clockwise), (N, 3) in 3D (the rotation vector's rate, world
+        frame).
+    vertices : (K, dim) array_like of float, polygon, hull and mesh only
+        In the body's frame, m: a polygon's or hull's points (their convex hull is the shape)
+        or a mesh's vertices.
+    triangles : (T, 3) array_like of int, mesh only
+        The mesh's triangles, as vertex indices. A mesh has no volume: fixed bodies only.
     density : float, default 1000
-        kg/m² (2D): the mass and moment of inertia follow from it and the shape.
+        kg/m² in 2D, kg/m³ in 3D: the mass and moment of inertia follow from it and the shape.
     friction : float, default 0.5
         Coulomb friction coefficient μ ≥ 0 (a contact uses the mean of its two bodies').
     restitution : float, default 0.1
@@ -147,17 +189,27 @@ class Bodies(Part):
 
     Attributes
     ----------
-    positions, angles, velocities, angular_velocities : float64 arrays
-        Once in a scene: the state now, shapes (N, 2), (N,), (N, 2), (N,) (copies; settable).
-    masses, inertia : (N,) float64
-        kg and kg·m².
+    positions, velocities : (N, dim) float64
+        Once in a scene: the state now (copies; settable), m and m/s.
+    angles : (N,) float64, 2D
+        rad (settable).
+    orientations : (N, 4) float64, 3D
+        Unit quaternions (x, y, z, w) (settable).
+    angular_velocities : float64
+        (N,) in 2D, (N, 3) in 3D, rad/s (settable).
+    masses : (N,) float64
+        kg.
+    inertia : float64
+        kg·m²: (N,) in 2D; (N, 3) in 3D, the principal moments.
 
     Raises
     ------
     InvalidInputError
-        (a ``ValueError``) naming the argument: an unknown shape or kind, wrong shapes,
-        non-finite values, sizes ≤ 0, density ≤ 0, friction < 0, restitution outside [0, 1],
-        fewer than 3 polygon vertices or all on a line; adding to a 3D scene.
+        (a ``ValueError``) naming the argument: an unknown shape or kind, a shape of the other
+        dimension, wrong shapes, non-finite values, sizes ≤ 0, density ≤ 0, friction < 0,
+        restitution outside [0, 1], a zero quaternion, too few vertices or all on a line (a
+        plane in 3D), a mesh that is not fixed or indexes no vertex; a group whose dimension
+        is not the scene's.
     InvalidTypeError
         (a ``TypeError``) a non-numeric argument.
     """
@@ -171,10 +223,12 @@ class Bodies(Part):
         size: Any = None,
         positions: Any = None,
         *,
-        angles: Any = 0.0,
+        angles: Any = None,
+        orientations: Any = None,
         velocities: Any = 0.0,
         angular_velocities: Any = 0.0,
         vertices: Any = None,
+        triangles: Any = None,
         density: float = 1000.0,
         friction: float = 0.5,
         restitution: float = 0.1,
@@ -184,64 +238,120 @@ class Bodies(Part):
     ) -> None:
         self.shape = _check.choice("shape", shape, tuple(SHAPES))
         self.kind = _check.choice("kind", kind, _KINDS)
-        width = 1 if self.shape == "ball" else 2
-        if positions is not None:
-            x = _rows("positions", positions, None, 2)
+        self._args = {"size": size, "positions": positions, "angles": angles, "orientations": orientations,
+                      "velocities": velocities, "angular_velocities": angular_velocities, "vertices": vertices,
+                      "triangles": triangles}
+        self.density = _number("density", density, 0.0, open_lo=True)
+        self.friction = _number("friction", friction, 0.0)
+        self.restitution = _number("restitution", restitution, 0.0, 1.0)
+        if name is not None and (not isinstance(name, str) or not name):
+            raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
+        self.name = name
+        self._color_arg = color
+        self.dim = _dim_of(self.shape, positions, size, orientations, angles, vertices)
+        # Checked now in the dimension the arguments give (2 if they do not say; checked again
+        # in the scene's when added).
+        self._resolve(self.dim or 2)
+        self.first: int | None = None
+        self._host: Host | None = None
+
+    def _resolve(self, dim: int) -> None:
+        """Checks the arguments as a `dim`-D group and sets the starting state from them."""
+        a = self._args
+        shape = self.shape
+        if shape in _SHAPES_3D and dim == 2:
+            raise InvalidInputError(f"shape: {shape!r} is a 3D shape; in 2D use one of {', '.join(_SHAPES_2D)}")
+        if shape in _SHAPES_2D_ONLY and dim == 3:
+            raise InvalidInputError(f"shape: {shape!r} is a 2D shape; in 3D use 'hull' (vertices (K, 3))")
+        width = 1 if shape == "ball" else (dim if shape == "box" else 2)
+        listed = shape in ("polygon", "hull", "mesh")
+        if a["positions"] is not None:
+            x = _rows("positions", a["positions"], None, dim)
             n = x.shape[0]
-        elif size is not None and self.shape != "polygon":
-            n = _rows("size", size, None, width).shape[0]
-            x = np.zeros((n, 2))
+        elif a["size"] is not None and not listed:
+            n = _rows("size", a["size"], None, width).shape[0]
+            x = np.zeros((n, dim))
         else:
-            n, x = 1, np.zeros((1, 2))
+            n, x = 1, np.zeros((1, dim))
         if n < 1:
             raise InvalidInputError("positions: a group needs at least one body")
         _check.memory("positions", n * BODY_BYTES, f"{n} rigid bodies")
         self.n = n
         self.start = x
-        if self.shape == "polygon":
-            if vertices is None:
-                raise InvalidInputError("vertices: a polygon group needs its vertices, shape (K, 2)")
-            v = _rows("vertices", vertices, None, 2)
-            if v.shape[0] < 3:
-                raise InvalidInputError(f"vertices: a polygon needs at least 3, got {v.shape[0]}")
+        self.triangles = None
+        if listed:
+            if a["vertices"] is None:
+                raise InvalidInputError(f"vertices: a {shape} group needs its vertices, shape (K, {dim})")
+            if a["size"] is not None:
+                raise InvalidInputError(f"size: a {shape} takes its shape from its vertices, not a size")
+            v = _rows("vertices", a["vertices"], None, dim)
+            need = dim + 1 if shape != "mesh" else 3
+            if v.shape[0] < need:
+                raise InvalidInputError(f"vertices: a {shape} needs at least {need}, got {v.shape[0]}")
             with np.errstate(all="ignore"):
                 e = v - v.mean(axis=0)
             if not np.isfinite(e).all():
                 raise InvalidInputError("vertices: beyond float64 (their centre overflows); give them in m, near the body's origin")
-            if np.linalg.matrix_rank(e, tol=1e-12 * max(1e-300, float(np.abs(e).max()))) < 2:
-                raise InvalidInputError("vertices: all on one line (the polygon has no area)")
+            rank = np.linalg.matrix_rank(e, tol=1e-12 * max(1e-300, float(np.abs(e).max())))
+            if shape != "mesh" and rank < dim:
+                raise InvalidInputError("vertices: " + ("all on one line (the polygon has no area)" if dim == 2
+                                                        else "all on one plane (the hull has no volume)"))
+            if shape == "mesh":
+                if self.kind != "fixed":
+                    raise InvalidInputError("kind: a triangle mesh has no volume and so no mass: make it kind='fixed'")
+                if a["triangles"] is None:
+                    raise InvalidInputError("triangles: a mesh needs its triangles, shape (T, 3) vertex indices")
+                t = _check.real_array("triangles", a["triangles"])
+                if t.ndim != 2 or t.shape[1] != 3 or t.shape[0] < 1:
+                    raise InvalidInputError(f"triangles: expected shape (T, 3) with T >= 1, got {t.shape}")
+                if not (np.isfinite(t).all() and (t == np.round(t)).all() and (t >= 0).all() and (t < v.shape[0]).all()):
+                    raise InvalidInputError(f"triangles: every entry must be a vertex index in 0..{v.shape[0] - 1}")
+                self.triangles = t.astype(np.int64)
+            elif a["triangles"] is not None:
+                raise InvalidInputError(f"triangles: only meshes have triangles, not a {shape}")
             self.vertices = v
             self.size = np.zeros((n, 0))
         else:
-            if vertices is not None:
-                raise InvalidInputError(f"vertices: only polygons have vertices, not a {self.shape}")
+            for key in ("vertices", "triangles"):
+                if a[key] is not None:
+                    raise InvalidInputError(f"{key}: only polygons, hulls and meshes have {key}, not a {shape}")
+            size = a["size"]
             if size is None:
-                size = {"ball": 0.1, "box": (0.1, 0.1), "capsule": (0.1, 0.05)}[self.shape]
+                size = {"ball": 0.1, "box": (0.1,) * dim, "capsule": (0.1, 0.05)}[shape]
             s = _rows("size", size, n, width)
             if not (s > 0).all():
                 raise InvalidInputError("size: every size must be > 0 (m)")
-            self.size = s if width == 2 else s.reshape(n)
+            self.size = s if width > 1 else s.reshape(n)
             self.vertices = None
-        self.start_angles = _rows("angles", angles, n, 1)
-        self.start_velocities = _rows("velocities", velocities if np.ndim(velocities) else np.full((n, 2), float(_check.real("velocities", velocities))), n, 2)
-        self.start_angular = _rows("angular_velocities", angular_velocities, n, 1)
-        self.density = _number("density", density, 0.0, open_lo=True)
+        if dim == 2:
+            if a["orientations"] is not None:
+                raise InvalidInputError("orientations: quaternions orient 3D bodies; in 2D give angles (rad)")
+            self.start_angles = _rows("angles", 0.0 if a["angles"] is None else a["angles"], n, 1)
+            ang_width = 1
+        else:
+            if a["angles"] is not None:
+                raise InvalidInputError("angles: a 3D body's orientation is a unit quaternion: give orientations (x, y, z, w)")
+            q = _rows("orientations", (0.0, 0.0, 0.0, 1.0) if a["orientations"] is None else a["orientations"], n, 4)
+            norm = np.linalg.norm(q, axis=1)
+            if not (norm > 1e-12).all():
+                raise InvalidInputError("orientations: a zero quaternion is no rotation")
+            self.start_angles = q / norm[:, None]
+            ang_width = 3
+        vel = a["velocities"]
+        self.start_velocities = _rows("velocities", vel if np.ndim(vel) else np.full((n, dim), float(_check.real("velocities", vel))), n, dim)
+        om = a["angular_velocities"]
+        if ang_width == 3 and not np.ndim(om):
+            om = np.full((n, 3), float(_check.real("angular_velocities", om)))
+        self.start_angular = _rows("angular_velocities", om, n, ang_width)
         with np.errstate(all="ignore"):
             reach = float(np.abs(self.size).max()) if self.vertices is None else float(np.abs(self.vertices).max())
-            mass = self.density * 4 * reach * reach
+            mass = self.density * (2 * reach) ** dim
             if not (np.isfinite(mass * reach * reach) and np.isfinite(np.abs(x).max() + 2 * reach)):
-                raise InvalidInputError(f"size, density: a body of {reach:g} m at {self.density:g} kg/m² has a mass or moment "
-                                        "of inertia beyond float64")
-        self.friction = _number("friction", friction, 0.0)
-        self.restitution = _number("restitution", restitution, 0.0, 1.0)
-        self.color = _color(color, self.shape)
+                raise InvalidInputError(f"size, density: a body of {reach:g} m at {self.density:g} kg/m^{dim} has a mass "
+                                        "or moment of inertia beyond float64")
+        self.color = _color(self._color_arg, shape)
         if self.color.ndim == 2 and self.color.shape[0] != n:
             raise InvalidInputError(f"color: {self.color.shape[0]} colours for {n} bodies")
-        if name is not None and (not isinstance(name, str) or not name):
-            raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
-        self.name = name
-        self.first: int | None = None
-        self._host: Host | None = None
 
     # -- referring to bodies
     def __len__(self) -> int:
@@ -280,45 +390,80 @@ class Bodies(Part):
         host.exclusive(write)
         host.energy_changed()
 
+    def _axes(self, prefix: str = "") -> list[str]:
+        return [prefix + c for c in "xyz"[: self.dim]]
+
     @property
     def positions(self) -> np.ndarray:
-        """Centres now, (N, 2) float64, m (a copy). Settable."""
-        x, y = self._fields(["x", "y"])
-        return np.stack([x, y], axis=1)
+        """Centres now, (N, dim) float64, m (a copy). Settable."""
+        return np.stack(self._fields(self._axes()), axis=1)
 
     @positions.setter
     def positions(self, value: Any) -> None:
-        a = _rows("positions", value, self.n, 2)
-        self._set(["x", "y"], [a[:, 0], a[:, 1]])
+        a = _rows("positions", value, self.n, self.dim)
+        self._set(self._axes(), list(a.T))
 
     @property
     def angles(self) -> np.ndarray:
-        """Orientations now, (N,) float64, rad in (−π, π]. Settable."""
+        """Orientations now, (N,) float64, rad in (−π, π] (2D). Settable."""
+        self._need(2, "angles", "orientations")
         return self._fields(["angle"])[0]
 
     @angles.setter
     def angles(self, value: Any) -> None:
+        self._need(2, "angles", "orientations")
         self._set(["angle"], [_rows("angles", value, self.n, 1)])
 
     @property
+    def orientations(self) -> np.ndarray:
+        """Orientations now, (N, 4) float64 unit quaternions (x, y, z, w) (3D). Settable
+        (normalised; a zero quaternion is refused)."""
+        self._need(3, "orientations", "angles")
+        return np.stack(self._fields(["qx", "qy", "qz", "qw"]), axis=1)
+
+    @orientations.setter
+    def orientations(self, value: Any) -> None:
+        self._need(3, "orientations", "angles")
+        q = _rows("orientations", value, self.n, 4)
+        norm = np.linalg.norm(q, axis=1)
+        if not (norm > 1e-12).all():
+            raise InvalidInputError("orientations: a zero quaternion is no rotation")
+        q = q / norm[:, None]
+        host = self._bound()
+
+        def write(sim: Any) -> None:
+            full = np.stack([np.asarray(f) for f in sim.system_fields(SYSTEM, ["qx", "qy", "qz", "qw"])], axis=1)
+            full[self.first:self.first + self.n] = q  # type: ignore[operator]
+            sim.set_system_field(SYSTEM, "q", np.ascontiguousarray(full).reshape(-1))
+
+        host.exclusive(write)
+        host.energy_changed()
+
+    @property
     def velocities(self) -> np.ndarray:
-        """Linear velocities now, (N, 2) float64, m/s. Settable."""
-        vx, vy = self._fields(["vx", "vy"])
-        return np.stack([vx, vy], axis=1)
+        """Linear velocities now, (N, dim) float64, m/s. Settable."""
+        return np.stack(self._fields(self._axes("v")), axis=1)
 
     @velocities.setter
     def velocities(self, value: Any) -> None:
-        a = _rows("velocities", value, self.n, 2)
-        self._set(["vx", "vy"], [a[:, 0], a[:, 1]])
+        a = _rows("velocities", value, self.n, self.dim)
+        self._set(self._axes("v"), list(a.T))
 
     @property
     def angular_velocities(self) -> np.ndarray:
-        """Angular velocities now, (N,) float64, rad/s (counter-clockwise). Settable."""
-        return self._fields(["omega"])[0]
+        """Angular velocities now, rad/s: (N,) float64 in 2D (counter-clockwise), (N, 3) in 3D
+        (world frame). Settable."""
+        if self.dim == 2:
+            return self._fields(["omega"])[0]
+        return np.stack(self._fields(["wx", "wy", "wz"]), axis=1)
 
     @angular_velocities.setter
     def angular_velocities(self, value: Any) -> None:
-        self._set(["omega"], [_rows("angular_velocities", value, self.n, 1)])
+        if self.dim == 2:
+            self._set(["omega"], [_rows("angular_velocities", value, self.n, 1)])
+        else:
+            a = _rows("angular_velocities", value, self.n, 3)
+            self._set(["wx", "wy", "wz"], list(a.T))
 
     @property
     def masses(self) -> np.ndarray:
@@ -327,28 +472,56 @@ class Bodies(Part):
 
     @property
     def inertia(self) -> np.ndarray:
-        """Moments of inertia about the centres of mass, (N,) float64, kg·m²."""
-        return self._fields(["inertia"])[0]
+        """Moments of inertia about the centres of mass, kg·m²: (N,) float64 in 2D; (N, 3) in
+        3D, the principal moments."""
+        if self.dim == 2:
+            return self._fields(["inertia"])[0]
+        return np.stack(self._fields(["ix", "iy", "iz"]), axis=1)
 
-    def outline(self) -> np.ndarray:
+    def _need(self, dim: int, what: str, other: str) -> None:
+        if self.dim != dim:
+            raise InvalidInputError(f"{what}: these bodies are {self.dim}D; read their {other}")
+
+    def outline(self) -> list[np.ndarray]:
         """The shape of each body as a polygon in its own frame, (V, 2) float64 m (a ball and a
-        capsule's caps as 32-gons): what the renderer fills."""
+        capsule's caps as 32-gons): what the renderer fills (2D)."""
+        self._need(2, "outline", "meshes")
         return _outline(self.shape, self.size, self.vertices)
+
+    def meshes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Each body's shape as triangles in its own frame (3D): vertices (V, 3) float64 m and
+        faces (T, 3) int64 (a ball and a capsule as 16 × 32 facets): what the renderer draws."""
+        self._need(3, "meshes", "outline")
+        host = self._bound()
+        first = self.first
+
+        def read(sim: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+            out = []
+            for i in range(self.n):
+                v, t = sim.body_mesh(first + i)  # type: ignore[operator]
+                out.append((np.asarray(v, np.float64), np.asarray(t, np.int64)))
+            return out
+
+        return host.exclusive(read)
 
     # -- the part protocol
     def _params(self) -> dict[str, Any]:
         """The core's parameters of the group, at its starting state."""
         p: dict[str, Any] = {
             "shape": self.shape, "kind": self.kind, "n": self.n,
-            "positions": np.ascontiguousarray(self.start).reshape(-1), "angles": np.ascontiguousarray(self.start_angles),
+            "positions": np.ascontiguousarray(self.start).reshape(-1),
+            ("angles" if self.dim == 2 else "orientations"): np.ascontiguousarray(self.start_angles).reshape(-1),
             "velocities": np.ascontiguousarray(self.start_velocities).reshape(-1),
-            "angular_velocities": np.ascontiguousarray(self.start_angular),
+            "angular_velocities": np.ascontiguousarray(self.start_angular).reshape(-1),
             "size": np.ascontiguousarray(self.size, dtype=np.float64).reshape(-1),
             "density": self.density, "friction": self.friction, "restitution": self.restitution,
         }
         if self.vertices is not None:
             p["vertices"] = np.ascontiguousarray(self.vertices).reshape(-1)
             p["n_vertices"] = int(self.vertices.shape[0])
+        if self.triangles is not None:
+            p["triangles"] = np.ascontiguousarray(self.triangles, np.float64).reshape(-1)
+            p["n_triangles"] = int(self.triangles.shape[0])
         return p
 
     def _claim_name(self, ctx: AttachContext) -> str:
@@ -363,10 +536,13 @@ class Bodies(Part):
         return name
 
     def _attach(self, ctx: AttachContext, name: str) -> Bodies:
-        if ctx.dim != 2:
-            raise InvalidInputError("item: rigid bodies are two-dimensional in this version (make the scene with dim=2)")
+        if self.dim is not None and self.dim != ctx.dim:
+            raise InvalidInputError(f"item: these bodies are {self.dim}D (their arguments' width) and the scene is {ctx.dim}D")
         if self._host is not None:
             raise InvalidInputError(f"item: bodies {self.name!r} are already in a scene (a group joins one scene)")
+        if self.dim is None:
+            self._resolve(ctx.dim)
+            self.dim = ctx.dim
         self.first = int(ctx.sim.add_bodies(self._params()))
         self.name = name
         self._host = ctx.host
@@ -378,11 +554,20 @@ class Bodies(Part):
 
     def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         a, b = self.first, self.first + self.n  # type: ignore[operator]
-        f = [np.asarray(v)[a:b] for v in sim.system_fields(SYSTEM, ["x", "y", "angle", "vx", "vy", "omega"])]
-        arrays = {"positions": np.stack(f[:2], 1), "angles": f[2], "velocities": np.stack(f[3:5], 1),
-                  "angular_velocities": f[5], "size": np.asarray(self.size, np.float64).reshape(-1)}
+        if self.dim == 2:
+            f = [np.asarray(v)[a:b] for v in sim.system_fields(SYSTEM, ["x", "y", "angle", "vx", "vy", "omega"])]
+            arrays = {"positions": np.stack(f[:2], 1), "angles": f[2], "velocities": np.stack(f[3:5], 1),
+                      "angular_velocities": f[5]}
+        else:
+            names = ["x", "y", "z", "qx", "qy", "qz", "qw", "vx", "vy", "vz", "wx", "wy", "wz"]
+            f = [np.asarray(v)[a:b] for v in sim.system_fields(SYSTEM, names)]
+            arrays = {"positions": np.stack(f[:3], 1), "orientations": np.stack(f[3:7], 1),
+                      "velocities": np.stack(f[7:10], 1), "angular_velocities": np.stack(f[10:13], 1)}
+        arrays["size"] = np.asarray(self.size, np.float64).reshape(-1)
         if self.vertices is not None:
             arrays["vertices"] = self.vertices
+        if self.triangles is not None:
+            arrays["triangles"] = self.triangles.astype(np.float64)
         if self.first == 0:
             # The solver's whole state (contacts, warm starts), once, with the first group.
             state = dict(sim.system_save(SYSTEM))
@@ -398,15 +583,22 @@ class Bodies(Part):
         rec = entry["record"]
         if not isinstance(rec, dict):
             raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
-        need = ["positions", "angles", "velocities", "angular_velocities", "size"]
+        need = ["positions", "angles" if "orientations" not in arrays else "orientations", "velocities",
+                "angular_velocities", "size"]
         missing = [k for k in need if k not in arrays]
         if missing:
             raise InvalidInputError(f"arrays: missing {', '.join(missing)}")
         shape = rec.get("shape")
-        size = arrays["size"].reshape(-1, 2) if shape in ("box", "capsule") else arrays["size"]
-        part = cls(shape, size=size if shape != "polygon" else None, positions=arrays["positions"], angles=arrays["angles"],
+        x = np.asarray(arrays["positions"])
+        dim = x.shape[1] if x.ndim == 2 and x.shape[1] in (2, 3) else 2
+        width = dim if shape == "box" else 2
+        size = arrays["size"].reshape(-1, width) if shape in ("box", "capsule") else arrays["size"]
+        listed = shape in ("polygon", "hull", "mesh")
+        part = cls(shape, size=size if not listed else None, positions=arrays["positions"], angles=arrays.get("angles"),
+                   orientations=arrays.get("orientations"),
                    velocities=arrays["velocities"], angular_velocities=arrays["angular_velocities"],
-                   vertices=arrays.get("vertices"), density=rec.get("density"), friction=rec.get("friction"),
+                   vertices=arrays.get("vertices"), triangles=arrays.get("triangles"),
+                   density=rec.get("density"), friction=rec.get("friction"),
                    restitution=rec.get("restitution"), kind=rec.get("kind"), color=rec.get("color"), name=entry.get("name"))
         if ("state" in arrays) != ("state_bytes" in arrays):
             raise InvalidInputError("state, state_bytes: the bodies' solver state needs both (its packed bytes and their count)")
@@ -420,23 +612,26 @@ class Bodies(Part):
 
 
 class Joints(Part):
-    """Joints between rigid bodies (2D), one per pair ``(a[k], b[k])``.
+    """Joints between rigid bodies, one per pair ``(a[k], b[k])``; 2D or 3D (the width of
+    ``anchors``).
 
     Parameters
     ----------
     kind : str
-        ``"revolute"`` (a hinge: the bodies share the anchor point and turn freely about it),
-        ``"fixed"`` (welded as they are now), ``"prismatic"`` (a slider along ``axis``, no
-        turning), ``"rope"`` (the anchors at most ``length`` apart; slack below it).
+        ``"revolute"`` (a hinge: the bodies share the anchor point and turn freely about it;
+        in 3D about ``axis``), ``"fixed"`` (welded as they are now), ``"prismatic"`` (a slider
+        along ``axis``, no turning), ``"spherical"`` (3D: a ball-and-socket, turning freely
+        about every axis), ``"rope"`` (the anchors at most ``length`` apart; slack below it).
     a, b : BodyRef or None
         The bodies joined, as ``group[i]`` or ``group[i:j]`` (equal counts M); ``None`` for one
         of them: the fixed world (a pendulum's pivot).
-    anchors : (M, 2) or (2,) array_like of float
+    anchors : (M, dim) or (dim,) array_like of float
         The joints' points in the world now, m (on body ``a``; for a rope, its end on ``a``).
-    anchors_b : (M, 2) or (2,) array_like of float, optional
+    anchors_b : (M, dim) or (dim,) array_like of float, optional
         A rope's end on body ``b`` (default: ``anchors``).
-    axis : (2,) or (M, 2) array_like, prismatic only
-        The sliding direction in the world now (default x).
+    axis : (dim,) or (M, dim) array_like, prismatic (and revolute in 3D) only
+        The sliding direction, or the hinge's axis, in the world now (default x for a slider in
+        2D, z otherwise).
     limits : (2,) or (M, 2) array_like, optional
         Revolute: the relative angle's range, rad; prismatic: the travel along the axis, m.
     length : float or (M,) array_like, rope only
@@ -445,8 +640,9 @@ class Joints(Part):
     Raises
     ------
     InvalidInputError
-        Unknown kind; `a` and `b` of different lengths, both None, or joining a body to itself;
-        bodies of another scene or not yet added; wrong shapes; a zero axis; lower > upper limit.
+        Unknown kind, or a spherical joint in 2D; `a` and `b` of different lengths, both None,
+        or joining a body to itself; bodies of another scene or dimension, or not yet added;
+        wrong shapes; a zero axis; lower > upper limit.
     """
 
     section: ClassVar[str] = "bodies"
@@ -463,12 +659,19 @@ class Joints(Part):
             raise InvalidInputError(f"b: joins {len(rb)} bodies to {len(ra)} (a and b must have equal counts)")
         self.m = m
         self.a, self.b = ra, rb
-        self.anchors = _rows("anchors", anchors, m, 2)
-        self.anchors_b = None if anchors_b is None else _rows("anchors_b", anchors_b, m, 2)
-        if axis is not None and self.kind != "prismatic":
-            raise InvalidInputError(f"axis: only prismatic joints have one, not {self.kind}")
-        self.axis = None if axis is None else _rows("axis", axis, m, 2)
-        if self.axis is not None and (np.hypot(self.axis[:, 0], self.axis[:, 1]) == 0).any():
+        dim = _width(anchors)
+        if dim is None:
+            raise InvalidInputError(f"anchors: expected shape (M, 2) or (M, 3), got {np.shape(anchors)}")
+        self.dim = dim
+        if self.kind == "spherical" and dim != 3:
+            raise InvalidInputError("kind: a spherical joint is 3D (in 2D a revolute joint turns freely)")
+        self.anchors = _rows("anchors", anchors, m, dim)
+        self.anchors_b = None if anchors_b is None else _rows("anchors_b", anchors_b, m, dim)
+        if axis is not None and not (self.kind == "prismatic" or (self.kind == "revolute" and dim == 3)):
+            raise InvalidInputError(f"axis: only prismatic joints (and revolute ones in 3D) have one, not {self.kind}"
+                                    + (" in 2D" if self.kind == "revolute" else ""))
+        self.axis = None if axis is None else _rows("axis", axis, m, dim)
+        if self.axis is not None and (np.linalg.norm(self.axis, axis=1) == 0).any():
             raise InvalidInputError("axis: must not be zero")
         if limits is not None and self.kind not in ("revolute", "prismatic"):
             raise InvalidInputError(f"limits: only revolute and prismatic joints have them, not {self.kind}")
@@ -503,8 +706,8 @@ class Joints(Part):
         return p
 
     def _attach(self, ctx: AttachContext, name: Any) -> Joints:
-        if ctx.dim != 2:
-            raise InvalidInputError("item: rigid bodies are two-dimensional in this version (make the scene with dim=2)")
+        if self.dim != ctx.dim:
+            raise InvalidInputError(f"anchors: these joints are {self.dim}D (the anchors' width) and the scene is {ctx.dim}D")
         if self._host is not None:
             raise InvalidInputError("item: these joints are already in a scene")
         ctx.sim.add_joints(self._params(ctx.parts))
@@ -532,9 +735,10 @@ class Joints(Part):
         j.kind = _check.choice("kind", rec.get("kind"), JOINTS)
         j.m = _check.int_in_range("m", rec.get("m"), 1, 1 << 24)
         j.a = j.b = None
-        j.anchors = _rows("anchor", arrays.get("anchor"), j.m, 2)
-        j.anchors_b = None if "anchor_b" not in arrays else _rows("anchor_b", arrays["anchor_b"], j.m, 2)
-        j.axis = None if "axis" not in arrays else _rows("axis", arrays["axis"], j.m, 2)
+        j.dim = _width(arrays.get("anchor")) or 2
+        j.anchors = _rows("anchor", arrays.get("anchor"), j.m, j.dim)
+        j.anchors_b = None if "anchor_b" not in arrays else _rows("anchor_b", arrays["anchor_b"], j.m, j.dim)
+        j.axis = None if "axis" not in arrays else _rows("axis", arrays["axis"], j.m, j.dim)
         j.limits = None if "limits" not in arrays else _rows("limits", arrays["limits"], j.m, 2)
         j.length = None if "length" not in arrays else _rows("length", arrays["length"], j.m, 1)
         j._host = None
@@ -543,6 +747,119 @@ class Joints(Part):
 
     def __repr__(self) -> str:
         return f"Joints({self.kind!r}, m={self.m})"
+
+
+class Pins(Part):
+    """Particles pinned to rigid bodies: each particle moves with the point of its body where it
+    is when added, both ways (cloth hung from a bar, a rope tied to a box). Each step the
+    particle is put on that point and its velocity made the point's by an impulse along the
+    difference, applied to the body the other way (the particle's forces, springs and all,
+    reach the body through it); a fixed or kinematic body is not pushed. What this exchanges is
+    booked with the particle coupling (``"bodies ⇄ particles"``). Particles pinned in the scene
+    (``pinned=True``) stay where they are.
+
+    Parameters
+    ----------
+    particles : (M,) array_like of int
+        Particle indices (distinct).
+    body : BodyRef
+        One body for all (``bars[0]``) or one per particle (``boxes[[0, 0, 1]]``).
+
+    Raises
+    ------
+    InvalidInputError
+        Indices not distinct, negative or beyond the scene's particles; a body count that is
+        neither 1 nor M; bodies of another scene or dimension, or not yet added.
+    InvalidTypeError
+        `body` not a BodyRef or Bodies group.
+
+    Examples
+    --------
+    >>> import numpy as np, physcore as pc
+    >>> scene = pc.Scene(dim=2, dt=1 / 240)
+    >>> _ = scene.add(pc.Gravity([0.0, -9.81]))
+    >>> scene.add_particles(np.array([[0.3, 0.0]]))
+    >>> bar = scene.add(pc.Bodies("box", size=(0.3, 0.05), positions=[(0.0, 0.0)], kind="kinematic",
+    ...                           velocities=[(1.0, 0.0)]))
+    >>> _ = scene.add(pc.Pins([0], bar[0]))
+    >>> scene.step(240)
+    >>> np.round(scene.positions[0], 3)  # carried along with the bar's end, 1 m in 1 s
+    array([1.3, 0. ])
+    """
+
+    section: ClassVar[str] = "bodies"
+    part_kind: ClassVar[str] = "pins"
+
+    def __init__(self, particles: Any, body: BodyRef | Bodies) -> None:
+        idx = _check.real_array("particles", particles)
+        if idx.ndim != 1 or idx.size < 1:
+            raise InvalidInputError(f"particles: expected shape (M,) with M >= 1, got {idx.shape}")
+        if not (np.isfinite(idx).all() and (idx == np.round(idx)).all() and (idx >= 0).all()):
+            raise InvalidInputError("particles: every entry must be a particle index (an integer >= 0)")
+        self.particles = idx.astype(np.int64)
+        if np.unique(self.particles).size != self.particles.size:
+            raise InvalidInputError("particles: each particle can be pinned once")
+        ref = _ref("body", body)
+        if ref is None:
+            raise InvalidInputError("body: pins need a body (a particle pinned to the world: scene.add_particles(pinned=True))")
+        if len(ref) not in (1, idx.size):
+            raise InvalidInputError(f"body: {len(ref)} bodies for {idx.size} particles (give 1, or one per particle)")
+        self.body = ref
+        self._host: Host | None = None
+        self._loaded: dict[str, np.ndarray] | None = None
+
+    def _attach(self, ctx: AttachContext, name: Any) -> Pins:
+        if self._host is not None:
+            raise InvalidInputError("item: these pins are already in a scene")
+        m = self.particles.size
+        if self._loaded is not None:
+            numbers, points = self._loaded["body"], self._loaded["points"]
+        else:
+            g = self.body.group
+            if g.first is None or not any(p is g for p in ctx.parts):
+                raise InvalidInputError(f"body: bodies {g.name!r} are not in this scene (add them before the pins)")
+            if g.dim != ctx.dim:
+                raise InvalidInputError(f"body: these bodies are {g.dim}D and the scene is {ctx.dim}D")
+            numbers = np.broadcast_to(g.first + self.body.index, (m,)).astype(np.float64)
+            if int(self.particles.max()) >= ctx.n_particles:
+                raise InvalidInputError(f"particles: index {int(self.particles.max())} is beyond the scene's "
+                                        f"{ctx.n_particles} particles (add the particles first)")
+            points = np.asarray(ctx.read_positions(), np.float64)[self.particles]
+        ctx.sim.add_pins({"m": m, "particles": self.particles.astype(np.float64), "body": np.ascontiguousarray(numbers),
+                          "points": np.ascontiguousarray(points).reshape(-1)})
+        self._numbers, self._points = np.asarray(numbers), np.asarray(points)
+        self._host = ctx.host
+        return self
+
+    def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        return ({"part": "pins", "record": {"m": int(self.particles.size)}},
+                {"particles": self.particles.astype(np.float64), "body": self._numbers, "points": self._points})
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {}
+
+    @classmethod
+    def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
+        rec = entry["record"]
+        if not isinstance(rec, dict):
+            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        m = _check.int_in_range("m", rec.get("m"), 1, 1 << 24)
+        missing = [k for k in ("particles", "body", "points") if k not in arrays]
+        if missing:
+            raise InvalidInputError(f"arrays: missing {', '.join(missing)}")
+        p = cls.__new__(cls)
+        p.particles = _rows("particles", arrays["particles"], m, 1).astype(np.int64)
+        body = _rows("body", arrays["body"], m, 1)
+        pts = np.asarray(arrays["points"], np.float64)
+        dim = _width(pts) or 2
+        p._loaded = {"body": body, "points": _rows("points", pts, m, dim)}
+        p.body = None  # type: ignore[assignment]
+        p._host = None
+        ctx.add(p)
+
+    def __repr__(self) -> str:
+        return f"Pins(m={self.particles.size})"
 
 
 def _ref(arg: str, value: Any) -> BodyRef | None:
@@ -555,7 +872,8 @@ def _ref(arg: str, value: Any) -> BodyRef | None:
     raise InvalidTypeError(f"{arg}: expected bodies[i] (a BodyRef), a Bodies group or None, got {type(value).__name__}")
 
 
-_DEFAULT_COLORS = {"ball": (214, 96, 77), "box": (222, 160, 87), "capsule": (95, 158, 160), "polygon": (130, 120, 190)}
+_DEFAULT_COLORS = {"ball": (214, 96, 77), "box": (222, 160, 87), "capsule": (95, 158, 160), "polygon": (130, 120, 190),
+                   "hull": (130, 120, 190), "mesh": (150, 156, 166)}
 
 
 def _color(value: Any, shape: str) -> np.ndarray:

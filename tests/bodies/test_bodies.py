@@ -230,10 +230,15 @@ def test_bad_bodies_are_refused_by_name(kwargs, arg):
         pc.Bodies(**kwargs)
 
 
-def test_bodies_refuse_a_3d_scene_and_bad_joints():
+def test_bodies_refuse_a_scene_of_the_other_dimension_and_bad_joints():
     s3 = pc.Scene(dim=3)
-    with pytest.raises(pc.InvalidInputError, match="two-dimensional"):
-        s3.add(pc.Bodies("ball", size=0.1))
+    with pytest.raises(pc.InvalidInputError, match="2D"):
+        s3.add(pc.Bodies("ball", size=0.1, positions=[(0.0, 0.0)]))
+    with pytest.raises(pc.InvalidInputError, match="2D"):
+        s3.add(pc.Bodies("polygon", vertices=[(0, 0), (1, 0), (0, 1)]))
+    with pytest.raises(pc.InvalidInputError, match="shape"):
+        pc.Bodies("polygon", positions=[(0, 0, 0)], vertices=[(0, 0, 0), (1, 0, 0), (0, 1, 0)])
+    assert not s3.bodies
     s = _scene()
     g = s.add(pc.Bodies("ball", size=[0.1, 0.1], positions=[(0, 0), (1, 0)]))
     with pytest.raises(pc.InvalidInputError, match="b"):

@@ -1,19 +1,24 @@
-"""Rigid bodies in a recording and on the image: each body's outline (a convex polygon in its own
-frame) and colour, its pose every frame, and the drawing: a filled, shaded, antialiased polygon
-with a darker rim (a ball also gets a spoke, so its rolling shows)."""
+"""Rigid bodies in a recording and on the image. In 2D: each body's outline (a convex polygon in
+its own frame) and colour, its pose every frame, and the drawing: a filled, shaded, antialiased
+polygon with a darker rim (a ball also gets a spoke, so its rolling shows). In 3D: each body's
+triangles in its own frame (flat-shaded faces for boxes, hulls and meshes; smooth for balls and
+capsules, a ball's two halves in two shades so that its rolling shows), posed every frame and
+lit and rasterised like the cloth (``_mesh``), in one depth buffer with it."""
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
 
-__all__ = ["BodyTrack", "body_track", "draw_bodies", "body_bounds"]
+__all__ = ["BodyTrack", "BodyTrack3", "body_track", "draw_bodies", "body_bounds", "body_bounds3", "body_geometry"]
 
 
 class BodyTrack:
     """The bodies of a scene as recorded: ``outlines`` (B,) of (V, 2) float64 polygons (m, body
     frame, convex), ``colors`` (B, 3) uint8, ``balls`` (B,) bool (draw a spoke), ``poses``
     (F, B, 3) float32 ``(x, y, angle)`` with x, y relative to the recording's origin."""
+
+    dim = 2
 
     def __init__(self, outlines: list[np.ndarray], colors: np.ndarray, balls: np.ndarray, frames: int) -> None:
         self.outlines = outlines
@@ -23,11 +28,97 @@ class BodyTrack:
         self.reach = np.array([float(np.hypot(o[:, 0], o[:, 1]).max()) for o in outlines])
 
 
-def body_track(scene: Any, frames: int) -> tuple[BodyTrack | None, Any]:
-    """The scene's bodies (None if it has none) and ``grab()``: their poses now, (B, 3) float64."""
+class BodyTrack3:
+    """The bodies of a 3D scene as recorded: every body's triangles in its own frame, joined:
+    ``local`` (V, 3) float64 vertices (m), ``normals`` (V, 3) their unit normals, ``faces``
+    (T, 3) int64, ``owner`` (V,) int64 the body of each vertex, ``rgb`` (V, 3) float32 in
+    [0, 1]; ``reach`` (B,) each body's farthest vertex from its centre (m); ``poses`` (F, B, 7)
+    float32 ``(x, y, z, qx, qy, qz, qw)``, the centre relative to the recording's origin."""
+
+    dim = 3
+
+    def __init__(self, meshes: list[tuple[np.ndarray, np.ndarray]], smooth: np.ndarray, colors: np.ndarray,
+                 balls: np.ndarray, frames: int) -> None:
+        local, normals, faces, owner, rgb = [], [], [], [], []
+        k = 0
+        for b, (v, t) in enumerate(meshes):
+            tri = v[t]  # (T, 3 corners, 3)
+            fn = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            if smooth[b]:  # per-vertex normals: the area-weighted mean of the faces around
+                vn = np.zeros_like(v)
+                for c in range(3):
+                    np.add.at(vn, t[:, c], fn)
+                vn /= np.maximum(np.linalg.norm(vn, axis=1, keepdims=True), 1e-300)
+                verts, norms, f = v, vn, t
+            else:  # each face its own corners: flat faces with sharp edges
+                fn = fn / np.maximum(np.linalg.norm(fn, axis=1, keepdims=True), 1e-300)
+                verts, norms = tri.reshape(-1, 3), np.repeat(fn, 3, axis=0)
+                f = np.arange(3 * len(t)).reshape(-1, 3)
+            base = np.tile(colors[b].astype(np.float32) / 255.0, (len(verts), 1))
+            if balls[b]:  # two shades, split along the body's x: a rolling ball shows it
+                base[verts[:, 0] * verts[:, 1] > 0] *= 0.78
+            local.append(verts)
+            normals.append(norms)
+            faces.append(f + k)
+            owner.append(np.full(len(verts), b, dtype=np.int64))
+            rgb.append(base)
+            k += len(verts)
+        self.local = np.concatenate(local)
+        self.normals = np.concatenate(normals)
+        self.faces = np.concatenate(faces).astype(np.int64)
+        self.owner = np.concatenate(owner)
+        self.rgb = np.concatenate(rgb).astype(np.float32)
+        self.reach = np.array([float(np.linalg.norm(v, axis=1).max()) for v, _ in meshes])
+        self.poses = np.zeros((frames, len(meshes), 7), dtype=np.float32)
+
+
+def _rotations(q: np.ndarray) -> np.ndarray:
+    """(B, 3, 3) rotation matrices of the unit quaternions q (B, 4), (x, y, z, w)."""
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+    ], 1)
+
+
+def body_geometry(track: BodyTrack3, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Frame k's 3D bodies as one mesh relative to the recording's origin: vertices (V, 3)
+    float64 m, unit normals (V, 3), faces (T, 3) int64, colours (V, 3) float32 in [0, 1]; the
+    faces of bodies whose pose is not finite are left out."""
+    poses = track.poses[k].astype(np.float64)
+    ok = np.isfinite(poses).all(axis=1)
+    q = np.where(ok[:, None], poses[:, 3:], [0.0, 0.0, 0.0, 1.0])
+    q /= np.maximum(np.linalg.norm(q, axis=1, keepdims=True), 1e-300)
+    rot = _rotations(q)[track.owner]
+    centre = np.where(ok[:, None], poses[:, :3], 0.0)[track.owner]
+    verts = np.einsum("vij,vj->vi", rot, track.local) + centre
+    normals = np.einsum("vij,vj->vi", rot, track.normals)
+    faces = track.faces if ok.all() else track.faces[ok[track.owner[track.faces[:, 0]]]]
+    return verts, normals, faces, track.rgb
+
+
+def body_bounds3(track: BodyTrack3, cam: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The (2,) lower and upper corners, on the screen plane of `cam`, of every body over
+    every frame: each centre ± its reach (m, relative to the origin); non-finite poses are
+    skipped."""
+    c = track.poses[:, :, :3].astype(np.float64).reshape(-1, 3)
+    r = np.tile(track.reach, track.poses.shape[0])
+    ok = np.isfinite(c).all(axis=1)
+    if not ok.any():
+        return np.full(2, np.inf), np.full(2, -np.inf)
+    s, _ = cam.project(c[ok])
+    return (s - r[ok, None]).min(axis=0), (s + r[ok, None]).max(axis=0)
+
+
+def body_track(scene: Any, frames: int) -> tuple[BodyTrack | BodyTrack3 | None, Any]:
+    """The scene's bodies (None if it has none) and ``grab()``: their poses now, (B, 3)
+    float64 ``(x, y, angle)`` in 2D, (B, 7) ``(x, y, z, qx, qy, qz, qw)`` in 3D."""
     groups = [g for g in getattr(scene, "bodies", ()) if getattr(g, "first", None) is not None]
     if not groups:
         return None, None
+    if groups[0].dim == 3:
+        return _body_track3(groups, frames)
     outlines: list[np.ndarray] = []
     colors, balls = [], []
     for g in groups:
@@ -43,6 +134,28 @@ def body_track(scene: Any, frames: int) -> tuple[BodyTrack | None, Any]:
     def grab() -> np.ndarray:
         x, y, a = host.exclusive(lambda sim: sim.system_fields("bodies", ["x", "y", "angle"]))
         full = np.stack([np.asarray(x), np.asarray(y), np.asarray(a)], axis=1)
+        return np.concatenate([full[s:e] for s, e in spans])
+
+    return track, grab
+
+
+def _body_track3(groups: list[Any], frames: int) -> tuple[BodyTrack3, Any]:
+    meshes: list[tuple[np.ndarray, np.ndarray]] = []
+    colors, smooth, balls = [], [], []
+    for g in groups:
+        meshes += g.meshes()
+        c = np.asarray(g.color, dtype=np.uint8)
+        colors.append(np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c)
+        smooth.append(np.full(g.n, g.shape in ("ball", "capsule")))
+        balls.append(np.full(g.n, g.shape == "ball"))
+    track = BodyTrack3(meshes, np.concatenate(smooth), np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames)
+    spans = [(g.first, g.first + g.n) for g in groups]
+    host = groups[0]._bound()
+    names = ["x", "y", "z", "qx", "qy", "qz", "qw"]
+
+    def grab() -> np.ndarray:
+        f = host.exclusive(lambda sim: sim.system_fields("bodies", names))
+        full = np.stack([np.asarray(v) for v in f], axis=1)
         return np.concatenate([full[s:e] for s, e in spans])
 
     return track, grab

@@ -362,12 +362,23 @@ class _MeshShader:
             self.ball_uv = np.tile(np.array(uv, dtype=np.float32), (len(self.ball[0]), 1))
         self._joined: tuple[Any, np.ndarray, np.ndarray | None] | None = None  # (key, faces, uv) with the balls
 
-    def draw(self, out: np.ndarray, x: np.ndarray, cam: Any, base: np.ndarray | None = None) -> None:
+    def _untextured(self, geometry: tuple[np.ndarray, np.ndarray, np.ndarray], rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Colours and uv for static geometry drawn with a textured sheet: every vertex samples
+        the texture's brightest texel and its colour is divided by it (see __init__)."""
+        tex = self.texture
+        h, w = tex.shape[:2]  # type: ignore[union-attr]
+        ty, tx = np.unravel_index(int(np.argmax(tex.sum(axis=2))), (h, w))  # type: ignore[union-attr]
+        uv = (tx / max(w - 1, 1), 1.0 - ty / max(h - 1, 1))
+        return (rgb / np.maximum(tex[ty, tx], 0.05)).astype(np.float32), np.tile(np.array(uv, np.float32), (len(geometry[0]), 1))
+
+    def draw(self, out: np.ndarray, x: np.ndarray, cam: Any, base: np.ndarray | None = None,
+             solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
         """Frame `x` ((N, dim) positions relative to the recording's origin) lit, rasterised and
         blended by coverage over `out`, an (H, W, 3) uint8 C-contiguous RGB image, in place.
 
         `base`: optional (N, 3) per-vertex colours in [0, 1] (a colour map), replacing the front
-        colour.
+        colour. `solids`: this frame's rigid bodies (3D), ``(vertices, normals, faces, rgb)`` as
+        :func:`._bodies.body_geometry` gives them, drawn in the same depth buffer.
         """
         from .. import _core
 
@@ -412,15 +423,30 @@ class _MeshShader:
         verts[:, 0], verts[:, 1] = col, row
         verts[:, 2] = 0.0 if depth is None else depth
         faces, uv = self.faces_u32, self.uv if self.texture is not None else None
-        if self.ball is not None and depth is not None:
+        static = self.ball
+        ball_rgb, ball_uv = self.ball_rgb, self.ball_uv
+        if solids is not None and depth is not None:
+            # The bodies join the static geometry for this frame (after it: the floors' face
+            # ranges stay where they are).
+            sx, sn, sf, srgb = solids
+            if static is None:
+                static, ball_rgb = (sx, sn, sf), srgb
+            else:
+                static = (np.concatenate([static[0], sx]), np.concatenate([static[1], sn]),
+                          np.concatenate([static[2], sf + len(static[0])]))
+                ball_rgb = np.concatenate([ball_rgb, srgb])
+            if uv is not None:
+                ball_rgb, ball_uv = self._untextured(static, ball_rgb)
+            self._joined = None
+        if static is not None and depth is not None:
             # The balls: static vertices, lit like the sheet's front, appended to the one draw
             # call so that the depth buffer sorts sheet and balls per sample.
-            bx, bn, bf = self.ball
+            bx, bn, bf = static
             nb = len(bx)
             bs, bd = cam.project(bx)
             bc, br = cam.pixels(bs)
             bl = np.empty((nb, 4), dtype=np.float32)
-            bl[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((bn @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * self.ball_rgb
+            bl[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((bn @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * ball_rgb
             bl[:, 3] = _SPECULAR * _pow24(np.maximum(bn @ half, 0.0))
             bv = np.empty((nb, 3), dtype=np.float32)
             bv[:, 0], bv[:, 1], bv[:, 2] = bc, br, bd
@@ -431,7 +457,7 @@ class _MeshShader:
                 for j in hidden:
                     a, b, _ = self._floor_faces[j]
                     keep[a:b] = False
-                joined_uv = None if uv is None else np.ascontiguousarray(np.concatenate([uv, self.ball_uv]))
+                joined_uv = None if uv is None else np.ascontiguousarray(np.concatenate([uv, ball_uv]))
                 self._joined = ((n, hidden), np.ascontiguousarray(np.concatenate([faces, (bf[keep] + n).astype(np.uint32)])),
                                 joined_uv)
             _, faces, uv = self._joined
@@ -440,3 +466,27 @@ class _MeshShader:
             verts, faces, front, back, out, _SS,
             uv=uv, texture=self.texture,
         )
+
+
+def shade_solids(out: np.ndarray, cam: Any, solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:
+    """Lights and rasterises solid geometry ``(vertices, normals, faces, rgb)`` (3D, m relative
+    to the recording's origin; :func:`._bodies.body_geometry`) over the RGB image `out`, in
+    place, with the mesh shader's light, in a depth buffer of its own."""
+    from .. import _core
+
+    verts, normals, faces, rgb = solids
+    if not len(faces):
+        return
+    right, up, toward = cam.basis[:, 0], cam.basis[:, 1], cam.basis[:, 2]
+    light = -0.35 * right + 0.45 * up + 0.82 * toward
+    light /= np.linalg.norm(light)
+    half = light + toward
+    half /= np.linalg.norm(half)
+    s, depth = cam.project(verts)
+    col, row = cam.pixels(s)
+    lit = np.empty((len(verts), 4), dtype=np.float32)
+    lit[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((normals @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * rgb
+    lit[:, 3] = _SPECULAR * _pow24(np.maximum(normals @ half, 0.0))
+    v = np.empty((len(verts), 3), dtype=np.float32)
+    v[:, 0], v[:, 1], v[:, 2] = col, row, depth
+    _core.rasterise_mesh(v, np.ascontiguousarray(faces, dtype=np.uint32), lit, lit, out, _SS)

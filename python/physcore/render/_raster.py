@@ -554,9 +554,9 @@ class _Rasteriser:
                 lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
                 amax = max(amax, float(np.abs(c).max() + r.max()))
         if rec.bodies is not None and fit is None and mode != "orbit":
-            from ._bodies import body_bounds
+            from ._bodies import body_bounds, body_bounds3
 
-            blo, bhi = body_bounds(rec.bodies)
+            blo, bhi = body_bounds3(rec.bodies, self.cam) if rec.bodies.dim == 3 else body_bounds(rec.bodies)
             if np.isfinite(blo).all() and np.isfinite(bhi).all():
                 if rec.positions.shape[1] == 0:
                     lo, hi = blo, bhi
@@ -962,7 +962,7 @@ class _Rasteriser:
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
         out = self.palette[under]  # a new C-contiguous (H, W, 3) uint8 array
-        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k))
+        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
         if self._pinned_idx.size:
@@ -1018,12 +1018,27 @@ class _Rasteriser:
         _paste(out, over, self.palette)
         return out
 
+    def _solids(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """Frame k's 3D rigid bodies as geometry for the mesh shader (None if there are none)."""
+        if self.rec.bodies is None or self.rec.bodies.dim != 3:
+            return None
+        from ._bodies import body_geometry
+
+        return body_geometry(self.rec.bodies, k)
+
     def _draw_bodies(self, out: np.ndarray, k: int, cam: _Camera) -> None:
-        """Frame k's rigid bodies, filled and shaded, on the RGB image `out` (2D)."""
-        if self.rec.bodies is not None and cam.dim == 2:
+        """Frame k's rigid bodies, filled and shaded, on the RGB image `out` (in 3D, lit solids
+        over the particles; with a mesh they were drawn in its depth buffer)."""
+        if self.rec.bodies is None:
+            return
+        if cam.dim == 2:
             from ._bodies import draw_bodies
 
             draw_bodies(out, cam, self.rec.bodies, k)
+        elif self.mesh is None:
+            from ._mesh import shade_solids
+
+            shade_solids(out, cam, self._solids(k))  # type: ignore[arg-type]
 
     def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> bool:
         """What frame k draws under its discs: the trails, and the springs unless colouring by

@@ -186,7 +186,7 @@ def _simulate(
     elif walls is not None and len(walls):
         origin = _finite_mean(walls)
     elif b0 is not None:
-        origin = _finite_mean(b0[:, :2])
+        origin = _finite_mean(b0[:, :dim])
     else:
         origin = np.zeros(dim)
     pos = np.empty((frames, n, dim), dtype=np.float32)
@@ -254,8 +254,8 @@ def _simulate(
             if track is not None:
                 b = b0 if k == 0 else grab_bodies()
                 with np.errstate(over="ignore", invalid="ignore"):
-                    track.poses[k, :, :2] = b[:, :2] - origin[:2]
-                    track.poses[k, :, 2] = b[:, 2]
+                    track.poses[k, :, :dim] = b[:, :dim] - origin[:dim]
+                    track.poses[k, :, dim:] = b[:, dim:]
             if on_frame is not None:
                 on_frame(k, scene, taken)
             if bar is not None:

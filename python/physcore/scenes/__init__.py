@@ -31,7 +31,7 @@ grids        ripple, double_slit, turing, smoke, cavity, vortex_street
 flows        lorenz
 grains       galton_board, galton_bins, billiards, newtons_cradle, jelly (DEM)
 constraints  shape_matched_boxes (XPBD shape matching), double_pendulum (stiff rods)
-bodies       dominoes, pyramid, tumbling_boxes (rigid bodies, rapier)
+bodies       dominoes, pyramid, tumbling_boxes, tablecloth (rigid bodies, rapier)
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ from ..scene import Scene
 from ..shapes import cloth_springs as cloth_springs
 from ..shapes import mesh_edges_and_hinges as mesh_edges_and_hinges
 from ..shapes import plummer_sphere
-from .bodies import dominoes, pyramid, tumbling_boxes
+from .bodies import dominoes, pyramid, tablecloth, tumbling_boxes
 from .charges import CHARGE_COLORS as CHARGE_COLORS
 from .charges import cyclotron
 from .cloth import cloth, cloth_on_ball, xpbd_cloth
@@ -64,7 +64,7 @@ __all__ = [
     "cloth", "projectile", "kepler", "spring_chain", "dam_break", "drop", "droplets", "crown", "figure_eight", "pythagorean",
     "galaxies", "cyclotron", "lorenz", "plummer_sphere", "galton_board", "galton_bins", "billiards", "newtons_cradle", "jelly",
     "xpbd_cloth", "tumbling_boxes", "cloth_on_ball", "ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street",
-    "double_pendulum", "dominoes", "pyramid", "floating", "shape_matched_boxes", "REGISTRY", "DEFAULT_SCENE",
+    "double_pendulum", "dominoes", "pyramid", "floating", "shape_matched_boxes", "tablecloth", "REGISTRY", "DEFAULT_SCENE",
 ]
 
 #: Scene name → function, in the order ``physcore scenes`` lists them.
@@ -100,6 +100,7 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
     "pyramid": pyramid,
     "floating": floating,
     "shape_matched_boxes": shape_matched_boxes,
+    "tablecloth": tablecloth,
 }
 #: The scene `physcore render` and `physcore view` show when none is named.
 DEFAULT_SCENE = "cloth"

@@ -3,12 +3,13 @@ use super::{convert::*, errors::*, watch::*, Inner};
 use crate::alloc::{count, Need};
 use crate::constraints;
 use crate::error::{invalid, Error};
+use crate::systems::bodies::{Bodies2, Bodies3};
 use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
 use numpy::ndarray::Array1;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::atomic::AtomicBool;
@@ -308,32 +309,53 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
     }
 
-    /// Adds a group of rigid bodies (`systems::bodies`, 2D) to the system "bodies" (made, with
-    /// its coupling to the particles, at the first group); returns the number of its first body.
+    /// Adds a group of rigid bodies (`systems::bodies`) to the system "bodies" (made, with its
+    /// coupling to the particles, at the first group); returns the number of its first body.
     fn add_bodies(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<usize> {
         let p = params_of(py, "add_bodies", params)?;
-        let Inner::D2(s) = &mut self.inner else {
-            return Err(err(invalid(
-                "dim",
-                "rigid bodies are two-dimensional in this version: make the scene with dim=2",
-            )));
+        let r = match &mut self.inner {
+            Inner::D2(s) => bodies_of::<_, Bodies2>(s, true).and_then(|b| b.add_group(p)),
+            Inner::D3(s) => bodies_of::<_, Bodies3>(s, true).and_then(|b| b.add_group(p)),
         };
-        bodies_system(s).map_err(|e| to_py(py, e))?;
-        let b = s.other_mut("bodies").map_err(|e| to_py(py, e))?.as_bodies().expect("the bodies system");
-        b.add_group(p).map_err(|e| to_py(py, e))
+        r.map_err(|e| to_py(py, e))
     }
 
     /// Adds joints between rigid bodies (`systems::bodies::Bodies2::add_joints`).
     fn add_joints(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_joints", params)?;
-        let Inner::D2(s) = &mut self.inner else {
-            return Err(err(invalid(
-                "dim",
-                "rigid bodies are two-dimensional in this version: make the scene with dim=2",
-            )));
+        let r = match &mut self.inner {
+            Inner::D2(s) => bodies_of::<_, Bodies2>(s, false).and_then(|b| b.add_joints(p)),
+            Inner::D3(s) => bodies_of::<_, Bodies3>(s, false).and_then(|b| b.add_joints(p)),
         };
-        let b = s.other_mut("bodies").map_err(|e| to_py(py, e))?.as_bodies().expect("the bodies system");
-        b.add_joints(p).map_err(|e| to_py(py, e))
+        r.map_err(|e| to_py(py, e))
+    }
+
+    /// Pins particles to rigid bodies (`systems::bodies::Bodies2::add_pins`).
+    fn add_pins(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        let p = params_of(py, "add_pins", params)?;
+        let r = match &mut self.inner {
+            Inner::D2(s) => bodies_of::<_, Bodies2>(s, false).and_then(|b| b.add_pins(p)),
+            Inner::D3(s) => bodies_of::<_, Bodies3>(s, false).and_then(|b| b.add_pins(p)),
+        };
+        r.map_err(|e| to_py(py, e))
+    }
+
+    /// Body `i`'s shape as triangles in its own frame (3D bodies only): vertices (V, 3) float64
+    /// m and corner indices (T, 3) uint32 (`systems::bodies::Bodies3::body_mesh`).
+    #[allow(clippy::type_complexity)]
+    fn body_mesh<'py>(
+        &mut self,
+        py: Python<'py>,
+        i: usize,
+    ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u32>>)> {
+        let Inner::D3(s) = &mut self.inner else {
+            return Err(err(invalid("dim", "body meshes are for 3D bodies (2D bodies have outlines)")));
+        };
+        let (v, t) = bodies_of::<_, Bodies3>(s, false).and_then(|b| b.body_mesh(i)).map_err(|e| to_py(py, e))?;
+        let (nv, nt) = (v.len() / 3, t.len() / 3);
+        let v = numpy::PyArray1::from_vec(py, v).reshape([nv, 3])?;
+        let t = numpy::PyArray1::from_vec(py, t).reshape([nt, 3])?;
+        Ok((v, t))
     }
 
     /// The fields `names` of system `name`, each a flat float64 array (the grid's layout).
@@ -532,12 +554,42 @@ fn copy_of(a: &[f64], what: &'static str, of: &str) -> crate::error::Result<Vec<
         .copy(a)
 }
 
-/// The index of the world's "bodies" system, made (with its particle coupling) if missing.
-fn bodies_system(s: &mut World<DVec2>) -> crate::error::Result<usize> {
-    if let Some(k) = s.others().iter().position(|o| o.name() == "bodies") {
-        return Ok(k);
+/// The world's "bodies" system, as `B` (`Bodies2` or `Bodies3`); made, with its particle
+/// coupling, if missing and `make` (else refused: joints need bodies first).
+fn bodies_of<V: Vector, B: BodiesKind<V>>(s: &mut World<V>, make: bool) -> crate::error::Result<&mut B> {
+    if !s.others().iter().any(|o| o.name() == "bodies") {
+        if !make {
+            return Err(invalid("a", "the scene has no rigid bodies yet: add Bodies before their joints"));
+        }
+        let k = s.add_system(Box::new(B::make("bodies")))?;
+        s.add_coupling(B::coupling(k));
     }
-    let k = s.add_system(Box::new(crate::systems::bodies::Bodies2::new("bodies")))?;
-    s.add_coupling(Box::new(crate::systems::bodies::BodyContacts::new(k)));
-    Ok(k)
+    Ok(s.other_mut("bodies")?
+        .as_any_bodies()
+        .and_then(|a| a.downcast_mut::<B>())
+        .expect("the world's system \"bodies\" is its rigid bodies"))
+}
+
+/// The rigid-body system of a dimension and its coupling to the particles.
+trait BodiesKind<V: Vector>: crate::systems::System + 'static {
+    fn make(name: &str) -> Self;
+    fn coupling(k: usize) -> Box<dyn crate::systems::Coupling<V>>;
+}
+
+impl BodiesKind<DVec2> for Bodies2 {
+    fn make(name: &str) -> Self {
+        Bodies2::new(name)
+    }
+    fn coupling(k: usize) -> Box<dyn crate::systems::Coupling<DVec2>> {
+        Box::new(crate::systems::bodies::BodyContacts2::new(k))
+    }
+}
+
+impl BodiesKind<DVec3> for Bodies3 {
+    fn make(name: &str) -> Self {
+        Bodies3::new(name)
+    }
+    fn coupling(k: usize) -> Box<dyn crate::systems::Coupling<DVec3>> {
+        Box::new(crate::systems::bodies::BodyContacts3::new(k))
+    }
 }

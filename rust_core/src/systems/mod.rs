@@ -121,8 +121,9 @@ pub trait System: Send + Sync {
     /// given at the start of every call of steps: systems with mass under gravity (rigid
     /// bodies) follow the scene's gravity. Default: ignored.
     fn set_gravity(&mut self, _g: [Real; 3]) {}
-    /// The rigid bodies, for the coupling that reaches them (`bodies::BodyContacts`).
-    fn as_bodies(&mut self) -> Option<&mut bodies::Bodies2> {
+    /// The rigid bodies (`bodies::Bodies2` or `bodies::Bodies3`), for the coupling that reaches
+    /// them (`bodies::BodyContacts2`, `BodyContacts3`) and the bindings: downcast it.
+    fn as_any_bodies(&mut self) -> Option<&mut dyn std::any::Any> {
         None
     }
     /// Hands the system the stop flag of the call in progress (`Stop::default()` after it),

@@ -1,29 +1,9 @@
-//! Rigid bodies in 2D (balls, boxes, capsules, convex polygons; revolute, fixed, prismatic and
-//! rope joints), solved by rapier (Crozet, dimforge: rapier2d-f64). Contact and joint solving
-//! is a field of its own with a well-kept library: physcore adds what it does not have, the
-//! coupling with particles ([`BodyContacts`]), the energy books, rollback and bit-identical
-//! restarts, and the rendering.
-//!
-//! Why rapier: deterministic (its `enhanced-determinism` feature: libm's functions, the same
-//! bits on every platform), double precision, serialisable state (serde), and no threads of its
-//! own here (no `parallel` feature), so results never depend on the thread count.
-//!
-//! Bodies are numbered in the order they were added, across groups (the Python `Bodies` parts):
-//! the fields (`x`, `y`, `angle`, `vx`, `vy`, `omega`, `mass`) hold one value per body in that
-//! order. A group is one shape kind; joints join two bodies (or a body and a fixed point).
-//!
-//! The books: kinetic energy (translation and rotation) and the potential of uniform gravity
-//! of the dynamic bodies; what rapier's contacts, friction, restitution and joints (and its
-//! integrator's error) change is booked as one residual, "bodies: contacts and joints", since
-//! rapier does not report them apart; what the particle coupling exchanges, as "bodies ⇄
-//! particles". So the total balances by construction and the residual is what to read.
-use super::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
-use crate::error::{invalid, Failure, Result};
-use crate::terms::registry::Params;
-use crate::vector::{Real, Vector as PVector};
-use rapier2d_f64::parry::bounding_volume::BoundingVolume;
-use rapier2d_f64::prelude::*;
-use std::sync::atomic::AtomicBool;
+// The rigid-body system written once for both dimensions: `include!`d by `dim2.rs` (rapier2d-f64)
+// and `dim3.rs` (rapier3d-f64), each of which first brings its rapier into scope and defines the
+// few things that differ (vectors from slices, rotations, shapes, fields, the angular term of an
+// effective mass). rapier's 2D and 3D crates are separate crates with separate types, so a
+// generic would need a trait over all of rapier; the two inclusions are what parry and rapier
+// themselves do (one source, built per dimension). Formatted with `rustfmt` on this file.
 
 /// Everything rapier keeps between steps: what a snapshot copies and a save writes.
 #[derive(Clone, serde::Serialize, serde::Deserialize)]
@@ -48,10 +28,12 @@ struct Dynamic {
     coupling: Real,
     /// Parts (groups and joint sets) added when this was saved: a load waits for as many.
     parts: usize,
+    /// Particles pinned to bodies: (particle, body, the point in the body's frame).
+    pins: Vec<(usize, usize, Vector)>,
 }
 
-/// The rigid bodies of a world (2D).
-pub struct Bodies2 {
+/// The rigid bodies of a world.
+pub struct Bodies {
     name: String,
     d: Dynamic,
     gravity: Vector,
@@ -67,27 +49,7 @@ pub struct Bodies2 {
     pending: Option<Dynamic>,
 }
 
-/// The shape kinds of a group, as Python names them.
-pub const SHAPES: [&str; 4] = ["ball", "box", "capsule", "polygon"];
-pub const JOINTS: [&str; 4] = ["revolute", "fixed", "prismatic", "rope"];
-
-fn finite_all(key: &str, v: &[Real]) -> Result<()> {
-    match v.iter().position(|x| !x.is_finite()) {
-        Some(i) => Err(invalid(key, format!("entry {i} is not finite: {}", v[i]))),
-        None => Ok(()),
-    }
-}
-
-fn take_len(p: &mut Params, key: &str, len: usize) -> Result<Vec<Real>> {
-    let v = p.take_floats(key)?;
-    if v.len() != len {
-        return Err(invalid(key, format!("has {} values, expected {len}", v.len())));
-    }
-    finite_all(key, &v)?;
-    Ok(v)
-}
-
-impl Bodies2 {
+impl Bodies {
     pub fn new(name: &str) -> Self {
         let params = IntegrationParameters::default();
         Self {
@@ -106,6 +68,7 @@ impl Bodies2 {
                 contacts: 0.0,
                 coupling: 0.0,
                 parts: 0,
+                pins: Vec::new(),
             },
             gravity: Vector::ZERO,
             params,
@@ -139,34 +102,28 @@ impl Bodies2 {
             return Err(invalid("shape", format!("unknown shape {shape:?}; valid: {}", SHAPES.join(", "))));
         }
         let kind = p.text("kind")?.to_string();
+        if !["dynamic", "fixed", "kinematic"].contains(&kind.as_str()) {
+            return Err(invalid("kind", format!("unknown body kind {kind:?}; valid: dynamic, fixed, kinematic")));
+        }
         let n = p.count("n", 1 << 24)?;
         if n == 0 {
             return Err(invalid("n", "a group needs at least one body"));
         }
-        let x = take_len(&mut p, "positions", 2 * n)?;
-        let angle = take_len(&mut p, "angles", n)?;
-        let v = take_len(&mut p, "velocities", 2 * n)?;
-        let omega = take_len(&mut p, "angular_velocities", n)?;
-        let per = match shape.as_str() {
-            "ball" => 1,
-            "polygon" => 0,
-            _ => 2,
-        };
+        let x = take_len(&mut p, "positions", D * n)?;
+        let rotations = take_len(&mut p, ROTATION_KEY, ROT * n)?;
+        let rot: Vec<Rotation> = rotations.chunks_exact(ROT).map(rotation).collect::<Result<_>>()?;
+        let v = take_len(&mut p, "velocities", D * n)?;
+        let omega = take_len(&mut p, "angular_velocities", ANG * n)?;
+        let per = size_len(&shape);
         let size = take_len(&mut p, "size", per * n)?;
         if size.iter().any(|&s| s <= 0.0) {
             return Err(invalid("size", "every size must be > 0"));
         }
-        let vertices = if shape == "polygon" {
-            let len = p_len(&p)?;
-            take_len(&mut p, "vertices", len)?
-        } else {
-            Vec::new()
-        };
         let density = p.number("density")?;
         let friction = p.number("friction")?;
         let restitution = p.number("restitution")?;
         if density <= 0.0 {
-            return Err(invalid("density", format!("must be > 0 (kg/m²), got {density}")));
+            return Err(invalid("density", format!("must be > 0 (kg/m^{D}), got {density}")));
         }
         if friction < 0.0 {
             return Err(invalid("friction", format!("must be >= 0, got {friction}")));
@@ -174,42 +131,26 @@ impl Bodies2 {
         if !(0.0..=1.0).contains(&restitution) {
             return Err(invalid("restitution", format!("must be in [0, 1], got {restitution}")));
         }
-        let hull: Vec<Vector> = vertices.chunks_exact(2).map(|c| Vector::new(c[0], c[1])).collect();
-        let polygon = if shape == "polygon" {
-            if hull.len() < 3 {
-                return Err(invalid("vertices", "a polygon needs at least 3 vertices"));
-            }
-            Some(
-                ColliderBuilder::convex_hull(&hull)
-                    .ok_or_else(|| invalid("vertices", "their convex hull is degenerate (all on one line)"))?,
-            )
-        } else {
-            None
-        };
+        // The group's one shape given by vertices (a convex polygon or hull, a triangle mesh).
+        let listed = listed_shape(&shape, &kind, &mut p)?;
         let builder = |i: usize| -> RigidBodyBuilder {
             let b = match kind.as_str() {
                 "fixed" => RigidBodyBuilder::fixed(),
                 "kinematic" => RigidBodyBuilder::kinematic_velocity_based(),
                 _ => RigidBodyBuilder::dynamic(),
             };
-            b.translation(Vector::new(x[2 * i], x[2 * i + 1]))
-                .rotation(angle[i])
-                .linvel(Vector::new(v[2 * i], v[2 * i + 1]))
-                .angvel(omega[i])
+            b.pose(Pose::from_parts(vector(&x[D * i..D * (i + 1)]), rot[i]))
+                .linvel(vector(&v[D * i..D * (i + 1)]))
+                .angvel(ang_vector(&omega[ANG * i..ANG * (i + 1)]))
                 // Sleeping freezes a body bit for bit at rest: deterministic, and a pile at rest
                 // costs nothing, but a body asleep is not woken by particles (see BodyContacts).
                 .can_sleep(false)
         };
-        if !["dynamic", "fixed", "kinematic"].contains(&kind.as_str()) {
-            return Err(invalid("kind", format!("unknown body kind {kind:?}; valid: dynamic, fixed, kinematic")));
-        }
         let first = self.handles.len();
         for i in 0..n {
-            let c = match shape.as_str() {
-                "ball" => ColliderBuilder::ball(size[i]),
-                "box" => ColliderBuilder::cuboid(size[2 * i], size[2 * i + 1]),
-                "capsule" => ColliderBuilder::capsule_x(size[2 * i], size[2 * i + 1]),
-                _ => polygon.clone().expect("checked above"),
+            let c = match &listed {
+                Some(c) => c.clone(),
+                None => sized_shape(&shape, &size[per * i..per * (i + 1)]),
             };
             let c = c.density(density).friction(friction).restitution(restitution);
             let h = self.d.r.bodies.insert(builder(i));
@@ -223,7 +164,8 @@ impl Bodies2 {
 
     /// Adds `m` joints of one kind between bodies `a[k]` and `b[k]` (body numbers; −1: the
     /// world), at world points `anchor` (`anchor_b` for the second body of a rope; `axis` for a
-    /// prismatic joint; `limits` in rad or m; `length`: a rope's longest length, m).
+    /// prismatic joint, and in 3D for a revolute one; `limits` in rad or m; `length`: a rope's
+    /// longest length, m).
     pub fn add_joints(&mut self, mut p: Params) -> Result<()> {
         let kind = p.text("kind")?.to_string();
         if !JOINTS.contains(&kind.as_str()) {
@@ -232,9 +174,9 @@ impl Bodies2 {
         let m = p.count("m", 1 << 24)?;
         let a = take_len(&mut p, "a", m)?;
         let b = take_len(&mut p, "b", m)?;
-        let anchor = take_len(&mut p, "anchor", 2 * m)?;
-        let anchor_b = if p.has("anchor_b") { take_len(&mut p, "anchor_b", 2 * m)? } else { anchor.clone() };
-        let axis = if p.has("axis") { take_len(&mut p, "axis", 2 * m)? } else { [1.0, 0.0].repeat(m) };
+        let anchor = take_len(&mut p, "anchor", D * m)?;
+        let anchor_b = if p.has("anchor_b") { take_len(&mut p, "anchor_b", D * m)? } else { anchor.clone() };
+        let axis = if p.has("axis") { take_len(&mut p, "axis", D * m)? } else { DEFAULT_AXIS.repeat(m) };
         let limits = if p.has("limits") { Some(take_len(&mut p, "limits", 2 * m)?) } else { None };
         let length = if p.has("length") { Some(take_len(&mut p, "length", m)?) } else { None };
         let n = self.handles.len() as Real;
@@ -249,7 +191,7 @@ impl Bodies2 {
         if let Some(k) = (0..m).find(|&k| a[k] < 0.0 && b[k] < 0.0) {
             return Err(invalid("a", format!("joint {k} joins the world to the world")));
         }
-        if let Some(k) = (0..m).find(|&k| axis[2 * k].hypot(axis[2 * k + 1]) == 0.0) {
+        if let Some(k) = (0..m).find(|&k| vector(&axis[D * k..D * (k + 1)]).length() == 0.0) {
             return Err(invalid("axis", format!("joint {k}'s axis is zero")));
         }
         if let Some(l) = &limits {
@@ -274,45 +216,72 @@ impl Bodies2 {
         for k in 0..m {
             let h = |i: Real| if i < 0.0 { anchor_body.expect("set above") } else { self.handles[i as usize] };
             let (ha, hb) = (h(a[k]), h(b[k]));
-            let pa = Vector::new(anchor[2 * k], anchor[2 * k + 1]);
-            let pb = Vector::new(anchor_b[2 * k], anchor_b[2 * k + 1]);
-            let la = self.d.r.bodies[ha].position().inverse_transform_point(pa);
-            let lb = self.d.r.bodies[hb].position().inverse_transform_point(pb);
+            let pa = vector(&anchor[D * k..D * (k + 1)]);
+            let pb = vector(&anchor_b[D * k..D * (k + 1)]);
+            let (posa, posb) = (*self.d.r.bodies[ha].position(), *self.d.r.bodies[hb].position());
+            let la = posa.inverse_transform_point(pa);
+            let lb = posb.inverse_transform_point(pb);
+            // The axis in each body's frame (the two may be turned differently now).
+            let ax = vector(&axis[D * k..D * (k + 1)]).normalize();
+            let (axa, axb) = (posa.rotation.inverse() * ax, posb.rotation.inverse() * ax);
+            let range = limits.as_ref().map(|l| [l[2 * k], l[2 * k + 1]]);
             // Joined bodies do not collide with each other (a chain's links overlap at their
             // hinges); a rope's ends still do.
             let joint: GenericJoint = match kind.as_str() {
                 "revolute" => {
-                    let mut j = RevoluteJointBuilder::new().local_anchor1(la).local_anchor2(lb).contacts_enabled(false);
-                    if let Some(l) = &limits {
-                        j = j.limits([l[2 * k], l[2 * k + 1]]);
+                    let mut j = revolute(axa, axb).local_anchor1(la).local_anchor2(lb).contacts_enabled(false);
+                    if let Some(r) = range {
+                        j = j.limits(r);
                     }
                     j.build().into()
                 }
-                "fixed" => {
-                    let rel = self.d.r.bodies[ha].position().inverse() * *self.d.r.bodies[hb].position();
-                    FixedJointBuilder::new()
-                        .local_frame1(rel)
-                        .local_frame2(Pose::IDENTITY)
-                        .contacts_enabled(false)
-                        .build()
-                        .into()
-                }
+                "fixed" => FixedJointBuilder::new()
+                    .local_frame1(posa.inverse() * posb)
+                    .local_frame2(Pose::IDENTITY)
+                    .contacts_enabled(false)
+                    .build()
+                    .into(),
                 "prismatic" => {
-                    let ax = Vector::new(axis[2 * k], axis[2 * k + 1]).normalize();
-                    let lax = self.d.r.bodies[ha].rotation().inverse_transform_vector(ax);
                     let mut j =
-                        PrismaticJointBuilder::new(lax).local_anchor1(la).local_anchor2(lb).contacts_enabled(false);
-                    if let Some(l) = &limits {
-                        j = j.limits([l[2 * k], l[2 * k + 1]]);
+                        PrismaticJointBuilder::new(axa).local_anchor1(la).local_anchor2(lb).contacts_enabled(false);
+                    if let Some(r) = range {
+                        j = j.limits(r);
                     }
-                    j.build().into()
+                    let mut g: GenericJoint = j.build().into();
+                    g.set_local_axis2(axb);
+                    g
                 }
+                "spherical" => spherical(la, lb),
                 _ => {
                     let len = length.as_ref().map(|l| l[k]).unwrap_or((pa - pb).length());
                     RopeJointBuilder::new(len).local_anchor1(la).local_anchor2(lb).build().into()
                 }
             };
             self.d.r.impulse_joints.insert(ha, hb, joint, true);
+        }
+        self.part_added();
+        Ok(())
+    }
+
+    /// Pins particle `particles[k]` to body `body[k]` at the world point `points[k]` (where the
+    /// particle is now): from now on the particle moves with that point of the body, and what
+    /// holds it there pushes the body back (see `BodyContacts`).
+    pub fn add_pins(&mut self, mut p: Params) -> Result<()> {
+        let m = p.count("m", 1 << 24)?;
+        let particles = take_len(&mut p, "particles", m)?;
+        let body = take_len(&mut p, "body", m)?;
+        let points = take_len(&mut p, "points", D * m)?;
+        if let Some(k) = particles.iter().position(|&i| i.fract() != 0.0 || i < 0.0) {
+            return Err(invalid("particles", format!("entry {k} ({}) is not a particle index", particles[k])));
+        }
+        let n = self.handles.len() as Real;
+        if let Some(k) = body.iter().position(|&i| i.fract() != 0.0 || i < 0.0 || i >= n) {
+            return Err(invalid("body", format!("entry {k} ({}) is not a body of the scene (0..{n})", body[k])));
+        }
+        for k in 0..m {
+            let h = self.handles[body[k] as usize];
+            let local = self.d.r.bodies[h].position().inverse_transform_point(vector(&points[D * k..D * (k + 1)]));
+            self.d.pins.push((particles[k] as usize, body[k] as usize, local));
         }
         self.part_added();
         Ok(())
@@ -346,7 +315,7 @@ impl Bodies2 {
     fn fault(&self) -> Option<(usize, Failure)> {
         (0..self.handles.len()).find_map(|i| {
             let b = self.body(i);
-            if !(b.translation().is_finite() && b.rotation().angle().is_finite()) {
+            if !(b.translation().is_finite() && rotation_finite(b.rotation())) {
                 Some((i, Failure::Position))
             } else if !(b.linvel().is_finite() && b.angvel().is_finite()) {
                 Some((i, Failure::Velocity))
@@ -357,14 +326,7 @@ impl Bodies2 {
     }
 }
 
-fn p_len(p: &Params) -> Result<usize> {
-    let k = p.count("n_vertices", 1 << 16)?;
-    Ok(2 * k)
-}
-
-const FIELDS: [&str; 8] = ["x", "y", "angle", "vx", "vy", "omega", "mass", "inertia"];
-
-impl System for Bodies2 {
+impl System for Bodies {
     fn name(&self) -> &str {
         &self.name
     }
@@ -375,10 +337,7 @@ impl System for Bodies2 {
         self.handles.len()
     }
     fn set_gravity(&mut self, g: [Real; 3]) {
-        self.gravity = Vector::new(g[0], g[1]);
-    }
-    fn as_bodies(&mut self) -> Option<&mut Bodies2> {
-        Some(self)
+        self.gravity = vector(&g[..D]);
     }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let (k0, u0) = self.mechanical();
@@ -425,27 +384,24 @@ impl System for Bodies2 {
     }
     fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
         let n = self.handles.len();
-        if !FIELDS[..6].contains(&name) {
+        let Some(width) = settable_width(name) else {
             return Err(invalid(
                 "field",
-                format!("{name:?} cannot be set on the bodies (settable: x, y, angle, vx, vy, omega)"),
+                format!("{name:?} cannot be set on the bodies (settable: {})", FIELDS[..SETTABLE].join(", ")),
             ));
-        }
-        if values.len() != n {
-            return Err(invalid(name, format!("has {} values, expected {n}", values.len())));
+        };
+        if values.len() != width * n {
+            return Err(invalid(name, format!("has {} values, expected {}", values.len(), width * n)));
         }
         finite_all(name, values)?;
-        for (i, &val) in values.iter().enumerate() {
-            let b = &mut self.d.r.bodies[self.handles[i]];
-            let (t, v) = (b.translation(), b.linvel());
-            match name {
-                "x" => b.set_translation(Vector::new(val, t.y), true),
-                "y" => b.set_translation(Vector::new(t.x, val), true),
-                "angle" => b.set_rotation(Rotation::new(val), true),
-                "vx" => b.set_linvel(Vector::new(val, v.y), true),
-                "vy" => b.set_linvel(Vector::new(v.x, val), true),
-                _ => b.set_angvel(val, true),
-            }
+        let rows: Vec<&[Real]> = values.chunks_exact(width).collect();
+        // Every row checked before the first is written (a zero quaternion has no rotation).
+        for (i, row) in rows.iter().enumerate() {
+            set_one(&mut self.d.r.bodies[self.handles[i]], name, row, true)
+                .map_err(|e| invalid(name, format!("entry {i}: {e}")))?;
+        }
+        for (i, row) in rows.iter().enumerate() {
+            set_one(&mut self.d.r.bodies[self.handles[i]], name, row, false).expect("checked above");
         }
         Ok(())
     }
@@ -453,27 +409,13 @@ impl System for Bodies2 {
         names
             .iter()
             .map(|&name| {
-                if !FIELDS.contains(&name) {
+                if !FIELDS.contains(&name) || settable_width(name).is_some_and(|w| w > 1) {
                     return Err(invalid(
                         "field",
-                        format!("the bodies have no field {name:?} (valid: {})", FIELDS.join(", ")),
+                        format!("the bodies have no field {name:?} to read (valid: {})", READABLE.join(", ")),
                     ));
                 }
-                Ok((0..self.handles.len())
-                    .map(|i| {
-                        let b = self.body(i);
-                        match name {
-                            "x" => b.translation().x,
-                            "y" => b.translation().y,
-                            "angle" => b.rotation().angle(),
-                            "vx" => b.linvel().x,
-                            "vy" => b.linvel().y,
-                            "omega" => b.angvel(),
-                            "mass" => b.mass(),
-                            _ => b.mass_properties().local_mprops.principal_inertia(),
-                        }
-                    })
-                    .collect())
+                Ok((0..self.handles.len()).map(|i| get_one(self.body(i), name)).collect())
             })
             .collect()
     }
@@ -522,44 +464,19 @@ impl System for Bodies2 {
         self.pipeline = PhysicsPipeline::new();
         self.ccd = CCDSolver::new();
     }
-}
-
-/// Bytes packed 6 to a real (each an integer below 2⁴⁸, exact and finite), so that rapier's
-/// serialised state travels in the scene file's arrays of reals.
-fn pack(bytes: &[u8]) -> Vec<Real> {
-    bytes
-        .chunks(6)
-        .map(|c| {
-            let mut w = [0u8; 8];
-            w[..c.len()].copy_from_slice(c);
-            u64::from_le_bytes(w) as Real
-        })
-        .collect()
-}
-
-fn unpack(packed: &[Real], len: Real) -> Option<Vec<u8>> {
-    if !(len >= 0.0 && len.fract() == 0.0 && len as usize <= packed.len() * 6 && len as usize + 6 > packed.len() * 6) {
-        return None;
+    fn as_any_bodies(&mut self) -> Option<&mut dyn std::any::Any> {
+        Some(self)
     }
-    let mut out = Vec::with_capacity(packed.len() * 6);
-    for &w in packed {
-        if !(0.0..281_474_976_710_656.0).contains(&w) || w.fract() != 0.0 {
-            return None;
-        }
-        out.extend_from_slice(&(w as u64).to_le_bytes()[..6]);
-    }
-    out.truncate(len as usize);
-    Some(out)
 }
 
 /// Particles against the bodies, both ways: a particle (its `radius` attribute, else a point)
 /// inside or touching a body's shape is put back on its surface, and the impulse that stops
-/// its approach (the body's restitution, Coulomb friction with the body's coefficient) is applied to both,
-/// equal and opposite, at the contact point: grains push bodies, a body pushes grains, cloth
-/// drapes over a body, fluid particles hold a body up. Particles are visited in order (the
-/// bodies' velocities change as they go): deterministic. The energy this removes (kinetic, and
-/// the particles' potential in gravity raised by the moves) is booked in the bodies' "bodies ⇄
-/// particles".
+/// its approach (the body's restitution, Coulomb friction with the body's coefficient) is
+/// applied to both, equal and opposite, at the contact point: grains push bodies, a body pushes
+/// grains, cloth drapes over a body, fluid particles hold a body up. Particles are visited in
+/// order (the bodies' velocities change as they go): deterministic. The energy this removes
+/// (kinetic, and the particles' potential in gravity raised by the moves) is booked in the
+/// bodies' "bodies ⇄ particles".
 pub struct BodyContacts {
     system: usize,
 }
@@ -577,14 +494,16 @@ impl<V: PVector> Coupling<V> for BodyContacts {
     }
     fn apply(
         &mut self,
-        particles: &mut super::particles::ParticleSystem<V>,
+        particles: &mut crate::systems::particles::ParticleSystem<V>,
         others: &mut [Box<dyn System>],
         _dt: Real,
     ) {
-        if V::DIM != 2 {
+        if V::DIM != D {
             return;
         }
-        let Some(bodies) = others.get_mut(self.system).and_then(|s| s.as_bodies()) else {
+        let Some(bodies) =
+            others.get_mut(self.system).and_then(|s| s.as_any_bodies()).and_then(|a| a.downcast_mut::<Bodies>())
+        else {
             return;
         };
         let (state, model) = particles.state_model_mut();
@@ -598,15 +517,28 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         let boxes: Vec<_> =
             bodies.colliders.iter().map(|&c| bodies.d.r.colliders[c].compute_aabb().loosened(r_max)).collect();
         let e_before = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
-        let gravity = bodies.gravity;
-        let mut lifted = 0.0;
+        // Every move: the particle and where it was (the potential energy the moves change,
+        // of gravity, springs and every term, is booked with the exchange below).
+        let mut moved: Vec<(usize, V)> = Vec::new();
+        let from_p = |x: V| {
+            let mut s = [0.0; 3];
+            for (c, v) in s.iter_mut().enumerate().take(D) {
+                *v = x.comp(c);
+            }
+            vector(&s[..D])
+        };
+        let to_p = |x: Vector| {
+            let mut s = [0.0; 3];
+            s[..D].copy_from_slice(&x.to_array()[..D]);
+            V::from_slice(&s)
+        };
         for i in 0..n {
             let im = model.inv_mass[i];
             if im == 0.0 {
                 continue;
             }
             let ri = radius.map(|r| r[i]).unwrap_or(0.0);
-            let p = Vector::new(state.x[i].comp(0), state.x[i].comp(1));
+            let p = from_p(state.x[i]);
             for (k, bb) in boxes.iter().enumerate() {
                 if !bb.contains_local_point(p) {
                     continue;
@@ -630,119 +562,88 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 let h = bodies.handles[k];
                 let body = &mut bodies.d.r.bodies[h];
                 let c = proj.point;
-                let vi = Vector::new(state.v[i].comp(0), state.v[i].comp(1));
+                let vi = from_p(state.v[i]);
                 let vb = body.velocity_at_point(c);
                 let vn = (vi - vb).dot(normal);
-                // The particle goes back to the surface (plus its radius) along the normal; the
-                // work gravity does against that move, −m g·Δx, is booked with the exchange.
-                let pn = p + normal * depth;
-                state.x[i] = V::from_slice(&[pn.x, pn.y, 0.0]);
-                lifted -= model.mass[i] * gravity.dot(normal * depth);
+                // The particle goes back to the surface (plus its radius) along the normal.
+                moved.push((i, state.x[i]));
+                state.x[i] = to_p(p + normal * depth);
                 if vn >= 0.0 {
                     continue;
                 }
-                // Effective mass of the pair along the normal: 1/(1/m_i + 1/m_b + (r×n)²/I_b).
+                // Effective mass of the pair along a direction t: 1/(1/m_i + 1/m_b + the body's
+                // turning term (r×t)·I⁻¹(r×t)).
                 let dynamic = body.is_dynamic();
-                let (ib_m, ib_i, rc) = if dynamic {
-                    let mp = body.mass_properties();
-                    let com = body.center_of_mass();
-                    (mp.effective_inv_mass.x, mp.effective_world_inv_inertia, c - com)
+                let (ib_m, com) = if dynamic {
+                    (body.mass_properties().effective_inv_mass.x, body.center_of_mass())
                 } else {
-                    (0.0, 0.0, Vector::ZERO)
+                    (0.0, c)
                 };
-                let rn = rc.perp_dot(normal);
-                let k_n = im + ib_m + rn * rn * ib_i;
+                let rc = c - com;
+                let turn = |t: Vector| if dynamic { turning(body, rc, t) } else { 0.0 };
+                let k_n = im + ib_m + turn(normal);
                 let jn = -(1.0 + e) * vn / k_n;
                 let vt_vec = (vi - vb) - normal * vn;
                 let vt = vt_vec.length();
                 let mut impulse = normal * jn;
                 if vt > 0.0 && mu > 0.0 {
                     let t = vt_vec / vt;
-                    let rt = rc.perp_dot(t);
-                    let k_t = im + ib_m + rt * rt * ib_i;
+                    let k_t = im + ib_m + turn(t);
                     impulse -= t * (mu * jn).min(vt / k_t);
                 }
-                let nv = vi + impulse * im;
-                state.v[i] = V::from_slice(&[nv.x, nv.y, 0.0]);
+                state.v[i] = to_p(vi + impulse * im);
                 if dynamic {
                     body.apply_impulse_at_point(-impulse, c, true);
                 }
             }
         }
+        // Pinned particles: put on their point of the body, their velocity made the point's by
+        // an impulse along the difference, applied to the body the other way.
+        let Dynamic { r, pins, .. } = &mut bodies.d;
+        for &(i, k, local) in pins.iter() {
+            if i >= n || model.inv_mass[i] == 0.0 {
+                continue;
+            }
+            let im = model.inv_mass[i];
+            let body = &mut r.bodies[bodies.handles[k]];
+            let c = body.position().transform_point(local);
+            moved.push((i, state.x[i]));
+            state.x[i] = to_p(c);
+            let vi = from_p(state.v[i]);
+            let dv = body.velocity_at_point(c) - vi;
+            let len = dv.length();
+            if len == 0.0 {
+                continue;
+            }
+            let u = dv / len;
+            if body.is_dynamic() {
+                let rc = c - body.center_of_mass();
+                let k_u = im + body.mass_properties().effective_inv_mass.x + turning(body, rc, u);
+                let j = u * (len / k_u);
+                state.v[i] = to_p(vi + j * im);
+                body.apply_impulse_at_point(-j, c, true);
+            } else {
+                state.v[i] = to_p(vi + dv);
+            }
+        }
         let e_after = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
-        bodies.d.coupling += e_before - e_after - lifted;
-    }
-}
-
-fn particle_kinetic<V: PVector>(v: &[V], mass: &[Real], inv_mass: &[Real]) -> Real {
-    let mut k = 0.0;
-    for i in 0..v.len() {
-        if inv_mass[i] != 0.0 {
-            k += 0.5 * mass[i] * v[i].length_squared();
+        // The potential the moves changed: evaluated after them, and before them with the old
+        // positions put back for the moment (only when something moved).
+        let mut raised = 0.0;
+        if !moved.is_empty() {
+            let finals: Vec<V> = moved.iter().map(|&(i, _)| state.x[i]).collect();
+            let u_after = particles.potential_energy();
+            let (state, _) = particles.state_model_mut();
+            for &(i, old) in moved.iter().rev() {
+                state.x[i] = old;
+            }
+            let u_before = particles.potential_energy();
+            let (state, _) = particles.state_model_mut();
+            for (&(i, _), &x) in moved.iter().zip(&finals) {
+                state.x[i] = x;
+            }
+            raised = u_after - u_before;
         }
-    }
-    k
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::terms::registry::Value;
-
-    fn group(shape: &str, x: &[Real], size: &[Real]) -> Params {
-        let n = x.len() / 2;
-        Params::new()
-            .with("shape", Value::Text(shape.into()))
-            .with("kind", Value::Text("dynamic".into()))
-            .with("n", Value::Number(n as Real))
-            .with("positions", Value::Floats(x.to_vec()))
-            .with("angles", Value::Floats(vec![0.0; n]))
-            .with("velocities", Value::Floats(vec![0.0; 2 * n]))
-            .with("angular_velocities", Value::Floats(vec![0.0; n]))
-            .with("size", Value::Floats(size.to_vec()))
-            .with("density", Value::Number(1000.0))
-            .with("friction", Value::Number(0.5))
-            .with("restitution", Value::Number(0.1))
-    }
-
-    #[test]
-    fn bytes_pack_into_reals_and_back() {
-        let bytes: Vec<u8> = (0..=255u8).chain(0..7).collect();
-        let packed = pack(&bytes);
-        assert!(packed.iter().all(|w| w.is_finite() && w.fract() == 0.0));
-        assert_eq!(unpack(&packed, bytes.len() as Real).unwrap(), bytes);
-        assert!(unpack(&packed, (bytes.len() + 100) as Real).is_none());
-        assert!(unpack(&[0.5], 1.0).is_none());
-    }
-
-    #[test]
-    fn a_ball_falls_freely_and_a_restore_returns_bit_for_bit() {
-        let mut b = Bodies2::new("bodies");
-        b.add_group(group("ball", &[0.0, 10.0], &[0.1])).unwrap();
-        b.set_gravity([0.0, -9.81, 0.0]);
-        let stop = AtomicBool::new(false);
-        let snap = b.snapshot().unwrap();
-        let dt = 1e-3;
-        for _ in 0..1000 {
-            b.step(dt, &stop).unwrap();
-        }
-        let y = b.fields(&["y"]).unwrap()[0][0];
-        // Free fall, y0 − g t²/2 at t = 1 s, to the first order in dt of rapier's integrator.
-        assert!((y - (10.0 - 9.81 / 2.0)).abs() < 9.81 * dt, "{y}");
-        // The books balance: kinetic + potential + residual as at the start.
-        let e = b.energy();
-        assert!((e.total() - 1000.0 * std::f64::consts::PI * 0.01 * 9.81 * 10.0).abs() < 1e-6, "{e:?}");
-        b.restore(snap);
-        assert_eq!(b.fields(&["y"]).unwrap()[0][0], 10.0);
-    }
-
-    #[test]
-    fn bad_groups_are_refused_by_name() {
-        let mut b = Bodies2::new("bodies");
-        let e = b.add_group(group("blob", &[0.0, 0.0], &[0.1])).unwrap_err();
-        assert!(e.to_string().contains("shape"), "{e}");
-        let e = b.add_group(group("ball", &[0.0, 0.0], &[-1.0])).unwrap_err();
-        assert!(e.to_string().contains("size"), "{e}");
-        assert!(b.is_empty());
+        bodies.d.coupling += e_before - e_after - raised;
     }
 }

@@ -1,0 +1,212 @@
+//! The rigid bodies of a 3D world (`rapier3d-f64`): what differs from 2D, then the system
+//! itself (`common.rs`, shared with `dim2`). Orientations are unit quaternions stored scalar
+//! last, (x, y, z, w), as scipy's `Rotation.from_quat` reads them.
+use super::{finite_all, pack, particle_kinetic, take_len, unpack};
+use crate::error::{invalid, Failure, Result};
+use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
+use crate::terms::registry::Params;
+use crate::vector::{Real, Vector as PVector};
+use rapier3d_f64::parry::bounding_volume::BoundingVolume;
+use rapier3d_f64::prelude::*;
+use std::sync::atomic::AtomicBool;
+
+const D: usize = 3;
+/// Values per body of the orientation (a unit quaternion) and of the angular velocity.
+const ROT: usize = 4;
+const ANG: usize = 3;
+const ROTATION_KEY: &str = "orientations";
+/// The shape kinds of a group, as Python names them ("mesh": fixed bodies only).
+pub const SHAPES: [&str; 5] = ["ball", "box", "capsule", "hull", "mesh"];
+pub const JOINTS: [&str; 5] = ["revolute", "fixed", "prismatic", "spherical", "rope"];
+/// A revolute or prismatic joint's axis when none is given: z, as in the plane.
+const DEFAULT_AXIS: [Real; 3] = [0.0, 0.0, 1.0];
+/// "q" sets the orientation, four values (x, y, z, w) a body; read it as qx, qy, qz, qw.
+const FIELDS: [&str; 18] =
+    ["x", "y", "z", "q", "vx", "vy", "vz", "wx", "wy", "wz", "qx", "qy", "qz", "qw", "mass", "ix", "iy", "iz"];
+const READABLE: [&str; 17] =
+    ["x", "y", "z", "vx", "vy", "vz", "wx", "wy", "wz", "qx", "qy", "qz", "qw", "mass", "ix", "iy", "iz"];
+const SETTABLE: usize = 10;
+
+fn settable_width(name: &str) -> Option<usize> {
+    match name {
+        "q" => Some(4),
+        _ => FIELDS[..SETTABLE].contains(&name).then_some(1),
+    }
+}
+
+fn vector(s: &[Real]) -> Vector {
+    Vector::new(s[0], s[1], s[2])
+}
+
+/// A unit quaternion from (x, y, z, w), normalised; refused if its norm is 0 (no rotation).
+fn rotation(s: &[Real]) -> Result<Rotation> {
+    let q = Rotation::from_xyzw(s[0], s[1], s[2], s[3]);
+    let norm = q.length();
+    if !(norm > 1e-12 && norm.is_finite()) {
+        return Err(invalid(
+            ROTATION_KEY,
+            format!("({}, {}, {}, {}) is not a rotation (norm {norm})", s[0], s[1], s[2], s[3]),
+        ));
+    }
+    Ok(q / norm)
+}
+
+fn ang_vector(s: &[Real]) -> AngVector {
+    Vector::new(s[0], s[1], s[2])
+}
+
+fn rotation_finite(r: &Rotation) -> bool {
+    r.is_finite()
+}
+
+fn size_len(shape: &str) -> usize {
+    match shape {
+        "ball" => 1,
+        "box" => 3,
+        "capsule" => 2,
+        _ => 0,
+    }
+}
+
+fn sized_shape(shape: &str, s: &[Real]) -> ColliderBuilder {
+    match shape {
+        "ball" => ColliderBuilder::ball(s[0]),
+        "box" => ColliderBuilder::cuboid(s[0], s[1], s[2]),
+        _ => ColliderBuilder::capsule_x(s[0], s[1]),
+    }
+}
+
+/// A hull or mesh group's one shape: the convex hull of its `vertices` (K·3 values,
+/// `n_vertices`), or the triangle mesh of `vertices` and `triangles` (T·3 indices,
+/// `n_triangles`), for fixed bodies only (a mesh has no volume, so no mass).
+fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<ColliderBuilder>> {
+    if shape != "hull" && shape != "mesh" {
+        return Ok(None);
+    }
+    let k = p.count("n_vertices", 1 << 20)?;
+    let v = take_len(p, "vertices", 3 * k)?;
+    let points: Vec<Vector> = v.chunks_exact(3).map(vector).collect();
+    if shape == "hull" {
+        if points.len() < 4 {
+            return Err(invalid("vertices", "a hull needs at least 4 vertices"));
+        }
+        return ColliderBuilder::convex_hull(&points)
+            .map(Some)
+            .ok_or_else(|| invalid("vertices", "their convex hull is degenerate (all on one plane)"));
+    }
+    if kind != "fixed" {
+        return Err(invalid("kind", "a triangle mesh has no volume and so no mass: make it kind=\"fixed\""));
+    }
+    let t = p.count("n_triangles", 1 << 22)?;
+    let idx = take_len(p, "triangles", 3 * t)?;
+    if t == 0 {
+        return Err(invalid("triangles", "a mesh needs at least one triangle"));
+    }
+    if let Some(j) = idx.iter().position(|&i| i.fract() != 0.0 || i < 0.0 || i >= k as Real) {
+        return Err(invalid("triangles", format!("entry {j} ({}) is not a vertex index (0..{k})", idx[j])));
+    }
+    let tris: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
+    ColliderBuilder::trimesh(points, tris)
+        .map(Some)
+        .map_err(|e| invalid("triangles", format!("do not make a mesh: {e}")))
+}
+
+/// A hinge about the axis given (in each body's frame).
+fn revolute(axis1: Vector, axis2: Vector) -> RevoluteJointBuilder {
+    let mut b = RevoluteJointBuilder::new(axis1);
+    b.0.data.set_local_axis2(axis2);
+    b
+}
+
+/// A ball-and-socket joint: the anchors together, turning free about every axis.
+fn spherical(la: Vector, lb: Vector) -> GenericJoint {
+    SphericalJointBuilder::new().local_anchor1(la).local_anchor2(lb).contacts_enabled(false).build().into()
+}
+
+/// The turning term (r×t)·I⁻¹(r×t) of a body's effective mass along t (r: from its centre of
+/// mass; I⁻¹ in the world frame).
+fn turning(body: &RigidBody, rc: Vector, t: Vector) -> Real {
+    let r = rc.cross(t);
+    r.dot(body.mass_properties().effective_world_inv_inertia * r)
+}
+
+fn get_one(b: &RigidBody, name: &str) -> Real {
+    let (t, q, v, w) = (b.translation(), b.rotation(), b.linvel(), b.angvel());
+    let i = b.mass_properties().local_mprops.principal_inertia();
+    match name {
+        "x" => t.x,
+        "y" => t.y,
+        "z" => t.z,
+        "qx" => q.x,
+        "qy" => q.y,
+        "qz" => q.z,
+        "qw" => q.w,
+        "vx" => v.x,
+        "vy" => v.y,
+        "vz" => v.z,
+        "wx" => w.x,
+        "wy" => w.y,
+        "wz" => w.z,
+        "mass" => b.mass(),
+        "ix" => i.x,
+        "iy" => i.y,
+        _ => i.z,
+    }
+}
+
+/// Sets field `name` of body `b` to `row` (its values); `dry`: only checks.
+fn set_one(b: &mut RigidBody, name: &str, row: &[Real], dry: bool) -> std::result::Result<(), String> {
+    if name == "q" {
+        let q = rotation(row).map_err(|e| e.to_string())?;
+        if !dry {
+            b.set_rotation(q, true);
+        }
+        return Ok(());
+    }
+    if dry {
+        return Ok(());
+    }
+    let (mut t, mut v, mut w, val) = (b.translation(), b.linvel(), b.angvel(), row[0]);
+    match name {
+        "x" | "y" | "z" => {
+            t[(name.as_bytes()[0] - b'x') as usize] = val;
+            b.set_translation(t, true)
+        }
+        "vx" | "vy" | "vz" => {
+            v[(name.as_bytes()[1] - b'x') as usize] = val;
+            b.set_linvel(v, true)
+        }
+        _ => {
+            w[(name.as_bytes()[1] - b'x') as usize] = val;
+            b.set_angvel(w, true)
+        }
+    }
+    Ok(())
+}
+
+impl Bodies {
+    /// Body `i`'s shape as triangles in its own frame (m): vertices (V·3) and corner indices
+    /// (T·3), what the renderer draws; a ball and a capsule as 16 × 32 facets.
+    pub fn body_mesh(&self, i: usize) -> Result<(Vec<Real>, Vec<u32>)> {
+        if i >= self.handles.len() {
+            return Err(invalid("body", format!("{i} is not a body of the scene (0..{})", self.handles.len())));
+        }
+        let shape = self.d.r.colliders[self.colliders[i]].shape();
+        let (v, t) = if let Some(s) = shape.as_ball() {
+            s.to_trimesh(16, 32)
+        } else if let Some(s) = shape.as_cuboid() {
+            s.to_trimesh()
+        } else if let Some(s) = shape.as_capsule() {
+            s.to_trimesh(16, 32)
+        } else if let Some(s) = shape.as_convex_polyhedron() {
+            s.to_trimesh()
+        } else if let Some(s) = shape.as_trimesh() {
+            (s.vertices().to_vec(), s.indices().to_vec())
+        } else {
+            return Err(invalid("body", format!("{i}'s shape cannot be drawn")));
+        };
+        Ok((v.iter().flat_map(|p| [p.x, p.y, p.z]).collect(), t.into_iter().flatten().collect()))
+    }
+}
+
+include!("common.rs");

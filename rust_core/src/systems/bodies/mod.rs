@@ -1,0 +1,180 @@
+//! Rigid bodies in 2D and 3D (balls, boxes, capsules, convex polygons and hulls, triangle meshes
+//! for fixed bodies; revolute, fixed, prismatic, spherical and rope joints), solved by rapier
+//! (Crozet, dimforge: `rapier2d-f64`, `rapier3d-f64`). Contact and joint solving is a field of
+//! its own with a well-kept library: physcore adds what it does not have, the coupling with
+//! particles (`BodyContacts`), the energy books, rollback and bit-identical restarts, and the
+//! rendering. The system is written once (`common.rs`) and built per dimension (`dim2`,
+//! `dim3`).
+//!
+//! Why rapier: deterministic (its `enhanced-determinism` feature: libm's functions, the same
+//! bits on every platform), double precision, serialisable state (serde), and no threads of its
+//! own here (no `parallel` feature), so results never depend on the thread count.
+//!
+//! Bodies are numbered in the order they were added, across groups (the Python `Bodies` parts):
+//! the fields (`x`, `y`, `angle`, `vx`, ... in 2D; `x`, `y`, `z`, `qx`, ..., `wz` in 3D) hold one
+//! value per body in that order. A group is one shape kind; joints join two bodies (or a body
+//! and a fixed point).
+//!
+//! The books: kinetic energy (translation and rotation) and the potential of uniform gravity
+//! of the dynamic bodies; what rapier's contacts, friction, restitution and joints (and its
+//! integrator's error) change is booked as one residual, "bodies: contacts and joints", since
+//! rapier does not report them apart; what the particle coupling exchanges, as "bodies ⇄
+//! particles". So the total balances by construction and the residual is what to read.
+pub mod dim2;
+pub mod dim3;
+
+pub use dim2::{Bodies as Bodies2, BodyContacts as BodyContacts2};
+pub use dim3::{Bodies as Bodies3, BodyContacts as BodyContacts3};
+
+use crate::error::{invalid, Result};
+use crate::terms::registry::Params;
+use crate::vector::{Real, Vector as PVector};
+
+fn finite_all(key: &str, v: &[Real]) -> Result<()> {
+    match v.iter().position(|x| !x.is_finite()) {
+        Some(i) => Err(invalid(key, format!("entry {i} is not finite: {}", v[i]))),
+        None => Ok(()),
+    }
+}
+
+fn take_len(p: &mut Params, key: &str, len: usize) -> Result<Vec<Real>> {
+    let v = p.take_floats(key)?;
+    if v.len() != len {
+        return Err(invalid(key, format!("has {} values, expected {len}", v.len())));
+    }
+    finite_all(key, &v)?;
+    Ok(v)
+}
+
+/// Bytes packed 6 to a real (each an integer below 2⁴⁸, exact and finite), so that rapier's
+/// serialised state travels in the scene file's arrays of reals.
+fn pack(bytes: &[u8]) -> Vec<Real> {
+    bytes
+        .chunks(6)
+        .map(|c| {
+            let mut w = [0u8; 8];
+            w[..c.len()].copy_from_slice(c);
+            u64::from_le_bytes(w) as Real
+        })
+        .collect()
+}
+
+fn unpack(packed: &[Real], len: Real) -> Option<Vec<u8>> {
+    if !(len >= 0.0 && len.fract() == 0.0 && len as usize <= packed.len() * 6 && len as usize + 6 > packed.len() * 6) {
+        return None;
+    }
+    let mut out = Vec::with_capacity(packed.len() * 6);
+    for &w in packed {
+        if !(0.0..281_474_976_710_656.0).contains(&w) || w.fract() != 0.0 {
+            return None;
+        }
+        out.extend_from_slice(&(w as u64).to_le_bytes()[..6]);
+    }
+    out.truncate(len as usize);
+    Some(out)
+}
+
+fn particle_kinetic<V: PVector>(v: &[V], mass: &[Real], inv_mass: &[Real]) -> Real {
+    let mut k = 0.0;
+    for i in 0..v.len() {
+        if inv_mass[i] != 0.0 {
+            k += 0.5 * mass[i] * v[i].length_squared();
+        }
+    }
+    k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::systems::System;
+    use crate::terms::registry::Value;
+    use std::sync::atomic::AtomicBool;
+
+    /// A group of dynamic bodies of `shape` at the `dim`-D positions `x`.
+    pub(super) fn group(dim: usize, shape: &str, x: &[Real], size: &[Real]) -> Params {
+        let n = x.len() / dim;
+        let (rot, ang) = if dim == 2 { (vec![0.0; n], n) } else { ([0.0, 0.0, 0.0, 1.0].repeat(n), 3 * n) };
+        Params::new()
+            .with("shape", Value::Text(shape.into()))
+            .with("kind", Value::Text("dynamic".into()))
+            .with("n", Value::Number(n as Real))
+            .with("positions", Value::Floats(x.to_vec()))
+            .with(if dim == 2 { "angles" } else { "orientations" }, Value::Floats(rot))
+            .with("velocities", Value::Floats(vec![0.0; dim * n]))
+            .with("angular_velocities", Value::Floats(vec![0.0; ang]))
+            .with("size", Value::Floats(size.to_vec()))
+            .with("density", Value::Number(1000.0))
+            .with("friction", Value::Number(0.5))
+            .with("restitution", Value::Number(0.1))
+    }
+
+    #[test]
+    fn bytes_pack_into_reals_and_back() {
+        let bytes: Vec<u8> = (0..=255u8).chain(0..7).collect();
+        let packed = pack(&bytes);
+        assert!(packed.iter().all(|w| w.is_finite() && w.fract() == 0.0));
+        assert_eq!(unpack(&packed, bytes.len() as Real).unwrap(), bytes);
+        assert!(unpack(&packed, (bytes.len() + 100) as Real).is_none());
+        assert!(unpack(&[0.5], 1.0).is_none());
+    }
+
+    #[test]
+    fn a_ball_falls_freely_and_a_restore_returns_bit_for_bit() {
+        let mut b = Bodies2::new("bodies");
+        b.add_group(group(2, "ball", &[0.0, 10.0], &[0.1])).unwrap();
+        b.set_gravity([0.0, -9.81, 0.0]);
+        let stop = AtomicBool::new(false);
+        let snap = b.snapshot().unwrap();
+        let dt = 1e-3;
+        for _ in 0..1000 {
+            b.step(dt, &stop).unwrap();
+        }
+        let y = b.fields(&["y"]).unwrap()[0][0];
+        // Free fall, y0 − g t²/2 at t = 1 s, to the first order in dt of rapier's integrator.
+        assert!((y - (10.0 - 9.81 / 2.0)).abs() < 9.81 * dt, "{y}");
+        // The books balance: kinetic + potential + residual as at the start.
+        let e = b.energy();
+        assert!((e.total() - 1000.0 * std::f64::consts::PI * 0.01 * 9.81 * 10.0).abs() < 1e-6, "{e:?}");
+        b.restore(snap);
+        assert_eq!(b.fields(&["y"]).unwrap()[0][0], 10.0);
+    }
+
+    #[test]
+    fn a_ball_falls_freely_in_3d_and_its_books_balance() {
+        let mut b = Bodies3::new("bodies");
+        b.add_group(group(3, "ball", &[0.0, 0.0, 10.0], &[0.1])).unwrap();
+        b.set_gravity([0.0, 0.0, -9.81]);
+        let stop = AtomicBool::new(false);
+        let snap = b.snapshot().unwrap();
+        let dt = 1e-3;
+        for _ in 0..1000 {
+            b.step(dt, &stop).unwrap();
+        }
+        let z = b.fields(&["z"]).unwrap()[0][0];
+        assert!((z - (10.0 - 9.81 / 2.0)).abs() < 9.81 * dt, "{z}");
+        let mass = 1000.0 * 4.0 / 3.0 * std::f64::consts::PI * 0.001;
+        let e = b.energy();
+        assert!((e.total() - mass * 9.81 * 10.0).abs() < 1e-6, "{e:?}");
+        b.restore(snap);
+        assert_eq!(b.fields(&["z"]).unwrap()[0][0], 10.0);
+    }
+
+    #[test]
+    fn bad_groups_are_refused_by_name() {
+        let mut b = Bodies2::new("bodies");
+        let e = b.add_group(group(2, "blob", &[0.0, 0.0], &[0.1])).unwrap_err();
+        assert!(e.to_string().contains("shape"), "{e}");
+        let e = b.add_group(group(2, "ball", &[0.0, 0.0], &[-1.0])).unwrap_err();
+        assert!(e.to_string().contains("size"), "{e}");
+        assert!(b.is_empty());
+        let mut b = Bodies3::new("bodies");
+        let e = b.add_group(group(3, "box", &[0.0, 0.0, 0.0], &[0.1, 0.1])).unwrap_err();
+        assert!(e.to_string().contains("size"), "{e}");
+        let mut p = group(3, "box", &[0.0, 0.0, 0.0], &[0.1, 0.1, 0.1]);
+        p.insert("orientations", Value::Floats(vec![0.0; 4]));
+        let e = b.add_group(p).unwrap_err();
+        assert!(e.to_string().contains("orientations"), "{e}");
+        assert!(b.is_empty());
+    }
+}

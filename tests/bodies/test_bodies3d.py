@@ -1,0 +1,249 @@
+"""Rigid bodies in 3D (physcore.bodies on rapier3d-f64) against closed forms: free fall, friction
+on an incline, the large-amplitude pendulum on a revolute and on a spherical joint, a ball
+resting on a triangle-mesh floor and on a convex hull; the world's promises in 3D (threads,
+save/load bit for bit, the books); particles pinned to bodies (Pins); bad input by name."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import ellipk
+
+import physcore as pc
+
+G = 9.81
+
+
+def _scene(dt: float = 1 / 240, threads: int | None = None, gravity: bool = True) -> pc.Scene:
+    s = pc.Scene(dim=3, integrator="semi_implicit_euler", dt=dt, threads=threads)
+    if gravity:
+        s.add(pc.Gravity([0.0, 0.0, -G]))
+    return s
+
+
+def _about_y(theta: float) -> tuple[float, float, float, float]:
+    """The unit quaternion (x, y, z, w) of a turn by theta about y."""
+    return (0.0, math.sin(theta / 2), 0.0, math.cos(theta / 2))
+
+
+def test_a_ball_falls_freely_and_the_state_reads_back():
+    s = _scene(dt=1e-3, gravity=True)
+    ball = s.add(pc.Bodies("ball", size=0.1, positions=[(0.0, 0.0, 10.0)], velocities=[(1.0, 0.0, 0.0)],
+                           angular_velocities=[(0.0, 0.0, 2.0)]))
+    assert ball.dim == 3
+    s.step(1000)
+    x = ball.positions[0]
+    assert x[0] == pytest.approx(1.0, abs=1e-9) and x[2] == pytest.approx(10.0 - G / 2, abs=G * 1e-3)
+    assert ball.angular_velocities[0] == pytest.approx([0.0, 0.0, 2.0])
+    q = ball.orientations[0]  # turned by 2 rad about z in 1 s (rapier's per-step quaternion
+    # update, renormalised, errs by 1.8e-8 here: its first-order rotation integrator)
+    assert q == pytest.approx([0.0, 0.0, math.sin(1.0), math.cos(1.0)], abs=1e-7)
+    assert ball.masses[0] == pytest.approx(1000.0 * 4 / 3 * math.pi * 1e-3)
+    assert ball.inertia[0] == pytest.approx([0.4 * ball.masses[0] * 0.01] * 3)
+
+
+def _incline(theta: float, mu: float) -> tuple[pc.Scene, pc.Bodies]:
+    """A box on a fixed ramp turned by theta about y (downhill: +x), friction mu, restitution 0."""
+    s = _scene(dt=1 / 600)
+    q = _about_y(theta)  # turns the box's z onto the ramp's normal n: the ramp rises towards −x
+    n = np.array([math.sin(theta), 0.0, math.cos(theta)])
+    s.add(pc.Bodies("box", size=[(4.0, 1.0, 0.1)], positions=[-0.1 * n], orientations=[q], kind="fixed", friction=mu,
+                    restitution=0.0))
+    block = s.add(pc.Bodies("box", size=[(0.1, 0.1, 0.1)], positions=[0.1 * n], orientations=[q], friction=mu,
+                            restitution=0.0))
+    return s, block
+
+
+def test_block_on_incline_sticks_below_the_friction_angle():
+    s, block = _incline(math.radians(20.0), 0.5)  # tan 20° = 0.364 < 0.5
+    x0 = block.positions[0].copy()
+    s.step(600)
+    assert np.linalg.norm(block.positions[0] - x0) < 1e-3
+    assert np.linalg.norm(block.velocities[0]) < 1e-3
+
+
+@pytest.mark.parametrize("deg", [30.0, 40.0])
+def test_block_on_incline_slides_with_coulomb_acceleration(deg):
+    theta, mu = math.radians(deg), 0.3
+    s, block = _incline(theta, mu)
+    down = np.array([math.cos(theta), 0.0, -math.sin(theta)])
+    s.step(60)
+    v0, t0 = float(block.velocities[0] @ down), s.time
+    s.step(300)
+    a = (float(block.velocities[0] @ down) - v0) / (s.time - t0)
+    assert a == pytest.approx(G * (math.sin(theta) - mu * math.cos(theta)), rel=0.02)
+
+
+def _period(kind: str) -> tuple[float, float, pc.Bodies]:
+    """A small ball on a joint at the origin released from (L, 0, 0) (90°), swinging in the xz
+    plane: its measured period, the exact one, 4 K(sin²(θ0/2))/ω0 with ω0² = m g L / I_pivot
+    (Landau & Lifshitz, Mechanics §11), and the ball."""
+    L, r, theta0 = 1.0, 0.02, math.pi / 2
+    s = _scene(dt=1 / 2000)
+    bob = s.add(pc.Bodies("ball", size=[r], positions=[(L, 0.0, 0.0)], friction=0.0))
+    opts = {"axis": (0.0, 1.0, 0.0)} if kind == "revolute" else {}
+    s.add(pc.Joints(kind, None, bob[0], anchors=(0.0, 0.0, 0.0), **opts))
+    m = float(bob.masses[0])
+    w0 = math.sqrt(m * G * L / (m * (L * L + 0.4 * r * r)))
+    exact = 4 * ellipk(math.sin(theta0 / 2) ** 2) / w0
+    t_prev, x_prev, crossings = 0.0, L, []
+    while len(crossings) < 5:
+        s.step(5)
+        x = float(bob.positions[0, 0])
+        if (x_prev > 0) != (x > 0):
+            crossings.append(t_prev + (s.time - t_prev) * x_prev / (x_prev - x))
+        t_prev, x_prev = s.time, x
+    return (crossings[4] - crossings[0]) / 2, exact, bob
+
+
+@pytest.mark.parametrize("kind", ["revolute", "spherical"])
+def test_pendulum_keeps_the_large_amplitude_period(kind):
+    measured, exact, bob = _period(kind)
+    assert measured == pytest.approx(exact, rel=0.005)
+    assert np.linalg.norm(bob.positions[0]) == pytest.approx(1.0, abs=1e-3)
+    assert abs(bob.positions[0, 1]) < 1e-9  # it stays in its plane
+
+
+def test_a_ball_rests_on_a_mesh_floor_and_a_hull_rests_on_a_box():
+    s = _scene()
+    verts = [(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)]
+    s.add(pc.Bodies("mesh", vertices=verts, triangles=[(0, 1, 2), (0, 2, 3)], kind="fixed"))
+    ball = s.add(pc.Bodies("ball", size=0.1, positions=[(0.0, 0.0, 0.5)], restitution=0.0))
+    tetra = [(0.1, 0.1, 0.1), (-0.1, -0.1, 0.1), (-0.1, 0.1, -0.1), (0.1, -0.1, -0.1)]
+    s.add(pc.Bodies("box", size=[(0.3, 0.3, 0.05)], positions=[(1.0, 0.0, 0.05)], kind="fixed"))
+    hull = s.add(pc.Bodies("hull", vertices=tetra, positions=[(1.0, 0.0, 0.6)], restitution=0.0))
+    s.step(480)
+    assert ball.positions[0, 2] == pytest.approx(0.1, abs=2e-3)
+    assert np.linalg.norm(hull.velocities[0]) < 1e-3
+    assert 0.1 + 0.05 < hull.positions[0, 2] < 0.1 + 0.1 + 0.05  # on the box: its centre above its lowest corner
+    assert hull.masses[0] == pytest.approx(1000.0 * (0.2**3) / 3)  # the regular tetrahedron in a 0.2 m cube
+
+
+def _falling_pile(threads: int | None) -> pc.Scene:
+    s = _scene(threads=threads)
+    s.add(pc.Bodies("box", size=[(2.0, 2.0, 0.1)], positions=[(0.0, 0.0, -0.1)], kind="fixed"))
+    rng = np.random.default_rng(5)
+    pos = np.stack([rng.uniform(-0.5, 0.5, 30), rng.uniform(-0.5, 0.5, 30), 0.3 + np.arange(30) * 0.25], 1)
+    q = rng.normal(size=(30, 4))
+    s.add(pc.Bodies("box", size=[(0.1, 0.07, 0.05)], positions=pos, orientations=q))
+    s.add(pc.Bodies("capsule", size=(0.08, 0.04), positions=pos[:8] + [0.0, 0.0, 8.0]))
+    return s
+
+
+def test_bit_identical_for_one_and_two_threads():
+    a, b = _falling_pile(1), _falling_pile(2)
+    a.step(300)
+    b.step(300)
+    for ga, gb in zip(a.bodies, b.bodies, strict=True):
+        assert np.array_equal(ga.positions, gb.positions) and np.array_equal(ga.orientations, gb.orientations)
+
+
+def test_save_and_load_continue_bit_for_bit_and_the_books_balance(tmp_path):
+    s = _falling_pile(None)
+    e0 = s.energy()
+    s.step(200)
+    s.save(tmp_path / "pile.npz")
+    r = pc.Scene.load(tmp_path / "pile.npz")
+    s.step(200)
+    r.step(200)
+    for ga, gb in zip(s.bodies, r.bodies, strict=True):
+        assert np.array_equal(ga.positions, gb.positions) and np.array_equal(ga.orientations, gb.orientations)
+        assert np.array_equal(ga.angular_velocities, gb.angular_velocities)
+    e1 = s.energy()
+    assert e1.total == r.energy().total
+    assert e1.total == pytest.approx(e0.total, rel=1e-9)
+    assert e1.dissipated["bodies: contacts and joints"] > 0
+
+
+def test_orientations_set_and_read_back_normalised():
+    s = _scene(gravity=False)
+    g = s.add(pc.Bodies("box", size=(0.1, 0.2, 0.3), positions=[(0, 0, 0), (1, 0, 0)]))
+    g.orientations = [(0.0, 0.0, 2.0, 0.0), (1.0, 1.0, 0.0, 0.0)]
+    assert np.allclose(g.orientations, [(0, 0, 1, 0), (math.sqrt(0.5), math.sqrt(0.5), 0, 0)], rtol=0, atol=1e-15)
+    with pytest.raises(pc.InvalidInputError, match="orientations"):
+        g.orientations = [(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)]
+    assert g.orientations[1] == pytest.approx([math.sqrt(0.5), math.sqrt(0.5), 0, 0])  # unchanged
+    with pytest.raises(pc.InvalidInputError, match="angles"):
+        _ = g.angles
+
+
+def test_a_particle_pinned_to_a_free_box_keeps_momentum_and_moves_with_it():
+    """No gravity: a box moving at 1 m/s with a particle at rest pinned to its corner. The pin's
+    impulses are equal and opposite: the total momentum is kept, and the particle stays on the
+    corner."""
+    s = _scene(gravity=False)
+    box = s.add(pc.Bodies("box", size=(0.1, 0.1, 0.1), positions=[(0.0, 0.0, 0.0)], velocities=[(1.0, 0.0, 0.0)],
+                          density=100.0))
+    s.add_particles([[0.1, 0.1, 0.1]], masses=[0.05])
+    s.add(pc.Pins([0], box[0]))
+    p0 = float(box.masses[0]) * np.array([1.0, 0.0, 0.0])
+    s.step(240)
+    p1 = 0.05 * s.velocities[0] + box.masses[0] * box.velocities[0]
+    assert np.allclose(p1, p0, rtol=0, atol=1e-12)
+    assert np.linalg.norm(box.angular_velocities[0]) > 0  # pulled at the corner: it turns
+    # Still on the corner, wherever the box has gone.
+    x, q = box.positions[0], box.orientations[0]
+    from scipy.spatial.transform import Rotation
+
+    corner = x + Rotation.from_quat(q).apply([0.1, 0.1, 0.1])
+    assert s.positions[0] == pytest.approx(corner, abs=1e-12)
+
+
+def test_cloth_hung_from_a_kinematic_bar_is_carried_along():
+    s = _scene()
+    n = 6
+    gx, gy = np.meshgrid(np.arange(n) * 0.1, np.arange(n) * 0.1)
+    x = np.stack([gx.ravel(), np.zeros(n * n), -gy.ravel()], 1)
+    s.add_particles(x, masses=0.01)
+    i, j = pc.shapes.cloth_springs(n)
+    s.add(pc.Springs(i, j, stiffness=200.0, damping=0.01))
+    bar = s.add(pc.Bodies("box", size=(0.3, 0.02, 0.02), positions=[(0.25, 0.0, 0.0)], kind="kinematic",
+                          velocities=[(0.5, 0.0, 0.0)]))
+    s.add(pc.Pins(np.arange(n), bar[0]))
+    s.step(240)
+    assert s.positions[:n, 0] == pytest.approx(x[:n, 0] + 0.5, abs=1e-9)
+    assert s.positions[n:, 0].mean() > x[n:, 0].mean() + 0.3  # the rest followed
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "arg"),
+    [
+        ({"shape": "box", "positions": [(0, 0, 0)], "angles": 0.3}, "angles"),
+        ({"shape": "box", "positions": [(0, 0, 0)], "orientations": [(0, 0, 0, 0)]}, "orientations"),
+        ({"shape": "box", "size": [(0.1, 0.1, -0.1)]}, "size"),
+        ({"shape": "hull", "vertices": [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0)]}, "vertices"),
+        ({"shape": "mesh", "vertices": [(0, 0, 0), (1, 0, 0), (0, 1, 0)], "triangles": [(0, 1, 2)]}, "kind"),
+        ({"shape": "mesh", "vertices": [(0, 0, 0), (1, 0, 0), (0, 1, 0)], "triangles": [(0, 1, 3)], "kind": "fixed"},
+         "triangles"),
+        ({"shape": "hull", "positions": [(0, 0)], "vertices": [(0, 0), (1, 0), (0, 1)]}, "shape"),
+        ({"shape": "ball", "positions": [(0, 0, 0)], "angular_velocities": [1.0, 2.0]}, "angular_velocities"),
+    ],
+)
+def test_bad_bodies_are_refused_by_name(kwargs, arg):
+    with pytest.raises(pc.InvalidInputError, match=arg):
+        pc.Bodies(**kwargs)
+
+
+def test_refused_joints_and_pins_change_nothing():
+    s = _scene()
+    g = s.add(pc.Bodies("ball", size=0.1, positions=[(0, 0, 0), (1, 0, 0)]))
+    with pytest.raises(pc.InvalidInputError, match="kind"):
+        pc.Joints("spherical", None, g[0], anchors=(0.0, 0.0))
+    with pytest.raises(pc.InvalidInputError, match="anchors"):
+        s.add(pc.Joints("revolute", None, g[0], anchors=(0.0, 0.0)))
+    with pytest.raises(pc.InvalidInputError, match="axis"):
+        s.add(pc.Joints("revolute", None, g[0], anchors=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 0.0)))
+    with pytest.raises(pc.InvalidInputError, match="particles"):
+        s.add(pc.Pins([0], g[0]))  # the scene has no particles
+    with pytest.raises(pc.InvalidInputError, match="particles"):
+        pc.Pins([0, 0], g[0])
+    with pytest.raises(pc.InvalidInputError, match="body"):
+        pc.Pins([0, 1, 2], g[[0, 1]])
+    s2 = pc.Scene(dim=2)
+    with pytest.raises(pc.InvalidInputError, match="3D"):
+        s2.add(pc.Bodies("box", size=(0.1, 0.1, 0.1)))
+    assert len(s.bodies) == 1 and not s2.bodies
+    x0 = g.positions
+    s.step(10)
+    assert g.positions[0, 2] < x0[0, 2]  # still steps: the refusals left it whole
