@@ -1,8 +1,9 @@
-"""Rigid bodies in 2D: balls, boxes, capsules and convex polygons that fall, stack, topple and
-roll, joined by revolute, fixed, prismatic and rope joints, and coupled both ways with the
-scene's particles (grains, cloth, fluids).
+"""Rigid bodies in 2D and 3D: balls, boxes, capsules, convex polygons (2D) and hulls (3D), and
+fixed triangle meshes (3D), that fall, stack, topple and roll, joined by revolute, fixed,
+prismatic, spherical (3D) and rope joints, and coupled both ways with the scene's particles
+(grains, cloth, fluids), which can also be pinned to them (:class:`Pins`).
 
-Contacts and joints are solved by rapier (dimforge's ``rapier2d-f64``, double precision, its
+Contacts and joints are solved by rapier (dimforge's ``rapier2d-f64`` and ``rapier3d-f64``, double precision, its
 deterministic build): the field's well-kept library, a sequential-impulse (soft PGS) solver with
 warm starting (Catto, "Iterative Dynamics with Temporal Coherence", GDC 2005). physcore adds the
 coupling with its particles, the energy books, rollback on divergence and on Ctrl-C, and
@@ -26,8 +27,9 @@ Energy books (:meth:`Scene.energy`): the bodies' kinetic energy (translation and
 in ``kinetic``, the potential of gravity under ``"bodies: gravity"``; rapier does not report
 what contacts, friction, restitution and joints take out, so their sum (with the solver's
 error) is booked as the residual ``"bodies: contacts and joints"``, and what the particle
-coupling removes (kinetic energy, less the particles' potential in gravity that its moves raise)
-as ``"bodies ⇄ particles"``.
+coupling removes (kinetic energy, less the potential its moves raise: of gravity, springs and
+the other terms whose potential is a cheap pass; an SPH fluid's, DEM contacts' or N-body
+gravity's share is left to the drift) as ``"bodies ⇄ particles"``.
 
 Examples
 --------

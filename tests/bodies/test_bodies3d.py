@@ -247,3 +247,22 @@ def test_refused_joints_and_pins_change_nothing():
     x0 = g.positions
     s.step(10)
     assert g.positions[0, 2] < x0[0, 2]  # still steps: the refusals left it whole
+
+
+def test_a_grain_hitting_a_free_box_in_3d_keeps_momentum_and_a_grain_rests_on_a_box():
+    s = _scene(gravity=False)
+    box = s.add(pc.Bodies("box", size=(0.2, 0.2, 0.2), positions=[(0.0, 0.0, 0.0)], density=100.0))
+    s.add_particles([[-1.0, 0.05, 0.08]], velocities=[[2.0, 0.0, 0.0]], masses=[0.5])
+    s.set_attribute("radius", [0.02])
+    p0 = 0.5 * np.array([2.0, 0.0, 0.0])
+    s.step(240)
+    p1 = 0.5 * s.velocities[0] + box.masses[0] * box.velocities[0]
+    assert np.allclose(p1, p0, rtol=0, atol=1e-12)
+    assert box.velocities[0, 0] > 0.03
+    assert abs(box.angular_velocities[0, 1]) > 0 and abs(box.angular_velocities[0, 2]) > 0  # hit off-centre
+    g = _scene()
+    g.add(pc.Bodies("box", size=[(1.0, 1.0, 0.1)], positions=[(0.0, 0.0, -0.1)], kind="fixed"))
+    g.add_particles([[0.1, 0.2, 0.5]], masses=[1.0])
+    g.set_attribute("radius", [0.05])
+    g.step(480)
+    assert g.positions[0] == pytest.approx([0.1, 0.2, 0.05], abs=2e-3)

@@ -139,6 +139,9 @@ impl<V: Vector> Sph<V> {
 }
 
 impl<V: Vector> Term<V> for Sph<V> {
+    fn cheap_potential(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

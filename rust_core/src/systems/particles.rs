@@ -80,11 +80,12 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn state_model_mut(&mut self) -> (&mut State<V>, &Model) {
         (&mut self.sys.state, &self.sys.model)
     }
-    /// The potential energy of every term at the positions now (J): what a coupling that moves
-    /// particles changes and must book.
-    pub fn potential_energy(&self) -> Real {
+    /// The potential energy at the positions now (J) of the terms whose potential is cheap to
+    /// evaluate (`Term::cheap_potential`: gravity, springs, fields; not SPH, DEM contacts or
+    /// N-body gravity): what a coupling that moves particles books of what its moves change.
+    pub fn cheap_potential_energy(&self) -> Real {
         let (x, m) = (&self.sys.state.x, &self.sys.model);
-        self.sys.forces.terms.iter().filter_map(|t| t.potential(x, m)).sum()
+        self.sys.forces.terms.iter().filter(|t| t.cheap_potential()).filter_map(|t| t.potential(x, m)).sum()
     }
     /// Masses and optional attributes.
     pub fn model(&self) -> &Model {

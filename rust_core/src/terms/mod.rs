@@ -83,6 +83,14 @@ pub trait Term<V: Vector>: Send + Sync {
     }
     /// Potential energy (J) if the term is conservative (or has a conservative part).
     fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
+    /// Whether `potential` costs little next to a step (a pass over the particles or the
+    /// springs): what a coupling that moves particles evaluates around its moves to book what
+    /// they change (`systems::bodies::BodyContacts`). Terms whose potential needs a neighbour
+    /// search or a pair sum (SPH, DEM contacts, N-body gravity) say no, and the coupling leaves
+    /// their share to the books' drift rather than pay two searches a step.
+    fn cheap_potential(&self) -> bool {
+        true
+    }
     /// Whether the term can dissipate energy (drag, dashpots).
     fn dissipative(&self) -> bool;
     /// Whether the forces depend on the velocities: integrators that evaluate forces at

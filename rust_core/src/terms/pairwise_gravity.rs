@@ -530,6 +530,9 @@ impl Pairwise {
 }
 
 impl<V: Vector> Term<V> for Pairwise {
+    fn cheap_potential(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

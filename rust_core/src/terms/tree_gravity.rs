@@ -690,6 +690,9 @@ impl TreeGravity {
 }
 
 impl<V: Vector> Term<V> for TreeGravity {
+    fn cheap_potential(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }

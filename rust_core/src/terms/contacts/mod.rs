@@ -1120,6 +1120,9 @@ fn radii(model: &Model) -> Option<&[Real]> {
 }
 
 impl<V: Vector> Term<V> for Contacts<V> {
+    fn cheap_potential(&self) -> bool {
+        false
+    }
     fn name(&self) -> &str {
         &self.name
     }
