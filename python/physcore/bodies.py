@@ -102,6 +102,16 @@ def _number(arg: str, value: Any, lo: float, hi: float = math.inf, *, open_lo: b
     return x
 
 
+def _unit_quaternions(q: np.ndarray) -> np.ndarray:
+    """The rows of q (N, 4) normalised (scaled by their largest entry first, so that no norm
+    overflows); InvalidInputError naming orientations for a zero row."""
+    big = np.abs(q).max(axis=1, keepdims=True)
+    if not (big > 0).all():
+        raise InvalidInputError("orientations: a zero quaternion is no rotation")
+    u = q / big
+    return u / np.linalg.norm(u, axis=1, keepdims=True)
+
+
 def _width(value: Any) -> int | None:
     """The last axis of an array argument, if it says a dimension (2 or 3)."""
     try:
@@ -334,10 +344,7 @@ class Bodies(Part):
             if a["angles"] is not None:
                 raise InvalidInputError("angles: a 3D body's orientation is a unit quaternion: give orientations (x, y, z, w)")
             q = _rows("orientations", (0.0, 0.0, 0.0, 1.0) if a["orientations"] is None else a["orientations"], n, 4)
-            norm = np.linalg.norm(q, axis=1)
-            if not (norm > 1e-12).all():
-                raise InvalidInputError("orientations: a zero quaternion is no rotation")
-            self.start_angles = q / norm[:, None]
+            self.start_angles = _unit_quaternions(q)
             ang_width = 3
         vel = a["velocities"]
         self.start_velocities = _rows("velocities", vel if np.ndim(vel) else np.full((n, dim), float(_check.real("velocities", vel))), n, dim)
@@ -426,11 +433,7 @@ class Bodies(Part):
     @orientations.setter
     def orientations(self, value: Any) -> None:
         self._need(3, "orientations", "angles")
-        q = _rows("orientations", value, self.n, 4)
-        norm = np.linalg.norm(q, axis=1)
-        if not (norm > 1e-12).all():
-            raise InvalidInputError("orientations: a zero quaternion is no rotation")
-        q = q / norm[:, None]
+        q = _unit_quaternions(_rows("orientations", value, self.n, 4))
         host = self._bound()
 
         def write(sim: Any) -> None:
@@ -780,7 +783,7 @@ class Pins(Part):
     >>> import numpy as np, physcore as pc
     >>> scene = pc.Scene(dim=2, dt=1 / 240)
     >>> _ = scene.add(pc.Gravity([0.0, -9.81]))
-    >>> scene.add_particles(np.array([[0.3, 0.0]]))
+    >>> _ = scene.add_particles(np.array([[0.3, 0.0]]))
     >>> bar = scene.add(pc.Bodies("box", size=(0.3, 0.05), positions=[(0.0, 0.0)], kind="kinematic",
     ...                           velocities=[(1.0, 0.0)]))
     >>> _ = scene.add(pc.Pins([0], bar[0]))
@@ -793,19 +796,14 @@ class Pins(Part):
     part_kind: ClassVar[str] = "pins"
 
     def __init__(self, particles: Any, body: BodyRef | Bodies) -> None:
-        idx = _check.real_array("particles", particles)
-        if idx.ndim != 1 or idx.size < 1:
-            raise InvalidInputError(f"particles: expected shape (M,) with M >= 1, got {idx.shape}")
-        if not (np.isfinite(idx).all() and (idx == np.round(idx)).all() and (idx >= 0).all()):
-            raise InvalidInputError("particles: every entry must be a particle index (an integer >= 0)")
-        self.particles = idx.astype(np.int64)
+        self.particles = _indices(particles)
         if np.unique(self.particles).size != self.particles.size:
             raise InvalidInputError("particles: each particle can be pinned once")
         ref = _ref("body", body)
         if ref is None:
             raise InvalidInputError("body: pins need a body (a particle pinned to the world: scene.add_particles(pinned=True))")
-        if len(ref) not in (1, idx.size):
-            raise InvalidInputError(f"body: {len(ref)} bodies for {idx.size} particles (give 1, or one per particle)")
+        if len(ref) not in (1, self.particles.size):
+            raise InvalidInputError(f"body: {len(ref)} bodies for {self.particles.size} particles (give 1, or one per particle)")
         self.body = ref
         self._host: Host | None = None
         self._loaded: dict[str, np.ndarray] | None = None
@@ -851,7 +849,9 @@ class Pins(Part):
         if missing:
             raise InvalidInputError(f"arrays: missing {', '.join(missing)}")
         p = cls.__new__(cls)
-        p.particles = _rows("particles", arrays["particles"], m, 1).astype(np.int64)
+        p.particles = _indices(arrays["particles"])
+        if p.particles.size != m:
+            raise InvalidInputError(f"particles: {p.particles.size} entries where record.m is {m}")
         body = _rows("body", arrays["body"], m, 1)
         pts = np.asarray(arrays["points"], np.float64)
         dim = _width(pts) or 2
@@ -862,6 +862,16 @@ class Pins(Part):
 
     def __repr__(self) -> str:
         return f"Pins(m={self.particles.size})"
+
+
+def _indices(value: Any) -> np.ndarray:
+    """Particle indices (M,) int64 from `value`, checked: integers in 0..2⁴⁰, M ≥ 1."""
+    idx = _check.real_array("particles", value)
+    if idx.ndim != 1 or idx.size < 1:
+        raise InvalidInputError(f"particles: expected shape (M,) with M >= 1, got {idx.shape}")
+    if not (np.isfinite(idx).all() and (idx == np.round(idx)).all() and (idx >= 0).all() and (idx < 2.0**40).all()):
+        raise InvalidInputError("particles: every entry must be a particle index (an integer >= 0)")
+    return idx.astype(np.int64)
 
 
 def _ref(arg: str, value: Any) -> BodyRef | None:

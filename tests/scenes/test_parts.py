@@ -183,7 +183,16 @@ def _every_kind() -> list[pc.Scene]:
     tri = f.add(pc.Bodies("polygon", positions=[(0.0, 0.5), (0.3, 0.9)], vertices=[(0, 0), (0.2, 0), (0, 0.2)]))
     f.add(pc.Joints("rope", tri[0], tri[1], anchors=(0.0, 0.5), anchors_b=(0.3, 0.9), length=0.6))
     f.add_particles([[0.5, 1.0]])
-    return [a, b, c, d, e, f]
+    g = pc.Scene(3, integrator="semi_implicit_euler", threads=1)
+    g.add(pc.Gravity([0.0, 0.0, -9.81]))
+    g.add(pc.Bodies("mesh", vertices=[(-2, -2, 0), (2, -2, 0), (2, 2, 0)], triangles=[(0, 1, 2)], kind="fixed"))
+    hull = g.add(pc.Bodies("hull", positions=[(0.0, 0.0, 0.5), (0.3, 0.0, 0.9)], orientations=[(0, 0, 0.6, 0.8)] * 2,
+                           vertices=[(0, 0, 0), (0.2, 0, 0), (0, 0.2, 0), (0, 0, 0.2)]))
+    g.add(pc.Joints("spherical", hull[0], hull[1], anchors=(0.1, 0.0, 0.7)))
+    g.add(pc.Joints("revolute", None, hull[0], anchors=(0.0, 0.0, 0.5), axis=(0.0, 1.0, 0.0), limits=(-1.0, 1.0)))
+    g.add_particles([[0.3, 0.0, 1.0], [0.4, 0.0, 1.0]])
+    g.add(pc.Pins([1], hull[1]))
+    return [a, b, c, d, e, f, g]
 
 
 def test_the_scene_file_round_trips_every_part_kind(tmp_path):

@@ -307,6 +307,7 @@ def tablecloth(
     bar: float = 3.0,
     friction: float = 0.15,
     dishes: bool = True,
+    integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -314,13 +315,14 @@ def tablecloth(
     `mass` kg dropped onto a table 1.0 × 0.7 m, draping over its edges, with a brass bar of
     `bar` kg sewn along one hem (:class:`~physcore.Pins`) hanging over the side. The bar's
     weight drags the cloth across the table and off; the dishes set on it (a plate, cups and a
-    ball, rigid bodies) are left behind or dragged along as friction decides.
+    loaf, rigid bodies) are left behind or dragged along as friction decides.
 
     The sheet is :func:`~physcore.scenes.cloth`'s (structural, shear and bend springs of
-    `stiffness` N/m, velocity Verlet), its particles 4 mm in radius against the bodies
+    `stiffness` N/m, stepped by `integrator`), its particles 4 mm in radius against the bodies
     (``"bodies ⇄ particles"``: the table's, the dishes' and the floor's Coulomb `friction`).
     The table, its legs and the floor are fixed boxes; the bar a capsule. Gravity (0, 0, −9.81)
-    m/s²; ``dt=None`` takes :meth:`Scene.suggest_dt` (half the springs' fastest time scale).
+    m/s²; ``dt=None`` takes half of :meth:`Scene.suggest_dt` (a quarter of the springs'
+    fastest time scale), for the books to drift under 1e-3 through the landings.
 
     Raises TypeError / InvalidInputError naming the argument.
     """
@@ -340,7 +342,7 @@ def tablecloth(
         raise InvalidInputError(f"size: the cloth must be 0.2 to 10 m across to cover the table, got {size}")
     s = size / (n - 1)
     m = _particle_mass(mass / (n * n), "mass, n")
-    scene = Scene(3, integrator="verlet", dt=1e-3 if dt is None else dt, threads=threads)
+    scene = Scene(3, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
     top = 0.76  # the table top's upper face, m
     hx, hy, ht = 0.5, 0.35, 0.025
     # The sheet: centred over the table, shifted so one hem hangs 0.1 m past the +x edge.
@@ -353,7 +355,9 @@ def tablecloth(
     scene.add(Springs(i, j, stiffness=k, damping=0.02))
     scene.add(Gravity([0.0, 0.0, -9.81]))
     scene.add(Drag(0.3 * mass / (n * n)))
-    scene.add(Bodies("box", size=[(1.2, 0.65, 0.05)], positions=[(0.55, 0.0, -0.05)], kind="fixed", friction=0.6,
+    # A wide floor (what rolls off the table stays on it) and the camera fitted to the table's
+    # surroundings (render_defaults' extent), not to the floor.
+    scene.add(Bodies("box", size=[(3.0, 2.5, 0.05)], positions=[(0.4, 0.0, -0.05)], kind="fixed", friction=0.6,
                      restitution=0.1, color=_FLOOR3, name="floor"))
     legs = [(sx * (hx - 0.05), sy * (hy - 0.05), 0.5 * (top - 2 * ht)) for sx in (-1, 1) for sy in (-1, 1)]
     scene.add(Bodies("box", size=[(hx, hy, ht)] + [(0.025, 0.025, 0.5 * (top - 2 * ht))] * 4,
@@ -367,8 +371,9 @@ def tablecloth(
         up = (0.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5))
         scene.add(Bodies("capsule", size=[(0.03, 0.035)] * 3, positions=cups, orientations=[up] * 3, density=400.0,
                          friction=mu, restitution=0.05, color=_DISHES[[1, 2, 3]], name="cups"))
-        scene.add(Bodies("ball", size=[0.05], positions=[(-0.3, 0.18, top + 0.08)], density=700.0, friction=mu,
-                         restitution=0.2, color=(236, 140, 40), name="orange"))
+        # A loaf (a box: a ball here rolled off the table's far side and the floor's edge).
+        scene.add(Bodies("box", size=[(0.07, 0.045, 0.04)], positions=[(-0.3, 0.18, top + 0.07)], density=300.0,
+                         friction=mu, restitution=0.05, color=(214, 150, 70), name="loaf"))
     if bar_mass > 0:
         hem = np.flatnonzero(np.isclose(x[:, 0], x[:, 0].max()))
         half = 0.5 * size
@@ -380,14 +385,15 @@ def tablecloth(
                                color=_BRASS, name="bar"))
         scene.add(Pins(hem, rod[0]))
     if dt is None:
-        # suggest_dt() itself, not twice it as cloth() takes: the pins snap the hem to the bar
-        # every step and the springs' dashpots meet that jump; at twice the step the books
-        # drift by 5 % in 1.5 s (n = 16), at this one by 0.35 % (0.02 % at half of it).
-        _set_stable_dt(scene, 1.0, "stiffness, mass")
+        # Half of suggest_dt(), not twice it as cloth() takes: the cloth lands on the table and
+        # the floor, and the pins snap the hem to the bar, every step moving particles between
+        # velocity Verlet's steps. The books' drift over 3 s: 2.7e-2 at suggest_dt(), 8.6e-4
+        # at half of it (n = 24, measured).
+        _set_stable_dt(scene, 0.5, "stiffness, mass")
     scene.render_defaults = {"mesh": Mesh.grid(n, n)}
     return scene
 
 
-tablecloth.render_defaults = {"frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
-                              "view": (-50.0, 20.0)}
+tablecloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
+                              "view": (-50.0, 20.0), "extent": ((-0.8, -0.75, 0.0), (1.6, 0.75, 0.9))}
 tablecloth = _stamped(tablecloth)
