@@ -275,9 +275,8 @@ def _inside(outline: np.ndarray, p: np.ndarray) -> bool:
 
 
 def _has_bodies(scene: Any) -> bool:
-    """Whether the scene holds rigid bodies drawn live like its particles (2D ones: 3D bodies
-    are drawn in renders, not live)."""
-    return any(getattr(g, "first", None) is not None and g.n and g.dim == 2 for g in getattr(scene, "bodies", ()))
+    """Whether the scene holds rigid bodies (drawn live like its particles)."""
+    return any(getattr(g, "first", None) is not None and g.n for g in getattr(scene, "bodies", ()))
 
 
 # --------------------------------------------------------------------------- the live state
@@ -348,8 +347,8 @@ class _Live:
         if self._poses_of is not s:
             from .render._bodies import body_track
 
-            track, self._poses = body_track(s, 1) if _has_bodies(s) else (None, None)
-            self._poses_of, self.outlines = s, ([] if track is None else list(track.outlines))
+            track, self._poses = body_track(s, 1)
+            self._poses_of, self.outlines = s, list(getattr(track, "outlines", []))
         #: The rigid bodies' poses (B, 3) float64 ``(x, y, angle)``, m and rad; None without bodies.
         self.b = None if self._poses is None else np.asarray(self._poses(), dtype=np.float64)
 
@@ -369,6 +368,14 @@ class _Live:
         b, pb = self.b, self.pb
         if b is None or pb is None or pb.shape != b.shape:
             return b
+        if b.shape[1] == 7:  # 3D: (x, y, z, qx, qy, qz, qw), each quaternion the short way (nlerp)
+            q, pq = b[:, 3:], pb[:, 3:]
+            q = np.where((np.sum(q * pq, axis=1) < 0)[:, None], -q, q)
+            out = interpolate(pb, b, alpha)
+            mid = pq + alpha * (q - pq)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                out[:, 3:] = mid / np.linalg.norm(mid, axis=1, keepdims=True)
+            return out
         turn = np.remainder(b[:, 2] - pb[:, 2] + np.pi, 2 * np.pi) - np.pi
         out = interpolate(pb, b, alpha)
         out[:, 2] = pb[:, 2] + alpha * turn
@@ -676,6 +683,12 @@ class _Painter:
                 corners = np.array([[c[a] + (half[a] if (k >> a) & 1 else -half[a]) for a in range(len(c))]
                                     for k in range(2 ** len(c))])
                 fit = np.concatenate([pts, corners])
+        if d.get("extent") is not None:  # the scene's own view box, as gif() fits it
+            from .render._checks import _extent_box
+
+            box = _extent_box(d.get("extent"), rec.positions.shape[-1])
+            if box is not None:
+                fit = box - rec.origin
         trail = min(int(settings.get("trail") or 0), 240)
         kw: dict[str, Any] = {"colorbar": settings["colorbar"], "size_by": settings["size_by"], "annotate": True,
                               "title": (settings.get("title") or "physcore") if hud else (settings.get("title") or None),
@@ -711,8 +724,14 @@ class _Painter:
             from .render._bodies import BodyTrack
 
             b = rec.bodies
-            bodies = BodyTrack(b.outlines, b.colors, b.balls, f)
-            bodies.poses[:] = b.poses[:1]
+            if b.dim == 3:
+                import copy
+
+                bodies = copy.copy(b)
+                bodies.poses = np.repeat(b.poses[:1], f, axis=0)
+            else:
+                bodies = BodyTrack(b.outlines, b.colors, b.balls, f, b.chains)
+                bodies.poses[:] = b.poses[:1]
         self.live = rec._replace(
             bodies=bodies,
             positions=np.repeat(rec.positions[:1], f, axis=0),
@@ -761,8 +780,9 @@ class _Painter:
             if live.pressures is not None and p is not None:
                 live.pressures[k] = p
             if live.bodies is not None and bodies is not None and bodies.shape == live.bodies.poses[k].shape:
-                live.bodies.poses[k, :, :2] = bodies[:, :2] - self.origin[:2]
-                live.bodies.poses[k, :, 2] = bodies[:, 2]
+                d = len(self.origin)
+                live.bodies.poses[k, :, :d] = bodies[:, :d] - self.origin
+                live.bodies.poses[k, :, d:] = bodies[:, d:]
         live.times[k] = t
         if self.frames > 1:
             self.ras._pix = None  # the history moved: project it again

@@ -378,7 +378,7 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
         v = rec["record"].get(count)
         if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 1 << 24:
             raise r.error(f"{field}.record.{count}", f"must be a count in 1..{1 << 24}, got {_show(v)}")
-        shapes = ("ball", "box", "capsule", "polygon") if dim == 2 else ("ball", "box", "capsule", "hull", "mesh")
+        shapes = ("ball", "box", "capsule", "polygon", "polyline") if dim == 2 else ("ball", "box", "capsule", "hull", "mesh")
         if b["part"] == "group" and rec["record"].get("shape") not in shapes:
             raise r.error(f"{field}.record.shape", f"must be one of {', '.join(shapes)} in {dim}D, got {_show(rec['record'].get('shape'))}")
         bodies.append(rec)
@@ -661,7 +661,7 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     for k, b in enumerate(meta.get("bodies", ())):
         rec, field = b["record"], f"meta.bodies[{k}].record"
         if b["part"] == "group":
-            n, w = rec["n"], {"ball": 1, "box": meta["dim"], "capsule": 2, "polygon": 0, "hull": 0, "mesh": 0}[rec["shape"]]
+            n, w = rec["n"], {"ball": 1, "box": meta["dim"], "capsule": 2, "polygon": 0, "polyline": 0, "hull": 0, "mesh": 0}[rec["shape"]]
             sizes[f"B{k}"] = (n, f"{field}.n")
             sizes[f"BS{k}"] = (n * w, f"{field}.n (and its shape)")
             turn = (("angles", (f"B{k}",)), ("angular_velocities", (f"B{k}",))) if meta["dim"] == 2 else (

@@ -61,11 +61,12 @@ SHAPES: dict[str, str] = {
     "box": "half extents (hx, hy) in 2D, (hx, hy, hz) in 3D (m)",
     "capsule": "half length of the axis and radius (l, r) (m), axis along the body's x",
     "polygon": "2D; none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
+    "polyline": "2D, fixed bodies only; none: the group's ``vertices``, a chain of segments (ground, ramps)",
     "hull": "3D; none: the group's ``vertices`` (m, in the body's frame; their convex hull)",
     "mesh": "3D, fixed bodies only; none: the group's ``vertices`` and ``triangles``",
 }
-_SHAPES_2D = ("ball", "box", "capsule", "polygon")
-_SHAPES_2D_ONLY = ("polygon",)
+_SHAPES_2D = ("ball", "box", "capsule", "polygon", "polyline")
+_SHAPES_2D_ONLY = ("polygon", "polyline")
 _SHAPES_3D = ("hull", "mesh")
 #: The joints of :class:`Joints`.
 JOINTS: tuple[str, ...] = ("revolute", "fixed", "prismatic", "spherical", "rope")
@@ -160,8 +161,8 @@ class Bodies(Part):
     Parameters
     ----------
     shape : str
-        2D: ``"ball"``, ``"box"``, ``"capsule"`` or ``"polygon"``; 3D: ``"ball"``, ``"box"``,
-        ``"capsule"``, ``"hull"`` or ``"mesh"`` (:data:`SHAPES`).
+        2D: ``"ball"``, ``"box"``, ``"capsule"``, ``"polygon"`` or ``"polyline"``; 3D: ``"ball"``,
+        ``"box"``, ``"capsule"``, ``"hull"`` or ``"mesh"`` (:data:`SHAPES`).
     size : array_like of float
         Per body (or one value for all): a ball's radius, shape (N,); a box's half extents
         ``(hx, hy)`` in 2D or ``(hx, hy, hz)`` in 3D, (N, dim); a capsule's ``(half_length,
@@ -180,9 +181,9 @@ class Bodies(Part):
     angular_velocities : default 0
         rad/s: (N,) in 2D (counter-clockwise), (N, 3) in 3D (the rotation vector's rate, world
         frame).
-    vertices : (K, dim) array_like of float, polygon, hull and mesh only
-        In the body's frame, m: a polygon's or hull's points (their convex hull is the shape)
-        or a mesh's vertices.
+    vertices : (K, dim) array_like of float, polygon, polyline, hull and mesh only
+        In the body's frame, m: a polygon's or hull's points (their convex hull is the shape),
+        a polyline's chain (fixed bodies only), or a mesh's vertices.
     triangles : (T, 3) array_like of int, mesh only
         The mesh's triangles, as vertex indices. A mesh has no volume: fixed bodies only.
     density : float, default 1000
@@ -274,9 +275,9 @@ class Bodies(Part):
         if shape in _SHAPES_3D and dim == 2:
             raise InvalidInputError(f"shape: {shape!r} is a 3D shape; in 2D use one of {', '.join(_SHAPES_2D)}")
         if shape in _SHAPES_2D_ONLY and dim == 3:
-            raise InvalidInputError(f"shape: {shape!r} is a 2D shape; in 3D use 'hull' (vertices (K, 3))")
+            raise InvalidInputError(f"shape: {shape!r} is a 2D shape; in 3D use 'hull' or 'mesh' (vertices (K, 3))")
         width = 1 if shape == "ball" else (dim if shape == "box" else 2)
-        listed = shape in ("polygon", "hull", "mesh")
+        listed = shape in ("polygon", "polyline", "hull", "mesh")
         if a["positions"] is not None:
             x = _rows("positions", a["positions"], None, dim)
             n = x.shape[0]
@@ -297,7 +298,7 @@ class Bodies(Part):
             if a["size"] is not None:
                 raise InvalidInputError(f"size: a {shape} takes its shape from its vertices, not a size")
             v = _rows("vertices", a["vertices"], None, dim)
-            need = dim + 1 if shape != "mesh" else 3
+            need = {"mesh": 3, "polyline": 2}.get(shape, dim + 1)
             if v.shape[0] < need:
                 raise InvalidInputError(f"vertices: a {shape} needs at least {need}, got {v.shape[0]}")
             with np.errstate(all="ignore"):
@@ -305,9 +306,14 @@ class Bodies(Part):
             if not np.isfinite(e).all():
                 raise InvalidInputError("vertices: beyond float64 (their centre overflows); give them in m, near the body's origin")
             rank = np.linalg.matrix_rank(e, tol=1e-12 * max(1e-300, float(np.abs(e).max())))
-            if shape != "mesh" and rank < dim:
+            if shape in ("polygon", "hull") and rank < dim:
                 raise InvalidInputError("vertices: " + ("all on one line (the polygon has no area)" if dim == 2
                                                         else "all on one plane (the hull has no volume)"))
+            if shape == "polyline":
+                if self.kind != "fixed":
+                    raise InvalidInputError("kind: a polyline has no area and so no mass: make it kind='fixed'")
+                if (np.abs(np.diff(v, axis=0)).max(axis=1) == 0).any():
+                    raise InvalidInputError("vertices: two consecutive vertices coincide (a segment of no length)")
             if shape == "mesh":
                 if self.kind != "fixed":
                     raise InvalidInputError("kind: a triangle mesh has no volume and so no mass: make it kind='fixed'")
@@ -598,7 +604,7 @@ class Bodies(Part):
         dim = x.shape[1] if x.ndim == 2 and x.shape[1] in (2, 3) else 2
         width = dim if shape == "box" else 2
         size = arrays["size"].reshape(-1, width) if shape in ("box", "capsule") else arrays["size"]
-        listed = shape in ("polygon", "hull", "mesh")
+        listed = shape in ("polygon", "polyline", "hull", "mesh")
         part = cls(shape, size=size if not listed else None, positions=arrays["positions"], angles=arrays.get("angles"),
                    orientations=arrays.get("orientations"),
                    velocities=arrays["velocities"], angular_velocities=arrays["angular_velocities"],
@@ -885,6 +891,7 @@ def _ref(arg: str, value: Any) -> BodyRef | None:
 
 
 _DEFAULT_COLORS = {"ball": (214, 96, 77), "box": (222, 160, 87), "capsule": (95, 158, 160), "polygon": (130, 120, 190),
+                   "polyline": (110, 116, 128),
                    "hull": (130, 120, 190), "mesh": (150, 156, 166)}
 
 
@@ -925,6 +932,8 @@ def _outline(shape: str, size: np.ndarray, vertices: np.ndarray | None) -> list[
             right = np.stack([half + r * np.cos(h), r * np.sin(h)], 1)
             left = np.stack([-half - r * np.cos(h), -r * np.sin(h)], 1)
             out.append(np.concatenate([right, left]))
+        elif shape == "polyline":
+            out.append(np.asarray(vertices, np.float64))  # an open chain: drawn segment by segment
         else:
             out.append(_hull(vertices))  # type: ignore[arg-type]
     return out

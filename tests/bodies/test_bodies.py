@@ -274,3 +274,27 @@ def test_domino_wave_runs_at_a_steady_speed():
     assert late == pytest.approx(early, rel=0.05)
     v = late / math.sqrt(G * h)
     assert 0.5 < v < 2.0
+
+
+def test_a_ball_settles_at_the_bottom_of_a_polyline_valley_and_is_drawn():
+    """A fixed polyline (a V of two segments, 30° each side) holds a ball; friction and
+    restitution bring it to rest at the bottom, r / cos 30° above the vertex."""
+    s = _scene()
+    t = math.tan(math.radians(30.0))
+    s.add(pc.Bodies("polyline", vertices=[(-1.0, t), (0.0, 0.0), (1.0, t)], kind="fixed", restitution=0.0))
+    ball = s.add(pc.Bodies("ball", size=0.05, positions=[(0.4, 0.5)], restitution=0.0))
+    s.step(2400)  # 10 s
+    assert ball.positions[0] == pytest.approx([0.0, 0.05 / math.cos(math.radians(30.0))], abs=2e-3)
+    # Drawn: the polyline's colour (its default, slate grey) along the V, segment by segment.
+    img = next(iter(pc.render.frames(s, frames=1, size=(160, 120), color_by="none", antialias=False)))
+    grey = np.all(np.abs(img.astype(int) - [110, 116, 128]) <= 40, axis=2) & (img.std(axis=2) < 12)
+    assert grey.sum() > 100, grey.sum()
+
+
+def test_polylines_are_fixed_and_their_segments_have_length():
+    with pytest.raises(pc.InvalidInputError, match="kind"):
+        pc.Bodies("polyline", vertices=[(0, 0), (1, 0)])
+    with pytest.raises(pc.InvalidInputError, match="vertices"):
+        pc.Bodies("polyline", vertices=[(0, 0), (0, 0), (1, 0)], kind="fixed")
+    with pytest.raises(pc.InvalidInputError, match="vertices"):
+        pc.Bodies("polyline", vertices=[(0, 0)], kind="fixed")

@@ -66,10 +66,11 @@ def test_paused_frame_is_the_gif_frame():
     assert np.abs(_decode(data).astype(int) - next(pc.render.frames(_cloth(10))).astype(int)).mean() < 3.0
 
 
-@pytest.mark.parametrize(("name", "ticks"), [("dominoes", 40), ("floating", 8)])
+@pytest.mark.parametrize(("name", "ticks"), [("dominoes", 40), ("floating", 8), ("tablecloth", 12)])
 def test_rigid_bodies_and_fluid_surfaces_are_drawn_live_as_the_gif_draws_them(name, ticks):
-    """Rigid bodies alone (the dominoes) and with a fluid drawn as a surface in the ice colour map
-    (floating): paused after some ticks, the widget's frame is exactly that frame of the scene's
+    """Rigid bodies alone (the dominoes), with a fluid drawn as a surface in the ice colour map
+    (floating), and 3D bodies with a cloth in one depth buffer, in the scene's own view box
+    (tablecloth): paused after some ticks, the widget's frame is exactly that frame of the scene's
     GIF (the bodies where the scene has them now, not where the preview started them; the
     scene's own colour map and surface)."""
     import itertools

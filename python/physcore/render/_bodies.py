@@ -20,10 +20,13 @@ class BodyTrack:
 
     dim = 2
 
-    def __init__(self, outlines: list[np.ndarray], colors: np.ndarray, balls: np.ndarray, frames: int) -> None:
+    def __init__(self, outlines: list[np.ndarray], colors: np.ndarray, balls: np.ndarray, frames: int,
+                 chains: np.ndarray | None = None) -> None:
         self.outlines = outlines
         self.colors = colors
         self.balls = balls
+        #: (B,) bool: the outline is an open chain of segments (a polyline), drawn segment by segment.
+        self.chains = np.zeros(len(outlines), dtype=bool) if chains is None else chains
         self.poses = np.zeros((frames, len(outlines), 3), dtype=np.float32)
         self.reach = np.array([float(np.hypot(o[:, 0], o[:, 1]).max()) for o in outlines])
 
@@ -120,14 +123,16 @@ def body_track(scene: Any, frames: int) -> tuple[BodyTrack | BodyTrack3 | None, 
     if groups[0].dim == 3:
         return _body_track3(groups, frames)
     outlines: list[np.ndarray] = []
-    colors, balls = [], []
+    colors, balls, chains = [], [], []
     for g in groups:
         outs = g.outline()
         outlines += outs
         c = np.asarray(g.color, dtype=np.uint8)
         colors.append(np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c)
         balls.append(np.full(g.n, g.shape == "ball"))
-    track = BodyTrack(outlines, np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames)
+        chains.append(np.full(g.n, g.shape == "polyline"))
+    track = BodyTrack(outlines, np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames,
+                      np.concatenate(chains))
     spans = [(g.first, g.first + g.n) for g in groups]
     host = groups[0]._bound()
 
@@ -229,6 +234,12 @@ def draw_bodies(out: np.ndarray, cam: Any, track: BodyTrack, k: int) -> None:
         world = np.stack([x + c * outline[:, 0] - s * outline[:, 1], y + s * outline[:, 0] + c * outline[:, 1]], axis=1)
         col, row = cam.pixels(cam.project(world)[0])
         poly = np.stack([col, row], axis=1).astype(np.float64)
+        if track.chains[b]:  # a polyline: each segment a quad 4 px thick
+            for p0, p1 in zip(poly[:-1], poly[1:], strict=True):
+                d = p1 - p0
+                n = np.array([-d[1], d[0]]) * (2.0 / max(float(np.hypot(*d)), 1e-9))
+                _fill(out, np.array([p0 - n, p1 - n, p1 + n, p0 + n]), track.colors[b])
+            continue
         _fill(out, poly, track.colors[b])
         if track.balls[b]:
             from ._raster import _draw_lines

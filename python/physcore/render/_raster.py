@@ -659,9 +659,11 @@ class _Rasteriser:
         self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
         if self.surface:
             self._surface_setup()
-        #: frame_rgb is the frame (full colour): shaded meshes, soft discs, glow in own colours.
+        #: frame_rgb is the frame (full colour): shaded meshes, soft discs, glow in own colours,
+        #: rigid bodies (filled and shaded: a palette frame had none of them, so a scene of
+        #: bodies rendered without antialias= showed its particles only).
         self.full_colour = (mesh is not None or self.antialias or self.surface
-                            or (self.colors is not None and color_by == "density"))
+                            or (self.colors is not None and color_by == "density") or rec.bodies is not None)
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
         self.trail_px = 2 if min(size) >= 300 else 1
         self.mesh = mesh

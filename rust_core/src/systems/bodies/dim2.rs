@@ -14,8 +14,8 @@ const D: usize = 2;
 const ROT: usize = 1;
 const ANG: usize = 1;
 const ROTATION_KEY: &str = "angles";
-/// The shape kinds of a group, as Python names them.
-pub const SHAPES: [&str; 4] = ["ball", "box", "capsule", "polygon"];
+/// The shape kinds of a group, as Python names them ("polyline": fixed bodies only).
+pub const SHAPES: [&str; 5] = ["ball", "box", "capsule", "polygon", "polyline"];
 pub const JOINTS: [&str; 4] = ["revolute", "fixed", "prismatic", "rope"];
 /// A prismatic joint's axis when none is given.
 const DEFAULT_AXIS: [Real; 2] = [1.0, 0.0];
@@ -47,7 +47,7 @@ fn rotation_finite(r: &Rotation) -> bool {
 fn size_len(shape: &str) -> usize {
     match shape {
         "ball" => 1,
-        "polygon" => 0,
+        "polygon" | "polyline" => 0,
         _ => 2,
     }
 }
@@ -60,14 +60,28 @@ fn sized_shape(shape: &str, s: &[Real]) -> ColliderBuilder {
     }
 }
 
-/// A polygon group's one shape: the convex hull of its `vertices` (K·2 values, `n_vertices`).
-fn listed_shape(shape: &str, _kind: &str, p: &mut Params) -> Result<Option<ColliderBuilder>> {
-    if shape != "polygon" {
+/// A polygon group's one shape: the convex hull of its `vertices` (K·2 values, `n_vertices`);
+/// a polyline group's: the chain of segments through them, for fixed bodies only (a chain of
+/// segments has no area, so no mass: ground profiles, ramps, a bowl's section).
+fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<ColliderBuilder>> {
+    if shape != "polygon" && shape != "polyline" {
         return Ok(None);
     }
-    let k = p.count("n_vertices", 1 << 16)?;
+    let k = p.count("n_vertices", 1 << 20)?;
     let v = take_len(p, "vertices", 2 * k)?;
     let hull: Vec<Vector> = v.chunks_exact(2).map(vector).collect();
+    if shape == "polyline" {
+        if kind != "fixed" {
+            return Err(invalid("kind", "a polyline has no area and so no mass: make it kind=\"fixed\""));
+        }
+        if hull.len() < 2 {
+            return Err(invalid("vertices", "a polyline needs at least 2 vertices"));
+        }
+        if let Some(j) = (1..hull.len()).find(|&j| hull[j] == hull[j - 1]) {
+            return Err(invalid("vertices", format!("vertices {} and {j} coincide (a segment of no length)", j - 1)));
+        }
+        return Ok(Some(ColliderBuilder::polyline(hull, None)));
+    }
     if hull.len() < 3 {
         return Err(invalid("vertices", "a polygon needs at least 3 vertices"));
     }
