@@ -266,3 +266,25 @@ def test_a_grain_hitting_a_free_box_in_3d_keeps_momentum_and_a_grain_rests_on_a_
     g.set_attribute("radius", [0.05])
     g.step(480)
     assert g.positions[0] == pytest.approx([0.1, 0.2, 0.05], abs=2e-3)
+
+
+@pytest.mark.parametrize(("shape", "kwargs"), [("box", {"size": (0.1, 0.2, 0.3)}), ("ball", {"size": 0.1}),
+                                                ("capsule", {"size": (0.2, 0.05)}),
+                                                ("hull", {"vertices": [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)]})])
+def test_each_3d_shape_is_drawn_as_a_closed_surface_around_its_body(shape, kwargs):
+    """What the renderer draws: each body's triangles close a surface (Euler: V − E + F = 2,
+    every edge in two triangles) and reach as far as the shape does."""
+    s = _scene(gravity=False)
+    g = s.add(pc.Bodies(shape, positions=[(0.0, 0.0, 0.0)], **kwargs))
+    (v, t), = g.meshes()
+    assert v.shape[1] == 3 and t.shape[1] == 3 and t.max() < len(v)
+    # Welded: the same corner may be listed twice by a shape's own mesh (a ball's seam).
+    key = np.round(v, 9)
+    _, weld = np.unique(key, axis=0, return_inverse=True)
+    tri = weld.reshape(-1)[t]
+    edges = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
+    e, counts = np.unique(edges, axis=0, return_counts=True)
+    assert (counts == 2).all()
+    assert len(np.unique(tri)) - len(e) + len(t) == 2
+    reach = {"box": np.linalg.norm([0.1, 0.2, 0.3]), "ball": 0.1, "capsule": 0.25, "hull": np.sqrt(3.0)}[shape]
+    assert np.linalg.norm(v, axis=1).max() == pytest.approx(reach, rel=1e-9)
