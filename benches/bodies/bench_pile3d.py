@@ -18,14 +18,13 @@ step against the bare rapier3d-f64 pipeline on this scene).
 from __future__ import annotations
 
 import os
-import statistics
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # benches/: _common
 
 from _common import header, require_release  # first: sets up the environment before numpy loads
 import numpy as np
+from bench_pile import _median  # the 2D bench's timing (this folder): the same blocks and median
 
 import physcore as pc
 
@@ -67,16 +66,6 @@ def rapier_pile(n: int, threads: int | None):
         world.add_body(r.RigidBody.dynamic(translation=(float(x), float(y), float(z))).can_sleep(False),
                        colliders=[r.Collider.cuboid(HALF, HALF, HALF).density(1.0).friction(0.5).restitution(0.1)])
     return world
-
-
-def _median(step, blocks: int = 3, steps: int = 60) -> float:
-    step(60)
-    times = []
-    for _ in range(blocks):
-        t0 = time.perf_counter()
-        step(steps)
-        times.append((time.perf_counter() - t0) / steps)
-    return statistics.median(times)
 
 
 def main(sizes: list[int]) -> None:
