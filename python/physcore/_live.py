@@ -721,17 +721,7 @@ class _Painter:
         self.springs = None if rec.pairs is None else _scene_springs(scene)
         bodies = None
         if rec.bodies is not None:  # the live poses go in its last frame, as the particles'
-            from .render._bodies import BodyTrack
-
-            b = rec.bodies
-            if b.dim == 3:
-                import copy
-
-                bodies = copy.copy(b)
-                bodies.poses = np.repeat(b.poses[:1], f, axis=0)
-            else:
-                bodies = BodyTrack(b.outlines, b.colors, b.balls, f, b.chains)
-                bodies.poses[:] = b.poses[:1]
+            bodies = rec.bodies.with_frames(f)
         self.live = rec._replace(
             bodies=bodies,
             positions=np.repeat(rec.positions[:1], f, axis=0),

@@ -140,6 +140,24 @@ def _dim_of(shape: str, positions: Any, size: Any, orientations: Any, angles: An
     return None
 
 
+class _BodiesPart(Part):
+    """What the parts of the "bodies" section share: where a file names their entries, and
+    their JSON record, checked."""
+
+    section: ClassVar[str] = "bodies"
+
+    @classmethod
+    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
+        return f"{ctx.field}.record", {}
+
+    @staticmethod
+    def _checked_record(entry: dict[str, Any]) -> dict[str, Any]:
+        rec = entry["record"]
+        if not isinstance(rec, dict):
+            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        return rec
+
+
 class BodyRef:
     """Some bodies of a :class:`Bodies` group, by index within it: ``bodies[3]``,
     ``bodies[:-1]``, ``bodies[[0, 2]]`` (what :class:`Joints` joins)."""
@@ -155,7 +173,7 @@ class BodyRef:
         return f"BodyRef({self.group.name!r}, {self.index.tolist()})"
 
 
-class Bodies(Part):
+class Bodies(_BodiesPart):
     """A group of rigid bodies of one shape, in 2D or 3D (the dimension of the positions).
 
     Parameters
@@ -227,7 +245,6 @@ class Bodies(Part):
         (a ``TypeError``) a non-numeric argument.
     """
 
-    section: ClassVar[str] = "bodies"
     part_kind: ClassVar[str] = "group"
 
     def __init__(
@@ -344,13 +361,13 @@ class Bodies(Part):
         if dim == 2:
             if a["orientations"] is not None:
                 raise InvalidInputError("orientations: quaternions orient 3D bodies; in 2D give angles (rad)")
-            self.start_angles = _rows("angles", 0.0 if a["angles"] is None else a["angles"], n, 1)
+            self.start_turns = _rows("angles", 0.0 if a["angles"] is None else a["angles"], n, 1)
             ang_width = 1
         else:
             if a["angles"] is not None:
                 raise InvalidInputError("angles: a 3D body's orientation is a unit quaternion: give orientations (x, y, z, w)")
             q = _rows("orientations", (0.0, 0.0, 0.0, 1.0) if a["orientations"] is None else a["orientations"], n, 4)
-            self.start_angles = _unit_quaternions(q)
+            self.start_turns = _unit_quaternions(q)  # (N, 4) in 3D, angles (N,) in 2D
             ang_width = 3
         vel = a["velocities"]
         self.start_velocities = _rows("velocities", vel if np.ndim(vel) else np.full((n, dim), float(_check.real("velocities", vel))), n, dim)
@@ -521,7 +538,7 @@ class Bodies(Part):
         p: dict[str, Any] = {
             "shape": self.shape, "kind": self.kind, "n": self.n,
             "positions": np.ascontiguousarray(self.start).reshape(-1),
-            ("angles" if self.dim == 2 else "orientations"): np.ascontiguousarray(self.start_angles).reshape(-1),
+            ("angles" if self.dim == 2 else "orientations"): np.ascontiguousarray(self.start_turns).reshape(-1),
             "velocities": np.ascontiguousarray(self.start_velocities).reshape(-1),
             "angular_velocities": np.ascontiguousarray(self.start_angular).reshape(-1),
             "size": np.ascontiguousarray(self.size, dtype=np.float64).reshape(-1),
@@ -586,14 +603,8 @@ class Bodies(Part):
         return {"name": self.name, "part": "group", "record": self._record()}, arrays
 
     @classmethod
-    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
-        return f"{ctx.field}.record", {}
-
-    @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        rec = entry["record"]
-        if not isinstance(rec, dict):
-            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        rec = cls._checked_record(entry)
         need = ["positions", "angles" if "orientations" not in arrays else "orientations", "velocities",
                 "angular_velocities", "size"]
         missing = [k for k in need if k not in arrays]
@@ -622,7 +633,7 @@ class Bodies(Part):
         return f"Bodies({self.shape!r}, n={self.n}, kind={self.kind!r}, name={self.name!r})"
 
 
-class Joints(Part):
+class Joints(_BodiesPart):
     """Joints between rigid bodies, one per pair ``(a[k], b[k])``; 2D or 3D (the width of
     ``anchors``).
 
@@ -656,7 +667,6 @@ class Joints(Part):
         wrong shapes; a zero axis; lower > upper limit.
     """
 
-    section: ClassVar[str] = "bodies"
     part_kind: ClassVar[str] = "joints"
 
     def __init__(self, kind: str, a: BodyRef | Bodies | None, b: BodyRef | Bodies | None, anchors: Any, *,
@@ -734,14 +744,8 @@ class Joints(Part):
         return {"part": "joints", "record": {"kind": self.kind, "m": self.m}}, arrays
 
     @classmethod
-    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
-        return f"{ctx.field}.record", {}
-
-    @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        rec = entry["record"]
-        if not isinstance(rec, dict):
-            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        rec = cls._checked_record(entry)
         j = cls.__new__(cls)
         j.kind = _check.choice("kind", rec.get("kind"), JOINTS)
         j.m = _check.int_in_range("m", rec.get("m"), 1, 1 << 24)
@@ -760,7 +764,7 @@ class Joints(Part):
         return f"Joints({self.kind!r}, m={self.m})"
 
 
-class Pins(Part):
+class Pins(_BodiesPart):
     """Particles pinned to rigid bodies: each particle moves with the point of its body where it
     is when added, both ways (cloth hung from a bar, a rope tied to a box). Each step the
     particle is put on that point and its velocity made the point's by an impulse along the
@@ -798,7 +802,6 @@ class Pins(Part):
     array([1.3, 0. ])
     """
 
-    section: ClassVar[str] = "bodies"
     part_kind: ClassVar[str] = "pins"
 
     def __init__(self, particles: Any, body: BodyRef | Bodies) -> None:
@@ -842,14 +845,8 @@ class Pins(Part):
                 {"particles": self.particles.astype(np.float64), "body": self._numbers, "points": self._points})
 
     @classmethod
-    def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
-        return f"{ctx.field}.record", {}
-
-    @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        rec = entry["record"]
-        if not isinstance(rec, dict):
-            raise InvalidInputError(f"record: expected an object, got {type(rec).__name__}")
+        rec = cls._checked_record(entry)
         m = _check.int_in_range("m", rec.get("m"), 1, 1 << 24)
         missing = [k for k in ("particles", "body", "points") if k not in arrays]
         if missing:

@@ -6,6 +6,7 @@ capsules, a ball's two halves in two shades so that its rolling shows), posed ev
 lit and rasterised like the cloth (``_mesh``), in one depth buffer with it."""
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import numpy as np
@@ -29,6 +30,12 @@ class BodyTrack:
         self.chains = np.zeros(len(outlines), dtype=bool) if chains is None else chains
         self.poses = np.zeros((frames, len(outlines), 3), dtype=np.float32)
         self.reach = np.array([float(np.hypot(o[:, 0], o[:, 1]).max()) for o in outlines])
+
+    def with_frames(self, frames: int) -> BodyTrack:
+        """A copy holding `frames` frames, each frame 0's poses (the live painter's history)."""
+        out = copy.copy(self)
+        out.poses = np.repeat(self.poses[:1], frames, axis=0)
+        return out
 
 
 class BodyTrack3:
@@ -73,6 +80,12 @@ class BodyTrack3:
         self.rgb = np.concatenate(rgb).astype(np.float32)
         self.reach = np.array([float(np.linalg.norm(v, axis=1).max()) for v, _ in meshes])
         self.poses = np.zeros((frames, len(meshes), 7), dtype=np.float32)
+
+    def with_frames(self, frames: int) -> BodyTrack3:
+        """A copy holding `frames` frames, each frame 0's poses (the live painter's history)."""
+        out = copy.copy(self)
+        out.poses = np.repeat(self.poses[:1], frames, axis=0)
+        return out
 
 
 def _rotations(q: np.ndarray) -> np.ndarray:
@@ -120,47 +133,27 @@ def body_track(scene: Any, frames: int) -> tuple[BodyTrack | BodyTrack3 | None, 
     groups = [g for g in getattr(scene, "bodies", ()) if getattr(g, "first", None) is not None]
     if not groups:
         return None, None
+
+    def flag(test: Any) -> np.ndarray:  # (B,) bool: test(group) for each body of every group
+        return np.concatenate([np.full(g.n, bool(test(g))) for g in groups])
+
+    colors = np.concatenate([np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c
+                             for g in groups for c in [np.asarray(g.color, dtype=np.uint8)]]).astype(np.uint8)
+    balls = flag(lambda g: g.shape == "ball")
+    track: BodyTrack | BodyTrack3
     if groups[0].dim == 3:
-        return _body_track3(groups, frames)
-    outlines: list[np.ndarray] = []
-    colors, balls, chains = [], [], []
-    for g in groups:
-        outs = g.outline()
-        outlines += outs
-        c = np.asarray(g.color, dtype=np.uint8)
-        colors.append(np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c)
-        balls.append(np.full(g.n, g.shape == "ball"))
-        chains.append(np.full(g.n, g.shape == "polyline"))
-    track = BodyTrack(outlines, np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames,
-                      np.concatenate(chains))
+        meshes = [m for g in groups for m in g.meshes()]
+        track = BodyTrack3(meshes, flag(lambda g: g.shape in ("ball", "capsule")), colors, balls, frames)
+        names = ["x", "y", "z", "qx", "qy", "qz", "qw"]
+    else:
+        outlines = [o for g in groups for o in g.outline()]
+        track = BodyTrack(outlines, colors, balls, frames, flag(lambda g: g.shape == "polyline"))
+        names = ["x", "y", "angle"]
     spans = [(g.first, g.first + g.n) for g in groups]
     host = groups[0]._bound()
 
     def grab() -> np.ndarray:
-        x, y, a = host.exclusive(lambda sim: sim.system_fields("bodies", ["x", "y", "angle"]))
-        full = np.stack([np.asarray(x), np.asarray(y), np.asarray(a)], axis=1)
-        return np.concatenate([full[s:e] for s, e in spans])
-
-    return track, grab
-
-
-def _body_track3(groups: list[Any], frames: int) -> tuple[BodyTrack3, Any]:
-    meshes: list[tuple[np.ndarray, np.ndarray]] = []
-    colors, smooth, balls = [], [], []
-    for g in groups:
-        meshes += g.meshes()
-        c = np.asarray(g.color, dtype=np.uint8)
-        colors.append(np.broadcast_to(c, (g.n, 3)) if c.ndim == 1 else c)
-        smooth.append(np.full(g.n, g.shape in ("ball", "capsule")))
-        balls.append(np.full(g.n, g.shape == "ball"))
-    track = BodyTrack3(meshes, np.concatenate(smooth), np.concatenate(colors).astype(np.uint8), np.concatenate(balls), frames)
-    spans = [(g.first, g.first + g.n) for g in groups]
-    host = groups[0]._bound()
-    names = ["x", "y", "z", "qx", "qy", "qz", "qw"]
-
-    def grab() -> np.ndarray:
-        f = host.exclusive(lambda sim: sim.system_fields("bodies", names))
-        full = np.stack([np.asarray(v) for v in f], axis=1)
+        full = np.stack([np.asarray(v) for v in host.exclusive(lambda sim: sim.system_fields("bodies", names))], axis=1)
         return np.concatenate([full[s:e] for s, e in spans])
 
     return track, grab

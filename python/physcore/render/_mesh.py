@@ -306,6 +306,25 @@ def _pow24(a: np.ndarray) -> np.ndarray:
     return a8 * a8 * a8
 
 
+def _light(right: np.ndarray, up: np.ndarray, toward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The unit light direction (from the viewer's upper left, in world coordinates) and the
+    Blinn half vector, from the camera's right, up and toward-the-viewer axes."""
+    light = -0.35 * right + 0.45 * up + 0.82 * toward
+    light /= np.linalg.norm(light)
+    half = light + toward
+    half /= np.linalg.norm(half)
+    return light, half
+
+
+def _lit(normals: np.ndarray, rgb: np.ndarray, light: np.ndarray, half: np.ndarray) -> np.ndarray:
+    """Static geometry's vertices lit on their front: (V, 4) float32, the diffuse colour
+    (wrapped Lambert times `rgb`) and the specular highlight."""
+    out = np.empty((len(normals), 4), dtype=np.float32)
+    out[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((normals @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * rgb
+    out[:, 3] = _SPECULAR * _pow24(np.maximum(normals @ half, 0.0))
+    return out
+
+
 class _MeshShader:
     """Lights and rasterises a mesh frame by frame (into the caller's image, at its size)."""
 
@@ -350,21 +369,15 @@ class _MeshShader:
             self.ball = (np.concatenate([g[0] for g, _ in parts]), np.concatenate([g[1] for g, _ in parts]),
                          np.concatenate([g[2] + k[j] for j, (g, _) in enumerate(parts)]))
             self.ball_rgb = np.concatenate([c for _, c in parts]).astype(np.float32)
-        ball = self.ball_rgb
         if self.ball is not None and texture is not None:
-            # The rasteriser multiplies by the texel at each vertex's uv: the balls' vertices
-            # all sample the brightest texel, and their colour is divided by it (exact unless a
-            # channel of it is nearly 0).
-            h, w = texture.shape[:2]
-            ty, tx = np.unravel_index(int(np.argmax(texture.sum(axis=2))), (h, w))
-            uv = (tx / max(w - 1, 1), 1.0 - ty / max(h - 1, 1))
-            self.ball_rgb = ball / np.maximum(texture[ty, tx], 0.05)
-            self.ball_uv = np.tile(np.array(uv, dtype=np.float32), (len(self.ball[0]), 1))
+            self.ball_rgb, self.ball_uv = self._untextured(self.ball, self.ball_rgb)
         self._joined: tuple[Any, np.ndarray, np.ndarray | None] | None = None  # (key, faces, uv) with the balls
 
     def _untextured(self, geometry: tuple[np.ndarray, np.ndarray, np.ndarray], rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Colours and uv for static geometry drawn with a textured sheet: every vertex samples
-        the texture's brightest texel and its colour is divided by it (see __init__)."""
+        """Colours and uv for static geometry (balls, floors, bodies) drawn with a textured
+        sheet: the rasteriser multiplies by the texel at each vertex's uv, so every vertex
+        samples the texture's brightest texel and its colour is divided by it (exact unless a
+        channel of it is nearly 0)."""
         tex = self.texture
         h, w = tex.shape[:2]  # type: ignore[union-attr]
         ty, tx = np.unravel_index(int(np.argmax(tex.sum(axis=2))), (h, w))  # type: ignore[union-attr]
@@ -394,10 +407,7 @@ class _MeshShader:
         else:
             xs = np.concatenate([xs, np.zeros((xs.shape[0], 1))], axis=1)
             right, up, toward = np.array([1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, 0, 1.0])
-        light = -0.35 * right + 0.45 * up + 0.82 * toward
-        light /= np.linalg.norm(light)
-        half = light + toward
-        half /= np.linalg.norm(half)
+        light, half = _light(right, up, toward)
         n = _core.mesh_normals(np.ascontiguousarray(xs), self.faces_u32)
         nl, nh = n @ light, n @ half
         # Each vertex lit on both sides: the front along n, the back along -n; the rasteriser
@@ -445,9 +455,7 @@ class _MeshShader:
             nb = len(bx)
             bs, bd = cam.project(bx)
             bc, br = cam.pixels(bs)
-            bl = np.empty((nb, 4), dtype=np.float32)
-            bl[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((bn @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * ball_rgb
-            bl[:, 3] = _SPECULAR * _pow24(np.maximum(bn @ half, 0.0))
+            bl = _lit(bn, ball_rgb, light, half)
             bv = np.empty((nb, 3), dtype=np.float32)
             bv[:, 0], bv[:, 1], bv[:, 2] = bc, br, bd
             n = xs.shape[0]
@@ -477,16 +485,10 @@ def shade_solids(out: np.ndarray, cam: Any, solids: tuple[np.ndarray, np.ndarray
     verts, normals, faces, rgb = solids
     if not len(faces):
         return
-    right, up, toward = cam.basis[:, 0], cam.basis[:, 1], cam.basis[:, 2]
-    light = -0.35 * right + 0.45 * up + 0.82 * toward
-    light /= np.linalg.norm(light)
-    half = light + toward
-    half /= np.linalg.norm(half)
+    light, half = _light(cam.basis[:, 0], cam.basis[:, 1], cam.basis[:, 2])
     s, depth = cam.project(verts)
     col, row = cam.pixels(s)
-    lit = np.empty((len(verts), 4), dtype=np.float32)
-    lit[:, :3] = (_AMBIENT + _DIFFUSE * np.maximum((normals @ light + _WRAP) / (1.0 + _WRAP), 0.0))[:, None] * rgb
-    lit[:, 3] = _SPECULAR * _pow24(np.maximum(normals @ half, 0.0))
+    lit = _lit(normals, rgb, light, half)
     v = np.empty((len(verts), 3), dtype=np.float32)
     v[:, 0], v[:, 1], v[:, 2] = col, row, depth
     _core.rasterise_mesh(v, np.ascontiguousarray(faces, dtype=np.uint32), lit, lit, out, _SS)

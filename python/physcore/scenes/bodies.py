@@ -10,9 +10,11 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError
 from ..bodies import BODY_BYTES, Bodies, Joints, Pins
+from ..render._mesh import Mesh
 from ..scene import Scene
-from ..terms import Gravity
-from ._common import _count, _nonneg, _positive, _stamped
+from ..shapes import cloth_springs
+from ..terms import Drag, Gravity, Springs
+from ._common import _count, _flag, _nonneg, _optional, _particle_mass, _particles, _positive, _set_stable_dt, _stamped
 
 
 def _named(args: str, build):
@@ -326,10 +328,6 @@ def tablecloth(
 
     Raises TypeError / InvalidInputError naming the argument.
     """
-    from ..render._mesh import Mesh
-    from ..shapes import cloth_springs
-    from ..terms import Drag, Springs
-    from ._common import _flag, _optional, _particle_mass, _particles, _set_stable_dt
 
     n = _count(n, "n", 4)
     _particles("n", n * n, 6 * n * n)

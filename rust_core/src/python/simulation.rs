@@ -313,31 +313,19 @@ impl PySimulation {
     /// coupling to the particles, at the first group); returns the number of its first body.
     fn add_bodies(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<usize> {
         let p = params_of(py, "add_bodies", params)?;
-        let r = match &mut self.inner {
-            Inner::D2(s) => bodies_of::<_, Bodies2>(s, true).and_then(|b| b.add_group(p)),
-            Inner::D3(s) => bodies_of::<_, Bodies3>(s, true).and_then(|b| b.add_group(p)),
-        };
-        r.map_err(|e| to_py(py, e))
+        with_bodies!(self, true, b => b.add_group(p)).map_err(|e| to_py(py, e))
     }
 
     /// Adds joints between rigid bodies (`systems::bodies::Bodies2::add_joints`).
     fn add_joints(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_joints", params)?;
-        let r = match &mut self.inner {
-            Inner::D2(s) => bodies_of::<_, Bodies2>(s, false).and_then(|b| b.add_joints(p)),
-            Inner::D3(s) => bodies_of::<_, Bodies3>(s, false).and_then(|b| b.add_joints(p)),
-        };
-        r.map_err(|e| to_py(py, e))
+        with_bodies!(self, false, b => b.add_joints(p)).map_err(|e| to_py(py, e))
     }
 
     /// Pins particles to rigid bodies (`systems::bodies::Bodies2::add_pins`).
     fn add_pins(&mut self, py: Python<'_>, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_pins", params)?;
-        let r = match &mut self.inner {
-            Inner::D2(s) => bodies_of::<_, Bodies2>(s, false).and_then(|b| b.add_pins(p)),
-            Inner::D3(s) => bodies_of::<_, Bodies3>(s, false).and_then(|b| b.add_pins(p)),
-        };
-        r.map_err(|e| to_py(py, e))
+        with_bodies!(self, false, b => b.add_pins(p)).map_err(|e| to_py(py, e))
     }
 
     /// Body `i`'s shape as triangles in its own frame (3D bodies only): vertices (V, 3) float64
@@ -553,6 +541,18 @@ fn copy_of(a: &[f64], what: &'static str, of: &str) -> crate::error::Result<Vec<
     Need::new(what, Need::bytes_of::<f64>(a.len()), format!("a copy of {of} ({} values)", count(a.len() as u128)))
         .copy(a)
 }
+
+/// `$body` with `$b` the world's rigid-body system of the scene's dimension (`bodies_of`; made
+/// first if `$make`): one call written for `Bodies2` and `Bodies3`, whose methods share names.
+macro_rules! with_bodies {
+    ($self:expr, $make:expr, $b:ident => $body:expr) => {
+        match &mut $self.inner {
+            Inner::D2(s) => bodies_of::<_, Bodies2>(s, $make).and_then(|$b| $body),
+            Inner::D3(s) => bodies_of::<_, Bodies3>(s, $make).and_then(|$b| $body),
+        }
+    };
+}
+use with_bodies;
 
 /// The world's "bodies" system, as `B` (`Bodies2` or `Bodies3`); made, with its particle
 /// coupling, if missing and `make` (else refused: joints need bodies first).

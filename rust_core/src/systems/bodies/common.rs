@@ -479,13 +479,27 @@ impl System for Bodies {
 /// bodies' "bodies ⇄ particles".
 pub struct BodyContacts {
     system: usize,
+    /// Working buffers kept between steps: each body's grown box, and every move of the step
+    /// (the particle and, in turn, its position before and after: see `apply`).
+    boxes: Vec<Aabb>,
+    moved: Vec<(usize, [Real; 3])>,
 }
 
 impl BodyContacts {
     /// The coupling of the particles with the bodies system `others[system]` of the world.
     pub fn new(system: usize) -> Self {
-        Self { system }
+        Self { system, boxes: Vec::new(), moved: Vec::new() }
     }
+}
+
+/// The inverse effective mass of a particle (inverse mass `im`) and a body pushed apart at `c`
+/// along the unit `t`: im + 1/m + (r×t)·I⁻¹(r×t), r from the body's centre of mass; the body's
+/// share is 0 if it is fixed or kinematic.
+fn pair_inv_mass(im: Real, body: &RigidBody, c: Vector, t: Vector) -> Real {
+    if !body.is_dynamic() {
+        return im;
+    }
+    im + body.mass_properties().effective_inv_mass.x + turning(body, c - body.center_of_mass(), t)
 }
 
 impl<V: PVector> Coupling<V> for BodyContacts {
@@ -514,19 +528,22 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         let radius = model.attribute("radius");
         let r_max = radius.map(|r| r.iter().cloned().fold(0.0, Real::max)).unwrap_or(0.0);
         // Each body's box, grown by the largest radius: the broad test.
-        let boxes: Vec<_> =
-            bodies.colliders.iter().map(|&c| bodies.d.r.colliders[c].compute_aabb().loosened(r_max)).collect();
+        let boxes = &mut self.boxes;
+        boxes.clear();
+        boxes.extend(bodies.colliders.iter().map(|&c| bodies.d.r.colliders[c].compute_aabb().loosened(r_max)));
         let e_before = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
-        // Every move: the particle and where it was (the potential energy the moves change,
-        // of gravity, springs and every term, is booked with the exchange below).
-        let mut moved: Vec<(usize, V)> = Vec::new();
-        let from_p = |x: V| {
+        // Every move: the particle and where it was (the potential energy the moves change
+        // is booked with the exchange below).
+        let moved = &mut self.moved;
+        moved.clear();
+        let slot = |x: V| {
             let mut s = [0.0; 3];
             for (c, v) in s.iter_mut().enumerate().take(D) {
                 *v = x.comp(c);
             }
-            vector(&s[..D])
+            s
         };
+        let from_p = |x: V| vector(&slot(x)[..D]);
         let to_p = |x: Vector| {
             let mut s = [0.0; 3];
             s[..D].copy_from_slice(&x.to_array()[..D]);
@@ -566,33 +583,24 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 let vb = body.velocity_at_point(c);
                 let vn = (vi - vb).dot(normal);
                 // The particle goes back to the surface (plus its radius) along the normal.
-                moved.push((i, state.x[i]));
+                moved.push((i, slot(state.x[i])));
                 state.x[i] = to_p(p + normal * depth);
                 if vn >= 0.0 {
                     continue;
                 }
-                // Effective mass of the pair along a direction t: 1/(1/m_i + 1/m_b + the body's
-                // turning term (r×t)·I⁻¹(r×t)).
-                let dynamic = body.is_dynamic();
-                let (ib_m, com) = if dynamic {
-                    (body.mass_properties().effective_inv_mass.x, body.center_of_mass())
-                } else {
-                    (0.0, c)
-                };
-                let rc = c - com;
-                let turn = |t: Vector| if dynamic { turning(body, rc, t) } else { 0.0 };
-                let k_n = im + ib_m + turn(normal);
+                // Effective mass of the pair along a direction t: 1/(1/m_i + the body's share).
+                let k_n = pair_inv_mass(im, body, c, normal);
                 let jn = -(1.0 + e) * vn / k_n;
                 let vt_vec = (vi - vb) - normal * vn;
                 let vt = vt_vec.length();
                 let mut impulse = normal * jn;
                 if vt > 0.0 && mu > 0.0 {
                     let t = vt_vec / vt;
-                    let k_t = im + ib_m + turn(t);
+                    let k_t = pair_inv_mass(im, body, c, t);
                     impulse -= t * (mu * jn).min(vt / k_t);
                 }
                 state.v[i] = to_p(vi + impulse * im);
-                if dynamic {
+                if body.is_dynamic() {
                     body.apply_impulse_at_point(-impulse, c, true);
                 }
             }
@@ -607,7 +615,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
             let im = model.inv_mass[i];
             let body = &mut r.bodies[bodies.handles[k]];
             let c = body.position().transform_point(local);
-            moved.push((i, state.x[i]));
+            moved.push((i, slot(state.x[i])));
             state.x[i] = to_p(c);
             let vi = from_p(state.v[i]);
             let dv = body.velocity_at_point(c) - vi;
@@ -617,9 +625,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
             }
             let u = dv / len;
             if body.is_dynamic() {
-                let rc = c - body.center_of_mass();
-                let k_u = im + body.mass_properties().effective_inv_mass.x + turning(body, rc, u);
-                let j = u * (len / k_u);
+                let j = u * (len / pair_inv_mass(im, body, c, u));
                 state.v[i] = to_p(vi + j * im);
                 body.apply_impulse_at_point(-j, c, true);
             } else {
@@ -631,18 +637,24 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         // positions put back for the moment (only when something moved); of the terms whose
         // potential is cheap to evaluate (gravity, springs, fields): an SPH fluid's or DEM
         // contacts' share would cost two neighbour searches a step, and is left to the drift.
+        // Undone and redone by swaps: backwards, each record takes the position its move made
+        // and gives back the one before; forwards, the reverse.
         let mut raised = 0.0;
         if !moved.is_empty() {
-            let finals: Vec<V> = moved.iter().map(|&(i, _)| state.x[i]).collect();
             let u_after = particles.cheap_potential_energy();
+            let swap = |x: &mut V, rec: &mut [Real; 3]| {
+                let here = slot(*x);
+                *x = V::from_slice(rec);
+                *rec = here;
+            };
             let (state, _) = particles.state_model_mut();
-            for &(i, old) in moved.iter().rev() {
-                state.x[i] = old;
+            for (i, rec) in moved.iter_mut().rev() {
+                swap(&mut state.x[*i], rec);
             }
             let u_before = particles.cheap_potential_energy();
             let (state, _) = particles.state_model_mut();
-            for (&(i, _), &x) in moved.iter().zip(&finals) {
-                state.x[i] = x;
+            for (i, rec) in moved.iter_mut() {
+                swap(&mut state.x[*i], rec);
             }
             raised = u_after - u_before;
         }
