@@ -377,7 +377,7 @@ class Bodies(_BodiesPart):
         self.start_angular = _rows("angular_velocities", om, n, ang_width)
         with np.errstate(all="ignore"):
             reach = float(np.abs(self.size).max()) if self.vertices is None else float(np.abs(self.vertices).max())
-            mass = self.density * (2 * reach) ** dim
+            mass = self.density * float(np.power(2.0 * reach, dim))  # inf, not OverflowError, past float64
             if not (np.isfinite(mass * reach * reach) and np.isfinite(np.abs(x).max() + 2 * reach)):
                 raise InvalidInputError(f"size, density: a body of {reach:g} m at {self.density:g} kg/m^{dim} has a mass "
                                         "or moment of inertia beyond float64")

@@ -14,7 +14,18 @@ from ..render._mesh import Mesh
 from ..scene import Scene
 from ..shapes import cloth_springs
 from ..terms import Drag, Gravity, Springs
-from ._common import _count, _flag, _nonneg, _optional, _particle_mass, _particles, _positive, _set_stable_dt, _stamped
+from ._common import (
+    _count,
+    _finite_books,
+    _flag,
+    _nonneg,
+    _optional,
+    _particle_mass,
+    _particles,
+    _positive,
+    _set_stable_dt,
+    _stamped,
+)
 
 
 def _named(args: str, build):
@@ -333,6 +344,8 @@ def tablecloth(
     _particles("n", n * n, 6 * n * n)
     size, mass, k = _positive(size, "size"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
     bar_mass = _nonneg(bar, "bar")
+    if bar_mass > 1e6:
+        raise InvalidInputError(f"bar: a bar of {bar_mass:g} kg is no tablecloth's hem (0 to 1e6 kg)")
     mu = _nonneg(friction, "friction")
     dishes = _flag(dishes, "dishes")
     dt = _optional(dt, "dt")
@@ -389,7 +402,7 @@ def tablecloth(
         # at half of it (n = 24, measured).
         _set_stable_dt(scene, 0.5, "stiffness, mass")
     scene.render_defaults = {"mesh": Mesh.grid(n, n)}
-    return scene
+    return _finite_books(scene, "size, mass, bar")
 
 
 tablecloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
