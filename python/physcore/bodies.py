@@ -19,9 +19,19 @@ The particles (with their ``radius`` attribute, else as points) are kept out of 
 particle found inside or touching a body after a step is put back on its surface, and the
 impulse that stops its approach (the body's restitution, Coulomb friction with the body's
 coefficient) is applied to both, equal and opposite, at the contact point. So grains push
-boxes, a box ploughs through grains, cloth drapes on a table, and fluid particles hold a box
-up (a particle-impulse coupling, not Akinci et al.'s boundary particles: a floating body's
-draft is approximate).
+boxes, a box ploughs through grains, and cloth drapes on a table.
+
+A DFSPH fluid (``Fluid(method="dfsph")``) meets the dynamic and kinematic bodies through boundary
+particles (Akinci et al., "Versatile rigid-fluid coupling for incompressible SPH", ACM TOG 31
+(2012) 62): each body's surface is sampled at the fluid's spacing, half a spacing inside it,
+each sample weighed by Ψ_b = ρ0/Σ_k W_bk (paper eq. 4–5, scaled so that a flat layer stands for
+the lattice rows a wall would have); the fluid counts them in its density and divergence like
+moving walls, and its pressure solve pushes each body as it pushes its particles, iteration by
+iteration (the body's response enters the next iteration, as in the strong coupling of Gissler
+et al., ACM TOG 38 (2019) 5), so a light body neither overshoots nor sinks: it floats at its
+Archimedes draft (a box of half the water's density within 4 % at 8 spacings of height; the
+guide's table). Fixed bodies are the fluid's walls to give (``boundary=``); a WCSPH fluid still
+meets bodies through the impulse exchange alone (its draft is approximate).
 
 Energy books (:meth:`Scene.energy`): the bodies' kinetic energy (translation and rotation) is
 in ``kinetic``, the potential of gravity under ``"bodies: gravity"``; rapier does not report

@@ -659,7 +659,16 @@ impl<V: Vector> World<V> {
             if stop.load(Ordering::Relaxed) {
                 return interrupted;
             }
-            let halt = self.systems_mut().find_map(|s| s.step(dt, stop).err());
+            for c in &mut self.couplings {
+                c.prepare(&mut self.particles, &mut self.others);
+            }
+            let mut halt = self.particles.step(dt, stop).err();
+            if halt.is_none() {
+                for c in &mut self.couplings {
+                    c.between(&mut self.particles, &mut self.others);
+                }
+                halt = self.others.iter_mut().find_map(|s| s.step(dt, stop).err());
+            }
             if halt == Some(Halt::Stopped) {
                 return interrupted;
             }

@@ -630,9 +630,10 @@ def floating(
     particles across its width, 1 m wide and 2 m high in a 4 × 3 m tank) collapses with two
     crates and a ball (``density`` kg/m², lighter than the water's 1000) resting on its top; they sink with
     it, ride the surge to the far wall and back. The tank is both the fluid's walls and fixed
-    bodies; bodies and fluid particles meet through the particle coupling (:mod:`physcore.bodies`:
-    an impulse exchange, so the bodies float approximately, not by Akinci et al.'s boundary
-    particles). ``method`` and ``integrator`` step the fluid (see :func:`dam_break`).
+    bodies; the crates and the ball meet the fluid through boundary particles on their surfaces
+    (Akinci et al. 2012, :mod:`physcore.bodies`), so they float at their Archimedes draft and the
+    surge pushes them by its pressure (with ``method="wcsph"``, through the impulse exchange
+    alone). ``method`` and ``integrator`` step the fluid (see :func:`dam_break`).
 
     Raises TypeError / InvalidInputError naming the argument.
     """

@@ -9,6 +9,7 @@ use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
 use crate::par::{self, SyncPtr};
+use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector};
 
 /// Wall particles in the precision of the passes, in the cell order of `Walls::grid`, padded.
@@ -116,6 +117,105 @@ impl Walls {
     /// Heap bytes held.
     pub(super) fn bytes(&self) -> usize {
         self.grid.bytes() + self.w32.bytes() + self.w64.bytes()
+    }
+}
+
+/// Moving wall particles: the rigid bodies' boundary samples (Akinci et al. 2012; the role
+/// `terms::MovingBoundary`), set before every step, sorted into cells of the fluid's support
+/// like `Walls` (f64 only: the DFSPH build reads them), each with its body and its offset from
+/// the body's centre of mass (sorted); the bodies' motion, which the pressure solve updates
+/// iteration by iteration, and the impulse it gave each body over the step; and the step's
+/// pairs of a fluid particle and a sample (`pair_up`).
+#[derive(Clone, Debug)]
+pub(super) struct MovingWalls<V: Vector> {
+    pub(super) grid: CellList,
+    pub(super) w: WallArrays<f64>,
+    pub(super) body: Vec<u32>,
+    pub(super) offset: Vec<V>,
+    pub(super) bodies: Vec<BodyMotion<V>>,
+    pub(super) impulse: Vec<(V, [Real; 3])>,
+    /// The pairs (sorted fluid particle k, sorted sample b, g = Ψ_b ∇W_kb) ordered by k, then
+    /// b; and per fluid particle that has any, (k, its first pair, past its last).
+    pub(super) pairs: Vec<(u32, u32, V)>,
+    pub(super) runs: Vec<(u32, u32, u32)>,
+}
+
+impl<V: Vector> MovingWalls<V> {
+    pub(super) fn new(support: Real) -> Result<Self> {
+        let grid = CellList::new(support, V::DIM)?;
+        Ok(Self {
+            grid,
+            w: WallArrays::default(),
+            body: Vec::new(),
+            offset: Vec::new(),
+            bodies: Vec::new(),
+            impulse: Vec::new(),
+            pairs: Vec::new(),
+            runs: Vec::new(),
+        })
+    }
+
+    /// The boundary of the next step (`MovingBoundary::set_boundary`).
+    pub(super) fn set(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {
+        self.grid.build(x);
+        let order = &self.grid.order;
+        for d in 0..V::DIM {
+            self.w.pos[d].clear();
+            self.w.pos[d].extend(order.iter().map(|&i| x[i as usize].comp(d)));
+        }
+        self.w.psi.clear();
+        self.w.psi.extend(order.iter().map(|&i| psi[i as usize]));
+        self.body.clear();
+        self.body.extend(order.iter().map(|&i| body[i as usize]));
+        self.offset.clear();
+        self.offset.extend(order.iter().map(|&i| offset[i as usize]));
+        self.bodies.clear();
+        self.bodies.extend_from_slice(bodies);
+        self.impulse.clear();
+        self.impulse.resize(bodies.len(), (V::ZERO, [0.0; 3]));
+        self.pairs.clear();
+        self.runs.clear();
+    }
+
+    /// The velocity of sample `b` now: v + ω × r.
+    #[inline(always)]
+    pub(super) fn velocity(&self, b: usize) -> V {
+        let m = &self.bodies[self.body[b] as usize];
+        m.v + omega_cross(m.w, self.offset[b])
+    }
+
+    pub(super) fn bytes(&self) -> usize {
+        let vb = std::mem::size_of::<V>();
+        self.grid.bytes()
+            + self.w.bytes()
+            + self.body.capacity() * 4
+            + self.offset.capacity() * vb
+            + self.pairs.capacity() * (8 + vb)
+            + self.runs.capacity() * 12
+    }
+}
+
+/// ω × r for ω = (wx, wy, wz) (2D: only wz) and r of the vector's dimension.
+#[inline(always)]
+pub(super) fn omega_cross<V: Vector>(w: [Real; 3], r: V) -> V {
+    let (x, y) = (r.comp(0), r.comp(1));
+    if V::DIM == 2 {
+        V::from_slice(&[-w[2] * y, w[2] * x])
+    } else {
+        let z = r.comp(2);
+        V::from_slice(&[w[1] * z - w[2] * y, w[2] * x - w[0] * z, w[0] * y - w[1] * x])
+    }
+}
+
+/// r × f as three components (2D: (0, 0, r_x f_y − r_y f_x)).
+#[inline(always)]
+pub(super) fn cross3<V: Vector>(r: V, f: V) -> [Real; 3] {
+    let (rx, ry, fx, fy) = (r.comp(0), r.comp(1), f.comp(0), f.comp(1));
+    if V::DIM == 2 {
+        [0.0, 0.0, rx * fy - ry * fx]
+    } else {
+        let (rz, fz) = (r.comp(2), f.comp(2));
+        [ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx]
     }
 }
 

@@ -208,4 +208,10 @@ pub trait Coupling<V: Vector>: Send + Sync {
     fn name(&self) -> &str;
     /// Applies the exchange over a step of `dt` seconds.
     fn apply(&mut self, particles: &mut particles::ParticleSystem<V>, others: &mut [Box<dyn System>], dt: Real);
+    /// Before every step, from the state alone (so that a restart or a rollback steps the same):
+    /// what the systems' steps read of each other (the bodies' boundary particles a fluid counts).
+    fn prepare(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>]) {}
+    /// After the particles' step and before the other systems' (what the particles' step gave
+    /// them: the impulse a fluid's pressure solve gave the bodies, before they step with it).
+    fn between(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>]) {}
 }

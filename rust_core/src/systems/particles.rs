@@ -87,6 +87,12 @@ impl<V: Vector> ParticleSystem<V> {
         let (x, m) = (&self.sys.state.x, &self.sys.model);
         self.sys.forces.terms.iter().filter(|t| t.cheap_potential()).filter_map(|t| t.potential(x, m)).sum()
     }
+    /// The fluids that take moving boundary particles from rigid bodies (`MovingBoundary`), with
+    /// the masses and attributes.
+    pub fn moving_boundaries(&mut self) -> (Vec<&mut dyn crate::terms::MovingBoundary<V>>, &Model) {
+        let hosts = self.sys.forces.terms.iter_mut().filter_map(|t| t.as_moving_boundary()).collect();
+        (hosts, &self.sys.model)
+    }
     /// Masses and optional attributes.
     pub fn model(&self) -> &Model {
         &self.sys.model

@@ -27,7 +27,7 @@ pub use drag::Drag;
 pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
-pub use roles::{Constraints, Jacobian, Magnetic, OwnState, VelocityProjection};
+pub use roles::{BodyMotion, Constraints, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection};
 pub use springs::Springs;
 pub use tree_gravity::TreeGravity;
 
@@ -182,6 +182,11 @@ pub trait Term<V: Vector>: Send + Sync {
     }
     /// The term as a velocity projection (DFSPH's pressure solve), for "semi_implicit_euler".
     fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
+        None
+    }
+    /// The term as a fluid that takes moving boundary particles from rigid bodies (Akinci
+    /// 2012), for the bodies' coupling (`None`: not one).
+    fn as_moving_boundary(&mut self) -> Option<&mut dyn MovingBoundary<V>> {
         None
     }
     /// The term's Jacobians, for implicit integrators (`None`: taken explicitly).

@@ -39,6 +39,44 @@ pub trait VelocityProjection<V: Vector> {
     fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real;
 }
 
+/// A fluid that rigid bodies meet through boundary particles sampled on their surfaces
+/// (Akinci et al., "Versatile rigid-fluid coupling for incompressible SPH", ACM TOG 31 (2012)
+/// 62): the bodies' coupling (`systems::bodies::BodyContacts`) samples each moving body's
+/// surface at the fluid's particle spacing, weighs each sample by Ψ_b = ρ0 / Σ_k W_bk over its
+/// body's samples (paper eq. 4–5), and before every step hands the fluid the samples and their
+/// bodies' motion; the fluid counts them in its density and divergence like its walls (but
+/// moving), and its pressure solve pushes the bodies as it pushes its particles, iteration by
+/// iteration (so a light body does not overshoot: the solve sees the body's response, as in the
+/// strong coupling of Gissler et al., "Interlinked SPH pressure solvers for strong fluid-rigid
+/// coupling", ACM TOG 38 (2019) 5). After the step the coupling applies to each body the
+/// impulse the fluid gave it (paper eq. 10–11: equal and opposite to the fluid's).
+pub trait MovingBoundary<V: Vector> {
+    /// The smoothing length h (m), rest density ρ0 (kg/m^dim), kernel, and particle spacing
+    /// (m: (m̄/ρ0)^(1/dim) over the fluid's particles), to sample and weigh the boundary.
+    fn boundary_sampling(&self, model: &Model) -> (Real, Real, crate::sph::KernelKind, Real);
+    /// The boundary of the next step: positions `x` (m), Ψ_b (`psi`, kg), each sample's body
+    /// (index into `bodies`) and its offset from that body's centre of mass (m), and the
+    /// bodies' motion at the step's start.
+    fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]);
+    /// The linear (N s) and angular (N m s, about the centre of mass) impulse the fluid gave
+    /// each body over the last step (zeros before a step).
+    fn boundary_impulses(&self, out: &mut Vec<(V, [Real; 3])>);
+}
+
+/// A rigid body as a fluid's pressure solve sees it: velocity (m/s), angular velocity (rad/s,
+/// (0, 0, ω) in 2D), inverse mass (1/kg) and world inverse inertia (symmetric: m11, m12, m13,
+/// m22, m23, m33; 2D: only m33), 0 for a body that is not pushed (kinematic), and the
+/// acceleration its own step gives it (gravity, m/s²), which the density solve adds as the fluid
+/// adds its particles' (the body's step then adds it for real).
+#[derive(Clone, Copy, Debug)]
+pub struct BodyMotion<V: Vector> {
+    pub v: V,
+    pub w: [Real; 3],
+    pub inv_mass: Real,
+    pub inv_inertia: [Real; 6],
+    pub accel: V,
+}
+
 /// The force's Jacobians, for implicit integrators ("implicit_euler"): a term that has them is
 /// taken implicitly (linearised at the step's start); a term without them explicitly at the
 /// step's start. Uniform fields (gravity) are constant and need none.

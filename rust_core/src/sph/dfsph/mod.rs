@@ -68,7 +68,7 @@
 //! Layout, one stage a file: this file holds the parameters, the term and its roles (`Term`,
 //! `VelocityProjection`, `OwnState`); `pairs` the pair build (step 1, on the SIMD layer);
 //! `solve` the two solves and the surface forces (steps 2–4); `tests` the tests.
-use super::buffers::{PassFloat, WallArrays, Walls, PAD};
+use super::buffers::{cross3, MovingWalls, PassFloat, WallArrays, Walls, PAD};
 use super::kernels::{CubicSpline, Kernel, WendlandC2};
 use super::params::{positive, KernelKind};
 use super::surface::Surface;
@@ -81,7 +81,7 @@ use crate::simd::{self, Kernel as SimdKernel, Simd, P};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{OwnState, Projection, Term, VelocityProjection, Write};
+use crate::terms::{BodyMotion, MovingBoundary, OwnState, Projection, Term, VelocityProjection, Write};
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::marker::PhantomData;
@@ -187,6 +187,9 @@ struct Site<V: Vector> {
     gs: V,
     /// Whether its neighbourhood is full enough for the divergence solve.
     inner: bool,
+    /// Σ_b Ψ_b v_b·∇W_ib over the moving walls (the bodies' boundary), kg/(m^dim s): their
+    /// share of Dρ_i/Dt is Σ_b Ψ_b (v_i − v_b)·∇W_ib = v_i·(their part of gw) − wv.
+    wv: Real,
 }
 
 /// The stored pairs of one chunk of sorted particles: particle `s + k`'s are
@@ -267,6 +270,8 @@ pub(super) struct Solver<V: Vector> {
     visc_u: Vec<Real>,
     /// The walls of all members (each position once).
     walls: Walls,
+    /// The rigid bodies' boundary particles (`MovingBoundary`), once a coupling has set them.
+    moving: Option<MovingWalls<V>>,
     grid: CellList,
     /// Sorted order: positions, masses, per-particle quantities, velocities, κ/ρ of the
     /// iteration and its sum over the solve.
@@ -406,6 +411,7 @@ impl<V: Vector> Solver<V> {
             visc: Vec::new(),
             visc_u: Vec::new(),
             walls: checked,
+            moving: None,
             grid: CellList::new(2.0 * p.h, V::DIM)?,
             xs: Vec::new(),
             xc: Default::default(),
@@ -579,6 +585,7 @@ impl<V: Vector> Solver<V> {
     fn bytes(&self) -> usize {
         self.grid.bytes()
             + self.walls.bytes()
+            + self.moving.as_ref().map_or(0, MovingWalls::bytes)
             + self.pairs.iter().map(Pairs::bytes).sum::<usize>()
             + (self.xs.capacity() + self.vs.capacity() + self.normals.capacity() + self.xg.capacity())
                 * std::mem::size_of::<V>()
@@ -817,6 +824,14 @@ impl<V: Vector> Term<V> for Dfsph<V> {
     fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {
         Some(self)
     }
+    /// The solve's first fluid takes the bodies' boundary for all its fluids.
+    fn as_moving_boundary(&mut self) -> Option<&mut dyn MovingBoundary<V>> {
+        if self.who == 0 {
+            Some(self)
+        } else {
+            None
+        }
+    }
     fn as_own_state(&self) -> Option<&dyn OwnState<V>> {
         Some(self)
     }
@@ -845,6 +860,38 @@ impl<V: Vector> OwnState<V> for Dfsph<V> {
     fn restore_history(&mut self, h: &[Real], _n_particles: usize) {
         assert_eq!(h.len(), 3 * self.range.len(), "a DFSPH term's own history restores");
         self.solver().set_history_of(self.who, h);
+    }
+}
+
+impl<V: Vector> MovingBoundary<V> for Dfsph<V> {
+    fn boundary_sampling(&self, model: &Model) -> (Real, Real, KernelKind, Real) {
+        let s = self.solver();
+        let (mut sum, mut n) = (0.0, 0usize);
+        for m in &s.members {
+            sum += model.mass[m.range.clone()].iter().sum::<Real>();
+            n += m.range.len();
+        }
+        let mean = if n > 0 { sum / n as Real } else { 0.0 };
+        (s.p.h, s.p.rho0, s.p.kernel, (mean / s.p.rho0).powf(1.0 / V::DIM as Real))
+    }
+
+    fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {
+        let mut s = self.solver();
+        if x.is_empty() {
+            s.moving = None;
+        } else {
+            let support = 2.0 * s.p.h;
+            let mw = s.moving.get_or_insert_with(|| MovingWalls::new(support).expect("a valid support"));
+            mw.set(x, psi, body, offset, bodies);
+        }
+        s.built = false;
+    }
+
+    fn boundary_impulses(&self, out: &mut Vec<(V, [Real; 3])>) {
+        out.clear();
+        if let Some(mw) = &self.solver().moving {
+            out.extend_from_slice(&mw.impulse);
+        }
     }
 }
 

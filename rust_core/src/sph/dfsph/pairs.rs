@@ -76,6 +76,7 @@ pub(super) fn components_sum<V: Vector>(v: V) -> Real {
 pub(super) struct BuildChunk<'a, V: Vector, K> {
     grid: &'a CellList,
     walls: &'a Walls,
+    moving: Option<&'a MovingWalls<V>>,
     xs: &'a [V],
     xc: &'a [Vec<Real>; 3],
     m: &'a [Real],
@@ -93,7 +94,7 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
     type Output = ();
     #[inline(always)]
     fn run<S: Simd>(self, simd: S) {
-        let BuildChunk { grid, walls, xs, xc, m, h, n_min, s, pairs, sites, rho: rho_out, .. } = self;
+        let BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, s, pairs, sites, rho: rho_out, .. } = self;
         let (sigma, reach) = (K::sigma(h, V::DIM), 4.0 * h * h);
         let gscale = sigma / (h * h);
         let (w, flat, lanes) = (f64::walls(walls), V::flat(xs), P::<S, f64>::lanes());
@@ -105,12 +106,14 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
         let mut top = 0;
         let mut last = [i64::MIN; 3];
         let (mut fluid, mut wall) = (grid.query(last), walls.grid.query(last));
+        let mut mwall = moving.map(|mw| mw.grid.query(last));
         for (kk, (site, rho_out)) in sites.iter_mut().zip(rho_out.iter_mut()).enumerate() {
             let k = s + kk;
             let cell = grid.cells[k];
             if cell != last {
                 fluid = grid.query(cell);
                 wall = walls.grid.query(cell);
+                mwall = moving.map(|mw| mw.grid.query(cell));
                 last = cell;
             }
             pairs.start.push(top as u32);
@@ -196,11 +199,26 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
                     }
                 }
             }
+            // The bodies' boundary: as the walls (their motion is the solves', `Site::wv`).
+            if let (Some(mw), Some(runs)) = (moving, &mwall) {
+                for run in runs.iter() {
+                    for b in run {
+                        let d = xk - wall_at::<V>(&mw.w, b);
+                        let r2 = d.length_squared();
+                        if r2 < reach {
+                            let q = r2.sqrt() / h;
+                            rho += mw.w.psi[b] * sigma * K::w(q);
+                            gw += d * (mw.w.psi[b] * gscale * K::g(q));
+                            count += 1;
+                        }
+                    }
+                }
+            }
             // Own push v_i −= dt κ_i/ρ_i (Σ_j m_j ∇W_ij + 2 Σ_b Ψ_b ∇W_ib) (walls mirror the
             // pressure), so Dρ_i/Dt changes by −dt κ_i/ρ_i D_i with this D_i (taken no
             // smaller than the neighbours' part, which is > 0, where a wall makes it so).
             let dd = ((sum + gw * 2.0).dot(sum + gw) + sq).max(sq);
-            *site = Site { dinv: if dd > 0.0 { 1.0 / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min };
+            *site = Site { dinv: if dd > 0.0 { 1.0 / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min, wv: 0.0 };
             *rho_out = rho;
         }
         pairs.start.push(top as u32);
@@ -281,10 +299,11 @@ impl<V: Vector> Solver<V> {
         self.sites.resize(n, Site::default());
         self.rho.resize(n, 0.0);
         let (grid, xs, xc, m, walls) = (&self.grid, &self.xs, &self.xc, &self.m, &self.walls);
+        let moving = self.moving.as_ref();
         let n_min = self.n_min;
         let chunk = |c: usize, pairs: &mut Pairs<V>, sites: &mut [Site<V>], rho: &mut [Real]| {
             let (s, _k) = (c * CHUNK, PhantomData::<K>);
-            simd::dispatch(level, BuildChunk { grid, walls, xs, xc, m, h, n_min, s, pairs, sites, rho, _k });
+            simd::dispatch(level, BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, s, pairs, sites, rho, _k });
         };
         let (pairs, sites, rho) = (&mut self.pairs, &mut self.sites, &mut self.rho);
         if par::fork_if(n, || {
@@ -295,6 +314,9 @@ impl<V: Vector> Solver<V> {
         {
             let parts = pairs.iter_mut().zip(sites.chunks_mut(CHUNK).zip(rho.chunks_mut(CHUNK)));
             parts.enumerate().for_each(|(c, (p, (s, r)))| chunk(c, p, s, r));
+        }
+        if self.moving.is_some() {
+            self.pair_up::<K>();
         }
         // The measured compression of this step's positions (the density solve's real result).
         let (rho0, rho) = (self.p.rho0, &self.rho);

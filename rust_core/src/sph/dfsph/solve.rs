@@ -44,6 +44,7 @@ impl<V: Vector> Solver<V> {
     /// (density: (ρ*_i − ρ0)₊, kg/m^dim; divergence: (Dρ_i/Dt)₊, kg/(m^dim s)), turned into
     /// κ_i/ρ_i = e_i / (dt^p D_i) in `k`; returns Σ e_i.
     pub(super) fn errors(&mut self, stage: Projection, dt: Real) -> Real {
+        self.boundary_divergence();
         let (pairs, sites, rho, vs, rho0) = (&self.pairs, &self.sites, &self.rho, &self.vs, self.p.rho0);
         let scale = match stage {
             Projection::Density => 1.0 / (dt * dt),
@@ -60,7 +61,7 @@ impl<V: Vector> Solver<V> {
                 // 0.48 ms a pass beside the pairwise form in one process; between separate
                 // binaries within noise; the whole run's solver share 11.7 → 8.0 ms a step).
                 let acc = pair_sum(p, kk, |j, g| g * vs[j]);
-                let div = vi.dot(site.gw + site.gs) - components_sum(acc);
+                let div = vi.dot(site.gw + site.gs) - components_sum(acc) - site.wv;
                 let e = match stage {
                     Projection::Density => (rho[i] + dt * div - rho0).max(0.0),
                     Projection::Divergence if site.inner => div.max(0.0),
@@ -94,6 +95,7 @@ impl<V: Vector> Solver<V> {
                 ksum[kk] += ki;
             }
         });
+        self.push_boundary(dt);
     }
 
     /// Turns the κ/ρ of an error pass in `k` into `pick(κ/ρ, w)` with w = `WARM_START` times
@@ -126,6 +128,9 @@ impl<V: Vector> Solver<V> {
             Projection::Density => WarmStart::Before,
             Projection::Divergence => WarmStart::FirstIteration,
         };
+        if stage == Projection::Density {
+            self.kick_boundary(dt);
+        }
         self.k.resize(n, 0.0);
         self.ksum.clear();
         self.ksum.resize(n, 0.0);
@@ -201,6 +206,103 @@ impl<V: Vector> Solver<V> {
         }
         self.clock[1] += t0.elapsed().as_secs_f64();
         e0 - e1
+    }
+
+    /// The step's pairs of a fluid particle k and a boundary sample b within reach, with
+    /// g = Ψ_b ∇W_kb, ordered by k and then b (`MovingWalls::pairs`): found from the samples'
+    /// side (they are few), sorted stably; one thread, the same order for any count.
+    pub(super) fn pair_up<K: Kernel>(&mut self) {
+        let Some(mw) = self.moving.as_mut() else {
+            return;
+        };
+        let (grid, xs, h) = (&self.grid, &self.xs, self.p.h);
+        let (reach, gscale) = (4.0 * h * h, K::sigma(h, V::DIM) / (h * h));
+        mw.pairs.clear();
+        for b in 0..mw.grid.len() {
+            let xb = wall_at::<V>(&mw.w, b);
+            for run in grid.query(grid.cell_of(xb)).iter() {
+                for k in run {
+                    let d = xs[k] - xb;
+                    let r2 = d.length_squared();
+                    if r2 < reach {
+                        mw.pairs.push((k as u32, b as u32, d * (mw.w.psi[b] * gscale * K::g(r2.sqrt() / h))));
+                    }
+                }
+            }
+        }
+        mw.pairs.sort_by_key(|p| p.0);
+        mw.runs.clear();
+        let mut a = 0;
+        while a < mw.pairs.len() {
+            let k = mw.pairs[a].0;
+            let e = a + mw.pairs[a..].iter().take_while(|p| p.0 == k).count();
+            mw.runs.push((k, a as u32, e as u32));
+            a = e;
+        }
+    }
+
+    /// The bodies' share of Dρ_k/Dt at their motion now, Σ_b Ψ_b v_b·∇W_kb (`Site::wv`).
+    pub(super) fn boundary_divergence(&mut self) {
+        let Some(mw) = &self.moving else {
+            return;
+        };
+        for &(k, a, e) in &mw.runs {
+            let wv = mw.pairs[a as usize..e as usize].iter().map(|&(_, b, g)| mw.velocity(b as usize).dot(g)).sum();
+            self.sites[k as usize].wv = wv;
+        }
+    }
+
+    /// The bodies' response to one velocity update with κ/ρ in `k`: a free particle k pushed by
+    /// −dt 2 (κ_k/ρ_k) Ψ_b ∇W_kb through sample b (walls mirror the pressure, `apply`) pushes
+    /// b's body by 2 m_k dt (κ_k/ρ_k) Ψ_b ∇W_kb at b (Akinci et al. 2012, eq. 10–11), which
+    /// changes its velocity and spin (and the solve sees them in its next error pass), and is
+    /// added to the step's impulse. In pair order: the same bits for any thread count.
+    pub(super) fn push_boundary(&mut self, dt: Real) {
+        let Some(mw) = self.moving.as_mut() else {
+            return;
+        };
+        let (k, m, free) = (&self.k, &self.m, &self.free);
+        let nb = mw.bodies.len();
+        let mut dp = vec![(V::ZERO, [0.0; 3]); nb];
+        for &(kk, a, e) in &mw.runs {
+            let kk = kk as usize;
+            if !free[kk] || k[kk] == 0.0 {
+                continue;
+            }
+            let s = 2.0 * m[kk] * dt * k[kk];
+            for &(_, b, g) in &mw.pairs[a as usize..e as usize] {
+                let (j, body) = (g * s, mw.body[b as usize] as usize);
+                let l = cross3(mw.offset[b as usize], j);
+                dp[body].0 += j;
+                for c in 0..3 {
+                    dp[body].1[c] += l[c];
+                }
+            }
+        }
+        for ((body, imp), (p, l)) in mw.bodies.iter_mut().zip(mw.impulse.iter_mut()).zip(dp) {
+            if body.inv_mass == 0.0 {
+                continue;
+            }
+            body.v += p * body.inv_mass;
+            let [a11, a12, a13, a22, a23, a33] = body.inv_inertia;
+            body.w[0] += a11 * l[0] + a12 * l[1] + a13 * l[2];
+            body.w[1] += a12 * l[0] + a22 * l[1] + a23 * l[2];
+            body.w[2] += a13 * l[0] + a23 * l[1] + a33 * l[2];
+            imp.0 += p;
+            for c in 0..3 {
+                imp.1[c] += l[c];
+            }
+        }
+    }
+
+    /// Before the density solve: each pushed body's own acceleration over the step (gravity),
+    /// as the kick gave the fluid its forces.
+    pub(super) fn kick_boundary(&mut self, dt: Real) {
+        if let Some(mw) = self.moving.as_mut() {
+            for b in mw.bodies.iter_mut().filter(|b| b.inv_mass > 0.0) {
+                b.v += b.accel * dt;
+            }
+        }
     }
 
     /// The step's surface normals n_i = H Σ_j m_j/ρ_j ∇W_ij (Akinci 2013, eq. 4; fluid
@@ -318,6 +420,16 @@ impl<V: Vector> Solver<V> {
                             let r2 = (xr[i] - wall_at::<V>(w, b)).length_squared();
                             if r2 < reach {
                                 s += w.psi[b] * sigma * K::w(r2.sqrt() / h);
+                            }
+                        }
+                    }
+                    if let Some(mw) = &self.moving {
+                        for run in mw.grid.query(c).iter() {
+                            for b in run {
+                                let r2 = (xr[i] - wall_at::<V>(&mw.w, b)).length_squared();
+                                if r2 < reach {
+                                    s += mw.w.psi[b] * sigma * K::w(r2.sqrt() / h);
+                                }
                             }
                         }
                     }

@@ -477,19 +477,129 @@ impl System for Bodies {
 /// order (the bodies' velocities change as they go): deterministic. The energy this removes
 /// (kinetic, and the particles' potential in gravity raised by the moves) is booked in the
 /// bodies' "bodies ⇄ particles".
+///
+/// Fluids that take moving boundary particles (`terms::MovingBoundary`: DFSPH) meet the moving
+/// (dynamic and kinematic) bodies through them as well (Akinci et al. 2012): each such body's
+/// surface is sampled once at the fluid's spacing (`surface_samples`), each sample weighed by
+/// Ψ_b = ρ0/Σ_k W_bk over its body's samples (`sph::resolve::wall_psi`, paper eq. 4–5); before
+/// each step (`prepare`) the samples are posed and given their body's velocity at that point,
+/// and after it the impulse the fluid's pressure gave each is applied to its body at that point.
+/// So the fluid holds a body up by its pressure, as it does its walls. (The fluid's share of the
+/// exchange is in its own books, as what its projections remove.)
 pub struct BodyContacts {
     system: usize,
     /// Working buffers kept between steps: each body's grown box, and every move of the step
     /// (the particle and, in turn, its position before and after: see `apply`).
     boxes: Vec<Aabb>,
     moved: Vec<(usize, [Real; 3])>,
+    /// The boundary particles of each fluid that takes them, in the particle system's order.
+    fluids: Vec<Boundary>,
+    /// The impulses a fluid reports, by body (linear, angular), kept between steps.
+    impulses: Vec<([Real; 3], [Real; 3])>,
+}
+
+/// One fluid's boundary particles on the moving bodies, in their bodies' frames.
+#[derive(Default)]
+struct Boundary {
+    /// What the samples were made for: bodies, and the bits of h, ρ0, the spacing and the kernel.
+    key: Option<(usize, [u64; 3], crate::sph::KernelKind)>,
+    /// The bodies sampled (body numbers), each sample's index among them and its point (body
+    /// frame), and its Ψ_b (kg).
+    movers: Vec<usize>,
+    body: Vec<u32>,
+    local: Vec<Vector>,
+    psi: Vec<Real>,
+}
+
+impl Boundary {
+    /// Samples every dynamic and kinematic body's surface (fixed ones are the fluid's walls to
+    /// give; they keep fluid out by the impulse exchange).
+    fn sample(&mut self, bodies: &Bodies, h: Real, rho0: Real, kernel: crate::sph::KernelKind, spacing: Real) {
+        use crate::sph::resolve::{wall_psi, WallVolume};
+        let scale = layer_scale(h, spacing, kernel);
+        self.movers.clear();
+        self.body.clear();
+        self.local.clear();
+        self.psi.clear();
+        for (k, (&hd, &c)) in bodies.handles.iter().zip(&bodies.colliders).enumerate() {
+            if bodies.d.r.bodies[hd].is_fixed() {
+                continue;
+            }
+            let col = &bodies.d.r.colliders[c];
+            let mut pts = surface_samples(col.shape(), spacing, 0.5 * spacing);
+            if let Some(rel) = col.position_wrt_parent() {
+                pts.iter_mut().for_each(|p| *p = rel.transform_point(*p));
+            }
+            let flat: Vec<Real> = pts.iter().flat_map(|p| p.to_array()[..D].to_vec()).collect();
+            // Finite and > 0 for any sampled surface (each sample counts itself).
+            let Ok(mut psi) = wall_psi(&flat, D, rho0, h, kernel, WallVolume::Sampled, 0.0) else {
+                continue;
+            };
+            psi.iter_mut().for_each(|p| *p *= scale);
+            if pts.is_empty() {
+                continue;
+            }
+            self.body.extend(std::iter::repeat_n(self.movers.len() as u32, pts.len()));
+            self.movers.push(k);
+            self.local.extend(pts);
+            self.psi.extend(psi);
+        }
+    }
+}
+
+/// The factor on Akinci's Ψ_b = ρ0/Σ_k W_bk for one layer of samples `spacing` apart (a
+/// body's boundary), so that a fluid particle one spacing from a flat layer finds the density
+/// the missing rows of a lattice would give it (what a wall of lattice layers gives): with
+/// f(r) the kernel summed over a flat layer at distance r and m = ρ0/Σ_j f(j s) the fluid
+/// particle's mass, Ψ f(s) = m Σ_{j≥1} f(j s). Akinci's Ψ alone, f(0) ρ0/f(0), holds the fluid
+/// off: a box of half the water's density floated 1.4 spacings high (2D, h = 1.3 spacings).
+fn layer_scale(h: Real, spacing: Real, kernel: crate::sph::KernelKind) -> Real {
+    let Ok(inv) = crate::sph::resolve::inv_h_dim(h, D) else {
+        return 1.0;
+    };
+    let reach = (2.0 * h / spacing).ceil() as i64 + 1;
+    let w = |r2: Real| crate::sph::resolve::kernel_value(r2.sqrt() / h, inv, D, kernel);
+    let layer = |r: Real| {
+        let mut t = 0.0;
+        for i in -reach..=reach {
+            let a = (i as Real * spacing).powi(2) + r * r;
+            if D == 2 {
+                t += w(a);
+            } else {
+                for j in -reach..=reach {
+                    t += w(a + (j as Real * spacing).powi(2));
+                }
+            }
+        }
+        t
+    };
+    let rows: Vec<Real> = (0..=reach).map(|j| layer(j as Real * spacing)).collect();
+    let beyond: Real = rows[1..].iter().sum();
+    let total = rows[0] + 2.0 * beyond;
+    if rows[1] > 0.0 && total > 0.0 {
+        rows[0] * beyond / (total * rows[1])
+    } else {
+        1.0
+    }
 }
 
 impl BodyContacts {
     /// The coupling of the particles with the bodies system `others[system]` of the world.
     pub fn new(system: usize) -> Self {
-        Self { system, boxes: Vec::new(), moved: Vec::new() }
+        Self { system, boxes: Vec::new(), moved: Vec::new(), fluids: Vec::new(), impulses: Vec::new() }
     }
+}
+
+/// The bodies system `others[system]` of this dimension, if it is one.
+fn bodies_in(others: &mut [Box<dyn System>], system: usize) -> Option<&mut Bodies> {
+    others.get_mut(system).and_then(|s| s.as_any_bodies()).and_then(|a| a.downcast_mut::<Bodies>())
+}
+
+/// A vector of the bodies' dimension as the particles' (`V::DIM == D`).
+fn to_particle<V: PVector>(x: Vector) -> V {
+    let mut s = [0.0; 3];
+    s[..D].copy_from_slice(&x.to_array()[..D]);
+    V::from_slice(&s[..V::DIM])
 }
 
 /// The inverse effective mass of a particle (inverse mass `im`) and a body pushed apart at `c`
@@ -506,6 +616,96 @@ impl<V: PVector> Coupling<V> for BodyContacts {
     fn name(&self) -> &str {
         "bodies ⇄ particles"
     }
+    fn prepare(
+        &mut self,
+        particles: &mut crate::systems::particles::ParticleSystem<V>,
+        others: &mut [Box<dyn System>],
+    ) {
+        if V::DIM != D {
+            return;
+        }
+        let Some(bodies) = bodies_in(others, self.system) else {
+            return;
+        };
+        let (hosts, model) = particles.moving_boundaries();
+        self.fluids.resize_with(hosts.len(), Boundary::default);
+        for (host, bd) in hosts.into_iter().zip(&mut self.fluids) {
+            let (h, rho0, kernel, spacing) = host.boundary_sampling(model);
+            let key = (bodies.handles.len(), [h.to_bits(), rho0.to_bits(), spacing.to_bits()], kernel);
+            if bd.key != Some(key) {
+                if spacing.is_finite() && spacing > 0.0 {
+                    bd.sample(bodies, h, rho0, kernel, spacing);
+                }
+                bd.key = Some(key);
+            }
+            let motion: Vec<BodyMotion<V>> = bd
+                .movers
+                .iter()
+                .map(|&k| {
+                    let b = &bodies.d.r.bodies[bodies.handles[k]];
+                    let pushed = b.is_dynamic();
+                    BodyMotion {
+                        v: to_particle(b.linvel()),
+                        w: ang3(b.angvel()),
+                        inv_mass: if pushed { b.mass_properties().effective_inv_mass.x } else { 0.0 },
+                        inv_inertia: if pushed { inv_inertia6(b) } else { [0.0; 6] },
+                        accel: if pushed { to_particle(bodies.gravity * b.gravity_scale()) } else { V::ZERO },
+                    }
+                })
+                .collect();
+            let mut x = Vec::with_capacity(bd.local.len());
+            let mut offset = Vec::with_capacity(bd.local.len());
+            for (&m, &local) in bd.body.iter().zip(&bd.local) {
+                let body = &bodies.d.r.bodies[bodies.handles[bd.movers[m as usize]]];
+                let p = body.position().transform_point(local);
+                x.push(to_particle(p));
+                offset.push(to_particle(p - body.center_of_mass()));
+            }
+            host.set_boundary(&x, &bd.psi, &bd.body, &offset, &motion);
+        }
+    }
+
+    /// The impulse each fluid's pressure solve gave the bodies over the particles' step,
+    /// applied before the bodies step (so they move with it); the energy it gives them is
+    /// booked with the exchange.
+    fn between(
+        &mut self,
+        particles: &mut crate::systems::particles::ParticleSystem<V>,
+        others: &mut [Box<dyn System>],
+    ) {
+        if V::DIM != D || self.fluids.is_empty() {
+            return;
+        }
+        let Some(bodies) = bodies_in(others, self.system) else {
+            return;
+        };
+        let before = bodies.mechanical().0;
+        let (hosts, _) = particles.moving_boundaries();
+        let mut out: Vec<(V, [Real; 3])> = Vec::new();
+        for (host, bd) in hosts.into_iter().zip(&self.fluids) {
+            host.boundary_impulses(&mut out);
+            if out.len() != bd.movers.len() {
+                continue;
+            }
+            self.impulses.clear();
+            self.impulses.extend(out.iter().map(|(p, l)| {
+                let mut s = [0.0; 3];
+                for (c, v) in s.iter_mut().enumerate().take(D) {
+                    *v = p.comp(c);
+                }
+                (s, *l)
+            }));
+            for (&k, (p, l)) in bd.movers.iter().zip(&self.impulses) {
+                let body = &mut bodies.d.r.bodies[bodies.handles[k]];
+                if body.is_dynamic() {
+                    body.apply_impulse(vector(&p[..D]), true);
+                    body.apply_torque_impulse(ang_of(*l), true);
+                }
+            }
+        }
+        bodies.d.coupling += before - bodies.mechanical().0;
+    }
+
     fn apply(
         &mut self,
         particles: &mut crate::systems::particles::ParticleSystem<V>,
@@ -515,9 +715,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         if V::DIM != D {
             return;
         }
-        let Some(bodies) =
-            others.get_mut(self.system).and_then(|s| s.as_any_bodies()).and_then(|a| a.downcast_mut::<Bodies>())
-        else {
+        let Some(bodies) = bodies_in(others, self.system) else {
             return;
         };
         let (state, model) = particles.state_model_mut();

@@ -4,6 +4,7 @@ use super::{finite_all, pack, particle_kinetic, take_len, unpack};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
+use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
 use rapier2d_f64::parry::bounding_volume::BoundingVolume;
 use rapier2d_f64::prelude::*;
@@ -133,6 +134,96 @@ fn set_one(b: &mut RigidBody, name: &str, row: &[Real], dry: bool) -> std::resul
         _ => b.set_angvel(val, true),
     }
     Ok(())
+}
+
+/// Points on the outline of `shape` (its own frame) set `inset` inside it, about `spacing` apart,
+/// every corner among them: a body's boundary particles for a fluid (Akinci et al. 2012 sample
+/// the surface at the fluid's spacing; half a spacing inside, the fluid's edge, half a spacing
+/// beyond its last particle, meets the surface, as at a wall of lattice particles). Balls and
+/// capsules are walked along a fine polygon (256 and 128 sides a cap); a polygon's outline is
+/// moved in by its edges' normals (exact for a convex one). The inset is at most half the
+/// shape's smallest half-extent. Empty for a shape with no inside (a polyline).
+fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector> {
+    let he = shape.compute_local_aabb().half_extents();
+    let d = inset.min(0.5 * he.x.min(he.y));
+    let ring: Vec<Vector> = if let Some(b) = shape.as_ball() {
+        Ball::new(b.radius - d).to_polyline(256)
+    } else if let Some(c) = shape.as_cuboid() {
+        Cuboid::new(c.half_extents - Vector::splat(d)).to_polyline()
+    } else if let Some(c) = shape.as_capsule() {
+        Capsule::new(c.segment.a, c.segment.b, c.radius - d).to_polyline(128)
+    } else if let Some(p) = shape.as_convex_polygon() {
+        let (pts, nrm) = (p.points(), p.normals());
+        let n = pts.len();
+        // Vertex i joins edges i − 1 and i: moved so that both edges move in by d.
+        (0..n)
+            .map(|i| {
+                let (a, b) = (nrm[(i + n - 1) % n], nrm[i]);
+                pts[i] - (a + b) * (d / (1.0 + a.dot(b)).max(0.1))
+            })
+            .collect()
+    } else {
+        return Vec::new();
+    };
+    walk_ring(&ring, spacing)
+}
+
+/// Points about `spacing` apart along the closed polygon `ring`: each run between corners (turns
+/// of more than 15°; the whole ring if it has none) walked by arc length from its corner, so
+/// every corner is a point and the points are evenly spaced between.
+fn walk_ring(ring: &[Vector], spacing: Real) -> Vec<Vector> {
+    let n = ring.len();
+    if n < 2 {
+        return ring.to_vec();
+    }
+    let dir = |i: usize| (ring[(i + 1) % n] - ring[i]).normalize_or_zero();
+    let turn = (15.0 as Real).to_radians().cos();
+    let mut starts: Vec<usize> = (0..n).filter(|&i| dir((i + n - 1) % n).dot(dir(i)) < turn).collect();
+    if starts.is_empty() {
+        starts.push(0);
+    }
+    let mut out = Vec::new();
+    for (r, &s) in starts.iter().enumerate() {
+        let e = starts[(r + 1) % starts.len()];
+        let mut run = vec![ring[s]];
+        let mut i = s;
+        loop {
+            i = (i + 1) % n;
+            run.push(ring[i]);
+            if i == e {
+                break;
+            }
+        }
+        let lens: Vec<Real> = run.windows(2).map(|w| (w[1] - w[0]).length()).collect();
+        let total: Real = lens.iter().sum();
+        let m = ((total / spacing).round() as usize).max(1);
+        let (mut seg, mut done) = (0, 0.0);
+        for k in 0..m {
+            let at = k as Real * total / m as Real;
+            while seg + 1 < lens.len() && done + lens[seg] < at {
+                done += lens[seg];
+                seg += 1;
+            }
+            let t = if lens[seg] > 0.0 { ((at - done) / lens[seg]).min(1.0) } else { 0.0 };
+            out.push(run[seg] + (run[seg + 1] - run[seg]) * t);
+        }
+    }
+    out
+}
+
+/// A body's world inverse inertia as (m11, m12, m13, m22, m23, m33): in the plane only m33.
+fn inv_inertia6(body: &RigidBody) -> [Real; 6] {
+    [0.0, 0.0, 0.0, 0.0, 0.0, body.mass_properties().effective_world_inv_inertia]
+}
+
+/// An angular velocity as three components, (0, 0, ω) in the plane.
+fn ang3(w: AngVector) -> [Real; 3] {
+    [0.0, 0.0, w]
+}
+
+/// Three components of an angular impulse as the dimension's (its z).
+fn ang_of(l: [Real; 3]) -> AngVector {
+    l[2]
 }
 
 include!("common.rs");

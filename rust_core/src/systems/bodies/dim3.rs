@@ -5,6 +5,7 @@ use super::{finite_all, pack, particle_kinetic, take_len, unpack};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
+use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::prelude::*;
@@ -184,6 +185,81 @@ fn set_one(b: &mut RigidBody, name: &str, row: &[Real], dry: bool) -> std::resul
     Ok(())
 }
 
+/// Points on the surface of `shape` (its own frame) about `spacing` apart: a body's boundary
+/// particles for a fluid (Akinci et al. 2012 sample the surface at the fluid's spacing). Each
+/// triangle of the shape's mesh (`shape_mesh`) is covered by a lattice no coarser than
+/// `spacing`, and a point is kept unless one kept already lies within 0.75 `spacing` (so the
+/// edges shared by two triangles are sampled once). Empty for a shape without a mesh.
+fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector> {
+    // Half a spacing inside (see the 2D `surface_samples`): balls, boxes and capsules shrunk,
+    // a hull's or mesh's points moved in along their triangle's normal; at most half the
+    // shape's smallest half-extent.
+    let he = shape.compute_local_aabb().half_extents();
+    let d = inset.min(0.5 * he.x.min(he.y).min(he.z));
+    let mesh = if let Some(b) = shape.as_ball() {
+        shape_mesh(&Ball::new(b.radius - d)).map(|m| (m, 0.0))
+    } else if let Some(c) = shape.as_cuboid() {
+        shape_mesh(&Cuboid::new(c.half_extents - Vector::splat(d))).map(|m| (m, 0.0))
+    } else if let Some(c) = shape.as_capsule() {
+        shape_mesh(&Capsule::new(c.segment.a, c.segment.b, c.radius - d)).map(|m| (m, 0.0))
+    } else {
+        shape_mesh(shape).map(|m| (m, d))
+    };
+    let Some(((v, t), along)) = mesh else {
+        return Vec::new();
+    };
+    let mut out: Vec<Vector> = Vec::new();
+    let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
+    let cell =
+        |p: Vector| [(p.x / spacing).floor() as i64, (p.y / spacing).floor() as i64, (p.z / spacing).floor() as i64];
+    let min2 = (0.75 * spacing) * (0.75 * spacing);
+    for tri in &t {
+        let [a, b, c] = tri.map(|i| v[i as usize]);
+        let shift = (b - a).cross(c - a).normalize_or_zero() * along;
+        let [a, b, c] = [a - shift, b - shift, c - shift];
+        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+        let n = ((longest / spacing).ceil() as usize).max(1);
+        for i in 0..=n {
+            for j in 0..=n - i {
+                let p = a + (b - a) * (i as Real / n as Real) + (c - a) * (j as Real / n as Real);
+                let k = cell(p);
+                let near = (-1..=1).any(|dx| {
+                    (-1..=1).any(|dy| {
+                        (-1..=1).any(|dz| {
+                            cells
+                                .get(&[k[0] + dx, k[1] + dy, k[2] + dz])
+                                .is_some_and(|l| l.iter().any(|&q| (out[q] - p).length_squared() < min2))
+                        })
+                    })
+                });
+                if !near {
+                    cells.entry(k).or_default().push(out.len());
+                    out.push(p);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A shape as triangles in its own frame: vertices and corner indices (a ball and a capsule as
+/// 16 × 32 facets); `None` for a shape of no kind here.
+fn shape_mesh(shape: &dyn Shape) -> Option<(Vec<Vector>, Vec<[u32; 3]>)> {
+    Some(if let Some(s) = shape.as_ball() {
+        s.to_trimesh(16, 32)
+    } else if let Some(s) = shape.as_cuboid() {
+        s.to_trimesh()
+    } else if let Some(s) = shape.as_capsule() {
+        s.to_trimesh(16, 32)
+    } else if let Some(s) = shape.as_convex_polyhedron() {
+        s.to_trimesh()
+    } else if let Some(s) = shape.as_trimesh() {
+        (s.vertices().to_vec(), s.indices().to_vec())
+    } else {
+        return None;
+    })
+}
+
 impl Bodies {
     /// Body `i`'s shape as triangles in its own frame (m): vertices (V·3) and corner indices
     /// (T·3), what the renderer draws; a ball and a capsule as 16 × 32 facets.
@@ -192,21 +268,27 @@ impl Bodies {
             return Err(invalid("body", format!("{i} is not a body of the scene (0..{})", self.handles.len())));
         }
         let shape = self.d.r.colliders[self.colliders[i]].shape();
-        let (v, t) = if let Some(s) = shape.as_ball() {
-            s.to_trimesh(16, 32)
-        } else if let Some(s) = shape.as_cuboid() {
-            s.to_trimesh()
-        } else if let Some(s) = shape.as_capsule() {
-            s.to_trimesh(16, 32)
-        } else if let Some(s) = shape.as_convex_polyhedron() {
-            s.to_trimesh()
-        } else if let Some(s) = shape.as_trimesh() {
-            (s.vertices().to_vec(), s.indices().to_vec())
-        } else {
+        let Some((v, t)) = shape_mesh(shape) else {
             return Err(invalid("body", format!("{i}'s shape cannot be drawn")));
         };
         Ok((v.iter().flat_map(|p| [p.x, p.y, p.z]).collect(), t.into_iter().flatten().collect()))
     }
+}
+
+/// A body's world inverse inertia as (m11, m12, m13, m22, m23, m33).
+fn inv_inertia6(body: &RigidBody) -> [Real; 6] {
+    let m = body.mass_properties().effective_world_inv_inertia;
+    [m.m11, m.m12, m.m13, m.m22, m.m23, m.m33]
+}
+
+/// An angular velocity as three components.
+fn ang3(w: AngVector) -> [Real; 3] {
+    [w.x, w.y, w.z]
+}
+
+/// Three components of an angular impulse as the dimension's.
+fn ang_of(l: [Real; 3]) -> AngVector {
+    Vector::new(l[0], l[1], l[2])
 }
 
 include!("common.rs");
