@@ -30,8 +30,9 @@ moving walls, and its pressure solve pushes each body as it pushes its particles
 iteration (the body's response enters the next iteration, as in the strong coupling of Gissler
 et al., ACM TOG 38 (2019) 5), so a light body neither overshoots nor sinks: it floats at its
 Archimedes draft (a box of half the water's density within 4 % at 8 spacings of height; the
-guide's table). Fixed bodies are the fluid's walls to give (``boundary=``); a WCSPH fluid still
-meets bodies through the impulse exchange alone (its draft is approximate).
+guide's table). A WCSPH fluid meets them through the same samples, counted in its density
+and pushing with −m_i Ψ_b (p_i/ρ_i²) ∇W_ib (paper eq. 10), the reaction applied to the body
+(eq. 11). Fixed bodies are the fluid's walls to give (``boundary=``).
 
 Energy books (:meth:`Scene.energy`): the bodies' kinetic energy (translation and rotation) is
 in ``kinetic``, the potential of gravity under ``"bodies: gravity"``; rapier does not report

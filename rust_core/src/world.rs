@@ -665,7 +665,7 @@ impl<V: Vector> World<V> {
             let mut halt = self.particles.step(dt, stop).err();
             if halt.is_none() {
                 for c in &mut self.couplings {
-                    c.between(&mut self.particles, &mut self.others);
+                    c.between(&mut self.particles, &mut self.others, dt);
                 }
                 halt = self.others.iter_mut().find_map(|s| s.step(dt, stop).err());
             }

@@ -632,8 +632,8 @@ def floating(
     it, ride the surge to the far wall and back. The tank is both the fluid's walls and fixed
     bodies; the crates and the ball meet the fluid through boundary particles on their surfaces
     (Akinci et al. 2012, :mod:`physcore.bodies`), so they float at their Archimedes draft and the
-    surge pushes them by its pressure (with ``method="wcsph"``, through the impulse exchange
-    alone). ``method`` and ``integrator`` step the fluid (see :func:`dam_break`).
+    surge pushes them by its pressure. ``method`` and ``integrator`` step the fluid (see
+    :func:`dam_break`).
 
     Raises TypeError / InvalidInputError naming the argument.
     """

@@ -4,7 +4,7 @@
 //! positions, velocities and masses into cell order (and, when several fluids share the passes,
 //! each particle's fluid and viscosity coefficient), and the reservation that makes a step
 //! allocation-free.
-use super::kernels::Float;
+use super::kernels::{Float, Kernel};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
@@ -134,9 +134,9 @@ pub(super) struct MovingWalls<V: Vector> {
     pub(super) offset: Vec<V>,
     pub(super) bodies: Vec<BodyMotion<V>>,
     pub(super) impulse: Vec<(V, [Real; 3])>,
-    /// The pairs (sorted fluid particle k, sorted sample b, g = Ψ_b ∇W_kb) ordered by k, then
-    /// b; and per fluid particle that has any, (k, its first pair, past its last).
-    pub(super) pairs: Vec<(u32, u32, V)>,
+    /// The pairs (sorted fluid particle k, sorted sample b, g = Ψ_b ∇W_kb, Ψ_b W_kb) ordered by
+    /// k, then b; and per fluid particle that has any, (k, its first pair, past its last).
+    pub(super) pairs: Vec<(u32, u32, V, Real)>,
     pub(super) runs: Vec<(u32, u32, u32)>,
 }
 
@@ -175,6 +175,55 @@ impl<V: Vector> MovingWalls<V> {
         self.impulse.resize(bodies.len(), (V::ZERO, [0.0; 3]));
         self.pairs.clear();
         self.runs.clear();
+    }
+
+    /// The step's pairs of a fluid particle k (sorted by `grid`, at `at(k)`) and a sample b
+    /// within reach 2h, found from the samples' side (they are few) into `out`, ordered by k
+    /// and then b (a stable sort): one thread, the same order for any count.
+    pub(super) fn find_pairs<K: Kernel>(
+        &self,
+        grid: &CellList,
+        at: impl Fn(usize) -> V,
+        h: Real,
+        out: &mut Vec<(u32, u32, V, Real)>,
+    ) {
+        let (sigma, reach) = (K::sigma(h, V::DIM), 4.0 * h * h);
+        let gscale = sigma / (h * h);
+        out.clear();
+        for b in 0..self.grid.len() {
+            let mut c = [0.0; 3];
+            for (d, cd) in c.iter_mut().enumerate().take(V::DIM) {
+                *cd = self.w.pos[d][b];
+            }
+            let xb = V::from_slice(&c[..V::DIM]);
+            let psi = self.w.psi[b];
+            for run in grid.query(grid.cell_of(xb)).iter() {
+                for k in run {
+                    let d = at(k) - xb;
+                    let r2 = d.length_squared();
+                    if r2 < reach {
+                        let q = r2.sqrt() / h;
+                        out.push((k as u32, b as u32, d * (psi * gscale * K::g(q)), psi * sigma * K::w(q)));
+                    }
+                }
+            }
+        }
+        out.sort_by_key(|p| p.0);
+    }
+
+    /// `find_pairs` into `pairs`, and their `runs`.
+    pub(super) fn pair_up<K: Kernel>(&mut self, grid: &CellList, at: impl Fn(usize) -> V, h: Real) {
+        let mut pairs = std::mem::take(&mut self.pairs);
+        self.find_pairs::<K>(grid, at, h, &mut pairs);
+        self.runs.clear();
+        let mut a = 0;
+        while a < pairs.len() {
+            let k = pairs[a].0;
+            let e = a + pairs[a..].iter().take_while(|p| p.0 == k).count();
+            self.runs.push((k, a as u32, e as u32));
+            a = e;
+        }
+        self.pairs = pairs;
     }
 
     /// The velocity of sample `b` now: v + ω × r.

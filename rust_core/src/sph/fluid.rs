@@ -17,7 +17,7 @@ use crate::simd::{self, Level};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{Term, Write};
+use crate::terms::{BodyMotion, MovingBoundary, Term, Write};
 use crate::vector::{Real, Vector};
 use std::ops::Range;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -220,6 +220,15 @@ impl<V: Vector> Term<V> for Sph<V> {
         self.first + self.n
     }
 
+    /// The group's first fluid takes the bodies' boundary for all its fluids.
+    fn as_moving_boundary(&mut self) -> Option<&mut dyn MovingBoundary<V>> {
+        if self.who == 0 {
+            Some(self)
+        } else {
+            None
+        }
+    }
+
     fn max_dt(&self, _x: &[V], v: &[V], _model: &Model, g: Real) -> Option<Real> {
         if self.n == 0 {
             return None;
@@ -231,6 +240,31 @@ impl<V: Vector> Term<V> for Sph<V> {
         let a = self.group().sums.amax[self.who].sqrt() + g;
         let force = if a > 0.0 { 0.25 * (self.p.h / a).sqrt() } else { f64::INFINITY };
         Some(cfl.min(force))
+    }
+}
+
+impl<V: Vector> MovingBoundary<V> for Sph<V> {
+    fn boundary_sampling(&self, model: &Model) -> (Real, Real, KernelKind, Real) {
+        let g = self.group();
+        let (mut sum, mut n) = (0.0, 0usize);
+        for m in &g.members {
+            sum += model.mass[m.range.clone()].iter().sum::<Real>();
+            n += m.range.len();
+        }
+        let mean = if n > 0 { sum / n as Real } else { 0.0 };
+        (self.p.h, self.p.rho0, self.p.kernel, (mean / self.p.rho0).powf(1.0 / V::DIM as Real))
+    }
+
+    fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {
+        self.group().set_boundary(x, psi, body, offset, bodies);
+    }
+
+    fn boundary_impulses(&self, dt: Real, out: &mut Vec<(V, [Real; 3])>) {
+        self.group().boundary_impulses(dt, out);
+    }
+
+    fn books_exchange(&self) -> bool {
+        false
     }
 }
 

@@ -17,7 +17,9 @@
 //!
 //! A group of one fluid is today's single fluid: the passes take their one-fluid path and the
 //! evaluation reads the scene's arrays in place, with no copy into the group's order.
-use super::buffers::{BufSet, Bufs, PassFloat, Walls, PAD};
+use super::buffers::{cross3, BufSet, Bufs, MovingWalls, PassFloat, Walls, PAD};
+use super::kernels::{CubicSpline, Float, WendlandC2};
+use super::params::KernelKind;
 use super::params::{Precision, SphParams};
 use super::passes::{self, FluidView, Sums, MAX_FLUIDS};
 use crate::alloc::{count, Need};
@@ -25,6 +27,7 @@ use crate::error::Result;
 use crate::neighbors::CellList;
 use crate::simd::Level;
 use crate::stop::Stop;
+use crate::terms::BodyMotion;
 use crate::terms::Write;
 use crate::vector::{Real, Vector};
 use std::ops::Range;
@@ -60,6 +63,12 @@ pub(super) struct Group<V: Vector> {
     fresh: [bool; MAX_FLUIDS],
     /// Wall time spent so far in (cell list + gather, density pass, force pass), s.
     pub(super) clock: [f64; 3],
+    /// The rigid bodies' boundary particles (`terms::MovingBoundary`), once a coupling has set
+    /// them: counted in the density like the walls (Akinci et al. 2012, eq. 4–5), pushing with
+    /// −m_i Ψ_b (p_i/ρ_i²) ∇W_ib (eq. 10) and pushed back (eq. 11); `impulse` sums the forces
+    /// on each body over the evaluations since (`evals` of them).
+    moving: Option<MovingWalls<V>>,
+    evals: u32,
 }
 
 impl<V: Vector> Group<V> {
@@ -78,6 +87,8 @@ impl<V: Vector> Group<V> {
             sums: Sums::default(),
             fresh: [false; MAX_FLUIDS],
             clock: [0.0; 3],
+            moving: None,
+            evals: 0,
         })
     }
 
@@ -244,7 +255,7 @@ impl<V: Vector> Group<V> {
     /// Once the stop flag is set the rest is skipped and `out` is left partly written.
     fn eval<F: PassFloat>(&mut self, level: Level, x: &[V], v: &[V], m: &[Real], out: &mut [V], stop: &Stop) -> Sums {
         let want_power = self.dissipative();
-        let Self { members, fluid_of, grid, bufs, clock, .. } = self;
+        let Self { members, fluid_of, grid, bufs, clock, moving, evals, .. } = self;
         let (b, stop) = (F::bufs(bufs), stop.flag());
         let stopped = || stop.load(Ordering::Relaxed);
         let t0 = std::time::Instant::now();
@@ -264,6 +275,13 @@ impl<V: Vector> Group<V> {
         let p = &members[0].p;
         let t1 = std::time::Instant::now();
         passes::density::<V, F>(level, p, grid, &views[..members.len()], b, stop);
+        if let Some(mw) = moving.as_mut() {
+            match p.kernel {
+                KernelKind::CubicSpline => mw.pair_up::<CubicSpline>(grid, |k| x[grid.order[k] as usize], p.h),
+                KernelKind::WendlandC2 => mw.pair_up::<WendlandC2>(grid, |k| x[grid.order[k] as usize], p.h),
+            }
+            boundary_density(mw, members, b);
+        }
         let t2 = std::time::Instant::now();
         clock[0] += (t1 - t0).as_secs_f64();
         clock[1] += (t2 - t1).as_secs_f64();
@@ -271,6 +289,10 @@ impl<V: Vector> Group<V> {
             return Sums::default();
         }
         let sums = passes::forces::<V, F>(level, p, grid, &views[..members.len()], b, out, want_power, stop);
+        if let Some(mw) = moving.as_mut() {
+            boundary_forces(mw, grid, b, out);
+            *evals += 1;
+        }
         clock[2] += t2.elapsed().as_secs_f64();
         sums
     }
@@ -293,12 +315,49 @@ impl<V: Vector> Group<V> {
         let views = views::<f64>(&self.members);
         let never = Stop::default();
         let views = &views[..self.members.len()];
-        passes::density::<V, f64>(crate::simd::level(), &self.members[0].p, &grid, views, &mut b, never.flag());
+        let p = &self.members[0].p;
+        passes::density::<V, f64>(crate::simd::level(), p, &grid, views, &mut b, never.flag());
+        if let Some(mw) = &self.moving {
+            let mut pairs = Vec::new();
+            match p.kernel {
+                KernelKind::CubicSpline => {
+                    mw.find_pairs::<CubicSpline>(&grid, |k| gx[grid.order[k] as usize], p.h, &mut pairs)
+                }
+                KernelKind::WendlandC2 => {
+                    mw.find_pairs::<WendlandC2>(&grid, |k| gx[grid.order[k] as usize], p.h, &mut pairs)
+                }
+            }
+            for &(k, _, _, w) in &pairs {
+                b.rho[k as usize] += w;
+            }
+        }
         let mut rho = vec![0.0; gx.len()];
         for (k, &i) in grid.order.iter().enumerate() {
             rho[i as usize] = b.rho[k];
         }
         rho
+    }
+
+    /// The boundary of the next step (`MovingBoundary::set_boundary`).
+    pub(super) fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {
+        self.evals = 0;
+        if x.is_empty() {
+            self.moving = None;
+            return;
+        }
+        let support = 2.0 * self.members[0].p.h;
+        let mw = self.moving.get_or_insert_with(|| MovingWalls::new(support).expect("a valid support"));
+        mw.set(x, psi, body, offset, bodies);
+    }
+
+    /// The impulse on each body over a step of `dt`: the mean force of the evaluations since
+    /// the boundary was set (one a step for semi-implicit Euler and velocity Verlet) times dt.
+    pub(super) fn boundary_impulses(&self, dt: Real, out: &mut Vec<(V, [Real; 3])>) {
+        out.clear();
+        if let Some(mw) = &self.moving {
+            let s = if self.evals > 0 { dt / self.evals as Real } else { 0.0 };
+            out.extend(mw.impulse.iter().map(|(f, l)| (*f * s, l.map(|c| c * s))));
+        }
     }
 
     /// Member `who`'s share of a group-order array.
@@ -315,4 +374,39 @@ fn views<F: PassFloat>(members: &[Member]) -> [FluidView<'_, F>; MAX_FLUIDS] {
         let m = &members[k.min(members.len() - 1)];
         FluidView::new(&m.p, &m.walls.grid, F::walls(&m.walls))
     })
+}
+
+/// The boundary's density Σ_b Ψ_b W_kb added to each sorted particle's ρ that has any, and its
+/// p/ρ² recomputed with its fluid's equation of state.
+fn boundary_density<V: Vector, F: Float>(mw: &MovingWalls<V>, members: &[Member], b: &mut Bufs<F>) {
+    for &(k, a, e) in &mw.runs {
+        let k = k as usize;
+        let extra: Real = mw.pairs[a as usize..e as usize].iter().map(|p| p.3).sum();
+        let rho = b.rho[k].f64() + extra;
+        let p = if members.len() > 1 { &members[b.fluid[k] as usize].p } else { &members[0].p };
+        b.rho[k] = F::of(rho);
+        b.pr[k] = F::of(p.pressure(rho) / (rho * rho));
+    }
+}
+
+/// The boundary's pressure force on each particle near it, −m_k (p_k/ρ_k²) Ψ_b ∇W_kb (Akinci
+/// 2012, eq. 10: free slip), added into `out` (the group's order), and its reaction on each
+/// body at the sample (eq. 11) added to `mw.impulse` (force, torque about the centre of mass).
+fn boundary_forces<V: Vector, F: Float>(mw: &mut MovingWalls<V>, grid: &CellList, b: &Bufs<F>, out: &mut [V]) {
+    let MovingWalls { pairs, runs, body, offset, impulse, .. } = mw;
+    for &(k, a, e) in runs.iter() {
+        let k = k as usize;
+        let s = b.m[k].f64() * b.pr[k].f64();
+        let mut fk = V::ZERO;
+        for &(_, sb, g, _) in &pairs[a as usize..e as usize] {
+            let f = g * s;
+            fk += f;
+            let (imp, l) = (&mut impulse[body[sb as usize] as usize], cross3(offset[sb as usize], f));
+            imp.0 += f;
+            for c in 0..3 {
+                imp.1[c] += l[c];
+            }
+        }
+        out[grid.order[k] as usize] -= fk;
+    }
 }

@@ -213,5 +213,5 @@ pub trait Coupling<V: Vector>: Send + Sync {
     fn prepare(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>]) {}
     /// After the particles' step and before the other systems' (what the particles' step gave
     /// them: the impulse a fluid's pressure solve gave the bodies, before they step with it).
-    fn between(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>]) {}
+    fn between(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>], _dt: Real) {}
 }

@@ -59,8 +59,12 @@ pub trait MovingBoundary<V: Vector> {
     /// bodies' motion at the step's start.
     fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]);
     /// The linear (N s) and angular (N m s, about the centre of mass) impulse the fluid gave
-    /// each body over the last step (zeros before a step).
-    fn boundary_impulses(&self, out: &mut Vec<(V, [Real; 3])>);
+    /// each body over the last step of `dt` seconds (zeros before a step).
+    fn boundary_impulses(&self, dt: Real, out: &mut Vec<(V, [Real; 3])>);
+    /// Whether the energy the fluid gives the bodies is booked by the coupling as exchanged
+    /// (DFSPH: its projections book the fluid's share as they remove it), or is paid by the
+    /// fluid's own potential energy, which counts the boundary (WCSPH's internal energy).
+    fn books_exchange(&self) -> bool;
 }
 
 /// A rigid body as a fluid's pressure solve sees it: velocity (m/s), angular velocity (rad/s,

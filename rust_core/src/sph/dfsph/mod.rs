@@ -887,7 +887,11 @@ impl<V: Vector> MovingBoundary<V> for Dfsph<V> {
         s.built = false;
     }
 
-    fn boundary_impulses(&self, out: &mut Vec<(V, [Real; 3])>) {
+    fn books_exchange(&self) -> bool {
+        true
+    }
+
+    fn boundary_impulses(&self, _dt: Real, out: &mut Vec<(V, [Real; 3])>) {
         out.clear();
         if let Some(mw) = &self.solver().moving {
             out.extend_from_slice(&mw.impulse);

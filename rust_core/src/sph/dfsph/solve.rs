@@ -208,36 +208,11 @@ impl<V: Vector> Solver<V> {
         e0 - e1
     }
 
-    /// The step's pairs of a fluid particle k and a boundary sample b within reach, with
-    /// g = Ψ_b ∇W_kb, ordered by k and then b (`MovingWalls::pairs`): found from the samples'
-    /// side (they are few), sorted stably; one thread, the same order for any count.
+    /// The step's pairs of a fluid particle and a boundary sample (`MovingWalls::pair_up`).
     pub(super) fn pair_up<K: Kernel>(&mut self) {
-        let Some(mw) = self.moving.as_mut() else {
-            return;
-        };
-        let (grid, xs, h) = (&self.grid, &self.xs, self.p.h);
-        let (reach, gscale) = (4.0 * h * h, K::sigma(h, V::DIM) / (h * h));
-        mw.pairs.clear();
-        for b in 0..mw.grid.len() {
-            let xb = wall_at::<V>(&mw.w, b);
-            for run in grid.query(grid.cell_of(xb)).iter() {
-                for k in run {
-                    let d = xs[k] - xb;
-                    let r2 = d.length_squared();
-                    if r2 < reach {
-                        mw.pairs.push((k as u32, b as u32, d * (mw.w.psi[b] * gscale * K::g(r2.sqrt() / h))));
-                    }
-                }
-            }
-        }
-        mw.pairs.sort_by_key(|p| p.0);
-        mw.runs.clear();
-        let mut a = 0;
-        while a < mw.pairs.len() {
-            let k = mw.pairs[a].0;
-            let e = a + mw.pairs[a..].iter().take_while(|p| p.0 == k).count();
-            mw.runs.push((k, a as u32, e as u32));
-            a = e;
+        let (xs, h) = (&self.xs, self.p.h);
+        if let Some(mw) = self.moving.as_mut() {
+            mw.pair_up::<K>(&self.grid, |k| xs[k], h);
         }
     }
 
@@ -247,7 +222,7 @@ impl<V: Vector> Solver<V> {
             return;
         };
         for &(k, a, e) in &mw.runs {
-            let wv = mw.pairs[a as usize..e as usize].iter().map(|&(_, b, g)| mw.velocity(b as usize).dot(g)).sum();
+            let wv = mw.pairs[a as usize..e as usize].iter().map(|&(_, b, g, _)| mw.velocity(b as usize).dot(g)).sum();
             self.sites[k as usize].wv = wv;
         }
     }
@@ -270,7 +245,7 @@ impl<V: Vector> Solver<V> {
                 continue;
             }
             let s = 2.0 * m[kk] * dt * k[kk];
-            for &(_, b, g) in &mw.pairs[a as usize..e as usize] {
+            for &(_, b, g, _) in &mw.pairs[a as usize..e as usize] {
                 let (j, body) = (g * s, mw.body[b as usize] as usize);
                 let l = cross3(mw.offset[b as usize], j);
                 dp[body].0 += j;

@@ -672,6 +672,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         &mut self,
         particles: &mut crate::systems::particles::ParticleSystem<V>,
         others: &mut [Box<dyn System>],
+        dt: Real,
     ) {
         if V::DIM != D || self.fluids.is_empty() {
             return;
@@ -679,11 +680,11 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         let Some(bodies) = bodies_in(others, self.system) else {
             return;
         };
-        let before = bodies.mechanical().0;
         let (hosts, _) = particles.moving_boundaries();
         let mut out: Vec<(V, [Real; 3])> = Vec::new();
         for (host, bd) in hosts.into_iter().zip(&self.fluids) {
-            host.boundary_impulses(&mut out);
+            let before = bodies.mechanical().0;
+            host.boundary_impulses(dt, &mut out);
             if out.len() != bd.movers.len() {
                 continue;
             }
@@ -702,8 +703,12 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                     body.apply_torque_impulse(ang_of(*l), true);
                 }
             }
+            // DFSPH's projections book the fluid's share of the exchange; a WCSPH fluid's
+            // internal energy counts the boundary, so it pays the bodies' gain itself.
+            if host.books_exchange() {
+                bodies.d.coupling += before - bodies.mechanical().0;
+            }
         }
-        bodies.d.coupling += before - bodies.mechanical().0;
     }
 
     fn apply(
