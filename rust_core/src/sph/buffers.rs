@@ -244,6 +244,23 @@ impl<V: Vector> MovingWalls<V> {
     }
 }
 
+/// A fluid's particle spacing (m̄/ρ0)^(1/dim), m̄ the mean of `mass` over the fluids' `ranges`:
+/// what the bodies' boundary is sampled at (`MovingBoundary::boundary_sampling`).
+pub(super) fn spacing(
+    mass: &[Real],
+    ranges: impl Iterator<Item = std::ops::Range<usize>>,
+    rho0: Real,
+    dim: usize,
+) -> Real {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for r in ranges {
+        n += r.len();
+        sum += mass[r].iter().sum::<Real>();
+    }
+    let mean = if n > 0 { sum / n as Real } else { 0.0 };
+    (mean / rho0).powf(1.0 / dim as Real)
+}
+
 /// ω × r for ω = (wx, wy, wz) (2D: only wz) and r of the vector's dimension.
 #[inline(always)]
 pub(super) fn omega_cross<V: Vector>(w: [Real; 3], r: V) -> V {

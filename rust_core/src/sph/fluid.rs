@@ -246,13 +246,9 @@ impl<V: Vector> Term<V> for Sph<V> {
 impl<V: Vector> MovingBoundary<V> for Sph<V> {
     fn boundary_sampling(&self, model: &Model) -> (Real, Real, KernelKind, Real) {
         let g = self.group();
-        let (mut sum, mut n) = (0.0, 0usize);
-        for m in &g.members {
-            sum += model.mass[m.range.clone()].iter().sum::<Real>();
-            n += m.range.len();
-        }
-        let mean = if n > 0 { sum / n as Real } else { 0.0 };
-        (self.p.h, self.p.rho0, self.p.kernel, (mean / self.p.rho0).powf(1.0 / V::DIM as Real))
+        let spacing =
+            super::buffers::spacing(&model.mass, g.members.iter().map(|m| m.range.clone()), self.p.rho0, V::DIM);
+        (self.p.h, self.p.rho0, self.p.kernel, spacing)
     }
 
     fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {

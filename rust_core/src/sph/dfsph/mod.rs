@@ -866,13 +866,8 @@ impl<V: Vector> OwnState<V> for Dfsph<V> {
 impl<V: Vector> MovingBoundary<V> for Dfsph<V> {
     fn boundary_sampling(&self, model: &Model) -> (Real, Real, KernelKind, Real) {
         let s = self.solver();
-        let (mut sum, mut n) = (0.0, 0usize);
-        for m in &s.members {
-            sum += model.mass[m.range.clone()].iter().sum::<Real>();
-            n += m.range.len();
-        }
-        let mean = if n > 0 { sum / n as Real } else { 0.0 };
-        (s.p.h, s.p.rho0, s.p.kernel, (mean / s.p.rho0).powf(1.0 / V::DIM as Real))
+        let spacing = super::buffers::spacing(&model.mass, s.members.iter().map(|m| m.range.clone()), s.p.rho0, V::DIM);
+        (s.p.h, s.p.rho0, s.p.kernel, spacing)
     }
 
     fn set_boundary(&mut self, x: &[V], psi: &[Real], body: &[u32], offset: &[V], bodies: &[BodyMotion<V>]) {
