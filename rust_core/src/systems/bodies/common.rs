@@ -478,14 +478,16 @@ impl System for Bodies {
 /// (kinetic, and the particles' potential in gravity raised by the moves) is booked in the
 /// bodies' "bodies ⇄ particles".
 ///
-/// Fluids that take moving boundary particles (`terms::MovingBoundary`: DFSPH) meet the moving
-/// (dynamic and kinematic) bodies through them as well (Akinci et al. 2012): each such body's
-/// surface is sampled once at the fluid's spacing (`surface_samples`), each sample weighed by
-/// Ψ_b = ρ0/Σ_k W_bk over its body's samples (`sph::resolve::wall_psi`, paper eq. 4–5); before
-/// each step (`prepare`) the samples are posed and given their body's velocity at that point,
-/// and after it the impulse the fluid's pressure gave each is applied to its body at that point.
-/// So the fluid holds a body up by its pressure, as it does its walls. (The fluid's share of the
-/// exchange is in its own books, as what its projections remove.)
+/// Fluids that take moving boundary particles (`terms::MovingBoundary`: DFSPH and WCSPH) meet
+/// the moving (dynamic and kinematic) bodies through them as well (Akinci et al. 2012): each
+/// such body's surface is sampled once at the fluid's spacing, half a spacing inside
+/// (`surface_samples`), each sample weighed by Ψ_b = ρ0/Σ_k W_bk over its body's samples
+/// (`sph::resolve::wall_psi`, paper eq. 4–5) times `layer_scale`; before each step (`prepare`)
+/// the samples are posed and the fluid given their bodies' motion; after the particles' step
+/// and before the bodies' (`between`), each body takes the impulse the fluid gave it. So the
+/// fluid holds a body up by its pressure, as it does its walls. (DFSPH books the fluid's share
+/// of the exchange as what its projections remove, the coupling the bodies'; a WCSPH fluid's
+/// internal energy pays for both.)
 pub struct BodyContacts {
     system: usize,
     /// Working buffers kept between steps: each body's grown box, and every move of the step
@@ -551,8 +553,9 @@ impl Boundary {
 /// body's boundary), so that a fluid particle one spacing from a flat layer finds the density
 /// the missing rows of a lattice would give it (what a wall of lattice layers gives): with
 /// f(r) the kernel summed over a flat layer at distance r and m = ρ0/Σ_j f(j s) the fluid
-/// particle's mass, Ψ f(s) = m Σ_{j≥1} f(j s). Akinci's Ψ alone, f(0) ρ0/f(0), holds the fluid
-/// off: a box of half the water's density floated 1.4 spacings high (2D, h = 1.3 spacings).
+/// particle's mass, Ψ f(s) = m Σ_{j≥1} f(j s). Akinci's Ψ alone gives that particle ρ0 f(s)/f(0),
+/// about twice as much at h = 1.3 spacings, and holds the fluid off: a box of half the water's
+/// density floated 1.4 spacings too high (2D).
 fn layer_scale(h: Real, spacing: Real, kernel: crate::sph::KernelKind) -> Real {
     let Ok(inv) = crate::sph::resolve::inv_h_dim(h, D) else {
         return 1.0;
