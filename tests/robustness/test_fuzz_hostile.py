@@ -359,6 +359,7 @@ def _check_scene_function(case):
 @example(("dam_break", "integrator", np.array([0.5, 1.0])))  # found by this fuzz: ValueError of numpy's, not naming it
 @example(("droplets", "surface_tension", 3.505501612981517e303))  # found by this fuzz: refused as sound_speed
 @example(("vortex_street", "n", 10**400))  # found by this fuzz: OverflowError
+@example(("pyramid", "ball_density", 2.1319675335445308e306))  # found by this fuzz: books inf (gravity's potential)
 def test_fuzz_scene_functions(case):
     assert _check_scene_function(case), f"{case}: the scene's dt is not a usable step"
 

@@ -30,11 +30,13 @@ from ._common import (
 
 def _named(args: str, build):
     """``build()``, with what the bodies refuse (a size derived from the arguments that came out
-    ≤ 0 or beyond float64) named by the scene's arguments `args`."""
+    ≤ 0 or beyond float64) and a scene whose energy is beyond float64 (a density of 1e306 kg/m²
+    gives a finite mass but an infinite potential) named by the scene's arguments `args`."""
     try:
-        return build()
+        scene = build()
     except InvalidInputError as e:
         raise InvalidInputError(f"{args}: give bodies the core refuses ({e})") from None
+    return _finite_books(scene, args)
 
 
 # Warm wood, one tone a domino (so the wave reads as it runs), and the crates' pine.

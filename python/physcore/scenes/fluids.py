@@ -647,7 +647,7 @@ def floating(
     scene.add(Bodies("ball", size=[0.1], positions=[(0.5, 2.9)], density=rho, friction=0.4, restitution=0.1,
                      color=(214, 96, 77), name="ball"))
     scene.render_defaults = None
-    return scene
+    return _finite_books(scene, "density")
 
 
 floating.render_defaults = {"frames": 100, "fps": 30, "frame_time": 1 / 50, "substeps": "auto", "color_by": "speed",
