@@ -46,8 +46,8 @@ pub trait VelocityProjection<V: Vector> {
 /// body's samples (paper eq. 4–5), and before every step hands the fluid the samples and their
 /// bodies' motion; the fluid counts them in its density and divergence like its walls (but
 /// moving), and its pressure solve pushes the bodies as it pushes its particles, iteration by
-/// iteration (so a light body does not overshoot: the solve sees the body's response, as in the
-/// strong coupling of Gissler et al., "Interlinked SPH pressure solvers for strong fluid-rigid
+/// iteration (the solve sees the body's response, so a light body whose added mass exceeds its
+/// own is solved with the fluid, as in the strong coupling of Gissler et al., "Interlinked SPH pressure solvers for strong fluid-rigid
 /// coupling", ACM TOG 38 (2019) 5). After the step the coupling applies to each body the
 /// impulse the fluid gave it (paper eq. 10–11: equal and opposite to the fluid's).
 pub trait MovingBoundary<V: Vector> {
