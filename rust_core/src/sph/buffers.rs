@@ -138,6 +138,8 @@ pub(super) struct MovingWalls<V: Vector> {
     /// k, then b; and per fluid particle that has any, (k, its first pair, past its last).
     pub(super) pairs: Vec<(u32, u32, V, Real)>,
     pub(super) runs: Vec<(u32, u32, u32)>,
+    /// Each body's push in one solver iteration (scratch, kept so an iteration allocates nothing).
+    pub(super) push: Vec<(V, [Real; 3])>,
 }
 
 impl<V: Vector> MovingWalls<V> {
@@ -152,6 +154,7 @@ impl<V: Vector> MovingWalls<V> {
             impulse: Vec::new(),
             pairs: Vec::new(),
             runs: Vec::new(),
+            push: Vec::new(),
         })
     }
 

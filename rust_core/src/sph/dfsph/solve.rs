@@ -237,8 +237,9 @@ impl<V: Vector> Solver<V> {
             return;
         };
         let (k, m, free) = (&self.k, &self.m, &self.free);
-        let nb = mw.bodies.len();
-        let mut dp = vec![(V::ZERO, [0.0; 3]); nb];
+        let mut dp = std::mem::take(&mut mw.push);
+        dp.clear();
+        dp.resize(mw.bodies.len(), (V::ZERO, [0.0; 3]));
         for &(kk, a, e) in &mw.runs {
             let kk = kk as usize;
             if !free[kk] || k[kk] == 0.0 {
@@ -254,7 +255,7 @@ impl<V: Vector> Solver<V> {
                 }
             }
         }
-        for ((body, imp), (p, l)) in mw.bodies.iter_mut().zip(mw.impulse.iter_mut()).zip(dp) {
+        for ((body, imp), &(p, l)) in mw.bodies.iter_mut().zip(mw.impulse.iter_mut()).zip(&dp) {
             if body.inv_mass == 0.0 {
                 continue;
             }
@@ -268,6 +269,7 @@ impl<V: Vector> Solver<V> {
                 imp.1[c] += l[c];
             }
         }
+        mw.push = dp;
     }
 
     /// Before the density solve: each pushed body's own acceleration over the step (gravity),
