@@ -28,9 +28,10 @@ each sample weighed by Ψ_b = ρ0/Σ_k W_bk (paper eq. 4–5, scaled so that a f
 the lattice rows a wall would have); the fluid counts them in its density and divergence like
 moving walls, and its pressure solve pushes each body as it pushes its particles, iteration by
 iteration (the body's response enters the next iteration, as in the strong coupling of Gissler
-et al., ACM TOG 38 (2019) 5: a floating body's added mass exceeds its own), and it floats near
-its Archimedes draft (a box of half the water's density within 4 % at 8 spacings of height;
-the guide's table and its limits). A WCSPH fluid meets them through the same samples, counted in its density
+et al., ACM TOG 38 (2019) 5: a floating body's added mass exceeds its own); a sample mirrors
+its particle's pressure plus the hydrostatic rise between them (Adami et al., J. Comput. Phys.
+231 (2012) 7057, eq. 27), and a box floats at its Archimedes draft (within 3 % at 6 spacings of
+draft, 80 across; the guide's table and its limits). A WCSPH fluid meets them through the same samples, counted in its density
 and pushing with −m_i Ψ_b (p_i/ρ_i²) ∇W_ib (paper eq. 10), the reaction applied to the body
 (eq. 11). Fixed bodies are the fluid's walls to give (``boundary=``).
 

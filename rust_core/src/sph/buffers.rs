@@ -229,6 +229,26 @@ impl<V: Vector> MovingWalls<V> {
         self.pairs = pairs;
     }
 
+    /// Gives each pushed body its impulse in `dp` (linear, angular about its centre of mass):
+    /// its velocity and spin change, and the step's impulse grows; `dp` is kept as `push`.
+    pub(super) fn give(&mut self, dp: Vec<(V, [Real; 3])>) {
+        for ((body, imp), &(p, l)) in self.bodies.iter_mut().zip(self.impulse.iter_mut()).zip(&dp) {
+            if body.inv_mass == 0.0 {
+                continue;
+            }
+            body.v += p * body.inv_mass;
+            let [a11, a12, a13, a22, a23, a33] = body.inv_inertia;
+            body.w[0] += a11 * l[0] + a12 * l[1] + a13 * l[2];
+            body.w[1] += a12 * l[0] + a22 * l[1] + a23 * l[2];
+            body.w[2] += a13 * l[0] + a23 * l[1] + a33 * l[2];
+            imp.0 += p;
+            for c in 0..3 {
+                imp.1[c] += l[c];
+            }
+        }
+        self.push = dp;
+    }
+
     /// The velocity of sample `b` now: v + ω × r.
     #[inline(always)]
     pub(super) fn velocity(&self, b: usize) -> V {

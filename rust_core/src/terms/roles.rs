@@ -71,7 +71,9 @@ pub trait MovingBoundary<V: Vector> {
 /// (0, 0, ω) in 2D), inverse mass (1/kg) and world inverse inertia (symmetric: m11, m12, m13,
 /// m22, m23, m33; 2D: only m33), 0 for a body that is not pushed (kinematic), and the
 /// acceleration its own step gives it (gravity, m/s²), which the density solve adds as the fluid
-/// adds its particles' (the body's step then adds it for real).
+/// adds its particles' (the body's step then adds it for real); and the gravity of the scene
+/// (m/s², for every body, pushed or not), which sets the hydrostatic rise of the fluid's
+/// pressure from a particle to a sample of the body (Adami et al. 2012).
 #[derive(Clone, Copy, Debug)]
 pub struct BodyMotion<V: Vector> {
     pub v: V,
@@ -79,6 +81,7 @@ pub struct BodyMotion<V: Vector> {
     pub inv_mass: Real,
     pub inv_inertia: [Real; 6],
     pub accel: V,
+    pub gravity: V,
 }
 
 /// The force's Jacobians, for implicit integrators ("implicit_euler"): a term that has them is

@@ -653,6 +653,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                         inv_mass: if pushed { b.mass_properties().effective_inv_mass.x } else { 0.0 },
                         inv_inertia: if pushed { inv_inertia6(b) } else { [0.0; 6] },
                         accel: if pushed { to_particle(bodies.gravity * b.gravity_scale()) } else { V::ZERO },
+                        gravity: to_particle(bodies.gravity),
                     }
                 })
                 .collect();
