@@ -71,11 +71,12 @@ def test_a_floating_box_sinks_to_its_archimedes_draft(rho_body):
 
     Within 3 % at 80 across, as the issue asks; at 40 the box rides a quarter of a spacing high.
     (At 750 kg/m³ and 80 across the drop from 2 cm washes water onto the deck, 3 spacings
-    above the surface, and the box carries it: no Archimedes draft to measure.) Before the
-    samples' mirrored pressure took its hydrostatic part (``dfsph/solve.rs``,
-    ``hydrostatic_boundary``; Adami et al. 2012) the box rode 0.3–0.5 spacings high (a 0.2 ×
-    0.1 m box of 500 kg/m³: 3.75 cm at 40 across, −25 %); before the boundary particles, with
-    the impulse exchange alone, it sank 20 % too deep."""
+    above the surface, and the box carries it: no Archimedes draft to measure.) Without the
+    hydrostatic part of the samples' mirrored pressure (``dfsph/solve.rs``,
+    ``hydrostatic_boundary``; Adami et al. 2012) the box rides 0.1–0.2 spacings higher: −27,
+    −11.5, −7.9 % at 40 across, −6.1, −2.3, −0.6 % at 80 (the 250 row would fail this test). With the
+    impulse exchange alone, before the boundary particles, a box of half the water's density
+    sank 20 % too deep."""
     archimedes = rho_body / RHO * 2 * HY
     fine = _draft(80, rho_body)
     assert fine == pytest.approx(archimedes, rel=0.03)
@@ -85,8 +86,8 @@ def test_a_floating_box_sinks_to_its_archimedes_draft(rho_body):
 
 @pytest.mark.slow
 def test_the_draft_converges_with_the_resolution_at_a_tight_density_tolerance():
-    """At density_error 0.01 % the draft converges: 6.46, 7.28 and 7.44 cm at 40, 80 and 120
-    across (−14, −2.9 and −0.8 %; spacing 2.5, 1.25 and 0.83 cm). At the default 0.1 %, past
+    """At density_error 0.01 % the draft converges: 6.77, 7.28 and 7.44 cm at 40, 80 and 120
+    across (−9.7, −2.9 and −0.8 %; spacing 2.5, 1.25 and 0.83 cm). At the default 0.1 %, past
     80 across the box bobs (±0.4 cm at 120 across, a density solve of 2–3 iterations a step)
     about a draft too deep: 8.16 cm (+8.8 %)."""
     assert _draft(120, 500.0, density_error=1e-4) == pytest.approx(2 * HY * 0.5, rel=0.02)

@@ -275,11 +275,11 @@ impl<V: Vector> Solver<V> {
     /// Adams 2012, eq. 27, for a body at rest: its own acceleration is left out). The
     /// difference is known at the step's start, so it is given once, as a force: particle k by
     /// dt Σ_b Ψ_b (g·(x_k − x_b)/ρ_k) ∇W_kb, its body the opposite at b. Without it a floating
-    /// box rode 0.2–0.4 spacings high (2D, a 0.2 m box, 40 and 80 across; with it within 2 %
-    /// of Archimedes); left out on the box's vertical sides only, the offset came back: with
-    /// p_b = p_k the particle below a side's sample presses it harder than the one above, an
-    /// upward push on a wall that hydrostatics pushes only sideways. In pair order: the same
-    /// bits for any thread count.
+    /// box rode 0.1–0.2 spacings higher (2D, a 0.3 × 0.15 m box of 250 kg/m², 80 across: −6.1 %
+    /// of Archimedes' draft, −0.2 % with it); left out on the box's vertical sides only, most
+    /// of that came back: with p_b = p_k the particle below a side's sample presses it harder
+    /// than the one above, an upward push on a wall that hydrostatics pushes only sideways. In
+    /// pair order: the same bits for any thread count.
     pub(super) fn hydrostatic_boundary(&mut self, dt: Real) {
         let Some(mw) = self.moving.as_mut() else {
             return;
