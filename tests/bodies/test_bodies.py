@@ -86,11 +86,17 @@ def _bounce(e: float, shape: str, angle: float = 0.0) -> float:
     s.add(pc.Bodies("box", size=[(2.0, 0.1)], positions=[(0.0, -0.1)], kind="fixed", restitution=e, friction=0.0))
     box = s.add(pc.Bodies(shape, size=[(0.1, 0.1)] if shape == "box" else [0.1], positions=[(0.0, 0.6)], angles=angle,
                           restitution=e, friction=0.0))
+    return _rebound(s, box, 1)
+
+
+def _rebound(s: pc.Scene, body: pc.Bodies, axis: int) -> float:
+    """Steps `s` through `body`'s first bounce (its velocity along `axis`, up, turning from
+    down to up) and returns the speed it leaves with over the speed it came in with."""
     v_in = v_out = None
     for _ in range(2000):
-        v = float(box.velocities[0, 1])
+        v = float(body.velocities[0, axis])
         s.step(1)
-        w = float(box.velocities[0, 1])
+        w = float(body.velocities[0, axis])
         if v_in is None and v < 0 <= w:
             v_in = v
         if v_in is not None and w > 0:

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from scipy.special import ellipk
+from test_bodies import _rebound
 
 import physcore as pc
 
@@ -117,19 +118,7 @@ def test_restitution_of_a_box_dropped_on_its_corner(e):
     q = [*(np.sin(a / 2) * np.array([1.0, -1.0, 0.0]) / np.sqrt(2)), np.cos(a / 2)]
     box = s.add(pc.Bodies("box", size=[(0.1, 0.1, 0.1)], positions=[(0.0, 0.0, 0.6)], orientations=[q],
                           restitution=e, friction=0.0))
-    v_in = v_out = None
-    for _ in range(2000):
-        v = float(box.velocities[0, 2])
-        s.step(1)
-        w = float(box.velocities[0, 2])
-        if v_in is None and v < 0 <= w:
-            v_in = v
-        if v_in is not None and w > 0:
-            v_out = max(v_out or 0.0, w)
-        if v_in is not None and w < 0:
-            break
-    assert v_in is not None and v_out is not None
-    assert v_out / -v_in == pytest.approx(e, rel=0.02)
+    assert _rebound(s, box, 2) == pytest.approx(e, rel=0.02)
     assert np.abs(box.angular_velocities[0]).max() < 1e-9
 
 

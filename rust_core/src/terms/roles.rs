@@ -47,8 +47,8 @@ pub trait VelocityProjection<V: Vector> {
 /// bodies' motion; the fluid counts them in its density and divergence like its walls (but
 /// moving), and its pressure solve pushes the bodies as it pushes its particles, iteration by
 /// iteration (the solve sees the body's response, so a light body whose added mass exceeds its
-/// own is solved with the fluid, as in the strong coupling of Gissler et al., "Interlinked SPH pressure solvers for strong fluid-rigid
-/// coupling", ACM TOG 38 (2019) 5). After the step the coupling applies to each body the
+/// own is solved with the fluid, as in the strong coupling of Gissler et al., "Interlinked SPH
+/// pressure solvers for strong fluid-rigid coupling", ACM TOG 38 (2019) 5). After the step the coupling applies to each body the
 /// impulse the fluid gave it (paper eq. 10–11: equal and opposite to the fluid's).
 pub trait MovingBoundary<V: Vector> {
     /// The smoothing length h (m), rest density ρ0 (kg/m^dim), kernel, and particle spacing
@@ -73,7 +73,8 @@ pub trait MovingBoundary<V: Vector> {
 /// acceleration its own step gives it (gravity, m/s²), which the density solve adds as the fluid
 /// adds its particles' (the body's step then adds it for real); and the gravity of the scene
 /// (m/s², for every body, pushed or not), which sets the hydrostatic rise of the fluid's
-/// pressure from a particle to a sample of the body (Adami et al. 2012).
+/// pressure from a particle to a sample of the body (Adami et al. 2012: g − a_b, per body; the
+/// body's own acceleration a_b is not known before the solve and is left out).
 #[derive(Clone, Copy, Debug)]
 pub struct BodyMotion<V: Vector> {
     pub v: V,

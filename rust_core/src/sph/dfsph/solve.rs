@@ -288,7 +288,7 @@ impl<V: Vector> Solver<V> {
         let mut dp = std::mem::take(&mut mw.push);
         dp.clear();
         dp.resize(mw.bodies.len(), (V::ZERO, [0.0; 3]));
-        let mut c = [0.0; 3];
+        let mut xb = [0.0; 3];
         for &(kk, a, e) in &mw.runs {
             let kk = kk as usize;
             if !free[kk] || rho[kk] <= 0.0 {
@@ -297,10 +297,10 @@ impl<V: Vector> Solver<V> {
             let mut dv = V::ZERO;
             for &(_, b, g, _) in &mw.pairs[a as usize..e as usize] {
                 let b = b as usize;
-                for (d, cd) in c.iter_mut().enumerate().take(V::DIM) {
-                    *cd = mw.w.pos[d][b];
+                for (d, x) in xb.iter_mut().enumerate().take(V::DIM) {
+                    *x = mw.w.pos[d][b];
                 }
-                let r = xs[kk] - V::from_slice(&c[..V::DIM]);
+                let r = xs[kk] - V::from_slice(&xb[..V::DIM]);
                 let body = mw.body[b] as usize;
                 let step = g * (dt * mw.bodies[body].gravity.dot(r) / rho[kk]);
                 dv += step;
