@@ -80,6 +80,13 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn state_model_mut(&mut self) -> (&mut State<V>, &Model) {
         (&mut self.sys.state, &self.sys.model)
     }
+    /// Say that a coupling moved particles or changed their velocities between steps: the
+    /// integrator's cached forces (velocity Verlet's force at the step's end, kept for the
+    /// next step's first kick) were evaluated at the old state and are dropped, as the
+    /// constraint stage drops them (`Constraints::apply`).
+    pub fn state_changed(&mut self) {
+        self.integrator.reset();
+    }
     /// The potential energy at the positions now (J) of the terms whose potential is cheap to
     /// evaluate (`Term::cheap_potential`: gravity, springs, fields; not SPH, DEM contacts or
     /// N-body gravity): what a coupling that moves particles books of what its moves change.

@@ -866,5 +866,8 @@ impl<V: PVector> Coupling<V> for BodyContacts {
             raised = u_after - u_before;
         }
         bodies.d.coupling += e_before - e_after - raised;
+        if !moved.is_empty() {
+            particles.state_changed();
+        }
     }
 }
