@@ -145,8 +145,8 @@ def _pyramid(scene: Scene, rows: int, b: float, links: int, r: float, rho: float
     # A floor between two low walls, so that nothing leaves the picture.
     lo, hi = -1.6 * width, 1.9 * width
     wall = 0.15 * b
-    scene.add(Bodies("box", size=[(0.5 * (hi - lo) + 2 * wall, wall), (wall, 0.6 * width), (wall, 0.6 * width)],
-                     positions=[(0.5 * (lo + hi), -wall), (lo - wall, 0.6 * width), (hi + wall, 0.6 * width)], kind="fixed",
+    scene.add(Bodies("box", size=[(0.5 * (hi - lo) + 2 * wall, wall), (wall, 0.9 * width), (wall, 0.9 * width)],
+                     positions=[(0.5 * (lo + hi), -wall), (lo - wall, 0.9 * width), (hi + wall, 0.9 * width)], kind="fixed",
                      friction=0.6, restitution=0.0, color=_GROUND, name="floor"))
     pos = [((k - 0.5 * (rows - 1 - i)) * b, (i + 0.5) * b) for i in range(rows) for k in range(rows - i)]
     pos_a = np.array(pos) + np.array([0.5 * width, 0.0])

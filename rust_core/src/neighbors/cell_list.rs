@@ -203,8 +203,12 @@ impl CellList {
         let (xlo, xhi) = crate::par::reduce(n, ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), merge, bbox);
         let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
         for k in 0..V::DIM {
-            lo[k] = cell_coord(xlo[k], inv);
-            hi[k] = cell_coord(xhi[k], inv);
+            // An axis with every coordinate NaN (a diverging step) has an empty box (lo = +inf,
+            // hi = −inf): one cell, not a span of −2⁶⁴ that made the dense numbering's clamp panic.
+            if xlo[k] <= xhi[k] {
+                lo[k] = cell_coord(xlo[k], inv);
+                hi[k] = cell_coord(xhi[k], inv);
+            }
         }
         let mut dims = [1i64; 3];
         let mut cells: i128 = 1;
@@ -420,6 +424,19 @@ fn bucket(mode: Mode, c: [i64; 3]) -> usize {
 pub(super) mod tests {
     use super::*;
     use glam::DVec3;
+
+    /// Found by the hostile fuzz (`test_fuzz_add_fluid`): points whose every coordinate along an
+    /// axis is NaN gave the dense numbering an empty box and its clamp panicked (min > max).
+    #[test]
+    fn points_all_nan_along_an_axis_build_without_a_panic() {
+        let mut list = CellList::new(0.1, 3).unwrap();
+        let x = vec![DVec3::new(0.0, f64::NAN, 0.0), DVec3::new(0.05, f64::NAN, 0.3)];
+        list.build(&x);
+        assert_eq!(list.len(), 2);
+        let x = vec![DVec3::NAN; 3];
+        list.build(&x);
+        assert_eq!(list.len(), 3);
+    }
 
     /// A reproducible uniform draw in [0, 1) (also used by the pair query's tests).
     pub(in crate::neighbors) fn lcg(s: &mut u64) -> f64 {

@@ -1,6 +1,6 @@
 //! The rigid bodies of a 2D world (`rapier2d-f64`): what differs from 3D, then the system
 //! itself (`common.rs`, shared with `dim3`).
-use super::{finite_all, pack, particle_kinetic, take_len, unpack};
+use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
@@ -81,14 +81,15 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
         if let Some(j) = (1..hull.len()).find(|&j| hull[j] == hull[j - 1]) {
             return Err(invalid("vertices", format!("vertices {} and {j} coincide (a segment of no length)", j - 1)));
         }
-        return Ok(Some(ColliderBuilder::polyline(hull, None)));
+        resolvable(&v, 2)?;
+        return built("vertices", || Some(ColliderBuilder::polyline(hull, None)), "they make no polyline").map(Some);
     }
     if hull.len() < 3 {
         return Err(invalid("vertices", "a polygon needs at least 3 vertices"));
     }
-    ColliderBuilder::convex_hull(&hull)
+    resolvable(&v, 2)?;
+    built("vertices", || ColliderBuilder::convex_hull(&hull), "their convex hull is degenerate (all on one line)")
         .map(Some)
-        .ok_or_else(|| invalid("vertices", "their convex hull is degenerate (all on one line)"))
 }
 
 /// A hinge in the plane: it turns about z, whatever the axis.

@@ -1,7 +1,7 @@
 //! The rigid bodies of a 3D world (`rapier3d-f64`): what differs from 2D, then the system
 //! itself (`common.rs`, shared with `dim2`). Orientations are unit quaternions stored scalar
 //! last, (x, y, z, w), as scipy's `Rotation.from_quat` reads them.
-use super::{finite_all, pack, particle_kinetic, take_len, unpack};
+use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
@@ -91,9 +91,13 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
         if points.len() < 4 {
             return Err(invalid("vertices", "a hull needs at least 4 vertices"));
         }
-        return ColliderBuilder::convex_hull(&points)
-            .map(Some)
-            .ok_or_else(|| invalid("vertices", "their convex hull is degenerate (all on one plane)"));
+        resolvable(&v, 3)?;
+        return built(
+            "vertices",
+            || ColliderBuilder::convex_hull(&points),
+            "their convex hull is degenerate (all on one plane)",
+        )
+        .map(Some);
     }
     if kind != "fixed" {
         return Err(invalid("kind", "a triangle mesh has no volume and so no mass: make it kind=\"fixed\""));
@@ -107,9 +111,12 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
         return Err(invalid("triangles", format!("entry {j} ({}) is not a vertex index (0..{k})", idx[j])));
     }
     let tris: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
-    ColliderBuilder::trimesh(points, tris)
-        .map(Some)
-        .map_err(|e| invalid("triangles", format!("do not make a mesh: {e}")))
+    resolvable(&v, 3)?;
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| ColliderBuilder::trimesh(points, tris))) {
+        Ok(Ok(c)) => Ok(Some(c)),
+        Ok(Err(e)) => Err(invalid("triangles", format!("do not make a mesh: {e}"))),
+        Err(_) => Err(invalid("triangles", "do not make a mesh (the shape builder failed on them)")),
+    }
 }
 
 /// A hinge about the axis given (in each body's frame).

@@ -46,6 +46,38 @@ fn take_len(p: &mut Params, key: &str, len: usize) -> Result<Vec<Real>> {
     Ok(v)
 }
 
+/// Refuses `vertices` (`dim` reals a vertex) whose extent float64 cannot resolve: under 1e-150 m
+/// (squared lengths underflow) or under 1e-12 of their distance from the origin (the vertices
+/// coincide once rounded). parry's hull builders panicked on such input (a polygon of vertices
+/// 1e-200 apart, found by the hostile fuzz) instead of refusing it.
+fn resolvable(vertices: &[Real], dim: usize) -> Result<()> {
+    let (mut extent, mut far): (Real, Real) = (0.0, 0.0);
+    for k in 0..dim {
+        let axis = vertices.iter().skip(k).step_by(dim);
+        let (lo, hi) = axis.fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+        extent = extent.max(hi - lo);
+        far = far.max(lo.abs()).max(hi.abs());
+    }
+    if extent > 1e-150 && extent > 1e-12 * far {
+        Ok(())
+    } else {
+        Err(invalid(
+            "vertices",
+            format!("span {extent:.3e} m at {far:.3e} m from the origin: too small a shape for float64 to resolve"),
+        ))
+    }
+}
+
+/// A shape built by parry from vertices, a panic inside it (input it does not refuse) turned
+/// into the refusal of `key`.
+fn built<T>(key: &str, build: impl FnOnce() -> Option<T>, why: &str) -> Result<T> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(build)) {
+        Ok(Some(shape)) => Ok(shape),
+        Ok(None) => Err(invalid(key, why.to_string())),
+        Err(_) => Err(invalid(key, format!("{why} (the shape builder failed on them)"))),
+    }
+}
+
 /// Bytes packed 6 to a real (each an integer below 2⁴⁸, exact and finite), so that rapier's
 /// serialised state travels in the scene file's arrays of reals.
 fn pack(bytes: &[u8]) -> Vec<Real> {
