@@ -251,10 +251,20 @@ class Bodies(_BodiesPart):
         (a ``ValueError``) naming the argument: an unknown shape or kind, a shape of the other
         dimension, wrong shapes, non-finite values, sizes ≤ 0, density ≤ 0, friction < 0,
         restitution outside [0, 1], a zero quaternion, too few vertices or all on a line (a
-        plane in 3D), a mesh that is not fixed or indexes no vertex; a group whose dimension
-        is not the scene's.
+        plane in 3D), vertices whose extent float64 cannot resolve (under 1e-150 m, or under
+        1e-12 of their distance from the origin), a mesh that is not fixed or indexes no vertex;
+        a group whose dimension is not the scene's.
     InvalidTypeError
         (a ``TypeError``) a non-numeric argument.
+
+    Notes
+    -----
+    Bodies are stepped by rapier's own scheme (semi-implicit Euler with sequential-impulse
+    contacts and joints, Catto 2005), whatever the scene's ``integrator``: that names the
+    particles' integrator only, and gives the bodies the same bits under every name. rapier's
+    tolerances are in units of the smallest dynamic body's size L and its contact rates in
+    units of √(L / 1 m) s, so a scene scaled in size behaves the same (docs/guide/bodies.md,
+    "Units"); bodies are never held to a top speed.
     """
 
     part_kind: ClassVar[str] = "group"

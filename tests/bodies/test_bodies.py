@@ -429,3 +429,19 @@ def test_no_speed_cap_holds_a_fast_body_back():
     assert ball.velocities[0, 0] == pytest.approx(1000.0, rel=1e-12)
     assert ball.positions[0, 0] == pytest.approx(1000.0 * s.time, rel=1e-9)
     assert abs(s.energy_drift()) < 1e-12
+
+
+def test_the_scene_integrator_does_not_step_the_bodies_as_their_docstring_says():
+    """Bodies step by rapier's own scheme whatever the scene's integrator (the `Bodies`
+    docstring's Notes): the same bits under every particle integrator's name."""
+    assert "whatever the scene's ``integrator``" in pc.Bodies.__doc__
+    runs = []
+    for integrator in ("semi_implicit_euler", "verlet", "rk4", "yoshida4"):
+        s = pc.Scene(dim=2, integrator=integrator, dt=1 / 240)
+        s.add(pc.Gravity([0.0, -G]))
+        s.add(pc.Bodies("box", size=[(2.0, 0.1)], positions=[(0.0, -0.1)], kind="fixed"))
+        b = s.add(pc.Bodies("box", size=[(0.1, 0.1)], positions=[(0.0, 1.0)], angles=0.3, restitution=0.5))
+        s.step(240)
+        runs.append(np.concatenate([b.positions.ravel(), b.velocities.ravel(), b.angles]))
+    for r in runs[1:]:
+        np.testing.assert_array_equal(r, runs[0])
