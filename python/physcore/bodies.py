@@ -139,7 +139,7 @@ def _dim_of(shape: str, positions: Any, size: Any, orientations: Any, angles: An
     if positions is not None:
         w = _width(positions)
         if w is None:
-            raise InvalidInputError(f"positions: expected shape (N, 2) or (N, 3), got {np.shape(positions)}")
+            raise InvalidInputError(f"positions: expected shape (N, 2) or (N, 3), got {_check.array('positions', positions).shape}")
         return w
     if shape in _SHAPES_3D or orientations is not None:
         return 3
@@ -392,9 +392,10 @@ class Bodies(_BodiesPart):
             self.start_turns = _unit_quaternions(q)  # (N, 4) in 3D, angles (N,) in 2D
             ang_width = 3
         vel = a["velocities"]
-        self.start_velocities = _rows("velocities", vel if np.ndim(vel) else np.full((n, dim), float(_check.real("velocities", vel))), n, dim)
+        vel_rank = _check.array("velocities", vel).ndim  # a ragged list refused by name
+        self.start_velocities = _rows("velocities", vel if vel_rank else np.full((n, dim), float(_check.real("velocities", vel))), n, dim)
         om = a["angular_velocities"]
-        if ang_width == 3 and not np.ndim(om):
+        if ang_width == 3 and not _check.array("angular_velocities", om).ndim:
             om = np.full((n, 3), float(_check.real("angular_velocities", om)))
         self.start_angular = _rows("angular_velocities", om, n, ang_width)
         with np.errstate(all="ignore"):

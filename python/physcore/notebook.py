@@ -475,6 +475,11 @@ def widget(
     if not isinstance(name, str) or not name:
         raise InvalidTypeError(f"name: expected a non-empty str, got {name!r}")
     settings = _settings(scene, size, view)
+    # A frame's buffers (colour, depth, the antialiased canvas at twice the size, the encoded
+    # image): about 64 bytes a pixel, refused up front rather than as a MemoryError out of the
+    # first frame's message handler (widget(size=(40000, 30000)), issue 64's hostile run).
+    w, h = settings["size"]
+    _check.memory("size", 64.0 * w * h, f"a {w}x{h} widget frame")
     fps = _check_fps(scene_defaults(scene).get("fps", 30.0) if fps is None else fps)
     preview = _check.real("preview", preview)
     if not (preview >= 0 and math.isfinite(preview)):

@@ -445,3 +445,20 @@ def test_the_scene_integrator_does_not_step_the_bodies_as_their_docstring_says()
         runs.append(np.concatenate([b.positions.ravel(), b.velocities.ravel(), b.angles]))
     for r in runs[1:]:
         np.testing.assert_array_equal(r, runs[0])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_shapes_float64_cannot_resolve_are_refused_by_name_not_a_panic(dim):
+    """Found by the hostile fuzz (`test_fuzz_scene_functions`: tumbling_boxes(box=1e-200)):
+    parry's hull builder panicked on vertices 1e-200 apart (PanicException) instead of refusing
+    them. The core refuses an extent under 1e-150 m, or under 1e-12 of the distance from the
+    origin, naming vertices, before anything changes."""
+    s = pc.Scene(dim=dim, dt=1 / 240)
+    unit = np.eye(dim)
+    for tiny in (np.vstack([np.zeros(dim), 1e-200 * unit]), np.vstack([np.zeros(dim), 1e-14 * unit]) + 100.0):
+        shape = "polygon" if dim == 2 else "hull"
+        with pytest.raises(pc.InvalidInputError, match="vertices"):
+            s.add(pc.Bodies(shape, vertices=tiny, positions=[np.zeros(dim)]))
+        assert not s.bodies
+    with pytest.raises(pc.InvalidInputError, match="box"):
+        pc.scenes.tumbling_boxes(box=1e-200)

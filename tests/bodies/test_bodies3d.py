@@ -235,6 +235,10 @@ def test_cloth_hung_from_a_kinematic_bar_is_carried_along():
          "triangles"),
         ({"shape": "hull", "positions": [(0, 0)], "vertices": [(0, 0), (1, 0), (0, 1)]}, "shape"),
         ({"shape": "ball", "positions": [(0, 0, 0)], "angular_velocities": [1.0, 2.0]}, "angular_velocities"),
+        # Ragged lists (issue 64's hostile run: numpy's bare ValueError, naming nothing).
+        ({"shape": "ball", "positions": [(0, 0, 0), (1, 2)]}, "positions"),
+        ({"shape": "ball", "positions": [(0, 0, 0), (1, 2, 3)], "velocities": [(0, 0, 0), (1,)]}, "velocities"),
+        ({"shape": "ball", "positions": [(0, 0, 0)], "angular_velocities": [(0, 0), (1,)]}, "angular_velocities"),
     ],
 )
 def test_bad_bodies_are_refused_by_name(kwargs, arg):

@@ -413,6 +413,11 @@ def test_bad_arguments_are_refused_naming_them():
         pc.widget(scene, playing="yes")
     with pytest.raises(ValueError, match="size"):
         pc.widget(scene, size=(3, 3))
+    # size=(40000, 30000) was accepted, then its first frame raised MemoryError out of the
+    # message handler (issue 64); now refused up front, above half the physical memory (the
+    # largest size, 275 GB of buffers, on any machine of under 550 GB).
+    with pytest.raises(pc.InvalidInputError, match="size: a 65535x65535 widget frame would need"):
+        pc.widget(scene, size=(65535, 65535))
 
 
 def test_frames_per_second_of_the_kernels_side():
