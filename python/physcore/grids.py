@@ -548,9 +548,20 @@ class GrayScott(Grid):
     def seed(self, seed: int = 0, *, squares: int = 1, size: float = 0.08, noise: float = 0.01) -> None:
         """Pearson's start: u = 1, v = 0, with ``squares`` squares of side ``size`` (a fraction of
         the domain) set to u = ½, v = ¼, placed at random (seeded; the first one at the centre),
-        and ±``noise`` uniform noise on both (Pearson: 1 %)."""
+        and ±``noise`` uniform noise on both (Pearson: 1 %).
+
+        Raises
+        ------
+        InvalidTypeError
+            ``seed`` or ``squares`` not an int, ``size`` or ``noise`` not a real number.
+        InvalidInputError
+            ``seed`` < 0, ``squares`` outside 0..10,000, ``size`` outside (0, 1] or ``noise``
+            negative or not finite; nothing is changed.
+        """
         rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
         squares = _check.int_in_range("squares", squares, 0, 10_000)
+        size = _check.float_in_range("size", size, 0.0, 1.0, lo_open=True, unit="a fraction of the domain")
+        noise = _check.nonneg_float("noise", noise)
         u = np.ones(self.shape)
         v = np.zeros(self.shape)
         side = [max(1, int(round(size * n))) for n in self.shape]
