@@ -3,7 +3,7 @@
 //! Every kind takes `shape` (cell counts, x first), `dx` (m) and `edges` (one rule per face,
 //! "x-,x+,y-,y+[,z-,z+]", each `fixed`, `free` or `periodic`). Arrays over cells are in the
 //! grid's layout (x fastest). Lists of sources come as flat arrays plus a count per source.
-use super::fluid::{Advection, FluidConfig, Source, StableFluid};
+use super::fluid::{Advection, FluidConfig, Projection, Source, StableFluid};
 use super::gray_scott::{GrayScottConfig, GrayScottSystem};
 use super::wave::{Drop, Oscillator, WaveConfig, WaveSystem};
 use super::{Edge, Grid};
@@ -89,6 +89,12 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
                 ambient_temperature: p.number("ambient_temperature")?,
                 vorticity: p.number("vorticity")?,
                 advection: Advection::by_name(advection)?,
+                // Absent (a caller from before issue 64): Chorin's, as such a caller's runs were.
+                projection: if p.has("projection") {
+                    Projection::by_name(p.text("projection")?)?
+                } else {
+                    Projection::Chorin
+                },
                 tolerance: p.number("tolerance")?,
                 max_iterations: p.count("max_iterations", 1 << 30)?,
                 no_slip: p.flag("no_slip")?,
