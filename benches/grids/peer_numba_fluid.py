@@ -381,6 +381,7 @@ def main() -> None:
     scene = pc.Scene(2, dt=dt)
     src = pc.Source(density=1.0, temperature=1.0, velocity=(0.0, vent[2]), center=vent[0], radius=vent[1])
     f = scene.add(pc.StableFluid((n, n), dx, buoyancy=(0.0, 4.0), vorticity=0.3, advection="semi_lagrangian",
+                                 projection="chorin",  # the peer's step: the pressure only at the end
                                  sources=[src], tracers=0, tolerance=1e-6, name="smoke"))
     peer = NumbaSmoke(n, dx, dt, vent, 0.0, 4.0, 0.3)
     its_pc, t_pc, t_nb, res_nb = [], [], [], []

@@ -138,7 +138,7 @@ _GRID_RECORD: dict[str, dict[str, str]] = {
         "lid": "optional_number", "mask": "bool", "tracers": "int", "cfl": "number", "sources": "sources",
     },
 }
-_GRID_RECORD_OPTIONAL: dict[str, dict[str, str]] = {"stable_fluid": {"inflow": "optional_number"}}
+_GRID_RECORD_OPTIONAL: dict[str, dict[str, str]] = {"stable_fluid": {"inflow": "optional_number", "projection": "str"}}
 #: Entries of a grid's lists of sources, by position: kind of value (see _grid_record).
 _GRID_ENTRIES: dict[str, tuple[tuple[str, str], ...]] = {
     "drops": (("t", "number"), ("center", "vector"), ("radius", "number"), ("amplitude", "number")),

@@ -201,7 +201,8 @@ class Flow(Part):
 
     @points.setter
     def points(self, values: Any) -> None:
-        a = np.asarray(values, dtype=np.float64)
+        # Named errors, as the constructor's (not numpy's bare ValueError for "abc" or ragged rows).
+        a = _check.real_array("points", values).astype(np.float64)
         if a.shape != (self.n, self.dim):
             raise InvalidInputError(f"points: expected shape {(self.n, self.dim)}, got {a.shape}")
         if not np.isfinite(a).all():

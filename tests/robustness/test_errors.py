@@ -400,3 +400,45 @@ def test_spring_divergence_advice_names_only_remedies_the_scene_has():
     t = re.search(r"\(t = ([^)]*)\)", msg).group(1)
     assert re.fullmatch(r"\d+(\.\d+)? s", t), msg  # e.g. "0.002 s", never "2.000000e-3 s"
     assert float(t[:-2]) == pytest.approx(info.value.time, rel=1e-3)
+
+
+def test_flow_points_setter_names_the_argument_and_changes_nothing():
+    # Issue 64 item 8: ``flow.points = 'abc'`` (and ragged rows) raised numpy's bare ValueError,
+    # naming nothing. Now as the constructor: a type error for what is not numbers, an input
+    # error for the rest, each starting with "points:", and the points kept.
+    scene = pc.Scene(3)
+    flow = scene.add(pc.Flow("lorenz", points=4, seed=1))
+    before = flow.points
+    for bad, kind in [
+        ("abc", pc.InvalidTypeError),
+        ([[1.0, 2.0, 3.0]] * 3 + [[1.0, 2.0]], pc.InvalidInputError),
+        ([[1.0, 2.0, "x"]] * 4, pc.InvalidTypeError),
+        (True, pc.InvalidTypeError),
+        (np.zeros((4, 2)), pc.InvalidInputError),
+        (np.full((4, 3), np.nan), pc.InvalidInputError),
+    ]:
+        with pytest.raises(kind, match="^points: "):
+            flow.points = bad
+    assert np.array_equal(flow.points, before)
+    flow.points = before + 1.0  # a good value still goes through
+    assert np.array_equal(flow.points, before + 1.0)
+
+
+def test_gray_scott_seed_names_a_bad_size_or_noise_and_changes_nothing():
+    # Issue 64 item 8: ``GrayScott.seed(size=nan)`` raised Python's bare "cannot convert float
+    # NaN to integer"; a size above 1 silently wrote a square larger than the grid, and a NaN
+    # noise reached the field's setter, which named "u".
+    scene = pc.Scene(2)
+    gs = scene.add(pc.GrayScott((32, 32), preset="spots"))
+    gs.seed(1)
+    u, v = gs.u, gs.v
+    for bad in [dict(size=math.nan), dict(size=math.inf), dict(size=0.0), dict(size=1.5), dict(size=-0.1),
+                dict(noise=math.nan), dict(noise=math.inf), dict(noise=-0.01)]:
+        (name,) = bad
+        with pytest.raises(pc.InvalidInputError, match=f"^{name}: "):
+            gs.seed(2, **bad)
+    with pytest.raises(pc.InvalidTypeError, match="^size: "):
+        gs.seed(2, size="big")
+    assert np.array_equal(gs.u, u) and np.array_equal(gs.v, v)
+    gs.seed(2, size=1.0, noise=0.0)  # the whole domain, no noise: u = ½, v = ¼ everywhere
+    assert np.all(gs.u == 0.5) and np.all(gs.v == 0.25)

@@ -370,3 +370,38 @@ def test_every_system_kind_refuses_memory_with_out_of_memory_error_never_an_abor
     code += 'assert REFUSED > 0, "no call was refused: the cap never bit"\nprint("ok")\n'
     out = _child(code, env=FIXED_MMAP)
     assert "BAD" not in out and out.strip().endswith("ok"), out
+
+
+def test_a_wave_with_a_mask_and_absorbing_faces_refuses_memory_at_every_cap_never_an_abort():
+    """Issue 64 item 8: ``Wave(mask=...)`` aborted the process (SIGABRT: "memory allocation of
+    134217728 bytes failed") under a cap of the process's use + 780 MB at 4096² with absorbing
+    faces: ``WaveSystem::new`` collected the mask's per-cell factors infallibly once u, u_prev
+    and the damping had fit (the ladder above, doubling, stepped over that window). Here the cap
+    rises 32 MiB at a time until the grid fits: each rung refused with OutOfMemoryError naming
+    the call, never an abort."""
+    out = _child(LADDER + """
+n = 3000  # 72 MB a buffer: u, u_prev, the damping, the mask's factors
+mask = np.zeros((n, n), bool)
+mask[1000:1100, :1400] = True
+w = pc.Wave((n, n), spacing=0.01, mask=mask, absorbing=True)
+scene = pc.Scene(2)
+mib = 32
+while True:
+    cap(mib)
+    try:
+        scene.add(w)
+    except MemoryError as e:
+        lift()
+        assert isinstance(e, pc.OutOfMemoryError), repr(e)
+        assert str(e).startswith(("add: needs ", "add_wave: needs ")), str(e)
+        REFUSED += 1
+        mib += 32
+        assert mib <= 4096, str(e)
+        continue
+    lift()
+    break
+assert REFUSED >= 4 and len(scene.grids) == 1, REFUSED
+scene.step(1)
+print(f"ok: {REFUSED} refusals, added with {mib} MiB")
+""", env=FIXED_MMAP)
+    assert out.strip().startswith("ok"), out

@@ -3,10 +3,11 @@
 //! Every kind takes `shape` (cell counts, x first), `dx` (m) and `edges` (one rule per face,
 //! "x-,x+,y-,y+[,z-,z+]", each `fixed`, `free` or `periodic`). Arrays over cells are in the
 //! grid's layout (x fastest). Lists of sources come as flat arrays plus a count per source.
-use super::fluid::{Advection, FluidConfig, Source, StableFluid};
+use super::fluid::{Advection, FluidConfig, Projection, Source, StableFluid};
 use super::gray_scott::{GrayScottConfig, GrayScottSystem};
 use super::wave::{Drop, Oscillator, WaveConfig, WaveSystem};
 use super::{Edge, Grid};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::systems::System;
 use crate::terms::registry::Params;
@@ -35,7 +36,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             for (f, a) in absorbing.iter().enumerate() {
                 c.absorbing[f] = *a != 0.0;
             }
-            c.mask = p.take_floats("mask").ok().map(|m| m.iter().map(|&x| x != 0.0).collect());
+            c.mask = p.take_floats("mask").ok().map(|m| flags("add_wave", &m)).transpose()?;
             let t = p.take_floats("drop_t")?;
             let amp = p.take_floats("drop_amplitude")?;
             let shapes = profiles(&mut p, "drop", t.len())?;
@@ -88,15 +89,18 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
                 ambient_temperature: p.number("ambient_temperature")?,
                 vorticity: p.number("vorticity")?,
                 advection: Advection::by_name(advection)?,
+                // Absent (a caller from before issue 64): Chorin's, as such a caller's runs were.
+                projection: if p.has("projection") {
+                    Projection::by_name(p.text("projection")?)?
+                } else {
+                    Projection::Chorin
+                },
                 tolerance: p.number("tolerance")?,
                 max_iterations: p.count("max_iterations", 1 << 30)?,
                 no_slip: p.flag("no_slip")?,
                 lid: if p.flag("has_lid")? { Some(p.number("lid")?) } else { None },
                 inflow: if p.flag("has_inflow")? { Some(p.number("inflow")?) } else { None },
-                obstacles: p
-                    .take_floats("obstacles")
-                    .map(|m| m.iter().map(|&x| x != 0.0).collect())
-                    .unwrap_or_default(),
+                obstacles: p.take_floats("obstacles").ok().map(|m| flags("fluid", &m)).transpose()?.unwrap_or_default(),
                 sources: Vec::new(),
                 n_tracers: p.count("n_tracers", 1 << 26)?,
                 cfl: p.number("cfl")?,
@@ -122,6 +126,12 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
         }
         _ => Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
     }
+}
+
+/// A 1/0 array over the cells as flags, allocated fallibly (`what`: the call that needs it).
+fn flags(what: &'static str, m: &[Real]) -> Result<Vec<bool>> {
+    let need = Need::new(what, Need::bytes_of::<bool>(m.len()), format!("a mask of {} cells", count(m.len() as u128)));
+    need.collect(m.iter().map(|&x| x != 0.0))
 }
 
 /// The step limits of a grid of `kind` from the same parameters `build` takes (only the grid and

@@ -237,7 +237,7 @@ impl WaveSystem {
         let u_prev = need.filled(n, 0.0)?;
         let (nx, rows) = (g.n[0], g.rows());
         let mut gamma_cells = Vec::new();
-        let mut row_in_layer = vec![false; rows];
+        let mut row_in_layer = need.filled(rows, false)?;
         let mut x_layer = (0, nx);
         if cfg.absorbing.iter().any(|&a| a) {
             gamma_cells = need.filled(n, cfg.gamma)?;
@@ -264,9 +264,11 @@ impl WaveSystem {
             }
             x_layer = (if a[0] { cfg.layer } else { 0 }, if a[1] { nx - cfg.layer } else { nx });
         }
-        let (mut keep, mut row_masked) = (Vec::new(), vec![false; rows]);
+        let (mut keep, mut row_masked) = (Vec::new(), need.filled(rows, false)?);
         if let Some(m) = &cfg.mask {
-            keep = m.iter().map(|&b| if b { 0.0 } else { 1.0 }).collect();
+            // Fallible, as every buffer sized by the grid: an infallible collect here aborted
+            // the process under a memory cap (issue 64 item 8).
+            keep = need.collect(m.iter().map(|&b| if b { 0.0 } else { 1.0 }))?;
             for (r, flag) in row_masked.iter_mut().enumerate() {
                 *flag = m[r * nx..(r + 1) * nx].iter().any(|&b| b);
             }
@@ -282,8 +284,8 @@ impl WaveSystem {
             x_layer,
             keep,
             row_masked,
-            src_prev: vec![0.0; src],
-            partials: vec![(0.0, 0.0); rows],
+            src_prev: need.filled(src, 0.0)?,
+            partials: need.filled(rows, (0.0, 0.0))?,
             spare: super::Spare::default(),
             fused: wave_fused::Scratch::default(),
             cfg,

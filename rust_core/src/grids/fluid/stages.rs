@@ -156,7 +156,18 @@ impl StableFluid {
         }
     }
 
-    /// Advects the velocity by itself.
+    /// The share of the last step's pressure that acts at the departure point of this step's
+    /// characteristics and is kept as the start of the new pressure (see [`Projection`]).
+    pub(super) fn departure_share(&self) -> Real {
+        match self.cfg.projection {
+            Projection::Chorin => 0.0,
+            Projection::Incremental => 0.5,
+        }
+    }
+
+    /// Advects the velocity by itself. With the incremental projection, what is advected is
+    /// u − ½dt·∇p (p the last step's pressure, on the open faces, with the projection's own
+    /// differences), while the paths are traced through u itself (divergence-free).
     pub(super) fn advect_velocity(&mut self, dt: Real) {
         let (lu, lv, _) = self.lays();
         let (nx, ny, dx) = (self.nx, self.ny, self.dx);
@@ -164,19 +175,31 @@ impl StableFluid {
         let mc = self.cfg.advection == Advection::MacCormack;
         let au = Active { lay: lu, kind: Node::U, a0: 0, a1: nx + 1, b0: 1, b1: ny + 1, mask: &self.u_open, fill: 0.0 };
         let av = Active { lay: lv, kind: Node::V, a0: 1, a1: nx + 1, b0: 0, b1: ny + 1, mask: &self.v_open, fill: 0.0 };
+        let share = self.departure_share();
         let vel = self.vel(&self.s.u, &self.s.v);
+        // The fields to advect: u and v, or u − ½dt·∇p in the projection's scratch (`rhs`, `q`:
+        // (nx+2)(ny+2) values each, more than either face layout; the projection refills them).
+        let (src_u, src_v): (&[Real], &[Real]) = if share > 0.0 {
+            let (ku, kv) = (&mut self.rhs[..lu.w * lu.h], &mut self.q[..lv.w * lv.h]);
+            kick_faces(&self.s, [&self.u_open, &self.v_open], [nx, ny], share * dt / dx, [&mut *ku, &mut *kv]);
+            fill_u_ghosts(ku, nx, ny, bounds);
+            fill_v_ghosts(kv, nx, ny, bounds);
+            (ku, kv)
+        } else {
+            (&self.s.u, &self.s.v)
+        };
         if mc {
             let hat = &mut self.hat[..lu.w * lu.h];
-            advect_faces(&vel, dx, &au, &self.s.u, None, dt, hat);
+            advect_faces(&vel, dx, &au, src_u, None, dt, hat);
             fill_u_ghosts(hat, nx, ny, bounds);
-            advect_faces(&vel, dx, &au, &self.s.u, Some(hat), dt, &mut self.u2);
+            advect_faces(&vel, dx, &au, src_u, Some(hat), dt, &mut self.u2);
             let hat = &mut self.hat[..lv.w * lv.h];
-            advect_faces(&vel, dx, &av, &self.s.v, None, dt, hat);
+            advect_faces(&vel, dx, &av, src_v, None, dt, hat);
             fill_v_ghosts(hat, nx, ny, bounds);
-            advect_faces(&vel, dx, &av, &self.s.v, Some(hat), dt, &mut self.v2);
+            advect_faces(&vel, dx, &av, src_v, Some(hat), dt, &mut self.v2);
         } else {
-            advect_faces(&vel, dx, &au, &self.s.u, None, dt, &mut self.u2);
-            advect_faces(&vel, dx, &av, &self.s.v, None, dt, &mut self.v2);
+            advect_faces(&vel, dx, &au, src_u, None, dt, &mut self.u2);
+            advect_faces(&vel, dx, &av, src_v, None, dt, &mut self.v2);
         }
         std::mem::swap(&mut self.s.u, &mut self.u2);
         std::mem::swap(&mut self.s.v, &mut self.v2);
@@ -248,6 +271,13 @@ impl StableFluid {
     /// Makes the velocity divergence-free: solves ∇²p = ∇·u/dt (Neumann at walls and
     /// obstacles), u −= dt·∇p. The pressure is kept as the next solve's start. `None` if stopped.
     pub fn project(&mut self, dt: Real, stop: &AtomicBool) -> Option<Solve> {
+        self.project_keeping(dt, 0.0, stop)
+    }
+
+    /// `project`, where a share `keep` of the last pressure p already acted at the departure
+    /// points (`advect_velocity`): solves for π (started at (1 − keep)·p, which is exact for a
+    /// steady pressure) and keeps keep·p + π as the pressure.
+    pub(super) fn project_keeping(&mut self, dt: Real, keep: Real, stop: &AtomicBool) -> Option<Solve> {
         let (nx, ny, dx) = (self.nx, self.ny, self.dx);
         let w = nx + 2;
         // rhs = −(unnormalised divergence); q = p·dt/dx (the solve's unknown).
@@ -265,8 +295,9 @@ impl StableFluid {
             });
         }
         let scale = dt / dx;
+        let start = (1.0 - keep) * scale;
         for (q, p) in self.q.iter_mut().zip(&self.s.pressure) {
-            *q = p * scale;
+            *q = p * start;
         }
         let solve = self.pressure.solve(&mut self.q, &self.rhs, self.cfg.tolerance, self.cfg.max_iterations, stop)?;
         {
@@ -294,7 +325,7 @@ impl StableFluid {
         }
         let inv = 1.0 / scale;
         for (p, q) in self.s.pressure.iter_mut().zip(&self.q) {
-            *p = q * inv;
+            *p = keep * *p + q * inv;
         }
         self.s.books.pressure = solve;
         self.fill_ghosts_uv();
@@ -332,4 +363,34 @@ impl StableFluid {
         }
         self.s.tracers = tr;
     }
+}
+
+/// ku = u − h·Δp and kv = v − h·Δp on the open faces of `s` (h = share·dt/dx; Δp the
+/// difference of the padded pressure across each face, as `project` takes it); ghosts are
+/// left to the caller.
+fn kick_faces(s: &State, [u_open, v_open]: [&[Real]; 2], [nx, ny]: [usize; 2], h: Real, [ku, kv]: [&mut [Real]; 2]) {
+    let (u, v, p) = (&s.u, &s.v, &s.pressure);
+    let (wu, w) = (nx + 1, nx + 2);
+    each_row(ku, wu, |b, row| {
+        let src = &u[wu * b..wu * (b + 1)];
+        if b == 0 || b > ny {
+            row.copy_from_slice(src);
+            return;
+        }
+        let (m, pr) = (&u_open[wu * b..wu * (b + 1)], &p[w * b..w * (b + 1)]);
+        for i in 0..wu {
+            row[i] = src[i] - m[i] * h * (pr[i + 1] - pr[i]);
+        }
+    });
+    each_row(kv, w, |j, row| {
+        let src = &v[w * j..w * (j + 1)];
+        if j == 0 || j == ny {
+            row.copy_from_slice(src);
+            return;
+        }
+        let (m, ps, pn) = (&v_open[w * j..w * (j + 1)], &p[w * j..w * (j + 1)], &p[w * (j + 1)..w * (j + 2)]);
+        for i in 0..w {
+            row[i] = src[i] - m[i] * h * (pn[i] - ps[i]);
+        }
+    });
 }
