@@ -57,7 +57,9 @@ def _grids_scene() -> pc.Scene:
     s.add(pc.Springs([0], [1], stiffness=10.0, damping=0.1))
     s.add(pc.Wave((8, 6), spacing=0.1, c=0.5, damping=0.2, drops=[pc.Drop(0.0, (0.4, 0.3), radius=0.1, amplitude=0.01)], name="pond"))
     s.add(pc.GrayScott((8, 8), spacing=0.05, preset="spots", name="gs"))
-    s.add(pc.StableFluid((8, 8), spacing=0.1, nu=1e-3, buoyancy=(0.0, 0.5), name="smoke",
+    # projection="chorin": the old file's fluid stepped by Chorin's splitting, as a file without
+    # the "projection" key still loads (the default became "incremental" in issue 64).
+    s.add(pc.StableFluid((8, 8), spacing=0.1, nu=1e-3, buoyancy=(0.0, 0.5), name="smoke", projection="chorin",
                          sources=[pc.Source(density=1.0, temperature=1.0, velocity=(0.0, 0.2), center=(0.4, 0.2), radius=0.15)]))
     s.step(3)
     return s
