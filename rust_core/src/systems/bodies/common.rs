@@ -311,13 +311,10 @@ impl Bodies {
     fn scale_time(&mut self) {
         let second = self.params.length_unit.sqrt();
         let d = IntegrationParameters::default();
-        let mut soft = d.contact_softness;
-        soft.natural_frequency = d.contact_softness.natural_frequency / second;
-        self.params.contact_softness = soft;
-        let mut soft = d.static_contact_softness;
-        soft.natural_frequency = d.static_contact_softness.natural_frequency / second;
-        self.params.static_contact_softness = soft;
-        self.params.normalized_max_corrective_velocity = d.normalized_max_corrective_velocity / second;
+        let (p, [soft, fixed]) = (&mut self.params, [d.contact_softness, d.static_contact_softness]);
+        p.contact_softness.natural_frequency = soft.natural_frequency / second;
+        p.static_contact_softness.natural_frequency = fixed.natural_frequency / second;
+        p.normalized_max_corrective_velocity = d.normalized_max_corrective_velocity / second;
     }
 
     /// The length rapier's tolerances are measured in (its `length_unit`, m): the diameter of

@@ -82,14 +82,16 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
             return Err(invalid("vertices", format!("vertices {} and {j} coincide (a segment of no length)", j - 1)));
         }
         resolvable(&v, 2)?;
-        return built("vertices", || Some(ColliderBuilder::polyline(hull, None)), "they make no polyline").map(Some);
+        return built("vertices", || Ok(ColliderBuilder::polyline(hull, None))).map(Some);
     }
     if hull.len() < 3 {
         return Err(invalid("vertices", "a polygon needs at least 3 vertices"));
     }
     resolvable(&v, 2)?;
-    built("vertices", || ColliderBuilder::convex_hull(&hull), "their convex hull is degenerate (all on one line)")
-        .map(Some)
+    built("vertices", || {
+        ColliderBuilder::convex_hull(&hull).ok_or_else(|| "their convex hull is degenerate (all on one line)".into())
+    })
+    .map(Some)
 }
 
 /// A hinge in the plane: it turns about z, whatever the axis.

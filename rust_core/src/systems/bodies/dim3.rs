@@ -92,11 +92,10 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
             return Err(invalid("vertices", "a hull needs at least 4 vertices"));
         }
         resolvable(&v, 3)?;
-        return built(
-            "vertices",
-            || ColliderBuilder::convex_hull(&points),
-            "their convex hull is degenerate (all on one plane)",
-        )
+        return built("vertices", || {
+            ColliderBuilder::convex_hull(&points)
+                .ok_or_else(|| "their convex hull is degenerate (all on one plane)".into())
+        })
         .map(Some);
     }
     if kind != "fixed" {
@@ -112,11 +111,8 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
     }
     let tris: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
     resolvable(&v, 3)?;
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| ColliderBuilder::trimesh(points, tris))) {
-        Ok(Ok(c)) => Ok(Some(c)),
-        Ok(Err(e)) => Err(invalid("triangles", format!("do not make a mesh: {e}"))),
-        Err(_) => Err(invalid("triangles", "do not make a mesh (the shape builder failed on them)")),
-    }
+    built("triangles", || ColliderBuilder::trimesh(points, tris).map_err(|e| format!("do not make a mesh: {e}")))
+        .map(Some)
 }
 
 /// A hinge about the axis given (in each body's frame).

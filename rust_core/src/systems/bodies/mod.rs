@@ -68,13 +68,13 @@ fn resolvable(vertices: &[Real], dim: usize) -> Result<()> {
     }
 }
 
-/// A shape built by parry from vertices, a panic inside it (input it does not refuse) turned
-/// into the refusal of `key`.
-fn built<T>(key: &str, build: impl FnOnce() -> Option<T>, why: &str) -> Result<T> {
+/// A shape built by parry (`Err`: why it refuses the input), a panic inside it (input it does
+/// not refuse) turned into a refusal too, naming `key`.
+fn built<T>(key: &str, build: impl FnOnce() -> std::result::Result<T, String>) -> Result<T> {
     match std::panic::catch_unwind(std::panic::AssertUnwindSafe(build)) {
-        Ok(Some(shape)) => Ok(shape),
-        Ok(None) => Err(invalid(key, why.to_string())),
-        Err(_) => Err(invalid(key, format!("{why} (the shape builder failed on them)"))),
+        Ok(Ok(shape)) => Ok(shape),
+        Ok(Err(why)) => Err(invalid(key, why)),
+        Err(_) => Err(invalid(key, "the shape builder failed on them")),
     }
 }
 
