@@ -78,6 +78,27 @@ use crate::vector::Real;
 use std::sync::atomic::{AtomicBool, Ordering};
 mod stages;
 
+/// `NAMES`, `by_name` (an unknown name is an error naming `arg`) and `name` for a unit enum
+/// whose variants the user picks by name.
+macro_rules! named {
+    ($ty:ident, $arg:literal, $($v:ident => $n:literal),+) => {
+        impl $ty {
+            pub const NAMES: &'static [&'static str] = &[$($n),+];
+            pub fn by_name(s: &str) -> Result<Self> {
+                match s {
+                    $($n => Ok(Self::$v),)+
+                    _ => Err(invalid($arg, format!("unknown scheme {s:?}; valid names: {}", Self::NAMES.join(", ")))),
+                }
+            }
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(Self::$v => $n,)+
+                }
+            }
+        }
+    };
+}
+
 /// How quantities are carried by the flow.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Advection {
@@ -88,22 +109,7 @@ pub enum Advection {
     MacCormack,
 }
 
-impl Advection {
-    pub const NAMES: [&'static str; 2] = ["semi_lagrangian", "maccormack"];
-    pub fn by_name(s: &str) -> Result<Self> {
-        match s {
-            "semi_lagrangian" => Ok(Self::SemiLagrangian),
-            "maccormack" => Ok(Self::MacCormack),
-            _ => Err(invalid("advection", format!("unknown scheme {s:?}; valid names: {}", Self::NAMES.join(", ")))),
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::SemiLagrangian => Self::NAMES[0],
-            Self::MacCormack => Self::NAMES[1],
-        }
-    }
-}
+named!(Advection, "advection", SemiLagrangian => "semi_lagrangian", MacCormack => "maccormack");
 
 /// How the pressure enters a step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,22 +131,7 @@ pub enum Projection {
     Incremental,
 }
 
-impl Projection {
-    pub const NAMES: [&'static str; 2] = ["chorin", "incremental"];
-    pub fn by_name(s: &str) -> Result<Self> {
-        match s {
-            "chorin" => Ok(Self::Chorin),
-            "incremental" => Ok(Self::Incremental),
-            _ => Err(invalid("projection", format!("unknown scheme {s:?}; valid names: {}", Self::NAMES.join(", ")))),
-        }
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Chorin => Self::NAMES[0],
-            Self::Incremental => Self::NAMES[1],
-        }
-    }
-}
+named!(Projection, "projection", Chorin => "chorin", Incremental => "incremental");
 
 /// An inflow: each step, each of its cells c with weight w (0..=1) has density, temperature and
 /// the velocity of its four faces blended towards the source's values: q += w·(q_source − q).
