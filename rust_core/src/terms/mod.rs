@@ -302,9 +302,10 @@ impl<V: Vector> ForceSet<V> {
     /// Runs the velocity projections at `stage` (`VelocityProjection::project`), in term order,
     /// booking the kinetic energy each removes as its term's dissipation.
     pub fn project_velocities(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) {
+        let g = self.g;
         for &k in &self.projections {
             if let Some(p) = self.terms[k].as_projection() {
-                self.dissipated[k] += p.project(stage, x, v, model, dt);
+                self.dissipated[k] += p.project(stage, x, v, model, dt, g);
             }
         }
     }

@@ -35,8 +35,10 @@ pub trait VelocityProjection<V: Vector> {
     /// a step of `dt` (s): `Projection::Divergence` at the step's start, before the forces are
     /// evaluated, and `Projection::Density` after the kick, before the drift (positions are the
     /// step's start in both). Returns the kinetic energy the projection removed (J; negative if
-    /// it added some), which the integrator books as the term's dissipation.
-    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real;
+    /// it added some), which the integrator books as the term's dissipation. `g` is the step's
+    /// uniform acceleration (world gravity, m/s²), which walls need for their hydrostatic
+    /// pressure (DFSPH).
+    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real, g: V) -> Real;
 }
 
 /// A fluid that rigid bodies meet through boundary particles sampled on their surfaces

@@ -16,11 +16,14 @@
 //! 5. drift x += dt v*.
 //!
 //! Both solvers update all velocities at once (Jacobi) with
-//! v_i −= dt [Σ_j m_j (κ_i/ρ_i + κ_j/ρ_j) ∇W_ij + (κ_i/ρ_i) Σ_b Ψ_b ∇W_ib]
-//! (paper eq. 10–11, walls as Akinci 2012 eq. 10), and iterate until the mean error over the
+//! v_i −= dt [Σ_j m_j (κ_i/ρ_i + κ_j/ρ_j) ∇W_ij + 2 (κ_i/ρ_i) Σ_b Ψ_b ∇W_ib]
+//! (paper eq. 10–11; a wall sample mirrors its particle's pressure, p_b = p_i, `Solver::apply`,
+//! plus, once a step before the density solve, its hydrostatic part ρ_i g·(x_b − x_i), Adami,
+//! Hu & Adams 2012, eq. 27: `hydrostatic_walls`, `hydrostatic_boundary`), and iterate until the mean error over the
 //! fluid's particles is below the tolerance: mean(ρ* − ρ0)₊/ρ0 ≤ `density_tol` (paper: 0.01–0.1 %),
 //! mean (Dρ/Dt)₊·dt/ρ0 ≤ `divergence_tol`. Warm starts (paper §4.4): each solve starts from
-//! half the previous step's summed κ/ρ (`WARM_START`; κ/ρ = p/ρ² does not scale with dt) on
+//! a share of the previous step's summed κ/ρ (`WARM_START`, `WARM_START_DENSITY`; κ/ρ = p/ρ²
+//! does not scale with dt) on
 //! the particles that compress at the solve's start, and adds it to this step's sum: the
 //! density solve applies it before its iterations, the divergence solve takes the larger of it
 //! and the Jacobi κ/ρ in its first iteration (`WarmStart`: two passes fewer). Those sums
@@ -35,15 +38,16 @@
 //! Surface tension and adhesion (optional): Akinci, Akinci & Teschner (2013), `sph::surface`,
 //! from the stored pairs and the step's normals; their work on the fluid (surface energy
 //! released, or stored when negative) is booked with the dissipation, so the books balance.
-//! The term books its forces' work over the kick, −Σ_i F_i·(v_i + dt a_i/2) with a_i its own
-//! acceleration: the kick's change of kinetic energy by these forces, which the density solve's
-//! books then see (exact but for the cross terms m dt² a_i·a_other with the kick's other
-//! forces, which vanish for pair forces under uniform gravity).
 //!
-//! Energy books: an incompressible fluid stores no internal energy (`potential` is 0). The
-//! projections remove kinetic energy (they are inelastic: the velocity components that would
-//! compress are taken out); what each removes is measured (the change of Σ ½ m |v|² across it)
-//! and booked as the term's dissipation, with the viscosity's.
+//! Energy books: an incompressible fluid stores no internal energy (`potential` is 0). Every
+//! velocity change the term makes in a step (the two solves' and its own forces' kick) is
+//! booked as dissipation by its work over the step's mean velocity, −Σ_i m_i Δv_i·(v₀ + v₁)/2
+//! (`Solver::books_step`). With the drift x₁ = x₀ + dt v₁ the books then move by exactly
+//! semi-implicit Euler's own error, −½ dt Σ_i m_i g·(v₁ − v₀) a step: zero at rest, first order
+//! in dt. (Their change of ½ m|v|² instead counted the ½ m (g dt)² the kick gives a resting
+//! particle, which the density solve takes out, as dissipation: M g² dt/2 a second.) Together
+//! the projections remove energy (they are inelastic); the density solve alone may do positive
+//! work, as the pressure that spreads a collapsing column does.
 //!
 //! Neighbours are stored per step, unlike the WCSPH passes: the solvers visit the same pairs
 //! 2 × (iterations) times a step, so each pair's m_j ∇W_ij is computed once (with the density
@@ -99,6 +103,19 @@ use pairs::*;
 /// 25 J that the divergence solve then took out (front 8 % fast); a half sum keeps both solves
 /// dissipative and cut the density iterations from 3.3 to 2.3 a step against no warm start.
 const WARM_START: Real = 0.5;
+
+/// The density solve's share, below `WARM_START`: the one-sided solve cannot take back a warm
+/// push that overshoots, and on a resting pool (0.5 × 0.5 m, 24 × 24, α = 0.05, 8 s, three
+/// perturbed starts) a larger share set off a jitter near the floor that the solve then fed:
+/// late rms speed 0.045–0.049 m/s at 0.5 against 0.017 at 0.4 and 0.014 at 0.35, with 12.8,
+/// 17.5 and 20.5 density iterations a step (the threshold lies between 0.4 and 0.5).
+const WARM_START_DENSITY: Real = 0.4;
+
+/// The force criterion's share of the CFL number: dt ≤ (`FORCE_CFL` λ) √(h/|g|), 0.15 √(h/|g|)
+/// at the default λ = 0.4 (Monaghan's 0.25 let the same pool's floor rows jitter at 0.04–0.08
+/// m/s; 0.15: 0.017), and scaled with λ so that the CFL number alone sets how fine the steps
+/// are, on a resting fluid as on a fast one (the drift of a dam break then converges with it).
+const FORCE_CFL: Real = 0.375;
 
 /// Where a solve applies its warm start (`Dfsph::solve`).
 ///
@@ -187,6 +204,9 @@ struct Site<V: Vector> {
     gs: V,
     /// Whether its neighbourhood is full enough for the divergence solve.
     inner: bool,
+    /// Σ_b Ψ_b (g·(x_i − x_b)) ∇W_ib over the static walls, kg/s² (m^(1−dim)): the hydrostatic
+    /// part of their mirrored pressure (`Solver::hydrostatic_walls`).
+    hw: V,
     /// Σ_b Ψ_b v_b·∇W_ib over the moving walls (the bodies' boundary), kg/(m^dim s): their
     /// share of Dρ_i/Dt is Σ_b Ψ_b (v_i − v_b)·∇W_ib = v_i·(their part of gw) − wv.
     wv: Real,
@@ -309,6 +329,17 @@ pub(super) struct Solver<V: Vector> {
     surface_p: Vec<Real>,
     /// The step of the kick that follows the divergence solve (set by it), s.
     kick_dt: Real,
+    /// The step's uniform acceleration (world gravity, m/s²), set by each projection.
+    gravity: V,
+    /// Sorted, for the step's books (`Solver::books_step`): the velocities at the step's
+    /// start, the divergence solve's change of them, and the velocities after the kick; and
+    /// whether a divergence stage opened the step.
+    v_start: Vec<V>,
+    dv_div: Vec<V>,
+    v_kick: Vec<V>,
+    /// The term's own acceleration (viscosity, surface forces) evaluated inside the step.
+    a_forces: Vec<V>,
+    open: bool,
     books: Books,
     /// Wall time (neighbours + pairs, solver iterations, the rest), s.
     clock: [f64; 3],
@@ -432,6 +463,12 @@ impl<V: Vector> Solver<V> {
             normals: Vec::new(),
             surface_p: Vec::new(),
             kick_dt: 0.0,
+            gravity: V::ZERO,
+            v_start: Vec::new(),
+            dv_div: Vec::new(),
+            v_kick: Vec::new(),
+            a_forces: Vec::new(),
+            open: false,
             books: Books::default(),
             clock: [0.0; 3],
             stop: Stop::default(),
@@ -517,6 +554,10 @@ impl<V: Vector> Solver<V> {
         }
         // Written below only where the surface forces are on (then it holds n values).
         let sp = SyncPtr(self.surface_p.as_mut_ptr());
+        if self.open {
+            self.a_forces.clear();
+            self.a_forces.resize(self.n, V::ZERO);
+        }
         let power = if visc == 0.0 && !surf.tension() && !surf.adhesion() {
             if write == Write::Overwrite {
                 for m in &self.members {
@@ -530,6 +571,8 @@ impl<V: Vector> Solver<V> {
             let (first, to_scene, vc) = (self.first, &self.to_scene, &self.visc);
             let eps = 0.01 * h * h;
             let kick_dt = self.kick_dt;
+            let open = self.open;
+            let av = SyncPtr(self.a_forces.as_mut_ptr());
             par::sum(self.n, 0.0, |ks| {
                 let mut power = 0.0;
                 for i in ks {
@@ -561,7 +604,11 @@ impl<V: Vector> Solver<V> {
                     // at v alone the kick's ½ m dt² |a|², which the density solve then takes
                     // out and books, went unbooked: a drop held by its surface tension drifted
                     // its books by 1.5 % per ms, 2D, 2 400 particles.)
-                    if self.free[i] {
+                    if open {
+                        // Booked with the solves over the step's mean velocity (`books_step`).
+                        // SAFETY: each sorted slot i is written by this one iteration.
+                        unsafe { *av.get().add(i) = a };
+                    } else if self.free[i] {
                         power -= m[i] * a.dot(vi + a * (0.5 * kick_dt));
                     }
                     // SAFETY: `order` is a permutation: each particle is written by one slot.
@@ -589,6 +636,8 @@ impl<V: Vector> Solver<V> {
             + self.pairs.iter().map(Pairs::bytes).sum::<usize>()
             + (self.xs.capacity() + self.vs.capacity() + self.normals.capacity() + self.xg.capacity())
                 * std::mem::size_of::<V>()
+            + (self.v_start.capacity() + self.dv_div.capacity() + self.v_kick.capacity() + self.a_forces.capacity())
+                * std::mem::size_of::<V>()
             + self.sites.capacity() * std::mem::size_of::<Site<V>>()
             + (self.m.capacity() + self.k.capacity() + self.ksum.capacity() + self.surface_p.capacity()) * 8
             + (self.rho.capacity() + self.xc.iter().map(Vec::capacity).sum::<usize>()) * 8
@@ -602,12 +651,15 @@ impl<V: Vector> Solver<V> {
         let vb = std::mem::size_of::<V>();
         let several = !self.to_scene.is_empty();
         // Several members: the gathered positions, masses and α c0 too.
-        let per = 2 * vb + std::mem::size_of::<Site<V>>() + (4 + V::DIM) * 8 + if several { vb + 24 } else { 0 };
+        let per = 6 * vb + std::mem::size_of::<Site<V>>() + (4 + V::DIM) * 8 + if several { vb + 24 } else { 0 };
         let bytes = (n as u128) * per as u128 + (V::DIM * PAD * 8) as u128;
         let need = Need::new("step", bytes, format!("the DFSPH buffers of {} particles", count(n as u128)));
         need.check()?;
         need.reserve(&mut self.xs, n)?;
         need.reserve(&mut self.vs, n)?;
+        for a in [&mut self.v_start, &mut self.dv_div, &mut self.v_kick, &mut self.a_forces] {
+            need.reserve(a, n)?;
+        }
         need.reserve(&mut self.sites, n)?;
         for a in [&mut self.m, &mut self.k, &mut self.ksum, &mut self.rho] {
             need.reserve(a, n)?;
@@ -668,9 +720,13 @@ impl<V: Vector> Solver<V> {
         self.built = false;
     }
 
-    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
+    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real, g: V) -> Real {
         if self.n == 0 || self.stop.is_set() {
             return 0.0;
+        }
+        if (0..V::DIM).any(|c| g.comp(c).to_bits() != self.gravity.comp(c).to_bits()) {
+            self.gravity = g;
+            self.built = false;
         }
         if stage == Projection::Divergence || !self.built {
             self.build(x, model);
@@ -758,7 +814,7 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         let h = self.p.h;
         let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
         let viscous = super::resolve::dfsph_viscous(h, V::DIM, self.p.alpha, self.p.c0);
-        let force = if g > 0.0 { 0.25 * (h / g).sqrt() } else { f64::INFINITY };
+        let force = if g > 0.0 { FORCE_CFL * self.p.cfl * (h / g).sqrt() } else { f64::INFINITY };
         let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
         let dt = cfl.min(viscous).min(force).min(capillary);
         dt.is_finite().then_some(dt)
@@ -896,11 +952,11 @@ impl<V: Vector> MovingBoundary<V> for Dfsph<V> {
 
 impl<V: Vector> VelocityProjection<V> for Dfsph<V> {
     /// The solve's first fluid runs the solve for all its fluids, and books what it removes.
-    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real) -> Real {
+    fn project(&mut self, stage: Projection, x: &[V], v: &mut [V], model: &Model, dt: Real, g: V) -> Real {
         if self.who != 0 {
             return 0.0;
         }
-        self.solver().project(stage, x, v, model, dt)
+        self.solver().project(stage, x, v, model, dt, g)
     }
 }
 

@@ -82,6 +82,8 @@ pub(super) struct BuildChunk<'a, V: Vector, K> {
     m: &'a [Real],
     h: Real,
     n_min: u32,
+    /// The step's gravity (m/s²), for the walls' hydrostatic pressure (`Site::hw`).
+    g: V,
     /// The chunk's first sorted particle.
     s: usize,
     pairs: &'a mut Pairs<V>,
@@ -94,7 +96,7 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
     type Output = ();
     #[inline(always)]
     fn run<S: Simd>(self, simd: S) {
-        let BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, s, pairs, sites, rho: rho_out, .. } = self;
+        let BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, g, s, pairs, sites, rho: rho_out, .. } = self;
         let (sigma, reach) = (K::sigma(h, V::DIM), 4.0 * h * h);
         let gscale = sigma / (h * h);
         let (w, flat, lanes) = (f64::walls(walls), V::flat(xs), P::<S, f64>::lanes());
@@ -186,7 +188,7 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
                 q += cnt;
             }
             count += (end - base) as u32;
-            let mut gw = V::ZERO;
+            let (mut gw, mut hw) = (V::ZERO, V::ZERO);
             for run in wall.iter() {
                 for b in run {
                     let d = xk - wall_at::<V>(w, b);
@@ -194,7 +196,9 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
                     if r2 < reach {
                         let q = r2.sqrt() / h;
                         rho += w.psi[b] * sigma * K::w(q);
-                        gw += d * (w.psi[b] * gscale * K::g(q));
+                        let gb = d * (w.psi[b] * gscale * K::g(q));
+                        gw += gb;
+                        hw += gb * g.dot(d);
                         count += 1;
                     }
                 }
@@ -218,7 +222,8 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
             // pressure), so Dρ_i/Dt changes by −dt κ_i/ρ_i D_i with this D_i (taken no
             // smaller than the neighbours' part, which is > 0, where a wall makes it so).
             let dd = ((sum + gw * 2.0).dot(sum + gw) + sq).max(sq);
-            *site = Site { dinv: if dd > 0.0 { 1.0 / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min, wv: 0.0 };
+            *site =
+                Site { dinv: if dd > 0.0 { 1.0 / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min, hw, wv: 0.0 };
             *rho_out = rho;
         }
         pairs.start.push(top as u32);
@@ -300,10 +305,10 @@ impl<V: Vector> Solver<V> {
         self.rho.resize(n, 0.0);
         let (grid, xs, xc, m, walls) = (&self.grid, &self.xs, &self.xc, &self.m, &self.walls);
         let moving = self.moving.as_ref();
-        let n_min = self.n_min;
+        let (n_min, g) = (self.n_min, self.gravity);
         let chunk = |c: usize, pairs: &mut Pairs<V>, sites: &mut [Site<V>], rho: &mut [Real]| {
             let (s, _k) = (c * CHUNK, PhantomData::<K>);
-            simd::dispatch(level, BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, s, pairs, sites, rho, _k });
+            simd::dispatch(level, BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, g, s, pairs, sites, rho, _k });
         };
         let (pairs, sites, rho) = (&mut self.pairs, &mut self.sites, &mut self.rho);
         if par::fork_if(n, || {

@@ -154,7 +154,7 @@ fn a_density_solve_reaches_its_tolerance() {
         let (m, model, mut t) = term(n, &w, dx);
         let mut v = v0.clone();
         t.build(&x, &model);
-        let removed = t.project(Projection::Density, &x, &mut v, &model, dt);
+        let removed = t.project(Projection::Density, &x, &mut v, &model, dt, DVec2::ZERO);
         let ke = |v: &[DVec2]| v.iter().map(|u| 0.5 * m * u.length_squared()).sum::<f64>();
         assert!((removed - (ke(&v0) - ke(&v))).abs() <= 1e-9 * ke(&v0).max(1e-9));
         assert!(t.books.density_iterations >= 2 && t.books.unconverged == 0);
@@ -280,7 +280,7 @@ fn fluids_with_the_same_settings_join_one_solve() {
         let mut f = vec![DVec2::ZERO; n];
         let mut e = 0.0;
         for t in terms.iter_mut() {
-            e += VelocityProjection::project(*t, Projection::Divergence, &x, &mut v, &model, dt);
+            e += VelocityProjection::project(*t, Projection::Divergence, &x, &mut v, &model, dt, DVec2::ZERO);
         }
         for (k, t) in terms.iter_mut().enumerate() {
             let write = if k == 0 { Write::Overwrite } else { Write::Add };
@@ -290,7 +290,7 @@ fn fluids_with_the_same_settings_join_one_solve() {
             *vi += *fi * (dt / m);
         }
         for t in terms.iter_mut() {
-            e += VelocityProjection::project(*t, Projection::Density, &x, &mut v, &model, dt);
+            e += VelocityProjection::project(*t, Projection::Density, &x, &mut v, &model, dt, DVec2::ZERO);
         }
         (v, f, e)
     };
