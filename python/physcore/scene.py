@@ -13,6 +13,7 @@ import math
 import os
 import threading
 import warnings
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -199,20 +200,64 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     return a
 
 
-class _SceneHost:
-    """What a live handle (a grid, a flow) holds of the scene it joined: exactly the calls it
-    makes later (see :class:`physcore._parts.Host`)."""
+class _Session:
+    """The core simulation and its one-thread-at-a-time rule: what a scene's calls and its live
+    parts' calls share. A part holds this, not the scene, so that it works on after its scene is
+    dropped without the scene and its parts forming a reference cycle (one is freed only by the
+    cyclic garbage collector, which counts Python objects, not the memory the core holds:
+    rebuilding a scene 20 times in a loop held 643 MB)."""
 
-    __slots__ = ("_scene",)
+    __slots__ = ("busy", "lock", "sim")
 
-    def __init__(self, scene: Scene) -> None:
-        self._scene = scene
+    def __init__(self, sim: _core.Simulation) -> None:
+        self.sim = sim
+        # Taken without waiting by the calls that release the GIL for long; `busy` names the
+        # thread inside one.
+        self.lock = threading.Lock()
+        self.busy: int | None = None
+
+    def checked(self) -> _core.Simulation:
+        """The simulation, unless another thread is inside a call (then SceneBusyError, instead
+        of pyo3's bare "Already mutably borrowed" RuntimeError)."""
+        busy = self.busy
+        if busy is not None and busy != threading.get_ident():
+            raise SceneBusyError(
+                "this Scene is being stepped by another thread; use a Scene from one thread at a "
+                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
+            )
+        return self.sim
 
     def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
-        return self._scene._exclusive(call)
+        """Runs ``call(sim)`` as the only user (see ``Scene._exclusive``)."""
+        sim = self.checked()
+        if not self.lock.acquire(blocking=False):
+            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
+        self.busy = threading.get_ident()
+        try:
+            return call(sim)
+        finally:
+            self.busy = None
+            self.lock.release()
+
+
+class _SceneHost:
+    """What a live handle (a grid, a flow, bodies) holds of the scene it joined: exactly the
+    calls it makes later (see :class:`physcore._parts.Host`): the scene's session, and the scene
+    itself only weakly (`_Session`)."""
+
+    __slots__ = ("_scene", "_session")
+
+    def __init__(self, scene: Scene) -> None:
+        self._session = scene._session
+        self._scene = weakref.ref(scene)
+
+    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
+        return self._session.exclusive(call)
 
     def energy_changed(self) -> None:
-        self._scene._e0 = None
+        scene = self._scene()
+        if scene is not None:
+            scene._e0 = None
 
 
 class Scene:
@@ -337,11 +382,8 @@ class Scene:
         sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
-        # One thread at a time (see `_sim`): the lock is taken without waiting by the calls
-        # that release the GIL for long, and _busy names the thread inside one.
-        self._lock = threading.Lock()
-        self._busy: int | None = None
-        self._sim = sim
+        # One thread at a time (`_Session`).
+        self._session = _Session(sim)
         self._threads = threads
         #: Everything the scene holds, as stored, in the order added (see physcore._parts).
         self._parts: list[Part] = []
@@ -357,34 +399,30 @@ class Scene:
     # ---------------------------------------------------------------- threads
     @property
     def _sim(self) -> _core.Simulation:
-        # A Scene is not shared between threads while one of them steps it: every use from
-        # another thread then raises SceneBusyError, instead of pyo3's bare "Already mutably
-        # borrowed" RuntimeError.
-        busy = self._busy
-        if busy is not None and busy != threading.get_ident():
-            raise SceneBusyError(
-                "this Scene is being stepped by another thread; use a Scene from one thread at a "
-                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
-            )
-        return self._raw_sim
+        # A Scene is not shared between threads while one of them steps it (`_Session`).
+        return self._session.checked()
 
-    @_sim.setter
-    def _sim(self, sim: _core.Simulation) -> None:
-        self._raw_sim = sim
+    @property
+    def _raw_sim(self) -> _core.Simulation:
+        return self._session.sim
+
+    @property
+    def _lock(self) -> threading.Lock:
+        return self._session.lock
+
+    @property
+    def _busy(self) -> int | None:
+        return self._session.busy
+
+    @_busy.setter
+    def _busy(self, who: int | None) -> None:
+        self._session.busy = who
 
     def _exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
         """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
         only user of the scene; another thread's use meanwhile raises :class:`SceneBusyError`
         (so does this call, if another thread is inside one)."""
-        sim = self._sim
-        if not self._lock.acquire(blocking=False):
-            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
-        self._busy = threading.get_ident()
-        try:
-            return call(sim)
-        finally:
-            self._busy = None
-            self._lock.release()
+        return self._session.exclusive(call)
 
     # ---------------------------------------------------------------- building
     def add_particles(

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 
 import physcore as pc
@@ -405,3 +406,46 @@ scene.step(1)
 print(f"ok: {REFUSED} refusals, added with {mib} MiB")
 """, env=FIXED_MMAP)
     assert out.strip().startswith("ok"), out
+
+
+def test_every_default_scene_is_freed_without_the_cyclic_collector():
+    """A dropped scene is freed by reference counting alone (issue "Physics you can trust, round
+    2", item 9): its parts hold it by a weak reference, not a cycle, which only the cyclic
+    collector frees, and it counts Python objects, not the memory the core holds (rebuilding a
+    scene 20 times in a loop held 643 MB). Every registered scene, built and stepped."""
+    import gc
+    import weakref
+
+    held = []
+    gc.disable()
+    try:
+        for name, build in pc.scenes.REGISTRY.items():
+            scene = build()
+            scene.advance(1e-3)
+            ref = weakref.ref(scene)
+            del scene
+            if ref() is not None:
+                held.append(name)
+    finally:
+        gc.enable()
+    assert held == []
+
+
+def test_a_part_works_on_after_its_scene_is_dropped():
+    """A part holds the scene's session (the core and its lock), not the scene: the scene is
+    freed when dropped, and the part still reads and writes its bodies (a function may build a
+    scene and return one of its parts)."""
+    import gc
+    import weakref
+
+    gc.disable()
+    try:
+        scene = pc.Scene(2)
+        box = scene.add(pc.Bodies("box", size=[(0.1, 0.1)], positions=[(0.0, 0.0)]))
+        ref = weakref.ref(scene)
+        del scene
+        assert ref() is None
+    finally:
+        gc.enable()
+    box.positions = [(1.0, 2.0)]
+    assert np.array_equal(box.positions, [[1.0, 2.0]])
