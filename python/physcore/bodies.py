@@ -252,8 +252,9 @@ class Bodies(_BodiesPart):
         dimension, wrong shapes, non-finite values, sizes ≤ 0, density ≤ 0, friction < 0,
         restitution outside [0, 1], a zero quaternion, too few vertices or all on a line (a
         plane in 3D), vertices whose extent float64 cannot resolve (under 1e-150 m, or under
-        1e-12 of their distance from the origin), a mesh that is not fixed or indexes no vertex;
-        a group whose dimension is not the scene's.
+        1e-12 of their distance from the origin), a mass or moment of inertia beyond float64 or
+        below 1e-280 (SI), a mesh that is not fixed or indexes no vertex; a group whose
+        dimension is not the scene's.
     InvalidTypeError
         (a ``TypeError``) a non-numeric argument.
 
@@ -404,6 +405,16 @@ class Bodies(_BodiesPart):
             if not (np.isfinite(mass * reach * reach) and np.isfinite(np.abs(x).max() + 2 * reach)):
                 raise InvalidInputError(f"size, density: a body of {reach:g} m at {self.density:g} kg/m^{dim} has a mass "
                                         "or moment of inertia beyond float64")
+            # The other end: a mass or inertia that underflows (to 0, it hangs in the air and
+            # others pass through it), or whose inverse, which the contact solver multiplies,
+            # is near overflow: both below 1e-280 (a lower bound from the smallest size; a
+            # polygon's or mesh's vertices are checked for their resolution instead).
+            lo = float(np.abs(self.size).min()) if self.vertices is None else 1.0
+            mass_lo = self.density * float(np.power(2.0 * lo, dim))
+            if self.vertices is None and not (mass_lo >= 1e-280 and mass_lo * lo * lo >= 1e-280):
+                raise InvalidInputError(f"size, density: a body of {lo:g} m at {self.density:g} kg/m^{dim} has a mass "
+                                        "or moment of inertia below 1e-280 (SI): it underflows, or its inverse "
+                                        "overflows in the contact solver")
         self.color = _color(self._color_arg, shape)
         if self.color.ndim == 2 and self.color.shape[0] != n:
             raise InvalidInputError(f"color: {self.color.shape[0]} colours for {n} bodies")

@@ -240,6 +240,9 @@ def test_rollback_on_divergence_restores_the_bodies():
         ({"shape": "box", "kind": "floppy"}, "kind"),
         ({"shape": "polygon", "vertices": [(0, 0), (1, 1), (2, 2)]}, "vertices"),
         ({"shape": "polygon"}, "vertices"),
+        # A mass that underflows would hang in the air and let others pass through it.
+        ({"shape": "ball", "size": [1e-120]}, "size, density"),
+        ({"shape": "box", "size": [(0.1, 0.1)], "density": 1e-300}, "size, density"),
     ],
 )
 def test_bad_bodies_are_refused_by_name(kwargs, arg):
