@@ -325,12 +325,25 @@ class Batch:
             message names the member).
         """
         where = str(path)
+
+        def stored(z: zipfile.ZipFile, name: str) -> bytes:
+            # `save` stores every member: a compressed one is refused before it is inflated (a
+            # 1 MB file could otherwise claim gigabytes), as Scene.load refuses one.
+            info = z.getinfo(name)
+            if info.compress_type != zipfile.ZIP_STORED or info.compress_size != info.file_size:
+                raise SceneFileError(where, name, "compressed (a batch file's members are stored, as save writes them)")
+            return z.read(name)
+
         try:
             with zipfile.ZipFile(path) as z:
                 try:
-                    meta = json.loads(z.read("batch.json"))
-                except (KeyError, ValueError) as e:
-                    raise SceneFileError(where, "batch.json", f"missing or not JSON ({type(e).__name__})") from None
+                    raw = stored(z, "batch.json")
+                except KeyError:
+                    raise SceneFileError(where, "batch.json", "missing") from None
+                try:
+                    meta = json.loads(raw)
+                except (ValueError, RecursionError) as e:  # RecursionError: nesting too deep
+                    raise SceneFileError(where, "batch.json", f"not JSON ({type(e).__name__})") from None
                 if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION:
                     fmt = meta.get("format") if isinstance(meta, dict) else meta
                     raise SceneFileError(where, "batch.json.format", f"unsupported batch format {fmt!r} (this physcore reads {FORMAT_VERSION})")
@@ -340,7 +353,7 @@ class Batch:
                 blobs = []
                 for k in range(count):
                     try:
-                        blobs.append(z.read(f"member{k}.npz"))
+                        blobs.append(stored(z, f"member{k}.npz"))
                     except KeyError:
                         raise SceneFileError(where, f"member{k}.npz", "missing") from None
         except (OSError, zipfile.BadZipFile) as e:
@@ -354,7 +367,10 @@ class Batch:
         threads = meta.get("threads")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise SceneFileError(where, "batch.json.threads", f"must be null or a count >= 1, got {threads!r}")
-        batch = cls(members, threads=threads)
+        try:
+            batch = cls(members, threads=threads)
+        except InvalidInputError as e:  # members of different structures: not a batch save wrote
+            raise SceneFileError(where, "batch.json.members", str(e)) from None
         diverged = meta.get("diverged") or {}
         if not isinstance(diverged, dict):
             raise SceneFileError(where, "batch.json.diverged", "must be an object")

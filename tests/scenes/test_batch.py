@@ -205,6 +205,32 @@ def test_a_broken_batch_file_is_refused_naming_what(tmp_path):
         pc.Batch.load(tmp_path / "bad.batch")
 
 
+def test_hostile_batch_files_raise_scene_file_error(tmp_path):
+    """What the hostile run found (issue "Physics you can trust, round 2", item 9): a compressed
+    member (inflated whole before: a 1 MB file peaked at 2 GB), JSON nested past the recursion
+    limit (a bare RecursionError), members of two different scenes (InvalidInputError): each a
+    SceneFileError naming the field."""
+    import zipfile
+
+    path = pc.Batch(_fan(2)).save(tmp_path / "ok.batch")
+    with zipfile.ZipFile(path) as z:
+        parts = {n: z.read(n) for n in z.namelist()}
+
+    def write(name, entries, deflated=()):
+        with zipfile.ZipFile(tmp_path / name, "w") as out:
+            for n, b in entries.items():
+                out.writestr(n, b, zipfile.ZIP_DEFLATED if n in deflated else zipfile.ZIP_STORED)
+        return tmp_path / name
+
+    with pytest.raises(pc.SceneFileError, match="member0.npz: compressed"):
+        pc.Batch.load(write("zipped.batch", parts, deflated={"member0.npz"}))
+    with pytest.raises(pc.SceneFileError, match="batch.json: not JSON"):
+        pc.Batch.load(write("deep.batch", {**parts, "batch.json": b"[" * 100_000 + b"]" * 100_000}))
+    other = pc.scenes.kepler().__reduce__()[1][0]
+    with pytest.raises(pc.SceneFileError, match="batch.json.members: .*differs"):
+        pc.Batch.load(write("mixed.batch", {**parts, "member1.npz": other}))
+
+
 def test_bad_input_is_refused_by_name_before_anything_steps():
     a, b = _fan(2)
     with pytest.raises(pc.InvalidInputError, match="at least one"):
