@@ -31,37 +31,12 @@ use crate::integrators::yoshida::{W0, W1};
 use crate::simd::{self, Kernel, Level, Simd, P};
 use crate::terms::pairwise_small::{small_sum, Lane, SMALL};
 use crate::vector::{Real, Vector};
+use crate::systems::particles::{Scheme, Shape};
 use crate::world::{Checkpoint, World};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// The integrators the fused kernel runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Scheme {
-    /// Velocity Verlet (`integrators::VelocityVerlet`).
-    Verlet,
-    /// Yoshida's fourth order: three velocity Verlet substeps (`integrators::Yoshida4`).
-    Yoshida4,
-}
-
-impl Scheme {
-    fn evals_per_step(self) -> u64 {
-        match self {
-            Scheme::Verlet => 1,
-            Scheme::Yoshida4 => 3,
-        }
-    }
-}
-
-/// What members of one fused chunk share: particle count, dimension and integrator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub struct Shape {
-    pub n: usize,
-    pub dim: usize,
-    pub scheme: Scheme,
-}
 
 /// Worlds with their index in the call.
 type Members<'a, V> = Vec<(usize, &'a mut World<V>)>;
@@ -290,7 +265,7 @@ impl Pack {
                 .forces
                 .terms
                 .iter()
-                .find_map(|t| t.small_pairwise(&sys.model, n))
+                .find_map(|t| t.as_fused().and_then(|f| f.small_pairwise(&sys.model, n)))
                 .expect("a fused member has its small pairwise sum");
             // The force cache, read in place (a fused member's integrator keeps one).
             let cache = integrator.cache_ref().map(|(f, _)| f);

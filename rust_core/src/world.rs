@@ -283,7 +283,7 @@ impl<V: Vector> World<V> {
 
     /// The shape of this world for the batch's fused kernel (`crate::batch`): particles alone
     /// (no other system, no coupling) that the kernel can step with the same bits.
-    pub(crate) fn fused_shape(&self) -> Option<crate::batch::Shape> {
+    pub(crate) fn fused_shape(&self) -> Option<crate::systems::particles::Shape> {
         (self.others.is_empty() && self.couplings.is_empty()).then(|| self.particles.fused_shape()).flatten()
     }
 

@@ -17,7 +17,7 @@ use crate::simd::{self, Level};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{BodyMotion, MovingBoundary, Term, Write};
+use crate::terms::{BodyMotion, Diagnostics, MovingBoundary, Scratch, Setting, Term, Traits, Write};
 use crate::vector::{Real, Vector};
 use std::ops::Range;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -139,11 +139,17 @@ impl<V: Vector> Sph<V> {
 }
 
 impl<V: Vector> Term<V> for Sph<V> {
-    fn cheap_potential(&self) -> bool {
-        false
-    }
     fn name(&self) -> &str {
         &self.name
+    }
+
+    /// Its pairs with another fluid of the group dissipate if either fluid is viscous.
+    fn traits(&self) -> Traits<V> {
+        Traits {
+            cheap_potential: false,
+            min_particles: self.first + self.n,
+            ..Traits::dissipating(self.group().dissipative())
+        }
     }
 
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
@@ -159,35 +165,26 @@ impl<V: Vector> Term<V> for Sph<V> {
         Some(par::sum(self.n, 0.0, |r| r.map(|i| m[i] * self.p.internal_energy(rho[i])).sum::<Real>()))
     }
 
-    /// The books' densities are computed afresh by `potential` (the group's points copied and
-    /// sorted into a new cell list, a density pass, copies out: under 256 bytes a particle),
-    /// which cannot report a refused allocation: check that much room is there first.
-    fn reserve_potential(&mut self, n: usize) -> Result<()> {
-        let bytes = 256 * n as u128;
-        Need::new("energy", bytes, format!("the SPH densities of {} particles", count(n as u128))).room(bytes)
-    }
-
-    fn dissipative(&self) -> bool {
-        // Its pairs with another fluid of the group dissipate if either fluid is viscous.
-        self.group().dissipative()
-    }
 
     fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
         let (rho, p) = Sph::fields(self, x, model);
         vec![("density", self.range(), rho), ("pressure", self.range(), p)]
     }
 
-    fn profile(&self) -> Option<([f64; 3], usize)> {
-        // The group's clock and buffers are booked once, by its first fluid.
+    /// The group's clock and buffers are booked once, by its first fluid.
+    fn diagnostics(&self) -> Diagnostics {
         let g = self.group();
-        Some(if self.who == 0 { (g.clock, g.bytes()) } else { ([0.0; 3], 0) })
+        let profile = Some(if self.who == 0 { (g.clock, g.bytes()) } else { ([0.0; 3], 0) });
+        Diagnostics { profile, ..Diagnostics::default() }
     }
 
-    fn set_stop(&mut self, stop: Stop) {
-        self.stop = stop;
+    fn set(&mut self, setting: Setting) {
+        if let Setting::Stop(stop) = setting {
+            self.stop = stop;
+        }
     }
 
-    fn share(&mut self, shared: &mut Shared) -> Result<()> {
+    fn join(&mut self, shared: &mut Shared) -> Result<()> {
         let key = Group::<V>::key(&self.p);
         if let Some(other) = shared.find::<Mutex<Group<V>>>(&key) {
             if Arc::ptr_eq(&other, &self.group) {
@@ -212,12 +209,17 @@ impl<V: Vector> Term<V> for Sph<V> {
         Ok(())
     }
 
-    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
-        self.group().reserve()
-    }
-
-    fn min_particles(&self) -> usize {
-        self.first + self.n
+    /// For the books: their densities are computed afresh by `potential` (the group's points
+    /// copied and sorted into a new cell list, a density pass, copies out: under 256 bytes a
+    /// particle), which cannot report a refused allocation: check that much room is there.
+    fn reserve(&mut self, n: usize, scratch: Scratch) -> Result<()> {
+        match scratch {
+            Scratch::Step => self.group().reserve(),
+            Scratch::Potential => {
+                let bytes = 256 * n as u128;
+                Need::new("energy", bytes, format!("the SPH densities of {} particles", count(n as u128))).room(bytes)
+            }
+        }
     }
 
     /// The group's first fluid takes the bodies' boundary for all its fluids.
@@ -337,7 +339,7 @@ mod tests {
         };
         let mut t = Sph::new("fluid", 0, n, p, w.clone(), vec![10.0; w.len()]).unwrap();
         for stopped in [true, false] {
-            t.set_stop(Stop::new(Some(std::sync::Arc::new(AtomicBool::new(stopped)))));
+            t.set(Setting::Stop(Stop::new(Some(std::sync::Arc::new(AtomicBool::new(stopped))))));
             let sentinel = DVec2::splat(123.0);
             let mut f = vec![sentinel; n];
             t.forces_at(simd::level(), &x, &v, &model, &mut f, Write::Overwrite);
@@ -419,8 +421,8 @@ mod tests {
         let mut first = 0;
         for (k, &c) in cuts.iter().enumerate() {
             let mut t = Sph::new(&format!("f{k}"), first, c, ps[k], ws[k].clone(), vec![psi[k]; ws[k].len()]).unwrap();
-            t.share(&mut shared).unwrap();
-            t.reserve(n).unwrap();
+            t.join(&mut shared).unwrap();
+            t.reserve(n, Scratch::Step).unwrap();
             terms.push(t);
             first += c;
         }
@@ -586,13 +588,13 @@ mod tests {
         let mut shared = Shared::default();
         let mut make = |first: usize, n: usize, p: SphParams| {
             let mut t = Sph::<DVec2>::new("f", first, n, p, vec![], vec![]).unwrap();
-            t.share(&mut shared).unwrap();
+            t.join(&mut shared).unwrap();
             t
         };
         let a = make(0, 10, p);
         let b = make(10, 10, SphParams { rho0: 500.0, alpha: 0.0, ..p });
         assert_eq!((a.group_size(), b.group_size()), (2, 2));
-        assert!(b.dissipative(), "pairs with the viscous fluid dissipate");
+        assert!(Term::<DVec2>::traits(&b).dissipative, "pairs with the viscous fluid dissipate");
         for other in [
             SphParams { h: 0.11, ..p },
             SphParams { kernel: KernelKind::WendlandC2, ..p },

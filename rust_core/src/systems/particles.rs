@@ -9,10 +9,38 @@ use crate::integrators::{self, Cache, Integrator, IntegratorInfo, IntegratorOpti
 use crate::par;
 use crate::state::{Model, State};
 use crate::stop::Stop;
-use crate::terms::{ForceSet, Term};
+use crate::terms::{ForceSet, Scratch, Setting, Term};
 use crate::vector::{Real, Vector};
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
+
+/// The integrators the batch's fused kernel (`crate::batch`) runs. These types live with
+/// the particles, which decide whether they fit it (`fused_shape`); the batch sits above the
+/// world and reads them from here, so no module below it imports the batch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Scheme {
+    /// Velocity Verlet (`integrators::VelocityVerlet`).
+    Verlet,
+    /// Yoshida's fourth order: three velocity Verlet substeps (`integrators::Yoshida4`).
+    Yoshida4,
+}
+
+impl Scheme {
+    pub(crate) fn evals_per_step(self) -> u64 {
+        match self {
+            Scheme::Verlet => 1,
+            Scheme::Yoshida4 => 3,
+        }
+    }
+}
+
+/// What members of one fused chunk share: particle count, dimension and integrator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Shape {
+    pub n: usize,
+    pub dim: usize,
+    pub scheme: Scheme,
+}
 
 pub struct ParticleSystem<V: Vector> {
     sys: Particles<V>,
@@ -88,11 +116,11 @@ impl<V: Vector> ParticleSystem<V> {
         self.integrator.reset();
     }
     /// The potential energy at the positions now (J) of the terms whose potential is cheap to
-    /// evaluate (`Term::cheap_potential`: gravity, springs, fields; not SPH, DEM contacts or
+    /// evaluate (`Traits::cheap_potential`: gravity, springs, fields; not SPH, DEM contacts or
     /// N-body gravity): what a coupling that moves particles books of what its moves change.
     pub fn cheap_potential_energy(&self) -> Real {
         let (x, m) = (&self.sys.state.x, &self.sys.model);
-        self.sys.forces.terms.iter().filter(|t| t.cheap_potential()).filter_map(|t| t.potential(x, m)).sum()
+        self.sys.forces.terms.iter().filter(|t| t.traits().cheap_potential).filter_map(|t| t.potential(x, m)).sum()
     }
     /// The fluids that take moving boundary particles from rigid bodies (`MovingBoundary`), with
     /// the masses and attributes.
@@ -120,7 +148,7 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn remedies(&self) -> crate::error::Remedies {
         let terms = &self.sys.forces.terms;
         crate::error::Remedies {
-            softening: terms.iter().any(|t| t.softened()),
+            softening: terms.iter().any(|t| t.traits().softened),
             implicit: !self.integrator.implicit() && self.sys.forces.has_jacobian(),
         }
     }
@@ -136,18 +164,17 @@ impl<V: Vector> ParticleSystem<V> {
         self.integrator.check_dt(dt)
     }
 
-    /// Reserves, fallibly, the scratch the terms' potentials need (`Term::reserve_potential`).
+    /// Reserves, fallibly, the scratch the terms' potentials need (`Scratch::Potential`).
     pub fn reserve_potential(&mut self) -> Result<()> {
         let n = self.n_particles();
-        self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve_potential(n))
+        self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve(n, Scratch::Potential))
     }
 
     /// The shape of these particles for the batch's fused kernel (`crate::batch`), where it
     /// steps them with the same bits: float64, 1..=`pairwise_small::SMALL` particles, velocity
     /// Verlet or Yoshida's fourth order, no constraints or colliders, and terms that are
     /// uniform fields or one small pairwise sum (gravity or Coulomb), nothing else.
-    pub(crate) fn fused_shape(&self) -> Option<crate::batch::Shape> {
-        use crate::batch::{Scheme, Shape};
+    pub(crate) fn fused_shape(&self) -> Option<Shape> {
         let (sys, n) = (&self.sys, self.sys.state.x.len());
         let scheme = match self.integrator.info().name {
             "verlet" => Scheme::Verlet,
@@ -159,9 +186,9 @@ impl<V: Vector> ParticleSystem<V> {
         }
         let mut pairwise = 0;
         for t in &sys.forces.terms {
-            if t.small_pairwise(&sys.model, n).is_some() && t.as_own_state().is_none() {
+            if t.as_fused().and_then(|f| f.small_pairwise(&sys.model, n)).is_some() && t.as_own_state().is_none() {
                 pairwise += 1;
-            } else if t.uniform_acceleration().is_none() {
+            } else if t.traits().uniform.is_none() {
                 return None;
             }
         }
@@ -248,7 +275,7 @@ impl<V: Vector> ParticleSystem<V> {
         }
         self.sys.single = single;
         for t in &mut self.sys.forces.terms {
-            t.set_single(single);
+            t.set(Setting::Single(single));
         }
     }
     pub fn single(&self) -> bool {
@@ -359,14 +386,12 @@ impl<V: Vector> ParticleSystem<V> {
     /// The checks a term joining the system passes, new or replacing one (its particles exist,
     /// the integrator can step it), and the scene's precision handed to it.
     fn admit(&self, mut t: Box<dyn Term<V>>) -> Result<Box<dyn Term<V>>> {
-        if t.min_particles() > self.n_particles() {
-            return Err(invalid(
-                "term",
-                format!("refers to {} particles, the scene has {}", t.min_particles(), self.n_particles()),
-            ));
+        let min = t.traits().min_particles;
+        if min > self.n_particles() {
+            return Err(invalid("term", format!("refers to {min} particles, the scene has {}", self.n_particles())));
         }
         check_integrator(t.as_ref(), self.integrator.info().name)?;
-        t.set_single(self.sys.single);
+        t.set(Setting::Single(self.sys.single));
         Ok(t)
     }
 
@@ -473,7 +498,7 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn fluid_profile(&self) -> ([f64; 3], usize) {
         let mut c = [0.0; 3];
         let mut bytes = 0;
-        for (clock, b) in self.sys.forces.terms.iter().filter_map(|t| t.profile()) {
+        for (clock, b) in self.sys.forces.terms.iter().filter_map(|t| t.diagnostics().profile) {
             for k in 0..3 {
                 c[k] += clock[k];
             }
@@ -482,20 +507,20 @@ impl<V: Vector> ParticleSystem<V> {
         (c, bytes)
     }
 
-    /// Each term's real-valued statistics (`Term::stats`): (term name, statistic, value).
+    /// Each term's real-valued statistics (`Diagnostics::stats`): (term name, statistic, value).
     pub fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
         let mut out = Vec::new();
         for t in &self.sys.forces.terms {
-            out.extend(t.stats().into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
+            out.extend(t.diagnostics().stats.into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
         }
         out
     }
 
-    /// Each term's counters (`Term::counts`): (term name, counter, value).
+    /// Each term's counters (`Diagnostics::counts`): (term name, counter, value).
     pub fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
         let mut out = Vec::new();
         for t in &self.sys.forces.terms {
-            out.extend(t.counts().into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
+            out.extend(t.diagnostics().counts.into_iter().map(|(k, c)| (t.name().to_string(), k, c)));
         }
         out
     }
@@ -673,7 +698,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             }
         }
         // On the world's pool: the cell lists size their histograms by its thread count.
-        self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve(n))
+        self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve(n, Scratch::Step))
     }
 
     fn set_stop(&mut self, stop: &Stop) {
@@ -803,7 +828,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         let mut dissipated: Vec<(String, Real)> = terms
             .iter()
             .zip(&self.sys.forces.dissipated)
-            .filter(|(t, _)| t.dissipative())
+            .filter(|(t, _)| t.traits().dissipative)
             .map(|(t, d)| (t.name().to_string(), *d))
             .collect();
         dissipated.extend(terms.iter().filter_map(|t| t.as_own_state()).flat_map(|s| s.books()));
@@ -1003,7 +1028,7 @@ impl<V: Vector> System for ParticleSystem<V> {
 
 /// `InvalidInput` naming the integrator if term `t` cannot be stepped by integrator `name`.
 fn check_integrator<V: Vector>(t: &dyn Term<V>, name: &str) -> Result<()> {
-    match t.integrators() {
+    match t.traits().integrators {
         Some(ok) if !ok.contains(&name) => Err(invalid(
             "integrator",
             format!(

@@ -1,7 +1,7 @@
 //! Linear (Stokes) drag: F_i = −b v_i, dissipating P = b Σ |v_i|². Jacobian: ∂f/∂v = −b I,
 //! ∂f/∂x = 0 (for implicit integrators).
 use super::registry::{Context, Params};
-use super::{Jacobian, Term, Write};
+use super::{Jacobian, Term, Traits, Write};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -50,8 +50,8 @@ impl<V: Vector> Term<V> for Drag {
     fn potential(&self, _x: &[V], _m: &Model) -> Option<Real> {
         None
     }
-    fn dissipative(&self) -> bool {
-        self.b > 0.0
+    fn traits(&self) -> Traits<V> {
+        Traits::dissipating(self.b > 0.0)
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         // Velocity relaxation time m/b of the lightest free particle.

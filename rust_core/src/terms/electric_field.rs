@@ -2,7 +2,7 @@
 //! particles (Griffiths, *Introduction to Electrodynamics*, 4th ed., eqs. 2.21 and 4.14 for a
 //! point charge). q is the `charge` attribute (C); a scene without it feels no force.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Term, Traits, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -52,8 +52,8 @@ impl<V: Vector> Term<V> for UniformElectricField<V> {
             u
         }))
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits::conservative()
     }
 }
 

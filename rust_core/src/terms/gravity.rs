@@ -1,6 +1,6 @@
 //! Uniform gravity: F_i = m_i g on every free particle; U = −Σ m_i g·x_i.
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Term, Traits, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -32,9 +32,6 @@ impl<V: Vector> Term<V> for UniformGravity<V> {
         });
         0.0
     }
-    fn uniform_acceleration(&self) -> Option<V> {
-        Some(self.g)
-    }
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         let g = self.g;
         Some(par::sum(x.len(), 0.0, |r| {
@@ -47,7 +44,7 @@ impl<V: Vector> Term<V> for UniformGravity<V> {
             u
         }))
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits { uniform: Some(self.g), ..Traits::conservative() }
     }
 }

@@ -16,7 +16,7 @@
 //! `uniform_magnetic_field`. q is the `charge` attribute (C); without it neither acts.
 use super::magnetic_field::{gyration_time, lorentz_forces};
 use super::registry::{Context, Params};
-use super::{Magnetic, Term, Write};
+use super::{Magnetic, Term, Traits, Write};
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
@@ -187,8 +187,8 @@ impl<V: Vector> Term<V> for GridElectricField {
     fn potential(&self, _x: &[V], _model: &Model) -> Option<Real> {
         None // a field given by its vectors need not have one
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits::conservative()
     }
 }
 
@@ -204,11 +204,9 @@ impl<V: Vector> Term<V> for GridMagneticField {
     fn potential(&self, _x: &[V], _model: &Model) -> Option<Real> {
         None
     }
-    fn dissipative(&self) -> bool {
-        false
-    }
-    fn velocity_dependent(&self) -> bool {
-        true
+    /// The magnetic force depends on the velocities, though it does no work.
+    fn traits(&self) -> Traits<V> {
+        Traits { velocity_dependent: true, ..Traits::conservative() }
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         gyration_time(model, self.grid.max_norm())

@@ -8,7 +8,7 @@
 //! integrator (the `Magnetic` role), which turns each velocity through it exactly,
 //! keeping |v| to round-off for any step; the other integrators take the force from `add_forces`.
 use super::registry::{Context, Params};
-use super::{Magnetic, Term, Write};
+use super::{Magnetic, Term, Traits, Write};
 use crate::error::Result;
 use crate::par;
 use crate::state::Model;
@@ -68,11 +68,9 @@ impl<V: Vector> Term<V> for UniformMagneticField<V> {
     fn potential(&self, _x: &[V], _model: &Model) -> Option<Real> {
         None // a velocity-dependent force that does no work has none
     }
-    fn dissipative(&self) -> bool {
-        false
-    }
-    fn velocity_dependent(&self) -> bool {
-        true
+    /// The magnetic force depends on the velocities, though it does no work.
+    fn traits(&self) -> Traits<V> {
+        Traits { velocity_dependent: true, ..Traits::conservative() }
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         gyration_time(model, V::axial_length_squared(self.b).sqrt())

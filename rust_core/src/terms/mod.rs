@@ -27,7 +27,7 @@ pub use drag::Drag;
 pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
-pub use roles::{BodyMotion, Constraints, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection};
+pub use roles::{BodyMotion, Constraints, FusedForce, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection};
 pub use springs::Springs;
 pub use tree_gravity::TreeGravity;
 
@@ -60,49 +60,111 @@ impl Write {
     }
 }
 
-/// One force term.
-pub trait Term<V: Vector>: Send + Sync {
-    /// Stable name used as the key of the energy books (unique within a scene).
-    fn name(&self) -> &str;
-    /// Stores this term's forces (N) at `(x, v)` in `f` as `write` says, one per particle (0 for
-    /// particles it does not act on). Returns the power it dissipates at this state (W) if it
-    /// is `dissipative()`, else 0 (conservative terms skip that sum). Usually ≥ 0; a term whose
-    /// non-conservative forces also release stored energy books that as negative dissipation
-    /// (DFSPH with surface tension: the surface energy a drop releases as it rounds).
-    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real;
-    /// `Some(g)` for a uniform acceleration field (uniform gravity): integrators then add `g` to
-    /// every free particle's acceleration directly and `add_forces` is never called.
-    fn uniform_acceleration(&self) -> Option<V> {
-        None
-    }
-    /// `Some((c, ε², weights))` where the term is the small pairwise sum
-    /// (`pairwise_small`): F_i = c w_i S_i at this scene's `n` particles, float64. The batch's
-    /// fused kernel (`crate::batch`) then steps it with the same bits.
-    fn small_pairwise<'a>(&self, _model: &'a Model, _n: usize) -> Option<(Real, Real, &'a [Real])> {
-        None
-    }
-    /// Potential energy (J) if the term is conservative (or has a conservative part).
-    fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
+/// What a term is, read when it joins a force set (`ForceSet::push`, `replace`) and fixed for
+/// its life: a term whose parameters change is replaced, not told. Build one from
+/// `Traits::conservative()` or `Traits::dissipative()` and change the fields that differ.
+#[derive(Clone, Copy, Debug)]
+pub struct Traits<V> {
+    /// Whether the term can dissipate energy (drag, dashpots): its `add_forces` then returns
+    /// the power it dissipates, which the integrators book.
+    pub dissipative: bool,
+    /// Whether the forces depend on the velocities: integrators that evaluate forces at
+    /// predicted states (velocity Verlet) then predict the velocities too. Dissipative terms
+    /// usually do; the magnetic force q v × B does too, though it does no work.
+    pub velocity_dependent: bool,
     /// Whether `potential` costs little next to a step (a pass over the particles or the
     /// springs): what a coupling that moves particles evaluates around its moves to book what
     /// they change (`systems::bodies::BodyContacts`). Terms whose potential needs a neighbour
     /// search or a pair sum (SPH, DEM contacts, N-body gravity) say no, and the coupling leaves
     /// their share to the books' drift rather than pay two searches a step.
-    fn cheap_potential(&self) -> bool {
-        true
-    }
-    /// Whether the term can dissipate energy (drag, dashpots).
-    fn dissipative(&self) -> bool;
-    /// Whether the forces depend on the velocities: integrators that evaluate forces at
-    /// predicted states (velocity Verlet) then predict the velocities too. Dissipative terms do;
-    /// the magnetic force q v × B does too, though it does no work.
-    fn velocity_dependent(&self) -> bool {
-        self.dissipative()
-    }
+    pub cheap_potential: bool,
+    /// Whether the term has a softening length (so that a divergence's advice may name it).
+    pub softened: bool,
     /// Largest particle index the term refers to, plus one (0 if none).
-    fn min_particles(&self) -> usize {
-        0
+    pub min_particles: usize,
+    /// The integrators the term can be stepped by (`None`: any).
+    pub integrators: Option<&'static [&'static str]>,
+    /// `Some(g)` for a uniform acceleration field (world gravity, m/s²): integrators then add
+    /// `g` to every free particle's acceleration directly and `add_forces` is never called.
+    pub uniform: Option<V>,
+}
+
+impl<V> Traits<V> {
+    /// A conservative term: no dissipation, no velocity dependence, a cheap potential.
+    pub fn conservative() -> Self {
+        Traits {
+            dissipative: false,
+            velocity_dependent: false,
+            cheap_potential: true,
+            softened: false,
+            min_particles: 0,
+            integrators: None,
+            uniform: None,
+        }
     }
+    /// A term that dissipates, with forces that depend on the velocities.
+    pub fn dissipative() -> Self {
+        Traits { dissipative: true, velocity_dependent: true, ..Self::conservative() }
+    }
+    /// `conservative()` where `dissipative` is false, else `dissipative()`.
+    pub fn dissipating(dissipative: bool) -> Self {
+        if dissipative {
+            Self::dissipative()
+        } else {
+            Self::conservative()
+        }
+    }
+}
+
+/// Which evaluation `Term::reserve` reserves scratch for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scratch {
+    /// A step's force evaluations (`add_forces`).
+    Step,
+    /// The energy books (`potential`, which reads through `&self`).
+    Potential,
+}
+
+/// What a term is told about the call or the system it is in (`Term::set`).
+#[derive(Clone, Debug)]
+pub enum Setting {
+    /// The scene's state became single precision (`true`) or double: a term may then compute
+    /// in float32 where that is faster (pairwise gravity does).
+    Single(bool),
+    /// The stop flag of the interruptible call in progress (`Stop::default()` between calls).
+    /// A term whose one evaluation may take long polls it and skips the rest of its work once
+    /// it is set (see `crate::stop`).
+    Stop(Stop),
+}
+
+/// What a term reports besides its forces and energies (`Term::diagnostics`); empty by default.
+#[derive(Clone, Debug, Default)]
+pub struct Diagnostics {
+    /// Wall time (s) spent so far in up to three phases of its evaluation (SPH: cell list and
+    /// gather, density, forces) and the heap bytes it holds.
+    pub profile: Option<([f64; 3], usize)>,
+    /// Counters (contacts now), by name.
+    pub counts: Vec<(&'static str, u64)>,
+    /// Real-valued statistics (a solver's iterations and residuals), by name.
+    pub stats: Vec<(&'static str, Real)>,
+}
+
+/// One force term: its forces, its potential and books, its scratch, and the roles it may play
+/// besides (`roles`). The trait is kept small on purpose (a test caps it, `trait_sizes`): what
+/// one or two terms need is a role they return, not a method every term carries.
+pub trait Term<V: Vector>: Send + Sync {
+    /// Stable name used as the key of the energy books (unique within a scene).
+    fn name(&self) -> &str;
+    /// What the term is (`Traits`), fixed for its life.
+    fn traits(&self) -> Traits<V>;
+    /// Stores this term's forces (N) at `(x, v)` in `f` as `write` says, one per particle (0 for
+    /// particles it does not act on). Returns the power it dissipates at this state (W) if it
+    /// is dissipative (`Traits`), else 0 (conservative terms skip that sum). Usually ≥ 0; a term
+    /// whose non-conservative forces also release stored energy books that as negative
+    /// dissipation (DFSPH with surface tension: the surface energy a drop releases as it rounds).
+    fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real;
+    /// Potential energy (J) if the term is conservative (or has a conservative part).
+    fn potential(&self, x: &[V], model: &Model) -> Option<Real>;
     /// The fastest time scale the term introduces (s), used to suggest a dt on divergence.
     fn time_scale(&self, _x: &[V], _model: &Model) -> Option<Real> {
         None
@@ -112,33 +174,29 @@ pub trait Term<V: Vector>: Send + Sync {
     fn max_dt(&self, _x: &[V], _v: &[V], _model: &Model, _g: Real) -> Option<Real> {
         None
     }
-    /// Told when the scene's state becomes single precision (`true`) or double: a term may then
-    /// compute in float32 where that is faster (pairwise gravity does).
-    fn set_single(&mut self, _single: bool) {}
     /// Named per-particle output fields the term computes now (SPH: "density" in kg/m^dim,
     /// "pressure" in Pa), each over the particles it covers: `(name, particle range, values)`.
     fn fields(&self, _x: &[V], _model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
         Vec::new()
     }
-    /// Wall time (s) the term has spent so far in up to three phases of its evaluation (SPH:
-    /// cell list and gather, density, forces) and the heap bytes it holds; `None` if it keeps
-    /// no such books.
-    fn profile(&self) -> Option<([f64; 3], usize)> {
-        None
+    /// What the term reports besides forces and energies (timings, counters, solver stats).
+    fn diagnostics(&self) -> Diagnostics {
+        Diagnostics::default()
     }
-    /// The stop flag of the interruptible call in progress (`Stop::default()` between calls).
-    /// A term whose one evaluation may take long polls it and skips the rest of its work once
-    /// it is set (see `crate::stop`); the others ignore it.
-    fn set_stop(&mut self, _stop: Stop) {}
-    /// Reserves, fallibly, the scratch an evaluation over `n` particles needs, so that the
-    /// evaluation then allocates nothing (a refused allocation is `Error::OutOfMemory`, not an
-    /// abort of the process). Terms without per-particle scratch need not implement it.
-    fn reserve(&mut self, _n: usize) -> Result<()> {
+    /// Tells the term a setting of the call or the system it is in (`Setting`).
+    fn set(&mut self, _setting: Setting) {}
+    /// Called once when the term is added to a system, before it is evaluated: a term that
+    /// needs neighbours joins a search that terms of its kind already share in this system, or
+    /// registers its own (see `neighbors::Shared`). Terms without neighbours need not implement
+    /// it.
+    fn join(&mut self, _shared: &mut Shared) -> Result<()> {
         Ok(())
     }
-    /// Reserves, fallibly, the scratch `potential` over `n` particles needs (the energy books
-    /// are read through `&self`), so that reading them allocates nothing sized by `n`.
-    fn reserve_potential(&mut self, _n: usize) -> Result<()> {
+    /// Reserves, fallibly, the scratch an evaluation over `n` particles needs (`Scratch`), so
+    /// that it then allocates nothing sized by `n` (a refused allocation is
+    /// `Error::OutOfMemory`, not an abort of the process). Terms without per-particle scratch
+    /// need not implement it.
+    fn reserve(&mut self, _n: usize, _for: Scratch) -> Result<()> {
         Ok(())
     }
     /// Bytes an evaluation over `n` particles allocates on the fly, where a refusal cannot be
@@ -146,32 +204,11 @@ pub trait Term<V: Vector>: Send + Sync {
     fn transient_bytes(&self, _n: usize) -> u128 {
         0
     }
-    /// Whether the term has a softening length (so that a divergence's advice may name it).
-    fn softened(&self) -> bool {
-        false
-    }
-    /// The integrators the term can be stepped by (`None`: any).
-    fn integrators(&self) -> Option<&'static [&'static str]> {
+    // ---- Roles besides giving forces (`roles`): each stage asks for the one it runs. ------
+    /// The term as the batch's fused kernel can step it (`crate::batch`; `None`: it cannot).
+    fn as_fused(&self) -> Option<&dyn FusedForce> {
         None
     }
-    /// Counters to report (contacts now), by name.
-    fn counts(&self) -> Vec<(&'static str, u64)> {
-        Vec::new()
-    }
-
-    /// Called once when the term is added to a system, before it is evaluated: a term that
-    /// needs neighbours joins a search that terms of its kind already share in this system, or
-    /// registers its own (see `neighbors::Shared`). Terms without neighbours need not implement
-    /// it.
-    fn share(&mut self, _shared: &mut Shared) -> Result<()> {
-        Ok(())
-    }
-
-    /// Real-valued statistics the term keeps (a solver's iterations and residuals), by name.
-    fn stats(&self) -> Vec<(&'static str, Real)> {
-        Vec::new()
-    }
-    // ---- Roles besides giving forces (`roles`): each stage asks for the one it runs. ------
     /// The term as a magnetic field, for the Boris push (`None`: not one).
     fn as_magnetic(&self) -> Option<&dyn Magnetic<V>> {
         None
@@ -221,6 +258,8 @@ pub struct ForceSet<V: Vector> {
     any_velocity_apart: bool,
     /// Whether any term is magnetic (`Term::as_magnetic`).
     any_magnetic: bool,
+    /// Per term, whether `eval` skips it: a uniform field, which the integrators apply (`g`).
+    uniform: Vec<bool>,
     /// Whether any term has Jacobians (`Term::as_jacobian`).
     any_jacobian: bool,
     /// The terms that hold XPBD constraints (`Term::as_constraints`), in term order.
@@ -247,6 +286,7 @@ impl<V: Vector> Default for ForceSet<V> {
             any_velocity: false,
             any_velocity_apart: false,
             any_magnetic: false,
+            uniform: Vec::new(),
             any_jacobian: false,
             constraints: Vec::new(),
             projections: Vec::new(),
@@ -262,7 +302,7 @@ impl<V: Vector> ForceSet<V> {
     /// Adds `t` after the others (it is evaluated after them), first letting it join the
     /// neighbour searches the terms share.
     pub fn push(&mut self, mut t: Box<dyn Term<V>>) -> Result<()> {
-        t.share(&mut self.shared)?;
+        t.join(&mut self.shared)?;
         self.terms.push(t);
         self.dissipated.push(0.0);
         self.power.push(0.0);
@@ -274,12 +314,15 @@ impl<V: Vector> ForceSet<V> {
     /// gives (the uniform fields' sum included, bit for bit).
     fn refresh(&mut self) {
         let terms = &mut self.terms;
-        self.any_dissipative = terms.iter().any(|t| t.dissipative());
-        self.any_velocity = terms.iter().any(|t| t.velocity_dependent());
-        self.any_velocity_apart = terms.iter().any(|t| t.velocity_dependent() && t.as_magnetic().is_none());
+        let traits: Vec<Traits<V>> = terms.iter().map(|t| t.traits()).collect();
+        self.any_dissipative = traits.iter().any(|t| t.dissipative);
+        self.any_velocity = traits.iter().any(|t| t.velocity_dependent);
+        self.any_velocity_apart =
+            terms.iter().zip(&traits).any(|(t, tr)| tr.velocity_dependent && t.as_magnetic().is_none());
         self.any_magnetic = terms.iter().any(|t| t.as_magnetic().is_some());
         self.any_jacobian = terms.iter().any(|t| t.as_jacobian().is_some());
-        self.g = terms.iter().filter_map(|t| t.uniform_acceleration()).fold(V::ZERO, |g, a| g + a);
+        self.uniform = traits.iter().map(|t| t.uniform.is_some()).collect();
+        self.g = traits.iter().filter_map(|t| t.uniform).fold(V::ZERO, |g, a| g + a);
         self.constraints = (0..terms.len()).filter(|&k| terms[k].as_constraints().is_some()).collect();
         self.projections = (0..terms.len()).filter(|&k| terms[k].as_projection().is_some()).collect();
     }
@@ -321,14 +364,14 @@ impl<V: Vector> ForceSet<V> {
     /// (a fluid) cannot be replaced: its search holds its particles.
     pub fn replace(&mut self, at: usize, mut t: Box<dyn Term<V>>) -> Result<()> {
         let mut probe = Shared::default();
-        t.share(&mut probe)?;
+        t.join(&mut probe)?;
         if !probe.is_empty() {
             return Err(crate::error::invalid(
                 "item",
                 format!("term {:?} shares a neighbour search and cannot be replaced", t.name()),
             ));
         }
-        t.set_stop(self.stop.clone());
+        t.set(Setting::Stop(self.stop.clone()));
         self.terms[at] = t;
         self.refresh();
         self.power[at] = 0.0;
@@ -351,8 +394,8 @@ impl<V: Vector> ForceSet<V> {
     fn eval_terms(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], apart: bool) {
         self.evaluations += 1;
         let mut write = Write::Overwrite;
-        for (t, p) in self.terms.iter_mut().zip(self.power.iter_mut()) {
-            if t.uniform_acceleration().is_some() || (apart && t.as_magnetic().is_some()) {
+        for ((t, p), &uniform) in self.terms.iter_mut().zip(self.power.iter_mut()).zip(&self.uniform) {
+            if uniform || (apart && t.as_magnetic().is_some()) {
                 continue;
             }
             if self.stop.is_set() {
@@ -380,7 +423,7 @@ impl<V: Vector> ForceSet<V> {
     /// Hands every term the stop flag of the call in progress (see `crate::stop`).
     pub fn set_stop(&mut self, stop: &Stop) {
         for t in &mut self.terms {
-            t.set_stop(stop.clone());
+            t.set(Setting::Stop(stop.clone()));
         }
         self.stop = stop.clone();
     }

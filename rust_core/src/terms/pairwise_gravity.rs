@@ -28,7 +28,7 @@
 //! it is set.
 use super::pairwise_small::{small_sum, SMALL};
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{FusedForce, Scratch, Setting, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
@@ -529,26 +529,39 @@ impl Pairwise {
     }
 }
 
-impl<V: Vector> Term<V> for Pairwise {
-    fn cheap_potential(&self) -> bool {
-        false
+impl FusedForce for Pairwise {
+    fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])> {
+        let w = self.weights(model)?;
+        (!self.single && n <= SMALL).then_some((self.law_constant(), self.softening * self.softening, w))
     }
+}
+
+impl<V: Vector> Term<V> for Pairwise {
     fn name(&self) -> &str {
         &self.name
     }
-    fn softened(&self) -> bool {
-        true
+    fn traits(&self) -> Traits<V> {
+        Traits { cheap_potential: false, softened: true, ..Traits::conservative() }
     }
 
-    fn set_single(&mut self, single: bool) {
-        self.single = single;
+    fn set(&mut self, setting: Setting) {
+        match setting {
+            Setting::Single(single) => self.single = single,
+            Setting::Stop(stop) => self.stop = stop,
+        }
     }
 
-    fn set_stop(&mut self, stop: Stop) {
-        self.stop = stop;
-    }
-
-    fn reserve(&mut self, n: usize) -> Result<()> {
+    fn reserve(&mut self, n: usize, scratch: Scratch) -> Result<()> {
+        if scratch == Scratch::Potential {
+            let np = n.div_ceil(PAD) * PAD;
+            let need = Need::new(
+                "energy",
+                4 * Need::bytes_of::<Real>(np),
+                format!("the potential of {} bodies", count(n as u128)),
+            );
+            need.check()?;
+            return self.pot.get_mut().unwrap_or_else(|e| e.into_inner()).reserve(n, &need);
+        }
         if n <= SMALL && !self.single && self.acc.capacity() >= n {
             return Ok(()); // the small sum needs only `acc` (a batch prepares thousands of these per call)
         }
@@ -643,22 +656,6 @@ impl<V: Vector> Term<V> for Pairwise {
         0.0
     }
 
-    fn reserve_potential(&mut self, n: usize) -> Result<()> {
-        let np = n.div_ceil(PAD) * PAD;
-        let need = Need::new(
-            "energy",
-            4 * Need::bytes_of::<Real>(np),
-            format!("the potential of {} bodies", count(n as u128)),
-        );
-        need.check()?;
-        self.pot.get_mut().unwrap_or_else(|e| e.into_inner()).reserve(n, &need)
-    }
-
-    fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])> {
-        let w = self.weights(model)?;
-        (!self.single && n <= SMALL).then_some((self.law_constant(), self.softening * self.softening, w))
-    }
-
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         let Some(w) = self.weights(model) else {
             return Some(0.0); // uncharged
@@ -677,8 +674,8 @@ impl<V: Vector> Term<V> for Pairwise {
         })
     }
 
-    fn dissipative(&self) -> bool {
-        false
+    fn as_fused(&self) -> Option<&dyn FusedForce> {
+        Some(self)
     }
 
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {

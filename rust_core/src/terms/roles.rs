@@ -9,6 +9,15 @@ use crate::error::Result;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
 
+/// A force the batch's fused kernel (`crate::batch`) steps with the same bits: the small
+/// pairwise sum (`pairwise_small`) of gravity or Coulomb. The batch is its only user; no other
+/// stage asks for it.
+pub trait FusedForce {
+    /// `Some((c, ε², weights))` where the term is the small pairwise sum F_i = c w_i S_i at this
+    /// scene's `n` particles, float64.
+    fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])>;
+}
+
 /// A magnetic field (F = q v × B), which the Boris push turns the velocities through exactly
 /// (`integrators/boris.rs`); the other integrators take its force from `Term::add_forces`.
 pub trait Magnetic<V: Vector> {

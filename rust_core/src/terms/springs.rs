@@ -25,7 +25,7 @@
 //! derivative with respect to positions (not symmetric) is left out. Both change only the
 //! linearisation, not the force: the step stays consistent, first order.
 use super::registry::{Context, Params};
-use super::{Jacobian, Term, Write};
+use super::{Jacobian, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par;
@@ -490,12 +490,8 @@ impl<V: Vector> Term<V> for Springs<V> {
         }))
     }
 
-    fn dissipative(&self) -> bool {
-        self.any_damping
-    }
-
-    fn min_particles(&self) -> usize {
-        self.n_cov
+    fn traits(&self) -> Traits<V> {
+        Traits { min_particles: self.n_cov, ..Traits::dissipating(self.any_damping) }
     }
 
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {

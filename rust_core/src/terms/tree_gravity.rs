@@ -49,7 +49,7 @@
 //! total momentum is conserved only to the accuracy of the forces (see the tests).
 use super::pairwise_gravity::encounter_time;
 use super::registry::{Context, Params};
-use super::{Term, Write};
+use super::{Scratch, Setting, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::{self, SyncPtr};
@@ -687,34 +687,8 @@ impl TreeGravity {
         let books = Mutex::new((Tree::default(), Vec::new()));
         Self { name, g, softening, theta, tree: Tree::default(), acc: Vec::new(), books, stop: Stop::default() }
     }
-}
 
-impl<V: Vector> Term<V> for TreeGravity {
-    fn cheap_potential(&self) -> bool {
-        false
-    }
-    fn name(&self) -> &str {
-        &self.name
-    }
-    fn softened(&self) -> bool {
-        true
-    }
-
-    fn set_stop(&mut self, stop: Stop) {
-        self.stop = stop;
-    }
-
-    fn reserve(&mut self, n: usize) -> Result<()> {
-        let bytes = Tree::bytes(n) + Need::bytes_of::<[Real; 3]>(n);
-        let need = Need::new("step", bytes, format!("tree gravity over {} bodies", count(n as u128)));
-        need.check()?;
-        if n > u32::MAX as usize {
-            return Err(need.error());
-        }
-        self.tree.reserve(n, &need)?;
-        need.reserve(&mut self.acc, n)
-    }
-
+    /// `Term::reserve` for the energy books.
     fn reserve_potential(&mut self, n: usize) -> Result<()> {
         let bytes = Tree::bytes(n) + Need::bytes_of::<[Real; 3]>(n);
         let need = Need::new("energy", bytes, format!("tree gravity's potential of {} bodies", count(n as u128)));
@@ -725,6 +699,35 @@ impl<V: Vector> Term<V> for TreeGravity {
         let (tree, phi) = self.books.get_mut().unwrap_or_else(|e| e.into_inner());
         tree.reserve(n, &need)?;
         need.reserve(phi, n)
+    }
+}
+
+impl<V: Vector> Term<V> for TreeGravity {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn traits(&self) -> Traits<V> {
+        Traits { cheap_potential: false, softened: true, ..Traits::conservative() }
+    }
+
+    fn set(&mut self, setting: Setting) {
+        if let Setting::Stop(stop) = setting {
+            self.stop = stop;
+        }
+    }
+
+    fn reserve(&mut self, n: usize, scratch: Scratch) -> Result<()> {
+        if scratch == Scratch::Potential {
+            return self.reserve_potential(n);
+        }
+        let bytes = Tree::bytes(n) + Need::bytes_of::<[Real; 3]>(n);
+        let need = Need::new("step", bytes, format!("tree gravity over {} bodies", count(n as u128)));
+        need.check()?;
+        if n > u32::MAX as usize {
+            return Err(need.error());
+        }
+        self.tree.reserve(n, &need)?;
+        need.reserve(&mut self.acc, n)
     }
 
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
@@ -775,10 +778,6 @@ impl<V: Vector> Term<V> for TreeGravity {
         // ½ Σ_i m_i φ_i in fixed chunks of the sorted order (any thread count: the same bits).
         let u = par::sum(n, 0.0, |r| r.map(|k| tree.pos[k][3] * phi[k][0]).sum::<Real>());
         Some(-0.5 * self.g * u)
-    }
-
-    fn dissipative(&self) -> bool {
-        false
     }
 
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {

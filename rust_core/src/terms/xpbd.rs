@@ -50,7 +50,7 @@
 //! and converges more slowly per iteration; with one iteration per substep ("Small steps",
 //! Macklin et al. 2019) Gauss–Seidel's faster propagation matters most.
 use super::registry::{Context, Params};
-use super::{Constraints, Term, Write};
+use super::{Constraints, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::{self, SyncPtr};
@@ -628,15 +628,10 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
         }
         Some(u)
     }
-    /// The projection damps (the energy it removes is booked by the integrator).
-    fn dissipative(&self) -> bool {
-        true
-    }
-    fn velocity_dependent(&self) -> bool {
-        false
-    }
-    fn min_particles(&self) -> usize {
-        self.n_cov.min(
+    /// The projection damps (the energy it removes is booked by the integrator); its forces
+    /// do not depend on the velocities.
+    fn traits(&self) -> Traits<V> {
+        let min_particles = self.n_cov.min(
             self.sets
                 .iter()
                 .flat_map(|s| s.idx.iter())
@@ -644,7 +639,8 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
                 .map(|&i| i as usize + 1)
                 .max()
                 .unwrap_or(0),
-        )
+        );
+        Traits { velocity_dependent: false, min_particles, ..Traits::dissipative() }
     }
 
     /// 1/ω_max of the compliant distance and pin constraints, ω_max² ≤ max_p (2/m_p) Σ_{c ∋ p}

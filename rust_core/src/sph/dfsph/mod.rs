@@ -85,7 +85,10 @@ use crate::simd::{self, Kernel as SimdKernel, Simd, P};
 use crate::state::Model;
 use crate::stop::Stop;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{BodyMotion, MovingBoundary, OwnState, Projection, Term, VelocityProjection, Write};
+use crate::terms::{
+    BodyMotion, Diagnostics, MovingBoundary, OwnState, Projection, Scratch, Setting, Term, Traits, VelocityProjection,
+    Write,
+};
 use crate::vector::{Real, Vector};
 use rayon::prelude::*;
 use std::marker::PhantomData;
@@ -747,6 +750,14 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         &self.name
     }
 
+    fn traits(&self) -> Traits<V> {
+        Traits {
+            min_particles: self.range.end,
+            integrators: crate::terms::registry::integrator_rule("dfsph").map(|r| r.0),
+            ..Traits::dissipative()
+        }
+    }
+
     /// (`crate::alloc`) The build grows its pair lists inside parallel kernels, where a refusal
     /// cannot be reported; the world checks this much room is left once the step's checkpoint
     /// is taken. After a build: what it held again (a list that must grow reallocates beside
@@ -788,18 +799,6 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         Some(0.0)
     }
 
-    fn dissipative(&self) -> bool {
-        true
-    }
-
-    fn velocity_dependent(&self) -> bool {
-        true
-    }
-
-    fn min_particles(&self) -> usize {
-        self.range.end
-    }
-
     fn max_dt(&self, _x: &[V], v: &[V], _model: &Model, g: Real) -> Option<Real> {
         if self.range.is_empty() {
             return None;
@@ -827,17 +826,21 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         vec![("density", self.range(), s.member_densities(self.who, x, model)), ("pressure", self.range(), pressure)]
     }
 
-    fn profile(&self) -> Option<([f64; 3], usize)> {
-        // The solve's clock and buffers are booked once, by its first fluid.
+    /// The solve's clock and buffers are booked once, by its first fluid; its totals (a solve
+    /// of several fluids: each reports the same).
+    fn diagnostics(&self) -> Diagnostics {
         let s = self.solver();
-        Some(if self.who == 0 { (s.clock, s.bytes()) } else { ([0.0; 3], 0) })
+        let profile = Some(if self.who == 0 { (s.clock, s.bytes()) } else { ([0.0; 3], 0) });
+        Diagnostics { profile, stats: s.stats(), ..Diagnostics::default() }
     }
 
-    fn set_stop(&mut self, stop: Stop) {
-        self.solver().stop = stop;
+    fn set(&mut self, setting: Setting) {
+        if let Setting::Stop(stop) = setting {
+            self.solver().stop = stop;
+        }
     }
 
-    fn share(&mut self, shared: &mut Shared) -> Result<()> {
+    fn join(&mut self, shared: &mut Shared) -> Result<()> {
         let key = Self::key(&self.p);
         if let Some(other) = shared.find::<Mutex<Solver<V>>>(&key) {
             if Arc::ptr_eq(&other, &self.solver) {
@@ -864,17 +867,12 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         Ok(())
     }
 
-    fn reserve(&mut self, _n_particles: usize) -> Result<()> {
-        self.solver().reserve()
-    }
-
-    fn integrators(&self) -> Option<&'static [&'static str]> {
-        crate::terms::registry::integrator_rule("dfsph").map(|r| r.0)
-    }
-
-    /// The solve's totals (a solve of several fluids: each reports the same).
-    fn stats(&self) -> Vec<(&'static str, Real)> {
-        self.solver().stats()
+    /// The books need no scratch (the potential is 0).
+    fn reserve(&mut self, _n_particles: usize, scratch: Scratch) -> Result<()> {
+        match scratch {
+            Scratch::Step => self.solver().reserve(),
+            Scratch::Potential => Ok(()),
+        }
     }
 
     fn as_projection(&mut self) -> Option<&mut dyn VelocityProjection<V>> {

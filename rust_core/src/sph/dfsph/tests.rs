@@ -262,15 +262,15 @@ fn fluids_with_the_same_settings_join_one_solve() {
     let half = n / 2;
     let mut a = Dfsph::new("a", 0, half, params(dx), w.clone(), psi.clone()).unwrap();
     let mut b = Dfsph::new("b", half, n - half, params(dx), w.clone(), psi.clone()).unwrap();
-    a.share(&mut shared).unwrap();
-    b.share(&mut shared).unwrap();
+    a.join(&mut shared).unwrap();
+    b.join(&mut shared).unwrap();
     assert_eq!((a.solve_size(), b.who), (2, 1));
     assert_eq!(a.solver().walls.grid.len(), w.len(), "the same tank counted once");
     let mut other = Dfsph::<DVec2>::new("c", n, 10, DfsphParams { rho0: 999.0, ..params(dx) }, vec![], vec![]).unwrap();
-    other.share(&mut shared).unwrap();
+    other.join(&mut shared).unwrap();
     assert_eq!(other.solve_size(), 1);
     let mut overlap = Dfsph::<DVec2>::new("d", half - 1, 2, params(dx), vec![], vec![]).unwrap();
-    overlap.share(&mut shared).unwrap();
+    overlap.join(&mut shared).unwrap();
     assert_eq!((overlap.solve_size(), a.solve_size()), (1, 2));
 
     let mut one = Dfsph::new("one", 0, n, params(dx), w.clone(), psi).unwrap();

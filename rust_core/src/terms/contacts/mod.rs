@@ -79,7 +79,7 @@
 //! stale, and their rebuild); `passes` the pair, grain and rolling passes and the commit of a
 //! step; `lanes` the SIMD lanes of the pair pass; `tests` the tests.
 use super::registry::{Context, Params};
-use super::{OwnState, Term, Write};
+use super::{Diagnostics, OwnState, Scratch, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::neighbors::CellList;
@@ -1120,11 +1120,18 @@ fn radii(model: &Model) -> Option<&[Real]> {
 }
 
 impl<V: Vector> Term<V> for Contacts<V> {
-    fn cheap_potential(&self) -> bool {
-        false
-    }
     fn name(&self) -> &str {
         &self.name
+    }
+    /// It books its own dissipation (two ledgers, `OwnState::books`), so it is not
+    /// `dissipative` to the integrators; its forces depend on the velocities.
+    fn traits(&self) -> Traits<V> {
+        Traits {
+            velocity_dependent: true,
+            cheap_potential: false,
+            integrators: crate::terms::registry::integrator_rule("contacts").map(|r| r.0),
+            ..Traits::conservative()
+        }
     }
 
     fn add_forces(&mut self, x: &[V], v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
@@ -1211,13 +1218,6 @@ impl<V: Vector> Term<V> for Contacts<V> {
         Some(u + self.carry().iter().map(|k| k.u + k.ur).sum::<Real>())
     }
 
-    fn dissipative(&self) -> bool {
-        // Books its own dissipation (two ledgers): see `OwnState::books`.
-        false
-    }
-    fn velocity_dependent(&self) -> bool {
-        true
-    }
     fn max_dt(&self, _x: &[V], v: &[V], model: &Model, g: Real) -> Option<Real> {
         let r = radii(model)?;
         let (mut m_min, mut r_min) = (Real::INFINITY, Real::INFINITY);
@@ -1291,7 +1291,14 @@ impl<V: Vector> Term<V> for Contacts<V> {
         out
     }
 
-    fn reserve(&mut self, n: usize) -> Result<()> {
+    fn reserve(&mut self, n: usize, scratch: Scratch) -> Result<()> {
+        if scratch == Scratch::Potential {
+            let books = self.books.get_mut().unwrap_or_else(|e| e.into_inner());
+            if books.is_none() {
+                *books = CellList::new(1.0, V::DIM).ok();
+            }
+            return books.as_mut().map_or(Ok(()), |c| c.reserve(n, "energy"));
+        }
         // [alloc] Room for the spins (`fit`) and the cell list before the first step builds
         // them: their infallible growth aborted the process under memory pressure. The list's
         // size is set by the radii at its first build (`rebuild`); 1 m until then.
@@ -1321,14 +1328,6 @@ impl<V: Vector> Term<V> for Contacts<V> {
         Ok(())
     }
 
-    fn reserve_potential(&mut self, n: usize) -> Result<()> {
-        let books = self.books.get_mut().unwrap_or_else(|e| e.into_inner());
-        if books.is_none() {
-            *books = CellList::new(1.0, V::DIM).ok();
-        }
-        books.as_mut().map_or(Ok(()), |c| c.reserve(n, "energy"))
-    }
-
     /// (`crate::alloc`) The build's per-chunk parts (two counts a grain, the last build's pairs again)
     /// are allocated in parallel where a refusal cannot be reported; the world checks this much
     /// room is left once the step's checkpoint is taken.
@@ -1337,12 +1336,8 @@ impl<V: Vector> Term<V> for Contacts<V> {
         Need::bytes_of::<u32>(2 * n) + Need::bytes_of::<(u32, Link<V>)>(pairs)
     }
 
-    fn integrators(&self) -> Option<&'static [&'static str]> {
-        crate::terms::registry::integrator_rule("contacts").map(|r| r.0)
-    }
-
-    fn counts(&self) -> Vec<(&'static str, u64)> {
-        vec![("contacts", self.count())]
+    fn diagnostics(&self) -> Diagnostics {
+        Diagnostics { counts: vec![("contacts", self.count())], ..Diagnostics::default() }
     }
 
     fn as_own_state(&self) -> Option<&dyn OwnState<V>> {

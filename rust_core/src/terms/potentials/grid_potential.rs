@@ -27,7 +27,7 @@ use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{Term, Write};
+use crate::terms::{Term, Traits, Write};
 use crate::vector::{Real, Vector};
 use std::sync::OnceLock;
 
@@ -216,8 +216,8 @@ impl<V: Vector> Term<V> for GridPotential<V> {
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         Some(coupled_potential(self.coupling, x, model, |p| self.sample(p).0))
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits::conservative()
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         let w2 = self.bounds().0 * self.coupling.max_ratio(model);

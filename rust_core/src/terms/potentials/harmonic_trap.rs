@@ -5,7 +5,7 @@ use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{Term, Write};
+use crate::terms::{Term, Traits, Write};
 use crate::vector::{Real, Vector};
 
 pub struct HarmonicTrap<V: Vector> {
@@ -74,8 +74,8 @@ impl<V: Vector> Term<V> for HarmonicTrap<V> {
             u
         }))
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits::conservative()
     }
     fn time_scale(&self, _x: &[V], model: &Model) -> Option<Real> {
         // 1/ω of the lightest free particle on the stiffest axis: √(m / k).

@@ -19,7 +19,7 @@ use crate::error::{invalid, Result};
 use crate::par;
 use crate::state::Model;
 use crate::terms::registry::{Context, Params};
-use crate::terms::{Term, Write};
+use crate::terms::{Term, Traits, Write};
 use crate::vector::{Real, Vector};
 
 pub struct PointSources<V: Vector> {
@@ -110,9 +110,6 @@ impl<V: Vector> Term<V> for PointSources<V> {
     fn name(&self) -> &str {
         &self.name
     }
-    fn softened(&self) -> bool {
-        true
-    }
     fn add_forces(&mut self, x: &[V], _v: &[V], model: &Model, f: &mut [V], write: Write) -> Real {
         let this = &*self;
         coupled_forces(self.coupling, x, model, f, write, |p| this.field(p).0);
@@ -121,8 +118,8 @@ impl<V: Vector> Term<V> for PointSources<V> {
     fn potential(&self, x: &[V], model: &Model) -> Option<Real> {
         Some(coupled_potential(self.coupling, x, model, |p| self.field(p).1))
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<V> {
+        Traits { softened: true, ..Traits::conservative() }
     }
     fn time_scale(&self, x: &[V], model: &Model) -> Option<Real> {
         // The shortest free-fall (or Coulomb) time sqrt((r² + ε²)^{3/2} / |c_i K_s / m_i|) over
