@@ -34,6 +34,8 @@ pub mod systems;
 pub mod terms;
 pub mod vector;
 pub mod world;
+#[cfg(test)]
+mod trait_sizes;
 
 #[cfg(feature = "python")]
 mod python;

@@ -110,7 +110,8 @@ mod tests {
         assert_eq!(f[1], DVec3::ZERO); // pinned
         assert_eq!(f[2], v[2].cross(t.b) * -3.0);
         assert_eq!(Term::<DVec3>::potential(&t, &v, &model), None);
-        assert!(Term::<DVec3>::velocity_dependent(&t) && !Term::<DVec3>::dissipative(&t));
+        let traits = Term::<DVec3>::traits(&t);
+        assert!(traits.velocity_dependent && !traits.dissipative);
         let mut b = vec![DVec3::X; 3];
         Magnetic::add_field(&t, &v, &model, &mut b);
         assert_eq!(b, vec![DVec3::X + t.b; 3]);

@@ -846,7 +846,7 @@ mod tests {
     /// The term's accelerations / G, by particle (not sorted), and the potential.
     fn tree_accel<V: Vector>(x: &[V], model: &Model, eps: f64, theta: f64) -> (Vec<[f64; 3]>, f64) {
         let mut t = TreeGravity::new("t".into(), 1.0, eps, theta);
-        Term::<V>::reserve(&mut t, x.len()).unwrap();
+        Term::<V>::reserve(&mut t, x.len(), crate::terms::Scratch::Step).unwrap();
         let mut f = vec![V::ZERO; x.len()];
         Term::<V>::add_forces(&mut t, x, &[], model, &mut f, Write::Overwrite);
         let a = f
@@ -1070,7 +1070,7 @@ mod tests {
         }
         assert!(ty.build::<DVec2>("t".into(), params(1.0, 0.0, 0.0), &ctx).is_ok());
         let mut t = TreeGravity::new("t".into(), 1.0, 0.0, 0.5);
-        let e = Term::<DVec3>::reserve(&mut t, usize::MAX / 64).unwrap_err().to_string();
+        let e = Term::<DVec3>::reserve(&mut t, usize::MAX / 64, crate::terms::Scratch::Step).unwrap_err().to_string();
         assert!(e.contains("tree gravity"), "{e}");
     }
 }
