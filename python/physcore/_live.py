@@ -198,17 +198,22 @@ def param_value(scene: Any, name: str) -> float | None:
     return float(terms[0][1].coefficient)
 
 
+def _file_members(scene: Any) -> dict[str, np.ndarray]:
+    """The members of ``scene``'s scene file (:meth:`Scene.to_bytes`), by name."""
+    with np.load(io.BytesIO(scene.to_bytes()), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
+
+
 def _rebuild(scene: Any, edit: Callable[[dict, dict], None], like: Any = None) -> Any:
     """A new Scene from `scene`'s in-memory scene file after ``edit(meta, arrays)``, without the
     integrator's force cache and with a fresh energy-drift reference. `like` (default `scene`)
     gives the term records, dt and integrator when `scene` is an earlier state (reset)."""
-    from . import _scenefile
     from .scene import Scene
 
-    arrays = scene._file_arrays()
+    arrays = _file_members(scene)
     meta = json.loads(arrays["meta"].item())
     if like is not None and like is not scene:
-        now = like._file_arrays()
+        now = _file_members(like)
         now_meta = json.loads(now["meta"].item())
         for key in ("terms", "dt", "integrator", "rtol", "atol"):
             meta[key] = now_meta[key]
@@ -222,7 +227,7 @@ def _rebuild(scene: Any, edit: Callable[[dict, dict], None], like: Any = None) -
     arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    new = Scene._from_file(_scenefile.read_bytes(buf.getvalue(), "<viewer>"), scene.threads)
+    new = Scene.from_bytes(buf.getvalue(), threads=scene.threads, source="<viewer>")
     new.render_defaults = scene.render_defaults
     return new
 

@@ -11,9 +11,7 @@ import io
 import json
 import math
 import os
-import threading
 import warnings
-import weakref
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +25,6 @@ from ._errors import (
     ContactStepWarning,
     InvalidInputError,
     InvalidTypeError,
-    SceneBusyError,
     ThreadPoolWarning,
     allocating,
 )
@@ -41,6 +38,7 @@ from ._parts import (
     entry_class,
     part_class,
 )
+from ._system import usable_cpus
 
 # The part modules register their classes in physcore._parts.PARTS when imported: the scene
 # file reader finds every part kind there. (They import nothing from this module.)
@@ -49,6 +47,7 @@ from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
 from .potentials import PointMasses  # noqa: F401 - registers the potential terms
+from .session import Session
 from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -117,14 +116,6 @@ _MAX_STEPS = 2**63 - 1
 
 def _check_int(value: object, arg: str, minimum: int, maximum: int | None = None) -> int:
     return _check.int_in_range(arg, value, minimum, maximum)
-
-
-def _usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask where the OS has one)."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
 
 
 def _check_dt(dt: object) -> float:
@@ -198,66 +189,6 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
     return a
-
-
-class _Session:
-    """The core simulation and its one-thread-at-a-time rule: what a scene's calls and its live
-    parts' calls share. A part holds this, not the scene, so that it works on after its scene is
-    dropped without the scene and its parts forming a reference cycle (one is freed only by the
-    cyclic garbage collector, which counts Python objects, not the memory the core holds:
-    rebuilding a scene 20 times in a loop held 643 MB)."""
-
-    __slots__ = ("busy", "lock", "sim")
-
-    def __init__(self, sim: _core.Simulation) -> None:
-        self.sim = sim
-        # Taken without waiting by the calls that release the GIL for long; `busy` names the
-        # thread inside one.
-        self.lock = threading.Lock()
-        self.busy: int | None = None
-
-    def checked(self) -> _core.Simulation:
-        """The simulation, unless another thread is inside a call (then SceneBusyError, instead
-        of pyo3's bare "Already mutably borrowed" RuntimeError)."""
-        busy = self.busy
-        if busy is not None and busy != threading.get_ident():
-            raise SceneBusyError(
-                "this Scene is being stepped by another thread; use a Scene from one thread at a "
-                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
-            )
-        return self.sim
-
-    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
-        """Runs ``call(sim)`` as the only user (see ``Scene._exclusive``)."""
-        sim = self.checked()
-        if not self.lock.acquire(blocking=False):
-            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
-        self.busy = threading.get_ident()
-        try:
-            return call(sim)
-        finally:
-            self.busy = None
-            self.lock.release()
-
-
-class _SceneHost:
-    """What a live handle (a grid, a flow, bodies) holds of the scene it joined: exactly the
-    calls it makes later (see :class:`physcore._parts.Host`): the scene's session, and the scene
-    itself only weakly (`_Session`)."""
-
-    __slots__ = ("_scene", "_session")
-
-    def __init__(self, scene: Scene) -> None:
-        self._session = scene._session
-        self._scene = weakref.ref(scene)
-
-    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
-        return self._session.exclusive(call)
-
-    def energy_changed(self) -> None:
-        scene = self._scene()
-        if scene is not None:
-            scene._e0 = None
 
 
 class Scene:
@@ -382,15 +313,12 @@ class Scene:
         sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
-        # One thread at a time (`_Session`).
-        self._session = _Session(sim)
+        # One thread at a time, and the books' reference (physcore.session).
+        self._session = Session(sim)
         self._threads = threads
         #: Everything the scene holds, as stored, in the order added (see physcore._parts).
         self._parts: list[Part] = []
-        self._host = _SceneHost(self)
-        self._e0: float | None = None
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
-        self._e0_scale: float = 0.0
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
         #: ``None``: the renderer's own (real-time playback). Not saved with the scene.
@@ -398,25 +326,39 @@ class Scene:
 
     # ---------------------------------------------------------------- threads
     @property
+    def session(self) -> Session:
+        """The scene's :class:`~physcore.session.Session`: its core simulation, the lock that
+        lets one thread at a time use it, and the energy books' reference. The same object for
+        the scene's life; its parts hold it too. What drives scenes from outside
+        (:class:`~physcore.Batch`, :func:`~physcore.sweep`, the live viewer) uses this."""
+        return self._session
+
+    @property
+    def parts(self) -> tuple[Part, ...]:
+        """Everything the scene holds (terms, colliders, grids, flows, bodies), as stored, in the
+        order added: a new tuple. Each part has a ``section`` and a ``part_kind``
+        (``physcore/_parts.py``)."""
+        return tuple(self._parts)
+
+    @property
     def _sim(self) -> _core.Simulation:
-        # A Scene is not shared between threads while one of them steps it (`_Session`).
+        # A Scene is not shared between threads while one of them steps it (`Session`).
         return self._session.checked()
 
     @property
-    def _raw_sim(self) -> _core.Simulation:
-        return self._session.sim
+    def _e0(self) -> float | None:
+        ref = self._session.reference_energy
+        return None if ref is None else ref[0]
+
+    @_e0.setter
+    def _e0(self, value: None) -> None:
+        assert value is None  # a reference is taken whole (Session.take_reference_energy)
+        self._session.reference_energy = None
 
     @property
-    def _lock(self) -> threading.Lock:
-        return self._session.lock
-
-    @property
-    def _busy(self) -> int | None:
-        return self._session.busy
-
-    @_busy.setter
-    def _busy(self, who: int | None) -> None:
-        self._session.busy = who
+    def _e0_scale(self) -> float:
+        ref = self._session.reference_energy
+        return 0.0 if ref is None else ref[1]
 
     def _exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
         """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
@@ -581,7 +523,7 @@ class Scene:
             read_attributes=lambda: frozenset(self.attributes),
             add_particles=self.add_particles,
             lower_dt=self._lower_dt,
-            host=self._host,
+            host=self._session,
             restoring=restoring,
         )
 
@@ -642,12 +584,19 @@ class Scene:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        self._warn_contact_step()
+        self.warn_contact_step()
         self._exclusive(lambda sim: sim.step(n))
 
-    def _warn_contact_step(self) -> None:
+    def warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
-        automatic step: ``Scene``'s default dt is far too long for stiff contacts."""
+        automatic step: ``Scene``'s default dt is far too long for stiff contacts. :meth:`step`
+        calls it; so does whatever steps the scene's :attr:`session` itself (a Batch).
+
+        Warns
+        -----
+        ContactStepWarning
+            As :meth:`step` describes.
+        """
         if self._step_checked == self.dt or not any(isinstance(t, Contacts) for t in self.terms):
             return
         self._step_checked = self.dt
@@ -726,9 +675,7 @@ class Scene:
         return math.inf if self.integrator == "dopri5" else self.dt
 
     def _set_reference_energy(self) -> None:
-        e = self.energy()
-        self._e0 = e.total
-        self._e0_scale = abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
+        self._session.take_reference_energy()
 
     # ---------------------------------------------------------------- state
     @property
@@ -1223,9 +1170,33 @@ class Scene:
         and unpickling checks the bytes as strictly as :meth:`load` checks a file. The saved
         thread count travels too (``None``: the receiving process's default), and so do the
         ``render_defaults``. Raises what :meth:`save` raises for books that are not finite."""
+        return (_unpickle_scene, (self.to_bytes(), self.render_defaults))
+
+    def to_bytes(self) -> bytes:
+        """The scene file :meth:`save` writes, as bytes (no file is written). Raises what
+        :meth:`save` raises for books that are not finite."""
         buf = io.BytesIO()
         np.savez(buf, **self._file_arrays())
-        return (_unpickle_scene, (buf.getvalue(), self.render_defaults))
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, threads: int | None = None, source: str = "<bytes>") -> Scene:
+        """A scene from the bytes of a scene file (:meth:`to_bytes`, or a file's contents),
+        checked as strictly as :meth:`load` checks a file; ``threads`` as for :meth:`load`;
+        ``source`` names the bytes in error messages.
+
+        Raises
+        ------
+        TypeError
+            ``data`` is not bytes; ``threads`` is not an int.
+        SceneFileError
+            (a ``ValueError``) As :meth:`load` raises it, naming ``source`` and the field.
+        """
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise InvalidTypeError(f"data: expected the bytes of a scene file, got {type(data).__name__}")
+        if threads is not None:
+            threads = _check_int(threads, "threads", 1)
+        return cls._from_file(_scenefile.read_bytes(data, source), threads)
     @classmethod
     def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
@@ -1268,7 +1239,7 @@ class Scene:
     def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None) -> Scene:
         meta, z, r = sf.meta, sf.arrays, sf.reader
         if threads is None and meta["threads"] is not None:
-            threads = min(meta["threads"], _usable_cpus())
+            threads = min(meta["threads"], usable_cpus())
         with r.api("meta"):
             scene = cls(
                 meta["dim"],
@@ -1310,8 +1281,7 @@ class Scene:
                 z.get("cache_forces"),
                 z["cache_power"].tolist() if "cache_power" in z else None,
             )
-        scene._e0 = meta["e0"]
-        scene._e0_scale = meta["e0_scale"]
+        scene._session.reference_energy = None if meta["e0"] is None else (meta["e0"], meta["e0_scale"])
         return scene
 
     def show(self, **options: Any) -> None:
