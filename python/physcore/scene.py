@@ -12,7 +12,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -189,6 +189,42 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
     return a
+
+
+def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
+    """``value`` of ``state[key]`` checked against the scene's own ``now`` (see Scene.set_state)."""
+    arg = f"state[{key!r}]"
+    if key in ("time", "collisions"):
+        v = _check.real(arg, value)
+        if not math.isfinite(v):
+            raise InvalidInputError(f"{arg}: must be finite, got {v}")
+        return v
+    if key == "dt":
+        v = _check.real(arg, value)
+        if not (math.isfinite(v) and v >= _MIN_DT):
+            raise InvalidInputError(f"{arg}: must be finite and >= {_MIN_DT:.3g} s, got {v}")
+        return v
+    if key == "step":
+        return _check_int(value, arg, 0, _MAX_STEPS)
+    if value is None:
+        if key in ("cache_forces", "cache_power", "reference_energy"):
+            return None
+        raise InvalidTypeError(f"{arg}: expected an array, got None")
+    a = _check.array(arg, value)
+    if a.dtype != np.float64:
+        raise InvalidTypeError(f"{arg}: expected dtype float64, got {a.dtype}")
+    if key in ("positions", "velocities") or key.startswith("attr_") or key in ("ledger", "reference_energy"):
+        want = now.shape if now is not None else (2,)
+        if a.shape != want:
+            raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
+    elif key == "cache_forces":
+        if a.ndim != 2 or a.shape[1] != scene.dim:
+            raise InvalidInputError(f"{arg}: expected shape (M, {scene.dim}), got {a.shape}")
+    elif a.ndim != 1 if now is None else a.ndim != now.ndim:
+        raise InvalidInputError(f"{arg}: expected {1 if now is None else now.ndim} dimension(s), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise InvalidInputError(f"{arg}: must be finite")
+    return np.ascontiguousarray(a)
 
 
 class Scene:
@@ -1104,6 +1140,127 @@ class Scene:
         arrays = self._file_arrays()
         atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
+
+    def state(self) -> dict[str, Any]:
+        """A snapshot of everything that changes while the scene runs, for :meth:`set_state`:
+        a flat dict of numpy arrays (copies) and scalars, named as the scene file's members.
+
+        What stays fixed (masses, pins, the terms' records, colliders, grid sizes) is not in it;
+        a snapshot goes back into the scene it came from, or into one of the same structure
+        (:func:`physcore.batch.structure`, same attribute names). Keys:
+
+        ``"time"`` : float
+            Simulated time, s.
+        ``"step"`` : int
+            :attr:`step_count`.
+        ``"dt"`` : float
+            The time step, s (:meth:`advance` changes it, e.g. with a DFSPH fluid).
+        ``"positions"``, ``"velocities"`` : ndarray, (N, dim) float64
+            m and m/s (float64 even with ``precision="f32"``: the stored values, exactly).
+        ``"attr_{name}"`` : ndarray, (N,) float64
+            Each per-particle attribute set (:attr:`attributes`: ``attr_charge`` in C,
+            ``attr_radius`` in m).
+        ``"ledger"`` : ndarray, (K,) float64
+            The energy books' dissipated energy so far, J, one entry per dissipative term.
+        ``"collisions"`` : float
+            Energy dissipated by the colliders so far, J.
+        ``"cache_forces"`` : ndarray (float64) or None; ``"cache_power"`` : ndarray, (P,) float64, or None
+            The integrator's cache (velocity Verlet's forces at the current positions, the
+            dopri5 step-size controller); None where it holds none.
+        ``"reference_energy"`` : ndarray, (2,) float64, or None
+            The books' reference ``(E0, S0)`` in J (:attr:`Session.reference_energy
+            <physcore.session.Session.reference_energy>`); None until the next step takes it.
+        ``"{prefix}{k}_{member}"`` : ndarray, float64
+            The parts' own state, named as in the scene file (``{prefix}`` is the section's:
+            ``term``, ``grid``, ``flow``, ``body``; ``k`` its index in the section):
+            ``term{k}_history`` (contacts: particle spins and contact springs; DFSPH: the
+            solvers' warm starts), a grid's fields (``grid{k}_u``, ``grid{k}_v``, ...), a flow's
+            points and rates (``flow{k}_y``), the rigid bodies' whole solver state
+            (``body0_state``, ``body0_state_bytes``: poses, velocities, contacts).
+
+        Stepping after ``set_state(s)`` repeats, bit for bit, what stepping after ``s = state()``
+        did. The layout is described in docs/guide/architecture.md (Saving, checkpoints and
+        the state protocol).
+        """
+        sim = self._sim
+        out: dict[str, Any] = {
+            "time": sim.time,
+            "step": sim.step_count,
+            "dt": sim.dt,
+            "positions": sim.positions,
+            "velocities": sim.velocities,
+            **{f"attr_{a}": v for a, v in self.attributes.items()},
+        }
+        ledger, collisions = sim.ledger()
+        out["ledger"] = np.asarray(ledger, dtype=np.float64)
+        out["collisions"] = float(collisions)
+        cache = sim.integrator_cache()
+        out["cache_forces"] = None if cache is None else cache[0]
+        out["cache_power"] = None if cache is None else np.asarray(cache[1], dtype=np.float64)
+        ref = self._session.reference_energy
+        out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
+        count = dict.fromkeys(SECTIONS, 0)
+        for part in self._parts:
+            k = count[part.section]
+            count[part.section] += 1
+            out.update({f"{MEMBER_PREFIX[part.section]}{k}_{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
+        return out
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Put back a snapshot taken by :meth:`state` (see there for the keys).
+
+        Every key is checked first (the same keys as this scene's :meth:`state`; each array's
+        dtype, shape and finiteness; each scalar's type and range); the core then checks the
+        parts' contents, and if it refuses one, the scene is put back as it was before the call.
+
+        Raises
+        ------
+        TypeError
+            ``state`` is not a mapping, or a value is of the wrong type; names the key.
+        InvalidInputError
+            (a ``ValueError``) A key missing or unknown, an array of the wrong dtype or shape, a
+            non-finite number, a scalar out of range; names the key (``state['positions']``).
+            Nothing changes.
+        """
+        if not isinstance(state, Mapping):
+            raise InvalidTypeError(f"state: expected a dict from Scene.state(), got {type(state).__name__}")
+        now = self.state()
+        missing = [k for k in now if k not in state]
+        if missing:
+            raise InvalidInputError(f"state: missing key {missing[0]!r} (this scene's state has {', '.join(map(repr, now))})")
+        extra = [k for k in state if k not in now]
+        if extra:
+            raise InvalidInputError(f"state[{extra[0]!r}]: not a key of this scene's state (see Scene.state)")
+        new = {k: _check_state_value(k, state[k], now[k], self) for k in now}
+
+        def put(sim: _core.Simulation, s: dict[str, Any]) -> None:
+            sim.set_state(positions=s["positions"], velocities=s["velocities"])
+            for key, v in s.items():
+                if key.startswith("attr_"):
+                    sim.set_attribute(key[5:], v)
+            count = dict.fromkeys(SECTIONS, 0)
+            for part in self._parts:
+                k = count[part.section]
+                count[part.section] += 1
+                prefix = f"{MEMBER_PREFIX[part.section]}{k}_"
+                own = {key[len(prefix):]: v for key, v in s.items() if key.startswith(prefix)}
+                if own:
+                    part._set_state(sim, own)
+            sim.dt = s["dt"]
+            power = s["cache_power"]
+            sim.restore(s["time"], s["step"], s["ledger"].tolist(), s["collisions"], s["cache_forces"],
+                        None if power is None else power.tolist())
+
+        def apply(sim: _core.Simulation) -> None:
+            try:
+                put(sim, new)
+            except BaseException:
+                put(sim, now)  # the core refused a part's contents: back as it was
+                raise
+
+        self._exclusive(apply)
+        ref = new["reference_energy"]
+        self._session.reference_energy = None if ref is None else (float(ref[0]), float(ref[1]))
 
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""

@@ -161,6 +161,16 @@ class Term(Part):
             members = {**members, "history": history}
         return {"type": self.kind, "name": self.name, **record}, members
 
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """``{"history": ...}`` where the core keeps the term's own state (contacts: spins and
+        springs; DFSPH: the solvers' warm starts), else ``{}``."""
+        history = sim.term_history(self.name)
+        return {} if history is None else {"history": history}
+
+    def _set_state(self, sim: Any, arrays: Any) -> None:
+        if "history" in arrays:
+            sim.set_term_history(self.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
+
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """What a scene file holds of this term: the ``record_fields`` (JSON values) and the
         ``record_arrays``."""
