@@ -1441,16 +1441,6 @@ class Scene:
         scene._session.reference_energy = None if meta["e0"] is None else (meta["e0"], meta["e0_scale"])
         return scene
 
-    def show(self, **options: Any) -> None:
-        """Display this scene running live in a Jupyter notebook: ``physcore.widget(self,
-        **options)`` (see :func:`physcore.notebook.widget`) shown with IPython's ``display``.
-        Needs ``pip install "physcore[notebook]"`` (ImportError saying so otherwise)."""
-        from IPython.display import display
-
-        from .notebook import widget
-
-        display(widget(self, **options))
-
     def __repr__(self) -> str:
         terms = ", ".join(t.name for t in self.terms) or "no terms"
         boxes, spheres, grids = self.boxes, self.spheres, self.grids
