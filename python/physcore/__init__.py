@@ -88,6 +88,21 @@ __all__ = [
 _LAZY = ("scenes", "render", "cli", "viewer", "notebook")
 
 
+def _show(self: Scene, **options: object) -> None:
+    """Display this scene running live in a Jupyter notebook: ``physcore.widget(self,
+    **options)`` (see :func:`physcore.notebook.widget`) shown with IPython's ``display``.
+    Needs ``pip install "physcore[notebook]"`` (ImportError saying so otherwise)."""
+    from .notebook import show
+
+    show(self, **options)
+
+
+# Presentation sits above the scene: the package attaches it (scene.py imports nothing of it).
+_show.__name__ = "show"
+_show.__qualname__ = "Scene.show"
+Scene.show = _show  # type: ignore[attr-defined]
+
+
 def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
     if name == "widget":  # the notebook widget (physcore.notebook.widget), imported on first use
         from .notebook import widget

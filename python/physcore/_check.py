@@ -204,3 +204,13 @@ def memory(name: str, nbytes: float, what: str) -> None:
 
 def _unit(unit: str) -> str:
     return f" ({unit})" if unit else ""
+
+
+def finite_float(value: object, arg: str, *, minimum: float | None = None, strict: bool = False) -> float:
+    v = real(arg, value)  # TypeError for bool/str/None; an int beyond float64 is refused
+    if not np.isfinite(v):
+        raise InvalidInputError(f"{arg}: must be finite, got {v}")
+    if minimum is not None and (v < minimum or (strict and v == minimum)):
+        op = ">" if strict else ">="
+        raise InvalidInputError(f"{arg}: must be {op} {minimum}, got {v}")
+    return v

@@ -28,7 +28,7 @@ import json
 import math
 import time
 from collections.abc import Callable
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -161,26 +161,21 @@ def _parts(k: int, m: int) -> list[int]:
 
 
 # --------------------------------------------------------------------------- parameters
-class _Param(NamedTuple):
-    name: str  # "stiffness", "damping", "gravity", "drag"
-    keys: tuple[str, str]  # down, up
-    label: str  # HUD symbol
-    unit: str
+def _params() -> tuple[Any, ...]:
+    """The live parameters every registered term class declares (``Term.live_params``,
+    :class:`physcore.terms.LiveParam`), by rank: the keys, sliders and heads-up line offer
+    these, so a new term brings its own."""
+    from ._parts import PARTS
 
-
-_PARAMS = (
-    _Param("stiffness", ("[", "]"), "k", "N/m"),
-    _Param("damping", ("-", "="), "c", "N·s/m"),
-    _Param("gravity", ("g", "G"), "g", "m/s²"),
-    _Param("drag", ("d", "D"), "b", "kg/s"),
-)
+    seen: dict[str, Any] = {}
+    for cls in PARTS.values():
+        for p in getattr(cls, "live_params", ()):
+            seen.setdefault(p.name, p)
+    return tuple(sorted(seen.values(), key=lambda p: (p.rank, p.name)))
 
 
 def _terms_of(scene: Any, name: str) -> list[tuple[int, Any]]:
-    from .terms import Drag, Gravity, Springs
-
-    kind = {"stiffness": Springs, "damping": Springs, "gravity": Gravity, "drag": Drag}[name]
-    return [(k, t) for k, t in enumerate(scene.terms) if type(t) is kind]
+    return [(k, t) for k, t in enumerate(scene.terms) if any(p.name == name for p in type(t).live_params)]
 
 
 def param_value(scene: Any, name: str) -> float | None:
@@ -190,25 +185,31 @@ def param_value(scene: Any, name: str) -> float | None:
     terms = _terms_of(scene, name)
     if not terms:
         return None
-    if name in ("stiffness", "damping"):
-        values = np.concatenate([np.asarray(getattr(t, name), dtype=np.float64).reshape(-1) for _, t in terms])
+    p = _param(name)
+    if p.reduce == "mean":
+        values = np.concatenate([np.asarray(getattr(t, p.attribute), dtype=np.float64).reshape(-1) for _, t in terms])
         return float(values.mean()) if values.size else None
-    if name == "gravity":
-        return float(np.linalg.norm(terms[0][1].g))
-    return float(terms[0][1].coefficient)
+    if p.reduce == "norm":
+        return float(np.linalg.norm(getattr(terms[0][1], p.attribute)))
+    return float(getattr(terms[0][1], p.attribute))
+
+
+def _file_members(scene: Any) -> dict[str, np.ndarray]:
+    """The members of ``scene``'s scene file (:meth:`Scene.to_bytes`), by name."""
+    with np.load(io.BytesIO(scene.to_bytes()), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
 
 
 def _rebuild(scene: Any, edit: Callable[[dict, dict], None], like: Any = None) -> Any:
     """A new Scene from `scene`'s in-memory scene file after ``edit(meta, arrays)``, without the
     integrator's force cache and with a fresh energy-drift reference. `like` (default `scene`)
     gives the term records, dt and integrator when `scene` is an earlier state (reset)."""
-    from . import _scenefile
     from .scene import Scene
 
-    arrays = scene._file_arrays()
+    arrays = _file_members(scene)
     meta = json.loads(arrays["meta"].item())
     if like is not None and like is not scene:
-        now = like._file_arrays()
+        now = _file_members(like)
         now_meta = json.loads(now["meta"].item())
         for key in ("terms", "dt", "integrator", "rtol", "atol"):
             meta[key] = now_meta[key]
@@ -222,7 +223,7 @@ def _rebuild(scene: Any, edit: Callable[[dict, dict], None], like: Any = None) -
     arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    new = Scene._from_file(_scenefile.read_bytes(buf.getvalue(), "<viewer>"), scene.threads)
+    new = Scene.from_bytes(buf.getvalue(), threads=scene.threads, source="<viewer>")
     new.render_defaults = scene.render_defaults
     return new
 
@@ -239,24 +240,25 @@ def scale_param(scene: Any, name: str, factor: float) -> Any:
     factor = _check.real("factor", factor)
     if not (factor > 0 and math.isfinite(factor)):
         raise InvalidInputError(f"factor: must be a finite number > 0, got {factor!r}")
-    names = [p.name for p in _PARAMS]
+    names = [p.name for p in _params()]
     if name not in names:
         raise InvalidInputError(f"name: expected one of {', '.join(names)}, got {name!r}")
     terms = _terms_of(scene, name)
     if not terms:
         raise InvalidInputError(f"name: the scene has no term with a {name!r} parameter")
-    start = param_value(scene, "damping") if name == "damping" else None
-    kick = name == "damping" and start == 0.0 and factor > 1
+    p = _param(name)
+    start = param_value(scene, name) if p.at_zero == "critical" else None
+    kick = p.at_zero == "critical" and start == 0.0 and factor > 1
     if kick:
         base = _critical_percent(scene)
     for _, t in terms:
-        if name in ("stiffness", "damping"):
-            a = np.asarray(getattr(t, name), dtype=np.float64)
-            new = dataclasses.replace(t, **{name: np.full_like(a, base) if kick else a * factor})
-        elif name == "gravity":
-            new = dataclasses.replace(t, g=np.array([factor * float(c) for c in t.g]))
+        if p.reduce == "mean":
+            a = np.asarray(getattr(t, p.attribute), dtype=np.float64)
+            new = dataclasses.replace(t, **{p.attribute: np.full_like(a, base) if kick else a * factor})
+        elif p.reduce == "norm":
+            new = dataclasses.replace(t, **{p.attribute: np.array([factor * float(c) for c in getattr(t, p.attribute)])})
         else:
-            new = dataclasses.replace(t, coefficient=factor * float(t.coefficient))
+            new = dataclasses.replace(t, **{p.attribute: factor * float(getattr(t, p.attribute))})
         scene.replace(t.name, new)
     return scene
 
@@ -285,7 +287,7 @@ class _Live:
     parameter keys. No display: testable on its own."""
 
     def __init__(self, scene: Any, color_by: str) -> None:
-        from .render._recording import default_stepping, scene_defaults
+        from .render.painter import default_stepping, scene_defaults
 
         # Stepped in place, and parameter keys replace its terms in place (Scene.replace).
         self.scene = scene
@@ -345,7 +347,7 @@ class _Live:
         if self.grabbed is not None:  # pinned while held: its velocity is the pointer's
             self.v[self.grabbed] = self.vel
         if self._poses_of is not s:
-            from .render._bodies import body_track
+            from .render.painter import body_track
 
             track, self._poses = body_track(s, 1)
             self._poses_of, self.outlines = s, list(getattr(track, "outlines", []))
@@ -544,7 +546,7 @@ class _Live:
         the terms once after each change (:meth:`scale`, :meth:`set`)."""
         if self._params is None:
             out = {}
-            for p in _PARAMS:
+            for p in _params():
                 value = param_value(self.scene, p.name)
                 if value is not None:
                     out[p.name] = value
@@ -574,7 +576,7 @@ class _Live:
         dt = self.dt0 * min(1.0, self._suggest(s) / self.suggest0) if math.isfinite(self.suggest0) else self.dt0
         if dt != s.dt:
             s.dt = dt
-        from .render._recording import steps_for
+        from .render.painter import steps_for
 
         self.steps = steps_for(self.frame_time, s.dt)
 
@@ -594,9 +596,9 @@ class _Live:
         r: tuple[float, float] | None = None
         if start > 0:
             r = (start / PARAM_RANGE, start * PARAM_RANGE)
-        elif name == "damping":
+        elif _param(name).at_zero == "critical":
             r = (0.0, (_critical_percent(self.scene) or 1.0) * PARAM_RANGE)
-        elif name == "drag":
+        elif _param(name).at_zero == "mass":
             r = (0.0, (float(np.mean(self.scene.masses)) if self.scene.n_particles else 1.0) * PARAM_RANGE)
         self._ranges[name] = r
         return r
@@ -633,9 +635,7 @@ class _Painter:
     one camera and colour scale fitted once to a preview run."""
 
     def __init__(self, scene: Any, settings: dict[str, Any], preview: float, hud: bool) -> None:
-        from .render._raster import _Rasteriser
-        from .render._recording import _simulate, default_stepping, scene_defaults
-        from .render._scene_state import _scene_springs
+        from .render.painter import Rasteriser, default_stepping, scene_defaults, scene_springs, simulate
 
         d = scene_defaults(scene)
         self.size = settings["size"]
@@ -662,10 +662,10 @@ class _Painter:
         copy = _rebuild(scene, lambda meta, arrays: None)
         copy.render_defaults = scene.render_defaults
         try:
-            rec = _simulate(copy, budget, spf, color_by == "speed", settings["springs"], False,
+            rec = simulate(copy, budget, spf, color_by == "speed", settings["springs"], False,
                             need_pressure=color_by == "pressure", frame_time=ft)
         except SimulationDiverged:
-            rec = _simulate(_rebuild(scene, lambda meta, arrays: None), 1, spf, color_by == "speed",
+            rec = simulate(_rebuild(scene, lambda meta, arrays: None), 1, spf, color_by == "speed",
                             settings["springs"], False, need_pressure=color_by == "pressure", frame_time=ft)
         self.complete = rec.frames >= frames
         #: The preview's recording: the scene's first GIF frames (the widget's fallback draws it).
@@ -684,9 +684,9 @@ class _Painter:
                                     for k in range(2 ** len(c))])
                 fit = np.concatenate([pts, corners])
         if d.get("extent") is not None:  # the scene's own view box, as gif() fits it
-            from .render._checks import _extent_box
+            from .render.painter import extent_box
 
-            box = _extent_box(d.get("extent"), rec.positions.shape[-1])
+            box = extent_box(d.get("extent"), rec.positions.shape[-1])
             if box is not None:
                 fit = box - rec.origin
         trail = min(int(settings.get("trail") or 0), 240)
@@ -697,28 +697,27 @@ class _Painter:
             kw["fit"] = fit
         # A shaded surface where the scene's GIF has one (the cloth), and soft discs where it has
         # them, exactly as gif() picks them.
-        from .render._mesh import check_mesh, check_texture
+        from .render.painter import check_mesh, check_texture
 
         mesh = None if color_by == "density" else check_mesh(d.get("mesh"), rec.positions.shape[1])
         kw.update(mesh=mesh, texture=check_texture(d.get("texture"), mesh), theme=settings["theme"],
                   antialias=bool(d.get("antialias", False)))
         # The rest of what gif() takes from the scene's defaults: the colour map, a fluid's
         # surface, the background, each particle's own colour and halo.
-        from .render._checks import _check_background, _check_cmap, _check_colors
-        from .render._gif import _check_halo
+        from .render.painter import check_background, check_cmap, check_colors, check_halo
 
         n = rec.positions.shape[1]
-        kw.update(cmap=_check_cmap(d.get("cmap")), surface=bool(d.get("surface", False)),
-                  background=_check_background(d.get("background")), colors=_check_colors(d.get("colors"), n),
-                  halo=_check_halo(d.get("halo"), n))
-        self.ras = _Rasteriser(rec, self.size, color_by, settings["radius"], settings["view"], **kw)
+        kw.update(cmap=check_cmap(d.get("cmap")), surface=bool(d.get("surface", False)),
+                  background=check_background(d.get("background")), colors=check_colors(d.get("colors"), n),
+                  halo=check_halo(d.get("halo"), n))
+        self.ras = Rasteriser(rec, self.size, color_by, settings["radius"], settings["view"], **kw)
         self.hud = hud and self.ras.title is not None
         # The live recording: the trail's history of ticks, then the drawn state, last.
         f = trail + 1 if trail and hasattr(self.ras, "_pix") else 1
         n, dim = rec.positions.shape[1:]
         self.origin = rec.origin
         m = 0 if rec.pairs is None else rec.pairs[0].size
-        self.springs = None if rec.pairs is None else _scene_springs(scene)
+        self.springs = None if rec.pairs is None else scene_springs(scene)
         bodies = None
         if rec.bodies is not None:  # the live poses go in its last frame, as the particles'
             bodies = rec.bodies.with_frames(f)
@@ -754,19 +753,26 @@ class _Painter:
              bodies: np.ndarray | None = None) -> np.ndarray:
         """(H, W, 3) uint8 RGB image of the state (with the rigid bodies' poses `bodies`, (B, 3)
         ``(x, y, angle)``, where the scene has them), with the HUD."""
-        from .render._colorbar import _CB_MARGIN, _draw_text, _text_mask
-        from .render._palette import _BACKGROUND, _TEXT
-        from .render._raster import _draw_title, _overlay, _paste
-        from .render._rows import _row_norms
-        from .render._scene_state import _strain
+        from .render.painter import (
+            BACKGROUND,
+            CB_MARGIN,
+            TEXT,
+            draw_text,
+            draw_title,
+            overlay,
+            paste,
+            row_norms,
+            strain,
+            text_mask,
+        )
 
         live, k = self.live, self.frames - 1
         with np.errstate(over="ignore", invalid="ignore"):
             live.positions[k] = x - self.origin
             if live.speeds is not None:
-                live.speeds[k] = _row_norms(v)
+                live.speeds[k] = row_norms(v)
             if live.strain is not None and self.springs is not None:
-                live.strain[k] = _strain(x, *self.springs)
+                live.strain[k] = strain(x, *self.springs)
             if live.pressures is not None and p is not None:
                 live.pressures[k] = p
             if live.bodies is not None and bodies is not None and bodies.shape == live.bodies.poses[k].shape:
@@ -775,41 +781,39 @@ class _Painter:
                 live.bodies.poses[k, :, d:] = bodies[:, d:]
         live.times[k] = t
         if self.frames > 1:
-            self.ras._pix = None  # the history moved: project it again
+            self.ras.forget_projection()  # the history moved: project it again
         # Full colour where the renderer has it (a shaded mesh), else the palette image.
         rgb = self.ras.frame_rgb(k)  # a new C-contiguous array
         if self.hud:
             # Drawn as palette indices on an overlay (-1: nothing), in the labels' font of this
             # image size where the renderer has several (else the bitmap font).
             px = self.ras.font_px
-            line = _text_mask("0", px).shape[0]
+            line = text_mask("0", px).shape[0]
             h, w = rgb.shape[:2]
-            over = _overlay((h, w))
+            over = overlay((h, w))
             right = w - 8 if self.ras.colorbar is None else self.ras.colorbar.lo_x - 8
-            over[: _CB_MARGIN + line + 1, : max(right, 0)] = _BACKGROUND
-            _draw_title(over, params or " ", right, px)
+            over[: CB_MARGIN + line + 1, : max(right, 0)] = BACKGROUND
+            draw_title(over, params or " ", right, px)
             if status:
-                _draw_text(over, status, min(8 * line, w // 4), h - 4 - line, _TEXT, _BACKGROUND, px=px)
-            _paste(rgb, over, self.ras.palette)
+                draw_text(over, status, min(8 * line, w // 4), h - 4 - line, TEXT, BACKGROUND, px=px)
+            paste(rgb, over, self.ras.palette)
         return rgb
 
 
 
 def _settings(scene: Any, size: Any, view_angles: Any) -> dict[str, Any]:
     """The drawing settings of ``gif(scene)``: the scene's render_defaults, else gif's."""
-    from .render._checks import _check_color_by, _check_radius, _check_size, _check_view
-    from .render._palette import THEMES
-    from .render._recording import scene_defaults
+    from .render.painter import THEMES, check_color_by, check_radius, check_size, check_view, scene_defaults
 
     d = scene_defaults(scene)
     theme = d.get("theme", "light")
     if theme not in THEMES:
         theme = "light"
     return {
-        "size": _check_size(tuple(d.get("size", (480, 360))) if size is None else size),
-        "color_by": _check_color_by(d.get("color_by", "speed")),
-        "radius": _check_radius(d.get("radius")),
-        "view": _check_view(d.get("view") if view_angles is None else view_angles),
+        "size": check_size(tuple(d.get("size", (480, 360))) if size is None else size),
+        "color_by": check_color_by(d.get("color_by", "speed")),
+        "radius": check_radius(d.get("radius")),
+        "view": check_view(d.get("view") if view_angles is None else view_angles),
         "theme": theme,
         "trail": int(d.get("trail", 0) or 0),
         "size_by": d.get("size_by", "none") if d.get("size_by") in ("none", "mass") else "none",
@@ -830,7 +834,7 @@ def set_param(scene: Any, name: str, value: float) -> Any:
     Raises InvalidInputError naming `name` where the scene has no such term, and naming `value`
     where it is not finite and >= 0 (> 0 for stiffness and gravity); nothing changes then.
     """
-    names = [p.name for p in _PARAMS]
+    names = [p.name for p in _params()]
     if name not in names:
         raise InvalidInputError(f"name: expected one of {', '.join(names)}, got {name!r}")
     value = _check.real("value", value)
@@ -1046,7 +1050,7 @@ class _Session:
             return self.step_once()
         if ch == "r":
             return self.reset()
-        for p in _PARAMS:
+        for p in _params():
             if ch in p.keys:
                 return self.scale(p.name, STEP_FACTOR if ch == p.keys[1] else 1.0 / STEP_FACTOR)
         return None
@@ -1056,7 +1060,7 @@ class _Session:
         """The parameters the scene has: name -> value (see :func:`param_value`)."""
         return self.live.params()
 
-    def _said(self, p: _Param) -> str:
+    def _said(self, p: Any) -> str:
         live = self.live
         value = live.params()[p.name]
         extra = f", dt now {live.scene.dt:.3g} s" if not live.advance and live.scene.dt != live.dt0 else ""
@@ -1094,12 +1098,12 @@ class _Session:
         return self._said(p)
 
     def sliders(self) -> list[dict[str, Any]]:
-        """One slider per parameter the scene's terms have, in :data:`_PARAMS` order: name,
+        """One slider per parameter the scene's terms have, in :func:`_params` order: name,
         label, unit, value now, and the range (lo may be 0: a damping or drag that starts at 0;
         a stiffness or gravity that starts at 0 has none)."""
         self.settle()
         out = []
-        for p in _PARAMS:
+        for p in _params():
             value = self.live.params().get(p.name)
             if value is None:
                 continue
@@ -1189,7 +1193,7 @@ class _Session:
     def hud(self, name: str = "") -> tuple[str, str]:
         """The parameter line (or `name` where the scene has none) and the state line."""
         params = self.live.params()
-        parts = [f"{p.label} {params[p.name]:.4g} {p.unit}" for p in _PARAMS if p.name in params]
+        parts = [f"{p.label} {params[p.name]:.4g} {p.unit}" for p in _params() if p.name in params]
         status = self.status
         if self.clock.paused and not status.startswith("diverged"):
             status = "paused" + (f" - {status}" if status else "")
@@ -1209,8 +1213,8 @@ class _Session:
             return self.painter.draw(x, v, t, p, params, status, bodies)
 
 
-def _param(name: str) -> _Param:
-    for p in _PARAMS:
+def _param(name: str) -> Any:
+    for p in _params():
         if p.name == name:
             return p
-    raise InvalidInputError(f"name: expected one of {', '.join(q.name for q in _PARAMS)}, got {name!r}")
+    raise InvalidInputError(f"name: expected one of {', '.join(q.name for q in _params())}, got {name!r}")

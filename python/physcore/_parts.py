@@ -197,6 +197,16 @@ class Part:
         for state only the core holds (a grid's fields, a contact term's springs)."""
         raise NotImplementedError
 
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """What changes of the part while the scene runs, for :meth:`Scene.state`: float64 arrays
+        by member name, as its scene file members are named (``history``, a grid's fields); a
+        part with no state of its own (a record the core only reads) returns ``{}``."""
+        return {}
+
+    def _set_state(self, sim: Any, arrays: Mapping[str, np.ndarray]) -> None:
+        """Puts back what :meth:`_state` returned (for :meth:`Scene.set_state`, which has checked
+        the names, dtypes and finiteness); the core checks the contents."""
+
     @classmethod
     def _load_names(cls, ctx: LoadContext, arrays: Mapping[str, np.ndarray]) -> tuple[str, dict[str, str]]:
         """``(context, members)`` for the reader's error messages while :meth:`_load` runs (see

@@ -1,6 +1,7 @@
 """What physcore runs on: the CPU, the SIMD level of the kernels, threads and build."""
 from __future__ import annotations
 
+import os
 from typing import Any
 
 from . import _core
@@ -60,3 +61,11 @@ def info() -> dict[str, Any]:
         "simd_levels": simd_levels(),
         "threads": _core.default_threads(),
     }
+
+
+def usable_cpus() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1

@@ -51,7 +51,7 @@ from . import _check, _core
 from ._atomic import atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SceneFileError, SimulationDiverged
 from .contacts import Contacts
-from .scene import Scene, _unpickle_scene
+from .scene import Scene
 
 __all__ = ["Batch"]
 
@@ -63,9 +63,11 @@ _REFERENCE_AT_ONCE = 4096
 FORMAT_VERSION = 1
 
 
-def _structure(scene: Scene) -> tuple[Any, ...]:
-    """What members must share: dimension, particle count, and each part's section and kind."""
-    return (scene.dim, scene.n_particles, tuple((p.section, p.part_kind) for p in scene._parts))
+def structure(scene: Scene) -> tuple[Any, ...]:
+    """What the members of a batch must share: ``(dim, n_particles, ((section, part_kind), ...))``,
+    the dimension, the particle count, and each part's section and kind in order
+    (:attr:`Scene.parts`). Two scenes of equal structure can be stepped together."""
+    return (scene.dim, scene.n_particles, tuple((p.section, p.part_kind) for p in scene.parts))
 
 
 class Batch:
@@ -104,9 +106,9 @@ class Batch:
             if id(s) in seen:
                 raise InvalidInputError(f"scenes: entry {k} is entry {seen[id(s)]} again (each scene once)")
             seen[id(s)] = k
-        first = _structure(members[0])
+        first = structure(members[0])
         for k, s in enumerate(members[1:], start=1):
-            other = _structure(s)
+            other = structure(s)
             if other != first:
                 i = next(i for i in range(3) if other[i] != first[i])
                 what = ("dimension", "particle count", "parts")[i]
@@ -117,8 +119,9 @@ class Batch:
         self.diverged: dict[int, SimulationDiverged] = {}
         # What a call reads of every member, gathered once (a scene keeps its core simulation
         # and its lock for life): a call's Python work per member is then a few list steps.
-        self._sims = [s._raw_sim for s in members]
-        self._locks = [s._lock for s in members]
+        self._sessions = [s.session for s in members]
+        self._sims = [x.sim for x in self._sessions]
+        self._locks = [x.lock for x in self._sessions]
 
     # ------------------------------------------------------------------------ building
     @classmethod
@@ -170,16 +173,16 @@ class Batch:
     # ------------------------------------------------------------------------ stepping
     def _set_reference_energies(self, fresh: list[Scene]) -> list[Scene]:
         """The books' reference of each member before its first step, as its first step alone
-        takes it (:meth:`Scene._set_reference_energy`), for members whose locks the caller
+        takes it (:meth:`Session.take_reference_energy <physcore.session.Session.take_reference_energy>`), for members whose locks the caller
         holds: all at once in the core (the same additions, in parallel, the GIL released). The
         members whose books could not be prepared are returned, their reference not taken."""
-        refs = _core.reference_energies([s._raw_sim for s in fresh], self._threads)
+        refs = _core.reference_energies([s.session.sim for s in fresh], self._threads)
         missing = []
         for s, r in zip(fresh, refs, strict=True):
             if r is None:  # its books could not be prepared (memory): read alone, which says why
                 missing.append(s)
             else:
-                s._e0, s._e0_scale = r
+                s.session.reference_energy = r
         return missing
 
     def step(self, n: int = 1) -> None:
@@ -213,36 +216,36 @@ class Batch:
             live, scenes, sims, locks = None, self._members, self._sims, self._locks
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = [s for s in scenes if s._e0 is None]
+        fresh = [s for s in scenes if s.session.reference_energy is None]
         if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
             for s in fresh:
-                s._set_reference_energy()
+                s.session.take_reference_energy()
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
-                s._warn_contact_step()  # as Scene.step warns (ContactStepWarning)
+                s.warn_contact_step()  # as Scene.step warns (ContactStepWarning)
         taken = 0
         try:
             for lock in locks:
                 if not lock.acquire(blocking=False):
                     raise SceneBusyError("a member of this Batch is being stepped by another thread")
                 taken += 1
-            # As Scene._exclusive marks it: another thread's use of a member meanwhile raises
+            # As Session.exclusive marks it: another thread's use of a member meanwhile raises
             # SceneBusyError, not pyo3's bare "Already mutably borrowed".
             me = threading.get_ident()
             for s in scenes:
-                s._busy = me
-            missing = self._set_reference_energies([s for s in fresh if s._e0 is None])
+                s.session.busy = me
+            missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None])
             # The core checks n against every member's step count before stepping any.
             failed = None if missing else _core.step_batch(sims, n, self._threads)
         finally:
             if taken == len(locks):
                 for s in scenes:
-                    s._busy = None
+                    s.session.busy = None
             for lock in locks[:taken]:
                 lock.release()
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
-                s._set_reference_energy()
+                s.session.take_reference_energy()
             return self.step(n)
         for j, e in failed:
             if not isinstance(e, SimulationDiverged):
@@ -297,7 +300,7 @@ class Batch:
         """Write the batch to one file, atomically: a zip of every member's scene file
         (``member{k}.npz``, as :meth:`Scene.save` writes it) and ``batch.json`` (the format,
         the thread count, and the retired members' messages). Returns the path."""
-        blobs = [s.__reduce__()[1][0] for s in self._members]
+        blobs = [s.to_bytes() for s in self._members]
         meta = {
             "format": FORMAT_VERSION,
             "members": len(blobs),
@@ -361,7 +364,7 @@ class Batch:
         members = []
         for k, b in enumerate(blobs):
             try:
-                members.append(_unpickle_scene(b, None))
+                members.append(Scene.from_bytes(b, source="<pickled Scene>"))
             except SceneFileError as e:
                 raise SceneFileError(where, f"member{k}.npz", e.problem if e.field == "" else f"{e.field}: {e.problem}") from None
         threads = meta.get("threads")

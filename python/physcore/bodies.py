@@ -636,6 +636,20 @@ class Bodies(_BodiesPart):
             arrays["state"], arrays["state_bytes"] = state["state"], state["bytes"]
         return {"name": self.name, "part": "group", "record": self._record()}, arrays
 
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """The rigid-body solver's whole state (every group's poses and velocities, contacts,
+        warm starts: ``state`` and ``state_bytes``, as the scene file), held by the first group;
+        ``{}`` for the others."""
+        if self.first != 0:
+            return {}
+        state = dict(sim.system_save(SYSTEM))
+        return {"state": state["state"], "state_bytes": state["bytes"]}
+
+    def _set_state(self, sim: Any, arrays: Any) -> None:
+        if "state" in arrays:
+            sim.system_load(SYSTEM, [("state", np.asarray(arrays["state"], np.float64)),
+                                     ("bytes", np.asarray(arrays["state_bytes"], np.float64).reshape(-1))])
+
     @classmethod
     def _load(cls, ctx: LoadContext, entry: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         rec = cls._checked_record(entry)

@@ -332,7 +332,7 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
         stepping = {"steps_per_frame": args.steps_per_frame}
     elif args.frame_time is None:
         # The scene's defaults, chosen exactly as render.record() chooses them.
-        from .render._recording import default_stepping
+        from .render.painter import default_stepping
 
         if "frame_time" in d and not auto and not float(d["frame_time"]) / dt <= _MAX_STEPS:
             raise _too_many_steps(float(d["frame_time"]), dt)
@@ -343,7 +343,7 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
     else:
         # Simulated seconds per frame: keeps the animation's time span whatever dt is (the
         # conversion record() uses for a scene's defaults).
-        from .render._recording import steps_for
+        from .render.painter import steps_for
 
         if not float(frame_time) / dt <= _MAX_STEPS:
             raise _too_many_steps(float(frame_time), dt)
@@ -428,19 +428,19 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
 
 def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """``physcore view``: the named scene live in a window (:func:`physcore.viewer.view`)."""
-    from . import render
     from ._live import _has_bodies
+    from .render import painter
     from .viewer import _import_pygame, view
 
     name, fn, kwargs = _scene_call(args, parser)
     shot = None
     if args.screenshot is not None:
         try:
-            shot = render._check_path(args.screenshot, "png")
+            shot = painter.check_path(args.screenshot, "png")
         except (TypeError, ValueError) as e:
             parser.error(f"--screenshot: {e}")
         try:
-            render._check_writable(shot)
+            painter.check_writable(shot)
         except OSError as e:
             print(f"physcore view: error: cannot write {shot}: {e}", file=sys.stderr)
             return 1
@@ -473,6 +473,7 @@ def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from . import render
     from ._errors import SimulationDiverged
+    from .render import painter
 
     name, fn, kwargs = _scene_call(args, parser)
     out = Path(args.output if args.output is not None else f"{name}.gif")
@@ -483,7 +484,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         fmt = render.FORMATS.get(out.suffix.lower())
         if fmt is None:
             raise _UsageError(f"-o: the output's extension picks the format, one of {', '.join(render.FORMATS)}; got {str(out)!r}")
-        render._check_path(out, fmt)
+        painter.check_path(out, fmt)
         if fmt in ("mp4", "webm"):
             try:
                 import av  # noqa: F401 - fail before simulating, not after
@@ -495,7 +496,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         parser.error(str(e))
     for target_path in [out] + ([Path(args.energy_plot)] if args.energy_plot is not None else []):
         try:
-            render._check_writable(target_path)
+            painter.check_writable(target_path)
         except OSError as e:
             reason = os.strerror(e.errno) if e.errno else str(e)
             print(f"physcore render: error: cannot write {target_path}: {reason}", file=sys.stderr)
@@ -520,17 +521,16 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     try:
         settings = _render_settings(fn, args, scene.dt)
         if "camera" in settings:  # before simulating: orbit needs 3D, follow:I a particle I
-            from .render._checks import _check_camera
-            from .render._recording import points_view
+            from .render.painter import check_camera, points_view
 
-            _check_camera(settings["camera"], int(getattr(scene, "dim", 0)), int(getattr(points_view(scene), "n_particles", 0)))
+            check_camera(settings["camera"], int(getattr(scene, "dim", 0)), int(getattr(points_view(scene), "n_particles", 0)))
         if "cmap" in settings or "background" in settings:  # before simulating
-            from .render._checks import _check_background, _check_cmap
+            from .render.painter import check_background, check_cmap
 
-            _check_cmap(settings.get("cmap"))
-            _check_background(settings.get("background"))
+            check_cmap(settings.get("cmap"))
+            check_background(settings.get("background"))
         if "texture" in settings:  # before simulating: the image must load onto a mesh with uv
-            from .render._mesh import check_mesh, check_texture
+            from .render.painter import check_mesh, check_texture
 
             mesh = settings.get("mesh", (getattr(scene, "render_defaults", None) or {}).get("mesh"))
             check_texture(settings["texture"], check_mesh(mesh, int(getattr(scene, "n_particles", 0))))

@@ -31,9 +31,10 @@ from typing import Any, ClassVar
 import numpy as np
 
 from . import _core, _deprecate
+from ._check import finite_float as _finite_float
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, LoadContext
-from .terms import Box, Plane, Term, _finite_float
+from .terms import Box, Plane, Term
 
 __all__ = ["Contacts"]
 

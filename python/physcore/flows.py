@@ -235,6 +235,13 @@ class Flow(Part):
         ((_, y),) = sim.system_save(self.name)
         return {"name": self.name, "record": self._record()}, {"y": y}
 
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """``{"y": ...}``: the points and their rates in the core's layout (as the scene file)."""
+        return dict(sim.system_save(self.name))
+
+    def _set_state(self, sim: Any, arrays: Any) -> None:
+        sim.system_load(self.name, list(arrays.items()))
+
     @classmethod
     def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
         return f"{ctx.field}.record", {"points": f"flow{ctx.index}_y"}

@@ -49,11 +49,12 @@ from typing import Any, ClassVar
 import numpy as np
 
 from . import _check, _core, _deprecate
+from ._check import finite_float as _finite_float
 from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning
 from ._parts import AttachContext, LoadContext
 from .shapes import lattice, tank_walls  # the lattice and tank builders, still importable from here
 from .shapes import lattice_counts as lattice_counts
-from .terms import Gravity, Term, _finite_float
+from .terms import Gravity, Term
 
 __all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
 

@@ -270,6 +270,13 @@ class Grid(Part):
             members[a] = v
         return {"kind": self.kind, "name": self.name, "record": self._record()}, members
 
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """The fields the core saves (as the scene file's members)."""
+        return dict(sim.system_save(self.name))
+
+    def _set_state(self, sim: Any, arrays: Any) -> None:
+        sim.system_load(self.name, list(arrays.items()))
+
     @classmethod
     def _load_names(cls, ctx: LoadContext, arrays: Any) -> tuple[str, dict[str, str]]:
         return f"{ctx.field}.record", {}

@@ -66,7 +66,7 @@ try:
 except ImportError as _e:  # pragma: no cover - the notebook extra brings both
     raise ImportError('the notebook widget needs anywidget: pip install "physcore[notebook]"') from _e
 
-__all__ = ["widget", "Widget", "FORMATS", "SLIDER_POSITIONS", "slider_value", "slider_position", "INSTALL"]
+__all__ = ["widget", "show", "Widget", "FORMATS", "SLIDER_POSITIONS", "slider_value", "slider_position", "INSTALL"]
 
 #: What to install for the widget.
 INSTALL = 'pip install "physcore[notebook]"'
@@ -465,10 +465,9 @@ def widget(
     InvalidTypeError, InvalidInputError
         A bad argument, naming it, or a scene without particles.
     """
-    from .render._checks import _check_fps
-    from .render._recording import scene_defaults
+    from .render.painter import check_fps, scene_defaults
 
-    if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "_file_arrays")):
+    if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "to_bytes")):
         raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
     if int(scene.n_particles) == 0 and not _has_bodies(scene):
         raise InvalidInputError("scene: it has no particles or rigid bodies; the widget shows those (render grids and flows with physcore.render.gif)")
@@ -480,7 +479,7 @@ def widget(
     # first frame's message handler (widget(size=(40000, 30000)), issue 64's hostile run).
     w, h = settings["size"]
     _check.memory("size", 64.0 * w * h, f"a {w}x{h} widget frame")
-    fps = _check_fps(scene_defaults(scene).get("fps", 30.0) if fps is None else fps)
+    fps = check_fps(scene_defaults(scene).get("fps", 30.0) if fps is None else fps)
     preview = _check.real("preview", preview)
     if not (preview >= 0 and math.isfinite(preview)):
         raise InvalidInputError(f"preview: must be a finite number of seconds >= 0, got {preview!r}")
@@ -509,3 +508,11 @@ def _frames_per_second(w: Widget, seconds: float) -> float:
         n += 1
     return n / (time.perf_counter() - t0)
 
+
+def show(scene: Any, **options: Any) -> None:
+    """Display ``scene`` running live in a Jupyter notebook: :func:`widget` ``(scene, **options)``
+    shown with IPython's ``display``. ``Scene.show(**options)`` calls this (the package attaches
+    it, so that ``scene.py`` needs nothing of the presentation layer)."""
+    from IPython.display import display
+
+    display(widget(scene, **options))

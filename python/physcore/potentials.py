@@ -35,9 +35,10 @@ from typing import Any, ClassVar, Union
 import numpy as np
 
 from . import _check, _deprecate
+from ._check import finite_float as _finite_float
 from ._errors import InvalidInputError, InvalidTypeError
 from ._parts import AttachContext, LoadContext
-from .terms import Term, _finite_float
+from .terms import Term
 
 __all__ = ["PointMasses", "PointCharges", "HarmonicTrap", "PotentialGrid"]
 

@@ -11,10 +11,8 @@ import io
 import json
 import math
 import os
-import threading
 import warnings
-import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +25,6 @@ from ._errors import (
     ContactStepWarning,
     InvalidInputError,
     InvalidTypeError,
-    SceneBusyError,
     ThreadPoolWarning,
     allocating,
 )
@@ -41,6 +38,7 @@ from ._parts import (
     entry_class,
     part_class,
 )
+from ._system import usable_cpus
 
 # The part modules register their classes in physcore._parts.PARTS when imported: the scene
 # file reader finds every part kind there. (They import nothing from this module.)
@@ -49,6 +47,7 @@ from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
 from .potentials import PointMasses  # noqa: F401 - registers the potential terms
+from .session import Session
 from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -117,14 +116,6 @@ _MAX_STEPS = 2**63 - 1
 
 def _check_int(value: object, arg: str, minimum: int, maximum: int | None = None) -> int:
     return _check.int_in_range(arg, value, minimum, maximum)
-
-
-def _usable_cpus() -> int:
-    """CPUs this process may run on (its affinity mask where the OS has one)."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
 
 
 def _check_dt(dt: object) -> float:
@@ -200,64 +191,40 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
     return a
 
 
-class _Session:
-    """The core simulation and its one-thread-at-a-time rule: what a scene's calls and its live
-    parts' calls share. A part holds this, not the scene, so that it works on after its scene is
-    dropped without the scene and its parts forming a reference cycle (one is freed only by the
-    cyclic garbage collector, which counts Python objects, not the memory the core holds:
-    rebuilding a scene 20 times in a loop held 643 MB)."""
-
-    __slots__ = ("busy", "lock", "sim")
-
-    def __init__(self, sim: _core.Simulation) -> None:
-        self.sim = sim
-        # Taken without waiting by the calls that release the GIL for long; `busy` names the
-        # thread inside one.
-        self.lock = threading.Lock()
-        self.busy: int | None = None
-
-    def checked(self) -> _core.Simulation:
-        """The simulation, unless another thread is inside a call (then SceneBusyError, instead
-        of pyo3's bare "Already mutably borrowed" RuntimeError)."""
-        busy = self.busy
-        if busy is not None and busy != threading.get_ident():
-            raise SceneBusyError(
-                "this Scene is being stepped by another thread; use a Scene from one thread at a "
-                "time (wait for that call to return, e.g. join the thread), or one Scene per thread"
-            )
-        return self.sim
-
-    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
-        """Runs ``call(sim)`` as the only user (see ``Scene._exclusive``)."""
-        sim = self.checked()
-        if not self.lock.acquire(blocking=False):
-            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
-        self.busy = threading.get_ident()
-        try:
-            return call(sim)
-        finally:
-            self.busy = None
-            self.lock.release()
-
-
-class _SceneHost:
-    """What a live handle (a grid, a flow, bodies) holds of the scene it joined: exactly the
-    calls it makes later (see :class:`physcore._parts.Host`): the scene's session, and the scene
-    itself only weakly (`_Session`)."""
-
-    __slots__ = ("_scene", "_session")
-
-    def __init__(self, scene: Scene) -> None:
-        self._session = scene._session
-        self._scene = weakref.ref(scene)
-
-    def exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
-        return self._session.exclusive(call)
-
-    def energy_changed(self) -> None:
-        scene = self._scene()
-        if scene is not None:
-            scene._e0 = None
+def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
+    """``value`` of ``state[key]`` checked against the scene's own ``now`` (see Scene.set_state)."""
+    arg = f"state[{key!r}]"
+    if key in ("time", "collisions"):
+        v = _check.real(arg, value)
+        if not math.isfinite(v):
+            raise InvalidInputError(f"{arg}: must be finite, got {v}")
+        return v
+    if key == "dt":
+        v = _check.real(arg, value)
+        if not (math.isfinite(v) and v >= _MIN_DT):
+            raise InvalidInputError(f"{arg}: must be finite and >= {_MIN_DT:.3g} s, got {v}")
+        return v
+    if key == "step":
+        return _check_int(value, arg, 0, _MAX_STEPS)
+    if value is None:
+        if key in ("cache_forces", "cache_power", "reference_energy"):
+            return None
+        raise InvalidTypeError(f"{arg}: expected an array, got None")
+    a = _check.array(arg, value)
+    if a.dtype != np.float64:
+        raise InvalidTypeError(f"{arg}: expected dtype float64, got {a.dtype}")
+    if key in ("positions", "velocities") or key.startswith("attr_") or key in ("ledger", "reference_energy"):
+        want = now.shape if now is not None else (2,)
+        if a.shape != want:
+            raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
+    elif key == "cache_forces":
+        if a.ndim != 2 or a.shape[1] != scene.dim:
+            raise InvalidInputError(f"{arg}: expected shape (M, {scene.dim}), got {a.shape}")
+    elif a.ndim != 1 if now is None else a.ndim != now.ndim:
+        raise InvalidInputError(f"{arg}: expected {1 if now is None else now.ndim} dimension(s), got shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise InvalidInputError(f"{arg}: must be finite")
+    return np.ascontiguousarray(a)
 
 
 class Scene:
@@ -382,15 +349,12 @@ class Scene:
         sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
-        # One thread at a time (`_Session`).
-        self._session = _Session(sim)
+        # One thread at a time, and the books' reference (physcore.session).
+        self._session = Session(sim)
         self._threads = threads
         #: Everything the scene holds, as stored, in the order added (see physcore._parts).
         self._parts: list[Part] = []
-        self._host = _SceneHost(self)
-        self._e0: float | None = None
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
-        self._e0_scale: float = 0.0
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
         #: ``None``: the renderer's own (real-time playback). Not saved with the scene.
@@ -398,25 +362,39 @@ class Scene:
 
     # ---------------------------------------------------------------- threads
     @property
+    def session(self) -> Session:
+        """The scene's :class:`~physcore.session.Session`: its core simulation, the lock that
+        lets one thread at a time use it, and the energy books' reference. The same object for
+        the scene's life; its parts hold it too. What drives scenes from outside
+        (:class:`~physcore.Batch`, :func:`~physcore.sweep`, the live viewer) uses this."""
+        return self._session
+
+    @property
+    def parts(self) -> tuple[Part, ...]:
+        """Everything the scene holds (terms, colliders, grids, flows, bodies), as stored, in the
+        order added: a new tuple. Each part has a ``section`` and a ``part_kind``
+        (``physcore/_parts.py``)."""
+        return tuple(self._parts)
+
+    @property
     def _sim(self) -> _core.Simulation:
-        # A Scene is not shared between threads while one of them steps it (`_Session`).
+        # A Scene is not shared between threads while one of them steps it (`Session`).
         return self._session.checked()
 
     @property
-    def _raw_sim(self) -> _core.Simulation:
-        return self._session.sim
+    def _e0(self) -> float | None:
+        ref = self._session.reference_energy
+        return None if ref is None else ref[0]
+
+    @_e0.setter
+    def _e0(self, value: None) -> None:
+        assert value is None  # a reference is taken whole (Session.take_reference_energy)
+        self._session.reference_energy = None
 
     @property
-    def _lock(self) -> threading.Lock:
-        return self._session.lock
-
-    @property
-    def _busy(self) -> int | None:
-        return self._session.busy
-
-    @_busy.setter
-    def _busy(self, who: int | None) -> None:
-        self._session.busy = who
+    def _e0_scale(self) -> float:
+        ref = self._session.reference_energy
+        return 0.0 if ref is None else ref[1]
 
     def _exclusive(self, call: Callable[[_core.Simulation], Any]) -> Any:
         """Runs ``call(sim)`` (a call that releases the GIL: stepping, energies, fields) as the
@@ -581,7 +559,7 @@ class Scene:
             read_attributes=lambda: frozenset(self.attributes),
             add_particles=self.add_particles,
             lower_dt=self._lower_dt,
-            host=self._host,
+            host=self._session,
             restoring=restoring,
         )
 
@@ -642,12 +620,19 @@ class Scene:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         if self._e0 is None:
             self._set_reference_energy()
-        self._warn_contact_step()
+        self.warn_contact_step()
         self._exclusive(lambda sim: sim.step(n))
 
-    def _warn_contact_step(self) -> None:
+    def warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
-        automatic step: ``Scene``'s default dt is far too long for stiff contacts."""
+        automatic step: ``Scene``'s default dt is far too long for stiff contacts. :meth:`step`
+        calls it; so does whatever steps the scene's :attr:`session` itself (a Batch).
+
+        Warns
+        -----
+        ContactStepWarning
+            As :meth:`step` describes.
+        """
         if self._step_checked == self.dt or not any(isinstance(t, Contacts) for t in self.terms):
             return
         self._step_checked = self.dt
@@ -726,9 +711,7 @@ class Scene:
         return math.inf if self.integrator == "dopri5" else self.dt
 
     def _set_reference_energy(self) -> None:
-        e = self.energy()
-        self._e0 = e.total
-        self._e0_scale = abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
+        self._session.take_reference_energy()
 
     # ---------------------------------------------------------------- state
     @property
@@ -1158,6 +1141,127 @@ class Scene:
         atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
 
+    def state(self) -> dict[str, Any]:
+        """A snapshot of everything that changes while the scene runs, for :meth:`set_state`:
+        a flat dict of numpy arrays (copies) and scalars, named as the scene file's members.
+
+        What stays fixed (masses, pins, the terms' records, colliders, grid sizes) is not in it;
+        a snapshot goes back into the scene it came from, or into one of the same structure
+        (:func:`physcore.batch.structure`, same attribute names). Keys:
+
+        ``"time"`` : float
+            Simulated time, s.
+        ``"step"`` : int
+            :attr:`step_count`.
+        ``"dt"`` : float
+            The time step, s (:meth:`advance` changes it, e.g. with a DFSPH fluid).
+        ``"positions"``, ``"velocities"`` : ndarray, (N, dim) float64
+            m and m/s (float64 even with ``precision="f32"``: the stored values, exactly).
+        ``"attr_{name}"`` : ndarray, (N,) float64
+            Each per-particle attribute set (:attr:`attributes`: ``attr_charge`` in C,
+            ``attr_radius`` in m).
+        ``"ledger"`` : ndarray, (K,) float64
+            The energy books' dissipated energy so far, J, one entry per dissipative term.
+        ``"collisions"`` : float
+            Energy dissipated by the colliders so far, J.
+        ``"cache_forces"`` : ndarray (float64) or None; ``"cache_power"`` : ndarray, (P,) float64, or None
+            The integrator's cache (velocity Verlet's forces at the current positions, the
+            dopri5 step-size controller); None where it holds none.
+        ``"reference_energy"`` : ndarray, (2,) float64, or None
+            The books' reference ``(E0, S0)`` in J (:attr:`Session.reference_energy
+            <physcore.session.Session.reference_energy>`); None until the next step takes it.
+        ``"{prefix}{k}_{member}"`` : ndarray, float64
+            The parts' own state, named as in the scene file (``{prefix}`` is the section's:
+            ``term``, ``grid``, ``flow``, ``body``; ``k`` its index in the section):
+            ``term{k}_history`` (contacts: particle spins and contact springs; DFSPH: the
+            solvers' warm starts), a grid's fields (``grid{k}_u``, ``grid{k}_v``, ...), a flow's
+            points and rates (``flow{k}_y``), the rigid bodies' whole solver state
+            (``body0_state``, ``body0_state_bytes``: poses, velocities, contacts).
+
+        Stepping after ``set_state(s)`` repeats, bit for bit, what stepping after ``s = state()``
+        did. The layout is described in docs/guide/architecture.md (Saving, checkpoints and
+        the state protocol).
+        """
+        sim = self._sim
+        out: dict[str, Any] = {
+            "time": sim.time,
+            "step": sim.step_count,
+            "dt": sim.dt,
+            "positions": sim.positions,
+            "velocities": sim.velocities,
+            **{f"attr_{a}": v for a, v in self.attributes.items()},
+        }
+        ledger, collisions = sim.ledger()
+        out["ledger"] = np.asarray(ledger, dtype=np.float64)
+        out["collisions"] = float(collisions)
+        cache = sim.integrator_cache()
+        out["cache_forces"] = None if cache is None else cache[0]
+        out["cache_power"] = None if cache is None else np.asarray(cache[1], dtype=np.float64)
+        ref = self._session.reference_energy
+        out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
+        count = dict.fromkeys(SECTIONS, 0)
+        for part in self._parts:
+            k = count[part.section]
+            count[part.section] += 1
+            out.update({f"{MEMBER_PREFIX[part.section]}{k}_{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
+        return out
+
+    def set_state(self, state: Mapping[str, Any]) -> None:
+        """Put back a snapshot taken by :meth:`state` (see there for the keys).
+
+        Every key is checked first (the same keys as this scene's :meth:`state`; each array's
+        dtype, shape and finiteness; each scalar's type and range); the core then checks the
+        parts' contents, and if it refuses one, the scene is put back as it was before the call.
+
+        Raises
+        ------
+        TypeError
+            ``state`` is not a mapping, or a value is of the wrong type; names the key.
+        InvalidInputError
+            (a ``ValueError``) A key missing or unknown, an array of the wrong dtype or shape, a
+            non-finite number, a scalar out of range; names the key (``state['positions']``).
+            Nothing changes.
+        """
+        if not isinstance(state, Mapping):
+            raise InvalidTypeError(f"state: expected a dict from Scene.state(), got {type(state).__name__}")
+        now = self.state()
+        missing = [k for k in now if k not in state]
+        if missing:
+            raise InvalidInputError(f"state: missing key {missing[0]!r} (this scene's state has {', '.join(map(repr, now))})")
+        extra = [k for k in state if k not in now]
+        if extra:
+            raise InvalidInputError(f"state[{extra[0]!r}]: not a key of this scene's state (see Scene.state)")
+        new = {k: _check_state_value(k, state[k], now[k], self) for k in now}
+
+        def put(sim: _core.Simulation, s: dict[str, Any]) -> None:
+            sim.set_state(positions=s["positions"], velocities=s["velocities"])
+            for key, v in s.items():
+                if key.startswith("attr_"):
+                    sim.set_attribute(key[5:], v)
+            count = dict.fromkeys(SECTIONS, 0)
+            for part in self._parts:
+                k = count[part.section]
+                count[part.section] += 1
+                prefix = f"{MEMBER_PREFIX[part.section]}{k}_"
+                own = {key[len(prefix):]: v for key, v in s.items() if key.startswith(prefix)}
+                if own:
+                    part._set_state(sim, own)
+            sim.dt = s["dt"]
+            power = s["cache_power"]
+            sim.restore(s["time"], s["step"], s["ledger"].tolist(), s["collisions"], s["cache_forces"],
+                        None if power is None else power.tolist())
+
+        def apply(sim: _core.Simulation) -> None:
+            try:
+                put(sim, new)
+            except BaseException:
+                put(sim, now)  # the core refused a part's contents: back as it was
+                raise
+
+        self._exclusive(apply)
+        ref = new["reference_energy"]
+        self._session.reference_energy = None if ref is None else (float(ref[0]), float(ref[1]))
+
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""
         arrays: dict[str, np.ndarray] = {
@@ -1223,9 +1327,33 @@ class Scene:
         and unpickling checks the bytes as strictly as :meth:`load` checks a file. The saved
         thread count travels too (``None``: the receiving process's default), and so do the
         ``render_defaults``. Raises what :meth:`save` raises for books that are not finite."""
+        return (_unpickle_scene, (self.to_bytes(), self.render_defaults))
+
+    def to_bytes(self) -> bytes:
+        """The scene file :meth:`save` writes, as bytes (no file is written). Raises what
+        :meth:`save` raises for books that are not finite."""
         buf = io.BytesIO()
         np.savez(buf, **self._file_arrays())
-        return (_unpickle_scene, (buf.getvalue(), self.render_defaults))
+        return buf.getvalue()
+
+    @classmethod
+    def from_bytes(cls, data: bytes, *, threads: int | None = None, source: str = "<bytes>") -> Scene:
+        """A scene from the bytes of a scene file (:meth:`to_bytes`, or a file's contents),
+        checked as strictly as :meth:`load` checks a file; ``threads`` as for :meth:`load`;
+        ``source`` names the bytes in error messages.
+
+        Raises
+        ------
+        TypeError
+            ``data`` is not bytes; ``threads`` is not an int.
+        SceneFileError
+            (a ``ValueError``) As :meth:`load` raises it, naming ``source`` and the field.
+        """
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise InvalidTypeError(f"data: expected the bytes of a scene file, got {type(data).__name__}")
+        if threads is not None:
+            threads = _check_int(threads, "threads", 1)
+        return cls._from_file(_scenefile.read_bytes(data, source), threads)
     @classmethod
     def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
@@ -1268,7 +1396,7 @@ class Scene:
     def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None) -> Scene:
         meta, z, r = sf.meta, sf.arrays, sf.reader
         if threads is None and meta["threads"] is not None:
-            threads = min(meta["threads"], _usable_cpus())
+            threads = min(meta["threads"], usable_cpus())
         with r.api("meta"):
             scene = cls(
                 meta["dim"],
@@ -1310,19 +1438,8 @@ class Scene:
                 z.get("cache_forces"),
                 z["cache_power"].tolist() if "cache_power" in z else None,
             )
-        scene._e0 = meta["e0"]
-        scene._e0_scale = meta["e0_scale"]
+        scene._session.reference_energy = None if meta["e0"] is None else (meta["e0"], meta["e0_scale"])
         return scene
-
-    def show(self, **options: Any) -> None:
-        """Display this scene running live in a Jupyter notebook: ``physcore.widget(self,
-        **options)`` (see :func:`physcore.notebook.widget`) shown with IPython's ``display``.
-        Needs ``pip install "physcore[notebook]"`` (ImportError saying so otherwise)."""
-        from IPython.display import display
-
-        from .notebook import widget
-
-        display(widget(self, **options))
 
     def __repr__(self) -> str:
         terms = ", ".join(t.name for t in self.terms) or "no terms"

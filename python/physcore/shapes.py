@@ -34,8 +34,8 @@ import math
 import numpy as np
 
 from . import _check
+from ._check import finite_float as _finite_float
 from ._errors import InvalidInputError
-from .terms import _finite_float
 
 __all__ = ["lattice", "lattice_counts", "tank_walls", "blob", "plummer_sphere", "cloth_springs", "mesh_edges_and_hinges"]
 

@@ -53,7 +53,8 @@ import numpy as np
 from . import _check
 from ._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write
 from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
-from .scene import DEFAULT_THREADS, Scene, _usable_cpus
+from ._system import usable_cpus
+from .scene import DEFAULT_THREADS, Scene
 
 __all__ = ["sweep", "ensemble", "Ensemble", "expand", "run_seed", "RESERVED"]
 
@@ -224,7 +225,7 @@ def _run_chunk(build: Callable[..., Any], measure: Callable[[Any], Any], steps: 
     (in build, steps, stepping or measure) is its own row's error. `emit(j, row)`, where given,
     gets each row as soon as it is made (the serial sweep's progress); the rows are returned
     in the order of `chunk`."""
-    from .batch import Batch, _structure
+    from .batch import Batch, structure
 
     worker = _worker_name()
     rows: list[dict[str, Any] | None] = [None] * len(chunk)
@@ -263,7 +264,7 @@ def _run_chunk(build: Callable[..., Any], measure: Callable[[Any], Any], steps: 
                 n = counts[j]
                 if isinstance(scene, Scene) and id(scene) not in seen and n <= (1 << 63) - 1 - scene.step_count:
                     seen.add(id(scene))
-                    groups.setdefault((_structure(scene), n), []).append(j)
+                    groups.setdefault((structure(scene), n), []).append(j)
                 else:
                     alone.append(j)
             for (_, n), members in groups.items():
@@ -341,7 +342,7 @@ class _Cluster:
             if client is None:
                 import logging
 
-                n = workers if workers is not None else _usable_cpus()
+                n = workers if workers is not None else usable_cpus()
                 cluster = distributed.LocalCluster(
                     n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
                 )
@@ -1025,7 +1026,7 @@ def ensemble(
     if client == "serial":
         size = members
     else:
-        size = max(1, math.ceil(members / (4 * (workers or _usable_cpus()))))
+        size = max(1, math.ceil(members / (4 * (workers or usable_cpus()))))
     chunks = [list(range(a, min(a + size, members))) for a in range(0, members, size)]
 
     def on_result(c: int, value: Any) -> None:

@@ -460,18 +460,18 @@ def view(
     pygame.error
         No display to open a window on (set DISPLAY, or run under ``xvfb-run``).
     """
-    from .render._checks import _check_fps
+    from .render.painter import check_fps
 
-    if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "_file_arrays")):
+    if not (hasattr(scene, "positions") and hasattr(scene, "terms") and hasattr(scene, "to_bytes")):
         raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
     if int(scene.n_particles) == 0 and not _has_bodies(scene):
         raise InvalidInputError("scene: it has no particles or rigid bodies; the live viewer shows those (render grids and flows with physcore render)")
     if not isinstance(name, str) or not name:
         raise InvalidTypeError(f"name: expected a non-empty str, got {name!r}")
     settings = _settings(scene, size, view)
-    from .render._recording import scene_defaults
+    from .render.painter import scene_defaults
 
-    fps = _check_fps(scene_defaults(scene).get("fps", 30.0) if fps is None else fps)
+    fps = check_fps(scene_defaults(scene).get("fps", 30.0) if fps is None else fps)
     if seconds is not None:
         seconds = _check.real("seconds", seconds)
         if not (seconds > 0 and math.isfinite(seconds)):
@@ -482,9 +482,9 @@ def view(
         if draws < 1:
             raise InvalidInputError(f"draws: must be >= 1, got {draws}")
     if screenshot is not None:
-        from .render._checks import _check_path
+        from .render.painter import check_path
 
-        screenshot = _check_path(screenshot, "png")
+        screenshot = check_path(screenshot, "png")
     preview = _check.real("preview", preview)
     if not (preview >= 0 and math.isfinite(preview)):
         raise InvalidInputError(f"preview: must be a finite number of seconds >= 0, got {preview!r}")

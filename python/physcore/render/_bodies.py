@@ -235,7 +235,7 @@ def draw_bodies(out: np.ndarray, cam: Any, track: BodyTrack, k: int) -> None:
             continue
         _fill(out, poly, track.colors[b])
         if track.balls[b]:
-            from ._raster import _draw_lines
+            from ._lines import _draw_lines
 
             r = float(np.hypot(outline[:, 0], outline[:, 1]).max())
             ends = np.array([[x, y], [x + 0.8 * r * c, y + 0.8 * r * s]])

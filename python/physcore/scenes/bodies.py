@@ -10,7 +10,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError
 from ..bodies import BODY_BYTES, Bodies, Joints, Pins
-from ..render._mesh import Mesh
+from ..render import Mesh
 from ..scene import Scene
 from ..shapes import cloth_springs
 from ..terms import Drag, Gravity, Springs

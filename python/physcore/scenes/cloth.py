@@ -8,7 +8,7 @@ import numpy as np
 
 from .. import _check
 from .._errors import InvalidInputError
-from ..render._mesh import Mesh
+from ..render import Mesh
 from ..scene import Scene
 from ..shapes import cloth_springs, mesh_edges_and_hinges
 from ..terms import Drag, Gravity, Plane, Sphere, Springs, XpbdConstraints

@@ -9,7 +9,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ..contacts import Contacts
-from ..render._mesh import Mesh
+from ..render import Mesh
 from ..scene import Scene
 from ..shapes import cloth_springs
 from ..terms import Box, Drag, Gravity, Plane, Springs

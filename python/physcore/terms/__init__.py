@@ -45,6 +45,7 @@ from . import _base, fields, springs, nbody, charges, xpbd, colliders, capsule  
 # isort: on
 from ._base import REGISTRY as REGISTRY
 from ._base import ArrayLike as ArrayLike
+from ._base import LiveParam as LiveParam
 from ._base import Term
 from ._base import _finite_float as _finite_float
 from ._base import _hashable as _hashable

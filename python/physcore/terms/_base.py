@@ -3,7 +3,7 @@ argument checks the term families share."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, ClassVar, Union
+from typing import Any, ClassVar, NamedTuple, Union
 
 import numpy as np
 
@@ -17,14 +17,7 @@ REGISTRY: dict[str, type[Term]] = {}
 ArrayLike = Union[float, int, "np.typing.ArrayLike"]
 
 
-def _finite_float(value: object, arg: str, *, minimum: float | None = None, strict: bool = False) -> float:
-    v = _check.real(arg, value)  # TypeError for bool/str/None; an int beyond float64 is refused
-    if not np.isfinite(v):
-        raise InvalidInputError(f"{arg}: must be finite, got {v}")
-    if minimum is not None and (v < minimum or (strict and v == minimum)):
-        op = ">" if strict else ">="
-        raise InvalidInputError(f"{arg}: must be {op} {minimum}, got {v}")
-    return v
+_finite_float = _check.finite_float
 
 
 def _int_array(arg: str, value: object) -> np.ndarray:
@@ -79,6 +72,42 @@ def _hashable(v: object) -> object:
     return (v.dtype.str, v.shape, v.tobytes()) if isinstance(v, np.ndarray) else v
 
 
+class LiveParam(NamedTuple):
+    """A parameter of a term that the live viewer and the notebook widget offer as a key pair and
+    a slider. A term class lists its own in ``live_params`` (a class attribute), so a new term
+    gets its sliders without any table elsewhere naming its class.
+
+    Attributes
+    ----------
+    name : str
+        The parameter's name in the viewer (``"stiffness"``): unique across term classes.
+    attribute : str
+        The term record's field it scales (``"stiffness"``, ``"g"``, ``"coefficient"``).
+    reduce : {"mean", "norm", "value"}
+        How the shown value is read: the mean over every term's array field (springs), the
+        vector's length in the first term (gravity, m/s²), the first term's scalar (drag).
+    keys : tuple of (str, str)
+        The viewer's keys that lower and raise it.
+    label, unit : str
+        Its symbol and SI unit on the heads-up line (``"k"``, ``"N/m"``).
+    at_zero : {"critical", "mass", None}
+        A parameter that starts at 0 gets a slider up to ``PARAM_RANGE`` times: 1 % of the
+        critical damping of the mean spring (``"critical"``), the mean particle mass in kg/s
+        (``"mass"``); None: no slider from 0.
+    rank : int
+        Its place on the heads-up line and among the sliders (lower first).
+    """
+
+    name: str
+    attribute: str
+    reduce: str
+    keys: tuple[str, str]
+    label: str
+    unit: str
+    at_zero: str | None = None
+    rank: int = 100
+
+
 class Term(Part):
     """Base of the force-term records: the parts of the ``"terms"`` section of a scene file (see
     :mod:`physcore._parts`). A subclass registers itself by its type key
@@ -109,6 +138,9 @@ class Term(Part):
     record_optional: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {}
     #: True when the term owns a run of the scene's particles (``first``, ``count`` in its record).
     owns_particles: ClassVar[bool] = False
+    #: The parameters the live viewer and the notebook widget offer for this term
+    #: (:class:`LiveParam`); none by default.
+    live_params: ClassVar[tuple[LiveParam, ...]] = ()
 
     name: str
 
@@ -160,6 +192,16 @@ class Term(Part):
         if history is not None:
             members = {**members, "history": history}
         return {"type": self.kind, "name": self.name, **record}, members
+
+    def _state(self, sim: Any) -> dict[str, np.ndarray]:
+        """``{"history": ...}`` where the core keeps the term's own state (contacts: spins and
+        springs; DFSPH: the solvers' warm starts), else ``{}``."""
+        history = sim.term_history(self.name)
+        return {} if history is None else {"history": history}
+
+    def _set_state(self, sim: Any, arrays: Any) -> None:
+        if "history" in arrays:
+            sim.set_term_history(self.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """What a scene file holds of this term: the ``record_fields`` (JSON values) and the

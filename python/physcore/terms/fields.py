@@ -6,7 +6,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ._base import Term, _finite_float, _vector
+from ._base import LiveParam, Term, _finite_float, _vector
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,6 +25,7 @@ class Gravity(Term, kind="gravity"):
     name: str = field(default="gravity", kw_only=True)
 
     record_fields: ClassVar[dict[str, str]] = {"g": "vector"}
+    live_params: ClassVar[tuple[LiveParam, ...]] = (LiveParam("gravity", "g", "norm", ("g", "G"), "g", "m/s²", rank=2),)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "g", _vector(self.g, "g"))
@@ -46,6 +47,9 @@ class Drag(Term, kind="drag"):
     name: str = field(default="drag", kw_only=True)
 
     record_fields: ClassVar[dict[str, str]] = {"coefficient": "number"}
+    live_params: ClassVar[tuple[LiveParam, ...]] = (
+        LiveParam("drag", "coefficient", "value", ("d", "D"), "b", "kg/s", at_zero="mass", rank=3),
+    )
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "coefficient", _finite_float(self.coefficient, "coefficient", minimum=0.0))

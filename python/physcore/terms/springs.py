@@ -10,7 +10,7 @@ import numpy as np
 from .. import _check, _deprecate
 from .._errors import InvalidInputError, InvalidTypeError
 from .._parts import AttachContext
-from ._base import ArrayLike, Term, _per_spring
+from ._base import ArrayLike, LiveParam, Term, _per_spring
 
 
 @_deprecate.record(('i', 'j', 'stiffness', 'damping', 'rest_length'), keep=2)
@@ -78,6 +78,10 @@ class Springs(Term, kind="springs"):
         if self.rest_length is not None:
             object.__setattr__(self, "rest_length", _per_spring(self.rest_length, m, "rest_length"))
 
+    live_params: ClassVar[tuple[LiveParam, ...]] = (
+        LiveParam("stiffness", "stiffness", "mean", ("[", "]"), "k", "N/m", rank=0),
+        LiveParam("damping", "damping", "mean", ("-", "="), "c", "N·s/m", at_zero="critical", rank=1),
+    )
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
         "i": ("i8", ("M",)),
         "j": ("i8", ("M",)),

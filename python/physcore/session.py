@@ -1,0 +1,112 @@
+"""The :class:`Session`: a scene's core simulation, its one-thread-at-a-time rule and its energy
+books' reference, shared by the scene, its live parts and the code that drives many scenes.
+
+A :class:`~physcore.Scene` holds one session for life (:attr:`Scene.session
+<physcore.Scene.session>`). What steps scenes from outside the scene itself, a
+:class:`~physcore.Batch`, :func:`~physcore.sweep`, the live viewer and the notebook widget, goes
+through this object's public members and never through the scene's private ones; a second
+backend needs only to provide the same members.
+
+A part that joined a scene (a grid, a flow, bodies) holds the session, not the scene: it works on
+after its scene is dropped, and the scene is freed by reference counting alone (the scene and its
+parts form no reference cycle, which only the cyclic garbage collector would free: it counts
+Python objects, not the memory the core holds; rebuilding a scene 20 times in a loop once held
+643 MB).
+"""
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from ._errors import SceneBusyError
+
+__all__ = ["Session"]
+
+_BUSY = (
+    "this Scene is being stepped by another thread; use a Scene from one thread at a time (wait for "
+    "that call to return, e.g. join the thread), or one Scene per thread"
+)
+
+
+class Session:
+    """A core simulation and the rule that one thread at a time uses it.
+
+    Parameters
+    ----------
+    sim : physcore._core.Simulation
+        The core simulation (a scene makes it; user code never needs to).
+
+    Attributes
+    ----------
+    sim : physcore._core.Simulation
+        The core simulation, unchecked: read it only while holding :attr:`lock` (as
+        :class:`~physcore.Batch` does), otherwise use :meth:`checked` or :meth:`exclusive`.
+    lock : threading.Lock
+        Taken without waiting by every call that releases the GIL for long (stepping, energies,
+        fields); a caller that cannot take it raises :class:`~physcore.SceneBusyError`.
+    busy : int or None
+        The ``threading.get_ident()`` of the thread inside such a call (set by whoever holds
+        :attr:`lock`), else None.
+    reference_energy : tuple of (float, float), or None
+        The energy books' reference ``(E0, S0)`` in J: the total energy at the first step and
+        the sum of the magnitudes of its parts (see :meth:`Scene.energy_drift
+        <physcore.Scene.energy_drift>`); None until the next step takes it (it is dropped
+        whenever the energy's definition or the state changes).
+    """
+
+    __slots__ = ("busy", "lock", "reference_energy", "sim")
+
+    def __init__(self, sim: Any) -> None:
+        self.sim = sim
+        self.lock = threading.Lock()
+        self.busy: int | None = None
+        self.reference_energy: tuple[float, float] | None = None
+
+    def checked(self) -> Any:
+        """The simulation, unless another thread is inside a call.
+
+        Raises
+        ------
+        SceneBusyError
+            Another thread holds the session (instead of pyo3's bare "Already mutably borrowed"
+            RuntimeError).
+        """
+        busy = self.busy
+        if busy is not None and busy != threading.get_ident():
+            raise SceneBusyError(_BUSY)
+        return self.sim
+
+    def exclusive(self, call: Callable[[Any], Any]) -> Any:
+        """Runs ``call(sim)`` (a call that releases the GIL) as the only user and returns what it
+        returns; another thread's use meanwhile raises :class:`~physcore.SceneBusyError`.
+
+        Raises
+        ------
+        SceneBusyError
+            Another thread is inside a call (nothing runs).
+        """
+        sim = self.checked()
+        if not self.lock.acquire(blocking=False):
+            raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
+        self.busy = threading.get_ident()
+        try:
+            return call(sim)
+        finally:
+            self.busy = None
+            self.lock.release()
+
+    def take_reference_energy(self) -> tuple[float, float]:
+        """Takes the books' reference now (:attr:`reference_energy`) and returns it: the total
+        energy ``E0`` (J) and ``S0``, the sum of the magnitudes of kinetic, potential and
+        dissipated energy (J). Raises what :meth:`exclusive` raises."""
+        d = self.exclusive(lambda sim: sim.energy())
+        pot, dis = dict(d["potential"]), dict(d["dissipated"])
+        total = d["kinetic"] + sum(pot.values()) + sum(dis.values())
+        scale = abs(d["kinetic"]) + sum(abs(u) for u in pot.values()) + sum(abs(v) for v in dis.values())
+        self.reference_energy = (total, scale)
+        return self.reference_energy
+
+    def energy_changed(self) -> None:
+        """The books' reference is to be taken anew at the next step (a part's field was set)."""
+        self.reference_energy = None
