@@ -336,10 +336,7 @@ impl PySimulation {
         py: Python<'py>,
         i: usize,
     ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<u32>>)> {
-        let Inner::D3(s) = &mut self.inner else {
-            return Err(err(invalid("dim", "body meshes are for 3D bodies (2D bodies have outlines)")));
-        };
-        let (v, t) = bodies_of::<_, Bodies3>(s, false).and_then(|b| b.body_mesh(i)).map_err(|e| to_py(py, e))?;
+        let (v, t) = with_bodies!(self, false, b => b.body_mesh(i)).map_err(|e| to_py(py, e))?;
         let (nv, nt) = (v.len() / 3, t.len() / 3);
         let v = numpy::PyArray1::from_vec(py, v).reshape([nv, 3])?;
         let t = numpy::PyArray1::from_vec(py, t).reshape([nt, 3])?;
@@ -542,8 +539,8 @@ fn copy_of(a: &[f64], what: &'static str, of: &str) -> crate::error::Result<Vec<
         .copy(a)
 }
 
-/// `$body` with `$b` the world's rigid-body system of the scene's dimension (`bodies_of`; made
-/// first if `$make`): one call written for `Bodies2` and `Bodies3`, whose methods share names.
+/// `$body` with `$b` the world's rigid-body system (`bodies_of`, as the `RigidBodies` role;
+/// made first, of the scene's dimension, if `$make`).
 macro_rules! with_bodies {
     ($self:expr, $make:expr, $b:ident => $body:expr) => {
         match &mut $self.inner {
@@ -554,9 +551,13 @@ macro_rules! with_bodies {
 }
 use with_bodies;
 
-/// The world's "bodies" system, as `B` (`Bodies2` or `Bodies3`); made, with its particle
-/// coupling, if missing and `make` (else refused: joints need bodies first).
-fn bodies_of<V: Vector, B: BodiesKind<V>>(s: &mut World<V>, make: bool) -> crate::error::Result<&mut B> {
+/// The world's "bodies" system, as its `RigidBodies` role; made (a `B`: `Bodies2` or
+/// `Bodies3`), with its particle coupling, if missing and `make` (else refused: joints need
+/// bodies first).
+fn bodies_of<V: Vector, B: BodiesKind<V>>(
+    s: &mut World<V>,
+    make: bool,
+) -> crate::error::Result<&mut dyn crate::systems::RigidBodies> {
     if !s.others().iter().any(|o| o.name() == "bodies") {
         if !make {
             return Err(invalid("a", "the scene has no rigid bodies yet: add Bodies before their joints"));
@@ -564,10 +565,9 @@ fn bodies_of<V: Vector, B: BodiesKind<V>>(s: &mut World<V>, make: bool) -> crate
         let k = s.add_system(Box::new(B::make("bodies")))?;
         s.add_coupling(B::coupling(k));
     }
-    Ok(s.other_mut("bodies")?
-        .as_any_bodies()
-        .and_then(|a| a.downcast_mut::<B>())
-        .expect("the world's system \"bodies\" is its rigid bodies"))
+    s.other_mut("bodies")?
+        .as_rigid_bodies()
+        .ok_or_else(|| invalid("a", "the scene's system \"bodies\" is not rigid bodies"))
 }
 
 /// The rigid-body system of a dimension and its coupling to the particles.

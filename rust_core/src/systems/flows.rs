@@ -213,7 +213,7 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> FlowSystem<F> {
     }
 }
 
-impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync> System for FlowSystem<F> {
+impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync + 'static> System for FlowSystem<F> {
     fn name(&self) -> &str {
         &self.name
     }

@@ -102,8 +102,27 @@ pub enum Halt {
     Diverged { index: usize, quantity: Failure },
 }
 
+/// Rigid bodies (`bodies::Bodies2`, `bodies::Bodies3`): the role through which the bindings
+/// add bodies, joints and pins and read a body's mesh, the same calls in 2D and 3D.
+pub trait RigidBodies {
+    /// Adds a group of bodies of one shape (`Params` as the Python `Bodies` part gives them);
+    /// returns the number of its first body.
+    fn add_group(&mut self, p: crate::terms::registry::Params) -> Result<usize>;
+    /// Adds joints between bodies (or a body and a fixed point).
+    fn add_joints(&mut self, p: crate::terms::registry::Params) -> Result<()>;
+    /// Pins particles to bodies.
+    fn add_pins(&mut self, p: crate::terms::registry::Params) -> Result<()>;
+    /// Body `i`'s shape as triangles in its own frame (m): vertices (V·3) and corner indices
+    /// (T·3). 3D only: 2D bodies refuse naming `dim` (they have outlines).
+    fn body_mesh(&self, i: usize) -> Result<(Vec<Real>, Vec<u32>)>;
+}
+
 /// One system of a world. Methods that run kernels are called on the world's thread pool.
-pub trait System: Send + Sync {
+///
+/// A system is `Any` so that a coupling written beside it (the bodies' `BodyContacts`) can
+/// find its own system's type among the world's; nothing outside that module looks inside a
+/// system: the bindings and the world go through this trait and its roles (`as_rigid_bodies`).
+pub trait System: std::any::Any + Send + Sync {
     /// Short name, e.g. "particles" (the books of several systems are told apart by it).
     fn name(&self) -> &str;
     /// Whether there is nothing to step (the world then only advances time).
@@ -121,9 +140,8 @@ pub trait System: Send + Sync {
     /// given at the start of every call of steps: systems with mass under gravity (rigid
     /// bodies) follow the scene's gravity. Default: ignored.
     fn set_gravity(&mut self, _g: [Real; 3]) {}
-    /// The rigid bodies (`bodies::Bodies2` or `bodies::Bodies3`), for the coupling that reaches
-    /// them (`bodies::BodyContacts2`, `BodyContacts3`) and the bindings: downcast it.
-    fn as_any_bodies(&mut self) -> Option<&mut dyn std::any::Any> {
+    /// The system as rigid bodies (`RigidBodies`), for the bindings (`None`: not bodies).
+    fn as_rigid_bodies(&mut self) -> Option<&mut dyn RigidBodies> {
         None
     }
     /// Hands the system the stop flag of the call in progress (`Stop::default()` after it),

@@ -511,8 +511,23 @@ impl System for Bodies {
         self.pipeline = PhysicsPipeline::new();
         self.ccd = CCDSolver::new();
     }
-    fn as_any_bodies(&mut self) -> Option<&mut dyn std::any::Any> {
+    fn as_rigid_bodies(&mut self) -> Option<&mut dyn crate::systems::RigidBodies> {
         Some(self)
+    }
+}
+
+impl crate::systems::RigidBodies for Bodies {
+    fn add_group(&mut self, p: Params) -> Result<usize> {
+        Bodies::add_group(self, p)
+    }
+    fn add_joints(&mut self, p: Params) -> Result<()> {
+        Bodies::add_joints(self, p)
+    }
+    fn add_pins(&mut self, p: Params) -> Result<()> {
+        Bodies::add_pins(self, p)
+    }
+    fn body_mesh(&self, i: usize) -> Result<(Vec<Real>, Vec<u32>)> {
+        Bodies::body_mesh(self, i)
     }
 }
 
@@ -642,7 +657,9 @@ impl BodyContacts {
 
 /// The bodies system `others[system]` of this dimension, if it is one.
 fn bodies_in(others: &mut [Box<dyn System>], system: usize) -> Option<&mut Bodies> {
-    others.get_mut(system).and_then(|s| s.as_any_bodies()).and_then(|a| a.downcast_mut::<Bodies>())
+    // The one place a system's type is asked for: this coupling and the system it couples are
+    // written together (`System` is `Any` for this).
+    others.get_mut(system).and_then(|s| (s.as_mut() as &mut dyn std::any::Any).downcast_mut::<Bodies>())
 }
 
 /// A vector of the bodies' dimension as the particles' (`V::DIM == D`).

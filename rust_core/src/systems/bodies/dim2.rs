@@ -229,4 +229,11 @@ fn ang_of(l: [Real; 3]) -> AngVector {
     l[2]
 }
 
+impl Bodies {
+    /// 2D bodies have outlines, not meshes (`RigidBodies::body_mesh`).
+    pub fn body_mesh(&self, _i: usize) -> Result<(Vec<Real>, Vec<u32>)> {
+        Err(invalid("dim", "body meshes are for 3D bodies (2D bodies have outlines)"))
+    }
+}
+
 include!("common.rs");
