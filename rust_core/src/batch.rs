@@ -29,9 +29,9 @@
 use crate::error::{Error, Result};
 use crate::integrators::yoshida::{W0, W1};
 use crate::simd::{self, Kernel, Level, Simd, P};
+use crate::systems::particles::{Scheme, Shape};
 use crate::terms::pairwise_small::{small_sum, Lane, SMALL};
 use crate::vector::{Real, Vector};
-use crate::systems::particles::{Scheme, Shape};
 use crate::world::{Checkpoint, World};
 use rayon::prelude::*;
 use std::collections::BTreeMap;

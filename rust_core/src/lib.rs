@@ -32,10 +32,10 @@ pub mod state;
 pub mod stop;
 pub mod systems;
 pub mod terms;
-pub mod vector;
-pub mod world;
 #[cfg(test)]
 mod trait_sizes;
+pub mod vector;
+pub mod world;
 
 #[cfg(feature = "python")]
 mod python;

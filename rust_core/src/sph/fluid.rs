@@ -165,7 +165,6 @@ impl<V: Vector> Term<V> for Sph<V> {
         Some(par::sum(self.n, 0.0, |r| r.map(|i| m[i] * self.p.internal_energy(rho[i])).sum::<Real>()))
     }
 
-
     fn fields(&self, x: &[V], model: &Model) -> Vec<(&'static str, Range<usize>, Vec<Real>)> {
         let (rho, p) = Sph::fields(self, x, model);
         vec![("density", self.range(), rho), ("pressure", self.range(), p)]

@@ -27,7 +27,9 @@ pub use drag::Drag;
 pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
-pub use roles::{BodyMotion, Constraints, FusedForce, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection};
+pub use roles::{
+    BodyMotion, Constraints, FusedForce, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection,
+};
 pub use springs::Springs;
 pub use tree_gravity::TreeGravity;
 

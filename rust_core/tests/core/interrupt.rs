@@ -7,7 +7,7 @@ use glam::DVec3;
 use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;
 use physcore_core::state::Model;
-use physcore_core::terms::{Springs, Term, UniformGravity, Write};
+use physcore_core::terms::{Springs, Term, Traits, UniformGravity, Write};
 use physcore_core::World;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -38,8 +38,8 @@ impl Term<DVec3> for Tripwire {
     fn potential(&self, _x: &[DVec3], _m: &Model) -> Option<f64> {
         None
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<DVec3> {
+        Traits::conservative()
     }
 }
 
@@ -162,8 +162,8 @@ impl Term<DVec3> for Counter {
     fn potential(&self, _x: &[DVec3], _m: &Model) -> Option<f64> {
         None
     }
-    fn dissipative(&self) -> bool {
-        false
+    fn traits(&self) -> Traits<DVec3> {
+        Traits::conservative()
     }
 }
 
