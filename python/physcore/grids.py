@@ -155,9 +155,9 @@ class Grid(Part):
     a live handle: once added, its fields read the scene's state through the scene's
     :class:`~physcore._parts.Host`."""
 
+    #: Its kind, the same in the core (``add_grid``, ``grid_limits``), in scene files and in
+    #: :data:`physcore._parts.PARTS`.
     kind = ""
-    #: The kind the core's ``add_grid`` and ``grid_limits`` take (the kind itself unless renamed).
-    core_kind: ClassVar[str] = ""
     section: ClassVar[str] = "grids"
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
@@ -233,8 +233,7 @@ class Grid(Part):
         host.energy_changed()
 
     def _params(self) -> dict[str, Any]:
-        # The core's key for the cell size is "dx".
-        return {"shape": np.asarray(self.shape, dtype=np.float64), "dx": self.spacing, "edges": ",".join(self.edges)}
+        return {"shape": np.asarray(self.shape, dtype=np.float64), "spacing": self.spacing, "edges": ",".join(self.edges)}
 
     def _record(self) -> dict[str, Any]:
         """What a scene file stores to rebuild this grid (JSON-able; arrays: `_record_arrays`)."""
@@ -257,7 +256,7 @@ class Grid(Part):
     def _attach(self, ctx: AttachContext, name: str) -> Grid:
         """Joins the scene: one scene only, under a free name; returns the grid itself, bound."""
         check_system(ctx, self, "grid")
-        ctx.sim.add_grid(self.core_kind or self.kind, self.name, self._params())
+        ctx.sim.add_grid(self.kind, self.name, self._params())
         self._host = ctx.host
         return self
 
@@ -391,7 +390,7 @@ class Wave(Grid):
     @property
     def cfl_limit(self) -> float:
         """The largest stable step spacing / (c √dim), s (the core's formula)."""
-        return float(_core.grid_limits(self.core_kind or self.kind, self.dim, {**Grid._params(self), "c": self.c})["cfl_limit"])
+        return float(_core.grid_limits(self.kind, self.dim, {**Grid._params(self), "c": self.c})["cfl_limit"])
 
     def _profiles(self) -> dict[str, Any]:
         p: dict[str, Any] = {}
@@ -426,7 +425,7 @@ class Wave(Grid):
         p = super()._params()
         p.update(
             c=self.c,
-            gamma=self.damping,  # the core's key for the damping rate
+            damping=self.damping,
             cfl=self.cfl,
             layer=float(self.layer),
             layer_strength=self.layer_strength,
@@ -542,7 +541,7 @@ class GrayScott(Grid):
     def diffusion_limit(self) -> float:
         """The largest stable step dx² / (2·dim·max(D_u, D_v)), s (the core's formula)."""
         params = {**Grid._params(self), "du": self.du, "dv": self.dv}
-        return float(_core.grid_limits(self.core_kind or self.kind, self.dim, params)["diffusion_limit"])
+        return float(_core.grid_limits(self.kind, self.dim, params)["diffusion_limit"])
 
     def _params(self) -> dict[str, Any]:
         p = super()._params()
@@ -685,7 +684,6 @@ class StableFluid(Grid):
     #: Its kind in scene files and in :data:`physcore._parts.PARTS` (``"grids/stable_fluid"``); files
     #: that say ``"fluid"`` (before issue 45) still load (:data:`KIND_ALIASES`).
     kind = "stable_fluid"
-    core_kind = "fluid"
 
     #: Deprecated alias of :attr:`nu` (m²/s).
     viscosity = _deprecate.alias("nu", "viscosity")
@@ -776,7 +774,7 @@ class StableFluid(Grid):
     def _params(self) -> dict[str, Any]:
         p = super()._params()
         p.update(
-            viscosity=self.nu, buoyancy_alpha=self.buoyancy[0], buoyancy_beta=self.buoyancy[1],
+            nu=self.nu, buoyancy_alpha=self.buoyancy[0], buoyancy_beta=self.buoyancy[1],
             ambient_temperature=self.ambient_temperature, vorticity=self.vorticity, advection=self.advection,
             projection=self.projection,
             tolerance=self.tolerance, max_iterations=float(self.max_iterations), no_slip=self.walls == "no_slip",

@@ -56,18 +56,10 @@ __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
 #: hold them load silently) -> the name now. ``"rk45"`` could be Fehlberg's pair; physcore's is
 #: Dormand–Prince 5(4), and the flows call the same tableau ``"dopri5"`` (docs/naming.md).
 INTEGRATOR_ALIASES: dict[str, str] = {"rk45": "dopri5"}
-#: The core's name of each integrator whose Python name differs (rust_core keeps ``"rk45"``).
-_CORE_INTEGRATOR: dict[str, str] = {"dopri5": "rk45"}
-_PY_INTEGRATOR: dict[str, str] = {v: k for k, v in _CORE_INTEGRATOR.items()}
-
-
-def _py_integrator(core_name: str) -> str:
-    return _PY_INTEGRATOR.get(core_name, core_name)
-
 
 #: Integrator names accepted by ``Scene(integrator=...)``, with order, symplecticity and force
-#: evaluations per step, as reported by the core (under the Python names).
-INTEGRATORS: tuple[dict[str, Any], ...] = tuple({**d, "name": _py_integrator(d["name"])} for d in _core.integrator_table())
+#: evaluations per step, as reported by the core (whose names are these: one vocabulary).
+INTEGRATORS: tuple[dict[str, Any], ...] = tuple(_core.integrator_table())
 _INTEGRATOR_NAMES = tuple(d["name"] for d in INTEGRATORS)
 #: Largest ``threads`` accepted: rayon's own limit (it silently uses no more than this).
 MAX_THREADS = 65535
@@ -154,10 +146,6 @@ def _check_integrator(name: object, warn: bool = True) -> str:
     if name not in _INTEGRATOR_NAMES:
         raise InvalidInputError(f"integrator: unknown integrator {name!r}; valid names: {', '.join(_INTEGRATOR_NAMES)}")
     return name
-
-
-def _core_integrator(name: str) -> str:
-    return _CORE_INTEGRATOR.get(name, name)
 
 
 def _check_tol(value: object, arg: str) -> float:
@@ -335,7 +323,7 @@ class Scene:
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
-        sim = _core.Simulation(int(dim), _core_integrator(integrator), dt, DEFAULT_THREADS.get() if threads is None else threads)
+        sim = _core.Simulation(int(dim), integrator, dt, DEFAULT_THREADS.get() if threads is None else threads)
         if sim.sequential is not None:
             warnings.warn(
                 f"threads=None: could not start a thread pool ({sim.sequential}); this scene runs on "
@@ -551,7 +539,7 @@ class Scene:
         return AttachContext(
             dim=sim.dim,
             names=names,
-            integrator=sim.integrator,  # the core's name: parts pass it to the core's rules
+            integrator=sim.integrator,  # parts pass it to the core's rules (the same names)
             n_particles=sim.n_particles,
             sim=sim,
             parts=tuple(self._parts),
@@ -746,11 +734,11 @@ class Scene:
     def integrator(self) -> str:
         """Integrator name. Settable (see :data:`INTEGRATORS`; an old name, ``"rk45"``, is
         taken with a DeprecationWarning and reads back as the new one, ``"dopri5"``)."""
-        return _py_integrator(self._sim.integrator)
+        return self._sim.integrator
 
     @integrator.setter
     def integrator(self, name: str) -> None:
-        self._sim.integrator = _core_integrator(_check_integrator(name))
+        self._sim.integrator = _check_integrator(name)
 
     @property
     def rtol(self) -> float:
@@ -841,9 +829,7 @@ class Scene:
     @property
     def integrator_info(self) -> dict[str, Any]:
         """``{"name", "order", "symplectic", "force_evals_per_step"}`` of the current integrator."""
-        info = dict(self._sim.integrator_info())
-        info["name"] = _py_integrator(info["name"])
-        return info
+        return dict(self._sim.integrator_info())
 
     @property
     def threads(self) -> int | None:

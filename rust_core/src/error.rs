@@ -162,7 +162,7 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, 
             "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
-        // rk45's dt is an output interval: a loose rtol may have led the trajectory astray.
+        // dopri5's dt is an output interval: a loose rtol may have led the trajectory astray.
         Failure::Error => format!(
             "Try a tighter rtol (a loose one can let an orbit decay into a collision){softening} \
              or a fixed-step integrator."

@@ -233,7 +233,7 @@ impl<V: Vector> World<V> {
     }
 
     /// `step(n)` that stops once `stop` is set, from any thread (the Python binding sets it on
-    /// Ctrl-C). The flag is read before and after every step, in "rk45" before every internal
+    /// Ctrl-C). The flag is read before and after every step, in "dopri5" before every internal
     /// step attempt, and inside long force evaluations (pairwise gravity, see `crate::stop`).
     /// Reading it is a relaxed atomic load and changes no result. When it is seen set, the
     /// state is rolled back like on divergence and `Error::Interrupted` is returned; a flag set

@@ -91,7 +91,7 @@ def test_grid_limits_are_the_cores():
     assert w.cfl_limit == pytest.approx(0.05 / (2.0 * math.sqrt(2)), rel=1e-15)
     gs = pc.GrayScott((32, 32), 0.01, du=2e-5, dv=1e-5, preset="mitosis")
     assert gs.diffusion_limit == pytest.approx(0.01**2 / (4 * 2e-5), rel=1e-15)
-    assert _core.grid_limits("fluid", 2, {"shape": np.array([8.0, 8.0]), "dx": 0.1, "edges": "fixed,fixed,fixed,fixed"}) == {}
+    assert _core.grid_limits("stable_fluid", 2, {"shape": np.array([8.0, 8.0]), "spacing": 0.1, "edges": "fixed,fixed,fixed,fixed"}) == {}
 
 
 @pytest.mark.parametrize(("kind", "integrator", "arg"), [("contacts", "rk4", "integrator"), ("dfsph", "verlet", "method")])

@@ -99,7 +99,7 @@ scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 x0 = scene.positions
 cap(300)
 e = refused(lambda: scene.step(1), "step")
-assert "rk45" in str(e) and "2,000,000 particles" in str(e), str(e)  # the core's message keeps its own name (rk45)
+assert "dopri5" in str(e) and "2,000,000 particles" in str(e), str(e)  # the core names the integrator as the user does
 assert scene.step_count == 0
 scene.integrator = "semi_implicit_euler"  # one (N, 3) array of scratch: fits
 assert np.array_equal(scene.positions, x0)

@@ -14,7 +14,7 @@ use crate::terms::registry::Params;
 use crate::vector::Real;
 
 /// The kinds `build` knows.
-pub const KINDS: [&str; 3] = ["wave", "gray_scott", "fluid"];
+pub const KINDS: [&str; 3] = ["wave", "gray_scott", "stable_fluid"];
 
 /// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
 pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
@@ -22,7 +22,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
     match kind {
         "wave" => {
             let mut c = WaveConfig::new(name, grid, p.number("c")?);
-            c.gamma = p.number("gamma")?;
+            c.gamma = p.number("damping")?;
             c.cfl = p.number("cfl")?;
             c.layer = p.count("layer", 1 << 20)?;
             c.layer_strength = p.number("layer_strength")?;
@@ -74,7 +74,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
             c.cfl = p.number("cfl")?;
             Ok(Box::new(GrayScottSystem::new(c)?))
         }
-        "fluid" => {
+        "stable_fluid" => {
             if dim != 2 {
                 return Err(invalid("shape", "the grid fluid is 2D only"));
             }
@@ -83,7 +83,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
                 name: name.to_string(),
                 shape: [grid.n[0], grid.n[1]],
                 dx: grid.dx,
-                viscosity: p.number("viscosity")?,
+                viscosity: p.number("nu")?,
                 buoyancy_alpha: p.number("buoyancy_alpha")?,
                 buoyancy_beta: p.number("buoyancy_beta")?,
                 ambient_temperature: p.number("ambient_temperature")?,
@@ -136,7 +136,7 @@ fn flags(what: &'static str, m: &[Real]) -> Result<Vec<bool>> {
 
 /// The step limits of a grid of `kind` from the same parameters `build` takes (only the grid and
 /// the numbers a limit needs are read; nothing is allocated): `("cfl_limit", s)` for "wave",
-/// `("diffusion_limit", s)` for "gray_scott", none for "fluid" (its limit follows the flow).
+/// `("diffusion_limit", s)` for "gray_scott", none for "stable_fluid" (its limit follows the flow).
 pub fn limits(kind: &str, dim: usize, mut p: Params) -> Result<Vec<(&'static str, Real)>> {
     let grid = grid_of(&mut p, dim)?;
     Ok(match kind {
@@ -148,7 +148,7 @@ pub fn limits(kind: &str, dim: usize, mut p: Params) -> Result<Vec<(&'static str
             let c = GrayScottConfig::new("limits", grid, p.number("du")?, p.number("dv")?, 0.0, 0.0);
             vec![("diffusion_limit", c.diffusion_limit())]
         }
-        "fluid" => Vec::new(),
+        "stable_fluid" => Vec::new(),
         _ => return Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
     })
 }
@@ -170,7 +170,7 @@ fn grid_of(p: &mut Params, dim: usize) -> Result<Grid> {
                 .ok_or_else(|| invalid("edges", format!("unknown rule {e:?}; valid: fixed, free, periodic")))
         })
         .collect::<Result<Vec<_>>>()?;
-    Grid::new(&shape, p.number("dx")?, &edges)
+    Grid::new(&shape, p.number("spacing")?, &edges)
 }
 
 /// `n` profiles from `{prefix}_counts` (cells per source), `{prefix}_cells`, `{prefix}_weights`.

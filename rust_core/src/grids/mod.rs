@@ -83,7 +83,7 @@ impl Grid {
             return Err(invalid("shape", format!("{shape:?} has too many cells")));
         }
         if !(dx.is_finite() && dx > 0.0) {
-            return Err(invalid("dx", format!("{dx} must be finite and > 0 (m)")));
+            return Err(invalid("spacing", format!("{dx} must be finite and > 0 (m)")));
         }
         if edges.len() != 2 * dim {
             return Err(invalid(

@@ -112,7 +112,7 @@ impl WaveConfig {
             return Err(invalid("c", format!("{} must be finite and > 0 (m/s)", self.c)));
         }
         if !(self.gamma.is_finite() && self.gamma >= 0.0) {
-            return Err(invalid("gamma", format!("{} must be finite and >= 0 (1/s)", self.gamma)));
+            return Err(invalid("damping", format!("{} must be finite and >= 0 (1/s)", self.gamma)));
         }
         if !(self.cfl.is_finite() && self.cfl > 0.0 && self.cfl <= 1.0) {
             return Err(invalid("cfl", format!("{} must be in (0, 1] (a fraction of the CFL limit)", self.cfl)));

@@ -4,7 +4,7 @@ pub mod boris;
 pub mod euler;
 pub mod implicit_euler;
 pub mod rk4;
-pub mod rk45;
+pub mod dopri5;
 pub mod semi_implicit_euler;
 pub mod verlet;
 pub mod xpbd;
@@ -21,7 +21,7 @@ pub use boris::Boris;
 pub use euler::ExplicitEuler;
 pub use implicit_euler::ImplicitEuler;
 pub use rk4::Rk4;
-pub use rk45::Rk45;
+pub use dopri5::Dopri5;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
 pub use xpbd::Xpbd;
@@ -60,9 +60,9 @@ pub struct IntegratorInfo {
 /// (`Integrator::configure`), which reads the fields it uses.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IntegratorOptions {
-    /// "rk45": relative tolerance of the error estimate, in [1e-14, 1). Default 1e-6.
+    /// "dopri5": relative tolerance of the error estimate, in [1e-14, 1). Default 1e-6.
     pub rtol: Real,
-    /// "rk45": absolute tolerance (m for positions, m/s for velocities), ≥ 0. Default 1e-9.
+    /// "dopri5": absolute tolerance (m for positions, m/s for velocities), ≥ 0. Default 1e-9.
     pub atol: Real,
     /// "implicit_euler": relative residual at which CG stops, in [1e-14, 1). Default 1e-8.
     pub cg_tol: Real,
@@ -237,7 +237,7 @@ impl SolverStats {
 
 /// All integrator names, in the order of the documentation table.
 pub const NAMES: [&str; 9] =
-    ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "rk45", "boris", "xpbd", "implicit_euler"];
+    ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5", "boris", "xpbd", "implicit_euler"];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -246,7 +246,7 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "verlet" => Box::new(VelocityVerlet::default()),
         "yoshida4" => Box::new(Yoshida4::default()),
         "rk4" => Box::new(Rk4::default()),
-        "rk45" => Box::new(Rk45::default()),
+        "dopri5" => Box::new(Dopri5::default()),
         "boris" => Box::new(Boris::default()),
         "xpbd" => Box::new(Xpbd::default()),
         "implicit_euler" => Box::new(ImplicitEuler::default()),

@@ -112,7 +112,7 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.particles_mut().set_substeps(substeps, iterations)).map_err(|e| to_py(py, e))
     }
 
-    /// (accepted, rejected, next internal step s) for "rk45", else None.
+    /// (accepted, rejected, next internal step s) for "dopri5", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
         with_sim!(&self.inner, s => s.particles().adaptive_stats())
     }

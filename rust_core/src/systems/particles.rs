@@ -60,7 +60,7 @@ struct ParticleSnapshot<V: Vector> {
     dissipated: Vec<Real>,
     collisions: Real,
     cache: Option<Cache<V>>,
-    /// rk45's (accepted, rejected, next h): the counts are restored too.
+    /// dopri5's (accepted, rejected, next h): the counts are restored too.
     adaptive: Option<(u64, u64, Real)>,
     /// The terms' own states (`OwnState::history`), in term order.
     histories: Vec<Option<Vec<Real>>>,
@@ -240,7 +240,7 @@ impl<V: Vector> ParticleSystem<V> {
     }
 
     /// Relative and absolute (m, m/s) tolerances of the adaptive integrator; stored for any
-    /// integrator, used by "rk45". rtol in [1e-14, 1), atol >= 0.
+    /// integrator, used by "dopri5". rtol in [1e-14, 1), atol >= 0.
     pub fn set_tolerances(&mut self, rtol: Real, atol: Real) -> Result<()> {
         self.set_options(IntegratorOptions { rtol, atol, ..self.options })
     }
@@ -259,7 +259,7 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn solver_stats(&self) -> Option<SolverStats> {
         self.integrator.solver_stats()
     }
-    /// (accepted, rejected internal steps, next internal step in s) for "rk45".
+    /// (accepted, rejected internal steps, next internal step in s) for "dopri5".
     pub fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
         self.integrator.adaptive_stats()
     }
@@ -784,7 +784,7 @@ impl<V: Vector> System for ParticleSystem<V> {
     /// limit (SPH CFL). RK4 is not given a longer step for its longer interval: it is
     /// dissipative, and on a stiff chain at ω·dt = 0.71 it lost 26 % of the energy in 200 stiff
     /// periods against 5.6 % at 0.5. Explicit Euler has no stability interval on undamped
-    /// oscillations (it grows at every dt) and gets the same step. rk45 picks its own internal
+    /// oscillations (it grows at every dt) and gets the same step. dopri5 picks its own internal
     /// steps, so only the term limits apply to it.
     ///
     /// An implicit integrator ("implicit_euler") is unconditionally stable on the terms it takes
@@ -955,7 +955,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         let (x, v) = (vectors("x", Some(n * d))?, vectors("v", Some(n * d))?);
         let dissipated = array(arrays, "dissipated", Some(terms))?;
         let collisions = array(arrays, "collisions", Some(1))?[0];
-        // The cache's shape is the integrator's own (rk45 adds its controller's memory):
+        // The cache's shape is the integrator's own (dopri5 adds its controller's memory):
         // `restore_books` asks the integrator whether it fits.
         let cache = match arrays.iter().any(|(k, _)| k == "cache_forces") {
             true => Some((vectors("cache_forces", None)?, array(arrays, "cache_power", None)?.to_vec())),

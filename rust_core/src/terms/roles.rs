@@ -200,7 +200,7 @@ mod tests {
 
     #[test]
     fn integrator_options_are_validated_and_kept_across_a_switch() {
-        let mut p = ParticleSystem::<DVec2>::new("rk45").unwrap();
+        let mut p = ParticleSystem::<DVec2>::new("dopri5").unwrap();
         assert_eq!(p.options(), IntegratorOptions::default());
         let o = IntegratorOptions { rtol: 1e-9, xpbd_substeps: 4, ..IntegratorOptions::default() };
         p.set_options(o).unwrap();

@@ -48,7 +48,7 @@ fn integrator_table() {
             ("verlet", 2, true, 1),
             ("yoshida4", 4, true, 3),
             ("rk4", 4, false, 4),
-            ("rk45", 5, false, 6),
+            ("dopri5", 5, false, 6),
             ("boris", 2, false, 1),
             ("xpbd", 1, false, 10),
             ("implicit_euler", 1, false, 1),
@@ -167,16 +167,16 @@ fn suggested_dt_accounts_for_dashpots() {
     }
 }
 
-/// rk45 on the oscillator (ω = 1) over 10 periods, one output step per unit time: the global
+/// dopri5 on the oscillator (ω = 1) over 10 periods, one output step per unit time: the global
 /// error follows the tolerance (tolerance proportionality, Hairer, Nørsett & Wanner I, §II.4),
 /// each call lands exactly on its output time, and the work grows like rtol^(-1/5).
 #[test]
-fn rk45_error_follows_tolerance() {
+fn dopri5_error_follows_tolerance() {
     let t_end = 20.0 * std::f64::consts::PI;
     let mut errs = vec![];
     let mut evals = vec![];
     for rtol in [1e-4, 1e-6, 1e-8, 1e-10] {
-        let mut s = oscillator("rk45", 1.0);
+        let mut s = oscillator("dopri5", 1.0);
         s.particles_mut().set_tolerances(rtol, rtol * 1e-3).unwrap();
         let n = t_end.round() as u64;
         s.step(n).unwrap();
@@ -203,14 +203,14 @@ fn rk45_error_follows_tolerance() {
     }
 }
 
-/// rk45 follows a Kepler orbit with e = 0.9 through 10 pericentre passages (a 1.9/0.1 = 19:1
+/// dopri5 follows a Kepler orbit with e = 0.9 through 10 pericentre passages (a 1.9/0.1 = 19:1
 /// range of distances): the step shrinks near pericentre instead of failing, energy holds.
 #[test]
-fn rk45_kepler_high_eccentricity() {
+fn dopri5_kepler_high_eccentricity() {
     use glam::DVec2;
     use physcore_core::terms::PairwiseGravity;
     let e: f64 = 0.9;
-    let mut s = physcore_core::World::<DVec2>::new("rk45", 0.5, Some(1)).unwrap();
+    let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.5, Some(1)).unwrap();
     let rp = 1.0 - e;
     let vp = ((1.0 + e) / rp).sqrt();
     s.particles_mut()
@@ -235,14 +235,14 @@ fn rk45_kepler_high_eccentricity() {
     assert!(acc > 160, "adaptive steps taken: {acc}");
 }
 
-/// Same scene, 1 and 2 threads, an rk45 run larger than one parallel chunk: bit-identical.
+/// Same scene, 1 and 2 threads, an dopri5 run larger than one parallel chunk: bit-identical.
 #[test]
-fn rk45_is_deterministic_and_fails_cleanly() {
+fn dopri5_is_deterministic_and_fails_cleanly() {
     use glam::DVec2;
     use physcore_core::terms::Springs;
     let run = |threads| {
         let n = 5000;
-        let mut s = physcore_core::World::<DVec2>::new("rk45", 0.01, Some(threads)).unwrap();
+        let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.01, Some(threads)).unwrap();
         let x: Vec<DVec2> = (0..n).map(|i| DVec2::new(i as f64 * 0.01, ((i * 7919) % 13) as f64 * 1e-3)).collect();
         s.particles_mut()
             .add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect())
@@ -262,7 +262,7 @@ fn rk45_is_deterministic_and_fails_cleanly() {
     // Forces that are infinite at the start: the controller gives up with the particle named,
     // and the state is rolled back.
     use physcore_core::terms::PairwiseGravity;
-    let mut s = physcore_core::World::<DVec2>::new("rk45", 0.1, Some(1)).unwrap();
+    let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.1, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(
             vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)],

@@ -1,4 +1,4 @@
-//! The stop flag of `step_interruptible`: read between steps and between rk45's internal step
+//! The stop flag of `step_interruptible`: read between steps and between dopri5's internal step
 //! attempts, it rolls everything back, and reading it never changes a result; `run_watched`
 //! leaves the calling thread free to set it.
 
@@ -58,12 +58,12 @@ fn snapshot(s: &World<DVec3>) -> Snapshot {
     )
 }
 
-/// A damped 8×8 cloth (dissipation books in play) with a tripwire; rk45 gets one long output
+/// A damped 8×8 cloth (dissipation books in play) with a tripwire; dopri5 gets one long output
 /// step of many internal steps.
 fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> World<DVec3> {
     let mut s = cloth(8, integrator, threads, 0.05);
     s.particles_mut().add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
-    if integrator == "rk45" {
+    if integrator == "dopri5" {
         s.set_dt(0.5).unwrap();
         s.particles_mut().set_tolerances(1e-9, 1e-12).unwrap();
     }
@@ -97,8 +97,8 @@ fn flag_set_before_the_call_stops_it_before_the_first_step() {
 fn interrupt_inside_a_call_rolls_back_and_the_retry_is_bit_identical() {
     for name in NAMES {
         for threads in [1, 2] {
-            // Where the flag goes up: mid-call, and for rk45 inside its single output step.
-            let (warmup, n) = if name == "rk45" { (1, 1) } else { (2, 20) };
+            // Where the flag goes up: mid-call, and for dopri5 inside its single output step.
+            let (warmup, n) = if name == "dopri5" { (1, 1) } else { (2, 20) };
             let mut reference = scene(name, threads, &Arc::new(AtomicBool::new(false)), 0);
             reference.step(warmup).unwrap();
             let e0 = reference.force_evaluations();
@@ -115,10 +115,10 @@ fn interrupt_inside_a_call_rolls_back_and_the_retry_is_bit_identical() {
             assert!(snapshot(&s) == before, "{name}, {threads} threads: not rolled back");
             // The flag is read before every step / internal attempt: at most one more attempt.
             let after = s.force_evaluations() - at;
-            let bound = if name == "rk45" { 6 } else { 4 };
+            let bound = if name == "dopri5" { 6 } else { 4 };
             assert!(after <= bound, "{name}: {after} force evaluations after the flag went up (call: {call_evals})");
-            if name == "rk45" {
-                assert!(call_evals > 100, "the rk45 output step should be long; it took {call_evals} evaluations");
+            if name == "dopri5" {
+                assert!(call_evals > 100, "the dopri5 output step should be long; it took {call_evals} evaluations");
             }
 
             flag.store(false, Ordering::Relaxed);
@@ -184,10 +184,10 @@ fn once_the_flag_is_up_the_remaining_terms_of_an_evaluation_are_skipped() {
     }
 }
 
-/// A stiff hanging chain under rk45 whose one output step (dt = 10⁴ s) takes minutes.
-fn long_rk45_step(threads: Option<usize>) -> World<DVec3> {
+/// A stiff hanging chain under dopri5 whose one output step (dt = 10⁴ s) takes minutes.
+fn long_dopri5_step(threads: Option<usize>) -> World<DVec3> {
     let n = 200;
-    let mut s = World::new("rk45", 1e4, threads).unwrap();
+    let mut s = World::new("dopri5", 1e4, threads).unwrap();
     let x = (0..n).map(|i| DVec3::new(i as f64 / n as f64, 0.0, 0.0)).collect();
     s.particles_mut()
         .add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect())
@@ -209,7 +209,7 @@ fn long_rk45_step(threads: Option<usize>) -> World<DVec3> {
 #[test]
 fn a_watcher_on_the_calling_thread_stops_a_step_running_on_the_pool() {
     for threads in [None, Some(1), Some(2)] {
-        let mut s = long_rk45_step(threads);
+        let mut s = long_dopri5_step(threads);
         let before = snapshot(&s);
         let stop = Arc::new(AtomicBool::new(false));
         let caller = std::thread::current().id();
@@ -244,7 +244,7 @@ fn a_watcher_on_the_calling_thread_stops_a_step_running_on_the_pool() {
 fn run_watched_from_a_pool_thread_runs_the_job_there() {
     // On the only thread of a pool, a task queued on that pool would never start.
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let mut s = long_rk45_step(None);
+    let mut s = long_dopri5_step(None);
     s.set_dt(1e-3).unwrap();
     let r = one.install(|| s.run_watched(|s| s.step(1), |wait| assert!(wait(Duration::from_secs(60)))));
     assert_eq!(r, Ok(()));

@@ -139,7 +139,7 @@ fn restartable(integrator: &str) -> World<glam::DVec3> {
     let floor = Plane::new(glam::DVec3::new(0.0, 0.0, -0.05), glam::DVec3::Z, 0.5, 0.3).unwrap();
     w.particles_mut().add_constraint(Box::new(floor));
     w.add_system(Box::new(harmonic("dopri5", None))).unwrap();
-    if integrator == "rk45" {
+    if integrator == "dopri5" {
         w.set_dt(0.01).unwrap();
     }
     w

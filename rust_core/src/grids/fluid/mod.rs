@@ -257,10 +257,10 @@ impl FluidConfig {
             return Err(invalid("shape", format!("{:?} has too many cells", self.shape)));
         }
         if !(self.dx.is_finite() && self.dx > 0.0) {
-            return Err(invalid("dx", format!("{} must be finite and > 0 (m)", self.dx)));
+            return Err(invalid("spacing", format!("{} must be finite and > 0 (m)", self.dx)));
         }
         if !(self.viscosity.is_finite() && self.viscosity >= 0.0) {
-            return Err(invalid("viscosity", format!("{} must be finite and >= 0 (m^2/s)", self.viscosity)));
+            return Err(invalid("nu", format!("{} must be finite and >= 0 (m^2/s)", self.viscosity)));
         }
         finite("buoyancy_alpha", self.buoyancy_alpha)?;
         finite("buoyancy_beta", self.buoyancy_beta)?;

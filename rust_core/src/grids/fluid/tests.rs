@@ -208,8 +208,8 @@ fn bad_configs_are_refused_naming_the_argument() {
     let src = |cells| Source { cells, density: 1.0, temperature: 0.0, velocity: [0.0; 2] };
     let cases: Vec<(FluidConfig, &str)> = vec![
         (FluidConfig { shape: [2, 8], ..d() }, "shape"),
-        (FluidConfig { dx: 0.0, ..d() }, "dx"),
-        (FluidConfig { viscosity: -1.0, ..d() }, "viscosity"),
+        (FluidConfig { dx: 0.0, ..d() }, "spacing"),
+        (FluidConfig { viscosity: -1.0, ..d() }, "nu"),
         (FluidConfig { buoyancy_beta: Real::NAN, ..d() }, "buoyancy_beta"),
         (FluidConfig { vorticity: -0.1, ..d() }, "vorticity"),
         (FluidConfig { tolerance: 0.0, ..d() }, "tolerance"),

@@ -1,4 +1,4 @@
-//! Adaptive Dormand–Prince RK5(4) ("rk45"; Dormand & Prince 1980, J. Comput. Appl. Math. 6, 19,
+//! Adaptive Dormand–Prince RK5(4) ("dopri5"; Dormand & Prince 1980, J. Comput. Appl. Math. 6, 19,
 //! Table 2; Hairer, Nørsett & Wanner, Solving ODEs I, §II.4–5, the DOPRI5 code).
 //!
 //! One `step(dt)` integrates exactly `dt` in as many internal steps `h` as the error control
@@ -38,7 +38,7 @@ const BETA: Real = 0.04;
 /// e.g. non-finite forces): h has then shrunk by at least 0.2^40 ≈ 1e-28.
 const MAX_REJECTS: u32 = 40;
 
-pub struct Rk45<V: Vector> {
+pub struct Dopri5<V: Vector> {
     pub rtol: Real,
     pub atol: Real,
     /// Stage derivatives: kx[j] = velocity, kv[j] = acceleration at stage j.
@@ -60,7 +60,7 @@ pub struct Rk45<V: Vector> {
     failed: Option<usize>,
 }
 
-impl<V: Vector> Default for Rk45<V> {
+impl<V: Vector> Default for Dopri5<V> {
     fn default() -> Self {
         Self {
             rtol: 1e-6,
@@ -103,7 +103,7 @@ fn max_combine(a: Real, b: Real) -> Real {
     }
 }
 
-impl<V: Vector> Rk45<V> {
+impl<V: Vector> Dopri5<V> {
     /// Derivative at the current state into stage 0.
     fn first_stage(&mut self, sys: &mut Particles<V>) {
         sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
@@ -274,9 +274,9 @@ impl<V: Vector> Rk45<V> {
     }
 }
 
-impl<V: Vector> Integrator<V> for Rk45<V> {
+impl<V: Vector> Integrator<V> for Dopri5<V> {
     fn info(&self) -> IntegratorInfo {
-        IntegratorInfo { name: "rk45", order: 5, symplectic: false, force_evals_per_step: 6 }
+        IntegratorInfo { name: "dopri5", order: 5, symplectic: false, force_evals_per_step: 6 }
     }
 
     fn step(&mut self, sys: &mut Particles<V>, dt: Real) -> bool {
