@@ -21,12 +21,13 @@ from ._errors import (
     ThreadPoolError,
     ThreadPoolWarning,
 )
+from ._integrators import RK4, XPBD, Boris, Dopri5, Euler, ImplicitEuler, SemiImplicitEuler, Verlet, Yoshida4
 from ._system import info, set_simd_level, simd_level, simd_levels
 from .batch import Batch
 from .bodies import Bodies, Joints, Pins
 from .contacts import Contacts
 from .flows import Flow
-from .fluids import Fluid, neighbors
+from .fluids import DFSPH, WCSPH, Fluid, neighbors
 from .grids import Drop, GrayScott, Oscillator, Source, StableFluid, Wave
 from .potentials import *  # noqa: F403 - the potential fields, as potentials.__all__ lists them
 from .scene import INTEGRATORS, EnergyReport, Scene
@@ -39,10 +40,21 @@ __all__ = [
     "Scene",
     "EnergyReport",
     "INTEGRATORS",
+    "Euler",
+    "SemiImplicitEuler",
+    "Verlet",
+    "Yoshida4",
+    "RK4",
+    "Dopri5",
+    "Boris",
+    "XPBD",
+    "ImplicitEuler",
     *_terms.__all__,
     *_potentials.__all__,
     "Contacts",
     "Fluid",
+    "WCSPH",
+    "DFSPH",
     "neighbors",
     "Wave",
     "GrayScott",

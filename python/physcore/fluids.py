@@ -43,7 +43,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import warnings
-from dataclasses import KW_ONLY, dataclass, field
+from dataclasses import KW_ONLY, InitVar, dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -56,7 +56,7 @@ from .shapes import lattice, tank_walls  # the lattice and tank builders, still 
 from .shapes import lattice_counts as lattice_counts
 from .terms import Gravity, Term
 
-__all__ = ["Fluid", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
+__all__ = ["Fluid", "WCSPH", "DFSPH", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
 
 #: Kernel names accepted by :class:`Fluid`.
 KERNELS = ("cubic_spline", "wendland_c2")
@@ -162,6 +162,156 @@ def lattice_density_sum(spacing: float, h: float, dim: int, kernel: str) -> floa
     return float(_core.sph_lattice_sum(float(spacing), float(h), int(dim), str(kernel)))
 
 
+# ----------------------------------------------------------------------------- the solver records
+def _check_wcsph(rec: Any) -> None:
+    """Check (TypeError / InvalidInputError naming the field) a record's WCSPH options: ``gamma``,
+    ``clamp_pressure``, ``pass_precision`` (a :class:`WCSPH` or a :class:`Fluid`)."""
+    if isinstance(rec.gamma, bool) or not isinstance(rec.gamma, (int, np.integer)):
+        raise InvalidTypeError(f"gamma: expected an int, got {type(rec.gamma).__name__}")
+    if not 1 <= rec.gamma <= 15:
+        raise InvalidInputError(f"gamma: must be in 1..15, got {rec.gamma}")
+    if not isinstance(rec.clamp_pressure, (bool, np.bool_)):
+        raise InvalidTypeError(f"clamp_pressure: expected a bool, got {type(rec.clamp_pressure).__name__}")
+    if not isinstance(rec.pass_precision, str) or rec.pass_precision not in ("f32", "f64"):
+        raise InvalidInputError(f"pass_precision: expected 'f32' or 'f64', got {rec.pass_precision!r}")
+
+
+def _check_dfsph(rec: Any) -> None:
+    """Check and normalise (floats, ints) a record's DFSPH options, naming the field: the
+    tolerances, ``max_iterations``, ``cfl``, ``surface_tension``, ``adhesion`` (a :class:`DFSPH`
+    or a :class:`Fluid`)."""
+    for arg in ("density_error", "divergence_error"):
+        v = _finite_float(getattr(rec, arg), arg, minimum=0.0, strict=True)
+        if not v < 1.0:
+            raise InvalidInputError(f"{arg}: a relative error in (0, 1) (0.001 = 0.1 %), got {v}")
+        object.__setattr__(rec, arg, v)
+    object.__setattr__(rec, "max_iterations", _check.int_in_range("max_iterations", rec.max_iterations, 1, 100_000))
+    cfl = _finite_float(rec.cfl, "cfl", minimum=0.0, strict=True)
+    if not cfl <= 1.0:
+        raise InvalidInputError(f"cfl: must be in (0, 1], got {cfl}")
+    object.__setattr__(rec, "cfl", cfl)
+    for arg in ("surface_tension", "adhesion"):
+        object.__setattr__(rec, arg, _finite_float(getattr(rec, arg), arg, minimum=0.0))
+
+
+@dataclass(frozen=True)
+class SPHSolver:
+    """Base of the particle-fluid solver records, :class:`WCSPH` and :class:`DFSPH`: the pressure
+    solver of a :class:`Fluid` with its own options (``Fluid(..., solver=pc.DFSPH(cfl=0.3))``).
+    Records compare by value, hash, and are immutable; their fields are keyword-only and checked
+    when the record is made."""
+
+    #: The solver's name, ``Fluid.method`` (``"wcsph"``, ``"dfsph"``), as scene files keep it.
+    name: ClassVar[str] = ""
+
+    def options(self) -> dict[str, Any]:
+        """The :class:`Fluid` keywords this record sets (its fields), with its values: a new dict."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class WCSPH(SPHSolver):
+    """Weakly compressible SPH (Becker & Teschner 2007; Monaghan 1994): the pressure from the Tait
+    equation of state ``p = B[(ρ/ρ0)^γ − 1]``, ``B = ρ0 c0²/γ`` (module docstring).
+    ``Fluid(..., solver=pc.WCSPH(...))`` is ``Fluid(..., method="wcsph", ...)`` with the same
+    options; the default solver.
+
+    Parameters
+    ----------
+    gamma : int
+        Tait exponent γ (dimensionless), 1..15. Default 7 (water).
+    clamp_pressure : bool
+        Clamp ``p ≥ 0`` (no tension at the free surface). Default True.
+    pass_precision : {"f64", "f32"}
+        Arithmetic of the density and force passes (positions and velocities stay float64).
+        ``"f32"`` is about twice as fast. Default ``"f64"``.
+
+    Raises
+    ------
+    InvalidTypeError
+        (a ``TypeError``) ``gamma`` not an int, ``clamp_pressure`` not a bool; names it.
+    InvalidInputError
+        (a ``ValueError``) A field out of range, naming it.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> from physcore.shapes import lattice
+    >>> fluid = pc.Fluid(lattice([0, 0], [0.1, 0.1], 0.01), 0.01, solver=pc.WCSPH(gamma=3))
+    >>> fluid.method, fluid.gamma
+    ('wcsph', 3)
+    """
+
+    name: ClassVar[str] = "wcsph"
+
+    gamma: int = 7
+    clamp_pressure: bool = True
+    pass_precision: str = "f64"
+
+    def __post_init__(self) -> None:
+        _check_wcsph(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DFSPH(SPHSolver):
+    """Divergence-free SPH (Bender & Koschier, "Divergence-free SPH for incompressible and viscous
+    fluids", IEEE TVCG 23, 2017, Algorithms 1–3): a divergence solve and a density solve each
+    step, warm-started (module docstring). ``Fluid(..., solver=pc.DFSPH(...))`` is
+    ``Fluid(..., method="dfsph", ...)`` with the same options. Steps inside
+    ``integrator="semi_implicit_euler"`` only.
+
+    Parameters
+    ----------
+    density_error : float
+        The density solve iterates until the predicted mean compression ``mean((ρ − ρ0)₊)/ρ0``
+        is at most this (dimensionless), in (0, 1). Default 1e-3 (0.1 %); 1e-4 is the paper's
+        strict setting.
+    divergence_error : float
+        The divergence solve's tolerance, ``mean((Dρ/Dt)₊) dt/ρ0`` (dimensionless), in (0, 1).
+        Default 1e-3.
+    max_iterations : int
+        Most iterations of each solve, 1..100000. Default 100.
+    cfl : float
+        The CFL number λ of the step limit ``λ h/|v|max`` (dimensionless), in (0, 1]. Default 0.4.
+    surface_tension : float
+        Surface tension σ ≥ 0, N/m (N in 2D; water: 0.072 N/m), Akinci, Akinci & Teschner, ACM
+        TOG 32(6) 182, 2013, eq. 1–6 (see :class:`Fluid`). Default 0: none.
+    adhesion : float
+        Attraction to the walls ≥ 0 (Akinci et al. 2013, eq. 7), in σ's units. Default 0.
+
+    Raises
+    ------
+    InvalidTypeError
+        (a ``TypeError``) A field of the wrong type (``bool`` and ``str`` are not numbers); names it.
+    InvalidInputError
+        (a ``ValueError``) A field out of range, naming it.
+
+    Examples
+    --------
+    >>> import physcore as pc
+    >>> from physcore.shapes import lattice
+    >>> fluid = pc.Fluid(lattice([0, 0], [0.1, 0.1], 0.01), 0.01, solver=pc.DFSPH(cfl=0.3))
+    >>> fluid.method, fluid.cfl, fluid == pc.Fluid(fluid.positions, 0.01, method="dfsph", cfl=0.3)
+    ('dfsph', 0.3, True)
+    """
+
+    name: ClassVar[str] = "dfsph"
+
+    density_error: float = 1e-3
+    divergence_error: float = 1e-3
+    max_iterations: int = 100
+    cfl: float = 0.4
+    surface_tension: float = 0.0
+    adhesion: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_dfsph(self)
+
+
+#: The solver record of each ``Fluid(method=...)`` name.
+SOLVERS: dict[str, type[SPHSolver]] = {cls.name: cls for cls in (WCSPH, DFSPH)}
+
+
 #: Fluid's fields in their positional order before issue 45 (new names), and its renames.
 _FLUID_ORDER = (
     "positions", "spacing", "velocities", "density", "sound_speed", "alpha", "smoothing", "kernel", "gamma",
@@ -239,8 +389,9 @@ class Fluid(Term, kind="fluid"):
         about twice as fast. Default ``"f64"``. WCSPH only: DFSPH computes in float64 whatever
         this says.
     method : {"wcsph", "dfsph"}
-        ``"wcsph"`` (default): Tait equation of state. ``"dfsph"``: divergence-free SPH (module
-        docstring); ``gamma``, ``clamp_pressure`` and ``pass_precision`` then do not apply. Known
+        ``"wcsph"`` (default, unless ``solver`` says otherwise): Tait equation of state.
+        ``"dfsph"``: divergence-free SPH (module docstring); ``gamma``, ``clamp_pressure`` and
+        ``pass_precision`` then do not apply. Known
         bug: a DFSPH fluid at rest does not settle at the default ``alpha`` (a layer 24
         particles deep keeps an rms speed of about 0.2 m/s; WCSPH's settles to 0.03 m/s); use
         ``alpha=0.5`` where a tank must come to rest (docs/guide/fluids_dfsph.md).
@@ -288,6 +439,14 @@ class Fluid(Term, kind="fluid"):
         fluid (continuum contact angle ``cos θ = 2·adhesion/σ − 1``, Young–Dupré). Default 0.
     name : str
         Key of the fluid in the energy books.
+    solver : WCSPH or DFSPH, optional
+        The solver as a record holding its own options, checked when it is made:
+        ``solver=pc.DFSPH(cfl=0.3)`` makes the same fluid as ``method="dfsph", cfl=0.3`` (same
+        core term, same saved file). It sets ``method`` and the record's fields; the fluid keeps
+        them as fields (``fluid.method``, ``fluid.cfl``) and not the record. A ``method`` naming
+        the other solver, or one of the record's options also given here with another value than
+        the record's, raises InvalidInputError naming it (an option left at its default defers
+        to the record).
 
     Raises
     ------
@@ -310,24 +469,29 @@ class Fluid(Term, kind="fluid"):
     alpha: float = 0.05
     smoothing: float = 1.3
     kernel: str = "cubic_spline"
-    gamma: int = 7
-    clamp_pressure: bool = True
+    # The solver options' defaults are their records' (WCSPH, DFSPH).
+    gamma: int = WCSPH.gamma
+    clamp_pressure: bool = WCSPH.clamp_pressure
     mass: float | None = None
     boundary: np.ndarray | None = None
     boundary_volume: str | float | np.ndarray = "lattice"
-    pass_precision: str = "f64"
-    method: str = "wcsph"
-    density_error: float = 1e-3
-    divergence_error: float = 1e-3
-    max_iterations: int = 100
-    cfl: float = 0.4
-    surface_tension: float = 0.0
-    adhesion: float = 0.0
+    pass_precision: str = WCSPH.pass_precision
+    #: None while being made: the solver record's name, else "wcsph" (always a str once made).
+    method: str = None  # type: ignore[assignment]
+    density_error: float = DFSPH.density_error
+    divergence_error: float = DFSPH.divergence_error
+    max_iterations: int = DFSPH.max_iterations
+    cfl: float = DFSPH.cfl
+    surface_tension: float = DFSPH.surface_tension
+    adhesion: float = DFSPH.adhesion
     name: str = "fluid"
     #: Index of the first particle once added to a scene (set by :meth:`Scene.add`).
     first: int | None = field(default=None, compare=False)
+    #: The solver as a record: not kept (it sets ``method`` and its options, which the fluid
+    #: keeps as fields; ``dataclasses.replace`` leaves them as they are).
+    solver: InitVar[SPHSolver | None] = None
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, solver: SPHSolver | None = None) -> None:
         x = _array2(self.positions, "positions")
         dim = x.shape[1]
         object.__setattr__(self, "positions", x)
@@ -351,12 +515,6 @@ class Fluid(Term, kind="fluid"):
             )
         if not isinstance(self.kernel, str) or self.kernel not in KERNELS:
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
-        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)):
-            raise InvalidTypeError(f"gamma: expected an int, got {type(self.gamma).__name__}")
-        if not 1 <= self.gamma <= 15:
-            raise InvalidInputError(f"gamma: must be in 1..15, got {self.gamma}")
-        if not isinstance(self.clamp_pressure, (bool, np.bool_)):
-            raise InvalidTypeError(f"clamp_pressure: expected a bool, got {type(self.clamp_pressure).__name__}")
         if self.mass is not None:
             object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
         if self.boundary is not None:
@@ -394,27 +552,38 @@ class Fluid(Term, kind="fluid"):
                 )
         if isinstance(self.boundary_volume, np.ndarray) and not np.all(np.isfinite(_scaled(self.boundary_volume, self.density))):
             raise InvalidInputError("boundary_volume: density · boundary volume overflows float64")
-        if not isinstance(self.pass_precision, str) or self.pass_precision not in ("f32", "f64"):
-            raise InvalidInputError(f"pass_precision: expected 'f32' or 'f64', got {self.pass_precision!r}")
-        if not isinstance(self.method, str) or self.method not in METHODS:
+        _check_wcsph(self)
+        if self.method is not None and (not isinstance(self.method, str) or self.method not in METHODS):
             raise InvalidInputError(f"method: expected one of {', '.join(map(repr, METHODS))}, got {self.method!r}")
-        for arg in ("density_error", "divergence_error"):
-            v = _finite_float(getattr(self, arg), arg, minimum=0.0, strict=True)
-            if not v < 1.0:
-                raise InvalidInputError(f"{arg}: a relative error in (0, 1) (0.001 = 0.1 %), got {v}")
-            object.__setattr__(self, arg, v)
-        object.__setattr__(self, "max_iterations", _check.int_in_range("max_iterations", self.max_iterations, 1, 100_000))
-        cfl = _finite_float(self.cfl, "cfl", minimum=0.0, strict=True)
-        if not cfl <= 1.0:
-            raise InvalidInputError(f"cfl: must be in (0, 1], got {cfl}")
-        object.__setattr__(self, "cfl", cfl)
+        _check_dfsph(self)
+        if solver is not None:
+            self._take_solver(solver)
+        elif self.method is None:
+            object.__setattr__(self, "method", "wcsph")
         for arg in ("surface_tension", "adhesion"):
-            v = _finite_float(getattr(self, arg), arg, minimum=0.0)
+            v = getattr(self, arg)
             if v > 0 and self.method != "dfsph":
                 raise InvalidInputError(f"{arg}: needs method='dfsph' (WCSPH has no surface tension), got {v} with method={self.method!r}")
-            object.__setattr__(self, arg, v)
         if not isinstance(self.name, str) or not self.name:
             raise InvalidTypeError("name: expected a non-empty str")
+
+    def _take_solver(self, solver: object) -> None:
+        """Set ``method`` and the options from a solver record. An option also given as a keyword
+        (checked already) with another value than the record's, and not at its default, is given
+        twice: InvalidInputError naming it; so is a ``method`` naming another solver."""
+        if not isinstance(solver, SPHSolver):
+            raise InvalidTypeError(f"solver: expected a solver record (pc.WCSPH(...), pc.DFSPH(...)), got {type(solver).__name__}")
+        if self.method is not None and self.method != solver.name:
+            raise InvalidInputError(f"method: {self.method!r} conflicts with solver={solver!r}; give one of them")
+        for f in dataclasses.fields(solver):
+            given, value = getattr(self, f.name), getattr(solver, f.name)
+            if given != f.default and given != value:
+                raise InvalidInputError(
+                    f"{f.name}: {given!r} conflicts with solver={solver!r}, which sets it to {value!r}; give it once"
+                )
+        for f, value in solver.options().items():
+            object.__setattr__(self, f, value)
+        object.__setattr__(self, "method", solver.name)
 
     # ------------------------------------------------------------ the term protocol (see Term)
     #: Scene files keep the keys they had before issue 45 (``viscosity``, ``precision``,

@@ -28,6 +28,15 @@ from ._errors import (
     ThreadPoolWarning,
     allocating,
 )
+from ._integrators import (
+    XPBD,
+    Dopri5,
+    ImplicitEuler,
+    Integrator,
+    check_cg_max_iter,
+    check_xpbd_iterations,
+    check_xpbd_substeps,
+)
 from ._parts import (
     MEMBER_PREFIX,
     OPTIONAL_SECTIONS,
@@ -135,10 +144,15 @@ def _no_particles(*_args: Any, **_kw: Any) -> Any:
 
 
 def _check_integrator(name: object, warn: bool = True) -> str:
-    """The integrator's Python name; an old name (:data:`INTEGRATOR_ALIASES`) warns unless
-    ``warn`` is False (a scene file's)."""
+    """The integrator's Python name, of a name or of an integrator record (its ``name``); an old
+    name (:data:`INTEGRATOR_ALIASES`) warns unless ``warn`` is False (a scene file's)."""
+    if isinstance(name, Integrator):
+        name = name.name
     if not isinstance(name, str):
-        raise InvalidTypeError(f"integrator: expected a name (str), got {type(name).__name__}")
+        raise InvalidTypeError(
+            f"integrator: expected a name (str) or an integrator record (pc.Verlet(), pc.Dopri5(rtol=...), ...), "
+            f"got {type(name).__name__}"
+        )
     if name in INTEGRATOR_ALIASES:
         if warn:
             _deprecate.warn(f"integrator: {name!r} is now {INTEGRATOR_ALIASES[name]!r}", stacklevel=4)
@@ -146,6 +160,24 @@ def _check_integrator(name: object, warn: bool = True) -> str:
     if name not in _INTEGRATOR_NAMES:
         raise InvalidInputError(f"integrator: unknown integrator {name!r}; valid names: {', '.join(_INTEGRATOR_NAMES)}")
     return name
+
+
+def _record_options(integrator: object, options: dict[str, Any]) -> dict[str, Any]:
+    """Scene's integrator keywords ``options`` (checked) with an integrator record's own in place
+    (``Dopri5(rtol=1e-8)`` sets ``rtol`` and ``atol``). A keyword the record owns that was set
+    away from its default, to another value than the record's, raises naming the keyword: the
+    option is given twice. (A keyword left at its default defers to the record.)"""
+    if not isinstance(integrator, Integrator):
+        return options
+    own, defaults = integrator.options(), integrator.defaults()
+    for kw, value in own.items():
+        given = options[kw]
+        if given != defaults[kw] and given != value:
+            raise InvalidInputError(
+                f"{kw}: {given!r} conflicts with integrator={integrator!r}, which sets it to {value!r}; "
+                f"give it once (in the record, or integrator={integrator.name!r} with {kw}=)"
+            )
+    return {**options, **own}
 
 
 def _check_tol(value: object, arg: str) -> float:
@@ -222,8 +254,8 @@ class Scene:
     ----------
     dim : {2, 3}
         Spatial dimension.
-    integrator : str
-        ``"euler"`` (explicit, 1st order, for contrast), ``"semi_implicit_euler"`` (symplectic,
+    integrator : str or integrator record
+        A name or, equally, its record (below): ``"euler"`` (explicit, 1st order, for contrast), ``"semi_implicit_euler"`` (symplectic,
         1st order), ``"verlet"`` (velocity Verlet, symplectic, 2nd order; default), ``"yoshida4"``
         (Yoshida 1990's fourth-order composition of three Verlet substeps, symplectic, 3 force
         evaluations per step), ``"rk4"``
@@ -241,6 +273,17 @@ class Scene:
         order, unconditionally stable on springs, so stiff cloth may take steps 10–100× the
         explicit limit, at the price of numerical damping that the energy books show as a
         residual; see `cg_tol`).
+
+        Each name has an immutable record holding that integrator's own options, checked when
+        the record is made: :class:`~physcore.Euler`, :class:`~physcore.SemiImplicitEuler`,
+        :class:`~physcore.Verlet`, :class:`~physcore.Yoshida4`, :class:`~physcore.RK4`,
+        :class:`~physcore.Dopri5` (``rtol``, ``atol``), :class:`~physcore.Boris`,
+        :class:`~physcore.XPBD` (``substeps``, ``iterations``: ``xpbd_substeps``,
+        ``xpbd_iterations`` here) and :class:`~physcore.ImplicitEuler` (``cg_tol``,
+        ``cg_max_iter``). ``integrator=pc.Dopri5(rtol=1e-8)`` makes the same scene as
+        ``integrator="dopri5", rtol=1e-8`` (same core calls, same saved file). A keyword that the
+        record owns, also given here with another value than the record's, raises
+        InvalidInputError naming the keyword (left at its default, it defers to the record).
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"dopri5"`` it is the output interval: each step
@@ -301,25 +344,35 @@ class Scene:
         self,
         dim: int = 2,
         *,
-        integrator: str = "verlet",
+        integrator: str | Integrator = "verlet",
         dt: float = 1e-3,
-        rtol: float = 1e-6,
-        atol: float = 1e-9,
-        cg_tol: float = 1e-8,
-        cg_max_iter: int = 200,
+        # The options' defaults are their integrator records' (physcore/_integrators.py).
+        rtol: float = Dopri5.rtol,
+        atol: float = Dopri5.atol,
+        cg_tol: float = ImplicitEuler.cg_tol,
+        cg_max_iter: int = ImplicitEuler.cg_max_iter,
         precision: str = "f64",
         threads: int | None = None,
-        xpbd_substeps: int = 10,
-        xpbd_iterations: int = 1,
+        xpbd_substeps: int = XPBD.substeps,
+        xpbd_iterations: int = XPBD.iterations,
     ) -> None:
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
         if dim not in (2, 3):
             raise InvalidInputError(f"dim: must be 2 or 3, got {dim}")
-        integrator = _check_integrator(integrator)
+        name = _check_integrator(integrator)
         dt = _check_dt(dt)
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
-        cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), _check_int(cg_max_iter, "cg_max_iter", 1, 1_000_000)
+        cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), check_cg_max_iter(cg_max_iter)
+        xpbd_substeps, xpbd_iterations = check_xpbd_substeps(xpbd_substeps), check_xpbd_iterations(xpbd_iterations)
+        options = _record_options(
+            integrator,
+            {"rtol": rtol, "atol": atol, "cg_tol": cg_tol, "cg_max_iter": cg_max_iter,
+             "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations},
+        )
+        rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
+        xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
+        integrator = name
         precision = _check_precision(precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
@@ -334,7 +387,7 @@ class Scene:
                 stacklevel=2,
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
-        sim.set_substeps(_check_int(xpbd_substeps, "xpbd_substeps", 1, 100_000), _check_int(xpbd_iterations, "xpbd_iterations", 1, 10_000))
+        sim.set_substeps(xpbd_substeps, xpbd_iterations)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         sim.single = precision == "f32"
         # One thread at a time, and the books' reference (physcore.session).
@@ -732,13 +785,19 @@ class Scene:
 
     @property
     def integrator(self) -> str:
-        """Integrator name. Settable (see :data:`INTEGRATORS`; an old name, ``"rk45"``, is
-        taken with a DeprecationWarning and reads back as the new one, ``"dopri5"``)."""
+        """Integrator name (a str, also where the scene was made with a record). Settable to a
+        name (see :data:`INTEGRATORS`; an old name, ``"rk45"``, is taken with a
+        DeprecationWarning and reads back as the new one, ``"dopri5"``) or to an integrator record,
+        which also sets its options (``scene.integrator = pc.Dopri5(rtol=1e-8)`` is
+        ``scene.integrator = "dopri5"; scene.rtol = 1e-8; scene.atol = 1e-9``)."""
         return self._sim.integrator
 
     @integrator.setter
-    def integrator(self, name: str) -> None:
-        self._sim.integrator = _check_integrator(name)
+    def integrator(self, value: str | Integrator) -> None:
+        self._sim.integrator = _check_integrator(value)
+        if isinstance(value, Integrator):  # its options, checked when it was made
+            for kw, v in value.options().items():
+                setattr(self, kw, v)
 
     @property
     def rtol(self) -> float:
@@ -765,7 +824,7 @@ class Scene:
 
     @xpbd_substeps.setter
     def xpbd_substeps(self, value: int) -> None:
-        self._sim.set_substeps(_check_int(value, "xpbd_substeps", 1, 100_000), self.xpbd_iterations)
+        self._sim.set_substeps(check_xpbd_substeps(value), self.xpbd_iterations)
 
     @property
     def xpbd_iterations(self) -> int:
@@ -774,7 +833,7 @@ class Scene:
 
     @xpbd_iterations.setter
     def xpbd_iterations(self, value: int) -> None:
-        self._sim.set_substeps(self.xpbd_substeps, _check_int(value, "xpbd_iterations", 1, 10_000))
+        self._sim.set_substeps(self.xpbd_substeps, check_xpbd_iterations(value))
 
     @property
     def precision(self) -> str:
@@ -797,7 +856,7 @@ class Scene:
 
     @cg_max_iter.setter
     def cg_max_iter(self, value: int) -> None:
-        self._sim.set_solver_options(self.cg_tol, _check_int(value, "cg_max_iter", 1, 1_000_000))
+        self._sim.set_solver_options(self.cg_tol, check_cg_max_iter(value))
 
     @property
     def integrator_stats(self) -> dict[str, Any] | None:
