@@ -53,6 +53,19 @@ class Session:
         the sum of the magnitudes of its parts (see :meth:`Scene.energy_drift
         <physcore.Scene.energy_drift>`); None until the next step takes it (it is dropped
         whenever the energy's definition or the state changes).
+
+    Examples
+    --------
+    Run a call on a scene's core as its only user, as a driver of many scenes does:
+
+    >>> import physcore as pc
+    >>> scene = pc.scenes.kepler()
+    >>> session = scene.session
+    >>> session.exclusive(lambda sim: sim.step(10))
+    >>> scene.step_count
+    10
+    >>> session.busy is None  # nobody is inside a call now
+    True
     """
 
     __slots__ = ("busy", "lock", "reference_energy", "sim")
