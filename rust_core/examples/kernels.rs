@@ -3,11 +3,11 @@
 use glam::DVec3;
 use physcore_core::simd::{self, Level};
 use physcore_core::terms::{PairwiseGravity, Springs, UniformGravity};
-use physcore_core::World;
+use physcore_core::{ParticleSystem, World};
 use std::time::Instant;
 
 fn nbody(n: usize, single: bool) -> World<DVec3> {
-    let mut s = World::<DVec3>::new("verlet", 1e-3, None).unwrap();
+    let mut s = World::<DVec3>::new(ParticleSystem::<DVec3>::new("verlet").unwrap(), 1e-3, None).unwrap();
     let mut seed = 42u64;
     let mut rnd = || {
         seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -26,7 +26,9 @@ fn cloth(g: usize) -> World<DVec3> {
     let m = 1.0 / n as f64;
     let k = 100.0;
     let sp = 1.0 / (g - 1) as f64;
-    let mut s = World::<DVec3>::new("semi_implicit_euler", 0.25 * (m / k).sqrt(), None).unwrap();
+    let mut s =
+        World::<DVec3>::new(ParticleSystem::<DVec3>::new("semi_implicit_euler").unwrap(), 0.25 * (m / k).sqrt(), None)
+            .unwrap();
     let x: Vec<DVec3> = (0..n).map(|p| DVec3::new((p % g) as f64 * sp, (p / g) as f64 * sp, 0.0)).collect();
     let (mut i, mut j) = (vec![], vec![]);
     for y in 0..g {

@@ -598,13 +598,14 @@ const _: () = assert!(std::mem::size_of::<Real>() == 8);
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::systems::particles::ParticleSystem;
     use crate::terms::{PairwiseGravity, UniformGravity};
     use glam::{DVec2, DVec3};
 
     /// A three-body world (figure-eight-like, perturbed by `eps`), optionally with uniform
     /// gravity and a pinned body.
     fn three<V: Vector>(integrator: &str, eps: f64, softening: f64, extra: bool) -> World<V> {
-        let mut w = World::<V>::new(integrator, 1e-3 * (1.0 + eps), None).unwrap();
+        let mut w = World::<V>::new(ParticleSystem::<V>::new(integrator).unwrap(), 1e-3 * (1.0 + eps), None).unwrap();
         let c = |a: [f64; 3]| V::from_slice(&a[..V::DIM]);
         let x = vec![c([0.97000436 + eps, -0.24308753, 0.1]), c([-0.97000436, 0.24308753, -0.1]), c([0.0, 0.0, 0.0])];
         let v = vec![
@@ -807,7 +808,7 @@ mod tests {
     #[test]
     fn only_plain_small_nbody_worlds_are_fused() {
         assert!(three::<DVec2>("rk4", 0.0, 0.0, false).fused_shape().is_none());
-        let mut big = World::<DVec2>::new("verlet", 1e-3, Some(1)).unwrap();
+        let mut big = World::<DVec2>::new(ParticleSystem::<DVec2>::new("verlet").unwrap(), 1e-3, Some(1)).unwrap();
         let x: Vec<DVec2> = (0..SMALL + 1).map(|k| DVec2::new(k as f64, 0.5 * k as f64)).collect();
         big.particles_mut()
             .add_particles(x, vec![DVec2::ZERO; SMALL + 1], vec![1.0; SMALL + 1], vec![false; SMALL + 1])

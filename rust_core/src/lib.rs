@@ -41,5 +41,6 @@ pub mod world;
 mod python;
 
 pub use error::{Error, Result};
+pub use systems::particles::ParticleSystem;
 pub use systems::EnergyReport;
 pub use world::{Checkpoint, World};

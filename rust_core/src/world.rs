@@ -63,16 +63,15 @@ pub struct World<V: Vector> {
 }
 
 impl<V: Vector> World<V> {
-    /// A world with an empty particle system stepped by `integrator` (`integrators::NAMES`).
-    /// `threads`: `None` shares `par::default_pool` (all cores, or `RAYON_NUM_THREADS`), or, if
+    /// A world of `particles` (a `ParticleSystem`, made with its integrator: the world steps
+    /// systems and knows no integrator). `threads`: `None` shares `par::default_pool` (all cores, or `RAYON_NUM_THREADS`), or, if
     /// its threads cannot be started (a thread limit), runs on the calling thread only
     /// (`sequential()` says why); `Some(n)`: a pool of its own, `Error::Threads` if the n
     /// threads cannot be started.
-    pub fn new(integrator: &str, dt: Real, threads: Option<usize>) -> Result<Self> {
+    pub fn new(particles: ParticleSystem<V>, dt: Real, threads: Option<usize>) -> Result<Self> {
         check_dt(dt)?;
-        // A PHYSCORE_SIMD the CPU cannot honour is refused here, before any state exists.
+        // A PHYSCORE_SIMD the CPU cannot honour is refused here, before any state steps.
         crate::simd::check()?;
-        let particles = ParticleSystem::new(integrator)?;
         let (pool, sequential) = match threads {
             None => match par::default_pool() {
                 Ok(p) => (Some(p), None),
@@ -861,7 +860,8 @@ mod tests {
 
     #[test]
     fn a_flow_limit_that_collapses_within_an_advance_is_a_divergence_not_bad_input() {
-        let mut w = World::<DVec2>::new("semi_implicit_euler", 1e-3, Some(1)).unwrap();
+        let mut w =
+            World::<DVec2>::new(ParticleSystem::<DVec2>::new("semi_implicit_euler").unwrap(), 1e-3, Some(1)).unwrap();
         w.add_system(Box::new(Runaway { limit: 1e-3 })).unwrap();
         let stop = Arc::new(AtomicBool::new(false));
         // Two substeps (under limits of 1e-3 and 1e-12 s), then the limit is 1e-21 s with 9e-3 s left.
@@ -874,7 +874,8 @@ mod tests {
         // Rolled back to the call's start.
         assert_eq!(w.time(), 0.0);
         // A duration too long for the limit at the call's start stays the caller's error.
-        let mut w = World::<DVec2>::new("semi_implicit_euler", 1e-3, Some(1)).unwrap();
+        let mut w =
+            World::<DVec2>::new(ParticleSystem::<DVec2>::new("semi_implicit_euler").unwrap(), 1e-3, Some(1)).unwrap();
         w.add_system(Box::new(Runaway { limit: 1e-15 })).unwrap();
         match w.advance_interruptible(10.0, None, &stop) {
             Err(Error::InvalidInput { arg, .. }) => assert_eq!(arg, "duration"),

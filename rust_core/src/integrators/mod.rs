@@ -1,10 +1,10 @@
 //! Time integrators behind one trait. Each reports its name, order, whether it is symplectic and
 //! its force evaluations per step, so the speed/accuracy trade can be tabulated honestly.
 pub mod boris;
+pub mod dopri5;
 pub mod euler;
 pub mod implicit_euler;
 pub mod rk4;
-pub mod dopri5;
 pub mod semi_implicit_euler;
 pub mod verlet;
 pub mod xpbd;
@@ -18,10 +18,10 @@ use std::collections::TryReserveError;
 use std::sync::atomic::AtomicBool;
 
 pub use boris::Boris;
+pub use dopri5::Dopri5;
 pub use euler::ExplicitEuler;
 pub use implicit_euler::ImplicitEuler;
 pub use rk4::Rk4;
-pub use dopri5::Dopri5;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
 pub use xpbd::Xpbd;

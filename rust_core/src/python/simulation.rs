@@ -4,6 +4,7 @@ use crate::alloc::{count, Need};
 use crate::constraints;
 use crate::error::{invalid, Error};
 use crate::systems::bodies::{Bodies2, Bodies3};
+use crate::systems::particles::ParticleSystem;
 use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
 use crate::world::World;
@@ -35,8 +36,12 @@ impl PySimulation {
     #[pyo3(signature = (dim, integrator, dt, threads=None))]
     fn new(py: Python<'_>, dim: usize, integrator: &str, dt: f64, threads: Option<usize>) -> PyResult<Self> {
         let inner = match dim {
-            2 => Inner::D2(World::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
-            3 => Inner::D3(World::new(integrator, dt, threads).map_err(|e| to_py(py, e))?),
+            2 => Inner::D2(
+                ParticleSystem::new(integrator).and_then(|p| World::new(p, dt, threads)).map_err(|e| to_py(py, e))?,
+            ),
+            3 => Inner::D3(
+                ParticleSystem::new(integrator).and_then(|p| World::new(p, dt, threads)).map_err(|e| to_py(py, e))?,
+            ),
             _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
         Ok(Self { inner })

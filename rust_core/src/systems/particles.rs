@@ -1043,6 +1043,7 @@ fn check_integrator<V: Vector>(t: &dyn Term<V>, name: &str) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+    use super::ParticleSystem;
     use crate::terms::PairwiseGravity;
     use crate::world::World;
     use glam::DVec2;
@@ -1056,7 +1057,7 @@ mod tests {
     /// the particle count grew past what the buffers held, and past `SPARE_MAX`.
     #[test]
     fn a_recycled_snapshot_restores_the_state_it_was_taken_at() {
-        let mut w = World::<DVec2>::new("verlet", 1e-3, None).unwrap();
+        let mut w = World::<DVec2>::new(ParticleSystem::<DVec2>::new("verlet").unwrap(), 1e-3, None).unwrap();
         let add = |w: &mut World<DVec2>, n: usize, at: f64| {
             let x = (0..n).map(|k| DVec2::new(at + k as f64, 0.5 * k as f64)).collect();
             w.particles_mut().add_particles(x, vec![DVec2::new(0.0, 0.1); n], vec![1.0; n], vec![false; n]).unwrap();

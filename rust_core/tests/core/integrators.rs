@@ -2,6 +2,7 @@
 
 use crate::common::oscillator;
 use physcore_core::integrators::{by_name, NAMES};
+use physcore_core::ParticleSystem;
 
 fn error_at(integrator: &str, dt: f64, t_end: f64) -> f64 {
     let mut s = oscillator(integrator, dt);
@@ -106,7 +107,7 @@ fn symplectic_methods_have_no_secular_energy_drift() {
 fn damped_error(integrator: &str, dt: f64) -> f64 {
     use physcore_core::terms::Springs;
     let c = 0.4;
-    let mut s = physcore_core::World::new(integrator, dt, Some(1)).unwrap();
+    let mut s = physcore_core::World::new(ParticleSystem::new(integrator).unwrap(), dt, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(
             vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
@@ -143,7 +144,7 @@ fn verlet_stays_second_order_with_velocity_dependent_forces() {
 fn suggested_dt_accounts_for_dashpots() {
     use physcore_core::terms::Springs;
     for name in ["semi_implicit_euler", "verlet", "rk4"] {
-        let mut s = physcore_core::World::new(name, 1.0, Some(1)).unwrap();
+        let mut s = physcore_core::World::new(ParticleSystem::new(name).unwrap(), 1.0, Some(1)).unwrap();
         s.particles_mut()
             .add_particles(
                 vec![glam::DVec2::ZERO, glam::DVec2::new(1.0, 0.0)],
@@ -210,7 +211,8 @@ fn dopri5_kepler_high_eccentricity() {
     use glam::DVec2;
     use physcore_core::terms::PairwiseGravity;
     let e: f64 = 0.9;
-    let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.5, Some(1)).unwrap();
+    let mut s =
+        physcore_core::World::<DVec2>::new(ParticleSystem::<DVec2>::new("dopri5").unwrap(), 0.5, Some(1)).unwrap();
     let rp = 1.0 - e;
     let vp = ((1.0 + e) / rp).sqrt();
     s.particles_mut()
@@ -242,7 +244,9 @@ fn dopri5_is_deterministic_and_fails_cleanly() {
     use physcore_core::terms::Springs;
     let run = |threads| {
         let n = 5000;
-        let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.01, Some(threads)).unwrap();
+        let mut s =
+            physcore_core::World::<DVec2>::new(ParticleSystem::<DVec2>::new("dopri5").unwrap(), 0.01, Some(threads))
+                .unwrap();
         let x: Vec<DVec2> = (0..n).map(|i| DVec2::new(i as f64 * 0.01, ((i * 7919) % 13) as f64 * 1e-3)).collect();
         s.particles_mut()
             .add_particles(x, vec![DVec2::ZERO; n], vec![1e-3; n], (0..n).map(|i| i == 0).collect())
@@ -262,7 +266,8 @@ fn dopri5_is_deterministic_and_fails_cleanly() {
     // Forces that are infinite at the start: the controller gives up with the particle named,
     // and the state is rolled back.
     use physcore_core::terms::PairwiseGravity;
-    let mut s = physcore_core::World::<DVec2>::new("dopri5", 0.1, Some(1)).unwrap();
+    let mut s =
+        physcore_core::World::<DVec2>::new(ParticleSystem::<DVec2>::new("dopri5").unwrap(), 0.1, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(
             vec![DVec2::ZERO, DVec2::new(1e-160, 0.0)],

@@ -8,6 +8,7 @@ use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;
 use physcore_core::state::Model;
 use physcore_core::terms::{Springs, Term, Traits, UniformGravity, Write};
+use physcore_core::ParticleSystem;
 use physcore_core::World;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
@@ -187,7 +188,7 @@ fn once_the_flag_is_up_the_remaining_terms_of_an_evaluation_are_skipped() {
 /// A stiff hanging chain under dopri5 whose one output step (dt = 10⁴ s) takes minutes.
 fn long_dopri5_step(threads: Option<usize>) -> World<DVec3> {
     let n = 200;
-    let mut s = World::new("dopri5", 1e4, threads).unwrap();
+    let mut s = World::new(ParticleSystem::new("dopri5").unwrap(), 1e4, threads).unwrap();
     let x = (0..n).map(|i| DVec3::new(i as f64 / n as f64, 0.0, 0.0)).collect();
     s.particles_mut()
         .add_particles(x, vec![DVec3::ZERO; n], vec![1.0 / n as f64; n], (0..n).map(|i| i == 0).collect())

@@ -4,7 +4,7 @@ use crate::common::{cloth, cloud, Rng};
 use glam::{DVec2, DVec3};
 use physcore_core::constraints::{Aabb, Plane, Sphere};
 use physcore_core::terms::{Drag, Springs, UniformGravity};
-use physcore_core::{Error, World};
+use physcore_core::{Error, ParticleSystem, World};
 
 #[test]
 fn springs_and_gravity_conserve_momentum_to_round_off() {
@@ -17,7 +17,7 @@ fn springs_and_gravity_conserve_momentum_to_round_off() {
     let n = 300;
     let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(r.uniform(), r.uniform(), r.uniform())).collect();
     // Velocity Verlet conserves P and L of central forces exactly up to round-off (RK4 only P).
-    let mut sim = World::new("verlet", 1e-3, Some(2)).unwrap();
+    let mut sim = World::new(ParticleSystem::new("verlet").unwrap(), 1e-3, Some(2)).unwrap();
     sim.particles_mut().add_particles(x, vec![DVec3::ZERO; n], vec![1.0; n], vec![false; n]).unwrap();
     let m = 1000;
     let i: Vec<u32> = (0..m).map(|_| (r.next_u64() % n as u64) as u32).collect();
@@ -73,7 +73,7 @@ fn damped_energy_books_balance() {
 #[test]
 fn plane_bounce_follows_restitution() {
     let e = 0.8;
-    let mut s = World::new("verlet", 1e-4, Some(1)).unwrap();
+    let mut s = World::new(ParticleSystem::new("verlet").unwrap(), 1e-4, Some(1)).unwrap();
     s.particles_mut().add_particles(vec![DVec2::new(0.0, 1.0)], vec![DVec2::ZERO], vec![2.0], vec![false]).unwrap();
     s.particles_mut().add_term(Box::new(UniformGravity { name: "gravity".into(), g: DVec2::new(0.0, -9.81) })).unwrap();
     s.particles_mut().add_constraint(Box::new(Plane::new(DVec2::ZERO, DVec2::new(0.0, 3.0), e, 0.0).unwrap()));
@@ -102,7 +102,7 @@ fn plane_bounce_follows_restitution() {
 fn sphere_bounce_follows_restitution_and_books_balance() {
     // A particle dropped from 1 m above the top of a sphere bounces straight up to e², then e⁴.
     let (e, r) = (0.8, 0.5);
-    let mut s = World::new("verlet", 1e-4, Some(1)).unwrap();
+    let mut s = World::new(ParticleSystem::new("verlet").unwrap(), 1e-4, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(vec![DVec3::new(0.0, 0.0, r + 1.0)], vec![DVec3::ZERO], vec![2.0], vec![false])
         .unwrap();
@@ -150,7 +150,7 @@ fn sphere_collider_is_bit_identical_for_1_and_2_threads() {
 
 #[test]
 fn divergence_is_reported_and_rolled_back() {
-    let mut s = World::new("euler", 1.0, Some(1)).unwrap();
+    let mut s = World::new(ParticleSystem::new("euler").unwrap(), 1.0, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(
             vec![DVec2::ZERO, DVec2::new(1.0, 0.0)],
@@ -181,10 +181,10 @@ fn divergence_is_reported_and_rolled_back() {
 
 #[test]
 fn bad_input_is_rejected_before_state_changes() {
-    let mut s: World<DVec2> = World::new("verlet", 1e-3, None).unwrap();
-    assert!(matches!(World::<DVec2>::new("leapfrogg", 1e-3, None), Err(Error::InvalidInput { .. })));
-    assert!(World::<DVec2>::new("rk4", 0.0, None).is_err());
-    assert!(World::<DVec2>::new("rk4", f64::NAN, None).is_err());
+    let mut s: World<DVec2> = World::new(ParticleSystem::new("verlet").unwrap(), 1e-3, None).unwrap();
+    assert!(matches!(ParticleSystem::<DVec2>::new("leapfrogg"), Err(Error::InvalidInput { .. })));
+    assert!(World::<DVec2>::new(ParticleSystem::<DVec2>::new("rk4").unwrap(), 0.0, None).is_err());
+    assert!(World::<DVec2>::new(ParticleSystem::<DVec2>::new("rk4").unwrap(), f64::NAN, None).is_err());
     assert!(s
         .particles_mut()
         .add_particles(vec![DVec2::new(f64::NAN, 0.0)], vec![DVec2::ZERO], vec![1.0], vec![false])
@@ -208,7 +208,7 @@ fn bad_input_is_rejected_before_state_changes() {
 
 #[test]
 fn zero_length_spring_and_coincident_bodies_give_no_nan() {
-    let mut s = World::new("rk4", 1e-3, Some(1)).unwrap();
+    let mut s = World::new(ParticleSystem::new("rk4").unwrap(), 1e-3, Some(1)).unwrap();
     s.particles_mut().add_particles(vec![DVec3::ONE; 3], vec![DVec3::ZERO; 3], vec![1.0; 3], vec![false; 3]).unwrap();
     s.particles_mut()
         .add_term(Box::new(

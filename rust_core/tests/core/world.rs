@@ -87,7 +87,7 @@ impl Coupling<DVec2> for Probe {
 #[test]
 fn couplings_run_after_every_step_and_see_the_stepped_systems() {
     let seen = Arc::new(Mutex::new(Vec::new()));
-    let mut w = World::<DVec2>::new("verlet", 0.1, Some(1)).unwrap();
+    let mut w = World::<DVec2>::new(ParticleSystem::<DVec2>::new("verlet").unwrap(), 0.1, Some(1)).unwrap();
     w.add_system(Box::new(harmonic("heun", None))).unwrap();
     w.add_coupling(Box::new(Probe(seen.clone())));
     let mut alone = harmonic("heun", None);
@@ -115,7 +115,7 @@ fn system_names_are_unique_and_bad_ode_input_is_refused() {
 #[test]
 fn an_ode_system_is_bit_identical_for_1_and_2_threads() {
     let run = |threads| {
-        let mut w = World::<DVec2>::new("verlet", 1e-3, Some(threads)).unwrap();
+        let mut w = World::<DVec2>::new(ParticleSystem::<DVec2>::new("verlet").unwrap(), 1e-3, Some(threads)).unwrap();
         let n = 200_000;
         let y0: Vec<f64> = (0..n).map(|i| (i as f64 * 0.37).sin()).collect();
         // A ring of coupled rates: every derivative reads its neighbours.

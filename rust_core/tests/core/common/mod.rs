@@ -1,11 +1,11 @@
 #![allow(dead_code)]
 use glam::{DVec2, DVec3};
 use physcore_core::terms::{PairwiseGravity, Springs, UniformGravity};
-use physcore_core::World;
+use physcore_core::{ParticleSystem, World};
 
 /// Unit-mass particle on a unit spring to a pinned anchor at the origin: x(t) = cos t.
 pub fn oscillator(integrator: &str, dt: f64) -> World<DVec2> {
-    let mut s = World::new(integrator, dt, Some(1)).unwrap();
+    let mut s = World::new(ParticleSystem::new(integrator).unwrap(), dt, Some(1)).unwrap();
     s.particles_mut()
         .add_particles(vec![DVec2::ZERO, DVec2::new(1.0, 0.0)], vec![DVec2::ZERO; 2], vec![1.0, 1.0], vec![true, false])
         .unwrap();
@@ -44,7 +44,7 @@ pub fn cloth(n: usize, integrator: &str, threads: usize, damping: f64) -> World<
         }
     }
     let np = n * n;
-    let mut sim = World::new(integrator, 1e-4, Some(threads)).unwrap();
+    let mut sim = World::new(ParticleSystem::new(integrator).unwrap(), 1e-4, Some(threads)).unwrap();
     sim.particles_mut().add_particles(x.clone(), vec![DVec3::ZERO; np], vec![1.0 / np as f64; np], pinned).unwrap();
     let (mut a, mut b) = (Vec::new(), Vec::new());
     for j in 0..n {
@@ -83,7 +83,7 @@ pub fn cloud(n: usize, threads: usize, softening: f64) -> World<DVec3> {
     let x: Vec<DVec3> = (0..n).map(|_| DVec3::new(r.uniform(), r.uniform(), r.uniform())).collect();
     let v: Vec<DVec3> =
         (0..n).map(|_| DVec3::new(r.uniform() - 0.5, r.uniform() - 0.5, r.uniform() - 0.5) * 0.1).collect();
-    let mut sim = World::new("verlet", 1e-3, Some(threads)).unwrap();
+    let mut sim = World::new(ParticleSystem::new("verlet").unwrap(), 1e-3, Some(threads)).unwrap();
     sim.particles_mut().add_particles(x, v, vec![1.0 / n as f64; n], vec![false; n]).unwrap();
     sim.particles_mut().add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, softening))).unwrap();
     sim
