@@ -154,17 +154,23 @@ pub struct Context {
 /// Builds one term of the scene's dimension from its name and parameters.
 pub type Build<V> = fn(String, Params, &Context) -> Result<Box<dyn Term<V>>>;
 
-/// A registered term type: its key and its builders for 2D and 3D.
+/// The integrators a part can be stepped by, with the argument a refusal names and what the
+/// part is called in it (`check_integrator`).
+pub type Rule = (&'static [&'static str], &'static str, &'static str);
+
+/// A registered term type: its key, its builders for 2D and 3D, and its part–integrator rule
+/// (`None`: any integrator), registered beside the term (`register_term!`).
 #[derive(Debug)]
 pub struct TermType {
     pub kind: &'static str,
     build2: Build<DVec2>,
     build3: Build<DVec3>,
+    rule: Option<Rule>,
 }
 
 impl TermType {
-    pub const fn new(kind: &'static str, build2: Build<DVec2>, build3: Build<DVec3>) -> Self {
-        Self { kind, build2, build3 }
+    pub const fn new(kind: &'static str, build2: Build<DVec2>, build3: Build<DVec3>, rule: Option<Rule>) -> Self {
+        Self { kind, build2, build3, rule }
     }
 
     /// The term for a scene of vectors `V` (`DVec2` or `DVec3`).
@@ -182,18 +188,12 @@ impl TermType {
 
 inventory::collect!(TermType);
 
-/// The integrators a part of `kind` can be stepped by (`None`: any), with the argument a refusal
-/// names and what the part is called in it. The one table of these rules: the terms'
-/// `Term::integrators` read it, and so does the facade (`check_integrator`) before it adds
-/// anything of the part.
-pub fn integrator_rule(kind: &str) -> Option<(&'static [&'static str], &'static str, &'static str)> {
-    match kind {
-        // "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
-        "contacts" => Some((&["semi_implicit_euler", "xpbd"], "integrator", "Contacts need")),
-        // DFSPH's projections run inside semi-implicit Euler's step (velocity, then position).
-        "dfsph" => Some((&["semi_implicit_euler"], "method", "DFSPH steps with")),
-        _ => None,
-    }
+/// The integrators a part of `kind` can be stepped by (`None`: any, or no such kind), with the
+/// argument a refusal names and what the part is called in it: the rule its term registered
+/// (`register_term!(kind, build, rule)`). The terms' `Traits::integrators` read it, and so does
+/// the facade (`check_integrator`) before it adds anything of the part.
+pub fn integrator_rule(kind: &str) -> Option<Rule> {
+    lookup(kind).ok().and_then(|t| t.rule)
 }
 
 /// `InvalidInput` if a part of `kind` cannot be stepped by `integrator`.
@@ -231,12 +231,19 @@ pub fn kinds() -> Vec<&'static str> {
 }
 
 /// Registers a term type: `register_term!("gravity", build)` with
-/// `fn build<V: Vector>(name: String, p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>>`.
+/// `fn build<V: Vector>(name: String, p: Params, ctx: &Context) -> Result<Box<dyn Term<V>>>`;
+/// a term that only some integrators can step adds its rule (`Rule`):
+/// `register_term!("dfsph", build, (&["semi_implicit_euler"], "method", "DFSPH steps with"))`.
 #[macro_export]
 macro_rules! register_term {
     ($kind:literal, $build:ident) => {
         inventory::submit! {
-            $crate::terms::registry::TermType::new($kind, $build::<glam::DVec2>, $build::<glam::DVec3>)
+            $crate::terms::registry::TermType::new($kind, $build::<glam::DVec2>, $build::<glam::DVec3>, None)
+        }
+    };
+    ($kind:literal, $build:ident, $rule:expr) => {
+        inventory::submit! {
+            $crate::terms::registry::TermType::new($kind, $build::<glam::DVec2>, $build::<glam::DVec3>, Some($rule))
         }
     };
 }
@@ -244,6 +251,18 @@ macro_rules! register_term {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The rules are registered beside their terms and read back by key; a kind without one
+    /// (or unknown) takes any integrator.
+    #[test]
+    fn part_integrator_rules_come_from_the_registration() {
+        let (ok, arg, _) = integrator_rule("dfsph").expect("DFSPH registers its rule");
+        assert_eq!((ok, arg), (&["semi_implicit_euler"][..], "method"));
+        assert!(integrator_rule("contacts").unwrap().0.contains(&"xpbd"));
+        assert!(integrator_rule("springs").is_none() && integrator_rule("no_such_term").is_none());
+        assert!(check_integrator("dfsph", "verlet").unwrap_err().to_string().contains("method"));
+        assert!(check_integrator("springs", "verlet").is_ok());
+    }
 
     #[test]
     fn every_term_type_is_registered_once() {

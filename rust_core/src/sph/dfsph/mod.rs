@@ -386,7 +386,8 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     let psi = p.take_floats("wall_psi")?;
     Ok(Box::new(Dfsph::new(&name, first, n, params, walls, psi)?))
 }
-crate::register_term!("dfsph", build);
+// DFSPH's projections run inside semi-implicit Euler's step (velocity, then position).
+crate::register_term!("dfsph", build, (&["semi_implicit_euler"], "method", "DFSPH steps with"));
 
 impl<V: Vector> Dfsph<V> {
     /// `walls`: static wall particle positions; `psi`: their Ψ_b = ρ0 V_b (kg), one each.

@@ -753,7 +753,8 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     }
     Ok(Box::new(Contacts::new(name, material, walls)))
 }
-crate::register_term!("contacts", build);
+// "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
+crate::register_term!("contacts", build, (&["semi_implicit_euler", "xpbd"], "integrator", "Contacts need"));
 
 fn restitution_arg(key: &str, e: Real) -> Result<Real> {
     if !(e > 0.0 && e <= 1.0) {
