@@ -67,7 +67,7 @@ fn physcore(n: usize) -> Bodies3 {
     ))
     .unwrap();
     b.add_group(group("dynamic", grid(n).concat(), [HALF; 3].repeat(n), 1.0, 0.1)).unwrap();
-    b.set_gravity([0.0, 0.0, -9.81]);
+    b.set(&physcore_core::systems::WorldSetting::Gravity([0.0, 0.0, -9.81]));
     b
 }
 

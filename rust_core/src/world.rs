@@ -18,7 +18,7 @@ use crate::error::{invalid, Error, Result};
 use crate::par;
 use crate::stop::Stop;
 use crate::systems::particles::ParticleSystem;
-use crate::systems::{Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
+use crate::systems::{Arrays, Coupling, EnergyReport, Halt, Snapshot, System, WorldSetting};
 use crate::vector::{Real, Vector};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
@@ -400,11 +400,11 @@ impl<V: Vector> World<V> {
 
     /// Runs `f` on this world's pool with `stop` handed to the systems for its duration.
     fn with_stop<R: Send>(&mut self, stop: &Arc<AtomicBool>, f: impl FnOnce(&mut Self) -> R + Send) -> R {
-        let flag = Stop::new(Some(stop.clone()));
-        self.systems_mut().for_each(|s| s.set_stop(&flag));
+        let flag = WorldSetting::Stop(Stop::new(Some(stop.clone())));
+        self.systems_mut().for_each(|s| s.set(&flag));
         let pool = self.pool.clone();
         let r = par::install(pool.as_ref(), || f(self));
-        self.systems_mut().for_each(|s| s.set_stop(&Stop::default()));
+        self.systems_mut().for_each(|s| s.set(&WorldSetting::Stop(Stop::default())));
         r
     }
 
@@ -620,13 +620,13 @@ impl<V: Vector> World<V> {
         }
     }
 
-    /// Gives every other system the particles' uniform gravity (`System::set_gravity`): the
+    /// Gives every other system the world's gravity (`WorldSetting::Gravity`): the
     /// rigid bodies fall under the scene's `Gravity` terms, and their books use the same g.
     fn sync_gravity(&mut self) {
         if !self.others.is_empty() {
             let g = self.particles.forces().g;
             let g = [g.comp(0), g.comp(1), if V::DIM == 3 { g.comp(2) } else { 0.0 }];
-            self.others.iter_mut().for_each(|s| s.set_gravity(g));
+            self.others.iter_mut().for_each(|s| s.set(&WorldSetting::Gravity(g)));
         }
     }
 

@@ -102,6 +102,19 @@ pub enum Halt {
     Diverged { index: usize, quantity: Failure },
 }
 
+/// What the world tells its systems at the start of a call (`System::set`), as a term is told
+/// its settings (`terms::Setting`).
+#[derive(Clone, Debug)]
+pub enum WorldSetting {
+    /// The world's gravity (m/s²; the particles' uniform fields, their `Gravity` terms,
+    /// summed), given at the start of every call of steps and before the books are read:
+    /// systems with mass under gravity (rigid bodies) fall under it and book its potential.
+    Gravity([Real; 3]),
+    /// The stop flag of the call in progress (`Stop::default()` after it), for evaluations long
+    /// enough to poll it (see `crate::stop`).
+    Stop(Stop),
+}
+
 /// Rigid bodies (`bodies::Bodies2`, `bodies::Bodies3`): the role through which the bindings
 /// add bodies, joints and pins and read a body's mesh, the same calls in 2D and 3D.
 pub trait RigidBodies {
@@ -136,17 +149,13 @@ pub trait System: std::any::Any + Send + Sync {
     fn prepare(&mut self) -> Result<()> {
         Ok(())
     }
-    /// The uniform acceleration of the particles' fields (their `Gravity` terms summed, m/s²),
-    /// given at the start of every call of steps: systems with mass under gravity (rigid
-    /// bodies) follow the scene's gravity. Default: ignored.
-    fn set_gravity(&mut self, _g: [Real; 3]) {}
     /// The system as rigid bodies (`RigidBodies`), for the bindings (`None`: not bodies).
     fn as_rigid_bodies(&mut self) -> Option<&mut dyn RigidBodies> {
         None
     }
-    /// Hands the system the stop flag of the call in progress (`Stop::default()` after it),
-    /// for evaluations long enough to poll it (see `crate::stop`).
-    fn set_stop(&mut self, _stop: &Stop) {}
+    /// Tells the system a property of the world for the call in progress (`WorldSetting`: the
+    /// world's gravity, the stop flag). Default: ignored.
+    fn set(&mut self, _setting: &WorldSetting) {}
     /// Advances by `dt` seconds. On `Err` the world rolls every system back.
     fn step(&mut self, dt: Real, stop: &AtomicBool) -> std::result::Result<(), Halt>;
     /// `n` steps of `dt`, when this is the world's only system with anything to step and no

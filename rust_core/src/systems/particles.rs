@@ -1,14 +1,13 @@
 //! The particle system: particles (state + model) under force terms, advanced by a particle
 //! integrator, then projected by the constraint stage. Everything physcore simulated before
 //! the `World` existed is this one system.
-use super::{array, Arrays, EnergyReport, Halt, Snapshot, System};
+use super::{array, Arrays, EnergyReport, Halt, Snapshot, System, WorldSetting};
 use crate::alloc::{count, Need};
 use crate::constraints::{Constraint, Constraints};
 use crate::error::{invalid, Failure, Result};
 use crate::integrators::{self, Cache, Integrator, IntegratorInfo, IntegratorOptions, Particles, SolverStats};
 use crate::par;
 use crate::state::{Model, State};
-use crate::stop::Stop;
 use crate::terms::{ForceSet, Scratch, Setting, Term};
 use crate::vector::{Real, Vector};
 use std::ops::Range;
@@ -701,8 +700,10 @@ impl<V: Vector> System for ParticleSystem<V> {
         self.sys.forces.terms.iter_mut().try_for_each(|t| t.reserve(n, Scratch::Step))
     }
 
-    fn set_stop(&mut self, stop: &Stop) {
-        self.sys.forces.set_stop(stop);
+    fn set(&mut self, setting: &WorldSetting) {
+        if let WorldSetting::Stop(stop) = setting {
+            self.sys.forces.set_stop(stop);
+        }
     }
 
     /// One integrator step, then the constraint stage. A stop flag seen set during the step

@@ -383,8 +383,10 @@ impl System for Bodies {
     fn size(&self) -> usize {
         self.handles.len()
     }
-    fn set_gravity(&mut self, g: [Real; 3]) {
-        self.gravity = vector(&g[..D]);
+    fn set(&mut self, setting: &crate::systems::WorldSetting) {
+        if let crate::systems::WorldSetting::Gravity(g) = setting {
+            self.gravity = vector(&g[..D]);
+        }
     }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let (k0, u0) = self.mechanical();

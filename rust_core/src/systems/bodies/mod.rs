@@ -155,7 +155,7 @@ mod tests {
     fn a_ball_falls_freely_and_a_restore_returns_bit_for_bit() {
         let mut b = Bodies2::new("bodies");
         b.add_group(group(2, "ball", &[0.0, 10.0], &[0.1])).unwrap();
-        b.set_gravity([0.0, -9.81, 0.0]);
+        b.set(&crate::systems::WorldSetting::Gravity([0.0, -9.81, 0.0]));
         let stop = AtomicBool::new(false);
         let snap = b.snapshot().unwrap();
         let dt = 1e-3;
@@ -176,7 +176,7 @@ mod tests {
     fn a_ball_falls_freely_in_3d_and_its_books_balance() {
         let mut b = Bodies3::new("bodies");
         b.add_group(group(3, "ball", &[0.0, 0.0, 10.0], &[0.1])).unwrap();
-        b.set_gravity([0.0, 0.0, -9.81]);
+        b.set(&crate::systems::WorldSetting::Gravity([0.0, 0.0, -9.81]));
         let stop = AtomicBool::new(false);
         let snap = b.snapshot().unwrap();
         let dt = 1e-3;
