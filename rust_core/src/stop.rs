@@ -1,7 +1,7 @@
 //! The stop flag of a call in progress (Ctrl-C), as the force terms see it.
 //!
 //! `World::step_interruptible` hands its flag to every term for the length of the call
-//! (`Term::set_stop`). A term whose one evaluation is long (pairwise gravity: O(N²)) reads it
+//! (`Term::set(Setting::Stop)`). A term whose one evaluation is long (pairwise gravity: O(N²)) reads it
 //! every fraction of a millisecond of work and, once it is set, skips the rest, leaving its
 //! forces partly written: the simulation sees the flag after the evaluation and rolls the whole
 //! call back, so such forces are never kept. Reading the flag is a relaxed atomic load and
