@@ -1,6 +1,6 @@
 //! The constraint (projection) stage: run after each integration step, it moves particles back
 //! into the allowed set and corrects their velocities. The colliders (`Plane`, `Aabb`, `Sphere`,
-//! `Capsule`) are one generic [`Collider`] (`collider`: the loop, the bounce and
+//! `Capsule`, `OrientedBox`) are one generic [`Collider`] (`collider`: the loop, the bounce and
 //! the books, written once) over a shape of `crate::geometry`, each registered by key in its own
 //! small file (`registry`, as force terms are); position-based constraints (XPBD) are the
 //! "xpbd" integrator's. The energy a projection removes goes into one book, "collisions".
@@ -10,12 +10,14 @@
 pub mod aabb;
 pub mod capsule;
 pub mod collider;
+pub mod oriented_box;
 pub mod plane;
 pub mod registry;
 pub mod sphere;
 pub use aabb::Aabb;
 pub use capsule::Capsule;
 pub use collider::{Collide, Collider, Resolved};
+pub use oriented_box::OrientedBox;
 pub use plane::Plane;
 pub use sphere::Sphere;
 

@@ -8,16 +8,19 @@
 //! shape computes it (a plane adds n·depth to x; a sphere puts x at c + r·radial and takes the
 //! difference), so a collider keeps the float operations, and the bits, it always had.
 //!
-//! Shapes: [`HalfSpace`] (the plane), [`Ball`] (a ball, or with `inside` a bowl), [`Capsule`]
-//! and [`Aabb`] (an axis-aligned box kept inside: a tank).
+//! Shapes: [`HalfSpace`] (the plane), [`Ball`] (a ball, or with `inside` a bowl), [`Capsule`],
+//! [`Aabb`] (an axis-aligned box kept inside: a tank) and [`OrientedBox`] (a rotated block kept
+//! outside: a ramp, an obstacle).
 pub mod aabb;
 pub mod ball;
 pub mod capsule;
 pub mod half_space;
+pub mod oriented_box;
 pub use aabb::Aabb;
 pub use ball::Ball;
 pub use capsule::Capsule;
 pub use half_space::HalfSpace;
+pub use oriented_box::OrientedBox;
 
 use crate::vector::{Real, Vector};
 
