@@ -4,8 +4,8 @@
 //! A [`World`] steps one or more systems (`systems`) with one clock, thread pool and rollback.
 //! The particle system holds the particle state and model (`state`), force terms (`terms`,
 //! `sph`), an integrator (`integrators`, with tableaux from `ode`) and the projection stage
-//! (`constraints`). Fields on grids (`grids`: waves, reaction–diffusion, a grid fluid) are
-//! further systems. Shared services: the neighbour search (`neighbors`), the SIMD layer
+//! (`constraints`: colliders over the shapes of `geometry`). Fields on grids (`grids`: waves,
+//! reaction–diffusion, a grid fluid) are further systems. Shared services: the neighbour search (`neighbors`), the SIMD layer
 //! (`simd`), deterministic parallel loops (`par`), fallible allocation (`alloc`), the stop flag
 //! (`stop`) and typed errors (`error`). Outside the physics, `raster` draws the renderer's
 //! shaded triangle meshes (per pixel, per frame: too slow in numpy).
@@ -20,6 +20,7 @@ pub mod alloc;
 pub mod batch;
 pub mod constraints;
 pub mod error;
+pub mod geometry;
 pub mod grids;
 pub mod integrators;
 pub mod neighbors;

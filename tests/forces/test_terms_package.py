@@ -29,6 +29,7 @@ RECORDS = [
     terms.Box([0.0, 0.0], [1.0, 1.0]),
     terms.Sphere([0.0, 0.0], 1.0),
     terms.Capsule([0.0, 0.0], [1.0, 0.0], 0.1),
+    terms.OrientedBox([0.0, 0.0], [1.0, 0.5], 0.3),
 ]
 
 

@@ -159,7 +159,7 @@ def _every_kind() -> list[pc.Scene]:
         pc.PointMasses([[5.0, 5.0]], [1.0]), pc.PointCharges([[5.0, -5.0]], [1e-9]), pc.HarmonicTrap(0.5),
         pc.PotentialGrid(np.zeros((4, 4)), 0.5, origin=[-1.0, -1.0]),
         pc.Plane([0.0, -1.0], [0.0, 1.0]), pc.Box([-3.0, -3.0], [3.0, 3.0]), pc.Sphere([0.0, 0.0], 9.0, inside=True),
-        pc.Capsule([-4.0, -2.5], [4.0, -2.5], 0.2),
+        pc.Capsule([-4.0, -2.5], [4.0, -2.5], 0.2), pc.OrientedBox([6.0, 6.0], [0.5, 0.25], 0.3),
         pc.Wave((8, 8), 0.1, drops=[pc.Drop(0.0, (0.4, 0.4), radius=0.1, amplitude=0.01)]), pc.GrayScott((8, 8), preset="spots"),
         pc.StableFluid((8, 8), 0.1, tracers=4), pc.Flow("van_der_pol", 3, seed=1),
     ):

@@ -41,7 +41,7 @@ import numpy as np  # noqa: F401
 #   xpbd        XpbdConstraints
 #   colliders   Plane, Box, Sphere
 # isort: off
-from . import _base, fields, springs, nbody, charges, xpbd, colliders, capsule  # noqa: F401 - in this order
+from . import _base, fields, springs, nbody, charges, xpbd, colliders, capsule, oriented_box  # noqa: F401 - in this order
 # isort: on
 from ._base import REGISTRY as REGISTRY
 from ._base import ArrayLike as ArrayLike
@@ -65,6 +65,7 @@ from .charges import _GridField as _GridField
 from .colliders import Box, Collider, Plane, Sphere
 from .fields import Drag, Gravity
 from .nbody import PairwiseGravity, TreeGravity
+from .oriented_box import OrientedBox
 from .springs import Springs
 from .xpbd import XpbdConstraints
 from .xpbd import _angles as _angles
@@ -90,11 +91,12 @@ __all__ = [
     "Sphere",
     "Collider",
     "Capsule",
+    "OrientedBox",
 ]
 
 
 # Pickles record a class by its module path: the records keep the path they had as one module
 # (physcore.terms), so old pickles load and new ones are byte-identical.
-for _public in (Term, Gravity, Drag, Springs, PairwiseGravity, TreeGravity, ElectricField, Coulomb, MagneticField, GridElectricField, GridMagneticField, XpbdConstraints, Plane, Box, Sphere, Collider, Capsule):
+for _public in (Term, Gravity, Drag, Springs, PairwiseGravity, TreeGravity, ElectricField, Coulomb, MagneticField, GridElectricField, GridMagneticField, XpbdConstraints, Plane, Box, Sphere, Collider, Capsule, OrientedBox):
     _public.__module__ = __name__
 del _public

@@ -240,7 +240,7 @@ class Collider(Part):
     """Base of the colliders registered by key, in the core (``constraints::registry``, one Rust
     file each with ``register_collider!``) and here: a subclass is a frozen dataclass that sets
     ``part_kind`` (the core's key) and ``record_fields`` (its fields by kind of value:
-    ``"vector"``, ``"number"``, ``"bool"``), checks them in ``__post_init__``, and may draw itself
+    ``"vector"``, ``"axial"``, ``"number"``, ``"bool"``), checks them in ``__post_init__``, and may draw itself
     (:meth:`drawn_rods`). Adding, saving, loading, the hostile-file checks and the energy books
     ("collisions") then need nothing else: a new collider touches its own files only
     (:class:`~physcore.Capsule` is one)."""
@@ -269,7 +269,7 @@ class Collider(Part):
         record: dict[str, Any] = {"type": self.part_kind}
         for f, kind in self.record_fields.items():
             v = getattr(self, f)
-            record[f] = v.tolist() if kind == "vector" else v
+            record[f] = v.tolist() if kind in ("vector", "axial") else v
         return record, {}
 
     @classmethod

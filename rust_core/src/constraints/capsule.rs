@@ -5,54 +5,27 @@
 //! restitution and Coulomb friction on the impulse, the energy removed booked), with the centre
 //! taken at the nearest point of the axis, p = a + t (b − a), t = clamp((x − a)·(b − a)/|b − a|²,
 //! 0, 1) (Ericson, *Real-Time Collision Detection*, 2005, §5.1.2). With a = b it is a sphere.
-use super::sphere::project_round;
+//!
+//! The shape is `geometry::Capsule`; the loop, the bounce and the books are `Collider`'s
+//! (`collider.rs`).
+use super::collider::{Collide, Collider};
 use super::{Constraint, Contact};
-use crate::error::{invalid, Result};
-use crate::state::Model;
+use crate::error::Result;
+use crate::geometry;
 use crate::terms::registry::Params;
 use crate::vector::{Real, Vector};
 
-#[derive(Clone, Debug)]
-pub struct Capsule<V: Vector> {
-    /// The axis' ends, m.
-    a: V,
-    b: V,
-    /// Radius, m (> 0, with a finite square).
-    radius: Real,
-    contact: Contact,
-}
+/// The capsule collider: a [`geometry::Capsule`] with its [`Contact`].
+pub type Capsule<V> = Collider<V, geometry::Capsule<V>>;
+
+impl<V: Vector> Collide<V> for geometry::Capsule<V> {}
 
 impl<V: Vector> Capsule<V> {
     /// The capsule of `radius` (m) about the segment `a`–`b` (m); `InvalidInput` naming the
     /// argument if one is out of range.
     pub fn new(a: V, b: V, radius: Real, restitution: Real, friction: Real) -> Result<Self> {
-        for (p, arg) in [(a, "a"), (b, "b")] {
-            if !p.is_finite() {
-                return Err(invalid(arg, "must be finite"));
-            }
-        }
-        if !(b - a).length_squared().is_finite() {
-            return Err(invalid("b", "the axis' squared length must be finite"));
-        }
-        if !(radius > 0.0 && (radius * radius).is_finite()) {
-            return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
-        }
-        Ok(Self { a, b, radius, contact: Contact::new(restitution, friction)? })
-    }
-
-    /// The point of the axis nearest to `x`.
-    #[inline(always)]
-    fn nearest(&self, x: V) -> V {
-        let ab = self.b - self.a;
-        let l2 = ab.length_squared();
-        let t = if l2 > 0.0 { ((x - self.a).dot(ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
-        self.a + ab * t
-    }
-}
-
-impl<V: Vector> Constraint<V> for Capsule<V> {
-    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        project_round(x, v, model, f_last, g, self.radius, false, self.contact, |x| self.nearest(x))
+        let shape = geometry::Capsule::new(a, b, radius)?;
+        Ok(Self::with_shape(shape, Contact::new(restitution, friction)?))
     }
 }
 
@@ -65,6 +38,7 @@ crate::register_collider!("capsule", build);
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::state::Model;
     use glam::{DVec2, DVec3};
     use std::collections::BTreeMap;
 

@@ -1,15 +1,23 @@
 //! The constraint (projection) stage: run after each integration step, it moves particles back
-//! into the allowed set and corrects their velocities. Today's walls (`Plane`, `Aabb`, `Sphere`) live
-//! here, with `Capsule`, each registered by key in its own file (`registry`, as force terms
-//! are); position-based constraints (XPBD) are the "xpbd" integrator's.
-//! The energy a projection removes goes into one book, "collisions".
+//! into the allowed set and corrects their velocities. The colliders (`Plane`, `Aabb`, `Sphere`,
+//! `Capsule`, `OrientedBox`) are one generic [`Collider`] (`collider`: the loop, the bounce and
+//! the books, written once) over a shape of `crate::geometry`, each registered by key in its own
+//! small file (`registry`, as force terms are); position-based constraints (XPBD) are the
+//! "xpbd" integrator's. The energy a projection removes goes into one book, "collisions".
+//!
+//! A new collider is a shape (`geometry/`, `impl Shape`) plus a file here with its type alias,
+//! `impl Collide<V> for MyShape<V> {}`, a constructor and `register_collider!`.
 pub mod aabb;
 pub mod capsule;
+pub mod collider;
+pub mod oriented_box;
 pub mod plane;
 pub mod registry;
 pub mod sphere;
 pub use aabb::Aabb;
 pub use capsule::Capsule;
+pub use collider::{Collide, Collider, Resolved};
+pub use oriented_box::OrientedBox;
 pub use plane::Plane;
 pub use sphere::Sphere;
 

@@ -72,7 +72,7 @@ mod tests {
     #[test]
     fn every_collider_is_registered_once_and_bad_parameters_are_named() {
         let k = kinds();
-        assert_eq!(k, ["box", "capsule", "plane", "sphere"]);
+        assert_eq!(k, ["box", "capsule", "oriented_box", "plane", "sphere"]);
         assert!(lookup("cone").unwrap_err().to_string().contains("known: box, capsule"));
         let p = Params::new()
             .with("center", Value::Floats(vec![0.0, 0.0]))

@@ -9,119 +9,27 @@
 //! zero. The energy this removes is booked as dissipated: the change in kinetic energy plus the
 //! work −F·Δx of the last evaluated force F (with gravity) over the projection Δx (exact for
 //! uniform gravity, first order otherwise).
+//!
+//! The shape is `geometry::Ball`; the loop, the bounce and the books are `Collider`'s
+//! (`collider.rs`).
+use super::collider::{Collide, Collider};
 use super::{Constraint, Contact};
-use crate::error::{invalid, Result};
-use crate::par;
-use crate::state::Model;
+use crate::error::Result;
+use crate::geometry::Ball;
 use crate::vector::{Real, Vector};
 
-#[derive(Clone, Debug)]
-pub struct Sphere<V: Vector> {
-    /// Centre, m.
-    pub(crate) center: V,
-    /// Radius, m (> 0 and finite).
-    pub(crate) radius: Real,
-    /// Keep particles inside (a bowl) instead of outside (a ball).
-    pub(crate) inside: bool,
-    pub(crate) contact: Contact,
-}
+/// The sphere collider: a [`Ball`] (or bowl) with its [`Contact`].
+pub type Sphere<V> = Collider<V, Ball<V>>;
+
+impl<V: Vector> Collide<V> for Ball<V> {}
 
 impl<V: Vector> Sphere<V> {
     /// The sphere of `radius` (m) about `center` (m), keeping particles outside it (a ball) or,
     /// with `inside`, in it (a bowl); `InvalidInput` naming the argument if one is out of range.
     pub fn new(center: V, radius: Real, inside: bool, restitution: Real, friction: Real) -> Result<Self> {
-        if !center.is_finite() {
-            return Err(invalid("center", "must be finite"));
-        }
-        // r² must be finite too: the test below compares squared distances.
-        if !(radius > 0.0 && (radius * radius).is_finite()) {
-            return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
-        }
-        let contact = Contact::new(restitution, friction)?;
-        Ok(Self { center, radius, inside, contact })
+        let shape = Ball::new(center, radius, inside)?;
+        Ok(Self::with_shape(shape, Contact::new(restitution, friction)?))
     }
-}
-
-/// A unit vector along the last axis (z in 3D, y in 2D): the direction out of a particle found
-/// exactly at the centre and at rest.
-fn up<V: Vector>() -> V {
-    let mut a = [0.0; 3];
-    a[V::DIM - 1] = 1.0;
-    V::from_slice(&a[..V::DIM])
-}
-
-impl<V: Vector> Constraint<V> for Sphere<V> {
-    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
-        let c = self.center;
-        project_round(x, v, model, f_last, g, self.radius, self.inside, self.contact, |_| c)
-    }
-}
-
-/// The rule of a round surface (module doc), shared by the sphere and the capsule: the surface
-/// is at distance `r` from `centre_of(x)` (the sphere's centre; the nearest point of a capsule's
-/// axis), particles kept outside (or with `inside`, within). Returns (energy removed, J;
-/// whether any particle was moved).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn project_round<V: Vector>(
-    x: &mut [V],
-    v: &mut [V],
-    model: &Model,
-    f_last: &[V],
-    g: V,
-    r: Real,
-    inside: bool,
-    contact: Contact,
-    centre_of: impl Fn(V) -> V + Sync,
-) -> (Real, bool) {
-    let r2 = r * r;
-    par::chunks2_fold(
-        x,
-        v,
-        (0.0, false),
-        |a, b| (a.0 + b.0, a.1 | b.1),
-        |s, x, v| {
-            let mut d = 0.0;
-            let mut touched = false;
-            for k in 0..x.len() {
-                let c = centre_of(x[k]);
-                let rel = x[k] - c;
-                let l2 = rel.length_squared();
-                // NaN positions compare false and are left alone, as the plane leaves them.
-                let wrong = if inside { l2 > r2 } else { l2 < r2 };
-                if !wrong {
-                    continue;
-                }
-                let i = s + k;
-                if model.inv_mass[i] == 0.0 {
-                    continue;
-                }
-                touched = true;
-                let m = model.mass[i];
-                let ke0 = 0.5 * m * v[k].length_squared();
-                // Outward radial unit vector; a particle exactly at the centre goes back the
-                // way it came (or up, at rest).
-                let l = l2.sqrt();
-                let radial = if l > 0.0 {
-                    rel / l
-                } else if v[k].length_squared() > 0.0 {
-                    -v[k] / v[k].length_squared().sqrt()
-                } else {
-                    up::<V>()
-                };
-                // Unit normal into the allowed side.
-                let n = if inside { -radial } else { radial };
-                let x0 = x[k];
-                x[k] = c + radial * r;
-                v[k] = contact.bounce(v[k], n);
-                let ke1 = 0.5 * m * v[k].length_squared();
-                // Projection work: ΔU ≈ −F·Δx.
-                let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
-                let du = -f.dot(x[k] - x0);
-                d += (ke0 - ke1) - du;
-            }
-            (d, touched)
-        },
-    )
 }
 
 fn build<V: Vector>(p: &crate::terms::registry::Params) -> Result<Box<dyn Constraint<V>>> {
@@ -133,6 +41,7 @@ crate::register_collider!("sphere", build);
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::state::Model;
     use glam::{DVec2, DVec3};
     use std::collections::BTreeMap;
 
@@ -147,12 +56,12 @@ mod tests {
         // 0.1 m inside along (1, 2, 2)/3, moving in along the normal with a tangential part.
         let n = DVec3::new(1.0, 2.0, 2.0) / 3.0;
         let t = DVec3::new(2.0, -1.0, 0.0) / 5f64.sqrt(); // ⟂ n
-        let mut x = vec![s.center + n * 0.4];
+        let mut x = vec![s.shape.center + n * 0.4];
         let mut v = vec![n * -3.0 + t * 1.5];
         let (d, touched) = s.project(&mut x, &mut v, &model(&[m]), &[], DVec3::ZERO);
         assert!(touched);
-        assert!(((x[0] - s.center).length() - 0.5).abs() < 1e-15, "not on the surface: {:?}", x[0]);
-        assert!((x[0] - (s.center + n * 0.5)).length() < 1e-15, "not projected along the radius");
+        assert!(((x[0] - s.shape.center).length() - 0.5).abs() < 1e-15, "not on the surface: {:?}", x[0]);
+        assert!((x[0] - (s.shape.center + n * 0.5)).length() < 1e-15, "not projected along the radius");
         assert!((v[0].dot(n) - e * 3.0).abs() < 1e-14, "normal speed {} vs e·3", v[0].dot(n));
         assert!((v[0] - n * v[0].dot(n) - t * 1.5).length() < 1e-14, "frictionless: tangential kept");
         // No forces: the energy booked is the kinetic energy lost, ½ m (1 − e²) v_n².

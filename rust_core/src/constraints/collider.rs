@@ -1,0 +1,91 @@
+//! One collider for every shape: [`Collider`] holds a `geometry::Shape` and a [`Contact`] and
+//! runs the projection loop once for all of them. Per particle, per step: skip the pinned
+//! (inverse mass 0); ask the shape where a particle on its forbidden side goes; move it there,
+//! bounce its velocity (restitution e on the normal part, Coulomb friction μ(1 + e)|v_n| off the
+//! tangential part, `Contact::bounce`); book the energy removed: the change in kinetic energy
+//! plus the work −F·Δx of the last evaluated force F (with gravity) over the projection Δx
+//! (exact for uniform gravity, first order otherwise).
+//!
+//! How the velocity is corrected is [`Collide::resolve`], which by default is the one bounce
+//! off the shape's normal. The axis-aligned box overrides it (`aabb.rs`): it bounces face by
+//! face, once per axis it is outside of, so a particle past a corner gets two (three) bounces,
+//! each off its own face, and sliding along the floor keeps its bits; one bounce off the
+//! diagonal would change both.
+use super::{Constraint, Contact};
+use crate::geometry::Shape;
+use crate::par;
+use crate::state::Model;
+use crate::vector::{Real, Vector};
+
+/// A resolved contact: the new position and velocity, and the displacement the work is booked
+/// over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Resolved<V> {
+    /// New position, m.
+    pub x: V,
+    /// Displacement, m (as the shape computed it).
+    pub dx: V,
+    /// New velocity, m/s.
+    pub v: V,
+}
+
+/// How a shape resolves a contact. The default, one bounce off the shape's normal, is what
+/// every shape but the axis-aligned box uses (`impl Collide<V> for MyShape<V> {}`).
+pub trait Collide<V: Vector>: Shape<V> {
+    /// `None` if `x` is allowed; else the particle moved onto the surface and its velocity
+    /// corrected by `contact`.
+    #[inline(always)]
+    fn resolve(&self, x: V, v: V, contact: Contact) -> Option<Resolved<V>> {
+        let p = self.project(x, v)?;
+        Some(Resolved { x: p.x, dx: p.dx, v: contact.bounce(v, p.normal) })
+    }
+}
+
+/// A shape with contact coefficients: the constraint of the projection stage (module doc).
+#[derive(Clone, Debug)]
+pub struct Collider<V: Vector, S: Collide<V>> {
+    pub shape: S,
+    pub contact: Contact,
+    _v: std::marker::PhantomData<V>,
+}
+
+impl<V: Vector, S: Collide<V>> Collider<V, S> {
+    /// `shape` with `contact` (both checked by their own constructors).
+    pub fn with_shape(shape: S, contact: Contact) -> Self {
+        Self { shape, contact, _v: std::marker::PhantomData }
+    }
+}
+
+impl<V: Vector, S: Collide<V>> Constraint<V> for Collider<V, S> {
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
+        let (shape, contact) = (&self.shape, self.contact);
+        par::chunks2_fold(
+            x,
+            v,
+            (0.0, false),
+            |a, b| (a.0 + b.0, a.1 | b.1),
+            |s, x, v| {
+                let mut d = 0.0;
+                let mut touched = false;
+                for k in 0..x.len() {
+                    let i = s + k;
+                    if model.inv_mass[i] == 0.0 {
+                        continue;
+                    }
+                    let Some(r) = shape.resolve(x[k], v[k], contact) else { continue };
+                    touched = true;
+                    let m = model.mass[i];
+                    let ke0 = 0.5 * m * v[k].length_squared();
+                    x[k] = r.x;
+                    v[k] = r.v;
+                    let ke1 = 0.5 * m * v[k].length_squared();
+                    // Projection work: ΔU ≈ −F·Δx.
+                    let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
+                    let du = -f.dot(r.dx);
+                    d += (ke0 - ke1) - du;
+                }
+                (d, touched)
+            },
+        )
+    }
+}
