@@ -7,10 +7,14 @@
 //! (exact for uniform gravity, first order otherwise).
 //!
 //! How the velocity is corrected is [`Collide::resolve`], which by default is the one bounce
-//! off the shape's normal. The axis-aligned box overrides it (`aabb.rs`): it bounces face by
-//! face, once per axis it is outside of, so a particle past a corner gets two (three) bounces,
-//! each off its own face, and sliding along the floor keeps its bits; one bounce off the
-//! diagonal would change both.
+//! off the shape's normal; a shape with another rule overrides it.
+//!
+//! The axis-aligned box (`aabb.rs`) keeps a loop of its own: it bounces face by face, once per
+//! axis it is outside of (a particle past a corner gets two or three bounces, each off its own
+//! face: one off the diagonal would change the bits), and through this loop, with that rule as
+//! its `resolve`, it ran 25–35 % slower (200,000 particles in a box under gravity, 2 cores,
+//! AVX-512: 0.86–0.92 ms a step alone, 1.09–1.27 ms through here; the plane and the sphere
+//! kept their speed). `geometry::Aabb` is its shape for every other use.
 use super::{Constraint, Contact};
 use crate::geometry::Shape;
 use crate::par;
@@ -35,9 +39,9 @@ pub trait Collide<V: Vector>: Shape<V> {
     /// `None` if `x` is allowed; else the particle moved onto the surface and its velocity
     /// corrected by `contact`.
     #[inline(always)]
-    fn resolve(&self, x: V, v: V, contact: Contact) -> Option<Resolved<V>> {
+    fn resolve(&self, x: V, v: &V, contact: Contact) -> Option<Resolved<V>> {
         let p = self.project(x, v)?;
-        Some(Resolved { x: p.x, dx: p.dx, v: contact.bounce(v, p.normal) })
+        Some(Resolved { x: p.x, dx: p.dx, v: contact.bounce(*v, p.normal) })
     }
 }
 
@@ -56,7 +60,7 @@ impl<V: Vector, S: Collide<V>> Collider<V, S> {
     }
 }
 
-impl<V: Vector, S: Collide<V>> Constraint<V> for Collider<V, S> {
+impl<V: Vector, S: Collide<V> + Clone> Constraint<V> for Collider<V, S> {
     fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
         let (shape, contact) = (&self.shape, self.contact);
         par::chunks2_fold(
@@ -65,14 +69,22 @@ impl<V: Vector, S: Collide<V>> Constraint<V> for Collider<V, S> {
             (0.0, false),
             |a, b| (a.0 + b.0, a.1 | b.1),
             |s, x, v| {
+                // A copy of the shape on this chunk's stack: its parameters then stay in registers
+                // through the loop (read through the shared reference, they were loaded again per
+                // particle: the box ran 35 % slower).
+                let shape = shape.clone();
                 let mut d = 0.0;
                 let mut touched = false;
                 for k in 0..x.len() {
+                    // The geometry first, from the position alone: a particle on the allowed
+                    // side (nearly all of them) costs one load of x, not of v and its mass too
+                    // (this order kept the old box and sphere loops' speed; resolving is pure,
+                    // so a pinned particle's answer is just dropped).
+                    let Some(r) = shape.resolve(x[k], &v[k], contact) else { continue };
                     let i = s + k;
                     if model.inv_mass[i] == 0.0 {
                         continue;
                     }
-                    let Some(r) = shape.resolve(x[k], v[k], contact) else { continue };
                     touched = true;
                     let m = model.mass[i];
                     let ke0 = 0.5 * m * v[k].length_squared();

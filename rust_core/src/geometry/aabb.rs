@@ -30,7 +30,7 @@ impl<V: Vector> Shape<V> for Aabb<V> {
     /// Detection*, 2005, §5.1.3); the normal points back in along the displacement (at a
     /// corner or an edge, the diagonal). The box collider does not use this answer: it bounces
     /// face by face (`constraints::aabb`).
-    fn project(&self, x: V, _v: V) -> Option<Projection<V>> {
+    fn project(&self, x: V, _v: &V) -> Option<Projection<V>> {
         let outside = (0..V::DIM).any(|k| x.comp(k) < self.lo.comp(k) || x.comp(k) > self.hi.comp(k));
         if !outside {
             return None;
@@ -54,12 +54,12 @@ mod tests {
     #[test]
     fn a_point_outside_is_clamped_onto_the_nearest_face_edge_or_corner() {
         let b = Aabb::new(DVec2::ZERO, DVec2::new(2.0, 1.0)).unwrap();
-        let face = b.project(DVec2::new(1.0, -0.5), DVec2::ZERO).unwrap();
+        let face = b.project(DVec2::new(1.0, -0.5), &DVec2::ZERO).unwrap();
         assert_eq!((face.x, face.normal), (DVec2::new(1.0, 0.0), DVec2::Y));
-        let corner = b.project(DVec2::new(3.0, 2.0), DVec2::ZERO).unwrap();
+        let corner = b.project(DVec2::new(3.0, 2.0), &DVec2::ZERO).unwrap();
         assert_eq!(corner.x, DVec2::new(2.0, 1.0));
         assert!((corner.normal - DVec2::new(-1.0, -1.0) / 2f64.sqrt()).length() < 1e-15);
-        assert_eq!(b.project(DVec2::new(2.0, 0.5), DVec2::ZERO), None, "on a face: allowed");
+        assert_eq!(b.project(DVec2::new(2.0, 0.5), &DVec2::ZERO), None, "on a face: allowed");
         assert!(Aabb::new(DVec2::ZERO, DVec2::new(1.0, 0.0)).is_err());
     }
 }

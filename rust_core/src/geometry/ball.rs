@@ -1,5 +1,5 @@
 //! The ball {x : |x − c| < r} (a disc in 2D), kept outside; with `inside`, a bowl: the outside
-//! {|x − c| > r} is forbidden. Also the round rule the capsule shares ([`onto_round`]).
+//! {|x − c| > r} is forbidden. Also the round rule the capsule shares (`onto_round`).
 use super::{splat, unbounded, Projection, Shape};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
@@ -42,7 +42,7 @@ fn up<V: Vector>() -> V {
 /// `inside`, farther); it moves radially to c + r·radial. A point at `c` goes back the way it
 /// came (along −v), or up at rest. NaN positions compare false and are left alone.
 #[inline(always)]
-pub(crate) fn onto_round<V: Vector>(x: V, v: V, c: V, r: Real, inside: bool) -> Option<Projection<V>> {
+pub(crate) fn onto_round<V: Vector>(x: V, v: &V, c: V, r: Real, inside: bool) -> Option<Projection<V>> {
     let r2 = r * r;
     let rel = x - c;
     let l2 = rel.length_squared();
@@ -54,7 +54,7 @@ pub(crate) fn onto_round<V: Vector>(x: V, v: V, c: V, r: Real, inside: bool) -> 
     let radial = if l > 0.0 {
         rel / l
     } else if v.length_squared() > 0.0 {
-        -v / v.length_squared().sqrt()
+        -*v / v.length_squared().sqrt()
     } else {
         up::<V>()
     };
@@ -64,7 +64,7 @@ pub(crate) fn onto_round<V: Vector>(x: V, v: V, c: V, r: Real, inside: bool) -> 
 
 impl<V: Vector> Shape<V> for Ball<V> {
     #[inline(always)]
-    fn project(&self, x: V, v: V) -> Option<Projection<V>> {
+    fn project(&self, x: V, v: &V) -> Option<Projection<V>> {
         onto_round(x, v, self.center, self.radius, self.inside)
     }
 
@@ -87,28 +87,28 @@ mod tests {
     fn a_point_inside_the_ball_moves_out_along_the_radius() {
         let b = Ball::new(DVec3::new(1.0, 2.0, 3.0), 0.5, false).unwrap();
         let n = DVec3::new(1.0, 2.0, 2.0) / 3.0;
-        let p = b.project(b.center + n * 0.2, DVec3::ZERO).unwrap();
+        let p = b.project(b.center + n * 0.2, &DVec3::ZERO).unwrap();
         assert!((p.x - (b.center + n * 0.5)).length() < 1e-15);
         assert!((p.normal - n).length() < 1e-15 && (p.dx - n * 0.3).length() < 1e-15);
-        assert_eq!(b.project(b.center + n * 0.5, DVec3::ZERO), None, "on the surface: allowed");
-        assert_eq!(b.project(b.center + n * 0.7, DVec3::ZERO), None);
+        assert_eq!(b.project(b.center + n * 0.5, &DVec3::ZERO), None, "on the surface: allowed");
+        assert_eq!(b.project(b.center + n * 0.7, &DVec3::ZERO), None);
         assert_eq!(b.bounds(), (DVec3::new(0.5, 1.5, 2.5), DVec3::new(1.5, 2.5, 3.5)));
     }
 
     #[test]
     fn a_bowl_pulls_points_in_with_the_normal_pointing_to_the_centre() {
         let b = Ball::new(DVec2::new(0.0, 1.0), 1.0, true).unwrap();
-        let p = b.project(DVec2::new(0.0, -0.5), DVec2::ZERO).unwrap();
+        let p = b.project(DVec2::new(0.0, -0.5), &DVec2::ZERO).unwrap();
         assert_eq!((p.x, p.normal, p.dx), (DVec2::ZERO, DVec2::Y, DVec2::new(0.0, 0.5)));
-        assert_eq!(b.project(DVec2::new(0.0, 0.5), DVec2::ZERO), None);
+        assert_eq!(b.project(DVec2::new(0.0, 0.5), &DVec2::ZERO), None);
         assert_eq!(b.bounds(), (DVec2::NEG_INFINITY, DVec2::INFINITY));
     }
 
     #[test]
     fn the_centre_goes_back_along_the_velocity_or_up() {
         let b = Ball::new(DVec2::ZERO, 2.0, false).unwrap();
-        assert_eq!(b.project(DVec2::ZERO, DVec2::new(3.0, 0.0)).unwrap().x, DVec2::new(-2.0, 0.0));
-        assert_eq!(b.project(DVec2::ZERO, DVec2::ZERO).unwrap().x, DVec2::new(0.0, 2.0));
-        assert_eq!(b.project(DVec2::new(f64::NAN, 0.0), DVec2::ZERO), None, "NaN left alone");
+        assert_eq!(b.project(DVec2::ZERO, &DVec2::new(3.0, 0.0)).unwrap().x, DVec2::new(-2.0, 0.0));
+        assert_eq!(b.project(DVec2::ZERO, &DVec2::ZERO).unwrap().x, DVec2::new(0.0, 2.0));
+        assert_eq!(b.project(DVec2::new(f64::NAN, 0.0), &DVec2::ZERO), None, "NaN left alone");
     }
 }

@@ -1,5 +1,5 @@
 //! The capsule: the points within `radius` of the segment a–b (a stadium in 2D), kept outside.
-//! The round rule of the ball ([`super::ball::onto_round`]) about the nearest point of the axis,
+//! The round rule of the ball (`ball::onto_round`) about the nearest point of the axis,
 //! p = a + t (b − a), t = clamp((x − a)·(b − a)/|b − a|², 0, 1) (Ericson, *Real-Time Collision
 //! Detection*, 2005, §5.1.2). With a = b it is a ball.
 use super::ball::onto_round;
@@ -46,7 +46,7 @@ impl<V: Vector> Capsule<V> {
 
 impl<V: Vector> Shape<V> for Capsule<V> {
     #[inline(always)]
-    fn project(&self, x: V, v: V) -> Option<Projection<V>> {
+    fn project(&self, x: V, v: &V) -> Option<Projection<V>> {
         onto_round(x, v, self.nearest(x), self.radius, false)
     }
 
@@ -65,12 +65,12 @@ mod tests {
     #[test]
     fn the_side_pushes_out_perpendicular_and_the_cap_radially() {
         let c = Capsule::new(DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), 0.5).unwrap();
-        let side = c.project(DVec3::new(1.0, 0.3, 0.0), DVec3::ZERO).unwrap();
+        let side = c.project(DVec3::new(1.0, 0.3, 0.0), &DVec3::ZERO).unwrap();
         assert!((side.x - DVec3::new(1.0, 0.5, 0.0)).length() < 1e-15 && side.normal == DVec3::Y);
-        let cap = c.project(DVec3::new(2.3, 0.0, 0.2), DVec3::ZERO).unwrap();
+        let cap = c.project(DVec3::new(2.3, 0.0, 0.2), &DVec3::ZERO).unwrap();
         let n = DVec3::new(0.3, 0.0, 0.2).normalize();
         assert!((cap.x - (DVec3::new(2.0, 0.0, 0.0) + n * 0.5)).length() < 1e-15 && (cap.normal - n).length() < 1e-15);
-        assert_eq!(c.project(DVec3::new(1.0, 0.0, 0.6), DVec3::ZERO), None);
+        assert_eq!(c.project(DVec3::new(1.0, 0.0, 0.6), &DVec3::ZERO), None);
         assert_eq!(c.bounds(), (DVec3::new(-0.5, -0.5, -0.5), DVec3::new(2.5, 0.5, 0.5)));
     }
 }

@@ -31,7 +31,7 @@ impl<V: Vector> Shape<V> for HalfSpace<V> {
     /// Moved along the normal by the depth: x + n·(−(x − p)·n). A NaN depth is not refused
     /// here (it moves to NaN, as it always has): the divergence check reports it.
     #[inline(always)]
-    fn project(&self, x: V, _v: V) -> Option<Projection<V>> {
+    fn project(&self, x: V, _v: &V) -> Option<Projection<V>> {
         let n = self.normal;
         let depth = (x - self.point).dot(n);
         if depth >= 0.0 {
@@ -66,14 +66,14 @@ mod tests {
     fn a_point_below_moves_along_the_normal_onto_the_plane() {
         let h = HalfSpace::new(DVec2::new(0.0, 1.0), DVec2::new(0.0, 2.0)).unwrap();
         assert_eq!(h.normal, DVec2::Y, "normalised");
-        let p = h.project(DVec2::new(0.3, 0.75), DVec2::ZERO).unwrap();
+        let p = h.project(DVec2::new(0.3, 0.75), &DVec2::ZERO).unwrap();
         assert_eq!(p, Projection { x: DVec2::new(0.3, 1.0), dx: DVec2::new(0.0, 0.25), normal: DVec2::Y });
-        assert_eq!(h.project(DVec2::new(5.0, 1.0), DVec2::ZERO), None, "on the plane: allowed");
-        assert_eq!(h.project(DVec2::new(5.0, 1.5), DVec2::ZERO), None);
+        assert_eq!(h.project(DVec2::new(5.0, 1.0), &DVec2::ZERO), None, "on the plane: allowed");
+        assert_eq!(h.project(DVec2::new(5.0, 1.5), &DVec2::ZERO), None);
         // Tilted: the projection is the nearest point of the plane.
         let n = DVec3::new(1.0, 1.0, 1.0) / 3f64.sqrt();
         let h = HalfSpace::new(DVec3::ZERO, n).unwrap();
-        let p = h.project(DVec3::new(-1.0, 0.0, 0.0), DVec3::ZERO).unwrap();
+        let p = h.project(DVec3::new(-1.0, 0.0, 0.0), &DVec3::ZERO).unwrap();
         assert!((p.x.dot(n)).abs() < 1e-15 && (p.x - DVec3::new(-2.0, 1.0, 1.0) / 3.0).length() < 1e-15);
     }
 

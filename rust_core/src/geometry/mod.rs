@@ -41,7 +41,7 @@ pub trait Shape<V: Vector>: Send + Sync {
     /// `None` if `x` is on the allowed side (its surface included); else where it goes. `v` (the
     /// point's velocity, m/s) is read only where the geometry gives no direction: a point at a
     /// sphere's centre goes back the way it came.
-    fn project(&self, x: V, v: V) -> Option<Projection<V>>;
+    fn project(&self, x: V, v: &V) -> Option<Projection<V>>;
 
     /// The box (lo, hi), m, that holds the forbidden side: a point outside it is never moved.
     /// Infinite where the forbidden side is unbounded (a tilted plane; the outside of a bowl).

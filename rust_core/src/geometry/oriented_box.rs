@@ -61,7 +61,7 @@ impl<V: Vector> OrientedBox<V> {
 
 impl<V: Vector> Shape<V> for OrientedBox<V> {
     #[inline(always)]
-    fn project(&self, x: V, _v: V) -> Option<Projection<V>> {
+    fn project(&self, x: V, _v: &V) -> Option<Projection<V>> {
         let rel = x - self.center;
         let mut best = (Real::INFINITY, 0, 0.0);
         for j in 0..V::DIM {
@@ -115,7 +115,7 @@ mod tests {
             [([0.4, 0.0], u, 0.1), ([-0.45, 0.1], -u, 0.05), ([0.0, -0.2], -w, 0.05), ([0.1, 0.2], w, 0.05)]
         {
             let x = local(&b, [q[0], q[1], 0.0]);
-            let p = b.project(x, DVec2::ZERO).unwrap();
+            let p = b.project(x, &DVec2::ZERO).unwrap();
             assert!((p.normal - n).length() < 1e-15, "{q:?}: normal {:?}", p.normal);
             assert!((p.dx - n * depth).length() < 1e-14, "{q:?}: dx {:?}", p.dx);
             let on = (p.x - b.center).dot(n);
@@ -128,7 +128,7 @@ mod tests {
     #[test]
     fn near_an_edge_or_a_corner_the_least_deep_face_wins() {
         let b = OrientedBox::new(DVec3::new(1.0, -1.0, 0.5), DVec3::new(0.5, 0.25, 0.375), DVec3::ZERO).unwrap();
-        let at = |q: [Real; 3]| b.project(b.center + DVec3::from_array(q), DVec3::ZERO).unwrap();
+        let at = |q: [Real; 3]| b.project(b.center + DVec3::from_array(q), &DVec3::ZERO).unwrap();
         // Edge x–y: 0.0625 under x, 0.03125 under y: out through +y.
         let p = at([0.4375, 0.21875, 0.0]);
         assert_eq!((p.normal, p.x), (DVec3::Y, b.center + DVec3::new(0.4375, 0.25, 0.0)));
@@ -149,7 +149,7 @@ mod tests {
             [0.5, 0.25, 0.375],
             [f64::NAN, 0.0, 0.0],
         ] {
-            assert_eq!(b.project(DVec3::from_array(q), DVec3::ZERO), None, "{q:?}");
+            assert_eq!(b.project(DVec3::from_array(q), &DVec3::ZERO), None, "{q:?}");
         }
     }
 
