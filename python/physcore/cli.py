@@ -420,7 +420,15 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
     except _UsageError as e:
         parser.error(str(e))
     if args.integrator is not None:
-        kwargs["integrator"] = args.integrator
+        from .scene import INTEGRATOR_ALIASES
+
+        integrator = args.integrator
+        if integrator in INTEGRATOR_ALIASES:
+            # An old name on the command line: said once on stderr (a DeprecationWarning from
+            # inside the scene would be an exception under -W error, and is hidden otherwise).
+            integrator = INTEGRATOR_ALIASES[integrator]
+            print(f"note: --integrator {args.integrator} is now {integrator} (the old name goes in the next release)", file=sys.stderr)
+        kwargs["integrator"] = integrator
     if args.dt is not None:
         kwargs["dt"] = args.dt
     return name, fn, kwargs

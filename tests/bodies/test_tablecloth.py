@@ -69,7 +69,7 @@ def test_without_the_bar_the_cloth_stays_on_the_table():
     assert s.positions[:, 2].min() > 0.3  # hanging over the edges, not fallen
 
 
-@pytest.mark.parametrize(("kwargs", "arg"), [({"size": 0.1}, "size"), ({"bar": -1.0}, "bar"), ({"n": 2}, "n"),
+@pytest.mark.parametrize(("kwargs", "arg"), [({"size": 0.1}, "size"), ({"bar": -1.0}, "bar"), ({"bar": 1e-320}, "bar"), ({"n": 2}, "n"),
                                              ({"friction": np.nan}, "friction")])
 def test_bad_arguments_are_refused_by_name(kwargs, arg):
     with pytest.raises(pc.InvalidInputError, match=arg):

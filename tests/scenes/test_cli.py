@@ -30,6 +30,16 @@ def test_render_spring_chain(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == [out]
 
 
+def test_an_old_integrator_name_renders_with_a_note(tmp_path, capsys):
+    # The old name is said on stderr, not raised as a DeprecationWarning from inside the scene
+    # (an exception under -W error, as the fuzzed CLI found).
+    out = tmp_path / "x.gif"
+    assert main(["render", "kepler", "-o", str(out), "--integrator", "rk45", "-q"] + SMALL) == 0
+    captured = capsys.readouterr()
+    assert "--integrator rk45 is now dopri5" in captured.err
+    assert out.exists()
+
+
 def test_render_default_output_path_and_params(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     args = ["render", "spring_chain", "--param", "dim=3", "--param", "n=6", "--integrator", "rk4", "--dt", "5e-4", "-q"]

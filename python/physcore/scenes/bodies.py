@@ -353,8 +353,9 @@ def tablecloth(
     _particles("n", n * n, 6 * n * n)
     size, mass, k = _positive(size, "size"), _positive(mass, "mass"), _positive(stiffness, "stiffness")
     bar_mass = _nonneg(bar, "bar")
-    if bar_mass > 1e6:
-        raise InvalidInputError(f"bar: a bar of {bar_mass:g} kg is no tablecloth's hem (0 to 1e6 kg)")
+    # A bar lighter than a gram is no hem, and one of 1e-320 kg underflows the body's mass.
+    if bar_mass != 0 and not (1e-3 <= bar_mass <= 1e6):
+        raise InvalidInputError(f"bar: a bar of {bar_mass:g} kg is no tablecloth's hem (0 for none, or 1e-3 to 1e6 kg)")
     mu = _nonneg(friction, "friction")
     dishes = _flag(dishes, "dishes")
     dt = _optional(dt, "dt")
