@@ -9,14 +9,14 @@ simulated seconds (``scene.advance(frame_time)`` for scenes with automatic subst
 every ``1 / fps`` seconds of wall time (:class:`FixedStep`); every drawn frame runs the ticks
 that are due (at most :data:`MAX_TICKS_PER_DRAW`, and stopping once they have taken
 ``_TICK_BUDGET`` seconds; the rest dropped) and draws the state interpolated between the last
-two ticks. :class:`_Session` holds that loop with the live state (:class:`_Live`: the scene, its
+two ticks. :class:`_LiveRun` holds that loop with the live state (:class:`_Live`: the scene, its
 drag and its parameters) and the painter (:class:`_Painter`: :mod:`physcore.render`'s rasteriser
 with one camera and colour scale fitted to a preview). The window feeds it pygame's events and
 wall clock; the widget feeds it the browser's messages, and sends its frames as images. The
-widget steps in the background by default (``_Session(..., background=True)``): one tick at a
+widget steps in the background by default (``_LiveRun(..., background=True)``): one tick at a
 time on a worker thread (the core releases the GIL), the frames drawing the last two states
-interpolated meanwhile, every scene write waiting for the tick in flight (:meth:`_Session.settle`).
-The keys of both (:meth:`_Session.key`) are the viewer's.
+interpolated meanwhile, every scene write waiting for the tick in flight (:meth:`_LiveRun.settle`).
+The keys of both (:meth:`_LiveRun.key`) are the viewer's.
 
 See :mod:`physcore.viewer` for the drag (a pinned, kinematic particle) and the parameter keys.
 """
@@ -868,7 +868,7 @@ def _critical_percent(scene: Any) -> float:
 
 
 # --------------------------------------------------------------------------- the loop
-class _Session:
+class _LiveRun:
     """The loop shared by the window and the widget: the live state, the painter and the clock,
     and what the user can do to them (pause, one tick, reset, a parameter, the pointer). No
     display and no event types: each front end turns its input into these calls, and shows

@@ -58,7 +58,7 @@ from typing import Any
 
 from . import _check
 from ._errors import InvalidInputError, InvalidTypeError, PhyscoreError
-from ._live import PARAM_RANGE, _has_bodies, _Session, _settings
+from ._live import PARAM_RANGE, _has_bodies, _LiveRun, _settings
 
 try:
     import anywidget
@@ -138,11 +138,11 @@ class Widget(anywidget.AnyWidget):
     size = traitlets.List(traitlets.Int(), [480, 360]).tag(sync=True)
     #: Most frames a second the front end asks for (it gives a credit back no sooner).
     max_fps = traitlets.Float(30.0).tag(sync=True)
-    #: One slider per parameter the scene's terms have (:meth:`physcore._live._Session.sliders`,
+    #: One slider per parameter the scene's terms have (:meth:`physcore._live._LiveRun.sliders`,
     #: with ``position`` and ``positions``).
     sliders = traitlets.List(traitlets.Dict()).tag(sync=True)
 
-    def __init__(self, session: _Session, *, name: str, image_format: str, quality: int, playing: bool,
+    def __init__(self, session: _LiveRun, *, name: str, image_format: str, quality: int, playing: bool,
                  fallback: bool, max_fps: float) -> None:
         self._session = session
         self._name = name
@@ -493,7 +493,7 @@ def widget(
     max_fps = _check.real("max_fps", max_fps)
     if not (max_fps > 0 and math.isfinite(max_fps)):
         raise InvalidInputError(f"max_fps: must be a finite number > 0, got {max_fps!r}")
-    session = _Session(scene, settings=settings, fps=fps, preview=preview, hud=hud, background=background)
+    session = _LiveRun(scene, settings=settings, fps=fps, preview=preview, hud=hud, background=background)
     return Widget(session, name=name, image_format=image_format, quality=quality, playing=playing, fallback=fallback,
                   max_fps=max_fps)
 

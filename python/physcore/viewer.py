@@ -14,7 +14,7 @@ by the accumulator's fraction, so motion is smooth at any display rate (up to 60
 also stop for a frame to be drawn once they have taken 50 ms, so that a slow scene still draws
 and follows the pointer at about 20 Hz (the HUD then says "slower than real time"). The
 simulation itself never sees the display rate: its steps are those of the GIF.
-The loop, the live state and the painter live in ``physcore._live`` (its ``_Session``), shared
+The loop, the live state and the painter live in ``physcore._live`` (its ``_LiveRun``), shared
 with the notebook widget (:mod:`physcore.notebook`); this module adds the window, the keys and the
 mouse.
 
@@ -81,7 +81,7 @@ from ._live import (
     STEP_FACTOR,
     FixedStep,
     _has_bodies,
-    _Session,
+    _LiveRun,
     _settings,
     interpolate,
     param_value,
@@ -182,7 +182,7 @@ def _import_pygame() -> Any:
 
 class Viewer:
     """The window and its loop (see the module docstring); :func:`view` makes and runs one.
-    The loop, the live state and the painter are :class:`physcore._live._Session`'s, shared
+    The loop, the live state and the painter are :class:`physcore._live._LiveRun`'s, shared
     with the notebook widget; this class turns pygame's events into its calls.
 
     A `script` item's callable receives this object: it reads ``scene``, ``time``, ``paused``,
@@ -195,7 +195,7 @@ class Viewer:
         self.pygame = _import_pygame()
         self.name = name
         self.out = out
-        self.session = _Session(scene, settings=settings, fps=fps, preview=preview, hud=hud)
+        self.session = _LiveRun(scene, settings=settings, fps=fps, preview=preview, hud=hud)
         self.live, self.painter, self.clock = self.session.live, self.session.painter, self.session.clock
         self.draws = 0
         self.screenshots: list[Path] = []

@@ -44,10 +44,10 @@ def _wired(w) -> _Sent:
 
 # --------------------------------------------------------------------------- one loop, one painter
 def test_viewer_and_widget_share_the_loop_and_the_painter():
-    # One definition, in physcore._live: the viewer re-exports it, the widget holds a _Session.
+    # One definition, in physcore._live: the viewer re-exports it, the widget holds a _LiveRun.
     assert viewer.FixedStep is _live.FixedStep and viewer._Live is _live._Live and viewer._Painter is _live._Painter
     w = pc.widget(pc.scenes.spring_chain(n=5), preview=0.0, fallback=False)
-    assert type(w._session) is _live._Session
+    assert type(w._session) is _live._LiveRun
     assert isinstance(w._session.clock, _live.FixedStep) and isinstance(w._session.painter, _live._Painter)
     assert pc.widget is notebook.widget
 
