@@ -12,7 +12,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -1244,12 +1244,18 @@ class Scene:
         out["cache_power"] = None if cache is None else np.asarray(cache[1], dtype=np.float64)
         ref = self._session.reference_energy
         out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
+        for part, prefix in self._prefixed_parts():
+            out.update({f"{prefix}{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
+        return out
+
+    def _prefixed_parts(self) -> Iterator[tuple[Part, str]]:
+        """Each part with the prefix of its members, ``{section's prefix}{k}_`` with k counted
+        within its section: the scene file's names, which :meth:`state` uses too."""
         count = dict.fromkeys(SECTIONS, 0)
         for part in self._parts:
             k = count[part.section]
             count[part.section] += 1
-            out.update({f"{MEMBER_PREFIX[part.section]}{k}_{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
-        return out
+            yield part, f"{MEMBER_PREFIX[part.section]}{k}_"
 
     def set_state(self, state: Mapping[str, Any]) -> None:
         """Put back a snapshot taken by :meth:`state` (see there for the keys).
@@ -1283,11 +1289,7 @@ class Scene:
             for key, v in s.items():
                 if key.startswith("attr_"):
                     sim.set_attribute(key[5:], v)
-            count = dict.fromkeys(SECTIONS, 0)
-            for part in self._parts:
-                k = count[part.section]
-                count[part.section] += 1
-                prefix = f"{MEMBER_PREFIX[part.section]}{k}_"
+            for part, prefix in self._prefixed_parts():
                 own = {key[len(prefix):]: v for key, v in s.items() if key.startswith(prefix)}
                 if own:
                     part._set_state(sim, own)
@@ -1322,11 +1324,10 @@ class Scene:
         sim = self._sim
         entries: dict[str, list[dict[str, Any]]] = {s: [] for s in SECTIONS}
         members: dict[str, dict[str, np.ndarray]] = {s: {} for s in SECTIONS}
-        for part in self._parts:
+        for part, prefix in self._prefixed_parts():
             entry, own = part._entry(sim)
-            k = len(entries[part.section])
             entries[part.section].append(entry)
-            members[part.section].update({f"{MEMBER_PREFIX[part.section]}{k}_{a}": v for a, v in own.items()})
+            members[part.section].update({f"{prefix}{a}": v for a, v in own.items()})
         for section in SECTIONS:
             arrays.update(members[section])
         ledger, collisions = self._sim.ledger()
