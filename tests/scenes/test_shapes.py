@@ -211,7 +211,7 @@ def test_old_import_paths_give_the_same_objects():
     assert cloth_springs is shapes.cloth_springs and mesh_edges_and_hinges is shapes.mesh_edges_and_hinges
     assert plummer_sphere is shapes.plummer_sphere
     assert pc.shapes is shapes and "shapes" in pc.__all__
-    assert set(shapes.__all__) == {"lattice", "lattice_counts", "tank_walls", "blob", "plummer_sphere",
+    assert set(shapes.__all__) == {"lattice", "lattice_counts", "tank_walls", "sample_boundary", "blob", "plummer_sphere",
                                    "cloth_springs", "mesh_edges_and_hinges"}
     for name in shapes.__all__:
         fn = getattr(shapes, name)
