@@ -59,7 +59,7 @@ import numpy as np
 
 from ._errors import InvalidInputError, InvalidTypeError
 
-__all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "OPTIONAL_SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
+__all__ = ["Part", "PARTS", "PART_ALIASES", "SECTIONS", "OPTIONAL_SECTIONS", "COLLIDER_SECTIONS", "MEMBER_PREFIX", "AttachContext", "LoadContext", "Host", "part_class", "unique_name"]
 
 #: The sections of a scene file's ``meta``, in the order they are written and read.
 SECTIONS: tuple[str, ...] = ("terms", "planes", "boxes", "spheres", "grids", "flows", "colliders", "bodies")
@@ -75,6 +75,9 @@ SECTION_KEY: dict[str, str] = {"terms": "type", "grids": "kind", "colliders": "t
 #: the colliders registered by key (:class:`physcore.terms.Collider`: the capsule, and the next
 #: ones); the plane, box and sphere keep their own sections.
 OPTIONAL_SECTIONS: frozenset[str] = frozenset({"colliders", "bodies"})
+#: The sections that hold colliders, in the order :attr:`physcore.Scene.colliders` lists them
+#: (the order they are written and read, so a scene and its loaded copy list them alike).
+COLLIDER_SECTIONS: tuple[str, ...] = ("planes", "boxes", "spheres", "colliders")
 #: Names no part may take: the energy books' entry of the colliders, and of the particles.
 RESERVED_NAMES: frozenset[str] = frozenset({"collisions"})
 RESERVED_SYSTEM_NAMES: frozenset[str] = frozenset({"particles", "collisions"})

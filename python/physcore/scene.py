@@ -38,6 +38,7 @@ from ._integrators import (
     check_xpbd_substeps,
 )
 from ._parts import (
+    COLLIDER_SECTIONS,
     MEMBER_PREFIX,
     OPTIONAL_SECTIONS,
     SECTIONS,
@@ -994,9 +995,12 @@ class Scene:
 
     @property
     def colliders(self) -> list[Any]:
-        """The colliders registered by key (:class:`~physcore.Capsule`, ...; not the planes, boxes
-        and spheres above), in the order added (a new list)."""
-        return self._section("colliders")
+        """Every collider record, one list (a new one): the :class:`Plane`, :class:`Box` and
+        :class:`Sphere` records, then those registered by key (:class:`~physcore.Capsule`,
+        :class:`~physcore.OrientedBox`, ...), each kind in the order added. The order of the
+        scene file's sections, so a loaded copy lists them alike. A box is listed as itself (in
+        :attr:`planes` as its faces)."""
+        return [p for section in COLLIDER_SECTIONS for p in self._section(section)]
 
     def spring_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(i, j, rest_length)`` of all springs of all :class:`Springs` terms: int64 (M,),

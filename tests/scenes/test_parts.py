@@ -217,6 +217,35 @@ def test_the_scene_file_round_trips_every_part_kind(tmp_path):
         assert s.save(tmp_path / f"s{k}.npz").read_bytes() == back.save(tmp_path / f"b{k}.npz").read_bytes()
 
 
+def test_scene_colliders_is_one_list_of_every_collider_record(tmp_path):
+    """Issue 62, one shape layer: ``Scene.colliders`` lists every collider record, the plane,
+    box and sphere sections first and then the keyed colliders, each in the order added (the
+    file's order, so a loaded copy lists them alike); ``planes``, ``boxes`` and ``spheres``
+    stay as they were."""
+    s = pc.Scene(2)
+    s.add_particles([[0.0, 0.5]])
+    rod, block = pc.Capsule([-1.0, 0.0], [1.0, 0.2], 0.1), pc.OrientedBox([0.0, -1.0], [2.0, 1.0], 0.3)
+    ball, box, floor = pc.Sphere([3.0, 0.0], 0.5), pc.Box([-5.0, -5.0], [5.0, 5.0]), pc.Plane([0.0, -3.0], [0.0, 1.0])
+    for c in (rod, ball, box, block, floor):
+        s.add(c)
+    assert [type(c) for c in s.colliders] == [pc.Plane, pc.Box, pc.Sphere, pc.Capsule, pc.OrientedBox]
+    assert s.colliders[0] is floor and s.colliders[1] is box and s.colliders[2] is ball
+    assert s.colliders[3:] == [rod, block]
+    assert len(s.planes) == 1 + 4 and s.boxes == [box] and s.spheres == [ball]
+    s.colliders.clear()  # a new list each time
+    assert len(s.colliders) == 5
+    back = pc.Scene.load(s.save(tmp_path / "all.npz"))
+    assert [type(c) for c in back.colliders] == [type(c) for c in s.colliders] and back.colliders[3:] == [rod, block]
+    assert pc.Scene(3).colliders == []
+    from physcore.testing import assert_momentum_conserved
+
+    only_box = pc.Scene(2)
+    only_box.add_particles([[0.0, 0.0]])
+    only_box.add(pc.Box([-1.0, -1.0], [1.0, 1.0]))
+    with pytest.raises(pc.InvalidInputError, match="colliders"):  # a box alone is a collider too
+        assert_momentum_conserved(only_box, 1)
+
+
 # ----------------------------------------------------------------------------------- refusals
 @pytest.mark.parametrize("item", [object(), "gravity", 3.0, None, pc.Gravity, Part()])
 def test_scene_add_refuses_what_is_not_a_part_naming_item(item):

@@ -294,9 +294,14 @@ def _simulate(
 
 def _drawn_rods(scene: Any, dim: int) -> list[tuple[np.ndarray, np.ndarray, float]]:
     """The rods ``(a, b, radius)`` (m) that draw the scene's keyed colliders (their
-    ``drawn_rods()``: a capsule is one); degenerate ones are skipped."""
+    ``drawn_rods()``: a capsule is one); degenerate ones are skipped. The scene's planes, boxes
+    and spheres, in ``scene.colliders`` too, are drawn from ``scene.planes`` and ``scene.spheres``."""
+    from ..terms import Collider
+
     out = []
     for c in getattr(scene, "colliders", ()):
+        if not isinstance(c, Collider):
+            continue
         for a, b, r in c.drawn_rods():
             a, b, r = np.asarray(a, np.float64).reshape(-1), np.asarray(b, np.float64).reshape(-1), float(r)
             if a.shape == b.shape == (dim,) and np.isfinite(a).all() and np.isfinite(b).all() and math.isfinite(r) and r > 0:
