@@ -134,10 +134,47 @@ def test_a_box_of_another_dimension_is_refused_before_anything_changes():
 
 def test_corners_and_drawn_edges():
     """The corners of a box turned by 90° are those of the unturned box with its sides swapped;
-    it is drawn as its 4 (2D) or 12 (3D) edges."""
+    it is drawn as a filled rectangle (its corners in order around) in 2D, as its 12 edges in
+    3D."""
     box = pc.OrientedBox([1.0, 2.0], [0.5, 0.25], math.pi / 2)
     c = box.corners()
     want = {(1.25, 1.5), (1.25, 2.5), (0.75, 1.5), (0.75, 2.5)}
     assert {tuple(np.round(p, 12)) for p in c} == want
-    assert len(box.drawn_rods()) == 4
-    assert len(pc.OrientedBox([0.0] * 3, [1.0] * 3).drawn_rods()) == 12
+    assert box.drawn_rods() == []
+    (poly,) = box.drawn_polygons()
+    assert {tuple(np.round(p, 12)) for p in poly} == want
+    sides = np.linalg.norm(np.roll(poly, -1, axis=0) - poly, axis=1)  # around it, not across
+    np.testing.assert_allclose(sides, [0.5, 1.0, 0.5, 1.0] if sides[0] < 0.75 else [1.0, 0.5, 1.0, 0.5], atol=1e-12)
+    cube = pc.OrientedBox([0.0] * 3, [1.0] * 3)
+    assert len(cube.drawn_rods()) == 12 and cube.drawn_polygons() == []
+
+
+def test_a_2d_box_is_drawn_filled():
+    """A 2D recording holds the box as one polygon (no rods); the frame's background fills it,
+    with the edge line the sphere's disc has, and leaves the outside alone, also where a
+    rectangle's corner stands out past its sides' lines. A 3D recording holds its 12 edges."""
+    from physcore.render._raster import _BACKGROUND, _PLANE_FILL, _PLANE_LINE, _background, _Camera
+
+    box = pc.OrientedBox([0.0, 0.0], [0.5, 0.2], math.radians(30))
+    s = pc.Scene(2, integrator="semi_implicit_euler", dt=1e-3)
+    s.add_particles([[0.0, 0.8]])
+    s.add(box)
+    rec = pc.render.record(s, frames=1, frame_time=0.01)
+    assert rec.rods == () and len(rec.polygons) == 1
+    cam = _Camera(2, (0.0, 0.0), (200, 200))
+    cam.fit(np.array([-1.0, -1.0]), np.array([1.0, 1.0]), pad=0)  # 100 px/m, the origin centred
+    img = _background(cam, [], np.zeros(2), (), (), rec.polygons)
+    u, v = np.array([math.cos(math.radians(30)), math.sin(math.radians(30))]), np.array([-0.5, math.sqrt(3) / 2])
+
+    def at(p):
+        col, row = cam.pixels(np.array([p]))
+        return img[int(row[0]), int(col[0])]
+
+    assert at(0.4 * u + 0.15 * v) == _PLANE_FILL and at(-0.4 * u - 0.15 * v) == _PLANE_FILL
+    assert at(0.5 * u) == _PLANE_LINE  # on the short side's middle
+    assert at(0.55 * u) == _BACKGROUND and at(0.25 * v) == _BACKGROUND and at(0.52 * u + 0.22 * v) == _BACKGROUND
+    s3 = pc.Scene(3)
+    s3.add_particles([[0.0, 0.0, 1.0]])
+    s3.add(pc.OrientedBox([0.0] * 3, [0.5, 0.2, 0.1], [0.0, 0.0, 0.5]))
+    rec3 = pc.render.record(s3, frames=1, frame_time=0.01)
+    assert len(rec3.rods) == 12 and rec3.polygons == ()

@@ -175,6 +175,22 @@ def test_render_frame_shape_and_dtype():
     assert img.dtype == np.uint8
 
 
+@pytest.mark.parametrize("collider", [
+    pc.Sphere([0.0, -0.5], 0.3), pc.Capsule([-0.5, -0.5], [0.5, -0.4], 0.1), pc.OrientedBox([0.0, -0.5], [0.5, 0.1], 0.2),
+])
+def test_render_frame_draws_a_2d_scenes_colliders_as_gif_does(collider):
+    """Issue 62: every collider of a 2D scene is drawn by render_frame too (it drew planes only):
+    the colliders' fill shows, in view (the camera fits the collider, as gif's does)."""
+    s = pc.Scene(2)
+    s.add_particles([[0.0, 0.5], [0.2, 0.6]])
+    s.add(collider)
+    fill = _palette._PALETTE[_palette._PLANE_FILL]
+    img = render.render_frame(s, size=(160, 120))
+    assert (img == fill).all(axis=2).sum() > 200
+    bare = render.render_frame(s.positions, size=(160, 120))
+    assert not (bare == fill).all(axis=2).any()
+
+
 @pytest.mark.parametrize("x", [np.zeros((1, 2)), np.ones((5, 2)), np.full((3, 3), 2.5), np.zeros((0, 2))])
 def test_render_frame_degenerate_extent(x):
     # A single particle, or all at one point: the camera falls back to a unit box around it.

@@ -11,9 +11,9 @@ from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import _check_color_by, _check_radius, _check_size, _check_view, _extent_box
 from ._palette import _PALETTE
 from ._raster import _Rasteriser
-from ._recording import Recording
+from ._recording import Recording, _drawn_polygons, _drawn_rods
 from ._rows import _finite_mean, _row_norms
-from ._scene_state import _boundary_array, _planes, _scene_boundary, _scene_pressure, _scene_springs, _strain
+from ._scene_state import _boundary_array, _planes, _scene_boundary, _scene_pressure, _scene_springs, _spheres, _strain
 
 
 def render_frame(
@@ -47,7 +47,8 @@ def render_frame(
         Particle positions in m, dim 2 or 3. A Scene supplies its positions, and also its
         velocities, pinned flags, springs, planes, pressures (``pressure()``, only for
         ``color_by="pressure"``) and boundary points (``boundary_points()``, where it has those
-        methods) unless those are given explicitly.
+        methods) unless those are given explicitly; in 2D its other colliders are drawn too, as
+        :func:`gif` draws them (spheres, capsules, oriented boxes).
     size : (int, int), default (480, 360)
         Width and height in pixels, each >= 16.
     velocities : array_like (N, dim) float, optional
@@ -103,6 +104,7 @@ def render_frame(
         sp = None
     else:
         sp = _springs(springs)
+    solids: dict[str, tuple] = {}
     if hasattr(positions, "positions"):
         scene = positions
         positions = scene.positions
@@ -114,6 +116,9 @@ def render_frame(
             pressures = _scene_pressure(scene, len(np.asarray(positions)))
         if boundary is None:
             boundary = _scene_boundary(scene, dim)
+        if dim == 2:  # the other colliders, as a recording holds them (3D draws them on a mesh only)
+            solids = {"spheres": tuple(_spheres(getattr(scene, "spheres", None), dim)),
+                      "rods": tuple(_drawn_rods(scene, dim)), "polygons": tuple(_drawn_polygons(scene, dim))}
 
     x = _check.real_array("positions", positions).astype(np.float64)
     if x.ndim != 2 or x.shape[1] not in (2, 3):
@@ -167,6 +172,7 @@ def render_frame(
         planes=_planes(_check_planes(planes), dim),
         pressures=pres,
         walls=None if walls is None else walls - origin,
+        **solids,
     )
     ras = _Rasteriser(
         rec, size, color_by, radius, view, speed_scale=speed_scale, pressure_scale=pressure_scale,

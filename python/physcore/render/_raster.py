@@ -91,13 +91,13 @@ def _disc_stencil(radius: int) -> tuple[np.ndarray, np.ndarray]:
     return dy[keep].astype(np.intp), dx[keep].astype(np.intp)
 
 
-def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = (), rods: Any = ()) -> np.ndarray:
+def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = (), rods: Any = (), polygons: Any = ()) -> np.ndarray:
     """(H, W) uint8 index image with the colliders of a 2D scene: solid side shaded, edge a line
     (a sphere collider is a disc: filled, or with ``inside`` its outside filled, a bowl; a rod
-    ``(a, b, radius)`` a stadium)."""
+    ``(a, b, radius)`` a stadium; a convex polygon, ``(k, 2)`` vertices in order around, filled)."""
     w, h = cam.width, cam.height
     img = np.full((h, w), _BACKGROUND, dtype=np.uint8)
-    if cam.dim != 2 or not (planes or spheres or rods):
+    if cam.dim != 2 or not (planes or spheres or rods or len(polygons)):
         return img
     # World coordinates (relative to origin) of the pixel centres.
     xs = (np.arange(w) + 0.5 - 0.5 * w) / cam.scale + cam.centre[0]
@@ -122,6 +122,22 @@ def _background(cam: _Camera, planes: list, origin: np.ndarray, spheres: Any = (
         l2 = float(ab @ ab)
         t = np.clip((px * ab[0] + py * ab[1]) / l2, 0.0, 1.0) if l2 > 0 else 0.0
         d = (np.hypot(px - t * ab[0], py - t * ab[1]) - r) * cam.scale
+        img[d < 0] = _PLANE_FILL
+        img[np.abs(d) <= 0.75] = _PLANE_LINE
+    for v in polygons:
+        v = np.asarray(v, np.float64) - origin
+        e = np.roll(v, -1, axis=0) - v
+        # Outward edge normals whichever way round the vertices go (the sign of the area).
+        turn = 1.0 if float(np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])) >= 0 else -1.0
+        nx, ny = turn * e[:, 1], -turn * e[:, 0]
+        ln = np.hypot(nx, ny)
+        keep = ln > 0
+        if not keep.any():
+            continue
+        d = np.full((h, w), -np.inf)
+        # The largest distance beyond an edge's line, in pixels: < 0 inside the polygon.
+        for (x0, y0), ux, uy in zip(v[keep], nx[keep] / ln[keep], ny[keep] / ln[keep], strict=True):
+            d = np.maximum(d, ((xs[None, :] - x0) * ux + (ys[:, None] - y0) * uy) * cam.scale)
         img[d < 0] = _PLANE_FILL
         img[np.abs(d) <= 0.75] = _PLANE_LINE
     return img
@@ -493,6 +509,7 @@ class _Rasteriser:
                 lo, hi, amax = np.minimum(lo, wlo), np.maximum(hi, whi), max(amax, wmax)
             balls = [(c - rec.origin, r) for c, r, inside in rec.spheres if not inside]
             balls += [(e - rec.origin, r) for a, b, r in rec.rods for e in (a, b)]  # a rod: its two end balls
+            balls += [(e - rec.origin, 0.0) for v in rec.polygons for e in v]  # a polygon: its corners
             if balls:  # sphere colliders (balls) whole in view: a sphere's outline is ±r about its centre
                 c = np.array([b[0] for b in balls])
                 r = np.array([b[1] for b in balls])[:, None]
@@ -652,7 +669,7 @@ class _Rasteriser:
     def _scene_background(self, cam: _Camera) -> np.ndarray:
         """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
         and the boundary particles, under everything that moves."""
-        img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres, self.rec.rods)
+        img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres, self.rec.rods, self.rec.polygons)
         if self.walls is not None:
             s, _ = cam.project(self.walls)
             col, row = cam.pixels(s)

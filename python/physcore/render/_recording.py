@@ -98,6 +98,9 @@ class Recording(NamedTuple):
     spheres: tuple = ()
     #: Rods ``(a, b, radius)`` (m) drawing the keyed colliders (a capsule), as the balls draw.
     rods: tuple = ()
+    #: Filled convex polygons, ``(k, 2)`` float64 vertices in order around (m), drawing the keyed
+    #: colliders of a 2D scene (an oriented box), as the discs draw.
+    polygons: tuple = ()
     #: The scene's rigid bodies (``render._bodies.BodyTrack``: outlines, colours, poses per
     #: frame), or None.
     bodies: Any = None
@@ -288,6 +291,7 @@ def _simulate(
         velocities=vels,
         spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
         rods=tuple(_drawn_rods(scene, dim)),
+        polygons=tuple(_drawn_polygons(scene, dim)),
         bodies=track,
     )
 
@@ -306,6 +310,24 @@ def _drawn_rods(scene: Any, dim: int) -> list[tuple[np.ndarray, np.ndarray, floa
             a, b, r = np.asarray(a, np.float64).reshape(-1), np.asarray(b, np.float64).reshape(-1), float(r)
             if a.shape == b.shape == (dim,) and np.isfinite(a).all() and np.isfinite(b).all() and math.isfinite(r) and r > 0:
                 out.append((a, b, r))
+    return out
+
+
+def _drawn_polygons(scene: Any, dim: int) -> list[np.ndarray]:
+    """The filled polygons ``(k, 2)`` (m) that draw a 2D scene's keyed colliders (their
+    ``drawn_polygons()``: an oriented box is one); none in 3D; degenerate ones are skipped."""
+    from ..terms import Collider
+
+    if dim != 2:
+        return []
+    out = []
+    for c in getattr(scene, "colliders", ()):
+        if not isinstance(c, Collider):
+            continue
+        for v in c.drawn_polygons():
+            v = np.asarray(v, np.float64)
+            if v.ndim == 2 and v.shape[0] >= 3 and v.shape[1] == 2 and np.isfinite(v).all():
+                out.append(v)
     return out
 
 

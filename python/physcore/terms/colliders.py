@@ -241,7 +241,7 @@ class Collider(Part):
     file each with ``register_collider!``) and here: a subclass is a frozen dataclass that sets
     ``part_kind`` (the core's key) and ``record_fields`` (its fields by kind of value:
     ``"vector"``, ``"axial"``, ``"number"``, ``"bool"``), checks them in ``__post_init__``, and may draw itself
-    (:meth:`drawn_rods`). Adding, saving, loading, the hostile-file checks and the energy books
+    (:meth:`drawn_rods`, :meth:`drawn_polygons`). Adding, saving, loading, the hostile-file checks and the energy books
     ("collisions") then need nothing else: a new collider touches its own files only
     (:class:`~physcore.Capsule` is one)."""
 
@@ -279,5 +279,11 @@ class Collider(Part):
     def drawn_rods(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
         """What draws the collider in a render: rods ``(a, b, radius)``, the points within
         ``radius`` of the segment a–b, m (a ball where a == b); none by default."""
+        return []
+
+    def drawn_polygons(self) -> list[np.ndarray]:
+        """What draws the collider in a 2D render as filled solids: convex polygons, each
+        ``(k, 2)`` float64 vertices in order around it, m (drawn as the sphere's disc is: filled,
+        with an edge line); none by default."""
         return []
 

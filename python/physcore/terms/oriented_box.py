@@ -128,8 +128,17 @@ class OrientedBox(Collider):
         return self.center + signs @ axes
 
     def drawn_rods(self) -> list[tuple[np.ndarray, np.ndarray, float]]:
-        """Drawn as its edges: thin rods (radius 2% of the smallest half extent) between the
-        corners that differ in one sign."""
+        """In 3D drawn as its 12 edges: thin rods (radius 2% of the smallest half extent) between
+        the corners that differ in one sign. In 2D none: it is drawn filled
+        (:meth:`drawn_polygons`)."""
         c, dim = self.corners(), self.center.shape[0]
+        if dim == 2:
+            return []
         r = 0.02 * float(self.half_extents.min())
         return [(c[i], c[i | 1 << b], r) for i in range(2**dim) for b in range(dim) if not i & 1 << b]
+
+    def drawn_polygons(self) -> list[np.ndarray]:
+        """In 2D drawn as a filled rectangle: its 4 corners in order around it, m. In 3D none."""
+        if self.center.shape[0] != 2:
+            return []
+        return [self.corners()[[0, 1, 3, 2]]]
