@@ -145,7 +145,7 @@ impl Bodies {
                 "kinematic" => RigidBodyBuilder::kinematic_velocity_based(),
                 _ => RigidBodyBuilder::dynamic(),
             };
-            b.pose(Pose::from_parts(vector(&x[D * i..D * (i + 1)]), rot[i]))
+            own_gyroscopic(b).pose(Pose::from_parts(vector(&x[D * i..D * (i + 1)]), rot[i]))
                 .linvel(vector(&v[D * i..D * (i + 1)]))
                 .angvel(ang_vector(&omega[ANG * i..ANG * (i + 1)]))
                 // Sleeping freezes a body bit for bit at rest: deterministic, and a pile at rest
@@ -265,6 +265,8 @@ impl Bodies {
                 }
             };
             self.d.r.impulse_joints.insert(ha, hb, joint, true);
+            joined_gyroscopic(&mut self.d.r.bodies, ha);
+            joined_gyroscopic(&mut self.d.r.bodies, hb);
         }
         self.part_added();
         Ok(())
@@ -392,6 +394,7 @@ impl System for Bodies {
         let (k0, u0) = self.mechanical();
         self.params.dt = dt;
         let r = &mut self.d.r;
+        gyroscopic_step(&mut r.bodies, dt);
         self.pipeline.step(
             self.gravity,
             &self.params,

@@ -236,4 +236,11 @@ impl Bodies {
     }
 }
 
+/// In the plane a body turns about its one axis: no gyroscopic term (rapier's pass is 3D only).
+fn own_gyroscopic(b: RigidBodyBuilder) -> RigidBodyBuilder {
+    b
+}
+fn joined_gyroscopic(_bodies: &mut RigidBodySet, _h: RigidBodyHandle) {}
+fn gyroscopic_step(_bodies: &mut RigidBodySet, _dt: Real) {}
+
 include!("common.rs");
