@@ -268,7 +268,7 @@ impl Pack {
                 .find_map(|t| t.as_fused().and_then(|f| f.small_pairwise(&sys.model, n)))
                 .expect("a fused member has its small pairwise sum");
             // The force cache, read in place (a fused member's integrator keeps one).
-            let cache = integrator.cache_ref().map(|(f, _)| f);
+            let cache = integrator.as_carry().and_then(|c| c.borrow()).map(|(f, _)| f);
             for i in 0..n {
                 for k in 0..V::DIM {
                     let at = (3 * i + k) * lanes + l;
@@ -333,7 +333,8 @@ impl Pack {
             sys.state.v[i] = comps(&self.v, i);
         }
         // Into the integrator's own buffers: they allocate only the first time.
-        let (f, p, valid) = integrator.cache_parts().expect("a fused member's integrator keeps a force cache");
+        let (f, p, valid) =
+            integrator.as_carry_mut().and_then(|c| c.parts()).expect("a fused member's integrator keeps a force cache");
         f.clear();
         f.extend((0..self.shape.n).map(|i| comps(&self.f, i)));
         p.clear();

@@ -23,7 +23,7 @@
 //! Like Verlet it keeps the forces at x_{n+1} (and B there) for the next step. Velocity-dependent
 //! forces other than the magnetic one (drag) are evaluated at x_{n+1} with the velocity predicted
 //! by the step's own kicks and turn with the old a and B (error O(dt²), keeping second order).
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Carry, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 use std::collections::TryReserveError;
@@ -151,15 +151,24 @@ impl<V: Vector> Integrator<V> for Boris<V> {
         self.valid = false;
         self.b_valid = false;
     }
-    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+    fn as_carry(&self) -> Option<&dyn Carry<V>> {
+        Some(self)
+    }
+    fn as_carry_mut(&mut self) -> Option<&mut dyn Carry<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Carry<V> for Boris<V> {
+    fn get(&self) -> Option<(Vec<V>, Vec<Real>)> {
         self.valid.then(|| (self.f.clone(), self.p.clone()))
     }
-    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
+    fn try_get(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
     }
     /// The forces and powers; B is not part of the cache (it depends on the positions alone and
     /// is recomputed, to the same bits, at the next step).
-    fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
+    fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
         if f.len() != v.len() || p.len() != n_terms {
             return false;
         }

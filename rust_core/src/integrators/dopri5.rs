@@ -16,7 +16,9 @@
 //!
 //! One output step may take thousands of internal steps, so `step_interruptible` reads its stop
 //! flag before every attempt (accepted or not): a relaxed atomic load, which changes no result.
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles, Stopped};
+use super::{
+    accel, bad, ensure_len, store, try_copy, Adaptive, Cache, Carry, Integrator, IntegratorInfo, Particles, Stopped,
+};
 use crate::ode;
 use crate::par;
 use crate::vector::{Real, Vector};
@@ -400,36 +402,38 @@ impl<V: Vector> Integrator<V> for Dopri5<V> {
         self.atol = o.atol;
     }
 
-    fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
-        Some((self.accepted, self.rejected, self.h))
+    fn as_carry(&self) -> Option<&dyn Carry<V>> {
+        Some(self)
     }
-
-    fn set_adaptive_counts(&mut self, accepted: u64, rejected: u64) {
-        self.accepted = accepted;
-        self.rejected = rejected;
+    fn as_carry_mut(&mut self) -> Option<&mut dyn Carry<V>> {
+        Some(self)
     }
-
-    fn failure(&self) -> Option<(usize, crate::error::Failure)> {
-        self.failed.map(|i| (i, crate::error::Failure::Error))
+    fn as_adaptive(&self) -> Option<&dyn Adaptive> {
+        Some(self)
     }
+    fn as_adaptive_mut(&mut self) -> Option<&mut dyn Adaptive> {
+        Some(self)
+    }
+}
 
+impl<V: Vector> Carry<V> for Dopri5<V> {
     /// The derivative at the current state (accelerations) and, after the stage-0 powers, the
     /// controller's memory (next h, last error), so a saved run continues bit for bit. Without
     /// a derivative there are no forces and no powers, only the controller's memory.
-    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+    fn get(&self) -> Option<(Vec<V>, Vec<Real>)> {
         let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
         p.extend([self.h, self.err_prev]);
         Some((if self.fsal { self.kv[0].clone() } else { Vec::new() }, p))
     }
 
-    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
+    fn try_get(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         let f = if self.fsal { try_copy(&self.kv[0])? } else { Vec::new() };
         let mut p = if self.fsal { self.pw[0].clone() } else { Vec::new() };
         p.extend([self.h, self.err_prev]);
         Ok(Some((f, p)))
     }
 
-    fn set_cache(&mut self, f: Vec<V>, mut p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
+    fn set(&mut self, f: Vec<V>, mut p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
         // Without a derivative (`f` empty) the powers are absent (or zeros, in files saved by
         // earlier versions); the controller is restored either way (a rolled-back first call
         // needs it).
@@ -449,5 +453,20 @@ impl<V: Vector> Integrator<V> for Dopri5<V> {
             self.xs.resize(v.len(), V::ZERO);
         }
         true
+    }
+}
+
+impl<V: Vector> Adaptive for Dopri5<V> {
+    fn stats(&self) -> (u64, u64, Real) {
+        (self.accepted, self.rejected, self.h)
+    }
+
+    fn set_counts(&mut self, accepted: u64, rejected: u64) {
+        self.accepted = accepted;
+        self.rejected = rejected;
+    }
+
+    fn failure(&self) -> Option<(usize, crate::error::Failure)> {
+        self.failed.map(|i| (i, crate::error::Failure::Error))
     }
 }

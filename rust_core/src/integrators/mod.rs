@@ -149,45 +149,24 @@ pub trait Integrator<V: Vector>: Send + Sync {
     }
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
-    /// What the integrator carries from one step to the next ("first same as last" forces, the
-    /// term powers there, an adaptive controller's memory); needed to continue a saved run, or
-    /// to retry a rolled-back one, bit for bit.
-    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+    /// What the integrator carries from one step to the next, as one value (`Carry`); `None`
+    /// for an integrator that carries nothing.
+    fn as_carry(&self) -> Option<&dyn Carry<V>> {
         None
     }
-    /// `cache()`, with its copy of the per-particle forces allocated fallibly.
-    fn try_cache(&self) -> std::result::Result<Option<Cache<V>>, TryReserveError> {
-        Ok(self.cache())
-    }
-    /// `cache()` borrowed, where the integrator can lend it (`None` also where it has none): a
-    /// checkpoint copies it into buffers it already has instead of allocating two.
-    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
+    /// `as_carry`, to restore or write in place.
+    fn as_carry_mut(&mut self) -> Option<&mut dyn Carry<V>> {
         None
-    }
-    /// The cache in place, for a caller that steps the particles itself with the same bits
-    /// (the batch's fused kernel): the per-particle forces, the terms' powers there, and
-    /// whether they are valid (the caller sets the three together). `None` if it keeps none.
-    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
-        None
-    }
-    /// Restores `cache()`'s output at the state whose velocities are `v`, for a scene with
-    /// `n_terms` terms; returns false (and changes nothing) if it does not fit.
-    fn set_cache(&mut self, _f: Vec<V>, _p: Vec<Real>, _v: &[V], _n_terms: usize) -> bool {
-        false
     }
     /// Takes the options it uses from `o` (validated by `IntegratorOptions::validate`); the
     /// others it leaves for the integrators that use them.
     fn configure(&mut self, _o: &IntegratorOptions) {}
-    /// (accepted, rejected internal steps, next internal step in s) of an adaptive integrator.
-    fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
+    /// An adaptive integrator's step control (`Adaptive`); `None` for a fixed-step one.
+    fn as_adaptive(&self) -> Option<&dyn Adaptive> {
         None
     }
-    /// Sets the accepted and rejected counts of an adaptive integrator (a rolled-back call
-    /// leaves them as they were).
-    fn set_adaptive_counts(&mut self, _accepted: u64, _rejected: u64) {}
-    /// Why the last `step` failed with a finite state (adaptive step control gave up): the
-    /// particle and what was wrong.
-    fn failure(&self) -> Option<(usize, crate::error::Failure)> {
+    /// `as_adaptive`, to restore its counts.
+    fn as_adaptive_mut(&mut self) -> Option<&mut dyn Adaptive> {
         None
     }
     /// Whether the terms with Jacobians (the `Jacobian` role) are taken implicitly, so that
@@ -204,6 +183,45 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn solver_stats(&self) -> Option<SolverStats> {
         None
     }
+}
+
+/// What an integrator carries from one step to the next ("first same as last" forces, the
+/// term powers there, an adaptive controller's memory): needed to continue a saved run, or to
+/// retry a rolled-back one, bit for bit. One value behind `Integrator::as_carry`, so that the
+/// central trait does not hold five ways to reach it.
+pub trait Carry<V: Vector> {
+    /// A copy (forces, N, one per particle; powers, W, one per term, then any controller
+    /// memory), or `None` while nothing valid is carried.
+    fn get(&self) -> Option<Cache<V>>;
+    /// `get`, with its copy of the per-particle forces allocated fallibly.
+    fn try_get(&self) -> std::result::Result<Option<Cache<V>>, TryReserveError> {
+        Ok(self.get())
+    }
+    /// Borrowed, where it can be lent (`None` also while nothing valid is carried): a checkpoint
+    /// copies it into buffers it already has instead of allocating two.
+    fn borrow(&self) -> Option<(&[V], &[Real])> {
+        None
+    }
+    /// In place, for a caller that steps the particles itself with the same bits (the batch's
+    /// fused kernel): the forces, the terms' powers there, and whether they are valid (the
+    /// caller sets the three together). `None` if it cannot be written in place.
+    fn parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
+        None
+    }
+    /// Restores `get()`'s output at the state whose velocities are `v`, for a scene with
+    /// `n_terms` terms; returns false (and changes nothing) if it does not fit.
+    fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool;
+}
+
+/// An adaptive integrator's step control, behind `Integrator::as_adaptive`.
+pub trait Adaptive {
+    /// (accepted, rejected internal steps, next internal step in s).
+    fn stats(&self) -> (u64, u64, Real);
+    /// Sets the accepted and rejected counts (a rolled-back call leaves them as they were).
+    fn set_counts(&mut self, accepted: u64, rejected: u64);
+    /// Why the last `step` failed with a finite state (step control gave up): the particle and
+    /// what was wrong.
+    fn failure(&self) -> Option<(usize, crate::error::Failure)>;
 }
 
 /// Books of an implicit integrator's linear solves (CG), over every solve run since the

@@ -8,7 +8,7 @@
 //! order; evaluating them with v½ (a common shortcut) would drop it to first order. Without
 //! such forces the prediction is skipped and the method is exactly the symplectic velocity
 //! Verlet.
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Integrator, IntegratorInfo, Particles};
+use super::{accel, bad, ensure_len, store, try_copy, Cache, Carry, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
 use std::collections::TryReserveError;
@@ -89,19 +89,28 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
     fn reset(&mut self) {
         self.valid = false;
     }
-    fn cache(&self) -> Option<(Vec<V>, Vec<Real>)> {
+    fn as_carry(&self) -> Option<&dyn Carry<V>> {
+        Some(self)
+    }
+    fn as_carry_mut(&mut self) -> Option<&mut dyn Carry<V>> {
+        Some(self)
+    }
+}
+
+impl<V: Vector> Carry<V> for VelocityVerlet<V> {
+    fn get(&self) -> Option<(Vec<V>, Vec<Real>)> {
         self.valid.then(|| (self.f.clone(), self.p.clone()))
     }
-    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
+    fn try_get(&self) -> Result<Option<Cache<V>>, TryReserveError> {
         Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
     }
-    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
+    fn borrow(&self) -> Option<(&[V], &[Real])> {
         self.valid.then_some((&self.f[..], &self.p[..]))
     }
-    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
+    fn parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
         Some((&mut self.f, &mut self.p, &mut self.valid))
     }
-    fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
+    fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
         if f.len() != v.len() || p.len() != n_terms {
             return false;
         }

@@ -10,9 +10,8 @@
 //!
 //! With velocity-dependent forces (drag, dashpots) Verlet predicts the end velocity and is no
 //! longer symmetric, so the composition keeps Verlet's second order there.
-use super::{Cache, Integrator, IntegratorInfo, Particles, VelocityVerlet};
+use super::{Carry, Integrator, IntegratorInfo, Particles, VelocityVerlet};
 use crate::vector::{Real, Vector};
-use std::collections::TryReserveError;
 
 /// w₁ = 1/(2 − 2^{1/3}) (Yoshida 1990, eq. 4.14).
 pub const W1: Real = 1.351_207_191_959_657_8;
@@ -44,20 +43,11 @@ impl<V: Vector> Integrator<V> for Yoshida4<V> {
     fn reset(&mut self) {
         self.verlet.reset()
     }
-    fn cache(&self) -> Option<Cache<V>> {
-        self.verlet.cache()
+    fn as_carry(&self) -> Option<&dyn Carry<V>> {
+        Some(&self.verlet)
     }
-    fn try_cache(&self) -> Result<Option<Cache<V>>, TryReserveError> {
-        self.verlet.try_cache()
-    }
-    fn cache_ref(&self) -> Option<(&[V], &[Real])> {
-        self.verlet.cache_ref()
-    }
-    fn cache_parts(&mut self) -> Option<(&mut Vec<V>, &mut Vec<Real>, &mut bool)> {
-        self.verlet.cache_parts()
-    }
-    fn set_cache(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
-        self.verlet.set_cache(f, p, v, n_terms)
+    fn as_carry_mut(&mut self) -> Option<&mut dyn Carry<V>> {
+        Some(&mut self.verlet)
     }
 }
 

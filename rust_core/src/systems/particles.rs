@@ -260,7 +260,7 @@ impl<V: Vector> ParticleSystem<V> {
     }
     /// (accepted, rejected internal steps, next internal step in s) for "dopri5".
     pub fn adaptive_stats(&self) -> Option<(u64, u64, Real)> {
-        self.integrator.adaptive_stats()
+        self.integrator.as_adaptive().map(|a| a.stats())
     }
 
     /// Single-precision state (`true`): positions and velocities are kept rounded to float32.
@@ -477,7 +477,7 @@ impl<V: Vector> ParticleSystem<V> {
         self.check_books(dissipated, collisions, &cache)?;
         match cache {
             Some((f, p)) => {
-                if !self.integrator.set_cache(f, p, &self.sys.state.v, dissipated.len()) {
+                if !self.integrator.as_carry_mut().is_some_and(|c| c.set(f, p, &self.sys.state.v, dissipated.len())) {
                     return Err(invalid("cache", "does not match the scene or its integrator"));
                 }
             }
@@ -489,7 +489,7 @@ impl<V: Vector> ParticleSystem<V> {
     }
 
     pub fn integrator_cache(&self) -> Option<Cache<V>> {
-        self.integrator.cache()
+        self.integrator.as_carry().and_then(|c| c.get())
     }
 
     /// Wall time (s) the terms that keep such books have spent in their phases so far (SPH:
@@ -734,8 +734,10 @@ impl<V: Vector> System for ParticleSystem<V> {
             }
         }
         if non_finite {
-            let (index, quantity) =
-                self.first_non_finite().or(self.integrator.failure()).unwrap_or((0, Failure::Position));
+            let (index, quantity) = self
+                .first_non_finite()
+                .or(self.integrator.as_adaptive().and_then(|a| a.failure()))
+                .unwrap_or((0, Failure::Position));
             return Err(Halt::Diverged { index, quantity });
         }
         // What the integrator does not see: the state terms keep (a grain's spin) and the
@@ -772,7 +774,7 @@ impl<V: Vector> System for ParticleSystem<V> {
     }
 
     fn adaptive(&self) -> bool {
-        self.integrator.adaptive_stats().is_some()
+        self.integrator.as_adaptive().map(|a| a.stats()).is_some()
     }
 
     fn limit_follows_flow(&self) -> bool {
@@ -884,19 +886,19 @@ impl<V: Vector> System for ParticleSystem<V> {
         let copied = (|| {
             copy_into(&mut snap.state.x, &st.x)?;
             copy_into(&mut snap.state.v, &st.v)?;
-            match self.integrator.cache_ref() {
+            match self.integrator.as_carry().and_then(|c| c.borrow()) {
                 Some((f, p)) => {
                     let (cf, cp) = snap.cache.get_or_insert_with(Default::default);
                     copy_into(cf, f)?;
                     copy_into(cp, p)
                 }
-                None => self.integrator.try_cache().map(|c| snap.cache = c),
+                None => self.integrator.as_carry().map_or(Ok(None), |c| c.try_get()).map(|c| snap.cache = c),
             }
         })();
         copied.map_err(|_| need().error())?;
         copy_into(&mut snap.dissipated, &self.sys.forces.dissipated).map_err(|_| need().error())?;
         snap.collisions = self.constraints.dissipated;
-        snap.adaptive = self.integrator.adaptive_stats();
+        snap.adaptive = self.integrator.as_adaptive().map(|a| a.stats());
         snap.histories.clear();
         snap.histories.extend(self.sys.forces.terms.iter().map(|t| t.as_own_state().map(|s| s.history())));
         Ok(snap)
@@ -925,7 +927,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             ("dissipated".to_string(), self.sys.forces.dissipated.clone()),
             ("collisions".to_string(), vec![self.constraints.dissipated]),
         ];
-        if let Some((f, p)) = self.integrator.cache() {
+        if let Some((f, p)) = self.integrator.as_carry().and_then(|c| c.get()) {
             out.push(("cache_forces".to_string(), flat(&f)));
             out.push(("cache_power".to_string(), p));
         }
@@ -934,7 +936,7 @@ impl<V: Vector> System for ParticleSystem<V> {
                 out.push((format!("history:{}", t.name()), s.history()));
             }
         }
-        if let Some((accepted, rejected, _)) = self.integrator.adaptive_stats() {
+        if let Some((accepted, rejected, _)) = self.integrator.as_adaptive().map(|a| a.stats()) {
             // Counts below 2^53 are exact in a float64.
             out.push(("adaptive_counts".to_string(), vec![accepted as Real, rejected as Real]));
         }
@@ -992,7 +994,9 @@ impl<V: Vector> System for ParticleSystem<V> {
         if r.is_err() {
             self.restore(before);
         } else if let Some((accepted, rejected)) = counts {
-            self.integrator.set_adaptive_counts(accepted, rejected);
+            if let Some(a) = self.integrator.as_adaptive_mut() {
+                a.set_counts(accepted, rejected);
+            }
         }
         r
     }
@@ -1001,7 +1005,9 @@ impl<V: Vector> System for ParticleSystem<V> {
         let ParticleSnapshot { state, dissipated, collisions, cache, adaptive, histories } =
             *snapshot.downcast::<ParticleSnapshot<V>>().expect("a snapshot of this particle system");
         if let Some((accepted, rejected, _)) = adaptive {
-            self.integrator.set_adaptive_counts(accepted, rejected);
+            if let Some(a) = self.integrator.as_adaptive_mut() {
+                a.set_counts(accepted, rejected);
+            }
         }
         let n = state.x.len();
         for (t, h) in self.sys.forces.terms.iter_mut().zip(&histories) {
@@ -1018,7 +1024,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         self.constraints.dissipated = collisions;
         let n_terms = self.sys.forces.terms.len();
         let restored = match cache {
-            Some((f, p)) => self.integrator.set_cache(f, p, &self.sys.state.v, n_terms),
+            Some((f, p)) => self.integrator.as_carry_mut().is_some_and(|c| c.set(f, p, &self.sys.state.v, n_terms)),
             None => false,
         };
         if !restored {
