@@ -49,7 +49,14 @@ import numpy as np
 
 from . import _check, _core
 from ._atomic import atomic_write
-from ._errors import InvalidInputError, InvalidTypeError, SceneBusyError, SceneFileError, SimulationDiverged
+from ._errors import (
+    InvalidInputError,
+    InvalidTypeError,
+    OutOfMemoryError,
+    SceneBusyError,
+    SceneFileError,
+    SimulationDiverged,
+)
 from .contacts import Contacts
 from .scene import Scene
 
@@ -69,6 +76,23 @@ def structure(scene: Scene) -> tuple[Any, ...]:
     (:attr:`Scene.parts`). Two scenes of equal structure can be stepped together."""
     return (scene.dim, scene.n_particles, tuple((p.section, p.part_kind) for p in scene.parts))
 
+
+
+def _room() -> int:
+    """Bytes a batch may plan for: physcore's limit (half the physical memory), or less where a
+    memory cap (``RLIMIT_AS``) leaves less room above what the process maps now."""
+    room = _check.memory_limit()
+    try:
+        import resource
+
+        cap = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if cap != resource.RLIM_INFINITY:
+            with open("/proc/self/statm") as f:
+                mapped = int(f.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+            room = min(room, max(cap - mapped, 0))
+    except (ImportError, OSError, ValueError):
+        pass
+    return room
 
 class Batch:
     """M scenes of the same structure, stepped together (see the module docstring).
@@ -139,19 +163,37 @@ class Batch:
         ``v``: the scene's, (N, dim) float64 m and m/s).
 
         Raises TypeError / InvalidInputError naming ``scene``, ``m`` (an int ≥ 1) or the array a
-        callable returned (as :attr:`Scene.positions` would)."""
+        callable returned (as :attr:`Scene.positions` would); :class:`~physcore.OutOfMemoryError`
+        naming ``m``, before any copy is made, when ``m`` copies would not fit: a copy takes
+        about twice its pickled size plus 4 kB (measured: a 2-body scene 2.8 kB, a 32 × 32
+        cloth 1.1 MB for 0.56 MB pickled), against half the physical memory or what a memory
+        cap (``RLIMIT_AS``) leaves."""
         if not isinstance(scene, Scene):
             raise InvalidTypeError(f"scene: expected a Scene, got {type(scene).__name__}")
         m = _check.int_in_range("m", m, 1, 1 << 24)
         data = pickle.dumps(scene)
+        need = m * (2 * len(data) + 4096)
+        room = _room()
+        if need > room:
+            raise OutOfMemoryError(
+                f"m: {m} copies of the scene would need about {_check.human_bytes(need)}, "
+                f"above the {_check.human_bytes(room)} physcore plans for (half the physical memory, or what the "
+                "memory cap leaves)",
+                bytes=need,
+            )
         members = []
-        for k in range(m):
-            s = pickle.loads(data)
-            if positions is not None:
-                s.positions = positions(k, s.positions)
-            if velocities is not None:
-                s.velocities = velocities(k, s.velocities)
-            members.append(s)
+        try:
+            for k in range(m):
+                s = pickle.loads(data)
+                if positions is not None:
+                    s.positions = positions(k, s.positions)
+                if velocities is not None:
+                    s.velocities = velocities(k, s.velocities)
+                members.append(s)
+        except MemoryError as e:
+            if isinstance(e, OutOfMemoryError):
+                raise
+            raise OutOfMemoryError(f"m: out of memory after {len(members)} of {m} copies of the scene") from None
         return cls(members, threads=threads)
 
     # ------------------------------------------------------------------------ members

@@ -304,3 +304,33 @@ def test_a_batch_renders_as_one_animation_of_its_members_overlaid(tmp_path):
     assert fan.render_defaults["color_by"] == "none"
     path = pc.render.gif(fan, tmp_path / "fan.gif", frames=8, steps_per_frame=20, size=(160, 120))
     assert path.read_bytes()[:6] == b"GIF89a"
+
+
+def test_from_scene_refuses_copies_that_would_not_fit_before_making_any():
+    """m copies are estimated (twice the pickled size plus 4 kB each) before the first is made:
+    2^24 figure-eights (about 200 GB) are refused at once, naming m (the hostile run waited
+    644 s for a bare MemoryError)."""
+    t0 = time.perf_counter()
+    with pytest.raises(pc.OutOfMemoryError, match="^m: ") as err:
+        pc.Batch.from_scene(pc.scenes.figure_eight(), 1 << 24)
+    assert time.perf_counter() - t0 < 5.0
+    assert err.value.bytes > 1e11
+
+
+def test_from_scene_under_a_memory_cap_is_refused_by_name():
+    """Under RLIMIT_AS (what the process maps now + 300 MB), 10^5 copies (about 1.2 GB) are
+    refused naming m, in a fresh interpreter so the cap stays there."""
+    import subprocess
+
+    code = (
+        "import os, resource, physcore as pc\n"
+        "s = pc.scenes.figure_eight()\n"
+        "mapped = int(open('/proc/self/statm').read().split()[0]) * os.sysconf('SC_PAGE_SIZE')\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (mapped + 300_000_000, resource.RLIM_INFINITY))\n"
+        "try:\n"
+        "    pc.Batch.from_scene(s, 100_000)\n"
+        "except pc.OutOfMemoryError as e:\n"
+        "    print('refused', str(e).split(':')[0])\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.strip() == "refused m", out.stderr[-2000:]
