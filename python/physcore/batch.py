@@ -78,6 +78,18 @@ def structure(scene: Scene) -> tuple[Any, ...]:
 
 
 
+
+def _same_structure(members: Sequence[Scene], name: str, after: str = "") -> None:
+    """InvalidInputError naming the first member (``name`` and its index) whose
+    :func:`structure` differs from member 0's, and what differs."""
+    first = structure(members[0])
+    for k, s in enumerate(members[1:], start=1):
+        other = structure(s)
+        if other != first:
+            i = next(i for i in range(3) if other[i] != first[i])
+            what = ("dimension", "particle count", "parts")[i]
+            raise InvalidInputError(f"{name} {k} differs from entry 0 in its {what}{after}: {other[i]} vs {first[i]}")
+
 def _room() -> int:
     """Bytes a batch may plan for: physcore's limit (half the physical memory), or less where a
     memory cap (``RLIMIT_AS``) leaves less room above what the process maps now."""
@@ -130,13 +142,7 @@ class Batch:
             if id(s) in seen:
                 raise InvalidInputError(f"scenes: entry {k} is entry {seen[id(s)]} again (each scene once)")
             seen[id(s)] = k
-        first = structure(members[0])
-        for k, s in enumerate(members[1:], start=1):
-            other = structure(s)
-            if other != first:
-                i = next(i for i in range(3) if other[i] != first[i])
-                what = ("dimension", "particle count", "parts")[i]
-                raise InvalidInputError(f"scenes: entry {k} differs from entry 0 in its {what}: {other[i]} vs {first[i]}")
+        _same_structure(members, "scenes: entry")
         self._threads = None if threads is None else _check.int_in_range("threads", threads, 1, 1 << 16)
         self._members: tuple[Scene, ...] = tuple(members)
         #: Retired members: index -> the :class:`~physcore.SimulationDiverged` it raised.
@@ -341,7 +347,12 @@ class Batch:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the batch to one file, atomically: a zip of every member's scene file
         (``member{k}.npz``, as :meth:`Scene.save` writes it) and ``batch.json`` (the format,
-        the thread count, and the retired members' messages). Returns the path."""
+        the thread count, and the retired members' messages). Returns the path.
+
+        Raises InvalidInputError, before anything is written, if a member was changed since the
+        batch was made so that its structure differs from member 0's (a part added to one
+        member): such a file could not be loaded as a batch; save that member on its own."""
+        _same_structure(self._members, "member", after=" since the batch was made")
         blobs = [s.to_bytes() for s in self._members]
         meta = {
             "format": FORMAT_VERSION,

@@ -334,3 +334,18 @@ def test_from_scene_under_a_memory_cap_is_refused_by_name():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.stdout.strip() == "refused m", out.stderr[-2000:]
+
+
+def test_a_member_changed_after_the_batch_was_made_is_refused_by_save(tmp_path):
+    """A part added to one member after Batch(): save refuses by name before writing (the file
+    could not be loaded as a batch: its members differ), and a file already there stays."""
+    b = pc.Batch.from_scene(pc.scenes.figure_eight(), 3)
+    path = tmp_path / "b.npz"
+    b.save(path)
+    before = path.read_bytes()
+    b[1].add(pc.Drag(0.1))
+    b.step(5)
+    with pytest.raises(pc.InvalidInputError, match="member 1 differs from entry 0 in its parts since the batch was made"):
+        b.save(path)
+    assert path.read_bytes() == before
+    assert len(pc.Batch.load(path)) == 3
