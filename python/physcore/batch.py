@@ -444,7 +444,9 @@ class _Overlay:
     Stepping it steps the batch: ``step(n)`` is ``batch.step(n)``; ``advance(duration)`` takes
     the steps of member 0's ``dt`` nearest ``duration`` (members keep their own ``dt``; the
     render's automatic CFL substeps of a fluid scene do not apply). A retired member stays
-    where it diverged. Grids and flows are not drawn."""
+    where it diverged. Rigid bodies are drawn, every member's, in their own colours, and a
+    member's surface (a cloth's ``render.Mesh``) once for each member. Grids and flows are not
+    drawn."""
 
     def __init__(self, batch: Batch) -> None:
         self._batch = batch
@@ -454,9 +456,13 @@ class _Overlay:
         rgb = np.clip(np.stack([np.abs(hue * 6 - 3) - 1, 2 - np.abs(hue * 6 - 2), 2 - np.abs(hue * 6 - 4)], axis=1), 0, 1)
         rgb = np.rint((0.25 + 0.75 * rgb) * 255).astype(np.uint8)
         defaults = dict(self._first.render_defaults or {})
-        defaults.pop("mesh", None)  # one member's mesh does not fit M members' particles
-        defaults["colors"] = np.repeat(rgb, n, axis=0).tolist()
-        defaults["color_by"] = "none"  # the hues tell the members apart (a speed scale would not)
+        mesh = defaults.pop("mesh", None)
+        if n and hasattr(mesh, "faces") and hasattr(mesh, "uv"):  # a render.Mesh: one copy a member
+            uv = None if mesh.uv is None else np.tile(mesh.uv, (m, 1))
+            defaults["mesh"] = type(mesh)(np.concatenate([np.asarray(mesh.faces) + k * n for k in range(m)]), uv)
+        if n:
+            defaults["colors"] = np.repeat(rgb, n, axis=0).tolist()
+            defaults["color_by"] = "none"  # the hues tell the members apart (a speed scale would not)
         self.render_defaults = defaults
         self.dim = self._first.dim
         self.n_particles = m * n
@@ -477,6 +483,8 @@ class _Overlay:
     fluids = property(lambda self: self._first.fluids)
     grids = property(lambda self: ())
     flows = property(lambda self: ())
+    #: Every member's rigid bodies, member after member (each body group keeps its colours).
+    bodies = property(lambda self: tuple(g for s in self._batch.members for g in s.bodies))
 
     @property
     def attributes(self) -> dict[str, np.ndarray]:

@@ -349,3 +349,28 @@ def test_a_member_changed_after_the_batch_was_made_is_refused_by_save(tmp_path):
         b.save(path)
     assert path.read_bytes() == before
     assert len(pc.Batch.load(path)) == 3
+
+
+def test_a_batch_of_body_scenes_renders_every_members_bodies_and_surface():
+    """A batch of dominoes (bodies, no particles) renders, every member's bodies in the
+    recording with each member's own poses; a batch of tablecloths draws its tables and dishes
+    and one cloth surface a member (the hostile run: the first raised on the empty colour list,
+    the second drew the cloth's particles alone)."""
+    from physcore import render
+
+    b = pc.Batch.from_scene(pc.scenes.dominoes(), 2)
+    b[1].bodies[1].velocities = b[1].bodies[1].velocities + [0.5, 0.0]  # member 1 moves differently
+    alone = render.record(pc.scenes.dominoes(), frames=3).bodies.poses
+    rec = render.record(b, frames=3)
+    poses = rec.bodies.poses
+    assert poses.shape == (3, 2 * alone.shape[1], 3)
+    assert np.array_equal(poses[0, : alone.shape[1]], alone[0])
+    assert not np.array_equal(poses[-1, : alone.shape[1]], poses[-1, alone.shape[1]:])
+    assert len(list(render.frames(b, frames=2))) == 2
+
+    cloth = pc.Batch.from_scene(pc.scenes.tablecloth(), 2)
+    one = pc.scenes.tablecloth()
+    n, faces = one.n_particles, one.render_defaults["mesh"].faces
+    view = cloth._render_view()
+    assert np.array_equal(view.render_defaults["mesh"].faces, np.concatenate([faces, faces + n]))
+    assert len(view.bodies) == 2 * len(one.bodies)

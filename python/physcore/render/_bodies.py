@@ -149,12 +149,17 @@ def body_track(scene: Any, frames: int) -> tuple[BodyTrack | BodyTrack3 | None, 
         outlines = [o for g in groups for o in g.outline()]
         track = BodyTrack(outlines, colors, balls, frames, flag(lambda g: g.shape == "polyline"))
         names = ["x", "y", "angle"]
-    spans = [(g.first, g.first + g.n) for g in groups]
-    host = groups[0]._bound()
+    # The groups may belong to several scenes (a batch's members overlaid): each scene's poses
+    # are read once a frame, under its own lock.
+    hosts = [g._bound() for g in groups]
 
     def grab() -> np.ndarray:
-        full = np.stack([np.asarray(v) for v in host.exclusive(lambda sim: sim.system_fields("bodies", names))], axis=1)
-        return np.concatenate([full[s:e] for s, e in spans])
+        full: dict[int, np.ndarray] = {}
+        for h in hosts:
+            if id(h) not in full:
+                fields = h.exclusive(lambda sim: sim.system_fields("bodies", names))
+                full[id(h)] = np.stack([np.asarray(v) for v in fields], axis=1)
+        return np.concatenate([full[id(h)][g.first:g.first + g.n] for g, h in zip(groups, hosts, strict=True)])
 
     return track, grab
 

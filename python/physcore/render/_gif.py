@@ -360,7 +360,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             raise InvalidInputError("mesh: color_by='density' (glow) draws no surface; give another color_by or mesh=False")
         mesh = None  # the scene's default surface gives way to a requested glow
     texture = d.get("texture") if texture is None else texture
-    n_points = scene.positions.shape[1] if isinstance(scene, _recording.Recording) else int(getattr(scene, "n_particles", 0))
+    n_points = (scene.positions.shape[1] if isinstance(scene, _recording.Recording)
+                else int(getattr(_recording.points_view(scene), "n_particles", 0)))
     mesh = check_mesh(mesh, n_points)
     texture = check_texture(texture, mesh)
     antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
