@@ -107,6 +107,13 @@ impl<V: Vector> ParticleSystem<V> {
     pub fn state_model_mut(&mut self) -> (&mut State<V>, &Model) {
         (&mut self.sys.state, &self.sys.model)
     }
+    /// `state_model_mut` with the spins a term gives the particles (`OwnState::spins`, the
+    /// first term that gives them): a coupling that pushes particles at their surface turns
+    /// them too.
+    pub fn state_model_spins_mut(&mut self) -> (&mut State<V>, &Model, Option<crate::terms::Spins<'_, V>>) {
+        let spins = self.sys.forces.terms.iter_mut().find_map(|t| t.as_own_state_mut().and_then(|o| o.spins()));
+        (&mut self.sys.state, &self.sys.model, spins)
+    }
     /// Say that a coupling moved particles or changed their velocities between steps: the
     /// integrator's cached forces (velocity Verlet's force at the step's end, kept for the
     /// next step's first kick) were evaluated at the old state and are dropped, as the

@@ -28,7 +28,7 @@ pub use gravity::UniformGravity;
 pub use magnetic_field::UniformMagneticField;
 pub use pairwise_gravity::{Pairwise, PairwiseGravity};
 pub use roles::{
-    BodyMotion, Constraints, FusedForce, Jacobian, Magnetic, MovingBoundary, OwnState, VelocityProjection,
+    BodyMotion, Constraints, FusedForce, Jacobian, Magnetic, MovingBoundary, OwnState, Spins, VelocityProjection,
 };
 pub use springs::Springs;
 pub use tree_gravity::TreeGravity;

@@ -165,6 +165,23 @@ pub trait OwnState<V: Vector> {
     /// Restores what `history` returned on this very term (a rollback to a snapshot its system
     /// took): the values are taken as they are, non-finite ones included, so it cannot fail.
     fn restore_history(&mut self, h: &[Real], n_particles: usize);
+    /// The spins the term gives its particles (contacts: grains), for a coupling that pushes
+    /// a particle at its surface and so turns it (the rigid bodies' `BodyContacts`); `None`
+    /// (the default) where the term gives none.
+    fn spins(&mut self) -> Option<Spins<'_, V>> {
+        None
+    }
+}
+
+/// The spins a term gives its particles (`OwnState::spins`): a particle turns if it has a
+/// radius r > 0 (the model's `"radius"` attribute) and is not pinned (inverse mass ≠ 0), with
+/// moment of inertia I = β m r² about its centre.
+pub struct Spins<'a, V: Vector> {
+    /// Angular velocity of each particle, rad/s (2D: about z); as many as the system has
+    /// particles once the term has stepped (fewer before: then none turns).
+    pub omega: &'a mut [V::Axial],
+    /// β in I = β m r² (dimensionless).
+    pub inertia_factor: Real,
 }
 
 #[cfg(test)]

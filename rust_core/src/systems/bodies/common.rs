@@ -45,6 +45,9 @@ pub struct Bodies {
     colliders: Vec<ColliderHandle>,
     /// The fixed body, without a collider, that joins to "the world" use.
     anchor: Option<RigidBodyHandle>,
+    /// Each collider's coefficient of rolling friction μ_r (dimensionless), by the index of its
+    /// handle (its group's `rolling_friction`; given again when a saved scene adds its groups).
+    rolling: Vec<Real>,
     /// A saved state waiting for the parts it holds to be added again (scene file reader).
     pending: Option<Dynamic>,
 }
@@ -81,6 +84,7 @@ impl Bodies {
             handles: Vec::new(),
             colliders: Vec::new(),
             anchor: None,
+            rolling: Vec::new(),
             pending: None,
         };
         b.scale_time();
@@ -137,6 +141,11 @@ impl Bodies {
         if !(0.0..=1.0).contains(&restitution) {
             return Err(invalid("restitution", format!("must be in [0, 1], got {restitution}")));
         }
+        // Absent (files and callers from before it): no rolling resistance.
+        let rolling = if p.has("rolling_friction") { p.number("rolling_friction")? } else { 0.0 };
+        if rolling < 0.0 {
+            return Err(invalid("rolling_friction", format!("must be >= 0 (dimensionless), got {rolling}")));
+        }
         // The group's one shape given by vertices (a convex polygon or hull, a triangle mesh).
         let listed = listed_shape(&shape, &kind, &mut p)?;
         let builder = |i: usize| -> RigidBodyBuilder {
@@ -164,6 +173,11 @@ impl Bodies {
             let ch = self.d.r.colliders.insert_with_parent(c, h, &mut self.d.r.bodies);
             self.handles.push(h);
             self.colliders.push(ch);
+            let at = ch.into_raw_parts().0 as usize;
+            if self.rolling.len() <= at {
+                self.rolling.resize(at + 1, 0.0);
+            }
+            self.rolling[at] = rolling;
         }
         self.part_added();
         Ok(first)
@@ -375,6 +389,157 @@ impl Bodies {
     }
 }
 
+/// Rolling resistance at the bodies' contacts over the step rapier just took (rapier has
+/// none): each contact manifold whose colliders have rolling friction (μ_r, the larger of
+/// the two) resists the relative rolling of its bodies, ω_r = ω_1 − ω_2 less its twist about
+/// the normal n (3D), with a couple of angular impulse H along −ω_r on the first body and +ω_r
+/// on the second, at most the limiting torque μ_r R f_n over the step, H ≤ μ_r R J_n (J_n the
+/// manifold's normal impulse in the step, summed over its contacts): the grains' model at full
+/// mobilisation (Ai, Chen, Rotter & Ooi, Powder Technol. 206 (2011) 269, model A, a constant
+/// torque against ω_r; the grains' elastic spring of model C needs a state per contact that
+/// rapier does not keep). R is the rolling radius, R = R_1 R_2/(R_1 + R_2) with R_k the
+/// distance along n from body k's centre of mass to its contact point (at the centre of the
+/// normal impulses): a ball's radius, a capsule's on its side; a fixed or kinematic body
+/// counts as a wall (R_k = ∞).
+///
+/// A contact that sticks keeps sticking: the couple comes with the tangential impulse j at the
+/// contact point that leaves its slip as rapier's friction left it (what that friction would
+/// add in the next step, taken now), so the couple slows the rolling motion as a whole (a
+/// ball's spin and its speed, v = ω R), whose inverse inertia k is the Schur complement
+/// k = k_HH − k_Ht K_tt⁻¹ k_tH of the contact's response (1/(I + m R²) for a ball on the
+/// ground); where friction could not supply j (|j| + rapier's friction impulse > μ J_n) the
+/// couple acts alone, k = û·(I_1⁻¹ + I_2⁻¹)û. Either way H = min(μ_r R J_n, |ω_r|/k): it stops
+/// the relative rolling at most, never reverses it, and only takes kinetic energy (by
+/// H(|ω_r| − kH/2) at zero slip; the step books it with the contacts'). The bodies are then
+/// moved by `lag` times the velocity this changed: as far as the change would have moved them
+/// had it acted evenly through rapier's step (its n substeps of semi-implicit Euler: lag =
+/// dt (n + 1)/(2n)). Without that a ball held on a slope by its rolling resistance crept down
+/// at 2.4 mm/s (dt = 1/240), and with dt in place of the lag crept up at 0.9 mm/s. A couple plus an
+/// equal and opposite pair of impulses at one point: momentum and angular momentum are kept.
+/// On a flat floor a ball rolling at v decelerates at a = μ_r g /(1 + I/(m R²)) (the torque
+/// μ_r R m g on the rolling constraint v = ω R).
+fn rolling_resistance(r: &mut Rapier, mu_r: &[Real], lag: Real) {
+    let mu_of = |c: ColliderHandle| mu_r.get(c.into_raw_parts().0 as usize).copied().unwrap_or(0.0);
+    let Rapier { narrow_phase, bodies, colliders, .. } = r;
+    for pair in narrow_phase.contact_pairs() {
+        let mu = mu_of(pair.collider1).max(mu_of(pair.collider2));
+        if !(mu > 0.0) {
+            continue;
+        }
+        for m in pair.solver_manifolds() {
+            let (Some(h1), Some(h2)) = (m.data.rigid_body1, m.data.rigid_body2) else {
+                continue;
+            };
+            // The normal impulse of the step, where it acted on each surface, and the friction
+            // impulse rapier spent (summed in magnitude: an upper bound of its total's).
+            let (mut jn, mut jt, mut p1, mut p2) = (0.0, 0.0, Vector::ZERO, Vector::ZERO);
+            for sc in &m.data.solver_contacts {
+                let id = (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize;
+                let Some(point) = m.points.get(id) else {
+                    continue;
+                };
+                let j = point.data.impulse;
+                if j > 0.0 {
+                    let (a, b) = m.data.solver_contact_world_points(sc, bodies);
+                    jn += j;
+                    p1 += a * j;
+                    p2 += b * j;
+                    jt += point.data.tangent_impulse.iter().map(|t| t * t).sum::<Real>().sqrt();
+                }
+            }
+            if !(jn > 0.0) {
+                continue;
+            }
+            let (n, friction) = (m.data.normal, m.data.friction);
+            let (p1, p2) = (p1 / jn, p2 / jn);
+            let (b1, b2) = (&bodies[h1], &bodies[h2]);
+            let (r1, r2) = (p1 - b1.center_of_mass(), p2 - b2.center_of_mass());
+            let arm = |b: &RigidBody, r: Vector| if b.is_dynamic() { r.dot(n).abs() } else { Real::INFINITY };
+            let (a1, a2) = (arm(b1, r1), arm(b2, r2));
+            let reff = if a1.is_infinite() {
+                a2
+            } else if a2.is_infinite() {
+                a1
+            } else {
+                a1 * a2 / (a1 + a2)
+            };
+            let w = rolling_part(b1.angvel() - b2.angvel(), n);
+            let speed = ang_norm(w);
+            if !(reff.is_finite() && reff > 0.0 && speed > 0.0) {
+                continue;
+            }
+            let u = w / speed;
+            // The change of the contact's relative velocity (at p) and of ω_1 − ω_2 under an
+            // impulse j on body 1 at its contact point (−j on body 2) and the couple h (−h û on
+            // body 1, +h û on body 2).
+            let response = |j: Vector, h: Real| -> (Vector, AngVector) {
+                let (mut du, mut dw) = (Vector::ZERO, ANG_ZERO);
+                for (b, r, s) in [(b1, r1, 1.0), (b2, r2, -1.0)] {
+                    if b.is_dynamic() {
+                        let mp = b.mass_properties();
+                        let dwb = mp.effective_world_inv_inertia * (moment(r, j * s) + u * (-h * s));
+                        du += (j * s * mp.effective_inv_mass + ang_cross(dwb, r)) * s;
+                        dw += dwb * s;
+                    }
+                }
+                (du, dw)
+            };
+            let t = tangents(n);
+            let (du_h, dw_h) = response(Vector::ZERO, 1.0);
+            let mut kt = [[0.0; 2]; 2];
+            let mut rhs = [0.0; 2];
+            for a in 0..TANGENTS {
+                for b in 0..TANGENTS {
+                    kt[a][b] = t[a].dot(response(t[b], 0.0).0);
+                }
+                rhs[a] = -t[a].dot(du_h);
+            }
+            // The impulse per unit couple that keeps the slip, and the rolling's inverse inertia.
+            let held = solve2(kt, rhs, TANGENTS).map(|x| t[0] * x[0] + t[1] * x[1]);
+            let rolling = held.map(|j| (j, -ang_dot(u, response(j, 1.0).1))).filter(|&(_, k)| k > 0.0);
+            let alone = (Vector::ZERO, -ang_dot(u, dw_h));
+            let (mut j_unit, mut k) = rolling.unwrap_or(alone);
+            let mut h = (mu * reff * jn).min(speed / k);
+            if (j_unit * h).length() + jt > friction * jn {
+                (j_unit, k) = alone;
+                h = (mu * reff * jn).min(speed / k);
+            }
+            if !(k > 0.0 && h > 0.0 && h.is_finite()) {
+                continue;
+            }
+            let j = j_unit * h;
+            for (hb, p, s) in [(h1, p1, 1.0), (h2, p2, -1.0)] {
+                let body = &mut bodies[hb];
+                if !body.is_dynamic() {
+                    continue;
+                }
+                let (v0, w0) = (body.linvel(), body.angvel());
+                body.apply_impulse_at_point(j * s, p, true);
+                body.apply_torque_impulse(u * (-h * s), true);
+                let dv = RigidBodyVelocity::<Real> { linvel: body.linvel() - v0, angvel: body.angvel() - w0 };
+                let pose = dv.integrate(lag, body.position(), &body.mass_properties().local_mprops.local_com);
+                body.set_position(pose, true);
+                for &c in body.colliders() {
+                    if let Some(rel) = colliders[c].position_wrt_parent().copied() {
+                        colliders[c].set_position(pose * rel);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// x with k x = b for the leading `dim` × `dim` block of `k` (dim 1 or 2); `None` if singular.
+fn solve2(k: [[Real; 2]; 2], b: [Real; 2], dim: usize) -> Option<[Real; 2]> {
+    let x = if dim == 1 {
+        [b[0] / k[0][0], 0.0]
+    } else {
+        let det = k[0][0] * k[1][1] - k[0][1] * k[1][0];
+        [(b[0] * k[1][1] - k[0][1] * b[1]) / det, (k[0][0] * b[1] - b[0] * k[1][0]) / det]
+    };
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
 impl System for Bodies {
     fn name(&self) -> &str {
         &self.name
@@ -410,6 +575,12 @@ impl System for Bodies {
             &(),
             &(),
         );
+        if self.rolling.iter().any(|&m| m > 0.0) {
+            // rapier's step is n substeps of semi-implicit Euler: a velocity change spread evenly
+            // over them moves a body by (n + 1)/(2n) of it times dt.
+            let n = self.params.num_solver_iterations as Real;
+            rolling_resistance(&mut self.d.r, &self.rolling, dt * (n + 1.0) / (2.0 * n));
+        }
         if let Some((index, quantity)) = self.fault() {
             return Err(Halt::Diverged { index, quantity });
         }
@@ -540,10 +711,14 @@ impl crate::systems::RigidBodies for Bodies {
 /// inside or touching a body's shape is put back on its surface, and the impulse that stops
 /// its approach (the body's restitution, Coulomb friction with the body's coefficient) is
 /// applied to both, equal and opposite, at the contact point: grains push bodies, a body pushes
-/// grains, cloth drapes over a body, fluid particles hold a body up. Particles are visited in
+/// grains, cloth drapes over a body, fluid particles hold a body up. A grain that turns (a
+/// radius and a spin from a term's `OwnState::spins`: DEM contacts) is pushed at its surface
+/// point, its friction against the contact point's velocity with its rotational inertia in the
+/// effective mass, and the moment turns it (`grain_contact`); other particles are pushed at
+/// their centres, as they were before grains turned here. Particles are visited in
 /// order (the bodies' velocities change as they go): deterministic. The energy this removes
-/// (kinetic, and the particles' potential in gravity raised by the moves) is booked in the
-/// bodies' "bodies ⇄ particles".
+/// (kinetic, the grains' spin included, and the particles' potential in gravity raised by the
+/// moves) is booked in the bodies' "bodies ⇄ particles".
 ///
 /// Fluids that take moving boundary particles (`terms::MovingBoundary`: DFSPH and WCSPH) meet
 /// the moving (dynamic and kinematic) bodies through them as well (Akinci et al. 2012): each
@@ -684,6 +859,93 @@ fn pair_inv_mass(im: Real, body: &RigidBody, c: Vector, t: Vector) -> Real {
     im + body.mass_properties().effective_inv_mass.x + turning(body, c - body.center_of_mass(), t)
 }
 
+/// The rotational kinetic energy of the grains that turn, Σ ½ β m r² |ω|² (J; 0 without spins).
+fn spin_kinetic<V: PVector>(
+    spins: Option<&crate::terms::Spins<'_, V>>,
+    model: &crate::state::Model,
+    radius: Option<&[Real]>,
+) -> Real {
+    let (Some(sp), Some(r)) = (spins, radius) else {
+        return 0.0;
+    };
+    let mut k = 0.0;
+    for (i, w) in sp.omega.iter().enumerate() {
+        if model.inv_mass[i] != 0.0 && r[i] > 0.0 {
+            k += 0.5 * sp.inertia_factor * model.mass[i] * r[i] * r[i] * V::axial_length_squared(*w);
+        }
+    }
+    k
+}
+
+/// A particle's spin (`V::AXIAL_DIM` components) as the bodies' angular vector.
+fn axial_ang<V: PVector>(w: V::Axial) -> AngVector {
+    let s = V::axial_flat(std::slice::from_ref(&w));
+    let mut a = [0.0; 3];
+    a[3 - s.len()..].copy_from_slice(s);
+    ang_of(a)
+}
+
+/// The bodies' angular vector as a particle's spin.
+fn ang_axial<V: PVector>(w: AngVector) -> V::Axial {
+    V::axial_from_slice(&ang3(w)[3 - V::AXIAL_DIM..])
+}
+
+/// A grain that turns, as one contact with a body sees it: velocity (m/s), spin (rad/s),
+/// inverse mass (1/kg), radius (m) and β in I = β m r².
+struct Grain<V: PVector> {
+    v: Vector,
+    w: V::Axial,
+    inv_mass: Real,
+    radius: Real,
+    beta: Real,
+}
+
+/// The impulse between a grain that turns and a body, the grain already put back on the
+/// body's surface (its centre at c + r n, n the unit normal out of the body): the contact acts
+/// at the grain's surface point c, r_c = −r n from its centre. The contact point's relative
+/// velocity is u = v + ω × r_c − v_b(c); the normal impulse stops its approach with the
+/// restitution e, J_n = −(1 + e) u_n / k_n; friction acts against the sliding u_t, J_t = −t ·
+/// min(μ J_n, |u_t| / k_t), where 1/k_t, the effective mass along t, counts the grain's turning
+/// as the body's: k_t = 1/m + |r_c × t|²/I + the body's share = (1 + 1/β)/m + the body's share
+/// (|r_c × t| = r for t ⊥ n). (On the normal r_c × n = 0: k_n is the centre's.) The grain takes
+/// J at its centre and the moment r_c × J_t on its spin, the body −J at c: momentum and angular
+/// momentum are exchanged exactly. Rigid impact theory with Coulomb friction (Stronge, *Impact
+/// Mechanics*, 2000, §4.2; the rough ball of Garwin, Am. J. Phys. 37 (1969) 88, at e_t = 0):
+/// a disc (β = ½) meeting a fixed surface at u_t with μ(1 + e)u_n ≥ u_t β/(1 + β) leaves
+/// rolling, v_t' = u_t/(1 + β) = ⅔ u_t. Returns the grain's new velocity and spin.
+fn grain_contact<V: PVector>(
+    body: &mut RigidBody,
+    g: Grain<V>,
+    c: Vector,
+    normal: Vector,
+    e: Real,
+    mu: Real,
+) -> (Vector, V::Axial) {
+    let w = axial_ang::<V>(g.w);
+    let rc = normal * -g.radius;
+    let rel = g.v + ang_cross(w, rc) - body.velocity_at_point(c);
+    let vn = rel.dot(normal);
+    if vn >= 0.0 {
+        return (g.v, g.w);
+    }
+    let k_n = pair_inv_mass(g.inv_mass, body, c, normal);
+    let jn = -(1.0 + e) * vn / k_n;
+    let vt_vec = rel - normal * vn;
+    let vt = vt_vec.length();
+    let mut jt = Vector::ZERO;
+    if vt > 0.0 && mu > 0.0 {
+        let t = vt_vec / vt;
+        let k_t = pair_inv_mass(g.inv_mass, body, c, t) + g.inv_mass / g.beta;
+        jt = t * -(mu * jn).min(vt / k_t);
+    }
+    let impulse = normal * jn + jt;
+    if body.is_dynamic() {
+        body.apply_impulse_at_point(-impulse, c, true);
+    }
+    let inv_inertia = g.inv_mass / (g.beta * g.radius * g.radius);
+    (g.v + impulse * g.inv_mass, ang_axial::<V>(w + moment(rc, jt) * inv_inertia))
+}
+
 impl<V: PVector> Coupling<V> for BodyContacts {
     fn name(&self) -> &str {
         "bodies ⇄ particles"
@@ -796,18 +1058,24 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         let Some(bodies) = bodies_in(others, self.system) else {
             return;
         };
-        let (state, model) = particles.state_model_mut();
+        let (state, model, mut spins) = particles.state_model_spins_mut();
         let n = state.x.len();
         if n == 0 || bodies.handles.is_empty() {
             return;
         }
         let radius = model.attribute("radius");
+        // Spins once their term has sized them to the particles (after its first step).
+        if spins.as_ref().is_some_and(|s| s.omega.len() != n || radius.is_none()) {
+            spins = None;
+        }
         let r_max = radius.map(|r| r.iter().cloned().fold(0.0, Real::max)).unwrap_or(0.0);
         // Each body's box, grown by the largest radius: the broad test.
         let boxes = &mut self.boxes;
         boxes.clear();
         boxes.extend(bodies.colliders.iter().map(|&c| bodies.d.r.colliders[c].compute_aabb().loosened(r_max)));
-        let e_before = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
+        let e_before = particle_kinetic(&state.v, &model.mass, &model.inv_mass)
+            + bodies.mechanical().0
+            + spin_kinetic(spins.as_ref(), model, radius);
         // Every move: the particle and where it was (the potential energy the moves change
         // is booked with the exchange below).
         let moved = &mut self.moved;
@@ -857,6 +1125,22 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 let c = proj.point;
                 let vi = from_p(state.v[i]);
                 let vb = body.velocity_at_point(c);
+                // A grain that turns is pushed at its surface point (see `grain_contact`).
+                if let Some(sp) = spins.as_mut().filter(|_| ri > 0.0) {
+                    moved.push((i, slot(state.x[i])));
+                    state.x[i] = to_p(p + normal * depth);
+                    let (v, w) = grain_contact::<V>(
+                        body,
+                        Grain { v: vi, w: sp.omega[i], inv_mass: im, radius: ri, beta: sp.inertia_factor },
+                        c,
+                        normal,
+                        e,
+                        mu,
+                    );
+                    state.v[i] = to_p(v);
+                    sp.omega[i] = w;
+                    continue;
+                }
                 let vn = (vi - vb).dot(normal);
                 // The particle goes back to the surface (plus its radius) along the normal.
                 moved.push((i, slot(state.x[i])));
@@ -908,7 +1192,9 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 state.v[i] = to_p(vi + dv);
             }
         }
-        let e_after = particle_kinetic(&state.v, &model.mass, &model.inv_mass) + bodies.mechanical().0;
+        let e_after = particle_kinetic(&state.v, &model.mass, &model.inv_mass)
+            + bodies.mechanical().0
+            + spin_kinetic(spins.as_ref(), model, radius);
         // The potential the moves changed: evaluated after them, and before them with the old
         // positions put back for the moment (only when something moved); of the terms whose
         // potential is cheap to evaluate (gravity, springs, fields): an SPH fluid's or DEM

@@ -6,6 +6,7 @@ use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, Syst
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
+use rapier2d_f64::geometry::NEW_CONTACT_BIT;
 use rapier2d_f64::parry::bounding_volume::BoundingVolume;
 use rapier2d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -227,6 +228,38 @@ fn ang3(w: AngVector) -> [Real; 3] {
 /// Three components of an angular impulse as the dimension's (its z).
 fn ang_of(l: [Real; 3]) -> AngVector {
     l[2]
+}
+
+/// ω × r for an angular velocity about z.
+fn ang_cross(w: AngVector, r: Vector) -> Vector {
+    Vector::new(-w * r.y, w * r.x)
+}
+
+/// The moment r × j (about z).
+fn moment(r: Vector, j: Vector) -> AngVector {
+    r.perp_dot(j)
+}
+
+/// The rolling part of a relative angular velocity at a contact of normal `n`: all of it in
+/// the plane (a turn about z rolls every contact of the plane).
+fn rolling_part(w: AngVector, _n: Vector) -> AngVector {
+    w
+}
+
+fn ang_norm(w: AngVector) -> Real {
+    w.abs()
+}
+
+fn ang_dot(a: AngVector, b: AngVector) -> Real {
+    a * b
+}
+
+const ANG_ZERO: AngVector = 0.0;
+
+/// The tangents of a contact of normal `n`: one in the plane (the second unused).
+const TANGENTS: usize = 1;
+fn tangents(n: Vector) -> [Vector; 2] {
+    [n.perp(), Vector::ZERO]
 }
 
 impl Bodies {

@@ -7,6 +7,7 @@ use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, Syst
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
+use rapier3d_f64::geometry::NEW_CONTACT_BIT;
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -292,6 +293,39 @@ fn ang3(w: AngVector) -> [Real; 3] {
 /// Three components of an angular impulse as the dimension's.
 fn ang_of(l: [Real; 3]) -> AngVector {
     Vector::new(l[0], l[1], l[2])
+}
+
+/// ω × r.
+fn ang_cross(w: AngVector, r: Vector) -> Vector {
+    w.cross(r)
+}
+
+/// The moment r × j.
+fn moment(r: Vector, j: Vector) -> AngVector {
+    r.cross(j)
+}
+
+/// The rolling part of a relative angular velocity `w` at a contact of normal `n`: w less its
+/// twist about n, which rolls nothing (as the grains' rolling resistance takes it).
+fn rolling_part(w: AngVector, n: Vector) -> AngVector {
+    w - n * w.dot(n)
+}
+
+fn ang_norm(w: AngVector) -> Real {
+    w.length()
+}
+
+fn ang_dot(a: AngVector, b: AngVector) -> Real {
+    a.dot(b)
+}
+
+const ANG_ZERO: AngVector = Vector::ZERO;
+
+/// Two orthonormal tangents of a contact of normal `n`.
+const TANGENTS: usize = 2;
+fn tangents(n: Vector) -> [Vector; 2] {
+    let (a, b) = n.any_orthonormal_pair();
+    [a, b]
 }
 
 /// 3D bodies turn without rapier's gyroscopic pass (`gyroscopic_step` replaces it).

@@ -199,6 +199,11 @@ mod tests {
         assert!(e.to_string().contains("shape"), "{e}");
         let e = b.add_group(group(2, "ball", &[0.0, 0.0], &[-1.0])).unwrap_err();
         assert!(e.to_string().contains("size"), "{e}");
+        for bad in [-0.1, Real::NAN, Real::INFINITY] {
+            let p = group(2, "ball", &[0.0, 0.0], &[0.1]).with("rolling_friction", Value::Number(bad));
+            let e = b.add_group(p).unwrap_err();
+            assert!(e.to_string().contains("rolling_friction"), "{e}");
+        }
         assert!(b.is_empty());
         let mut b = Bodies3::new("bodies");
         let e = b.add_group(group(3, "box", &[0.0, 0.0, 0.0], &[0.1, 0.1])).unwrap_err();

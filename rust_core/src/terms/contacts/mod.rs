@@ -1468,6 +1468,11 @@ impl<V: Vector> OwnState<V> for Contacts<V> {
     fn restore_history(&mut self, h: &[Real], n_particles: usize) {
         self.load_history(h, n_particles, false).expect("a contact term's own history restores");
     }
+    /// The grains' spins and β: the rigid bodies' coupling pushes a grain at its surface point,
+    /// so its friction turns the grain (and the moment is the body's too).
+    fn spins(&mut self) -> Option<super::Spins<'_, V>> {
+        Some(super::Spins { omega: &mut self.omega, inertia_factor: self.material.inertia_factor })
+    }
     /// Spins, angles and the springs of live contacts.
     fn non_finite(&self) -> Option<usize> {
         // It runs after every step: first one streaming, branch-free pass (0·x is 0 for a
