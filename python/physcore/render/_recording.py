@@ -286,7 +286,7 @@ def _simulate(
         field_points=points,
         field_label=_field_label(gp),
         velocities=vels,
-        spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
+        spheres=tuple(_spheres([*(getattr(scene, "spheres", None) or ()), *_contact_walls(scene, "sphere")], dim)),
         rods=tuple(_drawn_rods(scene, dim)),
         bodies=track,
     )
@@ -296,7 +296,7 @@ def _drawn_rods(scene: Any, dim: int) -> list[tuple[np.ndarray, np.ndarray, floa
     """The rods ``(a, b, radius)`` (m) that draw the scene's keyed colliders (their
     ``drawn_rods()``: a capsule is one); degenerate ones are skipped."""
     out = []
-    for c in getattr(scene, "colliders", ()):
+    for c in [*getattr(scene, "colliders", ()), *_contact_walls(scene, "capsule", "oriented_box")]:
         for a, b, r in c.drawn_rods():
             a, b, r = np.asarray(a, np.float64).reshape(-1), np.asarray(b, np.float64).reshape(-1), float(r)
             if a.shape == b.shape == (dim,) and np.isfinite(a).all() and np.isfinite(b).all() and math.isfinite(r) and r > 0:
@@ -328,16 +328,20 @@ def _masses(scene: Any, n: int) -> np.ndarray | None:
     return m.copy() if m.shape == (n,) and np.all(np.isfinite(m) & (m > 0)) else None
 
 
-def _drawn_planes(scene: Any) -> list | None:
-    """The scene's plane colliders plus the walls of its contact terms (drawn alike)."""
-    from ..terms import Plane
-
-    planes = getattr(scene, "planes", None)
+def _contact_walls(scene: Any, *kinds: str) -> list:
+    """The walls of the scene's contact terms (``Contacts.walls``: collider records) whose key
+    is one of ``kinds``, drawn as the colliders of that kind are."""
     from ..fluids import Fluid
 
-    # A fluid's boundary particles are not planes (and Fluid.walls is a deprecated alias).
+    # A fluid's boundary particles are not walls of this kind (and Fluid.walls is a deprecated alias).
     own = [getattr(t, "walls", None) for t in getattr(scene, "terms", ()) if not isinstance(t, Fluid)]
-    walls = [w for ws in own if isinstance(ws, tuple) for w in ws if isinstance(w, Plane)]
+    return [w for ws in own if isinstance(ws, tuple) for w in ws if getattr(w, "part_kind", None) in kinds]
+
+
+def _drawn_planes(scene: Any) -> list | None:
+    """The scene's plane colliders plus the plane walls of its contact terms (drawn alike)."""
+    planes = getattr(scene, "planes", None)
+    walls = _contact_walls(scene, "plane")
     return planes if not walls else [*(planes or []), *walls]
 
 
