@@ -4,7 +4,8 @@ A :class:`Contacts` term makes the scene's particles solid grains of the radii i
 ``"radius"`` attribute (:meth:`~physcore.Scene.set_attribute`): overlapping grains push apart
 through a spring–dashpot whose damping gives the chosen coefficient of restitution, rub through
 Coulomb friction with a tangential spring (Cundall & Strack 1979), and roll, each grain carrying
-an angular velocity. Pinned particles are fixed obstacles (pegs); walls are half-spaces.
+an angular velocity. Pinned particles are fixed obstacles (pegs); walls are the colliders'
+shapes (planes, boxes, balls and bowls, capsules, oriented boxes).
 
 Examples
 --------
@@ -32,31 +33,85 @@ import numpy as np
 
 from . import _core, _deprecate
 from ._check import finite_float as _finite_float
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, PhyscoreError
 from ._parts import AttachContext, LoadContext
-from .terms import Box, Plane, Term
+from .terms import Box, Capsule, OrientedBox, Plane, Sphere, Term
 
 __all__ = ["Contacts"]
 
 _LAWS = ("linear", "hertz")
 
+#: The collider records a wall may be, by their key (the core's ``wall_kinds``), each with the
+#: fields that give its geometry, in the order the core reads them (``terms::contacts::walls``);
+#: every wall also has its ``restitution`` and ``friction``. A :class:`Box` is its faces.
+_WALL_SHAPES: dict[str, tuple[type, tuple[str, ...]]] = {
+    "plane": (Plane, ("point", "normal")),
+    "sphere": (Sphere, ("center", "radius", "inside")),
+    "capsule": (Capsule, ("a", "b", "radius")),
+    "oriented_box": (OrientedBox, ("center", "half_extents", "rotation")),
+}
+_WALL_TYPES = tuple(cls for cls, _ in _WALL_SHAPES.values())
+_EXPECTED = "a Plane, Box, Sphere, Capsule or OrientedBox"
 
-def _walls(walls: Any) -> tuple[Plane, ...]:
+_Wall = Plane | Sphere | Capsule | OrientedBox
+
+
+def _walls(walls: Any) -> tuple[_Wall, ...]:
     if walls is None:
         return ()
-    if isinstance(walls, (Plane, Box)):
+    if isinstance(walls, (Box, *_WALL_TYPES)):
         walls = [walls]
     if isinstance(walls, (str, bytes)) or not isinstance(walls, Sequence):
-        raise InvalidTypeError(f"walls: expected a Plane, a Box or a list of them, got {type(walls).__name__}")
-    out: list[Plane] = []
+        raise InvalidTypeError(f"walls: expected {_EXPECTED}, or a list of them, got {type(walls).__name__}")
+    out: list[_Wall] = []
     for k, w in enumerate(walls):
         if isinstance(w, Box):
             out.extend(w.faces())
-        elif isinstance(w, Plane):
+        elif isinstance(w, _WALL_TYPES):
             out.append(w)
         else:
-            raise InvalidTypeError(f"walls: entry {k} is a {type(w).__name__}, expected a Plane or a Box")
+            raise InvalidTypeError(f"walls: entry {k} is a {type(w).__name__}, expected {_EXPECTED}")
     return tuple(out)
+
+
+def _wall_dim(w: _Wall) -> int:
+    """The dimension of a wall: the length of its first vector (point, center or a)."""
+    return int(getattr(w, _WALL_SHAPES[w.part_kind][1][0]).shape[0])
+
+
+def _wall_numbers(w: _Wall) -> np.ndarray:
+    """A wall's geometry as the core reads it: its fields in order, flat (``inside`` as 0 or 1)."""
+    return np.concatenate([np.asarray(getattr(w, f), dtype=np.float64).reshape(-1) for f in _WALL_SHAPES[w.part_kind][1]])
+
+
+def _wall_entry(w: _Wall) -> dict[str, Any]:
+    """A wall's record in a scene file (``meta.terms[k].walls[j]``): its key, its geometry and
+    its coefficients, as JSON values (floats round-trip exactly)."""
+    fields = (*_WALL_SHAPES[w.part_kind][1], "restitution", "friction")
+    out: dict[str, Any] = {"type": w.part_kind}
+    for f in fields:
+        v = getattr(w, f)
+        out[f] = v.tolist() if isinstance(v, np.ndarray) else v
+    return out
+
+
+def _wall_from_entry(k: int, entry: Any) -> _Wall:
+    """The wall a file's record describes; a TypeError or ValueError naming ``walls`` and the wall
+    if it is not one (an unknown type, a missing or extra key, a value the record refuses)."""
+    if not isinstance(entry, dict):
+        raise InvalidTypeError(f"walls: wall {k} must be an object, got {type(entry).__name__}")
+    kind = entry.get("type")
+    if not isinstance(kind, str) or kind not in _WALL_SHAPES:
+        raise InvalidInputError(f"walls: wall {k} has type {kind!r}, expected one of {', '.join(_WALL_SHAPES)}")
+    cls, geometry = _WALL_SHAPES[kind]
+    fields = ("type", *geometry, "restitution", "friction")
+    if set(entry) != set(fields):
+        raise InvalidInputError(f"walls: wall {k} ({kind}) has keys {sorted(entry)}, expected {sorted(fields)}")
+    try:
+        return cls(**{f: entry[f] for f in fields[1:]})
+    except (TypeError, ValueError) as exc:
+        wrap = type(exc) if isinstance(exc, PhyscoreError) else (InvalidTypeError if isinstance(exc, TypeError) else InvalidInputError)
+        raise wrap(f"walls: wall {k} ({kind}): {exc}") from exc
 
 
 def _restitution(arg: str, e: Any) -> float:
@@ -140,9 +195,19 @@ class Contacts(Term, kind="contacts"):
         Coefficient of restitution ``e`` in (0, 1] of grain–grain collisions. Default 0.9.
     friction : float
         Coulomb friction coefficient ``μ`` ≥ 0. Default 0.5.
-    walls : Plane, Box or sequence of them, optional
-        Walls, each with its own restitution and friction (a :class:`Box` is its faces). They
-        use the same contact law with ``m* = m``.
+    walls : Plane, Box, Sphere, Capsule, OrientedBox or sequence of them, optional
+        Walls, each with its own restitution (in (0, 1]) and friction: the colliders' records
+        (the same objects :meth:`~physcore.Scene.add` takes for particles) as fixed obstacles
+        for the grains. A :class:`Plane` is a floor or a ramp; a :class:`Box`, its faces (one
+        plane each, so a grain in a corner touches two); a :class:`Sphere` a ball to land on, or
+        with ``inside=True`` a bowl; a :class:`Capsule` a rod or rail; an :class:`OrientedBox`
+        a block, a tilted ramp, rounded at its edges and corners as seen by a grain. Grain i
+        touches a wall when the signed distance ``s`` of its centre from the wall's surface
+        (positive on the allowed side; the geometry layer's ``Shape::closest``) is below
+        ``r_i``: overlap ``δ = r_i − s``, normal along the surface's at the nearest point. The
+        contact is the grains' (same law, friction, spin, rolling resistance) with ``m* = m_i``,
+        ``R* = r_i``, and a wall that neither moves nor turns. Plane walls give the same bits
+        as before the other shapes.
     tangential_ratio : float, optional
         ``k_t / k`` > 0 (Hertz: over the normal contact stiffness ``(3/2)k√δ``). Default (None):
         the ratio that gives the scene's solid grains equal normal and tangential periods, 1/3
@@ -175,11 +240,12 @@ class Contacts(Term, kind="contacts"):
     Raises
     ------
     TypeError
-        A wall that is not a Plane or Box; non-numeric parameters.
+        A wall that is not a Plane, Box, Sphere, Capsule or OrientedBox; non-numeric parameters.
     ValueError
-        Parameters out of range (named); at :meth:`~physcore.Scene.add`: a scene whose
-        integrator is neither ``"semi_implicit_euler"`` nor ``"xpbd"``, walls of the wrong dimension, or no
-        ``"radius"`` attribute.
+        Parameters out of range (named; a wall's restitution not in (0, 1]: ``walls``); at
+        :meth:`~physcore.Scene.add`, before the scene changes: a scene whose integrator is
+        neither ``"semi_implicit_euler"`` nor ``"xpbd"``, walls of the wrong dimension
+        (``walls``), or no ``"radius"`` attribute.
     """
 
     stiffness: float
@@ -206,6 +272,10 @@ class Contacts(Term, kind="contacts"):
     record_fields_optional: ClassVar[dict[str, str]] = {
         "rolling_friction": "number",
         "rolling_damping": "number",
+        # Every wall's record ({"type": "sphere", "center": ..., ...}), written only when a wall
+        # is not a plane (the ``wall_*`` arrays then hold none): plane walls are written as
+        # files always held them.
+        "walls": "list",
     }
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
         "wall_points": ("f8", ("W", "D")),
@@ -242,20 +312,46 @@ class Contacts(Term, kind="contacts"):
                 raise InvalidInputError(f"inertia_factor: must be > 0 (I = β m r²), got {b}")
             object.__setattr__(self, "inertia_factor", b)
         walls = _walls(self.walls)
-        for w in walls:
-            _restitution("walls", w.restitution)
+        for k, w in enumerate(walls):
+            if not 0.0 < w.restitution <= 1.0:
+                raise InvalidInputError(
+                    f"walls: wall {k} ({w.part_kind}) has restitution {w.restitution}, which must be in (0, 1] here "
+                    "(a dashpot that never pulls cannot stop a grain dead; use e.g. 0.05)"
+                )
         object.__setattr__(self, "walls", walls)
 
-    def _wall_arrays(self, dim: int) -> dict[str, np.ndarray]:
+    def _check_dim(self, dim: int) -> None:
         for k, w in enumerate(self.walls):
-            if w.point.shape[0] != dim:
-                raise InvalidInputError(f"walls: wall {k} has {w.point.shape[0]} components, the scene is {dim}D")
+            n = _wall_dim(w)
+            if n != dim:
+                raise InvalidInputError(f"walls: wall {k} ({w.part_kind}) has {n} components, the scene is {dim}D")
+
+    def _core_walls(self, dim: int) -> dict[str, Any]:
+        """The walls as the core's parameters: their keys, their numbers (``_wall_numbers``) and
+        their coefficients."""
+        self._check_dim(dim)
+        numbers = [_wall_numbers(w) for w in self.walls]
         return {
-            "wall_points": np.array([w.point for w in self.walls], dtype=np.float64).reshape(-1, dim),
-            "wall_normals": np.array([w.normal for w in self.walls], dtype=np.float64).reshape(-1, dim),
+            "wall_kinds": ",".join(w.part_kind for w in self.walls),
+            "wall_params": np.concatenate(numbers) if numbers else np.zeros(0),
             "wall_restitution": np.array([w.restitution for w in self.walls], dtype=np.float64),
             "wall_friction": np.array([w.friction for w in self.walls], dtype=np.float64),
         }
+
+    def _wall_arrays(self, dim: int) -> dict[str, np.ndarray]:
+        """The plane walls as a scene file's arrays (none if a wall is not a plane: see
+        ``record_fields_optional``)."""
+        self._check_dim(dim)
+        planes = [w for w in self.walls if isinstance(w, Plane)] if self._planes_only() else []
+        return {
+            "wall_points": np.array([w.point for w in planes], dtype=np.float64).reshape(-1, dim),
+            "wall_normals": np.array([w.normal for w in planes], dtype=np.float64).reshape(-1, dim),
+            "wall_restitution": np.array([w.restitution for w in planes], dtype=np.float64),
+            "wall_friction": np.array([w.friction for w in planes], dtype=np.float64),
+        }
+
+    def _planes_only(self) -> bool:
+        return all(isinstance(w, Plane) for w in self.walls)
 
     def _attach(self, ctx: AttachContext, name: str) -> Contacts:
         _core.check_integrator("contacts", ctx.integrator)  # the core's part–integrator rule
@@ -270,7 +366,7 @@ class Contacts(Term, kind="contacts"):
             "rolling_friction": self.rolling_friction,
             "rolling_damping": self.rolling_damping,
             "law": self.law,
-            **{k: np.ascontiguousarray(v).reshape(-1) for k, v in self._wall_arrays(ctx.dim).items()},
+            **self._core_walls(ctx.dim),
         }
         if self.inertia_factor is not None:
             params["inertia_factor"] = self.inertia_factor
@@ -285,18 +381,25 @@ class Contacts(Term, kind="contacts"):
         return (*spin, "coordination")
 
     def _record(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        meta = {f: getattr(self, f) for f in (*self.record_fields, *self.record_fields_optional)}
-        dim = self.walls[0].point.shape[0] if self.walls else self._dim
+        meta = {f: getattr(self, f) for f in (*self.record_fields, "rolling_friction", "rolling_damping")}
+        if not self._planes_only():
+            meta["walls"] = [_wall_entry(w) for w in self.walls]
+        dim = _wall_dim(self.walls[0]) if self.walls else self._dim
         return meta, self._wall_arrays(dim)  # the scene adds "history" (the spins and springs) from the core
 
     @classmethod
     def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
-        walls = [
+        planes = [
             Plane(p, n, restitution=float(e), friction=float(mu))
             for p, n, e, mu in zip(arrays["wall_points"], arrays["wall_normals"], arrays["wall_restitution"], arrays["wall_friction"], strict=True)
         ]
+        walls: list[_Wall] = list(planes)
+        if "walls" in meta:
+            if planes:
+                raise InvalidInputError("walls: a file holds the walls either as records (walls) or as planes (wall_points, ...), not both")
+            walls = [_wall_from_entry(k, e) for k, e in enumerate(meta["walls"])]
         fields = {f: meta[f] for f in cls.record_fields}
         # Files from before rolling resistance hold none: the old contacts, bit for bit.
-        fields.update({f: meta[f] for f in cls.record_fields_optional if f in meta})
+        fields.update({f: meta[f] for f in ("rolling_friction", "rolling_damping") if f in meta})
         term = ctx.add(cls(**fields, walls=walls, name=meta["name"]))
         ctx.sim.set_term_history(term.name, np.ascontiguousarray(arrays["history"], dtype=np.float64))

@@ -289,7 +289,7 @@ def _simulate(
         field_points=points,
         field_label=_field_label(gp),
         velocities=vels,
-        spheres=tuple(_spheres(getattr(scene, "spheres", None), dim)),
+        spheres=tuple(_spheres([*(getattr(scene, "spheres", None) or ()), *_contact_walls(scene, "sphere")], dim)),
         rods=tuple(_drawn_rods(scene, dim)),
         polygons=tuple(_drawn_polygons(scene, dim)),
         bodies=track,
@@ -303,9 +303,8 @@ def _drawn_rods(scene: Any, dim: int) -> list[tuple[np.ndarray, np.ndarray, floa
     from ..terms import Collider
 
     out = []
-    for c in getattr(scene, "colliders", ()):
-        if not isinstance(c, Collider):
-            continue
+    keyed = [c for c in getattr(scene, "colliders", ()) if isinstance(c, Collider)]
+    for c in [*keyed, *_contact_walls(scene, "capsule", "oriented_box")]:
         for a, b, r in c.drawn_rods():
             a, b, r = np.asarray(a, np.float64).reshape(-1), np.asarray(b, np.float64).reshape(-1), float(r)
             if a.shape == b.shape == (dim,) and np.isfinite(a).all() and np.isfinite(b).all() and math.isfinite(r) and r > 0:
@@ -321,9 +320,8 @@ def _drawn_polygons(scene: Any, dim: int) -> list[np.ndarray]:
     if dim != 2:
         return []
     out = []
-    for c in getattr(scene, "colliders", ()):
-        if not isinstance(c, Collider):
-            continue
+    keyed = [c for c in getattr(scene, "colliders", ()) if isinstance(c, Collider)]
+    for c in [*keyed, *_contact_walls(scene, "oriented_box")]:
         for v in c.drawn_polygons():
             v = np.asarray(v, np.float64)
             if v.ndim == 2 and v.shape[0] >= 3 and v.shape[1] == 2 and np.isfinite(v).all():
@@ -355,16 +353,20 @@ def _masses(scene: Any, n: int) -> np.ndarray | None:
     return m.copy() if m.shape == (n,) and np.all(np.isfinite(m) & (m > 0)) else None
 
 
-def _drawn_planes(scene: Any) -> list | None:
-    """The scene's plane colliders plus the walls of its contact terms (drawn alike)."""
-    from ..terms import Plane
-
-    planes = getattr(scene, "planes", None)
+def _contact_walls(scene: Any, *kinds: str) -> list:
+    """The walls of the scene's contact terms (``Contacts.walls``: collider records) whose key
+    is one of ``kinds``, drawn as the colliders of that kind are."""
     from ..fluids import Fluid
 
-    # A fluid's boundary particles are not planes (and Fluid.walls is a deprecated alias).
+    # A fluid's boundary particles are not walls of this kind (and Fluid.walls is a deprecated alias).
     own = [getattr(t, "walls", None) for t in getattr(scene, "terms", ()) if not isinstance(t, Fluid)]
-    walls = [w for ws in own if isinstance(ws, tuple) for w in ws if isinstance(w, Plane)]
+    return [w for ws in own if isinstance(ws, tuple) for w in ws if getattr(w, "part_kind", None) in kinds]
+
+
+def _drawn_planes(scene: Any) -> list | None:
+    """The scene's plane colliders plus the plane walls of its contact terms (drawn alike)."""
+    planes = getattr(scene, "planes", None)
+    walls = _contact_walls(scene, "plane")
     return planes if not walls else [*(planes or []), *walls]
 
 

@@ -1,6 +1,6 @@
 //! The axis-aligned box [lo, hi] with points kept inside (a tank, a room): its outside is the
 //! forbidden side.
-use super::{unbounded, zip, Projection, Shape};
+use super::{unbounded, zip, Projection, Shape, Surface};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
 
@@ -43,6 +43,39 @@ impl<V: Vector> Shape<V> for Aabb<V> {
     /// The outside of a box is unbounded.
     fn bounds(&self) -> (V, V) {
         unbounded()
+    }
+
+    /// Outside: the clamped point c = clamp(x, lo, hi), distance −|x − c|, normal
+    /// (c − x)/|x − c| (back in). Inside or on a face: the nearest face, the least of
+    /// x_k − lo_k (normal +e_k) and hi_k − x_k (normal −e_k) over the axes (the first on a tie,
+    /// lower before upper), that distance (≥ 0), and x with x_k set on that face. One face
+    /// only: a grain in a corner touches two, so the grains' walls take a box as its faces.
+    fn closest(&self, x: V) -> Surface<V> {
+        let c = zip(zip(x, self.lo, Real::max), self.hi, Real::min);
+        let l2 = (x - c).length_squared();
+        // Outside, or NaN (which the clamp does not keep: its distance must be NaN).
+        if l2 != 0.0 {
+            let l = l2.sqrt();
+            return Surface { point: c, normal: (c - x) / l, distance: -l };
+        }
+        let mut best = (Real::INFINITY, 0, 1.0);
+        for k in 0..V::DIM {
+            let (below, above) = (x.comp(k) - self.lo.comp(k), self.hi.comp(k) - x.comp(k));
+            if below < best.0 {
+                best = (below, k, 1.0);
+            }
+            if above < best.0 {
+                best = (above, k, -1.0);
+            }
+        }
+        let (distance, k, s) = best;
+        let (mut n, mut p) = ([0.0; 3], [0.0; 3]);
+        for j in 0..V::DIM {
+            p[j] = x.comp(j);
+        }
+        n[k] = s;
+        p[k] = if s > 0.0 { self.lo.comp(k) } else { self.hi.comp(k) };
+        Surface { point: V::from_slice(&p[..V::DIM]), normal: V::from_slice(&n[..V::DIM]), distance }
     }
 }
 

@@ -1,6 +1,6 @@
 //! The ball {x : |x − c| < r} (a disc in 2D), kept outside; with `inside`, a bowl: the outside
 //! {|x − c| > r} is forbidden. Also the round rule the capsule shares (`onto_round`).
-use super::{splat, unbounded, Projection, Shape};
+use super::{splat, unbounded, up, Projection, Shape, Surface};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
 
@@ -29,14 +29,6 @@ impl<V: Vector> Ball<V> {
     }
 }
 
-/// A unit vector along the last axis (z in 3D, y in 2D): the direction out of a point found
-/// exactly at the centre and at rest.
-fn up<V: Vector>() -> V {
-    let mut a = [0.0; 3];
-    a[V::DIM - 1] = 1.0;
-    V::from_slice(&a[..V::DIM])
-}
-
 /// The round rule, shared by the ball and the capsule: the surface at distance `r` from `c`
 /// (the ball's centre; the capsule's nearest axis point), `x` forbidden when nearer (with
 /// `inside`, farther); it moves radially to c + r·radial. A point at `c` goes back the way it
@@ -62,6 +54,23 @@ pub(crate) fn onto_round<V: Vector>(x: V, v: &V, c: V, r: Real, inside: bool) ->
     Some(Projection { x: moved, dx: moved - x, normal: if inside { -radial } else { radial } })
 }
 
+/// The round surface at distance `r` from `c` seen from `x` (the ball and the capsule's
+/// `closest`): with l = |x − c| and the radial direction u = (x − c)/l (up where l = 0), the
+/// point c + r·u; outside kept (a ball) distance l − r and normal u; inside kept (a bowl)
+/// distance r − l and normal −u.
+#[inline(always)]
+pub(crate) fn round_surface<V: Vector>(x: V, c: V, r: Real, inside: bool) -> Surface<V> {
+    let rel = x - c;
+    let l = rel.length_squared().sqrt();
+    let u = if l > 0.0 { rel / l } else { up::<V>() };
+    let point = c + u * r;
+    if inside {
+        Surface { point, normal: -u, distance: r - l }
+    } else {
+        Surface { point, normal: u, distance: l - r }
+    }
+}
+
 impl<V: Vector> Shape<V> for Ball<V> {
     #[inline(always)]
     fn project(&self, x: V, v: &V) -> Option<Projection<V>> {
@@ -75,6 +84,13 @@ impl<V: Vector> Shape<V> for Ball<V> {
         }
         let r = splat::<V>(self.radius);
         (self.center - r, self.center + r)
+    }
+
+    /// `round_surface` about the centre: distance |x − c| − r (a bowl: r − |x − c|), the
+    /// normal radial (a bowl: towards the centre); at the centre itself, up.
+    #[inline(always)]
+    fn closest(&self, x: V) -> Surface<V> {
+        round_surface(x, self.center, self.radius, self.inside)
     }
 }
 

@@ -2,8 +2,8 @@
 //! The round rule of the ball (`ball::onto_round`) about the nearest point of the axis,
 //! p = a + t (b − a), t = clamp((x − a)·(b − a)/|b − a|², 0, 1) (Ericson, *Real-Time Collision
 //! Detection*, 2005, §5.1.2). With a = b it is a ball.
-use super::ball::onto_round;
-use super::{splat, zip, Projection, Shape};
+use super::ball::{onto_round, round_surface};
+use super::{splat, zip, Projection, Shape, Surface};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
 
@@ -54,6 +54,13 @@ impl<V: Vector> Shape<V> for Capsule<V> {
     fn bounds(&self) -> (V, V) {
         let r = splat::<V>(self.radius);
         (zip(self.a, self.b, Real::min) - r, zip(self.a, self.b, Real::max) + r)
+    }
+
+    /// The ball's rule about the nearest axis point p (module doc): distance |x − p| − r, the
+    /// normal (x − p)/|x − p| (up on the axis itself).
+    #[inline(always)]
+    fn closest(&self, x: V) -> Surface<V> {
+        round_surface(x, self.nearest(x), self.radius, false)
     }
 }
 

@@ -1,5 +1,5 @@
 //! The half-space {x : (x − p)·n ≥ 0}: a floor, a wall, a ramp of any tilt.
-use super::{unbounded, Projection, Shape};
+use super::{unbounded, Projection, Shape, Surface};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
 
@@ -54,6 +54,15 @@ impl<V: Vector> Shape<V> for HalfSpace<V> {
             lo[k] = self.point.comp(k);
         }
         (V::from_slice(&lo[..V::DIM]), V::from_slice(&hi[..V::DIM]))
+    }
+
+    /// Distance (x − p)·n, normal n, point x − n·distance. The grains' plane walls take the
+    /// distance and the normal as they always computed them (the same operations, the same bits).
+    #[inline(always)]
+    fn closest(&self, x: V) -> Surface<V> {
+        let n = self.normal;
+        let distance = (x - self.point).dot(n);
+        Surface { point: x - n * distance, normal: n, distance }
     }
 }
 

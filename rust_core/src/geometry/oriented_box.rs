@@ -9,7 +9,7 @@
 //! R = [[cos θ, −sin θ], [sin θ, cos θ]]; in 3D the rotation vector θk (axis k, angle θ, rad),
 //! R from Rodrigues' formula (Murray, Li & Sastry, *A Mathematical Introduction to Robotic
 //! Manipulation*, 1994, §2.2), computed through glam's quaternion.
-use super::{Projection, Shape};
+use super::{Projection, Shape, Surface};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
 use glam::{DMat3, DQuat, DVec3};
@@ -91,6 +91,51 @@ impl<V: Vector> Shape<V> for OrientedBox<V> {
         }
         let e = V::from_slice(&ext[..V::DIM]);
         (self.center - e, self.center + e)
+    }
+
+    /// With the local coordinates q_j = (x − c)·u_j: inside or on the surface (|q_j| ≤ h_j on
+    /// every axis), the face `project` leaves through (least depth h_j − |q_j|, the first on a
+    /// tie), distance −(h_j − |q_j|), normal ±u_j (the sign of q_j), point x + normal·depth.
+    /// Outside across one face only (|q_j| > h_j on one axis j), that face: distance
+    /// |q_j| − h_j, normal ±u_j. Outside an edge or a corner, the clamped point
+    /// p = c + Σ_j clamp(q_j, −h_j, h_j) u_j (Ericson 2005, §5.1.4), distance |x − p|, normal
+    /// (x − p)/|x − p|: a grain rolls round an edge as round a rod.
+    #[inline(always)]
+    fn closest(&self, x: V) -> Surface<V> {
+        let rel = x - self.center;
+        let mut q = [0.0; 3];
+        let (mut outside, mut across) = (0, 0);
+        let mut least = (Real::INFINITY, 0);
+        for j in 0..V::DIM {
+            q[j] = rel.dot(self.axes[j]);
+            let depth = self.half[j] - q[j].abs();
+            // Outside on this axis (NaN included: its distance comes out NaN below).
+            if !(depth >= 0.0) {
+                outside += 1;
+                across = j;
+            }
+            if depth < least.0 {
+                least = (depth, j);
+            }
+        }
+        let face = |j: usize| if q[j] < 0.0 { -self.axes[j] } else { self.axes[j] };
+        if outside == 0 {
+            let (depth, j) = least;
+            let normal = face(j);
+            return Surface { point: x + normal * depth, normal, distance: -depth };
+        }
+        if outside == 1 {
+            let normal = face(across);
+            let distance = q[across].abs() - self.half[across];
+            return Surface { point: x - normal * distance, normal, distance };
+        }
+        let mut point = self.center;
+        for j in 0..V::DIM {
+            point += self.axes[j] * q[j].clamp(-self.half[j], self.half[j]);
+        }
+        let off = x - point;
+        let distance = off.length_squared().sqrt();
+        Surface { point, normal: off / distance, distance }
     }
 }
 

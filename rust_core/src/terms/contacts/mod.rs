@@ -1,7 +1,14 @@
 //! Contacts between grains: the discrete element method (DEM) for discs (2D) and spheres (3D).
 //!
 //! Grains are the scene's particles with a `radius` attribute > 0; pinned particles are fixed
-//! obstacles (pegs). Walls are half-spaces `{x : (x − p)·n ≥ 0}`.
+//! obstacles (pegs). Walls are shapes of the geometry layer (`geometry::AnyShape`: a half-space
+//! `{x : (x − p)·n ≥ 0}`, a ball or a bowl, a capsule, an oriented box), each with its own
+//! restitution and friction. A grain i touches wall w when the signed distance of its centre
+//! from the surface (`Shape::closest`: distance s, unit normal u into the allowed side) is
+//! below r_i: overlap δ = r_i − s, normal n = −u (from the grain to the wall), lever
+//! a_i = r_i − δ/2, and the pair laws below with m* = m_i, R* = r_i and a wall that neither
+//! moves nor turns. A plane's distance and normal are the arithmetic this term always had for
+//! it, so plane walls keep their bits.
 //!
 //! Pair (i, j) touches when d = |x_j − x_i| < r_i + r_j: normal n = (x_j − x_i)/d, overlap
 //! δ = r_i + r_j − d, effective mass m* = 1/(1/m_i + 1/m_j), levers a_i = r_i − δ/2 (both
@@ -53,9 +60,10 @@
 //! Contact search: Verlet lists (Verlet, Phys. Rev. 159 (1967) 98; Allen & Tildesley,
 //! *Computer Simulation of Liquids*, §5.3). Candidates are the pairs i < j closer than
 //! r_i + r_j + s (skin s = `SKIN`·r_max), found through a cell list of side 2 r_max + s, and the
-//! grain–wall pairs closer than r_i + s; they are rebuilt once a grain has moved s/2 since the
-//! last build (no contact can then form unseen), or the radii change. Each candidate carries its
-//! contact's state (`Link`), carried over by partner when the lists are rebuilt.
+//! grain–wall pairs closer than r_i + s (by the signed distance, which changes by no more than
+//! the grain moves); they are rebuilt once a grain has moved s/2 since the last build (no
+//! contact can then form unseen), or the radii change. Each candidate carries its contact's
+//! state (`Link`), carried over by partner when the lists are rebuilt.
 //!
 //! Determinism and conservation: each pair is evaluated once, from its lower index, into its
 //! own slot; each particle then gathers its pairs' forces in a fixed order (its pairs as the
@@ -82,6 +90,7 @@ use super::registry::{Context, Params};
 use super::{Diagnostics, OwnState, Scratch, Term, Traits, Write};
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
+use crate::geometry::{AnyShape, Ball, Capsule, HalfSpace, OrientedBox, Shape, Surface};
 use crate::neighbors::CellList;
 use crate::par::{self, CHUNK};
 use crate::simd;
@@ -107,14 +116,34 @@ pub enum Law {
     Hertz,
 }
 
-/// A half-space wall with its own contact coefficients.
-#[derive(Clone, Copy, Debug)]
-pub struct Wall<V> {
-    pub point: V,
-    /// Unit normal into the allowed side.
-    pub normal: V,
+/// A wall: a shape of the geometry layer with its own contact coefficients.
+#[derive(Clone, Debug)]
+pub struct Wall<V: Vector> {
+    pub shape: AnyShape<V>,
+    /// The damping ratio of its restitution (`damping_ratio`).
     pub zeta: Real,
     pub friction: Real,
+}
+
+impl<V: Vector> Wall<V> {
+    /// The wall's surface seen from `x` (grain centre): the overlap of a grain of radius `r` is
+    /// r − distance, its normal (grain to wall) −normal. A plane inline; the other shapes
+    /// through one call (`rounded`), so that their code stays out of the passes' loops. (Scenes
+    /// whose walls are all planes do not come here: the passes take a loop of their own for
+    /// them, `Contacts::planes`.)
+    #[inline(always)]
+    fn closest(&self, x: V) -> Surface<V> {
+        match &self.shape {
+            AnyShape::HalfSpace(h) => h.closest(x),
+            shape => rounded(shape, x),
+        }
+    }
+}
+
+/// `Shape::closest` of a wall that is not a plane (see `Wall::closest`).
+#[inline(never)]
+fn rounded<V: Vector>(shape: &AnyShape<V>, x: V) -> Surface<V> {
+    shape.closest(x)
 }
 
 /// A candidate contact (a pair i < j, or a grain and a wall) and the state of its contact,
@@ -213,6 +242,9 @@ struct Lists<V: Vector> {
     wstart: Vec<u32>,
     links: Vec<Link<V>>,
     wlinks: Vec<Link<V>>,
+    /// Beside `wlinks`: the wall's normal into the allowed side at the contact's last
+    /// evaluation (its force was f_t + normal·f_n; "xpbd"'s commits read it).
+    wnormal: Vec<V>,
     forces: Vec<PairForce<V>>,
     /// The rolling springs beside `links` and `wlinks`, and each pair's rolling torque on its
     /// first grain (N·m; the second gets its negative); empty without rolling resistance.
@@ -726,28 +758,8 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
         rolling_friction,
         rolling_damping,
     };
-    let points: Vec<V> = p.take_vectors("wall_points")?;
-    let normals: Vec<V> = p.take_vectors("wall_normals")?;
-    let e = p.take_floats("wall_restitution")?;
-    let mu = p.take_floats("wall_friction")?;
-    let w = points.len();
-    if normals.len() != w || e.len() != w || mu.len() != w {
-        return Err(invalid("walls", "points, normals, restitution and friction must have one entry per wall"));
-    }
-    let mut walls = Vec::with_capacity(w);
-    for k in 0..w {
-        let l2 = normals[k].length_squared();
-        if !(l2.is_finite() && l2 > 0.0 && points[k].is_finite()) {
-            return Err(invalid("walls", format!("wall {k}: the point must be finite and the normal non-zero")));
-        }
-        let e = restitution_arg("walls", e[k])?;
-        walls.push(Wall {
-            point: points[k],
-            normal: normals[k] / l2.sqrt(),
-            zeta: damping_ratio(law, e),
-            friction: friction_arg("walls", mu[k])?,
-        });
-    }
+    let walls = walls::<V>(&mut p, law)?;
+    let w = walls.len();
     if u32::try_from(ctx.n_particles + w).is_err() {
         return Err(invalid("walls", "too many particles and walls for 32-bit contact indices"));
     }
@@ -755,6 +767,69 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
 }
 // "xpbd" is semi-implicit Euler per substep under the force terms (then projections).
 crate::register_term!("contacts", build, (&["semi_implicit_euler", "xpbd"], "integrator", "Contacts need"));
+
+/// The walls from `wall_kinds` (their collider keys, comma-separated: "plane", "sphere",
+/// "capsule", "oriented_box"), `wall_params` (each wall's numbers, in order: a plane its point
+/// and normal (any length > 0); a sphere its centre, radius and inside (1) or not (0); a capsule
+/// its ends a, b and radius; an oriented box its centre, half extents and rotation (1 number in
+/// 2D, 3 in 3D)), `wall_restitution` and `wall_friction`; `InvalidInput` naming "walls" and the
+/// wall if one is out of range.
+fn walls<V: Vector>(p: &mut Params, law: Law) -> Result<Vec<Wall<V>>> {
+    let kinds = if p.has("wall_kinds") { p.text("wall_kinds")?.to_string() } else { String::new() };
+    let kinds: Vec<&str> = if kinds.is_empty() { Vec::new() } else { kinds.split(',').collect() };
+    let params = p.take_floats("wall_params")?;
+    let e = p.take_floats("wall_restitution")?;
+    let mu = p.take_floats("wall_friction")?;
+    let w = kinds.len();
+    if e.len() != w || mu.len() != w {
+        return Err(invalid("walls", "kinds, restitution and friction must have one entry per wall"));
+    }
+    let (d, a) = (V::DIM, V::AXIAL_DIM);
+    let mut at = 0;
+    let mut walls = Vec::with_capacity(w);
+    for (k, &kind) in kinds.iter().enumerate() {
+        let len = match kind {
+            "plane" => 2 * d,
+            "sphere" => d + 2,
+            "capsule" => 2 * d + 1,
+            "oriented_box" => 2 * d + a,
+            other => {
+                return Err(invalid(
+                    "walls",
+                    format!("wall {k}: unknown shape {other:?}; valid: plane, sphere, capsule, oriented_box"),
+                ))
+            }
+        };
+        let Some(q) = params.get(at..at + len) else {
+            return Err(invalid("walls", format!("wall {k} ({kind}): too few parameters")));
+        };
+        at += len;
+        let named = |e: crate::Error| invalid("walls", format!("wall {k} ({kind}): {e}"));
+        if !q.iter().all(|c| c.is_finite()) {
+            return Err(invalid("walls", format!("wall {k} ({kind}): its parameters must be finite")));
+        }
+        let vec = |i: usize| V::from_slice(&q[i * d..(i + 1) * d]);
+        let shape: AnyShape<V> = match kind {
+            "plane" => HalfSpace::new(vec(0), vec(1)).map_err(named)?.into(),
+            "sphere" => {
+                let inside = q[d + 1];
+                if inside != 0.0 && inside != 1.0 {
+                    return Err(invalid("walls", format!("wall {k} (sphere): inside must be 0 or 1, got {inside}")));
+                }
+                let inside = inside == 1.0;
+                Ball::new(vec(0), q[d], inside).map_err(named)?.into()
+            }
+            "capsule" => Capsule::new(vec(0), vec(1), q[2 * d]).map_err(named)?.into(),
+            _ => OrientedBox::new(vec(0), vec(1), V::axial_from_slice(&q[2 * d..2 * d + a])).map_err(named)?.into(),
+        };
+        let e = restitution_arg("walls", e[k])?;
+        walls.push(Wall { shape, zeta: damping_ratio(law, e), friction: friction_arg("walls", mu[k])? });
+    }
+    if at != params.len() {
+        return Err(invalid("walls", format!("{} parameters for walls that take {at}", params.len())));
+    }
+    Ok(walls)
+}
 
 fn restitution_arg(key: &str, e: Real) -> Result<Real> {
     if !(e > 0.0 && e <= 1.0) {
@@ -1209,7 +1284,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
                 continue;
             }
             for wall in &self.walls {
-                let d = r[i] - (x[i] - wall.point).dot(wall.normal);
+                let d = r[i] - wall.closest(x[i]).distance;
                 if d > 0.0 {
                     u += mat.normal_energy(d);
                 }

@@ -136,9 +136,35 @@ impl<V: Vector> Contacts<V> {
     /// The pass over grains: commits the last step's live wall contacts if `commit` is set;
     /// then, if `eval`, evaluates the wall contacts and gathers each grain's force into `f`
     /// and torque (its pairs as the first grain, then as the second, then its walls).
+    ///
+    /// Walls that are all planes (the usual case) take a loop of their own, the plane's
+    /// arithmetic inline and nothing else: with any shape possible in the loop (a `match`, a
+    /// call for the rounded ones, the normal kept for "xpbd") the pass ran 10 % more
+    /// instructions (callgrind, 3,600 spheres over a floor) even where no grain touched a
+    /// wall; through its own loop, within 1 % of the plane walls' pass before the shapes.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn grain_pass(
         &mut self,
+        x: &[V],
+        v: &[V],
+        model: &Model,
+        r: &[Real],
+        commit: Option<Commit>,
+        f: &mut [V],
+        write: Write,
+        eval: bool,
+    ) -> Sums {
+        match self.planes() {
+            Some(planes) => self.grain_pass_with::<true>(&planes, x, v, model, r, commit, f, write, eval),
+            None => self.grain_pass_with::<false>(&[], x, v, model, r, commit, f, write, eval),
+        }
+    }
+
+    /// `grain_pass`, with `PLANES`: every wall is the half-space `planes[w]`.
+    #[allow(clippy::too_many_arguments)]
+    fn grain_pass_with<const PLANES: bool>(
+        &mut self,
+        planes: &[HalfSpace<V>],
         x: &[V],
         v: &[V],
         model: &Model,
@@ -158,7 +184,7 @@ impl<V: Vector> Contacts<V> {
             .uniform
             .map(|(m, im0)| walls.iter().map(|w| mat.coef(im0, (kn * m).sqrt(), w.zeta, w.friction, dt)).collect());
         let im = &model.inv_mass;
-        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], wl: &mut [Link<V>]| -> Sums {
+        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], (wl, wn): (&mut [Link<V>], &mut [V])| -> Sums {
             let s0 = c * CHUNK;
             let base = wstart[s0] as usize;
             let mut sums = Sums::default();
@@ -190,7 +216,10 @@ impl<V: Vector> Contacts<V> {
                 for q in a..b {
                     let w = &walls[wall[q] as usize];
                     let l = &mut wl[q - base];
-                    let sd = (x[i] - w.point).dot(w.normal);
+                    // Signed distance and normal into the allowed side (a plane: (x − p)·n and
+                    // n, as this pass always computed them).
+                    let surface = if PLANES { planes[wall[q] as usize].closest(x[i]) } else { w.closest(x[i]) };
+                    let sd = surface.distance;
                     let touching = eval && sd < ri;
                     if !(touching || (commit.is_some() && l.live())) {
                         if eval {
@@ -198,13 +227,19 @@ impl<V: Vector> Contacts<V> {
                         }
                         continue;
                     }
-                    let nrm = -w.normal;
+                    let nrm = -surface.normal;
                     let d = ri - sd;
                     let ai = ri - 0.5 * d;
                     let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
                     if let (Some(c), true) = (commit, l.live()) {
-                        // The wall's normal is fixed: its force was f_t − n f_n.
-                        let fp = l.ft + w.normal * l.fn_;
+                        // "xpbd"'s commits read the force of the last evaluation, f_t − n f_n
+                        // with that evaluation's normal (a plane's is fixed); a full commit
+                        // does not.
+                        let fp = match c {
+                            Commit::Full(_) => V::ZERO,
+                            _ if PLANES => l.ft + surface.normal * l.fn_,
+                            _ => l.ft + wn[q - base] * l.fn_,
+                        };
                         mat.commit(l, nrm, d, vc, w.friction, c, fp, v[i], &mut sums);
                     }
                     if touching {
@@ -213,6 +248,9 @@ impl<V: Vector> Contacts<V> {
                             None => mat.coef(im[i], (kn * model.mass[i]).sqrt(), w.zeta, w.friction, dt),
                         };
                         let (fw, ft) = mat.evaluate(l, nrm, d, vc, &c, dt);
+                        if !PLANES {
+                            wn[q - base] = surface.normal;
+                        }
                         force += fw;
                         torque = torque + moment(nrm, ft) * ai;
                         sums.walls += 1;
@@ -231,10 +269,11 @@ impl<V: Vector> Contacts<V> {
         let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| wstart[(c * CHUNK).min(n)] as usize).collect();
         let torque = &mut self.torque;
         let wls = split_at(&mut l.wlinks, &bounds);
+        let wns = split_at(&mut l.wnormal, &bounds);
         let parts: Vec<Sums> = match par::fork_if(n, || {
             f.par_chunks_mut(CHUNK)
                 .zip(torque.par_chunks_mut(CHUNK))
-                .zip(wls.into_par_iter())
+                .zip(wls.into_par_iter().zip(wns))
                 .enumerate()
                 .map(|(c, ((f, t), w))| body(c, f, t, w))
                 .collect()
@@ -242,15 +281,27 @@ impl<V: Vector> Contacts<V> {
             Some(p) => p,
             None => {
                 let wls = split_at(&mut l.wlinks, &bounds);
+                let wns = split_at(&mut l.wnormal, &bounds);
                 f.chunks_mut(CHUNK)
                     .zip(torque.chunks_mut(CHUNK))
-                    .zip(wls)
+                    .zip(wls.into_iter().zip(wns))
                     .enumerate()
                     .map(|(c, ((f, t), w))| body(c, f, t, w))
                     .collect()
             }
         };
         parts.into_iter().fold(Sums::default(), Sums::add)
+    }
+
+    /// The walls as half-spaces, if every one is a plane.
+    fn planes(&self) -> Option<Vec<HalfSpace<V>>> {
+        self.walls
+            .iter()
+            .map(|w| match &w.shape {
+                AnyShape::HalfSpace(h) => Some(h.clone()),
+                _ => None,
+            })
+            .collect()
     }
 
     /// Entries per live contact in `history`: first grain, partner, ξ, its energy, and with
@@ -268,6 +319,24 @@ impl<V: Vector> Contacts<V> {
     /// R* = r_i r_j/(r_i + r_j) (r_i for a wall), and I_r = 1/(1/(I_i + m_i r_i²) +
     /// 1/(I_j + m_j r_j²)) the moment of inertia of its dashpot (a pinned grain or a wall: ∞).
     pub(super) fn roll_pass(&mut self, x: &[V], model: &Model, r: &[Real], commit: Option<Real>, eval: bool) -> Sums {
+        // Plane walls alone take their own loop, as in `grain_pass` (4 % more instructions
+        // through the one for any shape, 3,600 spheres rolling on a floor).
+        match self.planes() {
+            Some(planes) => self.roll_pass_with::<true>(&planes, x, model, r, commit, eval),
+            None => self.roll_pass_with::<false>(&[], x, model, r, commit, eval),
+        }
+    }
+
+    /// `roll_pass`, with `PLANES`: every wall is the half-space `planes[w]`.
+    fn roll_pass_with<const PLANES: bool>(
+        &mut self,
+        planes: &[HalfSpace<V>],
+        x: &[V],
+        model: &Model,
+        r: &[Real],
+        commit: Option<Real>,
+        eval: bool,
+    ) -> Sums {
         let n = x.len();
         let Some(l) = self.lists.as_mut() else { return Sums::default() };
         let (mat, omega, walls, dt) = (&self.material, &self.omega, &self.walls, self.dt);
@@ -350,9 +419,10 @@ impl<V: Vector> Contacts<V> {
                     if !(rl.live || on) {
                         continue;
                     }
-                    let w = &walls[wall[q] as usize];
-                    let nrm = -w.normal;
-                    let d = r[i] - (x[i] - w.point).dot(w.normal);
+                    let w = wall[q] as usize;
+                    let surface = if PLANES { planes[w].closest(x[i]) } else { walls[w].closest(x[i]) };
+                    let nrm = -surface.normal;
+                    let d = r[i] - surface.distance;
                     let wr = rolling_part::<V>(omega[i], nrm);
                     if let (Some(h), true) = (commit, rl.live) {
                         mat.roll_commit(rl, d, r[i], wr, h, &mut sums);

@@ -92,14 +92,14 @@ fn lanes_match_the_loop<V: Vector>() {
             };
             let mut normal = [0.0; 3];
             normal[V::DIM - 1] = 1.0;
-            let wall =
-                Wall { point: V::ZERO, normal: V::from_slice(&normal), zeta: damping_ratio(law, 0.7), friction: 0.4 };
+            let plane = HalfSpace::new(V::ZERO, V::from_slice(&normal)).unwrap();
+            let wall = Wall { shape: plane.into(), zeta: damping_ratio(law, 0.7), friction: 0.4 };
             let (x0, v0, model) = pile::<V>(300, uniform, 7);
             let mut reference = None;
             let paths =
                 std::iter::once(PairPath::Loop).chain(simd::Level::available().into_iter().map(PairPath::Lanes));
             for path in paths {
-                let mut c = Contacts::new("c".into(), material, vec![wall]);
+                let mut c = Contacts::new("c".into(), material, vec![wall.clone()]);
                 c.path = path;
                 let (mut x, mut v) = (x0.clone(), v0.clone());
                 let out = run(&mut c, &mut x, &mut v, &model, 2e-5, 60);
@@ -148,8 +148,8 @@ fn a_disc_rolling_on_a_floor_stops_where_its_rolling_friction_says() {
         rolling_friction: mu_r,
         rolling_damping: 0.3,
     };
-    let floor =
-        Wall { point: glam::DVec2::ZERO, normal: glam::DVec2::Y, zeta: damping_ratio(Law::Linear, 0.5), friction: 0.5 };
+    let plane = HalfSpace::new(glam::DVec2::ZERO, glam::DVec2::Y).unwrap();
+    let floor = Wall { shape: plane.into(), zeta: damping_ratio(Law::Linear, 0.5), friction: 0.5 };
     let d0 = m * g / k;
     let mut x = vec![glam::DVec2::new(0.0, r - d0)];
     let mut v = vec![glam::DVec2::new(v0, 0.0)];
@@ -215,4 +215,141 @@ fn an_unstepped_history_loads_and_a_diverged_snapshot_restores() {
     c.fit(0);
     c.restore_history(&diverged, 3);
     assert!(c.omega[1].is_nan() && c.dissipated[0] == Real::INFINITY && c.omega.len() == 3);
+}
+
+fn linear(e: Real, mu: Real) -> Material {
+    let ratio: Real = 1.0 / 3.0;
+    Material {
+        law: Law::Linear,
+        stiffness: 1e4,
+        tangential_ratio: ratio,
+        restitution: e,
+        zeta: damping_ratio(Law::Linear, e),
+        friction: mu,
+        inertia_factor: 0.5,
+        tangential_damping: ratio.sqrt(),
+        rolling_friction: 0.0,
+        rolling_damping: 0.0,
+    }
+}
+
+/// A disc of radius r dropped onto each shape (and into a bowl) comes to rest touching it at
+/// the linear law's overlap, straight above where it fell: the shape's top, plus r − δ. The
+/// overlap at rest is m g/k (1 + hγ) exactly: the dashpot reads the mid-step speed
+/// v − h f (h = ½dt/m, `Material::normal`), which at rest is −h f, not 0; at a 50th of a
+/// contact hγ = ζπ/50, 3 % here (ζ = 0.49 for e = 0.3).
+#[test]
+fn a_grain_rests_on_every_wall_shape_at_the_linear_overlap() {
+    use glam::DVec2;
+    let (m, r, k, g) = (0.01, 0.01, 1e4, 9.81);
+    let top = 0.1;
+    let cases: Vec<(&str, AnyShape<DVec2>)> = vec![
+        ("plane", HalfSpace::new(DVec2::new(0.0, top), DVec2::Y).unwrap().into()),
+        ("ball", Ball::new(DVec2::new(0.0, top - 0.05), 0.05, false).unwrap().into()),
+        ("bowl", Ball::new(DVec2::new(0.0, top + 0.05), 0.05, true).unwrap().into()),
+        ("capsule", Capsule::new(DVec2::new(-0.05, top - 0.02), DVec2::new(0.05, top - 0.02), 0.02).unwrap().into()),
+        ("oriented box", OrientedBox::new(DVec2::new(0.0, top - 0.03), DVec2::new(0.05, 0.03), 0.0).unwrap().into()),
+    ];
+    for (what, shape) in cases {
+        let wall = Wall { shape, zeta: damping_ratio(Law::Linear, 0.3), friction: 0.5 };
+        let mut c = Contacts::new("c".into(), linear(0.3, 0.5), vec![wall]);
+        let mut x = vec![DVec2::new(0.0, top + r + 0.005)];
+        let mut v = vec![DVec2::ZERO];
+        let mut attributes = std::collections::BTreeMap::new();
+        attributes.insert("radius", vec![r]);
+        let model = Model { mass: vec![m], inv_mass: vec![1.0 / m], attributes };
+        let dt = std::f64::consts::PI * (m / k).sqrt() / STEPS_PER_CONTACT;
+        let out = run(&mut c, &mut x, &mut v, &model, dt, (0.5 / dt) as usize);
+        assert!(out.iter().all(|a| a.is_finite()), "{what}");
+        let hg = 0.5 * dt / m * 2.0 * damping_ratio(Law::Linear, 0.3) * (k * m).sqrt();
+        let overlap = top + r - x[0].y;
+        let want = m * g / k * (1.0 + hg);
+        assert!((overlap - want).abs() < 1e-6 * want, "{what}: overlap {overlap} m, want {want} m");
+        assert!((overlap / (m * g / k) - 1.0).abs() < 0.04, "{what}: overlap {overlap} m against m g/k");
+        assert!(x[0].x.abs() < 1e-12 && v[0].length() < 1e-6, "{what}: {:?} {:?}", x[0], v[0]);
+        assert_eq!(c.count(), 1, "{what}");
+    }
+}
+
+/// The walls from the term's parameters: each shape's numbers in order, refused naming "walls"
+/// and the wall (wrong count, unknown shape, non-finite, out of range).
+#[test]
+fn walls_from_parameters_are_checked_and_named() {
+    use crate::terms::registry::Value;
+    use glam::{DVec2, DVec3};
+    let params = |kinds: &str, p: Vec<Real>, w: usize| {
+        Params::new()
+            .with("wall_kinds", Value::Text(kinds.into()))
+            .with("wall_params", Value::Floats(p))
+            .with("wall_restitution", Value::Floats(vec![0.5; w]))
+            .with("wall_friction", Value::Floats(vec![0.2; w]))
+    };
+    let p = vec![0.0, 0.0, 0.0, 2.0, 1.0, 1.0, 0.5, 1.0, 0.0, 0.0, 1.0, 0.0, 0.1, 0.0, 0.0, 1.0, 0.5, 0.3];
+    let w = walls::<DVec2>(&mut params("plane,sphere,capsule,oriented_box", p, 4), Law::Linear).unwrap();
+    assert_eq!(w[0].shape, AnyShape::from(HalfSpace::new(DVec2::ZERO, DVec2::Y).unwrap()));
+    assert_eq!(w[1].shape, AnyShape::from(Ball::new(DVec2::new(1.0, 1.0), 0.5, true).unwrap()));
+    assert_eq!(w[2].shape, AnyShape::from(Capsule::new(DVec2::ZERO, DVec2::new(1.0, 0.0), 0.1).unwrap()));
+    let ob = OrientedBox::new(DVec2::ZERO, DVec2::new(1.0, 0.5), 0.3).unwrap();
+    assert_eq!(w[3].shape, AnyShape::from(ob));
+    let p3 = vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.1, 0.2, 0.3];
+    let w3 = walls::<DVec3>(&mut params("oriented_box", p3, 1), Law::Linear).unwrap();
+    assert_eq!(
+        w3[0].shape,
+        AnyShape::from(OrientedBox::new(DVec3::ZERO, DVec3::ONE, DVec3::new(0.1, 0.2, 0.3)).unwrap())
+    );
+    assert!(walls::<DVec2>(&mut params("", vec![], 0), Law::Linear).unwrap().is_empty());
+    let refused = |kinds: &str, p: Vec<Real>, w: usize| match walls::<DVec2>(&mut params(kinds, p, w), Law::Linear) {
+        Err(crate::Error::InvalidInput { arg, msg }) => {
+            assert_eq!(arg, "walls", "{msg}");
+            msg
+        }
+        other => panic!("{kinds}: expected InvalidInput, got {other:?}"),
+    };
+    assert!(refused("cone", vec![0.0; 4], 1).contains("unknown shape"));
+    assert!(refused("sphere", vec![0.0, 0.0, 1.0], 1).contains("too few"));
+    assert!(refused("sphere", vec![0.0, 0.0, 1.0, 0.0, 9.0], 1).contains("that take 4"));
+    assert!(refused("sphere", vec![f64::NAN, 0.0, 1.0, 0.0], 1).contains("wall 0 (sphere)"));
+    assert!(refused("sphere", vec![0.0, 0.0, -1.0, 0.0], 1).contains("radius"));
+    assert!(refused("sphere", vec![0.0, 0.0, 1.0, 0.5], 1).contains("inside"));
+    assert!(refused("plane,plane", vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], 2).contains("wall 1 (plane): normal"));
+    assert!(refused("capsule", vec![0.0; 4], 1).contains("too few"));
+    assert!(refused("oriented_box", vec![0.0, 0.0, 1.0, -1.0, 0.0], 1).contains("half_extents"));
+    assert!(refused("plane", vec![0.0, 0.0, 0.0, 1.0], 2).contains("one entry per wall"));
+}
+
+/// The passes' loop for any shape gives a plane wall the bits of the loop for planes alone:
+/// a pile on a floor, with and without a ball far away (which then sends every wall through
+/// the loop for any shape), the same positions, forces, torques and books, bit for bit.
+#[test]
+fn a_plane_wall_has_the_same_bits_beside_any_shape() {
+    fn check<V: Vector>() {
+        let mut normal = [0.0; 3];
+        normal[V::DIM - 1] = 1.0;
+        let floor = Wall {
+            shape: HalfSpace::new(V::ZERO, V::from_slice(&normal[..V::DIM])).unwrap().into(),
+            zeta: damping_ratio(Law::Linear, 0.7),
+            friction: 0.4,
+        };
+        let far = Wall {
+            shape: Ball::new(V::from_slice(&[1e3; 3][..V::DIM]), 1.0, false).unwrap().into(),
+            zeta: damping_ratio(Law::Linear, 0.5),
+            friction: 0.2,
+        };
+        let (x0, v0, model) = pile::<V>(300, false, 11);
+        let mut material = linear(0.5, 0.3);
+        material.rolling_friction = 0.2;
+        material.rolling_damping = 0.3;
+        let mut runs = Vec::new();
+        for walls in [vec![floor.clone()], vec![floor.clone(), far.clone()]] {
+            let mut c = Contacts::new("c".into(), material, walls);
+            let (mut x, mut v) = (x0.clone(), v0.clone());
+            let out = run(&mut c, &mut x, &mut v, &model, 2e-5, 80);
+            assert!(c.last.walls > 0, "{}D: no grain on the floor", V::DIM);
+            let bits: Vec<u64> = x.iter().flat_map(|p| (0..V::DIM).map(|k| p.comp(k).to_bits())).collect();
+            runs.push((bits, out.iter().map(|a| a.to_bits()).collect::<Vec<_>>()));
+        }
+        assert!(runs[0] == runs[1], "{}D: the loop for any shape changed a plane's bits", V::DIM);
+    }
+    check::<glam::DVec2>();
+    check::<glam::DVec3>();
 }

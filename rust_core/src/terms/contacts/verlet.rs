@@ -94,7 +94,9 @@ impl<V: Vector> Contacts<V> {
                 let w0 = out.wall.len();
                 if ri > 0.0 {
                     for (w, wall) in walls.iter().enumerate() {
-                        if (x[i] - wall.point).dot(wall.normal) < ri + skin {
+                        // The distance changes by at most a grain's move, less than the skin
+                        // until the next build.
+                        if wall.closest(x[i]).distance < ri + skin {
                             out.wall.push(w as u32);
                         }
                     }
@@ -175,6 +177,8 @@ impl<V: Vector> Contacts<V> {
             fill[j as usize] += 1;
         }
         l.fill = fill;
+        l.wnormal.clear();
+        l.wnormal.resize(l.wall.len(), V::ZERO);
         l.forces.clear();
         l.forces.resize(l.pj.len(), PairForce::ZERO);
         l.rt.clear();
