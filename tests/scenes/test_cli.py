@@ -15,11 +15,14 @@ from physcore import cli, render
 from physcore.cli import main
 
 SMALL = ["--frames", "5", "--size", "64x48", "--steps-per-frame", "2"]
+# The chain falls visibly from frame to frame (a frame the same as the one before is merged
+# into it by the GIF writer, and the chain, with no trail, barely moves in 2 steps).
+CHAIN = ["--frames", "5", "--size", "64x48", "--steps-per-frame", "300"]
 
 
 def test_render_spring_chain(tmp_path, capsys):
     out = tmp_path / "x.gif"
-    assert main(["render", "spring_chain", "-o", str(out)] + SMALL) == 0
+    assert main(["render", "spring_chain", "-o", str(out)] + CHAIN) == 0
     with Image.open(out) as im:
         assert im.n_frames == 5
         assert im.size == (64, 48)
@@ -43,7 +46,7 @@ def test_an_old_integrator_name_renders_with_a_note(tmp_path, capsys):
 def test_render_default_output_path_and_params(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     args = ["render", "spring_chain", "--param", "dim=3", "--param", "n=6", "--integrator", "rk4", "--dt", "5e-4", "-q"]
-    assert main(args + SMALL) == 0
+    assert main(args + CHAIN) == 0
     with Image.open(tmp_path / "spring_chain.gif") as im:
         assert im.n_frames == 5
     stdout = capsys.readouterr().out

@@ -32,6 +32,8 @@ _scene_state    reading a scene's optional parts: springs and strain, planes, pr
 _recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
 _colorbar       the colour bar: labels, layout and drawing into the background.
 _mesh           ``Mesh`` (triangles over the particles) and its shading; the core rasterises it.
+_style          ``Style`` (fading trails, line widths, lit spheres, a backdrop and props, swept
+                areas): its checks and drawing helpers; ``swept_polygons``.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
                 or RGB with a shaded mesh).
 _gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one, rasterise, write a
@@ -82,12 +84,14 @@ from ._recording import Recording, record
 from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
+from ._style import Style, swept_polygons
 
 # The notebook display lives with the GIF writer: _recording sits below _gif and cannot import it.
 Recording._repr_html_ = recording_html  # type: ignore[attr-defined]
 
-__all__ = ["record", "Recording", "Mesh", "gif", "save", "frames", "render_frame", "contact_sheet", "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
+__all__ = ["record", "Recording", "Mesh", "Style", "gif", "save", "frames", "render_frame", "contact_sheet", "swept_polygons",
+           "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
 
-for _public in (Recording, Mesh, record, gif, save, frames, render_frame, contact_sheet):
+for _public in (Recording, Mesh, Style, record, gif, save, frames, render_frame, contact_sheet, swept_polygons):
     _public.__module__ = __name__
 del _public

@@ -56,6 +56,16 @@ from ._palette import (
 )
 from ._recording import Recording
 from ._rows import _row_norms
+from ._style import (
+    Style,
+    blend,
+    draw_spheres,
+    polygon_coverage,
+    polyline_coverage,
+    stroke_points,
+    swept_path,
+    width_offsets,
+)
 
 
 def _auto_radius(n: int, size: tuple[int, int]) -> int:
@@ -439,6 +449,7 @@ class _Rasteriser:
         surface: bool = False,
         halo: np.ndarray | None = None,
         loop: bool = False,
+        style: Style | None = None,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -458,8 +469,11 @@ class _Rasteriser:
         `loop`: the recording is periodic (its last frame runs on into its first), so trails
         at the start continue from the end and the GIF loops without a seam.
         `surface`: frame_rgb draws the free particles as one continuous surface (a liquid),
-        coloured by `color_by` (see :meth:`_frame_rgb_surface`)."""
+        coloured by `color_by` (see :meth:`_frame_rgb_surface`). `style`: a checked
+        :class:`~physcore.render.Style` (fading trails, line widths, lit spheres, a backdrop and
+        props, swept areas), drawn by the soft discs' frames (:meth:`_frame_rgb_discs`)."""
         n, dim = rec.positions.shape[1:]
+        self.style = Style() if style is None else style
         mode, cam_param = camera
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
@@ -516,6 +530,12 @@ class _Rasteriser:
                 s, _ = self.cam.project(c)
                 lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
                 amax = max(amax, float(np.abs(c).max() + r.max()))
+        if self.style.decor and fit is None and mode != "orbit":
+            # Props are framed as the colliders are: whole in view.
+            pts = np.concatenate([item["points"] for item in self.style.decor]) - rec.origin
+            s, _ = self.cam.project(pts)
+            lo, hi = np.minimum(lo, s.min(axis=0)), np.maximum(hi, s.max(axis=0))
+            amax = max(amax, float(np.abs(pts).max()))
         if rec.bodies is not None and fit is None and mode != "orbit":
             from ._bodies import body_bounds, body_bounds3
 
@@ -603,7 +623,11 @@ class _Rasteriser:
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
+        if self.style.backdrop is not None and background is None:
+            # Text boxes and the classic trails fade into the backdrop's mean colour.
+            background = tuple(int(round(c)) for c in np.mean(np.array(self.style.backdrop, dtype=np.float64), axis=0))
         self.palette = styled_palette(theme, cmap, background)
+        self._static: np.ndarray | None = None  # the backdrop and props, fitted camera
         # Own colours apply where no quantity is coloured: plain discs and the glow.
         self.colors = colors if colors is not None and color_by in ("none", "density") else None
         # Own colours: hard-edged discs take palette entries of their own while they fit beside
@@ -628,7 +652,9 @@ class _Rasteriser:
         self.full_colour = (mesh is not None or self.antialias or self.surface
                             or (self.colors is not None and color_by == "density") or rec.bodies is not None)
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
-        self.trail_px = 2 if min(size) >= 300 else 1
+        self._line_px = 2 if min(size) >= 300 else 1
+        self.trail_px = self.style.trail_width or self._line_px
+        self._swept_cache: dict[int, np.ndarray] = {}  # complete swept areas by interval
         self.mesh = mesh
         self._shader = None
         if mesh is not None:
@@ -951,13 +977,19 @@ class _Rasteriser:
         under = self._under(cam)
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
+        # Style: springs as soft strokes of a width, under the discs.
+        thick = self.style.spring_width is not None and rec.pairs is not None and rec.strain is not None
         if self.colors is None:
-            on_top = self._draw_behind(under, k, cam, col, row)
-            out = self.palette[under]
+            on_top = self._draw_behind(under, k, cam, col, row, springs=not thick)
+            out = self._rgb(under, cam)
+            self._draw_swept(out, k, cam)
         else:  # own colours: trails and springs in the particles' colours, in full colour
             on_top = False
-            out = self.palette[under]
-            self._draw_behind_rgb(out, k, cam, col, row)
+            out = self._rgb(under, cam)
+            self._draw_swept(out, k, cam)
+            self._draw_behind_rgb(out, k, cam, col, row, springs=not thick)
+        if thick:
+            self._draw_thick_springs(out, k, col, row)
         if col.size:
             colors = self._disc_colors(k, col.size)
             order = np.argsort(depth, kind="stable") if depth is not None else self.pin_order
@@ -971,8 +1003,11 @@ class _Rasteriser:
             if self.halo is not None:
                 self._draw_halos(out, col, row, rad, colors)
             rgb = self.palette[colors[order]] if self.colors is None else self.colors[order]
-            _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
-                             rad[order].astype(np.float32), np.ascontiguousarray(rgb))
+            if self.style.shading == "sphere":
+                draw_spheres(out, col[order], row[order], rad[order], rgb)
+            else:
+                _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
+                                 rad[order].astype(np.float32), np.ascontiguousarray(rgb))
         over = _overlay(under.shape)
         if on_top:
             i, j = rec.pairs
@@ -985,6 +1020,11 @@ class _Rasteriser:
         self._draw_bodies(out, k, cam)
         self._draw_overlays(over, k, cam)
         self._draw_clock(over, k)
+        if self.style.backdrop is not None or self.style.decor:
+            # The labels' boxes show the backdrop (and props) there, as the still labels do.
+            box = over == _BACKGROUND
+            out[box] = self._static_image(cam)[box]
+            over[box] = -1
         _paste(out, over, self.palette)
         return out
 
@@ -1010,14 +1050,16 @@ class _Rasteriser:
 
             shade_solids(out, cam, self._solids(k))  # type: ignore[arg-type]
 
-    def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> bool:
+    def _draw_behind(self, buf: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray,
+                     springs: bool = True) -> bool:
         """What frame k draws under its discs: the trails, and the springs unless colouring by
         strain, which draws them over the discs (the picture is the springs). `col`, `row`:
-        the particles' pixel positions. Returns whether the springs still go on top."""
+        the particles' pixel positions; `springs` False: none (they are drawn elsewhere).
+        Returns whether the springs still go on top."""
         rec = self.rec
         if self.trail and (k > 0 or self.loop):
             self._draw_trail(buf, k, cam)
-        springs = rec.pairs is not None and rec.strain is not None
+        springs = springs and rec.pairs is not None and rec.strain is not None
         if springs and self.color_by != "strain":
             i, j = rec.pairs
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
@@ -1043,22 +1085,30 @@ class _Rasteriser:
             patch = out[r0:r1, c0:c1].astype(np.float32)
             out[r0:r1, c0:c1] = np.rint(patch * (1 - a) + tint * a).astype(np.uint8)
 
-    def _draw_behind_rgb(self, out: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray) -> None:
+    def _draw_behind_rgb(self, out: np.ndarray, k: int, cam: _Camera, col: np.ndarray, row: np.ndarray,
+                         springs: bool = True) -> None:
         """What frame k draws under its discs in their own colours (``colors``), onto the RGB
         image `out`: each moving particle's trail in its colour, fading into the background
-        with age (from 15 % to 75 % of the colour), then the springs (rods, strings) in the
-        colour of their moving end (the pinned end is a pivot), 2 px wide from 300 px on."""
+        with age (from 15 % to 75 % of the colour; with ``style.trail_fade``, blended as
+        :meth:`_draw_faded_trail` does), then the springs (rods, strings; unless `springs` is
+        False) in the colour of their moving end (the pinned end is a pivot), 2 px wide from
+        300 px on."""
         rec = self.rec
         bg = self.palette[_BACKGROUND].astype(np.float32)
         rgb = self.colors.astype(np.float32)
-        passes = ((0, 0), (1, 0), (0, 1))[: 1 if self.trail_px < 2 else 3]
-        if self.trail and (k > 0 or self.loop):
+        passes = width_offsets(self.trail_px)
+        if self.trail and (k > 0 or self.loop) and self.style.trail_fade is not None:
+            self._draw_faded_trail(out, k, cam, rgb)
+        elif self.trail and (k > 0 or self.loop):
             moving = ~rec.pinned
             first = max(0, k - self.trail)
             if self._centres is None and self._pix is None:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
             if self.loop and self._centres is None:  # periodic: the trail runs on from the end
                 first = k - self.trail
+            # Every segment in one call, in the order they used to be drawn one frame at a time
+            # (oldest first, pass by pass): the same pixels, a fraction of the time.
+            parts: list[list[np.ndarray]] = [[], [], [], [], []]
             for f in range(first, k):
                 if self._centres is None:
                     (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
@@ -1067,8 +1117,12 @@ class _Rasteriser:
                 a = 0.15 + 0.6 * (f - first + 1) / max(1, k - first)
                 shade = np.rint(bg * (1 - a) + rgb[moving] * a).astype(np.uint8)
                 for dc, dr in passes:
-                    _draw_lines(out, c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, shade)
-        if rec.pairs is not None and rec.strain is not None:
+                    for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, shade), strict=True):
+                        part.append(v)
+            if parts[0]:
+                _draw_lines(out, *(np.concatenate(p) for p in parts))
+        if springs and rec.pairs is not None and rec.strain is not None:
+            passes = width_offsets(self._line_px)
             i, j = rec.pairs
             end = np.where(rec.pinned[j], i, j)
             shade = np.rint(0.2 * bg + 0.8 * rgb[end]).astype(np.uint8)
@@ -1158,9 +1212,189 @@ class _Rasteriser:
         else:
             # Orbiting: the paths turn with the view, so they are projected again.
             pix = {f: cam.pixels(cam.project(rec.positions[f])[0]) for f in range(first, k + 1)}
+        # Every segment in one call, in the order they used to be drawn one frame at a time
+        # (oldest first, pass by pass): the same pixels, a fraction of the time.
+        parts: list[list[np.ndarray]] = [[], [], [], [], []]
+        fade = self.style.trail_fade
         for f in range(first, k):
             (c0, r0), (c1, r1) = pix[f], pix[f + 1]
-            shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
+            if fade is None:
+                shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
+            else:  # style.trail_fade: the shade of the opacity at this age (see _trail_alpha)
+                a = self._trail_alpha(k, f)
+                if a < 0.5 / _N_TRAIL:
+                    continue
+                shade = _TRAIL0 + min(_N_TRAIL - 1, int(a * _N_TRAIL))
             colors = np.full(int(moving.sum()), shade, dtype=np.uint8)
-            for dc, dr in ((0, 0), (1, 0), (0, 1))[: 1 if self.trail_px < 2 else 3]:
-                _draw_lines(buf, c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, colors)
+            for dc, dr in width_offsets(self.trail_px):
+                for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, colors), strict=True):
+                    part.append(v)
+        if parts[0]:
+            _draw_lines(buf, *(np.concatenate(p) for p in parts))
+
+    # ------------------------------------------------------------------ style (see _style.Style)
+
+    def _trail_alpha(self, k: int, f: int) -> float:
+        """The opacity of frame k's trail segment from frame f to f + 1 under
+        ``style.trail_fade`` = φ: φ + (1 − φ)(1 − age)², age = (k − 1 − f) / trail."""
+        fade = float(self.style.trail_fade or 0.0)
+        age = (k - 1 - f) / max(1, self.trail)
+        return fade + (1.0 - fade) * (1.0 - age) ** 2
+
+    def _trail_pixels(self, k: int, cam: _Camera) -> tuple[int, Any]:
+        """(first frame, f -> (col, row) of every particle at frame f through `cam`) of frame k's
+        trails, as :meth:`_draw_trail` sees them (a periodic recording runs on from its end)."""
+        rec = self.rec
+        first = max(0, k - self.trail)
+        if self._centres is None:
+            if self._pix is None:
+                self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
+            if self.loop:
+                first = k - self.trail
+            pix = self._pix
+            return first, lambda f: pix[f]
+        return first, lambda f: cam.pixels(cam.project(rec.positions[f])[0])
+
+    def _draw_faded_trail(self, out: np.ndarray, k: int, cam: _Camera, rgb: np.ndarray) -> None:
+        """The moving particles' trails in their (N, 3) float colours `rgb`, blended over the
+        full-colour image `out` with the opacity of their age (:meth:`_trail_alpha`): drawn
+        into one layer of colour and opacity, oldest first (a newer segment covers an older
+        one where they cross), then laid over `out` once, so nothing is blended twice."""
+        rec = self.rec
+        moving = np.flatnonzero(~rec.pinned)
+        first, pix = self._trail_pixels(k, cam)
+        h, w = out.shape[:2]
+        parts: list[list[np.ndarray]] = [[], [], [], [], []]
+        offsets = width_offsets(self.trail_px)
+        for f in range(first, k):
+            (c0, r0), (c1, r1) = pix(f), pix(f + 1)
+            a = self._trail_alpha(k, f)
+            if a <= 0.0:
+                continue
+            vals = np.concatenate([rgb[moving], np.full((moving.size, 1), a, np.float32)], axis=1).astype(np.float32)
+            for dc, dr in offsets:
+                for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, vals), strict=True):
+                    part.append(v)
+        if not parts[0]:
+            return
+        c0, r0, c1, r1, vals = (np.concatenate(p) for p in parts)
+        # The layer covers the trails' box only (clipped to the image).
+        with np.errstate(invalid="ignore"):
+            cols, rows = np.concatenate([c0, c1]), np.concatenate([r0, r1])
+            fin = np.isfinite(cols) & np.isfinite(rows)
+        if not fin.any():
+            return
+        left = max(0, int(math.floor(cols[fin].min())) - 1)
+        top = max(0, int(math.floor(rows[fin].min())) - 1)
+        right = min(w, int(math.ceil(cols[fin].max())) + 2)
+        bottom = min(h, int(math.ceil(rows[fin].max())) + 2)
+        if left >= right or top >= bottom:
+            return
+        layer = np.zeros((bottom - top, right - left, 4), np.float32)
+        _draw_lines(layer, c0 - left, r0 - top, c1 - left, r1 - top, vals)
+        a = layer[..., 3:4]
+        drawn = a[..., 0] > 0
+        view = out[top:bottom, left:right]
+        mixed = view[drawn].astype(np.float32) * (1 - a[drawn]) + layer[drawn][:, :3] * a[drawn]
+        view[drawn] = np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
+
+    def _rgb(self, under: np.ndarray, cam: _Camera) -> np.ndarray:
+        """The full-colour image of the index image `under`, with the style's backdrop and props
+        where `under` shows the background (labels, colliders and walls stay on top)."""
+        out = self.palette[under]
+        if self.style.backdrop is None and not self.style.decor:
+            return out
+        static = self._static_image(cam)
+        bg = under == _BACKGROUND
+        out[bg] = static[bg]
+        return out
+
+    def _static_image(self, cam: _Camera) -> np.ndarray:
+        """(H, W, 3) uint8: the style's backdrop (a vertical gradient, else the background
+        colour) with its props drawn over it (antialiased), through `cam`; kept for the fitted
+        camera."""
+        if self._centres is None and self._static is not None:
+            return self._static
+        h, w = cam.height, cam.width
+        if self.style.backdrop is not None:
+            top, bottom = (np.array(c, np.float32) for c in self.style.backdrop)
+            t = np.linspace(0.0, 1.0, h, dtype=np.float32)[:, None, None]
+            img = np.broadcast_to(top * (1 - t) + bottom * t, (h, w, 3)).copy()
+        else:
+            img = np.broadcast_to(self.palette[_BACKGROUND].astype(np.float32), (h, w, 3)).copy()
+        for item in self.style.decor:
+            col, row = cam.pixels(cam.project(item["points"] - self.rec.origin)[0])
+            pts = np.stack([col, row], axis=1)
+            cover = (polygon_coverage(pts, (h, w)) if item["kind"] == "polygon"
+                     else polyline_coverage(pts, float(item["width"]), (h, w)))
+            blend(img, cover, item["color"])
+        img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+        if self._centres is None:
+            self._static = img
+        return img
+
+    def _draw_thick_springs(self, out: np.ndarray, k: int, col: np.ndarray, row: np.ndarray) -> None:
+        """Frame k's springs as soft round strokes ``style.spring_width`` pixels wide on the
+        full-colour image `out`: coloured by strain (the strain map and scale of the thin
+        ones), or, with own colours and no strain colouring, in their moving end's colour."""
+        from .. import _core
+
+        rec = self.rec
+        i, j = rec.pairs
+        if self.colors is not None and self.color_by != "strain":
+            end = np.where(rec.pinned[j], i, j)
+            bg = self.palette[_BACKGROUND].astype(np.float32)
+            rgb = np.rint(0.2 * bg + 0.8 * self.colors[end].astype(np.float32)).astype(np.uint8)
+        else:
+            rgb = self.palette[_strain_levels(rec.strain[k], self.strain_scale)]
+        cc, rr, seg = stroke_points(col[i], row[i], col[j], row[j])
+        if cc.size:
+            rad = np.full(cc.size, 0.5 * float(self.style.spring_width), np.float32)
+            _core.draw_discs(out, cc, rr, rad, np.ascontiguousarray(rgb[seg]))
+
+    def _swept_colors(self) -> np.ndarray:
+        """(2, 3) float32: the alternating colours of the swept areas."""
+        sw = self.style.swept_areas
+        if sw["colors"] is not None:
+            return sw["colors"].astype(np.float32)
+        if self.colors is not None:
+            return self.colors[[sw["body"], sw["centre"]]].astype(np.float32)
+        return self.palette[[_PLAIN, _PINNED]].astype(np.float32)
+
+    def _draw_swept(self, out: np.ndarray, k: int, cam: _Camera) -> None:
+        """``style.swept_areas`` at frame k on the full-colour image `out`: the area being swept
+        (from the start of its interval to now) and the `count` − 1 intervals before it, each the
+        polygon of the centre and the body's path (:func:`~._style.swept_path`, relative to the
+        centre, placed at its position now), filled in two alternating colours, the older ones
+        fainter; then the radius vector. Intervals before frame 0 come from the end of a
+        periodic (`loop`) recording and are left out otherwise."""
+        sw = self.style.swept_areas
+        if sw is None:
+            return
+        rec = self.rec
+        n_f, centre, body = sw["frames"], sw["centre"], sw["body"]
+        colours = self._swept_colors()
+        here = rec.positions[k, centre].astype(np.float64)
+        shape = out.shape[:2]
+        now = k // n_f
+        for age in range(sw["count"] - 1, -1, -1):  # oldest first
+            j = now - age
+            f0, f1 = j * n_f, min((j + 1) * n_f, k)
+            if f1 <= f0 or (f0 < 0 and not self.loop):
+                continue
+            rel = self._swept_cache.get(j) if f1 == (j + 1) * n_f else None
+            if rel is None:
+                b = swept_path(rec.positions, rec.velocities, rec.times, body, f0, f1, loop=self.loop)
+                c = swept_path(rec.positions, rec.velocities, rec.times, centre, f0, f1, loop=self.loop)
+                rel = b - c
+                if f1 == (j + 1) * n_f:
+                    self._swept_cache[j] = rel
+            poly = np.concatenate([here[None], here + rel])
+            col, row = cam.pixels(cam.project(poly)[0])
+            opacity = 0.5 if age == 0 else 0.3  # the one being swept brighter; the rest alike
+            blend(out, polygon_coverage(np.stack([col, row], axis=1), shape, 3), colours[j % 2], opacity)
+        # The radius vector that sweeps them.
+        seg = rec.positions[k, [centre, body]].astype(np.float64)
+        col, row = cam.pixels(cam.project(seg)[0])
+        ink = 0.5 * (colours[0] + colours[1]) * 0.4 + 255.0 * 0.6
+        blend(out, polyline_coverage(np.stack([col, row], axis=1), 1.5, shape), ink, 0.8)

@@ -504,8 +504,9 @@ def record(
         progress reports and probes (energy books, counters); it must not change the scene.
     velocities : bool, optional
         Also record every frame's (N, dim) velocities (``Recording.velocities``, float32), which
-        :func:`gif`'s `arrows` draw; 4·N·dim bytes a frame more. Default: only when the
-        scene's ``render_defaults`` ask for arrows.
+        :func:`gif`'s `arrows` draw (and its ``style`` swept areas follow between frames); 4·N·dim
+        bytes a frame more. Default: only when the scene's ``render_defaults`` ask for arrows or
+        swept areas.
 
     Returns
     -------
@@ -532,7 +533,9 @@ def record(
     if on_frame is not None and not callable(on_frame):
         raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
     if velocities is None:
-        velocities = scene_defaults(scene).get("arrows") not in (None, "none")
+        d = scene_defaults(scene)
+        # Arrows, and swept areas (their path between frames follows the velocities).
+        velocities = d.get("arrows") not in (None, "none") or bool((d.get("style") or {}).get("swept_areas"))
     velocities = _check.flag("velocities", velocities)
     plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, velocities)
     _check_memory(scene, plan["frames"], (0, 0), springs, velocities)

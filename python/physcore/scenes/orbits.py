@@ -134,12 +134,18 @@ kepler.render_defaults = {"antialias": True,
     "frame_time": 4 * math.pi / 120,
     "size": (380, 320),  # the e = 0.5 ellipse is 2a wide and 1.73a high
     "speed_unit": "(G=1)",  # G = 1, total mass 1, a = 1: no SI unit applies
-    "trail": 90,  # three quarters of an orbit (the 120 frames cover two): the ellipse stays drawn
-    "size_by": "mass",  # the star (3× the planet's 12 px) larger than the planet
-    "radius": 12,
+    # A sixth of an orbit, fading: the trail's length is the planet's speed, long at perihelion.
+    "trail": 10,
+    "size_by": "mass",  # the star (3× the planet's 9 px) larger than the planet
+    "radius": 9,
     # Bodies as objects (a sun, a planet: KEPLER_COLORS), not a speed map that turns the star at
     # rest into the map's darkest end; the night sky.
     "color_by": "none", "theme": "dark", "loop": True,  # two whole orbits: the GIF loops seamlessly
+    "title": "equal areas in equal times",
+    # Kepler's second law: the radius vector sweeps a wedge a sixth of a period long (10
+    # frames) in alternating colours, the last orbit's six tiling the ellipse; equal areas
+    # (tests/render/test_style.py measures them), fat at perihelion, thin at aphelion.
+    "style": {"swept_areas": {"centre": 0, "body": 1, "frames": 10, "count": 6}, "trail_fade": 0.0, "trail_width": 3},
 }
 kepler = _stamped(kepler, old_order=('e', 'a', 'mass_ratio', 'steps_per_orbit', 'integrator', 'dt', 'threads'), keep=1)
 
@@ -188,6 +194,9 @@ figure_eight.render_defaults = {"antialias": True,
 figure_eight = _stamped(figure_eight, old_order=('steps_per_period', 'integrator', 'dt', 'threads'), keep=0)
 
 
+#: ``pythagorean``: colours of the masses 3, 4 and 5 (coral red, sky blue, gold), RGB.
+PYTHAGOREAN_COLORS = ((255, 96, 96), (86, 168, 255), (255, 204, 72))
+
 def pythagorean(
     *,
     rtol: float = 1e-10,
@@ -208,18 +217,22 @@ def pythagorean(
     x = np.array([[1.0, 3.0], [-2.0, -1.0], [1.0, -1.0]])
     scene.add_particles(x, np.zeros((3, 2)), masses=[3.0, 4.0, 5.0])
     scene.add(PairwiseGravity(G=1.0))
-    scene.render_defaults = {"colors": [3, 0, 1]}  # masses 3, 4, 5: tab10 red, blue, orange
+    scene.render_defaults = {"colors": [list(c) for c in PYTHAGOREAN_COLORS]}  # masses 3, 4, 5: red, blue, gold
     return scene
 
 
 pythagorean.render_defaults = {"antialias": True,
-    # To t = 60.2: the last close encounter (t ≈ 59) has flung the lightest body out and it is
-    # 5–6 from the centre, no farther than its excursion at t ≈ 53, so the camera still fits
-    # the dance (|x| ≤ 3.2, |y| ≤ 4.5 before); a second later it is 8.4 out and the dance would
-    # shrink. Frames 0.2 apart (two output intervals of dopri5's default dt) keep the trails of the
-    # close encounters smooth; trails of 20 time units; the masses as objects, each its own colour.
-    "frames": 302, "fps": 50, "frame_time": 0.2, "size": (400, 440), "speed_unit": "(G=1)", "trail": 100, "size_by": "mass",
-    "radius": 6, "theme": "dark", "color_by": "none",
+    # To t = 62.4: the dance, then the ejection. The last close encounter (t ≈ 59) flings the
+    # lightest body out of the top of the frame (by t ≈ 60.3, at 4.3 a time unit), and the 4-5
+    # binary, recoiling at a third of that speed, reaches the bottom edge at the end. The camera
+    # holds the dance (`extent`: every position to t = 58.5 lies within |x| ≤ 3.2,
+    # -4.5 ≤ y ≤ 3.0), one scale throughout. Frames 0.2 apart (two output intervals of dopri5's
+    # default dt) keep the close encounters smooth; trails of 8 time units fading to nothing,
+    # so the current loops read over the older ones.
+    "frames": 313, "fps": 50, "frame_time": 0.2, "size": (400, 460), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
+    "radius": 8, "theme": "dark", "color_by": "none", "extent": [[-3.3, -4.7], [3.4, 3.2]],
+    "title": "Burrau's problem: masses 3, 4, 5",
+    "style": {"trail_fade": 0.0, "trail_width": 3},
 }
 pythagorean = _stamped(pythagorean, old_order=('rtol', 'integrator', 'dt', 'threads'), keep=0)
 

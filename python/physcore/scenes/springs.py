@@ -67,11 +67,24 @@ def spring_chain(
     scene.add(Gravity(g))
     if dt is None:
         _set_stable_dt(scene, 0.5, "stiffness, damping, mass")
+    # The pivot's ceiling bracket (a render prop), in the plane the chain swings in.
+    up = 1 if dim == 2 else 2
+    bracket = np.zeros((4, dim))
+    bracket[:, 0] = [-0.1 * length, 0.1 * length, 0.1 * length, -0.1 * length]
+    bracket[:, up] = [0.0, 0.0, 0.03 * length, 0.03 * length]
+    scene.render_defaults = {"style": {**_CHAIN_STYLE, "decor": [{"polygon": bracket.tolist(), "color": (110, 104, 98)}]}}
     return _finite_books(scene, "length, mass")
 
 
-# The swing spans the chain's length either side of the pivot and one below it: a wide frame.
-# Beads 7 px wide (the links hidden under them) and short trails for the whip of the free end.
-spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (480, 320),
-                                "radius": 7, "trail": 4}
+#: ``spring_chain``'s look: the links as a rope 10 px wide coloured by strain before a pale
+#: backdrop (the scene adds the pivot's bracket).
+_CHAIN_STYLE = {"spring_width": 10, "backdrop": ((250, 248, 244), (218, 222, 232))}
+
+
+# The swing spans the chain's length either side of the pivot and 1.2 of it below (the links
+# stretch): a wide frame. The chain reads as a rope coloured by its links' strain (tension red,
+# the whip's compression blue: the colour bar's ends are the run's 99th percentile), no beads
+# over it, the pivot on a ceiling bracket; no trails.
+spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (430, 300),
+                                "radius": 0, "trail": 0, "color_by": "strain"}
 spring_chain = _stamped(spring_chain, old_order=('n', 'length', 'mass', 'stiffness', 'damping', 'dim', 'integrator', 'dt', 'threads'), keep=1)

@@ -1,0 +1,163 @@
+"""gif(style=...): render.Style's checks and what each field draws; Kepler's swept areas are
+equal (measured from the recorded motion)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import physcore as pc
+from physcore.render import Style, swept_polygons
+from physcore.render._style import polygon_area, swept_path, width_offsets
+
+
+def _ball(n: int = 1) -> pc.Scene:
+    s = pc.Scene(2, dt=1e-3)
+    s.add_particles([[float(i), 0.0] for i in range(n)], masses=1.0)
+    return s
+
+
+def test_kepler_wedges_sweep_equal_areas_in_equal_times():
+    # The default Kepler render shades the areas swept in each sixth of a period (10 frames):
+    # measured from the recorded positions and velocities (the path between frames as their
+    # cubic Hermite curve), each is the same area, (Δt/P) π a b of the relative orbit, to 1e-4.
+    scene = pc.scenes.kepler()
+    sw = scene.render_defaults["style"]["swept_areas"]
+    assert (sw["centre"], sw["body"], sw["frames"]) == (0, 1, 10)
+    rec = pc.render.record(scene)
+    assert rec.velocities is not None  # recorded for the swept areas
+    polys = swept_polygons(rec, 0, 1, 10)
+    assert len(polys) == (rec.frames - 1) // 10 == 11
+    areas = np.array([polygon_area(p) for p in polys])
+    e, a = 0.5, 1.0
+    dt = float(rec.times[10] - rec.times[0])
+    exact = dt / (2 * math.pi * math.sqrt(a**3)) * math.pi * a * a * math.sqrt(1 - e * e)
+    assert np.abs(areas / exact - 1).max() < 3e-4, areas / exact  # measured 1.2e-4
+    assert np.ptp(areas) / exact < 3e-4
+    # Fat near perihelion, thin near aphelion: the shapes differ, the areas do not.
+    turn = [abs(math.remainder(math.atan2(p[-1, 1], p[-1, 0]) - math.atan2(p[1, 1], p[1, 0]), 2 * math.pi)) for p in polys]
+    assert max(turn) > 3 * min(turn), turn
+    # The polygons run through the recorded relative positions at the wedges' boundaries.
+    rel = (rec.positions[:, 1] - rec.positions[:, 0]).astype(np.float64)
+    for j, p in enumerate(polys):
+        np.testing.assert_allclose(p[1], rel[10 * j], atol=1e-6)
+        np.testing.assert_allclose(p[-1], rel[10 * (j + 1)], atol=1e-6)
+    # Straight chords between frames would be 0.8 % short: the curve is what makes them equal.
+    chords = np.array([polygon_area(p) for p in swept_polygons(rec, 0, 1, 10, samples=1)])
+    assert np.abs(chords / exact - 1).max() > 3e-3
+
+
+def test_swept_path_without_velocities_follows_catmull_rom_tangents():
+    rec = pc.render.record(pc.scenes.kepler(), velocities=False)
+    assert rec.velocities is None
+    areas = np.array([polygon_area(p) for p in swept_polygons(rec, 0, 1, 10)])
+    assert np.ptp(areas) / areas.mean() < 2e-3  # measured 8e-4
+    loop = swept_path(rec.positions, None, rec.times, 1, -3, 2, loop=True, samples=4)
+    assert loop.shape == (5 * 4 + 1, 2)
+    np.testing.assert_allclose(loop[0], rec.positions[-3, 1])
+
+
+def test_kepler_frame_shows_the_wedges():
+    rec = pc.render.record(pc.scenes.kepler())  # two whole orbits: it loops
+    on = list(pc.render.frames(rec, size=(190, 160), radius=3))
+    off = list(pc.render.frames(rec, size=(190, 160), radius=3, style={"swept_areas": None}))
+    for k in (0, 25):  # frame 0 of the looping recording already shows the last orbit's wedges
+        changed = np.abs(on[k].astype(int) - off[k].astype(int)).sum(axis=2) > 12
+        assert changed.mean() > 0.2, (k, changed.mean())
+
+
+def test_a_default_style_leaves_the_picture_as_it_was():
+    rec = pc.render.record(pc.scenes.projectile(n=3), frames=6)
+    base = list(pc.render.frames(rec, size=(96, 64)))
+    for style in ({}, Style(), {"trail_fade": None}):
+        again = list(pc.render.frames(rec, size=(96, 64), style=style))
+        assert all(np.array_equal(a, b) for a, b in zip(base, again, strict=True))
+
+
+def test_style_is_checked_naming_the_field(tmp_path):
+    s = _ball(2)
+    path = tmp_path / "x.gif"
+    cases = [
+        ({"trail_fad": 0.5}, ValueError, "trail_fad"),
+        ("sphere", TypeError, "style"),
+        ({"trail_fade": 1.5}, ValueError, "trail_fade"),
+        ({"trail_width": 0}, ValueError, "trail_width"),
+        ({"shading": "metal"}, ValueError, "shading"),
+        ({"backdrop": [(0, 0, 0)]}, ValueError, "backdrop"),
+        ({"decor": [{"polygon": [[0, 0], [1, 0]], "color": (1, 2, 3)}]}, ValueError, "decor"),
+        ({"decor": [{"polygon": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "color": (1, 2, 3)}]}, ValueError, "decor"),
+        ({"decor": [{"line": [[0, 0], [1, 0]]}]}, ValueError, "color"),
+        ({"swept_areas": {"centre": 0, "body": 5, "frames": 2}}, ValueError, "swept_areas"),
+        ({"swept_areas": {"centre": 0, "body": 0, "frames": 2}}, ValueError, "swept_areas"),
+        ({"swept_areas": {"centre": 0, "frames": 2}}, ValueError, "body"),
+    ]
+    for style, err, word in cases:
+        with pytest.raises(err, match=word):
+            pc.render.gif(s, path, frames=2, size=(64, 48), style=style)
+    assert not path.exists() and s.time == 0.0
+
+
+def test_a_dict_changes_only_the_fields_it_names():
+    kepler = pc.scenes.kepler()
+    from physcore.render._style import check_style
+
+    merged = check_style({"trail_width": 1}, kepler.render_defaults["style"])
+    assert merged.trail_width == 1 and merged.trail_fade == 0.0 and merged.swept_areas["frames"] == 10
+    assert check_style({"swept_areas": None}, kepler.render_defaults["style"]).swept_areas is None
+
+
+def test_trail_fade_fades_the_oldest_end_to_nothing():
+    s = pc.Scene(2, dt=1e-3)
+    s.add_particles([[0.0, 0.0]], [[1.0, 0.0]], masses=1.0)
+    rec = pc.render.record(s, frames=30, frame_time=0.02)
+    opts = dict(size=(200, 60), trail=29, color_by="none", colors=["#ff3000"], colorbar=False, theme="dark", radius=3,
+                antialias=True)
+    classic = list(pc.render.frames(rec, **opts))[-1].astype(int)
+    faded = list(pc.render.frames(rec, style={"trail_fade": 0.0, "trail_width": 3}, **opts))[-1].astype(int)
+    bg = faded[2, 2]
+    row = np.argmax((np.abs(faded - bg).sum(axis=2) > 3).sum(axis=1))  # the trail's middle row
+    red = faded[row, :, 0] - bg[0]
+    lit = np.flatnonzero(red > 3)
+    # From nothing at the oldest end to nearly the full colour at the ball, rising all the way.
+    tail, head = red[lit[:10]].mean(), red[lit[-20:-10]].mean()
+    assert tail < 0.15 * (255 - bg[0]) and head > 0.6 * (255 - bg[0]), (tail, head)
+    assert not np.array_equal(classic, faded)
+    assert width_offsets(1) == ((0, 0),) and width_offsets(2) == ((0, 0), (1, 0), (0, 1)) and len(width_offsets(3)) == 5
+
+
+def test_sphere_shading_lights_the_upper_left():
+    s = _ball()
+    opts = dict(frames=1, size=(80, 80), radius=24, color_by="none", colors=["#b0b0b0"], colorbar=False)
+    flat = next(pc.render.frames(s, **opts)).astype(int)
+    lit = next(pc.render.frames(s, style={"shading": "sphere"}, **opts)).astype(int)
+    centre = np.argwhere((flat == [176, 176, 176]).all(axis=2)).mean(axis=0).round().astype(int)
+    r, c = centre
+    upper_left, lower_right = lit[r - 9, c - 7].sum(), lit[r + 12, c + 12].sum()
+    assert upper_left > 3 * 250 and lower_right < 3 * 150, (upper_left, lower_right)  # a highlight; a shaded side
+
+
+def test_backdrop_and_decor_are_drawn_behind_and_framed(tmp_path):
+    s = _ball()
+    decor = [{"polygon": [[-3.0, -1.0], [3.0, -1.0], [3.0, -0.8], [-3.0, -0.8]], "color": (200, 40, 40)}]
+    opts = dict(frames=1, size=(160, 120), radius=4, color_by="none", colors=["#ffffff"], colorbar=False)
+    img = next(pc.render.frames(s, style={"backdrop": ((0, 0, 100), (0, 100, 0)), "decor": decor}, **opts)).astype(int)
+    top, bottom = img[1, 80], img[-1, 80]
+    assert top[2] > 90 and top[1] < 10 and bottom[1] > 90 and bottom[2] < 10  # the gradient, top to bottom
+    red = (img[..., 0] > 150) & (img[..., 1] < 80)
+    cols = np.flatnonzero(red.any(axis=0))
+    assert cols.size and cols.min() < 20 and cols.max() > 140  # the 6 m prop, framed whole
+    rows = np.flatnonzero(red.any(axis=1))
+    ball_row = np.argwhere((img == 255).all(axis=2))[:, 0].mean()
+    assert rows.min() > ball_row  # below the ball, as placed
+
+
+def test_thick_springs_are_coloured_by_strain_under_the_beads():
+    s = pc.scenes.spring_chain(n=6)
+    rec = pc.render.record(s, frames=12, color_by="strain")
+    opts = dict(size=(240, 160), radius=0, colorbar=False)
+    img = list(pc.render.frames(rec, style={"spring_width": 9}, **opts))[-1].astype(int)
+    reddish = (img[..., 0] - img[..., 2] > 40)
+    assert reddish.sum() > 200  # a stretched rope, 9 px wide
+    thin = list(pc.render.frames(rec, style={"spring_width": None}, **opts))[-1].astype(int)
+    assert (thin[..., 0] - thin[..., 2] > 40).sum() < 0.5 * reddish.sum()
