@@ -295,6 +295,110 @@ class Bodies(_BodiesPart):
 
     part_kind: ClassVar[str] = "group"
 
+    @classmethod
+    def from_shape(
+        cls,
+        shape: Any,
+        *,
+        extent: float | None = None,
+        kind: str = "fixed",
+        density: float = 1000.0,
+        rolling_friction: float = 0.0,
+        color: Any = None,
+        name: str | None = None,
+    ) -> Bodies:
+        """The rigid bodies (rapier, parry's shapes) that fill a collider record, so that one
+        shape serves particles (as a collider), grains (as a :class:`~physcore.Contacts` wall),
+        fluids (:func:`physcore.shapes.sample_boundary`) and bodies alike. Restitution and
+        friction are the record's.
+
+        ===================================== =============================================
+        record                                bodies
+        ===================================== =============================================
+        :class:`~physcore.OrientedBox`        one box: its centre, half extents, rotation
+        :class:`~physcore.Sphere`             one ball (``inside=True``, a bowl, is refused)
+        :class:`~physcore.Capsule`            one capsule along ``b − a`` (a ball if a = b)
+        :class:`~physcore.Plane`              one slab under the plane: ``extent`` m either
+                                              side of ``point`` along the plane, ``extent``/4
+                                              thick below it (``extent`` required)
+        :class:`~physcore.Box` (a tank)       its walls: one slab a face, ¼ of the box's
+                                              largest side thick, outside the box
+        ===================================== =============================================
+
+        ``kind`` is ``"fixed"`` (default), ``"kinematic"`` or ``"dynamic"`` (then ``density``,
+        kg/m³ or kg/m² in 2D, gives the mass). Rotations follow the records: a 2D angle
+        counter-clockwise, a 3D rotation vector (axis × angle, rad) turned into the unit
+        quaternion (x, y, z, w) = (k sin(θ/2), cos(θ/2)).
+
+        Raises TypeError / InvalidInputError naming ``shape`` (not a collider record, or a
+        bowl) or ``extent`` (missing or not finite and > 0 for a Plane); the rest as
+        :class:`Bodies` raises."""
+        from .terms import Box as _Box
+        from .terms import Capsule as _Capsule
+        from .terms import OrientedBox as _OrientedBox
+        from .terms import Plane as _Plane
+        from .terms import Sphere as _Sphere
+
+        common = {"kind": kind, "density": density, "rolling_friction": rolling_friction, "color": color, "name": name}
+        if isinstance(shape, _OrientedBox):
+            c, h, rot = (np.asarray(a, dtype=np.float64) for a in (shape.center, shape.half_extents, shape.rotation))
+            turn = {"angles": [float(rot[0])]} if c.shape[0] == 2 else {"orientations": [_quaternion(rot)]}
+            return cls("box", size=[h], positions=[c], friction=shape.friction, restitution=shape.restitution,
+                       **turn, **common)
+        if isinstance(shape, _Sphere):
+            if shape.inside:
+                raise InvalidInputError("shape: a Sphere with inside=True (a bowl) has no solid body; build it from "
+                                        "boxes or a mesh")
+            return cls("ball", size=[float(shape.radius)], positions=[np.asarray(shape.center, dtype=np.float64)],
+                       friction=shape.friction, restitution=shape.restitution, **common)
+        if isinstance(shape, _Capsule):
+            a, b = np.asarray(shape.a, dtype=np.float64), np.asarray(shape.b, dtype=np.float64)
+            axis = b - a
+            length = float(np.linalg.norm(axis))
+            rec = {"friction": shape.friction, "restitution": shape.restitution}
+            if length == 0.0:
+                return cls("ball", size=[float(shape.radius)], positions=[a], **rec, **common)
+            turn = _turn_x_onto(axis / length)
+            return cls("capsule", size=[(0.5 * length, float(shape.radius))], positions=[0.5 * (a + b)], **turn, **rec,
+                       **common)
+        if isinstance(shape, _Plane):
+            if extent is None:
+                raise InvalidInputError("extent: a Plane is unbounded; give extent (m), the slab's half width along it")
+            half = _check.finite_float(extent, "extent", minimum=0.0, strict=True)
+            p, n = np.asarray(shape.point, dtype=np.float64), np.asarray(shape.normal, dtype=np.float64)
+            n = n / np.linalg.norm(n)
+            return cls._slabs([(p, n)], half, 0.25 * half, shape, common)
+        if isinstance(shape, _Box):
+            lo, hi = np.asarray(shape.lower, dtype=np.float64), np.asarray(shape.upper, dtype=np.float64)
+            dim, side = lo.shape[0], float(np.max(hi - lo))
+            faces = []
+            for k in range(dim):
+                for corner, sign in ((lo, 1.0), (hi, -1.0)):
+                    n = np.zeros(dim)
+                    n[k] = sign
+                    p = 0.5 * (lo + hi)
+                    p[k] = corner[k]
+                    faces.append((p, n))
+            return cls._slabs(faces, 0.5 * side + 0.25 * side, 0.125 * side, shape, common)
+        raise InvalidTypeError(f"shape: expected a collider record (OrientedBox, Sphere, Capsule, Plane, Box), got "
+                               f"{type(shape).__name__}")
+
+    @classmethod
+    def _slabs(cls, faces: list[tuple[np.ndarray, np.ndarray]], half: float, thick: float, shape: Any,
+               common: dict[str, Any]) -> Bodies:
+        """Boxes under the planes ``(point, unit normal)``: ``half`` m either side of the point
+        along the plane, ``2 thick`` m thick, their top face on the plane."""
+        dim = faces[0][0].shape[0]
+        size = [(half, thick) if dim == 2 else (half, half, thick) for _ in faces]
+        positions = [p - thick * n for p, n in faces]
+        # The box's local y (2D) or z (3D) turned onto the normal.
+        if dim == 2:
+            turn: dict[str, Any] = {"angles": [math.atan2(-n[0], n[1]) for _, n in faces]}
+        else:
+            turn = {"orientations": [_quaternion_between(np.array([0.0, 0.0, 1.0]), n) for _, n in faces]}
+        return cls("box", size=size, positions=positions, friction=shape.friction, restitution=shape.restitution,
+                   **turn, **common)
+
     def __init__(
         self,
         shape: str = "box",
@@ -1035,3 +1139,32 @@ def _hull(v: np.ndarray) -> np.ndarray:
             upper.pop()
         upper.append(p)
     return np.array(lower[:-1] + upper[:-1], dtype=np.float64)
+
+
+def _quaternion(rotvec: np.ndarray) -> list[float]:
+    """The unit quaternion (x, y, z, w) of a rotation vector (axis × angle, rad)."""
+    theta = float(np.linalg.norm(rotvec))
+    if theta == 0.0:
+        return [0.0, 0.0, 0.0, 1.0]
+    k = rotvec / theta
+    return [*(math.sin(0.5 * theta) * k).tolist(), math.cos(0.5 * theta)]
+
+
+def _quaternion_between(u: np.ndarray, v: np.ndarray) -> list[float]:
+    """The unit quaternion (x, y, z, w) of the shortest turn taking unit u onto unit v."""
+    c = float(np.dot(u, v))
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any axis normal to u
+        axis = np.cross(u, [1.0, 0.0, 0.0])
+        if np.linalg.norm(axis) < 1e-6:
+            axis = np.cross(u, [0.0, 1.0, 0.0])
+        return _quaternion(math.pi * axis / np.linalg.norm(axis))
+    w = np.cross(u, v)
+    q = np.array([*w, 1.0 + c])
+    return (q / np.linalg.norm(q)).tolist()
+
+
+def _turn_x_onto(d: np.ndarray) -> dict[str, Any]:
+    """``angles`` (2D) or ``orientations`` (3D) turning a body's local x onto the unit d."""
+    if d.shape[0] == 2:
+        return {"angles": [math.atan2(d[1], d[0])]}
+    return {"orientations": [_quaternion_between(np.array([1.0, 0.0, 0.0]), d)]}
