@@ -433,8 +433,6 @@ def _box_boundary(box: Any, s: float, layers: int) -> np.ndarray:
 
 def _oriented_box_boundary(box: Any, s: float, layers: int) -> np.ndarray:
     """The box's own lattice (cells of about s) within ``layers`` cells of its faces."""
-    from .terms.oriented_box import _axes
-
     h = box.half_extents
     dim = h.shape[0]
     cells = [_cells(2.0 * float(h[d]), s) for d in range(dim)]
@@ -445,7 +443,7 @@ def _oriented_box_boundary(box: Any, s: float, layers: int) -> np.ndarray:
     step = np.array([2.0 * float(h[d]) / n[d] for d in range(dim)])
     band = [(np.arange(m) < layers) | (np.arange(m) >= m - layers) for m in n]
     local = -h + (_shell(n, band) + 0.5) * step
-    return np.ascontiguousarray(box.center + local @ _axes(box.rotation))
+    return np.ascontiguousarray(box.center + local @ box.axes())
 
 
 def _plane_boundary(plane: Any, s: float, layers: int, extent: tuple[np.ndarray, np.ndarray]) -> np.ndarray:

@@ -420,15 +420,18 @@ def test_a_file_with_both_records_and_plane_arrays_is_refused(tmp_path):
 
 
 def test_a_recording_draws_the_walls_as_their_colliders(tmp_path):
-    # A ball wall is drawn as a sphere collider is, a capsule and a block as their rods, a plane
-    # as a plane: the recording holds them (and a GIF of it renders).
+    # A ball wall is drawn as a sphere collider is, a capsule as its rod, a 2D block as its filled
+    # rectangle (as an OrientedBox collider), a plane as a plane: the recording holds them (and a
+    # GIF of it renders).
     walls = [pc.Plane([0.0, 0.0], [0.0, 1.0]), pc.Sphere([0.1, 0.05], 0.03, inside=False),
              pc.Capsule([-0.1, 0.05], [-0.05, 0.08], 0.01), pc.OrientedBox([0.0, 0.1], [0.02, 0.01], 0.3)]
     s = _grain(2, [0.0, 0.2], walls=walls)
     rec = pc.render.record(s, frames=2, steps_per_frame=5)
     assert [(c.tolist(), r, inside) for c, r, inside in rec.spheres] == [([0.1, 0.05], 0.03, False)]
-    assert len(rec.rods) == 1 + 4  # the capsule, the block's four edges
+    assert len(rec.rods) == 1  # the capsule
     assert np.array_equal(rec.rods[0][0], [-0.1, 0.05]) and rec.rods[0][2] == 0.01
+    assert len(rec.polygons) == 1 and rec.polygons[0].shape == (4, 2)  # the block
+    assert np.allclose(rec.polygons[0].mean(axis=0), [0.0, 0.1])  # about the block's centre, m
     assert len(rec.planes) == 1
     pc.render.gif(rec, tmp_path / "walls.gif", size=(80, 60))
     assert (tmp_path / "walls.gif").stat().st_size > 0

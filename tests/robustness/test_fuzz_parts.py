@@ -378,7 +378,7 @@ def test_every_hostile_value_on_render_frame(arg):
 
 # --------------------------------------------------------------------------- gif's newer options
 GIF_OPTIONS = ["trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture", "antialias", "colors",
-               "cmap", "background", "surface", "extent", "halo", "loop", "style"]
+               "cmap", "background", "surface", "extent", "halo", "loop", "look"]
 _gif_value = st.one_of(hostile, st.sampled_from(["mass", "dark", "light", "orbit", "velocity", "viridis", "auto",
                                                  "#ff0000", (255, 0, 0), "x" * 300, "\x00", [[0, 1, 2]]]))
 _gif_case = st.tuples(st.sampled_from(GIF_OPTIONS), _gif_value)

@@ -32,7 +32,7 @@ _scene_state    reading a scene's optional parts: springs and strain, planes, pr
 _recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
 _colorbar       the colour bar: labels, layout and drawing into the background.
 _mesh           ``Mesh`` (triangles over the particles) and its shading; the core rasterises it.
-_style          ``Style`` (fading trails, line widths, lit spheres, a backdrop and props, swept
+_look          ``Look`` (fading trails, line widths, lit spheres, a backdrop and props, swept
                 areas): its checks and drawing helpers; ``swept_polygons``.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
                 or RGB with a shaded mesh).
@@ -69,6 +69,7 @@ from ._checks import _check_writable as _check_writable
 from ._colorbar import _colorbar_labels as _colorbar_labels
 from ._frame import render_frame
 from ._gif import FORMATS, frames, gif, recording_html, save
+from ._look import Look, swept_polygons
 from ._mesh import Mesh
 from ._palette import _N_PRESSURE as _N_PRESSURE
 from ._palette import _N_SPEED as _N_SPEED
@@ -84,14 +85,13 @@ from ._recording import Recording, record
 from ._rows import _row_norms as _row_norms
 from ._scene_state import _strain as _strain
 from ._sheet import contact_sheet
-from ._style import Style, swept_polygons
 
 # The notebook display lives with the GIF writer: _recording sits below _gif and cannot import it.
 Recording._repr_html_ = recording_html  # type: ignore[attr-defined]
 
-__all__ = ["record", "Recording", "Mesh", "Style", "gif", "save", "frames", "render_frame", "contact_sheet", "swept_polygons",
+__all__ = ["record", "Recording", "Mesh", "Look", "gif", "save", "frames", "render_frame", "contact_sheet", "swept_polygons",
            "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
 
-for _public in (Recording, Mesh, Style, record, gif, save, frames, render_frame, contact_sheet, swept_polygons):
+for _public in (Recording, Mesh, Look, record, gif, save, frames, render_frame, contact_sheet, swept_polygons):
     _public.__module__ = __name__
 del _public

@@ -31,10 +31,10 @@ from ._checks import (
     _extent_box,
     _short,
 )
+from ._look import check_look, check_look_particles
 from ._mesh import check_mesh, check_texture
 from ._palette import _PALETTE, THEMES
 from ._raster import _Rasteriser
-from ._style import check_style, check_style_particles
 
 
 def gif(
@@ -69,7 +69,7 @@ def gif(
     extent: Any = None,
     halo: Any = None,
     loop: bool | None = None,
-    style: Any = None,
+    look: Any = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -268,12 +268,12 @@ def gif(
         choreography), so each trail at the start runs on from the end and the GIF loops
         without a seam (with the still camera). Default: the scene's ``render_defaults``
         (Kepler, the figure-eight), else False.
-    style : physcore.render.Style or dict, optional
-        How the particles' frames look beyond their colouring (:class:`Style`): trails that
+    look : physcore.render.Look or dict, optional
+        How the particles' frames look beyond their colouring (:class:`Look`): trails that
         fade with age (``trail_fade``) and their width, springs drawn as strokes of a width,
         discs lit as spheres, a gradient backdrop and static props, and the areas a radius
         vector sweeps in equal times (Kepler's second law). A dict changes only the fields it
-        names over the scene's ``render_defaults["style"]``; each field's default leaves the
+        names over the scene's ``render_defaults["look"]``; each field's default leaves the
         picture as it was. Any of them but the trail's draws the frames in full colour with
         soft discs (unless ``antialias=False`` is given, which leaves them out). Not drawn with
         a mesh, a liquid surface or glow.
@@ -315,13 +315,13 @@ def gif(
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
                    colors=colors, cmap=cmap, background=background, surface=surface, extent=extent,
-                   halo=halo, loop=loop, style=style)
+                   halo=halo, loop=loop, look=look)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background", "surface", "extent", "halo", "loop", "style")
+            "antialias", "colors", "cmap", "background", "surface", "extent", "halo", "loop", "look")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -333,7 +333,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
      trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent, halo, loop,
-     style) = (
+     look) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -388,12 +388,12 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     box = _extent_box(d.get("extent") if extent is None else extent, dim)
     halo = _check_halo(d.get("halo") if halo is None else halo, n_colors)
     loop = _check.flag("loop", bool(d.get("loop", False)) if loop is None else loop)
-    style = check_style(style, d.get("style"))
-    check_style_particles(style, n_colors, dim)
-    if style.full_colour and not antialias and bound.arguments["antialias"] is None:
-        antialias = True  # the style's strokes, shading, backdrop and wedges are drawn in full colour
+    look = check_look(look, d.get("look"))
+    check_look_particles(look, n_colors, dim)
+    if look.full_colour and not antialias and bound.arguments["antialias"] is None:
+        antialias = True  # the look's strokes, shading, backdrop and wedges are drawn in full colour
     # The swept areas follow the body's path between frames by its recorded velocities.
-    velocities = arrows is not None or style.swept_areas is not None
+    velocities = arrows is not None or look.swept_areas is not None
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene
@@ -439,7 +439,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
                       antialias=antialias, colors=colors, cmap=cmap, background=background,
-                      surface=surface, fit=None if box is None else box - rec.origin, halo=halo, loop=loop, style=style)
+                      surface=surface, fit=None if box is None else box - rec.origin, halo=halo, loop=loop, look=look)
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")

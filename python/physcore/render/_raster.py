@@ -29,6 +29,16 @@ from ._colorbar import (
     _text_mask,
 )
 from ._lines import _draw_lines
+from ._look import (
+    Look,
+    blend,
+    draw_spheres,
+    polygon_coverage,
+    polyline_coverage,
+    stroke_points,
+    swept_path,
+    width_offsets,
+)
 from ._mesh import Mesh, _MeshShader
 from ._palette import (
     _ARROW,
@@ -56,16 +66,6 @@ from ._palette import (
 )
 from ._recording import Recording
 from ._rows import _row_norms
-from ._style import (
-    Style,
-    blend,
-    draw_spheres,
-    polygon_coverage,
-    polyline_coverage,
-    stroke_points,
-    swept_path,
-    width_offsets,
-)
 
 
 def _auto_radius(n: int, size: tuple[int, int]) -> int:
@@ -449,7 +449,7 @@ class _Rasteriser:
         surface: bool = False,
         halo: np.ndarray | None = None,
         loop: bool = False,
-        style: Style | None = None,
+        look: Look | None = None,
     ):
         """`fit`: (K, dim) points (relative to ``rec.origin``) the camera is fitted to instead
         of the recorded positions and walls (``render_frame(extent=...)``). `trail`: frames of
@@ -469,11 +469,11 @@ class _Rasteriser:
         `loop`: the recording is periodic (its last frame runs on into its first), so trails
         at the start continue from the end and the GIF loops without a seam.
         `surface`: frame_rgb draws the free particles as one continuous surface (a liquid),
-        coloured by `color_by` (see :meth:`_frame_rgb_surface`). `style`: a checked
-        :class:`~physcore.render.Style` (fading trails, line widths, lit spheres, a backdrop and
+        coloured by `color_by` (see :meth:`_frame_rgb_surface`). `look`: a checked
+        :class:`~physcore.render.Look` (fading trails, line widths, lit spheres, a backdrop and
         props, swept areas), drawn by the soft discs' frames (:meth:`_frame_rgb_discs`)."""
         n, dim = rec.positions.shape[1:]
-        self.style = Style() if style is None else style
+        self.look = Look() if look is None else look
         mode, cam_param = camera
         walls = rec.walls if rec.walls is not None and len(rec.walls) else None
         self.rec = rec
@@ -530,9 +530,9 @@ class _Rasteriser:
                 s, _ = self.cam.project(c)
                 lo, hi = np.minimum(lo, (s - r).min(axis=0)), np.maximum(hi, (s + r).max(axis=0))
                 amax = max(amax, float(np.abs(c).max() + r.max()))
-        if self.style.decor and fit is None and mode != "orbit":
+        if self.look.decor and fit is None and mode != "orbit":
             # Props are framed as the colliders are: whole in view.
-            pts = np.concatenate([item["points"] for item in self.style.decor]) - rec.origin
+            pts = np.concatenate([item["points"] for item in self.look.decor]) - rec.origin
             s, _ = self.cam.project(pts)
             lo, hi = np.minimum(lo, s.min(axis=0)), np.maximum(hi, s.max(axis=0))
             amax = max(amax, float(np.abs(pts).max()))
@@ -623,9 +623,9 @@ class _Rasteriser:
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
-        if self.style.backdrop is not None and background is None:
+        if self.look.backdrop is not None and background is None:
             # Text boxes and the classic trails fade into the backdrop's mean colour.
-            background = tuple(int(round(c)) for c in np.mean(np.array(self.style.backdrop, dtype=np.float64), axis=0))
+            background = tuple(int(round(c)) for c in np.mean(np.array(self.look.backdrop, dtype=np.float64), axis=0))
         self.palette = styled_palette(theme, cmap, background)
         self._static: np.ndarray | None = None  # the backdrop and props, fitted camera
         # Own colours apply where no quantity is coloured: plain discs and the glow.
@@ -653,7 +653,7 @@ class _Rasteriser:
                             or (self.colors is not None and color_by == "density") or rec.bodies is not None)
         # Trails 2 px wide from 300 px on: a 1-px path vanishes at a shared GIF's size.
         self._line_px = 2 if min(size) >= 300 else 1
-        self.trail_px = self.style.trail_width or self._line_px
+        self.trail_px = self.look.trail_width or self._line_px
         self._swept_cache: dict[int, np.ndarray] = {}  # complete swept areas by interval
         self.mesh = mesh
         self._shader = None
@@ -977,8 +977,8 @@ class _Rasteriser:
         under = self._under(cam)
         s, depth = cam.project(rec.positions[k])
         col, row = cam.pixels(s)
-        # Style: springs as soft strokes of a width, under the discs.
-        thick = self.style.spring_width is not None and rec.pairs is not None and rec.strain is not None
+        # Look: springs as soft strokes of a width, under the discs.
+        thick = self.look.spring_width is not None and rec.pairs is not None and rec.strain is not None
         if self.colors is None:
             on_top = self._draw_behind(under, k, cam, col, row, springs=not thick)
             out = self._rgb(under, cam)
@@ -1003,7 +1003,7 @@ class _Rasteriser:
             if self.halo is not None:
                 self._draw_halos(out, col, row, rad, colors)
             rgb = self.palette[colors[order]] if self.colors is None else self.colors[order]
-            if self.style.shading == "sphere":
+            if self.look.shading == "sphere":
                 draw_spheres(out, col[order], row[order], rad[order], rgb)
             else:
                 _core.draw_discs(out, col[order].astype(np.float32), row[order].astype(np.float32),
@@ -1020,7 +1020,7 @@ class _Rasteriser:
         self._draw_bodies(out, k, cam)
         self._draw_overlays(over, k, cam)
         self._draw_clock(over, k)
-        if self.style.backdrop is not None or self.style.decor:
+        if self.look.backdrop is not None or self.look.decor:
             # The labels' boxes show the backdrop (and props) there, as the still labels do.
             box = over == _BACKGROUND
             out[box] = self._static_image(cam)[box]
@@ -1089,7 +1089,7 @@ class _Rasteriser:
                          springs: bool = True) -> None:
         """What frame k draws under its discs in their own colours (``colors``), onto the RGB
         image `out`: each moving particle's trail in its colour, fading into the background
-        with age (from 15 % to 75 % of the colour; with ``style.trail_fade``, blended as
+        with age (from 15 % to 75 % of the colour; with ``look.trail_fade``, blended as
         :meth:`_draw_faded_trail` does), then the springs (rods, strings; unless `springs` is
         False) in the colour of their moving end (the pinned end is a pivot), 2 px wide from
         300 px on."""
@@ -1097,7 +1097,7 @@ class _Rasteriser:
         bg = self.palette[_BACKGROUND].astype(np.float32)
         rgb = self.colors.astype(np.float32)
         passes = width_offsets(self.trail_px)
-        if self.trail and (k > 0 or self.loop) and self.style.trail_fade is not None:
+        if self.trail and (k > 0 or self.loop) and self.look.trail_fade is not None:
             self._draw_faded_trail(out, k, cam, rgb)
         elif self.trail and (k > 0 or self.loop):
             moving = ~rec.pinned
@@ -1215,12 +1215,12 @@ class _Rasteriser:
         # Every segment in one call, in the order they used to be drawn one frame at a time
         # (oldest first, pass by pass): the same pixels, a fraction of the time.
         parts: list[list[np.ndarray]] = [[], [], [], [], []]
-        fade = self.style.trail_fade
+        fade = self.look.trail_fade
         for f in range(first, k):
             (c0, r0), (c1, r1) = pix[f], pix[f + 1]
             if fade is None:
                 shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
-            else:  # style.trail_fade: the shade of the opacity at this age (see _trail_alpha)
+            else:  # look.trail_fade: the shade of the opacity at this age (see _trail_alpha)
                 a = self._trail_alpha(k, f)
                 if a < 0.5 / _N_TRAIL:
                     continue
@@ -1232,12 +1232,12 @@ class _Rasteriser:
         if parts[0]:
             _draw_lines(buf, *(np.concatenate(p) for p in parts))
 
-    # ------------------------------------------------------------------ style (see _style.Style)
+    # ------------------------------------------------------------------ look (see _look.Look)
 
     def _trail_alpha(self, k: int, f: int) -> float:
         """The opacity of frame k's trail segment from frame f to f + 1 under
-        ``style.trail_fade`` = φ: φ + (1 − φ)(1 − age)², age = (k − 1 − f) / trail."""
-        fade = float(self.style.trail_fade or 0.0)
+        ``look.trail_fade`` = φ: φ + (1 − φ)(1 − age)², age = (k − 1 − f) / trail."""
+        fade = float(self.look.trail_fade or 0.0)
         age = (k - 1 - f) / max(1, self.trail)
         return fade + (1.0 - fade) * (1.0 - age) ** 2
 
@@ -1299,10 +1299,10 @@ class _Rasteriser:
         view[drawn] = np.clip(np.rint(mixed), 0, 255).astype(np.uint8)
 
     def _rgb(self, under: np.ndarray, cam: _Camera) -> np.ndarray:
-        """The full-colour image of the index image `under`, with the style's backdrop and props
+        """The full-colour image of the index image `under`, with the look's backdrop and props
         where `under` shows the background (labels, colliders and walls stay on top)."""
         out = self.palette[under]
-        if self.style.backdrop is None and not self.style.decor:
+        if self.look.backdrop is None and not self.look.decor:
             return out
         static = self._static_image(cam)
         bg = under == _BACKGROUND
@@ -1310,19 +1310,19 @@ class _Rasteriser:
         return out
 
     def _static_image(self, cam: _Camera) -> np.ndarray:
-        """(H, W, 3) uint8: the style's backdrop (a vertical gradient, else the background
+        """(H, W, 3) uint8: the look's backdrop (a vertical gradient, else the background
         colour) with its props drawn over it (antialiased), through `cam`; kept for the fitted
         camera."""
         if self._centres is None and self._static is not None:
             return self._static
         h, w = cam.height, cam.width
-        if self.style.backdrop is not None:
-            top, bottom = (np.array(c, np.float32) for c in self.style.backdrop)
+        if self.look.backdrop is not None:
+            top, bottom = (np.array(c, np.float32) for c in self.look.backdrop)
             t = np.linspace(0.0, 1.0, h, dtype=np.float32)[:, None, None]
             img = np.broadcast_to(top * (1 - t) + bottom * t, (h, w, 3)).copy()
         else:
             img = np.broadcast_to(self.palette[_BACKGROUND].astype(np.float32), (h, w, 3)).copy()
-        for item in self.style.decor:
+        for item in self.look.decor:
             col, row = cam.pixels(cam.project(item["points"] - self.rec.origin)[0])
             pts = np.stack([col, row], axis=1)
             cover = (polygon_coverage(pts, (h, w)) if item["kind"] == "polygon"
@@ -1334,7 +1334,7 @@ class _Rasteriser:
         return img
 
     def _draw_thick_springs(self, out: np.ndarray, k: int, col: np.ndarray, row: np.ndarray) -> None:
-        """Frame k's springs as soft round strokes ``style.spring_width`` pixels wide on the
+        """Frame k's springs as soft round strokes ``look.spring_width`` pixels wide on the
         full-colour image `out`: coloured by strain (the strain map and scale of the thin
         ones), or, with own colours and no strain colouring, in their moving end's colour."""
         from .. import _core
@@ -1349,12 +1349,12 @@ class _Rasteriser:
             rgb = self.palette[_strain_levels(rec.strain[k], self.strain_scale)]
         cc, rr, seg = stroke_points(col[i], row[i], col[j], row[j])
         if cc.size:
-            rad = np.full(cc.size, 0.5 * float(self.style.spring_width), np.float32)
+            rad = np.full(cc.size, 0.5 * float(self.look.spring_width), np.float32)
             _core.draw_discs(out, cc, rr, rad, np.ascontiguousarray(rgb[seg]))
 
     def _swept_colors(self) -> np.ndarray:
         """(2, 3) float32: the alternating colours of the swept areas."""
-        sw = self.style.swept_areas
+        sw = self.look.swept_areas
         if sw["colors"] is not None:
             return sw["colors"].astype(np.float32)
         if self.colors is not None:
@@ -1362,13 +1362,13 @@ class _Rasteriser:
         return self.palette[[_PLAIN, _PINNED]].astype(np.float32)
 
     def _draw_swept(self, out: np.ndarray, k: int, cam: _Camera) -> None:
-        """``style.swept_areas`` at frame k on the full-colour image `out`: the area being swept
+        """``look.swept_areas`` at frame k on the full-colour image `out`: the area being swept
         (from the start of its interval to now) and the `count` − 1 intervals before it, each the
-        polygon of the centre and the body's path (:func:`~._style.swept_path`, relative to the
+        polygon of the centre and the body's path (:func:`~._look.swept_path`, relative to the
         centre, placed at its position now), filled in two alternating colours, the older ones
         fainter; then the radius vector. Intervals before frame 0 come from the end of a
         periodic (`loop`) recording and are left out otherwise."""
-        sw = self.style.swept_areas
+        sw = self.look.swept_areas
         if sw is None:
             return
         rec = self.rec
@@ -1384,17 +1384,24 @@ class _Rasteriser:
                 continue
             rel = self._swept_cache.get(j) if f1 == (j + 1) * n_f else None
             if rel is None:
-                b = swept_path(rec.positions, rec.velocities, rec.times, body, f0, f1, loop=self.loop)
-                c = swept_path(rec.positions, rec.velocities, rec.times, centre, f0, f1, loop=self.loop)
-                rel = b - c
+                # A motion beyond float64 (a hostile dt) leaves no area to draw, not a warning.
+                with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+                    b = swept_path(rec.positions, rec.velocities, rec.times, body, f0, f1, loop=self.loop)
+                    c = swept_path(rec.positions, rec.velocities, rec.times, centre, f0, f1, loop=self.loop)
+                    rel = b - c
                 if f1 == (j + 1) * n_f:
                     self._swept_cache[j] = rel
-            poly = np.concatenate([here[None], here + rel])
+            with np.errstate(invalid="ignore", over="ignore"):
+                poly = np.concatenate([here[None], here + rel])
+            if not np.isfinite(poly).all():
+                continue
             col, row = cam.pixels(cam.project(poly)[0])
             opacity = 0.5 if age == 0 else 0.3  # the one being swept brighter; the rest alike
             blend(out, polygon_coverage(np.stack([col, row], axis=1), shape, 3), colours[j % 2], opacity)
         # The radius vector that sweeps them.
         seg = rec.positions[k, [centre, body]].astype(np.float64)
+        if not np.isfinite(seg).all():
+            return
         col, row = cam.pixels(cam.project(seg)[0])
         ink = 0.5 * (colours[0] + colours[1]) * 0.4 + 255.0 * 0.6
         blend(out, polyline_coverage(np.stack([col, row], axis=1), 1.5, shape), ink, 0.8)

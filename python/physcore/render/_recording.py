@@ -504,7 +504,7 @@ def record(
         progress reports and probes (energy books, counters); it must not change the scene.
     velocities : bool, optional
         Also record every frame's (N, dim) velocities (``Recording.velocities``, float32), which
-        :func:`gif`'s `arrows` draw (and its ``style`` swept areas follow between frames); 4·N·dim
+        :func:`gif`'s `arrows` draw (and its ``look`` swept areas follow between frames); 4·N·dim
         bytes a frame more. Default: only when the scene's ``render_defaults`` ask for arrows or
         swept areas.
 
@@ -535,7 +535,7 @@ def record(
     if velocities is None:
         d = scene_defaults(scene)
         # Arrows, and swept areas (their path between frames follows the velocities).
-        velocities = d.get("arrows") not in (None, "none") or bool((d.get("style") or {}).get("swept_areas"))
+        velocities = d.get("arrows") not in (None, "none") or bool((d.get("look") or {}).get("swept_areas"))
     velocities = _check.flag("velocities", velocities)
     plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, velocities)
     _check_memory(scene, plan["frames"], (0, 0), springs, velocities)

@@ -317,7 +317,7 @@ def newtons_cradle(
     ]
     scene.render_defaults = {
         "colors": [(206, 212, 224)] * balls + [(214, 170, 82)] * balls,
-        "style": {"shading": "sphere", "spring_width": 1, "backdrop": ((64, 74, 98), (14, 16, 24)), "decor": decor},
+        "look": {"shading": "sphere", "spring_width": 1, "backdrop": ((64, 74, 98), (14, 16, 24)), "decor": decor},
     }
     return _auto_grain_dt(scene, dt)
 

@@ -144,8 +144,8 @@ kepler.render_defaults = {"antialias": True,
     "title": "equal areas in equal times",
     # Kepler's second law: the radius vector sweeps a wedge a sixth of a period long (10
     # frames) in alternating colours, the last orbit's six tiling the ellipse; equal areas
-    # (tests/render/test_style.py measures them), fat at perihelion, thin at aphelion.
-    "style": {"swept_areas": {"centre": 0, "body": 1, "frames": 10, "count": 6}, "trail_fade": 0.0, "trail_width": 3},
+    # (tests/render/test_look.py measures them), fat at perihelion, thin at aphelion.
+    "look": {"swept_areas": {"centre": 0, "body": 1, "frames": 10, "count": 6}, "trail_fade": 0.0, "trail_width": 3},
 }
 kepler = _stamped(kepler, old_order=('e', 'a', 'mass_ratio', 'steps_per_orbit', 'integrator', 'dt', 'threads'), keep=1)
 
@@ -232,7 +232,7 @@ pythagorean.render_defaults = {"antialias": True,
     "frames": 313, "fps": 50, "frame_time": 0.2, "size": (400, 460), "speed_unit": "(G=1)", "trail": 40, "size_by": "mass",
     "radius": 8, "theme": "dark", "color_by": "none", "extent": [[-3.3, -4.7], [3.4, 3.2]],
     "title": "Burrau's problem: masses 3, 4, 5",
-    "style": {"trail_fade": 0.0, "trail_width": 3},
+    "look": {"trail_fade": 0.0, "trail_width": 3},
 }
 pythagorean = _stamped(pythagorean, old_order=('rtol', 'integrator', 'dt', 'threads'), keep=0)
 

@@ -72,7 +72,7 @@ def spring_chain(
     bracket = np.zeros((4, dim))
     bracket[:, 0] = [-0.1 * length, 0.1 * length, 0.1 * length, -0.1 * length]
     bracket[:, up] = [0.0, 0.0, 0.03 * length, 0.03 * length]
-    scene.render_defaults = {"style": {**_CHAIN_STYLE, "decor": [{"polygon": bracket.tolist(), "color": (110, 104, 98)}]}}
+    scene.render_defaults = {"look": {**_CHAIN_STYLE, "decor": [{"polygon": bracket.tolist(), "color": (110, 104, 98)}]}}
     return _finite_books(scene, "length, mass")
 
 

@@ -120,6 +120,11 @@ class OrientedBox(Collider):
         for name, value in (("center", center), ("half_extents", half), ("rotation", rotation), ("restitution", e), ("friction", mu)):
             object.__setattr__(self, name, value)
 
+    def axes(self) -> np.ndarray:
+        """The box's local unit axes u_j as rows, (dim, dim) float64: the columns of its rotation
+        (the angle in 2D, counter-clockwise; the rotation vector by Rodrigues' formula in 3D)."""
+        return _axes(self.rotation)
+
     def corners(self) -> np.ndarray:
         """The box's corners, m, (2**dim, dim): ``center + Σ_j ±h_j u_j``, in binary order of
         the signs (the last axis fastest)."""

@@ -1,4 +1,4 @@
-"""gif(style=...): render.Style's checks and what each field draws; Kepler's swept areas are
+"""gif(look=...): render.Look's checks and what each field draws; Kepler's swept areas are
 equal (measured from the recorded motion)."""
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import physcore as pc
-from physcore.render import Style, swept_polygons
-from physcore.render._style import polygon_area, swept_path, width_offsets
+from physcore.render import Look, swept_polygons
+from physcore.render._look import polygon_area, swept_path, width_offsets
 
 
 def _ball(n: int = 1) -> pc.Scene:
@@ -23,7 +23,7 @@ def test_kepler_wedges_sweep_equal_areas_in_equal_times():
     # measured from the recorded positions and velocities (the path between frames as their
     # cubic Hermite curve), each is the same area, (Δt/P) π a b of the relative orbit, to 1e-4.
     scene = pc.scenes.kepler()
-    sw = scene.render_defaults["style"]["swept_areas"]
+    sw = scene.render_defaults["look"]["swept_areas"]
     assert (sw["centre"], sw["body"], sw["frames"]) == (0, 1, 10)
     rec = pc.render.record(scene)
     assert rec.velocities is not None  # recorded for the swept areas
@@ -61,26 +61,26 @@ def test_swept_path_without_velocities_follows_catmull_rom_tangents():
 def test_kepler_frame_shows_the_wedges():
     rec = pc.render.record(pc.scenes.kepler())  # two whole orbits: it loops
     on = list(pc.render.frames(rec, size=(190, 160), radius=3))
-    off = list(pc.render.frames(rec, size=(190, 160), radius=3, style={"swept_areas": None}))
+    off = list(pc.render.frames(rec, size=(190, 160), radius=3, look={"swept_areas": None}))
     for k in (0, 25):  # frame 0 of the looping recording already shows the last orbit's wedges
         changed = np.abs(on[k].astype(int) - off[k].astype(int)).sum(axis=2) > 12
         assert changed.mean() > 0.2, (k, changed.mean())
 
 
-def test_a_default_style_leaves_the_picture_as_it_was():
+def test_a_default_look_leaves_the_picture_as_it_was():
     rec = pc.render.record(pc.scenes.projectile(n=3), frames=6)
     base = list(pc.render.frames(rec, size=(96, 64)))
-    for style in ({}, Style(), {"trail_fade": None}):
-        again = list(pc.render.frames(rec, size=(96, 64), style=style))
+    for look in ({}, Look(), {"trail_fade": None}):
+        again = list(pc.render.frames(rec, size=(96, 64), look=look))
         assert all(np.array_equal(a, b) for a, b in zip(base, again, strict=True))
 
 
-def test_style_is_checked_naming_the_field(tmp_path):
+def test_look_is_checked_naming_the_field(tmp_path):
     s = _ball(2)
     path = tmp_path / "x.gif"
     cases = [
         ({"trail_fad": 0.5}, ValueError, "trail_fad"),
-        ("sphere", TypeError, "style"),
+        ("sphere", TypeError, "look"),
         ({"trail_fade": 1.5}, ValueError, "trail_fade"),
         ({"trail_width": 0}, ValueError, "trail_width"),
         ({"shading": "metal"}, ValueError, "shading"),
@@ -92,19 +92,19 @@ def test_style_is_checked_naming_the_field(tmp_path):
         ({"swept_areas": {"centre": 0, "body": 0, "frames": 2}}, ValueError, "swept_areas"),
         ({"swept_areas": {"centre": 0, "frames": 2}}, ValueError, "body"),
     ]
-    for style, err, word in cases:
+    for look, err, word in cases:
         with pytest.raises(err, match=word):
-            pc.render.gif(s, path, frames=2, size=(64, 48), style=style)
+            pc.render.gif(s, path, frames=2, size=(64, 48), look=look)
     assert not path.exists() and s.time == 0.0
 
 
 def test_a_dict_changes_only_the_fields_it_names():
     kepler = pc.scenes.kepler()
-    from physcore.render._style import check_style
+    from physcore.render._look import check_look
 
-    merged = check_style({"trail_width": 1}, kepler.render_defaults["style"])
+    merged = check_look({"trail_width": 1}, kepler.render_defaults["look"])
     assert merged.trail_width == 1 and merged.trail_fade == 0.0 and merged.swept_areas["frames"] == 10
-    assert check_style({"swept_areas": None}, kepler.render_defaults["style"]).swept_areas is None
+    assert check_look({"swept_areas": None}, kepler.render_defaults["look"]).swept_areas is None
 
 
 def test_trail_fade_fades_the_oldest_end_to_nothing():
@@ -114,7 +114,7 @@ def test_trail_fade_fades_the_oldest_end_to_nothing():
     opts = dict(size=(200, 60), trail=29, color_by="none", colors=["#ff3000"], colorbar=False, theme="dark", radius=3,
                 antialias=True)
     classic = list(pc.render.frames(rec, **opts))[-1].astype(int)
-    faded = list(pc.render.frames(rec, style={"trail_fade": 0.0, "trail_width": 3}, **opts))[-1].astype(int)
+    faded = list(pc.render.frames(rec, look={"trail_fade": 0.0, "trail_width": 3}, **opts))[-1].astype(int)
     bg = faded[2, 2]
     row = np.argmax((np.abs(faded - bg).sum(axis=2) > 3).sum(axis=1))  # the trail's middle row
     red = faded[row, :, 0] - bg[0]
@@ -130,7 +130,7 @@ def test_sphere_shading_lights_the_upper_left():
     s = _ball()
     opts = dict(frames=1, size=(80, 80), radius=24, color_by="none", colors=["#b0b0b0"], colorbar=False)
     flat = next(pc.render.frames(s, **opts)).astype(int)
-    lit = next(pc.render.frames(s, style={"shading": "sphere"}, **opts)).astype(int)
+    lit = next(pc.render.frames(s, look={"shading": "sphere"}, **opts)).astype(int)
     centre = np.argwhere((flat == [176, 176, 176]).all(axis=2)).mean(axis=0).round().astype(int)
     r, c = centre
     upper_left, lower_right = lit[r - 9, c - 7].sum(), lit[r + 12, c + 12].sum()
@@ -141,7 +141,7 @@ def test_backdrop_and_decor_are_drawn_behind_and_framed(tmp_path):
     s = _ball()
     decor = [{"polygon": [[-3.0, -1.0], [3.0, -1.0], [3.0, -0.8], [-3.0, -0.8]], "color": (200, 40, 40)}]
     opts = dict(frames=1, size=(160, 120), radius=4, color_by="none", colors=["#ffffff"], colorbar=False)
-    img = next(pc.render.frames(s, style={"backdrop": ((0, 0, 100), (0, 100, 0)), "decor": decor}, **opts)).astype(int)
+    img = next(pc.render.frames(s, look={"backdrop": ((0, 0, 100), (0, 100, 0)), "decor": decor}, **opts)).astype(int)
     top, bottom = img[1, 80], img[-1, 80]
     assert top[2] > 90 and top[1] < 10 and bottom[1] > 90 and bottom[2] < 10  # the gradient, top to bottom
     red = (img[..., 0] > 150) & (img[..., 1] < 80)
@@ -156,8 +156,8 @@ def test_thick_springs_are_coloured_by_strain_under_the_beads():
     s = pc.scenes.spring_chain(n=6)
     rec = pc.render.record(s, frames=12, color_by="strain")
     opts = dict(size=(240, 160), radius=0, colorbar=False)
-    img = list(pc.render.frames(rec, style={"spring_width": 9}, **opts))[-1].astype(int)
+    img = list(pc.render.frames(rec, look={"spring_width": 9}, **opts))[-1].astype(int)
     reddish = (img[..., 0] - img[..., 2] > 40)
     assert reddish.sum() > 200  # a stretched rope, 9 px wide
-    thin = list(pc.render.frames(rec, style={"spring_width": None}, **opts))[-1].astype(int)
+    thin = list(pc.render.frames(rec, look={"spring_width": None}, **opts))[-1].astype(int)
     assert (thin[..., 0] - thin[..., 2] > 40).sum() < 0.5 * reddish.sum()

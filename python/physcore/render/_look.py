@@ -1,5 +1,5 @@
-"""How a particle animation looks beyond its colouring: :class:`Style`, the one parameter object
-of ``gif(style=...)`` (trails that fade, line widths, lit spheres, a backdrop and static props,
+"""How a particle animation looks beyond its colouring: :class:`Look`, the one parameter object
+of ``gif(look=...)`` (trails that fade, line widths, lit spheres, a backdrop and static props,
 the areas a radius vector sweeps), its checks, and the drawing helpers it needs (numpy and
 Pillow, on full-colour frames)."""
 from __future__ import annotations
@@ -14,15 +14,15 @@ from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import _check_int, _rgb_rows
 
-#: ``Style.shading`` values: flat discs, or discs lit as spheres.
+#: ``Look.shading`` values: flat discs, or discs lit as spheres.
 SHADINGS = ("flat", "sphere")
 
 
 @dataclasses.dataclass(frozen=True)
-class Style:
+class Look:
     """How ``gif()`` draws a particle animation beyond its colouring; every field's default
-    leaves the picture as it was. Give a Style or a dict of some of its fields
-    (``gif(scene, style={"trail_fade": 0.0})``); a scene's ``render_defaults["style"]`` is the
+    leaves the picture as it was. Give a Look or a dict of some of its fields
+    (``gif(scene, look={"trail_fade": 0.0})``); a scene's ``render_defaults["look"]`` is the
     default, and a dict given to ``gif`` changes only the fields it names (None: the default).
 
     Attributes
@@ -74,50 +74,50 @@ class Style:
 
     @property
     def full_colour(self) -> bool:
-        """Whether this style needs frames drawn in full colour (soft discs)."""
+        """Whether this look needs frames drawn in full colour (soft discs)."""
         return (self.shading != "flat" or self.backdrop is not None or bool(self.decor)
                 or self.swept_areas is not None or self.spring_width is not None)
 
 
-_FIELDS = tuple(f.name for f in dataclasses.fields(Style))
+_FIELDS = tuple(f.name for f in dataclasses.fields(Look))
 
 
-def check_style(value: Any, base: Any = None) -> Style:
-    """The checked :class:`Style` of `value` (a Style, a dict of some of its fields, or None)
+def check_look(value: Any, base: Any = None) -> Look:
+    """The checked :class:`Look` of `value` (a Look, a dict of some of its fields, or None)
     over `base` (the scene's default, likewise): the fields `value` names replace `base`'s."""
     fields: dict[str, Any] = {}
     for v in (base, value):
         if v is None:
             continue
-        if isinstance(v, Style):
+        if isinstance(v, Look):
             v = dataclasses.asdict(v)
         if not isinstance(v, dict):
-            raise InvalidTypeError(f"style must be a physcore.render.Style or a dict of its fields, got {type(v).__name__}")
+            raise InvalidTypeError(f"look must be a physcore.render.Look or a dict of its fields, got {type(v).__name__}")
         unknown = sorted(set(v) - set(_FIELDS))
         if unknown:
-            raise InvalidInputError(f"style: unknown field(s) {', '.join(map(str, unknown))}; valid: {', '.join(_FIELDS)}")
+            raise InvalidInputError(f"look: unknown field(s) {', '.join(map(str, unknown))}; valid: {', '.join(_FIELDS)}")
         fields.update(v)
     out: dict[str, Any] = {}
     fade = fields.get("trail_fade")
     if fade is not None:
-        out["trail_fade"] = _check.float_in_range("style.trail_fade", fade, 0.0, 1.0)
+        out["trail_fade"] = _check.float_in_range("look.trail_fade", fade, 0.0, 1.0)
     for name, top in (("trail_width", 16), ("spring_width", 32)):
         if fields.get(name) is not None:
-            out[name] = _check_int(f"style.{name}", fields[name], 1, top)
+            out[name] = _check_int(f"look.{name}", fields[name], 1, top)
     if fields.get("shading") is not None:
-        out["shading"] = _check.choice("style.shading", fields["shading"], SHADINGS)
+        out["shading"] = _check.choice("look.shading", fields["shading"], SHADINGS)
     if fields.get("backdrop") is not None:
-        rows = _rgb_rows(fields["backdrop"], "style.backdrop", 2)
+        rows = _rgb_rows(fields["backdrop"], "look.backdrop", 2)
         out["backdrop"] = tuple(tuple(int(c) for c in row) for row in rows)
     if fields.get("decor"):
         out["decor"] = tuple(_check_decor_item(k, item) for k, item in enumerate(fields["decor"]))
     if fields.get("swept_areas") is not None:
         out["swept_areas"] = _check_swept(fields["swept_areas"])
-    return Style(**out)
+    return Look(**out)
 
 
 def _check_decor_item(k: int, item: Any) -> dict:
-    where = f"style.decor[{k}]"
+    where = f"look.decor[{k}]"
     if not isinstance(item, dict):
         raise InvalidTypeError(f"{where} must be a dict with 'polygon' or 'line', and 'color'; got {type(item).__name__}")
     kinds = [key for key in ("polygon", "line") if key in item]
@@ -138,35 +138,35 @@ def _check_decor_item(k: int, item: Any) -> dict:
 
 def _check_swept(value: Any) -> dict:
     if not isinstance(value, dict):
-        raise InvalidTypeError(f"style.swept_areas must be a dict with 'centre', 'body' and 'frames', got {type(value).__name__}")
+        raise InvalidTypeError(f"look.swept_areas must be a dict with 'centre', 'body' and 'frames', got {type(value).__name__}")
     unknown = sorted(set(value) - {"centre", "body", "frames", "count", "colors"})
     missing = sorted({"centre", "body", "frames"} - set(value))
     if unknown or missing:
-        raise InvalidInputError(f"style.swept_areas: keys 'centre', 'body', 'frames' (and 'count', 'colors'); "
+        raise InvalidInputError(f"look.swept_areas: keys 'centre', 'body', 'frames' (and 'count', 'colors'); "
                                 f"{'unknown ' + ', '.join(unknown) if unknown else 'missing ' + ', '.join(missing)}")
     out = {
-        "centre": _check_int("style.swept_areas['centre']", value["centre"], 0),
-        "body": _check_int("style.swept_areas['body']", value["body"], 0),
-        "frames": _check_int("style.swept_areas['frames']", value["frames"], 1),
-        "count": _check_int("style.swept_areas['count']", value.get("count", 6), 1, 1000),
+        "centre": _check_int("look.swept_areas['centre']", value["centre"], 0),
+        "body": _check_int("look.swept_areas['body']", value["body"], 0),
+        "frames": _check_int("look.swept_areas['frames']", value["frames"], 1),
+        "count": _check_int("look.swept_areas['count']", value.get("count", 6), 1, 1000),
         "colors": None,
     }
     if out["centre"] == out["body"]:
-        raise InvalidInputError(f"style.swept_areas: 'centre' and 'body' must be two particles, got {out['centre']} twice")
+        raise InvalidInputError(f"look.swept_areas: 'centre' and 'body' must be two particles, got {out['centre']} twice")
     if value.get("colors") is not None:
-        out["colors"] = _rgb_rows(value["colors"], "style.swept_areas['colors']", 2).astype(np.uint8)
+        out["colors"] = _rgb_rows(value["colors"], "look.swept_areas['colors']", 2).astype(np.uint8)
     return out
 
 
-def check_style_particles(style: Style, n: int, dim: int) -> None:
+def check_look_particles(look: Look, n: int, dim: int) -> None:
     """Refuse particle indices and decor points that do not fit a recording of `n` particles
     in `dim` dimensions."""
-    sw = style.swept_areas
+    sw = look.swept_areas
     if sw is not None and max(sw["centre"], sw["body"]) >= n:
-        raise InvalidInputError(f"style.swept_areas: particle indices must be in [0, {n}), got centre {sw['centre']}, body {sw['body']}")
-    for k, item in enumerate(style.decor):
+        raise InvalidInputError(f"look.swept_areas: particle indices must be in [0, {n}), got centre {sw['centre']}, body {sw['body']}")
+    for k, item in enumerate(look.decor):
         if item["points"].shape[1] != dim:
-            raise InvalidInputError(f"style.decor[{k}]: points of {item['points'].shape[1]} coordinates in a {dim}D scene")
+            raise InvalidInputError(f"look.decor[{k}]: points of {item['points'].shape[1]} coordinates in a {dim}D scene")
 
 
 # --------------------------------------------------------------------------- lines and widths
@@ -363,7 +363,7 @@ def swept_polygons(recording: Any, centre: int, body: int, frames: int, *, sampl
     interval of `frames` frames of `recording` (from frame 0), as (S + 1, dim) polygons of
     the body's position relative to the centre: the origin, then the body's path
     (:func:`swept_path`, `samples` points a frame). By Kepler's second law they are all of one
-    area (half the angular momentum per unit reduced mass, times the interval). ``style=
+    area (half the angular momentum per unit reduced mass, times the interval). ``look=
     {"swept_areas": ...}`` draws them, placed at the centre's position."""
     out = []
     rec = recording
