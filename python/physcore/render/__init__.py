@@ -32,7 +32,7 @@ _scene_state    reading a scene's optional parts: springs and strain, planes, pr
 _recording      ``Recording`` and ``record()``: stepping a scene into frames of data, ``MAX_STEPS``.
 _colorbar       the colour bar: labels, layout and drawing into the background.
 _mesh           ``Mesh`` (triangles over the particles) and its shading; the core rasterises it.
-_look          ``Look`` (fading trails, line widths, lit spheres, a backdrop and props, swept
+_look           ``Look`` (fading trails, line widths, lit spheres, a backdrop and props, swept
                 areas): its checks and drawing helpers; ``swept_polygons``.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
                 or RGB with a shaded mesh).
