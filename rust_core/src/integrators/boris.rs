@@ -23,10 +23,9 @@
 //! Like Verlet it keeps the forces at x_{n+1} (and B there) for the next step. Velocity-dependent
 //! forces other than the magnetic one (drag) are evaluated at x_{n+1} with the velocity predicted
 //! by the step's own kicks and turn with the old a and B (error O(dt²), keeping second order).
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Carry, Integrator, IntegratorInfo, Particles};
+use super::{accel, bad, ensure_len, store, Carry, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
-use std::collections::TryReserveError;
 
 pub struct Boris<V: Vector> {
     /// Non-magnetic forces at the current state, and the term powers there.
@@ -160,11 +159,8 @@ impl<V: Vector> Integrator<V> for Boris<V> {
 }
 
 impl<V: Vector> Carry<V> for Boris<V> {
-    fn get(&self) -> Option<(Vec<V>, Vec<Real>)> {
-        self.valid.then(|| (self.f.clone(), self.p.clone()))
-    }
-    fn try_get(&self) -> Result<Option<Cache<V>>, TryReserveError> {
-        Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
+    fn borrow(&self) -> Option<(&[V], &[Real])> {
+        self.valid.then_some((&self.f[..], &self.p[..]))
     }
     /// The forces and powers; B is not part of the cache (it depends on the positions alone and
     /// is recomputed, to the same bits, at the next step).

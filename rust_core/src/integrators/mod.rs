@@ -192,13 +192,16 @@ pub trait Integrator<V: Vector>: Send + Sync {
 pub trait Carry<V: Vector> {
     /// A copy (forces, N, one per particle; powers, W, one per term, then any controller
     /// memory), or `None` while nothing valid is carried.
-    fn get(&self) -> Option<Cache<V>>;
+    fn get(&self) -> Option<Cache<V>> {
+        self.borrow().map(|(f, p)| (f.to_vec(), p.to_vec()))
+    }
     /// `get`, with its copy of the per-particle forces allocated fallibly.
     fn try_get(&self) -> std::result::Result<Option<Cache<V>>, TryReserveError> {
-        Ok(self.get())
+        self.borrow().map(|(f, p)| Ok((try_copy(f)?, p.to_vec()))).transpose()
     }
     /// Borrowed, where it can be lent (`None` also while nothing valid is carried): a checkpoint
-    /// copies it into buffers it already has instead of allocating two.
+    /// copies it into buffers it already has instead of allocating two. `get` and `try_get`
+    /// copy it, unless the carried value is not held as two slices (dopri5).
     fn borrow(&self) -> Option<(&[V], &[Real])> {
         None
     }

@@ -8,10 +8,9 @@
 //! order; evaluating them with v½ (a common shortcut) would drop it to first order. Without
 //! such forces the prediction is skipped and the method is exactly the symplectic velocity
 //! Verlet.
-use super::{accel, bad, ensure_len, store, try_copy, Cache, Carry, Integrator, IntegratorInfo, Particles};
+use super::{accel, bad, ensure_len, store, Carry, Integrator, IntegratorInfo, Particles};
 use crate::par;
 use crate::vector::{Real, Vector};
-use std::collections::TryReserveError;
 
 #[derive(Default)]
 pub struct VelocityVerlet<V: Vector> {
@@ -98,12 +97,6 @@ impl<V: Vector> Integrator<V> for VelocityVerlet<V> {
 }
 
 impl<V: Vector> Carry<V> for VelocityVerlet<V> {
-    fn get(&self) -> Option<(Vec<V>, Vec<Real>)> {
-        self.valid.then(|| (self.f.clone(), self.p.clone()))
-    }
-    fn try_get(&self) -> Result<Option<Cache<V>>, TryReserveError> {
-        Ok(if self.valid { Some((try_copy(&self.f)?, self.p.clone())) } else { None })
-    }
     fn borrow(&self) -> Option<(&[V], &[Real])> {
         self.valid.then_some((&self.f[..], &self.p[..]))
     }
