@@ -128,14 +128,23 @@ pub trait RigidBodies {
     /// Body `i`'s shape as triangles in its own frame (m): vertices (V·3) and corner indices
     /// (T·3). 3D only: 2D bodies refuse naming `dim` (they have outlines).
     fn body_mesh(&self, i: usize) -> Result<(Vec<Real>, Vec<u32>)>;
+    /// The bodies themselves, of their dimension: what the particles⇄bodies coupling written
+    /// beside them (`BodyContacts`) steps with. A role, not a downcast: no system is `Any`.
+    fn bodies(&mut self) -> BodiesOf<'_>;
+}
+
+/// A rigid-body system as the particles⇄bodies coupling of its dimension sees it.
+pub enum BodiesOf<'a> {
+    Two(&'a mut bodies::Bodies2),
+    Three(&'a mut bodies::Bodies3),
 }
 
 /// One system of a world. Methods that run kernels are called on the world's thread pool.
 ///
-/// A system is `Any` so that a coupling written beside it (the bodies' `BodyContacts`) can
-/// find its own system's type among the world's; nothing outside that module looks inside a
-/// system: the bindings and the world go through this trait and its roles (`as_rigid_bodies`).
-pub trait System: std::any::Any + Send + Sync {
+/// Nothing looks inside a system: the bindings, the world and the couplings go through this
+/// trait and its roles (`as_rigid_bodies`; the bodies' `BodyContacts` finds its bodies by
+/// `RigidBodies::bodies`).
+pub trait System: Send + Sync {
     /// Short name, e.g. "particles" (the books of several systems are told apart by it).
     fn name(&self) -> &str;
     /// Whether there is nothing to step (the world then only advances time).

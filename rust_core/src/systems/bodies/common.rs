@@ -693,6 +693,9 @@ impl System for Bodies {
 }
 
 impl crate::systems::RigidBodies for Bodies {
+    fn bodies(&mut self) -> crate::systems::BodiesOf<'_> {
+        as_bodies_of(self)
+    }
     fn add_group(&mut self, p: Params) -> Result<usize> {
         Bodies::add_group(self, p)
     }
@@ -835,11 +838,9 @@ impl BodyContacts {
     }
 }
 
-/// The bodies system `others[system]` of this dimension, if it is one.
+/// The bodies system `others[system]` of this dimension, if it is one (through its role).
 fn bodies_in(others: &mut [Box<dyn System>], system: usize) -> Option<&mut Bodies> {
-    // The one place a system's type is asked for: this coupling and the system it couples are
-    // written together (`System` is `Any` for this).
-    others.get_mut(system).and_then(|s| (s.as_mut() as &mut dyn std::any::Any).downcast_mut::<Bodies>())
+    of_this_dim(others.get_mut(system)?.as_rigid_bodies()?.bodies())
 }
 
 /// A vector of the bodies' dimension as the particles' (`V::DIM == D`).

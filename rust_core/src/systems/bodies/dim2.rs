@@ -12,6 +12,17 @@ use rapier2d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
 
 const D: usize = 2;
+
+/// These bodies as the coupling's role hands them out, and back (`None`: the other dimension's).
+fn as_bodies_of(b: &mut Bodies) -> crate::systems::BodiesOf<'_> {
+    crate::systems::BodiesOf::Two(b)
+}
+fn of_this_dim(b: crate::systems::BodiesOf<'_>) -> Option<&mut Bodies> {
+    match b {
+        crate::systems::BodiesOf::Two(b) => Some(b),
+        _ => None,
+    }
+}
 /// Values per body of the orientation (an angle) and of the angular velocity (about z).
 const ROT: usize = 1;
 const ANG: usize = 1;

@@ -13,6 +13,17 @@ use rapier3d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
 
 const D: usize = 3;
+
+/// These bodies as the coupling's role hands them out, and back (`None`: the other dimension's).
+fn as_bodies_of(b: &mut Bodies) -> crate::systems::BodiesOf<'_> {
+    crate::systems::BodiesOf::Three(b)
+}
+fn of_this_dim(b: crate::systems::BodiesOf<'_>) -> Option<&mut Bodies> {
+    match b {
+        crate::systems::BodiesOf::Three(b) => Some(b),
+        _ => None,
+    }
+}
 /// Values per body of the orientation (a unit quaternion) and of the angular velocity.
 const ROT: usize = 4;
 const ANG: usize = 3;
