@@ -258,7 +258,8 @@ def test_surface_tension_scenes(name):
     p = scene.positions
     assert np.isfinite(p).all()
     # The walls' innermost layer lies 2 spacings inside their outermost.
-    lo = scene.boundary_points().min(axis=0) + 2 * (0.06 if name == "droplets" else 0.04) / 80
+    # Two spacings of the droplets tank (0.04 m long); for the crown (0.07 m) a looser bound.
+    lo = scene.boundary_points().min(axis=0) + 2 * 0.04 / 80
     assert (p > lo).all()
     st = scene.solver_stats()
     assert st["unconverged"] == 0

@@ -161,3 +161,51 @@ def test_thick_springs_are_coloured_by_strain_under_the_beads():
     assert reddish.sum() > 200  # a stretched rope, 9 px wide
     thin = list(pc.render.frames(rec, look={"spring_width": None}, **opts))[-1].astype(int)
     assert (thin[..., 0] - thin[..., 2] > 40).sum() < 0.5 * reddish.sum()
+
+
+def test_hulls_draw_a_body_of_grains_whole():
+    # A 3 × 3 box of grains (radius 0.3 of their spacing, so gaps show between the discs): as a
+    # hull it is one solid square out to the grains' outer edges, in its colour, and no wider.
+    x = np.array([[i, j] for j in range(3) for i in range(3)], dtype=float)
+    s = pc.Scene(2, dt=1e-3)
+    s.add_particles(x, masses=1.0)
+    s.set_attribute("radius", np.full(9, 0.3))
+    opts = dict(frames=1, size=(200, 200), size_by="radius", color_by="none", colors=["#2060c0"] * 9, colorbar=False,
+                antialias=True)
+    discs = next(pc.render.frames(s, **opts)).astype(int)
+    hull = next(pc.render.frames(s, look={"hulls": [list(range(9))]}, **opts)).astype(int)
+    blue = lambda img: (img[..., 2] > 150) & (img[..., 0] < 100)  # noqa: E731
+    r, c = np.argwhere(blue(hull)).T
+    # Between two neighbouring grains' centres (gaps there among the discs, filled in the hull).
+    mid_r, mid_c = int(round(r.mean())), int(round(c.mean()))
+    span = c.max() - c.min()
+    gap = (mid_r, mid_c - int(round(0.25 * span)))  # halfway from the middle grain to its left one
+    assert blue(hull)[gap] and not blue(discs)[gap]
+    # The hull reaches the grains' outer edges: 2 spacings + 2 radii across, as the discs do.
+    rd, cd = np.argwhere(blue(discs)).T
+    assert abs(span - (cd.max() - cd.min())) <= 2 and abs((r.max() - r.min()) - (rd.max() - rd.min())) <= 2
+    assert blue(hull).sum() > 1.15 * blue(discs).sum()
+
+
+def test_hulls_are_checked_naming_the_field(tmp_path):
+    s = _ball(2)
+    for look, err in (({"hulls": [[0, 5]]}, ValueError), ({"hulls": [[]]}, ValueError), ({"hulls": [[0.5]]}, ValueError)):
+        with pytest.raises(err, match="hulls"):
+            pc.render.gif(s, tmp_path / "x.gif", frames=2, size=(64, 48), look=look)
+    s3 = pc.Scene(3, dt=1e-3)
+    s3.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], masses=1.0)
+    with pytest.raises(ValueError, match="hulls"):
+        pc.render.gif(s3, tmp_path / "y.gif", frames=2, size=(64, 48), look={"hulls": [[0, 1]]})
+
+
+def test_a_backdrop_shows_behind_a_mesh_and_a_liquid_surface():
+    # Issue 65: the backdrop (and props) were left out with a mesh or a liquid surface.
+    back = {"backdrop": ((0, 0, 120), (0, 120, 0))}
+    cloth = pc.scenes.cloth(n=6)
+    drop = pc.scenes.drop(n=20)
+    for img in (next(pc.render.frames(cloth, frames=1, size=(120, 90), look=back)),
+                next(pc.render.frames(drop, frames=1, size=(120, 90), surface=True, colorbar=False, look=back))):
+        img = img.astype(int)
+        top, bottom = img[1, 60], img[-2, 60]  # the gradient's top and bottom rows, not white
+        assert top[2] > 100 and top[0] < 30 and top[1] < 30, top
+        assert bottom[1] > 100 and bottom[0] < 30 and bottom[2] < 30, bottom

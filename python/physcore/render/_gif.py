@@ -275,8 +275,8 @@ def gif(
         vector sweeps in equal times (Kepler's second law). A dict changes only the fields it
         names over the scene's ``render_defaults["look"]``; each field's default leaves the
         picture as it was. Any of them but the trail's draws the frames in full colour with
-        soft discs (unless ``antialias=False`` is given, which leaves them out). Not drawn with
-        a mesh, a liquid surface or glow.
+        soft discs (unless ``antialias=False`` is given, which leaves them out). With a mesh or
+        a liquid surface only the backdrop and props are drawn (behind it); with glow, none.
 
     Returns
     -------

@@ -62,6 +62,13 @@ class Look:
         frames is the cubic Hermite curve of the recorded positions and velocities, so the
         wedges' areas are those of the motion (:func:`swept_polygons`). With ``loop`` the
         wedges run on across the GIF's end (`frames` should divide the frame count).
+    hulls : sequence of sequences of int, optional
+        2D: groups of particles drawn as one solid body each (a rigid box of grains), in
+        place of their discs: the convex hull of the group's discs (each of its drawn radius,
+        the true radius with ``size_by="radius"``), filled in the group's first particle's
+        colour with a darker rim. For a convex rigid body of grains the hull is its outline
+        but for the notches between neighbouring grains (a grain of another body can sit a
+        little way into one). Drawn under the other discs.
     """
 
     trail_fade: float | None = None
@@ -71,12 +78,13 @@ class Look:
     backdrop: tuple | None = None
     decor: tuple = ()
     swept_areas: dict | None = None
+    hulls: tuple = ()
 
     @property
     def full_colour(self) -> bool:
         """Whether this look needs frames drawn in full colour (soft discs)."""
         return (self.shading != "flat" or self.backdrop is not None or bool(self.decor)
-                or self.swept_areas is not None or self.spring_width is not None)
+                or self.swept_areas is not None or self.spring_width is not None or bool(self.hulls))
 
 
 _FIELDS = tuple(f.name for f in dataclasses.fields(Look))
@@ -113,7 +121,16 @@ def check_look(value: Any, base: Any = None) -> Look:
         out["decor"] = tuple(_check_decor_item(k, item) for k, item in enumerate(fields["decor"]))
     if fields.get("swept_areas") is not None:
         out["swept_areas"] = _check_swept(fields["swept_areas"])
+    if fields.get("hulls") is not None and len(fields["hulls"]):
+        out["hulls"] = tuple(_check_hull(k, group) for k, group in enumerate(fields["hulls"]))
     return Look(**out)
+
+
+def _check_hull(k: int, group: Any) -> tuple[int, ...]:
+    idx = _check.array(f"look.hulls[{k}]", group)
+    if idx.ndim != 1 or idx.size == 0 or idx.dtype.kind not in "iu" or (idx < 0).any():
+        raise InvalidInputError(f"look.hulls[{k}] must be a non-empty sequence of particle indices (ints >= 0), got {group!r}")
+    return tuple(int(i) for i in idx)
 
 
 def _check_decor_item(k: int, item: Any) -> dict:
@@ -164,6 +181,11 @@ def check_look_particles(look: Look, n: int, dim: int) -> None:
     sw = look.swept_areas
     if sw is not None and max(sw["centre"], sw["body"]) >= n:
         raise InvalidInputError(f"look.swept_areas: particle indices must be in [0, {n}), got centre {sw['centre']}, body {sw['body']}")
+    for k, group in enumerate(look.hulls):
+        if dim != 2:
+            raise InvalidInputError(f"look.hulls: drawn in 2D scenes only, got a {dim}D one")
+        if max(group) >= n:
+            raise InvalidInputError(f"look.hulls[{k}]: particle indices must be in [0, {n}), got {max(group)}")
     for k, item in enumerate(look.decor):
         if item["points"].shape[1] != dim:
             raise InvalidInputError(f"look.decor[{k}]: points of {item['points'].shape[1]} coordinates in a {dim}D scene")
@@ -304,6 +326,35 @@ def blend(out: np.ndarray, cover: tuple[int, int, np.ndarray] | None, rgb: Any, 
     patch = out[top : top + hh, left : left + ww].astype(np.float32)
     mixed = patch * (1 - a) + np.asarray(rgb, np.float32) * a
     out[top : top + hh, left : left + ww] = np.rint(mixed) if out.dtype == np.uint8 else mixed
+
+
+def disc_hull(col: np.ndarray, row: np.ndarray, rad: np.ndarray, sides: int = 32) -> np.ndarray:
+    """(M, 2) pixel vertices (column, row), in order, of the convex hull of the discs at
+    (K,) centres `col`, `row` with (K,) radii `rad`: each disc as a regular `sides`-gon round
+    its circle (whose edges touch it), hulled by Andrew's monotone chain. Non-finite discs are
+    left out; empty if none is left."""
+    ok = np.isfinite(col) & np.isfinite(row) & np.isfinite(rad)
+    if not ok.any():
+        return np.zeros((0, 2))
+    a = np.arange(sides) * (2 * math.pi / sides)
+    reach = np.asarray(rad, np.float64)[ok, None] / math.cos(math.pi / sides)
+    pts = np.stack([(np.asarray(col, np.float64)[ok, None] + reach * np.cos(a)).ravel(),
+                    (np.asarray(row, np.float64)[ok, None] + reach * np.sin(a)).ravel()], axis=1)
+    pts = np.unique(pts, axis=0)  # sorted by column, then row
+    if len(pts) < 3:
+        return pts
+
+    def chain(points: np.ndarray) -> list:
+        out: list = []
+        for p in points:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 0:
+                out.pop()
+            out.append(p)
+        return out
+
+    lower, upper = chain(pts), chain(pts[::-1])
+    return np.array(lower[:-1] + upper[:-1])
 
 
 # --------------------------------------------------------------------------- swept areas

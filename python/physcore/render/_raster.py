@@ -32,6 +32,7 @@ from ._lines import _draw_lines
 from ._look import (
     Look,
     blend,
+    disc_hull,
     draw_spheres,
     polygon_coverage,
     polyline_coverage,
@@ -834,7 +835,7 @@ class _Rasteriser:
         under = self._under(cam)
         if self.trail and (k > 0 or self.loop):
             self._draw_trail(under, k, cam)
-        out = self.palette[under].astype(np.float32)
+        out = self._rgb(under, cam).astype(np.float32)  # with the look's backdrop and props
         free = ~rec.pinned
         s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
         col, row = cam.pixels(s)
@@ -957,7 +958,7 @@ class _Rasteriser:
             order = slice(None) if depth is None else np.argsort(depth, kind="stable")
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
-        out = self.palette[under]  # a new C-contiguous (H, W, 3) uint8 array
+        out = self._rgb(under, cam)  # a new C-contiguous (H, W, 3) uint8 array, with the look's backdrop
         self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
@@ -995,6 +996,9 @@ class _Rasteriser:
             order = np.argsort(depth, kind="stable") if depth is not None else self.pin_order
             if order is None:
                 order = np.arange(col.size)
+            if self.look.hulls:  # bodies of grains, drawn whole in place of their discs
+                self._draw_hulls(out, cam, col, row, colors)
+                order = order[~self._in_hull[order]]
             # The stencil's reach, sqrt(r² + r/2) (see _disc_stencil), as the soft disc's radius.
             r = np.full(col.size, float(self.radius)) if self.radii is None else self.radii.astype(np.float64)
             rad = np.maximum(np.sqrt(r * r + 0.5 * r), 0.6)
@@ -1013,6 +1017,37 @@ class _Rasteriser:
             i, j = rec.pairs
             _draw_lines(over, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return self._finish_rgb(out, over, k, cam)
+
+    def _draw_hulls(self, out: np.ndarray, cam: _Camera, col: np.ndarray, row: np.ndarray, colors: np.ndarray) -> None:
+        """``look.hulls`` on the full-colour image `out`: each group of particles (at pixel
+        centres `col`, `row`; `colors` their palette indices) as the filled convex hull of its
+        discs (true radii where the recording has them, else the drawn ones), in its first
+        particle's colour, with a rim of 0.6 of it 1.5 pixels wide."""
+        rec = self.rec
+        if rec.radii is not None and len(rec.radii) == col.size and (rec.radii > 0).all():
+            rad = rec.radii.astype(np.float64) * cam.scale
+        else:
+            rad = np.full(col.size, float(self.radius)) if self.radii is None else self.radii.astype(np.float64)
+        shape = out.shape[:2]
+        # Centres to a quarter pixel (the coverage's own resolution): a body at rest that creeps by
+        # a thousandth of a pixel a frame then draws the same frame after frame, not flickering edges.
+        col, row = np.round(col * 4) / 4, np.round(row * 4) / 4
+        for group in self.look.hulls:
+            g = np.asarray(group)
+            pts = disc_hull(col[g], row[g], rad[g])
+            if len(pts) < 3:
+                continue
+            rgb = (self.palette[colors[g[0]]] if self.colors is None else self.colors[g[0]]).astype(np.float32)
+            blend(out, polygon_coverage(pts, shape), rgb)
+            blend(out, polyline_coverage(np.concatenate([pts, pts[:1]]), 1.5, shape), 0.6 * rgb)
+
+    @property
+    def _in_hull(self) -> np.ndarray:
+        """(N,) bool: the particles drawn as part of a ``look.hulls`` body."""
+        mask = np.zeros(self.rec.positions.shape[1], dtype=bool)
+        for group in self.look.hulls:
+            mask[list(group)] = True
+        return mask
 
     def _finish_rgb(self, out: np.ndarray, over: np.ndarray, k: int, cam: _Camera) -> np.ndarray:
         """A full-colour frame's last layer: the arrows and labels drawn on the `over` layer

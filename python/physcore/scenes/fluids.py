@@ -397,8 +397,8 @@ def droplets(
     n: int | None = None,
     drops: int = 3,
     radius: float = 0.003,
-    speed: float = 1.5,
-    tank: tuple[float, float] = (0.06, 0.03),
+    speed: float = 0.3,
+    tank: tuple[float, float] = (0.04, 0.02),
     depth: float = 0.02,
     surface_tension: float = 0.072,
     adhesion: float = 0.0,
@@ -408,8 +408,8 @@ def droplets(
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Droplets: water drops hit a floor, spread into sheets, and surface tension pulls the
-    sheets' rims back into round drops (a splash with surface tension).
+    """Droplets: water drops fall onto a floor, splash into one another and coalesce; surface
+    tension rounds the splash's jets and pulls the merged puddle back in from the walls.
 
     ``drops`` drops of ``radius`` (m) start in a row across the tank at staggered heights, moving
     down at ``speed`` (m/s), under gravity 9.81 m/s². Water at millimetre scale: DFSPH
@@ -417,16 +417,18 @@ def droplets(
     adhesion to the walls by default (:class:`~physcore.fluids.Fluid`; with the 0.02 N/m of earlier
     versions the spray thrown up hung from the lid for the rest of the animation); the capillary length
     √(σ/(ρ0 g)) = 2.7 mm is the drops' size, so both gravity and surface tension shape them. The
-    default impact (Weber number ρ0 v² 2R/σ ≈ 190) spreads each drop into a thin sheet whose rim
-    gathers and breaks into droplets.
+    default impact (about 0.6 m/s after the fall: Weber number ρ0 v² 2R/σ ≈ 30) spreads each drop
+    into a sheet that runs into its neighbours' and throws up a jet, without breaking into spray
+    (at the 1.5 m/s of earlier versions, Weber ≈ 190, the rims broke into droplets of a few
+    particles each, which filled the tank as specks).
 
     Parameters
     ----------
     dim : {2, 3}
         In 3D the tank has a ``depth`` (along y) and the drops are centred in it.
     n : int, optional
-        Particles across the tank length (spacing ``tank[0] / n``). Default 240 in 2D (about
-        1 400 water particles, 12 across a drop's radius) and 120 in 3D (about 2 700, 6 across).
+        Particles across the tank length (spacing ``tank[0] / n``). Default 160 in 2D (about
+        1 400 water particles, 12 across a drop's radius) and 80 in 3D (about 2 700, 6 across).
     drops : int
         Number of drops (1..20).
     radius : float
@@ -464,9 +466,9 @@ def droplets(
     >>> import physcore as pc
     >>> scene = pc.scenes.droplets(n=80, drops=2)
     >>> scene.n_particles
-    104
+    224
     """
-    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 240, 120, integrator, surface_tension, adhesion, alpha)
+    dim, n, sigma, adh, alpha = _surface_scene_args(dim, n, 160, 80, integrator, surface_tension, adhesion, alpha)
     drops = _check.int_in_range("drops", drops, 1, 20)
     radius, speed = _positive(radius, "radius"), _speed(speed)
     length, top = _pair(tank, "tank")
@@ -497,18 +499,23 @@ def droplets(
     return _surface_water(pos, vel, dx, tlo, thi, dim, lid, alpha, sigma, adh, integrator, dt, threads)
 
 
-# 120 frames over 0.15 s: the fall, the impacts (the first at ≈ 6 ms), the sheets and the rims
-# pulling back into drops, and the spray raining back from the lid (after 0.15 s the puddles
-# only wobble).
+# 72 frames over 0.118 s, played at 24 fps (3 s): the fall, the impacts (the first at ≈ 25 ms),
+# the sheets running into each other and the jet they throw up, and the merged film running up
+# the walls and drawing back, which it still does at the end (later the puddle only creeps in:
+# over 0.165 s the last quarter's motion was 0.21 of the rest's). Plain water before a pale
+# backdrop: coloured by speed, the drops' small velocity jitter mottled them (the first frame,
+# the thumbnail, most of all), and the story here is the shape, not the speed (--color-by speed
+# shows it, in the "ice" map).
 droplets.render_defaults = {
-    "frames": 120,
-    "fps": 30,
-    "frame_time": 0.15 / 120,
+    "frames": 72,
+    "fps": 24,
+    "frame_time": 1 / 600,
     "substeps": "auto",
-    "color_by": "speed",
+    "color_by": "none",
     "size": (480, 240),
     "surface": True,
     "cmap": "ice",
+    "look": {"backdrop": ((240, 245, 250), (210, 220, 232))},
 }
 droplets = _stamped(droplets, renames={"viscosity": "alpha"})
 

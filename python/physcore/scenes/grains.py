@@ -337,23 +337,28 @@ def jelly(
     *,
     size: float = 0.3,
     mass: float = 1.0,
-    stiffness: float = 60.0,
+    stiffness: float = 30.0,
     damping: float = 0.02,
-    height: float = 0.6,
-    spin: float = 3.0,
+    height: float = 1.9,
+    spin: float = -3.0,
     integrator: str | None = None,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Jelly: a soft square (n×n particles on springs) dropped, turning, on a floor in a box.
+    """Jelly: a soft square (n×n particles on springs) tumbling down a hill: it lands on one
+    face after another, squashing and springing back, and bounces out onto the flat.
 
     2D. The body is the cloth's spring network (structural, shear and bend springs of
     `stiffness` N/m and `damping` N·s/m, rest lengths as built) over `mass` kg; its particles
     are grains of radius half their spacing under :class:`~physcore.Contacts` (k = 4·10⁴ N/m,
-    restitution 0.3, friction 0.6), so it lands, squashes, rolls and wobbles on the floor and
-    walls, and cannot fold through itself. It falls from `height` m with angular velocity
-    `spin` rad/s. Drawn as a shaded surface (:class:`~physcore.render.Mesh`) coloured by its
-    springs' strain.
+    restitution 0.3, friction 0.6), so it lands, squashes, rolls and wobbles on the ground,
+    and cannot fold through itself. The ground is a 25° slope down to the floor y = 0 at x = 0,
+    the floor, and a wall 8 sizes beyond the slope's foot (contact planes). The jelly starts on
+    the slope, the middle of its lower side `height` m above the floor, turned 0.3 rad from
+    the slope, moving down it at 1 m/s and turning at `spin` rad/s (negative: clockwise, the
+    way it rolls). Drawn as a shaded surface (:class:`~physcore.render.Mesh`) in four layers of
+    colour, a layered dessert's, so its bending and shear show (``--color-by strain`` shows the
+    strain itself), followed by the camera.
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
@@ -372,11 +377,15 @@ def jelly(
     g = (np.arange(n) - 0.5 * (n - 1)) * s
     gx, gy = np.meshgrid(g, g)
     local = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    th = 0.5
+    slope = math.radians(25.0)
+    normal = np.array([math.sin(slope), math.cos(slope)])  # the slope's, out of the ground
+    downhill = np.array([math.cos(slope), -math.sin(slope)])
+    th = 0.3 - slope
     rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
     r = local @ rot.T
-    centre = np.array([0.0, height + 0.75 * size])
-    v = spin * np.stack([-r[:, 1], r[:, 0]], axis=1) + np.array([0.4, 0.0])
+    along = height / math.sin(slope)  # from the slope's foot up to the start
+    centre = along * -downhill + 0.9 * size * normal
+    v = spin * np.stack([-r[:, 1], r[:, 0]], axis=1) + 1.0 * downhill
     scene = _grain_scene(dt, integrator, threads)
     scene.add_particles(centre + r, v, masses=m)
     scene.set_attribute("radius", np.full(n * n, 0.5 * s))
@@ -384,19 +393,27 @@ def jelly(
     scene.add(Springs(i, j, stiffness=stiffness, damping=damping))
     scene.add(Gravity([0.0, -9.81]))
     # tangential_ratio 2/7 (the disc default is 1/3): its grains are nodes of one soft body, not
-    # rolling discs, and at 1/3 its wobble faded to 0.20 of the motion by the end (gallery budget
-    # 0.3); 2/7 keeps the look the gallery was measured with.
-    scene.add(Contacts(stiffness=4e4, restitution=0.3, friction=0.6, tangential_ratio=2.0 / 7.0,
-                       walls=Box([-2.0 * size, 0.0], [2.0 * size, height + 3.0 * size], restitution=0.3, friction=0.6)))
-    # A raspberry jelly: its own colour on the shaded sheet (--color-by strain shows the strain).
-    scene.render_defaults = {"mesh": Mesh.grid(n, n), "colors": [(214, 40, 90)] * (n * n)}
+    # rolling discs, and at 1/3 the jelly of before issue 65 (dropped into a box) wobbled out to
+    # 0.20 of the motion by the end (gallery budget 0.3); 2/7 kept the look it was measured with.
+    ground = [Plane([0.0, 0.0], normal.tolist(), restitution=0.3, friction=0.6),
+              Plane([0.0, 0.0], [0.0, 1.0], restitution=0.3, friction=0.6),
+              Plane([8.0 * size, 0.0], [-1.0, 0.0], restitution=0.3, friction=0.6)]
+    scene.add(Contacts(stiffness=4e4, restitution=0.3, friction=0.6, tangential_ratio=2.0 / 7.0, walls=ground))
+    # A layered jelly (raspberry, orange, lemon, lime from the bottom row of the body up): the
+    # bands bend and shear with it, where one colour showed a flat, featureless square
+    # (--color-by strain shows the strain). Before a sky over the hill.
+    layers = [(196, 28, 72), (240, 120, 40), (248, 204, 64), (110, 180, 60)]
+    rows = np.repeat(np.arange(n), n) * len(layers) // n  # particle j·n + i is in row j
+    scene.render_defaults = {"mesh": Mesh.grid(n, n), "colors": [layers[b] for b in rows.tolist()],
+                             "look": {"backdrop": ((226, 236, 248), (250, 246, 240))}}
     # A 100th of a contact: the dashpots' rectangle-rule books then stay within 1e-3 of the
     # energy over the fall and the bounces (1.2e-3 at a 50th).
     return _auto_grain_dt(scene, dt, 0.5)
 
 
-# 1.9 s: the fall, the landing and the roll to the wall, cut while it still rocks (it is at rest
-# by about 3 s; the strain colours flicker on, so a GIF to rest would end on a long fade).
-jelly.render_defaults = {"antialias": True, "frames": 57, "fps": 30, "frame_time": 1 / 30, "size": (400, 320),
-                         "color_by": "none"}
+# 2.5 s: the tumble down the hill, one face after another, and the first bounces on the flat,
+# with the camera following (it would leave a thumbnail-sized jelly in a wide, still view); the
+# loop starts it again at the top.
+jelly.render_defaults = {"antialias": True, "frames": 75, "fps": 30, "frame_time": 1 / 30, "size": (480, 320),
+                         "color_by": "none", "camera": "follow"}
 jelly = _stamped(jelly, old_order=('n', 'size', 'mass', 'stiffness', 'damping', 'height', 'spin', 'integrator', 'dt', 'threads'), keep=1)
