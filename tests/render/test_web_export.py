@@ -363,3 +363,15 @@ def test_without_pygltflib_the_error_names_the_extra(tmp_path, monkeypatch):
         with pytest.raises(ImportError, match=r'pip install "physcore\[web\]"'):
             fn(scene, tmp_path / f"x.{ext}")
     assert scene.time == 0.0 and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fn", ["gltf", "html"])
+def test_the_docstring_examples_run(fn):
+    """physcore.render's doctest run skips these (they are defined in private modules)."""
+    import doctest
+
+    runner = doctest.DocTestRunner()
+    for t in doctest.DocTestFinder().find(getattr(pc.render, fn), globs={}):
+        runner.run(t)
+    result = runner.summarize(verbose=False)
+    assert result.attempted > 0 and result.failed == 0

@@ -240,7 +240,13 @@ def _bounds(rec: Any, moving: np.ndarray | None, extent: Any) -> tuple[np.ndarra
     if rec.walls is not None and len(rec.walls):
         pts.append(_pad3(np.asarray(rec.walls, np.float64)))
     tr = rec.bodies
-    if tr is not None:
+    if tr is not None and dim == 2:  # the outlines themselves
+        from ._bodies import body_bounds
+
+        blo, bhi = body_bounds(tr)
+        if np.isfinite(blo).all() and np.isfinite(bhi).all():
+            pts += [np.array([[blo[0], blo[1], 0.0], [bhi[0], bhi[1], 0.0]])]
+    elif tr is not None:
         c = _pad3(tr.poses[:, :, :dim].astype(np.float64)).reshape(-1, 3)
         r = np.tile(tr.reach, tr.poses.shape[0])
         ok = np.isfinite(c).all(axis=1)
@@ -573,10 +579,10 @@ def gltf(
     --------
     >>> import os, tempfile
     >>> import physcore as pc
-    >>> with tempfile.TemporaryDirectory() as tmp:  # doctest: +SKIP
-    ...     out = pc.render.gltf(pc.scenes.cloth_on_ball(n=12), os.path.join(tmp, "cloth.glb"), frames=10)
-    ...     out.suffix
-    '.glb'
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     out = pc.render.gltf(pc.scenes.cloth_on_ball(n=8), os.path.join(tmp, "cloth.glb"), frames=4)
+    ...     out.suffix, out.read_bytes()[:4]
+    ('.glb', b'glTF')
     """
     from .._atomic import atomic_write
     from ._checks import _check_writable

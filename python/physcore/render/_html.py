@@ -115,8 +115,8 @@ def html(
     --------
     >>> import os, tempfile
     >>> import physcore as pc
-    >>> with tempfile.TemporaryDirectory() as tmp:  # doctest: +SKIP
-    ...     out = pc.render.html(pc.scenes.cloth_on_ball(n=12), os.path.join(tmp, "cloth.html"), frames=10)
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     out = pc.render.html(pc.scenes.cloth_on_ball(n=8), os.path.join(tmp, "cloth.html"), frames=4)
     ...     out.read_text().startswith("<!DOCTYPE html>")
     True
     """

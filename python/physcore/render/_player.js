@@ -1,8 +1,8 @@
 /* physcore's HTML player (physcore.render.html): plays the binary glTF embedded in this page with
    three.js r111 (global THREE, inlined above): an orbit camera (drag to turn, wheel to zoom, right
    drag to pan), play/pause (or the space bar) and a time slider. window.physcore is its state, for
-   scripts and tests: ready, error, playing, time (s of playback), duration, frame, and play(),
-   pause(), setTime(t). MIT licence, as physcore. */
+   scripts and tests: ready, error, playing, time (s of playback), duration, frame, frames,
+   background, and play(), pause(), setTime(t). MIT licence, as physcore. */
 (function () {
   "use strict";
   var state = window.physcore = { ready: false, error: null, playing: true, time: 0, duration: 0, frame: 0, frames: 1 };
@@ -36,7 +36,7 @@
   camera.add(sun);
   var controls = new THREE.OrbitControls(camera, renderer.domElement);
   controls.enableDamping = false;
-  var mixer = null, info = {}, times = [0];
+  var mixer = null, info = {}, times = [0], morphing = [];
 
   function resize() {
     var w = view.clientWidth || window.innerWidth, h = view.clientHeight || Math.max(1, window.innerHeight - 40);
@@ -70,6 +70,16 @@
     state.time = Math.max(0, Math.min(t, state.duration));
     // The last frame is at `duration`: a looping action wraps it to the first, so stop just short.
     if (mixer) mixer.setTime(Math.min(state.time, state.duration * (1 - 1e-7)));
+    // Points and lines move by the same morph targets, but r111's GLTFLoader binds a weights
+    // track to meshes only: their weights are set here, as the track would (LINEAR, frame k
+    // showing target k - 1 alone).
+    var f = state.time * (info.fps || 30), k = Math.min(Math.floor(f), state.frames - 1), a = f - k;
+    for (var j = 0; j < morphing.length; j++) {
+      var w = morphing[j].morphTargetInfluences;
+      for (var m = 0; m < w.length; m++) w[m] = 0;
+      if (k >= 1) w[k - 1] = k + 1 < state.frames ? 1 - a : 1;
+      if (k + 1 < state.frames && a > 0) w[k] = a;
+    }
     state.frame = Math.min(state.frames - 1, Math.round(state.time * (info.fps || 30)));
     slider.value = String(state.duration > 0 ? state.time / state.duration : 0);
     var st = sceneTime(state.time);
@@ -83,14 +93,25 @@
   window.addEventListener("keydown", function (e) { if (e.code === "Space" && e.target === document.body) { e.preventDefault(); button.click(); } });
 
   function frameView(bounds, dir) {
+    // The camera along `dir` from the box's centre, as near as shows the whole box: its eight
+    // corners on the view's right and up axes fit the field of view (in both directions).
     var lo = new THREE.Vector3().fromArray(bounds[0]), hi = new THREE.Vector3().fromArray(bounds[1]);
     var centre = lo.clone().add(hi).multiplyScalar(0.5);
-    var radius = Math.max(hi.clone().sub(lo).length() * 0.5, 1e-6);
-    var fov = camera.fov * Math.PI / 180, fit = Math.min(fov, 2 * Math.atan(Math.tan(fov / 2) * camera.aspect));
-    var dist = 1.05 * radius / Math.sin(fit / 2);
     var d = new THREE.Vector3().fromArray(dir).normalize();
+    var up = Math.abs(d.y) > 0.999 ? new THREE.Vector3(0, 0, -1) : new THREE.Vector3(0, 1, 0);
+    var right = new THREE.Vector3().crossVectors(up, d).normalize();
+    var upv = new THREE.Vector3().crossVectors(d, right);
+    var tan = Math.tan(camera.fov * Math.PI / 360), dist = 1e-6, reach = 0;
+    for (var i = 0; i < 8; i++) {
+      var c = new THREE.Vector3(i & 1 ? hi.x : lo.x, i & 2 ? hi.y : lo.y, i & 4 ? hi.z : lo.z).sub(centre);
+      var toward = c.dot(d);  // the corner's depth toward the camera
+      var need = Math.max(Math.abs(c.dot(upv)) / tan, Math.abs(c.dot(right)) / (tan * camera.aspect));
+      dist = Math.max(dist, 1.08 * need + toward);
+      reach = Math.max(reach, c.length());
+    }
+    camera.up.copy(up);
     camera.position.copy(centre).addScaledVector(d, dist);
-    camera.near = dist / 100; camera.far = dist * 100;
+    camera.near = Math.max(dist - 2 * reach, dist / 1000, 1e-6); camera.far = dist + 20 * reach + 1e-3;
     camera.updateProjectionMatrix();
     controls.target.copy(centre);
     controls.update();
@@ -101,7 +122,7 @@
     times = info.times || [0];
     state.frames = info.frames || 1;
     state.duration = (state.frames - 1) / (info.fps || 30);
-    var bg = info.background || [255, 255, 255];
+    var bg = state.background = info.background || [255, 255, 255];  // sRGB, 0-255
     renderer.setClearColor(new THREE.Color(bg[0] / 255, bg[1] / 255, bg[2] / 255).convertSRGBToLinear(), 1);
     var disc = discTexture();
     var pointScale = 1 / Math.tan(camera.fov * Math.PI / 360);
@@ -114,6 +135,7 @@
         o.material.alphaTest = 0.5;
         o.material.needsUpdate = true;
       }
+      if ((o.isPoints || o.isLine) && o.morphTargetInfluences && o.morphTargetInfluences.length) morphing.push(o);
       o.frustumCulled = false;  // morph targets move vertices beyond the base's bounding sphere
     });
     scene.add(gltf.scene);
