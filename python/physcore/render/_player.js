@@ -12,6 +12,9 @@
     var msg = document.getElementById("physcore-message");
     if (msg) { msg.textContent = "Cannot show this recording: " + state.error; msg.style.display = "block"; }
   }
+  // r111's GLTFLoader calls updateMorphTargets on every primitive, which r111's lines lack
+  // (springs between moving points): they take the meshes' (it reads only the geometry).
+  if (THREE.Line && !THREE.Line.prototype.updateMorphTargets) THREE.Line.prototype.updateMorphTargets = THREE.Mesh.prototype.updateMorphTargets;
   var view = document.getElementById("physcore-view");
   var button = document.getElementById("physcore-play");
   var slider = document.getElementById("physcore-time");
@@ -47,17 +50,19 @@
   window.addEventListener("resize", resize);
   resize();
 
-  function discTexture() {  // round points: a white disc, its edge soft
+  function discTexture() {  // round points, shaded as balls lit from the upper left
     var c = document.createElement("canvas");
     c.width = c.height = 64;
     var g = c.getContext("2d");
-    var grad = g.createRadialGradient(32, 32, 0, 32, 32, 32);
-    grad.addColorStop(0, "rgba(255,255,255,1)");
-    grad.addColorStop(0.8, "rgba(255,255,255,1)");
-    grad.addColorStop(1, "rgba(255,255,255,0)");
+    var grad = g.createRadialGradient(24, 22, 2, 32, 32, 32);
+    grad.addColorStop(0, "rgb(255,255,255)");
+    grad.addColorStop(0.75, "rgb(200,200,200)");
+    grad.addColorStop(1, "rgb(150,150,150)");
     g.fillStyle = grad;
-    g.beginPath(); g.arc(32, 32, 32, 0, 2 * Math.PI); g.fill();
-    return new THREE.CanvasTexture(c);
+    g.beginPath(); g.arc(32, 32, 31, 0, 2 * Math.PI); g.fill();
+    var tex = new THREE.CanvasTexture(c);
+    tex.encoding = THREE.sRGBEncoding;
+    return tex;
   }
 
   function sceneTime(t) {  // the scene's own time (s) at playback time t, between recorded frames
