@@ -375,3 +375,27 @@ def test_the_docstring_examples_run(fn):
         runner.run(t)
     result = runner.summarize(verbose=False)
     assert result.attempted > 0 and result.failed == 0
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_the_files_camera_sees_the_whole_scene(recorded, name):
+    """The camera node (for viewers that open a file's own camera) looks at the centre of the
+    bounds in extras, every corner of them inside its field of view, along the scene's view."""
+    _, rec, path, _ = recorded[name]
+    g, _ = _load(path)
+    (k,) = [k for k, n in enumerate(g.nodes) if n.camera is not None]
+    assert k in g.scenes[0].nodes  # at the root: world axes
+    node, cam = g.nodes[k], g.cameras[g.nodes[k].camera]
+    extras = g.scenes[0].extras["physcore"]
+    lo, hi = (np.asarray(v) for v in extras["bounds"])
+    eye = np.asarray(node.translation)
+    axes = _quat_rotate(np.asarray(node.rotation), np.eye(3))  # the camera's x, y, z in the world
+    np.testing.assert_allclose(axes[2], np.asarray(extras["view"]) / np.linalg.norm(extras["view"]), atol=1e-9)
+    corners = np.array([[(hi if i & b else lo)[j] for j, b in enumerate((1, 2, 4))] for i in range(8)])
+    rel = (corners - eye) @ axes.T  # camera coordinates: in front is -z
+    tan = math.tan(cam.perspective.yfov / 2)
+    assert np.all(-rel[:, 2] > cam.perspective.znear) and np.all(-rel[:, 2] < cam.perspective.zfar)
+    assert np.all(np.abs(rel[:, 1]) <= tan * -rel[:, 2] + 1e-9)
+    assert np.all(np.abs(rel[:, 0]) <= tan * cam.perspective.aspectRatio * -rel[:, 2] + 1e-9)
+    centre = (0.5 * (lo + hi) - eye) @ axes.T
+    np.testing.assert_allclose(centre[:2], 0.0, atol=1e-9 * max(1.0, np.abs(eye).max()))

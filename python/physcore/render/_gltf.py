@@ -46,7 +46,9 @@ GLTF_FORMATS = (".glb", ".gltf")
 #: Quaternion (x, y, z, w) turning a scene's +z up to glTF's +y up: -90 degrees about x,
 #: (x, y, z) -> (x, z, -y).
 _Z_UP = (-math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))
-#: Grey of boundary particles and 2D colliders; the shade of a ball body's second half (as the GIF).
+#: The vertical field of view (radians) of the camera in the file, and of the player's (35 degrees).
+_YFOV = math.radians(35.0)
+#: Grey of boundary particles and 2D colliders.
 _WALL_RGB = (150, 150, 150)
 #: Opacity of a fluid's boundary particles (drawn half the size of the moving ones).
 _WALL_ALPHA = 0.12
@@ -264,6 +266,37 @@ def _bounds(rec: Any, moving: np.ndarray | None, extent: Any) -> tuple[np.ndarra
         return np.full(3, -0.5), np.full(3, 0.5)
     allp = np.concatenate(pts)
     return allp.min(axis=0), allp.max(axis=0)
+
+
+def _camera_pose(lo: np.ndarray, hi: np.ndarray, toward: np.ndarray, aspect: float,
+                 yfov: float) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """A perspective camera looking along -`toward` at the box [lo, hi] (glTF world axes, +y up)
+    from as near as shows the whole box (the player's fit, _player.js): its position (3,), its
+    rotation (x, y, z, w) (glTF cameras look along their -z, +y up) and znear, zfar (m)."""
+    centre = 0.5 * (lo + hi)
+    d = np.asarray(toward, np.float64) / np.linalg.norm(toward)
+    up = np.array([0.0, 0.0, -1.0]) if abs(d[1]) > 0.999 else np.array([0.0, 1.0, 0.0])
+    right = np.cross(up, d)
+    right /= np.linalg.norm(right)
+    upv = np.cross(d, right)
+    tan = math.tan(yfov / 2)
+    corners = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)]) - centre
+    need = np.maximum(np.abs(corners @ upv) / tan, np.abs(corners @ right) / (tan * aspect))
+    dist = max(float(np.max(1.08 * need + corners @ d)), 1e-6)
+    reach = float(np.max(np.linalg.norm(corners, axis=1)))
+    m = np.stack([right, upv, d], axis=1)  # the camera's axes, as columns
+    w = math.sqrt(max(1.0 + m[0, 0] + m[1, 1] + m[2, 2], 0.0)) / 2
+    if w > 1e-6:
+        q = np.array([(m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w), (m[1, 0] - m[0, 1]) / (4 * w), w])
+    else:  # a half turn: the axis from the diagonal
+        k = int(np.argmax(np.diag(m)))
+        i, j = (k + 1) % 3, (k + 2) % 3
+        s = math.sqrt(max(1.0 + m[k, k] - m[i, i] - m[j, j], 0.0)) * 2
+        q = np.zeros(4)
+        q[k], q[i], q[j], q[3] = s / 4, (m[i, k] + m[k, i]) / s, (m[j, k] + m[k, j]) / s, (m[j, i] - m[i, j]) / s
+    q /= np.linalg.norm(q)
+    near = max(dist - 2 * reach, dist / 1000, 1e-6)
+    return centre + dist * d, q, near, dist + 20 * reach + 1e-3
 
 
 def _check_recording(source: Any) -> None:
@@ -501,11 +534,18 @@ def glb_bytes(rec: Any, fps: float, theme: str, view: tuple[float, float], mesh:
 
     a, c = world(lo + origin), world(hi + origin)
     toward = world(_view_basis(*view)[:, 2]) if dim == 3 else np.array([0.0, 0.0, 1.0])
+    # A camera for viewers that open a file's own (Blender imports it): the player's view.
+    size = defaults.get("size", (480, 360))
+    aspect = float(size[0]) / float(size[1]) if len(size) == 2 and float(size[1]) > 0 else 4.0 / 3.0
+    eye, quat, near, far = _camera_pose(np.minimum(a, c), np.maximum(a, c), toward, aspect, _YFOV)
+    g.cameras.append(lib.Camera(type="perspective", name="view", perspective=lib.Perspective(
+        aspectRatio=aspect, yfov=_YFOV, znear=near, zfar=far)))
+    cam = b.node("camera", camera=0, translation=eye.tolist(), rotation=quat.tolist())
     bg = defaults.get("background")
     bg = tuple(int(v) for v in theme_palette(theme)[_BACKGROUND]) if bg is None else tuple(int(v) for v in bg)
     scene_times = rec.times if rec.times is not None else times
     title = defaults.get("title")
-    g.scenes.append(lib.Scene(name="physcore", nodes=[root], extras={"physcore": {
+    g.scenes.append(lib.Scene(name="physcore", nodes=[root, cam], extras={"physcore": {
         "frames": int(F), "fps": float(fps), "dim": int(dim),
         "times": [float(t) for t in _held(np.asarray(scene_times, np.float64)[:, None])[:, 0]],
         "bounds": [np.minimum(a, c).tolist(), np.maximum(a, c).tolist()],
