@@ -3,13 +3,17 @@
 Usage::
 
     physcore scenes
-    physcore render SCENE [-o OUT.gif|OUT.mp4|OUT.webm|OUT.png] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
+    physcore render SCENE [-o OUT.gif|OUT.mp4|OUT.webm|OUT.png|OUT.glb|OUT.gltf|OUT.html] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
                           [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
                           [--color-by speed|pressure|none] [--no-colorbar]
                           [--camera fit|follow|orbit] [--arrows velocity|acceleration]
                           [--no-mesh] [--texture IMAGE] [--[no-]antialias] [--cmap NAME] [--background #RRGGBB]
                           [--param key=value ...]
     physcore view SCENE [--param key=value ...] [--size WxH] [--fps F] [--seconds S] [--screenshot OUT.png]
+
+``-o OUT.glb`` (or ``.gltf``) writes the motion as glTF 2.0 and ``-o OUT.html`` a page that
+plays it in a browser (:func:`physcore.render.gltf`, :func:`physcore.render.html`; both need
+pygltflib, the web extra); of the drawing options they take ``--fps`` and ``--theme``.
 
 ``physcore view`` runs a scene live in a window (:mod:`physcore.viewer`; needs pygame-ce).
 
@@ -498,6 +502,11 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 import av  # noqa: F401 - fail before simulating, not after
             except ImportError:
                 raise _UsageError(f'-o {out.name}: MP4 and WebM output need PyAV: pip install "physcore[video]"') from None
+        if fmt in ("glb", "gltf", "html"):
+            try:
+                import pygltflib  # noqa: F401 - fail before simulating, not after
+            except ImportError:
+                raise _UsageError(f'-o {out.name}: glTF and HTML output need pygltflib: pip install "physcore[web]"') from None
     except _UsageError as e:
         parser.error(str(e))
     except (TypeError, ValueError) as e:
@@ -577,13 +586,21 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             velocities=settings.get("arrows", "none") != "none",
             **{k: v for k, v in settings.items() if k in produce},
         )
-        written = render.save(
-            recording,
-            out,
-            springs=not args.no_springs,
-            colorbar=not args.no_colorbar,
-            **{k: v for k, v in settings.items() if k not in produce or k == "color_by"},
-        )
+        if fmt in ("glb", "gltf", "html"):  # the motion, not pixels: only what a player uses
+            web = {k: settings[k] for k in ("fps", "theme", "view") if k in settings}
+            if settings.get("mesh") is False:
+                web["mesh"] = False
+            if fmt == "html":
+                web["title"] = settings.get("title") or name
+            written = render.save(recording, out, **web)
+        else:
+            written = render.save(
+                recording,
+                out,
+                springs=not args.no_springs,
+                colorbar=not args.no_colorbar,
+                **{k: v for k, v in settings.items() if k not in produce or k == "color_by"},
+            )
     except SimulationDiverged as e:
         msg = f"physcore render: error: {e}"  # the message says "simulation diverged at step ..."
         dt_hint = getattr(e, "suggested_dt", float("nan"))
@@ -619,7 +636,8 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     print(f"wrote {path}" if len(paths) == 1 else f"wrote {len(paths)} frames, {paths[0]} … {paths[-1].name}")
     if recorder is not None:
         print(f"wrote {args.energy_plot} (energy books at {len(recorder)} frames)")
-    print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s), {w}x{h} px")
+    pixels = "" if fmt in ("glb", "gltf", "html") else f", {w}x{h} px"
+    print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s){pixels}")
     print(f"  file size:      {_human_bytes(sum(p.stat().st_size for p in paths))}")
     if "frame_time" in settings:
         print(
@@ -697,7 +715,8 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
     r.add_argument("-o", "--output", metavar="OUT.gif", help="output file (default: SCENE.gif); the extension picks the "
-                   "format: .gif, .mp4 (H.264) or .webm (VP9; both need the video extra), .png (one file per frame)")
+                   "format: .gif, .mp4 (H.264) or .webm (VP9; both need the video extra), .png (one file per frame), "
+                   ".glb or .gltf (glTF 2.0) or .html (a 3D player; both need the web extra)")
     r.add_argument("--frames", type=_positive_int, metavar="N", help="number of frames")
     r.add_argument("--fps", type=_positive_float, metavar="F", help="frames per second of playback")
     r.add_argument("--size", type=_size, metavar="WxH", help="image size in pixels, e.g. 480x360")

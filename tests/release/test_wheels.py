@@ -88,6 +88,11 @@ def test_every_wheel_is_small_stripped_and_licensed():
             names = z.namelist()
             assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names), names
             assert any(n.endswith(".dist-info/licenses/LICENSES-THIRD-PARTY") for n in names), names
+            # The HTML player's scripts (package data beside the Python: maturin ships the folder).
+            for f in ("three.min.js", "OrbitControls.min.js", "GLTFLoader.min.js", "LICENSE-three.js"):
+                assert f"physcore/render/_vendor/{f}" in names, (f, w.name)
+            assert "physcore/render/_player.js" in names, w.name
+            assert b"three.js" in z.read(next(n for n in names if n.endswith(".dist-info/licenses/LICENSES-THIRD-PARTY")))
             (so,) = [n for n in names if n.startswith("physcore/_core") and n.endswith(".so")]
             assert "abi3" in so and "abi3" in w.name, (so, w.name)
             data = z.read(so)

@@ -11,7 +11,10 @@ Public functions
 ============================== ======================================================================
 record(scene, ...)             step a scene and return every frame's state (a Recording).
 gif(recording, path, ...)      draw a Recording as an animated GIF (or a scene: record, then draw).
-save(recording, path, ...)     the same in the format of path's extension: .gif, .mp4, .webm, .png.
+save(recording, path, ...)     the same in the format of path's extension: .gif, .mp4, .webm, .png
+                               (or .glb, .gltf, .html: gltf() and html()).
+gltf(recording, path, ...)     the motion in 3D as glTF 2.0 (.glb or .gltf): bodies, meshes, points.
+html(recording, path, ...)     one self-contained page playing it in WebGL (three.js), orbit camera.
 frames(recording, ...)         the same frames as an iterator of RGB arrays.
 render_frame(positions, ...)   rasterise one state to an RGB array (for notebooks and tests).
 contact_sheet(scenes, path)    several scenes animated side by side in one GIF.
@@ -36,6 +39,9 @@ _look           ``Look`` (fading trails, line widths, lit spheres, a backdrop an
                 areas): its checks and drawing helpers; ``swept_polygons``.
 _raster         disc size, background, lines and discs; ``_Rasteriser`` (Recording -> index images,
                 or RGB with a shaded mesh).
+_gltf           ``gltf()``: a Recording as glTF 2.0 through pygltflib (bodies animated, meshes and
+                points by morph targets), ``glb_bytes()``.
+_html           ``html()``: the player page, three.js r111 vendored in ``_vendor/`` and ``_player.js``.
 _gif            ``gif()``, ``save()``, ``frames()``: record a scene if given one, rasterise, write a
                 palette GIF, an MP4/WebM video (PyAV) or PNGs atomically, or yield RGB frames;
                 the notebook display (``Recording._repr_html_``: its GIF as a data URL).
@@ -69,6 +75,8 @@ from ._checks import _check_writable as _check_writable
 from ._colorbar import _colorbar_labels as _colorbar_labels
 from ._frame import render_frame
 from ._gif import FORMATS, frames, gif, recording_html, save
+from ._gltf import gltf
+from ._html import html
 from ._look import Look, swept_polygons
 from ._mesh import Mesh
 from ._palette import _N_PRESSURE as _N_PRESSURE
@@ -89,9 +97,9 @@ from ._sheet import contact_sheet
 # The notebook display lives with the GIF writer: _recording sits below _gif and cannot import it.
 Recording._repr_html_ = recording_html  # type: ignore[attr-defined]
 
-__all__ = ["record", "Recording", "Mesh", "Look", "gif", "save", "frames", "render_frame", "contact_sheet", "swept_polygons",
+__all__ = ["record", "Recording", "Mesh", "Look", "gif", "save", "frames", "render_frame", "contact_sheet", "swept_polygons", "gltf", "html",
            "FORMATS", "COLOR_BY", "STRAIN_SATURATION", "CMAPS", "GROUP_COLORS"]
 
-for _public in (Recording, Mesh, Look, record, gif, save, frames, render_frame, contact_sheet, swept_polygons):
+for _public in (Recording, Mesh, Look, record, gif, save, frames, render_frame, contact_sheet, swept_polygons, gltf, html):
     _public.__module__ = __name__
 del _public

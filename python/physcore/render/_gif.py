@@ -467,8 +467,12 @@ def _check_halo(halo: Any, n: int) -> np.ndarray | None:
     return mask
 
 
-#: Output formats by file extension: what :func:`save` and ``physcore render -o`` write.
-FORMATS = {".gif": "gif", ".mp4": "mp4", ".webm": "webm", ".png": "png"}
+#: Output formats by file extension: what :func:`save` and ``physcore render -o`` write (the
+#: last three: glTF 2.0 and the HTML player, :func:`gltf` and :func:`html`).
+FORMATS = {".gif": "gif", ".mp4": "mp4", ".webm": "webm", ".png": "png", ".glb": "glb", ".gltf": "gltf", ".html": "html"}
+#: The formats of the motion in 3D rather than pixels, and the options they take.
+_WEB = ("glb", "gltf", "html")
+_WEB_OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "mesh", "theme", "view", "progress", "title")
 _VIDEO_INSTALL = 'pip install "physcore[video]"'
 
 
@@ -572,15 +576,17 @@ def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
     slides). ``.webm``: VP9 video. Both through PyAV, an optional extra (``pip install
     "physcore[video]"``; its wheel brings FFmpeg's libraries). ``.png``: one PNG per frame,
     ``stem_0000.png``, ``stem_0001.png``, … beside `path`, renamed into place only once all are
-    written. Every file is written atomically.
+    written. ``.glb``/``.gltf``: :func:`gltf`; ``.html``: :func:`html` (they take only
+    frames, steps_per_frame, frame_time, substeps, fps, mesh, theme, view, progress and, for
+    ``.html``, title). Every file is written atomically.
 
     Parameters
     ----------
     scene : physcore.Scene or Recording
         As for :func:`gif`.
     path : str or os.PathLike
-        Ends in ``.gif``, ``.mp4``, ``.webm`` or ``.png``; its directory must exist and be
-        writable (checked before simulating).
+        Ends in ``.gif``, ``.mp4``, ``.webm``, ``.png``, ``.glb``, ``.gltf`` or ``.html``; its
+        directory must exist and be writable (checked before simulating).
     **options
         The keyword arguments of :func:`gif` (frames, frame_time, fps, size, color_by, theme, …).
 
@@ -593,7 +599,8 @@ def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
     TypeError, ValueError
         As :func:`gif`; also an extension that is none of the above, naming `path`.
     ImportError
-        ``.mp4``/``.webm`` without PyAV, naming the extra to install (before simulating).
+        ``.mp4``/``.webm`` without PyAV, ``.glb``/``.gltf``/``.html`` without pygltflib, naming
+        the extra to install (before simulating).
     physcore.SimulationDiverged, OSError
         As :func:`gif`: no file is written.
     """
@@ -604,6 +611,17 @@ def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
         raise InvalidInputError(f"path must end in one of {', '.join(FORMATS)}; got {str(path)!r}")
     if fmt in ("mp4", "webm"):
         _video_module()  # fail before simulating
+    if fmt in _WEB:
+        other = [k for k in options if k not in _WEB_OPTIONS or (k == "title" and fmt != "html")]
+        if other:
+            if other[0] in _OPTIONS or other[0] == "title":
+                raise InvalidInputError(f"{other[0]}: a .{fmt} file is not drawn in pixels and takes no {other[0]}; "
+                                        f"its options are {', '.join(o for o in _WEB_OPTIONS if o != 'title' or fmt == 'html')}")
+            raise InvalidTypeError(f"save() got an unexpected keyword argument {other[0]!r}")
+        from ._gltf import gltf
+        from ._html import html
+
+        return html(scene, path, **options) if fmt == "html" else gltf(scene, path, **options)
     return _render(scene, path, fmt, **options)
 
 
