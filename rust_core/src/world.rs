@@ -147,7 +147,13 @@ impl<V: Vector> World<V> {
     }
     /// Particles plus the elements of the other systems (grid cells, flow points, an ODE's
     /// values): the work of one step. A system that has something to step counts at least 1.
+    /// A world with couplings counts as unbounded work: a coupling's first step may take
+    /// seconds whatever the counts (sampling a large body's surface for a fluid), so its calls
+    /// are always watched for Ctrl-C.
     pub fn elements(&self) -> usize {
+        if !self.couplings.is_empty() {
+            return usize::MAX;
+        }
         let others = self.others.iter().filter(|s| !s.is_empty()).map(|s| s.size().max(1));
         self.particles.n_particles() + others.sum::<usize>()
     }
@@ -659,7 +665,7 @@ impl<V: Vector> World<V> {
                 return interrupted;
             }
             for c in &mut self.couplings {
-                c.prepare(&mut self.particles, &mut self.others);
+                c.prepare(&mut self.particles, &mut self.others, stop)?;
             }
             let mut halt = self.particles.step(dt, stop).err();
             if halt.is_none() {

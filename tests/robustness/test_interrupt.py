@@ -222,3 +222,21 @@ def test_keyboard_interrupt_stops_a_flow_only_scene_at_once():
     assert latency < 1.0, f"Ctrl-C took {latency:.2f} s to stop the call"
     assert np.array_equal(cloud.points, points)
     assert scene.step_count == step and scene.time == t
+
+
+def test_keyboard_interrupt_stops_the_sampling_of_a_large_body_in_a_fluid():
+    # Issue 64 item 9: the first step of a DFSPH fluid with a moving body samples the body's
+    # surface at the fluid's spacing; for a 3D box 20 m wide at 5 cm that is 8 s, during which
+    # Ctrl-C was not seen (a call with a coupling of few particles ran unwatched, and the
+    # sampling had no stop). Now seen within the polls, and the call rolled back.
+    from physcore.fluids import lattice
+
+    s = pc.Scene(3, integrator="semi_implicit_euler", dt=1e-3)
+    s.add(pc.Gravity([0.0, 0.0, -9.81]))
+    s.add_fluid(lattice([0, 0, 0], [0.3, 0.3, 0.3], 0.05), spacing=0.05, method="dfsph")
+    box = s.add(pc.Bodies("box", size=[(10.0, 10.0, 10.0)], positions=[(0.2, 0.2, 11.0)], density=500.0))
+    before, b0 = _snapshot(s), box.positions.copy()
+    latency = _interrupt(lambda: s.step(1), 0.3)
+    assert latency < 0.2, f"Ctrl-C took {latency:.2f} s to stop the sampling"
+    _assert_unchanged(s, before)
+    assert np.array_equal(box.positions, b0)

@@ -110,6 +110,30 @@ print("ok")
     assert out.strip() == "ok"
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_body_too_large_to_sample_for_a_fluid_is_refused_and_changes_nothing(dim):
+    # Issue 64 item 9: a moving body in a DFSPH fluid has its surface sampled at the fluid's
+    # spacing on the first step; a box a thousand kilometres wide at 2 cm aborted the process
+    # (a 2 GB allocation, 2D). Its samples and their kernel pairs are now asked for first.
+    out = _child(PRELUDE + f"""
+from physcore.fluids import lattice
+dim = {dim}
+s = pc.Scene(dim, integrator="semi_implicit_euler", dt=1e-3)
+s.add(pc.Gravity([0.0] * (dim - 1) + [-9.81]))
+s.add_fluid(lattice([0.0] * dim, [0.3] * dim, 0.02 if dim == 2 else 0.05), spacing=0.02 if dim == 2 else 0.05, method="dfsph")
+L = 1e6 if dim == 2 else 1e4
+box = s.add(pc.Bodies("box", size=[(L,) * dim], positions=[(0.2,) * (dim - 1) + (L + 1.0,)], density=500.0))
+x0, b0 = s.positions, box.positions.copy()
+cap(500)
+e = refused(lambda: s.step(1), "boundary samples")
+assert "body 0's surface" in str(e), str(e)
+assert s.step_count == 0 and s.time == 0.0
+assert np.array_equal(s.positions, x0) and np.array_equal(box.positions, b0)
+print("ok")
+""")
+    assert out.strip() == "ok"
+
+
 def test_springs_that_do_not_fit_raise_memory_error():
     out = _child(PRELUDE + """
 n, m = 100_000, 10_000_000  # 100 springs a particle

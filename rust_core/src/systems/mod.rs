@@ -246,7 +246,16 @@ pub trait Coupling<V: Vector>: Send + Sync {
     fn apply(&mut self, particles: &mut particles::ParticleSystem<V>, others: &mut [Box<dyn System>], dt: Real);
     /// Before every step, from the state alone (so that a restart or a rollback steps the same):
     /// what the systems' steps read of each other (the bodies' boundary particles a fluid counts).
-    fn prepare(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>]) {}
+    /// Refuses (`Error::OutOfMemory`) what it cannot hold and sees Ctrl-C (`stop`,
+    /// `Error::Interrupted`); the call is then rolled back.
+    fn prepare(
+        &mut self,
+        _particles: &mut particles::ParticleSystem<V>,
+        _others: &mut [Box<dyn System>],
+        _stop: &AtomicBool,
+    ) -> Result<()> {
+        Ok(())
+    }
     /// After the particles' step and before the other systems' (what the particles' step gave
     /// them: the impulse a fluid's pressure solve gave the bodies, before they step with it).
     fn between(&mut self, _particles: &mut particles::ParticleSystem<V>, _others: &mut [Box<dyn System>], _dt: Real) {}

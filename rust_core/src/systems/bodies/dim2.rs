@@ -158,7 +158,14 @@ fn set_one(b: &mut RigidBody, name: &str, row: &[Real], dry: bool) -> std::resul
 /// capsules are walked along a fine polygon (256 and 128 sides a cap); a polygon's outline is
 /// moved in by its edges' normals (exact for a convex one). The inset is at most half the
 /// shape's smallest half-extent. Empty for a shape with no inside (a polyline).
-fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector> {
+fn surface_samples(
+    shape: &dyn Shape,
+    spacing: Real,
+    inset: Real,
+    room: &dyn Fn(usize) -> Result<()>,
+    _stop: &AtomicBool,
+) -> Result<Vec<Vector>> {
+    // (A ring of millions of points is walked in a fraction of a second: no stop to watch.)
     let he = shape.compute_local_aabb().half_extents();
     let d = inset.min(0.5 * he.x.min(he.y));
     let ring: Vec<Vector> = if let Some(b) = shape.as_ball() {
@@ -178,9 +185,12 @@ fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector>
             })
             .collect()
     } else {
-        return Vec::new();
+        return Ok(Vec::new());
     };
-    walk_ring(&ring, spacing)
+    // About one point a spacing, and every corner: asked for before any is made.
+    let perimeter: Real = (0..ring.len()).map(|i| (ring[(i + 1) % ring.len()] - ring[i]).length()).sum();
+    room(((perimeter / spacing).ceil() as usize).saturating_add(2 * ring.len()))?;
+    Ok(walk_ring(&ring, spacing))
 }
 
 /// Points about `spacing` apart along the closed polygon `ring`: each run between corners (turns

@@ -205,7 +205,13 @@ fn set_one(b: &mut RigidBody, name: &str, row: &[Real], dry: bool) -> std::resul
 /// triangle of the shape's mesh (`shape_mesh`) is covered by a lattice no coarser than
 /// `spacing`, and a point is kept unless one kept already lies within 0.75 `spacing` (so the
 /// edges shared by two triangles are sampled once). Empty for a shape without a mesh.
-fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector> {
+fn surface_samples(
+    shape: &dyn Shape,
+    spacing: Real,
+    inset: Real,
+    room: &dyn Fn(usize) -> Result<()>,
+    stop: &AtomicBool,
+) -> Result<Vec<Vector>> {
     // Half a spacing inside (see the 2D `surface_samples`): balls, boxes and capsules shrunk,
     // a hull's or mesh's points moved in along their triangle's normal; at most half the
     // shape's smallest half-extent.
@@ -221,8 +227,15 @@ fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector>
         shape_mesh(shape).map(|m| (m, d))
     };
     let Some(((v, t), along)) = mesh else {
-        return Vec::new();
+        return Ok(Vec::new());
     };
+    // Points kept at least 0.75 spacing apart cover at most 1/(π 0.375²) ≈ 2.3 a spacing²
+    // of surface, plus those along the edges: asked for before any is made.
+    let (area, edges) = t.iter().fold((0.0, 0.0), |(a, e), tri| {
+        let [p, q, r] = tri.map(|i| v[i as usize]);
+        (a + 0.5 * (q - p).cross(r - p).length(), e + (q - p).length() + (r - q).length() + (p - r).length())
+    });
+    room((2.5 * area / (spacing * spacing) + edges / spacing).ceil().min(usize::MAX as Real) as usize)?;
     let mut out: Vec<Vector> = Vec::new();
     let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
     let cell =
@@ -235,6 +248,11 @@ fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector>
         let longest = (b - a).length().max((c - b).length()).max((a - c).length());
         let n = ((longest / spacing).ceil() as usize).max(1);
         for i in 0..=n {
+            // A large body's surface takes seconds (a box 20 m wide at 5 cm: 8 s): Ctrl-C is
+            // seen between rows of a triangle's lattice.
+            if stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Err(crate::error::Error::Interrupted { rolled_back_to: 0 });
+            }
             for j in 0..=n - i {
                 let p = a + (b - a) * (i as Real / n as Real) + (c - a) * (j as Real / n as Real);
                 let k = cell(p);
@@ -254,7 +272,7 @@ fn surface_samples(shape: &dyn Shape, spacing: Real, inset: Real) -> Vec<Vector>
             }
         }
     }
-    out
+    Ok(out)
 }
 
 /// A shape as triangles in its own frame: vertices and corner indices (a ball and a capsule as
