@@ -179,7 +179,7 @@ impl Bodies {
             }
             self.rolling[at] = rolling;
         }
-        self.part_added();
+        self.part_added()?;
         Ok(first)
     }
 
@@ -282,7 +282,7 @@ impl Bodies {
             joined_gyroscopic(&mut self.d.r.bodies, ha);
             joined_gyroscopic(&mut self.d.r.bodies, hb);
         }
-        self.part_added();
+        self.part_added()?;
         Ok(())
     }
 
@@ -306,17 +306,49 @@ impl Bodies {
             let local = self.d.r.bodies[h].position().inverse_transform_point(vector(&points[D * k..D * (k + 1)]));
             self.d.pins.push((particles[k] as usize, body[k] as usize, local));
         }
-        self.part_added();
+        self.part_added()?;
         Ok(())
     }
 
-    fn part_added(&mut self) {
+    /// Counts a part added; a loaded state waiting for this part (`pending`) is checked against
+    /// the bodies the parts built, and taken (a refusal drops it: the load fails).
+    fn part_added(&mut self) -> Result<()> {
         self.d.parts += 1;
         if self.pending.as_ref().is_some_and(|p| p.parts == self.d.parts) {
-            self.d = self.pending.take().expect("checked");
+            let d = self.pending.take().expect("checked");
+            self.take_state(d)?;
         }
         self.params.length_unit = self.length_unit();
         self.scale_time();
+        Ok(())
+    }
+
+    /// Takes a loaded state for these bodies, after checking that it holds them: the same
+    /// bodies and colliders, each collider of the same shape, density and material as the
+    /// scene's records built (a state of another scene with as many bodies is refused), and
+    /// every body finite.
+    fn take_state(&mut self, d: Dynamic) -> Result<()> {
+        let same = d.r.colliders.len() == self.colliders.len()
+            && self.handles.iter().all(|&h| d.r.bodies.contains(h))
+            && self.colliders.iter().all(|&h| {
+                let (Some(a), Some(b)) = (d.r.colliders.get(h), self.d.r.colliders.get(h)) else {
+                    return false;
+                };
+                a.parent() == b.parent()
+                    && a.density().to_bits() == b.density().to_bits()
+                    && a.friction().to_bits() == b.friction().to_bits()
+                    && a.restitution().to_bits() == b.restitution().to_bits()
+                    && bincode::serialize(a.shared_shape()).ok() == bincode::serialize(b.shared_shape()).ok()
+            });
+        if !same {
+            return Err(invalid("state", "holds other bodies than the scene's"));
+        }
+        let old = std::mem::replace(&mut self.d, d);
+        if let Some((i, q)) = self.fault() {
+            self.d = old;
+            return Err(invalid("state", format!("body {i}'s {q:?} is not finite")));
+        }
+        Ok(())
     }
 
     /// rapier's rates scaled with its length unit L: its defaults are tuned for bodies of about
@@ -646,34 +678,20 @@ impl System for Bodies {
         Ok(Box::new(self.d.clone()))
     }
     fn save(&self) -> Arrays {
-        let bytes = bincode::serialize(&self.d).expect("rapier's state serialises");
+        let bytes = super::sealed(bincode::serialize(&self.d).expect("rapier's state serialises"));
         vec![("state".to_string(), pack(&bytes)), ("bytes".to_string(), vec![bytes.len() as Real])]
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let len = array(arrays, "bytes", Some(1))?[0];
         let packed = array(arrays, "state", None)?;
         let bytes = unpack(packed, len).ok_or_else(|| invalid("state", "is not a packed bodies state"))?;
-        let d: Dynamic = bincode::deserialize(&bytes).map_err(|e| invalid("state", format!("cannot be read: {e}")))?;
-        let check = |d: &Dynamic| -> Result<()> {
-            let ok = d.r.colliders.len() == self.colliders.len()
-                && self.handles.iter().all(|&h| d.r.bodies.contains(h))
-                && self.colliders.iter().all(|&h| d.r.colliders.contains(h));
-            if ok {
-                Ok(())
-            } else {
-                Err(invalid("state", "holds other bodies than the scene's"))
-            }
-        };
+        let d: Dynamic = bincode::deserialize(super::unsealed(&bytes)?)
+            .map_err(|e| invalid("state", format!("cannot be read: {e}")))?;
         if d.parts < self.d.parts {
             return Err(invalid("state", format!("holds {} parts, the scene has {}", d.parts, self.d.parts)));
         }
         if d.parts == self.d.parts {
-            check(&d)?;
-            let old = std::mem::replace(&mut self.d, d);
-            if let Some((i, q)) = self.fault() {
-                self.d = old;
-                return Err(invalid("state", format!("body {i}'s {q:?} is not finite")));
-            }
+            self.take_state(d)?;
         } else {
             self.pending = Some(d);
         }
