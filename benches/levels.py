@@ -393,7 +393,10 @@ def main() -> int:
                      f"its native ISA, what a user gets, whatever PHYSCORE_SIMD says; only physcore changes level")
     notes.append("- ratio = physcore / numba at the same precision (f64 vs f64, f32 vs f32)")
 
-    md = ["# physcore speed by SIMD level", ""] + notes + [""]
+    # The machine and the day in the title: the docs keep several of these pages (one a machine).
+    cpu = results[0]["header"].split(" · ")[0].removeprefix("CPU: ") if results else platform.machine()
+    day = datetime.datetime.now().astimezone().strftime("%Y-%m-%d")
+    md = [f"# physcore speed by SIMD level: {cpu}, {day}", ""] + notes + [""]
     for res in results:
         md += [f"## SIMD level {res['level']}", "", res["header"], "", level_table(res), ""]
     if len(results) > 1:

@@ -531,7 +531,8 @@ def markdown(problems: list[Problem], rows: list[dict[str, Any]], command: str) 
     ver = getattr(physcore, "__version__", "?")
     profile = getattr(pc._core, "build_profile", "?")
     lines = [
-        "# Work-precision results",
+        # The day in the title: the docs keep several of these pages (one a machine or a set).
+        f"# Work-precision results, {datetime.datetime.now().astimezone().strftime('%Y-%m-%d')}",
         "",
         f"- machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores ({platform.platform()})",
         f"- date: {datetime.datetime.now().astimezone().strftime('%Y-%m-%d %H:%M %Z')}",
