@@ -115,8 +115,9 @@ def check_mesh(mesh: Any, n: int) -> Mesh | None:
 
 
 def check_texture(texture: Any, mesh: Mesh | None) -> np.ndarray | None:
-    """`texture` (None, an image path, or an (H, W, 3) uint8 array) -> (H, W, 3) float32 in [0, 1]."""
-    if texture is None:
+    """`texture` (None or False, an image path, or an (H, W, 3) uint8 array) -> (H, W, 3) float32
+    in [0, 1], or None."""
+    if texture is None or texture is False:
         return None
     if mesh is None or mesh.uv is None:
         raise InvalidInputError("texture: needs a mesh with texture coordinates (mesh=Mesh(faces, uv), or a scene with a grid mesh)")
