@@ -700,7 +700,7 @@ class _Painter:
         from .render.painter import check_mesh, check_texture
 
         mesh = None if color_by == "density" else check_mesh(d.get("mesh"), rec.positions.shape[1])
-        from .render._look import check_look
+        from .render.painter import check_look
 
         look = check_look(None, d.get("look"))  # the scene's backdrop and props, as gif() draws them
         fabric = d.get("texture") if color_by == "none" and mesh is not None and mesh.uv is not None else None

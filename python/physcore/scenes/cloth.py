@@ -95,13 +95,14 @@ def cloth(
     return _finite_books(scene, "size, mass")
 
 
-def _gingham(light: tuple, dark: tuple, cells: int = 8, px: int = 8) -> np.ndarray:
-    """A gingham texture, (cells·px)² RGB: checks of `light`, half-tone bands of `dark` one way
-    and the other, full `dark` where they cross (folds read in its lines)."""
+def _gingham(light: tuple, dark: tuple, cells: int = 8, px: int = 8) -> list:
+    """A gingham texture, (cells·px)² RGB as nested lists (render_defaults compare with ==):
+    checks of `light`, half-tone bands of `dark` one way and the other, full `dark` where they
+    cross (folds read in its lines)."""
     u = (np.arange(cells * px) // px) % 2
     w = 0.5 * (u[:, None] + u[None, :])
     a, b = np.array(light, np.float64), np.array(dark, np.float64)
-    return np.rint(a * (1 - w)[..., None] + b * w[..., None]).astype(np.uint8)
+    return np.rint(a * (1 - w)[..., None] + b * w[..., None]).astype(np.uint8).tolist()
 
 
 def _room(size: float, floor: bool = True) -> dict:
