@@ -700,8 +700,12 @@ class _Painter:
         from .render.painter import check_mesh, check_texture
 
         mesh = None if color_by == "density" else check_mesh(d.get("mesh"), rec.positions.shape[1])
-        kw.update(mesh=mesh, texture=check_texture(d.get("texture"), mesh), theme=settings["theme"],
-                  antialias=bool(d.get("antialias", False)))
+        from .render.painter import check_look
+
+        look = check_look(None, d.get("look"))  # the scene's backdrop and props, as gif() draws them
+        fabric = d.get("texture") if color_by == "none" and mesh is not None and mesh.uv is not None else None
+        kw.update(mesh=mesh, texture=check_texture(fabric, mesh), theme=settings["theme"], look=look,
+                  antialias=bool(d.get("antialias", False)) or look.full_colour)
         # The rest of what gif() takes from the scene's defaults: the colour map, a fluid's
         # surface, the background, each particle's own colour and halo.
         from .render.painter import check_background, check_cmap, check_colors, check_halo

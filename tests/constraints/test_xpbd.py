@@ -53,7 +53,7 @@ def settled_cloths(n: int = 8, k: float = 2000.0, dt: float = 1e-2, substeps: in
     """The same n×n sheet (edge pinned) with physcore's springs (cloth's structural, shear and
     bend springs, stiffness k) and with XPBD distance constraints on the same pairs (compliance
     1/k, the same rest lengths), each settled by drag."""
-    springs = pc.scenes.cloth(n=n, stiffness=k, damping=0.5, air_drag=2.0, threads=1)
+    springs = pc.scenes.cloth(n=n, stiffness=k, damping=0.5, air_drag=2.0, pin="edge", threads=1)
     springs.step(int(round(30.0 / springs.dt)))
     x0 = pc.scenes.cloth(n=n, threads=1).positions
     xp = pc.Scene(3, integrator="xpbd", dt=dt, xpbd_substeps=substeps, threads=1)

@@ -17,7 +17,13 @@ notebook = pytest.importorskip("physcore.notebook", reason='anywidget is not ins
 
 
 def _cloth(n: int, mesh: bool = False):
-    scene = pc.scenes.cloth(n=n)
+    """The plain cloth these tests were written on: pinned along its first row (the scene's
+    default pins two corners), seen from the default view without the scene's room and fabric
+    (its low view lines up the flat sheet's rows); with ``mesh=False`` drawn as discs and
+    springs."""
+    scene = pc.scenes.cloth(n=n, pin="edge")
+    plain = {k: v for k, v in (scene.render_defaults or {}).items() if k not in ("look", "texture", "view", "extent")}
+    scene.render_defaults = plain
     if not mesh:
         scene.render_defaults = {**(scene.render_defaults or {}), "mesh": False}
     return scene

@@ -26,10 +26,11 @@ from physcore import render
 
 def test_library_defaults_are_the_clis_for_a_ready_made_scene():
     scene = pc.scenes.cloth(n=8)
-    # The function's defaults, plus what this sheet's size decides: its grid mesh.
+    # The function's defaults, plus what this sheet's size decides: its grid mesh, and its room
+    # (the floor's props and the camera's box scale with the sheet).
     fn_defaults = pc.scenes.cloth.render_defaults
     assert {k: scene.render_defaults[k] for k in fn_defaults} == fn_defaults
-    assert set(scene.render_defaults) - set(fn_defaults) == {"mesh"}
+    assert set(scene.render_defaults) - set(fn_defaults) == {"mesh", "look", "extent"}
     assert np.array_equal(scene.render_defaults["mesh"].faces, render.Mesh.grid(8, 8).faces)
     rec = render.record(scene, frames=3)
     frame_time = pc.scenes.cloth.render_defaults["frame_time"]
@@ -196,7 +197,7 @@ def test_strain_is_a_colour_choice_on_the_runs_own_scale(tmp_path):
     rec = render.record(pc.scenes.cloth(n=12), frames=20, color_by="strain")
     p99 = float(np.percentile(np.abs(rec.strain[np.isfinite(rec.strain)]), 99))
     assert 0 < p99 < 0.02  # the strains this test is about: far below STRAIN_SATURATION
-    path = render.gif(rec, tmp_path / "s.gif", color_by="strain", size=(240, 180))
+    path = render.gif(rec, tmp_path / "s.gif", color_by="strain", size=(240, 180), look=render.Look(), view=render.DEFAULT_VIEW)
     with Image.open(path) as im:
         im.seek(im.n_frames - 1)
         img = np.asarray(im.convert("RGB"))

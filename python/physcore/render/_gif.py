@@ -220,7 +220,9 @@ def gif(
         gets one adaptive 256-colour palette for the whole animation.
     texture : str, os.PathLike or (H, W, 3) uint8 array, optional
         An image mapped onto the mesh by its texture coordinates (``Mesh.uv``; a grid mesh has
-        them), shaded like the plain surface. Needs a mesh with uv.
+        them), shaded like the plain surface. Needs a mesh with uv. Default: the scene's
+        ``render_defaults`` (the cloths' gingham), unless `mesh` is given or `color_by` (other
+        than "none") or `colors` colours the surface. False: none (the plain fabric).
     antialias : bool, optional
         Draw the discs with soft edges: each pixel blended by the fraction of it the disc
         covers (the discs in full colour; a GIF then gets one adaptive 256-colour palette).
@@ -371,10 +373,13 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         if mesh_given:
             raise InvalidInputError("mesh: color_by='density' (glow) draws no surface; give another color_by or mesh=False")
         mesh = None  # the scene's default surface gives way to a requested glow
-    texture = d.get("texture") if texture is None else texture
     n_points = (scene.positions.shape[1] if isinstance(scene, _recording.Recording)
                 else int(getattr(_recording.points_view(scene), "n_particles", 0)))
     mesh = check_mesh(mesh, n_points)
+    if texture is None and not mesh_given and mesh is not None and mesh.uv is not None and color_by == "none" and colors is None:
+        texture = d.get("texture")  # a scene's default fabric gives way to a mesh or colouring asked for
+    if texture is False:
+        texture = None  # the plain fabric
     texture = check_texture(texture, mesh)
     antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
     cmap = _check_cmap(d.get("cmap") if cmap is None else cmap)

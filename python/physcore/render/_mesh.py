@@ -115,8 +115,10 @@ def check_mesh(mesh: Any, n: int) -> Mesh | None:
 
 
 def check_texture(texture: Any, mesh: Mesh | None) -> np.ndarray | None:
-    """`texture` (None, an image path, or an (H, W, 3) uint8 array) -> (H, W, 3) float32 in [0, 1]."""
-    if texture is None:
+    """`texture` (None or False, an image path, an (H, W, 3) uint8 array, or nested lists of
+    such an array's values, as a scene's render_defaults keep it: they compare with ==) ->
+    (H, W, 3) float32 in [0, 1], or None."""
+    if texture is None or texture is False:
         return None
     if mesh is None or mesh.uv is None:
         raise InvalidInputError("texture: needs a mesh with texture coordinates (mesh=Mesh(faces, uv), or a scene with a grid mesh)")
@@ -130,12 +132,20 @@ def check_texture(texture: Any, mesh: Mesh | None) -> np.ndarray | None:
             raise InvalidInputError(f"texture: cannot read the image {str(texture)!r}: {e}") from None
         except Image.DecompressionBombError as e:  # a hostile image: its size alone would fill memory
             raise InvalidInputError(f"texture: the image {str(texture)!r} is too large to load safely: {e}") from None
-    elif isinstance(texture, np.ndarray):
+    elif isinstance(texture, (np.ndarray, list, tuple)):
         arr = texture
+        if not isinstance(arr, np.ndarray):
+            try:
+                arr = np.asarray(texture)
+            except ValueError:  # ragged
+                raise InvalidInputError("texture: nested lists must be (H, W, 3) values in 0..255") from None
+            if arr.dtype.kind not in "iu" or arr.size == 0 or arr.min() < 0 or arr.max() > 255:
+                raise InvalidInputError(f"texture: nested lists must be (H, W, 3) integers in 0..255, got {arr.dtype} values")
+            arr = arr.astype(np.uint8)
         if arr.dtype != np.uint8 or arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 1 or arr.shape[1] < 1:
             raise InvalidInputError(f"texture: an array must be (H, W, 3) uint8, got {arr.shape} {arr.dtype}")
     else:
-        raise InvalidTypeError(f"texture must be an image path or an (H, W, 3) uint8 array, got {type(texture).__name__}")
+        raise InvalidTypeError(f"texture must be an image path or an (H, W, 3) uint8 array (or nested lists), got {type(texture).__name__}")
     return arr.astype(np.float32) / 255.0
 
 

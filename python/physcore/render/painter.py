@@ -22,7 +22,7 @@ Stepping as the renderer steps
     :func:`simulate`, :func:`default_stepping`, :func:`scene_defaults`, :func:`steps_for`.
 Option checks
     :func:`check_background`, :func:`check_camera`, :func:`check_cmap`, :func:`check_color_by`,
-    :func:`check_colors`, :func:`check_fps`, :func:`check_halo`, :func:`check_mesh`,
+    :func:`check_colors`, :func:`check_fps`, :func:`check_halo`, :func:`check_look`, :func:`check_mesh`,
     :func:`check_path`, :func:`check_radius`, :func:`check_size`, :func:`check_texture`,
     :func:`check_view`, :func:`check_writable`.
 """
@@ -45,6 +45,7 @@ from ._colorbar import _CB_MARGIN as CB_MARGIN
 from ._colorbar import _draw_text as draw_text
 from ._colorbar import _text_mask as text_mask
 from ._gif import _check_halo as check_halo
+from ._look import check_look
 from ._mesh import check_mesh, check_texture
 from ._palette import _BACKGROUND as BACKGROUND
 from ._palette import _TEXT as TEXT
@@ -61,7 +62,7 @@ from ._scene_state import _strain as strain
 
 __all__ = [
     "BACKGROUND", "CB_MARGIN", "TEXT", "THEMES", "Rasteriser", "body_track", "check_background", "check_camera",
-    "check_cmap", "check_color_by", "check_colors", "check_fps", "check_halo", "check_mesh", "check_path",
+    "check_cmap", "check_color_by", "check_colors", "check_fps", "check_halo", "check_look", "check_mesh", "check_path",
     "check_radius", "check_size", "check_texture", "check_view", "check_writable", "default_stepping", "draw_text",
     "draw_title", "extent_box", "overlay", "paste", "points_view", "row_norms", "scene_defaults", "scene_springs", "simulate",
     "steps_for", "strain", "text_mask",

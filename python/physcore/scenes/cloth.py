@@ -34,19 +34,22 @@ def cloth(
     stiffness: float = 2000.0,
     damping: float = 0.1,
     air_drag: float = 0.5,
-    pin: str = "edge",
+    pin: str = "corners",
     ground: bool = False,
     integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Hanging cloth: an n×n mass-spring sheet, one edge pinned, falling and swinging under gravity.
+    """Hanging cloth: an n×n mass-spring sheet pinned by two corners, falling and swinging
+    under gravity.
 
-    The sheet starts flat in the z = 0 plane (x, y in [0, size]); the row y = 0 is pinned
-    (``pin="edge"``) or only its two corners (``pin="corners"``). Structural, shear and bend
+    The sheet starts flat in the z = 0 plane (x, y in [0, size]); the two corners of the row
+    y = 0 are pinned (``pin="corners"``) or that whole row (``pin="edge"``). Structural, shear and bend
     springs (stiffness N/m, dashpot damping N·s/m) join neighbours; gravity is (0, 0, -9.81) m/s²;
     linear air drag b = air_drag · m per particle (air_drag in 1/s; 0 turns it off).
-    ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5). ``dt=None``
+    ``ground=True`` adds a floor at z = -0.8·size (restitution 0.1, friction 0.5), which the
+    hanging sheet's lower fifth folds onto (the default render draws a floor well below the
+    sheet's reach, a prop that takes no part). ``dt=None``
     uses twice :meth:`Scene.suggest_dt` (1/ω_max here), half of velocity Verlet's stability limit.
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
@@ -86,13 +89,46 @@ def cloth(
         # suggest_dt() is half the fastest time scale (1/ω_max or the dashpot's 1/λ_max); twice
         # that is still well inside velocity Verlet's limits (2/ω_max; 2/λ_max with dashpots).
         _set_stable_dt(scene, 2.0, "stiffness, damping, air_drag, mass")
-    # Drawn as a shaded sheet over its grid (render.Mesh.grid: rows of n, index row·n + col).
-    scene.render_defaults = {"mesh": Mesh.grid(n, n)}
+    # Drawn as a shaded sheet over its grid (render.Mesh.grid: rows of n, index row·n + col),
+    # in a room of its size.
+    scene.render_defaults = {"mesh": Mesh.grid(n, n), **_room(size, floor=not ground)}
     return _finite_books(scene, "size, mass")
 
 
-# A plain fabric colour: the shading is the picture (--color-by speed or strain colours the sheet).
-cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none"}
+def _gingham(light: tuple, dark: tuple, cells: int = 8, px: int = 8) -> list:
+    """A gingham texture, (cells·px)² RGB as nested lists (render_defaults compare with ==):
+    checks of `light`, half-tone bands of `dark` one way and the other, full `dark` where they
+    cross (folds read in its lines)."""
+    u = (np.arange(cells * px) // px) % 2
+    w = 0.5 * (u[:, None] + u[None, :])
+    a, b = np.array(light, np.float64), np.array(dark, np.float64)
+    return np.rint(a * (1 - w)[..., None] + b * w[..., None]).astype(np.uint8).tolist()
+
+
+def _room(size: float, floor: bool = True) -> dict:
+    """Render defaults for a sheet of `size` m hanging from z = 0: a pale wall (a gradient
+    backdrop) over a tiled floor 1.25·size below its pins, drawn as props (the floor takes no
+    part in the physics: the sheet reaches 1.0·size below its pins, 1.1·size by XPBD), one
+    polygon and its joints' lines (a few dozen props, drawn once); and the camera fitted to
+    the sheet's swing (to 0.9·size and 1.0·size through) and the floor. ``floor=False``: the
+    wall only (a scene with a ground collider, which the renderer draws itself)."""
+    z, cell = -1.25 * size, 0.25 * size
+    (x0, y0), (x1, y1) = (-1.5 * size, -2.0 * size), (2.5 * size, 4.0 * size)
+    decor = [{"polygon": [[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], "color": (212, 207, 197)}]
+    decor += [{"line": [[x, y0, z], [x, y1, z]], "color": (184, 178, 168), "width": 1} for x in np.arange(x0, x1 + 1e-9, cell)]
+    decor += [{"line": [[x0, y, z], [x1, y, z]], "color": (184, 178, 168), "width": 1} for y in np.arange(y0, y1 + 1e-9, cell)]
+    return {"look": {"backdrop": ((226, 232, 240), (196, 204, 216)), "decor": decor if floor else []},
+            "extent": ((-0.05 * size, -1.0 * size, z), (1.05 * size, 1.0 * size, 0.05 * size))}
+
+
+#: The sheets' fabrics (blue and red gingham), seen in their room (:func:`_room`) from low
+#: down, so that the wall shows above the floor.
+_BLUE_GINGHAM = _gingham((250, 246, 238), (62, 104, 168))
+_RED_GINGHAM = _gingham((250, 246, 238), (186, 58, 52))
+
+# A gingham fabric (its lines show the folds and the swing) before a wall, over the floor.
+cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
+                         "texture": _BLUE_GINGHAM, "view": (-60.0, 8.0)}
 cloth = _stamped(cloth, old_order=('n', 'size', 'mass', 'stiffness', 'damping', 'air_drag', 'pin', 'ground', 'integrator', 'dt', 'threads'), keep=1)
 
 
@@ -229,9 +265,10 @@ def xpbd_cloth(
             distance=edges, distance_compliance=compliance, bending=hinges, bending_compliance=bending_compliance, name="cloth"
         )
     )
-    scene.render_defaults = {"mesh": mesh}
+    scene.render_defaults = {"mesh": mesh, **_room(size)}
     return _finite_books(scene, "size, mass")
 
 
-xpbd_cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none"}
+xpbd_cloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
+                              "texture": _RED_GINGHAM, "view": (-60.0, 8.0)}
 xpbd_cloth = _stamped(xpbd_cloth, old_order=('n', 'size', 'mass', 'compliance', 'bending_compliance', 'air_drag', 'pin', 'substeps', 'integrator', 'dt', 'threads'), keep=1)

@@ -12,7 +12,7 @@ from ..contacts import Contacts
 from ..render import Mesh
 from ..scene import Scene
 from ..shapes import cloth_springs
-from ..terms import Box, Drag, Gravity, Plane, Springs
+from ..terms import Capsule, Drag, Gravity, Plane, Springs
 from ._common import _count, _nonneg, _optional, _particles, _positive, _stamped
 
 
@@ -177,23 +177,30 @@ def galton_bins(scene: Scene) -> np.ndarray:
 
 def billiards(
     *,
-    speed: float = 6.0,
+    speed: float = 10.0,
     restitution: float = 0.93,
     cushion: float = 0.75,
-    seed: int = 0,
+    seed: int = 9,
     integrator: str | None = None,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """Billiards break: a cue ball at `speed` (m/s) into a rack of 15 balls, seen from above.
+    """Billiards break: a cue ball at `speed` (m/s; a firm break is 9 to 11) into a rack of 15
+    balls on a pool table with six pockets, seen from above.
 
     Pool balls (radius 28.6 mm, 170 g) on a 2.54 × 1.27 m table, Hertz contacts
     (:class:`~physcore.Contacts`, so the touching rack passes the impulse through like a real
-    one) with ball–ball `restitution` and friction 0.05, cushions of restitution `cushion`;
-    the cloth's rolling resistance as linear drag 0.05 kg/s (speeds decay over m/b = 3.4 s,
-    so the balls still roll at the end of the 5 s animation). No pockets. Drawn on felt, each
-    ball in its colour (stripes in a lighter shade of their solid). `seed`
-    offsets the cue by a fraction of a millimetre, so each seed breaks differently.
+    one) with ball–ball `restitution` and friction 0.05; the cushions are rails
+    (:class:`~physcore.terms.Capsule` walls, 12 mm round, their faces on the table's edges) of
+    restitution `cushion` and friction 0.2, broken at the six pockets: mouths 12.7 cm wide
+    between the cushions' ends, jaws narrowing them to 6.8 cm (corners) and 11 cm (sides), then
+    a round cup 7.3 cm in inner radius (capsules of restitution 0.05 and friction 1). Seen from
+    above a ball cannot drop, so the cup stops a ball that enters instead; one that only
+    rattles in the jaws can come back out. The cloth's rolling resistance is linear drag 0.05 kg/s (speeds decay over m/b = 3.4 s, so the balls still
+    roll at the end of the 5 s animation). Drawn on felt in a wooden frame, each ball in its
+    colour (stripes in a lighter shade of their solid), lit as a ball. `seed` offsets the cue
+    by a fraction of a millimetre, so each seed breaks differently (the default, 9, sinks two
+    balls within 3 s).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring).
     """
@@ -219,13 +226,83 @@ def billiards(
     scene.add_particles(x, v, masses=m)
     scene.set_attribute("radius", np.full(len(x), r))
     scene.add(Drag(0.05))
-    scene.add(Contacts(stiffness=5e9, restitution=restitution, friction=0.05, law="hertz",
-                       walls=Box([0.0, 0.0], [L, W], restitution=cushion, friction=0.2)))
+    rails, cups = _pool_table(L, W)
+    walls = ([Capsule(a, b, _RAIL, restitution=cushion, friction=0.2) for a, b in rails]
+             + [Capsule(a, b, _RAIL, restitution=0.05, friction=1.0) for a, b in cups])
+    scene.add(Contacts(stiffness=5e9, restitution=restitution, friction=0.05, law="hertz", walls=walls))
     # Drawn as the table is: each ball its own colour (the cue white; the 1 ball at the apex,
-    # the 8 in the middle of the third row), on felt.
+    # the 8 in the middle of the third row), on felt in a wooden frame, the pockets dark.
     scene.render_defaults = {"colors": [_POOL_COLORS[k] for k in (0, 1, 9, 2, 10, 8, 3, 11, 4, 12, 5, 6, 13, 14, 7, 15)],
-                             "background": (28, 110, 60)}
+                             "background": (28, 110, 60),
+                             "look": {"shading": "sphere", "backdrop": ((46, 40, 36), (22, 20, 18)), "decor": _pool_decor(L, W)}}
     return _auto_grain_dt(scene, dt)
+
+
+#: The pool table's rails and pockets: capsule radius (m), the corner cushions' ends from the
+#: corner (m, along each edge) and the side pockets' half-gap (m), and how far outside the table
+#: the corner and side cups are centred (m).
+_RAIL, _CORNER_END, _SIDE_HALF, _CORNER_CUP, _SIDE_CUP, _CUP = 0.012, 0.095, 0.0755, 0.042, 0.07, 0.085
+
+
+def _pool_table(L: float, W: float) -> tuple[list, list]:
+    """The cushions (six capsule axes, their faces on the table's edges, and two jaws a pocket
+    from the cushions' ends into its cup) and the pockets' cups (arcs of 6 capsule axes round
+    the back of each pocket, from jaw to jaw) of an L × W table: two lists of (a, b) points.
+    Few walls: each costs the contacts about 50 ms to set up."""
+    rc, mc, ms = _RAIL, _CORNER_END, _SIDE_HALF
+    rails = [((mc, -rc), (L / 2 - ms, -rc)), ((L / 2 + ms, -rc), (L - mc, -rc)),
+             ((mc, W + rc), (L / 2 - ms, W + rc)), ((L / 2 + ms, W + rc), (L - mc, W + rc)),
+             ((-rc, mc), (-rc, W - mc)), ((L + rc, mc), (L + rc, W - mc))]
+    cups = []
+    for c, a, b, out in _pockets(L, W):
+        radius = _CUP
+        ja = np.add(c, radius * np.subtract(a, c) / np.hypot(*np.subtract(a, c)))  # the jaws' inner ends
+        jb = np.add(c, radius * np.subtract(b, c) / np.hypot(*np.subtract(b, c)))
+        rails += [(a, tuple(ja)), (b, tuple(jb))]
+        t0 = math.atan2(ja[1] - c[1], ja[0] - c[0])
+        sweep = (math.atan2(jb[1] - c[1], jb[0] - c[0]) - t0) % (2 * math.pi)
+        if (out - t0) % (2 * math.pi) > sweep:  # go round the back of the pocket, away from the table
+            sweep -= 2 * math.pi
+        t = t0 + sweep * np.arange(7) / 6
+        pts = np.stack([c[0] + radius * np.cos(t), c[1] + radius * np.sin(t)], axis=1)
+        cups += [(tuple(pts[k]), tuple(pts[k + 1])) for k in range(6)]
+    return rails, cups
+
+
+def _pockets(L: float, W: float) -> list:
+    """Each pocket's cup centre, the two cushion ends it joins, and the outward direction (rad)."""
+    rc, mc, ms, a, b = _RAIL, _CORNER_END, _SIDE_HALF, _CORNER_CUP, _SIDE_CUP
+    out = []
+    for cx, cy, sx, sy in ((0.0, 0.0, -1, -1), (L, 0.0, 1, -1), (0.0, W, -1, 1), (L, W, 1, 1)):
+        out.append(((cx + sx * a, cy + sy * a), (cx - sx * mc, cy + sy * rc), (cx + sx * rc, cy - sy * mc), math.atan2(sy, sx)))
+    for cy, sy in ((0.0, -1), (W, 1)):
+        out.append(((L / 2, cy + sy * b), (L / 2 - ms, cy + sy * rc), (L / 2 + ms, cy + sy * rc), math.atan2(sy, 0.0)))
+    return out
+
+
+def _pool_decor(L: float, W: float) -> list:
+    """The table drawn under the balls: a wooden frame, the cushions' green, the pockets dark."""
+    frame, rim = 0.16, 0.05
+    def rect(x0, y0, x1, y1):
+        return [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+    def disc(c, rad):
+        t = np.arange(40) * (2 * math.pi / 40)
+        return np.stack([c[0] + rad * np.cos(t), c[1] + rad * np.sin(t)], axis=1).tolist()
+    decor = [{"polygon": rect(-frame, -frame, L + frame, W + frame), "color": (104, 60, 32)},
+             {"polygon": rect(-frame + 0.025, -frame + 0.025, L + frame - 0.025, W + frame - 0.025), "color": (138, 84, 46)},
+             {"polygon": rect(-rim, -rim, L + rim, W + rim), "color": (18, 84, 44)},
+             {"polygon": rect(0.0, 0.0, L, W), "color": (28, 110, 60)}]
+    for c, a, b, _ in _pockets(L, W):
+        decor.append({"polygon": disc(c, _CUP + _RAIL), "color": (16, 14, 12)})
+        ja, jb = (np.add(c, _CUP * np.subtract(e, c) / np.hypot(*np.subtract(e, c))) for e in (a, b))
+        decor.append({"polygon": [list(a), ja.tolist(), jb.tolist(), list(b)], "color": (16, 14, 12)})
+    for x in (L / 8, L / 4, 3 * L / 8, 5 * L / 8, 3 * L / 4, 7 * L / 8):  # the rails' diamonds
+        for y in (-0.5 * (frame + rim), W + 0.5 * (frame + rim)):
+            decor.append({"polygon": disc((x, y), 0.012), "color": (236, 226, 200)})
+    for y in (W / 4, W / 2, 3 * W / 4):
+        for x in (-0.5 * (frame + rim), L + 0.5 * (frame + rim)):
+            decor.append({"polygon": disc((x, y), 0.012), "color": (236, 226, 200)})
+    return decor
 
 
 #: Pool balls' colours (RGB) by number, 0 the cue ball: the solids 1–7, the 8 and the stripes
@@ -235,7 +312,7 @@ _POOL_COLORS = {0: (246, 244, 236), 1: (250, 200, 30), 2: (30, 70, 190), 3: (215
 _POOL_COLORS.update({k + 8: tuple(int(c + 0.35 * (255 - c)) for c in _POOL_COLORS[k]) for k in range(1, 8)})
 
 
-billiards.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (480, 260),
+billiards.render_defaults = {"antialias": True, "frames": 150, "fps": 30, "frame_time": 1 / 30, "size": (600, 340),
                              "size_by": "radius", "trail": 12, "color_by": "none"}
 billiards = _stamped(billiards, old_order=('speed', 'restitution', 'cushion', 'seed', 'integrator', 'dt', 'threads'), keep=0)
 
