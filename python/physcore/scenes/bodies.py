@@ -386,15 +386,15 @@ def tablecloth(
                      color=_OAK, name="table"))
     if dishes:
         scene.add(Bodies("box", size=[(0.11, 0.11, 0.005)], positions=[(-0.15, 0.0, top + 0.05)], density=1000.0,
-                         friction=mu, restitution=0.05, color=_DISHES[0], name="plate"))
+                         friction=mu, restitution=0.0, color=_DISHES[0], name="plate"))
         cups = [(0.12, 0.14, top + 0.09), (0.12, -0.14, top + 0.09), (-0.3, -0.2, top + 0.09)]
         # A cup: a capsule standing up (its axis, the body's x, turned to z).
         up = (0.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5))
         scene.add(Bodies("capsule", size=[(0.03, 0.035)] * 3, positions=cups, orientations=[up] * 3, density=400.0,
-                         friction=mu, restitution=0.05, color=_DISHES[[1, 2, 3]], name="cups"))
+                         friction=mu, restitution=0.0, color=_DISHES[[1, 2, 3]], name="cups"))
         # A loaf (a box: a ball here rolled off the table's far side and the floor's edge).
         scene.add(Bodies("box", size=[(0.07, 0.045, 0.04)], positions=[(-0.3, 0.18, top + 0.07)], density=300.0,
-                         friction=mu, restitution=0.05, color=(214, 150, 70), name="loaf"))
+                         friction=mu, restitution=0.0, color=(214, 150, 70), name="loaf"))
     if bar_mass > 0:
         hem = np.flatnonzero(np.isclose(x[:, 0], x[:, 0].max()))
         half = 0.5 * size
