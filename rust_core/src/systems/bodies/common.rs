@@ -852,8 +852,10 @@ impl System for Bodies {
             &self.impacts,
             &(),
         );
-        let found = std::mem::take(self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner()));
-        restitution(r, &found, substep);
+        // The list is emptied in place: its buffer serves every step's impacts.
+        let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());
+        restitution(r, found, substep);
+        found.clear();
         if self.rolling.iter().any(|&m| m > 0.0) {
             // rapier's step is n substeps of semi-implicit Euler: a velocity change spread evenly
             // over them moves a body by (n + 1)/(2n) of it times dt.
