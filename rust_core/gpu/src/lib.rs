@@ -1,0 +1,275 @@
+//! physcore's GPU backend: wgpu compute (WGSL) with the state resident on the device.
+//!
+//! This crate knows nothing of physcore's scenes: it holds a device ([`Gpu`]), lists the
+//! adapters ([`adapters`]) and runs kernels on flat arrays ([`particles::Particles`]). The core
+//! crate wraps it in a `System` (the device seam, docs/guide/architecture.md), so the world steps,
+//! checkpoints and books a device system as any other.
+//!
+//! Promises kept from the CPU path:
+//! - **Gather only.** Each thread writes its own element and sums over the others in a fixed
+//!   order; no float atomics. A run repeats bit for bit on one adapter.
+//! - **No silent CPU.** A CPU adapter (Mesa's lavapipe/llvmpipe, WARP, SwiftShader) is taken only
+//!   when asked for by name (`"gpu:lavapipe"`) or with `PHYSCORE_GPU_ALLOW_CPU=1` (CI).
+//! - **Clear failures.** No adapter, no f64 on the adapter, a buffer over the device's limits or
+//!   out of device memory, a lost device: each is a [`GpuError`] saying which.
+use std::fmt;
+use std::sync::Arc;
+
+pub mod particles;
+
+/// What can go wrong on the device.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter matches (none at all, or only CPU adapters that were not asked for).
+    #[error("{0}")]
+    NoAdapter(String),
+    /// The adapter lacks something the scene needs (f64, a limit).
+    #[error("{0}")]
+    Unsupported(String),
+    /// A device buffer could not be had.
+    #[error("out of device memory: {what} ({bytes} bytes)")]
+    OutOfMemory { what: String, bytes: u64 },
+    /// The device was lost or reported an error; the state is as of the last completed step.
+    #[error("the GPU device failed: {0}")]
+    Device(String),
+}
+
+pub type Result<T> = std::result::Result<T, GpuError>;
+
+/// Floating-point width of the device state and kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Precision {
+    F32,
+    F64,
+}
+
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+    /// Bytes of one scalar.
+    pub fn bytes(self) -> u64 {
+        match self {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        }
+    }
+    /// The WGSL header that defines `real` and `bad` (non-finite) for this width.
+    fn header(self) -> &'static str {
+        match self {
+            // The exponent bits all set: inf or NaN (comparisons may be folded by fast math).
+            Precision::F32 => {
+                "alias real = f32;\nfn bad(x: f32) -> bool { return (bitcast<u32>(x) & 0x7f800000u) == 0x7f800000u; }\n"
+            }
+            Precision::F64 => "alias real = f64;\nfn bad(x: f64) -> bool { return !(abs(x) <= 1.7976931348623157e308); }\n",
+        }
+    }
+}
+
+/// One adapter as `physcore info` lists it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AdapterSummary {
+    pub name: String,
+    /// "vulkan", "metal", "dx12", ...
+    pub backend: String,
+    /// "discrete", "integrated", "virtual", "cpu" or "other".
+    pub kind: String,
+    pub driver: String,
+    /// Whether the adapter runs f64 in shaders (`precision="f64"`).
+    pub f64: bool,
+    /// Largest storage buffer binding, bytes.
+    pub max_storage_binding: u64,
+    /// Largest buffer, bytes.
+    pub max_buffer: u64,
+}
+
+impl AdapterSummary {
+    fn of(a: &wgpu::Adapter) -> Self {
+        let info = a.get_info();
+        let limits = a.limits();
+        Self {
+            name: info.name.clone(),
+            backend: info.backend.to_str().to_string(),
+            kind: kind_name(info.device_type).to_string(),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+            f64: a.features().contains(wgpu::Features::SHADER_F64),
+            max_storage_binding: limits.max_storage_buffer_binding_size as u64,
+            max_buffer: limits.max_buffer_size,
+        }
+    }
+    /// Whether this is a CPU implementation (never taken silently).
+    pub fn is_cpu(&self) -> bool {
+        self.kind == "cpu"
+    }
+}
+
+fn kind_name(t: wgpu::DeviceType) -> &'static str {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => "discrete",
+        wgpu::DeviceType::IntegratedGpu => "integrated",
+        wgpu::DeviceType::VirtualGpu => "virtual",
+        wgpu::DeviceType::Cpu => "cpu",
+        wgpu::DeviceType::Other => "other",
+    }
+}
+
+fn instance() -> wgpu::Instance {
+    // Vulkan, Metal and DX12 only: the GL backend has no f64 and weaker compute.
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::VULKAN | wgpu::Backends::METAL | wgpu::Backends::DX12;
+    // Validation layers are for development; wgpu's own validation stays on.
+    desc.flags = wgpu::InstanceFlags::empty();
+    wgpu::Instance::new(desc)
+}
+
+fn enumerate() -> Vec<wgpu::Adapter> {
+    // A missing Vulkan loader panics in some drivers' probing: treat it as "no adapter".
+    std::panic::catch_unwind(|| pollster::block_on(instance().enumerate_adapters(wgpu::Backends::all())))
+        .unwrap_or_default()
+}
+
+/// Every adapter wgpu sees (Vulkan, Metal, DX12), CPU ones included, in the order found.
+pub fn adapters() -> Vec<AdapterSummary> {
+    enumerate().iter().map(AdapterSummary::of).collect()
+}
+
+/// Whether CPU adapters may be taken without being named (`PHYSCORE_GPU_ALLOW_CPU=1`: CI's
+/// lavapipe).
+pub fn cpu_allowed_by_env() -> bool {
+    std::env::var("PHYSCORE_GPU_ALLOW_CPU").map(|v| v == "1").unwrap_or(false)
+}
+
+/// An open device and its queue, shared by the systems of a scene.
+pub struct Gpu {
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    summary: AdapterSummary,
+}
+
+impl fmt::Debug for Gpu {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Gpu({} via {})", self.summary.name, self.summary.backend)
+    }
+}
+
+impl Gpu {
+    /// Opens a device. `which`: `"gpu"` (the best non-CPU adapter: discrete, then integrated,
+    /// then virtual), or `"gpu:NAME"` (the first adapter whose name, backend or kind contains
+    /// NAME, case-insensitive; `"gpu:lavapipe"` takes Mesa's CPU Vulkan, whose name is
+    /// "llvmpipe"). CPU adapters are taken under `"gpu"` only with `PHYSCORE_GPU_ALLOW_CPU=1`.
+    ///
+    /// Errors: [`GpuError::NoAdapter`] naming what was found instead.
+    pub fn open(which: &str) -> Result<Arc<Gpu>> {
+        let found = enumerate();
+        let named = which.strip_prefix("gpu:").map(|s| s.to_ascii_lowercase());
+        let listed: Vec<String> =
+            found.iter().map(|a| AdapterSummary::of(a)).map(|s| format!("{} ({}, {})", s.name, s.kind, s.backend)).collect();
+        let seen = if listed.is_empty() { "no adapter at all (is a Vulkan driver installed?)".to_string() } else { listed.join("; ") };
+        let pick = match (&named, which) {
+            (Some(name), _) => {
+                // lavapipe calls itself llvmpipe.
+                let name = if name == "lavapipe" { "llvmpipe".to_string() } else { name.clone() };
+                found.into_iter().find(|a| {
+                    let s = AdapterSummary::of(a);
+                    [s.name, s.backend, s.kind].iter().any(|f| f.to_ascii_lowercase().contains(&name))
+                })
+            }
+            (None, "gpu") => {
+                let allow_cpu = cpu_allowed_by_env();
+                let rank = |a: &wgpu::Adapter| match a.get_info().device_type {
+                    wgpu::DeviceType::DiscreteGpu => 0,
+                    wgpu::DeviceType::IntegratedGpu => 1,
+                    wgpu::DeviceType::VirtualGpu => 2,
+                    wgpu::DeviceType::Other => 3,
+                    wgpu::DeviceType::Cpu => 4,
+                };
+                let mut ok: Vec<_> =
+                    found.into_iter().filter(|a| allow_cpu || a.get_info().device_type != wgpu::DeviceType::Cpu).collect();
+                ok.sort_by_key(rank);
+                ok.into_iter().next()
+            }
+            _ => {
+                return Err(GpuError::NoAdapter(format!(
+                    "device must be \"gpu\" or \"gpu:NAME\" (an adapter's name, backend or kind), got {which:?}"
+                )))
+            }
+        };
+        let adapter = pick.ok_or_else(|| {
+            GpuError::NoAdapter(match &named {
+                Some(n) => format!("no GPU adapter matches {n:?}; found: {seen}"),
+                None => format!(
+                    "no GPU adapter; found: {seen}. A CPU adapter (lavapipe) runs only when named \
+                     (device=\"gpu:lavapipe\") or with PHYSCORE_GPU_ALLOW_CPU=1"
+                ),
+            })
+        })?;
+        let summary = AdapterSummary::of(&adapter);
+        let limits = adapter.limits();
+        let mut features = wgpu::Features::empty();
+        if summary.f64 {
+            features |= wgpu::Features::SHADER_F64;
+        }
+        let desc = wgpu::DeviceDescriptor {
+            label: Some("physcore"),
+            required_features: features,
+            // The adapter's own limits: large scenes need more than WebGPU's defaults.
+            required_limits: limits,
+            ..Default::default()
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc))
+            .map_err(|e| GpuError::Device(format!("could not open {}: {e}", summary.name)))?;
+        Ok(Arc::new(Gpu { device, queue, summary }))
+    }
+
+    /// The adapter it runs on.
+    pub fn adapter(&self) -> &AdapterSummary {
+        &self.summary
+    }
+
+    /// Refuses a precision the adapter lacks, naming it.
+    pub fn check_precision(&self, p: Precision) -> Result<()> {
+        if p == Precision::F64 && !self.summary.f64 {
+            return Err(GpuError::Unsupported(format!(
+                "precision \"f64\": the adapter {} has no f64 in shaders (use \"f32\")",
+                self.summary.name
+            )));
+        }
+        Ok(())
+    }
+
+    /// Creates a buffer, refusing one over the device's limits and reporting out-of-memory as
+    /// [`GpuError::OutOfMemory`] naming `what`.
+    pub(crate) fn buffer(&self, what: &str, bytes: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
+        let lim = self.device.limits();
+        let storage = usage.contains(wgpu::BufferUsages::STORAGE);
+        if bytes > lim.max_buffer_size || (storage && bytes > lim.max_storage_buffer_binding_size as u64) {
+            let most = if storage { lim.max_storage_buffer_binding_size as u64 } else { lim.max_buffer_size };
+            return Err(GpuError::Unsupported(format!(
+                "{what} needs {bytes} bytes; the adapter {} binds at most {most}",
+                self.summary.name
+            )));
+        }
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let b = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(what),
+            size: bytes.max(16),
+            usage,
+            mapped_at_creation: false,
+        });
+        if pollster::block_on(scope.pop()).is_some() {
+            return Err(GpuError::OutOfMemory { what: what.to_string(), bytes });
+        }
+        Ok(b)
+    }
+
+    /// Waits for all submitted work.
+    pub(crate) fn wait(&self) -> Result<()> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Device(e.to_string()))
+    }
+}

@@ -1,0 +1,482 @@
+//! Particles on the device: uniform gravity, linear drag and direct pairwise gravity (Plummer
+//! softening), stepped by semi-implicit Euler or velocity Verlet, with the energy books.
+//!
+//! Layout (one `vec4` per particle, f32 or f64): position and mass, velocity and 1/mass (0:
+//! pinned), acceleration, and the drag's books. Forces per unit mass as on the CPU path
+//! (`terms::gravity`, `terms::drag`, `terms::pairwise_gravity`):
+//!   a_i = g − (b/m_i) v_i + G Σ_j m_j (x_j − x_i) / (|x_j − x_i|² + ε²)^{3/2}
+//! for free particles, 0 for pinned ones (which still pull). Velocity Verlet evaluates the drag
+//! at the predicted velocity v + dt a and books dissipation by the trapezoidal rule, as the CPU's
+//! `integrators::verlet` does, so both paths are the same method.
+use crate::{Gpu, GpuError, Precision, Result};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The integrators the device runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scheme {
+    /// v += dt a(x, v); x += dt v.
+    SemiImplicitEuler,
+    /// Kick–drift–kick (Swope et al. 1982).
+    VelocityVerlet,
+}
+
+/// The forces of a device particle system (all optional; several uniform fields are summed).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Forces {
+    /// Uniform gravitational acceleration, m/s² (z = 0 in 2D).
+    pub g: [f64; 3],
+    /// Linear drag coefficient b, kg/s (F = −b v).
+    pub drag: f64,
+    /// Direct pairwise gravity: (G, Plummer softening ε in m).
+    pub pairwise: Option<(f64, f64)>,
+}
+
+/// Energy books summed on the host, in f64, in particle order (deterministic).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Books {
+    pub kinetic: f64,
+    /// −Σ m g·x over free particles.
+    pub uniform: f64,
+    /// −Σ_{i<j} G m_i m_j / √(r² + ε²).
+    pub pairwise: f64,
+    /// Energy taken out by drag so far.
+    pub dissipated: f64,
+}
+
+/// Why `step` stopped early.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Halt {
+    /// The stop flag was raised (Ctrl-C): the steps before it completed.
+    Stopped,
+    /// A particle's position or velocity stopped being finite within the last submission.
+    Diverged { particle: usize },
+    Failed(GpuError),
+}
+
+struct Bufs {
+    pos: wgpu::Buffer,
+    vel: wgpu::Buffer,
+    acc: wgpu::Buffer,
+    aux: wgpu::Buffer,
+}
+
+/// Particles resident on one device.
+pub struct Particles {
+    gpu: Arc<Gpu>,
+    precision: Precision,
+    dim: usize,
+    n: usize,
+    scheme: Scheme,
+    forces: Forces,
+    live: Bufs,
+    saved: Option<Bufs>,
+    saved_acc_valid: bool,
+    books: wgpu::Buffer,
+    flag: wgpu::Buffer,
+    params: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    bind: wgpu::BindGroup,
+    pipes: Pipes,
+    acc_valid: bool,
+    /// Steps per submission, grown while a submission takes under `SUBMIT_S`.
+    chunk: u64,
+}
+
+struct Pipes {
+    forces: wgpu::ComputePipeline,
+    kick_drift: wgpu::ComputePipeline,
+    kick: wgpu::ComputePipeline,
+    check: wgpu::ComputePipeline,
+    energy: wgpu::ComputePipeline,
+}
+
+const WG: u32 = 256;
+/// A submission's target length: Ctrl-C is answered between submissions.
+const SUBMIT_S: f64 = 0.1;
+const MAX_CHUNK: u64 = 4096;
+
+impl Particles {
+    /// Uploads `n` particles: `x`, `v` flat (n·dim, m and m/s), `mass` (kg, > 0), `inv_mass`
+    /// (1/kg, 0 for pinned). The caller has validated the values (the core's scene checks).
+    ///
+    /// Errors: `Unsupported` for f64 on an adapter without it or buffers over its limits,
+    /// `OutOfMemory` naming the buffer.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        gpu: Arc<Gpu>,
+        precision: Precision,
+        dim: usize,
+        scheme: Scheme,
+        forces: Forces,
+        x: &[f64],
+        v: &[f64],
+        mass: &[f64],
+        inv_mass: &[f64],
+    ) -> Result<Self> {
+        assert!(dim == 2 || dim == 3, "dim must be 2 or 3");
+        let n = mass.len();
+        assert!(x.len() == n * dim && v.len() == n * dim && inv_mass.len() == n, "ragged particle arrays");
+        gpu.check_precision(precision)?;
+        let row = 4 * precision.bytes();
+        let size = (n as u64).max(1) * row;
+        use wgpu::BufferUsages as U;
+        let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let mk = |what: &str| gpu.buffer(what, size, st);
+        let live = Bufs { pos: mk("positions")?, vel: mk("velocities")?, acc: mk("accelerations")?, aux: mk("drag books")? };
+        let books = mk("energy books")?;
+        let flag = gpu.buffer("finiteness flag", 16, st)?;
+        let params = gpu.buffer("parameters", 16 * precision.bytes() + 16, U::UNIFORM | U::COPY_DST)?;
+        let staging = gpu.buffer("read-back staging", size, U::MAP_READ | U::COPY_DST)?;
+        let (layout, pipes) = pipelines(&gpu, precision);
+        let entries: Vec<wgpu::BindGroupEntry> = [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &flag]
+            .iter()
+            .enumerate()
+            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+            .collect();
+        let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("particles"),
+            layout: &layout,
+            entries: &entries,
+        });
+        let mut p = Self {
+            gpu,
+            precision,
+            dim,
+            n,
+            scheme,
+            forces,
+            live,
+            saved: None,
+            saved_acc_valid: false,
+            books,
+            flag,
+            params,
+            staging,
+            bind,
+            pipes,
+            acc_valid: false,
+            chunk: 1,
+        };
+        p.write(x, v, Some((mass, inv_mass)))?;
+        let zero = vec![0u8; size as usize];
+        p.gpu.queue.write_buffer(&p.live.aux, 0, &zero);
+        p.gpu.queue.write_buffer(&p.live.acc, 0, &zero);
+        p.gpu.wait()?;
+        Ok(p)
+    }
+
+    pub fn len(&self) -> usize {
+        self.n
+    }
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+    pub fn precision(&self) -> Precision {
+        self.precision
+    }
+    pub fn gpu(&self) -> &Arc<Gpu> {
+        &self.gpu
+    }
+    pub fn forces(&self) -> Forces {
+        self.forces
+    }
+
+    /// Replaces the forces (the next step re-evaluates the accelerations).
+    pub fn set_forces(&mut self, f: Forces) {
+        self.forces = f;
+        self.acc_valid = false;
+    }
+
+    /// Overwrites positions and velocities (flat, n·dim), and masses when given.
+    pub fn write(&mut self, x: &[f64], v: &[f64], masses: Option<(&[f64], &[f64])>) -> Result<()> {
+        assert!(x.len() == self.n * self.dim && v.len() == self.n * self.dim, "ragged particle arrays");
+        let (m, im) = match masses {
+            Some(m) => (m.0.to_vec(), m.1.to_vec()),
+            None => {
+                let (px, pv) = self.read_raw()?;
+                ((0..self.n).map(|i| px[4 * i + 3]).collect(), (0..self.n).map(|i| pv[4 * i + 3]).collect())
+            }
+        };
+        let pack = |a: &[f64], w: &[f64]| {
+            let mut out = vec![0.0; 4 * self.n];
+            for i in 0..self.n {
+                out[4 * i..4 * i + self.dim].copy_from_slice(&a[self.dim * i..self.dim * (i + 1)]);
+                out[4 * i + 3] = w[i];
+            }
+            out
+        };
+        self.upload(&self.live.pos, &pack(x, &m));
+        self.upload(&self.live.vel, &pack(v, &im));
+        self.acc_valid = false;
+        Ok(())
+    }
+
+    fn upload(&self, b: &wgpu::Buffer, data: &[f64]) {
+        match self.precision {
+            Precision::F64 => self.gpu.queue.write_buffer(b, 0, bytemuck::cast_slice(data)),
+            Precision::F32 => {
+                let d: Vec<f32> = data.iter().map(|&x| x as f32).collect();
+                self.gpu.queue.write_buffer(b, 0, bytemuck::cast_slice(&d))
+            }
+        }
+    }
+
+    fn write_params(&self, dt: f64, h1: f64, h2: f64, w_new: f64, w_old: f64, pred: bool) {
+        let f = &self.forces;
+        let (gg, eps) = f.pairwise.unwrap_or((0.0, 0.0));
+        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, 0];
+        let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0];
+        let mut bytes: Vec<u8> = bytemuck::cast_slice(&u).to_vec();
+        match self.precision {
+            Precision::F64 => bytes.extend_from_slice(bytemuck::cast_slice(&r)),
+            Precision::F32 => {
+                let r: Vec<f32> = r.iter().map(|&x| x as f32).collect();
+                bytes.extend_from_slice(bytemuck::cast_slice(&r))
+            }
+        }
+        self.gpu.queue.write_buffer(&self.params, 0, &bytes);
+    }
+
+    fn groups(&self) -> u32 {
+        (self.n as u32).div_ceil(WG).max(1)
+    }
+
+    fn velocity_dependent(&self) -> bool {
+        self.forces.drag != 0.0
+    }
+
+    /// Records `steps` steps into one submission (the parameters already written).
+    fn record(&self, steps: u64) -> wgpu::CommandBuffer {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_bind_group(0, &self.bind, &[]);
+            let g = self.groups();
+            for _ in 0..steps {
+                match self.scheme {
+                    Scheme::SemiImplicitEuler => {
+                        pass.set_pipeline(&self.pipes.forces);
+                        pass.dispatch_workgroups(g, 1, 1);
+                        pass.set_pipeline(&self.pipes.kick_drift);
+                        pass.dispatch_workgroups(g, 1, 1);
+                    }
+                    Scheme::VelocityVerlet => {
+                        pass.set_pipeline(&self.pipes.kick_drift);
+                        pass.dispatch_workgroups(g, 1, 1);
+                        pass.set_pipeline(&self.pipes.forces);
+                        pass.dispatch_workgroups(g, 1, 1);
+                        pass.set_pipeline(&self.pipes.kick);
+                        pass.dispatch_workgroups(g, 1, 1);
+                    }
+                }
+            }
+            pass.set_pipeline(&self.pipes.check);
+            pass.dispatch_workgroups(g, 1, 1);
+        }
+        enc.finish()
+    }
+
+    /// Runs `n` steps of `dt`. Steps are recorded into submissions of up to ~0.1 s each; the
+    /// stop flag is read before each, and the finiteness flag after each (one u32 read back).
+    /// Returns the steps completed; on a halt, those before the failing submission (the caller
+    /// rolls back to its snapshot, as the world does for any system).
+    pub fn step(&mut self, n: u64, dt: f64, stop: &AtomicBool) -> std::result::Result<u64, (u64, Halt)> {
+        if self.n == 0 {
+            return Ok(n);
+        }
+        let fail = |done: u64, e: GpuError| (done, Halt::Failed(e));
+        let vv = self.scheme == Scheme::VelocityVerlet;
+        let pred = vv && self.velocity_dependent();
+        if vv && !self.acc_valid {
+            // The first force evaluation of velocity Verlet: books nothing.
+            self.write_params(dt, 0.0, 0.0, 0.0, 0.0, false);
+            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_bind_group(0, &self.bind, &[]);
+                pass.set_pipeline(&self.pipes.forces);
+                pass.dispatch_workgroups(self.groups(), 1, 1);
+            }
+            self.gpu.queue.submit([enc.finish()]);
+            self.acc_valid = true;
+        }
+        match self.scheme {
+            Scheme::SemiImplicitEuler => self.write_params(dt, dt, 0.0, dt, 0.0, false),
+            Scheme::VelocityVerlet => self.write_params(dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, pred),
+        }
+        let mut done = 0;
+        while done < n {
+            if stop.load(Ordering::Relaxed) {
+                return Err((done, Halt::Stopped));
+            }
+            let k = self.chunk.min(n - done);
+            self.gpu.queue.write_buffer(&self.flag, 0, bytemuck::cast_slice(&[u32::MAX; 4]));
+            let t0 = Instant::now();
+            self.gpu.queue.submit([self.record(k)]);
+            let bad = self.read_flag().map_err(|e| fail(done, e))?;
+            let took = t0.elapsed().as_secs_f64();
+            if bad != u32::MAX {
+                return Err((done, Halt::Diverged { particle: bad as usize }));
+            }
+            done += k;
+            if took < 0.5 * SUBMIT_S && k == self.chunk {
+                self.chunk = (self.chunk * 2).min(MAX_CHUNK);
+            } else if took > 2.0 * SUBMIT_S && self.chunk > 1 {
+                self.chunk /= 2;
+            }
+        }
+        Ok(done)
+    }
+
+    fn read_flag(&self) -> Result<u32> {
+        let bytes = self.read_buffer(&self.flag, 4)?;
+        Ok(u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]))
+    }
+
+    /// Copies `bytes` of `b` to the host (waits for the queue).
+    fn read_buffer(&self, b: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(b, 0, &self.staging, 0, bytes);
+        self.gpu.queue.submit([enc.finish()]);
+        let slice = self.staging.slice(0..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.gpu.wait()?;
+        rx.recv()
+            .map_err(|e| GpuError::Device(e.to_string()))?
+            .map_err(|e| GpuError::Device(format!("reading back: {e}")))?;
+        let out = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?.to_vec();
+        self.staging.unmap();
+        Ok(out)
+    }
+
+    fn read_reals(&self, b: &wgpu::Buffer) -> Result<Vec<f64>> {
+        let bytes = self.read_buffer(b, (self.n as u64).max(1) * 4 * self.precision.bytes())?;
+        Ok(match self.precision {
+            Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&bytes),
+            Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&bytes).into_iter().map(f64::from).collect(),
+        })
+    }
+
+    fn read_raw(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        Ok((self.read_reals(&self.live.pos)?, self.read_reals(&self.live.vel)?))
+    }
+
+    /// Positions and velocities, flat (n·dim), as f64.
+    pub fn read(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (x, v) = self.read_raw()?;
+        let d = self.dim;
+        let unpack = |a: &[f64]| (0..self.n).flat_map(|i| a[4 * i..4 * i + d].to_vec()).collect();
+        Ok((unpack(&x), unpack(&v)))
+    }
+
+    /// The energy books (reduced on the host in particle order).
+    pub fn books(&self) -> Result<Books> {
+        let vv = self.scheme == Scheme::VelocityVerlet;
+        self.write_params(0.0, 0.0, 0.0, 0.0, 0.0, false);
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_bind_group(0, &self.bind, &[]);
+            pass.set_pipeline(&self.pipes.energy);
+            pass.dispatch_workgroups(self.groups(), 1, 1);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        let e = self.read_reals(&self.books)?;
+        let _ = vv;
+        let mut b = Books::default();
+        for i in 0..self.n {
+            b.kinetic += e[4 * i];
+            b.uniform += e[4 * i + 1];
+            b.pairwise += e[4 * i + 2];
+            b.dissipated += e[4 * i + 3];
+        }
+        Ok(b)
+    }
+
+    /// Keeps a copy of the state on the device (the world's checkpoint).
+    pub fn snapshot(&mut self) -> Result<()> {
+        if self.saved.is_none() {
+            let size = (self.n as u64).max(1) * 4 * self.precision.bytes();
+            use wgpu::BufferUsages as U;
+            let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+            let mk = |what: &str| self.gpu.buffer(what, size, st);
+            self.saved = Some(Bufs {
+                pos: mk("checkpoint positions")?,
+                vel: mk("checkpoint velocities")?,
+                acc: mk("checkpoint accelerations")?,
+                aux: mk("checkpoint drag books")?,
+            });
+        }
+        let s = self.saved.as_ref().expect("made above");
+        self.copy(&self.live, s);
+        self.saved_acc_valid = self.acc_valid;
+        Ok(())
+    }
+
+    /// Returns to the last snapshot (nothing happens without one).
+    pub fn restore(&mut self) -> Result<()> {
+        if let Some(s) = &self.saved {
+            self.copy(s, &self.live);
+            self.acc_valid = self.saved_acc_valid;
+        }
+        self.gpu.wait()
+    }
+
+    fn copy(&self, from: &Bufs, to: &Bufs) {
+        let size = (self.n as u64).max(1) * 4 * self.precision.bytes();
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        for (a, b) in [(&from.pos, &to.pos), (&from.vel, &to.vel), (&from.acc, &to.acc), (&from.aux, &to.aux)] {
+            enc.copy_buffer_to_buffer(a, 0, b, 0, size);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+    }
+}
+
+fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
+    let d = &gpu.device;
+    let src = format!("{}{}", p.header(), include_str!("particles.wgsl"));
+    let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("particles.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(src.into()),
+    });
+    let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    };
+    let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
+    for b in 1..=6 {
+        entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: false }));
+    }
+    let layout =
+        d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("particles"), entries: &entries });
+    let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("particles"),
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let pipe = |name: &str| {
+        d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(name),
+            layout: Some(&pl),
+            module: &module,
+            entry_point: Some(name),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    };
+    let pipes = Pipes {
+        forces: pipe("forces"),
+        kick_drift: pipe("kick_drift"),
+        kick: pipe("kick"),
+        check: pipe("check"),
+        energy: pipe("energy"),
+    };
+    (layout, pipes)
+}

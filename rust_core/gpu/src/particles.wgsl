@@ -1,0 +1,192 @@
+// Particles resident on the device: forces, the integrators' updates, the books and a finiteness
+// check. The host prepends the precision header (`alias real = f32;` or f64, and `bad`).
+//
+// Every kernel gathers: thread i writes only particle i, and sums over the others in one fixed
+// order (tiles of WG bodies, GPU Gems 3 ch. 31), so a run repeats bit for bit on one adapter.
+// The one atomic is an integer min over the index of the first non-finite particle.
+
+struct Params {
+    n: u32,
+    // 1: pairwise gravity on.
+    pair: u32,
+    // 1: the forces see the predicted velocity stored in acc.xyz (velocity Verlet with drag).
+    pred: u32,
+    pad: u32,
+    dt: real,
+    // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
+    h1: real,
+    h2: real,
+    // Weight of the power just evaluated in the dissipation books (dt, dt/2 or 0), and of the
+    // power evaluated before it (0 or dt/2: the trapezoidal rule of velocity Verlet).
+    w_new: real,
+    w_old: real,
+    big_g: real,
+    eps2: real,
+    b: real,
+    gx: real,
+    gy: real,
+    gz: real,
+    pad1: real,
+};
+
+const WG: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> P: Params;
+// xyz: position (m), w: mass (kg).
+@group(0) @binding(1) var<storage, read_write> pos: array<vec4<real>>;
+// xyz: velocity (m/s), w: 1/mass (0: pinned).
+@group(0) @binding(2) var<storage, read_write> vel: array<vec4<real>>;
+// xyz: acceleration (m/s²), or the predicted velocity between kick_drift and forces; w unused.
+@group(0) @binding(3) var<storage, read_write> acc: array<vec4<real>>;
+// x: energy dissipated by drag so far (J), y: drag power at the last force evaluation (W).
+@group(0) @binding(4) var<storage, read_write> aux: array<vec4<real>>;
+// Per particle: kinetic, uniform-gravity potential, half its pairwise potential, dissipated.
+@group(0) @binding(5) var<storage, read_write> books: array<vec4<real>>;
+// [0]: the smallest index of a particle with a non-finite position or velocity (or 0xffffffff).
+@group(0) @binding(6) var<storage, read_write> flag: array<atomic<u32>>;
+
+var<workgroup> tile: array<vec4<real>, WG>;
+
+fn load_tile(t: u32, l: u32) {
+    let j = t * WG + l;
+    if (j < P.n) {
+        tile[l] = pos[j];
+    } else {
+        // Mass 0: a pad pulls on nothing.
+        tile[l] = vec4<real>(0.0, 0.0, 0.0, 0.0);
+    }
+}
+
+@compute @workgroup_size(WG)
+fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let i = gid.x;
+    let live = i < P.n;
+    var xi = vec4<real>(0.0, 0.0, 0.0, 0.0);
+    if (live) {
+        xi = pos[i];
+    }
+    var a = vec3<real>(0.0, 0.0, 0.0);
+    if (P.pair != 0u) {
+        let tiles = (P.n + WG - 1u) / WG;
+        for (var t = 0u; t < tiles; t++) {
+            load_tile(t, lid.x);
+            workgroupBarrier();
+            for (var k = 0u; k < WG; k++) {
+                let s = tile[k];
+                let d = s.xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2;
+                // r2 = 0 only for a body with itself without softening: it pulls on nothing.
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+                a += d * (s.w * inv * inv * inv);
+            }
+            workgroupBarrier();
+        }
+        a *= P.big_g;
+    }
+    if (!live) {
+        return;
+    }
+    let v = vel[i];
+    var u = v.xyz;
+    if (P.pred != 0u) {
+        u = acc[i].xyz;
+    }
+    var ai = vec3<real>(0.0, 0.0, 0.0);
+    var p: real = 0.0;
+    if (v.w != 0.0) {
+        ai = a + vec3<real>(P.gx, P.gy, P.gz) - u * (P.b * v.w);
+        p = P.b * dot(u, u);
+    }
+    acc[i] = vec4<real>(ai, 0.0);
+    var x = aux[i];
+    x.x += P.w_old * x.y + P.w_new * p;
+    x.y = p;
+    aux[i] = x;
+}
+
+// v += h1 a; x += dt v (semi-implicit Euler with h1 = dt; velocity Verlet's first kick and drift
+// with h1 = dt/2, which also stores the predicted velocity v + dt a in acc.xyz when pred = 1).
+@compute @workgroup_size(WG)
+fn kick_drift(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if (i >= P.n) {
+        return;
+    }
+    let v = vel[i];
+    if (v.w == 0.0) {
+        // Pinned: never moves.
+        return;
+    }
+    let a = acc[i].xyz;
+    if (P.pred != 0u) {
+        acc[i] = vec4<real>(v.xyz + a * P.dt, 0.0);
+    }
+    let nv = v.xyz + a * P.h1;
+    vel[i] = vec4<real>(nv, v.w);
+    let x = pos[i];
+    pos[i] = vec4<real>(x.xyz + nv * P.dt, x.w);
+}
+
+// Velocity Verlet's second kick: v += h2 a.
+@compute @workgroup_size(WG)
+fn kick(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if (i >= P.n) {
+        return;
+    }
+    let v = vel[i];
+    if (v.w == 0.0) {
+        return;
+    }
+    vel[i] = vec4<real>(v.xyz + acc[i].xyz * P.h2, v.w);
+}
+
+@compute @workgroup_size(WG)
+fn check(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if (i >= P.n) {
+        return;
+    }
+    let x = pos[i];
+    let v = vel[i];
+    if (bad(x.x) || bad(x.y) || bad(x.z) || bad(v.x) || bad(v.y) || bad(v.z)) {
+        atomicMin(&flag[0], i);
+    }
+}
+
+@compute @workgroup_size(WG)
+fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let i = gid.x;
+    let live = i < P.n;
+    var xi = vec4<real>(0.0, 0.0, 0.0, 0.0);
+    if (live) {
+        xi = pos[i];
+    }
+    var phi: real = 0.0;
+    if (P.pair != 0u) {
+        let tiles = (P.n + WG - 1u) / WG;
+        for (var t = 0u; t < tiles; t++) {
+            load_tile(t, lid.x);
+            workgroupBarrier();
+            for (var k = 0u; k < WG; k++) {
+                let j = t * WG + k;
+                let s = tile[k];
+                let d = s.xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2;
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0 && j != i);
+                phi += s.w * inv;
+            }
+            workgroupBarrier();
+        }
+    }
+    if (!live) {
+        return;
+    }
+    let v = vel[i];
+    var ug: real = 0.0;
+    if (v.w != 0.0) {
+        ug = -xi.w * dot(vec3<real>(P.gx, P.gy, P.gz), xi.xyz);
+    }
+    // Each pair counted from both ends: half each.
+    books[i] = vec4<real>(0.5 * xi.w * dot(v.xyz, v.xyz), ug, -0.5 * P.big_g * xi.w * phi, aux[i].x);
+}

@@ -1,0 +1,228 @@
+//! The device particle kernels against an f64 reference on the host. Run on any adapter; CI runs
+//! them on lavapipe with `PHYSCORE_GPU_ALLOW_CPU=1 PHYSCORE_GPU_REQUIRED=1` (no adapter is then
+//! a failure, not a skip).
+use physcore_gpu::particles::{Forces, Halt, Particles, Scheme};
+use physcore_gpu::{Gpu, Precision};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+fn gpu() -> Option<Arc<Gpu>> {
+    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
+    match Gpu::open(which) {
+        Ok(g) => Some(g),
+        Err(e) => {
+            if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") {
+                panic!("PHYSCORE_GPU_REQUIRED=1 but no adapter: {e}");
+            }
+            eprintln!("skipped: {e}");
+            None
+        }
+    }
+}
+
+/// A deterministic cloud: xorshift positions in the unit cube, small velocities.
+fn cloud(n: usize, dim: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let mut s = seed | 1;
+    let mut r = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let x: Vec<f64> = (0..n * dim).map(|_| r() - 0.5).collect();
+    let v: Vec<f64> = (0..n * dim).map(|_| 0.1 * (r() - 0.5)).collect();
+    let m: Vec<f64> = (0..n).map(|_| 0.5 + r()).collect();
+    (x, v, m)
+}
+
+/// Host f64 accelerations (the formula in particles.rs).
+fn accel(x: &[f64], v: &[f64], m: &[f64], im: &[f64], dim: usize, f: &Forces) -> Vec<f64> {
+    let n = m.len();
+    let mut a = vec![0.0; n * dim];
+    for i in 0..n {
+        if im[i] == 0.0 {
+            continue;
+        }
+        for k in 0..dim {
+            a[i * dim + k] = f.g[k] - f.drag * im[i] * v[i * dim + k];
+        }
+        if let Some((g, eps)) = f.pairwise {
+            for j in 0..n {
+                let d: Vec<f64> = (0..dim).map(|k| x[j * dim + k] - x[i * dim + k]).collect();
+                let r2: f64 = d.iter().map(|c| c * c).sum::<f64>() + eps * eps;
+                if r2 == 0.0 {
+                    continue;
+                }
+                let s = g * m[j] / (r2 * r2.sqrt());
+                for k in 0..dim {
+                    a[i * dim + k] += s * d[k];
+                }
+            }
+        }
+    }
+    a
+}
+
+fn semi_implicit_euler(x: &mut [f64], v: &mut [f64], m: &[f64], im: &[f64], dim: usize, f: &Forces, dt: f64) {
+    let a = accel(x, v, m, im, dim, f);
+    for i in 0..m.len() {
+        if im[i] == 0.0 {
+            continue;
+        }
+        for k in 0..dim {
+            v[i * dim + k] += dt * a[i * dim + k];
+            x[i * dim + k] += dt * v[i * dim + k];
+        }
+    }
+}
+
+fn max_rel(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(0.0f64, |s, x| s.max(x.abs()));
+    a.iter().zip(b).fold(0.0f64, |e, (p, q)| e.max((p - q).abs() / scale))
+}
+
+fn run(gpu: &Arc<Gpu>, p: Precision, dim: usize, scheme: Scheme, f: Forces, n: usize, steps: u64, dt: f64) -> Particles {
+    let (x, v, m) = cloud(n, dim, 7);
+    let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+    let mut ps = Particles::new(gpu.clone(), p, dim, scheme, f, &x, &v, &m, &im).unwrap();
+    ps.step(steps, dt, &AtomicBool::new(false)).unwrap();
+    ps
+}
+
+#[test]
+fn steps_agree_with_the_f64_host_path() {
+    let Some(gpu) = gpu() else { return };
+    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.05, pairwise: Some((1e-3, 0.05)) };
+    for dim in [2, 3] {
+        let n = 600; // more than two tiles, not a multiple of one
+        let (mut x, mut v, m) = cloud(n, dim, 7);
+        let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+        let ps = run(&gpu, Precision::F32, dim, Scheme::SemiImplicitEuler, f, n, 20, 1e-3);
+        for _ in 0..20 {
+            semi_implicit_euler(&mut x, &mut v, &m, &im, dim, &f, 1e-3);
+        }
+        let (gx, gv) = ps.read().unwrap();
+        let (ex, ev) = (max_rel(&gx, &x), max_rel(&gv, &v));
+        eprintln!("dim {dim}: f32 vs f64 after 20 steps: positions {ex:.2e}, velocities {ev:.2e}");
+        assert!(ex < 1e-6 && ev < 1e-5, "dim {dim}: positions {ex:e}, velocities {ev:e}");
+        if gpu.adapter().f64 {
+            let ps = run(&gpu, Precision::F64, dim, Scheme::SemiImplicitEuler, f, n, 20, 1e-3);
+            let (gx, gv) = ps.read().unwrap();
+            let (ex, ev) = (max_rel(&gx, &x), max_rel(&gv, &v));
+            eprintln!("dim {dim}: f64 vs f64 after 20 steps: positions {ex:.2e}, velocities {ev:.2e}");
+            assert!(ex < 1e-13 && ev < 1e-12, "dim {dim}: positions {ex:e}, velocities {ev:e}");
+        }
+    }
+}
+
+#[test]
+fn runs_repeat_bit_for_bit() {
+    let Some(gpu) = gpu() else { return };
+    let f = Forces { g: [0.0, 0.0, -1.0], drag: 0.1, pairwise: Some((1e-2, 0.01)) };
+    let a = run(&gpu, Precision::F32, 3, Scheme::VelocityVerlet, f, 700, 50, 1e-3).read().unwrap();
+    let b = run(&gpu, Precision::F32, 3, Scheme::VelocityVerlet, f, 700, 50, 1e-3).read().unwrap();
+    assert_eq!(a, b);
+    // And the same steps taken in other submissions (1 + 49, 25 + 25) give the same bits.
+    let (x, v, m) = cloud(700, 3, 7);
+    let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+    let mut c = Particles::new(gpu.clone(), Precision::F32, 3, Scheme::VelocityVerlet, f, &x, &v, &m, &im).unwrap();
+    let no = AtomicBool::new(false);
+    c.step(1, 1e-3, &no).unwrap();
+    c.step(24, 1e-3, &no).unwrap();
+    c.step(25, 1e-3, &no).unwrap();
+    assert_eq!(c.read().unwrap(), a);
+}
+
+/// Two equal bodies on a circular orbit: velocity Verlet keeps the energy to O(dt²) and the
+/// books balance; the orbit closes after one period.
+#[test]
+fn a_kepler_orbit_keeps_its_energy() {
+    let Some(gpu) = gpu() else { return };
+    let (g, m, r) = (1.0, 0.5, 0.5); // separation 2r = 1, total mass 1: period 2π
+    let w = (g * 2.0 * m / 1.0f64).sqrt() / 1.0; // ω² = G M / a³ with a = 1
+    let vt = w * r;
+    let x = [-r, 0.0, 0.0, r, 0.0, 0.0];
+    let v = [0.0, -vt, 0.0, 0.0, vt, 0.0];
+    let f = Forces { pairwise: Some((g, 0.0)), ..Default::default() };
+    for p in [Precision::F32, Precision::F64] {
+        if p == Precision::F64 && !gpu.adapter().f64 {
+            continue;
+        }
+        let mut ps = Particles::new(gpu.clone(), p, 3, Scheme::VelocityVerlet, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m]).unwrap();
+        let e0 = ps.books().unwrap();
+        let exact = -g * m * m / 1.0 + 2.0 * 0.5 * m * vt * vt;
+        assert!((e0.kinetic + e0.pairwise - exact).abs() < 1e-6, "{e0:?} vs {exact}");
+        let steps = 2000u64;
+        let dt = 2.0 * std::f64::consts::PI / steps as f64;
+        let mut worst: f64 = 0.0;
+        for _ in 0..20 {
+            ps.step(steps / 20, dt, &AtomicBool::new(false)).unwrap();
+            let e = ps.books().unwrap();
+            worst = worst.max(((e.kinetic + e.pairwise) - exact).abs() / exact.abs());
+        }
+        let (xe, _) = ps.read().unwrap();
+        let closure = ((xe[3] - r).powi(2) + xe[4].powi(2)).sqrt();
+        eprintln!("{}: energy error {worst:.2e} over one period, orbit closes to {closure:.2e}", p.name());
+        // Verlet at 2000 steps per orbit: energy O((ω dt)²) ~ 1e-5 and f32 rounding ~1e-6 a step.
+        let (de, dc) = if p == Precision::F32 { (5e-5, 5e-4) } else { (1e-5, 1e-4) };
+        assert!(worst < de && closure < dc, "{}: energy {worst:e}, closure {closure:e}", p.name());
+    }
+}
+
+#[test]
+fn drag_books_balance_and_pinned_particles_stay() {
+    let Some(gpu) = gpu() else { return };
+    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.3, pairwise: None };
+    for scheme in [Scheme::SemiImplicitEuler, Scheme::VelocityVerlet] {
+        let (x, v, m) = cloud(300, 2, 3);
+        let mut im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+        im[5] = 0.0;
+        let mut v = v;
+        v[10] = 0.0;
+        v[11] = 0.0;
+        let mut ps = Particles::new(gpu.clone(), Precision::F32, 2, scheme, f, &x, &v, &m, &im).unwrap();
+        let b0 = ps.books().unwrap();
+        ps.step(2000, 1e-3, &AtomicBool::new(false)).unwrap();
+        let b = ps.books().unwrap();
+        let (e0, e) = (b0.kinetic + b0.uniform, b.kinetic + b.uniform + b.dissipated);
+        let lost = b.dissipated;
+        eprintln!("{scheme:?}: dissipated {lost:.4} J, books off by {:.2e} of it", (e - e0).abs() / lost);
+        assert!(lost > 1.0);
+        // First order (semi-implicit Euler) misses O(dt) of the work; Verlet O(dt²).
+        let tol = if scheme == Scheme::SemiImplicitEuler { 5e-3 } else { 1e-5 };
+        assert!((e - e0).abs() < tol * lost, "{scheme:?}: {e0} vs {e}");
+        let (xe, _) = ps.read().unwrap();
+        assert_eq!([xe[10], xe[11]], [(x[10] as f32) as f64, (x[11] as f32) as f64]);
+    }
+}
+
+#[test]
+fn stop_divergence_and_rollback() {
+    let Some(gpu) = gpu() else { return };
+    let f = Forces { g: [0.0, -9.81, 0.0], ..Default::default() };
+    let (x, v, m) = cloud(100, 3, 1);
+    let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+    let mut ps = Particles::new(gpu.clone(), Precision::F32, 3, Scheme::SemiImplicitEuler, f, &x, &v, &m, &im).unwrap();
+    // A raised flag stops before any step.
+    assert_eq!(ps.step(10, 1e-3, &AtomicBool::new(true)), Err((0, Halt::Stopped)));
+    ps.snapshot().unwrap();
+    let before = ps.read().unwrap();
+    // A step of 1e30 s overflows f32: found, named, and the snapshot brings the state back.
+    match ps.step(3, 1e30, &AtomicBool::new(false)) {
+        Err((0, Halt::Diverged { particle })) => assert!(particle < 100),
+        other => panic!("expected a divergence, got {other:?}"),
+    }
+    ps.restore().unwrap();
+    assert_eq!(ps.read().unwrap(), before);
+}
+
+#[test]
+fn what_the_adapter_lacks_is_refused_by_name() {
+    let Some(gpu) = gpu() else { return };
+    if !gpu.adapter().f64 {
+        let e = Particles::new(gpu.clone(), Precision::F64, 2, Scheme::SemiImplicitEuler, Forces::default(), &[0.0; 2], &[0.0; 2], &[1.0], &[1.0]);
+        assert!(format!("{}", e.err().unwrap()).contains("f64"));
+    }
+    assert!(Gpu::open("gpu:no-such-adapter").unwrap_err().to_string().contains("no-such-adapter"));
+    assert!(Gpu::open("tpu").unwrap_err().to_string().contains("\"gpu\""));
+}
