@@ -10,6 +10,7 @@ from . import potentials as _potentials
 from . import terms as _terms
 from ._errors import (
     ContactStepWarning,
+    DeviceError,
     InvalidInputError,
     InvalidTypeError,
     OutOfMemoryError,
@@ -83,6 +84,7 @@ __all__ = [
     "SimulationDiverged",
     "SceneBusyError",
     "OutOfMemoryError",
+    "DeviceError",
     "ThreadPoolError",
     "ThreadPoolWarning",
     "ContactStepWarning",

@@ -104,6 +104,11 @@ class ThreadPoolError(PhyscoreError, RuntimeError):
     on threads, ``ulimit -u``). Ask for fewer, or pass ``threads=None``."""
 
 
+class DeviceError(PhyscoreError, RuntimeError):
+    """The GPU failed while stepping or reading back (a lost device, a driver error). The scene's
+    state is as of the last step that completed."""
+
+
 class ThreadPoolWarning(RuntimeWarning):
     """A scene built with ``threads=None`` could not start its threads and runs on the calling
     thread alone: same results, slower, and Ctrl-C takes effect when a call ends (the call is

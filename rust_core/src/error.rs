@@ -55,6 +55,11 @@ pub enum Error {
         size = human(*bytes)
     )]
     OutOfMemory { what: String, bytes: u64, of: String },
+
+    /// The GPU failed (a lost device, a driver error): the state is as of the last step that
+    /// completed.
+    #[error("the GPU device failed: {msg}")]
+    Device { msg: String },
 }
 
 /// The remedies for a divergence that exist for the scene's terms and integrator, so that the

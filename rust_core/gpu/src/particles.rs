@@ -398,6 +398,24 @@ impl Particles {
         Ok(b)
     }
 
+    /// The raw device rows (position·mass, velocity·1/mass, acceleration, drag books; 4n values
+    /// each, as f64) and whether the accelerations are current: what a restart needs.
+    pub fn save_raw(&self) -> Result<([Vec<f64>; 4], bool)> {
+        let l = &self.live;
+        Ok(([self.read_reals(&l.pos)?, self.read_reals(&l.vel)?, self.read_reals(&l.acc)?, self.read_reals(&l.aux)?], self.acc_valid))
+    }
+
+    /// Loads what `save_raw` gave (rounded to the device's precision).
+    pub fn load_raw(&mut self, raw: &[Vec<f64>; 4], acc_valid: bool) -> Result<()> {
+        assert!(raw.iter().all(|a| a.len() == 4 * self.n), "ragged raw arrays");
+        let l = &self.live;
+        for (b, a) in [&l.pos, &l.vel, &l.acc, &l.aux].into_iter().zip(raw) {
+            self.upload(b, a);
+        }
+        self.acc_valid = acc_valid;
+        self.gpu.wait()
+    }
+
     /// Keeps a copy of the state on the device (the world's checkpoint).
     pub fn snapshot(&mut self) -> Result<()> {
         if self.saved.is_none() {

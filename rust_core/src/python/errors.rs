@@ -15,6 +15,7 @@ pub(super) fn to_py(py: Python<'_>, e: Error) -> PyErr {
             }
             Error::InvalidType { .. } => PyErr::from_value(errors.getattr("InvalidTypeError")?.call1((msg.clone(),))?),
             Error::Interrupted { .. } => pyo3::exceptions::PyKeyboardInterrupt::new_err(msg.clone()),
+            Error::Device { .. } => PyErr::from_value(errors.getattr("DeviceError")?.call1((msg.clone(),))?),
             Error::Threads { .. } => PyErr::from_value(errors.getattr("ThreadPoolError")?.call1((msg.clone(),))?),
             Error::OutOfMemory { bytes, .. } => {
                 PyErr::from_value(errors.getattr("OutOfMemoryError")?.call1((msg.clone(), bytes))?)

@@ -12,6 +12,8 @@
 //!
 //! Couplings between systems ([`Coupling`]) run after all systems have stepped.
 pub mod bodies;
+#[cfg(feature = "gpu")]
+pub mod device;
 pub mod flows;
 pub mod ode;
 pub mod particles;

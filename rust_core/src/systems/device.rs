@@ -1,0 +1,415 @@
+//! The device seam's first system: particles resident on a GPU (`physcore_gpu::particles`),
+//! built from the same part records as the CPU's `ParticleSystem` (registry keys and `Params`)
+//! and stepped, checkpointed and booked by the world as any system (docs/guide/architecture.md,
+//! "How to add a backend").
+//!
+//! What it holds: particles (positions, velocities, masses, pinned) under the terms `gravity`
+//! (summed), `drag` (summed) and one `pairwise_gravity`, with `semi_implicit_euler` or `verlet`.
+//! Any other term kind or integrator is refused by name: nothing runs silently on the CPU.
+use super::{Arrays, EnergyReport, Halt, Snapshot, System};
+use crate::error::{invalid, Error, Failure, Result};
+use crate::terms::registry::Params;
+use crate::vector::Real;
+use physcore_gpu::particles::{self as dp, Forces, Particles, Scheme};
+use physcore_gpu::{Gpu, GpuError, Precision};
+use std::sync::atomic::AtomicBool;
+use std::sync::Mutex;
+
+impl From<GpuError> for Error {
+    fn from(e: GpuError) -> Self {
+        match e {
+            GpuError::NoAdapter(m) => invalid("device", m),
+            GpuError::Unsupported(m) => invalid("device", m),
+            GpuError::OutOfMemory { what, bytes } => {
+                Error::OutOfMemory { what: "device".into(), bytes, of: format!("the GPU buffer of {what}") }
+            }
+            GpuError::Device(m) => Error::Device { msg: m },
+        }
+    }
+}
+
+/// Names of the terms the books are kept under.
+#[derive(Clone, Debug, Default)]
+struct Names {
+    gravity: Vec<String>,
+    drag: Vec<String>,
+    pairwise: Option<String>,
+}
+
+/// Particles on a GPU: a `System` whose state lives on the device.
+pub struct DeviceParticles {
+    name: String,
+    dim: usize,
+    names: Names,
+    p: Mutex<Particles>,
+}
+
+/// The integrators the device has, by the core's names.
+pub fn scheme_of(integrator: &str) -> Result<Scheme> {
+    match integrator {
+        "semi_implicit_euler" => Ok(Scheme::SemiImplicitEuler),
+        "verlet" => Ok(Scheme::VelocityVerlet),
+        other => Err(invalid(
+            "integrator",
+            format!("the GPU path has {other:?} not yet (it has \"semi_implicit_euler\" and \"verlet\")"),
+        )),
+    }
+}
+
+/// The precision by name (`"f32"`, `"f64"`).
+pub fn precision_of(name: &str) -> Result<Precision> {
+    match name {
+        "f32" => Ok(Precision::F32),
+        "f64" => Ok(Precision::F64),
+        other => Err(invalid("precision", format!("must be \"f32\" or \"f64\", got {other:?}"))),
+    }
+}
+
+impl DeviceParticles {
+    /// Particles on the device `which` (`"gpu"`, `"gpu:NAME"`: see `physcore_gpu::Gpu::open`).
+    /// `x`, `v`: flat (n·dim; pinned particles get zero velocity); `mass` > 0; `pinned`; `terms`: (kind, name, params) records.
+    ///
+    /// Errors: `InvalidInput` naming `device`, `precision`, `integrator` or the term that the
+    /// device cannot run; `OutOfMemory` for device buffers.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        which: &str,
+        precision: &str,
+        dim: usize,
+        integrator: &str,
+        x: &[Real],
+        v: &[Real],
+        mass: &[Real],
+        pinned: &[bool],
+        terms: &[(String, String, Params)],
+    ) -> Result<Self> {
+        if dim != 2 && dim != 3 {
+            return Err(invalid("dim", format!("must be 2 or 3, got {dim}")));
+        }
+        let n = mass.len();
+        if x.len() != n * dim || v.len() != n * dim || pinned.len() != n {
+            return Err(invalid("positions", "positions, velocities, masses and pinned must describe the same particles"));
+        }
+        if let Some(i) = mass.iter().position(|m| !(m.is_finite() && *m > 0.0)) {
+            return Err(invalid("masses", format!("entry {i} must be finite and > 0, got {}", mass[i])));
+        }
+        if let Some(i) = x.iter().chain(v).position(|c| !c.is_finite()) {
+            return Err(invalid("positions", format!("value {i} of the positions and velocities is not finite")));
+        }
+        let (scheme, precision) = (scheme_of(integrator)?, precision_of(precision)?);
+        let (forces, names) = forces_of(dim, terms)?;
+        let gpu = Gpu::open(which)?;
+        let im: Vec<Real> = mass.iter().zip(pinned).map(|(m, &p)| if p { 0.0 } else { 1.0 / m }).collect();
+        // Pinned particles get zero velocity, as on the CPU (`ParticleSystem::add_particles`).
+        let v: Vec<Real> = v.iter().enumerate().map(|(k, &c)| if pinned[k / dim] { 0.0 } else { c }).collect();
+        let p = Particles::new(gpu, precision, dim, scheme, forces, x, &v, mass, &im)?;
+        // Beside the world's (empty) CPU particle system, which is "particles".
+        Ok(Self { name: "device particles".into(), dim, names, p: Mutex::new(p) })
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, Particles> {
+        self.p.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Positions and velocities, flat (n·dim), read back.
+    pub fn read(&self) -> Result<(Vec<Real>, Vec<Real>)> {
+        Ok(self.lock().read()?)
+    }
+
+    /// The adapter it runs on and its precision, e.g. "NVIDIA H100 (vulkan, f32)".
+    pub fn describe(&self) -> String {
+        let p = self.lock();
+        let a = p.gpu().adapter();
+        format!("{} ({}, {})", a.name, a.backend, p.precision().name())
+    }
+}
+
+/// The device's forces from term records, refusing kinds it has no kernel for.
+fn forces_of(dim: usize, terms: &[(String, String, Params)]) -> Result<(Forces, Names)> {
+    let mut f = Forces::default();
+    let mut names = Names::default();
+    for (kind, name, p) in terms {
+        match kind.as_str() {
+            "gravity" => {
+                let g = if dim == 2 {
+                    let g = p.vector::<glam::DVec2>("g")?;
+                    [g.x, g.y, 0.0]
+                } else {
+                    p.vector::<glam::DVec3>("g")?.to_array()
+                };
+                for (k, c) in g.iter().enumerate() {
+                    f.g[k] += c;
+                }
+                names.gravity.push(name.clone());
+            }
+            "drag" => {
+                let b = p.number("coefficient")?;
+                if b < 0.0 {
+                    return Err(invalid("coefficient", format!("{b} must be finite and >= 0")));
+                }
+                f.drag += b;
+                names.drag.push(name.clone());
+            }
+            "pairwise_gravity" => {
+                if names.pairwise.is_some() {
+                    return Err(invalid(name, "the GPU path holds one pairwise_gravity term"));
+                }
+                let (g, eps) = (p.number("G")?, p.number("softening")?);
+                if g <= 0.0 {
+                    return Err(invalid("G", format!("{g} must be finite and > 0")));
+                }
+                if eps < 0.0 {
+                    return Err(invalid("softening", format!("{eps} must be finite and >= 0")));
+                }
+                f.pairwise = Some((g, eps));
+                names.pairwise = Some(name.clone());
+            }
+            other => {
+                return Err(invalid(
+                    name,
+                    format!(
+                        "the GPU path has no kernel for {other:?} yet (it has gravity, drag and pairwise_gravity); \
+                         run this scene on the CPU (device=\"cpu\")"
+                    ),
+                ))
+            }
+        }
+    }
+    Ok((f, names))
+}
+
+/// The device's own checkpoint is kept on the device; the world's snapshot only marks it.
+struct Mark;
+
+impl System for DeviceParticles {
+    fn name(&self) -> &str {
+        &self.name
+    }
+    fn is_empty(&self) -> bool {
+        self.lock().is_empty()
+    }
+    fn size(&self) -> usize {
+        self.lock().len()
+    }
+    fn step(&mut self, dt: Real, stop: &AtomicBool) -> std::result::Result<(), Halt> {
+        self.steps(1, dt, stop).map_err(|(_, h)| h)
+    }
+    fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
+        let mut p = self.lock();
+        p.step(n, dt, stop).map(|_| ()).map_err(|(done, h)| match h {
+            dp::Halt::Stopped => (done, Halt::Stopped),
+            dp::Halt::Diverged { particle } => (done, Halt::Diverged { index: particle, quantity: Failure::Position }),
+            // A device failure reads as a divergence of particle 0: the world rolls back to its
+            // checkpoint (kept on the device, or lost with it: see `restore`).
+            dp::Halt::Failed(_) => (done, Halt::Diverged { index: 0, quantity: Failure::Position }),
+        })
+    }
+    fn auto_dt(&self) -> Option<Real> {
+        None
+    }
+    fn suggest_dt(&self) -> Option<Real> {
+        None
+    }
+    fn energy(&self) -> EnergyReport {
+        // A device that cannot be read gives NaN books (the world's checks see them).
+        let b = self.lock().books().unwrap_or(dp::Books {
+            kinetic: Real::NAN,
+            uniform: Real::NAN,
+            pairwise: Real::NAN,
+            dissipated: Real::NAN,
+        });
+        let mut r = EnergyReport { kinetic: b.kinetic, ..Default::default() };
+        // The summed uniform field's potential is booked under the first gravity term's name.
+        if let Some(g) = self.names.gravity.first() {
+            r.potential.push((g.clone(), b.uniform));
+        }
+        if let Some(p) = &self.names.pairwise {
+            r.potential.push((p.clone(), b.pairwise));
+        }
+        if let Some(d) = self.names.drag.first() {
+            r.dissipated.push((d.clone(), b.dissipated));
+        }
+        r
+    }
+    fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let (x, v) = self.read()?;
+        let d = self.dim;
+        names
+            .iter()
+            .map(|name| {
+                let (a, k) = match *name {
+                    "x" => (&x, 0),
+                    "y" => (&x, 1),
+                    "z" if d == 3 => (&x, 2),
+                    "vx" => (&v, 0),
+                    "vy" => (&v, 1),
+                    "vz" if d == 3 => (&v, 2),
+                    _ => return Ok(vec![0.0; x.len() / d]),
+                };
+                Ok(a.chunks_exact(d).map(|c| c[k]).collect())
+            })
+            .collect()
+    }
+    fn snapshot(&self) -> Result<Snapshot> {
+        self.lock().snapshot()?;
+        Ok(Box::new(Mark))
+    }
+    fn restore(&mut self, _snapshot: Snapshot) {
+        // A lost device cannot be restored: its next read reports the failure.
+        let _ = self.lock().restore();
+    }
+    fn save(&self) -> Arrays {
+        // Raw device rows (vec4: position and mass, velocity and 1/mass, acceleration, drag
+        // books) and whether the accelerations are current: a restart repeats bit for bit.
+        match self.lock().save_raw() {
+            Ok(([pos, vel, acc, aux], valid)) => vec![
+                ("pos".into(), pos),
+                ("vel".into(), vel),
+                ("acc".into(), acc),
+                ("aux".into(), aux),
+                ("acc_valid".into(), vec![valid as u8 as Real]),
+            ],
+            Err(_) => Vec::new(),
+        }
+    }
+    fn load(&mut self, arrays: &Arrays) -> Result<()> {
+        let n = self.lock().len();
+        let mut raw: [Vec<Real>; 4] = Default::default();
+        for (k, name) in ["pos", "vel", "acc", "aux"].iter().enumerate() {
+            let a = super::array(arrays, name, Some(4 * n))?;
+            if let Some(i) = a.iter().position(|c| !c.is_finite()) {
+                return Err(invalid(name, format!("entry {i} is not finite")));
+            }
+            raw[k] = a.to_vec();
+        }
+        if let Some(i) = (0..n).find(|&i| !(raw[0][4 * i + 3] > 0.0) || raw[1][4 * i + 3] < 0.0) {
+            return Err(invalid("pos", format!("particle {i}: mass must be > 0 and 1/mass >= 0")));
+        }
+        let valid = super::array(arrays, "acc_valid", Some(1))?[0];
+        if valid != 0.0 && valid != 1.0 {
+            return Err(invalid("acc_valid", format!("must be 0 or 1, got {valid}")));
+        }
+        Ok(self.lock().load_raw(&raw, valid == 1.0)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The device system inside a world against the CPU path (skipped where no adapter is found,
+    //! unless PHYSCORE_GPU_REQUIRED=1; CI runs them on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
+    use super::*;
+    use crate::systems::particles::ParticleSystem;
+    use crate::terms::registry::{self, Context, Value};
+    use crate::world::World;
+    use glam::DVec3;
+
+    fn which() -> Option<&'static str> {
+        let w = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
+        match Gpu::open(w) {
+            Ok(_) => Some(w),
+            Err(e) if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") => panic!("no adapter: {e}"),
+            Err(e) => {
+                eprintln!("skipped: {e}");
+                None
+            }
+        }
+    }
+
+    fn terms() -> Vec<(String, String, Params)> {
+        vec![
+            ("gravity".into(), "gravity".into(), Params::new().with("g", Value::Floats(vec![0.0, 0.0, -9.81]))),
+            ("drag".into(), "drag".into(), Params::new().with("coefficient", Value::Number(0.2))),
+            (
+                "pairwise_gravity".into(),
+                "nbody".into(),
+                Params::new().with("G", Value::Number(1e-3)).with("softening", Value::Number(0.05)),
+            ),
+        ]
+    }
+
+    fn cloud(n: usize) -> (Vec<Real>, Vec<Real>, Vec<Real>, Vec<bool>) {
+        let x = (0..3 * n).map(|i| ((i * 7919) % 1000) as Real / 1000.0 - 0.5).collect();
+        let v = (0..3 * n).map(|i| ((i * 104729) % 1000) as Real / 1e4 - 0.05).collect();
+        let m = (0..n).map(|i| 0.5 + (i % 7) as Real / 7.0).collect();
+        let p = (0..n).map(|i| i % 50 == 0).collect();
+        (x, v, m, p)
+    }
+
+    #[test]
+    fn a_device_world_steps_as_the_cpu_world() {
+        let Some(w) = which() else { return };
+        let n = 400;
+        let (x, v, m, pinned) = cloud(n);
+        let mut cpu = ParticleSystem::<DVec3>::new("verlet").unwrap();
+        let xs: Vec<DVec3> = x.chunks(3).map(DVec3::from_slice).collect();
+        let vs: Vec<DVec3> = v.chunks(3).map(DVec3::from_slice).collect();
+        cpu.add_particles(xs, vs, m.clone(), pinned.clone()).unwrap();
+        let ctx = Context { n_particles: n };
+        for (kind, name, p) in terms() {
+            cpu.add_term(registry::lookup(&kind).unwrap().build::<DVec3>(name, p, &ctx).unwrap()).unwrap();
+        }
+        let mut cw = World::new(cpu, 1e-3, Some(1)).unwrap();
+        let e0 = cw.energy();
+        cw.step(100).unwrap();
+        let (cx, e1) = (cw.particles().state().x.clone(), cw.energy());
+        let drift = |a: &EnergyReport, b: &EnergyReport| (b.total() - a.total()).abs();
+        for precision in ["f32", "f64"] {
+            let d = match DeviceParticles::new(w, precision, 3, "verlet", &x, &v, &m, &pinned, &terms()) {
+                Ok(d) => d,
+                Err(e) if precision == "f64" => {
+                    eprintln!("f64 skipped: {e}");
+                    continue;
+                }
+                Err(e) => panic!("{e}"),
+            };
+            let mut dw = World::new(ParticleSystem::<DVec3>::new("verlet").unwrap(), 1e-3, Some(1)).unwrap();
+            dw.add_system(Box::new(d)).unwrap();
+            let d0 = dw.energy();
+            dw.step(100).unwrap();
+            let d1 = dw.energy();
+            let f = dw.other("device particles").unwrap().fields(&["x", "y", "z"]).unwrap();
+            let err = (0..n).map(|i| (DVec3::new(f[0][i], f[1][i], f[2][i]) - cx[i]).length()).fold(0.0, Real::max);
+            let dev = drift(&d0, &d1);
+            eprintln!(
+                "{precision}: device vs CPU after 100 verlet steps: positions {err:.2e} m; books' drift: CPU {:.2e} J, device {dev:.2e} J (of {:.3} J)",
+                drift(&e0, &e1),
+                e0.total()
+            );
+            let (tol_x, tol_e) = if precision == "f32" { (1e-5, 1e-5) } else { (1e-12, 1e-9) };
+            assert!(err < tol_x, "{precision}: {err}");
+            // The books keep the CPU's names, and the device's total drifts no more than f32 allows.
+            let names = |e: &EnergyReport| {
+                (e.potential.iter().map(|p| p.0.clone()).collect::<Vec<_>>(), e.dissipated.iter().map(|p| p.0.clone()).collect::<Vec<_>>())
+            };
+            assert_eq!(names(&e1), names(&d1));
+            assert!((d1.total() - e1.total()).abs() < tol_e * e0.total().abs().max(1.0), "{precision}: {d1:?} vs {e1:?}");
+            assert!(dev < drift(&e0, &e1) + tol_e * e0.total().abs().max(1.0), "{precision}: device drift {dev}");
+        }
+    }
+
+    #[test]
+    fn a_restart_repeats_bit_for_bit_and_unknown_parts_are_refused() {
+        let Some(w) = which() else { return };
+        let (x, v, m, pinned) = cloud(300);
+        let mut a = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms()).unwrap();
+        let no = AtomicBool::new(false);
+        a.steps(10, 1e-3, &no).unwrap();
+        let saved = a.save();
+        a.steps(10, 1e-3, &no).unwrap();
+        let mut b = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms()).unwrap();
+        b.load(&saved).unwrap();
+        b.steps(10, 1e-3, &no).unwrap();
+        assert_eq!(a.read().unwrap(), b.read().unwrap());
+        // Rollback through the world's snapshot.
+        let snap = a.snapshot().unwrap();
+        let before = a.read().unwrap();
+        a.steps(5, 1e-3, &no).unwrap();
+        a.restore(snap);
+        assert_eq!(a.read().unwrap(), before);
+        let springs = vec![("springs".to_string(), "cloth".to_string(), Params::new())];
+        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &springs).err().unwrap();
+        assert!(e.to_string().starts_with("cloth: the GPU path has no kernel for \"springs\""), "{e}");
+        let e = DeviceParticles::new(w, "f32", 3, "rk4", &x, &v, &m, &pinned, &terms()).err().unwrap();
+        assert!(e.to_string().starts_with("integrator:"), "{e}");
+    }
+}
