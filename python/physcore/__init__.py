@@ -23,7 +23,7 @@ from ._errors import (
     ThreadPoolWarning,
 )
 from ._integrators import RK4, XPBD, Boris, Dopri5, Euler, ImplicitEuler, SemiImplicitEuler, Verlet, Yoshida4
-from ._system import info, set_simd_level, simd_level, simd_levels
+from ._system import gpu_adapters, info, set_simd_level, simd_level, simd_levels
 from .batch import Batch
 from .bodies import Bodies, Joints, Pins
 from .contacts import Contacts
@@ -95,6 +95,7 @@ __all__ = [
     "simd_levels",
     "set_simd_level",
     "info",
+    "gpu_adapters",
     "__version__",
 ]
 

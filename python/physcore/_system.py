@@ -60,7 +60,18 @@ def info() -> dict[str, Any]:
         "simd_level": level,
         "simd_levels": simd_levels(),
         "threads": _core.default_threads(),
+        "gpu_adapters": gpu_adapters(),
     }
+
+
+def gpu_adapters() -> list[dict[str, Any]]:
+    """The GPU adapters this machine has (Vulkan, Metal, DX12; CPU ones such as lavapipe
+    included, with ``kind="cpu"``): a list of dicts with ``name``, ``backend``, ``kind``
+    (``"discrete"``, ``"integrated"``, ``"virtual"``, ``"cpu"``, ``"other"``), ``driver``,
+    ``f64`` (bool: ``precision="f64"`` possible) and the largest ``max_storage_binding`` and
+    ``max_buffer`` in bytes. Empty where there is no GPU driver. A scene picks one with
+    ``Scene(device="gpu")`` or ``device="gpu:NAME"``."""
+    return list(_core.gpu_adapters())
 
 
 def usable_cpus() -> int:

@@ -279,6 +279,14 @@ def _cmd_info() -> int:
     print(f"cpu: {d['cpu']}")
     print(f"simd level: {d['simd_level']} (available: {', '.join(d['simd_levels'])}; set PHYSCORE_SIMD to force one)")
     print(f"threads: {d['threads']}")
+    gpus = d["gpu_adapters"]
+    if not gpus:
+        print("gpu: no adapter (no Vulkan, Metal or DX12 driver found); Scene(device='gpu') is refused")
+    for a in gpus:
+        f64 = "f64" if a["f64"] else "f32 only"
+        note = "  (a CPU implementation: taken only as device='gpu:...' by name)" if a["kind"] == "cpu" else ""
+        print(f"gpu: {a['name']} ({a['kind']}, {a['backend']}, {f64}, "
+              f"storage binding up to {a['max_storage_binding'] / 2**20:.0f} MiB){note}")
     return 1 if d["simd_level"].startswith("invalid") else 0
 
 
@@ -702,10 +710,10 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
 
     sub.add_parser("scenes", help="list the ready-made scenes and their parameters",
                    description="List the ready-made scenes, their one-line descriptions and parameters.")
-    sub.add_parser("info", help="show the version, CPU, SIMD level and threads",
+    sub.add_parser("info", help="show the version, CPU, SIMD level, threads and GPU adapters",
                    description="Show physcore's version and build, the CPU, the SIMD level the kernels run at "
                    "(set PHYSCORE_SIMD=scalar|avx2|avx512|neon|auto to force one) and the levels this CPU has, "
-                   "and the default thread count.")
+                   "the default thread count, and the GPU adapters (Scene(device='gpu'|'gpu:NAME')).")
 
     r = sub.add_parser(
         "render",

@@ -188,6 +188,18 @@ def _check_tol(value: object, arg: str) -> float:
 _PRECISIONS = ("f64", "f32")
 
 
+def _check_device(value: object) -> str:
+    if not isinstance(value, str):
+        raise InvalidTypeError(f"device: expected 'cpu', 'gpu' or 'gpu:NAME', got {type(value).__name__}")
+    if value != "cpu" and value != "gpu" and not (value.startswith("gpu:") and len(value) > 4):
+        raise InvalidInputError(f"device: must be 'cpu', 'gpu' or 'gpu:NAME' (an adapter; physcore info lists them), got {value!r}")
+    return value
+
+
+#: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
+_GPU_TERMS = ("gravity", "drag", "pairwise_gravity")
+
+
 def _check_precision(value: object) -> str:
     if not isinstance(value, str):
         raise InvalidTypeError(f"precision: expected 'f64' or 'f32', got {type(value).__name__}")
@@ -307,6 +319,20 @@ class Scene:
         each step (the arithmetic within a step stays float64), as a float32 state array would
         hold them; ``positions``/``velocities`` are then returned as float32. It shows what
         single precision costs in accuracy (see the work-precision table in docs/guide/integrators.md).
+        With a GPU ``device``: the precision of the device's state and arithmetic, ``"f32"`` by
+        default; ``"f64"`` where the adapter has it (refused, naming the adapter, where not).
+    device : {"cpu", "gpu", "gpu:NAME"}
+        Where the particles are stepped. ``"cpu"`` (default): the reference path, with every part.
+        ``"gpu"``: the best GPU adapter (discrete, then integrated; ``physcore info`` lists them);
+        ``"gpu:NAME"``: the first adapter whose name, backend or kind contains NAME
+        (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
+        (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag` and
+        :class:`PairwiseGravity`, stepped by ``"semi_implicit_euler"`` or ``"verlet"``; the parts
+        move to the device at the first step, and a part it has no kernel for is refused then,
+        by name (never run silently on the CPU). After that step the scene steps, reads
+        positions, velocities and the energy books, and renders; adding parts, setting the
+        state, :meth:`state`, :meth:`save` and pickling are refused (not yet on the GPU path).
+        docs/guide/gpu.md gives each kernel's measured agreement with the CPU path.
     threads : int or None
         Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
         ``None`` (default) uses all cores (or ``RAYON_NUM_THREADS``). Results are bit-identical
@@ -352,11 +378,13 @@ class Scene:
         atol: float = Dopri5.atol,
         cg_tol: float = ImplicitEuler.cg_tol,
         cg_max_iter: int = ImplicitEuler.cg_max_iter,
-        precision: str = "f64",
+        precision: str | None = None,
         threads: int | None = None,
         xpbd_substeps: int = XPBD.substeps,
         xpbd_iterations: int = XPBD.iterations,
+        device: str = "cpu",
     ) -> None:
+        device = _check_device(device)
         if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)):
             raise InvalidTypeError(f"dim: expected 2 or 3, got {type(dim).__name__}")
         if dim not in (2, 3):
@@ -374,7 +402,7 @@ class Scene:
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
         integrator = name
-        precision = _check_precision(precision)
+        precision = _check_precision(("f64" if device == "cpu" else "f32") if precision is None else precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
         sim = _core.Simulation(int(dim), integrator, dt, DEFAULT_THREADS.get() if threads is None else threads)
@@ -390,7 +418,10 @@ class Scene:
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.set_substeps(xpbd_substeps, xpbd_iterations)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
-        sim.single = precision == "f32"
+        # The CPU's f32 mode rounds the stored state; a device computes in its own precision.
+        sim.single = precision == "f32" and device == "cpu"
+        self._device = device
+        self._device_precision = precision
         # One thread at a time, and the books' reference (physcore.session).
         self._session = Session(sim)
         self._threads = threads
@@ -660,10 +691,37 @@ class Scene:
         n = _check_int(n, "n", 0)
         if n > _MAX_STEPS - self.step_count:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
+        self._to_device()
         if self._e0 is None:
             self._set_reference_energy()
         self.warn_contact_step()
         self._exclusive(lambda sim: sim.step(n))
+
+    @property
+    def device(self) -> str:
+        """Where the particles are stepped: ``"cpu"``, ``"gpu"`` or ``"gpu:NAME"`` (see the
+        constructor)."""
+        return self._device
+
+    def _to_device(self) -> None:
+        """Moves the particles and terms to the GPU before the first step of a GPU scene,
+        refusing by name any part the GPU path has no kernel for (nothing changes then)."""
+        if self._device == "cpu" or self._sim.on_device:
+            return
+        for part in self._parts:
+            if part.section != "terms" or part.part_kind not in _GPU_TERMS:
+                what = getattr(part, "name", None) or type(part).__name__
+                raise InvalidInputError(
+                    f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
+                    f"(it has {', '.join(_GPU_TERMS)}); run this scene with device='cpu'"
+                )
+        self._exclusive(lambda sim: sim.to_device(self._device, self._device_precision))
+
+    def _cpu_only(self, what: str) -> None:
+        """Refuses ``what`` once the particles live on a GPU."""
+        if self._device != "cpu" and self._sim.on_device:
+            raise InvalidInputError(f"{what}: not yet on the GPU path (device={self._device!r}); the scene steps, "
+                                    "reads positions, velocities and energies, and renders")
 
     def warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
@@ -738,6 +796,7 @@ class Scene:
                 )
             if fixed > _MAX_STEPS - self.step_count:
                 raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
+        self._to_device()
         if self._e0 is None:
             self._set_reference_energy()
         return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
@@ -838,7 +897,10 @@ class Scene:
 
     @property
     def precision(self) -> str:
-        """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor)."""
+        """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor; on
+        a GPU, of the device's state and arithmetic)."""
+        if self._device != "cpu":
+            return self._device_precision
         return "f32" if self._sim.single else "f64"
 
     @property
@@ -1231,6 +1293,7 @@ class Scene:
         did. The layout is described in docs/guide/architecture.md (Saving, checkpoints and
         the state protocol).
         """
+        self._cpu_only("state()")
         sim = self._sim
         out: dict[str, Any] = {
             "time": sim.time,
@@ -1315,6 +1378,7 @@ class Scene:
 
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""
+        self._cpu_only("save()")
         arrays: dict[str, np.ndarray] = {
             "positions": self.positions,
             "velocities": self.velocities,

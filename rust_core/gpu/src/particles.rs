@@ -374,6 +374,12 @@ impl Particles {
         Ok((unpack(&x), unpack(&v)))
     }
 
+    /// Masses and 1/masses (0: pinned), as stored on the device.
+    pub fn masses(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (x, v) = self.read_raw()?;
+        Ok(((0..self.n).map(|i| x[4 * i + 3]).collect(), (0..self.n).map(|i| v[4 * i + 3]).collect()))
+    }
+
     /// The energy books (reduced on the host in particle order).
     pub fn books(&self) -> Result<Books> {
         let vv = self.scheme == Scheme::VelocityVerlet;

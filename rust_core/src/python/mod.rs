@@ -216,6 +216,37 @@ fn particle_attributes() -> Vec<(&'static str, &'static str)> {
     crate::state::ATTRIBUTES.to_vec()
 }
 
+/// The GPU adapters wgpu sees (Vulkan, Metal, DX12), CPU ones included: one dict each with
+/// name, backend, kind ("discrete", "integrated", "virtual", "cpu", "other"), driver, f64 and
+/// the largest storage binding and buffer (bytes). Empty without a GPU backend or a driver.
+#[pyfunction]
+fn gpu_adapters(py: Python<'_>) -> PyResult<Vec<Bound<'_, pyo3::types::PyDict>>> {
+    #[cfg(feature = "gpu")]
+    let found = py.detach(physcore_gpu::adapters);
+    #[cfg(not(feature = "gpu"))]
+    let found: Vec<()> = Vec::new();
+    #[cfg(feature = "gpu")]
+    return found
+        .into_iter()
+        .map(|a| {
+            let d = pyo3::types::PyDict::new(py);
+            d.set_item("name", a.name)?;
+            d.set_item("backend", a.backend)?;
+            d.set_item("kind", a.kind)?;
+            d.set_item("driver", a.driver)?;
+            d.set_item("f64", a.f64)?;
+            d.set_item("max_storage_binding", a.max_storage_binding)?;
+            d.set_item("max_buffer", a.max_buffer)?;
+            Ok(d)
+        })
+        .collect();
+    #[cfg(not(feature = "gpu"))]
+    {
+        let _ = (py, found);
+        Ok(Vec::new())
+    }
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySimulation>()?;
@@ -226,6 +257,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(set_simd_level, m)?)?;
     m.add_function(wrap_pyfunction!(cpu_name, m)?)?;
     m.add_function(wrap_pyfunction!(particle_attributes, m)?)?;
+    m.add_function(wrap_pyfunction!(gpu_adapters, m)?)?;
     m.add_function(wrap_pyfunction!(neighbors, m)?)?;
     m.add_function(wrap_pyfunction!(rasterise_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;

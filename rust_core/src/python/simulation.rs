@@ -21,9 +21,54 @@ use std::sync::Arc;
 #[pyclass(module = "physcore._core", name = "Simulation")]
 pub struct PySimulation {
     inner: Inner,
+    /// The force terms' records as added (kind, name, parameters), in order: what a device
+    /// system is built from (`to_device`).
+    terms: Vec<(String, String, registry::Params)>,
+    /// Whether the particles live on a device (`to_device`): the getters read them from there.
+    on_device: bool,
+}
+
+/// The name of the device particle system (`systems::device`).
+#[cfg(feature = "gpu")]
+const DEVICE: &str = "device particles";
+
+/// Vectors as a flat run of their components.
+#[cfg(feature = "gpu")]
+fn flat_of<V: Vector>(a: &[V]) -> Vec<f64> {
+    a.iter().flat_map(|x| (0..V::DIM).map(move |k| x.comp(k))).collect()
+}
+
+/// The device system's fields `names`, read back, if the world has one.
+fn device_fields<V: Vector>(w: &World<V>, on: bool, names: &[&str]) -> Option<crate::error::Result<Vec<Vec<f64>>>> {
+    #[cfg(feature = "gpu")]
+    if on {
+        return w.other(DEVICE).ok().map(|d| d.fields(names));
+    }
+    let _ = (w, on, names);
+    None
 }
 
 impl PySimulation {
+    /// The device's (N, dim) rows of the fields `names` (the first dim of them), if the
+    /// particles are on a device.
+    fn device_rows<'py>(&self, py: Python<'py>, names: [&str; 3]) -> PyResult<Option<Bound<'py, PyArray2<f64>>>> {
+        let (on, dim) = (self.on_device, self.dim());
+        let Some(f) = with_sim!(&self.inner, s => device_fields(s, on, &names[..dim])) else { return Ok(None) };
+        let f = f.map_err(|e| to_py(py, e))?;
+        let n = f[0].len();
+        let flat: Vec<f64> = (0..n).flat_map(|i| f.iter().map(move |c| c[i])).collect();
+        let a = numpy::ndarray::Array2::from_shape_vec((n, dim), flat).map_err(|e| err(invalid("positions", e.to_string())))?;
+        Ok(Some(a.into_pyarray(py)))
+    }
+
+    /// Refuses a change of the particles once they live on a device.
+    fn host_only(&self) -> PyResult<()> {
+        if self.on_device {
+            return Err(err(invalid("particles", "they are on the GPU: add and set them before the first step")));
+        }
+        Ok(())
+    }
+
     /// The world it holds (the batch steps several at once).
     pub(super) fn inner_mut(&mut self) -> &mut Inner {
         &mut self.inner
@@ -44,7 +89,55 @@ impl PySimulation {
             ),
             _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
-        Ok(Self { inner })
+        Ok(Self { inner, terms: Vec::new(), on_device: false })
+    }
+
+    /// Moves the particles and the force terms to a device (`"gpu"`, `"gpu:NAME"`) at
+    /// `precision` (`"f32"`, `"f64"`): a `systems::device::DeviceParticles` joins the world and
+    /// the CPU particle system is left empty. Refuses (naming it) a term the device has no kernel
+    /// for, an integrator it lacks, attributes, colliders; nothing changes then.
+    fn to_device(&mut self, py: Python<'_>, device: &str, precision: &str) -> PyResult<()> {
+        #[cfg(feature = "gpu")]
+        {
+            if self.on_device {
+                return Err(err(invalid("device", "the particles are on the device already")));
+            }
+            let terms = &self.terms;
+            let dim = self.dim();
+            with_sim!(&mut self.inner, s => {
+                let p = s.particles();
+                if let Some(a) = p.model().attributes.keys().next() {
+                    return Err(err(invalid("device", format!("the GPU path has no per-particle {a:?} yet"))));
+                }
+                if p.n_constraints() > 0 {
+                    return Err(err(invalid("device", "the GPU path has no colliders or constraints yet")));
+                }
+                let (x, v) = (flat_of(&p.state().x), flat_of(&p.state().v));
+                let m = p.model().mass.clone();
+                let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
+                let integrator = p.integrator_info().name;
+                let d = py
+                    .detach(|| crate::systems::device::DeviceParticles::new(device, precision, dim, integrator, &x, &v, &m, &pinned, terms))
+                    .map_err(|e| to_py(py, e))?;
+                let empty = ParticleSystem::new(integrator).map_err(|e| to_py(py, e))?;
+                s.add_system(Box::new(d)).map_err(|e| to_py(py, e))?;
+                *s.particles_mut() = empty;
+                Ok::<(), PyErr>(())
+            })?;
+            self.on_device = true;
+            Ok(())
+        }
+        #[cfg(not(feature = "gpu"))]
+        {
+            let _ = (device, precision);
+            Err(to_py(py, invalid("device", "this build of physcore has no GPU backend")))
+        }
+    }
+
+    /// Whether the particles live on a device (`to_device`).
+    #[getter]
+    fn on_device(&self) -> bool {
+        self.on_device
     }
 
     #[getter]
@@ -57,7 +150,11 @@ impl PySimulation {
 
     #[getter]
     fn n_particles(&self) -> usize {
-        with_sim!(&self.inner, s => s.n_particles())
+        let on = self.on_device;
+        with_sim!(&self.inner, s => match device_fields(s, on, &["mass"]) {
+            Some(Ok(f)) => f[0].len(),
+            _ => s.n_particles(),
+        })
     }
 
     #[getter]
@@ -173,6 +270,7 @@ impl PySimulation {
         masses: PyReadonlyArray1<'_, f64>,
         pinned: PyReadonlyArray1<'_, bool>,
     ) -> PyResult<usize> {
+        self.host_only()?;
         let dim = self.dim();
         let x = flat2(&positions, dim, "positions")?;
         let v = flat2(&velocities, dim, "velocities")?;
@@ -195,18 +293,29 @@ impl PySimulation {
     /// Positions, m: a new (N, dim) float64 array (a copy; writing to it changes nothing).
     #[getter]
     fn positions<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        if let Some(a) = self.device_rows(py, ["x", "y", "z"])? {
+            return Ok(a);
+        }
         with_sim!(&self.inner, s => to_array2(py, &s.particles().state().x, "positions"))
     }
 
     /// Velocities, m/s: a new (N, dim) float64 array (a copy).
     #[getter]
     fn velocities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        if let Some(a) = self.device_rows(py, ["vx", "vy", "vz"])? {
+            return Ok(a);
+        }
         with_sim!(&self.inner, s => to_array2(py, &s.particles().state().v, "velocities"))
     }
 
     /// Masses, kg: a new (N,) float64 array (a copy).
     #[getter]
     fn masses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let on = self.on_device;
+        if let Some(f) = with_sim!(&self.inner, s => device_fields(s, on, &["mass"])) {
+            let mut f = f.map_err(|e| to_py(py, e))?;
+            return Ok(Array1::from_vec(f.swap_remove(0)).into_pyarray(py));
+        }
         let m = with_sim!(&self.inner, s => copy_of(&s.particles().model().mass, "masses", "masses"));
         Ok(Array1::from_vec(m.map_err(|e| to_py(py, e))?).into_pyarray(py))
     }
@@ -214,6 +323,11 @@ impl PySimulation {
     /// Which particles are pinned: a new (N,) bool array.
     #[getter]
     fn pinned<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray1<bool>>> {
+        let on = self.on_device;
+        if let Some(f) = with_sim!(&self.inner, s => device_fields(s, on, &["pinned"])) {
+            let f = f.map_err(|e| to_py(py, e))?;
+            return Ok(Array1::from_vec(f[0].iter().map(|&p| p != 0.0).collect::<Vec<bool>>()).into_pyarray(py));
+        }
         let p = with_sim!(&self.inner, s => {
             let im = &s.particles().model().inv_mass;
             Need::new("pinned", Need::bytes_of::<bool>(im.len()), format!("{} particles", count(im.len() as u128)))
@@ -229,6 +343,7 @@ impl PySimulation {
         positions: Option<PyReadonlyArray2<'_, f64>>,
         velocities: Option<PyReadonlyArray2<'_, f64>>,
     ) -> PyResult<()> {
+        self.host_only()?;
         let dim = self.dim();
         let x = positions.as_ref().map(|a| flat2(a, dim, "positions")).transpose()?;
         let v = velocities.as_ref().map(|a| flat2(a, dim, "velocities")).transpose()?;
@@ -242,6 +357,7 @@ impl PySimulation {
 
     /// Sets the optional per-particle attribute `name` (`state::ATTRIBUTES`), (N,) float64.
     fn set_attribute(&mut self, py: Python<'_>, name: &str, values: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
+        self.host_only()?;
         let v = slice1(&values, name)?;
         let need = Need::new("set_attribute", Need::bytes_of::<f64>(v.len()), format!("a copy of {name}"));
         let v = need.copy(v).map_err(|e| to_py(py, e))?;
@@ -263,8 +379,12 @@ impl PySimulation {
     /// from `params`: numbers, bools, strings, and 1-D or 2-D arrays (float64: numbers; uint32:
     /// particle indices), copied fallibly.
     fn add_term(&mut self, py: Python<'_>, kind: &str, name: String, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        if self.on_device {
+            return Err(err(invalid("item", "the particles are on the GPU: add every part before the first step")));
+        }
         let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
+        let record = (kind.to_string(), name.clone(), p.clone());
         match &mut self.inner {
             Inner::D2(s) => {
                 let ctx = Context { n_particles: s.n_particles() };
@@ -275,15 +395,24 @@ impl PySimulation {
                 ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.particles_mut().add_term(t))
             }
         }
-        .map_err(|e| to_py(py, e))
+        .map_err(|e| to_py(py, e))?;
+        self.terms.push(record);
+        Ok(())
     }
 
     /// Replaces the force term `name` by one of registered type `kind` built from `params`
     /// (`ParticleSystem::replace_term`): same place, books kept, state untouched; nothing changes
     /// on error. What the viewer's parameter keys use.
     fn replace_term(&mut self, py: Python<'_>, kind: &str, name: String, params: &Bound<'_, PyDict>) -> PyResult<()> {
+        if self.on_device {
+            return Err(err(invalid("item", "the particles are on the GPU: its terms cannot be replaced yet")));
+        }
         let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
+        let record = (kind.to_string(), name.clone(), p.clone());
+        if let Some(r) = self.terms.iter_mut().find(|r| r.1 == name) {
+            *r = record;
+        }
         match &mut self.inner {
             Inner::D2(s) => {
                 let ctx = Context { n_particles: s.n_particles() };

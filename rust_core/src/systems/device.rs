@@ -41,6 +41,10 @@ pub struct DeviceParticles {
     name: String,
     dim: usize,
     names: Names,
+    /// The masses as given (float64) and which particles are pinned: fixed, so kept here too
+    /// (an f32 device holds rounded masses).
+    mass: Vec<Real>,
+    pinned: Vec<bool>,
     p: Mutex<Particles>,
 }
 
@@ -104,7 +108,7 @@ impl DeviceParticles {
         let v: Vec<Real> = v.iter().enumerate().map(|(k, &c)| if pinned[k / dim] { 0.0 } else { c }).collect();
         let p = Particles::new(gpu, precision, dim, scheme, forces, x, &v, mass, &im)?;
         // Beside the world's (empty) CPU particle system, which is "particles".
-        Ok(Self { name: "device particles".into(), dim, names, p: Mutex::new(p) })
+        Ok(Self { name: "device particles".into(), dim, names, mass: mass.to_vec(), pinned: pinned.to_vec(), p: Mutex::new(p) })
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Particles> {
@@ -237,6 +241,12 @@ impl System for DeviceParticles {
         names
             .iter()
             .map(|name| {
+                if *name == "mass" {
+                    return Ok(self.mass.clone());
+                }
+                if *name == "pinned" {
+                    return Ok(self.pinned.iter().map(|&p| p as u8 as Real).collect());
+                }
                 let (a, k) = match *name {
                     "x" => (&x, 0),
                     "y" => (&x, 1),

@@ -1,0 +1,151 @@
+"""Scenes on the GPU path (``Scene(device=...)``) against the CPU path, the reference.
+
+They run on any adapter: a real GPU where one is present, else Mesa's lavapipe (CPU Vulkan),
+which CI installs; with ``PHYSCORE_GPU_REQUIRED=1`` (CI) a machine without either fails these
+tests instead of skipping them. The expected values are the CPU path's (float64) and closed
+forms (a Kepler orbit's energy), never numbers copied from an earlier GPU run.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+
+import numpy as np
+import pytest
+
+import physcore as pc
+
+
+def _device() -> str | None:
+    adapters = pc.gpu_adapters()
+    if any(a["kind"] != "cpu" for a in adapters):
+        return "gpu"
+    if any("llvmpipe" in a["name"] for a in adapters):
+        return "gpu:lavapipe"
+    return None
+
+
+DEVICE = _device()
+if DEVICE is None and os.environ.get("PHYSCORE_GPU_REQUIRED") == "1":
+    raise RuntimeError("PHYSCORE_GPU_REQUIRED=1 but no GPU adapter and no lavapipe (apt-get install mesa-vulkan-drivers)")
+pytestmark = pytest.mark.skipif(DEVICE is None, reason="no GPU adapter and no lavapipe (apt-get install mesa-vulkan-drivers)")
+F64 = DEVICE is not None and any(a["f64"] for a in pc.gpu_adapters() if DEVICE == "gpu" or "llvmpipe" in a["name"])
+
+
+def _cluster(dim: int, n: int = 500, device: str = "cpu", precision: str | None = None,
+             integrator: str = "verlet") -> pc.Scene:
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(n, dim))
+    v = 0.2 * rng.normal(size=(n, dim))
+    s = pc.Scene(dim=dim, integrator=integrator, dt=1e-3, device=device, precision=precision)
+    s.add_particles(x, v, masses=rng.uniform(0.5, 1.5, n) / n, pinned=np.arange(n) % 97 == 0)
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.05))
+    s.add(pc.Gravity([0.0] * (dim - 1) + [-0.5]))
+    s.add(pc.Drag(0.01))
+    return s
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("integrator", ["verlet", "semi_implicit_euler"])
+def test_a_gpu_scene_steps_as_the_cpu_scene(dim: int, integrator: str) -> None:
+    cpu = _cluster(dim, integrator=integrator)
+    cpu.step(100)
+    precisions = ["f32", "f64"] if F64 else ["f32"]
+    for precision in precisions:
+        gpu = _cluster(dim, device=DEVICE, precision=precision, integrator=integrator)
+        assert gpu.precision == precision and gpu.device == DEVICE
+        gpu.step(100)
+        dx = np.abs(gpu.positions - cpu.positions).max()
+        dv = np.abs(gpu.velocities - cpu.velocities).max()
+        e_cpu, e_gpu = cpu.energy(), gpu.energy()
+        de = abs(e_gpu.total - e_cpu.total) / abs(e_cpu.total)
+        # f32: 24-bit mantissas over 100 steps of a softened cluster; f64: rounding only.
+        tol = {"f32": (2e-5, 2e-4, 1e-5), "f64": (1e-12, 1e-11, 1e-12)}[precision]
+        assert dx < tol[0] and dv < tol[1] and de < tol[2], (precision, dx, dv, de)
+        assert gpu.n_particles == cpu.n_particles
+        np.testing.assert_array_equal(gpu.masses, cpu.masses)
+        np.testing.assert_array_equal(gpu.pinned, cpu.pinned)
+        # The books keep the CPU's names.
+        assert sorted(e_gpu.potential) == sorted(e_cpu.potential)
+        assert sorted(e_gpu.dissipated) == sorted(e_cpu.dissipated)
+
+
+def test_a_kepler_orbit_on_the_gpu_keeps_its_energy() -> None:
+    """Two bodies of mass 1/2 at separation 1 on a circular orbit: E = -G m²/a + m v² = -1/8 J."""
+    s = pc.Scene(dim=2, integrator="verlet", dt=2 * np.pi / 2000, device=DEVICE)
+    s.add_particles([[-0.5, 0.0], [0.5, 0.0]], [[0.0, -0.5], [0.0, 0.5]], masses=0.5)
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.0))
+    assert abs(s.energy().total - (-0.125)) < 1e-7
+    s.step(2000)
+    assert abs(s.energy().total - (-0.125)) < 1e-6  # f32 rounding over one period
+    np.testing.assert_allclose(s.positions, [[-0.5, 0.0], [0.5, 0.0]], atol=5e-4)
+
+
+def test_gpu_runs_repeat_bit_for_bit() -> None:
+    a, b = _cluster(3, device=DEVICE), _cluster(3, device=DEVICE)
+    a.step(60)
+    for n in (1, 29, 30):
+        b.step(n)
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(a.velocities, b.velocities)
+
+
+def test_a_gpu_divergence_is_rolled_back() -> None:
+    s = pc.Scene(dim=2, integrator="semi_implicit_euler", dt=1e30, device=DEVICE)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0]], masses=1.0)
+    s.add(pc.PairwiseGravity(G=1e30, softening=0.0))
+    with pytest.raises(pc.SimulationDiverged):
+        s.step(5)
+    assert s.step_count == 0
+    np.testing.assert_array_equal(s.positions, [[0.0, 0.0], [1.0, 0.0]])
+
+
+def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
+    s = pc.Scene(dim=2, device=DEVICE)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0]])
+    s.add(pc.Springs([0], [1], stiffness=10.0))
+    with pytest.raises(pc.InvalidInputError, match="no kernel for Springs 'springs'"):
+        s.step(1)
+    assert s.step_count == 0
+
+    s = pc.Scene(dim=2, integrator="rk4", device=DEVICE)
+    s.add_particles([[0.0, 0.0]])
+    with pytest.raises(pc.InvalidInputError, match="integrator"):
+        s.step(1)
+
+    s = pc.Scene(dim=2, device=DEVICE)
+    s.add_particles([[0.0, 0.0]])
+    s.add(pc.Plane([0.0, -1.0], [0.0, 1.0]))
+    with pytest.raises(pc.InvalidInputError, match="Plane"):
+        s.step(1)
+
+
+def test_after_the_first_step_a_gpu_scene_refuses_what_it_cannot_do_yet() -> None:
+    s = _cluster(2, n=20, device=DEVICE)
+    s.step(2)
+    for call in (lambda: s.add_particles([[0.0, 0.0]]), lambda: s.add(pc.Drag(1.0)), s.state,
+                 lambda: pickle.dumps(s), lambda: setattr(s, "positions", np.zeros((20, 2)))):
+        with pytest.raises(pc.InvalidInputError, match="GPU"):
+            call()
+    s.step(2)  # still steps
+    assert s.step_count == 4
+
+
+def test_the_device_argument_is_checked() -> None:
+    with pytest.raises(pc.InvalidInputError, match="device"):
+        pc.Scene(device="tpu")
+    with pytest.raises(pc.InvalidTypeError, match="device"):
+        pc.Scene(device=1)  # type: ignore[arg-type]
+    s = pc.Scene(dim=2, device="gpu:no-such-adapter")
+    s.add_particles([[0.0, 0.0]])
+    with pytest.raises(pc.InvalidInputError, match="no-such-adapter"):
+        s.step(1)
+    assert pc.Scene().device == "cpu" and pc.Scene().precision == "f64"
+
+
+def test_a_gpu_scene_renders() -> None:
+    s = _cluster(2, n=200, device=DEVICE)
+    frames = [np.asarray(f) for f in pc.render.frames(s, frames=3, size=(160, 120))]
+    assert len(frames) == 3 and frames[0].shape == (120, 160, 3)
+    assert frames[0].std() > 0 and not np.array_equal(frames[0], frames[-1])  # drawn, and moving
+    assert s.step_count > 0
