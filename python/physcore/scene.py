@@ -197,7 +197,7 @@ def _check_device(value: object) -> str:
 
 
 #: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
-_GPU_TERMS = ("gravity", "drag", "pairwise_gravity")
+_GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "springs")
 
 
 def _check_precision(value: object) -> str:
@@ -715,7 +715,7 @@ class Scene:
                     f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
                     f"(it has {', '.join(_GPU_TERMS)}); run this scene with device='cpu'"
                 )
-        self._exclusive(lambda sim: sim.to_device(self._device, self._device_precision))
+        self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
 
     def _cpu_only(self, what: str) -> None:
         """Refuses ``what`` once the particles live on a GPU."""

@@ -70,6 +70,40 @@ def test_a_gpu_scene_steps_as_the_cpu_scene(dim: int, integrator: str) -> None:
         assert sorted(e_gpu.dissipated) == sorted(e_cpu.dissipated)
 
 
+def _cloth(device: str = "cpu", precision: str | None = None, integrator: str = "verlet", n: int = 16) -> pc.Scene:
+    """An n×n sheet of springs with dashpots, pinned at two corners, falling under gravity."""
+    s = pc.Scene(dim=3, integrator=integrator, dt=5e-4, device=device, precision=precision)
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2) * 0.05
+    x = np.column_stack([g[:, 0], g[:, 1], np.zeros(n * n)])
+    pinned = np.zeros(n * n, bool)
+    pinned[[0, n - 1]] = True
+    s.add_particles(x, masses=0.01, pinned=pinned)
+    idx = np.arange(n * n).reshape(n, n)
+    i = np.concatenate([idx[:-1, :].ravel(), idx[:, :-1].ravel(), idx[:-1, :-1].ravel()])
+    j = np.concatenate([idx[1:, :].ravel(), idx[:, 1:].ravel(), idx[1:, 1:].ravel()])
+    s.add(pc.Springs(i, j, stiffness=500.0, damping=0.02))
+    s.add(pc.Gravity([0.0, 0.0, -9.81]))
+    return s
+
+
+@pytest.mark.parametrize("integrator", ["verlet", "semi_implicit_euler"])
+def test_a_cloth_on_the_gpu_hangs_as_on_the_cpu(integrator: str) -> None:
+    cpu = _cloth(integrator=integrator)
+    cpu.step(400)
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu = _cloth(DEVICE, precision, integrator)
+        gpu.step(400)
+        dx = np.abs(gpu.positions - cpu.positions).max()
+        e_cpu, e_gpu = cpu.energy(), gpu.energy()
+        assert sorted(e_gpu.potential) == sorted(e_cpu.potential)
+        assert sorted(e_gpu.dissipated) == sorted(e_cpu.dissipated)
+        de = abs(e_gpu.total - e_cpu.total)
+        sag = -cpu.positions[:, 2].min()
+        assert sag > 0.1  # it fell: the comparison is of a moving cloth
+        tol = {"f32": (2e-4, 1e-4), "f64": (1e-11, 1e-11)}[precision]
+        assert dx < tol[0] * sag and de < tol[1] * abs(e_cpu.potential["gravity"]), (precision, dx, de)
+
+
 def test_a_kepler_orbit_on_the_gpu_keeps_its_energy() -> None:
     """Two bodies of mass 1/2 at separation 1 on a circular orbit: E = -G m²/a + m v² = -1/8 J."""
     s = pc.Scene(dim=2, integrator="verlet", dt=2 * np.pi / 2000, device=DEVICE)
@@ -103,8 +137,8 @@ def test_a_gpu_divergence_is_rolled_back() -> None:
 def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
     s = pc.Scene(dim=2, device=DEVICE)
     s.add_particles([[0.0, 0.0], [1.0, 0.0]])
-    s.add(pc.Springs([0], [1], stiffness=10.0))
-    with pytest.raises(pc.InvalidInputError, match="no kernel for Springs 'springs'"):
+    s.add(pc.TreeGravity(G=1.0, softening=0.1))
+    with pytest.raises(pc.InvalidInputError, match="no kernel for TreeGravity 'tree_gravity'"):
         s.step(1)
     assert s.step_count == 0
 

@@ -64,7 +64,9 @@ impl Precision {
             Precision::F32 => {
                 "alias real = f32;\nfn bad(x: f32) -> bool { return (bitcast<u32>(x) & 0x7f800000u) == 0x7f800000u; }\n"
             }
-            Precision::F64 => "alias real = f64;\nfn bad(x: f64) -> bool { return !(abs(x) <= 1.7976931348623157e308); }\n",
+            Precision::F64 => {
+                "alias real = f64;\nfn bad(x: f64) -> bool { return !(abs(x) <= 1.7976931348623157e308); }\n"
+            }
         }
     }
 }
@@ -96,7 +98,7 @@ impl AdapterSummary {
             kind: kind_name(info.device_type).to_string(),
             driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
             f64: a.features().contains(wgpu::Features::SHADER_F64),
-            max_storage_binding: limits.max_storage_buffer_binding_size as u64,
+            max_storage_binding: limits.max_storage_buffer_binding_size,
             max_buffer: limits.max_buffer_size,
         }
     }
@@ -166,8 +168,12 @@ impl Gpu {
         let found = enumerate();
         let named = which.strip_prefix("gpu:").map(|s| s.to_ascii_lowercase());
         let listed: Vec<String> =
-            found.iter().map(|a| AdapterSummary::of(a)).map(|s| format!("{} ({}, {})", s.name, s.kind, s.backend)).collect();
-        let seen = if listed.is_empty() { "no adapter at all (is a Vulkan driver installed?)".to_string() } else { listed.join("; ") };
+            found.iter().map(AdapterSummary::of).map(|s| format!("{} ({}, {})", s.name, s.kind, s.backend)).collect();
+        let seen = if listed.is_empty() {
+            "no adapter at all (is a Vulkan driver installed?)".to_string()
+        } else {
+            listed.join("; ")
+        };
         let pick = match (&named, which) {
             (Some(name), _) => {
                 // lavapipe calls itself llvmpipe.
@@ -186,8 +192,10 @@ impl Gpu {
                     wgpu::DeviceType::Other => 3,
                     wgpu::DeviceType::Cpu => 4,
                 };
-                let mut ok: Vec<_> =
-                    found.into_iter().filter(|a| allow_cpu || a.get_info().device_type != wgpu::DeviceType::Cpu).collect();
+                let mut ok: Vec<_> = found
+                    .into_iter()
+                    .filter(|a| allow_cpu || a.get_info().device_type != wgpu::DeviceType::Cpu)
+                    .collect();
                 ok.sort_by_key(rank);
                 ok.into_iter().next()
             }
@@ -245,8 +253,8 @@ impl Gpu {
     pub(crate) fn buffer(&self, what: &str, bytes: u64, usage: wgpu::BufferUsages) -> Result<wgpu::Buffer> {
         let lim = self.device.limits();
         let storage = usage.contains(wgpu::BufferUsages::STORAGE);
-        if bytes > lim.max_buffer_size || (storage && bytes > lim.max_storage_buffer_binding_size as u64) {
-            let most = if storage { lim.max_storage_buffer_binding_size as u64 } else { lim.max_buffer_size };
+        if bytes > lim.max_buffer_size || (storage && bytes > lim.max_storage_buffer_binding_size) {
+            let most = if storage { lim.max_storage_buffer_binding_size } else { lim.max_buffer_size };
             return Err(GpuError::Unsupported(format!(
                 "{what} needs {bytes} bytes; the adapter {} binds at most {most}",
                 self.summary.name
@@ -267,9 +275,6 @@ impl Gpu {
 
     /// Waits for all submitted work.
     pub(crate) fn wait(&self) -> Result<()> {
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map(|_| ())
-            .map_err(|e| GpuError::Device(e.to_string()))
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map(|_| ()).map_err(|e| GpuError::Device(e.to_string()))
     }
 }

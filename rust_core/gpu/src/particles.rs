@@ -33,6 +33,48 @@ pub struct Forces {
     pub pairwise: Option<(f64, f64)>,
 }
 
+/// Hookean springs with dashpots between particle pairs (one entry per spring), as the CPU's
+/// `terms::springs`: f = [k (L − L0) + c (v_j − v_i)·n] n on i, −f on j.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Springs {
+    pub i: Vec<u32>,
+    pub j: Vec<u32>,
+    /// Stiffness k, N/m.
+    pub k: Vec<f64>,
+    /// Dashpot coefficient c, N·s/m.
+    pub c: Vec<f64>,
+    /// Rest length L0, m.
+    pub rest: Vec<f64>,
+}
+
+impl Springs {
+    /// Per particle, its springs in spring order (CSR): start offsets (n + 1), the other ends,
+    /// and (k, c, L0, 0) rows.
+    fn gathered(&self, n: usize) -> (Vec<u32>, Vec<u32>, Vec<f64>) {
+        let mut count = vec![0u32; n + 1];
+        for (&a, &b) in self.i.iter().zip(&self.j) {
+            count[a as usize + 1] += 1;
+            count[b as usize + 1] += 1;
+        }
+        for p in 0..n {
+            count[p + 1] += count[p];
+        }
+        let start = count.clone();
+        let mut fill = count;
+        let m = 2 * self.i.len();
+        let (mut other, mut rows) = (vec![0u32; m], vec![0.0; 4 * m]);
+        for s in 0..self.i.len() {
+            for (a, b) in [(self.i[s], self.j[s]), (self.j[s], self.i[s])] {
+                let e = fill[a as usize] as usize;
+                fill[a as usize] += 1;
+                other[e] = b;
+                rows[4 * e..4 * e + 3].copy_from_slice(&[self.k[s], self.c[s], self.rest[s]]);
+            }
+        }
+        (start, other, rows)
+    }
+}
+
 /// Energy books summed on the host, in f64, in particle order (deterministic).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Books {
@@ -43,6 +85,10 @@ pub struct Books {
     pub pairwise: f64,
     /// Energy taken out by drag so far.
     pub dissipated: f64,
+    /// Σ ½ k (L − L0)² over the springs.
+    pub springs: f64,
+    /// Energy taken out by the springs' dashpots so far.
+    pub dashpots: f64,
 }
 
 /// Why `step` stopped early.
@@ -51,7 +97,9 @@ pub enum Halt {
     /// The stop flag was raised (Ctrl-C): the steps before it completed.
     Stopped,
     /// A particle's position or velocity stopped being finite within the last submission.
-    Diverged { particle: usize },
+    Diverged {
+        particle: usize,
+    },
     Failed(GpuError),
 }
 
@@ -75,6 +123,11 @@ pub struct Particles {
     saved_acc_valid: bool,
     books: wgpu::Buffer,
     flag: wgpu::Buffer,
+    /// The predicted velocities and the springs' gathered lists (kept alive for the bind group).
+    _vp: wgpu::Buffer,
+    _springs: [wgpu::Buffer; 3],
+    has_springs: bool,
+    velocity_dependent: bool,
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
     bind: wgpu::BindGroup,
@@ -114,6 +167,7 @@ impl Particles {
         v: &[f64],
         mass: &[f64],
         inv_mass: &[f64],
+        springs: Option<&Springs>,
     ) -> Result<Self> {
         assert!(dim == 2 || dim == 3, "dim must be 2 or 3");
         let n = mass.len();
@@ -124,17 +178,35 @@ impl Particles {
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let mk = |what: &str| gpu.buffer(what, size, st);
-        let live = Bufs { pos: mk("positions")?, vel: mk("velocities")?, acc: mk("accelerations")?, aux: mk("drag books")? };
-        let books = mk("energy books")?;
+        let live =
+            Bufs { pos: mk("positions")?, vel: mk("velocities")?, acc: mk("accelerations")?, aux: mk("drag books")? };
+        let books = gpu.buffer("energy books", 2 * size, st)?;
+        let vp = mk("predicted velocities")?;
+        let empty = Springs::default();
+        let sp = springs.unwrap_or(&empty);
+        assert!(sp.i.iter().chain(&sp.j).all(|&p| (p as usize) < n), "spring index out of range");
+        let (start, other, rows) = sp.gathered(n);
+        let ro = U::STORAGE | U::COPY_DST;
+        let entries_n = other.len().max(1) as u64;
+        let sb = [
+            gpu.buffer("spring offsets", 4 * (n as u64 + 1), ro)?,
+            gpu.buffer("spring ends", 4 * entries_n, ro)?,
+            gpu.buffer("spring constants", entries_n * row, ro)?,
+        ];
+        gpu.queue.write_buffer(&sb[0], 0, bytemuck::cast_slice(&start));
+        if !other.is_empty() {
+            gpu.queue.write_buffer(&sb[1], 0, bytemuck::cast_slice(&other));
+        }
         let flag = gpu.buffer("finiteness flag", 16, st)?;
         let params = gpu.buffer("parameters", 16 * precision.bytes() + 16, U::UNIFORM | U::COPY_DST)?;
-        let staging = gpu.buffer("read-back staging", size, U::MAP_READ | U::COPY_DST)?;
+        let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
         let (layout, pipes) = pipelines(&gpu, precision);
-        let entries: Vec<wgpu::BindGroupEntry> = [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &flag]
-            .iter()
-            .enumerate()
-            .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-            .collect();
+        let entries: Vec<wgpu::BindGroupEntry> =
+            [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &flag, &vp, &sb[0], &sb[1], &sb[2]]
+                .iter()
+                .enumerate()
+                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .collect();
         let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("particles"),
             layout: &layout,
@@ -152,6 +224,10 @@ impl Particles {
             saved_acc_valid: false,
             books,
             flag,
+            _vp: vp,
+            _springs: sb,
+            has_springs: !sp.i.is_empty(),
+            velocity_dependent: forces.drag != 0.0 || sp.c.iter().any(|&c| c != 0.0),
             params,
             staging,
             bind,
@@ -159,8 +235,12 @@ impl Particles {
             acc_valid: false,
             chunk: 1,
         };
+        if !rows.is_empty() {
+            p.upload(&p._springs[2], &rows);
+        }
         p.write(x, v, Some((mass, inv_mass)))?;
         let zero = vec![0u8; size as usize];
+        p.gpu.queue.write_buffer(&p._vp, 0, &zero);
         p.gpu.queue.write_buffer(&p.live.aux, 0, &zero);
         p.gpu.queue.write_buffer(&p.live.acc, 0, &zero);
         p.gpu.wait()?;
@@ -181,12 +261,6 @@ impl Particles {
     }
     pub fn forces(&self) -> Forces {
         self.forces
-    }
-
-    /// Replaces the forces (the next step re-evaluates the accelerations).
-    pub fn set_forces(&mut self, f: Forces) {
-        self.forces = f;
-        self.acc_valid = false;
     }
 
     /// Overwrites positions and velocities (flat, n·dim), and masses when given.
@@ -226,7 +300,7 @@ impl Particles {
     fn write_params(&self, dt: f64, h1: f64, h2: f64, w_new: f64, w_old: f64, pred: bool) {
         let f = &self.forces;
         let (gg, eps) = f.pairwise.unwrap_or((0.0, 0.0));
-        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, 0];
+        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, self.has_springs as u32];
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0];
         let mut bytes: Vec<u8> = bytemuck::cast_slice(&u).to_vec();
         match self.precision {
@@ -244,7 +318,7 @@ impl Particles {
     }
 
     fn velocity_dependent(&self) -> bool {
-        self.forces.drag != 0.0
+        self.velocity_dependent
     }
 
     /// Records `steps` steps into one submission (the parameters already written).
@@ -355,7 +429,11 @@ impl Particles {
     }
 
     fn read_reals(&self, b: &wgpu::Buffer) -> Result<Vec<f64>> {
-        let bytes = self.read_buffer(b, (self.n as u64).max(1) * 4 * self.precision.bytes())?;
+        self.read_rows(b, self.n)
+    }
+
+    fn read_rows(&self, b: &wgpu::Buffer, rows: usize) -> Result<Vec<f64>> {
+        let bytes = self.read_buffer(b, (rows as u64).max(1) * 4 * self.precision.bytes())?;
         Ok(match self.precision {
             Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&bytes),
             Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&bytes).into_iter().map(f64::from).collect(),
@@ -392,14 +470,16 @@ impl Particles {
             pass.dispatch_workgroups(self.groups(), 1, 1);
         }
         self.gpu.queue.submit([enc.finish()]);
-        let e = self.read_reals(&self.books)?;
+        let e = self.read_rows(&self.books, 2 * self.n)?;
         let _ = vv;
         let mut b = Books::default();
-        for i in 0..self.n {
-            b.kinetic += e[4 * i];
-            b.uniform += e[4 * i + 1];
-            b.pairwise += e[4 * i + 2];
-            b.dissipated += e[4 * i + 3];
+        for r in e.chunks_exact(8).take(self.n) {
+            b.kinetic += r[0];
+            b.uniform += r[1];
+            b.pairwise += r[2];
+            b.dissipated += r[3];
+            b.springs += r[4];
+            b.dashpots += r[5];
         }
         Ok(b)
     }
@@ -408,7 +488,10 @@ impl Particles {
     /// each, as f64) and whether the accelerations are current: what a restart needs.
     pub fn save_raw(&self) -> Result<([Vec<f64>; 4], bool)> {
         let l = &self.live;
-        Ok(([self.read_reals(&l.pos)?, self.read_reals(&l.vel)?, self.read_reals(&l.acc)?, self.read_reals(&l.aux)?], self.acc_valid))
+        Ok((
+            [self.read_reals(&l.pos)?, self.read_reals(&l.vel)?, self.read_reals(&l.acc)?, self.read_reals(&l.aux)?],
+            self.acc_valid,
+        ))
     }
 
     /// Loads what `save_raw` gave (rounded to the device's precision).
@@ -475,8 +558,11 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
         count: None,
     };
     let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
-    for b in 1..=6 {
+    for b in 1..=7 {
         entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: false }));
+    }
+    for b in 8..=10 {
+        entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: true }));
     }
     let layout =
         d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("particles"), entries: &entries });

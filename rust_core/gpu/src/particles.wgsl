@@ -9,9 +9,11 @@ struct Params {
     n: u32,
     // 1: pairwise gravity on.
     pair: u32,
-    // 1: the forces see the predicted velocity stored in acc.xyz (velocity Verlet with drag).
+    // 1: the forces see the predicted velocity stored in vp (velocity Verlet with velocity-
+    // dependent forces: drag, dashpots).
     pred: u32,
-    pad: u32,
+    // 1: springs on.
+    springs: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
     h1: real,
@@ -36,14 +38,23 @@ const WG: u32 = 256u;
 @group(0) @binding(1) var<storage, read_write> pos: array<vec4<real>>;
 // xyz: velocity (m/s), w: 1/mass (0: pinned).
 @group(0) @binding(2) var<storage, read_write> vel: array<vec4<real>>;
-// xyz: acceleration (m/s²), or the predicted velocity between kick_drift and forces; w unused.
+// xyz: acceleration (m/s²); w unused.
 @group(0) @binding(3) var<storage, read_write> acc: array<vec4<real>>;
-// x: energy dissipated by drag so far (J), y: drag power at the last force evaluation (W).
+// x, y: energy dissipated by drag so far (J) and its power at the last force evaluation (W);
+// z, w: the same for the springs' dashpots (half of each spring's, from each end).
 @group(0) @binding(4) var<storage, read_write> aux: array<vec4<real>>;
-// Per particle: kinetic, uniform-gravity potential, half its pairwise potential, dissipated.
+// Per particle, two rows: (kinetic, uniform-gravity potential, half its pairwise potential,
+// drag dissipated), (half its springs' potential, dashpots dissipated, 0, 0).
 @group(0) @binding(5) var<storage, read_write> books: array<vec4<real>>;
 // [0]: the smallest index of a particle with a non-finite position or velocity (or 0xffffffff).
 @group(0) @binding(6) var<storage, read_write> flag: array<atomic<u32>>;
+// The predicted velocity v + dt a (velocity Verlet with velocity-dependent forces).
+@group(0) @binding(7) var<storage, read_write> vp: array<vec4<real>>;
+// Springs gathered per particle (CSR): particle i's entries are start[i]..start[i+1]; each names
+// the other end and holds (k, c, L0, 0). Every spring appears once from each end.
+@group(0) @binding(8) var<storage, read> start: array<u32>;
+@group(0) @binding(9) var<storage, read> other: array<u32>;
+@group(0) @binding(10) var<storage, read> spring: array<vec4<real>>;
 
 var<workgroup> tile: array<vec4<real>, WG>;
 
@@ -89,23 +100,46 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     let v = vel[i];
     var u = v.xyz;
     if (P.pred != 0u) {
-        u = acc[i].xyz;
+        u = vp[i].xyz;
+    }
+    // Hookean springs with dashpots: f = [k (L − L0) + c (u_j − u_i)·n] n, n = (x_j − x_i)/L.
+    var fs = vec3<real>(0.0, 0.0, 0.0);
+    var ps: real = 0.0;
+    if (P.springs != 0u) {
+        for (var e = start[i]; e < start[i + 1u]; e++) {
+            let j = other[e];
+            let s = spring[e];
+            let d = pos[j].xyz - xi.xyz;
+            let l = length(d);
+            if (l > 0.0) {
+                let n = d / l;
+                var uj = vel[j].xyz;
+                if (P.pred != 0u) {
+                    uj = vp[j].xyz;
+                }
+                let w = dot(uj - u, n);
+                fs += n * (s.x * (l - s.z) + s.y * w);
+                ps += 0.5 * s.y * w * w;
+            }
+        }
     }
     var ai = vec3<real>(0.0, 0.0, 0.0);
     var p: real = 0.0;
     if (v.w != 0.0) {
-        ai = a + vec3<real>(P.gx, P.gy, P.gz) - u * (P.b * v.w);
+        ai = a + vec3<real>(P.gx, P.gy, P.gz) + (fs - u * P.b) * v.w;
         p = P.b * dot(u, u);
     }
     acc[i] = vec4<real>(ai, 0.0);
     var x = aux[i];
     x.x += P.w_old * x.y + P.w_new * p;
     x.y = p;
+    x.z += P.w_old * x.w + P.w_new * ps;
+    x.w = ps;
     aux[i] = x;
 }
 
 // v += h1 a; x += dt v (semi-implicit Euler with h1 = dt; velocity Verlet's first kick and drift
-// with h1 = dt/2, which also stores the predicted velocity v + dt a in acc.xyz when pred = 1).
+// with h1 = dt/2, which also stores the predicted velocity v + dt a in vp when pred = 1).
 @compute @workgroup_size(WG)
 fn kick_drift(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = gid.x;
@@ -119,7 +153,7 @@ fn kick_drift(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let a = acc[i].xyz;
     if (P.pred != 0u) {
-        acc[i] = vec4<real>(v.xyz + a * P.dt, 0.0);
+        vp[i] = vec4<real>(v.xyz + a * P.dt, 0.0);
     }
     let nv = v.xyz + a * P.h1;
     vel[i] = vec4<real>(nv, v.w);
@@ -187,6 +221,16 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     if (v.w != 0.0) {
         ug = -xi.w * dot(vec3<real>(P.gx, P.gy, P.gz), xi.xyz);
     }
+    var us: real = 0.0;
+    if (P.springs != 0u) {
+        for (var e = start[i]; e < start[i + 1u]; e++) {
+            let s = spring[e];
+            let dl = length(pos[other[e]].xyz - xi.xyz) - s.z;
+            us += 0.25 * s.x * dl * dl;
+        }
+    }
     // Each pair counted from both ends: half each.
-    books[i] = vec4<real>(0.5 * xi.w * dot(v.xyz, v.xyz), ug, -0.5 * P.big_g * xi.w * phi, aux[i].x);
+    let x = aux[i];
+    books[2u * i] = vec4<real>(0.5 * xi.w * dot(v.xyz, v.xyz), ug, -0.5 * P.big_g * xi.w * phi, x.x);
+    books[2u * i + 1u] = vec4<real>(us, x.z, 0.0, 0.0);
 }

@@ -1,7 +1,7 @@
 //! The device particle kernels against an f64 reference on the host. Run on any adapter; CI runs
 //! them on lavapipe with `PHYSCORE_GPU_ALLOW_CPU=1 PHYSCORE_GPU_REQUIRED=1` (no adapter is then
 //! a failure, not a skip).
-use physcore_gpu::particles::{Forces, Halt, Particles, Scheme};
+use physcore_gpu::particles::{Forces, Halt, Particles, Scheme, Springs};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -81,10 +81,20 @@ fn max_rel(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).fold(0.0f64, |e, (p, q)| e.max((p - q).abs() / scale))
 }
 
-fn run(gpu: &Arc<Gpu>, p: Precision, dim: usize, scheme: Scheme, f: Forces, n: usize, steps: u64, dt: f64) -> Particles {
+#[allow(clippy::too_many_arguments)]
+fn run(
+    gpu: &Arc<Gpu>,
+    p: Precision,
+    dim: usize,
+    scheme: Scheme,
+    f: Forces,
+    n: usize,
+    steps: u64,
+    dt: f64,
+) -> Particles {
     let (x, v, m) = cloud(n, dim, 7);
     let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
-    let mut ps = Particles::new(gpu.clone(), p, dim, scheme, f, &x, &v, &m, &im).unwrap();
+    let mut ps = Particles::new(gpu.clone(), p, dim, scheme, f, &x, &v, &m, &im, None).unwrap();
     ps.step(steps, dt, &AtomicBool::new(false)).unwrap();
     ps
 }
@@ -125,7 +135,8 @@ fn runs_repeat_bit_for_bit() {
     // And the same steps taken in other submissions (1 + 49, 25 + 25) give the same bits.
     let (x, v, m) = cloud(700, 3, 7);
     let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
-    let mut c = Particles::new(gpu.clone(), Precision::F32, 3, Scheme::VelocityVerlet, f, &x, &v, &m, &im).unwrap();
+    let mut c =
+        Particles::new(gpu.clone(), Precision::F32, 3, Scheme::VelocityVerlet, f, &x, &v, &m, &im, None).unwrap();
     let no = AtomicBool::new(false);
     c.step(1, 1e-3, &no).unwrap();
     c.step(24, 1e-3, &no).unwrap();
@@ -148,7 +159,9 @@ fn a_kepler_orbit_keeps_its_energy() {
         if p == Precision::F64 && !gpu.adapter().f64 {
             continue;
         }
-        let mut ps = Particles::new(gpu.clone(), p, 3, Scheme::VelocityVerlet, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m]).unwrap();
+        let mut ps =
+            Particles::new(gpu.clone(), p, 3, Scheme::VelocityVerlet, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m], None)
+                .unwrap();
         let e0 = ps.books().unwrap();
         let exact = -g * m * m / 1.0 + 2.0 * 0.5 * m * vt * vt;
         assert!((e0.kinetic + e0.pairwise - exact).abs() < 1e-6, "{e0:?} vs {exact}");
@@ -180,7 +193,7 @@ fn drag_books_balance_and_pinned_particles_stay() {
         let mut v = v;
         v[10] = 0.0;
         v[11] = 0.0;
-        let mut ps = Particles::new(gpu.clone(), Precision::F32, 2, scheme, f, &x, &v, &m, &im).unwrap();
+        let mut ps = Particles::new(gpu.clone(), Precision::F32, 2, scheme, f, &x, &v, &m, &im, None).unwrap();
         let b0 = ps.books().unwrap();
         ps.step(2000, 1e-3, &AtomicBool::new(false)).unwrap();
         let b = ps.books().unwrap();
@@ -202,7 +215,8 @@ fn stop_divergence_and_rollback() {
     let f = Forces { g: [0.0, -9.81, 0.0], ..Default::default() };
     let (x, v, m) = cloud(100, 3, 1);
     let im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
-    let mut ps = Particles::new(gpu.clone(), Precision::F32, 3, Scheme::SemiImplicitEuler, f, &x, &v, &m, &im).unwrap();
+    let mut ps =
+        Particles::new(gpu.clone(), Precision::F32, 3, Scheme::SemiImplicitEuler, f, &x, &v, &m, &im, None).unwrap();
     // A raised flag stops before any step.
     assert_eq!(ps.step(10, 1e-3, &AtomicBool::new(true)), Err((0, Halt::Stopped)));
     ps.snapshot().unwrap();
@@ -220,9 +234,127 @@ fn stop_divergence_and_rollback() {
 fn what_the_adapter_lacks_is_refused_by_name() {
     let Some(gpu) = gpu() else { return };
     if !gpu.adapter().f64 {
-        let e = Particles::new(gpu.clone(), Precision::F64, 2, Scheme::SemiImplicitEuler, Forces::default(), &[0.0; 2], &[0.0; 2], &[1.0], &[1.0]);
+        let e = Particles::new(
+            gpu.clone(),
+            Precision::F64,
+            2,
+            Scheme::SemiImplicitEuler,
+            Forces::default(),
+            &[0.0; 2],
+            &[0.0; 2],
+            &[1.0],
+            &[1.0],
+            None,
+        );
         assert!(format!("{}", e.err().unwrap()).contains("f64"));
     }
     assert!(Gpu::open("gpu:no-such-adapter").unwrap_err().to_string().contains("no-such-adapter"));
     assert!(Gpu::open("tpu").unwrap_err().to_string().contains("\"gpu\""));
+}
+
+/// A 12×12 cloth pinned at two corners under gravity with dashpots, velocity Verlet: against a
+/// host f64 Verlet of the same springs (predicted velocities for the dashpots, as on the CPU
+/// path), and its books balance.
+#[test]
+fn a_cloth_hangs_as_on_the_host() {
+    let Some(gpu) = gpu() else { return };
+    let (w, h) = (12usize, 12usize);
+    let d = 0.1;
+    let mut x = Vec::new();
+    for r in 0..h {
+        for c in 0..w {
+            x.extend_from_slice(&[c as f64 * d, 0.0, -(r as f64) * d]);
+        }
+    }
+    let n = w * h;
+    let mut sp = Springs::default();
+    for r in 0..h {
+        for c in 0..w {
+            let p = (r * w + c) as u32;
+            if c + 1 < w {
+                sp.i.push(p);
+                sp.j.push(p + 1);
+            }
+            if r + 1 < h {
+                sp.i.push(p);
+                sp.j.push(p + w as u32);
+            }
+        }
+    }
+    let ns = sp.i.len();
+    sp.k = vec![400.0; ns];
+    sp.c = vec![0.05; ns];
+    sp.rest = vec![d; ns];
+    let m = vec![0.01; n];
+    let mut im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();
+    im[0] = 0.0;
+    im[w - 1] = 0.0;
+    let f = Forces { g: [0.0, 0.0, -9.81], ..Default::default() };
+    let v0 = vec![0.0; 3 * n];
+    // Host reference: Verlet with the dashpots at the predicted velocity.
+    let acc = |x: &[f64], v: &[f64]| {
+        let mut a = vec![0.0; 3 * n];
+        for p in 0..n {
+            if im[p] != 0.0 {
+                a[3 * p + 2] = -9.81;
+            }
+        }
+        for s in 0..ns {
+            let (i, j) = (sp.i[s] as usize, sp.j[s] as usize);
+            let dx: Vec<f64> = (0..3).map(|k| x[3 * j + k] - x[3 * i + k]).collect();
+            let l = dx.iter().map(|c| c * c).sum::<f64>().sqrt();
+            let nn: Vec<f64> = dx.iter().map(|c| c / l).collect();
+            let wv: f64 = (0..3).map(|k| (v[3 * j + k] - v[3 * i + k]) * nn[k]).sum();
+            let fm = sp.k[s] * (l - sp.rest[s]) + sp.c[s] * wv;
+            for k in 0..3 {
+                a[3 * i + k] += fm * nn[k] * im[i];
+                a[3 * j + k] -= fm * nn[k] * im[j];
+            }
+        }
+        a
+    };
+    let dt = 5e-4;
+    let steps = 400;
+    let (mut hx, mut hv) = (x.clone(), v0.clone());
+    let mut a = acc(&hx, &hv);
+    for _ in 0..steps {
+        let mut vp = hv.clone();
+        for q in 0..3 * n {
+            if im[q / 3] != 0.0 {
+                vp[q] = hv[q] + dt * a[q];
+                hv[q] += 0.5 * dt * a[q];
+                hx[q] += dt * hv[q];
+            }
+        }
+        a = acc(&hx, &vp);
+        for q in 0..3 * n {
+            if im[q / 3] != 0.0 {
+                hv[q] += 0.5 * dt * a[q];
+            }
+        }
+    }
+    for p in [Precision::F32, Precision::F64] {
+        if p == Precision::F64 && !gpu.adapter().f64 {
+            continue;
+        }
+        let mut ps = Particles::new(gpu.clone(), p, 3, Scheme::VelocityVerlet, f, &x, &v0, &m, &im, Some(&sp)).unwrap();
+        let b0 = ps.books().unwrap();
+        ps.step(steps, dt, &AtomicBool::new(false)).unwrap();
+        let b = ps.books().unwrap();
+        let (gx, _) = ps.read().unwrap();
+        let err = gx.iter().zip(&hx).fold(0.0f64, |e, (a, b)| e.max((a - b).abs()));
+        let e0 = b0.kinetic + b0.uniform + b0.springs;
+        let e1 = b.kinetic + b.uniform + b.springs + b.dashpots;
+        eprintln!(
+            "{}: cloth after {steps} steps: largest position difference {err:.2e} m; far corner stretched {:.4} m; books off by {:.2e} J of {:.3e} J dissipated",
+            p.name(),
+            -gx[3 * (n - 1) + 2] - (h - 1) as f64 * d,
+            e1 - e0,
+            b.dashpots
+        );
+        let tol = if p == Precision::F32 { 1e-4 } else { 1e-11 };
+        assert!(err < tol, "{}: {err}", p.name());
+        assert!(b.dashpots > 0.0 && b.springs > 0.0);
+        assert!((e1 - e0).abs() < 0.05 * b.dashpots.max(1e-3), "{}: books {e0} -> {e1}", p.name());
+    }
 }

@@ -22,9 +22,9 @@ use std::sync::Arc;
 pub struct PySimulation {
     inner: Inner,
     /// The force terms' records as added (kind, name, parameters), in order: what a device
-    /// system is built from (`to_device`).
+    /// system is built from (`move_to_device`).
     terms: Vec<(String, String, registry::Params)>,
-    /// Whether the particles live on a device (`to_device`): the getters read them from there.
+    /// Whether the particles live on a device (`move_to_device`): the getters read them from there.
     on_device: bool,
 }
 
@@ -57,7 +57,8 @@ impl PySimulation {
         let f = f.map_err(|e| to_py(py, e))?;
         let n = f[0].len();
         let flat: Vec<f64> = (0..n).flat_map(|i| f.iter().map(move |c| c[i])).collect();
-        let a = numpy::ndarray::Array2::from_shape_vec((n, dim), flat).map_err(|e| err(invalid("positions", e.to_string())))?;
+        let a = numpy::ndarray::Array2::from_shape_vec((n, dim), flat)
+            .map_err(|e| err(invalid("positions", e.to_string())))?;
         Ok(Some(a.into_pyarray(py)))
     }
 
@@ -96,7 +97,7 @@ impl PySimulation {
     /// `precision` (`"f32"`, `"f64"`): a `systems::device::DeviceParticles` joins the world and
     /// the CPU particle system is left empty. Refuses (naming it) a term the device has no kernel
     /// for, an integrator it lacks, attributes, colliders; nothing changes then.
-    fn to_device(&mut self, py: Python<'_>, device: &str, precision: &str) -> PyResult<()> {
+    fn move_to_device(&mut self, py: Python<'_>, device: &str, precision: &str) -> PyResult<()> {
         #[cfg(feature = "gpu")]
         {
             if self.on_device {
@@ -134,7 +135,7 @@ impl PySimulation {
         }
     }
 
-    /// Whether the particles live on a device (`to_device`).
+    /// Whether the particles live on a device (`move_to_device`).
     #[getter]
     fn on_device(&self) -> bool {
         self.on_device

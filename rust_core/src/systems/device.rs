@@ -4,13 +4,14 @@
 //! "How to add a backend").
 //!
 //! What it holds: particles (positions, velocities, masses, pinned) under the terms `gravity`
-//! (summed), `drag` (summed) and one `pairwise_gravity`, with `semi_implicit_euler` or `verlet`.
+//! (summed), `drag` (summed), one `pairwise_gravity` and one `springs` (cloth, chains: gathered
+//! per particle, no atomics), with `semi_implicit_euler` or `verlet`.
 //! Any other term kind or integrator is refused by name: nothing runs silently on the CPU.
 use super::{Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::error::{invalid, Error, Failure, Result};
 use crate::terms::registry::Params;
 use crate::vector::Real;
-use physcore_gpu::particles::{self as dp, Forces, Particles, Scheme};
+use physcore_gpu::particles::{self as dp, Forces, Particles, Scheme, Springs};
 use physcore_gpu::{Gpu, GpuError, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::Mutex;
@@ -34,6 +35,9 @@ struct Names {
     gravity: Vec<String>,
     drag: Vec<String>,
     pairwise: Option<String>,
+    springs: Option<String>,
+    /// Whether the springs have dashpots (the CPU books their dissipation only then).
+    damped: bool,
 }
 
 /// Particles on a GPU: a `System` whose state lives on the device.
@@ -92,7 +96,10 @@ impl DeviceParticles {
         }
         let n = mass.len();
         if x.len() != n * dim || v.len() != n * dim || pinned.len() != n {
-            return Err(invalid("positions", "positions, velocities, masses and pinned must describe the same particles"));
+            return Err(invalid(
+                "positions",
+                "positions, velocities, masses and pinned must describe the same particles",
+            ));
         }
         if let Some(i) = mass.iter().position(|m| !(m.is_finite() && *m > 0.0)) {
             return Err(invalid("masses", format!("entry {i} must be finite and > 0, got {}", mass[i])));
@@ -101,14 +108,21 @@ impl DeviceParticles {
             return Err(invalid("positions", format!("value {i} of the positions and velocities is not finite")));
         }
         let (scheme, precision) = (scheme_of(integrator)?, precision_of(precision)?);
-        let (forces, names) = forces_of(dim, terms)?;
+        let (forces, springs, names) = forces_of(dim, n, terms)?;
         let gpu = Gpu::open(which)?;
         let im: Vec<Real> = mass.iter().zip(pinned).map(|(m, &p)| if p { 0.0 } else { 1.0 / m }).collect();
         // Pinned particles get zero velocity, as on the CPU (`ParticleSystem::add_particles`).
         let v: Vec<Real> = v.iter().enumerate().map(|(k, &c)| if pinned[k / dim] { 0.0 } else { c }).collect();
-        let p = Particles::new(gpu, precision, dim, scheme, forces, x, &v, mass, &im)?;
+        let p = Particles::new(gpu, precision, dim, scheme, forces, x, &v, mass, &im, springs.as_ref())?;
         // Beside the world's (empty) CPU particle system, which is "particles".
-        Ok(Self { name: "device particles".into(), dim, names, mass: mass.to_vec(), pinned: pinned.to_vec(), p: Mutex::new(p) })
+        Ok(Self {
+            name: "device particles".into(),
+            dim,
+            names,
+            mass: mass.to_vec(),
+            pinned: pinned.to_vec(),
+            p: Mutex::new(p),
+        })
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Particles> {
@@ -129,8 +143,9 @@ impl DeviceParticles {
 }
 
 /// The device's forces from term records, refusing kinds it has no kernel for.
-fn forces_of(dim: usize, terms: &[(String, String, Params)]) -> Result<(Forces, Names)> {
+fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result<(Forces, Option<Springs>, Names)> {
     let mut f = Forces::default();
+    let mut springs = None;
     let mut names = Names::default();
     for (kind, name, p) in terms {
         match kind.as_str() {
@@ -152,7 +167,10 @@ fn forces_of(dim: usize, terms: &[(String, String, Params)]) -> Result<(Forces, 
                     return Err(invalid("coefficient", format!("{b} must be finite and >= 0")));
                 }
                 f.drag += b;
-                names.drag.push(name.clone());
+                // As on the CPU, a drag of 0 dissipates nothing and has no entry in the books.
+                if b > 0.0 {
+                    names.drag.push(name.clone());
+                }
             }
             "pairwise_gravity" => {
                 if names.pairwise.is_some() {
@@ -168,18 +186,51 @@ fn forces_of(dim: usize, terms: &[(String, String, Params)]) -> Result<(Forces, 
                 f.pairwise = Some((g, eps));
                 names.pairwise = Some(name.clone());
             }
+            "springs" => {
+                if names.springs.is_some() {
+                    return Err(invalid(name, "the GPU path holds one springs term (join them into one)"));
+                }
+                let mut p = p.clone();
+                let (i, j) = (p.take_indices("i")?, p.take_indices("j")?);
+                let (k, c, rest) =
+                    (p.take_floats("stiffness")?, p.take_floats("damping")?, p.take_floats("rest_length")?);
+                let m = i.len();
+                if j.len() != m || k.len() != m || c.len() != m || rest.len() != m {
+                    return Err(invalid(
+                        name,
+                        "i, j, stiffness, damping and rest_length must have one entry per spring",
+                    ));
+                }
+                if let Some(s) = (0..m).find(|&s| i[s] as usize >= n || j[s] as usize >= n || i[s] == j[s]) {
+                    return Err(invalid(
+                        "i",
+                        format!("spring {s} joins {} and {} (particles 0..{n}, two different)", i[s], j[s]),
+                    ));
+                }
+                if let Some(s) = (0..m)
+                    .find(|&s| !(k[s] >= 0.0 && c[s] >= 0.0 && rest[s] >= 0.0) || !(k[s] + c[s] + rest[s]).is_finite())
+                {
+                    return Err(invalid(
+                        name,
+                        format!("spring {s}: stiffness, damping and rest_length must be finite and >= 0"),
+                    ));
+                }
+                names.damped = c.iter().any(|&c| c > 0.0);
+                springs = Some(Springs { i, j, k, c, rest });
+                names.springs = Some(name.clone());
+            }
             other => {
                 return Err(invalid(
                     name,
                     format!(
-                        "the GPU path has no kernel for {other:?} yet (it has gravity, drag and pairwise_gravity); \
-                         run this scene on the CPU (device=\"cpu\")"
+                        "the GPU path has no kernel for {other:?} yet (it has gravity, drag, pairwise_gravity and \
+                         springs); run this scene on the CPU (device=\"cpu\")"
                     ),
                 ))
             }
         }
     }
-    Ok((f, names))
+    Ok((f, springs, names))
 }
 
 /// The device's own checkpoint is kept on the device; the world's snapshot only marks it.
@@ -221,6 +272,8 @@ impl System for DeviceParticles {
             uniform: Real::NAN,
             pairwise: Real::NAN,
             dissipated: Real::NAN,
+            springs: Real::NAN,
+            dashpots: Real::NAN,
         });
         let mut r = EnergyReport { kinetic: b.kinetic, ..Default::default() };
         // The summed uniform field's potential is booked under the first gravity term's name.
@@ -230,8 +283,14 @@ impl System for DeviceParticles {
         if let Some(p) = &self.names.pairwise {
             r.potential.push((p.clone(), b.pairwise));
         }
+        if let Some(s) = &self.names.springs {
+            r.potential.push((s.clone(), b.springs));
+        }
         if let Some(d) = self.names.drag.first() {
             r.dissipated.push((d.clone(), b.dissipated));
+        }
+        if let (Some(s), true) = (&self.names.springs, self.names.damped) {
+            r.dissipated.push((s.clone(), b.dashpots));
         }
         r
     }
@@ -389,10 +448,16 @@ mod tests {
             assert!(err < tol_x, "{precision}: {err}");
             // The books keep the CPU's names, and the device's total drifts no more than f32 allows.
             let names = |e: &EnergyReport| {
-                (e.potential.iter().map(|p| p.0.clone()).collect::<Vec<_>>(), e.dissipated.iter().map(|p| p.0.clone()).collect::<Vec<_>>())
+                (
+                    e.potential.iter().map(|p| p.0.clone()).collect::<Vec<_>>(),
+                    e.dissipated.iter().map(|p| p.0.clone()).collect::<Vec<_>>(),
+                )
             };
             assert_eq!(names(&e1), names(&d1));
-            assert!((d1.total() - e1.total()).abs() < tol_e * e0.total().abs().max(1.0), "{precision}: {d1:?} vs {e1:?}");
+            assert!(
+                (d1.total() - e1.total()).abs() < tol_e * e0.total().abs().max(1.0),
+                "{precision}: {d1:?} vs {e1:?}"
+            );
             assert!(dev < drift(&e0, &e1) + tol_e * e0.total().abs().max(1.0), "{precision}: device drift {dev}");
         }
     }
@@ -416,9 +481,9 @@ mod tests {
         a.steps(5, 1e-3, &no).unwrap();
         a.restore(snap);
         assert_eq!(a.read().unwrap(), before);
-        let springs = vec![("springs".to_string(), "cloth".to_string(), Params::new())];
-        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &springs).err().unwrap();
-        assert!(e.to_string().starts_with("cloth: the GPU path has no kernel for \"springs\""), "{e}");
+        let coulomb = vec![("coulomb".to_string(), "charges".to_string(), Params::new())];
+        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &coulomb).err().unwrap();
+        assert!(e.to_string().starts_with("charges: the GPU path has no kernel for \"coulomb\""), "{e}");
         let e = DeviceParticles::new(w, "f32", 3, "rk4", &x, &v, &m, &pinned, &terms()).err().unwrap();
         assert!(e.to_string().starts_with("integrator:"), "{e}");
     }
