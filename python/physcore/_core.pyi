@@ -14,6 +14,7 @@ __all__ = [
     "set_simd_level",
     "cpu_name",
     "particle_attributes",
+    "gpu_adapters",
     "mesh_normals",
     "draw_discs",
     "rasterise_mesh",

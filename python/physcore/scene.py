@@ -313,21 +313,21 @@ class Scene:
         side's norm, or after ``cg_max_iter`` iterations. ``cg_tol`` in [1e-14, 1), default
         1e-8; ``cg_max_iter`` in 1..1000000, default 200. A solve stopped by the limit keeps its
         last iterate and is counted in :attr:`integrator_stats` (``"cg_unconverged"``).
-    precision : {"f64", "f32"}
-        ``"f64"`` (default) keeps positions and velocities in double precision. ``"f32"`` keeps
-        them in single precision: every stored value is rounded to the nearest float32 after
+    precision : {"f64", "f32"} or None
+        ``"f64"`` (the default on the CPU: ``None``) keeps positions and velocities in double
+        precision. ``"f32"`` keeps them in single precision: every stored value is rounded to the nearest float32 after
         each step (the arithmetic within a step stays float64), as a float32 state array would
         hold them; ``positions``/``velocities`` are then returned as float32. It shows what
         single precision costs in accuracy (see the work-precision table in docs/guide/integrators.md).
         With a GPU ``device``: the precision of the device's state and arithmetic, ``"f32"`` by
-        default; ``"f64"`` where the adapter has it (refused, naming the adapter, where not).
+        default (``None``); ``"f64"`` where the adapter has it (refused, naming the adapter, where not).
     device : {"cpu", "gpu", "gpu:NAME"}
         Where the particles are stepped. ``"cpu"`` (default): the reference path, with every part.
         ``"gpu"``: the best GPU adapter (discrete, then integrated; ``physcore info`` lists them);
         ``"gpu:NAME"``: the first adapter whose name, backend or kind contains NAME
         (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
-        (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag` and
-        :class:`PairwiseGravity`, stepped by ``"semi_implicit_euler"`` or ``"verlet"``; the parts
+        (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag`,
+        :class:`PairwiseGravity` and one :class:`Springs`, stepped by ``"semi_implicit_euler"`` or ``"verlet"``; the parts
         move to the device at the first step, and a part it has no kernel for is refused then,
         by name (never run silently on the CPU). After that step the scene steps, reads
         positions, velocities and the energy books, and renders; adding parts, setting the
