@@ -985,7 +985,11 @@ impl crate::systems::RigidBodies for Bodies {
 /// radius and a spin from a term's `OwnState::spins`: DEM contacts) is pushed at its surface
 /// point, its friction against the contact point's velocity with its rotational inertia in the
 /// effective mass, and the moment turns it (`grain_contact`); other particles are pushed at
-/// their centres, as they were before grains turned here. Particles are visited in
+/// their centres, as they were before grains turned here. A particle with a radius held
+/// between a moving body and a fixed one (`backing`: a cloth under a plate on the table) bears
+/// the moving body's weight instead: the body is lifted off it and the contacts of each such
+/// body are solved together (`Held`), with Coulomb friction between the particle and the body.
+/// Particles are visited in
 /// order (the bodies' velocities change as they go): deterministic. The energy this removes
 /// (kinetic, the grains' spin included, and the particles' potential in gravity raised by the
 /// moves) is booked in the bodies' "bodies ⇄ particles".
@@ -1196,7 +1200,8 @@ fn to_particle<V: PVector>(x: Vector) -> V {
 /// radius a little into the surface, and a sheet pressed between two bodies a little out.
 const RESTING: Real = 1.25;
 
-/// The outward normal of the fixed body that the particle at `p` (radius `ri`) rests on, if one
+/// The outward normal of the fixed body that the particle at `p` (radius `ri` > 0: particles
+/// of no size, an SPH fluid's, are pushed out as before) rests on, if one
 /// lies on the far side of it from a moving body touching it with the normal `normal` (from
 /// that body to the particle; the two normals more than 90° apart: the body touches the
 /// particle on the half away from the fixed one): the particle is then held between them, a
@@ -1523,7 +1528,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 // the table) bears the body's weight: the body, not the particle, is put back (lifted
                 // along the fixed body's normal after the sweep, `lifts`), and the contact is solved
                 // after the sweep with the body's others (`Held`).
-                if body.is_dynamic() {
+                if body.is_dynamic() && ri > 0.0 {
                     let nf = {
                         let b: &Bodies = bodies;
                         backing(b, p, ri, normal)
