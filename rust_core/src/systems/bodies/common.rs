@@ -1014,8 +1014,8 @@ pub struct BodyContacts {
     fluids: Vec<Boundary>,
     /// The impulses a fluid reports, by body (linear, angular), kept between steps.
     impulses: Vec<([Real; 3], [Real; 3])>,
-    /// Each body's lift off the particles that hold it up against a fixed body (`backed`): how
-    /// far, and along which normal, kept between steps.
+    /// Each body's lift off the particles that hold it up against a fixed body (`backing`):
+    /// how far, and along which normal, kept between steps.
     lifts: Vec<(Real, Vector)>,
     /// The step's contacts of particles held between a moving body and a fixed one, kept
     /// between steps.
@@ -1534,7 +1534,6 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                         backing(b, p, ri, normal)
                     };
                     if let Some(nf) = nf {
-                        let body = &mut bodies.d.r.bodies[h];
                         let q = c - p;
                         let (qn, qt) = (q.dot(nf), (q - nf * q.dot(nf)).length());
                         if qt < ri {
@@ -1543,7 +1542,6 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                                 self.lifts[k] = (lift, nf);
                             }
                         }
-                        let _ = body;
                         self.held.push(Held { i, k, c, nf, mu, jn: 0.0 });
                         continue;
                     }
