@@ -309,9 +309,19 @@ tumbling_boxes.render_defaults = {"frames": 180, "fps": 30, "frame_time": 1 / 30
 tumbling_boxes = _stamped(tumbling_boxes)
 
 
-# Oak for the table, linen for the cloth (the mesh shader's own colour), a brass bar, china.
-_OAK, _BRASS, _FLOOR3 = (150, 98, 60), (196, 160, 70), (92, 98, 110)
-_DISHES = np.array([[232, 236, 240], [200, 72, 60], [70, 120, 190], [236, 200, 90]], dtype=np.uint8)
+# Oak for the table, a brass bar, china, a wooden floor before a warm wall.
+_OAK, _BRASS, _FLOOR3 = (150, 98, 60), (196, 160, 70), (122, 92, 70)
+
+
+def _bistro_check(cells: int = 12, px: int = 8) -> list:
+    """A red-and-white checked tablecloth, (cells·px)² RGB as nested lists (render_defaults
+    compare with ==): white checks, pink where a red band crosses a white one, red where two
+    cross (the folds and the slide read in its lines)."""
+    band = (np.arange(cells * px) // px) % 2
+    red = 0.5 * (band[:, None] + band[None, :])
+    white, crimson = np.array((250, 246, 240), np.float64), np.array((196, 40, 44), np.float64)
+    return np.rint(white * (1 - red)[..., None] + crimson * red[..., None]).astype(np.uint8).tolist()
+_DISHES = np.array([[232, 236, 240], [200, 72, 60], [46, 98, 186], [236, 200, 90]], dtype=np.uint8)
 
 
 def tablecloth(
@@ -320,31 +330,40 @@ def tablecloth(
     size: float = 1.2,
     mass: float = 0.6,
     stiffness: float = 800.0,
-    bar: float = 3.0,
-    friction: float = 0.15,
+    bar: float = 0.3,
+    pull: float = 4.0,
+    pull_at: float = 0.15,
+    friction: float = 0.2,
     dishes: bool = True,
     integrator: str = "rk4",
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
-    """A tablecloth pulled off a laid table (3D): an n×n mass-spring sheet of `size` m and
-    `mass` kg dropped onto a table 1.0 × 0.7 m, draping over its edges, with a brass bar of
-    `bar` kg sewn along one hem (:class:`~physcore.Pins`) hanging over the side. The bar's
-    weight drags the cloth across the table and off; the dishes set on it (a plate, cups and a
-    loaf, rigid bodies) are left behind or dragged along as friction decides.
+    """The tablecloth trick (3D): a laid table, its cloth yanked out from under the dishes. An
+    n×n mass-spring sheet of `size` m and `mass` kg lies on a table 1.0 × 0.7 m, falling over
+    its +x and y edges, a brass bar of `bar` kg sewn along the +x hem (:class:`~physcore.Pins`).
+    At `pull_at` s a rope from the bar to a hand moving away at `pull` m/s (a kinematic body
+    out of the picture, pulling out and 15° down) goes taut and yanks the cloth off. The
+    dishes (a plate, three bowls and a loaf, rigid bodies) rest on the cloth: the sheet
+    between a dish and the table bears the dish's weight N = m g, so while the cloth slides
+    under a dish, Coulomb friction drags the dish with μ N, and in the time Δt the cloth takes
+    to leave it, the dish gains only μ g Δt of speed (½ μ g Δt² of travel; as much again
+    sliding on the bare table): a fast pull leaves the dishes where they stood, give or take
+    a few centimetres (the two bowls nearest the pulled edge, where the sheet lifts as it
+    bends over it, slide 15–25 cm); a slow one (a small `pull`: the dish keeps up with the
+    cloth) drags them along with it.
 
     The sheet is :func:`~physcore.scenes.cloth`'s (structural, shear and bend springs of
     `stiffness` N/m, stepped by `integrator`), its particles 4 mm in radius against the bodies
-    (``"bodies ⇄ particles"``: the table's, the dishes' and the floor's Coulomb `friction`).
-    The table, its legs and the floor are fixed boxes; the bar a capsule. Gravity (0, 0, −9.81)
-    m/s²; ``dt=None`` takes :meth:`Scene.suggest_dt` (half of the springs' fastest time scale).
+    (``"bodies ⇄ particles"``: the table's, the dishes' and the floor's Coulomb `friction`),
+    its bend springs at a tenth of `stiffness` (cloth bends far more easily than it stretches),
+    with dashpots of 0.3 N·s/m (the yank's shock dies out instead of ringing). The table, its legs and the floor are fixed boxes; the bar a capsule; ``pull=0`` leaves the
+    bar hanging (``bar=0``: no bar, no pull). Gravity (0, 0, −9.81) m/s²; ``dt=None`` takes
+    :meth:`Scene.suggest_dt` (half of the springs' fastest time scale).
 
     The sheet is stepped by RK4, not velocity Verlet: the pins and the contacts move particles
     between steps, every step, so Verlet's symplectic advantage is lost (each move restarts it)
-    and its error in the books is third order, concentrated in the landings. Measured over 3 s at
-    the defaults (n = 24): RK4 at ``suggest_dt`` drifts −1.1e-4 in 5.6 s of stepping; Verlet
-    drifts −3.8e-3 at half that dt (8.2 s) and −4e-4 to −8e-4 at a quarter (16 s), on an
-    AVX-512 machine, the same to within the scene's chaos at every SIMD level.
+    and its error in the books is third order, concentrated in the landings.
 
     Raises TypeError / InvalidInputError naming the argument.
     """
@@ -356,6 +375,12 @@ def tablecloth(
     # A bar lighter than a gram is no hem, and one of 1e-320 kg underflows the body's mass.
     if bar_mass != 0 and not (1e-3 <= bar_mass <= 1e6):
         raise InvalidInputError(f"bar: a bar of {bar_mass:g} kg is no tablecloth's hem (0 for none, or 1e-3 to 1e6 kg)")
+    speed = _nonneg(pull, "pull")
+    if speed > 100.0:
+        raise InvalidInputError(f"pull: a hand pulls at most 100 m/s, got {speed:g}")
+    t_pull = _nonneg(pull_at, "pull_at")
+    if t_pull > 60.0:
+        raise InvalidInputError(f"pull_at: the pull starts within 60 s, got {t_pull:g}")
     mu = _nonneg(friction, "friction")
     dishes = _flag(dishes, "dishes")
     dt = _optional(dt, "dt")
@@ -366,54 +391,80 @@ def tablecloth(
     scene = Scene(3, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
     top = 0.76  # the table top's upper face, m
     hx, hy, ht = 0.5, 0.35, 0.025
-    # The sheet: centred over the table, shifted so one hem hangs 0.1 m past the +x edge.
-    x0 = hx + 0.1 - size
-    gx, gy = np.meshgrid(x0 + np.arange(n) * s, np.arange(n) * s - 0.5 * size)
-    x = np.stack([gx.ravel(), gy.ravel(), np.full(n * n, top + 0.03)], axis=1)
+    r = 0.004  # the particles' radius: the cloth lies 2r thick
+    # The sheet, laid flat on the table: its far hem 5 cm inside the table's −x edge, the rest
+    # reaching past the +x edge (0.25 m for the default size) and 0.25 m past the y edges; what
+    # lies past an edge falls over it as the scene starts. (A hem hanging down the far side
+    # had to be dragged up over that edge, and the sheet, stretched to twice its length, held
+    # to the table by the friction of its own flutter: the dishes went with it.)
+    u, w = np.meshgrid(-hx + 0.05 + np.arange(n) * s, np.arange(n) * s - 0.5 * size)
+    u, w = u.ravel(), w.ravel()
+    x = np.stack([u, w, np.full(n * n, top + r)], axis=1)
     scene.add_particles(x, masses=m)
-    scene.set_attribute("radius", np.full(n * n, 0.004))
+    scene.set_attribute("radius", np.full(n * n, r))
     i, j = cloth_springs(n)
-    scene.add(Springs(i, j, stiffness=k, damping=0.02))
+    # Cloth bends far more easily than it stretches: the bend springs (two cells long) at a
+    # tenth of the others' stiffness, so it falls in soft folds rather than as card.
+    bend = np.hypot(u[i] - u[j], w[i] - w[j]) > 1.5 * s
+    scene.add(Springs(i, j, stiffness=np.where(bend, 0.1 * k, k), damping=0.3))
     scene.add(Gravity([0.0, 0.0, -9.81]))
     scene.add(Drag(0.3 * mass / (n * n)))
     # A wide floor (what rolls off the table stays on it) and the camera fitted to the table's
     # surroundings (render_defaults' extent), not to the floor.
-    scene.add(Bodies("box", size=[(3.0, 2.5, 0.05)], positions=[(0.4, 0.0, -0.05)], kind="fixed", friction=0.6,
+    scene.add(Bodies("box", size=[(6.0, 3.5, 0.05)], positions=[(0.4, -2.5, -0.05)], kind="fixed", friction=0.6,
                      restitution=0.1, color=_FLOOR3, name="floor"))
     legs = [(sx * (hx - 0.05), sy * (hy - 0.05), 0.5 * (top - 2 * ht)) for sx in (-1, 1) for sy in (-1, 1)]
     scene.add(Bodies("box", size=[(hx, hy, ht)] + [(0.025, 0.025, 0.5 * (top - 2 * ht))] * 4,
                      positions=[(0.0, 0.0, top - ht)] + legs, kind="fixed", friction=mu, restitution=0.0,
                      color=_OAK, name="table"))
     if dishes:
-        scene.add(Bodies("box", size=[(0.11, 0.11, 0.005)], positions=[(-0.15, 0.0, top + 0.05)], density=1000.0,
+        on = top + 2 * r  # the cloth's upper face: the dishes stand on it
+        scene.add(Bodies("box", size=[(0.11, 0.11, 0.006)], positions=[(-0.12, 0.02, on + 0.006)], density=1000.0,
                          friction=mu, restitution=0.0, color=_DISHES[0], name="plate"))
-        cups = [(0.12, 0.14, top + 0.09), (0.12, -0.14, top + 0.09), (-0.3, -0.2, top + 0.09)]
-        # A cup: a capsule standing up (its axis, the body's x, turned to z).
-        up = (0.0, -math.sqrt(0.5), 0.0, math.sqrt(0.5))
-        scene.add(Bodies("capsule", size=[(0.03, 0.035)] * 3, positions=cups, orientations=[up] * 3, density=400.0,
-                         friction=mu, restitution=0.0, color=_DISHES[[1, 2, 3]], name="cups"))
-        # A loaf (a box: a ball here rolled off the table's far side and the floor's edge).
-        scene.add(Bodies("box", size=[(0.07, 0.045, 0.04)], positions=[(-0.3, 0.18, top + 0.07)], density=300.0,
+        # A bowl: a 16-sided frustum (a convex hull) 5 cm tall, 5 cm in radius at its foot and
+        # 7 cm at its rim: wide enough to stand on the sheet's particles (5 cm apart at n = 24).
+        a = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+        ring = np.stack([np.cos(a), np.sin(a)], 1)
+        bowl = np.concatenate([np.c_[0.05 * ring, np.full(16, -0.025)], np.c_[0.07 * ring, np.full(16, 0.025)]])
+        bowls = [(0.1, 0.15, on + 0.025), (0.12, -0.14, on + 0.025), (-0.28, -0.17, on + 0.025)]
+        scene.add(Bodies("hull", vertices=bowl, positions=bowls, density=500.0, friction=mu, restitution=0.0,
+                         color=_DISHES[2], name="bowls"))
+        scene.add(Bodies("box", size=[(0.07, 0.045, 0.04)], positions=[(-0.32, 0.17, on + 0.04)], density=300.0,
                          friction=mu, restitution=0.0, color=(214, 150, 70), name="loaf"))
     if bar_mass > 0:
-        hem = np.flatnonzero(np.isclose(x[:, 0], x[:, 0].max()))
+        # The bar along the +x hem.
+        hem = np.flatnonzero(np.isclose(u, u.max()))
+        rb = 0.012
         half = 0.5 * size
-        r = 0.012
-        volume = math.pi * r * r * (2 * half) + 4.0 / 3.0 * math.pi * r**3
+        volume = math.pi * rb * rb * (2 * half) + 4.0 / 3.0 * math.pi * rb**3
         along_y = (0.0, 0.0, math.sqrt(0.5), math.sqrt(0.5))
-        rod = scene.add(Bodies("capsule", size=[(half, r)], positions=[(float(x[hem, 0].max()), 0.0, top + 0.03)],
-                               orientations=[along_y], density=bar_mass / volume, friction=mu, restitution=0.0,
-                               color=_BRASS, name="bar"))
+        at = (float(u.max()), 0.0, top + r)
+        rod = scene.add(Bodies("capsule", size=[(half, rb)], positions=[at], orientations=[along_y],
+                               density=bar_mass / volume, friction=mu, restitution=0.0, color=_BRASS, name="bar"))
         scene.add(Pins(hem, rod[0]))
+        if speed > 0:
+            # The hand: a small kinematic ball 5 cm from the bar, moving away out and down; the
+            # rope goes taut when it has moved speed × pull_at more.
+            way = np.array([math.cos(math.radians(15.0)), 0.0, -math.sin(math.radians(15.0))])
+            start = np.asarray(at) + 0.05 * way
+            hand = scene.add(Bodies("ball", size=[0.002], positions=[tuple(start)], velocities=[tuple(speed * way)],
+                                    kind="kinematic", color=_BRASS, name="hand"))
+            scene.add(Joints("rope", rod[0], hand[0], anchors=at, anchors_b=tuple(start), length=0.05 + speed * t_pull))
     if dt is None:
         # suggest_dt(), not twice it as cloth() takes: the cloth lands on the table and the
         # floor, and the pins snap the hem to the bar, every step moving particles between the
-        # integrator's steps (RK4's books drift −1.1e-4 over 3 s here, −2.8e-6 at half the dt).
+        # integrator's steps.
         _set_stable_dt(scene, 1.0, "stiffness, mass")
     scene.render_defaults = {"mesh": Mesh.grid(n, n)}
     return _finite_books(scene, "size, mass, bar")
 
 
-tablecloth.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "size": (480, 360), "color_by": "none",
-                              "view": (-50.0, 20.0), "extent": ((-0.8, -0.75, 0.0), (1.6, 0.75, 0.9))}
+# The trick in slow motion: 0.7 s of simulated time over 2.8 s (a quarter of real speed): the
+# flaps fall over the edges, the yank at 0.15 s, the cloth gone by about 0.35 s, the dishes'
+# slide over by about 0.6 s. A checked cloth (its lines show it slide and fold) in a room: a
+# wooden floor wider than the view, before a warm wall; the camera on the table.
+tablecloth.render_defaults = {"frames": 84, "fps": 30, "frame_time": 0.7 / 84, "size": (480, 360), "color_by": "none",
+                              "texture": _bistro_check(), "title": "the tablecloth trick, 1/4 speed",
+                              "look": {"backdrop": ((236, 226, 212), (200, 186, 170))},
+                              "view": (-50.0, 20.0), "extent": ((-0.6, -0.55, 0.3), (1.1, 0.55, 0.85))}
 tablecloth = _stamped(tablecloth)

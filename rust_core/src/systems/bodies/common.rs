@@ -985,7 +985,11 @@ impl crate::systems::RigidBodies for Bodies {
 /// radius and a spin from a term's `OwnState::spins`: DEM contacts) is pushed at its surface
 /// point, its friction against the contact point's velocity with its rotational inertia in the
 /// effective mass, and the moment turns it (`grain_contact`); other particles are pushed at
-/// their centres, as they were before grains turned here. Particles are visited in
+/// their centres, as they were before grains turned here. A particle with a radius held
+/// between a moving body and a fixed one (`backing`: a cloth under a plate on the table) bears
+/// the moving body's weight instead: the body is lifted off it and the contacts of each such
+/// body are solved together (`Held`), with Coulomb friction between the particle and the body.
+/// Particles are visited in
 /// order (the bodies' velocities change as they go): deterministic. The energy this removes
 /// (kinetic, the grains' spin included, and the particles' potential in gravity raised by the
 /// moves) is booked in the bodies' "bodies ⇄ particles".
@@ -1010,7 +1014,29 @@ pub struct BodyContacts {
     fluids: Vec<Boundary>,
     /// The impulses a fluid reports, by body (linear, angular), kept between steps.
     impulses: Vec<([Real; 3], [Real; 3])>,
+    /// Each body's lift off the particles that hold it up against a fixed body (`backing`):
+    /// how far, and along which normal, kept between steps.
+    lifts: Vec<(Real, Vector)>,
+    /// The step's contacts of particles held between a moving body and a fixed one, kept
+    /// between steps.
+    held: Vec<Held>,
 }
+
+/// A particle `i` held between the moving body `k` and a fixed body (`backing`): the contact
+/// point on the body `c`, the fixed body's outward normal `nf`, the body's friction
+/// coefficient, and the normal impulse found for it (N·s).
+struct Held {
+    i: usize,
+    k: usize,
+    c: Vector,
+    nf: Vector,
+    mu: Real,
+    jn: Real,
+}
+
+/// Projected Gauss-Seidel sweeps over the contacts of the bodies particles hold up, a step:
+/// enough for a plate on a few dozen particles to rest (see `apply`).
+const HELD_SWEEPS: usize = 16;
 
 /// The lightest moving body a fluid takes, as a fraction of its rest density. Measured on a
 /// ball (radius 2.5 and 1.5 spacings, 2D and 3D) dropped 1 cm onto DFSPH water at rest, its
@@ -1153,7 +1179,7 @@ fn layer_scale(h: Real, spacing: Real, kernel: crate::sph::KernelKind) -> Real {
 impl BodyContacts {
     /// The coupling of the particles with the bodies system `others[system]` of the world.
     pub fn new(system: usize) -> Self {
-        Self { system, boxes: Vec::new(), moved: Vec::new(), fluids: Vec::new(), impulses: Vec::new() }
+        Self { system, boxes: Vec::new(), moved: Vec::new(), fluids: Vec::new(), impulses: Vec::new(), lifts: Vec::new(), held: Vec::new() }
     }
 }
 
@@ -1167,6 +1193,38 @@ fn to_particle<V: PVector>(x: Vector) -> V {
     let mut s = [0.0; 3];
     s[..D].copy_from_slice(&x.to_array()[..D]);
     V::from_slice(&s[..V::DIM])
+}
+
+/// How far (at most, over its radius) a particle may sit from a fixed body's surface and still
+/// rest on it, as a fraction of its radius: one step of gravity takes a particle resting at its
+/// radius a little into the surface, and a sheet pressed between two bodies a little out.
+const RESTING: Real = 1.25;
+
+/// The outward normal of the fixed body that the particle at `p` (radius `ri` > 0: particles
+/// of no size, an SPH fluid's, are pushed out as before) rests on, if one
+/// lies on the far side of it from a moving body touching it with the normal `normal` (from
+/// that body to the particle; the two normals more than 90° apart: the body touches the
+/// particle on the half away from the fixed one): the particle is then held between them, a
+/// cloth between a plate and the table. (A sheet of particles is a surface: a plate's edge that
+/// dips between two of them as the sheet slides under it is held up by it, not rammed.)
+fn backing(bodies: &Bodies, p: Vector, ri: Real, normal: Vector) -> Option<Vector> {
+    for (&h, &c) in bodies.handles.iter().zip(&bodies.colliders) {
+        if !bodies.d.r.bodies[h].is_fixed() {
+            continue;
+        }
+        let col = &bodies.d.r.colliders[c];
+        let proj = col.shape().project_point(col.position(), p, false);
+        let d = p - proj.point;
+        let dist = d.length();
+        if dist == 0.0 || (!proj.is_inside && dist > RESTING * ri) {
+            continue;
+        }
+        let nf = if proj.is_inside { -d / dist } else { d / dist };
+        if nf.dot(normal) < 0.0 {
+            return Some(nf);
+        }
+    }
+    None
 }
 
 /// The inverse effective mass of a particle (inverse mass `im`) and a body pushed apart at `c`
@@ -1402,6 +1460,9 @@ impl<V: PVector> Coupling<V> for BodyContacts {
         // is booked with the exchange below).
         let moved = &mut self.moved;
         moved.clear();
+        self.lifts.clear();
+        self.held.clear();
+        self.lifts.resize(bodies.handles.len(), (0.0, Vector::ZERO));
         let slot = |x: V| {
             let mut s = [0.0; 3];
             for (c, v) in s.iter_mut().enumerate().take(D) {
@@ -1463,6 +1524,29 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                     sp.omega[i] = w;
                     continue;
                 }
+                // A particle held between a moving body and a fixed one (a cloth under a plate on
+                // the table) bears the body's weight: the body, not the particle, is put back (lifted
+                // along the fixed body's normal after the sweep, `lifts`), and the contact is solved
+                // after the sweep with the body's others (`Held`).
+                if body.is_dynamic() && ri > 0.0 {
+                    let nf = {
+                        let b: &Bodies = bodies;
+                        backing(b, p, ri, normal)
+                    };
+                    if let Some(nf) = nf {
+                        let q = c - p;
+                        let (qn, qt) = (q.dot(nf), (q - nf * q.dot(nf)).length());
+                        if qt < ri {
+                            let lift = (ri * ri - qt * qt).sqrt() - qn;
+                            if lift > self.lifts[k].0 {
+                                self.lifts[k] = (lift, nf);
+                            }
+                        }
+                        self.held.push(Held { i, k, c, nf, mu, jn: 0.0 });
+                        continue;
+                    }
+                }
+                let body = &mut bodies.d.r.bodies[h];
                 let vn = (vi - vb).dot(normal);
                 // The particle goes back to the surface (plus its radius) along the normal.
                 moved.push((i, slot(state.x[i])));
@@ -1485,6 +1569,53 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                 if body.is_dynamic() {
                     body.apply_impulse_at_point(-impulse, c, true);
                 }
+            }
+        }
+        // The bodies held up by particles: the normal impulses of each one's contacts (the fixed
+        // body bears them through the particle, whose share of the effective mass is 0) found
+        // together, by projected Gauss-Seidel sweeps (each contact's total kept ≥ 0), so that
+        // no point of the body approaches the fixed one: a plate lying on a sheet rests (one
+        // contact at a time, each stopping its own point, set it rocking, and the impulses
+        // grew to 40 times its weight). Then Coulomb friction at each, with its normal impulse
+        // J_n, between the particle and the body: the body slides on the sheet, dragged by
+        // μ J_n each step while they slip, and carried along where the limit allows it.
+        let held = &mut self.held;
+        for _ in 0..HELD_SWEEPS {
+            for hc in held.iter_mut() {
+                let body = &mut bodies.d.r.bodies[bodies.handles[hc.k]];
+                let u = -body.velocity_at_point(hc.c).dot(hc.nf);
+                let next = (hc.jn + u / pair_inv_mass(0.0, body, hc.c, hc.nf)).max(0.0);
+                if next != hc.jn {
+                    body.apply_impulse_at_point(hc.nf * (next - hc.jn), hc.c, true);
+                    hc.jn = next;
+                }
+            }
+        }
+        for hc in held.iter() {
+            if hc.jn <= 0.0 || hc.mu <= 0.0 {
+                continue;
+            }
+            let body = &mut bodies.d.r.bodies[bodies.handles[hc.k]];
+            let im = model.inv_mass[hc.i];
+            let vi = from_p(state.v[hc.i]);
+            let rel = vi - body.velocity_at_point(hc.c);
+            let vt_vec = rel - hc.nf * rel.dot(hc.nf);
+            let vt = vt_vec.length();
+            if vt > 0.0 {
+                let t = vt_vec / vt;
+                let jt = t * -(hc.mu * hc.jn).min(vt / pair_inv_mass(im, body, hc.c, t));
+                state.v[hc.i] = to_p(vi + jt * im);
+                body.apply_impulse_at_point(-jt, hc.c, true);
+            }
+        }
+        // The bodies held up by particles, lifted off them (the most any of them asks) along the
+        // fixed body's normal: the potential of gravity this raises is booked with the exchange.
+        let mut lifted = 0.0;
+        for (k, &(lift, nf)) in self.lifts.iter().enumerate() {
+            if lift > 0.0 {
+                let body = &mut bodies.d.r.bodies[bodies.handles[k]];
+                lifted -= body.mass() * bodies.gravity.dot(nf * lift);
+                body.set_translation(body.translation() + nf * lift, true);
             }
         }
         // Pinned particles: put on their point of the body, their velocity made the point's by
@@ -1542,7 +1673,7 @@ impl<V: PVector> Coupling<V> for BodyContacts {
             }
             raised = u_after - u_before;
         }
-        bodies.d.coupling += e_before - e_after - raised;
+        bodies.d.coupling += e_before - e_after - raised - lifted;
         if !moved.is_empty() {
             particles.state_changed();
         }
