@@ -285,6 +285,16 @@ class Bodies(_BodiesPart):
         group whose dimension is not the scene's.
     InvalidTypeError
         (a ``TypeError``) a non-numeric argument.
+    OutOfMemoryError
+        (a ``MemoryError``, from ``Scene.add``) rapier's sets cannot grow by the group now (about
+        2.5 kB a body is asked for first: rapier's own growth cannot be refused, it aborted the
+        process); nothing is added. Under a memory cap, the first step (its checkpoint copies
+        rapier's state), ``Scene.save`` and pickling, and loading are refused the same way,
+        named ``step``, ``save`` and ``load``.
+    KeyboardInterrupt
+        Ctrl-C while ``Scene.add`` builds the group's shape (parry's convex hull of 200,000
+        vertices on a sphere takes 3–13 s) is answered within about 30 ms, and nothing is
+        added; the abandoned build finishes on its own thread and is dropped.
 
     Notes
     -----

@@ -240,3 +240,24 @@ def test_keyboard_interrupt_stops_the_sampling_of_a_large_body_in_a_fluid():
     assert latency < 0.2, f"Ctrl-C took {latency:.2f} s to stop the sampling"
     _assert_unchanged(s, before)
     assert np.array_equal(box.positions, b0)
+
+
+def test_keyboard_interrupt_stops_the_build_of_a_large_hull_and_adds_nothing():
+    # Issue 64 item 9: parry's convex hull of 200,000 vertices (on a sphere: each one on the
+    # hull) took 3-13 s with the GIL held and no way to stop it; Ctrl-C came after it, once the
+    # core held the body and before the scene recorded it (drawn nowhere, still colliding). The
+    # shape is now built apart from the calling thread, which answers Ctrl-C: nothing is added.
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(200_000, 3))
+    v /= np.linalg.norm(v, axis=1)[:, None]
+    s = pc.Scene(3, dt=1e-3)
+    s.add(pc.Gravity([0.0, 0.0, -9.81]))
+    books = s.energy()
+    t0 = time.perf_counter()
+    latency = _interrupt(lambda: s.add(pc.Bodies("hull", vertices=v, positions=[(0.0, 0.0, 5.0)])), 0.3)
+    assert latency < 0.2 and time.perf_counter() - t0 < 1.0, f"Ctrl-C took {latency:.2f} s to stop the build"
+    assert s.bodies == ()
+    assert s.energy() == books  # the core made no rigid-body system either
+    ball = s.add(pc.Bodies("ball", size=[0.5], positions=[(0.0, 0.0, 1.0)]))
+    s.step(10)
+    assert ball.first == 0 and len(s.bodies) == 1 and ball.positions[0, 2] < 1.0

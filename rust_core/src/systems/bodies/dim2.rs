@@ -1,12 +1,15 @@
 //! The rigid bodies of a 2D world (`rapier2d-f64`): what differs from 3D, then the system
 //! itself (`common.rs`, shared with `dim3`).
 use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
-use rapier2d_f64::geometry::NEW_CONTACT_BIT;
+use rapier2d_f64::geometry::{
+    ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
+};
 use rapier2d_f64::parry::bounding_volume::BoundingVolume;
 use rapier2d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;

@@ -2,12 +2,15 @@
 //! itself (`common.rs`, shared with `dim2`). Orientations are unit quaternions stored scalar
 //! last, (x, y, z, w), as scipy's `Rotation.from_quat` reads them.
 use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
-use rapier3d_f64::geometry::NEW_CONTACT_BIT;
+use rapier3d_f64::geometry::{
+    ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
+};
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
