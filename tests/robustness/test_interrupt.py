@@ -261,3 +261,32 @@ def test_keyboard_interrupt_stops_the_build_of_a_large_hull_and_adds_nothing():
     ball = s.add(pc.Bodies("ball", size=[0.5], positions=[(0.0, 0.0, 1.0)]))
     s.step(10)
     assert ball.first == 0 and len(s.bodies) == 1 and ball.positions[0, 2] < 1.0
+
+
+def test_keyboard_interrupt_between_body_steps_rolls_the_bodies_back_bit_for_bit():
+    # Issue 64 item 9: rapier's step cannot be stopped inside, so Ctrl-C is seen once the step in
+    # progress ends (1,000 balls in one place: seconds a step); the call is then rolled back,
+    # and the scene steps on as one never interrupted.
+    rng = np.random.default_rng(1)
+    x = rng.random((300, 3)) * 2.0
+
+    def scene():
+        s = pc.Scene(3, dt=1e-3)
+        s.add(pc.Gravity([0.0, 0.0, -9.81]))
+        s.add(pc.Bodies("box", kind="fixed", size=[(5.0, 5.0, 0.5)], positions=[(1.0, 1.0, -0.5)]))
+        return s, s.add(pc.Bodies("ball", size=np.full(300, 0.3), positions=x, restitution=0.5))
+
+    s, balls = scene()
+    twin, twin_balls = scene()
+    s.step(5)
+    twin.step(5)
+    before = balls.positions.copy()
+    t0 = time.perf_counter()
+    s.step(10)
+    per_step = (time.perf_counter() - t0) / 10
+    latency = _interrupt(lambda: s.step(10**6), 0.3)
+    assert latency < 0.2 + per_step, f"Ctrl-C took {latency:.2f} s (a step takes {per_step:.3f} s)"
+    assert s.step_count == 15
+    s.step(5)
+    twin.step(20)
+    assert np.array_equal(balls.positions, twin_balls.positions) and not np.array_equal(before, balls.positions)

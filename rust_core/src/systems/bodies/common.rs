@@ -166,7 +166,12 @@ impl Bodies {
         }
         let x = take_len(&mut p, "positions", D * n)?;
         let rotations = take_len(&mut p, ROTATION_KEY, ROT * n)?;
-        let rot: Vec<Rotation> = rotations.chunks_exact(ROT).map(rotation).collect::<Result<_>>()?;
+        let mut rot = Vec::new();
+        Need::new("add_bodies", Need::bytes_of::<Rotation>(n), format!("{} rotations", count(n as u128)))
+            .reserve(&mut rot, n)?;
+        for r in rotations.chunks_exact(ROT) {
+            rot.push(rotation(r)?);
+        }
         let v = take_len(&mut p, "velocities", D * n)?;
         let omega = take_len(&mut p, "angular_velocities", ANG * n)?;
         let per = size_len(&shape);
@@ -1058,13 +1063,14 @@ impl System for Bodies {
     /// fallibly, so too little memory is an `Error::OutOfMemory` named "save", not an abort.
     fn save(&self) -> Result<Arrays> {
         // Serialising rapier's types allocates temporaries of its own, infallibly (20 MB aborted
-        // a save of 100,000 touching balls under a cap): up to a state's worth is asked first.
-        let state = state_bytes(&self.d.r);
+        // a save of 100,000 touching balls under a cap): a quarter of the state's copy is asked
+        // for them first.
+        let temporaries = state_bytes(&self.d.r) / 4;
         let of = format!("the solver state of {} rigid bodies", count(self.handles.len() as u128));
-        Need::new("save", state, &of).room(state)?;
+        Need::new("save", temporaries, &of).room(temporaries)?;
         let size = bincode::serialized_size(&self.d).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
         let len = super::SEALED + size as usize;
-        let bytes = len as u128 * 7 / 3 + state;
+        let bytes = len as u128 * 7 / 3 + temporaries;
         let need = Need::new("save", bytes, format!("{of} ({} bytes, packed)", count(len as u128)));
         need.room(bytes)?;
         let mut bytes = Vec::new();

@@ -231,6 +231,16 @@ mod tests {
     }
 
     #[test]
+    fn a_stop_is_answered_within_its_poll_while_the_job_runs_on() {
+        let stop = AtomicBool::new(true);
+        let t = std::time::Instant::now();
+        let r = off_thread(&stop, || std::thread::sleep(std::time::Duration::from_secs(2)));
+        assert!(matches!(r, Err(Error::Interrupted { .. })), "{r:?}");
+        assert!(t.elapsed().as_secs_f64() < 0.5, "{:?}", t.elapsed());
+        assert_eq!(off_thread(&AtomicBool::new(false), || 7).unwrap(), 7);
+    }
+
+    #[test]
     fn bytes_pack_into_reals_and_back() {
         let bytes: Vec<u8> = (0..=255u8).chain(0..7).collect();
         let need = Need::new("save", 0, "");
