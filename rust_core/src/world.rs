@@ -36,6 +36,9 @@ enum Begun {
     Run(Checkpoint),
 }
 
+/// What `World::save` returns: the clock (t, step count, dt) and each system's arrays by name.
+pub type Saved = ((Real, u64, Real), Vec<(String, Arrays)>);
+
 /// What `World::rollback` restores (see `World::checkpoint`).
 pub struct Checkpoint {
     snapshots: Vec<Snapshot>,
@@ -201,7 +204,7 @@ impl<V: Vector> World<V> {
     /// Everything a restart needs: the clock (t, step count, dt) and each system's arrays
     /// (`System::save`), by system name, the particles first; `Error::OutOfMemory` if a system's
     /// arrays cannot be had.
-    pub fn save(&self) -> Result<((Real, u64, Real), Vec<(String, Arrays)>)> {
+    pub fn save(&self) -> Result<Saved> {
         let systems = self.systems().map(|s| Ok((s.name().to_string(), s.save()?))).collect::<Result<_>>()?;
         Ok(((self.t, self.step, self.dt), systems))
     }
