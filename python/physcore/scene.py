@@ -649,7 +649,12 @@ class Scene:
             Ctrl-C (or any exception raised by a Python signal handler), noticed within about
             20 ms plus one force evaluation: between steps and between dopri5's internal steps;
             the scene is rolled back likewise. A call of at most 4096 particle-steps with a
-            fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
+            fixed-step integrator runs unwatched, and Ctrl-C lands just after it. Rigid bodies:
+            within a rapier step Ctrl-C waits for its end (seconds for 1,000 balls in one place).
+        OutOfMemoryError
+            (a ``MemoryError``) The call's checkpoint or scratch cannot be had now (for rigid
+            bodies, a copy of rapier's state and an allowance for what its step allocates:
+            docs/guide/bodies.md, "Limits"); nothing was stepped.
 
         Warns
         -----

@@ -591,8 +591,9 @@ fn bodies_of<V: Vector, B: BodiesKind<V>>(
 /// this thread runs Python's signal handlers (`watched`): a convex hull of 200,000 vertices
 /// takes seconds, and Ctrl-C then stops the build at once with nothing added (it left the core
 /// holding a body the scene did not know of). Then the system "bodies" is made if missing (a
-/// refused group leaves none) and the group put in it, unwatched: no Python code runs until
-/// the call returns.
+/// refused group leaves none) and the group put in it, unwatched: a Ctrl-C during that insertion
+/// (1.4 ms for 1,000 balls, 0.4 s for 100,000) is raised once the call returns, the group in
+/// the core and not in the scene: the window left (rapier's sets cannot be cut back cheaply).
 fn add_group<V: Vector, B: BodiesKind<V>>(py: Python<'_>, s: &mut World<V>, p: Params) -> PyResult<usize> {
     let group = match watched(py, s, |_, stop| B::build(p, stop)) {
         (Ok(g), None) => g,
