@@ -546,7 +546,16 @@ class Scene:
         if cls is None:
             raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane, Box or Sphere, got {type(item).__name__}")
         ctx = self._context(restoring)
-        stored = item._attach(ctx, item._claim_name(ctx))
+        name = item._claim_name(ctx)
+        try:
+            stored = item._attach(ctx, name)
+        except BaseException:
+            # Ctrl-C raised as the core's call returned, the part taken (the bodies' insertion
+            # into rapier cannot be stopped): recorded, so that the scene and the core agree.
+            stored = item._taken_despite(ctx, name)
+            if stored is not None:
+                self._parts.append(stored)
+            raise
         self._parts.append(stored)
         if cls.changes_energy:
             self._e0 = None
