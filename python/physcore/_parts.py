@@ -194,6 +194,12 @@ class Part:
         as stored. Raises before changing anything."""
         raise NotImplementedError
 
+    def _taken_despite(self, ctx: AttachContext, name: Any) -> Part | None:
+        """After ``_attach`` raised: the part completed as stored if the core took it all the
+        same (Ctrl-C raised as the core's call returned), so that the scene records what the core
+        holds; ``None`` (the default) if the core did not take it."""
+        return None
+
     def _entry(self, sim: Any) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
         """Its entry in its section of the scene file (JSON values) and its array members (by
         member name, without the ``{prefix}{k}_`` the writer adds). ``sim`` is the core, read

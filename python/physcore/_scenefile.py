@@ -579,6 +579,8 @@ def _read_member(
                 done += len(chunk)
             if fh.read(1):  # also makes zipfile check the CRC
                 raise ValueError("data past the array's end")
+        except MemoryError:
+            raise  # the process's memory, not the file's damage: OutOfMemoryError from the caller
         except Exception as exc:  # noqa: BLE001 - BadZipFile (CRC), OSError, EOFError
             raise r.error(field, f"damaged data ({type(exc).__name__}: {_show(str(exc))})") from None
     out = out.reshape(shape)

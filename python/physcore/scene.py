@@ -577,7 +577,16 @@ class Scene:
         if cls is None:
             raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane, Box or Sphere, got {type(item).__name__}")
         ctx = self._context(restoring)
-        stored = item._attach(ctx, item._claim_name(ctx))
+        name = item._claim_name(ctx)
+        try:
+            stored = item._attach(ctx, name)
+        except BaseException:
+            # Ctrl-C raised as the core's call returned, the part taken (the bodies' insertion
+            # into rapier cannot be stopped): recorded, so that the scene and the core agree.
+            stored = item._taken_despite(ctx, name)
+            if stored is not None:
+                self._parts.append(stored)
+            raise
         self._parts.append(stored)
         if cls.changes_energy:
             self._e0 = None
@@ -680,7 +689,12 @@ class Scene:
             Ctrl-C (or any exception raised by a Python signal handler), noticed within about
             20 ms plus one force evaluation: between steps and between dopri5's internal steps;
             the scene is rolled back likewise. A call of at most 4096 particle-steps with a
-            fixed-step integrator runs unwatched, and Ctrl-C lands just after it.
+            fixed-step integrator runs unwatched, and Ctrl-C lands just after it. Rigid bodies:
+            within a rapier step Ctrl-C waits for its end (seconds for 1,000 balls in one place).
+        OutOfMemoryError
+            (a ``MemoryError``) The call's checkpoint or scratch cannot be had now (for rigid
+            bodies, a copy of rapier's state and an allowance for what its step allocates:
+            docs/guide/bodies.md, "Limits"); nothing was stepped.
 
         Warns
         -----
@@ -1244,12 +1258,16 @@ class Scene:
         OSError
             The file cannot be written; ``path`` is then left as it was and no temporary file
             remains.
+        OutOfMemoryError
+            (a ``MemoryError``) The file's arrays (the rigid bodies' solver state: about 1.7 kB
+            a body) cannot be had now; ``path`` is left as it was.
         """
         path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
-        arrays = self._file_arrays()
-        atomic_write(path, lambda fh: np.savez(fh, **arrays))
+        with allocating("save", "the scene file's arrays"):
+            arrays = self._file_arrays()
+            atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
 
     def state(self) -> dict[str, Any]:
@@ -1440,15 +1458,19 @@ class Scene:
         built on one machine continues bit for bit on another (a Dask worker, a process pool),
         and unpickling checks the bytes as strictly as :meth:`load` checks a file. The saved
         thread count travels too (``None``: the receiving process's default), and so do the
-        ``render_defaults``. Raises what :meth:`save` raises for books that are not finite."""
+        ``render_defaults``. Raises what :meth:`save` raises for books that are not finite, and
+        :class:`OutOfMemoryError` as :meth:`to_bytes` does; unpickling raises what
+        :meth:`from_bytes` raises."""
         return (_unpickle_scene, (self.to_bytes(), self.render_defaults))
 
     def to_bytes(self) -> bytes:
         """The scene file :meth:`save` writes, as bytes (no file is written). Raises what
-        :meth:`save` raises for books that are not finite."""
-        buf = io.BytesIO()
-        np.savez(buf, **self._file_arrays())
-        return buf.getvalue()
+        :meth:`save` raises for books that are not finite, and :class:`OutOfMemoryError` (a
+        ``MemoryError``) where the file's arrays or their bytes cannot be had now."""
+        with allocating("save", "the scene file's arrays"):
+            buf = io.BytesIO()
+            np.savez(buf, **self._file_arrays())
+            return buf.getvalue()
 
     @classmethod
     def from_bytes(cls, data: bytes, *, threads: int | None = None, source: str = "<bytes>") -> Scene:
@@ -1462,12 +1484,15 @@ class Scene:
             ``data`` is not bytes; ``threads`` is not an int.
         SceneFileError
             (a ``ValueError``) As :meth:`load` raises it, naming ``source`` and the field.
+        OutOfMemoryError
+            (a ``MemoryError``) As :meth:`load` raises it.
         """
         if not isinstance(data, (bytes, bytearray, memoryview)):
             raise InvalidTypeError(f"data: expected the bytes of a scene file, got {type(data).__name__}")
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
-        return cls._from_file(_scenefile.read_bytes(data, source), threads)
+        with allocating("load", "the scene file's arrays"):
+            return cls._from_file(_scenefile.read_bytes(data, source), threads)
     @classmethod
     def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
@@ -1500,11 +1525,16 @@ class Scene:
             the field.
         OSError
             The file cannot be opened (missing, no permission).
+        OutOfMemoryError
+            (a ``MemoryError``) The scene cannot be held in memory now: its parts (named
+            ``add``, as :meth:`add` names them), the rigid bodies' solver state (``load``: taken
+            as four times its bytes while it is read) or the file's arrays (``load``).
         """
         path = _scenefile.check_path(path)
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
-        return cls._from_file(_scenefile.read(path), threads)
+        with allocating("load", "the scene file's arrays"):
+            return cls._from_file(_scenefile.read(path), threads)
 
     @classmethod
     def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None) -> Scene:
@@ -1573,6 +1603,7 @@ class Scene:
 
 def _unpickle_scene(data: bytes, render_defaults: dict[str, Any] | None) -> Scene:
     """Rebuilds a pickled :class:`Scene` (see ``Scene.__reduce__``)."""
-    scene = Scene._from_file(_scenefile.read_bytes(data), None)
+    with allocating("load", "the scene file's arrays"):
+        scene = Scene._from_file(_scenefile.read_bytes(data), None)
     scene.render_defaults = render_defaults
     return scene

@@ -36,6 +36,9 @@ enum Begun {
     Run(Checkpoint),
 }
 
+/// What `World::save` returns: the clock (t, step count, dt) and each system's arrays by name.
+pub type Saved = ((Real, u64, Real), Vec<(String, Arrays)>);
+
 /// What `World::rollback` restores (see `World::checkpoint`).
 pub struct Checkpoint {
     snapshots: Vec<Snapshot>,
@@ -199,10 +202,11 @@ impl<V: Vector> World<V> {
     }
 
     /// Everything a restart needs: the clock (t, step count, dt) and each system's arrays
-    /// (`System::save`), by system name, the particles first.
-    pub fn save(&self) -> ((Real, u64, Real), Vec<(String, Arrays)>) {
-        let systems = self.systems().map(|s| (s.name().to_string(), s.save())).collect();
-        ((self.t, self.step, self.dt), systems)
+    /// (`System::save`), by system name, the particles first; `Error::OutOfMemory` if a system's
+    /// arrays cannot be had.
+    pub fn save(&self) -> Result<Saved> {
+        let systems = self.systems().map(|s| Ok((s.name().to_string(), s.save()?))).collect::<Result<_>>()?;
+        Ok(((self.t, self.step, self.dt), systems))
     }
 
     /// Loads what `save` wrote into a world built the same way (same systems, terms and
@@ -852,8 +856,8 @@ mod tests {
         fn snapshot(&self) -> Result<Snapshot> {
             Ok(Box::new(self.limit))
         }
-        fn save(&self) -> Arrays {
-            vec![("limit".into(), vec![self.limit])]
+        fn save(&self) -> Result<Arrays> {
+            Ok(vec![("limit".into(), vec![self.limit])])
         }
         fn load(&mut self, arrays: &Arrays) -> Result<()> {
             self.limit = arrays[0].1[0];

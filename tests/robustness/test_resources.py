@@ -134,6 +134,63 @@ print("ok")
     assert out.strip() == "ok"
 
 
+def test_many_bodies_under_a_memory_cap_are_refused_and_change_nothing():
+    # Issue 64 item 9: 100,000 balls under a cap aborted the process (SIGABRT) when added, at
+    # the first step (the checkpoint's copy of rapier's state), pickled and unpickled. Each is
+    # now refused first, by name, and the scene steps on as if it had not been tried.
+    out = _child(PRELUDE + """
+import pickle
+n = 100_000
+g = np.stack(np.meshgrid(*[np.arange(47)] * 3, indexing="ij"), -1).reshape(-1, 3)[:n] * 1.0
+scene = pc.Scene(3, dt=1e-3)
+scene.add(pc.Gravity([0.0, 0.0, -9.81]))
+scene.add_particles(np.zeros((1, 3)))
+scene.step(1)
+books = sorted(scene.energy().dissipated)
+b = pc.Bodies("ball", size=np.full(n, 0.5), positions=g)
+lift = lambda: resource.setrlimit(resource.RLIMIT_AS, resource.getrlimit(resource.RLIMIT_AS)[1:] * 2)
+cap(16)
+e = refused(lambda: scene.add(b), "add_bodies")
+lift()
+assert "100,000 rigid bodies" in str(e), str(e)
+assert scene.bodies == () and sorted(scene.energy().dissipated) == books, scene.energy()
+scene.add(b)
+scene.step(1)
+x = b.positions
+cap(16)
+e = refused(lambda: scene.step(1), "step")
+lift()
+assert "100,000 rigid bodies" in str(e), str(e)
+assert scene.step_count == 2 and np.array_equal(b.positions, x)
+cap(16)
+refused(lambda: pickle.dumps(scene), "save")
+lift()
+data = pickle.dumps(scene)
+cap(16)
+try:
+    pickle.loads(data)  # pickle's own copy of the file's bytes may be refused first: a bare MemoryError
+    raise AssertionError("no MemoryError")
+except MemoryError:
+    pass
+lift()
+raw = scene.to_bytes()
+for headroom in (16, 400):  # the file's arrays; the parts and the solver state
+    cap(headroom)
+    try:
+        pc.Scene.from_bytes(raw)
+        raise AssertionError("no MemoryError")
+    except MemoryError as e:
+        assert isinstance(e, pc.OutOfMemoryError) and str(e).startswith(("load: needs ", "add: needs ", "add_bodies: needs ")), repr(e)
+    lift()
+copy = pickle.loads(data)
+scene.step(3)
+copy.step(3)
+assert np.array_equal(copy.bodies[0].positions, b.positions)  # bit for bit, as never refused
+print("ok")
+""")
+    assert out.strip() == "ok"
+
+
 def test_springs_that_do_not_fit_raise_memory_error():
     out = _child(PRELUDE + """
 n, m = 100_000, 10_000_000  # 100 springs a particle
@@ -377,6 +434,31 @@ scene.set_attribute("radius", np.full(n, 0.02))
 scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 scene.add(pc.Contacts(stiffness=1e4, restitution=0.5, friction=0.5))
 """, [("scene.step(1)", ("step", "energy"))]),
+    # Issue 64 item 9: rapier's sets, the checkpoint's copy of its state, its saved bytes and
+    # their reading back allocated infallibly and aborted the process under a cap. Touching
+    # neighbours, so that the state holds contact pairs too.
+    "bodies_3d": ("""
+n = 40_000
+g = np.stack(np.meshgrid(*[np.arange(35)] * 3, indexing="ij"), -1).reshape(-1, 3)[:n] * 1.0
+scene = pc.Scene(3, dt=1e-3)
+scene.add(pc.Gravity([0.0, 0.0, -9.81]))
+b = pc.Bodies("ball", size=np.full(n, 0.5), positions=g)
+def dump():
+    global data
+    data = scene.to_bytes()  # what pickling writes (pickle then copies the bytes: a bare MemoryError at worst)
+""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
+      ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
+    "bodies_2d": ("""
+n = 60_000
+g = np.stack(np.meshgrid(np.arange(250), np.arange(240), indexing="ij"), -1).reshape(-1, 2)[:n] * 1.0
+scene = pc.Scene(2, dt=1e-3)
+scene.add(pc.Gravity([0.0, -9.81]))
+b = pc.Bodies("box", size=np.full((n, 2), 0.5), positions=g)  # half widths: touching
+def dump():
+    global data
+    data = scene.to_bytes()  # what pickling writes (pickle then copies the bytes: a bare MemoryError at worst)
+""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
+      ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
     "xpbd": ("""
 n = 1_000_000
 scene = pc.Scene(2, integrator="xpbd", dt=1e-3)

@@ -435,12 +435,12 @@ impl System for GrayScottSystem {
     fn recycle(&mut self, snapshot: Snapshot) {
         self.spare.recycle2::<Books>(snapshot);
     }
-    fn save(&self) -> Arrays {
-        vec![
+    fn save(&self) -> Result<Arrays> {
+        Ok(vec![
             ("u".to_string(), self.u.clone()),
             ("v".to_string(), self.v.clone()),
             ("made".to_string(), vec![self.books.made_u, self.books.made_v]),
-        ]
+        ])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.u.len();
@@ -605,7 +605,7 @@ mod tests {
     fn restore_and_load_continue_bit_identically() {
         let mut s = pearson(32);
         run(&mut s, 10);
-        let (snap, saved) = (s.snapshot().unwrap(), s.save());
+        let (snap, saved) = (s.snapshot().unwrap(), s.save().unwrap());
         run(&mut s, 30);
         let a = s.v.clone();
         s.restore(snap);

@@ -732,13 +732,13 @@ impl System for WaveSystem {
     fn recycle(&mut self, snapshot: Snapshot) {
         self.spare.recycle2::<Clock>(snapshot);
     }
-    fn save(&self) -> Arrays {
+    fn save(&self) -> Result<Arrays> {
         let c = &self.clock;
-        vec![
+        Ok(vec![
             ("u".to_string(), self.u.clone()),
             ("u_prev".to_string(), self.u_prev.clone()),
             ("clock".to_string(), vec![c.t, c.dt, c.dissipated, c.work, c.next_drop as Real]),
-        ]
+        ])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.u.len();
@@ -938,7 +938,7 @@ mod tests {
         let dt = w.auto_dt().unwrap();
         steps(&mut w, 5, dt);
         let snap = w.snapshot().unwrap();
-        let saved = w.save();
+        let saved = w.save().unwrap();
         steps(&mut w, 40, dt);
         let a = w.u.clone();
         w.restore(snap);

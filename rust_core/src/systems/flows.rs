@@ -266,8 +266,8 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync + 'static> System for FlowSyste
     fn restore(&mut self, snapshot: Snapshot) {
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this flow");
     }
-    fn save(&self) -> Arrays {
-        vec![("y".to_string(), self.y.clone())]
+    fn save(&self) -> Result<Arrays> {
+        Ok(vec![("y".to_string(), self.y.clone())])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         load_flat(&mut self.y, arrays)

@@ -226,8 +226,9 @@ pub trait System: Send + Sync {
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>>;
     /// A copy of everything `step` changes, allocated fallibly.
     fn snapshot(&self) -> Result<Snapshot>;
-    /// Everything a restart needs (state, books, caches), as named arrays.
-    fn save(&self) -> Arrays;
+    /// Everything a restart needs (state, books, caches), as named arrays; `Error::OutOfMemory`
+    /// where a system counts its arrays first (the rigid bodies' solver state).
+    fn save(&self) -> Result<Arrays>;
     /// Loads what `save` wrote for a system built the same way; every array is checked (names,
     /// lengths, finite values) before anything changes.
     fn load(&mut self, arrays: &Arrays) -> Result<()>;

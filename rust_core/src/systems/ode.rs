@@ -116,8 +116,8 @@ impl System for OdeSystem {
     fn restore(&mut self, snapshot: Snapshot) {
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this ODE system");
     }
-    fn save(&self) -> Arrays {
-        vec![("y".to_string(), self.y.clone())]
+    fn save(&self) -> Result<Arrays> {
+        Ok(vec![("y".to_string(), self.y.clone())])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         load_flat(&mut self.y, arrays)

@@ -925,7 +925,7 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     /// "x", "v" (n × dim, row-major), "dissipated" (one per term), "collisions" (one) and, if the
     /// integrator carries them, "cache_forces" (n × dim) and "cache_power" (one per term).
-    fn save(&self) -> Arrays {
+    fn save(&self) -> Result<Arrays> {
         let flat = |a: &[V]| V::flat(a).to_vec();
         let st = &self.sys.state;
         let mut out = vec![
@@ -947,7 +947,7 @@ impl<V: Vector> System for ParticleSystem<V> {
             // Counts below 2^53 are exact in a float64.
             out.push(("adaptive_counts".to_string(), vec![accepted as Real, rejected as Real]));
         }
-        out
+        Ok(out)
     }
 
     fn load(&mut self, arrays: &Arrays) -> Result<()> {

@@ -959,9 +959,9 @@ impl System for StableFluid {
             }
         }
     }
-    fn save(&self) -> Arrays {
+    fn save(&self) -> Result<Arrays> {
         let s = &self.s;
-        vec![
+        Ok(vec![
             ("u".into(), s.u.clone()),
             ("v".into(), s.v.clone()),
             ("density".into(), s.density.clone()),
@@ -971,7 +971,7 @@ impl System for StableFluid {
             // Exact as f64 below 2^53 steps.
             ("steps".into(), vec![s.steps as Real]),
             ("books".into(), self.books_array()),
-        ]
+        ])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let s = &self.s;

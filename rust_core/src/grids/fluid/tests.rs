@@ -359,13 +359,13 @@ fn an_open_channel_with_a_cylinder_conserves_mass_and_reloads_bit_identically() 
     println!("cylinder channel: flux in {fin}, out {fout}");
     assert!((fout - fin).abs() < 1e-8 * fin, "in {fin} out {fout}");
     assert!(f.smoke_amount() > 0.0 && f.s.density.iter().all(|d| d.is_finite()));
-    let saved = f.save();
+    let saved = f.save().unwrap();
     run(&mut f, 10, dt);
-    let a = f.save();
+    let a = f.save().unwrap();
     let mut g = StableFluid::new(cfg).unwrap();
     g.load(&saved).unwrap();
     run(&mut g, 10, dt);
-    assert!(g.save() == a, "load");
+    assert!(g.save().unwrap() == a, "load");
 }
 
 /// Taylor–Green vortex in the free-slip box [0, π]²: u = sin x cos y, v = −cos x sin y has
@@ -548,7 +548,7 @@ fn runs_are_bit_identical_for_any_thread_count() {
         let out = crate::par::install(Some(&pool), || {
             let mut f = StableFluid::new(plume([64, 80], Advection::MacCormack)).unwrap();
             run(&mut f, 15, 0.01);
-            (f.save(), f.fields(&["vorticity", "speed", "pressure"]).unwrap())
+            (f.save().unwrap(), f.fields(&["vorticity", "speed", "pressure"]).unwrap())
         });
         saved.push(out);
     }
@@ -561,16 +561,16 @@ fn snapshot_restore_and_save_load_continue_bit_identically() {
     let mut f = StableFluid::new(cfg.clone()).unwrap();
     run(&mut f, 8, 0.01);
     let snap = f.snapshot().unwrap();
-    let saved = f.save();
+    let saved = f.save().unwrap();
     run(&mut f, 8, 0.01);
-    let a = f.save();
+    let a = f.save().unwrap();
     f.restore(snap);
     run(&mut f, 8, 0.01);
-    assert!(f.save() == a, "restore");
+    assert!(f.save().unwrap() == a, "restore");
     let mut g = StableFluid::new(cfg).unwrap();
     g.load(&saved).unwrap();
     run(&mut g, 8, 0.01);
-    assert!(g.save() == a, "load");
+    assert!(g.save().unwrap() == a, "load");
     let mut bad = saved.clone();
     bad[0].1[5] = Real::NAN;
     assert!(g.load(&bad).is_err());
@@ -598,14 +598,14 @@ fn an_overflow_is_reported_as_a_diverged_cell() {
     cfg.buoyancy_beta = 1e300;
     cfg.sources[0].temperature = 1e300;
     let mut f = StableFluid::new(cfg).unwrap();
-    let before = f.save();
+    let before = f.save().unwrap();
     let snap = f.snapshot().unwrap();
     match f.step(0.01, &no_stop()) {
         Err(Halt::Diverged { index, quantity: Failure::Cell }) => assert!(index < 32 * 40),
         other => panic!("{other:?}"),
     }
     f.restore(snap);
-    assert!(f.save() == before);
+    assert!(f.save().unwrap() == before);
     assert_eq!(f.step(0.01, &AtomicBool::new(true)), Err(Halt::Stopped));
 }
 
@@ -621,14 +621,14 @@ fn recycled_checkpoints_restore_what_they_saved() {
         f.recycle(snap);
     }
     assert!(f.spare.0.lock().unwrap().len() >= 6, "the recycled buffers are kept");
-    let before = f.save();
+    let before = f.save().unwrap();
     let snap = f.snapshot().unwrap();
     assert!(f.spare.0.lock().unwrap().is_empty(), "the checkpoint reused them");
     f.step(0.01, &stop).unwrap();
     f.step(0.01, &stop).unwrap();
-    assert!(f.save() != before);
+    assert!(f.save().unwrap() != before);
     f.restore(snap);
-    assert!(f.save() == before);
+    assert!(f.save().unwrap() == before);
 }
 
 /// Hot smoke rises; the smoke books balance: amount = injected + advection change.

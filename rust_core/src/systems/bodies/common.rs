@@ -32,6 +32,41 @@ struct Dynamic {
     pins: Vec<(usize, usize, Vector)>,
 }
 
+/// The memory that adding `n` bodies to a system that then holds `total` needs (`group_bytes`),
+/// checked to be there now (`Error::OutOfMemory` otherwise).
+fn group_need(total: usize, n: usize) -> Result<Need> {
+    let bytes = group_bytes(total, n);
+    let need = Need::new("add_bodies", bytes, format!("{} rigid bodies in rapier's sets", count(n as u128)));
+    need.room(bytes)?;
+    Ok(need)
+}
+
+impl Group {
+    /// Checks that the group fits in memory beside `existing` bodies, before any system is made
+    /// for it (`Bodies::insert_group` checks again, and reserves).
+    pub fn room(&self, existing: usize) -> Result<()> {
+        group_need(existing + self.n, self.n).map(drop)
+    }
+}
+
+/// A group of bodies checked and its shape built (`Bodies::build_group`).
+pub struct Group {
+    n: usize,
+    shape: String,
+    kind: String,
+    x: Vec<Real>,
+    rot: Vec<Rotation>,
+    v: Vec<Real>,
+    omega: Vec<Real>,
+    size: Vec<Real>,
+    density: Real,
+    friction: Real,
+    restitution: Real,
+    rolling: Real,
+    /// The one shape of a group given by its vertices.
+    listed: Option<ColliderBuilder>,
+}
+
 /// The rigid bodies of a world.
 pub struct Bodies {
     name: String,
@@ -109,7 +144,14 @@ impl Bodies {
 
     /// Adds a group of `n` bodies of one shape (see the Python `Bodies` for the parameters);
     /// returns the number of its first body. Checked whole before anything changes.
-    pub fn add_group(&mut self, mut p: Params) -> Result<usize> {
+    pub fn add_group(&mut self, p: Params) -> Result<usize> {
+        self.insert_group(Self::build_group(p, &AtomicBool::new(false))?)
+    }
+
+    /// A group checked whole and its shape built, in no system yet (`insert_group`): the long
+    /// part of an add (parry's convex hull of 200,000 vertices takes seconds) changes nothing,
+    /// so Ctrl-C (`stop`) can stop it, answered within 10 ms (`super::off_thread`).
+    pub fn build_group(mut p: Params, stop: &AtomicBool) -> Result<Group> {
         let shape = p.text("shape")?.to_string();
         if !SHAPES.contains(&shape.as_str()) {
             return Err(invalid("shape", format!("unknown shape {shape:?}; valid: {}", SHAPES.join(", "))));
@@ -124,7 +166,12 @@ impl Bodies {
         }
         let x = take_len(&mut p, "positions", D * n)?;
         let rotations = take_len(&mut p, ROTATION_KEY, ROT * n)?;
-        let rot: Vec<Rotation> = rotations.chunks_exact(ROT).map(rotation).collect::<Result<_>>()?;
+        let mut rot = Vec::new();
+        Need::new("add_bodies", Need::bytes_of::<Rotation>(n), format!("{} rotations", count(n as u128)))
+            .reserve(&mut rot, n)?;
+        for r in rotations.chunks_exact(ROT) {
+            rot.push(rotation(r)?);
+        }
         let v = take_len(&mut p, "velocities", D * n)?;
         let omega = take_len(&mut p, "angular_velocities", ANG * n)?;
         let per = size_len(&shape);
@@ -150,14 +197,28 @@ impl Bodies {
             return Err(invalid("rolling_friction", format!("must be >= 0 (dimensionless), got {rolling}")));
         }
         // The group's one shape given by vertices (a convex polygon or hull, a triangle mesh).
-        let listed = listed_shape(&shape, &kind, &mut p)?;
+        let listed = if p.has("vertices") {
+            let (shape, kind) = (shape.clone(), kind.clone());
+            super::off_thread(stop, move || listed_shape(&shape, &kind, &mut p))??
+        } else {
+            listed_shape(&shape, &kind, &mut p)?
+        };
+        let g = Group { n, shape, kind, x, rot, v, omega, size, density, friction, restitution, rolling, listed };
+        Ok(g)
+    }
+
+    /// Puts a group `build_group` made into rapier; returns the number of its first body.
+    pub fn insert_group(&mut self, g: Group) -> Result<usize> {
+        let Group { n, shape, kind, x, rot, v, omega, size, density, friction, restitution, rolling, listed } = g;
+        let per = size_len(&shape);
         let builder = |i: usize| -> RigidBodyBuilder {
             let b = match kind.as_str() {
                 "fixed" => RigidBodyBuilder::fixed(),
                 "kinematic" => RigidBodyBuilder::kinematic_velocity_based(),
                 _ => RigidBodyBuilder::dynamic(),
             };
-            own_gyroscopic(b).pose(Pose::from_parts(vector(&x[D * i..D * (i + 1)]), rot[i]))
+            own_gyroscopic(b)
+                .pose(Pose::from_parts(vector(&x[D * i..D * (i + 1)]), rot[i]))
                 .linvel(vector(&v[D * i..D * (i + 1)]))
                 .angvel(ang_vector(&omega[ANG * i..ANG * (i + 1)]))
                 // Sleeping freezes a body bit for bit at rest: deterministic, and a pile at rest
@@ -166,6 +227,7 @@ impl Bodies {
                 .allow_fast_rotation(true)
         };
         let first = self.handles.len();
+        self.room_for(n)?;
         for i in 0..n {
             let c = match &listed {
                 Some(c) => c.clone(),
@@ -311,6 +373,18 @@ impl Bodies {
         }
         self.part_added()?;
         Ok(())
+    }
+
+    /// Checks, before rapier is touched, that `n` more bodies fit in memory, and reserves this
+    /// system's own lists for them: rapier's sets grow infallibly (a refused allocation aborted
+    /// the process), so its need is estimated (`group_bytes`) and asked of the allocator first.
+    fn room_for(&mut self, n: usize) -> Result<()> {
+        let total = self.handles.len() + n;
+        let need = group_need(total, n)?;
+        need.reserve(&mut self.handles, total)?;
+        need.reserve(&mut self.colliders, total)?;
+        // A collider's handle index is at most the number of colliders (none is removed).
+        need.reserve(&mut self.rolling, total + 1)
     }
 
     /// Counts a part added; a loaded state waiting for this part (`pending`) is checked against
@@ -541,6 +615,55 @@ impl PhysicsHooks for Impacts {
     }
 }
 
+/// Bytes that adding `n` bodies (each with its collider) to a system that then holds `total`
+/// takes at its peak: each of rapier's arenas and lists of bodies and colliders (a body's and a
+/// collider's struct, an arena slot's tag, a handle in each list of changes) may double its
+/// capacity while the old buffer is still held, up to 2 `total` entries more; and each new body
+/// allocates its own shape and list of colliders (under 256 bytes).
+fn group_bytes(total: usize, n: usize) -> u128 {
+    use std::mem::size_of;
+    let slot = (size_of::<RigidBody>() + size_of::<Collider>() + 4 * 16) as u128;
+    2 * total as u128 * slot + n as u128 * 256
+}
+
+/// Bytes a copy of rapier's state (a checkpoint) takes, from what it holds: each body and
+/// collider (a hull shared by a group is shared by the copy too), contact pair, manifold and
+/// contact point, and joint; twice that, for what counts do not see (the broad phase's tree,
+/// the islands, hash tables' spare room, the allocator's overhead).
+fn state_bytes(r: &Rapier) -> u128 {
+    use std::mem::size_of;
+    let mut pairs = 0usize;
+    for p in r.narrow_phase.contact_pairs() {
+        pairs += size_of::<ContactPair>();
+        for m in p.manifolds() {
+            pairs += size_of::<ContactManifold>()
+                + m.points.len() * size_of::<TrackedContact<ContactData>>()
+                + m.data.solver_contacts.len() * size_of::<SolverContact>();
+        }
+    }
+    let bodies = r.bodies.len() * (size_of::<RigidBody>() + 64);
+    let colliders = r.colliders.len() * (size_of::<Collider>() + 128);
+    let joints = r.impulse_joints.len() * 2 * size_of::<ImpulseJoint>();
+    2 * (bodies + colliders + pairs + joints) as u128
+}
+
+/// Bytes a step of rapier allocates as it goes (its solver's bodies and constraints, the contact
+/// pairs its broad phase finds, each with its manifolds, graph edge and hash entries): a state's
+/// worth (`state_bytes`); three times a touching pair's structs for each pair touching now, or 4
+/// a body where fewer touch; twice a pair's struct for the others. (The first step of 40,000
+/// touching balls, 520,000 pairs in the broad phase of which 120,000 touch, took 1.07 GB; this
+/// asks 1.27 GB.) Pairs rapier has not met yet are not seen: bodies added overlapping many
+/// others (1,000 balls in one place, 500,000 pairs) need more than is asked.
+fn step_bytes(r: &Rapier, state: u128) -> u128 {
+    use std::mem::size_of;
+    let pair =
+        size_of::<ContactPair>() + 2 * size_of::<ContactManifold>() + 8 * size_of::<TrackedContact<ContactData>>();
+    let (all, touching) =
+        r.narrow_phase.contact_pairs().fold((0, 0), |(a, t), p| (a + 1, t + p.has_any_active_contact() as usize));
+    let heavy = touching.max(4 * r.bodies.len());
+    state + (heavy * 3 * pair + (all - touching) * 2 * size_of::<ContactPair>()) as u128
+}
+
 /// A contact point of `restitution`: its bodies (dynamic ones), where it acts on each, its
 /// normal (from body 1 to 2), its inverse effective mass, the speed it is to part at (an
 /// impact), the impulse Newton's pass has given and the least it may give (less the step's
@@ -602,7 +725,8 @@ fn restitution(r: &mut Rapier, found: &[Impact], h: Real) {
         let Some(m) = pair.solver_manifolds().iter().find(|m| m.data.user_data == f.tag) else {
             continue;
         };
-        let Some(sc) = m.data.solver_contacts.iter().find(|sc| (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize == f.id) else {
+        let Some(sc) = m.data.solver_contacts.iter().find(|sc| (sc.contact_id[0] & !NEW_CONTACT_BIT) as usize == f.id)
+        else {
             continue;
         };
         let j = m.points.get(f.id).map_or(0.0, |p| p.data.impulse);
@@ -919,21 +1043,59 @@ impl System for Bodies {
                         format!("the bodies have no field {name:?} to read (valid: {})", READABLE.join(", ")),
                     ));
                 }
-                Ok((0..self.handles.len()).map(|i| get_one(self.body(i), name)).collect())
+                let n = self.handles.len();
+                Need::fields(&[name], n, "rigid bodies").collect((0..n).map(|i| get_one(self.body(i), name)))
             })
             .collect()
     }
+    /// A copy of rapier's state. Its clone allocates infallibly (a refusal aborted the process),
+    /// so the copy and the step it guards are first asked of the allocator (`state_bytes`,
+    /// `step_bytes`): too little memory is an `Error::OutOfMemory` named "step".
     fn snapshot(&self) -> Result<Snapshot> {
+        let copy = state_bytes(&self.d.r);
+        let bytes = copy + step_bytes(&self.d.r, copy);
+        let of = format!("a checkpoint of {} rigid bodies and their step", count(self.handles.len() as u128));
+        Need::new("step", bytes, of).room(bytes)?;
         Ok(Box::new(self.d.clone()))
     }
-    fn save(&self) -> Arrays {
-        let bytes = super::sealed(bincode::serialize(&self.d).expect("rapier's state serialises"));
-        vec![("state".to_string(), pack(&bytes)), ("bytes".to_string(), vec![bytes.len() as Real])]
+    /// The state as bincode bytes, sealed (`super::seal`) and packed 6 to a real: its size is
+    /// counted first (`serialized_size`, which allocates nothing) and each buffer reserved
+    /// fallibly, so too little memory is an `Error::OutOfMemory` named "save", not an abort.
+    fn save(&self) -> Result<Arrays> {
+        // Serialising rapier's types allocates temporaries of its own, infallibly (20 MB aborted
+        // a save of 100,000 touching balls under a cap): a quarter of the state's copy is asked
+        // for them first.
+        let temporaries = state_bytes(&self.d.r) / 4;
+        let of = format!("the solver state of {} rigid bodies", count(self.handles.len() as u128));
+        Need::new("save", temporaries, &of).room(temporaries)?;
+        let size = bincode::serialized_size(&self.d).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
+        let len = super::SEALED + size as usize;
+        let bytes = len as u128 * 7 / 3 + temporaries;
+        let need = Need::new("save", bytes, format!("{of} ({} bytes, packed)", count(len as u128)));
+        need.room(bytes)?;
+        let mut bytes = Vec::new();
+        need.reserve(&mut bytes, len)?;
+        bytes.resize(super::SEALED, 0);
+        bincode::serialize_into(&mut bytes, &self.d).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
+        super::seal(&mut bytes);
+        let packed = pack(&bytes, &need)?;
+        Ok(vec![("state".to_string(), packed), ("bytes".to_string(), vec![bytes.len() as Real])])
     }
+    /// Reads a saved state: the packed bytes, then rapier's state from them, each asked of the
+    /// allocator first (the state in memory is taken as three times its bytes: what bincode's
+    /// growing lists may hold at their peak); too little memory is an `Error::OutOfMemory`
+    /// named "load", and nothing changes.
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let len = array(arrays, "bytes", Some(1))?[0];
         let packed = array(arrays, "state", None)?;
-        let bytes = unpack(packed, len).ok_or_else(|| invalid("state", "is not a packed bodies state"))?;
+        let total = 4 * packed.len() as u128 * 6;
+        let need = Need::new(
+            "load",
+            total,
+            format!("the rigid bodies' solver state ({} bytes)", count(packed.len() as u128 * 6)),
+        );
+        need.room(total)?;
+        let bytes = unpack(packed, len, &need)?.ok_or_else(|| invalid("state", "is not a packed bodies state"))?;
         let d: Dynamic = bincode::deserialize(super::unsealed(&bytes)?)
             .map_err(|e| invalid("state", format!("cannot be read: {e}")))?;
         if d.parts < self.d.parts {

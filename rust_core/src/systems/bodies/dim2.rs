@@ -1,12 +1,15 @@
 //! The rigid bodies of a 2D world (`rapier2d-f64`): what differs from 3D, then the system
 //! itself (`common.rs`, shared with `dim3`).
 use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
-use rapier2d_f64::geometry::NEW_CONTACT_BIT;
+use rapier2d_f64::geometry::{
+    ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
+};
 use rapier2d_f64::parry::bounding_volume::BoundingVolume;
 use rapier2d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -76,13 +79,20 @@ fn sized_shape(shape: &str, s: &[Real]) -> ColliderBuilder {
 /// A polygon group's one shape: the convex hull of its `vertices` (K·2 values, `n_vertices`);
 /// a polyline group's: the chain of segments through them, for fixed bodies only (a chain of
 /// segments has no area, so no mass: ground profiles, ramps, a bowl's section).
+/// What building a shape of `k` vertices needs, checked to be there (parry allocates
+/// infallibly): the points, and a hull's or a polyline's working lists, taken as 256 bytes a
+/// vertex.
+fn shape_need(k: usize) -> Need {
+    Need::new("add_bodies", k as u128 * 256, format!("a shape of {} vertices", count(k as u128)))
+}
+
 fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<ColliderBuilder>> {
     if shape != "polygon" && shape != "polyline" {
         return Ok(None);
     }
     let k = p.count("n_vertices", 1 << 20)?;
     let v = take_len(p, "vertices", 2 * k)?;
-    let hull: Vec<Vector> = v.chunks_exact(2).map(vector).collect();
+    let hull = shape_need(k).collect(v.chunks_exact(2).map(vector))?;
     if shape == "polyline" {
         if kind != "fixed" {
             return Err(invalid("kind", "a polyline has no area and so no mass: make it kind=\"fixed\""));
@@ -94,12 +104,14 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
             return Err(invalid("vertices", format!("vertices {} and {j} coincide (a segment of no length)", j - 1)));
         }
         resolvable(&v, 2)?;
+        shape_need(k).room(k as u128 * 256)?;
         return built("vertices", || Ok(ColliderBuilder::polyline(hull, None))).map(Some);
     }
     if hull.len() < 3 {
         return Err(invalid("vertices", "a polygon needs at least 3 vertices"));
     }
     resolvable(&v, 2)?;
+    shape_need(k).room(k as u128 * 256)?;
     built("vertices", || {
         ColliderBuilder::convex_hull(&hull).ok_or_else(|| "their convex hull is degenerate (all on one line)".into())
     })

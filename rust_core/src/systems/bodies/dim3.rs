@@ -2,12 +2,15 @@
 //! itself (`common.rs`, shared with `dim2`). Orientations are unit quaternions stored scalar
 //! last, (x, y, z, w), as scipy's `Rotation.from_quat` reads them.
 use super::{built, finite_all, pack, particle_kinetic, resolvable, take_len, unpack};
+use crate::alloc::{count, Need};
 use crate::error::{invalid, Failure, Result};
 use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, System};
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
-use rapier3d_f64::geometry::NEW_CONTACT_BIT;
+use rapier3d_f64::geometry::{
+    ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
+};
 use rapier3d_f64::parry::bounding_volume::BoundingVolume;
 use rapier3d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -92,18 +95,27 @@ fn sized_shape(shape: &str, s: &[Real]) -> ColliderBuilder {
 /// A hull or mesh group's one shape: the convex hull of its `vertices` (K·3 values,
 /// `n_vertices`), or the triangle mesh of `vertices` and `triangles` (T·3 indices,
 /// `n_triangles`), for fixed bodies only (a mesh has no volume, so no mass).
+/// What building a shape of `k` vertices and `t` triangles needs, checked to be there (parry
+/// allocates infallibly): the points, and a hull's working lists or a mesh's tree, taken as
+/// 2 kB a vertex and triangle (a hull of 50,000 vertices on a sphere peaked at 1.3 kB a vertex).
+fn shape_need(k: usize, t: usize) -> Need {
+    let of = format!("a shape of {} vertices and {} triangles", count(k as u128), count(t as u128));
+    Need::new("add_bodies", (k + t) as u128 * 2048, of)
+}
+
 fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<ColliderBuilder>> {
     if shape != "hull" && shape != "mesh" {
         return Ok(None);
     }
     let k = p.count("n_vertices", 1 << 20)?;
     let v = take_len(p, "vertices", 3 * k)?;
-    let points: Vec<Vector> = v.chunks_exact(3).map(vector).collect();
+    let points = shape_need(k, 0).collect(v.chunks_exact(3).map(vector))?;
     if shape == "hull" {
         if points.len() < 4 {
             return Err(invalid("vertices", "a hull needs at least 4 vertices"));
         }
         resolvable(&v, 3)?;
+        shape_need(k, 0).room(k as u128 * 2048)?;
         return built("vertices", || {
             ColliderBuilder::convex_hull(&points)
                 .ok_or_else(|| "their convex hull is degenerate (all on one plane)".into())
@@ -121,8 +133,9 @@ fn listed_shape(shape: &str, kind: &str, p: &mut Params) -> Result<Option<Collid
     if let Some(j) = idx.iter().position(|&i| i.fract() != 0.0 || i < 0.0 || i >= k as Real) {
         return Err(invalid("triangles", format!("entry {j} ({}) is not a vertex index (0..{k})", idx[j])));
     }
-    let tris: Vec<[u32; 3]> = idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]).collect();
+    let tris = shape_need(k, t).collect(idx.chunks_exact(3).map(|c| [c[0] as u32, c[1] as u32, c[2] as u32]))?;
     resolvable(&v, 3)?;
+    shape_need(k, t).room((k + t) as u128 * 2048)?;
     built("triangles", || ColliderBuilder::trimesh(points, tris).map_err(|e| format!("do not make a mesh: {e}")))
         .map(Some)
 }

@@ -23,12 +23,14 @@
 pub mod dim2;
 pub mod dim3;
 
-pub use dim2::{Bodies as Bodies2, BodyContacts as BodyContacts2};
-pub use dim3::{Bodies as Bodies3, BodyContacts as BodyContacts3};
+pub use dim2::{Bodies as Bodies2, BodyContacts as BodyContacts2, Group as Group2};
+pub use dim3::{Bodies as Bodies3, BodyContacts as BodyContacts3, Group as Group3};
 
-use crate::error::{invalid, Result};
+use crate::alloc::Need;
+use crate::error::{invalid, Error, Result};
 use crate::terms::registry::Params;
 use crate::vector::{Real, Vector as PVector};
+use std::sync::atomic::{AtomicBool, Ordering};
 
 fn finite_all(key: &str, v: &[Real]) -> Result<()> {
     match v.iter().position(|x| !x.is_finite()) {
@@ -78,17 +80,46 @@ fn built<T>(key: &str, build: impl FnOnce() -> std::result::Result<T, String>) -
     }
 }
 
+/// `job()` on a thread of its own while this one watches `stop` (every 10 ms): once it is set,
+/// `Error::Interrupted` is returned at once and the job is left to finish unseen (it owns what
+/// it reads; its result is dropped). parry's hull of 200,000 vertices takes seconds and has no
+/// way to be stopped inside. Where no thread can start (a limit on threads, or no memory for its
+/// stack) the job runs here, to its end.
+fn off_thread<T: Send + 'static>(stop: &AtomicBool, job: impl FnOnce() -> T + Send + 'static) -> Result<T> {
+    use std::sync::mpsc::{channel, RecvTimeoutError};
+    use std::sync::{Arc, Mutex};
+    let slot = Arc::new(Mutex::new(Some(job)));
+    let (theirs, (tx, rx)) = (slot.clone(), channel());
+    let started = std::thread::Builder::new().name("physcore-shape".into()).stack_size(8 << 20).spawn(move || {
+        if let Some(job) = theirs.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            let _ = tx.send(job());
+        }
+    });
+    if started.is_err() {
+        let job = slot.lock().unwrap_or_else(|p| p.into_inner()).take().expect("the thread never started");
+        return Ok(job());
+    }
+    loop {
+        match rx.recv_timeout(std::time::Duration::from_millis(10)) {
+            Ok(value) => return Ok(value),
+            Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
+                return Err(Error::Interrupted { rolled_back_to: 0 })
+            }
+            Err(RecvTimeoutError::Timeout) => {}
+            Err(RecvTimeoutError::Disconnected) => return Err(invalid("vertices", "the shape builder failed on them")),
+        }
+    }
+}
+
 /// Bytes packed 6 to a real (each an integer below 2⁴⁸, exact and finite), so that rapier's
 /// serialised state travels in the scene file's arrays of reals.
-fn pack(bytes: &[u8]) -> Vec<Real> {
-    bytes
-        .chunks(6)
-        .map(|c| {
-            let mut w = [0u8; 8];
-            w[..c.len()].copy_from_slice(c);
-            u64::from_le_bytes(w) as Real
-        })
-        .collect()
+/// Allocated fallibly (`need`).
+fn pack(bytes: &[u8], need: &Need) -> Result<Vec<Real>> {
+    need.collect(bytes.chunks(6).map(|c| {
+        let mut w = [0u8; 8];
+        w[..c.len()].copy_from_slice(c);
+        u64::from_le_bytes(w) as Real
+    }))
 }
 
 /// What a saved bodies state starts with: this tag, then the FNV-1a digest (64 bit, little
@@ -103,13 +134,15 @@ fn fnv1a(bytes: &[u8]) -> u64 {
     bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3))
 }
 
-/// `bytes` behind the tag and their digest.
-fn sealed(bytes: Vec<u8>) -> Vec<u8> {
-    let mut out = Vec::with_capacity(bytes.len() + 16);
-    out.extend_from_slice(SEAL);
-    out.extend_from_slice(&fnv1a(&bytes).to_le_bytes());
-    out.extend_from_slice(&bytes);
-    out
+/// The length of the tag and the digest before the bytes of a sealed state.
+const SEALED: usize = 16;
+
+/// Seals the bytes after the first `SEALED` of `bytes` (written in place, so that a large state
+/// is never copied): the tag, then their digest, go in front.
+fn seal(bytes: &mut [u8]) {
+    let digest = fnv1a(&bytes[SEALED..]);
+    bytes[..8].copy_from_slice(SEAL);
+    bytes[8..SEALED].copy_from_slice(&digest.to_le_bytes());
 }
 
 /// The bytes a sealed state carries, once their digest is checked. Bytes whose first eight
@@ -130,19 +163,21 @@ fn unsealed(bytes: &[u8]) -> Result<&[u8]> {
     Ok(body)
 }
 
-fn unpack(packed: &[Real], len: Real) -> Option<Vec<u8>> {
+/// The bytes `pack` packed (`None`: not such reals), allocated fallibly (`need`).
+fn unpack(packed: &[Real], len: Real, need: &Need) -> Result<Option<Vec<u8>>> {
     if !(len >= 0.0 && len.fract() == 0.0 && len as usize <= packed.len() * 6 && len as usize + 6 > packed.len() * 6) {
-        return None;
+        return Ok(None);
     }
-    let mut out = Vec::with_capacity(packed.len() * 6);
+    let mut out = Vec::new();
+    need.reserve(&mut out, packed.len() * 6)?;
     for &w in packed {
         if !(0.0..281_474_976_710_656.0).contains(&w) || w.fract() != 0.0 {
-            return None;
+            return Ok(None);
         }
         out.extend_from_slice(&(w as u64).to_le_bytes()[..6]);
     }
     out.truncate(len as usize);
-    Some(out)
+    Ok(Some(out))
 }
 
 fn particle_kinetic<V: PVector>(v: &[V], mass: &[Real], inv_mass: &[Real]) -> Real {
@@ -160,12 +195,13 @@ mod tests {
     use super::*;
     use crate::systems::System;
     use crate::terms::registry::Value;
-    use std::sync::atomic::AtomicBool;
 
     #[test]
     fn a_sealed_state_refuses_every_flipped_bit_and_an_unsealed_one_reads_as_it_is() {
         let body: Vec<u8> = (0..200u32).map(|i| (i * 7 + 3) as u8).collect();
-        let s = sealed(body.clone());
+        let mut s = vec![0u8; SEALED];
+        s.extend_from_slice(&body);
+        seal(&mut s);
         assert_eq!(unsealed(&s).unwrap(), &body[..]);
         for bit in 0..s.len() * 8 {
             let mut f = s.clone();
@@ -195,13 +231,24 @@ mod tests {
     }
 
     #[test]
+    fn a_stop_is_answered_within_its_poll_while_the_job_runs_on() {
+        let stop = AtomicBool::new(true);
+        let t = std::time::Instant::now();
+        let r = off_thread(&stop, || std::thread::sleep(std::time::Duration::from_secs(2)));
+        assert!(matches!(r, Err(Error::Interrupted { .. })), "{r:?}");
+        assert!(t.elapsed().as_secs_f64() < 0.5, "{:?}", t.elapsed());
+        assert_eq!(off_thread(&AtomicBool::new(false), || 7).unwrap(), 7);
+    }
+
+    #[test]
     fn bytes_pack_into_reals_and_back() {
         let bytes: Vec<u8> = (0..=255u8).chain(0..7).collect();
-        let packed = pack(&bytes);
+        let need = Need::new("save", 0, "");
+        let packed = pack(&bytes, &need).unwrap();
         assert!(packed.iter().all(|w| w.is_finite() && w.fract() == 0.0));
-        assert_eq!(unpack(&packed, bytes.len() as Real).unwrap(), bytes);
-        assert!(unpack(&packed, (bytes.len() + 100) as Real).is_none());
-        assert!(unpack(&[0.5], 1.0).is_none());
+        assert_eq!(unpack(&packed, bytes.len() as Real, &need).unwrap().unwrap(), bytes);
+        assert!(unpack(&packed, (bytes.len() + 100) as Real, &need).unwrap().is_none());
+        assert!(unpack(&[0.5], 1.0, &need).unwrap().is_none());
     }
 
     #[test]
