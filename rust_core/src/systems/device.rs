@@ -327,19 +327,17 @@ impl System for DeviceParticles {
         // A lost device cannot be restored: its next read reports the failure.
         let _ = self.lock().restore();
     }
-    fn save(&self) -> Arrays {
+    fn save(&self) -> Result<Arrays> {
         // Raw device rows (vec4: position and mass, velocity and 1/mass, acceleration, drag
         // books) and whether the accelerations are current: a restart repeats bit for bit.
-        match self.lock().save_raw() {
-            Ok(([pos, vel, acc, aux], valid)) => vec![
-                ("pos".into(), pos),
-                ("vel".into(), vel),
-                ("acc".into(), acc),
-                ("aux".into(), aux),
-                ("acc_valid".into(), vec![valid as u8 as Real]),
-            ],
-            Err(_) => Vec::new(),
-        }
+        let ([pos, vel, acc, aux], valid) = self.lock().save_raw()?;
+        Ok(vec![
+            ("pos".into(), pos),
+            ("vel".into(), vel),
+            ("acc".into(), acc),
+            ("aux".into(), aux),
+            ("acc_valid".into(), vec![valid as u8 as Real]),
+        ])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.lock().len();
@@ -469,7 +467,7 @@ mod tests {
         let mut a = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms()).unwrap();
         let no = AtomicBool::new(false);
         a.steps(10, 1e-3, &no).unwrap();
-        let saved = a.save();
+        let saved = a.save().unwrap();
         a.steps(10, 1e-3, &no).unwrap();
         let mut b = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms()).unwrap();
         b.load(&saved).unwrap();
