@@ -208,7 +208,7 @@ fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result
                     ));
                 }
                 if let Some(s) = (0..m)
-                    .find(|&s| !(k[s] >= 0.0 && c[s] >= 0.0 && rest[s] >= 0.0) || !(k[s] + c[s] + rest[s]).is_finite())
+                    .find(|&s| !(k[s] >= 0.0 && c[s] >= 0.0 && rest[s] >= 0.0 && (k[s] + c[s] + rest[s]).is_finite()))
                 {
                     return Err(invalid(
                         name,
