@@ -238,7 +238,7 @@ impl Particles {
         if !rows.is_empty() {
             p.upload(&p._springs[2], &rows);
         }
-        p.write(x, v, Some((mass, inv_mass)))?;
+        p.write(x, v, mass, inv_mass);
         let zero = vec![0u8; size as usize];
         p.gpu.queue.write_buffer(&p._vp, 0, &zero);
         p.gpu.queue.write_buffer(&p.live.aux, 0, &zero);
@@ -263,16 +263,9 @@ impl Particles {
         self.forces
     }
 
-    /// Overwrites positions and velocities (flat, n·dim), and masses when given.
-    pub fn write(&mut self, x: &[f64], v: &[f64], masses: Option<(&[f64], &[f64])>) -> Result<()> {
+    /// Writes positions and velocities (flat, n·dim) with the masses and 1/masses.
+    fn write(&mut self, x: &[f64], v: &[f64], m: &[f64], im: &[f64]) {
         assert!(x.len() == self.n * self.dim && v.len() == self.n * self.dim, "ragged particle arrays");
-        let (m, im) = match masses {
-            Some(m) => (m.0.to_vec(), m.1.to_vec()),
-            None => {
-                let (px, pv) = self.read_raw()?;
-                ((0..self.n).map(|i| px[4 * i + 3]).collect(), (0..self.n).map(|i| pv[4 * i + 3]).collect())
-            }
-        };
         let pack = |a: &[f64], w: &[f64]| {
             let mut out = vec![0.0; 4 * self.n];
             for i in 0..self.n {
@@ -281,10 +274,9 @@ impl Particles {
             }
             out
         };
-        self.upload(&self.live.pos, &pack(x, &m));
-        self.upload(&self.live.vel, &pack(v, &im));
+        self.upload(&self.live.pos, &pack(x, m));
+        self.upload(&self.live.vel, &pack(v, im));
         self.acc_valid = false;
-        Ok(())
     }
 
     fn upload(&self, b: &wgpu::Buffer, data: &[f64]) {
@@ -319,6 +311,18 @@ impl Particles {
 
     fn velocity_dependent(&self) -> bool {
         self.velocity_dependent
+    }
+
+    /// Submits one dispatch of `pipe` over the particles.
+    fn submit_one(&self, pipe: &wgpu::ComputePipeline) {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_bind_group(0, &self.bind, &[]);
+            pass.set_pipeline(pipe);
+            pass.dispatch_workgroups(self.groups(), 1, 1);
+        }
+        self.gpu.queue.submit([enc.finish()]);
     }
 
     /// Records `steps` steps into one submission (the parameters already written).
@@ -366,14 +370,7 @@ impl Particles {
         if vv && !self.acc_valid {
             // The first force evaluation of velocity Verlet: books nothing.
             self.write_params(dt, 0.0, 0.0, 0.0, 0.0, false);
-            let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                pass.set_bind_group(0, &self.bind, &[]);
-                pass.set_pipeline(&self.pipes.forces);
-                pass.dispatch_workgroups(self.groups(), 1, 1);
-            }
-            self.gpu.queue.submit([enc.finish()]);
+            self.submit_one(&self.pipes.forces);
             self.acc_valid = true;
         }
         match self.scheme {
@@ -452,26 +449,11 @@ impl Particles {
         Ok((unpack(&x), unpack(&v)))
     }
 
-    /// Masses and 1/masses (0: pinned), as stored on the device.
-    pub fn masses(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        let (x, v) = self.read_raw()?;
-        Ok(((0..self.n).map(|i| x[4 * i + 3]).collect(), (0..self.n).map(|i| v[4 * i + 3]).collect()))
-    }
-
     /// The energy books (reduced on the host in particle order).
     pub fn books(&self) -> Result<Books> {
-        let vv = self.scheme == Scheme::VelocityVerlet;
         self.write_params(0.0, 0.0, 0.0, 0.0, 0.0, false);
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_bind_group(0, &self.bind, &[]);
-            pass.set_pipeline(&self.pipes.energy);
-            pass.dispatch_workgroups(self.groups(), 1, 1);
-        }
-        self.gpu.queue.submit([enc.finish()]);
+        self.submit_one(&self.pipes.energy);
         let e = self.read_rows(&self.books, 2 * self.n)?;
-        let _ = vv;
         let mut b = Books::default();
         for r in e.chunks_exact(8).take(self.n) {
             b.kinetic += r[0];

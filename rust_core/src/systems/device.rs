@@ -295,29 +295,27 @@ impl System for DeviceParticles {
         r
     }
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
-        let (x, v) = self.read()?;
-        let d = self.dim;
-        names
+        // Masses and pins are kept on the host: read the device back only for the state.
+        let state = names.iter().any(|n| !matches!(*n, "mass" | "pinned"));
+        let (x, v) = if state { self.read()? } else { (Vec::new(), Vec::new()) };
+        let (d, n) = (self.dim, self.mass.len());
+        Ok(names
             .iter()
             .map(|name| {
-                if *name == "mass" {
-                    return Ok(self.mass.clone());
-                }
-                if *name == "pinned" {
-                    return Ok(self.pinned.iter().map(|&p| p as u8 as Real).collect());
-                }
                 let (a, k) = match *name {
+                    "mass" => return self.mass.clone(),
+                    "pinned" => return self.pinned.iter().map(|&p| p as u8 as Real).collect(),
                     "x" => (&x, 0),
                     "y" => (&x, 1),
                     "z" if d == 3 => (&x, 2),
                     "vx" => (&v, 0),
                     "vy" => (&v, 1),
                     "vz" if d == 3 => (&v, 2),
-                    _ => return Ok(vec![0.0; x.len() / d]),
+                    _ => return vec![0.0; n],
                 };
-                Ok(a.chunks_exact(d).map(|c| c[k]).collect())
+                a.chunks_exact(d).map(|c| c[k]).collect()
             })
-            .collect()
+            .collect())
     }
     fn snapshot(&self) -> Result<Snapshot> {
         self.lock().snapshot()?;
