@@ -13,6 +13,13 @@ A file is rewritten only when its text changes, so an unchanged scene does not m
 its page again; pages of scenes no longer in the registry are removed. The folder is generated
 (ignored by git): edit this file or the scene's docstring, never a page.
 
+Every 3D scene's page also embeds its HTML player (issue 67: :func:`physcore.render.html`,
+three.js; drag to turn): an ``<iframe>`` of ``_players/<name>.html``, which ``build-finished``
+writes into the build (not into ``docs/``) by recording the scene when it builds the site, with
+the player's scripts once in ``_players/`` for all of them (:data:`PLAYER_BUDGET` says how big a
+page may be, :data:`PLAYER_PARAMS` what a page changes of a scene). A player already in the
+build folder is kept unless ``PHYSCORE_DOCS_RERUN=1`` (as for the examples).
+
 The executed examples (issue 47, item 2): sphinx-gallery runs ``examples/plot_*.py`` into
 ``gallery_pages/examples/`` (``sphinx_gallery_conf["gallery_dirs"]`` in docs/conf.py, connected
 before this extension so that its pages exist when these are written); when that folder's
@@ -22,14 +29,32 @@ scene page links to ``examples/plot_<name>`` when that page exists. Nothing here
 from __future__ import annotations
 
 import inspect
+import math
+import os
 import re
 import textwrap
+import time
 from pathlib import Path
 
 from numpydoc.docscrape_sphinx import SphinxFunctionDoc
 
 OUT = "gallery_pages"  # relative to the source folder (docs/)
 THUMBS = "gallery"  # docs/gallery/<name>.gif
+PLAYERS = "_players"  # <build>/_players/<name>.html and the scripts they share
+#: Most bytes of a player's recording (its glTF; the page holds 4/3 of it, base64): a scene
+#: whose recording at its defaults would be larger keeps every k-th frame (the same simulated
+#: time; the player interpolates between frames).
+PLAYER_BUDGET = 2_000_000
+#: What a scene's player changes of its parameters, and why (said on its page).
+PLAYER_PARAMS = {"galaxies": ({"n": 2000}, "2 000 stars of the GIF's 10 000, to stay small")}
+
+
+def is_3d(fn) -> bool:
+    """Whether a scene function builds a 3D scene (one with a 3D camera ``view`` in its
+    defaults, built to be sure: 2D scenes are not built)."""
+    if "view" not in (getattr(fn, "render_defaults", {}) or {}):
+        return False
+    return int(getattr(fn(**PLAYER_PARAMS.get(fn.__name__, ({}, ""))[0]), "dim", 0)) == 3
 
 
 def scene_order(registry: dict, readme: Path) -> list[str]:
@@ -59,7 +84,7 @@ def _param_descriptions(doc: SphinxFunctionDoc) -> dict[str, str]:
     return out
 
 
-def scene_page(name: str, fn, examples: bool = False) -> str:
+def scene_page(name: str, fn, examples: bool = False, player: bool = False) -> str:
     """The reStructuredText of one scene's gallery page."""
     doc = SphinxFunctionDoc(fn, config={"show_class_members": False})
     described = _param_descriptions(doc)
@@ -95,6 +120,28 @@ def scene_page(name: str, fn, examples: bool = False) -> str:
         f'   pc.render.gif(pc.scenes.{name}(), "{name}.gif")',
         "",
     ]
+    if player:
+        params, why = PLAYER_PARAMS.get(name, ({}, ""))
+        args = ", ".join(f"{k}={v!r}" for k, v in params.items())
+        lines += [
+            "In 3D",
+            "-----",
+            "",
+            "The same motion in a browser (:func:`physcore.render.html`, three.js): drag to turn the "
+            "camera, the wheel to zoom, a right drag to pan; play/pause and the time slider below it."
+            + (f" This page's recording has {why} (``{name}({args})``)." if why else ""),
+            "",
+            ".. raw:: html",
+            "",
+            f'   <iframe class="pc-player" src="../{PLAYERS}/{name}.html" title="{name} in 3D" loading="lazy"></iframe>',
+            "",
+            "The page on its own (a file that plays offline):",
+            "",
+            ".. code-block:: python",
+            "",
+            f'   pc.render.html(pc.scenes.{name}({args}), "{name}.html")',
+            "",
+        ]
     if examples:
         lines += [f"A runnable example: :doc:`examples/plot_{name}`.", ""]
     # The signature's parameters; their meanings from a numpydoc Parameters section where the
@@ -195,7 +242,7 @@ def write_pages(srcdir: Path) -> list[Path]:
             raise FileNotFoundError(f"gallery: no thumbnail for scene {name!r}: {missing[0]}")
         has_example = (out / "examples" / f"plot_{name}.rst").exists()
         page = out / f"{name}.rst"
-        _write(page, scene_page(name, registry[name], examples=has_example))
+        _write(page, scene_page(name, registry[name], examples=has_example, player=name in players(registry)))
         pages.append(page)
     index = out / "index.rst"
     _write(index, index_page(order, registry, examples=examples))
@@ -205,11 +252,77 @@ def write_pages(srcdir: Path) -> list[Path]:
     return pages
 
 
+_PLAYERS_3D: dict[int, list[str]] = {}
+
+
+def players(registry: dict) -> list[str]:
+    """The scenes whose pages embed a player: the 3D ones, in the registry's order."""
+    key = id(registry)
+    if key not in _PLAYERS_3D:
+        _PLAYERS_3D[key] = [name for name, fn in registry.items() if is_3d(fn)]
+    return _PLAYERS_3D[key]
+
+
+def player_options(name: str, fn) -> dict:
+    """The recording options of a scene's player: its defaults, every k-th frame kept when a
+    frame of the scene's glTF (measured from recordings of 2 and 3 frames) times its frames
+    would pass :data:`PLAYER_BUDGET`."""
+    from physcore.render._html import player_text
+
+    params = PLAYER_PARAMS.get(name, ({}, ""))[0]
+    d = getattr(fn, "render_defaults", {}) or {}
+    frames = int(d.get("frames", 90))
+    per_frame = (len(player_text(fn(**params), frames=3)) - len(player_text(fn(**params), frames=2))) * 3 / 4
+    k = max(1, math.ceil(frames * per_frame / PLAYER_BUDGET))
+    if k == 1:
+        return {}
+    opts = {"frames": (frames - 1) // k + 1, "fps": float(d.get("fps", 30)) / k}
+    if "steps_per_frame" in d:
+        opts["steps_per_frame"] = int(d["steps_per_frame"]) * k
+    else:
+        opts["frame_time"] = float(d["frame_time"]) * k
+    return opts
+
+
+def write_players(outdir: Path, registry: dict, rerun: bool = False, log=print) -> list[Path]:
+    """Write ``outdir/_players/<name>.html`` for every 3D scene (kept when there unless `rerun`)
+    and the scripts they share; return the pages."""
+    from physcore.render._html import player_text, write_scripts
+
+    folder = outdir / PLAYERS
+    write_scripts(folder)
+    pages = []
+    for name in players(registry):
+        path = folder / f"{name}.html"
+        if rerun or not path.exists():
+            fn = registry[name]
+            t0 = time.perf_counter()
+            opts = player_options(name, fn)
+            text = player_text(fn(**PLAYER_PARAMS.get(name, ({}, ""))[0]), title=name, scripts_at="", **opts)
+            path.write_text(text)
+            log(f"physcore gallery: the {name} player, {len(text) / 1e6:.2f} MB ({opts or 'defaults'}), "
+                f"{time.perf_counter() - t0:.1f} s")
+        pages.append(path)
+    return pages
+
+
 def _builder_inited(app) -> None:
     write_pages(Path(app.srcdir))
 
 
+def _build_finished(app, exception) -> None:
+    if exception is not None or app.builder.format != "html":
+        return
+    from sphinx.util import logging
+
+    import physcore.scenes
+
+    rerun = os.environ.get("PHYSCORE_DOCS_RERUN", "") not in ("", "0")
+    write_players(Path(app.outdir), physcore.scenes.REGISTRY, rerun=rerun, log=logging.getLogger(__name__).info)
+
+
 def setup(app):
     app.connect("builder-inited", _builder_inited)
+    app.connect("build-finished", _build_finished)
     app.add_css_file("gallery.css")
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

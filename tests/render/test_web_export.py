@@ -399,3 +399,19 @@ def test_the_files_camera_sees_the_whole_scene(recorded, name):
     assert np.all(np.abs(rel[:, 0]) <= tan * cam.perspective.aspectRatio * -rel[:, 2] + 1e-9)
     centre = (0.5 * (lo + hi) - eye) @ axes.T
     np.testing.assert_allclose(centre[:2], 0.0, atol=1e-9 * max(1.0, np.abs(eye).max()))
+
+
+def test_a_few_escaping_particles_do_not_shrink_the_cloud(tmp_path):
+    """Of a cloud of particles (galaxies, a splash) the bounds players fit hold the first frame
+    and 99 % of every frame's positions: one particle flung 100 m away leaves them the cloud's."""
+    rng = np.random.default_rng(1)
+    s = pc.Scene(dim=3, integrator="verlet", dt=0.01)
+    x = rng.uniform(-1.0, 1.0, size=(600, 3))
+    v = np.zeros_like(x)
+    v[0] = (1000.0, 0.0, 0.0)  # 10 m a step: 100 m away at the last frame
+    s.add_particles(x, v)
+    path = pc.render.gltf(s, tmp_path / "cloud.glb", frames=3, steps_per_frame=5)
+    g, _ = _load(path)
+    lo, hi = (np.asarray(b) for b in g.scenes[0].extras["physcore"]["bounds"])
+    assert np.all(hi - lo < 2.5), (lo, hi)  # the cloud (2 m across, the origin its centroid)
+    assert np.all(hi - lo > 1.9), (lo, hi)  # all of it at the first frame

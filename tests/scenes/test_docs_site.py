@@ -14,6 +14,7 @@ import sys
 import zlib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import physcore as pc
@@ -75,6 +76,34 @@ def test_every_scene_has_a_gallery_page_with_its_gif(site):
         assert gif.read_bytes() == (DOCS / "gallery" / f"{name}.gif").read_bytes(), name
         # The index shows its thumbnail and links to its page.
         assert f'href="{name}.html"' in index and f'src="../_images/{name}.gif"' in index, name
+
+
+#: The 3D scenes of the gallery, whose pages embed an HTML player (issue 67).
+PLAYERS = ["cloth", "galaxies", "lorenz", "xpbd_cloth", "cloth_on_ball", "tablecloth"]
+
+
+@pytest.mark.slow
+def test_every_3d_scene_page_embeds_its_player(site):
+    """A 3D scene's page holds an <iframe> of its player, built into _players/ with the scripts
+    the players share (three.js and its licence once); each page under 3 MB; 2D pages have none."""
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        import physcore_gallery
+    finally:
+        sys.path.remove(str(DOCS / "_ext"))
+    assert physcore_gallery.players(pc.scenes.REGISTRY) == PLAYERS
+    for name in pc.scenes.REGISTRY:
+        source = (site / "gallery_pages" / f"{name}.html").read_text()
+        embedded = f'src="../_players/{name}.html"' in source
+        assert embedded == (name in PLAYERS), name
+    for script in ("three.min.js", "OrbitControls.min.js", "GLTFLoader.min.js", "_player.js", "LICENSE-three.js"):
+        assert (site / "_players" / script).stat().st_size > 0, script
+    assert "MIT" in (site / "_players" / "LICENSE-three.js").read_text()
+    for name in PLAYERS:
+        player = site / "_players" / f"{name}.html"
+        text = player.read_text()
+        assert '<script src="three.min.js"></script>' in text and 'id="physcore-glb"' in text, name
+        assert player.stat().st_size < 3_000_000, (name, player.stat().st_size)
 
 
 @pytest.mark.slow
@@ -191,12 +220,26 @@ def _browser():
     return sync_api, chromium
 
 
+def _canvas(frame) -> np.ndarray:
+    """A player's canvas (in a page or an <iframe>) as (H, W, 3) int16, after two more draws."""
+    import base64
+    import io
+
+    from PIL import Image
+
+    frame.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+    url = frame.evaluate("document.querySelector('#physcore-view canvas').toDataURL('image/png')")
+    png = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(np.int16)
+
+
 @pytest.mark.slow  # 10 s or more (tests/README.md), with the site's build
 def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
     """The index, a gallery page and an API page, served over HTTP and opened in Chromium
     (Debian's, driven by Playwright): no console error and no page error, every image of the
     gallery page loaded (its GIF: natural width > 0), and the gallery index shows every scene's
-    thumbnail. Screenshots land in the test's tmp folder."""
+    thumbnail; a 3D scene's page plays its player (it draws, a drag turns it, its frames
+    differ). Screenshots land in the test's tmp folder."""
     import functools
     import http.server
     import threading
@@ -215,8 +258,33 @@ def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
             browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
             page = browser.new_page(viewport={"width": 1200, "height": 900})
             problems: list[str] = []
-            page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
+            # Headless Chromium logs "GPU stall due to ReadPixels" for a read of the software GL's
+            # pixels (the player's canvas): no page's error.
+            page.on("console", lambda m: problems.append(f"console {m.type}: {m.text}")
+                    if m.type == "error" and "GPU stall due to ReadPixels" not in m.text else None)
             page.on("pageerror", lambda e: problems.append(f"page error: {e}"))
+            # A 3D scene's page: its player (an <iframe>) loads, draws and turns under a drag.
+            page.goto(base + "gallery_pages/cloth_on_ball.html", wait_until="load")
+            player = page.locator("iframe.pc-player")
+            player.scroll_into_view_if_needed()
+            frame = next(f for f in page.frames if f.url.endswith("_players/cloth_on_ball.html"))
+            frame.wait_for_function("window.physcore && (physcore.ready || physcore.error !== null)", timeout=30_000)
+            assert frame.evaluate("physcore.error") is None
+            frame.evaluate("physcore.pause(); physcore.setTime(0)")
+            before = _canvas(frame)
+            bg = np.asarray(frame.evaluate("physcore.background"))
+            assert (np.abs(before - bg).max(axis=2) > 24).mean() > 0.02, "the player draws next to nothing"
+            box = player.bounding_box()
+            x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 3
+            page.mouse.move(x, y)
+            page.mouse.down()
+            page.mouse.move(x + 80, y + 20, steps=4)
+            page.mouse.up()
+            after = _canvas(frame)
+            assert (np.abs(before - after).max(axis=2) > 24).mean() > 0.01, "a drag did not turn the player's camera"
+            frame.evaluate("physcore.setTime(physcore.duration)")
+            assert (np.abs(_canvas(frame) - after).max(axis=2) > 24).mean() > 0.0005, "the player's last frame is its first"
+            page.screenshot(path=str(tmp_path / "gallery_pages_cloth_on_ball.png"))
             for path in ("index.html", "gallery_pages/kepler.html", "api/generated/physcore.Scene.html", "gallery_pages/index.html",
                          "gallery_pages/examples/plot_own_scene.html", "gallery_pages/examples/plot_video.html"):
                 response = page.goto(base + path, wait_until="load")

@@ -52,6 +52,8 @@ _YFOV = math.radians(35.0)
 _WALL_RGB = (150, 150, 150)
 #: Opacity of a fluid's boundary particles (drawn half the size of the moving ones).
 _WALL_ALPHA = 0.12
+#: Particles from which the players' bounds leave out the farthest 0.5 % on each side (_bounds).
+_CLOUD = 500
 
 _GRID = ("scene: a grid scene (a field on a grid, no particles or bodies) has no glTF export; "
          "render it as a GIF or video")
@@ -234,7 +236,9 @@ def _point_size(x0: np.ndarray, radii: np.ndarray | None, diag: float) -> float:
 def _bounds(rec: Any, moving: np.ndarray | None, extent: Any) -> tuple[np.ndarray, np.ndarray]:
     """(3,) lower and upper corners (m, relative to the origin, scene axes) of what the
     recording shows over every frame: the `extent` render default if given, else its particles,
-    bodies, walls and spheres."""
+    bodies, walls and spheres. Of a cloud of particles (`_CLOUD` or more) the bounds hold the
+    first frame whole and 99 % of the positions of every frame along each axis, so that a few
+    escaping stars or drops do not shrink the rest to a speck."""
     dim = rec.positions.shape[2]
     if extent is not None:
         lo, hi = (_pad3(np.asarray(e, np.float64)[None] - rec.origin[None])[0] for e in extent)
@@ -242,7 +246,13 @@ def _bounds(rec: Any, moving: np.ndarray | None, extent: Any) -> tuple[np.ndarra
     pts = []
     if moving is not None and moving.size:
         f = moving.reshape(-1, 3)
-        pts.append(f[np.isfinite(f).all(axis=1)])
+        f = f[np.isfinite(f).all(axis=1)]
+        first = moving[0][np.isfinite(moving[0]).all(axis=1)]
+        if moving.shape[1] >= _CLOUD and len(first):
+            pts.append(np.quantile(f, [0.005, 0.995], axis=0))
+            pts.append(first)
+        else:
+            pts.append(f)
     if rec.walls is not None and len(rec.walls):
         pts.append(_pad3(np.asarray(rec.walls, np.float64)))
     tr = rec.bodies

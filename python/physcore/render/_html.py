@@ -58,13 +58,35 @@ def _script(name: str) -> str:
     return f"<script>\n{text}\n</script>"
 
 
-def page(glb: bytes, title: str, background: tuple[int, int, int]) -> str:
-    """The player's page around the binary glTF `glb`."""
+def page(glb: bytes, title: str, background: tuple[int, int, int], scripts_at: str | None = None) -> str:
+    """The player's page around the binary glTF `glb`: its scripts inlined (what :func:`html`
+    writes), or, with `scripts_at` (a relative URL prefix such as ``"../_players/"``), loaded
+    from the files :func:`write_scripts` put there, so that the pages of one site share a copy
+    of three.js (the docs' gallery)."""
     b64 = base64.b64encode(glb).decode("ascii")
     lines = "\n".join(b64[i:i + 120] for i in range(0, len(b64), 120))
     light = sum(background) > 3 * 128
+    if scripts_at is None:
+        scripts = "\n".join(_script(s) for s in _SCRIPTS)
+    else:
+        scripts = "\n".join(f'<script src="{_html_escape.escape(scripts_at + Path(s).name)}"></script>' for s in _SCRIPTS)
     return _PAGE.format(title=_html_escape.escape(title), bg="rgb({},{},{})".format(*background),
-                        fg="#222" if light else "#ddd", glb=lines, scripts="\n".join(_script(s) for s in _SCRIPTS))
+                        fg="#222" if light else "#ddd", glb=lines, scripts=scripts)
+
+
+def write_scripts(folder: str | os.PathLike) -> list[Path]:
+    """Copy the player's scripts (three.js r111 and its licence, the player) into `folder`, for
+    pages written by :func:`page` with ``scripts_at``; return the files written."""
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name in (*_SCRIPTS, "_vendor/LICENSE-three.js"):
+        data = resources.files(__package__).joinpath(name).read_bytes()
+        dest = out / Path(name).name
+        if not dest.exists() or dest.read_bytes() != data:
+            dest.write_bytes(data)
+        written.append(dest)
+    return written
 
 
 def html(
@@ -130,10 +152,23 @@ def html(
             raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")
         if "\n" in title or len(title) > 200:
             raise InvalidInputError(f"title must be one line of at most 200 characters, got {_short(title)}")
+    text = player_text(scene, frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time, substeps=substeps,
+                       fps=fps, mesh=mesh, theme=theme, view=view, title=title, progress=progress,
+                       before_simulating=lambda: _check_writable(p))
+    return atomic_write(p, lambda fh: fh.write(text), binary=False)
+
+
+def player_text(scene: Any, *, frames: Any = None, steps_per_frame: Any = None, frame_time: Any = None,
+                substeps: Any = None, fps: Any = None, mesh: Any = None, theme: Any = None, view: Any = None,
+                title: str | None = None, progress: bool = False, before_simulating: Any = None,
+                scripts_at: str | None = None) -> str:
+    """The player page's text for `scene` (options as :func:`html`'s, checked there; `title`
+    already checked): what :func:`html` writes, or with `scripts_at` a page whose scripts are
+    shared files (:func:`page`)."""
     pygltflib_module()
     rec, opts = _prepare(scene, frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time, substeps=substeps,
                          fps=fps, mesh=mesh, theme=theme, view=view, progress=progress,
-                         before_simulating=lambda: _check_writable(p))
+                         before_simulating=before_simulating or (lambda: None))
     glb = glb_bytes(rec, opts["fps"], opts["theme"], opts["view"], opts["mesh"], opts["colors"], opts["defaults"])
     d = opts["defaults"]
     if title is None:
@@ -142,5 +177,4 @@ def html(
 
     bg = d.get("background")
     bg = tuple(int(v) for v in (theme_palette(opts["theme"])[_BACKGROUND] if bg is None else bg))
-    text = page(glb, title, bg)
-    return atomic_write(p, lambda fh: fh.write(text), binary=False)
+    return page(glb, title, bg, scripts_at=scripts_at)
