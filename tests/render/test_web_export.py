@@ -415,3 +415,15 @@ def test_a_few_escaping_particles_do_not_shrink_the_cloud(tmp_path):
     lo, hi = (np.asarray(b) for b in g.scenes[0].extras["physcore"]["bounds"])
     assert np.all(hi - lo < 2.5), (lo, hi)  # the cloud (2 m across, the origin its centroid)
     assert np.all(hi - lo > 1.9), (lo, hi)  # all of it at the first frame
+
+
+def test_the_scenes_backdrop_goes_to_the_players(recorded):
+    """A scene whose look has a backdrop (the tablecloth's wall) gives players its gradient,
+    top and bottom sRGB, and their mean as the one background colour; others give none."""
+    g, _ = _load(recorded["tablecloth"][2])
+    extras = g.scenes[0].extras["physcore"]
+    top, bottom = pc.scenes.tablecloth.render_defaults["look"]["backdrop"]
+    assert extras["backdrop"] == [list(top), list(bottom)]
+    assert extras["background"] == [round((a + b) / 2) for a, b in zip(top, bottom, strict=True)]
+    g, _ = _load(recorded["cloth_on_ball"][2])
+    assert "backdrop" not in g.scenes[0].extras["physcore"]

@@ -309,6 +309,17 @@ def _camera_pose(lo: np.ndarray, hi: np.ndarray, toward: np.ndarray, aspect: flo
     return centre + dist * d, q, near, dist + 20 * reach + 1e-3
 
 
+def _backdrop(look: Any) -> tuple[tuple[int, ...], tuple[int, ...]] | None:
+    """The (top, bottom) sRGB colours of a scene's ``render_defaults`` look's backdrop (a dict or
+    a :class:`Look`), or None; players draw it as a vertical gradient behind the scene."""
+    b = look.get("backdrop") if isinstance(look, dict) else getattr(look, "backdrop", None)
+    try:
+        top, bottom = (tuple(int(v) for v in np.clip(np.asarray(c, np.float64), 0, 255)) for c in b)
+    except (TypeError, ValueError):
+        return None
+    return (top, bottom) if len(top) == 3 and len(bottom) == 3 else None
+
+
 def _check_recording(source: Any) -> None:
     if isinstance(source, _recording.Recording):
         return
@@ -553,6 +564,9 @@ def glb_bytes(rec: Any, fps: float, theme: str, view: tuple[float, float], mesh:
     cam = b.node("camera", camera=0, translation=eye.tolist(), rotation=quat.tolist())
     bg = defaults.get("background")
     bg = tuple(int(v) for v in theme_palette(theme)[_BACKGROUND]) if bg is None else tuple(int(v) for v in bg)
+    backdrop = _backdrop(defaults.get("look"))
+    if backdrop is not None:  # the GIF's gradient; its mean stands for it where one colour is wanted
+        bg = tuple(int(round((a + c) / 2)) for a, c in zip(*backdrop, strict=True))
     scene_times = rec.times if rec.times is not None else times
     title = defaults.get("title")
     g.scenes.append(lib.Scene(name="physcore", nodes=[root, cam], extras={"physcore": {
@@ -561,6 +575,7 @@ def glb_bytes(rec: Any, fps: float, theme: str, view: tuple[float, float], mesh:
         "bounds": [np.minimum(a, c).tolist(), np.maximum(a, c).tolist()],
         "view": [float(v) for v in toward], "point_size": point_size,
         "background": list(bg), "theme": theme, "title": title if isinstance(title, str) else "",
+        **({"backdrop": [list(c) for c in backdrop]} if backdrop is not None else {}),
     }}))
     b.blob.extend(b"\0" * (-len(b.blob) % 4))
     if embed:

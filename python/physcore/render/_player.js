@@ -2,7 +2,7 @@
    three.js r111 (global THREE, inlined above): an orbit camera (drag to turn, wheel to zoom, right
    drag to pan), play/pause (or the space bar) and a time slider. window.physcore is its state, for
    scripts and tests: ready, error, playing, time (s of playback), duration, frame, frames,
-   background, and play(), pause(), setTime(t). MIT licence, as physcore. */
+   background (sRGB; a backdrop's mean), and play(), pause(), setTime(t). MIT licence, as physcore. */
 (function () {
   "use strict";
   var state = window.physcore = { ready: false, error: null, playing: true, time: 0, duration: 0, frame: 0, frames: 1 };
@@ -60,6 +60,19 @@
     grad.addColorStop(1, "rgb(150,150,150)");
     g.fillStyle = grad;
     g.beginPath(); g.arc(32, 32, 31, 0, 2 * Math.PI); g.fill();
+    var tex = new THREE.CanvasTexture(c);
+    tex.encoding = THREE.sRGBEncoding;
+    return tex;
+  }
+
+  function gradientTexture(top, bottom) {  // the GIF's backdrop: a vertical gradient, sRGB 0-255
+    var c = document.createElement("canvas");
+    c.width = 2; c.height = 256;
+    var g = c.getContext("2d"), grad = g.createLinearGradient(0, 0, 0, 256);
+    grad.addColorStop(0, "rgb(" + top.join(",") + ")");
+    grad.addColorStop(1, "rgb(" + bottom.join(",") + ")");
+    g.fillStyle = grad;
+    g.fillRect(0, 0, 2, 256);
     var tex = new THREE.CanvasTexture(c);
     tex.encoding = THREE.sRGBEncoding;
     return tex;
@@ -129,6 +142,7 @@
     state.duration = (state.frames - 1) / (info.fps || 30);
     var bg = state.background = info.background || [255, 255, 255];  // sRGB, 0-255
     renderer.setClearColor(new THREE.Color(bg[0] / 255, bg[1] / 255, bg[2] / 255).convertSRGBToLinear(), 1);
+    if (info.backdrop) scene.background = gradientTexture(info.backdrop[0], info.backdrop[1]);
     var disc = discTexture();
     var pointScale = 1 / Math.tan(camera.fov * Math.PI / 360);
     gltf.scene.traverse(function (o) {
