@@ -198,6 +198,10 @@ def _check_device(value: object) -> str:
 
 #: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
 _GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "springs")
+#: Grid kinds the GPU path has kernels for (the same file).
+_GPU_GRIDS = ("gray_scott",)
+#: Collider sections the GPU path has kernels for (planes and boxes).
+_GPU_COLLIDERS = ("planes", "boxes")
 
 
 def _check_precision(value: object) -> str:
@@ -327,7 +331,9 @@ class Scene:
         ``"gpu:NAME"``: the first adapter whose name, backend or kind contains NAME
         (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
         (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag`,
-        :class:`PairwiseGravity` and one :class:`Springs`, stepped by ``"semi_implicit_euler"`` or ``"verlet"``; the parts
+        :class:`PairwiseGravity` and one :class:`Springs`, stepped by ``"semi_implicit_euler"``, ``"verlet"`` or ``"yoshida4"``,
+        with :class:`Plane` and :class:`Box` colliders, and :class:`~physcore.grids.GrayScott` grids (their
+        fields read and set as on the CPU); the parts
         move to the device at the first step, and a part it has no kernel for is refused then,
         by name (never run silently on the CPU). After that step the scene steps, reads
         positions, velocities and the energy books, and renders; adding parts, setting the
@@ -723,11 +729,15 @@ class Scene:
         if self._device == "cpu" or self._sim.on_device:
             return
         for part in self._parts:
-            if part.section != "terms" or part.part_kind not in _GPU_TERMS:
+            ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
+                  or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
+                  or part.section in _GPU_COLLIDERS)
+            if not ok:
                 what = getattr(part, "name", None) or type(part).__name__
                 raise InvalidInputError(
                     f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                    f"(it has {', '.join(_GPU_TERMS)}); run this scene with device='cpu'"
+                    f"(it has the terms {', '.join(_GPU_TERMS)}, Plane and Box colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                    "run this scene with device='cpu'"
                 )
         self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
 

@@ -131,6 +131,14 @@ impl<V: Vector> World<V> {
         self.others.push(s);
         Ok(self.others.len() - 1)
     }
+    /// Puts `s` in the place of the system of the same name (a grid moved to a device keeps its
+    /// place in the order of steps); returns the one it replaced.
+    pub fn replace_system(&mut self, s: Box<dyn System>) -> Result<Box<dyn System>> {
+        match self.others.iter_mut().find(|o| o.name() == s.name()) {
+            Some(o) => Ok(std::mem::replace(o, s)),
+            None => Err(invalid("name", format!("no system named {:?}", s.name()))),
+        }
+    }
     /// Adds a coupling, run after every step (after those already there).
     pub fn add_coupling(&mut self, c: Box<dyn Coupling<V>>) {
         self.couplings.push(c);

@@ -46,7 +46,7 @@ def _cluster(dim: int, n: int = 500, device: str = "cpu", precision: str | None 
 
 
 @pytest.mark.parametrize("dim", [2, 3])
-@pytest.mark.parametrize("integrator", ["verlet", "semi_implicit_euler"])
+@pytest.mark.parametrize("integrator", ["verlet", "semi_implicit_euler", "yoshida4"])
 def test_a_gpu_scene_steps_as_the_cpu_scene(dim: int, integrator: str) -> None:
     cpu = _cluster(dim, integrator=integrator)
     cpu.step(100)
@@ -149,8 +149,8 @@ def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
 
     s = pc.Scene(dim=2, device=DEVICE)
     s.add_particles([[0.0, 0.0]])
-    s.add(pc.Plane([0.0, -1.0], [0.0, 1.0]))
-    with pytest.raises(pc.InvalidInputError, match="Plane"):
+    s.add(pc.Sphere([0.0, -1.0], 0.5))
+    with pytest.raises(pc.InvalidInputError, match="Sphere"):
         s.step(1)
 
 
@@ -183,3 +183,84 @@ def test_a_gpu_scene_renders() -> None:
     assert len(frames) == 3 and frames[0].shape == (120, 160, 3)
     assert frames[0].std() > 0 and not np.array_equal(frames[0], frames[-1])  # drawn, and moving
     assert s.step_count > 0
+
+
+def _pattern(device: str, precision: str | None = None) -> tuple[pc.Scene, pc.grids.GrayScott]:
+    s = pc.Scene(dim=2, dt=1.0, device=device, precision=precision)
+    gs = s.add(pc.grids.GrayScott((72, 40), 2.5 / 72, preset="maze", edges=("periodic", "periodic", "free", "free")))
+    gs.seed(3, squares=2, size=0.2)
+    return s, gs
+
+
+def test_a_gray_scott_grid_on_the_gpu_grows_as_on_the_cpu() -> None:
+    cpu, gc = _pattern("cpu")
+    cpu.advance(150.0)
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu, gg = _pattern(DEVICE, precision)
+        assert gpu.auto_dt() == cpu.auto_dt()
+        gpu.advance(150.0)
+        assert gpu.time == cpu.time and gpu.step_count == cpu.step_count
+        du = np.abs(gg.field("u") - gc.field("u")).max()
+        dv = np.abs(gg.field("v") - gc.field("v")).max()
+        # f64: the CPU's order of operations, cell for cell; f32: rounding of fields of order 1.
+        tol = 1e-13 if precision == "f64" else 1e-5
+        assert max(du, dv) < tol, (precision, du, dv)
+        bc, bg = gc.books(), gg.books()
+        assert bc.keys() == bg.keys()
+        for k in bc:
+            assert abs(bg[k] - bc[k]) <= tol * max(abs(bc[k]), 1e-3), (precision, k, bg[k], bc[k])
+        # Diffusion moves, never makes: u − u_made keeps its start value (no-flux y faces).
+        assert abs((bg["u"] - bg["u_made"]) - (bc["u"] - bc["u_made"])) < 10 * tol
+        # Fields are set on the device as on the CPU.
+        gg.u = np.ones((72, 40))
+        assert np.array_equal(gg.field("u"), np.ones((72, 40)))
+
+
+def test_a_gpu_turing_scene_renders_and_refuses_what_it_lacks() -> None:
+    s = pc.scenes.turing(n=48, device=DEVICE)
+    frames = [np.asarray(f) for f in pc.render.frames(s, frames=2, size=(96, 96), frame_time=200.0)]
+    assert len(frames) == 2 and not np.array_equal(frames[0], frames[1])
+    w = pc.Scene(dim=2, device=DEVICE)
+    w.add(pc.grids.Wave((32, 32), 0.01, c=1.0, name="pond"))
+    with pytest.raises(pc.InvalidInputError, match="no kernel for Wave 'pond'"):
+        w.step(1)
+
+
+def _bouncing(dim: int, device: str = "cpu", precision: str | None = None, integrator: str = "verlet") -> pc.Scene:
+    """Particles under gravity and drag in a box with a tilted floor plane inside it: bounces
+    (e = 0.7), friction on the floor (μ = 0.3), corners."""
+    rng = np.random.default_rng(5)
+    n = 300
+    s = pc.Scene(dim=dim, integrator=integrator, dt=2e-3, device=device, precision=precision)
+    s.add_particles(rng.uniform(-0.9, 0.9, (n, dim)), rng.normal(size=(n, dim)), masses=rng.uniform(0.5, 1.5, n))
+    s.add(pc.Gravity([0.0] * (dim - 1) + [-9.81]))
+    s.add(pc.Drag(0.05))
+    normal = [0.2] + [0.0] * (dim - 2) + [1.0]
+    s.add(pc.Plane([0.0] * (dim - 1) + [-0.6], normal, restitution=0.7, friction=0.3))
+    s.add(pc.Box([-1.0] * dim, [1.0] * dim, restitution=0.9, friction=0.1))
+    return s
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("integrator", ["verlet", "semi_implicit_euler", "yoshida4"])
+def test_particles_bounce_off_gpu_planes_and_boxes_as_on_the_cpu(dim: int, integrator: str) -> None:
+    cpu = _bouncing(dim, integrator=integrator)
+    cpu.step(300)
+    e_cpu = cpu.energy()
+    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the walls: the comparison is of bounces
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu = _bouncing(dim, DEVICE, precision, integrator)
+        gpu.step(300)
+        e_gpu = gpu.energy()
+        assert sorted(e_gpu.dissipated) == sorted(e_cpu.dissipated)
+        dx = np.abs(gpu.positions - cpu.positions).max()
+        # f64: the CPU's bounce, operation for operation (the force F = m·a differs in its last
+        # bits); f32: rounding, which a bounce can turn into a different contact step.
+        tol = {"f32": 1e-3, "f64": 1e-9}[precision]
+        assert dx < tol, (precision, dx)
+        for k in ("collisions", "drag"):
+            assert abs(e_gpu.dissipated[k] - e_cpu.dissipated[k]) < 1e-3 * e_cpu.dissipated[k] + (
+                1e-9 if precision == "f64" else 1e-3), (precision, k)
+        assert abs(e_gpu.total - e_cpu.total) < 1e-3 * abs(e_cpu.total)
+        lo = gpu.positions.min()
+        assert lo >= -1.0 and gpu.positions.max() <= 1.0

@@ -113,6 +113,7 @@ def turing(
     seed: int = 1,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """Turing patterns: Gray–Scott reaction–diffusion grows spots, stripes or mazes.
 
@@ -122,6 +123,7 @@ def turing(
     The animation spans `duration` time units: by default the maze grows from two seeds until
     it fills the domain, at about 4500. Steps are at most 1 time unit (the reaction's accuracy;
     Pearson's step) and within the diffusion limit, so coarse grids stay stable.
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import PRESETS, GrayScott
 
@@ -132,7 +134,7 @@ def turing(
     n = _count(n, "n", 16)
     _cells("n", n * n)
     duration = _positive(duration, "duration")
-    scene = Scene(2, dt=1.0 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1.0 if dt is None else dt, threads=threads, device=device)
     dx = 2.5 / n
     # The automatic step keeps a fraction of the diffusion limit dx²/(4 D_u), which grows as dx²:
     # on coarse grids (n <= 64: 76 time units at n = 32) it would step straight over the

@@ -15,6 +15,7 @@
 use std::fmt;
 use std::sync::Arc;
 
+pub mod gray_scott;
 pub mod particles;
 
 /// What can go wrong on the device.
@@ -271,6 +272,71 @@ impl Gpu {
             return Err(GpuError::OutOfMemory { what: what.to_string(), bytes });
         }
         Ok(b)
+    }
+
+    /// Writes `data` (f64 on the host) into `b` at the device's precision.
+    pub(crate) fn upload(&self, p: Precision, b: &wgpu::Buffer, data: &[f64]) {
+        match p {
+            Precision::F64 => self.queue.write_buffer(b, 0, bytemuck::cast_slice(data)),
+            Precision::F32 => {
+                let d: Vec<f32> = data.iter().map(|&x| x as f32).collect();
+                self.queue.write_buffer(b, 0, bytemuck::cast_slice(&d))
+            }
+        }
+    }
+
+    /// Writes a uniform block: `ints` (u32) then `reals` at the device's precision.
+    pub(crate) fn write_params(&self, p: Precision, b: &wgpu::Buffer, ints: &[u32], reals: &[f64]) {
+        self.write_params_at(p, b, 0, ints, reals)
+    }
+
+    /// `write_params` at byte `offset` of `b`.
+    pub(crate) fn write_params_at(&self, p: Precision, b: &wgpu::Buffer, offset: u64, ints: &[u32], reals: &[f64]) {
+        let mut bytes: Vec<u8> = bytemuck::cast_slice(ints).to_vec();
+        match p {
+            Precision::F64 => bytes.extend_from_slice(bytemuck::cast_slice(reals)),
+            Precision::F32 => {
+                let r: Vec<f32> = reals.iter().map(|&x| x as f32).collect();
+                bytes.extend_from_slice(bytemuck::cast_slice(&r))
+            }
+        }
+        self.queue.write_buffer(b, offset, &bytes);
+    }
+
+    /// Copies the first `bytes` of `b` to the host through `staging` (waits for the queue).
+    pub(crate) fn read_back(&self, b: &wgpu::Buffer, staging: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(b, 0, staging, 0, bytes);
+        self.queue.submit([enc.finish()]);
+        let slice = staging.slice(0..bytes);
+        let (tx, rx) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.wait()?;
+        rx.recv()
+            .map_err(|e| GpuError::Device(e.to_string()))?
+            .map_err(|e| GpuError::Device(format!("reading back: {e}")))?;
+        let out = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?.to_vec();
+        staging.unmap();
+        Ok(out)
+    }
+
+    /// The first u32 of `b` (a flag), read back.
+    pub(crate) fn read_u32(&self, b: &wgpu::Buffer, staging: &wgpu::Buffer) -> Result<u32> {
+        let bytes = self.read_back(b, staging, 4)?;
+        Ok(u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]))
+    }
+
+    /// The first `count` reals of `b`, read back as f64.
+    pub(crate) fn read_reals(&self, p: Precision, b: &wgpu::Buffer, staging: &wgpu::Buffer, count: usize) -> Result<Vec<f64>> {
+        let bytes = self.read_back(b, staging, (count as u64).max(1) * p.bytes())?;
+        let mut v: Vec<f64> = match p {
+            Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&bytes),
+            Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&bytes).into_iter().map(f64::from).collect(),
+        };
+        v.truncate(count);
+        Ok(v)
     }
 
     /// Waits for all submitted work.

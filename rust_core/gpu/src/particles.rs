@@ -20,7 +20,14 @@ pub enum Scheme {
     SemiImplicitEuler,
     /// Kick–drift–kick (Swope et al. 1982).
     VelocityVerlet,
+    /// Yoshida's fourth-order "triple jump": velocity Verlet substeps of w₁dt, w₀dt, w₁dt
+    /// (Yoshida, Phys. Lett. A 150 (1990) 262, eqs. 4.12–4.14), as the CPU's `yoshida4`.
+    Yoshida4,
 }
+
+/// Yoshida's weights: w₁ = 1/(2 − 2^{1/3}), w₀ = 1 − 2w₁ (the CPU's `integrators::yoshida`).
+pub const YOSHIDA_W1: f64 = 1.351_207_191_959_657_8;
+pub const YOSHIDA_W0: f64 = -1.702_414_383_919_315_3;
 
 /// The forces of a device particle system (all optional; several uniform fields are summed).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -75,6 +82,16 @@ impl Springs {
     }
 }
 
+/// A collider of the projection stage, applied after every step in the order given (the CPU's
+/// `constraints::Plane` and `constraints::Aabb`; restitution e in [0, 1], friction μ ≥ 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Collider {
+    /// The half-space (x − point)·normal ≥ 0 (`normal` of unit length; z = 0 in 2D).
+    Plane { point: [f64; 3], normal: [f64; 3], restitution: f64, friction: f64 },
+    /// Particles kept inside [lower, upper] (z ignored in 2D).
+    Box { lower: [f64; 3], upper: [f64; 3], restitution: f64, friction: f64 },
+}
+
 /// Energy books summed on the host, in f64, in particle order (deterministic).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Books {
@@ -89,6 +106,8 @@ pub struct Books {
     pub springs: f64,
     /// Energy taken out by the springs' dashpots so far.
     pub dashpots: f64,
+    /// Energy taken out by the colliders so far.
+    pub collisions: f64,
 }
 
 /// Why `step` stopped early.
@@ -108,6 +127,10 @@ struct Bufs {
     vel: wgpu::Buffer,
     acc: wgpu::Buffer,
     aux: wgpu::Buffer,
+    /// The colliders' books (one real per particle).
+    hits: wgpu::Buffer,
+    /// The flags (the touched flag is state: a projection makes the carried force stale).
+    flag: wgpu::Buffer,
 }
 
 /// Particles resident on one device.
@@ -122,13 +145,17 @@ pub struct Particles {
     saved: Option<Bufs>,
     saved_acc_valid: bool,
     books: wgpu::Buffer,
-    flag: wgpu::Buffer,
+    /// The colliders (three rows each) and how many.
+    colliders: wgpu::Buffer,
+    ncol: u32,
     /// The predicted velocities and the springs' gathered lists (kept alive for the bind group).
     _vp: wgpu::Buffer,
     _springs: [wgpu::Buffer; 3],
     has_springs: bool,
     velocity_dependent: bool,
+    /// Parameter blocks, one per substep of a composition (bound at dynamic offsets of `slot`).
     params: wgpu::Buffer,
+    slot: u64,
     staging: wgpu::Buffer,
     bind: wgpu::BindGroup,
     pipes: Pipes,
@@ -139,6 +166,9 @@ pub struct Particles {
 
 struct Pipes {
     forces: wgpu::ComputePipeline,
+    forces_if_touched: wgpu::ComputePipeline,
+    clear_touched: wgpu::ComputePipeline,
+    project: wgpu::ComputePipeline,
     kick_drift: wgpu::ComputePipeline,
     kick: wgpu::ComputePipeline,
     check: wgpu::ComputePipeline,
@@ -149,6 +179,8 @@ const WG: u32 = 256;
 /// A submission's target length: Ctrl-C is answered between submissions.
 const SUBMIT_S: f64 = 0.1;
 const MAX_CHUNK: u64 = 4096;
+/// Colliders a device particle system holds.
+pub const MAX_COLLIDERS: usize = 64;
 
 impl Particles {
     /// Uploads `n` particles: `x`, `v` flat (n·dim, m and m/s), `mass` (kg, > 0), `inv_mass`
@@ -178,8 +210,15 @@ impl Particles {
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let mk = |what: &str| gpu.buffer(what, size, st);
-        let live =
-            Bufs { pos: mk("positions")?, vel: mk("velocities")?, acc: mk("accelerations")?, aux: mk("drag books")? };
+        let live = Bufs {
+            pos: mk("positions")?,
+            vel: mk("velocities")?,
+            acc: mk("accelerations")?,
+            aux: mk("drag books")?,
+            hits: gpu.buffer("collision books", (n as u64).max(1) * precision.bytes(), st)?,
+            flag: gpu.buffer("flags", 16, st)?,
+        };
+        let colliders = gpu.buffer("colliders", 3 * row * MAX_COLLIDERS as u64, U::STORAGE | U::COPY_DST)?;
         let books = gpu.buffer("energy books", 2 * size, st)?;
         let vp = mk("predicted velocities")?;
         let empty = Springs::default();
@@ -197,15 +236,30 @@ impl Particles {
         if !other.is_empty() {
             gpu.queue.write_buffer(&sb[1], 0, bytemuck::cast_slice(&other));
         }
-        let flag = gpu.buffer("finiteness flag", 16, st)?;
-        let params = gpu.buffer("parameters", 16 * precision.bytes() + 16, U::UNIFORM | U::COPY_DST)?;
+        // Three parameter blocks (Yoshida's substeps), each at the device's uniform offset alignment.
+        let align = gpu.device.limits().min_uniform_buffer_offset_alignment as u64;
+        let slot = (16 * precision.bytes() + 32).div_ceil(align) * align;
+        // A fourth: velocity Verlet's evaluation after a projection (books nothing).
+        let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
         let (layout, pipes) = pipelines(&gpu, precision);
         let entries: Vec<wgpu::BindGroupEntry> =
-            [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &flag, &vp, &sb[0], &sb[1], &sb[2]]
+            [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2], &colliders, &live.hits]
                 .iter()
                 .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
+                .map(|(i, b)| wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    // The parameters: one block's worth, at the offset given when bound.
+                    resource: if i == 0 {
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                            buffer: b,
+                            offset: 0,
+                            size: std::num::NonZeroU64::new(16 * precision.bytes() + 32),
+                        })
+                    } else {
+                        b.as_entire_binding()
+                    },
+                })
                 .collect();
         let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("particles"),
@@ -223,12 +277,14 @@ impl Particles {
             saved: None,
             saved_acc_valid: false,
             books,
-            flag,
+            colliders,
+            ncol: 0,
             _vp: vp,
             _springs: sb,
             has_springs: !sp.i.is_empty(),
             velocity_dependent: forces.drag != 0.0 || sp.c.iter().any(|&c| c != 0.0),
             params,
+            slot,
             staging,
             bind,
             pipes,
@@ -280,29 +336,21 @@ impl Particles {
     }
 
     fn upload(&self, b: &wgpu::Buffer, data: &[f64]) {
-        match self.precision {
-            Precision::F64 => self.gpu.queue.write_buffer(b, 0, bytemuck::cast_slice(data)),
-            Precision::F32 => {
-                let d: Vec<f32> = data.iter().map(|&x| x as f32).collect();
-                self.gpu.queue.write_buffer(b, 0, bytemuck::cast_slice(&d))
-            }
-        }
+        self.gpu.upload(self.precision, b, data)
     }
 
     fn write_params(&self, dt: f64, h1: f64, h2: f64, w_new: f64, w_old: f64, pred: bool) {
+        self.write_params_at(0, dt, h1, h2, w_new, w_old, pred)
+    }
+
+    /// Writes parameter block `k` (substep k of a composition).
+    #[allow(clippy::too_many_arguments)]
+    fn write_params_at(&self, k: u64, dt: f64, h1: f64, h2: f64, w_new: f64, w_old: f64, pred: bool) {
         let f = &self.forces;
         let (gg, eps) = f.pairwise.unwrap_or((0.0, 0.0));
-        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, self.has_springs as u32];
+        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, self.has_springs as u32, self.dim as u32, self.ncol, 0, 0];
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0];
-        let mut bytes: Vec<u8> = bytemuck::cast_slice(&u).to_vec();
-        match self.precision {
-            Precision::F64 => bytes.extend_from_slice(bytemuck::cast_slice(&r)),
-            Precision::F32 => {
-                let r: Vec<f32> = r.iter().map(|&x| x as f32).collect();
-                bytes.extend_from_slice(bytemuck::cast_slice(&r))
-            }
-        }
-        self.gpu.queue.write_buffer(&self.params, 0, &bytes);
+        self.gpu.write_params_at(self.precision, &self.params, k * self.slot, &u, &r);
     }
 
     fn groups(&self) -> u32 {
@@ -318,7 +366,7 @@ impl Particles {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_bind_group(0, &self.bind, &[]);
+            pass.set_bind_group(0, &self.bind, &[0]);
             pass.set_pipeline(pipe);
             pass.dispatch_workgroups(self.groups(), 1, 1);
         }
@@ -330,8 +378,9 @@ impl Particles {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_bind_group(0, &self.bind, &[]);
+            pass.set_bind_group(0, &self.bind, &[0]);
             let g = self.groups();
+            let colliders = self.ncol > 0;
             for _ in 0..steps {
                 match self.scheme {
                     Scheme::SemiImplicitEuler => {
@@ -340,16 +389,40 @@ impl Particles {
                         pass.set_pipeline(&self.pipes.kick_drift);
                         pass.dispatch_workgroups(g, 1, 1);
                     }
-                    Scheme::VelocityVerlet => {
-                        pass.set_pipeline(&self.pipes.kick_drift);
-                        pass.dispatch_workgroups(g, 1, 1);
-                        pass.set_pipeline(&self.pipes.forces);
-                        pass.dispatch_workgroups(g, 1, 1);
-                        pass.set_pipeline(&self.pipes.kick);
-                        pass.dispatch_workgroups(g, 1, 1);
+                    Scheme::VelocityVerlet | Scheme::Yoshida4 => {
+                        if colliders {
+                            // The carried force is stale if the last step's projection moved a
+                            // particle: evaluated again here, booking nothing (slot 3).
+                            pass.set_bind_group(0, &self.bind, &[(3 * self.slot) as u32]);
+                            pass.set_pipeline(&self.pipes.forces_if_touched);
+                            pass.dispatch_workgroups(g, 1, 1);
+                            pass.set_pipeline(&self.pipes.clear_touched);
+                            pass.dispatch_workgroups(1, 1, 1);
+                            pass.set_bind_group(0, &self.bind, &[0]);
+                        }
+                        let substeps = if self.scheme == Scheme::Yoshida4 { 3 } else { 1 };
+                        for k in 0..substeps {
+                            if substeps > 1 {
+                                pass.set_bind_group(0, &self.bind, &[(k * self.slot) as u32]);
+                            }
+                            pass.set_pipeline(&self.pipes.kick_drift);
+                            pass.dispatch_workgroups(g, 1, 1);
+                            pass.set_pipeline(&self.pipes.forces);
+                            pass.dispatch_workgroups(g, 1, 1);
+                            pass.set_pipeline(&self.pipes.kick);
+                            pass.dispatch_workgroups(g, 1, 1);
+                        }
+                        if substeps > 1 {
+                            pass.set_bind_group(0, &self.bind, &[0]);
+                        }
                     }
                 }
+                if colliders {
+                    pass.set_pipeline(&self.pipes.project);
+                    pass.dispatch_workgroups(g, 1, 1);
+                }
             }
+            pass.set_bind_group(0, &self.bind, &[0]);
             pass.set_pipeline(&self.pipes.check);
             pass.dispatch_workgroups(g, 1, 1);
         }
@@ -365,7 +438,7 @@ impl Particles {
             return Ok(n);
         }
         let fail = |done: u64, e: GpuError| (done, Halt::Failed(e));
-        let vv = self.scheme == Scheme::VelocityVerlet;
+        let vv = matches!(self.scheme, Scheme::VelocityVerlet | Scheme::Yoshida4);
         let pred = vv && self.velocity_dependent();
         if vv && !self.acc_valid {
             // The first force evaluation of velocity Verlet: books nothing.
@@ -375,7 +448,18 @@ impl Particles {
         }
         match self.scheme {
             Scheme::SemiImplicitEuler => self.write_params(dt, dt, 0.0, dt, 0.0, false),
-            Scheme::VelocityVerlet => self.write_params(dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, pred),
+            Scheme::VelocityVerlet => {
+                self.write_params(dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, 0.5 * dt, pred);
+                self.write_params_at(3, dt, 0.0, 0.0, 0.0, 0.0, false);
+            }
+            Scheme::Yoshida4 => {
+                self.write_params_at(3, dt, 0.0, 0.0, 0.0, 0.0, false);
+                // Each substep is a Verlet step of its own length (the CPU's `Yoshida4::step`).
+                for (k, w) in [YOSHIDA_W1, YOSHIDA_W0, YOSHIDA_W1].into_iter().enumerate() {
+                    let h = w * dt;
+                    self.write_params_at(k as u64, h, 0.5 * h, 0.5 * h, 0.5 * h, 0.5 * h, pred);
+                }
+            }
         }
         let mut done = 0;
         while done < n {
@@ -383,7 +467,8 @@ impl Particles {
                 return Err((done, Halt::Stopped));
             }
             let k = self.chunk.min(n - done);
-            self.gpu.queue.write_buffer(&self.flag, 0, bytemuck::cast_slice(&[u32::MAX; 4]));
+            // The first-bad-particle flag only: the touched flag carries over.
+            self.gpu.queue.write_buffer(&self.live.flag, 0, bytemuck::cast_slice(&[u32::MAX]));
             let t0 = Instant::now();
             self.gpu.queue.submit([self.record(k)]);
             let bad = self.read_flag().map_err(|e| fail(done, e))?;
@@ -402,27 +487,7 @@ impl Particles {
     }
 
     fn read_flag(&self) -> Result<u32> {
-        let bytes = self.read_buffer(&self.flag, 4)?;
-        Ok(u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]))
-    }
-
-    /// Copies `bytes` of `b` to the host (waits for the queue).
-    fn read_buffer(&self, b: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>> {
-        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(b, 0, &self.staging, 0, bytes);
-        self.gpu.queue.submit([enc.finish()]);
-        let slice = self.staging.slice(0..bytes);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.gpu.wait()?;
-        rx.recv()
-            .map_err(|e| GpuError::Device(e.to_string()))?
-            .map_err(|e| GpuError::Device(format!("reading back: {e}")))?;
-        let out = slice.get_mapped_range().map_err(|e| GpuError::Device(e.to_string()))?.to_vec();
-        self.staging.unmap();
-        Ok(out)
+        self.gpu.read_u32(&self.live.flag, &self.staging)
     }
 
     fn read_reals(&self, b: &wgpu::Buffer) -> Result<Vec<f64>> {
@@ -430,11 +495,7 @@ impl Particles {
     }
 
     fn read_rows(&self, b: &wgpu::Buffer, rows: usize) -> Result<Vec<f64>> {
-        let bytes = self.read_buffer(b, (rows as u64).max(1) * 4 * self.precision.bytes())?;
-        Ok(match self.precision {
-            Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&bytes),
-            Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(&bytes).into_iter().map(f64::from).collect(),
-        })
+        self.gpu.read_reals(self.precision, b, &self.staging, 4 * rows.max(1))
     }
 
     fn read_raw(&self) -> Result<(Vec<f64>, Vec<f64>)> {
@@ -463,26 +524,65 @@ impl Particles {
             b.springs += r[4];
             b.dashpots += r[5];
         }
+        if self.ncol > 0 {
+            b.collisions = self.read_hits()?.iter().sum();
+        }
         Ok(b)
     }
 
+    fn read_hits(&self) -> Result<Vec<f64>> {
+        self.gpu.read_reals(self.precision, &self.live.hits, &self.staging, self.n)
+    }
+
+    /// Sets the colliders (at most `MAX_COLLIDERS`), applied after every step in this order.
+    ///
+    /// Errors: `Unsupported` for more than `MAX_COLLIDERS`.
+    pub fn set_colliders(&mut self, colliders: &[Collider]) -> Result<()> {
+        if colliders.len() > MAX_COLLIDERS {
+            return Err(GpuError::Unsupported(format!(
+                "{} colliders: the GPU path holds at most {MAX_COLLIDERS}",
+                colliders.len()
+            )));
+        }
+        let mut rows = Vec::with_capacity(12 * colliders.len());
+        for c in colliders {
+            let (kind, a, b, e, mu) = match *c {
+                Collider::Plane { point, normal, restitution, friction } => (0.0, point, normal, restitution, friction),
+                Collider::Box { lower, upper, restitution, friction } => (1.0, lower, upper, restitution, friction),
+            };
+            rows.extend_from_slice(&[kind, e, mu, 0.0, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
+        }
+        if !rows.is_empty() {
+            self.upload(&self.colliders, &rows);
+        }
+        self.ncol = colliders.len() as u32;
+        self.gpu.wait()
+    }
+
     /// The raw device rows (position·mass, velocity·1/mass, acceleration, drag books; 4n values
-    /// each, as f64) and whether the accelerations are current: what a restart needs.
-    pub fn save_raw(&self) -> Result<([Vec<f64>; 4], bool)> {
+    /// each, as f64), the colliders' books (n values) and whether the accelerations are current
+    /// (not after a projection moved a particle): what a restart needs.
+    pub fn save_raw(&self) -> Result<([Vec<f64>; 4], Vec<f64>, bool)> {
         let l = &self.live;
+        let touched = self.gpu.read_back(&l.flag, &self.staging, 8)?[4..8] != [0; 4];
         Ok((
             [self.read_reals(&l.pos)?, self.read_reals(&l.vel)?, self.read_reals(&l.acc)?, self.read_reals(&l.aux)?],
-            self.acc_valid,
+            self.read_hits()?,
+            self.acc_valid && !touched,
         ))
     }
 
     /// Loads what `save_raw` gave (rounded to the device's precision).
-    pub fn load_raw(&mut self, raw: &[Vec<f64>; 4], acc_valid: bool) -> Result<()> {
-        assert!(raw.iter().all(|a| a.len() == 4 * self.n), "ragged raw arrays");
+    pub fn load_raw(&mut self, raw: &[Vec<f64>; 4], hits: &[f64], acc_valid: bool) -> Result<()> {
+        assert!(raw.iter().all(|a| a.len() == 4 * self.n) && hits.len() == self.n, "ragged raw arrays");
         let l = &self.live;
         for (b, a) in [&l.pos, &l.vel, &l.acc, &l.aux].into_iter().zip(raw) {
             self.upload(b, a);
         }
+        if self.n > 0 {
+            self.upload(&l.hits, hits);
+        }
+        self.gpu.queue.write_buffer(&l.flag, 0, bytemuck::cast_slice(&[u32::MAX, 0, 0, 0]));
         self.acc_valid = acc_valid;
         self.gpu.wait()
     }
@@ -499,6 +599,8 @@ impl Particles {
                 vel: mk("checkpoint velocities")?,
                 acc: mk("checkpoint accelerations")?,
                 aux: mk("checkpoint drag books")?,
+                hits: self.gpu.buffer("checkpoint collision books", (self.n as u64).max(1) * self.precision.bytes(), st)?,
+                flag: self.gpu.buffer("checkpoint flags", 16, st)?,
             });
         }
         let s = self.saved.as_ref().expect("made above");
@@ -522,6 +624,8 @@ impl Particles {
         for (a, b) in [(&from.pos, &to.pos), (&from.vel, &to.vel), (&from.acc, &to.acc), (&from.aux, &to.aux)] {
             enc.copy_buffer_to_buffer(a, 0, b, 0, size);
         }
+        enc.copy_buffer_to_buffer(&from.hits, 0, &to.hits, 0, to.hits.size());
+        enc.copy_buffer_to_buffer(&from.flag, 0, &to.flag, 0, 16);
         self.gpu.queue.submit([enc.finish()]);
     }
 }
@@ -540,12 +644,17 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
         count: None,
     };
     let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
+    // The parameters are bound at a dynamic offset: one block per substep of a composition.
+    if let wgpu::BindingType::Buffer { has_dynamic_offset, .. } = &mut entries[0].ty {
+        *has_dynamic_offset = true;
+    }
     for b in 1..=7 {
         entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: false }));
     }
-    for b in 8..=10 {
+    for b in 8..=11 {
         entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: true }));
     }
+    entries.push(entry(12, wgpu::BufferBindingType::Storage { read_only: false }));
     let layout =
         d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("particles"), entries: &entries });
     let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -565,6 +674,9 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
     };
     let pipes = Pipes {
         forces: pipe("forces"),
+        forces_if_touched: pipe("forces_if_touched"),
+        clear_touched: pipe("clear_touched"),
+        project: pipe("project"),
         kick_drift: pipe("kick_drift"),
         kick: pipe("kick"),
         check: pipe("check"),

@@ -14,6 +14,11 @@ struct Params {
     pred: u32,
     // 1: springs on.
     springs: u32,
+    // 2 or 3 (the colliders' axes), and the number of colliders.
+    dim: u32,
+    ncol: u32,
+    pad_a: u32,
+    pad_b: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
     h1: real,
@@ -46,7 +51,9 @@ const WG: u32 = 256u;
 // Per particle, two rows: (kinetic, uniform-gravity potential, half its pairwise potential,
 // drag dissipated), (half its springs' potential, dashpots dissipated, 0, 0).
 @group(0) @binding(5) var<storage, read_write> books: array<vec4<real>>;
-// [0]: the smallest index of a particle with a non-finite position or velocity (or 0xffffffff).
+// [0]: the smallest index of a particle with a non-finite position or velocity (or 0xffffffff);
+// [1]: 1 if a collider moved a particle in the last step (velocity Verlet's carried force is
+// then stale and evaluated again at the next step's start, as the CPU's `integrator.reset()`).
 @group(0) @binding(6) var<storage, read_write> flag: array<atomic<u32>>;
 // The predicted velocity v + dt a (velocity Verlet with velocity-dependent forces).
 @group(0) @binding(7) var<storage, read_write> vp: array<vec4<real>>;
@@ -55,6 +62,13 @@ const WG: u32 = 256u;
 @group(0) @binding(8) var<storage, read> start: array<u32>;
 @group(0) @binding(9) var<storage, read> other: array<u32>;
 @group(0) @binding(10) var<storage, read> spring: array<vec4<real>>;
+// Colliders, three rows each, in the order added: (kind: 0 plane, 1 box; restitution e,
+// friction μ, 0), then a plane's point and unit normal, or a box's lower and upper corners.
+@group(0) @binding(11) var<storage, read> col: array<vec4<real>>;
+// Per particle: the energy the colliders removed from it so far (J).
+@group(0) @binding(12) var<storage, read_write> hits: array<real>;
+
+var<workgroup> wtouch: u32;
 
 var<workgroup> tile: array<vec4<real>, WG>;
 
@@ -70,7 +84,28 @@ fn load_tile(t: u32, l: u32) {
 
 @compute @workgroup_size(WG)
 fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let i = gid.x;
+    eval_forces(gid.x, lid.x);
+}
+
+// `forces` only if a collider moved a particle in the last step (flag[1]): velocity Verlet's
+// evaluation at the start of a step after a projection (the CPU's reset carry).
+@compute @workgroup_size(WG)
+fn forces_if_touched(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    if (lid.x == 0u) {
+        wtouch = atomicLoad(&flag[1]);
+    }
+    if (workgroupUniformLoad(&wtouch) == 0u) {
+        return;
+    }
+    eval_forces(gid.x, lid.x);
+}
+
+@compute @workgroup_size(1)
+fn clear_touched() {
+    atomicStore(&flag[1], 0u);
+}
+
+fn eval_forces(i: u32, l: u32) {
     let live = i < P.n;
     var xi = vec4<real>(0.0, 0.0, 0.0, 0.0);
     if (live) {
@@ -80,7 +115,7 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     if (P.pair != 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         for (var t = 0u; t < tiles; t++) {
-            load_tile(t, lid.x);
+            load_tile(t, l);
             workgroupBarrier();
             for (var k = 0u; k < WG; k++) {
                 let s = tile[k];
@@ -233,4 +268,112 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     let x = aux[i];
     books[2u * i] = vec4<real>(0.5 * xi.w * dot(v.xyz, v.xyz), ug, -0.5 * P.big_g * xi.w * phi, x.x);
     books[2u * i + 1u] = vec4<real>(us, x.z, 0.0, 0.0);
+}
+
+// The colliders (the CPU's `constraints::Collider` with `Contact::bounce`, and `constraints::Aabb`
+// face by face): a free particle on a forbidden side is moved onto the surface; moving into it,
+// its normal velocity becomes −e v_n and its tangential speed drops by μ(1 + e)|v_n|, never past
+// zero. The energy removed (ΔKE plus the work F·Δx of the last evaluated force, gravity in it,
+// over the move) is booked per particle in `hits`.
+@compute @workgroup_size(WG)
+fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let i = gid.x;
+    if (i >= P.n) {
+        return;
+    }
+    let v4 = vel[i];
+    if (v4.w == 0.0) {
+        return;
+    }
+    let p4 = pos[i];
+    let m = p4.w;
+    var x = p4.xyz;
+    var v = v4.xyz;
+    let f = acc[i].xyz * m;
+    var d: real = 0.0;
+    var touched = false;
+    for (var c = 0u; c < P.ncol; c++) {
+        let h = col[3u * c];
+        let a = col[3u * c + 1u].xyz;
+        let b = col[3u * c + 2u].xyz;
+        let e = h.y;
+        let mu = h.z;
+        let ke0 = 0.5 * m * dot(v, v);
+        var dx = vec3<real>(0.0, 0.0, 0.0);
+        if (h.x == 0.0) {
+            // A plane through a with unit normal b into the allowed side.
+            let depth = dot(x - a, b);
+            if (depth >= 0.0) {
+                continue;
+            }
+            dx = b * (-depth);
+            x = x + dx;
+            let vn = dot(v, b);
+            if (vn < 0.0) {
+                let vt = v - b * vn;
+                let vt2 = dot(vt, vt);
+                let dvn = (1.0 + e) * (-vn);
+                var vtn = vt;
+                if (mu > 0.0 && vt2 > 0.0) {
+                    let l = sqrt(vt2);
+                    vtn = vt * (max(l - mu * dvn, 0.0) / l);
+                }
+                v = vtn + b * (-e * vn);
+            }
+        } else {
+            // A box [a, b]: particles kept inside, bounced face by face.
+            var out = false;
+            for (var k = 0u; k < P.dim; k++) {
+                out = out || x[k] < a[k] || x[k] > b[k];
+            }
+            if (!out) {
+                continue;
+            }
+            let x0 = x;
+            for (var k = 0u; k < P.dim; k++) {
+                var o: real = 0.0;
+                if (x[k] < a[k]) {
+                    x[k] = a[k];
+                    o = -1.0;
+                } else if (x[k] > b[k]) {
+                    x[k] = b[k];
+                    o = 1.0;
+                } else {
+                    continue;
+                }
+                let vn = v[k] * o;
+                if (vn > 0.0) {
+                    let dvn = (1.0 + e) * vn;
+                    v[k] = v[k] * (-e);
+                    if (mu > 0.0) {
+                        var vt2: real = 0.0;
+                        for (var q = 0u; q < P.dim; q++) {
+                            if (q != k) {
+                                vt2 += v[q] * v[q];
+                            }
+                        }
+                        if (vt2 > 0.0) {
+                            let vt = sqrt(vt2);
+                            let sc = max(vt - mu * dvn, 0.0) / vt;
+                            for (var q = 0u; q < P.dim; q++) {
+                                if (q != k) {
+                                    v[q] = v[q] * sc;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            dx = x - x0;
+        }
+        touched = true;
+        let ke1 = 0.5 * m * dot(v, v);
+        d += (ke0 - ke1) + dot(f, dx);
+    }
+    if (touched) {
+        pos[i] = vec4<real>(x, m);
+        vel[i] = vec4<real>(v, v4.w);
+        hits[i] = hits[i] + d;
+        atomicStore(&flag[1], 1u);
+    }
 }

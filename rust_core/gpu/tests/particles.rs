@@ -358,3 +358,32 @@ fn a_cloth_hangs_as_on_the_host() {
         assert!((e1 - e0).abs() < 0.05 * b.dashpots.max(1e-3), "{}: books {e0} -> {e1}", p.name());
     }
 }
+
+/// Yoshida's triple jump on the device is of fourth order: a circular Kepler orbit's position
+/// error after one period falls ~16× per halving of dt (f64), against Verlet's 4×.
+#[test]
+fn yoshida4_converges_at_fourth_order() {
+    let Some(gpu) = gpu() else { return };
+    if !gpu.adapter().f64 {
+        eprintln!("skipped: no f64 on {}", gpu.adapter().name);
+        return;
+    }
+    let (g, m, r): (f64, f64, f64) = (1.0, 0.5, 0.5);
+    let vt = (g * 2.0 * m).sqrt() * r;
+    let x = [-r, 0.0, 0.0, r, 0.0, 0.0];
+    let v = [0.0, -vt, 0.0, 0.0, vt, 0.0];
+    let f = Forces { pairwise: Some((g, 0.0)), ..Default::default() };
+    let err = |scheme: Scheme, steps: u64| {
+        let mut ps =
+            Particles::new(gpu.clone(), Precision::F64, 3, scheme, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m], None).unwrap();
+        ps.step(steps, 2.0 * std::f64::consts::PI / steps as f64, &AtomicBool::new(false)).unwrap();
+        let (xe, _) = ps.read().unwrap();
+        ((xe[3] - r).powi(2) + xe[4].powi(2)).sqrt()
+    };
+    for (scheme, order) in [(Scheme::Yoshida4, 4.0), (Scheme::VelocityVerlet, 2.0)] {
+        let (e1, e2) = (err(scheme, 100), err(scheme, 200));
+        let observed = (e1 / e2).log2();
+        eprintln!("{scheme:?}: errors {e1:.2e}, {e2:.2e}: order {observed:.2}");
+        assert!((observed - order).abs() < 0.25, "{scheme:?}: observed order {observed}");
+    }
+}

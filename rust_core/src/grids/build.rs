@@ -16,6 +16,21 @@ use crate::vector::Real;
 /// The kinds `build` knows.
 pub const KINDS: [&str; 3] = ["wave", "gray_scott", "stable_fluid"];
 
+/// The configuration of a Gray–Scott system from its parameters (also what a device's copy is
+/// built from: `systems::device`).
+pub fn gray_scott_config(name: &str, dim: usize, mut p: Params) -> Result<GrayScottConfig> {
+    let grid = grid_of(&mut p, dim)?;
+    let c = gray_scott_of(name, grid, &mut p)?;
+    c.validate()?;
+    Ok(c)
+}
+
+fn gray_scott_of(name: &str, grid: Grid, p: &mut Params) -> Result<GrayScottConfig> {
+    let mut c = GrayScottConfig::new(name, grid, p.number("du")?, p.number("dv")?, p.number("feed")?, p.number("kill")?);
+    c.cfl = p.number("cfl")?;
+    Ok(c)
+}
+
 /// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
 pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
     let grid = grid_of(&mut p, dim)?;
@@ -62,18 +77,7 @@ pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dy
                 .collect();
             Ok(Box::new(WaveSystem::new(c)?))
         }
-        "gray_scott" => {
-            let mut c = GrayScottConfig::new(
-                name,
-                grid,
-                p.number("du")?,
-                p.number("dv")?,
-                p.number("feed")?,
-                p.number("kill")?,
-            );
-            c.cfl = p.number("cfl")?;
-            Ok(Box::new(GrayScottSystem::new(c)?))
-        }
+        "gray_scott" => Ok(Box::new(GrayScottSystem::new(gray_scott_of(name, grid, &mut p)?)?)),
         "stable_fluid" => {
             if dim != 2 {
                 return Err(invalid("shape", "the grid fluid is 2D only"));

@@ -52,6 +52,18 @@ impl GrayScottConfig {
         g.dx * g.dx / (2.0 * g.dim as Real * self.du.max(self.dv))
     }
 
+    /// `GrayScottSystem::reaction_rate` of the fields `u`, `v`.
+    pub fn reaction_rate(&self, u: &[Real], v: &[Real]) -> Real {
+        let m = u.iter().zip(v).fold(0.0, |m: Real, (u, v)| m.max(v.abs() * (v.abs() + 2.0 * u.abs())));
+        self.feed + self.kill + m.max(1.0)
+    }
+
+    /// `GrayScottSystem::stability_limit` of the fields `u`, `v`.
+    pub fn stability_limit(&self, u: &[Real], v: &[Real]) -> Real {
+        let t_d = self.diffusion_limit();
+        t_d / (1.0 + 0.5 * self.reaction_rate(u, v) * t_d)
+    }
+
     pub fn new(name: &str, grid: Grid, du: Real, dv: Real, feed: Real, kill: Real) -> Self {
         Self { name: name.to_string(), grid, du, dv, feed, kill, cfl: 0.8 }
     }
@@ -146,8 +158,7 @@ impl GrayScottSystem {
     /// v(v + 2u) ≤ v(2 − v) ≤ 1; the bound takes at least that 1, so a pattern that grows within
     /// one `advance` (seeds start at v ≈ 0.25) stays inside the limit taken at its start.
     pub fn reaction_rate(&self) -> Real {
-        let m = self.u.iter().zip(&self.v).fold(0.0, |m: Real, (u, v)| m.max(v.abs() * (v.abs() + 2.0 * u.abs())));
-        self.cfg.feed + self.cfg.kill + m.max(1.0)
+        self.cfg.reaction_rate(&self.u, &self.v)
     }
 
     /// The step (s) within forward Euler's stability region for diffusion and reactions
@@ -157,8 +168,7 @@ impl GrayScottSystem {
     /// diagonal). So dt ≤ 2 / (4·dim·D/dx² + ρ_R) = t_D / (1 + ρ_R t_D / 2), with t_D the
     /// diffusion limit and ρ_R `reaction_rate`. At Pearson's grid (t_D = 1.19) it is 0.72.
     pub fn stability_limit(&self) -> Real {
-        let t_d = self.diffusion_limit();
-        t_d / (1.0 + 0.5 * self.reaction_rate() * t_d)
+        self.cfg.stability_limit(&self.u, &self.v)
     }
 
     pub fn set_state(&mut self, u: Option<&[Real]>, v: Option<&[Real]>) -> Result<()> {

@@ -28,6 +28,10 @@ pub struct PySimulation {
     terms: Vec<(String, String, registry::Params)>,
     /// Whether the particles live on a device (`move_to_device`): the getters read them from there.
     on_device: bool,
+    /// The grids' records as added (kind, name, parameters): what a device grid is built from.
+    grids: Vec<(String, String, registry::Params)>,
+    /// The colliders' records as added (kind, parameters), in order: what the device's are.
+    colliders: Vec<(String, registry::Params)>,
 }
 
 /// The name of the device particle system (`systems::device`).
@@ -92,7 +96,7 @@ impl PySimulation {
             ),
             _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
-        Ok(Self { inner, terms: Vec::new(), on_device: false })
+        Ok(Self { inner, terms: Vec::new(), on_device: false, grids: Vec::new(), colliders: Vec::new() })
     }
 
     /// Moves the particles and the force terms to a device (`"gpu"`, `"gpu:NAME"`) at
@@ -105,26 +109,57 @@ impl PySimulation {
             if self.on_device {
                 return Err(err(invalid("device", "the particles are on the device already")));
             }
-            let terms = &self.terms;
+            use crate::systems::device::{DeviceGrayScott, DeviceParticles};
+            use crate::systems::System;
+            let (terms, grids, colliders) = (&self.terms, &self.grids, &self.colliders);
             let dim = self.dim();
             with_sim!(&mut self.inner, s => {
                 let p = s.particles();
                 if let Some(a) = p.model().attributes.keys().next() {
                     return Err(err(invalid("device", format!("the GPU path has no per-particle {a:?} yet"))));
                 }
-                if p.n_constraints() > 0 {
-                    return Err(err(invalid("device", "the GPU path has no colliders or constraints yet")));
+                if p.n_constraints() != colliders.len() {
+                    return Err(err(invalid("device", "the GPU path has no constraints but its colliders yet")));
                 }
-                let (x, v) = (flat_of(&p.state().x), flat_of(&p.state().v));
-                let m = p.model().mass.clone();
-                let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
+                // Every device system is built before any is swapped in: a refusal changes nothing.
+                let gpu = py.detach(|| physcore_gpu::Gpu::open(device)).map_err(|e| to_py(py, e.into()))?;
+                let mut moved: Vec<Box<dyn System>> = Vec::new();
+                for (kind, name, params) in grids {
+                    if kind != "gray_scott" {
+                        return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\")"))));
+                    }
+                    let cfg = crate::grids::build::gray_scott_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
+                    let cpu = s.other(name).map_err(|e| to_py(py, e))?;
+                    let f = cpu.fields(&["u", "v"]).map_err(|e| to_py(py, e))?;
+                    let made: Vec<f64> = cpu.books().into_iter().filter(|b| b.0.ends_with("_made")).map(|b| b.1).collect();
+                    let made = [made[0], made[1]];
+                    let g = gpu.clone();
+                    let d = py.detach(|| DeviceGrayScott::on(g, precision, cfg, &f[0], &f[1], made)).map_err(|e| to_py(py, e))?;
+                    moved.push(Box::new(d));
+                }
+                let particles = p.n_particles() > 0 || !terms.is_empty() || !colliders.is_empty();
+                let d = if particles {
+                    let (x, v) = (flat_of(&p.state().x), flat_of(&p.state().v));
+                    let m = p.model().mass.clone();
+                    let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
+                    let integrator = p.integrator_info().name;
+                    let g = gpu.clone();
+                    Some(
+                        py.detach(|| DeviceParticles::on(g, precision, dim, integrator, &x, &v, &m, &pinned, terms, colliders))
+                            .map_err(|e| to_py(py, e))?,
+                    )
+                } else {
+                    None
+                };
                 let integrator = p.integrator_info().name;
-                let d = py
-                    .detach(|| crate::systems::device::DeviceParticles::new(device, precision, dim, integrator, &x, &v, &m, &pinned, terms))
-                    .map_err(|e| to_py(py, e))?;
-                let empty = ParticleSystem::new(integrator).map_err(|e| to_py(py, e))?;
-                s.add_system(Box::new(d)).map_err(|e| to_py(py, e))?;
-                *s.particles_mut() = empty;
+                for g in moved {
+                    s.replace_system(g).map_err(|e| to_py(py, e))?;
+                }
+                if let Some(d) = d {
+                    let empty = ParticleSystem::new(integrator).map_err(|e| to_py(py, e))?;
+                    s.add_system(Box::new(d)).map_err(|e| to_py(py, e))?;
+                    *s.particles_mut() = empty;
+                }
                 Ok::<(), PyErr>(())
             })?;
             self.on_device = true;
@@ -433,8 +468,10 @@ impl PySimulation {
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;
         let dim = self.dim();
-        let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
-        with_sim!(&mut self.inner, s => s.add_system(sys)).map(drop).map_err(|e| to_py(py, e))
+        let sys = crate::grids::build::build(kind, name, dim, p.clone()).map_err(|e| to_py(py, e))?;
+        with_sim!(&mut self.inner, s => s.add_system(sys)).map_err(|e| to_py(py, e))?;
+        self.grids.push((kind.to_string(), name.to_string(), p));
+        Ok(())
     }
 
     /// Adds points advected by a flow (`crate::systems::flows::build`) of `kind` named `name`,
@@ -548,7 +585,9 @@ impl PySimulation {
         let ty = constraints::registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
         with_sim!(&mut self.inner, s => ty.build(&p).map(|c| s.particles_mut().add_constraint(c)))
-            .map_err(|e| to_py(py, e))
+            .map_err(|e| to_py(py, e))?;
+        self.colliders.push((ty.kind.to_string(), p));
+        Ok(())
     }
 
     /// Runs n steps in Rust with the GIL released. Ctrl-C is noticed within about

@@ -1,0 +1,136 @@
+// Gray–Scott reaction–diffusion on a cell-centred grid (forward Euler, 5- or 7-point Laplacian),
+// the CPU's `grids::gray_scott` cell for cell. The host prepends the precision header (`real`,
+// `bad`).
+//
+// Gather only: thread c writes cell c of the new fields from the old ones (two buffers, swapped
+// each step by the host's bind groups). The books' reaction sums are reduced in each workgroup
+// in one fixed tree order and added to that workgroup's own slot: no atomics on floats, so a run
+// repeats bit for bit on one adapter. The one atomic is an integer min over the index of the
+// first non-finite cell.
+
+struct Params {
+    nx: u32,
+    ny: u32,
+    nz: u32,
+    // Bit f set: face f (x-, x+, y-, y+, z-, z+) is free (∂u/∂n = 0: the ghost is the cell
+    // itself); clear: periodic (the ghost is the opposite cell).
+    free: u32,
+    // Workgroups along x of the 2D dispatch (the linear workgroup index is x + gx·y).
+    gx: u32,
+    three: u32,
+    pad0: u32,
+    pad1: u32,
+    // dt·D_u/dx², dt·D_v/dx², dt, F, F + k, and 2·dim (the Laplacian's centre weight).
+    du: real,
+    dv: real,
+    dt: real,
+    f: real,
+    fk: real,
+    centre: real,
+    pad2: real,
+    pad3: real,
+};
+
+const WG: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> P: Params;
+@group(0) @binding(1) var<storage, read> u0: array<real>;
+@group(0) @binding(2) var<storage, read> v0: array<real>;
+@group(0) @binding(3) var<storage, read_write> u1: array<real>;
+@group(0) @binding(4) var<storage, read_write> v1: array<real>;
+// Two per workgroup: what the reactions made of u and of v so far, Σ_steps dt Σ_cells (per
+// unit cell measure; the host multiplies by dx^dim).
+@group(0) @binding(5) var<storage, read_write> made: array<real>;
+// [0]: the smallest index of a cell whose u or v is not finite (or 0xffffffff).
+@group(0) @binding(6) var<storage, read_write> flag: array<atomic<u32>>;
+
+var<workgroup> su: array<real, WG>;
+var<workgroup> sv: array<real, WG>;
+
+// The neighbour of index i (of n) one step back / forward along an axis whose faces are free
+// (bits lo, hi of P.free) or periodic.
+fn back(i: u32, n: u32, lo: u32) -> u32 {
+    if (i > 0u) {
+        return i - 1u;
+    }
+    if ((P.free & (1u << lo)) != 0u) {
+        return i;
+    }
+    return n - 1u;
+}
+
+fn fwd(i: u32, n: u32, hi: u32) -> u32 {
+    if (i + 1u < n) {
+        return i + 1u;
+    }
+    if ((P.free & (1u << hi)) != 0u) {
+        return i;
+    }
+    return 0u;
+}
+
+fn cell_of(wid: vec3<u32>, lid: vec3<u32>) -> u32 {
+    return (wid.x + P.gx * wid.y) * WG + lid.x;
+}
+
+@compute @workgroup_size(WG)
+fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let c = cell_of(wid, lid);
+    let nxy = P.nx * P.ny;
+    let n = nxy * P.nz;
+    var ru: real = 0.0;
+    var rv: real = 0.0;
+    if (c < n) {
+        let i = c % P.nx;
+        let j = (c / P.nx) % P.ny;
+        let k = c / nxy;
+        let row = c - i;
+        let l = row + back(i, P.nx, 0u);
+        let r = row + fwd(i, P.nx, 1u);
+        let s = c - j * P.nx + back(j, P.ny, 2u) * P.nx;
+        let t = c - j * P.nx + fwd(j, P.ny, 3u) * P.nx;
+        let uc = u0[c];
+        let vc = v0[c];
+        // The CPU's order of operations (grids::gray_scott, `Stencil`).
+        var lu = u0[l] + u0[r] + u0[s] + u0[t] - P.centre * uc;
+        var lv = v0[l] + v0[r] + v0[s] + v0[t] - P.centre * vc;
+        if (P.three != 0u) {
+            let d = c - k * nxy + back(k, P.nz, 4u) * nxy;
+            let up = c - k * nxy + fwd(k, P.nz, 5u) * nxy;
+            lu = lu + (u0[d] + u0[up]);
+            lv = lv + (v0[d] + v0[up]);
+        }
+        let uvv = uc * vc * vc;
+        ru = P.f * (1.0 - uc) - uvv;
+        rv = uvv - P.fk * vc;
+        u1[c] = uc + P.du * lu + P.dt * ru;
+        v1[c] = vc + P.dv * lv + P.dt * rv;
+    }
+    // The workgroup's reaction sums, in one fixed tree order.
+    su[lid.x] = ru;
+    sv[lid.x] = rv;
+    workgroupBarrier();
+    for (var w = WG / 2u; w > 0u; w = w / 2u) {
+        if (lid.x < w) {
+            su[lid.x] = su[lid.x] + su[lid.x + w];
+            sv[lid.x] = sv[lid.x] + sv[lid.x + w];
+        }
+        workgroupBarrier();
+    }
+    if (lid.x == 0u) {
+        let g = wid.x + P.gx * wid.y;
+        made[2u * g] = made[2u * g] + P.dt * su[0];
+        made[2u * g + 1u] = made[2u * g + 1u] + P.dt * sv[0];
+    }
+}
+
+@compute @workgroup_size(WG)
+fn check(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let c = cell_of(wid, lid);
+    if (c >= P.nx * P.ny * P.nz) {
+        return;
+    }
+    if (bad(u0[c]) || bad(v0[c])) {
+        atomicMin(&flag[0], c);
+    }
+}
