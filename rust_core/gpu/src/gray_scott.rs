@@ -77,7 +77,14 @@ impl GrayScott {
     ///
     /// Errors: `Unsupported` for f64 on an adapter without it or buffers over its limits,
     /// `OutOfMemory` naming the buffer.
-    pub fn new(gpu: Arc<Gpu>, precision: Precision, model: Model, u: &[f64], v: &[f64], made: [f64; 2]) -> Result<Self> {
+    pub fn new(
+        gpu: Arc<Gpu>,
+        precision: Precision,
+        model: Model,
+        u: &[f64],
+        v: &[f64],
+        made: [f64; 2],
+    ) -> Result<Self> {
         assert!(model.dim == 2 || model.dim == 3, "dim must be 2 or 3");
         let cells = model.n.iter().product::<usize>();
         assert!(u.len() == cells && v.len() == cells, "fields must have one value per cell");
@@ -97,7 +104,8 @@ impl GrayScott {
         let made_buf = gpu.buffer("reaction books", 2 * slots * precision.bytes(), st)?;
         let flag = gpu.buffer("finiteness flag", 16, st)?;
         let params = gpu.buffer("parameters", 32 + 8 * precision.bytes(), U::UNIFORM | U::COPY_DST)?;
-        let staging = gpu.buffer("read-back staging", size.max(2 * slots * precision.bytes()), U::MAP_READ | U::COPY_DST)?;
+        let staging =
+            gpu.buffer("read-back staging", size.max(2 * slots * precision.bytes()), U::MAP_READ | U::COPY_DST)?;
         let (layout, step_pipe, check_pipe) = pipelines(&gpu, precision);
         let bind = |a: &Pair, b: &Pair| {
             let res = [&params, &a.u, &a.v, &b.u, &b.v, &made_buf, &flag];

@@ -329,7 +329,13 @@ impl Gpu {
     }
 
     /// The first `count` reals of `b`, read back as f64.
-    pub(crate) fn read_reals(&self, p: Precision, b: &wgpu::Buffer, staging: &wgpu::Buffer, count: usize) -> Result<Vec<f64>> {
+    pub(crate) fn read_reals(
+        &self,
+        p: Precision,
+        b: &wgpu::Buffer,
+        staging: &wgpu::Buffer,
+        count: usize,
+    ) -> Result<Vec<f64>> {
         let bytes = self.read_back(b, staging, (count as u64).max(1) * p.bytes())?;
         let mut v: Vec<f64> = match p {
             Precision::F64 => bytemuck::pod_collect_to_vec::<u8, f64>(&bytes),

@@ -243,24 +243,26 @@ impl Particles {
         let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
         let (layout, pipes) = pipelines(&gpu, precision);
-        let entries: Vec<wgpu::BindGroupEntry> =
-            [&params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2], &colliders, &live.hits]
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    // The parameters: one block's worth, at the offset given when bound.
-                    resource: if i == 0 {
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: b,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(16 * precision.bytes() + 32),
-                        })
-                    } else {
-                        b.as_entire_binding()
-                    },
+        let entries: Vec<wgpu::BindGroupEntry> = [
+            &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
+            &colliders, &live.hits,
+        ]
+        .iter()
+        .enumerate()
+        .map(|(i, b)| wgpu::BindGroupEntry {
+            binding: i as u32,
+            // The parameters: one block's worth, at the offset given when bound.
+            resource: if i == 0 {
+                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: b,
+                    offset: 0,
+                    size: std::num::NonZeroU64::new(16 * precision.bytes() + 32),
                 })
-                .collect();
+            } else {
+                b.as_entire_binding()
+            },
+        })
+        .collect();
         let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("particles"),
             layout: &layout,
@@ -348,7 +350,16 @@ impl Particles {
     fn write_params_at(&self, k: u64, dt: f64, h1: f64, h2: f64, w_new: f64, w_old: f64, pred: bool) {
         let f = &self.forces;
         let (gg, eps) = f.pairwise.unwrap_or((0.0, 0.0));
-        let u = [self.n as u32, f.pairwise.is_some() as u32, pred as u32, self.has_springs as u32, self.dim as u32, self.ncol, 0, 0];
+        let u = [
+            self.n as u32,
+            f.pairwise.is_some() as u32,
+            pred as u32,
+            self.has_springs as u32,
+            self.dim as u32,
+            self.ncol,
+            0,
+            0,
+        ];
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0];
         self.gpu.write_params_at(self.precision, &self.params, k * self.slot, &u, &r);
     }
@@ -599,7 +610,11 @@ impl Particles {
                 vel: mk("checkpoint velocities")?,
                 acc: mk("checkpoint accelerations")?,
                 aux: mk("checkpoint drag books")?,
-                hits: self.gpu.buffer("checkpoint collision books", (self.n as u64).max(1) * self.precision.bytes(), st)?,
+                hits: self.gpu.buffer(
+                    "checkpoint collision books",
+                    (self.n as u64).max(1) * self.precision.bytes(),
+                    st,
+                )?,
                 flag: self.gpu.buffer("checkpoint flags", 16, st)?,
             });
         }

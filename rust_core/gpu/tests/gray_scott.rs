@@ -100,9 +100,27 @@ fn gray_scott_steps_as_the_host_reference() {
         // 2D periodic, a row longer than a workgroup.
         Model { n: [300, 7, 1], dim: 2, dx: 0.01, free: [false; 6], du: 2e-5, dv: 1e-5, feed: 0.035, kill: 0.065 },
         // 2D with free x faces, periodic y.
-        Model { n: [17, 23, 1], dim: 2, dx: 0.01, free: [true, true, false, false, false, false], du: 2e-5, dv: 1e-5, feed: 0.03, kill: 0.06 },
+        Model {
+            n: [17, 23, 1],
+            dim: 2,
+            dx: 0.01,
+            free: [true, true, false, false, false, false],
+            du: 2e-5,
+            dv: 1e-5,
+            feed: 0.03,
+            kill: 0.06,
+        },
         // 3D, free z only.
-        Model { n: [9, 8, 7], dim: 3, dx: 0.01, free: [false, false, false, false, true, true], du: 2e-5, dv: 1e-5, feed: 0.035, kill: 0.065 },
+        Model {
+            n: [9, 8, 7],
+            dim: 3,
+            dx: 0.01,
+            free: [false, false, false, false, true, true],
+            du: 2e-5,
+            dv: 1e-5,
+            feed: 0.035,
+            kill: 0.065,
+        },
     ];
     for m in cases {
         let dt = 0.5;

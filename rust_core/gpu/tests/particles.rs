@@ -375,7 +375,8 @@ fn yoshida4_converges_at_fourth_order() {
     let f = Forces { pairwise: Some((g, 0.0)), ..Default::default() };
     let err = |scheme: Scheme, steps: u64| {
         let mut ps =
-            Particles::new(gpu.clone(), Precision::F64, 3, scheme, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m], None).unwrap();
+            Particles::new(gpu.clone(), Precision::F64, 3, scheme, f, &x, &v, &[m, m], &[1.0 / m, 1.0 / m], None)
+                .unwrap();
         ps.step(steps, 2.0 * std::f64::consts::PI / steps as f64, &AtomicBool::new(false)).unwrap();
         let (xe, _) = ps.read().unwrap();
         ((xe[3] - r).powi(2) + xe[4].powi(2)).sqrt()

@@ -26,7 +26,8 @@ pub fn gray_scott_config(name: &str, dim: usize, mut p: Params) -> Result<GraySc
 }
 
 fn gray_scott_of(name: &str, grid: Grid, p: &mut Params) -> Result<GrayScottConfig> {
-    let mut c = GrayScottConfig::new(name, grid, p.number("du")?, p.number("dv")?, p.number("feed")?, p.number("kill")?);
+    let mut c =
+        GrayScottConfig::new(name, grid, p.number("du")?, p.number("dv")?, p.number("feed")?, p.number("kill")?);
     c.cfl = p.number("cfl")?;
     Ok(c)
 }

@@ -12,10 +12,10 @@
 //! Any other term kind or integrator is refused by name: nothing runs silently on the CPU.
 use super::{Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::error::{invalid, Error, Failure, Result};
-use crate::terms::registry::Params;
-use crate::vector::Real;
 use crate::grids::gray_scott::GrayScottConfig;
 use crate::grids::Edge;
+use crate::terms::registry::Params;
+use crate::vector::Real;
 use physcore_gpu::gray_scott::{self as dg, GrayScott};
 use physcore_gpu::particles::{self as dp, Collider, Forces, Particles, Scheme, Springs};
 use physcore_gpu::{Gpu, GpuError, Precision};
@@ -68,9 +68,7 @@ pub fn scheme_of(integrator: &str) -> Result<Scheme> {
         "yoshida4" => Ok(Scheme::Yoshida4),
         other => Err(invalid(
             "integrator",
-            format!(
-                "the GPU path has {other:?} not yet (it has \"semi_implicit_euler\", \"verlet\" and \"yoshida4\")"
-            ),
+            format!("the GPU path has {other:?} not yet (it has \"semi_implicit_euler\", \"verlet\" and \"yoshida4\")"),
         )),
     }
 }
@@ -467,7 +465,14 @@ impl DeviceGrayScott {
     ///
     /// Errors: `InvalidInput` naming `precision` or `device` (f64 on an adapter without it,
     /// a grid over its limits); `OutOfMemory` for device buffers.
-    pub fn on(gpu: Arc<Gpu>, precision: &str, cfg: GrayScottConfig, u: &[Real], v: &[Real], made: [Real; 2]) -> Result<Self> {
+    pub fn on(
+        gpu: Arc<Gpu>,
+        precision: &str,
+        cfg: GrayScottConfig,
+        u: &[Real],
+        v: &[Real],
+        made: [Real; 2],
+    ) -> Result<Self> {
         cfg.validate()?;
         let g = &cfg.grid;
         let cells = g.cells();
@@ -482,16 +487,8 @@ impl DeviceGrayScott {
             free[f] = *e == Edge::Free;
         }
         let da = g.cell_measure();
-        let model = dg::Model {
-            n: g.n,
-            dim: g.dim,
-            dx: g.dx,
-            free,
-            du: cfg.du,
-            dv: cfg.dv,
-            feed: cfg.feed,
-            kill: cfg.kill,
-        };
+        let model =
+            dg::Model { n: g.n, dim: g.dim, dx: g.dx, free, du: cfg.du, dv: cfg.dv, feed: cfg.feed, kill: cfg.kill };
         let limit = cfg.stability_limit(u, v);
         let dev = GrayScott::new(gpu, precision_of(precision)?, model, u, v, [made[0] / da, made[1] / da])?;
         Ok(Self { cfg, limit, g: Mutex::new(dev) })
@@ -601,8 +598,11 @@ impl System for DeviceGrayScott {
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.size();
-        let (u, v, m) =
-            (super::array(arrays, "u", Some(n))?, super::array(arrays, "v", Some(n))?, super::array(arrays, "made", Some(2))?);
+        let (u, v, m) = (
+            super::array(arrays, "u", Some(n))?,
+            super::array(arrays, "v", Some(n))?,
+            super::array(arrays, "made", Some(2))?,
+        );
         for (name, a) in [("u", u), ("v", v), ("made", m)] {
             if let Some(i) = crate::grids::first_non_finite(a) {
                 return Err(invalid(name, format!("value {i} is not finite: {}", a[i])));
@@ -759,7 +759,10 @@ mod tests {
         use crate::grids::gray_scott::GrayScottSystem;
         let Some(w) = which() else { return };
         let gpu = Gpu::open(w).unwrap();
-        for (shape, edges) in [(vec![96.0, 80.0], "periodic,periodic,free,free"), (vec![12.0, 10.0, 9.0], "free,free,periodic,periodic,free,free")] {
+        for (shape, edges) in [
+            (vec![96.0, 80.0], "periodic,periodic,free,free"),
+            (vec![12.0, 10.0, 9.0], "free,free,periodic,periodic,free,free"),
+        ] {
             let dim = shape.len();
             let params = Params::new()
                 .with("shape", Value::Floats(shape.clone()))
@@ -793,7 +796,8 @@ mod tests {
                 c.steps(40, dt, &no).unwrap();
                 d.steps(40, dt, &no).unwrap();
                 let (du, dv) = d.read().unwrap();
-                let err = du.iter().zip(c.u()).chain(dv.iter().zip(c.v())).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max);
+                let err =
+                    du.iter().zip(c.u()).chain(dv.iter().zip(c.v())).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max);
                 let (cb, db) = (c.books(), d.books());
                 eprintln!("{shape:?} {precision}: fields {err:.1e}; books CPU {cb:?} device {db:?}");
                 let tol = if precision == "f32" { 1e-5 } else { 1e-13 };
