@@ -197,7 +197,7 @@ def _check_device(value: object) -> str:
 
 
 #: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
-_GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "springs")
+_GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "coulomb", "springs")
 #: Grid kinds the GPU path has kernels for (the same file).
 _GPU_GRIDS = ("gray_scott",)
 #: Collider sections the GPU path has kernels for (planes and boxes).
@@ -331,7 +331,7 @@ class Scene:
         ``"gpu:NAME"``: the first adapter whose name, backend or kind contains NAME
         (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
         (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag`,
-        :class:`PairwiseGravity` and one :class:`Springs`, stepped by ``"semi_implicit_euler"``, ``"verlet"`` or ``"yoshida4"``,
+        :class:`PairwiseGravity`, :class:`Coulomb` (the ``"charge"`` attribute) and one :class:`Springs`, stepped by ``"semi_implicit_euler"``, ``"verlet"`` or ``"yoshida4"``,
         with :class:`Plane` and :class:`Box` colliders, and :class:`~physcore.grids.GrayScott` grids (their
         fields read and set as on the CPU); the parts
         move to the device at the first step, and a part it has no kernel for is refused then,

@@ -264,3 +264,38 @@ def test_particles_bounce_off_gpu_planes_and_boxes_as_on_the_cpu(dim: int, integ
         assert abs(e_gpu.total - e_cpu.total) < 1e-3 * abs(e_cpu.total)
         lo = gpu.positions.min()
         assert lo >= -1.0 and gpu.positions.max() <= 1.0
+
+
+def _plasma(dim: int, device: str = "cpu", precision: str | None = None) -> pc.Scene:
+    """Charges of both signs (some pinned) under Coulomb forces, gravity between the same
+    particles, and drag."""
+    rng = np.random.default_rng(11)
+    n = 400
+    s = pc.Scene(dim=dim, integrator="verlet", dt=1e-3, device=device, precision=precision)
+    s.add_particles(rng.normal(size=(n, dim)), 0.1 * rng.normal(size=(n, dim)), masses=rng.uniform(0.5, 1.5, n),
+                    pinned=np.arange(n) % 53 == 0)
+    s.set_attribute("charge", rng.choice([-1.0, 1.0], n) * rng.uniform(0.5, 1.0, n) * 1e-2)
+    s.add(pc.Coulomb(k=1.0, softening=0.05))
+    s.add(pc.PairwiseGravity(G=1e-3, softening=0.1))
+    s.add(pc.Drag(0.01))
+    return s
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_coulomb_forces_on_the_gpu_act_as_on_the_cpu(dim: int) -> None:
+    cpu = _plasma(dim)
+    e0 = cpu.energy().potential["coulomb"]
+    cpu.step(200)
+    e_cpu = cpu.energy()
+    assert abs(e_cpu.potential["coulomb"] - e0) > 1e-3 * abs(e0)  # the charges moved each other
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu = _plasma(dim, DEVICE, precision)
+        assert abs(gpu.energy().potential["coulomb"] - e0) < (1e-6 if precision == "f32" else 1e-13) * abs(e0)
+        gpu.step(200)
+        e_gpu = gpu.energy()
+        assert sorted(e_gpu.potential) == sorted(e_cpu.potential)
+        dx = np.abs(gpu.positions - cpu.positions).max()
+        tol = {"f32": (1e-4, 1e-5), "f64": (1e-12, 1e-12)}[precision]
+        assert dx < tol[0], (precision, dx)
+        de = abs(e_gpu.potential["coulomb"] - e_cpu.potential["coulomb"])
+        assert de < tol[1] * abs(e_cpu.potential["coulomb"]) + 1e-12, (precision, de)

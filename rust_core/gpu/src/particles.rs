@@ -38,6 +38,9 @@ pub struct Forces {
     pub drag: f64,
     /// Direct pairwise gravity: (G, Plummer softening ε in m).
     pub pairwise: Option<(f64, f64)>,
+    /// Direct Coulomb forces between the charges (`Particles::set_charges`): (k in N·m²/C²,
+    /// Plummer softening ε in m).
+    pub coulomb: Option<(f64, f64)>,
 }
 
 /// Hookean springs with dashpots between particle pairs (one entry per spring), as the CPU's
@@ -108,6 +111,8 @@ pub struct Books {
     pub dashpots: f64,
     /// Energy taken out by the colliders so far.
     pub collisions: f64,
+    /// k Σ_{i<j} q_i q_j / √(r² + ε²).
+    pub coulomb: f64,
 }
 
 /// Why `step` stopped early.
@@ -145,6 +150,8 @@ pub struct Particles {
     saved: Option<Bufs>,
     saved_acc_valid: bool,
     books: wgpu::Buffer,
+    /// The charges (one real per particle; zero until `set_charges`).
+    charges: wgpu::Buffer,
     /// The colliders (three rows each) and how many.
     colliders: wgpu::Buffer,
     ncol: u32,
@@ -219,6 +226,7 @@ impl Particles {
             flag: gpu.buffer("flags", 16, st)?,
         };
         let colliders = gpu.buffer("colliders", 3 * row * MAX_COLLIDERS as u64, U::STORAGE | U::COPY_DST)?;
+        let charges = gpu.buffer("charges", (n as u64).max(1) * precision.bytes(), U::STORAGE | U::COPY_DST)?;
         let books = gpu.buffer("energy books", 2 * size, st)?;
         let vp = mk("predicted velocities")?;
         let empty = Springs::default();
@@ -245,7 +253,7 @@ impl Particles {
         let (layout, pipes) = pipelines(&gpu, precision);
         let entries: Vec<wgpu::BindGroupEntry> = [
             &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
-            &colliders, &live.hits,
+            &colliders, &live.hits, &charges,
         ]
         .iter()
         .enumerate()
@@ -279,6 +287,7 @@ impl Particles {
             saved: None,
             saved_acc_valid: false,
             books,
+            charges,
             colliders,
             ncol: 0,
             _vp: vp,
@@ -357,10 +366,11 @@ impl Particles {
             self.has_springs as u32,
             self.dim as u32,
             self.ncol,
-            0,
+            f.coulomb.is_some() as u32,
             0,
         ];
-        let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0];
+        let (kc, epc) = f.coulomb.unwrap_or((0.0, 0.0));
+        let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0, kc, epc * epc, 0.0, 0.0];
         self.gpu.write_params_at(self.precision, &self.params, k * self.slot, &u, &r);
     }
 
@@ -534,6 +544,7 @@ impl Particles {
             b.dissipated += r[3];
             b.springs += r[4];
             b.dashpots += r[5];
+            b.coulomb += r[6];
         }
         if self.ncol > 0 {
             b.collisions = self.read_hits()?.iter().sum();
@@ -543,6 +554,15 @@ impl Particles {
 
     fn read_hits(&self) -> Result<Vec<f64>> {
         self.gpu.read_reals(self.precision, &self.live.hits, &self.staging, self.n)
+    }
+
+    /// Sets the charges (C, one per particle): the Coulomb term's source weights.
+    pub fn set_charges(&mut self, q: &[f64]) -> Result<()> {
+        assert_eq!(q.len(), self.n, "one charge per particle");
+        if self.n > 0 {
+            self.upload(&self.charges, q);
+        }
+        self.gpu.wait()
     }
 
     /// Sets the colliders (at most `MAX_COLLIDERS`), applied after every step in this order.
@@ -670,6 +690,7 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
         entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: true }));
     }
     entries.push(entry(12, wgpu::BufferBindingType::Storage { read_only: false }));
+    entries.push(entry(13, wgpu::BufferBindingType::Storage { read_only: true }));
     let layout =
         d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("particles"), entries: &entries });
     let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

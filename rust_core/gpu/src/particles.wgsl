@@ -17,7 +17,8 @@ struct Params {
     // 2 or 3 (the colliders' axes), and the number of colliders.
     dim: u32,
     ncol: u32,
-    pad_a: u32,
+    // 1: Coulomb on.
+    coul: u32,
     pad_b: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
@@ -34,6 +35,11 @@ struct Params {
     gy: real,
     gz: real,
     pad1: real,
+    // Coulomb's constant k (N·m²/C²) and its softening ε² (m²).
+    kc: real,
+    eps2c: real,
+    pad2: real,
+    pad3: real,
 };
 
 const WG: u32 = 256u;
@@ -67,10 +73,13 @@ const WG: u32 = 256u;
 @group(0) @binding(11) var<storage, read> col: array<vec4<real>>;
 // Per particle: the energy the colliders removed from it so far (J).
 @group(0) @binding(12) var<storage, read_write> hits: array<real>;
+// Per particle: its charge q (C), the Coulomb term's source weight.
+@group(0) @binding(13) var<storage, read> charge: array<real>;
 
 var<workgroup> wtouch: u32;
 
 var<workgroup> tile: array<vec4<real>, WG>;
+var<workgroup> qtile: array<real, WG>;
 
 fn load_tile(t: u32, l: u32) {
     let j = t * WG + l;
@@ -79,6 +88,18 @@ fn load_tile(t: u32, l: u32) {
     } else {
         // Mass 0: a pad pulls on nothing.
         tile[l] = vec4<real>(0.0, 0.0, 0.0, 0.0);
+    }
+}
+
+// Positions and charges of tile t (charge 0 past the end: a pad pushes on nothing).
+fn load_charges(t: u32, l: u32) {
+    let j = t * WG + l;
+    if (j < P.n) {
+        tile[l] = pos[j];
+        qtile[l] = charge[j];
+    } else {
+        tile[l] = vec4<real>(0.0, 0.0, 0.0, 0.0);
+        qtile[l] = 0.0;
     }
 }
 
@@ -129,6 +150,26 @@ fn eval_forces(i: u32, l: u32) {
         }
         a *= P.big_g;
     }
+    // Coulomb: F_i = k q_i Σ_j q_j (x_i − x_j) / (|x_i − x_j|² + ε²)^{3/2} (the CPU's
+    // `terms::coulomb`), summed over tiles of charges.
+    var fc = vec3<real>(0.0, 0.0, 0.0);
+    if (P.coul != 0u) {
+        let tiles = (P.n + WG - 1u) / WG;
+        for (var t = 0u; t < tiles; t++) {
+            load_charges(t, l);
+            workgroupBarrier();
+            for (var k = 0u; k < WG; k++) {
+                let d = tile[k].xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2c;
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+                fc -= d * (qtile[k] * inv * inv * inv);
+            }
+            workgroupBarrier();
+        }
+        if (live) {
+            fc *= P.kc * charge[i];
+        }
+    }
     if (!live) {
         return;
     }
@@ -161,7 +202,7 @@ fn eval_forces(i: u32, l: u32) {
     var ai = vec3<real>(0.0, 0.0, 0.0);
     var p: real = 0.0;
     if (v.w != 0.0) {
-        ai = a + vec3<real>(P.gx, P.gy, P.gz) + (fs - u * P.b) * v.w;
+        ai = a + vec3<real>(P.gx, P.gy, P.gz) + (fs + fc - u * P.b) * v.w;
         p = P.b * dot(u, u);
     }
     acc[i] = vec4<real>(ai, 0.0);
@@ -248,6 +289,22 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
             workgroupBarrier();
         }
     }
+    var phic: real = 0.0;
+    if (P.coul != 0u) {
+        let tiles = (P.n + WG - 1u) / WG;
+        for (var t = 0u; t < tiles; t++) {
+            load_charges(t, lid.x);
+            workgroupBarrier();
+            for (var k = 0u; k < WG; k++) {
+                let j = t * WG + k;
+                let d = tile[k].xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2c;
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0 && j != i);
+                phic += qtile[k] * inv;
+            }
+            workgroupBarrier();
+        }
+    }
     if (!live) {
         return;
     }
@@ -267,7 +324,11 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     // Each pair counted from both ends: half each.
     let x = aux[i];
     books[2u * i] = vec4<real>(0.5 * xi.w * dot(v.xyz, v.xyz), ug, -0.5 * P.big_g * xi.w * phi, x.x);
-    books[2u * i + 1u] = vec4<real>(us, x.z, 0.0, 0.0);
+    var uc: real = 0.0;
+    if (P.coul != 0u) {
+        uc = 0.5 * P.kc * charge[i] * phic;
+    }
+    books[2u * i + 1u] = vec4<real>(us, x.z, uc, 0.0);
 }
 
 // The colliders (the CPU's `constraints::Collider` with `Contact::bounce`, and `constraints::Aabb`

@@ -102,7 +102,7 @@ fn run(
 #[test]
 fn steps_agree_with_the_f64_host_path() {
     let Some(gpu) = gpu() else { return };
-    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.05, pairwise: Some((1e-3, 0.05)) };
+    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.05, pairwise: Some((1e-3, 0.05)), ..Default::default() };
     for dim in [2, 3] {
         let n = 600; // more than two tiles, not a multiple of one
         let (mut x, mut v, m) = cloud(n, dim, 7);
@@ -128,7 +128,7 @@ fn steps_agree_with_the_f64_host_path() {
 #[test]
 fn runs_repeat_bit_for_bit() {
     let Some(gpu) = gpu() else { return };
-    let f = Forces { g: [0.0, 0.0, -1.0], drag: 0.1, pairwise: Some((1e-2, 0.01)) };
+    let f = Forces { g: [0.0, 0.0, -1.0], drag: 0.1, pairwise: Some((1e-2, 0.01)), ..Default::default() };
     let a = run(&gpu, Precision::F32, 3, Scheme::VelocityVerlet, f, 700, 50, 1e-3).read().unwrap();
     let b = run(&gpu, Precision::F32, 3, Scheme::VelocityVerlet, f, 700, 50, 1e-3).read().unwrap();
     assert_eq!(a, b);
@@ -185,7 +185,7 @@ fn a_kepler_orbit_keeps_its_energy() {
 #[test]
 fn drag_books_balance_and_pinned_particles_stay() {
     let Some(gpu) = gpu() else { return };
-    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.3, pairwise: None };
+    let f = Forces { g: [0.0, -9.81, 0.0], drag: 0.3, ..Default::default() };
     for scheme in [Scheme::SemiImplicitEuler, Scheme::VelocityVerlet] {
         let (x, v, m) = cloud(300, 2, 3);
         let mut im: Vec<f64> = m.iter().map(|m| 1.0 / m).collect();

@@ -115,9 +115,11 @@ impl PySimulation {
             let dim = self.dim();
             with_sim!(&mut self.inner, s => {
                 let p = s.particles();
-                if let Some(a) = p.model().attributes.keys().next() {
+                // Charges are the Coulomb term's weights; other attributes have no kernel.
+                if let Some(a) = p.model().attributes.keys().find(|a| **a != "charge") {
                     return Err(err(invalid("device", format!("the GPU path has no per-particle {a:?} yet"))));
                 }
+                let charge = p.model().attribute("charge").map(|q| q.to_vec());
                 if p.n_constraints() != colliders.len() {
                     return Err(err(invalid("device", "the GPU path has no constraints but its colliders yet")));
                 }
@@ -145,7 +147,7 @@ impl PySimulation {
                     let integrator = p.integrator_info().name;
                     let g = gpu.clone();
                     Some(
-                        py.detach(|| DeviceParticles::on(g, precision, dim, integrator, &x, &v, &m, &pinned, terms, colliders))
+                        py.detach(|| DeviceParticles::on(g, precision, dim, integrator, &x, &v, &m, &pinned, charge.as_deref(), terms, colliders))
                             .map_err(|e| to_py(py, e))?,
                     )
                 } else {

@@ -41,6 +41,7 @@ struct Names {
     gravity: Vec<String>,
     drag: Vec<String>,
     pairwise: Option<String>,
+    coulomb: Option<String>,
     springs: Option<String>,
     /// Whether the springs have dashpots (the CPU books their dissipation only then).
     damped: bool,
@@ -102,7 +103,7 @@ impl DeviceParticles {
         colliders: &[(String, Params)],
     ) -> Result<Self> {
         let gpu = Gpu::open(which)?;
-        Self::on(gpu, precision, dim, integrator, x, v, mass, pinned, terms, colliders)
+        Self::on(gpu, precision, dim, integrator, x, v, mass, pinned, None, terms, colliders)
     }
 
     /// As `new`, on a device already open (one device serves every system of a scene).
@@ -116,6 +117,7 @@ impl DeviceParticles {
         v: &[Real],
         mass: &[Real],
         pinned: &[bool],
+        charge: Option<&[Real]>,
         terms: &[(String, String, Params)],
         colliders: &[(String, Params)],
     ) -> Result<Self> {
@@ -144,6 +146,12 @@ impl DeviceParticles {
         let v: Vec<Real> = v.iter().enumerate().map(|(k, &c)| if pinned[k / dim] { 0.0 } else { c }).collect();
         let mut p = Particles::new(gpu, precision, dim, scheme, forces, x, &v, mass, &im, springs.as_ref())?;
         p.set_colliders(&colliders)?;
+        if let Some(q) = charge {
+            if q.len() != n || q.iter().any(|c| !c.is_finite()) {
+                return Err(invalid("charge", "must be finite, one value per particle"));
+            }
+            p.set_charges(q)?;
+        }
         // Beside the world's (empty) CPU particle system, which is "particles".
         Ok(Self {
             name: "device particles".into(),
@@ -262,6 +270,20 @@ fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result
                 f.pairwise = Some((g, eps));
                 names.pairwise = Some(name.clone());
             }
+            "coulomb" => {
+                if names.coulomb.is_some() {
+                    return Err(invalid(name, "the GPU path holds one coulomb term"));
+                }
+                let (k, eps) = (p.number("k")?, p.number("softening")?);
+                if k <= 0.0 {
+                    return Err(invalid("k", format!("{k} must be finite and > 0")));
+                }
+                if eps < 0.0 {
+                    return Err(invalid("softening", format!("{eps} must be finite and >= 0")));
+                }
+                f.coulomb = Some((k, eps));
+                names.coulomb = Some(name.clone());
+            }
             "springs" => {
                 if names.springs.is_some() {
                     return Err(invalid(name, "the GPU path holds one springs term (join them into one)"));
@@ -299,8 +321,8 @@ fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result
                 return Err(invalid(
                     name,
                     format!(
-                        "the GPU path has no kernel for {other:?} yet (it has gravity, drag, pairwise_gravity and \
-                         springs); run this scene on the CPU (device=\"cpu\")"
+                        "the GPU path has no kernel for {other:?} yet (it has gravity, drag, pairwise_gravity, \
+                         coulomb and springs); run this scene on the CPU (device=\"cpu\")"
                     ),
                 ))
             }
@@ -351,6 +373,7 @@ impl System for DeviceParticles {
             springs: Real::NAN,
             dashpots: Real::NAN,
             collisions: Real::NAN,
+            coulomb: Real::NAN,
         });
         let mut r = EnergyReport { kinetic: b.kinetic, ..Default::default() };
         // The summed uniform field's potential is booked under the first gravity term's name.
@@ -362,6 +385,9 @@ impl System for DeviceParticles {
         }
         if let Some(s) = &self.names.springs {
             r.potential.push((s.clone(), b.springs));
+        }
+        if let Some(c) = &self.names.coulomb {
+            r.potential.push((c.clone(), b.coulomb));
         }
         if let Some(d) = self.names.drag.first() {
             r.dissipated.push((d.clone(), b.dissipated));
