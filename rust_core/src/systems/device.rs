@@ -772,9 +772,15 @@ mod tests {
         a.steps(5, 1e-3, &no).unwrap();
         a.restore(snap);
         assert_eq!(a.read().unwrap(), before);
-        let coulomb = vec![("coulomb".to_string(), "charges".to_string(), Params::new())];
-        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &coulomb, &[]).err().unwrap();
-        assert!(e.to_string().starts_with("charges: the GPU path has no kernel for \"coulomb\""), "{e}");
+        let tree = vec![("tree_gravity".to_string(), "tree".to_string(), Params::new())];
+        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &tree, &[]).err().unwrap();
+        assert!(e.to_string().starts_with("tree: the GPU path has no kernel for \"tree_gravity\""), "{e}");
+        let sphere = vec![(
+            "sphere".to_string(),
+            Params::new().with("restitution", Value::Number(0.5)).with("friction", Value::Number(0.0)),
+        )];
+        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms(), &sphere).err().unwrap();
+        assert!(e.to_string().contains("no \"sphere\" collider"), "{e}");
         let e = DeviceParticles::new(w, "f32", 3, "rk4", &x, &v, &m, &pinned, &terms(), &[]).err().unwrap();
         assert!(e.to_string().starts_with("integrator:"), "{e}");
     }
