@@ -57,6 +57,7 @@ def double_slit(
     separation: float = 0.2,
     width: float = 0.03,
     speed: float = 0.3,
+    start: float = 1.0,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -65,7 +66,11 @@ def double_slit(
     The wave comes from an oscillating line on the left of a 1.5 m × 1 m tank and meets a wall
     with two slits (`width` m wide, centres `separation` m apart);
     the other faces absorb (damping layers), so the fringes are those of an open field. The
-    grid is (1.5 n) × n; the source's frequency is speed / wavelength.
+    grid is (1.5 n) × n; the source's frequency is speed / wavelength. The scene is returned
+    already stepped `start` seconds from rest (its clock reads `start`): by default the plane
+    wave's front, 0.23 m from the source line to the wall, has just passed the slits (0.77 s at
+    0.3 m/s), so the first frame shows the incoming wave train and the first wavelets behind the
+    wall; ``start=0`` returns the tank at rest.
     """
     from ..grids import Oscillator, Wave
 
@@ -97,6 +102,11 @@ def double_slit(
     tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
     if dt is None:
         scene.dt = _cfl_step(tank, "speed")
+    start = _nonneg(start, "start")
+    if start > 0:  # the first frame shows the wave at the slits, not an empty tank
+        step = scene.dt
+        scene.advance(start)
+        scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
     return scene
 
 
@@ -108,9 +118,10 @@ def turing(
     preset: str = "maze",
     *,
     n: int = 256,
-    duration: float = 4500.0,
+    duration: float = 3500.0,
     seeds: int = 2,
     seed: int = 1,
+    start: float = 1000.0,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -119,8 +130,11 @@ def turing(
     :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
-    The animation spans `duration` time units: by default the maze grows from two seeds until
-    it fills the domain, at about 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    The scene is returned already stepped `start` time units from the seeds (its clock reads
+    `start`), so the first frame shows a pattern (a maze about a third of the domain across, by
+    default) rather than a few small squares; ``start=0`` returns Pearson's start itself. The
+    animation spans `duration` time units from there: by default the maze grows until it fills
+    the domain, at about t = 4500. Steps are at most 1 time unit (the reaction's accuracy;
     Pearson's step) and within the diffusion limit, so coarse grids stay stable.
     """
     from ..grids import PRESETS, GrayScott
@@ -141,13 +155,19 @@ def turing(
     gs = scene.add(GrayScott((n, n), dx, preset=preset, cfl=cfl, name="turing"))
     if dt is None:
         scene.dt = gs.cfl * gs.diffusion_limit
+    start = _nonneg(start, "start")
     gs.seed(_check.int_in_range("seed", seed, 0, 2**63 - 1), squares=_check.int_in_range("seeds", seeds, 1, 1000), size=0.06)
+    if start > 0:  # the first frame shows a pattern, not the seeds' few small squares
+        step = scene.dt
+        scene.advance(start)
+        scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
     scene.render_defaults = {"frame_time": duration / 119}
     return scene
 
 
-# The default duration (4500) over 119 frame steps: the maze grows until the last frame.
-turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
+# From t = 1000 (a maze a third of the domain across) the default duration (3500) over 119 frame
+# steps: the maze grows until the last frame, when it fills the domain (t = 4500).
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 3500.0 / 119, "substeps": "auto", "size": (400, 400)}
 turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
