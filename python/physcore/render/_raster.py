@@ -366,6 +366,14 @@ def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
     return (cut(c, 2 * r + 1, m) - cut(c, 0, m - 2 * r - 1)) * np.float32(1.0 / (2 * r + 1))
 
 
+#: A liquid's spray (``surface``): particles with fewer than SPRAY_NEIGHBOURS others within two
+#: spacings are drawn apart from the surface as a mist, blurred SPRAY_BLUR times wider than the
+#: surface and at most SPRAY_OPACITY opaque (see _Rasteriser._spray_of and _mist).
+SPRAY_NEIGHBOURS = 3
+SPRAY_BLUR = 3
+SPRAY_OPACITY = 0.7
+
+
 def _blur(a: np.ndarray, r: int) -> np.ndarray:
     """Three box blurs each way: close to a Gaussian of σ ≈ r (the central limit), O(1) a pixel."""
     for _ in range(3):
@@ -828,8 +836,10 @@ class _Rasteriser:
         neighbours close; a pixel is inside where the density passes 45 % of a filled
         interior's, with a soft edge over 30–60 %, coloured by the density-weighted mean value
         on the colour map, lit along the surface's edge (the density's gradient as a normal,
-        light from the upper left) so a wave's crest reads as a surface. Spray thinner than
-        the threshold still shows, fainter. Walls and colliders stay as drawn underneath."""
+        light from the upper left) so a wave's crest reads as a surface. Spray (particles with
+        fewer than SPRAY_NEIGHBOURS others within two spacings) is left out of the surface and
+        drawn under it as a soft mist (:meth:`_mist`), a lone particle not at all, so a splash
+        reads as a plume, not as specks. Walls and colliders stay as drawn underneath."""
         rec = self.rec
         cam = self.cam_at(k)
         under = self._under(cam)
@@ -839,16 +849,20 @@ class _Rasteriser:
         free = ~rec.pinned
         s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
         col, row = cam.pixels(s)
+        # Spray (particles with few neighbours) is drawn apart, as a mist under the surface.
+        spray = self._spray_of(col, row, under.shape)
+        body = ~spray
         r = self._surf_r
-        dens = _blur(_splat(col, row, under.shape), r) / self._surf_ref
+        dens = _blur(_splat(col[body], row[body], under.shape), r) / self._surf_ref
         values = None
         if self.color_by == "speed" and rec.speeds is not None:
             values = rec.speeds[k]
         elif self.color_by == "pressure" and rec.pressures is not None:
             values = rec.pressures[k]
+        v = None
         if values is not None:
-            v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0)
-            wsum = _blur(_splat(col, row, under.shape, v.astype(np.float32)), r) / self._surf_ref
+            v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+            wsum = _blur(_splat(col[body], row[body], under.shape, v[body]), r) / self._surf_ref
             mean = wsum / np.maximum(dens, 1e-12)
             idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
             colour = self.palette[idx].astype(np.float32)
@@ -861,6 +875,8 @@ class _Rasteriser:
         lit = np.clip(-(gx + gy) * (0.7 * self._surf_spacing), -1.0, 1.0)  # light from the upper left
         shade = (1.0 + 0.35 * lit)[..., None]
         colour = np.clip(colour * shade + 60.0 * np.maximum(lit, 0)[..., None], 0, 255)
+        if spray.any():
+            out = self._mist(out, col[spray], row[spray], None if v is None else v[spray])
         a = alpha[..., None]
         out = out * (1 - a) + colour * a
         out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
@@ -870,6 +886,46 @@ class _Rasteriser:
             col, row = cam.pixels(s)
             _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
+
+    def _spray_of(self, col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """(N,) bool: the particles of the liquid's spray, those with fewer than SPRAY_NEIGHBOURS
+        others within about two particle spacings (a square window of half-width 2 spacings,
+        which holds some 20 in a filled interior); the surface leaves them to the mist."""
+        h, w = shape
+        ok = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        spray = np.zeros(col.shape, bool)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            return spray
+        half = max(2, int(round(2.0 * self._surf_spacing)))
+        counts = _splat(col, row, shape)
+        near = _box_blur(_box_blur(counts, half, 0), half, 1) * float((2 * half + 1) ** 2)
+        others = near[row[idx].astype(np.int64), col[idx].astype(np.int64)] - 1.0
+        spray[idx] = others < SPRAY_NEIGHBOURS
+        return spray
+
+    def _mist(self, out: np.ndarray, col: np.ndarray, row: np.ndarray, values: np.ndarray | None) -> np.ndarray:
+        """`out` (H, W, 3 float32) with the liquid's spray (the particles at `col`, `row`, see
+        :meth:`_spray_of`) drawn as a mist: splatted and blurred SPRAY_BLUR times wider than the
+        surface, shown where about two of them overlap or more (full at about four), at most
+        SPRAY_OPACITY opaque, coloured like the surface by their `values`. A jet or a cloud of
+        spray reads as one soft plume, not as specks a pixel or two wide; a particle alone, far
+        from any other, is left out (too small to see at the image's scale)."""
+        h, w = out.shape[:2]
+        rw = SPRAY_BLUR * self._surf_r
+        dw = _blur(_splat(col, row, (h, w)), rw)
+        one = 1.0 / (2.0 * math.pi * rw * (rw + 1))  # a lone particle's peak: σ² = r(r + 1)
+        mist = np.clip((dw - 1.5 * one) / (3.0 * one), 0.0, 1.0)
+        mist = SPRAY_OPACITY * mist * mist * (3 - 2 * mist)
+        if not mist.any():
+            return out
+        if values is not None:
+            mean = _blur(_splat(col, row, (h, w), values), rw) / np.maximum(dw, 1e-12)
+            colour = self.palette[self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)].astype(np.float32)
+        else:
+            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
+        m = mist[..., None]
+        return out * (1 - m) + colour * m
 
     def _value_levels_of(self, values: np.ndarray) -> np.ndarray:
         """Palette indices of `values` on the map of `color_by` (speed or pressure)."""
