@@ -366,6 +366,10 @@ def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
     return (cut(c, 2 * r + 1, m) - cut(c, 0, m - 2 * r - 1)) * np.float32(1.0 / (2 * r + 1))
 
 
+#: A 3D mesh's shadow on a floor prop: blurred with σ about this fraction of the image's width,
+#: darkening the floor by up to this much.
+SHADOW_BLUR, SHADOW_DARK = 0.012, 0.45
+
 #: A liquid's spray (``surface``): particles with fewer than SPRAY_NEIGHBOURS others within two
 #: spacings are drawn apart from the surface as a mist, blurred SPRAY_BLUR times wider than the
 #: surface and at most SPRAY_OPACITY opaque (see _Rasteriser._spray_of and _mist).
@@ -684,6 +688,17 @@ class _Rasteriser:
             on_mesh[mesh.faces.ravel()] = True
             self._off_mesh = ~on_mesh & ~rec.pinned  # drawn as discs under the surface
             self._pinned_idx = np.flatnonzero(rec.pinned)  # drawn as discs over it
+        # A 3D mesh over a floor drawn as a prop (a horizontal decor polygon, the lowest): the
+        # mesh casts a soft shadow on it (light from overhead), (z, (K, 3) points) relative to
+        # the recording's origin.
+        self._ground: tuple[float, np.ndarray] | None = None
+        if mesh is not None and dim == 3:
+            flat = [item["points"] - rec.origin for item in self.look.decor
+                    if item["kind"] == "polygon" and np.ptp(item["points"][:, 2]) <= 1e-9 * max(1.0, float(np.abs(item["points"]).max()))]
+            if flat:
+                low = min(flat, key=lambda q: float(q[0, 2]))
+                self._ground = (float(low[0, 2]), low)
+        self._ground_cover: np.ndarray | None = None  # the floor's coverage, for the fitted camera
 
 
     def forget_projection(self) -> None:
@@ -1015,6 +1030,8 @@ class _Rasteriser:
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
         out = self._rgb(under, cam)  # a new C-contiguous (H, W, 3) uint8 array, with the look's backdrop
+        if self._ground is not None:
+            self._cast_shadow(out, under, k, cam)
         self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
@@ -1022,6 +1039,48 @@ class _Rasteriser:
             col, row = cam.pixels(cam.project(rec.positions[k][self._pinned_idx])[0])
             _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
+
+    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera) -> None:
+        """Frame k's mesh casts a soft shadow on the floor prop (``self._ground``) in `out`, in
+        place: its triangles dropped straight down onto the floor's height, rasterised,
+        blurred (σ ≈ SHADOW_BLUR of the image's width) and darkening the floor by up to
+        SHADOW_DARK (under a vertex at height h, times exp(−h / the mesh's width)) where the floor shows (nothing that moves, no label is drawn there), as an
+        overcast sky's light from above would."""
+        from .. import _core
+
+        z, poly = self._ground
+        x = np.nan_to_num(np.asarray(self.rec.positions[k], dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        height = x[:, 2] - z
+        above = height > 0
+        if not above.any():
+            return
+        x[:, 2] = z
+        col, row = cam.pixels(cam.project(x)[0])
+        h, w = under.shape
+        verts = np.zeros((len(x), 3), dtype=np.float32)
+        verts[:, 0], verts[:, 1] = col, row
+        faces = self._shader.faces_u32
+        faces = faces[above[faces].any(axis=1)]  # a triangle below the floor casts nothing on it
+        img = np.full((h, w, 3), 255, dtype=np.uint8)
+        # Fainter the higher: each vertex's shadow weighs exp(−height / the mesh's size).
+        size = max(float(np.ptp(x[:, :2], axis=0).max()), 1e-12)
+        ink = np.zeros((len(x), 4), dtype=np.float32)
+        ink[:, :3] = (1.0 - np.exp(-np.maximum(height, 0.0) / size))[:, None]
+        _core.rasterise_mesh(verts, np.ascontiguousarray(faces), ink, ink, img, 1)
+        shade = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(SHADOW_BLUR * w))))
+        if self._ground_cover is None or self._centres is not None:
+            pc, pr = cam.pixels(cam.project(poly)[0])
+            cover = np.zeros((h, w), np.float32)
+            part = polygon_coverage(np.stack([pc, pr], axis=1), (h, w))
+            if part is not None:
+                top, left, c = part
+                cover[top : top + c.shape[0], left : left + c.shape[1]] = c
+            if self._centres is None:
+                self._ground_cover = cover
+        else:
+            cover = self._ground_cover
+        dark = SHADOW_DARK * shade * cover * (under == _BACKGROUND)
+        out[...] = np.rint(out * (1.0 - dark)[..., None]).astype(np.uint8)
 
     def _frame_rgb_discs(self, k: int) -> np.ndarray:
         """:meth:`frame` with antialiased discs: the background, trails and springs as palette
