@@ -78,8 +78,10 @@ def cyclotron(
     return scene
 
 
-#: ``cyclotron``: how long (q=m=B=1 time units) the guide paths run: the default animation's span.
+#: ``cyclotron``: how long (q=m=B=1 time units) the guide paths run: the default animation's span;
+#: and the most points a guide path has.
 GUIDE_TIME = 45.0
+GUIDE_POINTS = 4096
 
 
 def trochoids(x0: np.ndarray, u0: np.ndarray, q: np.ndarray, m: np.ndarray, B: float, E: float, duration: float,
@@ -88,11 +90,13 @@ def trochoids(x0: np.ndarray, u0: np.ndarray, q: np.ndarray, m: np.ndarray, B: f
     velocities (E/B + u0, 0) (`u0`: the speed along x in the frame drifting at E/B), over
     [0, `duration`]: a circle of angular speed ω = q B/m in the drifting frame,
     ``x = x0 + (E/B) t + (u0/ω) sin ωt``, ``y = y0 − (u0/ω)(1 − cos ωt)``. A list of (K, 2)
-    arrays, `points_per_turn` points to a gyration."""
+    arrays, `points_per_turn` points to a gyration (at most GUIDE_POINTS in all)."""
     out = []
     for p, u, qi, mi in zip(np.asarray(x0, float), np.asarray(u0, float), q, m, strict=True):
         omega = qi * B / mi
-        k = max(2, int(math.ceil(abs(omega) * duration / (2 * math.pi) * points_per_turn)) + 1)
+        turns = abs(omega) * duration / (2 * math.pi)
+        # At most GUIDE_POINTS (a strong B: many tiny turns, which a guide cannot show anyway).
+        k = max(64, min(GUIDE_POINTS, int(math.ceil(turns * points_per_turn)) + 1)) if math.isfinite(turns) else GUIDE_POINTS
         t = np.linspace(0.0, duration, k)
         with np.errstate(all="ignore"):
             px = p[0] + (E / B) * t + (u / omega) * np.sin(omega * t)
