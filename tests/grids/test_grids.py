@@ -651,3 +651,22 @@ def test_gray_scott_automatic_step_keeps_within_the_reactions_on_coarse_grids(n)
     assert scene.dt * (1.0 + feed + kill) <= 2 * gs.cfl
     assert np.all(np.isfinite(gs.u)) and np.all(np.isfinite(gs.v))
     assert 0.0 <= gs.v.min() and gs.v.max() < 1.0  # a pattern, not a blow-up
+
+
+def test_turing_and_double_slit_start_where_something_shows():
+    # Issue 65: the first frame was nearly empty (two small squares; a tank at rest). The scenes
+    # are returned stepped to `start` (their clocks read it, their own step kept); start=0 gives
+    # the old starts; a start out of range is refused by name.
+    t0, t = pc.scenes.turing(start=0.0), pc.scenes.turing()  # n = 256: coarse grids lose the seeds
+    assert t0.time == 0.0 and abs(t.time - 1000.0) < 1e-6 and t.dt == t0.dt
+    v0, v = np.asarray(t0.grids[0].v), np.asarray(t.grids[0].v)
+    assert (v > 0.1).mean() > 3 * (v0 > 0.1).mean()  # the pattern has grown past the seeds
+    d0, d = pc.scenes.double_slit(n=64, start=0.0), pc.scenes.double_slit(n=64)
+    assert d0.time == 0.0 and abs(d.time - 1.0) < 1e-9 and d.dt == d0.dt
+    assert not np.asarray(d0.grids[0].u).any()
+    u = np.abs(np.asarray(d.grids[0].u))
+    wall = int(0.35 * 64)
+    assert u[:wall].max() > 0 and u[wall + 2 : wall + 8].max() > 0.01 * u[:wall].max()  # through the slits
+    for fn, bad in ((pc.scenes.turing, 2e5), (pc.scenes.double_slit, 101.0), (pc.scenes.turing, -1.0), (pc.scenes.double_slit, 5e-324)):
+        with pytest.raises(pc.InvalidInputError, match="start"):
+            fn(n=32 if fn is pc.scenes.turing else 48, start=bad)

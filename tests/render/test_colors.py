@@ -136,6 +136,39 @@ def test_surface_closes_the_gaps_between_particles():
     assert not (discs[inner] != discs[0, 0]).any(axis=2).all()
 
 
+def test_surface_draws_spray_as_a_mist_and_leaves_out_a_lone_particle():
+    # Issue 65: spray read as specks. A jet of particles two spacings apart (two others each
+    # within two spacings) is drawn as one soft streak; a particle alone is not drawn; the
+    # block's interior stays filled.
+    block = _block()
+    jet = np.stack([np.full(17, 2.4), np.linspace(0.2, 1.8, 17)], axis=1)
+    lone = np.array([[2.9, 1.0]])
+    s = pc.Scene(2)
+    s.add_particles(np.concatenate([block.positions, jet, lone]), masses=1.0)
+    img = next(pc.render.frames(s, surface=True, frames=1, size=(300, 200), color_by="none", colorbar=False))
+    bg = img[0, 0]
+    mask = (img != bg).any(axis=2)
+    mask[-20:] = False  # the clock and the scale bar
+    rows, cols = np.nonzero(mask)
+    r0, r1, c0 = rows.min(), rows.max(), cols.min()  # the block's top, bottom and left
+    px = (r1 - r0) / 1.95  # pixels a metre
+    c1 = int(round(c0 + 1.95 * px))
+    assert mask[r0 + 4 : r1 - 3, c0 + 4 : c1 - 3].all()
+
+    def col(x: float) -> int:
+        return int(round(c0 + x * px))
+
+    def row(y: float) -> int:
+        return int(round(r1 - y * px))
+
+    streak = mask[row(1.6) : row(0.4), col(2.4) - 2 : col(2.4) + 3].any(axis=1)
+    assert streak.mean() > 0.9  # drawn along the jet, without gaps
+    assert not mask[row(1.0) - 5 : row(1.0) + 6, col(2.9) - 5 : col(2.9) + 6].any()  # the lone one: nothing
+    # A mist, fainter than the surface: no streak pixel is as far from the background as the block.
+    far = np.abs(img.astype(int) - bg.astype(int)).sum(axis=2)
+    assert far[row(1.6) : row(0.4), col(2.4) - 2 : col(2.4) + 3].max() < far[(r0 + r1) // 2, (c0 + c1) // 2]
+
+
 def test_surface_colours_by_the_local_mean_speed():
     # Left half at rest, right half moving: the surface's colour follows the speed map.
     s = _block()

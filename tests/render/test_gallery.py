@@ -168,6 +168,23 @@ def test_cyclotron_trochoids_sweep_their_own_bands():
         assert np.all(lo[order][1:] > hi[order][:-1])  # stacked, 0.6/B apart
 
 
+def test_cyclotron_guides_are_the_paths_the_charges_take():
+    # Issue 65: the render draws each charge's predicted trochoid (render_defaults' look.decor)
+    # from the first frame; the Boris run follows it (ω_c dt ≤ 0.02) to within 1e-3 over the
+    # default 45 time units, wherever the charge is along it.
+    from physcore.scenes.charges import GUIDE_TIME
+
+    s = pc.scenes.cyclotron()
+    guides = [np.asarray(d["line"]) for d in s.render_defaults["look"]["decor"]]
+    assert len(guides) == s.n_particles
+    for k in range(1, 4):
+        s.step(round(k * GUIDE_TIME / 3 / s.dt) - s.step_count)
+        for g, x in zip(guides, s.positions, strict=True):
+            t = np.linspace(0.0, GUIDE_TIME, len(g))
+            at = np.array([np.interp(s.time, t, g[:, 0]), np.interp(s.time, t, g[:, 1])])
+            assert np.linalg.norm(at - x) < 1e-3 + 0.05 * (GUIDE_TIME / len(g))  # + the guide's chord
+
+
 def test_cyclotron_without_e_keeps_every_speed():
     s = pc.scenes.cyclotron(E=0.0)
     v0 = np.linalg.norm(s.velocities, axis=1)

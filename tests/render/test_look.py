@@ -209,3 +209,32 @@ def test_a_backdrop_shows_behind_a_mesh_and_a_liquid_surface():
         top, bottom = img[1, 60], img[-2, 60]  # the gradient's top and bottom rows, not white
         assert top[2] > 100 and top[0] < 30 and top[1] < 30, top
         assert bottom[1] > 100 and bottom[0] < 30 and bottom[2] < 30, bottom
+
+
+def _sheet_over_a_floor(height: float) -> np.ndarray:
+    """A 1 m sheet (a 6 × 6 mesh) lying flat `height` m over a floor prop at z = 0, seen by a
+    camera fixed on the floor: the frame's image."""
+    g = np.linspace(-0.5, 0.5, 6)
+    x = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    s = pc.Scene(3)
+    s.add_particles(np.concatenate([x, np.full((36, 1), height)], axis=1), masses=1.0)
+    floor = {"polygon": [[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], "color": (200, 200, 200)}
+    return next(pc.render.frames(s, frames=1, size=(160, 120), mesh=pc.render.Mesh.grid(6, 6), colorbar=False,
+                                 extent=((-2, -2, 0), (2, 2, 1)), look={"decor": [floor]})).astype(int)
+
+
+def test_a_mesh_casts_a_soft_shadow_on_a_floor_prop():
+    # Issue 65: a sheet over a floor drawn as a prop darkens the floor under it, less the higher
+    # it hangs; a sheet far above casts nothing to speak of.
+    near, high, far = (_sheet_over_a_floor(h) for h in (0.1, 0.6, 50.0))
+    floor = (np.abs(far - 200).max(axis=2) <= 1)  # the floor's pixels with no shadow on them
+    assert floor.mean() > 0.1
+    def shaded(img: np.ndarray) -> np.ndarray:  # floor pixels darkened to a grey: the shadow, not the sheet
+        grey = (np.abs(img[..., 0] - img[..., 1]) <= 2) & (np.abs(img[..., 1] - img[..., 2]) <= 2)
+        return floor & grey & (img[..., 0] < far[..., 0])
+
+    for img in (near, high):
+        assert shaded(img).any()
+        assert (img[shaded(img)] <= far[shaded(img)]).all()  # a shadow only darkens
+    depth = lambda img: int((200 - img[shaded(img)][:, 0]).max())  # noqa: E731 - the darkest shade
+    assert depth(near) > depth(high) > 5

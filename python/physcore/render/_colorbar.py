@@ -165,8 +165,9 @@ def _draw_text(buf: np.ndarray, text: str, x: int, y: int, ink: int, box: int, b
 
 
 def _format_value(v: float) -> str:
-    """Three significant digits; plain digits (no exponent) from 1000 up to 10^6."""
-    return f"{v:.0f}" if 1000 <= v < 1e6 else f"{v:.3g}"
+    """Three significant digits; plain digits (no exponent) from 1000 up to 10^6 (also for a value
+    that rounds to 1000, such as a clock at 999.9999 after automatic substeps)."""
+    return f"{v:.0f}" if 1000 <= float(f"{v:.3g}") < 1e6 else f"{v:.3g}"
 
 
 def _colorbar_labels(color_by: str, vmax: float, speed_unit: str = "m/s") -> tuple[str, str]:

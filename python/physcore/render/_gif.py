@@ -252,7 +252,10 @@ def gif(
         and value (``color_by`` "speed" or "pressure", else one colour) splatted per pixel and
         blurred with σ ≈ 0.7 particle spacings (the spacing read off the first frame), inside
         where the density passes 45 % of a filled interior's, with a soft edge and a light on
-        the surface's upper-left rim; each pixel takes the density-weighted mean value. Walls
+        the surface's upper-left rim; each pixel takes the density-weighted mean value. Spray
+        (particles with fewer than three others within two spacings) is drawn under it as a
+        soft mist, blurred three times wider, where two or more overlap (a lone particle is
+        left out), so a splash reads as a plume rather than specks. Walls
         and colliders are drawn as usual. Not with a mesh or ``color_by`` "density"/"strain"
         (then ignored). Default: the scene's ``render_defaults`` (the fluid scenes have it on),
         else False.

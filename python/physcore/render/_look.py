@@ -52,7 +52,9 @@ class Look:
         coordinates (m), antialiased, and included in the camera's fit: ``{"polygon":
         [[x, y], ...], "color": (r, g, b)}`` (filled, three points or more) or ``{"line":
         [[x, y], ...], "color": (r, g, b), "width": px}`` (a polyline, default 2 px). A
-        cradle's frame, a ceiling bracket: what explains the scene but does not move.
+        cradle's frame, a ceiling bracket: what explains the scene but does not move. In 3D
+        the lowest horizontal polygon is a floor: a mesh drawn over it casts a soft shadow on
+        it (light from overhead; fainter the higher the mesh hangs).
     swept_areas : dict, optional
         Kepler's second law drawn: the areas the line from particle ``"centre"`` to particle
         ``"body"`` sweeps in equal times, as wedges of ``"frames"`` frames each (the first from

@@ -366,6 +366,18 @@ def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
     return (cut(c, 2 * r + 1, m) - cut(c, 0, m - 2 * r - 1)) * np.float32(1.0 / (2 * r + 1))
 
 
+#: A 3D mesh's shadow on a floor prop: blurred with σ about this fraction of the image's width,
+#: darkening the floor by up to this much.
+SHADOW_BLUR, SHADOW_DARK = 0.012, 0.45
+
+#: A liquid's spray (``surface``): particles with fewer than SPRAY_NEIGHBOURS others within two
+#: spacings are drawn apart from the surface as a mist, blurred SPRAY_BLUR times wider than the
+#: surface and at most SPRAY_OPACITY opaque (see _Rasteriser._spray_of and _mist).
+SPRAY_NEIGHBOURS = 3
+SPRAY_BLUR = 3
+SPRAY_OPACITY = 0.7
+
+
 def _blur(a: np.ndarray, r: int) -> np.ndarray:
     """Three box blurs each way: close to a Gaussian of σ ≈ r (the central limit), O(1) a pixel."""
     for _ in range(3):
@@ -676,6 +688,17 @@ class _Rasteriser:
             on_mesh[mesh.faces.ravel()] = True
             self._off_mesh = ~on_mesh & ~rec.pinned  # drawn as discs under the surface
             self._pinned_idx = np.flatnonzero(rec.pinned)  # drawn as discs over it
+        # A 3D mesh over a floor drawn as a prop (a horizontal decor polygon, the lowest): the
+        # mesh casts a soft shadow on it (light from overhead), (z, (K, 3) points) relative to
+        # the recording's origin.
+        self._ground: tuple[float, np.ndarray] | None = None
+        if mesh is not None and dim == 3:
+            flat = [item["points"] - rec.origin for item in self.look.decor
+                    if item["kind"] == "polygon" and np.ptp(item["points"][:, 2]) <= 1e-9 * max(1.0, float(np.abs(item["points"]).max()))]
+            if flat:
+                low = min(flat, key=lambda q: float(q[0, 2]))
+                self._ground = (float(low[0, 2]), low)
+        self._ground_cover: np.ndarray | None = None  # the floor's coverage, for the fitted camera
 
 
     def forget_projection(self) -> None:
@@ -828,8 +851,10 @@ class _Rasteriser:
         neighbours close; a pixel is inside where the density passes 45 % of a filled
         interior's, with a soft edge over 30–60 %, coloured by the density-weighted mean value
         on the colour map, lit along the surface's edge (the density's gradient as a normal,
-        light from the upper left) so a wave's crest reads as a surface. Spray thinner than
-        the threshold still shows, fainter. Walls and colliders stay as drawn underneath."""
+        light from the upper left) so a wave's crest reads as a surface. Spray (particles with
+        fewer than SPRAY_NEIGHBOURS others within two spacings) is left out of the surface and
+        drawn under it as a soft mist (:meth:`_mist`), a lone particle not at all, so a splash
+        reads as a plume, not as specks. Walls and colliders stay as drawn underneath."""
         rec = self.rec
         cam = self.cam_at(k)
         under = self._under(cam)
@@ -839,16 +864,20 @@ class _Rasteriser:
         free = ~rec.pinned
         s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
         col, row = cam.pixels(s)
+        # Spray (particles with few neighbours) is drawn apart, as a mist under the surface.
+        spray = self._spray_of(col, row, under.shape)
+        body = ~spray
         r = self._surf_r
-        dens = _blur(_splat(col, row, under.shape), r) / self._surf_ref
+        dens = _blur(_splat(col[body], row[body], under.shape), r) / self._surf_ref
         values = None
         if self.color_by == "speed" and rec.speeds is not None:
             values = rec.speeds[k]
         elif self.color_by == "pressure" and rec.pressures is not None:
             values = rec.pressures[k]
+        v = None
         if values is not None:
-            v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0)
-            wsum = _blur(_splat(col, row, under.shape, v.astype(np.float32)), r) / self._surf_ref
+            v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+            wsum = _blur(_splat(col[body], row[body], under.shape, v[body]), r) / self._surf_ref
             mean = wsum / np.maximum(dens, 1e-12)
             idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
             colour = self.palette[idx].astype(np.float32)
@@ -861,6 +890,8 @@ class _Rasteriser:
         lit = np.clip(-(gx + gy) * (0.7 * self._surf_spacing), -1.0, 1.0)  # light from the upper left
         shade = (1.0 + 0.35 * lit)[..., None]
         colour = np.clip(colour * shade + 60.0 * np.maximum(lit, 0)[..., None], 0, 255)
+        if spray.any():
+            out = self._mist(out, col[spray], row[spray], None if v is None else v[spray])
         a = alpha[..., None]
         out = out * (1 - a) + colour * a
         out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
@@ -870,6 +901,46 @@ class _Rasteriser:
             col, row = cam.pixels(s)
             _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
+
+    def _spray_of(self, col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+        """(N,) bool: the particles of the liquid's spray, those with fewer than SPRAY_NEIGHBOURS
+        others within about two particle spacings (a square window of half-width 2 spacings,
+        which holds some 20 in a filled interior); the surface leaves them to the mist."""
+        h, w = shape
+        ok = np.isfinite(col) & np.isfinite(row) & (col >= 0) & (col < w) & (row >= 0) & (row < h)
+        spray = np.zeros(col.shape, bool)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            return spray
+        half = max(2, int(round(2.0 * self._surf_spacing)))
+        counts = _splat(col, row, shape)
+        near = _box_blur(_box_blur(counts, half, 0), half, 1) * float((2 * half + 1) ** 2)
+        others = near[row[idx].astype(np.int64), col[idx].astype(np.int64)] - 1.0
+        spray[idx] = others < SPRAY_NEIGHBOURS
+        return spray
+
+    def _mist(self, out: np.ndarray, col: np.ndarray, row: np.ndarray, values: np.ndarray | None) -> np.ndarray:
+        """`out` (H, W, 3 float32) with the liquid's spray (the particles at `col`, `row`, see
+        :meth:`_spray_of`) drawn as a mist: splatted and blurred SPRAY_BLUR times wider than the
+        surface, shown where about two of them overlap or more (full at about four), at most
+        SPRAY_OPACITY opaque, coloured like the surface by their `values`. A jet or a cloud of
+        spray reads as one soft plume, not as specks a pixel or two wide; a particle alone, far
+        from any other, is left out (too small to see at the image's scale)."""
+        h, w = out.shape[:2]
+        rw = SPRAY_BLUR * self._surf_r
+        dw = _blur(_splat(col, row, (h, w)), rw)
+        one = 1.0 / (2.0 * math.pi * rw * (rw + 1))  # a lone particle's peak: σ² = r(r + 1)
+        mist = np.clip((dw - 1.5 * one) / (3.0 * one), 0.0, 1.0)
+        mist = SPRAY_OPACITY * mist * mist * (3 - 2 * mist)
+        if not mist.any():
+            return out
+        if values is not None:
+            mean = _blur(_splat(col, row, (h, w), values), rw) / np.maximum(dw, 1e-12)
+            colour = self.palette[self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)].astype(np.float32)
+        else:
+            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
+        m = mist[..., None]
+        return out * (1 - m) + colour * m
 
     def _value_levels_of(self, values: np.ndarray) -> np.ndarray:
         """Palette indices of `values` on the map of `color_by` (speed or pressure)."""
@@ -959,6 +1030,8 @@ class _Rasteriser:
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
         out = self._rgb(under, cam)  # a new C-contiguous (H, W, 3) uint8 array, with the look's backdrop
+        if self._ground is not None:
+            self._cast_shadow(out, under, k, cam)
         self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
@@ -966,6 +1039,48 @@ class _Rasteriser:
             col, row = cam.pixels(cam.project(rec.positions[k][self._pinned_idx])[0])
             _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
+
+    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera) -> None:
+        """Frame k's mesh casts a soft shadow on the floor prop (``self._ground``) in `out`, in
+        place: its triangles dropped straight down onto the floor's height, rasterised,
+        blurred (σ ≈ SHADOW_BLUR of the image's width) and darkening the floor by up to
+        SHADOW_DARK (under a vertex at height h, times exp(−h / the mesh's width)) where the floor shows (nothing that moves, no label is drawn there), as an
+        overcast sky's light from above would."""
+        from .. import _core
+
+        z, poly = self._ground
+        x = np.nan_to_num(np.asarray(self.rec.positions[k], dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+        height = x[:, 2] - z
+        above = height > 0
+        if not above.any():
+            return
+        x[:, 2] = z
+        col, row = cam.pixels(cam.project(x)[0])
+        h, w = under.shape
+        verts = np.zeros((len(x), 3), dtype=np.float32)
+        verts[:, 0], verts[:, 1] = col, row
+        faces = self._shader.faces_u32
+        faces = faces[above[faces].any(axis=1)]  # a triangle below the floor casts nothing on it
+        img = np.full((h, w, 3), 255, dtype=np.uint8)
+        # Fainter the higher: each vertex's shadow weighs exp(−height / the mesh's size).
+        size = max(float(np.ptp(x[:, :2], axis=0).max()), 1e-12)
+        ink = np.zeros((len(x), 4), dtype=np.float32)
+        ink[:, :3] = (1.0 - np.exp(-np.maximum(height, 0.0) / size))[:, None]
+        _core.rasterise_mesh(verts, np.ascontiguousarray(faces), ink, ink, img, 1)
+        shade = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(SHADOW_BLUR * w))))
+        if self._ground_cover is None or self._centres is not None:
+            pc, pr = cam.pixels(cam.project(poly)[0])
+            cover = np.zeros((h, w), np.float32)
+            part = polygon_coverage(np.stack([pc, pr], axis=1), (h, w))
+            if part is not None:
+                top, left, c = part
+                cover[top : top + c.shape[0], left : left + c.shape[1]] = c
+            if self._centres is None:
+                self._ground_cover = cover
+        else:
+            cover = self._ground_cover
+        dark = SHADOW_DARK * shade * cover * (under == _BACKGROUND)
+        out[...] = np.rint(out * (1.0 - dark)[..., None]).astype(np.uint8)
 
     def _frame_rgb_discs(self, k: int) -> np.ndarray:
         """:meth:`frame` with antialiased discs: the background, trails and springs as palette

@@ -35,7 +35,9 @@ def cyclotron(
     sweeps a band ``2 m w/(|q|B)`` high (above its start if positive, below if negative); the
     bands are stacked 0.6/B apart, in index order from the bottom, centred on y = 0. Boris push;
     ``dt=None`` takes 0.02/B (ω_c dt ≤ 0.02). The render colours positive charges red and
-    negative blue (:data:`CHARGE_COLORS`).
+    negative blue (:data:`CHARGE_COLORS`), and draws under them, faintly, each charge's
+    trochoid as the theory predicts it (:func:`trochoids`) over the default animation's 45 time
+    units: the first frame already shows the paths, and the charges trace them.
     """
     n = _count(n, "n", 1)
     B = _positive(B, "B")
@@ -65,8 +67,42 @@ def cyclotron(
     scene.add(MagneticField(B))
     if E:
         scene.add(ElectricField([0.0, E]))
-    scene.render_defaults = {"colors": [CHARGE_COLORS[0] if c > 0 else CHARGE_COLORS[1] for c in q]}
-    return _finite_books(scene, "E, B")  # the drift E/B: a huge E or a tiny B
+    colors = [CHARGE_COLORS[0] if c > 0 else CHARGE_COLORS[1] for c in q]
+    scene = _finite_books(scene, "E, B")  # the drift E/B: a huge E or a tiny B
+    # The predicted paths, faint, under the trails (plain lists: render_defaults compare with ==).
+    paths = trochoids(x, v[:, 0] - E / B, q, m, B, E, GUIDE_TIME)
+    night = np.array([12.0, 14.0, 26.0])  # the dark theme's background
+    decor = [{"line": path.tolist(), "width": 1, "color": tuple(int(c) for c in np.rint(0.7 * night + 0.3 * np.array(col)))}
+             for path, col in zip(paths, colors, strict=True) if np.isfinite(path).all()]
+    scene.render_defaults = {"colors": colors, "look": {"decor": decor}}
+    return scene
+
+
+#: ``cyclotron``: how long (q=m=B=1 time units) the guide paths run: the default animation's span;
+#: and the most points a guide path has.
+GUIDE_TIME = 45.0
+GUIDE_POINTS = 4096
+
+
+def trochoids(x0: np.ndarray, u0: np.ndarray, q: np.ndarray, m: np.ndarray, B: float, E: float, duration: float,
+              points_per_turn: int = 96) -> list[np.ndarray]:
+    """Each charge's exact path in B_z = `B` and E = (0, `E`) from (N, 2) positions `x0` with
+    velocities (E/B + u0, 0) (`u0`: the speed along x in the frame drifting at E/B), over
+    [0, `duration`]: a circle of angular speed ω = q B/m in the drifting frame,
+    ``x = x0 + (E/B) t + (u0/ω) sin ωt``, ``y = y0 − (u0/ω)(1 − cos ωt)``. A list of (K, 2)
+    arrays, `points_per_turn` points to a gyration (at most GUIDE_POINTS in all)."""
+    out = []
+    for p, u, qi, mi in zip(np.asarray(x0, float), np.asarray(u0, float), q, m, strict=True):
+        omega = qi * B / mi
+        turns = abs(omega) * duration / (2 * math.pi)
+        # At most GUIDE_POINTS (a strong B: many tiny turns, which a guide cannot show anyway).
+        k = max(64, min(GUIDE_POINTS, int(math.ceil(turns * points_per_turn)) + 1)) if math.isfinite(turns) else GUIDE_POINTS
+        t = np.linspace(0.0, duration, k)
+        with np.errstate(all="ignore"):
+            px = p[0] + (E / B) * t + (u / omega) * np.sin(omega * t)
+            py = p[1] - (u / omega) * (1.0 - np.cos(omega * t))
+        out.append(np.stack([px, py], axis=1))
+    return out
 
 
 #: ``cyclotron``: colours of positive (red) and negative (blue) charges, RGB.

@@ -50,6 +50,14 @@ ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "subst
 ripple = _stamped(ripple, old_order=('n', 'drops', 'speed', 'damping', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
+def _start(value: object, top: float, unit: str) -> float:
+    """`start=`: 0, or a normal float up to `top` (a subnormal one is no step that advance takes)."""
+    start = _check.float_in_range("start", value, 0.0, top, unit=unit)
+    if 0.0 < start < _check.MIN_NORMAL:
+        raise InvalidInputError(f"start: must be 0 or at least {_check.MIN_NORMAL:.3g}, got {start:.3g}")
+    return start
+
+
 def double_slit(
     n: int = 256,
     *,
@@ -57,6 +65,7 @@ def double_slit(
     separation: float = 0.2,
     width: float = 0.03,
     speed: float = 0.3,
+    start: float = 1.0,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -65,7 +74,11 @@ def double_slit(
     The wave comes from an oscillating line on the left of a 1.5 m × 1 m tank and meets a wall
     with two slits (`width` m wide, centres `separation` m apart);
     the other faces absorb (damping layers), so the fringes are those of an open field. The
-    grid is (1.5 n) × n; the source's frequency is speed / wavelength.
+    grid is (1.5 n) × n; the source's frequency is speed / wavelength. The scene is returned
+    already stepped `start` seconds (0 to 100) from rest (its clock reads `start`): by default the plane
+    wave's front, 0.23 m from the source line to the wall, has just passed the slits (0.77 s at
+    0.3 m/s), so the first frame shows the incoming wave train and the first wavelets behind the
+    wall; ``start=0`` returns the tank at rest.
     """
     from ..grids import Oscillator, Wave
 
@@ -97,6 +110,12 @@ def double_slit(
     tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
     if dt is None:
         scene.dt = _cfl_step(tank, "speed")
+    # Bounded: the wave has crossed the tank and settled into its fringes within 10 s.
+    start = _start(start, 100.0, "s")
+    if start > 0:  # the first frame shows the wave at the slits, not an empty tank
+        step = scene.dt
+        scene.advance(start)
+        scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
     return scene
 
 
@@ -108,9 +127,10 @@ def turing(
     preset: str = "maze",
     *,
     n: int = 256,
-    duration: float = 4500.0,
+    duration: float = 3500.0,
     seeds: int = 2,
     seed: int = 1,
+    start: float = 1000.0,
     dt: float | None = None,
     threads: int | None = None,
     device: str = "cpu",
@@ -120,8 +140,11 @@ def turing(
     :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
-    The animation spans `duration` time units: by default the maze grows from two seeds until
-    it fills the domain, at about 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    The scene is returned already stepped `start` time units (0 to 1e5) from the seeds (its clock reads
+    `start`), so the first frame shows a pattern (a maze about a third of the domain across, by
+    default) rather than a few small squares; ``start=0`` returns Pearson's start itself. The
+    animation spans `duration` time units from there: by default the maze grows until it fills
+    the domain, at about t = 4500. Steps are at most 1 time unit (the reaction's accuracy;
     Pearson's step) and within the diffusion limit, so coarse grids stay stable.
     ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
@@ -143,13 +166,20 @@ def turing(
     gs = scene.add(GrayScott((n, n), dx, preset=preset, cfl=cfl, name="turing"))
     if dt is None:
         scene.dt = gs.cfl * gs.diffusion_limit
+    # Bounded: every time unit is a step or two of the whole grid (1e5: minutes at n = 256).
+    start = _start(start, 1e5, "")
     gs.seed(_check.int_in_range("seed", seed, 0, 2**63 - 1), squares=_check.int_in_range("seeds", seeds, 1, 1000), size=0.06)
+    if start > 0:  # the first frame shows a pattern, not the seeds' few small squares
+        step = scene.dt
+        scene.advance(start)
+        scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
     scene.render_defaults = {"frame_time": duration / 119}
     return scene
 
 
-# The default duration (4500) over 119 frame steps: the maze grows until the last frame.
-turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
+# From t = 1000 (a maze a third of the domain across) the default duration (3500) over 119 frame
+# steps: the maze grows until the last frame, when it fills the domain (t = 4500).
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 3500.0 / 119, "substeps": "auto", "size": (400, 400)}
 turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
