@@ -28,8 +28,9 @@ pub struct PySimulation {
     terms: Vec<(String, String, registry::Params)>,
     /// Whether the particles live on a device (`move_to_device`): the getters read them from there.
     on_device: bool,
-    /// The grids' records as added (kind, name, parameters): what a device grid is built from.
-    grids: Vec<(String, String, registry::Params)>,
+    /// The grids as added (kind, name, and the parameters of kinds the device has: what a device
+    /// grid is built from; others keep none, so a wave's mask is not held twice).
+    grids: Vec<(String, String, Option<registry::Params>)>,
     /// The colliders' records as added (kind, parameters), in order: what the device's are.
     colliders: Vec<(String, registry::Params)>,
 }
@@ -127,9 +128,9 @@ impl PySimulation {
                 let gpu = py.detach(|| physcore_gpu::Gpu::open(device)).map_err(|e| to_py(py, e.into()))?;
                 let mut moved: Vec<Box<dyn System>> = Vec::new();
                 for (kind, name, params) in grids {
-                    if kind != "gray_scott" {
+                    let Some(params) = params.as_ref().filter(|_| kind == "gray_scott") else {
                         return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\")"))));
-                    }
+                    };
                     let cfg = crate::grids::build::gray_scott_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
                     let cpu = s.other(name).map_err(|e| to_py(py, e))?;
                     let f = cpu.fields(&["u", "v"]).map_err(|e| to_py(py, e))?;
@@ -470,9 +471,10 @@ impl PySimulation {
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;
         let dim = self.dim();
-        let sys = crate::grids::build::build(kind, name, dim, p.clone()).map_err(|e| to_py(py, e))?;
+        let record = (kind == "gray_scott").then(|| p.clone());
+        let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => s.add_system(sys)).map_err(|e| to_py(py, e))?;
-        self.grids.push((kind.to_string(), name.to_string(), p));
+        self.grids.push((kind.to_string(), name.to_string(), record));
         Ok(())
     }
 
