@@ -65,7 +65,7 @@ def double_slit(
     separation: float = 0.2,
     width: float = 0.03,
     speed: float = 0.3,
-    start: float = 1.0,
+    start: float = 0.0,
     dt: float | None = None,
     threads: int | None = None,
 ) -> Scene:
@@ -74,11 +74,12 @@ def double_slit(
     The wave comes from an oscillating line on the left of a 1.5 m × 1 m tank and meets a wall
     with two slits (`width` m wide, centres `separation` m apart);
     the other faces absorb (damping layers), so the fringes are those of an open field. The
-    grid is (1.5 n) × n; the source's frequency is speed / wavelength. The scene is returned
-    already stepped `start` seconds (0 to 100) from rest (its clock reads `start`): by default the plane
-    wave's front, 0.23 m from the source line to the wall, has just passed the slits (0.77 s at
-    0.3 m/s), so the first frame shows the incoming wave train and the first wavelets behind the
-    wall; ``start=0`` returns the tank at rest.
+    grid is (1.5 n) × n; the source's frequency is speed / wavelength. With ``start`` > 0 the scene
+    is returned already stepped `start` seconds (0 to 100) from rest (its clock reads `start`):
+    at ``start=1`` the plane wave's front, 0.23 m from the source line to the wall, has just
+    passed the slits (0.77 s at 0.3 m/s), so the first frame shows the incoming wave train and
+    the first wavelets behind the wall. The default, 0, returns the tank at rest (a pre-step at
+    construction runs as long as the scene's step asks: with hostile arguments, unbounded).
     """
     from ..grids import Oscillator, Wave
 
@@ -127,10 +128,10 @@ def turing(
     preset: str = "maze",
     *,
     n: int = 256,
-    duration: float = 3500.0,
+    duration: float = 4500.0,
     seeds: int = 2,
     seed: int = 1,
-    start: float = 1000.0,
+    start: float = 0.0,
     dt: float | None = None,
     threads: int | None = None,
     device: str = "cpu",
@@ -140,11 +141,11 @@ def turing(
     :class:`~physcore.grids.GrayScott` from Pearson's start on his 2.5 × 2.5 periodic domain (n × n cells,
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
-    The scene is returned already stepped `start` time units (0 to 1e5) from the seeds (its clock reads
-    `start`), so the first frame shows a pattern (a maze about a third of the domain across, by
-    default) rather than a few small squares; ``start=0`` returns Pearson's start itself. The
-    animation spans `duration` time units from there: by default the maze grows until it fills
-    the domain, at about t = 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    With ``start`` > 0 the scene is returned already stepped `start` time units (0 to 1e5) from the
+    seeds (its clock reads `start`), so the first frame shows a pattern (at ``start=1000``, with
+    ``duration=3500``, a maze about a third of the domain across) rather than a few small
+    squares; the default, 0, returns Pearson's start itself. The animation spans `duration` time
+    units from there: by default the maze grows until it fills the domain, at about t = 4500. Steps are at most 1 time unit (the reaction's accuracy;
     Pearson's step) and within the diffusion limit, so coarse grids stay stable.
     ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
@@ -179,7 +180,7 @@ def turing(
 
 # From t = 1000 (a maze a third of the domain across) the default duration (3500) over 119 frame
 # steps: the maze grows until the last frame, when it fills the domain (t = 4500).
-turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 3500.0 / 119, "substeps": "auto", "size": (400, 400)}
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
 turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
