@@ -654,14 +654,14 @@ def test_gray_scott_automatic_step_keeps_within_the_reactions_on_coarse_grids(n)
 
 
 def test_turing_and_double_slit_start_where_something_shows():
-    # Issue 65: the first frame was nearly empty (two small squares; a tank at rest). The scenes
-    # are returned stepped to `start` (their clocks read it, their own step kept); start=0 gives
-    # the old starts; a start out of range is refused by name.
-    t0, t = pc.scenes.turing(start=0.0), pc.scenes.turing()  # n = 256: coarse grids lose the seeds
+    # Issue 65: the first frame was nearly empty (two small squares; a tank at rest). With
+    # `start` the scenes are returned stepped to it (their clocks read it, their own step kept);
+    # start=0, the default, gives the old starts; a start out of range is refused by name.
+    t0, t = pc.scenes.turing(), pc.scenes.turing(start=1000.0)  # n = 256: coarse grids lose the seeds
     assert t0.time == 0.0 and abs(t.time - 1000.0) < 1e-6 and t.dt == t0.dt
     v0, v = np.asarray(t0.grids[0].v), np.asarray(t.grids[0].v)
     assert (v > 0.1).mean() > 3 * (v0 > 0.1).mean()  # the pattern has grown past the seeds
-    d0, d = pc.scenes.double_slit(n=64, start=0.0), pc.scenes.double_slit(n=64)
+    d0, d = pc.scenes.double_slit(n=64), pc.scenes.double_slit(n=64, start=1.0)
     assert d0.time == 0.0 and abs(d.time - 1.0) < 1e-9 and d.dt == d0.dt
     assert not np.asarray(d0.grids[0].u).any()
     u = np.abs(np.asarray(d.grids[0].u))
