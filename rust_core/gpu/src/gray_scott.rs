@@ -298,45 +298,11 @@ impl GrayScott {
 }
 
 fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline, wgpu::ComputePipeline) {
-    let d = &gpu.device;
-    let src = format!("{}{}", p.header(), include_str!("gray_scott.wgsl"));
-    let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("gray_scott.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(src.into()),
-    });
-    let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
-        count: None,
-    };
-    use wgpu::BufferBindingType as B;
-    let entries = [
-        entry(0, B::Uniform),
-        entry(1, B::Storage { read_only: true }),
-        entry(2, B::Storage { read_only: true }),
-        entry(3, B::Storage { read_only: false }),
-        entry(4, B::Storage { read_only: false }),
-        entry(5, B::Storage { read_only: false }),
-        entry(6, B::Storage { read_only: false }),
-    ];
-    let layout =
-        d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("gray-scott"), entries: &entries });
-    let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("gray-scott"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipe = |name: &str| {
-        d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(name),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some(name),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let (s, c) = (pipe("step"), pipe("check"));
+    use crate::Bind::{Read as R, ReadWrite as W, Uniform};
+    let binds = [Uniform { dynamic: false }, R, R, W, W, W, W];
+    let (layout, mut pipes) =
+        gpu.kernels("gray_scott.wgsl", p, include_str!("gray_scott.wgsl"), &binds, &["step", "check"]);
+    let c = pipes.pop().expect("two kernels");
+    let s = pipes.pop().expect("two kernels");
     (layout, s, c)
 }

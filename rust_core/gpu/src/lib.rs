@@ -72,6 +72,17 @@ impl Precision {
     }
 }
 
+/// How a kernel binds a buffer (`Gpu::kernels`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Bind {
+    /// A uniform block, at a dynamic offset if `dynamic`.
+    Uniform {
+        dynamic: bool,
+    },
+    Read,
+    ReadWrite,
+}
+
 /// One adapter as `physcore info` lists it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AdapterSummary {
@@ -343,6 +354,63 @@ impl Gpu {
         };
         v.truncate(count);
         Ok(v)
+    }
+
+    /// Compiles `wgsl` (after the precision header of `p`) and makes its bind group layout from
+    /// `binds` (binding k: `binds[k]`, every one a buffer seen by compute) and one pipeline per
+    /// entry point of `names`, in that order.
+    pub(crate) fn kernels(
+        &self,
+        label: &str,
+        p: Precision,
+        wgsl: &str,
+        binds: &[Bind],
+        names: &[&str],
+    ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
+        let d = &self.device;
+        let src = format!("{}{}", p.header(), wgsl);
+        let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(src.into()),
+        });
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = binds
+            .iter()
+            .enumerate()
+            .map(|(k, b)| {
+                let (ty, has_dynamic_offset) = match b {
+                    Bind::Uniform { dynamic } => (wgpu::BufferBindingType::Uniform, *dynamic),
+                    Bind::Read => (wgpu::BufferBindingType::Storage { read_only: true }, false),
+                    Bind::ReadWrite => (wgpu::BufferBindingType::Storage { read_only: false }, false),
+                };
+                wgpu::BindGroupLayoutEntry {
+                    binding: k as u32,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset, min_binding_size: None },
+                    count: None,
+                }
+            })
+            .collect();
+        let layout =
+            d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
+        let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipes = names
+            .iter()
+            .map(|name| {
+                d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(name),
+                    layout: Some(&pl),
+                    module: &module,
+                    entry_point: Some(name),
+                    compilation_options: Default::default(),
+                    cache: None,
+                })
+            })
+            .collect();
+        (layout, pipes)
     }
 
     /// Waits for all submitted work.

@@ -666,57 +666,12 @@ impl Particles {
 }
 
 fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
-    let d = &gpu.device;
-    let src = format!("{}{}", p.header(), include_str!("particles.wgsl"));
-    let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("particles.wgsl"),
-        source: wgpu::ShaderSource::Wgsl(src.into()),
-    });
-    let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
-        count: None,
-    };
-    let mut entries = vec![entry(0, wgpu::BufferBindingType::Uniform)];
+    use crate::Bind::{Read as R, ReadWrite as W, Uniform};
     // The parameters are bound at a dynamic offset: one block per substep of a composition.
-    if let wgpu::BindingType::Buffer { has_dynamic_offset, .. } = &mut entries[0].ty {
-        *has_dynamic_offset = true;
-    }
-    for b in 1..=7 {
-        entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: false }));
-    }
-    for b in 8..=11 {
-        entries.push(entry(b, wgpu::BufferBindingType::Storage { read_only: true }));
-    }
-    entries.push(entry(12, wgpu::BufferBindingType::Storage { read_only: false }));
-    entries.push(entry(13, wgpu::BufferBindingType::Storage { read_only: true }));
-    let layout =
-        d.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("particles"), entries: &entries });
-    let pl = d.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("particles"),
-        bind_group_layouts: &[Some(&layout)],
-        immediate_size: 0,
-    });
-    let pipe = |name: &str| {
-        d.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(name),
-            layout: Some(&pl),
-            module: &module,
-            entry_point: Some(name),
-            compilation_options: Default::default(),
-            cache: None,
-        })
-    };
-    let pipes = Pipes {
-        forces: pipe("forces"),
-        forces_if_touched: pipe("forces_if_touched"),
-        clear_touched: pipe("clear_touched"),
-        project: pipe("project"),
-        kick_drift: pipe("kick_drift"),
-        kick: pipe("kick"),
-        check: pipe("check"),
-        energy: pipe("energy"),
-    };
-    (layout, pipes)
+    let binds = [Uniform { dynamic: true }, W, W, W, W, W, W, W, R, R, R, R, W, R];
+    let names = ["forces", "forces_if_touched", "clear_touched", "project", "kick_drift", "kick", "check", "energy"];
+    let (layout, pipes) = gpu.kernels("particles.wgsl", p, include_str!("particles.wgsl"), &binds, &names);
+    let [forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy]: [wgpu::ComputePipeline;
+        8] = pipes.try_into().unwrap_or_else(|_| unreachable!("eight kernels"));
+    (layout, Pipes { forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy })
 }
