@@ -77,6 +77,17 @@ def _human(nbytes: int) -> str:
     return f"{x:.0f} {units[u]}" if x >= 99.95 else f"{x:.1f} {units[u]}" if x >= 9.995 else f"{x:.2f} {units[u]}"
 
 
+def _memory_error_in(e: BaseException | None) -> MemoryError | None:
+    """The ``MemoryError`` that ``e`` is, or that it was raised while handling (its context
+    chain), if any."""
+    seen = 0
+    while e is not None and seen < 16:
+        if isinstance(e, MemoryError):
+            return e
+        e, seen = e.__context__, seen + 1
+    return None
+
+
 @contextmanager
 def allocating(what: str, context: str) -> Iterator[None]:
     """Turns a bare ``MemoryError`` raised in the block (numpy's, for an array the facade
@@ -87,7 +98,14 @@ def allocating(what: str, context: str) -> Iterator[None]:
         yield
     except OutOfMemoryError:
         raise
-    except MemoryError as e:
+    except Exception as raised:
+        # A MemoryError, or an error raised while cleaning up after one (np.savez into a full
+        # BytesIO: zipfile's close then raises "I/O operation on closed file", a ValueError).
+        e = _memory_error_in(raised)
+        if e is None:
+            raise
+        if isinstance(e, OutOfMemoryError):
+            raise e from None
         nbytes = getattr(e, "_total_size", -1)  # numpy's _ArrayMemoryError knows the size
         shape, dtype = getattr(e, "shape", None), getattr(e, "dtype", None)
         array = f"an array of shape {tuple(shape)}, {dtype}" if shape is not None else "an array"

@@ -696,7 +696,8 @@ class Scene:
             20 ms plus one force evaluation: between steps and between dopri5's internal steps;
             the scene is rolled back likewise. A call of at most 4096 particle-steps with a
             fixed-step integrator runs unwatched, and Ctrl-C lands just after it. Rigid bodies:
-            within a rapier step Ctrl-C waits for its end (seconds for 1,000 balls in one place).
+            inside a long rapier step too (seconds for 1,000 balls in one place): such a step
+            runs on a thread of its own, left to finish unseen (docs/guide/bodies.md, "Limits").
         OutOfMemoryError
             (a ``MemoryError``) The call's checkpoint or scratch cannot be had now (for rigid
             bodies, a copy of rapier's state and an allowance for what its step allocates:

@@ -327,6 +327,11 @@ def ladder(label, call, whats):
         lift()
         print(f"{label}: ok at {mib} MiB")
         return
+
+
+def dump():
+    global data
+    data = scene.to_bytes()  # what pickling writes (pickle then copies the bytes: a bare MemoryError at worst)
 """
 
 # glibc serves a large buffer from its heap (already mapped, so not refused) once a freed one has
@@ -334,6 +339,10 @@ def ladder(label, call, whats):
 # so each one meets the cap and the ladder is the same from run to run. And a worker thread's
 # arena grows by reserving 64 MB of address space at a time, so under the cap a small buffer of a
 # worker failed where the main arena had room (an artefact of RLIMIT_AS, not of memory): one arena.
+# What a save may be refused as: the file's arrays ("save"), or the reads it makes (the
+# particles' state, a grid's fields), each named as the call that reads it names it.
+SAVE = ("save", "field", "positions", "velocities", "masses", "integrator_cache")
+
 FIXED_MMAP = {"MALLOC_MMAP_THRESHOLD_": str(128 * 1024), "MALLOC_ARENA_MAX": "1"}
 
 CASES = {
@@ -344,7 +353,7 @@ scene.add_particles(np.random.default_rng(0).random((n, 3)))
 scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 scene.add(pc.Drag(0.1))
 """, [("scene.step(1)", ("step",)), ("scene.positions", ("positions",)), ("scene.velocities", ("velocities",)),
-      ("scene.masses", ("masses",)), ("scene.energy()", ("energy",))]),
+      ("scene.masses", ("masses",)), ("scene.energy()", ("energy",)), ("dump()", SAVE)]),
     "fields_boris": ("""
 n = 2_000_000
 scene = pc.Scene(3, integrator="boris", dt=1e-3)
@@ -394,14 +403,14 @@ scene.add(pc.Gravity([0.0, -9.81]))
 scene = pc.Scene(2)
 g = pc.StableFluid((1500, 1500), spacing=1 / 1500, sources=[pc.Source(density=1.0, velocity=(0.0, 1.0), center=(0.5, 0.1), radius=0.05)])
 """, [("scene.add(g)", ("add", "fluid")), ("scene.step(1)", ("step",)), ("g.density", ("field",)),
-      ("g.velocity", ("field", "velocity"))]),
+      ("g.velocity", ("field", "velocity")), ("dump()", SAVE)]),
     "wave_mask": ("""
 scene = pc.Scene(2)
 mask = np.zeros((3000, 3000), bool)
 mask[1000:1100, :1400] = True
 w = pc.Wave((3000, 3000), spacing=0.01, mask=mask, drops=[pc.Drop(0.0, (15.0, 15.0), 0.2, 0.01)])
 """, [("scene.add(w)", ("add", "add_wave")), ("scene.step(1)", ("step",)), ("w.u", ("field",)),
-      ("w.velocity", ("field",))]),
+      ("w.velocity", ("field",)), ("dump()", SAVE)]),
     "wave_3d": ("""
 scene = pc.Scene(3)
 w = pc.Wave((200, 200, 200), spacing=0.01, drops=[pc.Drop(0.0, (1.0, 1.0, 1.0), 0.1, 0.01)])
@@ -410,12 +419,12 @@ w = pc.Wave((200, 200, 200), spacing=0.01, drops=[pc.Drop(0.0, (1.0, 1.0, 1.0), 
 scene = pc.Scene(2)
 gs = pc.GrayScott((2500, 2500), preset="coral")
 """, [("scene.add(gs)", ("add", "add_gray_scott")), ("scene.step(1)", ("step",)), ("gs.u", ("field",)),
-      ("gs.v", ("field",)), ("gs.books()", ("books",))]),
+      ("gs.v", ("field",)), ("gs.books()", ("books",)), ("dump()", SAVE)]),
     "lorenz": ("""
 scene = pc.Scene(3)
 f = pc.Flow("lorenz", 5_000_000, seed=0)
 """, [("scene.add(f)", ("add", "add_flow")), ("scene.step(1)", ("step",)), ("f.points", ("field",)),
-      ("f.velocity", ("field",))]),
+      ("f.velocity", ("field",)), ("dump()", SAVE)]),
     "contacts_2d": ("""
 n = 1_000_000
 scene = pc.Scene(2, integrator="semi_implicit_euler", dt=1e-5)
@@ -443,9 +452,6 @@ g = np.stack(np.meshgrid(*[np.arange(35)] * 3, indexing="ij"), -1).reshape(-1, 3
 scene = pc.Scene(3, dt=1e-3)
 scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 b = pc.Bodies("ball", size=np.full(n, 0.5), positions=g)
-def dump():
-    global data
-    data = scene.to_bytes()  # what pickling writes (pickle then copies the bytes: a bare MemoryError at worst)
 """, [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
       ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
     "bodies_2d": ("""
@@ -454,9 +460,6 @@ g = np.stack(np.meshgrid(np.arange(250), np.arange(240), indexing="ij"), -1).res
 scene = pc.Scene(2, dt=1e-3)
 scene.add(pc.Gravity([0.0, -9.81]))
 b = pc.Bodies("box", size=np.full((n, 2), 0.5), positions=g)  # half widths: touching
-def dump():
-    global data
-    data = scene.to_bytes()  # what pickling writes (pickle then copies the bytes: a bare MemoryError at worst)
 """, [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
       ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
     "xpbd": ("""

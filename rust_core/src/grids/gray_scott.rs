@@ -446,11 +446,9 @@ impl System for GrayScottSystem {
         self.spare.recycle2::<Books>(snapshot);
     }
     fn save(&self) -> Result<Arrays> {
-        Ok(vec![
-            ("u".to_string(), self.u.clone()),
-            ("v".to_string(), self.v.clone()),
-            ("made".to_string(), vec![self.books.made_u, self.books.made_v]),
-        ])
+        let made = [self.books.made_u, self.books.made_v];
+        let of = format!("the Gray–Scott fields of {} cells", count(self.u.len() as u128));
+        crate::systems::saved(of, &[("u", &self.u), ("v", &self.v), ("made", &made)])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.u.len();

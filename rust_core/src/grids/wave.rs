@@ -734,11 +734,9 @@ impl System for WaveSystem {
     }
     fn save(&self) -> Result<Arrays> {
         let c = &self.clock;
-        Ok(vec![
-            ("u".to_string(), self.u.clone()),
-            ("u_prev".to_string(), self.u_prev.clone()),
-            ("clock".to_string(), vec![c.t, c.dt, c.dissipated, c.work, c.next_drop as Real]),
-        ])
+        let clock = [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real];
+        let of = format!("the wave's fields of {} cells", count(self.u.len() as u128));
+        crate::systems::saved(of, &[("u", &self.u), ("u_prev", &self.u_prev), ("clock", &clock)])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.u.len();

@@ -267,7 +267,7 @@ impl<F: Fn([Real; 3]) -> [Real; 3] + Send + Sync + 'static> System for FlowSyste
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this flow");
     }
     fn save(&self) -> Result<Arrays> {
-        Ok(vec![("y".to_string(), self.y.clone())])
+        super::saved("the flow's points", &[("y", &self.y)])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         load_flat(&mut self.y, arrays)

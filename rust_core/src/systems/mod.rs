@@ -59,6 +59,14 @@ pub type Snapshot = Box<dyn Any + Send>;
 /// reads it back bit for bit, so a run restarted from it continues exactly as the original.
 pub type Arrays = Vec<(String, Vec<Real>)>;
 
+/// What a `System::save` returns: `arrays` copied, each allocated fallibly, so that a save under
+/// memory pressure is an `Error::OutOfMemory` named "save" (of `of`), not an abort.
+pub fn saved(of: impl std::fmt::Display, arrays: &[(&str, &[Real])]) -> Result<Arrays> {
+    let total: usize = arrays.iter().map(|(_, a)| a.len()).sum();
+    let need = crate::alloc::Need::new("save", crate::alloc::Need::bytes_of::<Real>(total), of);
+    arrays.iter().map(|(name, a)| Ok((name.to_string(), need.copy(a)?))).collect()
+}
+
 /// A snapshot of a flat state `y` (its copy, allocated fallibly): what systems whose whole state
 /// is one array of reals (ODE systems, flows) return from `System::snapshot`.
 pub fn snapshot_flat(y: &[Real]) -> Result<Snapshot> {

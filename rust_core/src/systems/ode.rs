@@ -117,7 +117,7 @@ impl System for OdeSystem {
         self.y = *snapshot.downcast::<Vec<Real>>().expect("a snapshot of this ODE system");
     }
     fn save(&self) -> Result<Arrays> {
-        Ok(vec![("y".to_string(), self.y.clone())])
+        super::saved("the ODE system's state", &[("y", &self.y)])
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         load_flat(&mut self.y, arrays)

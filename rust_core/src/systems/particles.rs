@@ -926,17 +926,30 @@ impl<V: Vector> System for ParticleSystem<V> {
     /// "x", "v" (n × dim, row-major), "dissipated" (one per term), "collisions" (one) and, if the
     /// integrator carries them, "cache_forces" (n × dim) and "cache_power" (one per term).
     fn save(&self) -> Result<Arrays> {
-        let flat = |a: &[V]| V::flat(a).to_vec();
         let st = &self.sys.state;
-        let mut out = vec![
-            ("x".to_string(), flat(&st.x)),
-            ("v".to_string(), flat(&st.v)),
-            ("dissipated".to_string(), self.sys.forces.dissipated.clone()),
-            ("collisions".to_string(), vec![self.constraints.dissipated]),
-        ];
-        if let Some((f, p)) = self.integrator.as_carry().and_then(|c| c.get()) {
-            out.push(("cache_forces".to_string(), flat(&f)));
-            out.push(("cache_power".to_string(), p));
+        let of = format!("the state of {} particles", count(st.x.len() as u128));
+        let collisions = [self.constraints.dissipated];
+        let mut out = crate::systems::saved(
+            &of,
+            &[
+                ("x", V::flat(&st.x)),
+                ("v", V::flat(&st.v)),
+                ("dissipated", &self.sys.forces.dissipated),
+                ("collisions", &collisions),
+            ],
+        )?;
+        if let Some(c) = self.integrator.as_carry() {
+            let carried =
+                |f: &[V], p: &[Real]| crate::systems::saved(&of, &[("cache_forces", V::flat(f)), ("cache_power", p)]);
+            match c.borrow() {
+                Some((f, p)) => out.extend(carried(f, p)?),
+                None => {
+                    let need = Need::new("save", Need::bytes_of::<V>(st.x.len()), &of);
+                    if let Some((f, p)) = c.try_get().map_err(|_| need.error())? {
+                        out.extend(carried(&f, &p)?);
+                    }
+                }
+            }
         }
         for t in &self.sys.forces.terms {
             if let Some(s) = t.as_own_state() {

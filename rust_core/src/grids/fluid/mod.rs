@@ -961,17 +961,22 @@ impl System for StableFluid {
     }
     fn save(&self) -> Result<Arrays> {
         let s = &self.s;
-        Ok(vec![
-            ("u".into(), s.u.clone()),
-            ("v".into(), s.v.clone()),
-            ("density".into(), s.density.clone()),
-            ("temperature".into(), s.temperature.clone()),
-            ("pressure".into(), s.pressure.clone()),
-            ("tracers".into(), s.tracers.clone()),
-            // Exact as f64 below 2^53 steps.
-            ("steps".into(), vec![s.steps as Real]),
-            ("books".into(), self.books_array()),
-        ])
+        // Exact as f64 below 2^53 steps.
+        let (steps, books) = ([s.steps as Real], self.books_array());
+        let of = format!("the fluid's fields of {} cells", count(s.density.len() as u128));
+        crate::systems::saved(
+            of,
+            &[
+                ("u", &s.u),
+                ("v", &s.v),
+                ("density", &s.density),
+                ("temperature", &s.temperature),
+                ("pressure", &s.pressure),
+                ("tracers", &s.tracers),
+                ("steps", &steps),
+                ("books", &books),
+            ],
+        )
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let s = &self.s;

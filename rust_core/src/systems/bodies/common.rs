@@ -18,6 +18,55 @@ struct Rapier {
     soft_bodies: SoftBodySet,
 }
 
+impl Rapier {
+    fn empty() -> Self {
+        Rapier {
+            islands: IslandManager::new(),
+            broad_phase: BroadPhaseBvh::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+        }
+    }
+}
+
+/// What rapier's step reads and changes, apart from the bodies' other fields, so that it can run
+/// on a thread of its own (`Bodies::rapier_step`).
+struct Stepper {
+    r: Rapier,
+    pipeline: PhysicsPipeline,
+    ccd: CCDSolver,
+    impacts: Impacts,
+}
+
+impl Stepper {
+    fn step(&mut self, gravity: Vector, params: &IntegrationParameters) {
+        let r = &mut self.r;
+        self.pipeline.step(
+            gravity,
+            params,
+            &mut r.islands,
+            &mut r.broad_phase,
+            &mut r.narrow_phase,
+            &mut r.bodies,
+            &mut r.colliders,
+            &mut r.impulse_joints,
+            &mut r.multibody_joints,
+            &mut r.soft_bodies,
+            &mut self.ccd,
+            &self.impacts,
+            &(),
+        );
+    }
+}
+
+/// A rapier step that took this long runs the next on a watched thread (`Bodies::rapier_step`):
+/// starting the thread costs about 30 µs, under 0.3 % of such a step.
+const WATCHED_STEP: std::time::Duration = std::time::Duration::from_millis(10);
+
 /// What `step` changes: rapier's state and the books.
 #[derive(Clone, serde::Serialize, serde::Deserialize)]
 struct Dynamic {
@@ -87,6 +136,9 @@ pub struct Bodies {
     rolling: Vec<Real>,
     /// A saved state waiting for the parts it holds to be added again (scene file reader).
     pending: Option<Dynamic>,
+    /// How long the last rapier step took (`None` before the first after a change of bodies or
+    /// a rollback): it picks where the next runs (`rapier_step`), never what it computes.
+    last_step: Option<std::time::Duration>,
 }
 
 impl Bodies {
@@ -99,16 +151,7 @@ impl Bodies {
         let mut b = Self {
             name: name.to_string(),
             d: Dynamic {
-                r: Rapier {
-                    islands: IslandManager::new(),
-                    broad_phase: BroadPhaseBvh::new(),
-                    narrow_phase: NarrowPhase::new(),
-                    bodies: RigidBodySet::new(),
-                    colliders: ColliderSet::new(),
-                    impulse_joints: ImpulseJointSet::new(),
-                    multibody_joints: MultibodyJointSet::new(),
-                    soft_bodies: SoftBodySet::new(),
-                },
+                r: Rapier::empty(),
                 contacts: 0.0,
                 coupling: 0.0,
                 parts: 0,
@@ -124,6 +167,7 @@ impl Bodies {
             anchor: None,
             rolling: Vec::new(),
             pending: None,
+            last_step: None,
         };
         b.scale_time();
         b
@@ -391,6 +435,7 @@ impl Bodies {
     /// the bodies the parts built, and taken (a refusal drops it: the load fails).
     fn part_added(&mut self) -> Result<()> {
         self.d.parts += 1;
+        self.last_step = None;
         if self.pending.as_ref().is_some_and(|p| p.parts == self.d.parts) {
             let d = self.pending.take().expect("checked");
             self.take_state(d)?;
@@ -937,6 +982,45 @@ fn solve2(k: [[Real; 2]; 2], b: [Real; 2], dim: usize) -> Option<[Real; 2]> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
+impl Bodies {
+    /// rapier's step. It has no stopping point inside (1,000 balls in one place: seconds a
+    /// step), so a step that may be long (the first after a change or a rollback, or one after
+    /// a step of `WATCHED_STEP` or more) runs on a thread of its own while this one watches
+    /// `stop` (`super::watched`): once it is set, `Halt::Stopped` is returned within 10 ms and
+    /// the step is left to finish unseen on its thread with the state it took (its result
+    /// dropped; it runs on for the rest of its step, on one core). The bodies then hold an
+    /// empty state until the caller rolls the call back (`restore`), as a stopped step must be.
+    /// Where the step runs changes no bit of what it computes.
+    fn rapier_step(&mut self, stop: &AtomicBool) -> std::result::Result<(), Halt> {
+        let start = std::time::Instant::now();
+        let mut stepper = Stepper {
+            r: std::mem::replace(&mut self.d.r, Rapier::empty()),
+            pipeline: std::mem::replace(&mut self.pipeline, PhysicsPipeline::new()),
+            ccd: std::mem::replace(&mut self.ccd, CCDSolver::new()),
+            impacts: std::mem::take(&mut self.impacts),
+        };
+        let (gravity, params) = (self.gravity, self.params);
+        if self.last_step.is_some_and(|t| t < WATCHED_STEP) {
+            stepper.step(gravity, &params);
+        } else {
+            stepper = match super::watched("physcore-bodies", stop, move || {
+                stepper.step(gravity, &params);
+                stepper
+            }) {
+                Some(Ok(stepper)) => stepper,
+                Some(Err(panic)) => std::panic::resume_unwind(panic),
+                None => {
+                    self.last_step = None;
+                    return Err(Halt::Stopped);
+                }
+            };
+        }
+        Stepper { r: self.d.r, pipeline: self.pipeline, ccd: self.ccd, impacts: self.impacts } = stepper;
+        self.last_step = Some(start.elapsed());
+        Ok(())
+    }
+}
+
 impl System for Bodies {
     fn name(&self) -> &str {
         &self.name
@@ -952,7 +1036,7 @@ impl System for Bodies {
             self.gravity = vector(&g[..D]);
         }
     }
-    fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
+    fn step(&mut self, dt: Real, stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let (k0, u0) = self.mechanical();
         self.params.dt = dt;
         let r = &mut self.d.r;
@@ -961,21 +1045,8 @@ impl System for Bodies {
         (self.impacts.gravity, self.impacts.dt, self.impacts.substep) = (self.gravity, dt, substep);
         // Faster than gravity gives in two steps: a body resting on another stays below it.
         hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
-        self.pipeline.step(
-            self.gravity,
-            &self.params,
-            &mut r.islands,
-            &mut r.broad_phase,
-            &mut r.narrow_phase,
-            &mut r.bodies,
-            &mut r.colliders,
-            &mut r.impulse_joints,
-            &mut r.multibody_joints,
-            &mut r.soft_bodies,
-            &mut self.ccd,
-            &self.impacts,
-            &(),
-        );
+        self.rapier_step(stop)?;
+        let r = &mut self.d.r;
         // The list is emptied in place: its buffer serves every step's impacts.
         let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());
         restitution(r, found, substep);
@@ -1115,6 +1186,7 @@ impl System for Bodies {
         // for bit), so a rolled-back run matches one never interrupted.
         self.pipeline = PhysicsPipeline::new();
         self.ccd = CCDSolver::new();
+        self.last_step = None;
     }
     fn as_rigid_bodies(&mut self) -> Option<&mut dyn crate::systems::RigidBodies> {
         Some(self)

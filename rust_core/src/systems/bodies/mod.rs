@@ -86,27 +86,42 @@ fn built<T>(key: &str, build: impl FnOnce() -> std::result::Result<T, String>) -
 /// way to be stopped inside. Where no thread can start (a limit on threads, or no memory for its
 /// stack) the job runs here, to its end.
 fn off_thread<T: Send + 'static>(stop: &AtomicBool, job: impl FnOnce() -> T + Send + 'static) -> Result<T> {
+    match watched("physcore-shape", stop, job) {
+        Some(Ok(value)) => Ok(value),
+        Some(Err(_)) => Err(invalid("vertices", "the shape builder failed on them")),
+        None => Err(Error::Interrupted { rolled_back_to: 0 }),
+    }
+}
+
+/// `job()` on a thread named `name` while this one polls `stop` every 10 ms: `None` once `stop`
+/// is seen set (the job is left to finish unseen and its result dropped), else the job's result,
+/// or the payload of its panic (for the caller to resume or refuse). Where no thread can start,
+/// the job runs here, to its end (a panic then unwinds from here, as without the thread).
+fn watched<T: Send + 'static>(
+    name: &str,
+    stop: &AtomicBool,
+    job: impl FnOnce() -> T + Send + 'static,
+) -> Option<std::thread::Result<T>> {
     use std::sync::mpsc::{channel, RecvTimeoutError};
     use std::sync::{Arc, Mutex};
     let slot = Arc::new(Mutex::new(Some(job)));
     let (theirs, (tx, rx)) = (slot.clone(), channel());
-    let started = std::thread::Builder::new().name("physcore-shape".into()).stack_size(8 << 20).spawn(move || {
+    let started = std::thread::Builder::new().name(name.into()).stack_size(8 << 20).spawn(move || {
         if let Some(job) = theirs.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            let _ = tx.send(job());
+            let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)));
         }
     });
     if started.is_err() {
         let job = slot.lock().unwrap_or_else(|p| p.into_inner()).take().expect("the thread never started");
-        return Ok(job());
+        return Some(Ok(job()));
     }
     loop {
         match rx.recv_timeout(std::time::Duration::from_millis(10)) {
-            Ok(value) => return Ok(value),
-            Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
-                return Err(Error::Interrupted { rolled_back_to: 0 })
-            }
+            Ok(result) => return Some(result),
+            Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => return None,
             Err(RecvTimeoutError::Timeout) => {}
-            Err(RecvTimeoutError::Disconnected) => return Err(invalid("vertices", "the shape builder failed on them")),
+            // The job is sent as it ends, panic or not: only a thread killed unwinding gets here.
+            Err(RecvTimeoutError::Disconnected) => return Some(Err(Box::new("the thread ended without a result"))),
         }
     }
 }
