@@ -44,23 +44,33 @@ struct Stepper {
 
 impl Stepper {
     fn step(&mut self, gravity: Vector, params: &IntegrationParameters) {
-        let r = &mut self.r;
-        self.pipeline.step(
-            gravity,
-            params,
-            &mut r.islands,
-            &mut r.broad_phase,
-            &mut r.narrow_phase,
-            &mut r.bodies,
-            &mut r.colliders,
-            &mut r.impulse_joints,
-            &mut r.multibody_joints,
-            &mut r.soft_bodies,
-            &mut self.ccd,
-            &self.impacts,
-            &(),
-        );
+        rapier_step_on(&mut self.r, &mut self.pipeline, &mut self.ccd, &self.impacts, gravity, params);
     }
+}
+
+fn rapier_step_on(
+    r: &mut Rapier,
+    pipeline: &mut PhysicsPipeline,
+    ccd: &mut CCDSolver,
+    impacts: &Impacts,
+    gravity: Vector,
+    params: &IntegrationParameters,
+) {
+    pipeline.step(
+        gravity,
+        params,
+        &mut r.islands,
+        &mut r.broad_phase,
+        &mut r.narrow_phase,
+        &mut r.bodies,
+        &mut r.colliders,
+        &mut r.impulse_joints,
+        &mut r.multibody_joints,
+        &mut r.soft_bodies,
+        ccd,
+        impacts,
+        &(),
+    );
 }
 
 /// A rapier step that took this long runs the next on a watched thread (`Bodies::rapier_step`):
@@ -993,16 +1003,16 @@ impl Bodies {
     /// Where the step runs changes no bit of what it computes.
     fn rapier_step(&mut self, stop: &AtomicBool) -> std::result::Result<(), Halt> {
         let start = std::time::Instant::now();
-        let mut stepper = Stepper {
-            r: std::mem::replace(&mut self.d.r, Rapier::empty()),
-            pipeline: std::mem::replace(&mut self.pipeline, PhysicsPipeline::new()),
-            ccd: std::mem::replace(&mut self.ccd, CCDSolver::new()),
-            impacts: std::mem::take(&mut self.impacts),
-        };
         let (gravity, params) = (self.gravity, self.params);
         if self.last_step.is_some_and(|t| t < WATCHED_STEP) {
-            stepper.step(gravity, &params);
+            rapier_step_on(&mut self.d.r, &mut self.pipeline, &mut self.ccd, &self.impacts, gravity, &params);
         } else {
+            let mut stepper = Stepper {
+                r: std::mem::replace(&mut self.d.r, Rapier::empty()),
+                pipeline: std::mem::replace(&mut self.pipeline, PhysicsPipeline::new()),
+                ccd: std::mem::replace(&mut self.ccd, CCDSolver::new()),
+                impacts: std::mem::take(&mut self.impacts),
+            };
             stepper = match super::watched("physcore-bodies", stop, move || {
                 stepper.step(gravity, &params);
                 stepper
@@ -1014,8 +1024,8 @@ impl Bodies {
                     return Err(Halt::Stopped);
                 }
             };
+            Stepper { r: self.d.r, pipeline: self.pipeline, ccd: self.ccd, impacts: self.impacts } = stepper;
         }
-        Stepper { r: self.d.r, pipeline: self.pipeline, ccd: self.ccd, impacts: self.impacts } = stepper;
         self.last_step = Some(start.elapsed());
         Ok(())
     }
