@@ -54,7 +54,8 @@ class Look:
         [[x, y], ...], "color": (r, g, b), "width": px}`` (a polyline, default 2 px). A
         cradle's frame, a ceiling bracket: what explains the scene but does not move. In 3D
         the lowest horizontal polygon is a floor: a mesh drawn over it casts a soft shadow on
-        it (light from overhead; fainter the higher the mesh hangs).
+        it (light from overhead; fainter the higher the mesh hangs), as it does on an upward
+        plane collider and on the upward faces of fixed bodies.
     swept_areas : dict, optional
         Kepler's second law drawn: the areas the line from particle ``"centre"`` to particle
         ``"body"`` sweeps in equal times, as wedges of ``"frames"`` frames each (the first from

@@ -369,6 +369,8 @@ def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
 #: A 3D mesh's shadow on a floor prop: blurred with σ about this fraction of the image's width,
 #: darkening the floor by up to this much.
 SHADOW_BLUR, SHADOW_DARK = 0.012, 0.45
+#: At most this many heights of fixed bodies' upward faces receive it (the largest by area).
+SHADOW_RECEIVERS = 4
 
 #: A liquid's spray (``surface``): particles with fewer than SPRAY_NEIGHBOURS others within two
 #: spacings are drawn apart from the surface as a mist, blurred SPRAY_BLUR times wider than the
@@ -699,6 +701,15 @@ class _Rasteriser:
                 low = min(flat, key=lambda q: float(q[0, 2]))
                 self._ground = (float(low[0, 2]), low)
         self._ground_cover: np.ndarray | None = None  # the floor's coverage, for the fitted camera
+        # What else the mesh casts its shadow on, drawn in its depth buffer: the plane colliders
+        # that face up (a floor) and the upward faces of fixed bodies (a table's top, a floor
+        # slab), each a plane (point, unit normal) relative to the origin, and a label for each
+        # vertex the shader draws (the sheet's, the static geometry's, the bodies') naming the
+        # plane it lies on (−1: none).
+        self._receivers: list[tuple[np.ndarray, np.ndarray]] = []
+        self._receiver_labels: np.ndarray | None = None
+        if mesh is not None and dim == 3:
+            self._receivers_setup(planes, n)
 
 
     def forget_projection(self) -> None:
@@ -1030,9 +1041,12 @@ class _Rasteriser:
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
         out = self._rgb(under, cam)  # a new C-contiguous (H, W, 3) uint8 array, with the look's backdrop
+        solids = self._solids(k)
         if self._ground is not None:
-            self._cast_shadow(out, under, k, cam)
-        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
+            self._cast_shadow(out, under, k, cam, solids)
+        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=solids)
+        if self._receivers:
+            self._shadow_on_receivers(out, k, cam, solids)
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
         if self._pinned_idx.size:
@@ -1040,34 +1054,109 @@ class _Rasteriser:
             _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
 
-    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera) -> None:
-        """Frame k's mesh casts a soft shadow on the floor prop (``self._ground``) in `out`, in
-        place: its triangles dropped straight down onto the floor's height, rasterised,
-        blurred (σ ≈ SHADOW_BLUR of the image's width) and darkening the floor by up to
-        SHADOW_DARK (under a vertex at height h, times exp(−h / the mesh's width)) where the floor shows (nothing that moves, no label is drawn there), as an
-        overcast sky's light from above would."""
+    def _receivers_setup(self, planes: list[tuple[np.ndarray, np.ndarray]], n: int) -> None:
+        """Finds the surfaces, other than a floor prop, that the mesh casts its shadow on (see
+        ``self._receivers``): each plane collider whose normal points up (at most 60° from +z)
+        and, grouped by height, the upward faces of fixed 3D bodies (the SHADOW_RECEIVERS
+        largest heights by area)."""
+        shader = self._shader
+        static = 0 if shader.ball is None else len(shader.ball[0])
+        labels = [np.full(n, -1, dtype=np.int64), np.full(static, -1, dtype=np.int64)]
+        for j, (p, nrm) in enumerate(planes):
+            unit = nrm / max(float(np.linalg.norm(nrm)), 1e-300)
+            if unit[2] >= 0.5 and shader.floor_verts:
+                labels[1][j * shader.floor_verts:(j + 1) * shader.floor_verts] = len(self._receivers)
+                self._receivers.append((np.asarray(p, np.float64), unit))
+        bodies = self.rec.bodies
+        if bodies is not None and bodies.dim == 3:
+            from ._bodies import body_geometry
+
+            verts, normals, faces, _ = body_geometry(bodies, 0)
+            up = (normals[:, 2] > 0.99) & bodies.flat & bodies.fixed[bodies.owner] & np.isfinite(verts).all(axis=1)
+            own = np.full(len(verts), -1, dtype=np.int64)
+            tri = faces[up[faces].all(axis=1)]
+            if len(tri):
+                scale = max(1.0, float(np.abs(verts[up]).max()))
+                level = np.round(verts[:, 2] / (1e-6 * scale))
+                heights, which = np.unique(level[tri[:, 0]], return_inverse=True)
+                e1, e2 = verts[tri[:, 1]] - verts[tri[:, 0]], verts[tri[:, 2]] - verts[tri[:, 0]]
+                area = np.bincount(which, weights=0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]),
+                                   minlength=len(heights))
+                for g in np.argsort(-area)[:SHADOW_RECEIVERS]:
+                    own[tri[which == g].ravel()] = len(self._receivers)
+                    z = float(verts[tri[which == g][0, 0], 2])
+                    self._receivers.append((np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 1.0])))
+            labels.append(own)
+        self._receiver_labels = np.concatenate(labels) if self._receivers else None
+
+    def _shadow(self, k: int, cam: _Camera, point: np.ndarray, normal: np.ndarray, shape: tuple[int, int],
+                solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+        """(H, W) float32 in [0, 1], the soft shadow frame k's mesh (and its rigid bodies,
+        `solids` as :meth:`_solids` gives them) casts on the plane through `point` with unit
+        `normal` (relative to the origin, facing up), light from straight overhead (an overcast
+        sky): their triangles dropped straight down onto the plane, rasterised (where two
+        overlap, the lower one's), each vertex weighing exp(−h / the mesh's width) at a height
+        h above the plane (fainter the higher), and blurred (σ ≈ SHADOW_BLUR of the image's
+        width). A triangle with no corner above the plane (a body's face lying on it, one below
+        it) casts nothing. None if nothing lies above the plane."""
         from .. import _core
 
-        z, poly = self._ground
         x = np.nan_to_num(np.asarray(self.rec.positions[k], dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-        height = x[:, 2] - z
-        above = height > 0
-        if not above.any():
-            return
-        x[:, 2] = z
-        col, row = cam.pixels(cam.project(x)[0])
-        h, w = under.shape
-        verts = np.zeros((len(x), 3), dtype=np.float32)
-        verts[:, 0], verts[:, 1] = col, row
-        faces = self._shader.faces_u32
-        faces = faces[above[faces].any(axis=1)]  # a triangle below the floor casts nothing on it
-        img = np.full((h, w, 3), 255, dtype=np.uint8)
-        # Fainter the higher: each vertex's shadow weighs exp(−height / the mesh's size).
         size = max(float(np.ptp(x[:, :2], axis=0).max()), 1e-12)
+        faces = self._shader.faces_u32
+        if solids is not None and len(solids[2]):
+            faces = np.concatenate([faces, (solids[2] + len(x)).astype(np.uint32)])
+            x = np.concatenate([x, np.nan_to_num(solids[0], nan=0.0, posinf=0.0, neginf=0.0)])
+        height = ((x - point) @ normal) / normal[2]  # straight up from the plane to the vertex
+        # Above by more than rounding: a body's face lying on the plane casts nothing on it.
+        above = height > 1e-6 * max(1.0, float(np.abs(point).max()), size)
+        if not above.any():
+            return None
+        x[:, 2] -= height
+        col, row = cam.pixels(cam.project(x)[0])
+        # Drawn and blurred at half the resolution (a quarter of the work; what comes back is
+        # smooth at the blur's width, so its 2 × 2 blocks do not show).
+        h, w = shape
+        verts = np.zeros((len(x), 3), dtype=np.float32)
+        verts[:, 0], verts[:, 1], verts[:, 2] = 0.5 * col, 0.5 * row, -height  # the lowest nearest: its shadow shows
+        faces = faces[above[faces].any(axis=1)]  # a triangle below the plane casts nothing on it
+        img = np.full(((h + 1) // 2, (w + 1) // 2, 3), 255, dtype=np.uint8)
         ink = np.zeros((len(x), 4), dtype=np.float32)
         ink[:, :3] = (1.0 - np.exp(-np.maximum(height, 0.0) / size))[:, None]
         _core.rasterise_mesh(verts, np.ascontiguousarray(faces), ink, ink, img, 1)
-        shade = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(SHADOW_BLUR * w))))
+        half = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(0.5 * SHADOW_BLUR * w))))
+        return np.repeat(np.repeat(half, 2, axis=0), 2, axis=1)[:h, :w]
+
+    def _shadow_on_receivers(self, out: np.ndarray, k: int, cam: _Camera,
+                             solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Frame k's mesh casts its soft shadow (:meth:`_shadow`) on the surfaces drawn with it
+        that face up (``self._receivers``), in `out`, in place, after the shader drew them:
+        darkening each by up to SHADOW_DARK where it shows (nothing in front of it)."""
+        labels = self._receiver_labels
+        if labels is None or len(labels) != len(self._shader.drawn[0]):
+            return
+        shape = out.shape[:2]
+        cover = self._shader.coverage(labels, len(self._receivers), shape)
+        dark = np.zeros(shape, dtype=np.float32)
+        for (point, normal), part in zip(self._receivers, cover, strict=True):
+            if part.max() <= 0.0:
+                continue
+            shade = self._shadow(k, cam, point, normal, shape, solids)
+            if shade is not None:
+                dark += SHADOW_DARK * shade * part
+        if dark.any():
+            out[...] = np.rint(out * (1.0 - np.minimum(dark, 1.0))[..., None]).astype(np.uint8)
+
+    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera,
+                     solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Frame k's mesh casts a soft shadow (:meth:`_shadow`) on the floor prop
+        (``self._ground``) in `out`, in place, darkening the floor by up to SHADOW_DARK where it
+        shows (nothing that moves, no label is drawn there)."""
+        z, poly = self._ground
+        h, w = under.shape
+        shade = self._shadow(k, cam, np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 1.0]), (h, w), solids)
+        if shade is None:
+            return
         if self._ground_cover is None or self._centres is not None:
             pc, pr = cam.pixels(cam.project(poly)[0])
             cover = np.zeros((h, w), np.float32)
