@@ -12,11 +12,13 @@ import numpy as np
 from ._camera import (
     FOLLOW_MAX_ZOOM,
     FOLLOW_SMOOTHING,
+    ZOOM_EASE,
     _Camera,
     _follow_centres,
     _orbit_bounds,
     _screen_bounds,
     _view_basis,
+    _zoom_scales,
 )
 from ._colorbar import (
     _CB_MARGIN,
@@ -577,15 +579,22 @@ class _Rasteriser:
         # bases; None for the one fitted camera. The scale stays fixed, so the scale bar holds.
         self._centres: np.ndarray | None = None
         self._bases: np.ndarray | None = None
-        if mode == "follow":
+        #: camera="zoom": (F,) per-frame scales (pixels per unit), self.cam's the last and smallest.
+        self._scales: np.ndarray | None = None
+        if mode in ("follow", "zoom"):
             centres, spread = _follow_centres(self.cam, rec.positions, rec.pinned, rec.masses, cam_param,
                                               FOLLOW_SMOOTHING * fps)
             avail = np.array([max(w - 2 * pad, 1), max(h - (bottom_pad or pad) - (top_pad or pad), 1)], dtype=float)
             wide = spread > 1e-6 * amax
             # Zoom in (never out: the fitted view holds everything) until the spread fits.
             zoom = float(np.min(avail[wide] / (2.0 * spread[wide]))) / self.cam.scale if wide.any() else math.inf
+            fitted = self.cam.scale
             self.cam.scale *= min(max(zoom, 1.0), FOLLOW_MAX_ZOOM)
             self._centres = centres
+            if mode == "zoom":
+                self._scales = _zoom_scales(self.cam, rec.positions, rec.pinned, centres, avail, self.cam.scale,
+                                            FOLLOW_MAX_ZOOM * fitted, ZOOM_EASE * fps)
+                self.cam.scale = float(self._scales[-1])
         elif mode == "orbit":
             turn = np.arange(rec.frames) * (360.0 / rec.frames if cam_param is None else cam_param / fps)
             self._bases = np.stack([_view_basis(view[0] + a, view[1]) for a in turn])
@@ -618,7 +627,7 @@ class _Rasteriser:
                 _draw_colorbar(img, self.colorbar, base, levels)
             if self.title is not None:
                 _draw_title(img, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8, self.font_px)
-            if self.annotate:
+            if self.annotate and self._scales is None:  # a zooming view draws its own each frame
                 self.scale_bar = _draw_scale_bar(img, self.cam.scale, "m" if rec.speed_unit == "m/s" else "", self.font_px)
         self._labels: tuple[np.ndarray, np.ndarray] | None = None
         if self._centres is not None:
@@ -721,7 +730,8 @@ class _Rasteriser:
         same scale and image, its own centre and, orbiting, its own basis)."""
         if self._centres is None:
             return self.cam
-        return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k])
+        return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k],
+                              None if self._scales is None else float(self._scales[k]))
 
     def _under(self, cam: _Camera) -> np.ndarray:
         """A fresh copy of what frame drawing starts from, seen through `cam`: the background."""
@@ -755,6 +765,11 @@ class _Rasteriser:
         free = ~rec.pinned
         x = rec.positions[k][free] if rec.pinned.any() else rec.positions[k]
         col, row = cam.pixels(cam.project(x)[0])
+        if self._scales is not None:
+            # Zoomed in z times, the particles spread over z² times the pixels: each weighs z²,
+            # so that a region's glow (its surface brightness) does not change with the zoom.
+            gain = (float(self._scales[k]) / self.cam.scale) ** 2
+            return col, row, np.full(col.shape, gain, dtype=np.float32)
         if not self.trail or k == 0 or self._centres is not None:
             return col, row, None
         x0 = rec.positions[k - 1][free] if rec.pinned.any() else rec.positions[k - 1]
@@ -1417,6 +1432,8 @@ class _Rasteriser:
             _draw_arrows(buf, cam, self.rec.positions[k][self._arrows[0]], self._arrows[1][k], self._arrows[2])
         if self._labels is not None:
             buf.reshape(-1)[self._labels[0]] = self._labels[1]
+        if self._scales is not None and self.annotate:  # a zooming view: the scale bar of this frame's scale
+            self.scale_bar = _draw_scale_bar(buf, cam.scale, "m" if self.rec.speed_unit == "m/s" else "", self.font_px)
 
     def _draw_clock(self, buf: np.ndarray, k: int) -> None:
         """The simulated time in the bottom-left corner ("t = 1.23 s"; no unit in a scene's own
