@@ -293,3 +293,34 @@ def test_a_body_standing_on_a_fixed_body_casts_a_contact_shadow():
     near[max(rows.min() - 6, 0) : rows.max() + 7, max(cols.min() - 6, 0) : cols.max() + 7] = True
     darker = (without - with_).sum(axis=2) > 15
     assert (darker & near & ~red).any()
+
+
+def test_trail_of_draws_only_the_named_particles_paths():
+    # Issue 65: spring_chain's frame was empty while its rope lay level, and every link's trail
+    # was clutter; look.trail_of draws one path (the free end's). Two balls fly side by side,
+    # 1 m apart: with trail_of=(1,) only ball 1's band holds trail pixels, with none both do.
+    from physcore.render import _palette
+
+    s = pc.Scene(2, dt=1e-2)
+    s.add_particles([[0.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [1.0, 0.0]], masses=1.0)
+    rec = pc.render.record(s, frames=20, frame_time=0.05)
+
+    def trail_rows(look):
+        ras = pc.render._Rasteriser(rec, (200, 150), "none", 2, pc.render.DEFAULT_VIEW, trail=10, look=look)
+        img = ras.frame(rec.frames - 1)
+        rows = np.nonzero(((img >= _palette._TRAIL0) & (img < _palette._TRAIL0 + _palette._N_TRAIL)).any(axis=1))[0]
+        ball = [ras.cam.pixels(ras.cam.project(rec.positions[-1][[i]])[0])[1][0] for i in (0, 1)]
+        return rows, ball
+
+    rows, (y0, y1) = trail_rows(Look(trail_of=(1,)))
+    assert rows.size and np.all(np.abs(rows - y1) <= 3)
+    rows, (y0, y1) = trail_rows(None)
+    assert (np.abs(rows - y0) <= 3).any() and (np.abs(rows - y1) <= 3).any()
+
+
+def test_trail_of_is_checked(tmp_path):
+    with pytest.raises(ValueError, match="trail_of"):
+        pc.render.gif(_ball(2), tmp_path / "x.gif", frames=2, trail=2, look={"trail_of": [-1]})
+    with pytest.raises(ValueError, match="trail_of"):
+        pc.render.gif(_ball(2), tmp_path / "x.gif", frames=2, trail=2, look={"trail_of": [5]})
+    assert pc.scenes.spring_chain(n=6).render_defaults["look"]["trail_of"] == (5,)

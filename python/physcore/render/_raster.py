@@ -643,6 +643,10 @@ class _Rasteriser:
             sample = np.concatenate([d[d > 0] for d in (self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1}))] or [np.zeros(1)])
             self.glow_scale = float(np.percentile(sample, 99.5)) if sample.size else 1.0
         self.trail = int(trail)
+        #: (N,) bool: the particles whose paths the trails draw (the moving ones, or look.trail_of's).
+        self._trailed = ~rec.pinned
+        if self.look.trail_of:
+            self._trailed = self._trailed & np.isin(np.arange(len(rec.pinned)), self.look.trail_of)
         self._glow_history: tuple[int, np.ndarray] | None = None  # (frame, glow with trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
@@ -1354,7 +1358,7 @@ class _Rasteriser:
         if self.trail and (k > 0 or self.loop) and self.look.trail_fade is not None:
             self._draw_faded_trail(out, k, cam, rgb)
         elif self.trail and (k > 0 or self.loop):
-            moving = ~rec.pinned
+            moving = self._trailed
             first = max(0, k - self.trail)
             if self._centres is None and self._pix is None:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
@@ -1452,7 +1456,7 @@ class _Rasteriser:
         first: one segment per particle per frame step, under everything that moves; seen
         through frame k's camera `cam`."""
         rec = self.rec
-        moving = ~rec.pinned
+        moving = self._trailed
         first = max(0, k - self.trail)
         if self._centres is None:
             if self._pix is None:
@@ -1516,8 +1520,7 @@ class _Rasteriser:
         full-colour image `out` with the opacity of their age (:meth:`_trail_alpha`): drawn
         into one layer of colour and opacity, oldest first (a newer segment covers an older
         one where they cross), then laid over `out` once, so nothing is blended twice."""
-        rec = self.rec
-        moving = np.flatnonzero(~rec.pinned)
+        moving = np.flatnonzero(self._trailed)
         first, pix = self._trail_pixels(k, cam)
         h, w = out.shape[:2]
         parts: list[list[np.ndarray]] = [[], [], [], [], []]
