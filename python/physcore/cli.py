@@ -6,7 +6,7 @@ Usage::
     physcore render SCENE [-o OUT.gif|OUT.mp4|OUT.webm|OUT.png|OUT.glb|OUT.gltf|OUT.html] [--frames N] [--fps F] [--size WxH] [--integrator NAME]
                           [--dt DT] [--steps-per-frame K | --frame-time SECONDS]
                           [--color-by speed|pressure|none] [--no-colorbar]
-                          [--camera fit|follow|orbit] [--arrows velocity|acceleration]
+                          [--camera fit|follow|zoom|orbit] [--arrows velocity|acceleration]
                           [--no-mesh] [--texture IMAGE] [--[no-]antialias] [--cmap NAME] [--background #RRGGBB]
                           [--param key=value ...]
     physcore view SCENE [--param key=value ...] [--size WxH] [--fps F] [--seconds S] [--screenshot OUT.png]
@@ -122,19 +122,19 @@ def _view(text: str) -> tuple[float, float]:
 
 
 def _camera_arg(text: str) -> Any:
-    """--camera: fit, follow, orbit, follow:INDEX (a particle) or orbit:DEG_PER_S."""
+    """--camera: fit, follow, zoom, orbit, follow:INDEX or zoom:INDEX (a particle) or orbit:DEG_PER_S."""
     mode, sep, param = text.partition(":")
-    if mode in ("fit", "follow", "orbit") and not sep:
+    if mode in ("fit", "follow", "zoom", "orbit") and not sep:
         return mode
     try:
-        if mode == "follow" and sep:
-            return ("follow", int(param))
+        if mode in ("follow", "zoom") and sep:
+            return (mode, int(param))
         if mode == "orbit" and sep:
             return ("orbit", float(param))
     except ValueError:
         pass
     raise argparse.ArgumentTypeError(
-        f"expected fit, follow, orbit, follow:INDEX or orbit:DEGREES_PER_SECOND; got {text!r}"
+        f"expected fit, follow, zoom, orbit, follow:INDEX, zoom:INDEX or orbit:DEGREES_PER_SECOND; got {text!r}"
     )
 
 
@@ -761,7 +761,8 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     r.add_argument("--background", metavar="#RRGGBB", help="background colour of particle animations (default: the theme's)")
     r.add_argument("--camera", type=_camera_arg, metavar="MODE",
                    help="fit (still, the default), follow (the moving particles' centre of mass; follow:I "
-                   "particle I), orbit (3D: one turn over the animation; orbit:D at D degrees a second)")
+                   "particle I), zoom (follow, widening as the motion spreads; the scale bar shows each frame's "
+                   "scale), orbit (3D: one turn over the animation; orbit:D at D degrees a second)")
     r.add_argument("--arrows", choices=("none", "velocity", "acceleration"),
                    help="arrows on up to 300 moving particles (default: the scene's, else none)")
     r.add_argument("--no-springs", action="store_true", help="do not draw springs")

@@ -1,4 +1,4 @@
-"""Camera modes (fit, follow, orbit), velocity and acceleration arrows, and the labels' font:
+"""Camera modes (fit, follow, zoom, orbit), velocity and acceleration arrows, and the labels' font:
 measured on the drawn pixels (disc and arrow centroids, text masks) against the geometry each
 promises."""
 from __future__ import annotations
@@ -99,6 +99,68 @@ def test_follow_steps_never_exceed_the_targets():
     assert {ras.cam_at(k).scale for k in range(rec.frames)} == {ras.cam.scale}
 
 
+# ----------------------------------------------------------------------------------- zoom
+def _spreading_ring(frames: int = 120) -> render.Recording:
+    """300 particles: 200 at rest in a disc 0.5 m across, 100 on a ring of radius 1 m moving
+    out at 1 m/s, recorded over 4 s (the ring ends at 5 m)."""
+    rng = np.random.default_rng(1)
+    core = rng.uniform(-0.25, 0.25, (200, 2))
+    a = np.linspace(0.0, 2.0 * np.pi, 100, endpoint=False)
+    ring = np.stack([np.cos(a), np.sin(a)], axis=1)
+    scene = still_scene(np.concatenate([core, ring]), np.concatenate([np.zeros_like(core), ring]))
+    return render.record(scene, frames=frames, frame_time=4.0 / (frames - 1))
+
+
+def test_zoom_starts_close_and_widens_to_follows_scale_keeping_every_frame_whole():
+    """Issue 65 (galaxies small and blurred in the first frame, the one scale set by the tails
+    at the end): the zoom's scale never grows, ends at follow's, starts at least twice as close
+    on a ring that spreads fivefold, and every frame holds 99 % of the particles in the image,
+    around follow's centres."""
+    rec = _spreading_ring()
+    size = (240, 200)
+    follow = render._Rasteriser(rec, size, "none", 2, render.DEFAULT_VIEW, camera=("follow", None), fps=24)
+    zoom = render._Rasteriser(rec, size, "none", 2, render.DEFAULT_VIEW, camera=("zoom", None), fps=24)
+    scales = np.array([zoom.cam_at(k).scale for k in range(rec.frames)])
+    assert np.all(np.diff(scales) <= 1e-12 * scales[0])
+    assert scales[-1] == pytest.approx(follow.cam.scale)
+    assert scales[0] >= 2.0 * follow.cam.scale
+    for k in range(rec.frames):
+        cam = zoom.cam_at(k)
+        assert np.array_equal(cam.centre, follow.cam_at(k).centre)
+        col, row = cam.pixels(cam.project(rec.positions[k])[0])
+        inside = (col >= 0) & (col <= size[0]) & (row >= 0) & (row <= size[1])
+        assert inside.mean() >= 0.99, k
+
+
+def test_zoom_draws_the_scale_bar_of_each_frame():
+    """The scale bar holds in every frame of a zoom: drawn at that frame's scale (its pixels
+    over the scale are the round length it is labelled with), the first frame's bar standing
+    for a shorter length than the last's."""
+    from physcore.render._raster import _scale_bar_length
+
+    rec = _spreading_ring()
+    ras = render._Rasteriser(rec, (240, 200), "none", 2, render.DEFAULT_VIEW, camera=("zoom", None), fps=24,
+                             annotate=True)
+    lengths = []
+    for k in (0, rec.frames - 1):
+        ras.frame(k)
+        length, px = ras.scale_bar
+        assert length == _scale_bar_length(ras.cam_at(k).scale, 240 / 6.0)
+        assert px == round(length * ras.cam_at(k).scale)
+        lengths.append(length)
+    assert lengths[0] < lengths[1]
+
+
+def test_galaxies_zoom_in_on_the_disks_at_the_start():
+    # The default galaxies start closer than one scale for the whole run would (n = 2000: the
+    # zoom stops at FOLLOW_MAX_ZOOM times the fitted view; 2.4 times follow's at n = 10 000).
+    assert pc.scenes.galaxies.render_defaults["camera"] == "zoom"
+    rec = render.record(pc.scenes.galaxies(n=2000), frames=120, frame_time=0.1)
+    follow = render._Rasteriser(rec, (240, 200), "density", 0, (30.0, 70.0), camera=("follow", None), fps=24)
+    zoom = render._Rasteriser(rec, (240, 200), "density", 0, (30.0, 70.0), camera=("zoom", None), fps=24)
+    assert zoom.cam_at(0).scale > 1.3 * follow.cam.scale
+
+
 # ---------------------------------------------------------------------------------- orbit
 def marker_azimuth(img: np.ndarray, el: float) -> float:
     """Azimuth (degrees) of the camera seeing the pinned marker at (+0.5, 0, 0) and the free
@@ -154,7 +216,7 @@ def test_orbit_is_refused_for_2d_scenes_before_stepping(tmp_path):
 
 
 @pytest.mark.parametrize("camera, error", [
-    ("zoom", ValueError), (3, TypeError), (("follow", 1.5), TypeError), (("follow", 5), ValueError),
+    ("pan", ValueError), (3, TypeError), (("follow", 1.5), TypeError), (("follow", 5), ValueError), (("zoom", 5), ValueError),
     (("follow", -1), ValueError), (("follow", True), TypeError), (("fit", 1), ValueError), (("orbit",), ValueError),
     (("orbit", math.inf), ValueError), (("orbit", "fast"), TypeError),
 ])
@@ -361,7 +423,7 @@ def test_cli_camera_and_arrows(tmp_path, capsys):
     with Image.open(out) as im:
         assert mask_of(np.asarray(im.convert("RGB")), ARROW).sum() > 5
     capsys.readouterr()
-    for bad in (["--camera", "orbit"], ["--camera", "follow:3"], ["--camera", "zoom"], ["--arrows", "force"]):
+    for bad in (["--camera", "orbit"], ["--camera", "follow:3"], ["--camera", "pan"], ["--arrows", "force"]):
         out.unlink(missing_ok=True)
         assert main(args + bad) == 2
         err = capsys.readouterr().err.strip().splitlines()

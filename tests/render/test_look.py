@@ -238,3 +238,89 @@ def test_a_mesh_casts_a_soft_shadow_on_a_floor_prop():
         assert (img[shaded(img)] <= far[shaded(img)]).all()  # a shadow only darkens
     depth = lambda img: int((200 - img[shaded(img)][:, 0]).max())  # noqa: E731 - the darkest shade
     assert depth(near) > depth(high) > 5
+
+
+def _sheet_over_a_ground(height: float, ground: str, shadow: bool = True, cube: bool = False) -> np.ndarray:
+    """A 1 m sheet (a 6 × 6 mesh) lying flat `height` m over a ground at z = 0 drawn in the
+    mesh's depth buffer: a plane collider (``"plane"``) or a fixed box's top (``"box"``), with
+    a 10 cm cube standing on the box's corner (``cube``); the frame's image, with the shadows
+    or (``shadow=False``) without."""
+    from physcore.render import _raster
+
+    g = np.linspace(-0.5, 0.5, 6)
+    x = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+    s = pc.Scene(3)
+    s.add_particles(np.concatenate([x, np.full((36, 1), height)], axis=1), masses=1.0)
+    if ground == "plane":
+        s.add(pc.Plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0]))
+    else:
+        s.add(pc.Bodies("box", size=[(1.5, 1.5, 0.05)], positions=[(0.0, 0.0, -0.05)], kind="fixed"))
+        if cube:
+            s.add(pc.Bodies("box", size=[(0.05, 0.05, 0.05)], positions=[(0.9, -0.9, 0.05)], color=(200, 40, 40)))
+    dark = _raster.SHADOW_DARK
+    _raster.SHADOW_DARK = dark if shadow else 0.0
+    try:
+        return next(pc.render.frames(s, frames=1, size=(160, 120), mesh=pc.render.Mesh.grid(6, 6), colorbar=False,
+                                     extent=((-1, -1, 0), (1, 1, 1)), view=(-60.0, 25.0))).astype(int)
+    finally:
+        _raster.SHADOW_DARK = dark
+
+
+@pytest.mark.parametrize("ground", ["plane", "box"])
+def test_a_mesh_casts_a_soft_shadow_on_a_floor_collider_and_a_fixed_bodys_top(ground):
+    # Issue 65: cloth_on_ball's floor (a plane collider) and tablecloth's table (a fixed box) are
+    # drawn in the mesh's depth buffer, not as a floor prop, and had no shadow under the sheet.
+    # Now the ground darkens under it (only darkens), less the higher the sheet hangs.
+    shade = {}  # by height: how much darker each pixel is with the shadow than without
+    for h in (0.1, 0.6):
+        img, plain = _sheet_over_a_ground(h, ground), _sheet_over_a_ground(h, ground, shadow=False)
+        assert (img <= plain + 1).all()  # a shadow only darkens (±1 for rounding)
+        shade[h] = (plain - img).sum(axis=2)
+    assert shade[0.1].max() > shade[0.6].max() > 30
+    # The shadow falls on the ground straight under the sheet, centred on the screen as it is.
+    _, cols = np.nonzero(shade[0.1] > 30)
+    assert abs(cols.mean() - 80) < 10
+
+
+def test_a_body_standing_on_a_fixed_body_casts_a_contact_shadow():
+    # The dishes on tablecloth's table looked placed, not settled: a body resting on a fixed
+    # body's top darkens it around its foot.
+    with_, without = _sheet_over_a_ground(0.3, "box", cube=True), _sheet_over_a_ground(0.3, "box", shadow=False, cube=True)
+    red = (without[..., 0] > 120) & (without[..., 1] < 60)  # the cube's faces
+    assert red.any()
+    rows, cols = np.nonzero(red)
+    near = np.zeros_like(red)
+    near[max(rows.min() - 6, 0) : rows.max() + 7, max(cols.min() - 6, 0) : cols.max() + 7] = True
+    darker = (without - with_).sum(axis=2) > 15
+    assert (darker & near & ~red).any()
+
+
+def test_trail_of_draws_only_the_named_particles_paths():
+    # Issue 65: spring_chain's frame was empty while its rope lay level, and every link's trail
+    # was clutter; look.trail_of draws one path (the free end's). Two balls fly side by side,
+    # 1 m apart: with trail_of=(1,) only ball 1's band holds trail pixels, with none both do.
+    from physcore.render import _palette
+
+    s = pc.Scene(2, dt=1e-2)
+    s.add_particles([[0.0, 0.0], [0.0, 1.0]], [[1.0, 0.0], [1.0, 0.0]], masses=1.0)
+    rec = pc.render.record(s, frames=20, frame_time=0.05)
+
+    def trail_rows(look):
+        ras = pc.render._Rasteriser(rec, (200, 150), "none", 2, pc.render.DEFAULT_VIEW, trail=10, look=look)
+        img = ras.frame(rec.frames - 1)
+        rows = np.nonzero(((img >= _palette._TRAIL0) & (img < _palette._TRAIL0 + _palette._N_TRAIL)).any(axis=1))[0]
+        ball = [ras.cam.pixels(ras.cam.project(rec.positions[-1][[i]])[0])[1][0] for i in (0, 1)]
+        return rows, ball
+
+    rows, (y0, y1) = trail_rows(Look(trail_of=(1,)))
+    assert rows.size and np.all(np.abs(rows - y1) <= 3)
+    rows, (y0, y1) = trail_rows(None)
+    assert (np.abs(rows - y0) <= 3).any() and (np.abs(rows - y1) <= 3).any()
+
+
+def test_trail_of_is_checked(tmp_path):
+    with pytest.raises(ValueError, match="trail_of"):
+        pc.render.gif(_ball(2), tmp_path / "x.gif", frames=2, trail=2, look={"trail_of": [-1]})
+    with pytest.raises(ValueError, match="trail_of"):
+        pc.render.gif(_ball(2), tmp_path / "x.gif", frames=2, trail=2, look={"trail_of": [5]})
+    assert pc.scenes.spring_chain(n=6).render_defaults["look"]["trail_of"] == (5,)

@@ -425,5 +425,5 @@ def test_the_scenes_backdrop_goes_to_the_players(recorded):
     top, bottom = pc.scenes.tablecloth.render_defaults["look"]["backdrop"]
     assert extras["backdrop"] == [list(top), list(bottom)]
     assert extras["background"] == [round((a + b) / 2) for a, b in zip(top, bottom, strict=True)]
-    g, _ = _load(recorded["cloth_on_ball"][2])
+    g, _ = _load(recorded["drop"][2])
     assert "backdrop" not in g.scenes[0].extras["physcore"]

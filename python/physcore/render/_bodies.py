@@ -43,12 +43,14 @@ class BodyTrack3:
     ``local`` (V, 3) float64 vertices (m), ``normals`` (V, 3) their unit normals, ``faces``
     (T, 3) int64, ``owner`` (V,) int64 the body of each vertex, ``rgb`` (V, 3) float32 in
     [0, 1]; ``reach`` (B,) each body's farthest vertex from its centre (m); ``poses`` (F, B, 7)
-    float32 ``(x, y, z, qx, qy, qz, qw)``, the centre relative to the recording's origin."""
+    float32 ``(x, y, z, qx, qy, qz, qw)``, the centre relative to the recording's origin;
+    ``fixed`` (B,) bool, the bodies that never move (all False unless given), and ``flat`` (V,)
+    bool, the vertices of flat faces (each face its own corners and normal)."""
 
     dim = 3
 
     def __init__(self, meshes: list[tuple[np.ndarray, np.ndarray]], smooth: np.ndarray, colors: np.ndarray,
-                 balls: np.ndarray, frames: int) -> None:
+                 balls: np.ndarray, frames: int, fixed: np.ndarray | None = None) -> None:
         local, normals, faces, owner, rgb = [], [], [], [], []
         k = 0
         for b, (v, t) in enumerate(meshes):
@@ -80,6 +82,8 @@ class BodyTrack3:
         self.rgb = np.concatenate(rgb).astype(np.float32)
         self.reach = np.array([float(np.linalg.norm(v, axis=1).max()) for v, _ in meshes])
         self.poses = np.zeros((frames, len(meshes), 7), dtype=np.float32)
+        self.fixed = np.zeros(len(meshes), dtype=bool) if fixed is None else np.asarray(fixed, dtype=bool)
+        self.flat = ~np.asarray(smooth, dtype=bool)[self.owner]
 
     def with_frames(self, frames: int) -> BodyTrack3:
         """A copy holding `frames` frames, each frame 0's poses (the live painter's history)."""
@@ -143,7 +147,8 @@ def body_track(scene: Any, frames: int) -> tuple[BodyTrack | BodyTrack3 | None, 
     track: BodyTrack | BodyTrack3
     if groups[0].dim == 3:
         meshes = [m for g in groups for m in g.meshes()]
-        track = BodyTrack3(meshes, flag(lambda g: g.shape in ("ball", "capsule")), colors, balls, frames)
+        track = BodyTrack3(meshes, flag(lambda g: g.shape in ("ball", "capsule")), colors, balls, frames,
+                           flag(lambda g: g.kind == "fixed"))
         names = ["x", "y", "z", "qx", "qy", "qz", "qw"]
     else:
         outlines = [o for g in groups for o in g.outline()]

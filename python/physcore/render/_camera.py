@@ -1,7 +1,8 @@
 """The camera: orthographic projection of 2D or 3D world points onto the image. ``"fit"`` fits one
 camera to every frame, so the view does not move; ``"follow"`` and ``"orbit"`` give each frame
 its own centre (a smoothed target) or azimuth (a turn about the vertical axis) at one fixed
-scale (:func:`_follow_centres`, :func:`_orbit_bounds`)."""
+scale (:func:`_follow_centres`, :func:`_orbit_bounds`); ``"zoom"`` follows with a scale of
+each frame's own, widening as the motion spreads (:func:`_zoom_scales`)."""
 from __future__ import annotations
 
 import copy
@@ -15,7 +16,7 @@ from ._rows import _rows_finite
 DEFAULT_VIEW = (-60.0, 25.0)
 
 #: Camera modes (``gif(camera=...)``).
-CAMERAS = ("fit", "follow", "orbit")
+CAMERAS = ("fit", "follow", "zoom", "orbit")
 
 #: ``camera="follow"``: σ of the Gaussian that smooths the target's path, in seconds of playback.
 FOLLOW_SMOOTHING = 0.1
@@ -23,6 +24,10 @@ FOLLOW_SMOOTHING = 0.1
 #: ``camera="follow"``: the most the view zooms in on the fitted one (a lone target has no spread
 #: to fit, so it is shown at this zoom).
 FOLLOW_MAX_ZOOM = 4.0
+
+#: ``camera="zoom"``: σ of the Gaussian that eases the zoom, in seconds of playback; the view
+#: starts to widen three σ before the motion needs it.
+ZOOM_EASE = 0.5
 
 
 def _view_basis(az_deg: float, el_deg: float) -> np.ndarray:
@@ -85,13 +90,16 @@ class _Camera:
             self.scale = float(min(a / e for a, e in zip(avail, ext, strict=False) if e > tol))
         self.centre = 0.5 * (lo + hi)
 
-    def moved(self, centre: np.ndarray, basis: np.ndarray | None = None) -> _Camera:
+    def moved(self, centre: np.ndarray, basis: np.ndarray | None = None, scale: float | None = None) -> _Camera:
         """A copy looking at screen-plane point `centre` (2,), optionally along another `basis`
-        (3, 3); same scale and image (a per-frame camera costs no fitting)."""
+        (3, 3) or at another `scale` (pixels per unit); the same image (a per-frame camera
+        costs no fitting)."""
         cam = copy.copy(self)
         cam.centre = centre
         if basis is not None:
             cam.basis = basis
+        if scale is not None:
+            cam.scale = scale
         return cam
 
     def pixels(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -199,6 +207,39 @@ def _follow_centres(cam: _Camera, positions: np.ndarray, pinned: np.ndarray, mas
             s, _ = cam.project(x)
             spread = np.maximum(spread, np.quantile(np.abs(s - centres[k].astype(s.dtype)), q, axis=0))
     return centres, spread
+
+
+def _zoom_scales(cam: _Camera, positions: np.ndarray, pinned: np.ndarray, centres: np.ndarray, avail: np.ndarray,
+                 lo: float, hi: float, sigma_frames: float) -> np.ndarray:
+    """The zoom camera's (F,) scales (pixels per unit): each frame's the largest at which the
+    moving particles' spread around its centre fits `avail` (2,) pixels (measured as
+    :func:`_follow_centres` does but on 99 % of them, so that the subject of a close view is
+    whole; on at most 256 frames spread through the run, interpolated between them), within
+    [`lo`, `hi`]; then never larger than an earlier frame's (the view only widens), taken 3σ
+    frames ahead and eased by a Gaussian of σ = `sigma_frames`, so it widens smoothly and before
+    the motion needs it (an average of later, smaller scales: every frame still fits)."""
+    f, n, _ = positions.shape
+    moving = np.flatnonzero(~pinned) if (~pinned).any() else np.arange(n)
+    q = 1.0 if moving.size <= 20 else 0.99
+    moving = moving[:: max(1, -(-moving.size // _SPREAD_SAMPLE))]
+    picks = np.unique(np.linspace(0, f - 1, min(f, 256)).round().astype(np.int64))
+    fit = np.full(len(picks), hi)
+    for j, k in enumerate(picks):
+        x = _finite(positions[k][moving])
+        if len(x):
+            s, _ = cam.project(x)
+            spread = np.quantile(np.abs(s - centres[k].astype(s.dtype)), q, axis=0)
+            wide = spread > 0
+            if wide.any():
+                fit[j] = float(np.min(avail[wide] / (2.0 * spread[wide])))
+    fit = np.minimum.accumulate(np.clip(np.interp(np.arange(f), picks, fit), lo, hi))
+    ahead = int(math.ceil(3.0 * sigma_frames))
+    lead = fit[np.minimum(np.arange(f) + ahead, f - 1)]
+    if ahead < 1 or f < 3:
+        return lead
+    w = np.exp(-0.5 * (np.arange(-ahead, ahead + 1) / sigma_frames) ** 2)
+    eased = np.convolve(np.pad(lead, ahead, mode="edge"), w / w.sum(), mode="valid")
+    return np.minimum(eased, fit)
 
 
 def _orbit_bounds(positions: np.ndarray, walls: np.ndarray | None, el_deg: float

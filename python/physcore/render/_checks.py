@@ -191,12 +191,13 @@ def _check_view(view: Any) -> tuple[float, float]:
 #: Valid values of the ``arrows`` argument.
 ARROWS = ("none", "velocity", "acceleration")
 
-_CAMERA_FORMS = "'fit', 'follow', 'orbit', ('follow', particle_index) or ('orbit', degrees_per_second)"
+_CAMERA_FORMS = "'fit', 'follow', 'zoom', 'orbit', ('follow', particle_index), ('zoom', particle_index) or ('orbit', degrees_per_second)"
 
 
 def _check_camera(camera: Any, dim: int, n: int) -> tuple[str, Any]:
-    """(mode, parameter): ("fit", None), ("follow", None or a particle index in [0, n)),
-    ("orbit", None or finite degrees per second of playback); orbit needs a 3D scene (`dim`)."""
+    """(mode, parameter): ("fit", None), ("follow" or "zoom", None or a particle index in
+    [0, n)), ("orbit", None or finite degrees per second of playback); orbit needs a 3D scene
+    (`dim`)."""
     if isinstance(camera, str):
         mode, param = camera, None
     elif isinstance(camera, (tuple, list)) and len(camera) == 2 and isinstance(camera[0], str):
@@ -208,10 +209,10 @@ def _check_camera(camera: Any, dim: int, n: int) -> tuple[str, Any]:
     if mode not in CAMERAS or (mode == "fit" and not isinstance(camera, str)):
         raise InvalidInputError(f"camera must be {_CAMERA_FORMS}; got {_short(camera)}")
     if mode == "orbit" and dim != 3:
-        raise InvalidInputError(f"camera='orbit' turns a 3D view; this scene is {dim}D (use 'fit' or 'follow')")
+        raise InvalidInputError(f"camera='orbit' turns a 3D view; this scene is {dim}D (use 'fit', 'follow' or 'zoom')")
     if param is None:
         return mode, None
-    if mode == "follow":
+    if mode in ("follow", "zoom"):
         index = _check_int("camera's particle index", param, 0)
         if index >= n:
             raise InvalidInputError(f"camera: particle index {index} is out of range for {n} particles")

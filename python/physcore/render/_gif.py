@@ -191,7 +191,13 @@ def gif(
         target is spread over about half a second). The scale is fixed, zoomed in on the
         fitted view (up to ``FOLLOW_MAX_ZOOM``, 4×) until the moving particles' spread around
         the target fits (95 % of them above 20 particles); colliders and boundary particles
-        pass by behind, the labels stay put over everything. ``"orbit"`` (3D only): the
+        pass by behind, the labels stay put over everything. ``"zoom"`` (or ``("zoom", i)``)
+        follows as ``"follow"`` does at a scale of each frame's own: the largest at which that
+        frame's spread fits (within ``FOLLOW_MAX_ZOOM`` of the fitted view), never larger than
+        an earlier frame's, eased by a Gaussian of ``ZOOM_EASE`` (0.5) s of playback and taken
+        that far ahead that the view widens before the motion needs it; the last frame is
+        ``"follow"``'s. The scale bar is drawn at each frame's scale, and a glow
+        (``color_by="density"``) keeps its brightness per area. ``"orbit"`` (3D only): the
         azimuth turns by 360°/`frames` a frame from ``view``'s (one full turn over the
         animation, looping), or with ``("orbit", degrees_per_second)`` at that rate of
         playback, about the vertical axis through the middle of the scene, at one scale that

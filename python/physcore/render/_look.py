@@ -35,6 +35,9 @@ class Look:
         ramp (15 % to 75 % of the particle's colour, or the palette's trail shades).
     trail_width : int, optional
         Trail width in pixels, 1 to 16. Default: 1, and 2 on images of 300 pixels and more.
+    trail_of : sequence of int, optional
+        The particles whose paths the trail draws (a chain's free end, a pendulum's bob: one
+        path that reads where every particle's would clutter). Default: every moving one.
     spring_width : int, optional
         Springs (rods, strings, a chain's links) drawn this many pixels wide, 1 to 32, as soft
         round-capped strokes in full-colour frames, under the discs, coloured as before (by
@@ -54,7 +57,8 @@ class Look:
         [[x, y], ...], "color": (r, g, b), "width": px}`` (a polyline, default 2 px). A
         cradle's frame, a ceiling bracket: what explains the scene but does not move. In 3D
         the lowest horizontal polygon is a floor: a mesh drawn over it casts a soft shadow on
-        it (light from overhead; fainter the higher the mesh hangs).
+        it (light from overhead; fainter the higher the mesh hangs), as it does on an upward
+        plane collider and on the upward faces of fixed bodies.
     swept_areas : dict, optional
         Kepler's second law drawn: the areas the line from particle ``"centre"`` to particle
         ``"body"`` sweeps in equal times, as wedges of ``"frames"`` frames each (the first from
@@ -75,6 +79,7 @@ class Look:
 
     trail_fade: float | None = None
     trail_width: int | None = None
+    trail_of: tuple = ()
     spring_width: int | None = None
     shading: str = "flat"
     backdrop: tuple | None = None
@@ -123,15 +128,18 @@ def check_look(value: Any, base: Any = None) -> Look:
         out["decor"] = tuple(_check_decor_item(k, item) for k, item in enumerate(fields["decor"]))
     if fields.get("swept_areas") is not None:
         out["swept_areas"] = _check_swept(fields["swept_areas"])
+    if fields.get("trail_of") is not None and len(fields["trail_of"]):
+        out["trail_of"] = _check_hull("trail_of", fields["trail_of"], "look.trail_of")
     if fields.get("hulls") is not None and len(fields["hulls"]):
         out["hulls"] = tuple(_check_hull(k, group) for k, group in enumerate(fields["hulls"]))
     return Look(**out)
 
 
-def _check_hull(k: int, group: Any) -> tuple[int, ...]:
-    idx = _check.array(f"look.hulls[{k}]", group)
+def _check_hull(k: Any, group: Any, where: str | None = None) -> tuple[int, ...]:
+    where = f"look.hulls[{k}]" if where is None else where
+    idx = _check.array(where, group)
     if idx.ndim != 1 or idx.size == 0 or idx.dtype.kind not in "iu" or (idx < 0).any():
-        raise InvalidInputError(f"look.hulls[{k}] must be a non-empty sequence of particle indices (ints >= 0), got {group!r}")
+        raise InvalidInputError(f"{where} must be a non-empty sequence of particle indices (ints >= 0), got {group!r}")
     return tuple(int(i) for i in idx)
 
 
@@ -183,6 +191,8 @@ def check_look_particles(look: Look, n: int, dim: int) -> None:
     sw = look.swept_areas
     if sw is not None and max(sw["centre"], sw["body"]) >= n:
         raise InvalidInputError(f"look.swept_areas: particle indices must be in [0, {n}), got centre {sw['centre']}, body {sw['body']}")
+    if look.trail_of and max(look.trail_of) >= n:
+        raise InvalidInputError(f"look.trail_of: particle indices must be in [0, {n}), got {max(look.trail_of)}")
     for k, group in enumerate(look.hulls):
         if dim != 2:
             raise InvalidInputError(f"look.hulls: drawn in 2D scenes only, got a {dim}D one")

@@ -374,6 +374,8 @@ class _MeshShader:
                 parts.append((geometry, np.tile(np.array(_BALL.get(theme, _BALL["light"]), np.float32), (len(geometry[0]), 1))))
         self.ball = None
         self.ball_rgb, self.ball_uv = np.zeros((0, 3), np.float32), None
+        #: Vertices of each floor patch (they come first in the static geometry, floor after floor).
+        self.floor_verts = 0 if floors is None else 4 * _FLOOR_CELLS * _FLOOR_CELLS
         if parts:
             k = np.cumsum([0] + [len(g[0]) for g, _ in parts])
             self.ball = (np.concatenate([g[0] for g, _ in parts]), np.concatenate([g[1] for g, _ in parts]),
@@ -480,10 +482,34 @@ class _MeshShader:
                                 joined_uv)
             _, faces, uv = self._joined
             verts, front, back = (np.concatenate([a, b]) for a, b in ((verts, bv), (front, bl), (back, bl)))
+        self.drawn = (verts, faces)
         _core.rasterise_mesh(
             verts, faces, front, back, out, _SS,
             uv=uv, texture=self.texture,
         )
+
+    def coverage(self, labels: np.ndarray, count: int, shape: tuple[int, int]) -> np.ndarray:
+        """(count, H, W) float32: for each label 0 … count − 1, whether (1) or not (0) the
+        last frame :meth:`draw` drew shows, at each pixel's centre of an image of `shape`, a
+        triangle whose corners carry that label, in front of everything else drawn (the same
+        triangles and depth buffer: the sheet, the balls and the bodies hide what lies behind
+        them; one sample a pixel, a quarter of the drawing's). `labels`: (V,) int, one per
+        vertex drawn (the sheet's, the static geometry's, then the bodies'), −1 for none.
+        Three labels a pass, as the colour channels of a black image."""
+        from .. import _core
+
+        verts, faces = self.drawn
+        h, w = shape
+        out = np.zeros((count, h, w), dtype=np.float32)
+        for first in range(0, count, 3):
+            ink = np.zeros((len(verts), 4), dtype=np.float32)
+            for c in range(min(3, count - first)):
+                ink[labels == first + c, c] = 1.0
+            img = np.zeros((h, w, 3), dtype=np.uint8)
+            _core.rasterise_mesh(verts, faces, ink, ink, img, 1)
+            for c in range(min(3, count - first)):
+                out[first + c] = img[..., c] * np.float32(1.0 / 255.0)
+        return out
 
 
 def shade_solids(out: np.ndarray, cam: Any, solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]) -> None:

@@ -12,11 +12,13 @@ import numpy as np
 from ._camera import (
     FOLLOW_MAX_ZOOM,
     FOLLOW_SMOOTHING,
+    ZOOM_EASE,
     _Camera,
     _follow_centres,
     _orbit_bounds,
     _screen_bounds,
     _view_basis,
+    _zoom_scales,
 )
 from ._colorbar import (
     _CB_MARGIN,
@@ -369,6 +371,8 @@ def _box_blur(a: np.ndarray, r: int, axis: int) -> np.ndarray:
 #: A 3D mesh's shadow on a floor prop: blurred with σ about this fraction of the image's width,
 #: darkening the floor by up to this much.
 SHADOW_BLUR, SHADOW_DARK = 0.012, 0.45
+#: At most this many heights of fixed bodies' upward faces receive it (the largest by area).
+SHADOW_RECEIVERS = 4
 
 #: A liquid's spray (``surface``): particles with fewer than SPRAY_NEIGHBOURS others within two
 #: spacings are drawn apart from the surface as a mist, blurred SPRAY_BLUR times wider than the
@@ -575,15 +579,22 @@ class _Rasteriser:
         # bases; None for the one fitted camera. The scale stays fixed, so the scale bar holds.
         self._centres: np.ndarray | None = None
         self._bases: np.ndarray | None = None
-        if mode == "follow":
+        #: camera="zoom": (F,) per-frame scales (pixels per unit), self.cam's the last and smallest.
+        self._scales: np.ndarray | None = None
+        if mode in ("follow", "zoom"):
             centres, spread = _follow_centres(self.cam, rec.positions, rec.pinned, rec.masses, cam_param,
                                               FOLLOW_SMOOTHING * fps)
             avail = np.array([max(w - 2 * pad, 1), max(h - (bottom_pad or pad) - (top_pad or pad), 1)], dtype=float)
             wide = spread > 1e-6 * amax
             # Zoom in (never out: the fitted view holds everything) until the spread fits.
             zoom = float(np.min(avail[wide] / (2.0 * spread[wide]))) / self.cam.scale if wide.any() else math.inf
+            fitted = self.cam.scale
             self.cam.scale *= min(max(zoom, 1.0), FOLLOW_MAX_ZOOM)
             self._centres = centres
+            if mode == "zoom":
+                self._scales = _zoom_scales(self.cam, rec.positions, rec.pinned, centres, avail, self.cam.scale,
+                                            FOLLOW_MAX_ZOOM * fitted, ZOOM_EASE * fps)
+                self.cam.scale = float(self._scales[-1])
         elif mode == "orbit":
             turn = np.arange(rec.frames) * (360.0 / rec.frames if cam_param is None else cam_param / fps)
             self._bases = np.stack([_view_basis(view[0] + a, view[1]) for a in turn])
@@ -616,7 +627,7 @@ class _Rasteriser:
                 _draw_colorbar(img, self.colorbar, base, levels)
             if self.title is not None:
                 _draw_title(img, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8, self.font_px)
-            if self.annotate:
+            if self.annotate and self._scales is None:  # a zooming view draws its own each frame
                 self.scale_bar = _draw_scale_bar(img, self.cam.scale, "m" if rec.speed_unit == "m/s" else "", self.font_px)
         self._labels: tuple[np.ndarray, np.ndarray] | None = None
         if self._centres is not None:
@@ -632,6 +643,10 @@ class _Rasteriser:
             sample = np.concatenate([d[d > 0] for d in (self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1}))] or [np.zeros(1)])
             self.glow_scale = float(np.percentile(sample, 99.5)) if sample.size else 1.0
         self.trail = int(trail)
+        #: (N,) bool: the particles whose paths the trails draw (the moving ones, or look.trail_of's).
+        self._trailed = ~rec.pinned
+        if self.look.trail_of:
+            self._trailed = self._trailed & np.isin(np.arange(len(rec.pinned)), self.look.trail_of)
         self._glow_history: tuple[int, np.ndarray] | None = None  # (frame, glow with trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
@@ -699,6 +714,15 @@ class _Rasteriser:
                 low = min(flat, key=lambda q: float(q[0, 2]))
                 self._ground = (float(low[0, 2]), low)
         self._ground_cover: np.ndarray | None = None  # the floor's coverage, for the fitted camera
+        # What else the mesh casts its shadow on, drawn in its depth buffer: the plane colliders
+        # that face up (a floor) and the upward faces of fixed bodies (a table's top, a floor
+        # slab), each a plane (point, unit normal) relative to the origin, and a label for each
+        # vertex the shader draws (the sheet's, the static geometry's, the bodies') naming the
+        # plane it lies on (−1: none).
+        self._receivers: list[tuple[np.ndarray, np.ndarray]] = []
+        self._receiver_labels: np.ndarray | None = None
+        if mesh is not None and dim == 3:
+            self._receivers_setup(planes, n)
 
 
     def forget_projection(self) -> None:
@@ -710,7 +734,8 @@ class _Rasteriser:
         same scale and image, its own centre and, orbiting, its own basis)."""
         if self._centres is None:
             return self.cam
-        return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k])
+        return self.cam.moved(self._centres[k], None if self._bases is None else self._bases[k],
+                              None if self._scales is None else float(self._scales[k]))
 
     def _under(self, cam: _Camera) -> np.ndarray:
         """A fresh copy of what frame drawing starts from, seen through `cam`: the background."""
@@ -744,6 +769,11 @@ class _Rasteriser:
         free = ~rec.pinned
         x = rec.positions[k][free] if rec.pinned.any() else rec.positions[k]
         col, row = cam.pixels(cam.project(x)[0])
+        if self._scales is not None:
+            # Zoomed in z times, the particles spread over z² times the pixels: each weighs z²,
+            # so that a region's glow (its surface brightness) does not change with the zoom.
+            gain = (float(self._scales[k]) / self.cam.scale) ** 2
+            return col, row, np.full(col.shape, gain, dtype=np.float32)
         if not self.trail or k == 0 or self._centres is not None:
             return col, row, None
         x0 = rec.positions[k - 1][free] if rec.pinned.any() else rec.positions[k - 1]
@@ -1030,9 +1060,12 @@ class _Rasteriser:
             colors = self._disc_colors(k, rec.positions.shape[1])[free]
             _draw_discs(under, col[order], row[order], colors[order], self.stencil)
         out = self._rgb(under, cam)  # a new C-contiguous (H, W, 3) uint8 array, with the look's backdrop
+        solids = self._solids(k)
         if self._ground is not None:
-            self._cast_shadow(out, under, k, cam)
-        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=self._solids(k))
+            self._cast_shadow(out, under, k, cam, solids)
+        self._shader.draw(out, rec.positions[k], cam, self._mesh_colors(k), solids=solids)
+        if self._receivers:
+            self._shadow_on_receivers(out, k, cam, solids)
         # Over the surface: pinned particles, arrows and labels, drawn as palette indices.
         over = _overlay(under.shape)
         if self._pinned_idx.size:
@@ -1040,34 +1073,109 @@ class _Rasteriser:
             _draw_discs(over, col, row, np.full(col.size, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
 
-    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera) -> None:
-        """Frame k's mesh casts a soft shadow on the floor prop (``self._ground``) in `out`, in
-        place: its triangles dropped straight down onto the floor's height, rasterised,
-        blurred (σ ≈ SHADOW_BLUR of the image's width) and darkening the floor by up to
-        SHADOW_DARK (under a vertex at height h, times exp(−h / the mesh's width)) where the floor shows (nothing that moves, no label is drawn there), as an
-        overcast sky's light from above would."""
+    def _receivers_setup(self, planes: list[tuple[np.ndarray, np.ndarray]], n: int) -> None:
+        """Finds the surfaces, other than a floor prop, that the mesh casts its shadow on (see
+        ``self._receivers``): each plane collider whose normal points up (at most 60° from +z)
+        and, grouped by height, the upward faces of fixed 3D bodies (the SHADOW_RECEIVERS
+        largest heights by area)."""
+        shader = self._shader
+        static = 0 if shader.ball is None else len(shader.ball[0])
+        labels = [np.full(n, -1, dtype=np.int64), np.full(static, -1, dtype=np.int64)]
+        for j, (p, nrm) in enumerate(planes):
+            unit = nrm / max(float(np.linalg.norm(nrm)), 1e-300)
+            if unit[2] >= 0.5 and shader.floor_verts:
+                labels[1][j * shader.floor_verts:(j + 1) * shader.floor_verts] = len(self._receivers)
+                self._receivers.append((np.asarray(p, np.float64), unit))
+        bodies = self.rec.bodies
+        if bodies is not None and bodies.dim == 3:
+            from ._bodies import body_geometry
+
+            verts, normals, faces, _ = body_geometry(bodies, 0)
+            up = (normals[:, 2] > 0.99) & bodies.flat & bodies.fixed[bodies.owner] & np.isfinite(verts).all(axis=1)
+            own = np.full(len(verts), -1, dtype=np.int64)
+            tri = faces[up[faces].all(axis=1)]
+            if len(tri):
+                scale = max(1.0, float(np.abs(verts[up]).max()))
+                level = np.round(verts[:, 2] / (1e-6 * scale))
+                heights, which = np.unique(level[tri[:, 0]], return_inverse=True)
+                e1, e2 = verts[tri[:, 1]] - verts[tri[:, 0]], verts[tri[:, 2]] - verts[tri[:, 0]]
+                area = np.bincount(which, weights=0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]),
+                                   minlength=len(heights))
+                for g in np.argsort(-area)[:SHADOW_RECEIVERS]:
+                    own[tri[which == g].ravel()] = len(self._receivers)
+                    z = float(verts[tri[which == g][0, 0], 2])
+                    self._receivers.append((np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 1.0])))
+            labels.append(own)
+        self._receiver_labels = np.concatenate(labels) if self._receivers else None
+
+    def _shadow(self, k: int, cam: _Camera, point: np.ndarray, normal: np.ndarray, shape: tuple[int, int],
+                solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> np.ndarray | None:
+        """(H, W) float32 in [0, 1], the soft shadow frame k's mesh (and its rigid bodies,
+        `solids` as :meth:`_solids` gives them) casts on the plane through `point` with unit
+        `normal` (relative to the origin, facing up), light from straight overhead (an overcast
+        sky): their triangles dropped straight down onto the plane, rasterised (where two
+        overlap, the lower one's), each vertex weighing exp(−h / the mesh's width) at a height
+        h above the plane (fainter the higher), and blurred (σ ≈ SHADOW_BLUR of the image's
+        width). A triangle with no corner above the plane (a body's face lying on it, one below
+        it) casts nothing. None if nothing lies above the plane."""
         from .. import _core
 
-        z, poly = self._ground
         x = np.nan_to_num(np.asarray(self.rec.positions[k], dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-        height = x[:, 2] - z
-        above = height > 0
-        if not above.any():
-            return
-        x[:, 2] = z
-        col, row = cam.pixels(cam.project(x)[0])
-        h, w = under.shape
-        verts = np.zeros((len(x), 3), dtype=np.float32)
-        verts[:, 0], verts[:, 1] = col, row
-        faces = self._shader.faces_u32
-        faces = faces[above[faces].any(axis=1)]  # a triangle below the floor casts nothing on it
-        img = np.full((h, w, 3), 255, dtype=np.uint8)
-        # Fainter the higher: each vertex's shadow weighs exp(−height / the mesh's size).
         size = max(float(np.ptp(x[:, :2], axis=0).max()), 1e-12)
+        faces = self._shader.faces_u32
+        if solids is not None and len(solids[2]):
+            faces = np.concatenate([faces, (solids[2] + len(x)).astype(np.uint32)])
+            x = np.concatenate([x, np.nan_to_num(solids[0], nan=0.0, posinf=0.0, neginf=0.0)])
+        height = ((x - point) @ normal) / normal[2]  # straight up from the plane to the vertex
+        # Above by more than rounding: a body's face lying on the plane casts nothing on it.
+        above = height > 1e-6 * max(1.0, float(np.abs(point).max()), size)
+        if not above.any():
+            return None
+        x[:, 2] -= height
+        col, row = cam.pixels(cam.project(x)[0])
+        # Drawn and blurred at half the resolution (a quarter of the work; what comes back is
+        # smooth at the blur's width, so its 2 × 2 blocks do not show).
+        h, w = shape
+        verts = np.zeros((len(x), 3), dtype=np.float32)
+        verts[:, 0], verts[:, 1], verts[:, 2] = 0.5 * col, 0.5 * row, -height  # the lowest nearest: its shadow shows
+        faces = faces[above[faces].any(axis=1)]  # a triangle below the plane casts nothing on it
+        img = np.full(((h + 1) // 2, (w + 1) // 2, 3), 255, dtype=np.uint8)
         ink = np.zeros((len(x), 4), dtype=np.float32)
         ink[:, :3] = (1.0 - np.exp(-np.maximum(height, 0.0) / size))[:, None]
         _core.rasterise_mesh(verts, np.ascontiguousarray(faces), ink, ink, img, 1)
-        shade = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(SHADOW_BLUR * w))))
+        half = _blur(1.0 - img[..., 0].astype(np.float32) / 255.0, max(1, int(round(0.5 * SHADOW_BLUR * w))))
+        return np.repeat(np.repeat(half, 2, axis=0), 2, axis=1)[:h, :w]
+
+    def _shadow_on_receivers(self, out: np.ndarray, k: int, cam: _Camera,
+                             solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Frame k's mesh casts its soft shadow (:meth:`_shadow`) on the surfaces drawn with it
+        that face up (``self._receivers``), in `out`, in place, after the shader drew them:
+        darkening each by up to SHADOW_DARK where it shows (nothing in front of it)."""
+        labels = self._receiver_labels
+        if labels is None or len(labels) != len(self._shader.drawn[0]):
+            return
+        shape = out.shape[:2]
+        cover = self._shader.coverage(labels, len(self._receivers), shape)
+        dark = np.zeros(shape, dtype=np.float32)
+        for (point, normal), part in zip(self._receivers, cover, strict=True):
+            if part.max() <= 0.0:
+                continue
+            shade = self._shadow(k, cam, point, normal, shape, solids)
+            if shade is not None:
+                dark += SHADOW_DARK * shade * part
+        if dark.any():
+            out[...] = np.rint(out * (1.0 - np.minimum(dark, 1.0))[..., None]).astype(np.uint8)
+
+    def _cast_shadow(self, out: np.ndarray, under: np.ndarray, k: int, cam: _Camera,
+                     solids: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+        """Frame k's mesh casts a soft shadow (:meth:`_shadow`) on the floor prop
+        (``self._ground``) in `out`, in place, darkening the floor by up to SHADOW_DARK where it
+        shows (nothing that moves, no label is drawn there)."""
+        z, poly = self._ground
+        h, w = under.shape
+        shade = self._shadow(k, cam, np.array([0.0, 0.0, z]), np.array([0.0, 0.0, 1.0]), (h, w), solids)
+        if shade is None:
+            return
         if self._ground_cover is None or self._centres is not None:
             pc, pr = cam.pixels(cam.project(poly)[0])
             cover = np.zeros((h, w), np.float32)
@@ -1250,7 +1358,7 @@ class _Rasteriser:
         if self.trail and (k > 0 or self.loop) and self.look.trail_fade is not None:
             self._draw_faded_trail(out, k, cam, rgb)
         elif self.trail and (k > 0 or self.loop):
-            moving = ~rec.pinned
+            moving = self._trailed
             first = max(0, k - self.trail)
             if self._centres is None and self._pix is None:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
@@ -1328,6 +1436,8 @@ class _Rasteriser:
             _draw_arrows(buf, cam, self.rec.positions[k][self._arrows[0]], self._arrows[1][k], self._arrows[2])
         if self._labels is not None:
             buf.reshape(-1)[self._labels[0]] = self._labels[1]
+        if self._scales is not None and self.annotate:  # a zooming view: the scale bar of this frame's scale
+            self.scale_bar = _draw_scale_bar(buf, cam.scale, "m" if self.rec.speed_unit == "m/s" else "", self.font_px)
 
     def _draw_clock(self, buf: np.ndarray, k: int) -> None:
         """The simulated time in the bottom-left corner ("t = 1.23 s"; no unit in a scene's own
@@ -1346,7 +1456,7 @@ class _Rasteriser:
         first: one segment per particle per frame step, under everything that moves; seen
         through frame k's camera `cam`."""
         rec = self.rec
-        moving = ~rec.pinned
+        moving = self._trailed
         first = max(0, k - self.trail)
         if self._centres is None:
             if self._pix is None:
@@ -1410,8 +1520,7 @@ class _Rasteriser:
         full-colour image `out` with the opacity of their age (:meth:`_trail_alpha`): drawn
         into one layer of colour and opacity, oldest first (a newer segment covers an older
         one where they cross), then laid over `out` once, so nothing is blended twice."""
-        rec = self.rec
-        moving = np.flatnonzero(~rec.pinned)
+        moving = np.flatnonzero(self._trailed)
         first, pix = self._trail_pixels(k, cam)
         h, w = out.shape[:2]
         parts: list[list[np.ndarray]] = [[], [], [], [], []]

@@ -332,11 +332,15 @@ def galaxies(
 
 # 120 frames of 8 steps (t = 0 to 11.9) played in 5 s: the approach, the pericentre at t ≈ 4.3,
 # and the tails and bridge growing for about one orbit of the disks' edges (2π) after it. The view looks down
-# on the orbital plane at 70°, with the separating pair across the frame; "follow" frames 95 % of
-# the stars (the centre of mass stays put), so a few stars flung far do not shrink the picture.
+# on the orbital plane at 70°, with the separating pair across the frame; the camera frames 95 %
+# of the stars (the centre of mass stays put), so a few stars flung far do not shrink the
+# picture. One scale for the whole run would be set by the tails at the end, leaving the two
+# disks of the first frame (the thumbnail) a sixth of the width and blurred: "zoom" starts on
+# the disks (2.5 times closer) and widens, eased, as the tails grow, to that scale at the end;
+# the scale bar shows each frame's scale.
 galaxies.render_defaults = {
     "frames": 120, "fps": 24, "frame_time": 0.1, "size": (480, 400), "view": (30.0, 70.0), "radius": 0,
     "speed_unit": "(G=1)", "theme": "dark", "color_by": "density",  # glow: stars accumulate like an exposure
-    "camera": "follow",
+    "camera": "zoom",
 }
 galaxies = _stamped(galaxies, old_order=('n', 'pericentre', 'prograde', 'theta', 'softening', 'seed', 'integrator', 'dt', 'threads'), keep=1)

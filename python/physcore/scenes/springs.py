@@ -72,19 +72,23 @@ def spring_chain(
     bracket = np.zeros((4, dim))
     bracket[:, 0] = [-0.1 * length, 0.1 * length, 0.1 * length, -0.1 * length]
     bracket[:, up] = [0.0, 0.0, 0.03 * length, 0.03 * length]
-    scene.render_defaults = {"look": {**_CHAIN_STYLE, "decor": [{"polygon": bracket.tolist(), "color": (110, 104, 98)}]}}
+    # The free end's path (the whip's tip), fading: one trail, not every link's.
+    scene.render_defaults = {"look": {**_CHAIN_STYLE, "decor": [{"polygon": bracket.tolist(), "color": (110, 104, 98)}],
+                                      "trail_of": (n - 1,)}}
     return _finite_books(scene, "length, mass")
 
 
 #: ``spring_chain``'s look: the links as a rope 10 px wide coloured by strain before a pale
-#: backdrop (the scene adds the pivot's bracket).
-_CHAIN_STYLE = {"spring_width": 10, "backdrop": ((250, 248, 244), (218, 222, 232))}
+#: backdrop, trails 3 px wide fading to nothing (the scene adds the pivot's bracket and draws
+#: the free end's trail only).
+_CHAIN_STYLE = {"spring_width": 10, "backdrop": ((250, 248, 244), (218, 222, 232)), "trail_fade": 0.0, "trail_width": 3}
 
 
 # The swing spans the chain's length either side of the pivot and 1.2 of it below (the links
 # stretch): a wide frame. The chain reads as a rope coloured by its links' strain (tension red,
 # the whip's compression blue: the colour bar's ends are the run's 99th percentile), no beads
-# over it, the pivot on a ceiling bracket; no trails.
+# over it, the pivot on a ceiling bracket; the free end's path over the last 1.5 s, fading (one
+# trace, not every link's: it spans the frame while the rope lies level and draws the whip).
 spring_chain.render_defaults = {"antialias": True, "frames": 100, "fps": 30, "frame_time": 1 / 30, "size": (430, 300),
-                                "radius": 0, "trail": 0, "color_by": "strain"}
+                                "radius": 0, "trail": 45, "color_by": "strain"}
 spring_chain = _stamped(spring_chain, old_order=('n', 'length', 'mass', 'stiffness', 'damping', 'dim', 'integrator', 'dt', 'threads'), keep=1)
