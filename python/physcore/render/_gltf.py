@@ -375,13 +375,18 @@ def _prepare(source: Any, *, frames: Any, steps_per_frame: Any, frame_time: Any,
     mesh = check_mesh(d.get("mesh") if mesh is None else mesh, n)
     colors = _check_colors(d.get("colors"), n)
     opts = {"fps": fps, "theme": theme, "view": view or DEFAULT_VIEW, "mesh": mesh, "colors": colors, "defaults": d}
+    if frames is not None and not isinstance(source, _recording.Recording):
+        frames = _check_int("frames", frames, 1)
+    # glTF's animation clock is float32: the last frame's time, (frames - 1) / fps, must be one.
+    count = source.positions.shape[0] if isinstance(source, _recording.Recording) else frames or d.get("frames", 90)
+    if isinstance(count, int) and (count - 1) / fps > float(np.finfo(np.float32).max):
+        raise InvalidInputError(f"fps: {fps:g} puts frame {count - 1} at {(count - 1) / fps:.3g} s, beyond glTF's "
+                                "float32 clock (3.4e38 s); give a larger fps")
     if before_simulating is not None:
         before_simulating()
     if isinstance(source, _recording.Recording):
         rec = source
     else:
-        if frames is not None:
-            frames = _check_int("frames", frames, 1)
         rec = _recording.record(source, frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time,
                                 substeps="auto" if substeps is None else substeps, color_by="none", progress=progress,
                                 velocities=False)
