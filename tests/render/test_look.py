@@ -203,6 +203,7 @@ def test_look_containers_of_the_wrong_kind_are_refused_naming_the_field(tmp_path
         ({1: 2, "trail_fad": 3}, pc.InvalidInputError, "unknown field"),
         ({"decor": [{1: 2, "polygon": [[0, 0], [1, 0], [0, 1]], "color": (1, 2, 3)}]}, pc.InvalidInputError, r"look.decor\[0\]"),
         ({"swept_areas": {1: 0, "body": 1, "frames": 1}}, pc.InvalidInputError, "swept_areas"),
+        ({"decor": [{"line": ["a", "b"], "color": (1, 2, 3)}]}, pc.InvalidTypeError, r"look.decor\[0\].line"),
     ]
     for look, err, word in cases:
         with pytest.raises(err, match=word):

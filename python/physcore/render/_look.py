@@ -159,7 +159,7 @@ def _check_decor_item(k: int, item: Any) -> dict:
     if len(kinds) != 1 or unknown:
         raise InvalidInputError(f"{where} needs exactly one of 'polygon' and 'line' (and 'color', 'width'), got keys {_keys(item)}")
     kind = kinds[0]
-    pts = _check.array(f"{where}.{kind}", item[kind]).astype(np.float64)
+    pts = _check.real_array(f"{where}.{kind}", item[kind]).astype(np.float64)
     least = 3 if kind == "polygon" else 2
     if pts.ndim != 2 or pts.shape[0] < least or pts.shape[1] not in (2, 3) or not np.isfinite(pts).all():
         raise InvalidInputError(f"{where}.{kind} must be {least} or more finite points (K, 2) or (K, 3), got shape {pts.shape}")
