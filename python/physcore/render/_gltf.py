@@ -377,11 +377,15 @@ def _prepare(source: Any, *, frames: Any, steps_per_frame: Any, frame_time: Any,
     opts = {"fps": fps, "theme": theme, "view": view or DEFAULT_VIEW, "mesh": mesh, "colors": colors, "defaults": d}
     if frames is not None and not isinstance(source, _recording.Recording):
         frames = _check_int("frames", frames, 1)
-    # glTF's animation clock is float32: the last frame's time, (frames - 1) / fps, must be one.
+    # glTF's animation clock is float32, its key times finite and strictly increasing: frame k
+    # at k / fps (fps = 1e-300 overflowed it, fps = 1e308 put every frame at 0).
     count = source.positions.shape[0] if isinstance(source, _recording.Recording) else frames or d.get("frames", 90)
-    if isinstance(count, int) and (count - 1) / fps > float(np.finfo(np.float32).max):
-        raise InvalidInputError(f"fps: {fps:g} puts frame {count - 1} at {(count - 1) / fps:.3g} s, beyond glTF's "
-                                "float32 clock (3.4e38 s); give a larger fps")
+    if isinstance(count, int) and count > 1:
+        with np.errstate(over="ignore"):
+            keys = (np.arange(count, dtype=np.float64) / fps).astype(np.float32)
+        if not (np.isfinite(keys).all() and (np.diff(keys) > 0).all()):
+            raise InvalidInputError(f"fps: {fps:g} gives {count} frames no distinct finite times on glTF's float32 "
+                                    "clock (frame k at k / fps s); give an fps between about 1e-36 and 1e36")
     if before_simulating is not None:
         before_simulating()
     if isinstance(source, _recording.Recording):
