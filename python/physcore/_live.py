@@ -658,7 +658,7 @@ class _Painter:
             except SimulationDiverged:
                 pass
             cost = max(time.perf_counter() - t0, 1e-6)
-            budget = max(2, min(frames, int(preview / cost)))
+            budget = max(2, int(min(frames, preview / cost)))  # preview / cost may overflow to inf
         copy = _rebuild(scene, lambda meta, arrays: None)
         copy.render_defaults = scene.render_defaults
         try:

@@ -262,6 +262,13 @@ class Batch:
             sims, locks = [self._sims[k] for k in live], [self._locks[k] for k in live]
         else:
             live, scenes, sims, locks = None, self._members, self._sims, self._locks
+        # A GPU member moves to its device at its first step, as Scene.step moves it: its parts
+        # checked first (refused by name, for every member, before any moves), else the core
+        # would step it on the CPU.
+        for s in scenes:
+            s._check_device_parts()
+        for s in scenes:
+            s._to_device()
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
         fresh = [s for s in scenes if s.session.reference_energy is None]

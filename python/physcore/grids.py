@@ -159,6 +159,8 @@ class Grid(Part):
     #: :data:`physcore._parts.PARTS`.
     kind = ""
     section: ClassVar[str] = "grids"
+    #: The names :meth:`field` reads (the core gives zeros for any other name).
+    fields: ClassVar[tuple[str, ...]] = ()
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         if cls.__dict__.get("kind"):
@@ -214,7 +216,13 @@ class Grid(Part):
 
     @allocating("field", "a field of the grid")
     def field(self, name: str) -> np.ndarray:
-        """The field ``name`` now, shape :attr:`shape`, float64 (a copy)."""
+        """The field ``name`` now (one of :attr:`fields`), shape :attr:`shape`, float64 (a copy).
+
+        Raises
+        ------
+        InvalidInputError, TypeError
+            ``name`` is not one of the grid's :attr:`fields` (an unknown name read as zeros)."""
+        name = _check.choice("name", name, self.fields)
         host = self._bound()
         (flat,) = host.exclusive(lambda sim: sim.system_fields(self.name, [name]))
         return _unlayout(flat, self.shape)
@@ -341,6 +349,7 @@ class Wave(Grid):
     """
 
     kind = "wave"
+    fields: ClassVar[tuple[str, ...]] = ("u", "velocity", "mask")
 
     #: Deprecated alias of :attr:`damping` (1/s).
     gamma = _deprecate.alias("damping", "gamma")
@@ -497,6 +506,7 @@ class GrayScott(Grid):
     """
 
     kind = "gray_scott"
+    fields: ClassVar[tuple[str, ...]] = ("u", "v")
 
     @_deprecate.args(("shape", "spacing"), keep=2, renames={"dx": "spacing"}, skip_self=True, name="GrayScott")
     def __init__(
@@ -684,6 +694,7 @@ class StableFluid(Grid):
     #: Its kind in scene files and in :data:`physcore._parts.PARTS` (``"grids/stable_fluid"``); files
     #: that say ``"fluid"`` (before issue 45) still load (:data:`KIND_ALIASES`).
     kind = "stable_fluid"
+    fields: ClassVar[tuple[str, ...]] = ("u", "v", "speed", "vorticity", "density", "temperature", "pressure", "divergence", "solid")
 
     #: Deprecated alias of :attr:`nu` (m²/s).
     viscosity = _deprecate.alias("nu", "viscosity")

@@ -335,9 +335,11 @@ class Scene:
         with :class:`Plane` and :class:`Box` colliders, and :class:`~physcore.grids.GrayScott` grids (their
         fields read and set as on the CPU); the parts
         move to the device at the first step, and a part it has no kernel for is refused then,
-        by name (never run silently on the CPU). After that step the scene steps, reads
-        positions, velocities and the energy books, and renders; adding parts, setting the
-        state, :meth:`state`, :meth:`save` and pickling are refused (not yet on the GPU path).
+        by name (never run silently on the CPU; a :class:`~physcore.Batch` moves its GPU members
+        likewise). After that step the scene steps, reads positions, velocities and the energy
+        books, and renders; adding parts, setting the state or another integrator and
+        :meth:`state` are refused (not yet on the GPU path). :meth:`save` and pickling are
+        refused before the first step too: a scene file has no device.
         docs/guide/gpu.md gives each kernel's measured agreement with the CPU path.
     threads : int or None
         Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
@@ -729,6 +731,13 @@ class Scene:
         refusing by name any part the GPU path has no kernel for (nothing changes then)."""
         if self._device == "cpu" or self._sim.on_device:
             return
+        self._check_device_parts()
+        self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
+
+    def _check_device_parts(self) -> None:
+        """Refuses by name a part the GPU path has no kernel for (a GPU scene not yet moved)."""
+        if self._device == "cpu" or self._sim.on_device:
+            return
         for part in self._parts:
             ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
                   or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
@@ -740,7 +749,6 @@ class Scene:
                     f"(it has the terms {', '.join(_GPU_TERMS)}, Plane and Box colliders and the grids {', '.join(_GPU_GRIDS)}); "
                     "run this scene with device='cpu'"
                 )
-        self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
 
     def _cpu_only(self, what: str) -> None:
         """Refuses ``what`` once the particles live on a GPU."""
@@ -879,7 +887,13 @@ class Scene:
 
     @integrator.setter
     def integrator(self, value: str | Integrator) -> None:
-        self._sim.integrator = _check_integrator(value)
+        name = _check_integrator(value)
+        # The device keeps the integrator it was given at the first step: another one set
+        # afterwards would be read back but never run.
+        if name != self.integrator and self._device != "cpu" and self._sim.on_device:
+            raise InvalidInputError(f"integrator: the particles are on the GPU, stepped by {self.integrator!r} since the "
+                                    f"first step; set the integrator before it (got {name!r})")
+        self._sim.integrator = name
         if isinstance(value, Integrator):  # its options, checked when it was made
             for kw, v in value.options().items():
                 setattr(self, kw, v)
@@ -1408,6 +1422,11 @@ class Scene:
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""
         self._cpu_only("save()")
+        if self._device != "cpu":
+            # Before its first step too: the file has no device, and its precision would
+            # describe float64 arrays as float32 (a file, or a pickle, that cannot be read back).
+            raise InvalidInputError(f"save(): a scene file has no device yet (device={self._device!r}); save or pickle "
+                                    "a scene made with device='cpu'")
         arrays: dict[str, np.ndarray] = {
             "positions": self.positions,
             "velocities": self.velocities,

@@ -299,3 +299,51 @@ def test_coulomb_forces_on_the_gpu_act_as_on_the_cpu(dim: int) -> None:
         assert dx < tol[0], (precision, dx)
         de = abs(e_gpu.potential["coulomb"] - e_cpu.potential["coulomb"])
         assert de < tol[1] * abs(e_cpu.potential["coulomb"]) + 1e-12, (precision, de)
+
+
+def test_a_gpu_scene_is_not_saved_or_pickled_before_its_first_step_either(tmp_path) -> None:
+    # The file has no device, and its precision ("f32") described float64 arrays: save and
+    # pickle wrote what load and unpickling then refused (SceneFileError), and Batch.from_scene
+    # and contact_sheet failed on it. Refused by name now, as after the first step.
+    s = _cluster(2, n=20, device=DEVICE)
+    for call in (lambda: s.save(tmp_path / "gpu.npz"), lambda: pickle.dumps(s), s.to_bytes,
+                 lambda: pc.Batch.from_scene(s, 2)):
+        with pytest.raises(pc.InvalidInputError, match="device"):
+            call()
+    assert not (tmp_path / "gpu.npz").exists()
+    s.step(1)  # nothing changed: it still moves to the device and steps
+    assert s.step_count == 1
+
+
+def test_the_integrator_of_a_gpu_scene_is_refused_once_it_runs_on_the_device() -> None:
+    # The device keeps the integrator of its first step: "semi_implicit_euler" or "rk4" set
+    # afterwards was read back by scene.integrator while Verlet kept running (bit-identical).
+    s = _cluster(2, n=20, device=DEVICE)
+    s.step(1)
+    for name in ("semi_implicit_euler", "rk4", pc.Yoshida4()):
+        with pytest.raises(pc.InvalidInputError, match="integrator"):
+            s.integrator = name
+    assert s.integrator == "verlet"
+    s.integrator = "verlet"  # the same one is no change
+    before = _cluster(2, n=20, device=DEVICE)
+    before.integrator = "semi_implicit_euler"  # before the first step: taken
+    before.step(1)
+    assert before.integrator == "semi_implicit_euler"
+
+
+def test_a_batch_of_gpu_scenes_steps_them_on_their_device() -> None:
+    # Batch.step went straight to the core: GPU members were stepped on the CPU, and a part
+    # the device has no kernel for was not refused.
+    members = [_cluster(2, n=20, device=DEVICE) for _ in range(2)]
+    pc.Batch(members).step(3)
+    alone = _cluster(2, n=20, device=DEVICE)
+    alone.step(3)
+    for m in members:
+        assert m.session.sim.on_device
+        np.testing.assert_array_equal(m.positions, alone.positions)
+    refused = [_cluster(2, n=20, device=DEVICE) for _ in range(2)]
+    for m in refused:
+        m.add(pc.TreeGravity(G=1.0))
+    with pytest.raises(pc.InvalidInputError, match="TreeGravity"):
+        pc.Batch(refused).step(1)
+    assert all(m.step_count == 0 and not m.session.sim.on_device for m in refused)

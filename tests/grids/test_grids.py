@@ -670,3 +670,19 @@ def test_turing_and_double_slit_start_where_something_shows():
     for fn, bad in ((pc.scenes.turing, 2e5), (pc.scenes.double_slit, 101.0), (pc.scenes.turing, -1.0), (pc.scenes.double_slit, 5e-324)):
         with pytest.raises(pc.InvalidInputError, match="start"):
             fn(n=32 if fn is pc.scenes.turing else 48, start=bad)
+
+
+def test_a_field_name_the_grid_does_not_have_is_refused_naming_it():
+    # The core reads any other name as zeros: g.field("w") of a Gray-Scott grid was an array
+    # of zeros, no error, and g.field(None) pyo3's bare TypeError.
+    for grid, names in ((pc.grids.GrayScott((8, 8), 0.1, preset="maze"), ("u", "v")),
+                        (pc.grids.Wave((8, 8), 0.1), ("u", "velocity", "mask")),
+                        (pc.grids.StableFluid((8, 8), 0.1), ("density", "speed", "vorticity", "solid"))):
+        scene = pc.Scene(2, dt=1e-3)
+        scene.add(grid)
+        for name in names:
+            assert grid.field(name).shape == (8, 8)
+        with pytest.raises(pc.InvalidInputError, match="name"):
+            grid.field("w")
+        with pytest.raises(pc.InvalidTypeError, match="name"):
+            grid.field(None)

@@ -187,6 +187,32 @@ def test_hulls_draw_a_body_of_grains_whole():
     assert blue(hull).sum() > 1.15 * blue(discs).sum()
 
 
+def test_look_containers_of_the_wrong_kind_are_refused_naming_the_field(tmp_path):
+    # A number for decor or hulls, an array for decor and dict keys that are not all strings
+    # raised Python's own TypeError ("'int' object is not iterable", "'<' not supported")
+    # or numpy's "truth value of an array is ambiguous", naming nothing.
+    s = _ball(2)
+    path = tmp_path / "x.gif"
+    cases = [
+        ({"decor": 5}, pc.InvalidTypeError, "look.decor"),
+        ({"decor": 2.5}, pc.InvalidTypeError, "look.decor"),
+        ({"decor": {"polygon": [[0, 0], [1, 0], [0, 1]], "color": (1, 2, 3)}}, pc.InvalidTypeError, "look.decor"),
+        ({"decor": np.zeros((3, 2))}, pc.InvalidTypeError, r"look.decor\[0\]"),
+        ({"hulls": 5}, pc.InvalidTypeError, "look.hulls"),
+        ({"hulls": True}, pc.InvalidTypeError, "look.hulls"),
+        ({1: 2, "trail_fad": 3}, pc.InvalidInputError, "unknown field"),
+        ({"decor": [{1: 2, "polygon": [[0, 0], [1, 0], [0, 1]], "color": (1, 2, 3)}]}, pc.InvalidInputError, r"look.decor\[0\]"),
+        ({"swept_areas": {1: 0, "body": 1, "frames": 1}}, pc.InvalidInputError, "swept_areas"),
+        ({"decor": [{"line": ["a", "b"], "color": (1, 2, 3)}]}, pc.InvalidTypeError, r"look.decor\[0\].line"),
+    ]
+    for look, err, word in cases:
+        with pytest.raises(err, match=word):
+            pc.render.gif(s, path, frames=2, size=(64, 48), look=look)
+    assert not path.exists() and s.time == 0.0
+    pc.render.gif(s, path, frames=2, size=(64, 48), look={"hulls": np.array([[0, 1]]), "decor": []})
+    assert path.exists()
+
+
 def test_hulls_are_checked_naming_the_field(tmp_path):
     s = _ball(2)
     for look, err in (({"hulls": [[0, 5]]}, ValueError), ({"hulls": [[]]}, ValueError), ({"hulls": [[0.5]]}, ValueError)):

@@ -115,6 +115,17 @@ def test_save_refuses_unknown_extensions_and_missing_pyav(tmp_path, monkeypatch)
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("fps", [1e-300, 1e308])
+def test_a_video_refuses_a_rate_it_cannot_carry_before_simulating(tmp_path, fps):
+    # The stream's rate is a fraction of C ints: fps = 1e-300 rounded to 0 and FFmpeg wrote a
+    # 24 fps video without a word; fps = 1e308 raised PyAV's bare OverflowError after simulating.
+    scene = pc.scenes.kepler()
+    for ext in ("mp4", "webm"):
+        with pytest.raises(pc.InvalidInputError, match="fps"):
+            pc.render.save(scene, tmp_path / f"a.{ext}", frames=2, fps=fps)
+    assert scene.time == 0.0 and list(tmp_path.iterdir()) == []
+
+
 def test_diverging_video_render_leaves_no_file(tmp_path):
     scene = pc.Scene(dim=2, dt=0.05)
     scene.add_particles([[0.0, 0.0], [0.1, 0.0]], [[0.0, 0.0], [1.0, 0.0]], pinned=[True, False])

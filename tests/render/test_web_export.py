@@ -344,6 +344,14 @@ def test_bad_options_are_refused_naming_them_before_simulating(tmp_path):
     with pytest.raises(InvalidTypeError, match="title"):
         pc.render.html(scene, tmp_path / "x.html", title=3)
     assert scene.time == 0.0 and not list(tmp_path.iterdir())
+    # glTF's clock is float32: fps = 1e-300 put frame 1 at 1e300 s, and json refused the
+    # infinite float32 time with a bare ValueError after the whole simulation; fps = 1e308
+    # wrote every frame at t = 0 (an animation whose key times must increase).
+    for fn, ext in ((pc.render.gltf, "glb"), (pc.render.html, "html")):
+        for fps in (1e-300, 1e308):
+            with pytest.raises(InvalidInputError, match="fps"):
+                fn(scene, tmp_path / f"x.{ext}", fps=fps, frames=2)
+    assert scene.time == 0.0 and not list(tmp_path.iterdir())
     rec = pc.render.record(pc.scenes.pyramid(), frames=2)
     with pytest.raises(InvalidInputError, match="frames"):
         pc.render.gltf(rec, tmp_path / "x.glb", frames=3)

@@ -58,6 +58,13 @@ def test_viewer_and_widget_share_the_loop_and_the_painter():
     assert pc.widget is notebook.widget
 
 
+def test_a_preview_of_1e308_seconds_is_the_whole_gif():
+    # preview / (one tick's cost) overflowed to inf and int() raised a bare OverflowError.
+    w = pc.widget(pc.scenes.spring_chain(n=5), preview=1e308, fallback=False, playing=False)
+    frames = int(pc.scenes.spring_chain.render_defaults.get("frames", 90))
+    assert len(w._session.painter.preview.positions) == frames
+
+
 def test_paused_frame_is_the_gif_frame():
     """Paused before the first tick, without the HUD and in PNG, the widget's frame is exactly
     frame 0 of the scene's GIF (same camera, colours and scale bar)."""

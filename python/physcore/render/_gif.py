@@ -356,6 +356,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     else:
         d = _recording.scene_defaults(scene)
     fps = _check_fps(d.get("fps", 30.0) if fps is None else fps)
+    if fmt in ("mp4", "webm"):
+        _check_video_rate(fps)
     size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)
@@ -573,6 +575,17 @@ def _write_video(path: Path, rgb: Any, fps: float, fmt: str) -> None:
                     container.mux(packet)
 
     atomic_write(path, write)
+
+
+def _check_video_rate(fps: float) -> None:
+    """Refuse, naming fps, a rate a video stream cannot carry: ``_write_video`` writes it as a
+    fraction of denominator at most 1001 whose numerator is a C int (fps = 1e-300 rounded to 0,
+    and FFmpeg then wrote 24 fps; fps = 1e308 overflowed after the whole simulation)."""
+    from fractions import Fraction
+
+    rate = Fraction(fps).limit_denominator(1001)
+    if not (0 < rate and rate.numerator < 2**31):
+        raise InvalidInputError(f"fps must be between 1/1001 and 2**31 - 1 frames per second for a video, got {fps:g}")
 
 
 def _video_module() -> Any:

@@ -375,13 +375,22 @@ def _prepare(source: Any, *, frames: Any, steps_per_frame: Any, frame_time: Any,
     mesh = check_mesh(d.get("mesh") if mesh is None else mesh, n)
     colors = _check_colors(d.get("colors"), n)
     opts = {"fps": fps, "theme": theme, "view": view or DEFAULT_VIEW, "mesh": mesh, "colors": colors, "defaults": d}
+    if frames is not None and not isinstance(source, _recording.Recording):
+        frames = _check_int("frames", frames, 1)
+    # glTF's animation clock is float32, its key times finite and strictly increasing: frame k
+    # at k / fps (fps = 1e-300 overflowed it, fps = 1e308 put every frame at 0).
+    count = source.positions.shape[0] if isinstance(source, _recording.Recording) else frames or d.get("frames", 90)
+    if isinstance(count, int) and count > 1:
+        with np.errstate(over="ignore"):
+            keys = (np.arange(count, dtype=np.float64) / fps).astype(np.float32)
+        if not (np.isfinite(keys).all() and (np.diff(keys) > 0).all()):
+            raise InvalidInputError(f"fps: {fps:g} gives {count} frames no distinct finite times on glTF's float32 "
+                                    "clock (frame k at k / fps s); give an fps between about 1e-36 and 1e36")
     if before_simulating is not None:
         before_simulating()
     if isinstance(source, _recording.Recording):
         rec = source
     else:
-        if frames is not None:
-            frames = _check_int("frames", frames, 1)
         rec = _recording.record(source, frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time,
                                 substeps="auto" if substeps is None else substeps, color_by="none", progress=progress,
                                 velocities=False)

@@ -108,9 +108,9 @@ def check_look(value: Any, base: Any = None) -> Look:
             v = dataclasses.asdict(v)
         if not isinstance(v, dict):
             raise InvalidTypeError(f"look must be a physcore.render.Look or a dict of its fields, got {type(v).__name__}")
-        unknown = sorted(set(v) - set(_FIELDS))
+        unknown = _keys(k for k in v if k not in _FIELDS)
         if unknown:
-            raise InvalidInputError(f"look: unknown field(s) {', '.join(map(str, unknown))}; valid: {', '.join(_FIELDS)}")
+            raise InvalidInputError(f"look: unknown field(s) {unknown}; valid: {', '.join(_FIELDS)}")
         fields.update(v)
     out: dict[str, Any] = {}
     fade = fields.get("trail_fade")
@@ -124,15 +124,30 @@ def check_look(value: Any, base: Any = None) -> Look:
     if fields.get("backdrop") is not None:
         rows = _rgb_rows(fields["backdrop"], "look.backdrop", 2)
         out["backdrop"] = tuple(tuple(int(c) for c in row) for row in rows)
-    if fields.get("decor"):
-        out["decor"] = tuple(_check_decor_item(k, item) for k, item in enumerate(fields["decor"]))
+    if fields.get("decor") is not None:
+        out["decor"] = tuple(_check_decor_item(k, item) for k, item in enumerate(_items("look.decor", fields["decor"])))
     if fields.get("swept_areas") is not None:
         out["swept_areas"] = _check_swept(fields["swept_areas"])
-    if fields.get("trail_of") is not None and len(fields["trail_of"]):
-        out["trail_of"] = _check_hull("trail_of", fields["trail_of"], "look.trail_of")
-    if fields.get("hulls") is not None and len(fields["hulls"]):
-        out["hulls"] = tuple(_check_hull(k, group) for k, group in enumerate(fields["hulls"]))
+    if fields.get("trail_of") is not None and (trail_of := _items("look.trail_of", fields["trail_of"])):
+        out["trail_of"] = _check_hull("trail_of", trail_of, "look.trail_of")
+    if fields.get("hulls") is not None:
+        out["hulls"] = tuple(_check_hull(k, group) for k, group in enumerate(_items("look.hulls", fields["hulls"])))
     return Look(**out)
+
+
+def _items(arg: str, value: Any) -> list:
+    """The entries of `value`, a list, tuple or array (InvalidTypeError naming `arg` otherwise:
+    a number, a string, a dict or a set is not a sequence of entries)."""
+    if isinstance(value, np.ndarray) and value.ndim >= 1:
+        return list(value)
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
+        raise InvalidTypeError(f"{arg} must be a list of entries, got {type(value).__name__}")
+    return list(value)
+
+
+def _keys(keys: Any) -> str:
+    """Dict keys for a message, in a stable order whatever their types."""
+    return ", ".join(sorted(repr(k) if not isinstance(k, str) else k for k in keys))
 
 
 def _check_hull(k: Any, group: Any, where: str | None = None) -> tuple[int, ...]:
@@ -148,11 +163,11 @@ def _check_decor_item(k: int, item: Any) -> dict:
     if not isinstance(item, dict):
         raise InvalidTypeError(f"{where} must be a dict with 'polygon' or 'line', and 'color'; got {type(item).__name__}")
     kinds = [key for key in ("polygon", "line") if key in item]
-    unknown = sorted(set(item) - {"polygon", "line", "color", "width"})
+    unknown = [key for key in item if key not in ("polygon", "line", "color", "width")]
     if len(kinds) != 1 or unknown:
-        raise InvalidInputError(f"{where} needs exactly one of 'polygon' and 'line' (and 'color', 'width'), got keys {sorted(item)}")
+        raise InvalidInputError(f"{where} needs exactly one of 'polygon' and 'line' (and 'color', 'width'), got keys {_keys(item)}")
     kind = kinds[0]
-    pts = _check.array(f"{where}.{kind}", item[kind]).astype(np.float64)
+    pts = _check.real_array(f"{where}.{kind}", item[kind]).astype(np.float64)
     least = 3 if kind == "polygon" else 2
     if pts.ndim != 2 or pts.shape[0] < least or pts.shape[1] not in (2, 3) or not np.isfinite(pts).all():
         raise InvalidInputError(f"{where}.{kind} must be {least} or more finite points (K, 2) or (K, 3), got shape {pts.shape}")
@@ -166,11 +181,11 @@ def _check_decor_item(k: int, item: Any) -> dict:
 def _check_swept(value: Any) -> dict:
     if not isinstance(value, dict):
         raise InvalidTypeError(f"look.swept_areas must be a dict with 'centre', 'body' and 'frames', got {type(value).__name__}")
-    unknown = sorted(set(value) - {"centre", "body", "frames", "count", "colors"})
-    missing = sorted({"centre", "body", "frames"} - set(value))
+    unknown = _keys(k for k in value if k not in ("centre", "body", "frames", "count", "colors"))
+    missing = ", ".join(k for k in ("centre", "body", "frames") if k not in value)
     if unknown or missing:
         raise InvalidInputError(f"look.swept_areas: keys 'centre', 'body', 'frames' (and 'count', 'colors'); "
-                                f"{'unknown ' + ', '.join(unknown) if unknown else 'missing ' + ', '.join(missing)}")
+                                f"{'unknown ' + unknown if unknown else 'missing ' + missing}")
     out = {
         "centre": _check_int("look.swept_areas['centre']", value["centre"], 0),
         "body": _check_int("look.swept_areas['body']", value["body"], 0),
