@@ -5,7 +5,10 @@ A scene file is a zip archive of uncompressed ``.npy`` members, as ``numpy.savez
 ``meta`` (a JSON string: parameters, terms, colliders, counters), ``time_hex`` (the time as
 ``float.hex``), ``positions``, ``velocities``, ``masses``, ``pinned``, the per-term arrays
 ``term{k}_*``, ``ledger`` (energy dissipated per term, J) and, for the integrators that keep one,
-``cache_forces`` and ``cache_power``.
+``cache_forces`` and ``cache_power``. A scene saved on a GPU names its device in ``meta``
+(``device``; absent means the CPU) and holds the device's rows, read back as float64:
+``device_pos``, ``device_vel``, ``device_acc``, ``device_aux`` (N × 4) and ``device_hits`` (N);
+its ledger is read from the device's books, and it has no integrator cache (``Scene.load``).
 
 The reader treats every file as hostile:
 
@@ -111,6 +114,10 @@ _META_OPTIONAL["colliders"] = "list"
 _META_DEFAULTS["bodies"] = []
 _META_OPTIONAL["bodies"] = "list"
 _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
+# Where a scene stepped (absent: the CPU), and for a scene saved on a GPU whether the device's
+# accelerations were current; its raw rows are the members device_* (_expected_members).
+_META_DEFAULTS.update({"device": "cpu", "device_acc_valid": False})
+_META_OPTIONAL.update({"device": "str", "device_acc_valid": "bool"})
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
@@ -687,6 +694,12 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
     opt.update({"cache_forces": _Spec("f8", ("C", d)), "cache_power": _Spec("f8", ("K",))})
     # Optional per-particle attributes (charge, radius): one value per particle when set.
     opt.update({f"attr_{a}": _Spec("f8", ("N",)) for a, _ in _core.particle_attributes()})
+    if meta["device"] != "cpu":
+        # A scene saved on a GPU: the device's raw rows (position and mass, velocity and
+        # 1/mass, acceleration, drag books; "collisions" per particle), read back as float64.
+        sizes["R4"] = (4, "a device row")
+        opt.update({f"device_{k}": _Spec("f8", ("N", "R4")) for k in ("pos", "vel", "acc", "aux")})
+        opt["device_hits"] = _Spec("f8", ("N",))
     return req, opt, sizes
 
 
@@ -771,6 +784,9 @@ def _read_archive(r: _Reader, fh: IO[bytes], size: int) -> SceneFile:
             for stem in req:
                 if stem not in infos:
                     raise r.error(stem, "missing member")
+            rows = [f"device_{k}" for k in ("pos", "vel", "acc", "aux", "hits")]
+            if any(k in infos for k in rows) and not all(k in infos for k in rows):
+                raise r.error(next(k for k in rows if k not in infos), "missing member (the device's rows come as five)")
             if ("cache_forces" in infos) != ("cache_power" in infos):
                 raise r.error("cache_forces" if "cache_forces" not in infos else "cache_power", "missing member (the integrator cache has two)")
             arrays = {}

@@ -198,6 +198,8 @@ def _check_device(value: object) -> str:
 
 #: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
 _GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "coulomb", "springs")
+#: The core's name of the particles' system on a device (`systems::device::DeviceParticles`).
+_DEVICE_PARTICLES = "device particles"
 #: Grid kinds the GPU path has kernels for (the same file).
 _GPU_GRIDS = ("gray_scott",)
 #: Collider sections the GPU path has kernels for (planes and boxes).
@@ -337,9 +339,8 @@ class Scene:
         move to the device at the first step, and a part it has no kernel for is refused then,
         by name (never run silently on the CPU; a :class:`~physcore.Batch` moves its GPU members
         likewise). After that step the scene steps, reads positions, velocities and the energy
-        books, and renders; adding parts, setting the state or another integrator and
-        :meth:`state` are refused (not yet on the GPU path). :meth:`save` and pickling are
-        refused before the first step too: a scene file has no device.
+        books, renders, saves and pickles (:meth:`save`); adding parts, setting the state or
+        another integrator and :meth:`state` are refused (not yet on the GPU path).
         docs/guide/gpu.md gives each kernel's measured agreement with the CPU path.
     threads : int or None
         Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);
@@ -1270,6 +1271,9 @@ class Scene:
 
         Continuing a loaded scene reproduces the uninterrupted run bit for bit (the velocity
         Verlet force cache, the dopri5 step-size controller and the energy books are saved too).
+        A scene on a GPU is read back for it (positions, velocities, the books, a grid's fields)
+        and its device's own rows saved with it: :meth:`load` opens that device again and
+        continues bit for bit, or continues on the CPU with ``device="cpu"``.
         The layout is described in ``physcore/_scenefile.py``. An energy-drift baseline that
         overflowed float64 is not saved (the loaded scene takes a new one at its next step).
 
@@ -1421,15 +1425,13 @@ class Scene:
 
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""
-        self._cpu_only("save()")
-        if self._device != "cpu":
-            # Before its first step too: the file has no device, and its precision would
-            # describe float64 arrays as float32 (a file, or a pickle, that cannot be read back).
-            raise InvalidInputError(f"save(): a scene file has no device yet (device={self._device!r}); save or pickle "
-                                    "a scene made with device='cpu'")
+        on_device = self._device != "cpu" and self._sim.on_device
+        # A file of precision "f32" holds the state as float32: a device's f32 state read back
+        # is exact in it (before the first step, the upload would round it so anyway).
+        fx = np.float32 if self.precision == "f32" else np.float64
         arrays: dict[str, np.ndarray] = {
-            "positions": self.positions,
-            "velocities": self.velocities,
+            "positions": self.positions.astype(fx, copy=False),
+            "velocities": self.velocities.astype(fx, copy=False),
             "masses": self.masses,
             "pinned": self.pinned,
             **{f"attr_{a}": v for a, v in self.attributes.items()},
@@ -1446,13 +1448,25 @@ class Scene:
             members[part.section].update({f"{prefix}{a}": v for a, v in own.items()})
         for section in SECTIONS:
             arrays.update(members[section])
-        ledger, collisions = self._sim.ledger()
+        if on_device:
+            # The books live on the device: the ledger (each term's dissipated energy) and the
+            # collisions read from them, so that the file also continues on the CPU; the device's
+            # raw rows (device_*) let a load onto the device continue bit for bit.
+            dissipated = self.energy().dissipated
+            ledger, collisions = [float(dissipated.get(t.name, 0.0)) for t in self.terms], float(dissipated.get("collisions", 0.0))
+            if _DEVICE_PARTICLES in self._sim.system_names():
+                raw = dict(self._sim.system_save(_DEVICE_PARTICLES))
+                arrays.update({f"device_{k}": raw[k].reshape(-1, 4) for k in ("pos", "vel", "acc", "aux")})
+                arrays["device_hits"] = raw["hits"]
+                device_acc_valid = bool(raw["acc_valid"][0])
+        else:
+            ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
         # The loader refuses non-finite books; say so now rather than write a file it refuses.
         for field, v in (("time", [self.time]), ("ledger", ledger), ("collisions", [collisions])):
             if not np.isfinite(v).all():
                 raise InvalidInputError(f"{field}: {list(v)} overflowed float64; a scene file holds finite values only, so this scene cannot be saved")
-        cache = self._sim.integrator_cache()
+        cache = None if on_device else self._sim.integrator_cache()
         if cache is not None:
             arrays["cache_forces"] = cache[0]
             arrays["cache_power"] = np.asarray(cache[1], dtype=np.float64)
@@ -1478,6 +1492,10 @@ class Scene:
             # "terms", "planes", "boxes", "spheres", "grids", "flows"; "colliders" if it holds one
             **{s: e for s, e in entries.items() if e or s not in OPTIONAL_SECTIONS},
         }
+        if self._device != "cpu":
+            meta["device"] = self._device
+            if "device_pos" in arrays:
+                meta["device_acc_valid"] = device_acc_valid
         # float.hex keeps every float bit-exact through JSON.
         arrays["meta"] = np.array(json.dumps(meta, default=float, allow_nan=False))
         arrays["time_hex"] = np.array(float(self.time).hex())
@@ -1503,9 +1521,9 @@ class Scene:
             return buf.getvalue()
 
     @classmethod
-    def from_bytes(cls, data: bytes, *, threads: int | None = None, source: str = "<bytes>") -> Scene:
+    def from_bytes(cls, data: bytes, *, threads: int | None = None, source: str = "<bytes>", device: str | None = None) -> Scene:
         """A scene from the bytes of a scene file (:meth:`to_bytes`, or a file's contents),
-        checked as strictly as :meth:`load` checks a file; ``threads`` as for :meth:`load`;
+        checked as strictly as :meth:`load` checks a file; ``threads`` and ``device`` as for :meth:`load`;
         ``source`` names the bytes in error messages.
 
         Raises
@@ -1521,10 +1539,12 @@ class Scene:
             raise InvalidTypeError(f"data: expected the bytes of a scene file, got {type(data).__name__}")
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
+        if device is not None:
+            device = _check_device(device)
         with allocating("load", "the scene file's arrays"):
-            return cls._from_file(_scenefile.read_bytes(data, source), threads)
+            return cls._from_file(_scenefile.read_bytes(data, source), threads, device)
     @classmethod
-    def load(cls, path: str | os.PathLike, *, threads: int | None = None) -> Scene:
+    def load(cls, path: str | os.PathLike, *, threads: int | None = None, device: str | None = None) -> Scene:
         """Read a scene written by :meth:`save`.
 
         The file is treated as hostile (see ``physcore/_scenefile.py``): every field is checked
@@ -1540,6 +1560,14 @@ class Scene:
             Overrides the saved thread count. Without it the saved count is used, capped at the
             number of CPUs this process may use (results do not depend on it, and a file should
             not decide how many threads start); ``None`` saved stays ``None`` (all cores).
+        device : str or None
+            Where the loaded scene steps (as :class:`Scene`'s ``device``). Without it, where it
+            was saved: a scene saved on a GPU opens that device again and continues there bit for
+            bit (the device's own rows are in the file, read back at the save). ``"cpu"``
+            continues a GPU scene on the CPU from its state read back (positions, velocities,
+            books; the velocity Verlet force is evaluated again at the first step, so the run
+            differs from the device's in the last bits, and f32 state stays as the device
+            rounded it).
 
         Raises
         ------
@@ -1563,12 +1591,15 @@ class Scene:
         path = _scenefile.check_path(path)
         if threads is not None:
             threads = _check_int(threads, "threads", 1)
+        if device is not None:
+            device = _check_device(device)
         with allocating("load", "the scene file's arrays"):
-            return cls._from_file(_scenefile.read(path), threads)
+            return cls._from_file(_scenefile.read(path), threads, device)
 
     @classmethod
-    def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None) -> Scene:
+    def _from_file(cls, sf: _scenefile.SceneFile, threads: int | None, device: str | None = None) -> Scene:
         meta, z, r = sf.meta, sf.arrays, sf.reader
+        device = meta["device"] if device is None else device
         if threads is None and meta["threads"] is not None:
             threads = min(meta["threads"], usable_cpus())
         with r.api("meta"):
@@ -1584,6 +1615,7 @@ class Scene:
                 threads=threads,
                 xpbd_substeps=meta["xpbd_substeps"],
                 xpbd_iterations=meta["xpbd_iterations"],
+                device=device,
             )
         if z["positions"].shape[0]:
             with r.api(""):  # the API's argument names are the members' names
@@ -1612,8 +1644,30 @@ class Scene:
                 z.get("cache_forces"),
                 z["cache_power"].tolist() if "cache_power" in z else None,
             )
+        if device != "cpu":
+            try:
+                scene._to_device()
+            except InvalidInputError as e:  # no such device here, or a part it lacks
+                raise InvalidInputError(f"{e} (the file was saved with device={meta['device']!r}; "
+                                        "Scene.load(..., device='cpu') continues it on the CPU)") from None
+            with r.api(""):
+                scene._load_device(meta, z)
         scene._session.reference_energy = None if meta["e0"] is None else (meta["e0"], meta["e0_scale"])
         return scene
+
+    def _load_device(self, meta: dict[str, Any], z: Mapping[str, np.ndarray]) -> None:
+        """Moves a loaded GPU scene to its device and, if the file holds the device's rows (a
+        scene saved there), puts them back, so that it continues bit for bit. The books and the
+        clock were restored on the host first; the rows carry the device's books."""
+        if "device_pos" not in z or _DEVICE_PARTICLES not in self._sim.system_names():
+            return
+        f32 = self.precision == "f32"
+        masses = z["masses"].astype(np.float32).astype(np.float64) if f32 else z["masses"]
+        if not np.array_equal(z["device_pos"][:, 3], masses):
+            raise InvalidInputError("device_pos: its mass column differs from masses")
+        arrays = [(k, np.ascontiguousarray(z[f"device_{k}"], dtype=np.float64).reshape(-1)) for k in ("pos", "vel", "acc", "aux", "hits")]
+        arrays.append(("acc_valid", np.array([float(meta["device_acc_valid"])])))
+        self._exclusive(lambda sim: sim.system_load(_DEVICE_PARTICLES, arrays))
 
     def __repr__(self) -> str:
         terms = ", ".join(t.name for t in self.terms) or "no terms"

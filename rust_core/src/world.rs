@@ -111,6 +111,10 @@ impl<V: Vector> World<V> {
         &self.others
     }
     /// The system after the particles named `name`.
+    /// The names of the systems besides the particles, in the order they joined.
+    pub fn other_names(&self) -> Vec<String> {
+        self.others.iter().map(|s| s.name().to_string()).collect()
+    }
     pub fn other(&self, name: &str) -> Result<&dyn System> {
         match self.others.iter().find(|s| s.name() == name) {
             Some(s) => Ok(s.as_ref()),

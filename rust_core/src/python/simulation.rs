@@ -557,6 +557,12 @@ impl PySimulation {
     }
 
     /// Everything a restart of system `name` needs, as (name, flat float64 array) pairs.
+    /// The names of the world's systems besides the particles (rigid bodies, grids, flows,
+    /// the particles on a device), in the order they joined.
+    fn system_names(&self) -> Vec<String> {
+        with_sim!(&self.inner, s => s.other_names())
+    }
+
     fn system_save<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Vec<(String, Bound<'py, PyArray1<f64>>)>> {
         let a = with_sim!(&self.inner, s => s.other(name).and_then(|o| o.save())).map_err(|e| to_py(py, e))?;
         Ok(a.into_iter().map(|(k, v)| (k, Array1::from(v).into_pyarray(py))).collect())
@@ -671,6 +677,11 @@ impl PySimulation {
     /// The own state of term `name` (contacts: spins and springs) as a flat float64 array, or
     /// None if it keeps none.
     fn term_history<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
+        // The terms the device has kernels for keep no state of their own (its system saves
+        // what it carries: `system_save`); the host's particle system is empty then.
+        if self.on_device && self.terms.iter().any(|(_, n, _)| n == name) {
+            return Ok(None);
+        }
         let h = with_sim!(&self.inner, s => s.particles().term_history(name)).map_err(|e| to_py(py, e))?;
         Ok(h.map(|h| Array1::from(h).into_pyarray(py)))
     }

@@ -483,6 +483,11 @@ pub struct DeviceGrayScott {
     /// per call).
     limit: Real,
     g: Mutex<GrayScott>,
+    /// What the reactions made before the fields came to the device (u's, v's; moved or
+    /// loaded), kept on the host in f64: the device's per-workgroup slots start from zero and
+    /// `made` adds them to it. One f32 slot holding a saved total lost its low bits, and the
+    /// additions to it more.
+    base: [Real; 2],
 }
 
 impl DeviceGrayScott {
@@ -512,12 +517,11 @@ impl DeviceGrayScott {
         for (f, e) in g.edges.iter().enumerate().take(2 * g.dim) {
             free[f] = *e == Edge::Free;
         }
-        let da = g.cell_measure();
         let model =
             dg::Model { n: g.n, dim: g.dim, dx: g.dx, free, du: cfg.du, dv: cfg.dv, feed: cfg.feed, kill: cfg.kill };
         let limit = cfg.stability_limit(u, v);
-        let dev = GrayScott::new(gpu, precision_of(precision)?, model, u, v, [made[0] / da, made[1] / da])?;
-        Ok(Self { cfg, limit, g: Mutex::new(dev) })
+        let dev = GrayScott::new(gpu, precision_of(precision)?, model, u, v, [0.0; 2])?;
+        Ok(Self { cfg, limit, g: Mutex::new(dev), base: made })
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, GrayScott> {
@@ -532,7 +536,7 @@ impl DeviceGrayScott {
     fn made(&self) -> Result<[Real; 2]> {
         let m = self.lock().made()?;
         let da = self.cfg.grid.cell_measure();
-        Ok([m[0] * da, m[1] * da])
+        Ok([self.base[0] + m[0] * da, self.base[1] + m[1] * da])
     }
 }
 
@@ -634,10 +638,12 @@ impl System for DeviceGrayScott {
                 return Err(invalid(name, format!("value {i} is not finite: {}", a[i])));
             }
         }
-        let da = self.cfg.grid.cell_measure();
         let g = self.lock();
         g.set_fields(Some(u), Some(v))?;
-        Ok(g.set_made([m[0] / da, m[1] / da])?)
+        g.set_made([0.0; 2])?;
+        drop(g);
+        self.base = [m[0], m[1]];
+        Ok(())
     }
 }
 
