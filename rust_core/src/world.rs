@@ -284,6 +284,11 @@ impl<V: Vector> World<V> {
     /// and writes nothing before it keeps its result: it begins with `begin_fused` instead.)
     fn begin_steps(&mut self, n: u64) -> Result<Begun> {
         self.check_n(n)?;
+        // Any scene, not only an empty one: a clock at inf stepped on silently (issue 64's
+        // hostile pass: dt = 1e308, two steps).
+        if !(self.t + n as Real * self.dt).is_finite() {
+            return Err(invalid("n", format!("{n} steps of {:e} s take the time past the largest float", self.dt)));
+        }
         self.prepare()?;
         let cp = self.checkpoint()?;
         if let Err(e) = self.room() {
@@ -543,6 +548,11 @@ impl<V: Vector> World<V> {
                     "substeps",
                     format!("{n} substeps of {duration:.3e} s would each be below float64's normal range"),
                 ));
+            }
+            // Any scene, not only an empty one: a clock at inf stepped on silently (issue 64's
+            // hostile pass: dt = 1e308, two steps).
+            if !(s.t + duration).is_finite() {
+                return Err(invalid("duration", format!("{duration} s take the time past the largest float")));
             }
             let old = s.dt;
             s.dt = duration / n as Real;

@@ -442,3 +442,24 @@ def test_gray_scott_seed_names_a_bad_size_or_noise_and_changes_nothing():
     assert np.array_equal(gs.u, u) and np.array_equal(gs.v, v)
     gs.seed(2, size=1.0, noise=0.0)  # the whole domain, no noise: u = ½, v = ¼ everywhere
     assert np.all(gs.u == 0.5) and np.all(gs.v == 0.25)
+
+
+def test_a_clock_past_the_largest_float_is_refused_in_any_scene():
+    # The check ran for empty scenes only: a particle's or a body's scene stepped on with its
+    # clock at inf (dt = 1e308, two steps), silently. Refused now, naming the argument, with
+    # nothing changed.
+    s = pc.Scene(2, dt=1e308)
+    s.add_particles([[0.0, 5.0]])
+    s.step(1)
+    x = s.positions
+    with pytest.raises(pc.InvalidInputError, match="^n: "):
+        s.step(1)
+    with pytest.raises(pc.InvalidInputError, match="^duration: "):
+        s.advance(1e308)
+    assert s.time == 1e308 and s.step_count == 1 and np.array_equal(s.positions, x)
+    b = pc.Scene(2, dt=1e308)
+    b.add(pc.Bodies("ball", size=[0.5], positions=[(0.0, 1.0)]))
+    b.step(1)
+    with pytest.raises(pc.InvalidInputError, match="^n: "):
+        b.step(1)
+    assert b.time == 1e308

@@ -120,6 +120,14 @@ impl PySimulation {
                 if let Some(a) = p.model().attributes.keys().find(|a| **a != "charge") {
                     return Err(err(invalid("device", format!("the GPU path has no per-particle {a:?} yet"))));
                 }
+                // The host copies made on the way (state, masses, pins, charges; a grid's two
+                // fields) and as much again for the uploads' staging, asked for first: under a
+                // memory cap they aborted the process (3,000,000 particles at +900 MB).
+                let n = p.n_particles() as u128;
+                let cells: u128 = grids.iter().filter_map(|(_, name, _)| s.other(name).ok()).map(|g| g.size() as u128).sum();
+                let bytes = 2 * (n * (2 * dim as u128 + 3) * 8 + cells * 2 * 8);
+                let of = format!("{} particles' and {} grid cells' copies for the device", count(n), count(cells));
+                Need::new("step", bytes, of).room(bytes).map_err(|e| to_py(py, e))?;
                 let charge = p.model().attribute("charge").map(|q| q.to_vec());
                 if p.n_constraints() != colliders.len() {
                     return Err(err(invalid("device", "the GPU path has no constraints but its colliders yet")));

@@ -138,6 +138,27 @@ impl DeviceParticles {
             return Err(invalid("positions", format!("value {i} of the positions and velocities is not finite")));
         }
         let (scheme, precision) = (scheme_of(integrator)?, precision_of(precision)?);
+        if precision == Precision::F32 {
+            // A value past f32's range became inf on the device, silently (or a divergence
+            // that blamed dt); a mass whose reciprocal is past it, likewise.
+            let over = |a: &[Real]| a.iter().position(|c| c.abs() > f32::MAX as Real);
+            for (key, what, a) in
+                [("positions", "position", x), ("velocities", "velocity", v), ("masses", "mass", mass)]
+            {
+                if let Some(i) = over(a) {
+                    return Err(invalid(key, format!("{what} value {i} ({:e}) is past f32's range (precision=\"f32\" on the device; use \"f64\")", a[i])));
+                }
+            }
+            if let Some(i) = mass.iter().zip(pinned).position(|(m, &p)| !p && (1.0 / m).abs() > f32::MAX as Real) {
+                return Err(invalid("masses", format!("entry {i} ({:e}): its reciprocal is past f32's range (precision=\"f32\" on the device; use \"f64\")", mass[i])));
+            }
+            if let Some(i) = charge.and_then(over) {
+                return Err(invalid(
+                    "charge",
+                    format!("value {i} is past f32's range (precision=\"f32\" on the device; use \"f64\")"),
+                ));
+            }
+        }
         let (forces, springs, mut names) = forces_of(dim, n, terms)?;
         let colliders = colliders_of(dim, colliders)?;
         names.collisions = !colliders.is_empty();
