@@ -266,9 +266,9 @@ class Batch:
         # checked first (refused by name, for every member, before any moves), else the core
         # would step it on the CPU.
         for s in scenes:
-            s._check_device_parts()
+            s.to_device(check_only=True)
         for s in scenes:
-            s._to_device()
+            s.to_device()
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
         fresh = [s for s in scenes if s.session.reference_energy is None]

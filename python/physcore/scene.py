@@ -757,6 +757,23 @@ class Scene:
             raise InvalidInputError(f"{what}: not yet on the GPU path (device={self._device!r}); the scene steps, "
                                     "reads positions, velocities and energies, and renders")
 
+    def to_device(self, *, check_only: bool = False) -> None:
+        """Moves a GPU scene's parts to its device now, as its first :meth:`step` does; nothing
+        for a CPU scene or one already there. What steps the scene's :attr:`session` itself
+        (a :class:`~physcore.Batch`) calls it first. ``check_only=True`` only checks that the
+        device has a kernel for every part (a batch checks all its members before any moves).
+
+        Raises
+        ------
+        InvalidInputError
+            (a ``ValueError``) A part the GPU path has no kernel for, named; no such device, or
+            f64 on an adapter without it (naming ``device``); a value the device's precision
+            cannot hold. Nothing changes.
+        """
+        self._check_device_parts()
+        if not check_only:
+            self._to_device()
+
     def warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
         automatic step: ``Scene``'s default dt is far too long for stiff contacts. :meth:`step`
