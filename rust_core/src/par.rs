@@ -40,6 +40,7 @@ pub fn install<R>(pool: Option<&Arc<ThreadPool>>, f: impl FnOnce() -> R) -> R {
 /// Runs `f`, which forks rayon work, on the pool of the call in progress: directly on one of
 /// its threads, through `ThreadPool::install` from elsewhere. `None` (and `f` not run) if there
 /// is no such pool: the caller then runs its loop serially.
+#[inline]
 pub fn fork<R: Send>(f: impl FnOnce() -> R + Send) -> Option<R> {
     if rayon::current_thread_index().is_some() {
         return Some(f());
@@ -86,13 +87,17 @@ fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
 }
 
 /// `f(start, chunk)` on consecutive chunks of `a`.
+#[inline]
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
     if fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a))).is_none() {
-        a.chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a));
+        for (c, a) in a.chunks_mut(CHUNK).enumerate() {
+            f(c * CHUNK, a);
+        }
     }
 }
 
 /// `f(start, chunk_a, chunk_b)` on matching chunks of two equally long slices.
+#[inline]
 pub fn chunks2<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send) {
     debug_assert_eq!(a.len(), b.len());
     if fork_if(a.len(), || {
@@ -100,11 +105,14 @@ pub fn chunks2<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: impl Fn(usize, &mu
     })
     .is_none()
     {
-        a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().for_each(|(c, (a, b))| f(c * CHUNK, a, b));
+        for (c, (a, b)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
+            f(c * CHUNK, a, b);
+        }
     }
 }
 
 /// `f(start, a, b, c)` on matching chunks of three equally long slices.
+#[inline]
 pub fn chunks3<A: Send, B: Send, C: Send>(
     a: &mut [A],
     b: &mut [B],
@@ -120,15 +128,14 @@ pub fn chunks3<A: Send, B: Send, C: Send>(
     })
     .is_none()
     {
-        a.chunks_mut(CHUNK)
-            .zip(b.chunks_mut(CHUNK))
-            .zip(c.chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(k, ((a, b), c))| f(k * CHUNK, a, b, c));
+        for (k, ((a, b), c)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).enumerate() {
+            f(k * CHUNK, a, b, c);
+        }
     }
 }
 
 /// `f(start, a, b, c, d)` on matching chunks of four equally long slices.
+#[inline]
 pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     a: &mut [A],
     b: &mut [B],
@@ -146,16 +153,15 @@ pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     })
     .is_none()
     {
-        a.chunks_mut(CHUNK)
-            .zip(b.chunks_mut(CHUNK))
-            .zip(c.chunks_mut(CHUNK))
-            .zip(d.chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(k, (((a, b), c), d))| f(k * CHUNK, a, b, c, d));
+        let chunks = a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).zip(d.chunks_mut(CHUNK));
+        for (k, (((a, b), c), d)) in chunks.enumerate() {
+            f(k * CHUNK, a, b, c, d);
+        }
     }
 }
 
 /// Deterministic sum of `f(range)` over fixed chunks of `0..n`.
+#[inline]
 pub fn sum<T>(n: usize, zero: T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T
 where
     T: Send + Copy + std::ops::Add<Output = T>,
@@ -164,12 +170,14 @@ where
 }
 
 /// Deterministic sum where each chunk also writes into its own slice of `out` (fused pass).
+#[inline]
 pub fn chunks1_sum<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) -> f64 + Sync + Send) -> f64 {
     chunks1_fold(a, 0.0, |a, b| a + b, f)
 }
 
 /// Like `chunks2`, with each chunk returning a value; the values are folded in chunk order
 /// (deterministic for any thread count).
+#[inline]
 pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     a: &mut [A],
     b: &mut [B],
@@ -177,42 +185,60 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> = match fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
+    if let Some(p) = fork_if(a.len(), || {
+        a.par_chunks_mut(CHUNK)
+            .zip(b.par_chunks_mut(CHUNK))
+            .enumerate()
+            .map(|(c, (a, b))| f(c * CHUNK, a, b))
+            .collect::<Vec<T>>()
     }) {
-        Some(p) => p,
-        None => {
-            a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate().map(|(c, (a, b))| f(c * CHUNK, a, b)).collect()
-        }
-    };
-    partials.into_iter().fold(zero, fold)
+        return p.into_iter().fold(zero, fold);
+    }
+    // Serially: the same partials folded in the same order, without the vector of partials.
+    let mut acc = zero;
+    for (c, (a, b)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
+        acc = fold(acc, f(c * CHUNK, a, b));
+    }
+    acc
 }
 
 /// Like `chunks1`, with each chunk returning a value folded in chunk order (deterministic).
+#[inline]
 pub fn chunks1_fold<A: Send, T: Send>(
     a: &mut [A],
     zero: T,
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    let partials: Vec<T> =
-        match fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect()) {
-            Some(p) => p,
-            None => a.chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect(),
-        };
-    partials.into_iter().fold(zero, fold)
+    if let Some(p) =
+        fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect::<Vec<T>>())
+    {
+        return p.into_iter().fold(zero, fold);
+    }
+    // Serially: the same partials folded in the same order, without the vector of partials.
+    let mut acc = zero;
+    for (c, a) in a.chunks_mut(CHUNK).enumerate() {
+        acc = fold(acc, f(c * CHUNK, a));
+    }
+    acc
 }
 
 /// Deterministic fold of `f(range)` over fixed chunks of `0..n` (e.g. a maximum).
+#[inline]
 pub fn reduce<T: Send>(n: usize, zero: T, fold: impl Fn(T, T) -> T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T {
-    let partials: Vec<T> = match fork_if(n, || ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect()) {
-        Some(p) => p,
-        None => ranges(n).map(&f).collect(),
-    };
-    partials.into_iter().fold(zero, fold)
+    if let Some(p) = fork_if(n, || ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect::<Vec<T>>()) {
+        return p.into_iter().fold(zero, fold);
+    }
+    // Serially: the same partials folded in the same order, without the vector of partials.
+    let mut acc = zero;
+    for r in ranges(n) {
+        acc = fold(acc, f(r));
+    }
+    acc
 }
 
 /// `chunks2` whose chunks raise a flag; returns whether any did.
+#[inline]
 pub fn chunks2_any<A: Send, B: Send>(
     a: &mut [A],
     b: &mut [B],

@@ -237,7 +237,10 @@ pub trait Simd: pulp::Simd {
     /// an insert per lane and component); the default gathers. Panics if a row is out of bounds.
     #[inline(always)]
     fn load_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, first: usize) -> ([Self::f64s; 3], [Self::f64s; 3]) {
-        let idx: [u32; 8] = std::array::from_fn(|k| (first + k) as u32);
+        let mut idx = [0u32; 8];
+        for (k, i) in idx.iter_mut().enumerate() {
+            *i = (first + k) as u32;
+        }
         self.gather_rows_f64s(a, b, dim, &idx)
     }
 

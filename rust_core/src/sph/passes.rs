@@ -318,8 +318,12 @@ impl<F: Float, K: Kernel, const D: usize, const SEVERAL: bool> SimdKernel for De
                 && grid.cells[k + 1] == grid.cells[k]
                 && (!SEVERAL || fluid_of::<F, SEVERAL>(b, k + 1) == f);
             let k2 = if pair { k + 1 } else { k };
-            let xa: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
-            let xb: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k2]) } else { zero });
+            // A loop, not `std::array::from_fn`: its closure can stay out of line (a call per
+            // splat) in a build of several codegen units.
+            let (mut xa, mut xb) = ([zero; 3], [zero; 3]);
+            for d in 0..D {
+                (xa[d], xb[d]) = (P::splat(s, b.pos[d][k]), P::splat(s, b.pos[d][k2]));
+            }
             let (mut acc_a, mut acc_b) = (zero, zero);
             for r in nb.fluid.iter() {
                 let cols = run(&b.pos[0], &r, l).chunks_exact(l).zip(run(&b.pos[1], &r, l).chunks_exact(l));
@@ -433,8 +437,11 @@ impl<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: bool, const 
             let f = fluid_of::<F, SEVERAL>(b, k);
             nb.at::<SEVERAL>(k, f);
             let fl = if SEVERAL { &fluids[f] } else { first };
-            let xi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.pos[d][k]) } else { zero });
-            let vi: [P<S, F>; 3] = std::array::from_fn(|d| if d < D { P::splat(s, b.vel[d][k]) } else { zero });
+            // A loop, not `std::array::from_fn` (see the density pass).
+            let (mut xi, mut vi) = ([zero; 3], [zero; 3]);
+            for d in 0..D {
+                (xi[d], vi[d]) = (P::splat(s, b.pos[d][k]), P::splat(s, b.vel[d][k]));
+            }
             let (rho_i, pr_i) = (P::splat(s, b.rho[k]), P::splat(s, b.pr[k]));
             let visc_i = if SEVERAL { P::splat(s, b.visc[k]) } else { zero };
             let mut acc = [zero; 3];

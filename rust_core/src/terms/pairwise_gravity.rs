@@ -377,15 +377,23 @@ fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(
     let Soa { xs, ys, zs, ms } = src;
     let l = P::<S, F>::lanes();
     let (zero, eps2) = (P::<S, F>::zero(s), P::splat(s, eps2));
-    let xi: [[P<S, F>; 3]; R] =
-        std::array::from_fn(|r| [P::splat(s, xs[i0 + r]), P::splat(s, ys[i0 + r]), P::splat(s, zs[i0 + r])]);
+    // Plain loops, not `std::array::from_fn` / `map` (here and at the end): their closures run
+    // behind core's generic `try_from_fn` / `try_map`, which in a build of several codegen units
+    // stayed out of line, compiled without the level's features, so every splat and lane sum
+    // became a call (N-body 2048: 1.11x the time in 16 units; see Cargo.toml).
+    let mut xi = [[zero; 3]; R];
     // −m_i hoisted: the reaction is one FMA per component (negation is exact).
-    let nmi: [P<S, F>; R] = std::array::from_fn(|r| P::splat(s, -ms[i0 + r]));
-    let mut acc = [[zero; 3]; R];
+    let mut nmi = [zero; R];
     // One receiver in `S::SPLIT_RSQRT` takes f64 1/√ through the divider where the level asks
     // for it (a fixed choice per receiver index: the same bits for any tiling and thread count).
     let k = S::SPLIT_RSQRT;
-    let exact: [bool; R] = std::array::from_fn(|r| std::mem::size_of::<F>() == 8 && k > 0 && (i0 + r) % k == k - 1);
+    let mut exact = [false; R];
+    for r in 0..R {
+        xi[r] = [P::splat(s, xs[i0 + r]), P::splat(s, ys[i0 + r]), P::splat(s, zs[i0 + r])];
+        nmi[r] = P::splat(s, -ms[i0 + r]);
+        exact[r] = std::mem::size_of::<F>() == 8 && k > 0 && (i0 + r) % k == k - 1;
+    }
+    let mut acc = [[zero; 3]; R];
     let Cols { x: cx, y: cy, z: cz } = cols;
     let col = cx[far.clone()]
         .chunks_exact_mut(l)
@@ -417,7 +425,11 @@ fn far_tile<S: Simd, F: Float, const R: usize, const MASK: bool>(
         sy.store(oy);
         sz.store(oz);
     }
-    acc.map(|a| [a[0].sum().f64(), a[1].sum().f64(), a[2].sum().f64()])
+    let mut sums = [[0.0; 3]; R];
+    for r in 0..R {
+        sums[r] = [acc[r][0].sum().f64(), acc[r][1].sum().f64(), acc[r][2].sum().f64()];
+    }
+    sums
 }
 
 /// A receiver block of the symmetric sum: its index and its rows of the output.

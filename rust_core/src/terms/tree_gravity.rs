@@ -580,12 +580,18 @@ fn tile<S: Simd, const R: usize, const MASK: bool, const POT: bool>(
 ) -> [[Real; 3]; R] {
     let l = P::<S, Real>::lanes();
     let (zero, e2) = (P::<S, Real>::zero(s), P::splat(s, eps2));
-    let xi: [[P<S, Real>; 3]; R] = std::array::from_fn(|r| recv[r].map(|v| P::splat(s, v))[..3].try_into().unwrap());
-    let idi: [P<S, Real>; R] = std::array::from_fn(|r| P::splat(s, (i0 + r) as Real));
+    // Plain loops, not `std::array::from_fn` / `map` (as in `pairwise_gravity::far_tile`: their
+    // closures can stay out of line, without the level's features, in several codegen units).
+    let (mut xi, mut idi) = ([[zero; 3]; R], [zero; R]);
     // One receiver in `S::SPLIT_RSQRT` takes 1/√ through the divider (see `Simd::SPLIT_RSQRT`);
     // fixed per sorted index, so the same bits for any tiling and thread count.
     let k = S::SPLIT_RSQRT;
-    let exact: [bool; R] = std::array::from_fn(|r| k > 0 && (i0 + r) % k == k - 1);
+    let mut exact = [false; R];
+    for r in 0..R {
+        xi[r] = [P::splat(s, recv[r][0]), P::splat(s, recv[r][1]), P::splat(s, recv[r][2])];
+        idi[r] = P::splat(s, (i0 + r) as Real);
+        exact[r] = k > 0 && (i0 + r) % k == k - 1;
+    }
     let mut acc = [[zero; 3]; R];
     for j in (0..nl).step_by(l) {
         let x = P::load(s, &list.x[j..]);
@@ -619,7 +625,11 @@ fn tile<S: Simd, const R: usize, const MASK: bool, const POT: bool>(
             }
         }
     }
-    acc.map(|a| [a[0].sum(), a[1].sum(), a[2].sum()])
+    let mut sums = [[0.0; 3]; R];
+    for r in 0..R {
+        sums[r] = [acc[r][0].sum(), acc[r][1].sum(), acc[r][2].sum()];
+    }
+    sums
 }
 
 /// Runs `sum` for every group in parallel (each group by one task, into its own receivers'

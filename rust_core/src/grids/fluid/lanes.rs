@@ -112,7 +112,9 @@ impl<S: Simd> LaneLay<S> {
             c[2][l] = q[w];
             c[3][l] = q[w + 1];
         }
-        c.map(|b| V::load(s, &b))
+        // Not `c.map(..)`: its closure can stay out of line (a call per load) in a build of
+        // several codegen units.
+        [V::load(s, &c[0]), V::load(s, &c[1]), V::load(s, &c[2]), V::load(s, &c[3])]
     }
 }
 

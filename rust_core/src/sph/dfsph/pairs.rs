@@ -126,7 +126,12 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
             // branch (about a third of them pass, at random: a branch there mispredicts): each
             // candidate is written, and the count moves past it only if it passed.
             let base = top;
-            let xkv: [P<S, f64>; 3] = std::array::from_fn(|c| splat(if c < V::DIM { xk.comp(c) } else { 0.0 }));
+            // Loops here and below, not `std::array::from_fn`: its closures can stay out of line
+            // (a call per splat or lane) in a build of several codegen units.
+            let mut xkv = [splat(0.0); 3];
+            for (c, x) in xkv.iter_mut().enumerate().take(V::DIM) {
+                *x = splat(xk.comp(c));
+            }
             for run in fluid.iter() {
                 if pairs.j.len() < top + run.len() + lanes {
                     pairs.j.resize(top + run.len() + lanes, 0);
@@ -164,7 +169,10 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
                 // A vector of pairs; lanes past the particle's last pair take j = k (d = 0:
                 // finite, and dropped).
                 let cnt = lanes.min(end - q);
-                let idx: [usize; 16] = std::array::from_fn(|t| if t < cnt { pairs.j[q + t] as usize } else { k });
+                let mut idx = [k; 16];
+                for (t, i) in idx.iter_mut().enumerate().take(cnt) {
+                    *i = pairs.j[q + t] as usize;
+                }
                 let mut d = [P::zero(simd); 3];
                 for c in 0..V::DIM {
                     d[c] = xkv[c] - P::from_fn(simd, |t| flat[idx[t] * V::DIM + c]);
@@ -177,7 +185,10 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
                 let (wq, gq) = K::wg_exact(r2.sqrt() * v_inv_h);
                 let mj = P::from_fn(simd, |t| m[idx[t]]);
                 let (wr, f) = ((mj * v_sigma * wq).to_array(), mj * v_gscale * gq);
-                let gc: [[f64; 16]; 3] = std::array::from_fn(|c| (d[c] * f).to_array());
+                let mut gc = [[0.0; 16]; 3];
+                for c in 0..3 {
+                    gc[c] = (d[c] * f).to_array();
+                }
                 for t in 0..cnt {
                     let g = V::from_slice(&[gc[0][t], gc[1][t], gc[2][t]][..V::DIM]);
                     pairs.g[q + t] = g;

@@ -392,7 +392,10 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
             }
 
             // Write the lanes back.
-            let (a_xi, a_ft) = (out_xi.map(|q| q.to_array()), out_ft.map(|q| q.to_array()));
+            // `to_array` by hand, not `[_; 3]::map`: its closures can stay out of line in a build
+            // of several codegen units.
+            let arr = |q: [F<S>; 3]| [q[0].to_array(), q[1].to_array(), q[2].to_array()];
+            let (a_xi, a_ft) = (arr(out_xi), arr(out_ft));
             let (a_fn, a_bt, a_bn) = (out_fn.to_array(), out_bt.to_array(), out_bn.to_array());
             let mut buf = [0.0; 3];
             for k in 0..cnt {
@@ -410,8 +413,7 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 lkm.bn = a_bn[k];
             }
             if eval {
-                let (a_f, a_ti, a_tj) =
-                    (pf_f.map(|q| q.to_array()), pf_ti.map(|q| q.to_array()), pf_tj.map(|q| q.to_array()));
+                let (a_f, a_ti, a_tj) = (arr(pf_f), arr(pf_ti), arr(pf_tj));
                 for k in 0..cnt {
                     for c in 0..dim {
                         buf[c] = a_f[c][k];
