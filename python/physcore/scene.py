@@ -770,9 +770,10 @@ class Scene:
             f64 on an adapter without it (naming ``device``); a value the device's precision
             cannot hold. Nothing changes.
         """
-        self._check_device_parts()
-        if not check_only:
-            self._to_device()
+        if check_only:
+            self._check_device_parts()
+        else:
+            self._to_device()  # checks the parts first
 
     def warn_contact_step(self) -> None:
         """Warn (once per dt value) when a scene with contacts steps at more than twice its
@@ -1673,8 +1674,8 @@ class Scene:
         return scene
 
     def _load_device(self, meta: dict[str, Any], z: Mapping[str, np.ndarray]) -> None:
-        """Moves a loaded GPU scene to its device and, if the file holds the device's rows (a
-        scene saved there), puts them back, so that it continues bit for bit. The books and the
+        """Puts back the device's rows of a loaded GPU scene, now on its device, where the file
+        holds them (a scene saved there), so that it continues bit for bit. The books and the
         clock were restored on the host first; the rows carry the device's books."""
         if "device_pos" not in z or _DEVICE_PARTICLES not in self._sim.system_names():
             return

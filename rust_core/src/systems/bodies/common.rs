@@ -42,12 +42,6 @@ struct Stepper {
     impacts: Impacts,
 }
 
-impl Stepper {
-    fn step(&mut self, gravity: Vector, params: &IntegrationParameters) {
-        rapier_step_on(&mut self.r, &mut self.pipeline, &mut self.ccd, &self.impacts, gravity, params);
-    }
-}
-
 fn rapier_step_on(
     r: &mut Rapier,
     pipeline: &mut PhysicsPipeline,
@@ -1014,7 +1008,8 @@ impl Bodies {
                 impacts: std::mem::take(&mut self.impacts),
             };
             stepper = match super::watched("physcore-bodies", stop, move || {
-                stepper.step(gravity, &params);
+                let s = &mut stepper;
+                rapier_step_on(&mut s.r, &mut s.pipeline, &mut s.ccd, &s.impacts, gravity, &params);
                 stepper
             }) {
                 Some(Ok(stepper)) => stepper,
