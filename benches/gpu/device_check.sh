@@ -1,20 +1,45 @@
 #!/usr/bin/env bash
-# The GPU path on a device machine (run through the device tool from the repository root):
-# builds the wheel, runs the GPU tests (Rust and Python) on the real adapter, then the N-body
-# and Gray-Scott benches beside ../shared/gpu/cuda_reference.py in the same call, so the ratio is of one card.
-# Everything it prints goes to $OUT/device_check.txt too. Budget: about 6 minutes on 16 cores.
+# The GPU path on a device machine (run through the device tool from the repository root). That
+# machine reaches no package index and has no Rust toolchain, so what it runs is built here:
+#   - the extension, python/physcore/_core.abi3.so (`maturin develop --release`), carried;
+#   - the Rust GPU tests' binaries, copied stripped into .devbin/ (see below), carried;
+#   - the Vulkan loader's .deb files in .gl/ (the device README), carried;
+#   - ../shared/gpu/cuda_reference.py copied into .devbin/ (the CUDA peer on the same card).
+# It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, Gray-Scott and
+# cloth benches beside the CUDA reference in the same call, so every ratio is of one card. Each
+# part has its own time limit so that one stuck part cannot eat the call. Everything it prints
+# goes to $OUT/device_check.txt too. Budget: about 7 minutes.
+#
+# Here, before the call:
+#   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-gpu -p physcore-core --lib --no-run
+#   mkdir -p .devbin; cp <the test binaries> .devbin/; strip .devbin/*; cp ../shared/gpu/cuda_reference.py .devbin/
+# then run(command="bash benches/gpu/device_check.sh", carry=[".gl", ".devbin", "python/physcore/_core.abi3.so"]).
 set -uo pipefail
 out="${OUT:-/tmp}/device_check.txt"
 exec > >(tee "$out") 2>&1
-nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv 2>/dev/null || true
-python3 -m venv /tmp/pcv && . /tmp/pcv/bin/activate
-pip install -q maturin numpy pillow tqdm pytest hypothesis >/dev/null 2>&1
-CARGO_PROFILE_RELEASE_LTO=false CARGO_PROFILE_RELEASE_CODEGEN_UNITS=16 pip install -q . || exit 1
-python3 -c 'import physcore as pc; [print(a) for a in pc.gpu_adapters()]'
-PHYSCORE_GPU_REQUIRED=1 cargo test --release -p physcore-gpu 2>&1 | tail -5
-PHYSCORE_GPU_REQUIRED=1 python3 -m pytest -p no:cacheprovider -n 0 -q tests/gpu 2>&1 | tail -5
-python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 65536,262144 --steps 10
-python3 benches/gpu/bench_gpu_grids.py --device gpu --n 1024,4096 --steps 100
-if [ -f shared/gpu/cuda_reference.py ]; then
-  python3 shared/gpu/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -20
-fi
+for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+[ -f "$VK_DRIVER_FILES" ] || unset VK_DRIVER_FILES
+export PYTHONPATH="$PWD/python" PYTHONUNBUFFERED=1 PHYSCORE_GPU_REQUIRED=1 PHYSCORE_GPU_ALLOW_CPU=1
+nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv 2>/dev/null || true
+lscpu | grep -E "Model name|^CPU\(s\)" || true
+python3 -c 'import physcore as pc; print(pc.__version__, pc.simd_level()); [print(a) for a in pc.gpu_adapters()]' || exit 1
+section() { echo; echo "=== $1 ($SECONDS s)"; }
+section "Rust GPU tests"
+for b in .devbin/physcore_gpu-* .devbin/particles-* .devbin/gray_scott-*; do
+  [ -x "$b" ] && timeout 120 "$b" --test-threads 4 2>&1 | tail -4
+done
+[ -x .devbin/physcore_core-lib ] && timeout 120 .devbin/physcore_core-lib device --test-threads 4 2>&1 | tail -4
+section "Python GPU tests"
+timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -x tests/gpu 2>&1 | tail -15
+section "N-body (CPU to 65536)"
+timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16384,65536,262144 --steps 10 --cpu-max 65536
+timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
+section "Gray-Scott"
+timeout 90 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+section "cloth"
+timeout 90 python3 benches/gpu/bench_gpu_cloth.py --device gpu --n 16,64,256,1024 --steps 50
+section "CUDA reference (CuPy)"
+[ -f .devbin/cuda_reference.py ] && timeout 90 python3 .devbin/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -12
+section "done"
