@@ -34,15 +34,21 @@ def scene(n: int, device: str, precision: str | None) -> tuple[pc.Scene, pc.grid
     return s, g
 
 
-def timed(s: pc.Scene, g: pc.grids.GrayScott, steps: int) -> float:
-    s.step(1)  # warm-up: the move to the device, the shader's compilation
-    times = []
+def timed(s: pc.Scene, g: pc.grids.GrayScott, steps: int) -> tuple[float, float]:
+    """Median seconds of a call of ``steps`` steps, and of one read-back after them. A device's
+    ``step`` returns once the device has finished (it waits for each submission's finiteness
+    flag), so the steps are timed alone; the read-back (g.books(): device to host, f32 to f64)
+    is timed apart, as a frame or a save pays it."""
+    s.step(1)  # warm-up: the move to the device, the shaders' compilation
+    times, reads = [], []
     for _ in range(3):
         t = time.perf_counter()
         s.step(steps)
-        _ = g.books()  # a read-back ends the timed work
         times.append(time.perf_counter() - t)
-    return statistics.median(times)
+        t = time.perf_counter()
+        _ = g.books()
+        reads.append(time.perf_counter() - t)
+    return statistics.median(times), statistics.median(reads)
 
 
 def main() -> None:
@@ -57,23 +63,23 @@ def main() -> None:
     print(header())
     for a in adapters:
         print(f"# adapter: {a['name']} ({a['kind']}, {a['backend']}, f64: {a['f64']})")
-    print(f"# device: {device}; Gray-Scott (maze), dt = 1, median of 3 calls of {args.steps} steps")
-    print("| n × n | path | precision | cell-steps/s | vs CPU | max |u - u_cpu|, |v - v_cpu| |")
-    print("|---:|---|---|---:|---:|---:|")
+    print(f"# device: {device}; Gray-Scott (maze), dt = 1, median of 3 calls of {args.steps} steps (the read-back after them timed apart)")
+    print("| n × n | path | precision | cell-steps/s | ms/step | vs CPU | read-back ms | max |u - u_cpu|, |v - v_cpu| |")
+    print("|---:|---|---|---:|---:|---:|---:|---:|")
     for n in (int(v) for v in args.n.split(",")):
         steps = args.steps
         cpu, gc = scene(n, "cpu", None)
-        t_cpu = timed(cpu, gc, steps)
-        print(f"| {n}² | CPU ({pc.simd_level()}) | f64 | {n * n * steps / t_cpu:.3g} | 1.00 | 0 |", flush=True)
+        t_cpu, r_cpu = timed(cpu, gc, steps)
+        print(f"| {n}² | CPU ({pc.simd_level()}) | f64 | {n * n * steps / t_cpu:.3g} | {1e3 * t_cpu / steps:.3g} | 1.00 | {1e3 * r_cpu:.3g} | 0 |", flush=True)
         for precision in ("f32", "f64"):
             s, g = scene(n, device, precision)
             try:
-                t = timed(s, g, steps)
+                t, r = timed(s, g, steps)
             except pc.InvalidInputError as e:
-                print(f"| {n}² | {device} | {precision} | refused: {e} | | |")
+                print(f"| {n}² | {device} | {precision} | refused: {e} | | | | |")
                 continue
             d = max(float(np.abs(g.field(f) - gc.field(f)).max()) for f in ("u", "v"))
-            print(f"| {n}² | {device} | {precision} | {n * n * steps / t:.3g} | {t_cpu / t:.2f} | {d:.1e} |", flush=True)
+            print(f"| {n}² | {device} | {precision} | {n * n * steps / t:.3g} | {1e3 * t / steps:.3g} | {t_cpu / t:.2f} | {1e3 * r:.3g} | {d:.1e} |", flush=True)
 
 
 if __name__ == "__main__":

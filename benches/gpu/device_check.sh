@@ -8,16 +8,22 @@
 # It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, Gray-Scott and
 # cloth benches beside the CUDA reference in the same call, so every ratio is of one card. Each
 # part has its own time limit so that one stuck part cannot eat the call. Everything it prints
-# goes to $OUT/device_check.txt too. Budget: about 7 minutes.
+# goes to $OUT/device_check.txt too. Budget: about 2 minutes (plus the machine's start);
+# `--no-cuda` skips the CUDA reference (the half minute it takes).
 #
-# Here, before the call:
-#   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-gpu -p physcore-core --lib --no-run
-#   mkdir -p .devbin; cp <the test binaries> .devbin/; strip .devbin/*; cp ../shared/gpu/cuda_reference.py .devbin/
-# then run(command="bash benches/gpu/device_check.sh", carry=[".gl", ".devbin", "python/physcore/_core.abi3.so"]).
+# Here, before the call (the tree that travels is at most 64 MiB: binaries stripped and gzipped):
+#   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-core --lib --no-run
+#   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-gpu --tests --no-run
+#   mkdir -p .devbin; cp the binaries to .devbin/{physcore_core-lib,physcore_gpu-tests,particles-tests,
+#   gray_scott-tests} and python/physcore/_core.abi3.so to .devbin/; strip and gzip -9 them;
+#   cp ../shared/gpu/cuda_reference.py .devbin/
+# then run(command="bash benches/gpu/device_check.sh", carry=[".gl", ".devbin"]).
 set -uo pipefail
 out="${OUT:-/tmp}/device_check.txt"
 exec > >(tee "$out") 2>&1
 for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+for f in .devbin/*.gz; do gunzip -f "$f"; done; chmod +x .devbin/*
+[ -f .devbin/_core.abi3.so ] && mv .devbin/_core.abi3.so python/physcore/
 export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 [ -f "$VK_DRIVER_FILES" ] || unset VK_DRIVER_FILES
@@ -27,12 +33,22 @@ lscpu | grep -E "Model name|^CPU\(s\)" || true
 python3 -c 'import physcore as pc; print(pc.__version__, pc.simd_level()); [print(a) for a in pc.gpu_adapters()]' || exit 1
 section() { echo; echo "=== $1 ($SECONDS s)"; }
 section "Rust GPU tests"
-for b in .devbin/physcore_gpu-* .devbin/particles-* .devbin/gray_scott-*; do
+for b in .devbin/physcore_gpu-tests .devbin/particles-tests .devbin/gray_scott-tests; do
   [ -x "$b" ] && timeout 120 "$b" --test-threads 4 2>&1 | tail -4
 done
 [ -x .devbin/physcore_core-lib ] && timeout 120 .devbin/physcore_core-lib device --test-threads 4 2>&1 | tail -4
 section "Python GPU tests"
 timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -x tests/gpu 2>&1 | tail -15
+section "device='auto'"
+python3 - <<'PY'
+import numpy as np, physcore as pc
+for n in (256, 4096, 65536):
+    s = pc.Scene(dim=3, integrator="verlet", dt=1e-4, device="auto")
+    s.add_particles(np.random.default_rng(0).normal(size=(n, 3)), masses=1.0 / n)
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.05))
+    s.step(2)
+    print(n, s.device, s.precision, "|", s.device_reason)
+PY
 section "N-body (CPU to 65536)"
 timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16384,65536,262144 --steps 10 --cpu-max 65536
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
@@ -41,5 +57,5 @@ timeout 90 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,
 section "cloth"
 timeout 90 python3 benches/gpu/bench_gpu_cloth.py --device gpu --n 16,64,256,1024 --steps 50
 section "CUDA reference (CuPy)"
-[ -f .devbin/cuda_reference.py ] && timeout 90 python3 .devbin/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -12
+[ "${1:-}" != "--no-cuda" ] && [ -f .devbin/cuda_reference.py ] && timeout 90 python3 .devbin/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -12
 section "done"

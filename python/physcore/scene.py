@@ -190,10 +190,85 @@ _PRECISIONS = ("f64", "f32")
 
 def _check_device(value: object) -> str:
     if not isinstance(value, str):
-        raise InvalidTypeError(f"device: expected 'cpu', 'gpu' or 'gpu:NAME', got {type(value).__name__}")
-    if value != "cpu" and value != "gpu" and not (value.startswith("gpu:") and len(value) > 4):
-        raise InvalidInputError(f"device: must be 'cpu', 'gpu' or 'gpu:NAME' (an adapter; physcore info lists them), got {value!r}")
+        raise InvalidTypeError(f"device: expected 'cpu', 'gpu', 'gpu:NAME' or 'auto', got {type(value).__name__}")
+    if value not in ("cpu", "gpu", "auto") and not (value.startswith("gpu:") and len(value) > 4):
+        raise InvalidInputError(f"device: must be 'cpu', 'gpu', 'gpu:NAME' (an adapter; physcore info lists them) or 'auto', got {value!r}")
     return value
+
+
+#: ``device="auto"``'s cost model (docs/guide/gpu.md, "Choosing a device"), fitted to
+#: benches/gpu on an NVIDIA H100 SXM beside its host's 16-thread Xeon (AVX-512; f32 on the
+#: device, f64 on the CPU, medians of 3 calls), the CPU's rates checked on the project's
+#: 2-core Xeon. A CPU step: a floor plus each kind's work at its rate per thread, on as many
+#: threads as the work has chunks (a direct sum splits by particle, 256 a chunk; the rest 4096
+#: units a chunk). A GPU step: a floor per system (its dispatches) plus each kind's work at the
+#: GPU's rate, where a direct sum runs one thread per particle, looping over all N at a fixed
+#: rate until the GPU is full (N² / (rate · min(N, lanes))). The scene goes to the GPU when that
+#: is at most half the CPU's time. Fitted: N-body 1024 / 4096 / 65536 on 16 threads 0.28 / 1.1 /
+#: 268 ms a step (measured 0.30 / 1.4 / 273), on the GPU 0.13 / 0.42 / 6.3 ms (0.15 / 0.43 /
+#: 5.6); cloth 16² / 64² 45 / 138 µs on the CPU (16 / 126), 30 / 32 µs on the GPU (33 / 33);
+#: Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27 µs / 3.9 ms) and 8 µs / 0.31 ms (8 µs / 0.30 ms).
+#: A smaller GPU has about the same floors and fewer lanes: near the threshold the floors
+#: decide, far above it any GPU wins.
+_AUTO_CPU_FLOOR_S = 15e-6
+_AUTO_FLOOR_S = {"particles": 30e-6, "grid": 8e-6}  # a GPU step, per system
+_AUTO_LANES = 9e4
+#: kind: (CPU rate per thread, CPU chunk, GPU rate), in units of work per second (pairs: the
+#: GPU's rate is per thread, see _AUTO_LANES; the CPU's chunks are of particles).
+_AUTO_RATES = {
+    "pairs": (1.0e9, 256, 1.05e7),
+    "springs": (5.0e7, 4096, 1.2e10),
+    "cells": (2.7e8, 4096, 5.5e10),
+    "particles": (1.0e8, 4096, 1.0e10),
+}
+
+
+def _auto_work(parts: list[Part], n: int) -> dict[str, float]:
+    """One step's work for ``device="auto"``'s cost model, by kind (see :data:`_AUTO_RATES`)."""
+    work = {"pairs": 0.0, "springs": 0.0, "cells": 0.0, "particles": float(n), "grids": 0.0}
+    for part in parts:
+        if part.section == "terms" and part.part_kind in ("pairwise_gravity", "coulomb"):
+            work["pairs"] += float(n) * float(n)
+        elif part.section == "terms" and part.part_kind == "springs":
+            work["springs"] += float(len(part))  # type: ignore[arg-type]
+        elif part.section == "grids":
+            work["cells"] += float(math.prod(part.shape))  # type: ignore[attr-defined]
+            work["grids"] += 1.0
+    return work
+
+
+def _auto_times(work: dict[str, float], threads: int) -> tuple[float, float]:
+    """A step's estimated seconds on the CPU (``threads`` threads) and on a GPU."""
+    n = work["particles"]
+    cpu, gpu = _AUTO_CPU_FLOOR_S, 0.0
+    if n > 0:
+        gpu += _AUTO_FLOOR_S["particles"]
+    gpu += _AUTO_FLOOR_S["grid"] * work["grids"]
+    for kind, (rate, chunk, gpu_rate) in _AUTO_RATES.items():
+        w = work[kind]
+        if w <= 0:
+            continue
+        chunks = (n if kind == "pairs" else w) / chunk
+        cpu += w / (rate * min(max(threads, 1), max(chunks, 1.0)))
+        gpu += w / (gpu_rate * (min(max(n, 1.0), _AUTO_LANES) if kind == "pairs" else 1.0))
+    return cpu, gpu
+
+
+def _auto_choice(work: dict[str, float], threads: int, adapters: list[dict[str, Any]], precision: str | None) -> tuple[str, str]:
+    """``device="auto"``: the device a scene of this work per step runs on, and why. Only a
+    real GPU is taken (never a CPU adapter such as lavapipe), one with f64 where ``precision``
+    asks for it; the GPU when the cost model says a step there takes at most half the CPU's time."""
+    real = [a for a in adapters if a["kind"] != "cpu" and (precision != "f64" or a["f64"])]
+    if not real:
+        what = "no GPU adapter" + (" with f64" if precision == "f64" and any(a["kind"] != "cpu" for a in adapters) else "")
+        return "cpu", f"{what} (device='auto')"
+    order = {"discrete": 0, "integrated": 1, "virtual": 2}
+    best = min(real, key=lambda a: order.get(a["kind"], 3))
+    cpu, gpu = _auto_times(work, threads)
+    estimate = f"a step estimated at {cpu * 1e3:.3g} ms on {threads} CPU thread(s), {gpu * 1e3:.3g} ms on {best['name']}"
+    if gpu <= 0.5 * cpu:
+        return f"gpu:{best['name']}", estimate
+    return "cpu", estimate + " (too small a scene to gain on a GPU)"
 
 
 #: Term kinds the GPU path has kernels for (rust_core/src/systems/device.rs).
@@ -327,8 +402,15 @@ class Scene:
         single precision costs in accuracy (see the work-precision table in docs/guide/integrators.md).
         With a GPU ``device``: the precision of the device's state and arithmetic, ``"f32"`` by
         default (``None``); ``"f64"`` where the adapter has it (refused, naming the adapter, where not).
-    device : {"cpu", "gpu", "gpu:NAME"}
+    device : {"cpu", "gpu", "gpu:NAME", "auto"}
         Where the particles are stepped. ``"cpu"`` (default): the reference path, with every part.
+        ``"auto"``: chosen at the first step, a real GPU (never a CPU adapter such as lavapipe)
+        when every part has a GPU kernel and a cost model fitted to measurements (an NVIDIA H100
+        beside a 16-thread Xeon; docs/guide/gpu.md) expects a step there in at most half the
+        CPU's time (at default threads: a direct N-body sum from ~1000 particles, a cloth from
+        ~32², a Gray–Scott grid of any size), else the CPU; :attr:`device` then says which and
+        :attr:`device_reason` why. The precision follows the choice (f32 on a GPU, f64 on the
+        CPU) unless ``precision`` is given.
         ``"gpu"``: the best GPU adapter (discrete, then integrated; ``physcore info`` lists them);
         ``"gpu:NAME"``: the first adapter whose name, backend or kind contains NAME
         (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
@@ -411,7 +493,10 @@ class Scene:
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
         integrator = name
-        precision = _check_precision(("f64" if device == "cpu" else "f32") if precision is None else precision)
+        # device="auto": the precision follows the choice made at the first step (f64 on the CPU,
+        # f32 on a GPU) unless it was given.
+        auto_precision = None if precision is None or device != "auto" else _check_precision(precision)
+        precision = _check_precision(("f64" if device in ("cpu", "auto") else "f32") if precision is None else precision)
         if threads is not None:
             threads = _check_int(threads, "threads", 1, MAX_THREADS)
         sim = _core.Simulation(int(dim), integrator, dt, DEFAULT_THREADS.get() if threads is None else threads)
@@ -428,9 +513,11 @@ class Scene:
         sim.set_substeps(xpbd_substeps, xpbd_iterations)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         # The CPU's f32 mode rounds the stored state; a device computes in its own precision.
-        sim.single = precision == "f32" and device == "cpu"
+        sim.single = precision == "f32" and device in ("cpu", "auto")
         self._device = device
         self._device_precision = precision
+        self._auto_precision = auto_precision
+        self._device_reason: str | None = None
         # One thread at a time, and the books' reference (physcore.session).
         self._session = Session(sim)
         self._threads = threads
@@ -724,32 +811,76 @@ class Scene:
     @property
     def device(self) -> str:
         """Where the particles are stepped: ``"cpu"``, ``"gpu"`` or ``"gpu:NAME"`` (see the
-        constructor)."""
+        constructor). A scene made with ``device="auto"`` says ``"auto"`` until its first step
+        and then what was chosen (``"cpu"`` or ``"gpu:NAME"``; :attr:`device_reason` says why)."""
         return self._device
+
+    @property
+    def device_reason(self) -> str | None:
+        """Why ``device="auto"`` chose :attr:`device` (the cost model's estimate of a step on
+        each, or what kept the scene on the CPU); None for any other device and before the
+        first step."""
+        return self._device_reason
 
     def _to_device(self) -> None:
         """Moves the particles and terms to the GPU before the first step of a GPU scene,
-        refusing by name any part the GPU path has no kernel for (nothing changes then)."""
+        refusing by name any part the GPU path has no kernel for (nothing changes then).
+        ``device="auto"`` makes its choice here (:func:`_auto_choice`)."""
+        if self._device == "auto":
+            self._choose_device()
+            return
         if self._device == "cpu" or self._sim.on_device:
             return
         self._check_device_parts()
         self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
 
-    def _check_device_parts(self) -> None:
-        """Refuses by name a part the GPU path has no kernel for (a GPU scene not yet moved)."""
-        if self._device == "cpu" or self._sim.on_device:
+    def _choose_device(self) -> None:
+        """``device="auto"``: a GPU when every part has a kernel there, a real GPU is present and
+        the cost model expects a step there in at most half the CPU's time; else the CPU. A
+        failed move (the device's memory, a value f32 cannot hold) raises and leaves the
+        scene as it was (still ``"auto"``)."""
+        part = self._unsupported_part()
+        if part is not None:
+            device = "cpu"
+            why = f"{type(part).__name__} {getattr(part, 'name', None) or type(part).__name__!r} has no GPU kernel yet (device='auto')"
+        else:
+            threads = self._threads if self._threads is not None else _core.default_threads()
+            device, why = _auto_choice(_auto_work(self._parts, self.n_particles), threads,
+                                       list(_core.gpu_adapters()), self._auto_precision)
+        if device == "cpu":
+            self._device, self._device_reason = "cpu", why
             return
+        precision = self._auto_precision or "f32"
+        self._sim.single = False
+        try:
+            self._exclusive(lambda sim: sim.move_to_device(device, precision))
+        except BaseException:
+            self._sim.single = self._auto_precision == "f32"
+            raise
+        self._device, self._device_precision, self._device_reason = device, precision, why
+
+    def _unsupported_part(self) -> Part | None:
+        """The first part the GPU path has no kernel for, or None."""
         for part in self._parts:
             ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
                   or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
                   or part.section in _GPU_COLLIDERS)
             if not ok:
-                what = getattr(part, "name", None) or type(part).__name__
-                raise InvalidInputError(
-                    f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                    f"(it has the terms {', '.join(_GPU_TERMS)}, Plane and Box colliders and the grids {', '.join(_GPU_GRIDS)}); "
-                    "run this scene with device='cpu'"
-                )
+                return part
+        return None
+
+    def _check_device_parts(self) -> None:
+        """Refuses by name a part the GPU path has no kernel for (a GPU scene not yet moved)."""
+        if self._device in ("cpu", "auto") or self._sim.on_device:
+            return
+        part = self._unsupported_part()
+        if part is not None:
+            what = getattr(part, "name", None) or type(part).__name__
+            raise InvalidInputError(
+                f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, Plane and Box colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
+            )
 
     def _cpu_only(self, what: str) -> None:
         """Refuses ``what`` once the particles live on a GPU."""
@@ -957,7 +1088,7 @@ class Scene:
     def precision(self) -> str:
         """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor; on
         a GPU, of the device's state and arithmetic)."""
-        if self._device != "cpu":
+        if self._device not in ("cpu", "auto"):
             return self._device_precision
         return "f32" if self._sim.single else "f64"
 

@@ -432,3 +432,20 @@ def test_values_past_f32s_range_are_refused_by_name_on_an_f32_device() -> None:
             s64 = pc.Scene(dim=2, device=DEVICE, precision="f64")
             s64.add_particles(**kwargs)
             s64.step(1)
+
+
+def test_many_live_scenes_share_the_device_and_each_steps_as_alone():
+    # Each scene used to open its own wgpu instance and device: on the NVIDIA driver a test
+    # module holding a few dozen alive found "no adapter at all" (H100, driver 580). Scenes on
+    # one adapter now share its device while any lives; sharing must change no result.
+    alone = _cluster(3, n=64, device=DEVICE)
+    alone.step(5)
+    live = [_cluster(3, n=64, device=DEVICE) for _ in range(80)]
+    for s in live:
+        s.step(5)
+    assert all(np.array_equal(s.positions, alone.positions) for s in live)
+    del live
+    # After the last sharer is gone, a new scene opens the device again.
+    again = _cluster(3, n=64, device=DEVICE)
+    again.step(5)
+    assert np.array_equal(again.positions, alone.positions)

@@ -519,16 +519,20 @@ impl Particles {
         self.gpu.read_reals(self.precision, b, &self.staging, 4 * rows.max(1))
     }
 
-    fn read_raw(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        Ok((self.read_reals(&self.live.pos)?, self.read_reals(&self.live.vel)?))
-    }
-
     /// Positions and velocities, flat (n·dim), as f64.
     pub fn read(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        let (x, v) = self.read_raw()?;
+        Ok((self.read_one(false)?, self.read_one(true)?))
+    }
+
+    /// Positions (`vel` false) or velocities, flat (n·dim), as f64: one buffer read back.
+    pub fn read_one(&self, vel: bool) -> Result<Vec<f64>> {
+        let a = self.read_reals(if vel { &self.live.vel } else { &self.live.pos })?;
         let d = self.dim;
-        let unpack = |a: &[f64]| (0..self.n).flat_map(|i| a[4 * i..4 * i + d].to_vec()).collect();
-        Ok((unpack(&x), unpack(&v)))
+        let mut out = Vec::with_capacity(self.n * d);
+        for row in a.chunks_exact(4).take(self.n) {
+            out.extend_from_slice(&row[..d]);
+        }
+        Ok(out)
     }
 
     /// The energy books (reduced on the host in particle order).

@@ -63,7 +63,10 @@ impl PySimulation {
         let Some(f) = with_sim!(&self.inner, s => device_fields(s, on, &names[..dim])) else { return Ok(None) };
         let f = f.map_err(|e| to_py(py, e))?;
         let n = f[0].len();
-        let flat: Vec<f64> = (0..n).flat_map(|i| f.iter().map(move |c| c[i])).collect();
+        let mut flat = Vec::with_capacity(n * dim);
+        for i in 0..n {
+            flat.extend(f.iter().map(|c| c[i]));
+        }
         let a = numpy::ndarray::Array2::from_shape_vec((n, dim), flat)
             .map_err(|e| err(invalid("positions", e.to_string())))?;
         Ok(Some(a.into_pyarray(py)))

@@ -423,8 +423,11 @@ impl System for DeviceParticles {
     }
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
         // Masses and pins are kept on the host: read the device back only for the state.
-        let state = names.iter().any(|n| !matches!(*n, "mass" | "pinned"));
-        let (x, v) = if state { self.read()? } else { (Vec::new(), Vec::new()) };
+        // Each buffer only if asked for (a million particles' positions: one 16 MB read).
+        let want_x = names.iter().any(|n| matches!(*n, "x" | "y" | "z"));
+        let want_v = names.iter().any(|n| matches!(*n, "vx" | "vy" | "vz"));
+        let x = if want_x { self.lock().read_one(false)? } else { Vec::new() };
+        let v = if want_v { self.lock().read_one(true)? } else { Vec::new() };
         let (d, n) = (self.dim, self.mass.len());
         Ok(names
             .iter()
