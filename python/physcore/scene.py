@@ -205,20 +205,21 @@ def _check_device(value: object) -> str:
 #: GPU's rate, where a direct sum runs one thread per particle, looping over all N at a fixed
 #: rate until the GPU is full (N² / (rate · min(N, lanes))). The scene goes to the GPU when that
 #: is at most half the CPU's time. Fitted: N-body 1024 / 4096 / 65536 on 16 threads 0.28 / 1.1 /
-#: 268 ms a step (measured 0.30 / 1.4 / 273), on the GPU 0.13 / 0.42 / 6.3 ms (0.15 / 0.43 /
-#: 5.6); cloth 16² / 64² 45 / 138 µs on the CPU (16 / 126), 30 / 32 µs on the GPU (33 / 33);
-#: Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27 µs / 3.9 ms) and 8 µs / 0.31 ms (8 µs / 0.30 ms).
+#: 268 ms a step (measured 0.30 / 1.4–1.7 / 273), on the GPU 4096 / 65536 / 262144 0.23 / 3.3 /
+#: 49 ms (0.18 / 3.4 / 51); cloth 16² / 64² 45 / 138 µs on the CPU (16 / 126), 30 / 32 µs on
+#: the GPU (33 / 33); Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27–46 µs / 3.9 ms) and 8 µs /
+#: 0.23 ms (9 µs / 0.23 ms).
 #: A smaller GPU has about the same floors and fewer lanes: near the threshold the floors
 #: decide, far above it any GPU wins.
 _AUTO_CPU_FLOOR_S = 15e-6
 _AUTO_FLOOR_S = {"particles": 30e-6, "grid": 8e-6}  # a GPU step, per system
-_AUTO_LANES = 9e4
+_AUTO_LANES = 7e4
 #: kind: (CPU rate per thread, CPU chunk, GPU rate), in units of work per second (pairs: the
 #: GPU's rate is per thread, see _AUTO_LANES; the CPU's chunks are of particles).
 _AUTO_RATES = {
-    "pairs": (1.0e9, 256, 1.05e7),
+    "pairs": (1.0e9, 256, 2.0e7),
     "springs": (5.0e7, 4096, 1.2e10),
-    "cells": (2.7e8, 4096, 5.5e10),
+    "cells": (2.7e8, 4096, 7.5e10),
     "particles": (1.0e8, 4096, 1.0e10),
 }
 
@@ -407,7 +408,7 @@ class Scene:
         ``"auto"``: chosen at the first step, a real GPU (never a CPU adapter such as lavapipe)
         when every part has a GPU kernel and a cost model fitted to measurements (an NVIDIA H100
         beside a 16-thread Xeon; docs/guide/gpu.md) expects a step there in at most half the
-        CPU's time (at default threads: a direct N-body sum from ~1000 particles, a cloth from
+        CPU's time (at default threads: a direct N-body sum from ~500 particles, a cloth from
         ~32², a Gray–Scott grid of any size), else the CPU; :attr:`device` then says which and
         :attr:`device_reason` why. The precision follows the choice (f32 on a GPU, f64 on the
         CPU) unless ``precision`` is given.

@@ -15,6 +15,10 @@ import numpy as np
 import pytest
 
 import physcore as pc
+
+# Imported before any test patches render._recording._simulate: the painter binds it by name at
+# import, and a first import inside the patch kept the mock for every later test of the worker.
+import physcore.render.painter  # noqa: F401
 from physcore import _check, render
 from physcore.cli import main
 from physcore.fluids import lattice, tank_walls

@@ -63,11 +63,13 @@ pub struct GrayScott {
     binds: [wgpu::BindGroup; 2],
     step_pipe: wgpu::ComputePipeline,
     check_pipe: wgpu::ComputePipeline,
-    groups: (u32, u32),
+    /// Workgroups along x (a row's segments of WG cells), and along y and z (the rows, ny·nz
+    /// of them, folded into y ≤ 65,535 and z).
+    groups: (u32, u32, u32),
     chunk: u64,
 }
 
-const WG: u32 = 256;
+const WG: u32 = 64;
 const SUBMIT_S: f64 = 0.1;
 const MAX_CHUNK: u64 = 8192;
 
@@ -89,11 +91,22 @@ impl GrayScott {
         let cells = model.n.iter().product::<usize>();
         assert!(u.len() == cells && v.len() == cells, "fields must have one value per cell");
         gpu.check_precision(precision)?;
-        let total = cells.div_ceil(WG as usize) as u64;
-        // Workgroups in a 2D dispatch: at most 65,535 along each axis.
-        let gx = total.min(65_535) as u32;
-        let gy = total.div_ceil(gx as u64) as u32;
-        let slots = gx as u64 * gy as u64;
+        // One workgroup per segment of WG cells of a row (x), one row per (y, z) workgroup: a
+        // thread finds its cell without an integer division (the row's j and k are worked out
+        // once per workgroup). At most 65,535 workgroups along each axis.
+        let gx = (model.n[0] as u64).div_ceil(WG as u64);
+        let rows = (model.n[1] * model.n[2]) as u64;
+        let gy = rows.min(65_535);
+        let gz = rows.div_ceil(gy);
+        if gx > 65_535 || gz > 65_535 {
+            return Err(GpuError::Unsupported(format!(
+                "a grid of {} × {} × {} cells: the GPU path dispatches at most 65,535 × 64 cells along x and \
+                 65,535² rows",
+                model.n[0], model.n[1], model.n[2]
+            )));
+        }
+        let (gx, gy, gz) = (gx as u32, gy as u32, gz as u32);
+        let slots = gx as u64 * gy as u64 * gz as u64;
         let size = cells as u64 * precision.bytes();
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
@@ -137,12 +150,17 @@ impl GrayScott {
             binds,
             step_pipe,
             check_pipe,
-            groups: (gx, gy),
+            groups: (gx, gy, gz),
             chunk: 1,
         };
         g.set_fields(Some(u), Some(v))?;
         g.set_made(made)?;
         Ok(g)
+    }
+
+    /// The books' slots: one per workgroup.
+    fn slots(&self) -> usize {
+        self.groups.0 as usize * self.groups.1 as usize * self.groups.2 as usize
     }
 
     pub fn cells(&self) -> usize {
@@ -172,7 +190,7 @@ impl GrayScott {
 
     /// Sets what the reactions made so far (u's, v's), kept in the first workgroup's slot.
     pub fn set_made(&self, made: [f64; 2]) -> Result<()> {
-        let mut m = vec![0.0; 2 * (self.groups.0 as usize * self.groups.1 as usize)];
+        let mut m = vec![0.0; 2 * self.slots()];
         m[..2].copy_from_slice(&made);
         self.gpu.upload(self.precision, &self.made, &m);
         self.gpu.wait()
@@ -181,7 +199,8 @@ impl GrayScott {
     fn write_params(&self, dt: f64) {
         let m = &self.model;
         let free = m.free.iter().enumerate().fold(0u32, |acc, (f, &b)| acc | ((b as u32) << f));
-        let u = [m.n[0] as u32, m.n[1] as u32, m.n[2] as u32, free, self.groups.0, (m.dim == 3) as u32, 0, 0];
+        let u =
+            [m.n[0] as u32, m.n[1] as u32, m.n[2] as u32, free, self.groups.0, (m.dim == 3) as u32, self.groups.1, 0];
         let inv = 1.0 / (m.dx * m.dx);
         let r = [dt * m.du * inv, dt * m.dv * inv, dt, m.feed, m.feed + m.kill, 2.0 * m.dim as f64, 0.0, 0.0];
         self.gpu.write_params(self.precision, &self.params, &u, &r);
@@ -196,12 +215,12 @@ impl GrayScott {
             let mut c = self.cur;
             for _ in 0..steps {
                 pass.set_bind_group(0, &self.binds[c], &[]);
-                pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+                pass.dispatch_workgroups(self.groups.0, self.groups.1, self.groups.2);
                 c = 1 - c;
             }
             pass.set_pipeline(&self.check_pipe);
             pass.set_bind_group(0, &self.binds[c], &[]);
-            pass.dispatch_workgroups(self.groups.0, self.groups.1, 1);
+            pass.dispatch_workgroups(self.groups.0, self.groups.1, self.groups.2);
         }
         enc.finish()
     }
@@ -250,7 +269,7 @@ impl GrayScott {
     /// What the reactions made of u and of v so far, per unit cell measure (summed on the host
     /// in f64, in workgroup order).
     pub fn made(&self) -> Result<[f64; 2]> {
-        let slots = self.groups.0 as usize * self.groups.1 as usize;
+        let slots = self.slots();
         let m = self.gpu.read_reals(self.precision, &self.made, &self.staging, 2 * slots)?;
         let mut out = [0.0; 2];
         for s in m.chunks_exact(2) {

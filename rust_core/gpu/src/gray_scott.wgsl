@@ -15,10 +15,10 @@ struct Params {
     // Bit f set: face f (x-, x+, y-, y+, z-, z+) is free (∂u/∂n = 0: the ghost is the cell
     // itself); clear: periodic (the ghost is the opposite cell).
     free: u32,
-    // Workgroups along x of the 2D dispatch (the linear workgroup index is x + gx·y).
+    // Workgroups along x (segments of a row) and along y (rows; row r = y + gy·z).
     gx: u32,
     three: u32,
-    pad0: u32,
+    gy: u32,
     pad1: u32,
     // dt·D_u/dx², dt·D_v/dx², dt, F, F + k, and 2·dim (the Laplacian's centre weight).
     du: real,
@@ -31,7 +31,7 @@ struct Params {
     pad3: real,
 };
 
-const WG: u32 = 256u;
+const WG: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> P: Params;
 @group(0) @binding(1) var<storage, read> u0: array<real>;
@@ -69,22 +69,24 @@ fn fwd(i: u32, n: u32, hi: u32) -> u32 {
     return 0u;
 }
 
-fn cell_of(wid: vec3<u32>, lid: vec3<u32>) -> u32 {
-    return (wid.x + P.gx * wid.y) * WG + lid.x;
+// The workgroup's row (j + ny·k; ny·nz of them) and the thread's column i: one workgroup per
+// segment of WG cells of a row, so that no thread divides (the row's j and k are uniform).
+fn row_of(wid: vec3<u32>) -> u32 {
+    return wid.y + P.gy * wid.z;
 }
 
 @compute @workgroup_size(WG)
 fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let c = cell_of(wid, lid);
+    let rr = row_of(wid);
+    let i = wid.x * WG + lid.x;
     let nxy = P.nx * P.ny;
-    let n = nxy * P.nz;
     var ru: real = 0.0;
     var rv: real = 0.0;
-    if (c < n) {
-        let i = c % P.nx;
-        let j = (c / P.nx) % P.ny;
-        let k = c / nxy;
-        let row = c - i;
+    if (i < P.nx && rr < P.ny * P.nz) {
+        let j = rr % P.ny;
+        let k = rr / P.ny;
+        let row = rr * P.nx;
+        let c = row + i;
         let l = row + back(i, P.nx, 0u);
         let r = row + fwd(i, P.nx, 1u);
         let s = c - j * P.nx + back(j, P.ny, 2u) * P.nx;
@@ -118,7 +120,7 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
         workgroupBarrier();
     }
     if (lid.x == 0u) {
-        let g = wid.x + P.gx * wid.y;
+        let g = wid.x + P.gx * rr;
         made[2u * g] = made[2u * g] + P.dt * su[0];
         made[2u * g + 1u] = made[2u * g + 1u] + P.dt * sv[0];
     }
@@ -126,10 +128,12 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
 
 @compute @workgroup_size(WG)
 fn check(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let c = cell_of(wid, lid);
-    if (c >= P.nx * P.ny * P.nz) {
+    let rr = row_of(wid);
+    let i = wid.x * WG + lid.x;
+    if (i >= P.nx || rr >= P.ny * P.nz) {
         return;
     }
+    let c = rr * P.nx + i;
     if (bad(u0[c]) || bad(v0[c])) {
         atomicMin(&flag[0], c);
     }

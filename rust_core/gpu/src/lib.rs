@@ -161,11 +161,14 @@ fn enumerate() -> Vec<wgpu::Adapter> {
     .unwrap_or_default()
 }
 
+/// Each open device by its adapter's key, held weakly.
+type OpenDevices = Mutex<Vec<(String, Weak<Gpu>)>>;
+
 /// The devices open in this process, by adapter: scenes on one adapter share its device (and
 /// queue) while any of them lives, as a process shares one CUDA context per GPU. Each scene's
 /// work is submitted and waited for within its own calls, so sharing changes no result.
-fn open_devices() -> &'static Mutex<Vec<(String, Weak<Gpu>)>> {
-    static OPEN: OnceLock<Mutex<Vec<(String, Weak<Gpu>)>>> = OnceLock::new();
+fn open_devices() -> &'static OpenDevices {
+    static OPEN: OnceLock<OpenDevices> = OnceLock::new();
     OPEN.get_or_init(|| Mutex::new(Vec::new()))
 }
 
