@@ -83,7 +83,47 @@ impl Springs {
         }
         (start, other, rows)
     }
+
+    /// The gathered springs in slices of `SLICE` particles (sliced ELLPACK): particle i's q-th
+    /// entry at `base[i] + q · SLICE`, a slice's entries interleaved lane by lane and padded
+    /// to its largest degree, so that a warp's threads read consecutive entries together
+    /// (CSR made each thread read its own run: the 1024² cloth ran ~4× off the H100's memory
+    /// bandwidth). Entries keep their spring order per particle: the same sums, the same bits.
+    /// Returns (offsets: CSR starts (n + 1) then base (n), other ends, rows, slice width);
+    /// where padding would more than double the entries (a particle with far more springs
+    /// than its slice-mates), the CSR layout itself (base = start, width 1).
+    fn sliced(&self, n: usize) -> (Vec<u32>, Vec<u32>, Vec<f64>, u32) {
+        let (start, other, rows) = self.gathered(n);
+        let deg = |i: usize| (start[i + 1] - start[i]) as usize;
+        let slices = n.div_ceil(SLICE);
+        let mut base_of_slice = Vec::with_capacity(slices + 1);
+        let mut total = 0usize;
+        for s in 0..slices {
+            base_of_slice.push(total);
+            let most = (s * SLICE..((s + 1) * SLICE).min(n)).map(deg).max().unwrap_or(0);
+            total += most * SLICE;
+        }
+        let mut offsets = start.clone();
+        if total > 2 * other.len() + SLICE || u32::try_from(total).is_err() {
+            offsets.extend_from_slice(&start[..n]);
+            return (offsets, other, rows, 1);
+        }
+        let (mut o, mut r) = (vec![0u32; total], vec![0.0; 4 * total]);
+        for i in 0..n {
+            let b = base_of_slice[i / SLICE] + i % SLICE;
+            offsets.push(b as u32);
+            for q in 0..deg(i) {
+                let (from, to) = (start[i] as usize + q, b + q * SLICE);
+                o[to] = other[from];
+                r[4 * to..4 * to + 4].copy_from_slice(&rows[4 * from..4 * from + 4]);
+            }
+        }
+        (offsets, o, r, SLICE as u32)
+    }
 }
+
+/// Particles per slice of the springs' sliced layout: a warp on NVIDIA (32 threads).
+const SLICE: usize = 32;
 
 /// A collider of the projection stage, applied after every step in the order given (the CPU's
 /// `constraints::Plane` and `constraints::Aabb`; restitution e in [0, 1], friction μ ≥ 0).
@@ -159,6 +199,8 @@ pub struct Particles {
     _vp: wgpu::Buffer,
     _springs: [wgpu::Buffer; 3],
     has_springs: bool,
+    /// The springs' slice width (32, or 1: the CSR layout; see `Springs::sliced`).
+    slice: u32,
     velocity_dependent: bool,
     /// Parameter blocks, one per substep of a composition (bound at dynamic offsets of `slot`).
     params: wgpu::Buffer,
@@ -232,11 +274,11 @@ impl Particles {
         let empty = Springs::default();
         let sp = springs.unwrap_or(&empty);
         assert!(sp.i.iter().chain(&sp.j).all(|&p| (p as usize) < n), "spring index out of range");
-        let (start, other, rows) = sp.gathered(n);
+        let (start, other, rows, slice) = sp.sliced(n);
         let ro = U::STORAGE | U::COPY_DST;
         let entries_n = other.len().max(1) as u64;
         let sb = [
-            gpu.buffer("spring offsets", 4 * (n as u64 + 1), ro)?,
+            gpu.buffer("spring offsets", 4 * (2 * n as u64 + 1), ro)?,
             gpu.buffer("spring ends", 4 * entries_n, ro)?,
             gpu.buffer("spring constants", entries_n * row, ro)?,
         ];
@@ -293,6 +335,7 @@ impl Particles {
             _vp: vp,
             _springs: sb,
             has_springs: !sp.i.is_empty(),
+            slice,
             velocity_dependent: forces.drag != 0.0 || sp.c.iter().any(|&c| c != 0.0),
             params,
             slot,
@@ -367,7 +410,7 @@ impl Particles {
             self.dim as u32,
             self.ncol,
             f.coulomb.is_some() as u32,
-            0,
+            self.slice,
         ];
         let (kc, epc) = f.coulomb.unwrap_or((0.0, 0.0));
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0, kc, epc * epc, 0.0, 0.0];
@@ -678,4 +721,72 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
     let [forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy]: [wgpu::ComputePipeline;
         8] = pipes.try_into().unwrap_or_else(|_| unreachable!("eight kernels"));
     (layout, Pipes { forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Springs, SLICE};
+
+    fn springs(pairs: &[(u32, u32)]) -> Springs {
+        let m = pairs.len();
+        Springs {
+            i: pairs.iter().map(|p| p.0).collect(),
+            j: pairs.iter().map(|p| p.1).collect(),
+            k: (0..m).map(|s| 1.0 + s as f64).collect(),
+            c: vec![0.5; m],
+            rest: (0..m).map(|s| 0.1 * s as f64).collect(),
+        }
+    }
+
+    /// Particle i's entries (other end, row) in the order the kernel visits them.
+    fn visits(off: &[u32], other: &[u32], rows: &[f64], w: u32, n: usize, i: usize) -> Vec<(u32, Vec<f64>)> {
+        let deg = off[i + 1] - off[i];
+        (0..deg)
+            .map(|q| {
+                let e = (off[n + 1 + i] + q * w) as usize;
+                (other[e], rows[4 * e..4 * e + 4].to_vec())
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_sliced_layout_visits_each_particles_springs_in_the_csr_order() {
+        // A 40 × 40 cloth's structural springs (degrees 2 to 4, slices cut across rows).
+        let side = 40u32;
+        let mut pairs = Vec::new();
+        for r in 0..side {
+            for c in 0..side {
+                let p = r * side + c;
+                if c + 1 < side {
+                    pairs.push((p, p + 1));
+                }
+                if r + 1 < side {
+                    pairs.push((p, p + side));
+                }
+            }
+        }
+        let s = springs(&pairs);
+        let n = (side * side) as usize;
+        let (start, other, rows) = s.gathered(n);
+        let (off, o, r, w) = s.sliced(n);
+        assert_eq!(w as usize, SLICE);
+        assert_eq!(&off[..=n], &start[..]);
+        let mut csr = start.clone();
+        csr.extend_from_slice(&start[..n]);
+        for i in 0..n {
+            assert_eq!(visits(&off, &o, &r, w, n, i), visits(&csr, &other, &rows, 1, n, i), "particle {i}");
+        }
+    }
+
+    #[test]
+    fn a_hub_keeps_the_csr_layout() {
+        // One particle joined to 1,000 others: its slice padded to 1,000 would hold 32,000.
+        let pairs: Vec<(u32, u32)> = (1..1001).map(|j| (0, j)).collect();
+        let s = springs(&pairs);
+        let (start, other, rows) = s.gathered(1001);
+        let (off, o, r, w) = s.sliced(1001);
+        assert_eq!(w, 1);
+        assert_eq!((&off[..1002], &o, &r), (&start[..], &other, &rows));
+        assert_eq!(&off[1002..], &start[..1001]);
+    }
 }

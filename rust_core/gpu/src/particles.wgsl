@@ -19,7 +19,8 @@ struct Params {
     ncol: u32,
     // 1: Coulomb on.
     coul: u32,
-    pad_b: u32,
+    // The springs' slice width: particle i's q-th entry is at start[n + 1 + i] + q · sw.
+    sw: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
     h1: real,
@@ -63,8 +64,10 @@ const WG: u32 = 256u;
 @group(0) @binding(6) var<storage, read_write> flag: array<atomic<u32>>;
 // The predicted velocity v + dt a (velocity Verlet with velocity-dependent forces).
 @group(0) @binding(7) var<storage, read_write> vp: array<vec4<real>>;
-// Springs gathered per particle (CSR): particle i's entries are start[i]..start[i+1]; each names
-// the other end and holds (k, c, L0, 0). Every spring appears once from each end.
+// Springs gathered per particle: particle i has start[i + 1] − start[i] entries (CSR counts), its
+// q-th at start[n + 1 + i] + q · sw (sliced: a warp's threads read consecutive entries; sw = 1 is
+// plain CSR); each names the other end and holds (k, c, L0, 0). Every spring appears once from
+// each end, in spring order.
 @group(0) @binding(8) var<storage, read> start: array<u32>;
 @group(0) @binding(9) var<storage, read> other: array<u32>;
 @group(0) @binding(10) var<storage, read> spring: array<vec4<real>>;
@@ -207,7 +210,10 @@ fn eval_forces(i: u32, l: u32) {
     var fs = vec3<real>(0.0, 0.0, 0.0);
     var ps: real = 0.0;
     if (P.springs != 0u) {
-        for (var e = start[i]; e < start[i + 1u]; e++) {
+        let deg = start[i + 1u] - start[i];
+        let base = start[P.n + 1u + i];
+        for (var q = 0u; q < deg; q++) {
+            let e = base + q * P.sw;
             let j = other[e];
             let s = spring[e];
             let d = pos[j].xyz - xi.xyz;
@@ -340,7 +346,10 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     }
     var us: real = 0.0;
     if (P.springs != 0u) {
-        for (var e = start[i]; e < start[i + 1u]; e++) {
+        let deg = start[i + 1u] - start[i];
+        let base = start[P.n + 1u + i];
+        for (var q = 0u; q < deg; q++) {
+            let e = base + q * P.sw;
             let s = spring[e];
             let dl = length(pos[other[e]].xyz - xi.xyz) - s.z;
             us += 0.25 * s.x * dl * dl;
