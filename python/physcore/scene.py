@@ -206,8 +206,8 @@ def _check_device(value: object) -> str:
 #: rate until the GPU is full (N² / (rate · min(N, lanes))). The scene goes to the GPU when that
 #: is at most half the CPU's time. Fitted: N-body 1024 / 4096 / 65536 on 16 threads 0.28 / 1.1 /
 #: 268 ms a step (measured 0.30 / 1.4–1.7 / 273), on the GPU 4096 / 65536 / 262144 0.23 / 3.3 /
-#: 49 ms (0.18 / 3.4 / 51); cloth 16² / 64² 45 / 138 µs on the CPU (16 / 126), 30 / 32 µs on
-#: the GPU (33 / 33); Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27–46 µs / 3.9 ms) and 8 µs /
+#: 49 ms (0.18 / 3.4 / 51); cloth 16² / 64² 45 / 138 µs on the CPU (16–18 / 126–149), 30 / 31
+#: µs on the GPU (33 / 33–40), 1024² 0.27 ms (0.26); Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27–46 µs / 3.9 ms) and 8 µs /
 #: 0.23 ms (9 µs / 0.23 ms).
 #: A smaller GPU has about the same floors and fewer lanes: near the threshold the floors
 #: decide, far above it any GPU wins.
@@ -218,7 +218,7 @@ _AUTO_LANES = 7e4
 #: GPU's rate is per thread, see _AUTO_LANES; the CPU's chunks are of particles).
 _AUTO_RATES = {
     "pairs": (1.0e9, 256, 2.0e7),
-    "springs": (5.0e7, 4096, 1.2e10),
+    "springs": (5.0e7, 4096, 2.7e10),
     "cells": (2.7e8, 4096, 7.5e10),
     "particles": (1.0e8, 4096, 1.0e10),
 }
