@@ -14,15 +14,14 @@ speed. ``../shared/gpu/cuda_reference.py --only gs --grid N`` times the same ste
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import header, require_release  # noqa: E402
+from gpu_timing import device_of, timed  # noqa: E402
 
 import physcore as pc  # noqa: E402
 
@@ -34,23 +33,6 @@ def scene(n: int, device: str, precision: str | None) -> tuple[pc.Scene, pc.grid
     return s, g
 
 
-def timed(s: pc.Scene, g: pc.grids.GrayScott, steps: int) -> tuple[float, float]:
-    """Median seconds of a call of ``steps`` steps, and of one read-back after them. A device's
-    ``step`` returns once the device has finished (it waits for each submission's finiteness
-    flag), so the steps are timed alone; the read-back (g.books(): device to host, f32 to f64)
-    is timed apart, as a frame or a save pays it."""
-    s.step(1)  # warm-up: the move to the device, the shaders' compilation
-    times, reads = [], []
-    for _ in range(3):
-        t = time.perf_counter()
-        s.step(steps)
-        times.append(time.perf_counter() - t)
-        t = time.perf_counter()
-        _ = g.books()
-        reads.append(time.perf_counter() - t)
-    return statistics.median(times), statistics.median(reads)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default=None, help="gpu or gpu:NAME (default: gpu, else gpu:lavapipe)")
@@ -58,23 +40,20 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=50)
     args = ap.parse_args()
     require_release()
-    adapters = pc.gpu_adapters()
-    device = args.device or ("gpu" if any(a["kind"] != "cpu" for a in adapters) else "gpu:lavapipe")
     print(header())
-    for a in adapters:
-        print(f"# adapter: {a['name']} ({a['kind']}, {a['backend']}, f64: {a['f64']})")
+    device = device_of(args.device)
     print(f"# device: {device}; Gray-Scott (maze), dt = 1, median of 3 calls of {args.steps} steps (the read-back after them timed apart)")
     print("| n × n | path | precision | cell-steps/s | ms/step | vs CPU | read-back ms | max |u - u_cpu|, |v - v_cpu| |")
     print("|---:|---|---|---:|---:|---:|---:|---:|")
     for n in (int(v) for v in args.n.split(",")):
         steps = args.steps
         cpu, gc = scene(n, "cpu", None)
-        t_cpu, r_cpu = timed(cpu, gc, steps)
+        t_cpu, r_cpu = timed(cpu, steps, gc.books)
         print(f"| {n}² | CPU ({pc.simd_level()}) | f64 | {n * n * steps / t_cpu:.3g} | {1e3 * t_cpu / steps:.3g} | 1.00 | {1e3 * r_cpu:.3g} | 0 |", flush=True)
         for precision in ("f32", "f64"):
             s, g = scene(n, device, precision)
             try:
-                t, r = timed(s, g, steps)
+                t, r = timed(s, steps, g.books)
             except pc.InvalidInputError as e:
                 print(f"| {n}² | {device} | {precision} | refused: {e} | | | | |")
                 continue

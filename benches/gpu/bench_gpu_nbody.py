@@ -12,15 +12,14 @@ Vulkan): its figures show the path works and agrees, not GPU speed.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from _common import header, require_release  # noqa: E402
+from gpu_timing import device_of, timed  # noqa: E402
 
 import physcore as pc  # noqa: E402
 
@@ -33,23 +32,6 @@ def scene(n: int, device: str, precision: str | None) -> pc.Scene:
     return s
 
 
-def timed(s: pc.Scene, steps: int) -> tuple[float, float]:
-    """Median seconds of a call of ``steps`` steps, and of one read-back after them. A device's
-    ``step`` returns once the device has finished (it waits for each submission's finiteness
-    flag), so the steps are timed alone; the read-back (s.positions: device to host, f32 to f64)
-    is timed apart, as a frame or a save pays it."""
-    s.step(1)  # warm-up: the move to the device, the shaders' compilation
-    times, reads = [], []
-    for _ in range(3):
-        t = time.perf_counter()
-        s.step(steps)
-        times.append(time.perf_counter() - t)
-        t = time.perf_counter()
-        _ = s.positions
-        reads.append(time.perf_counter() - t)
-    return statistics.median(times), statistics.median(reads)
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--device", default=None, help="gpu or gpu:NAME (default: gpu, else gpu:lavapipe)")
@@ -58,24 +40,21 @@ def main() -> None:
     ap.add_argument("--cpu-max", type=int, default=16384, help="largest N also run on the CPU (its N² takes long)")
     args = ap.parse_args()
     require_release()
-    adapters = pc.gpu_adapters()
-    device = args.device or ("gpu" if any(a["kind"] != "cpu" for a in adapters) else "gpu:lavapipe")
     print(header())
-    for a in adapters:
-        print(f"# adapter: {a['name']} ({a['kind']}, {a['backend']}, f64: {a['f64']})")
+    device = device_of(args.device)
     print(f"# device: {device}; velocity Verlet, softening 0.05, median of 3 calls of {args.steps} steps (the read-back after them timed apart)")
     print("| N | path | precision | pairs/s | ms/step | vs CPU | read-back ms | max |x - x_cpu| (m) |")
     print("|---:|---|---|---:|---:|---:|---:|---:|")
     for n in (int(v) for v in args.n.split(",")):
         steps = args.steps
         cpu = scene(n, "cpu", None) if n <= args.cpu_max else None
-        t_cpu, r_cpu = timed(cpu, steps) if cpu is not None else (float("nan"), float("nan"))
+        t_cpu, r_cpu = timed(cpu, steps, lambda: cpu.positions) if cpu is not None else (float("nan"), float("nan"))
         if cpu is not None:
             print(f"| {n} | CPU | f64 | {n * n * steps / t_cpu:.3g} | {1e3 * t_cpu / steps:.3g} | 1.00 | {1e3 * r_cpu:.3g} | 0 |", flush=True)
         for precision in ("f32", "f64"):
             s = scene(n, device, precision)
             try:
-                t, r = timed(s, steps)
+                t, r = timed(s, steps, lambda: s.positions)
             except pc.InvalidInputError as e:
                 print(f"| {n} | {device} | {precision} | refused: {e} | | | | |")
                 continue
