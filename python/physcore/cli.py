@@ -22,7 +22,9 @@ A scene function's ``render_defaults`` dict gives its animation defaults: ``fram
 (simulated seconds per frame, rendered as ``round(frame_time / dt)`` steps of dt). With
 ``"substeps": "auto"`` next to ``frame_time`` each frame calls ``scene.advance(frame_time)``,
 which picks its own substeps (fluids: CFL and stability limits), unless ``--steps-per-frame``
-is given.
+is given. ``lead_in`` (simulated seconds, default 0) is simulated before the first frame, so
+that it shows something (a Turing pattern already grown from its seeds, a wave already at the
+slits); the scene's clock in the frames says so.
 
 Exit codes: 0 success, 1 the simulation diverged or the file could not be written, 2 bad usage
 (unknown scene, parameter or option value, or a request too large for memory). Every usage error

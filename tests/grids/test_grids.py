@@ -672,6 +672,34 @@ def test_turing_and_double_slit_start_where_something_shows():
             fn(n=32 if fn is pc.scenes.turing else 48, start=bad)
 
 
+def test_the_render_lead_in_starts_the_animation_where_something_shows():
+    # Issue 65: the default turing and double_slit GIFs opened on two small squares and a tank
+    # at rest. Their scenes are returned at rest (a pre-step at construction made hostile
+    # arguments hang), and the renderer simulates render_defaults["lead_in"] before frame 0.
+    from physcore import render
+
+    d = pc.scenes.double_slit(n=48)
+    assert d.time == 0.0 and d.render_defaults["lead_in"] == 1.0
+    rec = render.record(d, frames=2)
+    assert abs(rec.times[0] - 1.0) < 1e-9 and rec.times[1] > rec.times[0]
+    assert np.abs(rec.fields[0]).max() > 0  # the wave train, not a tank at rest
+    # A scene returned already started is not led in again; the lead-in scales with the duration.
+    assert pc.scenes.double_slit(n=48, start=0.5).render_defaults["lead_in"] == 0.0
+    t = pc.scenes.turing(n=32, duration=450.0)
+    assert t.render_defaults["lead_in"] == pytest.approx(100.0)
+    rec = render.record(t)  # its default 120 frames span the lead-in's end to the duration
+    assert len(rec.times) == 120 and rec.times[0] == pytest.approx(100.0) and rec.times[-1] == pytest.approx(450.0)
+    # Set to 0 it records from the scene's own state; a bad value is refused by name, unstepped.
+    t = pc.scenes.turing(n=32, duration=450.0)
+    t.render_defaults["lead_in"] = 0.0
+    assert render.record(t, frames=1).times[0] == 0.0
+    for bad in (-1.0, float("nan"), "1", True, 1e15):  # 1e15: more steps than a frame may take
+        t.render_defaults["lead_in"] = bad
+        with pytest.raises(pc.InvalidInputError, match="lead_in"):
+            render.record(t, frames=2)
+        assert t.time == 0.0
+
+
 def test_a_field_name_the_grid_does_not_have_is_refused_naming_it():
     # The core reads any other name as zeros: g.field("w") of a Gray-Scott grid was an array
     # of zeros, no error, and g.field(None) pyo3's bare TypeError.

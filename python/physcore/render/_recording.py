@@ -12,6 +12,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import (
+    _MAX_AUTO_SUBSTEPS,
     _check_advance,
     _check_auto_substeps,
     _check_color_by,
@@ -164,8 +165,11 @@ def _simulate(
     substeps: str | int = "auto",
     on_frame: Any = None,
     need_velocity: bool = False,
+    lead_in: float = 0.0,
 ) -> Recording:
-    """Step `scene` and record every frame; frame 0 (read before any stepping) is the current state.
+    """Step `scene` and record every frame; frame 0 is the current state, or the state `lead_in`
+    simulated seconds later (the scene's ``render_defaults["lead_in"]``: a first frame where
+    something is already visible, e.g. a Turing pattern grown from its seeds).
 
     Between frames: ``scene.step(steps_per_frame)``, or ``scene.advance(frame_time)`` when
     `frame_time` is given. Everything read from the scene is checked at frame 0, so a bad scene
@@ -213,6 +217,13 @@ def _simulate(
     points = np.empty((frames, n_tracers, 2), dtype=np.float32) if n_tracers else None
     has_time = hasattr(scene, "time")
     times = np.empty(frames) if has_time else None
+    if lead_in > 0:  # after every read above has been checked: a bad scene still raises unstepped
+        _lead_in(scene, lead_in)
+        x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
+        if p0 is not None:
+            p0 = _scene_pressure(scene, n)
+        if b0 is not None:
+            b0 = grab_bodies()
     bar = None
     if progress:
         from tqdm import tqdm  # plain text bar: works in terminals and notebooks alike
@@ -380,6 +391,34 @@ def _radii(scene: Any, n: int) -> np.ndarray | None:
     return r.copy() if r.shape == (n,) and np.all(np.isfinite(r) & (r >= 0)) else None
 
 
+def _lead_in(scene: Any, seconds: float) -> None:
+    """Advance `scene` by `seconds` before the first frame: in automatic substeps where it has
+    ``advance``, else as the nearest number of steps of its dt."""
+    if hasattr(scene, "advance"):
+        scene.advance(seconds)
+    else:
+        scene.step(steps_for(seconds, scene.dt))
+
+
+def _check_lead_in(scene: Any, d: dict[str, Any]) -> float:
+    """``render_defaults["lead_in"]`` (simulated seconds before the first frame, default 0)
+    checked, and refused where it would take more steps than a frame may (InvalidInputError)."""
+    v = d.get("lead_in", 0.0)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+        raise InvalidInputError(f"render_defaults['lead_in']: expected simulated seconds >= 0 (finite), got {_short(v)}")
+    v = float(v)
+    if v > 0:
+        auto_dt = getattr(scene, "auto_dt", None)
+        step = float(auto_dt()) if hasattr(scene, "advance") and callable(auto_dt) else float(getattr(scene, "dt", 0.0))
+        limit = _MAX_AUTO_SUBSTEPS if hasattr(scene, "advance") else MAX_STEPS
+        if step > 0 and not v / step <= limit:
+            raise InvalidInputError(
+                f"render_defaults['lead_in']: {v:.3g} s would take {v / step:.3g} steps of {step:.3g} s, "
+                f"more than {limit:.0e}; give a shorter lead-in (0: from the scene's state)"
+            )
+    return v
+
+
 def scene_defaults(scene: Any) -> dict[str, Any]:
     """The scene's animation defaults (``scene.render_defaults``, set by :mod:`physcore.scenes`),
     or {} for a scene without them."""
@@ -467,6 +506,7 @@ def _plan(
         "frame_time": frame_time,
         "substeps": substeps,
         "need_velocity": bool(velocities),
+        "lead_in": _check_lead_in(scene, d),
     }
 
 

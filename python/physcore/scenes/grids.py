@@ -75,11 +75,12 @@ def double_slit(
     with two slits (`width` m wide, centres `separation` m apart);
     the other faces absorb (damping layers), so the fringes are those of an open field. The
     grid is (1.5 n) × n; the source's frequency is speed / wavelength. With ``start`` > 0 the scene
-    is returned already stepped `start` seconds (0 to 100) from rest (its clock reads `start`):
-    at ``start=1`` the plane wave's front, 0.23 m from the source line to the wall, has just
-    passed the slits (0.77 s at 0.3 m/s), so the first frame shows the incoming wave train and
-    the first wavelets behind the wall. The default, 0, returns the tank at rest (a pre-step at
-    construction runs as long as the scene's step asks: with hostile arguments, unbounded).
+    is returned already stepped `start` seconds (0 to 100) from rest (its clock reads `start`).
+    The default, 0, returns the tank at rest, and its animation (``render_defaults["lead_in"]``)
+    begins 0.3 / `speed` s later (1 s at the default speed): the plane wave's front, 0.23 m from
+    the source line to the wall, has just passed the slits (0.77 s at 0.3 m/s), so the first
+    frame shows the incoming wave train and the first wavelets behind the wall, not an empty
+    tank. The lead-in is simulated by the renderer, under its progress bar and Ctrl-C, not here.
     """
     from ..grids import Oscillator, Wave
 
@@ -117,10 +118,12 @@ def double_slit(
         step = scene.dt
         scene.advance(start)
         scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
+    # Recorded from when the front has passed the slits (a scene returned at rest only).
+    scene.render_defaults = {"lead_in": 0.3 / speed if start == 0 else 0.0}
     return scene
 
 
-double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (480, 320), "style": "signed"}
+double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "lead_in": 1.0, "substeps": "auto", "size": (480, 320), "style": "signed"}
 double_slit = _stamped(double_slit, old_order=('n', 'wavelength', 'separation', 'width', 'speed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
@@ -142,10 +145,12 @@ def turing(
     D_u = 2e-5, D_v = 1e-5), with `seeds` perturbed squares (seeded) and the (F, k) of `preset`
     (:data:`physcore.grids.PRESETS`: spots, mitosis, stripes, maze, coral, holes, chaos).
     With ``start`` > 0 the scene is returned already stepped `start` time units (0 to 1e5) from the
-    seeds (its clock reads `start`), so the first frame shows a pattern (at ``start=1000``, with
-    ``duration=3500``, a maze about a third of the domain across) rather than a few small
-    squares; the default, 0, returns Pearson's start itself. The animation spans `duration` time
-    units from there: by default the maze grows until it fills the domain, at about t = 4500. Steps are at most 1 time unit (the reaction's accuracy;
+    seeds (its clock reads `start`); the default, 0, returns Pearson's start itself. The
+    animation ends `duration` time units after that: by default the maze grows until it fills
+    the domain, at about t = 4500. From a scene returned at Pearson's start, the animation's first
+    frame is drawn 22 % of `duration` in (``render_defaults["lead_in"]``: t = 1000 by default,
+    a maze about a third of the domain across) rather than on the seeds' few small squares; the
+    renderer simulates that lead-in under its progress bar and Ctrl-C. Steps are at most 1 time unit (the reaction's accuracy;
     Pearson's step) and within the diffusion limit, so coarse grids stay stable.
     ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
@@ -174,13 +179,14 @@ def turing(
         step = scene.dt
         scene.advance(start)
         scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
-    scene.render_defaults = {"frame_time": duration / 119}
+    # From Pearson's start, recorded from 22 % of the duration (t = 1000 of 4500: a maze a third of
+    # the domain across) over 119 frame steps: the maze grows until the last frame fills the domain.
+    lead = 1000.0 / 4500.0 * duration if start == 0 else 0.0
+    scene.render_defaults = {"frame_time": (duration - lead) / 119, "lead_in": lead}
     return scene
 
 
-# From t = 1000 (a maze a third of the domain across) the default duration (3500) over 119 frame
-# steps: the maze grows until the last frame, when it fills the domain (t = 4500).
-turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 4500.0 / 119, "substeps": "auto", "size": (400, 400)}
+turing.render_defaults = {"frames": 120, "fps": 30, "frame_time": 3500.0 / 119, "lead_in": 1000.0, "substeps": "auto", "size": (400, 400)}
 turing = _stamped(turing, old_order=('preset', 'n', 'duration', 'seeds', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
