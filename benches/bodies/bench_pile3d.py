@@ -12,7 +12,7 @@ above a container 4 × 4 m (floor and four walls, fixed), gravity 9.81 m/s², dt
 reported. physcore's rapier is its deterministic build (``enhanced-determinism``, no threads
 of its own: the thread count does not change this time); the bindings are timed with their
 pool at 1 thread and at their default. The precision differs (f64 against f32): physcore's own
-overhead at one precision is what ``cargo run --release --example pile3d`` measures (physcore's
+overhead at one precision is what ``cargo run --release --features examples --example pile3d`` measures (physcore's
 step against the bare rapier3d-f64 pipeline on this scene).
 """
 from __future__ import annotations

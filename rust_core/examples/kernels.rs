@@ -1,5 +1,5 @@
 //! Quick timing of the hot kernels at every SIMD level this CPU has (a development aid; the
-//! benchmarks of record are under benches/). `cargo run --release --example kernels -- nbody`
+//! benchmarks of record are under benches/). `cargo run --release --features examples --example kernels -- nbody`
 use glam::DVec3;
 use physcore_core::simd::{self, Level};
 use physcore_core::terms::{PairwiseGravity, Springs, UniformGravity};

@@ -3,7 +3,7 @@
 //! dt = 1/60 s, 4 solver iterations, no sleeping; median ms/step of 3 blocks of 60 steps after
 //! 60 steps of fall, the two stepped alternately, block by block. What physcore adds per step:
 //! its energy books (kinetic and potential energy before and after) and the divergence check.
-//! `cargo run --release --example pile3d -- 1000 3000`
+//! `cargo run --release --features examples --example pile3d -- 1000 3000`
 use physcore_core::systems::bodies::Bodies3;
 use physcore_core::systems::System;
 use physcore_core::terms::registry::{Params, Value};

@@ -35,6 +35,11 @@ pub mod systems;
 pub mod terms;
 #[cfg(test)]
 mod trait_sizes;
+// The public-API tests (src/integration_tests) name the crate as a user does.
+#[cfg(test)]
+extern crate self as physcore_core;
+#[cfg(test)]
+mod integration_tests;
 pub mod vector;
 pub mod world;
 

@@ -1,6 +1,6 @@
 //! Integrator numerics: convergence orders, stability, energy behaviour.
 
-use crate::common::oscillator;
+use super::common::oscillator;
 use physcore_core::integrators::{by_name, NAMES};
 use physcore_core::ParticleSystem;
 

@@ -2,7 +2,7 @@
 //! attempts, it rolls everything back, and reading it never changes a result; `run_watched`
 //! leaves the calling thread free to set it.
 
-use crate::common::cloth;
+use super::common::cloth;
 use glam::DVec3;
 use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;

@@ -1,6 +1,6 @@
 //! Terms, colliders, energy books, conservation laws, determinism and error handling.
 
-use crate::common::{cloth, cloud, Rng};
+use super::common::{cloth, cloud, Rng};
 use glam::{DVec2, DVec3};
 use physcore_core::constraints::{Aabb, Plane, Sphere};
 use physcore_core::terms::{Drag, Springs, UniformGravity};

@@ -2,7 +2,7 @@
 //! them, couplings after every step, and the ODE layer's tableaux shared with the particle
 //! integrators.
 
-use crate::common::oscillator;
+use super::common::oscillator;
 use glam::DVec2;
 use physcore_core::error::Error;
 use physcore_core::systems::ode::OdeSystem;
@@ -65,7 +65,7 @@ fn a_divergence_in_any_system_rolls_every_system_back() {
 #[test]
 fn advance_keeps_to_the_smallest_stable_step_of_all_systems() {
     let mut w = oscillator("verlet", 0.1);
-    let particles_dt = w.auto_dt().unwrap();
+    let particles_dt: f64 = w.auto_dt().unwrap();
     w.add_system(Box::new(harmonic("rk4", Some(particles_dt / 3.0)))).unwrap();
     assert_eq!(w.auto_dt(), Some(particles_dt / 3.0));
     let n = w.advance_interruptible(1.0, None, &Arc::default()).unwrap();
@@ -135,7 +135,7 @@ fn an_ode_system_is_bit_identical_for_1_and_2_threads() {
 /// A damped cloth falling onto a floor (constraint books), plus an ODE system.
 fn restartable(integrator: &str) -> World<glam::DVec3> {
     use physcore_core::constraints::Plane;
-    let mut w = crate::common::cloth(6, integrator, 2, 0.05);
+    let mut w = super::common::cloth(6, integrator, 2, 0.05);
     let floor = Plane::new(glam::DVec3::new(0.0, 0.0, -0.05), glam::DVec3::Z, 0.5, 0.3).unwrap();
     w.particles_mut().add_constraint(Box::new(floor));
     w.add_system(Box::new(harmonic("dopri5", None))).unwrap();
