@@ -1,5 +1,5 @@
 """Linear stability limits of the fixed-step integrators, measured through the Python API: the
-pytest twin of the cargo test ``stability_limits_match_theory`` (rust_core/tests/core/integrators.rs).
+pytest twin of the cargo test ``stability_limits_match_theory`` (rust_core/src/integration_tests/integrators.rs).
 
 Model problem: the undamped harmonic oscillator x'' = -ω² x, a free particle of mass m tied by
 a zero-rest-length spring of stiffness k = m ω² to a pinned anchor (the force is exactly -k x,
