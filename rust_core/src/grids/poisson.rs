@@ -146,17 +146,27 @@ impl Stencil {
     /// identity part nor a Dirichlet side (adds 1 to its d0), making a pure-Neumann operator
     /// definite. If the right-hand side sums to zero over the component (a compatible Poisson
     /// problem), the solution is unchanged: summing the rows of the component gives x_pin = 0.
-    pub fn pin(&mut self) {
+    ///
+    /// `Error::OutOfMemory` (naming "fluid") if its flood fill's buffers cannot be had: they
+    /// are sized by the grid (a flag per unknown; the stack, up to one entry per unknown).
+    pub fn pin(&mut self) -> Result<()> {
         let w = self.w;
-        let mut seen = vec![false; self.open.len()];
-        let mut stack = Vec::new();
-        for c0 in 0..self.open.len() {
+        let n = self.open.len();
+        let need = Need::new(
+            "fluid",
+            Need::bytes_of::<bool>(n) + Need::bytes_of::<usize>(n),
+            format!("a solver of {} unknowns", count(n as u128)),
+        );
+        let mut seen = need.filled(n, false)?;
+        let mut stack: Vec<usize> = Vec::new();
+        need.reserve(&mut stack, n.min(64))?;
+        for c0 in 0..n {
             if !self.open[c0] || seen[c0] {
                 continue;
             }
             let mut definite = false;
             seen[c0] = true;
-            stack.push(c0);
+            stack.push(c0); // room: the stack is empty here, and keeps the capacity it grew to
             while let Some(c) = stack.pop() {
                 definite |= self.d0[c] > 0.0 || self.held(c) > 0.0;
                 let links =
@@ -164,6 +174,11 @@ impl Stencil {
                 for (nb, wt) in links {
                     if wt > 0.0 && !seen[nb] {
                         seen[nb] = true;
+                        // Grown fallibly, doubling (at most n entries: each unknown is pushed once).
+                        if stack.len() == stack.capacity() {
+                            let grown = (2 * stack.capacity()).min(n);
+                            need.reserve(&mut stack, grown)?;
+                        }
                         stack.push(nb);
                     }
                 }
@@ -173,6 +188,7 @@ impl Stencil {
             }
         }
         self.set_scale(self.scale);
+        Ok(())
     }
 
     /// Sets s (e.g. ν·dt/dx² for viscosity) and the scaled coefficients.
@@ -788,7 +804,7 @@ mod tests {
 
     fn poisson(nx: usize, ny: usize, solid: impl Fn(usize, usize) -> bool) -> Stencil {
         let mut s = Stencil::build(nx, ny, &|i, j| !solid(i, j), [0.0; 4], false, 0.0).unwrap();
-        s.pin();
+        s.pin().unwrap();
         s
     }
 

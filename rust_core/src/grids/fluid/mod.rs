@@ -591,7 +591,7 @@ impl StableFluid {
         // an outflow. Viscosity: the wall rule; zero gradient at an outflow; v = 0 on an inflow.
         let mut st =
             Stencil::build(nx, ny, &|i, j| !solid(i, j), [if outflow { 1.0 } else { 0.0 }, 0.0, 0.0, 0.0], false, 0.0)?;
-        st.pin();
+        st.pin()?;
         let pressure = Pcg::new(st, true)?;
         let wall = if config.no_slip { 2.0 } else { 0.0 };
         let (east, west) = if outflow { (0.0, 2.0) } else { (wall, wall) };
