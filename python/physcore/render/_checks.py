@@ -262,17 +262,18 @@ def _check_writable(path: Path) -> None:
     os.unlink(probe)
 
 
-def _check_auto_substeps(scene: Any, frame_time: float) -> None:
-    """Refuse, naming frame_time, a frame that would need more automatic substeps than
-    ``Scene.advance`` takes in one call (1e12) at the scene's current substep."""
+def _check_auto_substeps(scene: Any, frame_time: float, name: str = "frame_time") -> None:
+    """Refuse, naming `name` (frame_time, or the lead-in before the first frame), a span of
+    simulated time that would need more automatic substeps than ``Scene.advance`` takes in one
+    call (1e12) at the scene's current substep."""
     auto_dt = getattr(scene, "auto_dt", None)
     if not callable(auto_dt):
         return
     step = float(auto_dt())
     if step > 0 and not frame_time / step <= _MAX_AUTO_SUBSTEPS:
         raise InvalidInputError(
-            f"frame_time: {frame_time:.3g} s per frame would take {frame_time / step:.3g} automatic substeps of "
-            f"{step:.3g} s, more than {_MAX_AUTO_SUBSTEPS:.0e}; give a shorter frame_time"
+            f"{name}: {frame_time:.3g} s{' per frame' if name == 'frame_time' else ''} would take {frame_time / step:.3g} automatic substeps of "
+            f"{step:.3g} s, more than {_MAX_AUTO_SUBSTEPS:.0e}; give a shorter {name}"
         )
 
 

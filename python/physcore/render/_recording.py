@@ -12,7 +12,6 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ._checks import (
-    _MAX_AUTO_SUBSTEPS,
     _check_advance,
     _check_auto_substeps,
     _check_color_by,
@@ -391,31 +390,31 @@ def _radii(scene: Any, n: int) -> np.ndarray | None:
     return r.copy() if r.shape == (n,) and np.all(np.isfinite(r) & (r >= 0)) else None
 
 
+_LEAD_IN = "render_defaults['lead_in']"
+
+
 def _lead_in(scene: Any, seconds: float) -> None:
     """Advance `scene` by `seconds` before the first frame: in automatic substeps where it has
     ``advance``, else as the nearest number of steps of its dt."""
     if hasattr(scene, "advance"):
         scene.advance(seconds)
     else:
-        scene.step(steps_for(seconds, scene.dt))
+        scene.step(steps_for(seconds, scene.dt, _LEAD_IN))
 
 
 def _check_lead_in(scene: Any, d: dict[str, Any]) -> float:
     """``render_defaults["lead_in"]`` (simulated seconds before the first frame, default 0)
-    checked, and refused where it would take more steps than a frame may (InvalidInputError)."""
+    checked, and refused where it would take more steps than a frame may (InvalidInputError):
+    the checks of a frame's stepping, under the lead-in's name."""
     v = d.get("lead_in", 0.0)
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-        raise InvalidInputError(f"render_defaults['lead_in']: expected simulated seconds >= 0 (finite), got {_short(v)}")
+        raise InvalidInputError(f"{_LEAD_IN}: expected simulated seconds >= 0 (finite), got {_short(v)}")
     v = float(v)
     if v > 0:
-        auto_dt = getattr(scene, "auto_dt", None)
-        step = float(auto_dt()) if hasattr(scene, "advance") and callable(auto_dt) else float(getattr(scene, "dt", 0.0))
-        limit = _MAX_AUTO_SUBSTEPS if hasattr(scene, "advance") else MAX_STEPS
-        if step > 0 and not v / step <= limit:
-            raise InvalidInputError(
-                f"render_defaults['lead_in']: {v:.3g} s would take {v / step:.3g} steps of {step:.3g} s, "
-                f"more than {limit:.0e}; give a shorter lead-in (0: from the scene's state)"
-            )
+        if hasattr(scene, "advance"):
+            _check_auto_substeps(scene, v, _LEAD_IN)
+        else:
+            steps_for(v, scene.dt, _LEAD_IN)
     return v
 
 
@@ -426,14 +425,14 @@ def scene_defaults(scene: Any) -> dict[str, Any]:
     return dict(d) if isinstance(d, dict) else {}
 
 
-def steps_for(frame_time: float, dt: float) -> int:
+def steps_for(frame_time: float, dt: float, name: str = "frame_time") -> int:
     """Steps of `dt` closest to `frame_time` simulated seconds (at least 1); InvalidInputError
-    naming frame_time above MAX_STEPS. The one conversion the CLI and the library share."""
+    naming `name` above MAX_STEPS. The one conversion the CLI and the library share."""
     ratio = float(frame_time) / float(dt)
     if not ratio <= MAX_STEPS:
         raise InvalidInputError(
-            f"frame_time: {float(frame_time):.3g} s per frame is {ratio:.3g} steps of dt = {float(dt):.3g} s, "
-            f"above {MAX_STEPS:.3g}; give a shorter frame_time or a larger dt"
+            f"{name}: {float(frame_time):.3g} s{' per frame' if name == 'frame_time' else ''} is {ratio:.3g} steps of "
+            f"dt = {float(dt):.3g} s, above {MAX_STEPS:.3g}; give a shorter {name} or a larger dt"
         )
     return max(1, int(round(ratio)))
 
