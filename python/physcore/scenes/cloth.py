@@ -115,8 +115,8 @@ def _room(size: float, floor: bool = True) -> dict:
     z, cell = -1.25 * size, 0.25 * size
     (x0, y0), (x1, y1) = (-1.5 * size, -2.0 * size), (2.5 * size, 4.0 * size)
     decor = [{"polygon": [[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], "color": (212, 207, 197)}]
-    decor += [{"line": [[x, y0, z], [x, y1, z]], "color": (184, 178, 168), "width": 1} for x in np.arange(x0, x1 + 1e-9, cell)]
-    decor += [{"line": [[x0, y, z], [x1, y, z]], "color": (184, 178, 168), "width": 1} for y in np.arange(y0, y1 + 1e-9, cell)]
+    decor += [{"line": [[x, y0, z], [x, y1, z]], "color": (184, 178, 168), "width": 1} for x in np.arange(x0, x1 + 0.5 * cell, cell)]
+    decor += [{"line": [[x0, y, z], [x1, y, z]], "color": (184, 178, 168), "width": 1} for y in np.arange(y0, y1 + 0.5 * cell, cell)]
     return {"look": {"backdrop": ((226, 232, 240), (196, 204, 216)), "decor": decor if floor else []},
             "extent": ((-0.05 * size, -1.0 * size, z), (1.05 * size, 1.0 * size, 0.05 * size))}
 
