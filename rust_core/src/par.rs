@@ -86,13 +86,107 @@ fn ranges(n: usize) -> impl Iterator<Item = Range<usize>> + Clone {
     (0..n.div_ceil(CHUNK)).map(move |c| c * CHUNK..((c + 1) * CHUNK).min(n))
 }
 
+/// Runs `body(c)` for every `c` in `0..n` on the pool of the call in progress (rayon splits the
+/// indices as it splits a slice's chunks); false, and nothing run, without a pool.
+///
+/// The one place the loops below meet rayon. Its machinery (jobs, join, the bridge of producers
+/// and consumers) is generic over the closure it runs, and was compiled once per loop: 800,000
+/// of the crate's 4.2 million lines of LLVM IR, a fifth of its build (issue 67). Behind a `dyn`
+/// it is compiled once; the cost is one indirect call per chunk of `CHUNK` items.
+#[inline(never)]
+pub fn for_each_index(n: usize, body: &(dyn Fn(usize) + Sync)) -> bool {
+    for_each_index_min(n, 1, body)
+}
+
+/// `for_each_index` with at least `min_len` indices a task (rayon's `with_min_len`).
+#[inline(never)]
+pub fn for_each_index_min(n: usize, min_len: usize, body: &(dyn Fn(usize) + Sync)) -> bool {
+    fork(|| (0..n).into_par_iter().with_min_len(min_len).for_each(body)).is_some()
+}
+
+/// `f(c)` for every `c` in `0..n`: in parallel (`for_each_index_min`, at least `min_len` indices
+/// a task) when `parallel` and a pool is there, else in index order on the calling thread. With
+/// `Shared` for the slices each index writes, this is every chunked loop of the crate.
+#[inline]
+pub fn each(parallel: bool, n: usize, min_len: usize, f: impl Fn(usize) + Sync + Send) {
+    if !(parallel && for_each_index_min(n, min_len, &f)) {
+        (0..n).for_each(f);
+    }
+}
+
+/// `f(c)` for every `c` in `0..n`, in parallel (`for_each_index`), collected in index order;
+/// `None` (nothing run) without a pool.
+#[inline]
+pub fn map_index<T: Send>(n: usize, f: impl Fn(usize) -> T + Sync) -> Option<Vec<T>> {
+    let mut out: Vec<T> = Vec::with_capacity(n);
+    let p = SyncPtr(out.as_mut_ptr());
+    // Each index writes its own slot once. If `f` panics, rayon re-raises it here after every
+    // task has ended, and `out` (length 0) frees its buffer without dropping what was written.
+    if !for_each_index(n, &|c| unsafe { p.get().add(c).write(f(c)) }) {
+        return None;
+    }
+    // SAFETY: every slot in 0..n was written (for_each_index ran every index, none panicked).
+    unsafe { out.set_len(n) };
+    Some(out)
+}
+
+/// `f(c)` for `c` in `0..chunks`, in index order: in parallel (`map_index`) when the loop covers
+/// `n >= PAR_MIN` items and a pool is there, else serially. The same values either way.
+#[inline]
+pub fn map_chunks<T: Send>(n: usize, chunks: usize, f: impl Fn(usize) -> T + Sync + Send) -> Vec<T> {
+    if n >= PAR_MIN {
+        if let Some(v) = map_index(chunks, &f) {
+            return v;
+        }
+    }
+    (0..chunks).map(f).collect()
+}
+
+/// `f(c, item)` for each item of `items` (`c` its index), in index order: in parallel when the
+/// loop covers `n >= PAR_MIN` items and a pool is there, else serially. The items are typically
+/// a chunk's disjoint slices of several arrays, zipped.
+#[inline]
+pub fn map_vec<T: Send, R: Send>(n: usize, items: Vec<T>, f: impl Fn(usize, T) -> R + Sync + Send) -> Vec<R> {
+    if n >= PAR_MIN {
+        let len = items.len();
+        let mut items = std::mem::ManuallyDrop::new(items);
+        let src = SyncPtr(items.as_mut_ptr());
+        // SAFETY: each index moves its own item out once; the buffer is then freed without
+        // dropping them (and leaked, with what was not moved, if `f` panics).
+        if let Some(out) = map_index(len, |c| f(c, unsafe { src.get().add(c).read() })) {
+            unsafe { drop(Vec::from_raw_parts(items.as_mut_ptr(), 0, items.capacity())) };
+            return out;
+        }
+        // No pool: nothing was moved out.
+        return std::mem::ManuallyDrop::into_inner(items).into_iter().enumerate().map(|(c, t)| f(c, t)).collect();
+    }
+    items.into_iter().enumerate().map(|(c, t)| f(c, t)).collect()
+}
+
+/// The `c`-th chunk of `CHUNK` items of the slice at `p` of `len` items (empty past its end).
+///
+/// # Safety
+/// `p` and `len` describe a live `&mut [T]`, and no other reference to this chunk is alive.
+#[inline(always)]
+unsafe fn chunk_of<'a, T>(p: SyncPtr<T>, len: usize, c: usize) -> &'a mut [T] {
+    let start = (c * CHUNK).min(len);
+    let end = ((c + 1) * CHUNK).min(len);
+    std::slice::from_raw_parts_mut(p.get().add(start), end - start)
+}
+
 /// `f(start, chunk)` on consecutive chunks of `a`.
 #[inline]
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
-    if fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().for_each(|(c, a)| f(c * CHUNK, a))).is_none() {
-        for (c, a) in a.chunks_mut(CHUNK).enumerate() {
-            f(c * CHUNK, a);
+    let n = a.len();
+    if n >= PAR_MIN {
+        let pa = SyncPtr(a.as_mut_ptr());
+        // SAFETY (here and below): chunk `c` of each slice is handed to index `c` alone.
+        if for_each_index(n.div_ceil(CHUNK), &|c| f(c * CHUNK, unsafe { chunk_of(pa, n, c) })) {
+            return;
         }
+    }
+    for (c, a) in a.chunks_mut(CHUNK).enumerate() {
+        f(c * CHUNK, a);
     }
 }
 
@@ -100,14 +194,16 @@ pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) 
 #[inline]
 pub fn chunks2<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send) {
     debug_assert_eq!(a.len(), b.len());
-    if fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK).zip(b.par_chunks_mut(CHUNK)).enumerate().for_each(|(c, (a, b))| f(c * CHUNK, a, b))
-    })
-    .is_none()
-    {
-        for (c, (a, b)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
-            f(c * CHUNK, a, b);
+    let (na, nb) = (a.len(), b.len());
+    if na >= PAR_MIN {
+        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
+        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK));
+        if for_each_index(chunks, &|c| f(c * CHUNK, unsafe { chunk_of(pa, na, c) }, unsafe { chunk_of(pb, nb, c) })) {
+            return;
         }
+    }
+    for (c, (a, b)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
+        f(c * CHUNK, a, b);
     }
 }
 
@@ -119,18 +215,17 @@ pub fn chunks3<A: Send, B: Send, C: Send>(
     c: &mut [C],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C]) + Sync + Send,
 ) {
-    if fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks_mut(CHUNK))
-            .zip(c.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(k, ((a, b), c))| f(k * CHUNK, a, b, c))
-    })
-    .is_none()
-    {
-        for (k, ((a, b), c)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).enumerate() {
-            f(k * CHUNK, a, b, c);
+    let (na, nb, nc) = (a.len(), b.len(), c.len());
+    if na >= PAR_MIN {
+        let (pa, pb, pc) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()), SyncPtr(c.as_mut_ptr()));
+        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK)).min(nc.div_ceil(CHUNK));
+        let body = |k: usize| unsafe { f(k * CHUNK, chunk_of(pa, na, k), chunk_of(pb, nb, k), chunk_of(pc, nc, k)) };
+        if for_each_index(chunks, &body) {
+            return;
         }
+    }
+    for (k, ((a, b), c)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).enumerate() {
+        f(k * CHUNK, a, b, c);
     }
 }
 
@@ -143,20 +238,21 @@ pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     d: &mut [D],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
 ) {
-    if fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks_mut(CHUNK))
-            .zip(c.par_chunks_mut(CHUNK))
-            .zip(d.par_chunks_mut(CHUNK))
-            .enumerate()
-            .for_each(|(k, (((a, b), c), d))| f(k * CHUNK, a, b, c, d))
-    })
-    .is_none()
-    {
-        let chunks = a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).zip(d.chunks_mut(CHUNK));
-        for (k, (((a, b), c), d)) in chunks.enumerate() {
-            f(k * CHUNK, a, b, c, d);
+    let (na, nb, nc, nd) = (a.len(), b.len(), c.len(), d.len());
+    if na >= PAR_MIN {
+        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
+        let (pc, pd) = (SyncPtr(c.as_mut_ptr()), SyncPtr(d.as_mut_ptr()));
+        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK)).min(nc.div_ceil(CHUNK)).min(nd.div_ceil(CHUNK));
+        let body = |k: usize| unsafe {
+            f(k * CHUNK, chunk_of(pa, na, k), chunk_of(pb, nb, k), chunk_of(pc, nc, k), chunk_of(pd, nd, k))
+        };
+        if for_each_index(chunks, &body) {
+            return;
         }
+    }
+    let chunks = a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).zip(d.chunks_mut(CHUNK));
+    for (k, (((a, b), c), d)) in chunks.enumerate() {
+        f(k * CHUNK, a, b, c, d);
     }
 }
 
@@ -185,14 +281,15 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    if let Some(p) = fork_if(a.len(), || {
-        a.par_chunks_mut(CHUNK)
-            .zip(b.par_chunks_mut(CHUNK))
-            .enumerate()
-            .map(|(c, (a, b))| f(c * CHUNK, a, b))
-            .collect::<Vec<T>>()
-    }) {
-        return p.into_iter().fold(zero, fold);
+    let (na, nb) = (a.len(), b.len());
+    if na >= PAR_MIN {
+        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
+        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK));
+        if let Some(p) =
+            map_index(chunks, |c| f(c * CHUNK, unsafe { chunk_of(pa, na, c) }, unsafe { chunk_of(pb, nb, c) }))
+        {
+            return p.into_iter().fold(zero, fold);
+        }
     }
     // Serially: the same partials folded in the same order, without the vector of partials.
     let mut acc = zero;
@@ -210,10 +307,12 @@ pub fn chunks1_fold<A: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    if let Some(p) =
-        fork_if(a.len(), || a.par_chunks_mut(CHUNK).enumerate().map(|(c, a)| f(c * CHUNK, a)).collect::<Vec<T>>())
-    {
-        return p.into_iter().fold(zero, fold);
+    let n = a.len();
+    if n >= PAR_MIN {
+        let pa = SyncPtr(a.as_mut_ptr());
+        if let Some(p) = map_index(n.div_ceil(CHUNK), |c| f(c * CHUNK, unsafe { chunk_of(pa, n, c) })) {
+            return p.into_iter().fold(zero, fold);
+        }
     }
     // Serially: the same partials folded in the same order, without the vector of partials.
     let mut acc = zero;
@@ -226,8 +325,10 @@ pub fn chunks1_fold<A: Send, T: Send>(
 /// Deterministic fold of `f(range)` over fixed chunks of `0..n` (e.g. a maximum).
 #[inline]
 pub fn reduce<T: Send>(n: usize, zero: T, fold: impl Fn(T, T) -> T, f: impl Fn(Range<usize>) -> T + Sync + Send) -> T {
-    if let Some(p) = fork_if(n, || ranges(n).collect::<Vec<_>>().into_par_iter().map(&f).collect::<Vec<T>>()) {
-        return p.into_iter().fold(zero, fold);
+    if n >= PAR_MIN {
+        if let Some(p) = map_index(n.div_ceil(CHUNK), |c| f(c * CHUNK..((c + 1) * CHUNK).min(n))) {
+            return p.into_iter().fold(zero, fold);
+        }
     }
     // Serially: the same partials folded in the same order, without the vector of partials.
     let mut acc = zero;
@@ -247,10 +348,58 @@ pub fn chunks2_any<A: Send, B: Send>(
     chunks2_fold(a, b, false, |x, y| x | y, f)
 }
 
+/// A `&mut [T]` handed out in disjoint pieces to the tasks of a parallel pass (`each`): piece
+/// `c` of `size` items to index `c`, as `chunks_mut(size)` would give them.
+pub struct Shared<T> {
+    p: SyncPtr<T>,
+    len: usize,
+}
+impl<T> Clone for Shared<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for Shared<T> {}
+impl<T> Shared<T> {
+    #[inline(always)]
+    pub fn new(s: &mut [T]) -> Self {
+        Shared { p: SyncPtr(s.as_mut_ptr()), len: s.len() }
+    }
+    /// How many pieces of `size` items (the last one shorter).
+    #[inline(always)]
+    pub fn pieces(self, size: usize) -> usize {
+        self.len.div_ceil(size)
+    }
+    /// Piece `c` of `size` items (empty past the end).
+    ///
+    /// # Safety
+    /// The slice outlives the result, and no other live reference overlaps it.
+    #[inline(always)]
+    pub unsafe fn piece<'a>(self, size: usize, c: usize) -> &'a mut [T] {
+        let (start, end) = ((c * size).min(self.len), ((c + 1) * size).min(self.len));
+        std::slice::from_raw_parts_mut(self.p.get().add(start), end - start)
+    }
+    /// Item `i` (`i < len`).
+    ///
+    /// # Safety
+    /// As `piece`.
+    #[inline(always)]
+    pub unsafe fn at<'a>(self, i: usize) -> &'a mut T {
+        debug_assert!(i < self.len);
+        &mut *self.p.get().add(i)
+    }
+}
+
 /// A raw pointer shared by the threads of a parallel pass in which each thread writes a disjoint
 /// set of indices (a scatter through a permutation, the cell-list sort).
-#[derive(Clone, Copy)]
 pub struct SyncPtr<T>(pub *mut T);
+// By hand: the derives would ask `T: Copy`, and a pointer copies whatever it points to.
+impl<T> Clone for SyncPtr<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SyncPtr<T> {}
 unsafe impl<T> Send for SyncPtr<T> {}
 unsafe impl<T> Sync for SyncPtr<T> {}
 impl<T> SyncPtr<T> {

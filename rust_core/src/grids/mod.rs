@@ -24,7 +24,6 @@ mod wave_fused;
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::vector::Real;
-use rayon::prelude::*;
 
 /// What lies beyond a face of the grid (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -302,16 +301,11 @@ pub fn rows_each<T: Send>(
 ) {
     debug_assert_eq!(out.len(), row_len * partials.len());
     let per_task = task_rows(partials.len());
-    let done = par::fork_if(out.len(), || {
-        out.par_chunks_mut(row_len)
-            .zip(partials.par_iter_mut())
-            .with_min_len(per_task)
-            .enumerate()
-            .for_each(|(r, (row, p))| *p = f(r, row))
-    });
-    if done.is_none() {
-        out.chunks_mut(row_len).zip(partials.iter_mut()).enumerate().for_each(|(r, (row, p))| *p = f(r, row));
-    }
+    let rows = partials.len().min(out.len().div_ceil(row_len));
+    let parallel = out.len() >= par::PAR_MIN;
+    let (o, p) = (par::Shared::new(out), par::Shared::new(partials));
+    // SAFETY: row r and partial r go to index r alone.
+    par::each(parallel, rows, per_task, |r| unsafe { *p.at(r) = f(r, o.piece(row_len, r)) });
 }
 
 /// `rows_each`, returning Σ f in row order.
@@ -335,21 +329,11 @@ pub fn rows2_each<T: Send>(
 ) {
     debug_assert_eq!(a.len(), b.len());
     let per_task = task_rows(partials.len());
-    let done = par::fork_if(a.len(), || {
-        a.par_chunks_mut(row_len)
-            .zip(b.par_chunks_mut(row_len))
-            .zip(partials.par_iter_mut())
-            .with_min_len(per_task)
-            .enumerate()
-            .for_each(|(r, ((a, b), p))| *p = f(r, a, b))
-    });
-    if done.is_none() {
-        a.chunks_mut(row_len)
-            .zip(b.chunks_mut(row_len))
-            .zip(partials.iter_mut())
-            .enumerate()
-            .for_each(|(r, ((a, b), p))| *p = f(r, a, b));
-    }
+    let rows = partials.len().min(a.len().div_ceil(row_len)).min(b.len().div_ceil(row_len));
+    let parallel = a.len() >= par::PAR_MIN;
+    let (pa, pb, p) = (par::Shared::new(a), par::Shared::new(b), par::Shared::new(partials));
+    // SAFETY: the rows and partial r go to index r alone.
+    par::each(parallel, rows, per_task, |r| unsafe { *p.at(r) = f(r, pa.piece(row_len, r), pb.piece(row_len, r)) });
 }
 
 /// `rows2_each`, returning Σ f in row order.
@@ -385,12 +369,11 @@ pub fn rows2_sum(
 
 /// Σ f(r) over `rows` rows, in row order, in parallel (read-only passes: energies, norms).
 pub fn sum_rows(rows: usize, cells: usize, f: impl Fn(usize) -> Real + Sync + Send) -> Real {
-    let partials: Option<Vec<Real>> =
-        par::fork_if(cells, || (0..rows).into_par_iter().with_min_len(MIN_ROWS).map(&f).collect());
-    match partials {
-        Some(p) => p.into_iter().sum(),
-        None => (0..rows).map(f).sum(),
-    }
+    let mut partials = vec![0.0; rows];
+    let p = par::Shared::new(&mut partials);
+    // SAFETY: partial r goes to index r alone.
+    par::each(cells >= par::PAR_MIN, rows, MIN_ROWS, |r| unsafe { *p.at(r) = f(r) });
+    partials.into_iter().sum()
 }
 
 /// Σ a in a fixed order of 8 interleaved partial sums (vectorises at every SIMD level and gives

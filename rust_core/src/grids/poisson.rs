@@ -20,6 +20,7 @@
 use super::{rows2_sum, rows_sum, sum_rows};
 use crate::alloc::{count, Need};
 use crate::error::Result;
+use crate::par::Shared;
 use crate::simd;
 use crate::vector::Real;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -429,21 +430,11 @@ fn jacobi2(st: &Stencil, x: &[Real], b: &[Real], out: &mut [Real], scratch: &mut
     let mut partials = vec![0.0; blocks];
     let rows = rows_of(out, w, ny);
     let scratch = &mut scratch[..blocks * 3 * w];
-    let done = crate::par::fork_if(rows.len(), || {
-        use rayon::prelude::*;
-        rows.par_chunks_mut(BLOCK * w)
-            .zip(scratch.par_chunks_mut(3 * w))
-            .zip(partials.par_iter_mut())
-            .enumerate()
-            .for_each(|(k, ((o, sc), p))| run(k, o, sc, p))
-    });
-    if done.is_none() {
-        for (k, ((o, sc), p)) in
-            rows.chunks_mut(BLOCK * w).zip(scratch.chunks_mut(3 * w)).zip(partials.iter_mut()).enumerate()
-        {
-            run(k, o, sc, p);
-        }
-    }
+    let parallel = rows.len() >= crate::par::PAR_MIN;
+    let n = partials.len().min(rows.len().div_ceil(BLOCK * w)).min(scratch.len().div_ceil(3 * w));
+    let (o, sc, p) = (Shared::new(rows), Shared::new(scratch), Shared::new(&mut partials));
+    // SAFETY: block k's rows, scratch and partial go to index k alone.
+    crate::par::each(parallel, n, 1, |k| unsafe { run(k, o.piece(BLOCK * w, k), sc.piece(3 * w, k), p.at(k)) });
     partials.iter().sum()
 }
 
@@ -583,23 +574,11 @@ fn update_xrz(
             || f(j, a, b, c),
         )
     };
-    let done = crate::par::fork_if(x.len(), || {
-        use rayon::prelude::*;
-        x.par_chunks_mut(w)
-            .zip(r.par_chunks_mut(w))
-            .zip(z.par_chunks_mut(w))
-            .zip(partials.par_iter_mut())
-            .with_min_len(4)
-            .enumerate()
-            .for_each(|(j, (((a, b), c), p))| *p = g(j, a, b, c))
-    });
-    if done.is_none() {
-        for (j, (((a, b), c), p)) in
-            x.chunks_mut(w).zip(r.chunks_mut(w)).zip(z.chunks_mut(w)).zip(partials.iter_mut()).enumerate()
-        {
-            *p = g(j, a, b, c);
-        }
-    }
+    let parallel = x.len() >= crate::par::PAR_MIN;
+    let n = partials.len().min(x.len().div_ceil(w)).min(r.len().div_ceil(w)).min(z.len().div_ceil(w));
+    let (a, b, c, p) = (Shared::new(x), Shared::new(r), Shared::new(z), Shared::new(&mut partials));
+    // SAFETY: row j of each array and partial j go to index j alone.
+    crate::par::each(parallel, n, 4, |j| unsafe { *p.at(j) = g(j, a.piece(w, j), b.piece(w, j), c.piece(w, j)) });
     partials.iter().fold((0.0, 0.0), |(s, t), &(a, b)| (s + a, t + b))
 }
 

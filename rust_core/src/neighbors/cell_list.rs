@@ -19,7 +19,6 @@ use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::par::SyncPtr;
 use crate::vector::{Real, Vector};
-use rayon::prelude::*;
 use std::ops::Range;
 
 /// Maximum candidate ranges a query returns (3D, hashed: 27 cells).
@@ -257,9 +256,9 @@ impl CellList {
                     hp[kk as usize] += 1;
                 }
             };
-            if parts == 1 || crate::par::fork(|| h.par_chunks_mut(nb).enumerate().for_each(count)).is_none() {
-                h.chunks_mut(nb).enumerate().for_each(count);
-            }
+            let hs = crate::par::Shared::new(h);
+            // SAFETY: part p's histogram goes to index p alone.
+            crate::par::each(parts > 1, hs.pieces(nb), 1, |p| count((p, unsafe { hs.piece(nb, p) })));
         }
         self.start.resize(nb + 1, 0);
         let mut acc = 0u32;
@@ -298,9 +297,9 @@ impl CellList {
             off[b] = slot;
         };
         let h = &mut self.hist;
-        if parts == 1 || crate::par::fork(|| h.par_chunks_mut(nb).enumerate().for_each(scatter)).is_none() {
-            h.chunks_mut(nb).enumerate().for_each(scatter);
-        }
+        let hs = crate::par::Shared::new(h);
+        // SAFETY: part p's offsets go to index p alone.
+        crate::par::each(parts > 1, hs.pieces(nb), 1, |p| scatter((p, unsafe { hs.piece(nb, p) })));
 
         // 4. Cell coordinates in sorted order (for queries).
         self.cells.resize(n, [0; 3]);

@@ -6,7 +6,6 @@ use super::cell_list::CellList;
 use crate::alloc::{count, Need};
 use crate::error::{invalid, Result};
 use crate::vector::{Real, Vector};
-use rayon::prelude::*;
 
 impl CellList {
     /// All pairs (i, j), i < j (original indices), with squared distance < radius² evaluated in
@@ -60,11 +59,8 @@ impl CellList {
             }
             Ok(c)
         };
-        let counts: Vec<usize> =
-            match crate::par::fork_if(n, || (0..blocks).into_par_iter().map(count_block).collect::<Result<_>>()) {
-                Some(c) => c?,
-                None => (0..blocks).map(count_block).collect::<Result<_>>()?,
-            };
+        // Every block counted, then the first error in block order (the same for any thread count).
+        let counts: Vec<usize> = crate::par::map_chunks(n, blocks, count_block).into_iter().collect::<Result<_>>()?;
         let total: usize = counts.iter().sum();
         let need = Need::new("neighbors", 2 * Need::bytes_of::<i64>(total), format!("{} pairs", count(total as u128)));
         need.check()?;
@@ -94,11 +90,7 @@ impl CellList {
             }
             Ok(())
         };
-        let mut parts = Some(parts);
-        match crate::par::fork_if(n, || parts.take().unwrap_or_default().into_par_iter().try_for_each(fill)) {
-            Some(r) => r?,
-            None => parts.unwrap_or_default().into_iter().try_for_each(fill)?,
-        }
+        crate::par::map_vec(n, parts, |_, part| fill(part)).into_iter().collect::<Result<()>>()?;
         Ok((i_out, j_out))
     }
 }

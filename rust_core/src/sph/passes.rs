@@ -29,7 +29,6 @@ use crate::neighbors::{CellList, Ranges, MAX_RANGES};
 use crate::par::{self, SyncPtr};
 use crate::simd::{self, Kernel as SimdKernel, Level, Simd, P};
 use crate::vector::Vector;
-use rayon::prelude::*;
 use std::marker::PhantomData;
 use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -182,10 +181,7 @@ fn force_pass<V: Vector, F: Float, K: Kernel, const D: usize, const SEVERAL: boo
         simd::dispatch(level, Forces::<V, F, K, D, SEVERAL, POWER> { p, grid, fluids, b, ks, out, _k: PhantomData })
     };
     let nc = n.div_ceil(par::CHUNK);
-    let parts: Vec<Sums> = match par::fork_if(n, || (0..nc).into_par_iter().map(chunk).collect()) {
-        Some(p) => p,
-        None => (0..nc).map(chunk).collect(),
-    };
+    let parts: Vec<Sums> = par::map_chunks(n, nc, chunk);
     // Fixed chunk order: the same sum for any thread count.
     parts.into_iter().fold(Sums::default(), Sums::fold)
 }

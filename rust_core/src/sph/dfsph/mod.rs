@@ -90,7 +90,6 @@ use crate::terms::{
     Write,
 };
 use crate::vector::{Real, Vector};
-use rayon::prelude::*;
 use std::marker::PhantomData;
 use std::ops::Range;
 use std::sync::{Arc, Mutex, MutexGuard};

@@ -322,15 +322,12 @@ impl<V: Vector> Solver<V> {
             simd::dispatch(level, BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, g, s, pairs, sites, rho, _k });
         };
         let (pairs, sites, rho) = (&mut self.pairs, &mut self.sites, &mut self.rho);
-        if par::fork_if(n, || {
-            let parts = pairs.par_iter_mut().zip(sites.par_chunks_mut(CHUNK).zip(rho.par_chunks_mut(CHUNK)));
-            parts.enumerate().for_each(|(c, (p, (s, r)))| chunk(c, p, s, r))
-        })
-        .is_none()
-        {
-            let parts = pairs.iter_mut().zip(sites.chunks_mut(CHUNK).zip(rho.chunks_mut(CHUNK)));
-            parts.enumerate().for_each(|(c, (p, (s, r)))| chunk(c, p, s, r));
-        }
+        let count = pairs.len().min(sites.len().div_ceil(CHUNK)).min(rho.len().div_ceil(CHUNK));
+        let (pp, ps, pr) = (par::Shared::new(pairs), par::Shared::new(sites), par::Shared::new(rho));
+        // SAFETY: chunk c's pairs, sites and densities go to index c alone.
+        par::each(n >= par::PAR_MIN, count, 1, |c| unsafe {
+            chunk(c, pp.at(c), ps.piece(CHUNK, c), pr.piece(CHUNK, c))
+        });
         if self.moving.is_some() {
             self.pair_up::<K>();
         }

@@ -96,7 +96,6 @@ use crate::par::{self, CHUNK};
 use crate::simd;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
-use rayon::prelude::*;
 
 mod lanes;
 mod passes;

@@ -120,16 +120,7 @@ impl<V: Vector> Contacts<V> {
         let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| pstart[(c * CHUNK).min(n)] as usize).collect();
         let links = split_at(&mut l.links, &bounds);
         let forces = split_at(&mut l.forces, &bounds);
-        let parts: Vec<Sums> = match par::fork_if(n, || {
-            links.into_par_iter().zip(forces).enumerate().map(|(c, (a, b))| body(c, a, b)).collect()
-        }) {
-            Some(p) => p,
-            None => {
-                let links = split_at(&mut l.links, &bounds);
-                let forces = split_at(&mut l.forces, &bounds);
-                links.into_iter().zip(forces).enumerate().map(|(c, (a, b))| body(c, a, b)).collect()
-            }
-        };
+        let parts: Vec<Sums> = par::map_vec(n, links.into_iter().zip(forces).collect(), |c, (a, b)| body(c, a, b));
         parts.into_iter().fold(Sums::default(), Sums::add)
     }
 
@@ -270,26 +261,8 @@ impl<V: Vector> Contacts<V> {
         let torque = &mut self.torque;
         let wls = split_at(&mut l.wlinks, &bounds);
         let wns = split_at(&mut l.wnormal, &bounds);
-        let parts: Vec<Sums> = match par::fork_if(n, || {
-            f.par_chunks_mut(CHUNK)
-                .zip(torque.par_chunks_mut(CHUNK))
-                .zip(wls.into_par_iter().zip(wns))
-                .enumerate()
-                .map(|(c, ((f, t), w))| body(c, f, t, w))
-                .collect()
-        }) {
-            Some(p) => p,
-            None => {
-                let wls = split_at(&mut l.wlinks, &bounds);
-                let wns = split_at(&mut l.wnormal, &bounds);
-                f.chunks_mut(CHUNK)
-                    .zip(torque.chunks_mut(CHUNK))
-                    .zip(wls.into_iter().zip(wns))
-                    .enumerate()
-                    .map(|(c, ((f, t), w))| body(c, f, t, w))
-                    .collect()
-            }
-        };
+        let items = f.chunks_mut(CHUNK).zip(torque.chunks_mut(CHUNK)).zip(wls.into_iter().zip(wns)).collect();
+        let parts: Vec<Sums> = par::map_vec(n, items, |c, ((f, t), w)| body(c, f, t, w));
         parts.into_iter().fold(Sums::default(), Sums::add)
     }
 
@@ -385,16 +358,8 @@ impl<V: Vector> Contacts<V> {
             sums
         };
         let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| pstart[(c * CHUNK).min(n)] as usize).collect();
-        let parts: Vec<Sums> = match par::fork_if(n, || {
-            let (a, b) = (split_at(roll, &bounds), split_at(rt, &bounds));
-            a.into_par_iter().zip(b).enumerate().map(|(c, (a, b))| pairs(c, a, b)).collect()
-        }) {
-            Some(p) => p,
-            None => {
-                let (a, b) = (split_at(roll, &bounds), split_at(rt, &bounds));
-                a.into_iter().zip(b).enumerate().map(|(c, (a, b))| pairs(c, a, b)).collect()
-            }
-        };
+        let (a, b) = (split_at(roll, &bounds), split_at(rt, &bounds));
+        let parts: Vec<Sums> = par::map_vec(n, a.into_iter().zip(b).collect(), |c, (a, b)| pairs(c, a, b));
         let mut sums = parts.into_iter().fold(Sums::default(), Sums::add);
         // The grains: their walls' springs, and each grain's rolling torques gathered.
         let rt = &*rt;
@@ -445,16 +410,8 @@ impl<V: Vector> Contacts<V> {
         };
         let bounds: Vec<usize> = (0..=n.div_ceil(CHUNK)).map(|c| wstart[(c * CHUNK).min(n)] as usize).collect();
         let torque = &mut self.torque;
-        let parts: Vec<Sums> = match par::fork_if(n, || {
-            let w = split_at(wroll, &bounds);
-            torque.par_chunks_mut(CHUNK).zip(w.into_par_iter()).enumerate().map(|(c, (t, w))| grains(c, t, w)).collect()
-        }) {
-            Some(p) => p,
-            None => {
-                let w = split_at(wroll, &bounds);
-                torque.chunks_mut(CHUNK).zip(w).enumerate().map(|(c, (t, w))| grains(c, t, w)).collect()
-            }
-        };
+        let w = split_at(wroll, &bounds);
+        let parts: Vec<Sums> = par::map_vec(n, torque.chunks_mut(CHUNK).zip(w).collect(), |c, (t, w)| grains(c, t, w));
         sums = sums.add(parts.into_iter().fold(Sums::default(), Sums::add));
         sums
     }

@@ -126,10 +126,7 @@ impl<V: Vector> Contacts<V> {
             out
         };
         let chunks = n.div_ceil(CHUNK);
-        let parts: Vec<Part<V>> = match par::fork_if(n, || (0..chunks).into_par_iter().map(part).collect()) {
-            Some(p) => p,
-            None => (0..chunks).map(part).collect(),
-        };
+        let parts: Vec<Part<V>> = par::map_chunks(n, chunks, part);
         let mut l = self.lists.take().or_else(|| self.room.take()).unwrap_or_default();
         for v in [&mut l.pi, &mut l.pj, &mut l.pstart, &mut l.rpair, &mut l.rstart, &mut l.wall, &mut l.wstart] {
             v.clear();
