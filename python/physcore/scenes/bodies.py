@@ -44,6 +44,14 @@ _WOOD = np.array([[196, 132, 78], [214, 156, 96], [176, 112, 64], [226, 172, 110
 _GROUND = (84, 92, 104)
 
 
+def _grounded(x0: float, x1: float, depth: float) -> dict:
+    """A 2D scene's look on the ground (issue 65: flat scenes on plain white read as diagrams):
+    the sky-grey backdrop of the other 2D scenes, and a band of earth under the floor, which
+    lies at y = 0, from ``x0`` to ``x1`` and ``depth`` m deep (a prop: it does not collide)."""
+    earth = [[x0, 0.0], [x1, 0.0], [x1, -depth], [x0, -depth]]
+    return {"backdrop": ((236, 240, 246), (196, 204, 216)), "decor": [{"polygon": earth, "color": (216, 206, 190)}]}
+
+
 def dominoes(
     n: int = 13,
     *,
@@ -101,6 +109,7 @@ def _dominoes(scene: Scene, n: int, h0: float, k: float, gap: float, ratio: floa
     scene.add(Bodies("box", size=np.stack([t / 2, h / 2], 1), positions=np.stack([x, h / 2], 1), velocities=v,
                      angular_velocities=w, density=650.0, friction=mu, restitution=0.0,
                      color=_WOOD[np.arange(n) % len(_WOOD)], name="dominoes"))
+    scene.render_defaults = {"look": _grounded(ends[0], ends[1], 0.3 * h[-1])}
     return scene
 
 
@@ -174,6 +183,7 @@ def _pyramid(scene: Scene, rows: int, b: float, links: int, r: float, rho: float
     if links > 1:
         scene.add(Joints("revolute", scene_links[:-1], scene_links[1:], anchors=np.stack([ends[1:-1], np.full(links - 1, pivot[1])], 1)))
     scene.add(Joints("revolute", scene_links[links - 1], ball[0], anchors=(ends[-1], pivot[1])))
+    scene.render_defaults = {"look": _grounded(lo - 2 * wall, hi + 2 * wall, 0.3 * width)}
     return scene
 
 
