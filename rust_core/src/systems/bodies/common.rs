@@ -143,6 +143,9 @@ pub struct Bodies {
     /// How long the last rapier step took (`None` before the first after a change of bodies or
     /// a rollback): it picks where the next runs (`rapier_step`), never what it computes.
     last_step: Option<std::time::Duration>,
+    /// Bodies were moved by hand (`set_field`) since rapier's last step: the next step's
+    /// memory is counted from their boxes, as after a change of bodies (`step_bytes`).
+    moved: bool,
 }
 
 impl Bodies {
@@ -172,6 +175,7 @@ impl Bodies {
             rolling: Vec::new(),
             pending: None,
             last_step: None,
+            moved: false,
         };
         b.scale_time();
         b
@@ -701,16 +705,71 @@ fn state_bytes(r: &Rapier) -> u128 {
 /// worth (`state_bytes`); three times a touching pair's structs for each pair touching now, or 4
 /// a body where fewer touch; twice a pair's struct for the others. (The first step of 40,000
 /// touching balls, 520,000 pairs in the broad phase of which 120,000 touch, took 1.07 GB; this
-/// asks 1.27 GB.) Pairs rapier has not met yet are not seen: bodies added overlapping many
-/// others (1,000 balls in one place, 500,000 pairs) need more than is asked.
-fn step_bytes(r: &Rapier, state: u128) -> u128 {
+/// asks 1.48 GB, counting its pairs from the boxes as below.) Before the first step after bodies were added, loaded, moved by hand or rolled
+/// back (`cold`), rapier has not met their pairs: they are counted from the bodies' boxes
+/// (`box_pairs`), so that bodies added overlapping many others (1,000 balls in one place,
+/// 500,000 pairs) are asked for, not met inside rapier's step (an abort under a memory cap).
+fn step_bytes(r: &Rapier, state: u128, cold: Option<Real>) -> u128 {
     use std::mem::size_of;
     let pair =
         size_of::<ContactPair>() + 2 * size_of::<ContactManifold>() + 8 * size_of::<TrackedContact<ContactData>>();
-    let (all, touching) =
+    let (mut all, mut touching) =
         r.narrow_phase.contact_pairs().fold((0, 0), |(a, t), p| (a + 1, t + p.has_any_active_contact() as usize));
-    let heavy = touching.max(4 * r.bodies.len());
-    state + (heavy * 3 * pair + (all - touching) * 2 * size_of::<ContactPair>()) as u128
+    let mut heavy = 3 * touching.max(4 * r.bodies.len());
+    if let Some(margin) = cold {
+        // A pair met for the first time costs more than one carried over (its graph edge, hash
+        // entry and first manifolds): 4 a touching pair's structs (1,000 balls in one place took
+        // 3.78 GB in their first step; this asks 4.45 GB). Counting stops where the step could
+        // not fit in any memory (2^40 bytes).
+        let (a, t) = box_pairs(r, margin, (1usize << 40) / (4 * pair));
+        heavy = heavy.max(4 * t);
+        (all, touching) = (all.max(a), touching.max(t));
+    }
+    state + (heavy * pair + all.saturating_sub(touching) * 2 * size_of::<ContactPair>()) as u128
+}
+
+/// The pairs of colliders rapier's broad phase will find at the next step, counted from their
+/// boxes grown by `margin` (its prediction distance): (all, touching), where a pair touches if
+/// the colliders' bounding spheres meet (exact for balls). Pairs within one body or of two
+/// fixed bodies' colliders are left out, as rapier leaves them out. A sweep along x over the
+/// boxes sorted by their low ends, stopping at `limit` pairs; too little memory for the boxes
+/// counts as `limit` (the step would not fit either).
+fn box_pairs(r: &Rapier, margin: Real, limit: usize) -> (usize, usize) {
+    let mut boxes: Vec<(Aabb, BoundingSphere, Option<RigidBodyHandle>, bool)> = Vec::new();
+    if boxes.try_reserve_exact(r.colliders.len()).is_err() {
+        return (limit, limit);
+    }
+    for (_, c) in r.colliders.iter() {
+        let parent = c.parent();
+        let body = parent.and_then(|h| r.bodies.get(h));
+        let fixed = body.is_none_or(|b| b.is_fixed());
+        // Where the body is now: a collider's own pose follows its body's only in rapier's step,
+        // and bodies moved by hand (`set_field`) have not stepped since.
+        let pose = match (body, c.position_wrt_parent()) {
+            (Some(b), Some(rel)) => *b.position() * *rel,
+            _ => *c.position(),
+        };
+        let (aabb, sphere) = (c.shape().compute_aabb(&pose), c.shape().compute_bounding_sphere(&pose));
+        boxes.push((aabb.loosened(margin), sphere, parent, fixed));
+    }
+    boxes.sort_unstable_by(|a, b| a.0.mins.x.total_cmp(&b.0.mins.x));
+    let (mut all, mut touching) = (0, 0);
+    for (i, (a, sa, pa, fa)) in boxes.iter().enumerate() {
+        for (b, sb, pb, fb) in &boxes[i + 1..] {
+            if b.mins.x > a.maxs.x {
+                break;
+            }
+            if (*fa && *fb) || (pa.is_some() && pa == pb) || !a.intersects(b) {
+                continue;
+            }
+            all += 1;
+            touching += (sa.center.distance(sb.center) <= sa.radius + sb.radius) as usize;
+            if all >= limit {
+                return (all, touching);
+            }
+        }
+    }
+    (all, touching)
 }
 
 /// A contact point of `restitution`: its bodies (dynamic ones), where it acts on each, its
@@ -1022,6 +1081,7 @@ impl Bodies {
             Stepper { r: self.d.r, pipeline: self.pipeline, ccd: self.ccd, impacts: self.impacts } = stepper;
         }
         self.last_step = Some(start.elapsed());
+        self.moved = false;
         Ok(())
     }
 }
@@ -1107,6 +1167,9 @@ impl System for Bodies {
         for (i, row) in rows.iter().enumerate() {
             set_one(&mut self.d.r.bodies[self.handles[i]], name, row, false).expect("checked above");
         }
+        // Bodies moved by hand may overlap others rapier has not paired: the next step's memory
+        // is counted from their boxes (`step_bytes`).
+        self.moved = true;
         Ok(())
     }
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
@@ -1129,7 +1192,8 @@ impl System for Bodies {
     /// `step_bytes`): too little memory is an `Error::OutOfMemory` named "step".
     fn snapshot(&self) -> Result<Snapshot> {
         let copy = state_bytes(&self.d.r);
-        let bytes = copy + step_bytes(&self.d.r, copy);
+        let cold = (self.last_step.is_none() || self.moved).then(|| self.params.prediction_distance());
+        let bytes = copy + step_bytes(&self.d.r, copy, cold);
         let of = format!("a checkpoint of {} rigid bodies and their step", count(self.handles.len() as u128));
         Need::new("step", bytes, of).room(bytes)?;
         Ok(Box::new(self.d.clone()))

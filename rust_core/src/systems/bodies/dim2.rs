@@ -10,7 +10,7 @@ use crate::vector::{Real, Vector as PVector};
 use rapier2d_f64::geometry::{
     ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
 };
-use rapier2d_f64::parry::bounding_volume::BoundingVolume;
+use rapier2d_f64::parry::bounding_volume::{BoundingSphere, BoundingVolume};
 use rapier2d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
 

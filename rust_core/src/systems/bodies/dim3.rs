@@ -11,7 +11,7 @@ use crate::vector::{Real, Vector as PVector};
 use rapier3d_f64::geometry::{
     ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
 };
-use rapier3d_f64::parry::bounding_volume::BoundingVolume;
+use rapier3d_f64::parry::bounding_volume::{BoundingSphere, BoundingVolume};
 use rapier3d_f64::prelude::*;
 use std::sync::atomic::AtomicBool;
 
