@@ -705,10 +705,11 @@ fn state_bytes(r: &Rapier) -> u128 {
 /// worth (`state_bytes`); three times a touching pair's structs for each pair touching now, or 4
 /// a body where fewer touch; twice a pair's struct for the others. (The first step of 40,000
 /// touching balls, 520,000 pairs in the broad phase of which 120,000 touch, took 1.07 GB; this
-/// asks 1.48 GB, counting its pairs from the boxes as below.) Before the first step after bodies were added, loaded, moved by hand or rolled
-/// back (`cold`), rapier has not met their pairs: they are counted from the bodies' boxes
-/// (`box_pairs`), so that bodies added overlapping many others (1,000 balls in one place,
-/// 500,000 pairs) are asked for, not met inside rapier's step (an abort under a memory cap).
+/// asks 1.48 GB, counting its pairs from the boxes as below.) Before the first step after
+/// bodies were added, loaded, moved by hand or rolled back (`cold`), rapier has not met their
+/// pairs: they are counted from the bodies' boxes (`box_pairs`), so that bodies added
+/// overlapping many others (1,000 balls in one place, 500,000 pairs) are asked for, not met
+/// inside rapier's step (an abort under a memory cap).
 fn step_bytes(r: &Rapier, state: u128, cold: Option<Real>) -> u128 {
     use std::mem::size_of;
     let pair =
