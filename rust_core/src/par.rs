@@ -164,48 +164,23 @@ pub fn map_vec<T: Send, R: Send>(n: usize, items: Vec<T>, f: impl Fn(usize, T) -
     items.into_iter().enumerate().map(|(c, t)| f(c, t)).collect()
 }
 
-/// The `c`-th chunk of `CHUNK` items of the slice at `p` of `len` items (empty past its end).
-///
-/// # Safety
-/// `p` and `len` describe a live `&mut [T]`, and no other reference to this chunk is alive.
-#[inline(always)]
-unsafe fn chunk_of<'a, T>(p: SyncPtr<T>, len: usize, c: usize) -> &'a mut [T] {
-    let start = (c * CHUNK).min(len);
-    let end = ((c + 1) * CHUNK).min(len);
-    std::slice::from_raw_parts_mut(p.get().add(start), end - start)
-}
-
 /// `f(start, chunk)` on consecutive chunks of `a`.
 #[inline]
 pub fn chunks1<A: Send>(a: &mut [A], f: impl Fn(usize, &mut [A]) + Sync + Send) {
-    let n = a.len();
-    if n >= PAR_MIN {
-        let pa = SyncPtr(a.as_mut_ptr());
-        // SAFETY (here and below): chunk `c` of each slice is handed to index `c` alone.
-        if for_each_index(n.div_ceil(CHUNK), &|c| f(c * CHUNK, unsafe { chunk_of(pa, n, c) })) {
-            return;
-        }
-    }
-    for (c, a) in a.chunks_mut(CHUNK).enumerate() {
-        f(c * CHUNK, a);
-    }
+    let parallel = a.len() >= PAR_MIN;
+    let a = Shared::new(a);
+    // SAFETY (here and below): chunk `c` of each slice goes to index `c` alone.
+    each(parallel, a.pieces(CHUNK), 1, |c| f(c * CHUNK, unsafe { a.piece(CHUNK, c) }));
 }
 
 /// `f(start, chunk_a, chunk_b)` on matching chunks of two equally long slices.
 #[inline]
 pub fn chunks2<A: Send, B: Send>(a: &mut [A], b: &mut [B], f: impl Fn(usize, &mut [A], &mut [B]) + Sync + Send) {
     debug_assert_eq!(a.len(), b.len());
-    let (na, nb) = (a.len(), b.len());
-    if na >= PAR_MIN {
-        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
-        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK));
-        if for_each_index(chunks, &|c| f(c * CHUNK, unsafe { chunk_of(pa, na, c) }, unsafe { chunk_of(pb, nb, c) })) {
-            return;
-        }
-    }
-    for (c, (a, b)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).enumerate() {
-        f(c * CHUNK, a, b);
-    }
+    let parallel = a.len() >= PAR_MIN;
+    let (a, b) = (Shared::new(a), Shared::new(b));
+    let chunks = a.pieces(CHUNK).min(b.pieces(CHUNK));
+    each(parallel, chunks, 1, |c| unsafe { f(c * CHUNK, a.piece(CHUNK, c), b.piece(CHUNK, c)) });
 }
 
 /// `f(start, a, b, c)` on matching chunks of three equally long slices.
@@ -216,18 +191,10 @@ pub fn chunks3<A: Send, B: Send, C: Send>(
     c: &mut [C],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C]) + Sync + Send,
 ) {
-    let (na, nb, nc) = (a.len(), b.len(), c.len());
-    if na >= PAR_MIN {
-        let (pa, pb, pc) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()), SyncPtr(c.as_mut_ptr()));
-        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK)).min(nc.div_ceil(CHUNK));
-        let body = |k: usize| unsafe { f(k * CHUNK, chunk_of(pa, na, k), chunk_of(pb, nb, k), chunk_of(pc, nc, k)) };
-        if for_each_index(chunks, &body) {
-            return;
-        }
-    }
-    for (k, ((a, b), c)) in a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).enumerate() {
-        f(k * CHUNK, a, b, c);
-    }
+    let parallel = a.len() >= PAR_MIN;
+    let (a, b, c) = (Shared::new(a), Shared::new(b), Shared::new(c));
+    let chunks = a.pieces(CHUNK).min(b.pieces(CHUNK)).min(c.pieces(CHUNK));
+    each(parallel, chunks, 1, |k| unsafe { f(k * CHUNK, a.piece(CHUNK, k), b.piece(CHUNK, k), c.piece(CHUNK, k)) });
 }
 
 /// `f(start, a, b, c, d)` on matching chunks of four equally long slices.
@@ -239,22 +206,12 @@ pub fn chunks4<A: Send, B: Send, C: Send, D: Send>(
     d: &mut [D],
     f: impl Fn(usize, &mut [A], &mut [B], &mut [C], &mut [D]) + Sync + Send,
 ) {
-    let (na, nb, nc, nd) = (a.len(), b.len(), c.len(), d.len());
-    if na >= PAR_MIN {
-        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
-        let (pc, pd) = (SyncPtr(c.as_mut_ptr()), SyncPtr(d.as_mut_ptr()));
-        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK)).min(nc.div_ceil(CHUNK)).min(nd.div_ceil(CHUNK));
-        let body = |k: usize| unsafe {
-            f(k * CHUNK, chunk_of(pa, na, k), chunk_of(pb, nb, k), chunk_of(pc, nc, k), chunk_of(pd, nd, k))
-        };
-        if for_each_index(chunks, &body) {
-            return;
-        }
-    }
-    let chunks = a.chunks_mut(CHUNK).zip(b.chunks_mut(CHUNK)).zip(c.chunks_mut(CHUNK)).zip(d.chunks_mut(CHUNK));
-    for (k, (((a, b), c), d)) in chunks.enumerate() {
-        f(k * CHUNK, a, b, c, d);
-    }
+    let parallel = a.len() >= PAR_MIN;
+    let (a, b, c, d) = (Shared::new(a), Shared::new(b), Shared::new(c), Shared::new(d));
+    let chunks = a.pieces(CHUNK).min(b.pieces(CHUNK)).min(c.pieces(CHUNK)).min(d.pieces(CHUNK));
+    each(parallel, chunks, 1, |k| unsafe {
+        f(k * CHUNK, a.piece(CHUNK, k), b.piece(CHUNK, k), c.piece(CHUNK, k), d.piece(CHUNK, k))
+    });
 }
 
 /// Deterministic sum of `f(range)` over fixed chunks of `0..n`.
@@ -282,13 +239,10 @@ pub fn chunks2_fold<A: Send, B: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A], &mut [B]) -> T + Sync + Send,
 ) -> T {
-    let (na, nb) = (a.len(), b.len());
-    if na >= PAR_MIN {
-        let (pa, pb) = (SyncPtr(a.as_mut_ptr()), SyncPtr(b.as_mut_ptr()));
-        let chunks = na.div_ceil(CHUNK).min(nb.div_ceil(CHUNK));
-        if let Some(p) =
-            map_index(chunks, |c| f(c * CHUNK, unsafe { chunk_of(pa, na, c) }, unsafe { chunk_of(pb, nb, c) }))
-        {
+    if a.len() >= PAR_MIN {
+        let (pa, pb) = (Shared::new(a), Shared::new(b));
+        let chunks = pa.pieces(CHUNK).min(pb.pieces(CHUNK));
+        if let Some(p) = map_index(chunks, |c| unsafe { f(c * CHUNK, pa.piece(CHUNK, c), pb.piece(CHUNK, c)) }) {
             return p.into_iter().fold(zero, fold);
         }
     }
@@ -308,10 +262,9 @@ pub fn chunks1_fold<A: Send, T: Send>(
     fold: impl Fn(T, T) -> T,
     f: impl Fn(usize, &mut [A]) -> T + Sync + Send,
 ) -> T {
-    let n = a.len();
-    if n >= PAR_MIN {
-        let pa = SyncPtr(a.as_mut_ptr());
-        if let Some(p) = map_index(n.div_ceil(CHUNK), |c| f(c * CHUNK, unsafe { chunk_of(pa, n, c) })) {
+    if a.len() >= PAR_MIN {
+        let pa = Shared::new(a);
+        if let Some(p) = map_index(pa.pieces(CHUNK), |c| f(c * CHUNK, unsafe { pa.piece(CHUNK, c) })) {
             return p.into_iter().fold(zero, fold);
         }
     }

@@ -369,11 +369,16 @@ pub fn rows2_sum(
 
 /// Σ f(r) over `rows` rows, in row order, in parallel (read-only passes: energies, norms).
 pub fn sum_rows(rows: usize, cells: usize, f: impl Fn(usize) -> Real + Sync + Send) -> Real {
-    let mut partials = vec![0.0; rows];
-    let p = par::Shared::new(&mut partials);
-    // SAFETY: partial r goes to index r alone.
-    par::each(cells >= par::PAR_MIN, rows, MIN_ROWS, |r| unsafe { *p.at(r) = f(r) });
-    partials.into_iter().sum()
+    if cells >= par::PAR_MIN {
+        let mut partials = vec![0.0; rows];
+        let p = par::Shared::new(&mut partials);
+        // SAFETY: partial r goes to index r alone.
+        if par::for_each_index_min(rows, MIN_ROWS, &|r| unsafe { *p.at(r) = f(r) }) {
+            return partials.into_iter().sum();
+        }
+    }
+    // Serially (small grids, every solver iteration): the same sum, nothing allocated.
+    (0..rows).map(f).sum()
 }
 
 /// Σ a in a fixed order of 8 interleaved partial sums (vectorises at every SIMD level and gives
