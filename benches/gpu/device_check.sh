@@ -9,7 +9,9 @@
 # cloth benches beside the CUDA reference in the same call, so every ratio is of one card. Each
 # part has its own time limit so that one stuck part cannot eat the call. Everything it prints
 # goes to $OUT/device_check.txt too. Budget: about 2 minutes (plus the machine's start);
-# `--no-cuda` skips the CUDA reference (the half minute it takes).
+# `--no-cuda` skips the CUDA reference (the half minute it takes). With
+# .devbin/base_core.abi3.so(.gz) carried (a baseline build), the Gray–Scott bench also runs
+# alternately with it and with this tree's extension (A/B on one card, one call).
 #
 # Here, before the call (the tree that travels is at most 64 MiB: binaries stripped and gzipped):
 #   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-core --lib --no-run
@@ -54,6 +56,19 @@ timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
 section "Gray-Scott"
 timeout 90 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+if [ -f .devbin/base_core.abi3.so ]; then
+  # A/B in one call: the same benches alternately with a baseline build of the extension
+  # (carried as .devbin/base_core.abi3.so; the Python package is this tree's) and this one.
+  section "A/B: Gray-Scott 4096² and N-body 262,144 (base, then this tree; 3 rounds)"
+  mkdir -p /tmp/base && cp -r python/physcore /tmp/base/ && cp .devbin/base_core.abi3.so /tmp/base/physcore/_core.abi3.so
+  for r in 1 2 3; do
+    for who in base this; do
+      pp=""; [ $who = base ] && pp=/tmp/base
+      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 4096 --steps 200 2>&1 | grep -F "4096²" | grep -v CPU | sed "s/^/$who  /"
+      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 262144 --steps 10 --cpu-max 0 2>&1 | grep -F "262144 |" | sed "s/^/$who  /"
+    done
+  done
+fi
 section "cloth"
 timeout 90 python3 benches/gpu/bench_gpu_cloth.py --device gpu --n 16,64,256,1024 --steps 50
 section "CUDA reference (CuPy)"

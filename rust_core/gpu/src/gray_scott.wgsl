@@ -69,44 +69,59 @@ fn fwd(i: u32, n: u32, hi: u32) -> u32 {
     return 0u;
 }
 
-// The workgroup's row (j + ny·k; ny·nz of them) and the thread's column i: one workgroup per
-// segment of WG cells of a row, so that no thread divides (the row's j and k are uniform).
+// The workgroup's row (j + ny·k; ny·nz of them): one workgroup per segment of SPAN cells of a
+// row, so that no thread divides (the row's j and k are uniform).
 fn row_of(wid: vec3<u32>) -> u32 {
     return wid.y + P.gy * wid.z;
 }
 
+// Each thread updates CPT cells of its row, WG apart (each pass of the workgroup reads WG
+// consecutive cells), and sums their reactions in that order before the workgroup's tree: the
+// books' reduction (six barriers) runs once per SPAN cells, not once per WG.
+const CPT: u32 = 4u;
+const SPAN: u32 = WG * CPT;
+
 @compute @workgroup_size(WG)
 fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
     let rr = row_of(wid);
-    let i = wid.x * WG + lid.x;
     let nxy = P.nx * P.ny;
     var ru: real = 0.0;
     var rv: real = 0.0;
-    if (i < P.nx && rr < P.ny * P.nz) {
+    if (rr < P.ny * P.nz) {
         let j = rr % P.ny;
         let k = rr / P.ny;
         let row = rr * P.nx;
-        let c = row + i;
-        let l = row + back(i, P.nx, 0u);
-        let r = row + fwd(i, P.nx, 1u);
-        let s = c - j * P.nx + back(j, P.ny, 2u) * P.nx;
-        let t = c - j * P.nx + fwd(j, P.ny, 3u) * P.nx;
-        let uc = u0[c];
-        let vc = v0[c];
-        // The CPU's order of operations (grids::gray_scott, `Stencil`).
-        var lu = u0[l] + u0[r] + u0[s] + u0[t] - P.centre * uc;
-        var lv = v0[l] + v0[r] + v0[s] + v0[t] - P.centre * vc;
-        if (P.three != 0u) {
-            let d = c - k * nxy + back(k, P.nz, 4u) * nxy;
-            let up = c - k * nxy + fwd(k, P.nz, 5u) * nxy;
-            lu = lu + (u0[d] + u0[up]);
-            lv = lv + (v0[d] + v0[up]);
+        // The rows (and planes) either side: the same for every cell of the row.
+        let south = back(j, P.ny, 2u) * P.nx + k * nxy;
+        let north = fwd(j, P.ny, 3u) * P.nx + k * nxy;
+        let down = j * P.nx + back(k, P.nz, 4u) * nxy;
+        let up = j * P.nx + fwd(k, P.nz, 5u) * nxy;
+        for (var m = 0u; m < CPT; m = m + 1u) {
+            let i = wid.x * SPAN + m * WG + lid.x;
+            if (i < P.nx) {
+                let c = row + i;
+                let l = row + back(i, P.nx, 0u);
+                let r = row + fwd(i, P.nx, 1u);
+                let s = south + i;
+                let t = north + i;
+                let uc = u0[c];
+                let vc = v0[c];
+                // The CPU's order of operations (grids::gray_scott, `Stencil`).
+                var lu = u0[l] + u0[r] + u0[s] + u0[t] - P.centre * uc;
+                var lv = v0[l] + v0[r] + v0[s] + v0[t] - P.centre * vc;
+                if (P.three != 0u) {
+                    lu = lu + (u0[down + i] + u0[up + i]);
+                    lv = lv + (v0[down + i] + v0[up + i]);
+                }
+                let uvv = uc * vc * vc;
+                let cu = P.f * (1.0 - uc) - uvv;
+                let cv = uvv - P.fk * vc;
+                u1[c] = uc + P.du * lu + P.dt * cu;
+                v1[c] = vc + P.dv * lv + P.dt * cv;
+                ru = ru + cu;
+                rv = rv + cv;
+            }
         }
-        let uvv = uc * vc * vc;
-        ru = P.f * (1.0 - uc) - uvv;
-        rv = uvv - P.fk * vc;
-        u1[c] = uc + P.du * lu + P.dt * ru;
-        v1[c] = vc + P.dv * lv + P.dt * rv;
     }
     // The workgroup's reaction sums, in one fixed tree order.
     su[lid.x] = ru;
@@ -129,12 +144,14 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
 @compute @workgroup_size(WG)
 fn check(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
     let rr = row_of(wid);
-    let i = wid.x * WG + lid.x;
-    if (i >= P.nx || rr >= P.ny * P.nz) {
+    if (rr >= P.ny * P.nz) {
         return;
     }
-    let c = rr * P.nx + i;
-    if (bad(u0[c]) || bad(v0[c])) {
-        atomicMin(&flag[0], c);
+    for (var m = 0u; m < CPT; m = m + 1u) {
+        let i = wid.x * SPAN + m * WG + lid.x;
+        let c = rr * P.nx + i;
+        if (i < P.nx && (bad(u0[c]) || bad(v0[c]))) {
+            atomicMin(&flag[0], c);
+        }
     }
 }

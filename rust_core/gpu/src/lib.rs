@@ -437,10 +437,21 @@ impl Gpu {
     ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
         let d = &self.device;
         let src = format!("{}{}", p.header(), wgsl);
-        let module = d.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(src.into()),
-        });
+        // Every check wgpu offers stays on (bounds of every buffer access, integer division by
+        // zero) except the loop counter naga adds to every loop in case it never ends
+        // (`force_loop_bounding`): a register and a compare-and-branch in each N-body and spring
+        // iteration. Safe here because every loop in physcore's WGSL runs a counter from 0 up
+        // to a bound fixed before it starts (a uniform, a workgroup constant, a particle's
+        // spring count) or halves a workgroup constant to 0; a shader that breaks this rule
+        // must not come through here.
+        let checks = wgpu::ShaderRuntimeChecks { force_loop_bounding: false, ..wgpu::ShaderRuntimeChecks::checked() };
+        // SAFETY: the one check left out is the loop bound above; our loops end (see there).
+        let module = unsafe {
+            d.create_shader_module_trusted(
+                wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(src.into()) },
+                checks,
+            )
+        };
         let entries: Vec<wgpu::BindGroupLayoutEntry> = binds
             .iter()
             .enumerate()
