@@ -63,14 +63,15 @@ pub struct GrayScott {
     binds: [wgpu::BindGroup; 2],
     step_pipe: wgpu::ComputePipeline,
     check_pipe: wgpu::ComputePipeline,
-    /// Workgroups along x (a row's segments of SPAN cells), and along y and z (the rows, ny·nz
-    /// of them, folded into y ≤ 65,535 and z).
+    /// Workgroups along x (a row's segments of WG cells), and along y and z (the blocks of ROWS
+    /// rows, folded into y ≤ 65,535 and z).
     groups: (u32, u32, u32),
     chunk: u64,
 }
 
-/// Cells of a row per workgroup: 64 threads of 4 cells each (the shader's WG and CPT).
-const SPAN: u32 = 256;
+/// A workgroup's cells: WG of a row (its threads) in each of ROWS rows (the shader's WG, CPT).
+const WG: u32 = 64;
+const ROWS: u64 = 4;
 const SUBMIT_S: f64 = 0.1;
 const MAX_CHUNK: u64 = 8192;
 
@@ -92,17 +93,17 @@ impl GrayScott {
         let cells = model.n.iter().product::<usize>();
         assert!(u.len() == cells && v.len() == cells, "fields must have one value per cell");
         gpu.check_precision(precision)?;
-        // One workgroup per segment of SPAN cells of a row (x), one row per (y, z) workgroup: a
-        // thread finds its cell without an integer division (the row's j and k are worked out
-        // once per workgroup). At most 65,535 workgroups along each axis.
-        let gx = (model.n[0] as u64).div_ceil(SPAN as u64);
-        let rows = (model.n[1] * model.n[2]) as u64;
-        let gy = rows.min(65_535);
-        let gz = rows.div_ceil(gy);
+        // One workgroup per WG cells of a row (x) and ROWS rows (a block; the blocks folded into
+        // y and z): a thread divides once to find its cell's j and k. At most 65,535 workgroups
+        // along each axis.
+        let gx = (model.n[0] as u64).div_ceil(WG as u64);
+        let blocks = ((model.n[1] * model.n[2]) as u64).div_ceil(ROWS);
+        let gy = blocks.min(65_535);
+        let gz = blocks.div_ceil(gy);
         if gx > 65_535 || gz > 65_535 {
             return Err(GpuError::Unsupported(format!(
-                "a grid of {} × {} × {} cells: the GPU path dispatches at most 65,535 × 256 cells along x and \
-                 65,535² rows",
+                "a grid of {} × {} × {} cells: the GPU path dispatches at most 65,535 × 64 cells along x and \
+                 65,535² × 4 rows",
                 model.n[0], model.n[1], model.n[2]
             )));
         }

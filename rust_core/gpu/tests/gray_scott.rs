@@ -1,5 +1,5 @@
 //! The device Gray–Scott step against an f64 reference on the host (periodic and free faces, 2D
-//! and 3D, a grid of more than one workgroup row). Skips without an adapter unless
+//! and 3D, a grid of more than one workgroup row, blocks of rows that cross planes). Skips without an adapter unless
 //! `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
 use physcore_gpu::gray_scott::{GrayScott, Halt, Model};
 use physcore_gpu::{Gpu, Precision};
@@ -116,6 +116,18 @@ fn gray_scott_steps_as_the_host_reference() {
             dim: 3,
             dx: 0.01,
             free: [false, false, false, false, true, true],
+            du: 2e-5,
+            dv: 1e-5,
+            feed: 0.035,
+            kill: 0.065,
+        },
+        // 3D with 5 rows a plane: a workgroup's block of 4 rows crosses planes (free y, periodic
+        // z), and a row longer than a workgroup.
+        Model {
+            n: [70, 5, 3],
+            dim: 3,
+            dx: 0.01,
+            free: [false, false, true, true, false, false],
             du: 2e-5,
             dv: 1e-5,
             feed: 0.035,
