@@ -436,7 +436,7 @@ impl PySimulation {
         }
         let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
-        let record = (kind.to_string(), name.clone(), p.clone());
+        let record = (kind.to_string(), name.clone(), p.try_clone(ty.kind).map_err(|e| to_py(py, e))?);
         match &mut self.inner {
             Inner::D2(s) => {
                 let ctx = Context { n_particles: s.n_particles() };
@@ -461,7 +461,7 @@ impl PySimulation {
         }
         let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
-        let record = (kind.to_string(), name.clone(), p.clone());
+        let record = (kind.to_string(), name.clone(), p.try_clone(ty.kind).map_err(|e| to_py(py, e))?);
         if let Some(r) = self.terms.iter_mut().find(|r| r.1 == name) {
             *r = record;
         }

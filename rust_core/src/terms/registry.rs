@@ -51,6 +51,26 @@ impl Params {
     pub fn insert(&mut self, key: &str, value: Value) {
         self.values.insert(key.to_string(), value);
     }
+    /// A copy whose arrays are allocated fallibly (`clone` aborts the process when the
+    /// allocator refuses): a refusal is `Error::OutOfMemory` of call `what` naming the parameter
+    /// and its length, as `params_of`'s copies of a front end's arrays are. What a part's record
+    /// keeps of the parameters it was built from.
+    pub fn try_clone(&self, what: &'static str) -> Result<Self> {
+        let mut values = BTreeMap::new();
+        for (key, v) in &self.values {
+            let copy_of = |n: usize, bytes: u128| {
+                Need::new(what, bytes, format!("a copy of its {key} ({} entries)", count(n as u128)))
+            };
+            let v = match v {
+                Value::Floats(a) => Value::Floats(copy_of(a.len(), Need::bytes_of::<Real>(a.len())).copy(a)?),
+                Value::Indices(a) => Value::Indices(copy_of(a.len(), Need::bytes_of::<u32>(a.len())).copy(a)?),
+                Value::Number(x) => Value::Number(*x),
+                Value::Text(t) => Value::Text(t.clone()),
+            };
+            values.insert(key.clone(), v);
+        }
+        Ok(Self { values })
+    }
     /// Whether `key` was given (for optional parameters with defaults).
     pub fn has(&self, key: &str) -> bool {
         self.values.contains_key(key)
@@ -251,6 +271,18 @@ macro_rules! register_term {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The copy a part's record keeps (`try_clone`, fallible) is the parameters, every kind of value.
+    #[test]
+    fn a_fallible_copy_of_the_parameters_is_a_clone() {
+        let p = Params::new()
+            .with("i", Value::Indices(vec![0, 1, 2]))
+            .with("stiffness", Value::Floats(vec![1.0, 2.5]))
+            .with("damping", Value::Number(0.5))
+            .with("name", Value::Text("cloth".into()));
+        assert_eq!(p.try_clone("springs").unwrap(), p);
+        assert_eq!(Params::new().try_clone("springs").unwrap(), Params::new());
+    }
 
     /// The rules are registered beside their terms and read back by key; a kind without one
     /// (or unknown) takes any integrator.

@@ -171,7 +171,8 @@ impl<V: Vector> Springs<V> {
         }
         let entries = entries as usize;
         let per_entry = if uniform.is_some() { 4 + 8 } else { 4 + 3 * 8 };
-        let need = Need::new("springs", bytes + entries as u128 * per_entry, &of);
+        // Plus one flag per group of 8 entries (`consecutive`).
+        let need = Need::new("springs", bytes + entries as u128 * per_entry + (entries / SLICE) as u128, &of);
         need.check()?;
         let mut other = need.filled(entries, 0u32)?;
         let mut e_rest = need.filled(entries, 0.0)?;
@@ -198,7 +199,7 @@ impl<V: Vector> Springs<V> {
             }
         }
         let consecutive =
-            other.chunks_exact(SLICE).map(|o| o.iter().zip(o[0] as u64..).all(|(&a, b)| a as u64 == b)).collect();
+            need.collect(other.chunks_exact(SLICE).map(|o| o.iter().zip(o[0] as u64..).all(|(&a, b)| a as u64 == b)))?;
         Ok(Self {
             name,
             i,
