@@ -34,6 +34,10 @@ def cap(headroom_mib):
     hard = resource.getrlimit(resource.RLIMIT_AS)[1]
     resource.setrlimit(resource.RLIMIT_AS, (vm + headroom_mib * 2**20, hard))
 
+def lift():
+    # Back to the hard limit (no cap).
+    resource.setrlimit(resource.RLIMIT_AS, resource.getrlimit(resource.RLIMIT_AS)[1:] * 2)
+
 def refused(call, what):
     try:
         call()
@@ -150,7 +154,6 @@ scene.add_particles(np.zeros((1, 3)))
 scene.step(1)
 books = sorted(scene.energy().dissipated)
 b = pc.Bodies("ball", size=np.full(n, 0.5), positions=g)
-lift = lambda: resource.setrlimit(resource.RLIMIT_AS, resource.getrlimit(resource.RLIMIT_AS)[1:] * 2)
 cap(16)
 e = refused(lambda: scene.add(b), "add_bodies")
 lift()
@@ -202,7 +205,6 @@ def test_bodies_added_overlapping_many_others_are_asked_for_before_their_first_s
     # into one place are counted again.
     out = _child(PRELUDE + """
 rng = np.random.default_rng(5)
-lift = lambda: resource.setrlimit(resource.RLIMIT_AS, resource.getrlimit(resource.RLIMIT_AS)[1:] * 2)
 scene = pc.Scene(3, dt=1e-3)
 scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 b = scene.add(pc.Bodies("ball", size=np.full(1000, 0.5), positions=rng.uniform(-0.1, 0.1, (1000, 3))))
@@ -343,10 +345,6 @@ import resource
 np.ones((256, 256)) @ np.ones((256, 256)), np.ones((1000, 3)) @ np.ones(3)
 
 REFUSED = 0  # refusals over the case: none would mean the case tests nothing
-
-
-def lift():
-    resource.setrlimit(resource.RLIMIT_AS, resource.getrlimit(resource.RLIMIT_AS)[1:] * 2)
 
 def ladder(label, call, whats):
     global REFUSED

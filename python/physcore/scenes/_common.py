@@ -14,6 +14,9 @@ from .. import _check, _deprecate
 from .._errors import InvalidInputError, InvalidTypeError
 from ..scene import Scene
 
+#: The 2-D scenes' backdrop (a render look's ``"backdrop"``): a pale sky fading to grey-blue.
+SKY_2D = ((236, 240, 246), (196, 204, 216))
+
 
 # Argument checks: the shared ones of physcore._check (TypeError for bool/str/None, names the
 # argument), plus checks of what the scene derives from them, naming the arguments involved.

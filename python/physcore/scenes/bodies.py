@@ -15,6 +15,7 @@ from ..scene import Scene
 from ..shapes import cloth_springs
 from ..terms import Drag, Gravity, Springs
 from ._common import (
+    SKY_2D,
     _count,
     _finite_books,
     _flag,
@@ -49,7 +50,7 @@ def _grounded(x0: float, x1: float, depth: float) -> dict:
     the sky-grey backdrop of the other 2D scenes, and a band of earth under the floor, which
     lies at y = 0, from ``x0`` to ``x1`` and ``depth`` m deep (a prop: it does not collide)."""
     earth = [[x0, 0.0], [x1, 0.0], [x1, -depth], [x0, -depth]]
-    return {"backdrop": ((236, 240, 246), (196, 204, 216)), "decor": [{"polygon": earth, "color": (216, 206, 190)}]}
+    return {"backdrop": SKY_2D, "decor": [{"polygon": earth, "color": (216, 206, 190)}]}
 
 
 def dominoes(

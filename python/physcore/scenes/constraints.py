@@ -11,7 +11,7 @@ from .._errors import InvalidInputError, InvalidTypeError
 from ..contacts import Contacts
 from ..scene import Scene
 from ..terms import Gravity, Plane, Springs, XpbdConstraints
-from ._common import _count, _finite_books, _nonneg, _optional, _particle_mass, _particles, _positive, _stamped
+from ._common import SKY_2D, _count, _finite_books, _nonneg, _optional, _particle_mass, _particles, _positive, _stamped
 
 
 def shape_matched_boxes(
@@ -100,7 +100,7 @@ def shape_matched_boxes(
     scene.render_defaults = {  # plain lists: render_defaults compare with ==
         "colors": np.repeat(np.arange(n_boxes), k * k).tolist(),
         "look": {"hulls": [list(range(b * k * k, (b + 1) * k * k)) for b in range(n_boxes)],
-                 "backdrop": ((236, 240, 246), (196, 204, 216))},
+                 "backdrop": SKY_2D},
     }
     if integrator in ("xpbd", "semi_implicit_euler"):
         # tangential_ratio 2/7 (the default before it became 1/3 for discs): the grains of a box do
