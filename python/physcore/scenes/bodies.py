@@ -318,8 +318,9 @@ def _tumbling(scene: Scene, n: int, ramps: int, theta: float, b: float, mu: floa
 
 # 6 s at 30 fps, one simulated second a second: the heap lands, slides and tips down the ramps;
 # the last bodies are still tumbling at the end. Portrait: the zig-zag is taller than wide.
+# The other 2D scenes' sky-grey backdrop (issue 65: on plain white the bin read as a diagram).
 tumbling_boxes.render_defaults = {"frames": 180, "fps": 30, "frame_time": 1 / 30, "size": (320, 480), "color_by": "none",
-                                  "antialias": True}
+                                  "antialias": True, "look": {"backdrop": SKY_2D}}
 tumbling_boxes = _stamped(tumbling_boxes)
 
 
