@@ -120,7 +120,38 @@ impl Springs {
         }
         (offsets, o, r, SLICE as u32)
     }
+
+    /// The entries' constants as a table of kinds, where there are few: with at most `KINDS`
+    /// distinct (k, c, L0) rows (a cloth has three: structure, shear, bend) and fewer than 2²⁴
+    /// particles, each entry's other end gets its kind in its top 8 bits and the table replaces
+    /// the rows (`Some(table)`); else `None` and nothing changes. The same constants, bit for
+    /// bit: only where they are read from changes.
+    fn kinds(other: &mut [u32], rows: &[f64], n: usize) -> Option<Vec<f64>> {
+        if n >= 1 << 24 {
+            return None;
+        }
+        let mut index: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
+        let mut table = Vec::new();
+        for (e, r) in rows.chunks_exact(4).enumerate() {
+            let key = [r[0].to_bits(), r[1].to_bits(), r[2].to_bits()];
+            let next = index.len() as u32;
+            let k = *index.entry(key).or_insert(next);
+            if k as usize >= KINDS {
+                // Too many kinds: the ends as they were (each below 2²⁴).
+                other[..e].iter_mut().for_each(|o| *o &= 0xff_ffff);
+                return None;
+            }
+            if k == next {
+                table.extend_from_slice(&[r[0], r[1], r[2], 0.0]);
+            }
+            other[e] |= k << 24;
+        }
+        Some(table)
+    }
 }
+
+/// The most kinds of spring constants `Springs::kinds` packs (8 bits of an entry).
+const KINDS: usize = 256;
 
 /// Particles per slice of the springs' sliced layout: a warp on NVIDIA (32 threads).
 const SLICE: usize = 32;
@@ -198,7 +229,8 @@ pub struct Particles {
     /// The predicted velocities and the springs' gathered lists (kept alive for the bind group).
     _vp: wgpu::Buffer,
     _springs: [wgpu::Buffer; 3],
-    has_springs: bool,
+    /// The shader's `springs`: 0 none, 1 constants per entry, 2 a table of kinds (`Springs::kinds`).
+    springs_mode: u32,
     /// The springs' slice width (32, or 1: the CSR layout; see `Springs::sliced`).
     slice: u32,
     velocity_dependent: bool,
@@ -274,13 +306,21 @@ impl Particles {
         let empty = Springs::default();
         let sp = springs.unwrap_or(&empty);
         assert!(sp.i.iter().chain(&sp.j).all(|&p| (p as usize) < n), "spring index out of range");
-        let (start, other, rows, slice) = sp.sliced(n);
+        let (start, mut other, mut rows, slice) = sp.sliced(n);
+        let springs_mode = match Springs::kinds(&mut other, &rows, n) {
+            _ if sp.i.is_empty() => 0,
+            Some(table) => {
+                rows = table;
+                2
+            }
+            None => 1,
+        };
         let ro = U::STORAGE | U::COPY_DST;
         let entries_n = other.len().max(1) as u64;
         let sb = [
             gpu.buffer("spring offsets", 4 * (2 * n as u64 + 1), ro)?,
             gpu.buffer("spring ends", 4 * entries_n, ro)?,
-            gpu.buffer("spring constants", entries_n * row, ro)?,
+            gpu.buffer("spring constants", (rows.len() as u64 / 4).max(1) * row, ro)?,
         ];
         gpu.queue.write_buffer(&sb[0], 0, bytemuck::cast_slice(&start));
         if !other.is_empty() {
@@ -334,7 +374,7 @@ impl Particles {
             ncol: 0,
             _vp: vp,
             _springs: sb,
-            has_springs: !sp.i.is_empty(),
+            springs_mode,
             slice,
             velocity_dependent: forces.drag != 0.0 || sp.c.iter().any(|&c| c != 0.0),
             params,
@@ -406,7 +446,7 @@ impl Particles {
             self.n as u32,
             f.pairwise.is_some() as u32,
             pred as u32,
-            self.has_springs as u32,
+            self.springs_mode,
             self.dim as u32,
             self.ncol,
             f.coulomb.is_some() as u32,
@@ -747,6 +787,42 @@ mod tests {
                 (other[e], rows[4 * e..4 * e + 4].to_vec())
             })
             .collect()
+    }
+
+    #[test]
+    fn a_few_kinds_of_constants_pack_into_the_ends_and_many_leave_them_as_they_were() {
+        // A 30 × 30 cloth, structural and shear springs: two kinds of rest length.
+        let side = 30u32;
+        let mut pairs = Vec::new();
+        for r in 0..side - 1 {
+            for c in 0..side - 1 {
+                let p = r * side + c;
+                pairs.extend_from_slice(&[(p, p + 1), (p, p + side), (p, p + side + 1)]);
+            }
+        }
+        let n = (side * side) as usize;
+        let mut s = springs(&pairs);
+        s.k = vec![100.0; pairs.len()];
+        s.rest = pairs.iter().map(|&(a, b)| if b == a + side + 1 { 0.1 * 2f64.sqrt() } else { 0.1 }).collect();
+        let (off, o, r, w) = s.sliced(n);
+        let mut packed = o.clone();
+        let table = Springs::kinds(&mut packed, &r, n).expect("two kinds");
+        assert_eq!(table.len(), 4 * 3, "structure, shear and the slices' padding"); // padding rows are zeros
+        for i in 0..n {
+            let deg = off[i + 1] - off[i];
+            for q in 0..deg {
+                let e = (off[n + 1 + i] + q * w) as usize;
+                let k = (packed[e] >> 24) as usize;
+                assert_eq!(packed[e] & 0xff_ffff, o[e]);
+                assert_eq!(&table[4 * k..4 * k + 4], &r[4 * e..4 * e + 4]);
+            }
+        }
+        // 300 kinds: past the 256 the top byte holds; the ends come back untouched.
+        let many = springs(&pairs[..300]);
+        let (_, o, r, _) = many.sliced(n);
+        let mut same = o.clone();
+        assert!(Springs::kinds(&mut same, &r, n).is_none());
+        assert_eq!(same, o);
     }
 
     #[test]

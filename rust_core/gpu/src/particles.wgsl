@@ -12,7 +12,9 @@ struct Params {
     // 1: the forces see the predicted velocity stored in vp (velocity Verlet with velocity-
     // dependent forces: drag, dashpots).
     pred: u32,
-    // 1: springs on.
+    // 0: no springs; 1: springs, entry e's constants at spring[e]; 2: springs of a few kinds,
+    // other[e] packs the other end (low 24 bits) and the kind (high 8), the constants at
+    // spring[kind] (a small table, read from the cache: 4 bytes an entry instead of 20).
     springs: u32,
     // 2 or 3 (the colliders' axes), and the number of colliders.
     dim: u32,
@@ -80,6 +82,22 @@ const WG: u32 = 256u;
 @group(0) @binding(13) var<storage, read> charge: array<real>;
 
 var<workgroup> wtouch: u32;
+
+// Entry e's other end and its constants (k, c, L0, 0), in either layout (P.springs 1 or 2).
+fn spring_end(e: u32) -> u32 {
+    let o = other[e];
+    if (P.springs == 2u) {
+        return o & 0xffffffu;
+    }
+    return o;
+}
+
+fn spring_constants(e: u32) -> vec4<real> {
+    if (P.springs == 2u) {
+        return spring[other[e] >> 24u];
+    }
+    return spring[e];
+}
 
 var<workgroup> tile: array<vec4<real>, WG>;
 var<workgroup> qtile: array<real, WG>;
@@ -214,8 +232,8 @@ fn eval_forces(i: u32, l: u32) {
         let base = start[P.n + 1u + i];
         for (var q = 0u; q < deg; q++) {
             let e = base + q * P.sw;
-            let j = other[e];
-            let s = spring[e];
+            let j = spring_end(e);
+            let s = spring_constants(e);
             let d = pos[j].xyz - xi.xyz;
             let l = length(d);
             if (l > 0.0) {
@@ -350,8 +368,8 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         let base = start[P.n + 1u + i];
         for (var q = 0u; q < deg; q++) {
             let e = base + q * P.sw;
-            let s = spring[e];
-            let dl = length(pos[other[e]].xyz - xi.xyz) - s.z;
+            let s = spring_constants(e);
+            let dl = length(pos[spring_end(e)].xyz - xi.xyz) - s.z;
             us += 0.25 * s.x * dl * dl;
         }
     }
