@@ -104,6 +104,22 @@ def test_a_cloth_on_the_gpu_hangs_as_on_the_cpu(integrator: str) -> None:
         assert dx < tol[0] * sag and de < tol[1] * abs(e_cpu.potential["gravity"]), (precision, dx, de)
 
 
+def test_a_replacement_the_core_refuses_leaves_the_term_the_device_is_built_from() -> None:
+    # The core refuses a spring of negative stiffness (here handed to it directly, past the
+    # front end's own check); the term it kept, not the refused one, must reach the device.
+    cpu = _cloth()
+    gpu = _cloth(DEVICE, "f64" if F64 else "f32")
+    name = gpu.terms[0].name
+    m = len(gpu.terms[0].i)
+    bad = {"i": gpu.terms[0].i.astype(np.uint32), "j": gpu.terms[0].j.astype(np.uint32), "stiffness": np.full(m, -1.0),
+           "damping": np.zeros(m), "rest_length": np.ones(m)}
+    with pytest.raises(pc.InvalidInputError, match="stiffness"):
+        gpu._sim.replace_term("springs", name, bad)
+    cpu.step(100)
+    gpu.step(100)  # the move to the device builds its terms from the records
+    assert np.abs(gpu.positions - cpu.positions).max() < (1e-11 if F64 else 2e-5)
+
+
 def test_a_kepler_orbit_on_the_gpu_keeps_its_energy() -> None:
     """Two bodies of mass 1/2 at separation 1 on a circular orbit: E = -G m²/a + m v² = -1/8 J."""
     s = pc.Scene(dim=2, integrator="verlet", dt=2 * np.pi / 2000, device=DEVICE)

@@ -2,8 +2,8 @@
 // the CPU's `grids::gray_scott` cell for cell. The host prepends the precision header (`real`,
 // `bad`).
 //
-// Gather only: thread c writes cell c of the new fields from the old ones (two buffers, swapped
-// each step by the host's bind groups). The books' reaction sums are reduced in each workgroup
+// Gather only: each thread writes its own cells of the new fields from the old ones (two
+// buffers, swapped each step by the host's bind groups). The books' reaction sums are reduced in each workgroup
 // in one fixed tree order and added to that workgroup's own slot: no atomics on floats, so a run
 // repeats bit for bit on one adapter. The one atomic is an integer min over the index of the
 // first non-finite cell.
@@ -15,7 +15,8 @@ struct Params {
     // Bit f set: face f (x-, x+, y-, y+, z-, z+) is free (∂u/∂n = 0: the ghost is the cell
     // itself); clear: periodic (the ghost is the opposite cell).
     free: u32,
-    // Workgroups along x (segments of a row) and along y (rows; row r = y + gy·z).
+    // Workgroups along x (segments of WG cells of a row) and along y (blocks of CPT rows; block
+    // b = y + gy·z holds rows CPT·b .. CPT·b + CPT − 1).
     gx: u32,
     three: u32,
     gy: u32,

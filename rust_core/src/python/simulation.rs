@@ -125,11 +125,19 @@ impl PySimulation {
                 }
                 // The host copies made on the way (state, masses, pins, charges; a grid's two
                 // fields) and as much again for the uploads' staging, asked for first: under a
-                // memory cap they aborted the process (3,000,000 particles at +900 MB).
+                // memory cap they aborted the process (3,000,000 particles at +900 MB). And the
+                // springs' lists, 256 bytes a spring at most: the record's copy (32), the lists
+                // gathered per particle (72) and their sliced layout with its padding (144).
                 let n = p.n_particles() as u128;
                 let cells: u128 = grids.iter().filter_map(|(_, name, _)| s.other(name).ok()).map(|g| g.size() as u128).sum();
-                let bytes = 2 * (n * (2 * dim as u128 + 3) * 8 + cells * 2 * 8);
-                let of = format!("{} particles' and {} grid cells' copies for the device", count(n), count(cells));
+                let springs: u128 = terms.iter().filter(|t| t.0 == "springs").map(|t| t.2.len_of("i") as u128).sum();
+                let bytes = 2 * (n * (2 * dim as u128 + 3) * 8 + cells * 2 * 8) + springs * 256;
+                let of = format!(
+                    "{} particles', {} springs' and {} grid cells' copies for the device",
+                    count(n),
+                    count(springs),
+                    count(cells)
+                );
                 Need::new("step", bytes, of).room(bytes).map_err(|e| to_py(py, e))?;
                 let charge = p.model().attribute("charge").map(|q| q.to_vec());
                 if p.n_constraints() != colliders.len() {
@@ -462,9 +470,7 @@ impl PySimulation {
         let ty = registry::lookup(kind).map_err(|e| to_py(py, e))?;
         let p = params_of(py, ty.kind, params)?;
         let record = (kind.to_string(), name.clone(), p.try_clone(ty.kind).map_err(|e| to_py(py, e))?);
-        if let Some(r) = self.terms.iter_mut().find(|r| r.1 == name) {
-            *r = record;
-        }
+        let key = name.clone();
         match &mut self.inner {
             Inner::D2(s) => {
                 let ctx = Context { n_particles: s.n_particles() };
@@ -475,7 +481,14 @@ impl PySimulation {
                 ty.build::<DVec3>(name, p, &ctx).and_then(|t| s.particles_mut().replace_term(t))
             }
         }
-        .map_err(|e| to_py(py, e))
+        .map_err(|e| to_py(py, e))?;
+        // The record only once the term is in: a refused one (bad parameters, an integrator
+        // that cannot take it) left the record of the term it did not replace (the move to a
+        // device builds the device's terms from these records).
+        if let Some(r) = self.terms.iter_mut().find(|r| r.1 == key) {
+            *r = record;
+        }
+        Ok(())
     }
 
     /// Adds a grid system (`crate::grids::build`) of `kind` named `name`, built from `params`.

@@ -309,7 +309,7 @@ fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result
                 if names.springs.is_some() {
                     return Err(invalid(name, "the GPU path holds one springs term (join them into one)"));
                 }
-                let mut p = p.clone();
+                let mut p = p.try_clone("step")?;
                 let (i, j) = (p.take_indices("i")?, p.take_indices("j")?);
                 let (k, c, rest) =
                     (p.take_floats("stiffness")?, p.take_floats("damping")?, p.take_floats("rest_length")?);

@@ -71,6 +71,14 @@ impl Params {
         }
         Ok(Self { values })
     }
+    /// The number of entries of array `key` (0 where it is missing or a single value).
+    pub fn len_of(&self, key: &str) -> usize {
+        match self.values.get(key) {
+            Some(Value::Floats(a)) => a.len(),
+            Some(Value::Indices(a)) => a.len(),
+            _ => 0,
+        }
+    }
     /// Whether `key` was given (for optional parameters with defaults).
     pub fn has(&self, key: &str) -> bool {
         self.values.contains_key(key)
