@@ -307,13 +307,13 @@ impl Particles {
         let sp = springs.unwrap_or(&empty);
         assert!(sp.i.iter().chain(&sp.j).all(|&p| (p as usize) < n), "spring index out of range");
         let (start, mut other, mut rows, slice) = sp.sliced(n);
-        let springs_mode = match Springs::kinds(&mut other, &rows, n) {
-            _ if sp.i.is_empty() => 0,
-            Some(table) => {
-                rows = table;
-                2
-            }
-            None => 1,
+        let springs_mode = if sp.i.is_empty() {
+            0
+        } else if let Some(table) = Springs::kinds(&mut other, &rows, n) {
+            rows = table;
+            2
+        } else {
+            1
         };
         let ro = U::STORAGE | U::COPY_DST;
         let entries_n = other.len().max(1) as u64;

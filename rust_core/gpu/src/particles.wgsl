@@ -83,18 +83,18 @@ const WG: u32 = 256u;
 
 var<workgroup> wtouch: u32;
 
-// Entry e's other end and its constants (k, c, L0, 0), in either layout (P.springs 1 or 2).
-fn spring_end(e: u32) -> u32 {
-    let o = other[e];
+// Entry e's other end and its constants (k, c, L0, 0) from o = other[e], read once, in either
+// layout (P.springs 1 or 2).
+fn spring_end(o: u32) -> u32 {
     if (P.springs == 2u) {
         return o & 0xffffffu;
     }
     return o;
 }
 
-fn spring_constants(e: u32) -> vec4<real> {
+fn spring_constants(e: u32, o: u32) -> vec4<real> {
     if (P.springs == 2u) {
-        return spring[other[e] >> 24u];
+        return spring[o >> 24u];
     }
     return spring[e];
 }
@@ -232,8 +232,9 @@ fn eval_forces(i: u32, l: u32) {
         let base = start[P.n + 1u + i];
         for (var q = 0u; q < deg; q++) {
             let e = base + q * P.sw;
-            let j = spring_end(e);
-            let s = spring_constants(e);
+            let o = other[e];
+            let j = spring_end(o);
+            let s = spring_constants(e, o);
             let d = pos[j].xyz - xi.xyz;
             let l = length(d);
             if (l > 0.0) {
@@ -368,8 +369,9 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         let base = start[P.n + 1u + i];
         for (var q = 0u; q < deg; q++) {
             let e = base + q * P.sw;
-            let s = spring_constants(e);
-            let dl = length(pos[spring_end(e)].xyz - xi.xyz) - s.z;
+            let o = other[e];
+            let s = spring_constants(e, o);
+            let dl = length(pos[spring_end(o)].xyz - xi.xyz) - s.z;
             us += 0.25 * s.x * dl * dl;
         }
     }
