@@ -328,7 +328,7 @@ def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
     a = _check.array(arg, value)
     if a.dtype != np.float64:
         raise InvalidTypeError(f"{arg}: expected dtype float64, got {a.dtype}")
-    if key in ("positions", "velocities") or key.startswith("attr_") or key in ("ledger", "reference_energy"):
+    if key in ("positions", "velocities") or key.startswith(("attr_", "device_")) or key in ("ledger", "reference_energy"):
         want = now.shape if now is not None else (2,)
         if a.shape != want:
             raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
@@ -519,6 +519,9 @@ class Scene:
         self._device_precision = precision
         self._auto_precision = auto_precision
         self._device_reason: str | None = None
+        # The particle attributes as they were moved to the device (None before): the core's
+        # host side hands them over with the particles, and they cannot change there.
+        self._device_attrs: dict[str, np.ndarray] | None = None
         # One thread at a time, and the books' reference (physcore.session).
         self._session = Session(sim)
         self._threads = threads
@@ -833,7 +836,14 @@ class Scene:
         if self._device == "cpu" or self._sim.on_device:
             return
         self._check_device_parts()
-        self._exclusive(lambda sim: sim.move_to_device(self._device, self._device_precision))
+        self._move_to_device(self._device, self._device_precision)
+
+    def _move_to_device(self, device: str, precision: str) -> None:
+        """The core's move, keeping a copy of the particle attributes it takes with it (read by
+        :attr:`attributes`, so that a save, a pickle and :meth:`state` keep the charges)."""
+        attrs = {k: np.array(v, dtype=np.float64) for k, v in self._sim.attributes().items()}
+        self._exclusive(lambda sim: sim.move_to_device(device, precision))
+        self._device_attrs = attrs
 
     def _choose_device(self) -> None:
         """``device="auto"``: a GPU when every part has a kernel there, a real GPU is present and
@@ -854,7 +864,7 @@ class Scene:
         precision = self._auto_precision or "f32"
         self._sim.single = False
         try:
-            self._exclusive(lambda sim: sim.move_to_device(device, precision))
+            self._move_to_device(device, precision)
         except BaseException:
             self._sim.single = self._auto_precision == "f32"
             raise
@@ -882,12 +892,6 @@ class Scene:
                 f"(it has the terms {', '.join(_GPU_TERMS)}, Plane and Box colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
-
-    def _cpu_only(self, what: str) -> None:
-        """Refuses ``what`` once the particles live on a GPU."""
-        if self._device != "cpu" and self._sim.on_device:
-            raise InvalidInputError(f"{what}: not yet on the GPU path (device={self._device!r}); the scene steps, "
-                                    "reads positions, velocities and energies, and renders")
 
     def to_device(self, *, check_only: bool = False) -> None:
         """Moves a GPU scene's parts to its device now, as its first :meth:`step` does; nothing
@@ -1189,7 +1193,10 @@ class Scene:
     @property
     def attributes(self) -> dict[str, np.ndarray]:
         """The optional per-particle attributes set so far (see :meth:`set_attribute`): name ->
-        ``(N,)`` float64 copy."""
+        ``(N,)`` float64 copy. On the GPU path, those the particles took to the device (they
+        cannot change there)."""
+        if self._device_attrs is not None and self._sim.on_device:
+            return {k: v.copy() for k, v in self._device_attrs.items()}
         return dict(self._sim.attributes())
 
     def set_attribute(self, name: str, values: np.typing.ArrayLike) -> None:
@@ -1486,12 +1493,21 @@ class Scene:
             points and rates (``flow{k}_y``), the rigid bodies' whole solver state
             (``body0_state``, ``body0_state_bytes``: poses, velocities, contacts).
 
+        ``"device_pos"``, ``"device_vel"``, ``"device_acc"``, ``"device_aux"`` : ndarray, (N, 4) float64; ``"device_hits"`` : ndarray, (N,) float64; ``"device_acc_valid"`` : ndarray, (1,) float64
+            Only on the GPU path, once the particles are on the device: its rows as it holds
+            them (each particle's position and mass, velocity, acceleration, its share of the
+            books; the colliders' hits; whether the accelerations are those of the positions),
+            as the scene file's ``device_*`` members. There, ``ledger`` and ``collisions`` are
+            read from the device's books and ``cache_*`` are None (the device keeps its
+            accelerations in its rows).
+
         Stepping after ``set_state(s)`` repeats, bit for bit, what stepping after ``s = state()``
-        did. The layout is described in docs/guide/architecture.md (Saving, checkpoints and
-        the state protocol).
+        did, on the CPU and on the GPU path. The layout is described in
+        docs/guide/architecture.md (Saving, checkpoints and the state protocol).
         """
-        self._cpu_only("state()")
         sim = self._sim
+        if self._device != "cpu" and sim.on_device:
+            return self._device_state()
         out: dict[str, Any] = {
             "time": sim.time,
             "step": sim.step_count,
@@ -1511,6 +1527,61 @@ class Scene:
         for part, prefix in self._prefixed_parts():
             out.update({f"{prefix}{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
         return out
+
+    def _device_state(self) -> dict[str, Any]:
+        """:meth:`state` of a scene whose particles are on a GPU: the host's clock and the
+        device's rows and books, read back (as :meth:`save` reads them)."""
+        sim = self._sim
+        dissipated = self.energy().dissipated
+        out: dict[str, Any] = {
+            "time": sim.time,
+            "step": sim.step_count,
+            "dt": sim.dt,
+            "positions": self.positions,
+            "velocities": self.velocities,
+            **{f"attr_{a}": v for a, v in self.attributes.items()},
+            "ledger": np.array([float(dissipated.get(t.name, 0.0)) for t in self.terms], dtype=np.float64),
+            "collisions": float(dissipated.get("collisions", 0.0)),
+            "cache_forces": None,
+            "cache_power": None,
+        }
+        ref = self._session.reference_energy
+        out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
+        for part, prefix in self._prefixed_parts():
+            out.update({f"{prefix}{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
+        if _DEVICE_PARTICLES in sim.system_names():
+            raw = dict(sim.system_save(_DEVICE_PARTICLES))
+            out.update({f"device_{k}": np.array(raw[k], dtype=np.float64).reshape(-1, 4) for k in ("pos", "vel", "acc", "aux")})
+            out["device_hits"] = np.array(raw["hits"], dtype=np.float64)
+            out["device_acc_valid"] = np.array(raw["acc_valid"], dtype=np.float64)
+        return out
+
+    def _put_device_state(self, sim: _core.Simulation, s: dict[str, Any]) -> None:
+        """:meth:`set_state`'s work on the GPU path (``s`` checked): the device's rows put back,
+        with ``positions`` and ``velocities`` written into them (rounded to the device's
+        precision), and its accelerations marked stale where either changed, so that the next
+        step evaluates the forces first; then the parts, the step and the host's clock."""
+        if "device_pos" in s:
+            dim = self.dim
+            rows = {k: s[f"device_{k}"].copy() for k in ("pos", "vel", "acc", "aux")}
+            valid = float(s["device_acc_valid"][0])
+            for key, row in (("positions", rows["pos"]), ("velocities", rows["vel"])):
+                want = s[key].astype(np.float32).astype(np.float64) if self.precision == "f32" else s[key]
+                if not np.array_equal(row[:, :dim], want):
+                    row[:, :dim] = want
+                    valid = 0.0
+            arrays = [(k, np.ascontiguousarray(rows[k]).reshape(-1)) for k in ("pos", "vel", "acc", "aux")]
+            arrays += [("hits", np.ascontiguousarray(s["device_hits"])), ("acc_valid", np.array([valid]))]
+            sim.system_load(_DEVICE_PARTICLES, arrays)
+        for part, prefix in self._prefixed_parts():
+            own = {key[len(prefix):]: v for key, v in s.items() if key.startswith(prefix)}
+            if own:
+                part._set_state(sim, own)
+        sim.dt = s["dt"]
+        # The books are the device's, in its rows (`ledger` and `collisions` are what they add
+        # up to); the host keeps none once the terms moved, so its clock alone is set here.
+        host_ledger, host_collisions = sim.ledger()
+        sim.restore(s["time"], s["step"], list(host_ledger), host_collisions, None, None)
 
     def _prefixed_parts(self) -> Iterator[tuple[Part, str]]:
         """Each part with the prefix of its members, ``{section's prefix}{k}_`` with k counted
@@ -1548,7 +1619,23 @@ class Scene:
             raise InvalidInputError(f"state[{extra[0]!r}]: not a key of this scene's state (see Scene.state)")
         new = {k: _check_state_value(k, state[k], now[k], self) for k in now}
 
+        on_device = self._device != "cpu" and self._sim.on_device
+        if on_device:
+            # Attributes live in the device's buffers, uploaded once: a snapshot puts back the
+            # ones it was taken with (changing them is not yet on the GPU path).
+            for key, v in new.items():
+                if key.startswith("attr_") and not np.array_equal(v, now[key]):
+                    raise InvalidInputError(f"state[{key!r}]: changing a particle attribute is not yet on the GPU path "
+                                            f"(device={self._device!r}); set it before the first step")
+            if "device_pos" in new:
+                masses = self.masses.astype(np.float32).astype(np.float64) if self.precision == "f32" else self.masses
+                if not np.array_equal(new["device_pos"][:, 3], masses):
+                    raise InvalidInputError("state['device_pos']: its mass column differs from this scene's masses")
+
         def put(sim: _core.Simulation, s: dict[str, Any]) -> None:
+            if on_device:
+                self._put_device_state(sim, s)
+                return
             sim.set_state(positions=s["positions"], velocities=s["velocities"])
             for key, v in s.items():
                 if key.startswith("attr_"):

@@ -104,5 +104,5 @@ def test_a_chosen_gpu_steps_the_scene_in_f32_and_agrees_with_the_cpu(monkeypatch
     assert "estimated" in auto.device_reason
     assert np.abs(auto.positions - cpu.positions).max() < 1e-5
     # Once chosen, the scene is a GPU scene: the same refusals as device="gpu".
-    with pytest.raises(pc.InvalidInputError, match="GPU path"):
-        auto.state()
+    with pytest.raises(pc.InvalidInputError, match="on the GPU"):
+        auto.integrator = "rk4"
