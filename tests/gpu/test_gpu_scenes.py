@@ -165,8 +165,8 @@ def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
 
     s = pc.Scene(dim=2, device=DEVICE)
     s.add_particles([[0.0, 0.0]])
-    s.add(pc.Sphere([0.0, -1.0], 0.5))
-    with pytest.raises(pc.InvalidInputError, match="Sphere"):
+    s.add(pc.Capsule([0.0, -1.0], [1.0, -1.0], 0.5))
+    with pytest.raises(pc.InvalidInputError, match="Capsule"):
         s.step(1)
 
 
@@ -281,6 +281,49 @@ def test_particles_bounce_off_gpu_planes_and_boxes_as_on_the_cpu(dim: int, integ
         assert abs(e_gpu.total - e_cpu.total) < 1e-3 * abs(e_cpu.total)
         lo = gpu.positions.min()
         assert lo >= -1.0 and gpu.positions.max() <= 1.0
+
+
+def _ball_and_bowl(dim: int, device: str = "cpu", precision: str | None = None, integrator: str = "verlet") -> pc.Scene:
+    """Particles under gravity in a bowl (a sphere that keeps them inside, e = 0.8, μ = 0.2),
+    falling onto a ball inside it (e = 0.6, μ = 0.4); one starts at the ball's centre at rest
+    (pushed up) and one there moving (sent back the way it came)."""
+    rng = np.random.default_rng(9)
+    n = 300
+    x = rng.uniform(-0.6, 0.6, (n, dim))
+    x[0] = x[1] = [0.0] * (dim - 1) + [-0.4]
+    v = rng.normal(size=(n, dim))
+    v[0] = 0.0
+    s = pc.Scene(dim=dim, integrator=integrator, dt=2e-3, device=device, precision=precision)
+    s.add_particles(x, v, masses=rng.uniform(0.5, 1.5, n))
+    s.add(pc.Gravity([0.0] * (dim - 1) + [-9.81]))
+    s.add(pc.Drag(0.05))
+    s.add(pc.Sphere([0.0] * (dim - 1) + [-0.4], 0.3, restitution=0.6, friction=0.4))
+    s.add(pc.Sphere([0.0] * dim, 1.0, inside=True, restitution=0.8, friction=0.2))
+    return s
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("integrator", ["verlet", "yoshida4"])
+def test_particles_bounce_off_gpu_spheres_and_bowls_as_on_the_cpu(dim: int, integrator: str) -> None:
+    cpu = _ball_and_bowl(dim, integrator=integrator)
+    cpu.step(300)
+    e_cpu = cpu.energy()
+    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the ball and the bowl
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu = _ball_and_bowl(dim, DEVICE, precision, integrator)
+        gpu.step(300)
+        e_gpu = gpu.energy()
+        # As for planes and boxes: f64 the CPU's projection and bounce, operation for operation;
+        # f32 rounding, which a bounce can turn into a different contact step.
+        dx = np.abs(gpu.positions - cpu.positions).max()
+        assert dx < {"f32": 1e-3, "f64": 1e-9}[precision], (precision, dx)
+        k = "collisions"
+        assert abs(e_gpu.dissipated[k] - e_cpu.dissipated[k]) < 1e-3 * e_cpu.dissipated[k] + (1e-9 if precision == "f64" else 1e-3)
+        assert abs(e_gpu.total - e_cpu.total) < 1e-3 * abs(e_cpu.total)
+        r = np.linalg.norm(gpu.positions, axis=1)
+        assert r.max() <= 1.0 + 1e-6
+        ball = np.array([0.0] * (dim - 1) + [-0.4])
+        assert np.linalg.norm(gpu.positions - ball, axis=1).min() >= 0.3 - 1e-6
 
 
 def _plasma(dim: int, device: str = "cpu", precision: str | None = None) -> pc.Scene:

@@ -164,6 +164,9 @@ pub enum Collider {
     Plane { point: [f64; 3], normal: [f64; 3], restitution: f64, friction: f64 },
     /// Particles kept inside [lower, upper] (z ignored in 2D).
     Box { lower: [f64; 3], upper: [f64; 3], restitution: f64, friction: f64 },
+    /// Particles kept outside the sphere (a disc in 2D) of `radius` about `center`, or with
+    /// `inside` in it (a bowl): the CPU's `constraints::Sphere` (`geometry::ball::onto_round`).
+    Sphere { center: [f64; 3], radius: f64, inside: bool, restitution: f64, friction: f64 },
 }
 
 /// Energy books summed on the host, in f64, in particle order (deterministic).
@@ -667,6 +670,9 @@ impl Particles {
             let (kind, a, b, e, mu) = match *c {
                 Collider::Plane { point, normal, restitution, friction } => (0.0, point, normal, restitution, friction),
                 Collider::Box { lower, upper, restitution, friction } => (1.0, lower, upper, restitution, friction),
+                Collider::Sphere { center, radius, inside, restitution, friction } => {
+                    (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], restitution, friction)
+                }
             };
             rows.extend_from_slice(&[kind, e, mu, 0.0, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
         }

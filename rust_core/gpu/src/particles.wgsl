@@ -385,6 +385,24 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     books[2u * i + 1u] = vec4<real>(us, x.z, uc, 0.0);
 }
 
+// `Contact::bounce`: moving into the surface of unit normal n (v·n < 0), the normal velocity
+// becomes −e v_n and the tangential speed drops by μ(1 + e)|v_n|, never past zero.
+fn bounce(v: vec3<real>, n: vec3<real>, e: real, mu: real) -> vec3<real> {
+    let vn = dot(v, n);
+    if (!(vn < 0.0)) {
+        return v;
+    }
+    let vt = v - n * vn;
+    let vt2 = dot(vt, vt);
+    let dvn = (1.0 + e) * (-vn);
+    var vtn = vt;
+    if (mu > 0.0 && vt2 > 0.0) {
+        let l = sqrt(vt2);
+        vtn = vt * (max(l - mu * dvn, 0.0) / l);
+    }
+    return vtn + n * (-e * vn);
+}
+
 // The colliders (the CPU's `constraints::Collider` with `Contact::bounce`, and `constraints::Aabb`
 // face by face): a free particle on a forbidden side is moved onto the surface; moving into it,
 // its normal velocity becomes −e v_n and its tangential speed drops by μ(1 + e)|v_n|, never past
@@ -423,18 +441,37 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             dx = b * (-depth);
             x = x + dx;
-            let vn = dot(v, b);
-            if (vn < 0.0) {
-                let vt = v - b * vn;
-                let vt2 = dot(vt, vt);
-                let dvn = (1.0 + e) * (-vn);
-                var vtn = vt;
-                if (mu > 0.0 && vt2 > 0.0) {
-                    let l = sqrt(vt2);
-                    vtn = vt * (max(l - mu * dvn, 0.0) / l);
-                }
-                v = vtn + b * (-e * vn);
+            v = bounce(v, b, e, mu);
+        } else if (h.x == 2.0) {
+            // A sphere about a of radius b.x, particles kept outside (b.y = 0: a ball) or inside
+            // (b.y = 1: a bowl): moved along the radius onto it (at the centre, back the way
+            // they came, or up when at rest), bounced off the surface's normal.
+            let r = b.x;
+            let inside = b.y != 0.0;
+            let rel = x - a;
+            let l2 = dot(rel, rel);
+            let r2 = r * r;
+            if ((inside && !(l2 > r2)) || (!inside && !(l2 < r2))) {
+                continue;
             }
+            let l = sqrt(l2);
+            let v2 = dot(v, v);
+            var u = vec3<real>(0.0, 0.0, 0.0);
+            if (l > 0.0) {
+                u = rel / l;
+            } else if (v2 > 0.0) {
+                u = -v / sqrt(v2);
+            } else {
+                u[P.dim - 1u] = 1.0;
+            }
+            let moved = a + u * r;
+            dx = moved - x;
+            x = moved;
+            var n = u;
+            if (inside) {
+                n = -u;
+            }
+            v = bounce(v, n, e, mu);
         } else {
             // A box [a, b]: particles kept inside, bounced face by face.
             var out = false;

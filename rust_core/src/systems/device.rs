@@ -202,7 +202,7 @@ impl DeviceParticles {
 }
 
 /// The device's colliders from their records (kind, parameters), checked as the CPU's
-/// constructors check them; kinds other than planes and boxes are refused by name.
+/// constructors check them; kinds other than planes, boxes and spheres are refused by name.
 fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider>> {
     let vec3 = |p: &Params, name: &str| -> Result<[f64; 3]> {
         let v = if dim == 2 {
@@ -238,9 +238,19 @@ fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider
                     }
                     Ok(Collider::Box { lower, upper, restitution, friction })
                 }
+                "sphere" => {
+                    let (center, radius) = (vec3(p, "center")?, p.number("radius")?);
+                    // As `geometry::Ball::new`: the test compares squared distances.
+                    if !(radius > 0.0 && (radius * radius).is_finite()) {
+                        return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
+                    }
+                    Ok(Collider::Sphere { center, radius, inside: p.flag("inside")?, restitution, friction })
+                }
                 other => Err(invalid(
                     other,
-                    format!("the GPU path has no {other:?} collider yet (it has planes and boxes); run this scene on the CPU"),
+                    format!(
+                        "the GPU path has no {other:?} collider yet (it has planes, boxes and spheres); run this scene on the CPU"
+                    ),
                 )),
             }
         })
