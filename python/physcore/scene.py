@@ -280,6 +280,8 @@ _DEVICE_PARTICLES = "device particles"
 _GPU_GRIDS = ("gray_scott",)
 #: Collider sections the GPU path has kernels for (planes, boxes and spheres).
 _GPU_COLLIDERS = ("planes", "boxes", "spheres")
+#: Kinds of the generic "colliders" section the GPU path has kernels for.
+_GPU_SHAPES = ("capsule",)
 
 
 def _check_precision(value: object) -> str:
@@ -875,7 +877,8 @@ class Scene:
         for part in self._parts:
             ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
                   or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
-                  or part.section in _GPU_COLLIDERS)
+                  or part.section in _GPU_COLLIDERS
+                  or (part.section == "colliders" and part.part_kind in _GPU_SHAPES))
             if not ok:
                 return part
         return None
@@ -889,7 +892,7 @@ class Scene:
             what = getattr(part, "name", None) or type(part).__name__
             raise InvalidInputError(
                 f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                f"(it has the terms {', '.join(_GPU_TERMS)}, Plane, Box and Sphere colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, Plane, Box, Sphere and Capsule colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
 

@@ -165,8 +165,8 @@ def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
 
     s = pc.Scene(dim=2, device=DEVICE)
     s.add_particles([[0.0, 0.0]])
-    s.add(pc.Capsule([0.0, -1.0], [1.0, -1.0], 0.5))
-    with pytest.raises(pc.InvalidInputError, match="Capsule"):
+    s.add(pc.OrientedBox([0.0, -1.0], [1.0, 0.2]))
+    with pytest.raises(pc.InvalidInputError, match="OrientedBox"):
         s.step(1)
 
 
@@ -285,8 +285,8 @@ def test_particles_bounce_off_gpu_planes_and_boxes_as_on_the_cpu(dim: int, integ
 
 def _ball_and_bowl(dim: int, device: str = "cpu", precision: str | None = None, integrator: str = "verlet") -> pc.Scene:
     """Particles under gravity in a bowl (a sphere that keeps them inside, e = 0.8, μ = 0.2),
-    falling onto a ball inside it (e = 0.6, μ = 0.4); one starts at the ball's centre at rest
-    (pushed up) and one there moving (sent back the way it came)."""
+    falling onto a ball inside it (e = 0.6, μ = 0.4) and onto capsules; one starts at the
+    ball's centre at rest (pushed up) and one there moving (sent back the way it came)."""
     rng = np.random.default_rng(9)
     n = 300
     x = rng.uniform(-0.6, 0.6, (n, dim))
@@ -299,16 +299,19 @@ def _ball_and_bowl(dim: int, device: str = "cpu", precision: str | None = None, 
     s.add(pc.Drag(0.05))
     s.add(pc.Sphere([0.0] * (dim - 1) + [-0.4], 0.3, restitution=0.6, friction=0.4))
     s.add(pc.Sphere([0.0] * dim, 1.0, inside=True, restitution=0.8, friction=0.2))
+    # A bar across the bowl above the ball, and a capsule of zero length (a ball) beside it.
+    s.add(pc.Capsule([-0.7] + [0.0] * (dim - 2) + [0.3], [0.6] + [0.0] * (dim - 2) + [0.2], 0.08, restitution=0.7, friction=0.3))
+    s.add(pc.Capsule([0.5] + [0.0] * (dim - 1), [0.5] + [0.0] * (dim - 1), 0.1, restitution=0.9))
     return s
 
 
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["verlet", "yoshida4"])
-def test_particles_bounce_off_gpu_spheres_and_bowls_as_on_the_cpu(dim: int, integrator: str) -> None:
+def test_particles_bounce_off_gpu_spheres_bowls_and_capsules_as_on_the_cpu(dim: int, integrator: str) -> None:
     cpu = _ball_and_bowl(dim, integrator=integrator)
     cpu.step(300)
     e_cpu = cpu.energy()
-    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the ball and the bowl
+    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the ball, the bowl and the capsules
     for precision in ["f32", "f64"] if F64 else ["f32"]:
         gpu = _ball_and_bowl(dim, DEVICE, precision, integrator)
         gpu.step(300)
@@ -324,6 +327,8 @@ def test_particles_bounce_off_gpu_spheres_and_bowls_as_on_the_cpu(dim: int, inte
         assert r.max() <= 1.0 + 1e-6
         ball = np.array([0.0] * (dim - 1) + [-0.4])
         assert np.linalg.norm(gpu.positions - ball, axis=1).min() >= 0.3 - 1e-6
+        pearl = np.array([0.5] + [0.0] * (dim - 1))
+        assert np.linalg.norm(gpu.positions - pearl, axis=1).min() >= 0.1 - 1e-6
 
 
 def _plasma(dim: int, device: str = "cpu", precision: str | None = None) -> pc.Scene:

@@ -167,6 +167,9 @@ pub enum Collider {
     /// Particles kept outside the sphere (a disc in 2D) of `radius` about `center`, or with
     /// `inside` in it (a bowl): the CPU's `constraints::Sphere` (`geometry::ball::onto_round`).
     Sphere { center: [f64; 3], radius: f64, inside: bool, restitution: f64, friction: f64 },
+    /// Particles kept outside the capsule of `radius` about the segment from `a` to `b`: the
+    /// CPU's `constraints::Capsule`.
+    Capsule { a: [f64; 3], b: [f64; 3], radius: f64, restitution: f64, friction: f64 },
 }
 
 /// Energy books summed on the host, in f64, in particle order (deterministic).
@@ -667,14 +670,16 @@ impl Particles {
         }
         let mut rows = Vec::with_capacity(12 * colliders.len());
         for c in colliders {
+            let w = if let Collider::Capsule { radius, .. } = *c { radius } else { 0.0 };
             let (kind, a, b, e, mu) = match *c {
                 Collider::Plane { point, normal, restitution, friction } => (0.0, point, normal, restitution, friction),
                 Collider::Box { lower, upper, restitution, friction } => (1.0, lower, upper, restitution, friction),
                 Collider::Sphere { center, radius, inside, restitution, friction } => {
                     (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], restitution, friction)
                 }
+                Collider::Capsule { a, b, restitution, friction, .. } => (3.0, a, b, restitution, friction),
             };
-            rows.extend_from_slice(&[kind, e, mu, 0.0, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
+            rows.extend_from_slice(&[kind, e, mu, w, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
         }
         if !rows.is_empty() {
             self.upload(&self.colliders, &rows);

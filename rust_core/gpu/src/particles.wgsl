@@ -385,6 +385,39 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
     books[2u * i + 1u] = vec4<real>(us, x.z, uc, 0.0);
 }
 
+// `geometry::ball::onto_round`: x on the wrong side of the round surface at distance r from c
+// (inside: kept within it) moved along the radius onto it, with the surface's normal into the
+// allowed side; at the centre itself, back the way it came, or up when at rest.
+struct Round {
+    x: vec3<real>,
+    n: vec3<real>,
+    hit: bool,
+}
+
+fn onto_round(x: vec3<real>, v: vec3<real>, c: vec3<real>, r: real, inside: bool) -> Round {
+    let rel = x - c;
+    let l2 = dot(rel, rel);
+    let r2 = r * r;
+    if ((inside && !(l2 > r2)) || (!inside && !(l2 < r2))) {
+        return Round(x, vec3<real>(0.0, 0.0, 0.0), false);
+    }
+    let l = sqrt(l2);
+    let v2 = dot(v, v);
+    var u = vec3<real>(0.0, 0.0, 0.0);
+    if (l > 0.0) {
+        u = rel / l;
+    } else if (v2 > 0.0) {
+        u = -v / sqrt(v2);
+    } else {
+        u[P.dim - 1u] = 1.0;
+    }
+    var n = u;
+    if (inside) {
+        n = -u;
+    }
+    return Round(c + u * r, n, true);
+}
+
 // `Contact::bounce`: moving into the surface of unit normal n (v·n < 0), the normal velocity
 // becomes −e v_n and the tangential speed drops by μ(1 + e)|v_n|, never past zero.
 fn bounce(v: vec3<real>, n: vec3<real>, e: real, mu: real) -> vec3<real> {
@@ -442,36 +475,31 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
             dx = b * (-depth);
             x = x + dx;
             v = bounce(v, b, e, mu);
-        } else if (h.x == 2.0) {
+        } else if (h.x == 2.0 || h.x == 3.0) {
             // A sphere about a of radius b.x, particles kept outside (b.y = 0: a ball) or inside
-            // (b.y = 1: a bowl): moved along the radius onto it (at the centre, back the way
-            // they came, or up when at rest), bounced off the surface's normal.
-            let r = b.x;
-            let inside = b.y != 0.0;
-            let rel = x - a;
-            let l2 = dot(rel, rel);
-            let r2 = r * r;
-            if ((inside && !(l2 > r2)) || (!inside && !(l2 < r2))) {
+            // (b.y = 1: a bowl); a capsule, particles kept outside the radius h.w about the
+            // segment from a to b (nearest its nearest point: `geometry::Capsule::nearest`).
+            var c = a;
+            var r = b.x;
+            var inside = b.y != 0.0;
+            if (h.x == 3.0) {
+                let ab = b - a;
+                let l2 = dot(ab, ab);
+                var t: real = 0.0;
+                if (l2 > 0.0) {
+                    t = clamp(dot(x - a, ab) / l2, 0.0, 1.0);
+                }
+                c = a + ab * t;
+                r = h.w;
+                inside = false;
+            }
+            let o = onto_round(x, v, c, r, inside);
+            if (!o.hit) {
                 continue;
             }
-            let l = sqrt(l2);
-            let v2 = dot(v, v);
-            var u = vec3<real>(0.0, 0.0, 0.0);
-            if (l > 0.0) {
-                u = rel / l;
-            } else if (v2 > 0.0) {
-                u = -v / sqrt(v2);
-            } else {
-                u[P.dim - 1u] = 1.0;
-            }
-            let moved = a + u * r;
-            dx = moved - x;
-            x = moved;
-            var n = u;
-            if (inside) {
-                n = -u;
-            }
-            v = bounce(v, n, e, mu);
+            dx = o.x - x;
+            x = o.x;
+            v = bounce(v, o.n, e, mu);
         } else {
             // A box [a, b]: particles kept inside, bounced face by face.
             var out = false;

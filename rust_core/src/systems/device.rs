@@ -202,7 +202,7 @@ impl DeviceParticles {
 }
 
 /// The device's colliders from their records (kind, parameters), checked as the CPU's
-/// constructors check them; kinds other than planes, boxes and spheres are refused by name.
+/// constructors check them; kinds other than planes, boxes, spheres and capsules are refused by name.
 fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider>> {
     let vec3 = |p: &Params, name: &str| -> Result<[f64; 3]> {
         let v = if dim == 2 {
@@ -246,10 +246,22 @@ fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider
                     }
                     Ok(Collider::Sphere { center, radius, inside: p.flag("inside")?, restitution, friction })
                 }
+                "capsule" => {
+                    let (a, b, radius) = (vec3(p, "a")?, vec3(p, "b")?, p.number("radius")?);
+                    // As `geometry::Capsule::new`.
+                    let ab2: f64 = (0..3).map(|k| (b[k] - a[k]) * (b[k] - a[k])).sum();
+                    if !ab2.is_finite() {
+                        return Err(invalid("b", "the axis' squared length must be finite"));
+                    }
+                    if !(radius > 0.0 && (radius * radius).is_finite()) {
+                        return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
+                    }
+                    Ok(Collider::Capsule { a, b, radius, restitution, friction })
+                }
                 other => Err(invalid(
                     other,
                     format!(
-                        "the GPU path has no {other:?} collider yet (it has planes, boxes and spheres); run this scene on the CPU"
+                        "the GPU path has no {other:?} collider yet (it has planes, boxes, spheres and capsules); run this scene on the CPU"
                     ),
                 )),
             }
