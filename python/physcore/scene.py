@@ -278,10 +278,10 @@ _GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "coulomb", "springs")
 _DEVICE_PARTICLES = "device particles"
 #: Grid kinds the GPU path has kernels for (the same file).
 _GPU_GRIDS = ("gray_scott",)
-#: Collider sections the GPU path has kernels for (planes, boxes and spheres).
+#: Collider sections the GPU path has kernels for (planes, boxes and spheres; capsules and oriented boxes below).
 _GPU_COLLIDERS = ("planes", "boxes", "spheres")
 #: Kinds of the generic "colliders" section the GPU path has kernels for.
-_GPU_SHAPES = ("capsule",)
+_GPU_SHAPES = ("capsule", "oriented_box")
 
 
 def _check_precision(value: object) -> str:
@@ -892,7 +892,7 @@ class Scene:
             what = getattr(part, "name", None) or type(part).__name__
             raise InvalidInputError(
                 f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                f"(it has the terms {', '.join(_GPU_TERMS)}, Plane, Box, Sphere and Capsule colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
 

@@ -165,8 +165,8 @@ def test_what_the_gpu_path_lacks_is_refused_by_name() -> None:
 
     s = pc.Scene(dim=2, device=DEVICE)
     s.add_particles([[0.0, 0.0]])
-    s.add(pc.OrientedBox([0.0, -1.0], [1.0, 0.2]))
-    with pytest.raises(pc.InvalidInputError, match="OrientedBox"):
+    s.add(pc.TreeGravity(G=1.0))
+    with pytest.raises(pc.InvalidInputError, match="TreeGravity"):
         s.step(1)
 
 
@@ -285,7 +285,7 @@ def test_particles_bounce_off_gpu_planes_and_boxes_as_on_the_cpu(dim: int, integ
 
 def _ball_and_bowl(dim: int, device: str = "cpu", precision: str | None = None, integrator: str = "verlet") -> pc.Scene:
     """Particles under gravity in a bowl (a sphere that keeps them inside, e = 0.8, μ = 0.2),
-    falling onto a ball inside it (e = 0.6, μ = 0.4) and onto capsules; one starts at the
+    falling onto a ball inside it (e = 0.6, μ = 0.4), capsules and a tilted block; one starts at the
     ball's centre at rest (pushed up) and one there moving (sent back the way it came)."""
     rng = np.random.default_rng(9)
     n = 300
@@ -302,16 +302,19 @@ def _ball_and_bowl(dim: int, device: str = "cpu", precision: str | None = None, 
     # A bar across the bowl above the ball, and a capsule of zero length (a ball) beside it.
     s.add(pc.Capsule([-0.7] + [0.0] * (dim - 2) + [0.3], [0.6] + [0.0] * (dim - 2) + [0.2], 0.08, restitution=0.7, friction=0.3))
     s.add(pc.Capsule([0.5] + [0.0] * (dim - 1), [0.5] + [0.0] * (dim - 1), 0.1, restitution=0.9))
+    # A tilted block (an oriented box) on the left.
+    s.add(pc.OrientedBox([-0.4] + [0.0] * (dim - 1), [0.25, 0.06] + [0.2] * (dim - 2), 0.4 if dim == 2 else [0.1, 0.2, 0.4],
+                         restitution=0.5, friction=0.3))
     return s
 
 
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("integrator", ["verlet", "yoshida4"])
-def test_particles_bounce_off_gpu_spheres_bowls_and_capsules_as_on_the_cpu(dim: int, integrator: str) -> None:
+def test_particles_bounce_off_gpu_spheres_bowls_capsules_and_oriented_boxes_as_on_the_cpu(dim: int, integrator: str) -> None:
     cpu = _ball_and_bowl(dim, integrator=integrator)
     cpu.step(300)
     e_cpu = cpu.energy()
-    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the ball, the bowl and the capsules
+    assert e_cpu.dissipated["collisions"] > 1.0  # they hit the ball, the bowl, the capsules, the block
     for precision in ["f32", "f64"] if F64 else ["f32"]:
         gpu = _ball_and_bowl(dim, DEVICE, precision, integrator)
         gpu.step(300)

@@ -170,6 +170,10 @@ pub enum Collider {
     /// Particles kept outside the capsule of `radius` about the segment from `a` to `b`: the
     /// CPU's `constraints::Capsule`.
     Capsule { a: [f64; 3], b: [f64; 3], radius: f64, restitution: f64, friction: f64 },
+    /// Particles kept outside the box of `half` extents along the unit `axes` about `center`
+    /// (2D: the first two axes, z = 0): the CPU's `constraints::OrientedBox`, its axes as the
+    /// CPU computes them from the rotation.
+    OrientedBox { center: [f64; 3], half: [f64; 3], axes: [[f64; 3]; 3], restitution: f64, friction: f64 },
 }
 
 /// Energy books summed on the host, in f64, in particle order (deterministic).
@@ -269,6 +273,10 @@ const MAX_CHUNK: u64 = 4096;
 /// Colliders a device particle system holds.
 pub const MAX_COLLIDERS: usize = 64;
 
+/// Rows (of 4 reals) per collider: its kind, restitution, friction and a radius; two points;
+/// three axes (an oriented box's).
+const COLLIDER_ROWS: u64 = 6;
+
 impl Particles {
     /// Uploads `n` particles: `x`, `v` flat (n·dim, m and m/s), `mass` (kg, > 0), `inv_mass`
     /// (1/kg, 0 for pinned). The caller has validated the values (the core's scene checks).
@@ -305,7 +313,8 @@ impl Particles {
             hits: gpu.buffer("collision books", (n as u64).max(1) * precision.bytes(), st)?,
             flag: gpu.buffer("flags", 16, st)?,
         };
-        let colliders = gpu.buffer("colliders", 3 * row * MAX_COLLIDERS as u64, U::STORAGE | U::COPY_DST)?;
+        let colliders =
+            gpu.buffer("colliders", COLLIDER_ROWS * row * MAX_COLLIDERS as u64, U::STORAGE | U::COPY_DST)?;
         let charges = gpu.buffer("charges", (n as u64).max(1) * precision.bytes(), U::STORAGE | U::COPY_DST)?;
         let books = gpu.buffer("energy books", 2 * size, st)?;
         let vp = mk("predicted velocities")?;
@@ -668,9 +677,10 @@ impl Particles {
                 colliders.len()
             )));
         }
-        let mut rows = Vec::with_capacity(12 * colliders.len());
+        let mut rows = Vec::with_capacity(4 * COLLIDER_ROWS as usize * colliders.len());
         for c in colliders {
             let w = if let Collider::Capsule { radius, .. } = *c { radius } else { 0.0 };
+            let axes = if let Collider::OrientedBox { axes, .. } = *c { axes } else { [[0.0; 3]; 3] };
             let (kind, a, b, e, mu) = match *c {
                 Collider::Plane { point, normal, restitution, friction } => (0.0, point, normal, restitution, friction),
                 Collider::Box { lower, upper, restitution, friction } => (1.0, lower, upper, restitution, friction),
@@ -678,8 +688,14 @@ impl Particles {
                     (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], restitution, friction)
                 }
                 Collider::Capsule { a, b, restitution, friction, .. } => (3.0, a, b, restitution, friction),
+                Collider::OrientedBox { center, half, restitution, friction, .. } => {
+                    (4.0, center, half, restitution, friction)
+                }
             };
             rows.extend_from_slice(&[kind, e, mu, w, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
+            for u in axes {
+                rows.extend_from_slice(&[u[0], u[1], u[2], 0.0]);
+            }
         }
         if !rows.is_empty() {
             self.upload(&self.colliders, &rows);

@@ -459,9 +459,9 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
     var d: real = 0.0;
     var touched = false;
     for (var c = 0u; c < P.ncol; c++) {
-        let h = col[3u * c];
-        let a = col[3u * c + 1u].xyz;
-        let b = col[3u * c + 2u].xyz;
+        let h = col[6u * c];
+        let a = col[6u * c + 1u].xyz;
+        let b = col[6u * c + 2u].xyz;
         let e = h.y;
         let mu = h.z;
         let ke0 = 0.5 * m * dot(v, v);
@@ -500,6 +500,38 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
             dx = o.x - x;
             x = o.x;
             v = bounce(v, o.n, e, mu);
+        } else if (h.x == 4.0) {
+            // An oriented box about a, half extents b along the axes in the next three rows,
+            // particles kept outside: one inside leaves through the face it is least deep under
+            // (the first on a tie), along that axis (`geometry::OrientedBox::project`).
+            let rel = x - a;
+            var best = 0u;
+            var least: real = 0.0;
+            var qb: real = 0.0;
+            var inside = true;
+            for (var j = 0u; j < P.dim; j++) {
+                let q = dot(rel, col[6u * c + 3u + j].xyz);
+                let depth = b[j] - abs(q);
+                if (!(depth > 0.0)) {
+                    inside = false;
+                    break;
+                }
+                if (j == 0u || depth < least) {
+                    best = j;
+                    least = depth;
+                    qb = q;
+                }
+            }
+            if (!inside) {
+                continue;
+            }
+            var n = col[6u * c + 3u + best].xyz;
+            if (qb < 0.0) {
+                n = -n;
+            }
+            dx = n * least;
+            x = x + dx;
+            v = bounce(v, n, e, mu);
         } else {
             // A box [a, b]: particles kept inside, bounced face by face.
             var out = false;

@@ -202,7 +202,7 @@ impl DeviceParticles {
 }
 
 /// The device's colliders from their records (kind, parameters), checked as the CPU's
-/// constructors check them; kinds other than planes, boxes, spheres and capsules are refused by name.
+/// constructors check them; kinds other than planes, boxes, spheres, capsules and oriented boxes are refused by name.
 fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider>> {
     let vec3 = |p: &Params, name: &str| -> Result<[f64; 3]> {
         let v = if dim == 2 {
@@ -258,10 +258,30 @@ fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider
                     }
                     Ok(Collider::Capsule { a, b, radius, restitution, friction })
                 }
+                "oriented_box" => {
+                    // Built as the CPU builds it (its checks, and its axes from the rotation).
+                    let (center, half, axes) = if dim == 2 {
+                        let b = crate::geometry::OrientedBox::<glam::DVec2>::new(
+                            p.vector("center")?,
+                            p.vector("half_extents")?,
+                            p.axial::<glam::DVec2>("rotation")?,
+                        )?;
+                        let ax = b.axes.map(|u| [u.x, u.y, 0.0]);
+                        ([b.center.x, b.center.y, 0.0], b.half, ax)
+                    } else {
+                        let b = crate::geometry::OrientedBox::<glam::DVec3>::new(
+                            p.vector("center")?,
+                            p.vector("half_extents")?,
+                            p.axial::<glam::DVec3>("rotation")?,
+                        )?;
+                        (b.center.to_array(), b.half, b.axes.map(|u| u.to_array()))
+                    };
+                    Ok(Collider::OrientedBox { center, half, axes, restitution, friction })
+                }
                 other => Err(invalid(
                     other,
                     format!(
-                        "the GPU path has no {other:?} collider yet (it has planes, boxes, spheres and capsules); run this scene on the CPU"
+                        "the GPU path has no {other:?} collider yet (it has planes, boxes, spheres, capsules and oriented boxes); run this scene on the CPU"
                     ),
                 )),
             }
