@@ -369,7 +369,7 @@ def test_a_slider_changes_the_term_and_keeps_the_state():
 
 
 def test_damping_from_zero_by_slider():
-    w = pc.widget(pc.scenes.spring_chain(n=5), preview=0.0, fallback=False)
+    w = pc.widget(pc.scenes.spring_chain(n=5, damping=0.0), preview=0.0, fallback=False)
     spec = next(s for s in w.sliders if s["name"] == "damping")
     assert spec["value"] == 0.0 and spec["lo"] == 0.0 and spec["position"] == 0
     w._on_msg(w, {"type": "param", "name": "damping", "position": 600}, [])

@@ -157,7 +157,7 @@ const KINDS: usize = 256;
 const SLICE: usize = 32;
 
 /// A collider of the projection stage, applied after every step in the order given (the CPU's
-/// `constraints::Plane` and `constraints::Aabb`; restitution e in [0, 1], friction μ ≥ 0).
+/// `constraints` colliders with `Contact::bounce`; restitution e in [0, 1], friction μ ≥ 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Collider {
     /// The half-space (x − point)·normal ≥ 0 (`normal` of unit length; z = 0 in 2D).
