@@ -847,12 +847,15 @@ mod tests {
         let tree = vec![("tree_gravity".to_string(), "tree".to_string(), Params::new())];
         let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &tree, &[]).err().unwrap();
         assert!(e.to_string().starts_with("tree: the GPU path has no kernel for \"tree_gravity\""), "{e}");
-        let sphere = vec![(
-            "sphere".to_string(),
-            Params::new().with("restitution", Value::Number(0.5)).with("friction", Value::Number(0.0)),
-        )];
+        // Every registered collider has a kernel: a kind the device does not know is refused
+        // by name, and a collider's own parameters are checked by name.
+        let contact = Params::new().with("restitution", Value::Number(0.5)).with("friction", Value::Number(0.0));
+        let torus = vec![("torus".to_string(), contact.clone())];
+        let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms(), &torus).err().unwrap();
+        assert!(e.to_string().contains("no \"torus\" collider"), "{e}");
+        let sphere = vec![("sphere".to_string(), contact)];
         let e = DeviceParticles::new(w, "f32", 3, "verlet", &x, &v, &m, &pinned, &terms(), &sphere).err().unwrap();
-        assert!(e.to_string().contains("no \"sphere\" collider"), "{e}");
+        assert!(e.to_string().starts_with("center:"), "{e}");
         let e = DeviceParticles::new(w, "f32", 3, "rk4", &x, &v, &m, &pinned, &terms(), &[]).err().unwrap();
         assert!(e.to_string().starts_with("integrator:"), "{e}");
     }
