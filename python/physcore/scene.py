@@ -1509,8 +1509,7 @@ class Scene:
         docs/guide/architecture.md (Saving, checkpoints and the state protocol).
         """
         sim = self._sim
-        if self._device != "cpu" and sim.on_device:
-            return self._device_state()
+        on_device = self._device != "cpu" and sim.on_device
         out: dict[str, Any] = {
             "time": sim.time,
             "step": sim.step_count,
@@ -1519,45 +1518,41 @@ class Scene:
             "velocities": sim.velocities,
             **{f"attr_{a}": v for a, v in self.attributes.items()},
         }
-        ledger, collisions = sim.ledger()
+        ledger, collisions = self._device_books() if on_device else sim.ledger()
         out["ledger"] = np.asarray(ledger, dtype=np.float64)
         out["collisions"] = float(collisions)
-        cache = sim.integrator_cache()
+        cache = None if on_device else sim.integrator_cache()
         out["cache_forces"] = None if cache is None else cache[0]
         out["cache_power"] = None if cache is None else np.asarray(cache[1], dtype=np.float64)
         ref = self._session.reference_energy
         out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
         for part, prefix in self._prefixed_parts():
             out.update({f"{prefix}{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
+        if on_device:
+            out.update(self._device_rows())
         return out
 
-    def _device_state(self) -> dict[str, Any]:
-        """:meth:`state` of a scene whose particles are on a GPU: the host's clock and the
-        device's rows and books, read back (as :meth:`save` reads them)."""
-        sim = self._sim
+    def _device_books(self) -> tuple[list[float], float]:
+        """The ledger (each term's dissipated energy) and the collisions of a scene on a GPU,
+        read from the device's books (the host keeps none once the terms moved)."""
         dissipated = self.energy().dissipated
-        out: dict[str, Any] = {
-            "time": sim.time,
-            "step": sim.step_count,
-            "dt": sim.dt,
-            "positions": self.positions,
-            "velocities": self.velocities,
-            **{f"attr_{a}": v for a, v in self.attributes.items()},
-            "ledger": np.array([float(dissipated.get(t.name, 0.0)) for t in self.terms], dtype=np.float64),
-            "collisions": float(dissipated.get("collisions", 0.0)),
-            "cache_forces": None,
-            "cache_power": None,
-        }
-        ref = self._session.reference_energy
-        out["reference_energy"] = None if ref is None else np.array(ref, dtype=np.float64)
-        for part, prefix in self._prefixed_parts():
-            out.update({f"{prefix}{m}": np.array(v, dtype=np.float64) for m, v in part._state(sim).items()})
-        if _DEVICE_PARTICLES in sim.system_names():
-            raw = dict(sim.system_save(_DEVICE_PARTICLES))
-            out.update({f"device_{k}": np.array(raw[k], dtype=np.float64).reshape(-1, 4) for k in ("pos", "vel", "acc", "aux")})
-            out["device_hits"] = np.array(raw["hits"], dtype=np.float64)
-            out["device_acc_valid"] = np.array(raw["acc_valid"], dtype=np.float64)
-        return out
+        return [float(dissipated.get(t.name, 0.0)) for t in self.terms], float(dissipated.get("collisions", 0.0))
+
+    def _device_rows(self) -> dict[str, np.ndarray]:
+        """The device's own rows, named as the scene file's ``device_*`` members (see
+        :meth:`state`); {} where no particles are on it."""
+        sim = self._sim
+        if _DEVICE_PARTICLES not in sim.system_names():
+            return {}
+        raw = dict(sim.system_save(_DEVICE_PARTICLES))
+        rows = {f"device_{k}": np.asarray(raw[k], dtype=np.float64).reshape(-1, 4) for k in ("pos", "vel", "acc", "aux")}
+        rows["device_hits"] = np.asarray(raw["hits"], dtype=np.float64)
+        rows["device_acc_valid"] = np.asarray(raw["acc_valid"], dtype=np.float64)
+        return rows
+
+    def _as_on_device(self, a: np.ndarray) -> np.ndarray:
+        """Float64 values as the device holds them: rounded to float32 on an f32 device."""
+        return a.astype(np.float32).astype(np.float64) if self.precision == "f32" else a
 
     def _put_device_state(self, sim: _core.Simulation, s: dict[str, Any]) -> None:
         """:meth:`set_state`'s work on the GPU path (``s`` checked): the device's rows put back,
@@ -1569,7 +1564,7 @@ class Scene:
             rows = {k: s[f"device_{k}"].copy() for k in ("pos", "vel", "acc", "aux")}
             valid = float(s["device_acc_valid"][0])
             for key, row in (("positions", rows["pos"]), ("velocities", rows["vel"])):
-                want = s[key].astype(np.float32).astype(np.float64) if self.precision == "f32" else s[key]
+                want = self._as_on_device(s[key])
                 if not np.array_equal(row[:, :dim], want):
                     row[:, :dim] = want
                     valid = 0.0
@@ -1631,8 +1626,7 @@ class Scene:
                     raise InvalidInputError(f"state[{key!r}]: changing a particle attribute is not yet on the GPU path "
                                             f"(device={self._device!r}); set it before the first step")
             if "device_pos" in new:
-                masses = self.masses.astype(np.float32).astype(np.float64) if self.precision == "f32" else self.masses
-                if not np.array_equal(new["device_pos"][:, 3], masses):
+                if not np.array_equal(new["device_pos"][:, 3], self._as_on_device(self.masses)):
                     raise InvalidInputError("state['device_pos']: its mass column differs from this scene's masses")
 
         def put(sim: _core.Simulation, s: dict[str, Any]) -> None:
@@ -1692,13 +1686,11 @@ class Scene:
             # The books live on the device: the ledger (each term's dissipated energy) and the
             # collisions read from them, so that the file also continues on the CPU; the device's
             # raw rows (device_*) let a load onto the device continue bit for bit.
-            dissipated = self.energy().dissipated
-            ledger, collisions = [float(dissipated.get(t.name, 0.0)) for t in self.terms], float(dissipated.get("collisions", 0.0))
-            if _DEVICE_PARTICLES in self._sim.system_names():
-                raw = dict(self._sim.system_save(_DEVICE_PARTICLES))
-                arrays.update({f"device_{k}": raw[k].reshape(-1, 4) for k in ("pos", "vel", "acc", "aux")})
-                arrays["device_hits"] = raw["hits"]
-                device_acc_valid = bool(raw["acc_valid"][0])
+            ledger, collisions = self._device_books()
+            rows = self._device_rows()
+            if rows:
+                device_acc_valid = bool(rows.pop("device_acc_valid")[0])  # a flag of the meta
+                arrays.update(rows)
         else:
             ledger, collisions = self._sim.ledger()
         arrays["ledger"] = np.asarray(ledger, dtype=np.float64)
@@ -1901,9 +1893,7 @@ class Scene:
         clock were restored on the host first; the rows carry the device's books."""
         if "device_pos" not in z or _DEVICE_PARTICLES not in self._sim.system_names():
             return
-        f32 = self.precision == "f32"
-        masses = z["masses"].astype(np.float32).astype(np.float64) if f32 else z["masses"]
-        if not np.array_equal(z["device_pos"][:, 3], masses):
+        if not np.array_equal(z["device_pos"][:, 3], self._as_on_device(z["masses"])):
             raise InvalidInputError("device_pos: its mass column differs from masses")
         arrays = [(k, np.ascontiguousarray(z[f"device_{k}"], dtype=np.float64).reshape(-1)) for k in ("pos", "vel", "acc", "aux", "hits")]
         arrays.append(("acc_valid", np.array([float(meta["device_acc_valid"])])))

@@ -678,18 +678,22 @@ impl Particles {
             )));
         }
         let mut rows = Vec::with_capacity(4 * COLLIDER_ROWS as usize * colliders.len());
+        const NO_AXES: [[f64; 3]; 3] = [[0.0; 3]; 3];
         for c in colliders {
-            let w = if let Collider::Capsule { radius, .. } = *c { radius } else { 0.0 };
-            let axes = if let Collider::OrientedBox { axes, .. } = *c { axes } else { [[0.0; 3]; 3] };
-            let (kind, a, b, e, mu) = match *c {
-                Collider::Plane { point, normal, restitution, friction } => (0.0, point, normal, restitution, friction),
-                Collider::Box { lower, upper, restitution, friction } => (1.0, lower, upper, restitution, friction),
-                Collider::Sphere { center, radius, inside, restitution, friction } => {
-                    (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], restitution, friction)
+            // Rows: kind, e, μ, a capsule's radius; two points; an oriented box's three axes.
+            let (kind, a, b, w, axes, e, mu) = match *c {
+                Collider::Plane { point, normal, restitution: e, friction: mu } => {
+                    (0.0, point, normal, 0.0, NO_AXES, e, mu)
                 }
-                Collider::Capsule { a, b, restitution, friction, .. } => (3.0, a, b, restitution, friction),
-                Collider::OrientedBox { center, half, restitution, friction, .. } => {
-                    (4.0, center, half, restitution, friction)
+                Collider::Box { lower, upper, restitution: e, friction: mu } => {
+                    (1.0, lower, upper, 0.0, NO_AXES, e, mu)
+                }
+                Collider::Sphere { center, radius, inside, restitution: e, friction: mu } => {
+                    (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], 0.0, NO_AXES, e, mu)
+                }
+                Collider::Capsule { a, b, radius, restitution: e, friction: mu } => (3.0, a, b, radius, NO_AXES, e, mu),
+                Collider::OrientedBox { center, half, axes, restitution: e, friction: mu } => {
+                    (4.0, center, half, 0.0, axes, e, mu)
                 }
             };
             rows.extend_from_slice(&[kind, e, mu, w, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);

@@ -402,12 +402,11 @@ fn onto_round(x: vec3<real>, v: vec3<real>, c: vec3<real>, r: real, inside: bool
         return Round(x, vec3<real>(0.0, 0.0, 0.0), false);
     }
     let l = sqrt(l2);
-    let v2 = dot(v, v);
     var u = vec3<real>(0.0, 0.0, 0.0);
     if (l > 0.0) {
         u = rel / l;
-    } else if (v2 > 0.0) {
-        u = -v / sqrt(v2);
+    } else if (dot(v, v) > 0.0) {
+        u = -v / sqrt(dot(v, v));
     } else {
         u[P.dim - 1u] = 1.0;
     }
@@ -436,8 +435,8 @@ fn bounce(v: vec3<real>, n: vec3<real>, e: real, mu: real) -> vec3<real> {
     return vtn + n * (-e * vn);
 }
 
-// The colliders (the CPU's `constraints::Collider` with `Contact::bounce`, and `constraints::Aabb`
-// face by face): a free particle on a forbidden side is moved onto the surface; moving into it,
+// The colliders (the CPU's `constraints::Collider` with `Contact::bounce`: planes, spheres,
+// capsules and oriented boxes; `constraints::Aabb` face by face): a free particle on a forbidden side is moved onto the surface; moving into it,
 // its normal velocity becomes −e v_n and its tangential speed drops by μ(1 + e)|v_n|, never past
 // zero. The energy removed (ΔKE plus the work F·Δx of the last evaluated force, gravity in it,
 // over the move) is booked per particle in `hits`.
@@ -478,7 +477,8 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
         } else if (h.x == 2.0 || h.x == 3.0) {
             // A sphere about a of radius b.x, particles kept outside (b.y = 0: a ball) or inside
             // (b.y = 1: a bowl); a capsule, particles kept outside the radius h.w about the
-            // segment from a to b (nearest its nearest point: `geometry::Capsule::nearest`).
+            // segment from a to b, measured from the segment's nearest point
+            // (`geometry::Capsule::nearest`).
             var c = a;
             var r = b.x;
             var inside = b.y != 0.0;

@@ -238,24 +238,15 @@ fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider
                     }
                     Ok(Collider::Box { lower, upper, restitution, friction })
                 }
+                // Spheres and capsules checked by the CPU's constructors (in 3D: a 2D shape's z is 0).
                 "sphere" => {
-                    let (center, radius) = (vec3(p, "center")?, p.number("radius")?);
-                    // As `geometry::Ball::new`: the test compares squared distances.
-                    if !(radius > 0.0 && (radius * radius).is_finite()) {
-                        return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
-                    }
-                    Ok(Collider::Sphere { center, radius, inside: p.flag("inside")?, restitution, friction })
+                    let (center, radius, inside) = (vec3(p, "center")?, p.number("radius")?, p.flag("inside")?);
+                    crate::geometry::Ball::new(glam::DVec3::from_array(center), radius, inside)?;
+                    Ok(Collider::Sphere { center, radius, inside, restitution, friction })
                 }
                 "capsule" => {
                     let (a, b, radius) = (vec3(p, "a")?, vec3(p, "b")?, p.number("radius")?);
-                    // As `geometry::Capsule::new`.
-                    let ab2: f64 = (0..3).map(|k| (b[k] - a[k]) * (b[k] - a[k])).sum();
-                    if !ab2.is_finite() {
-                        return Err(invalid("b", "the axis' squared length must be finite"));
-                    }
-                    if !(radius > 0.0 && (radius * radius).is_finite()) {
-                        return Err(invalid("radius", format!("{radius} must be > 0 with a finite square")));
-                    }
+                    crate::geometry::Capsule::new(glam::DVec3::from_array(a), glam::DVec3::from_array(b), radius)?;
                     Ok(Collider::Capsule { a, b, radius, restitution, friction })
                 }
                 "oriented_box" => {
