@@ -18,6 +18,7 @@ use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 pub mod gray_scott;
 pub mod particles;
+pub mod wave;
 
 /// What can go wrong on the device.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -331,11 +332,16 @@ impl Gpu {
 
     /// Writes `data` (f64 on the host) into `b` at the device's precision.
     pub(crate) fn upload(&self, p: Precision, b: &wgpu::Buffer, data: &[f64]) {
+        self.upload_at(p, b, 0, data)
+    }
+
+    /// `upload` from byte `offset` of `b`.
+    pub(crate) fn upload_at(&self, p: Precision, b: &wgpu::Buffer, offset: u64, data: &[f64]) {
         match p {
-            Precision::F64 => self.queue.write_buffer(b, 0, bytemuck::cast_slice(data)),
+            Precision::F64 => self.queue.write_buffer(b, offset, bytemuck::cast_slice(data)),
             Precision::F32 => {
                 let d: Vec<f32> = data.iter().map(|&x| x as f32).collect();
-                self.queue.write_buffer(b, 0, bytemuck::cast_slice(&d))
+                self.queue.write_buffer(b, offset, bytemuck::cast_slice(&d))
             }
         }
     }

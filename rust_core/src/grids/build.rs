@@ -32,52 +32,63 @@ fn gray_scott_of(name: &str, grid: Grid, p: &mut Params) -> Result<GrayScottConf
     Ok(c)
 }
 
+/// The configuration of a wave system from its parameters (also what a device's copy is built
+/// from: `systems::device`).
+pub fn wave_config(name: &str, dim: usize, mut p: Params) -> Result<WaveConfig> {
+    let grid = grid_of(&mut p, dim)?;
+    let c = wave_of(name, grid, dim, &mut p)?;
+    c.validate()?;
+    Ok(c)
+}
+
+fn wave_of(name: &str, grid: Grid, dim: usize, p: &mut Params) -> Result<WaveConfig> {
+    let mut c = WaveConfig::new(name, grid, p.number("c")?);
+    c.gamma = p.number("damping")?;
+    c.cfl = p.number("cfl")?;
+    c.layer = p.count("layer", 1 << 20)?;
+    c.layer_strength = p.number("layer_strength")?;
+    let absorbing = p.take_floats("absorbing")?;
+    if absorbing.len() != 2 * dim {
+        return Err(invalid(
+            "absorbing",
+            format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len()),
+        ));
+    }
+    for (f, a) in absorbing.iter().enumerate() {
+        c.absorbing[f] = *a != 0.0;
+    }
+    c.mask = p.take_floats("mask").ok().map(|m| flags("add_wave", &m)).transpose()?;
+    let t = p.take_floats("drop_t")?;
+    let amp = p.take_floats("drop_amplitude")?;
+    let shapes = profiles(p, "drop", t.len())?;
+    c.drops = t
+        .iter()
+        .zip(&amp)
+        .zip(shapes)
+        .map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile })
+        .collect();
+    let amp = p.take_floats("osc_amplitude")?;
+    let freq = p.take_floats("osc_frequency")?;
+    let phase = p.take_floats("osc_phase")?;
+    if freq.len() != amp.len() || phase.len() != amp.len() {
+        return Err(invalid(
+            "oscillators",
+            "amplitude, frequency and phase must have one entry per oscillator",
+        ));
+    }
+    let shapes = profiles(p, "osc", amp.len())?;
+    c.oscillators = (0..amp.len())
+        .zip(shapes)
+        .map(|(k, profile)| Oscillator { amplitude: amp[k], frequency: freq[k], phase: phase[k], profile })
+        .collect();
+    Ok(c)
+}
+
 /// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
 pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
     let grid = grid_of(&mut p, dim)?;
     match kind {
-        "wave" => {
-            let mut c = WaveConfig::new(name, grid, p.number("c")?);
-            c.gamma = p.number("damping")?;
-            c.cfl = p.number("cfl")?;
-            c.layer = p.count("layer", 1 << 20)?;
-            c.layer_strength = p.number("layer_strength")?;
-            let absorbing = p.take_floats("absorbing")?;
-            if absorbing.len() != 2 * dim {
-                return Err(invalid(
-                    "absorbing",
-                    format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len()),
-                ));
-            }
-            for (f, a) in absorbing.iter().enumerate() {
-                c.absorbing[f] = *a != 0.0;
-            }
-            c.mask = p.take_floats("mask").ok().map(|m| flags("add_wave", &m)).transpose()?;
-            let t = p.take_floats("drop_t")?;
-            let amp = p.take_floats("drop_amplitude")?;
-            let shapes = profiles(&mut p, "drop", t.len())?;
-            c.drops = t
-                .iter()
-                .zip(&amp)
-                .zip(shapes)
-                .map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile })
-                .collect();
-            let amp = p.take_floats("osc_amplitude")?;
-            let freq = p.take_floats("osc_frequency")?;
-            let phase = p.take_floats("osc_phase")?;
-            if freq.len() != amp.len() || phase.len() != amp.len() {
-                return Err(invalid(
-                    "oscillators",
-                    "amplitude, frequency and phase must have one entry per oscillator",
-                ));
-            }
-            let shapes = profiles(&mut p, "osc", amp.len())?;
-            c.oscillators = (0..amp.len())
-                .zip(shapes)
-                .map(|(k, profile)| Oscillator { amplitude: amp[k], frequency: freq[k], phase: phase[k], profile })
-                .collect();
-            Ok(Box::new(WaveSystem::new(c)?))
-        }
+        "wave" => Ok(Box::new(WaveSystem::new(wave_of(name, grid, dim, &mut p)?)?)),
         "gray_scott" => Ok(Box::new(GrayScottSystem::new(gray_scott_of(name, grid, &mut p)?)?)),
         "stable_fluid" => {
             if dim != 2 {

@@ -359,9 +359,48 @@ impl WaveSystem {
         (0.5 * kinetic * da, 0.5 * potential * da)
     }
 
+    /// Steps of `dt` from now on: u⁻ is rescaled so that the velocity (u − u⁻)/dt is kept.
+    pub(crate) fn change_dt(&mut self, dt: Real) {
+        if dt != self.clock.dt {
+            let ratio = dt / self.clock.dt;
+            for (a, b) in self.u.iter().zip(self.u_prev.iter_mut()) {
+                *b = a - ratio * (a - *b);
+            }
+            self.clock.dt = dt;
+        }
+    }
+
+    /// What a device's copy of this system needs beyond its configuration (`systems::device`):
+    /// γ per cell where the grid has damping layers (else empty) and 1 (free) or 0 (obstacle)
+    /// per cell where it has obstacles (else empty).
+    pub(crate) fn coefficients(&self) -> (&[Real], &[Real]) {
+        (&self.gamma_cells, &self.keep)
+    }
+
+    /// u and u⁻, to read or replace (a device's copy keeps them between its read-backs).
+    pub(crate) fn levels_mut(&mut self) -> (&mut Vec<Real>, &mut Vec<Real>) {
+        (&mut self.u, &mut self.u_prev)
+    }
+
+    /// The clock as `save` writes it: t, dt, dissipated, work, drops applied.
+    pub(crate) fn clock_values(&self) -> [Real; 5] {
+        let c = &self.clock;
+        [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real]
+    }
+
+    /// Sets the clock (`clock_values`' order; the values are the system's own, unchecked).
+    pub(crate) fn set_clock_values(&mut self, c: [Real; 5]) {
+        self.clock = Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize };
+    }
+
+    /// The time of the next drop not yet applied.
+    pub(crate) fn next_drop_time(&self) -> Option<Real> {
+        self.cfg.drops.get(self.clock.next_drop).map(|d| d.t)
+    }
+
     /// Applies the drops due before `t + dt` (a dent in u and u⁻ alike: no change of velocity)
     /// and books the energy each adds as work.
-    fn drop_due(&mut self, dt: Real) {
+    pub(crate) fn drop_due(&mut self, dt: Real) {
         while let Some(d) = self.cfg.drops.get(self.clock.next_drop).filter(|d| d.t < self.clock.t + dt) {
             let (k0, u0) = self.energies();
             for &(c, w) in &d.profile {
@@ -583,14 +622,7 @@ impl System for WaveSystem {
         self.u.len()
     }
     fn step(&mut self, dt: Real, _stop: &AtomicBool) -> std::result::Result<(), Halt> {
-        if dt != self.clock.dt {
-            // Keep the velocity (u − u⁻)/dt across the change of step.
-            let ratio = dt / self.clock.dt;
-            for (a, b) in self.u.iter().zip(self.u_prev.iter_mut()) {
-                *b = a - ratio * (a - *b);
-            }
-            self.clock.dt = dt;
-        }
+        self.change_dt(dt);
         self.drop_due(dt);
         let g = &self.cfg.grid;
         let nx = g.n[0];

@@ -113,7 +113,7 @@ impl PySimulation {
             if self.on_device {
                 return Err(err(invalid("device", "the particles are on the device already")));
             }
-            use crate::systems::device::{DeviceGrayScott, DeviceParticles};
+            use crate::systems::device::{DeviceGrayScott, DeviceParticles, DeviceWave};
             use crate::systems::System;
             let (terms, grids, colliders) = (&self.terms, &self.grids, &self.colliders);
             let dim = self.dim();
@@ -147,15 +147,22 @@ impl PySimulation {
                 let gpu = py.detach(|| physcore_gpu::Gpu::open(device)).map_err(|e| to_py(py, e.into()))?;
                 let mut moved: Vec<Box<dyn System>> = Vec::new();
                 for (kind, name, params) in grids {
-                    let Some(params) = params.as_ref().filter(|_| kind == "gray_scott") else {
-                        return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\")"))));
+                    let Some(params) = params.as_ref().filter(|_| matches!(kind.as_str(), "gray_scott" | "wave")) else {
+                        return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\" and \"wave\")"))));
                     };
-                    let cfg = crate::grids::build::gray_scott_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
                     let cpu = s.other(name).map_err(|e| to_py(py, e))?;
+                    let g = gpu.clone();
+                    if kind == "wave" {
+                        let cfg = crate::grids::build::wave_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
+                        let saved = cpu.save().map_err(|e| to_py(py, e))?;
+                        let d = py.detach(|| DeviceWave::on(g, precision, cfg, &saved)).map_err(|e| to_py(py, e))?;
+                        moved.push(Box::new(d));
+                        continue;
+                    }
+                    let cfg = crate::grids::build::gray_scott_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
                     let f = cpu.fields(&["u", "v"]).map_err(|e| to_py(py, e))?;
                     let made: Vec<f64> = cpu.books().into_iter().filter(|b| b.0.ends_with("_made")).map(|b| b.1).collect();
                     let made = [made[0], made[1]];
-                    let g = gpu.clone();
                     let d = py.detach(|| DeviceGrayScott::on(g, precision, cfg, &f[0], &f[1], made)).map_err(|e| to_py(py, e))?;
                     moved.push(Box::new(d));
                 }
@@ -495,7 +502,7 @@ impl PySimulation {
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;
         let dim = self.dim();
-        let record = (kind == "gray_scott").then(|| p.clone());
+        let record = matches!(kind, "gray_scott" | "wave").then(|| p.clone());
         let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => s.add_system(sys)).map_err(|e| to_py(py, e))?;
         self.grids.push((kind.to_string(), name.to_string(), record));
