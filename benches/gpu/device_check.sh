@@ -5,7 +5,7 @@
 #   - the Rust GPU tests' binaries, copied stripped into .devbin/ (see below), carried;
 #   - the Vulkan loader's .deb files in .gl/ (the device README), carried;
 #   - ../shared/gpu/cuda_reference.py copied into .devbin/ (the CUDA peer on the same card).
-# It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, Gray-Scott and
+# It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, grid (Gray-Scott, wave) and
 # cloth benches beside the CUDA reference in the same call, so every ratio is of one card. Each
 # part has its own time limit so that one stuck part cannot eat the call. Everything it prints
 # goes to $OUT/device_check.txt too. Budget: about 2 minutes (plus the machine's start);
@@ -54,8 +54,8 @@ PY
 section "N-body (CPU to 65536)"
 timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16384,65536,262144 --steps 10 --cpu-max 65536
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
-section "Gray-Scott"
-timeout 90 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+section "Grids: Gray-Scott and the wave"
+timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
 if [ -f .devbin/base_core.abi3.so ]; then
   # A/B in one call: the same benches alternately with a baseline build of the extension
   # (carried as .devbin/base_core.abi3.so; the Python package is this tree's) and this one.
@@ -64,7 +64,7 @@ if [ -f .devbin/base_core.abi3.so ]; then
   for r in 1 2 3; do
     for who in base this; do
       pp=""; [ $who = base ] && pp=/tmp/base
-      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 4096 --steps 200 2>&1 | grep -F "4096²" | grep -v CPU | sed "s/^/$who  /"
+      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 4096 --steps 200 --kinds gs 2>&1 | grep -F "4096²" | grep -v CPU | sed "s/^/$who  /"
       PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 262144 --steps 10 --cpu-max 0 2>&1 | grep -F "262144 |" | sed "s/^/$who  /"
     done
   done

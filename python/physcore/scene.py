@@ -277,7 +277,7 @@ _GPU_TERMS = ("gravity", "drag", "pairwise_gravity", "coulomb", "springs")
 #: The core's name of the particles' system on a device (`systems::device::DeviceParticles`).
 _DEVICE_PARTICLES = "device particles"
 #: Grid kinds the GPU path has kernels for (the same file).
-_GPU_GRIDS = ("gray_scott",)
+_GPU_GRIDS = ("gray_scott", "wave")
 #: Collider sections the GPU path has kernels for (planes, boxes and spheres; capsules and oriented boxes below).
 _GPU_COLLIDERS = ("planes", "boxes", "spheres")
 #: Kinds of the generic "colliders" section the GPU path has kernels for.
@@ -411,7 +411,7 @@ class Scene:
         when every part has a GPU kernel and a cost model fitted to measurements (an NVIDIA H100
         beside a 16-thread Xeon; docs/guide/gpu.md) expects a step there in at most half the
         CPU's time (at default threads: a direct N-body sum from ~500 particles, a cloth from
-        ~32², a Gray–Scott grid of any size), else the CPU; :attr:`device` then says which and
+        ~32², a Gray–Scott or wave grid of any size), else the CPU; :attr:`device` then says which and
         :attr:`device_reason` why. The precision follows the choice (f32 on a GPU, f64 on the
         CPU) unless ``precision`` is given.
         ``"gpu"``: the best GPU adapter (discrete, then integrated; ``physcore info`` lists them);
@@ -419,13 +419,15 @@ class Scene:
         (``"gpu:lavapipe"`` takes Mesa's CPU Vulkan, which is never taken silently). The GPU path
         (wgpu: Vulkan, Metal, DX12) holds particles under :class:`Gravity`, :class:`Drag`,
         :class:`PairwiseGravity`, :class:`Coulomb` (the ``"charge"`` attribute) and one :class:`Springs`, stepped by ``"semi_implicit_euler"``, ``"verlet"`` or ``"yoshida4"``,
-        with :class:`Plane` and :class:`Box` colliders, and :class:`~physcore.grids.GrayScott` grids (their
-        fields read and set as on the CPU); the parts
+        with every collider (:class:`Plane`, :class:`Box`, :class:`Sphere`, :class:`Capsule`,
+        :class:`OrientedBox`), and :class:`~physcore.grids.GrayScott` and
+        :class:`~physcore.grids.Wave` grids (their fields read and set as on the CPU); the parts
         move to the device at the first step, and a part it has no kernel for is refused then,
         by name (never run silently on the CPU; a :class:`~physcore.Batch` moves its GPU members
         likewise). After that step the scene steps, reads positions, velocities and the energy
-        books, renders, saves and pickles (:meth:`save`); adding parts, setting the state or
-        another integrator and :meth:`state` are refused (not yet on the GPU path).
+        books, renders, saves and pickles (:meth:`save`), and :meth:`state` / :meth:`set_state`
+        work; adding parts, another integrator and :meth:`set_attribute` are refused (not yet on
+        the GPU path).
         docs/guide/gpu.md gives each kernel's measured agreement with the CPU path.
     threads : int or None
         Worker threads for this scene, 1 to :data:`MAX_THREADS` (65535, rayon's own limit);

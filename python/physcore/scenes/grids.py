@@ -21,6 +21,7 @@ def ripple(
     seed: int = 3,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """Ripples on a pond: stones dropped one after another into a 1 m square pond.
 
@@ -28,6 +29,7 @@ def ripple(
 
     `drops` Gaussian dents (radius 1.2 cm, depth 4 mm) fall at random places (seeded) every 0.6 s
     from t = 0; the waves travel at `speed` (m/s) and fade at `damping` (1/s).
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import Drop, Wave
 
@@ -38,7 +40,7 @@ def ripple(
     damping = _nonneg(damping, "damping")
     rng = np.random.default_rng(_check.int_in_range("seed", seed, 0, 2**63 - 1))
     stones = [Drop(0.6 * k, tuple(rng.uniform(0.2, 0.8, 2)), radius=0.012, amplitude=0.004) for k in range(drops)]
-    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads, device=device)
     pond = scene.add(Wave((n, n), 1.0 / n, c=speed, damping=damping, edges="free", drops=stones, name="pond"))
     if dt is None:
         scene.dt = _cfl_step(pond, "speed")
@@ -68,6 +70,7 @@ def double_slit(
     start: float = 0.0,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """Interference behind two slits: a plane wave passes a wall with two openings.
 
@@ -81,6 +84,7 @@ def double_slit(
     the source line to the wall, has just passed the slits (0.77 s at 0.3 m/s), so the first
     frame shows the incoming wave train and the first wavelets behind the wall, not an empty
     tank. The lead-in is simulated by the renderer, under its progress bar and Ctrl-C, not here.
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import Oscillator, Wave
 
@@ -107,7 +111,7 @@ def double_slit(
     if not math.isfinite(40.0 * speed / wavelength):
         raise InvalidInputError(f"wavelength, speed: the source's frequency speed/wavelength = {speed / wavelength:g} Hz is beyond float64")
     source = Oscillator(amplitude=40.0 * speed / wavelength, frequency=speed / wavelength, region=line)
-    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-3 if dt is None else dt, threads=threads, device=device)
     layer = max(4, n // 10)
     tank = scene.add(Wave((nx, n), dx, c=speed, edges="fixed", absorbing=True, layer=layer, mask=wall, oscillators=[source], name="tank"))
     if dt is None:

@@ -151,7 +151,13 @@ impl Wave {
         let (layout, mut pipes) = {
             use crate::Bind::{Read as R, ReadWrite as W, Uniform};
             let binds = [Uniform { dynamic: false }, R, W, R, R, W, W, W, W];
-            gpu.kernels("wave.wgsl", precision, include_str!("wave.wgsl"), &binds, &["step", "gather", "sources", "check"])
+            gpu.kernels(
+                "wave.wgsl",
+                precision,
+                include_str!("wave.wgsl"),
+                &binds,
+                &["step", "gather", "sources", "check"],
+            )
         };
         let check_pipe = pipes.pop().expect("four kernels");
         let sources_pipe = pipes.pop().expect("four kernels");

@@ -49,10 +49,7 @@ fn wave_of(name: &str, grid: Grid, dim: usize, p: &mut Params) -> Result<WaveCon
     c.layer_strength = p.number("layer_strength")?;
     let absorbing = p.take_floats("absorbing")?;
     if absorbing.len() != 2 * dim {
-        return Err(invalid(
-            "absorbing",
-            format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len()),
-        ));
+        return Err(invalid("absorbing", format!("needs one flag per face ({}), got {}", 2 * dim, absorbing.len())));
     }
     for (f, a) in absorbing.iter().enumerate() {
         c.absorbing[f] = *a != 0.0;
@@ -61,20 +58,13 @@ fn wave_of(name: &str, grid: Grid, dim: usize, p: &mut Params) -> Result<WaveCon
     let t = p.take_floats("drop_t")?;
     let amp = p.take_floats("drop_amplitude")?;
     let shapes = profiles(p, "drop", t.len())?;
-    c.drops = t
-        .iter()
-        .zip(&amp)
-        .zip(shapes)
-        .map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile })
-        .collect();
+    c.drops =
+        t.iter().zip(&amp).zip(shapes).map(|((&t, &amplitude), profile)| Drop { t, amplitude, profile }).collect();
     let amp = p.take_floats("osc_amplitude")?;
     let freq = p.take_floats("osc_frequency")?;
     let phase = p.take_floats("osc_phase")?;
     if freq.len() != amp.len() || phase.len() != amp.len() {
-        return Err(invalid(
-            "oscillators",
-            "amplitude, frequency and phase must have one entry per oscillator",
-        ));
+        return Err(invalid("oscillators", "amplitude, frequency and phase must have one entry per oscillator"));
     }
     let shapes = profiles(p, "osc", amp.len())?;
     c.oscillators = (0..amp.len())

@@ -1158,7 +1158,14 @@ mod tests {
 
     /// A wave's parameters as the Python layer passes them: `shape`, `edges`, damping γ, the
     /// absorbing faces, a wall with a slit (`walled`), one oscillator, drops at `drops` s.
-    fn wave_params(shape: &[Real], edges: &str, gamma: Real, absorbing: &[Real], walled: bool, drops: &[Real]) -> Params {
+    fn wave_params(
+        shape: &[Real],
+        edges: &str,
+        gamma: Real,
+        absorbing: &[Real],
+        walled: bool,
+        drops: &[Real],
+    ) -> Params {
         let n: usize = shape.iter().map(|&s| s as usize).product();
         let nx = shape[0] as usize;
         let mut p = Params::new()
@@ -1205,7 +1212,14 @@ mod tests {
             (vec![70.0, 50.0], "fixed,free,periodic,periodic", 0.3, vec![0.0, 1.0, 0.0, 0.0], true, vec![0.01, 0.2]),
             // Undamped, no layer or wall (the CPU fuses these steps; their bits are single steps').
             (vec![64.0, 40.0], "free,fixed,fixed,free", 0.0, vec![0.0; 4], false, vec![0.05]),
-            (vec![14.0, 12.0, 10.0], "free,fixed,fixed,free,periodic,periodic", 0.1, vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0], false, vec![0.03]),
+            (
+                vec![14.0, 12.0, 10.0],
+                "free,fixed,fixed,free,periodic,periodic",
+                0.1,
+                vec![1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+                false,
+                vec![0.03],
+            ),
         ] {
             let dim = shape.len();
             let params = wave_params(&shape, edges, gamma, &absorbing, walled, &drops);
@@ -1215,7 +1229,13 @@ mod tests {
             let (_, keep) = cpu.coefficients();
             let keep = keep.to_vec();
             let u: Vec<Real> = (0..n)
-                .map(|c| if keep.is_empty() || keep[c] != 0.0 { 0.01 * (((c * 7919) % 101) as Real / 101.0 - 0.5) } else { 0.0 })
+                .map(|c| {
+                    if keep.is_empty() || keep[c] != 0.0 {
+                        0.01 * (((c * 7919) % 101) as Real / 101.0 - 0.5)
+                    } else {
+                        0.0
+                    }
+                })
                 .collect();
             cpu.set_state(&u, None).unwrap();
             let dt = cpu.auto_dt().unwrap();
