@@ -669,3 +669,17 @@ def test_many_live_scenes_share_the_device_and_each_steps_as_alone():
     again = _cluster(3, n=64, device=DEVICE)
     again.step(5)
     assert np.array_equal(again.positions, alone.positions)
+
+
+def test_galaxies_on_the_gpu_pass_as_the_exact_sum_on_the_cpu() -> None:
+    # The GPU path has no tree: the scene takes the direct sum there. The CPU's tree opened
+    # everywhere (theta = 0) is the same sum in another order; f32 on the device.
+    gpu = pc.scenes.galaxies(n=600, device=DEVICE)
+    cpu = pc.scenes.galaxies(n=600, theta=0.0)
+    assert [t.kind for t in gpu.terms] == ["pairwise_gravity"]
+    e0 = cpu.energy().total
+    gpu.step(40)
+    cpu.step(40)
+    assert gpu.device == DEVICE and gpu.precision == "f32"
+    assert np.abs(gpu.positions - cpu.positions).max() < 1e-4 * np.abs(cpu.positions).max()
+    assert abs(gpu.energy().total - cpu.energy().total) < 1e-4 * abs(e0)
