@@ -265,7 +265,8 @@ impl Wave {
             Face::Periodic => 2,
         };
         let edges = m.faces.iter().enumerate().fold(0u32, |acc, (f, &e)| acc | (code(e) << (2 * f)));
-        let flags = (!m.gamma_cells.is_empty()) as u32 | ((!m.keep.is_empty() as u32) << 1);
+        let damped = m.gamma != 0.0 || !m.gamma_cells.is_empty();
+        let flags = (!m.gamma_cells.is_empty()) as u32 | ((!m.keep.is_empty() as u32) << 1) | ((damped as u32) << 2);
         let (g, dim3) = (self.groups, (m.dim == 3) as u32);
         let ints = [
             m.n[0] as u32,

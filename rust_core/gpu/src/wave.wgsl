@@ -22,7 +22,8 @@ struct Params {
     gx: u32,
     three: u32,
     gy: u32,
-    // Bit 0: γ per cell (`gam`, damping layers); bit 1: obstacles (`keep`).
+    // Bit 0: γ per cell (`gam`, damping layers); bit 1: obstacles (`keep`); bit 2: damping
+    // anywhere (else the books' reduction, all zeros, is skipped).
     flags: u32,
     // Source entries (cells of the oscillators' profiles, all oscillators in order) and the
     // number of oscillators.
@@ -161,6 +162,9 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
                 k = k + 1u;
             }
         }
+    }
+    if ((P.flags & 4u) == 0u) {
+        return; // undamped: nothing to book (a uniform branch: the whole dispatch returns here)
     }
     sd[lid.x] = d;
     workgroupBarrier();

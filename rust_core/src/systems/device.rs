@@ -11,6 +11,7 @@
 //! per particle, no atomics), with `semi_implicit_euler` or `verlet`.
 //! Any other term kind or integrator is refused by name: nothing runs silently on the CPU.
 use super::{Arrays, EnergyReport, Halt, Snapshot, System};
+use crate::alloc::Need;
 use crate::error::{invalid, Error, Failure, Result};
 use crate::grids::gray_scott::GrayScottConfig;
 use crate::grids::wave::{WaveConfig, WaveSystem};
@@ -798,6 +799,10 @@ impl DeviceWave {
         let mut host = WaveSystem::new(cfg)?;
         host.load(saved)?;
         let (gamma_cells, keep) = host.coefficients();
+        // Copies for the upload, asked of the allocator (a grid's arrays abort the process where
+        // an infallible copy is refused under a memory cap).
+        let need =
+            Need::new("step", Need::bytes_of::<Real>(gamma_cells.len() + keep.len()), "a wave grid's layers and wall");
         let model = dw::Model {
             n,
             dim,
@@ -805,8 +810,8 @@ impl DeviceWave {
             faces,
             c,
             gamma,
-            gamma_cells: gamma_cells.to_vec(),
-            keep: keep.to_vec(),
+            gamma_cells: need.copy(gamma_cells)?,
+            keep: need.copy(keep)?,
             oscillators,
         };
         let clock = host.clock_values();
