@@ -108,7 +108,9 @@ impl Springs {
             offsets.extend_from_slice(&start[..n]);
             return (offsets, other, rows, 1);
         }
-        let (mut o, mut r) = (vec![0u32; total], vec![0.0; 4 * total]);
+        // Padding entries (never read: a particle reads its own degree's) are marked `PAD`, so
+        // that `kinds` gives them no kind of their own.
+        let (mut o, mut r) = (vec![PAD; total], vec![0.0; 4 * total]);
         for i in 0..n {
             let b = base_of_slice[i / SLICE] + i % SLICE;
             offsets.push(b as u32);
@@ -133,12 +135,15 @@ impl Springs {
         let mut index: std::collections::HashMap<[u64; 3], u32> = std::collections::HashMap::new();
         let mut table = Vec::new();
         for (e, r) in rows.chunks_exact(4).enumerate() {
+            if other[e] == PAD {
+                continue;
+            }
             let key = [r[0].to_bits(), r[1].to_bits(), r[2].to_bits()];
             let next = index.len() as u32;
             let k = *index.entry(key).or_insert(next);
             if k as usize >= KINDS {
-                // Too many kinds: the ends as they were (each below 2²⁴).
-                other[..e].iter_mut().for_each(|o| *o &= 0xff_ffff);
+                // Too many kinds: the ends as they were (each below 2²⁴; padding untouched).
+                other[..e].iter_mut().filter(|o| **o != PAD).for_each(|o| *o &= 0xff_ffff);
                 return None;
             }
             if k == next {
@@ -152,6 +157,10 @@ impl Springs {
 
 /// The most kinds of spring constants `Springs::kinds` packs (8 bits of an entry).
 const KINDS: usize = 256;
+
+/// The other end of a padding entry of the sliced layout (no particle: at most 2²⁴ − 1 of them
+/// are packed, and a layout's ends are below 2³²−1).
+const PAD: u32 = u32::MAX;
 
 /// Particles per slice of the springs' sliced layout: a warp on NVIDIA (32 threads).
 const SLICE: usize = 32;
@@ -796,7 +805,7 @@ fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
 
 #[cfg(test)]
 mod tests {
-    use super::{Springs, SLICE};
+    use super::{Springs, PAD, SLICE};
 
     fn springs(pairs: &[(u32, u32)]) -> Springs {
         let m = pairs.len();
@@ -838,7 +847,8 @@ mod tests {
         let (off, o, r, w) = s.sliced(n);
         let mut packed = o.clone();
         let table = Springs::kinds(&mut packed, &r, n).expect("two kinds");
-        assert_eq!(table.len(), 4 * 3, "structure, shear and the slices' padding"); // padding rows are zeros
+        assert_eq!(table.len(), 4 * 2, "structure and shear (the slices' padding takes no kind)");
+        assert!(o.contains(&PAD), "the layout has padding");
         for i in 0..n {
             let deg = off[i + 1] - off[i];
             for q in 0..deg {
@@ -854,6 +864,13 @@ mod tests {
         let mut same = o.clone();
         assert!(Springs::kinds(&mut same, &r, n).is_none());
         assert_eq!(same, o);
+        // Exactly 256 kinds pack, padding and all.
+        let mut full = springs(&pairs[..256]);
+        full.k = (0..256).map(|k| 1.0 + k as f64).collect();
+        let (_, o, r, _) = full.sliced(n);
+        assert!(o.contains(&PAD));
+        let mut packed = o.clone();
+        assert_eq!(Springs::kinds(&mut packed, &r, n).map(|t| t.len()), Some(4 * 256));
     }
 
     #[test]
