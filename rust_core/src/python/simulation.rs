@@ -7,7 +7,7 @@ use crate::systems::bodies::{Bodies2, Bodies3, Group2, Group3};
 use crate::systems::particles::ParticleSystem;
 use crate::systems::BodiesOf;
 use crate::terms::registry::Params;
-use crate::terms::registry::{self, Context};
+use crate::terms::registry::{self, Context, Value};
 use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
@@ -153,7 +153,13 @@ impl PySimulation {
                     let cpu = s.other(name).map_err(|e| to_py(py, e))?;
                     let g = gpu.clone();
                     if kind == "wave" {
-                        let cfg = crate::grids::build::wave_config(name, dim, params.clone()).map_err(|e| to_py(py, e))?;
+                        // The mask left out of the record, from the CPU system (1 on obstacles).
+                        let mut params = params.try_clone("step").map_err(|e| to_py(py, e))?;
+                        let mask = cpu.fields(&["mask"]).map_err(|e| to_py(py, e))?.remove(0);
+                        if mask.iter().any(|&m| m != 0.0) {
+                            params.insert("mask", Value::Floats(mask));
+                        }
+                        let cfg = crate::grids::build::wave_config(name, dim, params).map_err(|e| to_py(py, e))?;
                         let saved = cpu.save().map_err(|e| to_py(py, e))?;
                         let d = py.detach(|| DeviceWave::on(g, precision, cfg, &saved)).map_err(|e| to_py(py, e))?;
                         moved.push(Box::new(d));
@@ -502,7 +508,14 @@ impl PySimulation {
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;
         let dim = self.dim();
-        let record = matches!(kind, "gray_scott" | "wave").then(|| p.clone());
+        // What a move to a device rebuilds the grid from. A wave's mask (a value per cell) stays out:
+        // the device's copy reads it back from the CPU system ("mask"), and a copy of it here
+        // aborted the process under a memory cap (it is the grid's size).
+        let record = match kind {
+            "gray_scott" => Some(p.try_clone("add_grid").map_err(|e| to_py(py, e))?),
+            "wave" => Some(p.try_clone_except("add_wave", &["mask"]).map_err(|e| to_py(py, e))?),
+            _ => None,
+        };
         let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;
         with_sim!(&mut self.inner, s => s.add_system(sys)).map_err(|e| to_py(py, e))?;
         self.grids.push((kind.to_string(), name.to_string(), record));

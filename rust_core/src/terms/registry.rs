@@ -56,8 +56,12 @@ impl Params {
     /// and its length, as `params_of`'s copies of a front end's arrays are. What a part's record
     /// keeps of the parameters it was built from.
     pub fn try_clone(&self, what: &'static str) -> Result<Self> {
+        self.try_clone_except(what, &[])
+    }
+    /// `try_clone` without the parameters named in `skip`.
+    pub fn try_clone_except(&self, what: &'static str, skip: &[&str]) -> Result<Self> {
         let mut values = BTreeMap::new();
-        for (key, v) in &self.values {
+        for (key, v) in self.values.iter().filter(|(k, _)| !skip.contains(&k.as_str())) {
             let copy_of = |n: usize, bytes: u128| {
                 Need::new(what, bytes, format!("a copy of its {key} ({} entries)", count(n as u128)))
             };
