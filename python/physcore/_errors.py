@@ -158,7 +158,9 @@ class SimulationDiverged(PhyscoreError, RuntimeError):
     ``"dopri5"`` could not meet its tolerances; ``"speed"``: within one ``advance`` the flow sped up
     until its step limit fell over a millionfold, ``particle`` the fastest; ``"spin"``: a
     grain's spin, rotation or contact spring (:class:`~physcore.Contacts`) is not finite;
-    ``"books"``: a dissipated energy overflowed, ``particle`` the fastest), ``suggested_dt``
+    ``"books"``: a dissipated energy overflowed, ``particle`` the fastest; ``"solver"``: the
+    rigid bodies' solver, rapier, failed on their state, which a damaged or crafted scene file
+    can hold), ``suggested_dt``
     (s) and ``rolled_back_to`` (step count after the rollback).
     """
 

@@ -110,6 +110,9 @@ pub enum Failure {
     /// The energy books overflowed: a dissipated energy is not finite while the state still is
     /// (the index is the fastest particle's).
     Books,
+    /// The rigid bodies' solver (rapier) failed on their state (it panicked): a state loaded
+    /// from a damaged or crafted file that passed the load's checks, or a bug (the index is 0).
+    Solver,
 }
 
 impl Failure {
@@ -123,6 +126,7 @@ impl Failure {
             Failure::Speed => "speed",
             Failure::Spin => "spin",
             Failure::Books => "books",
+            Failure::Solver => "solver",
         }
     }
 }
@@ -142,6 +146,7 @@ fn describe(quantity: &Failure, index: usize) -> String {
         Failure::Books => {
             format!("the dissipated energy overflowed the energy books (particle {index} is the fastest)")
         }
+        Failure::Solver => "the rigid bodies' solver (rapier) failed on their state".to_string(),
         q => format!("particle {index} has a non-finite {}", q.as_str()),
     }
 }
@@ -167,6 +172,11 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, 
             "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
+        // Not a matter of the step: the state itself is inconsistent.
+        Failure::Solver => "Its state is inconsistent (a damaged or crafted scene file that passed the load's \
+             checks) or this is a bug: build the scene again or load it from a file you trust, and report \
+             it if the scene was built, not loaded."
+            .to_string(),
         // dopri5's dt is an output interval: a loose rtol may have led the trajectory astray.
         Failure::Error => format!(
             "Try a tighter rtol (a loose one can let an orbit decay into a collision){softening} \
