@@ -123,13 +123,20 @@ def test_a_crafted_state_that_passes_the_digest_is_refused_or_fails_cleanly(tmp_
         except pc.SceneFileError as e:
             outcomes["trial" if "inconsistent" in str(e) else "refused"] += 1
             continue
-        try:
-            for _ in range(20):
-                before, count = r.bodies[1].positions.copy(), r.step_count
+        failure = None
+        for _ in range(20):
+            before, count = r.bodies[1].positions.copy(), r.step_count
+            try:
                 r.step(1)
+            except pc.SimulationDiverged as e:
+                failure = e
+                break
+        if failure is None:
             outcomes["fine"] += 1
-        except pc.SimulationDiverged as e:
-            assert e.quantity == "solver", str(e)
-            assert r.step_count == count and np.array_equal(r.bodies[1].positions, before)  # rolled back
-            outcomes["solver"] += 1
-    assert outcomes["trial"] > 0 and outcomes["refused"] > 0 and outcomes["fine"] > 0, outcomes
+            continue
+        assert failure.quantity == "solver", str(failure)
+        assert r.step_count == count and np.array_equal(r.bodies[1].positions, before)  # rolled back
+        outcomes["solver"] += 1
+    # Every path taken (when written: 112 refused by the checks, 12 by the trial steps, 3 caught
+    # at a later step, 173 stepping on).
+    assert min(outcomes.values()) > 0, outcomes
