@@ -652,6 +652,21 @@ def test_values_past_f32s_range_are_refused_by_name_on_an_f32_device() -> None:
             s64 = pc.Scene(dim=2, device=DEVICE, precision="f64")
             s64.add_particles(**kwargs)
             s64.step(1)
+    # A wave's displacement likewise, at the move and when set on the device.
+    s, w = _tank(DEVICE, "f32")
+    u = np.zeros((60, 40))
+    u[3, 4] = 1e39
+    w.u = u
+    with pytest.raises(pc.InvalidInputError, match="^u: .*f32"):
+        s.step(1)
+    assert s.step_count == 0 and not s.session.sim.on_device
+    w.u = np.zeros((60, 40))
+    s.step(1)
+    kept = w.field("u")
+    with pytest.raises(pc.InvalidInputError, match="^u: .*f32"):
+        w.u = u
+    assert np.array_equal(w.field("u"), kept)  # nothing changed
+    s.step(1)
 
 
 def test_many_live_scenes_share_the_device_and_each_steps_as_alone():

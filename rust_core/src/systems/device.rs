@@ -752,10 +752,12 @@ impl Tended {
     }
 
     /// The device's fields made the host's, its books counting from the host's (after `pull`
-    /// and a change on the host).
+    /// and a change on the host). Refuses a value an f32 device cannot hold (`within_range`);
+    /// nothing is sent then.
     fn push(&mut self) -> Result<()> {
         let c = self.host.clock_values();
         let (u, up) = self.host.levels_mut();
+        within_range(self.dev.precision(), u, up)?;
         self.dev.set_fields(u, up)?;
         self.dev.clear_books()?;
         self.base = [c[2], c[3]];
@@ -816,6 +818,7 @@ impl DeviceWave {
         };
         let clock = host.clock_values();
         let (u, up) = host.levels_mut();
+        within_range(precision, u, up)?;
         let dev = Wave::new(gpu, precision, model, u, up)?;
         let auto = host.auto_dt();
         Ok(Self { name, cells, auto, t: Mutex::new(Tended { host, base: [clock[2], clock[3]], dev }) })
@@ -824,6 +827,21 @@ impl DeviceWave {
     fn lock(&self) -> std::sync::MutexGuard<'_, Tended> {
         self.t.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// Refuses, naming "u", a wave's value an f32 device cannot hold (it would turn inf there
+/// silently, or read as a divergence).
+fn within_range(precision: Precision, u: &[Real], up: &[Real]) -> Result<()> {
+    if precision == Precision::F32 {
+        let over = |a: &[Real]| a.iter().position(|x| x.abs() > f32::MAX as Real);
+        if let Some(i) = over(u).or_else(|| over(up)) {
+            return Err(invalid(
+                "u",
+                format!("cell {i} holds a value past f32's range (precision=\"f32\" on the device; use \"f64\")"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The clock and the books' base of a `DeviceWave` at a checkpoint (its fields stay on the device).
@@ -946,6 +964,9 @@ impl System for DeviceWave {
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let mut g = self.lock();
+        // The range first: a refused load changes nothing (the host's clock included).
+        let n = self.cells;
+        within_range(g.dev.precision(), super::array(arrays, "u", Some(n))?, super::array(arrays, "u_prev", Some(n))?)?;
         g.host.load(arrays)?;
         g.push()
     }
