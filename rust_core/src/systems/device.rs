@@ -717,7 +717,7 @@ impl System for DeviceGrayScott {
 /// Measured against the CPU path (`a_device_wave_steps_and_books_as_the_cpu_one`, lavapipe,
 /// 325 steps from a noisy start, a change of dt among them): f64 bit-identical fields (the same
 /// order of operations, no fused multiply–adds) with every face rule, a damping layer, a wall,
-/// an oscillator and drops, in 2D and 3D, and the books within 1e-15 relative (other summation
+/// an oscillator and drops, in 2D and 3D, and the books within 2e-15 relative (other summation
 /// orders); f32 within 2e-5 (u) and 4e-5 (velocity) of each field's largest value, the energy
 /// books within 1e-5 relative.
 pub struct DeviceWave {
