@@ -6,7 +6,8 @@
 //! pair and writes the other; the host swaps bind groups). The books: per workgroup, what the
 //! reactions made of u and of v (dt Σ reaction, reduced in a fixed tree order in the workgroup),
 //! summed on the host in f64 in workgroup order.
-use crate::{Gpu, GpuError, Precision, Result};
+use crate::grid;
+use crate::{Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -66,13 +67,10 @@ pub struct GrayScott {
     /// Workgroups along x (a row's segments of WG cells), and along y and z (the blocks of ROWS
     /// rows, folded into y ≤ 65,535 and z).
     groups: (u32, u32, u32),
-    chunk: u64,
+    chunk: Chunk,
 }
 
-/// A workgroup's cells: WG of a row (its threads) in each of ROWS rows (the shader's WG, CPT).
-const WG: u32 = 64;
-const ROWS: u64 = 4;
-const SUBMIT_S: f64 = 0.1;
+/// Steps in one submission at most.
 const MAX_CHUNK: u64 = 8192;
 
 impl GrayScott {
@@ -93,21 +91,7 @@ impl GrayScott {
         let cells = model.n.iter().product::<usize>();
         assert!(u.len() == cells && v.len() == cells, "fields must have one value per cell");
         gpu.check_precision(precision)?;
-        // One workgroup per WG cells of a row (x) and ROWS rows (a block; the blocks folded into
-        // y and z): a thread divides once to find its cell's j and k. At most 65,535 workgroups
-        // along each axis.
-        let gx = (model.n[0] as u64).div_ceil(WG as u64);
-        let blocks = ((model.n[1] * model.n[2]) as u64).div_ceil(ROWS);
-        let gy = blocks.min(65_535);
-        let gz = blocks.div_ceil(gy);
-        if gx > 65_535 || gz > 65_535 {
-            return Err(GpuError::Unsupported(format!(
-                "a grid of {} × {} × {} cells: the GPU path dispatches at most 65,535 × 64 cells along x and \
-                 65,535² × 4 rows",
-                model.n[0], model.n[1], model.n[2]
-            )));
-        }
-        let (gx, gy, gz) = (gx as u32, gy as u32, gz as u32);
+        let (gx, gy, gz) = grid::layout(model.n)?;
         let slots = gx as u64 * gy as u64 * gz as u64;
         let size = cells as u64 * precision.bytes();
         use wgpu::BufferUsages as U;
@@ -123,17 +107,7 @@ impl GrayScott {
             gpu.buffer("read-back staging", size.max(2 * slots * precision.bytes()), U::MAP_READ | U::COPY_DST)?;
         let (layout, step_pipe, check_pipe) = pipelines(&gpu, precision);
         let bind = |a: &Pair, b: &Pair| {
-            let res = [&params, &a.u, &a.v, &b.u, &b.v, &made_buf, &flag];
-            let entries: Vec<wgpu::BindGroupEntry> = res
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect();
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("gray-scott"),
-                layout: &layout,
-                entries: &entries,
-            })
+            grid::bind_group(&gpu, "gray-scott", &layout, &[&params, &a.u, &a.v, &b.u, &b.v, &made_buf, &flag])
         };
         let binds = [bind(&bufs[0], &bufs[1]), bind(&bufs[1], &bufs[0])];
         let g = Self {
@@ -153,7 +127,7 @@ impl GrayScott {
             step_pipe,
             check_pipe,
             groups: (gx, gy, gz),
-            chunk: 1,
+            chunk: Chunk::new(MAX_CHUNK),
         };
         g.set_fields(Some(u), Some(v))?;
         g.set_made(made)?;
@@ -237,7 +211,7 @@ impl GrayScott {
             if stop.load(Ordering::Relaxed) {
                 return Err((done, Halt::Stopped));
             }
-            let k = self.chunk.min(n - done);
+            let k = self.chunk.next(n - done);
             self.gpu.queue.write_buffer(&self.flag, 0, bytemuck::cast_slice(&[u32::MAX; 4]));
             let t0 = Instant::now();
             self.gpu.queue.submit([self.record(k)]);
@@ -250,11 +224,7 @@ impl GrayScott {
                 return Err((done, Halt::Diverged { cell: bad as usize }));
             }
             done += k;
-            if took < 0.5 * SUBMIT_S && k == self.chunk {
-                self.chunk = (self.chunk * 2).min(MAX_CHUNK);
-            } else if took > 2.0 * SUBMIT_S && self.chunk > 1 {
-                self.chunk /= 2;
-            }
+            self.chunk.adapt(k, took);
         }
         Ok(done)
     }

@@ -17,6 +17,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 pub mod gray_scott;
+mod grid;
 pub mod particles;
 pub mod wave;
 
@@ -70,6 +71,36 @@ impl Precision {
             Precision::F64 => {
                 "alias real = f64;\nfn bad(x: f64) -> bool { return !(abs(x) <= 1.7976931348623157e308); }\n"
             }
+        }
+    }
+}
+
+/// Steps per submission: grown (doubling, up to `most`) while a submission takes under half of
+/// `SUBMIT_S` (0.1 s), halved when one takes over twice that. Short enough that the stop flag,
+/// read between submissions, answers Ctrl-C within 0.5 s; long enough that the host's work per
+/// submission (recording, the flag's read-back) is small beside the device's.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Chunk {
+    steps: u64,
+    most: u64,
+}
+
+const SUBMIT_S: f64 = 0.1;
+
+impl Chunk {
+    pub(crate) fn new(most: u64) -> Self {
+        Self { steps: 1, most }
+    }
+    /// The steps of the next submission, with `left` to go.
+    pub(crate) fn next(&self, left: u64) -> u64 {
+        self.steps.min(left)
+    }
+    /// After a submission of `k` steps that took `took` seconds.
+    pub(crate) fn adapt(&mut self, k: u64, took: f64) {
+        if took < 0.5 * SUBMIT_S && k == self.steps {
+            self.steps = (self.steps * 2).min(self.most);
+        } else if took > 2.0 * SUBMIT_S && self.steps > 1 {
+            self.steps /= 2;
         }
     }
 }

@@ -8,7 +8,7 @@
 //! for free particles, 0 for pinned ones (which still pull). Velocity Verlet evaluates the drag
 //! at the predicted velocity v + dt a and books dissipation by the trapezoidal rule, as the CPU's
 //! `integrators::verlet` does, so both paths are the same method.
-use crate::{Gpu, GpuError, Precision, Result};
+use crate::{Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -260,8 +260,8 @@ pub struct Particles {
     bind: wgpu::BindGroup,
     pipes: Pipes,
     acc_valid: bool,
-    /// Steps per submission, grown while a submission takes under `SUBMIT_S`.
-    chunk: u64,
+    /// Steps per submission (`Chunk`: about 0.1 s each).
+    chunk: Chunk,
 }
 
 struct Pipes {
@@ -276,8 +276,7 @@ struct Pipes {
 }
 
 const WG: u32 = 256;
-/// A submission's target length: Ctrl-C is answered between submissions.
-const SUBMIT_S: f64 = 0.1;
+/// Steps in one submission at most.
 const MAX_CHUNK: u64 = 4096;
 /// Colliders a device particle system holds.
 pub const MAX_COLLIDERS: usize = 64;
@@ -407,7 +406,7 @@ impl Particles {
             bind,
             pipes,
             acc_valid: false,
-            chunk: 1,
+            chunk: Chunk::new(MAX_CHUNK),
         };
         if !rows.is_empty() {
             p.upload(&p._springs[2], &rows);
@@ -594,7 +593,7 @@ impl Particles {
             if stop.load(Ordering::Relaxed) {
                 return Err((done, Halt::Stopped));
             }
-            let k = self.chunk.min(n - done);
+            let k = self.chunk.next(n - done);
             // The first-bad-particle flag only: the touched flag carries over.
             self.gpu.queue.write_buffer(&self.live.flag, 0, bytemuck::cast_slice(&[u32::MAX]));
             let t0 = Instant::now();
@@ -605,11 +604,7 @@ impl Particles {
                 return Err((done, Halt::Diverged { particle: bad as usize }));
             }
             done += k;
-            if took < 0.5 * SUBMIT_S && k == self.chunk {
-                self.chunk = (self.chunk * 2).min(MAX_CHUNK);
-            } else if took > 2.0 * SUBMIT_S && self.chunk > 1 {
-                self.chunk /= 2;
-            }
+            self.chunk.adapt(k, took);
         }
         Ok(done)
     }

@@ -9,7 +9,8 @@
 //! same values) and uploaded with it. The books: per workgroup, the damping's Σ γ v̄² (reduced
 //! in a fixed tree order in the workgroup), and the sources' damping and work, accumulated by
 //! the one thread that applies them; summed on the host in f64 in slot order.
-use crate::{Gpu, GpuError, Precision, Result};
+use crate::grid::{self, WG};
+use crate::{Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -96,12 +97,9 @@ pub struct Wave {
     sources_pipe: wgpu::ComputePipeline,
     check_pipe: wgpu::ComputePipeline,
     groups: (u32, u32, u32),
-    chunk: u64,
+    chunk: Chunk,
 }
 
-const WG: u32 = 64;
-const ROWS: u64 = 4;
-const SUBMIT_S: f64 = 0.1;
 /// Steps in one submission at most (with oscillators, their forcing of every step travels with it).
 const MAX_CHUNK: u64 = 8192;
 
@@ -117,22 +115,11 @@ impl Wave {
         assert!(model.gamma_cells.is_empty() || model.gamma_cells.len() == cells, "γ per cell or none");
         assert!(model.keep.is_empty() || model.keep.len() == cells, "a mask value per cell or none");
         gpu.check_precision(precision)?;
-        let gx = (model.n[0] as u64).div_ceil(WG as u64);
-        let blocks = ((model.n[1] * model.n[2]) as u64).div_ceil(ROWS);
-        let gy = blocks.min(65_535);
-        let gz = blocks.div_ceil(gy);
-        if gx > 65_535 || gz > 65_535 {
-            return Err(GpuError::Unsupported(format!(
-                "a grid of {} × {} × {} cells: the GPU path dispatches at most 65,535 × 64 cells along x and \
-                 65,535² × 4 rows",
-                model.n[0], model.n[1], model.n[2]
-            )));
-        }
         let entries: usize = model.oscillators.iter().map(|o| o.profile.len()).sum();
         if entries as u64 > u32::MAX as u64 / 4 {
             return Err(GpuError::Unsupported(format!("{entries} source cells: at most 2^30")));
         }
-        let (gx, gy, gz) = (gx as u32, gy as u32, gz as u32);
+        let (gx, gy, gz) = grid::layout(model.n)?;
         let slots = gx as u64 * gy as u64 * gz as u64;
         let rb = precision.bytes();
         let size = cells as u64 * rb;
@@ -164,17 +151,7 @@ impl Wave {
         let gather_pipe = pipes.pop().expect("four kernels");
         let step_pipe = pipes.pop().expect("four kernels");
         let bind = |a: &wgpu::Buffer, b: &wgpu::Buffer| {
-            let res = [&params, a, b, &gam, &keep, &diss, &flag, &ints, &src];
-            let entries: Vec<wgpu::BindGroupEntry> = res
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() })
-                .collect();
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("wave"),
-                layout: &layout,
-                entries: &entries,
-            })
+            grid::bind_group(&gpu, "wave", &layout, &[&params, a, b, &gam, &keep, &diss, &flag, &ints, &src])
         };
         let binds = [bind(&bufs[0], &bufs[1]), bind(&bufs[1], &bufs[0])];
         if !model.gamma_cells.is_empty() {
@@ -219,7 +196,7 @@ impl Wave {
             sources_pipe,
             check_pipe,
             groups: (gx, gy, gz),
-            chunk: 1,
+            chunk: Chunk::new(MAX_CHUNK),
         };
         w.set_fields(u, up)?;
         w.clear_books()?;
@@ -330,7 +307,7 @@ impl Wave {
             if stop.load(Ordering::Relaxed) {
                 return Err((done, Halt::Stopped));
             }
-            let k = self.chunk.min(n - done);
+            let k = self.chunk.next(n - done);
             let mut t_end = t;
             if nosc > 0 {
                 // The forcing of each step of the submission, at the time the CPU's step sees.
@@ -362,11 +339,7 @@ impl Wave {
             }
             done += k;
             t = t_end;
-            if took < 0.5 * SUBMIT_S && k == self.chunk {
-                self.chunk = (self.chunk * 2).min(MAX_CHUNK);
-            } else if took > 2.0 * SUBMIT_S && self.chunk > 1 {
-                self.chunk /= 2;
-            }
+            self.chunk.adapt(k, took);
         }
         Ok(done)
     }
