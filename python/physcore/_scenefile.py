@@ -126,6 +126,9 @@ _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
     # The fluid's arrays carry ghost faces; their sizes follow from the record (_fluid_sizes).
     "stable_fluid": {k: ("f8", None) for k in ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books")},
 }
+#: State members absent from files written before them (the core takes their earlier value):
+#: the wave's book of its changes of dt.
+_GRID_STATE_OPTIONAL: dict[str, dict[str, tuple[str, Any]]] = {"wave": {"dt_changes": ("f8", 1)}}
 #: Each grid kind's record (what ``Grid._record`` writes): key -> kind of value. The kinds beyond
 #: :meth:`_Reader.value`'s are checked by :func:`_grid_record`. ``_GRID_RECORD_OPTIONAL`` keys may
 #: be absent (files written before them).
@@ -656,6 +659,9 @@ def _expected_members(meta: dict[str, Any]) -> tuple[dict[str, _Spec], dict[str,
             if axis not in ("G", None):
                 sizes[f"{name}{k}"] = (axis, f"a {g['kind']} grid's {name}")
             req[f"grid{k}_{name}"] = _Spec(dtype, (cells if axis == "G" else f"{name}{k}",))
+        for name, (dtype, n) in _GRID_STATE_OPTIONAL.get(g["kind"], {}).items():
+            sizes[f"{name}{k}"] = (n, f"a {g['kind']} grid's {name}")
+            opt[f"grid{k}_{name}"] = _Spec(dtype, (f"{name}{k}",))
         if g["record"].get("mask"):
             req[f"grid{k}_mask"] = _Spec("b1", (cells,))
         for j, o in enumerate(g["record"].get("oscillators", [])):

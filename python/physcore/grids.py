@@ -345,7 +345,9 @@ class Wave(Grid):
 
     Energy books (per unit areal density): kinetic ½Σ u_t² dA and potential ½c²|∇u|² (written as
     the leapfrog-conserved cross term of the two time levels), damping as dissipated, the work of
-    drops and oscillators as a negative dissipated entry ``"<name> sources"``.
+    drops and oscillators as a negative dissipated entry ``"<name> sources"``, and what each
+    change of ``dt`` moved that cross term by (the velocity kept: ½c² (dt′ − dt) Σ u_t·∇²u dA) as
+    ``"<name> dt changes"``, so that the total holds across a change as across a step.
     """
 
     kind = "wave"
@@ -859,7 +861,7 @@ KINDS: dict[str, type[Grid]] = {"wave": Wave, "gray_scott": GrayScott, "stable_f
 KIND_ALIASES: dict[str, str] = {"fluid": "stable_fluid"}
 #: The state arrays each kind saves (``System::save`` in the core).
 _GRID_ARRAYS: dict[str, tuple[str, ...]] = {
-    "wave": ("u", "u_prev", "clock"),
+    "wave": ("u", "u_prev", "clock", "dt_changes"),
     "gray_scott": ("u", "v", "made"),
     "stable_fluid": ("u", "v", "density", "temperature", "pressure", "tracers", "steps", "books"),
 }

@@ -152,6 +152,41 @@ def test_double_slit_mask_and_regions_survive_save_load(tmp_path):
     assert np.array_equal(again.grids[0].mask, scene.grids[0].mask)
 
 
+def test_a_change_of_the_waves_step_is_booked_and_the_books_hold(tmp_path):
+    """Leapfrog's discrete energy has its potential as the cross term of two time levels dt
+    apart, so a new dt (the velocity kept) moves it: by 4.83 of 31 here, which went into no book
+    before. The "dt changes" book holds each move, and a file keeps it; a file written before
+    the book loads with it at 0."""
+    import json
+
+    scene = pc.scenes.double_slit(n=64)
+    dt = scene.dt
+    scene.step(60)
+    assert abs(scene.energy_drift()) < 1e-12
+    scene.dt = 0.6 * dt
+    scene.step(1)
+    scene.advance(0.37)  # substeps of the call's own dt
+    e = scene.energy()
+    moved = e.dissipated["tank dt changes"]  # the grid's name, then the book's
+    assert abs(moved) > 0.01 * (e.kinetic + sum(e.potential.values()))  # not a vanishing correction
+    assert abs(scene.energy_drift()) < 1e-12
+    path = scene.save(tmp_path / "slit.npz")
+    again = pc.Scene.load(path)
+    assert again.energy() == scene.energy()
+    for s in (scene, again):
+        s.dt = 0.8 * dt
+        s.step(3)
+    assert np.array_equal(scene.grids[0].u, again.grids[0].u) and again.energy() == scene.energy()
+    # A file written before the book: no "grid0_dt_changes" member.
+    with np.load(path) as z:
+        members = {k: z[k] for k in z.files if k != "grid0_dt_changes"}
+    json.loads(str(members["meta"]))  # the meta is untouched
+    np.savez(tmp_path / "old.npz", **members)
+    old = pc.Scene.load(tmp_path / "old.npz")
+    assert old.energy().dissipated["tank dt changes"] == 0.0
+    assert np.array_equal(old.grids[0].u, pc.Scene.load(path).grids[0].u)
+
+
 def test_wave_in_3d_keeps_its_energy():
     scene = pc.Scene(dim=3)
     w = scene.add(pc.Wave((16, 12, 10), 0.1, c=2.0))

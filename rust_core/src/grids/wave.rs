@@ -19,7 +19,9 @@
 //! conserved by leapfrog to round-off when γ = 0 and f = 0, because L is symmetric for every edge
 //! rule (summation by parts). Damping books dt Σ γ v̄² dA as dissipated, v̄ = (u⁺ − u⁻)/(2 dt),
 //! and sources book their work dt Σ f v̄ dA (a drop: the energy it adds), so
-//! `kinetic + potential + dissipated − work` stays constant to round-off.
+//! `kinetic + potential + dissipated − work` stays constant to round-off. The potential's cross
+//! term depends on dt: a change of dt moves it (u⁻ rescaled, the velocity kept), and the
+//! `dt changes` book holds what each change moved, so the total holds across it too.
 //!
 //! **Absorbing faces** are damping layers ("sponges") of `layer` cells whose γ rises as the
 //! square of the depth into the layer to `layer_strength`·c/dx at the outer face (fixed): the
@@ -189,6 +191,9 @@ struct Clock {
     work: Real,
     /// Drops applied so far (they are sorted by time).
     next_drop: usize,
+    /// Energy the changes of dt added, J (per unit density): the discrete energy's potential is
+    /// a cross term of two time levels dt apart, so a new dt (the velocity kept) moves it.
+    rescaled: Real,
 }
 
 pub struct WaveSystem {
@@ -278,7 +283,7 @@ impl WaveSystem {
         Ok(Self {
             u,
             u_prev,
-            clock: Clock { t: 0.0, dt, dissipated: 0.0, work: 0.0, next_drop: 0 },
+            clock: Clock { t: 0.0, dt, dissipated: 0.0, work: 0.0, next_drop: 0, rescaled: 0.0 },
             gamma_cells,
             row_in_layer,
             x_layer,
@@ -360,13 +365,20 @@ impl WaveSystem {
     }
 
     /// Steps of `dt` from now on: u⁻ is rescaled so that the velocity (u − u⁻)/dt is kept.
+    ///
+    /// The discrete energy's potential −½c² Σ u⁻ L u moves with it (by ½c² (dt' − dt) Σ v L u,
+    /// v the velocity): the change is booked (`dt changes`), so that the books' total holds
+    /// across it as across a step.
     pub(crate) fn change_dt(&mut self, dt: Real) {
         if dt != self.clock.dt {
+            let (k0, p0) = self.energies();
             let ratio = dt / self.clock.dt;
             for (a, b) in self.u.iter().zip(self.u_prev.iter_mut()) {
                 *b = a - ratio * (a - *b);
             }
             self.clock.dt = dt;
+            let (k1, p1) = self.energies();
+            self.clock.rescaled += (k1 + p1) - (k0 + p0);
         }
     }
 
@@ -382,15 +394,17 @@ impl WaveSystem {
         (&mut self.u, &mut self.u_prev)
     }
 
-    /// The clock as `save` writes it: t, dt, dissipated, work, drops applied.
-    pub(crate) fn clock_values(&self) -> [Real; 5] {
+    /// The clock: t, dt, dissipated, work, drops applied (as `save` writes "clock"), then the
+    /// energy the changes of dt added (`save`'s "dt_changes").
+    pub(crate) fn clock_values(&self) -> [Real; 6] {
         let c = &self.clock;
-        [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real]
+        [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real, c.rescaled]
     }
 
     /// Sets the clock (`clock_values`' order; the values are the system's own, unchecked).
-    pub(crate) fn set_clock_values(&mut self, c: [Real; 5]) {
-        self.clock = Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize };
+    pub(crate) fn set_clock_values(&mut self, c: [Real; 6]) {
+        self.clock =
+            Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize, rescaled: c[5] };
     }
 
     /// The time of the next drop not yet applied.
@@ -725,6 +739,7 @@ impl System for WaveSystem {
         if !(self.cfg.drops.is_empty() && self.cfg.oscillators.is_empty()) {
             dissipated.push((format!("{} sources", self.cfg.name), -self.clock.work));
         }
+        dissipated.push((format!("{} dt changes", self.cfg.name), -self.clock.rescaled));
         EnergyReport { kinetic, potential: vec![(self.cfg.name.clone(), potential)], dissipated }
     }
     /// "u" (m; the velocity is kept) or "velocity" (m/s, at the half step before now).
@@ -768,14 +783,20 @@ impl System for WaveSystem {
         let c = &self.clock;
         let clock = [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real];
         let of = format!("the wave's fields of {} cells", count(self.u.len() as u128));
-        crate::systems::saved(of, &[("u", &self.u), ("u_prev", &self.u_prev), ("clock", &clock)])
+        let arrays = [("u", &self.u[..]), ("u_prev", &self.u_prev), ("clock", &clock), ("dt_changes", &[c.rescaled])];
+        crate::systems::saved(of, &arrays)
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let n = self.u.len();
         let u = array(arrays, "u", Some(n))?;
         let up = array(arrays, "u_prev", Some(n))?;
         let c = array(arrays, "clock", Some(5))?;
-        for (name, a) in [("u", u), ("u_prev", up), ("clock", c)] {
+        // Absent from files written before the changes of dt were booked (none was, then).
+        let changes = match arrays.iter().any(|(n, _)| n == "dt_changes") {
+            true => array(arrays, "dt_changes", Some(1))?,
+            false => &[0.0][..],
+        };
+        for (name, a) in [("u", u), ("u_prev", up), ("clock", c), ("dt_changes", changes)] {
             if let Some(i) = first_non_finite(a) {
                 return Err(invalid(name, format!("value {i} is not finite: {}", a[i])));
             }
@@ -791,7 +812,8 @@ impl System for WaveSystem {
         }
         self.u.copy_from_slice(u);
         self.u_prev.copy_from_slice(up);
-        self.clock = Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize };
+        let rescaled = changes[0];
+        self.clock = Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize, rescaled };
         Ok(())
     }
 }
@@ -899,6 +921,47 @@ mod tests {
             }
             assert!(worst < 1e-12, "{edge:?}: drift {worst:e}");
         }
+    }
+
+    /// A change of dt keeps the velocity and moves the discrete energy's potential; the books
+    /// hold the move, so their total holds across changes as across steps (and a file keeps it).
+    #[test]
+    fn changes_of_dt_are_booked_and_the_total_holds() {
+        let mut w = WaveSystem::new(square(48, 1.0, Edge::Free)).unwrap();
+        let dt = w.auto_dt().unwrap();
+        bumpy(&mut w);
+        steps(&mut w, 30, dt);
+        let e0 = total(&w);
+        let book = |w: &WaveSystem| w.energy().dissipated.iter().find(|d| d.0 == "wave dt changes").unwrap().1;
+        assert_eq!(book(&w), 0.0);
+        let need = Need::new("test", 0, "velocity");
+        for f in [0.6, 0.97, 0.31, 1.0, 0.5] {
+            let v0 = w.velocity(&need).unwrap();
+            w.change_dt(f * dt);
+            let v1 = w.velocity(&need).unwrap();
+            assert!(v0.iter().zip(&v1).all(|(a, b)| (a - b).abs() <= 1e-12 * (1.0 + a.abs())), "the velocity is kept");
+            steps(&mut w, 7, f * dt);
+            let drift = ((total(&w) - e0) / e0).abs();
+            assert!(drift < 1e-12, "after steps at {f} dt: drift {drift:e}");
+        }
+        // The book holds something a plain total would have lost (not a vanishing correction).
+        assert!(book(&w).abs() > 1e-4 * e0, "book {:e} of {e0:e}", book(&w));
+        // Saved and loaded, the book comes back; a file without it (written before it) reads 0.
+        let saved = w.save().unwrap();
+        let mut back = WaveSystem::new(square(48, 1.0, Edge::Free)).unwrap();
+        back.load(&saved).unwrap();
+        assert_eq!(book(&back), book(&w));
+        assert_eq!(total(&back), total(&w));
+        let old: Arrays = saved.into_iter().filter(|(n, _)| n != "dt_changes").collect();
+        back.load(&old).unwrap();
+        assert_eq!(book(&back), 0.0);
+        let bad: Arrays = w
+            .save()
+            .unwrap()
+            .into_iter()
+            .map(|(n, a)| if n == "dt_changes" { (n, vec![0.0, 1.0]) } else { (n, a) })
+            .collect();
+        assert!(back.load(&bad).unwrap_err().to_string().contains("dt_changes"));
     }
 
     #[test]

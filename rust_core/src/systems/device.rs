@@ -845,7 +845,7 @@ fn within_range(precision: Precision, u: &[Real], up: &[Real]) -> Result<()> {
 }
 
 /// The clock and the books' base of a `DeviceWave` at a checkpoint (its fields stay on the device).
-struct WaveMark([Real; 5], [Real; 2]);
+struct WaveMark([Real; 6], [Real; 2]);
 
 impl System for DeviceWave {
     fn name(&self) -> &str {
