@@ -5,8 +5,9 @@
 // generic would need a trait over all of rapier; the two inclusions are what parry and rapier
 // themselves do (one source, built per dimension). Formatted with `rustfmt` on this file.
 
-/// Everything rapier keeps between steps: what a snapshot copies and a save writes.
-#[derive(Clone, serde::Serialize, serde::Deserialize)]
+/// Everything rapier keeps between steps: what a snapshot copies and a save writes (through
+/// `io`, the crate physcore-bodies-io, in this order).
+#[derive(Clone)]
 struct Rapier {
     islands: IslandManager,
     broad_phase: BroadPhaseBvh,
@@ -71,8 +72,8 @@ fn rapier_step_on(
 /// starting the thread costs about 30 µs, under 0.3 % of such a step.
 const WATCHED_STEP: std::time::Duration = std::time::Duration::from_millis(10);
 
-/// What `step` changes: rapier's state and the books.
-#[derive(Clone, serde::Serialize, serde::Deserialize)]
+/// What `step` changes: rapier's state and the books (saved through `io`, in this order).
+#[derive(Clone)]
 struct Dynamic {
     r: Rapier,
     /// Energy the contacts and joints took out (J; the residual of each step, see the module).
@@ -83,6 +84,47 @@ struct Dynamic {
     parts: usize,
     /// Particles pinned to bodies: (particle, body, the point in the body's frame).
     pins: Vec<(usize, usize, Vector)>,
+}
+
+impl Dynamic {
+    /// The fields lent to `io` for a save.
+    fn saving(&self) -> io::Saving<'_> {
+        let r = &self.r;
+        io::Saving {
+            islands: &r.islands,
+            broad_phase: &r.broad_phase,
+            narrow_phase: &r.narrow_phase,
+            bodies: &r.bodies,
+            colliders: &r.colliders,
+            impulse_joints: &r.impulse_joints,
+            multibody_joints: &r.multibody_joints,
+            soft_bodies: &r.soft_bodies,
+            contacts: self.contacts,
+            coupling: self.coupling,
+            parts: self.parts,
+            pins: &self.pins,
+        }
+    }
+
+    /// The state `io` read.
+    fn loaded(l: io::Loaded) -> Self {
+        Dynamic {
+            r: Rapier {
+                islands: l.islands,
+                broad_phase: l.broad_phase,
+                narrow_phase: l.narrow_phase,
+                bodies: l.bodies,
+                colliders: l.colliders,
+                impulse_joints: l.impulse_joints,
+                multibody_joints: l.multibody_joints,
+                soft_bodies: l.soft_bodies,
+            },
+            contacts: l.contacts,
+            coupling: l.coupling,
+            parts: l.parts,
+            pins: l.pins,
+        }
+    }
 }
 
 /// The memory that adding `n` bodies to a system that then holds `total` needs (`group_bytes`),
@@ -468,7 +510,7 @@ impl Bodies {
                     && a.density().to_bits() == b.density().to_bits()
                     && a.friction().to_bits() == b.friction().to_bits()
                     && a.restitution().to_bits() == b.restitution().to_bits()
-                    && bincode::serialize(a.shared_shape()).ok() == bincode::serialize(b.shared_shape()).ok()
+                    && io::shape_bytes(a.shared_shape()) == io::shape_bytes(b.shared_shape())
             });
         if !same {
             return Err(invalid("state", "holds other bodies than the scene's"));
@@ -1265,7 +1307,8 @@ impl System for Bodies {
         let temporaries = state_bytes(&self.d.r) / 4;
         let of = format!("the solver state of {} rigid bodies", count(self.handles.len() as u128));
         Need::new("save", temporaries, &of).room(temporaries)?;
-        let size = bincode::serialized_size(&self.d).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
+        let saving = self.d.saving();
+        let size = io::size(&saving).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
         let len = super::SEALED + size as usize;
         let bytes = len as u128 * 7 / 3 + temporaries;
         let need = Need::new("save", bytes, format!("{of} ({} bytes, packed)", count(len as u128)));
@@ -1273,7 +1316,7 @@ impl System for Bodies {
         let mut bytes = Vec::new();
         need.reserve(&mut bytes, len)?;
         bytes.resize(super::SEALED, 0);
-        bincode::serialize_into(&mut bytes, &self.d).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
+        io::write(&mut bytes, &saving).map_err(|e| invalid("state", format!("cannot be saved: {e}")))?;
         super::seal(&mut bytes);
         let packed = pack(&bytes, &need)?;
         Ok(vec![("state".to_string(), packed), ("bytes".to_string(), vec![bytes.len() as Real])])
@@ -1293,8 +1336,9 @@ impl System for Bodies {
         );
         need.room(total)?;
         let bytes = unpack(packed, len, &need)?.ok_or_else(|| invalid("state", "is not a packed bodies state"))?;
-        let d: Dynamic = bincode::deserialize(super::unsealed(&bytes)?)
-            .map_err(|e| invalid("state", format!("cannot be read: {e}")))?;
+        let d = Dynamic::loaded(
+            io::read(super::unsealed(&bytes)?).map_err(|e| invalid("state", format!("cannot be read: {e}")))?,
+        );
         if d.parts < self.d.parts {
             return Err(invalid("state", format!("holds {} parts, the scene has {}", d.parts, self.d.parts)));
         }

@@ -8,6 +8,7 @@ use crate::systems::{array, Arrays, Coupling, EnergyReport, Halt, Snapshot, Syst
 use crate::terms::registry::Params;
 use crate::terms::BodyMotion;
 use crate::vector::{Real, Vector as PVector};
+use physcore_bodies_io::dim3 as io;
 use rapier3d_f64::geometry::{
     ContactData, ContactManifold, ContactPair, SolverContact, TrackedContact, NEW_CONTACT_BIT,
 };
