@@ -86,11 +86,14 @@ def test_an_old_grid_and_dopri5_file_loads_under_the_new_names_and_continues_bit
     pond, gs, smoke = loaded.grids
     assert (pond.spacing, pond.damping, gs.spacing, smoke.spacing, smoke.nu) == (0.1, 0.2, 0.05, 0.1, 1e-3)
     built = _grids_scene()
-    # The file written now holds the new stored names, and otherwise the old file's bytes.
+    # The file written now holds the new stored names, the wave's book of its changes of dt (a
+    # member added after the old file was written: 0 here, nothing has stepped), and otherwise
+    # the old file's bytes.
     new = built.save(tmp_path / "new.npz")
     assert loaded.save(tmp_path / "again.npz").read_bytes() == new.read_bytes()
     a, b = _members(old), _members(new)
-    assert a.keys() == b.keys()
+    assert b.keys() - a.keys() == {"grid0_dt_changes"} and a.keys() <= b.keys()
+    assert b["grid0_dt_changes"].dtype == np.float64 and b["grid0_dt_changes"].tolist() == [0.0]
     for k in a:
         if k != "meta":
             assert a[k].dtype == b[k].dtype and a[k].tobytes() == b[k].tobytes(), k
