@@ -8,7 +8,22 @@
 //! changes no result. The flag belongs to one call of one simulation: other scenes' kernels
 //! never see it.
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+
+/// Ctrl-C as code that holds the calling thread (outside a stepping call and its flag) can
+/// poll it: the Python module installs `check` (Python's signal handlers, run on the main
+/// thread); without it, never.
+static SIGNALS: OnceLock<fn() -> bool> = OnceLock::new();
+
+/// Installs the check `signalled` runs (the first one installed stays).
+pub fn on_signals(check: fn() -> bool) {
+    let _ = SIGNALS.set(check);
+}
+
+/// Whether a signal handler raised (Ctrl-C) since the last check: a waiting loop's way out.
+pub fn signalled() -> bool {
+    SIGNALS.get().is_some_and(|check| check())
+}
 
 /// A flag that is never set, for evaluations outside an interruptible call.
 static NEVER: AtomicBool = AtomicBool::new(false);

@@ -3,7 +3,9 @@ broad and narrow phase, bodies, colliders, joints) travels as bincode bytes in `
 sealed with a digest. A hostile run found that one flipped bit in it loaded, then aborted the
 process on the next step (a 103 GB allocation) or made every call panic (159 of 5,999 single
 flips), and that another scene's state with as many bodies loaded silently, the groups then
-reading the other scene's bodies. Each is now refused by `Scene.load`, before anything steps.
+reading the other scene's bodies. Each is now refused by `Scene.load`, before anything steps;
+a file crafted to pass the digest is stepped apart first (in a child process on Unix), so that
+what kills a process (an abort, a stack overflow, a step that never ends) kills that one.
 """
 from __future__ import annotations
 
@@ -137,6 +139,112 @@ def test_a_crafted_state_that_passes_the_digest_is_refused_or_fails_cleanly(tmp_
         assert failure.quantity == "solver", str(failure)
         assert r.step_count == count and np.array_equal(r.bodies[1].positions, before)  # rolled back
         outcomes["solver"] += 1
-    # Every path taken (when written: 112 refused by the checks, 12 by the trial steps, 3 caught
-    # at a later step, 173 stepping on).
-    assert min(outcomes.values()) > 0, outcomes
+    # The paths taken (when first written, with two trial steps in this process: 112 refused by
+    # the checks, 12 by the trial, 3 caught at a later step, 173 stepping on; with the trial apart,
+    # up to 64 steps and the state's own length unit: 112, 12, 0, 176: the 3 are refused by the
+    # trial, and 3 the old trial (at the tolerances of a metre) refused step on). A state caught
+    # at a later step: `test_a_crafted_state_that_fails_after_its_trial_...` below.
+    assert outcomes["refused"] > 0 and outcomes["trial"] > 0 and outcomes["fine"] > 0, outcomes
+
+
+def _crafted(tmp_path, bit: int) -> None:
+    """tmp_path/c.npz: `_scene()` saved with bit `bit` of its state (after the tag and digest)
+    flipped and the digest computed again."""
+    s = _scene()
+    s.save(tmp_path / "s.npz")
+    a = _arrays(tmp_path / "s.npz")
+    b = _state_bytes(a)
+    body = bytearray(b[16:])
+    body[bit // 8] ^= 1 << (bit % 8)
+    _write(tmp_path / "c.npz", _with_state(a, bytes(b[:8]) + _fnv1a(body).to_bytes(8, "little") + bytes(body)))
+
+
+def test_a_crafted_state_that_fails_after_its_trial_raises_simulation_diverged_rolled_back(tmp_path):
+    """Bit 4,656 of `_scene()`'s state passes the trial steps (a fresh pipeline at rapier's own
+    dt) and trips rapier's broad phase at the scene's first step: that call raises
+    SimulationDiverged(quantity="solver"), the scene as it was, never a PanicException."""
+    _crafted(tmp_path, 4656)
+    r = pc.Scene.load(tmp_path / "c.npz")
+    before, count = r.bodies[1].positions.copy(), r.step_count
+    with pytest.raises(pc.SimulationDiverged) as e:
+        r.step(5)
+    assert e.value.quantity == "solver"
+    assert r.step_count == count and np.array_equal(r.bodies[1].positions, before)
+
+
+# Flips of `_scene()`'s state (bits after the tag and digest) that, sealed again, killed the
+# process before the trial ran apart: an 8.8 TB allocation in rapier's island manager and a 4 GB
+# one in a broad-phase traversal run in a circle (aborts, in the trial steps), a tree refit
+# recursing until the stack overflowed (SIGSEGV) at the third step, a step that never ended (the
+# nineteenth).
+_KILLERS = {"island manager's allocation": 600, "traversal's allocation": 2430, "stack overflow": 3057,
+            "endless step": 10912}
+
+_LOAD_CRAFTED = """
+import sys, time, pathlib
+sys.path.insert(0, {tests!r})
+import numpy as np
+import physcore as pc
+from test_body_state_file import _crafted
+d = pathlib.Path({tmp!r})
+_crafted(d, {bit})
+print("ready", flush=True)
+t = time.perf_counter()
+try:
+    pc.Scene.load(d / "c.npz")
+    print("loaded")
+except pc.SceneFileError as e:
+    print("refused", time.perf_counter() - t, e)
+except KeyboardInterrupt:
+    print("interrupted", time.perf_counter() - t)
+"""
+
+
+def _load_crafted(tmp_path, bit: int, interrupt: bool = False) -> str:
+    """The load's outcome, run in a process of its own; `interrupt`: Ctrl-C (SIGINT from outside,
+    as a terminal sends it) 1 s after the load starts."""
+    import pathlib
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    code = _LOAD_CRAFTED.format(tests=str(pathlib.Path(__file__).parent), tmp=str(tmp_path), bit=bit)
+    p = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert p.stdout is not None
+    assert p.stdout.readline().strip() == "ready"
+    if interrupt:
+        time.sleep(1.0)
+        p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=120)
+    assert p.returncode == 0, f"the process died ({p.returncode}): {err[-2000:]}"
+    return out.strip()
+
+
+@pytest.mark.skipif(__import__("sys").platform != "linux", reason="the trial step runs apart on Unix; "
+                    "the address-space hold is Linux's")
+@pytest.mark.parametrize("what", sorted(_KILLERS))
+def test_a_crafted_state_that_killed_the_process_is_refused_and_the_process_lives(tmp_path, what):
+    """Each load runs in a process of its own here, so that a regression kills that one, not the
+    suite: it must end normally, the file refused as inconsistent (before: aborted, crashed or
+    never returned)."""
+    out = _load_crafted(tmp_path, _KILLERS[what])
+    assert out.startswith("refused") and "is inconsistent: rapier's step fails on it" in out, out
+    if what == "endless step":
+        assert "did not end within" in out, out
+
+
+@pytest.mark.skipif(__import__("sys").platform != "linux", reason="as above")
+def test_ctrl_c_during_a_trial_step_that_never_ends_interrupts_the_load_at_once(tmp_path):
+    out = _load_crafted(tmp_path, _KILLERS["endless step"], interrupt=True)
+    assert out.startswith("interrupted"), out
+    assert float(out.split()[1]) < 1.5, out  # the signal came at 1.0 s
+
+
+def test_a_crafted_state_whose_counts_ask_more_than_any_memory_is_refused_as_inconsistent(tmp_path):
+    """Bits 35,308-35,346 of `_scene()`'s state (a count the step's memory estimate reads) asked up
+    to 18 EB for the trial step: an `OutOfMemoryError`, as if the machine were short of memory.
+    Above 2**48 bytes no machine is: the file is refused as inconsistent."""
+    _crafted(tmp_path, 35340)
+    with pytest.raises(pc.SceneFileError, match=r"is inconsistent: its counts ask [\d.]+ EB for a step"):
+        pc.Scene.load(tmp_path / "c.npz")

@@ -274,5 +274,21 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(batch::reference_energies, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    let _ = MAIN_THREAD.set(std::thread::current().id());
+    crate::stop::on_signals(python_signalled);
     Ok(())
 }
+
+/// Python's signal handlers, run from the thread that imported the module (Python's main
+/// thread, where they run at all; elsewhere `check_signals` does nothing, and taking the GIL on
+/// a thread that a GIL holder waits on would never return): whether one raised (Ctrl-C). The
+/// raised exception itself is dropped; the caller reports `Error::Interrupted`.
+fn python_signalled() -> bool {
+    if MAIN_THREAD.get() != Some(&std::thread::current().id()) {
+        return false;
+    }
+    Python::attach(|py| py.check_signals().is_err())
+}
+
+/// The thread that imported the module.
+static MAIN_THREAD: std::sync::OnceLock<std::thread::ThreadId> = std::sync::OnceLock::new();

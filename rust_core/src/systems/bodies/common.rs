@@ -490,7 +490,7 @@ impl Bodies {
             let d = self.pending.take().expect("checked");
             self.take_state(d)?;
         }
-        self.params.length_unit = self.length_unit();
+        self.params.length_unit = self.length_unit(&self.d.r);
         self.scale_time();
         Ok(())
     }
@@ -515,7 +515,14 @@ impl Bodies {
         if !same {
             return Err(invalid("state", "holds other bodies than the scene's"));
         }
-        self.trial_step(&d)?;
+        // The trial steps with the tolerances the state's own steps will have (its length unit).
+        let kept = self.params;
+        self.params.length_unit = self.length_unit(&d.r);
+        self.scale_time();
+        if let Err(e) = self.trial_step(&d) {
+            self.params = kept;
+            return Err(e);
+        }
         let old = std::mem::replace(&mut self.d, d);
         if let Some((i, q)) = self.fault() {
             self.d = old;
@@ -524,46 +531,80 @@ impl Bodies {
         Ok(())
     }
 
-    /// Steps a copy of a loaded state twice, on a fresh pipeline, and refuses the state if
-    /// rapier panics on it. The digest (`super::seal`) refuses damage, but a file crafted to
-    /// pass it (its digest recomputed) can hold indices that rapier's step trips over: of 300
-    /// such single-bit flips of a small scene's state, 112 were refused by the checks above, 177
-    /// stepped on, and 11 loaded and then made every step raise a `PanicException`. The copy
-    /// and its step are asked of the allocator first (as a checkpoint's). A state crafted to
-    /// allocate without bound in its step still aborts the process: no check short of
-    /// rebuilding rapier's sets from the scene's records (which would end the bit-for-bit
-    /// restart) rules that out.
+    /// Steps a copy of a loaded state, on a fresh pipeline, and refuses the state if rapier
+    /// fails on it. The digest (`super::seal`) refuses damage, but a file crafted to pass it
+    /// (its digest recomputed) can hold indices and links that rapier's step trips over. Of the
+    /// 44,728 single-bit flips of a small scene's state, each sealed again, about 100 killed the
+    /// process in a step (aborts: 8.8 TB asked for by the island manager, 4 GB by a broad-phase
+    /// traversal run in a circle; crashes: a tree refit recursing until the stack overflowed;
+    /// steps that never ended), some only at the third or the nineteenth step, and others
+    /// panicked. No Rust code survives an abort or a stack overflow, so on Unix the copy is
+    /// stepped in a child process (`super::apart`), its memory held to twice what a step is
+    /// estimated to need plus 256 MiB: a state it dies or panics on, or that does not end in its
+    /// time, is refused, this process untouched. It takes 2 steps, then more while they last
+    /// under `TRIAL_TIME`, up to 64 (64 of a small scene, about 10 of 3,000 balls, 2 of 1,000
+    /// balls in one place): a state crafted to fail later than that still fails in the user's
+    /// step. Elsewhere (or where no process can be made) the copy is stepped here, where a
+    /// panic is refused alike and an abort still ends the process. The step's memory is asked
+    /// of the allocator first (as a checkpoint's).
     fn trial_step(&self, d: &Dynamic) -> Result<()> {
-        const TRIAL_STEPS: usize = 2;
+        const TRIAL_STEPS: [usize; 2] = [2, 64];
+        const TRIAL_TIME: std::time::Duration = std::time::Duration::from_millis(25);
         let copy = state_bytes(&d.r);
         let bytes = copy + step_bytes(&d.r, copy, Some(self.params.prediction_distance()));
         let of = format!("a trial step of the loaded state of {} rigid bodies", count(self.handles.len() as u128));
+        // No machine holds 2⁴⁸ bytes (256 TiB): a state whose counts ask that (41 of the flips
+        // above asked up to 18 EB) is not short of memory but not a scene's.
+        if bytes >= 1 << 48 {
+            return Err(invalid("state", format!("is inconsistent: its counts ask {} for a step", crate::error::human(u64::try_from(bytes).unwrap_or(u64::MAX)))));
+        }
         Need::new("load", bytes, of).room(bytes)?;
-        let mut r = d.r.clone();
         // The world's gravity is given at each call, not known here: a body scene's usual one.
         let mut gravity = Vector::ZERO;
         gravity[D - 1] = -9.81;
         let params = self.params;
+        let trial = |r: &mut Rapier| {
+            let (mut pipeline, mut ccd, impacts) = (PhysicsPipeline::new(), CCDSolver::new(), Impacts::default());
+            let start = std::time::Instant::now();
+            for k in 0..TRIAL_STEPS[1] {
+                if k >= TRIAL_STEPS[0] && start.elapsed() >= TRIAL_TIME {
+                    break;
+                }
+                rapier_step_on(r, &mut pipeline, &mut ccd, &impacts, gravity, &params);
+            }
+        };
+        let refused = |why: &str| invalid("state", format!("is inconsistent: rapier's step fails on it ({why})"));
         // rapier's messages (and backtraces) of a refused state are not the user's to read: the
         // panic hook is silenced for the trial (process-wide, so a panic on another thread in
         // these microseconds would go unprinted; it still unwinds as before).
         let hook = std::panic::take_hook();
         std::panic::set_hook(Box::new(|_| {}));
-        let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            let (mut pipeline, mut ccd, impacts) = (PhysicsPipeline::new(), CCDSolver::new(), Impacts::default());
-            for _ in 0..TRIAL_STEPS {
-                rapier_step_on(&mut r, &mut pipeline, &mut ccd, &impacts, gravity, &params);
+        // Its time: 5 s, and a second for each 10 MB a step is estimated to need (two steps of
+        // 1,000 balls in one place took 28 s and are asked 4.45 GB: 450 s), so that a state
+        // that loops for ever is refused in seconds at a small scene.
+        let wall = std::time::Duration::from_secs_f64(5.0 + bytes as f64 / 1e7) + TRIAL_TIME;
+        let apart = super::apart(2 * bytes + (256 << 20), wall, || trial(&mut d.r.clone()));
+        let run = match apart {
+            super::Apart::Unavailable => {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| trial(&mut d.r.clone())))
             }
-        }));
+            _ => Ok(()),
+        };
         std::panic::set_hook(hook);
-        run.map_err(|e| {
-            let why = e
-                .downcast_ref::<&str>()
-                .map(|s| s.to_string())
-                .or_else(|| e.downcast_ref::<String>().cloned())
-                .unwrap_or_else(|| "a panic".into());
-            invalid("state", format!("is inconsistent: rapier's step fails on it ({why})"))
-        })
+        match apart {
+            super::Apart::Ended => Ok(()),
+            super::Apart::Panicked => Err(refused("a panic")),
+            super::Apart::Died(why) => Err(refused(&why)),
+            super::Apart::Interrupted => Err(crate::error::Error::Interrupted { rolled_back_to: 0 }),
+            super::Apart::Unavailable => run.map_err(|e| {
+                let why = e
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| e.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "a panic".into());
+                refused(&why)
+            }),
+        }
     }
 
     /// rapier's rates scaled with its length unit L: its defaults are tuned for bodies of about
@@ -587,11 +628,11 @@ impl Bodies {
     /// 1 cm dominoes toppled 17 % slower in units of √(g h) than the same row at 1 m, as the
     /// 5 mm slop is half a domino's thickness there. From the bodies alone, so a loaded scene
     /// (its groups added again) steps with the same unit.
-    fn length_unit(&self) -> Real {
+    fn length_unit(&self, state: &Rapier) -> Real {
         let mut unit = Real::INFINITY;
         for (&h, &c) in self.handles.iter().zip(&self.colliders) {
-            if self.d.r.bodies[h].is_dynamic() {
-                let r = self.d.r.colliders[c].shape().compute_local_bounding_sphere().radius();
+            if state.bodies[h].is_dynamic() {
+                let r = state.colliders[c].shape().compute_local_bounding_sphere().radius();
                 if r > 0.0 && r.is_finite() {
                     unit = unit.min(2.0 * r);
                 }

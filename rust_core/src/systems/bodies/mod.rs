@@ -93,6 +93,131 @@ fn off_thread<T: Send + 'static>(stop: &AtomicBool, job: impl FnOnce() -> T + Se
     }
 }
 
+/// How a job run in a process of its own (`apart`) ended.
+#[derive(Debug, PartialEq)]
+#[cfg_attr(not(unix), allow(dead_code))]
+enum Apart {
+    /// It returned.
+    Ended,
+    /// It panicked (the panic was caught there).
+    Panicked,
+    /// Its process died: why, in words (an abort, most often an allocation no memory could
+    /// hold; a crash; no end within its time).
+    Died(String),
+    /// Ctrl-C came while it ran (`crate::stop::signalled`): it was killed.
+    Interrupted,
+    /// No process could be made (no `fork` here, or the system refused one), or its end could
+    /// not be read (SIGCHLD ignored by the program): the caller runs the job itself.
+    Unavailable,
+}
+
+/// `job()` in a child process (`fork`), so that what no Rust code can recover from (an
+/// allocation that fails, which aborts; a stack overflow; a crash in unsafe code) ends that
+/// process, not this one. The child's address space is held to its size at the fork plus
+/// `extra` bytes (RLIMIT_AS, Linux), so a runaway allocation fails there instead of taking the
+/// machine's memory; its stdout and stderr go to /dev/null. The parent polls its end (from 20 µs
+/// up to every 10 ms) and Ctrl-C, and kills it after `wall` (a state can also loop for ever). The child runs on one thread, this one's copy: the job must
+/// not wait on other threads (rapier here has none; rayon's pool is not in the child).
+#[cfg(unix)]
+fn apart(extra: u128, wall: std::time::Duration, job: impl FnOnce()) -> Apart {
+    // SAFETY: fork, then in the child only this thread's code, allocation (glibc's malloc is
+    // reset for the child) and libc calls, ended by `_exit` (no atexit handlers, no Python).
+    let pid = unsafe { libc::fork() };
+    if pid < 0 {
+        return Apart::Unavailable;
+    }
+    if pid == 0 {
+        unsafe {
+            let null = libc::open(c"/dev/null".as_ptr(), libc::O_WRONLY);
+            if null >= 0 {
+                libc::dup2(null, 1);
+                libc::dup2(null, 2);
+            }
+            for s in [libc::SIGSEGV, libc::SIGBUS, libc::SIGABRT, libc::SIGILL, libc::SIGFPE] {
+                libc::signal(s, libc::SIG_DFL);
+            }
+            hold_address_space(extra);
+        }
+        let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)).is_ok();
+        unsafe { libc::_exit(if ok { 0 } else { 101 }) }
+    }
+    let (start, mut nap) = (std::time::Instant::now(), std::time::Duration::from_micros(20));
+    loop {
+        let mut status = 0;
+        // SAFETY: waits on our own child.
+        let r = unsafe { libc::waitpid(pid, &mut status, libc::WNOHANG) };
+        if r == pid {
+            return if libc::WIFEXITED(status) {
+                match libc::WEXITSTATUS(status) {
+                    0 => Apart::Ended,
+                    101 => Apart::Panicked,
+                    c => Apart::Died(format!("its process exited with status {c}")),
+                }
+            } else if libc::WIFSIGNALED(status) {
+                Apart::Died(match libc::WTERMSIG(status) {
+                    libc::SIGABRT => "it aborted: an allocation failed (no memory could hold it)".into(),
+                    libc::SIGSEGV | libc::SIGBUS => "it crashed (a stack overflow or a bad address)".into(),
+                    libc::SIGKILL => "its process was killed (out of memory?)".into(),
+                    s => format!("its process died of signal {s}"),
+                })
+            } else {
+                Apart::Died("its process ended oddly".into())
+            };
+        }
+        if r < 0 {
+            if std::io::Error::last_os_error().raw_os_error() == Some(libc::EINTR) {
+                continue;
+            }
+            return Apart::Unavailable;
+        }
+        let late = start.elapsed() > wall;
+        if late || crate::stop::signalled() {
+            // SAFETY: our own child, not yet reaped.
+            unsafe {
+                libc::kill(pid, libc::SIGKILL);
+                libc::waitpid(pid, &mut status, 0);
+            }
+            return if late {
+                Apart::Died(format!("it did not end within {:.0} s", wall.as_secs_f64()))
+            } else {
+                Apart::Interrupted
+            };
+        }
+        std::thread::sleep(nap);
+        nap = (nap * 2).min(std::time::Duration::from_millis(10));
+    }
+}
+
+#[cfg(not(unix))]
+fn apart(_extra: u128, _wall: std::time::Duration, _job: impl FnOnce()) -> Apart {
+    Apart::Unavailable
+}
+
+/// Lowers this process's RLIMIT_AS (soft) to its present size plus `extra` bytes (never raising
+/// it). Linux only: elsewhere the limit is left as it is.
+#[cfg(unix)]
+unsafe fn hold_address_space(extra: u128) {
+    #[cfg(target_os = "linux")]
+    {
+        // /proc/self/statm: the size in pages first.
+        let Ok(statm) = std::fs::read_to_string("/proc/self/statm") else {
+            return;
+        };
+        let Some(pages) = statm.split_whitespace().next().and_then(|p| p.parse::<u128>().ok()) else {
+            return;
+        };
+        let page = libc::sysconf(libc::_SC_PAGESIZE).max(4096) as u128;
+        let want = (pages * page).saturating_add(extra).min(libc::rlim_t::MAX as u128) as libc::rlim_t;
+        let mut lim = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+        if libc::getrlimit(libc::RLIMIT_AS, &mut lim) == 0 && want < lim.rlim_cur {
+            lim.rlim_cur = want;
+            libc::setrlimit(libc::RLIMIT_AS, &lim);
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = extra;
+}
+
 /// `job()` on a thread named `name` while this one polls `stop` every 10 ms: `None` once `stop`
 /// is seen set (the job is left to finish unseen and its result dropped), else the job's result,
 /// or the payload of its panic (for the caller to resume or refuse). Where no thread can start,
@@ -210,6 +335,41 @@ mod tests {
     use super::*;
     use crate::systems::System;
     use crate::terms::registry::Value;
+
+    /// What kills a process kills the child `apart` runs the job in, and says how.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn a_job_apart_ends_panics_aborts_overflows_runs_out_of_memory_or_out_of_time_alone() {
+        use std::time::Duration;
+        let wall = Duration::from_secs(20);
+        assert_eq!(apart(1 << 26, wall, || {}), Apart::Ended);
+        assert_eq!(apart(1 << 26, wall, || panic!("a panic")), Apart::Panicked);
+        let aborted = apart(1 << 26, wall, || std::process::abort());
+        assert!(matches!(&aborted, Apart::Died(why) if why.contains("aborted")), "{aborted:?}");
+        // 1 GiB asked, 64 MiB allowed above the size at the fork: the allocation fails there.
+        let big = apart(1 << 26, wall, || {
+            let v = vec![1u8; 1 << 30];
+            std::hint::black_box(&v);
+        });
+        assert!(matches!(&big, Apart::Died(why) if why.contains("aborted")), "{big:?}");
+        #[allow(unconditional_recursion)]
+        fn deep(n: u64) -> u64 {
+            std::hint::black_box(deep(std::hint::black_box(n + 1))) + 1
+        }
+        let overflow = apart(1 << 26, wall, || {
+            std::hint::black_box(deep(0));
+        });
+        assert!(
+            matches!(&overflow, Apart::Died(why) if why.contains("crashed") || why.contains("aborted")),
+            "{overflow:?}"
+        );
+        let t = std::time::Instant::now();
+        let endless = apart(1 << 26, Duration::from_millis(300), || loop {
+            std::hint::spin_loop();
+        });
+        assert!(matches!(&endless, Apart::Died(why) if why.contains("did not end")), "{endless:?}");
+        assert!(t.elapsed() < Duration::from_secs(5));
+    }
 
     #[test]
     fn a_sealed_state_refuses_every_flipped_bit_and_an_unsealed_one_reads_as_it_is() {
