@@ -180,6 +180,10 @@ impl<V: Vector> World<V> {
     pub fn steps(&self) -> u64 {
         self.step
     }
+    /// The step a call takes when it is not given one.
+    pub fn dt(&self) -> Real {
+        self.dt
+    }
     pub fn set_dt(&mut self, dt: Real) -> Result<()> {
         check_dt(dt)?;
         self.dt = dt;

@@ -160,11 +160,23 @@ def _crafted(tmp_path, bit: int) -> None:
 
 
 def test_a_crafted_state_that_fails_after_its_trial_raises_simulation_diverged_rolled_back(tmp_path):
-    """Bit 4,656 of `_scene()`'s state passes the trial steps (a fresh pipeline at rapier's own
-    dt) and trips rapier's broad phase at the scene's first step: that call raises
-    SimulationDiverged(quantity="solver"), the scene as it was, never a PanicException."""
+    """The trial steps at the scene's dt. Bit 4,656 of `_scene()`'s state passes 64 steps at
+    1/60 s and trips rapier's broad phase at the first step of 1 ms: in a file whose scene dt
+    says 1/60, it loads, and once the user sets dt = 1 ms the call raises
+    SimulationDiverged(quantity="solver"), the scene as it was, never a PanicException. (At the
+    file's own 1 ms the trial refuses it; of all 44,728 flips none took this path then.)"""
+    import json
+
     _crafted(tmp_path, 4656)
+    a = _arrays(tmp_path / "c.npz")
+    with pytest.raises(pc.SceneFileError, match="is inconsistent"):
+        pc.Scene.load(tmp_path / "c.npz")
+    meta = json.loads(str(a["meta"]))
+    meta["dt"] = 1 / 60
+    a["meta"] = np.array(json.dumps(meta))
+    _write(tmp_path / "c.npz", a)
     r = pc.Scene.load(tmp_path / "c.npz")
+    r.dt = 1e-3
     before, count = r.bodies[1].positions.copy(), r.step_count
     with pytest.raises(pc.SimulationDiverged) as e:
         r.step(5)

@@ -834,7 +834,13 @@ fn add_group<V: Vector, B: BodiesKind<V>>(py: Python<'_>, s: &mut World<V>, p: P
     // Memory too is checked before the system is made, so that a refused group leaves none.
     let existing = s.others().iter().find(|o| o.name() == "bodies").map_or(0, |o| o.size());
     B::room(&group, existing).map_err(|e| to_py(py, e))?;
-    bodies_of::<V, B>(s, true).and_then(|b| B::insert(b, group)).map_err(|e| to_py(py, e))
+    let dt = s.dt();
+    bodies_of::<V, B>(s, true)
+        .and_then(|b| {
+            b.hint_dt(dt);
+            B::insert(b, group)
+        })
+        .map_err(|e| to_py(py, e))
 }
 
 /// The rigid-body system of a dimension, its coupling to the particles, and its groups.

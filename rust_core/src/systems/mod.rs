@@ -138,6 +138,9 @@ pub trait RigidBodies {
     /// Body `i`'s shape as triangles in its own frame (m): vertices (V·3) and corner indices
     /// (T·3). 3D only: 2D bodies refuse naming `dim` (they have outlines).
     fn body_mesh(&self, i: usize) -> Result<(Vec<Real>, Vec<u32>)>;
+    /// The scene's step (s), before any step is taken: what a loaded state's trial steps at
+    /// (`systems::bodies`); each step then sets its own.
+    fn hint_dt(&mut self, dt: crate::vector::Real);
     /// The bodies themselves, of their dimension: what the particles⇄bodies coupling written
     /// beside them (`BodyContacts`) steps with. A role, not a downcast: no system is `Any`.
     fn bodies(&mut self) -> BodiesOf<'_>;
