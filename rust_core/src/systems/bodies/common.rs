@@ -585,28 +585,24 @@ impl Bodies {
         // 1,000 balls in one place took 28 s and are asked 4.45 GB: 450 s), so that a state
         // that loops for ever is refused in seconds at a small scene.
         let wall = std::time::Duration::from_secs_f64(5.0 + bytes as f64 / 1e7) + TRIAL_TIME;
-        let apart = super::apart(2 * bytes + (256 << 20), wall, || trial(&mut d.r.clone()));
-        let run = match apart {
-            super::Apart::Unavailable => {
-                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| trial(&mut d.r.clone())))
-            }
-            _ => Ok(()),
-        };
-        std::panic::set_hook(hook);
-        match apart {
+        let outcome = match super::apart(2 * bytes + (256 << 20), wall, || trial(&mut d.r.clone())) {
             super::Apart::Ended => Ok(()),
             super::Apart::Panicked => Err(refused("a panic")),
             super::Apart::Died(why) => Err(refused(&why)),
             super::Apart::Interrupted => Err(crate::error::Error::Interrupted { rolled_back_to: 0 }),
-            super::Apart::Unavailable => run.map_err(|e| {
-                let why = e
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| e.downcast_ref::<String>().cloned())
-                    .unwrap_or_else(|| "a panic".into());
-                refused(&why)
-            }),
-        }
+            super::Apart::Unavailable => {
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| trial(&mut d.r.clone()))).map_err(|e| {
+                    let why = e
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| e.downcast_ref::<String>().cloned())
+                        .unwrap_or_else(|| "a panic".into());
+                    refused(&why)
+                })
+            }
+        };
+        std::panic::set_hook(hook);
+        outcome
     }
 
     /// rapier's rates scaled with its length unit L: its defaults are tuned for bodies of about

@@ -116,8 +116,9 @@ enum Apart {
 /// process, not this one. The child's address space is held to its size at the fork plus
 /// `extra` bytes (RLIMIT_AS, Linux), so a runaway allocation fails there instead of taking the
 /// machine's memory; its stdout and stderr go to /dev/null. The parent polls its end (from 20 µs
-/// up to every 10 ms) and Ctrl-C, and kills it after `wall` (a state can also loop for ever). The child runs on one thread, this one's copy: the job must
-/// not wait on other threads (rapier here has none; rayon's pool is not in the child).
+/// up to every 10 ms) and Ctrl-C, and kills it after `wall` (a state can also loop for ever).
+/// The child runs on one thread, this one's copy: the job must not wait on other threads
+/// (rapier here has none; rayon's pool is not in the child).
 #[cfg(unix)]
 fn apart(extra: u128, wall: std::time::Duration, job: impl FnOnce()) -> Apart {
     // SAFETY: fork, then in the child only this thread's code, allocation (glibc's malloc is
