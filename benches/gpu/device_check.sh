@@ -5,13 +5,15 @@
 #   - the Rust GPU tests' binaries, copied stripped into .devbin/ (see below), carried;
 #   - the Vulkan loader's .deb files in .gl/ (the device README), carried;
 #   - ../shared/gpu/cuda_reference.py copied into .devbin/ (the CUDA peer on the same card).
-# It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, grid (Gray-Scott, wave) and
-# cloth benches beside the CUDA reference in the same call, so every ratio is of one card. Each
-# part has its own time limit so that one stuck part cannot eat the call. Everything it prints
-# goes to $OUT/device_check.txt too. Budget: about 2 minutes (plus the machine's start);
+# It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, grid (Gray-Scott,
+# wave) and cloth benches beside the CUDA reference (and benches/gpu/cuda_wave.py, the wave's CUDA
+# peer) in the same call, so every ratio is of one card, and the galaxies scene's energy drift at
+# 10^5 stars in f32 and f64. Each part has its own time limit so that one stuck part cannot eat
+# the call. Everything it prints goes to $OUT/device_check.txt too. Budget: about 4 minutes (plus
+# the machine's start);
 # `--no-cuda` skips the CUDA reference (the half minute it takes). With
 # .devbin/base_core.abi3.so(.gz) carried (a baseline build), the Gray–Scott bench also runs
-# alternately with it and with this tree's extension (A/B on one card, one call).
+# alternately with it and with this tree's extension (A/B on one card, one call); so does the wave.
 #
 # Here, before the call (the tree that travels is at most 64 MiB: binaries stripped and gzipped):
 #   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-core --lib --no-run
@@ -59,18 +61,38 @@ timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024
 if [ -f .devbin/base_core.abi3.so ]; then
   # A/B in one call: the same benches alternately with a baseline build of the extension
   # (carried as .devbin/base_core.abi3.so; the Python package is this tree's) and this one.
-  section "A/B: Gray-Scott 4096² and N-body 262,144 (base, then this tree; 3 rounds)"
+  section "A/B: Gray-Scott and the wave at 1024² and 4096² (base, then this tree; 3 rounds)"
   mkdir -p /tmp/base && cp -r python/physcore /tmp/base/ && cp .devbin/base_core.abi3.so /tmp/base/physcore/_core.abi3.so
   for r in 1 2 3; do
     for who in base this; do
       pp=""; [ $who = base ] && pp=/tmp/base
-      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 4096 --steps 200 --kinds gs 2>&1 | grep -F "4096²" | grep -v CPU | sed "s/^/$who  /"
-      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 262144 --steps 10 --cpu-max 0 2>&1 | grep -F "262144 |" | sed "s/^/$who  /"
+      PYTHONPATH=${pp:-$PWD/python} timeout 60 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 1024,4096 --steps 300 --cpu-max 0 2>&1 | grep -F "²" | sed "s/^/$r $who  /"
     done
   done
 fi
+section "galaxies at 10^5 stars: energy drift over the render's 952 steps, f32 and f64"
+timeout 90 python3 - <<'PY'
+import time, physcore as pc
+g = pc.scenes.galaxies(n=100_000)
+for prec in ("f32", "f64"):
+    s = pc.Scene(dim=3, integrator="verlet", dt=g.dt, device="gpu", precision=prec)
+    s.add_particles(g.positions, velocities=g.velocities, masses=g.masses)
+    s.add(pc.PairwiseGravity(G=1.0, softening=0.05))
+    e0 = s.energy().total
+    t = time.perf_counter()
+    drift = []
+    for _ in range(8):
+        s.step(119)
+        drift.append((s.energy().total - e0) / abs(e0))
+    print(prec, f"{time.perf_counter() - t:.2f} s;", "drift every 119 steps:", " ".join(f"{d:+.2e}" for d in drift), flush=True)
+PY
 section "cloth"
 timeout 90 python3 benches/gpu/bench_gpu_cloth.py --device gpu --n 16,64,256,1024 --steps 50
 section "CUDA reference (CuPy)"
 [ "${1:-}" != "--no-cuda" ] && [ -f .devbin/cuda_reference.py ] && timeout 90 python3 .devbin/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -12
+[ "${1:-}" != "--no-cuda" ] && timeout 60 python3 benches/gpu/cuda_wave.py --n 1024,4096 --steps 300
+section "galaxies rendered on the GPU at its default size (10^5 stars)"
+t0=$(date +%s.%N)
+timeout 100 python3 -m physcore render galaxies --param device=gpu -o "${OUT:-/tmp}/galaxies_gpu.gif" -q
+python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
 section "done"

@@ -207,19 +207,23 @@ def _check_device(value: object) -> str:
 #: is at most half the CPU's time. Fitted: N-body 1024 / 4096 / 65536 on 16 threads 0.28 / 1.1 /
 #: 268 ms a step (measured 0.30 / 1.4–1.7 / 273), on the GPU 4096 / 65536 / 262144 0.23 / 3.3 /
 #: 49 ms (0.18 / 3.4 / 51); cloth 16² / 64² 45 / 138 µs on the CPU (16–18 / 126–149), 30 / 31
-#: µs on the GPU (33 / 33–40), 1024² 0.27 ms (0.26); Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27–46 µs / 3.9 ms) and 8 µs /
-#: 0.23 ms (9 µs / 0.23 ms).
+#: µs on the GPU (33 / 33–40), 1024² 0.27 ms (0.26); Gray–Scott 128² / 4096² 30 µs / 3.9 ms (27–46 µs / 3.9 ms) on the
+#: CPU. The grids' GPU rate and floor were refitted on the H200 (2026-11-28) after their
+#: workgroups took more rows on large grids: the wave (f32) 128² / 1024² / 4096² 10 / 17 / 122
+#: µs (measured 10.9 / 20 / 112), Gray–Scott 4096² 122 µs (100); the CPU (16 threads) 30 / 0.26
+#: ms / 3.9 ms for the wave (12 µs / 0.24 / 3.7 ms: at 128² the two are within 10 %, and the
+#: model's choice of the GPU there costs nothing noticeable).
 #: A smaller GPU has about the same floors and fewer lanes: near the threshold the floors
 #: decide, far above it any GPU wins.
 _AUTO_CPU_FLOOR_S = 15e-6
-_AUTO_FLOOR_S = {"particles": 30e-6, "grid": 8e-6}  # a GPU step, per system
+_AUTO_FLOOR_S = {"particles": 30e-6, "grid": 10e-6}  # a GPU step, per system
 _AUTO_LANES = 7e4
 #: kind: (CPU rate per thread, CPU chunk, GPU rate), in units of work per second (pairs: the
 #: GPU's rate is per thread, see _AUTO_LANES; the CPU's chunks are of particles).
 _AUTO_RATES = {
     "pairs": (1.0e9, 256, 2.0e7),
     "springs": (5.0e7, 4096, 2.7e10),
-    "cells": (2.7e8, 4096, 7.5e10),
+    "cells": (2.7e8, 4096, 1.5e11),
     "particles": (1.0e8, 4096, 1.0e10),
 }
 

@@ -106,3 +106,28 @@ def test_a_chosen_gpu_steps_the_scene_in_f32_and_agrees_with_the_cpu(monkeypatch
     # Once chosen, the scene is a GPU scene: the same refusals as device="gpu".
     with pytest.raises(pc.InvalidInputError, match="on the GPU"):
         auto.integrator = "rk4"
+
+
+def test_galaxies_take_ten_times_the_stars_on_a_real_gpu_and_not_on_lavapipe(monkeypatch):
+    # The adapters are replaced: no scene here steps, so none opens a device.
+    from physcore.scenes import orbits
+
+    for adapters, device, n in (
+        ([H100, LAVAPIPE], "gpu", 100_000),
+        ([H100, LAVAPIPE], "gpu:nvidia", 100_000),
+        ([H100, LAVAPIPE], "gpu:llvmpipe", 10_000),
+        ([H100, LAVAPIPE], "gpu:lavapipe", 10_000),
+        ([LAVAPIPE], "gpu", 10_000),
+        ([], "gpu", 10_000),
+        ([H100], "cpu", 10_000),
+        ([H100], "auto", 10_000),  # the tree: the CPU's
+    ):
+        monkeypatch.setattr(orbits, "gpu_adapters", lambda adapters=adapters: adapters)
+        s = pc.scenes.galaxies(device=device)
+        assert s.n_particles == n, (device, [a["kind"] for a in adapters])
+        # A size given is kept on any device.
+        assert pc.scenes.galaxies(n=600, device=device).n_particles == 600
+    # Which gravity each takes: the direct sum on a GPU, the tree elsewhere.
+    monkeypatch.setattr(orbits, "gpu_adapters", lambda: [H100])
+    assert [p.kind for p in pc.scenes.galaxies(n=600, device="gpu").terms] == ["pairwise_gravity"]
+    assert [p.kind for p in pc.scenes.galaxies(n=600).terms] == ["tree_gravity"]

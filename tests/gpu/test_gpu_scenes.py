@@ -30,6 +30,10 @@ if DEVICE is None and os.environ.get("PHYSCORE_GPU_REQUIRED") == "1":
     raise RuntimeError("PHYSCORE_GPU_REQUIRED=1 but no GPU adapter and no lavapipe (apt-get install mesa-vulkan-drivers)")
 pytestmark = pytest.mark.skipif(DEVICE is None, reason="no GPU adapter and no lavapipe (apt-get install mesa-vulkan-drivers)")
 F64 = DEVICE is not None and any(a["f64"] for a in pc.gpu_adapters() if DEVICE == "gpu" or "llvmpipe" in a["name"])
+# lavapipe runs f64 with the CPU's roundings; a GPU's compiler fuses a·b + c into one rounding, so
+# there "bit for bit with the CPU" becomes "within a few ulp" (the wave on an H200: 2.6e-16 of its
+# largest u after 100 steps at 4096²).
+F64_EXACT = DEVICE == "gpu:lavapipe"
 
 
 def _cluster(dim: int, n: int = 500, device: str = "cpu", precision: str | None = None,
@@ -273,8 +277,9 @@ def test_a_wave_grid_on_the_gpu_rings_as_on_the_cpu(tmp_path) -> None:
         assert scale > 0.1  # the source drove the tank
         du = np.abs(wg.field("u") - wc.field("u")).max() / scale
         # f64: the CPU's leapfrog, operation for operation (with its layers, wall, oscillator,
-        # drop and change of dt): bit for bit. f32: rounding.
-        assert (du == 0.0) if precision == "f64" else (du < 1e-5), (precision, du)
+        # drop and change of dt): bit for bit on lavapipe. f32: rounding.
+        f64_tol = 0.0 if F64_EXACT else 1e-12
+        assert du <= (f64_tol if precision == "f64" else 1e-5), (precision, du)
         ec, eg = cpu.energy(), gpu.energy()
         tol = {"f32": 1e-5, "f64": 1e-13}[precision]
         assert ec.dissipated.keys() == eg.dissipated.keys()
@@ -289,7 +294,7 @@ def test_a_wave_grid_on_the_gpu_rings_as_on_the_cpu(tmp_path) -> None:
         cpu_twin = pickle.loads(pickle.dumps(cpu))
         cpu_twin.step(20)
         (wb,), (wt,) = back.grids, cpu_twin.grids
-        assert np.abs(wb.field("u") - wt.field("u")).max() <= (0.0 if precision == "f64" else 1e-5 * scale)
+        assert np.abs(wb.field("u") - wt.field("u")).max() <= (f64_tol if precision == "f64" else 1e-5) * scale
         # A pickled device scene continues bit for bit on its device; a field set there is set.
         twin = pickle.loads(pickle.dumps(gpu))
         twin.step(20)

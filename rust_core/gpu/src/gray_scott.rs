@@ -64,8 +64,8 @@ pub struct GrayScott {
     binds: [wgpu::BindGroup; 2],
     step_pipe: wgpu::ComputePipeline,
     check_pipe: wgpu::ComputePipeline,
-    /// Workgroups along x (a row's segments of WG cells), and along y and z (the blocks of ROWS
-    /// rows, folded into y ≤ 65,535 and z).
+    /// Workgroups along x (a row's segments of WG cells), and along y and z (the blocks of
+    /// `grid::rows_for` rows, folded into y ≤ 65,535 and z).
     groups: (u32, u32, u32),
     chunk: Chunk,
 }
@@ -91,7 +91,7 @@ impl GrayScott {
         let cells = model.n.iter().product::<usize>();
         assert!(u.len() == cells && v.len() == cells, "fields must have one value per cell");
         gpu.check_precision(precision)?;
-        let (gx, gy, gz) = grid::layout(model.n)?;
+        let grid::Layout { groups: (gx, gy, gz), rows } = grid::layout(model.n)?;
         let slots = gx as u64 * gy as u64 * gz as u64;
         let size = cells as u64 * precision.bytes();
         use wgpu::BufferUsages as U;
@@ -105,7 +105,7 @@ impl GrayScott {
         let params = gpu.buffer("parameters", 32 + 8 * precision.bytes(), U::UNIFORM | U::COPY_DST)?;
         let staging =
             gpu.buffer("read-back staging", size.max(2 * slots * precision.bytes()), U::MAP_READ | U::COPY_DST)?;
-        let (layout, step_pipe, check_pipe) = pipelines(&gpu, precision);
+        let (layout, step_pipe, check_pipe) = pipelines(&gpu, precision, rows);
         let bind = |a: &Pair, b: &Pair| {
             grid::bind_group(&gpu, "gray-scott", &layout, &[&params, &a.u, &a.v, &b.u, &b.v, &made_buf, &flag])
         };
@@ -288,11 +288,20 @@ impl GrayScott {
     }
 }
 
-fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline, wgpu::ComputePipeline) {
+fn pipelines(
+    gpu: &Gpu,
+    p: Precision,
+    rows: u32,
+) -> (wgpu::BindGroupLayout, wgpu::ComputePipeline, wgpu::ComputePipeline) {
     use crate::Bind::{Read as R, ReadWrite as W, Uniform};
     let binds = [Uniform { dynamic: false }, R, R, W, W, W, W];
-    let (layout, mut pipes) =
-        gpu.kernels("gray_scott.wgsl", p, include_str!("gray_scott.wgsl"), &binds, &["step", "check"]);
+    let (layout, mut pipes) = gpu.kernels(
+        "gray_scott.wgsl",
+        p,
+        &grid::with_rows(include_str!("gray_scott.wgsl"), rows),
+        &binds,
+        &["step", "check"],
+    );
     let c = pipes.pop().expect("two kernels");
     let s = pipes.pop().expect("two kernels");
     (layout, s, c)

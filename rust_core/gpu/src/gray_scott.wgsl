@@ -81,6 +81,7 @@ fn block_of(wid: vec3<u32>) -> u32 {
 // barriers) runs once per WG·CPT cells, and the rows either side of a row are the workgroup's
 // own neighbouring rows, read again from the cache (a row is fetched (CPT + 2)/CPT times, not
 // 3 times). No thread divides more than once (j and k are carried up the column).
+// The host sets CPT by the grid's size (4, 8 or 16: `grid::rows_for`).
 const CPT: u32 = 4u;
 
 @compute @workgroup_size(WG)

@@ -19,6 +19,8 @@ use std::sync::{Arc, Mutex, OnceLock, Weak};
 pub mod gray_scott;
 mod grid;
 pub mod particles;
+#[doc(hidden)]
+pub use grid::set_threads_for_tests as set_grid_threads_for_tests;
 pub mod wave;
 
 /// What can go wrong on the device.

@@ -119,7 +119,7 @@ impl Wave {
         if entries as u64 > u32::MAX as u64 / 4 {
             return Err(GpuError::Unsupported(format!("{entries} source cells: at most 2^30")));
         }
-        let (gx, gy, gz) = grid::layout(model.n)?;
+        let grid::Layout { groups: (gx, gy, gz), rows } = grid::layout(model.n)?;
         let slots = gx as u64 * gy as u64 * gz as u64;
         let rb = precision.bytes();
         let size = cells as u64 * rb;
@@ -141,7 +141,7 @@ impl Wave {
             gpu.kernels(
                 "wave.wgsl",
                 precision,
-                include_str!("wave.wgsl"),
+                &grid::with_rows(include_str!("wave.wgsl"), rows),
                 &binds,
                 &["step", "gather", "sources", "check"],
             )
@@ -259,9 +259,10 @@ impl Wave {
             0,
             0,
         ];
-        // The CPU's k and dt/2 (grids::wave: `step`, `span`).
-        let k = (m.c * dt / m.dx).powi(2);
-        let reals = [k, (2 * m.dim) as f64, 0.5 * dt, m.gamma, dt, 0.25 / dt, 0.0, 0.0];
+        // The CPU's k, dt/2, 1/(1 + a) and 1 − a for the uniform γ (grids::wave: `step`, `span`).
+        let (k, half) = ((m.c * dt / m.dx).powi(2), 0.5 * dt);
+        let a0 = m.gamma * half;
+        let reals = [k, (2 * m.dim) as f64, half, m.gamma, dt, 0.25 / dt, 1.0 / (1.0 + m.gamma * half), 1.0 - a0];
         self.gpu.write_params(self.precision, &self.params, &ints, &reals);
     }
 

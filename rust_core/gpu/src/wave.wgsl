@@ -31,18 +31,21 @@ struct Params {
     nosc: u32,
     pad0: u32,
     pad1: u32,
-    // k = (c dt/dx)², 2·dim (the Laplacian's centre weight), dt/2, the uniform γ, dt, 1/(4 dt).
+    // k = (c dt/dx)², 2·dim (the Laplacian's centre weight), dt/2, the uniform γ, dt, 1/(4 dt),
+    // and for the uniform γ the CPU's 1 / (1 + a) and 1 − a (a = γ dt/2), computed on the host
+    // as the CPU computes them once a row: no division per cell.
     k: real,
     centre: real,
     half: real,
     gamma: real,
     dt: real,
     inv4dt: real,
-    pad2: real,
-    pad3: real,
+    inv0: real,
+    oma0: real,
 };
 
 const WG: u32 = 64u;
+// The host sets CPT by the grid's size (4, 8 or 16: `grid::rows_for`).
 const CPT: u32 = 4u;
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -143,13 +146,16 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
                     lap = lap + (across(c, k, P.nz, nxy, 4u, false) + across(c, k, P.nz, nxy, 5u, true));
                 }
                 var g = P.gamma;
+                var inv = P.inv0;
+                var oma = P.oma0;
                 if ((P.flags & 1u) != 0u) {
                     g = gam[c];
+                    let a = g * P.half;
+                    inv = 1.0 / (1.0 + a);
+                    oma = 1.0 - a;
                 }
-                let a = g * P.half;
-                let inv = 1.0 / (1.0 + a);
                 let um = up[c];
-                var nw = (2.0 * uc - (1.0 - a) * um + P.k * lap) * inv;
+                var nw = (2.0 * uc - oma * um + P.k * lap) * inv;
                 if ((P.flags & 2u) != 0u) {
                     nw = nw * keep[c];
                 }

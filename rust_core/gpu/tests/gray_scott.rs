@@ -1,5 +1,5 @@
 //! The device Gray–Scott step against an f64 reference on the host (periodic and free faces, 2D
-//! and 3D, a grid of more than one workgroup row, blocks of rows that cross planes). Skips without an adapter unless
+//! and 3D, a grid of more than one workgroup row, blocks of 4, 8 and 16 rows that cross planes). Skips without an adapter unless
 //! `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
 use physcore_gpu::gray_scott::{GrayScott, Halt, Model};
 use physcore_gpu::{Gpu, Precision};
@@ -145,10 +145,17 @@ fn gray_scott_steps_as_the_host_reference() {
             made[0] += dt * s[0];
             made[1] += dt * s[1];
         }
-        for p in [Precision::F32, Precision::F64] {
+        let cells = m.n.iter().product::<usize>() as u64;
+        // Blocks of 4 rows (these grids' own), 8 and 16 (a large grid's: grid::rows_for), each
+        // against the same host run; the fields do not depend on the blocks, the books' sums
+        // only in their order.
+        for (p, threads) in
+            [Precision::F32, Precision::F64].into_iter().flat_map(|p| [(p, 1 << 19), (p, cells / 8), (p, 1)])
+        {
             if g.check_precision(p).is_err() {
                 continue;
             }
+            physcore_gpu::set_grid_threads_for_tests(threads);
             let mut d = GrayScott::new(g.clone(), p, m, &u0, &v0, [0.0, 0.0]).unwrap();
             // Odd counts: the buffers swap on odd submissions.
             d.step(3, dt, &no).unwrap();
@@ -157,7 +164,7 @@ fn gray_scott_steps_as_the_host_reference() {
             let err = du.iter().zip(&hu).chain(dv.iter().zip(&hv)).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
             let dm = d.made().unwrap();
             let merr = (dm[0] - made[0]).abs().max((dm[1] - made[1]).abs()) / made[0].abs().max(made[1].abs());
-            eprintln!("{:?} {}: fields {err:.1e}, books {merr:.1e}", m.n, p.name());
+            eprintln!("{:?} {} ({threads} threads' rows): fields {err:.1e}, books {merr:.1e}", m.n, p.name());
             let (tf, tm) = if p == Precision::F32 { (1e-5, 1e-5) } else { (1e-13, 1e-12) };
             assert!(err < tf, "{:?} {}: fields differ by {err}", m.n, p.name());
             assert!(merr < tm, "{:?} {}: books differ by {merr}", m.n, p.name());

@@ -1232,6 +1232,8 @@ mod tests {
         use crate::grids::build;
         let Some(w) = which() else { return };
         let gpu = Gpu::open(w).unwrap();
+        // On a CPU adapter (lavapipe) f64 runs the CPU's operations bit for bit.
+        let exact = gpu.adapter().kind == "cpu";
         let no = AtomicBool::new(false);
         for (shape, edges, gamma, absorbing, walled, drops) in [
             // Damping, a layer, a wall with a slit, every face rule, an oscillator and drops.
@@ -1266,7 +1268,10 @@ mod tests {
             cpu.set_state(&u, None).unwrap();
             let dt = cpu.auto_dt().unwrap();
             let start = cpu.save().unwrap();
-            for precision in ["f32", "f64"] {
+            // Each precision with the kernels' blocks of 4 rows (these grids' own) and of 16 (a
+            // large grid's: the GPU crate's grid::rows_for).
+            for (precision, threads) in [("f32", 1 << 19), ("f64", 1 << 19), ("f32", 1), ("f64", 1)] {
+                physcore_gpu::set_grid_threads_for_tests(threads);
                 let mut d = match DeviceWave::on(gpu.clone(), precision, cfg.clone(), &start) {
                     Ok(d) => d,
                     Err(e) if precision == "f64" => {
@@ -1302,8 +1307,13 @@ mod tests {
                     de.dissipated
                 );
                 assert!(scale > 1e-3, "the waves move");
-                if precision == "f64" {
+                if precision == "f64" && exact {
                     assert!(rel == [0.0, 0.0], "f64: the fields differ by {rel:?}");
+                } else if precision == "f64" {
+                    // A GPU's compiler fuses a·b + c into one rounding (and may round a division
+                    // otherwise): the last bits differ from the CPU's (the H200: 2.6e-16 of the
+                    // largest u after 100 steps at 4096²).
+                    assert!(rel[0] < 1e-12 && rel[1] < 1e-12, "f64: the fields differ by {rel:?}");
                 } else {
                     assert!(rel[0] < 1e-4 && rel[1] < 1e-4, "f32: the fields differ by {rel:?}");
                 }
@@ -1326,7 +1336,14 @@ mod tests {
                 d.steps(9, dt, &no).unwrap();
                 let (cu, du) = (c.fields(&["u"]).unwrap(), d.fields(&["u"]).unwrap());
                 let err = diff(&cu[0], &du[0]) / max(&cu[0]);
-                assert!(if precision == "f64" { err == 0.0 } else { err < 1e-4 }, "{precision}: after load {err}");
+                let tol = if precision == "f32" {
+                    1e-4
+                } else if exact {
+                    0.0
+                } else {
+                    1e-12
+                };
+                assert!(err <= tol, "{precision}: after load {err}");
                 assert_eq!(d.save().unwrap().len(), saved.len());
             }
         }
