@@ -355,7 +355,7 @@ impl Particles {
         // A fourth: velocity Verlet's evaluation after a projection (books nothing).
         let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
-        let (layout, pipes) = pipelines(&gpu, precision);
+        let (layout, pipes) = pipelines(&gpu, precision, forces.pairwise.is_some() || forces.coulomb.is_some());
         let entries: Vec<wgpu::BindGroupEntry> = [
             &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
             &colliders, &live.hits, &charges,
@@ -787,11 +787,14 @@ impl Particles {
     }
 }
 
-fn pipelines(gpu: &Gpu, p: Precision) -> (wgpu::BindGroupLayout, Pipes) {
+/// The kernels; `far`: the scene has pairwise sums (gravity, Coulomb), else the force kernels are
+/// `forces_local` (the tiles' code compiled out: no workgroup memory, fewer registers).
+fn pipelines(gpu: &Gpu, p: Precision, far: bool) -> (wgpu::BindGroupLayout, Pipes) {
     use crate::Bind::{Read as R, ReadWrite as W, Uniform};
     // The parameters are bound at a dynamic offset: one block per substep of a composition.
     let binds = [Uniform { dynamic: true }, W, W, W, W, W, W, W, R, R, R, R, W, R];
-    let names = ["forces", "forces_if_touched", "clear_touched", "project", "kick_drift", "kick", "check", "energy"];
+    let (f, ft) = if far { ("forces", "forces_if_touched") } else { ("forces_local", "forces_local_if_touched") };
+    let names = [f, ft, "clear_touched", "project", "kick_drift", "kick", "check", "energy"];
     let (layout, pipes) = gpu.kernels("particles.wgsl", p, include_str!("particles.wgsl"), &binds, &names);
     let [forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy]: [wgpu::ComputePipeline;
         8] = pipes.try_into().unwrap_or_else(|_| unreachable!("eight kernels"));

@@ -126,7 +126,7 @@ fn load_charges(t: u32, l: u32) {
 
 @compute @workgroup_size(WG)
 fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    eval_forces(gid.x, lid.x);
+    eval_forces(gid.x, lid.x, true);
 }
 
 // `forces` only if a collider moved a particle in the last step (flag[1]): velocity Verlet's
@@ -139,7 +139,26 @@ fn forces_if_touched(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(loc
     if (workgroupUniformLoad(&wtouch) == 0u) {
         return;
     }
-    eval_forces(gid.x, lid.x);
+    eval_forces(gid.x, lid.x, true);
+}
+
+// `forces` and `forces_if_touched` for a scene without pairwise gravity or Coulomb (cloth,
+// chains, particles in fields): the tiles' code compiled out, so the kernel holds no workgroup
+// tile and fewer registers, and more of it fits on the GPU at once.
+@compute @workgroup_size(WG)
+fn forces_local(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    eval_forces(gid.x, lid.x, false);
+}
+
+@compute @workgroup_size(WG)
+fn forces_local_if_touched(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    if (lid.x == 0u) {
+        wtouch = atomicLoad(&flag[1]);
+    }
+    if (workgroupUniformLoad(&wtouch) == 0u) {
+        return;
+    }
+    eval_forces(gid.x, lid.x, false);
 }
 
 @compute @workgroup_size(1)
@@ -147,14 +166,29 @@ fn clear_touched() {
     atomicStore(&flag[1], 0u);
 }
 
-fn eval_forces(i: u32, l: u32) {
+// One spring end's force on i (xyz) and its dashpot's power (w): f = [k (L − L0) + c w] n,
+// n = d/L, w = du·n, power ½ c w² (half of the spring's, from each end); nothing at L = 0.
+// s = (k, c, L0, 0), d = x_j − x_i, du = u_j − u_i.
+fn spring_force(s: vec4<real>, d: vec3<real>, du: vec3<real>) -> vec4<real> {
+    let l = length(d);
+    if (l > 0.0) {
+        let n = d / l;
+        let w = dot(du, n);
+        return vec4<real>(n * (s.x * (l - s.z) + s.y * w), 0.5 * s.y * w * w);
+    }
+    return vec4<real>(0.0, 0.0, 0.0, 0.0);
+}
+
+// `far`: the pairwise sums (gravity, Coulomb) may be on (a constant at each call: false compiles
+// them out of `forces_local`).
+fn eval_forces(i: u32, l: u32, far: bool) {
     let live = i < P.n;
     var xi = vec4<real>(0.0, 0.0, 0.0, 0.0);
     if (live) {
         xi = pos[i];
     }
     var a = vec3<real>(0.0, 0.0, 0.0);
-    if (P.pair != 0u) {
+    if (far && P.pair != 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         // Softened (ε² > 0, the usual case), r² > 0 always: the guard below is left out and the
         // loop unrolled by 4, so that four inverse square roots are in flight at once; the sum
@@ -199,7 +233,7 @@ fn eval_forces(i: u32, l: u32) {
     // Coulomb: F_i = k q_i Σ_j q_j (x_i − x_j) / (|x_i − x_j|² + ε²)^{3/2} (the CPU's
     // `terms::coulomb`), summed over tiles of charges.
     var fc = vec3<real>(0.0, 0.0, 0.0);
-    if (P.coul != 0u) {
+    if (far && P.coul != 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         for (var t = 0u; t < tiles; t++) {
             load_charges(t, l);
@@ -230,23 +264,46 @@ fn eval_forces(i: u32, l: u32) {
     if (P.springs != 0u) {
         let deg = start[i + 1u] - start[i];
         let base = start[P.n + 1u + i];
-        for (var q = 0u; q < deg; q++) {
+        // Two entries a round, their loads (other end, its position and velocity) issued
+        // together before either is summed, so that two gathers are in flight at once; the sums
+        // are still taken entry by entry in spring order (the same bits).
+        var q = 0u;
+        for (; q + 1u < deg; q += 2u) {
+            let e0 = base + q * P.sw;
+            let e1 = e0 + P.sw;
+            let o0 = other[e0];
+            let o1 = other[e1];
+            let j0 = spring_end(o0);
+            let j1 = spring_end(o1);
+            let x0 = pos[j0].xyz;
+            let x1 = pos[j1].xyz;
+            var u0: vec3<real>;
+            var u1: vec3<real>;
+            if (P.pred != 0u) {
+                u0 = vp[j0].xyz;
+                u1 = vp[j1].xyz;
+            } else {
+                u0 = vel[j0].xyz;
+                u1 = vel[j1].xyz;
+            }
+            let r0 = spring_force(spring_constants(e0, o0), x0 - xi.xyz, u0 - u);
+            let r1 = spring_force(spring_constants(e1, o1), x1 - xi.xyz, u1 - u);
+            fs += r0.xyz;
+            ps += r0.w;
+            fs += r1.xyz;
+            ps += r1.w;
+        }
+        if (q < deg) {
             let e = base + q * P.sw;
             let o = other[e];
             let j = spring_end(o);
-            let s = spring_constants(e, o);
-            let d = pos[j].xyz - xi.xyz;
-            let l = length(d);
-            if (l > 0.0) {
-                let n = d / l;
-                var uj = vel[j].xyz;
-                if (P.pred != 0u) {
-                    uj = vp[j].xyz;
-                }
-                let w = dot(uj - u, n);
-                fs += n * (s.x * (l - s.z) + s.y * w);
-                ps += 0.5 * s.y * w * w;
+            var uj = vel[j].xyz;
+            if (P.pred != 0u) {
+                uj = vp[j].xyz;
             }
+            let r = spring_force(spring_constants(e, o), pos[j].xyz - xi.xyz, uj - u);
+            fs += r.xyz;
+            ps += r.w;
         }
     }
     var ai = vec3<real>(0.0, 0.0, 0.0);

@@ -73,49 +73,52 @@ fn edge(f: u32) -> u32 {
     return (P.edges >> (2u * f)) & 3u;
 }
 
-// The value of the neighbour across x− (side 0) or x+ (side 1) of cell i of the row starting
-// at `row`, as the CPU's `Grid::ghost_x` gives it beyond the row's ends.
-fn along_x(row: u32, i: u32, side: u32) -> real {
-    if (side == 0u && i > 0u) {
-        return u[row + i - 1u];
-    }
-    if (side == 1u && i + 1u < P.nx) {
-        return u[row + i + 1u];
-    }
-    let e = edge(side);
-    if (e == 0u) {
-        return -u[row + i];
-    }
-    if (e == 1u) {
-        return u[row + i];
-    }
-    if (side == 0u) {
-        return u[row + P.nx - 1u];
-    }
-    return u[row];
+// A neighbour of a cell: its index and whether its value is taken negated (a fixed face's ghost
+// is minus the cell itself). Only indices are chosen in branches and every value is then loaded
+// unconditionally, so that a thread's five (seven) loads are in flight together. The sign is
+// applied by a select, not by a product with ±1: each such product is exact, yet with them
+// lavapipe's 3D fields came out 4e-15 from the CPU's in f64 (its compiler rounded the stencil's
+// other products differently); with the select they are the CPU's bit for bit again.
+struct Nb {
+    at: u32,
+    neg: bool,
+};
+
+fn value(n: Nb) -> real {
+    let v = u[n.at];
+    return select(v, -v, n.neg);
 }
 
-// The neighbour's value times its factor (−1 for a fixed face's ghost, the cell itself) one step
-// back (`fwd` false) or forward along an axis of n cells and `stride`, cell c at coordinate q:
-// the CPU's `Grid::neighbour_row`.
-fn across(c: u32, q: u32, n: u32, stride: u32, face: u32, fwd: bool) -> real {
+// The neighbour across x− (side 0) or x+ (side 1) of cell i of the row starting at `row`, as the
+// CPU's `Grid::ghost_x` gives it beyond the row's ends.
+fn along_x(row: u32, i: u32, side: u32) -> Nb {
+    if (side == 0u && i > 0u) {
+        return Nb(row + i - 1u, false);
+    }
+    if (side == 1u && i + 1u < P.nx) {
+        return Nb(row + i + 1u, false);
+    }
+    let e = edge(side);
+    if (e == 2u) {
+        return Nb(select(row, row + P.nx - 1u, side == 0u), false);
+    }
+    return Nb(row + i, e == 0u);
+}
+
+// The neighbour one step back (`fwd` false) or forward along an axis of n cells and `stride`,
+// cell c at coordinate q: the CPU's `Grid::neighbour_row`.
+fn across(c: u32, q: u32, n: u32, stride: u32, face: u32, fwd: bool) -> Nb {
     if (fwd && q + 1u < n) {
-        return u[c + stride];
+        return Nb(c + stride, false);
     }
     if (!fwd && q > 0u) {
-        return u[c - stride];
+        return Nb(c - stride, false);
     }
     let e = edge(face);
-    if (e == 0u) {
-        return -u[c];
+    if (e == 2u) {
+        return Nb(select(c + (n - 1u) * stride, c - (n - 1u) * stride, fwd), false);
     }
-    if (e == 1u) {
-        return u[c];
-    }
-    if (fwd) {
-        return u[c - (n - 1u) * stride];
-    }
-    return u[c + (n - 1u) * stride];
+    return Nb(c, e == 0u);
 }
 
 fn block_of(wid: vec3<u32>) -> u32 {
@@ -140,10 +143,11 @@ fn step(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid
                 let c = row + i;
                 let uc = u[c];
                 // The CPU's order of operations (grids::wave, `span`).
-                var lap = along_x(row, i, 0u) + along_x(row, i, 1u) + across(c, j, P.ny, P.nx, 2u, false)
-                    + across(c, j, P.ny, P.nx, 3u, true) - P.centre * uc;
+                var lap = value(along_x(row, i, 0u)) + value(along_x(row, i, 1u))
+                    + value(across(c, j, P.ny, P.nx, 2u, false)) + value(across(c, j, P.ny, P.nx, 3u, true))
+                    - P.centre * uc;
                 if (P.three != 0u) {
-                    lap = lap + (across(c, k, P.nz, nxy, 4u, false) + across(c, k, P.nz, nxy, 5u, true));
+                    lap = lap + (value(across(c, k, P.nz, nxy, 4u, false)) + value(across(c, k, P.nz, nxy, 5u, true)));
                 }
                 var g = P.gamma;
                 var inv = P.inv0;
