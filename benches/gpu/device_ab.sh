@@ -6,13 +6,7 @@
 # carry=[".gl", ".devbin"]). About 2.5 minutes plus the machine's start.
 set -uo pipefail
 exec > >(tee "${OUT:-/tmp}/device_ab.txt") 2>&1
-for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
-for f in .devbin/*.gz; do gunzip -f "$f"; done; chmod +x .devbin/*
-[ -f .devbin/_core.abi3.so ] && mv .devbin/_core.abi3.so python/physcore/
-export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
-export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
-[ -f "$VK_DRIVER_FILES" ] || unset VK_DRIVER_FILES
-export PYTHONPATH="$PWD/python" PYTHONUNBUFFERED=1 PHYSCORE_GPU_REQUIRED=1 PHYSCORE_GPU_ALLOW_CPU=1
+. benches/gpu/device_env.sh
 nvidia-smi --query-gpu=name,driver_version --format=csv,noheader 2>/dev/null || true
 section() { echo; echo "=== $1 ($SECONDS s)"; }
 section "Rust GPU tests"

@@ -133,13 +133,17 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
 // evaluation at the start of a step after a projection (the CPU's reset carry).
 @compute @workgroup_size(WG)
 fn forces_if_touched(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    if (lid.x == 0u) {
+    if (touched(lid.x)) {
+        eval_forces(gid.x, lid.x, true);
+    }
+}
+
+// Whether a collider moved a particle in the last step (flag[1]), read once by the workgroup.
+fn touched(l: u32) -> bool {
+    if (l == 0u) {
         wtouch = atomicLoad(&flag[1]);
     }
-    if (workgroupUniformLoad(&wtouch) == 0u) {
-        return;
-    }
-    eval_forces(gid.x, lid.x, true);
+    return workgroupUniformLoad(&wtouch) != 0u;
 }
 
 // `forces` and `forces_if_touched` for a scene without pairwise gravity or Coulomb (cloth,
@@ -152,13 +156,9 @@ fn forces_local(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_in
 
 @compute @workgroup_size(WG)
 fn forces_local_if_touched(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    if (lid.x == 0u) {
-        wtouch = atomicLoad(&flag[1]);
+    if (touched(lid.x)) {
+        eval_forces(gid.x, lid.x, false);
     }
-    if (workgroupUniformLoad(&wtouch) == 0u) {
-        return;
-    }
-    eval_forces(gid.x, lid.x, false);
 }
 
 @compute @workgroup_size(1)
