@@ -108,7 +108,7 @@ def test_a_chosen_gpu_steps_the_scene_in_f32_and_agrees_with_the_cpu(monkeypatch
         auto.integrator = "rk4"
 
 
-def test_galaxies_take_ten_times_the_stars_on_a_real_gpu_and_not_on_lavapipe(monkeypatch):
+def test_galaxies_take_ten_times_the_stars_on_a_discrete_gpu_and_not_elsewhere(monkeypatch):
     # The adapters are replaced: no scene here steps, so none opens a device.
     from physcore.scenes import orbits
 
@@ -121,6 +121,8 @@ def test_galaxies_take_ten_times_the_stars_on_a_real_gpu_and_not_on_lavapipe(mon
         ([], "gpu", 10_000),
         ([H100], "cpu", 10_000),
         ([H100], "auto", 10_000),  # the tree: the CPU's
+        ([dict(H100, kind="integrated", name="Apple M2")], "gpu", 10_000),
+        ([dict(H100, kind="integrated", name="Intel UHD"), H100], "gpu", 100_000),  # the best: discrete
     ):
         monkeypatch.setattr(orbits, "gpu_adapters", lambda adapters=adapters: adapters)
         s = pc.scenes.galaxies(device=device)

@@ -238,20 +238,23 @@ pythagorean.render_defaults = {"antialias": True,
 pythagorean = _stamped(pythagorean, old_order=('rtol', 'integrator', 'dt', 'threads'), keep=0)
 
 
-def _on_a_real_gpu(device: object) -> bool:
-    """Whether ``device`` ("gpu" or "gpu:NAME") names a GPU that is not a CPU implementation of
-    Vulkan (lavapipe), by the rule a scene picks its adapter with (docs/guide/gpu.md, "Choosing a
-    device"); anything else (the CPU, "auto", a bad value: the scene reports it) is not."""
+def _gpu_kind(device: object) -> str | None:
+    """The kind ("discrete", "integrated", "virtual", "cpu", ...) of the adapter ``device``
+    ("gpu" or "gpu:NAME") names, by the rule a scene picks its adapter with (docs/guide/gpu.md,
+    "Choosing a device": "gpu" the best non-CPU one); None for anything else (the CPU, "auto", a
+    bad value: the scene reports it) or where nothing matches."""
     if not isinstance(device, str) or not device.startswith("gpu"):
-        return False
+        return None
     adapters = gpu_adapters()
     if device == "gpu":
-        return any(a["kind"] != "cpu" for a in adapters)
+        order = {"discrete": 0, "integrated": 1, "virtual": 2}
+        real = [a for a in adapters if a["kind"] != "cpu"]
+        return min(real, key=lambda a: order.get(a["kind"], 3))["kind"] if real else None
     name = device[4:].lower()
     for a in adapters:
         if any(name in str(a[k]).lower() for k in ("name", "backend", "kind")):
-            return a["kind"] != "cpu"
-    return False
+            return str(a["kind"])
+    return None
 
 
 #: ``galaxies``: colours of the two galaxies' stars (pale blue, warm gold), RGB.
@@ -305,8 +308,9 @@ def galaxies(
     render's last frame alone.) ``device="gpu"`` (or ``"gpu:NAME"``) steps the stars on a GPU in float32
     (see :class:`~physcore.Scene`) with the direct sum (:class:`~physcore.PairwiseGravity`, the
     same softening; `theta` is unused: the GPU path has no tree), N² pairs a step.
-    ``n=None`` takes 10,000 stars on the CPU and 100,000 on a GPU (a real one; a CPU
-    implementation such as lavapipe keeps 10,000): measured on an NVIDIA H200, the render's 952
+    ``n=None`` takes 10,000 stars on the CPU and 100,000 on a discrete GPU (an integrated one,
+    whose direct sum may be 100 times slower, and a CPU implementation such as lavapipe keep
+    10,000): measured on an NVIDIA H200, the render's 952
     steps at 10⁵ take about 7 s (1.5e12 pairs/s) and the whole GIF 18 s, against 10 s for the
     CPU's 10⁴ by Barnes–Hut on its host's 16 threads; 10⁶ stars would take 0.65 s a step, 10
     minutes for the render (docs/guide/gpu.md).
@@ -315,7 +319,7 @@ def galaxies(
     :func:`plummer_sphere` samples a spherical cluster instead.
     """
     if n is None:
-        n = 100_000 if _on_a_real_gpu(device) else 10_000
+        n = 100_000 if _gpu_kind(device) == "discrete" else 10_000
     n = _count(n, "n", 4)
     q = _positive(pericentre, "pericentre")
     prograde = _flag(prograde, "prograde")
