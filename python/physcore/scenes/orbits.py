@@ -299,8 +299,8 @@ def galaxies(
     Forces by Barnes–Hut (:class:`~physcore.TreeGravity`, opening angle `theta`, Plummer
     `softening` ε). ``dt=None`` takes 0.0125: 32 steps per orbit at the inner edge of the disks
     (angular speed √(G M_c / (r² + ε²)^{3/2}) there). The total energy wanders over the render
-    by up to 1e-3 of the initial kinetic energy K₀ (largest |E − E₀|/K₀ of 16 readings, n =
-    10 000: 9.9e-4 by the tree, 9.2e-4 by the direct sum). The direct sum's part is the step's,
+    by up to 1e-3 of the initial kinetic energy K₀ (the largest deviation from E₀ of 16
+    readings, n = 10 000: 9.9e-4 by the tree, 9.2e-4 by the direct sum). The direct sum's part is the step's,
     from the few stars that plunge through the other galaxy's centre (accelerations up to
     0.385 G M_c/ε² ≈ 150): dt = 0.00625 takes it to 3.0e-5 (0.025 gives 2.5e-2). The tree's is
     its own approximation (forces not exactly conservative, potential summed over the same
