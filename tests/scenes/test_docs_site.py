@@ -24,7 +24,7 @@ DOCS = ROOT / "docs"
 MODULES = ["render", "scenes", "shapes", "testing", "sweeps", "fluids", "grids", "flows", "potentials", "bodies"]
 # Each example of examples/ and what its run puts on its page (sphinx-gallery's name for it).
 EXAMPLES = {"plot_own_scene": ".gif", "plot_custom_force": ".gif", "plot_video": ".mp4", "plot_sweep": ".png",
-            "plot_batch": ".png"}
+            "plot_batch": ".png", "plot_gpu": ".png"}
 
 
 def _text(page: Path) -> str:
