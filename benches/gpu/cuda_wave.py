@@ -55,30 +55,39 @@ def reference(n: int, steps: int) -> np.ndarray:
     return u
 
 
-def run(cp, n: int, steps: int, prec: str) -> tuple[np.ndarray, float]:
-    real = {"f32": "float", "f64": "double"}[prec]
-    dt = {"f32": np.float32, "f64": np.float64}[prec]
-    kern = cp.RawKernel(f"#define REAL {real}\n" + SRC, "wave")
-    u = [cp.asarray(start(n).astype(dt)), cp.asarray(start(n).astype(dt))]
-    grid, block = ((n + 31) // 32, (n + 7) // 8), (32, 8)
-    cur = [0]
+class Sim:
+    """The bump on an n × n grid in `prec`, on the GPU, stepped by `step()`; `u()` reads it back."""
 
-    def step():
-        c = cur[0]
-        kern(grid, block, (u[c], u[1 - c], np.int32(n), np.int32(n), dt(K)))
-        cur[0] = 1 - c
+    def __init__(self, cp, n: int, prec: str):
+        real = {"f32": "float", "f64": "double"}[prec]
+        self.dt = {"f32": np.float32, "f64": np.float64}[prec]
+        self.kern = cp.RawKernel(f"#define REAL {real}\n" + SRC, "wave")
+        self.cp, self.n, self.cur = cp, n, 0
+        self.buf = [cp.asarray(start(n).astype(self.dt)), cp.asarray(start(n).astype(self.dt))]
 
+    def step(self) -> None:
+        c, n = self.cur, self.n
+        self.kern(((n + 31) // 32, (n + 7) // 8), (32, 8), (self.buf[c], self.buf[1 - c], np.int32(n), np.int32(n), self.dt(K)))
+        self.cur = 1 - c
+
+    def u(self) -> np.ndarray:
+        return self.cp.asnumpy(self.buf[self.cur])
+
+
+def timed(cp, n: int, steps: int, prec: str) -> float:
+    """Median seconds of 3 runs of `steps` steps, after 10 steps of warm-up."""
+    sim = Sim(cp, n, prec)
     for _ in range(10):
-        step()
+        sim.step()
     times = []
     for _ in range(3):
         cp.cuda.Device().synchronize()
         t = time.perf_counter()
         for _ in range(steps):
-            step()
+            sim.step()
         cp.cuda.Device().synchronize()
         times.append(time.perf_counter() - t)
-    return cp.asnumpy(u[cur[0]]), statistics.median(times)
+    return statistics.median(times)
 
 
 def main() -> None:
@@ -96,26 +105,15 @@ def main() -> None:
     print(f"# CUDA wave: {cp.cuda.runtime.getDeviceProperties(0)['name'].decode()}")
     for prec in ("f32", "f64"):
         # the check: 50 steps from the bump against numpy f64, before any timing
-        got = run_check(cp, prec)
-        err = float(np.abs(got - ref).max() / np.abs(ref).max())
+        check = Sim(cp, 96, prec)
+        for _ in range(50):
+            check.step()
+        err = float(np.abs(check.u() - ref).max() / np.abs(ref).max())
         for n in (int(v) for v in args.n.split(",")):
-            _, secs = run(cp, n, args.steps, prec)
+            secs = timed(cp, n, args.steps, prec)
             rate = n * n * args.steps / secs
             print(f"cuda wave {prec}: N={n}x{n}, {rate:.4g} cells*steps per second, "
                   f"{1e3 * secs / args.steps:.4f} ms/step, check (96², 50 steps) max rel error {err:.1e}", flush=True)
-
-
-def run_check(cp, prec: str) -> np.ndarray:
-    """50 steps on 96² (no warm-up steps: the same 50 steps as the reference)."""
-    real = {"f32": "float", "f64": "double"}[prec]
-    dt = {"f32": np.float32, "f64": np.float64}[prec]
-    kern = cp.RawKernel(f"#define REAL {real}\n" + SRC, "wave")
-    n = 96
-    u = [cp.asarray(start(n).astype(dt)), cp.asarray(start(n).astype(dt))]
-    for s in range(50):
-        c = s % 2
-        kern(((n + 31) // 32, (n + 7) // 8), (32, 8), (u[c], u[1 - c], np.int32(n), np.int32(n), dt(K)))
-    return cp.asnumpy(u[0])
 
 
 if __name__ == "__main__":

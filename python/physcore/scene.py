@@ -12,7 +12,7 @@ import json
 import math
 import os
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -259,16 +259,21 @@ def _auto_times(work: dict[str, float], threads: int) -> tuple[float, float]:
     return cpu, gpu
 
 
+def _best_gpu(adapters: Iterable[dict[str, Any]]) -> dict[str, Any] | None:
+    """The adapter ``device="gpu"`` takes of ``adapters``: discrete, then integrated, then
+    virtual, never a CPU one (the core's ``Gpu::open``); None where there is none."""
+    order = {"discrete": 0, "integrated": 1, "virtual": 2}
+    return min((a for a in adapters if a["kind"] != "cpu"), key=lambda a: order.get(a["kind"], 3), default=None)
+
+
 def _auto_choice(work: dict[str, float], threads: int, adapters: list[dict[str, Any]], precision: str | None) -> tuple[str, str]:
     """``device="auto"``: the device a scene of this work per step runs on, and why. Only a
     real GPU is taken (never a CPU adapter such as lavapipe), one with f64 where ``precision``
     asks for it; the GPU when the cost model says a step there takes at most half the CPU's time."""
-    real = [a for a in adapters if a["kind"] != "cpu" and (precision != "f64" or a["f64"])]
-    if not real:
+    best = _best_gpu(a for a in adapters if precision != "f64" or a["f64"])
+    if best is None:
         what = "no GPU adapter" + (" with f64" if precision == "f64" and any(a["kind"] != "cpu" for a in adapters) else "")
         return "cpu", f"{what} (device='auto')"
-    order = {"discrete": 0, "integrated": 1, "virtual": 2}
-    best = min(real, key=lambda a: order.get(a["kind"], 3))
     cpu, gpu = _auto_times(work, threads)
     estimate = f"a step estimated at {cpu * 1e3:.3g} ms on {threads} CPU thread(s), {gpu * 1e3:.3g} ms on {best['name']}"
     if gpu <= 0.5 * cpu:

@@ -9,7 +9,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError
 from .._system import gpu_adapters
-from ..scene import Scene
+from ..scene import Scene, _best_gpu
 from ..terms import Drag, Gravity, PairwiseGravity, Plane, TreeGravity
 from ._common import _count, _finite_books, _flag, _nonneg, _particle_mass, _particles, _positive, _stamped
 
@@ -247,10 +247,10 @@ def _gpu_kind(device: object) -> str | None:
         return None
     adapters = gpu_adapters()
     if device == "gpu":
-        order = {"discrete": 0, "integrated": 1, "virtual": 2}
-        real = [a for a in adapters if a["kind"] != "cpu"]
-        return min(real, key=lambda a: order.get(a["kind"], 3))["kind"] if real else None
+        best = _best_gpu(adapters)
+        return None if best is None else str(best["kind"])
     name = device[4:].lower()
+    name = "llvmpipe" if name == "lavapipe" else name  # lavapipe calls itself llvmpipe
     for a in adapters:
         if any(name in str(a[k]).lower() for k in ("name", "backend", "kind")):
             return str(a["kind"])
@@ -300,20 +300,21 @@ def galaxies(
     `softening` ε). ``dt=None`` takes 0.0125: 32 steps per orbit at the inner edge of the disks
     (angular speed √(G M_c / (r² + ε²)^{3/2}) there). The total energy wanders over the render
     by up to 1e-3 of the initial kinetic energy K₀ (the largest deviation from E₀ of 16
-    readings, n = 10 000: 9.9e-4 by the tree, 9.2e-4 by the direct sum). The direct sum's part is the step's,
-    from the few stars that plunge through the other galaxy's centre (accelerations up to
-    0.385 G M_c/ε² ≈ 150): dt = 0.00625 takes it to 3.0e-5 (0.025 gives 2.5e-2). The tree's is
-    its own approximation (forces not exactly conservative, potential summed over the same
-    lists): halving dt leaves it at 2.2e-3. (Before 2026-11-28 this said 1e-5, read at the
-    render's last frame alone.) ``device="gpu"`` (or ``"gpu:NAME"``) steps the stars on a GPU in float32
-    (see :class:`~physcore.Scene`) with the direct sum (:class:`~physcore.PairwiseGravity`, the
-    same softening; `theta` is unused: the GPU path has no tree), N² pairs a step.
-    ``n=None`` takes 10,000 stars on the CPU and 100,000 on a discrete GPU (an integrated one,
-    whose direct sum may be 100 times slower, and a CPU implementation such as lavapipe keep
-    10,000): measured on an NVIDIA H200, the render's 952
-    steps at 10⁵ take about 7 s (1.5e12 pairs/s) and the whole GIF 18 s, against 10 s for the
-    CPU's 10⁴ by Barnes–Hut on its host's 16 threads; 10⁶ stars would take 0.65 s a step, 10
-    minutes for the render (docs/guide/gpu.md).
+    readings, n = 10 000: 9.9e-4 by the tree, 9.2e-4 by the direct sum). The direct sum's part
+    is the step's, from the few stars that plunge through the other galaxy's centre
+    (accelerations up to 0.385 G M_c/ε² ≈ 150): dt = 0.00625 takes it to 3.0e-5 (0.025 gives
+    2.5e-2). The tree's is its own approximation (forces not exactly conservative, potential
+    summed over the same lists): halving dt leaves it at 2.2e-3. (Before 2026-11-28 this said
+    1e-5, read at the render's last frame alone.)
+
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the stars on a GPU in float32 (see
+    :class:`~physcore.Scene`) with the direct sum (:class:`~physcore.PairwiseGravity`, the same
+    softening; `theta` is unused: the GPU path has no tree), N² pairs a step. ``n=None`` takes
+    10,000 stars on the CPU and 100,000 on a discrete GPU (an integrated one, whose direct sum
+    may be 100 times slower, and a CPU implementation such as lavapipe keep 10,000). Measured on
+    an NVIDIA H200: the render's 952 steps at 10⁵ stars take 6.9 s (1.5e12 pairs/s) and the
+    whole GIF 18–21 s (two runs), against 10 s for the CPU's 10⁴ by Barnes–Hut on its host's 16
+    threads; 10⁶ stars would take 0.71 s a step, 11 minutes for the render (docs/guide/gpu.md).
     The render colours each galaxy's stars by origin (:data:`GALAXY_COLORS`:
     first blue, then gold). Particle order: centre A, its stars, centre B, its stars.
     :func:`plummer_sphere` samples a spherical cluster instead.

@@ -262,7 +262,7 @@ impl Wave {
         // The CPU's k, dt/2, 1/(1 + a) and 1 − a for the uniform γ (grids::wave: `step`, `span`).
         let (k, half) = ((m.c * dt / m.dx).powi(2), 0.5 * dt);
         let a0 = m.gamma * half;
-        let reals = [k, (2 * m.dim) as f64, half, m.gamma, dt, 0.25 / dt, 1.0 / (1.0 + m.gamma * half), 1.0 - a0];
+        let reals = [k, (2 * m.dim) as f64, half, m.gamma, dt, 0.25 / dt, 1.0 / (1.0 + a0), 1.0 - a0];
         self.gpu.write_params(self.precision, &self.params, &ints, &reals);
     }
 
