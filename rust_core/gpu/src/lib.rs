@@ -16,6 +16,7 @@ use std::fmt;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
+pub mod fluid;
 pub mod gray_scott;
 mod grid;
 pub mod particles;
@@ -412,8 +413,20 @@ impl Gpu {
         bytes: u64,
         f: impl FnOnce(&[u8]),
     ) -> Result<()> {
+        self.read_back_from(b, 0, staging, bytes, f)
+    }
+
+    /// `read_back_with` from byte `offset` of `b`.
+    pub(crate) fn read_back_from(
+        &self,
+        b: &wgpu::Buffer,
+        offset: u64,
+        staging: &wgpu::Buffer,
+        bytes: u64,
+        f: impl FnOnce(&[u8]),
+    ) -> Result<()> {
         let mut enc = self.device.create_command_encoder(&Default::default());
-        enc.copy_buffer_to_buffer(b, 0, staging, 0, bytes);
+        enc.copy_buffer_to_buffer(b, offset, staging, 0, bytes);
         self.queue.submit([enc.finish()]);
         let slice = staging.slice(0..bytes);
         let (tx, rx) = std::sync::mpsc::channel();
@@ -446,13 +459,25 @@ impl Gpu {
         staging: &wgpu::Buffer,
         count: usize,
     ) -> Result<Vec<f64>> {
+        self.read_reals_at(p, b, 0, staging, count)
+    }
+
+    /// `count` reals of `b` from byte `offset`, read back as f64.
+    pub(crate) fn read_reals_at(
+        &self,
+        p: Precision,
+        b: &wgpu::Buffer,
+        offset: u64,
+        staging: &wgpu::Buffer,
+        count: usize,
+    ) -> Result<Vec<f64>> {
         // Converted straight from the mapped range: one pass, no intermediate copies (a
         // million particles' rows took 150 ms through three copies).
         let bytes = (count as u64).max(1) * p.bytes();
         let mut v = Vec::new();
         v.try_reserve_exact(count)
             .map_err(|_| GpuError::OutOfMemory { what: "read-back".into(), bytes: 8 * count as u64 })?;
-        self.read_back_with(b, staging, bytes, |raw| match p {
+        self.read_back_from(b, offset, staging, bytes, |raw| match p {
             Precision::F64 => {
                 v.extend(raw.chunks_exact(8).take(count).map(|c| f64::from_le_bytes(c.try_into().unwrap())))
             }

@@ -74,62 +74,68 @@ fn wave_of(name: &str, grid: Grid, dim: usize, p: &mut Params) -> Result<WaveCon
     Ok(c)
 }
 
+/// The stable fluid's configuration from the parameters `build` takes (validated).
+pub fn fluid_config(name: &str, dim: usize, mut p: Params) -> Result<FluidConfig> {
+    let grid = grid_of(&mut p, dim)?;
+    let c = fluid_of(name, grid, dim, &mut p)?;
+    c.validate()?;
+    Ok(c)
+}
+
+fn fluid_of(name: &str, grid: Grid, dim: usize, p: &mut Params) -> Result<FluidConfig> {
+    if dim != 2 {
+        return Err(invalid("shape", "the grid fluid is 2D only"));
+    }
+    let advection = p.text("advection")?;
+    let mut c = FluidConfig {
+        name: name.to_string(),
+        shape: [grid.n[0], grid.n[1]],
+        dx: grid.dx,
+        viscosity: p.number("nu")?,
+        buoyancy_alpha: p.number("buoyancy_alpha")?,
+        buoyancy_beta: p.number("buoyancy_beta")?,
+        ambient_temperature: p.number("ambient_temperature")?,
+        vorticity: p.number("vorticity")?,
+        advection: Advection::by_name(advection)?,
+        // Absent (a caller from before issue 64): Chorin's, as such a caller's runs were.
+        projection: if p.has("projection") { Projection::by_name(p.text("projection")?)? } else { Projection::Chorin },
+        tolerance: p.number("tolerance")?,
+        max_iterations: p.count("max_iterations", 1 << 30)?,
+        no_slip: p.flag("no_slip")?,
+        lid: if p.flag("has_lid")? { Some(p.number("lid")?) } else { None },
+        inflow: if p.flag("has_inflow")? { Some(p.number("inflow")?) } else { None },
+        obstacles: p.take_floats("obstacles").ok().map(|m| flags("fluid", &m)).transpose()?.unwrap_or_default(),
+        sources: Vec::new(),
+        n_tracers: p.count("n_tracers", 1 << 26)?,
+        cfl: p.number("cfl")?,
+    };
+    let density = p.take_floats("src_density")?;
+    let temperature = p.take_floats("src_temperature")?;
+    let velocity = p.take_floats("src_velocity")?;
+    if temperature.len() != density.len() || velocity.len() != 2 * density.len() {
+        return Err(invalid("sources", "density, temperature and velocity must have one entry per source"));
+    }
+    let shapes = profiles(p, "src", density.len())?;
+    c.sources = shapes
+        .into_iter()
+        .enumerate()
+        .map(|(k, cells)| Source {
+            cells,
+            density: density[k],
+            temperature: temperature[k],
+            velocity: [velocity[2 * k], velocity[2 * k + 1]],
+        })
+        .collect();
+    Ok(c)
+}
+
 /// Builds a grid system of `kind` named `name` for a world of dimension `dim`.
 pub fn build(kind: &str, name: &str, dim: usize, mut p: Params) -> Result<Box<dyn System>> {
     let grid = grid_of(&mut p, dim)?;
     match kind {
         "wave" => Ok(Box::new(WaveSystem::new(wave_of(name, grid, dim, &mut p)?)?)),
         "gray_scott" => Ok(Box::new(GrayScottSystem::new(gray_scott_of(name, grid, &mut p)?)?)),
-        "stable_fluid" => {
-            if dim != 2 {
-                return Err(invalid("shape", "the grid fluid is 2D only"));
-            }
-            let advection = p.text("advection")?;
-            let mut c = FluidConfig {
-                name: name.to_string(),
-                shape: [grid.n[0], grid.n[1]],
-                dx: grid.dx,
-                viscosity: p.number("nu")?,
-                buoyancy_alpha: p.number("buoyancy_alpha")?,
-                buoyancy_beta: p.number("buoyancy_beta")?,
-                ambient_temperature: p.number("ambient_temperature")?,
-                vorticity: p.number("vorticity")?,
-                advection: Advection::by_name(advection)?,
-                // Absent (a caller from before issue 64): Chorin's, as such a caller's runs were.
-                projection: if p.has("projection") {
-                    Projection::by_name(p.text("projection")?)?
-                } else {
-                    Projection::Chorin
-                },
-                tolerance: p.number("tolerance")?,
-                max_iterations: p.count("max_iterations", 1 << 30)?,
-                no_slip: p.flag("no_slip")?,
-                lid: if p.flag("has_lid")? { Some(p.number("lid")?) } else { None },
-                inflow: if p.flag("has_inflow")? { Some(p.number("inflow")?) } else { None },
-                obstacles: p.take_floats("obstacles").ok().map(|m| flags("fluid", &m)).transpose()?.unwrap_or_default(),
-                sources: Vec::new(),
-                n_tracers: p.count("n_tracers", 1 << 26)?,
-                cfl: p.number("cfl")?,
-            };
-            let density = p.take_floats("src_density")?;
-            let temperature = p.take_floats("src_temperature")?;
-            let velocity = p.take_floats("src_velocity")?;
-            if temperature.len() != density.len() || velocity.len() != 2 * density.len() {
-                return Err(invalid("sources", "density, temperature and velocity must have one entry per source"));
-            }
-            let shapes = profiles(&mut p, "src", density.len())?;
-            c.sources = shapes
-                .into_iter()
-                .enumerate()
-                .map(|(k, cells)| Source {
-                    cells,
-                    density: density[k],
-                    temperature: temperature[k],
-                    velocity: [velocity[2 * k], velocity[2 * k + 1]],
-                })
-                .collect();
-            Ok(Box::new(StableFluid::new(c)?))
-        }
+        "stable_fluid" => Ok(Box::new(StableFluid::new(fluid_of(name, grid, dim, &mut p)?)?)),
         _ => Err(invalid("kind", format!("unknown grid kind {kind:?}; valid: {}", KINDS.join(", ")))),
     }
 }

@@ -207,6 +207,12 @@ impl Stencil {
     pub fn len(&self) -> usize {
         self.open.len()
     }
+
+    /// The unscaled coefficients, padded: east and north links, the identity part and the
+    /// neighbour count (the diagonal is d0 + s·count): what the device's solver is given.
+    pub fn coefficients(&self) -> [&[Real]; 4] {
+        [&self.we, &self.wn, &self.d0, &self.count]
+    }
     pub fn is_empty(&self) -> bool {
         self.open.is_empty()
     }
@@ -646,6 +652,10 @@ impl Pcg {
     }
     pub fn levels(&self) -> usize {
         self.levels.len()
+    }
+    /// The stencil of each level, finest first (one without multigrid).
+    pub fn stencils(&self) -> impl Iterator<Item = &Stencil> {
+        self.levels.iter().map(|l| &l.st)
     }
 
     /// z = M⁻¹ r; returns r·z.

@@ -114,6 +114,7 @@ impl PySimulation {
                 return Err(err(invalid("device", "the particles are on the device already")));
             }
             use crate::systems::device::{DeviceGrayScott, DeviceParticles, DeviceWave};
+            use crate::systems::device_fluid::DeviceFluid;
             use crate::systems::System;
             let (terms, grids, colliders) = (&self.terms, &self.grids, &self.colliders);
             let dim = self.dim();
@@ -147,11 +148,24 @@ impl PySimulation {
                 let gpu = py.detach(|| physcore_gpu::Gpu::open(device)).map_err(|e| to_py(py, e.into()))?;
                 let mut moved: Vec<Box<dyn System>> = Vec::new();
                 for (kind, name, params) in grids {
-                    let Some(params) = params.as_ref().filter(|_| matches!(kind.as_str(), "gray_scott" | "wave")) else {
-                        return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\" and \"wave\")"))));
+                    let Some(params) = params.as_ref().filter(|_| matches!(kind.as_str(), "gray_scott" | "wave" | "stable_fluid")) else {
+                        return Err(err(invalid(name, format!("the GPU path has no {kind:?} grid yet (it has \"gray_scott\", \"wave\" and \"stable_fluid\")"))));
                     };
                     let cpu = s.other(name).map_err(|e| to_py(py, e))?;
                     let g = gpu.clone();
+                    if kind == "stable_fluid" {
+                        // The obstacles left out of the record, from the CPU system (1 on solids).
+                        let mut params = params.try_clone("step").map_err(|e| to_py(py, e))?;
+                        let solid = cpu.fields(&["solid"]).map_err(|e| to_py(py, e))?.remove(0);
+                        if solid.iter().any(|&m| m != 0.0) {
+                            params.insert("obstacles", Value::Floats(solid));
+                        }
+                        let cfg = crate::grids::build::fluid_config(name, dim, params).map_err(|e| to_py(py, e))?;
+                        let saved = cpu.save().map_err(|e| to_py(py, e))?;
+                        let d = py.detach(|| DeviceFluid::on(g, precision, cfg, &saved)).map_err(|e| to_py(py, e))?;
+                        moved.push(Box::new(d));
+                        continue;
+                    }
                     if kind == "wave" {
                         // The mask left out of the record, from the CPU system (1 on obstacles).
                         let mut params = params.try_clone("step").map_err(|e| to_py(py, e))?;
@@ -508,12 +522,13 @@ impl PySimulation {
     fn add_grid(&mut self, py: Python<'_>, kind: &str, name: &str, params: &Bound<'_, PyDict>) -> PyResult<()> {
         let p = params_of(py, "add_grid", params)?;
         let dim = self.dim();
-        // What a move to a device rebuilds the grid from. A wave's mask (a value per cell) stays out:
-        // the device's copy reads it back from the CPU system ("mask"), and a copy of it here
-        // aborted the process under a memory cap (it is the grid's size).
+        // What a move to a device rebuilds the grid from. A wave's mask and a fluid's obstacles (a
+        // value per cell) stay out: the device's copy reads them back from the CPU system ("mask",
+        // "solid"), and a copy here aborted the process under a memory cap (it is the grid's size).
         let record = match kind {
             "gray_scott" => Some(p.try_clone("add_grid").map_err(|e| to_py(py, e))?),
             "wave" => Some(p.try_clone_except("add_wave", &["mask"]).map_err(|e| to_py(py, e))?),
+            "stable_fluid" => Some(p.try_clone_except("add_fluid", &["obstacles"]).map_err(|e| to_py(py, e))?),
             _ => None,
         };
         let sys = crate::grids::build::build(kind, name, dim, p).map_err(|e| to_py(py, e))?;

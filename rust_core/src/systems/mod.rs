@@ -14,6 +14,8 @@
 pub mod bodies;
 #[cfg(feature = "gpu")]
 pub mod device;
+#[cfg(feature = "gpu")]
+pub mod device_fluid;
 pub mod flows;
 pub mod ode;
 pub mod particles;

@@ -663,9 +663,46 @@ impl StableFluid {
     pub fn steps(&self) -> u64 {
         self.s.steps
     }
+    /// For the device path: the step count at a checkpoint.
+    pub(crate) fn set_steps(&mut self, steps: u64) {
+        self.s.steps = steps;
+    }
     /// The last pressure solve.
     pub fn pressure_solve(&self) -> Solve {
         self.s.books.pressure
+    }
+
+    /// For the device path (`systems::device::DeviceFluid`): the configuration, the open masks
+    /// of u and v faces and the fluid cells (1/0), the inflow column, and the pressure and
+    /// viscous solvers (their stencils).
+    #[allow(clippy::type_complexity)]
+    pub(crate) fn parts(&self) -> (&FluidConfig, [&[Real]; 4], &Pcg, Option<&[Pcg; 2]>) {
+        (&self.cfg, [&self.u_open, &self.v_open, &self.fluid, &self.inflow_u], &self.pressure, self.visc.as_ref())
+    }
+
+    /// For the device path: u, v, density, temperature and the padded pressure.
+    pub(crate) fn state_arrays(&mut self) -> [&mut Vec<Real>; 5] {
+        let s = &mut self.s;
+        [&mut s.u, &mut s.v, &mut s.density, &mut s.temperature, &mut s.pressure]
+    }
+
+    /// For the device path: the injected smoke, the smoke advection's change and the stages'
+    /// losses; the last pressure solve; the viscous iterations of the last step.
+    pub(crate) fn book_values(&self) -> ([Real; 7], Solve, usize) {
+        let b = &self.s.books;
+        let l = b.losses;
+        ([b.injected, b.smoke_advection, l[0], l[1], l[2], l[3], l[4]], b.pressure, b.viscosity_iterations)
+    }
+
+    /// The device path's books and `steps` more steps made the host's.
+    pub(crate) fn set_book_values(&mut self, v: [Real; 7], pressure: Solve, viscosity_iterations: usize, steps: u64) {
+        let b = &mut self.s.books;
+        b.injected = v[0];
+        b.smoke_advection = v[1];
+        b.losses.copy_from_slice(&v[2..]);
+        b.pressure = pressure;
+        b.viscosity_iterations = viscosity_iterations;
+        self.s.steps += steps;
     }
 
     fn fill_ghosts_uv(&mut self) {
