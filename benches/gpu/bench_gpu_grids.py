@@ -1,17 +1,17 @@
-"""Gray–Scott reaction–diffusion and the wave equation on the GPU path beside the CPU path:
-cell-steps per second and agreement.
+"""Gray–Scott reaction–diffusion, the wave equation and the stable fluid on the GPU path beside the
+CPU path: cell-steps per second and agreement.
 
-    python benches/gpu/bench_gpu_grids.py [--device gpu|gpu:lavapipe] [--n 512,2048] [--steps 50] [--kinds gs,wave]
+    python benches/gpu/bench_gpu_grids.py [--device gpu|gpu:lavapipe] [--n 512,2048] [--steps 50] [--kinds gs,wave,fluid]
 
 Each n × n grid (Gray–Scott: periodic, Pearson's maze, seeded; wave: a 1 m square of free faces,
-c = 1 m/s, undamped, a Gaussian bump at the CFL step, 0.9 of the limit) is stepped on the CPU (float64, all threads, the
+c = 1 m/s, undamped, a Gaussian bump at the CFL step, 0.9 of the limit; the fluid: ``fluid`` below) is stepped on the CPU (float64, all threads, the
 best SIMD level) and on the device (f32, and f64 where the adapter has it), after one warm-up
 call (which moves the grid to the device and compiles the kernel). Prints the median of three
 timed calls of ``--steps`` steps as cell-steps/s, the ratio to the CPU, and the largest
 difference of u and v from the CPU run after the same steps. Where no device machine is lent,
 run it on lavapipe (Mesa's CPU Vulkan): its figures show the path works and agrees, not GPU
 speed. ``../shared/gpu/cuda_reference.py --only gs --grid N`` times the same Gray–Scott stencil
-in CUDA (it has no wave kernel).
+in CUDA (it has no wave kernel, and no fluid; benches/gpu/cuda_wave.py is the wave's).
 """
 from __future__ import annotations
 
@@ -45,11 +45,22 @@ def wave(n: int, device: str, precision: str | None) -> tuple[pc.Scene, pc.grids
     return s, w
 
 
+def fluid(n: int, device: str, precision: str | None) -> tuple[pc.Scene, pc.grids.StableFluid]:
+    """A smoke plume in a 1 m square: a vent, buoyancy, vorticity confinement, MacCormack and the
+    incremental projection (the defaults), the pressure to 1e-5, dt = 1/n s (CFL 1 at 1 m/s)."""
+    from physcore.grids import Source, StableFluid
+    s = pc.Scene(dim=2, dt=1.0 / n, device=device, precision=precision)
+    vent = Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.1), radius=0.06)
+    f = s.add(StableFluid((n, n), 1.0 / n, buoyancy=(0.0, 4.0), vorticity=0.3, tolerance=1e-5, sources=[vent], name="smoke"))
+    return s, f
+
+
 # What each kind reads after its steps (timed apart): Gray–Scott its books (the amounts, summed
 # over the fields read back), the wave its displacement u.
 KINDS = {
     "gs": ("Gray-Scott (maze), dt = 1", scene, ("u", "v"), lambda g: g.books()),
     "wave": ("wave (free faces, undamped, CFL 0.9)", wave, ("u",), lambda g: g.field("u")),
+    "fluid": ("stable fluid (smoke plume, MGPCG to 1e-5)", fluid, ("density", "u", "v"), lambda g: g.field("density")),
 }
 
 
@@ -58,7 +69,7 @@ def main() -> None:
     ap.add_argument("--device", default=None, help="gpu or gpu:NAME (default: gpu, else gpu:lavapipe)")
     ap.add_argument("--n", default="512", help="comma-separated grid sides")
     ap.add_argument("--steps", type=int, default=50)
-    ap.add_argument("--kinds", default="gs,wave", help="comma-separated: gs, wave")
+    ap.add_argument("--kinds", default="gs,wave", help="comma-separated: gs, wave, fluid")
     ap.add_argument("--cpu-max", type=int, default=1 << 30,
                     help="run the CPU beside the device only up to this side (above it: no ratio, no difference)")
     args = ap.parse_args()

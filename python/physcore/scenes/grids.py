@@ -203,6 +203,7 @@ def smoke(
     tracers: int = 0,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """Smoke: a hot plume rises from a vent and curls around a disc.
 
@@ -210,6 +211,8 @@ def smoke(
     temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
     (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`; none by
     default: drawn as single pixels over the smoke they read as noise).
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`;
+    tracers stay on the CPU path).
     """
     from ..grids import Source, StableFluid
 
@@ -226,7 +229,7 @@ def smoke(
         y = (np.arange(ny) + 0.5) * dx
         mask = (x[:, None] - 0.45) ** 2 + (y[None, :] - 0.55) ** 2 < 0.09**2
     vent = Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.08), radius=0.06)
-    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads, device=device)
     scene.add(
         StableFluid(
             (n, ny), dx, buoyancy=(0.0, buoyancy), vorticity=vorticity, obstacles=mask, sources=[vent], tracers=tracers,
@@ -248,6 +251,7 @@ def cavity(
     dye: int = 6,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """The lid-driven cavity: a box of fluid stirred by its sliding top wall.
 
@@ -257,6 +261,8 @@ def cavity(
     at rest with `dye` horizontal bands of dye (its ``density``, 0 or 1; 0: none), which the
     vortex winds into a spiral as it spins up; drawn as that dye. `tracers` passive particles
     (spread over the box) can show the circulation too.
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`;
+    tracers stay on the CPU path).
     """
     from ..grids import StableFluid
 
@@ -267,7 +273,7 @@ def cavity(
         raise InvalidInputError(f"reynolds: {reynolds:g} makes the viscosity 1/Re overflow float64")
     tracers = _check.int_in_range("tracers", tracers, 0, 1 << 20)
     dye = _check.int_in_range("dye", dye, 0, n)
-    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads, device=device)
     box = scene.add(
         StableFluid(
             (n, n), 1.0 / n, nu=1.0 / reynolds, walls="no_slip", lid=1.0, advection="maccormack",
@@ -296,6 +302,7 @@ def vortex_street(
     height: float = 10.0,
     dt: float | None = None,
     threads: int | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """A von Kármán vortex street: water flowing past a cylinder sheds vortices, drawn by dye.
 
@@ -325,6 +332,8 @@ def vortex_street(
         Re = U D / ν (> 0; the street forms for 47 ≲ Re ≲ 190, where the 2D flow is laminar).
     length, height : float
         The channel in diameters (length ≥ 8, height ≥ 3).
+    device : str
+        ``"gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`).
 
     Raises
     ------
@@ -363,7 +372,7 @@ def vortex_street(
     inlet[0] = True
     dyed, clear = inlet & streak[None, :], inlet & ~streak[None, :]
     sources = [Source(density=1.0, velocity=(U, 0.0), region=dyed), Source(density=0.0, velocity=(U, 0.0), region=clear)]
-    scene = Scene(2, dt=0.5 * dx / U if dt is None else dt, threads=threads)
+    scene = Scene(2, dt=0.5 * dx / U if dt is None else dt, threads=threads, device=device)
     fluid = scene.add(
         StableFluid(
             (nx, ny), dx, nu=nu, advection="maccormack", inflow=U, obstacles=cylinder, sources=sources,

@@ -654,13 +654,17 @@ fn book(@builtin(local_invocation_id) l: vec3<u32>) {
 }
 
 // The first node (by index) whose value is not finite, of u, v, density and temperature
-// (flags[o7 + 0..4]): over rows of the widest layout.
+// (flags[o7 + 0..4]): over rows of the widest layout. A kinetic energy past the range (finite
+// velocities whose squares are not: the CPU's test) counts as u's node 0.
 @compute @workgroup_size(WG)
 fn check(@builtin(global_invocation_id) g: vec3<u32>) {
     let a = g.x;
     let b = g.y;
     let wu = P.nx + 1u;
     let wv = P.nx + 2u;
+    if (a == 0u && b == 0u && bad(sc[7])) {
+        atomicMin(&flags[P.o7], 0u);
+    }
     if (a < wu && b < P.ny + 2u && bad(U[a + wu * b])) {
         atomicMin(&flags[P.o7], a + wu * b);
     }
