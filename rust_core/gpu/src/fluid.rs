@@ -230,8 +230,13 @@ const FLUID_KERNELS: [&str; 20] = [
 ];
 const BOOK: usize = 20;
 const CHECK: usize = 21;
-const VECTOR_KERNELS: [&str; 9] =
-    ["apply", "residual", "norm", "jacobi", "restrict_residual", "prolong", "update", "diagonal", "direction"];
+const VECTOR_KERNELS: [&str; 10] =
+    ["apply", "residual", "norm", "jacobi", "restrict_residual", "prolong", "update", "diagonal", "direction", "coarsest"];
+/// Sweeps on the coarsest level (the CPU's `COARSE_SWEEPS`).
+const COARSE_SWEEPS: u32 = 32;
+/// The most unknowns of a coarsest level swept by one workgroup (`coarsest`); past it (a grid
+/// far longer than wide), a dispatch per sweep.
+const COARSE_MOST: usize = 4096;
 const CONTROL_KERNELS: [&str; 8] = ["zero_x", "arm", "c_norm", "c_start", "c_rz", "c_alpha", "c_rr", "c_beta"];
 
 fn fk(name: &str) -> usize {
@@ -881,10 +886,23 @@ impl Fluid {
         let levels: Vec<LevelAt> = (0..self.solvers[0].levels.len()).map(|k| self.cycle_level(k)).collect();
         let a = levels[l];
         let book = l == 0;
+        if l + 1 == levels.len() && l > 0 && a.nx * a.ny <= COARSE_MOST {
+            let mut b = self.level_block(0, l);
+            b.ints[O + 4] = a.x as u32;
+            b.ints[O + 5] = a.b as u32;
+            b.ints[O + 6] = a.tmp as u32;
+            b.ints[ID] = COARSE_SWEEPS;
+            b.reals[0] = 1.0;
+            // Direct: one workgroup, which reads nothing the stopping test has emptied (a done
+            // solve's V-cycles still run this one dispatch, a few thousand values).
+            let g = self.poisson("coarsest", b, Groups::Direct(1, 1));
+            out.push(g);
+            return;
+        }
         if l + 1 == levels.len() {
-            for k in 0..32 {
+            for k in 0..COARSE_SWEEPS {
                 let (from, to) = if k % 2 == 0 { (a.x, a.tmp) } else { (a.tmp, a.x) };
-                let g = self.sweep(0, l, 1.0, from, to, k == 0, book && k == 31);
+                let g = self.sweep(0, l, 1.0, from, to, k == 0, book && k == COARSE_SWEEPS - 1);
                 out.push(g);
             }
             return;

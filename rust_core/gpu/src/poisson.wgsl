@@ -113,6 +113,37 @@ fn jacobi(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation
     }
 }
 
+// The coarsest level's sweeps in one workgroup (its unknowns are few: a side of at most 4 and
+// at most `COARSE_MOST` in all): `P.id` damped-Jacobi sweeps from x = 0 alternating between x
+// (o4) and tmp (o6), which leaves the result in x for an even count; the workgroup's threads
+// take the unknowns in turn, a barrier on storage between sweeps. The CPU's arithmetic per
+// value (`jacobi` above), in one dispatch instead of one per sweep.
+@compute @workgroup_size(RW)
+fn coarsest(@builtin(local_invocation_id) l: vec3<u32>) {
+    let n = P.lnx * P.lny;
+    for (var k = 0u; k < P.id; k = k + 1u) {
+        let from_x = k % 2u == 0u;
+        for (var q = l.x; q < n; q = q + RW) {
+            let c = at(q % P.lnx, q / P.lnx);
+            let b = S[P.o5 + c];
+            var o: real;
+            if (k == 0u) {
+                o = OMEGA * S[P.o3 + c] * b;
+            } else if (from_x) {
+                o = S[P.o4 + c] + OMEGA * S[P.o3 + c] * (b - ax(P.o4, c));
+            } else {
+                o = S[P.o6 + c] + OMEGA * S[P.o3 + c] * (b - ax(P.o6, c));
+            }
+            if (from_x) {
+                S[P.o6 + c] = o;
+            } else {
+                S[P.o4 + c] = o;
+            }
+        }
+        storageBarrier();
+    }
+}
+
 // The coarse right-hand side (o6; coarse padded width o7, coarse unknowns id & 0xffff by
 // id >> 16) as the fine residual b − A x summed over each coarse cell's children, in the CPU's
 // order (each row's pair, then the rows). Here nx × ny are the fine level's unknowns, lw its
