@@ -6,7 +6,7 @@
 #   - the Vulkan loader's .deb files in .gl/ (the device README), carried;
 #   - ../shared/gpu/cuda_reference.py copied into .devbin/ (the CUDA peer on the same card).
 # It runs the GPU tests (Rust and Python) on the real adapter, then the N-body, grid (Gray-Scott,
-# wave) and cloth benches beside the CUDA reference (and benches/gpu/cuda_wave.py, the wave's CUDA
+# wave, the stable fluid) and cloth benches beside the CUDA reference (and benches/gpu/cuda_wave.py, the wave's CUDA
 # peer) in the same call, so every ratio is of one card, and the galaxies scene's energy drift at
 # 10^5 stars in f32 and f64. Each part has its own time limit so that one stuck part cannot eat
 # the call. Everything it prints goes to $OUT/device_check.txt too. Budget: about 4 minutes (plus
@@ -52,6 +52,8 @@ timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
 section "Grids: Gray-Scott and the wave"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+section "The stable fluid (CPU to 1024²)"
+timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --kinds fluid --n 256,1024,4096 --steps 20 --cpu-max 1024
 if [ -f .devbin/base_core.abi3.so ]; then
   # A/B in one call: the same benches alternately with a baseline build of the extension
   # (carried as .devbin/base_core.abi3.so; the Python package is this tree's) and this one.
