@@ -688,7 +688,7 @@ class StableFluid(Grid):
         where decay rates or frequencies matter.
 
     On a GPU (``Scene(device="gpu")``) every stage runs on the device, the pressure by MGPCG
-    there too, except the tracers (refused by name: ``tracers=0`` there); f64 runs agree with
+    and the tracers (re-seeded by the CPU's hash) too; f64 runs agree with
     the CPU path to round-off (within 4e-14 of each field's largest value after 100 steps),
     f32 runs to 1e-5 – 3e-4 (docs/guide/gpu.md, "Precision, stated").
 

@@ -241,10 +241,12 @@ def test_a_gpu_turing_scene_renders_and_refuses_what_it_lacks() -> None:
     s.render_defaults["lead_in"] = 0.0  # from the seeds: at n = 64 they fade by t = 1000
     frames = [np.asarray(f) for f in pc.render.frames(s, frames=2, size=(96, 96), frame_time=200.0)]
     assert len(frames) == 2 and not np.array_equal(frames[0], frames[1])
-    # A stable fluid runs on the device, but not its tracers: refused by name, nothing moved.
+    # A grid beside a part the device lacks: refused by name, nothing moved.
     w = pc.Scene(dim=2, device=DEVICE)
-    w.add(pc.grids.StableFluid((32, 32), 0.01, tracers=10, name="smoke"))
-    with pytest.raises(pc.InvalidInputError, match="tracers"):
+    w.add(pc.grids.StableFluid((32, 32), 0.01, name="smoke"))
+    w.add_particles([[0.0, 0.0], [1.0, 0.0]])
+    w.add(pc.TreeGravity(G=1.0, softening=0.1))
+    with pytest.raises(pc.InvalidInputError, match="no kernel for TreeGravity"):
         w.step(1)
     assert w.step_count == 0 and not w.session.sim.on_device
 
@@ -715,7 +717,7 @@ def test_a_stable_fluid_on_the_gpu_flows_as_on_the_cpu(tmp_path) -> None:
         n = 32
         x = (np.arange(n) + 0.5) / n
         disc = (x[:, None] - 0.45) ** 2 + (x[None, :] - 0.6) ** 2 < 0.1**2
-        f = s.add(StableFluid((n, n), 1 / n, buoyancy=(0.0, 4.0), vorticity=0.3, obstacles=disc, tolerance=1e-10,
+        f = s.add(StableFluid((n, n), 1 / n, buoyancy=(0.0, 4.0), vorticity=0.3, obstacles=disc, tolerance=1e-10, tracers=300,
                               sources=[Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.1), radius=0.08)],
                               name="smoke"))
         return s, f
@@ -736,6 +738,9 @@ def test_a_stable_fluid_on_the_gpu_flows_as_on_the_cpu(tmp_path) -> None:
             scale = np.abs(a).max()
             assert scale > 0.01, name  # the vent drove the flow
             assert np.abs(a - b).max() <= tol * scale, (precision, name, np.abs(a - b).max() / scale)
+        # The tracers ride the same velocity; those that leave re-enter at the vent by the
+        # CPU's hash of their index and the step.
+        assert np.abs(fg.tracers - fc.tracers).max() <= tol, (precision, np.abs(fg.tracers - fc.tracers).max())
         ec, eg = cpu.energy(), gpu.energy()
         assert ec.dissipated.keys() == eg.dissipated.keys()
         big = max(abs(b) for b in ec.dissipated.values())
@@ -761,6 +766,7 @@ def test_a_stable_fluid_on_the_gpu_flows_as_on_the_cpu(tmp_path) -> None:
         gpu.step(10)
         for name in ["u", "v", "density", "pressure"]:
             assert np.array_equal(dtwin.grids[0].field(name), fg.field(name)), name
+        assert np.array_equal(dtwin.grids[0].tracers, fg.tracers)
         # A field set on the device is set there (closed faces stay closed).
         fg.density = np.ones((32, 32))
         assert np.array_equal(fg.field("density"), np.where(fg.field("solid") > 0, 0.0, 1.0))

@@ -211,8 +211,7 @@ def smoke(
     temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
     (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`; none by
     default: drawn as single pixels over the smoke they read as noise).
-    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`;
-    tracers stay on the CPU path).
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import Source, StableFluid
 
@@ -261,8 +260,7 @@ def cavity(
     at rest with `dye` horizontal bands of dye (its ``density``, 0 or 1; 0: none), which the
     vortex winds into a spiral as it spins up; drawn as that dye. `tracers` passive particles
     (spread over the box) can show the circulation too.
-    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`;
-    tracers stay on the CPU path).
+    ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import StableFluid
 

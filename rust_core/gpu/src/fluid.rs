@@ -84,6 +84,11 @@ pub struct Model {
     /// The viscous operators of u and v (scaled by ν dt / dx² each step), with viscosity.
     pub viscous: Option<[Operator; 2]>,
     pub sources: Vec<Source>,
+    /// Passive tracers (moved by RK2 through the velocity each step).
+    pub n_tracers: usize,
+    /// The cells where a tracer that leaves re-enters: the first source's, in its order (empty:
+    /// any fluid cell).
+    pub seeds: Vec<u32>,
 }
 
 /// Everything a step changes, as the CPU keeps it.
@@ -98,6 +103,10 @@ pub struct State {
     /// Injected smoke, the smoke advection's change, then the stages' losses (forces, sources,
     /// advection, viscosity, projection).
     pub books: [f64; 7],
+    /// x0, y0, x1, … (m).
+    pub tracers: Vec<f64>,
+    /// Steps taken (the tracers' re-seeding hashes it).
+    pub steps: u64,
 }
 
 /// What the last solves did.
@@ -144,6 +153,8 @@ const INFLOW: u64 = 10;
 // The ints buffer: solver s's ints at 16 s (s = 0 pressure, 1 viscous u, 2 viscous v), the
 // finiteness flags at FLAGS; INTS in all. (The indirect counts have a buffer of their own.)
 const FLAGS: u64 = 48;
+/// The step counter (low, high).
+const STEP: u64 = 52;
 const INTS: u64 = 64;
 // The scalars: the books (0..9), solver s's from 16 + 16 s.
 const SOLVER_SC: u32 = 16;
@@ -230,8 +241,20 @@ const FLUID_KERNELS: [&str; 20] = [
 ];
 const BOOK: usize = 20;
 const CHECK: usize = 21;
-const VECTOR_KERNELS: [&str; 10] =
-    ["apply", "residual", "norm", "jacobi", "restrict_residual", "prolong", "update", "diagonal", "direction", "coarsest"];
+const TRACERS: usize = 22;
+const COUNT_STEP: usize = 23;
+const VECTOR_KERNELS: [&str; 10] = [
+    "apply",
+    "residual",
+    "norm",
+    "jacobi",
+    "restrict_residual",
+    "prolong",
+    "update",
+    "diagonal",
+    "direction",
+    "coarsest",
+];
 /// Sweeps on the coarsest level (the CPU's `COARSE_SWEEPS`).
 const COARSE_SWEEPS: u32 = 32;
 /// The most unknowns of a coarsest level swept by one workgroup (`coarsest`); past it (a grid
@@ -243,6 +266,8 @@ fn fk(name: &str) -> usize {
     match name {
         "book" => BOOK,
         "check" => CHECK,
+        "tracers" => TRACERS,
+        "count_step" => COUNT_STEP,
         _ => FLUID_KERNELS.iter().position(|k| *k == name).expect("a fluid kernel"),
     }
 }
@@ -326,8 +351,9 @@ pub struct Fluid {
     solves: Solves,
     /// Per source: its first group and its counts of cell, u-face and v-face groups.
     source_groups: Vec<(u32, [u32; 3])>,
-    /// Kept alive with the bind groups: the partial sums and the sources' groups.
-    _keep: [wgpu::Buffer; 3],
+    tr_buf: wgpu::Buffer,
+    /// Kept alive with the bind groups: the partial sums, the sources' groups, the seeds.
+    _keep: [wgpu::Buffer; 4],
     /// The checkpoint: copies of the state's regions (buffer, offset, copy), and the solves then.
     saved: Option<Vec<wgpu::Buffer>>,
     saved_solves: Solves,
@@ -468,6 +494,10 @@ impl Fluid {
         if ops_w.len() as u64 >= u32::MAX as u64 / 4 {
             return Err(GpuError::Unsupported("the sources' cells: at most 2^30 entries".into()));
         }
+        assert!(model.seeds.iter().all(|&c| (c as u64) < cells), "seed cells inside the grid");
+        let tr_buf = gpu.buffer("fluid tracers", (2 * model.n_tracers as u64).max(1) * rb, st)?;
+        let seeds_buf = gpu.buffer("fluid tracers' seed cells", (model.seeds.len() as u64).max(1) * 4, st)?;
+        gpu.queue.write_buffer(&seeds_buf, 0, bytemuck::cast_slice(&model.seeds));
         let ops_buf = gpu.buffer("fluid source groups", (ops_u.len() as u64).max(4) * 4, st)?;
         let opw_buf = gpu.buffer("fluid source weights", (ops_w.len() as u64).max(1) * rb, st)?;
         gpu.queue.write_buffer(&ops_buf, 0, bytemuck::cast_slice(&ops_u));
@@ -493,8 +523,8 @@ impl Fluid {
             "fluid.wgsl",
             precision,
             &format!("{header}{}", include_str!("fluid.wgsl")),
-            &[Uniform { dynamic: true }, W, W, W, W, W, W, R, R, W],
-            &[FLUID_KERNELS.as_slice(), &["book", "check"]].concat(),
+            &[Uniform { dynamic: true }, W, W, W, W, W, W, R, R, W, W, R],
+            &[FLUID_KERNELS.as_slice(), &["book", "check", "tracers", "count_step"]].concat(),
         );
         let poisson = format!("{header}{}", include_str!("poisson.wgsl"));
         let (vl, vector_pipes) =
@@ -525,8 +555,11 @@ impl Fluid {
                 .collect();
             gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
         };
-        let fluid_bind =
-            bind(&fl, &[&params, &sc, &part, &u_buf, &v_buf, &c_buf, &s_buf, &ops_buf, &opw_buf, &ints], "fluid");
+        let fluid_bind = bind(
+            &fl,
+            &[&params, &sc, &part, &u_buf, &v_buf, &c_buf, &s_buf, &ops_buf, &opw_buf, &ints, &tr_buf, &seeds_buf],
+            "fluid",
+        );
         let vector_bind = bind(&vl, &[&params, &sc, &part, &s_buf], "fluid solves");
         let control_bind = bind(&cl, &[&params, &sc, &part, &s_buf, &ints, &ind], "fluid solves' control");
         // Fixed arrays: masks, the inflow column, the solvers' coefficients, the indirect templates.
@@ -596,7 +629,8 @@ impl Fluid {
             last: [0; 3],
             solves: Solves::default(),
             source_groups,
-            _keep: [part, ops_buf, opw_buf],
+            tr_buf,
+            _keep: [part, ops_buf, opw_buf, seeds_buf],
             saved: None,
             saved_solves: Solves::default(),
         };
@@ -630,6 +664,7 @@ impl Fluid {
         assert!(s.u.len() as u64 == self.lu && s.v.len() as u64 == self.lv, "u and v in their layouts");
         assert!(s.density.len() as u64 == self.cells && s.temperature.len() as u64 == self.cells);
         assert!(s.pressure.len() as u64 == self.np, "a padded pressure");
+        assert!(s.tracers.len() == 2 * self.model.n_tracers, "two coordinates per tracer");
         let g = &self.gpu;
         g.upload_at(p, &self.u_buf, 0, &s.u);
         g.upload_at(p, &self.v_buf, 0, &s.v);
@@ -638,6 +673,11 @@ impl Fluid {
         g.upload_at(p, &self.s_buf, self.pressure_at * rb, &s.pressure);
         let b = &s.books;
         g.upload_at(p, &self.sc, 0, &[b[2], b[3], b[4], b[5], b[6], b[0], b[1]]);
+        if !s.tracers.is_empty() {
+            g.upload_at(p, &self.tr_buf, 0, &s.tracers);
+        }
+        let steps = [s.steps as u32, (s.steps >> 32) as u32];
+        g.queue.write_buffer(&self.ints, STEP * 4, bytemuck::cast_slice(&steps));
         self.clear_flags();
         g.wait()
     }
@@ -662,35 +702,46 @@ impl Fluid {
             temperature: self.read(&self.c_buf, TEM * self.cells, self.cells)?,
             pressure: self.read(&self.s_buf, self.pressure_at, self.np)?,
             books: [sc[5], sc[6], sc[0], sc[1], sc[2], sc[3], sc[4]],
+            tracers: if self.model.n_tracers > 0 {
+                self.read(&self.tr_buf, 0, 2 * self.model.n_tracers as u64)?
+            } else {
+                Vec::new()
+            },
+            steps: {
+                let st = self.status()?;
+                st[STEP as usize] as u64 | (st[STEP as usize + 1] as u64) << 32
+            },
         })
     }
 
-    /// The regions a checkpoint copies: (buffer, first element, count).
-    fn regions(&self) -> [(&wgpu::Buffer, u64, u64); 5] {
+    /// The regions a checkpoint copies: (buffer, first byte, bytes).
+    fn regions(&self) -> [(&wgpu::Buffer, u64, u64); 7] {
+        let rb = self.rb();
         [
-            (&self.u_buf, 0, self.lu),
-            (&self.v_buf, 0, self.lv),
-            (&self.c_buf, 0, 2 * self.cells),
-            (&self.s_buf, self.pressure_at, self.np),
-            (&self.sc, 0, 64),
+            (&self.u_buf, 0, self.lu * rb),
+            (&self.v_buf, 0, self.lv * rb),
+            (&self.c_buf, 0, 2 * self.cells * rb),
+            (&self.s_buf, self.pressure_at * rb, self.np * rb),
+            (&self.sc, 0, 64 * rb),
+            (&self.tr_buf, 0, self.tr_buf.size()),
+            (&self.ints, STEP * 4, 8),
         ]
     }
 
     /// Keeps a copy of the state and books on the device (the world's checkpoint).
     pub fn snapshot(&mut self) -> Result<()> {
-        let rb = self.rb();
         if self.saved.is_none() {
             use wgpu::BufferUsages as Us;
             let mut v = Vec::new();
             for (_, _, n) in self.regions() {
-                v.push(self.gpu.buffer("fluid checkpoint", n * rb, Us::STORAGE | Us::COPY_SRC | Us::COPY_DST)?);
+                v.push(self.gpu.buffer("fluid checkpoint", n, Us::STORAGE | Us::COPY_SRC | Us::COPY_DST)?);
             }
             self.saved = Some(v);
         }
         let saved = self.saved.as_ref().expect("made above");
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         for ((b, at, n), s) in self.regions().into_iter().zip(saved) {
-            enc.copy_buffer_to_buffer(b, at * rb, s, 0, n * rb);
+            enc.copy_buffer_to_buffer(b, at, s, 0, n);
         }
         self.gpu.queue.submit([enc.finish()]);
         self.saved_solves = self.solves;
@@ -699,11 +750,10 @@ impl Fluid {
 
     /// Returns to the last snapshot (nothing happens without one); the flags cleared.
     pub fn restore(&mut self) -> Result<()> {
-        let rb = self.rb();
         if let Some(saved) = &self.saved {
             let mut enc = self.gpu.device.create_command_encoder(&Default::default());
             for ((b, at, n), s) in self.regions().into_iter().zip(saved) {
-                enc.copy_buffer_to_buffer(s, 0, b, at * rb, n * rb);
+                enc.copy_buffer_to_buffer(s, 0, b, at, n);
             }
             self.gpu.queue.submit([enc.finish()]);
             self.solves = self.saved_solves;
@@ -1266,6 +1316,21 @@ impl Fluid {
         add(&mut ops, g);
         let g = self.energy(1, 4);
         add(&mut ops, g);
+        // 7. The tracers, then the step counted (the tracers' seeds hash it).
+        if m.n_tracers > 0 {
+            let mut b = self.adv_block(dt);
+            b.ints[O] = m.seeds.len() as u32;
+            b.ints[O + 1] = m.n_tracers as u32;
+            b.ints[O + 6] = slab(FLUID);
+            b.ints[O + 7] = STEP as u32;
+            let wgs = (m.n_tracers as u32).div_ceil(WG);
+            let g = self.go(TRACERS, b, (wgs.min(65_535), wgs.div_ceil(65_535)));
+            ops.push(Op::Go(g));
+        }
+        let mut b = block(nx, ny);
+        b.ints[O + 7] = STEP as u32;
+        let g = self.go(COUNT_STEP, b, (1, 1));
+        ops.push(Op::Go(g));
         // The finiteness check.
         let mut b = block(nx, ny);
         b.ints[O + 7] = FLAGS as u32;

@@ -22,6 +22,11 @@
 // The solvers' ints and the finiteness flags (at `o7` of `check`'s block): atomics here.
 @group(0) @binding(9) var<storage, read_write> flags: array<atomic<u32>>;
 
+// The tracers (x0, y0, x1, …, m) and the first source's cells (where they are re-seeded; none:
+// anywhere in the fluid).
+@group(0) @binding(10) var<storage, read_write> TR: array<real>;
+@group(0) @binding(11) var<storage, read> seeds: array<u32>;
+
 // ---- sampling (`Lay::sample`): layout 0 u, 1 v, 2 cells.
 
 struct Lay {
@@ -679,5 +684,143 @@ fn check(@builtin(global_invocation_id) g: vec3<u32>) {
         if (bad(C[P.nx * P.ny + c])) {
             atomicMin(&flags[P.o7 + 3u], c);
         }
+    }
+}
+
+// ---- tracers (`move_tracers`, `seed`). u64 values as vec2<u32> (low, high): WGSL has no 64-bit
+// integers, and the re-seeding hash is the CPU's splitmix64, so that a tracer that leaves lands
+// where the CPU's does.
+
+fn add64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let lo = a.x + b.x;
+    return vec2<u32>(lo, a.y + b.y + select(0u, 1u, lo < a.x));
+}
+
+// a >> s for 0 < s < 32.
+fn shr64(a: vec2<u32>, s: u32) -> vec2<u32> {
+    return vec2<u32>((a.x >> s) | (a.y << (32u - s)), a.y >> s);
+}
+
+// The full 64-bit product of two u32, in 16-bit halves.
+fn mul32(a: u32, b: u32) -> vec2<u32> {
+    let a0 = a & 0xffffu;
+    let a1 = a >> 16u;
+    let b0 = b & 0xffffu;
+    let b1 = b >> 16u;
+    let p00 = a0 * b0;
+    let p01 = a0 * b1;
+    let p10 = a1 * b0;
+    let mid = p01 + p10;
+    let mid_carry = select(0u, 1u, mid < p01);
+    let lo = p00 + (mid << 16u);
+    let carry = select(0u, 1u, lo < p00);
+    return vec2<u32>(lo, a1 * b1 + (mid >> 16u) + (mid_carry << 16u) + carry);
+}
+
+// a·b mod 2⁶⁴.
+fn mul64(a: vec2<u32>, b: vec2<u32>) -> vec2<u32> {
+    let p = mul32(a.x, b.x);
+    return vec2<u32>(p.x, p.y + a.x * b.y + a.y * b.x);
+}
+
+// splitmix64 (`fluid::hash`).
+fn mix(z0: vec2<u32>) -> vec2<u32> {
+    var z = add64(z0, vec2<u32>(0x7F4A7C15u, 0x9E3779B9u));
+    z = mul64(z ^ shr64(z, 30u), vec2<u32>(0x1CE4E5B9u, 0xBF58476Du));
+    z = mul64(z ^ shr64(z, 27u), vec2<u32>(0x133111EBu, 0x94D049BBu));
+    return z ^ shr64(z, 31u);
+}
+
+// a mod m (m > 0), by long division a bit at a time.
+fn mod64(a: vec2<u32>, m: u32) -> u32 {
+    var r = 0u;
+    for (var k = 0u; k < 64u; k = k + 1u) {
+        var bit: u32;
+        if (k < 32u) {
+            bit = (a.y >> (31u - k)) & 1u;
+        } else {
+            bit = (a.x >> (63u - k)) & 1u;
+        }
+        var r2 = (r << 1u) | bit;
+        if ((r >> 31u) != 0u || r2 >= m) {
+            r2 = r2 - m;
+        }
+        r = r2;
+    }
+    return r;
+}
+
+// (h >> 11) / 2⁵³ (`fluid::unit`): exact in f64.
+fn unit(h: vec2<u32>) -> real {
+    let s = shr64(h, 11u);
+    return (real(s.y) * 4294967296.0 + real(s.x)) / 9007199254740992.0;
+}
+
+// Where tracer k re-enters at a step (`StableFluid::seed`): a hash of both picks a cell of the
+// first source (`o0` of them; none: any cell) and a point in it, up to 64 tries for a fluid
+// cell. The fluid mask at o6.
+fn seed(k: u32, step: vec2<u32>) -> vec2<real> {
+    let dx = P.r1;
+    var h = mix(vec2<u32>(k, 0u) ^ mix(step));
+    var pick = vec2<real>(0.5 * dx, 0.5 * dx);
+    for (var t = 0u; t < 64u; t = t + 1u) {
+        var c: u32;
+        if (P.o0 > 0u) {
+            c = seeds[mod64(h, P.o0)];
+        } else {
+            c = mod64(h, P.nx * P.ny);
+        }
+        let h1 = mix(h ^ vec2<u32>(1u, 0u));
+        let h2 = mix(h ^ vec2<u32>(2u, 0u));
+        pick = vec2<real>((real(c % P.nx) + unit(h1)) * dx, (real(c / P.nx) + unit(h2)) * dx);
+        if (C[P.o6 + c] > 0.0) {
+            break;
+        }
+        h = mix(h);
+    }
+    return pick;
+}
+
+// Each tracer moved by RK2 through the velocity; one that leaves the domain or enters a solid
+// is re-seeded. Block: the advection's reals (r0 dt, r1 dx, r2 1/dx, r4, r5 the extent); o0 the
+// seeds, o1 the tracers, o6 the fluid mask, o7 the step counter's place in `flags`.
+@compute @workgroup_size(WG)
+fn tracers(@builtin(global_invocation_id) g: vec3<u32>) {
+    let k = g.x + 65535u * WG * g.y;
+    if (k >= P.o1) {
+        return;
+    }
+    let x = TR[2u * k];
+    let y = TR[2u * k + 1u];
+    let dt = P.r0;
+    let a = vel_at(x, y);
+    let xm = cl(x + 0.5 * dt * a.x, 0.0, P.r4);
+    let ym = cl(y + 0.5 * dt * a.y, 0.0, P.r5);
+    let b = vel_at(xm, ym);
+    var xn = x + dt * b.x;
+    var yn = y + dt * b.y;
+    var ok = xn >= 0.0 && yn >= 0.0 && xn < P.r4 && yn < P.r5;
+    if (ok) {
+        let i = min(u32(xn * P.r2), P.nx - 1u);
+        let j = min(u32(yn * P.r2), P.ny - 1u);
+        ok = C[P.o6 + i + P.nx * j] > 0.0;
+    }
+    if (!ok) {
+        let step = vec2<u32>(atomicLoad(&flags[P.o7]), atomicLoad(&flags[P.o7 + 1u]));
+        let p = seed(k, step);
+        xn = p.x;
+        yn = p.y;
+    }
+    TR[2u * k] = xn;
+    TR[2u * k + 1u] = yn;
+}
+
+// The step counter (at flags[o7], low then high) counts one more step (after `tracers`).
+@compute @workgroup_size(1)
+fn count_step() {
+    let lo = atomicLoad(&flags[P.o7]) + 1u;
+    atomicStore(&flags[P.o7], lo);
+    if (lo == 0u) {
+        atomicStore(&flags[P.o7 + 1u], atomicLoad(&flags[P.o7 + 1u]) + 1u);
     }
 }

@@ -6,7 +6,7 @@
 //! fields, save and load, the next step's size (it holds the state on the host too).
 //!
 //! Measured against the CPU path (`a_device_fluid_steps_as_the_cpu_one`, lavapipe): see its
-//! figures in docs/guide/gpu.md. Tracers are refused (the CPU path has them).
+//! figures in docs/guide/gpu.md.
 use super::device::precision_of;
 use super::{Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::error::{invalid, Failure, Result};
@@ -50,8 +50,8 @@ impl Tended {
     /// The device's state and books made the host's, with `steps` more steps.
     fn pull(&mut self, steps: u64) -> Result<()> {
         let s = self.dev.read_state()?;
-        let [u, v, d, t, p] = self.host.state_arrays();
-        (*u, *v, *d, *t, *p) = (s.u, s.v, s.density, s.temperature, s.pressure);
+        let [u, v, d, t, p, tr] = self.host.state_arrays();
+        (*u, *v, *d, *t, *p, *tr) = (s.u, s.v, s.density, s.temperature, s.pressure, s.tracers);
         let so = self.dev.solves();
         let pressure = Solve {
             iterations: so.pressure_iterations,
@@ -66,9 +66,12 @@ impl Tended {
     fn push(&mut self) -> Result<()> {
         let precision = self.dev.precision();
         let (books, ..) = self.host.book_values();
-        let [u, v, d, t, p] = self.host.state_arrays();
+        let steps = self.host.steps();
+        let [u, v, d, t, p, tr] = self.host.state_arrays();
         if precision == Precision::F32 {
-            for (name, a) in [("u", &u), ("v", &v), ("density", &d), ("temperature", &t), ("pressure", &p)] {
+            for (name, a) in
+                [("u", &u), ("v", &v), ("density", &d), ("temperature", &t), ("pressure", &p), ("tracers", &tr)]
+            {
                 if let Some(i) = a.iter().position(|x| x.abs() > f32::MAX as Real) {
                     return Err(invalid(
                         name,
@@ -84,6 +87,8 @@ impl Tended {
             temperature: t.clone(),
             pressure: p.clone(),
             books,
+            tracers: tr.clone(),
+            steps,
         };
         Ok(self.dev.set_state(&state)?)
     }
@@ -93,14 +98,11 @@ impl DeviceFluid {
     /// The fluid `cfg` with the state `saved` (what the CPU system's `save` wrote), on `gpu` at
     /// `precision` ("f32", "f64").
     ///
-    /// Errors: `InvalidInput` naming `tracers` (the GPU path has none), `precision` or `device`
+    /// Errors: `InvalidInput` naming `precision` or `device`
     /// (f64 on an adapter without it, a grid over its limits) or a saved array; `OutOfMemory`
     /// for host or device buffers.
     pub fn on(gpu: Arc<Gpu>, precision: &str, cfg: FluidConfig, saved: &Arrays) -> Result<Self> {
         let precision = precision_of(precision)?;
-        if cfg.n_tracers > 0 {
-            return Err(invalid("tracers", "the GPU path has no tracers yet (use tracers=0, or device=\"cpu\")"));
-        }
         let [nx, ny] = cfg.shape;
         if nx > 65_532 || ny > 65_532 {
             return Err(invalid("shape", format!("{nx} × {ny} cells: the GPU path takes at most 65,532 a side")));
@@ -152,10 +154,16 @@ impl DeviceFluid {
                         velocity: s.velocity,
                     })
                     .collect(),
+                n_tracers: c.n_tracers,
+                seeds: match c.sources.first().filter(|s| !s.cells.is_empty()) {
+                    Some(s) => s.cells.iter().map(|&(c, _)| c as u32).collect(),
+                    None => Vec::new(),
+                },
             }
         };
         let (books, ..) = host.book_values();
-        let [u, v, d, t, p] = host.state_arrays();
+        let steps = host.steps();
+        let [u, v, d, t, p, tr] = host.state_arrays();
         let state = df::State {
             u: u.clone(),
             v: v.clone(),
@@ -163,6 +171,8 @@ impl DeviceFluid {
             temperature: t.clone(),
             pressure: p.clone(),
             books,
+            tracers: tr.clone(),
+            steps,
         };
         let dev = Fluid::new(gpu, precision, model, &state)?;
         let mut tended = Tended { host, dev };
@@ -339,6 +349,7 @@ mod tests {
             advection: Advection::MacCormack,
             projection: Projection::Incremental,
             tolerance: 1e-12,
+            n_tracers: 400,
             obstacles: disc(shape, [nx as Real * 0.6, ny as Real * 0.6], nx as Real * 0.12),
             sources: vec![Source {
                 cells: Source::circle(shape, dx, [0.5, 0.15], 0.12),
@@ -351,9 +362,9 @@ mod tests {
     }
 
     /// `steps` steps of `dt` on the CPU and on the device at `precision`: the largest difference
-    /// of each field (u, v, density, temperature, pressure) over its largest value, and of each
-    /// book over the largest of them.
-    fn compare(cfg: FluidConfig, precision: &str, steps: u64, dt: Real) -> Option<([Real; 5], Real, (Solve, Solve))> {
+    /// of each field (u, v, density, temperature, pressure, tracers) over its largest value, and
+    /// of each book over the largest of them.
+    fn compare(cfg: FluidConfig, precision: &str, steps: u64, dt: Real) -> Option<([Real; 6], Real, (Solve, Solve))> {
         let g = gpu()?;
         let stop = AtomicBool::new(false);
         let mut cpu = StableFluid::new(cfg.clone()).unwrap();
@@ -363,10 +374,10 @@ mod tests {
             cpu.step(dt, &stop).unwrap();
         }
         dev.steps(steps, dt, &stop).unwrap();
-        let names = ["u", "v", "density", "temperature", "pressure"];
+        let names = ["u", "v", "density", "temperature", "pressure", "tracers"];
         let (a, b) = (cpu.fields(&names).unwrap(), dev.fields(&names).unwrap());
-        let mut errs = [0.0; 5];
-        for k in 0..5 {
+        let mut errs = [0.0; 6];
+        for k in 0..6 {
             let scale = a[k].iter().fold(0.0, |m: Real, x| m.max(x.abs())).max(1e-300);
             errs[k] = a[k].iter().zip(&b[k]).fold(0.0, |m: Real, (x, y)| m.max((x - y).abs())) / scale;
         }
@@ -382,7 +393,8 @@ mod tests {
 
     #[test]
     fn a_device_fluid_steps_as_the_cpu_one() {
-        // MacCormack, incremental, sources, buoyancy, confinement, an obstacle; f64 and f32.
+        // MacCormack, incremental, sources, buoyancy, confinement, an obstacle, tracers (some
+        // leave and are re-seeded in the source by the CPU's hash); f64 and f32.
         let Some((e, b, (cs, ds))) = compare(plume([40, 48]), "f64", 30, 0.01) else { return };
         println!("f64 plume 40 × 48, 30 steps: fields {e:?}, books {b:e}, solves {cs:?} / {ds:?}");
         assert!(e.iter().all(|&x| x < 1e-9), "{e:?}");
@@ -423,8 +435,19 @@ mod tests {
             obstacles: disc([48, 20], [12.0, 10.0], 3.0),
             advection: Advection::MacCormack,
             tolerance: 1e-12,
+            n_tracers: 300,
             ..FluidConfig::default()
         };
+        // Tracers leave through the outflow and re-enter anywhere (no source): the CPU's do.
+        let mut cpu = StableFluid::new(channel.clone()).unwrap();
+        let x0: Vec<Real> = cpu.fields(&["tracers"]).unwrap()[0].iter().step_by(2).copied().collect();
+        let stop = AtomicBool::new(false);
+        for _ in 0..40 {
+            cpu.step(0.02, &stop).unwrap();
+        }
+        let x1 = cpu.fields(&["tracers"]).unwrap().remove(0);
+        let back = x0.iter().zip(x1.iter().step_by(2)).filter(|(a, b)| **b < **a - 0.1).count();
+        assert!(back > 10, "only {back} tracers re-seeded");
         let (e, b, _) = compare(channel, "f64", 40, 0.02).unwrap();
         println!("f64 channel 48 × 20, 40 steps: fields {e:?}, books {b:e}");
         assert!(e.iter().all(|&x| x < 1e-9), "{e:?}");

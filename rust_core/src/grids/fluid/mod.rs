@@ -680,10 +680,10 @@ impl StableFluid {
         (&self.cfg, [&self.u_open, &self.v_open, &self.fluid, &self.inflow_u], &self.pressure, self.visc.as_ref())
     }
 
-    /// For the device path: u, v, density, temperature and the padded pressure.
-    pub(crate) fn state_arrays(&mut self) -> [&mut Vec<Real>; 5] {
+    /// For the device path: u, v, density, temperature, the padded pressure and the tracers.
+    pub(crate) fn state_arrays(&mut self) -> [&mut Vec<Real>; 6] {
         let s = &mut self.s;
-        [&mut s.u, &mut s.v, &mut s.density, &mut s.temperature, &mut s.pressure]
+        [&mut s.u, &mut s.v, &mut s.density, &mut s.temperature, &mut s.pressure, &mut s.tracers]
     }
 
     /// For the device path: the injected smoke, the smoke advection's change and the stages'
