@@ -109,6 +109,22 @@ pub struct State {
     pub steps: u64,
 }
 
+/// Which of the state's arrays a read brings back (the books and the step count always come).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Parts {
+    /// u and v.
+    pub velocity: bool,
+    /// Density and temperature.
+    pub smoke: bool,
+    pub pressure: bool,
+    pub tracers: bool,
+}
+
+impl Parts {
+    pub const ALL: Parts = Parts { velocity: true, smoke: true, pressure: true, tracers: true };
+    pub const NONE: Parts = Parts { velocity: false, smoke: false, pressure: false, tracers: false };
+}
+
 /// What the last solves did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Solves {
@@ -243,6 +259,8 @@ const BOOK: usize = 20;
 const CHECK: usize = 21;
 const TRACERS: usize = 22;
 const COUNT_STEP: usize = 23;
+const MAXIMA: usize = 24;
+const FASTEST: usize = 25;
 const VECTOR_KERNELS: [&str; 10] = [
     "apply",
     "residual",
@@ -268,6 +286,8 @@ fn fk(name: &str) -> usize {
         "check" => CHECK,
         "tracers" => TRACERS,
         "count_step" => COUNT_STEP,
+        "maxima" => MAXIMA,
+        "fastest" => FASTEST,
         _ => FLUID_KERNELS.iter().position(|k| *k == name).expect("a fluid kernel"),
     }
 }
@@ -524,7 +544,7 @@ impl Fluid {
             precision,
             &format!("{header}{}", include_str!("fluid.wgsl")),
             &[Uniform { dynamic: true }, W, W, W, W, W, W, R, R, W, W, R],
-            &[FLUID_KERNELS.as_slice(), &["book", "check", "tracers", "count_step"]].concat(),
+            &[FLUID_KERNELS.as_slice(), &["book", "check", "tracers", "count_step", "maxima", "fastest"]].concat(),
         );
         let poisson = format!("{header}{}", include_str!("poisson.wgsl"));
         let (vl, vector_pipes) =
@@ -693,20 +713,22 @@ impl Fluid {
 
     /// The state and books read back (and the last pressure solve's residual kept).
     pub fn read_state(&mut self) -> Result<State> {
+        self.read_parts(Parts::ALL)
+    }
+
+    /// The books, the step count and the arrays of `parts` read back (the others empty).
+    pub fn read_parts(&mut self, parts: Parts) -> Result<State> {
         let sc = self.read(&self.sc, 0, 32)?;
         self.solves.pressure_residual = sc[SOLVER_SC as usize + 6];
+        let get = |on: bool, b: &wgpu::Buffer, at: u64, n: u64| if on { self.read(b, at, n) } else { Ok(Vec::new()) };
         Ok(State {
-            u: self.read(&self.u_buf, 0, self.lu)?,
-            v: self.read(&self.v_buf, 0, self.lv)?,
-            density: self.read(&self.c_buf, DEN * self.cells, self.cells)?,
-            temperature: self.read(&self.c_buf, TEM * self.cells, self.cells)?,
-            pressure: self.read(&self.s_buf, self.pressure_at, self.np)?,
+            u: get(parts.velocity, &self.u_buf, 0, self.lu)?,
+            v: get(parts.velocity, &self.v_buf, 0, self.lv)?,
+            density: get(parts.smoke, &self.c_buf, DEN * self.cells, self.cells)?,
+            temperature: get(parts.smoke, &self.c_buf, TEM * self.cells, self.cells)?,
+            pressure: get(parts.pressure, &self.s_buf, self.pressure_at, self.np)?,
             books: [sc[5], sc[6], sc[0], sc[1], sc[2], sc[3], sc[4]],
-            tracers: if self.model.n_tracers > 0 {
-                self.read(&self.tr_buf, 0, 2 * self.model.n_tracers as u64)?
-            } else {
-                Vec::new()
-            },
+            tracers: get(parts.tracers && self.model.n_tracers > 0, &self.tr_buf, 0, 2 * self.model.n_tracers as u64)?,
             steps: {
                 let st = self.status()?;
                 st[STEP as usize] as u64 | (st[STEP as usize + 1] as u64) << 32
@@ -760,6 +782,27 @@ impl Fluid {
         }
         self.clear_flags();
         self.gpu.wait()
+    }
+
+    /// The largest |u| over the faces of the interior rows and |v| over all v faces (the
+    /// CPU's `auto_dt`), reduced on the device: one value read back. Uses the parameter
+    /// blocks past the step's (the plan is kept).
+    pub fn fastest(&mut self) -> Result<f64> {
+        let (nx, ny) = (self.model.nx, self.model.ny);
+        let keep = self.blocks.len();
+        let (gu, cu) = self.sums(0, false, 0, nx + 1, (0, nx + 1), (1, ny + 1), 0);
+        let (gv, cv) = self.sums(1, false, 0, nx + 2, (0, nx + 2), (0, ny + 1), cu);
+        let mut b = block(nx, ny);
+        b.ints[O] = 0;
+        b.ints[O + 1] = cu + cv;
+        let f = self.go(FASTEST, b, (1, 1));
+        for (k, b) in self.blocks.iter().enumerate().skip(keep) {
+            self.gpu.write_params_at(self.precision, &self.params, k as u64 * self.slot, &b.ints, &b.reals);
+        }
+        let gos = [Go { pipe: MAXIMA, ..gu }, Go { pipe: MAXIMA, ..gv }, f];
+        self.blocks.truncate(keep);
+        self.submit(&gos.iter().collect::<Vec<_>>());
+        Ok(self.read(&self.sc, 9, 1)?[0])
     }
 
     // ---- the plan of a step
@@ -1336,7 +1379,7 @@ impl Fluid {
         b.ints[O + 7] = FLAGS as u32;
         let g = self.go(fk("check"), b, groups(nx + 2, ny + 2));
         ops.push(Op::Go(g));
-        if self.blocks.len() > 4096 {
+        if self.blocks.len() > 4096 - 3 {
             return Err(GpuError::Unsupported(format!("a fluid step of {} parameter blocks", self.blocks.len())));
         }
         for (k, b) in self.blocks.iter().enumerate() {

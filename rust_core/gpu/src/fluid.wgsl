@@ -625,6 +625,54 @@ fn sums(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation_i
     }
 }
 
+// Partial maxima of |x| over a region, as `sums` (the same block), into part[o4 + slot].
+@compute @workgroup_size(WG)
+fn maxima(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation_id) l: vec3<u32>,
+          @builtin(workgroup_id) wid: vec3<u32>) {
+    var s: real = 0.0;
+    let a = P.o1 + g.x;
+    if (a < P.o2 && g.y < P.lny) {
+        let k = P.o0 + a + P.lw * (P.o3 + g.y);
+        if ((P.flags & 3u) == 0u) {
+            s = abs(U[k]);
+        } else {
+            s = abs(V[k]);
+        }
+    }
+    red[l.x] = s;
+    workgroupBarrier();
+    for (var w = WG / 2u; w > 0u; w = w / 2u) {
+        if (l.x < w) {
+            red[l.x] = max(red[l.x], red[l.x + w]);
+        }
+        workgroupBarrier();
+    }
+    if (l.x == 0u) {
+        part[P.o4 + slot(wid)] = red[0];
+    }
+}
+
+// One workgroup: sc[9] = the largest of part[o0 .. o0 + o1) (the fastest face, for the step's
+// CFL limit).
+@compute @workgroup_size(RW)
+fn fastest(@builtin(local_invocation_id) l: vec3<u32>) {
+    var m: real = 0.0;
+    for (var k = l.x; k < P.o1; k = k + RW) {
+        m = max(m, part[P.o0 + k]);
+    }
+    red[l.x] = m;
+    workgroupBarrier();
+    for (var w = RW / 2u; w > 0u; w = w / 2u) {
+        if (l.x < w) {
+            red[l.x] = max(red[l.x], red[l.x + w]);
+        }
+        workgroupBarrier();
+    }
+    if (l.x == 0u) {
+        sc[9] = red[0];
+    }
+}
+
 // One workgroup: a = Σ part[o0 .. o0 + o1), b = Σ part[o2 .. o2 + o3); r0 the cell area.
 // Mode (flags): 0 the kinetic energy (sc[7] = ½(a + b)·dA); 1 a stage's book (sc[id] += sc[7] −
 // now, sc[7] = now); 2 the smoke before advection (sc[8] = a·dA); 3 after it (sc[6] += a·dA −

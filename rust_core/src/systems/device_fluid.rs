@@ -13,7 +13,7 @@ use crate::error::{invalid, Failure, Result};
 use crate::grids::fluid::{FluidConfig, StableFluid};
 use crate::grids::poisson::{Pcg, Solve, Stencil};
 use crate::vector::Real;
-use physcore_gpu::fluid::{self as df, Fluid};
+use physcore_gpu::fluid::{self as df, Fluid, Parts};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
@@ -46,12 +46,61 @@ fn operators(p: &Pcg) -> Result<Vec<df::Operator>> {
     p.stencils().map(operator).collect()
 }
 
+/// A copy of the host's state for the device (asked of the allocator: the copies are the grid's
+/// size), refusing by name a value past f32's range on an f32 device (it would turn inf there
+/// silently, or read as a divergence).
+fn state_of(host: &mut StableFluid, precision: Precision) -> Result<df::State> {
+    let (books, ..) = host.book_values();
+    let steps = StableFluid::steps(host);
+    let [u, v, d, t, p, tr] = host.state_arrays();
+    let named = [("u", &*u), ("v", &*v), ("density", &*d), ("temperature", &*t), ("pressure", &*p), ("tracers", &*tr)];
+    if precision == Precision::F32 {
+        for (name, a) in named {
+            if let Some(i) = a.iter().position(|x| x.abs() > f32::MAX as Real) {
+                return Err(invalid(
+                    name,
+                    format!("entry {i} is past f32's range (precision=\"f32\" on the device; use \"f64\")"),
+                ));
+            }
+        }
+    }
+    let n: usize = named.iter().map(|(_, a)| a.len()).sum();
+    let need = crate::alloc::Need::new("step", 8 * n as u128, "a copy of the fluid's state for the device");
+    Ok(df::State {
+        u: need.copy(u)?,
+        v: need.copy(v)?,
+        density: need.copy(d)?,
+        temperature: need.copy(t)?,
+        pressure: need.copy(p)?,
+        books,
+        tracers: need.copy(tr)?,
+        steps,
+    })
+}
+
 impl Tended {
     /// The device's state and books made the host's, with `steps` more steps.
     fn pull(&mut self, steps: u64) -> Result<()> {
-        let s = self.dev.read_state()?;
+        self.pull_parts(Parts::ALL, steps)
+    }
+
+    /// `pull` of the books and the arrays of `parts` only (the host's others left as they were:
+    /// for what reads only those, e.g. a frame's smoke).
+    fn pull_parts(&mut self, parts: Parts, steps: u64) -> Result<()> {
+        let s = self.dev.read_parts(parts)?;
         let [u, v, d, t, p, tr] = self.host.state_arrays();
-        (*u, *v, *d, *t, *p, *tr) = (s.u, s.v, s.density, s.temperature, s.pressure, s.tracers);
+        if parts.velocity {
+            (*u, *v) = (s.u, s.v);
+        }
+        if parts.smoke {
+            (*d, *t) = (s.density, s.temperature);
+        }
+        if parts.pressure {
+            *p = s.pressure;
+        }
+        if parts.tracers {
+            *tr = s.tracers;
+        }
         let so = self.dev.solves();
         let pressure = Solve {
             iterations: so.pressure_iterations,
@@ -64,32 +113,7 @@ impl Tended {
 
     /// The host's state and books made the device's. Refuses a value an f32 device cannot hold.
     fn push(&mut self) -> Result<()> {
-        let precision = self.dev.precision();
-        let (books, ..) = self.host.book_values();
-        let steps = self.host.steps();
-        let [u, v, d, t, p, tr] = self.host.state_arrays();
-        if precision == Precision::F32 {
-            for (name, a) in
-                [("u", &u), ("v", &v), ("density", &d), ("temperature", &t), ("pressure", &p), ("tracers", &tr)]
-            {
-                if let Some(i) = a.iter().position(|x| x.abs() > f32::MAX as Real) {
-                    return Err(invalid(
-                        name,
-                        format!("entry {i} is past f32's range (precision=\"f32\" on the device; use \"f64\")"),
-                    ));
-                }
-            }
-        }
-        let state = df::State {
-            u: u.clone(),
-            v: v.clone(),
-            density: d.clone(),
-            temperature: t.clone(),
-            pressure: p.clone(),
-            books,
-            tracers: tr.clone(),
-            steps,
-        };
+        let state = state_of(&mut self.host, self.dev.precision())?;
         Ok(self.dev.set_state(&state)?)
     }
 }
@@ -161,24 +185,9 @@ impl DeviceFluid {
                 },
             }
         };
-        let (books, ..) = host.book_values();
-        let steps = host.steps();
-        let [u, v, d, t, p, tr] = host.state_arrays();
-        let state = df::State {
-            u: u.clone(),
-            v: v.clone(),
-            density: d.clone(),
-            temperature: t.clone(),
-            pressure: p.clone(),
-            books,
-            tracers: tr.clone(),
-            steps,
-        };
+        let state = state_of(&mut host, precision)?;
         let dev = Fluid::new(gpu, precision, model, &state)?;
-        let mut tended = Tended { host, dev };
-        // The f32 range check, and the device's state as the host holds it.
-        tended.push()?;
-        Ok(Self { name, cells: nx * ny, t: Mutex::new(tended) })
+        Ok(Self { name, cells: nx * ny, t: Mutex::new(Tended { host, dev }) })
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Tended> {
@@ -237,26 +246,26 @@ impl System for DeviceFluid {
             )
         })
     }
-    /// The CPU system's limit from the velocity read back.
+    /// The CPU system's limit from the fastest face, found on the device (one value read back).
     fn auto_dt(&self) -> Option<Real> {
         let mut g = self.lock();
-        g.pull(0).ok()?;
-        g.host.auto_dt()
+        let umax = g.dev.fastest().ok()?;
+        g.host.limit_at(umax)
     }
     fn suggest_dt(&self) -> Option<Real> {
         self.auto_dt().map(|dt| 0.5 * dt)
     }
-    /// The CPU system's books from the fields read back (NaN if the device cannot be read).
+    /// The CPU system's books from the velocity read back (NaN if the device cannot be read).
     fn energy(&self) -> EnergyReport {
         let mut g = self.lock();
-        match g.pull(0) {
+        match g.pull_parts(Parts { velocity: true, ..Parts::NONE }, 0) {
             Ok(()) => g.host.energy(),
             Err(_) => EnergyReport { kinetic: Real::NAN, ..Default::default() },
         }
     }
     fn books(&self) -> Vec<(String, Real)> {
         let mut g = self.lock();
-        match g.pull(0) {
+        match g.pull_parts(Parts { smoke: true, ..Parts::NONE }, 0) {
             Ok(()) => g.host.books(),
             Err(_) => Vec::new(),
         }
@@ -267,9 +276,17 @@ impl System for DeviceFluid {
         g.host.set_field(name, values)?;
         g.push()
     }
+    /// The fields from the arrays they need, read back (a frame of smoke reads the smoke).
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
+        let has = |set: &[&str]| names.iter().any(|n| set.contains(n));
+        let parts = Parts {
+            velocity: has(&["u", "v", "speed", "vorticity", "divergence"]),
+            smoke: has(&["density", "temperature"]),
+            pressure: has(&["pressure"]),
+            tracers: has(&["tracers"]),
+        };
         let mut g = self.lock();
-        g.pull(0)?;
+        g.pull_parts(parts, 0)?;
         g.host.fields(names)
     }
     fn snapshot(&self) -> Result<Snapshot> {
@@ -374,6 +391,10 @@ mod tests {
             cpu.step(dt, &stop).unwrap();
         }
         dev.steps(steps, dt, &stop).unwrap();
+        // The step's limit from the fastest face found on the device.
+        let (ta, tb) = (cpu.auto_dt().unwrap(), dev.auto_dt().unwrap());
+        let tol = if precision == "f64" { 1e-12 } else { 1e-5 };
+        assert!((ta - tb).abs() <= tol * ta, "auto_dt {ta} on the CPU, {tb} on the device");
         let names = ["u", "v", "density", "temperature", "pressure", "tracers"];
         let (a, b) = (cpu.fields(&names).unwrap(), dev.fields(&names).unwrap());
         let mut errs = [0.0; 6];

@@ -705,6 +705,21 @@ impl StableFluid {
         self.s.steps += steps;
     }
 
+    /// `auto_dt` for a largest face speed `umax` (m/s): cfl·dx / max(umax, the drive speed).
+    /// The device path (`systems::device_fluid`) finds umax on the device.
+    pub(crate) fn limit_at(&self, umax: Real) -> Option<Real> {
+        let c = &self.cfg;
+        let mut drive = c.lid.unwrap_or(0.0).abs().max(c.inflow.unwrap_or(0.0));
+        for s in &c.sources {
+            drive = drive.max(s.velocity[0].hypot(s.velocity[1]));
+            let g = c.buoyancy_alpha.abs() * s.density.abs()
+                + c.buoyancy_beta.abs() * (s.temperature - c.ambient_temperature).abs();
+            drive = drive.max((g * self.ny as Real * self.dx).sqrt());
+        }
+        let speed = umax.max(drive);
+        (speed > 0.0 && speed.is_finite()).then(|| c.cfl * self.dx / speed)
+    }
+
     fn fill_ghosts_uv(&mut self) {
         let (nx, ny) = (self.nx, self.ny);
         let b = Bounds::of(&self.cfg, &self.inflow_u);
@@ -870,17 +885,7 @@ impl System for StableFluid {
             |a: &[Real]| par::reduce(a.len(), 0.0, Real::max, |r| a[r].iter().fold(0.0, |m: Real, x| m.max(x.abs())));
         // Ghost rows of u left out: beside a lid they hold 2U − u.
         let (nx, ny) = (self.nx, self.ny);
-        let umax = amax(&self.s.u[nx + 1..(nx + 1) * (ny + 1)]).max(amax(&self.s.v));
-        let c = &self.cfg;
-        let mut drive = c.lid.unwrap_or(0.0).abs().max(c.inflow.unwrap_or(0.0));
-        for s in &c.sources {
-            drive = drive.max(s.velocity[0].hypot(s.velocity[1]));
-            let g = c.buoyancy_alpha.abs() * s.density.abs()
-                + c.buoyancy_beta.abs() * (s.temperature - c.ambient_temperature).abs();
-            drive = drive.max((g * self.ny as Real * self.dx).sqrt());
-        }
-        let speed = umax.max(drive);
-        (speed > 0.0 && speed.is_finite()).then(|| c.cfl * self.dx / speed)
+        self.limit_at(amax(&self.s.u[nx + 1..(nx + 1) * (ny + 1)]).max(amax(&self.s.v)))
     }
     fn suggest_dt(&self) -> Option<Real> {
         self.auto_dt().map(|dt| 0.5 * dt)
