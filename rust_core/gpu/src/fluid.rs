@@ -379,6 +379,28 @@ pub struct Fluid {
     saved_solves: Solves,
 }
 
+/// A region of a slab for partial sums (`sums`, `maxima`): the buffer (0 U, 1 V, 2 C), the
+/// slab's first element, its row length, nodes `cols` of rows `rows` (ranges).
+#[derive(Clone, Copy, Debug)]
+struct Region {
+    buffer: u32,
+    slab: u64,
+    lw: usize,
+    cols: (usize, usize),
+    rows: (usize, usize),
+}
+
+impl Region {
+    /// u's faces in the interior rows (the kinetic energy's and `auto_dt`'s).
+    fn u(nx: usize, ny: usize) -> Self {
+        Region { buffer: 0, slab: 0, lw: nx + 1, cols: (0, nx + 1), rows: (1, ny + 1) }
+    }
+    /// v's faces without its ghost columns (the kinetic energy's).
+    fn v(nx: usize, ny: usize) -> Self {
+        Region { buffer: 1, slab: 0, lw: nx + 2, cols: (1, nx + 1), rows: (0, ny + 1) }
+    }
+}
+
 /// Workgroups along x and rows for a region `w` wide, `h` high.
 fn groups(w: usize, h: usize) -> (u32, u32) {
     ((w as u32).div_ceil(WG), h as u32)
@@ -482,7 +504,7 @@ impl Fluid {
         for s in &model.sources {
             let mut counts = [0u32; 3];
             let first = (ops_u.len() / 3) as u32;
-            for kind in 0..3 {
+            for (kind, count) in counts.iter_mut().enumerate() {
                 let mut by_loc: Vec<(u64, Vec<f64>)> = Vec::new();
                 let mut index = std::collections::HashMap::new();
                 for &(c, w) in &s.cells {
@@ -506,7 +528,7 @@ impl Fluid {
                 for (loc, ws) in by_loc {
                     ops_u.extend([loc as u32, ops_w.len() as u32, ws.len() as u32]);
                     ops_w.extend(ws);
-                    counts[kind] += 1;
+                    *count += 1;
                 }
             }
             source_groups.push((first, counts));
@@ -790,8 +812,8 @@ impl Fluid {
     pub fn fastest(&mut self) -> Result<f64> {
         let (nx, ny) = (self.model.nx, self.model.ny);
         let keep = self.blocks.len();
-        let (gu, cu) = self.sums(0, false, 0, nx + 1, (0, nx + 1), (1, ny + 1), 0);
-        let (gv, cv) = self.sums(1, false, 0, nx + 2, (0, nx + 2), (0, ny + 1), cu);
+        let (gu, cu) = self.sums(Region::u(nx, ny), false, 0);
+        let (gv, cv) = self.sums(Region { cols: (0, nx + 2), ..Region::v(nx, ny) }, false, cu);
         let mut b = block(nx, ny);
         b.ints[O] = 0;
         b.ints[O + 1] = cu + cv;
@@ -853,17 +875,10 @@ impl Fluid {
         out
     }
 
-    /// The partial sums of a region into part[at ..]: returns the dispatch and the count.
-    fn sums(
-        &mut self,
-        buffer: u32,
-        squared: bool,
-        slab: u64,
-        lw: usize,
-        cols: (usize, usize),
-        rows: (usize, usize),
-        at: u32,
-    ) -> (Go, u32) {
+    /// The partial sums of region `r` (of squares if `squared`) into part[at ..]: the dispatch
+    /// and the count.
+    fn sums(&mut self, r: Region, squared: bool, at: u32) -> (Go, u32) {
+        let Region { buffer, slab, lw, cols, rows } = r;
         let m = &self.model;
         let mut b = block(m.nx, m.ny);
         let (gx, gy) = groups(cols.1 - cols.0, rows.1 - rows.0);
@@ -878,8 +893,8 @@ impl Fluid {
     /// The kinetic energy's sums and the book `mode` (0: the start; 1: stage `id`'s loss).
     fn energy(&mut self, mode: u32, id: u32) -> Vec<Go> {
         let (nx, ny) = (self.model.nx, self.model.ny);
-        let (gu, cu) = self.sums(0, true, 0, nx + 1, (0, nx + 1), (1, ny + 1), 0);
-        let (gv, cv) = self.sums(1, true, 0, nx + 2, (1, nx + 1), (0, ny + 1), cu);
+        let (gu, cu) = self.sums(Region::u(nx, ny), true, 0);
+        let (gv, cv) = self.sums(Region::v(nx, ny), true, cu);
         let mut b = block(nx, ny);
         b.ints[O..O + 4].copy_from_slice(&[0, cu, cu, cv]);
         b.ints[FLAGS_I] = mode;
@@ -891,7 +906,8 @@ impl Fluid {
     /// The smoke's amount and book `mode` (2 before advection, 3 after).
     fn smoke_amount(&mut self, mode: u32) -> Vec<Go> {
         let (nx, ny) = (self.model.nx, self.model.ny);
-        let (g, c) = self.sums(2, false, DEN * self.cells, nx, (0, nx), (0, ny), 0);
+        let cells = Region { buffer: 2, slab: DEN * self.cells, lw: nx, cols: (0, nx), rows: (0, ny) };
+        let (g, c) = self.sums(cells, false, 0);
         let mut b = block(nx, ny);
         b.ints[O..O + 4].copy_from_slice(&[0, c, 0, 0]);
         b.ints[FLAGS_I] = mode;
@@ -949,17 +965,17 @@ impl Fluid {
         self.poisson(pipe, b, Groups::Direct(1, 1))
     }
 
-    /// A damped-Jacobi sweep at level l of solver s from `x` into `out` (from zero if `zero`),
-    /// its partial sums with b kept if `book`.
-    fn sweep(&mut self, s: usize, l: usize, scale: f64, x: u64, out: u64, zero: bool, book: bool) -> Go {
-        let mut b = self.level_block(s, l);
+    /// A damped-Jacobi sweep at level l of the pressure's V-cycle from `x` into `out` (from
+    /// zero if `zero`), its partial sums with b kept if `book`.
+    fn sweep(&mut self, l: usize, x: u64, out: u64, zero: bool, book: bool) -> Go {
+        let mut b = self.level_block(0, l);
         let a = self.cycle_level(l);
         b.ints[O + 4] = x as u32;
         b.ints[O + 5] = a.b as u32;
         b.ints[O + 6] = out as u32;
         b.ints[FLAGS_I] = zero as u32 | (book as u32) << 1;
-        b.reals[0] = scale;
-        let g = self.indirect(s, l);
+        b.reals[0] = 1.0;
+        let g = self.indirect(0, l);
         self.poisson("jacobi", b, g)
     }
 
@@ -995,14 +1011,14 @@ impl Fluid {
         if l + 1 == levels.len() {
             for k in 0..COARSE_SWEEPS {
                 let (from, to) = if k % 2 == 0 { (a.x, a.tmp) } else { (a.tmp, a.x) };
-                let g = self.sweep(0, l, 1.0, from, to, k == 0, book && k == COARSE_SWEEPS - 1);
+                let g = self.sweep(l, from, to, k == 0, book && k == COARSE_SWEEPS - 1);
                 out.push(g);
             }
             return;
         }
-        let g = self.sweep(0, l, 1.0, a.x, a.tmp, true, false);
+        let g = self.sweep(l, a.x, a.tmp, true, false);
         out.push(g);
-        let g = self.sweep(0, l, 1.0, a.tmp, a.x, false, false);
+        let g = self.sweep(l, a.tmp, a.x, false, false);
         out.push(g);
         let c = levels[l + 1];
         let mut b = self.level_block(0, l);
@@ -1023,9 +1039,9 @@ impl Fluid {
         let g = self.indirect(0, l);
         let p = self.poisson("prolong", b, g);
         out.push(p);
-        let g = self.sweep(0, l, 1.0, a.x, a.tmp, false, false);
+        let g = self.sweep(l, a.x, a.tmp, false, false);
         out.push(g);
-        let g = self.sweep(0, l, 1.0, a.tmp, a.x, false, book);
+        let g = self.sweep(l, a.tmp, a.x, false, book);
         out.push(g);
     }
 
