@@ -578,24 +578,9 @@ impl Fluid {
             &[Uniform { dynamic: true }, W, W, W, W, W],
             &CONTROL_KERNELS,
         );
+        let block = 16 * 4 + 8 * rb;
         let bind = |layout: &wgpu::BindGroupLayout, bufs: &[&wgpu::Buffer], label: &str| {
-            let entries: Vec<wgpu::BindGroupEntry> = bufs
-                .iter()
-                .enumerate()
-                .map(|(i, b)| wgpu::BindGroupEntry {
-                    binding: i as u32,
-                    resource: if i == 0 {
-                        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                            buffer: b,
-                            offset: 0,
-                            size: std::num::NonZeroU64::new(16 * 4 + 8 * rb),
-                        })
-                    } else {
-                        b.as_entire_binding()
-                    },
-                })
-                .collect();
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(label), layout, entries: &entries })
+            gpu.bind_with_params(label, layout, bufs, block)
         };
         let fluid_bind = bind(
             &fl,
@@ -684,9 +669,6 @@ impl Fluid {
 impl Fluid {
     pub fn precision(&self) -> Precision {
         self.precision
-    }
-    pub fn gpu(&self) -> &Arc<Gpu> {
-        &self.gpu
     }
     pub fn model(&self) -> &Model {
         &self.model

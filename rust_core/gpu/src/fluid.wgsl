@@ -619,10 +619,7 @@ fn sums(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation_i
         }
         s = select(x, x * x, (P.flags & 4u) != 0u);
     }
-    let t = wg_sum(s, l.x, WG);
-    if (l.x == 0u) {
-        part[P.o4 + slot(wid)] = t;
-    }
+    put_part(P.o4 + slot(wid), s, l.x);
 }
 
 // Partial maxima of |x| over a region, as `sums` (the same block), into part[o4 + slot].
@@ -639,17 +636,26 @@ fn maxima(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation
             s = abs(V[k]);
         }
     }
-    red[l.x] = s;
+    let m = wg_max(s, l.x, WG);
+    if (l.x == 0u) {
+        part[P.o4 + slot(wid)] = m;
+    }
+}
+
+// The largest v over a workgroup of `n` threads (a power of two, at most RW), in a fixed tree
+// order (`wg_sum`'s with max).
+fn wg_max(v: real, lid: u32, n: u32) -> real {
+    red[lid] = v;
     workgroupBarrier();
-    for (var w = WG / 2u; w > 0u; w = w / 2u) {
-        if (l.x < w) {
-            red[l.x] = max(red[l.x], red[l.x + w]);
+    for (var w = n / 2u; w > 0u; w = w / 2u) {
+        if (lid < w) {
+            red[lid] = max(red[lid], red[lid + w]);
         }
         workgroupBarrier();
     }
-    if (l.x == 0u) {
-        part[P.o4 + slot(wid)] = red[0];
-    }
+    let s = red[0];
+    workgroupBarrier();
+    return s;
 }
 
 // One workgroup: sc[9] = the largest of part[o0 .. o0 + o1) (the fastest face, for the step's
@@ -660,16 +666,9 @@ fn fastest(@builtin(local_invocation_id) l: vec3<u32>) {
     for (var k = l.x; k < P.o1; k = k + RW) {
         m = max(m, part[P.o0 + k]);
     }
-    red[l.x] = m;
-    workgroupBarrier();
-    for (var w = RW / 2u; w > 0u; w = w / 2u) {
-        if (l.x < w) {
-            red[l.x] = max(red[l.x], red[l.x + w]);
-        }
-        workgroupBarrier();
-    }
+    let most = wg_max(m, l.x, RW);
     if (l.x == 0u) {
-        sc[9] = red[0];
+        sc[9] = most;
     }
 }
 

@@ -75,3 +75,11 @@ fn sum_parts(first: u32, count: u32, lid: u32) -> real {
 fn slot(wid: vec3<u32>) -> u32 {
     return wid.x + P.gx * wid.y;
 }
+
+// part[at] = the sum of s over the workgroup (of WG threads). Called in uniform control flow.
+fn put_part(at: u32, s: real, lid: u32) {
+    let t = wg_sum(s, lid, WG);
+    if (lid == 0u) {
+        part[at] = t;
+    }
+}

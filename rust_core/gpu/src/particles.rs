@@ -356,31 +356,16 @@ impl Particles {
         let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
         let (layout, pipes) = pipelines(&gpu, precision, forces.pairwise.is_some() || forces.coulomb.is_some());
-        let entries: Vec<wgpu::BindGroupEntry> = [
-            &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
-            &colliders, &live.hits, &charges,
-        ]
-        .iter()
-        .enumerate()
-        .map(|(i, b)| wgpu::BindGroupEntry {
-            binding: i as u32,
-            // The parameters: one block's worth, at the offset given when bound.
-            resource: if i == 0 {
-                wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: b,
-                    offset: 0,
-                    size: std::num::NonZeroU64::new(16 * precision.bytes() + 32),
-                })
-            } else {
-                b.as_entire_binding()
-            },
-        })
-        .collect();
-        let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("particles"),
-            layout: &layout,
-            entries: &entries,
-        });
+        // The parameters: one block's worth, at the offset given when bound.
+        let bind = gpu.bind_with_params(
+            "particles",
+            &layout,
+            &[
+                &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
+                &colliders, &live.hits, &charges,
+            ],
+            16 * precision.bytes() + 32,
+        );
         let mut p = Self {
             gpu,
             precision,

@@ -49,10 +49,7 @@ fn apply(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation_
         S[P.o6 + c] = o;
         s = o * S[P.o4 + c];
     }
-    let t = wg_sum(s, l.x, WG);
-    if (l.x == 0u) {
-        part[slot(wid)] = t;
-    }
+    put_part(slot(wid), s, l.x);
 }
 
 // out (o6) = b (o5) − A x (o4); partial sums of |out|².
@@ -66,10 +63,7 @@ fn residual(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocati
         S[P.o6 + c] = o;
         s = o * o;
     }
-    let t = wg_sum(s, l.x, WG);
-    if (l.x == 0u) {
-        part[slot(wid)] = t;
-    }
+    put_part(slot(wid), s, l.x);
 }
 
 // |b|² partial sums (b at o5).
@@ -81,10 +75,7 @@ fn norm(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation_i
         let b = S[P.o5 + at(g.x, g.y)];
         s = b * b;
     }
-    let t = wg_sum(s, l.x, WG);
-    if (l.x == 0u) {
-        part[slot(wid)] = t;
-    }
+    put_part(slot(wid), s, l.x);
 }
 
 // One damped-Jacobi sweep from x (o4) into out (o6) for b (o5): out = x + ω D⁻¹ (b − A x), or
@@ -106,10 +97,7 @@ fn jacobi(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation
         s = o * b;
     }
     if ((P.flags & 2u) != 0u) {
-        let t = wg_sum(s, l.x, WG);
-        if (l.x == 0u) {
-            part[slot(wid)] = t;
-        }
+        put_part(slot(wid), s, l.x);
     }
 }
 
@@ -201,15 +189,9 @@ fn update(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocation
             rz = z * r;
         }
     }
-    let t = wg_sum(rr, l.x, WG);
-    if (l.x == 0u) {
-        part[slot(wid)] = t;
-    }
+    put_part(slot(wid), rr, l.x);
     if ((P.flags & 1u) != 0u) {
-        let u = wg_sum(rz, l.x, WG);
-        if (l.x == 0u) {
-            part[P.o7 + slot(wid)] = u;
-        }
+        put_part(P.o7 + slot(wid), rz, l.x);
     }
 }
 
@@ -226,10 +208,7 @@ fn diagonal(@builtin(global_invocation_id) g: vec3<u32>, @builtin(local_invocati
         S[P.o5 + c] = z;
         s = z * r;
     }
-    let t = wg_sum(s, l.x, WG);
-    if (l.x == 0u) {
-        part[slot(wid)] = t;
-    }
+    put_part(slot(wid), s, l.x);
 }
 
 // p (o2) = z (o5) + β p, β at sc[o0]; with flags bit 0, p = z (the first direction).
