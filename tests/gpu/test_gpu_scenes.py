@@ -750,6 +750,15 @@ def test_a_stable_fluid_on_the_gpu_flows_as_on_the_cpu(tmp_path) -> None:
             assert abs(fg.books()[k] - fc.books()[k]) <= tol * fc.books()["smoke_amount"], (precision, k)
         if precision == "f64":
             assert fg.books()["pressure_iterations"] == fc.books()["pressure_iterations"]
+        # A file saved on the CPU continues on the device as the CPU run does.
+        cpu.save(tmp_path / "smoke_cpu.npz")
+        there = pc.Scene.load(tmp_path / "smoke_cpu.npz", device=DEVICE)
+        there.step(10)
+        here = pickle.loads(pickle.dumps(cpu))
+        here.step(10)
+        assert there.device == DEVICE
+        scale = np.abs(here.grids[0].field("density")).max()
+        assert np.abs(there.grids[0].field("density") - here.grids[0].field("density")).max() <= 1e-4 * scale
         # A file saved on the device continues on the CPU as the CPU run does.
         gpu.save(tmp_path / f"smoke_{precision}.npz")
         back = pc.Scene.load(tmp_path / f"smoke_{precision}.npz", device="cpu")
