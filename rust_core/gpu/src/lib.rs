@@ -16,6 +16,7 @@ use std::fmt;
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
+pub mod cells;
 pub mod fluid;
 pub mod gray_scott;
 mod grid;
