@@ -35,11 +35,19 @@ impl Operator {
     fn len(&self) -> usize {
         (self.nx + 2) * (self.ny + 2)
     }
-    /// The scaled diagonal and its inverse, as the CPU's `set_scale` makes them.
-    fn diagonal(&self, s: f64) -> (Vec<f64>, Vec<f64>) {
-        let d: Vec<f64> = self.d0.iter().zip(&self.count).map(|(d0, c)| d0 + s * c).collect();
-        let inv = d.iter().map(|d| 1.0 / d).collect();
-        (d, inv)
+    /// The scaled diagonal and its inverse, as the CPU's `set_scale` makes them (asked of the
+    /// allocator: they are the grid's size).
+    fn diagonal(&self, s: f64) -> Result<(Vec<f64>, Vec<f64>)> {
+        let n = self.d0.len();
+        let mut d = Vec::new();
+        let mut inv = Vec::new();
+        d.try_reserve_exact(n).and_then(|_| inv.try_reserve_exact(n)).map_err(|_| GpuError::OutOfMemory {
+            what: "the fluid solver's diagonal (host)".into(),
+            bytes: 16 * n as u64,
+        })?;
+        d.extend(self.d0.iter().zip(&self.count).map(|(d0, c)| d0 + s * c));
+        inv.extend(d.iter().map(|d| 1.0 / d));
+        Ok((d, inv))
     }
 }
 
@@ -612,7 +620,7 @@ impl Fluid {
         gpu.queue.write_buffer(&ind, 0, bytemuck::cast_slice(&ind_init));
         for (l, op) in model.pressure.iter().enumerate() {
             let a = solvers[0].levels[l];
-            let (d, inv) = op.diagonal(1.0);
+            let (d, inv) = op.diagonal(1.0)?;
             for (off, data) in [(a.we, &op.we), (a.wn, &op.wn), (a.diag, &d), (a.inv, &inv)] {
                 gpu.upload_at(precision, &s_buf, off * rb, data);
             }
@@ -1293,7 +1301,7 @@ impl Fluid {
             let rb = self.rb();
             for (k, op) in vis.iter().enumerate() {
                 let a = self.solvers[k + 1].levels[0];
-                let (d, inv) = op.diagonal(s);
+                let (d, inv) = op.diagonal(s)?;
                 self.gpu.upload_at(self.precision, &self.s_buf, a.diag * rb, &d);
                 self.gpu.upload_at(self.precision, &self.s_buf, a.inv * rb, &inv);
             }
