@@ -676,6 +676,20 @@ def test_values_past_f32s_range_are_refused_by_name_on_an_f32_device() -> None:
         w.u = u
     assert np.array_equal(w.field("u"), kept)  # nothing changed
     s.step(1)
+    # A stable fluid's smoke likewise.
+    s = pc.scenes.smoke(n=16, device=DEVICE)
+    (f,) = s.grids
+    f.density = np.full((16, 24), 1e39)
+    with pytest.raises(pc.InvalidInputError, match="^density: .*f32"):
+        s.step(1)
+    assert s.step_count == 0 and not s.session.sim.on_device
+    f.density = np.zeros((16, 24))
+    s.step(1)
+    kept = f.field("density")
+    with pytest.raises(pc.InvalidInputError, match="^density: .*f32"):
+        f.density = np.full((16, 24), 1e39)
+    assert np.array_equal(f.field("density"), kept)
+    s.step(1)
 
 
 def test_many_live_scenes_share_the_device_and_each_steps_as_alone():
