@@ -346,7 +346,9 @@ struct Plan {
 pub struct Fluid {
     gpu: Arc<Gpu>,
     precision: Precision,
-    model: Model,
+    /// Shared, so that a plan (made again at every change of dt) reads it without copying its
+    /// grid-sized masks and stencils.
+    model: Arc<Model>,
     lu: u64,
     lv: u64,
     cells: u64,
@@ -635,7 +637,7 @@ impl Fluid {
         let mut f = Self {
             gpu,
             precision,
-            model,
+            model: Arc::new(model),
             lu,
             lv,
             cells,
@@ -1296,7 +1298,7 @@ impl Fluid {
         let g = self.energy(1, 2);
         add(&mut ops, g);
         // 5. Viscosity (backward Euler, per component).
-        if let Some(vis) = self.model.viscous.clone() {
+        if let Some(vis) = &m.viscous {
             let s = m.viscosity * dt / (dx * dx);
             let rb = self.rb();
             for (k, op) in vis.iter().enumerate() {

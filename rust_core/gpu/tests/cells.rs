@@ -7,19 +7,8 @@ use physcore_gpu::cells::{Cells, Grid};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::Arc;
 
-fn gpu() -> Option<Arc<Gpu>> {
-    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
-    match Gpu::open(which) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") {
-                panic!("PHYSCORE_GPU_REQUIRED=1 but no adapter: {e}");
-            }
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
-}
+mod common;
+use common::gpu;
 
 /// A deterministic value in [0, 1).
 fn unit(k: u64) -> f64 {

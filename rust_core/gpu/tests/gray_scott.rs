@@ -2,23 +2,11 @@
 //! and 3D, a grid of more than one workgroup row, blocks of 4, 8 and 16 rows that cross planes). Skips without an adapter unless
 //! `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
 use physcore_gpu::gray_scott::{GrayScott, Halt, Model};
-use physcore_gpu::{Gpu, Precision};
+use physcore_gpu::Precision;
 use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
-fn gpu() -> Option<Arc<Gpu>> {
-    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
-    match Gpu::open(which) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") {
-                panic!("PHYSCORE_GPU_REQUIRED=1 but no adapter: {e}");
-            }
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
-}
+mod common;
+use common::gpu;
 
 /// One forward Euler step on the host (Pearson's scheme), returning Σ reaction of u and v.
 fn host_step(m: &Model, u: &mut Vec<f64>, v: &mut Vec<f64>, dt: f64) -> [f64; 2] {

@@ -6,19 +6,8 @@ use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-fn gpu() -> Option<Arc<Gpu>> {
-    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
-    match Gpu::open(which) {
-        Ok(g) => Some(g),
-        Err(e) => {
-            if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") {
-                panic!("PHYSCORE_GPU_REQUIRED=1 but no adapter: {e}");
-            }
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
-}
+mod common;
+use common::gpu;
 
 /// A deterministic cloud: xorshift positions in the unit cube, small velocities.
 fn cloud(n: usize, dim: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {

@@ -79,14 +79,14 @@ fn state_of(host: &mut StableFluid, precision: Precision) -> Result<df::State> {
 }
 
 impl Tended {
-    /// The device's state and books made the host's, with `steps` more steps.
-    fn pull(&mut self, steps: u64) -> Result<()> {
-        self.pull_parts(Parts::ALL, steps)
+    /// The device's state and books made the host's.
+    fn pull(&mut self) -> Result<()> {
+        self.pull_parts(Parts::ALL)
     }
 
     /// `pull` of the books and the arrays of `parts` only (the host's others left as they were:
     /// for what reads only those, e.g. a frame's smoke).
-    fn pull_parts(&mut self, parts: Parts, steps: u64) -> Result<()> {
+    fn pull_parts(&mut self, parts: Parts) -> Result<()> {
         let s = self.dev.read_parts(parts)?;
         let [u, v, d, t, p, tr] = self.host.state_arrays();
         if parts.velocity {
@@ -107,7 +107,7 @@ impl Tended {
             residual: so.pressure_residual,
             converged: so.pressure_converged,
         };
-        self.host.set_book_values(s.books, pressure, so.viscosity_iterations, steps);
+        self.host.set_book_values(s.books, pressure, so.viscosity_iterations);
         Ok(())
     }
 
@@ -228,9 +228,9 @@ impl System for DeviceFluid {
             Ok(k) => *k,
             Err((k, _)) => *k,
         };
-        // The host's clock of steps (the fields come on the next pull).
-        let (b, p, vi) = g.host.book_values();
-        g.host.set_book_values(b, p, vi, done);
+        // The host's count of steps (the fields come on the next pull).
+        let steps = g.host.steps() + done;
+        g.host.set_steps(steps);
         drop(g);
         r.map(|_| ()).map_err(|(i, h)| {
             (
@@ -258,21 +258,21 @@ impl System for DeviceFluid {
     /// The CPU system's books from the velocity read back (NaN if the device cannot be read).
     fn energy(&self) -> EnergyReport {
         let mut g = self.lock();
-        match g.pull_parts(Parts { velocity: true, ..Parts::NONE }, 0) {
+        match g.pull_parts(Parts { velocity: true, ..Parts::NONE }) {
             Ok(()) => g.host.energy(),
             Err(_) => EnergyReport { kinetic: Real::NAN, ..Default::default() },
         }
     }
     fn books(&self) -> Vec<(String, Real)> {
         let mut g = self.lock();
-        match g.pull_parts(Parts { smoke: true, ..Parts::NONE }, 0) {
+        match g.pull_parts(Parts { smoke: true, ..Parts::NONE }) {
             Ok(()) => g.host.books(),
             Err(_) => Vec::new(),
         }
     }
     fn set_field(&mut self, name: &str, values: &[Real]) -> Result<()> {
         let mut g = self.lock();
-        g.pull(0)?;
+        g.pull()?;
         g.host.set_field(name, values)?;
         g.push()
     }
@@ -286,7 +286,7 @@ impl System for DeviceFluid {
             tracers: has(&["tracers"]),
         };
         let mut g = self.lock();
-        g.pull_parts(parts, 0)?;
+        g.pull_parts(parts)?;
         g.host.fields(names)
     }
     fn snapshot(&self) -> Result<Snapshot> {
@@ -298,17 +298,14 @@ impl System for DeviceFluid {
         let mut g = self.lock();
         let _ = g.dev.restore();
         if let Ok(m) = snapshot.downcast::<FluidMark>() {
-            let now = g.host.steps();
-            let (b, p, vi) = g.host.book_values();
             // Back to the checkpoint's count (the books come from the device on the next pull).
-            g.host.set_book_values(b, p, vi, 0);
-            g.host.set_steps(m.0.min(now));
+            g.host.set_steps(m.0);
         }
     }
     /// The CPU system's arrays: a file saved from the device loads on the CPU.
     fn save(&self) -> Result<Arrays> {
         let mut g = self.lock();
-        g.pull(0)?;
+        g.pull()?;
         g.host.save()
     }
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
@@ -329,6 +326,7 @@ mod tests {
     //! The device fluid against the CPU system (skipped where no adapter is found, unless
     //! PHYSCORE_GPU_REQUIRED=1; CI runs them on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
     use super::*;
+    use crate::grids::fluid::tests::disc;
     use crate::grids::fluid::{Advection, Projection, Source};
 
     fn gpu() -> Option<Arc<Gpu>> {
@@ -341,16 +339,6 @@ mod tests {
                 None
             }
         }
-    }
-
-    fn disc(shape: [usize; 2], centre: [Real; 2], r: Real) -> Vec<bool> {
-        let nx = shape[0];
-        (0..shape[0] * shape[1])
-            .map(|c| {
-                let (x, y) = ((c % nx) as Real + 0.5 - centre[0], (c / nx) as Real + 0.5 - centre[1]);
-                x * x + y * y <= r * r
-            })
-            .collect()
     }
 
     /// A plume: a hot, dense source, buoyancy, confinement and an obstacle (the CPU tests' own).

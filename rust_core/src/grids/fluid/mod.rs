@@ -663,7 +663,7 @@ impl StableFluid {
     pub fn steps(&self) -> u64 {
         self.s.steps
     }
-    /// For the device path: the step count at a checkpoint.
+    /// For the device path: the step count (the device's steps counted, or a checkpoint's).
     pub(crate) fn set_steps(&mut self, steps: u64) {
         self.s.steps = steps;
     }
@@ -694,15 +694,14 @@ impl StableFluid {
         ([b.injected, b.smoke_advection, l[0], l[1], l[2], l[3], l[4]], b.pressure, b.viscosity_iterations)
     }
 
-    /// The device path's books and `steps` more steps made the host's.
-    pub(crate) fn set_book_values(&mut self, v: [Real; 7], pressure: Solve, viscosity_iterations: usize, steps: u64) {
+    /// The device path's books made the host's.
+    pub(crate) fn set_book_values(&mut self, v: [Real; 7], pressure: Solve, viscosity_iterations: usize) {
         let b = &mut self.s.books;
         b.injected = v[0];
         b.smoke_advection = v[1];
         b.losses.copy_from_slice(&v[2..]);
         b.pressure = pressure;
         b.viscosity_iterations = viscosity_iterations;
-        self.s.steps += steps;
     }
 
     /// `auto_dt` for a largest face speed `umax` (m/s): cfl·dx / max(umax, the drive speed).
@@ -1060,4 +1059,4 @@ impl System for StableFluid {
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -19,7 +19,7 @@ fn noise(k: usize, salt: u64) -> Real {
     2.0 * unit(hash(k as u64 ^ hash(salt))) - 1.0
 }
 
-fn disc(shape: [usize; 2], centre: [Real; 2], r: Real) -> Vec<bool> {
+pub(crate) fn disc(shape: [usize; 2], centre: [Real; 2], r: Real) -> Vec<bool> {
     let (nx, ny) = (shape[0], shape[1]);
     (0..nx * ny)
         .map(|c| {
