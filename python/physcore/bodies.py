@@ -856,7 +856,10 @@ class Joints(_BodiesPart):
         ``"revolute"`` (a hinge: the bodies share the anchor point and turn freely about it;
         in 3D about ``axis``), ``"fixed"`` (welded as they are now), ``"prismatic"`` (a slider
         along ``axis``, no turning), ``"spherical"`` (3D: a ball-and-socket, turning freely
-        about every axis), ``"rope"`` (the anchors at most ``length`` apart; slack below it).
+        about every axis; a body held only by one to the world is a heavy top, stepped about
+        its pivot by a second-order symplectic splitting while it touches nothing: Dullweber,
+        Leimkuhler and McLachlan, J. Chem. Phys. 107 (1997) 5840; see the bodies guide),
+        ``"rope"`` (the anchors at most ``length`` apart; slack below it).
     a, b : BodyRef or None
         The bodies joined, as ``group[i]`` or ``group[i:j]`` (equal counts M); ``None`` for one
         of them: the fixed world (a pendulum's pivot).

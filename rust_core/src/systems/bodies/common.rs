@@ -1244,12 +1244,14 @@ impl System for Bodies {
         self.params.dt = dt;
         let r = &mut self.d.r;
         gyroscopic_step(&mut r.bodies, dt);
+        let tops = tops(r, self.gravity, dt);
         let substep = dt / self.params.num_solver_iterations as Real;
         (self.impacts.gravity, self.impacts.dt, self.impacts.substep) = (self.gravity, dt, substep);
         // Faster than gravity gives in two steps: a body resting on another stays below it.
         hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
         self.rapier_step(stop)?;
         let r = &mut self.d.r;
+        place_tops(r, tops);
         // The list is emptied in place: its buffer serves every step's impacts.
         let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());
         restitution(r, found, substep);

@@ -309,5 +309,11 @@ fn own_gyroscopic(b: RigidBodyBuilder) -> RigidBodyBuilder {
 }
 fn joined_gyroscopic(_bodies: &mut RigidBodySet, _h: RigidBodyHandle) {}
 fn gyroscopic_step(_bodies: &mut RigidBodySet, _dt: Real) {}
+/// No tops in the plane: a body on a joint turns about one axis, as rapier steps it.
+struct Top;
+fn tops(_r: &Rapier, _gravity: Vector, _dt: Real) -> Vec<Top> {
+    Vec::new()
+}
+fn place_tops(_r: &mut Rapier, _tops: Vec<Top>) {}
 
 include!("common.rs");
