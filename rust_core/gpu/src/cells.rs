@@ -43,7 +43,7 @@ pub struct Cells {
 }
 
 /// A 1D dispatch of `n` threads, folded into y past 65,535 workgroups (the shader's `index`).
-fn spread(n: usize) -> (u32, u32) {
+pub(crate) fn spread(n: usize) -> (u32, u32) {
     let wgs = (n as u32).div_ceil(WG);
     (wgs.min(65_535), wgs.div_ceil(65_535).max(1))
 }

@@ -21,6 +21,7 @@ pub mod fluid;
 pub mod gray_scott;
 mod grid;
 pub mod particles;
+pub mod sph;
 #[doc(hidden)]
 pub use grid::set_threads_for_tests as set_grid_threads_for_tests;
 pub mod wave;

@@ -1,0 +1,535 @@
+//! Weakly compressible SPH (WCSPH) resident on the device: one fluid of equal-mass particles in a
+//! box, 2D or 3D, f32 or f64, a whole step on the device (issue "GPU fluids, grains and
+//! batches"). The formulas are the CPU's (`rust_core/src/sph`), written expression by expression
+//! in `sph.wgsl`:
+//!
+//! - Density by summation, ρ_i = σ_d Σ_j m W(|x_i − x_j|/h), self included.
+//! - Tait equation of state p = B[(ρ/ρ0)^γ − 1], B = ρ0 c0²/γ (Monaghan 1994; Becker & Teschner
+//!   2007, eq. 6), optionally clamped to p ≥ 0.
+//! - The symmetric pressure force with Monaghan (1992) artificial viscosity:
+//!   dv_i/dt = −Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) ∇_i W_ij + g,
+//!   Π_ij = −α c0 μ_ij / ρ̄_ij, μ_ij = h v_ij·x_ij / (r² + 0.01h²) if v_ij·x_ij < 0, else 0.
+//! - Kernels with support 2h: the cubic spline (Monaghan & Lattanzio 1985) and Wendland C2
+//!   (Wendland 1995, in the form of Dehnen & Aly 2012), as `sph::kernels` normalises them.
+//! - Semi-implicit Euler, v' = v + dt (f/m + g), x' = x + dt v' (the CPU's
+//!   `semi_implicit_euler`), then the box's walls as the CPU's "box" collider
+//!   (`constraints::Aabb`: projection onto the face, restitution e, Coulomb friction μ).
+//!
+//! A step is recorded as dispatches, with no read-back: the cell list (`cells.wgsl`'s kernels:
+//! a counting sort, each cell's particles then put in index order), the state copied into cell
+//! order, the density pass, then one pass of forces, update and walls that reads the cell-ordered
+//! copies and writes the state back in the caller's order. Every sum is gathered over the 3^d
+//! cells around a particle in a fixed order: no float atomics, and a run repeats bit for bit on
+//! one adapter. Against the CPU, f64 agrees to round-off, not bit for bit: the CPU's SIMD passes
+//! fuse some products (`mul_add`) and add their lanes in another order.
+//!
+//! Not here (the CPU has them): static or moving wall particles (Akinci et al. 2012), several
+//! fluids sharing one search, per-particle masses, the energy books (internal energy, viscous
+//! dissipation, collisions), the time step limit, checkpoints.
+use crate::cells::spread;
+use crate::particles::Halt;
+use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The smoothing kernel (support 2h).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kernel {
+    /// Cubic spline (M4), Monaghan & Lattanzio (1985): σ₂ = 10/(7π h²), σ₃ = 1/(π h³).
+    CubicSpline,
+    /// Wendland C2, support-2h form of Dehnen & Aly (2012): σ₂ = 7/(4π h²), σ₃ = 21/(16π h³).
+    WendlandC2,
+}
+
+impl Kernel {
+    /// The stable name ("cubic_spline", "wendland_c2").
+    pub fn name(self) -> &'static str {
+        match self {
+            Kernel::CubicSpline => "cubic_spline",
+            Kernel::WendlandC2 => "wendland_c2",
+        }
+    }
+
+    /// By name; `Unsupported` listing the valid names for any other.
+    pub fn by_name(s: &str) -> Result<Self> {
+        match s {
+            "cubic_spline" => Ok(Kernel::CubicSpline),
+            "wendland_c2" => Ok(Kernel::WendlandC2),
+            o => Err(GpuError::Unsupported(format!("unknown kernel {o:?}; valid: cubic_spline, wendland_c2"))),
+        }
+    }
+
+    /// The normalisation σ_d (1/m^dim) for dimension `dim` (2 or 3) and smoothing length `h` (m):
+    /// `sph::kernels`' `sigma`.
+    pub fn sigma(self, h: f64, dim: usize) -> f64 {
+        use std::f64::consts::PI;
+        match (self, dim) {
+            (Kernel::CubicSpline, 2) => 10.0 / (7.0 * PI * h * h),
+            (Kernel::CubicSpline, _) => 1.0 / (PI * h * h * h),
+            (Kernel::WendlandC2, 2) => 7.0 / (4.0 * PI * h * h),
+            (Kernel::WendlandC2, _) => 21.0 / (16.0 * PI * h * h * h),
+        }
+    }
+}
+
+/// The fluid and its box, SI units. Vectors have three components; z is ignored in 2D.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SphParams {
+    /// 2 or 3.
+    pub dim: usize,
+    /// Smoothing length h, m (support 2h).
+    pub h: f64,
+    /// Mass of each particle, kg.
+    pub mass: f64,
+    /// Rest density ρ0, kg/m^dim.
+    pub rho0: f64,
+    /// Speed of sound c0, m/s (sets the Tait stiffness B = ρ0 c0²/γ).
+    pub c0: f64,
+    /// Tait exponent γ, 1..=15 (water: 7).
+    pub gamma: u32,
+    /// Monaghan artificial viscosity α (≥ 0).
+    pub alpha: f64,
+    /// Clamp the pressure to p ≥ 0 (no tension at the free surface).
+    pub clamp: bool,
+    pub kernel: Kernel,
+    /// Uniform gravitational acceleration, m/s².
+    pub gravity: [f64; 3],
+    /// The box's lower corner, m.
+    pub lower: [f64; 3],
+    /// The box's upper corner, m (> lower on each axis).
+    pub upper: [f64; 3],
+    /// Restitution e of the box's walls, in [0, 1].
+    pub restitution: f64,
+    /// Coulomb friction μ of the box's walls, ≥ 0.
+    pub friction: f64,
+}
+
+impl Default for SphParams {
+    /// Water in a 1 m box, particles 1 cm apart in 2D (h = 1.3 cm, m = ρ0 (1 cm)²), sound at
+    /// 20 m/s, γ = 7, α = 0.1, clamped pressure, the cubic spline, g = 9.81 m/s² down y, walls
+    /// without bounce or friction.
+    fn default() -> Self {
+        Self {
+            dim: 2,
+            h: 0.013,
+            mass: 0.1,
+            rho0: 1000.0,
+            c0: 20.0,
+            gamma: 7,
+            alpha: 0.1,
+            clamp: true,
+            kernel: Kernel::CubicSpline,
+            gravity: [0.0, -9.81, 0.0],
+            lower: [0.0; 3],
+            upper: [1.0; 3],
+            restitution: 0.0,
+            friction: 0.0,
+        }
+    }
+}
+
+/// The error for argument `what`.
+fn invalid(what: &str, why: impl std::fmt::Display) -> GpuError {
+    GpuError::Unsupported(format!("{what}: {why}"))
+}
+
+fn positive(v: f64, what: &str) -> Result<()> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(what, format_args!("{v} must be finite and > 0")))
+    }
+}
+
+impl SphParams {
+    /// `Unsupported` naming the first field out of range.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.dim == 2 || self.dim == 3) {
+            return Err(invalid("dim", format_args!("{} must be 2 or 3", self.dim)));
+        }
+        positive(self.h, "h")?;
+        positive(self.mass, "mass")?;
+        positive(self.rho0, "rho0")?;
+        positive(self.c0, "c0")?;
+        if !(1..=15).contains(&self.gamma) {
+            return Err(invalid("gamma", format_args!("{} must be in 1..=15", self.gamma)));
+        }
+        if !(self.alpha.is_finite() && self.alpha >= 0.0) {
+            return Err(invalid("alpha", format_args!("{} must be finite and >= 0", self.alpha)));
+        }
+        if !self.gravity.iter().all(|g| g.is_finite()) {
+            return Err(invalid("gravity", "must be finite"));
+        }
+        for a in 0..self.dim {
+            let (lo, hi) = (self.lower[a], self.upper[a]);
+            if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+                return Err(invalid("upper", format_args!("axis {a}: [{lo}, {hi}] must be finite with upper > lower")));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.restitution) {
+            return Err(invalid("restitution", format_args!("{} is outside [0, 1]", self.restitution)));
+        }
+        if !(self.friction.is_finite() && self.friction >= 0.0) {
+            return Err(invalid("friction", format_args!("{} must be finite and >= 0", self.friction)));
+        }
+        Ok(())
+    }
+
+    /// Tait stiffness B = ρ0 c0²/γ, Pa.
+    pub fn b(&self) -> f64 {
+        self.rho0 * self.c0 * self.c0 / self.gamma as f64
+    }
+
+    /// Pressure (Pa) at density `rho` (kg/m^dim): B[(ρ/ρ0)^γ − 1], clamped to ≥ 0 if asked.
+    pub fn pressure(&self, rho: f64) -> f64 {
+        let p = self.b() * ((rho / self.rho0).powi(self.gamma as i32) - 1.0);
+        if self.clamp {
+            p.max(0.0)
+        } else {
+            p
+        }
+    }
+
+    /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (the support): the cell list
+    /// covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported` past 2^31 cells.
+    pub fn cells(&self) -> Result<[usize; 3]> {
+        let mut n = [1usize; 3];
+        let mut total = 1u64;
+        for (a, na) in n.iter_mut().enumerate().take(self.dim) {
+            let m = ((self.upper[a] - self.lower[a]) / (2.0 * self.h)).ceil().max(1.0);
+            if m >= 2f64.powi(31) {
+                return Err(invalid("h", format_args!("{m} cells of 2h along axis {a}: at most 2^31 cells")));
+            }
+            *na = m as usize;
+            total = total.saturating_mul(m as u64);
+        }
+        if total >= 1 << 31 {
+            return Err(invalid("h", format_args!("{total} cells of 2h in the box: at most 2^31")));
+        }
+        Ok(n)
+    }
+}
+
+/// The WCSPH fluid on one device: positions, velocities and densities in the caller's particle
+/// order, the cell list and the cell-ordered copies the passes read.
+pub struct Sph {
+    gpu: Arc<Gpu>,
+    precision: Precision,
+    p: SphParams,
+    n: usize,
+    cells: [usize; 3],
+    pos: wgpu::Buffer,
+    vel: wgpu::Buffer,
+    rho: wgpu::Buffer,
+    /// The first particle whose state stopped being finite (u32::MAX: none).
+    flag: wgpu::Buffer,
+    /// The parameter block of the SPH kernels (its dt written by each `step`).
+    params: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    cell_bind: wgpu::BindGroup,
+    sph_bind: wgpu::BindGroup,
+    /// cells.wgsl's clear, bin, scan, scatter, sort_cells.
+    cell_pipes: Vec<wgpu::ComputePipeline>,
+    /// sph.wgsl's gather, density, integrate.
+    sph_pipes: Vec<wgpu::ComputePipeline>,
+    /// Steps per submission (about 0.1 s each).
+    chunk: Chunk,
+    /// The cell list, the cell-ordered copies and the cell list's parameters (bound only).
+    _keep: Vec<wgpu::Buffer>,
+}
+
+/// Steps in one submission at most.
+const MAX_CHUNK: u64 = 1024;
+
+impl Sph {
+    /// Uploads `n` particles: `positions` and `velocities` flat (n·dim; m, m/s), every position
+    /// in the box.
+    ///
+    /// Errors: `Unsupported` for parameters out of range (`SphParams::validate`), ragged or
+    /// non-finite arrays, a position outside the box, more than 2^31 particles or cells, f64 on
+    /// an adapter without it, or buffers over its limits; `OutOfMemory` naming the buffer.
+    pub fn new(
+        gpu: Arc<Gpu>,
+        precision: Precision,
+        params: SphParams,
+        positions: &[f64],
+        velocities: &[f64],
+    ) -> Result<Self> {
+        params.validate()?;
+        gpu.check_precision(precision)?;
+        let d = params.dim;
+        if !positions.len().is_multiple_of(d) || velocities.len() != positions.len() {
+            return Err(invalid(
+                "positions",
+                format_args!(
+                    "{} positions and {} velocities: both must hold dim = {d} values per particle",
+                    positions.len(),
+                    velocities.len()
+                ),
+            ));
+        }
+        let n = positions.len() / d;
+        if n as u64 >= 1 << 31 {
+            return Err(invalid("positions", format_args!("{n} particles: at most 2^31")));
+        }
+        if let Some(k) = positions.iter().chain(velocities).position(|v| !v.is_finite()) {
+            let (what, k) = if k < positions.len() { ("positions", k) } else { ("velocities", k - positions.len()) };
+            return Err(invalid(what, format_args!("particle {} has a non-finite value", k / d)));
+        }
+        for (i, x) in positions.chunks_exact(d).enumerate() {
+            if (0..d).any(|a| !(x[a] >= params.lower[a] && x[a] <= params.upper[a])) {
+                return Err(invalid("positions", format_args!("particle {i} at {x:?} is outside the box")));
+            }
+        }
+        let cells = params.cells()?;
+        let ncells = cells.iter().product::<usize>() as u64;
+        let rb = precision.bytes();
+        let nn = n as u64;
+        use wgpu::BufferUsages as U;
+        let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+        let pos = gpu.buffer("SPH positions", nn * d as u64 * rb, st)?;
+        let vel = gpu.buffer("SPH velocities", nn * d as u64 * rb, st)?;
+        let rho = gpu.buffer("SPH densities", nn * rb, st)?;
+        let flag = gpu.buffer("SPH divergence flag", 16, st)?;
+        let cell_of = gpu.buffer("SPH cells", nn * 4, st)?;
+        let counts = gpu.buffer("SPH cell counts", ncells * 4, st)?;
+        let start = gpu.buffer("SPH cell starts", (ncells + 1) * 4, st)?;
+        let order = gpu.buffer("SPH cell order", nn * 4, st)?;
+        let found = gpu.buffer("SPH unused neighbour counts", 16, st)?;
+        let spos = gpu.buffer("SPH sorted positions", nn * d as u64 * rb, st)?;
+        let svel = gpu.buffer("SPH sorted velocities", nn * d as u64 * rb, st)?;
+        let srho = gpu.buffer("SPH sorted densities", nn * rb, st)?;
+        let spr = gpu.buffer("SPH sorted p/rho^2", nn * rb, st)?;
+        let cell_params = gpu.buffer("SPH cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
+        let params_buf = gpu.buffer("SPH parameters", 32 + 24 * rb, U::UNIFORM | U::COPY_DST)?;
+        let staging = gpu.buffer("SPH read-back", (nn * d as u64 * rb).max(16), U::MAP_READ | U::COPY_DST)?;
+        use Bind::{Read as R, ReadWrite as W, Uniform};
+        let uniform = Uniform { dynamic: false };
+        // cells.wgsl's build kernels with its layout; `neighbours` (its test's check) is not run.
+        let (cell_layout, cell_pipes) = gpu.kernels(
+            "cells.wgsl",
+            precision,
+            include_str!("cells.wgsl"),
+            &[uniform, R, W, W, W, W, W],
+            &["clear", "bin", "scan", "scatter", "sort_cells"],
+        );
+        let cell_bind = crate::grid::bind_group(
+            &gpu,
+            "SPH cell list",
+            &cell_layout,
+            &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
+        );
+        let (layout, sph_pipes) = gpu.kernels(
+            "sph.wgsl",
+            precision,
+            include_str!("sph.wgsl"),
+            &[uniform, W, W, W, R, R, R, W, W, W, W, W],
+            &["gather", "density", "integrate"],
+        );
+        let sph_bind = crate::grid::bind_group(
+            &gpu,
+            "SPH",
+            &layout,
+            &[&params_buf, &pos, &vel, &rho, &cell_of, &start, &order, &spos, &svel, &srho, &spr, &flag],
+        );
+        let (lo, cell) = (params.lower, 2.0 * params.h);
+        let grid = [n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32];
+        gpu.write_params(
+            precision,
+            &cell_params,
+            &[grid[0], grid[1], grid[2], grid[3], grid[4], 0, 0, 0],
+            &[lo[0], lo[1], lo[2], cell, cell],
+        );
+        if n > 0 {
+            gpu.upload(precision, &pos, positions);
+            gpu.upload(precision, &vel, velocities);
+        }
+        let s = Self {
+            gpu,
+            precision,
+            p: params,
+            n,
+            cells,
+            pos,
+            vel,
+            rho,
+            flag,
+            params: params_buf,
+            staging,
+            cell_bind,
+            sph_bind,
+            cell_pipes,
+            sph_pipes,
+            chunk: Chunk::new(MAX_CHUNK),
+            _keep: vec![cell_of, counts, start, order, found, spos, svel, srho, spr, cell_params],
+        };
+        s.write_params(0.0);
+        s.gpu.wait()?;
+        Ok(s)
+    }
+
+    pub fn len(&self) -> usize {
+        self.n
+    }
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+    pub fn precision(&self) -> Precision {
+        self.precision
+    }
+    pub fn params(&self) -> &SphParams {
+        &self.p
+    }
+    /// Cells of the cell list along x, y, z (each 2h wide).
+    pub fn cells(&self) -> [usize; 3] {
+        self.cells
+    }
+
+    /// The SPH kernels' parameter block, with time step `dt` (s); every constant derived from
+    /// the parameters in f64 on the host, as the CPU derives them.
+    fn write_params(&self, dt: f64) {
+        let p = &self.p;
+        let h = p.h;
+        let tiny = if self.precision == Precision::F32 { 1e-30 } else { 1e-300 };
+        let sigma = p.kernel.sigma(h, p.dim);
+        let c = self.cells;
+        let ints = [
+            self.n as u32,
+            p.dim as u32,
+            c[0] as u32,
+            c[1] as u32,
+            c[2] as u32,
+            (p.kernel == Kernel::WendlandC2) as u32,
+            p.gamma,
+            p.clamp as u32,
+        ];
+        let (g, lo, hi) = (p.gravity, p.lower, p.upper);
+        let reals = [
+            1.0 / h,
+            p.mass,
+            1.0 / p.mass,
+            sigma,
+            -sigma / (h * h),
+            2.0 * p.alpha * p.c0 * h,
+            0.01 * h * h,
+            4.0001 * h * h,
+            tiny,
+            p.b(),
+            1.0 / p.rho0,
+            dt,
+            g[0],
+            g[1],
+            g[2],
+            lo[0],
+            lo[1],
+            lo[2],
+            hi[0],
+            hi[1],
+            hi[2],
+            p.restitution,
+            p.friction,
+        ];
+        self.gpu.write_params(self.precision, &self.params, &ints, &reals);
+    }
+
+    /// Records the cell list's build and the density pass at the current positions.
+    fn record_density(&self, pass: &mut wgpu::ComputePass) {
+        let (n, m) = (spread(self.n), spread(self.cells.iter().product()));
+        pass.set_bind_group(0, &self.cell_bind, &[]);
+        for (pipe, (x, y)) in self.cell_pipes.iter().zip([m, n, (1, 1), n, m]) {
+            pass.set_pipeline(pipe);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+        pass.set_bind_group(0, &self.sph_bind, &[]);
+        for pipe in &self.sph_pipes[..2] {
+            pass.set_pipeline(pipe);
+            pass.dispatch_workgroups(n.0, n.1, 1);
+        }
+    }
+
+    /// Records `steps` whole steps into one command buffer.
+    fn record(&self, steps: u64) -> wgpu::CommandBuffer {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            let n = spread(self.n);
+            for _ in 0..steps {
+                self.record_density(&mut pass);
+                pass.set_pipeline(&self.sph_pipes[2]);
+                pass.dispatch_workgroups(n.0, n.1, 1);
+            }
+        }
+        enc.finish()
+    }
+
+    /// Runs `steps` steps of `dt` (s). Steps are recorded into submissions of up to ~0.1 s each
+    /// (nothing read back between the steps of one); the stop flag is read before each, and the
+    /// finiteness flag (one u32) after each. Returns the steps completed; on a halt, those before
+    /// the failing submission, with `Halt::Diverged` naming the first particle (the caller's
+    /// index) that stopped being finite, or `Halt::Failed` (`Unsupported` for a `dt` that is
+    /// not finite and > 0; a device error).
+    pub fn step(&mut self, steps: u64, dt: f64, stop: &AtomicBool) -> std::result::Result<u64, (u64, Halt)> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err((0, Halt::Failed(invalid("dt", format_args!("{dt} must be finite and > 0")))));
+        }
+        if self.n == 0 {
+            return Ok(steps);
+        }
+        self.write_params(dt);
+        let mut done = 0;
+        while done < steps {
+            if stop.load(Ordering::Relaxed) {
+                return Err((done, Halt::Stopped));
+            }
+            let k = self.chunk.next(steps - done);
+            self.gpu.queue.write_buffer(&self.flag, 0, bytemuck::cast_slice(&[u32::MAX]));
+            let t0 = Instant::now();
+            self.gpu.queue.submit([self.record(k)]);
+            let bad = self.gpu.read_u32(&self.flag, &self.staging).map_err(|e| (done, Halt::Failed(e)))?;
+            if bad != u32::MAX {
+                return Err((done, Halt::Diverged { particle: bad as usize }));
+            }
+            done += k;
+            self.chunk.adapt(k, t0.elapsed().as_secs_f64());
+        }
+        Ok(done)
+    }
+
+    /// Positions (m) and velocities (m/s), flat (n·dim), and densities (kg/m^dim, summed now at
+    /// these positions), in the caller's particle order, as f64.
+    pub fn read(&self) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+        if self.n == 0 {
+            return Ok((Vec::new(), Vec::new(), Vec::new()));
+        }
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.record_density(&mut pass);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
+        Ok((
+            self.gpu.read_reals(p, &self.pos, s, nd)?,
+            self.gpu.read_reals(p, &self.vel, s, nd)?,
+            self.gpu.read_reals(p, &self.rho, s, self.n)?,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_defaults_are_pinned_and_valid() {
+        let p = SphParams::default();
+        assert_eq!((p.dim, p.h, p.mass, p.rho0, p.c0, p.gamma, p.alpha), (2, 0.013, 0.1, 1000.0, 20.0, 7, 0.1));
+        assert!(p.clamp && p.kernel == Kernel::CubicSpline && p.gravity == [0.0, -9.81, 0.0]);
+        assert_eq!((p.lower, p.upper, p.restitution, p.friction), ([0.0; 3], [1.0; 3], 0.0, 0.0));
+        p.validate().unwrap();
+        assert_eq!(p.cells().unwrap(), [39, 39, 1]);
+        assert_eq!(Kernel::by_name("wendland_c2").unwrap(), Kernel::WendlandC2);
+        assert!(Kernel::by_name("gauss").unwrap_err().to_string().contains("cubic_spline, wendland_c2"));
+    }
+}

@@ -1,0 +1,318 @@
+// Weakly compressible SPH on the device (sph.rs): one step is the cell list (cells.wgsl, its own
+// bind group), then `gather`, `density` and `integrate` here. Threads run over the particles in
+// cell order (slot k of `order`), read the cell-ordered copies made by `gather`, and write the
+// state back in the caller's order, so `integrate` never reads what it writes. Every sum runs
+// over the 3^d cells around the particle's own (z, y, x, then each cell's particles by index):
+// no float atomics, the same bits on every run. The expressions follow the CPU's scalar kernels
+// (rust_core/src/sph/kernels.rs `w`, `g`), passes (passes.rs) and the semi-implicit Euler step
+// with the box collider (integrators/semi_implicit_euler.rs, constraints/aabb.rs) operation for
+// operation, but without fused multiply-adds. The host prepends the precision header.
+
+struct Params {
+    // Particles, dimension, cells along x, y, z (z = 1 in 2D), kernel (0 cubic spline, 1
+    // Wendland C2), Tait γ, whether p is clamped to ≥ 0.
+    n: u32,
+    dim: u32,
+    cx: u32,
+    cy: u32,
+    cz: u32,
+    kernel: u32,
+    gamma: u32,
+    clamp: u32,
+    // 1/h, particle mass and 1/mass, σ_d, −σ_d/h², 2 α c0 h, 0.01 h², 4.0001 h² (the pairs
+    // looked at), the r² floor, B, 1/ρ0, dt.
+    inv_h: real,
+    mass: real,
+    inv_mass: real,
+    sigma: real,
+    scale: real,
+    visc: real,
+    eps_h2: real,
+    reach: real,
+    tiny: real,
+    b: real,
+    inv_rho0: real,
+    dt: real,
+    // Gravity, the box's corners, restitution and friction of its walls.
+    gx: real,
+    gy: real,
+    gz: real,
+    lo_x: real,
+    lo_y: real,
+    lo_z: real,
+    hi_x: real,
+    hi_y: real,
+    hi_z: real,
+    restitution: real,
+    friction: real,
+};
+
+const WG: u32 = 64u;
+
+@group(0) @binding(0) var<uniform> P: Params;
+// The state in the caller's order: positions and velocities (`dim` per particle), densities.
+@group(0) @binding(1) var<storage, read_write> pos: array<real>;
+@group(0) @binding(2) var<storage, read_write> vel: array<real>;
+@group(0) @binding(3) var<storage, read_write> rho: array<real>;
+// The cell list (cells.wgsl): each particle's cell, each cell's first slot, the particles by cell.
+@group(0) @binding(4) var<storage, read> cell_of: array<u32>;
+@group(0) @binding(5) var<storage, read> start: array<u32>;
+@group(0) @binding(6) var<storage, read> order: array<u32>;
+// In cell order: positions, velocities, densities and p/ρ².
+@group(0) @binding(7) var<storage, read_write> spos: array<real>;
+@group(0) @binding(8) var<storage, read_write> svel: array<real>;
+@group(0) @binding(9) var<storage, read_write> srho: array<real>;
+@group(0) @binding(10) var<storage, read_write> spr: array<real>;
+// The first particle (caller's index) whose state stopped being finite (u32::MAX: none).
+@group(0) @binding(11) var<storage, read_write> flag: array<atomic<u32>>;
+
+fn index(g: vec3<u32>) -> u32 {
+    return g.x + 65535u * WG * g.y;
+}
+
+// The cell coordinates of a flat cell index (cells.wgsl's `flat`, inverted).
+fn coords(c: u32) -> vec3<u32> {
+    return vec3<u32>(c % P.cx, (c / P.cx) % P.cy, c / (P.cx * P.cy));
+}
+
+fn flat(c: vec3<u32>) -> u32 {
+    return c.x + P.cx * (c.y + P.cy * c.z);
+}
+
+// Cell-ordered position (or velocity) of slot s, z = 0 in 2D.
+fn at(a: u32, s: u32) -> vec3<real> {
+    let d = P.dim;
+    var r = vec3<real>(0.0, 0.0, 0.0);
+    for (var k = 0u; k < d; k = k + 1u) {
+        if (a == 0u) {
+            r[k] = spos[d * s + k];
+        } else {
+            r[k] = svel[d * s + k];
+        }
+    }
+    return r;
+}
+
+// w(q), zero for q ≥ 2: cubic spline ¼(2−q)₊³ − (1−q)₊³ (Monaghan & Lattanzio 1985), Wendland
+// C2 (1 − q/2)₊⁴ (2q + 1) (Wendland 1995; Dehnen & Aly 2012). kernels.rs `w`.
+fn w(q: real) -> real {
+    if (P.kernel == 0u) {
+        let a = max(2.0 - q, 0.0);
+        let b = max(1.0 - q, 0.0);
+        return 0.25 * a * a * a - b * b * b;
+    }
+    let t = max(1.0 - 0.5 * q, 0.0);
+    let t2 = t * t;
+    return t2 * t2 * (2.0 * q + 1.0);
+}
+
+// g(q) = w'(q)/q (finite at q = 0). kernels.rs `g`.
+fn g(q: real) -> real {
+    if (P.kernel == 0u) {
+        let a = max(2.0 - q, 0.0);
+        let inner = -3.0 + 2.25 * q;
+        let outer = -0.75 * a * a / max(q, 1.0);
+        return select(outer, inner, q < 1.0);
+    }
+    let t = max(1.0 - 0.5 * q, 0.0);
+    return -5.0 * t * t * t;
+}
+
+// s^γ: passes.rs `powi` (a fixed chain for γ = 7).
+fn powi(s: real) -> real {
+    if (P.gamma == 7u) {
+        let s2 = s * s;
+        let s4 = s2 * s2;
+        return s4 * s2 * s;
+    }
+    var r = s;
+    for (var k = 1u; k < P.gamma; k = k + 1u) {
+        r = r * s;
+    }
+    return r;
+}
+
+// The range of cells around coordinate c along an axis of m cells.
+fn lo_of(c: u32) -> u32 {
+    return max(c, 1u) - 1u;
+}
+
+fn hi_of(c: u32, m: u32) -> u32 {
+    return min(c + 1u, m - 1u);
+}
+
+// Slot k: the state of particle order[k], copied into cell order.
+@compute @workgroup_size(WG)
+fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = index(gid);
+    if (k >= P.n) {
+        return;
+    }
+    let d = P.dim;
+    let i = order[k];
+    for (var a = 0u; a < d; a = a + 1u) {
+        spos[d * k + a] = pos[d * i + a];
+        svel[d * k + a] = vel[d * i + a];
+    }
+}
+
+// Summation density ρ_k = σ Σ_j m w(|x_k − x_j|/h) (self included) and p_k/ρ_k² by the Tait
+// equation of state p = B((ρ/ρ0)^γ − 1), clamped to ≥ 0 if asked: passes.rs `Density`.
+@compute @workgroup_size(WG)
+fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = index(gid);
+    if (k >= P.n) {
+        return;
+    }
+    let d = P.dim;
+    let c = coords(cell_of[order[k]]);
+    let xi = at(0u, k);
+    var acc: real = 0.0;
+    var z0 = 0u;
+    var z1 = 0u;
+    if (d == 3u) {
+        z0 = lo_of(c.z);
+        z1 = hi_of(c.z, P.cz);
+    }
+    for (var z = z0; z <= z1; z = z + 1u) {
+        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
+            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
+                let cc = flat(vec3<u32>(x, y, z));
+                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
+                    let e = xi - at(0u, s);
+                    var r2 = e.x * e.x + e.y * e.y;
+                    if (d == 3u) {
+                        r2 = e.z * e.z + r2;
+                    }
+                    // Pairs past the support add exactly 0 (the margin: rounding of q near 2).
+                    if (r2 < P.reach) {
+                        acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * P.mass;
+                    }
+                }
+            }
+        }
+    }
+    let r = P.sigma * acc;
+    var p = P.b * (powi(r * P.inv_rho0) - 1.0);
+    if (P.clamp != 0u) {
+        p = max(p, 0.0);
+    }
+    srho[k] = r;
+    spr[k] = p / (r * r);
+    rho[order[k]] = r;
+}
+
+// Slot k: the pressure and viscosity acceleration (passes.rs `Forces`)
+//   a_i = −(σ/h²) Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) g(q) (x_i − x_j),
+//   Π_ij = 2 α c0 h max(−v_ij·x_ij, 0) / ((r² + 0.01h²)(ρ_i + ρ_j))   (Monaghan 1992),
+// then the semi-implicit Euler step v += dt (f/m + g), x += dt v (f = m a, as the CPU's force
+// term and integrator), then the box: a coordinate outside is put on the face it crossed; moving
+// outward, its velocity there becomes −e v_n and the tangential speed drops by μ (1 + e)|v_n|,
+// never past 0 (constraints/aabb.rs).
+@compute @workgroup_size(WG)
+fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = index(gid);
+    if (k >= P.n) {
+        return;
+    }
+    let d = P.dim;
+    let i = order[k];
+    let c = coords(cell_of[i]);
+    let xi = at(0u, k);
+    let vi = at(1u, k);
+    let rho_i = srho[k];
+    let pr_i = spr[k];
+    var acc = vec3<real>(0.0, 0.0, 0.0);
+    var z0 = 0u;
+    var z1 = 0u;
+    if (d == 3u) {
+        z0 = lo_of(c.z);
+        z1 = hi_of(c.z, P.cz);
+    }
+    for (var z = z0; z <= z1; z = z + 1u) {
+        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
+            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
+                let cc = flat(vec3<u32>(x, y, z));
+                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
+                    let e = xi - at(0u, s);
+                    let u = vi - at(1u, s);
+                    var r2 = e.x * e.x + e.y * e.y;
+                    var vr = u.x * e.x + u.y * e.y;
+                    if (d == 3u) {
+                        r2 = e.z * e.z + r2;
+                        vr = u.z * e.z + vr;
+                    }
+                    if (!(r2 < P.reach)) {
+                        continue;
+                    }
+                    let gq = g(sqrt(max(r2, P.tiny)) * P.inv_h);
+                    let approach = max(0.0 - vr, 0.0);
+                    let pi = P.visc * approach / ((r2 + P.eps_h2) * (rho_i + srho[s]));
+                    let cf = P.mass * gq * (pr_i + spr[s] + pi);
+                    for (var a = 0u; a < d; a = a + 1u) {
+                        acc[a] = cf * e[a] + acc[a];
+                    }
+                }
+            }
+        }
+    }
+    let grav = vec3<real>(P.gx, P.gy, P.gz);
+    let lo = vec3<real>(P.lo_x, P.lo_y, P.lo_z);
+    let hi = vec3<real>(P.hi_x, P.hi_y, P.hi_z);
+    var xn = xi;
+    var vn = vi;
+    var outside = false;
+    for (var a = 0u; a < d; a = a + 1u) {
+        let f = P.mass * (P.scale * acc[a]);
+        vn[a] = vi[a] + (f * P.inv_mass + grav[a]) * P.dt;
+        xn[a] = xi[a] + vn[a] * P.dt;
+        outside = outside || xn[a] < lo[a] || xn[a] > hi[a];
+    }
+    if (outside) {
+        let e = P.restitution;
+        let mu = P.friction;
+        for (var a = 0u; a < d; a = a + 1u) {
+            var out: real = 0.0;
+            if (xn[a] < lo[a]) {
+                xn[a] = lo[a];
+                out = -1.0;
+            } else if (xn[a] > hi[a]) {
+                xn[a] = hi[a];
+                out = 1.0;
+            } else {
+                continue;
+            }
+            let un = vn[a] * out;
+            if (un > 0.0) {
+                let dvn = (1.0 + e) * un;
+                vn[a] = vn[a] * -e;
+                if (mu > 0.0) {
+                    var vt2: real = 0.0;
+                    for (var b = 0u; b < d; b = b + 1u) {
+                        if (b != a) {
+                            vt2 = vt2 + vn[b] * vn[b];
+                        }
+                    }
+                    if (vt2 > 0.0) {
+                        let vt = sqrt(vt2);
+                        let sc = max(vt - mu * dvn, 0.0) / vt;
+                        for (var b = 0u; b < d; b = b + 1u) {
+                            if (b != a) {
+                                vn[b] = vn[b] * sc;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    var broken = false;
+    for (var a = 0u; a < d; a = a + 1u) {
+        pos[d * i + a] = xn[a];
+        vel[d * i + a] = vn[a];
+        broken = broken || bad(xn[a]) || bad(vn[a]);
+    }
+    if (broken) {
+        atomicMin(&flag[0], i);
+    }
+}
