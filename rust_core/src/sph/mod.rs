@@ -56,3 +56,5 @@ pub mod surface;
 pub use dfsph::{Dfsph, DfsphParams};
 pub use fluid::Sph;
 pub use params::{KernelKind, Precision, SphParams};
+#[cfg(all(test, feature = "gpu"))]
+mod device_tests;
