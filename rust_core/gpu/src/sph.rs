@@ -23,9 +23,14 @@
 //! one adapter. Against the CPU, f64 agrees to round-off, not bit for bit: the CPU's SIMD passes
 //! fuse some products (`mul_add`) and add their lanes in another order.
 //!
+//! The energy books (`Sph::books`) are the CPU's (`ParticleSystem::energy`): the state functions
+//! (kinetic energy, the fluid's internal energy Σ m u(ρ), gravity's potential −Σ m g·x) from a
+//! read-back, and the two accumulated books (viscous dissipation, what the walls removed) kept on
+//! the device per particle by the thread that owns it during `integrate`, summed on the host in
+//! the caller's order when read: no float atomics, nothing read back during a step.
+//!
 //! Not here (the CPU has them): static or moving wall particles (Akinci et al. 2012), several
-//! fluids sharing one search, per-particle masses, the energy books (internal energy, viscous
-//! dissipation, collisions), the time step limit, checkpoints.
+//! fluids sharing one search, per-particle masses, the time step limit, checkpoints.
 use crate::cells::spread;
 use crate::particles::Halt;
 use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
@@ -191,6 +196,22 @@ impl SphParams {
         }
     }
 
+    /// Specific internal energy u(ρ) = ∫_{ρ0}^{ρ} p/ρ'² dρ' (J/kg; zero at ρ0, ≥ 0): the CPU's
+    /// `sph::SphParams::internal_energy`, expression by expression.
+    pub fn internal_energy(&self, rho: f64) -> f64 {
+        let s = rho / self.rho0;
+        if self.clamp && s <= 1.0 {
+            return 0.0;
+        }
+        let g = self.gamma as f64;
+        let b = self.b() / self.rho0;
+        if self.gamma == 1 {
+            b * (s.ln() + 1.0 / s - 1.0)
+        } else {
+            b * (s.powi(self.gamma as i32 - 1) / (g - 1.0) + 1.0 / s - g / (g - 1.0))
+        }
+    }
+
     /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (the support): the cell list
     /// covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported` past 2^31 cells.
     pub fn cells(&self) -> Result<[usize; 3]> {
@@ -211,6 +232,30 @@ impl SphParams {
     }
 }
 
+/// The energy books of the fluid (J), as the CPU's `ParticleSystem::energy` reports them for a
+/// world of the "sph" term, a "gravity" term and the "box" collider.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SphBooks {
+    /// ½ Σ m |v|².
+    pub kinetic: f64,
+    /// The fluid's internal energy Σ m u(ρ), densities summed at the current positions (the sph
+    /// term's potential).
+    pub internal: f64,
+    /// Gravity's potential −Σ m g·x (zero at the origin, as the CPU's gravity term).
+    pub gravity: f64,
+    /// Energy the artificial viscosity dissipated so far (the sph term's dissipated book).
+    pub viscous: f64,
+    /// Energy the box's walls removed so far (the "collisions" book).
+    pub collisions: f64,
+}
+
+impl SphBooks {
+    /// Kinetic + potentials + dissipated: constant up to the integrator's error.
+    pub fn total(&self) -> f64 {
+        self.kinetic + (self.internal + self.gravity) + (self.viscous + self.collisions)
+    }
+}
+
 /// The WCSPH fluid on one device: positions, velocities and densities in the caller's particle
 /// order, the cell list and the cell-ordered copies the passes read.
 pub struct Sph {
@@ -224,6 +269,8 @@ pub struct Sph {
     rho: wgpu::Buffer,
     /// The first particle whose state stopped being finite (u32::MAX: none).
     flag: wgpu::Buffer,
+    /// Per particle (caller's order): the viscous books, then the walls' (2n reals, J).
+    books: wgpu::Buffer,
     /// The parameter block of the SPH kernels (its dt written by each `step`).
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
@@ -292,6 +339,7 @@ impl Sph {
         let vel = gpu.buffer("SPH velocities", nn * d as u64 * rb, st)?;
         let rho = gpu.buffer("SPH densities", nn * rb, st)?;
         let flag = gpu.buffer("SPH divergence flag", 16, st)?;
+        let books = gpu.buffer("SPH energy books", (2 * nn * rb).max(16), st)?;
         let cell_of = gpu.buffer("SPH cells", nn * 4, st)?;
         let counts = gpu.buffer("SPH cell counts", ncells * 4, st)?;
         let start = gpu.buffer("SPH cell starts", (ncells + 1) * 4, st)?;
@@ -324,14 +372,14 @@ impl Sph {
             "sph.wgsl",
             precision,
             include_str!("sph.wgsl"),
-            &[uniform, W, W, W, R, R, R, W, W, W, W, W],
+            &[uniform, W, W, W, R, R, R, W, W, W, W, W, W],
             &["gather", "density", "integrate"],
         );
         let sph_bind = crate::grid::bind_group(
             &gpu,
             "SPH",
             &layout,
-            &[&params_buf, &pos, &vel, &rho, &cell_of, &start, &order, &spos, &svel, &srho, &spr, &flag],
+            &[&params_buf, &pos, &vel, &rho, &cell_of, &start, &order, &spos, &svel, &srho, &spr, &flag, &books],
         );
         let (lo, cell) = (params.lower, 2.0 * params.h);
         let grid = [n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32];
@@ -355,6 +403,7 @@ impl Sph {
             vel,
             rho,
             flag,
+            books,
             params: params_buf,
             staging,
             cell_bind,
@@ -514,6 +563,35 @@ impl Sph {
             self.gpu.read_reals(p, &self.vel, s, nd)?,
             self.gpu.read_reals(p, &self.rho, s, self.n)?,
         ))
+    }
+
+    /// The energy books now (J; see `SphBooks`), as the CPU's `ParticleSystem::energy` defines
+    /// them: the state functions from a read-back of the state (densities summed now), each sum
+    /// in f64 in the caller's particle order; the viscous and wall books accumulated on the device
+    /// since `new`, per particle, summed here in the same order. Deterministic: the same bits
+    /// for the same run on one adapter.
+    pub fn books(&self) -> Result<SphBooks> {
+        if self.n == 0 {
+            return Ok(SphBooks::default());
+        }
+        let (x, v, rho) = self.read()?;
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.n)?;
+        let (p, d, m) = (&self.p, self.p.dim, self.p.mass);
+        let (mut kinetic, mut gravity, mut internal) = (0.0, 0.0, 0.0);
+        for i in 0..self.n {
+            let (xi, vi) = (&x[d * i..d * i + d], &v[d * i..d * i + d]);
+            kinetic += m * vi.iter().map(|u| u * u).sum::<f64>();
+            gravity -= m * (0..d).map(|a| p.gravity[a] * xi[a]).sum::<f64>();
+            internal += m * p.internal_energy(rho[i]);
+        }
+        let (viscous, walls) = per.split_at(self.n);
+        Ok(SphBooks {
+            kinetic: 0.5 * kinetic,
+            internal,
+            gravity,
+            viscous: viscous.iter().sum(),
+            collisions: walls.iter().sum(),
+        })
     }
 }
 

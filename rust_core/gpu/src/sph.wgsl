@@ -65,6 +65,9 @@ const WG: u32 = 64u;
 @group(0) @binding(10) var<storage, read_write> spr: array<real>;
 // The first particle (caller's index) whose state stopped being finite (u32::MAX: none).
 @group(0) @binding(11) var<storage, read_write> flag: array<atomic<u32>>;
+// The energy books of each particle (caller's order), J: [0, n) the viscous dissipation,
+// [n, 2n) what the box's walls removed. Each written only by the thread that owns the particle.
+@group(0) @binding(12) var<storage, read_write> books: array<real>;
 
 fn index(g: vec3<u32>) -> u32 {
     return g.x + 65535u * WG * g.y;
@@ -209,6 +212,10 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
 // term and integrator), then the box: a coordinate outside is put on the face it crossed; moving
 // outward, its velocity there becomes −e v_n and the tangential speed drops by μ (1 + e)|v_n|,
 // never past 0 (constraints/aabb.rs).
+// The books, as the CPU keeps them: the viscous power at the step's start (the state the forces
+// see), ½ m_i (σ/h²) Σ_j m g(q) Π_ij v_ij·x_ij ≥ 0 (passes.rs `Forces`, POWER), times dt
+// (semi_implicit_euler.rs `book_power(dt)`); a particle the walls move books
+// (KE before − KE after) + F·(x_after − x_before), F the step's SPH force plus m g (aabb.rs).
 @compute @workgroup_size(WG)
 fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let k = index(gid);
@@ -223,6 +230,7 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let rho_i = srho[k];
     let pr_i = spr[k];
     var acc = vec3<real>(0.0, 0.0, 0.0);
+    var pw: real = 0.0;
     var z0 = 0u;
     var z1 = 0u;
     if (d == 3u) {
@@ -248,10 +256,12 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let gq = g(sqrt(max(r2, P.tiny)) * P.inv_h);
                     let approach = max(0.0 - vr, 0.0);
                     let pi = P.visc * approach / ((r2 + P.eps_h2) * (rho_i + srho[s]));
-                    let cf = P.mass * gq * (pr_i + spr[s] + pi);
+                    let mg = P.mass * gq;
+                    let cf = mg * (pr_i + spr[s] + pi);
                     for (var a = 0u; a < d; a = a + 1u) {
                         acc[a] = cf * e[a] + acc[a];
                     }
+                    pw = (mg * pi) * vr + pw;
                 }
             }
         }
@@ -261,14 +271,19 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let hi = vec3<real>(P.hi_x, P.hi_y, P.hi_z);
     var xn = xi;
     var vn = vi;
+    var fs = vec3<real>(0.0, 0.0, 0.0);
     var outside = false;
     for (var a = 0u; a < d; a = a + 1u) {
         let f = P.mass * (P.scale * acc[a]);
+        fs[a] = f;
         vn[a] = vi[a] + (f * P.inv_mass + grav[a]) * P.dt;
         xn[a] = xi[a] + vn[a] * P.dt;
         outside = outside || xn[a] < lo[a] || xn[a] > hi[a];
     }
+    books[i] = books[i] + (0.5 * P.mass * (0.0 - P.scale) * pw) * P.dt;
     if (outside) {
+        let x0 = xn;
+        let v0 = vn;
         let e = P.restitution;
         let mu = P.friction;
         for (var a = 0u; a < d; a = a + 1u) {
@@ -305,6 +320,16 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
         }
+        var ke0: real = 0.0;
+        var ke1: real = 0.0;
+        var work: real = 0.0;
+        for (var a = 0u; a < d; a = a + 1u) {
+            ke0 = ke0 + v0[a] * v0[a];
+            ke1 = ke1 + vn[a] * vn[a];
+            work = work + (fs[a] + grav[a] * P.mass) * (xn[a] - x0[a]);
+        }
+        let du = 0.0 - work;
+        books[P.n + i] = books[P.n + i] + ((0.5 * P.mass * ke0 - 0.5 * P.mass * ke1) - du);
     }
     var broken = false;
     for (var a = 0u; a < d; a = a + 1u) {

@@ -3,10 +3,12 @@
 //! thrown at the box's corner under gravity, 2D and 3D, both kernels, γ = 7 (the shader's fixed
 //! chain) and 3 and 1 (its loop), clamped and unclamped pressure, walls with restitution and
 //! friction; f64 and f32; two runs repeat bit for bit; the summed density of a lattice at rest
-//! is its kernel's lattice sum; a divergence halts naming a particle; bad input is refused.
+//! is its kernel's lattice sum; a divergence halts naming a particle; bad input is refused. The
+//! energy books (`Sph::books`) against the reference's, and exactly 0 viscous and wall books
+//! for a fluid without viscosity that touches no wall.
 //! Skips without an adapter unless `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
 use physcore_gpu::particles::Halt;
-use physcore_gpu::sph::{Kernel, Sph, SphParams};
+use physcore_gpu::sph::{Kernel, Sph, SphBooks, SphParams};
 use physcore_gpu::{Gpu, GpuError, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -103,8 +105,10 @@ fn densities(p: &SphParams, x: &[f64]) -> Vec<f64> {
 }
 
 /// One step of the host reference; returns how many coordinates the walls projected and the
-/// largest |dv/dt| of the pressure and viscosity forces (m/s²).
-fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64) -> (usize, f64) {
+/// largest |dv/dt| of the pressure and viscosity forces (m/s²). Books into `books` the viscous
+/// dissipation (the power at the step's start times dt) and what the walls removed (ΔKE plus the
+/// work of the step's force over the projection), as the CPU's WCSPH and box collider do.
+fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64, books: &mut [f64; 2]) -> (usize, f64) {
     let (d, h, m) = (p.dim, p.h, p.mass);
     let n = x.len() / d;
     let rho = densities(p, x);
@@ -126,6 +130,7 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64) -> (usize, f64) {
     let (mut hits, mut amax) = (0, 0.0f64);
     for i in 0..n {
         let mut acc = [0.0; 3];
+        let mut pw = 0.0;
         for j in 0..n {
             let (e, r2) = pair(&x0, d, i, j);
             let (u, _) = pair(&v0, d, i, j);
@@ -143,14 +148,17 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64) -> (usize, f64) {
             for a in 0..d {
                 acc[a] += cf * e[a];
             }
+            pw += m * gq * pi * vr;
         }
-        let (mut xn, mut vn) = ([0.0; 3], [0.0; 3]);
+        books[0] += 0.5 * m * (-scale) * pw * dt;
+        let (mut xn, mut vn, mut f) = ([0.0; 3], [0.0; 3], [0.0; 3]);
         amax = amax.max((0..d).map(|a| (scale * acc[a]).powi(2)).sum::<f64>().sqrt());
         for a in 0..d {
-            let f = m * (scale * acc[a]);
-            vn[a] = v0[d * i + a] + (f * inv_m + p.gravity[a]) * dt;
+            f[a] = m * (scale * acc[a]);
+            vn[a] = v0[d * i + a] + (f[a] * inv_m + p.gravity[a]) * dt;
             xn[a] = x0[d * i + a] + vn[a] * dt;
         }
+        let (xb, vb) = (xn, vn);
         // The box (constraints/aabb.rs).
         let (e, mu) = (p.restitution, p.friction);
         for a in 0..d {
@@ -180,10 +188,33 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64) -> (usize, f64) {
                 }
             }
         }
+        if xn != xb || vn != vb {
+            let ke = |u: &[f64; 3]| 0.5 * m * (0..d).map(|a| u[a] * u[a]).sum::<f64>();
+            let work: f64 = (0..d).map(|a| (f[a] + p.gravity[a] * m) * (xn[a] - xb[a])).sum();
+            books[1] += ke(&vb) - ke(&vn) + work;
+        }
         x[d * i..d * i + d].copy_from_slice(&xn[..d]);
         v[d * i..d * i + d].copy_from_slice(&vn[..d]);
     }
     (hits, amax)
+}
+
+/// The books of the reference's state `x`, `v` with its accumulated `books` (`SphBooks`' sums).
+fn host_books(p: &SphParams, x: &[f64], v: &[f64], books: [f64; 2]) -> SphBooks {
+    let (d, m) = (p.dim, p.mass);
+    let rho = densities(p, x);
+    SphBooks {
+        kinetic: 0.5 * v.iter().map(|u| m * u * u).sum::<f64>(),
+        internal: rho.iter().map(|&r| m * p.internal_energy(r)).sum(),
+        gravity: -x.chunks_exact(d).map(|xi| m * (0..d).map(|a| p.gravity[a] * xi[a]).sum::<f64>()).sum::<f64>(),
+        viscous: books[0],
+        collisions: books[1],
+    }
+}
+
+/// The books' entries, for comparing.
+fn entries(b: &SphBooks) -> [f64; 5] {
+    [b.kinetic, b.internal, b.gravity, b.viscous, b.collisions]
 }
 
 /// A jittered block of `side`^dim particles `dx` apart, 0.3 dx from the box's lower faces, thrown
@@ -267,12 +298,13 @@ fn cases() -> Vec<Case> {
 const STEPS: u64 = 20;
 const DT: f64 = 2e-4;
 
-fn run(g: &Arc<Gpu>, precision: Precision, c: &Case) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+fn run(g: &Arc<Gpu>, precision: Precision, c: &Case) -> (Vec<f64>, Vec<f64>, Vec<f64>, SphBooks) {
     let mut s = Sph::new(g.clone(), precision, c.p, &c.x, &c.v).unwrap();
     // Two calls: the second starts from the state the first left.
     assert_eq!(s.step(STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS / 2);
     assert_eq!(s.step(STEPS - STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS - STEPS / 2);
-    s.read().unwrap()
+    let (x, v, rho) = s.read().unwrap();
+    (x, v, rho, s.books().unwrap())
 }
 
 #[test]
@@ -280,13 +312,17 @@ fn the_device_fluid_steps_as_the_host_reference_and_repeats_bit_for_bit() {
     let Some(g) = gpu() else { return };
     for c in cases() {
         let (mut x, mut v) = (c.x.clone(), c.v.clone());
-        let (mut hits, mut amax) = (0, 0.0f64);
+        let (mut hits, mut amax, mut acc) = (0, 0.0f64, [0.0; 2]);
         for _ in 0..STEPS {
-            let (k, a) = step(&c.p, &mut x, &mut v, DT);
+            let (k, a) = step(&c.p, &mut x, &mut v, DT, &mut acc);
             hits += k;
             amax = amax.max(a);
         }
         let rho = densities(&c.p, &x);
+        let books = host_books(&c.p, &x, &v, acc);
+        // Both accumulated books ran: the viscosity and the walls took energy.
+        assert!(books.viscous > 0.0 && books.collisions > 0.0, "{}: {books:?}", c.name);
+        let escale = entries(&books).iter().map(|e| e.abs()).sum::<f64>();
         // The walls' path ran: particles hit them, with restitution and friction.
         assert!(hits > 0, "{}: no particle reached a wall", c.name);
         // And the fluid's forces: the largest SPH acceleration, against g.
@@ -298,7 +334,7 @@ fn the_device_fluid_steps_as_the_host_reference_and_repeats_bit_for_bit() {
                 eprintln!("{}: {precision:?} not run: {e}", c.name);
                 continue;
             }
-            let (dx, dv, drho) = run(&g, precision, &c);
+            let (dx, dv, drho, db) = run(&g, precision, &c);
             // No particle lost (the mass, n m, kept): all there, finite and in the box.
             assert!(dx.len() == x.len() && dv.len() == v.len() && drho.len() == rho.len());
             let d = c.p.dim;
@@ -310,11 +346,18 @@ fn the_device_fluid_steps_as_the_host_reference_and_repeats_bit_for_bit() {
             );
             let tol = if precision == Precision::F64 { 1e-10 } else { 1e-4 };
             assert!(err.iter().all(|&e| e <= tol), "{} {precision:?}: errors {err:?} over {tol:e}", c.name);
+            // The books: each entry against the reference's, over the sum of their magnitudes.
+            let eb = entries(&db).iter().zip(entries(&books)).map(|(a, b)| (a - b).abs() / escale).collect::<Vec<_>>();
+            let ebs = eb.iter().map(|e| format!("{e:.2e}")).collect::<Vec<_>>().join(" ");
+            eprintln!("  books {db:?}; |Δ|/Σ|E| (kinetic internal gravity viscous collisions) {ebs}");
+            let btol = if precision == Precision::F64 { 1e-11 } else { 1e-4 };
+            assert!(eb.iter().all(|&e| e <= btol), "{} {precision:?}: books off by {eb:?}", c.name);
             let again = run(&g, precision, &c);
             let bits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&again.0), bits(&dx), "{} {precision:?}: positions repeat", c.name);
             assert_eq!(bits(&again.1), bits(&dv), "{} {precision:?}: velocities repeat", c.name);
             assert_eq!(bits(&again.2), bits(&drho), "{} {precision:?}: densities repeat", c.name);
+            assert_eq!(bits(&entries(&again.3)), bits(&entries(&db)), "{} {precision:?}: books repeat", c.name);
         }
     }
 }
@@ -430,4 +473,41 @@ fn a_diverging_fluid_halts_naming_a_particle() {
     let p = SphParams { gravity: [0.0, -1e30, 0.0], ..SphParams::default() };
     let mut s = Sph::new(g.clone(), Precision::F32, p, &[0.5, 0.5, 0.6, 0.5], &[0.0; 4]).unwrap();
     assert_eq!(s.step(3, 1e10, &AtomicBool::new(false)), Err((0, Halt::Diverged { particle: 0 })));
+}
+
+#[test]
+fn without_viscosity_or_walls_the_dissipated_books_are_zero_and_the_total_holds() {
+    let Some(g) = gpu() else { return };
+    let dx = 0.01;
+    // A block at rest in the middle of a large box, no viscosity: it falls and spreads, touching
+    // no wall within the run.
+    let p = SphParams {
+        h: 1.3 * dx,
+        mass: 1000.0 * dx * dx,
+        c0: 15.0,
+        alpha: 0.0,
+        clamp: false,
+        upper: [1.0, 1.0, 0.0],
+        ..SphParams::default()
+    };
+    let (mut x, _) = block(2, 12, dx, 3);
+    x.iter_mut().for_each(|c| *c += 0.4);
+    let v = vec![0.0; x.len()];
+    for precision in [Precision::F64, Precision::F32] {
+        if g.check_precision(precision).is_err() {
+            continue;
+        }
+        let mut s = Sph::new(g.clone(), precision, p, &x, &v).unwrap();
+        let b0 = s.books().unwrap();
+        assert_eq!((b0.kinetic, b0.viscous, b0.collisions), (0.0, 0.0, 0.0));
+        s.step(200, 1e-4, &AtomicBool::new(false)).unwrap();
+        let b = s.books().unwrap();
+        let (xd, _, _) = s.read().unwrap();
+        assert!(xd.iter().all(|&c| c > 0.2 && c < 0.8), "{precision:?}: a particle went near a wall");
+        assert_eq!((b.viscous, b.collisions), (0.0, 0.0), "{precision:?}");
+        let scale = entries(&b).iter().map(|e| e.abs()).sum::<f64>();
+        let drift = (b.total() - b0.total()).abs() / scale;
+        eprintln!("{precision:?}: books {b:?}, total drift {drift:.2e} of Σ|E|");
+        assert!(b.kinetic > 0.0 && drift < 1e-2, "{precision:?}: {b:?} from {b0:?}");
+    }
 }

@@ -2,16 +2,19 @@
 //! of water released in a box under gravity, stepped by a CPU world (the "sph" term, gravity,
 //! the "box" collider, semi-implicit Euler) and by the device (issue "GPU fluids, grains and
 //! batches"). Skipped where no adapter is found, unless PHYSCORE_GPU_REQUIRED=1 (CI runs it on
-//! lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
+//! lavapipe with PHYSCORE_GPU_ALLOW_CPU=1). The device's energy books (`Sph::books`) against the
+//! world's `energy()`: kinetic, each potential and each dissipated entry by name, the total, and
+//! the total's drift over the run.
 use crate::constraints::aabb::Aabb;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::KernelKind;
 use crate::systems::particles::ParticleSystem;
+use crate::systems::EnergyReport;
 use crate::terms::registry::{self, Context, Params, Value};
 use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
-use physcore_gpu::sph::{Kernel, Sph, SphParams};
+use physcore_gpu::sph::{Kernel, Sph, SphBooks, SphParams};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -51,7 +54,13 @@ struct Run {
     v: Vec<Real>,
 }
 
-fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: usize) -> Run {
+/// The CPU world's books before and after the run.
+struct Books {
+    start: EnergyReport,
+    end: EnergyReport,
+}
+
+fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: usize) -> (Run, Books) {
     let d = p.dim;
     let n = x.len() / d;
     let vec = |s: &[Real]| V::from_slice(s);
@@ -79,10 +88,37 @@ fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: us
     let b = Aabb::new(vec(&p.lower[..d]), vec(&p.upper[..d]), p.restitution, p.friction).unwrap();
     sys.add_constraint(Box::new(b));
     let mut w = World::new(sys, dt, Some(1)).unwrap();
+    let start = w.energy();
     w.step(steps as u64).unwrap();
     let s = w.particles().state();
     let flat = |a: &[V]| V::flat(a).to_vec();
-    Run { x: flat(&s.x), v: flat(&s.v) }
+    (Run { x: flat(&s.x), v: flat(&s.v) }, Books { start, end: w.energy() })
+}
+
+/// The entry of `list` named `name` (once).
+fn named(list: &[(String, Real)], name: &str) -> Real {
+    let hits: Vec<Real> = list.iter().filter(|(n, _)| n == name).map(|e| e.1).collect();
+    assert_eq!(hits.len(), 1, "{name:?} in {list:?}");
+    hits[0]
+}
+
+/// The device's books against the CPU's report `e` (the "sph" term named "water"): each entry's
+/// difference over Σ|E| of the report, in the order kinetic, water's potential, gravity's, water's
+/// dissipated, collisions, total.
+fn books_against(b: &SphBooks, e: &EnergyReport) -> [Real; 6] {
+    let names = |l: &[(String, Real)]| l.iter().map(|e| e.0.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&e.potential), ["water", "gravity"]);
+    assert_eq!(names(&e.dissipated), ["water", "collisions"]);
+    let scale = e.kinetic.abs() + e.potential.iter().chain(&e.dissipated).map(|p| p.1.abs()).sum::<Real>();
+    let pairs = [
+        (b.kinetic, e.kinetic),
+        (b.internal, named(&e.potential, "water")),
+        (b.gravity, named(&e.potential, "gravity")),
+        (b.viscous, named(&e.dissipated, "water")),
+        (b.collisions, named(&e.dissipated, "collisions")),
+        (b.total(), e.total()),
+    ];
+    pairs.map(|(d, c)| (d - c).abs() / scale)
 }
 
 /// The largest difference of positions (over the box's width) and velocities (over the
@@ -123,7 +159,15 @@ fn agree(dim: usize, kernel: Kernel) {
         friction: 0.0,
     };
     let (dt, steps) = (1e-4, 400);
-    let cpu = if dim == 2 { cpu_run::<DVec2>(&p, &x, &v, dt, steps) } else { cpu_run::<DVec3>(&p, &x, &v, dt, steps) };
+    let (cpu, books) =
+        if dim == 2 { cpu_run::<DVec2>(&p, &x, &v, dt, steps) } else { cpu_run::<DVec3>(&p, &x, &v, dt, steps) };
+    let (e0, e1) = (&books.start, &books.end);
+    // The run exercises every book: the viscosity took energy, the walls booked some (their
+    // book can go below 0: the work of gravity and the pressure over a projection off the floor
+    // is booked with the kinetic energy the projection removes), the block is compressed.
+    assert!(named(&e1.dissipated, "water") > 0.0 && named(&e1.dissipated, "collisions") != 0.0, "{e1:?}");
+    assert!(named(&e1.potential, "water") > 0.0, "{e1:?}");
+    let cpu_drift = (e1.total() - e0.total()).abs();
     for precision in [Precision::F64, Precision::F32] {
         let mut dev = match Sph::new(gpu.clone(), precision, p, &x, &v) {
             Ok(d) => d,
@@ -133,7 +177,9 @@ fn agree(dim: usize, kernel: Kernel) {
             }
             Err(e) => panic!("{e}"),
         };
+        let b0 = dev.books().unwrap();
         dev.step(steps as u64, dt, &AtomicBool::new(false)).unwrap();
+        let b1 = dev.books().unwrap();
         let (dx_, dv_, rho) = dev.read().unwrap();
         let (ex, ev, er) = compare(&cpu, &Run { x: dx_, v: dv_ }, &rho, &p);
         eprintln!(
@@ -142,6 +188,23 @@ fn agree(dim: usize, kernel: Kernel) {
         );
         let (tx, tv) = if precision == Precision::F64 { (1e-11, 1e-9) } else { (1e-4, 1e-2) };
         assert!(ex < tx && ev < tv, "{precision:?}: {ex} {ev}");
+        // The books, at the start and the end, entry by entry over Σ|E|.
+        let tb = if precision == Precision::F64 { 1e-12 } else { 1e-4 };
+        for (when, b, e) in [("start", &b0, e0), ("end", &b1, e1)] {
+            let err = books_against(b, e);
+            let errs = err.iter().map(|x| format!("{x:.2e}")).collect::<Vec<_>>().join(" ");
+            eprintln!("  books at the {when}: |Δ|/Σ|E| (kinetic internal gravity viscous collisions total) {errs}");
+            assert!(err.iter().all(|&x| x <= tb), "{precision:?} books at the {when}: {err:?}\n{b:?}\n{e:?}");
+        }
+        // And the total drifts no more than the CPU's (up to the agreement).
+        let scale = e1.kinetic.abs() + e1.potential.iter().chain(&e1.dissipated).map(|p| p.1.abs()).sum::<Real>();
+        let dev_drift = (b1.total() - b0.total()).abs();
+        eprintln!(
+            "  total drift over the run: device {:.3e}, CPU {:.3e} of Σ|E| = {scale:.4e} J",
+            dev_drift / scale,
+            cpu_drift / scale
+        );
+        assert!(dev_drift <= cpu_drift + tb * scale, "{precision:?}: drift {dev_drift} against the CPU's {cpu_drift}");
         // The block has hit the wall (so the walls' branch is in the agreement) and is
         // compressed there by a few per cent: v/c0 = 2 % (Monaghan 1994), more in 2D where the
         // projecting wall stacks the first rows (7 % measured).
