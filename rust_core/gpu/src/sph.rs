@@ -3,12 +3,15 @@
 //! batches"). The formulas are the CPU's (`rust_core/src/sph`), written expression by expression
 //! in `sph.wgsl`:
 //!
-//! - Density by summation, ρ_i = σ_d Σ_j m W(|x_i − x_j|/h), self included.
+//! - Density by summation, ρ_i = σ_d [Σ_j m W(|x_i − x_j|/h) + Σ_b Ψ_b W(|x_i − x_b|/h)], self
+//!   included, b over the static wall particles (Akinci et al. 2012, eq. 4–5; Ψ_b = ρ0 V_b, kg).
 //! - Tait equation of state p = B[(ρ/ρ0)^γ − 1], B = ρ0 c0²/γ (Monaghan 1994; Becker & Teschner
 //!   2007, eq. 6), optionally clamped to p ≥ 0.
 //! - The symmetric pressure force with Monaghan (1992) artificial viscosity:
-//!   dv_i/dt = −Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) ∇_i W_ij + g,
-//!   Π_ij = −α c0 μ_ij / ρ̄_ij, μ_ij = h v_ij·x_ij / (r² + 0.01h²) if v_ij·x_ij < 0, else 0.
+//!   dv_i/dt = −Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) ∇_i W_ij − (p_i/ρ_i²) Σ_b Ψ_b ∇_i W_ib + g,
+//!   Π_ij = −α c0 μ_ij / ρ̄_ij, μ_ij = h v_ij·x_ij / (r² + 0.01h²) if v_ij·x_ij < 0, else 0;
+//!   the walls push with the particle's own pressure mirrored (Akinci et al. 2012, eq. 10) and
+//!   no viscosity, as the CPU's `sph::passes::Forces`.
 //! - Kernels with support 2h: the cubic spline (Monaghan & Lattanzio 1985) and Wendland C2
 //!   (Wendland 1995, in the form of Dehnen & Aly 2012), as `sph::kernels` normalises them.
 //! - Semi-implicit Euler, v' = v + dt (f/m + g), x' = x + dt v' (the CPU's
@@ -18,18 +21,24 @@
 //! A step is recorded as dispatches, with no read-back: the cell list (`cells.wgsl`'s kernels:
 //! a counting sort, each cell's particles then put in index order), the state copied into cell
 //! order, the density pass, then one pass of forces, update and walls that reads the cell-ordered
-//! copies and writes the state back in the caller's order. Every sum is gathered over the 3^d
-//! cells around a particle in a fixed order: no float atomics, and a run repeats bit for bit on
-//! one adapter. Against the CPU, f64 agrees to round-off, not bit for bit: the CPU's SIMD passes
-//! fuse some products (`mul_add`) and add their lanes in another order.
+//! copies and writes the state back in the caller's order. The wall particles are static: sorted
+//! once on the host by (cell, index) over the same cells (those within one cell outside the grid
+//! clamped into its outer cells, those farther dropped: no point of the box is within 2h of
+//! them), with a start per cell, uploaded once. Every sum is gathered over the 3^d cells around
+//! a particle in a fixed order (the fluid's, then the walls'): no float atomics, and a run
+//! repeats bit for bit on one adapter. Against the CPU, f64 agrees to round-off, not bit for
+//! bit: the CPU's SIMD passes fuse some products (`mul_add`) and add their lanes in another
+//! order.
 //!
 //! The energy books (`Sph::books`) are the CPU's (`ParticleSystem::energy`): the state functions
 //! (kinetic energy, the fluid's internal energy Σ m u(ρ), gravity's potential −Σ m g·x) from a
-//! read-back, and the two accumulated books (viscous dissipation, what the walls removed) kept on
-//! the device per particle by the thread that owns it during `integrate`, summed on the host in
-//! the caller's order when read: no float atomics, nothing read back during a step.
+//! read-back, and the two accumulated books (viscous dissipation, what the box's faces removed)
+//! kept on the device per particle by the thread that owns it during `integrate`, summed on the
+//! host in the caller's order when read: no float atomics, nothing read back during a step. The
+//! wall particles book nothing of their own, as on the CPU: they enter the densities, so the
+//! internal energy, and their force is that energy's gradient.
 //!
-//! Not here (the CPU has them): static or moving wall particles (Akinci et al. 2012), several
+//! Not here (the CPU has them): moving wall particles (rigid bodies' boundary samples), several
 //! fluids sharing one search, per-particle masses, the time step limit, checkpoints.
 use crate::cells::spread;
 use crate::particles::Halt;
@@ -263,6 +272,8 @@ pub struct Sph {
     precision: Precision,
     p: SphParams,
     n: usize,
+    /// Wall particles kept (within reach of the box).
+    walls: usize,
     cells: [usize; 3],
     pos: wgpu::Buffer,
     vel: wgpu::Buffer,
@@ -282,7 +293,8 @@ pub struct Sph {
     sph_pipes: Vec<wgpu::ComputePipeline>,
     /// Steps per submission (about 0.1 s each).
     chunk: Chunk,
-    /// The cell list, the cell-ordered copies and the cell list's parameters (bound only).
+    /// The cell list, the cell-ordered copies, the cell list's parameters and the walls (bound
+    /// only).
     _keep: Vec<wgpu::Buffer>,
 }
 
@@ -291,7 +303,7 @@ const MAX_CHUNK: u64 = 1024;
 
 impl Sph {
     /// Uploads `n` particles: `positions` and `velocities` flat (n·dim; m, m/s), every position
-    /// in the box.
+    /// in the box. No wall particles: `with_walls` with none.
     ///
     /// Errors: `Unsupported` for parameters out of range (`SphParams::validate`), ragged or
     /// non-finite arrays, a position outside the box, more than 2^31 particles or cells, f64 on
@@ -302,6 +314,28 @@ impl Sph {
         params: SphParams,
         positions: &[f64],
         velocities: &[f64],
+    ) -> Result<Self> {
+        Self::with_walls(gpu, precision, params, positions, velocities, &[], &[])
+    }
+
+    /// `new` with static wall particles (Akinci et al. 2012), as the CPU's "sph" term takes them
+    /// (`walls`, `wall_psi`): `walls` flat (M·dim, m), anywhere (usually just outside the box,
+    /// e.g. three lattice layers lining it); `psi` their Ψ_b = ρ0 V_b (kg), one each, finite
+    /// and positive (a wall sampled on the fluid's lattice: Ψ_b = the particle mass). They add
+    /// Σ_b Ψ_b W_ib to each density and push with the particle's own pressure mirrored (see the
+    /// module docs). Those farther than 2h from the box never meet a particle and are not
+    /// uploaded.
+    ///
+    /// Errors: as `new`, and `Unsupported` naming `walls` (ragged, non-finite, 2^31 or more) or
+    /// `psi` (not one per wall, not finite and > 0).
+    pub fn with_walls(
+        gpu: Arc<Gpu>,
+        precision: Precision,
+        params: SphParams,
+        positions: &[f64],
+        velocities: &[f64],
+        walls: &[f64],
+        psi: &[f64],
     ) -> Result<Self> {
         params.validate()?;
         gpu.check_precision(precision)?;
@@ -331,6 +365,8 @@ impl Sph {
         }
         let cells = params.cells()?;
         let ncells = cells.iter().product::<usize>() as u64;
+        let (wall_data, wall_starts) = sort_walls(&params, cells, walls, psi)?;
+        let nw = wall_starts.last().copied().unwrap_or(0) as usize;
         let rb = precision.bytes();
         let nn = n as u64;
         use wgpu::BufferUsages as U;
@@ -351,6 +387,8 @@ impl Sph {
         let spr = gpu.buffer("SPH sorted p/rho^2", nn * rb, st)?;
         let cell_params = gpu.buffer("SPH cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
         let params_buf = gpu.buffer("SPH parameters", 32 + 24 * rb, U::UNIFORM | U::COPY_DST)?;
+        let wall = gpu.buffer("SPH wall particles", (wall_data.len() as u64 * rb).max(16), st)?;
+        let wall_start = gpu.buffer("SPH wall cell starts", (ncells + 1) * 4, st)?;
         let staging = gpu.buffer("SPH read-back", (nn * d as u64 * rb).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
@@ -372,14 +410,30 @@ impl Sph {
             "sph.wgsl",
             precision,
             include_str!("sph.wgsl"),
-            &[uniform, W, W, W, R, R, R, W, W, W, W, W, W],
+            &[uniform, W, W, W, R, R, R, W, W, W, W, W, W, R, R],
             &["gather", "density", "integrate"],
         );
         let sph_bind = crate::grid::bind_group(
             &gpu,
             "SPH",
             &layout,
-            &[&params_buf, &pos, &vel, &rho, &cell_of, &start, &order, &spos, &svel, &srho, &spr, &flag, &books],
+            &[
+                &params_buf,
+                &pos,
+                &vel,
+                &rho,
+                &cell_of,
+                &start,
+                &order,
+                &spos,
+                &svel,
+                &srho,
+                &spr,
+                &flag,
+                &books,
+                &wall,
+                &wall_start,
+            ],
         );
         let (lo, cell) = (params.lower, 2.0 * params.h);
         let grid = [n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32];
@@ -393,11 +447,16 @@ impl Sph {
             gpu.upload(precision, &pos, positions);
             gpu.upload(precision, &vel, velocities);
         }
+        if nw > 0 {
+            gpu.upload(precision, &wall, &wall_data);
+        }
+        gpu.queue.write_buffer(&wall_start, 0, bytemuck::cast_slice(&wall_starts));
         let s = Self {
             gpu,
             precision,
             p: params,
             n,
+            walls: nw,
             cells,
             pos,
             vel,
@@ -411,7 +470,7 @@ impl Sph {
             cell_pipes,
             sph_pipes,
             chunk: Chunk::new(MAX_CHUNK),
-            _keep: vec![cell_of, counts, start, order, found, spos, svel, srho, spr, cell_params],
+            _keep: vec![cell_of, counts, start, order, found, spos, svel, srho, spr, cell_params, wall, wall_start],
         };
         s.write_params(0.0);
         s.gpu.wait()?;
@@ -429,6 +488,10 @@ impl Sph {
     }
     pub fn params(&self) -> &SphParams {
         &self.p
+    }
+    /// Wall particles on the device: those of `with_walls` within reach (2h) of the box.
+    pub fn n_walls(&self) -> usize {
+        self.walls
     }
     /// Cells of the cell list along x, y, z (each 2h wide).
     pub fn cells(&self) -> [usize; 3] {
@@ -593,6 +656,63 @@ impl Sph {
             collisions: walls.iter().sum(),
         })
     }
+}
+
+/// The wall particles `walls` (flat, `dim` each) with their Ψ `psi`, checked, in the order the
+/// shader reads them: sorted by (cell, index) over the fluid's `cells` of 2h from the box's lower
+/// corner, a wall within one cell outside the grid clamped into its outer cell (still a neighbour
+/// cell of every cell within 2h of it), one farther dropped. Returns the walls as `dim`
+/// coordinates then Ψ each, and per cell its first wall (`cells` + 1 entries, the last the count).
+fn sort_walls(p: &SphParams, cells: [usize; 3], walls: &[f64], psi: &[f64]) -> Result<(Vec<f64>, Vec<u32>)> {
+    let d = p.dim;
+    if !walls.len().is_multiple_of(d) {
+        return Err(invalid(
+            "walls",
+            format_args!("{} values: must hold dim = {d} values per wall particle", walls.len()),
+        ));
+    }
+    let m = walls.len() / d;
+    if m as u64 >= 1 << 31 {
+        return Err(invalid("walls", format_args!("{m} wall particles: at most 2^31")));
+    }
+    if psi.len() != m {
+        return Err(invalid("psi", format_args!("{} values for {m} wall particles: one each", psi.len())));
+    }
+    if let Some(k) = walls.iter().position(|v| !v.is_finite()) {
+        return Err(invalid("walls", format_args!("wall particle {} has a non-finite value", k / d)));
+    }
+    if let Some(b) = psi.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
+        return Err(invalid("psi", format_args!("entry {b} is {} (must be finite and > 0)", psi[b])));
+    }
+    let cell = 2.0 * p.h;
+    let mut keyed: Vec<(usize, usize)> = Vec::new();
+    'walls: for (b, w) in walls.chunks_exact(d).enumerate() {
+        let (mut flat, mut stride) = (0usize, 1usize);
+        for a in 0..d {
+            let f = ((w[a] - p.lower[a]) / cell).floor();
+            if !(f >= -1.0 && f <= cells[a] as f64) {
+                continue 'walls;
+            }
+            flat += stride * (f.max(0.0) as usize).min(cells[a] - 1);
+            stride *= cells[a];
+        }
+        keyed.push((flat, b));
+    }
+    keyed.sort_unstable();
+    let ncells: usize = cells.iter().product();
+    let mut starts = vec![0u32; ncells + 1];
+    for &(c, _) in &keyed {
+        starts[c + 1] += 1;
+    }
+    for c in 0..ncells {
+        starts[c + 1] += starts[c];
+    }
+    let mut data = Vec::with_capacity(keyed.len() * (d + 1));
+    for &(_, b) in &keyed {
+        data.extend_from_slice(&walls[d * b..d * b + d]);
+        data.push(psi[b]);
+    }
+    Ok((data, starts))
 }
 
 #[cfg(test)]

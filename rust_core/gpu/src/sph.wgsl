@@ -68,6 +68,12 @@ const WG: u32 = 64u;
 // The energy books of each particle (caller's order), J: [0, n) the viscous dissipation,
 // [n, 2n) what the box's walls removed. Each written only by the thread that owns the particle.
 @group(0) @binding(12) var<storage, read_write> books: array<real>;
+// The static wall particles (Akinci et al. 2012), sorted by (cell, index) on the host over the
+// fluid's cells (those just outside the grid clamped into its outer cells): `dim` coordinates
+// then Ψ_b (kg) per wall particle; and per cell c the first wall of the cell (wall_start[cells]
+// = the walls' count).
+@group(0) @binding(13) var<storage, read> wall: array<real>;
+@group(0) @binding(14) var<storage, read> wall_start: array<u32>;
 
 fn index(g: vec3<u32>) -> u32 {
     return g.x + 65535u * WG * g.y;
@@ -93,6 +99,17 @@ fn at(a: u32, s: u32) -> vec3<real> {
             r[k] = svel[d * s + k];
         }
     }
+    return r;
+}
+
+// Position of wall particle s (z = 0 in 2D) and its Ψ_b.
+fn wall_at(s: u32) -> vec4<real> {
+    let d = P.dim;
+    var r = vec4<real>(0.0, 0.0, 0.0, 0.0);
+    for (var k = 0u; k < d; k = k + 1u) {
+        r[k] = wall[(d + 1u) * s + k];
+    }
+    r.w = wall[(d + 1u) * s + d];
     return r;
 }
 
@@ -159,7 +176,8 @@ fn gather(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
 }
 
-// Summation density ρ_k = σ Σ_j m w(|x_k − x_j|/h) (self included) and p_k/ρ_k² by the Tait
+// Summation density ρ_k = σ [Σ_j m w(|x_k − x_j|/h) (self included) + Σ_b Ψ_b w(|x_k − x_b|/h)
+// (the walls, Akinci et al. 2012, eq. 4–5)] and p_k/ρ_k² by the Tait
 // equation of state p = B((ρ/ρ0)^γ − 1), clamped to ≥ 0 if asked: passes.rs `Density`.
 @compute @workgroup_size(WG)
 fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -195,6 +213,26 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
+    // The walls' share Σ_b Ψ_b w(|x_k − x_b|/h), added to the same sum after the fluid's (as
+    // passes.rs `Density` adds them to its accumulator).
+    for (var z = z0; z <= z1; z = z + 1u) {
+        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
+            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
+                let cc = flat(vec3<u32>(x, y, z));
+                for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
+                    let wb = wall_at(s);
+                    let e = xi - wb.xyz;
+                    var r2 = e.x * e.x + e.y * e.y;
+                    if (d == 3u) {
+                        r2 = e.z * e.z + r2;
+                    }
+                    if (r2 < P.reach) {
+                        acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * wb.w;
+                    }
+                }
+            }
+        }
+    }
     let r = P.sigma * acc;
     var p = P.b * (powi(r * P.inv_rho0) - 1.0);
     if (P.clamp != 0u) {
@@ -206,7 +244,8 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // Slot k: the pressure and viscosity acceleration (passes.rs `Forces`)
-//   a_i = −(σ/h²) Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) g(q) (x_i − x_j),
+//   a_i = −(σ/h²) [Σ_j m (p_i/ρ_i² + p_j/ρ_j² + Π_ij) g(q) (x_i − x_j)
+//                  + p_i/ρ_i² Σ_b Ψ_b g(q) (x_i − x_b)]   (walls b: Akinci et al. 2012),
 //   Π_ij = 2 α c0 h max(−v_ij·x_ij, 0) / ((r² + 0.01h²)(ρ_i + ρ_j))   (Monaghan 1992),
 // then the semi-implicit Euler step v += dt (f/m + g), x += dt v (f = m a, as the CPU's force
 // term and integrator), then the box: a coordinate outside is put on the face it crossed; moving
@@ -266,6 +305,31 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
+    // The walls' pressure (Akinci et al. 2012, eq. 10, the fluid's own pressure mirrored; no
+    // viscosity against them): Σ_b Ψ_b g(q) (x_i − x_b), times p_i/ρ_i² below (passes.rs `Forces`).
+    var wacc = vec3<real>(0.0, 0.0, 0.0);
+    for (var z = z0; z <= z1; z = z + 1u) {
+        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
+            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
+                let cc = flat(vec3<u32>(x, y, z));
+                for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
+                    let wb = wall_at(s);
+                    let e = xi - wb.xyz;
+                    var r2 = e.x * e.x + e.y * e.y;
+                    if (d == 3u) {
+                        r2 = e.z * e.z + r2;
+                    }
+                    if (!(r2 < P.reach)) {
+                        continue;
+                    }
+                    let cf = wb.w * g(sqrt(max(r2, P.tiny)) * P.inv_h);
+                    for (var a = 0u; a < d; a = a + 1u) {
+                        wacc[a] = cf * e[a] + wacc[a];
+                    }
+                }
+            }
+        }
+    }
     let grav = vec3<real>(P.gx, P.gy, P.gz);
     let lo = vec3<real>(P.lo_x, P.lo_y, P.lo_z);
     let hi = vec3<real>(P.hi_x, P.hi_y, P.hi_z);
@@ -274,7 +338,7 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     var fs = vec3<real>(0.0, 0.0, 0.0);
     var outside = false;
     for (var a = 0u; a < d; a = a + 1u) {
-        let f = P.mass * (P.scale * acc[a]);
+        let f = P.mass * (P.scale * (acc[a] + pr_i * wacc[a]));
         fs[a] = f;
         vn[a] = vi[a] + (f * P.inv_mass + grav[a]) * P.dt;
         xn[a] = xi[a] + vn[a] * P.dt;

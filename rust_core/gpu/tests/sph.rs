@@ -2,7 +2,8 @@
 //! same formulas (brute-force neighbours, each sum in increasing particle index): jittered blocks
 //! thrown at the box's corner under gravity, 2D and 3D, both kernels, γ = 7 (the shader's fixed
 //! chain) and 3 and 1 (its loop), clamped and unclamped pressure, walls with restitution and
-//! friction; f64 and f32; two runs repeat bit for bit; the summed density of a lattice at rest
+//! friction, and static wall particles (Akinci et al. 2012) under the floor and beside the
+//! block; f64 and f32; two runs repeat bit for bit; the summed density of a lattice at rest
 //! is its kernel's lattice sum; a divergence halts naming a particle; bad input is refused. The
 //! energy books (`Sph::books`) against the reference's, and exactly 0 viscous and wall books
 //! for a fluid without viscosity that touches no wall.
@@ -85,8 +86,29 @@ fn pair(x: &[f64], d: usize, i: usize, j: usize) -> ([f64; 3], f64) {
     (e, r2)
 }
 
-/// Summation densities, brute force, j in increasing order.
-fn densities(p: &SphParams, x: &[f64]) -> Vec<f64> {
+/// Static wall particles: positions (flat, dim each) and Ψ_b (kg), one each.
+#[derive(Clone, Default)]
+struct Walls {
+    x: Vec<f64>,
+    psi: Vec<f64>,
+}
+
+/// x_i − x_b for particle i and wall particle b (z = 0 in 2D), |x_i − x_b|² as the shader sums it.
+fn wall_pair(x: &[f64], walls: &Walls, d: usize, i: usize, b: usize) -> ([f64; 3], f64) {
+    let mut e = [0.0; 3];
+    for a in 0..d {
+        e[a] = x[d * i + a] - walls.x[d * b + a];
+    }
+    let mut r2 = e[0] * e[0] + e[1] * e[1];
+    if d == 3 {
+        r2 += e[2] * e[2];
+    }
+    (e, r2)
+}
+
+/// Summation densities, brute force, j in increasing order, then the walls' Σ_b Ψ_b w in
+/// increasing order into the same sum (Akinci et al. 2012, eq. 4–5).
+fn densities(p: &SphParams, x: &[f64], walls: &Walls) -> Vec<f64> {
     let (d, h) = (p.dim, p.h);
     let n = x.len() / d;
     let (inv_h, sigma, reach) = (1.0 / h, p.kernel.sigma(h, d), 4.0001 * h * h);
@@ -99,19 +121,27 @@ fn densities(p: &SphParams, x: &[f64]) -> Vec<f64> {
                     acc += w(p.kernel, r2.max(TINY).sqrt() * inv_h) * p.mass;
                 }
             }
+            for b in 0..walls.psi.len() {
+                let (_, r2) = wall_pair(x, walls, d, i, b);
+                if r2 < reach {
+                    acc += w(p.kernel, r2.max(TINY).sqrt() * inv_h) * walls.psi[b];
+                }
+            }
             sigma * acc
         })
         .collect()
 }
 
-/// One step of the host reference; returns how many coordinates the walls projected and the
-/// largest |dv/dt| of the pressure and viscosity forces (m/s²). Books into `books` the viscous
-/// dissipation (the power at the step's start times dt) and what the walls removed (ΔKE plus the
-/// work of the step's force over the projection), as the CPU's WCSPH and box collider do.
-fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64, books: &mut [f64; 2]) -> (usize, f64) {
+/// One step of the host reference; returns how many coordinates the box's faces projected and
+/// the largest |dv/dt| of the pressure, viscosity and wall-particle forces (m/s²). Books into
+/// `books` the viscous dissipation (the power at the step's start times dt) and what the box's
+/// faces removed (ΔKE plus the work of the step's force over the projection), as the CPU's
+/// WCSPH and box collider do. The wall particles push with p_i/ρ_i² Σ_b Ψ_b g(q) (x_i − x_b)
+/// (Akinci et al. 2012, eq. 10; no viscosity), as passes.rs `Forces`.
+fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], walls: &Walls, dt: f64, books: &mut [f64; 2]) -> (usize, f64) {
     let (d, h, m) = (p.dim, p.h, p.mass);
     let n = x.len() / d;
-    let rho = densities(p, x);
+    let rho = densities(p, x, walls);
     let (b, inv_rho0) = (p.b(), 1.0 / p.rho0);
     let pr: Vec<f64> = rho
         .iter()
@@ -150,8 +180,20 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64, books: &mut [f64; 
             }
             pw += m * gq * pi * vr;
         }
+        let mut wacc = [0.0; 3];
+        for b in 0..walls.psi.len() {
+            let (e, r2) = wall_pair(&x0, walls, d, i, b);
+            if r2 >= reach {
+                continue;
+            }
+            let cf = walls.psi[b] * g(p.kernel, r2.max(TINY).sqrt() * inv_h);
+            for a in 0..d {
+                wacc[a] += cf * e[a];
+            }
+        }
         books[0] += 0.5 * m * (-scale) * pw * dt;
         let (mut xn, mut vn, mut f) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        let acc: [f64; 3] = std::array::from_fn(|a| acc[a] + pr[i] * wacc[a]);
         amax = amax.max((0..d).map(|a| (scale * acc[a]).powi(2)).sum::<f64>().sqrt());
         for a in 0..d {
             f[a] = m * (scale * acc[a]);
@@ -200,9 +242,9 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], dt: f64, books: &mut [f64; 
 }
 
 /// The books of the reference's state `x`, `v` with its accumulated `books` (`SphBooks`' sums).
-fn host_books(p: &SphParams, x: &[f64], v: &[f64], books: [f64; 2]) -> SphBooks {
+fn host_books(p: &SphParams, x: &[f64], v: &[f64], walls: &Walls, books: [f64; 2]) -> SphBooks {
     let (d, m) = (p.dim, p.mass);
-    let rho = densities(p, x);
+    let rho = densities(p, x, walls);
     SphBooks {
         kinetic: 0.5 * v.iter().map(|u| m * u * u).sum::<f64>(),
         internal: rho.iter().map(|&r| m * p.internal_energy(r)).sum(),
@@ -245,6 +287,29 @@ struct Case {
     p: SphParams,
     x: Vec<f64>,
     v: Vec<f64>,
+    walls: Walls,
+}
+
+/// `layers` layers of wall particles `dx` apart under the floor (y < 0) and beside the −x face
+/// (x < 0) of a box `width` wide (x, and z in 3D) from the origin, on the lattice (k + ½) dx;
+/// Ψ_b = `psi` each.
+fn floor_and_side(dim: usize, width: f64, dx: f64, layers: usize, psi: f64) -> Walls {
+    let (l, k) = (layers as i64, (width / dx).round() as i64);
+    let zs: Vec<i64> = if dim == 3 { (-l..k + l).collect() } else { vec![0] };
+    let mut x = Vec::new();
+    for &kz in &zs {
+        for ky in -l..k {
+            for kx in -l..k + l {
+                if ky >= 0 && kx >= 0 {
+                    continue;
+                }
+                let c = [kx, ky, kz];
+                x.extend((0..dim).map(|a| (c[a] as f64 + 0.5) * dx));
+            }
+        }
+    }
+    let psi = vec![psi; x.len() / dim];
+    Walls { x, psi }
 }
 
 fn cases() -> Vec<Case> {
@@ -267,30 +332,55 @@ fn cases() -> Vec<Case> {
     };
     let (x2, v2) = block(2, 20, dx, 1);
     let (x3, v3) = block(3, 8, dx, 2);
+    let none = Walls::default;
+    // Three layers of wall particles under the floor and beside the −x face, and (3D) one layer
+    // under the floor only, reaching past the grid on +x and z (those farther than 2h dropped).
+    let walls2 = floor_and_side(2, 0.4, dx, 3, 1000.0 * dx * dx);
+    let mut walls3 = floor_and_side(3, 0.2, dx, 1, 1000.0 * dx.powi(3));
+    walls3.x.extend([0.05, -0.005, 0.3, 0.5, -0.005, 0.05]);
+    walls3.psi.extend([0.5e-3, 2e-3]);
     vec![
         Case {
             name: "2D cubic spline, gamma 7, clamped",
             p: water(2, Kernel::CubicSpline, 7, true, [0.4, 0.3, 0.0]),
             x: x2.clone(),
             v: v2.clone(),
+            walls: none(),
         },
         Case {
             name: "2D Wendland C2, gamma 3, unclamped",
             p: water(2, Kernel::WendlandC2, 3, false, [0.4, 0.3, 0.0]),
+            x: x2.clone(),
+            v: v2.clone(),
+            walls: none(),
+        },
+        Case {
+            name: "2D cubic spline, gamma 7, clamped, 3 layers of wall particles",
+            p: water(2, Kernel::CubicSpline, 7, true, [0.4, 0.3, 0.0]),
             x: x2,
             v: v2,
+            walls: walls2,
         },
         Case {
             name: "3D Wendland C2, gamma 7, unclamped",
             p: water(3, Kernel::WendlandC2, 7, false, [0.2, 0.15, 0.12]),
             x: x3.clone(),
             v: v3.clone(),
+            walls: none(),
         },
         Case {
             name: "3D cubic spline, gamma 1, clamped",
             p: water(3, Kernel::CubicSpline, 1, true, [0.2, 0.15, 0.12]),
+            x: x3.clone(),
+            v: v3.clone(),
+            walls: none(),
+        },
+        Case {
+            name: "3D Wendland C2, gamma 7, clamped, a layer of wall particles",
+            p: water(3, Kernel::WendlandC2, 7, true, [0.2, 0.15, 0.12]),
             x: x3,
             v: v3,
+            walls: walls3,
         },
     ]
 }
@@ -299,7 +389,7 @@ const STEPS: u64 = 20;
 const DT: f64 = 2e-4;
 
 fn run(g: &Arc<Gpu>, precision: Precision, c: &Case) -> (Vec<f64>, Vec<f64>, Vec<f64>, SphBooks) {
-    let mut s = Sph::new(g.clone(), precision, c.p, &c.x, &c.v).unwrap();
+    let mut s = Sph::with_walls(g.clone(), precision, c.p, &c.x, &c.v, &c.walls.x, &c.walls.psi).unwrap();
     // Two calls: the second starts from the state the first left.
     assert_eq!(s.step(STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS / 2);
     assert_eq!(s.step(STEPS - STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS - STEPS / 2);
@@ -314,12 +404,17 @@ fn the_device_fluid_steps_as_the_host_reference_and_repeats_bit_for_bit() {
         let (mut x, mut v) = (c.x.clone(), c.v.clone());
         let (mut hits, mut amax, mut acc) = (0, 0.0f64, [0.0; 2]);
         for _ in 0..STEPS {
-            let (k, a) = step(&c.p, &mut x, &mut v, DT, &mut acc);
+            let (k, a) = step(&c.p, &mut x, &mut v, &c.walls, DT, &mut acc);
             hits += k;
             amax = amax.max(a);
         }
-        let rho = densities(&c.p, &x);
-        let books = host_books(&c.p, &x, &v, acc);
+        if !c.walls.psi.is_empty() {
+            // The wall particles are within reach: they add to the densities.
+            let (with, without) = (densities(&c.p, &c.x, &c.walls), densities(&c.p, &c.x, &Walls::default()));
+            assert!(with.iter().zip(&without).any(|(a, b)| a > b), "{}: the walls touch nothing", c.name);
+        }
+        let rho = densities(&c.p, &x, &c.walls);
+        let books = host_books(&c.p, &x, &v, &c.walls, acc);
         // Both accumulated books ran: the viscosity and the walls took energy.
         assert!(books.viscous > 0.0 && books.collisions > 0.0, "{}: {books:?}", c.name);
         let escale = entries(&books).iter().map(|e| e.abs()).sum::<f64>();
@@ -451,6 +546,21 @@ fn bad_input_is_refused() {
     refused(p, &x, &v[..2], "positions");
     refused(p, &x[..3], &v[..3], "positions");
     refused(p, &[0.5, 0.5, 1.5, 0.5], &v, "positions");
+    let walled =
+        |w: &[f64], psi: &[f64], what: &str| match Sph::with_walls(g.clone(), Precision::F32, p, &x, &v, w, psi) {
+            Err(GpuError::Unsupported(m)) => assert!(m.starts_with(what), "{what}: {m}"),
+            Err(e) => panic!("{what}: wrong error {e}"),
+            Ok(_) => panic!("{what}: accepted"),
+        };
+    walled(&[0.5, -0.005, 0.5], &[0.1], "walls");
+    walled(&[0.5, f64::NAN], &[0.1], "walls");
+    walled(&[0.5, -0.005], &[0.1, 0.1], "psi");
+    walled(&[0.5, -0.005], &[0.0], "psi");
+    walled(&[0.5, -0.005], &[f64::INFINITY], "psi");
+    // Walls far outside the box are accepted and dropped; those within 2h kept.
+    let s =
+        Sph::with_walls(g.clone(), Precision::F32, p, &x, &v, &[0.5, -0.005, 0.5, -5.0, 1.01, 0.5], &[0.1; 3]).unwrap();
+    assert_eq!(s.n_walls(), 2);
     let mut s = Sph::new(g.clone(), Precision::F32, p, &x, &v).unwrap();
     let stop = AtomicBool::new(false);
     for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY] {

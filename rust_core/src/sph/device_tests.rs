@@ -4,7 +4,10 @@
 //! batches"). Skipped where no adapter is found, unless PHYSCORE_GPU_REQUIRED=1 (CI runs it on
 //! lavapipe with PHYSCORE_GPU_ALLOW_CPU=1). The device's energy books (`Sph::books`) against the
 //! world's `energy()`: kinetic, each potential and each dissipated entry by name, the total, and
-//! the total's drift over the run.
+//! the total's drift over the run. Again in a tank of static wall particles (Akinci et al. 2012;
+//! three lattice layers lining the box's floor and sides, Ψ_b = the particle mass, as the Python
+//! facade's `tank_walls` and `boundary_volume="lattice"` build them), and a column of water at
+//! rest in such a tank settling to the hydrostatic pressure ρ0 g d on both.
 use crate::constraints::aabb::Aabb;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::KernelKind;
@@ -60,7 +63,31 @@ struct Books {
     end: EnergyReport,
 }
 
-fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: usize) -> (Run, Books) {
+/// The wall particles of `physcore.shapes.tank_walls(lower, upper, dx, layers, top=False)`
+/// for the box [0, upper]: the lattice points (k + ½) dx from `layers` spacings below the floor
+/// and outside the sides, up to the rim (the last axis is up), that are not inside the box.
+fn tank_walls(dim: usize, upper: &[Real], dx: Real, layers: i64) -> Vec<Real> {
+    let k: Vec<i64> = (0..dim).map(|a| (upper[a] / dx).round() as i64).collect();
+    let hi = |a: usize| if a + 1 == dim { k[a] } else { k[a] + layers };
+    let mut out = Vec::new();
+    let zs: Vec<i64> = if dim == 3 { (-layers..hi(2)).collect() } else { vec![0] };
+    for &z in &zs {
+        for y in -layers..hi(1) {
+            for x in -layers..hi(0) {
+                let c = [x, y, z];
+                if (0..dim).all(|a| c[a] >= 0 && c[a] < k[a]) {
+                    continue;
+                }
+                out.extend((0..dim).map(|a| (c[a] as Real + 0.5) * dx));
+            }
+        }
+    }
+    out
+}
+
+/// The CPU world of the device's fluid: the "sph" term (with the wall particles `walls`, Ψ each
+/// `psi`), gravity, the "box" collider, semi-implicit Euler at `dt`.
+fn cpu_world<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], walls: &[Real], psi: &[Real], dt: Real) -> World<V> {
     let d = p.dim;
     let n = x.len() / d;
     let vec = |s: &[Real]| V::from_slice(s);
@@ -76,8 +103,8 @@ fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: us
         .with("sound_speed", Value::Number(p.c0))
         .with("viscosity", Value::Number(p.alpha))
         .with("kernel", Value::Text(p.kernel.name().into()))
-        .with("walls", Value::Floats(Vec::new()))
-        .with("wall_psi", Value::Floats(Vec::new()))
+        .with("walls", Value::Floats(walls.to_vec()))
+        .with("wall_psi", Value::Floats(psi.to_vec()))
         .with("gamma", Value::Number(p.gamma as Real))
         .with("clamp_pressure", Value::Number(if p.clamp { 1.0 } else { 0.0 }))
         .with("precision", Value::Text("f64".into()));
@@ -87,7 +114,19 @@ fn cpu_run<V: Vector>(p: &SphParams, x: &[Real], v: &[Real], dt: Real, steps: us
     }
     let b = Aabb::new(vec(&p.lower[..d]), vec(&p.upper[..d]), p.restitution, p.friction).unwrap();
     sys.add_constraint(Box::new(b));
-    let mut w = World::new(sys, dt, Some(1)).unwrap();
+    World::new(sys, dt, Some(1)).unwrap()
+}
+
+fn cpu_run<V: Vector>(
+    p: &SphParams,
+    x: &[Real],
+    v: &[Real],
+    walls: &[Real],
+    psi: &[Real],
+    dt: Real,
+    steps: usize,
+) -> (Run, Books) {
+    let mut w = cpu_world::<V>(p, x, v, walls, psi, dt);
     let start = w.energy();
     w.step(steps as u64).unwrap();
     let s = w.particles().state();
@@ -133,7 +172,9 @@ fn compare(a: &Run, b: &Run, dens: &[Real], p: &SphParams) -> (Real, Real, Real)
     (dx, dv, rho)
 }
 
-fn agree(dim: usize, kernel: Kernel) {
+/// The device against the CPU world, the block thrown at the +x face; with `tank`, inside three
+/// layers of wall particles lining the box's floor and sides (Ψ_b = the particle mass).
+fn agree(dim: usize, kernel: Kernel, tank: bool) {
     let Some(gpu) = gpu() else { return };
     let (side, dx) = if dim == 2 { (20, 0.01) } else { (8, 0.01) };
     let h = 1.3 * dx;
@@ -158,18 +199,24 @@ fn agree(dim: usize, kernel: Kernel) {
         restitution: 0.0,
         friction: 0.0,
     };
+    let walls = if tank { tank_walls(dim, &up, dx, 3) } else { Vec::new() };
+    let psi = vec![p.mass; walls.len() / dim];
     let (dt, steps) = (1e-4, 400);
-    let (cpu, books) =
-        if dim == 2 { cpu_run::<DVec2>(&p, &x, &v, dt, steps) } else { cpu_run::<DVec3>(&p, &x, &v, dt, steps) };
+    let (cpu, books) = if dim == 2 {
+        cpu_run::<DVec2>(&p, &x, &v, &walls, &psi, dt, steps)
+    } else {
+        cpu_run::<DVec3>(&p, &x, &v, &walls, &psi, dt, steps)
+    };
     let (e0, e1) = (&books.start, &books.end);
     // The run exercises every book: the viscosity took energy, the walls booked some (their
     // book can go below 0: the work of gravity and the pressure over a projection off the floor
-    // is booked with the kinetic energy the projection removes), the block is compressed.
-    assert!(named(&e1.dissipated, "water") > 0.0 && named(&e1.dissipated, "collisions") != 0.0, "{e1:?}");
+    // is booked with the kinetic energy the projection removes), the block is compressed. In
+    // the tank the wall particles hold the block off the faces (the box may book nothing).
+    assert!(named(&e1.dissipated, "water") > 0.0 && (tank || named(&e1.dissipated, "collisions") != 0.0), "{e1:?}");
     assert!(named(&e1.potential, "water") > 0.0, "{e1:?}");
     let cpu_drift = (e1.total() - e0.total()).abs();
     for precision in [Precision::F64, Precision::F32] {
-        let mut dev = match Sph::new(gpu.clone(), precision, p, &x, &v) {
+        let mut dev = match Sph::with_walls(gpu.clone(), precision, p, &x, &v, &walls, &psi) {
             Ok(d) => d,
             Err(e) if precision == Precision::F64 => {
                 eprintln!("f64 skipped: {e}");
@@ -183,8 +230,9 @@ fn agree(dim: usize, kernel: Kernel) {
         let (dx_, dv_, rho) = dev.read().unwrap();
         let (ex, ev, er) = compare(&cpu, &Run { x: dx_, v: dv_ }, &rho, &p);
         eprintln!(
-            "WCSPH {dim}D {} {precision:?}, {steps} steps: positions {ex:.2e} of the box, velocities {ev:.2e} of the fastest; device's largest compression ρ/ρ0 − 1 {er:.2e}",
-            kernel.name()
+            "WCSPH {dim}D {}{} {precision:?}, {steps} steps: positions {ex:.2e} of the box, velocities {ev:.2e} of the fastest; device's largest compression ρ/ρ0 − 1 {er:.2e}",
+            kernel.name(),
+            if tank { format!(", a tank of {} wall particles", dev.n_walls()) } else { String::new() }
         );
         let (tx, tv) = if precision == Precision::F64 { (1e-11, 1e-9) } else { (1e-4, 1e-2) };
         assert!(ex < tx && ev < tv, "{precision:?}: {ex} {ev}");
@@ -214,11 +262,89 @@ fn agree(dim: usize, kernel: Kernel) {
 
 #[test]
 fn device_wcsph_agrees_with_the_cpu_fluid_2d() {
-    agree(2, Kernel::CubicSpline);
-    agree(2, Kernel::WendlandC2);
+    agree(2, Kernel::CubicSpline, false);
+    agree(2, Kernel::WendlandC2, false);
 }
 
 #[test]
 fn device_wcsph_agrees_with_the_cpu_fluid_3d() {
-    agree(3, Kernel::CubicSpline);
+    agree(3, Kernel::CubicSpline, false);
+}
+
+#[test]
+fn device_wcsph_agrees_with_the_cpu_fluid_in_a_tank_of_wall_particles() {
+    agree(2, Kernel::CubicSpline, true);
+    agree(2, Kernel::WendlandC2, true);
+    agree(3, Kernel::WendlandC2, true);
+}
+
+/// The mean over the column's lower half (the particles below half its height H) of the
+/// pressure over ρ0 g (H − y), the hydrostatic pressure at their depth; H is the lattice's top
+/// (rows × dx: the water's height at ρ0).
+fn hydrostatic(x: &[Real], pressure: &[Real], p: &SphParams, height: Real) -> Real {
+    let (d, g) = (p.dim, -p.gravity[p.dim - 1]);
+    let ratios: Vec<Real> = x
+        .chunks_exact(d)
+        .zip(pressure)
+        .filter(|(xi, _)| xi[d - 1] < 0.5 * height)
+        .map(|(xi, &pi)| pi / (p.rho0 * g * (height - xi[d - 1])))
+        .collect();
+    ratios.iter().sum::<Real>() / ratios.len() as Real
+}
+
+/// A column of water at rest (10 × 20 particles, 1 cm apart, 2D) in a tank of three layers of
+/// wall particles settles, on the CPU and on the device, to the hydrostatic pressure ρ0 g d at
+/// depth d within a few per cent, and both stay in the tank.
+#[test]
+fn device_wcsph_water_at_rest_in_a_wall_particle_tank_is_hydrostatic() {
+    let Some(gpu) = gpu() else { return };
+    let (dx, cols, rows) = (0.01, 10usize, 20usize);
+    let h = 1.3 * dx;
+    let sum = lattice_density_sum(dx, h, 2, KernelKind::CubicSpline).unwrap();
+    let up = [cols as Real * dx, 0.3, 0.0];
+    let p = SphParams {
+        dim: 2,
+        h,
+        mass: 1000.0 / sum,
+        rho0: 1000.0,
+        c0: 20.0,
+        gamma: 7,
+        alpha: 0.1,
+        clamp: true,
+        kernel: Kernel::CubicSpline,
+        gravity: [0.0, -9.81, 0.0],
+        lower: [0.0; 3],
+        upper: up,
+        restitution: 0.0,
+        friction: 0.0,
+    };
+    let x: Vec<Real> =
+        (0..cols * rows).flat_map(|k| [((k % cols) as Real + 0.5) * dx, ((k / cols) as Real + 0.5) * dx]).collect();
+    let v = vec![0.0; x.len()];
+    let walls = tank_walls(2, &up, dx, 3);
+    let psi = vec![p.mass; walls.len() / 2];
+    let (dt, steps, height) = (2e-4, 2500u64, rows as Real * dx);
+    let mut w = cpu_world::<DVec2>(&p, &x, &v, &walls, &psi, dt);
+    w.step(steps).unwrap();
+    let (_, pressure) = w.fluid_fields().unwrap();
+    let xc = DVec2::flat(&w.particles().state().x).to_vec();
+    let cpu = hydrostatic(&xc, &pressure, &p, height);
+    let mut dev = Sph::with_walls(gpu, Precision::F32, p, &x, &v, &walls, &psi).unwrap();
+    dev.step(steps, dt, &AtomicBool::new(false)).unwrap();
+    let (xd, vd, rho) = dev.read().unwrap();
+    let pd: Vec<Real> = rho.iter().map(|&r| p.pressure(r)).collect();
+    let device = hydrostatic(&xd, &pd, &p, height);
+    let vmax = vd.iter().map(|u| u.abs()).fold(0.0, Real::max);
+    let top = |x: &[Real]| x.chunks_exact(2).map(|c| c[1]).fold(0.0, Real::max);
+    eprintln!(
+        "column at rest after {:.2} s: p / (ρ0 g d) over the lower half: CPU {cpu:.4}, device (f32) {device:.4}; device's largest speed {vmax:.2e} m/s; top particle CPU {:.4} m, device {:.4} m",
+        steps as Real * dt,
+        top(&xc),
+        top(&xd)
+    );
+    // Settled: the oscillation left is slow against the sound speed (20 m/s).
+    assert!(vmax < 0.2, "device: speeds up to {vmax} m/s");
+    for (who, r) in [("CPU", cpu), ("device", device)] {
+        assert!((r - 1.0).abs() < 0.05, "{who}: p/(ρ0 g d) = {r}");
+    }
 }
