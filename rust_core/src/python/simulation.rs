@@ -187,16 +187,25 @@ impl PySimulation {
                     moved.push(Box::new(d));
                 }
                 let particles = p.n_particles() > 0 || !terms.is_empty() || !colliders.is_empty();
-                let d = if particles {
+                let d: Option<Box<dyn System>> = if particles {
                     let (x, v) = (flat_of(&p.state().x), flat_of(&p.state().v));
                     let m = p.model().mass.clone();
                     let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
                     let integrator = p.integrator_info().name;
                     let g = gpu.clone();
-                    Some(
-                        py.detach(|| DeviceParticles::on(g, precision, dim, integrator, &x, &v, &m, &pinned, charge.as_deref(), terms, colliders))
-                            .map_err(|e| to_py(py, e))?,
-                    )
+                    if terms.iter().any(|t| t.0 == "sph") {
+                        // A WCSPH fluid: its own device system, under the particles' name.
+                        use crate::systems::device_sph::DeviceSph;
+                        Some(Box::new(
+                            py.detach(|| DeviceSph::from_records(g, precision, DEVICE, dim, integrator, &x, &v, &m, &pinned, terms, colliders))
+                                .map_err(|e| to_py(py, e))?,
+                        ))
+                    } else {
+                        Some(Box::new(
+                            py.detach(|| DeviceParticles::on(g, precision, dim, integrator, &x, &v, &m, &pinned, charge.as_deref(), terms, colliders))
+                                .map_err(|e| to_py(py, e))?,
+                        ))
+                    }
                 } else {
                     None
                 };
@@ -206,7 +215,7 @@ impl PySimulation {
                 }
                 if let Some(d) = d {
                     let empty = ParticleSystem::new(integrator).map_err(|e| to_py(py, e))?;
-                    s.add_system(Box::new(d)).map_err(|e| to_py(py, e))?;
+                    s.add_system(d).map_err(|e| to_py(py, e))?;
                     *s.particles_mut() = empty;
                 }
                 Ok::<(), PyErr>(())
@@ -687,8 +696,16 @@ impl PySimulation {
 
     /// (density, pressure) of every particle, (N,) float64 each; 0 outside fluids.
     fn fluid_fields<'py>(&self, py: Python<'py>) -> PyResult<Columns<'py>> {
-        let inner = &self.inner;
-        let (r, p) = py.detach(|| with_sim!(inner, s => s.fluid_fields())).map_err(|e| to_py(py, e))?;
+        let (inner, on) = (&self.inner, self.on_device);
+        // On a device the fluid's fields are its system's (the host's particles are gone).
+        let (r, p) = py
+            .detach(|| {
+                with_sim!(inner, s => match device_fields(s, on, &["density", "pressure"]) {
+                    Some(f) => f.map(|mut f| (std::mem::take(&mut f[0]), std::mem::take(&mut f[1]))),
+                    None => s.fluid_fields(),
+                })
+            })
+            .map_err(|e| to_py(py, e))?;
         Ok((Array1::from(r).into_pyarray(py), Array1::from(p).into_pyarray(py)))
     }
 
@@ -718,8 +735,11 @@ impl PySimulation {
     /// 0 where a field is not defined.
     fn particle_fields<'py>(&self, py: Python<'py>, names: Vec<String>) -> PyResult<Vec<Bound<'py, PyArray1<f64>>>> {
         let names: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
-        let inner = &self.inner;
-        let f = py.detach(|| with_sim!(inner, s => s.fields(&names))).map_err(|e| to_py(py, e))?;
+        let (inner, on) = (&self.inner, self.on_device);
+        // On a device the fields are its system's (a device fluid's density and pressure).
+        let f = py
+            .detach(|| with_sim!(inner, s => device_fields(s, on, &names).unwrap_or_else(|| s.fields(&names))))
+            .map_err(|e| to_py(py, e))?;
         Ok(f.into_iter().map(|v| Array1::from(v).into_pyarray(py)).collect())
     }
 

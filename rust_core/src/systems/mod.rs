@@ -16,6 +16,8 @@ pub mod bodies;
 pub mod device;
 #[cfg(feature = "gpu")]
 pub mod device_fluid;
+#[cfg(feature = "gpu")]
+pub mod device_sph;
 pub mod flows;
 pub mod ode;
 pub mod particles;

@@ -1,0 +1,147 @@
+"""A WCSPH fluid on the GPU path (``Scene(device=...)`` with a :class:`~physcore.Fluid`, a
+:class:`~physcore.Gravity` and a :class:`~physcore.Box`): against the CPU path, the reference;
+its promises (save and load bit for bit, pickling, the CPU continuing a GPU file, rollback);
+and what it refuses, by name, before anything changes.
+
+Like ``test_gpu_scenes.py`` they run on a real GPU where one is present, else on lavapipe (CI).
+The expected values are the CPU path's, never numbers copied from an earlier GPU run.
+"""
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+from test_gpu_scenes import DEVICE, F64, F64_EXACT
+
+import physcore as pc
+from physcore.shapes import lattice, tank_walls
+
+pytestmark = pytest.mark.skipif(DEVICE is None, reason="no GPU adapter and no lavapipe")
+DX = 0.01
+
+
+def _tank(dim: int, device: str = "cpu", precision: str | None = None, walls: bool = True,
+          integrator: str = "semi_implicit_euler") -> pc.Scene:
+    """A block of water (0.2 wide, 0.3 tall; 0.1 deep in 3D) in the corner of a tank 0.6 × 0.5
+    (× 0.2) lined with 3 layers of boundary particles, inside a Box collider, under gravity."""
+    s = pc.Scene(dim=dim, integrator=integrator, device=device, precision=precision)
+    s.add(pc.Gravity([0.0] * (dim - 1) + [-9.81]))
+    if dim == 2:
+        lo, hi, tlo, thi = [0.0, 0.0], [0.2, 0.3], [0.0, 0.0], [0.6, 0.5]
+    else:
+        lo, hi, tlo, thi = [0.0, 0.0, 0.0], [0.1, 0.06, 0.15], [0.0, 0.0, 0.0], [0.3, 0.06, 0.25]
+    kw = {"boundary": tank_walls(tlo, thi, DX, layers=3)} if walls else {}
+    s.add(pc.Fluid(lattice(lo, hi, DX), DX, name="water", **kw))
+    s.add(pc.Box([c - 0.05 for c in tlo], [c + 0.05 for c in thi]))
+    return s
+
+
+def _books(s: pc.Scene) -> dict[str, float]:
+    e = s.energy()
+    return {"kinetic": e.kinetic, **{f"U {k}": v for k, v in e.potential.items()},
+            **{f"D {k}": v for k, v in e.dissipated.items()}}
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("walls", [True, False])
+def test_a_wcsph_tank_on_the_gpu_steps_and_books_as_on_the_cpu(dim: int, walls: bool) -> None:
+    cpu = _tank(dim, walls=walls)
+    b0 = _books(cpu)
+    cpu.step(200)
+    b1 = _books(cpu)
+    assert b1["D water"] > 0 and b1["kinetic"] > 0  # it moved, and the viscosity took energy
+    scale = sum(abs(v) for v in b1.values())
+    for precision in ["f32", "f64"] if F64 else ["f32"]:
+        gpu = _tank(dim, DEVICE, precision, walls=walls)
+        assert _books(gpu).keys() == b0.keys()
+        gpu.step(200)
+        assert gpu.device == DEVICE and gpu.precision == precision
+        width = 0.6 if dim == 2 else 0.3
+        dx = np.abs(gpu.positions - cpu.positions).max() / width
+        dv = np.abs(gpu.velocities - cpu.velocities).max() / np.abs(cpu.velocities).max()
+        drho = np.abs(gpu.density() - cpu.density()).max() / 1000.0
+        # The pressure over the Tait stiffness B = ρ0 c0²/γ (a free surface's pressure is near 0).
+        fluid = next(t for t in cpu.terms if isinstance(t, pc.Fluid))
+        dp = np.abs(gpu.pressure() - cpu.pressure()).max() / (1000.0 * fluid.sound_speed**2 / fluid.gamma)
+        g1 = _books(gpu)
+        assert g1.keys() == b1.keys()
+        db = max(abs(g1[k] - b1[k]) for k in b1) / scale
+        # f64: round-off (lavapipe, or a GPU that fuses a·b + c); f32: 24-bit mantissas over 200 steps.
+        tol = {"f32": (1e-4, 1e-2, 1e-4, 1e-3, 1e-4), "f64": (1e-12, 1e-9, 1e-12, 1e-11, 1e-12)}[precision]
+        assert dx < tol[0] and dv < tol[1] and drho < tol[2] and dp < tol[3] and db < tol[4], (precision, dx, dv, drho, dp, db)
+        np.testing.assert_array_equal(gpu.masses, cpu.masses)
+
+
+def test_a_gpu_fluid_saved_and_loaded_continues_bit_for_bit_and_on_the_cpu(tmp_path) -> None:
+    precision = "f64" if F64 else "f32"
+    a = _tank(2, DEVICE, precision)
+    a.step(50)
+    path = a.save(tmp_path / "tank.npz")
+    b = pc.Scene.load(path)
+    c = pickle.loads(pickle.dumps(a))
+    on_cpu = pc.Scene.load(path, device="cpu")
+    for s in (a, b, c, on_cpu):
+        s.step(50)
+    assert b.device == DEVICE and c.device == DEVICE and on_cpu.device == "cpu"
+    for s in (b, c):
+        np.testing.assert_array_equal(s.positions, a.positions)
+        np.testing.assert_array_equal(s.velocities, a.velocities)
+        # The dissipated books carried over and added to (round-off: the sums restart).
+        assert s.energy().total == pytest.approx(a.energy().total, rel=1e-12)
+    # The CPU continues the GPU's file: the same motion to the device's precision.
+    tol = 1e-12 if precision == "f64" else 1e-4
+    assert np.abs(on_cpu.positions - a.positions).max() < tol
+    assert on_cpu.energy().total == pytest.approx(a.energy().total, rel=tol)
+
+
+def test_a_gpu_fluid_that_diverges_is_rolled_back() -> None:
+    """A step of 1e100 s sends the f32 state past float32's range: the call raises naming the
+    particle and the scene is as it was before it (the checkpoint read back and sent again)."""
+    s = _tank(2, DEVICE, "f32", walls=False)
+    s.step(5)
+    x0, v0, e0 = s.positions, s.velocities, s.energy().total
+    s.dt = 1e100
+    with pytest.raises(pc.SimulationDiverged, match="particle"):
+        s.step(20)
+    np.testing.assert_array_equal(s.positions, x0)
+    np.testing.assert_array_equal(s.velocities, v0)
+    assert s.energy().total == e0
+    s.dt = 1e-4
+    s.step(5)  # and it steps on
+    assert np.isfinite(s.positions).all()
+
+
+@pytest.mark.parametrize("change", ["dfsph", "springs", "no_box", "verlet", "pinned"])
+def test_what_the_gpu_fluid_cannot_hold_is_refused_by_name_and_nothing_changes(change: str) -> None:
+    integrator = "verlet" if change == "verlet" else "semi_implicit_euler"
+    s = pc.Scene(dim=2, integrator=integrator, device=DEVICE)
+    s.add(pc.Gravity([0.0, -9.81]))
+    pos = lattice([0.0, 0.0], [0.1, 0.1], DX)
+    s.add(pc.Fluid(pos, DX, name="water", method="dfsph" if change == "dfsph" else "wcsph"))
+    if change != "no_box":
+        s.add(pc.Box([-0.1, -0.1], [0.5, 0.5]))
+    if change == "springs":
+        s.add(pc.Springs([0], [1], stiffness=10.0, rest_length=DX, name="tie"))
+    if change == "pinned":
+        s.add_particles([[0.3, 0.3]], masses=[1.0], pinned=[True])
+    want = {"dfsph": "Fluid", "springs": "tie", "no_box": "colliders", "verlet": "integrator", "pinned": "particles|pinned"}[change]
+    x0 = s.positions
+    with pytest.raises(pc.InvalidInputError, match=want):
+        s.step(1)
+    np.testing.assert_array_equal(s.positions, x0)
+    assert s.time == 0.0
+
+
+def test_device_auto_keeps_a_fluid_on_the_cpu_and_says_why() -> None:
+    s = _tank(2, "auto")
+    s.step(1)
+    assert s.device == "cpu" and "WCSPH" in s.device_reason
+
+
+@pytest.mark.skipif(not F64_EXACT, reason="bit-identity with the CPU holds on lavapipe only (a GPU fuses a·b + c)")
+def test_on_lavapipe_the_f64_fluid_runs_to_round_off_of_the_cpu() -> None:
+    cpu, gpu = _tank(2), _tank(2, DEVICE, "f64")
+    for s in (cpu, gpu):
+        s.step(100)
+    assert np.abs(gpu.positions - cpu.positions).max() < 1e-14
