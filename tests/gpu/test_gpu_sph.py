@@ -145,3 +145,20 @@ def test_on_lavapipe_the_f64_fluid_runs_to_round_off_of_the_cpu() -> None:
     for s in (cpu, gpu):
         s.step(100)
     assert np.abs(gpu.positions - cpu.positions).max() < 1e-14
+
+
+def test_the_dam_break_scene_runs_on_the_gpu_as_on_the_cpu() -> None:
+    """``dam_break(method="wcsph", device=...)``: the same surge as the CPU's (its front after
+    0.3 s, the water's books), the tank in a Box one the CPU does not need; DFSPH, the scene's
+    default, is refused on a GPU by name."""
+    with pytest.raises(pc.InvalidInputError, match="method"):
+        pc.scenes.dam_break(n=8, device=DEVICE)
+    cpu = pc.scenes.dam_break(n=12, method="wcsph")
+    gpu = pc.scenes.dam_break(n=12, method="wcsph", device=DEVICE)  # float32 on the device
+    for s in (cpu, gpu):
+        s.advance(0.3)
+    assert gpu.step_count == cpu.step_count and gpu.precision == "f32"
+    front_cpu, front_gpu = cpu.positions[:, 0].max(), gpu.positions[:, 0].max()
+    assert front_cpu > 1.5  # it surged (the column is 1 m wide)
+    assert front_gpu == pytest.approx(front_cpu, abs=1e-3)
+    assert gpu.energy().total == pytest.approx(cpu.energy().total, rel=1e-4)

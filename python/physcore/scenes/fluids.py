@@ -13,6 +13,7 @@ from ..fluids import SPACING_RANGE
 from ..scene import Scene
 from ..shapes import blob, lattice, lattice_counts, tank_walls
 from ..terms import Gravity
+from ..terms.colliders import Box
 from ._common import _count, _dim, _finite_books, _flag, _nonneg, _particles, _per, _positive, _stamped
 
 _G = 9.81  # m/s², gravity of the fluid scenes
@@ -49,10 +50,10 @@ def _walls_size(lo, hi, dx) -> float:
     return _lattice_size([v - pad for v in lo], [v + pad for v in hi], dx)
 
 
-def _fluid_scene(dim: int, integrator: str, dt: float | None, threads: int | None) -> Scene:
+def _fluid_scene(dim: int, integrator: str, dt: float | None, threads: int | None, device: str = "cpu") -> Scene:
     """A scene with gravity along −y (2D) or −z (3D), added before the fluid so that the fluid's
     default sound speed is estimated from it."""
-    scene = Scene(dim, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads)
+    scene = Scene(dim, integrator=integrator, dt=1e-3 if dt is None else dt, threads=threads, device=device)
     g = [0.0] * dim
     g[-1] = -_G
     scene.add(Gravity(g))
@@ -69,11 +70,14 @@ def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: t
 
 def _water_in_tank(
     positions, dx, tlo, thi, *, dim, lid, pass_precision, kernel, alpha, sound_speed, integrator, dt, threads, method="wcsph",
-    velocities=None, **surface: float,
+    velocities=None, device="cpu", **surface: float,
 ) -> Scene:
     """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers
-    (``surface``: DFSPH's ``surface_tension`` and ``adhesion``)."""
-    scene = _fluid_scene(dim, integrator, dt, threads)
+    (``surface``: DFSPH's ``surface_tension`` and ``adhesion``). On a GPU ``device`` the tank
+    also stands in a Box collider 4 spacings outside its outer wall layer: the extent of the
+    device's cell list (a particle that leaks through the walls is held there; on the CPU it
+    would fall away)."""
+    scene = _fluid_scene(dim, integrator, dt, threads, device)
     scene.add_fluid(
         positions,
         velocities=velocities,
@@ -87,6 +91,9 @@ def _water_in_tank(
         method=method,
         name="water",
     )
+    if device != "cpu":
+        margin = 4.0 * dx  # the 3 wall layers lie within 3 dx of the tank's faces
+        scene.add(Box([c - margin for c in tlo], [c + margin for c in thi]))
     if dt is not None:
         scene.dt = dt
     return _finite_books(scene, "n, tank")
@@ -109,6 +116,7 @@ def dam_break(
     dt: float | None = None,
     threads: int | None = None,
     method: str | None = None,
+    device: str = "cpu",
 ) -> Scene:
     """Dam break: a water column collapses in a tank, surges along the floor and splashes back.
 
@@ -161,6 +169,11 @@ def dam_break(
         of 29,000, three times faster (docs/guide/fluids_dfsph.md), with the Martin & Moyce
         front as close; ``sound_speed`` then only scales the viscosity and ``pass_precision`` does
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
+    device : {"cpu", "gpu", "gpu:NAME", "auto"}
+        ``"gpu"`` steps the water on a GPU in float32 (:class:`~physcore.Scene`; WCSPH only, so
+        ``method="wcsph"`` must be given: DFSPH has no GPU kernel yet). The tank then also stands
+        in a :class:`~physcore.Box` 4 spacings outside its walls, the extent of the device's cell
+        list. Its speed on a GPU is not measured yet (docs/guide/gpu.md).
 
     Returns
     -------
@@ -192,6 +205,9 @@ def dam_break(
     if not height <= top:
         raise InvalidInputError(f"tank, height: the tank's height {top} must be at least the column height {height}")
     dx = _spacing(_per(width, n), "n, width")
+    gpu = isinstance(device, str) and device.startswith("gpu")
+    if method is None and gpu:
+        raise InvalidInputError(f"method: device={device!r} runs WCSPH only (DFSPH has no GPU kernel yet): pass method='wcsph'")
     if method is None:
         # (Any other integrator, a bad one included, goes to Scene, which names it.)
         method = "dfsph" if isinstance(integrator, str) and integrator == "semi_implicit_euler" else "wcsph"
@@ -201,6 +217,7 @@ def dam_break(
     return _water_in_tank(
         lattice(lo, hi, dx), dx, tlo, thi, dim=dim, lid=lid, pass_precision=pass_precision, kernel=kernel,
         alpha=alpha, sound_speed=sound_speed, integrator=integrator, dt=dt, threads=threads, method=method,
+        device=device,
     )
 
 
