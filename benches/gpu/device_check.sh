@@ -57,6 +57,9 @@ timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
 section "Grids: Gray-Scott and the wave"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+section "WCSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"
+timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --n 72,144,720 --steps 20 --cpu-max 144
+timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --dim 3 --n 24,48,80 --steps 10 --cpu-max 24
 section "The stable fluid (CPU to 1024²)"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --kinds fluid --n 256,1024,4096 --steps 20 --cpu-max 1024
 if [ -f .devbin/base_core.abi3.so ]; then

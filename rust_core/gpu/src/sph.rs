@@ -628,6 +628,17 @@ impl Sph {
         ))
     }
 
+    /// The dissipated books alone (viscous, collisions), J: the per-particle accumulators read
+    /// back and summed in index order, as `books` sums them (a checkpoint needs no densities).
+    pub fn dissipated(&self) -> Result<(f64, f64)> {
+        if self.n == 0 {
+            return Ok((0.0, 0.0));
+        }
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.n)?;
+        let (viscous, walls) = per.split_at(self.n);
+        Ok((viscous.iter().sum(), walls.iter().sum()))
+    }
+
     /// The energy books now (J; see `SphBooks`), as the CPU's `ParticleSystem::energy` defines
     /// them: the state functions from a read-back of the state (densities summed now), each sum
     /// in f64 in the caller's particle order; the viscous and wall books accumulated on the device

@@ -201,9 +201,10 @@ impl DeviceSph {
     }
 
     fn state(&self) -> Result<Saved> {
-        let (x, v, _) = self.lock().read()?;
-        let b = self.books()?;
-        Ok(Saved { x, v, base: [b.viscous, b.collisions] })
+        let g = self.lock();
+        let (x, v, _) = g.read()?;
+        let (viscous, collisions) = g.dissipated()?;
+        Ok(Saved { x, v, base: [viscous + self.base[0], collisions + self.base[1]] })
     }
 }
 
