@@ -162,3 +162,41 @@ def test_the_dam_break_scene_runs_on_the_gpu_as_on_the_cpu() -> None:
     assert front_cpu > 1.5  # it surged (the column is 1 m wide)
     assert front_gpu == pytest.approx(front_cpu, abs=1e-3)
     assert gpu.energy().total == pytest.approx(cpu.energy().total, rel=1e-4)
+
+
+def test_the_gpu_dam_break_front_matches_martin_and_moyce() -> None:
+    """The CPU's Martin & Moyce test (tests/fluids/test_sph.py: column a × 2a, 20 particles
+    across, the surge front over T = 0..3 within 15 % of every measured point with the gate's
+    time shift) run on the device in float32, inside a Box around the open tank; and the front
+    the CPU's at every sample to 2 % of a."""
+    import math
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fluids"))
+    from test_sph import MARTIN_MOYCE_1952, MM_TIME_SHIFT, front
+
+    a, n, g = 0.25, 20, 9.81
+    dx, up = a / n, [5.0 * a, 2.5 * a]
+    runs = []
+    for device in ("cpu", DEVICE):
+        s = pc.Scene(dim=2, integrator="semi_implicit_euler", device=device)
+        s.add(pc.Gravity([0.0, -g]))
+        s.add(pc.Fluid(lattice([0, 0], [a, 2 * a], dx), dx, boundary=tank_walls([0.0, 0.0], up, dx, layers=3, top=False),
+                       pass_precision="f32", name="water"))
+        s.add(pc.Box([-4 * dx, -4 * dx], [up[0] + 4 * dx, 4 * up[1]]))
+        tscale = math.sqrt(2 * g / a)
+        ts, zs = [0.0], [1.0]
+        while ts[-1] < MARTIN_MOYCE_1952[-1][0] + 0.05:
+            s.advance(0.05 / tscale)
+            ts.append(s.time * tscale)
+            zs.append(front(s.positions, 1.3 * dx) / a)
+        runs.append((np.array(ts), np.array(zs)))
+    (tc, zc), (tg, zg) = runs
+    np.testing.assert_allclose(tg, tc, rtol=1e-12)  # the same samples (the clocks add in another order)
+    assert np.abs(zg - zc).max() < 0.02
+    t_exp = np.array([t for t, _ in MARTIN_MOYCE_1952])
+    z_exp = np.array([z for _, z in MARTIN_MOYCE_1952])
+    err = np.interp(t_exp - MM_TIME_SHIFT, tg, zg) / z_exp - 1.0
+    print(f"\nMartin & Moyce on {DEVICE} (f32): worst {np.abs(err).max():.1%}; front vs the CPU's: {np.abs(zg - zc).max():.2e} a")
+    assert np.abs(err).max() < 0.15, err
