@@ -306,6 +306,8 @@ impl System for DeviceSph {
             }
             out
         };
+        // The mass as the device holds it (the scene checks the column against its masses so).
+        let m = if self.precision == Precision::F32 { m as f32 as Real } else { m };
         let (pos, vel) = (rows(&s.x, m), rows(&s.v, 1.0 / m));
         let zero = vec![0.0; 4 * n];
         let mut aux = zero.clone();
