@@ -232,7 +232,14 @@ fn watched<T: Send + 'static>(
     use std::sync::{Arc, Mutex};
     let slot = Arc::new(Mutex::new(Some(job)));
     let (theirs, (tx, rx)) = (slot.clone(), channel());
+    // The thread's id, so that an abandoned job can be sent to the back of the queue.
+    let tid = Arc::new(std::sync::atomic::AtomicI64::new(0));
+    let their_tid = tid.clone();
     let started = std::thread::Builder::new().name(name.into()).stack_size(8 << 20).spawn(move || {
+        #[cfg(target_os = "linux")]
+        // SAFETY: gettid has no preconditions.
+        their_tid.store(unsafe { libc::gettid() } as i64, Ordering::Relaxed);
+        let _ = &their_tid;
         if let Some(job) = theirs.lock().unwrap_or_else(|p| p.into_inner()).take() {
             let _ = tx.send(std::panic::catch_unwind(std::panic::AssertUnwindSafe(job)));
         }
@@ -244,7 +251,21 @@ fn watched<T: Send + 'static>(
     loop {
         match rx.recv_timeout(std::time::Duration::from_millis(10)) {
             Ok(result) => return Some(result),
-            Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => return None,
+            Err(RecvTimeoutError::Timeout) if stop.load(Ordering::Relaxed) => {
+                // The abandoned job runs on to its end, unseen: at the lowest priority, so that
+                // it does not slow the caller's rollback on a busy machine (Linux: a thread's
+                // own nice value).
+                #[cfg(target_os = "linux")]
+                {
+                    let t = tid.load(Ordering::Relaxed);
+                    if t > 0 {
+                        // SAFETY: setpriority on a thread id of this process; a failure is harmless.
+                        unsafe { libc::setpriority(libc::PRIO_PROCESS, t as libc::id_t, 19) };
+                    }
+                }
+                let _ = &tid;
+                return None;
+            }
             Err(RecvTimeoutError::Timeout) => {}
             // The job is sent as it ends, panic or not: only a thread killed unwinding gets here.
             Err(RecvTimeoutError::Disconnected) => return Some(Err(Box::new("the thread ended without a result"))),
