@@ -620,12 +620,18 @@ impl Sph {
             self.record_density(&mut pass);
         }
         self.gpu.queue.submit([enc.finish()]);
+        let (x, v) = self.read_state()?;
+        Ok((x, v, self.gpu.read_reals(self.precision, &self.rho, &self.staging, self.n)?))
+    }
+
+    /// Positions and velocities alone (as `read`), without the density pass that `read` runs:
+    /// what a frame or a checkpoint needs.
+    pub fn read_state(&self) -> Result<(Vec<f64>, Vec<f64>)> {
+        if self.n == 0 {
+            return Ok((Vec::new(), Vec::new()));
+        }
         let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
-        Ok((
-            self.gpu.read_reals(p, &self.pos, s, nd)?,
-            self.gpu.read_reals(p, &self.vel, s, nd)?,
-            self.gpu.read_reals(p, &self.rho, s, self.n)?,
-        ))
+        Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
     }
 
     /// The dissipated books alone (viscous, collisions), J: the per-particle accumulators read

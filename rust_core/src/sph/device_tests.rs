@@ -11,6 +11,7 @@
 use crate::constraints::aabb::Aabb;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::KernelKind;
+use crate::systems::device_fluid::tests::gpu;
 use crate::systems::particles::ParticleSystem;
 use crate::systems::EnergyReport;
 use crate::terms::registry::{self, Context, Params, Value};
@@ -18,21 +19,8 @@ use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
 use physcore_gpu::sph::{Kernel, Sph, SphBooks, SphParams};
-use physcore_gpu::{Gpu, Precision};
+use physcore_gpu::Precision;
 use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
-
-fn gpu() -> Option<Arc<Gpu>> {
-    let w = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
-    match Gpu::open(w) {
-        Ok(g) => Some(g),
-        Err(e) if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") => panic!("no adapter: {e}"),
-        Err(e) => {
-            eprintln!("skipped: {e}");
-            None
-        }
-    }
-}
 
 /// A block of `side`^dim particles `dx` apart on the floor of a box 0.4 m wide, 2 mm from its
 /// +x wall and moving towards it at 0.3 m/s, so that it hits the wall at once.
@@ -302,22 +290,9 @@ fn device_wcsph_water_at_rest_in_a_wall_particle_tank_is_hydrostatic() {
     let h = 1.3 * dx;
     let sum = lattice_density_sum(dx, h, 2, KernelKind::CubicSpline).unwrap();
     let up = [cols as Real * dx, 0.3, 0.0];
-    let p = SphParams {
-        dim: 2,
-        h,
-        mass: 1000.0 / sum,
-        rho0: 1000.0,
-        c0: 20.0,
-        gamma: 7,
-        alpha: 0.1,
-        clamp: true,
-        kernel: Kernel::CubicSpline,
-        gravity: [0.0, -9.81, 0.0],
-        lower: [0.0; 3],
-        upper: up,
-        restitution: 0.0,
-        friction: 0.0,
-    };
+    // The defaults are this case's water (2D, ρ0 1000, c0 20, α 0.1, cubic spline, Tait γ 7
+    // clamped, gravity along −y, walls without bounce or friction).
+    let p = SphParams { h, mass: 1000.0 / sum, upper: up, ..SphParams::default() };
     let x: Vec<Real> =
         (0..cols * rows).flat_map(|k| [((k % cols) as Real + 0.5) * dx, ((k / cols) as Real + 0.5) * dx]).collect();
     let v = vec![0.0; x.len()];

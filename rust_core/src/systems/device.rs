@@ -391,6 +391,17 @@ fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result
 /// The device's own checkpoint is kept on the device; the world's snapshot only marks it.
 struct Mark;
 
+/// A device's halt after `done` steps as the world's (the particles and the WCSPH fluid alike).
+pub(crate) fn halt_of((done, h): (u64, dp::Halt)) -> (u64, Halt) {
+    match h {
+        dp::Halt::Stopped => (done, Halt::Stopped),
+        dp::Halt::Diverged { particle } => (done, Halt::Diverged { index: particle, quantity: Failure::Position }),
+        // A device failure reads as a divergence of particle 0: the world rolls back to its
+        // checkpoint (kept on the device, or lost with it: see `restore`).
+        dp::Halt::Failed(_) => (done, Halt::Diverged { index: 0, quantity: Failure::Position }),
+    }
+}
+
 impl System for DeviceParticles {
     fn name(&self) -> &str {
         &self.name
@@ -405,14 +416,7 @@ impl System for DeviceParticles {
         self.steps(1, dt, stop).map_err(|(_, h)| h)
     }
     fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
-        let mut p = self.lock();
-        p.step(n, dt, stop).map(|_| ()).map_err(|(done, h)| match h {
-            dp::Halt::Stopped => (done, Halt::Stopped),
-            dp::Halt::Diverged { particle } => (done, Halt::Diverged { index: particle, quantity: Failure::Position }),
-            // A device failure reads as a divergence of particle 0: the world rolls back to its
-            // checkpoint (kept on the device, or lost with it: see `restore`).
-            dp::Halt::Failed(_) => (done, Halt::Diverged { index: 0, quantity: Failure::Position }),
-        })
+        self.lock().step(n, dt, stop).map(|_| ()).map_err(halt_of)
     }
     fn auto_dt(&self) -> Option<Real> {
         None

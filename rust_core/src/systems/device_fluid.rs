@@ -322,14 +322,15 @@ impl System for DeviceFluid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     //! The device fluid against the CPU system (skipped where no adapter is found, unless
     //! PHYSCORE_GPU_REQUIRED=1; CI runs them on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
     use super::*;
     use crate::grids::fluid::tests::disc;
     use crate::grids::fluid::{Advection, Projection, Source};
 
-    fn gpu() -> Option<Arc<Gpu>> {
+    /// The adapter the core's device tests run on (shared with `sph::device_tests`).
+    pub(crate) fn gpu() -> Option<Arc<Gpu>> {
         let w = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
         match Gpu::open(w) {
             Ok(g) => Some(g),

@@ -13,10 +13,9 @@
 //! back and sent again: a restart continues bit for bit. The dissipated books kept on the device
 //! start from zero on a new upload; what was booked before is kept here (`base`) and added.
 use super::{saved, Arrays, EnergyReport, Halt, Snapshot, System};
-use crate::error::{invalid, Failure, Result};
+use crate::error::{invalid, Result};
 use crate::terms::registry::Params;
 use crate::vector::Real;
-use physcore_gpu::particles::Halt as DeviceHalt;
 use physcore_gpu::sph::{Kernel, Sph, SphBooks, SphParams};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
@@ -50,10 +49,6 @@ pub struct DeviceSph {
     g: Mutex<Sph>,
     /// The viscous and collision books booked before the fluid now on the device was uploaded.
     base: [Real; 2],
-}
-
-fn number(p: &Params, key: &str) -> Result<Real> {
-    p.number(key)
 }
 
 /// The floats under `key` (a copy: the records stay as they are).
@@ -125,7 +120,7 @@ impl DeviceSph {
                 "the GPU path's WCSPH needs exactly one Box collider (its walls and the cells' extent) and no other",
             ));
         }
-        let (first, count) = (number(fp, "first")?, number(fp, "n")?);
+        let (first, count) = (fp.number("first")?, fp.number("n")?);
         if first != 0.0 || count as usize != n {
             return Err(invalid("particles", "the GPU path's WCSPH holds the fluid's particles alone"));
         }
@@ -136,7 +131,7 @@ impl DeviceSph {
         if mass.iter().any(|&mi| mi != m) {
             return Err(invalid("masses", "the GPU path's WCSPH takes particles of one mass (the fluid's)"));
         }
-        let gamma = number(fp, "gamma")?;
+        let gamma = fp.number("gamma")?;
         let kernel = Kernel::by_name(fp.text("kernel")?)?;
         let b = boxes[0];
         let three = |s: &[Real]| {
@@ -150,19 +145,19 @@ impl DeviceSph {
         };
         let params = SphParams {
             dim,
-            h: number(fp, "h")?,
+            h: fp.number("h")?,
             mass: m,
-            rho0: number(fp, "density")?,
-            c0: number(fp, "sound_speed")?,
+            rho0: fp.number("density")?,
+            c0: fp.number("sound_speed")?,
             gamma: gamma as u32,
-            alpha: number(fp, "viscosity")?,
-            clamp: number(fp, "clamp_pressure")? == 1.0,
+            alpha: fp.number("viscosity")?,
+            clamp: fp.flag("clamp_pressure")?,
             kernel,
             gravity: g,
             lower: three(&floats(b, "lower")?),
             upper: three(&floats(b, "upper")?),
-            restitution: number(b, "restitution")?,
-            friction: number(b, "friction")?,
+            restitution: b.number("restitution")?,
+            friction: b.number("friction")?,
         };
         let walls = floats(fp, "walls")?;
         let psi = floats(fp, "wall_psi")?;
@@ -202,7 +197,7 @@ impl DeviceSph {
 
     fn state(&self) -> Result<Saved> {
         let g = self.lock();
-        let (x, v, _) = g.read()?;
+        let (x, v) = g.read_state()?;
         let (viscous, collisions) = g.dissipated()?;
         Ok(Saved { x, v, base: [viscous + self.base[0], collisions + self.base[1]] })
     }
@@ -222,13 +217,7 @@ impl System for DeviceSph {
         self.steps(1, dt, stop).map_err(|(_, h)| h)
     }
     fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
-        self.lock().step(n, dt, stop).map(|_| ()).map_err(|(done, h)| match h {
-            DeviceHalt::Stopped => (done, Halt::Stopped),
-            DeviceHalt::Diverged { particle } => {
-                (done, Halt::Diverged { index: particle, quantity: Failure::Position })
-            }
-            DeviceHalt::Failed(_) => (done, Halt::Diverged { index: 0, quantity: Failure::Position }),
-        })
+        self.lock().step(n, dt, stop).map(|_| ()).map_err(super::device::halt_of)
     }
     fn auto_dt(&self) -> Option<Real> {
         None
@@ -260,7 +249,13 @@ impl System for DeviceSph {
         r
     }
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
-        let (x, v, rho) = self.lock().read()?;
+        // The density pass and its read only when a density or a pressure is asked for.
+        let (x, v, rho) = if names.iter().any(|n| matches!(*n, "density" | "pressure")) {
+            self.lock().read()?
+        } else {
+            let (x, v) = self.lock().read_state()?;
+            (x, v, Vec::new())
+        };
         let (d, n) = (self.params.dim, x.len() / self.params.dim);
         Ok(names
             .iter()
