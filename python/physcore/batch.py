@@ -90,6 +90,22 @@ def _same_structure(members: Sequence[Scene], name: str, after: str = "") -> Non
             what = ("dimension", "particle count", "parts")[i]
             raise InvalidInputError(f"{name} {k} differs from entry 0 in its {what}{after}: {other[i]} vs {first[i]}")
 
+def _check_device(device: object, precision: object) -> tuple[str, str]:
+    """A batch's ``device`` (``"cpu"``, ``"gpu"``, ``"gpu:NAME"``) and its precision (``"f32"``
+    unless given; ``"f64"`` on the CPU, where members keep their own)."""
+    if not isinstance(device, str):
+        raise InvalidTypeError(f"device: expected 'cpu', 'gpu' or 'gpu:NAME', got {type(device).__name__}")
+    if device != "cpu" and device != "gpu" and not device.startswith("gpu:"):
+        raise InvalidInputError(f"device: must be 'cpu', 'gpu' or 'gpu:NAME', got {device!r}")
+    if precision is None:
+        return device, ("f64" if device == "cpu" else "f32")
+    if not isinstance(precision, str):
+        raise InvalidTypeError(f"precision: expected 'f32' or 'f64', got {type(precision).__name__}")
+    if precision not in ("f32", "f64"):
+        raise InvalidInputError(f"precision: must be 'f32' or 'f64', got {precision!r}")
+    return device, precision
+
+
 def _room() -> int:
     """Bytes a batch may plan for: physcore's limit (half the physical memory), or less where a
     memory cap (``RLIMIT_AS``) leaves less room above what the process maps now."""
@@ -118,6 +134,20 @@ class Batch:
     threads : int or None
         Threads stepping members side by side (``None``: all cores, or ``RAYON_NUM_THREADS``).
         Results do not depend on it.
+    device : str
+        ``"cpu"`` (default), or ``"gpu"`` / ``"gpu:NAME"``: every member on one GPU, each stage
+        of a step one dispatch for all members (each member's pairwise sums kept to its own
+        particles). The members stay CPU scenes: a call uploads their states, steps them on the
+        device and writes each member's state, clock and energy books back, as if it had
+        stepped alone in the device's ``precision``. A GPU batch holds particle scenes with
+        the GPU path's terms (gravity, drag, pairwise gravity, Coulomb, springs) and colliders,
+        and its members share the integrator, ``dt``, the fields' parameters (g, drag, G, k,
+        softening) and the colliders (one dispatch runs them); masses, charges, springs and
+        states may differ. Anything else is refused by name. A member that diverges is retired
+        as on the CPU; the others' results do not depend on it. Measured agreement with the CPU
+        path: docs/guide/gpu.md.
+    precision : {"f32", "f64"} or None
+        A GPU batch's precision (default ``"f32"``); ignored on the CPU (members keep their own).
 
     Raises
     ------
@@ -125,10 +155,19 @@ class Batch:
         ``scenes`` is not a sequence of :class:`~physcore.Scene`; ``threads`` not an int.
     InvalidInputError
         (a ``ValueError``) No scene, a scene given twice, or a member whose structure differs
-        from the first's (the message names its index and what differs).
+        from the first's (the message names its index and what differs); with a GPU
+        ``device``: no such device, f64 on an adapter without it, a part or a difference
+        between members the GPU batch cannot hold (named).
     """
 
-    def __init__(self, scenes: Sequence[Scene], *, threads: int | None = None) -> None:
+    def __init__(
+        self,
+        scenes: Sequence[Scene],
+        *,
+        threads: int | None = None,
+        device: str = "cpu",
+        precision: str | None = None,
+    ) -> None:
         if isinstance(scenes, Scene) or not isinstance(scenes, Sequence):
             raise InvalidTypeError(f"scenes: expected a sequence of Scene, got {type(scenes).__name__}")
         members = list(scenes)
@@ -152,6 +191,24 @@ class Batch:
         self._sessions = [s.session for s in members]
         self._sims = [x.sim for x in self._sessions]
         self._locks = [x.lock for x in self._sessions]
+        self._device, self._precision = _check_device(device, precision)
+        #: The members on the GPU (`_core.DeviceBatch`), built again when they change.
+        self._gpu: Any = None
+        if self._device != "cpu":
+            for k, s in enumerate(members):
+                if s.session.sim.on_device:
+                    raise InvalidInputError(f"scenes: entry {k} is on a device already (a GPU batch moves its members itself)")
+            s = members[0]
+            part = s._unsupported_part()
+            if part is not None or any(p.part_kind == "fluid" for p in s.parts):
+                part = part or next(p for p in s.parts if p.part_kind == "fluid")
+                what = getattr(part, "name", None) or type(part).__name__
+                raise InvalidInputError(
+                    f"device={self._device!r}: a GPU batch has no kernel for {type(part).__name__} {what!r} "
+                    "(it holds particles under gravity, drag, pairwise gravity, Coulomb and springs, with colliders); "
+                    "run this batch with device='cpu'"
+                )
+            self._gpu = self._device_batch(self._sims)
 
     # ------------------------------------------------------------------------ building
     @classmethod
@@ -163,10 +220,13 @@ class Batch:
         positions: Callable[[int, np.ndarray], Any] | None = None,
         velocities: Callable[[int, np.ndarray], Any] | None = None,
         threads: int | None = None,
+        device: str = "cpu",
+        precision: str | None = None,
     ) -> Batch:
         """``m`` copies of ``scene`` (bit-exact, through its scene file), member ``k``'s positions
         and velocities set to ``positions(k, x)`` and ``velocities(k, v)`` where given (``x``,
-        ``v``: the scene's, (N, dim) float64 m and m/s).
+        ``v``: the scene's, (N, dim) float64 m and m/s); ``threads``, ``device`` and
+        ``precision`` as :class:`Batch` takes them.
 
         Raises TypeError / InvalidInputError naming ``scene``, ``m`` (an int ≥ 1) or the array a
         callable returned (as :attr:`Scene.positions` would); :class:`~physcore.OutOfMemoryError`
@@ -200,9 +260,20 @@ class Batch:
             if isinstance(e, OutOfMemoryError):
                 raise
             raise OutOfMemoryError(f"m: out of memory after {len(members)} of {m} copies of the scene") from None
-        return cls(members, threads=threads)
+        return cls(members, threads=threads, device=device, precision=precision)
+
+    def _device_batch(self, sims: list[Any]) -> Any:
+        """The core's batch of ``sims`` on this batch's device (InvalidInputError naming what
+        it cannot hold)."""
+        return _core.DeviceBatch(sims, self._device, self._precision)
 
     # ------------------------------------------------------------------------ members
+    @property
+    def device(self) -> str:
+        """``"cpu"``, or the GPU the batch runs on, its backend and precision (e.g.
+        ``"NVIDIA H100 80GB HBM3 (vulkan, f32)"``)."""
+        return "cpu" if self._gpu is None else str(self._gpu.device)
+
     @property
     def members(self) -> tuple[Scene, ...]:
         """The scenes, in order."""
@@ -265,10 +336,11 @@ class Batch:
         # A GPU member moves to its device at its first step, as Scene.step moves it: its parts
         # checked first (refused by name, for every member, before any moves), else the core
         # would step it on the CPU.
-        for s in scenes:
-            s.to_device(check_only=True)
-        for s in scenes:
-            s.to_device()
+        if self._gpu is None:
+            for s in scenes:
+                s.to_device(check_only=True)
+            for s in scenes:
+                s.to_device()
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
         fresh = [s for s in scenes if s.session.reference_energy is None]
@@ -291,7 +363,14 @@ class Batch:
                 s.session.busy = me
             missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None])
             # The core checks n against every member's step count before stepping any.
-            failed = None if missing else _core.step_batch(sims, n, self._threads)
+            if missing:
+                failed = None
+            elif self._gpu is not None:
+                if not self._gpu.matches(sims):  # a member retired, or its terms changed
+                    self._gpu = self._device_batch(sims)
+                failed = self._gpu.step(sims, n)
+            else:
+                failed = _core.step_batch(sims, n, self._threads)
         finally:
             if taken == len(locks):
                 for s in scenes:
@@ -366,6 +445,8 @@ class Batch:
             "members": len(blobs),
             "threads": self._threads,
             "diverged": {str(k): str(e) for k, e in self.diverged.items()},
+            "device": self._device,
+            "precision": self._precision,
         }
 
         def write(fh: Any) -> None:
@@ -430,10 +511,17 @@ class Batch:
         threads = meta.get("threads")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise SceneFileError(where, "batch.json.threads", f"must be null or a count >= 1, got {threads!r}")
+        device, precision = meta.get("device", "cpu"), meta.get("precision")
         try:
-            batch = cls(members, threads=threads)
+            device, precision = _check_device(device, precision)
+        except (InvalidInputError, InvalidTypeError) as e:
+            raise SceneFileError(where, "batch.json.device", str(e)) from None
+        try:
+            _same_structure(members, "member")
         except InvalidInputError as e:  # members of different structures: not a batch save wrote
             raise SceneFileError(where, "batch.json.members", str(e)) from None
+        # A GPU batch comes back on a GPU of this machine (refused by name where it has none).
+        batch = cls(members, threads=threads, device=device, precision=precision)
         diverged = meta.get("diverged") or {}
         if not isinstance(diverged, dict):
             raise SceneFileError(where, "batch.json.diverged", "must be an object")

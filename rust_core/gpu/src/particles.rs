@@ -260,6 +260,8 @@ pub struct Particles {
     bind: wgpu::BindGroup,
     pipes: Pipes,
     acc_valid: bool,
+    /// 0, or the size of the worlds the pairwise sums keep to (`set_worlds`).
+    world: u32,
     /// Steps per submission (`Chunk`: about 0.1 s each).
     chunk: Chunk,
 }
@@ -278,6 +280,8 @@ struct Pipes {
 const WG: u32 = 256;
 /// Steps in one submission at most.
 const MAX_CHUNK: u64 = 4096;
+/// Bytes of the parameter block's integers (`Params` in particles.wgsl: twelve u32).
+const PARAM_INTS: u64 = 48;
 /// Colliders a device particle system holds.
 pub const MAX_COLLIDERS: usize = 64;
 
@@ -351,7 +355,7 @@ impl Particles {
         }
         // Three parameter blocks (Yoshida's substeps), each at the device's uniform offset alignment.
         let align = gpu.device.limits().min_uniform_buffer_offset_alignment as u64;
-        let slot = (16 * precision.bytes() + 32).div_ceil(align) * align;
+        let slot = (16 * precision.bytes() + PARAM_INTS).div_ceil(align) * align;
         // A fourth: velocity Verlet's evaluation after a projection (books nothing).
         let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
@@ -364,7 +368,7 @@ impl Particles {
                 &params, &live.pos, &live.vel, &live.acc, &live.aux, &books, &live.flag, &vp, &sb[0], &sb[1], &sb[2],
                 &colliders, &live.hits, &charges,
             ],
-            16 * precision.bytes() + 32,
+            16 * precision.bytes() + PARAM_INTS,
         );
         let mut p = Self {
             gpu,
@@ -391,6 +395,7 @@ impl Particles {
             bind,
             pipes,
             acc_valid: false,
+            world: 0,
             chunk: Chunk::new(MAX_CHUNK),
         };
         if !rows.is_empty() {
@@ -459,6 +464,10 @@ impl Particles {
             self.ncol,
             f.coulomb.is_some() as u32,
             self.slice,
+            self.world,
+            0,
+            0,
+            0,
         ];
         let (kc, epc) = f.coulomb.unwrap_or((0.0, 0.0));
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0, kc, epc * epc, 0.0, 0.0];
@@ -624,23 +633,71 @@ impl Particles {
 
     /// The energy books (reduced on the host in particle order).
     pub fn books(&self) -> Result<Books> {
+        Ok(self.books_of(self.n.max(1))?.pop().unwrap_or_default())
+    }
+
+    /// The energy books of each world of `size` consecutive particles (`set_worlds`), each
+    /// reduced on the host in particle order: one read-back for all.
+    pub fn books_of_worlds(&self) -> Result<Vec<Books>> {
+        self.books_of(if self.world > 0 { self.world as usize } else { self.n.max(1) })
+    }
+
+    fn books_of(&self, size: usize) -> Result<Vec<Books>> {
+        if self.n == 0 {
+            return Ok(Vec::new());
+        }
         self.write_params(0.0, 0.0, 0.0, 0.0, 0.0, false);
         self.submit_one(&self.pipes.energy);
         let e = self.read_rows(&self.books, 2 * self.n)?;
-        let mut b = Books::default();
-        for r in e.chunks_exact(8).take(self.n) {
-            b.kinetic += r[0];
-            b.uniform += r[1];
-            b.pairwise += r[2];
-            b.dissipated += r[3];
-            b.springs += r[4];
-            b.dashpots += r[5];
-            b.coulomb += r[6];
+        let hits = if self.ncol > 0 { self.read_hits()? } else { vec![0.0; self.n] };
+        let mut out = Vec::with_capacity(self.n / size);
+        for (rows, h) in e.chunks_exact(8 * size).zip(hits.chunks_exact(size)) {
+            let mut b = Books::default();
+            for r in rows.chunks_exact(8) {
+                b.kinetic += r[0];
+                b.uniform += r[1];
+                b.pairwise += r[2];
+                b.dissipated += r[3];
+                b.springs += r[4];
+                b.dashpots += r[5];
+                b.coulomb += r[6];
+            }
+            b.collisions = h.iter().sum();
+            out.push(b);
         }
-        if self.ncol > 0 {
-            b.collisions = self.read_hits()?.iter().sum();
+        Ok(out)
+    }
+
+    /// Keeps the pairwise sums (gravity, Coulomb) inside worlds of `size` consecutive particles
+    /// (0: all particles, the default): a batch of small worlds in one system, each world's
+    /// particles pulling only on each other, in one dispatch per stage for all.
+    ///
+    /// Errors: `Unsupported` if `size` does not divide the particle count.
+    pub fn set_worlds(&mut self, size: usize) -> Result<()> {
+        if size > 0 && (!self.n.is_multiple_of(size) || size > u32::MAX as usize) {
+            return Err(GpuError::Unsupported(format!(
+                "worlds of {size} particles do not divide {} particles",
+                self.n
+            )));
         }
-        Ok(b)
+        self.world = size as u32;
+        Ok(())
+    }
+
+    /// Replaces the state: positions and velocities (flat, n·dim), masses and 1/masses (0:
+    /// pinned), with the books' accumulators (drag, dashpots, colliders) set to zero and the
+    /// accelerations to be evaluated anew. The caller has validated the values.
+    pub fn set_state(&mut self, x: &[f64], v: &[f64], m: &[f64], im: &[f64]) -> Result<()> {
+        assert!(m.len() == self.n && im.len() == self.n, "one mass per particle");
+        if self.n == 0 {
+            return Ok(());
+        }
+        self.write(x, v, m, im);
+        let zero = vec![0.0; 4 * self.n];
+        self.upload(&self.live.aux, &zero);
+        self.upload(&self.live.hits, &zero[..self.n]);
+        self.gpu.queue.write_buffer(&self.live.flag, 0, bytemuck::cast_slice(&[u32::MAX, 0, 0, 0]));
+        self.gpu.wait()
     }
 
     fn read_hits(&self) -> Result<Vec<f64>> {

@@ -23,6 +23,12 @@ struct Params {
     coul: u32,
     // The springs' slice width: particle i's q-th entry is at start[n + 1 + i] + q · sw.
     sw: u32,
+    // 0: the pairwise sums (gravity, Coulomb) run over all particles; w > 0: over the world of
+    // w consecutive particles that i belongs to (a batch of small worlds, one dispatch for all).
+    world: u32,
+    upad0: u32,
+    upad1: u32,
+    upad2: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
     h1: real,
@@ -188,7 +194,22 @@ fn eval_forces(i: u32, l: u32, far: bool) {
         xi = pos[i];
     }
     var a = vec3<real>(0.0, 0.0, 0.0);
-    if (far && P.pair != 0u) {
+    if (far && P.pair != 0u && P.world != 0u) {
+        // One small world: its particles read straight from memory (a few, in cache), in index
+        // order, r² = 0 only for i itself without softening.
+        if (live) {
+            let b = (i / P.world) * P.world;
+            for (var j = b; j < b + P.world; j++) {
+                let s = pos[j];
+                let d = s.xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2;
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+                a += d * (s.w * inv * inv * inv);
+            }
+            a *= P.big_g;
+        }
+    }
+    if (far && P.pair != 0u && P.world == 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         // Softened (ε² > 0, the usual case), r² > 0 always: the guard below is left out and the
         // loop unrolled by 4, so that four inverse square roots are in flight at once; the sum
@@ -233,7 +254,18 @@ fn eval_forces(i: u32, l: u32, far: bool) {
     // Coulomb: F_i = k q_i Σ_j q_j (x_i − x_j) / (|x_i − x_j|² + ε²)^{3/2} (the CPU's
     // `terms::coulomb`), summed over tiles of charges.
     var fc = vec3<real>(0.0, 0.0, 0.0);
-    if (far && P.coul != 0u) {
+    if (far && P.coul != 0u && P.world != 0u) {
+        if (live) {
+            let b = (i / P.world) * P.world;
+            for (var j = b; j < b + P.world; j++) {
+                let d = pos[j].xyz - xi.xyz;
+                let r2 = dot(d, d) + P.eps2c;
+                let inv = select(0.0, inverseSqrt(r2), r2 > 0.0);
+                fc -= d * (charge[j] * inv * inv * inv);
+            }
+        }
+    }
+    if (far && P.coul != 0u && P.world == 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         for (var t = 0u; t < tiles; t++) {
             load_charges(t, l);
@@ -246,9 +278,9 @@ fn eval_forces(i: u32, l: u32, far: bool) {
             }
             workgroupBarrier();
         }
-        if (live) {
-            fc *= P.kc * charge[i];
-        }
+    }
+    if (far && P.coul != 0u && live) {
+        fc *= P.kc * charge[i];
     }
     if (!live) {
         return;
@@ -380,7 +412,17 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         xi = pos[i];
     }
     var phi: real = 0.0;
-    if (P.pair != 0u) {
+    if (P.pair != 0u && P.world != 0u && live) {
+        let b = (i / P.world) * P.world;
+        for (var j = b; j < b + P.world; j++) {
+            let s = pos[j];
+            let d = s.xyz - xi.xyz;
+            let r2 = dot(d, d) + P.eps2;
+            let inv = select(0.0, inverseSqrt(r2), r2 > 0.0 && j != i);
+            phi += s.w * inv;
+        }
+    }
+    if (P.pair != 0u && P.world == 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         for (var t = 0u; t < tiles; t++) {
             load_tile(t, lid.x);
@@ -397,7 +439,16 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocati
         }
     }
     var phic: real = 0.0;
-    if (P.coul != 0u) {
+    if (P.coul != 0u && P.world != 0u && live) {
+        let b = (i / P.world) * P.world;
+        for (var j = b; j < b + P.world; j++) {
+            let d = pos[j].xyz - xi.xyz;
+            let r2 = dot(d, d) + P.eps2c;
+            let inv = select(0.0, inverseSqrt(r2), r2 > 0.0 && j != i);
+            phic += charge[j] * inv;
+        }
+    }
+    if (P.coul != 0u && P.world == 0u) {
         let tiles = (P.n + WG - 1u) / WG;
         for (var t = 0u; t < tiles; t++) {
             load_charges(t, lid.x);

@@ -192,3 +192,140 @@ fn as_dict(pairs: &[(String, f64)]) -> Vec<f64> {
 fn sum(values: impl Iterator<Item = f64>) -> f64 {
     values.fold(0.0, |s, v| s + v)
 }
+
+/// Runs `f` with the GIL released on a thread of its own while the calling thread runs Python's
+/// signal handlers every `SIGNAL_POLL`; a handler's exception (Ctrl-C) sets `stop` and is
+/// returned beside `f`'s result.
+#[cfg(feature = "gpu")]
+fn with_signals<T: Send>(py: Python<'_>, stop: &AtomicBool, f: impl FnOnce() -> T + Send) -> (T, Option<PyErr>) {
+    let mut pending: Option<PyErr> = None;
+    let out = py.detach(|| {
+        let caller = std::thread::current();
+        std::thread::scope(|scope| {
+            let job = scope.spawn(|| {
+                let out = f();
+                caller.unpark();
+                out
+            });
+            while !job.is_finished() {
+                std::thread::park_timeout(SIGNAL_POLL);
+                if pending.is_none() {
+                    if let Err(e) = Python::attach(|py| py.check_signals()) {
+                        pending = Some(e);
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                }
+            }
+            job.join().unwrap_or_else(|p| std::panic::resume_unwind(p))
+        })
+    });
+    if pending.is_none() {
+        pending = py.check_signals().err();
+    }
+    (out, pending)
+}
+
+/// The worlds of `refs`, all of one dimension: `(Some(2D), None)` or `(None, Some(3D))`;
+/// `InvalidInput` naming `sims` for a mix.
+#[cfg(feature = "gpu")]
+#[allow(clippy::type_complexity)]
+fn worlds_of<'a>(
+    refs: &'a mut [PyRefMut<'_, PySimulation>],
+) -> crate::error::Result<(Vec<&'a mut crate::world::World<glam::DVec2>>, Vec<&'a mut crate::world::World<glam::DVec3>>)>
+{
+    let (mut d2, mut d3) = (Vec::new(), Vec::new());
+    for r in refs.iter_mut() {
+        match r.inner_mut() {
+            Inner::D2(w) => d2.push(w),
+            Inner::D3(w) => d3.push(w),
+        }
+    }
+    if !d2.is_empty() && !d3.is_empty() {
+        return Err(invalid("sims", "the members of a batch have one dimension"));
+    }
+    Ok((d2, d3))
+}
+
+/// Every member of a batch on one device (`Batch(..., device="gpu")`): see
+/// `systems::device_batch`. Built from the members' simulations (which stay on the CPU);
+/// `step` runs them there in one dispatch per stage and writes each member back.
+#[cfg(feature = "gpu")]
+#[pyclass(module = "physcore._core", name = "DeviceBatch")]
+pub(super) struct PyDeviceBatch {
+    inner: crate::systems::device_batch::DeviceBatch,
+}
+
+#[cfg(feature = "gpu")]
+fn records_of(
+    py: Python<'_>,
+    refs: &[PyRefMut<'_, PySimulation>],
+) -> PyResult<Vec<crate::systems::device_batch::Records>> {
+    refs.iter().enumerate().map(|(k, r)| r.device_records(k).map_err(|e| to_py(py, e))).collect()
+}
+
+#[cfg(feature = "gpu")]
+#[pymethods]
+impl PyDeviceBatch {
+    /// The members `sims` on the device `device` ("gpu", "gpu:NAME") at `precision` ("f32",
+    /// "f64"). InvalidInputError naming what a device batch cannot hold (nothing changes).
+    #[new]
+    fn new(py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>, device: &str, precision: &str) -> PyResult<Self> {
+        use crate::systems::device_batch::DeviceBatch;
+        let mut refs = borrow_all(py, &sims)?;
+        let records = records_of(py, &refs)?;
+        let gpu = py.detach(|| physcore_gpu::Gpu::open(device)).map_err(|e| to_py(py, e.into()))?;
+        let (d2, d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
+        let inner = py
+            .detach(|| {
+                if d3.is_empty() {
+                    let w: Vec<&_> = d2.iter().map(|w| &**w).collect();
+                    DeviceBatch::new(gpu, precision, &w, records)
+                } else {
+                    let w: Vec<&_> = d3.iter().map(|w| &**w).collect();
+                    DeviceBatch::new(gpu, precision, &w, records)
+                }
+            })
+            .map_err(|e| to_py(py, e))?;
+        Ok(Self { inner })
+    }
+
+    /// Whether `sims` are still the members it was built from (their terms and colliders).
+    fn matches(&self, py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>) -> PyResult<bool> {
+        let refs = borrow_all(py, &sims)?;
+        Ok(self.inner.matches(&records_of(py, &refs)?))
+    }
+
+    /// The adapter and precision, e.g. "NVIDIA H100 (vulkan, f32)".
+    #[getter]
+    fn device(&self) -> String {
+        self.inner.describe()
+    }
+
+    /// Steps every member `n` steps on the device (GIL released); returns `(index, exception)`
+    /// for each member that diverged (left as it was); the others are written back. Ctrl-C
+    /// writes nothing and is raised.
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        sims: Vec<Bound<'_, PySimulation>>,
+        n: u64,
+    ) -> PyResult<Vec<(usize, Py<PyAny>)>> {
+        let mut refs = borrow_all(py, &sims)?;
+        let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
+        let stop = AtomicBool::new(false);
+        let inner = &mut self.inner;
+        let (ran, pending) =
+            with_signals(py, &stop, || if d3.is_empty() { inner.run(&d2, n, &stop) } else { inner.run(&d3, n, &stop) });
+        if let Some(e) = pending {
+            return Err(e); // nothing was written
+        }
+        let ran = match ran {
+            Ok(r) => r,
+            Err(Error::Interrupted { .. }) => return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
+            Err(e) => return Err(to_py(py, e)),
+        };
+        let failed = if d3.is_empty() { self.inner.keep(&mut d2, ran) } else { self.inner.keep(&mut d3, ran) };
+        let failed = failed.map_err(|e| to_py(py, e))?;
+        Ok(failed.into_iter().map(|(k, e)| (k, to_py(py, e).into_value(py).into_any())).collect())
+    }
+}

@@ -271,6 +271,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(formulas::grid_limits, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::check_integrator, m)?)?;
     m.add_function(wrap_pyfunction!(batch::step_batch, m)?)?;
+    #[cfg(feature = "gpu")]
+    m.add_class::<batch::PyDeviceBatch>()?;
     m.add_function(wrap_pyfunction!(batch::reference_energies, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -84,6 +84,32 @@ impl PySimulation {
     pub(super) fn inner_mut(&mut self) -> &mut Inner {
         &mut self.inner
     }
+
+    /// Its term and collider records, what a batch on a device is built from; `InvalidInput`
+    /// naming `sims` (entry `k`) if its particles are on a device already or it has grids.
+    #[cfg(feature = "gpu")]
+    pub(super) fn device_records(&self, k: usize) -> crate::error::Result<crate::systems::device_batch::Records> {
+        if self.on_device {
+            return Err(invalid(
+                "sims",
+                format!("entry {k} is on a device already (a GPU batch moves its members itself)"),
+            ));
+        }
+        if let Some((_, name, _)) = self.grids.first() {
+            return Err(invalid("sims", format!("entry {k} has the grid {name:?}: a GPU batch holds particles only")));
+        }
+        let terms = self
+            .terms
+            .iter()
+            .map(|(k, n, p)| Ok((k.clone(), n.clone(), p.try_clone("step")?)))
+            .collect::<crate::error::Result<Vec<_>>>()?;
+        let cols = self
+            .colliders
+            .iter()
+            .map(|(k, p)| Ok((k.clone(), p.try_clone("step")?)))
+            .collect::<crate::error::Result<Vec<_>>>()?;
+        Ok((terms, cols))
+    }
 }
 
 #[pymethods]

@@ -40,7 +40,7 @@ impl From<GpuError> for Error {
 
 /// Names of the terms the books are kept under.
 #[derive(Clone, Debug, Default)]
-struct Names {
+pub(crate) struct Names {
     gravity: Vec<String>,
     drag: Vec<String>,
     pairwise: Option<String>,
@@ -206,7 +206,7 @@ impl DeviceParticles {
 
 /// The device's colliders from their records (kind, parameters), checked as the CPU's
 /// constructors check them; kinds other than planes, boxes, spheres, capsules and oriented boxes are refused by name.
-fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider>> {
+pub(crate) fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider>> {
     let vec3 = |p: &Params, name: &str| -> Result<[f64; 3]> {
         let v = if dim == 2 {
             let v = p.vector::<glam::DVec2>(name)?;
@@ -284,7 +284,11 @@ fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<Vec<Collider
 }
 
 /// The device's forces from term records, refusing kinds it has no kernel for.
-fn forces_of(dim: usize, n: usize, terms: &[(String, String, Params)]) -> Result<(Forces, Option<Springs>, Names)> {
+pub(crate) fn forces_of(
+    dim: usize,
+    n: usize,
+    terms: &[(String, String, Params)],
+) -> Result<(Forces, Option<Springs>, Names)> {
     let mut f = Forces::default();
     let mut springs = None;
     let mut names = Names::default();

@@ -15,6 +15,8 @@ pub mod bodies;
 #[cfg(feature = "gpu")]
 pub mod device;
 #[cfg(feature = "gpu")]
+pub mod device_batch;
+#[cfg(feature = "gpu")]
 pub mod device_fluid;
 #[cfg(feature = "gpu")]
 pub mod device_sph;

@@ -143,6 +143,10 @@ impl<V: Vector> ParticleSystem<V> {
         &self.sys.forces
     }
     /// Energy removed by the constraint stage so far, J.
+    /// The energy each force term has dissipated so far (J), in term order.
+    pub fn dissipated_by_term(&self) -> &[Real] {
+        &self.sys.forces.dissipated
+    }
     pub fn constraints_dissipated(&self) -> Real {
         self.constraints.dissipated
     }
