@@ -55,6 +55,8 @@ PY
 section "N-body (CPU to 65536)"
 timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16384,65536,262144 --steps 10 --cpu-max 65536
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
+section "Batches of three-body problems (CPU to 16384 worlds)"
+timeout 120 python3 benches/gpu/bench_gpu_batch.py --device gpu --m 1024,16384,65536 --steps 1000 --cpu-max 16384
 section "Grids: Gray-Scott and the wave"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
 section "WCSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"

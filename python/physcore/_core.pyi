@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = [
+    "DeviceBatch",
     "Simulation",
     "integrator_table",
     "default_threads",
@@ -98,6 +99,14 @@ def rasterise_mesh(
     uv: npt.NDArray[np.float32] | None = None,
     texture: npt.NDArray[np.float32] | None = None,
 ) -> None: ...
+
+@final
+class DeviceBatch:
+    def __new__(cls, sims: list[Simulation], device: str, precision: str) -> DeviceBatch: ...
+    def matches(self, sims: list[Simulation]) -> bool: ...
+    @property
+    def device(self) -> str: ...
+    def step(self, sims: list[Simulation], n: int) -> list[tuple[int, BaseException]]: ...
 
 @final
 class Simulation:

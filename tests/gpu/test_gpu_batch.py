@@ -1,0 +1,196 @@
+"""A batch on the GPU path (``Batch(..., device=...)``): every member in one dispatch per stage,
+against the CPU batch, the reference; its promises (a member's bits do not depend on the other
+members, a diverging member is retired alone, Ctrl-C changes nothing, save and load continue
+bit for bit) and what it refuses, by name, before anything changes.
+
+Like ``test_gpu_scenes.py`` they run on a real GPU where one is present, else on lavapipe (CI).
+The expected values are the CPU path's, never numbers copied from an earlier GPU run.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+from test_gpu_scenes import DEVICE, F64
+
+import physcore as pc
+
+pytestmark = pytest.mark.skipif(DEVICE is None, reason="no GPU adapter and no lavapipe")
+PRECISIONS = ["f32", "f64"] if F64 else ["f32"]
+
+
+def _fan(m: int, scene: pc.Scene | None = None, device: str = "cpu", precision: str | None = None) -> pc.Batch:
+    """``m`` figure-eight three-body problems, member k's positions scaled by 1 + 1e-3 k."""
+    base = scene if scene is not None else pc.scenes.figure_eight()
+    return pc.Batch.from_scene(base, m, positions=lambda k, x: x * (1 + 1e-3 * k), device=device, precision=precision)
+
+
+def _books(s: pc.Scene) -> dict[str, float]:
+    e = s.energy()
+    return {"kinetic": e.kinetic, **{f"U {k}": v for k, v in e.potential.items()},
+            **{f"D {k}": v for k, v in e.dissipated.items()}}
+
+
+@pytest.mark.parametrize("precision", PRECISIONS)
+def test_a_gpu_batch_of_three_body_problems_agrees_with_the_cpu_batch(precision: str) -> None:
+    """Figure-eight orbits (Yoshida 4, about a sixth of a period): positions to the device's
+    rounding, the clock and step count exactly, the energy books to the same drift."""
+    cpu, gpu = _fan(32), _fan(32, device=DEVICE, precision=precision)
+    assert gpu.device.endswith(f", {precision})") and cpu.device == "cpu"
+    cpu.step(1000)
+    gpu.step(1000)
+    moved = np.abs(cpu.positions - _fan(32).positions).max()
+    assert moved > 0.1  # the orbits went somewhere
+    err = np.abs(gpu.positions - cpu.positions).max()
+    # f64: the same method in another summation order (measured 2.5e-14); f32: its rounding,
+    # 6e-8 a step carried over 1000 steps of a chaotic orbit (measured 3.3e-5).
+    assert err < (1e-11 if precision == "f64" else 3e-4), err
+    assert np.array_equal(gpu.time, cpu.time) and np.array_equal(gpu.step_count, cpu.step_count)
+    drift = np.abs(gpu.energy_drift())
+    assert drift.max() < (1e-10 if precision == "f64" else 1e-5), drift.max()
+    gpu.step(500)  # a second call continues from what the first wrote back
+    cpu.step(500)
+    assert np.abs(gpu.positions - cpu.positions).max() < (1e-11 if precision == "f64" else 1e-3)
+
+
+def _chain(k: int, dim: int = 2) -> pc.Scene:
+    """A damped spring chain under gravity and drag, its stiffness and masses member k's own."""
+    s = pc.scenes.spring_chain(12, stiffness=2000.0 * (1 + 0.25 * k), mass=1.0 + 0.1 * k, damping=0.5, dim=dim, dt=2e-4)
+    s.add(pc.Drag(0.05))
+    return s
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_members_with_their_own_springs_and_masses_keep_their_own_books(dim: int) -> None:
+    """Springs and masses differ between members (one dispatch still): each member's state and
+    books (springs' potential, the dashpots' and the drag's dissipation) as its CPU run's."""
+    members = [_chain(k, dim) for k in range(4)]
+    cpus = [_chain(k, dim) for k in range(4)]
+    precision = "f64" if F64 else "f32"
+    batch = pc.Batch(members, device=DEVICE, precision=precision)
+    batch.step(2000)
+    for c in cpus:
+        c.step(2000)
+    tol = 1e-9 if F64 else 2e-3
+    for g, c in zip(members, cpus, strict=True):
+        scale = np.abs(c.positions).max()
+        assert np.abs(g.positions - c.positions).max() < tol * scale
+        bg, bc = _books(g), _books(c)
+        assert bg.keys() == bc.keys() and bc["D drag"] > 0 and bc["D springs"] > 0
+        total = sum(abs(v) for v in bc.values())
+        for key in bc:
+            assert abs(bg[key] - bc[key]) < tol * total, key
+        assert g.time == c.time and g.step_count == c.step_count
+        assert abs(g.energy_drift()) < 10 * tol + abs(c.energy_drift())
+
+
+def _drops(k: int) -> pc.Scene:
+    """Ten balls dropped onto a plane of restitution 0.6, from heights member k's own."""
+    s = pc.Scene(dim=2, integrator="verlet", dt=1e-3)
+    x = np.column_stack([np.linspace(0, 1, 10), 0.5 + 0.05 * k + 0.03 * np.arange(10)])
+    s.add_particles(x)
+    s.add(pc.Gravity([0.0, -9.81]))
+    s.add(pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=0.6))
+    return s
+
+
+def test_colliders_book_each_members_losses() -> None:
+    members, cpus = [_drops(k) for k in range(3)], [_drops(k) for k in range(3)]
+    batch = pc.Batch(members, device=DEVICE, precision="f64" if F64 else "f32")
+    batch.step(1500)
+    for g, c in zip(members, cpus, strict=True):
+        c.step(1500)
+        lost = _books(c)["D collisions"]
+        assert lost > 1.0  # the balls bounced and lost energy
+        assert abs(_books(g)["D collisions"] - lost) < (1e-6 if F64 else 1e-3) * lost
+        assert np.all(g.positions[:, 1] >= -1e-9)
+
+
+def test_a_members_bits_do_not_depend_on_the_other_members() -> None:
+    """Each world pulls only on its own particles, in one order: member k of a batch of 32 is
+    bit for bit member k alone in a batch of one, and two runs repeat."""
+    big = _fan(32, device=DEVICE)
+    big.step(300)
+    again = _fan(32, device=DEVICE)
+    again.step(300)
+    assert np.array_equal(big.positions, again.positions)
+    for k in (0, 17, 31):
+        one = pc.Batch([_fan(32).members[k]], device=DEVICE)
+        one.step(300)
+        assert np.array_equal(one.positions[0], big.positions[k]) and np.array_equal(one.velocities[0], big.velocities[k])
+
+
+def test_a_diverging_member_is_retired_and_the_others_do_not_notice() -> None:
+    members = list(_fan(6).members)
+    v = members[3].velocities
+    members[3].velocities = v / np.abs(v).max() * 3e38  # in f32's range, its positions past it in ~350 steps
+    before = members[3].positions
+    batch = pc.Batch(members, device=DEVICE)
+    batch.step(600)
+    assert list(batch.diverged) == [3]
+    e = batch.diverged[3]
+    assert isinstance(e, pc.SimulationDiverged) and e.rolled_back_to == 0 and 0 < e.step <= 600
+    assert np.array_equal(members[3].positions, before) and members[3].step_count == 0
+    others = pc.Batch([_fan(6).members[k] for k in (0, 1, 2, 4, 5)], device=DEVICE)
+    others.step(600)
+    assert np.array_equal(others.positions, np.stack([members[k].positions for k in (0, 1, 2, 4, 5)]))
+    batch.step(10)  # the retired member is not stepped again; the batch on the device is rebuilt
+    assert members[3].step_count == 0 and members[0].step_count == 610
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_ctrl_c_changes_no_member() -> None:
+    batch = _fan(64, device=DEVICE)
+    before = [(m.positions, m.velocities, m.step_count, m.time) for m in batch.members]
+    timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
+    timer.start()
+    t0 = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            batch.step(10**9)
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - t0 < 10.0
+    for m, (x, v, n, t) in zip(batch.members, before, strict=True):
+        assert np.array_equal(m.positions, x) and np.array_equal(m.velocities, v)
+        assert m.step_count == n and m.time == t
+    batch.step(5)  # and it steps on afterwards
+    assert batch.members[0].step_count == 5
+
+
+def test_save_and_load_continue_bit_for_bit_on_the_device(tmp_path) -> None:
+    batch = _fan(5, device=DEVICE)
+    batch.step(100)
+    copy = pc.Batch.load(batch.save(tmp_path / "fan.batch"))
+    assert copy.device == batch.device
+    batch.step(150)
+    copy.step(150)
+    assert np.array_equal(batch.positions, copy.positions) and np.array_equal(batch.time, copy.time)
+
+
+def test_what_a_gpu_batch_cannot_hold_is_refused_by_name_before_anything_changes() -> None:
+    def refused(members: list[pc.Scene], match: str, **kw) -> None:
+        before = [(m.positions, m.step_count) for m in members]
+        with pytest.raises(pc.InvalidInputError, match=match):
+            pc.Batch(members, device=kw.pop("device", DEVICE), **kw)
+        assert all(np.array_equal(m.positions, x) and m.step_count == n for m, (x, n) in zip(members, before, strict=True))
+
+    members = list(_fan(3).members)
+    members[1].dt = members[1].dt * 2
+    refused(members, "^dt: member 1's dt differs")
+    chains = [pc.scenes.spring_chain(12, dt=2e-4) for _ in range(2)]
+    for k, c in enumerate(chains):
+        c.add(pc.Drag(0.05 * (1 + k)))  # one drag coefficient a dispatch
+    refused(chains, "^terms: member 1's field parameters")
+    refused([pc.scenes.dam_break(n=8), pc.scenes.dam_break(n=8)], "Fluid")
+    refused(list(_fan(2).members), "^device: must be", device="tpu")
+    refused(list(_fan(2).members), "^precision: must be", precision="f16")
+    with pytest.raises(pc.InvalidInputError, match="^device"):
+        pc.Batch(list(_fan(2).members), device="gpu:no-such-adapter")
+    with pytest.raises(TypeError, match="^device"):
+        pc.Batch(list(_fan(2).members), device=3)
