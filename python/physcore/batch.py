@@ -194,6 +194,8 @@ class Batch:
         self._device, self._precision = _check_device(device, precision)
         #: The members on the GPU (`_core.DeviceBatch`), built again when they change.
         self._gpu: Any = None
+        #: Whether every member has been put on its own device (`Scene.to_device`) already.
+        self._placed = False
         if self._device != "cpu":
             for k, s in enumerate(members):
                 if s.session.sim.on_device:
@@ -330,20 +332,22 @@ class Batch:
         if self.diverged:
             live = [k for k in range(len(self)) if k not in self.diverged]
             scenes = [self._members[k] for k in live]
+            sessions = [self._sessions[k] for k in live]
             sims, locks = [self._sims[k] for k in live], [self._locks[k] for k in live]
         else:
-            live, scenes, sims, locks = None, self._members, self._sims, self._locks
+            live, scenes, sessions, sims, locks = None, self._members, self._sessions, self._sims, self._locks
         # A GPU member moves to its device at its first step, as Scene.step moves it: its parts
         # checked first (refused by name, for every member, before any moves), else the core
-        # would step it on the CPU.
-        if self._gpu is None:
+        # would step it on the CPU. Once moved, a member stays where it is: later calls skip it.
+        if self._gpu is None and not self._placed:
             for s in scenes:
                 s.to_device(check_only=True)
             for s in scenes:
                 s.to_device()
+            self._placed = live is None
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = [s for s in scenes if s.session.reference_energy is None]
+        fresh = [s for s, x in zip(scenes, sessions) if x.reference_energy is None]
         if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
             for s in fresh:
                 s.session.take_reference_energy()
@@ -359,9 +363,9 @@ class Batch:
             # As Session.exclusive marks it: another thread's use of a member meanwhile raises
             # SceneBusyError, not pyo3's bare "Already mutably borrowed".
             me = threading.get_ident()
-            for s in scenes:
-                s.session.busy = me
-            missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None])
+            for x in sessions:
+                x.busy = me
+            missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None]) if fresh else []
             # The core checks n against every member's step count before stepping any.
             if missing:
                 failed = None
@@ -373,8 +377,8 @@ class Batch:
                 failed = _core.step_batch(sims, n, self._threads)
         finally:
             if taken == len(locks):
-                for s in scenes:
-                    s.session.busy = None
+                for x in sessions:
+                    x.busy = None
             for lock in locks[:taken]:
                 lock.release()
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)

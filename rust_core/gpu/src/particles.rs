@@ -262,6 +262,9 @@ pub struct Particles {
     acc_valid: bool,
     /// 0, or the size of the worlds the pairwise sums keep to (`set_worlds`).
     world: u32,
+    /// The fused kernel's scheme (0 Euler, 1 Verlet, 2 Yoshida 4) and substep lengths.
+    fused_scheme: u32,
+    fused_h: [f64; 2],
     /// Steps per submission (`Chunk`: about 0.1 s each).
     chunk: Chunk,
 }
@@ -275,11 +278,15 @@ struct Pipes {
     kick: wgpu::ComputePipeline,
     check: wgpu::ComputePipeline,
     energy: wgpu::ComputePipeline,
+    /// The fused small worlds' kernel (worlds.wgsl), built for one world size by `set_worlds`.
+    worlds: Option<wgpu::ComputePipeline>,
 }
 
 const WG: u32 = 256;
 /// Steps in one submission at most.
 const MAX_CHUNK: u64 = 4096;
+/// Worlds of at most this many particles are stepped by the fused kernel (worlds.wgsl).
+pub const MAX_FUSED: u32 = 16;
 /// Bytes of the parameter block's integers (`Params` in particles.wgsl: twelve u32).
 const PARAM_INTS: u64 = 48;
 /// Colliders a device particle system holds.
@@ -359,7 +366,7 @@ impl Particles {
         // A fourth: velocity Verlet's evaluation after a projection (books nothing).
         let params = gpu.buffer("parameters", 4 * slot, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("read-back staging", 2 * size, U::MAP_READ | U::COPY_DST)?;
-        let (layout, pipes) = pipelines(&gpu, precision, forces.pairwise.is_some() || forces.coulomb.is_some());
+        let (layout, pipes) = pipelines(&gpu, precision, forces.pairwise.is_some() || forces.coulomb.is_some(), 0);
         // The parameters: one block's worth, at the offset given when bound.
         let bind = gpu.bind_with_params(
             "particles",
@@ -396,6 +403,12 @@ impl Particles {
             pipes,
             acc_valid: false,
             world: 0,
+            fused_scheme: match scheme {
+                Scheme::SemiImplicitEuler => 0,
+                Scheme::VelocityVerlet => 1,
+                Scheme::Yoshida4 => 2,
+            },
+            fused_h: [0.0; 2],
             chunk: Chunk::new(MAX_CHUNK),
         };
         if !rows.is_empty() {
@@ -466,11 +479,12 @@ impl Particles {
             self.slice,
             self.world,
             0,
-            0,
+            self.fused_scheme,
             0,
         ];
         let (kc, epc) = f.coulomb.unwrap_or((0.0, 0.0));
-        let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], 0.0, kc, epc * epc, 0.0, 0.0];
+        let [ha, hb] = self.fused_h;
+        let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], ha, kc, epc * epc, hb, 0.0];
         self.gpu.write_params_at(self.precision, &self.params, k * self.slot, &u, &r);
     }
 
@@ -561,6 +575,12 @@ impl Particles {
         let fail = |done: u64, e: GpuError| (done, Halt::Failed(e));
         let vv = matches!(self.scheme, Scheme::VelocityVerlet | Scheme::Yoshida4);
         let pred = vv && self.velocity_dependent();
+        let fused = self.fused();
+        // The fused kernel's substeps, computed as the general path's blocks compute them.
+        self.fused_h = match self.scheme {
+            Scheme::Yoshida4 => [YOSHIDA_W1 * dt, YOSHIDA_W0 * dt],
+            _ => [dt, dt],
+        };
         if vv && !self.acc_valid {
             // The first force evaluation of velocity Verlet: books nothing.
             self.write_params(dt, 0.0, 0.0, 0.0, 0.0, false);
@@ -591,7 +611,13 @@ impl Particles {
             // The first-bad-particle flag only: the touched flag carries over.
             self.gpu.queue.write_buffer(&self.live.flag, 0, bytemuck::cast_slice(&[u32::MAX]));
             let t0 = Instant::now();
-            self.gpu.queue.submit([self.record(k)]);
+            if fused {
+                // The step count of this submission (`Params::steps`, block 0).
+                self.gpu.queue.write_buffer(&self.params, 36, bytemuck::cast_slice(&[k as u32]));
+                self.gpu.queue.submit([self.record_fused()]);
+            } else {
+                self.gpu.queue.submit([self.record(k)]);
+            }
             let bad = self.read_flag().map_err(|e| fail(done, e))?;
             let took = t0.elapsed().as_secs_f64();
             if bad != u32::MAX {
@@ -681,7 +707,70 @@ impl Particles {
             )));
         }
         self.world = size as u32;
+        if (1..=MAX_FUSED as usize).contains(&size) {
+            let far = self.forces.pairwise.is_some() || self.forces.coulomb.is_some();
+            let (layout, pipes) = pipelines(&self.gpu, self.precision, far, self.world);
+            self.bind = self.bind_all(&layout);
+            self.pipes = pipes;
+        }
         Ok(())
+    }
+
+    /// The bind group of every buffer, for `layout` (the kernels' bindings, in order).
+    fn bind_all(&self, layout: &wgpu::BindGroupLayout) -> wgpu::BindGroup {
+        let l = &self.live;
+        let s = &self._springs;
+        self.gpu.bind_with_params(
+            "particles",
+            layout,
+            &[
+                &self.params,
+                &l.pos,
+                &l.vel,
+                &l.acc,
+                &l.aux,
+                &self.books,
+                &l.flag,
+                &self._vp,
+                &s[0],
+                &s[1],
+                &s[2],
+                &self.colliders,
+                &l.hits,
+                &self.charges,
+            ],
+            16 * self.precision.bytes() + PARAM_INTS,
+        )
+    }
+
+    /// Whether a step runs as the fused worlds' kernel: worlds of at most `MAX_FUSED`, no
+    /// drag, springs or colliders.
+    fn fused(&self) -> bool {
+        self.pipes.worlds.is_some()
+            && self.ncol == 0
+            && self.springs_mode == 0
+            && self.forces.drag == 0.0
+            && self.fused_groups() <= 65_535
+    }
+
+    /// Workgroups of the fused kernel: one thread a world, 64 a workgroup.
+    fn fused_groups(&self) -> u32 {
+        ((self.n / self.world.max(1) as usize) as u32).div_ceil(64).max(1)
+    }
+
+    /// Records `steps` steps of the fused worlds' kernel (its step count already written), then
+    /// the finiteness check.
+    fn record_fused(&self) -> wgpu::CommandBuffer {
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_bind_group(0, &self.bind, &[0]);
+            pass.set_pipeline(self.pipes.worlds.as_ref().expect("fused() checked it"));
+            pass.dispatch_workgroups(self.fused_groups(), 1, 1);
+            pass.set_pipeline(&self.pipes.check);
+            pass.dispatch_workgroups(self.groups(), 1, 1);
+        }
+        enc.finish()
     }
 
     /// Replaces the state: positions and velocities (flat, n·dim), masses and 1/masses (0:
@@ -831,16 +920,28 @@ impl Particles {
 
 /// The kernels; `far`: the scene has pairwise sums (gravity, Coulomb), else the force kernels are
 /// `forces_local` (the tiles' code compiled out: no workgroup memory, fewer registers).
-fn pipelines(gpu: &Gpu, p: Precision, far: bool) -> (wgpu::BindGroupLayout, Pipes) {
+/// The kernels; with `world` in 1..=`MAX_FUSED`, also the fused kernel for worlds of that size
+/// (worlds.wgsl appended, its size a constant: its loops unrolled, its state in registers).
+fn pipelines(gpu: &Gpu, p: Precision, far: bool, world: u32) -> (wgpu::BindGroupLayout, Pipes) {
     use crate::Bind::{Read as R, ReadWrite as W, Uniform};
     // The parameters are bound at a dynamic offset: one block per substep of a composition.
     let binds = [Uniform { dynamic: true }, W, W, W, W, W, W, W, R, R, R, R, W, R];
     let (f, ft) = if far { ("forces", "forces_if_touched") } else { ("forces_local", "forces_local_if_touched") };
-    let names = [f, ft, "clear_touched", "project", "kick_drift", "kick", "check", "energy"];
-    let (layout, pipes) = gpu.kernels("particles.wgsl", p, include_str!("particles.wgsl"), &binds, &names);
-    let [forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy]: [wgpu::ComputePipeline;
-        8] = pipes.try_into().unwrap_or_else(|_| unreachable!("eight kernels"));
-    (layout, Pipes { forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy })
+    let mut names = vec![f, ft, "clear_touched", "project", "kick_drift", "kick", "check", "energy"];
+    let fused = (1..=MAX_FUSED).contains(&world);
+    let src = if fused {
+        names.push("worlds");
+        format!("{}\nconst W: u32 = {world}u;\n{}", include_str!("particles.wgsl"), include_str!("worlds.wgsl"))
+    } else {
+        include_str!("particles.wgsl").to_string()
+    };
+    let (layout, pipes) = gpu.kernels("particles.wgsl", p, &src, &binds, &names);
+    let mut pipes = pipes.into_iter();
+    let mut next = || pipes.next().unwrap_or_else(|| unreachable!("a kernel per name"));
+    let [forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy] =
+        std::array::from_fn(|_| next());
+    let worlds = fused.then(next);
+    (layout, Pipes { forces, forces_if_touched, clear_touched, project, kick_drift, kick, check, energy, worlds })
 }
 
 #[cfg(test)]

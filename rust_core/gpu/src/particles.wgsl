@@ -26,8 +26,10 @@ struct Params {
     // 0: the pairwise sums (gravity, Coulomb) run over all particles; w > 0: over the world of
     // w consecutive particles that i belongs to (a batch of small worlds, one dispatch for all).
     world: u32,
-    upad0: u32,
-    upad1: u32,
+    // The fused worlds' kernel (worlds.wgsl): steps in this dispatch, and the scheme (0
+    // semi-implicit Euler, 1 velocity Verlet, 2 Yoshida 4).
+    steps: u32,
+    scheme: u32,
     upad2: u32,
     dt: real,
     // kick_drift's kick (dt for semi-implicit Euler, dt/2 for velocity Verlet), kick's kick.
@@ -43,11 +45,12 @@ struct Params {
     gx: real,
     gy: real,
     gz: real,
-    pad1: real,
+    // The fused worlds' substep lengths: dt (Euler, Verlet), or Yoshida's w₁dt and w₀dt.
+    h_a: real,
     // Coulomb's constant k (N·m²/C²) and its softening ε² (m²).
     kc: real,
     eps2c: real,
-    pad2: real,
+    h_b: real,
     pad3: real,
 };
 

@@ -384,3 +384,84 @@ fn yoshida4_converges_at_fourth_order() {
         assert!((observed - order).abs() < 0.25, "{scheme:?}: observed order {observed}");
     }
 }
+
+/// Worlds of a few particles in one system (`set_worlds`): the fused kernel (worlds.wgsl, one
+/// dispatch a chunk of steps) steps each world as the general path steps it alone, under every
+/// scheme, pinned particles and Coulomb too; and a world of more than `MAX_FUSED` particles,
+/// which takes the general path with its sums kept to the world, agrees as well.
+#[test]
+fn worlds_stepped_together_agree_with_each_world_alone() {
+    let Some(gpu) = gpu() else { return };
+    let p = if gpu.adapter().f64 { Precision::F64 } else { Precision::F32 };
+    let tol = if p == Precision::F64 { 1e-12 } else { 1e-4 };
+    for (scheme, w, dim, coulomb) in [
+        (Scheme::Yoshida4, 3, 2, false),
+        (Scheme::VelocityVerlet, 5, 3, true),
+        (Scheme::SemiImplicitEuler, 4, 3, false),
+        (Scheme::VelocityVerlet, 20, 2, false),
+    ] {
+        let m = 7;
+        let (x, v, mass) = cloud(m * w, dim, 11 + w as u64);
+        let mut im: Vec<f64> = mass.iter().map(|m| 1.0 / m).collect();
+        im[2 * w + 1] = 0.0; // a pinned particle in world 2
+        let mut v = v;
+        v[(2 * w + 1) * dim..(2 * w + 2) * dim].iter_mut().for_each(|c| *c = 0.0);
+        let q: Vec<f64> = (0..m * w).map(|i| if i % 2 == 0 { 1e-6 } else { -2e-6 }).collect();
+        let forces = Forces {
+            g: [0.0, -1.0, 0.0],
+            pairwise: Some((0.05, 0.02)),
+            coulomb: coulomb.then_some((8.99e9 * 1e-3, 0.02)),
+            ..Default::default()
+        };
+        let stop = AtomicBool::new(false);
+        let mut all = Particles::new(gpu.clone(), p, dim, scheme, forces, &x, &v, &mass, &im, None).unwrap();
+        all.set_worlds(w).unwrap();
+        if coulomb {
+            all.set_charges(&q).unwrap();
+        }
+        all.step(150, 2e-3, &stop).unwrap();
+        all.step(50, 2e-3, &stop).unwrap(); // a second call continues (the carried force)
+        let (xa, va) = all.read().unwrap();
+        let scale = xa.iter().fold(0.0f64, |s, c| s.max(c.abs()));
+        for k in 0..m {
+            let r = k * w * dim..(k + 1) * w * dim;
+            let rw = k * w..(k + 1) * w;
+            let mut one = Particles::new(
+                gpu.clone(),
+                p,
+                dim,
+                scheme,
+                forces,
+                &x[r.clone()],
+                &v[r.clone()],
+                &mass[rw.clone()],
+                &im[rw.clone()],
+                None,
+            )
+            .unwrap();
+            if coulomb {
+                one.set_charges(&q[rw]).unwrap();
+            }
+            one.step(200, 2e-3, &stop).unwrap();
+            let (xo, vo) = one.read().unwrap();
+            let dx = xo.iter().zip(&xa[r.clone()]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            let dv = vo.iter().zip(&va[r.clone()]).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(dx < tol * scale && dv < tol * scale.max(1.0), "{scheme:?} w {w} world {k}: dx {dx:e} dv {dv:e}");
+            if k == 0 {
+                eprintln!(
+                    "{scheme:?}, worlds of {w}, {p:?}: world 0 within {dx:.1e} (positions), {dv:.1e} (velocities)"
+                );
+            }
+            if k == 2 {
+                let pin = dim..2 * dim; // particle 1 of world 2
+                assert_eq!(xa[r][pin.clone()], x[2 * w * dim..][pin], "the pinned particle stays");
+            }
+        }
+        // The books per world sum to the whole.
+        let per = all.books_of_worlds().unwrap();
+        let whole = all.books().unwrap();
+        assert_eq!(per.len(), m);
+        let ke: f64 = per.iter().map(|b| b.kinetic).sum();
+        assert!((ke - whole.kinetic).abs() <= 1e-12 * whole.kinetic.abs().max(1e-30));
+    }
+}

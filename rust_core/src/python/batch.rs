@@ -292,7 +292,7 @@ impl PyDeviceBatch {
     /// Whether `sims` are still the members it was built from (their terms and colliders).
     fn matches(&self, py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>) -> PyResult<bool> {
         let refs = borrow_all(py, &sims)?;
-        Ok(self.inner.matches(&records_of(py, &refs)?))
+        Ok(refs.iter().all(|r| r.device_records_ready()) && self.inner.matches(refs.iter().map(|r| r.records_ref())))
     }
 
     /// The adapter and precision, e.g. "NVIDIA H100 (vulkan, f32)".

@@ -85,6 +85,18 @@ impl PySimulation {
         &mut self.inner
     }
 
+    /// Its term and collider records, borrowed (a batch on a device compares them with its own).
+    #[cfg(feature = "gpu")]
+    pub(super) fn records_ref(&self) -> (&[(String, String, registry::Params)], &[(String, registry::Params)]) {
+        (&self.terms, &self.colliders)
+    }
+
+    /// Whether `device_records` would give its records (not on a device, no grids).
+    #[cfg(feature = "gpu")]
+    pub(super) fn device_records_ready(&self) -> bool {
+        !self.on_device && self.grids.is_empty()
+    }
+
     /// Its term and collider records, what a batch on a device is built from; `InvalidInput`
     /// naming `sims` (entry `k`) if its particles are on a device already or it has grids.
     #[cfg(feature = "gpu")]

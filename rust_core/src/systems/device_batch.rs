@@ -186,8 +186,11 @@ impl DeviceBatch {
 
     /// Whether `records` are those of the members this batch was built from (else the caller
     /// builds it again: a member changed its terms, or members were retired).
-    pub fn matches(&self, records: &[Records]) -> bool {
-        self.records == records
+    pub fn matches<'a>(
+        &self,
+        records: impl ExactSizeIterator<Item = (&'a [(String, String, Params)], &'a [(String, Params)])>,
+    ) -> bool {
+        records.len() == self.records.len() && self.records.iter().zip(records).all(|(r, (t, c))| r.0 == t && r.1 == c)
     }
 
     /// The adapter it runs on and its precision, e.g. "NVIDIA H100 (vulkan, f32)".
@@ -267,7 +270,11 @@ impl DeviceBatch {
             }
         }
         (ran.x, ran.v) = self.p.read()?;
-        ran.books = self.p.books_of_worlds()?;
+        // Kinetic and potential energy follow from the state; the device's books are read only
+        // for what it accumulates (drag, dashpots, colliders).
+        if !self.drag.is_empty() || self.dashpots.is_some() || !self.records[0].1.is_empty() {
+            ran.books = self.p.books_of_worlds()?;
+        }
         Ok(ran)
     }
 
@@ -291,7 +298,8 @@ impl DeviceBatch {
             let r = k * self.n * d..(k + 1) * self.n * d;
             let rows = |a: &[Real]| a.chunks_exact(d).map(V::from_slice).collect::<Vec<V>>();
             let (xk, vk) = (rows(&x[r.clone()]), rows(&v[r]));
-            let b = &books[k];
+            let none = dp::Books::default();
+            let b = books.get(k).unwrap_or(&none);
             let mut dis = w.particles().dissipated_by_term().to_vec();
             for &(i, coef) in &self.drag {
                 dis[i] += b.dissipated * (coef / btot);
