@@ -324,7 +324,12 @@ impl PyDeviceBatch {
             Err(Error::Interrupted { .. }) => return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
             Err(e) => return Err(to_py(py, e)),
         };
-        let failed = if d3.is_empty() { self.inner.keep(&mut d2, ran) } else { self.inner.keep(&mut d3, ran) };
+        // Written member by member in parallel on the default pool, the GIL released.
+        let pool = batch_pool(py, None)?;
+        let inner = &self.inner;
+        let failed = py.detach(|| {
+            pool.install(|| if d3.is_empty() { inner.keep(&mut d2, ran) } else { inner.keep(&mut d3, ran) })
+        });
         let failed = failed.map_err(|e| to_py(py, e))?;
         Ok(failed.into_iter().map(|(k, e)| (k, to_py(py, e).into_value(py).into_any())).collect())
     }
