@@ -280,7 +280,8 @@ pub struct Sph {
     rho: wgpu::Buffer,
     /// The first particle whose state stopped being finite (u32::MAX: none).
     flag: wgpu::Buffer,
-    /// Per particle (caller's order): the viscous books, then the walls' (2n reals, J).
+    /// Per particle (caller's order): the viscous books, then the walls' (2n reals, J), then
+    /// the squared pressure and viscous acceleration of the last step (n reals, m²/s⁴).
     books: wgpu::Buffer,
     /// The parameter block of the SPH kernels (its dt written by each `step`).
     params: wgpu::Buffer,
@@ -375,7 +376,7 @@ impl Sph {
         let vel = gpu.buffer("SPH velocities", nn * d as u64 * rb, st)?;
         let rho = gpu.buffer("SPH densities", nn * rb, st)?;
         let flag = gpu.buffer("SPH divergence flag", 16, st)?;
-        let books = gpu.buffer("SPH energy books", (2 * nn * rb).max(16), st)?;
+        let books = gpu.buffer("SPH energy books", (3 * nn * rb).max(16), st)?;
         let cell_of = gpu.buffer("SPH cells", nn * 4, st)?;
         let counts = gpu.buffer("SPH cell counts", ncells * 4, st)?;
         let start = gpu.buffer("SPH cell starts", (ncells + 1) * 4, st)?;
@@ -632,6 +633,21 @@ impl Sph {
         }
         let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
         Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
+    }
+
+    /// The step limit's inputs: the largest speed now (m/s) and the largest squared pressure
+    /// and viscous acceleration of the last step (m²/s⁴; 0 before the first), as the CPU's
+    /// WCSPH takes them (`sph::fluid`'s `max_dt`). Two read-backs.
+    pub fn extremes(&self) -> Result<(f64, f64)> {
+        if self.n == 0 {
+            return Ok((0.0, 0.0));
+        }
+        let d = self.p.dim;
+        let v = self.gpu.read_reals(self.precision, &self.vel, &self.staging, d * self.n)?;
+        let vmax = v.chunks_exact(d).map(|u| u.iter().map(|c| c * c).sum::<f64>()).fold(0.0, f64::max).sqrt();
+        let at = 2 * self.n as u64 * self.precision.bytes();
+        let a2 = self.gpu.read_reals_at(self.precision, &self.books, at, &self.staging, self.n)?;
+        Ok((vmax, a2.into_iter().fold(0.0, f64::max)))
     }
 
     /// The dissipated books alone (viscous, collisions), J: the per-particle accumulators read

@@ -66,7 +66,8 @@ const WG: u32 = 64u;
 // The first particle (caller's index) whose state stopped being finite (u32::MAX: none).
 @group(0) @binding(11) var<storage, read_write> flag: array<atomic<u32>>;
 // The energy books of each particle (caller's order), J: [0, n) the viscous dissipation,
-// [n, 2n) what the box's walls removed. Each written only by the thread that owns the particle.
+// [n, 2n) what the box's walls removed; [2n, 3n) the squared pressure and viscous acceleration
+// of the last step (m²/s⁴). Each written only by the thread that owns the particle.
 @group(0) @binding(12) var<storage, read_write> books: array<real>;
 // The static wall particles (Akinci et al. 2012), sorted by (cell, index) on the host over the
 // fluid's cells (those just outside the grid clamped into its outer cells): `dim` coordinates
@@ -337,14 +338,19 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     var vn = vi;
     var fs = vec3<real>(0.0, 0.0, 0.0);
     var outside = false;
+    var a2: real = 0.0;
     for (var a = 0u; a < d; a = a + 1u) {
-        let f = P.mass * (P.scale * (acc[a] + pr_i * wacc[a]));
+        let asph = P.scale * (acc[a] + pr_i * wacc[a]);
+        a2 = a2 + asph * asph;
+        let f = P.mass * asph;
         fs[a] = f;
         vn[a] = vi[a] + (f * P.inv_mass + grav[a]) * P.dt;
         xn[a] = xi[a] + vn[a] * P.dt;
         outside = outside || xn[a] < lo[a] || xn[a] > hi[a];
     }
     books[i] = books[i] + (0.5 * P.mass * (0.0 - P.scale) * pw) * P.dt;
+    // |a|² of the pressure and viscous acceleration, the step limit's force criterion.
+    books[2u * P.n + i] = a2;
     if (outside) {
         let x0 = xn;
         let v0 = vn;

@@ -219,11 +219,20 @@ impl System for DeviceSph {
     fn steps(&mut self, n: u64, dt: Real, stop: &AtomicBool) -> std::result::Result<(), (u64, Halt)> {
         self.lock().step(n, dt, stop).map(|_| ()).map_err(super::device::halt_of)
     }
+    /// The CPU's WCSPH step limit (`sph::fluid`'s `max_dt`): the CFL condition at the largest
+    /// speed now and the force criterion at the last step's largest pressure and viscous
+    /// acceleration plus |g| (two read-backs; none before the first step's acceleration is
+    /// known, as on the CPU). A device that cannot be read gives no limit (its next step reports it).
     fn auto_dt(&self) -> Option<Real> {
-        None
+        let (vmax, a2) = self.lock().extremes().ok()?;
+        let p = &self.params;
+        let cfl = crate::sph::resolve::wcsph_cfl(p.h, p.c0, p.alpha, vmax);
+        let a = a2.sqrt() + p.gravity.iter().map(|c| c * c).sum::<Real>().sqrt();
+        let force = if a > 0.0 { 0.25 * (p.h / a).sqrt() } else { Real::INFINITY };
+        Some(cfl.min(force))
     }
     fn suggest_dt(&self) -> Option<Real> {
-        None
+        self.auto_dt()
     }
     /// The CPU's books under the CPU's names and order: the potentials in the terms' order,
     /// the fluid's dissipation (if α > 0), then the walls' "collisions".
