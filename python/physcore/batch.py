@@ -347,7 +347,7 @@ class Batch:
             self._placed = live is None
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = [s for s, x in zip(scenes, sessions) if x.reference_energy is None]
+        fresh = [s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None]
         if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
             for s in fresh:
                 s.session.take_reference_energy()

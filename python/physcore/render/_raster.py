@@ -398,6 +398,24 @@ def _bloom(a: np.ndarray, r: int) -> np.ndarray:
     return np.repeat(np.repeat(_blur(half, max(1, r // 2)), 2, axis=0), 2, axis=1)[:h, :w]
 
 
+def _occupied(col: np.ndarray, row: np.ndarray, c: float) -> int:
+    """How many square cells of side `c` (pixels) the points (`col`, `row`, finite) fall in:
+    an occupancy grid over their bounding box (O(N); np.unique over the pairs sorted them:
+    1.6 s for 432,000 points), or the distinct cells counted by a sort of one integer key
+    where the box holds more cells than points."""
+    ix = np.floor(col / c)
+    iy = np.floor(row / c)
+    ix -= ix.min()
+    iy -= iy.min()
+    nx, ny = int(ix.max()) + 1, int(iy.max()) + 1
+    key = ix.astype(np.int64) * ny + iy.astype(np.int64)
+    if nx * ny <= 4 * col.size + 1024:
+        grid = np.zeros(nx * ny, dtype=bool)
+        grid[key] = True
+        return int(np.count_nonzero(grid))
+    return int(np.unique(key).size)
+
+
 def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int], weights: np.ndarray | None = None) -> np.ndarray:
     """Particle count per pixel, each particle shared bilinearly among the four pixels around its
     position (sub-pixel motion shows, edges are antialiased). Accumulated on a grid one pixel
@@ -868,7 +886,7 @@ class _Rasteriser:
         spacing = math.sqrt(span / n)
         for _ in range(3):
             c = max(2.0 * spacing, 1e-3)
-            cells = np.unique(np.stack([np.floor(col / c), np.floor(row / c)], axis=1), axis=0).shape[0] if col.size else 1
+            cells = _occupied(col, row, c) if col.size else 1
             spacing = math.sqrt(cells * c * c / n)
         self._surf_spacing = max(spacing, 0.5)
         target = 0.7 * self._surf_spacing  # σ of three box blurs of radius r is √(r(r+1))
