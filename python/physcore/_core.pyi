@@ -17,6 +17,7 @@ __all__ = [
     "particle_attributes",
     "gpu_adapters",
     "mesh_normals",
+    "splat",
     "draw_discs",
     "rasterise_mesh",
     "neighbors",
@@ -88,6 +89,13 @@ def grid_limits(kind: str, dim: int, params: dict[str, Any]) -> dict[str, float]
 def check_integrator(kind: str, integrator: str) -> None: ...
 def step_batch(sims: list[Simulation], n: int, threads: int | None = None) -> list[tuple[int, BaseException]]: ...
 def reference_energies(sims: list[Simulation], threads: int | None = None) -> list[tuple[float, float] | None]: ...
+def splat(
+    col: npt.NDArray[np.float64],
+    row: npt.NDArray[np.float64],
+    height: int,
+    width: int,
+    weights: npt.NDArray[np.float32] | None = None,
+) -> npt.NDArray[np.float32]: ...
 def mesh_normals(x: npt.NDArray[np.float64], faces: npt.NDArray[np.uint32]) -> npt.NDArray[np.float64]: ...
 def rasterise_mesh(
     verts: npt.NDArray[np.float32],

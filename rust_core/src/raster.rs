@@ -90,6 +90,53 @@ pub fn draw_discs(
     Ok(())
 }
 
+/// Each point shared bilinearly among the four pixels around it (the renderer's splat: counts,
+/// or `weights`, per pixel; pixel k's centre at k + ½), on a `height × width` grid returned as
+/// f32. Accumulated in f64 on a grid one pixel wider each side (no bounds checks), in the order
+/// numpy's `bincount` over the four corners' concatenated arrays adds them (every point's first
+/// corner, then every point's second, ...), so the result is the numpy version's bit for bit,
+/// in a few milliseconds for 10⁶ points instead of 110 (its 4N-entry temporaries). Points off
+/// the grid (or not finite) are left out. Sequential: one order, any thread count.
+pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, height: usize) -> Result<Vec<f32>> {
+    let n = col.len();
+    if row.len() != n || weights.is_some_and(|w| w.len() != n) {
+        return Err(invalid("col", "col, row and weights must describe the same points"));
+    }
+    let wp = width + 2;
+    let mut grid = vec![0f64; (height + 2) * wp];
+    // Per point: its base cell and the fractions, as numpy computes them (fx in f64, the
+    // fractions rounded to f32, the products in f32).
+    let point = |i: usize| -> Option<(usize, f32, f32, f32)> {
+        let (fx, fy) = (col[i] - 0.5, row[i] - 0.5);
+        if !(fx > -1.0 && fx < width as f64 && fy > -1.0 && fy < height as f64) {
+            return None;
+        }
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (ax, ay) = ((fx - x0) as f32, (fy - y0) as f32);
+        let base = ((y0 as i64 + 1) * wp as i64 + (x0 as i64 + 1)) as usize;
+        Some((base, ax, ay, weights.map_or(1.0, |w| w[i])))
+    };
+    for corner in 0..4 {
+        for i in 0..n {
+            let Some((base, ax, ay, w)) = point(i) else { continue };
+            let bx = 1.0 - ax;
+            let (at, f) = match corner {
+                0 => (base, bx * (1.0 - ay)),
+                1 => (base + 1, ax * (1.0 - ay)),
+                2 => (base + wp, bx * ay),
+                _ => (base + wp + 1, ax * ay),
+            };
+            let f = if weights.is_some() { f * w } else { f };
+            grid[at] += f as f64;
+        }
+    }
+    let mut out = Vec::with_capacity(width * height);
+    for y in 1..=height {
+        out.extend(grid[y * wp + 1..y * wp + 1 + width].iter().map(|&v| v as f32));
+    }
+    Ok(out)
+}
+
 /// Unit vertex normals of a triangle mesh: each vertex the normalised sum of its faces'
 /// (p1 − p0) × (p2 − p0), which weights them by area. `x`: N × 3 positions; `faces`: T × 3
 /// indices, checked by the caller (InvalidInput otherwise); `out`: N × 3, zero where the sum

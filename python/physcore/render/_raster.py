@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import _core
 from ._camera import (
     FOLLOW_MAX_ZOOM,
     FOLLOW_SMOOTHING,
@@ -418,26 +419,13 @@ def _occupied(col: np.ndarray, row: np.ndarray, c: float) -> int:
 
 def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int], weights: np.ndarray | None = None) -> np.ndarray:
     """Particle count per pixel, each particle shared bilinearly among the four pixels around its
-    position (sub-pixel motion shows, edges are antialiased). Accumulated on a grid one pixel
-    wider each side, so the four corners need no bounds checks, then cropped. `weights`: (N,)
-    per-particle weights instead of counts (the glow's colour channels)."""
+    position (sub-pixel motion shows, edges are antialiased): an (H, W) float32 grid. `weights`:
+    (N,) per-particle weights instead of counts (the glow's colour channels). In the core
+    (`_core.splat`: the same arithmetic as numpy's bincount over the four corners, bit for bit,
+    without its 4N-entry temporaries: 110 ms for 10⁶ particles in numpy)."""
     h, w = shape
-    fx, fy = col - 0.5, row - 0.5  # pixel k's centre is at k + 0.5
-    ok = (fx > -1) & (fx < w) & (fy > -1) & (fy < h)  # False for NaN too
-    fx, fy = fx[ok], fy[ok]
-    if weights is not None:
-        weights = weights[ok]
-    x0, y0 = np.floor(fx), np.floor(fy)
-    ax, ay = (fx - x0).astype(np.float32), (fy - y0).astype(np.float32)
-    wp = w + 2
-    base = (y0.astype(np.int64) + 1) * wp + (x0.astype(np.int64) + 1)
-    bx = 1.0 - ax
-    idx = np.concatenate([base, base + 1, base + wp, base + wp + 1])
-    wgt = np.concatenate([bx * (1.0 - ay), ax * (1.0 - ay), bx * ay, ax * ay])
-    if weights is not None:
-        wgt = wgt * np.tile(weights.astype(np.float32), 4)
-    out = np.bincount(idx, weights=wgt, minlength=(h + 2) * wp).reshape(h + 2, wp)
-    return out[1 : h + 1, 1 : w + 1].astype(np.float32)
+    return _core.splat(np.ascontiguousarray(col, dtype=np.float64), np.ascontiguousarray(row, dtype=np.float64), h, w,
+                       None if weights is None else np.ascontiguousarray(weights, dtype=np.float32))
 
 
 def _overlay(shape: tuple[int, int]) -> np.ndarray:

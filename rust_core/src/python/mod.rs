@@ -141,6 +141,28 @@ fn draw_discs<'py>(
     py.detach(|| crate::raster::draw_discs(img, shape[1], shape[0], c, r, rad, cs)).map_err(|e| to_py(py, e))
 }
 
+/// Points `col`, `row` (N,) float64 in pixels splatted bilinearly on an (H, W) float32 grid
+/// (`crate::raster::splat`): counts, or `weights` (N,) float32. InvalidInputError for
+/// inconsistent shapes.
+#[pyfunction]
+#[pyo3(signature = (col, row, height, width, weights=None))]
+fn splat<'py>(
+    py: Python<'py>,
+    col: numpy::PyReadonlyArray1<'py, f64>,
+    row: numpy::PyReadonlyArray1<'py, f64>,
+    height: usize,
+    width: usize,
+    weights: Option<numpy::PyReadonlyArray1<'py, f32>>,
+) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
+    let (c, r) = (slice1(&col, "col")?, slice1(&row, "row")?);
+    let w = match &weights {
+        Some(w) => Some(slice1(w, "weights")?),
+        None => None,
+    };
+    let out = py.detach(|| crate::raster::splat(c, r, w, width, height)).map_err(|e| to_py(py, e))?;
+    Ok(numpy::ndarray::Array2::from_shape_vec((height, width), out).expect("shape matches").into_pyarray(py))
+}
+
 /// Unit vertex normals (V, 3) float64 of the mesh `faces` (T, 3) uint32 over `x` (V, 3) float64
 /// (area-weighted face normals; see `crate::raster::vertex_normals`). InvalidInputError for an
 /// index out of range or a non-contiguous array.
@@ -262,6 +284,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterise_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;
     m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
+    m.add_function(wrap_pyfunction!(splat, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_kernel, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_lattice_sum, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_particle_mass, m)?)?;
