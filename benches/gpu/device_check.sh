@@ -19,7 +19,7 @@
 #   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-core --lib --no-run
 #   CARGO_TARGET_DIR=/work/tgt-gpu cargo test --release -p physcore-gpu --tests --no-run
 #   mkdir -p .devbin; cp the binaries to .devbin/{physcore_core-lib,physcore_gpu-tests,particles-tests,
-#   gray_scott-tests,cells-tests,sph-tests,sph_bench-tests} and python/physcore/_core.abi3.so to .devbin/; strip and gzip -9 them;
+#   gray_scott-tests,cells-tests,sph-tests,sph_bench-tests,dem-tests,dfsph-tests} and python/physcore/_core.abi3.so to .devbin/; strip and gzip -9 them;
 #   cp ../shared/gpu/cuda_reference.py .devbin/
 # then run(command="bash benches/gpu/device_check.sh", carry=[".gl", ".devbin"]).
 set -uo pipefail
@@ -31,7 +31,7 @@ lscpu | grep -E "Model name|^CPU\(s\)" || true
 python3 -c 'import physcore as pc; print(pc.__version__, pc.simd_level()); [print(a) for a in pc.gpu_adapters()]' || exit 1
 section() { echo; echo "=== $1 ($SECONDS s)"; }
 section "Rust GPU tests"
-for b in .devbin/physcore_gpu-tests .devbin/particles-tests .devbin/gray_scott-tests .devbin/cells-tests .devbin/sph-tests; do
+for b in .devbin/physcore_gpu-tests .devbin/particles-tests .devbin/gray_scott-tests .devbin/cells-tests .devbin/sph-tests .devbin/dem-tests .devbin/dfsph-tests; do
   [ -x "$b" ] && timeout 120 "$b" --test-threads 4 2>&1 | tail -4
 done
 [ -x .devbin/physcore_core-lib ] && timeout 120 .devbin/physcore_core-lib device --test-threads 4 2>&1 | tail -4
@@ -40,6 +40,9 @@ if [ -x .devbin/sph_bench-tests ]; then
   timeout 90 .devbin/sph_bench-tests --ignored --nocapture 2>&1 | grep -E "adapter|WCSPH"
   PHYSCORE_SPH_PRECISION=f64 PHYSCORE_SPH_BENCH=2d:1048576,3d:262144 timeout 60 .devbin/sph_bench-tests --ignored --nocapture 2>&1 | grep -E "WCSPH"
 fi
+section "DEM and DFSPH on the device (bare steps, f32)"
+[ -x .devbin/dem-tests ] && timeout 90 .devbin/dem-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|discs|DEM"
+[ -x .devbin/dfsph-tests ] && timeout 90 .devbin/dfsph-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|DFSPH"
 section "Python GPU tests"
 timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -x tests/gpu 2>&1 | tail -15
 section "device='auto'"

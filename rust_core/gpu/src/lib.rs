@@ -17,6 +17,8 @@ use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
 pub mod cells;
+pub mod dem;
+pub mod dfsph;
 pub mod fluid;
 pub mod gray_scott;
 mod grid;
