@@ -58,3 +58,5 @@ pub use fluid::Sph;
 pub use params::{KernelKind, Precision, SphParams};
 #[cfg(all(test, feature = "gpu"))]
 mod device_tests;
+#[cfg(all(test, feature = "gpu"))]
+mod dfsph_device_tests;
