@@ -87,7 +87,14 @@ fn cpu_world<V: Vector>(p: &DfsphParams, x: &[Real], v: &[Real], walls: &[Real],
     World::new(sys, dt, Some(1)).unwrap()
 }
 
-fn cpu_run<V: Vector>(p: &DfsphParams, x: &[Real], v: &[Real], walls: &[Real], dt: Real, steps: u64) -> (Vec<Real>, Vec<Real>) {
+fn cpu_run<V: Vector>(
+    p: &DfsphParams,
+    x: &[Real],
+    v: &[Real],
+    walls: &[Real],
+    dt: Real,
+    steps: u64,
+) -> (Vec<Real>, Vec<Real>) {
     let psi = vec![p.mass; walls.len() / p.dim];
     let mut w = cpu_world::<V>(p, x, v, walls, &psi, dt);
     w.step(steps).unwrap();
@@ -137,8 +144,11 @@ fn runs(dim: usize, kernel: Kernel, vx: Real, steps: u64) -> Option<(DfsphParams
     };
     let walls = tank_walls(dim, &up, dx, 3);
     let dt = 1e-3;
-    let (cx, cv) =
-        if dim == 2 { cpu_run::<DVec2>(&p, &x, &v, &walls, dt, steps) } else { cpu_run::<DVec3>(&p, &x, &v, &walls, dt, steps) };
+    let (cx, cv) = if dim == 2 {
+        cpu_run::<DVec2>(&p, &x, &v, &walls, dt, steps)
+    } else {
+        cpu_run::<DVec3>(&p, &x, &v, &walls, dt, steps)
+    };
     let psi = vec![p.mass; walls.len() / dim];
     let mut dev = [None, None];
     for (k, precision) in [Precision::F64, Precision::F32].into_iter().enumerate() {
@@ -164,7 +174,9 @@ fn runs(dim: usize, kernel: Kernel, vx: Real, steps: u64) -> Option<(DfsphParams
 /// the box: f32 is held to its positions.
 #[test]
 fn device_dfsph_takes_the_cpus_steps() {
-    for (dim, kernel, vx) in [(2, Kernel::CubicSpline, 0.0), (2, Kernel::WendlandC2, 0.5), (3, Kernel::CubicSpline, 0.0)] {
+    for (dim, kernel, vx) in
+        [(2, Kernel::CubicSpline, 0.0), (2, Kernel::WendlandC2, 0.5), (3, Kernel::CubicSpline, 0.0)]
+    {
         let Some((p, cpu, dev)) = runs(dim, kernel, vx, 10) else { return };
         let width = p.upper[0] - p.lower[0];
         let vmax = cpu.v.iter().map(|u| u.abs()).fold(0.0, Real::max);
@@ -198,7 +210,10 @@ fn device_dfsph_collapses_a_column_as_the_cpu_does() {
                 (e - e0).abs() / width,
                 k / k0 - 1.0
             );
-            assert!((e - e0).abs() < 0.02 * width && (k / k0 - 1.0).abs() < 0.05, "{dim}D {precision}: {e} vs {e0}, {k} vs {k0}");
+            assert!(
+                (e - e0).abs() < 0.02 * width && (k / k0 - 1.0).abs() < 0.05,
+                "{dim}D {precision}: {e} vs {e0}, {k} vs {k0}"
+            );
         }
     }
 }

@@ -1638,3 +1638,5 @@ fn axial_components<V: Vector>(w: V::Axial) -> [Real; 3] {
 
 #[cfg(test)]
 mod tests;
+#[cfg(all(test, feature = "gpu"))]
+mod device_tests;

@@ -1,0 +1,162 @@
+//! The device's DEM (`physcore_gpu::dem`) against this crate's, the CPU path: grains thrown at
+//! each other and at a floor (a plane wall) under gravity, with friction, stepped by a CPU world
+//! (the "contacts" term, gravity, semi-implicit Euler) and by the device, for both laws, in 2D
+//! and 3D (issue "GPU fluids, grains and batches"). The damping ratios come from the CPU's own
+//! map of the restitution (`damping_ratio`). Skipped where no adapter is found, unless
+//! PHYSCORE_GPU_REQUIRED=1 (CI runs it on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
+use super::{damping_ratio, Law};
+use crate::systems::device_fluid::tests::gpu;
+use crate::systems::particles::ParticleSystem;
+use crate::terms::registry::{self, Context, Params, Value};
+use crate::vector::{Real, Vector};
+use crate::world::World;
+use glam::{DVec2, DVec3};
+use physcore_gpu::dem::{self as dd, Dem, DemParams, Plane};
+use physcore_gpu::Precision;
+use std::sync::atomic::AtomicBool;
+
+/// Six grains of unequal radii and masses: a pair thrown at each other, one falling onto the
+/// floor with spin-free sliding, a stack, and a fast one thrown obliquely at the floor.
+fn grains(dim: usize) -> (Vec<Real>, Vec<Real>, Vec<Real>, Vec<Real>) {
+    let p: [[Real; 3]; 6] = [
+        [-0.12, 0.3, 0.05],
+        [0.12, 0.32, 0.0],
+        [1.0, 0.12, 0.0],
+        [1.6, 0.12, 0.02],
+        [1.63, 0.35, 0.0],
+        [2.4, 0.2, -0.03],
+    ];
+    let u: [[Real; 3]; 6] =
+        [[1.2, 0.0, 0.1], [-1.0, 0.05, 0.0], [0.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, -0.5, 0.0], [1.5, -2.0, 0.4]];
+    let r = [0.1, 0.12, 0.1, 0.11, 0.1, 0.09];
+    let (mut x, mut v) = (Vec::new(), Vec::new());
+    for k in 0..6 {
+        // In 3D the last axis is up: y and z swapped.
+        let (a, b) = if dim == 2 { (p[k], u[k]) } else { ([p[k][0], p[k][2], p[k][1]], [u[k][0], u[k][2], u[k][1]]) };
+        x.extend_from_slice(&a[..dim]);
+        v.extend_from_slice(&b[..dim]);
+    }
+    let m: Vec<Real> = r.iter().map(|ri: &Real| 1000.0 * ri.powi(dim as i32)).collect();
+    (x, v, r.to_vec(), m)
+}
+
+struct Material {
+    law: Law,
+    stiffness: Real,
+    restitution: Real,
+    friction: Real,
+    ratio: Real,
+}
+
+fn cpu_run<V: Vector>(
+    mat: &Material,
+    x: &[Real],
+    v: &[Real],
+    r: &[Real],
+    m: &[Real],
+    dt: Real,
+    steps: u64,
+) -> (Vec<Real>, Vec<Real>) {
+    let d = V::DIM;
+    let n = m.len();
+    let vec = |s: &[Real]| V::from_slice(s);
+    let mut sys = ParticleSystem::<V>::new("semi_implicit_euler").unwrap();
+    sys.add_particles(x.chunks(d).map(vec).collect(), v.chunks(d).map(vec).collect(), m.to_vec(), vec![false; n])
+        .unwrap();
+    sys.set_attribute("radius", r.to_vec()).unwrap();
+    let ctx = Context { n_particles: n };
+    let mut up = vec![0.0; 2 * d];
+    up[2 * d - 1] = 1.0; // a floor through the origin, its normal up
+    let c = Params::new()
+        .with("law", Value::Text(if mat.law == Law::Linear { "linear" } else { "hertz" }.into()))
+        .with("stiffness", Value::Number(mat.stiffness))
+        .with("tangential_ratio", Value::Number(mat.ratio))
+        .with("restitution", Value::Number(mat.restitution))
+        .with("friction", Value::Number(mat.friction))
+        .with("wall_kinds", Value::Text("plane".into()))
+        .with("wall_params", Value::Floats(up))
+        .with("wall_restitution", Value::Floats(vec![mat.restitution]))
+        .with("wall_friction", Value::Floats(vec![mat.friction]));
+    let mut g = vec![0.0; d];
+    g[d - 1] = -9.81;
+    let g = Params::new().with("g", Value::Floats(g));
+    for (kind, name, params) in [("contacts", "contacts", c), ("gravity", "gravity", g)] {
+        sys.add_term(registry::lookup(kind).unwrap().build::<V>(name.into(), params, &ctx).unwrap()).unwrap();
+    }
+    let mut w = World::new(sys, dt, Some(1)).unwrap();
+    w.step(steps).unwrap();
+    let s = w.particles().state();
+    (V::flat(&s.x).to_vec(), V::flat(&s.v).to_vec())
+}
+
+/// The device against the CPU world: (positions over the scene's size, velocities over the
+/// fastest), f64 and f32 (NaN where the adapter has no f64).
+fn agree(dim: usize, mat: &Material, steps: u64) -> [(Real, Real); 2] {
+    let Some(gpu) = gpu() else { return [(0.0, 0.0); 2] };
+    let (x, v, r, m) = grains(dim);
+    // A 50th of the shortest contact at the fastest impact (the CPU's `max_dt` rule).
+    let dt = 2e-5;
+    let (cx, cv) = if dim == 2 {
+        cpu_run::<DVec2>(mat, &x, &v, &r, &m, dt, steps)
+    } else {
+        cpu_run::<DVec3>(mat, &x, &v, &r, &m, dt, steps)
+    };
+    // Every kind of contact happened: the pair bounced apart, the fast grain off the floor.
+    let up = |k: usize| cv[dim * k + dim - 1];
+    assert!(cv[0] < 0.0 && cv[dim] > 0.0, "the pair collided: {cv:?}");
+    assert!(up(5) > 0.0, "the oblique grain bounced: {cv:?}");
+    let zeta = damping_ratio(mat.law, mat.restitution);
+    let mut up = [0.0; 3];
+    up[dim - 1] = 1.0;
+    let mut g = [0.0; 3];
+    g[dim - 1] = -9.81;
+    let params = DemParams {
+        law: if mat.law == Law::Linear { dd::Law::Linear } else { dd::Law::Hertz },
+        stiffness: mat.stiffness,
+        zeta,
+        friction: mat.friction,
+        tangential_ratio: mat.ratio,
+        gravity: g,
+        lower: [-1.0, -1.0, -1.0],
+        upper: [4.0, 2.0, 2.0],
+        ..DemParams::default()
+    };
+    let floor = Plane { point: [0.0; 3], normal: up, zeta, friction: mat.friction };
+    let mut out = [(Real::NAN, Real::NAN); 2];
+    for (k, precision) in [Precision::F64, Precision::F32].into_iter().enumerate() {
+        let mut dev = match Dem::new(gpu.clone(), precision, dim, params, &x, &v, &r, &m, &[floor]) {
+            Ok(d) => d,
+            Err(e) if precision == Precision::F64 => {
+                eprintln!("f64 skipped: {e}");
+                continue;
+            }
+            Err(e) => panic!("{e}"),
+        };
+        dev.step(steps, dt, &AtomicBool::new(false)).unwrap();
+        let (dx_, dv_, _) = dev.read().unwrap();
+        let vmax = cv.iter().map(|u| u.abs()).fold(0.0, Real::max);
+        let ex = cx.iter().zip(&dx_).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / 3.0;
+        let ev = cv.iter().zip(&dv_).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / vmax;
+        eprintln!(
+            "DEM {dim}D {:?} e {} μ {} {precision:?}, {steps} steps: positions {ex:.2e} of the scene, velocities {ev:.2e} of the fastest",
+            mat.law, mat.restitution, mat.friction
+        );
+        out[k] = (ex, ev);
+    }
+    out
+}
+
+#[test]
+fn device_dem_agrees_with_the_cpu_contacts() {
+    for dim in [2, 3] {
+        for (law, stiffness) in [(Law::Linear, 1e5), (Law::Hertz, 1e7)] {
+            let ratio = if dim == 2 { 1.0 / 3.0 } else { 2.0 / 7.0 };
+            let mat = Material { law, stiffness, restitution: 0.6, friction: 0.4, ratio };
+            let [(x64, v64), (x32, v32)] = agree(dim, &mat, 5000);
+            if x64.is_finite() {
+                assert!(x64 < 1e-10 && v64 < 1e-8, "{dim}D {law:?} f64: {x64} {v64}");
+            }
+            assert!(x32 < 1e-3 && v32 < 1e-2, "{dim}D {law:?} f32: {x32} {v32}");
+        }
+    }
+}
