@@ -88,39 +88,17 @@ pub(super) fn step_batch(
     let pool = batch_pool(py, threads)?;
     let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
     let stop = Arc::new(AtomicBool::new(false));
-    let mut pending: Option<PyErr> = None;
-    let mut call: Call = py.detach(|| {
-        let caller = std::thread::current();
-        std::thread::scope(|scope| {
-            let job = scope.spawn(|| {
-                let out = pool.install(|| {
-                    // SAFETY: each pointer is a distinct simulation (each was borrowed mutably
-                    // above, and the borrows outlive this call), used by one task at a time.
-                    let inners: Vec<&mut Inner> = ptrs.iter().map(|p| unsafe { &mut *p.0 }).collect();
-                    step_members(inners, n, &stop)
-                });
-                caller.unpark(); // the caller's wait ends now, not at its next poll
-                out
-            });
-            // The calling thread runs Python's signal handlers meanwhile (`watch::watched`).
-            while !job.is_finished() {
-                std::thread::park_timeout(SIGNAL_POLL);
-                if pending.is_none() {
-                    if let Err(e) = Python::attach(|py| py.check_signals()) {
-                        pending = Some(e);
-                        stop.store(true, Ordering::Relaxed);
-                    }
-                }
-            }
-            job.join().unwrap_or_else(|p| std::panic::resume_unwind(p))
-        })
-    });
     // A signal during the call, or right after it: every member goes back to where it started
     // (those that stopped on the flag, or diverged, already are; a fused member was never
     // written). Else each member's steps are kept: a fused member written back now.
-    if pending.is_none() {
-        pending = py.check_signals().err();
-    }
+    let (mut call, pending): (Call, _) = with_signals(py, &stop, || {
+        pool.install(|| {
+            // SAFETY: each pointer is a distinct simulation (each was borrowed mutably above,
+            // and the borrows outlive this call), used by one task at a time.
+            let inners: Vec<&mut Inner> = ptrs.iter().map(|p| unsafe { &mut *p.0 }).collect();
+            step_members(inners, n, &stop)
+        })
+    });
     let keep = pending.is_none();
     let mut failed = Vec::new();
     for (k, r) in refs.iter_mut().enumerate() {
@@ -194,9 +172,9 @@ fn sum(values: impl Iterator<Item = f64>) -> f64 {
 }
 
 /// Runs `f` with the GIL released on a thread of its own while the calling thread runs Python's
-/// signal handlers every `SIGNAL_POLL`; a handler's exception (Ctrl-C) sets `stop` and is
-/// returned beside `f`'s result.
-#[cfg(feature = "gpu")]
+/// signal handlers every `SIGNAL_POLL` (as `watch::watched` does for one world); a handler's
+/// exception (Ctrl-C) sets `stop` and is returned beside `f`'s result, as is one raised by the
+/// handlers run once more right after `f` ends.
 fn with_signals<T: Send>(py: Python<'_>, stop: &AtomicBool, f: impl FnOnce() -> T + Send) -> (T, Option<PyErr>) {
     let mut pending: Option<PyErr> = None;
     let out = py.detach(|| {

@@ -54,7 +54,7 @@ struct Books {
 /// The wall particles of `physcore.shapes.tank_walls(lower, upper, dx, layers, top=False)`
 /// for the box [0, upper]: the lattice points (k + ½) dx from `layers` spacings below the floor
 /// and outside the sides, up to the rim (the last axis is up), that are not inside the box.
-fn tank_walls(dim: usize, upper: &[Real], dx: Real, layers: i64) -> Vec<Real> {
+pub(super) fn tank_walls(dim: usize, upper: &[Real], dx: Real, layers: i64) -> Vec<Real> {
     let k: Vec<i64> = (0..dim).map(|a| (upper[a] / dx).round() as i64).collect();
     let hi = |a: usize| if a + 1 == dim { k[a] } else { k[a] + layers };
     let mut out = Vec::new();

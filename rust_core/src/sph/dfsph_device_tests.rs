@@ -5,6 +5,7 @@
 //! Skipped where no adapter is found, unless PHYSCORE_GPU_REQUIRED=1 (CI runs it on lavapipe
 //! with PHYSCORE_GPU_ALLOW_CPU=1).
 use crate::constraints::aabb::Aabb;
+use super::device_tests::tank_walls;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::KernelKind;
 use crate::systems::device_fluid::tests::gpu;
@@ -31,26 +32,6 @@ fn column(dim: usize, cols: usize, rows: usize, dx: Real, vx: Real) -> (Vec<Real
     }
     let v = (0..dim * count).map(|i| if i % dim == 0 { vx } else { 0.0 }).collect();
     (x, v)
-}
-
-/// `physcore.shapes.tank_walls(0, upper, dx, layers, top=False)` (as in `device_tests`).
-fn tank_walls(dim: usize, upper: &[Real], dx: Real, layers: i64) -> Vec<Real> {
-    let k: Vec<i64> = (0..dim).map(|a| (upper[a] / dx).round() as i64).collect();
-    let hi = |a: usize| if a + 1 == dim { k[a] } else { k[a] + layers };
-    let mut out = Vec::new();
-    let zs: Vec<i64> = if dim == 3 { (-layers..hi(2)).collect() } else { vec![0] };
-    for &z in &zs {
-        for y in -layers..hi(1) {
-            for x in -layers..hi(0) {
-                let c = [x, y, z];
-                if (0..dim).all(|a| c[a] >= 0 && c[a] < k[a]) {
-                    continue;
-                }
-                out.extend((0..dim).map(|a| (c[a] as Real + 0.5) * dx));
-            }
-        }
-    }
-    out
 }
 
 /// The CPU world of the device's fluid.
