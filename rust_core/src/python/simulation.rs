@@ -87,7 +87,7 @@ impl PySimulation {
 
     /// Its term and collider records, borrowed (a batch on a device compares them with its own).
     #[cfg(feature = "gpu")]
-    pub(super) fn records_ref(&self) -> (&[(String, String, registry::Params)], &[(String, registry::Params)]) {
+    pub(super) fn records_ref(&self) -> crate::systems::device_batch::RecordsRef<'_> {
         (&self.terms, &self.colliders)
     }
 

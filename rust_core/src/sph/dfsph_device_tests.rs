@@ -4,8 +4,8 @@
 //! collider, semi-implicit Euler) and by the device (issue "GPU fluids, grains and batches").
 //! Skipped where no adapter is found, unless PHYSCORE_GPU_REQUIRED=1 (CI runs it on lavapipe
 //! with PHYSCORE_GPU_ALLOW_CPU=1).
-use crate::constraints::aabb::Aabb;
 use super::device_tests::tank_walls;
+use crate::constraints::aabb::Aabb;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::KernelKind;
 use crate::systems::device_fluid::tests::gpu;

@@ -33,6 +33,9 @@ use std::sync::Arc;
 /// the facade added them (`Simulation.move_to_device` builds from the same).
 pub type Records = (Vec<(String, String, Params)>, Vec<(String, Params)>);
 
+/// A member's records, borrowed (`DeviceBatch::matches`).
+pub type RecordsRef<'a> = (&'a [(String, String, Params)], &'a [(String, Params)]);
+
 /// Every member of a batch on one device.
 pub struct DeviceBatch {
     dim: usize,
@@ -187,10 +190,7 @@ impl DeviceBatch {
 
     /// Whether `records` are those of the members this batch was built from (else the caller
     /// builds it again: a member changed its terms, or members were retired).
-    pub fn matches<'a>(
-        &self,
-        records: impl ExactSizeIterator<Item = (&'a [(String, String, Params)], &'a [(String, Params)])>,
-    ) -> bool {
+    pub fn matches<'a>(&self, records: impl ExactSizeIterator<Item = RecordsRef<'a>>) -> bool {
         records.len() == self.records.len() && self.records.iter().zip(records).all(|(r, (t, c))| r.0 == t && r.1 == c)
     }
 

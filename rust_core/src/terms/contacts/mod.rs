@@ -1636,7 +1636,7 @@ fn axial_components<V: Vector>(w: V::Axial) -> [Real; 3] {
     }
 }
 
-#[cfg(test)]
-mod tests;
 #[cfg(all(test, feature = "gpu"))]
 mod device_tests;
+#[cfg(test)]
+mod tests;
