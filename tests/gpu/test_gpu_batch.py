@@ -187,7 +187,8 @@ def test_what_a_gpu_batch_cannot_hold_is_refused_by_name_before_anything_changes
     for k, c in enumerate(chains):
         c.add(pc.Drag(0.05 * (1 + k)))  # one drag coefficient a dispatch
     refused(chains, "^terms: member 1's field parameters")
-    refused([pc.scenes.dam_break(n=8), pc.scenes.dam_break(n=8)], "Fluid")
+    refused([pc.scenes.dam_break(n=8), pc.scenes.dam_break(n=8)], '^water: the GPU path has no kernel for "dfsph"')
+    refused([pc.scenes.turing(n=16), pc.scenes.turing(n=16)], "^sims: entry 0 has the grid")
     refused(list(_fan(2).members), "^device: must be", device="tpu")
     refused(list(_fan(2).members), "^precision: must be", precision="f16")
     with pytest.raises(pc.InvalidInputError, match="^device"):
