@@ -275,14 +275,16 @@ def test_keyboard_interrupt_inside_one_body_step_rolls_the_bodies_back_bit_for_b
     # a rollback, or one after a step of 10 ms or more) now runs on a thread of its own while
     # the core watches the stop flag: the call is rolled back at once (the step runs on unseen
     # to its end), and the scene steps on as one never interrupted.
+    # 800 balls: a step of about 0.6 s here, twice the signal's 0.3 s (600 took 0.25-0.31 s,
+    # and one CI run's first step ended before the signal came: the test must interrupt a step).
     rng = np.random.default_rng(1)
-    x = rng.random((600, 3)) * 1.2
+    x = rng.random((800, 3)) * 1.2
 
     def scene():
         s = pc.Scene(3, dt=1e-3)
         s.add(pc.Gravity([0.0, 0.0, -9.81]))
         s.add(pc.Bodies("box", kind="fixed", size=[(5.0, 5.0, 0.5)], positions=[(1.0, 1.0, -0.5)]))
-        return s, s.add(pc.Bodies("ball", size=np.full(600, 0.3), positions=x, restitution=0.5))
+        return s, s.add(pc.Bodies("ball", size=np.full(800, 0.3), positions=x, restitution=0.5))
 
     s, balls = scene()
     books = s.energy()
@@ -296,9 +298,9 @@ def test_keyboard_interrupt_inside_one_body_step_rolls_the_bodies_back_bit_for_b
     twin.step(2)
     assert np.array_equal(balls.positions, twin_balls.positions) and not np.array_equal(x, balls.positions)
     # Between steps too: after a few long steps, Ctrl-C inside a later one. Waiting for that
-    # step would take a whole step (0.27 s here, idle; 0.4 s and more while the suite's other
-    # worker runs beside it, when the rollback slows too: 0.32 s seen once in CI); the answer
-    # must come within 0.2 s or half a step as measured now, whichever is longer.
+    # step would take a whole step (0.6 s here, idle; more while the suite's other worker runs
+    # beside it, when the rollback slows too); the answer must come within 0.2 s or half a step
+    # as measured now, whichever is longer.
     latency = _interrupt(lambda: s.step(10**6), 0.3)
     assert latency < max(0.2, 0.5 * step), f"Ctrl-C took {latency:.2f} s (a step: {step:.2f} s)"
     assert s.step_count >= 2
