@@ -453,15 +453,20 @@ class Batch:
         return atomic_write(path, write)
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> Batch:
+    def load(cls, path: str | os.PathLike, *, device: str | None = None) -> Batch:
         """Read a file :meth:`save` wrote; each member is checked as :meth:`Scene.load` checks a
-        file. A retired member comes back retired (its exception rebuilt from its message).
+        file. A retired member comes back retired (its exception rebuilt from its message). A
+        batch saved on a GPU comes back on a GPU of this machine; ``device`` (``"cpu"``,
+        ``"gpu"``, ``"gpu:NAME"``) puts it elsewhere (a GPU batch continues on the CPU with
+        ``device="cpu"``).
 
         Raises
         ------
         SceneFileError
             Not a batch file, an unknown format, a member missing or failing its checks (the
             message names the member).
+        InvalidInputError
+            The file's GPU (or ``device``) is not on this machine, naming ``device``.
         """
         where = str(path)
 
@@ -506,17 +511,19 @@ class Batch:
         threads = meta.get("threads")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise SceneFileError(where, "batch.json.threads", f"must be null or a count >= 1, got {threads!r}")
-        device, precision = meta.get("device", "cpu"), meta.get("precision")
+        saved_device, precision = meta.get("device", "cpu"), meta.get("precision")
         try:
-            device, precision = _check_device(device, precision)
+            saved_device, precision = _check_device(saved_device, precision)
         except (InvalidInputError, InvalidTypeError) as e:
             raise SceneFileError(where, "batch.json.device", str(e)) from None
+        device = saved_device if device is None else device
         try:
             _same_structure(members, "member")
         except InvalidInputError as e:  # members of different structures: not a batch save wrote
             raise SceneFileError(where, "batch.json.members", str(e)) from None
-        # A GPU batch comes back on a GPU of this machine (refused by name where it has none).
-        batch = cls(members, threads=threads, device=device, precision=precision)
+        # A GPU batch comes back on a GPU of this machine (refused by name where it has none),
+        # unless `device` says otherwise; its precision is the file's on a GPU.
+        batch = cls(members, threads=threads, device=device, precision=None if device == "cpu" else precision)
         diverged = meta.get("diverged") or {}
         if not isinstance(diverged, dict):
             raise SceneFileError(where, "batch.json.diverged", "must be an object")

@@ -171,6 +171,15 @@ def test_save_and_load_continue_bit_for_bit_on_the_device(tmp_path) -> None:
     batch.step(150)
     copy.step(150)
     assert np.array_equal(batch.positions, copy.positions) and np.array_equal(batch.time, copy.time)
+    # The same file continues on the CPU, as the CPU batch of the same start does (to f32's
+    # rounding of the device's 100 steps before the save).
+    path = tmp_path / "fan.batch"
+    on_cpu = pc.Batch.load(path, device="cpu")
+    assert on_cpu.device == "cpu" and np.array_equal(on_cpu.step_count, np.full(5, 100))
+    on_cpu.step(150)
+    cpu = _fan(5)
+    cpu.step(250)
+    assert np.abs(on_cpu.positions - cpu.positions).max() < 1e-3
 
 
 def test_what_a_gpu_batch_cannot_hold_is_refused_by_name_before_anything_changes() -> None:
