@@ -198,6 +198,9 @@ def test_what_a_gpu_batch_cannot_hold_is_refused_by_name_before_anything_changes
     refused(chains, "^terms: member 1's field parameters")
     refused([pc.scenes.dam_break(n=8), pc.scenes.dam_break(n=8)], '^water: the GPU path has no kernel for "dfsph"')
     refused([pc.scenes.turing(n=16), pc.scenes.turing(n=16)], "^sims: entry 0 has the grid")
+    far = list(_fan(2).members)
+    far[1].positions = far[1].positions * 1e39  # past f32's range: refused, not inf on the device
+    refused(far, "^positions: value .* past f32's range", precision="f32")
     refused(list(_fan(2).members), "^device: must be", device="tpu")
     refused(list(_fan(2).members), "^precision: must be", precision="f16")
     with pytest.raises(pc.InvalidInputError, match="^device"):
