@@ -77,7 +77,8 @@
 //! Verlet lists (the cell list is rebuilt every step), "xpbd".
 use crate::cells::spread;
 use crate::particles::Halt;
-use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
+use crate::sph::{invalid, positive};
+use crate::{Bind, Chunk, Gpu, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -196,23 +197,11 @@ pub struct DemRaw {
     pub books: Vec<f64>,
 }
 
-fn invalid(what: &str, why: impl std::fmt::Display) -> GpuError {
-    GpuError::Unsupported(format!("{what}: {why}"))
-}
-
 fn finite_nonneg(v: f64, what: &str) -> Result<()> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
     } else {
         Err(invalid(what, format_args!("{v} must be finite and >= 0")))
-    }
-}
-
-fn positive(v: f64, what: &str) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(what, format_args!("{v} must be finite and > 0")))
     }
 }
 

@@ -55,8 +55,8 @@
 //! limit, checkpoints of the warm starts.
 use crate::cells::spread;
 use crate::particles::Halt;
-use crate::sph::Kernel;
-use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
+use crate::sph::{invalid, positive, sort_walls, Kernel};
+use crate::{Bind, Chunk, Gpu, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -126,19 +126,6 @@ impl Default for DfsphParams {
     }
 }
 
-/// The error for argument `what`.
-fn invalid(what: &str, why: impl std::fmt::Display) -> GpuError {
-    GpuError::Unsupported(format!("{what}: {why}"))
-}
-
-fn positive(v: f64, what: &str) -> Result<()> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(invalid(what, format_args!("{v} must be finite and > 0")))
-    }
-}
-
 impl DfsphParams {
     /// `Unsupported` naming the first field out of range.
     pub fn validate(&self) -> Result<()> {
@@ -180,20 +167,7 @@ impl DfsphParams {
 
     /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (as `SphParams::cells`).
     pub fn cells(&self) -> Result<[usize; 3]> {
-        let mut n = [1usize; 3];
-        let mut total = 1u64;
-        for (a, na) in n.iter_mut().enumerate().take(self.dim) {
-            let m = ((self.upper[a] - self.lower[a]) / (2.0 * self.h)).ceil().max(1.0);
-            if m >= 2f64.powi(31) {
-                return Err(invalid("h", format_args!("{m} cells of 2h along axis {a}: at most 2^31 cells")));
-            }
-            *na = m as usize;
-            total = total.saturating_mul(m as u64);
-        }
-        if total >= 1 << 31 {
-            return Err(invalid("h", format_args!("{total} cells of 2h in the box: at most 2^31")));
-        }
-        Ok(n)
+        crate::sph::box_cells(self.dim, self.h, &self.lower, &self.upper)
     }
 
     /// Neighbours (fluid and walls within 2h) below which the divergence solve leaves a
@@ -383,7 +357,7 @@ impl Dfsph {
         }
         let cells = params.cells()?;
         let ncells = cells.iter().product::<usize>() as u64;
-        let (wall_data, wall_starts) = sort_walls(&params, cells, walls, psi)?;
+        let (wall_data, wall_starts) = sort_walls((params.dim, params.h, &params.lower), cells, walls, psi)?;
         let nw = wall_starts.last().copied().unwrap_or(0) as usize;
         let groups = spread(n.max(1));
         let ngroups = groups.0 as u64 * groups.1 as u64;
@@ -828,62 +802,6 @@ impl Dfsph {
             collisions: sum(3),
         })
     }
-}
-
-/// The wall particles (flat, `dim` each) with their Ψ, checked, sorted by (cell, index) over the
-/// fluid's cells, those within one cell outside the grid clamped into its outer cells and those
-/// farther dropped: `sph.rs`'s `sort_walls` (private there), for these parameters. Returns the
-/// walls as `dim` coordinates then Ψ each, and per cell its first wall (cells + 1 entries).
-fn sort_walls(p: &DfsphParams, cells: [usize; 3], walls: &[f64], psi: &[f64]) -> Result<(Vec<f64>, Vec<u32>)> {
-    let d = p.dim;
-    if !walls.len().is_multiple_of(d) {
-        return Err(invalid(
-            "walls",
-            format_args!("{} values: must hold dim = {d} values per wall particle", walls.len()),
-        ));
-    }
-    let m = walls.len() / d;
-    if m as u64 >= 1 << 31 {
-        return Err(invalid("walls", format_args!("{m} wall particles: at most 2^31")));
-    }
-    if psi.len() != m {
-        return Err(invalid("psi", format_args!("{} values for {m} wall particles: one each", psi.len())));
-    }
-    if let Some(k) = walls.iter().position(|v| !v.is_finite()) {
-        return Err(invalid("walls", format_args!("wall particle {} has a non-finite value", k / d)));
-    }
-    if let Some(b) = psi.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-        return Err(invalid("psi", format_args!("entry {b} is {} (must be finite and > 0)", psi[b])));
-    }
-    let cell = 2.0 * p.h;
-    let mut keyed: Vec<(usize, usize)> = Vec::new();
-    'walls: for (b, w) in walls.chunks_exact(d).enumerate() {
-        let (mut flat, mut stride) = (0usize, 1usize);
-        for a in 0..d {
-            let f = ((w[a] - p.lower[a]) / cell).floor();
-            if !(f >= -1.0 && f <= cells[a] as f64) {
-                continue 'walls;
-            }
-            flat += stride * (f.max(0.0) as usize).min(cells[a] - 1);
-            stride *= cells[a];
-        }
-        keyed.push((flat, b));
-    }
-    keyed.sort_unstable();
-    let ncells: usize = cells.iter().product();
-    let mut starts = vec![0u32; ncells + 1];
-    for &(c, _) in &keyed {
-        starts[c + 1] += 1;
-    }
-    for c in 0..ncells {
-        starts[c + 1] += starts[c];
-    }
-    let mut data = Vec::with_capacity(keyed.len() * (d + 1));
-    for &(_, b) in &keyed {
-        data.extend_from_slice(&walls[d * b..d * b + d]);
-        data.push(psi[b]);
-    }
-    Ok((data, starts))
 }
 
 #[cfg(test)]

@@ -143,12 +143,12 @@ impl Default for SphParams {
     }
 }
 
-/// The error for argument `what`.
-fn invalid(what: &str, why: impl std::fmt::Display) -> GpuError {
+/// The error for argument `what` (the particle kernels' checks share it: sph, dfsph, dem).
+pub(crate) fn invalid(what: &str, why: impl std::fmt::Display) -> GpuError {
     GpuError::Unsupported(format!("{what}: {why}"))
 }
 
-fn positive(v: f64, what: &str) -> Result<()> {
+pub(crate) fn positive(v: f64, what: &str) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
@@ -224,20 +224,7 @@ impl SphParams {
     /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (the support): the cell list
     /// covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported` past 2^31 cells.
     pub fn cells(&self) -> Result<[usize; 3]> {
-        let mut n = [1usize; 3];
-        let mut total = 1u64;
-        for (a, na) in n.iter_mut().enumerate().take(self.dim) {
-            let m = ((self.upper[a] - self.lower[a]) / (2.0 * self.h)).ceil().max(1.0);
-            if m >= 2f64.powi(31) {
-                return Err(invalid("h", format_args!("{m} cells of 2h along axis {a}: at most 2^31 cells")));
-            }
-            *na = m as usize;
-            total = total.saturating_mul(m as u64);
-        }
-        if total >= 1 << 31 {
-            return Err(invalid("h", format_args!("{total} cells of 2h in the box: at most 2^31")));
-        }
-        Ok(n)
+        box_cells(self.dim, self.h, &self.lower, &self.upper)
     }
 }
 
@@ -366,7 +353,7 @@ impl Sph {
         }
         let cells = params.cells()?;
         let ncells = cells.iter().product::<usize>() as u64;
-        let (wall_data, wall_starts) = sort_walls(&params, cells, walls, psi)?;
+        let (wall_data, wall_starts) = sort_walls((params.dim, params.h, &params.lower), cells, walls, psi)?;
         let nw = wall_starts.last().copied().unwrap_or(0) as usize;
         let rb = precision.bytes();
         let nn = n as u64;
@@ -691,13 +678,37 @@ impl Sph {
     }
 }
 
+/// Cells along x, y, z (z = 1 in 2D) of a box [lower, upper] in `dim` dimensions, each 2h wide
+/// (the support): the cell list covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported`
+/// naming `h` past 2^31 cells.
+pub(crate) fn box_cells(dim: usize, h: f64, lower: &[f64; 3], upper: &[f64; 3]) -> Result<[usize; 3]> {
+    let mut n = [1usize; 3];
+    let mut total = 1u64;
+    for (a, na) in n.iter_mut().enumerate().take(dim) {
+        let m = ((upper[a] - lower[a]) / (2.0 * h)).ceil().max(1.0);
+        if m >= 2f64.powi(31) {
+            return Err(invalid("h", format_args!("{m} cells of 2h along axis {a}: at most 2^31 cells")));
+        }
+        *na = m as usize;
+        total = total.saturating_mul(m as u64);
+    }
+    if total >= 1 << 31 {
+        return Err(invalid("h", format_args!("{total} cells of 2h in the box: at most 2^31")));
+    }
+    Ok(n)
+}
+
 /// The wall particles `walls` (flat, `dim` each) with their Ψ `psi`, checked, in the order the
-/// shader reads them: sorted by (cell, index) over the fluid's `cells` of 2h from the box's lower
+/// shaders (sph, dfsph) read them: sorted by (cell, index) over the fluid's `cells` of 2h from the box's lower
 /// corner, a wall within one cell outside the grid clamped into its outer cell (still a neighbour
 /// cell of every cell within 2h of it), one farther dropped. Returns the walls as `dim`
 /// coordinates then Ψ each, and per cell its first wall (`cells` + 1 entries, the last the count).
-fn sort_walls(p: &SphParams, cells: [usize; 3], walls: &[f64], psi: &[f64]) -> Result<(Vec<f64>, Vec<u32>)> {
-    let d = p.dim;
+pub(crate) fn sort_walls(
+    (d, h, lower): (usize, f64, &[f64; 3]),
+    cells: [usize; 3],
+    walls: &[f64],
+    psi: &[f64],
+) -> Result<(Vec<f64>, Vec<u32>)> {
     if !walls.len().is_multiple_of(d) {
         return Err(invalid(
             "walls",
@@ -717,12 +728,12 @@ fn sort_walls(p: &SphParams, cells: [usize; 3], walls: &[f64], psi: &[f64]) -> R
     if let Some(b) = psi.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
         return Err(invalid("psi", format_args!("entry {b} is {} (must be finite and > 0)", psi[b])));
     }
-    let cell = 2.0 * p.h;
+    let cell = 2.0 * h;
     let mut keyed: Vec<(usize, usize)> = Vec::new();
     'walls: for (b, w) in walls.chunks_exact(d).enumerate() {
         let (mut flat, mut stride) = (0usize, 1usize);
         for a in 0..d {
-            let f = ((w[a] - p.lower[a]) / cell).floor();
+            let f = ((w[a] - lower[a]) / cell).floor();
             if !(f >= -1.0 && f <= cells[a] as f64) {
                 continue 'walls;
             }
