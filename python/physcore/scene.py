@@ -878,7 +878,7 @@ class Scene:
             why = f"{type(part).__name__} {getattr(part, 'name', None) or type(part).__name__!r} has no GPU kernel yet (device='auto')"
         elif fluid is not None:
             device = "cpu"
-            why = ("WCSPH's GPU path has not been timed on a GPU yet, so device='auto' keeps the fluid on the CPU "
+            why = ("the fluids' GPU path has not been timed on a GPU yet, so device='auto' keeps the fluid on the CPU "
                    "(device='gpu' runs it there)")
         else:
             threads = self._threads if self._threads is not None else _core.default_threads()
@@ -900,7 +900,7 @@ class Scene:
         """The first part the GPU path has no kernel for, or None."""
         for part in self._parts:
             ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
-                  or (part.section == "terms" and part.part_kind == "fluid" and getattr(part, "method", None) == "wcsph")
+                  or (part.section == "terms" and part.part_kind == "fluid" and getattr(part, "method", None) in ("wcsph", "dfsph"))
                   or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
                   or part.section in _GPU_COLLIDERS
                   or (part.section == "colliders" and part.part_kind in _GPU_SHAPES))
@@ -917,7 +917,7 @@ class Scene:
             what = getattr(part, "name", None) or type(part).__name__
             raise InvalidInputError(
                 f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH Fluid in a Box, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH or DFSPH Fluid in a Box, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
 

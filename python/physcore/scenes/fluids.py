@@ -170,10 +170,10 @@ def dam_break(
         front as close; ``sound_speed`` then only scales the viscosity and ``pass_precision`` does
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
     device : {"cpu", "gpu", "gpu:NAME", "auto"}
-        ``"gpu"`` steps the water on a GPU in float32 (:class:`~physcore.Scene`; WCSPH only, so
-        ``method="wcsph"`` must be given: DFSPH has no GPU kernel yet). The tank then also stands
-        in a :class:`~physcore.Box` 4 spacings outside its walls, the extent of the device's cell
-        list. Its speed on a GPU is not measured yet (docs/guide/gpu.md).
+        ``"gpu"`` steps the water on a GPU in float32 (:class:`~physcore.Scene`; DFSPH or
+        WCSPH, without surface tension). The tank then also stands in a :class:`~physcore.Box`
+        4 spacings outside its walls, the extent of the device's cell list. Its speed on a GPU
+        is not measured yet (docs/guide/gpu.md).
 
     Returns
     -------
@@ -205,9 +205,6 @@ def dam_break(
     if not height <= top:
         raise InvalidInputError(f"tank, height: the tank's height {top} must be at least the column height {height}")
     dx = _spacing(_per(width, n), "n, width")
-    gpu = isinstance(device, str) and device.startswith("gpu")
-    if method is None and gpu:
-        raise InvalidInputError(f"method: device={device!r} runs WCSPH only (DFSPH has no GPU kernel yet): pass method='wcsph'")
     if method is None:
         # (Any other integrator, a bad one included, goes to Scene, which names it.)
         method = "dfsph" if isinstance(integrator, str) and integrator == "semi_implicit_euler" else "wcsph"

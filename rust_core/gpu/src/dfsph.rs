@@ -768,6 +768,27 @@ impl Dfsph {
         Ok((self.history_part(0)?, self.history_part(1)?))
     }
 
+    /// Puts back the warm starts and the last step's pressure (`warm_starts` then `pressure`:
+    /// 3n values, caller's order; the CPU term's `history` layout), so that a restart or a file
+    /// continues as the run it came from. Errors: `Unsupported` for another length or a
+    /// non-finite value (nothing changes).
+    pub fn set_history(&mut self, history: &[f64]) -> Result<()> {
+        if history.len() != 3 * self.n {
+            return Err(invalid(
+                "history",
+                format_args!("expected {} values (3 per particle), got {}", 3 * self.n, history.len()),
+            ));
+        }
+        if let Some(i) = history.iter().position(|h| !h.is_finite()) {
+            return Err(invalid("history", format_args!("entry {i} is not finite")));
+        }
+        if self.n > 0 {
+            self.gpu.upload(self.precision, &self.hist, history);
+            self.gpu.wait()?;
+        }
+        Ok(())
+    }
+
     fn history_part(&self, k: u64) -> Result<Vec<f64>> {
         if self.n == 0 {
             return Ok(Vec::new());

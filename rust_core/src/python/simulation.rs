@@ -231,7 +231,20 @@ impl PySimulation {
                     let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
                     let integrator = p.integrator_info().name;
                     let g = gpu.clone();
-                    if terms.iter().any(|t| t.0 == "sph") {
+                    if let Some((_, fname, _)) = terms.iter().find(|t| t.0 == "dfsph") {
+                        // A DFSPH fluid: its own device system, under the particles' name, taking
+                        // the CPU term's warm starts with it.
+                        use crate::systems::device_dfsph::DeviceDfsph;
+                        let history = p.term_history(fname).map_err(|e| to_py(py, e))?;
+                        Some(Box::new(
+                            py.detach(|| {
+                                DeviceDfsph::from_records(
+                                    g, precision, DEVICE, dim, integrator, &x, &v, &m, &pinned, history.as_deref(), terms, colliders,
+                                )
+                            })
+                            .map_err(|e| to_py(py, e))?,
+                        ))
+                    } else if terms.iter().any(|t| t.0 == "sph") {
                         // A WCSPH fluid: its own device system, under the particles' name.
                         use crate::systems::device_sph::DeviceSph;
                         Some(Box::new(
@@ -783,7 +796,15 @@ impl PySimulation {
 
     /// Each term's real-valued statistics (`Term::stats`): (term name, statistic, value).
     fn term_stats(&self) -> Vec<(String, &'static str, f64)> {
-        with_sim!(&self.inner, s => s.particles().term_stats())
+        let on = self.on_device;
+        with_sim!(&self.inner, s => {
+            let mut out = s.particles().term_stats();
+            if on {
+                // The device system stands in for the terms it took (`System::term_stats`).
+                out.extend(s.other(DEVICE).map(|d| d.term_stats()).unwrap_or_default());
+            }
+            out
+        })
     }
 
     /// Each term's counters (`Term::counts`): (term name, counter, value).
@@ -794,10 +815,16 @@ impl PySimulation {
     /// The own state of term `name` (contacts: spins and springs) as a flat float64 array, or
     /// None if it keeps none.
     fn term_history<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Option<Bound<'py, PyArray1<f64>>>> {
-        // The terms the device has kernels for keep no state of their own (its system saves
-        // what it carries: `system_save`); the host's particle system is empty then.
+        // The device system answers for the terms it took (a DFSPH fluid's warm starts, in
+        // the CPU term's layout; None for those that keep nothing): the host's particle system
+        // is empty then.
         if self.on_device && self.terms.iter().any(|(_, n, _)| n == name) {
-            return Ok(None);
+            let h = with_sim!(&self.inner, s => match s.other(DEVICE) {
+                Ok(d) => d.term_history(name),
+                Err(_) => Ok(None),
+            })
+            .map_err(|e| to_py(py, e))?;
+            return Ok(h.map(|h| Array1::from(h).into_pyarray(py)));
         }
         let h = with_sim!(&self.inner, s => s.particles().term_history(name)).map_err(|e| to_py(py, e))?;
         Ok(h.map(|h| Array1::from(h).into_pyarray(py)))
@@ -806,6 +833,10 @@ impl PySimulation {
     /// Restores what `term_history` returned (checked; nothing changes on error).
     fn set_term_history(&mut self, py: Python<'_>, name: &str, history: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
         let h = slice1(&history, "history")?;
+        if self.on_device && self.terms.iter().any(|(_, n, _)| n == name) {
+            return with_sim!(&mut self.inner, s => s.other_mut(DEVICE).and_then(|d| d.set_term_history(name, h)))
+                .map_err(|e| to_py(py, e));
+        }
         with_sim!(&mut self.inner, s => s.particles_mut().set_term_history(name, h)).map_err(|e| to_py(py, e))
     }
 

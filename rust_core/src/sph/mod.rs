@@ -45,7 +45,7 @@
 pub mod kernels;
 
 mod buffers;
-mod dfsph;
+pub(crate) mod dfsph;
 mod fluid;
 mod group;
 mod params;

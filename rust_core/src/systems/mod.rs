@@ -17,6 +17,8 @@ pub mod device;
 #[cfg(feature = "gpu")]
 pub mod device_batch;
 #[cfg(feature = "gpu")]
+pub mod device_dfsph;
+#[cfg(feature = "gpu")]
 pub mod device_fluid;
 #[cfg(feature = "gpu")]
 pub mod device_sph;
@@ -235,6 +237,23 @@ pub trait System: Send + Sync {
     /// Further books that are not energies, by name (a reaction–diffusion system's amounts of
     /// each species and what its reactions made of them); empty by default.
     fn books(&self) -> Vec<(String, Real)> {
+        Vec::new()
+    }
+    /// The own state of the term named `name` that this system stands in for (a device system
+    /// holding a scene's terms: a DFSPH fluid's warm starts, contacts' spins and springs), in
+    /// the CPU term's `OwnState::history` layout, so that a scene file continues on either
+    /// path; `None` where it holds no such term or the term keeps none (the default).
+    fn term_history(&self, _name: &str) -> Result<Option<Vec<Real>>> {
+        Ok(None)
+    }
+    /// Loads what `term_history` gave (the CPU term's layout; checked, nothing changes on
+    /// error). The default refuses: the system holds no term of that name with a history.
+    fn set_term_history(&mut self, name: &str, _history: &[Real]) -> Result<()> {
+        Err(crate::error::invalid(name, format!("system {:?} keeps no history of a term {name:?}", self.name())))
+    }
+    /// The statistics of the terms it stands in for, as `Term::stats` gives them on the CPU:
+    /// (term name, statistic, value). Empty by default.
+    fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
         Vec::new()
     }
     /// The named output fields `names`, one value per element (0 where a field is not defined;

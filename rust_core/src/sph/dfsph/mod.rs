@@ -745,6 +745,17 @@ impl<V: Vector> Solver<V> {
     }
 }
 
+/// A DFSPH fluid's step limit without surface forces (`Dfsph::max_dt`, which the device's
+/// fluid also takes): the flow's CFL condition λ h/|v|max, the explicit viscosity's limit and
+/// the force criterion of a uniform field of strength `g` (m/s²); `None` where none applies.
+pub fn max_dt(cfl: Real, h: Real, dim: usize, alpha: Real, c0: Real, vmax: Real, g: Real) -> Option<Real> {
+    let flow = if vmax > 0.0 { cfl * h / vmax } else { f64::INFINITY };
+    let viscous = super::resolve::dfsph_viscous(h, dim, alpha, c0);
+    let force = if g > 0.0 { FORCE_CFL * cfl * (h / g).sqrt() } else { f64::INFINITY };
+    let dt = flow.min(viscous).min(force);
+    dt.is_finite().then_some(dt)
+}
+
 impl<V: Vector> Term<V> for Dfsph<V> {
     fn name(&self) -> &str {
         &self.name
@@ -811,11 +822,9 @@ impl<V: Vector> Term<V> for Dfsph<V> {
         // λ h/(|v|max + 0.6 α c0) took 2199 steps to T* = 4 on the 41k dam break.) Each fluid
         // of a solve limits the step by its own: a pair's α c0, their mean, is within them.
         let h = self.p.h;
-        let cfl = if vmax > 0.0 { self.p.cfl * h / vmax } else { f64::INFINITY };
-        let viscous = super::resolve::dfsph_viscous(h, V::DIM, self.p.alpha, self.p.c0);
-        let force = if g > 0.0 { FORCE_CFL * self.p.cfl * (h / g).sqrt() } else { f64::INFINITY };
         let capillary = Surface::max_dt(self.p.surface_tension, self.p.adhesion, self.p.rho0, h);
-        let dt = cfl.min(viscous).min(force).min(capillary);
+        let dt =
+            max_dt(self.p.cfl, h, V::DIM, self.p.alpha, self.p.c0, vmax, g).unwrap_or(f64::INFINITY).min(capillary);
         dt.is_finite().then_some(dt)
     }
 
