@@ -252,3 +252,32 @@ def test_the_dam_break_scene_runs_dfsph_on_the_gpu_as_on_the_cpu() -> None:
     e0, e = _edge(cpu.positions), _edge(gpu.positions)
     assert e0 > 1.5  # it surged (the column is 1 m wide)
     assert abs(e - e0) < 0.02, (e, e0)
+
+
+def test_a_bad_history_is_refused_by_name_on_the_device_and_nothing_changes(tmp_path) -> None:
+    """A snapshot or a file whose warm starts are not finite, or of another length, is refused
+    naming the history; the scene on the device is as it was and steps on as before."""
+    s = _tank(2, DEVICE, "f32")
+    s.step(3)
+    good = s.state()
+    key = next(k for k in good if k.endswith("_history"))
+    twin = _tank(2, DEVICE, "f32")
+    twin.step(3)
+    for bad in (np.where(np.arange(len(good[key])) == 7, np.nan, good[key]), good[key][:-1]):
+        with pytest.raises(pc.InvalidInputError, match="history"):
+            s.set_state({**good, key: bad})
+        now = s.state()
+        for k, v in good.items():
+            if isinstance(v, np.ndarray):
+                np.testing.assert_array_equal(now[k], v, err_msg=k)
+    for t in (s, twin):
+        t.step(3)
+    np.testing.assert_array_equal(s.positions, twin.positions)
+    # A file with a bad history is refused by the loader, naming it.
+    path = s.save(tmp_path / "tank.npz")
+    with np.load(path) as z:
+        arrays = dict(z)
+    arrays[key] = arrays[key][:-1]
+    np.savez(tmp_path / "bad.npz", **arrays)
+    with pytest.raises(pc.InvalidInputError, match="history"):
+        pc.Scene.load(tmp_path / "bad.npz")
