@@ -901,6 +901,7 @@ class Scene:
         for part in self._parts:
             ok = ((part.section == "terms" and part.part_kind in _GPU_TERMS)
                   or (part.section == "terms" and part.part_kind == "fluid" and getattr(part, "method", None) in ("wcsph", "dfsph"))
+                  or (part.section == "terms" and part.part_kind == "contacts")
                   or (part.section == "grids" and part.part_kind in _GPU_GRIDS)
                   or part.section in _GPU_COLLIDERS
                   or (part.section == "colliders" and part.part_kind in _GPU_SHAPES))
@@ -917,7 +918,7 @@ class Scene:
             what = getattr(part, "name", None) or type(part).__name__
             raise InvalidInputError(
                 f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH or DFSPH Fluid in a Box, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH or DFSPH Fluid in a Box, Contacts between grains with plane walls, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
 

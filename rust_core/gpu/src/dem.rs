@@ -27,7 +27,8 @@
 //!   again. +M on i, −M on j: a couple. Its books go to "friction".
 //! - Walls are planes {x : (x − p)·n ≥ 0}, each with its own ζ and μ: overlap r − (x − p)·n,
 //!   normal −n, m* = m, lever r − δ/2; a wall neither moves nor turns.
-//! - Semi-implicit Euler, v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + dt τ/I; then each
+//! - Semi-implicit Euler, v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + dt τ/I (in 2D also
+//!   the rotation angle, θ' = θ + dt ω', as the CPU's `end_step`); then each
 //!   contact's spring follows the contact point at the new state, ξ ← ξ_capped + dt·v_t(new).
 //!   The CPU defers that update to its next evaluation; here it runs at the end of the step
 //!   (`commit`), the same arithmetic on the same state, so the history is whole between calls.
@@ -73,8 +74,8 @@
 //! rolling resistance) and two keys: 2D f32 at the default capacity 8, about 500 bytes a grain
 //! (a million discs: 0.5 GB; the contact history alone is 352 MB, one binding).
 //!
-//! Not here (the CPU has them): walls other than planes, pinned grains, the 2D rotation angle,
-//! Verlet lists (the cell list is rebuilt every step), "xpbd".
+//! Not here (the CPU has them): walls other than planes, pinned grains, Verlet lists (the cell
+//! list is rebuilt every step), "xpbd".
 use crate::cells::spread;
 use crate::particles::Halt;
 use crate::sph::{invalid, positive};
@@ -186,6 +187,8 @@ pub struct DemRaw {
     pub x: Vec<f64>,
     pub v: Vec<f64>,
     pub omega: Vec<f64>,
+    /// The rotation angles (rad): n in 2D, none in 3D.
+    pub angle: Vec<f64>,
     /// The committed contact history: per grain, its count then `capacity` partners (a grain
     /// index, or n + w for wall w): n·(capacity + 1) values.
     pub keys: Vec<u32>,
@@ -195,6 +198,15 @@ pub struct DemRaw {
     pub springs: Vec<f64>,
     /// The dissipated books per grain: n of the normal dashpots, then n of friction (J).
     pub books: Vec<f64>,
+}
+
+/// Values per grain in the ω buffer: ω and, in 2D, the angle (the n angles after the n spins).
+fn spin_width(dim: usize) -> usize {
+    if dim == 2 {
+        2
+    } else {
+        3
+    }
 }
 
 fn finite_nonneg(v: f64, what: &str) -> Result<()> {
@@ -372,12 +384,11 @@ impl Dem {
         let rb = precision.bytes();
         let nn = n as u64;
         let (d, k) = (dim as u64, cap as u64);
-        let ad = if dim == 2 { 1 } else { 3 };
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
         let pos = gpu.buffer("DEM positions", nn * d * rb, st)?;
         let vel = gpu.buffer("DEM velocities", nn * d * rb, st)?;
-        let omega = gpu.buffer("DEM angular velocities", nn * ad * rb, st)?;
+        let omega = gpu.buffer("DEM angular velocities and angles", nn * spin_width(dim) as u64 * rb, st)?;
         let props = gpu.buffer("DEM radii and masses", 2 * nn * rb, st)?;
         let wall_buf = gpu.buffer("DEM walls", (8 * planes.len() as u64 * rb).max(16), st)?;
         let cell_of = gpu.buffer("DEM cells", nn * 4, st)?;
@@ -448,7 +459,7 @@ impl Dem {
         if n > 0 {
             gpu.upload(precision, &pos, x);
             gpu.upload(precision, &vel, v);
-            gpu.upload(precision, &omega, &vec![0.0; n * ad as usize]);
+            gpu.upload(precision, &omega, &vec![0.0; n * spin_width(dim)]);
             let pr: Vec<f64> = radius.iter().zip(mass).flat_map(|(&r, &m)| [r, m]).collect();
             gpu.upload(precision, &props, &pr);
             gpu.queue.write_buffer(&keys, 0, &vec![0u8; (2 * nn * (k + 1) * 4) as usize]);
@@ -687,6 +698,46 @@ impl Dem {
         self.gpu.wait()
     }
 
+    /// The rotation angles (rad; 2D, n of them: θ' = θ + dt ω' each step, 0 at `new`; in 3D
+    /// none are kept and this gives n zeros).
+    pub fn angles(&self) -> Result<Vec<f64>> {
+        if self.dim == 3 || self.n == 0 {
+            return Ok(vec![0.0; self.n]);
+        }
+        let at = self.n as u64 * self.precision.bytes();
+        self.gpu.read_reals_at(self.precision, &self.omega, at, &self.staging, self.n)
+    }
+
+    /// The largest overlap (m) among the contacts of the last step's evaluation (0 before the
+    /// first step; after `load_raw`, that of the last step run here, if any): the CPU's
+    /// `max_overlap`, which its Hertz step limit reads.
+    pub fn max_overlap(&self) -> Result<f64> {
+        if self.n == 0 {
+            return Ok(0.0);
+        }
+        let (p, n, k, d) = (self.precision, self.n, self.cap, self.dim);
+        let (sv, sc) = strides(d, self.p.rolling_friction > 0.0);
+        let kb = (n * (k + 1) * 4) as u64;
+        let mut counts = Vec::with_capacity(n);
+        self.gpu.read_back_from(&self.keys, kb, &self.staging, kb, |raw| {
+            counts.extend((0..n).map(|i| {
+                let o = 4 * i * (k + 1);
+                u32::from_le_bytes([raw[o], raw[o + 1], raw[o + 2], raw[o + 3]]) as usize
+            }))
+        })?;
+        use wgpu::BufferUsages as U;
+        let len = n * k * sc;
+        let staging = self.gpu.buffer("DEM overlap read-back", len as u64 * p.bytes(), U::MAP_READ | U::COPY_DST)?;
+        let vals = self.gpu.read_reals_at(p, &self.vals, (n * k * sv) as u64 * p.bytes(), &staging, len)?;
+        let mut most: f64 = 0.0;
+        for (i, &c) in counts.iter().enumerate() {
+            for q in 0..c.min(k) {
+                most = most.max(vals[(i * k + q) * sc + 3 * d + 1]);
+            }
+        }
+        Ok(most)
+    }
+
     /// Live contacts now (pairs counted at both grains, plus grain–wall contacts), from the
     /// committed history: for tests and diagnostics.
     pub fn contacts(&self) -> Result<usize> {
@@ -747,7 +798,8 @@ impl Dem {
         let keys = raw.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
         let springs = self.gpu.read_reals(p, &self.vals, &staging, springs_len)?;
         let books = self.gpu.read_reals(p, &self.books, &self.staging, 2 * n)?;
-        Ok(DemRaw { x, v, omega, keys, springs, books })
+        let angle = if self.dim == 2 { self.angles()? } else { Vec::new() };
+        Ok(DemRaw { x, v, omega, angle, keys, springs, books })
     }
 
     /// Loads what `save_raw` gave (of a `Dem` with the same grains, walls and capacity), as a
@@ -758,12 +810,22 @@ impl Dem {
     pub fn load_raw(&mut self, raw: &DemRaw) -> Result<()> {
         let (n, k, d) = (self.n, self.cap, self.dim);
         let ad = if d == 2 { 1 } else { 3 };
-        let lens = [raw.x.len(), raw.v.len(), raw.omega.len(), raw.keys.len(), raw.springs.len(), raw.books.len()];
+        let lens = [
+            raw.x.len(),
+            raw.v.len(),
+            raw.omega.len(),
+            raw.angle.len(),
+            raw.keys.len(),
+            raw.springs.len(),
+            raw.books.len(),
+        ];
         let sv = strides(d, self.p.rolling_friction > 0.0).0;
-        if lens != [n * d, n * d, n * ad, n * (k + 1), n * k * sv, 2 * n] {
+        let na = if d == 2 { n } else { 0 };
+        if lens != [n * d, n * d, n * ad, na, n * (k + 1), n * k * sv, 2 * n] {
             return Err(invalid("raw", format_args!("array lengths {lens:?} do not fit {n} grains of capacity {k}")));
         }
-        let reals = raw.x.iter().chain(&raw.v).chain(&raw.omega).chain(&raw.springs).chain(&raw.books);
+        let reals =
+            raw.x.iter().chain(&raw.v).chain(&raw.omega).chain(&raw.angle).chain(&raw.springs).chain(&raw.books);
         if !reals.into_iter().all(|u| u.is_finite()) {
             return Err(invalid("raw", "a non-finite value"));
         }
@@ -782,6 +844,9 @@ impl Dem {
         self.gpu.upload(p, &self.pos, &raw.x);
         self.gpu.upload(p, &self.vel, &raw.v);
         self.gpu.upload(p, &self.omega, &raw.omega);
+        if d == 2 {
+            self.gpu.upload_at(p, &self.omega, n as u64 * p.bytes(), &raw.angle);
+        }
         self.gpu.queue.write_buffer(&self.keys, 0, bytemuck::cast_slice(&raw.keys));
         self.gpu.upload(p, &self.vals, &raw.springs);
         self.gpu.upload(p, &self.books, &raw.books);
@@ -789,13 +854,22 @@ impl Dem {
         self.gpu.wait()
     }
 
+    /// Makes the next step book the contacts it finds that the history does not hold as a
+    /// new system's first step does (`new`): their springs' energy was in the books already
+    /// (the contact potential at these positions), as the CPU books them. For a state taken
+    /// over from elsewhere (`load_raw` of the CPU's history at a scene's move to the device),
+    /// not for a restart of this system's own run, whose next step must repeat it.
+    pub fn book_found_contacts(&mut self) {
+        self.primed = false;
+    }
+
     /// The buffers a snapshot holds: the state, the contact history, the books.
     fn state_buffers(&self) -> [&wgpu::Buffer; 6] {
         [&self.pos, &self.vel, &self.omega, &self.keys, &self.vals, &self.books]
     }
 
-    /// Keeps a copy of the whole state on the device (positions, velocities, ω, the contact
-    /// history and the books) for `restore`.
+    /// Keeps a copy of the whole state on the device (positions, velocities, ω and the 2D
+    /// angles, the contact history and the books) for `restore`.
     pub fn snapshot(&mut self) -> Result<()> {
         if self.saved.is_none() {
             let mut bufs = Vec::new();

@@ -54,7 +54,8 @@ struct Params {
 const WG: u32 = 64u;
 
 @group(0) @binding(0) var<uniform> P: Params;
-// The state in the caller's order: positions and velocities (`dim` each), ω (1 in 2D, 3 in 3D).
+// The state in the caller's order: positions and velocities (`dim` each), ω (1 in 2D, 3 in 3D);
+// in 2D `omg` then holds the n rotation angles after the n spins.
 @group(0) @binding(1) var<storage, read_write> pos: array<real>;
 @group(0) @binding(2) var<storage, read_write> vel: array<real>;
 @group(0) @binding(3) var<storage, read_write> omg: array<real>;
@@ -600,7 +601,8 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
     books[P.n + i] = books[P.n + i] + bt;
 }
 
-// Semi-implicit Euler: v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + τ (dt/I), I = β m r².
+// Semi-implicit Euler: v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + τ (dt/I), I = β m r²;
+// in 2D also the angle, θ' = θ + dt ω'.
 @compute @workgroup_size(WG)
 fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = index(gid);
@@ -624,7 +626,10 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (d == 2u) {
         let w = omg[i] + load[6u * i + 5u] * s;
         omg[i] = w;
-        broken = broken || bad(w);
+        // The rotation angle with the new ω (semi-implicit, as x with v'), the CPU's `end_step`.
+        let a = omg[P.n + i] + P.dt * w;
+        omg[P.n + i] = a;
+        broken = broken || bad(w) || bad(a);
     } else {
         for (var a = 0u; a < 3u; a = a + 1u) {
             let w = omg[3u * i + a] + load[6u * i + 3u + a] * s;

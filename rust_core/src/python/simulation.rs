@@ -158,8 +158,10 @@ impl PySimulation {
             let dim = self.dim();
             with_sim!(&mut self.inner, s => {
                 let p = s.particles();
-                // Charges are the Coulomb term's weights; other attributes have no kernel.
-                if let Some(a) = p.model().attributes.keys().find(|a| **a != "charge") {
+                // Charges are the Coulomb term's weights, radii the contacts term's grains;
+                // other attributes have no kernel.
+                let grains = terms.iter().any(|t| t.0 == "contacts");
+                if let Some(a) = p.model().attributes.keys().find(|a| **a != "charge" && !(grains && **a == "radius")) {
                     return Err(err(invalid("device", format!("the GPU path has no per-particle {a:?} yet"))));
                 }
                 // The host copies made on the way (state, masses, pins, charges; a grid's two
@@ -231,7 +233,33 @@ impl PySimulation {
                     let pinned: Vec<bool> = p.model().inv_mass.iter().map(|&im| im == 0.0).collect();
                     let integrator = p.integrator_info().name;
                     let g = gpu.clone();
-                    if let Some((_, fname, _)) = terms.iter().find(|t| t.0 == "dfsph") {
+                    if let Some((_, cname, _)) = terms.iter().find(|t| t.0 == "contacts") {
+                        // DEM grains: their own device system, under the particles' name, taking
+                        // the CPU term's spins and springs with them.
+                        use crate::systems::device_dem::DeviceDem;
+                        let history = p.term_history(cname).map_err(|e| to_py(py, e))?;
+                        let radius = p.model().attribute("radius").map(|r| r.to_vec());
+                        Some(Box::new(
+                            py.detach(|| {
+                                DeviceDem::from_records(
+                                    g,
+                                    precision,
+                                    DEVICE,
+                                    dim,
+                                    integrator,
+                                    &x,
+                                    &v,
+                                    &m,
+                                    &pinned,
+                                    radius.as_deref(),
+                                    history.as_deref(),
+                                    terms,
+                                    colliders,
+                                )
+                            })
+                            .map_err(|e| to_py(py, e))?,
+                        ))
+                    } else if let Some((_, fname, _)) = terms.iter().find(|t| t.0 == "dfsph") {
                         // A DFSPH fluid: its own device system, under the particles' name, taking
                         // the CPU term's warm starts with it.
                         use crate::systems::device_dfsph::DeviceDfsph;
@@ -809,7 +837,15 @@ impl PySimulation {
 
     /// Each term's counters (`Term::counts`): (term name, counter, value).
     fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
-        with_sim!(&self.inner, s => s.particles().term_counts())
+        let on = self.on_device;
+        with_sim!(&self.inner, s => {
+            let mut out = s.particles().term_counts();
+            if on {
+                // The device system stands in for the terms it took (`System::term_counts`).
+                out.extend(s.other(DEVICE).map(|d| d.term_counts()).unwrap_or_default());
+            }
+            out
+        })
     }
 
     /// The own state of term `name` (contacts: spins and springs) as a flat float64 array, or

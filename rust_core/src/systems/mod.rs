@@ -17,6 +17,8 @@ pub mod device;
 #[cfg(feature = "gpu")]
 pub mod device_batch;
 #[cfg(feature = "gpu")]
+pub mod device_dem;
+#[cfg(feature = "gpu")]
 pub mod device_dfsph;
 #[cfg(feature = "gpu")]
 pub mod device_fluid;
@@ -254,6 +256,11 @@ pub trait System: Send + Sync {
     /// The statistics of the terms it stands in for, as `Term::stats` gives them on the CPU:
     /// (term name, statistic, value). Empty by default.
     fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
+        Vec::new()
+    }
+    /// The counters of the terms it stands in for, as `Term::counts` gives them on the CPU:
+    /// (term name, counter, value). Empty by default.
+    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
         Vec::new()
     }
     /// The named output fields `names`, one value per element (0 where a field is not defined;
