@@ -1,9 +1,9 @@
-"""WCSPH on the GPU path beside the CPU path, at the scene level: the dam break
-(``pc.scenes.dam_break(method="wcsph", n=N)``, 2D: 2N² water particles in a 3-layer tank; 3D with
+"""WCSPH or DFSPH (``--method dfsph``) on the GPU path beside the CPU path, at the scene level:
+the dam break (``pc.scenes.dam_break(method="wcsph", n=N)``, 2D: 2N² water particles in a 3-layer tank; 3D with
 ``--dim 3``: 2N³·depth/width) stepped on the CPU (float64, all threads, the best SIMD level) and
 on the device (f32, the scene's precision on a GPU).
 
-    python benches/gpu/bench_gpu_sph.py [--device gpu|gpu:lavapipe] [--n 72,144,720] [--steps 20] [--cpu-max 144] [--dim 2]
+    python benches/gpu/bench_gpu_sph.py [--device gpu|gpu:lavapipe] [--n 72,144,720] [--steps 20] [--cpu-max 144] [--dim 2] [--method wcsph|dfsph]
 
 Prints the median of three timed calls of ``--steps`` steps (after a warm-up call: the move to
 the device, the shaders' compilation) as particle-steps/s, the ratio to the CPU, the read-back
@@ -35,20 +35,22 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20)
     ap.add_argument("--cpu-max", type=int, default=144, help="largest N also run on the CPU")
     ap.add_argument("--dim", type=int, default=2)
+    ap.add_argument("--method", default="wcsph", choices=["wcsph", "dfsph"])
     a = ap.parse_args()
     require_release()
     device = device_of(a.device)
     print(header())
+    print(f"{a.method.upper()} dam break, {a.dim}D")
     print("| N across | particles | CPU f64 p-steps/s | device f32 p-steps/s | ratio | read ms | Δx |")
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in (int(v) for v in a.n.split(",")):
         row: dict[str, str] = {}
         cpu = None
         if n <= a.cpu_max:
-            cpu = pc.scenes.dam_break(dim=a.dim, n=n, method="wcsph")
+            cpu = pc.scenes.dam_break(dim=a.dim, n=n, method=a.method)
             t_cpu, _ = timed(cpu, a.steps, lambda s=cpu: s.positions)
             row["cpu"] = f"{cpu.n_particles * a.steps / t_cpu:.3e}"
-        s = pc.scenes.dam_break(dim=a.dim, n=n, method="wcsph", device=device)
+        s = pc.scenes.dam_break(dim=a.dim, n=n, method=a.method, device=device)
         t, r = timed(s, a.steps, lambda s=s: s.positions)
         rate = s.n_particles * a.steps / t
         row["f32"], row["read"], row["N"] = f"{rate:.3e}", f"{r * 1e3:.1f}", str(s.n_particles)

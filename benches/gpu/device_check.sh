@@ -65,6 +65,13 @@ timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024
 section "WCSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"
 timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --n 72,144,720 --steps 20 --cpu-max 144
 timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --dim 3 --n 24,48,80 --steps 10 --cpu-max 24
+section "DFSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"
+timeout 120 python3 benches/gpu/bench_gpu_sph.py --method dfsph --device gpu --n 72,144,720 --steps 10 --cpu-max 144
+timeout 120 python3 benches/gpu/bench_gpu_sph.py --method dfsph --device gpu --dim 3 --n 24,48,80 --steps 5 --cpu-max 24
+section "The 10^6-particle 3D dam break GIF on the GPU (DFSPH, n=80: 1,024,000 water particles; target <= 60 s)"
+t0=$(date +%s.%N)
+timeout 150 python3 -m physcore render dam_break --param dim=3 --param n=80 --param device=gpu -o "${OUT:-/tmp}/dam_break_3d_gpu.gif" -q
+python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
 section "The stable fluid (CPU to 1024²)"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --kinds fluid --n 256,1024,4096 --steps 20 --cpu-max 1024
 if [ -f .devbin/base_core.abi3.so ]; then
