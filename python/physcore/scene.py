@@ -873,6 +873,7 @@ class Scene:
         scene as it was (still ``"auto"``)."""
         part = self._unsupported_part()
         fluid = next((p for p in self._parts if p.section == "terms" and p.part_kind == "fluid"), None)
+        grains = next((p for p in self._parts if p.section == "terms" and p.part_kind == "contacts"), None)
         if part is not None:
             device = "cpu"
             why = f"{type(part).__name__} {getattr(part, 'name', None) or type(part).__name__!r} has no GPU kernel yet (device='auto')"
@@ -880,6 +881,10 @@ class Scene:
             device = "cpu"
             why = ("the fluids' GPU path has not been timed on a GPU yet, so device='auto' keeps the fluid on the CPU "
                    "(device='gpu' runs it there)")
+        elif grains is not None:
+            device = "cpu"
+            why = ("the grains' (DEM) GPU path has not been timed on a GPU yet, so device='auto' keeps them on the CPU "
+                   "(device='gpu' runs them there)")
         else:
             threads = self._threads if self._threads is not None else _core.default_threads()
             device, why = _auto_choice(_auto_work(self._parts, self.n_particles), threads,

@@ -162,3 +162,9 @@ def test_what_gpu_grains_cannot_hold_is_refused_by_name_and_nothing_changes(chan
         s.step(1)
     np.testing.assert_array_equal(s.positions, x0)
     assert s.time == 0.0
+
+
+def test_device_auto_keeps_grains_on_the_cpu_and_says_why() -> None:
+    s = _pile(2, "auto")
+    s.step(1)
+    assert s.device == "cpu" and "grains' (DEM) GPU path has not been timed" in s.device_reason
