@@ -168,3 +168,31 @@ def test_device_auto_keeps_grains_on_the_cpu_and_says_why() -> None:
     s = _pile(2, "auto")
     s.step(1)
     assert s.device == "cpu" and "grains' (DEM) GPU path has not been timed" in s.device_reason
+
+
+def test_ctrl_c_during_a_gpu_dem_call_rolls_it_back() -> None:
+    """Ctrl-C 0.3 s into a call of 10^6 steps (submissions of about 0.1 s, the stop flag read
+    between them): KeyboardInterrupt, and the grains, their spins and springs are as before."""
+    import os
+    import signal
+    import threading
+    import time
+
+    s = _pile(2, DEVICE, "f32", rolling=0.1)
+    s.step(600)
+    before = s.state()
+    timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
+    t0 = time.perf_counter()
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            s.step(1_000_000)
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - t0 < 10.0
+    after = s.state()
+    for k, v in before.items():
+        if isinstance(v, np.ndarray):
+            np.testing.assert_array_equal(after[k], v, err_msg=k)
+    s.step(10)
+    assert s.step_count == 610
