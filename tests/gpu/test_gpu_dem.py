@@ -196,3 +196,16 @@ def test_ctrl_c_during_a_gpu_dem_call_rolls_it_back() -> None:
             np.testing.assert_array_equal(after[k], v, err_msg=k)
     s.step(10)
     assert s.step_count == 610
+
+
+@pytest.mark.parametrize("law", ["linear", "hertz"])
+def test_the_dem_step_limit_on_the_device_is_the_cpus(law: str) -> None:
+    """``auto_dt``: a 50th of the lightest pair's contact duration (Hertz: at the fastest speed
+    and the last evaluation's deepest overlap, read back from the device), as the CPU's."""
+    cpu = _pile(2, law=law, rolling=0.1)
+    gpu = _pile(2, DEVICE, "f64" if F64 else "f32", law=law, rolling=0.1)
+    assert gpu.auto_dt() == pytest.approx(cpu.auto_dt(), rel=1e-12)
+    for s in (cpu, gpu):
+        s.step(900)
+    assert cpu.contact_count() > 0
+    assert gpu.auto_dt() == pytest.approx(cpu.auto_dt(), rel=1e-12 if F64 else 1e-5)

@@ -28,9 +28,6 @@ use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
 
-/// Steps per contact duration in the step limit (the CPU term's `STEPS_PER_CONTACT`).
-const STEPS_PER_CONTACT: Real = 50.0;
-
 /// Cells the fitted box may hold at most: beyond, the cells grow (still ≥ 2 r_max).
 const MAX_CELLS: Real = 16_777_216.0;
 
@@ -422,39 +419,18 @@ impl DeviceDem {
         let p = &self.params;
         let m_min = self.mass.iter().cloned().fold(Real::INFINITY, Real::min);
         let r_min = self.radius.iter().cloned().fold(Real::INFINITY, Real::min);
-        let m_eff = 0.5 * m_min;
-        let tangential = p.tangential_ratio * (2.0 / m_min) * (1.0 + 1.0 / self.beta);
-        let rolling = 2.25 * p.rolling_friction * p.rolling_friction / ((1.0 + self.beta) * m_min);
-        let duration = match p.law {
-            Law::Linear => {
-                let mut w2 = (p.stiffness / m_eff).max(tangential * p.stiffness);
-                if rolling > 0.0 {
-                    w2 = w2.max(rolling * p.stiffness);
-                }
-                std::f64::consts::PI / w2.sqrt()
-            }
-            Law::Hertz => {
-                let g = self.lock();
-                let (_, v, _) = g.read()?;
-                let d = self.dim;
-                let v_max = v.chunks_exact(d).map(|c| c.iter().map(|u| u * u).sum::<Real>()).fold(0.0, Real::max);
-                let deepest = if self.evaluated { g.max_overlap()? } else { 0.0 };
-                let gm = p.gravity.iter().map(|c| c * c).sum::<Real>().sqrt();
-                let vr = (2.0 * v_max.sqrt()).max((2.0 * gm * r_min).sqrt()).max(1e-12);
-                let t_impact = 3.21 * (m_eff / p.stiffness).powf(0.4) * vr.powf(-0.2);
-                let k_deep = 1.5 * p.stiffness * deepest.sqrt();
-                let mut w2 = k_deep / m_eff * (1.0 + p.tangential_ratio * (1.0 + 1.0 / self.beta));
-                if rolling > 0.0 {
-                    w2 = w2.max(rolling * k_deep);
-                }
-                if w2 > 0.0 {
-                    t_impact.min(std::f64::consts::PI / w2.sqrt())
-                } else {
-                    t_impact
-                }
-            }
+        let hertz = matches!(p.law, Law::Hertz);
+        let (v_max2, deepest) = if hertz {
+            let g = self.lock();
+            let (_, v, _) = g.read()?;
+            let v_max2 = v.chunks_exact(self.dim).map(|c| c.iter().map(|u| u * u).sum::<Real>()).fold(0.0, Real::max);
+            (v_max2, if self.evaluated { g.max_overlap()? } else { 0.0 })
+        } else {
+            (0.0, 0.0)
         };
-        Ok(duration / STEPS_PER_CONTACT)
+        let gm = p.gravity.iter().map(|c| c * c).sum::<Real>().sqrt();
+        let shape = (p.stiffness, p.tangential_ratio, self.beta, p.rolling_friction);
+        Ok(crate::terms::contacts::step_limit(hertz, shape, m_min, r_min, v_max2, gm, deepest))
     }
 }
 

@@ -1194,6 +1194,53 @@ fn radii(model: &Model) -> Option<&[Real]> {
     model.attribute("radius")
 }
 
+/// The step limit of a contacts term (`Contacts::max_dt`, which the device's grains also take):
+/// a `STEPS_PER_CONTACT`th of the contact duration of the lightest pair. `shape`: the normal
+/// stiffness k, the tangential ratio, β of I = β m r² and μ_r; `m_min`, `r_min` the lightest
+/// mass and smallest radius of the free grains, `v_max2` the largest squared speed, `g` the
+/// uniform fields' strength (m/s²), `max_overlap` the deepest overlap at the last evaluation.
+pub(crate) fn step_limit(
+    hertz: bool,
+    shape: (Real, Real, Real, Real),
+    m_min: Real,
+    r_min: Real,
+    v_max2: Real,
+    g: Real,
+    max_overlap: Real,
+) -> Real {
+    let (stiffness, tangential_ratio, beta, rolling_friction) = shape;
+    // Lightest pair: m* = m/2; the tangential mode also turns both grains:
+    // 1/m*_t = 2/m + 2a²/I = (2/m)(1 + 1/β).
+    let m_eff = 0.5 * m_min;
+    let tangential = tangential_ratio * (2.0 / m_min) * (1.0 + 1.0 / beta);
+    // The rolling spring's mode, k_r/I_r, fastest against a wall: 2.25 μ_r² k_c/((1 + β) m).
+    let rolling = 2.25 * rolling_friction * rolling_friction / ((1.0 + beta) * m_min);
+    let duration = if !hertz {
+        let mut w2 = (stiffness / m_eff).max(tangential * stiffness);
+        if rolling > 0.0 {
+            w2 = w2.max(rolling * stiffness);
+        }
+        std::f64::consts::PI / w2.sqrt()
+    } else {
+        // Hertz contact duration 3.21 (m*/k)^{2/5} v^{-1/5} (Johnson, Contact Mechanics,
+        // eq. 11.24, in terms of k), at twice the fastest grain's speed or the speed of a
+        // fall through one radius; and the period at the deepest overlap seen.
+        let vr = (2.0 * v_max2.sqrt()).max((2.0 * g * r_min).sqrt()).max(1e-12);
+        let t_impact = 3.21 * (m_eff / stiffness).powf(0.4) * vr.powf(-0.2);
+        let k_deep = 1.5 * stiffness * max_overlap.sqrt();
+        let mut w2 = k_deep / m_eff * (1.0 + tangential_ratio * (1.0 + 1.0 / beta));
+        if rolling > 0.0 {
+            w2 = w2.max(rolling * k_deep);
+        }
+        if w2 > 0.0 {
+            t_impact.min(std::f64::consts::PI / w2.sqrt())
+        } else {
+            t_impact
+        }
+    };
+    duration / STEPS_PER_CONTACT
+}
+
 impl<V: Vector> Term<V> for Contacts<V> {
     fn name(&self) -> &str {
         &self.name
@@ -1308,39 +1355,9 @@ impl<V: Vector> Term<V> for Contacts<V> {
             return None;
         }
         let mat = &self.material;
-        // Lightest pair: m* = m/2; the tangential mode also turns both grains:
-        // 1/m*_t = 2/m + 2a²/I = (2/m)(1 + 1/β).
-        let m_eff = 0.5 * m_min;
-        let tangential = mat.tangential_ratio * (2.0 / m_min) * (1.0 + 1.0 / mat.inertia_factor);
-        // The rolling spring's mode, k_r/I_r, fastest against a wall: 2.25 μ_r² k_c/((1 + β) m).
-        let rolling = 2.25 * mat.rolling_friction * mat.rolling_friction / ((1.0 + mat.inertia_factor) * m_min);
-        let duration = match mat.law {
-            Law::Linear => {
-                let mut w2 = (mat.stiffness / m_eff).max(tangential * mat.stiffness);
-                if rolling > 0.0 {
-                    w2 = w2.max(rolling * mat.stiffness);
-                }
-                std::f64::consts::PI / w2.sqrt()
-            }
-            Law::Hertz => {
-                // Hertz contact duration 3.21 (m*/k)^{2/5} v^{-1/5} (Johnson, Contact Mechanics,
-                // eq. 11.24, in terms of k), at twice the fastest grain's speed or the speed of a
-                // fall through one radius; and the period at the deepest overlap seen.
-                let vr = (2.0 * v_max.sqrt()).max((2.0 * g * r_min).sqrt()).max(1e-12);
-                let t_impact = 3.21 * (m_eff / mat.stiffness).powf(0.4) * vr.powf(-0.2);
-                let k_deep = 1.5 * mat.stiffness * self.last.max_overlap.sqrt();
-                let mut w2 = k_deep / m_eff * (1.0 + mat.tangential_ratio * (1.0 + 1.0 / mat.inertia_factor));
-                if rolling > 0.0 {
-                    w2 = w2.max(rolling * k_deep);
-                }
-                if w2 > 0.0 {
-                    t_impact.min(std::f64::consts::PI / w2.sqrt())
-                } else {
-                    t_impact
-                }
-            }
-        };
-        Some(duration / STEPS_PER_CONTACT)
+        let hertz = matches!(mat.law, Law::Hertz);
+        let shape = (mat.stiffness, mat.tangential_ratio, mat.inertia_factor, mat.rolling_friction);
+        Some(step_limit(hertz, shape, m_min, r_min, v_max, g, self.last.max_overlap))
     }
 
     fn fields(&self, _x: &[V], model: &Model) -> Vec<(&'static str, std::ops::Range<usize>, Vec<Real>)> {
