@@ -171,7 +171,7 @@ def dam_break(
         not apply (DFSPH computes in float64). ``"wcsph"``: the Tait equation of state.
     device : {"cpu", "gpu", "gpu:NAME", "auto"}
         ``"gpu"`` steps the water on a GPU in float32 (:class:`~physcore.Scene`; DFSPH or
-        WCSPH, without surface tension). The tank then also stands in a :class:`~physcore.Box`
+        WCSPH). The tank then also stands in a :class:`~physcore.Box`
         4 spacings outside its walls, the extent of the device's cell list. Its speed on a GPU
         is not measured yet (docs/guide/gpu.md).
 

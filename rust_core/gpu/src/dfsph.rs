@@ -13,7 +13,8 @@
 //!    Σ_b Ψ_b v_i·∇W_ib, kept only where the neighbourhood (fluid and walls within 2h) holds at
 //!    least 57 % of a full one's particles, κ^v_i/ρ_i = e_i/(dt D_i);
 //! 3. Monaghan (1992) viscosity a_i = −Σ_j m Π_ij ∇W_ij (Π_ij = −α c0 h min(v_ij·x_ij, 0) /
-//!    ((r² + 0.01h²) ρ̄_ij)) at the divergence-free velocities, and the kick v* = v + dt (a + g);
+//!    ((r² + 0.01h²) ρ̄_ij)) at the divergence-free velocities, with surface tension and
+//!    adhesion if asked (below), and the kick v* = v + dt (a + g);
 //! 4. the walls' hydrostatic pressure once, v* += dt Σ_b Ψ_b (g·(x_i − x_b)/ρ_i) ∇W_ib (Adami, Hu
 //!    & Adams 2012, eq. 27: the CPU's `hydrostatic_walls`), then the density solve (Algorithm 2):
 //!    e_i = (ρ_i + dt Dρ_i/Dt(v*) − ρ0)₊, κ_i/ρ_i = e_i/(dt² D_i);
@@ -44,6 +45,16 @@
 //! The pair gradients m ∇W_ij are recomputed by each pass rather than stored (the CPU stores
 //! them): the cell list's 3^d cells are read instead, as `sph.wgsl` does.
 //!
+//! Surface tension and adhesion (optional; the CPU's `sph::surface`, `Solver::surface_acceleration`):
+//! Akinci, Akinci & Teschner, "Versatile surface tension and adhesion for SPH fluids", ACM TOG
+//! 32(6) 182 (2013), with H = 2h,
+//! a_i += −γ Σ_j K_ij [m C(r_ij) x̂_ij + c (n_i − n_j)] − β Σ_b Ψ_b A(r_ib) x̂_ib
+//! (paper eq. 1, 2, 6 and 7; K_ij = 2ρ0/(ρ_i + ρ_j)), the normals n_i = H Σ_j m/ρ_j ∇W_ij
+//! (eq. 4) gathered by a pass of their own (`normals`) after the build. γ, C's normalisation,
+//! c and β come from the core (`DfsphParams`); the pressure p_i gains the virial of the fluid
+//! pairs' surface forces, −γ ρ_i/(2d) Σ_j x_ij·K_ij[…], as on the CPU. Their work is booked with
+//! the viscosity's (the same kick).
+//!
 //! Energy books (the CPU's `books_step`): an incompressible fluid stores no internal energy;
 //! every velocity change of the step (the two solves', the viscosity's kick) is booked as
 //! dissipation by its work over the step's mean velocity, −Σ m Δv·(v0 + v1)/2, per particle by
@@ -51,8 +62,9 @@
 //! −½ dt Σ m g·(v1 − v0) a step: zero at rest, first order in dt.
 //!
 //! Not here (the CPU has them): several fluids in one solve, per-particle masses and pinned
-//! particles, moving boundaries (rigid bodies), surface tension and adhesion, the time step
-//! limit, checkpoints of the warm starts.
+//! particles, moving boundaries (rigid bodies), the time step limit (the core's
+//! `systems::device_dfsph` takes the CPU's, capillary limit included), checkpoints of the warm
+//! starts.
 use crate::cells::spread;
 use crate::particles::Halt;
 use crate::sph::{invalid, positive, sort_walls, Kernel};
@@ -99,12 +111,25 @@ pub struct DfsphParams {
     pub restitution: f64,
     /// Coulomb friction μ of the box's faces, ≥ 0.
     pub friction: f64,
+    /// Akinci et al. (2013) cohesion γ of eq. 1 (and of the curvature term, eq. 6),
+    /// m^(d+1)/(kg s²), ≥ 0; 0: no surface tension (no normals pass). The core maps a surface
+    /// tension σ to it (`sph::surface::Surface::new`).
+    pub cohesion: f64,
+    /// The normalisation of the cohesion spline C(r) = k · shape(r) (eq. 2), 1/m^(d+6): 32/(π H⁹)
+    /// in 3D, the core's 2D one in 2D (H = 2h), ≥ 0.
+    pub cohesion_norm: f64,
+    /// The curvature term's weight c (eq. 6 scaled by ρ0/(1000 kg/m^d), the core's
+    /// `CURVATURE_RHO`), dimensionless, ≥ 0.
+    pub curvature: f64,
+    /// Adhesion β of eq. 7 to the wall particles, m⁴/(kg s²), ≥ 0; 0: none.
+    pub adhesion: f64,
 }
 
 impl Default for DfsphParams {
     /// Water, particles 1 cm apart in 2D (h = 1.3 cm, m = ρ0 (1 cm)²), α = 0.05 with c0 = 20
     /// m/s, the cubic spline, tolerances 0.1 %, 100 iterations at most, g = 9.81 m/s² down y, a
-    /// 1 m box without bounce or friction (the CPU tests' settings).
+    /// 1 m box without bounce or friction (the CPU tests' settings); no surface tension or
+    /// adhesion.
     fn default() -> Self {
         Self {
             dim: 2,
@@ -122,6 +147,10 @@ impl Default for DfsphParams {
             upper: [1.0; 3],
             restitution: 0.0,
             friction: 0.0,
+            cohesion: 0.0,
+            cohesion_norm: 0.0,
+            curvature: 0.0,
+            adhesion: 0.0,
         }
     }
 }
@@ -162,6 +191,16 @@ impl DfsphParams {
         if !(self.friction.is_finite() && self.friction >= 0.0) {
             return Err(invalid("friction", format_args!("{} must be finite and >= 0", self.friction)));
         }
+        for (v, a) in [
+            (self.cohesion, "cohesion"),
+            (self.cohesion_norm, "cohesion_norm"),
+            (self.curvature, "curvature"),
+            (self.adhesion, "adhesion"),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(invalid(a, format_args!("{v} must be finite and >= 0")));
+            }
+        }
         Ok(())
     }
 
@@ -193,7 +232,8 @@ pub struct DfsphBooks {
     /// pressure does).
     pub divergence: f64,
     pub density: f64,
-    /// Energy the viscosity removed so far.
+    /// Energy the viscosity removed so far, with the surface forces' work (the surface energy
+    /// they released, negative where they stored it), as the CPU books them.
     pub viscous: f64,
     /// Energy the box's faces removed so far.
     pub collisions: f64,
@@ -243,8 +283,19 @@ const LEAST_BUDGET: u32 = 4;
 const MAX_CHUNK: u64 = 256;
 
 /// The particle kernels of `dfsph.wgsl`, in this order.
-const PARTICLE_KERNELS: [&str; 10] =
-    ["gather", "build", "div_err0", "div_err", "div_apply", "forces", "den_warm", "den_err", "den_apply", "drift"];
+const PARTICLE_KERNELS: [&str; 11] = [
+    "gather",
+    "build",
+    "div_err0",
+    "div_err",
+    "div_apply",
+    "forces",
+    "den_warm",
+    "den_err",
+    "den_apply",
+    "drift",
+    "normals",
+];
 const GATHER: usize = 0;
 const BUILD: usize = 1;
 const DIV_ERR0: usize = 2;
@@ -255,6 +306,7 @@ const DEN_WARM: usize = 6;
 const DEN_ERR: usize = 7;
 const DEN_APPLY: usize = 8;
 const DRIFT: usize = 9;
+const NORMALS: usize = 10;
 /// Its control kernels, in this order.
 const CONTROL_KERNELS: [&str; 5] = ["init_div", "check_div", "init_den", "check_den", "seal"];
 const SEAL: usize = 4;
@@ -370,8 +422,10 @@ impl Dfsph {
         let rho = gpu.buffer("DFSPH densities", nn * rb, st)?;
         let hist = gpu.buffer("DFSPH warm starts and pressure", 3 * nn * rb, st)?;
         let books = gpu.buffer("DFSPH energy books", 4 * nn * rb, st)?;
-        let sv = gpu.buffer("DFSPH sorted vectors", 8 * nn * dd * rb, st)?;
-        let ss = gpu.buffer("DFSPH sorted scalars", 6 * nn * rb, st)?;
+        // With cohesion, the normals and the surface forces' virial as one more field each.
+        let surface = (params.cohesion > 0.0) as u64;
+        let sv = gpu.buffer("DFSPH sorted vectors", (8 + surface) * nn * dd * rb, st)?;
+        let ss = gpu.buffer("DFSPH sorted scalars", (6 + surface) * nn * rb, st)?;
         let partial = gpu.buffer("DFSPH partial sums", ngroups * rb, st)?;
         let ctl = gpu.buffer("DFSPH control", 4 * CTL_WORDS as u64, st)?;
         let errs = gpu.buffer("DFSPH solver errors", 4 * rb, st)?;
@@ -382,7 +436,7 @@ impl Dfsph {
         let order = gpu.buffer("DFSPH cell order", nn * 4, st)?;
         let found = gpu.buffer("DFSPH unused neighbour counts", 16, st)?;
         let cell_params = gpu.buffer("DFSPH cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
-        let params_buf = gpu.buffer("DFSPH parameters", 48 + 32 * 8, U::UNIFORM | U::COPY_DST)?;
+        let params_buf = gpu.buffer("DFSPH parameters", 48 + 40 * 8, U::UNIFORM | U::COPY_DST)?;
         let wall = gpu.buffer("DFSPH wall particles", wall_data.len() as u64 * rb, st)?;
         let wall_start = gpu.buffer("DFSPH wall cell starts", (ncells + 1) * 4, st)?;
         let backup = vec![
@@ -532,6 +586,7 @@ impl Dfsph {
         let h = p.h;
         let tiny = if self.precision == Precision::F32 { 1e-30 } else { 1e-300 };
         let sigma = p.kernel.sigma(h, p.dim);
+        let big_h = 2.0 * h;
         let c = self.cells;
         let ng = self.groups.0 * self.groups.1;
         let ints = [
@@ -580,6 +635,14 @@ impl Dfsph {
             WARM_START_DENSITY,
             dt / nr,
             1.0 / nr,
+            // Akinci 2013 (`dfsph.wgsl`'s `surface`): γ, β, c, H, C's norm, H⁶/64, A's 0.007/H^3.25.
+            p.cohesion,
+            p.adhesion,
+            p.curvature,
+            big_h,
+            p.cohesion_norm,
+            big_h.powi(6) / 64.0,
+            0.007 / big_h.powf(3.25),
         ];
         self.gpu.write_params(self.precision, &self.params, &ints, &reals);
     }
@@ -651,6 +714,9 @@ impl Dfsph {
                 self.record_build(&mut pass);
                 self.control(&mut pass, 0);
                 self.record_solve(&mut pass, [DIV_ERR0, DIV_ERR, DIV_APPLY, 1], budget[0]);
+                if self.p.cohesion > 0.0 {
+                    self.direct(&mut pass, NORMALS);
+                }
                 self.direct(&mut pass, FORCES);
                 self.control(&mut pass, 2);
                 // The density solve's warm start, before its iterations (the CPU's `Before`).
@@ -756,8 +822,9 @@ impl Dfsph {
         Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
     }
 
-    /// The last step's pressure p_i = ρ_i² (Σκ_i/ρ_i + Σκ^v_i/ρ_i), Pa, caller's order (zero
-    /// before the first step).
+    /// The last step's pressure p_i = ρ_i² (Σκ_i/ρ_i + Σκ^v_i/ρ_i), plus with cohesion the
+    /// surface forces' virial (the CPU's mechanical pressure), Pa, caller's order (zero before
+    /// the first step).
     pub fn pressure(&self) -> Result<Vec<f64>> {
         self.history_part(2)
     }
@@ -839,5 +906,11 @@ mod tests {
         assert!(bad.validate().unwrap_err().to_string().contains("max_iterations"));
         let bad = DfsphParams { density_tol: 1.5, ..p };
         assert!(bad.validate().unwrap_err().to_string().contains("density_tol"));
+        // Surface tension and adhesion: off by default, finite and >= 0.
+        assert_eq!((p.cohesion, p.adhesion), (0.0, 0.0));
+        let bad = DfsphParams { cohesion: -1.0, ..p };
+        assert!(bad.validate().unwrap_err().to_string().contains("cohesion"));
+        let bad = DfsphParams { adhesion: f64::NAN, ..p };
+        assert!(bad.validate().unwrap_err().to_string().contains("adhesion"));
     }
 }

@@ -1,6 +1,7 @@
 // Divergence-free SPH on the device (dfsph.rs; the CPU's rust_core/src/sph/dfsph). One step is
 // the cell list (cells.wgsl, its own bind group), then here: `gather`, `build`, the divergence
-// solve (`div_err0`/`div_err`, `check_div`, `div_apply`), `forces`, the density solve
+// solve (`div_err0`/`div_err`, `check_div`, `div_apply`), `normals` (with cohesion), `forces`,
+// the density solve
 // (`den_err`, `check_den`, `den_apply`, after one warm-start push `den_warm` + `den_apply`) and
 // `drift`. Threads run over the particles in cell order (slot k of `order`) and write only slot
 // k (or particle order[k] in the caller's order): no float atomics. Every neighbour sum runs
@@ -59,6 +60,15 @@ struct Params {
     warm_den: real,
     norm_div: real,
     norm_den: real,
+    // Akinci et al. 2013 (`surface`): cohesion γ (0: off), adhesion β (0: off), the curvature
+    // weight c, H = 2h, C's normalisation, H⁶/64, A's factor 0.007/H^3.25.
+    gamma: real,
+    beta: real,
+    curv: real,
+    big_h: real,
+    coh_norm: real,
+    h6_64: real,
+    adh_k: real,
 };
 
 const WG: u32 = 64u;
@@ -76,6 +86,8 @@ const VD: u32 = 4u;
 const AF: u32 = 5u;
 const GW: u32 = 6u;
 const HW: u32 = 7u;
+// With cohesion only (the buffer has the field then): the step's normals n_k.
+const NRM: u32 = 8u;
 // Fields of `ss` (sorted scalars, n each): density, 1/D, whether the neighbourhood is full
 // enough (1) or not (0), κ/ρ of the pass, its sum over the density solve and over the
 // divergence solve.
@@ -85,6 +97,8 @@ const INNER: u32 = 2u;
 const K: u32 = 3u;
 const KSUM: u32 = 4u;
 const KSUMV: u32 = 5u;
+// With cohesion only: the surface forces' virial pressure.
+const VIR: u32 = 6u;
 // Words of `ctl`: whether the running solve goes on, its iterations so far, the last step's
 // divergence and density iterations, their totals, solves stopped unconverged, steps, the
 // first particle (caller's index) whose state stopped being finite (u32::MAX: none), the most
@@ -457,9 +471,115 @@ fn den_apply(@builtin(global_invocation_id) gid: vec3<u32>) {
     apply(index(gid), VD, KSUM);
 }
 
+// The step's normals n_k = H Σ_j m/ρ_j ∇W_kj (Akinci 2013, eq. 4; fluid neighbours only; the
+// CPU's `compute_normals`), after the build (every density known).
+@compute @workgroup_size(WG)
+fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let k = index(gid);
+    if (k >= P.n) {
+        return;
+    }
+    let c = coords(cell_of[order[k]]);
+    let z = zr(c);
+    let xi = vget(X, k);
+    var sum = vec3<real>(0.0, 0.0, 0.0);
+    for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+        for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
+                let cc = flat(vec3<u32>(cx, cy, cz));
+                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
+                    let e = xi - vget(X, s);
+                    let r2 = dot3(e, e);
+                    if (r2 < P.reach && s != k) {
+                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+                        let gr = e * (P.mass * P.gscale * g(q));
+                        sum = sum + gr * (1.0 / sget(RHO, s));
+                    }
+                }
+            }
+        }
+    }
+    vset(NRM, k, sum * P.big_h);
+}
+
+// Akinci's cohesion spline C(r) = k · shape (paper eq. 2; the CPU's `Surface::cohesion`):
+// shape = (H − r)³ r³ for H/2 < r ≤ H, 2 (H − r)³ r³ − H⁶/64 for 0 < r ≤ H/2, 0 beyond H.
+fn cohesion(r: real) -> real {
+    if (r >= P.big_h) {
+        return 0.0;
+    }
+    let a = max(P.big_h - r, 0.0);
+    let b = a * a * a * r * r * r;
+    return P.coh_norm * select(2.0 * b - P.h6_64, b, 2.0 * r > P.big_h);
+}
+
+// Slot k's acceleration by surface tension and adhesion (the CPU's `surface_acceleration`):
+// −γ Σ_j K_kj [m C(r) x̂_kj + c (n_k − n_j)] − β Σ_b Ψ_b A(r) x̂_kb, K_kj = 2ρ0/(ρ_k + ρ_j), with
+// A(r) = 0.007/H^3.25 (−4r²/H + 6r − 2H)^¼ for H/2 < r ≤ H (eq. 7); the fluid pairs' virial
+// pressure −γ ρ_k/(2d) Σ_j x_kj·K_kj[…] into VIR (with cohesion).
+fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
+    let c = coords(cell_of[order[k]]);
+    let z = zr(c);
+    var a = vec3<real>(0.0, 0.0, 0.0);
+    if (P.gamma > 0.0) {
+        let ni = vget(NRM, k);
+        var st = vec3<real>(0.0, 0.0, 0.0);
+        var vir: real = 0.0;
+        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
+                    let cc = flat(vec3<u32>(cx, cy, cz));
+                    for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
+                        let e = xi - vget(X, s);
+                        let r2 = dot3(e, e);
+                        if (r2 < P.reach && s != k) {
+                            let r = sqrt(r2);
+                            let k_ij = 2.0 * P.rho0 / (ri + sget(RHO, s));
+                            // Coincident particles have no direction: no cohesion (as the CPU).
+                            var coh = vec3<real>(0.0, 0.0, 0.0);
+                            if (r > 0.0) {
+                                coh = e * (P.mass * cohesion(r) / r);
+                            }
+                            let pair = (coh + (ni - vget(NRM, s)) * P.curv) * k_ij;
+                            st = st + pair;
+                            vir = vir + dot3(e, pair);
+                        }
+                    }
+                }
+            }
+        }
+        a = a - st * P.gamma;
+        sset(VIR, k, -P.gamma * vir * ri / (2.0 * real(P.dim)));
+    }
+    if (P.beta > 0.0) {
+        var ad = vec3<real>(0.0, 0.0, 0.0);
+        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
+                    let cc = flat(vec3<u32>(cx, cy, cz));
+                    for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
+                        let wb = wall_at(s);
+                        let e = xi - wb.xyz;
+                        let r = sqrt(dot3(e, e));
+                        if (2.0 * r > P.big_h && r <= P.big_h) {
+                            let t = max(-4.0 * r * r / P.big_h + 6.0 * r - 2.0 * P.big_h, 0.0);
+                            let kb = P.adh_k * sqrt(sqrt(t));
+                            if (kb > 0.0) {
+                                ad = ad + e * (wb.w * kb / r);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        a = a - ad * P.beta;
+    }
+    return a;
+}
+
 // Step 3: the term's own acceleration at (x, v after the divergence solve), Monaghan (1992)
 // viscosity a_k = −Σ_j m Π_kj ∇W_kj, Π_kj = −α c0 h min(v_kj·x_kj, 0) / ((r² + 0.01h²) ρ̄_kj)
-// (the CPU's `add_forces`), the kick v* = v + dt (a + g), and the start of the density solve:
+// plus `surface` if on (the CPU's `add_forces`), the kick v* = v + dt (a + g), and the start of the density solve:
 // its velocities v* + dt Σ_b Ψ_b (g·(x_k − x_b)/ρ_k) ∇W_kb (the walls' hydrostatic pressure,
 // Adami, Hu & Adams 2012, eq. 27: the CPU's `hydrostatic_walls`), its sum of κ/ρ zeroed.
 @compute @workgroup_size(WG)
@@ -492,6 +612,9 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
         }
+    }
+    if (P.gamma > 0.0 || P.beta > 0.0) {
+        a = a + surface(k, xi, ri);
     }
     let grav = vec3<real>(P.gx_, P.gy_, P.gz_);
     let vk = vi + (a + grav) * P.dt;
@@ -534,7 +657,11 @@ fn drift(@builtin(global_invocation_id) gid: vec3<u32>) {
     let r = sget(RHO, k);
     hist[i] = ks;
     hist[n + i] = kv;
-    hist[2u * n + i] = (ks + kv) * r * r;
+    var p = (ks + kv) * r * r;
+    if (P.gamma > 0.0) {
+        p = p + sget(VIR, k);
+    }
+    hist[2u * n + i] = p;
     let grav = vec3<real>(P.gx_, P.gy_, P.gz_);
     let lo = vec3<real>(P.lo_x, P.lo_y, P.lo_z);
     let hi = vec3<real>(P.hi_x, P.hi_y, P.hi_z);

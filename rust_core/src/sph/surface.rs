@@ -113,8 +113,8 @@ fn kirkwood_buff(f: impl Fn(Real) -> Real, big_h: Real, dim: usize) -> Real {
 pub struct Surface {
     /// Support radius H = 2h, m.
     pub big_h: Real,
-    /// Cohesion normalisation (C = norm · shape).
-    norm: Real,
+    /// Cohesion normalisation (C = norm · shape); the device's DFSPH takes it as a parameter.
+    pub(crate) norm: Real,
     /// γ, m^(d+1)/(kg s²) (0: no surface tension).
     pub gamma: Real,
     /// c = ρ0 / `CURVATURE_RHO`: the curvature term's weight against the cohesion's.

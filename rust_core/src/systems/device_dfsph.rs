@@ -5,8 +5,9 @@
 //!
 //! What it holds: one DFSPH fluid of equal-mass particles (every particle of the scene), its
 //! static boundary particles (Akinci et al. 2012) if any, at most one `gravity` term, exactly
-//! one `box` collider, semi-implicit Euler (the CPU's DFSPH scheme). Not on the device (refused
-//! by name before anything moves): surface tension and adhesion, several fluids, other terms.
+//! one `box` collider, semi-implicit Euler (the CPU's DFSPH scheme); its surface tension and
+//! adhesion (Akinci et al. 2013) with the CPU's coefficients (`sph::surface::Surface`). Not on
+//! the device (refused by name before anything moves): several fluids, other terms.
 //!
 //! The state on the device is the positions, the velocities and the solvers' warm starts with
 //! the last step's pressure (the CPU term's own state, `OwnState::history`: 3 values a
@@ -15,6 +16,7 @@
 //! file (`save`: positions, velocities, the books so far) continue bit for bit on the device.
 use super::{saved, Arrays, EnergyReport, Halt, Snapshot, System};
 use crate::error::{invalid, Result};
+use crate::sph::surface::Surface;
 use crate::terms::registry::Params;
 use crate::vector::Real;
 use physcore_gpu::dfsph::{Dfsph, DfsphParams};
@@ -60,6 +62,8 @@ pub struct DeviceDfsph {
     params: DfsphParams,
     /// The CPU term's CFL number λ (its step limit; the device does not use it).
     cfl: Real,
+    /// The capillary step limit (`Surface::max_dt`), s; infinite without surface forces.
+    capillary: Real,
     walls: Vec<Real>,
     psi: Vec<Real>,
     names: Names,
@@ -79,7 +83,7 @@ impl DeviceDfsph {
     /// "f64"), named `name`.
     ///
     /// Errors: `InvalidInput` naming what the device's DFSPH cannot hold (another term, a
-    /// second fluid or gravity, surface tension or adhesion, no box or another collider, another
+    /// second fluid or gravity, no box or another collider, another
     /// integrator, pinned particles, particles outside the fluid or of another mass, a position
     /// outside the box, f64 on an adapter without it); `OutOfMemory` for device buffers.
     #[allow(clippy::too_many_arguments)]
@@ -134,17 +138,6 @@ impl DeviceDfsph {
                 ),
             ));
         }
-        for key in ["surface_tension", "adhesion"] {
-            if fp.number(key)? != 0.0 {
-                return Err(invalid(
-                    key,
-                    format!(
-                        "the GPU path's DFSPH has no {} yet (fluid {fname:?}); run it with device='cpu'",
-                        key.replace('_', " ")
-                    ),
-                ));
-            }
-        }
         let boxes: Vec<&Params> = colliders.iter().filter(|c| c.0 == "box").map(|c| &c.1).collect();
         if boxes.len() != 1 || colliders.len() != 1 {
             return Err(invalid(
@@ -177,11 +170,15 @@ impl DeviceDfsph {
             Some((_, p)) => three(&floats(p, "g")?),
             None => [0.0; 3],
         };
+        // The CPU's own coefficients of Akinci et al. (2013), from the fluid's σ and adhesion.
+        let (h, rho0) = (fp.number("h")?, fp.number("density")?);
+        let (sigma, adhesion) = (fp.number("surface_tension")?, fp.number("adhesion")?);
+        let surface = Surface::new(sigma, adhesion, h, rho0, dim);
         let params = DfsphParams {
             dim,
-            h: fp.number("h")?,
+            h,
             mass: m,
-            rho0: fp.number("density")?,
+            rho0,
             alpha: fp.number("viscosity")?,
             c0: fp.number("sound_speed")?,
             kernel: Kernel::by_name(fp.text("kernel")?)?,
@@ -193,6 +190,10 @@ impl DeviceDfsph {
             upper: three(&floats(b, "upper")?),
             restitution: b.number("restitution")?,
             friction: b.number("friction")?,
+            cohesion: surface.gamma,
+            cohesion_norm: surface.norm,
+            curvature: surface.c,
+            adhesion: surface.beta,
         };
         let walls = floats(fp, "walls")?;
         let psi = floats(fp, "wall_psi")?;
@@ -207,6 +208,7 @@ impl DeviceDfsph {
             precision,
             params,
             cfl: fp.number("cfl")?,
+            capillary: Surface::max_dt(sigma, adhesion, rho0, h),
             walls,
             psi,
             names,
@@ -282,14 +284,18 @@ impl System for DeviceDfsph {
         true
     }
     /// The CPU term's step limit (`Dfsph::max_dt`): the flow's CFL condition λ h/|v|max at the
-    /// speeds now (one read-back), the explicit viscosity's limit and gravity's force criterion.
-    /// A device that cannot be read gives no limit (its next step reports it).
+    /// speeds now (one read-back), the explicit viscosity's limit, gravity's force criterion and
+    /// the capillary limit. A device that cannot be read gives no limit (its next step reports it).
     fn auto_dt(&self) -> Option<Real> {
         let (_, v) = self.lock().read_state().ok()?;
         let d = self.params.dim;
         let vmax = v.chunks_exact(d).map(|u| u.iter().map(|c| c * c).sum::<Real>()).fold(0.0, Real::max).sqrt();
         let g = self.params.gravity.iter().map(|c| c * c).sum::<Real>().sqrt();
-        crate::sph::dfsph::max_dt(self.cfl, self.params.h, d, self.params.alpha, self.params.c0, vmax, g)
+        let p = &self.params;
+        let dt = crate::sph::dfsph::max_dt(self.cfl, p.h, d, p.alpha, p.c0, vmax, g)
+            .unwrap_or(Real::INFINITY)
+            .min(self.capillary);
+        dt.is_finite().then_some(dt)
     }
     fn suggest_dt(&self) -> Option<Real> {
         self.auto_dt()
