@@ -829,7 +829,7 @@ impl PySimulation {
             let mut out = s.particles().term_stats();
             if on {
                 // The device system stands in for the terms it took (`System::term_stats`).
-                out.extend(s.other(DEVICE).map(|d| d.term_stats()).unwrap_or_default());
+                out.extend(s.other(DEVICE).ok().and_then(|d| d.as_held_terms()).map(|h| h.term_stats()).unwrap_or_default());
             }
             out
         })
@@ -842,7 +842,7 @@ impl PySimulation {
             let mut out = s.particles().term_counts();
             if on {
                 // The device system stands in for the terms it took (`System::term_counts`).
-                out.extend(s.other(DEVICE).map(|d| d.term_counts()).unwrap_or_default());
+                out.extend(s.other(DEVICE).ok().and_then(|d| d.as_held_terms()).map(|h| h.term_counts()).unwrap_or_default());
             }
             out
         })
@@ -856,7 +856,7 @@ impl PySimulation {
         // is empty then.
         if self.on_device && self.terms.iter().any(|(_, n, _)| n == name) {
             let h = with_sim!(&self.inner, s => match s.other(DEVICE) {
-                Ok(d) => d.term_history(name),
+                Ok(d) => d.as_held_terms().map_or(Ok(None), |h| h.term_history(name)),
                 Err(_) => Ok(None),
             })
             .map_err(|e| to_py(py, e))?;
@@ -870,8 +870,11 @@ impl PySimulation {
     fn set_term_history(&mut self, py: Python<'_>, name: &str, history: PyReadonlyArray1<'_, f64>) -> PyResult<()> {
         let h = slice1(&history, "history")?;
         if self.on_device && self.terms.iter().any(|(_, n, _)| n == name) {
-            return with_sim!(&mut self.inner, s => s.other_mut(DEVICE).and_then(|d| d.set_term_history(name, h)))
-                .map_err(|e| to_py(py, e));
+            return with_sim!(&mut self.inner, s => s.other_mut(DEVICE).and_then(|d| match d.as_held_terms_mut() {
+                Some(held) => held.set_term_history(name, h),
+                None => Err(invalid(name, "the device holds no term of this name with a history")),
+            }))
+            .map_err(|e| to_py(py, e));
         }
         with_sim!(&mut self.inner, s => s.particles_mut().set_term_history(name, h)).map_err(|e| to_py(py, e))
     }

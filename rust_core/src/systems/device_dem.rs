@@ -17,7 +17,7 @@
 //! The cell list's box (which orders the force sums, so the bits, not the physics) is fitted to
 //! the grains at `from_records` and kept in the saved rows: a load rebuilds it as it was, and
 //! the run continues bit for bit.
-use super::{saved, Arrays, EnergyReport, Halt, Snapshot, System};
+use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
 use crate::terms::contacts::{damping_ratio, Law as CpuLaw};
 use crate::terms::registry::{self, Context, Params};
@@ -438,6 +438,12 @@ impl System for DeviceDem {
     fn name(&self) -> &str {
         &self.name
     }
+    fn as_held_terms(&self) -> Option<&dyn HeldTerms> {
+        Some(self)
+    }
+    fn as_held_terms_mut(&mut self) -> Option<&mut dyn HeldTerms> {
+        Some(self)
+    }
     fn is_empty(&self) -> bool {
         self.radius.is_empty()
     }
@@ -533,65 +539,6 @@ impl System for DeviceDem {
             self.evaluated = m.evaluated;
         }
     }
-    /// The contacts term's counter "contacts", as the CPU's: grain pairs counted once and
-    /// grain–wall contacts, from the committed history (the contacts of the last evaluation).
-    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
-        let g = self.lock();
-        let (Ok(raw), k) = (g.save_raw(), g.capacity()) else { return Vec::new() };
-        let n = self.radius.len();
-        let mut count = 0;
-        for i in 0..n {
-            let row = &raw.keys[i * (k + 1)..(i + 1) * (k + 1)];
-            count += row[1..=row[0] as usize].iter().filter(|&&p| p as usize >= n || p as usize > i).count() as u64;
-        }
-        vec![(self.names.contacts.clone(), "contacts", count)]
-    }
-    /// [n, ω (n·axial), angle (n; zeros in 3D), dissipated (normal damping, friction), then per
-    /// live contact, sorted by first grain then partner (grains before walls): first grain,
-    /// partner (grain, or n + wall index), ξ (dim) seen from the first grain, its spring's
-    /// energy, and with rolling resistance θ_r (axial) and its energy]: the CPU contacts
-    /// term's `OwnState::history`, for the contacts term's name; `None` for any other.
-    fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
-        if name != self.names.contacts {
-            return Ok(None);
-        }
-        let raw = self.lock().save_raw()?;
-        Ok(Some(self.history_of(&raw)))
-    }
-    /// Takes the CPU term's history (checked by that term's loader, which also takes a pair
-    /// given from its higher index, or a history of 0 particles: at rest, no contacts). The
-    /// books so far go to grain 0 of the device's per-grain books; more contacts on one grain
-    /// than the device holds (32) is refused naming "history".
-    fn set_term_history(&mut self, name: &str, history: &[Real]) -> Result<()> {
-        if name != self.names.contacts {
-            return Err(invalid(name, format!("system {:?} keeps no history of a term {name:?}", self.name)));
-        }
-        let n = self.radius.len();
-        let c = if self.dim == 2 {
-            canonical::<DVec2>(&self.record, name, n, history)?
-        } else {
-            canonical::<DVec3>(&self.record, name, n, history)?
-        };
-        let most = self.most_contacts(&c);
-        if most > 32 {
-            return Err(invalid(
-                "history",
-                format!("a grain holds {most} contacts: the GPU path's DEM holds 32 at most"),
-            ));
-        }
-        let state = self.lock().save_raw()?;
-        let k = self.lock().capacity();
-        if most > k {
-            let params = DemParams { capacity: most, ..self.params };
-            let raw = self.raw_of(&c, state.x, state.v, most);
-            self.rebuild(params, &raw)?;
-        } else {
-            let raw = self.raw_of(&c, state.x, state.v, k);
-            self.g.get_mut().unwrap_or_else(|p| p.into_inner()).load_raw(&raw)?;
-        }
-        self.evaluated = false;
-        Ok(())
-    }
     /// The grains' rows, as the scene file keeps the device's (`systems::device`): `pos` and
     /// `vel` (N × 4: position and mass as the device holds it, velocity and 1/mass), `aux` (ω:
     /// 1 value in 2D, 3 in 3D, from column 0; the 2D angle in column 3), `acc` (the grain's
@@ -680,6 +627,68 @@ impl System for DeviceDem {
 /// both laws, 2D and 3D, f64 and f32; the history both ways, save and load, snapshot and
 /// restore, and the refusals. Skipped where no adapter is found, unless PHYSCORE_GPU_REQUIRED=1
 /// (CI runs it on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
+impl HeldTerms for DeviceDem {
+    /// [n, ω (n·axial), angle (n; zeros in 3D), dissipated (normal damping, friction), then per
+    /// live contact, sorted by first grain then partner (grains before walls): first grain,
+    /// partner (grain, or n + wall index), ξ (dim) seen from the first grain, its spring's
+    /// energy, and with rolling resistance θ_r (axial) and its energy]: the CPU contacts
+    /// term's `OwnState::history`, for the contacts term's name; `None` for any other.
+    fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
+        if name != self.names.contacts {
+            return Ok(None);
+        }
+        let raw = self.lock().save_raw()?;
+        Ok(Some(self.history_of(&raw)))
+    }
+    /// Takes the CPU term's history (checked by that term's loader, which also takes a pair
+    /// given from its higher index, or a history of 0 particles: at rest, no contacts). The
+    /// books so far go to grain 0 of the device's per-grain books; more contacts on one grain
+    /// than the device holds (32) is refused naming "history".
+    fn set_term_history(&mut self, name: &str, history: &[Real]) -> Result<()> {
+        if name != self.names.contacts {
+            return Err(invalid(name, format!("system {:?} keeps no history of a term {name:?}", self.name)));
+        }
+        let n = self.radius.len();
+        let c = if self.dim == 2 {
+            canonical::<DVec2>(&self.record, name, n, history)?
+        } else {
+            canonical::<DVec3>(&self.record, name, n, history)?
+        };
+        let most = self.most_contacts(&c);
+        if most > 32 {
+            return Err(invalid(
+                "history",
+                format!("a grain holds {most} contacts: the GPU path's DEM holds 32 at most"),
+            ));
+        }
+        let state = self.lock().save_raw()?;
+        let k = self.lock().capacity();
+        if most > k {
+            let params = DemParams { capacity: most, ..self.params };
+            let raw = self.raw_of(&c, state.x, state.v, most);
+            self.rebuild(params, &raw)?;
+        } else {
+            let raw = self.raw_of(&c, state.x, state.v, k);
+            self.g.get_mut().unwrap_or_else(|p| p.into_inner()).load_raw(&raw)?;
+        }
+        self.evaluated = false;
+        Ok(())
+    }
+    /// The contacts term's counter "contacts", as the CPU's: grain pairs counted once and
+    /// grain–wall contacts, from the committed history (the contacts of the last evaluation).
+    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
+        let g = self.lock();
+        let (Ok(raw), k) = (g.save_raw(), g.capacity()) else { return Vec::new() };
+        let n = self.radius.len();
+        let mut count = 0;
+        for i in 0..n {
+            let row = &raw.keys[i * (k + 1)..(i + 1) * (k + 1)];
+            count += row[1..=row[0] as usize].iter().filter(|&&p| p as usize >= n || p as usize > i).count() as u64;
+        }
+        vec![(self.names.contacts.clone(), "contacts", count)]
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,7 +14,7 @@
 //! particle). The warm starts travel as the CPU's term history (`term_history`), so a scene file
 //! written on the device continues on the CPU and the other way round; the device rows of the
 //! file (`save`: positions, velocities, the books so far) continue bit for bit on the device.
-use super::{saved, Arrays, EnergyReport, Halt, Snapshot, System};
+use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
 use crate::sph::surface::Surface;
 use crate::terms::registry::Params;
@@ -267,6 +267,12 @@ impl System for DeviceDfsph {
     fn name(&self) -> &str {
         &self.name
     }
+    fn as_held_terms(&self) -> Option<&dyn HeldTerms> {
+        Some(self)
+    }
+    fn as_held_terms_mut(&mut self) -> Option<&mut dyn HeldTerms> {
+        Some(self)
+    }
     fn is_empty(&self) -> bool {
         self.lock().is_empty()
     }
@@ -319,39 +325,6 @@ impl System for DeviceDfsph {
         r.dissipated.push((self.names.fluid.clone(), books[0]));
         r.dissipated.push(("collisions".to_string(), books[1]));
         r
-    }
-    fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
-        if name != self.names.fluid {
-            return Ok(None);
-        }
-        self.history().map(Some)
-    }
-    fn set_term_history(&mut self, name: &str, history: &[Real]) -> Result<()> {
-        if name != self.names.fluid {
-            return Err(invalid(name, format!("the device's DFSPH holds no term {name:?} with a history")));
-        }
-        Ok(self.g.get_mut().unwrap_or_else(|p| p.into_inner()).set_history(history)?)
-    }
-    /// The CPU term's statistics that the device counts: the steps, both solves' iterations and
-    /// unconverged solves (totals), the last solves' and the largest final mean errors.
-    fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
-        let (Ok(c), Ok(e)) = (self.counted(), self.lock().errors()) else {
-            return Vec::new();
-        };
-        let f = &self.names.fluid;
-        [
-            ("steps", c.steps as Real),
-            ("density_iterations", c.density_iterations as Real),
-            ("divergence_iterations", c.divergence_iterations as Real),
-            ("unconverged", c.unconverged as Real),
-            ("density_error", e.density),
-            ("density_error_max", c.error_max[0]),
-            ("divergence_error", e.divergence),
-            ("divergence_error_max", c.error_max[1]),
-        ]
-        .into_iter()
-        .map(|(k, v)| (f.clone(), k, v))
-        .collect()
     }
     fn fields(&self, names: &[&str]) -> Result<Vec<Vec<Real>>> {
         // The density pass and its read only when a density is asked for.
@@ -461,5 +434,41 @@ impl System for DeviceDfsph {
         let cols = |a: &[Real]| -> Vec<Real> { a.chunks_exact(4).flat_map(|r| r[..d].to_vec()).collect() };
         let history = self.history()?;
         self.upload(&cols(pos), &cols(vel), &history, base)
+    }
+}
+
+impl HeldTerms for DeviceDfsph {
+    fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
+        if name != self.names.fluid {
+            return Ok(None);
+        }
+        self.history().map(Some)
+    }
+    fn set_term_history(&mut self, name: &str, history: &[Real]) -> Result<()> {
+        if name != self.names.fluid {
+            return Err(invalid(name, format!("the device's DFSPH holds no term {name:?} with a history")));
+        }
+        Ok(self.g.get_mut().unwrap_or_else(|p| p.into_inner()).set_history(history)?)
+    }
+    /// The CPU term's statistics that the device counts: the steps, both solves' iterations and
+    /// unconverged solves (totals), the last solves' and the largest final mean errors.
+    fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
+        let (Ok(c), Ok(e)) = (self.counted(), self.lock().errors()) else {
+            return Vec::new();
+        };
+        let f = &self.names.fluid;
+        [
+            ("steps", c.steps as Real),
+            ("density_iterations", c.density_iterations as Real),
+            ("divergence_iterations", c.divergence_iterations as Real),
+            ("unconverged", c.unconverged as Real),
+            ("density_error", e.density),
+            ("density_error_max", c.error_max[0]),
+            ("divergence_error", e.divergence),
+            ("divergence_error_max", c.error_max[1]),
+        ]
+        .into_iter()
+        .map(|(k, v)| (f.clone(), k, v))
+        .collect()
     }
 }

@@ -162,6 +162,29 @@ pub enum BodiesOf<'a> {
     Three(&'a mut bodies::Bodies3),
 }
 
+/// The role of a system that stands in for terms of the scene (a device system that took a
+/// DFSPH fluid or grains' contacts): their own state, statistics and counters, in the CPU
+/// terms' layouts, so that a scene file and `state()` continue on either path.
+pub trait HeldTerms {
+    /// The own state of the term named `name`, in the CPU term's `OwnState::history` layout (a
+    /// DFSPH fluid's warm starts, contacts' spins and springs); `None` where it holds no such
+    /// term or the term keeps none.
+    fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>>;
+    /// Loads what `term_history` gave (the CPU term's layout; checked, nothing changes on
+    /// error); refuses, naming it, a term it does not hold.
+    fn set_term_history(&mut self, name: &str, history: &[Real]) -> Result<()>;
+    /// The statistics of the terms it holds, as `Term::stats` gives them on the CPU: (term
+    /// name, statistic, value). Empty by default.
+    fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
+        Vec::new()
+    }
+    /// The counters of the terms it holds, as `Term::counts` gives them on the CPU. Empty by
+    /// default.
+    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
+        Vec::new()
+    }
+}
+
 /// One system of a world. Methods that run kernels are called on the world's thread pool.
 ///
 /// Nothing looks inside a system: the bindings, the world and the couplings go through this
@@ -183,6 +206,15 @@ pub trait System: Send + Sync {
     }
     /// The system as rigid bodies (`RigidBodies`), for the bindings (`None`: not bodies).
     fn as_rigid_bodies(&mut self) -> Option<&mut dyn RigidBodies> {
+        None
+    }
+    /// The system as one that stands in for terms of the scene (`HeldTerms`: a device system
+    /// holding a DFSPH fluid or grains' contacts), for the bindings (`None`: it holds none).
+    fn as_held_terms(&self) -> Option<&dyn HeldTerms> {
+        None
+    }
+    /// `as_held_terms`, to load a term's history.
+    fn as_held_terms_mut(&mut self) -> Option<&mut dyn HeldTerms> {
         None
     }
     /// Tells the system a property of the world for the call in progress (`WorldSetting`: the
@@ -239,28 +271,6 @@ pub trait System: Send + Sync {
     /// Further books that are not energies, by name (a reaction–diffusion system's amounts of
     /// each species and what its reactions made of them); empty by default.
     fn books(&self) -> Vec<(String, Real)> {
-        Vec::new()
-    }
-    /// The own state of the term named `name` that this system stands in for (a device system
-    /// holding a scene's terms: a DFSPH fluid's warm starts, contacts' spins and springs), in
-    /// the CPU term's `OwnState::history` layout, so that a scene file continues on either
-    /// path; `None` where it holds no such term or the term keeps none (the default).
-    fn term_history(&self, _name: &str) -> Result<Option<Vec<Real>>> {
-        Ok(None)
-    }
-    /// Loads what `term_history` gave (the CPU term's layout; checked, nothing changes on
-    /// error). The default refuses: the system holds no term of that name with a history.
-    fn set_term_history(&mut self, name: &str, _history: &[Real]) -> Result<()> {
-        Err(crate::error::invalid(name, format!("system {:?} keeps no history of a term {name:?}", self.name())))
-    }
-    /// The statistics of the terms it stands in for, as `Term::stats` gives them on the CPU:
-    /// (term name, statistic, value). Empty by default.
-    fn term_stats(&self) -> Vec<(String, &'static str, Real)> {
-        Vec::new()
-    }
-    /// The counters of the terms it stands in for, as `Term::counts` gives them on the CPU:
-    /// (term name, counter, value). Empty by default.
-    fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
         Vec::new()
     }
     /// The named output fields `names`, one value per element (0 where a field is not defined;
