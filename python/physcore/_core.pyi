@@ -18,6 +18,7 @@ __all__ = [
     "gpu_adapters",
     "mesh_normals",
     "splat",
+    "sphere_depths",
     "draw_discs",
     "rasterise_mesh",
     "neighbors",
@@ -96,6 +97,14 @@ def splat(
     width: int,
     weights: npt.NDArray[np.float32] | None = None,
 ) -> npt.NDArray[np.float32]: ...
+def sphere_depths(
+    col: npt.NDArray[np.float64],
+    row: npt.NDArray[np.float64],
+    depth: npt.NDArray[np.float64],
+    radius: float,
+    height: int,
+    width: int,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]: ...
 def mesh_normals(x: npt.NDArray[np.float64], faces: npt.NDArray[np.uint32]) -> npt.NDArray[np.float64]: ...
 def rasterise_mesh(
     verts: npt.NDArray[np.float32],

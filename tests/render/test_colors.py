@@ -302,3 +302,57 @@ def test_a_decompression_bomb_texture_is_refused_by_name(tmp_path, monkeypatch):
     monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 500_000)
     with pytest.raises(ValueError, match="texture"):
         pc.render.gif(pc.scenes.cloth(n=6), tmp_path / "y.gif", frames=2, texture=bomb)
+
+
+def _ball3(radius: float = 1.0, spacing: float = 0.1) -> pc.Scene:
+    g = np.arange(-radius, radius + 1e-9, spacing)
+    x = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    s = pc.Scene(3)
+    s.add_particles(x[np.linalg.norm(x, axis=1) <= radius], masses=1.0)
+    return s
+
+
+def test_a_3d_liquid_surface_is_lit_from_the_upper_left():
+    # Issue 66: the 3D surface was the projected density in one flat colour. Lit as the nearest
+    # spheres' smoothed depth (screen-space fluid rendering), a ball of particles is a closed
+    # disc, brighter towards the key light (upper left, front) than away from it, with its
+    # highlight in the upper-left quadrant.
+    img = next(pc.render.frames(_ball3(), surface=True, frames=1, size=(240, 240), color_by="none", colorbar=False))
+    bg = img[0, 0]
+    mask = (img != bg).any(axis=2)
+    mask[-24:] = False  # the clock and the scale bar
+    rows, cols = np.nonzero(mask)
+    rc, cc = (rows.min() + rows.max()) / 2, (cols.min() + cols.max()) / 2
+    rad = (rows.max() - rows.min()) / 2
+    assert abs((cols.max() - cols.min()) / 2 - rad) < 0.1 * rad  # a disc
+    yy, xx = np.mgrid[: img.shape[0], : img.shape[1]]
+    inner = (yy - rc) ** 2 + (xx - cc) ** 2 < (0.85 * rad) ** 2
+    assert mask[inner].all()  # closed: no background inside
+    light = img.astype(float).sum(axis=2)
+    upper_left = inner & (yy < rc) & (xx < cc)
+    lower_right = inner & (yy > rc) & (xx > cc)
+    assert light[upper_left].mean() > light[lower_right].mean() + 60  # of 765
+    top = np.unravel_index(np.argmax(np.where(inner, light, -1)), light.shape)
+    assert top[0] < rc and top[1] < cc
+
+
+def test_a_3d_tank_is_drawn_as_glass_without_a_stipple():
+    # The 3D dam break's walls as discs beat with the pixel grid (a moiré stipple); as glass a
+    # wall seen face on is an even tint. The patch is above the water, inside the tank.
+    s = pc.scenes.dam_break(dim=3, n=8)
+    opts = dict(frames=1, size=(320, 240), colorbar=False)
+    glass = next(pc.render.frames(s, **opts)).astype(float).sum(axis=2)
+    discs = next(pc.render.frames(s, surface=False, **opts)).astype(float).sum(axis=2)
+    mask = (np.abs(glass - glass[0, 0]) > 0)[: int(0.8 * glass.shape[0])]
+    rows, cols = np.nonzero(mask)
+    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    top, mid = r0 + int(0.3 * (r1 - r0)), (c0 + c1) // 2  # the back wall, right of the column
+    patch = (slice(top, top + 20), slice(mid, mid + 30))
+
+    def grain(img: np.ndarray) -> float:  # the mean step between neighbouring pixels, of 765
+        p = img[patch]
+        return float(np.abs(np.diff(p, axis=0)).mean() + np.abs(np.diff(p, axis=1)).mean())
+
+    assert grain(glass) < 2.0  # smooth (a gradient at most)
+    assert glass[0, 0] - glass[patch].mean() > 10.0  # tinted
+    assert grain(discs) > 10 * grain(glass)  # what it replaces

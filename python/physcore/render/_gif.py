@@ -262,7 +262,13 @@ def gif(
         (particles with fewer than three others within two spacings) is drawn under it as a
         soft mist, blurred three times wider, where two or more overlap (a lone particle is
         left out), so a splash reads as a plume rather than specks. Walls
-        and colliders are drawn as usual. Not with a mesh or ``color_by`` "density"/"strain"
+        and colliders are drawn as usual. In 3D the surface is lit instead (screen-space
+        fluid rendering, van der Laan, Green & Sainz, I3D 2009): each particle a sphere of 0.9
+        spacings (the spacing in space, read off the first frame) in a depth buffer, the nearest
+        depth smoothed over 0.7 spacings and shaded by its normal (a key light from the upper
+        left front, a highlight, a rim), coloured by the nearest particles' values; boundary
+        particles (a tank) are drawn as glass, a faint tint darker along the edges, instead of
+        discs. Not with a mesh or ``color_by`` "density"/"strain"
         (then ignored). Default: the scene's ``render_defaults`` (the fluid scenes have it on),
         else False.
     extent : (array_like (dim,), array_like (dim,)), optional

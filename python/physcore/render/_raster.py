@@ -382,6 +382,23 @@ SPRAY_NEIGHBOURS = 3
 SPRAY_BLUR = 3
 SPRAY_OPACITY = 0.7
 
+#: A 3D liquid's lit surface (``surface`` in 3D, see _Rasteriser._lit_surface): each particle a
+#: sphere of SURFACE_SPHERE particle spacings in the depth buffer, the buffer smoothed over
+#: SURFACE_SMOOTH spacings (σ), so the spheres' bumps merge into one surface (two particles one
+#: spacing apart leave a dip of 3 % of a spacing under spheres of 0.9); lit by a key light from
+#: the upper left front (SURFACE_LIGHT, camera coordinates: right, up, towards the viewer), with a
+#: Blinn–Phong highlight of exponent SURFACE_SHINE and a Fresnel-like rim towards white.
+SURFACE_SPHERE = 0.9
+SURFACE_SMOOTH = 0.7
+SURFACE_LIGHT = (-0.45, 0.65, 0.62)
+SURFACE_SHINE = 40.0
+#: A 3D liquid's tank walls as glass (_Rasteriser._glass): the opacity of a wall seen face on
+#: (the median over the walls' pixels) and the most any pixel takes (edges seen edge on).
+GLASS_FACE = 0.10
+GLASS_EDGE = 0.45
+#: The largest sphere radius `_core.sphere_depths` takes, pixels (raster::MAX_SPHERE_RADIUS).
+_MAX_SPHERE_PX = 64.0
+
 
 def _blur(a: np.ndarray, r: int) -> np.ndarray:
     """Three box blurs each way: close to a Gaussian of σ ≈ r (the central limit), O(1) a pixel."""
@@ -415,6 +432,26 @@ def _occupied(col: np.ndarray, row: np.ndarray, c: float) -> int:
         grid[key] = True
         return int(np.count_nonzero(grid))
     return int(np.unique(key).size)
+
+
+def _spacing3(x: np.ndarray) -> float | None:
+    """The mean particle spacing (world units) of the (N, 3) points `x`: the volume of the cells
+    of twice the spacing they occupy, over their count, refined three times from their bounding
+    box's (the 3D form of _Rasteriser._surface_setup's estimate); None for fewer than 2 points."""
+    x = x[np.isfinite(x).all(axis=1)].astype(np.float64)
+    n = len(x)
+    if n < 2:
+        return None
+    lo = x.min(axis=0)
+    ext = np.maximum(np.ptp(x, axis=0), 1e-12)
+    s = float(np.cbrt(np.prod(ext) / n))
+    for _ in range(3):
+        c = 2.0 * s
+        k = np.floor((x - lo) / c).astype(np.int64)
+        dims = k.max(axis=0) + 1
+        cells = np.unique((k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]).size
+        s = float(np.cbrt(cells * c**3 / n))
+    return s
 
 
 def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int], weights: np.ndarray | None = None) -> np.ndarray:
@@ -622,6 +659,11 @@ class _Rasteriser:
             px = np.where(rec.radii > 0, rec.radii * self.cam.scale, self.radius)
             self.radii = np.maximum(np.rint(px), 1).astype(np.int64)
         self.walls = walls
+        # A 3D liquid's tank walls are drawn as glass (_glass), not as a stipple of discs.
+        self._glass_walls = (walls is not None and len(walls) > 0 and dim == 3 and bool(surface) and mesh is None
+                             and color_by in ("speed", "pressure", "none"))
+        self._glass_cache: np.ndarray | None = None
+        self._surf_backdrop: np.ndarray | None = None  # a liquid's backdrop (float RGB), fixed camera
         self.background = self._scene_background(self.cam)
         # The fitted camera draws the labels once, into the background. Moving cameras draw the
         # colliders and walls per frame and paste the labels over everything (a followed scene
@@ -751,11 +793,31 @@ class _Rasteriser:
         """(H, W) uint8 index image with what does not move through `cam`: the colliders (2D)
         and the boundary particles, under everything that moves."""
         img = _background(cam, self.rec.planes, self.rec.origin, self.rec.spheres, self.rec.rods, self.rec.polygons)
-        if self.walls is not None:
+        if self.walls is not None and not self._glass_walls:
             s, _ = cam.project(self.walls)
             col, row = cam.pixels(s)
             _draw_discs(img, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
         return img
+
+    def _glass(self, cam: _Camera) -> np.ndarray:
+        """(H, W) float32 opacity of a 3D liquid's tank walls drawn as glass: the boundary
+        particles splatted and blurred over about 0.7 wall spacing (σ), so a wall seen face on is a
+        faint, even tint (GLASS_FACE opaque) and one seen edge on (many particles over a pixel) a
+        darker line, at most GLASS_EDGE: the tank's edges outline it, where discs drew a stipple
+        that beat with the pixel grid (moiré). Kept for the fitted camera."""
+        if self._centres is None and self._glass_cache is not None:
+            return self._glass_cache
+        s, _ = cam.project(self.walls)
+        col, row = cam.pixels(s)
+        d = _spacing3(self.walls)
+        r = max(1, int(round(0.6 * (d if d is not None else 0.0) * cam.scale)))  # σ ≈ 0.7 spacing
+        dens = _blur(_splat(col, row, (cam.height, cam.width)), r)
+        lit = dens[dens > 1e-6]
+        face = float(np.median(lit)) if lit.size else 1.0
+        glass = np.clip(GLASS_FACE * dens / max(face, 1e-12), 0.0, GLASS_EDGE).astype(np.float32)
+        if self._centres is None:
+            self._glass_cache = glass
+        return glass
 
     def _density(self, k: int) -> np.ndarray:
         """Frame k's glow: the free particles' density (per pixel), a tight blur plus a wide
@@ -880,6 +942,15 @@ class _Rasteriser:
         target = 0.7 * self._surf_spacing  # σ of three box blurs of radius r is √(r(r+1))
         self._surf_r = max(1, int(round(math.sqrt(target * target + 0.25) - 0.5)))
         self._surf_ref = 1.0 / (self._surf_spacing**2)
+        # 3D: the spheres of the lit surface (_lit_surface), sized by the true spacing in space
+        # (the projected one above shrinks with the liquid's thickness).
+        self._surf_sphere = None
+        if self.cam.dim == 3:
+            d = _spacing3(rec.positions[0][free])
+            if d is not None:
+                px = d * self.cam.scale
+                self._surf_sphere = min(max(SURFACE_SPHERE * px, 1.0), _MAX_SPHERE_PX)
+                self._surf_smooth = max(1, int(round(math.sqrt((SURFACE_SMOOTH * px) ** 2 + 0.25) - 0.5)))
 
     def _frame_rgb_surface(self, k: int) -> np.ndarray:
         """Frame k with the free particles as a continuous liquid: their count and their values
@@ -896,15 +967,22 @@ class _Rasteriser:
         under = self._under(cam)
         if self.trail and (k > 0 or self.loop):
             self._draw_trail(under, k, cam)
-        out = self._rgb(under, cam).astype(np.float32)  # with the look's backdrop and props
+        still = self._centres is None and not self.trail  # the same backdrop every frame: kept
+        if still and self._surf_backdrop is not None:
+            out = self._surf_backdrop.copy()
+        else:
+            out = self._rgb(under, cam).astype(np.float32)  # with the look's backdrop and props
+            if self._glass_walls:
+                g = self._glass(cam)[..., None]
+                out = out * (1.0 - g) + self.palette[_WALL].astype(np.float32) * (0.55 * g)
+            if still:
+                self._surf_backdrop = out.copy()
         free = ~rec.pinned
-        s, _ = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
+        s, depth = cam.project(rec.positions[k][free] if rec.pinned.any() else rec.positions[k])
         col, row = cam.pixels(s)
         # Spray (particles with few neighbours) is drawn apart, as a mist under the surface.
         spray = self._spray_of(col, row, under.shape)
         body = ~spray
-        r = self._surf_r
-        dens = _blur(_splat(col[body], row[body], under.shape), r) / self._surf_ref
         values = None
         if self.color_by == "speed" and rec.speeds is not None:
             values = rec.speeds[k]
@@ -913,23 +991,38 @@ class _Rasteriser:
         v = None
         if values is not None:
             v = np.nan_to_num(values[free] if rec.pinned.any() else values, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
-            wsum = _blur(_splat(col[body], row[body], under.shape, v[body]), r) / self._surf_ref
-            mean = wsum / np.maximum(dens, 1e-12)
-            idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
-            colour = self.palette[idx].astype(np.float32)
+        if self._surf_sphere is not None and cam.dim == 3:
+            # 3D: the lit surface of the nearest spheres (it needs none of the projected density).
+            lit = None
+            if body.any():
+                lit = self._lit_surface(col[body], row[body], depth[body] * cam.scale,
+                                        None if v is None else v[body], under.shape)
+            if spray.any():
+                out = self._mist(out, col[spray], row[spray], None if v is None else v[spray])
+            if lit is not None:
+                box, colour, a = lit
+                out[box] = out[box] * (1 - a[..., None]) + colour * a[..., None]
         else:
-            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
-        alpha = np.clip((dens - 0.3) / 0.3, 0.0, 1.0)
-        alpha = alpha * alpha * (3 - 2 * alpha)  # smoothstep: a soft, antialiased edge
-        # Edge light: the density's gradient is the surface normal in the image plane.
-        gy, gx = np.gradient(np.minimum(dens, 1.0))
-        lit = np.clip(-(gx + gy) * (0.7 * self._surf_spacing), -1.0, 1.0)  # light from the upper left
-        shade = (1.0 + 0.35 * lit)[..., None]
-        colour = np.clip(colour * shade + 60.0 * np.maximum(lit, 0)[..., None], 0, 255)
-        if spray.any():
-            out = self._mist(out, col[spray], row[spray], None if v is None else v[spray])
-        a = alpha[..., None]
-        out = out * (1 - a) + colour * a
+            r = self._surf_r
+            dens = _blur(_splat(col[body], row[body], under.shape), r) / self._surf_ref
+            if v is not None:
+                wsum = _blur(_splat(col[body], row[body], under.shape, v[body]), r) / self._surf_ref
+                mean = wsum / np.maximum(dens, 1e-12)
+                idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
+                colour = self.palette[idx].astype(np.float32)
+            else:
+                colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
+            alpha = np.clip((dens - 0.3) / 0.3, 0.0, 1.0)
+            alpha = alpha * alpha * (3 - 2 * alpha)  # smoothstep: a soft, antialiased edge
+            # Edge light: the density's gradient is the surface normal in the image plane.
+            gy, gx = np.gradient(np.minimum(dens, 1.0))
+            lit2 = np.clip(-(gx + gy) * (0.7 * self._surf_spacing), -1.0, 1.0)  # light from the upper left
+            shade = (1.0 + 0.35 * lit2)[..., None]
+            colour = np.clip(colour * shade + 60.0 * np.maximum(lit2, 0)[..., None], 0, 255)
+            if spray.any():
+                out = self._mist(out, col[spray], row[spray], None if v is None else v[spray])
+            a = alpha[..., None]
+            out = out * (1 - a) + colour * a
         out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
         over = _overlay(under.shape)
         if rec.pinned.any():
@@ -937,6 +1030,57 @@ class _Rasteriser:
             col, row = cam.pixels(s)
             _draw_discs(over, col, row, np.full(col.shape, _PINNED, dtype=np.uint8), self.stencil)
         return self._finish_rgb(out, over, k, cam)
+
+    def _lit_surface(self, col: np.ndarray, row: np.ndarray, depth: np.ndarray, values: np.ndarray | None,
+                     shape: tuple[int, int]) -> tuple[tuple[slice, slice], np.ndarray, np.ndarray] | None:
+        """A 3D liquid's surface lit (screen-space fluid rendering: van der Laan, Green & Sainz,
+        I3D 2009), on the covered pixels' bounding box `box` (a pair of slices of the (H, W)
+        `shape`): (box, colours (h, w, 3) float32, opacity (h, w)); None if no pixel is covered.
+        The nearest sphere of SURFACE_SPHERE spacings over each pixel (`_core.sphere_depths`;
+        `depth` in pixels, larger = nearer), that depth smoothed over SURFACE_SMOOTH spacings
+        within the covered pixels, its gradient the normal; the colour that of the nearest
+        particles' `values` (their mean over the same window; the plain colour where `values`
+        is None) times an ambient and a diffuse term, plus a Blinn–Phong highlight and a rim
+        towards white where the surface turns away; the opacity the smoothed coverage (a soft
+        edge along the spheres' union)."""
+        h, w = shape
+        z, ids = _core.sphere_depths(np.ascontiguousarray(col, np.float64), np.ascontiguousarray(row, np.float64),
+                                     np.ascontiguousarray(depth, np.float64), self._surf_sphere, h, w)
+        covered = ids >= 0
+        rows, cols = np.flatnonzero(covered.any(axis=1)), np.flatnonzero(covered.any(axis=0))
+        if rows.size == 0:
+            return None
+        r = self._surf_smooth
+        pad = 3 * r + 2  # three box blurs of radius r reach 3r
+        y0, y1 = max(int(rows[0]) - pad, 0), min(int(rows[-1]) + pad + 1, h)
+        x0, x1 = max(int(cols[0]) - pad, 0), min(int(cols[-1]) + pad + 1, w)
+        box = (slice(y0, y1), slice(x0, x1))
+        covered, z, ids = covered[box], z[box], ids[box]
+        m = covered.astype(np.float32)
+        wsum = _blur(m, r)
+        inside = wsum > 1e-3
+        zs = _blur(np.where(covered, z, np.float32(0.0)), r)
+        zs = np.where(inside, zs / np.maximum(wsum, 1e-6), np.float32(0.0))
+        gy, gx = np.gradient(zs)
+        gx, gy = np.where(inside, gx, 0.0), np.where(inside, gy, 0.0)
+        norm = np.sqrt(gx * gx + gy * gy + 1.0)
+        nx, ny, nz = -gx / norm, gy / norm, 1.0 / norm  # rows run down, so +y on screen is −row
+        lx, ly, lz = (np.asarray(SURFACE_LIGHT) / np.linalg.norm(SURFACE_LIGHT)).tolist()
+        hx, hy, hz = lx, ly, lz + 1.0  # the half vector of the light and the view (0, 0, 1)
+        hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+        diffuse = np.clip(nx * lx + ny * ly + nz * lz, 0.0, 1.0)
+        spec = np.clip((nx * hx + ny * hy + nz * hz) / hn, 0.0, 1.0) ** SURFACE_SHINE
+        rim = (1.0 - nz) ** 2
+        if values is not None:
+            front = np.where(covered, values.astype(np.float32)[np.maximum(ids, 0)], np.float32(0.0))
+            mean = _blur(front, r) / np.maximum(wsum, 1e-6)
+            base = self.palette[self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)].astype(np.float32)
+        else:
+            base = self.palette[_PLAIN].astype(np.float32)
+        lit = base * (0.55 + 0.6 * diffuse)[..., None] + 255.0 * (0.5 * spec + 0.25 * rim)[..., None]
+        a = np.clip((wsum - 0.25) / 0.5, 0.0, 1.0)
+        a = a * a * (3 - 2 * a)  # smoothstep: half covered is the edge
+        return box, np.clip(lit, 0.0, 255.0).astype(np.float32), a.astype(np.float32)
 
     def _spray_of(self, col: np.ndarray, row: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
         """(N,) bool: the particles of the liquid's spray, those with fewer than SPRAY_NEIGHBOURS
@@ -964,6 +1108,18 @@ class _Rasteriser:
         from any other, is left out (too small to see at the image's scale)."""
         h, w = out.shape[:2]
         rw = SPRAY_BLUR * self._surf_r
+        # Only the spray's bounding box (with the blur's reach, 3·rw) can change.
+        ok = np.isfinite(col) & np.isfinite(row)
+        if not ok.any():
+            return out
+        pad = 3 * rw + 2
+        x0, x1 = max(int(np.floor(col[ok].min())) - pad, 0), min(int(np.ceil(col[ok].max())) + pad + 1, w)
+        y0, y1 = max(int(np.floor(row[ok].min())) - pad, 0), min(int(np.ceil(row[ok].max())) + pad + 1, h)
+        if x0 >= x1 or y0 >= y1:
+            return out
+        box = (slice(y0, y1), slice(x0, x1))
+        col, row = col - x0, row - y0
+        h, w = y1 - y0, x1 - x0
         dw = _blur(_splat(col, row, (h, w)), rw)
         one = 1.0 / (2.0 * math.pi * rw * (rw + 1))  # a lone particle's peak: σ² = r(r + 1)
         mist = np.clip((dw - 1.5 * one) / (3.0 * one), 0.0, 1.0)
@@ -974,9 +1130,11 @@ class _Rasteriser:
             mean = _blur(_splat(col, row, (h, w), values), rw) / np.maximum(dw, 1e-12)
             colour = self.palette[self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)].astype(np.float32)
         else:
-            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
+            colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), (h, w, 3))
         m = mist[..., None]
-        return out * (1 - m) + colour * m
+        out = np.array(out, dtype=np.float32, copy=True)
+        out[box] = out[box] * (1 - m) + colour * m
+        return out
 
     def _value_levels_of(self, values: np.ndarray) -> np.ndarray:
         """Palette indices of `values` on the map of `color_by` (speed or pressure)."""

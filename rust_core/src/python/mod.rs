@@ -163,6 +163,32 @@ fn splat<'py>(
     Ok(numpy::ndarray::Array2::from_shape_vec((height, width), out).expect("shape matches").into_pyarray(py))
 }
 
+/// The nearest sphere surfaces over an (H, W) image (`crate::raster::sphere_depths`): points
+/// `col`, `row` (N,) float64 in pixels with `depth` (N,) float64 (pixels, larger = nearer),
+/// spheres of `radius` pixels. Returns (H, W) float32 depths (−inf where empty) and (H, W)
+/// int32 point indices (−1 there). InvalidInputError for inconsistent shapes or a radius out of
+/// range.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn sphere_depths<'py>(
+    py: Python<'py>,
+    col: numpy::PyReadonlyArray1<'py, f64>,
+    row: numpy::PyReadonlyArray1<'py, f64>,
+    depth: numpy::PyReadonlyArray1<'py, f64>,
+    radius: f64,
+    height: usize,
+    width: usize,
+) -> PyResult<(Bound<'py, numpy::PyArray2<f32>>, Bound<'py, numpy::PyArray2<i32>>)> {
+    let (c, r, d) = (slice1(&col, "col")?, slice1(&row, "row")?, slice1(&depth, "depth")?);
+    let pool = crate::par::default_pool().ok();
+    let (z, ids) = py
+        .detach(|| crate::par::install(pool.as_ref(), || crate::raster::sphere_depths(c, r, d, radius, width, height)))
+        .map_err(|e| to_py(py, e))?;
+    let z = numpy::ndarray::Array2::from_shape_vec((height, width), z).expect("shape matches");
+    let ids = numpy::ndarray::Array2::from_shape_vec((height, width), ids).expect("shape matches");
+    Ok((z.into_pyarray(py), ids.into_pyarray(py)))
+}
+
 /// Unit vertex normals (V, 3) float64 of the mesh `faces` (T, 3) uint32 over `x` (V, 3) float64
 /// (area-weighted face normals; see `crate::raster::vertex_normals`). InvalidInputError for an
 /// index out of range or a non-contiguous array.
@@ -285,6 +311,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;
     m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
     m.add_function(wrap_pyfunction!(splat, m)?)?;
+    m.add_function(wrap_pyfunction!(sphere_depths, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_kernel, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_lattice_sum, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_particle_mass, m)?)?;
