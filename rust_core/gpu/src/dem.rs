@@ -261,7 +261,7 @@ pub struct Dem {
     bind: wgpu::BindGroup,
     /// cells.wgsl's clear, bin, scan, scatter, sort_cells.
     cell_pipes: Vec<wgpu::ComputePipeline>,
-    /// dem.wgsl's contacts, integrate, commit, energy.
+    /// dem.wgsl's contacts, integrate, commit, energy, tally.
     pipes: Vec<wgpu::ComputePipeline>,
     chunk: Chunk,
     saved: Option<Saved>,
@@ -426,7 +426,7 @@ impl Dem {
             precision,
             include_str!("dem.wgsl"),
             &[uniform, W, W, W, R, R, R, R, R, W, W, W, W, W],
-            &["contacts", "integrate", "commit", "energy"],
+            &["contacts", "integrate", "commit", "energy", "tally"],
         );
         let bind = crate::grid::bind_group(
             &gpu,
@@ -736,6 +736,30 @@ impl Dem {
             }
         }
         Ok(most)
+    }
+
+    /// The committed history's contacts counted once, as the CPU's contacts term counts them
+    /// (a grain pair once, a grain–wall contact once): counted on the device, 4 bytes read
+    /// back.
+    pub fn contacts_once(&self) -> Result<u64> {
+        if self.n == 0 {
+            return Ok(0);
+        }
+        self.gpu.queue.write_buffer(&self.flag, 8, bytemuck::cast_slice(&[0u32]));
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_bind_group(0, &self.bind, &[]);
+            pass.set_pipeline(&self.pipes[4]);
+            let n = spread(self.n);
+            pass.dispatch_workgroups(n.0, n.1, 1);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        let mut count = 0;
+        self.gpu.read_back_from(&self.flag, 8, &self.staging, 4, |raw| {
+            count = u32::from_le_bytes([raw[0], raw[1], raw[2], raw[3]]) as u64
+        })?;
+        Ok(count)
     }
 
     /// Live contacts now (pairs counted at both grains, plus grain–wall contacts), from the

@@ -78,7 +78,7 @@ const WG: u32 = 64u;
 // `stride_out` give their sizes; axial vectors take 1 value in 2D (z), 3 in 3D.
 @group(0) @binding(11) var<storage, read_write> vals: array<real>;
 // [0]: the first grain whose state stopped being finite; [1]: the first grain with more contacts
-// than `cap` (u32::MAX: none).
+// than `cap` (u32::MAX: none); [2]: the contacts `tally` counted.
 @group(0) @binding(12) var<storage, read_write> flag: array<atomic<u32>>;
 // Per grain, J: [0, n) dissipated by the normal dashpots, [n, 2n) by friction (sliding, and the
 // springs of contacts that ended), [2n, 3n) the contact potential (written by `energy`). A
@@ -799,4 +799,34 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     books[2u * P.n + i] = u;
+}
+
+var<workgroup> tallied: atomic<u32>;
+
+// The committed history's contacts counted once, as the CPU's contacts term counts them: each
+// grain's walls and its partners of a higher index, summed into flag[2] (integer atomics: the
+// same count in any order).
+@compute @workgroup_size(WG)
+fn tally(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) t: u32) {
+    if (t == 0u) {
+        atomicStore(&tallied, 0u);
+    }
+    workgroupBarrier();
+    let i = index(gid);
+    if (i < P.n) {
+        let kin = i * (P.cap + 1u);
+        let count = min(keys[kin], P.cap);
+        var c = 0u;
+        for (var q = 0u; q < count; q = q + 1u) {
+            let key = keys[kin + 1u + q];
+            if (key >= P.n || i < key) {
+                c = c + 1u;
+            }
+        }
+        atomicAdd(&tallied, c);
+    }
+    workgroupBarrier();
+    if (t == 0u) {
+        atomicAdd(&flag[2], atomicLoad(&tallied));
+    }
 }

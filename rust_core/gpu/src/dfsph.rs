@@ -66,6 +66,7 @@
 //! `systems::device_dfsph` takes the CPU's, capillary limit included), checkpoints of the warm
 //! starts.
 use crate::cells::spread;
+use crate::maxima::Maxima;
 use crate::particles::Halt;
 use crate::sph::{invalid, positive, sort_walls, Kernel};
 use crate::{Bind, Chunk, Gpu, Precision, Result};
@@ -348,6 +349,8 @@ pub struct Dfsph {
     full: bool,
     /// The copies of a submission's start: (buffer, its copy) pairs.
     backup: Vec<(wgpu::Buffer, wgpu::Buffer)>,
+    /// The step limit's largest speed, over `vel`.
+    maxima: Maxima,
     /// Bound only: the cell list, the sorted scratch, the partial sums, the walls.
     _keep: Vec<wgpu::Buffer>,
 }
@@ -508,6 +511,7 @@ impl Dfsph {
             gpu.upload(precision, &wall, &wall_data);
         }
         gpu.queue.write_buffer(&wall_start, 0, bytemuck::cast_slice(&wall_starts));
+        let maxima = Maxima::new(&gpu, precision, n, d, &vel, None)?;
         let mut ctl0 = [0u32; CTL_WORDS];
         ctl0[FLAG as usize] = u32::MAX;
         gpu.queue.write_buffer(&ctl, 0, bytemuck::cast_slice(&ctl0));
@@ -540,6 +544,7 @@ impl Dfsph {
             budget: [LEAST_BUDGET.min(params.max_iterations); 2],
             full: false,
             backup,
+            maxima,
             _keep: vec![cell_of, counts, start, order, found, sv, ss, partial, cell_params, wall, wall_start],
         };
         s.write_params(1.0);
@@ -820,6 +825,13 @@ impl Dfsph {
         }
         let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
         Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
+    }
+
+    /// The largest speed now (m/s), what the step limit's CFL condition takes: reduced on the
+    /// device (`maxima`), 16 bytes read back; the same bits as the largest speed the host
+    /// finds in `read_state`'s velocities (|v|² summed in f64, its square root).
+    pub fn max_speed(&self) -> Result<f64> {
+        Ok(self.maxima.read(&self.gpu, self.precision, &self.staging)?.0.sqrt())
     }
 
     /// The last step's pressure p_i = ρ_i² (Σκ_i/ρ_i + Σκ^v_i/ρ_i), plus with cohesion the

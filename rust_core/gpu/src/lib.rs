@@ -22,6 +22,7 @@ pub mod dfsph;
 pub mod fluid;
 pub mod gray_scott;
 mod grid;
+mod maxima;
 pub mod particles;
 pub mod sph;
 #[doc(hidden)]

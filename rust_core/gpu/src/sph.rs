@@ -41,6 +41,7 @@
 //! Not here (the CPU has them): moving wall particles (rigid bodies' boundary samples), several
 //! fluids sharing one search, per-particle masses, the time step limit, checkpoints.
 use crate::cells::spread;
+use crate::maxima::Maxima;
 use crate::particles::Halt;
 use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -279,6 +280,8 @@ pub struct Sph {
     cell_pipes: Vec<wgpu::ComputePipeline>,
     /// sph.wgsl's gather, density, integrate.
     sph_pipes: Vec<wgpu::ComputePipeline>,
+    /// The step limit's maxima over `vel` and the squared accelerations in `books`.
+    maxima: Maxima,
     /// Steps per submission (about 0.1 s each).
     chunk: Chunk,
     /// The cell list, the cell-ordered copies, the cell list's parameters and the walls (bound
@@ -439,6 +442,7 @@ impl Sph {
             gpu.upload(precision, &wall, &wall_data);
         }
         gpu.queue.write_buffer(&wall_start, 0, bytemuck::cast_slice(&wall_starts));
+        let maxima = Maxima::new(&gpu, precision, n, d, &vel, Some((&books, 2 * nn)))?;
         let s = Self {
             gpu,
             precision,
@@ -446,6 +450,7 @@ impl Sph {
             n,
             walls: nw,
             cells,
+            maxima,
             pos,
             vel,
             rho,
@@ -624,8 +629,17 @@ impl Sph {
 
     /// The step limit's inputs: the largest speed now (m/s) and the largest squared pressure
     /// and viscous acceleration of the last step (m²/s⁴; 0 before the first), as the CPU's
-    /// WCSPH takes them (`sph::fluid`'s `max_dt`). Two read-backs.
+    /// WCSPH takes them (`sph::fluid`'s `max_dt`). Reduced on the device (`maxima`): 16 bytes
+    /// read back, the same bits as `extremes_from_read_back`.
     pub fn extremes(&self) -> Result<(f64, f64)> {
+        let (v2, a2) = self.maxima.read(&self.gpu, self.precision, &self.staging)?;
+        Ok((v2.sqrt(), a2))
+    }
+
+    /// `extremes` from a read-back of every velocity and squared acceleration, the maxima taken
+    /// on the host: the reference the device's reduction is tested and timed against.
+    #[doc(hidden)]
+    pub fn extremes_from_read_back(&self) -> Result<(f64, f64)> {
         if self.n == 0 {
             return Ok((0.0, 0.0));
         }

@@ -753,3 +753,36 @@ fn bench_discs() {
         }
     }
 }
+
+/// `contacts_once` (counted on the device) against the count the host makes from the whole
+/// committed history (`save_raw`): grain pairs once, grain–wall contacts once; a settling pile
+/// with walls, 2D and 3D, f32 and f64; and none for no grains.
+#[test]
+fn the_device_counts_each_contact_once_as_the_host() {
+    let Some(gpu) = gpu() else { return };
+    for p in [Precision::F32, Precision::F64] {
+        if gpu.check_precision(p).is_err() {
+            continue;
+        }
+        for (dim, across, rows) in [(2, 10, 6), (3, 4, 4)] {
+            let mut dem = pile(&gpu, p, dim, across, rows, 3);
+            run(&mut dem, 300, pile_dt(dim));
+            let raw = dem.save_raw().unwrap();
+            let (n, k) = (dem.len(), dem.capacity());
+            let (mut pairs, mut walls) = (0u64, 0u64);
+            for i in 0..n {
+                let row = &raw.keys[i * (k + 1)..(i + 1) * (k + 1)];
+                for &q in &row[1..=row[0] as usize] {
+                    pairs += ((q as usize) > i && (q as usize) < n) as u64;
+                    walls += (q as usize >= n) as u64;
+                }
+            }
+            assert!(pairs > 0 && walls > 0, "{p:?} {dim}D: {pairs} pairs and {walls} wall contacts");
+            assert_eq!(dem.contacts_once().unwrap(), pairs + walls, "{p:?} {dim}D");
+            assert_eq!(dem.contacts().unwrap() as u64, 2 * pairs + walls, "{p:?} {dim}D");
+        }
+    }
+    let box1 = DemParams { cell: 0.1, lower: [0.0; 3], upper: [1.0; 3], ..Default::default() };
+    let none = Dem::new(gpu.clone(), Precision::F32, 2, box1, &[], &[], &[], &[], &[]).unwrap();
+    assert_eq!(none.contacts_once().unwrap(), 0);
+}

@@ -775,3 +775,80 @@ fn bench_dam_break_3d() {
         );
     }
 }
+
+/// The step limit's largest speed (`max_speed`), reduced on the device, against the host's
+/// from a read-back of every velocity (|v|² summed in f64, the largest, its square root): the
+/// same bits, f32 and f64, 2D and 3D, for 2500 and 2744 particles (three workgroups of the
+/// reduction's 1024, the last in part), one and none; at the upload and after steps. The
+/// speeds span four decades.
+#[test]
+fn the_device_reduced_largest_speed_is_the_hosts_bit_for_bit() {
+    let Some(gpu) = gpu() else { return };
+    let stop = AtomicBool::new(false);
+    for prec in [Precision::F32, Precision::F64] {
+        if gpu.check_precision(prec).is_err() {
+            eprintln!("skipped {prec:?}: the adapter has no f64");
+            continue;
+        }
+        for (dim, n) in [(2, 2500), (3, 2744), (2, 1), (3, 1), (2, 0)] {
+            let (block, w, ht) = if dim == 2 { ([50, 50, 1], 60, 60) } else { ([14, 14, 14], 16, 18) };
+            let mut s = tank(dim, block, w, ht, 0.2);
+            s.x.truncate(dim * n);
+            let v: Vec<f64> = (0..s.x.len() as u64)
+                .map(|k| (unit(k) - 0.5) * 10f64.powf(-4.0 * unit(5000 + k / dim as u64)))
+                .collect();
+            let mut f = Dfsph::with_walls(gpu.clone(), prec, s.p, &s.x, &v, &s.walls, &s.psi).unwrap();
+            for steps in [0, 3] {
+                f.step(steps, 1e-3, &stop).unwrap();
+                let vmax = f.max_speed().unwrap();
+                let (_, vd) = f.read_state().unwrap();
+                let host =
+                    vd.chunks_exact(dim).map(|u| u.iter().map(|c| c * c).sum::<f64>()).fold(0.0, f64::max).sqrt();
+                let what = format!("{prec:?} {dim}D, {n} particles, {steps} steps");
+                assert_eq!(vmax.to_bits(), host.to_bits(), "{what}: |v|max {vmax:e} against the host's {host:e}");
+                assert_eq!(vmax > 0.0, n > 0, "{what}");
+            }
+        }
+    }
+}
+
+/// The step limit's largest speed (`max_speed`: reduced on the device, 16 bytes read back)
+/// against the host's from `read_state` (what the core's `auto_dt` read before), on a 3D
+/// block of `PHYSCORE_DFSPH_MAXIMA_BENCH` particles (default 100000) with random velocities,
+/// f32 and f64 (where the adapter has it): the median of 15 calls of each, alternating, and
+/// their results compared bit for bit.
+#[test]
+#[ignore = "a benchmark: run with --ignored"]
+fn bench_max_speed() {
+    let Some(gpu) = gpu() else { return };
+    let count: usize = std::env::var("PHYSCORE_DFSPH_MAXIMA_BENCH").map_or(100_000, |c| c.parse().expect("a count"));
+    let side = (count as f64).cbrt().round() as usize;
+    let s = tank(3, [side, side, side], side, side + 2, 0.0);
+    let v: Vec<f64> = (0..s.x.len() as u64).map(|k| unit(k) - 0.5).collect();
+    for prec in [Precision::F32, Precision::F64] {
+        if gpu.check_precision(prec).is_err() {
+            continue;
+        }
+        let f = Dfsph::with_walls(gpu.clone(), prec, s.p, &s.x, &v, &s.walls, &s.psi).unwrap();
+        let (mut device, mut host) = (Vec::new(), Vec::new());
+        for _ in 0..15 {
+            let t = Instant::now();
+            let d = f.max_speed().unwrap();
+            device.push(t.elapsed().as_secs_f64());
+            let t = Instant::now();
+            let (_, v) = f.read_state().unwrap();
+            let h = v.chunks_exact(3).map(|u| u.iter().map(|c| c * c).sum::<f64>()).fold(0.0, f64::max).sqrt();
+            host.push(t.elapsed().as_secs_f64());
+            assert_eq!(d.to_bits(), h.to_bits());
+        }
+        device.sort_by(f64::total_cmp);
+        host.sort_by(f64::total_cmp);
+        eprintln!(
+            "DFSPH 3D {} particles {prec:?} on {}: max_speed {:.3} ms on the device, {:.3} ms from read_state",
+            f.len(),
+            gpu.adapter().name,
+            device[7] * 1e3,
+            host[7] * 1e3
+        );
+    }
+}

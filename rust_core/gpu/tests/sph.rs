@@ -621,3 +621,46 @@ fn without_viscosity_or_walls_the_dissipated_books_are_zero_and_the_total_holds(
         assert!(b.kinetic > 0.0 && drift < 1e-2, "{precision:?}: {b:?} from {b0:?}");
     }
 }
+
+/// The step limit's maxima (`extremes`), reduced on the device, against those the host finds
+/// in a read-back of every velocity and squared acceleration (`extremes_from_read_back`, and
+/// the largest speed from `read_state`): the same bits, f32 and f64, 2D and 3D, for 2500 and
+/// 2744 particles (three workgroups of the reduction's 1024, the last in part), one and none;
+/// at the upload (no acceleration yet) and after steps. The speeds span four decades.
+#[test]
+fn the_device_reduced_maxima_are_the_hosts_bit_for_bit() {
+    let Some(g) = gpu() else { return };
+    let dx = 0.01;
+    for precision in [Precision::F32, Precision::F64] {
+        if g.check_precision(precision).is_err() {
+            eprintln!("skipped {precision:?}: the adapter has no f64");
+            continue;
+        }
+        for (dim, n) in [(2, 2500), (3, 2744), (2, 1), (3, 1), (2, 0)] {
+            let side = if dim == 2 { 50 } else { 14 };
+            let (mut x, mut v) = block(dim, side, dx, 11);
+            x.iter_mut().for_each(|c| *c += 0.2);
+            x.truncate(dim * n);
+            v.truncate(dim * n);
+            for (k, c) in v.iter_mut().enumerate() {
+                *c *= 10f64.powf(-4.0 * unit(1000 + k as u64 / dim as u64));
+            }
+            let p = SphParams { dim, h: 1.3 * dx, mass: 1000.0 * dx.powi(dim as i32), ..SphParams::default() };
+            let mut s = Sph::new(g.clone(), precision, p, &x, &v).unwrap();
+            for steps in [0, 5] {
+                s.step(steps, 1e-5, &AtomicBool::new(false)).unwrap();
+                let (vmax, a2) = s.extremes().unwrap();
+                let (host_v, host_a2) = s.extremes_from_read_back().unwrap();
+                let (_, vd) = s.read_state().unwrap();
+                let from_state =
+                    vd.chunks_exact(dim).map(|u| u.iter().map(|c| c * c).sum::<f64>()).fold(0.0, f64::max).sqrt();
+                let what = format!("{precision:?} {dim}D, {n} particles, {steps} steps");
+                assert_eq!(vmax.to_bits(), host_v.to_bits(), "{what}: |v|max {vmax:e} against the host's {host_v:e}");
+                assert_eq!(vmax.to_bits(), from_state.to_bits(), "{what}");
+                assert_eq!(a2.to_bits(), host_a2.to_bits(), "{what}: |a|²max {a2:e} against the host's {host_a2:e}");
+                assert_eq!(vmax > 0.0, n > 0, "{what}");
+                assert_eq!(a2 > 0.0, n > 1 && steps > 0, "{what}: |a|²max {a2:e}");
+            }
+        }
+    }
+}

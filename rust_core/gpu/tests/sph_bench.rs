@@ -107,3 +107,45 @@ fn wcsph_throughput() {
         );
     }
 }
+
+/// The step limit's maxima (`extremes`: reduced on the device, 16 bytes read back) against the
+/// host's from a read-back of every velocity and squared acceleration
+/// (`extremes_from_read_back`), on a dam of `PHYSCORE_SPH_MAXIMA_BENCH` particles (default
+/// 100000) after 5 steps, 2D and 3D, f32 and f64 (where the adapter has it): the median of 15
+/// calls of each, alternating, and their results compared bit for bit.
+#[test]
+#[ignore = "a benchmark: run with --ignored"]
+fn step_limit_maxima() {
+    let Some(gpu) = common::gpu() else { return };
+    let count: usize = std::env::var("PHYSCORE_SPH_MAXIMA_BENCH").map_or(100_000, |c| c.parse().expect("a count"));
+    let a = gpu.adapter();
+    println!("adapter: {} ({}, {}, driver {})", a.name, a.backend, a.kind, a.driver);
+    for precision in [Precision::F32, Precision::F64] {
+        if gpu.check_precision(precision).is_err() {
+            continue;
+        }
+        for dim in [2, 3] {
+            let (p, x, v) = dam(dim, count);
+            let mut fluid = Sph::new(gpu.clone(), precision, p, &x, &v).expect("upload");
+            fluid.step(5, 5e-5, &AtomicBool::new(false)).expect("steps");
+            let (mut device, mut host) = (Vec::new(), Vec::new());
+            for _ in 0..15 {
+                let t = Instant::now();
+                let d = fluid.extremes().unwrap();
+                device.push(t.elapsed().as_secs_f64());
+                let t = Instant::now();
+                let h = fluid.extremes_from_read_back().unwrap();
+                host.push(t.elapsed().as_secs_f64());
+                assert_eq!((d.0.to_bits(), d.1.to_bits()), (h.0.to_bits(), h.1.to_bits()));
+            }
+            device.sort_by(f64::total_cmp);
+            host.sort_by(f64::total_cmp);
+            println!(
+                "WCSPH {dim}D {} particles {precision:?}: extremes {:.3} ms on the device, {:.3} ms from a read-back",
+                fluid.len(),
+                device[7] * 1e3,
+                host[7] * 1e3
+            );
+        }
+    }
+}

@@ -675,16 +675,10 @@ impl HeldTerms for DeviceDem {
         Ok(())
     }
     /// The contacts term's counter "contacts", as the CPU's: grain pairs counted once and
-    /// grain–wall contacts, from the committed history (the contacts of the last evaluation).
+    /// grain–wall contacts, from the committed history (the contacts of the last evaluation),
+    /// counted on the device.
     fn term_counts(&self) -> Vec<(String, &'static str, u64)> {
-        let g = self.lock();
-        let (Ok(raw), k) = (g.save_raw(), g.capacity()) else { return Vec::new() };
-        let n = self.radius.len();
-        let mut count = 0;
-        for i in 0..n {
-            let row = &raw.keys[i * (k + 1)..(i + 1) * (k + 1)];
-            count += row[1..=row[0] as usize].iter().filter(|&&p| p as usize >= n || p as usize > i).count() as u64;
-        }
+        let Ok(count) = self.lock().contacts_once() else { return Vec::new() };
         vec![(self.names.contacts.clone(), "contacts", count)]
     }
 }
@@ -983,6 +977,37 @@ mod tests {
         let Some(gpu) = gpu() else { return };
         cross::<DVec2>(&gpu);
         cross::<DVec3>(&gpu);
+    }
+
+    /// The contacts counter (`term_counts`, counted on the device) against the CPU term's,
+    /// mid-collision (the pair and the grain on the floor) and once the pair has parted.
+    fn counts<V: Vector>(gpu: &Arc<Gpu>) {
+        let dim = V::DIM;
+        let (x, v, r, m) = grains(dim);
+        let rec = records(dim, false);
+        let mut w = cpu_world::<V>(&x, &v, &r, &m, &rec, 1.0);
+        let dt = w.particles().auto_dt().unwrap();
+        w.set_dt(dt).unwrap();
+        let Ok(mut dev) = device(gpu, Precision::F64, dim, (&x, &v, &r, &m), None, &rec) else {
+            eprintln!("f64 skipped");
+            return;
+        };
+        let mut done = 0;
+        for at in [if dim == 2 { 90 } else { 130 }, 400] {
+            dev.steps(at - done, dt, &go()).unwrap();
+            w.step(at - done).unwrap();
+            done = at;
+            let cpu: Vec<_> = w.particles().term_counts().into_iter().filter(|c| c.1 == "contacts").collect();
+            assert!(cpu.len() == 1 && cpu[0].2 > 0, "{dim}D after {at} steps: {cpu:?}");
+            assert_eq!(dev.term_counts(), cpu, "{dim}D after {at} steps");
+        }
+    }
+
+    #[test]
+    fn device_dem_counts_its_contacts_as_the_cpu() {
+        let Some(gpu) = gpu() else { return };
+        counts::<DVec2>(&gpu);
+        counts::<DVec3>(&gpu);
     }
 
     /// Everything the device keeps: its rows, the contacts' history, the energy report.

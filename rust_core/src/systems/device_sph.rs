@@ -221,8 +221,9 @@ impl System for DeviceSph {
     }
     /// The CPU's WCSPH step limit (`sph::fluid`'s `max_dt`): the CFL condition at the largest
     /// speed now and the force criterion at the last step's largest pressure and viscous
-    /// acceleration plus |g| (two read-backs; none before the first step's acceleration is
-    /// known, as on the CPU). A device that cannot be read gives no limit (its next step reports it).
+    /// acceleration plus |g| (both maxima reduced on the device, 16 bytes read back; none
+    /// before the first step's acceleration is known, as on the CPU). A device that cannot be
+    /// read gives no limit (its next step reports it).
     fn auto_dt(&self) -> Option<Real> {
         let (vmax, a2) = self.lock().extremes().ok()?;
         let p = &self.params;
