@@ -19,6 +19,7 @@ __all__ = [
     "mesh_normals",
     "splat",
     "sphere_depths",
+    "blur",
     "draw_discs",
     "rasterise_mesh",
     "neighbors",
@@ -105,6 +106,7 @@ def sphere_depths(
     height: int,
     width: int,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]: ...
+def blur(a: npt.NDArray[np.float32], r: int, passes: int = 3) -> npt.NDArray[np.float32]: ...
 def mesh_normals(x: npt.NDArray[np.float64], faces: npt.NDArray[np.uint32]) -> npt.NDArray[np.float64]: ...
 def rasterise_mesh(
     verts: npt.NDArray[np.float32],

@@ -832,6 +832,46 @@ def test_glow_box_blur_is_a_moving_average(r):
     np.testing.assert_allclose(_box_blur(a.T.copy(), r, 0), want.T, rtol=1e-5, atol=1e-5)
 
 
+@pytest.mark.parametrize("shape, r", [((9, 31), 1), ((40, 23), 2), ((360, 480), 3), ((5, 3), 7), ((1, 200), 12)])
+def test_the_cores_blur_is_the_numpy_box_blurs_bit_for_bit(shape, r):
+    """`_blur` of a float32 image runs in the core (`_core.blur`); it is three numpy
+    `_box_blur` passes each way, bit for bit, at narrow and wide windows, at images smaller than
+    the window, and with the signed zeros and large values a frame can hold; a float64 image
+    stays in numpy. A bad array is refused naming it."""
+    from physcore import _core
+    from physcore.render._raster import _blur, _box_blur
+
+    rng = np.random.default_rng(r)
+    a = (rng.random(shape) * rng.choice([1e-3, 1.0, 3e4], shape)).astype(np.float32)
+    a[rng.random(shape) < 0.1] = -0.0
+    want = a
+    for _ in range(3):
+        want = _box_blur(_box_blur(want, r, 0), r, 1)
+    got = _blur(a, r)
+    assert got.dtype == np.float32 and got.shape == shape
+    assert np.array_equal(got.view(np.uint32), want.view(np.uint32))
+    assert np.array_equal(_core.blur(np.asfortranarray(a) if min(shape) == 1 else a, r).view(np.uint32), want.view(np.uint32))
+    a64 = a.astype(np.float64)
+    want64 = a64
+    for _ in range(3):
+        want64 = _box_blur(_box_blur(want64, r, 0), r, 1)
+    assert np.array_equal(_blur(a64, r), want64)
+    if min(shape) > 1:
+        with pytest.raises(ValueError, match="a: array must be C-contiguous"):
+            _core.blur(np.asfortranarray(a), r)
+
+
+def test_the_core_refuses_fortran_ordered_point_arrays():
+    """A Fortran-ordered (N, 2) array is contiguous, but its memory holds the columns: the core's
+    point arrays refuse it (the facade hands them C order), rather than read x as y."""
+    from physcore import _core
+
+    x = np.random.default_rng(0).random((50, 2))
+    with pytest.raises(ValueError, match="C-contiguous"):
+        _core.neighbors(np.asfortranarray(x), 0.2)
+    assert all(np.array_equal(p, q) for p, q in zip(_core.neighbors(x, 0.2), pc.neighbors(np.asfortranarray(x), 0.2)))
+
+
 def test_glow_splat_keeps_every_particle_inside_the_image():
     """Bilinear splatting conserves the count: a particle in the image adds exactly 1 in all
     (its four weights), one outside adds nothing, a NaN is dropped; the centre of mass of a

@@ -19,6 +19,10 @@ pub(super) fn flat2<'a>(a: &'a PyReadonlyArray2<'_, f64>, dim: usize, arg: &str)
     if shape[1] != dim {
         return Err(err(invalid(arg, format!("expected shape (N, {dim}), got ({}, {})", shape[0], shape[1]))));
     }
+    // `as_slice` also takes a Fortran-ordered array, whose rows it would read as columns.
+    if !a.is_c_contiguous() {
+        return Err(err(invalid(arg, "array must be C-contiguous")));
+    }
     a.as_slice().map_err(|_| err(invalid(arg, "array must be C-contiguous")))
 }
 

@@ -163,6 +163,32 @@ fn splat<'py>(
     Ok(numpy::ndarray::Array2::from_shape_vec((height, width), out).expect("shape matches").into_pyarray(py))
 }
 
+/// `passes` box means of 2r + 1 pixels down the columns then along the rows of `a` (H, W)
+/// float32, zeros beyond the edges (`crate::raster::blur`: the renderer's numpy `_blur` bit for
+/// bit). Returns (H, W) float32. InvalidInputError for a non-contiguous array or r above
+/// `raster::MAX_BLUR_RADIUS`.
+#[pyfunction]
+#[pyo3(signature = (a, r, passes=3))]
+fn blur<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f32>,
+    r: usize,
+    passes: usize,
+) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
+    let (height, width) = (a.shape()[0], a.shape()[1]);
+    let contiguous = || err(crate::error::invalid("a", "array must be C-contiguous"));
+    // `as_slice` also takes a Fortran-ordered array (its rows read as columns).
+    if !a.is_c_contiguous() {
+        return Err(contiguous());
+    }
+    let src = a.as_slice().map_err(|_| contiguous())?;
+    let pool = crate::par::default_pool().ok();
+    let out = py
+        .detach(|| crate::par::install(pool.as_ref(), || crate::raster::blur(src, width, height, r, passes)))
+        .map_err(|e| to_py(py, e))?;
+    Ok(numpy::ndarray::Array2::from_shape_vec((height, width), out).expect("shape matches").into_pyarray(py))
+}
+
 /// The nearest sphere surfaces over an (H, W) image (`crate::raster::sphere_depths`): points
 /// `col`, `row` (N,) float64 in pixels with `depth` (N,) float64 (pixels, larger = nearer),
 /// spheres of `radius` pixels. Returns (H, W) float32 depths (−inf where empty) and (H, W)
@@ -312,6 +338,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
     m.add_function(wrap_pyfunction!(splat, m)?)?;
     m.add_function(wrap_pyfunction!(sphere_depths, m)?)?;
+    m.add_function(wrap_pyfunction!(blur, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_kernel, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_lattice_sum, m)?)?;
     m.add_function(wrap_pyfunction!(formulas::sph_particle_mass, m)?)?;
