@@ -1,15 +1,18 @@
 """DEM grains on the GPU path (``Scene(device=...)`` with :class:`~physcore.Contacts` between
-grains of the scene's ``"radius"`` attribute, plane walls and a :class:`~physcore.Gravity`):
+grains of the scene's ``"radius"`` attribute, pinned grains as pegs, plane walls, a
+:class:`~physcore.Gravity` and a :class:`~physcore.Drag`):
 against the CPU path, the reference; the contact history (spins, angles, tangential and rolling
 springs) travelling as the term's history (save and load bit for bit, the CPU continuing a
 GPU file and the other way round, ``state``/``set_state``, rollback); the contact count and
-per-grain fields; what it refuses, by name, before anything changes.
+per-grain fields; the Galton board (pegs and dividers pinned, balls sinking under drag); what it
+refuses, by name, before anything changes.
 
 Like ``test_gpu_scenes.py`` they run on a real GPU where one is present, else on lavapipe (CI).
 The expected values are the CPU path's, never numbers copied from an earlier GPU run.
 """
 from __future__ import annotations
 
+import copy
 import pickle
 
 import numpy as np
@@ -144,24 +147,115 @@ def test_gpu_grains_that_diverge_are_rolled_back() -> None:
     assert np.isfinite(s.positions).all()
 
 
-@pytest.mark.parametrize("change", ["pinned", "sphere_wall", "springs", "collider"])
+@pytest.mark.parametrize("change", ["pinned_point", "sphere_wall", "springs", "collider"])
 def test_what_gpu_grains_cannot_hold_is_refused_by_name_and_nothing_changes(change: str) -> None:
+    """Pinned grains are held (see the Galton board's tests); a pinned particle of radius 0 (a
+    point, not a grain) is not: on the device every particle is a grain."""
     s = pc.Scene(dim=2, integrator="semi_implicit_euler", device=DEVICE)
     s.add(pc.Gravity([0.0, -9.81]))
-    s.add_particles([[0.0, 0.02], [0.03, 0.02]], masses=1e-3, pinned=[change == "pinned", False])
-    s.set_attribute("radius", [R, R])
+    s.add(pc.Drag(0.01))
+    s.add_particles([[0.0, 0.02], [0.03, 0.02]], masses=1e-3, pinned=[True, False])
+    s.set_attribute("radius", [0.0 if change == "pinned_point" else R, R])
     wall = pc.Sphere([0.0, 0.0], 0.5, inside=True) if change == "sphere_wall" else pc.Plane([0.0, 0.0], [0.0, 1.0])
     s.add(pc.Contacts(stiffness=2e3, walls=[wall]))
     if change == "springs":
         s.add(pc.Springs([0], [1], stiffness=10.0, rest_length=0.03, name="tie"))
     if change == "collider":
         s.add(pc.Box([-1.0, -1.0], [1.0, 1.0]))
-    want = {"pinned": "pinned", "sphere_wall": "wall", "springs": "tie", "collider": "collider"}[change]
+    want = {"pinned_point": "radius", "sphere_wall": "wall", "springs": "tie", "collider": "collider"}[change]
     x0 = s.positions
     with pytest.raises(pc.InvalidInputError, match=want):
         s.step(1)
     np.testing.assert_array_equal(s.positions, x0)
     assert s.time == 0.0
+
+
+RB = 0.002  # the Galton board's balls' radius
+
+
+def _galton(device: str = "cpu", precision: str | None = None) -> pc.Scene:
+    """``galton_board(balls=6, rows=3)`` (pegs and dividers pinned, drag, gravity, plane walls;
+    its automatic step), built on the CPU and, for a device, built again there from its
+    particles, attributes and (copies of its) terms: no stepped state crosses over."""
+    cpu = pc.scenes.galton_board(balls=6, rows=3)
+    if device == "cpu":
+        return cpu
+    s = pc.Scene(dim=2, integrator="semi_implicit_euler", device=device, precision=precision)
+    s.add_particles(cpu.positions, cpu.velocities, masses=cpu.masses, pinned=cpu.pinned)
+    for k, v in cpu.attributes.items():
+        s.set_attribute(k, v)
+    for t in cpu.terms:
+        s.add(copy.deepcopy(t))
+    s.dt = cpu.dt
+    return s
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_a_galton_board_runs_on_the_gpu_as_on_the_cpu(precision: str) -> None:
+    """The board of 6 balls and 3 rows for 10,000 steps (0.23 s: the first ball sinks onto the
+    top peg, hops on it and rolls off, the next sinks towards it): the balls where the
+    CPU has them, the pegs and dividers not moved by a bit, the books under the CPU's names in
+    its order (drag first of the dissipated) and equal to its, their total drifting as the
+    CPU's does (the left-point drag book and gravity's ½dt Σ m g·(v₀ − v), the scheme's own)."""
+    if precision == "f64" and not F64:
+        pytest.skip("the adapter has no f64")
+    cpu, gpu = _galton(), _galton(DEVICE, precision)
+    assert gpu.dt == cpu.dt and gpu.pinned.sum() > 100
+    b0, g0 = _books(cpu), _books(gpu)
+    assert list(g0) == list(b0) and list(b0)[-3:] == ["D drag", "D contacts (normal damping)", "D contacts (friction)"]
+    pins = cpu.pinned
+    x0 = cpu.positions
+    steps, seen = 10000, 0
+    for _ in range(20):
+        cpu.step(steps // 20)
+        gpu.step(steps // 20)
+        seen += cpu.contact_count()
+        assert gpu.contact_count() == cpu.contact_count() or precision == "f32"
+    assert gpu.device == DEVICE and gpu.precision == precision
+    b1, g1 = _books(cpu), _books(gpu)
+    assert list(g1) == list(b1)
+    # Ball 0 met the top peg and left its column (off it by more than a radius).
+    assert seen > 0 and abs(cpu.positions[0, 0]) > RB and b1["D contacts (normal damping)"] > 0
+    # Where they were put (f32: as the device rounded them), to the bit.
+    np.testing.assert_array_equal(gpu.positions[pins], x0[pins].astype(np.float32) if precision == "f32" else x0[pins])
+    np.testing.assert_array_equal(gpu.velocities[pins], 0.0)
+    dx = np.abs(gpu.positions[~pins] - cpu.positions[~pins]).max() / RB
+    scale = sum(abs(v) for v in b1.values())
+    ds = max(abs(g1[k] - b1[k]) for k in b1 if not k.startswith("D ")) / scale
+    db = max(abs(g1[k] - b1[k]) for k in b1 if k.startswith("D ")) / scale
+    dd = abs(g1["D drag"] - b1["D drag"]) / b1["D drag"]
+    drift = {k: sum(b[1].values()) - sum(b[0].values()) for k, b in (("cpu", (b0, b1)), ("gpu", (g0, g1)))}
+    print(f"\nGalton board 6 balls, 3 rows, {precision}, {steps} steps: balls {dx:.1e} RB apart, state books {ds:.1e}, "
+          f"dissipated {db:.1e} of their scale, drag {dd:.1e}; total drift CPU {drift['cpu']:.2e} J, GPU {drift['gpu']:.2e} J "
+          f"of {scale:.2e} J; {seen} contacts seen")
+    tol = {"f32": (1e-2, 1e-4, 3e-4), "f64": (1e-10, 1e-12, 1e-4)}[precision]
+    assert dx < tol[0] and ds < tol[1] and db < tol[2], (precision, dx, ds, db)
+    assert dd < tol[2] and abs(drift["gpu"] - drift["cpu"]) < tol[2] * scale
+    # The books balance to the scheme's first-order error (both paths alike).
+    assert abs(drift["gpu"]) < 1e-2 * (g1["D drag"] + g1["D contacts (normal damping)"])
+
+
+def test_a_galton_board_on_the_gpu_saves_and_loads_bit_for_bit(tmp_path) -> None:
+    """Pegs and drag in the file: a load and a pickle continue bit for bit, the CPU from the
+    GPU's file as the GPU does."""
+    precision = "f64" if F64 else "f32"
+    a = _galton(DEVICE, precision)
+    a.step(3000)
+    assert _books(a)["D contacts (normal damping)"] > 0  # ball 0 has met the top peg
+    path = a.save(tmp_path / "galton.npz")
+    b = pc.Scene.load(path)
+    c = pickle.loads(pickle.dumps(a))
+    on_cpu = pc.Scene.load(path, device="cpu")
+    for s in (a, b, c, on_cpu):
+        s.step(1000)
+    for s in (b, c):
+        assert s.device == DEVICE
+        np.testing.assert_array_equal(s.positions, a.positions)
+        np.testing.assert_array_equal(s.velocities, a.velocities)
+        assert _books(s) == _books(a)
+    tol = 1e-10 if precision == "f64" else 1e-2
+    assert np.abs(on_cpu.positions - a.positions).max() / RB < tol
+    np.testing.assert_array_equal(a.positions[a.pinned], _galton().positions[a.pinned])
 
 
 def test_device_auto_keeps_grains_on_the_cpu_and_says_why() -> None:

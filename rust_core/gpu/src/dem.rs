@@ -27,6 +27,14 @@
 //!   again. +M on i, −M on j: a couple. Its books go to "friction".
 //! - Walls are planes {x : (x − p)·n ≥ 0}, each with its own ζ and μ: overlap r − (x − p)·n,
 //!   normal −n, m* = m, lever r − δ/2; a wall neither moves nor turns.
+//! - Pinned grains (`set_pinned`) are fixed obstacles, pegs, as the CPU term holds them
+//!   (`inv_mass` 0): 1/m* = 1/m_i + 1/m_j with 1/m = 0 for the pinned one (so m* = m_free), its
+//!   1/(I + m r²) 0 in the rolling dashpot's I_r; a pinned grain never moves or turns, two
+//!   pinned grains never meet, and a pinned grain touches no wall. A pair with a free grain is
+//!   an ordinary pair otherwise (held in both histories, its books to its first grain, pinned
+//!   or not).
+//! - Linear drag (`DemParams::drag`, the CPU's "drag" term): F = −b v on each free grain at
+//!   the step's start, added to the contacts' force before the kick.
 //! - Semi-implicit Euler, v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + dt τ/I (in 2D also
 //!   the rotation angle, θ' = θ + dt ω', as the CPU's `end_step`); then each
 //!   contact's spring follows the contact point at the new state, ξ ← ξ_capped + dt·v_t(new).
@@ -52,8 +60,10 @@
 //!
 //! Energy books ([`DemBooks`]), as the CPU keeps them: kinetic (translation + rotation), the
 //! contact potential (½k_n δ² or ⅖k_n δ^{5/2} over the overlaps now, + ½k_t|ξ|² of the stored
-//! springs), gravity's potential −Σ m g·x, and the dissipated energy of the normal dashpots
-//! and of friction, booked per contact and step as the work its force drew from the motion
+//! springs), gravity's potential −Σ m g·x (kinetic and gravity over the free grains only), the
+//! energy drag dissipated (dt·b Σ|v|² a step, the power at the step's start: the CPU's
+//! `book_power`, so the drag book is the CPU's to rounding), and the dissipated energy of the
+//! normal dashpots and of friction, booked per contact and step as the work its force drew from the motion
 //! (the mean of its power at the step's two ends: semi-implicit Euler changes the kinetic
 //! energy by exactly F·(v + v')/2 dt) less what its spring gained. A pair's books go to its
 //! first grain, kept per grain on the device, summed on the host in index order. Two
@@ -74,8 +84,8 @@
 //! rolling resistance) and two keys: 2D f32 at the default capacity 8, about 500 bytes a grain
 //! (a million discs: 0.5 GB; the contact history alone is 352 MB, one binding).
 //!
-//! Not here (the CPU has them): walls other than planes, pinned grains, Verlet lists (the cell
-//! list is rebuilt every step), "xpbd".
+//! Not here (the CPU has them): walls other than planes, Verlet lists (the cell list is rebuilt
+//! every step), "xpbd"; of the other force terms only a uniform gravity and linear drag.
 use crate::cells::spread;
 use crate::particles::Halt;
 use crate::sph::{invalid, positive};
@@ -131,11 +141,14 @@ pub struct DemParams {
     pub rolling_friction: f64,
     /// η_r ≥ 0: the rolling dashpot over its critical value 2√(I_r k_r).
     pub rolling_damping: f64,
+    /// Linear drag b ≥ 0 (kg/s): F = −b v on every free grain, the CPU's "drag" term
+    /// (0: none, nothing of it runs).
+    pub drag: f64,
 }
 
 impl Default for DemParams {
     /// Linear law, k_n = 1e4 N/m, elastic, frictionless, ratio 2/7, β by dimension, no gravity,
-    /// the unit box, no rolling resistance.
+    /// the unit box, no rolling resistance, no drag.
     fn default() -> Self {
         Self {
             law: Law::Linear,
@@ -151,6 +164,7 @@ impl Default for DemParams {
             capacity: 0,
             rolling_friction: 0.0,
             rolling_damping: 0.0,
+            drag: 0.0,
         }
     }
 }
@@ -170,12 +184,15 @@ pub struct DemBooks {
     pub damping: f64,
     /// Dissipated so far by friction (slipping, and the springs of contacts that ended).
     pub friction: f64,
+    /// Dissipated so far by drag: Σ over steps of dt·b Σ|v|² at the step's start (the CPU's
+    /// book of a term's power).
+    pub drag: f64,
 }
 
 impl DemBooks {
     /// Everything: constant up to the scheme's error.
     pub fn total(&self) -> f64 {
-        (self.kinetic + self.rotational) + (self.potential + self.gravity) + (self.damping + self.friction)
+        (self.kinetic + self.rotational) + (self.potential + self.gravity) + (self.damping + self.friction + self.drag)
     }
 }
 
@@ -196,7 +213,8 @@ pub struct DemRaw {
     /// stores (J), then with rolling resistance θ_r (1 value in 2D, 3 in 3D) and its energy:
     /// n·capacity·(dim + 1) values, n·capacity·(dim + 2 + axial) with rolling resistance.
     pub springs: Vec<f64>,
-    /// The dissipated books per grain: n of the normal dashpots, then n of friction (J).
+    /// The dissipated books per grain: n of the normal dashpots, n of friction, then n of drag
+    /// (J).
     pub books: Vec<f64>,
 }
 
@@ -247,10 +265,14 @@ pub struct Dem {
     cells: [usize; 3],
     radius: Vec<f64>,
     mass: Vec<f64>,
+    /// Fixed obstacles (`set_pinned`).
+    pinned: Vec<bool>,
     walls: Vec<Plane>,
     pos: wgpu::Buffer,
     vel: wgpu::Buffer,
     omega: wgpu::Buffer,
+    /// Per grain: radius, mass, 1 free or 0 pinned.
+    props: wgpu::Buffer,
     keys: wgpu::Buffer,
     vals: wgpu::Buffer,
     flag: wgpu::Buffer,
@@ -303,6 +325,7 @@ impl Dem {
         finite_nonneg(p.cell, "cell")?;
         finite_nonneg(p.rolling_friction, "rolling_friction")?;
         finite_nonneg(p.rolling_damping, "rolling_damping")?;
+        finite_nonneg(p.drag, "drag")?;
         if !p.gravity.iter().all(|g| g.is_finite()) {
             return Err(invalid("gravity", "must be finite"));
         }
@@ -389,7 +412,7 @@ impl Dem {
         let pos = gpu.buffer("DEM positions", nn * d * rb, st)?;
         let vel = gpu.buffer("DEM velocities", nn * d * rb, st)?;
         let omega = gpu.buffer("DEM angular velocities and angles", nn * spin_width(dim) as u64 * rb, st)?;
-        let props = gpu.buffer("DEM radii and masses", 2 * nn * rb, st)?;
+        let props = gpu.buffer("DEM radii, masses and pins", 3 * nn * rb, st)?;
         let wall_buf = gpu.buffer("DEM walls", (8 * planes.len() as u64 * rb).max(16), st)?;
         let cell_of = gpu.buffer("DEM cells", nn * 4, st)?;
         let counts = gpu.buffer("DEM cell counts", total * 4, st)?;
@@ -401,11 +424,11 @@ impl Dem {
         let (sv, sc) = strides(dim, p.rolling_friction > 0.0);
         let vals = gpu.buffer("DEM contact history", nn * k * (sv + sc) as u64 * rb, st)?;
         let flag = gpu.buffer("DEM halt flags", 16, st)?;
-        let books = gpu.buffer("DEM energy books", 3 * nn * rb, st)?;
+        let books = gpu.buffer("DEM energy books", 4 * nn * rb, st)?;
         let cell_params = gpu.buffer("DEM cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
         let params_buf = gpu.buffer("DEM parameters", 64 + 16 * rb, U::UNIFORM | U::COPY_DST)?;
         let staging =
-            gpu.buffer("DEM read-back", (3 * nn * rb).max(nn * (k + 1) * 4).max(16), U::MAP_READ | U::COPY_DST)?;
+            gpu.buffer("DEM read-back", (4 * nn * rb).max(nn * (k + 1) * 4).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
         let (cell_layout, cell_pipes) = gpu.kernels(
@@ -460,10 +483,10 @@ impl Dem {
             gpu.upload(precision, &pos, x);
             gpu.upload(precision, &vel, v);
             gpu.upload(precision, &omega, &vec![0.0; n * spin_width(dim)]);
-            let pr: Vec<f64> = radius.iter().zip(mass).flat_map(|(&r, &m)| [r, m]).collect();
+            let pr: Vec<f64> = radius.iter().zip(mass).flat_map(|(&r, &m)| [r, m, 1.0]).collect();
             gpu.upload(precision, &props, &pr);
             gpu.queue.write_buffer(&keys, 0, &vec![0u8; (2 * nn * (k + 1) * 4) as usize]);
-            gpu.upload(precision, &books, &vec![0.0; 3 * n]);
+            gpu.upload(precision, &books, &vec![0.0; 4 * n]);
         }
         if !planes.is_empty() {
             let rows: Vec<f64> = planes
@@ -486,10 +509,12 @@ impl Dem {
             cells,
             radius: radius.to_vec(),
             mass: mass.to_vec(),
+            pinned: vec![false; n],
             walls: planes,
             pos,
             vel,
             omega,
+            props,
             keys,
             vals,
             flag,
@@ -503,7 +528,7 @@ impl Dem {
             chunk: Chunk::new(MAX_CHUNK),
             saved: None,
             primed: false,
-            _keep: vec![props, wall_buf, cell_of, counts, start, order, found, load, cell_params],
+            _keep: vec![wall_buf, cell_of, counts, start, order, found, load, cell_params],
         };
         s.write_params(0.0);
         s.gpu.wait()?;
@@ -536,6 +561,47 @@ impl Dem {
     /// The grains' masses (kg), as given.
     pub fn masses(&self) -> &[f64] {
         &self.mass
+    }
+    /// Which grains are pinned (`set_pinned`; none after `new`).
+    pub fn pinned(&self) -> &[bool] {
+        &self.pinned
+    }
+
+    /// Pins grains (`pinned`: one flag a grain): a pinned grain is a fixed obstacle, a peg,
+    /// as the CPU's contacts term holds one (`inv_mass` 0). It never moves or turns (its
+    /// velocity is set to 0 here, as the CPU's `add_particles` and `set_state` do; its spin is
+    /// kept, and enters its contacts as the CPU's does); a pair with a free grain has
+    /// m* = m_free, I_r = I_free + m r² of the free one, and is held in both grains' histories
+    /// like any pair, its books going to its first grain; two pinned grains never meet; a
+    /// pinned grain touches no wall; the books leave pinned grains out of the kinetic energy
+    /// and of gravity's potential, as the CPU's do.
+    ///
+    /// Errors: `Unsupported` naming "pinned" for a length other than one flag a grain.
+    pub fn set_pinned(&mut self, pinned: &[bool]) -> Result<()> {
+        if pinned.len() != self.n {
+            return Err(invalid("pinned", format_args!("{} flags for {} grains: one each", pinned.len(), self.n)));
+        }
+        self.pinned = pinned.to_vec();
+        if self.n == 0 {
+            return Ok(());
+        }
+        let pr: Vec<f64> =
+            (0..self.n).flat_map(|i| [self.radius[i], self.mass[i], if pinned[i] { 0.0 } else { 1.0 }]).collect();
+        self.gpu.upload(self.precision, &self.props, &pr);
+        if pinned.iter().any(|&p| p) {
+            let (_, mut v, _) = self.read()?;
+            self.rest_pinned(&mut v);
+            self.gpu.upload(self.precision, &self.vel, &v);
+        }
+        self.gpu.wait()
+    }
+
+    /// Zeroes the pinned grains' velocities in `v` (n·dim).
+    fn rest_pinned(&self, v: &mut [f64]) {
+        let d = self.dim;
+        for (i, _) in self.pinned.iter().enumerate().filter(|p| *p.1) {
+            v[d * i..d * (i + 1)].fill(0.0);
+        }
     }
     /// Contacts one grain may hold at once.
     pub fn capacity(&self) -> usize {
@@ -585,6 +651,7 @@ impl Dem {
             g[2],
             p.rolling_friction,
             p.rolling_damping,
+            p.drag,
         ];
         self.gpu.write_params(self.precision, &self.params, &ints, &reals);
     }
@@ -791,18 +858,23 @@ impl Dem {
         }
         self.gpu.queue.submit([enc.finish()]);
         let (x, v, w) = self.read()?;
-        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 3 * self.n)?;
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 4 * self.n)?;
         let (d, n) = (self.dim, self.n);
         let ad = if d == 2 { 1 } else { 3 };
         let mut b = DemBooks::default();
         for i in 0..n {
+            b.damping += per[i];
+            b.friction += per[n + i];
+            b.potential += per[2 * n + i];
+            b.drag += per[3 * n + i];
+            // A pinned grain holds no energy of motion or of gravity (the CPU's books).
+            if self.pinned[i] {
+                continue;
+            }
             let (m, r) = (self.mass[i], self.radius[i]);
             b.kinetic += 0.5 * m * (0..d).map(|a| v[d * i + a] * v[d * i + a]).sum::<f64>();
             b.rotational += 0.5 * self.beta * m * r * r * (0..ad).map(|a| w[ad * i + a] * w[ad * i + a]).sum::<f64>();
             b.gravity -= m * (0..d).map(|a| self.p.gravity[a] * x[d * i + a]).sum::<f64>();
-            b.damping += per[i];
-            b.friction += per[n + i];
-            b.potential += per[2 * n + i];
         }
         Ok(b)
     }
@@ -821,7 +893,8 @@ impl Dem {
         let raw = self.gpu.read_back(&self.keys, &staging, (n * (k + 1) * 4) as u64)?;
         let keys = raw.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
         let springs = self.gpu.read_reals(p, &self.vals, &staging, springs_len)?;
-        let books = self.gpu.read_reals(p, &self.books, &self.staging, 2 * n)?;
+        let mut books = self.gpu.read_reals(p, &self.books, &self.staging, 2 * n)?;
+        books.extend(self.gpu.read_reals_at(p, &self.books, (3 * n) as u64 * p.bytes(), &self.staging, n)?);
         let angle = if self.dim == 2 { self.angles()? } else { Vec::new() };
         Ok(DemRaw { x, v, omega, angle, keys, springs, books })
     }
@@ -845,7 +918,7 @@ impl Dem {
         ];
         let sv = strides(d, self.p.rolling_friction > 0.0).0;
         let na = if d == 2 { n } else { 0 };
-        if lens != [n * d, n * d, n * ad, na, n * (k + 1), n * k * sv, 2 * n] {
+        if lens != [n * d, n * d, n * ad, na, n * (k + 1), n * k * sv, 3 * n] {
             return Err(invalid("raw", format_args!("array lengths {lens:?} do not fit {n} grains of capacity {k}")));
         }
         let reals =
@@ -866,14 +939,17 @@ impl Dem {
         }
         let p = self.precision;
         self.gpu.upload(p, &self.pos, &raw.x);
-        self.gpu.upload(p, &self.vel, &raw.v);
+        let mut v = raw.v.clone();
+        self.rest_pinned(&mut v);
+        self.gpu.upload(p, &self.vel, &v);
         self.gpu.upload(p, &self.omega, &raw.omega);
         if d == 2 {
             self.gpu.upload_at(p, &self.omega, n as u64 * p.bytes(), &raw.angle);
         }
         self.gpu.queue.write_buffer(&self.keys, 0, bytemuck::cast_slice(&raw.keys));
         self.gpu.upload(p, &self.vals, &raw.springs);
-        self.gpu.upload(p, &self.books, &raw.books);
+        self.gpu.upload(p, &self.books, &raw.books[..2 * n]);
+        self.gpu.upload_at(p, &self.books, (3 * n) as u64 * p.bytes(), &raw.books[2 * n..]);
         self.primed = true;
         self.gpu.wait()
     }

@@ -36,7 +36,7 @@ struct Params {
     primed: u32,
     pad: u32,
     // k_n, the damping ratio ζ, friction μ, k_t/k_n, γ_t/γ_n (√ratio linear, √(1.5 ratio)
-    // Hertz), β of I = β m r², dt, gravity, rolling friction μ_r and rolling damping η_r.
+    // Hertz), β of I = β m r², dt, gravity, rolling friction μ_r and rolling damping η_r, drag.
     kn: real,
     zeta: real,
     mu: real,
@@ -49,6 +49,8 @@ struct Params {
     gz: real,
     mu_r: real,
     eta_r: real,
+    // Linear drag b (kg/s; 0: none): F = −b v on the free grains.
+    drag: real,
 };
 
 const WG: u32 = 64u;
@@ -59,7 +61,7 @@ const WG: u32 = 64u;
 @group(0) @binding(1) var<storage, read_write> pos: array<real>;
 @group(0) @binding(2) var<storage, read_write> vel: array<real>;
 @group(0) @binding(3) var<storage, read_write> omg: array<real>;
-// Per grain: radius, mass.
+// Per grain: radius, mass, and 1 for a free grain, 0 for a pinned one (a fixed obstacle).
 @group(0) @binding(4) var<storage, read> props: array<real>;
 // Per wall (a plane): point (3), unit normal into the allowed side (3), ζ, μ.
 @group(0) @binding(5) var<storage, read> walls: array<real>;
@@ -81,9 +83,26 @@ const WG: u32 = 64u;
 // than `cap` (u32::MAX: none); [2]: the contacts `tally` counted.
 @group(0) @binding(12) var<storage, read_write> flag: array<atomic<u32>>;
 // Per grain, J: [0, n) dissipated by the normal dashpots, [n, 2n) by friction (sliding, and the
-// springs of contacts that ended), [2n, 3n) the contact potential (written by `energy`). A
-// pair's books go to its first grain; each entry written only by the thread that owns it.
+// springs of contacts that ended), [2n, 3n) the contact potential (written by `energy`), [3n, 4n)
+// dissipated by drag. A pair's books go to its first grain (pinned or not); each entry written
+// only by the thread that owns it.
 @group(0) @binding(13) var<storage, read_write> books: array<real>;
+
+fn rad(i: u32) -> real {
+    return props[3u * i];
+}
+
+fn free(i: u32) -> bool {
+    return props[3u * i + 2u] != 0.0;
+}
+
+// 1/m, 0 for a pinned grain (the CPU's `inv_mass`): a pair with one has m* = m of the free one.
+fn inv_mass(i: u32) -> real {
+    if (free(i)) {
+        return 1.0 / props[3u * i + 1u];
+    }
+    return 0.0;
+}
 
 fn index(g: vec3<u32>) -> u32 {
     return g.x + 65535u * WG * g.y;
@@ -365,10 +384,14 @@ fn roll_eval(n: vec3<real>, d: real, wr: vec3<real>, f: real, reff: real, inv_ir
     return Roll(th, m);
 }
 
-// 1/(I + m r²) of grain i: the rolling dashpot's inertia I_r = 1/(Σ of these).
+// 1/(I + m r²) of grain i (0 pinned: it never turns): the rolling dashpot's inertia I_r = 1/(Σ of
+// these).
 fn inv_ic(i: u32) -> real {
-    let r = props[2u * i];
-    return 1.0 / ((P.beta + 1.0) * props[2u * i + 1u] * r * r);
+    if (!free(i)) {
+        return 0.0;
+    }
+    let r = rad(i);
+    return 1.0 / ((P.beta + 1.0) * props[3u * i + 1u] * r * r);
 }
 
 // A pair's geometry at the current state, first grain a < b: normal, overlap, levers and the
@@ -382,8 +405,8 @@ struct Geom {
 };
 
 fn geom(a: u32, b: u32, dx: vec3<real>, d2: real) -> Geom {
-    let ra = props[2u * a];
-    let rb = props[2u * b];
+    let ra = rad(a);
+    let rb = rad(b);
     let dist = sqrt(d2);
     var n = zero3();
     if (d2 > 0.0) {
@@ -399,7 +422,7 @@ fn geom(a: u32, b: u32, dx: vec3<real>, d2: real) -> Geom {
 // A grain and wall w: normal (grain to wall) −n_w, overlap r − (x − p)·n_w, lever r − δ/2,
 // contact-point velocity v + a ω × n (the wall neither moves nor turns).
 fn wall_geom(i: u32, x: vec3<real>, w: u32) -> Geom {
-    let r = props[2u * i];
+    let r = rad(i);
     let sd = dot(x - wall_point(w), wall_normal(w));
     let n = zero3() - wall_normal(w);
     let d = r - sd;
@@ -444,7 +467,7 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
     let vout = P.n * cap * sv + i * cap * sc;
     let count = keys[kin];
     let xi = xat(i);
-    let ri = props[2u * i];
+    let ri = rad(i);
     let c = coords(cell_of[i]);
     var force = zero3();
     var torque = zero3();
@@ -464,14 +487,15 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let cc = flat(vec3<u32>(x, y, z));
                 for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
                     let j = order[s];
-                    if (j == i) {
+                    // Two pinned grains never meet (the CPU skips the pair).
+                    if (j == i || !(free(i) || free(j))) {
                         continue;
                     }
                     let a = min(i, j);
                     let b = max(i, j);
                     let dx = xat(b) - xat(a);
                     let d2 = dot(dx, dx);
-                    let rs = props[2u * a] + props[2u * b];
+                    let rs = rad(a) + rad(b);
                     if (!(d2 < rs * rs && d2 > 0.0)) {
                         continue;
                     }
@@ -485,7 +509,7 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
                         u0 = vals[vin + q * sv + d];
                     }
                     let g = geom(a, b, dx, d2);
-                    let inv_m = 1.0 / props[2u * a + 1u] + 1.0 / props[2u * b + 1u];
+                    let inv_m = inv_mass(a) + inv_mass(b);
                     let o = contact(g.n, g.d, g.vc, coef(inv_m, P.zeta, P.mu), x0, fresh);
                     var rr = Roll(zero3(), zero3());
                     var ur: real = 0.0;
@@ -497,8 +521,8 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
                             ur = vals[vin + q * sv + d + 1u + P.ad];
                         }
                         let wab = wat(a) - wat(b);
-                        let ra = props[2u * a];
-                        let rb = props[2u * b];
+                        let ra = rad(a);
+                        let rb = rad(b);
                         let reff = ra * rb / (ra + rb);
                         rr = roll_eval(g.n, g.d, rolling_part(wab, g.n), o.fn_, reff, inv_ic(a) + inv_ic(b), th0);
                         ur = ur - 0.5 * P.dt * dot(rr.m, wab);
@@ -531,8 +555,10 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    let inv_mi = 1.0 / props[2u * i + 1u];
-    for (var w = 0u; w < P.walls; w = w + 1u) {
+    let inv_mi = inv_mass(i);
+    // A pinned grain touches no wall (the CPU ends its wall contacts).
+    let nw = select(0u, P.walls, free(i));
+    for (var w = 0u; w < nw; w = w + 1u) {
         let sd = dot(xi - wall_point(w), wall_normal(w));
         if (!(sd < ri)) {
             continue;
@@ -602,25 +628,38 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
 }
 
 // Semi-implicit Euler: v' = v + dt (f/m + g), x' = x + dt v', ω' = ω + τ (dt/I), I = β m r²;
-// in 2D also the angle, θ' = θ + dt ω'.
+// in 2D also the angle, θ' = θ + dt ω'. f holds the contacts' force and, with drag, −b v at the
+// step's start (the CPU's terms, summed before the kick); drag books dt·b|v|² per step, as the
+// CPU books a term's power (`Forces::book_power`: the power at the step's start times dt). A
+// pinned grain never moves or turns (the CPU's `accel` of inv_mass 0, its `end_step`).
 @compute @workgroup_size(WG)
 fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     let i = index(gid);
-    if (i >= P.n) {
+    if (i >= P.n || !free(i)) {
         return;
     }
     let d = P.dim;
-    let r = props[2u * i];
-    let m = props[2u * i + 1u];
+    let r = rad(i);
+    let m = props[3u * i + 1u];
     let inv_m = 1.0 / m;
     let grav = vec3<real>(P.gx, P.gy, P.gz);
     var broken = false;
+    var v2: real = 0.0;
     for (var a = 0u; a < d; a = a + 1u) {
-        let v = vel[d * i + a] + (load[6u * i + a] * inv_m + grav[a]) * P.dt;
+        let v0 = vel[d * i + a];
+        var f = load[6u * i + a];
+        if (P.drag > 0.0) {
+            f = f + v0 * (0.0 - P.drag);
+            v2 = v2 + v0 * v0;
+        }
+        let v = v0 + (f * inv_m + grav[a]) * P.dt;
         let x = pos[d * i + a] + v * P.dt;
         vel[d * i + a] = v;
         pos[d * i + a] = x;
         broken = broken || bad(v) || bad(x);
+    }
+    if (P.drag > 0.0) {
+        books[3u * P.n + i] = books[3u * P.n + i] + P.dt * (P.drag * v2);
     }
     let s = P.dt * (1.0 / (P.beta * m * r * r));
     if (d == 2u) {
@@ -682,15 +721,15 @@ fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {
             mu = P.mu;
             first = i == a;
             wab = wat(a) - wat(b);
-            let ra = props[2u * a];
-            let rb = props[2u * b];
+            let ra = rad(a);
+            let rb = rad(b);
             reff = ra * rb / (ra + rb);
         } else {
             let w = key - P.n;
             g = wall_geom(i, xi, w);
             mu = walls[8u * w + 7u];
             wab = wat(i);
-            reff = props[2u * i];
+            reff = rad(i);
         }
         let ft = vec_at(vout + q * sc + d);
         let n0 = vec_at(vout + q * sc + 2u * d);
@@ -705,10 +744,10 @@ fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {
         if (key < P.n) {
             let a = min(i, key);
             let b = max(i, key);
-            let w0 = wat(a) * (props[2u * a] - 0.5 * d0) + wat(b) * (props[2u * b] - 0.5 * d0);
+            let w0 = wat(a) * (rad(a) - 0.5 * d0) + wat(b) * (rad(b) - 0.5 * d0);
             v0 = vat(a) - vat(b) + cross(w0, n0);
         } else {
-            v0 = vat(i) + cross(wat(i) * (props[2u * i] - 0.5 * d0), n0);
+            v0 = vat(i) + cross(wat(i) * (rad(i) - 0.5 * d0), n0);
         }
         var x1 = zero3();
         if (mu > 0.0) {
@@ -754,7 +793,7 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
     let kin = i * (cap + 1u);
     let vin = i * cap * sv;
     let xi = xat(i);
-    let ri = props[2u * i];
+    let ri = rad(i);
     let c = coords(cell_of[i]);
     var u: real = 0.0;
     var z0 = 0u;
@@ -769,12 +808,12 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let cc = flat(vec3<u32>(x, y, z));
                 for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
                     let j = order[s];
-                    if (j <= i) {
+                    if (j <= i || !(free(i) || free(j))) {
                         continue;
                     }
                     let dx = xat(j) - xi;
                     let d2 = dot(dx, dx);
-                    let rs = ri + props[2u * j];
+                    let rs = ri + rad(j);
                     if (d2 < rs * rs && d2 > 0.0) {
                         u = u + un_of(rs - sqrt(d2));
                     }
@@ -782,7 +821,7 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
-    for (var w = 0u; w < P.walls; w = w + 1u) {
+    for (var w = 0u; w < select(0u, P.walls, free(i)); w = w + 1u) {
         let sd = dot(xi - wall_point(w), wall_normal(w));
         if (sd < ri) {
             u = u + un_of(ri - sd);

@@ -3,7 +3,9 @@
 //! momentum and angular momentum of an exploding cloud with friction; a grain sliding on a floor
 //! ends rolling at v0/(1 + β); a pile settles under gravity with its books balanced; runs repeat
 //! bit for bit and f32 follows f64; capacity overflow, non-finite input and divergence halt with
-//! an error. 2D discs and 3D spheres throughout.
+//! an error; pinned grains (pegs) stay still to the bit while grains rain onto them, and a grain
+//! bounces off one as off a wall (m* = m of the free grain); under linear drag a grain reaches
+//! the terminal speed m g / b with its books balanced. 2D discs and 3D spheres throughout.
 //! Skips without an adapter unless `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
 use physcore_gpu::dem::{Dem, DemParams, Law, Plane};
 use physcore_gpu::particles::Halt;
@@ -785,4 +787,251 @@ fn the_device_counts_each_contact_once_as_the_host() {
     let box1 = DemParams { cell: 0.1, lower: [0.0; 3], upper: [1.0; 3], ..Default::default() };
     let none = Dem::new(gpu.clone(), Precision::F32, 2, box1, &[], &[], &[], &[], &[]).unwrap();
     assert_eq!(none.contacts_once().unwrap(), 0);
+}
+
+/// Pegs: pinned grains on a staggered lattice (two of them overlapping each other and one
+/// overlapping the floor: neither may push), with a rain of free grains falling onto them under
+/// gravity, friction and rolling resistance; returns the system and the pinned flags.
+fn pegboard(gpu: &Arc<Gpu>, p: Precision, dim: usize) -> (Dem, Vec<bool>) {
+    let (mut x, mut v, mut rad, mut m, mut pinned) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut put = |c: [f64; 3], u: [f64; 3], r: f64, pin: bool| {
+        x.extend_from_slice(&c[..dim]);
+        v.extend_from_slice(&u[..dim]);
+        rad.push(r);
+        m.push((r / 0.03).powi(dim as i32));
+        pinned.push(pin);
+    };
+    // Free grains first, a queue above the pegs, a little off their axes.
+    for k in 0..12 {
+        let j = k as f64;
+        let c =
+            [0.25 + 0.07 * (k % 4) as f64 + 0.004 * unit(k), 0.75 + 0.07 * (k / 4) as f64, 0.25 + 0.01 * unit(99 + k)];
+        put(c, [0.1 * (unit(7 * k) - 0.5), -0.5, 0.1 * (unit(11 * k) - 0.5)], 0.025 + 0.002 * (j % 3.0), false);
+    }
+    for row in 0..3 {
+        for k in 0..5 {
+            let c = [0.1 + 0.1 * k as f64 + 0.05 * (row % 2) as f64, 0.55 - 0.12 * row as f64, 0.25];
+            // The pegs are given a velocity: pinning sets it to 0.
+            put(c, [0.3, 0.2, 0.1], 0.02, true);
+        }
+    }
+    put([0.62, 0.56, 0.25], [0.0; 3], 0.02, true); // overlaps the first row's last peg
+    put([0.3, 0.01, 0.25], [0.0; 3], 0.02, true); // overlaps the floor
+    let wall = |point: [f64; 3], normal: [f64; 3]| Plane { point, normal, zeta: 0.4, friction: 0.4 };
+    let walls =
+        [wall([0.0; 3], [0.0, 1.0, 0.0]), wall([0.0; 3], [1.0, 0.0, 0.0]), wall([0.7, 0.0, 0.0], [-1.0, 0.0, 0.0])];
+    let params = DemParams {
+        stiffness: 1e5,
+        zeta: 0.4,
+        friction: 0.4,
+        rolling_friction: 0.05,
+        rolling_damping: 0.3,
+        gravity: [0.0, -9.81, 0.0],
+        lower: [0.0; 3],
+        upper: [0.7, 1.1, 0.5],
+        ..Default::default()
+    };
+    let mut dem = Dem::new(gpu.clone(), p, dim, params, &x, &v, &rad, &m, &walls).unwrap();
+    dem.set_pinned(&pinned).unwrap();
+    (dem, pinned)
+}
+
+/// Pinned grains are fixed obstacles: grains rain onto them for 0.25 s and they stay where they
+/// were to the bit, at rest and unturned (f64 and f32, 2D and 3D), while the free grains touch
+/// them; the books leave them out and balance as a board without them does.
+#[test]
+fn pinned_grains_stay_still_to_the_bit_while_grains_rain_onto_them() {
+    let Some(gpu) = gpu() else { return };
+    for dim in [2, 3] {
+        for p in [Precision::F64, Precision::F32] {
+            let (mut dem, pinned) = pegboard(&gpu, p, dim);
+            let n = dem.len();
+            // A 59th of the pegs' contact duration π√(m*/k_n).
+            let dt = 1e-4;
+            let (x0, v0, w0) = dem.read().unwrap();
+            let a0 = dem.angles().unwrap();
+            let mass = dem.masses().to_vec();
+            let b0 = dem.books().unwrap();
+            let pins: Vec<usize> = (0..n).filter(|&i| pinned[i]).collect();
+            assert!(pins.iter().all(|&i| (0..dim).all(|a| v0[dim * i + a] == 0.0)), "pinning stops a grain");
+            let (mut peg_contacts, mut most) = (0usize, 0usize);
+            for _ in 0..25 {
+                run(&mut dem, 100, dt);
+                let raw = dem.save_raw().unwrap();
+                let k = dem.capacity();
+                let on_pegs: usize = pins.iter().map(|&i| raw.keys[i * (k + 1)] as usize).sum();
+                peg_contacts += on_pegs;
+                most = most.max(on_pegs);
+                // No peg holds a contact with another peg or a wall.
+                for &i in &pins {
+                    let row = &raw.keys[i * (k + 1) + 1..i * (k + 1) + 1 + raw.keys[i * (k + 1)] as usize];
+                    assert!(row.iter().all(|&j| (j as usize) < n && !pinned[j as usize]), "{dim}D peg {i}: {row:?}");
+                }
+            }
+            let (x, v, w) = dem.read().unwrap();
+            let a = dem.angles().unwrap();
+            let b = dem.books().unwrap();
+            for &i in &pins {
+                for c in 0..dim {
+                    assert_eq!(x[dim * i + c].to_bits(), x0[dim * i + c].to_bits(), "{dim}D {p:?} peg {i} moved");
+                    assert_eq!(v[dim * i + c].to_bits(), 0f64.to_bits(), "{dim}D {p:?} peg {i} has a velocity");
+                }
+                let ad = if dim == 2 { 1 } else { 3 };
+                assert!((0..ad).all(|c| w[ad * i + c] == w0[ad * i + c] && w[ad * i + c] == 0.0), "peg {i} turned");
+                assert_eq!(a[i], a0[i]);
+            }
+            // The free grains fell onto the pegs and bounced off them.
+            let fell = (0..n).filter(|&i| !pinned[i]).all(|i| x[dim * i + 1] < x0[dim * i + 1] - 0.05);
+            // Gravity's work in semi-implicit Euler, ½dt Σ m g·(v₀ − v) (free grains; the pegs'
+            // velocities are 0), taken out of the balance as in the pile's test.
+            let drift: f64 = (0..n)
+                .filter(|&i| !pinned[i])
+                .map(|i| 0.5 * dt * mass[i] * -9.81 * (v0[dim * i + 1] - v[dim * i + 1]))
+                .sum();
+            let lost = b.damping + b.friction;
+            let off = (b.total() - b0.total() - drift).abs();
+            eprintln!(
+                "{dim}D {p:?} pegboard, {} pegs: {peg_contacts} peg contacts seen ({most} at once), lost {lost:.3e} J, \
+                 books off by {off:.1e} J ({:.1e} of it); pegs still to the bit",
+                pins.len(),
+                off / lost
+            );
+            assert!(fell && most > 0 && lost > 0.0, "{dim}D {p:?}: the grains met the pegs");
+            if p == Precision::F64 {
+                assert!(off < 1e-9 * lost, "{dim}D books off by {off:e} J of {lost:e} J");
+            }
+        }
+    }
+}
+
+/// A grain falling head-on onto a pinned grain bounces as off a plane wall of the same ζ at the
+/// same overlap: m* = m of the free grain, the pinned one unmoved (the same trajectory to
+/// rounding, both laws); and the restitution is the model's.
+#[test]
+fn a_grain_bounces_off_a_pinned_grain_as_off_a_wall() {
+    let Some(gpu) = gpu() else { return };
+    let (kn, v, m, r) = (1e5f64, 1.0f64, 0.7f64, 0.5f64);
+    let zeta = 0.3;
+    for (law, hertz) in [(Law::Linear, false), (Law::Hertz, true)] {
+        let dmax = (5.0 * m * v * v / (4.0 * kn)).powf(0.4);
+        let dt = if hertz { HERTZ_T * dmax / v / 50.0 } else { std::f64::consts::PI / (kn / m).sqrt() / 50.0 };
+        for dim in [2, 3] {
+            let params =
+                DemParams { law, stiffness: kn, zeta, lower: [-2.0; 3], upper: [2.0; 3], ..Default::default() };
+            let gap = 0.0123 * v * dt;
+            // The free grain at y = 1 + gap above a pinned one at the origin, falling at v.
+            let (mut x, mut u) = (vec![0.0; 2 * dim], vec![0.0; 2 * dim]);
+            x[1] = 2.0 * r + gap;
+            u[1] = -v;
+            let mut peg = Dem::new(gpu.clone(), Precision::F64, dim, params, &x, &u, &[r, r], &[m, 3.0], &[]).unwrap();
+            peg.set_pinned(&[false, true]).unwrap();
+            // The same grain over a floor at y = r (the peg's top).
+            let floor = Plane { point: [0.0, r, 0.0], normal: [0.0, 1.0, 0.0], zeta, friction: 0.0 };
+            let mut wall =
+                Dem::new(gpu.clone(), Precision::F64, dim, params, &x[..dim], &u[..dim], &[r], &[m], &[floor]).unwrap();
+            let steps = 120;
+            for _ in 0..steps {
+                run(&mut peg, 1, dt);
+                run(&mut wall, 1, dt);
+            }
+            let (xp, vp, _) = peg.read().unwrap();
+            let (xw, vw, _) = wall.read().unwrap();
+            let e = vp[1] / v;
+            let dx = (xp[1] - xw[1]).abs().max((vp[1] - vw[1]).abs() * dt);
+            let b = peg.books().unwrap();
+            let balance = (b.kinetic + b.damping) / (0.5 * m * v * v) - 1.0;
+            eprintln!(
+                "{dim}D {law:?}: off a pinned grain e = {e:.12}, off a wall {:.12}; trajectories {dx:.1e} m apart; books {balance:+.1e}",
+                vw[1] / v
+            );
+            assert!(e > 0.1 && e < 0.9 && peg.contacts().unwrap() == 0, "{dim}D {law:?}: bounced off: {e}");
+            assert!((xp[1] - xw[1]).abs() < 1e-12 && (vp[1] - vw[1]).abs() < 1e-10, "{dim}D {law:?}: {xp:?} {xw:?}");
+            assert!(xp[dim..].iter().zip(&x[dim..]).all(|(a, b)| a.to_bits() == b.to_bits()), "the peg moved");
+            assert!(vp[dim..].iter().all(|&c| c == 0.0));
+            assert!(balance.abs() < 1e-12, "{dim}D {law:?}: books off by {balance:e}");
+        }
+    }
+}
+
+/// Linear drag under gravity: each grain tends to the terminal speed m g / b (the fixed point
+/// of v' = v + dt (g − b v/m) too), from above and from below; the drag book is the sum of
+/// dt·b|v|² over the steps (a host loop of the same expressions), the pinned grain none; the
+/// books balance: with gravity's ½dt Σ m g·(v₀ − v) taken out (as in the pile's test), what is
+/// left is the left-point rule's, ½dt Σ b v·(v − v'), bounded by ½dt b max|v| Σ|v_N − v₀|.
+#[test]
+fn drag_brings_a_grain_to_its_terminal_speed_with_its_books_balanced() {
+    let Some(gpu) = gpu() else { return };
+    let (b, g) = (0.05f64, 9.81f64);
+    for dim in [2, 3] {
+        for p in [Precision::F64, Precision::F32] {
+            // Three grains far apart (no contacts), masses 0.01, 0.02, 0.03 kg, the first
+            // thrown up, the second thrown down faster than terminal; a fourth pinned.
+            let n = 4;
+            let masses = [0.01, 0.02, 0.03, 0.05];
+            let (mut x, mut u) = (vec![0.0; n * dim], vec![0.0; n * dim]);
+            for i in 0..n {
+                x[dim * i] = i as f64;
+            }
+            u[1] = 2.0;
+            u[dim + 1] = -8.0;
+            u[2 * dim] = 0.5;
+            let params =
+                DemParams { gravity: [0.0, -g, 0.0], drag: b, lower: [-1.0; 3], upper: [5.0; 3], ..Default::default() };
+            let mut dem = Dem::new(gpu.clone(), p, dim, params, &x, &u, &[0.1; 4], &masses, &[]).unwrap();
+            dem.set_pinned(&[false, false, false, true]).unwrap();
+            let dt = 1e-3;
+            // 20 relaxation times of the heaviest free grain, m/b = 0.6 s.
+            let steps = (20.0 * 0.03 / b / dt).round() as u64;
+            let b0 = dem.books().unwrap();
+            let (_, v0, _) = dem.read().unwrap();
+            run(&mut dem, steps, dt);
+            let (_, v, _) = dem.read().unwrap();
+            let books = dem.books().unwrap();
+            // The host loop: the kernel's expressions in f64.
+            let mut want = 0.0;
+            let mut bound = 0.0;
+            let mut drift = 0.0;
+            for i in 0..3 {
+                let mut w: Vec<f64> = v0[dim * i..dim * (i + 1)].to_vec();
+                let mut vmax: f64 = 0.0;
+                for _ in 0..steps {
+                    let v2: f64 = w.iter().map(|c| c * c).sum();
+                    want += dt * (b * v2);
+                    vmax = vmax.max(v2.sqrt());
+                    for (a, c) in w.iter_mut().enumerate() {
+                        let ga = if a == 1 { -g } else { 0.0 };
+                        *c += (*c * -b * (1.0 / masses[i]) + ga) * dt;
+                    }
+                }
+                // Each component moves monotonically to its terminal value: Σ|v − v'| = |v_N − v₀|.
+                bound += 0.5 * dt * b * vmax * (0..dim).map(|c| (v[dim * i + c] - v0[dim * i + c]).abs()).sum::<f64>();
+                drift += 0.5 * dt * masses[i] * -g * (v0[dim * i + 1] - v[dim * i + 1]);
+            }
+            let terminal = (0..3).map(|i| (v[dim * i + 1] + masses[i] * g / b).abs() / (masses[i] * g / b));
+            let terminal = terminal.fold(0.0, f64::max);
+            let sideways = (0..3).map(|i| v[dim * i].abs()).fold(0.0, f64::max);
+            let off = (books.total() - b0.total() - drift).abs();
+            let err = (books.drag - want).abs() / want;
+            eprintln!(
+                "{dim}D {p:?} drag b = {b}: {steps} steps, speeds within {terminal:.1e} of m g / b; drag book {:.6e} J \
+                 (host loop {err:.1e} off); books off by {off:.2e} J (bound {bound:.2e} J, of {:.3e} J dissipated)",
+                books.drag, books.drag
+            );
+            let (x1, _, _) = dem.read().unwrap();
+            assert_eq!(&x1[3 * dim..], &x[3 * dim..], "the pinned grain stayed");
+            assert!(books.damping == 0.0 && books.friction == 0.0 && books.potential == 0.0);
+            if p == Precision::F64 {
+                assert!(terminal < 1e-8 && sideways < 1e-8, "{dim}D: {v:?}");
+                assert!(err < 1e-12, "{dim}D: drag book {} vs {want}", books.drag);
+                assert!(
+                    off <= bound * 1.0001 + 1e-12 * books.drag && off > 0.0,
+                    "{dim}D books off by {off:e} (bound {bound:e})"
+                );
+            } else {
+                // f32: the kick stalls once dt (g − b v/m) is below half an ulp of v (≈ 3e-5 of
+                // m g / b); each grain's book is a sum of `steps` f32 terms (n ε = 7e-4).
+                assert!(terminal < 1e-4 && err < 1e-3, "{dim}D f32: {terminal:e} {err:e}");
+            }
+        }
+    }
 }

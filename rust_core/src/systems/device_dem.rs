@@ -1,12 +1,14 @@
 //! DEM grains stepped on a GPU (`physcore_gpu::dem`) as a system of the world: what a scene of
-//! grains under one "contacts" term (and a uniform gravity) becomes at `device="gpu"` (issue
-//! "GPU fluids, grains and batches"). It stands in for the particle system under its name, so
-//! the scene reads positions, spins, the books and the contact term's history from it.
+//! grains under one "contacts" term (and a uniform gravity, a linear drag) becomes at
+//! `device="gpu"` (issue "GPU fluids, grains and batches"). It stands in for the particle system
+//! under its name, so the scene reads positions, spins, the books and the contact term's history
+//! from it.
 //!
-//! What it holds: every particle of the scene as a grain (its `radius` attribute > 0, none
-//! pinned), exactly one `contacts` term with plane walls only, at most one `gravity` term,
-//! semi-implicit Euler (the CPU's scheme for contacts; not "xpbd"), no scene colliders. Anything
-//! else is refused by name before anything moves (`from_records`).
+//! What it holds: every particle of the scene as a grain (its `radius` attribute > 0), pinned
+//! ones as fixed obstacles (pegs) as the CPU term holds them, exactly one `contacts` term with
+//! plane walls only, at most one `gravity` and one `drag` term, in any order, semi-implicit
+//! Euler (the CPU's scheme for contacts; not "xpbd"), no scene colliders. Anything else is
+//! refused by name before anything moves (`from_records`).
 //!
 //! Books, history and step limit are the CPU term's (`terms::contacts`): the same energy names
 //! and order, its `OwnState::history` layout both ways (`term_history`, `set_term_history`), so
@@ -35,6 +37,8 @@ const MAX_CELLS: Real = 16_777_216.0;
 struct Names {
     contacts: String,
     gravity: Option<String>,
+    /// The drag term's, if its coefficient is > 0 (the CPU books a drag of 0 nowhere).
+    drag: Option<String>,
     /// Whether gravity's potential comes before the contacts' (the terms' order).
     gravity_first: bool,
 }
@@ -54,6 +58,8 @@ pub struct DeviceDem {
     walls: Vec<Plane>,
     radius: Vec<Real>,
     mass: Vec<Real>,
+    /// The fixed grains (`Dem::set_pinned`).
+    pinned: Vec<bool>,
     /// β of I = β m r² (the CPU term's, its default by dimension).
     beta: Real,
     /// The contacts term's record, to read histories through the CPU term's own loader.
@@ -135,10 +141,11 @@ impl DeviceDem {
     /// no contacts yet).
     ///
     /// Errors: `InvalidInput` naming what the device's DEM cannot hold (a term other than one
-    /// "contacts" and one "gravity", no contacts term, a wall other than a plane, another
-    /// integrator than "semi_implicit_euler", pinned particles, scene colliders, no radius
-    /// attribute or a radius not > 0, no grains), the contacts term's own checks of its record
-    /// and of `history`, f64 on an adapter without it; `OutOfMemory` for device buffers.
+    /// "contacts", one "gravity" and one "drag", no contacts term, a wall other than a plane,
+    /// another integrator than "semi_implicit_euler", scene colliders, no radius attribute or
+    /// a radius not > 0, pinned particles included, no grains), the contacts and drag terms' own
+    /// checks of their records and of `history`, f64 on an adapter without it; `OutOfMemory` for
+    /// device buffers.
     #[allow(clippy::too_many_arguments)]
     pub fn from_records(
         gpu: Arc<Gpu>,
@@ -168,6 +175,7 @@ impl DeviceDem {
         }
         let mut contacts = None;
         let mut gravity = None;
+        let mut drag = None;
         let mut gravity_first = false;
         for (kind, tname, p) in terms {
             match kind.as_str() {
@@ -176,17 +184,20 @@ impl DeviceDem {
                     gravity_first = contacts.is_none();
                     gravity = Some((tname.clone(), p));
                 }
-                "contacts" | "gravity" => {
+                "drag" if drag.is_none() => drag = Some((tname.clone(), p)),
+                "contacts" | "gravity" | "drag" => {
                     return Err(invalid(
                         tname,
-                        format!("the GPU path's DEM holds one contacts and one gravity term; {tname:?} is a second {kind:?}"),
+                        format!(
+                            "the GPU path's DEM holds one contacts, one gravity and one drag term; {tname:?} is a second {kind:?}"
+                        ),
                     ))
                 }
                 _ => {
                     return Err(invalid(
                         tname,
                         format!(
-                            "the GPU path's DEM holds grains under one \"contacts\" term and a uniform gravity; it has no kernel for {kind:?}"
+                            "the GPU path's DEM holds grains under one \"contacts\" term, a uniform gravity and a linear drag; it has no kernel for {kind:?}"
                         ),
                     ))
                 }
@@ -207,8 +218,8 @@ impl DeviceDem {
                 format!("the GPU path's DEM has no scene colliders (a {kind:?} here); give the contacts term plane walls instead"),
             ));
         }
-        if pinned.len() != n || pinned.iter().any(|&p| p) {
-            return Err(invalid("pinned", "the GPU path's DEM has no pinned grains"));
+        if pinned.len() != n {
+            return Err(invalid("pinned", format!("{} flags for {n} particles", pinned.len())));
         }
         let Some(radius) = radius else {
             return Err(invalid("radius", "the GPU path's DEM needs the particles' \"radius\" attribute"));
@@ -217,9 +228,13 @@ impl DeviceDem {
             return Err(invalid("radius", format!("{} values for {n} particles", radius.len())));
         }
         if let Some(i) = radius.iter().position(|r| !(r.is_finite() && *r > 0.0)) {
+            let what = if pinned[i] { "pinned particle" } else { "particle" };
             return Err(invalid(
                 "radius",
-                format!("particle {i}: {} (the GPU path's DEM takes every particle as a grain, radius > 0)", radius[i]),
+                format!(
+                    "{what} {i}: {} (the GPU path's DEM takes every particle as a grain, pinned ones too: radius > 0)",
+                    radius[i]
+                ),
             ));
         }
         if n == 0 {
@@ -233,6 +248,14 @@ impl DeviceDem {
         } else {
             build.build::<DVec3>(cname.clone(), cp.try_clone("add_term")?, &ctx)?;
         }
+        // The drag term's own checks likewise; b = 0 is a term with no force and no book.
+        let b = match &drag {
+            Some((dname, p)) => {
+                registry::lookup("drag")?.build::<DVec2>(dname.clone(), p.try_clone("add_term")?, &ctx)?;
+                p.number("coefficient")?
+            }
+            None => 0.0,
+        };
         let (law, cpu_law) = match cp.text("law")? {
             "hertz" => (Law::Hertz, CpuLaw::Hertz),
             _ => (Law::Linear, CpuLaw::Linear),
@@ -273,9 +296,12 @@ impl DeviceDem {
             capacity: if dim == 2 { 8 } else { 16 },
             rolling_friction: number_or(cp, "rolling_friction", 0.0)?,
             rolling_damping: number_or(cp, "rolling_damping", 0.0)?,
+            drag: b,
         };
-        let dem = Dem::new(gpu.clone(), precision, dim, params, x, v, radius, mass, &walls)?;
-        let names = Names { contacts: cname, gravity: gravity.map(|g| g.0), gravity_first };
+        let mut dem = Dem::new(gpu.clone(), precision, dim, params, x, v, radius, mass, &walls)?;
+        dem.set_pinned(pinned)?;
+        let drag = drag.filter(|_| b > 0.0).map(|d| d.0);
+        let names = Names { contacts: cname, gravity: gravity.map(|g| g.0), drag, gravity_first };
         let mut s = Self {
             name: name.to_string(),
             gpu,
@@ -285,6 +311,7 @@ impl DeviceDem {
             walls,
             radius: radius.to_vec(),
             mass: mass.to_vec(),
+            pinned: pinned.to_vec(),
             beta,
             record: cp.try_clone("add_term")?,
             names,
@@ -318,6 +345,7 @@ impl DeviceDem {
             &self.mass,
             &self.walls,
         )?;
+        dem.set_pinned(&self.pinned)?;
         dem.load_raw(raw)?;
         *self.g.get_mut().unwrap_or_else(|p| p.into_inner()) = dem;
         self.params = params;
@@ -362,8 +390,9 @@ impl DeviceDem {
     }
 
     /// The device's raw state from a history in the CPU term's canonical layout (`canonical`),
-    /// at positions and velocities `x`, `v`, for capacity `k`; the books so far go to grain 0.
-    fn raw_of(&self, c: &[Real], x: Vec<Real>, v: Vec<Real>, k: usize) -> DemRaw {
+    /// at positions and velocities `x`, `v`, for capacity `k`; the contacts' books so far go to
+    /// grain 0, the drag's per grain are `drag` (not the contacts term's: kept as they are).
+    fn raw_of(&self, c: &[Real], x: Vec<Real>, v: Vec<Real>, drag: &[Real], k: usize) -> DemRaw {
         let (d, n, a) = (self.dim, self.radius.len(), axial(self.dim));
         let roll = self.params.rolling_friction > 0.0;
         let sv = d + 1 + if roll { a + 1 } else { 0 };
@@ -377,6 +406,7 @@ impl DeviceDem {
         let mut books = vec![0.0; 2 * n];
         books[0] = c[head - 2];
         books[n] = c[head - 1];
+        books.extend_from_slice(drag);
         let mut keys = vec![0u32; n * (k + 1)];
         let mut springs = vec![0.0; n * k * sv];
         let mut put = |i: usize, j: usize, e: &[Real]| {
@@ -411,26 +441,37 @@ impl DeviceDem {
         count.into_iter().max().unwrap_or(0)
     }
 
-    /// The CPU term's step limit (`Contacts::max_dt`): a 50th of the contact duration of the
-    /// lightest pair (linear: the stiffest of the normal, tangential and rolling modes; Hertz:
-    /// Johnson's impact duration at twice the fastest grain's speed or a fall through one
-    /// radius, and the period at the last evaluation's deepest overlap).
-    fn max_dt(&self) -> Result<Real> {
+    /// The CPU scene's step limit (`ParticleSystem::auto_dt` of these terms): the contacts
+    /// term's (`Contacts::max_dt`: a 50th of the contact duration of the lightest pair of free
+    /// grains; linear: the stiffest of the normal, tangential and rolling modes; Hertz:
+    /// Johnson's impact duration at twice the fastest free grain's speed or a fall through one
+    /// radius, and the period at the last evaluation's deepest overlap), within half the drag's
+    /// time scale m/b of the lightest free grain (`Drag::time_scale`); `None` with no free
+    /// grain, as on the CPU.
+    fn max_dt(&self) -> Result<Option<Real>> {
         let p = &self.params;
-        let m_min = self.mass.iter().cloned().fold(Real::INFINITY, Real::min);
-        let r_min = self.radius.iter().cloned().fold(Real::INFINITY, Real::min);
+        let free = || (0..self.mass.len()).filter(|&i| !self.pinned[i]);
+        let m_min = free().map(|i| self.mass[i]).fold(Real::INFINITY, Real::min);
+        let r_min = free().map(|i| self.radius[i]).fold(Real::INFINITY, Real::min);
+        if !m_min.is_finite() {
+            return Ok(None);
+        }
         let hertz = matches!(p.law, Law::Hertz);
         let (v_max2, deepest) = if hertz {
             let g = self.lock();
             let (_, v, _) = g.read()?;
-            let v_max2 = v.chunks_exact(self.dim).map(|c| c.iter().map(|u| u * u).sum::<Real>()).fold(0.0, Real::max);
+            let d = self.dim;
+            let v_max2 = free().map(|i| v[d * i..d * (i + 1)].iter().map(|u| u * u).sum::<Real>()).fold(0.0, Real::max);
             (v_max2, if self.evaluated { g.max_overlap()? } else { 0.0 })
         } else {
             (0.0, 0.0)
         };
         let gm = p.gravity.iter().map(|c| c * c).sum::<Real>().sqrt();
         let shape = (p.stiffness, p.tangential_ratio, self.beta, p.rolling_friction);
-        Ok(crate::terms::contacts::step_limit(hertz, shape, m_min, r_min, v_max2, gm, deepest))
+        let limit = crate::terms::contacts::step_limit(hertz, shape, m_min, r_min, v_max2, gm, deepest);
+        let drag = if p.drag > 0.0 { 0.5 * (m_min / p.drag) } else { Real::INFINITY };
+        let dt = drag.min(limit);
+        Ok((dt.is_finite() && dt > 0.0).then_some(dt))
     }
 }
 
@@ -461,14 +502,16 @@ impl System for DeviceDem {
     /// The CPU contacts term's limit (see `max_dt`); a device that cannot be read gives none
     /// (its next step reports it).
     fn auto_dt(&self) -> Option<Real> {
-        self.max_dt().ok()
+        self.max_dt().ok().flatten()
     }
     fn suggest_dt(&self) -> Option<Real> {
         self.auto_dt()
     }
-    /// The CPU scene's books under its names and order: kinetic with the spins (½Iω²), the
-    /// potentials in the terms' order (the contacts' springs, gravity's −Σ m g·x), then the
-    /// contacts term's own books, "NAME (normal damping)" and "NAME (friction)".
+    /// The CPU scene's books under its names and order: kinetic with the spins (½Iω²; free
+    /// grains), the potentials in the terms' order (the contacts' springs, gravity's −Σ m g·x
+    /// over the free grains), then the dissipated: the drag term's (if b > 0; the CPU lists the
+    /// dissipating terms first), the contacts term's own books, "NAME (normal damping)" and
+    /// "NAME (friction)".
     fn energy(&self) -> EnergyReport {
         let nan = Real::NAN;
         let b = self.lock().books().unwrap_or(DemBooks {
@@ -478,6 +521,7 @@ impl System for DeviceDem {
             gravity: nan,
             damping: nan,
             friction: nan,
+            drag: nan,
         });
         let mut r = EnergyReport { kinetic: b.rotational + b.kinetic, ..Default::default() };
         let contacts = (self.names.contacts.clone(), b.potential);
@@ -485,6 +529,9 @@ impl System for DeviceDem {
             Some(g) if self.names.gravity_first => r.potential.extend([(g.clone(), b.gravity), contacts]),
             Some(g) => r.potential.extend([contacts, (g.clone(), b.gravity)]),
             None => r.potential.push(contacts),
+        }
+        if let Some(d) = &self.names.drag {
+            r.dissipated.push((d.clone(), b.drag));
         }
         let c = &self.names.contacts;
         r.dissipated.push((format!("{c} (normal damping)"), b.damping));
@@ -517,6 +564,7 @@ impl System for DeviceDem {
                 "vy" => col(&v, 1, d),
                 "vz" if d == 3 => col(&v, 2, d),
                 "mass" => self.mass.clone(),
+                "pinned" => self.pinned.iter().map(|&p| p as u8 as Real).collect(),
                 "radius" => self.radius.clone(),
                 "angular_velocity" if d == 2 => w.clone(),
                 "angle" if d == 2 => angle.clone(),
@@ -543,8 +591,9 @@ impl System for DeviceDem {
     /// `vel` (N × 4: position and mass as the device holds it, velocity and 1/mass), `aux` (ω:
     /// 1 value in 2D, 3 in 3D, from column 0; the 2D angle in column 3), `acc` (the grain's
     /// books, normal damping and friction, then for rows a < dim the cell list's box along
-    /// axis a, lower and upper), `hits` zero, `acc_valid` 1. The contacts themselves travel in
-    /// the contacts term's history (`term_history`).
+    /// axis a, lower and upper), `hits` (the grain's drag book), `acc_valid` 1. A pinned grain's
+    /// 1/mass is 0 (the CPU's `inv_mass`). The contacts themselves travel in the contacts term's
+    /// history (`term_history`).
     fn save(&self) -> Result<Arrays> {
         let raw = self.lock().save_raw()?;
         let (d, n, a) = (self.dim, self.radius.len(), axial(self.dim));
@@ -557,7 +606,7 @@ impl System for DeviceDem {
             pos[4 * i..4 * i + d].copy_from_slice(&raw.x[d * i..d * (i + 1)]);
             pos[4 * i + 3] = m;
             vel[4 * i..4 * i + d].copy_from_slice(&raw.v[d * i..d * (i + 1)]);
-            vel[4 * i + 3] = 1.0 / m;
+            vel[4 * i + 3] = if self.pinned[i] { 0.0 } else { 1.0 / m };
             aux[4 * i..4 * i + a].copy_from_slice(&raw.omega[a * i..a * (i + 1)]);
             if d == 2 {
                 aux[4 * i + 3] = raw.angle[i];
@@ -569,14 +618,14 @@ impl System for DeviceDem {
                 acc[4 * i + 3] = self.params.upper[i];
             }
         }
-        let hits = vec![0.0; n];
+        let hits = raw.books[2 * n..].to_vec();
         saved(
             "the device grains",
             &[("pos", &pos), ("vel", &vel), ("acc", &acc), ("aux", &aux), ("hits", &hits), ("acc_valid", &[1.0])],
         )
     }
-    /// Loads what `save` wrote: the state, spins, angles and books from the rows, the contacts
-    /// kept as they are (set them first through `set_term_history`), the cell list's box as
+    /// Loads what `save` wrote: the state, spins, angles and books (the drag's from `hits`)
+    /// from the rows, the contacts kept as they are (set them first through `set_term_history`), the cell list's box as
     /// saved (rebuilt if it differs, so the sums run in the saved order).
     fn load(&mut self, arrays: &Arrays) -> Result<()> {
         let (d, n, a) = (self.dim, self.radius.len(), axial(self.dim));
@@ -609,7 +658,12 @@ impl System for DeviceDem {
         if d == 2 {
             raw.angle = aux.chunks_exact(4).map(|c| c[3]).collect();
         }
-        raw.books = acc.chunks_exact(4).map(|c| c[0]).chain(acc.chunks_exact(4).map(|c| c[1])).collect();
+        let hits = super::array(arrays, "hits", Some(n))?;
+        if let Some(i) = hits.iter().position(|c| !c.is_finite()) {
+            return Err(invalid("hits", format!("entry {i} is not finite")));
+        }
+        raw.books =
+            acc.chunks_exact(4).map(|c| c[0]).chain(acc.chunks_exact(4).map(|c| c[1])).chain(hits.to_vec()).collect();
         if (lower, upper) != (self.params.lower, self.params.upper) {
             let rmax = self.radius.iter().cloned().fold(0.0, Real::max);
             let cell = cell_of(d, &lower, &upper, rmax);
@@ -665,10 +719,10 @@ impl HeldTerms for DeviceDem {
         let k = self.lock().capacity();
         if most > k {
             let params = DemParams { capacity: most, ..self.params };
-            let raw = self.raw_of(&c, state.x, state.v, most);
+            let raw = self.raw_of(&c, state.x, state.v, &state.books[2 * n..], most);
             self.rebuild(params, &raw)?;
         } else {
-            let raw = self.raw_of(&c, state.x, state.v, k);
+            let raw = self.raw_of(&c, state.x, state.v, &state.books[2 * n..], k);
             self.g.get_mut().unwrap_or_else(|p| p.into_inner()).load_raw(&raw)?;
         }
         self.evaluated = false;
@@ -762,10 +816,22 @@ mod tests {
         rec: &[(String, String, Params)],
         dt: Real,
     ) -> World<V> {
+        cpu_world_pinned(x, v, r, m, &vec![false; m.len()], rec, dt)
+    }
+
+    fn cpu_world_pinned<V: Vector>(
+        x: &[Real],
+        v: &[Real],
+        r: &[Real],
+        m: &[Real],
+        pinned: &[bool],
+        rec: &[(String, String, Params)],
+        dt: Real,
+    ) -> World<V> {
         let (d, n) = (V::DIM, m.len());
         let vec = |s: &[Real]| V::from_slice(s);
         let mut sys = ParticleSystem::<V>::new("semi_implicit_euler").unwrap();
-        sys.add_particles(x.chunks(d).map(vec).collect(), v.chunks(d).map(vec).collect(), m.to_vec(), vec![false; n])
+        sys.add_particles(x.chunks(d).map(vec).collect(), v.chunks(d).map(vec).collect(), m.to_vec(), pinned.to_vec())
             .unwrap();
         sys.set_attribute("radius", r.to_vec()).unwrap();
         let ctx = Context { n_particles: n };
@@ -785,9 +851,20 @@ mod tests {
         history: Option<&[Real]>,
         rec: &[(String, String, Params)],
     ) -> Result<DeviceDem> {
+        device_pinned(gpu, p, dim, state, &vec![false; state.3.len()], history, rec)
+    }
+
+    fn device_pinned(
+        gpu: &Arc<Gpu>,
+        p: Precision,
+        dim: usize,
+        state: (&[Real], &[Real], &[Real], &[Real]),
+        pinned: &[bool],
+        history: Option<&[Real]>,
+        rec: &[(String, String, Params)],
+    ) -> Result<DeviceDem> {
         let (x, v, r, m) = state;
         let p = if p == Precision::F64 { "f64" } else { "f32" };
-        let pinned = vec![false; m.len()];
         DeviceDem::from_records(
             gpu.clone(),
             p,
@@ -797,7 +874,7 @@ mod tests {
             x,
             v,
             m,
-            &pinned,
+            pinned,
             Some(r),
             history,
             rec,
@@ -1059,6 +1136,127 @@ mod tests {
         }
     }
 
+    /// Positions, velocities, radii, masses.
+    type Grains = (Vec<Real>, Vec<Real>, Vec<Real>, Vec<Real>);
+
+    /// `grains` with pegs: pinned grains under the colliding pair and in the oblique grain's
+    /// way, one overlapping the floor and two overlapping each other (none of them may push);
+    /// the flags.
+    fn pegged(dim: usize) -> (Grains, Vec<bool>) {
+        let (mut x, mut v, mut r, mut m) = grains(dim);
+        let pegs: [([Real; 3], Real); 5] = [
+            ([0.0, 0.15, 0.02], 0.07),
+            ([2.62, 0.1, -0.02], 0.04),
+            ([2.0, 0.03, 0.0], 0.05),
+            ([3.0, 0.5, 0.0], 0.04),
+            ([3.05, 0.5, 0.0], 0.04),
+        ];
+        for (p, q) in pegs {
+            let p = if dim == 2 { p } else { [p[0], p[2], p[1]] };
+            x.extend_from_slice(&p[..dim]);
+            v.extend(std::iter::repeat_n(0.0, dim));
+            r.push(q);
+            m.push(1000.0 * q.powi(dim as i32));
+        }
+        let pinned = (0..m.len()).map(|i| i >= 6).collect();
+        ((x, v, r, m), pinned)
+    }
+
+    /// A scene of grains with pegs (pinned grains) and a linear drag, its terms in two orders:
+    /// the device follows the CPU world (positions, spins and springs, books under the same
+    /// names in the same order, the step limit), the pegs never move, the contacts with them are
+    /// in the history as the CPU's (pairs from their lower index), and a save and load continue
+    /// bit for bit.
+    fn pegs_and_drag<V: Vector>(gpu: &Arc<Gpu>, drag_first: bool) {
+        let dim = V::DIM;
+        let ((x, v, r, m), pinned) = pegged(dim);
+        let mut rec = records(dim, dim == 3);
+        let drag = ("drag".to_string(), "liquid".to_string(), Params::new().with("coefficient", Value::Number(2.0)));
+        if drag_first {
+            rec.insert(0, drag);
+            rec.swap(1, 2); // drag, gravity, contacts
+        } else {
+            rec.push(drag); // contacts, gravity, drag
+        }
+        let roll = dim == 3;
+        let mut w = cpu_world_pinned::<V>(&x, &v, &r, &m, &pinned, &rec, 1.0);
+        let dt = w.particles().auto_dt().unwrap();
+        w.set_dt(dt).unwrap();
+        let steps = 700;
+        // Some contacts with pegs, seen in the CPU's history along the way.
+        let mut peg_contacts = 0;
+        for _ in 0..7 {
+            w.step(steps / 7).unwrap();
+            let h = w.particles().term_history("grains").unwrap().unwrap();
+            peg_contacts +=
+                parts(&h, dim, roll).2.iter().filter(|c| c.1 < m.len() && (pinned[c.0] || pinned[c.1])).count();
+        }
+        let ce = w.energy();
+        for p in [Precision::F64, Precision::F32] {
+            let mut dev = match device_pinned(gpu, p, dim, (&x, &v, &r, &m), &pinned, None, &rec) {
+                Ok(d) => d,
+                Err(e) if p == Precision::F64 => {
+                    eprintln!("f64 skipped: {e}");
+                    continue;
+                }
+                Err(e) => panic!("{e}"),
+            };
+            let (a, b) = (dev.auto_dt().unwrap(), dt);
+            assert!((a - b).abs() <= 1e-6 * b, "{dim}D step limits: device {a}, CPU {b}");
+            let (x0, _) = dev_state(&dev);
+            dev.steps(steps, dt, &go()).unwrap();
+            let (cx, cv) = positions(&w);
+            let (dx, dv) = dev_state(&dev);
+            let de = dev.energy();
+            let (es, el) = compare_energy(&ce, &de);
+            let lost = |e: &EnergyReport| e.dissipated.iter().find(|q| q.0 == "liquid").unwrap().1;
+            let ed = (lost(&ce) - lost(&de)).abs() / lost(&ce);
+            let vmax = cv.iter().map(|u| u.abs()).fold(0.0, Real::max);
+            let (ex, ev) = (max_diff(&cx, &dx) / 3.0, max_diff(&cv, &dv) / vmax);
+            let hd = dev.term_history("grains").unwrap().unwrap();
+            let hc = w.particles().term_history("grains").unwrap().unwrap();
+            let (contacts, spins, springs, _) = compare_histories(&hd, &hc, dim, roll);
+            let still = (0..m.len()).filter(|&i| pinned[i]).all(|i| {
+                (0..dim).all(|a| dx[dim * i + a].to_bits() == x0[dim * i + a].to_bits() && dv[dim * i + a] == 0.0)
+            });
+            eprintln!(
+                "{dim}D pegs and drag ({}) {p:?}, {steps} steps of {dt:.2e} s: positions {ex:.1e} of the scene, velocities \
+                 {ev:.1e}; energy: state {es:.1e}, dissipated {el:.1e} of the total, drag's book {ed:.1e}; {contacts} contacts \
+                 now, {peg_contacts} with pegs seen; spins {spins:.1e}, springs {springs:.1e}",
+                if drag_first { "drag, gravity, contacts" } else { "contacts, gravity, drag" }
+            );
+            assert!(still, "{dim}D {p:?}: a peg moved");
+            assert!(peg_contacts > 0 && lost(&ce) > 0.0, "{dim}D: grains met the pegs, drag dissipated");
+            assert_eq!(entries(&de.dissipated)[0], "liquid", "the dissipating terms first, as on the CPU");
+            if p == Precision::F64 {
+                assert!(ex < 1e-12 && ev < 1e-10, "{dim}D f64: {ex:e} {ev:e}");
+                assert!(es < 1e-10 && spins < 1e-9 && springs < 1e-9, "{dim}D f64: {es:e} {spins:e} {springs:e}");
+                assert!(el < 1e-2 && ed < 1e-10, "{dim}D f64: {el:e} {ed:e}");
+            } else {
+                assert!(ex < 1e-3 && ev < 1e-2 && es < 1e-2, "{dim}D f32: {ex:e} {ev:e} {es:e}");
+            }
+            // A load as the scene file's continues bit for bit (the pegs' flags, the drag's
+            // books in `hits`).
+            let (rows, h, _) = all(&dev);
+            let (sx, sv) = dev_state(&dev);
+            let mut other = device_pinned(gpu, p, dim, (&sx, &sv, &r, &m), &pinned, Some(&h), &rec).unwrap();
+            other.load(&rows).unwrap();
+            assert!(all(&other) == all(&dev), "{dim}D {p:?}: a load holds what was saved");
+            dev.steps(100, dt, &go()).unwrap();
+            other.steps(100, dt, &go()).unwrap();
+            assert!(all(&other) == all(&dev), "{dim}D {p:?}: a loaded run continues bit for bit");
+        }
+    }
+
+    #[test]
+    fn device_dem_holds_pegs_and_drag_as_the_cpu() {
+        let Some(gpu) = gpu() else { return };
+        for drag_first in [false, true] {
+            pegs_and_drag::<DVec2>(&gpu, drag_first);
+            pegs_and_drag::<DVec3>(&gpu, drag_first);
+        }
+    }
+
     #[test]
     fn device_dem_refuses_what_it_cannot_hold() {
         let Some(gpu) = gpu() else { return };
@@ -1103,9 +1301,27 @@ mod tests {
         assert_eq!(arg_of(with(&springs, "semi_implicit_euler", &pinned, ok, &[])), "links");
         assert_eq!(arg_of(with(&rec[1..], "semi_implicit_euler", &pinned, ok, &[])), "terms");
         assert_eq!(arg_of(with(&rec, "xpbd", &pinned, ok, &[])), "integrator");
+        // Pinned grains are held (`device_dem_holds_pegs_and_drag_as_the_cpu`); one flag each, and
+        // a radius > 0 for them too.
         let mut pin = pinned.clone();
         pin[3] = true;
-        assert_eq!(arg_of(with(&rec, "semi_implicit_euler", &pin, ok, &[])), "pinned");
+        assert!(with(&rec, "semi_implicit_euler", &pin, ok, &[]).is_ok());
+        assert_eq!(arg_of(with(&rec, "semi_implicit_euler", &pin[1..], ok, &[])), "pinned");
+        let mut r3 = r.clone();
+        r3[3] = 0.0;
+        assert_eq!(arg_of(with(&rec, "semi_implicit_euler", &pin, Some(&r3), &[])), "radius");
+        // One drag term, of the drag term's own checks.
+        let drag = |name: &str, b: Real| {
+            ("drag".to_string(), name.to_string(), Params::new().with("coefficient", Value::Number(b)))
+        };
+        let mut dragged = rec.clone();
+        dragged.insert(0, drag("liquid", 0.5));
+        assert!(with(&dragged, "semi_implicit_euler", &pin, ok, &[]).is_ok());
+        dragged.push(drag("more liquid", 0.5));
+        assert_eq!(arg_of(with(&dragged, "semi_implicit_euler", &pinned, ok, &[])), "more liquid");
+        let mut negative = rec.clone();
+        negative.push(drag("liquid", -0.5));
+        assert_eq!(arg_of(with(&negative, "semi_implicit_euler", &pinned, ok, &[])), "coefficient");
         assert_eq!(arg_of(with(&rec, "semi_implicit_euler", &pinned, None, &[])), "radius");
         let mut r0 = r.clone();
         r0[2] = 0.0;

@@ -1,8 +1,9 @@
 //! The device's DEM (`physcore_gpu::dem`) against this crate's, the CPU path: grains thrown at
 //! each other and at a floor (a plane wall) under gravity, with friction, stepped by a CPU world
 //! (the "contacts" term, gravity, semi-implicit Euler) and by the device, for both laws, in 2D
-//! and 3D (issue "GPU fluids, grains and batches"). The damping ratios come from the CPU's own
-//! map of the restitution (`damping_ratio`). Skipped where no adapter is found, unless
+//! and 3D (issue "GPU fluids, grains and batches"); and a grain bouncing obliquely off a pinned
+//! grain (a peg). The damping ratios come from the CPU's own map of the restitution
+//! (`damping_ratio`). Skipped where no adapter is found, unless
 //! PHYSCORE_GPU_REQUIRED=1 (CI runs it on lavapipe with PHYSCORE_GPU_ALLOW_CPU=1).
 use super::{damping_ratio, Law};
 use crate::systems::device_fluid::tests::gpu;
@@ -48,12 +49,14 @@ struct Material {
     ratio: Real,
 }
 
+#[allow(clippy::too_many_arguments)]
 fn cpu_run<V: Vector>(
     mat: &Material,
     x: &[Real],
     v: &[Real],
     r: &[Real],
     m: &[Real],
+    pinned: &[bool],
     dt: Real,
     steps: u64,
 ) -> (Vec<Real>, Vec<Real>) {
@@ -61,7 +64,7 @@ fn cpu_run<V: Vector>(
     let n = m.len();
     let vec = |s: &[Real]| V::from_slice(s);
     let mut sys = ParticleSystem::<V>::new("semi_implicit_euler").unwrap();
-    sys.add_particles(x.chunks(d).map(vec).collect(), v.chunks(d).map(vec).collect(), m.to_vec(), vec![false; n])
+    sys.add_particles(x.chunks(d).map(vec).collect(), v.chunks(d).map(vec).collect(), m.to_vec(), pinned.to_vec())
         .unwrap();
     sys.set_attribute("radius", r.to_vec()).unwrap();
     let ctx = Context { n_particles: n };
@@ -96,10 +99,11 @@ fn agree(dim: usize, mat: &Material, steps: u64) -> [(Real, Real); 2] {
     let (x, v, r, m) = grains(dim);
     // A 50th of the shortest contact at the fastest impact (the CPU's `max_dt` rule).
     let dt = 2e-5;
+    let free = vec![false; m.len()];
     let (cx, cv) = if dim == 2 {
-        cpu_run::<DVec2>(mat, &x, &v, &r, &m, dt, steps)
+        cpu_run::<DVec2>(mat, &x, &v, &r, &m, &free, dt, steps)
     } else {
-        cpu_run::<DVec3>(mat, &x, &v, &r, &m, dt, steps)
+        cpu_run::<DVec3>(mat, &x, &v, &r, &m, &free, dt, steps)
     };
     // Every kind of contact happened: the pair bounced apart, the fast grain off the floor.
     let up = |k: usize| cv[dim * k + dim - 1];
@@ -157,6 +161,79 @@ fn device_dem_agrees_with_the_cpu_contacts() {
                 assert!(x64 < 1e-10 && v64 < 1e-8, "{dim}D {law:?} f64: {x64} {v64}");
             }
             assert!(x32 < 1e-3 && v32 < 1e-2, "{dim}D {law:?} f32: {x32} {v32}");
+        }
+    }
+}
+
+/// A grain (radius 0.1, 10 kg in 2D, 1 kg in 3D: density 1000) dropped a little off-centre onto
+/// a pinned grain (radius 0.08, on no floor: the peg alone holds it up for a moment), with
+/// friction: the device against the CPU world, the grain's state after it bounced and the peg
+/// unmoved; the rebound speed over the impact speed (normal to the contact) is the CPU's.
+#[test]
+fn a_grain_bounces_off_a_pinned_grain_as_on_the_cpu() {
+    let Some(gpu) = gpu() else { return };
+    for dim in [2, 3] {
+        for (law, stiffness) in [(Law::Linear, 1e5), (Law::Hertz, 1e7)] {
+            let ratio = if dim == 2 { 1.0 / 3.0 } else { 2.0 / 7.0 };
+            let mat = Material { law, stiffness, restitution: 0.6, friction: 0.4, ratio };
+            // Up is the last axis; the grain 0.03 m off the peg's axis, 0.25 m above it.
+            let (mut x, mut v) = (vec![0.0; 2 * dim], vec![0.0; 2 * dim]);
+            x[0] = 0.03;
+            x[dim - 1] = 0.43;
+            v[dim - 1] = -1.0;
+            let (r, m) = ([0.1, 0.08], [1000.0 * 0.1f64.powi(dim as i32), 1000.0 * 0.08f64.powi(dim as i32)]);
+            let pinned = [false, true];
+            let (dt, steps) = (2e-5, 11000);
+            let (cx, cv) = if dim == 2 {
+                cpu_run::<DVec2>(&mat, &x, &v, &r, &m, &pinned, dt, steps)
+            } else {
+                cpu_run::<DVec3>(&mat, &x, &v, &r, &m, &pinned, dt, steps)
+            };
+            // It hit (about step 7,300) and left: up and sideways, the peg where it was.
+            assert!(cv[dim - 1] > 0.0 && cv[0] > 0.0, "{dim}D {law:?}: bounced off the peg: {cv:?}");
+            assert!(cx[dim..] == x[dim..] && cv[dim..].iter().all(|&c| c == 0.0));
+            let zeta = damping_ratio(mat.law, mat.restitution);
+            let mut g = [0.0; 3];
+            g[dim - 1] = -9.81;
+            let params = DemParams {
+                law: if mat.law == Law::Linear { dd::Law::Linear } else { dd::Law::Hertz },
+                stiffness: mat.stiffness,
+                zeta,
+                friction: mat.friction,
+                tangential_ratio: mat.ratio,
+                gravity: g,
+                lower: [-1.0; 3],
+                upper: [1.0; 3],
+                ..DemParams::default()
+            };
+            for precision in [Precision::F64, Precision::F32] {
+                let mut dev = match Dem::new(gpu.clone(), precision, dim, params, &x, &v, &r, &m, &[]) {
+                    Ok(d) => d,
+                    Err(e) if precision == Precision::F64 => {
+                        eprintln!("f64 skipped: {e}");
+                        continue;
+                    }
+                    Err(e) => panic!("{e}"),
+                };
+                dev.set_pinned(&pinned).unwrap();
+                dev.step(steps, dt, &AtomicBool::new(false)).unwrap();
+                let (dx, dv, _) = dev.read().unwrap();
+                let ex = (0..dim).map(|a| (cx[a] - dx[a]).abs()).fold(0.0, Real::max) / 0.43;
+                let ev = (0..dim).map(|a| (cv[a] - dv[a]).abs()).fold(0.0, Real::max);
+                let speed = |u: &[Real]| u[..dim].iter().map(|c| c * c).sum::<Real>().sqrt();
+                eprintln!(
+                    "DEM {dim}D {law:?} off a peg {precision:?}, {steps} steps: rebound {:.6} m/s (CPU {:.6}); positions {ex:.1e} \
+                     of the drop, velocities {ev:.1e} m/s",
+                    speed(&dv),
+                    speed(&cv)
+                );
+                assert!(dx[dim..] == x[dim..] && dv[dim..].iter().all(|&c| c == 0.0), "the peg moved on the device");
+                if precision == Precision::F64 {
+                    assert!(ex < 1e-10 && ev < 1e-8, "{dim}D {law:?} f64: {ex:e} {ev:e}");
+                } else {
+                    assert!(ex < 1e-3 && ev < 1e-2, "{dim}D {law:?} f32: {ex:e} {ev:e}");
+                }
+            }
         }
     }
 }
