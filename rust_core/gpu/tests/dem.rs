@@ -805,7 +805,7 @@ fn pegboard(gpu: &Arc<Gpu>, p: Precision, dim: usize) -> (Dem, Vec<bool>) {
     for k in 0..12 {
         let j = k as f64;
         let c =
-            [0.25 + 0.07 * (k % 4) as f64 + 0.004 * unit(k), 0.75 + 0.07 * (k / 4) as f64, 0.25 + 0.01 * unit(99 + k)];
+            [0.25 + 0.07 * (k % 4) as f64 + 0.004 * unit(k), 0.66 + 0.07 * (k / 4) as f64, 0.25 + 0.01 * unit(99 + k)];
         put(c, [0.1 * (unit(7 * k) - 0.5), -0.5, 0.1 * (unit(11 * k) - 0.5)], 0.025 + 0.002 * (j % 3.0), false);
     }
     for row in 0..3 {
@@ -836,7 +836,7 @@ fn pegboard(gpu: &Arc<Gpu>, p: Precision, dim: usize) -> (Dem, Vec<bool>) {
     (dem, pinned)
 }
 
-/// Pinned grains are fixed obstacles: grains rain onto them for 0.25 s and they stay where they
+/// Pinned grains are fixed obstacles: grains rain onto them for 0.12 s and they stay where they
 /// were to the bit, at rest and unturned (f64 and f32, 2D and 3D), while the free grains touch
 /// them; the books leave them out and balance as a board without them does.
 #[test]
@@ -855,7 +855,7 @@ fn pinned_grains_stay_still_to_the_bit_while_grains_rain_onto_them() {
             let pins: Vec<usize> = (0..n).filter(|&i| pinned[i]).collect();
             assert!(pins.iter().all(|&i| (0..dim).all(|a| v0[dim * i + a] == 0.0)), "pinning stops a grain");
             let (mut peg_contacts, mut most) = (0usize, 0usize);
-            for _ in 0..25 {
+            for _ in 0..12 {
                 run(&mut dem, 100, dt);
                 let raw = dem.save_raw().unwrap();
                 let k = dem.capacity();
