@@ -869,7 +869,7 @@ def test_the_core_refuses_fortran_ordered_point_arrays():
     x = np.random.default_rng(0).random((50, 2))
     with pytest.raises(ValueError, match="C-contiguous"):
         _core.neighbors(np.asfortranarray(x), 0.2)
-    assert all(np.array_equal(p, q) for p, q in zip(_core.neighbors(x, 0.2), pc.neighbors(np.asfortranarray(x), 0.2)))
+    assert all(np.array_equal(p, q) for p, q in zip(_core.neighbors(x, 0.2), pc.neighbors(np.asfortranarray(x), 0.2), strict=True))
 
 
 def test_glow_splat_keeps_every_particle_inside_the_image():
