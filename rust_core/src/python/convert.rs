@@ -19,11 +19,17 @@ pub(super) fn flat2<'a>(a: &'a PyReadonlyArray2<'_, f64>, dim: usize, arg: &str)
     if shape[1] != dim {
         return Err(err(invalid(arg, format!("expected shape (N, {dim}), got ({}, {})", shape[0], shape[1]))));
     }
-    // `as_slice` also takes a Fortran-ordered array, whose rows it would read as columns.
+    c_order(a, arg)
+}
+
+/// The data of a C-ordered 2D array, row after row. `as_slice` alone also takes a
+/// Fortran-ordered array, whose rows it would read as columns.
+pub(super) fn c_order<'a, T: numpy::Element>(a: &'a PyReadonlyArray2<'_, T>, arg: &str) -> PyResult<&'a [T]> {
+    let refuse = || err(invalid(arg, "array must be C-contiguous"));
     if !a.is_c_contiguous() {
-        return Err(err(invalid(arg, "array must be C-contiguous")));
+        return Err(refuse());
     }
-    a.as_slice().map_err(|_| err(invalid(arg, "array must be C-contiguous")))
+    a.as_slice().map_err(|_| refuse())
 }
 
 pub(super) fn slice1<'a, T: numpy::Element>(a: &'a PyReadonlyArray1<'_, T>, arg: &str) -> PyResult<&'a [T]> {

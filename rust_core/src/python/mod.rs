@@ -176,12 +176,7 @@ fn blur<'py>(
     passes: usize,
 ) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
     let (height, width) = (a.shape()[0], a.shape()[1]);
-    let contiguous = || err(crate::error::invalid("a", "array must be C-contiguous"));
-    // `as_slice` also takes a Fortran-ordered array (its rows read as columns).
-    if !a.is_c_contiguous() {
-        return Err(contiguous());
-    }
-    let src = a.as_slice().map_err(|_| contiguous())?;
+    let src = convert::c_order(&a, "a")?;
     let pool = crate::par::default_pool().ok();
     let out = py
         .detach(|| crate::par::install(pool.as_ref(), || crate::raster::blur(src, width, height, r, passes)))

@@ -49,6 +49,26 @@ struct Material {
     ratio: Real,
 }
 
+impl Material {
+    /// The device's parameters of this material under gravity along −(last axis), cells over
+    /// the box `[lower, upper]`.
+    fn device_params(&self, dim: usize, lower: [Real; 3], upper: [Real; 3]) -> DemParams {
+        let mut g = [0.0; 3];
+        g[dim - 1] = -9.81;
+        DemParams {
+            law: if self.law == Law::Linear { dd::Law::Linear } else { dd::Law::Hertz },
+            stiffness: self.stiffness,
+            zeta: damping_ratio(self.law, self.restitution),
+            friction: self.friction,
+            tangential_ratio: self.ratio,
+            gravity: g,
+            lower,
+            upper,
+            ..DemParams::default()
+        }
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn cpu_run<V: Vector>(
     mat: &Material,
@@ -109,22 +129,10 @@ fn agree(dim: usize, mat: &Material, steps: u64) -> [(Real, Real); 2] {
     let up = |k: usize| cv[dim * k + dim - 1];
     assert!(cv[0] < 0.0 && cv[dim] > 0.0, "the pair collided: {cv:?}");
     assert!(up(5) > 0.0, "the oblique grain bounced: {cv:?}");
-    let zeta = damping_ratio(mat.law, mat.restitution);
+    let params = mat.device_params(dim, [-1.0, -1.0, -1.0], [4.0, 2.0, 2.0]);
+    let zeta = params.zeta;
     let mut up = [0.0; 3];
     up[dim - 1] = 1.0;
-    let mut g = [0.0; 3];
-    g[dim - 1] = -9.81;
-    let params = DemParams {
-        law: if mat.law == Law::Linear { dd::Law::Linear } else { dd::Law::Hertz },
-        stiffness: mat.stiffness,
-        zeta,
-        friction: mat.friction,
-        tangential_ratio: mat.ratio,
-        gravity: g,
-        lower: [-1.0, -1.0, -1.0],
-        upper: [4.0, 2.0, 2.0],
-        ..DemParams::default()
-    };
     let floor = Plane { point: [0.0; 3], normal: up, zeta, friction: mat.friction };
     let mut out = [(Real::NAN, Real::NAN); 2];
     for (k, precision) in [Precision::F64, Precision::F32].into_iter().enumerate() {
@@ -192,20 +200,7 @@ fn a_grain_bounces_off_a_pinned_grain_as_on_the_cpu() {
             // It hit (about step 500) and left: up and sideways, the peg where it was.
             assert!(cv[dim - 1] > 0.0 && cv[0] > 0.0, "{dim}D {law:?}: bounced off the peg: {cv:?}");
             assert!(cx[dim..] == x[dim..] && cv[dim..].iter().all(|&c| c == 0.0));
-            let zeta = damping_ratio(mat.law, mat.restitution);
-            let mut g = [0.0; 3];
-            g[dim - 1] = -9.81;
-            let params = DemParams {
-                law: if mat.law == Law::Linear { dd::Law::Linear } else { dd::Law::Hertz },
-                stiffness: mat.stiffness,
-                zeta,
-                friction: mat.friction,
-                tangential_ratio: mat.ratio,
-                gravity: g,
-                lower: [-1.0; 3],
-                upper: [1.0; 3],
-                ..DemParams::default()
-            };
+            let params = mat.device_params(dim, [-1.0; 3], [1.0; 3]);
             for precision in [Precision::F64, Precision::F32] {
                 let mut dev = match Dem::new(gpu.clone(), precision, dim, params, &x, &v, &r, &m, &[]) {
                     Ok(d) => d,
