@@ -426,7 +426,8 @@ impl Dem {
         let flag = gpu.buffer("DEM halt flags", 16, st)?;
         let books = gpu.buffer("DEM energy books", 4 * nn * rb, st)?;
         let cell_params = gpu.buffer("DEM cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
-        let params_buf = gpu.buffer("DEM parameters", 64 + 16 * rb, U::UNIFORM | U::COPY_DST)?;
+        // STORAGE too: on a CPU adapter the kernels read it as storage (`Gpu::kernels_with`).
+        let params_buf = gpu.buffer("DEM parameters", 64 + 16 * rb, U::UNIFORM | U::STORAGE | U::COPY_DST)?;
         let staging =
             gpu.buffer("DEM read-back", (4 * nn * rb).max(nn * (k + 1) * 4).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
@@ -444,12 +445,13 @@ impl Dem {
             &cell_layout,
             &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
         );
-        let (layout, pipes) = gpu.kernels(
+        let (layout, pipes) = gpu.kernels_with(
             "dem.wgsl",
             precision,
             include_str!("dem.wgsl"),
             &[uniform, W, W, W, R, R, R, R, R, W, W, W, W, W],
             &["contacts", "integrate", "commit", "energy", "tally"],
+            gpu.is_cpu(),
         );
         let bind = crate::grid::bind_group(
             &gpu,

@@ -230,6 +230,8 @@ pub struct Gpu {
     summary: AdapterSummary,
     /// Set by the device-lost callback.
     lost: Arc<AtomicBool>,
+    /// Whether the adapter is a CPU one (lavapipe): see `Gpu::kernels_with`.
+    cpu: bool,
 }
 
 impl fmt::Debug for Gpu {
@@ -246,6 +248,20 @@ impl Gpu {
     ///
     /// Errors: [`GpuError::NoAdapter`] naming what was found instead.
     pub fn open(which: &str) -> Result<Arc<Gpu>> {
+        Self::open_as(which, true)
+    }
+
+    /// Opens a device of its own on the adapter `which` names (as [`Gpu::open`]), shared with
+    /// no other caller: its queue runs beside theirs. On a CPU adapter (lavapipe) each queue
+    /// executes on a thread of its own, so the device tests, which open one each, run in
+    /// parallel; through one shared queue they ran one after another, on one core.
+    ///
+    /// Errors: as [`Gpu::open`].
+    pub fn open_own(which: &str) -> Result<Arc<Gpu>> {
+        Self::open_as(which, false)
+    }
+
+    fn open_as(which: &str, share: bool) -> Result<Arc<Gpu>> {
         let found = enumerate();
         let named = which.strip_prefix("gpu:").map(|s| s.to_ascii_lowercase());
         let listed: Vec<String> =
@@ -300,9 +316,11 @@ impl Gpu {
         let key = format!("{}|{:?}|{}|{}|{}", info.name, info.backend, info.vendor, info.device, info.driver_info);
         let mut open = open_devices().lock().unwrap_or_else(|e| e.into_inner());
         open.retain(|(_, w)| w.strong_count() > 0);
-        if let Some(gpu) = open.iter().find(|(k, _)| *k == key).and_then(|(_, w)| w.upgrade()) {
-            if !gpu.lost.load(std::sync::atomic::Ordering::Relaxed) {
-                return Ok(gpu);
+        if share {
+            if let Some(gpu) = open.iter().find(|(k, _)| *k == key).and_then(|(_, w)| w.upgrade()) {
+                if !gpu.lost.load(std::sync::atomic::Ordering::Relaxed) {
+                    return Ok(gpu);
+                }
             }
         }
         let limits = adapter.limits();
@@ -319,16 +337,24 @@ impl Gpu {
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&desc))
             .map_err(|e| GpuError::Device(format!("could not open {}: {e}", summary.name)))?;
-        let gpu = Arc::new(Gpu { device, queue, summary, lost: Arc::new(AtomicBool::new(false)) });
+        let cpu = info.device_type == wgpu::DeviceType::Cpu;
+        let gpu = Arc::new(Gpu { device, queue, summary, lost: Arc::new(AtomicBool::new(false)), cpu });
         // A lost device is not handed to the next scene: it opens a new one.
         let lost = gpu.lost.clone();
         gpu.device.set_device_lost_callback(move |_, _| lost.store(true, std::sync::atomic::Ordering::Relaxed));
-        open.retain(|(k, _)| *k != key);
-        open.push((key, Arc::downgrade(&gpu)));
+        if share {
+            open.retain(|(k, _)| *k != key);
+            open.push((key, Arc::downgrade(&gpu)));
+        }
         Ok(gpu)
     }
 
     /// The adapter it runs on.
+    /// Whether the adapter is a CPU one (lavapipe).
+    pub(crate) fn is_cpu(&self) -> bool {
+        self.cpu
+    }
+
     pub fn adapter(&self) -> &AdapterSummary {
         &self.summary
     }
@@ -504,8 +530,35 @@ impl Gpu {
         binds: &[Bind],
         names: &[&str],
     ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
+        self.kernels_with(label, p, wgsl, binds, names, false)
+    }
+
+    /// `kernels`, with the parameter block `P` (`var<uniform> P: Params;`, bound as
+    /// `Bind::Uniform`) read from a read-only storage buffer instead if `params_in_storage`
+    /// (its buffer then needs `STORAGE` usage too). The arithmetic, so every bit, is the same.
+    ///
+    /// Why (lavapipe only): lavapipe inlines the values of a uniform block that branch and loop
+    /// conditions read, and when that shrinks a shader by half it compiles the shader with LLVM
+    /// again at every dispatch (Mesa 22.3, `update_inline_shader_state`: no cache of those
+    /// variants); otherwise it gives up inlining for good. Which way it goes depends on the
+    /// values: a DEM step took 10 ms for 29 grains against 0.8 ms for 28 on CI's lavapipe, 64 %
+    /// of it in the driver. A storage buffer is never inlined, but on lavapipe its loads cost
+    /// more than a uniform's: the SPH, DFSPH and particle kernels ran 1.2-1.4x slower with it,
+    /// so only the DEM takes it there (`Dem::new`, on a CPU adapter).
+    pub(crate) fn kernels_with(
+        &self,
+        label: &str,
+        p: Precision,
+        wgsl: &str,
+        binds: &[Bind],
+        names: &[&str],
+        params_in_storage: bool,
+    ) -> (wgpu::BindGroupLayout, Vec<wgpu::ComputePipeline>) {
         let d = &self.device;
-        let src = format!("{}{}", p.header(), wgsl);
+        let mut src = format!("{}{}", p.header(), wgsl);
+        if params_in_storage {
+            src = src.replace("var<uniform> P: Params;", "var<storage, read> P: Params;");
+        }
         // Every check wgpu offers stays on (bounds of every buffer access, integer division by
         // zero) except the loop counter naga adds to every loop in case it never ends
         // (`force_loop_bounding`): a register and a compare-and-branch in each N-body and spring
@@ -526,6 +579,9 @@ impl Gpu {
             .enumerate()
             .map(|(k, b)| {
                 let (ty, has_dynamic_offset) = match b {
+                    Bind::Uniform { dynamic } if params_in_storage => {
+                        (wgpu::BufferBindingType::Storage { read_only: true }, *dynamic)
+                    }
                     Bind::Uniform { dynamic } => (wgpu::BufferBindingType::Uniform, *dynamic),
                     Bind::Read => (wgpu::BufferBindingType::Storage { read_only: true }, false),
                     Bind::ReadWrite => (wgpu::BufferBindingType::Storage { read_only: false }, false),

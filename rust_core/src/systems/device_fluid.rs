@@ -329,10 +329,11 @@ pub(crate) mod tests {
     use crate::grids::fluid::tests::disc;
     use crate::grids::fluid::{Advection, Projection, Source};
 
-    /// The adapter the core's device tests run on (shared with `sph::device_tests`).
+    /// The adapter the core's device tests run on (shared with `sph::device_tests`): a device of
+    /// the test's own (`Gpu::open_own`), so that on lavapipe the tests' queues run in parallel.
     pub(crate) fn gpu() -> Option<Arc<Gpu>> {
         let w = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
-        match Gpu::open(w) {
+        match Gpu::open_own(w) {
             Ok(g) => Some(g),
             Err(e) if std::env::var("PHYSCORE_GPU_REQUIRED").as_deref() == Ok("1") => panic!("no adapter: {e}"),
             Err(e) => {
