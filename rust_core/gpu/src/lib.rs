@@ -349,12 +349,12 @@ impl Gpu {
         Ok(gpu)
     }
 
-    /// The adapter it runs on.
     /// Whether the adapter is a CPU one (lavapipe).
     pub(crate) fn is_cpu(&self) -> bool {
         self.cpu
     }
 
+    /// The adapter it runs on.
     pub fn adapter(&self) -> &AdapterSummary {
         &self.summary
     }
@@ -541,8 +541,8 @@ impl Gpu {
     /// conditions read, and when that shrinks a shader by half it compiles the shader with LLVM
     /// again at every dispatch (Mesa 22.3, `update_inline_shader_state`: no cache of those
     /// variants); otherwise it gives up inlining for good. Which way it goes depends on the
-    /// values: a DEM step took 10 ms for 29 grains against 0.8 ms for 28 on CI's lavapipe, 64 %
-    /// of it in the driver. A storage buffer is never inlined, but on lavapipe its loads cost
+    /// values: a DEM step took 10 ms for 29 grains against 0.8 ms for 28 on CI's lavapipe, 63 %
+    /// of it in the driver (perf). A storage buffer is never inlined, but on lavapipe its loads cost
     /// more than a uniform's: the SPH, DFSPH and particle kernels ran 1.2-1.4x slower with it,
     /// so only the DEM takes it there (`Dem::new`, on a CPU adapter).
     pub(crate) fn kernels_with(
