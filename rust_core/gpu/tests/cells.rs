@@ -88,3 +88,19 @@ fn the_device_cell_list_sorts_by_cell_and_finds_the_neighbours() {
         }
     }
 }
+
+/// `Gpu::open` hands every caller on one adapter the same device (scenes share its queue);
+/// `Gpu::open_own` a device of the caller's own, which later `open`s do not hand out.
+#[test]
+fn open_shares_the_adapters_device_and_open_own_does_not() {
+    let Some(own) = gpu() else { return };
+    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
+    let a = Gpu::open(which).unwrap();
+    let b = Gpu::open(which).unwrap();
+    let c = Gpu::open_own(which).unwrap();
+    assert!(Arc::ptr_eq(&a, &b), "two opens on one adapter share its device");
+    assert!(!Arc::ptr_eq(&a, &c) && !Arc::ptr_eq(&own, &c) && !Arc::ptr_eq(&own, &a), "open_own shares nothing");
+    assert_eq!(a.adapter(), c.adapter());
+    drop(c);
+    assert!(Arc::ptr_eq(&a, &Gpu::open(which).unwrap()), "the shared device outlives an own one");
+}
