@@ -230,8 +230,6 @@ pub struct Gpu {
     summary: AdapterSummary,
     /// Set by the device-lost callback.
     lost: Arc<AtomicBool>,
-    /// Whether the adapter is a CPU one (lavapipe): see `Gpu::kernels_with`.
-    cpu: bool,
 }
 
 impl fmt::Debug for Gpu {
@@ -337,8 +335,7 @@ impl Gpu {
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&desc))
             .map_err(|e| GpuError::Device(format!("could not open {}: {e}", summary.name)))?;
-        let cpu = info.device_type == wgpu::DeviceType::Cpu;
-        let gpu = Arc::new(Gpu { device, queue, summary, lost: Arc::new(AtomicBool::new(false)), cpu });
+        let gpu = Arc::new(Gpu { device, queue, summary, lost: Arc::new(AtomicBool::new(false)) });
         // A lost device is not handed to the next scene: it opens a new one.
         let lost = gpu.lost.clone();
         gpu.device.set_device_lost_callback(move |_, _| lost.store(true, std::sync::atomic::Ordering::Relaxed));
@@ -349,9 +346,9 @@ impl Gpu {
         Ok(gpu)
     }
 
-    /// Whether the adapter is a CPU one (lavapipe).
+    /// Whether the adapter is a CPU one (lavapipe): see `Gpu::kernels_with`.
     pub(crate) fn is_cpu(&self) -> bool {
-        self.cpu
+        self.summary.kind == kind_name(wgpu::DeviceType::Cpu)
     }
 
     /// The adapter it runs on.

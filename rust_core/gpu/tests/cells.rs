@@ -94,7 +94,7 @@ fn the_device_cell_list_sorts_by_cell_and_finds_the_neighbours() {
 #[test]
 fn open_shares_the_adapters_device_and_open_own_does_not() {
     let Some(own) = gpu() else { return };
-    let which = if physcore_gpu::cpu_allowed_by_env() { "gpu" } else { "gpu:lavapipe" };
+    let which = common::which();
     let a = Gpu::open(which).unwrap();
     let b = Gpu::open(which).unwrap();
     let c = Gpu::open_own(which).unwrap();

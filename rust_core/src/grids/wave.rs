@@ -382,37 +382,37 @@ impl WaveSystem {
         }
     }
 
-    #[cfg(feature = "gpu")]
     /// What a device's copy of this system needs beyond its configuration (`systems::device`):
     /// γ per cell where the grid has damping layers (else empty) and 1 (free) or 0 (obstacle)
     /// per cell where it has obstacles (else empty).
+    #[cfg(feature = "gpu")]
     pub(crate) fn coefficients(&self) -> (&[Real], &[Real]) {
         (&self.gamma_cells, &self.keep)
     }
 
-    #[cfg(feature = "gpu")]
     /// u and u⁻, to read or replace (a device's copy keeps them between its read-backs).
+    #[cfg(feature = "gpu")]
     pub(crate) fn levels_mut(&mut self) -> (&mut Vec<Real>, &mut Vec<Real>) {
         (&mut self.u, &mut self.u_prev)
     }
 
-    #[cfg(feature = "gpu")]
     /// The clock: t, dt, dissipated, work, drops applied (as `save` writes "clock"), then the
     /// energy the changes of dt added (`save`'s "dt_changes").
+    #[cfg(feature = "gpu")]
     pub(crate) fn clock_values(&self) -> [Real; 6] {
         let c = &self.clock;
         [c.t, c.dt, c.dissipated, c.work, c.next_drop as Real, c.rescaled]
     }
 
-    #[cfg(feature = "gpu")]
     /// Sets the clock (`clock_values`' order; the values are the system's own, unchecked).
+    #[cfg(feature = "gpu")]
     pub(crate) fn set_clock_values(&mut self, c: [Real; 6]) {
         self.clock =
             Clock { t: c[0], dt: c[1], dissipated: c[2], work: c[3], next_drop: c[4] as usize, rescaled: c[5] };
     }
 
-    #[cfg(feature = "gpu")]
     /// The time of the next drop not yet applied.
+    #[cfg(feature = "gpu")]
     pub(crate) fn next_drop_time(&self) -> Option<Real> {
         self.cfg.drops.get(self.clock.next_drop).map(|d| d.t)
     }

@@ -663,8 +663,8 @@ impl StableFluid {
     pub fn steps(&self) -> u64 {
         self.s.steps
     }
-    #[cfg(feature = "gpu")]
     /// For the device path: the step count (the device's steps counted, or a checkpoint's).
+    #[cfg(feature = "gpu")]
     pub(crate) fn set_steps(&mut self, steps: u64) {
         self.s.steps = steps;
     }
@@ -673,33 +673,33 @@ impl StableFluid {
         self.s.books.pressure
     }
 
-    #[cfg(feature = "gpu")]
     /// For the device path (`systems::device::DeviceFluid`): the configuration, the open masks
     /// of u and v faces and the fluid cells (1/0), the inflow column, and the pressure and
     /// viscous solvers (their stencils).
     #[allow(clippy::type_complexity)]
+    #[cfg(feature = "gpu")]
     pub(crate) fn parts(&self) -> (&FluidConfig, [&[Real]; 4], &Pcg, Option<&[Pcg; 2]>) {
         (&self.cfg, [&self.u_open, &self.v_open, &self.fluid, &self.inflow_u], &self.pressure, self.visc.as_ref())
     }
 
-    #[cfg(feature = "gpu")]
     /// For the device path: u, v, density, temperature, the padded pressure and the tracers.
+    #[cfg(feature = "gpu")]
     pub(crate) fn state_arrays(&mut self) -> [&mut Vec<Real>; 6] {
         let s = &mut self.s;
         [&mut s.u, &mut s.v, &mut s.density, &mut s.temperature, &mut s.pressure, &mut s.tracers]
     }
 
-    #[cfg(feature = "gpu")]
     /// For the device path: the injected smoke, the smoke advection's change and the stages'
     /// losses; the last pressure solve; the viscous iterations of the last step.
+    #[cfg(feature = "gpu")]
     pub(crate) fn book_values(&self) -> ([Real; 7], Solve, usize) {
         let b = &self.s.books;
         let l = b.losses;
         ([b.injected, b.smoke_advection, l[0], l[1], l[2], l[3], l[4]], b.pressure, b.viscosity_iterations)
     }
 
-    #[cfg(feature = "gpu")]
     /// The device path's books made the host's.
+    #[cfg(feature = "gpu")]
     pub(crate) fn set_book_values(&mut self, v: [Real; 7], pressure: Solve, viscosity_iterations: usize) {
         let b = &mut self.s.books;
         b.injected = v[0];
