@@ -923,7 +923,7 @@ class Scene:
             what = getattr(part, "name", None) or type(part).__name__
             raise InvalidInputError(
                 f"device={self._device!r}: the GPU path has no kernel for {type(part).__name__} {what!r} yet "
-                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH or DFSPH Fluid in a Box, Contacts between grains with plane walls, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
+                f"(it has the terms {', '.join(_GPU_TERMS)}, a WCSPH or DFSPH Fluid in a Box, Contacts between grains with walls of any shape, Plane, Box, Sphere, Capsule and OrientedBox colliders and the grids {', '.join(_GPU_GRIDS)}); "
                 "run this scene with device='cpu' (or 'auto', which chooses the CPU for it)"
             )
 

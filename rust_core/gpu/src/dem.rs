@@ -25,8 +25,16 @@
 //!   for a wall) capped at μ_r R* f_n (the spring slips, the dashpot off); below the cap a dashpot
 //!   −η_r 2√(I_r k_r) ω_r, I_r = 1/(1/(I_i + m_i r_i²) + 1/(I_j + m_j r_j²)), the sum capped
 //!   again. +M on i, −M on j: a couple. Its books go to "friction".
-//! - Walls are planes {x : (x − p)·n ≥ 0}, each with its own ζ and μ: overlap r − (x − p)·n,
-//!   normal −n, m* = m, lever r − δ/2; a wall neither moves nor turns.
+//! - Walls ([`Shape`]) are the CPU's: planes {x : (x − p)·n ≥ 0}, balls and bowls, capsules
+//!   and oriented boxes, each with its own ζ and μ. A grain touches a wall when the signed
+//!   distance s of its centre from the surface (unit normal u into the allowed side, the CPU's
+//!   `Shape::closest` expression by expression) is below r: overlap r − s, normal −u, m* = m,
+//!   lever r − δ/2; a wall neither moves nor turns. A plane's s = (x − p)·n, u = n; a ball's
+//!   s = |x − c| − r along the radius (a bowl's r − |x − c|, u towards the centre; at the
+//!   centre itself u is up); a capsule is the ball about the axis point nearest to x (Ericson,
+//!   *Real-Time Collision Detection*, 2005, §5.1.2); an oriented box's s is the depth under
+//!   its least-deep face (inside), the distance across one face, or to the nearest edge or
+//!   corner point (Ericson 2005, §5.1.4), so a grain rolls round an edge as round a rod.
 //! - Pinned grains (`set_pinned`) are fixed obstacles, pegs, as the CPU term holds them
 //!   (`inv_mass` 0): 1/m* = 1/m_i + 1/m_j with 1/m = 0 for the pinned one (so m* = m_free), its
 //!   1/(I + m r²) 0 in the rolling dashpot's I_r; a pinned grain never moves or turns, two
@@ -84,7 +92,7 @@
 //! rolling resistance) and two keys: 2D f32 at the default capacity 8, about 500 bytes a grain
 //! (a million discs: 0.5 GB; the contact history alone is 352 MB, one binding).
 //!
-//! Not here (the CPU has them): walls other than planes, Verlet lists (the cell list is rebuilt
+//! Not here (the CPU has them): Verlet lists (the cell list is rebuilt
 //! every step), "xpbd"; of the other force terms only a uniform gravity and linear drag.
 use crate::cells::spread;
 use crate::particles::Halt;
@@ -103,15 +111,123 @@ pub enum Law {
     Hertz,
 }
 
-/// A wall: the half-space {x : (x − point)·normal ≥ 0} (normal need not be unit; z ignored in
-/// 2D), with its damping ratio ζ (of its restitution) and friction μ.
+/// A wall's shape: the CPU's wall shapes (`geometry`), m; z ignored in 2D.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Plane {
-    pub point: [f64; 3],
-    pub normal: [f64; 3],
+pub enum Shape {
+    /// The half-space {x : (x − point)·normal ≥ 0} (`normal` need not be unit).
+    Plane { point: [f64; 3], normal: [f64; 3] },
+    /// Grains kept outside the ball (a disc in 2D) of `radius` about `center`, or with `inside`
+    /// in it (a bowl).
+    Sphere { center: [f64; 3], radius: f64, inside: bool },
+    /// Grains kept outside the capsule of `radius` about the segment from `a` to `b`.
+    Capsule { a: [f64; 3], b: [f64; 3], radius: f64 },
+    /// Grains kept outside the box of `half` extents along the unit, orthogonal `axes` about
+    /// `center` (2D: the first two axes and half extents).
+    OrientedBox { center: [f64; 3], half: [f64; 3], axes: [[f64; 3]; 3] },
+}
+
+/// A wall: its shape, with its damping ratio ζ (of its restitution) and friction μ.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wall {
+    pub shape: Shape,
     pub zeta: f64,
     pub friction: f64,
 }
+
+impl Wall {
+    /// The half-space {x : (x − point)·normal ≥ 0}.
+    pub fn plane(point: [f64; 3], normal: [f64; 3], zeta: f64, friction: f64) -> Self {
+        Self { shape: Shape::Plane { point, normal }, zeta, friction }
+    }
+
+    /// Checked and in the device's form (z zeroed in 2D, a plane's normal of unit length);
+    /// `Unsupported` naming wall `w` if it is out of range.
+    fn checked(&self, w: usize, dim: usize) -> Result<Self> {
+        let bad = |what: &str| invalid("walls", format_args!("wall {w}: {what}"));
+        let flat = |mut v: [f64; 3]| {
+            if dim == 2 {
+                v[2] = 0.0;
+            }
+            v
+        };
+        let finite = |v: &[f64]| v.iter().all(|c| c.is_finite());
+        let round = |r: f64| r > 0.0 && (r * r).is_finite();
+        let shape = match self.shape {
+            Shape::Plane { point, normal } => {
+                let (point, normal) = (flat(point), flat(normal));
+                let len = normal.iter().map(|c| c * c).sum::<f64>().sqrt();
+                if !(len.is_finite() && len > 0.0 && finite(&point)) {
+                    return Err(bad("a plane needs a finite point and a non-zero normal"));
+                }
+                // A normal already of unit length (the CPU's, normalised there) keeps its bits.
+                let unit = (len - 1.0).abs() <= 4.0 * f64::EPSILON;
+                Shape::Plane { point, normal: if unit { normal } else { normal.map(|c| c / len) } }
+            }
+            Shape::Sphere { center, radius, inside } => {
+                if !(finite(&center) && round(radius)) {
+                    return Err(bad("a sphere needs a finite centre and a radius > 0 with a finite square"));
+                }
+                Shape::Sphere { center: flat(center), radius, inside }
+            }
+            Shape::Capsule { a, b, radius } => {
+                let (a, b) = (flat(a), flat(b));
+                let l2: f64 = (0..3).map(|k| (b[k] - a[k]) * (b[k] - a[k])).sum();
+                if !(finite(&a) && finite(&b) && l2.is_finite() && round(radius)) {
+                    return Err(bad("a capsule needs finite ends and a radius > 0 with a finite square"));
+                }
+                Shape::Capsule { a, b, radius }
+            }
+            Shape::OrientedBox { center, half, axes } => {
+                let axes = axes.map(flat);
+                let unit = (0..dim).all(|j| {
+                    (0..dim).all(|k| {
+                        let dot: f64 = (0..3).map(|c| axes[j][c] * axes[k][c]).sum();
+                        (dot - if j == k { 1.0 } else { 0.0 }).abs() <= 1e-9
+                    })
+                });
+                if !finite(&center) {
+                    return Err(bad("an oriented box needs a finite centre"));
+                }
+                if !half[..dim].iter().all(|h| h.is_finite() && *h > 0.0) {
+                    return Err(bad("an oriented box needs finite half extents > 0"));
+                }
+                if !unit {
+                    return Err(bad("an oriented box needs unit, orthogonal axes"));
+                }
+                let (mut half, mut axes) = (half, axes);
+                half[dim..].fill(0.0);
+                axes[dim..].fill([0.0; 3]);
+                Shape::OrientedBox { center: flat(center), half, axes }
+            }
+        };
+        finite_nonneg(self.zeta, "walls' zeta")?;
+        finite_nonneg(self.friction, "walls' friction")?;
+        Ok(Self { shape, zeta: self.zeta, friction: self.friction })
+    }
+
+    /// The device's row (`dem.wgsl`'s `wall_surface`): kind, ζ, μ, a radius (a sphere's, a
+    /// capsule's); two points padded to 4 (a plane's point and normal, a sphere's centre and
+    /// `inside`, a capsule's ends, a box's centre and half extents); a box's three axes.
+    fn row(&self) -> [f64; WALL_ROW] {
+        let (kind, r, a, b, axes) = match self.shape {
+            Shape::Plane { point, normal } => (0.0, 0.0, point, normal, [[0.0; 3]; 3]),
+            Shape::Sphere { center, radius, inside } => {
+                (1.0, radius, center, [f64::from(u8::from(inside)), 0.0, 0.0], [[0.0; 3]; 3])
+            }
+            Shape::Capsule { a, b, radius } => (2.0, radius, a, b, [[0.0; 3]; 3]),
+            Shape::OrientedBox { center, half, axes } => (3.0, 0.0, center, half, axes),
+        };
+        let mut row = [0.0; WALL_ROW];
+        row[..4].copy_from_slice(&[kind, self.zeta, self.friction, r]);
+        for (k, v) in [a, b, axes[0], axes[1], axes[2]].iter().enumerate() {
+            row[4 + 4 * k..7 + 4 * k].copy_from_slice(v);
+        }
+        row
+    }
+}
+
+/// Reals per wall on the device (`Wall::row`).
+const WALL_ROW: usize = 24;
 
 /// The grains' material, gravity and search box, SI units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -267,7 +383,7 @@ pub struct Dem {
     mass: Vec<f64>,
     /// Fixed obstacles (`set_pinned`).
     pinned: Vec<bool>,
-    walls: Vec<Plane>,
+    walls: Vec<Wall>,
     pos: wgpu::Buffer,
     vel: wgpu::Buffer,
     omega: wgpu::Buffer,
@@ -294,10 +410,10 @@ pub struct Dem {
 
 impl Dem {
     /// Uploads `n` grains: `x`, `v` flat (n·dim; m, m/s), `radius` (m, > 0) and `mass` (kg, > 0)
-    /// one each; ω starts at 0 (`set_omega`). `walls`: planes (at most 2^16).
+    /// one each; ω starts at 0 (`set_omega`). `walls`: at most 2^16.
     ///
     /// Errors: `Unsupported` naming the first thing out of range (parameters, ragged or
-    /// non-finite arrays, a radius or mass not finite and > 0, a wall's normal of length 0, more
+    /// non-finite arrays, a radius or mass not finite and > 0, a wall out of range (`Wall`), more
     /// than 2^31 cells or grains), f64 on an adapter without it, buffers over its limits;
     /// `OutOfMemory` naming the buffer.
     #[allow(clippy::too_many_arguments)]
@@ -310,7 +426,7 @@ impl Dem {
         v: &[f64],
         radius: &[f64],
         mass: &[f64],
-        walls: &[Plane],
+        walls: &[Wall],
     ) -> Result<Self> {
         gpu.check_precision(precision)?;
         let p = params;
@@ -368,26 +484,10 @@ impl Dem {
                 return Err(invalid(what, format_args!("grain {i}: {} must be finite and > 0", a[i])));
             }
         }
-        let mut planes = Vec::with_capacity(walls.len());
-        for (w, pl) in walls.iter().enumerate() {
-            let mut nrm = pl.normal;
-            let mut pt = pl.point;
-            if dim == 2 {
-                nrm[2] = 0.0;
-                pt[2] = 0.0;
-            }
-            let len = nrm.iter().map(|c| c * c).sum::<f64>().sqrt();
-            let finite = len.is_finite() && len > 0.0 && pt.iter().all(|c| c.is_finite());
-            if !finite {
-                return Err(invalid("walls", format_args!("wall {w}: a finite point and a non-zero normal")));
-            }
-            finite_nonneg(pl.zeta, "walls' zeta")?;
-            finite_nonneg(pl.friction, "walls' friction")?;
-            planes.push(Plane { point: pt, normal: nrm.map(|c| c / len), zeta: pl.zeta, friction: pl.friction });
+        if walls.len() > 1 << 16 {
+            return Err(invalid("walls", format_args!("{}: at most 2^16", walls.len())));
         }
-        if planes.len() > 1 << 16 {
-            return Err(invalid("walls", format_args!("{}: at most 2^16", planes.len())));
-        }
+        let walls = walls.iter().enumerate().map(|(w, wall)| wall.checked(w, dim)).collect::<Result<Vec<_>>>()?;
         let beta = if p.inertia_factor > 0.0 { p.inertia_factor } else { [0.5, 0.4][dim - 2] };
         let rmax = radius.iter().cloned().fold(0.0, f64::max);
         let cell = p.cell.max(2.0 * rmax).max(f64::MIN_POSITIVE);
@@ -413,7 +513,7 @@ impl Dem {
         let vel = gpu.buffer("DEM velocities", nn * d * rb, st)?;
         let omega = gpu.buffer("DEM angular velocities and angles", nn * spin_width(dim) as u64 * rb, st)?;
         let props = gpu.buffer("DEM radii, masses and pins", 3 * nn * rb, st)?;
-        let wall_buf = gpu.buffer("DEM walls", (8 * planes.len() as u64 * rb).max(16), st)?;
+        let wall_buf = gpu.buffer("DEM walls", (WALL_ROW as u64 * walls.len() as u64 * rb).max(16), st)?;
         let cell_of = gpu.buffer("DEM cells", nn * 4, st)?;
         let counts = gpu.buffer("DEM cell counts", total * 4, st)?;
         let start = gpu.buffer("DEM cell starts", (total + 1) * 4, st)?;
@@ -490,14 +590,8 @@ impl Dem {
             gpu.queue.write_buffer(&keys, 0, &vec![0u8; (2 * nn * (k + 1) * 4) as usize]);
             gpu.upload(precision, &books, &vec![0.0; 4 * n]);
         }
-        if !planes.is_empty() {
-            let rows: Vec<f64> = planes
-                .iter()
-                .flat_map(|w| {
-                    let (q, m) = (w.point, w.normal);
-                    [q[0], q[1], q[2], m[0], m[1], m[2], w.zeta, w.friction]
-                })
-                .collect();
+        if !walls.is_empty() {
+            let rows: Vec<f64> = walls.iter().flat_map(|w| w.row()).collect();
             gpu.upload(precision, &wall_buf, &rows);
         }
         let s = Self {
@@ -512,7 +606,7 @@ impl Dem {
             radius: radius.to_vec(),
             mass: mass.to_vec(),
             pinned: vec![false; n],
-            walls: planes,
+            walls,
             pos,
             vel,
             omega,
@@ -552,8 +646,8 @@ impl Dem {
     pub fn params(&self) -> &DemParams {
         &self.p
     }
-    /// The walls as the device holds them (unit normals; z zeroed in 2D).
-    pub fn walls(&self) -> &[Plane] {
+    /// The walls as the device holds them (planes' normals of unit length; z zeroed in 2D).
+    pub fn walls(&self) -> &[Wall] {
         &self.walls
     }
     /// The grains' radii (m), as given.

@@ -63,7 +63,9 @@ const WG: u32 = 64u;
 @group(0) @binding(3) var<storage, read_write> omg: array<real>;
 // Per grain: radius, mass, and 1 for a free grain, 0 for a pinned one (a fixed obstacle).
 @group(0) @binding(4) var<storage, read> props: array<real>;
-// Per wall (a plane): point (3), unit normal into the allowed side (3), ζ, μ.
+// Per wall, WS values (dem.rs's `Wall::row`): kind (0 plane, 1 sphere, 2 capsule, 3 oriented
+// box), ζ, μ, radius; two points padded to 4 (a plane's point and unit normal, a sphere's centre
+// and `inside`, a capsule's ends, a box's centre and half extents); a box's three unit axes.
 @group(0) @binding(5) var<storage, read> walls: array<real>;
 // The cell list (cells.wgsl): each grain's cell, each cell's first slot, the grains by cell.
 @group(0) @binding(6) var<storage, read> cell_of: array<u32>;
@@ -193,12 +195,99 @@ fn stride_out() -> u32 {
     return 3u * P.dim + 2u + P.roll * 2u * P.ad;
 }
 
-fn wall_point(w: u32) -> vec3<real> {
-    return vec3<real>(walls[8u * w], walls[8u * w + 1u], walls[8u * w + 2u]);
+const WS: u32 = 24u;
+
+fn wall_vec(w: u32, o: u32) -> vec3<real> {
+    let b = WS * w + o;
+    return vec3<real>(walls[b], walls[b + 1u], walls[b + 2u]);
 }
 
-fn wall_normal(w: u32) -> vec3<real> {
-    return vec3<real>(walls[8u * w + 3u], walls[8u * w + 4u], walls[8u * w + 5u]);
+// A wall's surface seen from a grain's centre: the unit normal into the allowed side and the
+// signed distance (the CPU's `Shape::closest`, expression by expression).
+struct Surf {
+    u: vec3<real>,
+    s: real,
+}
+
+// The round rule of the ball and the capsule (the CPU's `round_surface`): about c at radius r,
+// radial u = (x − c)/|x − c| (up at c itself); outside kept s = l − r, a bowl s = r − l, −u.
+fn round_surface(x: vec3<real>, c: vec3<real>, r: real, inside: bool) -> Surf {
+    let rel = x - c;
+    let l = sqrt(dot(rel, rel));
+    var u = zero3();
+    if (l > 0.0) {
+        u = rel / l;
+    } else if (P.dim == 2u) {
+        u.y = 1.0;
+    } else {
+        u.z = 1.0;
+    }
+    if (inside) {
+        return Surf(zero3() - u, r - l);
+    }
+    return Surf(u, l - r);
+}
+
+fn wall_surface(w: u32, x: vec3<real>) -> Surf {
+    let kind = walls[WS * w];
+    let a = wall_vec(w, 4u);
+    let b = wall_vec(w, 8u);
+    if (kind == 0.0) {
+        return Surf(b, dot(x - a, b));
+    }
+    let r = walls[WS * w + 3u];
+    if (kind == 1.0) {
+        return round_surface(x, a, r, b.x != 0.0);
+    }
+    if (kind == 2.0) {
+        // The axis point nearest x: a + t (b − a), t clamped to [0, 1].
+        let ab = b - a;
+        let l2 = dot(ab, ab);
+        var t: real = 0.0;
+        if (l2 > 0.0) {
+            t = clamp(dot(x - a, ab) / l2, 0.0, 1.0);
+        }
+        return round_surface(x, a + ab * t, r, false);
+    }
+    // The oriented box: local coordinates q_j = (x − c)·u_j; inside, the least-deep face
+    // (the first on a tie); outside across one face, that face; else the clamped point.
+    let rel = x - a;
+    var q = zero3();
+    var outside = 0u;
+    var across = 0u;
+    var least: real = 0.0;
+    var lj = 0u;
+    for (var j = 0u; j < P.dim; j = j + 1u) {
+        q[j] = dot(rel, wall_vec(w, 12u + 4u * j));
+        let depth = b[j] - abs(q[j]);
+        // Outside on this axis (NaN included: the distance comes out NaN).
+        if (!(depth >= 0.0)) {
+            outside = outside + 1u;
+            across = j;
+        }
+        if (j == 0u || depth < least) {
+            least = depth;
+            lj = j;
+        }
+    }
+    if (outside <= 1u) {
+        let j = select(lj, across, outside == 1u);
+        var u = wall_vec(w, 12u + 4u * j);
+        if (q[j] < 0.0) {
+            u = zero3() - u;
+        }
+        if (outside == 0u) {
+            return Surf(u, -least);
+        }
+        return Surf(u, abs(q[j]) - b[j]);
+    }
+    var p = a;
+    for (var j = 0u; j < P.dim; j = j + 1u) {
+        p = p + wall_vec(w, 12u + 4u * j) * clamp(q[j], -b[j], b[j]);
+    }
+    let off = x - p;
+    let dist = sqrt(dot(off, off));
+    return Surf(off / dist, dist);
 }
 
 // Tangential stiffness k_t at overlap d: ratio·k_n (linear), ratio·(3/2)k_n√δ (Hertz).
@@ -419,13 +508,12 @@ fn geom(a: u32, b: u32, dx: vec3<real>, d2: real) -> Geom {
     return Geom(n, d, aa, ab, vc);
 }
 
-// A grain and wall w: normal (grain to wall) −n_w, overlap r − (x − p)·n_w, lever r − δ/2,
-// contact-point velocity v + a ω × n (the wall neither moves nor turns).
-fn wall_geom(i: u32, x: vec3<real>, w: u32) -> Geom {
+// A grain and wall w whose surface `sf` is: normal (grain to wall) −u, overlap r − s, lever
+// r − δ/2, contact-point velocity v + a ω × n (the wall neither moves nor turns).
+fn wall_geom(i: u32, sf: Surf) -> Geom {
     let r = rad(i);
-    let sd = dot(x - wall_point(w), wall_normal(w));
-    let n = zero3() - wall_normal(w);
-    let d = r - sd;
+    let n = zero3() - sf.u;
+    let d = r - sf.s;
     let a = r - 0.5 * d;
     return Geom(n, d, a, 0.0, vat(i) + cross(wat(i) * a, n));
 }
@@ -559,8 +647,8 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
     // A pinned grain touches no wall (the CPU ends its wall contacts).
     let nw = select(0u, P.walls, free(i));
     for (var w = 0u; w < nw; w = w + 1u) {
-        let sd = dot(xi - wall_point(w), wall_normal(w));
-        if (!(sd < ri)) {
+        let sf = wall_surface(w, xi);
+        if (!(sf.s < ri)) {
             continue;
         }
         let key = P.n + w;
@@ -573,8 +661,8 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
             x0 = vec_at(vin + q * sv);
             u0 = vals[vin + q * sv + d];
         }
-        let g = wall_geom(i, xi, w);
-        let o = contact(g.n, g.d, g.vc, coef(inv_mi, walls[8u * w + 6u], walls[8u * w + 7u]), x0, fresh);
+        let g = wall_geom(i, sf);
+        let o = contact(g.n, g.d, g.vc, coef(inv_mi, walls[WS * w + 1u], walls[WS * w + 2u]), x0, fresh);
         var rr = Roll(zero3(), zero3());
         var ur: real = 0.0;
         if (P.roll != 0u) {
@@ -726,8 +814,8 @@ fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {
             reff = ra * rb / (ra + rb);
         } else {
             let w = key - P.n;
-            g = wall_geom(i, xi, w);
-            mu = walls[8u * w + 7u];
+            g = wall_geom(i, wall_surface(w, xi));
+            mu = walls[WS * w + 2u];
             wab = wat(i);
             reff = rad(i);
         }
@@ -822,7 +910,7 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     for (var w = 0u; w < select(0u, P.walls, free(i)); w = w + 1u) {
-        let sd = dot(xi - wall_point(w), wall_normal(w));
+        let sd = wall_surface(w, xi).s;
         if (sd < ri) {
             u = u + un_of(ri - sd);
         }

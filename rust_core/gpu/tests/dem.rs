@@ -5,9 +5,10 @@
 //! bit for bit and f32 follows f64; capacity overflow, non-finite input and divergence halt with
 //! an error; pinned grains (pegs) stay still to the bit while grains rain onto them, and a grain
 //! bounces off one as off a wall (m* = m of the free grain); under linear drag a grain reaches
-//! the terminal speed m g / b with its books balanced. 2D discs and 3D spheres throughout.
+//! the terminal speed m g / b with its books balanced; walls out of range are refused by name.
+//! 2D discs and 3D spheres throughout.
 //! Skips without an adapter unless `PHYSCORE_GPU_REQUIRED=1` (CI, on lavapipe).
-use physcore_gpu::dem::{Dem, DemParams, Law, Plane};
+use physcore_gpu::dem::{Dem, DemParams, Law, Shape, Wall};
 use physcore_gpu::particles::Halt;
 use physcore_gpu::{Gpu, GpuError, Precision};
 use std::sync::atomic::AtomicBool;
@@ -307,7 +308,7 @@ fn an_exploding_cloud_keeps_its_momentum_and_angular_momentum() {
 fn a_grain_sliding_on_a_floor_ends_rolling() {
     let Some(gpu) = gpu() else { return };
     let (r, m, kn, g, v0, mu) = (0.1, 1.0f64, 1e5f64, 9.81, 2.0, 0.3);
-    let floor = Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0], zeta: 0.5, friction: mu };
+    let floor = Wall::plane([0.0; 3], [0.0, 1.0, 0.0], 0.5, mu);
     let dt = std::f64::consts::PI / (kn / m).sqrt() / 50.0;
     for dim in [2, 3] {
         let mut x = vec![0.0; dim];
@@ -349,7 +350,7 @@ fn a_grain_sliding_on_a_floor_ends_rolling() {
 fn rolling_resistance_stops_a_rolling_grain_at_the_rate_of_its_torque() {
     let Some(gpu) = gpu() else { return };
     let (r, m, kn, g, v0, mu_r) = (0.1, 1.0f64, 1e5f64, 9.81, 0.5, 0.05);
-    let floor = Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0], zeta: 0.5, friction: 0.5 };
+    let floor = Wall::plane([0.0; 3], [0.0, 1.0, 0.0], 0.5, 0.5);
     let dt = std::f64::consts::PI / (kn / m).sqrt() / 50.0;
     for dim in [2, 3] {
         let mut x = vec![0.0; dim];
@@ -418,7 +419,7 @@ fn pile(gpu: &Arc<Gpu>, p: Precision, dim: usize, across: usize, rows: usize, se
         m.push((q / 0.035).powi(dim as i32));
     }
     let w = 0.09 * across as f64;
-    let wall = |point: [f64; 3], normal: [f64; 3]| Plane { point, normal, zeta: 0.5, friction: 0.5 };
+    let wall = |point: [f64; 3], normal: [f64; 3]| Wall::plane(point, normal, 0.5, 0.5);
     let mut walls =
         vec![wall([0.0; 3], [0.0, 1.0, 0.0]), wall([0.0; 3], [1.0, 0.0, 0.0]), wall([w, 0.0, 0.0], [-1.0, 0.0, 0.0])];
     if dim == 3 {
@@ -509,7 +510,7 @@ fn oblique(gpu: &Arc<Gpu>, p: Precision, dim: usize) -> Dem {
     }
     let params =
         DemParams { stiffness: 1e5, zeta: 0.3, friction: 0.5, lower: [-3.0; 3], upper: [4.0; 3], ..Default::default() };
-    let wall = Plane { point: [3.0, 0.0, 0.0], normal: [-1.0, 0.0, 0.0], zeta: 0.3, friction: 0.5 };
+    let wall = Wall::plane([3.0, 0.0, 0.0], [-1.0, 0.0, 0.0], 0.3, 0.5);
     let mut dem = Dem::new(gpu.clone(), p, dim, params, &x, &v, &[0.5; 3], &[1.0; 3], &[wall]).unwrap();
     let w: Vec<f64> = if dim == 2 { vec![3.0, -2.0, 5.0] } else { vec![3.0, 1.0, -2.0, 0.0, 2.0, 1.0, 1.0, -1.0, 5.0] };
     dem.set_omega(&w).unwrap();
@@ -598,7 +599,7 @@ fn snapshot_and_restore_repeat_the_steps() {
 #[test]
 fn the_2d_angle_follows_the_spin_and_is_kept() {
     let Some(gpu) = gpu() else { return };
-    let floor = Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0], zeta: 0.5, friction: 0.3 };
+    let floor = Wall::plane([0.0; 3], [0.0, 1.0, 0.0], 0.5, 0.3);
     let params = DemParams {
         stiffness: 1e5,
         friction: 0.3,
@@ -688,10 +689,8 @@ fn overflow_and_non_finite_values_halt_with_an_error() {
     assert!(e.unwrap().to_string().contains("mass: grain 2"));
     assert!(matches!(dem.step(1, f64::NAN, &go()), Err((0, Halt::Failed(_)))));
     // A grain between two walls with a step far past stable grows until it is not finite.
-    let walls = [
-        Plane { point: [0.0; 3], normal: [0.0, 1.0, 0.0], zeta: 0.0, friction: 0.0 },
-        Plane { point: [0.0, 1.0, 0.0], normal: [0.0, -1.0, 0.0], zeta: 0.0, friction: 0.0 },
-    ];
+    let walls =
+        [Wall::plane([0.0; 3], [0.0, 1.0, 0.0], 0.0, 0.0), Wall::plane([0.0, 1.0, 0.0], [0.0, -1.0, 0.0], 0.0, 0.0)];
     for p in [Precision::F32, Precision::F64] {
         let params = DemParams { stiffness: 1e5, lower: [-1.0; 3], upper: [2.0; 3], ..Default::default() };
         let mut dem = Dem::new(gpu.clone(), p, 2, params, &[0.0, 0.4], &[0.0, 0.0], &[0.5], &[1.0], &walls).unwrap();
@@ -717,7 +716,7 @@ fn bench_discs() {
             v.extend_from_slice(&[unit(2 * i as u64) - 0.5, unit(2 * i as u64 + 1) - 0.5]);
         }
         let w = side as f64 * gap + 1.2;
-        let wall = |point: [f64; 3], normal: [f64; 3]| Plane { point, normal, zeta: 0.3, friction: 0.5 };
+        let wall = |point: [f64; 3], normal: [f64; 3]| Wall::plane(point, normal, 0.3, 0.5);
         let walls =
             [wall([0.0; 3], [0.0, 1.0, 0.0]), wall([0.0; 3], [1.0, 0.0, 0.0]), wall([w, 0.0, 0.0], [-1.0, 0.0, 0.0])];
         let params = DemParams {
@@ -819,7 +818,7 @@ fn pegboard(gpu: &Arc<Gpu>, p: Precision, dim: usize) -> (Dem, Vec<bool>) {
     }
     put([0.62, 0.56, 0.25], [0.0; 3], 0.02, true); // overlaps the first row's last peg
     put([0.3, 0.01, 0.25], [0.0; 3], 0.02, true); // overlaps the floor
-    let wall = |point: [f64; 3], normal: [f64; 3]| Plane { point, normal, zeta: 0.4, friction: 0.4 };
+    let wall = |point: [f64; 3], normal: [f64; 3]| Wall::plane(point, normal, 0.4, 0.4);
     let walls =
         [wall([0.0; 3], [0.0, 1.0, 0.0]), wall([0.0; 3], [1.0, 0.0, 0.0]), wall([0.7, 0.0, 0.0], [-1.0, 0.0, 0.0])];
     let params = DemParams {
@@ -928,7 +927,7 @@ fn a_grain_bounces_off_a_pinned_grain_as_off_a_wall() {
             let mut peg = Dem::new(gpu.clone(), Precision::F64, dim, params, &x, &u, &[r, r], &[m, 3.0], &[]).unwrap();
             peg.set_pinned(&[false, true]).unwrap();
             // The same grain over a floor at y = r (the peg's top).
-            let floor = Plane { point: [0.0, r, 0.0], normal: [0.0, 1.0, 0.0], zeta, friction: 0.0 };
+            let floor = Wall::plane([0.0, r, 0.0], [0.0, 1.0, 0.0], zeta, 0.0);
             let mut wall =
                 Dem::new(gpu.clone(), Precision::F64, dim, params, &x[..dim], &u[..dim], &[r], &[m], &[floor]).unwrap();
             let steps = 120;
@@ -1037,5 +1036,53 @@ fn drag_brings_a_grain_to_its_terminal_speed_with_its_books_balanced() {
                 assert!(terminal < 1e-4 && err < 1e-3, "{dim}D f32: {terminal:e} {err:e}");
             }
         }
+    }
+}
+
+/// Each kind of wall out of range is refused with the wall's index and what is wrong (the
+/// shapes' own checks, as the CPU's constructors make them); a 2D box reads only its first two
+/// axes and half extents, so a third axis of any value is no error there.
+#[test]
+fn walls_out_of_range_are_refused_by_name() {
+    let Some(gpu) = gpu() else { return };
+    let params = DemParams { stiffness: 1e4, lower: [-1.0; 3], upper: [1.0; 3], ..DemParams::default() };
+    let floor = Wall::plane([0.0, -1.0, 0.0], [0.0, 1.0, 0.0], 0.5, 0.5);
+    let eye = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let nan = f64::NAN;
+    let boxed = |half: [f64; 3], axes: [[f64; 3]; 3]| Shape::OrientedBox { center: [0.0; 3], half, axes };
+    let bad = [
+        (Shape::Plane { point: [0.0; 3], normal: [0.0; 3] }, "non-zero normal"),
+        (Shape::Plane { point: [nan, 0.0, 0.0], normal: [0.0, 1.0, 0.0] }, "finite point"),
+        (Shape::Sphere { center: [0.0; 3], radius: 0.0, inside: true }, "radius > 0"),
+        (Shape::Sphere { center: [0.0; 3], radius: 1e200, inside: false }, "finite square"),
+        (Shape::Capsule { a: [0.0; 3], b: [f64::INFINITY, 0.0, 0.0], radius: 0.1 }, "finite ends"),
+        (boxed([0.5, 0.0, 0.5], eye), "half extents > 0"),
+        (Shape::OrientedBox { center: [nan; 3], half: [0.5; 3], axes: eye }, "finite centre"),
+        (boxed([0.5; 3], [[1.0, 0.0, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]), "orthogonal axes"),
+        (boxed([0.5; 3], [[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), "unit"),
+    ];
+    let (x, v) = ([0.0, 0.5, 0.0], [0.0; 3]);
+    for dim in [2, 3] {
+        for (shape, what) in bad {
+            let walls = [floor, Wall { shape, zeta: 0.5, friction: 0.5 }];
+            match Dem::new(gpu.clone(), Precision::F32, dim, params, &x[..dim], &v[..dim], &[0.1], &[1.0], &walls) {
+                Err(GpuError::Unsupported(m)) => {
+                    assert!(m.contains("wall 1") && m.contains(what), "{dim}D {shape:?}: {m}")
+                }
+                Err(e) => panic!("{dim}D {shape:?}: {e}"),
+                Ok(_) => panic!("{dim}D {shape:?} was taken"),
+            }
+        }
+        let skew = Wall {
+            shape: boxed([0.5, 0.5, nan], [[1.0, 0.0, 9.0], [0.0, 1.0, 0.0], [nan; 3]]),
+            zeta: 0.5,
+            friction: 0.5,
+        };
+        let got = Dem::new(gpu.clone(), Precision::F32, dim, params, &x[..dim], &v[..dim], &[0.1], &[1.0], &[skew]);
+        assert_eq!(got.is_ok(), dim == 2, "{dim}D: {:?}", got.err());
+        let wrong = Wall { friction: -0.1, ..floor };
+        assert!(
+            Dem::new(gpu.clone(), Precision::F32, dim, params, &x[..dim], &v[..dim], &[0.1], &[1.0], &[wrong]).is_err()
+        );
     }
 }

@@ -6,7 +6,7 @@
 //!
 //! What it holds: every particle of the scene as a grain (its `radius` attribute > 0), pinned
 //! ones as fixed obstacles (pegs) as the CPU term holds them, exactly one `contacts` term with
-//! plane walls only, at most one `gravity` and one `drag` term, in any order, semi-implicit
+//! its walls (planes, spheres and bowls, capsules, oriented boxes), at most one `gravity` and one `drag` term, in any order, semi-implicit
 //! Euler (the CPU's scheme for contacts; not "xpbd"), no scene colliders. Anything else is
 //! refused by name before anything moves (`from_records`).
 //!
@@ -21,11 +21,12 @@
 //! the run continues bit for bit.
 use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
+use crate::geometry::AnyShape;
 use crate::terms::contacts::{damping_ratio, Law as CpuLaw};
 use crate::terms::registry::{self, Context, Params};
 use crate::vector::{Real, Vector};
 use glam::{DVec2, DVec3};
-use physcore_gpu::dem::{Dem, DemBooks, DemParams, DemRaw, Law, Plane};
+use physcore_gpu::dem::{Dem, DemBooks, DemParams, DemRaw, Law, Shape, Wall};
 use physcore_gpu::{Gpu, Precision};
 use std::sync::atomic::AtomicBool;
 use std::sync::{Arc, Mutex};
@@ -55,7 +56,7 @@ pub struct DeviceDem {
     precision: Precision,
     dim: usize,
     params: DemParams,
-    walls: Vec<Plane>,
+    walls: Vec<Wall>,
     radius: Vec<Real>,
     mass: Vec<Real>,
     /// The fixed grains (`Dem::set_pinned`).
@@ -81,6 +82,45 @@ fn number_or(p: &Params, key: &str, default: Real) -> Result<Real> {
 }
 
 /// The floats under `key` (a copy: the records stay as they are).
+/// The contacts term's walls as the device's: read and checked by the CPU term's own parser
+/// (`contacts::walls`), so both paths hold the same shapes (an oriented box's axes as the CPU
+/// computed them from its rotation).
+fn walls_of<V: Vector>(cp: &Params, law: CpuLaw) -> Result<Vec<Wall>> {
+    let flat = |v: &V| {
+        let mut a = [0.0; 3];
+        a[..V::DIM].copy_from_slice(V::flat(std::slice::from_ref(v)));
+        a
+    };
+    let walls = crate::terms::contacts::walls::<V>(&mut cp.try_clone("add_term")?, law)?;
+    walls
+        .iter()
+        .enumerate()
+        .map(|(k, w)| {
+            let shape = match &w.shape {
+                AnyShape::HalfSpace(h) => Shape::Plane { point: flat(&h.point), normal: flat(&h.normal) },
+                AnyShape::Ball(b) => Shape::Sphere { center: flat(&b.center), radius: b.radius, inside: b.inside },
+                AnyShape::Capsule(c) => Shape::Capsule { a: flat(&c.a), b: flat(&c.b), radius: c.radius },
+                AnyShape::OrientedBox(b) => {
+                    Shape::OrientedBox { center: flat(&b.center), half: b.half, axes: b.axes.each_ref().map(flat) }
+                }
+                AnyShape::Aabb(_) => {
+                    return Err(invalid("walls", format!("wall {k}: the GPU path's DEM has no axis-aligned box walls")))
+                }
+            };
+            Ok(Wall { shape, zeta: w.zeta, friction: w.friction })
+        })
+        .collect()
+}
+
+/// `walls_of` in `dim` dimensions.
+pub(crate) fn walls_of_record(dim: usize, cp: &Params, law: CpuLaw) -> Result<Vec<Wall>> {
+    if dim == 2 {
+        walls_of::<DVec2>(cp, law)
+    } else {
+        walls_of::<DVec3>(cp, law)
+    }
+}
+
 fn floats(p: &Params, key: &str) -> Result<Vec<Real>> {
     p.try_clone("step")?.take_floats(key)
 }
@@ -141,7 +181,7 @@ impl DeviceDem {
     /// no contacts yet).
     ///
     /// Errors: `InvalidInput` naming what the device's DEM cannot hold (a term other than one
-    /// "contacts", one "gravity" and one "drag", no contacts term, a wall other than a plane,
+    /// "contacts", one "gravity" and one "drag", no contacts term,
     /// another integrator than "semi_implicit_euler", scene colliders, no radius attribute or
     /// a radius not > 0, pinned particles included, no grains), the contacts and drag terms' own
     /// checks of their records and of `history`, f64 on an adapter without it; `OutOfMemory` for
@@ -215,7 +255,9 @@ impl DeviceDem {
         if let Some((kind, _)) = colliders.first() {
             return Err(invalid(
                 "colliders",
-                format!("the GPU path's DEM has no scene colliders (a {kind:?} here); give the contacts term plane walls instead"),
+                format!(
+                    "the GPU path's DEM has no scene colliders (a {kind:?} here); give the contacts term walls instead"
+                ),
             ));
         }
         if pinned.len() != n {
@@ -261,20 +303,7 @@ impl DeviceDem {
             _ => (Law::Linear, CpuLaw::Linear),
         };
         let beta = number_or(cp, "inertia_factor", if dim == 2 { 0.5 } else { 0.4 })?;
-        let kinds = if cp.has("wall_kinds") { cp.text("wall_kinds")?.to_string() } else { String::new() };
-        let kinds: Vec<&str> = if kinds.is_empty() { Vec::new() } else { kinds.split(',').collect() };
-        let (wp, we, wmu) = (floats(cp, "wall_params")?, floats(cp, "wall_restitution")?, floats(cp, "wall_friction")?);
-        let mut walls = Vec::with_capacity(kinds.len());
-        for (k, kind) in kinds.iter().enumerate() {
-            if *kind != "plane" {
-                return Err(invalid("walls", format!("wall {k} is a {kind}: the GPU path's DEM has plane walls only")));
-            }
-            let q = &wp[2 * dim * k..2 * dim * (k + 1)];
-            let (mut point, mut normal) = ([0.0; 3], [0.0; 3]);
-            point[..dim].copy_from_slice(&q[..dim]);
-            normal[..dim].copy_from_slice(&q[dim..]);
-            walls.push(Plane { point, normal, zeta: damping_ratio(cpu_law, we[k]), friction: wmu[k] });
-        }
+        let walls = walls_of_record(dim, cp, cpu_law)?;
         let mut g = [0.0; 3];
         if let Some((_, p)) = &gravity {
             let gv = floats(p, "g")?;
@@ -1333,6 +1362,13 @@ mod tests {
         ball[0].2.insert("wall_params", Value::Floats(vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 5.0, 1.0]));
         ball[0].2.insert("wall_restitution", Value::Floats(vec![0.5, 0.5]));
         ball[0].2.insert("wall_friction", Value::Floats(vec![0.3, 0.3]));
+        // Walls of every shape are held (`contacts::device_tests`); the CPU term's parser
+        // refuses what it would refuse (an unknown shape, a bowl's radius of 0).
+        assert!(with(&ball, "semi_implicit_euler", &pinned, ok, &[]).is_ok());
+        let mut cone = ball.clone();
+        cone[0].2.insert("wall_kinds", Value::Text("plane,cone".into()));
+        assert_eq!(arg_of(with(&cone, "semi_implicit_euler", &pinned, ok, &[])), "walls");
+        ball[0].2.insert("wall_params", Value::Floats(vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]));
         assert_eq!(arg_of(with(&ball, "semi_implicit_euler", &pinned, ok, &[])), "walls");
         // The contacts term's own checks, as on the CPU.
         let mut soft = rec.clone();

@@ -12,7 +12,7 @@ use crate::terms::registry::{self, Context, Params, Value};
 use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
-use physcore_gpu::dem::{self as dd, Dem, DemParams, Plane};
+use physcore_gpu::dem::{self as dd, Dem, DemParams, Wall};
 use physcore_gpu::Precision;
 use std::sync::atomic::AtomicBool;
 
@@ -69,9 +69,26 @@ impl Material {
     }
 }
 
+/// The contacts term's walls as its record takes them: kinds ("plane,sphere,…") and every
+/// wall's numbers in order, each wall with the material's restitution and friction.
+struct Walls {
+    kinds: String,
+    params: Vec<Real>,
+}
+
+impl Walls {
+    /// A floor through the origin, its normal up (the last axis).
+    fn floor(dim: usize) -> Self {
+        let mut up = vec![0.0; 2 * dim];
+        up[2 * dim - 1] = 1.0;
+        Self { kinds: "plane".into(), params: up }
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn cpu_run<V: Vector>(
     mat: &Material,
+    walls: &Walls,
     x: &[Real],
     v: &[Real],
     r: &[Real],
@@ -88,18 +105,17 @@ fn cpu_run<V: Vector>(
         .unwrap();
     sys.set_attribute("radius", r.to_vec()).unwrap();
     let ctx = Context { n_particles: n };
-    let mut up = vec![0.0; 2 * d];
-    up[2 * d - 1] = 1.0; // a floor through the origin, its normal up
+    let nw = walls.kinds.split(',').count();
     let c = Params::new()
         .with("law", Value::Text(if mat.law == Law::Linear { "linear" } else { "hertz" }.into()))
         .with("stiffness", Value::Number(mat.stiffness))
         .with("tangential_ratio", Value::Number(mat.ratio))
         .with("restitution", Value::Number(mat.restitution))
         .with("friction", Value::Number(mat.friction))
-        .with("wall_kinds", Value::Text("plane".into()))
-        .with("wall_params", Value::Floats(up))
-        .with("wall_restitution", Value::Floats(vec![mat.restitution]))
-        .with("wall_friction", Value::Floats(vec![mat.friction]));
+        .with("wall_kinds", Value::Text(walls.kinds.clone()))
+        .with("wall_params", Value::Floats(walls.params.clone()))
+        .with("wall_restitution", Value::Floats(vec![mat.restitution; nw]))
+        .with("wall_friction", Value::Floats(vec![mat.friction; nw]));
     let mut g = vec![0.0; d];
     g[d - 1] = -9.81;
     let g = Params::new().with("g", Value::Floats(g));
@@ -121,9 +137,9 @@ fn agree(dim: usize, mat: &Material, steps: u64) -> [(Real, Real); 2] {
     let dt = 2e-5;
     let free = vec![false; m.len()];
     let (cx, cv) = if dim == 2 {
-        cpu_run::<DVec2>(mat, &x, &v, &r, &m, &free, dt, steps)
+        cpu_run::<DVec2>(mat, &Walls::floor(2), &x, &v, &r, &m, &free, dt, steps)
     } else {
-        cpu_run::<DVec3>(mat, &x, &v, &r, &m, &free, dt, steps)
+        cpu_run::<DVec3>(mat, &Walls::floor(3), &x, &v, &r, &m, &free, dt, steps)
     };
     // Every kind of contact happened: the pair bounced apart, the fast grain off the floor.
     let up = |k: usize| cv[dim * k + dim - 1];
@@ -133,7 +149,7 @@ fn agree(dim: usize, mat: &Material, steps: u64) -> [(Real, Real); 2] {
     let zeta = params.zeta;
     let mut up = [0.0; 3];
     up[dim - 1] = 1.0;
-    let floor = Plane { point: [0.0; 3], normal: up, zeta, friction: mat.friction };
+    let floor = Wall::plane([0.0; 3], up, zeta, mat.friction);
     let mut out = [(Real::NAN, Real::NAN); 2];
     for (k, precision) in [Precision::F64, Precision::F32].into_iter().enumerate() {
         let mut dev = match Dem::new(gpu.clone(), precision, dim, params, &x, &v, &r, &m, &[floor]) {
@@ -193,9 +209,9 @@ fn a_grain_bounces_off_a_pinned_grain_as_on_the_cpu() {
             let pinned = [false, true];
             let (dt, steps) = (2e-5, 2500);
             let (cx, cv) = if dim == 2 {
-                cpu_run::<DVec2>(&mat, &x, &v, &r, &m, &pinned, dt, steps)
+                cpu_run::<DVec2>(&mat, &Walls::floor(2), &x, &v, &r, &m, &pinned, dt, steps)
             } else {
-                cpu_run::<DVec3>(&mat, &x, &v, &r, &m, &pinned, dt, steps)
+                cpu_run::<DVec3>(&mat, &Walls::floor(3), &x, &v, &r, &m, &pinned, dt, steps)
             };
             // It hit (about step 500) and left: up and sideways, the peg where it was.
             assert!(cv[dim - 1] > 0.0 && cv[0] > 0.0, "{dim}D {law:?}: bounced off the peg: {cv:?}");
@@ -228,6 +244,86 @@ fn a_grain_bounces_off_a_pinned_grain_as_on_the_cpu() {
                 } else {
                     assert!(ex < 1e-3 && ev < 1e-2, "{dim}D {law:?} f32: {ex:e} {ev:e}");
                 }
+            }
+        }
+    }
+}
+
+/// Grains against a wall of every other shape, the device against the CPU world (linear law,
+/// friction, gravity along −up), in 2D and 3D: one falls onto a capsule (a rod) off its axis,
+/// one onto a tilted oriented box (a ramp) and slides off round its lower edge, one onto a
+/// ball off its top, and one onto the sloping side of a bowl that holds them all. Each grain
+/// leaves its fall line (so its wall pushed it), and the device's state is the CPU's: to
+/// rounding in f64, to f32's accuracy in f32. The shapes are read by the CPU term's own parser
+/// on both sides (as `DeviceDem` does).
+#[test]
+fn walls_of_every_shape_push_grains_as_on_the_cpu() {
+    let Some(gpu) = gpu() else { return };
+    let mat = Material { law: Law::Linear, stiffness: 1e5, restitution: 0.6, friction: 0.4, ratio: 1.0 / 3.0 };
+    // (x, up, depth) per grain, at rest: onto the rod's end cap, the ramp, the ball, the bowl.
+    let p: [[Real; 3]; 4] = [[0.36, 0.85, 0.0], [1.35, 0.95, 0.02], [1.86, 1.2, -0.03], [1.3, 0.2, 0.05]];
+    let (theta, dt, steps) = (0.5, 2e-4, 2500);
+    for dim in [2, 3] {
+        let at = |q: [Real; 3]| if dim == 2 { vec![q[0], q[1]] } else { vec![q[0], q[2], q[1]] };
+        let x: Vec<Real> = p.iter().flat_map(|&q| at(q)).collect();
+        let v = vec![0.0; 4 * dim];
+        let r = vec![0.1; 4];
+        let m: Vec<Real> = r.iter().map(|ri: &Real| 1000.0 * ri.powi(dim as i32)).collect();
+        // A bowl of radius 1.5 about (1, 1), a rod from (−0.1, 0.6) to (0.3, 0.6) of radius 0.05,
+        // a ramp 0.6 × 0.1 about (1.2, 0.5) turned up by θ, a ball of radius 0.15 at (1.8, 0.9).
+        let mut params = Vec::new();
+        params.extend(at([1.0, 1.0, 0.0]));
+        params.extend([1.5, 1.0]);
+        params.extend(at([-0.1, 0.6, 0.0]));
+        params.extend(at([0.3, 0.6, 0.0]));
+        params.push(0.05);
+        params.extend(at([1.2, 0.5, 0.0]));
+        params.extend(at([0.3, 0.05, 0.2]));
+        // In 3D the up axis is z: the x axis turned towards up is a turn of −θ about y.
+        params.extend(if dim == 2 { vec![theta] } else { vec![0.0, -theta, 0.0] });
+        params.extend(at([1.8, 0.9, 0.0]));
+        params.extend([0.15, 0.0]);
+        let walls = Walls { kinds: "sphere,capsule,oriented_box,sphere".into(), params };
+        let free = vec![false; 4];
+        let (cx, cv) = if dim == 2 {
+            cpu_run::<DVec2>(&mat, &walls, &x, &v, &r, &m, &free, dt, steps)
+        } else {
+            cpu_run::<DVec3>(&mat, &walls, &x, &v, &r, &m, &free, dt, steps)
+        };
+        // Each grain left its fall line: the rod's and the ball's to +x, the ramp's down it
+        // (−x), the bowl's towards its centre (−x) and up again.
+        let shift: Vec<Real> = (0..4).map(|k| cx[dim * k] - x[dim * k]).collect();
+        assert!(shift[0] > 0.05 && shift[1] < -0.2 && shift[2] > 0.05 && shift[3] < -0.01, "{dim}D: {shift:?}");
+        assert!(cv[dim * 3 + dim - 1] > 0.0, "{dim}D: the last grain bounced off the bowl: {cv:?}");
+        let record = Params::new()
+            .with("wall_kinds", Value::Text(walls.kinds.clone()))
+            .with("wall_params", Value::Floats(walls.params.clone()))
+            .with("wall_restitution", Value::Floats(vec![mat.restitution; 4]))
+            .with("wall_friction", Value::Floats(vec![mat.friction; 4]));
+        let dev_walls = crate::systems::device_dem::walls_of_record(dim, &record, mat.law).unwrap();
+        let params = mat.device_params(dim, [-1.0; 3], [3.0; 3]);
+        for precision in [Precision::F64, Precision::F32] {
+            let mut dev = match Dem::new(gpu.clone(), precision, dim, params, &x, &v, &r, &m, &dev_walls) {
+                Ok(d) => d,
+                Err(e) if precision == Precision::F64 => {
+                    eprintln!("f64 skipped: {e}");
+                    continue;
+                }
+                Err(e) => panic!("{e}"),
+            };
+            dev.step(steps, dt, &AtomicBool::new(false)).unwrap();
+            let (dx, dv, _) = dev.read().unwrap();
+            let vmax = cv.iter().map(|c| c.abs()).fold(0.0, Real::max);
+            let ex = cx.iter().zip(&dx).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / 3.0;
+            let ev = cv.iter().zip(&dv).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / vmax;
+            eprintln!(
+                "DEM {dim}D walls of every shape {precision:?}, {steps} steps: positions {ex:.2e} of the scene, velocities \
+                 {ev:.2e} of the fastest"
+            );
+            if precision == Precision::F64 {
+                assert!(ex < 1e-10 && ev < 1e-8, "{dim}D f64: {ex:e} {ev:e}");
+            } else {
+                assert!(ex < 1e-3 && ev < 1e-2, "{dim}D f32: {ex:e} {ev:e}");
             }
         }
     }

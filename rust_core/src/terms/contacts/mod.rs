@@ -773,7 +773,7 @@ crate::register_term!("contacts", build, (&["semi_implicit_euler", "xpbd"], "int
 /// its ends a, b and radius; an oriented box its centre, half extents and rotation (1 number in
 /// 2D, 3 in 3D)), `wall_restitution` and `wall_friction`; `InvalidInput` naming "walls" and the
 /// wall if one is out of range.
-fn walls<V: Vector>(p: &mut Params, law: Law) -> Result<Vec<Wall<V>>> {
+pub(crate) fn walls<V: Vector>(p: &mut Params, law: Law) -> Result<Vec<Wall<V>>> {
     let kinds = if p.has("wall_kinds") { p.text("wall_kinds")?.to_string() } else { String::new() };
     let kinds: Vec<&str> = if kinds.is_empty() { Vec::new() } else { kinds.split(',').collect() };
     let params = p.take_floats("wall_params")?;
