@@ -545,10 +545,16 @@ impl Dem {
             &cell_layout,
             &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
         );
+        // Walls all planes: the other shapes' code compiled out (`dem.wgsl`'s `SHAPED`), so a
+        // scene of planes runs the kernels it ran before the other shapes came.
+        let mut wgsl = include_str!("dem.wgsl").to_string();
+        if walls.iter().all(|w| matches!(w.shape, Shape::Plane { .. })) {
+            wgsl = wgsl.replace("const SHAPED: bool = true;", "const SHAPED: bool = false;");
+        }
         let (layout, pipes) = gpu.kernels_with(
             "dem.wgsl",
             precision,
-            include_str!("dem.wgsl"),
+            &wgsl,
             &[uniform, W, W, W, R, R, R, R, R, W, W, W, W, W],
             &["contacts", "integrate", "commit", "energy", "tally"],
             gpu.is_cpu(),

@@ -196,6 +196,8 @@ fn stride_out() -> u32 {
 }
 
 const WS: u32 = 24u;
+// False (set by the host) when every wall is a plane: the other shapes' code is dead then.
+const SHAPED: bool = true;
 
 fn wall_vec(w: u32, o: u32) -> vec3<real> {
     let b = WS * w + o;
@@ -232,7 +234,7 @@ fn wall_surface(w: u32, x: vec3<real>) -> Surf {
     let kind = walls[WS * w];
     let a = wall_vec(w, 4u);
     let b = wall_vec(w, 8u);
-    if (kind == 0.0) {
+    if (!SHAPED || kind == 0.0) {
         return Surf(b, dot(x - a, b));
     }
     let r = walls[WS * w + 3u];
