@@ -60,6 +60,23 @@ def _books(s: pc.Scene) -> dict[str, float]:
             **{f"D {k}": v for k, v in e.dissipated.items()}}
 
 
+#: The device against the CPU: positions (R), the state's books and the dissipated ones (of the
+#: books' scale), by precision.
+AGREE = {"f32": (1e-2, 1e-4, 3e-4), "f64": (1e-10, 1e-12, 1e-4)}
+
+
+def _apart(gpu: pc.Scene, cpu: pc.Scene, b1: dict[str, float]) -> tuple[float, float, float]:
+    """How far `gpu` is from `cpu` (whose books are `b1`): positions over R, the largest state
+    book's and dissipated book's difference over the sum of |books|."""
+    g1 = _books(gpu)
+    assert g1.keys() == b1.keys()
+    scale = sum(abs(v) for v in b1.values())
+    dx = np.abs(gpu.positions - cpu.positions).max() / R
+    ds = max(abs(g1[k] - b1[k]) for k in b1 if not k.startswith("D ")) / scale
+    db = max(abs(g1[k] - b1[k]) for k in b1 if k.startswith("D ")) / scale
+    return dx, ds, db
+
+
 @pytest.mark.parametrize("dim", [2, 3])
 @pytest.mark.parametrize("rolling", [0.0, 0.1])
 def test_grains_on_the_gpu_fall_collide_and_book_as_on_the_cpu(dim: int, rolling: float) -> None:
@@ -69,27 +86,22 @@ def test_grains_on_the_gpu_fall_collide_and_book_as_on_the_cpu(dim: int, rolling
     b1 = _books(cpu)
     assert cpu.contact_count() > 3  # they landed and touch
     assert b1["D contacts (normal damping)"] > 0 and b1["D contacts (friction)"] > 0
-    scale = sum(abs(v) for v in b1.values())
     for precision in PRECISIONS:
         gpu = _pile(dim, DEVICE, precision, rolling=rolling)
         assert _books(gpu).keys() == b0.keys()
         gpu.step(1500)
         assert gpu.device == DEVICE and gpu.precision == precision
-        dx = np.abs(gpu.positions - cpu.positions).max() / R
-        g1 = _books(gpu)
-        assert g1.keys() == b1.keys()
         # The state's books (kinetic, potentials) to the precision's round-off; the dissipated
         # ones differ by design: the device does not book the energy a contact's normal spring
         # holds at its first evaluation (formed within a step, no force did work on it; the CPU
         # books it and its totals keep that jump, O((ω dt)²) of the impact's: physcore_gpu::dem's
         # module doc), measured 1.3e-6 J of 0.041 J here.
-        ds = max(abs(g1[k] - b1[k]) for k in b1 if not k.startswith("D ")) / scale
-        db = max(abs(g1[k] - b1[k]) for k in b1 if k.startswith("D ")) / scale
+        dx, ds, db = _apart(gpu, cpu, b1)
         spin = "angular_velocity" if dim == 2 else "angular_velocity_z"
         dw = np.abs(gpu.particle_field(spin) - cpu.particle_field(spin)).max()
         print(f"\nDEM {dim}D rolling={rolling} {precision}, 1500 steps: x {dx:.1e} R, state books {ds:.1e}, dissipated {db:.1e} of their scale, "
               f"spins {dw:.1e} rad/s, contacts {gpu.contact_count()} vs {cpu.contact_count()}")
-        tol = {"f32": (1e-2, 1e-4, 3e-4), "f64": (1e-10, 1e-12, 1e-4)}[precision]
+        tol = AGREE[precision]
         assert dx < tol[0] and ds < tol[1] and db < tol[2], (precision, dx, ds, db)
         if precision == "f64":
             assert gpu.contact_count() == cpu.contact_count()
@@ -139,19 +151,14 @@ def test_grains_against_a_bowl_a_rod_and_a_ramp_on_the_gpu_as_on_the_cpu(dim: in
     gap = np.linalg.norm(cpu.positions[:, None] - cpu.positions[None], axis=2) - (r[:, None] + r[None])
     assert gap[np.triu_indices(3, 1)].min() > 0.1 * R
     assert b1["D contacts (normal damping)"] > 0 and b1["D contacts (friction)"] != 0
-    scale = sum(abs(v) for v in b1.values())
     for precision in PRECISIONS:
         gpu = _bowl(dim, DEVICE, precision)
         gpu.step(steps)
         assert gpu.device == DEVICE and gpu.precision == precision
-        dx = np.abs(gpu.positions - cpu.positions).max() / R
-        g1 = _books(gpu)
-        ds = max(abs(g1[k] - b1[k]) for k in b1 if not k.startswith("D ")) / scale
-        db = max(abs(g1[k] - b1[k]) for k in b1 if k.startswith("D ")) / scale
+        dx, ds, db = _apart(gpu, cpu, b1)
         print(f"\nDEM {dim}D bowl, rod and ramp {precision}, {steps} steps: x {dx:.1e} R, state books {ds:.1e}, "
               f"dissipated {db:.1e} of their scale, contacts {gpu.contact_count()} vs {cpu.contact_count()}")
-        # As the pile's (test_grains_on_the_gpu_fall_collide_and_book_as_on_the_cpu).
-        tol = {"f32": (1e-2, 1e-4, 3e-4), "f64": (1e-10, 1e-12, 1e-4)}[precision]
+        tol = AGREE[precision]
         assert dx < tol[0] and ds < tol[1] and db < tol[2], (precision, dx, ds, db)
         if precision == "f64":
             assert gpu.contact_count() == cpu.contact_count()
