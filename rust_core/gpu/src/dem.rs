@@ -96,6 +96,8 @@
 //! every step), "xpbd"; of the other force terms only a uniform gravity and linear drag.
 use crate::cells::spread;
 use crate::particles::Halt;
+pub use crate::shape::Shape;
+use crate::shape::ROW;
 use crate::sph::{invalid, positive};
 use crate::{Bind, Chunk, Gpu, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -111,22 +113,8 @@ pub enum Law {
     Hertz,
 }
 
-/// A wall's shape: the CPU's wall shapes (`geometry`), m; z ignored in 2D.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Shape {
-    /// The half-space {x : (x − point)·normal ≥ 0} (`normal` need not be unit).
-    Plane { point: [f64; 3], normal: [f64; 3] },
-    /// Grains kept outside the ball (a disc in 2D) of `radius` about `center`, or with `inside`
-    /// in it (a bowl).
-    Sphere { center: [f64; 3], radius: f64, inside: bool },
-    /// Grains kept outside the capsule of `radius` about the segment from `a` to `b`.
-    Capsule { a: [f64; 3], b: [f64; 3], radius: f64 },
-    /// Grains kept outside the box of `half` extents along the unit, orthogonal `axes` about
-    /// `center` (2D: the first two axes and half extents).
-    OrientedBox { center: [f64; 3], half: [f64; 3], axes: [[f64; 3]; 3] },
-}
-
-/// A wall: its shape, with its damping ratio ζ (of its restitution) and friction μ.
+/// A wall: its shape (any but `Shape::Box`: a box's walls are its faces, planes), with its
+/// damping ratio ζ (of its restitution) and friction μ.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Wall {
     pub shape: Shape,
@@ -177,6 +165,9 @@ impl Wall {
                 }
                 Shape::Capsule { a, b, radius }
             }
+            Shape::Box { .. } => {
+                return Err(bad("a box: give its faces as plane walls (the CPU's contacts term does)"));
+            }
             Shape::OrientedBox { center, half, axes } => {
                 let axes = axes.map(flat);
                 let unit = (0..dim).all(|j| {
@@ -204,30 +195,7 @@ impl Wall {
         finite_nonneg(self.friction, "walls' friction")?;
         Ok(Self { shape, zeta: self.zeta, friction: self.friction })
     }
-
-    /// The device's row (`dem.wgsl`'s `wall_surface`): kind, ζ, μ, a radius (a sphere's, a
-    /// capsule's); two points padded to 4 (a plane's point and normal, a sphere's centre and
-    /// `inside`, a capsule's ends, a box's centre and half extents); a box's three axes.
-    fn row(&self) -> [f64; WALL_ROW] {
-        let (kind, r, a, b, axes) = match self.shape {
-            Shape::Plane { point, normal } => (0.0, 0.0, point, normal, [[0.0; 3]; 3]),
-            Shape::Sphere { center, radius, inside } => {
-                (1.0, radius, center, [f64::from(u8::from(inside)), 0.0, 0.0], [[0.0; 3]; 3])
-            }
-            Shape::Capsule { a, b, radius } => (2.0, radius, a, b, [[0.0; 3]; 3]),
-            Shape::OrientedBox { center, half, axes } => (3.0, 0.0, center, half, axes),
-        };
-        let mut row = [0.0; WALL_ROW];
-        row[..4].copy_from_slice(&[kind, self.zeta, self.friction, r]);
-        for (k, v) in [a, b, axes[0], axes[1], axes[2]].iter().enumerate() {
-            row[4 + 4 * k..7 + 4 * k].copy_from_slice(v);
-        }
-        row
-    }
 }
-
-/// Reals per wall on the device (`Wall::row`).
-const WALL_ROW: usize = 24;
 
 /// The grains' material, gravity and search box, SI units.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -513,7 +481,7 @@ impl Dem {
         let vel = gpu.buffer("DEM velocities", nn * d * rb, st)?;
         let omega = gpu.buffer("DEM angular velocities and angles", nn * spin_width(dim) as u64 * rb, st)?;
         let props = gpu.buffer("DEM radii, masses and pins", 3 * nn * rb, st)?;
-        let wall_buf = gpu.buffer("DEM walls", (WALL_ROW as u64 * walls.len() as u64 * rb).max(16), st)?;
+        let wall_buf = gpu.buffer("DEM walls", (ROW as u64 * walls.len() as u64 * rb).max(16), st)?;
         let cell_of = gpu.buffer("DEM cells", nn * 4, st)?;
         let counts = gpu.buffer("DEM cell counts", total * 4, st)?;
         let start = gpu.buffer("DEM cell starts", (total + 1) * 4, st)?;
@@ -597,7 +565,7 @@ impl Dem {
             gpu.upload(precision, &books, &vec![0.0; 4 * n]);
         }
         if !walls.is_empty() {
-            let rows: Vec<f64> = walls.iter().flat_map(|w| w.row()).collect();
+            let rows: Vec<f64> = walls.iter().flat_map(|w| w.shape.row([w.zeta, w.friction])).collect();
             gpu.upload(precision, &wall_buf, &rows);
         }
         let s = Self {

@@ -63,9 +63,10 @@ const WG: u32 = 64u;
 @group(0) @binding(3) var<storage, read_write> omg: array<real>;
 // Per grain: radius, mass, and 1 for a free grain, 0 for a pinned one (a fixed obstacle).
 @group(0) @binding(4) var<storage, read> props: array<real>;
-// Per wall, WS values (dem.rs's `Wall::row`): kind (0 plane, 1 sphere, 2 capsule, 3 oriented
-// box), ζ, μ, radius; two points padded to 4 (a plane's point and unit normal, a sphere's centre
-// and `inside`, a capsule's ends, a box's centre and half extents); a box's three unit axes.
+// Per wall, WS values (shape.rs's `Shape::row`, as particles.wgsl reads its colliders): kind
+// (0 plane, 2 sphere, 3 capsule, 4 oriented box; no 1, a box), ζ, μ, a capsule's radius; two
+// points padded to 4 (a plane's point and unit normal, a sphere's centre then its radius and
+// `inside`, a capsule's ends, a box's centre and half extents); a box's three unit axes.
 @group(0) @binding(5) var<storage, read> walls: array<real>;
 // The cell list (cells.wgsl): each grain's cell, each cell's first slot, the grains by cell.
 @group(0) @binding(6) var<storage, read> cell_of: array<u32>;
@@ -237,11 +238,10 @@ fn wall_surface(w: u32, x: vec3<real>) -> Surf {
     if (!SHAPED || kind == 0.0) {
         return Surf(b, dot(x - a, b));
     }
-    let r = walls[WS * w + 3u];
-    if (kind == 1.0) {
-        return round_surface(x, a, r, b.x != 0.0);
-    }
     if (kind == 2.0) {
+        return round_surface(x, a, b.x, b.y != 0.0);
+    }
+    if (kind == 3.0) {
         // The axis point nearest x: a + t (b − a), t clamped to [0, 1].
         let ab = b - a;
         let l2 = dot(ab, ab);
@@ -249,7 +249,7 @@ fn wall_surface(w: u32, x: vec3<real>) -> Surf {
         if (l2 > 0.0) {
             t = clamp(dot(x - a, ab) / l2, 0.0, 1.0);
         }
-        return round_surface(x, a + ab * t, r, false);
+        return round_surface(x, a + ab * t, walls[WS * w + 3u], false);
     }
     // The oriented box: local coordinates q_j = (x − c)·u_j; inside, the least-deep face
     // (the first on a tie); outside across one face, that face; else the clamped point.

@@ -24,6 +24,7 @@ pub mod gray_scott;
 mod grid;
 mod maxima;
 pub mod particles;
+pub mod shape;
 pub mod sph;
 #[doc(hidden)]
 pub use grid::set_threads_for_tests as set_grid_threads_for_tests;

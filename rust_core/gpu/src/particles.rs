@@ -8,6 +8,7 @@
 //! for free particles, 0 for pinned ones (which still pull). Velocity Verlet evaluates the drag
 //! at the predicted velocity v + dt a and books dissipation by the trapezoidal rule, as the CPU's
 //! `integrators::verlet` does, so both paths are the same method.
+pub use crate::shape::Shape;
 use crate::{Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -166,23 +167,14 @@ const PAD: u32 = u32::MAX;
 const SLICE: usize = 32;
 
 /// A collider of the projection stage, applied after every step in the order given (the CPU's
-/// `constraints` colliders with `Contact::bounce`; restitution e in [0, 1], friction μ ≥ 0).
+/// `constraints` colliders with `Contact::bounce`; restitution e in [0, 1], friction μ ≥ 0):
+/// a plane, a box particles are kept in (its faces, `constraints::Aabb`), a sphere or bowl, a
+/// capsule, an oriented box ([`Shape`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Collider {
-    /// The half-space (x − point)·normal ≥ 0 (`normal` of unit length; z = 0 in 2D).
-    Plane { point: [f64; 3], normal: [f64; 3], restitution: f64, friction: f64 },
-    /// Particles kept inside [lower, upper] (z ignored in 2D).
-    Box { lower: [f64; 3], upper: [f64; 3], restitution: f64, friction: f64 },
-    /// Particles kept outside the sphere (a disc in 2D) of `radius` about `center`, or with
-    /// `inside` in it (a bowl): the CPU's `constraints::Sphere` (`geometry::ball::onto_round`).
-    Sphere { center: [f64; 3], radius: f64, inside: bool, restitution: f64, friction: f64 },
-    /// Particles kept outside the capsule of `radius` about the segment from `a` to `b`: the
-    /// CPU's `constraints::Capsule`.
-    Capsule { a: [f64; 3], b: [f64; 3], radius: f64, restitution: f64, friction: f64 },
-    /// Particles kept outside the box of `half` extents along the unit `axes` about `center`
-    /// (2D: the first two axes, z = 0): the CPU's `constraints::OrientedBox`, its axes as the
-    /// CPU computes them from the rotation.
-    OrientedBox { center: [f64; 3], half: [f64; 3], axes: [[f64; 3]; 3], restitution: f64, friction: f64 },
+pub struct Collider {
+    pub shape: Shape,
+    pub restitution: f64,
+    pub friction: f64,
 }
 
 /// Energy books summed on the host, in f64, in particle order (deterministic).
@@ -294,7 +286,8 @@ pub const MAX_COLLIDERS: usize = 64;
 
 /// Rows (of 4 reals) per collider: its kind, restitution, friction and a radius; two points;
 /// three axes (an oriented box's).
-const COLLIDER_ROWS: u64 = 6;
+/// vec4s per collider (`Shape::row`).
+const COLLIDER_ROWS: u64 = (crate::shape::ROW / 4) as u64;
 
 impl Particles {
     /// Uploads `n` particles: `x`, `v` flat (n·dim, m and m/s), `mass` (kg, > 0), `inv_mass`
@@ -812,30 +805,7 @@ impl Particles {
                 colliders.len()
             )));
         }
-        let mut rows = Vec::with_capacity(4 * COLLIDER_ROWS as usize * colliders.len());
-        const NO_AXES: [[f64; 3]; 3] = [[0.0; 3]; 3];
-        for c in colliders {
-            // Rows: kind, e, μ, a capsule's radius; two points; an oriented box's three axes.
-            let (kind, a, b, w, axes, e, mu) = match *c {
-                Collider::Plane { point, normal, restitution: e, friction: mu } => {
-                    (0.0, point, normal, 0.0, NO_AXES, e, mu)
-                }
-                Collider::Box { lower, upper, restitution: e, friction: mu } => {
-                    (1.0, lower, upper, 0.0, NO_AXES, e, mu)
-                }
-                Collider::Sphere { center, radius, inside, restitution: e, friction: mu } => {
-                    (2.0, center, [radius, if inside { 1.0 } else { 0.0 }, 0.0], 0.0, NO_AXES, e, mu)
-                }
-                Collider::Capsule { a, b, radius, restitution: e, friction: mu } => (3.0, a, b, radius, NO_AXES, e, mu),
-                Collider::OrientedBox { center, half, axes, restitution: e, friction: mu } => {
-                    (4.0, center, half, 0.0, axes, e, mu)
-                }
-            };
-            rows.extend_from_slice(&[kind, e, mu, w, a[0], a[1], a[2], 0.0, b[0], b[1], b[2], 0.0]);
-            for u in axes {
-                rows.extend_from_slice(&[u[0], u[1], u[2], 0.0]);
-            }
-        }
+        let rows: Vec<f64> = colliders.iter().flat_map(|c| c.shape.row([c.restitution, c.friction])).collect();
         if !rows.is_empty() {
             self.upload(&self.colliders, &rows);
         }

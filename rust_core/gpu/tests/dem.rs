@@ -1039,7 +1039,7 @@ fn drag_brings_a_grain_to_its_terminal_speed_with_its_books_balanced() {
     }
 }
 
-/// Each kind of wall out of range is refused with the wall's index and what is wrong (the
+/// Each kind of wall out of range, and a box (its faces are planes), is refused with the wall's index and what is wrong (the
 /// shapes' own checks, as the CPU's constructors make them); a 2D box reads only its first two
 /// axes and half extents, so a third axis of any value is no error there.
 #[test]
@@ -1058,6 +1058,7 @@ fn walls_out_of_range_are_refused_by_name() {
         (Shape::Capsule { a: [0.0; 3], b: [f64::INFINITY, 0.0, 0.0], radius: 0.1 }, "finite ends"),
         (boxed([0.5, 0.0, 0.5], eye), "half extents > 0"),
         (Shape::OrientedBox { center: [nan; 3], half: [0.5; 3], axes: eye }, "finite centre"),
+        (Shape::Box { lower: [-1.0; 3], upper: [1.0; 3] }, "faces as plane walls"),
         (boxed([0.5; 3], [[1.0, 0.0, 0.0], [0.6, 0.8, 0.0], [0.0, 0.0, 1.0]]), "orthogonal axes"),
         (boxed([0.5; 3], [[2.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]), "unit"),
     ];

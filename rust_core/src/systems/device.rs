@@ -19,7 +19,7 @@ use crate::grids::Edge;
 use crate::terms::registry::Params;
 use crate::vector::Real;
 use physcore_gpu::gray_scott::{self as dg, GrayScott};
-use physcore_gpu::particles::{self as dp, Collider, Forces, Particles, Scheme, Springs};
+use physcore_gpu::particles::{self as dp, Collider, Forces, Particles, Scheme, Shape, Springs};
 use physcore_gpu::wave::{self as dw, Wave};
 use physcore_gpu::{Gpu, GpuError, Precision};
 use std::sync::atomic::AtomicBool;
@@ -232,25 +232,25 @@ pub(crate) fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<V
                         return Err(invalid("normal", "must be finite and non-zero"));
                     }
                     let l = l2.sqrt();
-                    Ok(Collider::Plane { point, normal: [n[0] / l, n[1] / l, n[2] / l], restitution, friction })
+                    Ok(Collider { shape: Shape::Plane { point, normal: [n[0] / l, n[1] / l, n[2] / l] }, restitution, friction })
                 }
                 "box" => {
                     let (lower, upper) = (vec3(p, "lower")?, vec3(p, "upper")?);
                     if (0..dim).any(|k| !(upper[k] > lower[k])) {
                         return Err(invalid("upper", "must be > lower on every axis"));
                     }
-                    Ok(Collider::Box { lower, upper, restitution, friction })
+                    Ok(Collider { shape: Shape::Box { lower, upper }, restitution, friction })
                 }
                 // Spheres and capsules checked by the CPU's constructors (in 3D: a 2D shape's z is 0).
                 "sphere" => {
                     let (center, radius, inside) = (vec3(p, "center")?, p.number("radius")?, p.flag("inside")?);
                     crate::geometry::Ball::new(glam::DVec3::from_array(center), radius, inside)?;
-                    Ok(Collider::Sphere { center, radius, inside, restitution, friction })
+                    Ok(Collider { shape: Shape::Sphere { center, radius, inside }, restitution, friction })
                 }
                 "capsule" => {
                     let (a, b, radius) = (vec3(p, "a")?, vec3(p, "b")?, p.number("radius")?);
                     crate::geometry::Capsule::new(glam::DVec3::from_array(a), glam::DVec3::from_array(b), radius)?;
-                    Ok(Collider::Capsule { a, b, radius, restitution, friction })
+                    Ok(Collider { shape: Shape::Capsule { a, b, radius }, restitution, friction })
                 }
                 "oriented_box" => {
                     // Built as the CPU builds it (its checks, and its axes from the rotation).
@@ -270,7 +270,7 @@ pub(crate) fn colliders_of(dim: usize, records: &[(String, Params)]) -> Result<V
                         )?;
                         (b.center.to_array(), b.half, b.axes.map(|u| u.to_array()))
                     };
-                    Ok(Collider::OrientedBox { center, half, axes, restitution, friction })
+                    Ok(Collider { shape: Shape::OrientedBox { center, half, axes }, restitution, friction })
                 }
                 other => Err(invalid(
                     other,
