@@ -30,21 +30,30 @@ nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=c
 lscpu | grep -E "Model name|^CPU\(s\)" || true
 python3 -c 'import physcore as pc; print(pc.__version__, pc.simd_level()); [print(a) for a in pc.gpu_adapters()]' || exit 1
 section() { echo; echo "=== $1 ($SECONDS s)"; }
+part_tests() {
 section "Rust GPU tests"
 for b in .devbin/physcore_gpu-tests .devbin/particles-tests .devbin/gray_scott-tests .devbin/cells-tests .devbin/sph-tests .devbin/dem-tests .devbin/dfsph-tests; do
   [ -x "$b" ] && timeout 120 "$b" --test-threads 4 2>&1 | tail -4
 done
 [ -x .devbin/physcore_core-lib ] && timeout 120 .devbin/physcore_core-lib device --test-threads 4 2>&1 | tail -4
+}
+part_sph() {
 section "WCSPH on the device (2D 4M, 3D 1M, f32; then f64)"
 if [ -x .devbin/sph_bench-tests ]; then
   timeout 90 .devbin/sph_bench-tests --ignored --nocapture 2>&1 | grep -E "adapter|WCSPH"
   PHYSCORE_SPH_PRECISION=f64 PHYSCORE_SPH_BENCH=2d:1048576,3d:262144 timeout 60 .devbin/sph_bench-tests --ignored --nocapture 2>&1 | grep -E "WCSPH"
 fi
+}
+part_dem_dfsph() {
 section "DEM and DFSPH on the device (bare steps, f32)"
 [ -x .devbin/dem-tests ] && timeout 90 .devbin/dem-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|discs|DEM"
 [ -x .devbin/dfsph-tests ] && timeout 90 .devbin/dfsph-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|DFSPH"
+}
+part_pytests() {
 section "Python GPU tests"
-timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -x tests/gpu 2>&1 | tail -15
+timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -n 8 tests/gpu 2>&1 | tail -15
+}
+part_auto() {
 section "device='auto'"
 python3 - <<'PY'
 import numpy as np, physcore as pc
@@ -55,29 +64,46 @@ for n in (256, 4096, 65536):
     s.step(2)
     print(n, s.device, s.precision, "|", s.device_reason)
 PY
+}
+part_nbody() {
 section "N-body (CPU to 65536)"
 timeout 150 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1024,4096,16384,65536,262144 --steps 10 --cpu-max 65536
 timeout 60 python3 benches/gpu/bench_gpu_nbody.py --device gpu --n 1048576 --steps 2 --cpu-max 0 | tail -3
+}
+part_batch() {
 section "Batches of three-body problems (CPU to 16384 worlds)"
 timeout 120 python3 benches/gpu/bench_gpu_batch.py --device gpu --m 1024,16384,65536 --steps 1000 --cpu-max 16384
+}
+part_grids() {
 section "Grids: Gray-Scott and the wave"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --n 128,512,1024,4096 --steps 100
+}
+part_sph_scene() {
 section "WCSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"
 timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --n 72,144,720 --steps 20 --cpu-max 144
 timeout 150 python3 benches/gpu/bench_gpu_sph.py --device gpu --dim 3 --n 24,48,80 --steps 10 --cpu-max 24
+}
+part_dfsph_scene() {
 section "DFSPH dam break, scene level (2D to 10^6, 3D to 10^6; CPU to 41k)"
 timeout 120 python3 benches/gpu/bench_gpu_sph.py --method dfsph --device gpu --n 72,144,720 --steps 10 --cpu-max 144
 timeout 120 python3 benches/gpu/bench_gpu_sph.py --method dfsph --device gpu --dim 3 --n 24,48,80 --steps 5 --cpu-max 24
+}
+part_dam_gif() {
 section "The 10^6-particle 3D dam break GIF on the GPU (DFSPH, n=80: 1,024,000 water particles; target <= 60 s)"
 t0=$(date +%s.%N)
-timeout 150 python3 -m physcore render dam_break --param dim=3 --param n=80 --param device=gpu -o "${OUT:-/tmp}/dam_break_3d_gpu.gif" -q
+timeout 150 python3 -m physcore render dam_break --param dim=3 --param n=80 --param device=gpu -o "${OUT:-/tmp}/dam_break_3d_gpu.gif" 2>&1 | tr '\r' '\n' | grep -v "^ *$" > /tmp/gif.log
+awk 'NR % 25 == 1' /tmp/gif.log; tail -4 /tmp/gif.log
 python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
+}
+part_fluid() {
 section "The stable fluid (CPU to 1024²)"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --kinds fluid --n 256,1024,4096 --steps 20 --cpu-max 1024
+}
+part_ab() {
+section "A/B: Gray-Scott and the wave at 1024² and 4096² (base, then this tree; 3 rounds)"
 if [ -f .devbin/base_core.abi3.so ]; then
   # A/B in one call: the same benches alternately with a baseline build of the extension
   # (carried as .devbin/base_core.abi3.so; the Python package is this tree's) and this one.
-  section "A/B: Gray-Scott and the wave at 1024² and 4096² (base, then this tree; 3 rounds)"
   mkdir -p /tmp/base && cp -r python/physcore /tmp/base/ && cp .devbin/base_core.abi3.so /tmp/base/physcore/_core.abi3.so
   for r in 1 2 3; do
     for who in base this; do
@@ -86,6 +112,8 @@ if [ -f .devbin/base_core.abi3.so ]; then
     done
   done
 fi
+}
+part_galaxies() {
 section "galaxies at 10^5 stars: energy drift over the render's 952 steps, f32 and f64"
 timeout 90 python3 - <<'PY'
 import time, physcore as pc
@@ -102,13 +130,25 @@ for prec in ("f32", "f64"):
         drift.append((s.energy().total - e0) / abs(e0))
     print(prec, f"{time.perf_counter() - t:.2f} s;", "drift every 119 steps:", " ".join(f"{d:+.2e}" for d in drift), flush=True)
 PY
+}
+part_cloth() {
 section "cloth"
 timeout 90 python3 benches/gpu/bench_gpu_cloth.py --device gpu --n 16,64,256,1024 --steps 50
+}
+part_cuda() {
 section "CUDA reference (CuPy)"
 [ "${1:-}" != "--no-cuda" ] && [ -f .devbin/cuda_reference.py ] && timeout 90 python3 .devbin/cuda_reference.py --no-numba --nbody-n 65536,262144 --grid 4096 2>&1 | tail -12
 [ "${1:-}" != "--no-cuda" ] && timeout 60 python3 benches/gpu/cuda_wave.py --n 1024,4096 --steps 300
+}
+part_galaxies_gif() {
 section "galaxies rendered on the GPU at its default size (10^5 stars)"
 t0=$(date +%s.%N)
 timeout 100 python3 -m physcore render galaxies --param device=gpu -o "${OUT:-/tmp}/galaxies_gpu.gif" -q
 python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
+}
+# PARTS (a comma list, e.g. PARTS=sph,dem_dfsph,batch) picks the parts and their order; all of
+# them, in the order above, by default.
+for part in $(echo "${PARTS:-tests,sph,dem_dfsph,pytests,auto,nbody,batch,grids,sph_scene,dfsph_scene,dam_gif,fluid,ab,galaxies,cloth,cuda,galaxies_gif}" | tr , ' '); do
+  if declare -F "part_$part" >/dev/null; then "part_$part" "$@"; else echo "no part named $part"; fi
+done
 section "done"
