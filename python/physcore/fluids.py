@@ -835,6 +835,8 @@ def _add_fluid(ctx: AttachContext, fluid: Fluid, name: str, first: int | None = 
                 "cfl": fluid.cfl,
                 "surface_tension": fluid.surface_tension,
                 "adhesion": fluid.adhesion,
+                # h/Δx: the solves' Jacobi relaxation follows from it (rust_core/src/sph/dfsph/relax.rs).
+                "smoothing": fluid.smoothing,
             },
         )
     else:

@@ -124,6 +124,9 @@ pub struct DfsphParams {
     pub curvature: f64,
     /// Adhesion β of eq. 7 to the wall particles, m⁴/(kg s²), ≥ 0; 0: none.
     pub adhesion: f64,
+    /// The solves' Jacobi relaxation ω in (0, 1], folded into each factor (ω/D_k): the core's
+    /// `sph::dfsph::relaxation` (1 in 2D at h = 1.3 Δx; 0.585 in 3D).
+    pub relaxation: f64,
 }
 
 impl Default for DfsphParams {
@@ -152,6 +155,7 @@ impl Default for DfsphParams {
             cohesion_norm: 0.0,
             curvature: 0.0,
             adhesion: 0.0,
+            relaxation: 1.0,
         }
     }
 }
@@ -201,6 +205,9 @@ impl DfsphParams {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(a, format_args!("{v} must be finite and >= 0")));
             }
+        }
+        if !(self.relaxation > 0.0 && self.relaxation <= 1.0) {
+            return Err(invalid("relaxation", format_args!("{} must be in (0, 1]", self.relaxation)));
         }
         Ok(())
     }
@@ -648,6 +655,7 @@ impl Dfsph {
             p.cohesion_norm,
             big_h.powi(6) / 64.0,
             0.007 / big_h.powf(3.25),
+            p.relaxation,
         ];
         self.gpu.write_params(self.precision, &self.params, &ints, &reals);
     }

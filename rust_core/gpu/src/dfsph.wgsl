@@ -69,6 +69,8 @@ struct Params {
     coh_norm: real,
     h6_64: real,
     adh_k: real,
+    // The solves' Jacobi relaxation ω, folded into the factor (ω/D_k; the core's `relaxation`).
+    omega: real,
 };
 
 const WG: u32 = 64u;
@@ -319,7 +321,7 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     let dd = max(dot3(sum + gw * 2.0, sum + gw) + sq, sq);
     var dinv: real = 0.0;
     if (dd > 0.0) {
-        dinv = 1.0 / dd;
+        dinv = P.omega / dd;
     }
     let r = P.sigma * acc;
     sset(RHO, k, r);

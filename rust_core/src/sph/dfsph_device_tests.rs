@@ -9,6 +9,7 @@
 //! with PHYSCORE_GPU_ALLOW_CPU=1).
 use super::device_tests::tank_walls;
 use crate::constraints::aabb::Aabb;
+use crate::sph::dfsph::relaxation;
 use crate::sph::resolve::lattice_density_sum;
 use crate::sph::surface::Surface;
 use crate::sph::KernelKind;
@@ -153,6 +154,7 @@ fn runs(dim: usize, kernel: Kernel, vx: Real, steps: u64) -> Option<(DfsphParams
         gravity: g,
         lower: [-0.04; 3],
         upper: [up[0] + 0.04, up[1] + 0.04, up[2] + 0.04],
+        relaxation: relaxation(dim, KernelKind::by_name(kernel.name()).unwrap(), 1.3),
         ..DfsphParams::default()
     };
     let walls = tank_walls(dim, &up, dx, 3);
@@ -371,7 +373,17 @@ fn surface_params(dim: usize, dx: Real, g: Real, lower: Real, upper: Real) -> Df
     let sum = lattice_density_sum(dx, h, dim, KernelKind::CubicSpline).unwrap();
     let mut gravity = [0.0; 3];
     gravity[dim - 1] = -g;
-    DfsphParams { dim, h, mass: 1000.0 / sum, gravity, lower: [lower; 3], upper: [upper; 3], ..DfsphParams::default() }
+    let relaxation = relaxation(dim, KernelKind::CubicSpline, 1.3);
+    DfsphParams {
+        dim,
+        h,
+        mass: 1000.0 / sum,
+        gravity,
+        lower: [lower; 3],
+        upper: [upper; 3],
+        relaxation,
+        ..DfsphParams::default()
+    }
 }
 
 /// Holds a case's errors (positions of the box, velocities of the fastest, books of the

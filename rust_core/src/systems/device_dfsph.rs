@@ -16,7 +16,9 @@
 //! file (`save`: positions, velocities, the books so far) continue bit for bit on the device.
 use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
+use crate::sph::dfsph::smoothing;
 use crate::sph::surface::Surface;
+use crate::sph::KernelKind;
 use crate::terms::registry::Params;
 use crate::vector::Real;
 use physcore_gpu::dfsph::{Dfsph, DfsphParams};
@@ -182,6 +184,8 @@ impl DeviceDfsph {
             alpha: fp.number("viscosity")?,
             c0: fp.number("sound_speed")?,
             kernel: Kernel::by_name(fp.text("kernel")?)?,
+            // The CPU term's own relaxation (`sph::dfsph::relaxation`), so both solve alike.
+            relaxation: crate::sph::dfsph::relaxation(dim, KernelKind::by_name(fp.text("kernel")?)?, smoothing(fp)?),
             density_tol: fp.number("density_error")?,
             divergence_tol: fp.number("divergence_error")?,
             max_iterations: iterations as u32,

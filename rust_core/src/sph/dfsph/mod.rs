@@ -96,7 +96,10 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 mod pairs;
+mod relax;
 mod solve;
+
+pub use relax::relaxation;
 
 use pairs::*;
 
@@ -162,6 +165,10 @@ pub struct DfsphParams {
     pub surface_tension: Real,
     /// Adhesion to the walls, half the work of adhesion, σ's units, ≥ 0.
     pub adhesion: Real,
+    /// The solves' Jacobi relaxation ω in (0, 1]: each iteration applies ω times a particle's
+    /// own correction (`relaxation`, from the dimension, kernel and h/Δx; 1 in 2D at the
+    /// default h = 1.3 Δx).
+    pub relaxation: Real,
 }
 
 impl DfsphParams {
@@ -188,6 +195,9 @@ impl DfsphParams {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(invalid(a, format!("{v} must be finite and >= 0")));
             }
+        }
+        if !(self.relaxation > 0.0 && self.relaxation <= 1.0) {
+            return Err(invalid("relaxation", format!("{} must be in (0, 1]", self.relaxation)));
         }
         Ok(())
     }
@@ -380,11 +390,25 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
         cfl: p.number("cfl")?,
         surface_tension: p.number("surface_tension")?,
         adhesion: p.number("adhesion")?,
+        relaxation: relaxation(V::DIM, KernelKind::by_name(p.text("kernel")?)?, smoothing(&p)?),
     };
     let walls = p.take_vectors::<V>("walls")?;
     let psi = p.take_floats("wall_psi")?;
     Ok(Box::new(Dfsph::new(&name, first, n, params, walls, psi)?))
 }
+/// The fluid's h/Δx (`Fluid.smoothing`): the key "smoothing", 1.3 (the Fluid's default) where a
+/// caller gives none.
+pub(crate) fn smoothing(p: &Params) -> Result<Real> {
+    if !p.has("smoothing") {
+        return Ok(1.3);
+    }
+    let s = p.number("smoothing")?;
+    if !(s.is_finite() && (0.5..=4.0).contains(&s)) {
+        return Err(invalid("smoothing", format!("h/spacing must be in [0.5, 4], got {s}")));
+    }
+    Ok(s)
+}
+
 // DFSPH's projections run inside semi-implicit Euler's step (velocity, then position).
 crate::register_term!("dfsph", build, (&["semi_implicit_euler"], "method", "DFSPH steps with"));
 
@@ -500,6 +524,9 @@ impl<V: Vector> Solver<V> {
             }
         }
         self.walls = Walls::checked(&walls, &psi, 2.0 * self.p.h)?;
+        // The solve relaxes as its widest neighbourhood needs (the same h, so the finer
+        // spacing: the smaller ω).
+        self.p.relaxation = self.p.relaxation.min(other.p.relaxation);
         self.members.push(Member { offset: self.n, ..m });
         self.n += self.members.last().map_or(0, |m| m.range.len());
         self.to_scene = self.members.iter().flat_map(|m| m.range.clone().map(|i| i as u32)).collect();

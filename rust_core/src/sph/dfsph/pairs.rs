@@ -81,6 +81,8 @@ pub(super) struct BuildChunk<'a, V: Vector, K> {
     xc: &'a [Vec<Real>; 3],
     m: &'a [Real],
     h: Real,
+    /// The Jacobi relaxation ω (`DfsphParams::relaxation`), folded into the factor: ω/D_i.
+    relax: Real,
     n_min: u32,
     /// The step's gravity (m/s²), for the walls' hydrostatic pressure (`Site::hw`).
     g: V,
@@ -96,7 +98,7 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
     type Output = ();
     #[inline(always)]
     fn run<S: Simd>(self, simd: S) {
-        let BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, g, s, pairs, sites, rho: rho_out, .. } = self;
+        let BuildChunk { grid, walls, moving, xs, xc, m, h, relax, n_min, g, s, pairs, sites, rho: rho_out, .. } = self;
         let (sigma, reach) = (K::sigma(h, V::DIM), 4.0 * h * h);
         let gscale = sigma / (h * h);
         let (w, flat, lanes) = (f64::walls(walls), V::flat(xs), P::<S, f64>::lanes());
@@ -232,9 +234,10 @@ impl<V: Vector, K: Kernel> SimdKernel for BuildChunk<'_, V, K> {
             // Own push v_i −= dt κ_i/ρ_i (Σ_j m_j ∇W_ij + 2 Σ_b Ψ_b ∇W_ib) (walls mirror the
             // pressure), so Dρ_i/Dt changes by −dt κ_i/ρ_i D_i with this D_i (taken no
             // smaller than the neighbours' part, which is > 0, where a wall makes it so).
+            // The relaxation ω scales it (`relax`; exactly 1/D_i at ω = 1).
             let dd = ((sum + gw * 2.0).dot(sum + gw) + sq).max(sq);
             *site =
-                Site { dinv: if dd > 0.0 { 1.0 / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min, hw, wv: 0.0 };
+                Site { dinv: if dd > 0.0 { relax / dd } else { 0.0 }, gw, gs: sum, inner: count >= n_min, hw, wv: 0.0 };
             *rho_out = rho;
         }
         pairs.start.push(top as u32);
@@ -316,10 +319,13 @@ impl<V: Vector> Solver<V> {
         self.rho.resize(n, 0.0);
         let (grid, xs, xc, m, walls) = (&self.grid, &self.xs, &self.xc, &self.m, &self.walls);
         let moving = self.moving.as_ref();
-        let (n_min, g) = (self.n_min, self.gravity);
+        let (n_min, g, relax) = (self.n_min, self.gravity, self.p.relaxation);
         let chunk = |c: usize, pairs: &mut Pairs<V>, sites: &mut [Site<V>], rho: &mut [Real]| {
             let (s, _k) = (c * CHUNK, PhantomData::<K>);
-            simd::dispatch(level, BuildChunk { grid, walls, moving, xs, xc, m, h, n_min, g, s, pairs, sites, rho, _k });
+            simd::dispatch(
+                level,
+                BuildChunk { grid, walls, moving, xs, xc, m, h, relax, n_min, g, s, pairs, sites, rho, _k },
+            );
         };
         let (pairs, sites, rho) = (&mut self.pairs, &mut self.sites, &mut self.rho);
         let count = pairs.len().min(sites.len().div_ceil(CHUNK)).min(rho.len().div_ceil(CHUNK));

@@ -36,6 +36,7 @@ fn params(dx: f64) -> DfsphParams {
         cfl: 0.4,
         surface_tension: 0.0,
         adhesion: 0.0,
+        relaxation: 1.0,
     }
 }
 
