@@ -44,14 +44,34 @@ if [ -x .devbin/sph_bench-tests ]; then
   PHYSCORE_SPH_PRECISION=f64 PHYSCORE_SPH_BENCH=2d:1048576,3d:262144 timeout 60 .devbin/sph_bench-tests --ignored --nocapture 2>&1 | grep -E "WCSPH"
 fi
 }
-part_dem_dfsph() {
-section "DEM and DFSPH on the device (bare steps, f32)"
+part_dem() {
+section "DEM on the device (bare steps: 10^4, 10^5, 10^6 discs, f32 and f64)"
 [ -x .devbin/dem-tests ] && timeout 90 .devbin/dem-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|discs|DEM"
-[ -x .devbin/dfsph-tests ] && timeout 90 .devbin/dfsph-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|DFSPH"
+}
+part_dfsph() {
+section "DFSPH on the device (bare steps of the 3D dam break, f32)"
+[ -x .devbin/dfsph-tests ] && timeout 90 .devbin/dfsph-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|DFSPH|panicked"
+}
+part_ab_rust() {
+section "A/B: the bare WCSPH (4M 2D, 1M 3D) and DEM benches, base binaries then this tree's (WCSPH 2 rounds)"
+if [ -x .devbin/base_sph_bench-tests ]; then
+  for r in 1 2; do
+    for who in base this; do
+      b=.devbin/sph_bench-tests; [ $who = base ] && b=.devbin/base_sph_bench-tests
+      timeout 60 $b --ignored --nocapture wcsph_throughput 2>&1 | grep -E "^WCSPH" | sed "s/^/$r $who  /"
+    done
+  done
+fi
+if [ -x .devbin/base_dem-tests ]; then
+  for who in base this; do
+    b=.devbin/dem-tests; [ $who = base ] && b=.devbin/base_dem-tests
+    timeout 60 $b --ignored --nocapture bench_discs 2>&1 | grep -E "discs F32" | sed "s/^/$who  /"
+  done
+fi
 }
 part_pytests() {
 section "Python GPU tests"
-timeout 200 python3 -m pytest -p no:cacheprovider -o addopts="" -q -n 8 tests/gpu 2>&1 | tail -15
+timeout 200 python3 -m pytest -p no:cacheprovider -p no:benchmark -o addopts="" -q -n 8 tests/gpu 2>&1 | tail -15
 }
 part_auto() {
 section "device='auto'"
@@ -146,9 +166,9 @@ t0=$(date +%s.%N)
 timeout 100 python3 -m physcore render galaxies --param device=gpu -o "${OUT:-/tmp}/galaxies_gpu.gif" -q
 python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
 }
-# PARTS (a comma list, e.g. PARTS=sph,dem_dfsph,batch) picks the parts and their order; all of
+# PARTS (a comma list, e.g. PARTS=sph,dem,batch) picks the parts and their order; all of
 # them, in the order above, by default.
-for part in $(echo "${PARTS:-tests,sph,dem_dfsph,pytests,auto,nbody,batch,grids,sph_scene,dfsph_scene,dam_gif,fluid,ab,galaxies,cloth,cuda,galaxies_gif}" | tr , ' '); do
+for part in $(echo "${PARTS:-tests,sph,dem,dfsph,pytests,auto,nbody,batch,grids,sph_scene,dfsph_scene,dam_gif,fluid,ab,galaxies,cloth,cuda,galaxies_gif,ab_rust}" | tr , ' '); do
   if declare -F "part_$part" >/dev/null; then "part_$part" "$@"; else echo "no part named $part"; fi
 done
 section "done"

@@ -1,7 +1,7 @@
 //! A cell list on the device: the neighbour search the particle fluids and grains on a GPU will
 //! gather over (issue "GPU fluids, grains and batches"). Particles are binned into the cells of a
-//! box by a counting sort (u32 atomics for the counts, a one-workgroup prefix scan, an atomic
-//! scatter) and each cell's particles are then put in index order, so the order is the same on
+//! box by a counting sort (u32 atomics for the counts, a prefix scan in three dispatches, an
+//! atomic scatter) and each cell's particles are then put in index order, so the order is the same on
 //! every run (the atomics decide only the order before that sort) and any sum gathered over it
 //! repeats bit for bit. Particles outside the box fall into its edge cells.
 //!
@@ -11,6 +11,63 @@ use crate::{Bind, Gpu, GpuError, Precision, Result};
 use std::sync::Arc;
 
 const WG: u32 = 64;
+
+/// Cells a workgroup of the scan covers (`cells.wgsl`'s BLOCK: 256 threads of 4 cells).
+const SCAN_BLOCK: usize = 1024;
+
+/// cells.wgsl's build kernels, in dispatch order (`CellBuild::record`).
+const BUILD: [&str; 7] = ["clear", "bin", "scan_blocks", "scan_tops", "scan_apply", "scatter", "sort_cells"];
+
+/// The scan's block dispatch over `cells` cells, folded into y past 65,535 (`block_of`).
+fn scan_groups(cells: usize) -> (u32, u32) {
+    let b = cells.div_ceil(SCAN_BLOCK) as u32;
+    (b.clamp(1, 65_535), b.div_ceil(65_535).max(1))
+}
+
+/// cells.wgsl's build for a particle pass (WCSPH, DFSPH, DEM, the tests' `Cells`): its
+/// pipelines, their bind group and the scan's block totals, over a grid of `cells` cells.
+pub(crate) struct CellBuild {
+    pipes: Vec<wgpu::ComputePipeline>,
+    bind: wgpu::BindGroup,
+    cells: usize,
+    _blocks: wgpu::Buffer,
+}
+
+impl CellBuild {
+    /// `bufs`: cells.wgsl's bindings 0–6 (the parameters, positions, each particle's cell, the
+    /// counts, the starts, the order, the neighbour counts); `extra`: entry points after the
+    /// build's (the tests' "neighbours").
+    pub(crate) fn new(
+        gpu: &Gpu,
+        precision: Precision,
+        label: &str,
+        bufs: [&wgpu::Buffer; 7],
+        cells: usize,
+        extra: &[&str],
+    ) -> Result<Self> {
+        use wgpu::BufferUsages as U;
+        let blocks =
+            gpu.buffer(&format!("{label}: scan blocks"), (cells.div_ceil(SCAN_BLOCK) as u64 * 4).max(16), U::STORAGE)?;
+        use Bind::{Read as R, ReadWrite as W, Uniform};
+        let names: Vec<&str> = BUILD.iter().chain(extra).copied().collect();
+        let binds = [Uniform { dynamic: false }, R, W, W, W, W, W, W];
+        let (layout, pipes) = gpu.kernels("cells.wgsl", precision, include_str!("cells.wgsl"), &binds, &names);
+        let mut all = bufs.to_vec();
+        all.push(&blocks);
+        let bind = crate::grid::bind_group(gpu, label, &layout, &all);
+        Ok(Self { pipes, bind, cells, _blocks: blocks })
+    }
+
+    /// Records the build of `n` particles' cell list (the bind group stays set).
+    pub(crate) fn record(&self, pass: &mut wgpu::ComputePass, n: usize) {
+        let (p, m, b) = (spread(n), spread(self.cells), scan_groups(self.cells));
+        pass.set_bind_group(0, &self.bind, &[]);
+        for (pipe, (x, y)) in self.pipes.iter().zip([m, p, b, (1, 1), b, p, m]) {
+            pass.set_pipeline(pipe);
+            pass.dispatch_workgroups(x, y, 1);
+        }
+    }
+}
 
 /// The box and its cells.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,8 +94,7 @@ pub struct Cells {
     order: wgpu::Buffer,
     found: wgpu::Buffer,
     staging: wgpu::Buffer,
-    bind: wgpu::BindGroup,
-    pipes: Vec<wgpu::ComputePipeline>,
+    build: CellBuild,
     _keep: [wgpu::Buffer; 3],
 }
 
@@ -76,37 +132,12 @@ impl Cells {
         let found = gpu.buffer("cell list neighbours", n as u64 * 4, st)?;
         let staging = gpu.buffer("cell list read-back", ((cells + 1).max(n as u64)) * 4, U::MAP_READ | U::COPY_DST)?;
         let params = gpu.buffer("cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
-        use Bind::{Read as R, ReadWrite as W, Uniform};
-        let (layout, pipes) = gpu.kernels(
-            "cells.wgsl",
-            precision,
-            include_str!("cells.wgsl"),
-            &[Uniform { dynamic: false }, R, W, W, W, W, W],
-            &["clear", "bin", "scan", "scatter", "sort_cells", "neighbours"],
-        );
-        let bind = crate::grid::bind_group(
-            &gpu,
-            "cells",
-            &layout,
-            &[&params, &pos, &cell_of, &counts, &start, &order, &found],
-        );
+        let bufs = [&params, &pos, &cell_of, &counts, &start, &order, &found];
+        let build = CellBuild::new(&gpu, precision, "cells", bufs, cells as usize, &["neighbours"])?;
         gpu.upload(precision, &pos, positions);
         let ints = [n as u32, d as u32, grid.n[0] as u32, grid.n[1] as u32, grid.n[2] as u32, 0, 0, 0];
         gpu.write_params(precision, &params, &ints, &[grid.lo[0], grid.lo[1], grid.lo[2], grid.cell, grid.radius]);
-        Ok(Self {
-            gpu,
-            precision,
-            grid,
-            n,
-            pos,
-            start,
-            order,
-            found,
-            staging,
-            bind,
-            pipes,
-            _keep: [cell_of, counts, params],
-        })
+        Ok(Self { gpu, precision, grid, n, pos, start, order, found, staging, build, _keep: [cell_of, counts, params] })
     }
 
     /// Replaces the positions (as many as before).
@@ -117,16 +148,13 @@ impl Cells {
 
     /// Bins the particles and counts each one's neighbours (one submission).
     pub fn build(&self) -> Result<()> {
-        let cells = self.grid.n.iter().product::<usize>();
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_bind_group(0, &self.bind, &[]);
-            let shapes = [spread(cells), spread(self.n), (1, 1), spread(self.n), spread(cells), spread(self.n)];
-            for (pipe, (x, y)) in self.pipes.iter().zip(shapes) {
-                pass.set_pipeline(pipe);
-                pass.dispatch_workgroups(x, y, 1);
-            }
+            self.build.record(&mut pass, self.n);
+            let (x, y) = spread(self.n);
+            pass.set_pipeline(&self.build.pipes[BUILD.len()]);
+            pass.dispatch_workgroups(x, y, 1);
         }
         self.gpu.queue.submit([enc.finish()]);
         self.gpu.wait()

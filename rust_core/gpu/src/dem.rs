@@ -94,7 +94,7 @@
 //!
 //! Not here (the CPU has them): Verlet lists (the cell list is rebuilt
 //! every step), "xpbd"; of the other force terms only a uniform gravity and linear drag.
-use crate::cells::spread;
+use crate::cells::{spread, CellBuild};
 use crate::particles::Halt;
 pub use crate::shape::Shape;
 use crate::shape::ROW;
@@ -363,10 +363,9 @@ pub struct Dem {
     books: wgpu::Buffer,
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
-    cell_bind: wgpu::BindGroup,
     bind: wgpu::BindGroup,
-    /// cells.wgsl's clear, bin, scan, scatter, sort_cells.
-    cell_pipes: Vec<wgpu::ComputePipeline>,
+    /// cells.wgsl's build (`CellBuild`).
+    cell_build: CellBuild,
     /// dem.wgsl's contacts, integrate, commit, energy, tally.
     pipes: Vec<wgpu::ComputePipeline>,
     chunk: Chunk,
@@ -500,19 +499,8 @@ impl Dem {
             gpu.buffer("DEM read-back", (4 * nn * rb).max(nn * (k + 1) * 4).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
-        let (cell_layout, cell_pipes) = gpu.kernels(
-            "cells.wgsl",
-            precision,
-            include_str!("cells.wgsl"),
-            &[uniform, R, W, W, W, W, W],
-            &["clear", "bin", "scan", "scatter", "sort_cells"],
-        );
-        let cell_bind = crate::grid::bind_group(
-            &gpu,
-            "DEM cell list",
-            &cell_layout,
-            &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
-        );
+        let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
+        let cell_build = CellBuild::new(&gpu, precision, "DEM cell list", cell_bufs, total as usize, &[])?;
         // Walls all planes: the other shapes' code compiled out (`dem.wgsl`'s `SHAPED`), so a
         // scene of planes runs the kernels it ran before the other shapes came.
         let mut wgsl = include_str!("dem.wgsl").to_string();
@@ -591,9 +579,8 @@ impl Dem {
             books,
             params: params_buf,
             staging,
-            cell_bind,
             bind,
-            cell_pipes,
+            cell_build,
             pipes,
             chunk: Chunk::new(MAX_CHUNK),
             saved: None,
@@ -728,12 +715,7 @@ impl Dem {
 
     /// Records the cell list's build at the current positions.
     fn record_cells(&self, pass: &mut wgpu::ComputePass) {
-        let (n, m) = (spread(self.n), spread(self.cells.iter().product()));
-        pass.set_bind_group(0, &self.cell_bind, &[]);
-        for (pipe, (x, y)) in self.cell_pipes.iter().zip([m, n, (1, 1), n, m]) {
-            pass.set_pipeline(pipe);
-            pass.dispatch_workgroups(x, y, 1);
-        }
+        self.cell_build.record(pass, self.n);
     }
 
     /// Records `steps` whole steps into one command buffer.

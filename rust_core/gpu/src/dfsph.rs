@@ -65,7 +65,7 @@
 //! particles, moving boundaries (rigid bodies), the time step limit (the core's
 //! `systems::device_dfsph` takes the CPU's, capillary limit included), checkpoints of the warm
 //! starts.
-use crate::cells::spread;
+use crate::cells::{spread, CellBuild};
 use crate::maxima::Maxima;
 use crate::particles::Halt;
 use crate::sph::{invalid, positive, sort_walls, Kernel};
@@ -342,10 +342,10 @@ pub struct Dfsph {
     args: wgpu::Buffer,
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
-    cell_bind: wgpu::BindGroup,
     bind: wgpu::BindGroup,
     control_bind: wgpu::BindGroup,
-    cell_pipes: Vec<wgpu::ComputePipeline>,
+    /// cells.wgsl's build (`CellBuild`).
+    cell_build: CellBuild,
     pipes: Vec<wgpu::ComputePipeline>,
     control_pipes: Vec<wgpu::ComputePipeline>,
     chunk: Chunk,
@@ -460,19 +460,8 @@ impl Dfsph {
         let staging = gpu.buffer("DFSPH read-back", (4 * nn).max(nn * dd).max(16) * rb, U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
-        let (cell_layout, cell_pipes) = gpu.kernels(
-            "cells.wgsl",
-            precision,
-            include_str!("cells.wgsl"),
-            &[uniform, R, W, W, W, W, W],
-            &["clear", "bin", "scan", "scatter", "sort_cells"],
-        );
-        let cell_bind = crate::grid::bind_group(
-            &gpu,
-            "DFSPH cell list",
-            &cell_layout,
-            &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
-        );
+        let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
+        let cell_build = CellBuild::new(&gpu, precision, "DFSPH cell list", cell_bufs, ncells as usize, &[])?;
         let src = include_str!("dfsph.wgsl");
         let particle_binds = [uniform, W, W, W, R, R, R, W, W, W, W, R, R, W, W];
         let particle_bufs: [&wgpu::Buffer; 15] = [
@@ -540,10 +529,9 @@ impl Dfsph {
             args,
             params: params_buf,
             staging,
-            cell_bind,
             bind,
             control_bind,
-            cell_pipes,
+            cell_build,
             pipes,
             control_pipes,
             chunk: Chunk::new(MAX_CHUNK),
@@ -662,12 +650,8 @@ impl Dfsph {
 
     /// Records the cell list, the gather and the build (densities, factors) at the positions.
     fn record_build(&self, pass: &mut wgpu::ComputePass) {
-        let (n, m) = (self.groups, spread(self.cells.iter().product()));
-        pass.set_bind_group(0, &self.cell_bind, &[]);
-        for (pipe, (x, y)) in self.cell_pipes.iter().zip([m, n, (1, 1), n, m]) {
-            pass.set_pipeline(pipe);
-            pass.dispatch_workgroups(x, y, 1);
-        }
+        self.cell_build.record(pass, self.n);
+        let n = self.groups;
         pass.set_bind_group(0, &self.bind, &[]);
         for pipe in &self.pipes[GATHER..=BUILD] {
             pass.set_pipeline(pipe);

@@ -40,7 +40,7 @@
 //!
 //! Not here (the CPU has them): moving wall particles (rigid bodies' boundary samples), several
 //! fluids sharing one search, per-particle masses, the time step limit, checkpoints.
-use crate::cells::spread;
+use crate::cells::{spread, CellBuild};
 use crate::maxima::Maxima;
 use crate::particles::Halt;
 use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
@@ -274,10 +274,9 @@ pub struct Sph {
     /// The parameter block of the SPH kernels (its dt written by each `step`).
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
-    cell_bind: wgpu::BindGroup,
     sph_bind: wgpu::BindGroup,
-    /// cells.wgsl's clear, bin, scan, scatter, sort_cells.
-    cell_pipes: Vec<wgpu::ComputePipeline>,
+    /// cells.wgsl's build (`CellBuild`).
+    cell_build: CellBuild,
     /// sph.wgsl's gather, density, integrate.
     sph_pipes: Vec<wgpu::ComputePipeline>,
     /// The step limit's maxima over `vel` and the squared accelerations in `books`.
@@ -384,19 +383,8 @@ impl Sph {
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
         // cells.wgsl's build kernels with its layout; `neighbours` (its test's check) is not run.
-        let (cell_layout, cell_pipes) = gpu.kernels(
-            "cells.wgsl",
-            precision,
-            include_str!("cells.wgsl"),
-            &[uniform, R, W, W, W, W, W],
-            &["clear", "bin", "scan", "scatter", "sort_cells"],
-        );
-        let cell_bind = crate::grid::bind_group(
-            &gpu,
-            "SPH cell list",
-            &cell_layout,
-            &[&cell_params, &pos, &cell_of, &counts, &start, &order, &found],
-        );
+        let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
+        let cell_build = CellBuild::new(&gpu, precision, "SPH cell list", cell_bufs, ncells as usize, &[])?;
         let (layout, sph_pipes) = gpu.kernels(
             "sph.wgsl",
             precision,
@@ -458,9 +446,8 @@ impl Sph {
             books,
             params: params_buf,
             staging,
-            cell_bind,
             sph_bind,
-            cell_pipes,
+            cell_build,
             sph_pipes,
             chunk: Chunk::new(MAX_CHUNK),
             _keep: vec![cell_of, counts, start, order, found, spos, svel, srho, spr, cell_params, wall, wall_start],
@@ -540,12 +527,8 @@ impl Sph {
 
     /// Records the cell list's build and the density pass at the current positions.
     fn record_density(&self, pass: &mut wgpu::ComputePass) {
-        let (n, m) = (spread(self.n), spread(self.cells.iter().product()));
-        pass.set_bind_group(0, &self.cell_bind, &[]);
-        for (pipe, (x, y)) in self.cell_pipes.iter().zip([m, n, (1, 1), n, m]) {
-            pass.set_pipeline(pipe);
-            pass.dispatch_workgroups(x, y, 1);
-        }
+        self.cell_build.record(pass, self.n);
+        let n = spread(self.n);
         pass.set_bind_group(0, &self.sph_bind, &[]);
         for pipe in &self.sph_pipes[..2] {
             pass.set_pipeline(pipe);
