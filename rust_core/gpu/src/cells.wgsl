@@ -96,8 +96,8 @@ var<workgroup> sums: array<u32, RW>;
 // The prefix scan of the counts in three dispatches (reduce, scan of the block totals, apply),
 // all in u32 (exact, so the same whatever the order): block b holds the BLOCK cells from
 // b·BLOCK, thread t of its workgroup the CHUNK cells from b·BLOCK + t·CHUNK. One workgroup
-// scanning every cell alone (as before) left 256 threads to walk millions of cells: 7 of the
-// 11.6 ms of a 4M-particle WCSPH step on an H200 (2.5M cells).
+// scanning every cell alone (as before) left 256 threads to walk millions of cells: 8.4 of the
+// 11.7 ms of a 4M-particle WCSPH step on an H200 (2.5M cells; docs/guide/gpu.md).
 const CHUNK: u32 = 4u;
 const BLOCK: u32 = RW * CHUNK;
 
