@@ -258,7 +258,10 @@ class DFSPH(SPHSolver):
     fluids", IEEE TVCG 23, 2017, Algorithms 1–3): a divergence solve and a density solve each
     step, warm-started (module docstring). ``Fluid(..., solver=pc.DFSPH(...))`` is
     ``Fluid(..., method="dfsph", ...)`` with the same options. Steps inside
-    ``integrator="semi_implicit_euler"`` only.
+    ``integrator="semi_implicit_euler"`` only. The solves' Jacobi iterations are relaxed by an ω
+    that follows from the dimension, the kernel and ``smoothing`` (1 in 2D at the default
+    h = 1.3 Δx, 0.585 in 3D; Ihmsen et al. 2014, eq. 14), so wider neighbourhoods stay stable
+    (docs/guide/fluids_dfsph.md, "Relaxation").
 
     Parameters
     ----------
