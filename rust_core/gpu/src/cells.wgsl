@@ -110,10 +110,17 @@ fn block_of(w: vec3<u32>) -> u32 {
     return w.x + 65535u * w.y;
 }
 
-// Thread t's chunk total, its cells [a, b).
-fn chunk_total(a: u32, b: u32) -> u32 {
+// Thread t's cells of block b: [a, e), clamped to the grid.
+fn chunk_of(b: u32, t: u32) -> vec2<u32> {
+    let m = cells();
+    let a = min(b * BLOCK + t * CHUNK, m);
+    return vec2<u32>(a, min(a + CHUNK, m));
+}
+
+// The counts of cells [r.x, r.y).
+fn chunk_total(r: vec2<u32>) -> u32 {
     var s = 0u;
-    for (var c = a; c < b; c = c + 1u) {
+    for (var c = r.x; c < r.y; c = c + 1u) {
         s = s + atomicLoad(&counts[c]);
     }
     return s;
@@ -133,25 +140,18 @@ fn scan_sums(t: u32) {
     }
 }
 
-// 1. Each block's total into `blocks_sum[b]`.
+// 1. Each block's total into `blocks_sum[b]` (the last of its threads' prefix sums).
 @compute @workgroup_size(RW)
 fn scan_blocks(@builtin(local_invocation_id) l: vec3<u32>, @builtin(workgroup_id) w: vec3<u32>) {
     let b = block_of(w);
     if (b >= blocks()) {
         return;
     }
-    let m = cells();
-    let a = min(b * BLOCK + l.x * CHUNK, m);
-    sums[l.x] = chunk_total(a, min(a + CHUNK, m));
+    sums[l.x] = chunk_total(chunk_of(b, l.x));
     workgroupBarrier();
-    for (var h = RW / 2u; h > 0u; h = h / 2u) {
-        if (l.x < h) {
-            sums[l.x] = sums[l.x] + sums[l.x + h];
-        }
-        workgroupBarrier();
-    }
-    if (l.x == 0u) {
-        blocks_sum[b] = sums[0];
+    scan_sums(l.x);
+    if (l.x == RW - 1u) {
+        blocks_sum[b] = sums[RW - 1u];
     }
 }
 
@@ -189,15 +189,13 @@ fn scan_apply(@builtin(local_invocation_id) l: vec3<u32>, @builtin(workgroup_id)
     if (b >= blocks()) {
         return;
     }
-    let m = cells();
-    let a = min(b * BLOCK + l.x * CHUNK, m);
-    let e = min(a + CHUNK, m);
-    let s = chunk_total(a, e);
+    let r = chunk_of(b, l.x);
+    let s = chunk_total(r);
     sums[l.x] = s;
     workgroupBarrier();
     scan_sums(l.x);
     var run = blocks_sum[b] + sums[l.x] - s;
-    for (var c = a; c < e; c = c + 1u) {
+    for (var c = r.x; c < r.y; c = c + 1u) {
         let k = atomicLoad(&counts[c]);
         start[c] = run;
         atomicStore(&counts[c], run);

@@ -16,7 +16,7 @@
 //! file (`save`: positions, velocities, the books so far) continue bit for bit on the device.
 use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
-use crate::sph::dfsph::smoothing;
+use crate::sph::dfsph::{relaxation, smoothing};
 use crate::sph::surface::Surface;
 use crate::sph::KernelKind;
 use crate::terms::registry::Params;
@@ -185,7 +185,7 @@ impl DeviceDfsph {
             c0: fp.number("sound_speed")?,
             kernel: Kernel::by_name(fp.text("kernel")?)?,
             // The CPU term's own relaxation (`sph::dfsph::relaxation`), so both solve alike.
-            relaxation: crate::sph::dfsph::relaxation(dim, KernelKind::by_name(fp.text("kernel")?)?, smoothing(fp)?),
+            relaxation: relaxation(dim, KernelKind::by_name(fp.text("kernel")?)?, smoothing(fp)?),
             density_tol: fp.number("density_error")?,
             divergence_tol: fp.number("divergence_error")?,
             max_iterations: iterations as u32,
