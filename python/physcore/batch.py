@@ -41,7 +41,10 @@ import os
 import pickle
 import threading
 import zipfile
+from collections import deque
 from collections.abc import Callable, Sequence
+from itertools import compress, repeat
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -58,13 +61,23 @@ from ._errors import (
     SimulationDiverged,
 )
 from .contacts import Contacts
-from .scene import Scene
+from .scene import Scene, _copies
 
 __all__ = ["Batch"]
 
 #: Members of at most this many particles take their energy reference in one call into the core
 #: (not interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
 _REFERENCE_AT_ONCE = 4096
+#: A call's per-member work runs as C-level maps over these (the lock's methods, an attribute's
+#: getter), not as Python loops: a Python loop over 16,384 members took some 40 ms a call, far
+#: more than a GPU batch's thousand steps (benches/gpu/bench_gpu_batch.py).
+_LOCK = type(threading.Lock())
+_REFERENCE = attrgetter("reference_energy")
+
+
+def _each(values: Any) -> None:
+    """Runs the iterator `values` to its end (its items' side effects), keeping nothing."""
+    deque(values, maxlen=0)
 
 #: The batch file's format version (``Batch.save``).
 FORMAT_VERSION = 1
@@ -230,7 +243,7 @@ class Batch:
         if not isinstance(scene, Scene):
             raise InvalidTypeError(f"scene: expected a Scene, got {type(scene).__name__}")
         m = _check.int_in_range("m", m, 1, 1 << 24)
-        data = pickle.dumps(scene)
+        data = pickle.dumps(scene)  # its size sizes the copies
         need = m * (2 * len(data) + 4096)
         room = _room()
         if need > room:
@@ -242,8 +255,7 @@ class Batch:
             )
         members = []
         try:
-            for k in range(m):
-                s = pickle.loads(data)
+            for k, s in enumerate(_copies(scene, m)):
                 if positions is not None:
                     s.positions = positions(k, s.positions)
                 if velocities is not None:
@@ -338,40 +350,37 @@ class Batch:
             self._placed = live is None
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = [s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None]
+        fresh = [s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None] \
+            if None in map(_REFERENCE, sessions) else []
         if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
             for s in fresh:
                 s.session.take_reference_energy()
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
                 s.warn_contact_step()  # as Scene.step warns (ContactStepWarning)
-        taken = 0
+        got: list[bool] = []
         try:
-            for lock in locks:
-                if not lock.acquire(blocking=False):
-                    raise SceneBusyError("a member of this Batch is being stepped by another thread")
-                taken += 1
+            got = list(map(_LOCK.acquire, locks, repeat(False)))
+            if not all(got):
+                raise SceneBusyError("a member of this Batch is being stepped by another thread")
             # As Session.exclusive marks it: another thread's use of a member meanwhile raises
             # SceneBusyError, not pyo3's bare "Already mutably borrowed".
-            me = threading.get_ident()
-            for x in sessions:
-                x.busy = me
+            _each(map(setattr, sessions, repeat("busy"), repeat(threading.get_ident())))
             missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None]) if fresh else []
             # The core checks n against every member's step count before stepping any.
             if missing:
                 failed = None
             elif self._gpu is not None:
-                if not self._gpu.matches(sims):  # a member retired, or its terms changed
-                    self._gpu = self._device_batch(sims)
                 failed = self._gpu.step(sims, n)
+                if failed is None:  # a member retired, or its terms changed: built again from them
+                    self._gpu = self._device_batch(sims)
+                    failed = self._gpu.step(sims, n)
             else:
                 failed = _core.step_batch(sims, n, self._threads)
         finally:
-            if taken == len(locks):
-                for x in sessions:
-                    x.busy = None
-            for lock in locks[:taken]:
-                lock.release()
+            if all(got) and len(got) == len(locks):  # they were all this call's: it marked them
+                _each(map(setattr, sessions, repeat("busy"), repeat(None)))
+            _each(map(_LOCK.release, compress(locks, got)))
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
                 s.session.take_reference_energy()

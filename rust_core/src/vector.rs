@@ -64,6 +64,9 @@ pub trait Vector:
     fn round_f32(self) -> Self;
     /// The vectors as a flat row-major `(N, DIM)` slice of reals (no copy).
     fn flat(v: &[Self]) -> &[Real];
+    /// A flat row-major `(N, DIM)` slice of reals as vectors (no copy): `flat`'s inverse; the
+    /// slice's length is a multiple of `DIM`.
+    fn rows(flat: &[Real]) -> &[Self];
     /// Axial vectors as a flat row-major `(N, AXIAL_DIM)` slice of reals (no copy).
     fn axial_flat(b: &[Self::Axial]) -> &[Real];
 }
@@ -72,6 +75,10 @@ impl Vector for DVec2 {
     #[inline(always)]
     fn flat(v: &[Self]) -> &[Real] {
         bytemuck::cast_slice(v)
+    }
+    #[inline(always)]
+    fn rows(flat: &[Real]) -> &[Self] {
+        bytemuck::cast_slice(flat)
     }
     #[inline(always)]
     fn axial_flat(b: &[Real]) -> &[Real] {
@@ -125,6 +132,10 @@ impl Vector for DVec3 {
     #[inline(always)]
     fn flat(v: &[Self]) -> &[Real] {
         bytemuck::cast_slice(v)
+    }
+    #[inline(always)]
+    fn rows(flat: &[Real]) -> &[Self] {
+        bytemuck::cast_slice(flat)
     }
     #[inline(always)]
     fn axial_flat(b: &[DVec3]) -> &[Real] {

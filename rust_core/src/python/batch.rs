@@ -224,6 +224,10 @@ fn worlds_of<'a>(
     Ok((d2, d3))
 }
 
+/// The members of a call that failed, by index, with the exception each would have raised alone.
+#[cfg(feature = "gpu")]
+type Failed = Vec<(usize, Py<PyAny>)>;
+
 /// Every member of a batch on one device (`Batch(..., device="gpu")`): see
 /// `systems::device_batch`. Built from the members' simulations (which stay on the CPU);
 /// `step` runs them there in one dispatch per stage and writes each member back.
@@ -231,6 +235,8 @@ fn worlds_of<'a>(
 #[pyclass(module = "physcore._core", name = "DeviceBatch")]
 pub(super) struct PyDeviceBatch {
     inner: crate::systems::device_batch::DeviceBatch,
+    /// The members' records stamps at the build (`PySimulation::records_stamp`).
+    stamps: Vec<u64>,
 }
 
 #[cfg(feature = "gpu")]
@@ -264,13 +270,8 @@ impl PyDeviceBatch {
                 }
             })
             .map_err(|e| to_py(py, e))?;
-        Ok(Self { inner })
-    }
-
-    /// Whether `sims` are still the members it was built from (their terms and colliders).
-    fn matches(&self, py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>) -> PyResult<bool> {
-        let refs = borrow_all(py, &sims)?;
-        Ok(refs.iter().all(|r| r.device_records_ready()) && self.inner.matches(refs.iter().map(|r| r.records_ref())))
+        let stamps = refs.iter().map(|r| r.records_stamp()).collect();
+        Ok(Self { inner, stamps })
     }
 
     /// The adapter and precision, e.g. "NVIDIA H100 (vulkan, f32)".
@@ -281,14 +282,23 @@ impl PyDeviceBatch {
 
     /// Steps every member `n` steps on the device (GIL released); returns `(index, exception)`
     /// for each member that diverged (left as it was); the others are written back. Ctrl-C
-    /// writes nothing and is raised.
+    /// writes nothing and is raised. `None`, with nothing stepped, if `sims` are no longer the
+    /// members it was built from (a member retired, or its terms or colliders changed): the
+    /// caller builds it again (checked here, in the call's one pass over the members, not in a
+    /// call of its own: a pass costs about a microsecond a member on the host). The records are
+    /// compared by their stamps: a change to a member's terms or colliders gives it a new one.
     fn step(
         &mut self,
         py: Python<'_>,
         sims: Vec<Bound<'_, PySimulation>>,
         n: u64,
-    ) -> PyResult<Vec<(usize, Py<PyAny>)>> {
+    ) -> PyResult<Option<Failed>> {
         let mut refs = borrow_all(py, &sims)?;
+        let same = refs.len() == self.stamps.len()
+            && refs.iter().zip(&self.stamps).all(|(r, &s)| r.records_stamp() == s && r.device_records_ready());
+        if !same {
+            return Ok(None);
+        }
         let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
         let stop = AtomicBool::new(false);
         let inner = &mut self.inner;
@@ -309,6 +319,6 @@ impl PyDeviceBatch {
             pool.install(|| if d3.is_empty() { inner.keep(&mut d2, ran) } else { inner.keep(&mut d3, ran) })
         });
         let failed = failed.map_err(|e| to_py(py, e))?;
-        Ok(failed.into_iter().map(|(k, e)| (k, to_py(py, e).into_value(py).into_any())).collect())
+        Ok(Some(failed.into_iter().map(|(k, e)| (k, to_py(py, e).into_value(py).into_any())).collect()))
     }
 }

@@ -33,6 +33,15 @@ pub struct PySimulation {
     grids: Vec<(String, String, Option<registry::Params>)>,
     /// The colliders' records as added (kind, parameters), in order: what the device's are.
     colliders: Vec<(String, registry::Params)>,
+    /// A number that no simulation's term and collider records have had before, new at each
+    /// change of `terms` or `colliders` (`fresh_stamp`).
+    stamp: u64,
+}
+
+/// A stamp no records have had before (`PySimulation::stamp`): from one counter for the process.
+fn fresh_stamp() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// The name of the device particle system (`systems::device`).
@@ -85,10 +94,11 @@ impl PySimulation {
         &mut self.inner
     }
 
-    /// Its term and collider records, borrowed (a batch on a device compares them with its own).
+    /// Its records' stamp (`stamp`): a batch on a device compares it with the one it was built
+    /// from, one integer a member where comparing the records took a microsecond.
     #[cfg(feature = "gpu")]
-    pub(super) fn records_ref(&self) -> crate::systems::device_batch::RecordsRef<'_> {
-        (&self.terms, &self.colliders)
+    pub(super) fn records_stamp(&self) -> u64 {
+        self.stamp
     }
 
     /// Whether `device_records` would give its records (not on a device, no grids).
@@ -138,7 +148,14 @@ impl PySimulation {
             ),
             _ => return Err(err(invalid("dim", format!("must be 2 or 3, got {dim}")))),
         };
-        Ok(Self { inner, terms: Vec::new(), on_device: false, grids: Vec::new(), colliders: Vec::new() })
+        Ok(Self {
+            inner,
+            terms: Vec::new(),
+            on_device: false,
+            grids: Vec::new(),
+            colliders: Vec::new(),
+            stamp: fresh_stamp(),
+        })
     }
 
     /// Moves the particles and the force terms to a device (`"gpu"`, `"gpu:NAME"`) at
@@ -572,6 +589,7 @@ impl PySimulation {
         }
         .map_err(|e| to_py(py, e))?;
         self.terms.push(record);
+        self.stamp = fresh_stamp();
         Ok(())
     }
 
@@ -602,6 +620,7 @@ impl PySimulation {
         // device builds the device's terms from these records).
         if let Some(r) = self.terms.iter_mut().find(|r| r.1 == key) {
             *r = record;
+            self.stamp = fresh_stamp();
         }
         Ok(())
     }
@@ -744,6 +763,7 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => ty.build(&p).map(|c| s.particles_mut().add_constraint(c)))
             .map_err(|e| to_py(py, e))?;
         self.colliders.push((ty.kind.to_string(), p));
+        self.stamp = fresh_stamp();
         Ok(())
     }
 

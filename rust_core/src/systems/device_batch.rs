@@ -33,9 +33,6 @@ use std::sync::Arc;
 /// the facade added them (`Simulation.move_to_device` builds from the same).
 pub type Records = (Vec<(String, String, Params)>, Vec<(String, Params)>);
 
-/// A member's records, borrowed (`DeviceBatch::matches`).
-pub type RecordsRef<'a> = (&'a [(String, String, Params)], &'a [(String, Params)]);
-
 /// Every member of a batch on one device.
 pub struct DeviceBatch {
     dim: usize,
@@ -188,12 +185,6 @@ impl DeviceBatch {
         Ok(())
     }
 
-    /// Whether `records` are those of the members this batch was built from (else the caller
-    /// builds it again: a member changed its terms, or members were retired).
-    pub fn matches<'a>(&self, records: impl ExactSizeIterator<Item = RecordsRef<'a>>) -> bool {
-        records.len() == self.records.len() && self.records.iter().zip(records).all(|(r, (t, c))| r.0 == t && r.1 == c)
-    }
-
     /// The adapter it runs on and its precision, e.g. "NVIDIA H100 (vulkan, f32)".
     pub fn describe(&self) -> String {
         let a = self.p.gpu().adapter();
@@ -294,7 +285,7 @@ impl DeviceBatch {
             let t0 = w.time();
             clocks.entry(t0.to_bits()).or_insert_with(|| (0..n).fold(t0, |t, _| t + dt));
         }
-        // Each member written on its own (they share nothing), in parallel: ~1 µs a member.
+        // Each member written on its own (they share nothing), in parallel, into the arrays it has.
         let none = dp::Books::default();
         let written: Vec<Result<()>> = worlds
             .par_iter_mut()
@@ -305,8 +296,6 @@ impl DeviceBatch {
                 }
                 let t = clocks[&w.time().to_bits()];
                 let r = k * self.n * d..(k + 1) * self.n * d;
-                let rows = |a: &[Real]| a.chunks_exact(d).map(V::from_slice).collect::<Vec<V>>();
-                let (xk, vk) = (rows(&x[r.clone()]), rows(&v[r]));
                 let b = books.get(k).unwrap_or(&none);
                 let mut dis = w.particles().dissipated_by_term().to_vec();
                 for &(i, coef) in &self.drag {
@@ -317,7 +306,7 @@ impl DeviceBatch {
                 }
                 let collisions = w.particles().constraints_dissipated() + b.collisions;
                 let steps = w.steps() + n;
-                w.particles_mut().set_state(Some(xk), Some(vk))?;
+                w.particles_mut().set_state_from(V::rows(&x[r.clone()]), V::rows(&v[r]))?;
                 w.restore(t, steps, &dis, collisions, None)
             })
             .collect();

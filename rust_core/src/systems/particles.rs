@@ -425,25 +425,7 @@ impl<V: Vector> ParticleSystem<V> {
 
     /// Replaces positions and/or velocities (same particle count), e.g. to restore a saved run.
     pub fn set_state(&mut self, x: Option<Vec<V>>, v: Option<Vec<V>>) -> Result<()> {
-        let n = self.n_particles();
-        if let Some(x) = &x {
-            self.check_single_range(x, "positions")?;
-            if x.len() != n {
-                return Err(invalid("positions", format!("has {} rows, the scene has {n} particles", x.len())));
-            }
-            if let Some(i) = x.iter().position(|p| !p.is_finite()) {
-                return Err(invalid("positions", format!("row {i} is not finite")));
-            }
-        }
-        if let Some(v) = &v {
-            self.check_single_range(v, "velocities")?;
-            if v.len() != n {
-                return Err(invalid("velocities", format!("has {} rows, the scene has {n} particles", v.len())));
-            }
-            if let Some(i) = v.iter().position(|p| !p.is_finite()) {
-                return Err(invalid("velocities", format!("row {i} is not finite")));
-            }
-        }
+        self.check_state(x.as_deref(), v.as_deref())?;
         let single = self.sys.single;
         if let Some(mut x) = x {
             if single {
@@ -451,18 +433,59 @@ impl<V: Vector> ParticleSystem<V> {
             }
             self.sys.state.x = x;
         }
-        if let Some(mut v) = v {
-            for (i, vi) in v.iter_mut().enumerate() {
-                if self.sys.model.is_pinned(i) {
-                    *vi = V::ZERO;
-                } else if single {
-                    *vi = vi.round_f32();
-                }
-            }
+        if let Some(v) = v {
             self.sys.state.v = v;
+            self.settle_velocities();
         }
         self.integrator.reset();
         Ok(())
+    }
+
+    /// `set_state` of both from slices, copied into the arrays it has (no allocation: a device
+    /// batch writes thousands of small members back each call); the same checks, the same bits.
+    pub fn set_state_from(&mut self, x: &[V], v: &[V]) -> Result<()> {
+        self.check_state(Some(x), Some(v))?;
+        let single = self.sys.single;
+        let state = &mut self.sys.state;
+        state.x.copy_from_slice(x);
+        if single {
+            state.x.iter_mut().for_each(|p| *p = p.round_f32());
+        }
+        state.v.copy_from_slice(v);
+        self.settle_velocities();
+        self.integrator.reset();
+        Ok(())
+    }
+
+    /// `InvalidInput` naming "positions" / "velocities" for rows that are not finite, do not fit
+    /// float32 in a single-precision system, or are not one a particle.
+    fn check_state(&self, x: Option<&[V]>, v: Option<&[V]>) -> Result<()> {
+        let n = self.n_particles();
+        for (rows, arg) in [(x, "positions"), (v, "velocities")] {
+            let Some(rows) = rows else { continue };
+            self.check_single_range(rows, arg)?;
+            if rows.len() != n {
+                return Err(invalid(arg, format!("has {} rows, the scene has {n} particles", rows.len())));
+            }
+            if let Some(i) = rows.iter().position(|p| !p.is_finite()) {
+                return Err(invalid(arg, format!("row {i} is not finite")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The velocities just set: a pinned particle's zero, the others rounded to float32 in a
+    /// single-precision system.
+    fn settle_velocities(&mut self) {
+        let single = self.sys.single;
+        let (model, v) = (&self.sys.model, &mut self.sys.state.v);
+        for (i, vi) in v.iter_mut().enumerate() {
+            if model.is_pinned(i) {
+                *vi = V::ZERO;
+            } else if single {
+                *vi = vi.round_f32();
+            }
+        }
     }
 
     /// Checks the books of a saved run (per-term dissipated energy and the constraints', J; the
