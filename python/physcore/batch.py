@@ -69,18 +69,18 @@ __all__ = ["Batch"]
 #: (not interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
 _REFERENCE_AT_ONCE = 4096
 #: A call's per-member work runs as C-level maps over these (the lock's methods, an attribute's
-#: getter), not as Python loops: a Python loop over 16,384 members took some 40 ms a call, far
-#: more than a GPU batch's thousand steps (benches/gpu/bench_gpu_batch.py).
+#: getter), not as Python loops: the loops took tens of milliseconds a call at 16,384 members,
+#: where an H200 stepped 1,024 worlds 1,000 steps in 3.3 ms (docs/guide/gpu.md).
 _LOCK = type(threading.Lock())
 _REFERENCE = attrgetter("reference_energy")
+
+#: The batch file's format version (``Batch.save``).
+FORMAT_VERSION = 1
 
 
 def _each(values: Any) -> None:
     """Runs the iterator `values` to its end (its items' side effects), keeping nothing."""
     deque(values, maxlen=0)
-
-#: The batch file's format version (``Batch.save``).
-FORMAT_VERSION = 1
 
 
 def structure(scene: Scene) -> tuple[Any, ...]:
@@ -350,8 +350,8 @@ class Batch:
             self._placed = live is None
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = [s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None] \
-            if None in map(_REFERENCE, sessions) else []
+        fresh = ([s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None]
+                 if None in map(_REFERENCE, sessions) else [])
         if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
             for s in fresh:
                 s.session.take_reference_energy()
