@@ -9,7 +9,9 @@ Prints the median of three timed calls of ``--steps`` steps (after a warm-up cal
 the device, the shaders' compilation) as particle-steps/s (3 particles a member), the ratio to
 the CPU, and the largest position difference from the CPU batch after the same steps. A call
 uploads every member's state and writes each back (state, clock, books): the figures include
-that, as a user's call pays it. On lavapipe (Mesa's CPU Vulkan) they show the path works and
+that, as a user's call pays it. Beside them, what the host pays: ``from_scene``'s time to build
+the f32 batch, and the median of five calls of one step (mostly the host's work around the
+device: the locks, the upload, the write-back into every member). On lavapipe (Mesa's CPU Vulkan) they show the path works and
 agrees, not GPU speed. Target (issue "GPU fluids, grains and batches"): 16,384 worlds at
 ≥ 5e9 particle-steps/s on an H100.
 """
@@ -35,6 +37,16 @@ def fan(m: int, device: str = "cpu", precision: str | None = None) -> pc.Batch:
                                device=device, precision=precision)
 
 
+def one_step_call(b: pc.Batch) -> float:
+    """The median of five calls of one step, s."""
+    times = []
+    for _ in range(5):
+        t = time.perf_counter()
+        b.step(1)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
 def timed(b: pc.Batch, steps: int) -> float:
     b.step(1)
     times = []
@@ -56,8 +68,9 @@ def main() -> None:
     device = device_of(a.device)
     f64 = any(x["f64"] for x in pc.gpu_adapters() if device == "gpu" or "llvmpipe" in x["name"])
     print(header())
-    print("| worlds | CPU f64 p-steps/s | device f32 p-steps/s | ratio | Δx f32 | device f64 p-steps/s | Δx f64 |")
-    print("|---:|---:|---:|---:|---:|---:|---:|")
+    print("| worlds | CPU f64 p-steps/s | device f32 p-steps/s | ratio | Δx f32 | device f64 p-steps/s | Δx f64 "
+          "| f32 from_scene s | f32 call of 1 step ms |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for m in (int(v) for v in a.m.split(",")):
         row: dict[str, str] = {}
         cpu = None
@@ -65,13 +78,17 @@ def main() -> None:
             cpu = fan(m)
             row["cpu"] = f"{3 * m * a.steps / timed(cpu, a.steps):.3e}"
         for precision in ("f32", "f64") if f64 else ("f32",):
+            t = time.perf_counter()
             g = fan(m, device, precision)
+            built = time.perf_counter() - t
             row[precision] = f"{3 * m * a.steps / timed(g, a.steps):.3e}"
             if cpu is not None:
                 row["dx" + precision] = f"{np.abs(g.positions - cpu.positions).max():.1e}"
+            if precision == "f32":  # after the comparison: these steps put it ahead of the CPU batch
+                row["build"], row["call"] = f"{built:.2f}", f"{1e3 * one_step_call(g):.1f}"
         ratio = f"{float(row['f32']) / float(row['cpu']):.2f}" if "cpu" in row else "—"
         print(f"| {m} | {row.get('cpu', '—')} | {row['f32']} | {ratio} | {row.get('dxf32', '—')} | "
-              f"{row.get('f64', '—')} | {row.get('dxf64', '—')} |")
+              f"{row.get('f64', '—')} | {row.get('dxf64', '—')} | {row['build']} | {row['call']} |")
 
 
 if __name__ == "__main__":
