@@ -287,12 +287,7 @@ impl PyDeviceBatch {
     /// caller builds it again (checked here, in the call's one pass over the members, not in a
     /// call of its own: a pass costs about a microsecond a member on the host). The records are
     /// compared by their stamps: a change to a member's terms or colliders gives it a new one.
-    fn step(
-        &mut self,
-        py: Python<'_>,
-        sims: Vec<Bound<'_, PySimulation>>,
-        n: u64,
-    ) -> PyResult<Option<Failed>> {
+    fn step(&mut self, py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>, n: u64) -> PyResult<Option<Failed>> {
         let mut refs = borrow_all(py, &sims)?;
         let same = refs.len() == self.stamps.len()
             && refs.iter().zip(&self.stamps).all(|(r, &s)| r.records_stamp() == s && r.device_records_ready());
