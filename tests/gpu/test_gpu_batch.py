@@ -125,6 +125,32 @@ def test_a_members_bits_do_not_depend_on_the_other_members() -> None:
         assert np.array_equal(one.positions[0], big.positions[k]) and np.array_equal(one.velocities[0], big.velocities[k])
 
 
+def test_terms_added_to_the_members_between_calls_are_stepped_too() -> None:
+    """The device batch is built from its members' terms; a term added to every member after a
+    call (each member's records then get a new stamp) is on the device at the next call, which
+    builds the batch again: the members step with their drag as the CPU batch's do, and a
+    member's term replaced (a drag of another coefficient) is taken up the same way."""
+    cpu, gpu = _fan(4), _fan(4, device=DEVICE, precision="f64" if F64 else "f32")
+    cpu.step(100)
+    gpu.step(100)
+    for b in (cpu, gpu):
+        for m in b.members:
+            m.add(pc.Drag(0.3))
+    cpu.step(200)
+    gpu.step(200)
+    tol = 1e-11 if F64 else 3e-4
+    assert np.abs(gpu.positions - cpu.positions).max() < tol
+    drag = np.array([m.energy().dissipated["drag"] for m in gpu.members])
+    assert np.all(drag > 1e-3) and np.allclose(drag, [m.energy().dissipated["drag"] for m in cpu.members], rtol=1e-6)
+    for b in (cpu, gpu):
+        for m in b.members:
+            m.replace("drag", pc.Drag(3.0))
+    cpu.step(200)
+    gpu.step(200)
+    assert np.abs(gpu.positions - cpu.positions).max() < tol
+    assert np.abs(gpu.velocities - cpu.velocities).max() < (1e-9 if F64 else 1e-3)
+
+
 def test_a_diverging_member_is_retired_and_the_others_do_not_notice() -> None:
     members = list(_fan(6).members)
     v = members[3].velocities
