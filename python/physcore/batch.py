@@ -42,7 +42,8 @@ import pickle
 import threading
 import zipfile
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from itertools import compress, repeat
 from operator import attrgetter
 from pathlib import Path
@@ -62,11 +63,13 @@ from ._errors import (
 )
 from .contacts import Contacts
 from .scene import Scene, _copies
+from .session import Session, books, drift
 
 __all__ = ["Batch"]
 
-#: Members of at most this many particles take their energy reference in one call into the core
-#: (not interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
+#: Members of at most this many particles have their energy books read (the reference before
+#: their first step, ``energy_total``, ``energy_drift``) in one call into the core (not
+#: interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
 _REFERENCE_AT_ONCE = 4096
 #: A call's per-member work runs as C-level maps over these (the lock's methods, an attribute's
 #: getter), not as Python loops: the loops took tens of milliseconds a call at 16,384 members,
@@ -81,6 +84,25 @@ FORMAT_VERSION = 1
 def _each(values: Any) -> None:
     """Runs the iterator `values` to its end (its items' side effects), keeping nothing."""
     deque(values, maxlen=0)
+
+
+@contextmanager
+def _holding(sessions: Sequence[Session], locks: Sequence[Any]) -> Iterator[None]:
+    """Every session of `sessions` (their `locks`) held for a call into the core, as
+    :meth:`Session.exclusive <physcore.session.Session.exclusive>` holds one: another thread's
+    use of a member meanwhile raises SceneBusyError, not pyo3's bare "Already mutably
+    borrowed". SceneBusyError, with nothing held, if one is in use."""
+    got: list[bool] = []
+    try:
+        got = list(map(_LOCK.acquire, locks, repeat(False)))
+        if not all(got):
+            raise SceneBusyError("a member of this Batch is being stepped by another thread")
+        _each(map(setattr, sessions, repeat("busy"), repeat(threading.get_ident())))
+        yield
+    finally:
+        if all(got) and len(got) == len(locks):  # they were all this call's: it marked them
+            _each(map(setattr, sessions, repeat("busy"), repeat(None)))
+        _each(map(_LOCK.release, compress(locks, got)))
 
 
 def structure(scene: Scene) -> tuple[Any, ...]:
@@ -358,14 +380,7 @@ class Batch:
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
                 s.warn_contact_step()  # as Scene.step warns (ContactStepWarning)
-        got: list[bool] = []
-        try:
-            got = list(map(_LOCK.acquire, locks, repeat(False)))
-            if not all(got):
-                raise SceneBusyError("a member of this Batch is being stepped by another thread")
-            # As Session.exclusive marks it: another thread's use of a member meanwhile raises
-            # SceneBusyError, not pyo3's bare "Already mutably borrowed".
-            _each(map(setattr, sessions, repeat("busy"), repeat(threading.get_ident())))
+        with _holding(sessions, locks):
             missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None]) if fresh else []
             # The core checks n against every member's step count before stepping any.
             if missing:
@@ -377,10 +392,6 @@ class Batch:
                     failed = self._gpu.step(sims, n)
             else:
                 failed = _core.step_batch(sims, n, self._threads)
-        finally:
-            if all(got) and len(got) == len(locks):  # they were all this call's: it marked them
-                _each(map(setattr, sessions, repeat("busy"), repeat(None)))
-            _each(map(_LOCK.release, compress(locks, got)))
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
                 s.session.take_reference_energy()
@@ -411,15 +422,40 @@ class Batch:
         """Every member's step count: ``(M,)`` int64."""
         return np.array([s.step_count for s in self._members], dtype=np.int64)
 
+    def _books(self) -> list[tuple[float, float]]:
+        """Every member's energy books now, ``(total, scale)`` as :func:`physcore.session.books`
+        reduces them: members of at most _REFERENCE_AT_ONCE particles all in one call into the
+        core (the same additions, in parallel; one Python call a member took 40-60 µs, a
+        second at 16,384 members), larger ones alone (interruptible), as is a member whose
+        books could not be prepared (which then raises what it raises alone)."""
+        members = self._members
+        out: list[tuple[float, float] | None] = [None] * len(members)
+        if members[0].n_particles <= _REFERENCE_AT_ONCE:  # members share their particle count
+            with _holding(self._sessions, self._locks):
+                out = _core.reference_energies(self._sims, self._threads)
+        return [r if r is not None else books(x.exclusive(lambda sim: sim.energy()))
+                for r, x in zip(out, self._sessions, strict=True)]
+
     def energy_total(self) -> np.ndarray:
         """Every member's energy books' total now, J: ``(M,)`` float64 (kinetic + potential +
-        dissipated, :meth:`Scene.energy`)."""
-        return np.array([s.energy().total for s in self._members], dtype=np.float64)
+        dissipated, :meth:`Scene.energy`'s ``total``, bit for bit).
+
+        Raises
+        ------
+        SceneBusyError
+            A member is being stepped by another thread."""
+        return np.array([total for total, _ in self._books()], dtype=np.float64)
 
     def energy_drift(self) -> np.ndarray:
-        """Every member's relative energy drift since its first step (:meth:`Scene.energy_drift`):
-        ``(M,)`` float64."""
-        return np.array([s.energy_drift() for s in self._members], dtype=np.float64)
+        """Every member's relative energy drift since its first step (:meth:`Scene.energy_drift`,
+        bit for bit): ``(M,)`` float64.
+
+        Raises
+        ------
+        SceneBusyError
+            A member is being stepped by another thread."""
+        return np.array([drift(x.reference_energy, total, scale)
+                         for x, (total, scale) in zip(self._sessions, self._books(), strict=True)], dtype=np.float64)
 
     # ------------------------------------------------------------------------ drawing
     @property

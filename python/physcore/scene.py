@@ -57,7 +57,7 @@ from .flows import Flow
 from .fluids import Fluid
 from .grids import Grid
 from .potentials import PointMasses  # noqa: F401 - registers the potential terms
-from .session import Session
+from .session import Session, books, drift, left_sum
 from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -1316,8 +1316,8 @@ class Scene:
         d = self._exclusive(lambda sim: sim.energy())
         pot = dict(d["potential"])
         dis = dict(d["dissipated"])
-        mech = d["kinetic"] + sum(pot.values())
-        return EnergyReport(d["kinetic"], pot, dis, mech + sum(dis.values()), mech)
+        mech = d["kinetic"] + left_sum(pot.values())
+        return EnergyReport(d["kinetic"], pot, dis, mech + left_sum(dis.values()), mech)
 
     def energy_drift(self) -> float:
         """Relative change of ``energy().total`` since the first step (0 before any step).
@@ -1332,12 +1332,7 @@ class Scene:
         """
         if self._e0 is None:
             return 0.0
-        e = self.energy()
-        scale = abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values())
-        if not all(math.isfinite(v) for v in (self._e0, self._e0_scale, e.total, scale)):
-            return math.nan
-        denom = max(abs(self._e0), self._e0_scale, scale)
-        return (e.total - self._e0) / denom if denom > 0 else 0.0
+        return drift(self._session.reference_energy, *books(self._exclusive(lambda sim: sim.energy())))
 
     def momentum(self) -> np.ndarray:
         """Linear momentum ``Σ m v`` of free particles, kg·m/s: (dim,) float64."""

@@ -15,13 +15,47 @@ Python objects, not the memory the core holds; rebuilding a scene 20 times in a 
 """
 from __future__ import annotations
 
+import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from ._errors import SceneBusyError
 
 __all__ = ["Session"]
+
+def left_sum(values: Iterable[float]) -> float:
+    """The floats `values` added left to right from 0.0: how the energy books' parts are summed
+    here and in the core (`_core.reference_energies`), so that a total has the same bits in
+    both and under every Python (3.12's ``sum()`` compensates its rounding; 3.11's does not)."""
+    total = 0.0
+    for v in values:
+        total += v
+    return total
+
+
+def books(d: dict[str, Any]) -> tuple[float, float]:
+    """The core's energy books `d` (``Simulation.energy()``) reduced: ``(total, scale)`` with
+    total = (kinetic + Σ potential) + Σ dissipated and scale the same sum of the parts'
+    magnitudes (J; a repeated name counted once, as a dict keeps it)."""
+    pot, dis = dict(d["potential"]), dict(d["dissipated"])
+    total = d["kinetic"] + left_sum(pot.values()) + left_sum(dis.values())
+    scale = abs(d["kinetic"]) + left_sum(abs(u) for u in pot.values()) + left_sum(abs(v) for v in dis.values())
+    return total, scale
+
+
+def drift(reference: tuple[float, float] | None, total: float, scale: float) -> float:
+    """The relative energy drift of books now at (`total`, `scale`) from their `reference`
+    ``(E0, S0)`` (:meth:`Scene.energy_drift <physcore.Scene.energy_drift>`): 0.0 without one,
+    NaN where a value is not finite."""
+    if reference is None:
+        return 0.0
+    e0, s0 = reference
+    if not all(math.isfinite(v) for v in (e0, s0, total, scale)):
+        return math.nan
+    denom = max(abs(e0), s0, scale)
+    return (total - e0) / denom if denom > 0 else 0.0
+
 
 _BUSY = (
     "this Scene is being stepped by another thread; use a Scene from one thread at a time (wait for "
@@ -113,11 +147,7 @@ class Session:
         """Takes the books' reference now (:attr:`reference_energy`) and returns it: the total
         energy ``E0`` (J) and ``S0``, the sum of the magnitudes of kinetic, potential and
         dissipated energy (J). Raises what :meth:`exclusive` raises."""
-        d = self.exclusive(lambda sim: sim.energy())
-        pot, dis = dict(d["potential"]), dict(d["dissipated"])
-        total = d["kinetic"] + sum(pot.values()) + sum(dis.values())
-        scale = abs(d["kinetic"]) + sum(abs(u) for u in pot.values()) + sum(abs(v) for v in dis.values())
-        self.reference_energy = (total, scale)
+        self.reference_energy = books(self.exclusive(lambda sim: sim.energy()))
         return self.reference_energy
 
     def energy_changed(self) -> None:

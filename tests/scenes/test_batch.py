@@ -343,6 +343,32 @@ def test_from_scene_copies_are_the_scenes_file_each_with_its_own_arrays(make):
     assert b[1].to_bytes() == data and b[0].to_bytes() != data
 
 
+@pytest.mark.parametrize("make", [lambda: pc.scenes.figure_eight(integrator="yoshida4"), pc.scenes.tablecloth,
+                                  lambda: pc.scenes.spring_chain(6000, damping=0.5)])
+def test_the_books_of_every_member_are_each_members_own_bit_for_bit(make):
+    """energy_total and energy_drift read small members' books in one call into the core and
+    larger ones (a 6000-particle chain) alone: each value is the member's own Scene.energy()
+    total and Scene.energy_drift(), bit for bit, before the first step (drift 0) and after."""
+    b = pc.Batch.from_scene(make(), 3, velocities=lambda k, v: v + 0.01 * k)
+    assert np.array_equal(b.energy_drift(), np.zeros(3))
+    b.step(20)
+    total, drift = b.energy_total(), b.energy_drift()
+    assert total.tolist() == [m.energy().total for m in b.members]
+    assert drift.tolist() == [m.energy_drift() for m in b.members]
+    assert np.all(drift != 0) and len(set(total.tolist())) == 3  # the members differ, and drift
+
+
+def test_the_books_add_left_to_right_under_every_python():
+    """The books' parts are summed from 0.0 left to right, as the core adds them (Python 3.12's
+    sum() compensates its rounding and would give 1.0 here): a total is the same bits in Python
+    and in the core, whichever Python runs."""
+    from physcore.session import books, left_sum
+
+    assert left_sum([1e16, 1.0, -1e16]) == 0.0 and left_sum([]) == 0.0
+    d = {"kinetic": 1.0, "potential": [("a", 1e16), ("b", 1.0), ("c", -1e16)], "dissipated": [("d", 2.0)]}
+    assert books(d) == ((1.0 + ((1e16 + 1.0) - 1e16)) + 2.0, (1.0 + ((1e16 + 1.0) + 1e16)) + 2.0) == (3.0, 2e16)
+
+
 def test_from_scene_under_a_memory_cap_is_refused_by_name():
     """Under RLIMIT_AS (what the process maps now + 300 MB), 10^5 copies (about 1.2 GB) are
     refused naming m, in a fresh interpreter so the cap stays there."""

@@ -112,13 +112,14 @@ pub(super) fn step_batch(
     }
 }
 
-/// Each of `sims`' energy books reduced as `Scene._set_reference_energy` reduces them in Python
+/// Each of `sims`' energy books reduced as `physcore.session.books` reduces them in Python
 /// (the same additions in the same order, a repeated name counted once as a dict keeps it):
 /// `(total, scale)` with total = (kinetic + Σ potential) + Σ dissipated and scale = (|kinetic|
 /// + Σ |potential|) + Σ |dissipated|; `None` for a member whose books could not be prepared
 /// (out of memory), which the caller then reads alone. In parallel on a pool of `threads`
 /// threads with the GIL released: the batch's first step takes every member's reference at
-/// once instead of one Python call each. Not interruptible: the caller passes small members.
+/// once instead of one Python call each, and `Batch.energy_total` and `energy_drift` read every
+/// member's books so. Not interruptible: the caller passes small members.
 #[pyfunction]
 #[pyo3(signature = (sims, threads=None))]
 pub(super) fn reference_energies(
@@ -166,7 +167,7 @@ fn as_dict(pairs: &[(String, f64)]) -> Vec<f64> {
     values
 }
 
-/// Python's `sum` of floats: from 0, left to right.
+/// `physcore.session.left_sum`: from 0.0, left to right.
 fn sum(values: impl Iterator<Item = f64>) -> f64 {
     values.fold(0.0, |s, v| s + v)
 }
