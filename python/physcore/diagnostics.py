@@ -26,6 +26,7 @@ import numpy as np
 
 from ._atomic import atomic_write
 from ._errors import InvalidInputError
+from .session import left_sum
 
 __all__ = ["EnergyRecorder"]
 
@@ -64,7 +65,7 @@ class EnergyRecorder:
         self._t.append(float(scene.time))
         self._kin.append(float(e.kinetic))
         self._tot.append(float(e.total))
-        self._scale.append(abs(e.kinetic) + sum(abs(u) for u in e.potential.values()) + sum(abs(d) for d in e.dissipated.values()))
+        self._scale.append(abs(e.kinetic) + left_sum(abs(u) for u in e.potential.values()) + left_sum(abs(d) for d in e.dissipated.values()))
 
     def __len__(self) -> int:
         return len(self._t)
