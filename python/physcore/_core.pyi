@@ -34,6 +34,7 @@ __all__ = [
     "build_profile",
     "__version__",
     "reference_energies",
+    "batch_rows",
     "step_batch",
 ]
 
@@ -91,6 +92,7 @@ def grid_limits(kind: str, dim: int, params: dict[str, Any]) -> dict[str, float]
 def check_integrator(kind: str, integrator: str) -> None: ...
 def step_batch(sims: list[Simulation], n: int, threads: int | None = None) -> list[tuple[int, BaseException]]: ...
 def reference_energies(sims: list[Simulation], threads: int | None = None) -> list[tuple[float, float] | None]: ...
+def batch_rows(sims: list[Simulation], velocities: bool) -> npt.NDArray[np.float64] | None: ...
 def splat(
     col: npt.NDArray[np.float64],
     row: npt.NDArray[np.float64],

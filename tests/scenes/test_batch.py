@@ -283,7 +283,8 @@ def test_a_member_used_by_another_thread_while_its_batch_steps_says_so():
     pyo3's bare "Already mutably borrowed"; the batch's call is unharmed."""
     members = _fan(2, pc.scenes.cloth(n=32, threads=1))
     batch = pc.Batch(members, threads=1)
-    seen, errors = busy_uses(lambda: batch.step(3000), (lambda: members[1].positions, lambda: members[0].step(1)))
+    seen, errors = busy_uses(lambda: batch.step(3000), (lambda: members[1].positions, lambda: members[0].step(1),
+                                                        lambda: batch.positions))
     assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
     if errors:  # the batch lost the race to a member's step(1): it said so; again, uncontended
         return test_a_member_used_by_another_thread_while_its_batch_steps_says_so()
@@ -367,6 +368,25 @@ def test_the_books_add_left_to_right_under_every_python():
     assert left_sum([1e16, 1.0, -1e16]) == 0.0 and left_sum([]) == 0.0
     d = {"kinetic": 1.0, "potential": [("a", 1e16), ("b", 1.0), ("c", -1e16)], "dissipated": [("d", 2.0)]}
     assert books(d) == ((1.0 + ((1e16 + 1.0) - 1e16)) + 2.0, (1.0 + ((1e16 + 1.0) + 1e16)) + 2.0) == (3.0, 2e16)
+
+
+def test_positions_and_velocities_are_the_members_own_in_one_array():
+    """batch.positions and velocities are each member's own, stacked: one copy in the core for
+    float64 members on the CPU, each member's own array (float32) for f32 members."""
+    b = pc.Batch(_fan(5))
+    b.step(40)
+    for name in ("positions", "velocities"):
+        a = getattr(b, name)
+        assert a.dtype == np.float64 and a.shape == (5, 3, 2)
+        assert np.array_equal(a, np.stack([getattr(m, name) for m in b.members]))
+        a[:] = 0.0  # a copy: writing to it changes no member
+        assert np.abs(getattr(b, name)).max() > 0.1
+    s = pc.Scene(3, integrator="verlet", dt=1e-3, precision="f32")
+    s.add_particles(np.eye(3), np.ones((3, 3)), np.ones(3))
+    b32 = pc.Batch.from_scene(s, 4, velocities=lambda k, v: v * k)
+    b32.step(5)
+    assert b32.positions.dtype == np.float32 and b32.velocities.dtype == np.float32
+    assert np.array_equal(b32.velocities, np.stack([m.velocities for m in b32.members]))
 
 
 def test_from_scene_under_a_memory_cap_is_refused_by_name():

@@ -346,6 +346,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     #[cfg(feature = "gpu")]
     m.add_class::<batch::PyDeviceBatch>()?;
     m.add_function(wrap_pyfunction!(batch::reference_energies, m)?)?;
+    m.add_function(wrap_pyfunction!(batch::batch_rows, m)?)?;
     m.add("build_profile", if cfg!(debug_assertions) { "debug" } else { "release" })?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     let _ = MAIN_THREAD.set(std::thread::current().id());

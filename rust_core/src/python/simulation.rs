@@ -38,6 +38,12 @@ pub struct PySimulation {
     stamp: u64,
 }
 
+/// A world's positions (`velocities` false) or velocities, flat, and its dimension.
+fn rows_of<V: Vector>(w: &World<V>, velocities: bool) -> (&[Real], usize) {
+    let st = w.particles().state();
+    (V::flat(if velocities { &st.v } else { &st.x }), V::DIM)
+}
+
 /// A stamp no records have had before (`PySimulation::stamp`): from one counter for the process.
 fn fresh_stamp() -> u64 {
     static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
@@ -99,6 +105,16 @@ impl PySimulation {
     #[cfg(feature = "gpu")]
     pub(super) fn records_stamp(&self) -> u64 {
         self.stamp
+    }
+
+    /// Its particles' positions (`velocities` false) or velocities, flat row-major (N, dim),
+    /// and its dimension; None where they live on a device (the getters read them from there)
+    /// or are single precision (the facade gives those as float32).
+    pub(super) fn rows(&self, velocities: bool) -> Option<(&[Real], usize)> {
+        if self.on_device || with_sim!(&self.inner, s => s.particles().single()) {
+            return None;
+        }
+        Some(with_sim!(&self.inner, s => rows_of(s, velocities)))
     }
 
     /// Whether `device_records` would give its records (not on a device, no grids).
