@@ -71,6 +71,10 @@ __all__ = ["Batch"]
 #: their first step, ``energy_total``, ``energy_drift``) in one call into the core (not
 #: interruptible: an O(N²) potential of a few thousand bodies is milliseconds).
 _REFERENCE_AT_ONCE = 4096
+#: ``energy_total`` and ``energy_drift`` read every member's books in one call only where the
+#: members' pairs together (M N²) are at most this many, about a tenth of a second of O(N²)
+#: potential: a larger batch reads its members one by one, so that Ctrl-C is heard.
+_BOOKS_AT_ONCE = 1 << 26
 #: A call's per-member work runs as C-level maps over these (the lock's methods, an attribute's
 #: getter), not as Python loops: the loops took tens of milliseconds a call at 16,384 members,
 #: where an H200 stepped 1,024 worlds 1,000 steps in 3.3 ms (docs/guide/gpu.md).
@@ -442,13 +446,14 @@ class Batch:
 
     def _books(self) -> list[tuple[float, float]]:
         """Every member's energy books now, ``(total, scale)`` as :func:`physcore.session.books`
-        reduces them: members of at most _REFERENCE_AT_ONCE particles all in one call into the
-        core (the same additions, in parallel; one Python call a member took 40-60 µs, a
+        reduces them: small members (_REFERENCE_AT_ONCE, _BOOKS_AT_ONCE) all in one call into
+        the core (the same additions, in parallel; one Python call a member took 40-60 µs, a
         second at 16,384 members), larger ones alone (interruptible), as is a member whose
         books could not be prepared (which then raises what it raises alone)."""
         members = self._members
         out: list[tuple[float, float] | None] = [None] * len(members)
-        if members[0].n_particles <= _REFERENCE_AT_ONCE:  # members share their particle count
+        n = members[0].n_particles  # members share their particle count
+        if n <= _REFERENCE_AT_ONCE and n * n * len(members) <= _BOOKS_AT_ONCE:
             with _holding(self._sessions, self._locks):
                 out = _core.reference_energies(self._sims, self._threads)
         return [r if r is not None else books(x.exclusive(lambda sim: sim.energy()))

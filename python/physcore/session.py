@@ -24,6 +24,7 @@ from ._errors import SceneBusyError
 
 __all__ = ["Session"]
 
+
 def left_sum(values: Iterable[float]) -> float:
     """The floats `values` added left to right from 0.0: how the energy books' parts are summed
     here and in the core (`_core.reference_energies`), so that a total has the same bits in
