@@ -6,6 +6,7 @@ all state and steps ``n`` steps per call with the GIL released. Arrays cross in 
 from __future__ import annotations
 
 import contextvars
+import copy
 import dataclasses
 import io
 import json
@@ -1954,8 +1955,6 @@ def _copies(scene: Scene, m: int) -> Iterator[Scene]:
     through its scene file), the file read and checked once: its meta and arrays copied for
     each (a scene's parts may keep what they load), not parsed again (the parse was 85 % of a
     three-body copy's 3.6 ms; ``Batch.from_scene`` makes thousands)."""
-    import copy
-
     data, render_defaults = scene.to_bytes(), scene.render_defaults
     with allocating("load", "the scene file's arrays"):
         sf = _scenefile.read_bytes(data)

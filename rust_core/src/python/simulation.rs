@@ -38,10 +38,15 @@ pub struct PySimulation {
     stamp: u64,
 }
 
-/// A world's positions (`velocities` false) or velocities, flat, and its dimension.
-fn rows_of<V: Vector>(w: &World<V>, velocities: bool) -> (&[Real], usize) {
-    let st = w.particles().state();
-    (V::flat(if velocities { &st.v } else { &st.x }), V::DIM)
+/// A world's positions (`velocities` false) or velocities, flat, and its dimension; None in
+/// single precision.
+fn rows_of<V: Vector>(w: &World<V>, velocities: bool) -> Option<(&[Real], usize)> {
+    let p = w.particles();
+    if p.single() {
+        return None;
+    }
+    let st = p.state();
+    Some((V::flat(if velocities { &st.v } else { &st.x }), V::DIM))
 }
 
 /// A stamp no records have had before (`PySimulation::stamp`): from one counter for the process.
@@ -111,10 +116,10 @@ impl PySimulation {
     /// and its dimension; None where they live on a device (the getters read them from there)
     /// or are single precision (the facade gives those as float32).
     pub(super) fn rows(&self, velocities: bool) -> Option<(&[Real], usize)> {
-        if self.on_device || with_sim!(&self.inner, s => s.particles().single()) {
+        if self.on_device {
             return None;
         }
-        Some(with_sim!(&self.inner, s => rows_of(s, velocities)))
+        with_sim!(&self.inner, s => rows_of(s, velocities))
     }
 
     /// Whether `device_records` would give its records (not on a device, no grids).

@@ -426,12 +426,9 @@ impl<V: Vector> ParticleSystem<V> {
     /// Replaces positions and/or velocities (same particle count), e.g. to restore a saved run.
     pub fn set_state(&mut self, x: Option<Vec<V>>, v: Option<Vec<V>>) -> Result<()> {
         self.check_state(x.as_deref(), v.as_deref())?;
-        let single = self.sys.single;
-        if let Some(mut x) = x {
-            if single {
-                x.iter_mut().for_each(|p| *p = p.round_f32());
-            }
+        if let Some(x) = x {
             self.sys.state.x = x;
+            self.settle_positions();
         }
         if let Some(v) = v {
             self.sys.state.v = v;
@@ -445,13 +442,9 @@ impl<V: Vector> ParticleSystem<V> {
     /// batch writes thousands of small members back each call); the same checks, the same bits.
     pub fn set_state_from(&mut self, x: &[V], v: &[V]) -> Result<()> {
         self.check_state(Some(x), Some(v))?;
-        let single = self.sys.single;
-        let state = &mut self.sys.state;
-        state.x.copy_from_slice(x);
-        if single {
-            state.x.iter_mut().for_each(|p| *p = p.round_f32());
-        }
-        state.v.copy_from_slice(v);
+        self.sys.state.x.copy_from_slice(x);
+        self.settle_positions();
+        self.sys.state.v.copy_from_slice(v);
         self.settle_velocities();
         self.integrator.reset();
         Ok(())
@@ -472,6 +465,13 @@ impl<V: Vector> ParticleSystem<V> {
             }
         }
         Ok(())
+    }
+
+    /// The positions just set: rounded to float32 in a single-precision system.
+    fn settle_positions(&mut self) {
+        if self.sys.single {
+            self.sys.state.x.iter_mut().for_each(|p| *p = p.round_f32());
+        }
     }
 
     /// The velocities just set: a pinned particle's zero, the others rounded to float32 in a
