@@ -232,7 +232,8 @@ fn sort_cells(@builtin(global_invocation_id) g: vec3<u32>) {
 }
 
 // Particle i's neighbours within the radius, gathered over the 3^d cells around its own in a
-// fixed order (z, y, x, then each cell's particles by index).
+// fixed order (z, y, x, then each cell's particles by index; a row's three cells along x are
+// consecutive in `order`: one run of slots).
 @compute @workgroup_size(WG)
 fn neighbours(@builtin(global_invocation_id) g: vec3<u32>) {
     let i = index(g);
@@ -251,18 +252,16 @@ fn neighbours(@builtin(global_invocation_id) g: vec3<u32>) {
     }
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = max(c.y, 1u) - 1u; y <= min(c.y + 1u, P.cy - 1u); y = y + 1u) {
-            for (var x = max(c.x, 1u) - 1u; x <= min(c.x + 1u, P.cx - 1u); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let j = order[s];
-                    var q: real = 0.0;
-                    for (var a = 0u; a < d; a = a + 1u) {
-                        let e = pos[d * j + a] - pos[d * i + a];
-                        q = q + e * e;
-                    }
-                    if (j != i && q < r2) {
-                        k = k + 1u;
-                    }
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = start[row + max(c.x, 1u) - 1u]; s < start[row + min(c.x + 1u, P.cx - 1u) + 1u]; s = s + 1u) {
+                let j = order[s];
+                var q: real = 0.0;
+                for (var a = 0u; a < d; a = a + 1u) {
+                    let e = pos[d * j + a] - pos[d * i + a];
+                    q = q + e * e;
+                }
+                if (j != i && q < r2) {
+                    k = k + 1u;
                 }
             }
         }

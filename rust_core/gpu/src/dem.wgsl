@@ -4,8 +4,9 @@
 // `energy` runs only when the books are read.
 //
 // Deterministic gather, no float atomics: the thread of grain i computes only grain i's force
-// and torque, over the 3^d cells around its own (z, y, x, each cell's grains by index), then
-// the walls in order. A pair is always evaluated with its lower index as the first grain (the
+// and torque, over the 3^d cells around its own (z, y, x, each cell's grains by index; a row's
+// three cells along x are consecutive in `order`, so each row is one run of slots), then the
+// walls in order. A pair is always evaluated with its lower index as the first grain (the
 // same inputs, the same code site, so the same bits at both ends), and the second grain takes
 // the negated force: Σ F = 0 up to the rounding of each grain's own sum.
 //
@@ -573,74 +574,72 @@ fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let j = order[s];
-                    // Two pinned grains never meet (the CPU skips the pair).
-                    if (j == i || !(free(i) || free(j))) {
-                        continue;
-                    }
-                    let a = min(i, j);
-                    let b = max(i, j);
-                    let dx = xat(b) - xat(a);
-                    let d2 = dot(dx, dx);
-                    let rs = rad(a) + rad(b);
-                    if (!(d2 < rs * rs && d2 > 0.0)) {
-                        continue;
-                    }
-                    let q = find(kin, count, j);
-                    let fresh = q == count;
-                    var x0 = zero3();
-                    var u0: real = 0.0;
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let j = order[s];
+                // Two pinned grains never meet (the CPU skips the pair).
+                if (j == i || !(free(i) || free(j))) {
+                    continue;
+                }
+                let a = min(i, j);
+                let b = max(i, j);
+                let dx = xat(b) - xat(a);
+                let d2 = dot(dx, dx);
+                let rs = rad(a) + rad(b);
+                if (!(d2 < rs * rs && d2 > 0.0)) {
+                    continue;
+                }
+                let q = find(kin, count, j);
+                let fresh = q == count;
+                var x0 = zero3();
+                var u0: real = 0.0;
+                if (!fresh) {
+                    matched = matched | (1u << q);
+                    x0 = vec_at(vin + q * sv);
+                    u0 = vals[vin + q * sv + d];
+                }
+                let g = geom(a, b, dx, d2);
+                let inv_m = inv_mass(a) + inv_mass(b);
+                let o = contact(g.n, g.d, g.vc, coef(inv_m, P.zeta, P.mu), x0, fresh);
+                var rr = Roll(zero3(), zero3());
+                var ur: real = 0.0;
+                if (P.roll != 0u) {
+                    // Rolling resistance: +M on the first grain, −M on the other (a couple).
+                    var th0 = zero3();
                     if (!fresh) {
-                        matched = matched | (1u << q);
-                        x0 = vec_at(vin + q * sv);
-                        u0 = vals[vin + q * sv + d];
+                        th0 = ax_at(vin + q * sv + d + 1u);
+                        ur = vals[vin + q * sv + d + 1u + P.ad];
                     }
-                    let g = geom(a, b, dx, d2);
-                    let inv_m = inv_mass(a) + inv_mass(b);
-                    let o = contact(g.n, g.d, g.vc, coef(inv_m, P.zeta, P.mu), x0, fresh);
-                    var rr = Roll(zero3(), zero3());
-                    var ur: real = 0.0;
+                    let wab = wat(a) - wat(b);
+                    let ra = rad(a);
+                    let rb = rad(b);
+                    let reff = ra * rb / (ra + rb);
+                    rr = roll_eval(g.n, g.d, rolling_part(wab, g.n), o.fn_, reff, inv_ic(a) + inv_ic(b), th0);
+                    ur = ur - 0.5 * P.dt * dot(rr.m, wab);
+                }
+                if (i == a) {
+                    force = force + o.f;
+                    torque = torque + o.t * g.aa + rr.m;
+                    bn = bn + (select(un_of(g.d), 0.0, fresh && P.primed != 0u) + 0.5 * P.dt * o.wn);
+                    bt = bt + (u0 + 0.5 * P.dt * o.wt) + ur;
+                } else {
+                    force = force - o.f;
+                    torque = torque + o.t * g.ab - rr.m;
+                }
+                if (m == cap) {
+                    atomicMin(&flag[1], i);
+                } else {
+                    keys[kout + 1u + m] = j;
+                    put(vout + m * sc, o.xi);
+                    put(vout + m * sc + d, o.ft);
+                    put(vout + m * sc + 2u * d, g.n);
+                    vals[vout + m * sc + 3u * d] = o.fn_;
+                    vals[vout + m * sc + 3u * d + 1u] = g.d;
                     if (P.roll != 0u) {
-                        // Rolling resistance: +M on the first grain, −M on the other (a couple).
-                        var th0 = zero3();
-                        if (!fresh) {
-                            th0 = ax_at(vin + q * sv + d + 1u);
-                            ur = vals[vin + q * sv + d + 1u + P.ad];
-                        }
-                        let wab = wat(a) - wat(b);
-                        let ra = rad(a);
-                        let rb = rad(b);
-                        let reff = ra * rb / (ra + rb);
-                        rr = roll_eval(g.n, g.d, rolling_part(wab, g.n), o.fn_, reff, inv_ic(a) + inv_ic(b), th0);
-                        ur = ur - 0.5 * P.dt * dot(rr.m, wab);
+                        put_ax(vout + m * sc + 3u * d + 2u, rr.theta);
+                        put_ax(vout + m * sc + 3u * d + 2u + P.ad, rr.m);
                     }
-                    if (i == a) {
-                        force = force + o.f;
-                        torque = torque + o.t * g.aa + rr.m;
-                        bn = bn + (select(un_of(g.d), 0.0, fresh && P.primed != 0u) + 0.5 * P.dt * o.wn);
-                        bt = bt + (u0 + 0.5 * P.dt * o.wt) + ur;
-                    } else {
-                        force = force - o.f;
-                        torque = torque + o.t * g.ab - rr.m;
-                    }
-                    if (m == cap) {
-                        atomicMin(&flag[1], i);
-                    } else {
-                        keys[kout + 1u + m] = j;
-                        put(vout + m * sc, o.xi);
-                        put(vout + m * sc + d, o.ft);
-                        put(vout + m * sc + 2u * d, g.n);
-                        vals[vout + m * sc + 3u * d] = o.fn_;
-                        vals[vout + m * sc + 3u * d + 1u] = g.d;
-                        if (P.roll != 0u) {
-                            put_ax(vout + m * sc + 3u * d + 2u, rr.theta);
-                            put_ax(vout + m * sc + 3u * d + 2u + P.ad, rr.m);
-                        }
-                        m = m + 1u;
-                    }
+                    m = m + 1u;
                 }
             }
         }
@@ -894,19 +893,17 @@ fn energy(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let j = order[s];
-                    if (j <= i || !(free(i) || free(j))) {
-                        continue;
-                    }
-                    let dx = xat(j) - xi;
-                    let d2 = dot(dx, dx);
-                    let rs = ri + rad(j);
-                    if (d2 < rs * rs && d2 > 0.0) {
-                        u = u + un_of(rs - sqrt(d2));
-                    }
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let j = order[s];
+                if (j <= i || !(free(i) || free(j))) {
+                    continue;
+                }
+                let dx = xat(j) - xi;
+                let d2 = dot(dx, dx);
+                let rs = ri + rad(j);
+                if (d2 < rs * rs && d2 > 0.0) {
+                    u = u + un_of(rs - sqrt(d2));
                 }
             }
         }

@@ -5,8 +5,9 @@
 // (`den_err`, `check_den`, `den_apply`, after one warm-start push `den_warm` + `den_apply`) and
 // `drift`. Threads run over the particles in cell order (slot k of `order`) and write only slot
 // k (or particle order[k] in the caller's order): no float atomics. Every neighbour sum runs
-// over the 3^d cells around the particle's own (z, y, x, then each cell's slots in order), the
-// fluid's then the walls'. The solves' mean errors are reduced on the device: a tree per
+// over the 3^d cells around the particle's own (z, y, x, then each cell's slots in order; a
+// row's three cells along x are consecutive, so each row is one run of slots), the fluid's then
+// the walls'. The solves' mean errors are reduced on the device: a tree per
 // workgroup into `partial`, then one workgroup over the partials in a fixed order (`check`),
 // which also decides whether the solve goes on and, when it stops, empties the indirect
 // dispatch `args` of the iterations recorded after it. The host prepends the precision header.
@@ -26,7 +27,8 @@ struct Params {
     max_it: u32,
     gx: u32,
     gy: u32,
-    pad0: u32,
+    // Entries of each slot's neighbour list (`nbr`; 0: no lists, every pass reads the cells).
+    cap: u32,
     // 1/h, mass, σ_d, σ_d/h², α c0 h, 0.01 h², 4h² (the pairs), the r² floor, ρ0, dt, 1/dt,
     // 1/dt².
     inv_h: real,
@@ -141,6 +143,13 @@ const TRUNCATED: u32 = 11u;
 // One partial sum of the errors per workgroup.
 @group(0) @binding(13) var<storage, read_write> partial: array<real>;
 @group(0) @binding(14) var<storage, read_write> ctl: array<atomic<u32>>;
+// The step's neighbour lists, made by `build` for the passes after it: slot k's fluid
+// neighbours within 2h (itself left out) in the order the cells give them, the j-th at
+// nbr[j n + k] (a warp's threads read consecutive words), and how many there are (`nlen`). A
+// slot with more than `cap` reads the cells instead, so the lists never change a sum: the same
+// pairs in the same order, each evaluated by the same expression.
+@group(0) @binding(15) var<storage, read_write> nbr: array<u32>;
+@group(0) @binding(16) var<storage, read_write> nlen: array<u32>;
 
 fn index(g: vec3<u32>) -> u32 {
     return g.x + 65535u * WG * g.y;
@@ -274,22 +283,25 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum = vec3<real>(0.0, 0.0, 0.0);
     var sq: real = 0.0;
     var count = 0u;
+    var listed = 0u;
     for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
         for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                let cc = flat(vec3<u32>(cx, cy, cz));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let e = xi - vget(X, s);
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach) {
-                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                        acc = acc + w(q) * P.mass;
-                        if (s != k) {
-                            let gr = e * (P.mass * P.gscale * g(q));
-                            sum = sum + gr;
-                            sq = sq + dot3(gr, gr);
-                            count = count + 1u;
+            let row = flat(vec3<u32>(0u, cy, cz));
+            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let e = xi - vget(X, s);
+                let r2 = dot3(e, e);
+                if (r2 < P.reach) {
+                    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+                    acc = acc + w(q) * P.mass;
+                    if (s != k) {
+                        let gr = e * (P.mass * P.gscale * g(q));
+                        sum = sum + gr;
+                        sq = sq + dot3(gr, gr);
+                        count = count + 1u;
+                        if (listed < P.cap) {
+                            nbr[listed * P.n + k] = s;
                         }
+                        listed = listed + 1u;
                     }
                 }
             }
@@ -300,20 +312,18 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     var hw = vec3<real>(0.0, 0.0, 0.0);
     for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
         for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                let cc = flat(vec3<u32>(cx, cy, cz));
-                for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
-                    let wb = wall_at(s);
-                    let e = xi - wb.xyz;
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach) {
-                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                        acc = acc + w(q) * wb.w;
-                        let gb = e * (wb.w * P.gscale * g(q));
-                        gw = gw + gb;
-                        hw = hw + gb * dot3(grav, e);
-                        count = count + 1u;
-                    }
+            let row = flat(vec3<u32>(0u, cy, cz));
+            for (var s = wall_start[row + lo_of(c.x)]; s < wall_start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let wb = wall_at(s);
+                let e = xi - wb.xyz;
+                let r2 = dot3(e, e);
+                if (r2 < P.reach) {
+                    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+                    acc = acc + w(q) * wb.w;
+                    let gb = e * (wb.w * P.gscale * g(q));
+                    gw = gw + gb;
+                    hw = hw + gb * dot3(grav, e);
+                    count = count + 1u;
                 }
             }
         }
@@ -327,12 +337,26 @@ fn build(@builtin(global_invocation_id) gid: vec3<u32>) {
     sset(RHO, k, r);
     sset(DINV, k, dinv);
     sset(INNER, k, select(real(0.0), real(1.0), count >= P.n_min));
+    nlen[k] = listed;
     vset(GW, k, gw);
     vset(HW, k, hw);
     rho[order[k]] = r;
 }
 
 var<workgroup> red: array<real, WG>;
+
+// Whether slot s is a neighbour of slot k (at x_k = xi) in the lists' sense: within 2h, not k.
+fn near(xi: vec3<real>, s: u32, k: u32) -> bool {
+    let e = xi - vget(X, s);
+    return dot3(e, e) < P.reach && s != k;
+}
+
+// A neighbour s's share of Dρ_k/Dt: m (v_k − v_s)·∇W_ks at the velocities of field f.
+fn div_pair(xi: vec3<real>, vi: vec3<real>, f: u32, s: u32) -> real {
+    let e = xi - vget(X, s);
+    let q = sqrt(max(dot3(e, e), P.tiny)) * P.inv_h;
+    return dot3(vi - vget(f, s), e) * (P.mass * P.gscale * g(q));
+}
 
 // Dρ_k/Dt at the velocities of field f: Σ_j m (v_k − v_j)·∇W_kj + Σ_b Ψ_b v_k·∇W_kb.
 fn divergence(f: u32, k: u32) -> real {
@@ -341,16 +365,18 @@ fn divergence(f: u32, k: u32) -> real {
     let xi = vget(X, k);
     let vi = vget(f, k);
     var div: real = 0.0;
-    for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-        for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                let cc = flat(vec3<u32>(cx, cy, cz));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let e = xi - vget(X, s);
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach && s != k) {
-                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                        div = div + dot3(vi - vget(f, s), e) * (P.mass * P.gscale * g(q));
+    let m = nlen[k];
+    if (m <= P.cap) {
+        for (var j = 0u; j < m; j = j + 1u) {
+            div = div + div_pair(xi, vi, f, nbr[j * P.n + k]);
+        }
+    } else {
+        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                let row = flat(vec3<u32>(0u, cy, cz));
+                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                    if (near(xi, s, k)) {
+                        div = div + div_pair(xi, vi, f, s);
                     }
                 }
             }
@@ -432,6 +458,13 @@ fn den_err(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
     errors(gid, l, wid, true, 0u);
 }
 
+// A neighbour s's share of the Jacobi update: m (κ_k/ρ_k + κ_s/ρ_s) ∇W_ks.
+fn apply_pair(xi: vec3<real>, ki: real, s: u32) -> vec3<real> {
+    let e = xi - vget(X, s);
+    let q = sqrt(max(dot3(e, e), P.tiny)) * P.inv_h;
+    return e * ((ki + sget(K, s)) * (P.mass * P.gscale * g(q)));
+}
+
 // One Jacobi velocity update of field f with κ/ρ in K (the CPU's `Solver::apply`; paper eq.
 // 10–11): v_k −= dt [Σ_j m (κ_k/ρ_k + κ_j/ρ_j) ∇W_kj + 2 (κ_k/ρ_k) Σ_b Ψ_b ∇W_kb] (a wall
 // mirrors the particle's pressure), and the solve's sum of κ/ρ (field ks) += κ_k/ρ_k.
@@ -444,16 +477,18 @@ fn apply(k: u32, f: u32, ks: u32) {
     let xi = vget(X, k);
     let ki = sget(K, k);
     var a = vget(GW, k) * (2.0 * ki);
-    for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-        for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                let cc = flat(vec3<u32>(cx, cy, cz));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let e = xi - vget(X, s);
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach && s != k) {
-                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                        a = a + e * ((ki + sget(K, s)) * (P.mass * P.gscale * g(q)));
+    let m = nlen[k];
+    if (m <= P.cap) {
+        for (var j = 0u; j < m; j = j + 1u) {
+            a = a + apply_pair(xi, ki, nbr[j * P.n + k]);
+        }
+    } else {
+        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                let row = flat(vec3<u32>(0u, cy, cz));
+                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                    if (near(xi, s, k)) {
+                        a = a + apply_pair(xi, ki, s);
                     }
                 }
             }
@@ -487,16 +522,14 @@ fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
     var sum = vec3<real>(0.0, 0.0, 0.0);
     for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
         for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                let cc = flat(vec3<u32>(cx, cy, cz));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let e = xi - vget(X, s);
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach && s != k) {
-                        let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                        let gr = e * (P.mass * P.gscale * g(q));
-                        sum = sum + gr * (1.0 / sget(RHO, s));
-                    }
+            let row = flat(vec3<u32>(0u, cy, cz));
+            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let e = xi - vget(X, s);
+                let r2 = dot3(e, e);
+                if (r2 < P.reach && s != k) {
+                    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+                    let gr = e * (P.mass * P.gscale * g(q));
+                    sum = sum + gr * (1.0 / sget(RHO, s));
                 }
             }
         }
@@ -529,23 +562,21 @@ fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
         var vir: real = 0.0;
         for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
             for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                    let cc = flat(vec3<u32>(cx, cy, cz));
-                    for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                        let e = xi - vget(X, s);
-                        let r2 = dot3(e, e);
-                        if (r2 < P.reach && s != k) {
-                            let r = sqrt(r2);
-                            let k_ij = 2.0 * P.rho0 / (ri + sget(RHO, s));
-                            // Coincident particles have no direction: no cohesion (as the CPU).
-                            var coh = vec3<real>(0.0, 0.0, 0.0);
-                            if (r > 0.0) {
-                                coh = e * (P.mass * cohesion(r) / r);
-                            }
-                            let pair = (coh + (ni - vget(NRM, s)) * P.curv) * k_ij;
-                            st = st + pair;
-                            vir = vir + dot3(e, pair);
+                let row = flat(vec3<u32>(0u, cy, cz));
+                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                    let e = xi - vget(X, s);
+                    let r2 = dot3(e, e);
+                    if (r2 < P.reach && s != k) {
+                        let r = sqrt(r2);
+                        let k_ij = 2.0 * P.rho0 / (ri + sget(RHO, s));
+                        // Coincident particles have no direction: no cohesion (as the CPU).
+                        var coh = vec3<real>(0.0, 0.0, 0.0);
+                        if (r > 0.0) {
+                            coh = e * (P.mass * cohesion(r) / r);
                         }
+                        let pair = (coh + (ni - vget(NRM, s)) * P.curv) * k_ij;
+                        st = st + pair;
+                        vir = vir + dot3(e, pair);
                     }
                 }
             }
@@ -557,18 +588,16 @@ fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
         var ad = vec3<real>(0.0, 0.0, 0.0);
         for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
             for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                    let cc = flat(vec3<u32>(cx, cy, cz));
-                    for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
-                        let wb = wall_at(s);
-                        let e = xi - wb.xyz;
-                        let r = sqrt(dot3(e, e));
-                        if (2.0 * r > P.big_h && r <= P.big_h) {
-                            let t = max(-4.0 * r * r / P.big_h + 6.0 * r - 2.0 * P.big_h, 0.0);
-                            let kb = P.adh_k * sqrt(sqrt(t));
-                            if (kb > 0.0) {
-                                ad = ad + e * (wb.w * kb / r);
-                            }
+                let row = flat(vec3<u32>(0u, cy, cz));
+                for (var s = wall_start[row + lo_of(c.x)]; s < wall_start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                    let wb = wall_at(s);
+                    let e = xi - wb.xyz;
+                    let r = sqrt(dot3(e, e));
+                    if (2.0 * r > P.big_h && r <= P.big_h) {
+                        let t = max(-4.0 * r * r / P.big_h + 6.0 * r - 2.0 * P.big_h, 0.0);
+                        let kb = P.adh_k * sqrt(sqrt(t));
+                        if (kb > 0.0) {
+                            ad = ad + e * (wb.w * kb / r);
                         }
                     }
                 }
@@ -577,6 +606,16 @@ fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
         a = a - ad * P.beta;
     }
     return a;
+}
+
+// A neighbour s's share of the viscous acceleration: m Π_ks ∇W_ks (Monaghan 1992, below).
+fn visc_pair(xi: vec3<real>, vi: vec3<real>, ri: real, s: u32) -> vec3<real> {
+    let e = xi - vget(X, s);
+    let r2 = dot3(e, e);
+    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+    let vr = min(dot3(vi - vget(V, s), e), 0.0);
+    let pi = P.visc * vr / ((r2 + P.eps_h2) * (0.5 * (ri + sget(RHO, s))));
+    return e * (pi * (P.mass * P.gscale * g(q)));
 }
 
 // Step 3: the term's own acceleration at (x, v after the divergence solve), Monaghan (1992)
@@ -597,18 +636,18 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ri = sget(RHO, k);
     var a = vec3<real>(0.0, 0.0, 0.0);
     if (P.visc > 0.0) {
-        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                for (var cx = lo_of(c.x); cx <= hi_of(c.x, P.cx); cx = cx + 1u) {
-                    let cc = flat(vec3<u32>(cx, cy, cz));
-                    for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                        let e = xi - vget(X, s);
-                        let r2 = dot3(e, e);
-                        if (r2 < P.reach && s != k) {
-                            let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                            let vr = min(dot3(vi - vget(V, s), e), 0.0);
-                            let pi = P.visc * vr / ((r2 + P.eps_h2) * (0.5 * (ri + sget(RHO, s))));
-                            a = a + e * (pi * (P.mass * P.gscale * g(q)));
+        let m = nlen[k];
+        if (m <= P.cap) {
+            for (var j = 0u; j < m; j = j + 1u) {
+                a = a + visc_pair(xi, vi, ri, nbr[j * P.n + k]);
+            }
+        } else {
+            for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+                for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                    let row = flat(vec3<u32>(0u, cy, cz));
+                    for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                        if (near(xi, s, k)) {
+                            a = a + visc_pair(xi, vi, ri, s);
                         }
                     }
                 }
@@ -734,10 +773,10 @@ fn drift(@builtin(global_invocation_id) gid: vec3<u32>) {
 // within one dispatch).
 // The mean errors of the last solves and the largest of all steps: divergence, density, then
 // their maxima.
-@group(0) @binding(15) var<storage, read_write> errs: array<real>;
+@group(0) @binding(17) var<storage, read_write> errs: array<real>;
 // The workgroups (x, y, z) of the running solve's particle passes: the particle dispatch's
 // while it goes on, none once it stopped.
-@group(0) @binding(16) var<storage, read_write> args: array<u32>;
+@group(0) @binding(18) var<storage, read_write> args: array<u32>;
 
 fn arm() {
     atomicStore(&ctl[ACTIVE], 1u);

@@ -2,7 +2,8 @@
 // bind group), then `gather`, `density` and `integrate` here. Threads run over the particles in
 // cell order (slot k of `order`), read the cell-ordered copies made by `gather`, and write the
 // state back in the caller's order, so `integrate` never reads what it writes. Every sum runs
-// over the 3^d cells around the particle's own (z, y, x, then each cell's particles by index):
+// over the 3^d cells around the particle's own (z, y, x, then each cell's particles by index;
+// a row's three cells along x are consecutive in `order`, so each row is one run of slots):
 // no float atomics, the same bits on every run. The expressions follow the CPU's scalar kernels
 // (rust_core/src/sph/kernels.rs `w`, `g`), passes (passes.rs) and the semi-implicit Euler step
 // with the box collider (integrators/semi_implicit_euler.rs, constraints/aabb.rs) operation for
@@ -10,7 +11,8 @@
 
 struct Params {
     // Particles, dimension, cells along x, y, z (z = 1 in 2D), kernel (0 cubic spline, 1
-    // Wendland C2), Tait γ, whether p is clamped to ≥ 0.
+    // Wendland C2), Tait γ, whether p is clamped to ≥ 0, entries of each slot's neighbour list
+    // (`nbr`; 0: no lists).
     n: u32,
     dim: u32,
     cx: u32,
@@ -19,6 +21,10 @@ struct Params {
     kernel: u32,
     gamma: u32,
     clamp: u32,
+    cap: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
     // 1/h, particle mass and 1/mass, σ_d, −σ_d/h², 2 α c0 h, 0.01 h², 4.0001 h² (the pairs
     // looked at), the r² floor, B, 1/ρ0, dt.
     inv_h: real,
@@ -75,6 +81,13 @@ const WG: u32 = 64u;
 // = the walls' count).
 @group(0) @binding(13) var<storage, read> wall: array<real>;
 @group(0) @binding(14) var<storage, read> wall_start: array<u32>;
+// The step's neighbour lists, made by `density` for `integrate`: slot k's fluid neighbours
+// within 2h (itself included, as the sums include it) in the order the cells give them, the
+// j-th at nbr[j n + k] (a warp's threads read consecutive words), and how many (`nlen`). A slot
+// with more than `cap` reads the cells instead, so the lists never change a sum: the same pairs
+// in the same order, each evaluated by the same expression.
+@group(0) @binding(15) var<storage, read_write> nbr: array<u32>;
+@group(0) @binding(16) var<storage, read_write> nlen: array<u32>;
 
 fn index(g: vec3<u32>) -> u32 {
     return g.x + 65535u * WG * g.y;
@@ -190,6 +203,7 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
     let c = coords(cell_of[order[k]]);
     let xi = at(0u, k);
     var acc: real = 0.0;
+    var listed = 0u;
     var z0 = 0u;
     var z1 = 0u;
     if (d == 3u) {
@@ -198,38 +212,39 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
-                    let e = xi - at(0u, s);
-                    var r2 = e.x * e.x + e.y * e.y;
-                    if (d == 3u) {
-                        r2 = e.z * e.z + r2;
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let e = xi - at(0u, s);
+                var r2 = e.x * e.x + e.y * e.y;
+                if (d == 3u) {
+                    r2 = e.z * e.z + r2;
+                }
+                // Pairs past the support add exactly 0 (the margin: rounding of q near 2).
+                if (r2 < P.reach) {
+                    acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * P.mass;
+                    if (listed < P.cap) {
+                        nbr[listed * P.n + k] = s;
                     }
-                    // Pairs past the support add exactly 0 (the margin: rounding of q near 2).
-                    if (r2 < P.reach) {
-                        acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * P.mass;
-                    }
+                    listed = listed + 1u;
                 }
             }
         }
     }
+    nlen[k] = listed;
     // The walls' share Σ_b Ψ_b w(|x_k − x_b|/h), added to the same sum after the fluid's (as
     // passes.rs `Density` adds them to its accumulator).
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
-                    let wb = wall_at(s);
-                    let e = xi - wb.xyz;
-                    var r2 = e.x * e.x + e.y * e.y;
-                    if (d == 3u) {
-                        r2 = e.z * e.z + r2;
-                    }
-                    if (r2 < P.reach) {
-                        acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * wb.w;
-                    }
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = wall_start[row + lo_of(c.x)]; s < wall_start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let wb = wall_at(s);
+                let e = xi - wb.xyz;
+                var r2 = e.x * e.x + e.y * e.y;
+                if (d == 3u) {
+                    r2 = e.z * e.z + r2;
+                }
+                if (r2 < P.reach) {
+                    acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * wb.w;
                 }
             }
         }
@@ -242,6 +257,32 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
     srho[k] = r;
     spr[k] = p / (r * r);
     rho[order[k]] = r;
+}
+
+// Neighbour slot s's share of slot k's pressure and viscosity acceleration, added to acc, and
+// of its viscous power, added to pw (the sums of `integrate`, below).
+fn force_pair(s: u32, xi: vec3<real>, vi: vec3<real>, rho_i: real, pr_i: real, acc: ptr<function, vec3<real>>,
+              pw: ptr<function, real>) {
+    let d = P.dim;
+    let e = xi - at(0u, s);
+    let u = vi - at(1u, s);
+    var r2 = e.x * e.x + e.y * e.y;
+    var vr = u.x * e.x + u.y * e.y;
+    if (d == 3u) {
+        r2 = e.z * e.z + r2;
+        vr = u.z * e.z + vr;
+    }
+    let gq = g(sqrt(max(r2, P.tiny)) * P.inv_h);
+    let approach = max(0.0 - vr, 0.0);
+    let pi = P.visc * approach / ((r2 + P.eps_h2) * (rho_i + srho[s]));
+    let mg = P.mass * gq;
+    let cf = mg * (pr_i + spr[s] + pi);
+    var t = *acc;
+    for (var a = 0u; a < d; a = a + 1u) {
+        t[a] = cf * e[a] + t[a];
+    }
+    *acc = t;
+    *pw = (mg * pi) * vr + *pw;
 }
 
 // Slot k: the pressure and viscosity acceleration (passes.rs `Forces`)
@@ -277,31 +318,24 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
         z0 = lo_of(c.z);
         z1 = hi_of(c.z, P.cz);
     }
-    for (var z = z0; z <= z1; z = z + 1u) {
-        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = start[cc]; s < start[cc + 1u]; s = s + 1u) {
+    let m = nlen[k];
+    if (m <= P.cap) {
+        for (var j = 0u; j < m; j = j + 1u) {
+            force_pair(nbr[j * P.n + k], xi, vi, rho_i, pr_i, &acc, &pw);
+        }
+    } else {
+        for (var z = z0; z <= z1; z = z + 1u) {
+            for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
+                let row = flat(vec3<u32>(0u, y, z));
+                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
                     let e = xi - at(0u, s);
-                    let u = vi - at(1u, s);
                     var r2 = e.x * e.x + e.y * e.y;
-                    var vr = u.x * e.x + u.y * e.y;
                     if (d == 3u) {
                         r2 = e.z * e.z + r2;
-                        vr = u.z * e.z + vr;
                     }
-                    if (!(r2 < P.reach)) {
-                        continue;
+                    if (r2 < P.reach) {
+                        force_pair(s, xi, vi, rho_i, pr_i, &acc, &pw);
                     }
-                    let gq = g(sqrt(max(r2, P.tiny)) * P.inv_h);
-                    let approach = max(0.0 - vr, 0.0);
-                    let pi = P.visc * approach / ((r2 + P.eps_h2) * (rho_i + srho[s]));
-                    let mg = P.mass * gq;
-                    let cf = mg * (pr_i + spr[s] + pi);
-                    for (var a = 0u; a < d; a = a + 1u) {
-                        acc[a] = cf * e[a] + acc[a];
-                    }
-                    pw = (mg * pi) * vr + pw;
                 }
             }
         }
@@ -311,22 +345,20 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     var wacc = vec3<real>(0.0, 0.0, 0.0);
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            for (var x = lo_of(c.x); x <= hi_of(c.x, P.cx); x = x + 1u) {
-                let cc = flat(vec3<u32>(x, y, z));
-                for (var s = wall_start[cc]; s < wall_start[cc + 1u]; s = s + 1u) {
-                    let wb = wall_at(s);
-                    let e = xi - wb.xyz;
-                    var r2 = e.x * e.x + e.y * e.y;
-                    if (d == 3u) {
-                        r2 = e.z * e.z + r2;
-                    }
-                    if (!(r2 < P.reach)) {
-                        continue;
-                    }
-                    let cf = wb.w * g(sqrt(max(r2, P.tiny)) * P.inv_h);
-                    for (var a = 0u; a < d; a = a + 1u) {
-                        wacc[a] = cf * e[a] + wacc[a];
-                    }
+            let row = flat(vec3<u32>(0u, y, z));
+            for (var s = wall_start[row + lo_of(c.x)]; s < wall_start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                let wb = wall_at(s);
+                let e = xi - wb.xyz;
+                var r2 = e.x * e.x + e.y * e.y;
+                if (d == 3u) {
+                    r2 = e.z * e.z + r2;
+                }
+                if (!(r2 < P.reach)) {
+                    continue;
+                }
+                let cf = wb.w * g(sqrt(max(r2, P.tiny)) * P.inv_h);
+                for (var a = 0u; a < d; a = a + 1u) {
+                    wacc[a] = cf * e[a] + wacc[a];
                 }
             }
         }

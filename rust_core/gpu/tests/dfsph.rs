@@ -494,6 +494,47 @@ fn the_iteration_budget_changes_no_result() {
     assert!(a == b, "the budget changed the result");
 }
 
+/// The neighbour lists (`build` lists each particle's neighbours for the passes after it) are an
+/// index only: with them, without them (every pass reads the cells) and with lists too short
+/// for most particles (those read the cells, the others their list) a run gives the same bits,
+/// in 2D and 3D.
+#[test]
+fn the_neighbour_lists_change_no_bit() {
+    let Some(gpu) = gpu() else { return };
+    let stop = AtomicBool::new(false);
+    let mut precisions = vec![Precision::F32];
+    if gpu.adapter().f64 {
+        precisions.push(Precision::F64);
+    }
+    let mut cube = tank(3, [6, 8, 6], 10, 12, 0.1);
+    cube.p.relaxation = 0.5846;
+    for (dim, s) in [(2, dam()), (3, cube)] {
+        let v0 = vec![0.0; s.x.len()];
+        for &prec in &precisions {
+            let run = |cap: Option<u32>| {
+                let mut f = Dfsph::with_walls(gpu.clone(), prec, s.p, &s.x, &v0, &s.walls, &s.psi).unwrap();
+                let full = f.list_cap();
+                assert_eq!(full, if dim == 2 { 28 } else { 96 }, "{dim}D: the lists' length");
+                if let Some(c) = cap {
+                    f.set_list_cap(c);
+                }
+                f.step(20, 2e-3, &stop).unwrap();
+                let (x, v, rho) = f.read().unwrap();
+                let bits = |a: &[f64]| a.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                (bits(&x), bits(&v), bits(&rho), f.books().unwrap().total().to_bits(), f.iterations())
+            };
+            // 2D holds some 20 neighbours and 3D some 80: 12 and 40 leave most particles past
+            // their list's end.
+            let short = if dim == 2 { 12 } else { 40 };
+            let (listed, none, mixed) = (run(None), run(Some(0)), run(Some(short)));
+            assert_eq!(listed.4.steps, 20, "{dim}D {prec:?}: the steps ran");
+            assert!(listed == none, "{dim}D {prec:?}: the lists changed the result");
+            assert!(listed == mixed, "{dim}D {prec:?}: lists too short changed the result");
+            eprintln!("{dim}D {prec:?}: 20 steps the same bits with and without the lists; {:?}", listed.4);
+        }
+    }
+}
+
 /// Mean (ρ − ρ0)₊/ρ0, rms speed, and (slope, fit error) of pressure against depth.
 fn at_rest(f: &Dfsph, s: &Scene) -> (f64, f64, f64, f64) {
     let (x, v, rho) = f.read().unwrap();

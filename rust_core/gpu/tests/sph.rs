@@ -389,7 +389,21 @@ const STEPS: u64 = 20;
 const DT: f64 = 2e-4;
 
 fn run(g: &Arc<Gpu>, precision: Precision, c: &Case) -> (Vec<f64>, Vec<f64>, Vec<f64>, SphBooks) {
+    run_listing(g, precision, c, None)
+}
+
+/// `run` with the neighbour lists `cap` entries long (None: as `with_walls` chose them).
+fn run_listing(
+    g: &Arc<Gpu>,
+    precision: Precision,
+    c: &Case,
+    cap: Option<u32>,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>, SphBooks) {
     let mut s = Sph::with_walls(g.clone(), precision, c.p, &c.x, &c.v, &c.walls.x, &c.walls.psi).unwrap();
+    assert_eq!(s.list_cap(), if c.p.dim == 2 { 28 } else { 96 }, "{}: the lists' length", c.name);
+    if let Some(cap) = cap {
+        s.set_list_cap(cap);
+    }
     // Two calls: the second starts from the state the first left.
     assert_eq!(s.step(STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS / 2);
     assert_eq!(s.step(STEPS - STEPS / 2, DT, &AtomicBool::new(false)).unwrap(), STEPS - STEPS / 2);
@@ -453,6 +467,38 @@ fn the_device_fluid_steps_as_the_host_reference_and_repeats_bit_for_bit() {
             assert_eq!(bits(&again.1), bits(&dv), "{} {precision:?}: velocities repeat", c.name);
             assert_eq!(bits(&again.2), bits(&drho), "{} {precision:?}: densities repeat", c.name);
             assert_eq!(bits(&entries(&again.3)), bits(&entries(&db)), "{} {precision:?}: books repeat", c.name);
+        }
+    }
+}
+
+/// The neighbour lists (made by the density pass for the forces' pass) are an index only: with
+/// them, without them (the forces' pass reads the cells) and too short for most particles (those
+/// read the cells, the others their list), every case gives the same bits.
+#[test]
+fn the_neighbour_lists_change_no_bit() {
+    let Some(g) = gpu() else { return };
+    for c in cases() {
+        for precision in [Precision::F64, Precision::F32] {
+            if g.check_precision(precision).is_err() {
+                continue;
+            }
+            let bits = |r: &(Vec<f64>, Vec<f64>, Vec<f64>, SphBooks)| {
+                let b = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                (b(&r.0), b(&r.1), b(&r.2), b(&entries(&r.3)))
+            };
+            // 2D holds some 20 neighbours and 3D some 80: 12 and 40 leave most past the end.
+            let short = if c.p.dim == 2 { 12 } else { 40 };
+            let listed = bits(&run_listing(&g, precision, &c, None));
+            assert!(
+                listed == bits(&run_listing(&g, precision, &c, Some(0))),
+                "{} {precision:?}: the lists changed the result",
+                c.name
+            );
+            assert!(
+                listed == bits(&run_listing(&g, precision, &c, Some(short))),
+                "{} {precision:?}: lists too short changed the result",
+                c.name
+            );
         }
     }
 }
