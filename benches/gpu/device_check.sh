@@ -53,12 +53,20 @@ section "DFSPH on the device (bare steps of the 3D dam break, f32)"
 [ -x .devbin/dfsph-tests ] && timeout 90 .devbin/dfsph-tests --ignored --nocapture bench 2>&1 | grep -E "adapter|DFSPH|panicked"
 }
 part_ab_rust() {
-section "A/B: the bare WCSPH (4M 2D, 1M 3D) and DEM benches, base binaries then this tree's (WCSPH 2 rounds)"
+section "A/B: the bare WCSPH (4M 2D, 1M 3D), DFSPH (3D, 262,144 and 1M) and DEM benches, base binaries then this tree's (WCSPH and DFSPH 2 rounds)"
 if [ -x .devbin/base_sph_bench-tests ]; then
   for r in 1 2; do
     for who in base this; do
       b=.devbin/sph_bench-tests; [ $who = base ] && b=.devbin/base_sph_bench-tests
       timeout 60 $b --ignored --nocapture wcsph_throughput 2>&1 | grep -E "^WCSPH" | sed "s/^/$r $who  /"
+    done
+  done
+fi
+if [ -x .devbin/base_dfsph-tests ]; then
+  for r in 1 2; do
+    for who in base this; do
+      b=.devbin/dfsph-tests; [ $who = base ] && b=.devbin/base_dfsph-tests
+      PHYSCORE_DFSPH_BENCH=262144,1048576 timeout 60 $b --ignored --nocapture bench_dam_break_3d 2>&1 | grep -E "^DFSPH" | sed "s/^/$r $who  /"
     done
   done
 fi

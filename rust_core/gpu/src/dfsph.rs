@@ -74,7 +74,7 @@
 use crate::cells::{spread, CellBuild};
 use crate::maxima::Maxima;
 use crate::particles::Halt;
-use crate::sph::{invalid, list_cap, positive, sort_walls, Kernel};
+use crate::sph::{invalid, list_cap, neighbour_lists, positive, sort_walls, Kernel};
 use crate::{Bind, Chunk, Gpu, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -458,7 +458,7 @@ impl Dfsph {
         let wall = gpu.buffer("DFSPH wall particles", wall_data.len() as u64 * rb, st)?;
         let wall_start = gpu.buffer("DFSPH wall cell starts", (ncells + 1) * 4, st)?;
         let cap = list_cap(d, params.h, params.rho0 / params.mass, n, gpu.adapter());
-        let nbr = gpu.buffer("DFSPH neighbour lists", (nn * cap as u64).max(1) * 4, st)?;
+        let (cap, nbr) = neighbour_lists(&gpu, "DFSPH neighbour lists", cap, n)?;
         let nlen = gpu.buffer("DFSPH neighbour counts", nn.max(1) * 4, st)?;
         let backup = vec![
             (pos.clone(), gpu.buffer("DFSPH positions at the submission's start", nn * dd * rb, st)?),

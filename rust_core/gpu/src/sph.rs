@@ -386,7 +386,7 @@ impl Sph {
         let wall = gpu.buffer("SPH wall particles", (wall_data.len() as u64 * rb).max(16), st)?;
         let wall_start = gpu.buffer("SPH wall cell starts", (ncells + 1) * 4, st)?;
         let cap = list_cap(d, params.h, params.rho0 / params.mass, n, gpu.adapter());
-        let nbr = gpu.buffer("SPH neighbour lists", (nn * cap as u64).max(1) * 4, st)?;
+        let (cap, nbr) = neighbour_lists(&gpu, "SPH neighbour lists", cap, n)?;
         let nlen = gpu.buffer("SPH neighbour counts", nn.max(1) * 4, st)?;
         let staging = gpu.buffer("SPH read-back", (nn * d as u64 * rb).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
@@ -750,6 +750,18 @@ pub(crate) fn list_cap(dim: usize, h: f64, density: f64, n: usize, adapter: &cra
         0
     } else {
         (want.div_ceil(4) * 4).min(fits) as u32
+    }
+}
+
+/// The neighbour lists' buffer of `n` particles, `cap` entries each (`list_cap`), and the cap
+/// it holds: where the device has no room for it, none (cap 0: the passes read the cells, with
+/// the same result, more slowly), as the lists are an index, not state.
+pub(crate) fn neighbour_lists(gpu: &Gpu, what: &str, cap: u32, n: usize) -> Result<(u32, wgpu::Buffer)> {
+    use wgpu::BufferUsages as U;
+    let usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+    match gpu.buffer(what, (n as u64 * cap as u64).max(1) * 4, usage) {
+        Err(GpuError::OutOfMemory { .. }) if cap > 0 => Ok((0, gpu.buffer(what, 4, usage)?)),
+        b => Ok((cap, b?)),
     }
 }
 
