@@ -45,9 +45,9 @@
 //! The pair gradients m ∇W_ij are recomputed by each pass rather than stored (the CPU stores
 //! them). Which pairs to visit is stored: `build`, which reads the cell list's 3^d cells
 //! anyway, lists each particle's fluid neighbours within 2h (`list_cap` of them at most, about
-//! 1.3 full neighbourhoods), and the solves' passes and the viscosity read that list instead of
-//! the cells: in 3D at h = 1.3 Δx some 80 pairs in place of the 27 cells' ~475 candidates, ten
-//! passes or more a step. A particle with more neighbours than the list holds reads the cells;
+//! 1.3 full neighbourhoods), and the solves' passes, the viscosity and the surface tension (its
+//! normals and pairs) read that list instead of the cells: in 3D at h = 1.3 Δx some 80 pairs
+//! in place of the 27 cells' ~475 candidates, ten passes or more a step. A particle with more neighbours than the list holds reads the cells;
 //! both visit the same pairs in the same order with the same expressions, so the lists change
 //! no bit of a result (tested with the lists off).
 //!

@@ -508,6 +508,14 @@ fn den_apply(@builtin(global_invocation_id) gid: vec3<u32>) {
     apply(index(gid), VD, KSUM);
 }
 
+// A neighbour s's share of the normal: m/ρ_s ∇W_ks.
+fn normal_pair(xi: vec3<real>, s: u32) -> vec3<real> {
+    let e = xi - vget(X, s);
+    let q = sqrt(max(dot3(e, e), P.tiny)) * P.inv_h;
+    let gr = e * (P.mass * P.gscale * g(q));
+    return gr * (1.0 / sget(RHO, s));
+}
+
 // The step's normals n_k = H Σ_j m/ρ_j ∇W_kj (Akinci 2013, eq. 4; fluid neighbours only; the
 // CPU's `compute_normals`), after the build (every density known).
 @compute @workgroup_size(WG)
@@ -520,16 +528,19 @@ fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
     let z = zr(c);
     let xi = vget(X, k);
     var sum = vec3<real>(0.0, 0.0, 0.0);
-    for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-        for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-            let row = flat(vec3<u32>(0u, cy, cz));
-            for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                let e = xi - vget(X, s);
-                let r2 = dot3(e, e);
-                if (r2 < P.reach && s != k) {
-                    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
-                    let gr = e * (P.mass * P.gscale * g(q));
-                    sum = sum + gr * (1.0 / sget(RHO, s));
+    let m = nlen[k];
+    if (m <= P.cap) {
+        for (var j = 0u; j < m; j = j + 1u) {
+            sum = sum + normal_pair(xi, nbr[j * P.n + k]);
+        }
+    } else {
+        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                let row = flat(vec3<u32>(0u, cy, cz));
+                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                    if (near(xi, s, k)) {
+                        sum = sum + normal_pair(xi, s);
+                    }
                 }
             }
         }
@@ -548,6 +559,19 @@ fn cohesion(r: real) -> real {
     return P.coh_norm * select(2.0 * b - P.h6_64, b, 2.0 * r > P.big_h);
 }
 
+// A neighbour s's share of the surface tension (before −γ): K_ks [m C(r) x̂_ks + c (n_k − n_s)].
+fn tension_pair(xi: vec3<real>, ri: real, ni: vec3<real>, s: u32) -> vec3<real> {
+    let e = xi - vget(X, s);
+    let r = sqrt(dot3(e, e));
+    let k_ij = 2.0 * P.rho0 / (ri + sget(RHO, s));
+    // Coincident particles have no direction: no cohesion (as the CPU).
+    var coh = vec3<real>(0.0, 0.0, 0.0);
+    if (r > 0.0) {
+        coh = e * (P.mass * cohesion(r) / r);
+    }
+    return (coh + (ni - vget(NRM, s)) * P.curv) * k_ij;
+}
+
 // Slot k's acceleration by surface tension and adhesion (the CPU's `surface_acceleration`):
 // −γ Σ_j K_kj [m C(r) x̂_kj + c (n_k − n_j)] − β Σ_b Ψ_b A(r) x̂_kb, K_kj = 2ρ0/(ρ_k + ρ_j), with
 // A(r) = 0.007/H^3.25 (−4r²/H + 6r − 2H)^¼ for H/2 < r ≤ H (eq. 7); the fluid pairs' virial
@@ -560,23 +584,24 @@ fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
         let ni = vget(NRM, k);
         var st = vec3<real>(0.0, 0.0, 0.0);
         var vir: real = 0.0;
-        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                let row = flat(vec3<u32>(0u, cy, cz));
-                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                    let e = xi - vget(X, s);
-                    let r2 = dot3(e, e);
-                    if (r2 < P.reach && s != k) {
-                        let r = sqrt(r2);
-                        let k_ij = 2.0 * P.rho0 / (ri + sget(RHO, s));
-                        // Coincident particles have no direction: no cohesion (as the CPU).
-                        var coh = vec3<real>(0.0, 0.0, 0.0);
-                        if (r > 0.0) {
-                            coh = e * (P.mass * cohesion(r) / r);
+        let m = nlen[k];
+        if (m <= P.cap) {
+            for (var j = 0u; j < m; j = j + 1u) {
+                let s = nbr[j * P.n + k];
+                let pair = tension_pair(xi, ri, ni, s);
+                st = st + pair;
+                vir = vir + dot3(xi - vget(X, s), pair);
+            }
+        } else {
+            for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
+                for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
+                    let row = flat(vec3<u32>(0u, cy, cz));
+                    for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
+                        if (near(xi, s, k)) {
+                            let pair = tension_pair(xi, ri, ni, s);
+                            st = st + pair;
+                            vir = vir + dot3(xi - vget(X, s), pair);
                         }
-                        let pair = (coh + (ni - vget(NRM, s)) * P.curv) * k_ij;
-                        st = st + pair;
-                        vir = vir + dot3(e, pair);
                     }
                 }
             }

@@ -497,7 +497,7 @@ fn the_iteration_budget_changes_no_result() {
 /// The neighbour lists (`build` lists each particle's neighbours for the passes after it) are an
 /// index only: with them, without them (every pass reads the cells) and with lists too short
 /// for most particles (those read the cells, the others their list) a run gives the same bits,
-/// in 2D and 3D.
+/// in 2D (with and without surface tension) and 3D.
 #[test]
 fn the_neighbour_lists_change_no_bit() {
     let Some(gpu) = gpu() else { return };
@@ -508,9 +508,19 @@ fn the_neighbour_lists_change_no_bit() {
     }
     let mut cube = tank(3, [6, 8, 6], 10, 12, 0.1);
     cube.p.relaxation = 0.5846;
-    for (dim, s) in [(2, dam()), (3, cube)] {
+    // The dam with surface tension (σ = 0.0728 N as in the cohesion test below) and adhesion:
+    // the normals' and the tension's passes read the lists too.
+    let mut wet = dam();
+    let big_h = 2.0 * wet.p.h;
+    let k2 = 79.0 * 35840.0 / (336.0 * 209.0 * std::f64::consts::PI);
+    wet.p.cohesion = 0.0728 / (2.3 * 1e6 * k2 * 33.0 / 28672.0 / 3.0 * big_h * big_h);
+    wet.p.cohesion_norm = k2 / big_h.powi(8);
+    wet.p.curvature = 1.0;
+    wet.p.adhesion = 0.5 * wet.p.cohesion;
+    let mut dry = vec![];
+    for (case, (dim, s)) in [(2, dam()), (2, wet), (3, cube)].into_iter().enumerate() {
         let v0 = vec![0.0; s.x.len()];
-        for &prec in &precisions {
+        for (pk, &prec) in precisions.iter().enumerate() {
             let run = |cap: Option<u32>| {
                 let mut f = Dfsph::with_walls(gpu.clone(), prec, s.p, &s.x, &v0, &s.walls, &s.psi).unwrap();
                 let full = f.list_cap();
@@ -530,6 +540,11 @@ fn the_neighbour_lists_change_no_bit() {
             assert_eq!(listed.4.steps, 20, "{dim}D {prec:?}: the steps ran");
             assert!(listed == none, "{dim}D {prec:?}: the lists changed the result");
             assert!(listed == mixed, "{dim}D {prec:?}: lists too short changed the result");
+            match case {
+                0 => dry.push(listed.0.clone()),
+                1 => assert!(listed.0 != dry[pk], "{prec:?}: the surface forces moved nothing"),
+                _ => {}
+            }
             eprintln!("{dim}D {prec:?}: 20 steps the same bits with and without the lists; {:?}", listed.4);
         }
     }
