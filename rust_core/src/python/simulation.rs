@@ -7,7 +7,9 @@ use crate::systems::bodies::{Bodies2, Bodies3, Group2, Group3};
 use crate::systems::particles::ParticleSystem;
 use crate::systems::BodiesOf;
 use crate::terms::registry::Params;
-use crate::terms::registry::{self, Context, Value};
+#[cfg(feature = "gpu")]
+use crate::terms::registry::Value;
+use crate::terms::registry::{self, Context};
 use crate::vector::{Real, Vector};
 use crate::world::World;
 use glam::{DVec2, DVec3};
@@ -55,8 +57,8 @@ fn fresh_stamp() -> u64 {
     NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
-/// The name of the device particle system (`systems::device`).
-#[cfg(feature = "gpu")]
+/// The name of the device particle system (`systems::device`); without the GPU backend no
+/// world has one, and the lookups by it find nothing.
 const DEVICE: &str = "device particles";
 
 /// Vectors as a flat run of their components.
