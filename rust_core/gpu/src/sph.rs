@@ -739,17 +739,19 @@ pub(crate) fn box_cells(dim: usize, h: f64, lower: &[f64; 3], upper: &[f64; 3]) 
 /// Entries of each particle's neighbour list (`sph.wgsl`, `dfsph.wgsl`): 1.3 × a full
 /// neighbourhood, the ball of radius 2h holding `density` particles per unit volume (1/m^dim;
 /// a lattice at rest holds a little more than the ball's mean: 80 against 73.6 in 3D at h =
-/// 1.3 Δx), a multiple of 4, and as many as fit one binding of the adapter; 0 if not even 8 do.
-/// The lists are an index only: a particle with more neighbours reads the cells.
+/// 1.3 Δx), a multiple of 4; 0 (no lists) where that is over 4096 or the lists would not fit
+/// one binding of the adapter, as lists too short for most particles would be read past for the
+/// cells anyway. The lists are an index only: a particle with more neighbours reads the cells.
 pub(crate) fn list_cap(dim: usize, h: f64, density: f64, n: usize, adapter: &crate::AdapterSummary) -> u32 {
     use std::f64::consts::PI;
     let ball = if dim == 2 { PI * 4.0 * h * h } else { 4.0 / 3.0 * PI * 8.0 * h * h * h };
-    let want = (1.3 * ball * density).ceil().clamp(8.0, 4096.0) as u64;
+    let want = (1.3 * ball * density).ceil().max(8.0);
+    let cap = (want as u64).div_ceil(4) * 4;
     let fits = adapter.max_storage_binding.min(adapter.max_buffer) / (4 * n.max(1) as u64);
-    if fits < 8 {
+    if want > 4096.0 || cap > fits {
         0
     } else {
-        (want.div_ceil(4) * 4).min(fits) as u32
+        cap as u32
     }
 }
 
@@ -840,5 +842,26 @@ mod tests {
         assert_eq!(p.cells().unwrap(), [39, 39, 1]);
         assert_eq!(Kernel::by_name("wendland_c2").unwrap(), Kernel::WendlandC2);
         assert!(Kernel::by_name("gauss").unwrap_err().to_string().contains("cubic_spline, wendland_c2"));
+    }
+
+    #[test]
+    fn the_neighbour_lists_hold_a_neighbourhood_and_a_margin_or_nothing() {
+        let a = |binding: u64| crate::AdapterSummary {
+            name: "test".into(),
+            backend: "none".into(),
+            kind: "cpu".into(),
+            driver: String::new(),
+            f64: false,
+            max_storage_binding: binding,
+            max_buffer: binding,
+        };
+        let (dx, big) = (0.01, a(1 << 31));
+        // h = 1.3 Δx: 1.3 × 21.2 and 1.3 × 73.6 neighbours, to a multiple of 4 (a lattice holds 20 and 80).
+        assert_eq!(list_cap(2, 1.3 * dx, 1.0 / (dx * dx), 1000, &big), 28);
+        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &big), 96);
+        // Lists that would not fit one binding, or of more than 4096 entries: none.
+        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &a(96 * 4 * 1000 - 1)), 0);
+        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &a(96 * 4 * 1000)), 96);
+        assert_eq!(list_cap(3, 6.0 * dx, 1.0 / (dx * dx * dx), 10, &big), 0);
     }
 }
