@@ -47,9 +47,10 @@
 //! anyway, lists each particle's fluid neighbours within 2h (`list_cap` of them at most, about
 //! 1.3 full neighbourhoods), and the solves' passes, the viscosity and the surface tension (its
 //! normals and pairs) read that list instead of the cells: in 3D at h = 1.3 Δx some 80 pairs
-//! in place of the 27 cells' ~475 candidates, ten passes or more a step. A particle with more neighbours than the list holds reads the cells;
-//! both visit the same pairs in the same order with the same expressions, so the lists change
-//! no bit of a result (tested with the lists off).
+//! in place of the 27 cells' ~475 candidates, ten passes or more a step. A particle with more
+//! neighbours than the list holds reads the cells; both visit the same pairs in the same order
+//! with the same expressions, so the lists change no bit of a result (tested with the lists
+//! off).
 //!
 //! Surface tension and adhesion (optional; the CPU's `sph::surface`, `Solver::surface_acceleration`):
 //! Akinci, Akinci & Teschner, "Versatile surface tension and adhesion for SPH fluids", ACM TOG

@@ -27,12 +27,12 @@
 //! them), with a start per cell, uploaded once. Every sum is gathered over the 3^d cells around
 //! a particle in a fixed order (the fluid's, then the walls'): no float atomics, and a run
 //! repeats bit for bit on one adapter. The density pass also lists each particle's fluid
-//! neighbours within 2h (`list_cap` of them at most), and the forces' pass reads that list
-//! instead of the cells (in 3D at h = 1.3 Δx some 80 pairs in place of ~475 candidates); a
-//! particle with more neighbours reads the cells, and both visit the same pairs in the same
-//! order with the same expressions, so the lists change no bit (tested with them off). Against the CPU, f64 agrees to round-off, not bit for
-//! bit: the CPU's SIMD passes fuse some products (`mul_add`) and add their lanes in another
-//! order.
+//! neighbours within 2h, itself included (`list_cap` of them at most), and the forces' pass
+//! reads that list instead of the cells (in 3D at h = 1.3 Δx some 80 pairs in place of ~475
+//! candidates); a particle with more neighbours reads the cells, and both visit the same pairs
+//! in the same order with the same expressions, so the lists change no bit (tested with them
+//! off). Against the CPU, f64 agrees to round-off, not bit for bit: the CPU's SIMD passes
+//! fuse some products (`mul_add`) and add their lanes in another order.
 //!
 //! The energy books (`Sph::books`) are the CPU's (`ParticleSystem::energy`): the state functions
 //! (kinetic energy, the fluid's internal energy Σ m u(ρ), gravity's potential −Σ m g·x) from a
@@ -287,10 +287,10 @@ pub struct Sph {
     maxima: Maxima,
     /// Steps per submission (about 0.1 s each).
     chunk: Chunk,
-    /// The cell list, the cell-ordered copies, the cell list's parameters and the walls (bound
-    /// only).
     /// Entries of each particle's neighbour list (`list_cap`; 0: none).
     cap: u32,
+    /// The cell list, the cell-ordered copies, the cell list's parameters, the walls and the
+    /// neighbour lists (bound only).
     _keep: Vec<wgpu::Buffer>,
 }
 
