@@ -12,8 +12,8 @@ uploads every member's state and writes each back (state, clock, books): the fig
 that, as a user's call pays it. Beside them, what the host pays: ``from_scene``'s time to build
 the f32 batch, and the median of five calls of one step (mostly the host's work around the
 device: the locks, the upload, the write-back into every member). On lavapipe (Mesa's CPU
-Vulkan) they show the path works and agrees, not GPU speed. Target (issue "GPU fluids, grains and batches"): 16,384 worlds at
-≥ 5e9 particle-steps/s on an H100.
+Vulkan) they show the path works and agrees, not GPU speed. Target (issue "GPU fluids, grains
+and batches"): 16,384 worlds at ≥ 5e9 particle-steps/s on an H100.
 """
 from __future__ import annotations
 

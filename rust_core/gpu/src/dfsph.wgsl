@@ -351,6 +351,60 @@ fn near(xi: vec3<real>, s: u32, k: u32) -> bool {
     return dot3(e, e) < P.reach && s != k;
 }
 
+// The cells' walk for a slot whose neighbours outran its list (or with no lists): slot k's
+// fluid neighbours (`near`) one per call of `next_near`, in the order `build` lists them (z, y,
+// then a row's run of slots), END after the last.
+const END: u32 = 0xffffffffu;
+
+struct Walk {
+    k: u32,
+    xi: vec3<real>,
+    c: vec3<u32>,
+    z1: u32,
+    cz: u32,
+    cy: u32,
+    s: u32,
+    end: u32,
+}
+
+// The run of slots of the walk's row (cy, cz): cells x − 1..x + 1, consecutive in `order`.
+fn walk_row(w: ptr<function, Walk>) {
+    let row = flat(vec3<u32>(0u, (*w).cy, (*w).cz));
+    (*w).s = start[row + lo_of((*w).c.x)];
+    (*w).end = start[row + hi_of((*w).c.x, P.cx) + 1u];
+}
+
+fn walk(k: u32, xi: vec3<real>) -> Walk {
+    let c = coords(cell_of[order[k]]);
+    let z = zr(c);
+    var w = Walk(k, xi, c, z.y, z.x, lo_of(c.y), 0u, 0u);
+    walk_row(&w);
+    return w;
+}
+
+fn next_near(w: ptr<function, Walk>) -> u32 {
+    loop {
+        if ((*w).s < (*w).end) {
+            let s = (*w).s;
+            (*w).s = s + 1u;
+            if (near((*w).xi, s, (*w).k)) {
+                return s;
+            }
+            continue;
+        }
+        if ((*w).cy < hi_of((*w).c.y, P.cy)) {
+            (*w).cy = (*w).cy + 1u;
+        } else if ((*w).cz < (*w).z1) {
+            (*w).cz = (*w).cz + 1u;
+            (*w).cy = lo_of((*w).c.y);
+        } else {
+            return END;
+        }
+        walk_row(w);
+    }
+    return END;
+}
+
 // A neighbour s's share of Dρ_k/Dt: m (v_k − v_s)·∇W_ks at the velocities of field f.
 fn div_pair(xi: vec3<real>, vi: vec3<real>, f: u32, s: u32) -> real {
     let e = xi - vget(X, s);
@@ -360,8 +414,6 @@ fn div_pair(xi: vec3<real>, vi: vec3<real>, f: u32, s: u32) -> real {
 
 // Dρ_k/Dt at the velocities of field f: Σ_j m (v_k − v_j)·∇W_kj + Σ_b Ψ_b v_k·∇W_kb.
 fn divergence(f: u32, k: u32) -> real {
-    let c = coords(cell_of[order[k]]);
-    let z = zr(c);
     let xi = vget(X, k);
     let vi = vget(f, k);
     var div: real = 0.0;
@@ -371,15 +423,9 @@ fn divergence(f: u32, k: u32) -> real {
             div = div + div_pair(xi, vi, f, nbr[j * P.n + k]);
         }
     } else {
-        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                let row = flat(vec3<u32>(0u, cy, cz));
-                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                    if (near(xi, s, k)) {
-                        div = div + div_pair(xi, vi, f, s);
-                    }
-                }
-            }
+        var w = walk(k, xi);
+        for (var s = next_near(&w); s != END; s = next_near(&w)) {
+            div = div + div_pair(xi, vi, f, s);
         }
     }
     return div + dot3(vi, vget(GW, k));
@@ -472,8 +518,6 @@ fn apply(k: u32, f: u32, ks: u32) {
     if (k >= P.n) {
         return;
     }
-    let c = coords(cell_of[order[k]]);
-    let z = zr(c);
     let xi = vget(X, k);
     let ki = sget(K, k);
     var a = vget(GW, k) * (2.0 * ki);
@@ -483,15 +527,9 @@ fn apply(k: u32, f: u32, ks: u32) {
             a = a + apply_pair(xi, ki, nbr[j * P.n + k]);
         }
     } else {
-        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                let row = flat(vec3<u32>(0u, cy, cz));
-                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                    if (near(xi, s, k)) {
-                        a = a + apply_pair(xi, ki, s);
-                    }
-                }
-            }
+        var w = walk(k, xi);
+        for (var s = next_near(&w); s != END; s = next_near(&w)) {
+            a = a + apply_pair(xi, ki, s);
         }
     }
     vset(f, k, vget(f, k) - a * P.dt);
@@ -524,8 +562,6 @@ fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (k >= P.n) {
         return;
     }
-    let c = coords(cell_of[order[k]]);
-    let z = zr(c);
     let xi = vget(X, k);
     var sum = vec3<real>(0.0, 0.0, 0.0);
     let m = nlen[k];
@@ -534,15 +570,9 @@ fn normals(@builtin(global_invocation_id) gid: vec3<u32>) {
             sum = sum + normal_pair(xi, nbr[j * P.n + k]);
         }
     } else {
-        for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-            for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                let row = flat(vec3<u32>(0u, cy, cz));
-                for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                    if (near(xi, s, k)) {
-                        sum = sum + normal_pair(xi, s);
-                    }
-                }
-            }
+        var w = walk(k, xi);
+        for (var s = next_near(&w); s != END; s = next_near(&w)) {
+            sum = sum + normal_pair(xi, s);
         }
     }
     vset(NRM, k, sum * P.big_h);
@@ -593,17 +623,11 @@ fn surface(k: u32, xi: vec3<real>, ri: real) -> vec3<real> {
                 vir = vir + dot3(xi - vget(X, s), pair);
             }
         } else {
-            for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-                for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                    let row = flat(vec3<u32>(0u, cy, cz));
-                    for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                        if (near(xi, s, k)) {
-                            let pair = tension_pair(xi, ri, ni, s);
-                            st = st + pair;
-                            vir = vir + dot3(xi - vget(X, s), pair);
-                        }
-                    }
-                }
+            var w = walk(k, xi);
+            for (var s = next_near(&w); s != END; s = next_near(&w)) {
+                let pair = tension_pair(xi, ri, ni, s);
+                st = st + pair;
+                vir = vir + dot3(xi - vget(X, s), pair);
             }
         }
         a = a - st * P.gamma;
@@ -654,8 +678,6 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (k >= P.n) {
         return;
     }
-    let c = coords(cell_of[order[k]]);
-    let z = zr(c);
     let xi = vget(X, k);
     let vi = vget(V, k);
     let ri = sget(RHO, k);
@@ -667,15 +689,9 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>) {
                 a = a + visc_pair(xi, vi, ri, nbr[j * P.n + k]);
             }
         } else {
-            for (var cz = z.x; cz <= z.y; cz = cz + 1u) {
-                for (var cy = lo_of(c.y); cy <= hi_of(c.y, P.cy); cy = cy + 1u) {
-                    let row = flat(vec3<u32>(0u, cy, cz));
-                    for (var s = start[row + lo_of(c.x)]; s < start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                        if (near(xi, s, k)) {
-                            a = a + visc_pair(xi, vi, ri, s);
-                        }
-                    }
-                }
+            var w = walk(k, xi);
+            for (var s = next_near(&w); s != END; s = next_near(&w)) {
+                a = a + visc_pair(xi, vi, ri, s);
             }
         }
     }
