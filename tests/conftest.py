@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 import warnings
 from collections.abc import Callable, Sequence
 
@@ -26,6 +27,15 @@ with warnings.catch_warnings():
         import hypothesis.extra._patching  # noqa: F401
     except Exception:  # noqa: BLE001 - pragma: no cover - optional dependency of hypothesis
         pass
+
+# Ctrl-C as a user's terminal delivers it. A process started in the background by a shell
+# without job control (`pytest &`, `nohup`, some CI runners) inherits SIGINT ignored, and Python
+# then keeps it ignored instead of installing its KeyboardInterrupt handler: every test that
+# sends itself SIGINT (tests/robustness/test_interrupt.py, test_every_kind.py, the GPU and
+# batch Ctrl-C tests) would then wait for ever for a step(10**9) to end. Python's own handler,
+# in each worker's main thread (conftest is imported there), as a foreground run has it.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 settings.register_profile(
     "ci",

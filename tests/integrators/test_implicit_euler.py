@@ -244,9 +244,7 @@ def test_keyboard_interrupt_inside_one_long_solve():
     s.dt = 1e5 * s.suggest_dt()
     s.cg_tol, s.cg_max_iter = 1e-14, 10**6
     x0, v0 = s.positions, s.velocities
-    # Python's own Ctrl-C handler, whatever the run inherited: a test run started in the
-    # background (`cmd &`) inherits SIGINT ignored, and Python then keeps it ignored.
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    # (tests/conftest.py gives the run Python's own Ctrl-C handler, whatever it inherited.)
     timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
     timer.start()
     try:
@@ -254,7 +252,6 @@ def test_keyboard_interrupt_inside_one_long_solve():
             s.step(1)
     finally:
         timer.cancel()
-        signal.signal(signal.SIGINT, previous)
     assert s.integrator_stats["cg_solves"] == 2
     assert np.array_equal(s.positions, x0) and np.array_equal(s.velocities, v0)
     assert s.step_count == 2
