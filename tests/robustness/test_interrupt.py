@@ -8,6 +8,7 @@ asserted here are generous because the tests may run on slow, loaded hardware.
 """
 from __future__ import annotations
 
+import faulthandler
 import os
 import signal
 import sys
@@ -23,6 +24,11 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
 INTEGRATORS = ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5"]
 LATENCY_BOUND = 10.0  # s, from the signal to the exception
+# s after the signal: a call still running then never heard it (it was asked for hours of work),
+# and its process is ended (faulthandler: every thread's traceback to stderr, which pytest's
+# capture of a run without workers swallows), so that the test fails by name (xdist: "worker
+# crashed while running ...") instead of holding the run until CI's limit.
+HANG_BOUND = 120.0
 
 
 def _interrupt(call, delay: float, signum: int = signal.SIGINT, expected=KeyboardInterrupt) -> float:
@@ -35,6 +41,7 @@ def _interrupt(call, delay: float, signum: int = signal.SIGINT, expected=Keyboar
         os.kill(os.getpid(), signum)
 
     timer = threading.Timer(delay, fire)
+    faulthandler.dump_traceback_later(delay + HANG_BOUND, exit=True, file=sys.__stderr__)
     timer.start()
     try:
         with pytest.raises(expected):
@@ -42,6 +49,7 @@ def _interrupt(call, delay: float, signum: int = signal.SIGINT, expected=Keyboar
         caught = time.perf_counter()
     finally:
         timer.cancel()
+        faulthandler.cancel_dump_traceback_later()
     assert sent, "the call ended before the signal was sent"
     return caught - sent[0]
 
