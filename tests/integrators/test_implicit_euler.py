@@ -9,14 +9,12 @@ the static equilibrium every consistent integrator shares), never from a previou
 from __future__ import annotations
 
 import math
-import os
-import signal
 import sys
-import threading
 
 import numpy as np
 import pytest
 from conftest import EPS, fit_slope, oscillator
+from test_interrupt import _interrupt
 
 import physcore as pc
 
@@ -244,14 +242,7 @@ def test_keyboard_interrupt_inside_one_long_solve():
     s.dt = 1e5 * s.suggest_dt()
     s.cg_tol, s.cg_max_iter = 1e-14, 10**6
     x0, v0 = s.positions, s.velocities
-    # (tests/conftest.py gives the run Python's own Ctrl-C handler, whatever it inherited.)
-    timer = threading.Timer(0.3, lambda: os.kill(os.getpid(), signal.SIGINT))
-    timer.start()
-    try:
-        with pytest.raises(KeyboardInterrupt):
-            s.step(1)
-    finally:
-        timer.cancel()
+    _interrupt(lambda: s.step(1), 0.3)
     assert s.integrator_stats["cg_solves"] == 2
     assert np.array_equal(s.positions, x0) and np.array_equal(s.velocities, v0)
     assert s.step_count == 2
