@@ -110,6 +110,70 @@ def _holding(sessions: Sequence[Session], locks: Sequence[Any]) -> Iterator[None
         _each(map(_LOCK.release, compress(locks, got)))
 
 
+_PENDING = attrgetter("pending")
+
+
+def _settle(sessions: Sequence[Session]) -> None:
+    """Writes each of `sessions` whose newest state a GPU batch keeps (:attr:`Session.pending
+    <physcore.session.Session.pending>`) from there: one call into the core for each batch
+    that keeps some. SceneBusyError if such a batch is being stepped by another thread."""
+    pending = list(map(_PENDING, sessions))
+    if pending.count(None) == len(pending):
+        return
+    groups: dict[int, tuple[Any, list[Session]]] = {}
+    for x, p in zip(sessions, pending, strict=True):
+        if p is not None:
+            groups.setdefault(id(p), (p, []))[1].append(x)
+    for p, group in groups.values():
+        p.settle(group)
+
+
+class _Resident:
+    """A GPU batch's members as they live on the device between calls: the core's
+    ``DeviceBatch`` keeps their state there and in a mirror on the host, and writes a member
+    from the mirror only when it is used. After a call every member stepped is *pending*
+    (:attr:`Session.pending <physcore.session.Session.pending>` is this object), so that any
+    use of it through its scene (:meth:`Session.checked <physcore.session.Session.checked>`)
+    first writes it back (:meth:`settle`); a member written back is *touched*: the next call
+    checks it and writes it to the device again. A call's host work is then that of the
+    touched members, not of every member (writing back all 16,384 members of a batch took 20
+    ms a call on a 2-core EPYC; see docs/guide/gpu.md).
+
+    ``lock`` is held by a call and by :meth:`settle`: a member used from another thread while
+    the batch steps raises SceneBusyError, as a scene stepped by another thread does."""
+
+    def __init__(self, gpu: Any, members: list[int], sessions: list[Session]) -> None:
+        self.gpu = gpu
+        self.lock = threading.Lock()
+        #: The batch index of each of the core's members, and their sessions, in its order.
+        self.members = members
+        self.sessions = sessions
+        self.sims = [x.sim for x in sessions]
+        self.index = {id(x): j for j, x in enumerate(sessions)}
+        #: Members whose scenes may differ from the mirror (written back since the last call;
+        #: all of them until the first), and those retired (diverged; held still).
+        self.touched: set[int] = set(range(len(sessions)))
+        self.retired: set[int] = set()
+
+    def __call__(self, session: Session) -> None:
+        self.settle([session])
+
+    def settle(self, sessions: Sequence[Session]) -> None:
+        """Writes those of `sessions` that are pending here from the mirror (state, clock,
+        books), in one call into the core; they are touched from then on."""
+        if not self.lock.acquire(blocking=False):
+            raise SceneBusyError("the GPU Batch keeping this scene's state is being stepped by another thread")
+        try:
+            mine = [self.index[id(x)] for x in sessions if x.pending is self]
+            if mine:
+                self.gpu.settle([(j, self.sims[j]) for j in mine])
+                for j in mine:
+                    self.sessions[j].pending = None
+                self.touched.update(mine)
+        finally:
+            self.lock.release()
+
+
 def structure(scene: Scene) -> tuple[Any, ...]:
     """What the members of a batch must share: ``(dim, n_particles, ((section, part_kind), ...))``,
     the dimension, the particle count, and each part's section and kind in order
@@ -177,9 +241,10 @@ class Batch:
     device : str
         ``"cpu"`` (default), or ``"gpu"`` / ``"gpu:NAME"``: every member on one GPU, each stage
         of a step one dispatch for all members (each member's pairwise sums kept to its own
-        particles). The members stay CPU scenes: a call uploads their states, steps them on the
-        device and writes each member's state, clock and energy books back, as if it had
-        stepped alone in the device's ``precision``. A GPU batch holds particle scenes with
+        particles). The members stay CPU scenes whose state lives on the device between calls:
+        a member is written back (state, clock, energy books, as if it had stepped alone in the
+        device's ``precision``) when it is used, and read again by the next call only if it
+        was, so that a call's host work does not grow with the members it leaves alone. A GPU batch holds particle scenes with
         the GPU path's terms (gravity, drag, pairwise gravity, Coulomb, springs) and colliders,
         and its members share the integrator, ``dt``, the fields' parameters (g, drag, G, k,
         softening) and the colliders (one dispatch runs them); masses, charges, springs and
@@ -232,8 +297,10 @@ class Batch:
         self._sims = [x.sim for x in self._sessions]
         self._locks = [x.lock for x in self._sessions]
         self._device, self._precision = _check_device(device, precision)
-        #: The members on the GPU (`_core.DeviceBatch`), built again when they change.
+        #: The members on the GPU (`_core.DeviceBatch`), built again when they change, and
+        #: what keeps their state between calls (`_Resident`).
         self._gpu: Any = None
+        self._res: _Resident | None = None
         #: Whether every member has been put on its own device (`Scene.to_device`) already.
         self._placed = False
         if self._device != "cpu":
@@ -241,7 +308,8 @@ class Batch:
                 if s.session.sim.on_device:
                     raise InvalidInputError(f"scenes: entry {k} is on a device already (a GPU batch moves its members itself)")
             # The core refuses by name a term, grid or system the GPU batch has no kernel for.
-            self._gpu = self._device_batch(self._sims)
+            _settle(self._sessions)
+            self._build(list(range(len(members))))
 
     # ------------------------------------------------------------------------ building
     @classmethod
@@ -294,10 +362,12 @@ class Batch:
             raise OutOfMemoryError(f"m: out of memory after {len(members)} of {m} copies of the scene") from None
         return cls(members, threads=threads, device=device, precision=precision)
 
-    def _device_batch(self, sims: list[Any]) -> Any:
-        """The core's batch of ``sims`` on this batch's device (InvalidInputError naming what
-        it cannot hold)."""
-        return _core.DeviceBatch(sims, self._device, self._precision)
+    def _build(self, live: list[int]) -> None:
+        """The core's batch of the members ``live`` (batch indices, their state in their
+        scenes) on this batch's device (InvalidInputError naming what it cannot hold)."""
+        sessions = [self._sessions[k] for k in live]
+        self._gpu = _core.DeviceBatch([x.sim for x in sessions], self._device, self._precision)
+        self._res = _Resident(self._gpu, live, sessions)
 
     # ------------------------------------------------------------------------ members
     @property
@@ -359,6 +429,9 @@ class Batch:
             As :meth:`Scene.step` warns, for a member with contacts stepping far past their step.
         """
         n = _check.int_in_range("n", n, 0, (1 << 63) - 1)
+        if self._res is not None:
+            self._step_device(n)
+            return
         if self.diverged:
             live = [k for k in range(len(self)) if k not in self.diverged]
             scenes = [self._members[k] for k in live]
@@ -366,10 +439,11 @@ class Batch:
             sims, locks = [self._sims[k] for k in live], [self._locks[k] for k in live]
         else:
             live, scenes, sessions, sims, locks = None, self._members, self._sessions, self._sims, self._locks
+        _settle(sessions)  # a member a GPU batch stepped last: its state into its scene
         # A GPU member moves to its device at its first step, as Scene.step moves it: its parts
         # checked first (refused by name, for every member, before any moves), else the core
         # would step it on the CPU. Once moved, a member stays where it is: later calls skip it.
-        if self._gpu is None and not self._placed:
+        if not self._placed:
             for s in scenes:
                 s.to_device(check_only=True)
             for s in scenes:
@@ -377,26 +451,14 @@ class Batch:
             self._placed = live is None
         # The books' reference, as a member's first step alone takes it: large members one by
         # one (interruptible: their potential is O(N²)), the others in one call below.
-        fresh = ([s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None]
-                 if None in map(_REFERENCE, sessions) else [])
-        if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
-            for s in fresh:
-                s.session.take_reference_energy()
+        fresh = self._fresh(scenes, sessions)
         if scenes and any(isinstance(t, Contacts) for t in scenes[0].terms):  # members share their parts
             for s in scenes:
                 s.warn_contact_step()  # as Scene.step warns (ContactStepWarning)
         with _holding(sessions, locks):
             missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None]) if fresh else []
             # The core checks n against every member's step count before stepping any.
-            if missing:
-                failed = None
-            elif self._gpu is not None:
-                failed = self._gpu.step(sims, n)
-                if failed is None:  # a member retired, or its terms changed: built again from them
-                    self._gpu = self._device_batch(sims)
-                    failed = self._gpu.step(sims, n)
-            else:
-                failed = _core.step_batch(sims, n, self._threads)
+            failed = None if missing else _core.step_batch(sims, n, self._threads)
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
                 s.session.take_reference_energy()
@@ -405,6 +467,59 @@ class Batch:
             if not isinstance(e, SimulationDiverged):
                 raise e
             self.diverged[j if live is None else live[j]] = e
+
+    def _fresh(self, scenes: Sequence[Scene], sessions: Sequence[Session]) -> list[Scene]:
+        """Those of `scenes` whose books' reference is to be taken before this step; a large
+        member's is taken here, one by one (interruptible: its potential is O(N²))."""
+        fresh = ([s for s, x in zip(scenes, sessions, strict=True) if x.reference_energy is None]
+                 if None in map(_REFERENCE, sessions) else [])
+        if fresh and fresh[0].n_particles > _REFERENCE_AT_ONCE:  # members share their particle count
+            for s in fresh:
+                s.session.take_reference_energy()
+        return fresh
+
+    def _step_device(self, n: int) -> None:
+        """:meth:`step` for a GPU batch: the members stay on the device between calls
+        (:class:`_Resident`); only those touched since the last call are read from their
+        scenes, and no member is written back until it is used."""
+        res = self._res
+        assert res is not None
+        live = [j for j in range(len(res.sessions)) if j not in res.retired] if res.retired else range(len(res.sessions))
+        # A C-level pass first: building the lists of 16,384 members took 2 ms a call.
+        fresh = (self._fresh([self._members[res.members[j]] for j in live], [res.sessions[j] for j in live])
+                 if None in map(_REFERENCE, res.sessions) else [])
+        if fresh:  # their books' reference is read from their scenes: written back first
+            _settle([s.session for s in fresh])
+            with _holding([s.session for s in fresh], [s.session.lock for s in fresh]):
+                missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None])
+            for s in missing:
+                s.session.take_reference_energy()
+        if not res.lock.acquire(blocking=False):
+            raise SceneBusyError("a member of this Batch is being stepped by another thread")
+        try:
+            touched = sorted(res.touched - res.retired)
+            held = [res.sessions[j] for j in touched]
+            # One a GPU batch stepped since (another batch of it): its state into its scene.
+            _settle([x for x in held if x.pending is not None])
+            with _holding(held, [x.lock for x in held]):
+                failed = res.gpu.step([(j, res.sims[j]) for j in touched], n)
+            if failed is not None:
+                for j in failed:  # retired where its call started, with what alone it would raise
+                    res.gpu.settle([(j, res.sims[j])])
+                    res.sessions[j].pending = None
+                    res.retired.add(j)
+                    self.diverged[res.members[j]] = res.gpu.diverged(j, res.sims[j])
+                # The members stepped keep their state on the device until they are used.
+                gone = res.retired
+                _each(map(setattr, [x for x in held if res.index[id(x)] not in gone] if gone else held,
+                          repeat("pending"), repeat(res)))
+                res.touched = set(gone)
+        finally:
+            res.lock.release()
+        if failed is None:  # a touched member's terms or colliders changed: built again from them
+            _settle(res.sessions)
+            self._build([k for k in range(len(self)) if k not in self.diverged])
+            self._step_device(n)
 
     # ------------------------------------------------------------------------ state
     def _rows(self, velocities: bool) -> np.ndarray:
@@ -416,10 +531,46 @@ class Batch:
         me = threading.get_ident()
         if any(b is not None and b != me for b in set(map(_BUSY, self._sessions))):
             raise SceneBusyError("a member of this Batch is being stepped by another thread")
+        if self._res is not None:
+            return self._mirrored(velocities)[0]
+        _settle(self._sessions)
         rows = _core.batch_rows(self._sims, velocities)
         if rows is not None:
             return rows
         return np.stack([s.velocities if velocities else s.positions for s in self._members])
+
+    def _mirrored(self, velocities: bool, clock: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A GPU batch's members' positions or velocities ``(M, N, dim)`` float64, times
+        ``(M,)`` float64 and step counts ``(M,)`` int64: the device's mirror for the members it
+        keeps, each other member (written back since the last call, retired, or left out of
+        the device's batch) read from its scene, its clock only if `clock`. SceneBusyError
+        while another thread steps the batch."""
+        res = self._res
+        assert res is not None
+        if not res.lock.acquire(blocking=False):
+            raise SceneBusyError("a member of this Batch is being stepped by another thread")
+        try:
+            rows, t, steps = res.gpu.mirror(velocities)
+            read = [res.members[j] for j in sorted(res.touched)]
+        finally:
+            res.lock.release()
+        steps = steps.astype(np.int64)
+        m = len(self)
+        if len(res.members) != m:  # built again without the members retired before
+            at = np.asarray(res.members)
+            full, ft, fs = np.empty((m, *rows.shape[1:])), np.empty(m), np.empty(m, dtype=np.int64)
+            full[at], ft[at], fs[at] = rows, t, steps
+            rows, t, steps = full, ft, fs
+            read += sorted(set(range(m)) - set(res.members))
+        if read:  # from their scenes: in one call into the core where it can
+            scenes = [self._members[k] for k in read]
+            _settle([s.session for s in scenes])  # a member another GPU batch stepped since
+            sub = _core.batch_rows([s.session.sim for s in scenes], velocities)
+            rows[read] = sub if sub is not None else np.stack([s.velocities if velocities else s.positions for s in scenes])
+            if clock:
+                t[read] = [s.time for s in scenes]
+                steps[read] = [s.step_count for s in scenes]
+        return rows, t, steps
 
     @property
     def positions(self) -> np.ndarray:
@@ -437,11 +588,15 @@ class Batch:
     @property
     def time(self) -> np.ndarray:
         """Every member's simulated time, s: ``(M,)`` float64."""
+        if self._res is not None:
+            return self._mirrored(False, clock=True)[1]
         return np.array([s.time for s in self._members], dtype=np.float64)
 
     @property
     def step_count(self) -> np.ndarray:
         """Every member's step count: ``(M,)`` int64."""
+        if self._res is not None:
+            return self._mirrored(False, clock=True)[2]
         return np.array([s.step_count for s in self._members], dtype=np.int64)
 
     def _books(self) -> list[tuple[float, float]]:
@@ -451,6 +606,7 @@ class Batch:
         second at 16,384 members), larger ones alone (interruptible), as is a member whose
         books could not be prepared (which then raises what it raises alone)."""
         members = self._members
+        _settle(self._sessions)
         out: list[tuple[float, float] | None] = [None] * len(members)
         n = members[0].n_particles  # members share their particle count
         if n <= _REFERENCE_AT_ONCE and n * n * len(members) <= _BOOKS_AT_ONCE:
@@ -501,6 +657,7 @@ class Batch:
         Raises InvalidInputError, before anything is written, if a member was changed since the
         batch was made so that its structure differs from member 0's (a part added to one
         member): such a file could not be loaded as a batch; save that member on its own."""
+        _settle(self._sessions)  # in one call, not member by member
         _same_structure(self._members, "member", after=" since the batch was made")
         blobs = [s.to_bytes() for s in self._members]
         meta = {
@@ -633,6 +790,7 @@ class _Overlay:
         self.n_particles = m * n
 
     def _cat(self, name: str) -> np.ndarray:
+        _settle(self._batch._sessions)  # a GPU batch's members written back in one call
         return np.concatenate([getattr(s, name) for s in self._batch.members])
 
     positions = property(lambda self: self._cat("positions"))

@@ -88,6 +88,12 @@ class Session:
         the sum of the magnitudes of its parts (see :meth:`Scene.energy_drift
         <physcore.Scene.energy_drift>`); None until the next step takes it (it is dropped
         whenever the energy's definition or the state changes).
+    pending : object or None
+        Where the scene's newest state is kept when not in :attr:`sim`: a GPU
+        :class:`~physcore.Batch` keeps its members' state on the device between calls, and
+        ``pending(session)`` writes it into :attr:`sim` (:meth:`checked` and :meth:`exclusive`
+        call it, so every use of the scene sees its newest state). None when :attr:`sim` is
+        current.
 
     Examples
     --------
@@ -103,26 +109,30 @@ class Session:
     True
     """
 
-    __slots__ = ("busy", "lock", "reference_energy", "sim")
+    __slots__ = ("busy", "lock", "pending", "reference_energy", "sim")
 
     def __init__(self, sim: Any) -> None:
         self.sim = sim
         self.lock = threading.Lock()
         self.busy: int | None = None
         self.reference_energy: tuple[float, float] | None = None
+        self.pending: Callable[[Session], None] | None = None
 
     def checked(self) -> Any:
-        """The simulation, unless another thread is inside a call.
+        """The simulation, unless another thread is inside a call; its newest state written
+        into it first where a GPU batch keeps that (:attr:`pending`).
 
         Raises
         ------
         SceneBusyError
             Another thread holds the session (instead of pyo3's bare "Already mutably borrowed"
-            RuntimeError).
+            RuntimeError), or is stepping the GPU batch that keeps its state.
         """
         busy = self.busy
         if busy is not None and busy != threading.get_ident():
             raise SceneBusyError(_BUSY)
+        if self.pending is not None:
+            self.pending(self)
         return self.sim
 
     def exclusive(self, call: Callable[[Any], Any]) -> Any:
@@ -139,6 +149,8 @@ class Session:
             raise SceneBusyError("this Scene is being stepped by another thread; use a Scene from one thread at a time")
         self.busy = threading.get_ident()
         try:
+            if self.pending is not None:  # a GPU batch stepped it between the check and the lock
+                self.pending(self)
             return call(sim)
         finally:
             self.busy = None

@@ -12,6 +12,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import busy_uses
 from test_gpu_scenes import DEVICE, F64
 from test_interrupt import _interrupt
 
@@ -164,6 +165,85 @@ def test_a_diverging_member_is_retired_and_the_others_do_not_notice() -> None:
     assert np.array_equal(others.positions, np.stack([members[k].positions for k in (0, 1, 2, 4, 5)]))
     batch.step(10)  # the retired member is not stepped again; the batch on the device is rebuilt
     assert members[3].step_count == 0 and members[0].step_count == 610
+
+
+def test_members_stay_on_the_device_between_calls_and_are_written_back_when_used() -> None:
+    """The members' state stays on the device between calls: calls of 100, 100 and 100 steps
+    give the bits of one call of 300 (state, clock) with no member used between them; a member
+    used between calls (read, pickled, its velocities set) is written back first, so it reads
+    as the batch does, and the next call steps it from what it was set to, bit for bit as a
+    batch of it alone; the members left alone go on from the device, unaffected."""
+    precision = "f64" if F64 else "f32"
+    one, three = _fan(8, device=DEVICE, precision=precision), _fan(8, device=DEVICE, precision=precision)
+    one.step(300)
+    for _ in range(3):
+        three.step(100)
+    assert np.array_equal(one.positions, three.positions) and np.array_equal(one.velocities, three.velocities)
+    assert np.array_equal(one.time, three.time) and np.array_equal(one.step_count, three.step_count)
+    batch = _fan(8, device=DEVICE, precision=precision)
+    batch.step(100)
+    m = batch.members[5]
+    x = m.positions  # written back from the device
+    assert np.array_equal(x, batch.positions[5]) and m.step_count == 100 and m.time == batch.time[5]
+    copy = pc.Scene.from_bytes(m.to_bytes())
+    assert np.array_equal(copy.positions, x) and copy.step_count == 100
+    m.velocities = m.velocities * 0.5
+    alone = pc.Batch([pc.Scene.from_bytes(m.to_bytes())], device=DEVICE, precision=precision)
+    batch.step(200)
+    alone.step(200)
+    assert np.array_equal(batch.positions[5], alone.positions[0]) and batch.step_count[5] == 300
+    assert np.array_equal(m.positions, alone.positions[0])
+    keep = [k for k in range(8) if k != 5]
+    assert np.array_equal(batch.positions[keep], one.positions[keep])  # bit for bit: 300 steps untouched
+    assert np.array_equal(batch.velocities[keep], one.velocities[keep])
+    assert np.array_equal(batch.energy_drift()[keep], one.energy_drift()[keep])
+
+
+def test_the_books_of_members_left_on_the_device_add_up_call_by_call() -> None:
+    """Drag and dashpots book their losses on the device, which go on adding up from call to
+    call while the members stay there (as within one call): a run in calls of 250 steps books
+    what one call of 1000 does and has its state, bit for bit (the device's accelerations and
+    last powers carry over between calls as they do within one)."""
+    precision = "f64" if F64 else "f32"
+    one = pc.Batch([_chain(k) for k in range(3)], device=DEVICE, precision=precision)
+    four = pc.Batch([_chain(k) for k in range(3)], device=DEVICE, precision=precision)
+    one.step(1000)
+    for _ in range(4):
+        four.step(250)
+    assert np.array_equal(one.positions, four.positions) and np.array_equal(one.velocities, four.velocities)
+    for a, b in zip(one.members, four.members, strict=True):
+        ba, bb = _books(a), _books(b)
+        assert ba["D drag"] > 0 and ba["D springs"] > 0
+        assert ba == bb
+
+
+def test_a_member_of_two_gpu_batches_is_stepped_by_each_from_the_other_s_result() -> None:
+    """A scene in two GPU batches stepped in turn: each call starts from what the other batch
+    left (written back from its device first), as two CPU batches of the same scenes do."""
+    precision = "f64" if F64 else "f32"
+    cpu, gpu = _fan(4), _fan(4, device=DEVICE, precision=precision)
+    cpu_pair = pc.Batch(list(cpu.members[:2]))
+    gpu_pair = pc.Batch(list(gpu.members[:2]), device=DEVICE, precision=precision)
+    for b in (cpu, cpu_pair, cpu, gpu, gpu_pair, gpu):
+        b.step(150)
+    assert np.array_equal(gpu.step_count, [450, 450, 300, 300])
+    assert np.abs(gpu.positions - cpu.positions).max() < (1e-11 if F64 else 1e-3)
+
+
+def test_a_member_used_by_another_thread_while_its_gpu_batch_steps_says_so() -> None:
+    """While a GPU batch steps, another thread's use of a member (its state kept on the
+    device) or of the batch raises SceneBusyError, as for a CPU batch; the call is unharmed."""
+    batch = _fan(64, device=DEVICE)
+    batch.step(1)  # the members' state is on the device from here on
+    members = batch.members
+    seen, errors = busy_uses(lambda: batch.step(200_000), (lambda: members[1].positions, lambda: members[0].step(1),
+                                                          lambda: batch.positions))
+    assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
+    if errors:  # the batch lost the race to a member's step(1): it said so; again, uncontended
+        return test_a_member_used_by_another_thread_while_its_gpu_batch_steps_says_so()
+    assert seen, "the batch's call ended before another thread could use a member"
+    assert all("another thread" in str(e) for e in seen)
+    assert np.array_equal(batch.step_count, np.full(64, 200_001))
 
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")

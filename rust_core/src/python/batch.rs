@@ -217,15 +217,16 @@ fn sum(values: impl Iterator<Item = f64>) -> f64 {
 fn with_signals<T: Send>(py: Python<'_>, stop: &AtomicBool, f: impl FnOnce() -> T + Send) -> (T, Option<PyErr>) {
     let mut pending: Option<PyErr> = None;
     let out = py.detach(|| {
-        let caller = std::thread::current();
+        // A channel, not park/unpark and `is_finished`: the job's unpark could come before it
+        // counted as finished, and the caller then slept a whole `SIGNAL_POLL` (20 ms) after a
+        // short call. The sender dropped (the job returned or panicked) ends the wait.
+        let (done, wait) = std::sync::mpsc::channel::<()>();
         std::thread::scope(|scope| {
-            let job = scope.spawn(|| {
-                let out = f();
-                caller.unpark();
-                out
+            let job = scope.spawn(move || {
+                let _done = done;
+                f()
             });
-            while !job.is_finished() {
-                std::thread::park_timeout(SIGNAL_POLL);
+            while let Err(std::sync::mpsc::RecvTimeoutError::Timeout) = wait.recv_timeout(SIGNAL_POLL) {
                 if pending.is_none() {
                     if let Err(e) = Python::attach(|py| py.check_signals()) {
                         pending = Some(e);
@@ -263,13 +264,11 @@ fn worlds_of<'a>(
     Ok((d2, d3))
 }
 
-/// The members of a call that failed, by index, with the exception each would have raised alone.
-#[cfg(feature = "gpu")]
-type Failed = Vec<(usize, Py<PyAny>)>;
-
 /// Every member of a batch on one device (`Batch(..., device="gpu")`): see
-/// `systems::device_batch`. Built from the members' simulations (which stay on the CPU);
-/// `step` runs them there in one dispatch per stage and writes each member back.
+/// `systems::device_batch`. Built from the members' simulations (which stay CPU simulations);
+/// `step` runs them on the device in one dispatch per stage, keeping their state there and in
+/// a mirror on the host, and `settle` writes a member back from the mirror when it is read
+/// (the facade's `Session.checked` asks for it).
 #[cfg(feature = "gpu")]
 #[pyclass(module = "physcore._core", name = "DeviceBatch")]
 pub(super) struct PyDeviceBatch {
@@ -319,40 +318,110 @@ impl PyDeviceBatch {
         self.inner.describe()
     }
 
-    /// Steps every member `n` steps on the device (GIL released); returns `(index, exception)`
-    /// for each member that diverged (left as it was); the others are written back. Ctrl-C
-    /// writes nothing and is raised. `None`, with nothing stepped, if `sims` are no longer the
-    /// members it was built from (a member retired, or its terms or colliders changed): the
-    /// caller builds it again (checked here, in the call's one pass over the members, not in a
-    /// call of its own: a pass costs about a microsecond a member on the host). The records are
-    /// compared by their stamps: a change to a member's terms or colliders gives it a new one.
-    fn step(&mut self, py: Python<'_>, sims: Vec<Bound<'_, PySimulation>>, n: u64) -> PyResult<Option<Failed>> {
+    /// Steps every member not retired `n` steps on the device (GIL released), the members'
+    /// state kept there and in its mirror between calls: `touched` gives (index, simulation) of
+    /// the members whose simulations may differ from the mirror (settled since the last call),
+    /// checked and written to the device again; the others are not read at all. Returns the
+    /// members that diverged, retired (`retire` writes them back and gives their errors).
+    /// Ctrl-C commits nothing (the mirror stays where the call started) and is raised. `None`,
+    /// with nothing stepped, if a touched member is no longer what the batch was built from
+    /// (its terms or colliders changed: their records' stamps differ): the caller builds it
+    /// again.
+    fn step(&mut self, py: Python<'_>, touched: Vec<(usize, Bound<'_, PySimulation>)>, n: u64) -> PyResult<Option<Vec<usize>>> {
+        let sims: Vec<Bound<'_, PySimulation>> = touched.iter().map(|t| t.1.clone()).collect();
         let mut refs = borrow_all(py, &sims)?;
-        let same = refs.len() == self.stamps.len()
-            && refs.iter().zip(&self.stamps).all(|(r, &s)| r.records_stamp() == s && r.device_records_ready());
-        if !same {
-            return Ok(None);
+        for (&(k, _), r) in touched.iter().zip(&refs) {
+            if self.stamps.get(k) != Some(&r.records_stamp()) || !r.device_records_ready() {
+                return Ok(None);
+            }
         }
-        let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
+        let (d2, d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
+        if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
+            return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
+        }
+        let idx: Vec<usize> = touched.iter().map(|t| t.0).collect();
         let stop = AtomicBool::new(false);
         let inner = &mut self.inner;
-        let (ran, pending) =
-            with_signals(py, &stop, || if d3.is_empty() { inner.run(&d2, n, &stop) } else { inner.run(&d3, n, &stop) });
+        let (ran, pending) = with_signals(py, &stop, || {
+            if inner.dim() == 2 {
+                let t: Vec<_> = idx.iter().zip(&d2).map(|(&k, w)| (k, &**w)).collect();
+                inner.run(&t, n, &stop)
+            } else {
+                let t: Vec<_> = idx.iter().zip(&d3).map(|(&k, w)| (k, &**w)).collect();
+                inner.run(&t, n, &stop)
+            }
+        });
         if let Some(e) = pending {
-            return Err(e); // nothing was written
+            return Err(e); // nothing was committed
         }
-        let ran = match ran {
-            Ok(r) => r,
-            Err(Error::Interrupted { .. }) => return Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
-            Err(e) => return Err(to_py(py, e)),
-        };
-        // Written member by member in parallel on the default pool, the GIL released.
+        match ran {
+            Ok(r) => Ok(Some(self.inner.commit(r))),
+            Err(Error::Interrupted { .. }) => Err(pyo3::exceptions::PyKeyboardInterrupt::new_err(())),
+            Err(e) => Err(to_py(py, e)),
+        }
+    }
+
+    /// Writes each member of `members` (index, simulation) from the mirror: its state, clock
+    /// and books as if it had taken its steps alone (in parallel, the GIL released).
+    fn settle(&self, py: Python<'_>, members: Vec<(usize, Bound<'_, PySimulation>)>) -> PyResult<()> {
+        let sims: Vec<Bound<'_, PySimulation>> = members.iter().map(|t| t.1.clone()).collect();
+        let mut refs = borrow_all(py, &sims)?;
+        let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
+        if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
+            return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
+        }
+        let idx: Vec<usize> = members.iter().map(|t| t.0).collect();
         let pool = batch_pool(py, None)?;
         let inner = &self.inner;
-        let failed = py.detach(|| {
-            pool.install(|| if d3.is_empty() { inner.keep(&mut d2, ran) } else { inner.keep(&mut d3, ran) })
-        });
-        let failed = failed.map_err(|e| to_py(py, e))?;
-        Ok(Some(failed.into_iter().map(|(k, e)| (k, to_py(py, e).into_value(py).into_any())).collect()))
+        py.detach(|| {
+            pool.install(|| {
+                if inner.dim() == 2 {
+                    let mut t: Vec<_> = idx.iter().zip(d2.iter_mut()).map(|(&k, w)| (k, &mut **w)).collect();
+                    inner.settle_all(&mut t)
+                } else {
+                    let mut t: Vec<_> = idx.iter().zip(d3.iter_mut()).map(|(&k, w)| (k, &mut **w)).collect();
+                    inner.settle_all(&mut t)
+                }
+            })
+        })
+        .map_err(|e| to_py(py, e))
+    }
+
+    /// The exception the retired member `k` (its simulation `sim`, settled) would have raised
+    /// alone; None if it did not diverge.
+    fn diverged(&self, py: Python<'_>, k: usize, sim: Bound<'_, PySimulation>) -> PyResult<Option<Py<PyAny>>> {
+        let mut r = sim.try_borrow_mut().map_err(|_| to_py(py, invalid("sim", "in use")))?;
+        let e = match r.inner_mut() {
+            Inner::D2(w) => self.inner.diverged(k, w),
+            Inner::D3(w) => self.inner.diverged(k, w),
+        };
+        Ok(e.map(|e| to_py(py, e).into_value(py).into_any()))
+    }
+
+    /// Every member's positions (`velocities` false) or velocities, (m, n, dim) float64, with
+    /// each member's time (m,) and step count (m,), as the mirror holds them (a retired member
+    /// where its last call started).
+    #[allow(clippy::type_complexity)]
+    fn mirror<'py>(
+        &self,
+        py: Python<'py>,
+        velocities: bool,
+    ) -> PyResult<(Bound<'py, numpy::PyArray3<f64>>, Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<u64>>)>
+    {
+        use numpy::{IntoPyArray, PyArray1};
+        let (rows, t, steps) = self.inner.mirror(velocities);
+        let (m, dim) = (t.len(), self.inner.dim());
+        let what = if velocities { "velocities" } else { "positions" };
+        let need = crate::alloc::Need::new(
+            what,
+            crate::alloc::Need::bytes_of::<f64>(rows.len()),
+            format!("{m} members' {what}"),
+        );
+        let mut flat = Vec::new();
+        need.reserve(&mut flat, rows.len()).map_err(|e| to_py(py, e))?;
+        flat.extend_from_slice(rows);
+        let shape = (m, rows.len() / (m * dim).max(1), dim);
+        let a = numpy::ndarray::Array3::from_shape_vec(shape, flat).expect("shape matches").into_pyarray(py);
+        Ok((a, PyArray1::from_slice(py, t), PyArray1::from_slice(py, steps)))
     }
 }
