@@ -199,22 +199,39 @@ def test_members_stay_on_the_device_between_calls_and_are_written_back_when_used
     assert np.array_equal(batch.energy_drift()[keep], one.energy_drift()[keep])
 
 
-def test_the_books_of_members_left_on_the_device_add_up_call_by_call() -> None:
-    """Drag and dashpots book their losses on the device, which go on adding up from call to
-    call while the members stay there (as within one call): a run in calls of 250 steps books
-    what one call of 1000 does and has its state, bit for bit (the device's accelerations and
-    last powers carry over between calls as they do within one)."""
+def test_calls_reads_and_a_changed_member_leave_the_other_members_bits_alone() -> None:
+    """Damped spring chains with drag (forces of the velocities: velocity Verlet carries each
+    step's accelerations, taken at predicted velocities, into the next). A run in calls of 250
+    steps is one call of 1000 bit for bit, state and books (drag and dashpot losses go on
+    adding up on the device from call to call), also when every member is read between the
+    calls; a member whose velocities are set between calls starts from them with its forces
+    evaluated anew, as a batch of it alone does, and changes no other member's bits."""
     precision = "f64" if F64 else "f32"
-    one = pc.Batch([_chain(k) for k in range(3)], device=DEVICE, precision=precision)
-    four = pc.Batch([_chain(k) for k in range(3)], device=DEVICE, precision=precision)
+    one = pc.Batch([_chain(k) for k in range(4)], device=DEVICE, precision=precision)
+    four = pc.Batch([_chain(k) for k in range(4)], device=DEVICE, precision=precision)
     one.step(1000)
     for _ in range(4):
         four.step(250)
+        four.energy_drift(), [m.positions for m in four.members]  # every member written back
     assert np.array_equal(one.positions, four.positions) and np.array_equal(one.velocities, four.velocities)
     for a, b in zip(one.members, four.members, strict=True):
         ba, bb = _books(a), _books(b)
         assert ba["D drag"] > 0 and ba["D springs"] > 0
         assert ba == bb
+    changed = pc.Batch([_chain(k) for k in range(4)], device=DEVICE, precision=precision)
+    changed.step(500)
+    m = changed.members[2]
+    m.velocities = m.velocities + 0.01
+    alone = pc.Batch([pc.Scene.from_bytes(m.to_bytes())], device=DEVICE, precision=precision)
+    changed.step(500)
+    alone.step(500)
+    assert np.array_equal(changed.positions[2], alone.positions[0])
+    assert _books(changed.members[2]) == _books(alone.members[0])
+    assert not np.array_equal(changed.positions[2], one.positions[2])
+    others = [0, 1, 3]
+    assert np.array_equal(changed.positions[others], one.positions[others])
+    assert np.array_equal(changed.velocities[others], one.velocities[others])
+    assert all(_books(changed.members[k]) == _books(one.members[k]) for k in others)
 
 
 def test_a_member_of_two_gpu_batches_is_stepped_by_each_from_the_other_s_result() -> None:

@@ -252,6 +252,12 @@ pub struct Particles {
     bind: wgpu::BindGroup,
     pipes: Pipes,
     acc_valid: bool,
+    /// Particle ranges (start, count) whose state `set_rows` replaced while the accelerations
+    /// were carried: theirs are evaluated anew at the next step, every other particle's kept.
+    refresh: Vec<(usize, usize)>,
+    saved_refresh: Vec<(usize, usize)>,
+    /// Copies of the accelerations and drag books while a refresh evaluates the forces.
+    scratch: Option<[wgpu::Buffer; 2]>,
     /// 0, or the size of the worlds the pairwise sums keep to (`set_worlds`).
     world: u32,
     /// The fused kernel's scheme (0 Euler, 1 Verlet, 2 Yoshida 4) and substep lengths.
@@ -380,6 +386,9 @@ impl Particles {
             live,
             saved: None,
             saved_acc_valid: false,
+            refresh: Vec::new(),
+            saved_refresh: Vec::new(),
+            scratch: None,
             books,
             charges,
             colliders,
@@ -446,6 +455,79 @@ impl Particles {
         self.upload(&self.live.pos, &pack(x, m));
         self.upload(&self.live.vel, &pack(v, im));
         self.acc_valid = false;
+        self.refresh.clear();
+    }
+
+    /// Replaces the state of the `m.len()` particles from `start`: positions and velocities
+    /// (flat, count·dim), masses and 1/masses (0: pinned), their books' accumulators (drag,
+    /// dashpots, colliders) set to zero and their accelerations evaluated anew at the next
+    /// step. Every other particle's state, acceleration and books stay as they are, bit for
+    /// bit: a member of a batch written between calls changes no other member. The caller has
+    /// validated the values.
+    pub fn set_rows(&mut self, start: usize, x: &[f64], v: &[f64], m: &[f64], im: &[f64]) -> Result<()> {
+        let (count, d) = (m.len(), self.dim);
+        assert!(start + count <= self.n && im.len() == count, "rows out of range");
+        assert!(x.len() == count * d && v.len() == count * d, "ragged particle arrays");
+        if count == 0 {
+            return Ok(());
+        }
+        let pack = |a: &[f64], w: &[f64]| {
+            let mut out = vec![0.0; 4 * count];
+            for i in 0..count {
+                out[4 * i..4 * i + d].copy_from_slice(&a[d * i..d * (i + 1)]);
+                out[4 * i + 3] = w[i];
+            }
+            out
+        };
+        let (row, real) = (4 * self.precision.bytes(), self.precision.bytes());
+        let at = start as u64;
+        let zero = vec![0.0; 4 * count];
+        let g = &self.gpu;
+        g.upload_at(self.precision, &self.live.pos, at * row, &pack(x, m));
+        g.upload_at(self.precision, &self.live.vel, at * row, &pack(v, im));
+        g.upload_at(self.precision, &self.live.aux, at * row, &zero);
+        g.upload_at(self.precision, &self.live.hits, at * real, &zero[..count]);
+        if self.acc_valid {
+            self.refresh.push((start, count));
+        }
+        Ok(())
+    }
+
+    /// Evaluates the accelerations (and the drag books' last powers) of the particles in
+    /// `refresh` anew, as the first evaluation of a step does (booking nothing), and keeps every
+    /// other particle's: the whole pass runs, then the others' are copied back.
+    fn refresh_rows(&mut self, dt: f64) -> Result<()> {
+        let size = (self.n as u64).max(1) * 4 * self.precision.bytes();
+        if self.scratch.is_none() {
+            use wgpu::BufferUsages as U;
+            let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
+            self.scratch =
+                Some([self.gpu.buffer("kept accelerations", size, st)?, self.gpu.buffer("kept drag books", size, st)?]);
+        }
+        let [sa, sx] = self.scratch.as_ref().expect("made above");
+        let l = &self.live;
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(&l.acc, 0, sa, 0, size);
+        enc.copy_buffer_to_buffer(&l.aux, 0, sx, 0, size);
+        self.gpu.queue.submit([enc.finish()]);
+        self.write_params(dt, 0.0, 0.0, 0.0, 0.0, false);
+        self.submit_one(&self.pipes.forces);
+        // The particles outside the refreshed ranges get theirs back.
+        let row = 4 * self.precision.bytes();
+        let mut ranges = std::mem::take(&mut self.refresh);
+        ranges.sort_unstable();
+        let mut enc = self.gpu.device.create_command_encoder(&Default::default());
+        let mut from = 0usize;
+        for &(start, count) in ranges.iter().chain(std::iter::once(&(self.n, 0))) {
+            if start > from {
+                let (o, len) = (from as u64 * row, (start - from) as u64 * row);
+                enc.copy_buffer_to_buffer(sa, o, &l.acc, o, len);
+                enc.copy_buffer_to_buffer(sx, o, &l.aux, o, len);
+            }
+            from = from.max(start + count);
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        Ok(())
     }
 
     fn upload(&self, b: &wgpu::Buffer, data: &[f64]) {
@@ -579,7 +661,11 @@ impl Particles {
             self.write_params(dt, 0.0, 0.0, 0.0, 0.0, false);
             self.submit_one(&self.pipes.forces);
             self.acc_valid = true;
+            self.refresh.clear();
+        } else if vv && !self.refresh.is_empty() {
+            self.refresh_rows(dt).map_err(|e| fail(0, e))?;
         }
+        self.refresh.clear(); // (the other schemes carry no accelerations)
         match self.scheme {
             Scheme::SemiImplicitEuler => self.write_params(dt, dt, 0.0, dt, 0.0, false),
             Scheme::VelocityVerlet => {
@@ -838,6 +924,7 @@ impl Particles {
         }
         self.gpu.queue.write_buffer(&l.flag, 0, bytemuck::cast_slice(&[u32::MAX, 0, 0, 0]));
         self.acc_valid = acc_valid;
+        self.refresh.clear();
         self.gpu.wait()
     }
 
@@ -864,6 +951,7 @@ impl Particles {
         let s = self.saved.as_ref().expect("made above");
         self.copy(&self.live, s);
         self.saved_acc_valid = self.acc_valid;
+        self.saved_refresh.clone_from(&self.refresh);
         Ok(())
     }
 
@@ -872,6 +960,7 @@ impl Particles {
         if let Some(s) = &self.saved {
             self.copy(s, &self.live);
             self.acc_valid = self.saved_acc_valid;
+            self.refresh.clone_from(&self.saved_refresh);
         }
         self.gpu.wait()
     }

@@ -275,6 +275,8 @@ pub(super) struct PyDeviceBatch {
     inner: crate::systems::device_batch::DeviceBatch,
     /// The members' records stamps at the build (`PySimulation::records_stamp`).
     stamps: Vec<u64>,
+    /// The members' simulations, in order: a call names the members it reads by index.
+    sims: Vec<Py<PySimulation>>,
 }
 
 #[cfg(feature = "gpu")]
@@ -283,6 +285,21 @@ fn records_of(
     refs: &[PyRefMut<'_, PySimulation>],
 ) -> PyResult<Vec<crate::systems::device_batch::Records>> {
     refs.iter().enumerate().map(|(k, r)| r.device_records(k).map_err(|e| to_py(py, e))).collect()
+}
+
+#[cfg(feature = "gpu")]
+impl PyDeviceBatch {
+    /// The simulations of the members `ks`; `InvalidInputError` naming `members` for an index
+    /// past them.
+    fn members<'py>(&self, py: Python<'py>, ks: &[usize]) -> PyResult<Vec<Bound<'py, PySimulation>>> {
+        ks.iter()
+            .map(|&k| {
+                self.sims.get(k).map(|s| s.bind(py).clone()).ok_or_else(|| {
+                    to_py(py, invalid("members", format!("{k} is past the batch's {} members", self.sims.len())))
+                })
+            })
+            .collect()
+    }
 }
 
 #[cfg(feature = "gpu")]
@@ -309,7 +326,8 @@ impl PyDeviceBatch {
             })
             .map_err(|e| to_py(py, e))?;
         let stamps = refs.iter().map(|r| r.records_stamp()).collect();
-        Ok(Self { inner, stamps })
+        drop(refs);
+        Ok(Self { inner, stamps, sims: sims.into_iter().map(|s| s.unbind()).collect() })
     }
 
     /// The adapter and precision, e.g. "NVIDIA H100 (vulkan, f32)".
@@ -319,18 +337,19 @@ impl PyDeviceBatch {
     }
 
     /// Steps every member not retired `n` steps on the device (GIL released), the members'
-    /// state kept there and in its mirror between calls: `touched` gives (index, simulation) of
-    /// the members whose simulations may differ from the mirror (settled since the last call),
-    /// checked and written to the device again; the others are not read at all. Returns the
-    /// members that diverged, retired (`retire` writes them back and gives their errors).
+    /// state kept there and in its mirror between calls: `touched` names the members whose
+    /// simulations may differ from the mirror (settled since the last call), checked and, if
+    /// they changed, written to the device again; the others are not read at all. Returns the
+    /// members that diverged, retired (`settle` writes them back, `diverged` gives their
+    /// errors).
     /// Ctrl-C commits nothing (the mirror stays where the call started) and is raised. `None`,
     /// with nothing stepped, if a touched member is no longer what the batch was built from
     /// (its terms or colliders changed: their records' stamps differ): the caller builds it
     /// again.
-    fn step(&mut self, py: Python<'_>, touched: Vec<(usize, Bound<'_, PySimulation>)>, n: u64) -> PyResult<Option<Vec<usize>>> {
-        let sims: Vec<Bound<'_, PySimulation>> = touched.iter().map(|t| t.1.clone()).collect();
+    fn step(&mut self, py: Python<'_>, touched: Vec<usize>, n: u64) -> PyResult<Option<Vec<usize>>> {
+        let sims = self.members(py, &touched)?;
         let mut refs = borrow_all(py, &sims)?;
-        for (&(k, _), r) in touched.iter().zip(&refs) {
+        for (&k, r) in touched.iter().zip(&refs) {
             if self.stamps.get(k) != Some(&r.records_stamp()) || !r.device_records_ready() {
                 return Ok(None);
             }
@@ -339,7 +358,7 @@ impl PyDeviceBatch {
         if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
             return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
         }
-        let idx: Vec<usize> = touched.iter().map(|t| t.0).collect();
+        let idx = touched;
         let stop = AtomicBool::new(false);
         let inner = &mut self.inner;
         let (ran, pending) = with_signals(py, &stop, || {
@@ -361,16 +380,16 @@ impl PyDeviceBatch {
         }
     }
 
-    /// Writes each member of `members` (index, simulation) from the mirror: its state, clock
-    /// and books as if it had taken its steps alone (in parallel, the GIL released).
-    fn settle(&self, py: Python<'_>, members: Vec<(usize, Bound<'_, PySimulation>)>) -> PyResult<()> {
-        let sims: Vec<Bound<'_, PySimulation>> = members.iter().map(|t| t.1.clone()).collect();
+    /// Writes each of the members `members` from the mirror: its state, clock and books as if
+    /// it had taken its steps alone (in parallel, the GIL released).
+    fn settle(&self, py: Python<'_>, members: Vec<usize>) -> PyResult<()> {
+        let sims = self.members(py, &members)?;
         let mut refs = borrow_all(py, &sims)?;
         let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
         if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
             return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
         }
-        let idx: Vec<usize> = members.iter().map(|t| t.0).collect();
+        let idx = members;
         let pool = batch_pool(py, None)?;
         let inner = &self.inner;
         py.detach(|| {
@@ -387,10 +406,11 @@ impl PyDeviceBatch {
         .map_err(|e| to_py(py, e))
     }
 
-    /// The exception the retired member `k` (its simulation `sim`, settled) would have raised
-    /// alone; None if it did not diverge.
-    fn diverged(&self, py: Python<'_>, k: usize, sim: Bound<'_, PySimulation>) -> PyResult<Option<Py<PyAny>>> {
-        let mut r = sim.try_borrow_mut().map_err(|_| to_py(py, invalid("sim", "in use")))?;
+    /// The exception the retired member `k` (settled) would have raised alone; None if it did
+    /// not diverge.
+    fn diverged(&self, py: Python<'_>, k: usize) -> PyResult<Option<Py<PyAny>>> {
+        let sims = self.members(py, &[k])?;
+        let mut r = borrow_all(py, &sims)?.pop().expect("one member");
         let e = match r.inner_mut() {
             Inner::D2(w) => self.inner.diverged(k, w),
             Inner::D3(w) => self.inner.diverged(k, w),

@@ -269,8 +269,14 @@ impl DeviceBatch {
                 return Err(invalid("n", format!("{n} steps of {dt:e} s take the time past the largest float")));
             }
         }
+        // A member only read since it was written back is as the mirror has it: nothing to do
+        // (reading a member changes nothing, not even its carried accelerations).
+        let mut changed = Vec::new();
         for &(k, w) in touched {
-            self.gather(k, w);
+            if !self.holds(k, w) {
+                self.gather(k, w);
+                changed.push(k);
+            }
         }
         let mut ran = Ran { n, x: Vec::new(), v: Vec::new(), books: Vec::new(), failed: Vec::new() };
         if n == 0 {
@@ -281,7 +287,10 @@ impl DeviceBatch {
         loop {
             if !self.current {
                 self.upload(&still)?;
+            } else if !changed.is_empty() {
+                self.write_rows(&changed)?;
             }
+            changed.clear();
             // Until the results are committed, the device is ahead of the mirror.
             self.current = false;
             match self.p.step(n, dt, stop) {
@@ -366,8 +375,55 @@ impl DeviceBatch {
         failed.into_iter().map(|f| f.0).collect()
     }
 
-    /// Member `k`'s world into the mirror (state, masses, clock, books); the device is to be
-    /// written again before the next step.
+    /// Whether member `k`'s world is, bit for bit, what the mirror holds of it (state, masses,
+    /// clock, books): written back and not changed since.
+    fn holds<V: Vector>(&self, k: usize, w: &World<V>) -> bool {
+        let same =
+            |a: &[Real], b: &[Real]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+        let (p, m) = (w.particles(), &self.mirror);
+        let (rows, n) = (k * self.n * self.dim..(k + 1) * self.n * self.dim, k * self.n..(k + 1) * self.n);
+        same(V::flat(&p.state().x), &m.x[rows.clone()])
+            && same(V::flat(&p.state().v), &m.v[rows])
+            && same(&p.model().mass, &m.mass[n.clone()])
+            && same(&p.model().inv_mass, &m.im[n])
+            && w.time().to_bits() == m.t[k].to_bits()
+            && w.steps() == m.steps[k]
+            && same(p.dissipated_by_term(), &m.dis[k])
+            && p.constraints_dissipated().to_bits() == m.collisions[k].to_bits()
+    }
+
+    /// The rows of the members `changed` (gathered into the mirror) onto the device, a run of
+    /// consecutive members in one write: their books start from zero there and their
+    /// accelerations are evaluated anew, the other members' left as they are
+    /// (`Particles::set_rows`).
+    fn write_rows(&mut self, changed: &[usize]) -> Result<()> {
+        let mut ks = changed.to_vec();
+        ks.sort_unstable();
+        let (n, d, m) = (self.n, self.dim, &mut self.mirror);
+        let mut i = 0;
+        while i < ks.len() {
+            let mut j = i + 1;
+            while j < ks.len() && ks[j] == ks[j - 1] + 1 {
+                j += 1;
+            }
+            let (a, b) = (ks[i], ks[j - 1] + 1);
+            self.p.set_rows(
+                a * n,
+                &m.x[a * n * d..b * n * d],
+                &m.v[a * n * d..b * n * d],
+                &m.mass[a * n..b * n],
+                &m.im[a * n..b * n],
+            )?;
+            i = j;
+        }
+        for &k in &ks {
+            m.dis_at_upload[k].clone_from(&m.dis[k]);
+            m.collisions_at_upload[k] = m.collisions[k];
+        }
+        Ok(())
+    }
+
+    /// Member `k`'s world into the mirror (state, masses, clock, books).
     fn gather<V: Vector>(&mut self, k: usize, w: &World<V>) {
         let p = w.particles();
         let (rows, n) = (k * self.n * self.dim..(k + 1) * self.n * self.dim, k * self.n..(k + 1) * self.n);
@@ -380,7 +436,6 @@ impl DeviceBatch {
         mirror.steps[k] = w.steps();
         mirror.dis[k] = p.dissipated_by_term().to_vec();
         mirror.collisions[k] = p.constraints_dissipated();
-        self.current = false;
     }
 
     /// The mirror onto the device, the retired members and `failed` held still (no velocity,
