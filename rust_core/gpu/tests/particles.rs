@@ -465,3 +465,54 @@ fn worlds_stepped_together_agree_with_each_world_alone() {
         assert!((ke - whole.kinetic).abs() <= 1e-12 * whole.kinetic.abs().max(1e-30));
     }
 }
+
+/// `set_rows` replaces one world's rows between calls: with drag (a force of the velocities,
+/// whose carried accelerations velocity Verlet takes at predicted velocities), every other
+/// world's state and books go on bit for bit as in a run where nothing was replaced, and the
+/// replaced world steps bit for bit as a system of it alone, from the state written.
+#[test]
+fn set_rows_changes_its_rows_alone() {
+    let Some(gpu) = gpu() else { return };
+    let p = if gpu.adapter().f64 { Precision::F64 } else { Precision::F32 };
+    let (w, m, dim, dt) = (4, 5, 2, 2e-3);
+    let (x, v, mass) = cloud(m * w, dim, 5);
+    let im: Vec<f64> = mass.iter().map(|m| 1.0 / m).collect();
+    let forces = Forces { g: [0.0, -1.0, 0.0], drag: 0.3, pairwise: Some((0.05, 0.02)), ..Default::default() };
+    let stop = AtomicBool::new(false);
+    let make = |x: &[f64], v: &[f64], mass: &[f64], im: &[f64], worlds: bool| {
+        let mut s = Particles::new(gpu.clone(), p, dim, Scheme::VelocityVerlet, forces, x, v, mass, im, None).unwrap();
+        if worlds {
+            s.set_worlds(w).unwrap();
+        }
+        s
+    };
+    let mut plain = make(&x, &v, &mass, &im, true);
+    let mut changed = make(&x, &v, &mass, &im, true);
+    for s in [&mut plain, &mut changed] {
+        s.step(100, dt, &stop).unwrap();
+    }
+    // World 3's velocities halved, and its masses doubled, between the calls.
+    let (xc, vc) = changed.read().unwrap();
+    let r = 3 * w * dim..4 * w * dim;
+    let rw = 3 * w..4 * w;
+    let v3: Vec<f64> = vc[r.clone()].iter().map(|c| 0.5 * c).collect();
+    let m3: Vec<f64> = mass[rw.clone()].iter().map(|m| 2.0 * m).collect();
+    let im3: Vec<f64> = m3.iter().map(|m| 1.0 / m).collect();
+    changed.set_rows(3 * w, &xc[r.clone()], &v3, &m3, &im3).unwrap();
+    let mut alone = make(&xc[r.clone()], &v3, &m3, &im3, false);
+    for s in [&mut plain, &mut changed, &mut alone] {
+        s.step(100, dt, &stop).unwrap();
+    }
+    let ((xp, vp), (xc, vc), (xa, va)) = (plain.read().unwrap(), changed.read().unwrap(), alone.read().unwrap());
+    let other = |a: &[f64]| [&a[..3 * w * dim], &a[4 * w * dim..]].concat();
+    assert_eq!(other(&xc), other(&xp), "the other worlds' positions");
+    assert_eq!(other(&vc), other(&vp), "the other worlds' velocities");
+    assert_eq!(xc[r.clone()], xa[..], "the written world steps as alone");
+    assert_eq!(vc[r], va[..]);
+    assert_ne!(xc, xp, "the write changed world 3");
+    let (bp, bc, ba) = (plain.books_of_worlds().unwrap(), changed.books_of_worlds().unwrap(), alone.books().unwrap());
+    for k in [0, 1, 2, 4] {
+        assert_eq!(bc[k].dissipated, bp[k].dissipated, "world {k}'s drag books");
+    }
+    assert_eq!(bc[3].dissipated, ba.dissipated, "the written world's drag books start from zero");
+}
