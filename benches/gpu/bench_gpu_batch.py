@@ -7,11 +7,12 @@ CPU batch's fused kernel (float64, all threads, the best SIMD level) against the
 
 Prints the median of three timed calls of ``--steps`` steps (after a warm-up call: the build on
 the device, the shaders' compilation) as particle-steps/s (3 particles a member), the ratio to
-the CPU, and the largest position difference from the CPU batch after the same steps. A call
-uploads every member's state and writes each back (state, clock, books): the figures include
-that, as a user's call pays it. Beside them, what the host pays: ``from_scene``'s time to build
-the f32 batch, and the median of five calls of one step (mostly the host's work around the
-device: the locks, the upload, the write-back into every member). On lavapipe (Mesa's CPU
+the CPU, and the largest position difference from the CPU batch after the same steps. The
+members' state stays on the device between calls (a call reads the state back into the
+batch's mirror once and writes no member: a member is written back when it is used), so the
+figures include the read-back but not a write into every member. Beside them, what the host
+pays: ``from_scene``'s time to build the f32 batch, and the median of five calls of one step
+(the host's work around the device, and one step of it). On lavapipe (Mesa's CPU
 Vulkan) they show the path works and agrees, not GPU speed. Target (issue "GPU fluids, grains
 and batches"): 16,384 worlds at ≥ 5e9 particle-steps/s on an H100.
 """

@@ -131,9 +131,11 @@ class _Resident:
     (:attr:`Session.pending <physcore.session.Session.pending>` is this object), so that any
     use of it through its scene (:meth:`Session.checked <physcore.session.Session.checked>`)
     first writes it back (:meth:`settle`); a member written back is *touched*: the next call
-    checks it and writes it to the device again. A call's host work is then that of the
-    touched members, not of every member (writing back all 16,384 members of a batch took 20
-    ms a call on a 2-core EPYC; see docs/guide/gpu.md).
+    compares it with the mirror and, if it was changed, writes it alone to the device (its
+    forces evaluated anew, no other member's bits moved). A call's host work is then that of
+    the touched members, not of every member (a call of one step of 16,384 worlds on
+    lavapipe: 22–25 ms when every member was written back each call, 4.3–4.6 ms now, on a
+    2-core EPYC; see docs/guide/gpu.md).
 
     ``lock`` is held by a call and by :meth:`settle`: a member used from another thread while
     the batch steps raises SceneBusyError, as a scene stepped by another thread does."""

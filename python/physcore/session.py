@@ -75,8 +75,9 @@ class Session:
     Attributes
     ----------
     sim : physcore._core.Simulation
-        The core simulation, unchecked: read it only while holding :attr:`lock` (as
-        :class:`~physcore.Batch` does), otherwise use :meth:`checked` or :meth:`exclusive`.
+        The core simulation, unchecked: read it only while holding :attr:`lock` and with
+        :attr:`pending` None (as :class:`~physcore.Batch` does), otherwise use :meth:`checked`
+        or :meth:`exclusive`.
     lock : threading.Lock
         Taken without waiting by every call that releases the GIL for long (stepping, energies,
         fields); a caller that cannot take it raises :class:`~physcore.SceneBusyError`.
