@@ -143,9 +143,10 @@ class _Resident:
     def __init__(self, gpu: Any, members: list[int], sessions: list[Session]) -> None:
         self.gpu = gpu
         self.lock = threading.Lock()
-        #: The batch index of each of the core's members, and their sessions, in its order.
+        #: The batch index of each of the core's members, and each member's index by its
+        #: session's id. It holds no session: a session pending here holds it, so a batch and
+        #: its members dropped together are freed at once, not left to the cycle collector.
         self.members = members
-        self.sessions = sessions
         self.index = {id(x): j for j, x in enumerate(sessions)}
         #: Members whose scenes may differ from the mirror (written back since the last call;
         #: all of them until the first), and those retired (diverged; held still).
@@ -162,14 +163,11 @@ class _Resident:
             raise SceneBusyError("the GPU Batch keeping this scene's state is being stepped by another thread")
         try:
             # C-level passes: a Python loop over 16,384 members took milliseconds.
-            here = list(map(is_, map(_PENDING, sessions), repeat(self)))
-            if sessions is self.sessions:
-                mine = list(compress(range(len(here)), here))
-            else:
-                mine = [self.index[id(x)] for x in compress(sessions, here)]
-            if mine:
+            picked = list(compress(sessions, map(is_, map(_PENDING, sessions), repeat(self))))
+            if picked:
+                mine = list(map(self.index.__getitem__, map(id, picked)))
                 self.gpu.settle(mine)
-                _each(map(setattr, map(self.sessions.__getitem__, mine), repeat("pending"), repeat(None)))
+                _each(map(setattr, picked, repeat("pending"), repeat(None)))
                 self.touched.update(mine)
         finally:
             self.lock.release()
@@ -302,6 +300,7 @@ class Batch:
         #: what keeps their state between calls (`_Resident`).
         self._gpu: Any = None
         self._res: _Resident | None = None
+        self._dev_sessions: list[Session] = []
         #: Whether every member has been put on its own device (`Scene.to_device`) already.
         self._placed = False
         if self._device != "cpu":
@@ -369,6 +368,8 @@ class Batch:
         sessions = [self._sessions[k] for k in live]
         self._gpu = _core.DeviceBatch([x.sim for x in sessions], self._device, self._precision)
         self._res = _Resident(self._gpu, live, sessions)
+        #: The device's members' sessions, in its order.
+        self._dev_sessions = sessions
 
     # ------------------------------------------------------------------------ members
     @property
@@ -485,10 +486,11 @@ class Batch:
         scenes, and no member is written back until it is used."""
         res = self._res
         assert res is not None
-        live = [j for j in range(len(res.sessions)) if j not in res.retired] if res.retired else range(len(res.sessions))
+        sessions = self._dev_sessions
+        live = [j for j in range(len(sessions)) if j not in res.retired] if res.retired else range(len(sessions))
         # A C-level pass first: building the lists of 16,384 members took 2 ms a call.
-        fresh = (self._fresh([self._members[res.members[j]] for j in live], [res.sessions[j] for j in live])
-                 if None in map(_REFERENCE, res.sessions) else [])
+        fresh = (self._fresh([self._members[res.members[j]] for j in live], [sessions[j] for j in live])
+                 if None in map(_REFERENCE, sessions) else [])
         if fresh:  # their books' reference is read from their scenes: written back first
             _settle([s.session for s in fresh])
             with _holding([s.session for s in fresh], [s.session.lock for s in fresh]):
@@ -499,7 +501,7 @@ class Batch:
             raise SceneBusyError("a member of this Batch is being stepped by another thread")
         try:
             touched = sorted(res.touched - res.retired)
-            held = [res.sessions[j] for j in touched]
+            held = [sessions[j] for j in touched]
             # One a GPU batch stepped since (another batch of it): its state into its scene.
             _settle(list(compress(held, map(_PENDING, held))))
             with _holding(held, list(map(_LOCK_OF, held))):
@@ -507,7 +509,7 @@ class Batch:
             if failed is not None:
                 for j in failed:  # retired where its call started, with what alone it would raise
                     res.gpu.settle([j])
-                    res.sessions[j].pending = None
+                    sessions[j].pending = None
                     res.retired.add(j)
                     self.diverged[res.members[j]] = res.gpu.diverged(j)
                 # The members stepped keep their state on the device until they are used.
@@ -518,7 +520,7 @@ class Batch:
         finally:
             res.lock.release()
         if failed is None:  # a touched member's terms or colliders changed: built again from them
-            _settle(res.sessions)
+            _settle(sessions)
             self._build([k for k in range(len(self)) if k not in self.diverged])
             self._step_device(n)
 

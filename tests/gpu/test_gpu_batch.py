@@ -247,6 +247,32 @@ def test_a_member_of_two_gpu_batches_is_stepped_by_each_from_the_other_s_result(
     assert np.abs(gpu.positions - cpu.positions).max() < (1e-11 if F64 else 1e-3)
 
 
+def test_a_gpu_batch_dropped_with_its_members_is_freed_at_once() -> None:
+    """A member's state on the device keeps the batch's device buffers alive while the member
+    lives (it is written back from them when used), and no longer: a batch dropped with its
+    members is freed at once, by reference counting, not left to the cycle collector."""
+    import gc
+    import weakref
+
+    gc.collect()
+    gc.disable()
+    try:
+        batch = _fan(16, device=DEVICE)
+        batch.step(10)
+        kept = batch.members[3]
+        res = weakref.ref(batch._res)
+        del batch
+        assert res() is not None and kept.step_count == 10  # the member kept it, and read it
+        del kept
+        batch = _fan(16, device=DEVICE)
+        batch.step(10)
+        res = weakref.ref(batch._res)
+        del batch
+        assert res() is None
+    finally:
+        gc.enable()
+
+
 def test_a_member_used_by_another_thread_while_its_gpu_batch_steps_says_so() -> None:
     """While a GPU batch steps, another thread's use of a member (its state kept on the
     device) or of the batch raises SceneBusyError, as for a CPU batch; the call is unharmed."""
