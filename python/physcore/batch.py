@@ -796,8 +796,17 @@ class _Overlay:
         _settle(self._batch._sessions)  # a GPU batch's members written back in one call
         return np.concatenate([getattr(s, name) for s in self._batch.members])
 
-    positions = property(lambda self: self._cat("positions"))
-    velocities = property(lambda self: self._cat("velocities"))
+    def _rows(self, velocities: bool) -> np.ndarray:
+        """Every member's positions or velocities, member after member: the batch's one read
+        (a GPU batch's from its mirror, no member written back), or each member's own where
+        their shapes differ."""
+        try:
+            return self._batch._rows(velocities).reshape(-1, self.dim)
+        except ValueError:
+            return self._cat("velocities" if velocities else "positions")
+
+    positions = property(lambda self: self._rows(False))
+    velocities = property(lambda self: self._rows(True))
     masses = property(lambda self: self._cat("masses"))
     pinned = property(lambda self: self._cat("pinned"))
     time = property(lambda self: self._first.time)

@@ -247,6 +247,20 @@ def test_a_member_of_two_gpu_batches_is_stepped_by_each_from_the_other_s_result(
     assert np.abs(gpu.positions - cpu.positions).max() < (1e-11 if F64 else 1e-3)
 
 
+def test_a_gpu_batch_renders_from_its_mirror_as_a_cpu_batch_does(tmp_path) -> None:
+    """``render.record`` of a GPU batch reads every member's particles from the device's mirror
+    each frame (no member written back), frame for frame the batch's own positions, and the
+    members then read as the batch does."""
+    fan = _fan(6, device=DEVICE, precision="f64" if F64 else "f32")
+    rec = pc.render.record(fan, frames=4, steps_per_frame=30)
+    assert rec.positions.shape == (4, 18, 2) and (fan.step_count == 90).all()  # frame 0 at the start
+    last = rec.positions[-1].astype(np.float64) + rec.origin
+    assert np.allclose(last, fan.positions.reshape(18, 2), atol=1e-6)
+    assert np.array_equal(np.stack([m.positions for m in fan.members]), fan.positions)
+    path = pc.render.gif(fan, tmp_path / "fan.gif", frames=6, steps_per_frame=20, size=(160, 120))
+    assert path.read_bytes()[:6] == b"GIF89a"
+
+
 def test_a_gpu_batch_dropped_with_its_members_is_freed_at_once() -> None:
     """A member's state on the device keeps the batch's device buffers alive while the member
     lives (it is written back from them when used), and no longer: a batch dropped with its
