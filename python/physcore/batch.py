@@ -243,11 +243,11 @@ class Batch:
         particles). The members stay CPU scenes whose state lives on the device between calls:
         a member is written back (state, clock, energy books, as if it had stepped alone in the
         device's ``precision``) when it is used, and read again by the next call only if it
-        was, so that a call's host work does not grow with the members it leaves alone. A GPU batch holds particle scenes with
-        the GPU path's terms (gravity, drag, pairwise gravity, Coulomb, springs) and colliders,
-        and its members share the integrator, ``dt``, the fields' parameters (g, drag, G, k,
-        softening) and the colliders (one dispatch runs them); masses, charges, springs and
-        states may differ. Anything else is refused by name. A member that diverges is retired
+        was, so that a call's host work does not grow with the members it leaves alone. A GPU
+        batch holds particle scenes with the GPU path's terms (gravity, drag, pairwise gravity,
+        Coulomb, springs) and colliders, and its members share the integrator, ``dt``, the
+        fields' parameters (g, drag, G, k, softening) and the colliders (one dispatch runs
+        them); masses, charges, springs and states may differ. Anything else is refused by name. A member that diverges is retired
         as on the CPU; the others' results do not depend on it. Measured agreement with the CPU
         path: docs/guide/gpu.md.
     precision : {"f32", "f64"} or None

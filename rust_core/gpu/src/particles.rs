@@ -571,6 +571,14 @@ impl Particles {
         self.velocity_dependent
     }
 
+    /// Whether a step carries accelerations into the next that a fresh evaluation would not
+    /// give bit for bit: velocity Verlet's and Yoshida 4's, taken at predicted velocities,
+    /// where a force depends on the velocities (drag, dashpots). Where it does not, writing
+    /// the state anew (which evaluates the forces again) changes no bit.
+    pub fn carries_velocity_forces(&self) -> bool {
+        matches!(self.scheme, Scheme::VelocityVerlet | Scheme::Yoshida4) && self.velocity_dependent()
+    }
+
     /// Submits one dispatch of `pipe` over the particles.
     fn submit_one(&self, pipe: &wgpu::ComputePipeline) {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());

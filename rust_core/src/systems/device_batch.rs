@@ -7,9 +7,10 @@
 //! back once into the batch's mirror on the host (with each member's clock and books), and
 //! writes nothing into the members' worlds: a member is written from the mirror (`settle`)
 //! only when it is read or changed, as if it had stepped alone (in the device's precision).
-//! A member settled since the last call is "touched": the next call checks it and gathers it
-//! into the mirror again, and writes the device anew; the others cost a call nothing on the
-//! host. Writing every member back each call cost about 1.8 µs a member (16,384 members: 30
+//! A member settled since the last call is "touched": the next call compares its world with
+//! the mirror and, if it was changed, gathers it and writes its rows alone to the device
+//! (`Particles::set_rows`, no other member's bits moved); the others cost a call nothing on
+//! the host. Writing every member back each call cost about 1.8 µs a member (16,384 members: 30
 //! ms a call of one step on a 2-core EPYC, where the target is a call of 1,000 steps in 10
 //! ms; docs/guide/gpu.md).
 //!
@@ -21,8 +22,10 @@
 //!
 //! A member that diverges is retired (the mirror keeps it where the call started) and the call
 //! runs again from its start for the others, with the retired member's particles held still
-//! (pinned) on the device, as they stay: the others' results do not depend on it, as each world
-//! pulls only on its own particles. A stop (Ctrl-C) or a device failure commits nothing: the
+//! (pinned) on the device, as they stay: the others' results do not depend on it, bit for bit,
+//! as each world pulls only on its own particles (where the forces depend on the velocities,
+//! the run again starts from a copy of the call's start on the device, which keeps the
+//! accelerations velocity Verlet carried into it). A stop (Ctrl-C) or a device failure commits nothing: the
 //! mirror stays where the call started, and the next call writes the device from it.
 use super::device::{colliders_of, forces_of, precision_of, scheme_of};
 use crate::alloc::{count, Need};
@@ -59,8 +62,8 @@ pub struct DeviceBatch {
     dt: Real,
     p: Particles,
     mirror: Mirror,
-    /// Whether the device holds the mirror's state (false after a member was gathered, or a
-    /// call stopped or failed part way).
+    /// Whether the device holds the mirror's state (false after a call stopped or failed part
+    /// way, or diverged: the next call writes the whole mirror).
     current: bool,
     /// The members that diverged, held still on the device and not stepped again, with the
     /// steps their call had completed and the particle that failed.
@@ -284,15 +287,24 @@ impl DeviceBatch {
         }
         let books = !self.drag.is_empty() || self.dashpots.is_some() || !self.records[0].1.is_empty();
         let mut still: Vec<usize> = Vec::new();
+        // Where the accelerations a step carries are not what a fresh evaluation gives (forces
+        // of the velocities), a divergence's run again starts from a copy of the call's start
+        // on the device, not from the mirror: the others then go on bit for bit as without it.
+        let mut snapped = false;
         loop {
-            if !self.current {
+            // Until the results are committed, the device is apart from the mirror (also if a
+            // write fails part way).
+            let whole = !std::mem::replace(&mut self.current, false);
+            if whole {
                 self.upload(&still)?;
             } else if !changed.is_empty() {
                 self.write_rows(&changed)?;
             }
             changed.clear();
-            // Until the results are committed, the device is ahead of the mirror.
-            self.current = false;
+            if !snapped && !whole && self.p.carries_velocity_forces() {
+                self.p.snapshot()?;
+                snapped = true;
+            }
             match self.p.step(n, dt, stop) {
                 Ok(_) => break,
                 Err((_, dp::Halt::Stopped)) => return Err(Error::Interrupted { rolled_back_to: 0 }),
@@ -306,6 +318,11 @@ impl DeviceBatch {
                     // Held still from the call's start for the run again.
                     still.push(k);
                     ran.failed.push((k, done, particle % self.n));
+                    if snapped {
+                        self.p.restore()?;
+                        self.hold_still(k)?;
+                        self.current = true; // the call's start, `k` held still: no upload
+                    }
                 }
             }
         }
@@ -423,6 +440,16 @@ impl DeviceBatch {
         Ok(())
     }
 
+    /// Member `k`'s particles held still on the device, where the mirror has them (no
+    /// velocity, no inverse mass).
+    fn hold_still(&mut self, k: usize) -> Result<()> {
+        let (n, d, m) = (self.n, self.dim, &self.mirror);
+        let zero = vec![0.0; n * d];
+        self.p
+            .set_rows(k * n, &m.x[k * n * d..(k + 1) * n * d], &zero, &m.mass[k * n..(k + 1) * n], &zero[..n])
+            .map_err(Into::into)
+    }
+
     /// Member `k`'s world into the mirror (state, masses, clock, books).
     fn gather<V: Vector>(&mut self, k: usize, w: &World<V>) {
         let p = w.particles();
@@ -455,7 +482,6 @@ impl DeviceBatch {
             }
             self.p.set_state(&self.mirror.x, &v, &self.mirror.mass, &im)?;
         }
-        self.current = true;
         Ok(())
     }
 
