@@ -235,3 +235,19 @@ def busy_uses(run: Callable[[], None], uses: Sequence[Callable[[], object]], tri
         time.sleep(0.005)
     t.join()
     return seen, errors
+
+
+def batch_uses_say_busy(batch: pc.Batch, run: Callable[[], None]) -> bool:
+    """`busy_uses` of `run` (a long call of `batch`) while this thread reads member 1's
+    positions, steps member 0 and reads the batch's positions: asserts that the call raised
+    nothing but SceneBusyError, and that each use refused raised SceneBusyError naming another
+    thread. False, with nothing more asserted, where the batch lost the race to a member's step
+    (it said so itself): the caller runs its test again."""
+    members = batch.members
+    seen, errors = busy_uses(run, (lambda: members[1].positions, lambda: members[0].step(1), lambda: batch.positions))
+    assert all(isinstance(e, pc.SceneBusyError) for e in errors), errors
+    if errors:
+        return False
+    assert seen, "the batch's call ended before another thread could use a member"
+    assert all("another thread" in str(e) for e in seen)
+    return True
