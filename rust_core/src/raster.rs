@@ -104,21 +104,33 @@ pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, he
     }
     let wp = width + 2;
     let mut grid = vec![0f64; (height + 2) * wp];
-    // Per point: its base cell and the fractions, as numpy computes them (fx in f64, the
-    // fractions rounded to f32, the products in f32).
-    let point = |i: usize| -> Option<(usize, f32, f32, f32)> {
-        let (fx, fy) = (col[i] - 0.5, row[i] - 0.5);
-        if !(fx > -1.0 && fx < width as f64 && fy > -1.0 && fy < height as f64) {
-            return None;
+    // Per point, once: its base cell and the fractions, as numpy computes them (fx in f64, the
+    // fractions rounded to f32, the products in f32). floor(v) for v > −1 by truncation, as
+    // `sphere_depths` takes it (f64::floor is a libm call on baseline x86-64): computing each
+    // point's corner four times, with two floors each, took 28 ms of a 10⁶-point splat.
+    let floor = |v: f64| -> f64 {
+        let t = v as i64 as f64;
+        if t > v {
+            t - 1.0
+        } else {
+            t
         }
-        let (x0, y0) = (fx.floor(), fy.floor());
-        let (ax, ay) = ((fx - x0) as f32, (fy - y0) as f32);
-        let base = ((y0 as i64 + 1) * wp as i64 + (x0 as i64 + 1)) as usize;
-        Some((base, ax, ay, weights.map_or(1.0, |w| w[i])))
     };
+    let points: Vec<(usize, f32, f32, f32)> = (0..n)
+        .filter_map(|i| {
+            let (fx, fy) = (col[i] - 0.5, row[i] - 0.5);
+            if !(fx > -1.0 && fx < width as f64 && fy > -1.0 && fy < height as f64) {
+                return None;
+            }
+            let (x0, y0) = (floor(fx), floor(fy));
+            let (ax, ay) = ((fx - x0) as f32, (fy - y0) as f32);
+            let base = ((y0 as i64 + 1) * wp as i64 + (x0 as i64 + 1)) as usize;
+            Some((base, ax, ay, weights.map_or(1.0, |w| w[i])))
+        })
+        .collect();
+    let weighted = weights.is_some();
     for corner in 0..4 {
-        for i in 0..n {
-            let Some((base, ax, ay, w)) = point(i) else { continue };
+        for &(base, ax, ay, w) in &points {
             let bx = 1.0 - ax;
             let (at, f) = match corner {
                 0 => (base, bx * (1.0 - ay)),
@@ -126,7 +138,7 @@ pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, he
                 2 => (base + wp, bx * ay),
                 _ => (base + wp + 1, ax * ay),
             };
-            let f = if weights.is_some() { f * w } else { f };
+            let f = if weighted { f * w } else { f };
             grid[at] += f as f64;
         }
     }
