@@ -456,7 +456,14 @@ def _spacing3(x: np.ndarray) -> float | None:
         c = 2.0 * s
         k = np.floor((x - lo) / c).astype(np.int64)
         dims = k.max(axis=0) + 1
-        cells = np.unique((k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]).size
+        key = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+        total = int(np.prod(dims))
+        if total <= 4 * n + 1024:  # an occupancy grid, O(N), as _occupied counts (np.unique sorted
+            grid = np.zeros(total, dtype=bool)  # the keys: 0.3 s of a 10⁶-particle GIF's setup)
+            grid[key] = True
+            cells = int(np.count_nonzero(grid))
+        else:
+            cells = np.unique(key).size
         s = float(np.cbrt(cells * c**3 / n))
     return s
 
