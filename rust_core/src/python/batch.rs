@@ -289,6 +289,15 @@ fn records_of(
 
 #[cfg(feature = "gpu")]
 impl PyDeviceBatch {
+    /// InvalidInputError unless the worlds `worlds_of` split into `n2` of 2D and `n3` of 3D are
+    /// all of the batch's dimension.
+    fn one_dim(&self, py: Python<'_>, n2: usize, n3: usize) -> PyResult<()> {
+        if (if self.inner.dim() == 2 { n3 } else { n2 }) > 0 {
+            return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
+        }
+        Ok(())
+    }
+
     /// The simulations of the members `ks`; `InvalidInputError` naming `members` for an index
     /// past them.
     fn members<'py>(&self, py: Python<'py>, ks: &[usize]) -> PyResult<Vec<Bound<'py, PySimulation>>> {
@@ -355,9 +364,7 @@ impl PyDeviceBatch {
             }
         }
         let (d2, d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
-        if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
-            return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
-        }
+        self.one_dim(py, d2.len(), d3.len())?;
         let idx = touched;
         let stop = AtomicBool::new(false);
         let inner = &mut self.inner;
@@ -386,9 +393,7 @@ impl PyDeviceBatch {
         let sims = self.members(py, &members)?;
         let mut refs = borrow_all(py, &sims)?;
         let (mut d2, mut d3) = worlds_of(&mut refs).map_err(|e| to_py(py, e))?;
-        if !(if self.inner.dim() == 2 { d3.is_empty() } else { d2.is_empty() }) {
-            return Err(to_py(py, invalid("sims", "the members of a batch have one dimension")));
-        }
+        self.one_dim(py, d2.len(), d3.len())?;
         let idx = members;
         let pool = batch_pool(py, None)?;
         let inner = &self.inner;

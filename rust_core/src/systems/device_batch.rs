@@ -522,11 +522,6 @@ impl DeviceBatch {
     pub fn mirror(&self, vel: bool) -> (&[Real], &[Real], &[u64]) {
         (if vel { &self.mirror.v } else { &self.mirror.x }, &self.mirror.t, &self.mirror.steps)
     }
-
-    /// Whether member `k` diverged and was retired.
-    pub fn is_retired(&self, k: usize) -> bool {
-        self.retired.get(k).copied().unwrap_or(false)
-    }
 }
 
 /// The host's copy of every member as the device has stepped it: what a member's world is
