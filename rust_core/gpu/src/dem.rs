@@ -503,7 +503,7 @@ impl Dem {
         let cell_build = CellBuild::new(&gpu, precision, "DEM cell list", cell_bufs, total as usize, &[])?;
         // Walls all planes: the other shapes' code compiled out (`dem.wgsl`'s `SHAPED`), so a
         // scene of planes runs the kernels it ran before the other shapes came.
-        let mut wgsl = include_str!("dem.wgsl").to_string();
+        let mut wgsl = concat!(include_str!("dem.wgsl"), include_str!("cell_walk.wgsl")).to_string();
         if walls.iter().all(|w| matches!(w.shape, Shape::Plane { .. })) {
             wgsl = wgsl.replace("const SHAPED: bool = true;", "const SHAPED: bool = false;");
         }

@@ -108,26 +108,6 @@ fn inv_mass(i: u32) -> real {
     return 0.0;
 }
 
-fn index(g: vec3<u32>) -> u32 {
-    return g.x + 65535u * WG * g.y;
-}
-
-fn coords(c: u32) -> vec3<u32> {
-    return vec3<u32>(c % P.cx, (c / P.cx) % P.cy, c / (P.cx * P.cy));
-}
-
-fn flat(c: vec3<u32>) -> u32 {
-    return c.x + P.cx * (c.y + P.cy * c.z);
-}
-
-fn lo_of(c: u32) -> u32 {
-    return max(c, 1u) - 1u;
-}
-
-fn hi_of(c: u32, m: u32) -> u32 {
-    return min(c + 1u, m - 1u);
-}
-
 fn zero3() -> vec3<real> {
     return vec3<real>(0.0, 0.0, 0.0);
 }

@@ -72,10 +72,11 @@
 //! particles, moving boundaries (rigid bodies), the time step limit (the core's
 //! `systems::device_dfsph` takes the CPU's, capillary limit included), checkpoints of the warm
 //! starts.
-use crate::cells::{spread, CellBuild};
+use crate::cells::spread;
 use crate::maxima::Maxima;
 use crate::particles::Halt;
-use crate::sph::{invalid, list_cap, neighbour_lists, positive, sort_walls, Kernel};
+use crate::sph::{invalid, positive, Kernel};
+use crate::tank::{Region, Tank};
 use crate::{Bind, Chunk, Gpu, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -221,7 +222,12 @@ impl DfsphParams {
 
     /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (as `SphParams::cells`).
     pub fn cells(&self) -> Result<[usize; 3]> {
-        crate::sph::box_cells(self.dim, self.h, &self.lower, &self.upper)
+        crate::tank::box_cells(self.dim, self.h, &self.lower, &self.upper)
+    }
+
+    /// The box and resolution of the fluid's `Tank`.
+    fn region(&self) -> Region {
+        Region { dim: self.dim, h: self.h, lower: self.lower, upper: self.upper, number_density: self.rho0 / self.mass }
     }
 
     /// Neighbours (fluid and walls within 2h) below which the divergence solve leaves a
@@ -332,15 +338,10 @@ pub struct Dfsph {
     gpu: Arc<Gpu>,
     precision: Precision,
     p: DfsphParams,
-    n: usize,
-    walls: usize,
-    cells: [usize; 3],
+    /// The state, the cell list, the walls and the neighbour lists.
+    tank: Tank,
     /// Workgroups of a particle dispatch along x and y (`spread`).
     groups: (u32, u32),
-    /// Entries of each particle's neighbour list (`list_cap`; 0: none).
-    cap: u32,
-    pos: wgpu::Buffer,
-    vel: wgpu::Buffer,
     rho: wgpu::Buffer,
     /// Σκ/ρ, Σκ^v/ρ and the pressure of the last step, caller's order (3n).
     hist: wgpu::Buffer,
@@ -353,8 +354,6 @@ pub struct Dfsph {
     staging: wgpu::Buffer,
     bind: wgpu::BindGroup,
     control_bind: wgpu::BindGroup,
-    /// cells.wgsl's build (`CellBuild`).
-    cell_build: CellBuild,
     pipes: Vec<wgpu::ComputePipeline>,
     control_pipes: Vec<wgpu::ComputePipeline>,
     chunk: Chunk,
@@ -367,7 +366,7 @@ pub struct Dfsph {
     backup: Vec<(wgpu::Buffer, wgpu::Buffer)>,
     /// The step limit's largest speed, over `vel`.
     maxima: Maxima,
-    /// Bound only: the cell list, the sorted scratch, the partial sums, the walls.
+    /// Bound only: the sorted scratch, the partial sums.
     _keep: Vec<wgpu::Buffer>,
 }
 
@@ -402,42 +401,15 @@ impl Dfsph {
     ) -> Result<Self> {
         params.validate()?;
         gpu.check_precision(precision)?;
-        let d = params.dim;
-        if !positions.len().is_multiple_of(d) || velocities.len() != positions.len() {
-            return Err(invalid(
-                "positions",
-                format_args!(
-                    "{} positions and {} velocities: both must hold dim = {d} values per particle",
-                    positions.len(),
-                    velocities.len()
-                ),
-            ));
-        }
-        let n = positions.len() / d;
-        if n as u64 >= 1 << 31 {
-            return Err(invalid("positions", format_args!("{n} particles: at most 2^31")));
-        }
-        if let Some(k) = positions.iter().chain(velocities).position(|v| !v.is_finite()) {
-            let (what, k) = if k < positions.len() { ("positions", k) } else { ("velocities", k - positions.len()) };
-            return Err(invalid(what, format_args!("particle {} has a non-finite value", k / d)));
-        }
-        for (i, x) in positions.chunks_exact(d).enumerate() {
-            if (0..d).any(|a| !(x[a] >= params.lower[a] && x[a] <= params.upper[a])) {
-                return Err(invalid("positions", format_args!("particle {i} at {x:?} is outside the box")));
-            }
-        }
-        let cells = params.cells()?;
-        let ncells = cells.iter().product::<usize>() as u64;
-        let (wall_data, wall_starts) = sort_walls((params.dim, params.h, &params.lower), cells, walls, psi)?;
-        let nw = wall_starts.last().copied().unwrap_or(0) as usize;
+        let region = params.region();
+        let tank = Tank::new(&gpu, precision, "DFSPH", &region, (positions, velocities), (walls, psi))?;
+        let (n, d) = (tank.n, params.dim);
         let groups = spread(n.max(1));
         let ngroups = groups.0 as u64 * groups.1 as u64;
         let rb = precision.bytes();
         let (nn, dd) = (n as u64, d as u64);
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-        let pos = gpu.buffer("DFSPH positions", nn * dd * rb, st)?;
-        let vel = gpu.buffer("DFSPH velocities", nn * dd * rb, st)?;
         let rho = gpu.buffer("DFSPH densities", nn * rb, st)?;
         let hist = gpu.buffer("DFSPH warm starts and pressure", 3 * nn * rb, st)?;
         let books = gpu.buffer("DFSPH energy books", 4 * nn * rb, st)?;
@@ -449,21 +421,10 @@ impl Dfsph {
         let ctl = gpu.buffer("DFSPH control", 4 * CTL_WORDS as u64, st)?;
         let errs = gpu.buffer("DFSPH solver errors", 4 * rb, st)?;
         let args = gpu.buffer("DFSPH indirect counts", 16, st | U::INDIRECT)?;
-        let cell_of = gpu.buffer("DFSPH cells", nn * 4, st)?;
-        let counts = gpu.buffer("DFSPH cell counts", ncells * 4, st)?;
-        let start = gpu.buffer("DFSPH cell starts", (ncells + 1) * 4, st)?;
-        let order = gpu.buffer("DFSPH cell order", nn * 4, st)?;
-        let found = gpu.buffer("DFSPH unused neighbour counts", 16, st)?;
-        let cell_params = gpu.buffer("DFSPH cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
         let params_buf = gpu.buffer("DFSPH parameters", 48 + 40 * 8, U::UNIFORM | U::COPY_DST)?;
-        let wall = gpu.buffer("DFSPH wall particles", wall_data.len() as u64 * rb, st)?;
-        let wall_start = gpu.buffer("DFSPH wall cell starts", (ncells + 1) * 4, st)?;
-        let cap = list_cap(d, params.h, params.rho0 / params.mass, n, gpu.adapter());
-        let (cap, nbr) = neighbour_lists(&gpu, "DFSPH neighbour lists", cap, n)?;
-        let nlen = gpu.buffer("DFSPH neighbour counts", nn.max(1) * 4, st)?;
         let backup = vec![
-            (pos.clone(), gpu.buffer("DFSPH positions at the submission's start", nn * dd * rb, st)?),
-            (vel.clone(), gpu.buffer("DFSPH velocities at the submission's start", nn * dd * rb, st)?),
+            (tank.pos.clone(), gpu.buffer("DFSPH positions at the submission's start", nn * dd * rb, st)?),
+            (tank.vel.clone(), gpu.buffer("DFSPH velocities at the submission's start", nn * dd * rb, st)?),
             (hist.clone(), gpu.buffer("DFSPH warm starts at the submission's start", 3 * nn * rb, st)?),
             (books.clone(), gpu.buffer("DFSPH books at the submission's start", 4 * nn * rb, st)?),
             (ctl.clone(), gpu.buffer("DFSPH control at the submission's start", 4 * CTL_WORDS as u64, st)?),
@@ -472,28 +433,27 @@ impl Dfsph {
         let staging = gpu.buffer("DFSPH read-back", (4 * nn).max(nn * dd).max(16) * rb, U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
-        let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
-        let cell_build = CellBuild::new(&gpu, precision, "DFSPH cell list", cell_bufs, ncells as usize, &[])?;
-        let src = include_str!("dfsph.wgsl");
+        let src = concat!(include_str!("dfsph.wgsl"), include_str!("cell_walk.wgsl"), include_str!("box_faces.wgsl"));
         let particle_binds = [uniform, W, W, W, R, R, R, W, W, W, W, R, R, W, W, W, W];
+        let t = &tank;
         let particle_bufs: [&wgpu::Buffer; 17] = [
             &params_buf,
-            &pos,
-            &vel,
+            &t.pos,
+            &t.vel,
             &rho,
-            &cell_of,
-            &start,
-            &order,
+            &t.cell_of,
+            &t.start,
+            &t.order,
             &sv,
             &ss,
             &hist,
             &books,
-            &wall,
-            &wall_start,
+            &t.wall,
+            &t.wall_start,
             &partial,
             &ctl,
-            &nbr,
-            &nlen,
+            &t.nbr,
+            &t.nlen,
         ];
         let (layout, pipes) = gpu.kernels("dfsph.wgsl", precision, src, &particle_binds, &PARTICLE_KERNELS);
         let bind = crate::grid::bind_group(&gpu, "DFSPH", &layout, &particle_bufs);
@@ -506,22 +466,7 @@ impl Dfsph {
         let mut control_bufs = particle_bufs.to_vec();
         control_bufs.extend([&errs, &args]);
         let control_bind = crate::grid::bind_group(&gpu, "DFSPH control", &control_layout, &control_bufs);
-        let (lo, cell) = (params.lower, 2.0 * params.h);
-        gpu.write_params(
-            precision,
-            &cell_params,
-            &[n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32, 0, 0, 0],
-            &[lo[0], lo[1], lo[2], cell, cell],
-        );
-        if n > 0 {
-            gpu.upload(precision, &pos, positions);
-            gpu.upload(precision, &vel, velocities);
-        }
-        if nw > 0 {
-            gpu.upload(precision, &wall, &wall_data);
-        }
-        gpu.queue.write_buffer(&wall_start, 0, bytemuck::cast_slice(&wall_starts));
-        let maxima = Maxima::new(&gpu, precision, n, d, &vel, None)?;
+        let maxima = Maxima::new(&gpu, precision, n, d, &tank.vel, None)?;
         let mut ctl0 = [0u32; CTL_WORDS];
         ctl0[FLAG as usize] = u32::MAX;
         gpu.queue.write_buffer(&ctl, 0, bytemuck::cast_slice(&ctl0));
@@ -529,13 +474,8 @@ impl Dfsph {
             gpu,
             precision,
             p: params,
-            n,
-            walls: nw,
-            cells,
+            tank,
             groups,
-            cap,
-            pos,
-            vel,
             rho,
             hist,
             books,
@@ -546,7 +486,6 @@ impl Dfsph {
             staging,
             bind,
             control_bind,
-            cell_build,
             pipes,
             control_pipes,
             chunk: Chunk::new(MAX_CHUNK),
@@ -555,21 +494,7 @@ impl Dfsph {
             full: false,
             backup,
             maxima,
-            _keep: vec![
-                cell_of,
-                counts,
-                start,
-                order,
-                found,
-                sv,
-                ss,
-                partial,
-                cell_params,
-                wall,
-                wall_start,
-                nbr,
-                nlen,
-            ],
+            _keep: vec![sv, ss, partial],
         };
         s.write_params(1.0);
         s.gpu.wait()?;
@@ -577,10 +502,10 @@ impl Dfsph {
     }
 
     pub fn len(&self) -> usize {
-        self.n
+        self.tank.n
     }
     pub fn is_empty(&self) -> bool {
-        self.n == 0
+        self.tank.n == 0
     }
     pub fn precision(&self) -> Precision {
         self.precision
@@ -590,21 +515,21 @@ impl Dfsph {
     }
     /// Wall particles on the device: those of `with_walls` within reach (2h) of the box.
     pub fn n_walls(&self) -> usize {
-        self.walls
+        self.tank.walls
     }
     /// Cells of the cell list along x, y, z (each 2h wide).
     pub fn cells(&self) -> [usize; 3] {
-        self.cells
+        self.tank.cells
     }
     /// Entries of each particle's neighbour list (see `list_cap`; 0: the passes read the cells).
     pub fn list_cap(&self) -> u32 {
-        self.cap
+        self.tank.cap
     }
     /// Sets the neighbour lists' length (at most the one `with_walls` chose; 0: none), for
     /// tests: a particle with more neighbours reads the cells, and the result is the same.
     #[doc(hidden)]
     pub fn set_list_cap(&mut self, cap: u32) {
-        self.cap = cap.min(self.cap);
+        self.tank.set_list_cap(cap);
     }
 
     /// Records every solve's `max_iterations` in every submission instead of the adaptive
@@ -627,10 +552,10 @@ impl Dfsph {
         let tiny = if self.precision == Precision::F32 { 1e-30 } else { 1e-300 };
         let sigma = p.kernel.sigma(h, p.dim);
         let big_h = 2.0 * h;
-        let c = self.cells;
+        let c = self.tank.cells;
         let ng = self.groups.0 * self.groups.1;
         let ints = [
-            self.n as u32,
+            self.tank.n as u32,
             p.dim as u32,
             c[0] as u32,
             c[1] as u32,
@@ -641,10 +566,10 @@ impl Dfsph {
             p.max_iterations,
             self.groups.0,
             self.groups.1,
-            self.cap,
+            self.tank.cap,
         ];
         let (g, lo, hi) = (p.gravity, p.lower, p.upper);
-        let nr = (self.n.max(1) as f64) * p.rho0;
+        let nr = (self.tank.n.max(1) as f64) * p.rho0;
         let reals = [
             1.0 / h,
             p.mass,
@@ -690,7 +615,7 @@ impl Dfsph {
 
     /// Records the cell list, the gather and the build (densities, factors) at the positions.
     fn record_build(&self, pass: &mut wgpu::ComputePass) {
-        self.cell_build.record(pass, self.n);
+        self.tank.cell_build.record(pass, self.tank.n);
         let n = self.groups;
         pass.set_bind_group(0, &self.bind, &[]);
         for pipe in &self.pipes[GATHER..=BUILD] {
@@ -775,7 +700,7 @@ impl Dfsph {
         if !(dt.is_finite() && dt > 0.0) {
             return Err((0, Halt::Failed(invalid("dt", format_args!("{dt} must be finite and > 0")))));
         }
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok(steps);
         }
         self.write_params(dt);
@@ -837,7 +762,7 @@ impl Dfsph {
     /// Positions (m) and velocities (m/s), flat (n·dim), and densities (kg/m^dim, summed now at
     /// these positions), in the caller's particle order, as f64.
     pub fn read(&self) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((Vec::new(), Vec::new(), Vec::new()));
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
@@ -847,16 +772,16 @@ impl Dfsph {
         }
         self.gpu.queue.submit([enc.finish()]);
         let (x, v) = self.read_state()?;
-        Ok((x, v, self.gpu.read_reals(self.precision, &self.rho, &self.staging, self.n)?))
+        Ok((x, v, self.gpu.read_reals(self.precision, &self.rho, &self.staging, self.tank.n)?))
     }
 
     /// Positions and velocities alone (as `read`), without the density pass.
     pub fn read_state(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((Vec::new(), Vec::new()));
         }
-        let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
-        Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
+        let (p, s, nd) = (self.precision, &self.staging, self.tank.n * self.p.dim);
+        Ok((self.gpu.read_reals(p, &self.tank.pos, s, nd)?, self.gpu.read_reals(p, &self.tank.vel, s, nd)?))
     }
 
     /// The largest speed now (m/s), what the step limit's CFL condition takes: reduced on the
@@ -884,16 +809,16 @@ impl Dfsph {
     /// continues as the run it came from. Errors: `Unsupported` for another length or a
     /// non-finite value (nothing changes).
     pub fn set_history(&mut self, history: &[f64]) -> Result<()> {
-        if history.len() != 3 * self.n {
+        if history.len() != 3 * self.tank.n {
             return Err(invalid(
                 "history",
-                format_args!("expected {} values (3 per particle), got {}", 3 * self.n, history.len()),
+                format_args!("expected {} values (3 per particle), got {}", 3 * self.tank.n, history.len()),
             ));
         }
         if let Some(i) = history.iter().position(|h| !h.is_finite()) {
             return Err(invalid("history", format_args!("entry {i} is not finite")));
         }
-        if self.n > 0 {
+        if self.tank.n > 0 {
             self.gpu.upload(self.precision, &self.hist, history);
             self.gpu.wait()?;
         }
@@ -901,23 +826,23 @@ impl Dfsph {
     }
 
     fn history_part(&self, k: u64) -> Result<Vec<f64>> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok(Vec::new());
         }
-        let off = k * self.n as u64 * self.precision.bytes();
-        self.gpu.read_reals_at(self.precision, &self.hist, off, &self.staging, self.n)
+        let off = k * self.tank.n as u64 * self.precision.bytes();
+        self.gpu.read_reals_at(self.precision, &self.hist, off, &self.staging, self.tank.n)
     }
 
     /// The energy books now (J; see `DfsphBooks`): the state functions from a read-back, each
     /// sum in f64 in the caller's order, and the dissipated books kept per particle on the
     /// device, summed here in the same order (deterministic).
     pub fn books(&self) -> Result<DfsphBooks> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok(DfsphBooks::default());
         }
         let (x, v) = self.read_state()?;
-        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 4 * self.n)?;
-        let (p, d, m, n) = (&self.p, self.p.dim, self.p.mass, self.n);
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 4 * self.tank.n)?;
+        let (p, d, m, n) = (&self.p, self.p.dim, self.p.mass, self.tank.n);
         let (mut kinetic, mut gravity) = (0.0, 0.0);
         for i in 0..n {
             let (xi, vi) = (&x[d * i..d * i + d], &v[d * i..d * i + d]);

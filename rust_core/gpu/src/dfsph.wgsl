@@ -151,26 +151,6 @@ const TRUNCATED: u32 = 11u;
 @group(0) @binding(15) var<storage, read_write> nbr: array<u32>;
 @group(0) @binding(16) var<storage, read_write> nlen: array<u32>;
 
-fn index(g: vec3<u32>) -> u32 {
-    return g.x + 65535u * WG * g.y;
-}
-
-fn coords(c: u32) -> vec3<u32> {
-    return vec3<u32>(c % P.cx, (c / P.cx) % P.cy, c / (P.cx * P.cy));
-}
-
-fn flat(c: vec3<u32>) -> u32 {
-    return c.x + P.cx * (c.y + P.cy * c.z);
-}
-
-fn lo_of(c: u32) -> u32 {
-    return max(c, 1u) - 1u;
-}
-
-fn hi_of(c: u32, m: u32) -> u32 {
-    return min(c + 1u, m - 1u);
-}
-
 // Sorted vector field f of slot s (z = 0 in 2D).
 fn vget(f: u32, s: u32) -> vec3<real> {
     let d = P.dim;
@@ -710,8 +690,8 @@ fn forces(@builtin(global_invocation_id) gid: vec3<u32>) {
     sset(KSUM, k, 0.0);
 }
 
-// Step 5: the drift x' = x + dt v (v the density solve's result), the box (as sph.wgsl's
-// `integrate`: onto the face crossed, −e v_n, friction), written back in the caller's order;
+// Step 5: the drift x' = x + dt v (v the density solve's result), the box (`box_faces`, as
+// sph.wgsl's `integrate`: onto the face crossed, −e v_n, friction), written back in the caller's order;
 // the warm starts and the pressure p = ρ² (Σκ/ρ + Σκ^v/ρ) (the CPU's `solve`); the books: each
 // velocity change's work over the step's mean velocity v̄ = (v0 + v1)/2 (the CPU's
 // `books_step`): −m (v_div − v0)·v̄, −m (v1 − v*)·v̄, −m dt a·v̄, and the box's.
@@ -757,42 +737,7 @@ fn drift(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (outside) {
         let x0 = xn;
         let vb = vn;
-        let e = P.restitution;
-        let mu = P.friction;
-        for (var a = 0u; a < d; a = a + 1u) {
-            var out: real = 0.0;
-            if (xn[a] < lo[a]) {
-                xn[a] = lo[a];
-                out = -1.0;
-            } else if (xn[a] > hi[a]) {
-                xn[a] = hi[a];
-                out = 1.0;
-            } else {
-                continue;
-            }
-            let un = vn[a] * out;
-            if (un > 0.0) {
-                let dvn = (1.0 + e) * un;
-                vn[a] = vn[a] * -e;
-                if (mu > 0.0) {
-                    var vt2: real = 0.0;
-                    for (var b = 0u; b < d; b = b + 1u) {
-                        if (b != a) {
-                            vt2 = vt2 + vn[b] * vn[b];
-                        }
-                    }
-                    if (vt2 > 0.0) {
-                        let vt = sqrt(vt2);
-                        let sc = max(vt - mu * dvn, 0.0) / vt;
-                        for (var b = 0u; b < d; b = b + 1u) {
-                            if (b != a) {
-                                vn[b] = vn[b] * sc;
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        box_faces(&xn, &vn);
         // The kinetic energy the faces took, and gravity's work over the projection (the
         // potential −m g·x changes by it: the books stay balanced).
         books[3u * n + i] = books[3u * n + i] + (0.5 * m * (dot3(vb, vb) - dot3(vn, vn)) + m * dot3(grav, xn - x0));

@@ -26,6 +26,7 @@ mod maxima;
 pub mod particles;
 pub mod shape;
 pub mod sph;
+mod tank;
 #[doc(hidden)]
 pub use grid::set_threads_for_tests as set_grid_threads_for_tests;
 pub mod wave;

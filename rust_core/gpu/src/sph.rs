@@ -44,9 +44,10 @@
 //!
 //! Not here (the CPU has them): moving wall particles (rigid bodies' boundary samples), several
 //! fluids sharing one search, per-particle masses, the time step limit, checkpoints.
-use crate::cells::{spread, CellBuild};
+use crate::cells::spread;
 use crate::maxima::Maxima;
 use crate::particles::Halt;
+use crate::tank::{Region, Tank};
 use crate::{Bind, Chunk, Gpu, GpuError, Precision, Result};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -229,7 +230,12 @@ impl SphParams {
     /// Cells of the box along x, y, z (z = 1 in 2D), each 2h wide (the support): the cell list
     /// covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported` past 2^31 cells.
     pub fn cells(&self) -> Result<[usize; 3]> {
-        box_cells(self.dim, self.h, &self.lower, &self.upper)
+        crate::tank::box_cells(self.dim, self.h, &self.lower, &self.upper)
+    }
+
+    /// The box and resolution of the fluid's `Tank`.
+    pub(crate) fn region(&self) -> Region {
+        Region { dim: self.dim, h: self.h, lower: self.lower, upper: self.upper, number_density: self.rho0 / self.mass }
     }
 }
 
@@ -263,12 +269,8 @@ pub struct Sph {
     gpu: Arc<Gpu>,
     precision: Precision,
     p: SphParams,
-    n: usize,
-    /// Wall particles kept (within reach of the box).
-    walls: usize,
-    cells: [usize; 3],
-    pos: wgpu::Buffer,
-    vel: wgpu::Buffer,
+    /// The state, the cell list, the walls and the neighbour lists.
+    tank: Tank,
     rho: wgpu::Buffer,
     /// The first particle whose state stopped being finite (u32::MAX: none).
     flag: wgpu::Buffer,
@@ -279,18 +281,13 @@ pub struct Sph {
     params: wgpu::Buffer,
     staging: wgpu::Buffer,
     sph_bind: wgpu::BindGroup,
-    /// cells.wgsl's build (`CellBuild`).
-    cell_build: CellBuild,
     /// sph.wgsl's gather, density, integrate.
     sph_pipes: Vec<wgpu::ComputePipeline>,
     /// The step limit's maxima over `vel` and the squared accelerations in `books`.
     maxima: Maxima,
     /// Steps per submission (about 0.1 s each).
     chunk: Chunk,
-    /// Entries of each particle's neighbour list (`list_cap`; 0: none).
-    cap: u32,
-    /// The cell list, the cell-ordered copies, the cell list's parameters, the walls and the
-    /// neighbour lists (bound only).
+    /// The cell-ordered copies (bound only).
     _keep: Vec<wgpu::Buffer>,
 }
 
@@ -335,149 +332,72 @@ impl Sph {
     ) -> Result<Self> {
         params.validate()?;
         gpu.check_precision(precision)?;
-        let d = params.dim;
-        if !positions.len().is_multiple_of(d) || velocities.len() != positions.len() {
-            return Err(invalid(
-                "positions",
-                format_args!(
-                    "{} positions and {} velocities: both must hold dim = {d} values per particle",
-                    positions.len(),
-                    velocities.len()
-                ),
-            ));
-        }
-        let n = positions.len() / d;
-        if n as u64 >= 1 << 31 {
-            return Err(invalid("positions", format_args!("{n} particles: at most 2^31")));
-        }
-        if let Some(k) = positions.iter().chain(velocities).position(|v| !v.is_finite()) {
-            let (what, k) = if k < positions.len() { ("positions", k) } else { ("velocities", k - positions.len()) };
-            return Err(invalid(what, format_args!("particle {} has a non-finite value", k / d)));
-        }
-        for (i, x) in positions.chunks_exact(d).enumerate() {
-            if (0..d).any(|a| !(x[a] >= params.lower[a] && x[a] <= params.upper[a])) {
-                return Err(invalid("positions", format_args!("particle {i} at {x:?} is outside the box")));
-            }
-        }
-        let cells = params.cells()?;
-        let ncells = cells.iter().product::<usize>() as u64;
-        let (wall_data, wall_starts) = sort_walls((params.dim, params.h, &params.lower), cells, walls, psi)?;
-        let nw = wall_starts.last().copied().unwrap_or(0) as usize;
+        let region = params.region();
+        let tank = Tank::new(&gpu, precision, "SPH", &region, (positions, velocities), (walls, psi))?;
+        let (n, d) = (tank.n, params.dim);
         let rb = precision.bytes();
         let nn = n as u64;
         use wgpu::BufferUsages as U;
         let st = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-        let pos = gpu.buffer("SPH positions", nn * d as u64 * rb, st)?;
-        let vel = gpu.buffer("SPH velocities", nn * d as u64 * rb, st)?;
         let rho = gpu.buffer("SPH densities", nn * rb, st)?;
         let flag = gpu.buffer("SPH divergence flag", 16, st)?;
         let books = gpu.buffer("SPH energy books", (3 * nn * rb).max(16), st)?;
-        let cell_of = gpu.buffer("SPH cells", nn * 4, st)?;
-        let counts = gpu.buffer("SPH cell counts", ncells * 4, st)?;
-        let start = gpu.buffer("SPH cell starts", (ncells + 1) * 4, st)?;
-        let order = gpu.buffer("SPH cell order", nn * 4, st)?;
-        let found = gpu.buffer("SPH unused neighbour counts", 16, st)?;
         let spos = gpu.buffer("SPH sorted positions", nn * d as u64 * rb, st)?;
         let svel = gpu.buffer("SPH sorted velocities", nn * d as u64 * rb, st)?;
         let srho = gpu.buffer("SPH sorted densities", nn * rb, st)?;
         let spr = gpu.buffer("SPH sorted p/rho^2", nn * rb, st)?;
-        let cell_params = gpu.buffer("SPH cell list parameters", 32 + 8 * rb, U::UNIFORM | U::COPY_DST)?;
         let params_buf = gpu.buffer("SPH parameters", 48 + 24 * rb, U::UNIFORM | U::COPY_DST)?;
-        let wall = gpu.buffer("SPH wall particles", (wall_data.len() as u64 * rb).max(16), st)?;
-        let wall_start = gpu.buffer("SPH wall cell starts", (ncells + 1) * 4, st)?;
-        let cap = list_cap(d, params.h, params.rho0 / params.mass, n, gpu.adapter());
-        let (cap, nbr) = neighbour_lists(&gpu, "SPH neighbour lists", cap, n)?;
-        let nlen = gpu.buffer("SPH neighbour counts", nn.max(1) * 4, st)?;
         let staging = gpu.buffer("SPH read-back", (nn * d as u64 * rb).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
         let uniform = Uniform { dynamic: false };
-        // cells.wgsl's build kernels with its layout; `neighbours` (its test's check) is not run.
-        let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
-        let cell_build = CellBuild::new(&gpu, precision, "SPH cell list", cell_bufs, ncells as usize, &[])?;
         let (layout, sph_pipes) = gpu.kernels(
             "sph.wgsl",
             precision,
-            include_str!("sph.wgsl"),
+            concat!(include_str!("sph.wgsl"), include_str!("cell_walk.wgsl"), include_str!("box_faces.wgsl")),
             &[uniform, W, W, W, R, R, R, W, W, W, W, W, W, R, R, W, W],
             &["gather", "density", "integrate"],
         );
+        let t = &tank;
         let sph_bind = crate::grid::bind_group(
             &gpu,
             "SPH",
             &layout,
             &[
                 &params_buf,
-                &pos,
-                &vel,
+                &t.pos,
+                &t.vel,
                 &rho,
-                &cell_of,
-                &start,
-                &order,
+                &t.cell_of,
+                &t.start,
+                &t.order,
                 &spos,
                 &svel,
                 &srho,
                 &spr,
                 &flag,
                 &books,
-                &wall,
-                &wall_start,
-                &nbr,
-                &nlen,
+                &t.wall,
+                &t.wall_start,
+                &t.nbr,
+                &t.nlen,
             ],
         );
-        let (lo, cell) = (params.lower, 2.0 * params.h);
-        let grid = [n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32];
-        gpu.write_params(
-            precision,
-            &cell_params,
-            &[grid[0], grid[1], grid[2], grid[3], grid[4], 0, 0, 0],
-            &[lo[0], lo[1], lo[2], cell, cell],
-        );
-        if n > 0 {
-            gpu.upload(precision, &pos, positions);
-            gpu.upload(precision, &vel, velocities);
-        }
-        if nw > 0 {
-            gpu.upload(precision, &wall, &wall_data);
-        }
-        gpu.queue.write_buffer(&wall_start, 0, bytemuck::cast_slice(&wall_starts));
-        let maxima = Maxima::new(&gpu, precision, n, d, &vel, Some((&books, 2 * nn)))?;
+        let maxima = Maxima::new(&gpu, precision, n, d, &t.vel, Some((&books, 2 * nn)))?;
         let s = Self {
             gpu,
             precision,
             p: params,
-            n,
-            walls: nw,
-            cells,
+            tank,
             maxima,
-            pos,
-            vel,
             rho,
             flag,
             books,
             params: params_buf,
             staging,
             sph_bind,
-            cell_build,
             sph_pipes,
             chunk: Chunk::new(MAX_CHUNK),
-            cap,
-            _keep: vec![
-                cell_of,
-                counts,
-                start,
-                order,
-                found,
-                spos,
-                svel,
-                srho,
-                spr,
-                cell_params,
-                wall,
-                wall_start,
-                nbr,
-                nlen,
-            ],
+            _keep: vec![spos, svel, srho, spr],
         };
         s.write_params(0.0);
         s.gpu.wait()?;
@@ -485,10 +405,10 @@ impl Sph {
     }
 
     pub fn len(&self) -> usize {
-        self.n
+        self.tank.n
     }
     pub fn is_empty(&self) -> bool {
-        self.n == 0
+        self.tank.n == 0
     }
     pub fn precision(&self) -> Precision {
         self.precision
@@ -498,21 +418,21 @@ impl Sph {
     }
     /// Wall particles on the device: those of `with_walls` within reach (2h) of the box.
     pub fn n_walls(&self) -> usize {
-        self.walls
+        self.tank.walls
     }
     /// Cells of the cell list along x, y, z (each 2h wide).
     pub fn cells(&self) -> [usize; 3] {
-        self.cells
+        self.tank.cells
     }
     /// Entries of each particle's neighbour list (see `list_cap`; 0: `integrate` reads the cells).
     pub fn list_cap(&self) -> u32 {
-        self.cap
+        self.tank.cap
     }
     /// Sets the neighbour lists' length (at most the one `with_walls` chose; 0: none), for
     /// tests: a particle with more neighbours reads the cells, and the result is the same.
     #[doc(hidden)]
     pub fn set_list_cap(&mut self, cap: u32) {
-        self.cap = cap.min(self.cap);
+        self.tank.set_list_cap(cap);
     }
 
     /// The SPH kernels' parameter block, with time step `dt` (s); every constant derived from
@@ -522,9 +442,9 @@ impl Sph {
         let h = p.h;
         let tiny = if self.precision == Precision::F32 { 1e-30 } else { 1e-300 };
         let sigma = p.kernel.sigma(h, p.dim);
-        let c = self.cells;
+        let c = self.tank.cells;
         let ints = [
-            self.n as u32,
+            self.tank.n as u32,
             p.dim as u32,
             c[0] as u32,
             c[1] as u32,
@@ -532,7 +452,7 @@ impl Sph {
             (p.kernel == Kernel::WendlandC2) as u32,
             p.gamma,
             p.clamp as u32,
-            self.cap,
+            self.tank.cap,
             0,
             0,
             0,
@@ -568,8 +488,8 @@ impl Sph {
 
     /// Records the cell list's build and the density pass at the current positions.
     fn record_density(&self, pass: &mut wgpu::ComputePass) {
-        self.cell_build.record(pass, self.n);
-        let n = spread(self.n);
+        self.tank.cell_build.record(pass, self.tank.n);
+        let n = spread(self.tank.n);
         pass.set_bind_group(0, &self.sph_bind, &[]);
         for pipe in &self.sph_pipes[..2] {
             pass.set_pipeline(pipe);
@@ -582,7 +502,7 @@ impl Sph {
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            let n = spread(self.n);
+            let n = spread(self.tank.n);
             for _ in 0..steps {
                 self.record_density(&mut pass);
                 pass.set_pipeline(&self.sph_pipes[2]);
@@ -602,7 +522,7 @@ impl Sph {
         if !(dt.is_finite() && dt > 0.0) {
             return Err((0, Halt::Failed(invalid("dt", format_args!("{dt} must be finite and > 0")))));
         }
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok(steps);
         }
         self.write_params(dt);
@@ -628,7 +548,7 @@ impl Sph {
     /// Positions (m) and velocities (m/s), flat (n·dim), and densities (kg/m^dim, summed now at
     /// these positions), in the caller's particle order, as f64.
     pub fn read(&self) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((Vec::new(), Vec::new(), Vec::new()));
         }
         let mut enc = self.gpu.device.create_command_encoder(&Default::default());
@@ -638,17 +558,17 @@ impl Sph {
         }
         self.gpu.queue.submit([enc.finish()]);
         let (x, v) = self.read_state()?;
-        Ok((x, v, self.gpu.read_reals(self.precision, &self.rho, &self.staging, self.n)?))
+        Ok((x, v, self.gpu.read_reals(self.precision, &self.rho, &self.staging, self.tank.n)?))
     }
 
     /// Positions and velocities alone (as `read`), without the density pass that `read` runs:
     /// what a frame or a checkpoint needs.
     pub fn read_state(&self) -> Result<(Vec<f64>, Vec<f64>)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((Vec::new(), Vec::new()));
         }
-        let (p, s, nd) = (self.precision, &self.staging, self.n * self.p.dim);
-        Ok((self.gpu.read_reals(p, &self.pos, s, nd)?, self.gpu.read_reals(p, &self.vel, s, nd)?))
+        let (p, s, nd) = (self.precision, &self.staging, self.tank.n * self.p.dim);
+        Ok((self.gpu.read_reals(p, &self.tank.pos, s, nd)?, self.gpu.read_reals(p, &self.tank.vel, s, nd)?))
     }
 
     /// The step limit's inputs: the largest speed now (m/s) and the largest squared pressure
@@ -664,25 +584,25 @@ impl Sph {
     /// on the host: the reference the device's reduction is tested and timed against.
     #[doc(hidden)]
     pub fn extremes_from_read_back(&self) -> Result<(f64, f64)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((0.0, 0.0));
         }
         let d = self.p.dim;
-        let v = self.gpu.read_reals(self.precision, &self.vel, &self.staging, d * self.n)?;
+        let v = self.gpu.read_reals(self.precision, &self.tank.vel, &self.staging, d * self.tank.n)?;
         let vmax = v.chunks_exact(d).map(|u| u.iter().map(|c| c * c).sum::<f64>()).fold(0.0, f64::max).sqrt();
-        let at = 2 * self.n as u64 * self.precision.bytes();
-        let a2 = self.gpu.read_reals_at(self.precision, &self.books, at, &self.staging, self.n)?;
+        let at = 2 * self.tank.n as u64 * self.precision.bytes();
+        let a2 = self.gpu.read_reals_at(self.precision, &self.books, at, &self.staging, self.tank.n)?;
         Ok((vmax, a2.into_iter().fold(0.0, f64::max)))
     }
 
     /// The dissipated books alone (viscous, collisions), J: the per-particle accumulators read
     /// back and summed in index order, as `books` sums them (a checkpoint needs no densities).
     pub fn dissipated(&self) -> Result<(f64, f64)> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok((0.0, 0.0));
         }
-        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.n)?;
-        let (viscous, walls) = per.split_at(self.n);
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.tank.n)?;
+        let (viscous, walls) = per.split_at(self.tank.n);
         Ok((viscous.iter().sum(), walls.iter().sum()))
     }
 
@@ -692,20 +612,20 @@ impl Sph {
     /// since `new`, per particle, summed here in the same order. Deterministic: the same bits
     /// for the same run on one adapter.
     pub fn books(&self) -> Result<SphBooks> {
-        if self.n == 0 {
+        if self.tank.n == 0 {
             return Ok(SphBooks::default());
         }
         let (x, v, rho) = self.read()?;
-        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.n)?;
+        let per = self.gpu.read_reals(self.precision, &self.books, &self.staging, 2 * self.tank.n)?;
         let (p, d, m) = (&self.p, self.p.dim, self.p.mass);
         let (mut kinetic, mut gravity, mut internal) = (0.0, 0.0, 0.0);
-        for i in 0..self.n {
+        for i in 0..self.tank.n {
             let (xi, vi) = (&x[d * i..d * i + d], &v[d * i..d * i + d]);
             kinetic += m * vi.iter().map(|u| u * u).sum::<f64>();
             gravity -= m * (0..d).map(|a| p.gravity[a] * xi[a]).sum::<f64>();
             internal += m * p.internal_energy(rho[i]);
         }
-        let (viscous, walls) = per.split_at(self.n);
+        let (viscous, walls) = per.split_at(self.tank.n);
         Ok(SphBooks {
             kinetic: 0.5 * kinetic,
             internal,
@@ -714,118 +634,6 @@ impl Sph {
             collisions: walls.iter().sum(),
         })
     }
-}
-
-/// Cells along x, y, z (z = 1 in 2D) of a box [lower, upper] in `dim` dimensions, each 2h wide
-/// (the support): the cell list covers [lower, lower + cells · 2h] ⊇ the box. `Unsupported`
-/// naming `h` past 2^31 cells.
-pub(crate) fn box_cells(dim: usize, h: f64, lower: &[f64; 3], upper: &[f64; 3]) -> Result<[usize; 3]> {
-    let mut n = [1usize; 3];
-    let mut total = 1u64;
-    for (a, na) in n.iter_mut().enumerate().take(dim) {
-        let m = ((upper[a] - lower[a]) / (2.0 * h)).ceil().max(1.0);
-        if m >= 2f64.powi(31) {
-            return Err(invalid("h", format_args!("{m} cells of 2h along axis {a}: at most 2^31 cells")));
-        }
-        *na = m as usize;
-        total = total.saturating_mul(m as u64);
-    }
-    if total >= 1 << 31 {
-        return Err(invalid("h", format_args!("{total} cells of 2h in the box: at most 2^31")));
-    }
-    Ok(n)
-}
-
-/// Entries of each particle's neighbour list (`sph.wgsl`, `dfsph.wgsl`): 1.3 × a full
-/// neighbourhood, the ball of radius 2h holding `density` particles per unit volume (1/m^dim;
-/// a lattice at rest holds a little more than the ball's mean: 80 against 73.6 in 3D at h =
-/// 1.3 Δx), a multiple of 4; 0 (no lists) where that is over 4096 or the lists would not fit
-/// one binding of the adapter, as lists too short for most particles would be read past for the
-/// cells anyway. The lists are an index only: a particle with more neighbours reads the cells.
-pub(crate) fn list_cap(dim: usize, h: f64, density: f64, n: usize, adapter: &crate::AdapterSummary) -> u32 {
-    use std::f64::consts::PI;
-    let ball = if dim == 2 { PI * 4.0 * h * h } else { 4.0 / 3.0 * PI * 8.0 * h * h * h };
-    let want = (1.3 * ball * density).ceil().max(8.0);
-    let cap = (want as u64).div_ceil(4) * 4;
-    let fits = adapter.max_storage_binding.min(adapter.max_buffer) / (4 * n.max(1) as u64);
-    if want > 4096.0 || cap > fits {
-        0
-    } else {
-        cap as u32
-    }
-}
-
-/// The neighbour lists' buffer of `n` particles, `cap` entries each (`list_cap`), and the cap
-/// it holds: where the device has no room for it, none (cap 0: the passes read the cells, with
-/// the same result, more slowly), as the lists are an index, not state.
-pub(crate) fn neighbour_lists(gpu: &Gpu, what: &str, cap: u32, n: usize) -> Result<(u32, wgpu::Buffer)> {
-    use wgpu::BufferUsages as U;
-    let usage = U::STORAGE | U::COPY_SRC | U::COPY_DST;
-    match gpu.buffer(what, (n as u64 * cap as u64).max(1) * 4, usage) {
-        Err(GpuError::OutOfMemory { .. }) if cap > 0 => Ok((0, gpu.buffer(what, 4, usage)?)),
-        b => Ok((cap, b?)),
-    }
-}
-
-/// The wall particles `walls` (flat, `dim` each) with their Ψ `psi`, checked, in the order the
-/// shaders (sph, dfsph) read them: sorted by (cell, index) over the fluid's `cells` of 2h from the box's lower
-/// corner, a wall within one cell outside the grid clamped into its outer cell (still a neighbour
-/// cell of every cell within 2h of it), one farther dropped. Returns the walls as `dim`
-/// coordinates then Ψ each, and per cell its first wall (`cells` + 1 entries, the last the count).
-pub(crate) fn sort_walls(
-    (d, h, lower): (usize, f64, &[f64; 3]),
-    cells: [usize; 3],
-    walls: &[f64],
-    psi: &[f64],
-) -> Result<(Vec<f64>, Vec<u32>)> {
-    if !walls.len().is_multiple_of(d) {
-        return Err(invalid(
-            "walls",
-            format_args!("{} values: must hold dim = {d} values per wall particle", walls.len()),
-        ));
-    }
-    let m = walls.len() / d;
-    if m as u64 >= 1 << 31 {
-        return Err(invalid("walls", format_args!("{m} wall particles: at most 2^31")));
-    }
-    if psi.len() != m {
-        return Err(invalid("psi", format_args!("{} values for {m} wall particles: one each", psi.len())));
-    }
-    if let Some(k) = walls.iter().position(|v| !v.is_finite()) {
-        return Err(invalid("walls", format_args!("wall particle {} has a non-finite value", k / d)));
-    }
-    if let Some(b) = psi.iter().position(|v| !(v.is_finite() && *v > 0.0)) {
-        return Err(invalid("psi", format_args!("entry {b} is {} (must be finite and > 0)", psi[b])));
-    }
-    let cell = 2.0 * h;
-    let mut keyed: Vec<(usize, usize)> = Vec::new();
-    'walls: for (b, w) in walls.chunks_exact(d).enumerate() {
-        let (mut flat, mut stride) = (0usize, 1usize);
-        for a in 0..d {
-            let f = ((w[a] - lower[a]) / cell).floor();
-            if !(f >= -1.0 && f <= cells[a] as f64) {
-                continue 'walls;
-            }
-            flat += stride * (f.max(0.0) as usize).min(cells[a] - 1);
-            stride *= cells[a];
-        }
-        keyed.push((flat, b));
-    }
-    keyed.sort_unstable();
-    let ncells: usize = cells.iter().product();
-    let mut starts = vec![0u32; ncells + 1];
-    for &(c, _) in &keyed {
-        starts[c + 1] += 1;
-    }
-    for c in 0..ncells {
-        starts[c + 1] += starts[c];
-    }
-    let mut data = Vec::with_capacity(keyed.len() * (d + 1));
-    for &(_, b) in &keyed {
-        data.extend_from_slice(&walls[d * b..d * b + d]);
-        data.push(psi[b]);
-    }
-    Ok((data, starts))
 }
 
 #[cfg(test)]
@@ -842,26 +650,5 @@ mod tests {
         assert_eq!(p.cells().unwrap(), [39, 39, 1]);
         assert_eq!(Kernel::by_name("wendland_c2").unwrap(), Kernel::WendlandC2);
         assert!(Kernel::by_name("gauss").unwrap_err().to_string().contains("cubic_spline, wendland_c2"));
-    }
-
-    #[test]
-    fn the_neighbour_lists_hold_a_neighbourhood_and_a_margin_or_nothing() {
-        let a = |binding: u64| crate::AdapterSummary {
-            name: "test".into(),
-            backend: "none".into(),
-            kind: "cpu".into(),
-            driver: String::new(),
-            f64: false,
-            max_storage_binding: binding,
-            max_buffer: binding,
-        };
-        let (dx, big) = (0.01, a(1 << 31));
-        // h = 1.3 Δx: 1.3 × 21.2 and 1.3 × 73.6 neighbours, to a multiple of 4 (a lattice holds 20 and 80).
-        assert_eq!(list_cap(2, 1.3 * dx, 1.0 / (dx * dx), 1000, &big), 28);
-        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &big), 96);
-        // Lists that would not fit one binding, or of more than 4096 entries: none.
-        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &a(96 * 4 * 1000 - 1)), 0);
-        assert_eq!(list_cap(3, 1.3 * dx, 1.0 / (dx * dx * dx), 1000, &a(96 * 4 * 1000)), 96);
-        assert_eq!(list_cap(3, 6.0 * dx, 1.0 / (dx * dx * dx), 10, &big), 0);
     }
 }

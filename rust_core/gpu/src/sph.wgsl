@@ -89,19 +89,6 @@ const WG: u32 = 64u;
 @group(0) @binding(15) var<storage, read_write> nbr: array<u32>;
 @group(0) @binding(16) var<storage, read_write> nlen: array<u32>;
 
-fn index(g: vec3<u32>) -> u32 {
-    return g.x + 65535u * WG * g.y;
-}
-
-// The cell coordinates of a flat cell index (cells.wgsl's `flat`, inverted).
-fn coords(c: u32) -> vec3<u32> {
-    return vec3<u32>(c % P.cx, (c / P.cx) % P.cy, c / (P.cx * P.cy));
-}
-
-fn flat(c: vec3<u32>) -> u32 {
-    return c.x + P.cx * (c.y + P.cy * c.z);
-}
-
 // Cell-ordered position (or velocity) of slot s, z = 0 in 2D.
 fn at(a: u32, s: u32) -> vec3<real> {
     let d = P.dim;
@@ -164,15 +151,6 @@ fn powi(s: real) -> real {
         r = r * s;
     }
     return r;
-}
-
-// The range of cells around coordinate c along an axis of m cells.
-fn lo_of(c: u32) -> u32 {
-    return max(c, 1u) - 1u;
-}
-
-fn hi_of(c: u32, m: u32) -> u32 {
-    return min(c + 1u, m - 1u);
 }
 
 // Slot k: the state of particle order[k], copied into cell order.
@@ -386,42 +364,7 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
     if (outside) {
         let x0 = xn;
         let v0 = vn;
-        let e = P.restitution;
-        let mu = P.friction;
-        for (var a = 0u; a < d; a = a + 1u) {
-            var out: real = 0.0;
-            if (xn[a] < lo[a]) {
-                xn[a] = lo[a];
-                out = -1.0;
-            } else if (xn[a] > hi[a]) {
-                xn[a] = hi[a];
-                out = 1.0;
-            } else {
-                continue;
-            }
-            let un = vn[a] * out;
-            if (un > 0.0) {
-                let dvn = (1.0 + e) * un;
-                vn[a] = vn[a] * -e;
-                if (mu > 0.0) {
-                    var vt2: real = 0.0;
-                    for (var b = 0u; b < d; b = b + 1u) {
-                        if (b != a) {
-                            vt2 = vt2 + vn[b] * vn[b];
-                        }
-                    }
-                    if (vt2 > 0.0) {
-                        let vt = sqrt(vt2);
-                        let sc = max(vt - mu * dvn, 0.0) / vt;
-                        for (var b = 0u; b < d; b = b + 1u) {
-                            if (b != a) {
-                                vn[b] = vn[b] * sc;
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        box_faces(&xn, &vn);
         var ke0: real = 0.0;
         var ke1: real = 0.0;
         var work: real = 0.0;

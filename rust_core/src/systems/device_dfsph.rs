@@ -14,6 +14,7 @@
 //! particle). The warm starts travel as the CPU's term history (`term_history`), so a scene file
 //! written on the device continues on the CPU and the other way round; the device rows of the
 //! file (`save`: positions, velocities, the books so far) continue bit for bit on the device.
+use super::device_sph::{floats, fluid_records};
 use super::{saved, Arrays, EnergyReport, Halt, HeldTerms, Snapshot, System};
 use crate::error::{invalid, Result};
 use crate::sph::dfsph::{relaxation, smoothing};
@@ -73,11 +74,6 @@ pub struct DeviceDfsph {
     base: Base,
 }
 
-/// The floats under `key` (a copy: the records stay as they are).
-fn floats(p: &Params, key: &str) -> Result<Vec<Real>> {
-    p.try_clone("step")?.take_floats(key)
-}
-
 impl DeviceDfsph {
     /// The scene's particles (`x`, `v`: flat, n·dim; `mass`, `pinned`), the CPU fluid term's
     /// history at the move (`history`: 3n values, `None` for zeros), its force terms and
@@ -104,74 +100,12 @@ impl DeviceDfsph {
         colliders: &[(String, Params)],
     ) -> Result<Self> {
         let precision = super::device::precision_of(precision)?;
-        let n = mass.len();
-        let mut fluid = None;
-        let mut gravity = None;
-        let mut gravity_first = false;
-        for (kind, tname, p) in terms {
-            match kind.as_str() {
-                "dfsph" if fluid.is_none() => fluid = Some((tname.clone(), p)),
-                "gravity" if gravity.is_none() => {
-                    gravity_first = fluid.is_none();
-                    gravity = Some((tname.clone(), p));
-                }
-                "dfsph" | "gravity" => {
-                    return Err(invalid(
-                        tname,
-                        format!("the GPU path's DFSPH holds one fluid and one gravity term; {tname:?} is a second {kind:?}"),
-                    ))
-                }
-                _ => {
-                    return Err(invalid(
-                        tname,
-                        format!("the GPU path's DFSPH runs with a uniform gravity alone; it has no kernel for {kind:?} beside a fluid"),
-                    ))
-                }
-            }
-        }
-        let Some((fname, fp)) = fluid else {
-            return Err(invalid("terms", "no DFSPH fluid to move"));
-        };
-        if integrator != "semi_implicit_euler" {
-            return Err(invalid(
-                "integrator",
-                format!(
-                    "the GPU path's DFSPH steps by semi-implicit Euler (the CPU's scheme for it), not {integrator:?}"
-                ),
-            ));
-        }
-        let boxes: Vec<&Params> = colliders.iter().filter(|c| c.0 == "box").map(|c| &c.1).collect();
-        if boxes.len() != 1 || colliders.len() != 1 {
-            return Err(invalid(
-                "colliders",
-                "the GPU path's DFSPH needs exactly one Box collider (its walls and the cells' extent) and no other",
-            ));
-        }
-        let (first, count) = (fp.number("first")?, fp.number("n")?);
-        if first != 0.0 || count as usize != n {
-            return Err(invalid("particles", "the GPU path's DFSPH holds the fluid's particles alone"));
-        }
-        if pinned.iter().any(|&p| p) {
-            return Err(invalid("pinned", "the GPU path's DFSPH has no pinned particles"));
-        }
-        let m = mass.first().copied().unwrap_or(1.0);
-        if mass.iter().any(|&mi| mi != m) {
-            return Err(invalid("masses", "the GPU path's DFSPH takes particles of one mass (the fluid's)"));
-        }
+        let r = fluid_records(("DFSPH", "dfsph"), dim, integrator, mass, pinned, terms, colliders)?;
+        let (fname, fp) = r.fluid;
         let iterations = fp.number("max_iterations")?;
         if iterations.fract() != 0.0 || !(1.0..=100_000.0).contains(&iterations) {
             return Err(invalid("max_iterations", format!("expected a whole number in 1..=100000, got {iterations}")));
         }
-        let b = boxes[0];
-        let three = |s: &[Real]| {
-            let mut a = [0.0; 3];
-            a[..dim].copy_from_slice(&s[..dim]);
-            a
-        };
-        let g = match &gravity {
-            Some((_, p)) => three(&floats(p, "g")?),
-            None => [0.0; 3],
-        };
         // The CPU's own coefficients of Akinci et al. (2013), from the fluid's σ and adhesion.
         let (h, rho0) = (fp.number("h")?, fp.number("density")?);
         let (sigma, adhesion) = (fp.number("surface_tension")?, fp.number("adhesion")?);
@@ -179,7 +113,7 @@ impl DeviceDfsph {
         let params = DfsphParams {
             dim,
             h,
-            mass: m,
+            mass: r.mass,
             rho0,
             alpha: fp.number("viscosity")?,
             c0: fp.number("sound_speed")?,
@@ -189,11 +123,11 @@ impl DeviceDfsph {
             density_tol: fp.number("density_error")?,
             divergence_tol: fp.number("divergence_error")?,
             max_iterations: iterations as u32,
-            gravity: g,
-            lower: three(&floats(b, "lower")?),
-            upper: three(&floats(b, "upper")?),
-            restitution: b.number("restitution")?,
-            friction: b.number("friction")?,
+            gravity: r.g,
+            lower: r.lower,
+            upper: r.upper,
+            restitution: r.restitution,
+            friction: r.friction,
             cohesion: surface.gamma,
             cohesion_norm: surface.norm,
             curvature: surface.c,
@@ -201,7 +135,7 @@ impl DeviceDfsph {
         };
         let walls = floats(fp, "walls")?;
         let psi = floats(fp, "wall_psi")?;
-        let names = Names { fluid: fname, gravity: gravity.map(|g| g.0), gravity_first };
+        let names = Names { fluid: fname, gravity: r.gravity, gravity_first: r.gravity_first };
         let mut dfsph = Dfsph::with_walls(gpu.clone(), precision, params, x, v, &walls, &psi)?;
         if let Some(h) = history {
             dfsph.set_history(h)?;

@@ -52,8 +52,116 @@ pub struct DeviceSph {
 }
 
 /// The floats under `key` (a copy: the records stay as they are).
-fn floats(p: &Params, key: &str) -> Result<Vec<Real>> {
+pub(super) fn floats(p: &Params, key: &str) -> Result<Vec<Real>> {
     p.try_clone("step")?.take_floats(key)
+}
+
+/// What a particle fluid on the device (WCSPH here, DFSPH in `device_dfsph`) takes from a
+/// scene's records, checked alike for both.
+pub(super) struct FluidRecords<'a> {
+    /// The fluid term's name and record.
+    pub fluid: (String, &'a Params),
+    /// The gravity term's name, if any, and whether it comes before the fluid's.
+    pub gravity: Option<String>,
+    pub gravity_first: bool,
+    /// Gravity (m/s², zero without the term), the particles' one mass (kg).
+    pub g: [Real; 3],
+    pub mass: Real,
+    /// The Box collider's corners (m, z zero in 2D), restitution and friction.
+    pub lower: [Real; 3],
+    pub upper: [Real; 3],
+    pub restitution: Real,
+    pub friction: Real,
+}
+
+/// Checks that the records are one fluid of term `kind` ("sph", "dfsph"; `method` names it in
+/// messages) holding every particle, of one mass, none pinned, at most one gravity term,
+/// exactly one Box collider and semi-implicit Euler, and returns what the device takes.
+/// Errors: `InvalidInput` naming what the device cannot hold.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn fluid_records<'a>(
+    (method, kind): (&str, &str),
+    dim: usize,
+    integrator: &str,
+    mass: &[Real],
+    pinned: &[bool],
+    terms: &'a [(String, String, Params)],
+    colliders: &'a [(String, Params)],
+) -> Result<FluidRecords<'a>> {
+    let n = mass.len();
+    let mut fluid = None;
+    let mut gravity = None;
+    let mut gravity_first = false;
+    for (k, tname, p) in terms {
+        if k == kind && fluid.is_none() {
+            fluid = Some((tname.clone(), p));
+        } else if k == "gravity" && gravity.is_none() {
+            gravity_first = fluid.is_none();
+            gravity = Some((tname.clone(), p));
+        } else if k == kind || k == "gravity" {
+            return Err(invalid(
+                tname,
+                format!("the GPU path's {method} holds one fluid and one gravity term; {tname:?} is a second {k:?}"),
+            ));
+        } else {
+            return Err(invalid(
+                tname,
+                format!("the GPU path's {method} runs with a uniform gravity alone; it has no kernel for {k:?} beside a fluid"),
+            ));
+        }
+    }
+    let Some((fname, fp)) = fluid else {
+        return Err(invalid("terms", format!("no {method} fluid to move")));
+    };
+    if integrator != "semi_implicit_euler" {
+        return Err(invalid(
+            "integrator",
+            format!(
+                "the GPU path's {method} steps by semi-implicit Euler (the CPU's scheme for it), not {integrator:?}"
+            ),
+        ));
+    }
+    let boxes: Vec<&Params> = colliders.iter().filter(|c| c.0 == "box").map(|c| &c.1).collect();
+    if boxes.len() != 1 || colliders.len() != 1 {
+        return Err(invalid(
+            "colliders",
+            format!(
+                "the GPU path's {method} needs exactly one Box collider (its walls and the cells' extent) and no other"
+            ),
+        ));
+    }
+    let (first, count) = (fp.number("first")?, fp.number("n")?);
+    if first != 0.0 || count as usize != n {
+        return Err(invalid("particles", format!("the GPU path's {method} holds the fluid's particles alone")));
+    }
+    if pinned.iter().any(|&p| p) {
+        return Err(invalid("pinned", format!("the GPU path's {method} has no pinned particles")));
+    }
+    let m = mass.first().copied().unwrap_or(1.0);
+    if mass.iter().any(|&mi| mi != m) {
+        return Err(invalid("masses", format!("the GPU path's {method} takes particles of one mass (the fluid's)")));
+    }
+    let three = |s: &[Real]| {
+        let mut a = [0.0; 3];
+        a[..dim].copy_from_slice(&s[..dim]);
+        a
+    };
+    let g = match &gravity {
+        Some((_, p)) => three(&floats(p, "g")?),
+        None => [0.0; 3],
+    };
+    let b = boxes[0];
+    Ok(FluidRecords {
+        fluid: (fname, fp),
+        gravity: gravity.map(|g| g.0),
+        gravity_first,
+        g,
+        mass: m,
+        lower: three(&floats(b, "lower")?),
+        upper: three(&floats(b, "upper")?),
+        restitution: b.number("restitution")?,
+        friction: b.number("friction")?,
+    })
 }
 
 impl DeviceSph {
@@ -80,88 +188,28 @@ impl DeviceSph {
         colliders: &[(String, Params)],
     ) -> Result<Self> {
         let precision = super::device::precision_of(precision)?;
-        let n = mass.len();
-        let mut fluid = None;
-        let mut gravity = None;
-        let mut gravity_first = false;
-        for (kind, tname, p) in terms {
-            match kind.as_str() {
-                "sph" if fluid.is_none() => fluid = Some((tname.clone(), p)),
-                "gravity" if gravity.is_none() => {
-                    gravity_first = fluid.is_none();
-                    gravity = Some((tname.clone(), p));
-                }
-                "sph" | "gravity" => {
-                    return Err(invalid(tname, format!("the GPU path's WCSPH holds one fluid and one gravity term; {tname:?} is a second {kind:?}")))
-                }
-                _ => {
-                    return Err(invalid(
-                        tname,
-                        format!("the GPU path's WCSPH runs with a uniform gravity alone; it has no kernel for {kind:?} beside a fluid"),
-                    ))
-                }
-            }
-        }
-        let Some((fname, fp)) = fluid else {
-            return Err(invalid("terms", "no WCSPH fluid to move"));
-        };
-        if integrator != "semi_implicit_euler" {
-            return Err(invalid(
-                "integrator",
-                format!(
-                    "the GPU path's WCSPH steps by semi-implicit Euler (the CPU's scheme for it), not {integrator:?}"
-                ),
-            ));
-        }
-        let boxes: Vec<&Params> = colliders.iter().filter(|c| c.0 == "box").map(|c| &c.1).collect();
-        if boxes.len() != 1 || colliders.len() != 1 {
-            return Err(invalid(
-                "colliders",
-                "the GPU path's WCSPH needs exactly one Box collider (its walls and the cells' extent) and no other",
-            ));
-        }
-        let (first, count) = (fp.number("first")?, fp.number("n")?);
-        if first != 0.0 || count as usize != n {
-            return Err(invalid("particles", "the GPU path's WCSPH holds the fluid's particles alone"));
-        }
-        if pinned.iter().any(|&p| p) {
-            return Err(invalid("pinned", "the GPU path's WCSPH has no pinned particles"));
-        }
-        let m = mass.first().copied().unwrap_or(1.0);
-        if mass.iter().any(|&mi| mi != m) {
-            return Err(invalid("masses", "the GPU path's WCSPH takes particles of one mass (the fluid's)"));
-        }
-        let gamma = fp.number("gamma")?;
-        let kernel = Kernel::by_name(fp.text("kernel")?)?;
-        let b = boxes[0];
-        let three = |s: &[Real]| {
-            let mut a = [0.0; 3];
-            a[..dim].copy_from_slice(&s[..dim]);
-            a
-        };
-        let g = match &gravity {
-            Some((_, p)) => three(&floats(p, "g")?),
-            None => [0.0; 3],
-        };
+        let r = fluid_records(("WCSPH", "sph"), dim, integrator, mass, pinned, terms, colliders)?;
+        let (fname, fp) = r.fluid;
         let params = SphParams {
             dim,
             h: fp.number("h")?,
-            mass: m,
+            mass: r.mass,
             rho0: fp.number("density")?,
             c0: fp.number("sound_speed")?,
-            gamma: gamma as u32,
+            gamma: fp.number("gamma")? as u32,
             alpha: fp.number("viscosity")?,
             clamp: fp.flag("clamp_pressure")?,
-            kernel,
-            gravity: g,
-            lower: three(&floats(b, "lower")?),
-            upper: three(&floats(b, "upper")?),
-            restitution: b.number("restitution")?,
-            friction: b.number("friction")?,
+            kernel: Kernel::by_name(fp.text("kernel")?)?,
+            gravity: r.g,
+            lower: r.lower,
+            upper: r.upper,
+            restitution: r.restitution,
+            friction: r.friction,
         };
         let walls = floats(fp, "walls")?;
         let psi = floats(fp, "wall_psi")?;
-        let names = Names { fluid: fname, gravity: gravity.map(|g| g.0), gravity_first, viscous: params.alpha > 0.0 };
+        let names =
+            Names { fluid: fname, gravity: r.gravity, gravity_first: r.gravity_first, viscous: params.alpha > 0.0 };
         let sph = Sph::with_walls(gpu.clone(), precision, params, x, v, &walls, &psi)?;
         Ok(Self {
             name: name.to_string(),
