@@ -282,6 +282,21 @@ def test_loop_runs_the_trail_on_from_the_end():
         pc.render.gif(rec, "x.gif", loop="yes")
 
 
+def test_a_scenes_loop_default_holds_only_where_its_frames_close_the_period():
+    # The figure-eight loops by default (one period in 150 frames of 14 steps). In 60 frames the
+    # recording ends 40 % round: a loop would join its last positions to its first with chords
+    # across the picture, so the default gives way; loop=True given still loops.
+    opts = dict(size=(280, 150), trail=50, antialias=False, colorbar=False)
+    trail_px = lambda img: int(((img - img[0, 0]) != 0).any(axis=2)[:125].sum())  # noqa: E731 - above the labels
+    dot = trail_px(next(iter(pc.render.frames(pc.scenes.figure_eight(), frames=1, **opts))).astype(int))
+    whole = trail_px(next(iter(pc.render.frames(pc.scenes.figure_eight(), **opts))).astype(int))
+    cut = trail_px(next(iter(pc.render.frames(pc.scenes.figure_eight(), frames=60, **opts))).astype(int))
+    forced = trail_px(next(iter(pc.render.frames(pc.scenes.figure_eight(), frames=60, loop=True, **opts))).astype(int))
+    assert whole > dot + 200  # the default: frame 0 shows the trails run on from the end
+    assert cut == dot  # 60 frames: no loop, frame 0 shows the bodies alone
+    assert forced > dot + 200
+
+
 def test_a_decompression_bomb_texture_is_refused_by_name(tmp_path, monkeypatch):
     # A PNG whose header claims more pixels than Pillow's bomb limit: one clear error naming
     # texture, at the CLI one line with exit code 2 (issue 44 item 9: a 20-line traceback).

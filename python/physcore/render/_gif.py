@@ -284,7 +284,9 @@ def gif(
         The animation is periodic (the frame after the last would be the first: an orbit, a
         choreography), so each trail at the start runs on from the end and the GIF loops
         without a seam (with the still camera). Default: the scene's ``render_defaults``
-        (Kepler, the figure-eight), else False.
+        (Kepler, the figure-eight) where the frames close the period (the step from the last
+        frame back to the first at most 1.5 times the largest between frames: other frames or
+        frame times than the scene's own turn it off), else False.
     look : physcore.render.Look or dict, optional
         How the particles' frames look beyond their colouring (:class:`Look`): trails that
         fade with age (``trail_fade``) and their width, springs drawn as strokes of a width,
@@ -409,6 +411,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     dim = scene.positions.shape[2] if isinstance(scene, _recording.Recording) else int(getattr(_recording.points_view(scene), "dim", 0))
     box = _extent_box(d.get("extent") if extent is None else extent, dim)
     halo = _check_halo(d.get("halo") if halo is None else halo, n_colors)
+    loop_default = loop is None
     loop = _check.flag("loop", bool(d.get("loop", False)) if loop is None else loop)
     look = check_look(look, d.get("look"))
     check_look_particles(look, n_colors, dim)
@@ -457,6 +460,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             rec.fields, rec.field_style, fsize, rec.field_mask, rec.field_extent, rec.field_points, rec.times, rec.field_label, colorbar
         )
         return _emit(fmt, path, (fr.frame(k) for k in range(rec.frames)), palette(rec.field_style), fps, rec.frames)
+    if loop and loop_default and not _closes(rec):
+        loop = False  # other frames or frame times than the scene's cut its period: a seam, not a loop
     trail = min(trail, rec.frames)
     ras = _Rasteriser(rec, size, color_by, radius, view, colorbar=colorbar, trail=trail, size_by=size_by, annotate=True,
                       title=title or None, camera=camera, arrows=arrows, fps=fps, mesh=mesh, texture=texture, theme=theme,
@@ -497,6 +502,19 @@ _WEB = ("glb", "gltf", "html")
 _WEB_OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "mesh", "theme", "view", "progress", "title")
 _VIDEO_INSTALL = 'pip install "physcore[video]"'
 
+
+
+def _closes(rec: _recording.Recording) -> bool:
+    """Whether a recording's last frame runs on into its first as each frame into the next: the
+    step from the last frame back to the first at most 1.5 times the largest step between
+    frames. A scene's ``loop`` default holds for the span it renders by default; fewer frames,
+    another frame time or another step cut the period, and its trails would draw the seam as
+    chords across the picture."""
+    x = np.asarray(rec.positions)
+    if x.shape[0] < 3 or x.shape[1] == 0:
+        return False
+    step = float(np.abs(np.diff(x, axis=0)).max())
+    return bool(np.isfinite(step) and float(np.abs(x[-1] - x[0]).max()) <= 1.5 * step)
 
 def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | None, fps: float, count: int) -> Any:
     """Writes (or yields) the palette-index frames in `fmt`: "gif", "mp4", "webm", "png" (one

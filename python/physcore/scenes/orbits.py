@@ -75,7 +75,7 @@ def kepler(
     *,
     a: float = 1.0,
     mass_ratio: float = 1e-3,
-    steps_per_orbit: int = 1000,
+    steps_per_orbit: int = 1200,
     integrator: str = "verlet",
     dt: float | None = None,
     threads: int | None = None,
@@ -86,8 +86,10 @@ def kepler(
     sqrt(G M (1 + e) / (a (1 - e))); bodies are placed in the centre-of-mass frame. Period
     P = 2π sqrt(a³ / (G M)); total energy -G m1 m2 / (2a). ``mass_ratio = 0`` pins a unit-mass
     star at the origin and makes the planet (mass 1) a test particle: then E = -1/(2a) exactly.
-    ``dt=None`` uses P / steps_per_orbit. Particle 0 is the star, 1 the planet; the render
-    draws them in their own colours (:data:`KEPLER_COLORS`: warm yellow, blue).
+    ``dt=None`` uses P / steps_per_orbit (the default 1200: the render's frames, 60 an orbit,
+    fall on whole steps, so its two orbits close and the GIF loops without a seam). Particle 0
+    is the star, 1 the planet; the render draws them in their own colours
+    (:data:`KEPLER_COLORS`: warm yellow, blue).
 
     Raises TypeError / InvalidInputError naming the argument (see the module docstring); the
     separations a(1 - e) and a(1 + e) must lie in :data:`KEPLER_RANGE` (1e-100 to 1e100 m) so
@@ -125,7 +127,8 @@ def kepler(
         scene.add_particles(x, v, masses=[m1, m2])
     scene.add(PairwiseGravity(G=1.0))
     # Plain lists: render_defaults compare with ==. The star (particle 0) glows.
-    scene.render_defaults = {"colors": list(KEPLER_COLORS), "halo": [0]}
+    # Two whole orbits of this a in the render's 120 frames.
+    scene.render_defaults = {"colors": list(KEPLER_COLORS), "halo": [0], "frame_time": 2 * period / 120}
     return scene
 
 
@@ -161,7 +164,7 @@ FIGURE_EIGHT_PERIOD = 6.32591398
 
 def figure_eight(
     *,
-    steps_per_period: int = 2000,
+    steps_per_period: int = 2100,
     integrator: str = "yoshida4",
     dt: float | None = None,
     threads: int | None = None,
@@ -171,7 +174,9 @@ def figure_eight(
     G = m = 1: the choreography found by Moore (1993) and proved by Chenciner & Montgomery (2000), with
     Simó's initial conditions (:data:`FIGURE_EIGHT_X1`, :data:`FIGURE_EIGHT_V3`). Period
     T = 6.32591398; each body follows the one ahead by T/3. Total momentum 0, energy −1.287.
-    ``dt=None`` uses T / steps_per_period, with Yoshida's fourth-order integrator.
+    ``dt=None`` uses T / steps_per_period, with Yoshida's fourth-order integrator (the default
+    2100: 14 steps a frame of the render's 150, so its one period closes and the GIF loops
+    without a seam).
     """
     steps_per_period = _count(steps_per_period, "steps_per_period", 1)
     step = FIGURE_EIGHT_PERIOD / steps_per_period if steps_per_period <= 2**1000 else 0.0
