@@ -230,8 +230,18 @@ def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[tuple
 
 
 def _summary(fn: Callable[..., Any]) -> str:
-    doc = inspect.getdoc(fn) or ""
-    return doc.strip().splitlines()[0].strip() if doc.strip() else ""
+    """The docstring's first sentence as plain text: its first paragraph joined (a summary may
+    wrap), cut after the first full stop that is not an abbreviation's ("Annu.", "Am."), reST
+    roles unwrapped to their names and literals to `name`."""
+    doc = (inspect.getdoc(fn) or "").strip()
+    para = " ".join(line.strip() for line in doc.split("\n\n", 1)[0].splitlines())
+    para = re.sub(r":[a-z]+:`~?([^`]+)`", lambda m: m.group(1).rsplit(".", 1)[-1], para)
+    para = para.replace("``", "`")
+    for end in re.finditer(r"\.(\s|$)", para):
+        word = para[: end.start()].rsplit(" ", 1)[-1]
+        if not re.fullmatch(r"\(?[A-Z][a-z]{0,4}", word):
+            return para[: end.start() + 1]
+    return para
 
 
 def _defaults_text(fn: Callable[..., Any]) -> str:
@@ -260,7 +270,7 @@ def _cmd_scenes(args: argparse.Namespace) -> int:
     width = max((len(n) for n in registry), default=0) + 2
     out = sys.stdout
     for name, fn in registry.items():
-        out.write(f"{name.ljust(width)}{_summary(fn)}\n")
+        out.write(textwrap.fill(_summary(fn), width=100, initial_indent=name.ljust(width), subsequent_indent=" " * width) + "\n")
         body = textwrap.fill(
             _defaults_text(fn),
             width=100,

@@ -69,6 +69,29 @@ def test_scenes_lists_all(capsys):
     assert "n=40" in out  # parameters with their defaults
 
 
+def test_scenes_says_each_scene_in_a_whole_sentence_of_plain_text(capsys):
+    # Each summary is the docstring's first sentence, however it wraps there (it was cut at the
+    # docstring's first line: "…coalesce; surface"), without reST markup; an abbreviation
+    # ("Annu. Rev.") does not end it.
+    assert main(["scenes"]) == 0
+    out = capsys.readouterr().out
+    width = max(len(n) for n in pc.scenes.REGISTRY) + 2
+    summaries, current = {}, None
+    for line in out.splitlines():
+        head = line[:width].strip()
+        if head in pc.scenes.REGISTRY:
+            current = head
+            summaries[current] = line[width:].strip()
+        elif current and line.startswith(" " * width) and not line.startswith(" " * (width + 2)):
+            summaries[current] += " " + line.strip()
+    assert summaries.keys() == pc.scenes.REGISTRY.keys()
+    for name, text in summaries.items():
+        assert text.endswith("."), (name, text)
+        assert "``" not in text and ":func:" not in text and ":class:" not in text, (name, text)
+    assert summaries["droplets"].endswith("pulls the merged puddle back in from the walls.")
+    assert summaries["crown"].endswith("(Worthington's splash; Yarin, Annu. Rev. Fluid Mech. 38, 2006).")
+
+
 def test_unknown_scene(tmp_path, capsys):
     assert main(["render", "nosuchscene", "-o", str(tmp_path / "x.gif")]) == 2
     err = capsys.readouterr().err
