@@ -2,10 +2,13 @@
 from __future__ import annotations
 
 import os
+import stat
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import IO, Any
+
+from ._errors import InvalidInputError
 
 __all__ = ["atomic_write", "TEMP_PREFIX", "TEMP_SUFFIX"]
 
@@ -16,7 +19,13 @@ TEMP_PREFIX = ".physcore-"
 TEMP_SUFFIX = ".tmp"
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, binary: bool = True) -> Path:
+#: What :func:`atomic_write` calls a target it refuses, by its file type.
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
+          (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, binary: bool = True,
+                 arg: str = "path") -> Path:
     """Call ``write(fh)`` on a temporary file in ``path``'s directory, then rename it onto
     ``path`` (atomic on POSIX and Windows), so ``path`` is either the old file or the complete new
     one. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is left
@@ -24,8 +33,20 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, b
     mkstemp makes 0600). Text mode writes UTF-8 with no newline translation.
 
     The temporary name does not derive from ``path``'s (see :data:`TEMP_PREFIX`), so a target
-    name of up to the file system's limit works."""
+    name of up to the file system's limit works.
+
+    An existing ``path`` must be a regular file (followed through a symbolic link, which is then
+    replaced by the new file): a directory, named pipe, device or socket there raises
+    :class:`~physcore.InvalidInputError` naming ``arg``, before anything is written (the rename
+    would have replaced a FIFO or, as root, a device node such as /dev/full by a plain file)."""
     path = Path(path)
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:  # nothing there yet, or a dangling link: the write goes on as before
+        mode = None
+    if mode is not None and not stat.S_ISREG(mode):
+        kind = next((name for test, name in _KINDS if test(mode)), "a special file")
+        raise InvalidInputError(f"{arg}: {str(path)!r} is {kind}, not a regular file; give the name of a regular file or of a new one")
     fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
     try:
         kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}

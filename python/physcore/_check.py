@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, OutOfMemoryError
 
 __all__ = [
     "MIN_NORMAL",
@@ -33,6 +33,7 @@ __all__ = [
     "array",
     "memory_limit",
     "memory",
+    "room",
     "human_bytes",
 ]
 
@@ -199,6 +200,20 @@ def memory(name: str, nbytes: float, what: str) -> None:
         need = f"about {human_bytes(nb)}" if math.isfinite(nb) else "more than float64 can count"
         raise InvalidInputError(
             f"{name}: {what} would need {need}, above physcore's limit of {human_bytes(limit)} (half the physical memory)"
+        )
+
+
+def room(name: str, nbytes: int, what: str) -> None:
+    """Refuse with :class:`OutOfMemoryError`, naming ``name``, copies of an input that would need
+    ``nbytes`` (bytes) above :func:`memory_limit`, before any is attempted: a zero-stride
+    (broadcast) array can stand for far more rows than memory holds, and numpy's copy of it
+    would raise a bare MemoryError or let the OOM killer end the process."""
+    limit = memory_limit()
+    if nbytes > limit:
+        raise OutOfMemoryError(
+            f"{name}: needs about {human_bytes(nbytes)} for {what}, above physcore's limit of "
+            f"{human_bytes(limit)} (half the physical memory). Make the input smaller",
+            int(nbytes),
         )
 
 

@@ -61,6 +61,8 @@ from ._errors import (
     SceneFileError,
     SimulationDiverged,
 )
+from ._scenefile import _open_regular, check_path
+from ._system import usable_cpus
 from .contacts import Contacts
 from .scene import Scene, _copies
 from .session import Session, books, drift
@@ -655,11 +657,20 @@ class Batch:
     def save(self, path: str | os.PathLike) -> Path:
         """Write the batch to one file, atomically: a zip of every member's scene file
         (``member{k}.npz``, as :meth:`Scene.save` writes it) and ``batch.json`` (the format,
-        the thread count, and the retired members' messages). Returns the path.
+        the thread count, and the retired members' messages). Returns the path. Any file name
+        is taken: unlike :meth:`Scene.save`, no suffix is required (``.batch`` and ``.npz``
+        are both in use).
 
-        Raises InvalidInputError, before anything is written, if a member was changed since the
-        batch was made so that its structure differs from member 0's (a part added to one
-        member): such a file could not be loaded as a batch; save that member on its own."""
+        Raises, before anything is written:
+
+        InvalidTypeError
+            (a ``TypeError``) ``path`` is not a str or os.PathLike.
+        InvalidInputError
+            (a ``ValueError``) ``path`` contains a NUL, or names something that is not a
+            regular file (a directory, pipe or device); or a member was changed since the
+            batch was made so that its structure differs from member 0's (a part added to one
+            member): such a file could not be loaded as a batch; save that member on its own."""
+        path = check_path(path)
         _settle(self._sessions)  # in one call, not member by member
         _same_structure(self._members, "member", after=" since the batch was made")
         blobs = [s.to_bytes() for s in self._members]
@@ -688,14 +699,21 @@ class Batch:
         ``"gpu"``, ``"gpu:NAME"``) puts it elsewhere (a GPU batch continues on the CPU with
         ``device="cpu"``).
 
+        The saved thread count is capped at the CPUs this process may use, as
+        :meth:`Scene.load` caps it (a file should not decide how many threads start).
+
         Raises
         ------
+        InvalidTypeError
+            (a ``TypeError``) ``path`` is not a str or os.PathLike.
         SceneFileError
-            Not a batch file, an unknown format, a member missing or failing its checks (the
-            message names the member).
+            Not a regular file (a directory, pipe or device), not a batch file, an unknown
+            format, a malformed field of ``batch.json``, a member missing or failing its checks
+            (the message names the member).
         InvalidInputError
             The file's GPU (or ``device``) is not on this machine, naming ``device``.
         """
+        path = check_path(path)
         where = str(path)
 
         def stored(z: zipfile.ZipFile, name: str) -> bytes:
@@ -707,7 +725,11 @@ class Batch:
             return z.read(name)
 
         try:
-            with zipfile.ZipFile(path) as z:
+            try:  # a FIFO would block the read forever, a device could be endless
+                fh, _ = _open_regular(path, where)
+            except SceneFileError:
+                raise SceneFileError(where, "", "not a regular file (a directory, pipe or device); give a file written by Batch.save") from None
+            with fh, zipfile.ZipFile(fh) as z:
                 try:
                     raw = stored(z, "batch.json")
                 except KeyError:
@@ -739,6 +761,15 @@ class Batch:
         threads = meta.get("threads")
         if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
             raise SceneFileError(where, "batch.json.threads", f"must be null or a count >= 1, got {threads!r}")
+        if threads is not None:
+            threads = min(threads, usable_cpus())
+        diverged = meta.get("diverged") or {}
+        if not isinstance(diverged, dict):
+            raise SceneFileError(where, "batch.json.diverged", "must be an object")
+        for k in diverged:
+            # ASCII digits only, at most 8 (count <= 2**24): int() refuses "²" and over 4300 digits.
+            if not (k.isascii() and k.isdigit() and len(k) <= 8 and int(k) < count):
+                raise SceneFileError(where, "batch.json.diverged", f"names no member ({k!r})")
         saved_device, precision = meta.get("device", "cpu"), meta.get("precision")
         try:
             saved_device, precision = _check_device(saved_device, precision)
@@ -752,12 +783,7 @@ class Batch:
         # A GPU batch comes back on a GPU of this machine (refused by name where it has none),
         # unless `device` says otherwise; its precision is the file's on a GPU.
         batch = cls(members, threads=threads, device=device, precision=None if device == "cpu" else precision)
-        diverged = meta.get("diverged") or {}
-        if not isinstance(diverged, dict):
-            raise SceneFileError(where, "batch.json.diverged", "must be an object")
         for k, msg in diverged.items():
-            if not (k.isdigit() and int(k) < count):
-                raise SceneFileError(where, "batch.json.diverged", f"names no member ({k!r})")
             batch.diverged[int(k)] = SimulationDiverged(str(msg))
         return batch
 

@@ -310,8 +310,12 @@ def _check_precision(value: object) -> str:
     return value
 
 
-def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarray:
-    """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``."""
+def _points(value: object, arg: str, dim: int, n: int | None = None, *, precision: str = "f64",
+            row_bytes: int = 0, call: str | None = None) -> np.ndarray:
+    """(N, dim) float64 C-contiguous copy of ``value``; TypeError/ValueError naming ``arg``;
+    OutOfMemoryError, naming ``call`` (default ``arg``: a refused allocation names the call),
+    where the call's need (``row_bytes`` a row, default the copy's) is beyond memory or the copy
+    cannot be had; rows refused that ``precision`` cannot hold."""
     a = _check.real_array(arg, value)
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
         a = a[None, :]
@@ -319,10 +323,28 @@ def _points(value: object, arg: str, dim: int, n: int | None = None) -> np.ndarr
         raise InvalidInputError(f"{arg}: expected shape (N, {dim}), got {a.shape}")
     if n is not None and a.shape[0] != n:
         raise InvalidInputError(f"{arg}: expected {n} rows (one per particle), got {a.shape[0]}")
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    bad = ~np.isfinite(a).all(axis=1)
-    if bad.any():
-        raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
+    # A zero-stride (broadcast) input can stand for more rows than memory holds: asked for
+    # before copying, and a copy refused all the same is named as the argument's.
+    _check.room(call or arg, a.shape[0] * (row_bytes or 8 * dim), f"{a.shape[0]:,} particles")
+    with allocating(call or arg, f"a float64 copy of {arg}"):
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        bad = ~np.isfinite(a).all(axis=1)
+        if bad.any():
+            raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
+        return _fit_precision(a, arg, precision)
+
+
+def _fit_precision(a: np.ndarray, arg: str, precision: str) -> np.ndarray:
+    """``a``, rows (N, dim) of float64, with the first row that a float32 state would hold as
+    infinity refused by name. Both paths check here: the core checks only in the CPU's f32
+    mode, and a GPU scene's state stays float64 on the host until its first step, so it took
+    such rows and ``save`` wrote them as inf."""
+    if precision == "f32":
+        with np.errstate(over="ignore"):
+            bad = ~np.isfinite(a.astype(np.float32)).all(axis=1)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise InvalidInputError(f'{arg}: row {k} does not fit float32 (precision="f32"): {a[k].tolist()}')
     return a
 
 
@@ -359,6 +381,8 @@ def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
         raise InvalidInputError(f"{arg}: expected {1 if now is None else now.ndim} dimension(s), got shape {a.shape}")
     if not np.isfinite(a).all():
         raise InvalidInputError(f"{arg}: must be finite")
+    if key in ("positions", "velocities"):
+        _fit_precision(a, arg, scene.precision)
     return np.ascontiguousarray(a)
 
 
@@ -630,17 +654,25 @@ class Scene:
         TypeError
             Non-numeric arrays.
         InvalidInputError
-            (a ``ValueError``) Wrong shapes, NaN/inf, masses not in [2.2e-308, finite]; nothing
-            is added.
+            (a ``ValueError``) Wrong shapes, NaN/inf, masses not in [2.2e-308, finite], a row
+            past float32's range in an f32 scene (CPU or GPU); nothing is added.
+        OutOfMemoryError
+            (a ``MemoryError``) The particles would not fit (a broadcast array of a billion
+            rows), naming the argument; nothing is added.
         """
-        dim = self.dim
-        x = _points(positions, "positions", dim)
+        dim, precision = self.dim, self.precision
+        # Positions, velocities, masses and pinned flags, each held twice during the call (the
+        # checked copies and the core's): asked for before the first copy.
+        x = _points(positions, "positions", dim, precision=precision, row_bytes=2 * (2 * 8 * dim + 9), call="add_particles")
         n = x.shape[0]
-        v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n)
+        with allocating("add_particles", "zero velocities"):
+            v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n, precision=precision,
+                                                                     call="add_particles")
         m = _check.real_array("masses", masses)
-        m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
-        if m.shape != (n,):
+        if m.ndim != 0 and m.shape != (n,):  # before copying: a broadcast array can be huge
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
+        with allocating("add_particles", "a float64 copy of masses"):
+            m = np.ascontiguousarray(np.broadcast_to(m.astype(np.float64), (n,)) if m.ndim == 0 else m, dtype=np.float64)
         # The integrators divide by the mass: below the smallest normal float64 1/m overflows.
         bad = ~(np.isfinite(m) & (m >= _check.MIN_MASS))
         if bad.any():
@@ -656,7 +688,8 @@ class Scene:
                 raise InvalidTypeError(f"pinned: expected booleans, got dtype {p.dtype}")
             if p.shape != (n,):
                 raise InvalidInputError(f"pinned: expected shape ({n},), got {p.shape}")
-            p = np.ascontiguousarray(p)
+            with allocating("add_particles", "a copy of pinned"):
+                p = np.ascontiguousarray(p)
         first = self._sim.add_particles(x, v, m, p)
         self._e0 = None
         return np.arange(first, first + n, dtype=np.int64)
@@ -1200,7 +1233,7 @@ class Scene:
 
     @positions.setter
     def positions(self, value: np.typing.ArrayLike) -> None:
-        self._sim.set_state(positions=_points(value, "positions", self.dim, self.n_particles))
+        self._sim.set_state(positions=_points(value, "positions", self.dim, self.n_particles, precision=self.precision))
         self._e0 = None
 
     @property
@@ -1212,7 +1245,7 @@ class Scene:
 
     @velocities.setter
     def velocities(self, value: np.typing.ArrayLike) -> None:
-        self._sim.set_state(velocities=_points(value, "velocities", self.dim, self.n_particles))
+        self._sim.set_state(velocities=_points(value, "velocities", self.dim, self.n_particles, precision=self.precision))
         self._e0 = None
 
     @property

@@ -52,7 +52,7 @@ import numpy as np
 
 from . import _check
 from ._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write
-from ._errors import InvalidInputError, InvalidTypeError, SimulationDiverged
+from ._errors import InvalidInputError, InvalidTypeError, SceneFileError, SimulationDiverged
 from ._system import usable_cpus
 from .scene import DEFAULT_THREADS, Scene
 
@@ -452,6 +452,12 @@ def _parse(text: str) -> Any:
     return text
 
 
+def _shown(names: list[str], most: int = 12) -> str:
+    """Column names for a message, the first `most` of them (a damaged header may hold thousands)."""
+    text = ", ".join(repr(n[:40]) for n in names[:most])
+    return text + (f" and {len(names) - most} more" if len(names) > most else "")
+
+
 class _ResultsFile:
     """Results streamed to a CSV file as runs finish, rewritten atomically (temporary file, then
     rename), so the file is always a complete table. Rewrites are spaced so that they cost at
@@ -469,9 +475,15 @@ class _ResultsFile:
             return None
         # The csv module and Python's own int()/float() rather than a CSV parser's fast float
         # path: float() is correctly rounded, so every float comes back bit for bit.
+        from ._scenefile import _open_regular
+
         try:
-            with open(self.path, newline="", encoding="utf-8") as fh:
-                data = fh.read()
+            try:  # a FIFO would block the read forever, a device could be endless
+                fh, _ = _open_regular(self.path, str(self.path))
+            except SceneFileError:
+                raise InvalidInputError(f"out: {str(self.path)!r} is not a regular file (a directory, pipe or device); give a .csv file or a new name") from None
+            with fh:
+                data = fh.read().decode("utf-8")
             records = list(csv.DictReader(io.StringIO(data, newline="")))
         except (OSError, UnicodeDecodeError, csv.Error) as exc:
             raise InvalidInputError(f"out: {str(self.path)!r} is not a results file of a sweep ({type(exc).__name__}: {exc})") from None
@@ -513,7 +525,7 @@ class _ResultsFile:
         if not force and now - self.last < 10.0 * self.cost:
             return
         df = frame()
-        atomic_write(self.path, lambda fh: df.to_csv(fh, index=False), binary=False)
+        atomic_write(self.path, lambda fh: df.to_csv(fh, index=False), binary=False, arg="out")
         self.last = time.perf_counter()
         self.cost = self.last - now
         self.dirty = False
@@ -719,8 +731,17 @@ def sweep(
     kept_old: list[dict[str, Any]] = []  # rows of the file that are not runs of this grid
     if old is not None:
         where = {k: i for i, k in enumerate(keys)}
+        columns = old[0].keys()  # every record has the header's columns (load refuses ragged rows)
         for rec in old:
             i = where.get(rec["run_key"])
+            # A run found again must find its parameters as columns: else the header was edited
+            # (a parameter renamed) and resuming would mix rows of two layouts.
+            missing = [] if i is None else [k for k in runs[i] if k not in columns]
+            if missing:
+                raise InvalidInputError(
+                    f"out: {str(path)!r}: its columns differ from the sweep's parameters: no column {', '.join(map(repr, missing))} "
+                    f"(the file has {_shown(list(columns))}); was its header edited? Repair it, or give another path"
+                )
             failed = rec.get("error") is not None
             if i is None:
                 kept_old.append(rec)

@@ -8,7 +8,7 @@ from typing import ClassVar
 import numpy as np
 
 from .. import _check, _deprecate
-from .._errors import InvalidInputError, InvalidTypeError
+from .._errors import InvalidInputError, InvalidTypeError, allocating
 from .._parts import AttachContext
 from ._base import ArrayLike, LiveParam, Term, _per_spring
 
@@ -41,6 +41,8 @@ class Springs(Term, kind="springs"):
         Non-integer indices or non-numeric parameters.
     ValueError
         Mismatched lengths, negative indices, ``i == j``, negative or non-finite parameters.
+    OutOfMemoryError
+        (a ``MemoryError``) The arrays would not fit (broadcast indices of a billion springs).
     """
 
     i: np.ndarray
@@ -52,31 +54,38 @@ class Springs(Term, kind="springs"):
     name: str = field(default="springs", kw_only=True)
 
     def __post_init__(self) -> None:
-        idx = []
+        views = []
         for arg, val in (("i", self.i), ("j", self.j)):
             a = _check.array(arg, val)
             if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
                 raise InvalidTypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
             if a.ndim != 1:
                 raise InvalidInputError(f"{arg}: expected shape (M,), got {a.shape}")
-            a = a.astype(np.int64)
+            views.append(a)
+        if views[0].shape != views[1].shape:
+            raise InvalidInputError(f"j: has {views[1].shape[0]} entries but i has {views[0].shape[0]}")
+        m = views[0].shape[0]
+        # Broadcast indices can stand for more springs than memory holds: the record's five
+        # (M,) arrays of 8 bytes are asked for before any copy.
+        _check.room("i/j", 40 * m, f"{m:,} springs")
+        idx = []
+        for arg, a in zip(("i", "j"), views, strict=True):
+            with allocating(arg, f"a copy of {arg} as int64"):
+                a = a.astype(np.int64)
             if a.size and a.min() < 0:
                 raise InvalidInputError(f"{arg}: indices must be >= 0, got {int(a.min())}")
             a.setflags(write=False)
             idx.append(a)
         i, j = idx
-        if i.shape != j.shape:
-            raise InvalidInputError(f"j: has {j.shape[0]} entries but i has {i.shape[0]}")
         same = np.flatnonzero(i == j)
         if same.size:
             raise InvalidInputError(f"i/j: spring {int(same[0])} joins particle {int(i[same[0]])} to itself")
-        m = i.shape[0]
         object.__setattr__(self, "i", i)
         object.__setattr__(self, "j", j)
-        object.__setattr__(self, "stiffness", _per_spring(self.stiffness, m, "stiffness"))
-        object.__setattr__(self, "damping", _per_spring(self.damping, m, "damping"))
-        if self.rest_length is not None:
-            object.__setattr__(self, "rest_length", _per_spring(self.rest_length, m, "rest_length"))
+        for arg in ("stiffness", "damping", "rest_length"):
+            if getattr(self, arg) is not None:  # rest_length=None: measured when added
+                with allocating(arg, f"a float64 copy of {arg}"):
+                    object.__setattr__(self, arg, _per_spring(getattr(self, arg), m, arg))
 
     live_params: ClassVar[tuple[LiveParam, ...]] = (
         LiveParam("stiffness", "stiffness", "mean", ("[", "]"), "k", "N/m", rank=0),
