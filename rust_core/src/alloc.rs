@@ -27,6 +27,11 @@ impl Need {
         Self::new("field", bytes, format!("{} of {} {elements}", names.join(", "), count(n as u128)))
     }
 
+    /// The bytes needed (saturated at u64::MAX).
+    pub fn bytes(&self) -> u128 {
+        self.bytes as u128
+    }
+
     /// `n` items of type `T`, in bytes (saturating).
     pub fn bytes_of<T>(n: usize) -> u128 {
         n as u128 * std::mem::size_of::<T>() as u128

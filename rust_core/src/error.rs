@@ -113,6 +113,13 @@ pub enum Failure {
     /// The rigid bodies' solver (rapier) failed on their state (it panicked): a state loaded
     /// from a damaged or crafted file that passed the load's checks, or a bug (the index is 0).
     Solver,
+    /// A grid's energy books overflowed while its cells are still finite (a drop of 1e300 m):
+    /// the index is the cell of the largest magnitude.
+    GridBooks,
+    /// A term could not have the memory for lists its step sizes by the state (the contacts of
+    /// crowded grains): the world reports the term's `Error::OutOfMemory`
+    /// (`terms::OwnState::refused`), not a divergence (the index is 0).
+    Memory,
 }
 
 impl Failure {
@@ -127,6 +134,8 @@ impl Failure {
             Failure::Spin => "spin",
             Failure::Books => "books",
             Failure::Solver => "solver",
+            Failure::GridBooks => "books",
+            Failure::Memory => "memory",
         }
     }
 }
@@ -147,6 +156,8 @@ fn describe(quantity: &Failure, index: usize) -> String {
             format!("the dissipated energy overflowed the energy books (particle {index} is the fastest)")
         }
         Failure::Solver => "the rigid bodies' solver (rapier) failed on their state".to_string(),
+        Failure::GridBooks => format!("the energy books overflowed (grid cell {index} holds the largest value)"),
+        Failure::Memory => "a step's lists could not be allocated".to_string(),
         q => format!("particle {index} has a non-finite {}", q.as_str()),
     }
 }
@@ -172,6 +183,11 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, 
             "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
+        // Energies past float64 with a finite state: the values given are beyond any step.
+        Failure::Books | Failure::GridBooks => "The energies of this state are past float64's range (speeds, \
+             amplitudes or masses of some 1e150 or more): give values of a physical size; a \
+             smaller dt does not help."
+            .to_string(),
         // Not a matter of the step: the state itself is inconsistent.
         Failure::Solver => "Its state is inconsistent (a damaged or crafted scene file that passed the load's \
              checks) or this is a bug: build the scene again or load it from a file you trust, and report \

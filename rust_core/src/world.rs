@@ -731,6 +731,10 @@ impl<V: Vector> World<V> {
 
     /// The error of a divergence at the current step (`fail` completes it once rolled back).
     fn diverged(&self, index: usize, quantity: crate::error::Failure) -> Error {
+        if quantity == crate::error::Failure::Memory {
+            let generic = || Error::OutOfMemory { what: "step".into(), bytes: 0, of: "a term's lists".into() };
+            return self.particles.refusal().unwrap_or_else(generic);
+        }
         Error::Diverged {
             step: self.step,
             t: self.t,

@@ -885,6 +885,42 @@ def test_overflowed_books_stop_the_step_and_the_scene_still_saves(tmp_path):
     assert np.array_equal(t.velocities, s.velocities)
 
 
+def test_overflowed_books_of_a_wave_and_of_bodies_stop_the_step_and_the_scene_still_saves(tmp_path):
+    # A drop of 1e300 m: every cell finite, the sources' work past float64. The wave's clock
+    # holds its books, and a clock that is not finite could not be saved ("its clock is not
+    # finite"): the step is a divergence (quantity "books") rolled back to the call's start.
+    s = pc.Scene(2)
+    w = s.add(pc.Wave((32, 32), 1.0, drops=[pc.Drop(0.0, [16, 16], radius=2.0, amplitude=1e300)]))
+    with pytest.raises(pc.SimulationDiverged, match="grid cell .* largest value.*does not help") as err:
+        s.step(5)
+    assert err.value.quantity == "books" and s.step_count == 0 and s.time == 0.0
+    assert np.isfinite(s.energy().total) and np.array_equal(w.u, np.zeros((32, 32)))
+    pc.Scene.load(s.save(tmp_path / "w.npz"))
+    # A body at 1e200 m/s: its kinetic energy is past float64 (the books went NaN, the step stood).
+    b = pc.Scene(2, dt=1 / 240)
+    b.add(pc.Bodies("ball", size=[0.2], velocities=[(0.0, 1e200)]))
+    with pytest.raises(pc.SimulationDiverged) as err:
+        b.step(3)
+    assert err.value.quantity == "books" and b.step_count == 0
+    b.bodies[0].velocities = [(0.0, 1.0)]
+    b.step(3)
+    assert np.isfinite(b.energy().total) and np.isfinite(b.energy_drift())
+
+
+def test_a_particle_at_a_balls_centre_is_pushed_out_not_made_nan():
+    # parry's projection of a ball's centre onto the ball is undefined (NaN): the particle's
+    # state became NaN on its second step, and the error advised a smaller dt. It is now pushed
+    # out (upward), as from any other point inside, fixed ball or dynamic, 2D and 3D.
+    for dim in (2, 3):
+        for kind in ("fixed", "dynamic"):
+            s = pc.Scene(dim, dt=1 / 240)
+            s.add(pc.Bodies("ball", size=[0.1], positions=[[0.0] * dim], kind=kind))
+            s.add_particles([[0.0] * dim])
+            s.step(3)
+            x = s.positions[0]
+            assert np.isfinite(x).all() and np.linalg.norm(x - s.bodies[0].positions[0]) >= 0.1 - 1e-9, (dim, kind, x)
+
+
 def test_round_trip_is_bit_identical_for_every_integrator(tmp_path):
     for integ in ("euler", "semi_implicit_euler", "verlet", "rk4", "dopri5"):
         a, b = reference_scene(integ), reference_scene(integ)

@@ -75,6 +75,33 @@ print("ok")
     assert out.strip() == "ok"
 
 
+def test_crowded_grains_whose_contacts_do_not_fit_refuse_the_step_and_change_nothing():
+    """20,000 grains of radius 10 m in a 1 m square: every pair a candidate contact, 2·10⁸ of
+    them. Their lists are built inside the step's parallel parts, where a refused allocation
+    aborted the process (SIGABRT: "memory allocation of 73527296 bytes failed"); the build now
+    checks its room first, and the step is refused with OutOfMemoryError naming it, the scene as
+    it was. With radii that fit, the same scene steps."""
+    out = _child(PRELUDE + """
+n = 20000
+for integrator in ("semi_implicit_euler", "xpbd"):
+    s = pc.Scene(2, integrator=integrator, dt=1e-5, threads=1)
+    s.add_particles(np.random.default_rng(0).uniform(0, 1, (n, 2)))
+    s.set_attribute("radius", np.full(n, 10.0))
+    s.add(pc.Contacts(1e4))
+    x0 = s.positions.copy()
+    cap(512)
+    e = refused(lambda: s.step(1), "step")
+    lift()
+    assert "candidate pairs" in str(e), str(e)
+    assert s.time == 0.0 and s.step_count == 0 and np.array_equal(s.positions, x0)
+    s.set_attribute("radius", np.full(n, 0.001))
+    s.step(2)
+    assert s.step_count == 2
+print("ok")
+""")
+    assert out.strip() == "ok"
+
+
 def test_add_particles_that_do_not_fit_raise_memory_error_and_change_nothing():
     out = _child(PRELUDE + """
 n = 8_000_000  # copies and state: about 1 GB

@@ -528,6 +528,23 @@ impl WaveSystem {
             && g.rows() >= 8
     }
 
+    /// The clock's books (damping, the sources' work, dt changes) overflowed while every cell is
+    /// finite (a drop of 1e300 m): a halt, as a cell that is not finite is, so that the call is
+    /// rolled back (a clock that is not finite could not be saved).
+    fn books_halt(&self) -> Option<Halt> {
+        let c = &self.clock;
+        if c.dissipated.is_finite() && c.work.is_finite() && c.rescaled.is_finite() {
+            return None;
+        }
+        let index = self
+            .u
+            .iter()
+            .enumerate()
+            .fold((0, -1.0), |(k, m), (i, v)| if v.abs() > m { (i, v.abs()) } else { (k, m) })
+            .0;
+        Some(Halt::Diverged { index, quantity: Failure::GridBooks })
+    }
+
     /// `k` steps of `dt` in one sweep (`wave_fused`); `Err(j, halt)` names the step that
     /// diverged, j from 0. `Ok(false)`, with nothing changed, if the scratch cannot be had.
     fn step_fused(&mut self, dt: Real, k: usize) -> std::result::Result<bool, (u64, Halt)> {
@@ -699,7 +716,7 @@ impl System for WaveSystem {
                 return Err(Halt::Diverged { index, quantity: Failure::Cell });
             }
         }
-        Ok(())
+        self.books_halt().map_or(Ok(()), Err)
     }
     /// Up to `wave_fused::FUSE` steps per sweep over memory where `fusable`, with the bits of
     /// single steps; a drop that falls due ends a sweep.
@@ -724,6 +741,9 @@ impl System for WaveSystem {
                 }
                 if k >= 2 && self.step_fused(dt, k).map_err(|(j, h)| (i + j, h))? {
                     i += k as u64;
+                    if let Some(h) = self.books_halt() {
+                        return Err((i - 1, h));
+                    }
                     continue;
                 }
             }

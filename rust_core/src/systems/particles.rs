@@ -163,6 +163,11 @@ impl<V: Vector> ParticleSystem<V> {
         }
     }
 
+    /// The memory a term's last evaluation could not have (`OwnState::refused`), if any.
+    pub fn refusal(&self) -> Option<crate::error::Error> {
+        self.sys.forces.terms.iter().filter_map(|t| t.as_own_state()).find_map(|s| s.refused())
+    }
+
     /// Bytes the terms allocate on the fly in a step (`Term::transient_bytes`).
     pub fn transient_bytes(&self) -> u128 {
         let n = self.n_particles();
@@ -754,6 +759,10 @@ impl<V: Vector> System for ParticleSystem<V> {
         };
         if stop.load(Ordering::Relaxed) {
             return Err(Halt::Stopped);
+        }
+        // A term refused its lists: its forces were left out, so the step must not stand.
+        if self.refusal().is_some() {
+            return Err(Halt::Diverged { index: 0, quantity: Failure::Memory });
         }
         if !self.constraints.is_empty() {
             let (f, g) = (self.integrator.last_forces(), self.sys.forces.g);

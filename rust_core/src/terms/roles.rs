@@ -157,6 +157,12 @@ pub trait OwnState<V: Vector> {
     fn non_finite(&self) -> Option<usize> {
         None
     }
+    /// The memory the term's last evaluation could not have for lists its state sizes (the
+    /// contacts of crowded grains), checked after every step: the world then rolls the call
+    /// back and reports this `Error::OutOfMemory` (`Failure::Memory`).
+    fn refused(&self) -> Option<crate::error::Error> {
+        None
+    }
     /// The own state as reals (rollback, save/load).
     fn history(&self) -> Vec<Real>;
     /// Restores what `history` returned, for a scene of `n_particles`; checked, nothing changes

@@ -1266,6 +1266,14 @@ impl System for Bodies {
             return Err(Halt::Diverged { index, quantity });
         }
         let (k1, u1) = self.mechanical();
+        // Speeds whose energy float64 cannot hold (a body set moving at 1e200 m/s): the books
+        // overflow while the state is finite, and the call could not be saved with them; a
+        // halt, as the particles' books.
+        if !((k0 + u0) - (k1 + u1)).is_finite() {
+            let speed = |i: usize| self.body(i).linvel().length();
+            let fastest = (0..self.handles.len()).fold(0, |f, i| if speed(i) > speed(f) { i } else { f });
+            return Err(Halt::Diverged { index: fastest, quantity: Failure::Books });
+        }
         self.d.contacts += (k0 + u0) - (k1 + u1);
         Ok(())
     }
@@ -1650,6 +1658,23 @@ fn to_particle<V: PVector>(x: Vector) -> V {
 /// radius a little into the surface, and a sheet pressed between two bodies a little out.
 const RESTING: Real = 1.25;
 
+/// The projection of `p` onto the shape of `col`, and `p` minus the projected point. A point at
+/// a ball's centre has no nearest surface point (parry's is NaN, and the particle's state
+/// became NaN with it): it is projected from 1e-9 of the shape's size above it (+y), so it is
+/// pushed out upward.
+fn project(col: &Collider, p: Vector) -> (PointProjection, Vector) {
+    let proj = col.shape().project_point(col.position(), p, false);
+    let d = p - proj.point;
+    if d.is_finite() {
+        return (proj, d);
+    }
+    let size = col.shape().compute_local_bounding_sphere().radius();
+    let q = p + Vector::Y * (1e-9 * if size > 0.0 && size.is_finite() { size } else { 1.0 });
+    let proj = col.shape().project_point(col.position(), q, false);
+    let d = q - proj.point;
+    (proj, d)
+}
+
 /// The outward normal of the fixed body that the particle at `p` (radius `ri` > 0: particles
 /// of no size, an SPH fluid's, are pushed out as before) rests on, if one
 /// lies on the far side of it from a moving body touching it with the normal `normal` (from
@@ -1663,10 +1688,9 @@ fn backing(bodies: &Bodies, p: Vector, ri: Real, normal: Vector) -> Option<Vecto
             continue;
         }
         let col = &bodies.d.r.colliders[c];
-        let proj = col.shape().project_point(col.position(), p, false);
-        let d = p - proj.point;
+        let (proj, d) = project(col, p);
         let dist = d.length();
-        if dist == 0.0 || (!proj.is_inside && dist > RESTING * ri) {
+        if !(dist > 0.0) || (!proj.is_inside && dist > RESTING * ri) {
             continue;
         }
         let nf = if proj.is_inside { -d / dist } else { d / dist };
@@ -1938,12 +1962,11 @@ impl<V: PVector> Coupling<V> for BodyContacts {
                     continue;
                 }
                 let col = &bodies.d.r.colliders[bodies.colliders[k]];
-                let proj = col.shape().project_point(col.position(), p, false);
+                let (proj, d) = project(col, p);
                 let (e, mu) = (col.restitution(), col.friction());
-                let d = p - proj.point;
                 let dist = d.length();
                 let (normal, depth) = if proj.is_inside {
-                    if dist == 0.0 {
+                    if !(dist > 0.0) {
                         continue;
                     }
                     (-d / dist, ri + dist)

@@ -695,6 +695,8 @@ pub struct Contacts<V: Vector> {
     path: PairPath,
     /// The unwritten force buffer of `commit_pass`.
     scratch: Vec<V>,
+    /// The memory the last build could not have (`room_for_lists`): its step is refused.
+    refused: Option<crate::error::Error>,
 }
 
 /// The code a pair pass runs (see `lanes`).
@@ -972,6 +974,7 @@ impl<V: Vector> Contacts<V> {
             uniform: None,
             path: PairPath::Auto,
             scratch: Vec::new(),
+            refused: None,
         }
     }
 
@@ -1443,6 +1446,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
 impl<V: Vector> OwnState<V> for Contacts<V> {
     fn begin_step(&mut self, dt: Real) {
         self.dt = dt;
+        self.refused = None;
     }
     fn end_step(&mut self, _x: &[V], _v: &[V], model: &Model, dt: Real) {
         if !self.evaluated {
@@ -1565,6 +1569,9 @@ impl<V: Vector> OwnState<V> for Contacts<V> {
         Some(super::Spins { omega: &mut self.omega, inertia_factor: self.material.inertia_factor })
     }
     /// Spins, angles and the springs of live contacts.
+    fn refused(&self) -> Option<crate::error::Error> {
+        self.refused.clone()
+    }
     fn non_finite(&self) -> Option<usize> {
         // It runs after every step: first one streaming, branch-free pass (0·x is 0 for a
         // finite x and NaN otherwise, and NaN survives a sum), in parallel; the search for the

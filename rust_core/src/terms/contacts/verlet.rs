@@ -40,10 +40,6 @@ impl<V: Vector> Contacts<V> {
     /// since the last build by more than the skin: the grains were placed by hand).
     pub(super) fn rebuild(&mut self, x: &[V], r: &[Real]) -> Real {
         let n = x.len();
-        let carry = match self.seed.take() {
-            Some(s) => s,
-            None => self.carry(),
-        };
         let r_max = r.iter().fold(0.0, |a: Real, &b| a.max(b));
         let skin = SKIN * r_max;
         let reach = 2.0 * r_max + skin;
@@ -56,6 +52,16 @@ impl<V: Vector> Contacts<V> {
         if let Some(c) = self.cells.as_mut().filter(|_| r_max > 0.0) {
             c.build(x);
         }
+        if let Err(e) = self.room_for_lists(x, r, skin) {
+            // Nothing taken or built: the step is refused (`OwnState::refused`) and rolled back.
+            self.refused = Some(e);
+            self.lists = None;
+            return 0.0;
+        }
+        let carry = match self.seed.take() {
+            Some(s) => s,
+            None => self.carry(),
+        };
         let (cells, walls) = (self.cells.as_ref().filter(|_| r_max > 0.0), &self.walls);
         let carry = &carry;
         let rolling = self.material.rolling_friction > 0.0;
@@ -189,5 +195,63 @@ impl<V: Vector> Contacts<V> {
         l.skin = skin;
         self.lists = Some(l);
         dropped
+    }
+
+    /// (`crate::alloc`) Whether the memory of a build at `x` can be had. Its lists grow inside
+    /// parallel parts, where a refused allocation would abort the process, by some 160 bytes a
+    /// candidate pair (the parts' and the lists' copies). Between builds of the same grains and
+    /// radii no grain moves more than half the skin, so room for 4 times the last build's
+    /// pairs and 16 a grain answers at once. Else a bound on the candidates (every grain of the
+    /// neighbouring cells) is checked, at the cost of the cells' ranges alone; only where that
+    /// much cannot be had are the candidates counted, and their bytes checked.
+    /// `Error::OutOfMemory` naming the pairs if those cannot be had either.
+    fn room_for_lists(&self, x: &[V], r: &[Real], skin: Real) -> Result<()> {
+        let Some(cl) = self.cells.as_ref().filter(|_| r.iter().any(|&ri| ri > 0.0)) else { return Ok(()) };
+        let rolling = self.material.rolling_friction > 0.0;
+        let per_pair = Need::bytes_of::<u32>(5)
+            + Need::bytes_of::<Link<V>>(2)
+            + Need::bytes_of::<PairForce<V>>(1)
+            + if rolling { Need::bytes_of::<Roll<V>>(2) + Need::bytes_of::<V::Axial>(1) } else { 0 };
+        let need = |pairs: u64| {
+            let what = format!("the contact lists of {} candidate pairs", count(pairs as u128));
+            Need::new("step", pairs as u128 * per_pair, what)
+        };
+        let pairs = |exact: bool| {
+            par::reduce(
+                x.len(),
+                0u64,
+                |a, b| a + b,
+                |range| {
+                    let mut c = 0u64;
+                    for i in range.filter(|&i| r[i] > 0.0) {
+                        for q in cl.query(cl.cell_of(x[i])).iter() {
+                            if !exact {
+                                c += q.len() as u64;
+                                continue;
+                            }
+                            for &j in &cl.order[q] {
+                                let ju = j as usize;
+                                let s = r[i] + r[ju] + skin;
+                                c += (ju > i && r[ju] > 0.0 && (x[ju] - x[i]).length_squared() < s * s) as u64;
+                            }
+                        }
+                    }
+                    c
+                },
+            )
+        };
+        if let Some(l) = self.lists.as_ref().filter(|l| l.x.len() == x.len() && l.r == r) {
+            let likely = need(4 * (l.pj.len() + l.wall.len()) as u64 + 16 * x.len() as u64);
+            if likely.room(likely.bytes()).is_ok() {
+                return Ok(());
+            }
+        }
+        let bound = need(pairs(false));
+        if bound.room(bound.bytes()).is_ok() {
+            return Ok(());
+        }
+        let exact = need(pairs(true));
+        exact.check()?;
+        exact.room(exact.bytes())
     }
 }
