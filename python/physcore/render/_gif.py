@@ -247,7 +247,7 @@ def gif(
     cmap : str, optional
         The colour map of ``color_by`` "speed" and "pressure": one of
         :data:`physcore.render.CMAPS` ("viridis", "plasma", "magma", "inferno", "cividis",
-        "turbo", and "ice", water from deep navy to foam white). Default: the scene's ``render_defaults``, else viridis for speed and plasma
+        "turbo", and "ice", water from deep navy to a light cyan). Default: the scene's ``render_defaults``, else viridis for speed and plasma
         for pressure.
     background : (int, int, int), optional
         The background's RGB colour, 0–255 each (a billiard table's felt); trails fade into it,

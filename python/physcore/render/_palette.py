@@ -144,10 +144,11 @@ _CMAPS = {
                          [188, 174, 108], [222, 201, 88], [254, 232, 56]], dtype=np.float64),
     "turbo": np.array([[48, 18, 59], [70, 107, 227], [40, 188, 235], [50, 242, 152], [164, 252, 60], [238, 207, 58],
                        [251, 126, 33], [208, 47, 5], [122, 4, 3]], dtype=np.float64),
-    # "ice": water from deep navy through blue to foam white (physcore's own ramp, monotone in
-    # lightness), the fluid scenes' speed map.
-    "ice": np.array([[8, 22, 60], [14, 45, 110], [20, 75, 155], [30, 105, 190], [50, 135, 210], [85, 165, 225],
-                     [130, 195, 238], [180, 222, 246], [228, 244, 252]], dtype=np.float64),
+    # "ice": water from deep navy through blue to a light cyan (physcore's own ramp, monotone in
+    # lightness), the fluid scenes' speed map. It ended in foam white, which vanished on a white
+    # background: the fastest water, a dam break's spray, was the part not seen.
+    "ice": np.array([[8, 22, 60], [14, 45, 110], [20, 75, 155], [30, 105, 190], [50, 135, 210], [75, 165, 228],
+                     [105, 192, 240], [140, 214, 247], [175, 232, 252]], dtype=np.float64),
 }
 #: Names of the colour maps ``gif(cmap=...)`` takes for speed and pressure.
 CMAPS = tuple(_CMAPS)

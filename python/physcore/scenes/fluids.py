@@ -224,7 +224,7 @@ def dam_break(
 # 120 frames (4 s at 30 fps) over T = t·√(2g/width) = 0..8 for the default width (1 m): the
 # collapse, the surge along the floor, its impact on the far wall (T ≈ 3.3), the jet up to the
 # lid (T ≈ 5) and the plunging wave falling back (T ≈ 6–8), played 2.2× slower than real time.
-# The water is drawn as one surface (render.gif(surface=...)), by speed from deep navy to foam;
+# The water is drawn as one surface (render.gif(surface=...)), by speed from deep navy to light cyan;
 # in 3D a lit one (the nearest particles' smoothed depth, shaded) in a glass tank.
 dam_break.render_defaults = {
     "frames": 120,
