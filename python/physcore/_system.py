@@ -1,7 +1,11 @@
 """What physcore runs on: the CPU, the SIMD level of the kernels, threads and build."""
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import sys
+import tempfile
 from typing import Any
 
 from . import _core
@@ -64,6 +68,28 @@ def info() -> dict[str, Any]:
     }
 
 
+_RUNTIME_DIR_SET = False
+
+
+def quiet_wayland_probe() -> None:
+    """Gives a Linux process without ``XDG_RUNTIME_DIR`` (a container, a CI job, a shell without
+    a login session) a private one, 0700 and removed at exit, as a login session would, before
+    its first GPU probe or window: Mesa's Vulkan drivers and SDL probe Wayland there, and
+    libwayland printed "error: XDG_RUNTIME_DIR is invalid or not set in the environment." at
+    each probe, harmless but read as a failure. A set one is left alone; elsewhere it does
+    nothing."""
+    global _RUNTIME_DIR_SET
+    if _RUNTIME_DIR_SET or not sys.platform.startswith("linux") or os.environ.get("XDG_RUNTIME_DIR", "").startswith("/"):
+        return
+    _RUNTIME_DIR_SET = True
+    try:
+        path = tempfile.mkdtemp(prefix="physcore-runtime-")
+    except OSError:
+        return
+    atexit.register(shutil.rmtree, path, True)
+    os.environ["XDG_RUNTIME_DIR"] = path
+
+
 def gpu_adapters() -> list[dict[str, Any]]:
     """The GPU adapters this machine has (Vulkan, Metal, DX12; CPU ones such as lavapipe
     included, with ``kind="cpu"``): a list of dicts with ``name``, ``backend``, ``kind``
@@ -71,6 +97,7 @@ def gpu_adapters() -> list[dict[str, Any]]:
     ``f64`` (bool: ``precision="f64"`` possible) and the largest ``max_storage_binding`` and
     ``max_buffer`` in bytes. Empty where there is no GPU driver. A scene picks one with
     ``Scene(device="gpu")`` or ``device="gpu:NAME"``."""
+    quiet_wayland_probe()
     return list(_core.gpu_adapters())
 
 

@@ -62,7 +62,7 @@ from ._errors import (
     SimulationDiverged,
 )
 from ._scenefile import _open_regular, check_path
-from ._system import usable_cpus
+from ._system import quiet_wayland_probe, usable_cpus
 from .contacts import Contacts
 from .scene import Scene, _copies
 from .session import Session, books, drift
@@ -368,6 +368,7 @@ class Batch:
         """The core's batch of the members ``live`` (batch indices, their state in their
         scenes) on this batch's device (InvalidInputError naming what it cannot hold)."""
         sessions = [self._sessions[k] for k in live]
+        quiet_wayland_probe()
         self._gpu = _core.DeviceBatch([x.sim for x in sessions], self._device, self._precision)
         self._res = _Resident(self._gpu, live, sessions)
         #: The device's members' sessions, in its order.

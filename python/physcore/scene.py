@@ -42,6 +42,7 @@ from ._parts import (
     COLLIDER_SECTIONS,
     MEMBER_PREFIX,
     OPTIONAL_SECTIONS,
+    PARTS,
     SECTIONS,
     AttachContext,
     LoadContext,
@@ -49,7 +50,7 @@ from ._parts import (
     entry_class,
     part_class,
 )
-from ._system import usable_cpus
+from ._system import gpu_adapters, quiet_wayland_probe, usable_cpus
 
 # The part modules register their classes in physcore._parts.PARTS when imported: the scene
 # file reader finds every part kind there. (They import nothing from this module.)
@@ -308,6 +309,17 @@ def _check_precision(value: object) -> str:
     if value not in _PRECISIONS:
         raise InvalidInputError(f"precision: must be 'f64' or 'f32', got {value!r}")
     return value
+
+
+def _not_a_part(item: object, terms_only: bool = False) -> str:
+    """What :meth:`Scene.add` (``terms_only``: :meth:`Scene.replace`) says of an ``item`` it
+    cannot take: the kinds it takes, by name, and for a class given where an instance was meant
+    (``scene.add(pc.Gravity)``) the call that makes one."""
+    kinds = sorted({c.__name__ for c in PARTS.values() if not terms_only or issubclass(c, Term)})
+    what = "a term" if terms_only else "a part"
+    if isinstance(item, type) and item in set(PARTS.values()):
+        return f"got the class {item.__name__}, not {what}: did you mean {item.__name__}(...)?"
+    return f"expected {what} of physcore ({', '.join(kinds)}), got {type(item).__name__}"
 
 
 def _points(value: object, arg: str, dim: int, n: int | None = None, *, precision: str = "f64",
@@ -730,7 +742,7 @@ class Scene:
         (a loaded fluid's ``first`` particle)."""
         cls = part_class(item)
         if cls is None:
-            raise InvalidTypeError(f"item: expected a physcore term, Fluid, Plane, Box or Sphere, got {type(item).__name__}")
+            raise InvalidTypeError(f"item: {_not_a_part(item)}")
         ctx = self._context(restoring)
         name = item._claim_name(ctx)
         try:
@@ -767,7 +779,7 @@ class Scene:
         at = terms[0]
         old = self._parts[at]
         if part_class(item) is None or not isinstance(item, Term):
-            raise InvalidTypeError(f"item: expected a physcore term, got {type(item).__name__}")
+            raise InvalidTypeError(f"item: {_not_a_part(item, terms_only=True)}")
         if not getattr(type(old), "replaceable", True):
             raise InvalidInputError(f"item: {name!r} is a {type(old).__name__}, which owns particles and cannot be replaced")
         if type(item) is not type(old):
@@ -897,6 +909,7 @@ class Scene:
         """The core's move, keeping a copy of the particle attributes it takes with it (read by
         :attr:`attributes`, so that a save, a pickle and :meth:`state` keep the charges)."""
         attrs = {k: np.array(v, dtype=np.float64) for k, v in self._sim.attributes().items()}
+        quiet_wayland_probe()
         self._exclusive(lambda sim: sim.move_to_device(device, precision))
         self._device_attrs = attrs
 
@@ -922,7 +935,7 @@ class Scene:
         else:
             threads = self._threads if self._threads is not None else _core.default_threads()
             device, why = _auto_choice(_auto_work(self._parts, self.n_particles), threads,
-                                       list(_core.gpu_adapters()), self._auto_precision)
+                                       gpu_adapters(), self._auto_precision)
         if device == "cpu":
             self._device, self._device_reason = "cpu", why
             return

@@ -498,7 +498,15 @@ def view(
     for k, item in script:
         if not callable(item):
             _script_events(pg, k, item)
+    from ._system import quiet_wayland_probe
+
+    quiet_wayland_probe()
     pg.display.init()  # no display: pygame.error now, before the preview's simulation
+    driver = pg.display.get_driver()
+    if driver in ("offscreen", "dummy") and not os.environ.get("SDL_VIDEODRIVER"):
+        # SDL fell back to a driver that shows nothing: the viewer would run unseen, for ever.
+        pg.display.quit()
+        raise pg.error(f"no display: SDL fell back to its {driver!r} driver, which shows nothing")
     try:
         print(f"physcore view: {name}\n{keys_text()}", file=out)
         viewer = Viewer(scene, name=name, settings=settings, fps=fps, preview=preview, hud=hud, out=out)

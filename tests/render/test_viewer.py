@@ -221,6 +221,17 @@ def test_cli_without_a_display_says_so(monkeypatch, capsys):
     assert err.startswith("physcore view: error: cannot open a window (") and "xvfb-run" in err
 
 
+@needs_pygame
+def test_cli_with_no_display_at_all_says_so_instead_of_running_unseen(monkeypatch, capsys):
+    # Without DISPLAY or WAYLAND_DISPLAY, SDL falls back to its "offscreen" driver: the window
+    # opened, showed nothing, and the viewer ran until killed.
+    for k in ("DISPLAY", "WAYLAND_DISPLAY", "SDL_VIDEODRIVER"):
+        monkeypatch.delenv(k, raising=False)
+    assert main(["view", "spring_chain", "--param", "n=4", "--seconds", "1"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("physcore view: error: cannot open a window (no display") and "xvfb-run" in err
+
+
 def test_help_lists_the_keys(capsys):
     assert main(["view", "--help"]) == 0
     out = capsys.readouterr().out

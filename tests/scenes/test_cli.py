@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -90,6 +91,18 @@ def test_scenes_says_each_scene_in_a_whole_sentence_of_plain_text(capsys):
         assert "``" not in text and ":func:" not in text and ":class:" not in text, (name, text)
     assert summaries["droplets"].endswith("pulls the merged puddle back in from the walls.")
     assert summaries["crown"].endswith("(Worthington's splash; Yarin, Annu. Rev. Fluid Mech. 38, 2006).")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Wayland's runtime directory is a Linux matter")
+def test_info_on_a_machine_without_a_login_session_prints_no_wayland_error():
+    # Mesa's Vulkan drivers probe Wayland at each adapter enumeration; without XDG_RUNTIME_DIR
+    # (a container, a CI job) libwayland printed "error: XDG_RUNTIME_DIR is invalid or not set
+    # in the environment." 2-4 times, which a new user reads as a failure.
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_RUNTIME_DIR", "WAYLAND_DISPLAY")}
+    proc = subprocess.run([sys.executable, "-m", "physcore", "info"], env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "XDG_RUNTIME_DIR" not in proc.stderr and "error" not in proc.stderr.lower(), proc.stderr
+    assert proc.stdout.startswith("physcore ")
 
 
 def test_unknown_scene(tmp_path, capsys):

@@ -247,11 +247,20 @@ def test_scene_colliders_is_one_list_of_every_collider_record(tmp_path):
 
 
 # ----------------------------------------------------------------------------------- refusals
-@pytest.mark.parametrize("item", [object(), "gravity", 3.0, None, pc.Gravity, Part()])
-def test_scene_add_refuses_what_is_not_a_part_naming_item(item):
+@pytest.mark.parametrize("item", [object(), "gravity", 3.0, None, Part()])
+def test_scene_add_refuses_what_is_not_a_part_naming_item_and_every_kind_it_takes(item):
     s = pc.Scene(2, threads=1)
-    with pytest.raises(pc.InvalidTypeError, match=r"^item: expected a physcore term"):
+    with pytest.raises(pc.InvalidTypeError, match=r"^item: expected a part of physcore \(") as err:
         s.add(item)
+    for kind in ("Gravity", "Springs", "Fluid", "Plane", "Capsule", "OrientedBox", "Bodies", "Joints", "Contacts", "Wave"):
+        assert kind in str(err.value), kind
+    assert s._parts == []
+
+
+def test_scene_add_of_a_class_asks_for_an_instance():
+    s = pc.Scene(2, threads=1)
+    with pytest.raises(pc.InvalidTypeError, match=r"^item: got the class Gravity, not a part: did you mean Gravity\(\.\.\.\)\?"):
+        s.add(pc.Gravity)
     assert s._parts == []
 
 
