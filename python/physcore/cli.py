@@ -557,6 +557,8 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             parser.error(str(e))
     try:
         settings = _render_settings(fn, args, scene.dt)
+        if args.view is not None and int(getattr(scene, "dim", 0)) == 2:  # before simulating
+            parser.error("--view: a 2D scene is drawn in its plane; --view AZ,EL turns 3D scenes only")
         if "camera" in settings:  # before simulating: orbit needs 3D, follow:I a particle I
             from .render.painter import check_camera, points_view
 

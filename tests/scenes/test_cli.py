@@ -105,6 +105,17 @@ def test_info_on_a_machine_without_a_login_session_prints_no_wayland_error():
     assert proc.stdout.startswith("physcore ")
 
 
+def test_a_view_angle_for_a_2d_scene_is_refused_before_simulating(tmp_path, capsys):
+    # It was ignored: --camera orbit on a 2D scene was refused, --view AZ,EL silently dropped.
+    out = tmp_path / "k.gif"
+    assert main(["render", "kepler", "-o", str(out), "--view", "30,20"]) == 2
+    err = capsys.readouterr().err
+    assert "--view: a 2D scene is drawn in its plane" in err and "simulating" not in err
+    assert not out.exists()
+    with pytest.raises(pc.InvalidInputError, match="^view: a 2D scene"):
+        render.gif(pc.scenes.kepler(), tmp_path / "k.gif", view=(30, 20), frames=2)
+
+
 def test_unknown_scene(tmp_path, capsys):
     assert main(["render", "nosuchscene", "-o", str(tmp_path / "x.gif")]) == 2
     err = capsys.readouterr().err

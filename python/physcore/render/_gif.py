@@ -379,6 +379,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     theme = d.get("theme", "light") if theme is None else theme
     theme = _check.choice("theme", theme, THEMES)
     radius = _check_radius(d.get("radius") if radius is None else radius)
+    view_given = view is not None
     view = _check_view(d.get("view") if view is None else view)
     colorbar = _check.flag("colorbar", colorbar)
     springs = _check.flag("springs", springs)
@@ -409,6 +410,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
                 else int(getattr(_recording.points_view(scene), "n_particles", 0)))
     colors = _check_colors(d.get("colors") if colors is None else colors, n_colors)
     dim = scene.positions.shape[2] if isinstance(scene, _recording.Recording) else int(getattr(_recording.points_view(scene), "dim", 0))
+    if view_given and dim == 2:
+        raise InvalidInputError("view: a 2D scene is drawn in its plane; view=(azimuth, elevation) turns 3D scenes only")
     box = _extent_box(d.get("extent") if extent is None else extent, dim)
     halo = _check_halo(d.get("halo") if halo is None else halo, n_colors)
     loop_default = loop is None
