@@ -297,6 +297,22 @@ def test_a_scenes_loop_default_holds_only_where_its_frames_close_the_period():
     assert forced > dot + 200
 
 
+def test_the_colour_bar_stays_over_a_particle_that_passes_under_it():
+    # A scene's extent can let spray fly up into the colour bar's band (the crown's droplet
+    # hid "2 m/s"): the labels are pasted over every frame, the still camera's too.
+    def top_right(corner: list[float]) -> np.ndarray:
+        s = pc.Scene(2)
+        s.add_particles([[0.0, 0.0], corner], [[1.0, 0.0], [0.0, 0.0]])
+        f = next(iter(pc.render.frames(s, frames=1, steps_per_frame=1, size=(240, 160), radius=12, color_by="speed",
+                                       extent=((0.0, 0.0), (1.0, 1.0)), antialias=False)))
+        return f[:24, 120:].astype(int)
+
+    under, away = top_right([0.97, 1.08]), top_right([0.5, 0.5])  # past the extent, as spray flies
+    ink = (away != 255).any(axis=2)  # the bar and its labels
+    assert ink.sum() > 200 and (under != away).any()  # the disc is there, beside them
+    assert np.array_equal(under[ink], away[ink])
+
+
 def test_a_decompression_bomb_texture_is_refused_by_name(tmp_path, monkeypatch):
     # A PNG whose header claims more pixels than Pillow's bomb limit: one clear error naming
     # texture, at the CLI one line with exit code 2 (issue 44 item 9: a 20-line traceback).

@@ -679,10 +679,13 @@ class _Rasteriser:
         self._glass_cache: np.ndarray | None = None
         self._surf_backdrop: np.ndarray | None = None  # a liquid's backdrop (float RGB), fixed camera
         self.background = self._scene_background(self.cam)
-        # The fitted camera draws the labels once, into the background. Moving cameras draw the
-        # colliders and walls per frame and paste the labels over everything (a followed scene
-        # may pass under them): the pixels they set are those drawn alike over 0s and over 1s.
-        labels = [self.background] if self._centres is None else [np.zeros((h, w), np.uint8), np.ones((h, w), np.uint8)]
+        # The fitted camera draws the labels once, into the background. Every frame pastes them
+        # over everything too: a followed scene may pass under them, and spray thrown past a
+        # scene's extent did (the crown's over its colour bar). The pixels they set are those
+        # drawn alike over 0s and over 1s; where nothing passes under them, no pixel changes.
+        labels = [np.zeros((h, w), np.uint8), np.ones((h, w), np.uint8)]
+        if self._centres is None:
+            labels.insert(0, self.background)
         self.scale_bar = None
         for img in labels:
             if self.colorbar is not None:
@@ -691,10 +694,8 @@ class _Rasteriser:
                 _draw_title(img, self.title, w - 8 if self.colorbar is None else self.colorbar.lo_x - 8, self.font_px)
             if self.annotate and self._scales is None:  # a zooming view draws its own each frame
                 self.scale_bar = _draw_scale_bar(img, self.cam.scale, "m" if rec.speed_unit == "m/s" else "", self.font_px)
-        self._labels: tuple[np.ndarray, np.ndarray] | None = None
-        if self._centres is not None:
-            idx = np.flatnonzero(labels[0] == labels[1])
-            self._labels = (idx, labels[0].reshape(-1)[idx])
+        idx = np.flatnonzero(labels[-2] == labels[-1])
+        self._labels: tuple[np.ndarray, np.ndarray] | None = (idx, labels[-2].reshape(-1)[idx]) if idx.size else None
         self._arrows = None
         if arrows is not None and rec.velocities is not None:
             pick = _arrow_subset(rec, self.cam_at, min(size) / 12.0)
@@ -1608,8 +1609,8 @@ class _Rasteriser:
         return self.palette[idx].astype(np.float32) * np.float32(1 / 255)
 
     def _draw_overlays(self, buf: np.ndarray, k: int, cam: _Camera) -> None:
-        """Over everything that moves, under the clock: frame k's arrows, then (moving cameras)
-        the colour bar, title and scale bar."""
+        """Over everything that moves, under the clock: frame k's arrows, then the colour bar,
+        title and scale bar."""
         if self._arrows is not None:
             _draw_arrows(buf, cam, self.rec.positions[k][self._arrows[0]], self._arrows[1][k], self._arrows[2])
         if self._labels is not None:

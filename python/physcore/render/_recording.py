@@ -344,7 +344,8 @@ def _field_label(gp: dict[str, Any] | None) -> str:
         return ""
     units = {"u": "m", "velocity": "m/s", "speed": "m/s", "vorticity": "1/s", "temperature": "K"}
     name = gp["field"]
-    return f"{name} {units[name]}" if name in units and gp["grid"].kind != "gray_scott" else name
+    # "u (m)", not "u m", which read as a garbled unit beside the bar's top value.
+    return f"{name} ({units[name]})" if name in units and gp["grid"].kind != "gray_scott" else name
 
 
 def _grid_mask(gp: dict[str, Any] | None) -> np.ndarray | None:
