@@ -65,7 +65,7 @@ from ._scenefile import _open_regular, check_path
 from ._system import quiet_wayland_probe, usable_cpus
 from .contacts import Contacts
 from .scene import Scene, _copies
-from .session import Session, books, drift
+from .session import Session, books
 
 __all__ = ["Batch"]
 
@@ -639,8 +639,20 @@ class Batch:
         ------
         SceneBusyError
             A member is being stepped by another thread."""
-        return np.array([drift(x.reference_energy, total, scale)
-                         for x, (total, scale) in zip(self._sessions, self._books(), strict=True)], dtype=np.float64)
+        # Session.drift's arithmetic on arrays, elementwise in IEEE double: the same bits (a
+        # Python call a member took some 0.5 µs, 8 ms at 16,384 members).
+        now = np.array(self._books(), dtype=np.float64).reshape(-1, 2)
+        refs = [x.reference_energy for x in self._sessions]
+        have = np.array([r is not None for r in refs], dtype=bool)
+        ref = np.array([r if r is not None else (0.0, 0.0) for r in refs], dtype=np.float64).reshape(-1, 2)
+        e0, s0, total, scale = ref[:, 0], ref[:, 1], now[:, 0], now[:, 1]
+        finite = np.isfinite(e0) & np.isfinite(s0) & np.isfinite(total) & np.isfinite(scale)
+        with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
+            denom = np.maximum(np.maximum(np.abs(e0), s0), scale)
+            out = np.where(denom > 0, (total - e0) / np.where(denom > 0, denom, 1.0), 0.0)
+        out[~finite] = np.nan
+        out[~have] = 0.0
+        return out
 
     # ------------------------------------------------------------------------ drawing
     @property
