@@ -62,9 +62,15 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
     stiffness) by ``Δλ = (−C − α̃λ) / (Σ w_k |∇_k C|² + α̃)``, ``x_k += w_k ∇_k C Δλ``,
     ``α̃ = α/h²`` (Macklin, Müller & Chentanez, "XPBD", MIG 2016, eqs. 17–18; ``w = 1/m``, 0 for
     pinned particles), λ accumulated over the iterations of one substep, and sets
-    ``v = (x − x_prev)/h``. A compliance is a material constant: the static stretch of a distance
-    constraint under a force F is ``F α`` for any step, substep count or iteration count. ``α =
-    0`` is infinitely stiff. Kinds are projected in the order of the parameters below, each by
+    ``v = (x − x_prev)/h``. A compliance is a material constant: the static stretch of one
+    distance constraint under a force F is ``F α`` for any step, substep count or iteration
+    count. A chain of many is stiffer than that only where the iterations converge: one
+    Gauss–Seidel sweep a substep leaves a residual stretch that grows with the substep h, as
+    h² (a hanging chain of 40 links of 2.5 cm and 0.01 kg a node, at dt = 1/60 and 10
+    substeps of 1 iteration: 21.8 mm with ``α = 0``, and 102 mm where ``F α`` gives 80.4 mm
+    at ``α = 1e-3`` m/N; 20 substeps 5.4 and 85.9 mm, 10 iterations 2.2 and 80.44 mm). More
+    substeps (or iterations) where a long chain's stretch matters. ``α = 0`` is infinitely
+    stiff in the limit. Kinds are projected in the order of the parameters below, each by
     Gauss–Seidel over a greedy graph colouring (bit-identical results for any thread count).
 
     Parameters
