@@ -20,7 +20,8 @@
 //!
 //! A step is recorded as dispatches, with no read-back: the cell list (`cells.wgsl`'s kernels:
 //! a counting sort, each cell's particles then put in index order), the state copied into cell
-//! order, the density pass, then one pass of forces, update and walls that reads the cell-ordered
+//! order, the density pass (which also sums the walls' pressure push, so a step walks the walls'
+//! cells once), then one pass of forces, update and walls that reads the cell-ordered
 //! copies and writes the state back in the caller's order. The wall particles are static: sorted
 //! once on the host by (cell, index) over the same cells (those within one cell outside the grid
 //! clamped into its outer cells, those farther dropped: no point of the box is within 2h of
@@ -346,6 +347,7 @@ impl Sph {
         let svel = gpu.buffer("SPH sorted velocities", nn * d as u64 * rb, st)?;
         let srho = gpu.buffer("SPH sorted densities", nn * rb, st)?;
         let spr = gpu.buffer("SPH sorted p/rho^2", nn * rb, st)?;
+        let swall = gpu.buffer("SPH sorted wall pushes", nn * d as u64 * rb, st)?;
         let params_buf = gpu.buffer("SPH parameters", 48 + 24 * rb, U::UNIFORM | U::COPY_DST)?;
         let staging = gpu.buffer("SPH read-back", (nn * d as u64 * rb).max(16), U::MAP_READ | U::COPY_DST)?;
         use Bind::{Read as R, ReadWrite as W, Uniform};
@@ -354,7 +356,7 @@ impl Sph {
             "sph.wgsl",
             precision,
             concat!(include_str!("sph.wgsl"), include_str!("cell_walk.wgsl"), include_str!("box_faces.wgsl")),
-            &[uniform, W, W, W, R, R, R, W, W, W, W, W, W, R, R, W, W],
+            &[uniform, W, W, W, R, R, R, W, W, W, W, W, W, R, R, W, W, W],
             &["gather", "density", "integrate"],
         );
         let t = &tank;
@@ -380,6 +382,7 @@ impl Sph {
                 &t.wall_start,
                 &t.nbr,
                 &t.nlen,
+                &swall,
             ],
         );
         let maxima = Maxima::new(&gpu, precision, n, d, &t.vel, Some((&books, 2 * nn)))?;
@@ -397,7 +400,7 @@ impl Sph {
             sph_bind,
             sph_pipes,
             chunk: Chunk::new(MAX_CHUNK),
-            _keep: vec![spos, svel, srho, spr],
+            _keep: vec![spos, svel, srho, spr, swall],
         };
         s.write_params(0.0);
         s.gpu.wait()?;

@@ -88,6 +88,9 @@ const WG: u32 = 64u;
 // in the same order, each evaluated by the same expression.
 @group(0) @binding(15) var<storage, read_write> nbr: array<u32>;
 @group(0) @binding(16) var<storage, read_write> nlen: array<u32>;
+// Per slot (cell order), `dim` reals: the walls' Σ_b Ψ_b g(q) (x_k − x_b), made by `density`
+// in the same walk as their density share, for `integrate` (one walk of the walls' cells a step).
+@group(0) @binding(17) var<storage, read_write> swall: array<real>;
 
 // Cell-ordered position (or velocity) of slot s, z = 0 in 2D.
 fn at(a: u32, s: u32) -> vec3<real> {
@@ -210,7 +213,9 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     nlen[k] = listed;
     // The walls' share Σ_b Ψ_b w(|x_k − x_b|/h), added to the same sum after the fluid's (as
-    // passes.rs `Density` adds them to its accumulator).
+    // passes.rs `Density` adds them to its accumulator); in the same walk, the sum of their
+    // pressure push Σ_b Ψ_b g(q) (x_k − x_b) that `integrate` takes (the same expressions).
+    var wacc = vec3<real>(0.0, 0.0, 0.0);
     for (var z = z0; z <= z1; z = z + 1u) {
         for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
             let row = flat(vec3<u32>(0u, y, z));
@@ -222,10 +227,18 @@ fn density(@builtin(global_invocation_id) gid: vec3<u32>) {
                     r2 = e.z * e.z + r2;
                 }
                 if (r2 < P.reach) {
-                    acc = acc + w(sqrt(max(r2, P.tiny)) * P.inv_h) * wb.w;
+                    let q = sqrt(max(r2, P.tiny)) * P.inv_h;
+                    acc = acc + w(q) * wb.w;
+                    let cf = wb.w * g(q);
+                    for (var a = 0u; a < d; a = a + 1u) {
+                        wacc[a] = cf * e[a] + wacc[a];
+                    }
                 }
             }
         }
+    }
+    for (var a = 0u; a < d; a = a + 1u) {
+        swall[d * k + a] = wacc[a];
     }
     let r = P.sigma * acc;
     var p = P.b * (powi(r * P.inv_rho0) - 1.0);
@@ -319,27 +332,11 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     }
     // The walls' pressure (Akinci et al. 2012, eq. 10, the fluid's own pressure mirrored; no
-    // viscosity against them): Σ_b Ψ_b g(q) (x_i − x_b), times p_i/ρ_i² below (passes.rs `Forces`).
+    // viscosity against them): Σ_b Ψ_b g(q) (x_i − x_b) (summed by `density`), times p_i/ρ_i²
+    // below (passes.rs `Forces`).
     var wacc = vec3<real>(0.0, 0.0, 0.0);
-    for (var z = z0; z <= z1; z = z + 1u) {
-        for (var y = lo_of(c.y); y <= hi_of(c.y, P.cy); y = y + 1u) {
-            let row = flat(vec3<u32>(0u, y, z));
-            for (var s = wall_start[row + lo_of(c.x)]; s < wall_start[row + hi_of(c.x, P.cx) + 1u]; s = s + 1u) {
-                let wb = wall_at(s);
-                let e = xi - wb.xyz;
-                var r2 = e.x * e.x + e.y * e.y;
-                if (d == 3u) {
-                    r2 = e.z * e.z + r2;
-                }
-                if (!(r2 < P.reach)) {
-                    continue;
-                }
-                let cf = wb.w * g(sqrt(max(r2, P.tiny)) * P.inv_h);
-                for (var a = 0u; a < d; a = a + 1u) {
-                    wacc[a] = cf * e[a] + wacc[a];
-                }
-            }
-        }
+    for (var a = 0u; a < d; a = a + 1u) {
+        wacc[a] = swall[d * k + a];
     }
     let grav = vec3<real>(P.gx, P.gy, P.gz);
     let lo = vec3<real>(P.lo_x, P.lo_y, P.lo_z);
