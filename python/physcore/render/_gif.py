@@ -506,7 +506,6 @@ _WEB_OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "m
 _VIDEO_INSTALL = 'pip install "physcore[video]"'
 
 
-
 def _closes(rec: _recording.Recording) -> bool:
     """Whether a recording's last frame runs on into its first as each frame into the next: the
     step from the last frame back to the first at most 1.5 times the largest step between
@@ -518,6 +517,7 @@ def _closes(rec: _recording.Recording) -> bool:
         return False
     step = float(np.abs(np.diff(x, axis=0)).max())
     return bool(np.isfinite(step) and float(np.abs(x[-1] - x[0]).max()) <= 1.5 * step)
+
 
 def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | None, fps: float, count: int) -> Any:
     """Writes (or yields) the palette-index frames in `fmt`: "gif", "mp4", "webm", "png" (one
