@@ -24,6 +24,20 @@ fn scan_groups(cells: usize) -> (u32, u32) {
     (b.clamp(1, 65_535), b.div_ceil(65_535).max(1))
 }
 
+/// Writes cells.wgsl's parameter block to `buf`: `n` particles in `dim` dimensions over `cells`
+/// cells (z = 1 in 2D) of side `cell` m from the corner `lo` (m).
+pub(crate) fn write_cell_params(
+    gpu: &Gpu,
+    precision: Precision,
+    buf: &wgpu::Buffer,
+    (n, dim): (usize, usize),
+    cells: [usize; 3],
+    (lo, cell): ([f64; 3], f64),
+) {
+    let ints = [n as u32, dim as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32, 0, 0, 0];
+    gpu.write_params(precision, buf, &ints, &[lo[0], lo[1], lo[2], cell, cell]);
+}
+
 /// cells.wgsl's build for a particle pass (WCSPH, DFSPH, DEM, the tests' `Cells`): its
 /// pipelines, their bind group and the scan's block totals, over a grid of `cells` cells.
 pub(crate) struct CellBuild {

@@ -94,7 +94,7 @@
 //!
 //! Not here (the CPU has them): Verlet lists (the cell list is rebuilt
 //! every step), "xpbd"; of the other force terms only a uniform gravity and linear drag.
-use crate::cells::{spread, CellBuild};
+use crate::cells::{spread, write_cell_params, CellBuild};
 use crate::particles::Halt;
 pub use crate::shape::Shape;
 use crate::shape::ROW;
@@ -536,13 +536,7 @@ impl Dem {
                 &books,
             ],
         );
-        let lo = p.lower;
-        gpu.write_params(
-            precision,
-            &cell_params,
-            &[n as u32, dim as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32, 0, 0, 0],
-            &[lo[0], lo[1], lo[2], cell, cell],
-        );
+        write_cell_params(&gpu, precision, &cell_params, (n, dim), cells, (p.lower, cell));
         if n > 0 {
             gpu.upload(precision, &pos, x);
             gpu.upload(precision, &vel, v);

@@ -3,7 +3,7 @@
 //! 2h wide over the box and its build (`cells.wgsl`); the static wall particles sorted by cell;
 //! each particle's neighbour list. Each fluid adds its own fields, kernels and books; both bind
 //! these buffers in their shaders' order.
-use crate::cells::CellBuild;
+use crate::cells::{write_cell_params, CellBuild};
 use crate::sph::invalid;
 use crate::{Gpu, GpuError, Precision, Result};
 
@@ -114,13 +114,7 @@ impl Tank {
         let nlen = gpu.buffer(&name("neighbour counts"), nn.max(1) * 4, st)?;
         let cell_bufs = [&cell_params, &pos, &cell_of, &counts, &start, &order, &found];
         let cell_build = CellBuild::new(gpu, precision, &name("cell list"), cell_bufs, ncells as usize, &[])?;
-        let cell = 2.0 * region.h;
-        gpu.write_params(
-            precision,
-            &cell_params,
-            &[n as u32, d as u32, cells[0] as u32, cells[1] as u32, cells[2] as u32, 0, 0, 0],
-            &[lo[0], lo[1], lo[2], cell, cell],
-        );
+        write_cell_params(gpu, precision, &cell_params, (n, d), cells, (*lo, 2.0 * region.h));
         if n > 0 {
             gpu.upload(precision, &pos, positions);
             gpu.upload(precision, &vel, velocities);

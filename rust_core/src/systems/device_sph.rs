@@ -78,7 +78,6 @@ pub(super) struct FluidRecords<'a> {
 /// messages) holding every particle, of one mass, none pinned, at most one gravity term,
 /// exactly one Box collider and semi-implicit Euler, and returns what the device takes.
 /// Errors: `InvalidInput` naming what the device cannot hold.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn fluid_records<'a>(
     (method, kind): (&str, &str),
     dim: usize,

@@ -1568,10 +1568,10 @@ impl<V: Vector> OwnState<V> for Contacts<V> {
     fn spins(&mut self) -> Option<super::Spins<'_, V>> {
         Some(super::Spins { omega: &mut self.omega, inertia_factor: self.material.inertia_factor })
     }
-    /// Spins, angles and the springs of live contacts.
     fn refused(&self) -> Option<crate::error::Error> {
         self.refused.clone()
     }
+    /// Spins, angles and the springs of live contacts.
     fn non_finite(&self) -> Option<usize> {
         // It runs after every step: first one streaming, branch-free pass (0·x is 0 for a
         // finite x and NaN otherwise, and NaN survives a sum), in parallel; the search for the
