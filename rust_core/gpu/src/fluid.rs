@@ -1308,12 +1308,25 @@ impl Fluid {
                 self.gpu.upload_at(self.precision, &self.s_buf, a.inv * rb, &inv);
             }
             let lid_term = if m.no_slip { 2.0 * s * m.lid } else { 0.0 };
+            // The walls' slip terms, as the core's `slip_terms`: [y walls, x− wall, x+ wall].
+            let slip = 2.0 * s * (1.0 - m.share) * dt / dx;
+            let open = !m.inflow.is_empty();
+            let walls = if m.no_slip { slip } else { 0.0 };
+            let (west, east) = if open { (slip, 0.0) } else { (walls, walls) };
             for k in 0..2 {
                 let a = self.solvers[k + 1].levels[0];
                 let mut b = block(nx, ny);
-                b.ints[O..O + 7].copy_from_slice(&[a.x as u32, a.b as u32, 0, 0, 0, (OPEN * lu) as u32, 0]);
-                b.reals[..2].copy_from_slice(&[s, lid_term]);
-                b.ints[FLAGS_I] = !m.inflow.is_empty() as u32;
+                b.ints[O..O + 7].copy_from_slice(&[
+                    a.x as u32,
+                    a.b as u32,
+                    self.pressure_at as u32,
+                    0,
+                    0,
+                    (OPEN * lu) as u32,
+                    (OPEN * lv) as u32,
+                ]);
+                b.reals[..4].copy_from_slice(&[s, lid_term, if k == 0 { walls } else { west }, east]);
+                b.ints[FLAGS_I] = open as u32;
                 let (name, shape) =
                     if k == 0 { ("visc_u", groups(nx + 1, ny)) } else { ("visc_v", groups(nx, ny + 1)) };
                 let g = self.go(fk(name), b, shape);

@@ -547,8 +547,10 @@ fn gradient_v(@builtin(global_invocation_id) g: vec3<u32>) {
 }
 
 // ---- viscosity's right-hand sides and results (`diffuse`). u: unknowns (nx+1) × ny at padded
-// width nx+3 in S: x at o0, b at o1; the open mask at o5 (U); r0 the scale s, r1 the lid's
-// term; flags bit 0: an inflow (its held face feeds the next face's b), bit 1: back (u = x).
+// width nx+3 in S: x at o0, b at o1; the open mask at o5 (U); the pressure at o2 (S); r0 the
+// scale s, r1 the lid's term, r2 the y walls' slip term (`slip_terms`: u*'s wall value
+// (1 − share)·dt·∂p/∂x, from the wall row's pressure difference); flags bit 0: an inflow (its
+// held face feeds the next face's b), bit 1: back (u = x).
 @compute @workgroup_size(WG)
 fn visc_u(@builtin(global_invocation_id) g: vec3<u32>) {
     let wu = P.nx + 1u;
@@ -570,13 +572,19 @@ fn visc_u(@builtin(global_invocation_id) g: vec3<u32>) {
     if ((P.flags & 1u) != 0u && i == 1u) {
         b = b + U[P.o5 + k] * P.r0 * U[wu * (j + 1u)];
     }
+    let walls = select(real(0.0), real(1.0), j == 0u) + select(real(0.0), real(1.0), j == P.ny - 1u);
+    if (walls > 0.0 && P.r2 != 0.0) {
+        let pr = P.o2 + (P.nx + 2u) * (j + 1u) + i;
+        b = b + U[P.o5 + k] * (walls * P.r2) * (S[pr + 1u] - S[pr]);
+    }
     if (j == P.ny - 1u) {
         b = b + U[P.o5 + k] * P.r1;
     }
     S[P.o1 + c] = b;
 }
 
-// v: unknowns nx × (ny+1) at padded width nx+2: x at o0, b at o1; flags bit 1: back.
+// v: unknowns nx × (ny+1) at padded width nx+2: x at o0, b at o1; the open mask at o6 (V),
+// the pressure at o2 (S); r2, r3 the x− and x+ walls' slip terms (as u's); flags bit 1: back.
 @compute @workgroup_size(WG)
 fn visc_v(@builtin(global_invocation_id) g: vec3<u32>) {
     let i = g.x;
@@ -592,7 +600,17 @@ fn visc_v(@builtin(global_invocation_id) g: vec3<u32>) {
         return;
     }
     S[P.o0 + c] = V[k];
-    S[P.o1 + c] = V[k];
+    var b = V[k];
+    if (j > 0u && j < P.ny) {
+        let pr = P.o2 + w * j + i + 1u;
+        if (i == 0u) {
+            b = b + V[P.o6 + k] * P.r2 * (S[pr + w] - S[pr]);
+        }
+        if (i == P.nx - 1u) {
+            b = b + V[P.o6 + k] * P.r3 * (S[pr + w] - S[pr]);
+        }
+    }
+    S[P.o1 + c] = b;
 }
 
 // ---- books. Partial sums over a region of a slab: nodes o1..o2 of rows o3..o3 + lny of row

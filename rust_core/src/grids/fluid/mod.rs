@@ -20,7 +20,9 @@
 //!    field advected is u − ½dt·∇p, p the last step's pressure, while the paths are traced
 //!    through u; see [`Projection`]);
 //! 5. viscosity (ν > 0): backward Euler (I − ν·dt·∇²)u = u*, per component, by CG with a
-//!    diagonal preconditioner (unconditionally stable);
+//!    diagonal preconditioner (unconditionally stable); a wall that holds the tangential
+//!    velocity (no slip, the inflow's v = 0) gives u* the value (1 − share)·dt·∂p/∂τ that the
+//!    projection then takes back (Kim & Moin 1985; `slip_terms`), so the wall holds after it;
 //! 6. projection: ∇²p = ∇·u*/dt with Neumann conditions at walls and obstacles, by CG
 //!    preconditioned with one multigrid V-cycle (MGPCG, [`super::poisson`]), warm-started
 //!    from the last pressure; u −= dt·∇p (incremental: the solve is for π = p_new − ½p, started
