@@ -245,6 +245,27 @@ def test_extent_fixes_the_view_and_is_checked_before_stepping(tmp_path):
     assert s.time == 0.0
 
 
+def test_halo_in_an_own_colour_glow_is_a_bright_core_at_its_particle():
+    """color_by="density" with colours: a halo particle (a galaxy's central mass inside the
+    stars' ring) shines as a whitened core where the glow alone left the ring's dark hole."""
+    rng = np.random.default_rng(1)
+    r = np.sqrt(rng.uniform(0.3**2, 1.0, 3000))  # a ring of stars round an empty centre
+    phi = rng.uniform(0, 2 * np.pi, 3000)
+    x = np.concatenate([[[0.0, 0.0]], np.stack([r * np.cos(phi), r * np.sin(phi)], 1)])
+    s = pc.Scene(2)
+    s.add_particles(x)
+    opts = dict(frames=1, size=(200, 200), radius=0, color_by="density", colors=["#6080ff"] * len(x), theme="dark",
+                colorbar=False)
+    plain = next(pc.render.frames(s, **opts)).astype(int)
+    core = next(pc.render.frames(s, halo=[0], **opts)).astype(int)
+    ring_r, ring_c = np.nonzero(plain.sum(axis=2) > plain[0, 0].sum() + 60)  # the ring's pixels
+    r0, c0 = int(round(ring_r.mean())), int(round(ring_c.mean()))  # its centre
+    rows, cols = np.nonzero(np.abs(core - plain).sum(axis=2) > 10)
+    assert rows.size and abs(rows.mean() - r0) < 2 and abs(cols.mean() - c0) < 2  # at the centre only
+    assert np.ptp(rows) < 0.5 * np.ptp(ring_r)  # inside the ring
+    assert core[r0, c0].min() > 170 and (core[r0, c0] - plain[r0, c0]).min() > 60  # whitened, where it was dim
+
+
 def test_halo_glows_around_its_particle_only(tmp_path):
     s = _two_balls()
     opts = dict(frames=1, size=(200, 120), radius=6, color_by="none", colors=["#ffd000", "#0060ff"], theme="dark",

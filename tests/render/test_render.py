@@ -1058,6 +1058,20 @@ def test_field_labels_dimensionless_clock_and_a_scale_from_zero():
     assert shifted.lo > 5.0  # far from 0: the scale keeps its low percentile
 
 
+def test_a_stable_fluids_scalar_is_labelled_smoke_or_dye_not_density():
+    """The fluid's `density` is a passive 0..1 scalar: the colour bar calls it smoke where
+    buoyancy lifts it and dye otherwise (the cavity's bands, the vortex street's streaks)."""
+    from physcore.render._recording import _field_label
+
+    def label(scene, field="density"):
+        return _field_label({"field": field, "grid": scene.grids[0]})
+
+    assert label(pc.scenes.smoke(n=16)) == "smoke"
+    assert label(pc.scenes.cavity(n=16)) == "dye"
+    assert label(pc.scenes.vortex_street(n=4)) == "dye"
+    assert label(pc.scenes.cavity(n=16), "speed") == "speed (m/s)"
+
+
 def test_a_segment_wholly_outside_the_image_draws_nothing():
     """A line from inside the image to a point beyond float32's pixels (a scene about to diverge)
     draws its part inside; one wholly outside draws nothing (neither fails)."""

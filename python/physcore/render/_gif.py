@@ -279,7 +279,10 @@ def gif(
     halo : array_like of bool (N,) or of int, optional
         Particles drawn with a soft halo of their own colour around the disc (a star): a mask,
         or particle indices (``[]``: none). Drawn with soft discs only (``antialias=False``
-        leaves it out). Default: the scene's ``render_defaults`` (Kepler's star), else none.
+        leaves it out); in a glow in own colours (``color_by="density"`` with ``colors``) as
+        a bright core, 2.5 % of the first frame's side across (σ), whitened (the galaxies'
+        central masses). Default: the scene's ``render_defaults`` (Kepler's star, the
+        galaxies' centres), else none.
     loop : bool, optional
         The animation is periodic (the frame after the last would be the first: an orbit, a
         choreography), so each trail at the start runs on from the end and the GIF loops

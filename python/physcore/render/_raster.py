@@ -732,8 +732,11 @@ class _Rasteriser:
                 self._color_idx = (len(self.palette) + which.reshape(-1)).astype(np.uint8)
                 self.palette = np.concatenate([self.palette, hues.astype(np.uint8)])
         self.antialias = (bool(antialias) or (self.colors is not None and self._color_idx is None)) and color_by != "density"
-        # A halo needs full colour: hard-edged discs (antialias=False) go without.
-        self.halo = halo if halo is not None and halo.any() and mesh is None and color_by != "density" and antialias else None
+        # A halo needs full colour: hard-edged discs (antialias=False) go without; a glow in its
+        # own colours draws it as a bright core (a galaxy's bulge, `_frame_rgb_glow`).
+        glow_rgb = color_by == "density" and self.colors is not None
+        full = (color_by != "density" and antialias) or glow_rgb
+        self.halo = halo if halo is not None and halo.any() and mesh is None and full else None
         self.surface = bool(surface) and mesh is None and color_by in ("speed", "pressure", "none")
         if self.surface:
             self._surface_setup()
@@ -928,6 +931,14 @@ class _Rasteriser:
             lit = hue * (1 - white) + 255.0 * white
             out = out * (1 - t) + lit * t
         out = np.clip(np.rint(out), 0, 255).astype(np.uint8)
+        if self.halo is not None:
+            # The halo particles (e.g. a galaxy's central mass, one particle among thousands of
+            # stars, which the glow alone leaves as a dark hole) shine as a core: the halo's
+            # Gaussian in their colour, whitened by 80 %, σ 2.5 % of the first frame's shorter
+            # side, a size in the scene that follows a zooming camera.
+            col, row = cam.pixels(cam.project(self.rec.positions[k])[0])
+            sigma = 0.025 * min(out.shape[:2]) / self.cam_at(0).scale * cam.scale
+            self._draw_halos(out, col, row, np.full(col.size, max(sigma, 1.5) / 1.3), None, white=0.8)
         over = _overlay(under.shape)
         if self.rec.pinned.any():  # pinned particles stay discs on top
             s, _ = cam.project(self.rec.positions[k][self.rec.pinned])
@@ -1502,9 +1513,11 @@ class _Rasteriser:
             _draw_lines(buf, col[i], row[i], col[j], row[j], _strain_levels(rec.strain[k], self.strain_scale))
         return springs and self.color_by == "strain"
 
-    def _draw_halos(self, out: np.ndarray, col: np.ndarray, row: np.ndarray, rad: np.ndarray, colors: np.ndarray) -> None:
-        """A soft halo around each `halo` particle, onto the RGB image `out`: its colour blended
-        in with weight 0.85 exp(−d²/2σ²), σ = 1.3 disc radii, out to 4σ (a star's glow)."""
+    def _draw_halos(self, out: np.ndarray, col: np.ndarray, row: np.ndarray, rad: np.ndarray, colors: np.ndarray | None,
+                    white: float = 0.0) -> None:
+        """A soft halo around each `halo` particle, onto the RGB image `out`: its colour (moved a
+        share `white` towards white) blended in with weight 0.85 exp(−d²/2σ²), σ = 1.3 disc
+        radii, out to 4σ (a star's glow). `colors`: palette indices, unused with own colours."""
         h, w = out.shape[:2]
         for i in np.flatnonzero(self.halo):
             c, r = col[i], row[i]
@@ -1519,6 +1532,7 @@ class _Rasteriser:
             yy, xx = np.mgrid[r0:r1, c0:c1]
             a = (0.85 * np.exp(-((xx + 0.5 - c) ** 2 + (yy + 0.5 - r) ** 2) / (2 * sigma * sigma)))[..., None]
             tint = (self.palette[colors[i]] if self.colors is None else self.colors[i]).astype(np.float32)
+            tint = tint * (1 - white) + 255.0 * white
             patch = out[r0:r1, c0:c1].astype(np.float32)
             out[r0:r1, c0:c1] = np.rint(patch * (1 - a) + tint * a).astype(np.uint8)
 

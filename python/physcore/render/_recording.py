@@ -343,9 +343,13 @@ def _field_label(gp: dict[str, Any] | None) -> str:
     if gp is None:
         return ""
     units = {"u": "m", "velocity": "m/s", "speed": "m/s", "vorticity": "1/s", "temperature": "K"}
-    name = gp["field"]
+    name, grid = gp["field"], gp["grid"]
+    if name == "density" and grid.kind == "stable_fluid":
+        # A passive scalar of 0..1, not a mass density: smoke where buoyancy lifts it, else
+        # dye (the cavity's bands, the vortex street's streaks).
+        return "smoke" if any(grid.buoyancy) else "dye"
     # "u (m)", not "u m", which read as a garbled unit beside the bar's top value.
-    return f"{name} ({units[name]})" if name in units and gp["grid"].kind != "gray_scott" else name
+    return f"{name} ({units[name]})" if name in units and grid.kind != "gray_scott" else name
 
 
 def _grid_mask(gp: dict[str, Any] | None) -> np.ndarray | None:
