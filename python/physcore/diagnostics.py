@@ -38,8 +38,8 @@ class EnergyRecorder:
     ----------------------------------------------
     time, kinetic, total, drift : numpy.ndarray, shape (S,), float64
         ``drift`` is the relative change of ``total`` since the first sample, with the same
-        scale as :meth:`Scene.energy_drift` (``|E0|``, or the sum of the books' magnitudes when
-        larger).
+        scale as :meth:`Scene.energy_drift`: the largest of ``|E0|`` and the sums of the books'
+        magnitudes at the start and at the sample (the energy in play).
     potential, dissipated : dict[str, numpy.ndarray]
         Each term's potential energy and each source's dissipated energy, shape (S,).
     """

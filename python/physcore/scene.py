@@ -1370,8 +1370,15 @@ class Scene:
         """Relative change of ``energy().total`` since the first step (0 before any step).
 
         ``(E - E0) / max(|E0|, S0, S)`` where ``S0``, ``S`` are the sums of the magnitudes of the
-        books' parts at the start and now: relative to ``|E0|`` normally, and to the energy scale
-        in play when ``E0`` is zero by the choice of potential reference (e.g. a cloth at rest).
+        books' parts (kinetic, each potential, each dissipated) at the start and now: the change
+        relative to the energy in play, which stays meaningful where ``E0`` is zero or near it
+        by the choice of potential reference (a cloth at rest, an unbound pair). Where the books
+        hold only kinetic energy this is ``(E - E0) / |E0|``; where potential and kinetic
+        energy offset each other it is smaller. A bound orbit's scale is ``K + |U|``: a Kepler
+        orbit of eccentricity e started at pericentre reads ``(1 - e) / (3 + e)`` of the
+        conventional relative energy error ``(E - E0) / |E0|`` of N-body codes (REBOUND's), a
+        circular one 1/3. For that error, read ``E0 = scene.energy().total`` before the first
+        step and compare ``(scene.energy().total - E0) / abs(E0)``.
 
         NaN when the books at the start or now are not finite (e.g. ``½ m v²`` or ``G m² / r``
         beyond float64 for masses near 1e308): the drift is then unknown, never reported as 0.
