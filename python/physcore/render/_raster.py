@@ -441,22 +441,25 @@ def _occupied(col: np.ndarray, row: np.ndarray, c: float) -> int:
     return int(np.unique(key).size)
 
 
-def _spacing3(x: np.ndarray) -> float | None:
-    """The mean particle spacing (world units) of the (N, 3) points `x`: the volume of the cells
-    of twice the spacing they occupy, over their count, refined three times from their bounding
-    box's (the 3D form of _Rasteriser._surface_setup's estimate); None for fewer than 2 points."""
+def _spacing(x: np.ndarray) -> float | None:
+    """The mean particle spacing (world units) of the (N, d) points `x` (d = 2 or 3): the area or
+    volume of the cells of twice the spacing they occupy, over their count, refined three times
+    from their bounding box's (the form of _Rasteriser._surface_setup's estimate in space);
+    None for fewer than 2 points."""
     x = x[np.isfinite(x).all(axis=1)].astype(np.float64)
-    n = len(x)
+    n, d = x.shape
     if n < 2:
         return None
     lo = x.min(axis=0)
     ext = np.maximum(np.ptp(x, axis=0), 1e-12)
-    s = float(np.cbrt(np.prod(ext) / n))
+    s = float((np.prod(ext) / n) ** (1.0 / d))
     for _ in range(3):
         c = 2.0 * s
         k = np.floor((x - lo) / c).astype(np.int64)
         dims = k.max(axis=0) + 1
-        key = (k[:, 0] * dims[1] + k[:, 1]) * dims[2] + k[:, 2]
+        key = k[:, 0] * dims[1] + k[:, 1]
+        if d == 3:
+            key = key * dims[2] + k[:, 2]
         total = int(np.prod(dims))
         if total <= 4 * n + 1024:  # an occupancy grid, O(N), as _occupied counts (np.unique sorted
             grid = np.zeros(total, dtype=bool)  # the keys: 0.3 s of a 10⁶-particle GIF's setup)
@@ -464,7 +467,7 @@ def _spacing3(x: np.ndarray) -> float | None:
             cells = int(np.count_nonzero(grid))
         else:
             cells = np.unique(key).size
-        s = float(np.cbrt(cells * c**3 / n))
+        s = float((cells * c**d / n) ** (1.0 / d))
     return s
 
 
@@ -673,6 +676,7 @@ class _Rasteriser:
             px = np.where(rec.radii > 0, rec.radii * self.cam.scale, self.radius)
             self.radii = np.maximum(np.rint(px), 1).astype(np.int64)
         self.walls = walls
+        self._wall_spacing: float | None = None  # world units, found once (_scene_background)
         # A 3D liquid's tank walls are drawn as glass (_glass), not as a stipple of discs.
         self._glass_walls = (walls is not None and len(walls) > 0 and dim == 3 and bool(surface) and mesh is None
                              and color_by in ("speed", "pressure", "none"))
@@ -814,7 +818,16 @@ class _Rasteriser:
         if self.walls is not None and not self._glass_walls:
             s, _ = cam.project(self.walls)
             col, row = cam.pixels(s)
-            _draw_discs(img, col, row, np.full(col.shape, _WALL, dtype=np.uint8), self.stencil)
+            stencil = self.stencil
+            if self.walls.shape[1] == 2:
+                # Discs that close the lattice's gaps (radius 0.7 spacings: the half diagonal):
+                # the particle-sized ones drew the walls as perforated bands.
+                if self._wall_spacing is None:
+                    self._wall_spacing = _spacing(self.walls) or 0.0
+                r = min(int(math.ceil(0.7 * self._wall_spacing * cam.scale)), 12)
+                if r > int(self.radius):
+                    stencil = _disc_stencil(r)
+            _draw_discs(img, col, row, np.full(col.shape, _WALL, dtype=np.uint8), stencil)
         return img
 
     def _glass(self, cam: _Camera) -> np.ndarray:
@@ -827,7 +840,7 @@ class _Rasteriser:
             return self._glass_cache
         s, _ = cam.project(self.walls)
         col, row = cam.pixels(s)
-        d = _spacing3(self.walls)
+        d = _spacing(self.walls)
         r = max(1, int(round(0.6 * (d if d is not None else 0.0) * cam.scale)))  # σ ≈ 0.7 spacing
         dens = _blur(_splat(col, row, (cam.height, cam.width)), r)
         lit = dens[dens > 1e-6]
@@ -972,7 +985,7 @@ class _Rasteriser:
         # (the projected one above shrinks with the liquid's thickness).
         self._surf_sphere = None
         if self.cam.dim == 3:
-            d = _spacing3(rec.positions[0][free])
+            d = _spacing(rec.positions[0][free])
             if d is not None:
                 px = d * self.cam.scale
                 self._surf_sphere = min(max(SURFACE_SPHERE * px, 1.0), _MAX_SPHERE_PX)
