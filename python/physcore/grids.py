@@ -666,8 +666,8 @@ class StableFluid(Grid):
         (1 − share)·dt·∂p/∂τ that the projection's gradient takes back (Kim & Moin, J. Comput.
         Phys. 59 (1985) 308), so a steady state does not depend on the step (plane Poiseuille
         flow's pressure gradient −0.78 % at 16 cells across, the grid's error, at any ``cfl``
-        and either ``projection``). Obstacles' faces do not get this term: their tangential
-        velocity slips by O(dt) where the pressure gradient along them is large.
+        and either ``projection``). Obstacles (always no-slip) have their walls at their
+        cells' edges and get the same term.
     lid : float, optional
         Speed (m/s, +x) of the top wall: a lid-driven cavity (needs ``walls="no_slip"``).
     inflow : float, optional
@@ -690,7 +690,7 @@ class StableFluid(Grid):
         t = 1 s 0.54 % too little at dt = π/256 s, whether that is 256² at cfl 1 or 64² at
         cfl 0.25 (64² at cfl 1: 2.1 %). Flows that change shape keep a first-order part (the
         paths are traced through the velocity at the start of the step): the vortex street's
-        Strouhal number moves 2.4 % between cfl 1 and 0.5 (3.3 % with Chorin's). Lower ``cfl``
+        Strouhal number moves 0.6 % between cfl 1 and 0.5 (4.0 % with Chorin's). Lower ``cfl``
         where decay rates or frequencies matter.
 
     On a GPU (``Scene(device="gpu")``) every stage runs on the device, the pressure by MGPCG

@@ -46,10 +46,11 @@ def strouhal(re: float, n: int, cfl: float, height: float = 10.0) -> tuple[float
 @pytest.mark.parametrize("re", [100.0, 150.0])
 def test_strouhal_number_matches_roshko(re):
     """8 cells per diameter, cfl 0.5 (of U), blockage D/H = 0.1: St within 5 % of Roshko's fit.
-    (Measured, at the default incremental projection: Re 100: 0.1733 vs 0.1671, Re 150: 0.1882
+    (Measured, at the default incremental projection: Re 100: 0.1699 vs 0.1671, Re 150: 0.1841
     vs 0.1820, above the unbounded fit as the blockage makes it; 12 cells per D at Re 100:
-    0.1789; cfl 1 at 8 cells: 0.1775. With Chorin's projection, before issue 64: 0.1653,
-    0.1776; 0.1724; 0.1599.)"""
+    0.1758; cfl 1 at 8 cells: 0.1709. Before the cylinder's wall moved to its cells' edge with
+    the projection's slip term: 0.1733, 0.1882; 0.1789; 0.1775. With Chorin's projection,
+    before issue 64: 0.1653, 0.1776; 0.1724; 0.1599.)"""
     st, spread = strouhal(re, n=8, cfl=0.5)
     print(f"Re {re:g}: St {st:.4f}, Roshko {roshko(re):.4f} ({100 * (st / roshko(re) - 1):+.1f} %)")
     assert spread < 0.01, f"the shedding is not periodic yet: periods spread {spread:.2%}"

@@ -86,6 +86,10 @@ pub struct Model {
     /// 1/0 masks: open u faces ((nx+1)(ny+2)), open v faces ((nx+2)(ny+1)), fluid cells.
     pub u_open: Vec<f64>,
     pub v_open: Vec<f64>,
+    /// With viscosity: the no-slip walls along each u and v face (0, 1 or 2; the core's
+    /// `u_walls`, `v_walls`), in the layouts of `u_open` and `v_open`; empty without.
+    pub u_walls: Vec<f64>,
+    pub v_walls: Vec<f64>,
     pub fluid: Vec<f64>,
     /// The pressure operator and its coarse levels (scale 1).
     pub pressure: Vec<Operator>,
@@ -156,12 +160,13 @@ pub enum Halt {
 }
 
 // Slabs of U and V: the field, the advected one, MacCormack's first pass, the half-kicked one,
-// the open mask.
+// the open mask, the no-slip walls along each face.
 const F: u64 = 0;
 const F2: u64 = 1;
 const HAT: u64 = 2;
 const KICK: u64 = 3;
 const OPEN: u64 = 4;
+const WALLS: u64 = 5;
 // Slabs of C.
 const DEN: u64 = 0;
 const TEM: u64 = 1;
@@ -439,12 +444,16 @@ impl Fluid {
         assert_eq!(model.u_open.len() as u64, lu, "an open flag per u face");
         assert_eq!(model.v_open.len() as u64, lv, "an open flag per v face");
         assert_eq!(model.fluid.len() as u64, cells, "a fluid flag per cell");
+        if model.viscous.is_some() {
+            assert_eq!(model.u_walls.len() as u64, lu, "a wall count per u face");
+            assert_eq!(model.v_walls.len() as u64, lv, "a wall count per v face");
+        }
         assert!(!model.pressure.is_empty() && model.pressure[0].nx == nx && model.pressure[0].ny == ny);
         let rb = precision.bytes();
         use wgpu::BufferUsages as Us;
         let st = Us::STORAGE | Us::COPY_SRC | Us::COPY_DST;
-        let u_buf = gpu.buffer("fluid u faces", 5 * lu * rb, st)?;
-        let v_buf = gpu.buffer("fluid v faces", 5 * lv * rb, st)?;
+        let u_buf = gpu.buffer("fluid u faces", 6 * lu * rb, st)?;
+        let v_buf = gpu.buffer("fluid v faces", 6 * lv * rb, st)?;
         let c_buf = gpu.buffer("fluid cells", 11 * cells * rb, st)?;
         // S: the pressure, its right-hand side, then each solver's arrays.
         let mut at = 0u64;
@@ -602,6 +611,10 @@ impl Fluid {
         // Fixed arrays: masks, the inflow column, the solvers' coefficients, the indirect templates.
         gpu.upload_at(precision, &u_buf, OPEN * lu * rb, &model.u_open);
         gpu.upload_at(precision, &v_buf, OPEN * lv * rb, &model.v_open);
+        if model.viscous.is_some() {
+            gpu.upload_at(precision, &u_buf, WALLS * lu * rb, &model.u_walls);
+            gpu.upload_at(precision, &v_buf, WALLS * lv * rb, &model.v_walls);
+        }
         gpu.upload_at(precision, &c_buf, FLUID * cells * rb, &model.fluid);
         if !model.inflow.is_empty() {
             gpu.upload_at(precision, &c_buf, INFLOW * cells * rb, &model.inflow);
@@ -1308,14 +1321,12 @@ impl Fluid {
                 self.gpu.upload_at(self.precision, &self.s_buf, a.inv * rb, &inv);
             }
             let lid_term = if m.no_slip { 2.0 * s * m.lid } else { 0.0 };
-            // The walls' slip terms, as the core's `slip_terms`: [y walls, x− wall, x+ wall].
+            // The walls' slip term per wall and unit pressure difference (the core's `slip_scale`).
             let slip = 2.0 * s * (1.0 - m.share) * dt / dx;
-            let open = !m.inflow.is_empty();
-            let walls = if m.no_slip { slip } else { 0.0 };
-            let (west, east) = if open { (slip, 0.0) } else { (walls, walls) };
             for k in 0..2 {
                 let a = self.solvers[k + 1].levels[0];
                 let mut b = block(nx, ny);
+                let walls = if k == 0 { WALLS * lu } else { WALLS * lv };
                 b.ints[O..O + 7].copy_from_slice(&[
                     a.x as u32,
                     a.b as u32,
@@ -1323,10 +1334,10 @@ impl Fluid {
                     0,
                     0,
                     (OPEN * lu) as u32,
-                    (OPEN * lv) as u32,
+                    walls as u32,
                 ]);
-                b.reals[..4].copy_from_slice(&[s, lid_term, if k == 0 { walls } else { west }, east]);
-                b.ints[FLAGS_I] = open as u32;
+                b.reals[..3].copy_from_slice(&[s, lid_term, slip]);
+                b.ints[FLAGS_I] = !m.inflow.is_empty() as u32;
                 let (name, shape) =
                     if k == 0 { ("visc_u", groups(nx + 1, ny)) } else { ("visc_v", groups(nx, ny + 1)) };
                 let g = self.go(fk(name), b, shape);

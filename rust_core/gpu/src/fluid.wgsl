@@ -547,10 +547,11 @@ fn gradient_v(@builtin(global_invocation_id) g: vec3<u32>) {
 }
 
 // ---- viscosity's right-hand sides and results (`diffuse`). u: unknowns (nx+1) × ny at padded
-// width nx+3 in S: x at o0, b at o1; the open mask at o5 (U); the pressure at o2 (S); r0 the
-// scale s, r1 the lid's term, r2 the y walls' slip term (`slip_terms`: u*'s wall value
-// (1 − share)·dt·∂p/∂x, from the wall row's pressure difference); flags bit 0: an inflow (its
-// held face feeds the next face's b), bit 1: back (u = x).
+// width nx+3 in S: x at o0, b at o1; the open mask at o5 and the no-slip walls along each face
+// at o6 (U); the pressure at o2 (S); r0 the scale s, r1 the lid's term, r2 the slip term per
+// wall and unit pressure difference (`slip_scale`: u*'s wall value (1 − share)·dt·∂p/∂τ, from
+// the face's row); flags bit 0: an inflow (its held face feeds the next face's b), bit 1: back
+// (u = x).
 @compute @workgroup_size(WG)
 fn visc_u(@builtin(global_invocation_id) g: vec3<u32>) {
     let wu = P.nx + 1u;
@@ -572,19 +573,16 @@ fn visc_u(@builtin(global_invocation_id) g: vec3<u32>) {
     if ((P.flags & 1u) != 0u && i == 1u) {
         b = b + U[P.o5 + k] * P.r0 * U[wu * (j + 1u)];
     }
-    let walls = select(real(0.0), real(1.0), j == 0u) + select(real(0.0), real(1.0), j == P.ny - 1u);
-    if (walls > 0.0 && P.r2 != 0.0) {
-        let pr = P.o2 + (P.nx + 2u) * (j + 1u) + i;
-        b = b + U[P.o5 + k] * (walls * P.r2) * (S[pr + 1u] - S[pr]);
-    }
+    let pr = P.o2 + (P.nx + 2u) * (j + 1u) + i;
+    b = b + U[P.o6 + k] * P.r2 * (S[pr + 1u] - S[pr]);
     if (j == P.ny - 1u) {
         b = b + U[P.o5 + k] * P.r1;
     }
     S[P.o1 + c] = b;
 }
 
-// v: unknowns nx × (ny+1) at padded width nx+2: x at o0, b at o1; the open mask at o6 (V),
-// the pressure at o2 (S); r2, r3 the x− and x+ walls' slip terms (as u's); flags bit 1: back.
+// v: unknowns nx × (ny+1) at padded width nx+2: x at o0, b at o1; the no-slip walls along each
+// face at o6 (V), the pressure at o2 (S); r2 the slip term (as u's); flags bit 1: back.
 @compute @workgroup_size(WG)
 fn visc_v(@builtin(global_invocation_id) g: vec3<u32>) {
     let i = g.x;
@@ -603,12 +601,7 @@ fn visc_v(@builtin(global_invocation_id) g: vec3<u32>) {
     var b = V[k];
     if (j > 0u && j < P.ny) {
         let pr = P.o2 + w * j + i + 1u;
-        if (i == 0u) {
-            b = b + V[P.o6 + k] * P.r2 * (S[pr + w] - S[pr]);
-        }
-        if (i == P.nx - 1u) {
-            b = b + V[P.o6 + k] * P.r3 * (S[pr + w] - S[pr]);
-        }
+        b = b + V[P.o6 + k] * P.r2 * (S[pr + w] - S[pr]);
     }
     S[P.o1 + c] = b;
 }

@@ -204,6 +204,13 @@ impl Stencil {
         });
     }
 
+    /// Adds `extra` to the count of unknown (i, j) (a Dirichlet side's share that no link
+    /// carries); call `set_scale` after.
+    pub fn add_held(&mut self, i: usize, j: usize, extra: Real) {
+        let c = (i + 1) + self.w * (j + 1);
+        self.count[c] += extra;
+    }
+
     pub fn len(&self) -> usize {
         self.open.len()
     }

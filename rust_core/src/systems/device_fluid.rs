@@ -135,10 +135,10 @@ impl DeviceFluid {
         let mut host = StableFluid::new(cfg)?;
         host.load(saved)?;
         let model = {
-            let (c, [u_open, v_open, fluid, inflow], pressure, visc) = host.parts();
+            let (c, [u_open, v_open, fluid, inflow, u_walls, v_walls], pressure, visc) = host.parts();
             let need = crate::alloc::Need::new(
                 "step",
-                8 * (u_open.len() + v_open.len() + fluid.len()) as u128,
+                8 * (u_open.len() + v_open.len() + fluid.len() + u_walls.len() + v_walls.len()) as u128,
                 "a copy of the fluid's masks for the device",
             );
             df::Model {
@@ -162,6 +162,8 @@ impl DeviceFluid {
                 max_iterations: c.max_iterations,
                 u_open: need.copy(u_open)?,
                 v_open: need.copy(v_open)?,
+                u_walls: need.copy(u_walls)?,
+                v_walls: need.copy(v_walls)?,
                 fluid: need.copy(fluid)?,
                 pressure: operators(pressure)?,
                 viscous: match visc {

@@ -531,6 +531,9 @@ pub struct StableFluid {
     // Fixed: open faces (1/0) in the u and v layouts, fluid cells (1/0).
     u_open: Vec<Real>,
     v_open: Vec<Real>,
+    // With viscosity: the no-slip walls along each face (0, 1, 2), in the u and v layouts.
+    u_walls: Vec<Real>,
+    v_walls: Vec<Real>,
     fluid: Vec<Real>,
     /// The inflow face's u per row (U beside fluid, 0 beside solid); empty for a closed box.
     inflow_u: Vec<Real>,
@@ -597,9 +600,44 @@ impl StableFluid {
         let pressure = Pcg::new(st, true)?;
         let wall = if config.no_slip { 2.0 } else { 0.0 };
         let (east, west) = if outflow { (0.0, 2.0) } else { (wall, wall) };
+        // The no-slip walls along each open face, 0–2 (`u_walls`, `v_walls`): the domain's walls
+        // that hold the tangential velocity (the `wall` sides: no slip; v = 0 on the inflow) and
+        // the faces of obstacles. An obstacle's tangential neighbour face that lies inside it
+        // (both its cells solid) was a Dirichlet 0 one cell away, the wall taken half a cell
+        // into the solid; it is now a ghost −u like the domain's walls (count 2, the wall at the
+        // cell edge), and both get the slip term of `diffuse`.
+        // (An outflow face beside a solid cell ends that obstacle at the boundary: inside it.)
+        let inside_u = |i: usize, j: usize| i > 0 && solid(i - 1, j) && (i == nx || solid(i, j));
+        let inside_v = |i: usize, j: usize| j > 0 && j < ny && solid(i, j - 1) && solid(i, j);
+        let (mut u_walls, mut v_walls) = (Vec::new(), Vec::new());
         let visc = if config.viscosity > 0.0 {
-            let su = Stencil::build(nx + 1, ny, &u_open_at, [east, wall, wall, wall], true, 1.0)?;
-            let sv = Stencil::build(nx, ny + 1, &v_open_at, [east, west, wall, wall], true, 1.0)?;
+            let mut su = Stencil::build(nx + 1, ny, &u_open_at, [east, wall, wall, wall], true, 1.0)?;
+            let mut sv = Stencil::build(nx, ny + 1, &v_open_at, [east, west, wall, wall], true, 1.0)?;
+            u_walls = need.filled(nu_len, 0.0)?;
+            v_walls = need.filled(nv_len, 0.0)?;
+            let side = |k: Real| if k == 2.0 { 1.0 } else { 0.0 };
+            for j in 0..ny {
+                for i in 0..=nx {
+                    if u_open_at(i, j) {
+                        let inside = (j + 1 < ny && inside_u(i, j + 1)) as u8 + (j > 0 && inside_u(i, j - 1)) as u8;
+                        su.add_held(i, j, Real::from(inside));
+                        let domain = if j + 1 == ny { side(wall) } else { 0.0 } + if j == 0 { side(wall) } else { 0.0 };
+                        u_walls[i + (nx + 1) * (j + 1)] = domain + Real::from(inside);
+                    }
+                }
+            }
+            for j in 0..=ny {
+                for i in 0..nx {
+                    if v_open_at(i, j) {
+                        let inside = (i + 1 < nx && inside_v(i + 1, j)) as u8 + (i > 0 && inside_v(i - 1, j)) as u8;
+                        sv.add_held(i, j, Real::from(inside));
+                        let domain = if i + 1 == nx { side(east) } else { 0.0 } + if i == 0 { side(west) } else { 0.0 };
+                        v_walls[(i + 1) + (nx + 2) * j] = domain + Real::from(inside);
+                    }
+                }
+            }
+            su.set_scale(1.0);
+            sv.set_scale(1.0);
             Some([Pcg::new(su, false)?, Pcg::new(sv, false)?])
         } else {
             None
@@ -628,6 +666,8 @@ impl StableFluid {
             },
             u_open,
             v_open,
+            u_walls,
+            v_walls,
             fluid,
             inflow_u,
             u2: need.filled(nu_len, 0.0)?,
@@ -676,12 +716,14 @@ impl StableFluid {
     }
 
     /// For the device path (`systems::device::DeviceFluid`): the configuration, the open masks
-    /// of u and v faces and the fluid cells (1/0), the inflow column, and the pressure and
-    /// viscous solvers (their stencils).
+    /// of u and v faces and the fluid cells (1/0), the inflow column, the no-slip walls along
+    /// u and v faces (empty without viscosity), and the pressure and viscous solvers (their
+    /// stencils).
     #[allow(clippy::type_complexity)]
     #[cfg(feature = "gpu")]
-    pub(crate) fn parts(&self) -> (&FluidConfig, [&[Real]; 4], &Pcg, Option<&[Pcg; 2]>) {
-        (&self.cfg, [&self.u_open, &self.v_open, &self.fluid, &self.inflow_u], &self.pressure, self.visc.as_ref())
+    pub(crate) fn parts(&self) -> (&FluidConfig, [&[Real]; 6], &Pcg, Option<&[Pcg; 2]>) {
+        let masks = [&self.u_open[..], &self.v_open, &self.fluid, &self.inflow_u, &self.u_walls, &self.v_walls];
+        (&self.cfg, masks, &self.pressure, self.visc.as_ref())
     }
 
     /// For the device path: u, v, density, temperature, the padded pressure and the tracers.

@@ -213,7 +213,7 @@ impl StableFluid {
         }
         let (nx, ny) = (self.nx, self.ny);
         let s = self.cfg.viscosity * dt / (self.dx * self.dx);
-        let [south_north, west, east] = self.slip_terms(dt, s);
+        let slip = self.slip_scale(dt, s);
         let Some(visc) = self.visc.as_mut() else { return Some(()) };
         if s != self.visc_scale {
             visc[0].stencil_mut().set_scale(s);
@@ -226,7 +226,8 @@ impl StableFluid {
         let (p, wp) = (&self.s.pressure, nx + 2);
         // u: unknown (i, j), i in 0..=nx, j in 0..ny, at padded (i+1) + (nx+3)(j+1).
         {
-            let (x, b, u, open) = (&mut self.vx[0], &mut self.vb[0], &mut self.s.u, &self.u_open);
+            let (x, b, u, open, u_walls) =
+                (&mut self.vx[0], &mut self.vb[0], &mut self.s.u, &self.u_open, &self.u_walls);
             let (w, wu) = (nx + 3, nx + 1);
             let lid_term = if self.cfg.no_slip { 2.0 * s * lid } else { 0.0 };
             let inflow = !self.inflow_u.is_empty();
@@ -239,14 +240,12 @@ impl StableFluid {
                     b[2] += open[wu * (j + 1) + 1] * s * src[0];
                 }
                 let m = &open[wu * (j + 1)..wu * (j + 2)];
-                // The walls' value of u*: the lid's speed, and the slip the projection will
-                // take back (`slip_terms`), from the pressure difference along the wall's row.
-                let walls = (j == 0) as u8 + (j == ny - 1) as u8;
-                if walls > 0 && south_north != 0.0 {
-                    let (k, pr) = (Real::from(walls) * south_north, &p[wp * (j + 1)..wp * (j + 2)]);
-                    for i in 0..wu {
-                        b[i + 1] += m[i] * k * (pr[i + 1] - pr[i]);
-                    }
+                // The walls' value of u*: the slip the projection will take back
+                // (`slip_scale`), from the pressure difference along the face's row, and the
+                // lid's speed.
+                let (nw, pr) = (&u_walls[wu * (j + 1)..wu * (j + 2)], &p[wp * (j + 1)..wp * (j + 2)]);
+                for i in 0..wu {
+                    b[i + 1] += nw[i] * slip * (pr[i + 1] - pr[i]);
                 }
                 if j == ny - 1 {
                     for i in 0..wu {
@@ -263,17 +262,18 @@ impl StableFluid {
         }
         // v: unknown (i, j), i in 0..nx, j in 0..=ny, at padded (i+1) + (nx+2)(j+1).
         {
-            let (x, b, v, open) = (&mut self.vx[1], &mut self.vb[1], &mut self.s.v, &self.v_open);
+            let (x, b, v, v_walls) = (&mut self.vx[1], &mut self.vb[1], &mut self.s.v, &self.v_walls);
             let w = nx + 2;
             crate::grids::rows2_sum(&mut x[w..w * (ny + 2)], &mut b[w..w * (ny + 2)], w, |j, x, b| {
                 let src = &v[w * j + 1..w * j + 1 + nx];
                 x[1..nx + 1].copy_from_slice(src);
                 b[1..nx + 1].copy_from_slice(src);
                 if j > 0 && j < ny {
-                    // As for u: the x walls' value of v* (0 on a closed face's row).
-                    let dp = |i: usize| p[wp * (j + 1) + i + 1] - p[wp * j + i + 1];
-                    b[1] += open[w * j + 1] * west * dp(0);
-                    b[nx] += open[w * j + nx] * east * dp(nx - 1);
+                    // As for u (the rows of the closed faces j = 0 and ny have no walls).
+                    let (nw, ps, pn) = (&v_walls[w * j + 1..w * j + 1 + nx], &p[wp * j + 1..], &p[wp * (j + 1) + 1..]);
+                    for i in 0..nx {
+                        b[i + 1] += nw[i] * slip * (pn[i] - ps[i]);
+                    }
                 }
                 0.0
             });
@@ -288,19 +288,16 @@ impl StableFluid {
         Some(())
     }
 
-    /// The viscous solve's wall terms for the slip the projection makes, per side [y walls,
-    /// x− wall, x+ wall]: 2s·(1 − share)·dt/dx where the side holds the tangential velocity
-    /// (a no-slip wall, the inflow's v = 0), else 0. The projection subtracts dt·∇π from u*,
-    /// π ≈ (1 − share)·p (exact for a steady pressure), so a wall value u*_w = 0 would leave
-    /// −(1 − share)·dt·∂p/∂τ on the wall after it, an O(dt) slip that moves the steady state
-    /// (a Poiseuille flow's pressure gradient 28 % low at Re 1, cfl 1). The wall value of u*
-    /// is therefore (1 − share)·dt·∂p/∂τ, from the last step's pressure (Kim & Moin, J. Comput.
-    /// Phys. 59 (1985) 308; the ghost −u + 2u_w adds 2s·u_w to the right-hand side).
-    fn slip_terms(&self, dt: Real, s: Real) -> [Real; 3] {
-        let k = 2.0 * s * (1.0 - self.departure_share()) * dt / self.dx;
-        let no_slip = if self.cfg.no_slip { k } else { 0.0 };
-        let open = !self.inflow_u.is_empty();
-        [no_slip, if open { k } else { no_slip }, if open { 0.0 } else { no_slip }]
+    /// The viscous solve's wall term for the slip the projection makes, per no-slip wall along
+    /// a face (`u_walls`, `v_walls`) and per unit pressure difference along it:
+    /// 2s·(1 − share)·dt/dx. The projection subtracts dt·∇π from u*, π ≈ (1 − share)·p (exact
+    /// for a steady pressure), so a wall value u*_w = 0 would leave −(1 − share)·dt·∂p/∂τ on
+    /// the wall after it, an O(dt) slip that moves the steady state (a Poiseuille flow's
+    /// pressure gradient 28 % low at Re 1, cfl 1). The wall value of u* is therefore
+    /// (1 − share)·dt·∂p/∂τ, from the last step's pressure (Kim & Moin, J. Comput. Phys. 59
+    /// (1985) 308; the ghost −u + 2u_w adds 2s·u_w to the right-hand side).
+    fn slip_scale(&self, dt: Real, s: Real) -> Real {
+        2.0 * s * (1.0 - self.departure_share()) * dt / self.dx
     }
 
     /// Makes the velocity divergence-free: solves ∇²p = ∇·u/dt (Neumann at walls and
