@@ -47,7 +47,10 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, b
     if mode is not None and not stat.S_ISREG(mode):
         kind = next((name for test, name in _KINDS if test(mode)), "a special file")
         raise InvalidInputError(f"{arg}: {str(path)!r} is {kind}, not a regular file; give the name of a regular file or of a new one")
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+    except OSError as e:  # name the target, not the temporary file mkstemp tried
+        raise type(e)(e.errno, f"{arg}: cannot write {str(path)!r} ({e.strerror})") from None
     try:
         kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}
         with os.fdopen(fd, "wb" if binary else "w", **kw) as fh:

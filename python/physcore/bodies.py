@@ -522,7 +522,13 @@ class Bodies(_BodiesPart):
             size = a["size"]
             if size is None:
                 size = {"ball": 0.1, "box": (0.1,) * dim, "capsule": (0.1, 0.05)}[shape]
-            s = _rows("size", size, n, width)
+            try:
+                s = _rows("size", size, n, width)
+            except InvalidInputError as e:
+                if shape == "box" and a["positions"] is not None and _width(size) not in (None, dim):
+                    # The positions set the dimension: say so, where they may be the mistake.
+                    raise InvalidInputError(f"{e} (a {dim}D box: the positions give {dim} coordinates)") from None
+                raise
             if not (s > 0).all():
                 raise InvalidInputError("size: every size must be > 0 (m)")
             self.size = s if width > 1 else s.reshape(n)

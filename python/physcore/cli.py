@@ -517,6 +517,11 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         if fmt is None:
             raise _UsageError(f"-o: the output's extension picks the format, one of {', '.join(render.FORMATS)}; got {str(out)!r}")
         painter.check_path(out, fmt)
+        if args.energy_plot is not None:  # a usage error (exit 2) like -o's, before building the scene
+            try:
+                painter.check_path(Path(args.energy_plot), "png")
+            except (TypeError, ValueError) as e:
+                raise _UsageError(f"--energy-plot: {e}") from None
         if fmt in ("mp4", "webm"):
             try:
                 import av  # noqa: F401 - fail before simulating, not after
@@ -659,7 +664,13 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     if recorder is not None:
         print(f"wrote {args.energy_plot} (energy books at {len(recorder)} frames)")
     pixels = "" if fmt in ("glb", "gltf", "html") else f", {w}x{h} px"
-    print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s){pixels}")
+    played = ""
+    if fmt == "gif":
+        # A GIF's delays are whole centiseconds from 2 to 65535: say what it plays at.
+        gif_fps = 100.0 / min(max(100.0 / fps, 2.0), 65535.0)
+        if abs(gif_fps / fps - 1.0) > 0.01:
+            played = f"; a GIF's frame delays are 0.02 to 655.35 s, so it plays at {gif_fps:.4g} fps"
+    print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s){pixels}{played}")
     print(f"  file size:      {_human_bytes(sum(p.stat().st_size for p in paths))}")
     if "frame_time" in settings:
         print(

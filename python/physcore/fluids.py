@@ -520,6 +520,15 @@ class Fluid(Term, kind="fluid"):
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
         if self.mass is not None:
             object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
+            # The core takes the particles' spacing from m/ρ0 where it samples a body's surface;
+            # a mass far from ρ0·spacing^dim made it sample at a billionth of the spacing (an
+            # abort on a 22 GB allocation, found by a file with an edited density).
+            log_ratio = math.log(self.mass) - math.log(self.density) - dim * math.log(self.spacing)
+            if not abs(log_ratio) <= math.log(1e3):
+                raise InvalidInputError(
+                    f"mass: {self.mass:.4g} kg is {math.exp(min(log_ratio, 700.0)):.3g} times density · spacing^{dim}; a "
+                    "particle's mass must lie within a factor 1000 of it (about ρ0 Δx^dim), or leave mass out"
+                )
         if self.boundary is not None:
             w = _array2(self.boundary, "boundary")
             if w.shape[1] != dim:

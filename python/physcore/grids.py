@@ -580,18 +580,20 @@ class GrayScott(Grid):
         squares = _check.int_in_range("squares", squares, 0, 10_000)
         size = _check.float_in_range("size", size, 0.0, 1.0, lo_open=True, unit="a fraction of the domain")
         noise = _check.nonneg_float("noise", noise)
-        u = np.ones(self.shape)
-        v = np.zeros(self.shape)
-        side = [max(1, int(round(size * n))) for n in self.shape]
-        for k in range(squares):
-            lo = [n // 2 - s // 2 if k == 0 else int(rng.integers(0, n - s + 1)) for n, s in zip(self.shape, side, strict=False)]
-            sl = tuple(slice(a, a + s) for a, s in zip(lo, side, strict=False))
-            u[sl] = 0.5
-            v[sl] = 0.25
-        u += noise * (2 * rng.random(self.shape) - 1)
-        v += noise * (2 * rng.random(self.shape) - 1)
-        self.u = np.clip(u, 0, None)
-        self.v = np.clip(v, 0, None)
+        with allocating("seed", "the start's u and v"):  # numpy's MemoryError, named; nothing changed
+            u = np.ones(self.shape)
+            v = np.zeros(self.shape)
+            side = [max(1, int(round(size * n))) for n in self.shape]
+            for k in range(squares):
+                lo = [n // 2 - s // 2 if k == 0 else int(rng.integers(0, n - s + 1)) for n, s in zip(self.shape, side, strict=False)]
+                sl = tuple(slice(a, a + s) for a, s in zip(lo, side, strict=False))
+                u[sl] = 0.5
+                v[sl] = 0.25
+            u += noise * (2 * rng.random(self.shape) - 1)
+            v += noise * (2 * rng.random(self.shape) - 1)
+            u, v = np.clip(u, 0, None), np.clip(v, 0, None)
+        self.u = u
+        self.v = v
 
     def _record(self) -> dict[str, Any]:
         return {"shape": list(self.shape), "dx": self.spacing, "edges": list(self.edges), "du": self.du, "dv": self.dv,

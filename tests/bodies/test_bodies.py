@@ -340,6 +340,13 @@ def test_bad_bodies_are_refused_by_name(kwargs, arg):
         pc.Bodies(**kwargs)
 
 
+def test_a_box_size_that_disagrees_with_the_positions_dimension_says_where_it_comes_from():
+    """Three numbers of positions make a 3D box, so a 2D size is refused naming `size`, and the
+    message says the positions set the dimension (they may be the mistake)."""
+    with pytest.raises(pc.InvalidInputError, match=r"size: expected shape \(1, 3\).*the positions give 3 coordinates"):
+        pc.Bodies("box", size=[0.2, 0.2], positions=[1.0, 1.0, 1.0])
+
+
 def test_bodies_refuse_a_scene_of_the_other_dimension_and_bad_joints():
     s3 = pc.Scene(dim=3)
     with pytest.raises(pc.InvalidInputError, match="2D"):

@@ -168,6 +168,15 @@ def test_a_body_too_light_for_its_fluid_is_refused_naming_density(rho_body):
     assert s.step_count == 0 and np.array_equal(s.positions, x0) and np.array_equal(ball.positions, b0)
 
 
+@pytest.mark.parametrize("rho", [2.0, 99.0])
+def test_the_floating_scene_refuses_bodies_too_light_when_built(rho):
+    """`scenes.floating(density=...)` below the coupling's limit (100 kg/m² in its water) is
+    refused when the scene is built, naming `density`, not at the first step."""
+    with pytest.raises(pc.InvalidInputError, match="density: the bodies must be at least 100"):
+        pc.scenes.floating(n=8, density=rho)
+    assert pc.scenes.floating(n=8, density=100.0).step_count == 0
+
+
 def test_the_lightest_body_a_fluid_takes_floats_calmly():
     """At the limit (0.1 of the water's density, 100 kg/m²) the ball lands and floats: after
     1 s its speed is below 5 cm/s (measured 1.6 cm/s; 10 cm/s at 0.05, 2.3 m/s at 0.005) and

@@ -1263,3 +1263,27 @@ def test_a_source_with_both_region_and_center_round_trips(tmp_path, kind):
     s.step(3)
     back.step(3)
     assert np.array_equal(back.grids[0].field("u"), g.field("u"))
+
+
+@pytest.mark.parametrize("field", ["density", "spacing"])
+def test_a_fluid_whose_mass_disagrees_with_its_density_and_spacing_is_refused_at_load(tmp_path, field):
+    """A DFSPH fluid beside floating bodies, its file's density or spacing edited to 2**70 while
+    the particle mass stays: the core took the spacing from m/ρ0 where it samples the bodies'
+    surfaces, and the first step aborted the process on a 22.6 GB allocation (density) or
+    raised a Rust panic at every step (spacing). Refused at load, naming the mass."""
+    scene = pc.scenes.floating(n=8)
+    scene.step(3)
+    scene.save(tmp_path / "base.npz")
+    with np.load(tmp_path / "base.npz") as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    k = next(i for i, t in enumerate(meta["terms"]) if t["type"] == "fluid")
+    meta["terms"][k][field] = 2.0**70
+    arrays["meta"] = np.array(json.dumps(meta))
+    with open(tmp_path / "hostile.npz", "wb") as fh:
+        np.savez(fh, **arrays)
+    with pytest.raises(pc.SceneFileError, match=rf"terms\[{k}\]\.mass.*within a factor 1000"):
+        pc.Scene.load(tmp_path / "hostile.npz")
+    # The API refuses such a mass by name too.
+    with pytest.raises(pc.InvalidInputError, match="mass"):
+        pc.Fluid(lattice([0.0, 0.0], [0.5, 0.5], 0.05), 0.05, density=1000.0, mass=1e-20)

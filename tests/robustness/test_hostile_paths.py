@@ -210,3 +210,12 @@ def test_sweep_refuses_to_resume_a_file_whose_parameter_column_was_renamed(tmp_p
     out.write_text(before.replace(",height,", ",n,", 1))
     df = pc.sweep(_build, grid, measure=_measure, client="serial", progress=False, out=out)
     assert CALLS == [] and len(df) == 4 and list(pd.read_csv(out).columns[1:3]) == ["dt", "n"]
+
+
+def test_saving_into_a_missing_directory_names_the_target_not_a_temporary_file(tmp_path):
+    """Scene.save into a missing directory: a FileNotFoundError naming the file asked for (it
+    named the temporary file the atomic write tried to create there)."""
+    target = tmp_path / "nope" / "x.npz"
+    with pytest.raises(FileNotFoundError, match=r"path: cannot write .*nope/x\.npz") as e:
+        pc.scenes.kepler().save(target)
+    assert ".tmp" not in str(e.value) and not target.parent.exists()

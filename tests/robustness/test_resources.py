@@ -75,6 +75,22 @@ print("ok")
     assert out.strip() == "ok"
 
 
+def test_a_gray_scott_start_that_does_not_fit_raises_out_of_memory_error():
+    """`GrayScott.seed` (the turing scene's start) under a memory cap: numpy's own MemoryError
+    came out bare; now an OutOfMemoryError naming `seed`, and the grid keeps its fields."""
+    out = _child(PRELUDE + """
+scene = pc.Scene(2)
+gs = scene.add(pc.GrayScott((4000, 4000), 1e-3, preset="spots"))
+before = gs.u.copy()
+cap(200)
+refused(lambda: gs.seed(3), "seed")
+lift()
+assert np.array_equal(gs.u, before)
+print("ok")
+""")
+    assert out.strip() == "ok"
+
+
 def test_crowded_grains_whose_contacts_do_not_fit_refuse_the_step_and_change_nothing():
     """20,000 grains of radius 10 m in a 1 m square: every pair a candidate contact, 2·10⁸ of
     them. Their lists are built inside the step's parallel parts, where a refused allocation

@@ -60,3 +60,20 @@ def test_cli_energy_plot(tmp_path, capsys):
 def test_cli_energy_plot_needs_png(tmp_path):
     rc = main(["render", "spring_chain", "-o", str(tmp_path / "c.gif"), "--energy-plot", str(tmp_path / "e.pdf")])
     assert rc == 2 and not (tmp_path / "c.gif").exists()
+
+
+def test_cli_energy_plot_into_a_missing_directory_is_a_usage_error(tmp_path, capsys):
+    """Exit 2 (a usage error, as -o into a missing directory), before the scene is built; it
+    was 1."""
+    rc = main(["render", "spring_chain", "-o", str(tmp_path / "c.gif"), "--energy-plot", str(tmp_path / "nope" / "e.png")])
+    assert rc == 2 and not (tmp_path / "c.gif").exists()
+    assert "--energy-plot" in capsys.readouterr().err
+
+
+def test_cli_says_what_fps_a_gif_plays_at_when_it_cannot_store_the_one_asked(tmp_path, capsys):
+    """GIF delays are whole centiseconds from 2 to 65535: --fps 1e9 plays at 50 fps, and the
+    summary says so (it said 1e+09 fps and 0.00 s)."""
+    assert main(["render", "kepler", "-o", str(tmp_path / "k.gif"), "--frames", "3", "--fps", "1e9"]) == 0
+    assert "so it plays at 50 fps" in capsys.readouterr().out
+    assert main(["render", "kepler", "-o", str(tmp_path / "k.gif"), "--frames", "3", "--fps", "25"]) == 0
+    assert "plays at" not in capsys.readouterr().out

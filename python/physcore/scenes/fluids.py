@@ -664,9 +664,13 @@ def floating(
     surge pushes them by its pressure. ``method`` and ``integrator`` step the fluid (see
     :func:`dam_break`).
 
-    Raises TypeError / InvalidInputError naming the argument.
+    Raises TypeError / InvalidInputError naming the argument (a ``density`` below 100 kg/m², a
+    tenth of the water's, which the coupling refuses: such a body is flung out by the
+    pressure it takes).
     """
     rho = _positive(density, "density")
+    if rho < 100.0:  # the core's LIGHTEST (0.1) times the water's 1000: refused here, not at the first step
+        raise InvalidInputError(f"density: the bodies must be at least 100 kg/m² (a tenth of the water's), got {rho:g}")
     scene = dam_break(n=n, integrator=integrator, threads=threads, method=method)
     wall, w, h = 0.1, 4.0, 3.0
     scene.add(Bodies("box", size=[(w / 2 + 2 * wall, wall), (wall, h / 2 + wall), (wall, h / 2 + wall)],

@@ -1534,6 +1534,20 @@ impl Boundary {
         stop: &AtomicBool,
     ) -> Result<()> {
         use crate::sph::resolve::{wall_psi, WallVolume};
+        // The spacing is the fluid's m/ρ0 to the 1/D: a mass far from ρ0 Δx^D (a hostile file)
+        // gave 2h/spacing in the billions, and layer_scale's rows a 22 GB allocation.
+        let reach = 2.0 * h / spacing;
+        if !(reach <= 64.0 && reach >= 1e-3) {
+            return Err(invalid(
+                "mass",
+                format!(
+                    "the fluid's particle mass gives a spacing (m/ρ0)^(1/{D}) = {spacing:.3e} m, and its kernel \
+                     support 2h = {:.3e} m is {reach:.3e} of those: a mass so far from ρ0 Δx^{D} cannot \
+                     sample a body's surface",
+                    2.0 * h
+                ),
+            ));
+        }
         let scale = layer_scale(h, spacing, kernel);
         self.key = None;
         self.movers.clear();
@@ -1543,7 +1557,6 @@ impl Boundary {
         // A sample's bytes: its point here and in the fluid (position, offset), Ψ, its body,
         // and the kernel pairs Ψ is summed over (two indices and a value each, about
         // π (2h/spacing)^(D-1) pairs a sample on a surface).
-        let reach = 2.0 * h / spacing;
         let pairs = if D == 2 { 2.0 * reach + 1.0 } else { std::f64::consts::PI * reach * reach + 1.0 };
         let per = (3 * std::mem::size_of::<Vector>() + 12) as Real + 24.0 * pairs;
         for (k, (&hd, &c)) in bodies.handles.iter().zip(&bodies.colliders).enumerate() {
