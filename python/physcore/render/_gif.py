@@ -91,7 +91,9 @@ def gif(
     scene : physcore.Scene or Recording
         A recording from :func:`record` (then `frames`, `steps_per_frame`, `frame_time` and
         `substeps` must be left out: it is already simulated, and `color_by` needs what it
-        recorded), or a 2D or 3D scene, stepped in place. Optional methods, used when present:
+        recorded), or a 2D or 3D scene, stepped in place (to the end of the recording; Ctrl-C
+        leaves it at the last step completed, its time and step count consistent, and writes
+        no file). Optional methods, used when present:
         ``pressure()`` -> (N,) float64 Pa (needed for ``color_by="pressure"``),
         ``boundary_points()`` -> (B, dim) float64 m, static wall particles (B may be 0), and
         ``advance(duration)`` -> int substeps taken (needed for `frame_time`).
