@@ -520,15 +520,6 @@ class Fluid(Term, kind="fluid"):
             raise InvalidInputError(f"kernel: unknown kernel {self.kernel!r}; valid: {', '.join(KERNELS)}")
         if self.mass is not None:
             object.__setattr__(self, "mass", _check.mass("mass", _finite_float(self.mass, "mass", minimum=0.0, strict=True)))
-            # The core takes the particles' spacing from m/ρ0 where it samples a body's surface;
-            # a mass far from ρ0·spacing^dim made it sample at a billionth of the spacing (an
-            # abort on a 22 GB allocation, found by a file with an edited density).
-            log_ratio = math.log(self.mass) - math.log(self.density) - dim * math.log(self.spacing)
-            if not abs(log_ratio) <= math.log(1e3):
-                raise InvalidInputError(
-                    f"mass: {self.mass:.4g} kg is {math.exp(min(log_ratio, 700.0)):.3g} times density · spacing^{dim}; a "
-                    "particle's mass must lie within a factor 1000 of it (about ρ0 Δx^dim), or leave mass out"
-                )
         if self.boundary is not None:
             w = _array2(self.boundary, "boundary")
             if w.shape[1] != dim:
@@ -553,6 +544,16 @@ class Fluid(Term, kind="fluid"):
             object.__setattr__(self, "boundary_volume", a)
         if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")
+        if self.mass is not None:
+            # The core takes the particles' spacing from m/ρ0 where it samples a body's surface;
+            # a mass far from ρ0·spacing^dim made it sample at a billionth of the spacing (an
+            # abort on a 22 GB allocation, found by a file with an edited density).
+            log_ratio = math.log(self.mass) - math.log(self.density) - dim * math.log(self.spacing)
+            if not abs(log_ratio) <= math.log(1e3):
+                raise InvalidInputError(
+                    f"mass: {self.mass:.4g} kg is {math.exp(min(log_ratio, 700.0)):.3g} times density · spacing^{dim}; a "
+                    "particle's mass must lie within a factor 1000 of it (about ρ0 Δx^dim), or leave mass out"
+                )
         if self.mass is None:
             # ρ0 Δx^dim, computed here so that a density or spacing giving an unusable particle
             # mass is refused by name (not later as "masses" of Scene.add_particles).
