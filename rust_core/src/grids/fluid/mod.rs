@@ -21,8 +21,9 @@
 //!    through u; see [`Projection`]);
 //! 5. viscosity (ν > 0): backward Euler (I − ν·dt·∇²)u = u*, per component, by CG with a
 //!    diagonal preconditioner (unconditionally stable); a wall that holds the tangential
-//!    velocity (no slip, the inflow's v = 0) gives u* the value (1 − share)·dt·∂p/∂τ that the
-//!    projection then takes back (Kim & Moin 1985; `slip_terms`), so the wall holds after it;
+//!    velocity (no slip, the inflow's v = 0, an obstacle's face) gives u* the value
+//!    (1 − share)·dt·∂p/∂τ that the projection then takes back (Kim & Moin 1985;
+//!    `slip_scale`), so the wall holds after it;
 //! 6. projection: ∇²p = ∇·u*/dt with Neumann conditions at walls and obstacles, by CG
 //!    preconditioned with one multigrid V-cycle (MGPCG, [`super::poisson`]), warm-started
 //!    from the last pressure; u −= dt·∇p (incremental: the solve is for π = p_new − ½p, started
@@ -36,7 +37,8 @@
 //! Boundaries: the walls are solid (normal velocity 0); `no_slip` sets the tangential velocity
 //! on them to 0 (ghost = −inside) instead of free slip (ghost = inside), and `lid` moves the
 //! top wall at speed U (ghost = 2U − inside). Obstacles are solid cells: the faces touching
-//! them carry no velocity and smoke does not enter them.
+//! them carry no velocity and smoke does not enter them; their walls are no-slip, at the
+//! cells' edges (the viscous solve's ghost −inside, as the domain's walls).
 //!
 //! Open boundaries (`inflow` = U): the x− face is an inflow, u = U and v = 0 on it (v's ghost
 //! = −inside), held through every stage (its faces are not unknowns of the viscous or pressure

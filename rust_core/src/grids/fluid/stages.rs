@@ -208,9 +208,6 @@ impl StableFluid {
 
     /// Backward-Euler viscosity, per component. `None` if stopped.
     pub(super) fn diffuse(&mut self, dt: Real, stop: &AtomicBool) -> Option<()> {
-        if self.visc.is_none() {
-            return Some(());
-        }
         let (nx, ny) = (self.nx, self.ny);
         let s = self.cfg.viscosity * dt / (self.dx * self.dx);
         let slip = self.slip_scale(dt, s);

@@ -1537,7 +1537,7 @@ impl Boundary {
         // The spacing is the fluid's m/ρ0 to the 1/D: a mass far from ρ0 Δx^D (a hostile file)
         // gave 2h/spacing in the billions, and layer_scale's rows a 22 GB allocation.
         let reach = 2.0 * h / spacing;
-        if !(reach <= 64.0 && reach >= 1e-3) {
+        if !(1e-3..=64.0).contains(&reach) {
             return Err(invalid(
                 "mass",
                 format!(
