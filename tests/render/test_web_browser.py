@@ -59,11 +59,14 @@ def pages(tmp_path_factory):
 
 
 def _shot(page) -> np.ndarray:
-    """The canvas as (H, W, 3) int16, after the player has drawn twice more: its own pixels
+    """The canvas as (H, W, 3) int16, once the player has drawn the time last set, and twice more: its own pixels
     (toDataURL: the player keeps its drawing buffer), 0.02 s against 1.7 s for a screenshot
     through the compositor on the software GL."""
     from PIL import Image
 
+    # The time last set is on the canvas (the player counts what it showed and what it drew; two
+    # animation frames alone once read a canvas still showing the time before, in CI).
+    page.wait_for_function("physcore.drawn === physcore.shown", timeout=10_000)
     page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
     url = page.evaluate("document.querySelector('#physcore-view canvas').toDataURL('image/png')")
     png = base64.b64decode(url.split(",", 1)[1])

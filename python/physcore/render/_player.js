@@ -5,7 +5,9 @@
    background (sRGB; a backdrop's mean), and play(), pause(), setTime(t). MIT licence, as physcore. */
 (function () {
   "use strict";
-  var state = window.physcore = { ready: false, error: null, playing: true, time: 0, duration: 0, frame: 0, frames: 1 };
+  // shown / drawn: a count of show() calls and the count the last render drew (equal once a
+  // time set is on the canvas: what a test waits for before it reads the pixels).
+  var state = window.physcore = { ready: false, error: null, playing: true, time: 0, duration: 0, frame: 0, frames: 1, shown: 0, drawn: -1 };
   function fail(e) {
     state.error = String(e && e.message || e);
     console.error("physcore player: " + state.error);
@@ -85,6 +87,7 @@
   }
 
   function show(t) {
+    state.shown += 1;
     state.time = Math.max(0, Math.min(t, state.duration));
     // The last frame is at `duration`: a looping action wraps it to the first, so stop just short.
     if (mixer) mixer.setTime(Math.min(state.time, state.duration * (1 - 1e-7)));
@@ -184,7 +187,9 @@
     }
     last = now;
     controls.update();
+    var shown = state.shown;
     renderer.render(scene, camera);
+    state.drawn = shown;
     requestAnimationFrame(tick);
   }
   requestAnimationFrame(tick);
