@@ -452,8 +452,10 @@ impl Fluid {
         let rb = precision.bytes();
         use wgpu::BufferUsages as Us;
         let st = Us::STORAGE | Us::COPY_SRC | Us::COPY_DST;
-        let u_buf = gpu.buffer("fluid u faces", 6 * lu * rb, st)?;
-        let v_buf = gpu.buffer("fluid v faces", 6 * lv * rb, st)?;
+        // The WALLS slab only with viscosity (an inviscid fluid's faces keep five).
+        let slabs = WALLS + model.viscous.is_some() as u64;
+        let u_buf = gpu.buffer("fluid u faces", slabs * lu * rb, st)?;
+        let v_buf = gpu.buffer("fluid v faces", slabs * lv * rb, st)?;
         let c_buf = gpu.buffer("fluid cells", 11 * cells * rb, st)?;
         // S: the pressure, its right-hand side, then each solver's arrays.
         let mut at = 0u64;
