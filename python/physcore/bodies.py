@@ -230,8 +230,10 @@ class Bodies(_BodiesPart):
     restitution : float, default 0.1
         Coefficient of restitution e in [0, 1] (a contact uses the larger of its two bodies'). A
         body leaves an impact with e times its normal arrival speed at any step (to 0.3 % at
-        dt = 1/240: the bounce is late by up to a step, never short), a box landing flat at both
-        corners at once; a contact that goes on touching does not bounce unless e = 1.
+        dt = 1/240), a box landing flat at both corners at once; a fast body meets the surface
+        where it is (it looks ahead for contacts), so a dropped ball's apexes are e² of each
+        other within 0.1 % at dt = 1/60 as at 1/240. A contact that goes on touching does not
+        bounce unless e = 1.
     rolling_friction : float, default 0
         Coefficient of rolling friction μ_r ≥ 0 (dimensionless; a contact uses the larger of its
         two bodies', so a default ground leaves a ball's own): a contact resists the relative
