@@ -394,10 +394,10 @@ class Fluid(Term, kind="fluid"):
     method : {"wcsph", "dfsph"}
         ``"wcsph"`` (default, unless ``solver`` says otherwise): Tait equation of state.
         ``"dfsph"``: divergence-free SPH (module docstring); ``gamma``, ``clamp_pressure`` and
-        ``pass_precision`` then do not apply. Known
-        bug: a DFSPH fluid at rest does not settle at the default ``alpha`` (a layer 24
-        particles deep keeps an rms speed of about 0.2 m/s; WCSPH's settles to 0.03 m/s); use
-        ``alpha=0.5`` where a tank must come to rest (docs/guide/fluids_dfsph.md).
+        ``pass_precision`` then do not apply. A DFSPH fluid at rest settles at the defaults (a
+        layer 24 particles deep: rms speed 0.013 m/s at t = 1–4 s); keep the default ``alpha``
+        where a pressure or a float is measured (a large one holds the water up:
+        docs/guide/fluids_dfsph.md, Limits).
     density_error : float
         DFSPH: the density solver iterates until the mean compression ``mean((ρ − ρ0)₊)/ρ0`` of
         the predicted state is at most this, in (0, 1). Default 1e-3 (0.1 %); 1e-4 is the
@@ -420,22 +420,23 @@ class Fluid(Term, kind="fluid"):
         Limit of the model, measured (``benches/fluids/droplet_oscillation.py``,
         ``docs/surface_tension.md``; water, drops released as ellipses of axes R(1 ± 0.1)): drops
         ring near Rayleigh's frequency but damp several times faster than their viscosity
-        explains. 2D, ν = 1.6e-5 m²/s (``ν = α c0 h/8``): ω/ω_Rayleigh 0.96–0.99 at 24 particles
-        across (R = 9.2 h) and 0.98–1.07 at 40 (R = 15.4 h); the mode-2 decay rate over the
-        viscous ``4ν/R²`` (Lamb's calculation, §355, for a cylinder) 5.2–6.7 at 24 across, 11–26
-        at 40 and 28 at 64, where the drop keeps a fifth of its deformation: refining makes it
+        explains. 2D, ν = 1.6e-5 m²/s (``ν = α c0 h/8``), medians (ranges) over four drops:
+        ω/ω_Rayleigh 0.96 (0.82–1.07) at 24 particles across (R = 9.2 h) and 1.02 (0.70–1.20)
+        at 40 (R = 15.4 h); the mode-2 decay rate over the viscous ``4ν/R²`` (Lamb's
+        calculation, §355, for a cylinder) 5.8 (4.8–6.4) at 24 across, 12 (9.9–13.3) at 40 and
+        31 at 64, where the drop keeps up to a third of its deformation: refining makes it
         worse, so it is the model's, not a resolution error. At α = 0 the mode still decays
-        (1.2–1.6 s⁻¹ at 24 across, 3–4 times the viscous rate of ν = 1.6e-5) and rings 11–28 %
-        slow (24 and 40 across). 3D, 12 and 16 across (R = 4.6 h, 6.1 h): ω/ω_Rayleigh
-        1.05–1.08, decay 2.8–2.9 times ``5ν/R²`` (Lamb 1932, §355). Cause, as far as measured:
-        the viscosity's own work on the drop's mode-2 flow is half the continuum's ``2ρ0ν∫e:e``
-        (0.46–0.52 at 24 across; the Monaghan term acts on approaching pairs only), under a tenth
-        of the 2D decay at ν = 1.6e-5 (a sixth in 3D). The rest leaves through the fluid's only
-        other forces, the surface forces and the pressure projections: the drop carries a
-        particle-scale jitter of 4–15 times the mode's kinetic energy (2D, 24 and 40 across),
-        which the surface forces drive and the projections remove (2,300–7,300 times the mode's
-        peak kinetic energy over two periods). Use the model for the shapes and the Laplace
-        pressure of drops, not for their damping.
+        (1.2–1.7 s⁻¹ at 24 across, 3–4 times the viscous rate of ν = 1.6e-5) and rings 8–31 %
+        slow (24 and 40 across). 3D, 12 and 16 across (R = 4.6 h, 6.1 h): ω/ω_Rayleigh 1.09,
+        decay 2.6–2.9 times ``5ν/R²`` (Lamb 1932, §355). Cause, as far as measured: the
+        viscosity's own work on the drop's mode-2 flow is about half the continuum's
+        ``2ρ0ν∫e:e`` (0.39–0.45 at 24 across; the Monaghan term acts on approaching pairs
+        only), under a tenth of the 2D decay at ν = 1.6e-5 (a fifth in 3D). The rest leaves
+        through the fluid's only other forces, the surface forces and the pressure projections:
+        the drop carries a particle-scale jitter of 4–15 times the mode's kinetic energy (2D,
+        24 and 40 across), which the surface forces drive and the projections remove (22–57
+        times the mode's peak kinetic energy over two periods). Use the model for the shapes
+        and the Laplace pressure of drops, not for their damping (measured 2026-11-30).
     adhesion : float
         DFSPH: attraction of the fluid to the walls (Akinci et al. 2013, eq. 7), in σ's units:
         half the work of adhesion, so ``adhesion = surface_tension`` makes a wall attract like
