@@ -11,6 +11,7 @@ from . import terms as _terms
 from ._errors import (
     ContactStepWarning,
     DeviceError,
+    EnergyBooksWarning,
     InvalidInputError,
     InvalidTypeError,
     OutOfMemoryError,
@@ -88,6 +89,7 @@ __all__ = [
     "ThreadPoolError",
     "ThreadPoolWarning",
     "ContactStepWarning",
+    "EnergyBooksWarning",
     "SeparateFluidsWarning",
     "scenes",
     "render",
@@ -132,4 +134,5 @@ def __getattr__(name: str):  # lazy submodules: importing physcore stays cheap
 
 def __dir__() -> list[str]:
     # The lazy submodules are part of the package's surface (tab completion, dir()).
-    return sorted(set(globals()) | set(_LAZY) | {"widget"})
+    # Less `annotations`, the name `from __future__ import annotations` binds (not an API).
+    return sorted((set(globals()) - {"annotations"}) | set(_LAZY) | {"widget"})

@@ -14,6 +14,8 @@ This module imports nothing from physcore.
 from __future__ import annotations
 
 import functools
+import os
+import sys
 import warnings
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
@@ -23,9 +25,25 @@ __all__ = ["args", "alias", "renamed", "warn"]
 F = TypeVar("F", bound=Callable[..., Any])
 
 
+_PACKAGE = os.path.dirname(os.path.abspath(__file__)) + os.sep
+
+
+def user_stacklevel() -> int:
+    """The ``stacklevel`` at which :func:`warnings.warn`, called by the caller of this function,
+    points at the first frame outside the physcore package: the user's line, however deep in
+    physcore the warning starts (a fixed level blamed a scene's wrapper, ``_common.py``, which
+    Python's default filters then hid: they show a DeprecationWarning only in ``__main__``)."""
+    f, level = sys._getframe(1), 1
+    while f is not None and os.path.abspath(f.f_code.co_filename).startswith(_PACKAGE):
+        f, level = f.f_back, level + 1
+    return level
+
+
 def warn(message: str, stacklevel: int = 3) -> None:
-    """A :class:`DeprecationWarning` pointing at the caller's caller (the user's line)."""
-    warnings.warn(message + " (deprecated; the old spelling goes in the next release; see docs/naming.md)", DeprecationWarning, stacklevel=stacklevel)
+    """A :class:`DeprecationWarning` pointing at the user's line (the first frame outside
+    physcore; `stacklevel` is where that search starts being needed, kept for callers)."""
+    warnings.warn(message + " (deprecated; the old spelling goes in the next release; see docs/naming.md)",
+                  DeprecationWarning, stacklevel=max(stacklevel, user_stacklevel()))
 
 
 def _rename(where: str, kwargs: dict[str, Any], renames: Mapping[str, str]) -> None:

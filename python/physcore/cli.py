@@ -54,6 +54,7 @@ import sys
 import textwrap
 import time
 import typing
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -251,7 +252,8 @@ def _defaults_text(fn: Callable[..., Any]) -> str:
     for name, p in _scene_params(fn).items():
         text = name if p.default is inspect.Parameter.empty else f"{name}={p.default!r}"
         if name in _OWN_OPTION:
-            options.append(f"{_OWN_OPTION[name]} (default {p.default!r})")
+            default = "the scene's own" if p.default is None else repr(p.default)
+            options.append(f"{_OWN_OPTION[name]} (default {default})")
         else:
             params.append(text)
     out = "parameters (--param key=value): " + (", ".join(params) or "none")
@@ -265,10 +267,22 @@ def _registry() -> dict[str, Callable[..., Any]]:
     return dict(scenes.REGISTRY)
 
 
-def _cmd_scenes(args: argparse.Namespace) -> int:
+def _cmd_scenes(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     registry = _registry()
     width = max((len(n) for n in registry), default=0) + 2
     out = sys.stdout
+    one = getattr(args, "scene", None)
+    if one is not None:
+        if one not in registry:
+            import difflib
+
+            close = difflib.get_close_matches(one.lower(), list(registry), n=1)
+            hint = f"did you mean {close[0]!r}? " if close else ""
+            parser.error(f"unknown scene {one!r}; {hint}valid scenes: {', '.join(registry)}")
+        fn = registry[one]
+        doc = inspect.getdoc(fn) or ""
+        out.write(f"{one}\n\n{doc}\n\n{_defaults_text(fn)}\n\nRender it with: physcore render {one} -o {one}.gif\n")
+        return 0
     for name, fn in registry.items():
         out.write(textwrap.fill(_summary(fn), width=100, initial_indent=name.ljust(width), subsequent_indent=" " * width) + "\n")
         body = textwrap.fill(
@@ -437,12 +451,20 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
     registry = _registry()
     name = args.scene
     if name not in registry:
-        parser.error(f"unknown scene {name!r}; valid scenes: {', '.join(registry)}")
+        import difflib
+
+        close = difflib.get_close_matches(name.lower(), list(registry), n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
+        parser.error(f"unknown scene {name!r}; {hint}valid scenes: {', '.join(registry)}")
     fn = registry[name]
     try:
         kwargs = _scene_kwargs(name, fn, args.param or [])
     except _UsageError as e:
         parser.error(str(e))
+    if args.integrator is not None and "integrator" in getattr(fn, "deprecated_params", {}):
+        # The grid scenes take integrator= only to ignore it (their fields step by their own
+        # schemes): said here, not left to a warning and a summary naming another integrator.
+        parser.error(f"--integrator: {name} steps its fields by its own scheme; it takes no integrator")
     if args.integrator is not None:
         from .scene import INTEGRATOR_ALIASES
 
@@ -502,9 +524,28 @@ def _cmd_view(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     return 0
 
 
+def _as_option(message: str, parser: argparse.ArgumentParser) -> str:
+    """A render function's message naming its keyword (``cmap must be one of ...``, ``trail:
+    ...``) as the command line's option (``--cmap: must be one of ...``), where it has one."""
+    m = re.match(r"^([a-z_]+)(?::\s*| (?=must ))(.*)$", message, re.S)
+    if m:
+        option = "--" + m.group(1).replace("_", "-")
+        if option in parser._option_string_actions:
+            return f"{option}: {m.group(2)}"
+    return message
+
+
+def _stepper(scene: Any) -> str:
+    """What steps the scene, for the summary: its integrator, or for a scene of grids alone (no
+    particles: Gray–Scott, waves, flows) their own schemes, which the integrator does not touch."""
+    if int(getattr(scene, "n_particles", 0)) == 0 and getattr(scene, "grids", ()):
+        return "the grids' own schemes"
+    return str(getattr(scene, "integrator", "?"))
+
+
 def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from . import render
-    from ._errors import SimulationDiverged
+    from ._errors import EnergyBooksWarning, SimulationDiverged
     from .render import painter
 
     name, fn, kwargs = _scene_call(args, parser)
@@ -516,7 +557,10 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         fmt = render.FORMATS.get(out.suffix.lower())
         if fmt is None:
             raise _UsageError(f"-o: the output's extension picks the format, one of {', '.join(render.FORMATS)}; got {str(out)!r}")
-        painter.check_path(out, fmt)
+        try:
+            painter.check_path(out, fmt)
+        except (TypeError, ValueError) as e:  # named as the user typed it, not as `path`
+            raise _UsageError(f"-o: {re.sub(r'^path: ', '', str(e))}") from None
         if args.energy_plot is not None:  # a usage error (exit 2) like -o's, before building the scene
             try:
                 painter.check_path(Path(args.energy_plot), "png")
@@ -581,7 +625,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     except _UsageError as e:
         parser.error(str(e))
     except (TypeError, ValueError) as e:
-        parser.error(str(e))
+        parser.error(_as_option(str(e), parser))
     time0 = scene.time
     counts: list[Any] = []  # substeps taken per frame (frame_time with automatic substeps)
     recorder = None
@@ -605,14 +649,21 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
 
     produce = ("frames", "steps_per_frame", "frame_time", "substeps", "color_by")
     try:
-        recording = render.record(
-            scene,
-            springs=not args.no_springs,
-            progress=not args.quiet,
-            on_frame=on_frame,
-            velocities=settings.get("arrows", "none") != "none",
-            **{k: v for k, v in settings.items() if k in produce},
-        )
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", EnergyBooksWarning)
+            recording = render.record(
+                scene,
+                springs=not args.no_springs,
+                progress=not args.quiet,
+                on_frame=on_frame,
+                velocities=settings.get("arrows", "none") != "none",
+                **{k: v for k, v in settings.items() if k in produce},
+            )
+        for w in caught:  # ours said as the command's own; others as Python would have
+            if issubclass(w.category, EnergyBooksWarning):
+                print(f"physcore render: warning: {w.message}", file=sys.stderr)
+            else:
+                warnings.showwarning(w.message, w.category, w.filename, w.lineno)
         if fmt in ("glb", "gltf", "html"):  # the motion, not pixels: only what a player uses
             web = {k: settings[k] for k in ("fps", "theme", "view") if k in settings}
             if settings.get("mesh") is False:
@@ -633,18 +684,24 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         dt_hint = getattr(e, "suggested_dt", float("nan"))
         if getattr(scene, "integrator", None) == "euler":
             msg += "\n  try --integrator verlet (a smaller --dt does not make explicit Euler stable)"
-        elif dt_hint == dt_hint and dt_hint > 0 and "frame_time" in settings:  # not NaN; automatic substeps
+        elif dt_hint == dt_hint and dt_hint > 0 and "frame_time" in settings:  # not NaN; frame_time set
             k = max(1, math.ceil(settings["frame_time"] / dt_hint))
-            msg += (
-                f"\n  the automatic substeps were too long; try fixed ones, e.g. "
-                f"--dt {dt_hint:.3g} --steps-per-frame {k}"
-            )
+            if "substeps" in settings:  # fixed by --substeps N: the user's own count was too few
+                msg += (
+                    f"\n  {settings['substeps']} substeps of {settings['frame_time'] / settings['substeps']:.3g} s "
+                    f"a frame are too long; try --substeps {k} (steps of {dt_hint:.3g} s)"
+                )
+            else:
+                msg += (
+                    f"\n  the automatic substeps were too long; try fixed ones, e.g. "
+                    f"--dt {dt_hint:.3g} --steps-per-frame {k}"
+                )
         elif dt_hint == dt_hint and dt_hint > 0:  # not NaN
             msg += f"\n  try a smaller time step, e.g. --dt {dt_hint:.3g} (now {scene.dt:.3g} s)"
         print(msg + f"\n  no file written ({out})", file=sys.stderr)
         return 1
     except (TypeError, ValueError) as e:
-        parser.error(str(e))
+        parser.error(_as_option(str(e), parser))
     except OSError as e:
         print(f"physcore render: error: cannot write {out}: {e}", file=sys.stderr)
         return 1
@@ -673,9 +730,11 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s){pixels}{played}")
     print(f"  file size:      {_human_bytes(sum(p.stat().st_size for p in paths))}")
     if "frame_time" in settings:
+        lead = float((getattr(scene, "render_defaults", None) or {}).get("lead_in", 0.0) or 0.0)
+        lead_text = f"a lead-in of {lead:.4g} s before the first frame, then " if lead > 0 else ""
         print(
-            f"  simulated time: {scene.time - time0:.4g} s ({frames - 1} intervals of "
-            f"{settings['frame_time']:.4g} s between frames, {scene.integrator})"
+            f"  simulated time: {scene.time - time0:.4g} s ({lead_text}{frames - 1} interval{'s' if frames != 2 else ''} of "
+            f"{settings['frame_time']:.4g} s between frames, {_stepper(scene)})"
         )
         if "substeps" in settings:
             print(f"  substeps:       {settings['substeps']} per frame (fixed by --substeps)")
@@ -685,7 +744,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         steps = (frames - 1) * settings["steps_per_frame"]
         print(
             f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
-            f"{settings['steps_per_frame']} per frame, {scene.integrator})"
+            f"{settings['steps_per_frame']} per frame, {_stepper(scene)})"
         )
     stats = getattr(scene, "integrator_stats", None)
     if stats and "cg_solves" in stats:
@@ -733,8 +792,10 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    sub.add_parser("scenes", help="list the ready-made scenes and their parameters",
-                   description="List the ready-made scenes, their one-line descriptions and parameters.")
+    sc = sub.add_parser("scenes", help="list the ready-made scenes and their parameters",
+                        description="List the ready-made scenes, their one-line descriptions and parameters; "
+                        "given a NAME, that scene's whole description.")
+    sc.add_argument("scene", metavar="NAME", nargs="?", help="one scene to describe in full")
     sub.add_parser("info", help="show the version, CPU, SIMD level, threads and GPU adapters",
                    description="Show physcore's version and build, the CPU, the SIMD level the kernels run at "
                    "(set PHYSCORE_SIMD=scalar|avx2|avx512|neon|auto to force one) and the levels this CPU has, "
@@ -742,9 +803,10 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
 
     r = sub.add_parser(
         "render",
-        help="simulate a scene and write an animated GIF",
-        description="Simulate a ready-made scene and write it as an animated GIF. Animation defaults "
-        "come from the scene (see `physcore scenes`).",
+        help="simulate a scene and write a GIF, a video, PNG frames or a 3D player",
+        description="Simulate a ready-made scene and write it as an animated GIF (the default), an MP4 or "
+        "WebM video, PNG frames, glTF or an HTML 3D player: the extension of -o picks. Animation "
+        "defaults come from the scene (see `physcore scenes`).",
     )
     r.add_argument("scene", metavar="SCENE", help="scene name (see `physcore scenes`)")
     r.add_argument("-o", "--output", metavar="OUT.gif", help="output file (default: SCENE.gif); the extension picks the "
@@ -764,7 +826,8 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
                    help="with the frame time: 'auto' picks each frame's substeps inside the integrator's "
                    "stability region (and reports them), N fixes them")
     r.add_argument("--integrator", choices=accepted, metavar="NAME",
-                   help="integrator" + (f" ({', '.join(integrators)})" if integrators else ""))
+                   help="integrator" + (f" ({', '.join(integrators)}; rk45 is the old name of dopri5)"
+                                        if integrators else ""))
     r.add_argument("--dt", type=_positive_float, metavar="DT", help="time step in s (default: the scene's)")
     r.add_argument("--rtol", type=_positive_float, metavar="R", help="relative tolerance of --integrator dopri5 (default 1e-6)")
     r.add_argument("--atol", type=float, metavar="A", help="absolute tolerance of --integrator dopri5 (default 1e-9)")
@@ -846,7 +909,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         args = parser.parse_args(None if argv is None else list(argv))
         if args.command == "scenes":
-            return _cmd_scenes(args)
+            return _cmd_scenes(args, parser)
         if args.command == "info":
             return _cmd_info()
         if args.command == "view":

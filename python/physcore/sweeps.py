@@ -39,7 +39,9 @@ import math
 import numbers
 import os
 import pickle
+import re
 import socket
+import sys
 import tempfile
 import time
 import traceback
@@ -323,11 +325,31 @@ def _run_chunk(build: Callable[..., Any], measure: Callable[[Any], Any], steps: 
 
 # ------------------------------------------------------------------------------ the engine
 def _check_client(client: Any) -> Any:
-    if client is None or client == "serial" or isinstance(client, str):
+    if client is None or client == "serial":
+        return client
+    if isinstance(client, str):
+        if client == "local":  # the default, by name
+            return None
+        if not re.fullmatch(r"([a-z][a-z0-9+.-]*://)?[^\s/:]+:\d+/?", client):
+            raise InvalidInputError(
+                f"client: {client!r} is not a scheduler address (tcp://host:port); None or 'local' for a local "
+                "cluster, 'serial' for this process"
+            )
         return client
     if type(client).__name__ == "Client" and hasattr(client, "submit"):
         return client
     raise InvalidTypeError(f"client: expected None, 'serial', a scheduler address or a distributed.Client, got {type(client).__name__}")
+
+
+def _importing_main() -> bool:
+    """Whether a caller on the stack is a script's top level run as ``__mp_main__`` (a process
+    multiprocessing started, importing the parent's main script)."""
+    f = sys._getframe(1)
+    while f is not None:
+        if f.f_globals.get("__name__") == "__mp_main__" and f.f_code.co_name == "<module>":
+            return True
+        f = f.f_back
+    return False
 
 
 class _Cluster:
@@ -342,10 +364,27 @@ class _Cluster:
             if client is None:
                 import logging
 
+                if _importing_main():
+                    # A worker process Dask started runs the script's top level again as
+                    # __mp_main__: without the guard it would start a cluster of its own, and
+                    # each failed worker would print a page of Dask's tracebacks.
+                    raise RuntimeError(
+                        "physcore.sweep started a local cluster while a worker process was importing your "
+                        'script: put the sweep under `if __name__ == "__main__":` (Dask starts its workers '
+                        "as new processes, which run the script's top level again)"
+                    )
+
                 n = workers if workers is not None else usable_cpus()
-                cluster = distributed.LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0", silence_logs=logging.ERROR
-                )
+                try:
+                    cluster = distributed.LocalCluster(
+                        n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                        silence_logs=logging.ERROR,
+                    )
+                except RuntimeError as e:
+                    raise RuntimeError(
+                        f"physcore.sweep: the local cluster's workers failed to start ({e}); in a script, the "
+                        'sweep must run under `if __name__ == "__main__":` (see the first traceback above)'
+                    ) from e
                 self.own.append(cluster)
                 self.started = n
                 client = distributed.Client(cluster)
@@ -607,8 +646,11 @@ def sweep(
         process a row at a time. `build` and `measure` must not depend on running one after
         the other for the same run (a wave builds all its runs first), as on Dask they must
         not depend on other runs.
-    client : None, "serial", str or distributed.Client
-        Where the runs go (module docstring): by default a LocalCluster of `workers` processes.
+    client : None, "local", "serial", str or distributed.Client
+        Where the runs go (module docstring): by default (or ``"local"``) a LocalCluster of
+        `workers` processes; a str other than those is a scheduler's address
+        (``tcp://host:port``). In a script, call the sweep under ``if __name__ == "__main__":``
+        (the local cluster's workers run the script's top level again).
     workers : int, optional
         Worker processes of the default LocalCluster, >= 1; default one per usable core.
     out : str or os.PathLike, optional
@@ -803,7 +845,15 @@ def sweep(
                 if finished:  # else the interruption propagates; the file keeps its last whole table
                     raise _unwritten(exc, path, frame(), len(runs)) from exc
     df = frame()
-    return df[df["run"].isin(range(len(runs)))].reset_index(drop=True) if kept_old else df
+    df = df[df["run"].isin(range(len(runs)))].reset_index(drop=True) if kept_old else df
+    errors = df["error"] if "error" in df else None
+    if errors is not None and len(df) and errors.notna().all():
+        # Every run failed (a parameter name build() does not take, a typo in measure): say it
+        # here, not only in a column the caller may not read.
+        import warnings
+
+        warnings.warn(f"physcore.sweep: all {len(df)} runs failed; the first: {errors.iloc[0]}", RuntimeWarning, stacklevel=2)
+    return df
 
 
 # ------------------------------------------------------------------------------ ensembles

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._errors import InvalidInputError
+from . import _check
+from ._errors import InvalidInputError, InvalidTypeError
 from .scene import Scene
 from .terms import Gravity, PairwiseGravity, Springs
 
@@ -58,7 +59,13 @@ def spring_networks(*, dim: int | None = None, max_particles: int = 12, integrat
     direction, hence the force, turns arbitrarily fast): the velocities are scaled so that the
     kinetic energy E ≤ k L_min²/8, and since a spring's potential ½ k ΔL² never exceeds the
     energy of the (conservative or damped) network, every spring keeps ``|ΔL| ≤ L_min/2``.
+
+    Raises TypeError / InvalidInputError naming the argument (``dim`` not None, 2 or 3;
+    ``max_particles`` not an int ≥ 2; an unknown ``integrator``) when called, not when the test runs.
     """
+    dim = _dim(dim)
+    max_particles = _check.int_in_range("max_particles", max_particles, 2)
+    integrator = _integrator(integrator)
     st = _st()
 
     @st.composite
@@ -101,8 +108,15 @@ def nbody_systems(*, dim: int = 3, max_bodies: int = 8, integrator: str = "verle
     """Strategy for self-gravitating systems (G = 1) of 2..max_bodies bodies with masses
     0.1..1, positions in the unit cube, small random velocities and Plummer softening ε (default
     0.1). The step resolves the closest possible encounter, not only the current separations:
-    ``dt = min(suggest_dt(), 0.05 √(ε³/(G M))) / 4`` with M the total mass."""
-    if not softening > 0:
+    ``dt = min(suggest_dt(), 0.05 √(ε³/(G M))) / 4`` with M the total mass.
+
+    Raises TypeError / InvalidInputError naming the argument (``dim`` not 2 or 3,
+    ``max_bodies`` not an int ≥ 2, ``softening`` not > 0, an unknown ``integrator``)."""
+    if _dim(dim) is None:
+        raise InvalidInputError("dim: must be 2 or 3, got None")
+    max_bodies = _check.int_in_range("max_bodies", max_bodies, 2)
+    integrator = _integrator(integrator)
+    if not _check.real("softening", softening) > 0:
         raise InvalidInputError("softening: must be > 0 (the step is chosen from the softened encounter time)")
     st = _st()
 
@@ -124,7 +138,14 @@ def nbody_systems(*, dim: int = 3, max_bodies: int = 8, integrator: str = "verle
 def particle_clouds(*, dim: int | None = None, max_particles: int = 50, gravity: bool = True, integrator: str = "verlet"):
     """Strategy for free particles (random positions, velocities and masses) under uniform
     gravity (or none): the motion is exactly ballistic, so every integrator of order ≥ 2 is
-    exact up to round-off."""
+    exact up to round-off.
+
+    Raises TypeError / InvalidInputError naming the argument (``dim`` not None, 2 or 3;
+    ``max_particles`` not an int ≥ 1; an unknown ``integrator``)."""
+    dim = _dim(dim)
+    max_particles = _check.int_in_range("max_particles", max_particles, 1)
+    gravity = _check.flag("gravity", gravity)
+    integrator = _integrator(integrator)
     st = _st()
 
     @st.composite
@@ -145,18 +166,51 @@ def particle_clouds(*, dim: int | None = None, max_particles: int = 50, gravity:
     return build()
 
 
+def _dim(dim: object) -> int | None:
+    if dim is None:
+        return None
+    d = _check.int_in_range("dim", dim, 2, 3)
+    return d
+
+
+def _integrator(name: object) -> str:
+    from .scene import INTEGRATOR_ALIASES, INTEGRATORS
+
+    names = [d["name"] for d in INTEGRATORS]
+    return _check.choice("integrator", name, [*names, *INTEGRATOR_ALIASES])
+
+
+def _check_scene(scene: object) -> None:
+    if not isinstance(scene, Scene):
+        raise InvalidTypeError(f"scene: expected a physcore.Scene, got {type(scene).__name__}")
+
+
 def assert_energy_conserved(scene: Scene, steps: int, rtol: float, *, samples: int = 10) -> float:
     """Step ``scene`` ``steps`` times and assert that the energy books balance:
     ``|scene.energy_drift()| <= rtol`` at ``samples`` evenly spaced checks (so a transient
     excursion is caught, not only the end value). Returns the largest ``|drift|`` seen.
 
+    ``energy_drift()`` is the change of the books' total over the energy in play, max(|E0|,
+    S0, S) (S: the sum of the magnitudes of the kinetic and potential parts), not the
+    conventional (E − E0)/|E0|: a bound system whose parts are larger than its total reads
+    smaller (a Kepler orbit at e = 0.8 started at pericentre: 1/19 of the conventional error),
+    and it never exceeds 1, so an rtol of 1 or more cannot fail and is refused. For the
+    conventional measure, compare ``scene.energy().total`` with its value at the start.
+
     Raises
     ------
     AssertionError
         With the step and the drift where the books first failed to balance.
+    TypeError, ValueError
+        ``scene`` is not a Scene; ``steps`` or ``samples`` is not an int ≥ 1; ``rtol`` is not
+        a number in (0, 1) (named in the message).
     """
-    if steps < 1 or samples < 1:
-        raise InvalidInputError("steps, samples: must be >= 1")
+    _check_scene(scene)
+    steps = _check.int_in_range("steps", steps, 1)
+    samples = _check.int_in_range("samples", samples, 1)
+    rtol = _check.real("rtol", rtol)
+    if not 0.0 < rtol < 1.0:
+        raise InvalidInputError(f"rtol: must be in (0, 1), got {rtol:g} (energy_drift() is at most 1: an rtol of 1 or more cannot fail)")
     worst = 0.0
     done = 0
     for k in range(1, samples + 1):
@@ -178,11 +232,15 @@ def assert_momentum_conserved(scene: Scene, steps: int, rtol: float = 1e-10) -> 
 
     Raises
     ------
-    ValueError
-        The scene has pinned particles or colliders.
+    TypeError, ValueError
+        ``scene`` is not a Scene; ``steps`` is not an int ≥ 1; ``rtol`` is not a finite number
+        > 0; the scene has pinned particles or colliders.
     AssertionError
         With the momentum error.
     """
+    _check_scene(scene)
+    steps = _check.int_in_range("steps", steps, 1)
+    rtol = _check.positive_float("rtol", rtol)
     if scene.pinned.any() or scene.colliders:
         raise InvalidInputError("scene: pinned particles and colliders exchange momentum with the outside")
     g = sum((t.g for t in scene.terms if isinstance(t, Gravity)), np.zeros(scene.dim))

@@ -183,6 +183,14 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, 
             "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
+        // Energies past float64 with a finite state, at a step beyond the fastest time scale:
+        // most likely a run that blew up from a stable start (a cloth at too long a step
+        // reached 1e45 J in 0.14 s), which a smaller step cures.
+        Failure::Books | Failure::GridBooks if suggested_dt >= f64::MIN_POSITIVE && suggested_dt < dt => format!(
+            "The run most likely blew up: the step (now {now}) is longer than the fastest time scale \
+             asks ({then}): try a smaller dt, e.g. {then}. (Or some values given are of 1e150 or \
+             more: give values of a physical size.)"
+        ),
         // Energies past float64 with a finite state: the values given are beyond any step.
         Failure::Books | Failure::GridBooks => "The energies of this state are past float64's range (speeds, \
              amplitudes or masses of some 1e150 or more): give values of a physical size; a \

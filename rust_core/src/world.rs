@@ -589,11 +589,12 @@ impl<V: Vector> World<V> {
         while left > 0.0 {
             let limit = self.auto_dt().unwrap_or(left);
             // As the equal-substep path: refuse what would never end. After steps of this call
-            // (whose start passed this check) the flow itself sped up a millionfold or more: a
-            // runaway with finite velocities, which no other check catches, not a duration too
-            // long.
+            // (whose start passed this check), or at the start of a call with a limit a
+            // millionfold below the last step taken, the flow itself sped up: a runaway with
+            // finite velocities, which no other check catches, not a duration too long (an
+            // advance after one that ended in a runaway named `duration`).
             if left / limit > 1e12 {
-                if n > 0 {
+                if n > 0 || (self.step > 0 && limit < 1e-6 * self.dt) {
                     return Err(self.diverged(self.fastest(), crate::error::Failure::Speed));
                 }
                 return Err(invalid(

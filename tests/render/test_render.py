@@ -1104,3 +1104,24 @@ def test_a_segment_wholly_outside_the_image_draws_nothing():
     rgb = np.zeros((20, 20, 3), np.uint8)
     _draw_lines(rgb, np.array([-50.0]), np.array([-50.0]), np.array([-40.0]), np.array([-60.0]), np.array([[255, 0, 0]], np.uint8))
     assert not rgb.any()
+
+
+def test_a_recording_whose_books_blew_up_warns_and_a_sound_one_does_not():
+    """A cloth at three substeps a frame (some 200 times its stable step) reaches 1e45 J in ten
+    frames with every value finite, so nothing raises: the recording warns, naming the step
+    that would hold; the default scene's books close and say nothing."""
+    import warnings
+
+    with pytest.warns(pc.EnergyBooksWarning, match=r"off by \+1 of the energy in play.*suggest_dt\(\) = 5.71e-05 s"):
+        pc.render.record(pc.scenes.cloth(), frames=10, frame_time=1 / 30, substeps=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", pc.EnergyBooksWarning)
+        pc.render.record(pc.scenes.cloth(), frames=10)
+
+
+@pytest.mark.parametrize("scene", [None, "cloth", 3])
+def test_what_is_no_scene_is_refused_naming_the_argument(tmp_path, scene):
+    """``gif(None, ...)`` failed deep inside: AttributeError "'NoneType' object has no attribute 'dim'"."""
+    with pytest.raises(pc.InvalidTypeError, match=r"^scene: expected a physcore Scene, Batch or Recording, got "):
+        pc.render.gif(scene, tmp_path / "x.gif")
+    assert list(tmp_path.iterdir()) == []

@@ -123,6 +123,41 @@ def test_unknown_scene(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize(("typed", "meant"), [("clth", "cloth"), ("Cloth", "cloth"), ("dambreak", "dam_break")])
+def test_a_misspelt_scene_gets_the_closest_name(tmp_path, capsys, typed, meant):
+    assert main(["render", typed, "-o", str(tmp_path / "x.gif")]) == 2
+    assert f"did you mean {meant!r}?" in capsys.readouterr().err
+
+
+def test_an_integrator_for_a_grid_scene_is_refused_not_ignored(tmp_path, capsys):
+    """The grid scenes step their fields by their own schemes: ``--integrator`` was accepted,
+    ignored, and the summary named verlet."""
+    assert main(["render", "turing", "-o", str(tmp_path / "x.gif"), "--integrator", "rk4"]) == 2
+    assert "--integrator: turing steps its fields by its own scheme" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_that_blew_up_without_overflowing_is_written_with_a_warning(tmp_path, capsys):
+    """Three substeps a frame are far past the cloth's stable step: in ten frames its energy
+    reaches some 1e45 J, every value still finite, so nothing raises; the command says so."""
+    out = tmp_path / "b.gif"
+    assert main(["render", "cloth", "-o", str(out), "--frames", "10", "--substeps", "3", "--size", "64x48", "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "physcore render: warning: the energy books are off by +1 of the energy in play" in err, err
+    assert "RuntimeWarning" not in err and out.exists()
+
+
+def test_a_divergence_at_fixed_substeps_asks_for_more_of_them(tmp_path, capsys):
+    """With ``--substeps N`` the hint is a larger N, not "the automatic substeps were too long",
+    and the core's message asks for a smaller step (the run blew up from a normal start), not
+    for "values of a physical size"."""
+    assert main(["render", "cloth", "-o", str(tmp_path / "b.gif"), "--substeps", "3", "--size", "64x48", "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "3 substeps of 0.0111 s a frame are too long; try --substeps 585" in err, err
+    assert "automatic substeps" not in err and "physical size;" not in err
+    assert "try a smaller dt" in err
+
+
 @pytest.mark.parametrize(
     "param, message",
     [
@@ -440,3 +475,25 @@ def test_a_closed_pipe_is_not_a_traceback():
         proc.wait(timeout=60)
     assert "Traceback" not in err and "BrokenPipeError" not in err, err
     assert proc.returncode in (0, 1)  # 0 if it finished writing before the reader left
+
+
+def test_scenes_describes_one_scene_in_full(capsys):
+    assert cli.main(["scenes", "cloth"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("cloth\n\nHanging cloth") and "parameters (--param key=value)" in out
+    assert "Render it with: physcore render cloth" in out
+    assert cli.main(["scenes", "clth"]) == 2
+    assert "did you mean 'cloth'?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("option", "message"), [
+    (["-o", "nodir/x.gif"], "-o: directory 'nodir' does not exist"),
+    (["--cmap", "nope", "-o", "x.gif"], "--cmap: must be one of"),
+    (["--trail", "-3", "-o", "x.gif"], "--trail: must be >= 0, got -3"),
+    (["--background", "zz", "-o", "x.gif"], "--background: colours as text"),
+])
+def test_a_bad_option_is_named_as_typed(tmp_path, monkeypatch, capsys, option, message):
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", "projectile", *option] + SMALL) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []

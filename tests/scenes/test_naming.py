@@ -267,3 +267,18 @@ def test_no_warning_from_the_new_names():
         scenes.smoke(n=16)
         scenes.pythagorean()
     assert [str(w.message) for w in caught] == []
+
+
+def test_a_deprecation_is_blamed_on_the_users_line_however_deep_it_starts():
+    """A fixed stacklevel blamed the scenes' wrapper (``scenes/_common.py``), which Python's
+    default filters then hide (they show a DeprecationWarning only where ``__main__`` is
+    blamed): the warning names the first frame outside physcore."""
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        pc.scenes.turing(integrator="rk4", n=32)
+        pc.scenes.kepler(0.5, 2.0)
+    deprecations = [w for w in caught if issubclass(w.category, DeprecationWarning)]
+    assert len(deprecations) == 2
+    assert all(w.filename == __file__ for w in deprecations), [w.filename for w in deprecations]

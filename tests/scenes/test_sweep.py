@@ -302,10 +302,28 @@ def test_sweep_refuses_bad_arguments_before_running(kwargs, error, match):
 
 
 def test_measure_must_return_a_dict_with_new_names():
-    df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: 3.0, client="serial", progress=False)
+    with pytest.warns(RuntimeWarning, match="all 1 runs failed; the first: .*must return a dict"):
+        df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: 3.0, client="serial", progress=False)
     assert "must return a dict" in df["error"][0]
-    df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: {"k": 1.0}, client="serial", progress=False)
+    with pytest.warns(RuntimeWarning, match="all 1 runs failed"):
+        df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}], measure=lambda s: {"k": 1.0}, client="serial", progress=False)
     assert "'k' is a parameter" in df["error"][0]
+
+
+def test_a_sweep_whose_every_run_failed_says_so_and_one_with_a_success_does_not():
+    """A misspelt parameter fails every run: the rows' error column said so, and nothing else."""
+    with pytest.warns(RuntimeWarning, match=r"all 2 runs failed; the first: TypeError: .*unexpected keyword argument 'kk'"):
+        df = pc.sweep(chain, {"kk": [1.0, 2.0], "dt": [1e-4]}, measure=settle, client="serial", progress=False)
+    assert df["error"].notna().all()
+    df = pc.sweep(chain, [{"k": 1.0, "dt": 1e-4}, {"kk": 1.0, "dt": 1e-4}], measure=settle, client="serial",
+                  progress=False)
+    assert df["error"].isna().tolist() == [True, False]
+
+
+@pytest.mark.parametrize("client", ["local?", "tcp://", "my cluster", "localhost"])
+def test_a_client_string_that_is_no_address_is_refused_by_name(client):
+    with pytest.raises(pc.InvalidInputError, match=r"^client: .* is not a scheduler address \(tcp://host:port\)"):
+        pc.sweep(chain, GRID, measure=settle, client=client, progress=False)
 
 
 def test_missing_dask_is_a_clear_error(monkeypatch):

@@ -86,3 +86,32 @@ def test_momentum_assertion_catches_external_forces_and_refuses_pins():
     pinned.add_particles([[0.0, 0.0], [1.0, 0.0]], pinned=[True, False])
     with pytest.raises(ValueError, match="scene"):
         pt.assert_momentum_conserved(pinned, 10)
+
+
+@pytest.mark.parametrize(("kw", "error", "message"), [
+    ({"steps": 100, "rtol": 1e13}, pc.InvalidInputError, r"^rtol: must be in \(0, 1\), got 1e\+13 \(energy_drift\(\) is at most 1"),
+    ({"steps": 100, "rtol": -1.0}, pc.InvalidInputError, "^rtol: must be in"),
+    ({"steps": 100, "rtol": float("nan")}, pc.InvalidInputError, "^rtol: must be in"),
+    ({"steps": 100, "rtol": "1e-3"}, pc.InvalidTypeError, "^rtol: expected a real number"),
+    ({"steps": 2.5, "rtol": 1e-3}, pc.InvalidTypeError, "^steps: expected an int, got float 2.5"),
+    ({"steps": 100, "rtol": 1e-3, "samples": 0}, pc.InvalidInputError, "^samples: must be >= 1"),
+])
+def test_assert_energy_conserved_checks_its_arguments_before_stepping(kw, error, message):
+    """An rtol of 1e13 (a typo for 1e-13) passed every scene: energy_drift() is at most 1."""
+    s = pc.scenes.kepler()
+    with pytest.raises(error, match=message):
+        pt.assert_energy_conserved(s, **kw)
+    assert s.step_count == 0
+
+
+def test_the_assertions_and_strategies_name_a_bad_argument_when_called():
+    with pytest.raises(pc.InvalidTypeError, match="^scene: expected a physcore.Scene, got str"):
+        pt.assert_energy_conserved("kepler", 10, 1e-3)
+    with pytest.raises(pc.InvalidTypeError, match="^steps:"):
+        pt.assert_momentum_conserved(pc.scenes.kepler(), steps=1.5)
+    with pytest.raises(pc.InvalidInputError, match="^max_particles: must be >= 2, got 0"):
+        pt.spring_networks(max_particles=0)
+    with pytest.raises(pc.InvalidInputError, match="^max_bodies: must be >= 2"):
+        pt.nbody_systems(max_bodies=1)
+    with pytest.raises(pc.InvalidInputError, match="^integrator: must be one of"):
+        pt.particle_clouds(integrator="rk5")

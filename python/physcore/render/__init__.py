@@ -103,3 +103,4 @@ __all__ = ["record", "Recording", "Mesh", "Look", "gif", "save", "frames", "rend
 for _public in (Recording, Mesh, Look, record, gif, save, frames, render_frame, contact_sheet, swept_polygons, gltf, html):
     _public.__module__ = __name__
 del _public
+del annotations  # bound by `from __future__ import annotations`: not part of the API

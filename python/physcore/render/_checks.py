@@ -87,7 +87,7 @@ def _check_frame_time(frame_time: Any) -> float | None:
 def _check_color_by(color_by: Any) -> str:
     if not isinstance(color_by, str) or color_by not in COLOR_BY:
         valid = ", ".join(repr(c) for c in COLOR_BY)
-        raise InvalidInputError(f"color_by must be one of {valid}; got {_short(color_by)}")
+        raise InvalidInputError(f"color_by: must be one of {valid}; got {_short(color_by)}")
     return str(color_by)
 
 
@@ -98,7 +98,7 @@ def _check_cmap(cmap: Any) -> str | None:
     if not isinstance(cmap, str):
         raise InvalidTypeError(f"cmap must be a str naming a colour map, got {type(cmap).__name__}")
     if cmap not in CMAPS:
-        raise InvalidInputError(f"cmap must be one of {', '.join(CMAPS)}; got {_short(cmap)}")
+        raise InvalidInputError(f"cmap: must be one of {', '.join(CMAPS)}; got {_short(cmap)}")
     return cmap
 
 
@@ -232,7 +232,7 @@ def _check_arrows(arrows: Any) -> str | None:
     if not isinstance(arrows, str):
         raise InvalidTypeError(f"arrows must be a str or None, got {type(arrows).__name__} {_short(arrows)}")
     if arrows not in ARROWS:
-        raise InvalidInputError(f"arrows must be one of {', '.join(repr(a) for a in ARROWS)} or None; got {_short(arrows)}")
+        raise InvalidInputError(f"arrows: must be one of {', '.join(repr(a) for a in ARROWS)} or None; got {_short(arrows)}")
     return None if arrows == "none" else arrows
 
 

@@ -442,8 +442,9 @@ class _MeshShader:
         front[:, 3] = _SPECULAR * _pow24(np.maximum(nh, 0.0))
         back[:, 3] = _SPECULAR * _pow24(np.maximum(-nh, 0.0))
         verts = np.empty((xs.shape[0], 3), dtype=np.float32)
-        verts[:, 0], verts[:, 1] = col, row
-        verts[:, 2] = 0.0 if depth is None else depth
+        with np.errstate(over="ignore"):  # a blown-up scene's far points: inf, off the picture
+            verts[:, 0], verts[:, 1] = col, row
+            verts[:, 2] = 0.0 if depth is None else depth
         faces, uv = self.faces_u32, self.uv if self.texture is not None else None
         static = self.ball
         ball_rgb, ball_uv = self.ball_rgb, self.ball_uv

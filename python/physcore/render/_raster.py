@@ -1340,7 +1340,8 @@ class _Rasteriser:
         # smooth at the blur's width, so its 2 × 2 blocks do not show).
         h, w = shape
         verts = np.zeros((len(x), 3), dtype=np.float32)
-        verts[:, 0], verts[:, 1], verts[:, 2] = 0.5 * col, 0.5 * row, -height  # the lowest nearest: its shadow shows
+        with np.errstate(over="ignore"):  # a blown-up scene's far points: inf, off the picture
+            verts[:, 0], verts[:, 1], verts[:, 2] = 0.5 * col, 0.5 * row, -height  # the lowest nearest: its shadow shows
         faces = faces[above[faces].any(axis=1)]  # a triangle below the plane casts nothing on it
         img = np.full(((h + 1) // 2, (w + 1) // 2, 3), 255, dtype=np.uint8)
         ink = np.zeros((len(x), 4), dtype=np.float32)

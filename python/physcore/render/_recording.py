@@ -5,12 +5,14 @@ from __future__ import annotations
 import math
 import operator
 import sys
+import warnings
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from .. import _check
-from .._errors import InvalidInputError, InvalidTypeError
+from .._deprecate import user_stacklevel
+from .._errors import EnergyBooksWarning, InvalidInputError, InvalidTypeError
 from ._checks import (
     _check_advance,
     _check_auto_substeps,
@@ -147,6 +149,11 @@ def points_view(scene: Any) -> Any:
     view = getattr(scene, "_render_view", None)
     if callable(view):
         return view()
+    if not (hasattr(scene, "positions") and hasattr(scene, "dim") and callable(getattr(scene, "step", None))):
+        # Anything else failed deep inside (`None`: "'NoneType' object has no attribute 'dim'").
+        raise InvalidTypeError(
+            f"scene: expected a physcore Scene, Batch or Recording, got {type(scene).__name__}"
+        )
     if getattr(scene, "flows", ()) and int(getattr(scene, "n_particles", 0)) == 0:
         return _FlowPoints(scene)
     return scene
@@ -278,6 +285,7 @@ def _simulate(
             bar.close()
     pinned = np.asarray(scene.pinned, dtype=bool).reshape(n)
     pairs = (sp[0], sp[1]) if sp is not None else None
+    _warn_books(scene)
     return Recording(
         pos,
         origin,
@@ -586,3 +594,29 @@ def record(
     defaults = dict(scene_defaults(scene))
     rec = _simulate(scene, progress=progress, on_frame=on_frame, **plan)
     return rec._replace(color_by=color_by, defaults=defaults)
+
+
+def _warn_books(scene: Any) -> None:
+    """An :class:`~physcore.EnergyBooksWarning` where the recorded scene's books are off by
+    half the energy in play or more: a run that blew up without yet overflowing (the books of
+    every ready-made scene close within 0.5 % at its defaults)."""
+    drift = getattr(scene, "energy_drift", None)
+    if not callable(drift):
+        return
+    try:
+        d = float(drift())
+    except (AttributeError, TypeError, ValueError, RuntimeError):  # a view without books of its own: nothing to say
+        return
+    if abs(d) < 0.5:
+        return
+    try:
+        hint = f" (scene.suggest_dt() = {float(scene.suggest_dt()):.3g} s; dt now {float(scene.dt):.3g} s)"
+    except (AttributeError, TypeError, ValueError, RuntimeError):
+        hint = ""
+    warnings.warn(
+        f"the energy books are off by {d:+.2g} of the energy in play at the recording's end: unless "
+        f"something the books do not count drives the scene, the run blew up; try a smaller dt or "
+        f"more substeps{hint}",
+        EnergyBooksWarning,
+        stacklevel=user_stacklevel(),
+    )
