@@ -60,6 +60,7 @@ from .fluids import Fluid
 from .grids import Grid
 from .potentials import PointMasses  # noqa: F401 - registers the potential terms
 from .session import Session, books, drift, left_sum
+from . import terms as _terms_pkg
 from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
@@ -1978,6 +1979,16 @@ class Scene:
         arrays = [(k, np.ascontiguousarray(z[f"device_{k}"], dtype=np.float64).reshape(-1)) for k in ("pos", "vel", "acc", "aux", "hits")]
         arrays.append(("acc_valid", np.array([float(meta["device_acc_valid"])])))
         self._exclusive(lambda sim: sim.system_load(_DEVICE_PARTICLES, arrays))
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        # A name the scene does not have is refused, not stored and ignored: `scene.gravity =
+        # [0, -9.81]` did nothing, silently (physics is added as terms).
+        if not name.startswith("_") and name != "render_defaults" and not hasattr(type(self), name) \
+                and name not in self.__dict__:
+            term = name[:1].upper() + name[1:]
+            hint = f": physics is added as a term, scene.add(pc.{term}(...))" if hasattr(_terms_pkg, term) else ""
+            raise AttributeError(f"Scene has no attribute {name!r} to set{hint}")
+        object.__setattr__(self, name, value)
 
     def __repr__(self) -> str:
         terms = ", ".join(t.name for t in self.terms) or "no terms"

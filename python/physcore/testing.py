@@ -190,9 +190,9 @@ def assert_energy_conserved(scene: Scene, steps: int, rtol: float, *, samples: i
     ``|scene.energy_drift()| <= rtol`` at ``samples`` evenly spaced checks (so a transient
     excursion is caught, not only the end value). Returns the largest ``|drift|`` seen.
 
-    ``energy_drift()`` is the change of the books' total over the energy in play, max(|E0|,
-    S0, S) (S: the sum of the magnitudes of the kinetic and potential parts), not the
-    conventional (E − E0)/|E0|: a bound system whose parts are larger than its total reads
+    ``energy_drift()`` is the change of the books' total over the energy in play,
+    ``max(abs(E0), S0, S)`` (S: the sum of the magnitudes of the kinetic and potential parts), not the
+    conventional ``(E - E0) / abs(E0)``: a bound system whose parts are larger than its total reads
     smaller (a Kepler orbit at e = 0.8 started at pericentre: 1/19 of the conventional error),
     and it never exceeds 1, so an rtol of 1 or more cannot fail and is refused. For the
     conventional measure, compare ``scene.energy().total`` with its value at the start.

@@ -19,7 +19,7 @@ pub enum Error {
          {advice}",
         time = seconds(*t),
         what = describe(quantity, *particle),
-        advice = advise(quantity, *dt, *suggested_dt, *explicit_euler, *remedies)
+        advice = advise(quantity, *step, *dt, *suggested_dt, *explicit_euler, *remedies)
     )]
     Diverged {
         step: u64,
@@ -162,7 +162,14 @@ fn describe(quantity: &Failure, index: usize) -> String {
     }
 }
 
-fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, remedies: Remedies) -> String {
+fn advise(
+    quantity: &Failure,
+    step: u64,
+    dt: f64,
+    suggested_dt: f64,
+    explicit_euler: bool,
+    remedies: Remedies,
+) -> String {
     let (now, then) = (seconds(dt), seconds(suggested_dt));
     let softening = if remedies.softening { ", a larger softening" } else { "" };
     match quantity {
@@ -183,14 +190,17 @@ fn advise(quantity: &Failure, dt: f64, suggested_dt: f64, explicit_euler: bool, 
             "The step follows the flow (last {now}), so a smaller dt does not help: try a \
              smaller cfl, more viscosity or a tighter density_error."
         ),
-        // Energies past float64 with a finite state, at a step beyond the fastest time scale:
-        // most likely a run that blew up from a stable start (a cloth at too long a step
-        // reached 1e45 J in 0.14 s), which a smaller step cures.
-        Failure::Books | Failure::GridBooks if suggested_dt >= f64::MIN_POSITIVE && suggested_dt < dt => format!(
-            "The run most likely blew up: the step (now {now}) is longer than the fastest time scale \
+        // Energies past float64 with a finite state, some steps into the run and at a step
+        // beyond the fastest time scale: most likely a run that blew up from a stable start (a
+        // cloth at too long a step reached 1e45 J in 0.14 s), which a smaller step cures. At the
+        // first steps the values were given so (a drop of 1e300 m).
+        Failure::Books | Failure::GridBooks if step > 2 && suggested_dt >= f64::MIN_POSITIVE && suggested_dt < dt => {
+            format!(
+                "The run most likely blew up: the step (now {now}) is longer than the fastest time scale \
              asks ({then}): try a smaller dt, e.g. {then}. (Or some values given are of 1e150 or \
              more: give values of a physical size.)"
-        ),
+            )
+        }
         // Energies past float64 with a finite state: the values given are beyond any step.
         Failure::Books | Failure::GridBooks => "The energies of this state are past float64's range (speeds, \
              amplitudes or masses of some 1e150 or more): give values of a physical size; a \

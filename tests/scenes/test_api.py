@@ -340,3 +340,16 @@ def test_scene_functions_validate_arguments():
         pc.scenes.projectile(n=2.5)
     with pytest.raises(ValueError, match="pin"):
         pc.scenes.cloth(pin="middle")
+
+
+def test_setting_an_attribute_the_scene_does_not_have_is_refused():
+    """``scene.gravity = [0, -9.81]`` was stored and ignored: the scene fell without gravity."""
+    s = pc.Scene(2)
+    with pytest.raises(AttributeError, match=r"^Scene has no attribute 'gravity' to set: physics is added as a "
+                                             r"term, scene\.add\(pc\.Gravity\(\.\.\.\)\)"):
+        s.gravity = [0.0, -9.81]
+    with pytest.raises(AttributeError, match="^Scene has no attribute 'stepsize' to set$"):
+        s.stepsize = 0.1
+    s.dt = 0.01  # what the scene has stays settable
+    s.render_defaults = {"frames": 3}
+    assert s.dt == 0.01 and s.render_defaults == {"frames": 3} and not hasattr(s, "gravity")
