@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from . import _check, _core, _deprecate, _scenefile
+from . import terms as _terms_pkg
 from ._atomic import atomic_write
 from ._errors import (
     ContactStepWarning,
@@ -60,7 +61,6 @@ from .fluids import Fluid
 from .grids import Grid
 from .potentials import PointMasses  # noqa: F401 - registers the potential terms
 from .session import Session, books, drift, left_sum
-from . import terms as _terms_pkg
 from .terms import Box, Plane, Sphere, Springs, Term
 
 __all__ = ["Scene", "EnergyReport", "INTEGRATORS"]
