@@ -1125,3 +1125,15 @@ def test_what_is_no_scene_is_refused_naming_the_argument(tmp_path, scene):
     with pytest.raises(pc.InvalidTypeError, match=r"^scene: expected a physcore Scene, Batch or Recording, got "):
         pc.render.gif(scene, tmp_path / "x.gif")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_lead_in_steps_as_the_frames_do():
+    """A scene of fixed steps with a lead-in: ``advance`` set its dt to one of its own (1.785e-4
+    s for the double pendulum's 1.01e-4), and the frames, counted in steps of the dt before,
+    then lay 1.77 frame times apart. The lead-in now takes fixed steps too."""
+    s = pc.scenes.double_pendulum(n=2)
+    dt = s.dt
+    rec = pc.render.record(s, frames=4)
+    assert s.dt == dt
+    assert rec.times[0] == pytest.approx(3.0, abs=dt)
+    np.testing.assert_allclose(np.diff(rec.times), 1 / 30, atol=dt)

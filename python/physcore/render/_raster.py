@@ -334,13 +334,29 @@ def _draw_scale_bar(buf: np.ndarray, px_per_unit: float, unit: str, font_px: int
     x0 = x1 - px
     y = h - 6  # the line's row
     top = y - 4 - mask.shape[0]
-    buf[top - 1 : y + 3, min(x0, x1 - mask.shape[1]) - 2 : x1 + 2] = _BACKGROUND
-    buf[y - 1 : y + 1, x0 : x1 + 1] = _TEXT
-    buf[y - 4 : y + 2, x0] = _TEXT
-    buf[y - 4 : y + 2, x1] = _TEXT
+    # The ink (line, ticks, label) on a halo of background two pixels wide, not on a solid box:
+    # a box cut a notch out of whatever ran under the corner (a tank's floor, in every fluid
+    # scene), where a halo only parts it around the strokes.
+    left = min(x0, x1 - mask.shape[1]) - 2
+    ink = np.zeros((y + 3 - (top - 1), x1 + 2 - left), dtype=bool)
+    oy, ox = top - 1, left
+    ink[y - 1 - oy : y + 1 - oy, x0 - ox : x1 + 1 - ox] = True
+    ink[y - 4 - oy : y + 2 - oy, x0 - ox] = True
+    ink[y - 4 - oy : y + 2 - oy, x1 - ox] = True
     tx = x1 - mask.shape[1] + (mask.shape[1] - px) // 2 if mask.shape[1] < px else x1 - mask.shape[1]
-    region = buf[top : top + mask.shape[0], tx : tx + mask.shape[1]]
-    region[mask[: region.shape[0], : region.shape[1]]] = _TEXT
+    text = ink[top - oy : top - oy + mask.shape[0], tx - ox : tx - ox + mask.shape[1]]
+    text |= mask[: text.shape[0], : text.shape[1]]
+    halo = ink.copy()
+    for _ in range(2):
+        grown = halo.copy()
+        grown[1:] |= halo[:-1]
+        grown[:-1] |= halo[1:]
+        grown[:, 1:] |= halo[:, :-1]
+        grown[:, :-1] |= halo[:, 1:]
+        halo = grown
+    region = buf[oy : oy + ink.shape[0], ox : ox + ink.shape[1]]
+    region[halo[: region.shape[0], : region.shape[1]]] = _BACKGROUND
+    region[ink[: region.shape[0], : region.shape[1]]] = _TEXT
     return length, px
 
 

@@ -224,7 +224,7 @@ def _simulate(
     has_time = hasattr(scene, "time")
     times = np.empty(frames) if has_time else None
     if lead_in > 0:  # after every read above has been checked: a bad scene still raises unstepped
-        _lead_in(scene, lead_in)
+        _lead_in(scene, lead_in, fixed=frame_time is None)
         x = np.asarray(scene.positions, dtype=np.float64).reshape(n, dim)
         if p0 is not None:
             p0 = _scene_pressure(scene, n)
@@ -406,16 +406,18 @@ def _radii(scene: Any, n: int) -> np.ndarray | None:
 _LEAD_IN = "render_defaults['lead_in']"
 
 
-def _lead_in(scene: Any, seconds: float) -> None:
-    """Advance `scene` by `seconds` before the first frame: in automatic substeps where it has
-    ``advance``, else as the nearest number of steps of its dt."""
-    if hasattr(scene, "advance"):
+def _lead_in(scene: Any, seconds: float, fixed: bool) -> None:
+    """Advance `scene` by `seconds` before the first frame, as its frames step: in automatic
+    substeps where they do (and it has ``advance``), else as the nearest number of steps of its
+    dt. (``advance`` on a scene of fixed steps sets its dt to one of its own: the double
+    pendulum's frames, counted in steps of the dt before, then ran 1.77 times too long.)"""
+    if hasattr(scene, "advance") and not fixed:
         scene.advance(seconds)
     else:
         scene.step(steps_for(seconds, scene.dt, _LEAD_IN))
 
 
-def _check_lead_in(scene: Any, d: dict[str, Any]) -> float:
+def _check_lead_in(scene: Any, d: dict[str, Any], fixed: bool = False) -> float:
     """``render_defaults["lead_in"]`` (simulated seconds before the first frame, default 0)
     checked, and refused where it would take more steps than a frame may (InvalidInputError):
     the checks of a frame's stepping, under the lead-in's name."""
@@ -424,7 +426,7 @@ def _check_lead_in(scene: Any, d: dict[str, Any]) -> float:
         raise InvalidInputError(f"{_LEAD_IN}: expected simulated seconds >= 0 (finite), got {_short(v)}")
     v = float(v)
     if v > 0:
-        if hasattr(scene, "advance"):
+        if hasattr(scene, "advance") and fixed is False:
             _check_auto_substeps(scene, v, _LEAD_IN)
         else:
             steps_for(v, scene.dt, _LEAD_IN)
@@ -518,7 +520,7 @@ def _plan(
         "frame_time": frame_time,
         "substeps": substeps,
         "need_velocity": bool(velocities),
-        "lead_in": _check_lead_in(scene, d),
+        "lead_in": _check_lead_in(scene, d, fixed=frame_time is None),
     }
 
 
