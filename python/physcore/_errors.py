@@ -167,8 +167,9 @@ class SimulationDiverged(PhyscoreError, RuntimeError):
     never holds non-finite values. Attributes: ``step`` (the step at which it happened), ``time``
     (s), ``particle`` (index of the first bad particle), ``quantity`` (``"position"`` or
     ``"velocity"``: not finite; ``"cell"``: a grid cell, ``particle`` is its index; ``"error"``:
-    ``"dopri5"`` could not meet its tolerances; ``"speed"``: within one ``advance`` the flow sped up
-    until its step limit fell over a millionfold, ``particle`` the fastest; ``"spin"``: a
+    ``"dopri5"`` could not meet its tolerances; ``"speed"``: within one ``advance``, or since the last
+    step taken, the flow sped up until its step limit fell over a millionfold, ``particle`` the
+    fastest; ``"spin"``: a
     grain's spin, rotation or contact spring (:class:`~physcore.Contacts`) is not finite;
     ``"books"``: a dissipated energy overflowed, ``particle`` the fastest; ``"solver"``: the
     rigid bodies' solver, rapier, failed on their state, which a damaged or crafted scene file

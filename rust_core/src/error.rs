@@ -148,8 +148,8 @@ fn describe(quantity: &Failure, index: usize) -> String {
              step size (its forces are not finite or not smooth there)"
         ),
         Failure::Speed => format!(
-            "the flow ran away: its step limit fell over a millionfold within one advance \
-             (particle {index} is the fastest)"
+            "the flow ran away: its step limit fell over a millionfold within one advance or since \
+             the last step (particle {index} is the fastest)"
         ),
         Failure::Spin => format!("particle {index} has a non-finite spin, rotation or contact spring"),
         Failure::Books => {

@@ -1287,3 +1287,22 @@ def test_a_fluid_whose_mass_disagrees_with_its_density_and_spacing_is_refused_at
     # The API refuses such a mass by name too.
     with pytest.raises(pc.InvalidInputError, match="mass"):
         pc.Fluid(lattice([0.0, 0.0], [0.5, 0.5], 0.05), 0.05, density=1000.0, mass=1e-20)
+
+
+def test_an_advance_that_starts_on_a_runaway_flow_names_the_runaway_not_the_duration():
+    """A flow whose step limit fell a millionfold below its last step before the call (here a
+    particle set to 1e15 m/s after a step) is a runaway, rolled back: the call named
+    `duration` ("would take over 1e12 substeps"), as for a duration too long. A scene not yet
+    stepped keeps that message (no step to compare with)."""
+    s = pc.scenes.dam_break(n=8)
+    s.advance(0.01)
+    v = s.velocities
+    v[0] = [1e15, 0.0]
+    s.velocities = v
+    with pytest.raises(pc.SimulationDiverged, match="the flow ran away") as err:
+        s.advance(0.01)
+    assert err.value.quantity == "speed" and s.step_count == 1
+    fresh = pc.scenes.dam_break(n=8)
+    fresh.velocities = v
+    with pytest.raises(pc.InvalidInputError, match="^duration: .* would take over 1e12 substeps"):
+        fresh.advance(0.01)
