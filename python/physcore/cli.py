@@ -267,6 +267,15 @@ def _registry() -> dict[str, Callable[..., Any]]:
     return dict(scenes.REGISTRY)
 
 
+def _unknown_scene(name: str, registry: dict[str, Any], parser: argparse.ArgumentParser) -> None:
+    """Exits through ``parser.error``: the scene `name` is not registered (with the closest name)."""
+    import difflib
+
+    close = difflib.get_close_matches(name.lower(), list(registry), n=1)
+    hint = f"did you mean {close[0]!r}? " if close else ""
+    parser.error(f"unknown scene {name!r}; {hint}valid scenes: {', '.join(registry)}")
+
+
 def _cmd_scenes(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     registry = _registry()
     width = max((len(n) for n in registry), default=0) + 2
@@ -274,11 +283,7 @@ def _cmd_scenes(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     one = getattr(args, "scene", None)
     if one is not None:
         if one not in registry:
-            import difflib
-
-            close = difflib.get_close_matches(one.lower(), list(registry), n=1)
-            hint = f"did you mean {close[0]!r}? " if close else ""
-            parser.error(f"unknown scene {one!r}; {hint}valid scenes: {', '.join(registry)}")
+            _unknown_scene(one, registry, parser)
         fn = registry[one]
         doc = inspect.getdoc(fn) or ""
         out.write(f"{one}\n\n{doc}\n\n{_defaults_text(fn)}\n\nRender it with: physcore render {one} -o {one}.gif\n")
@@ -451,11 +456,7 @@ def _scene_call(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tu
     registry = _registry()
     name = args.scene
     if name not in registry:
-        import difflib
-
-        close = difflib.get_close_matches(name.lower(), list(registry), n=1)
-        hint = f"did you mean {close[0]!r}? " if close else ""
-        parser.error(f"unknown scene {name!r}; {hint}valid scenes: {', '.join(registry)}")
+        _unknown_scene(name, registry, parser)
     fn = registry[name]
     try:
         kwargs = _scene_kwargs(name, fn, args.param or [])
