@@ -48,7 +48,9 @@ def ripple(
 
 
 # 25 fps: waves move everywhere, so each frame costs its whole picture; 4 s in 100 frames.
-ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "substeps": "auto", "size": (400, 400)}
+# From t = 0.12 s: the first stone (dropped at t = 0) already a ring in the first frame, which
+# feeds and previews show (it was a blank pond).
+ripple.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "lead_in": 0.12, "substeps": "auto", "size": (400, 400)}
 ripple = _stamped(ripple, old_order=('n', 'drops', 'speed', 'damping', 'seed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
