@@ -730,9 +730,9 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             played = f"; a GIF's frame delays are 0.02 to 655.35 s, so it plays at {gif_fps:.4g} fps"
     print(f"  frames:         {frames} at {fps:g} fps ({frames / fps:.2f} s){pixels}{played}")
     print(f"  file size:      {_human_bytes(sum(p.stat().st_size for p in paths))}")
+    lead = float((getattr(scene, "render_defaults", None) or {}).get("lead_in", 0.0) or 0.0)
+    lead_text = f"a lead-in of {lead:.4g} s before the first frame, then " if lead > 0 else ""
     if "frame_time" in settings:
-        lead = float((getattr(scene, "render_defaults", None) or {}).get("lead_in", 0.0) or 0.0)
-        lead_text = f"a lead-in of {lead:.4g} s before the first frame, then " if lead > 0 else ""
         print(
             f"  simulated time: {scene.time - time0:.4g} s ({lead_text}{frames - 1} interval{'s' if frames != 2 else ''} of "
             f"{settings['frame_time']:.4g} s between frames, {_stepper(scene)})"
@@ -744,7 +744,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     else:
         steps = (frames - 1) * settings["steps_per_frame"]
         print(
-            f"  simulated time: {scene.time - time0:.4g} s ({steps} steps of dt = {scene.dt:.4g} s, "
+            f"  simulated time: {scene.time - time0:.4g} s ({lead_text}{steps} steps of dt = {scene.dt:.4g} s, "
             f"{settings['steps_per_frame']} per frame, {_stepper(scene)})"
         )
     stats = getattr(scene, "integrator_stats", None)

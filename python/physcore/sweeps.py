@@ -330,7 +330,9 @@ def _check_client(client: Any) -> Any:
     if isinstance(client, str):
         if client == "local":  # the default, by name
             return None
-        if not re.fullmatch(r"([a-z][a-z0-9+.-]*://)?[^\s/:]+:\d+/?", client):
+        # A scheme's address (tcp://host:port, tls://, ucx://, inproc://..., IPv6 in brackets)
+        # or a bare host:port; anything else is no scheduler's.
+        if not re.fullmatch(r"[a-z][a-z0-9+.-]*://\S+|[^\s/]+:\d+", client):
             raise InvalidInputError(
                 f"client: {client!r} is not a scheduler address (tcp://host:port); None or 'local' for a local "
                 "cluster, 'serial' for this process"
