@@ -146,8 +146,10 @@ _CMAPS = {
                        [251, 126, 33], [208, 47, 5], [122, 4, 3]], dtype=np.float64),
     # "ice": water from deep navy through blue to a light cyan (physcore's own ramp, monotone in
     # lightness), the fluid scenes' speed map. It ended in foam white, which vanished on a white
-    # background: the fastest water, a dam break's spray, was the part not seen.
-    "ice": np.array([[8, 22, 60], [14, 45, 110], [20, 75, 155], [30, 105, 190], [50, 135, 210], [75, 165, 228],
+    # background: the fastest water, a dam break's spray, was the part not seen. It started at
+    # near-black navy (CIELAB L* 8.6), which drew still water as ink; it now starts at L* 21, a
+    # deep sea blue, and rises in even steps of L* (8 to 10) to the same light cyan.
+    "ice": np.array([[18, 48, 108], [22, 66, 138], [26, 86, 166], [34, 108, 194], [50, 135, 210], [75, 165, 228],
                      [105, 192, 240], [140, 214, 247], [175, 232, 252]], dtype=np.float64),
 }
 #: Names of the colour maps ``gif(cmap=...)`` takes for speed and pressure.
