@@ -44,8 +44,9 @@ import zipfile
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
-from itertools import compress, repeat
-from operator import attrgetter, is_
+from functools import partial
+from itertools import chain, compress, repeat
+from operator import attrgetter, eq, is_
 from pathlib import Path
 from typing import Any
 
@@ -80,7 +81,7 @@ _BOOKS_AT_ONCE = 1 << 26
 #: A call's per-member work runs as C-level maps over these (the lock's methods, an attribute's
 #: getter), not as Python loops: the loops took tens of milliseconds a call at 16,384 members,
 #: where an H200 stepped 1,024 worlds 1,000 steps in 3.3 ms (docs/guide/gpu.md).
-_LOCK = type(threading.Lock())
+_LOCK = type(threading.RLock())  # a Session's (see Session.exclusive: its owner check)
 _REFERENCE = attrgetter("reference_energy")
 _LOCK_OF = attrgetter("lock")
 _BUSY = attrgetter("busy")
@@ -100,17 +101,24 @@ def _holding(sessions: Sequence[Session], locks: Sequence[Any]) -> Iterator[None
     :meth:`Session.exclusive <physcore.session.Session.exclusive>` holds one: another thread's
     use of a member meanwhile raises SceneBusyError, not pyo3's bare "Already mutably
     borrowed". SceneBusyError, with nothing held, if one is in use."""
-    got: list[bool] = []
+    me = threading.get_ident()
+    if me in set(map(_BUSY, sessions)):  # a call from inside a call on this thread
+        raise SceneBusyError("a member of this Batch is being stepped by another thread")
+    # Ctrl-C can land after any call returns, in `try` and in `finally` alike: what `finally`
+    # undoes is therefore read from the sessions and locks themselves (this thread's marks, the
+    # locks this thread holds), not from what acquire() returned, in one C-level pass built
+    # here, lazily, so that nothing in `finally` runs before it. (Taking locks and keeping
+    # what acquire() returned left them taken when the interrupt fell in between.)
+    undo = partial(deque, chain(
+        map(setattr, compress(sessions, map(eq, map(_BUSY, sessions), repeat(me))), repeat("busy"), repeat(None)),
+        map(_LOCK.release, compress(locks, map(_LOCK._is_owned, locks)))), 0)
     try:
-        got = list(map(_LOCK.acquire, locks, repeat(False)))
-        if not all(got):
+        if not all(map(_LOCK.acquire, locks, repeat(False))):
             raise SceneBusyError("a member of this Batch is being stepped by another thread")
-        _each(map(setattr, sessions, repeat("busy"), repeat(threading.get_ident())))
+        _each(map(setattr, sessions, repeat("busy"), repeat(me)))
         yield
     finally:
-        if all(got) and len(got) == len(locks):  # they were all this call's: it marked them
-            _each(map(setattr, sessions, repeat("busy"), repeat(None)))
-        _each(map(_LOCK.release, compress(locks, got)))
+        undo()
 
 
 _PENDING = attrgetter("pending")
@@ -144,7 +152,7 @@ class _Resident:
 
     def __init__(self, gpu: Any, members: list[int], sessions: list[Session]) -> None:
         self.gpu = gpu
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()  # for its owner check, as a Session's (see Session.exclusive)
         #: The batch index of each of the core's members, and each member's index by its
         #: session's id. It holds no session: a session pending here holds it, so a batch and
         #: its members dropped together are freed at once, not left to the cycle collector.
@@ -161,9 +169,9 @@ class _Resident:
     def settle(self, sessions: Sequence[Session]) -> None:
         """Writes those of `sessions` that are pending here from the mirror (state, clock,
         books), in one call into the core; they are touched from then on."""
-        if not self.lock.acquire(blocking=False):
-            raise SceneBusyError("the GPU Batch keeping this scene's state is being stepped by another thread")
-        try:
+        try:  # taken inside `try`, released whatever acquire() returned: see Session.exclusive
+            if not self.lock.acquire(blocking=False):
+                raise SceneBusyError("the GPU Batch keeping this scene's state is being stepped by another thread")
             # C-level passes: a Python loop over 16,384 members took milliseconds.
             picked = list(compress(sessions, map(is_, map(_PENDING, sessions), repeat(self))))
             if picked:
@@ -172,7 +180,10 @@ class _Resident:
                 _each(map(setattr, picked, repeat("pending"), repeat(None)))
                 self.touched.update(mine)
         finally:
-            self.lock.release()
+            try:
+                self.lock.release()
+            except RuntimeError:  # not this thread's
+                pass
 
 
 def structure(scene: Scene) -> tuple[Any, ...]:
@@ -500,9 +511,9 @@ class Batch:
                 missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None])
             for s in missing:
                 s.session.take_reference_energy()
-        if not res.lock.acquire(blocking=False):
-            raise SceneBusyError("a member of this Batch is being stepped by another thread")
-        try:
+        try:  # taken inside `try`, released whatever acquire() returned: see Session.exclusive
+            if not res.lock.acquire(blocking=False):
+                raise SceneBusyError("a member of this Batch is being stepped by another thread")
             touched = sorted(res.touched - res.retired)
             held = [sessions[j] for j in touched]
             # One a GPU batch stepped since (another batch of it): its state into its scene.
@@ -521,7 +532,10 @@ class Batch:
                           repeat("pending"), repeat(res)))
                 res.touched = set(gone)
         finally:
-            res.lock.release()
+            try:
+                res.lock.release()
+            except RuntimeError:  # not this thread's
+                pass
         if failed is None:  # a touched member's terms or colliders changed: built again from them
             _settle(sessions)
             self._build([k for k in range(len(self)) if k not in self.diverged])
@@ -553,13 +567,16 @@ class Batch:
         while another thread steps the batch."""
         res = self._res
         assert res is not None
-        if not res.lock.acquire(blocking=False):
-            raise SceneBusyError("a member of this Batch is being stepped by another thread")
-        try:
+        try:  # taken inside `try`, released whatever acquire() returned: see Session.exclusive
+            if not res.lock.acquire(blocking=False):
+                raise SceneBusyError("a member of this Batch is being stepped by another thread")
             rows, t, steps = res.gpu.mirror(velocities)
             read = [res.members[j] for j in sorted(res.touched)]
         finally:
-            res.lock.release()
+            try:
+                res.lock.release()
+            except RuntimeError:  # not this thread's
+                pass
         steps = steps.astype(np.int64)
         m = len(self)
         if len(res.members) != m:  # built again without the members retired before
