@@ -62,7 +62,7 @@ from ._errors import (
     SceneFileError,
     SimulationDiverged,
 )
-from ._scenefile import _open_regular, check_path
+from ._scenefile import _central_directory_size, _open_regular, _show, check_path
 from ._system import quiet_wayland_probe, usable_cpus
 from .contacts import Contacts
 from .scene import Scene, _copies
@@ -742,6 +742,9 @@ class Batch:
             (the message names the member).
         InvalidInputError
             The file's GPU (or ``device``) is not on this machine, naming ``device``.
+        OSError
+            The file cannot be opened (``FileNotFoundError``, ``PermissionError``), as
+            :meth:`Scene.load` raises.
         """
         path = check_path(path)
         where = str(path)
@@ -754,12 +757,33 @@ class Batch:
                 raise SceneFileError(where, name, "compressed (a batch file's members are stored, as save writes them)")
             return z.read(name)
 
+        # A missing or unreadable file raises its OSError (FileNotFoundError, PermissionError),
+        # as Scene.load does; what is read and is not a batch file is a SceneFileError.
+        try:  # a FIFO would block the read forever, a device could be endless
+            fh, size = _open_regular(path, where)
+        except SceneFileError:
+            raise SceneFileError(where, "", "not a regular file (a directory, pipe or device); give a file written by Batch.save") from None
         try:
-            try:  # a FIFO would block the read forever, a device could be endless
-                fh, _ = _open_regular(path, where)
-            except SceneFileError:
-                raise SceneFileError(where, "", "not a regular file (a directory, pipe or device); give a file written by Batch.save") from None
-            with fh, zipfile.ZipFile(fh) as z:
+            cd = _central_directory_size(fh, size)
+            if cd is not None and cd > size:
+                raise SceneFileError(where, "", f"zip central directory of {cd} bytes is larger than the file ({size} bytes)")
+            fh.seek(0)
+            z = zipfile.ZipFile(fh)
+        except BaseException as e:
+            fh.close()
+            if isinstance(e, (OSError, zipfile.BadZipFile)):
+                raise SceneFileError(where, "", f"not a batch file ({type(e).__name__}: {_show(str(e))})") from None
+            raise
+        try:
+            with fh, z:
+                # Members that claim more than the file holds overlap (a 1.5 MB file of nested
+                # members claimed 5 GB, every byte read before any was checked): refused before
+                # any is read, as Scene.load refuses them.
+                infos = z.infolist()
+                if sum(i.compress_size for i in infos) > size:
+                    raise SceneFileError(where, "", f"members claim {sum(i.compress_size for i in infos)} bytes, more than the file's {size}")
+                if len({i.filename for i in infos}) != len(infos):
+                    raise SceneFileError(where, "", "a member appears twice in the archive")
                 try:
                     raw = stored(z, "batch.json")
                 except KeyError:
@@ -768,12 +792,15 @@ class Batch:
                     meta = json.loads(raw)
                 except (ValueError, RecursionError) as e:  # RecursionError: nesting too deep
                     raise SceneFileError(where, "batch.json", f"not JSON ({type(e).__name__})") from None
-                if not isinstance(meta, dict) or meta.get("format") != FORMAT_VERSION:
-                    fmt = meta.get("format") if isinstance(meta, dict) else meta
+                fmt = meta.get("format") if isinstance(meta, dict) else meta
+                if type(fmt) is not int or fmt != FORMAT_VERSION:  # not true, not 1.0: save writes 1
                     raise SceneFileError(where, "batch.json.format", f"unsupported batch format {fmt!r} (this physcore reads {FORMAT_VERSION})")
                 count = meta.get("members")
                 if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= 1 << 24:
                     raise SceneFileError(where, "batch.json.members", f"must be a count >= 1, got {count!r}")
+                if len(infos) > count + 1:
+                    extra = sorted({i.filename for i in infos} - {"batch.json", *(f"member{k}.npz" for k in range(count))})
+                    raise SceneFileError(where, _show(extra[0]) if extra else "", "unexpected member (not written by Batch.save)")
                 blobs = []
                 for k in range(count):
                     try:
@@ -781,7 +808,7 @@ class Batch:
                     except KeyError:
                         raise SceneFileError(where, f"member{k}.npz", "missing") from None
         except (OSError, zipfile.BadZipFile) as e:
-            raise SceneFileError(where, "", f"not a batch file ({type(e).__name__}: {e})") from None
+            raise SceneFileError(where, "", f"not a batch file ({type(e).__name__}: {_show(str(e))})") from None
         members = []
         for k, b in enumerate(blobs):
             try:
@@ -796,10 +823,12 @@ class Batch:
         diverged = meta.get("diverged") or {}
         if not isinstance(diverged, dict):
             raise SceneFileError(where, "batch.json.diverged", "must be an object")
-        for k in diverged:
+        for k, msg in diverged.items():
             # ASCII digits only, at most 8 (count <= 2**24): int() refuses "²" and over 4300 digits.
             if not (k.isascii() and k.isdigit() and len(k) <= 8 and int(k) < count):
-                raise SceneFileError(where, "batch.json.diverged", f"names no member ({k!r})")
+                raise SceneFileError(where, "batch.json.diverged", f"names no member ({_show(k)})")
+            if not isinstance(msg, str):  # save writes the exception's message
+                raise SceneFileError(where, f"batch.json.diverged.{k}", f"must be a message (a string), got {type(msg).__name__}")
         saved_device, precision = meta.get("device", "cpu"), meta.get("precision")
         try:
             saved_device, precision = _check_device(saved_device, precision)

@@ -223,6 +223,58 @@ def test_hostile_batch_files_raise_scene_file_error(tmp_path):
         pc.Batch.load(write("mixed.batch", {**parts, "member1.npz": other}))
 
 
+def test_overlapping_extra_and_loosely_typed_batch_members_are_refused_before_any_is_read(tmp_path):
+    """A fault audit: members whose data overlap (each begins with the next's header) let a
+    1.5 MB file claim 5 GB, all read before any was checked (a bare MemoryError under a 3 GB
+    cap); a member save never writes, a format of ``true`` and a retired member's message that
+    is not a string were accepted; a missing file was a SceneFileError where Scene.load raises
+    FileNotFoundError."""
+    import struct
+    import zipfile
+    import zlib
+
+    path = pc.Batch(_fan(2)).save(tmp_path / "ok.batch")
+    with zipfile.ZipFile(path) as z:
+        parts = {n: z.read(n) for n in z.namelist()}
+
+    def write(name, entries):
+        with zipfile.ZipFile(tmp_path / name, "w") as out:
+            for n, b in entries.items():
+                out.writestr(n, b, zipfile.ZIP_STORED)
+        return tmp_path / name
+
+    def header(name, data):
+        n = name.encode()
+        return struct.pack("<4sHHHHHIIIHH", b"PK\x03\x04", 20, 0, 0, 0, 0x21, zlib.crc32(data), len(data), len(data), len(n), 0) + n
+
+    # member0's data is member1's header and data: 2 members in the bytes of one.
+    meta = json.dumps({**json.loads(parts["batch.json"]), "members": 2}).encode()
+    inner = header("member1.npz", parts["member1.npz"]) + parts["member1.npz"]
+    out = bytearray(header("batch.json", meta) + meta)
+    entries = [("batch.json", meta, 0), ("member0.npz", inner, len(out))]
+    out += header("member0.npz", inner) + inner
+    entries.append(("member1.npz", parts["member1.npz"], entries[1][2] + len(header("member0.npz", inner))))
+    cd = b"".join(struct.pack("<4sHHHHHHIIIHHHHHII", b"PK\x01\x02", 20, 20, 0, 0, 0, 0x21, zlib.crc32(d), len(d), len(d),
+                              len(n.encode()), 0, 0, 0, 0, 0, at) + n.encode() for n, d, at in entries)
+    start = len(out)
+    out += cd + struct.pack("<4sHHHHIIH", b"PK\x05\x06", 0, 0, 3, 3, len(cd), start, 0)
+    (tmp_path / "overlap.batch").write_bytes(bytes(out))
+    with pytest.raises(pc.SceneFileError, match="members claim .* more than the file's"):
+        pc.Batch.load(tmp_path / "overlap.batch")
+    with pytest.raises(pc.SceneFileError, match="unexpected member"):
+        pc.Batch.load(write("extra.batch", {**parts, "evil.py": b"print('hi')"}))
+    for fmt in (True, 1.0, "1"):
+        bad = json.dumps({**json.loads(parts["batch.json"]), "format": fmt}).encode()
+        with pytest.raises(pc.SceneFileError, match="batch.json.format"):
+            pc.Batch.load(write("fmt.batch", {**parts, "batch.json": bad}))
+    bad = json.dumps({**json.loads(parts["batch.json"]), "diverged": {"1": {"x": 1}}}).encode()
+    with pytest.raises(pc.SceneFileError, match=r"batch.json.diverged.1: must be a message"):
+        pc.Batch.load(write("msg.batch", {**parts, "batch.json": bad}))
+    with pytest.raises(FileNotFoundError):
+        pc.Batch.load(tmp_path / "missing.batch")
+    assert len(pc.Batch.load(path)) == 2
+
+
 def test_bad_input_is_refused_by_name_before_anything_steps():
     a, b = _fan(2)
     with pytest.raises(pc.InvalidInputError, match="at least one"):
