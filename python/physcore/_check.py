@@ -149,19 +149,28 @@ def mass(name: str, value: Any) -> float:
     return m
 
 
-def array(name: str, value: Any) -> np.ndarray:
+def array(name: str, value: Any, *, sized: bool = True) -> np.ndarray:
     """``np.asarray(value)``, with a ragged nested sequence refused by name (InvalidInputError)
-    instead of numpy's unnamed ValueError."""
+    instead of numpy's unnamed ValueError, and (``sized``) one of more values than memory could
+    copy as float64 refused by name (OutOfMemoryError) before any copy. ``sized=False`` where
+    the caller checks the shape, or its own need, before it copies."""
     try:
-        return np.asarray(value)
+        a = np.asarray(value)
     except (ValueError, TypeError) as e:
         raise InvalidInputError(f"{name}: not a rectangular array of numbers ({' '.join(str(e).split())[:80]})") from None
+    # A zero-stride (broadcast) array can stand for more values than memory holds, and every
+    # part copies what it is given (as float64 or int64, 8 bytes a value): refused before any
+    # copy, which would raise a bare MemoryError or let the OOM killer end the process (a
+    # fault audit: Bodies of 10**9 broadcast rows took 24 GB and were killed).
+    if sized:
+        room(name, a.size * max(8, a.itemsize), f"{a.size:,} values")
+    return a
 
 
-def real_array(name: str, value: Any) -> np.ndarray:
+def real_array(name: str, value: Any, *, sized: bool = True) -> np.ndarray:
     """:func:`array` of real numbers: InvalidTypeError naming ``name`` for any other dtype
     (bools, strings, objects, complex)."""
-    a = array(name, value)
+    a = array(name, value, sized=sized)
     if a.dtype.kind not in "iuf" or a.dtype == bool:
         raise InvalidTypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
     return a

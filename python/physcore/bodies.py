@@ -69,7 +69,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from . import _check
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, allocating
 from ._parts import AttachContext, Host, LoadContext, Part
 
 __all__ = ["Bodies", "Joints", "Pins", "BodyRef", "SHAPES", "JOINTS"]
@@ -416,6 +416,7 @@ class Bodies(_BodiesPart):
         return cls("box", size=size, positions=positions, friction=shape.friction, restitution=shape.restitution,
                    **turn, **common)
 
+    @allocating("Bodies", "its arrays")
     def __init__(
         self,
         shape: str = "box",
@@ -456,6 +457,7 @@ class Bodies(_BodiesPart):
         self.first: int | None = None
         self._host: Host | None = None
 
+    @allocating("Bodies", "its arrays")
     def _resolve(self, dim: int) -> None:
         """Checks the arguments as a `dim`-D group and sets the starting state from them."""
         a = self._args
@@ -893,6 +895,7 @@ class Joints(_BodiesPart):
 
     part_kind: ClassVar[str] = "joints"
 
+    @allocating("Joints", "its arrays")
     def __init__(self, kind: str, a: BodyRef | Bodies | None, b: BodyRef | Bodies | None, anchors: Any, *,
                  anchors_b: Any = None, axis: Any = None, limits: Any = None, length: Any = None) -> None:
         self.kind = _check.choice("kind", kind, JOINTS)
@@ -1028,6 +1031,7 @@ class Pins(_BodiesPart):
 
     part_kind: ClassVar[str] = "pins"
 
+    @allocating("Pins", "its arrays")
     def __init__(self, particles: Any, body: BodyRef | Bodies) -> None:
         self.particles = _indices(particles)
         if np.unique(self.particles).size != self.particles.size:

@@ -50,7 +50,7 @@ import numpy as np
 
 from . import _check, _core, _deprecate
 from ._check import finite_float as _finite_float
-from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning
+from ._errors import InvalidInputError, InvalidTypeError, SeparateFluidsWarning, allocating
 from ._parts import AttachContext, LoadContext
 from .shapes import lattice, tank_walls  # the lattice and tank builders, still importable from here
 from .shapes import lattice_counts as lattice_counts
@@ -495,6 +495,7 @@ class Fluid(Term, kind="fluid"):
     #: keeps as fields; ``dataclasses.replace`` leaves them as they are).
     solver: InitVar[SPHSolver | None] = None
 
+    @allocating("Fluid", "its arrays")
     def __post_init__(self, solver: SPHSolver | None = None) -> None:
         x = _array2(self.positions, "positions")
         dim = x.shape[1]

@@ -36,7 +36,7 @@ import numpy as np
 
 from . import _check, _deprecate
 from ._check import finite_float as _finite_float
-from ._errors import InvalidInputError, InvalidTypeError
+from ._errors import InvalidInputError, InvalidTypeError, allocating
 from ._parts import AttachContext, LoadContext
 from .terms import Term
 
@@ -177,6 +177,7 @@ class PointMasses(Term, kind="point_masses"):
         "masses": ("f8", ("S",)),
     }
 
+    @allocating("PointMasses", "its arrays")
     def __post_init__(self) -> None:
         x, m = _sources(self.positions, self.masses, "positions", "masses", nonnegative=True)
         object.__setattr__(self, "positions", x)
@@ -249,6 +250,7 @@ class PointCharges(Term, kind="point_charges"):
         "charges": ("f8", ("S",)),
     }
 
+    @allocating("PointCharges", "its arrays")
     def __post_init__(self) -> None:
         x, q = _sources(self.positions, self.charges, "positions", "charges", nonnegative=False)
         object.__setattr__(self, "positions", x)
@@ -300,6 +302,7 @@ class HarmonicTrap(Term, kind="harmonic_trap"):
 
     record_fields: ClassVar[dict[str, str]] = {"k": "vector", "center": "vector"}
 
+    @allocating("HarmonicTrap", "its arrays")
     def __post_init__(self) -> None:
         k = _scalar_or_axes(self.k, "k", nonnegative=True)
         c = _scalar_or_axes(self.center, "center")
@@ -390,6 +393,7 @@ class PotentialGrid(Term, kind="potential_grid"):
     record_fields: ClassVar[dict[str, str]] = {"shape": "vector", "spacing": "vector", "origin": "vector", "coupling": "str"}
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {"phi": ("f8", ("P",))}
 
+    @allocating("PotentialGrid", "its arrays")
     def __post_init__(self) -> None:
         a = _check.real_array("phi", self.phi)
         if a.ndim not in (2, 3):

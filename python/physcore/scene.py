@@ -329,7 +329,7 @@ def _points(value: object, arg: str, dim: int, n: int | None = None, *, precisio
     OutOfMemoryError, naming ``call`` (default ``arg``: a refused allocation names the call),
     where the call's need (``row_bytes`` a row, default the copy's) is beyond memory or the copy
     cannot be had; rows refused that ``precision`` cannot hold."""
-    a = _check.real_array(arg, value)
+    a = _check.real_array(arg, value, sized=False)  # its own need is asked for below, by particles
     if a.ndim == 1 and a.shape[0] == dim and n in (None, 1):
         a = a[None, :]
     if a.ndim != 2 or a.shape[1] != dim:
@@ -681,7 +681,7 @@ class Scene:
         with allocating("add_particles", "zero velocities"):
             v = np.zeros_like(x) if velocities is None else _points(velocities, "velocities", dim, n, precision=precision,
                                                                      call="add_particles")
-        m = _check.real_array("masses", masses)
+        m = _check.real_array("masses", masses, sized=False)
         if m.ndim != 0 and m.shape != (n,):  # before copying: a broadcast array can be huge
             raise InvalidInputError(f"masses: expected a scalar or shape ({n},), got {m.shape}")
         with allocating("add_particles", "a float64 copy of masses"):
@@ -1304,10 +1304,14 @@ class Scene:
         """
         if not isinstance(name, str):
             raise InvalidTypeError(f"name: expected a str, got {type(name).__name__}")
-        a = _check.real_array(name, values)
+        a = _check.real_array(name, values, sized=False)  # its length is checked before the copy
         if a.ndim != 1:
             raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")
-        self._exclusive(lambda sim: sim.set_attribute(name, np.ascontiguousarray(a, dtype=np.float64)))
+        if a.shape[0] != self.n_particles:  # before the copy: it may not fit in memory
+            raise InvalidInputError(f"{name}: has {a.shape[0]} entries, the scene has {self.n_particles} particles")
+        with allocating("set_attribute", f"a copy of {name}"):
+            a = np.ascontiguousarray(a, dtype=np.float64)
+        self._exclusive(lambda sim: sim.set_attribute(name, a))
         self._e0 = None  # the potential of charge-dependent terms changed
 
     def _section(self, section: str) -> list[Any]:

@@ -84,6 +84,33 @@ def test_broadcast_spring_arrays_beyond_memory_are_refused_by_name():
         pc.Springs([0], [1], stiffness=np.broadcast_to(1.0, (HUGE,)))
 
 
+@pytest.mark.parametrize("arg, make", [
+    ("size", lambda big: pc.Bodies("ball", big(0))),
+    ("positions", lambda big: pc.Bodies("ball", 1.0, big(2))),
+    ("distance", lambda big: pc.XpbdConstraints(distance=big(2, np.int64))),
+    ("positions", lambda big: pc.PointMasses(big(2), 1.0)),
+    ("anchors", lambda big: pc.Joints("revolute", pc.Bodies("ball", 1.0, np.zeros((1, 2))), None, big(2))),
+    ("phi", lambda big: pc.PotentialGrid(np.broadcast_to(0.0, (10**6, 10**6)), 1.0)),
+    ("mask", lambda big: pc.Wave((8, 8), mask=np.broadcast_to(False, (10**6, 10**6)))),
+    ("positions", lambda big: pc.render.render_frame(big(2))),
+], ids=["Bodies size", "Bodies positions", "XpbdConstraints", "PointMasses", "Joints", "PotentialGrid", "Wave", "render_frame"])
+def test_broadcast_arrays_beyond_memory_are_refused_by_name_by_every_constructor(arg, make):
+    # A fault audit: these copied first (Bodies of 10**9 broadcast rows took 24 GB and the OOM
+    # killer ended the process); every array a part takes is now measured before any copy.
+    def big(width, dtype=float):
+        return np.broadcast_to(np.zeros(width, dtype), (HUGE, width)) if width else np.broadcast_to(np.zeros((), dtype), (HUGE,))
+
+    with pytest.raises(pc.OutOfMemoryError, match=f"^{arg}: needs about "):
+        make(big)
+
+
+def test_an_attribute_of_the_wrong_length_is_refused_before_it_is_copied():
+    s = pc.Scene(2)
+    s.add_particles(np.zeros((3, 2)))
+    with pytest.raises(pc.InvalidInputError, match=f"^charge: has {HUGE} entries, the scene has 3 particles"):
+        s.set_attribute("charge", np.broadcast_to(1.0, (HUGE,)))
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS as Linux enforces it, /proc for the baseline")
 def test_broadcast_copies_that_fail_under_a_memory_cap_raise_physcores_error():
     # Sizes below physcore's limit whose copies (800 MB, 400 MB) a cap of 200 MB above what
@@ -101,6 +128,15 @@ def test_broadcast_copies_that_fail_under_a_memory_cap_raise_physcores_error():
         for name, call in (
             ("add_particles", lambda: s.add_particles(np.broadcast_to(np.zeros(2), (n, 2)))),
             ("i", lambda: pc.Springs(np.broadcast_to(np.int64(0), (n,)), np.broadcast_to(np.int64(1), (n,)))),
+            # A fault audit found these raising numpy's bare MemoryError (and Bodies of 10**9
+            # rows, uncapped, taking 24 GB until the OOM killer ended the process).
+            ("Bodies", lambda: pc.Bodies("ball", np.broadcast_to(1.0, (n,)))),
+            ("Fluid", lambda: pc.Fluid(np.broadcast_to(np.zeros(2), (n, 2)), 0.01)),
+            ("XpbdConstraints", lambda: pc.XpbdConstraints(distance=np.broadcast_to(np.zeros(2, np.int64), (n, 2)))),
+            ("PointMasses", lambda: pc.PointMasses(np.broadcast_to(np.zeros(2), (n, 2)), 1.0)),
+            ("Joints", lambda: pc.Joints("revolute", pc.Bodies("ball", 1.0, np.zeros((1, 2))), None,
+                                         np.broadcast_to(np.zeros(2), (n, 2)))),
+            ("render_frame", lambda: pc.render.render_frame(np.broadcast_to(np.zeros(2), (n, 2)))),
         ):
             try:
                 call()

@@ -111,8 +111,12 @@ def test_batch_load_refuses_a_fifo_without_blocking(tmp_path):
 def test_batch_load_refuses_a_directory_and_names_a_missing_file(tmp_path):
     with pytest.raises(pc.SceneFileError, match="not a regular file"):
         pc.Batch.load(tmp_path)
-    with pytest.raises(pc.SceneFileError, match=r"nope\.batch: not a batch file \(FileNotFoundError"):
+    # A missing file raises FileNotFoundError naming it, as Scene.load does (it was a
+    # SceneFileError wrapping one: a caller had to catch two kinds for one mistake).
+    with pytest.raises(FileNotFoundError, match=r"nope\.batch"):
         pc.Batch.load(tmp_path / "nope.batch")
+    with pytest.raises(FileNotFoundError, match=r"nope\.npz"):
+        pc.Scene.load(tmp_path / "nope.npz")
 
 
 # ------------------------------------------------------------------------------ atomic writes

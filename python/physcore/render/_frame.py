@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 
 from .. import _check
-from .._errors import InvalidInputError, InvalidTypeError
+from .._errors import InvalidInputError, InvalidTypeError, allocating
 from ._checks import _check_color_by, _check_radius, _check_size, _check_view, _extent_box
 from ._palette import _PALETTE
 from ._raster import _Rasteriser
@@ -16,6 +16,7 @@ from ._rows import _finite_mean, _row_norms
 from ._scene_state import _boundary_array, _planes, _scene_boundary, _scene_pressure, _scene_springs, _spheres, _strain
 
 
+@allocating("render_frame", "its arrays")
 def render_frame(
     positions: Any,
     *,

@@ -56,7 +56,7 @@ class Springs(Term, kind="springs"):
     def __post_init__(self) -> None:
         views = []
         for arg, val in (("i", self.i), ("j", self.j)):
-            a = _check.array(arg, val)
+            a = _check.array(arg, val, sized=False)  # the springs' need is asked for below
             if a.dtype.kind not in "iu" and not (a.size == 0 and a.dtype.kind == "f"):
                 raise InvalidTypeError(f"{arg}: expected integer particle indices, got dtype {a.dtype}")
             if a.ndim != 1:

@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .. import _check, _deprecate
-from .._errors import InvalidInputError, InvalidTypeError
+from .._errors import InvalidInputError, InvalidTypeError, allocating
 from .._parts import AttachContext, LoadContext
 from ._base import ArrayLike, Term, _int_array, _per_spring
 
@@ -197,6 +197,7 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         ("volume", "volume_compliance", "rest_volume", (4,)),
     )
 
+    @allocating("XpbdConstraints", "its arrays")
     def __post_init__(self) -> None:
         put = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 - frozen dataclass
         for idx, comp, rest, widths in self._KINDS:
