@@ -574,6 +574,12 @@ class Bodies(_BodiesPart):
         self.color = _color(self._color_arg, shape)
         if self.color.ndim == 2 and self.color.shape[0] != n:
             raise InvalidInputError(f"color: {self.color.shape[0]} colours for {n} bodies")
+        # The records are copies of the arguments, read-only: a write into `size` went into what
+        # save writes (a negative size: a file that failed to load), not into the core's bodies.
+        for rec in (self.start, self.size, self.vertices, self.triangles, self.start_turns, self.start_velocities,
+                    self.start_angular, self.color):
+            if rec is not None:
+                rec.setflags(write=False)
 
     # -- referring to bodies
     def __len__(self) -> int:
@@ -931,6 +937,9 @@ class Joints(_BodiesPart):
         self.length = None if length is None else _rows("length", length, m, 1)
         if self.length is not None and (self.length < 0).any():
             raise InvalidInputError("length: must be >= 0 (m)")
+        for rec in (self.anchors, self.anchors_b, self.axis, self.limits, self.length):  # copies: read-only (see Bodies)
+            if rec is not None:
+                rec.setflags(write=False)
         self._host: Host | None = None
         self._loaded: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -1034,6 +1043,7 @@ class Pins(_BodiesPart):
     @allocating("Pins", "its arrays")
     def __init__(self, particles: Any, body: BodyRef | Bodies) -> None:
         self.particles = _indices(particles)
+        self.particles.setflags(write=False)  # a copy: read-only (see Bodies)
         if np.unique(self.particles).size != self.particles.size:
             raise InvalidInputError("particles: each particle can be pinned once")
         ref = _ref("body", body)
@@ -1064,7 +1074,9 @@ class Pins(_BodiesPart):
             points = np.asarray(ctx.read_positions(), np.float64)[self.particles]
         ctx.sim.add_pins({"m": m, "particles": self.particles.astype(np.float64), "body": np.ascontiguousarray(numbers),
                           "points": np.ascontiguousarray(points).reshape(-1)})
-        self._numbers, self._points = np.asarray(numbers), np.asarray(points)
+        self._numbers, self._points = np.array(numbers), np.array(points)
+        self._numbers.setflags(write=False)
+        self._points.setflags(write=False)
         self._host = ctx.host
         return self
 

@@ -144,6 +144,7 @@ class Flow(Part):
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
         self.name = name
         self.start = self._points(points, spread, seed)
+        self.start.setflags(write=False)  # the record save writes: read-only (see Bodies)
         self._host: Host | None = None
 
     def _points(self, points: Any, spread: float, seed: int | None) -> np.ndarray:

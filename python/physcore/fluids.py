@@ -79,10 +79,13 @@ def _array2(value: object, arg: str, dims: tuple[int, ...] = (2, 3)) -> np.ndarr
     if a.ndim != 2 or a.shape[1] not in dims:
         want = " or ".join(f"(N, {d})" for d in dims)
         raise InvalidInputError(f"{arg}: expected shape {want}, got {a.shape}")
-    a = np.ascontiguousarray(a, dtype=np.float64)
+    # A copy of its own, read-only: the record was the caller's array (a later write to it, or
+    # to `fluid.positions`, went into what save writes, not into the particles the core holds).
+    a = np.array(a, dtype=np.float64, order="C")
     bad = ~np.isfinite(a).all(axis=1)
     if bad.any():
         raise InvalidInputError(f"{arg}: row {int(np.flatnonzero(bad)[0])} is not finite")
+    a.setflags(write=False)
     return a
 
 
@@ -543,6 +546,7 @@ class Fluid(Term, kind="fluid"):
                 psi = a * self.density
             if not np.all(np.isfinite(psi) & (psi > 0)):
                 raise InvalidInputError("boundary_volume: the boundary masses density·boundary_volume are outside float64 range")
+            a.setflags(write=False)
             object.__setattr__(self, "boundary_volume", a)
         if self.sound_speed is not None and not math.isfinite(self.density * self.sound_speed * self.sound_speed):
             raise InvalidInputError("sound_speed: the Tait stiffness density·sound_speed² overflows float64")

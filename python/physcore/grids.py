@@ -391,6 +391,8 @@ class Wave(Grid):
         self.layer = _check.int_in_range("layer", layer, 1, 1 << 20)
         self.layer_strength = _positive("layer_strength", layer_strength, "c/dx")
         self.mask = None if mask is None else _cells_mask("mask", mask, self.shape).copy()
+        if self.mask is not None:  # the record save writes (the core holds its own): read-only
+            self.mask.setflags(write=False)
         self.cfl = _positive("cfl", cfl, "fraction of the CFL limit")
         if self.cfl > 1:
             raise InvalidInputError(f"cfl: must be in (0, 1], got {self.cfl}")
@@ -759,6 +761,8 @@ class StableFluid(Grid):
             raise InvalidInputError("lid: a moving lid needs walls='no_slip' (free-slip walls do not feel it)")
         self.inflow = None if inflow is None else _positive("inflow", inflow, "m/s, +x")
         self.mask = None if obstacles is None else _cells_mask("obstacles", obstacles, self.shape).copy()
+        if self.mask is not None:  # the record save writes (the core holds its own): read-only
+            self.mask.setflags(write=False)
         self.sources = _records("sources", sources, Source)
         self.n_tracers = _check.int_in_range("tracers", tracers, 0, 1 << 24)
         self.cfl = _positive("cfl", cfl, "advection CFL number")

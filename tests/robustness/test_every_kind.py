@@ -16,6 +16,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -202,3 +203,40 @@ def test_a_damaged_scene_file_is_refused_by_name_or_loads_a_scene_that_works(nam
             pytest.fail(f"{name}, {what}: loaded, then step raised {type(e).__name__}: {e}")
         finally:
             watchdog.cancel()
+
+
+@pytest.mark.parametrize("name", ["dominoes", "tablecloth", "lorenz", "crown", "smoke", "double_slit", "pyramid"])
+def test_no_part_hands_out_a_writable_record(name, tmp_path):
+    # A fault audit: `scene.bodies[0].size[...] = -1` (or NaN into a fluid's positions, or a
+    # smoke's mask flipped) went into the record save writes, not into what the core holds:
+    # the save replaced a good file with one that failed to load, or that loaded as another
+    # simulation. Every array a part keeps is now read-only (a getter that computes an array
+    # from the core hands out a fresh copy, which may be written).
+    s = getattr(pc.scenes, name)()
+    kept = 0
+    for part in s._parts:
+        for attr in dir(part):
+            if attr.startswith("__"):
+                continue
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", DeprecationWarning)
+                try:
+                    a, b = getattr(part, attr), getattr(part, attr)
+                except Exception:  # noqa: BLE001 - a property that needs a scene state
+                    continue
+            if isinstance(a, np.ndarray) and a.size and np.shares_memory(a, b) and attr != "_color_arg":
+                kept += 1
+                assert not a.flags.writeable, f"{type(part).__name__}.{attr}"
+                with pytest.raises(ValueError, match="read-only"):
+                    a.flat[0] = a.flat[0]
+    assert kept
+    s.save(tmp_path / "a.npz")
+    pc.Scene.load(tmp_path / "a.npz").step(1)
+
+
+def test_a_fluid_keeps_a_copy_of_its_positions_and_leaves_the_callers_writable():
+    x = pc.fluids.lattice([0.0, 0.0], [0.1, 0.1], 0.01)
+    f = pc.Fluid(x, 0.01, sound_speed=10.0)
+    assert x.flags.writeable and not f.positions.flags.writeable and not np.shares_memory(x, f.positions)
+    x[0] = 99.0  # the caller's array is theirs
+    assert f.positions[0, 0] != 99.0
