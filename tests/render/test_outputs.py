@@ -88,6 +88,36 @@ def test_png_sequence_on_a_full_disk_leaves_the_old_sequence_whole(rec, tmp_path
     assert all((tmp_path / name).read_bytes() == data for name, data in old.items())
 
 
+def test_a_png_sequence_over_a_directory_is_refused_before_anything_is_simulated(tmp_path):
+    # A fault audit: frame 1's name was a directory; found only as the frames were put in
+    # place, after the simulation, it left frame 0 new and frames 2-3 old (a bare
+    # IsADirectoryError). Now refused by name before the scene steps, every old frame kept.
+    for k in (0, 2, 3):
+        Image.fromarray(np.full((8, 8, 3), k, dtype=np.uint8)).save(tmp_path / f"seq_{k:04d}.png")
+    (tmp_path / "seq_0001.png").mkdir()
+    old = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    s = pc.scenes.projectile()
+    with pytest.raises(pc.InvalidInputError, match=r"^path: frame file .*seq_0001\.png' is a directory"):
+        pc.render.save(s, tmp_path / "seq.png", frames=4, size=(32, 24))
+    assert s.step_count == 0
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == old
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="named pipes")
+@pytest.mark.parametrize("ext", ["gif", "mp4", "png"])
+def test_a_pipe_as_the_target_is_refused_before_anything_is_simulated(tmp_path, ext):
+    # The same audit: a FIFO target was refused only by the final write, after the whole
+    # simulation (the CLI simulated 120 frames first).
+    import os
+
+    name = "f_0000.png" if ext == "png" else f"f.{ext}"
+    os.mkfifo(tmp_path / name)
+    s = pc.scenes.projectile()
+    with pytest.raises(pc.InvalidInputError, match="not a regular file"):
+        pc.render.save(s, tmp_path / f"f.{ext}", frames=3, size=(32, 24))
+    assert s.step_count == 0
+
+
 @pytest.mark.parametrize(("ext", "codec"), [("mp4", "h264"), ("webm", "vp9")])
 def test_video_has_the_frames_size_and_duration(rec, tmp_path, ext, codec):
     out = pc.render.save(rec, tmp_path / f"orbit.{ext}", size=(97, 71), fps=24)  # odd: padded to even

@@ -246,7 +246,20 @@ def _check_path(path: Any, fmt: str = "gif") -> Path:
         raise InvalidInputError(f"path: directory {str(p.parent)!r} does not exist")
     if p.is_dir():
         raise InvalidInputError(f"path {str(p)!r} is a directory")
+    if p.exists() and not p.is_file():  # a FIFO, socket or device: refused before the simulation, not after
+        raise InvalidInputError(f"path {str(p)!r} is not a regular file (a pipe, socket or device)")
     return p
+
+
+def _check_png_targets(path: Path, count: int) -> None:
+    """Refuse, before anything is simulated, a PNG sequence (``stem_0000.png``, …) whose
+    frame files include one that is not a regular file: found only while the frames were put
+    in place, it left an older sequence of the same name half replaced."""
+    digits = max(4, len(str(count - 1)))
+    for k in range(count):
+        target = path.with_name(f"{path.stem}_{k:0{digits}d}.png")
+        if target.exists() and not target.is_file():
+            raise InvalidInputError(f"path: frame file {str(target)!r} is a directory or not a regular file")
 
 
 def _check_writable(path: Path) -> None:

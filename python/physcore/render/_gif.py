@@ -2,8 +2,12 @@
 frame with the one fixed palette, atomically."""
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import tempfile
+import threading
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -24,6 +28,7 @@ from ._checks import (
     _check_int,
     _check_memory,
     _check_path,
+    _check_png_targets,
     _check_radius,
     _check_size,
     _check_view,
@@ -449,6 +454,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         _check.memory("frames, size", rec.frames * 2 * size[0] * size[1], f"{rec.frames} frames of {size[0]}x{size[1]} pixels")
         if path is not None:
             _check_writable(path)
+            if fmt == "png":
+                _check_png_targets(path, rec.frames)
     else:
         scene = _recording.points_view(scene)
         camera = _check_camera(camera, int(getattr(scene, "dim", 0)), int(getattr(scene, "n_particles", 0)))
@@ -458,6 +465,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         _check_memory(scene, plan["frames"], size, springs, velocities)
         if path is not None:
             _check_writable(path)
+            if fmt == "png":
+                _check_png_targets(path, plan["frames"])
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
     if rec.fields is not None and rec.positions.shape[1] == 0:
@@ -544,6 +553,27 @@ def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | 
     return path
 
 
+@contextlib.contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """Holds back SIGINT (Ctrl-C) for the block, then hands one that came to the handler it
+    held back (Python's raises KeyboardInterrupt); in the main thread, where Python handles
+    signals (elsewhere it does nothing)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, _frame: came.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if came:
+        if callable(old):
+            old(signal.SIGINT, None)
+        elif old == signal.SIG_DFL:
+            raise KeyboardInterrupt
+
+
 def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
     """One PNG per frame beside `path`: ``stem_0000.png``, ``stem_0001.png``, … (as many digits as
     the count needs, at least 4), written as a whole: every frame goes to a temporary file in the
@@ -568,10 +598,13 @@ def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
         os.umask(umask)
         for tmp, _ in done:
             os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an ordinary new file's mode
-        while done:
-            tmp, target = done[0]
-            os.replace(tmp, target)
-            done.pop(0)
+        # The renames take milliseconds; a Ctrl-C among them would leave new frames beside old
+        # ones, so it is held until they are all in place (and raised then).
+        with _ctrl_c_held():
+            while done:
+                tmp, target = done[0]
+                os.replace(tmp, target)
+                done.pop(0)
     except BaseException:
         for tmp, _ in done:
             Path(tmp).unlink(missing_ok=True)
