@@ -1,16 +1,19 @@
 """One atomic file writer for every output physcore makes (scenes, GIFs, plots, tables)."""
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import stat
 import tempfile
-from collections.abc import Callable
+import threading
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import IO, Any
 
 from ._errors import InvalidInputError
 
-__all__ = ["atomic_write", "TEMP_PREFIX", "TEMP_SUFFIX"]
+__all__ = ["atomic_write", "ctrl_c_held", "TEMP_PREFIX", "TEMP_SUFFIX"]
 
 #: The temporary file is ``.physcore-XXXXXXXX.tmp`` (22 bytes) in the target's directory: short
 #: whatever the target's name, so any name the file system allows (up to NAME_MAX, 255 bytes)
@@ -22,6 +25,28 @@ TEMP_SUFFIX = ".tmp"
 #: What :func:`atomic_write` calls a target it refuses, by its file type.
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe"), (stat.S_ISCHR, "a device"),
           (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket"))
+
+
+@contextlib.contextmanager
+def ctrl_c_held() -> Iterator[None]:
+    """Holds back SIGINT (Ctrl-C) for the block, then hands one that came to the handler it
+    held back (Python's raises KeyboardInterrupt): for steps that must not be parted, such as
+    a temporary file made and its name kept for the clean-up. In the main thread, where Python
+    handles signals; elsewhere it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda signum, _frame: came.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+    if came:
+        if callable(old):
+            old(signal.SIGINT, None)
+        elif old == signal.SIG_DFL:
+            raise KeyboardInterrupt
 
 
 def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, binary: bool = True,
@@ -47,19 +72,27 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, b
     if mode is not None and not stat.S_ISREG(mode):
         kind = next((name for test, name in _KINDS if test(mode)), "a special file")
         raise InvalidInputError(f"{arg}: {str(path)!r} is {kind}, not a regular file; give the name of a regular file or of a new one")
+    kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}
+    tmp = fh = None
     try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
-    except OSError as e:  # name the target, not the temporary file mkstemp tried
-        raise type(e)(e.errno, f"{arg}: cannot write {str(path)!r} ({e.strerror})") from None
-    try:
-        kw: dict = {} if binary else {"newline": "", "encoding": "utf-8"}
-        with os.fdopen(fd, "wb" if binary else "w", **kw) as fh:
+        # Made, named and opened with Ctrl-C held: one landing as mkstemp returned left the
+        # temporary file and its descriptor behind (a fault audit).
+        with ctrl_c_held():
+            try:
+                fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+            except OSError as e:  # name the target, not the temporary file mkstemp tried
+                raise type(e)(e.errno, f"{arg}: cannot write {str(path)!r} ({e.strerror})") from None
+            fh = os.fdopen(fd, "wb" if binary else "w", **kw)
+        with fh:
             write(fh)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if fh is not None:
+            fh.close()
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
     return path

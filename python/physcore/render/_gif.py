@@ -2,19 +2,15 @@
 frame with the one fixed palette, atomically."""
 from __future__ import annotations
 
-import contextlib
 import os
-import signal
 import tempfile
-import threading
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .. import _check
-from .._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write
+from .._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write, ctrl_c_held
 from .._errors import InvalidInputError, InvalidTypeError
 from . import _recording
 from ._checks import (
@@ -553,27 +549,6 @@ def _emit(fmt: str, path: Path | None, index_frames: Any, colours: np.ndarray | 
     return path
 
 
-@contextlib.contextmanager
-def _ctrl_c_held() -> Iterator[None]:
-    """Holds back SIGINT (Ctrl-C) for the block, then hands one that came to the handler it
-    held back (Python's raises KeyboardInterrupt); in the main thread, where Python handles
-    signals (elsewhere it does nothing)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    came: list[int] = []
-    old = signal.signal(signal.SIGINT, lambda signum, _frame: came.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, old)
-    if came:
-        if callable(old):
-            old(signal.SIGINT, None)
-        elif old == signal.SIG_DFL:
-            raise KeyboardInterrupt
-
-
 def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
     """One PNG per frame beside `path`: ``stem_0000.png``, ``stem_0001.png``, … (as many digits as
     the count needs, at least 4), written as a whole: every frame goes to a temporary file in the
@@ -589,10 +564,12 @@ def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
     try:
         for k, frame in enumerate(rgb):
             target = path.with_name(f"{path.stem}_{k:0{digits}d}.png")
-            fd, tmp = tempfile.mkstemp(dir=directory, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
-            done.append((tmp, target))
+            with ctrl_c_held():  # made and kept for the clean-up together (see atomic_write)
+                fd, tmp = tempfile.mkstemp(dir=directory, prefix=TEMP_PREFIX, suffix=TEMP_SUFFIX)
+                done.append((tmp, target))
+                fh = os.fdopen(fd, "wb")
             targets.append(target)
-            with os.fdopen(fd, "wb") as fh:
+            with fh:
                 Image.fromarray(frame).save(fh, format="PNG", optimize=False)
         umask = os.umask(0)
         os.umask(umask)
@@ -600,7 +577,7 @@ def _write_pngs(path: Path, rgb: Any, count: int) -> list[Path]:
             os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; an ordinary new file's mode
         # The renames take milliseconds; a Ctrl-C among them would leave new frames beside old
         # ones, so it is held until they are all in place (and raised then).
-        with _ctrl_c_held():
+        with ctrl_c_held():
             while done:
                 tmp, target = done[0]
                 os.replace(tmp, target)
