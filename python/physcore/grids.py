@@ -411,8 +411,9 @@ class Wave(Grid):
         for k, d in enumerate(self.drops):
             c, w = self._gaussian(d.center, d.radius, f"drops[{k}]")
             cells.append(c), weights.append(w), counts.append(c.size)
-        p["drop_t"] = np.array([_check.real(f"drops[{k}].t", d.t) for k, d in enumerate(self.drops)], dtype=np.float64)
-        p["drop_amplitude"] = np.array([_check.real(f"drops[{k}].amplitude", d.amplitude) for k, d in enumerate(self.drops)], dtype=np.float64)
+        # Finite here, by name (the core refused them too, but only when the wave was added).
+        p["drop_t"] = np.array([_check.finite(f"drops[{k}].t", d.t) for k, d in enumerate(self.drops)], dtype=np.float64)
+        p["drop_amplitude"] = np.array([_check.finite(f"drops[{k}].amplitude", d.amplitude) for k, d in enumerate(self.drops)], dtype=np.float64)
         p["drop_counts"] = np.array(counts, dtype=np.float64)
         p["drop_cells"] = np.concatenate(cells) if cells else np.zeros(0, np.uint32)
         p["drop_weights"] = np.concatenate(weights) if weights else np.zeros(0)
@@ -428,7 +429,10 @@ class Wave(Grid):
                 c, w = self._gaussian(o.center, o.radius, f"oscillators[{k}]")
             cells.append(c), weights.append(w), counts.append(c.size)
         for key, attr in (("osc_amplitude", "amplitude"), ("osc_frequency", "frequency"), ("osc_phase", "phase")):
-            p[key] = np.array([_check.real(f"oscillators[{k}].{attr}", getattr(o, attr)) for k, o in enumerate(self.oscillators)], dtype=np.float64)
+            p[key] = np.array([_check.finite(f"oscillators[{k}].{attr}", getattr(o, attr)) for k, o in enumerate(self.oscillators)], dtype=np.float64)
+        for k, o in enumerate(self.oscillators):
+            if o.frequency < 0:
+                raise InvalidInputError(f"oscillators[{k}].frequency: must be >= 0 (Hz), got {o.frequency}")
         p["osc_counts"] = np.array(counts, dtype=np.float64)
         p["osc_cells"] = np.concatenate(cells) if cells else np.zeros(0, np.uint32)
         p["osc_weights"] = np.concatenate(weights) if weights else np.zeros(0)

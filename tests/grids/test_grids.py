@@ -361,6 +361,16 @@ def test_bad_grid_input_names_the_argument():
         pc.Wave((10, 10), mask=np.zeros((9, 10), dtype=bool))
     with pytest.raises(ValueError, match=r"drops\[0\]"):
         pc.Wave((10, 10), drops=[pc.Drop(0.0, (5.0, 5.0), radius=0.01, amplitude=1.0)])
+    # Non-finite times, amplitudes and frequencies by name at construction (a fault audit: they
+    # were refused only when the wave was added, as "drop 0: ...").
+    for bad, name in ((pc.Drop(np.nan, (5.0, 5.0), radius=2.0, amplitude=1.0), r"drops\[0\]\.t"),
+                      (pc.Drop(0.0, (5.0, 5.0), radius=2.0, amplitude=np.inf), r"drops\[0\]\.amplitude")):
+        with pytest.raises(pc.InvalidInputError, match=f"^{name}: must be finite"):
+            pc.Wave((10, 10), drops=[bad])
+    for bad, name in (((1.0, np.inf), r"frequency: must be finite"), ((1.0, -2.0), r"frequency: must be >= 0"),
+                      ((np.nan, 1.0), r"amplitude: must be finite")):
+        with pytest.raises(pc.InvalidInputError, match=rf"^oscillators\[0\]\.{name}"):
+            pc.Wave((10, 10), oscillators=[pc.Oscillator(*bad, center=(5.0, 5.0), radius=2.0)])
     with pytest.raises(ValueError, match="absorbing"):
         pc.Wave((10, 10), absorbing=("x-", "q+"))
     with pytest.raises(ValueError, match="preset"):

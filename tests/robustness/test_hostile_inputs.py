@@ -151,3 +151,9 @@ def test_broadcast_copies_that_fail_under_a_memory_cap_raise_physcores_error():
     env = dict(os.environ, PYTHONPATH=root + os.pathsep + os.environ.get("PYTHONPATH", ""))
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stdout + proc.stderr[-3000:]
+
+
+def test_an_unsigned_spring_index_past_int64_is_refused_as_itself():
+    # A fault audit: the cast to int64 wrapped 2**63 to -2**63, and the message said so.
+    with pytest.raises(pc.InvalidInputError, match=r"^i: index 9223372036854775808 is beyond any particle count"):
+        pc.Springs(np.array([2**63], np.uint64), np.array([0], np.uint64))

@@ -70,6 +70,8 @@ class Springs(Term, kind="springs"):
         _check.room("i/j", 40 * m, f"{m:,} springs")
         idx = []
         for arg, a in zip(("i", "j"), views, strict=True):
+            if a.dtype.kind == "u" and a.size and int(a.max()) > np.iinfo(np.int64).max:  # before the cast wraps it negative
+                raise InvalidInputError(f"{arg}: index {int(a.max())} is beyond any particle count")
             with allocating(arg, f"a copy of {arg} as int64"):
                 a = a.astype(np.int64)
             if a.size and a.min() < 0:
