@@ -98,8 +98,15 @@ def allocating(what: str, context: str) -> Iterator[None]:
     decorator."""
     try:
         yield
-    except OutOfMemoryError:
-        raise
+    except OutOfMemoryError as e:
+        # Made by an inner block of this kind (a part's constructor inside Scene.add_fluid):
+        # named again as this, the outer call, the one the user made.
+        tail = getattr(e, "_allocating", None)
+        if tail is None or e.args[0].startswith(f"{what}: "):
+            raise
+        again = OutOfMemoryError(f"{what}: {tail}", e.bytes)
+        again._allocating = tail  # type: ignore[attr-defined]
+        raise again from e.__cause__
     except Exception as raised:
         # A MemoryError, or an error raised while cleaning up after one (np.savez into a full
         # BytesIO: zipfile's close then raises "I/O operation on closed file", a ValueError).
@@ -112,11 +119,10 @@ def allocating(what: str, context: str) -> Iterator[None]:
         shape, dtype = getattr(e, "shape", None), getattr(e, "dtype", None)
         array = f"an array of shape {tuple(shape)}, {dtype}" if shape is not None else "an array"
         size = _human(nbytes) if nbytes >= 0 else "more memory"
-        raise OutOfMemoryError(
-            f"{what}: needs {size} for {array} ({context}), more than can be allocated now. "
-            "Free memory, or make the input smaller",
-            nbytes,
-        ) from e
+        tail = f"needs {size} for {array} ({context}), more than can be allocated now. Free memory, or make the input smaller"
+        err = OutOfMemoryError(f"{what}: {tail}", nbytes)
+        err._allocating = tail  # type: ignore[attr-defined]
+        raise err from e
 
 
 class ThreadPoolError(PhyscoreError, RuntimeError):

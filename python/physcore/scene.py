@@ -22,7 +22,7 @@ import numpy as np
 
 from . import _check, _core, _deprecate, _scenefile
 from . import terms as _terms_pkg
-from ._atomic import atomic_write
+from ._atomic import atomic_write, ctrl_c_held
 from ._errors import (
     ContactStepWarning,
     InvalidInputError,
@@ -127,6 +127,44 @@ def _check_dt(dt: object) -> float:
     """``dt`` as a float; its range (finite, >= the smallest normal float64) is the core's rule
     (``world::check_dt``), checked when the core takes it."""
     return _check.real("dt", dt)
+
+
+class _Rejoining:
+    """The core simulation as a part sees it while its interrupted join is run again
+    (:meth:`Scene._rejoin`): a call that registers a term, grid, flow or collider is passed
+    over where the core took it already (it holds more of that kind than ``before``, the
+    structure before the join), and made where it did not; everything else is the core's."""
+
+    def __init__(self, sim: Any, before: tuple[Any, ...], done: tuple[Any, ...]) -> None:
+        self._sim = sim
+        # How many of each kind the interrupted join registered, still to be passed over.
+        self._taken = {"terms": done[1] - before[1], "colliders": done[2] - before[2]}
+        self._systems = set(done[3]) - set(before[3])
+
+    def _skip(self, kind: str) -> bool:
+        if self._taken[kind] > 0:
+            self._taken[kind] -= 1
+            return True
+        return False
+
+    def add_term(self, kind: str, name: str, params: dict[str, Any]) -> None:
+        if not self._skip("terms"):
+            self._sim.add_term(kind, name, params)
+
+    def add_collider(self, kind: str, params: dict[str, Any]) -> None:
+        if not self._skip("colliders"):
+            self._sim.add_collider(kind, params)
+
+    def add_grid(self, kind: str, name: str, params: dict[str, Any]) -> None:
+        if name not in self._systems:
+            self._sim.add_grid(kind, name, params)
+
+    def add_flow(self, kind: str, name: str, params: dict[str, Any]) -> None:
+        if name not in self._systems:
+            self._sim.add_flow(kind, name, params)
+
+    def __getattr__(self, attr: str) -> Any:
+        return getattr(self._sim, attr)
 
 
 class _Replacing:
@@ -746,12 +784,16 @@ class Scene:
             raise InvalidTypeError(f"item: {_not_a_part(item)}")
         ctx = self._context(restoring)
         name = item._claim_name(ctx)
+        before = self._sim.structure()
+        host = getattr(item, "_host", None)
         try:
             stored = item._attach(ctx, name)
         except BaseException:
             # Ctrl-C raised as the core's call returned, the part taken (the bodies' insertion
             # into rapier cannot be stopped): recorded, so that the scene and the core agree.
             stored = item._taken_despite(ctx, name)
+            if stored is None and self._sim.structure() != before:
+                stored = self._rejoin(item, ctx, name, before, host)
             if stored is not None:
                 self._parts.append(stored)
             raise
@@ -759,6 +801,52 @@ class Scene:
         if cls.changes_energy:
             self._e0 = None
         return stored
+
+    def _rejoin(self, item: Any, ctx: AttachContext, name: Any, before: tuple[Any, ...], host: Any) -> Any:
+        """After ``item._attach`` raised (a Ctrl-C as one of its calls into the core returned)
+        with the core changed since ``before`` (:meth:`Simulation.structure`): the part as
+        stored, its join run again, with Ctrl-C held, against the core as it is, each call that
+        took effect already passed over and any it had not reached made (a fluid's particles in,
+        its term not yet), so that the scene records all the core holds. A fault audit found the
+        scene without the part and the core with it: the part acted unseen, and the next save
+        wrote a file that failed to load. None, the scene left as it was, if the join fails."""
+        with ctrl_c_held():
+            if host is None and getattr(item, "_host", None) is not None:
+                item._host = None  # bound by the interrupted join: the join binds it again
+            done = self._sim.structure()
+            sim = _Rejoining(self._sim, before, done)
+            grown = done[0] - before[0]
+            added: list[np.ndarray] = []
+
+            def add_particles(*args: Any, **kw: Any) -> np.ndarray:
+                if grown and not added:  # they are in already: their indices
+                    added.append(np.arange(before[0], done[0], dtype=np.int64))
+                    return added[0]
+                return ctx.add_particles(*args, **kw)
+
+            again = dataclasses.replace(ctx, sim=sim, add_particles=add_particles)
+            try:
+                with warnings.catch_warnings():  # said by the interrupted join already
+                    warnings.simplefilter("ignore")
+                    return item._attach(again, name)
+            except Exception:  # noqa: BLE001 - the interrupt is what the caller raises
+                return None
+
+    def _unrecorded(self) -> str | None:
+        """What the core holds that the scene has not recorded (a join interrupted where
+        :meth:`_rejoin` could not finish it), or None: the scene and the core agree."""
+        n, terms, colliders, systems = self._sim.structure()
+        mine = len(self._section("terms"))
+        walls = sum(len(self._section(k)) for k in ("planes", "boxes", "spheres", "colliders"))
+        named = {p.name for p in self._parts if p.section in ("grids", "flows")} | ({"bodies"} if self._section("bodies") else set())
+        extra = [x for x in systems if x not in named and x != "device particles"]
+        if terms != mine:
+            return f"{terms} force terms where the scene records {mine}"
+        if colliders != walls:
+            return f"{colliders} colliders where the scene records {walls}"
+        if extra:
+            return f"a system {extra[0]!r} the scene does not record"
+        return None
 
     def replace(self, name: str, item: Any) -> Any:
         """Put force term ``item`` in place of the term called ``name``, keeping the scene's state,
@@ -1744,6 +1832,10 @@ class Scene:
 
     def _file_arrays(self) -> dict[str, np.ndarray]:
         """The members of the scene file (see :meth:`save`), ``meta`` included."""
+        problem = self._unrecorded()
+        if problem is not None:  # the file would not load: refused before anything is written
+            raise InvalidInputError(f"scene: its core holds {problem} (an add interrupted by Ctrl-C); a file of it would "
+                                    "not load, so none was written. Build the scene again")
         on_device = self._device != "cpu" and self._sim.on_device
         # A file of precision "f32" holds the state as float32: a device's f32 state read back
         # is exact in it (before the first step, the upload would round it so anyway).

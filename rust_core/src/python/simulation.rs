@@ -752,6 +752,13 @@ impl PySimulation {
         with_sim!(&self.inner, s => s.other_names())
     }
 
+    /// What parts have registered here, counted: (particles, terms, colliders, the systems'
+    /// names). The facade compares it before and after a part joins: a Ctrl-C raised as one of
+    /// the part's calls returned leaves the core holding what the scene has not recorded.
+    fn structure(&self) -> (usize, usize, usize, Vec<String>) {
+        (self.n_particles(), self.terms.len(), self.colliders.len(), with_sim!(&self.inner, s => s.other_names()))
+    }
+
     fn system_save<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Vec<(String, Bound<'py, PyArray1<f64>>)>> {
         let a = with_sim!(&self.inner, s => s.other(name).and_then(|o| o.save())).map_err(|e| to_py(py, e))?;
         Ok(a.into_iter().map(|(k, v)| (k, Array1::from(v).into_pyarray(py))).collect())
