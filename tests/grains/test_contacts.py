@@ -495,6 +495,55 @@ def test_the_galton_board_refuses_bad_arguments_by_name(arg, value, error):
         pc.scenes.galton_board(**{arg: value})
 
 
+@pytest.mark.parametrize("law, k", [("linear", 1e4), ("hertz", 1e7)])
+@pytest.mark.parametrize("e", [0.9, 0.5, 0.1])
+def test_a_grain_sliding_onto_a_floor_gets_coulombs_tangential_impulse(law, k, e):
+    # It slides for the whole contact (v_t = 3 m/s, v_n = 1 m/s, μ = 0.1), so Coulomb's law
+    # gives a tangential impulse of exactly μ(1 + e) m v_n, and friction only takes energy. A
+    # physics audit found the Hertz law at 0.995 (e = 0.9), 0.71 (0.5) and -0.46 (0.1) of it,
+    # the friction book negative and the grain leaving faster than it came: a slipping spring
+    # held the dashpot's share, which the next step's larger k_t (∝ √δ) scaled up faster than
+    # γ_t grew. Both laws now read 1.000.
+    r = m = 0.01
+    s = pc.Scene(dim=3, integrator="semi_implicit_euler", threads=1)
+    s.add_particles([[0.0, 1.0005 * r, 0.0]], [[3.0, -1.0, 0.0]], masses=m)
+    s.set_attribute("radius", [r])
+    s.add(pc.Contacts(k, restitution=e, friction=0.1, law=law,
+                      walls=pc.Plane([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], restitution=e, friction=0.1)))
+    s.dt = s.suggest_dt()
+    s.advance(0.01)
+    v = s.velocities[0]
+    assert v[1] == pytest.approx(e, rel=5e-3)
+    assert (3.0 - v[0]) / (0.1 * (1.0 + e)) == pytest.approx(1.0, abs=2e-3)
+    assert s.energy().dissipated["contacts (friction)"] > 0.0
+
+
+@pytest.mark.parametrize("law, k", [("linear", 1e4), ("hertz", 1e7)])
+def test_a_spinning_disc_meeting_another_head_on_gets_coulombs_tangential_impulse(law, k):
+    # The grain-grain pass (its lanes): disc 0 spins at 300 rad/s (its contact point slides at
+    # 3 m/s) as the two meet head-on at 1 m/s, e = 0.1: the transverse impulse is μ times the
+    # normal one (1.00-1.03: the normal turns a little during the contact) and the spin only
+    # slows. Before the fix the Hertz law gave 0.31 of it at e = 0.3, and at e = 0.1 the disc
+    # spun up (300 -> 304 rad/s) and the other turned the wrong way.
+    r = m = 0.01
+    s = pc.Scene(dim=2, integrator="semi_implicit_euler", threads=1)
+    s.add_particles([[-1.0005 * r, 0.0], [1.0005 * r, 0.0]], [[0.5, 0.0], [-0.5, 0.0]], masses=m)
+    s.set_attribute("radius", [r, r])
+    s.add(pc.Contacts(k, restitution=0.1, friction=0.1, law=law))
+    s.dt = s.suggest_dt()
+    s._sim.set_term_history("contacts", np.array([2.0, 300.0, 0.0, 0.0, 0.0, 0.0, 0.0]))  # the spins
+    touched = False
+    for _ in range(100_000):
+        s.step(1)
+        touched |= s.contact_count() > 0
+        if touched and s.contact_count() == 0:
+            break
+    v = s.velocities
+    jn, jt = m * (v[1, 0] + 0.5), m * v[1, 1]
+    assert touched and 1.0 <= jt / (0.1 * jn) < 1.03, jt / (0.1 * jn)
+    assert 0.0 < s.particle_field("angular_velocity")[0] < 300.0
+
+
 def test_the_jelly_lands_squashes_and_keeps_its_shape():
     # A spring body whose particles are grains: it tumbles down the slope, out along the floor
     # (nothing passes either; the slope lies above the floor y = 0) and stops by the wall, its

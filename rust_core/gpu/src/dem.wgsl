@@ -396,7 +396,12 @@ fn contact(n: vec3<real>, d: real, vc: vec3<real>, c: Coef, xi: vec3<real>, fres
         if (kt > 0.0) {
             inv_kt = 1.0 / kt;
         }
-        xc = (ft + vt * gt) * (0.0 - inv_kt);
+        // Linear: less the dashpot's share; Hertz: the capped force alone (Material::pair).
+        var damp = gt;
+        if (P.hertz != 0u) {
+            damp = 0.0;
+        }
+        xc = (ft + vt * damp) * (0.0 - inv_kt);
     }
     return Out(ft - n * f, ft, xc, cross(n, ft), f, f * vn, 0.0 - dot(ft, vc));
 }

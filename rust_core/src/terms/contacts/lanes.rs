@@ -340,15 +340,17 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 let mut xi_c = xi_p;
                 if any(s, slip) {
                     let scale = cap / sqrt(f2);
-                    let inv_kt = match mat.law {
-                        Law::Linear => c.inv_kt,
-                        Law::Hertz => ktv.gt(zero).select(splat(1.0) / ktv, zero),
+                    // As the scalar pair (`Material::pair`): the linear law's spring takes the
+                    // capped force less the dashpot's share, the Hertz law's the capped force.
+                    let (inv_kt, damp) = match mat.law {
+                        Law::Linear => (c.inv_kt, gt),
+                        Law::Hertz => (ktv.gt(zero).select(splat(1.0) / ktv, zero), zero),
                     };
                     let mut fs = [zero; 3];
                     let mut xs = [zero; 3];
                     for c in 0..dim {
                         fs[c] = ft[c] * scale;
-                        xs[c] = (fs[c] + vt[c] * gt) * neg(inv_kt);
+                        xs[c] = (fs[c] + vt[c] * damp) * neg(inv_kt);
                     }
                     ft = sel3(slip, fs, ft, dim);
                     xi_c = sel3(slip, xs, xi_p, dim);

@@ -443,17 +443,23 @@ impl Material {
         let mut xi_c = xi_p;
         if f2 > cap * cap {
             ft = ft * (cap / f2.sqrt());
-            let inv_kt = match self.law {
-                Law::Linear => c.inv_kt,
+            xi_c = match self.law {
+                // The spring takes the capped force less the dashpot's share, so that the
+                // next step, at the same k_t and γ_t, continues the slip where it was.
+                Law::Linear => (ft + vt * c.gt) * (-c.inv_kt),
+                // Hertz: the spring alone holds the capped force. With the dashpot's share
+                // folded in as for the linear law, the next step's k_t (∝ √δ) scaled that
+                // share up faster than its γ_t (∝ δ^¼) grew: while the overlap grew, a slipping
+                // contact of strong damping (e ≲ 0.3) pushed along the slip, and at e = 0.1 a
+                // grain sliding onto a floor left faster than it came (a physics audit).
                 Law::Hertz => {
                     if kt > 0.0 {
-                        1.0 / kt
+                        ft * (-1.0 / kt)
                     } else {
-                        0.0
+                        V::ZERO
                     }
                 }
             };
-            xi_c = (ft + vt * gt) * (-inv_kt);
         }
         PairOut { force: ft - n * fn_, ft, xi: xi_c, fn_, wn0: fn_ * vn, wt0: -ft.dot(vt) }
     }
