@@ -143,7 +143,9 @@ class Contacts(Term, kind="contacts"):
 
     * normal force, never attractive: ``f_n = max(0, k δ + γ v_n)`` (``law="linear"``) or
       ``max(0, k δ^{3/2} + γ v_n)`` with ``γ ∝ δ^{1/4}`` (``law="hertz"``, Tsuji, Tanaka &
-      Ishida, Powder Technol. 71 (1992) 239, eq. 9); ``γ = 2ζ√(k m*)`` with the damping ratio ζ
+      Ishida, Powder Technol. 71 (1992) 239, eq. 9; Hertz's ``k = (4/3) E* √R*``, E* the
+      effective Young's modulus and R* the effective radius, r/2 for two grains of radius r, r
+      against a wall: one k is one material at one R*); ``γ = 2ζ√(k m*)`` with the damping ratio ζ
       solved so that a head-on collision of this clamped model returns exactly ``restitution``
       (Schwager & Pöschel, Phys. Rev. E 78 (2008) 051304, for the linear law; integrated
       numerically for Hertz);

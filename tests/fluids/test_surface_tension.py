@@ -137,8 +137,10 @@ def test_laplace_pressure_of_2d_droplets():
     a σ, ρ0 and spacing other than those `LAPLACE_FACTOR` was measured at), started 1e-9 m
     apart: each reads σ/R within a factor of 2 and their geometric mean within 30 %.
 
-    Measured: seeds 0–5 read 1.28, 1.23, 1.08, 0.96, 0.92, 1.23 (geometric mean 1.11); 13
-    droplets of this size 0.86–1.28, mean 1.10; 4 of R = 8.5 H 0.93–1.17. Each droplet freezes
+    Measured: seeds 0–5 read 0.968, 1.002, 1.007, 1.079, 1.079, 0.892 (geometric mean 1.002;
+    measured again 2026-11-30: the readings of an earlier build, 1.28, 1.23, 1.08, 0.96, 0.92,
+    1.23, mean 1.11, had stood here); 13 droplets of this size 0.86–1.28, mean 1.10, and 4 of
+    R = 8.5 H 0.93–1.17 (that earlier build). Each droplet freezes
     into its own packing, whose stress the reading carries: the Laplace pressure is the small
     difference of the solvers' pressure and the surface forces' virial, each 30 to 70 times
     σ/R (the cohesion's bulk tension), so a packing that changes either by 1 % moves the reading
