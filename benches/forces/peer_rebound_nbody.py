@@ -31,15 +31,9 @@ import numpy as np
 import physcore as pc
 import rebound
 
+from bench_nbody import initial  # the same bodies as physcore's own bench
+
 EPS, DT = 0.01, 1e-3
-
-
-def initial(n: int) -> np.ndarray:
-    rng = np.random.default_rng(42)
-    r = rng.random(n) ** (1 / 3)
-    d = rng.normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    return d * r[:, None]
 
 
 def np_acc(x, m):
