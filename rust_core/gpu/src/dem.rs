@@ -14,7 +14,8 @@
 //!   (`contacts::damping_ratio`).
 //! - Tangential force: Cundall & Strack, Géotechnique 29 (1979) 47: a spring ξ per contact
 //!   (zero when it forms, turned into the current tangent plane keeping its length),
-//!   f_t = −k_t ξ − γ_t v_t capped at μ f_n (the spring then slips to the cap); k_t = ratio·k_n
+//!   f_t = −k_t ξ − γ_t v_t capped at μ f_n (the spring then slips to the cap: linear, with the
+//!   dashpot's share; Hertz, −k_t ξ alone, as the CPU's `Material::pair`); k_t = ratio·k_n
 //!   (Hertz: ratio·(3/2)k_n√δ), γ_t = γ_n √ratio (Hertz √(1.5 ratio)).
 //! - Rotation: τ_i = a_i n × f_t on ω (2D a scalar about z, 3D a vector), I = β m r² (disc ½,
 //!   sphere ⅖ by default).

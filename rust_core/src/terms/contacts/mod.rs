@@ -27,7 +27,8 @@
 //! - Tangential force: Cundall & Strack, Géotechnique 29 (1979) 47, a tangential spring ξ per
 //!   contact (zero when the contact forms, rotated into the current tangent plane each step)
 //!   with f_t = −k_t ξ − γ_t v_t, capped by Coulomb's law |f_t| ≤ μ f_n (the spring then slips to
-//!   the cap). k_t = ratio·k_n, ratio > 0 (the facade's default β/(1 + β): equal normal and
+//!   the cap: linear, −k_t ξ − γ_t v_t = the capped force; Hertz, −k_t ξ alone, see
+//!   `Material::pair`). k_t = ratio·k_n, ratio > 0 (the facade's default β/(1 + β): equal normal and
 //!   tangential periods, 2/7 for spheres, Silbert et al., Phys. Rev. E 64 (2001) 051302, and 1/3
 //!   for discs); for Hertz k_t = ratio·(3/2)k_n√δ, the normal contact stiffness (Mindlin's
 //!   no-slip tangential stiffness in the same ratio).
