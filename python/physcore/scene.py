@@ -792,7 +792,9 @@ class Scene:
             # Ctrl-C raised as the core's call returned, the part taken (the bodies' insertion
             # into rapier cannot be stopped): recorded, so that the scene and the core agree.
             stored = item._taken_despite(ctx, name)
-            if stored is None and self._sim.structure() != before:
+            # Rigid bodies, joints and pins answer for themselves (`_taken_despite`): a join run
+            # again would insert a group the core refused, and that insertion cannot be stopped.
+            if stored is None and item.section != "bodies" and self._sim.structure() != before:
                 stored = self._rejoin(item, ctx, name, before, host)
             if stored is not None:
                 self._parts.append(stored)
