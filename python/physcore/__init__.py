@@ -23,7 +23,18 @@ from ._errors import (
     ThreadPoolError,
     ThreadPoolWarning,
 )
-from ._integrators import RK4, XPBD, Boris, Dopri5, Euler, ImplicitEuler, SemiImplicitEuler, Verlet, Yoshida4
+from ._integrators import (
+    RK4,
+    XPBD,
+    Boris,
+    Dopri5,
+    Euler,
+    ImplicitEuler,
+    SemiImplicitEuler,
+    Verlet,
+    WisdomHolman,
+    Yoshida4,
+)
 from ._system import gpu_adapters, info, set_simd_level, simd_level, simd_levels
 from .batch import Batch
 from .bodies import Bodies, Joints, Pins
@@ -48,6 +59,7 @@ __all__ = [
     "Yoshida4",
     "RK4",
     "Dopri5",
+    "WisdomHolman",
     "Boris",
     "XPBD",
     "ImplicitEuler",

@@ -7,6 +7,7 @@ pub mod implicit_euler;
 pub mod rk4;
 pub mod semi_implicit_euler;
 pub mod verlet;
+pub mod wisdom_holman;
 pub mod xpbd;
 pub mod yoshida;
 
@@ -24,6 +25,7 @@ pub use implicit_euler::ImplicitEuler;
 pub use rk4::Rk4;
 pub use semi_implicit_euler::SemiImplicitEuler;
 pub use verlet::VelocityVerlet;
+pub use wisdom_holman::WisdomHolman;
 pub use xpbd::Xpbd;
 pub use yoshida::Yoshida4;
 
@@ -174,9 +176,10 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn implicit(&self) -> bool {
         false
     }
-    /// Refuses a step `dt` (s) this integrator cannot take (already finite and > 0), with an
-    /// `InvalidInput` naming `dt`; every step size is fine by default.
-    fn check_dt(&self, _dt: Real) -> Result<()> {
+    /// Refuses, before a call steps, a step `dt` (s; already finite and > 0) this integrator
+    /// cannot take (`InvalidInput` naming `dt`), or a scene `sys` it cannot step (naming
+    /// `integrator`); every scene and step size is fine by default.
+    fn check_step(&self, _sys: &Particles<V>, _dt: Real) -> Result<()> {
         Ok(())
     }
     /// The linear solver's books, for an integrator that has one.
@@ -257,8 +260,18 @@ impl SolverStats {
 }
 
 /// All integrator names, in the order of the documentation table.
-pub const NAMES: [&str; 9] =
-    ["euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5", "boris", "xpbd", "implicit_euler"];
+pub const NAMES: [&str; 10] = [
+    "euler",
+    "semi_implicit_euler",
+    "verlet",
+    "yoshida4",
+    "rk4",
+    "dopri5",
+    "wisdom_holman",
+    "boris",
+    "xpbd",
+    "implicit_euler",
+];
 
 pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     Ok(match name {
@@ -268,6 +281,7 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
         "yoshida4" => Box::new(Yoshida4::default()),
         "rk4" => Box::new(Rk4::default()),
         "dopri5" => Box::new(Dopri5::default()),
+        "wisdom_holman" => Box::new(WisdomHolman::default()),
         "boris" => Box::new(Boris::default()),
         "xpbd" => Box::new(Xpbd::default()),
         "implicit_euler" => Box::new(ImplicitEuler::default()),

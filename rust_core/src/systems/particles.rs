@@ -174,9 +174,10 @@ impl<V: Vector> ParticleSystem<V> {
         self.sys.forces.terms.iter().map(|t| t.transient_bytes(n)).sum()
     }
 
-    /// Refuses a step `dt` the integrator cannot take (`Integrator::check_dt`).
+    /// Refuses a step `dt`, or these particles and terms, where the integrator cannot step them
+    /// (`Integrator::check_step`).
     pub fn check_dt(&self, dt: Real) -> Result<()> {
-        self.integrator.check_dt(dt)
+        self.integrator.check_step(&self.sys, dt)
     }
 
     /// Reserves, fallibly, the scratch the terms' potentials need (`Scratch::Potential`).

@@ -546,6 +546,12 @@ impl FusedForce for Pairwise {
         let w = self.weights(model)?;
         (!self.single && n <= SMALL).then_some((self.law_constant(), self.softening * self.softening, w))
     }
+    fn newtonian(&self) -> Option<(Real, Real)> {
+        match self.law {
+            Law::Gravity(g) => Some((g, self.softening)),
+            Law::Coulomb(_) => None,
+        }
+    }
 }
 
 impl<V: Vector> Term<V> for Pairwise {

@@ -9,13 +9,17 @@ use crate::error::Result;
 use crate::state::Model;
 use crate::vector::{Real, Vector};
 
-/// A force the batch's fused kernel (`crate::batch`) steps with the same bits: the small
-/// pairwise sum (`pairwise_small`) of gravity or Coulomb. The batch is its only user; no other
-/// stage asks for it.
+/// The pairwise sum of gravity or Coulomb (`pairwise_gravity`), as the stages that take its law
+/// apart read it: the batch's fused kernel (`crate::batch`), which steps the small sum with the
+/// same bits, and the Wisdom–Holman integrator (`integrators::wisdom_holman`), which splits
+/// Kepler orbits off Newtonian gravity.
 pub trait FusedForce {
     /// `Some((c, ε², weights))` where the term is the small pairwise sum F_i = c w_i S_i at this
     /// scene's `n` particles, float64.
     fn small_pairwise<'a>(&self, model: &'a Model, n: usize) -> Option<(Real, Real, &'a [Real])>;
+    /// `Some((G, ε))` where the term is Newtonian gravity summed directly over every pair (G in
+    /// m³/(kg·s²), the Plummer softening ε in m), at any size and precision.
+    fn newtonian(&self) -> Option<(Real, Real)>;
 }
 
 /// A magnetic field (F = q v × B), which the Boris push turns the velocities through exactly
