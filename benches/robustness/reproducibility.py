@@ -74,6 +74,19 @@ def _chain(integrator: str, threads: int | None) -> pc.Scene:
     return s
 
 
+def _solar(integrator: str, threads: int | None) -> pc.Scene:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integrators"))
+    from _solar import initial_state
+
+    x, v, m = initial_state()
+    s = pc.Scene(3, integrator=integrator, dt=2 * np.pi * 5.2026**1.5 / 20, threads=threads)
+    s.add_particles(x, v, masses=m)
+    s.add(pc.PairwiseGravity(G=1.0))
+    return s
+
+
 def cases() -> dict[str, tuple[Callable[[int | None], pc.Scene], int]]:
     """name → (build(threads), steps)."""
     out: dict[str, tuple[Callable[[int | None], pc.Scene], int]] = {}
@@ -81,6 +94,9 @@ def cases() -> dict[str, tuple[Callable[[int | None], pc.Scene], int]]:
         out[name] = ((lambda t, fn=fn: fn(threads=t)), FEWER.get(name, STEPS))
     for integ in ("euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5", "implicit_euler"):
         out[f"spring_chain/{integ}"] = ((lambda t, i=integ: _chain(i, t)), STEPS)
+    # The Wisdom–Holman map steps planetary systems only: the Sun and the four giant planets
+    # (benches/integrators/_solar.py's elements) at P_Jupiter/20.
+    out["solar/wisdom_holman"] = ((lambda t: _solar("wisdom_holman", t)), STEPS)
     for integ in ("verlet", "rk4"):
         # 5184 particles: past the springs' parallel threshold.
         out[f"cloth n=72/{integ}"] = ((lambda t, i=integ: pc.scenes.cloth(n=72, integrator=i, threads=t)), 20)

@@ -185,9 +185,10 @@ class WisdomHolman(Integrator, name="wisdom_holman"):
     System it reaches Verlet's energy error at a step 15–20 times longer. No options.
 
     The scene needs exactly one :class:`~physcore.PairwiseGravity` with ``softening=0`` (the
-    Kepler part is split off it) and no velocity-dependent force; other conservative terms
-    (fields, springs, Coulomb forces) join the kick. Pinned particles stay put; a pinned heaviest
-    particle is a fixed centre. A scene that does not fit is refused when it steps
+    Kepler part is split off it: its pairs with the heaviest particle are left out of the kick)
+    and no velocity-dependent force; other conservative terms (uniform fields, springs, Coulomb
+    forces) join the kick. Only the heaviest particle may be pinned, which makes it a fixed
+    centre. A scene that does not fit is refused when it steps, before anything changes
     (:class:`~physcore.InvalidInputError` naming ``integrator``). Close encounters between the
     other bodies are not treated specially: the step must resolve them, as with Verlet.
 
@@ -195,9 +196,9 @@ class WisdomHolman(Integrator, name="wisdom_holman"):
     --------
     >>> import physcore as pc
     >>> scene = pc.Scene(dim=2, dt=0.05, integrator=pc.WisdomHolman())
-    >>> scene.add_particles([[0, 0], [1, 0], [2, 0]], [[0, 0], [0, 1], [0, 0.7071]],
-    ...                     masses=[1.0, 1e-3, 1e-3])
-    >>> scene.add(pc.PairwiseGravity(G=1.0))
+    >>> _ = scene.add_particles([[0, 0], [1, 0], [2, 0]], [[0, 0], [0, 1], [0, 0.7071]],
+    ...                         masses=[1.0, 1e-3, 1e-3])
+    >>> _ = scene.add(pc.PairwiseGravity(G=1.0))
     >>> e0 = scene.energy().total
     >>> scene.step(1000)
     >>> abs(scene.energy().total / e0 - 1) < 1e-5

@@ -51,7 +51,8 @@ def test_quick_sweep(tmp_path, capsys):
         rows = list(csv.DictReader(f))
     names = [d["name"] for d in pc.INTEGRATORS]
     for problem in PROBLEMS:
-        for name in names:
+        # The Wisdom–Holman map steps planetary systems only: the Kepler problems.
+        for name in [n for n in names if n != "wisdom_holman" or problem.startswith("kepler")]:
             mine = [r for r in rows if r["problem"] == problem and r["integrator"] == name and r["status"] != "reference"]
             assert mine, f"no run of {name} on {problem}"
             assert all(int(r["force_evals"]) > 0 and float(r["wall_s"]) >= 0 for r in mine)

@@ -30,7 +30,7 @@ TABLE = BENCH.parse(TEXT[TEXT.index(BENCH.BEGIN) : TEXT.index(BENCH.END)])
 
 def test_the_table_covers_every_gallery_scene_and_integrator():
     assert set(TABLE) == set(BENCH.cases()), "rerun: python benches/robustness/reproducibility.py --against DUMP --write docs/reproducibility.md"
-    integrators = {name.split("/", 1)[1] for name in TABLE if name.startswith("spring_chain/")}
+    integrators = {name.split("/", 1)[1] for name in TABLE if name.startswith(("spring_chain/", "solar/"))}
     # boris and xpbd have their own gallery scenes (cyclotron, xpbd_cloth).
     assert integrators | {"boris", "xpbd"} == {d["name"] for d in pc.INTEGRATORS}
     assert set(pc.scenes.REGISTRY) <= set(TABLE)

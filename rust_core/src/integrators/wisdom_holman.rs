@@ -16,11 +16,12 @@
 //! order need P/300–P/1000 for the same energy error (docs/guide/integrators.md).
 //!
 //! The kick takes every force the scene's terms give (one evaluation a step, kept for the next
-//! step's first kick) minus the unsoftened Kepler pull of the Sun on each body and its reaction
-//! on the Sun; the scene needs exactly one `PairwiseGravity` without softening for that split
-//! (`check_step`), and no velocity-dependent force (the kick would no longer be a Hamiltonian
-//! flow). Pinned particles stay where they are; their pull acts through the kick. A pinned Sun
-//! is a fixed centre: no jump, inertial velocities.
+//! step's first kick), the scene's Newtonian gravity told to leave out every pair with the Sun
+//! (`Setting::KeplerCentre`), so the Kepler part is split off exactly, not subtracted from a sum
+//! rounded at its scale. The scene needs exactly one `PairwiseGravity` without softening for that
+//! split (`check_step`), no velocity-dependent force (the kick would no longer be a Hamiltonian
+//! flow), and no pinned particle but the Sun: a pinned Sun is a fixed centre (no jump, inertial
+//! velocities).
 //!
 //! The Kepler drift solves the universal Kepler equation for the universal anomaly s,
 //!   dt = r_0 G_1(s) + η_0 G_2(s) + μ G_3(s),   η_0 = r_0·v_0,   β = 2μ/r_0 − v_0²,
@@ -30,6 +31,7 @@
 //! rate r > 0), then moves by Gauss's f and g functions. Elliptic, parabolic and hyperbolic orbits
 //! alike.
 use super::{accel, bad, ensure_len, store, Carry, Integrator, IntegratorInfo, Particles};
+use crate::terms::Setting;
 use crate::error::{invalid, Result};
 use crate::par;
 use crate::vector::{Real, Vector};
@@ -41,45 +43,40 @@ pub struct WisdomHolman<V: Vector> {
     /// Term powers at the cached force state.
     p: Vec<Real>,
     valid: bool,
-    /// Heliocentric positions and barycentric velocities of the drift; the Kepler pulls of the
-    /// kick.
+    /// Heliocentric positions and barycentric velocities of the drift.
     q: Vec<V>,
     w: Vec<V>,
-    k: Vec<V>,
 }
 
-/// (G, index of the central body, G m_0) for the scene's Newtonian gravity, as `check_step`
-/// requires it; `None` where it does not hold.
-fn split<V: Vector>(sys: &Particles<V>) -> Option<(Real, usize, Real)> {
-    let g = sys.forces.terms.iter().find_map(|t| t.as_fused().and_then(|f| f.newtonian()))?.0;
+/// The index of the central body (the heaviest, the first of equals) and μ = G m_0 for the
+/// scene's Newtonian gravity (μ = 0 without one: `check_step` refuses that scene).
+fn centre<V: Vector>(sys: &Particles<V>) -> (usize, Real) {
+    let g = sys.forces.terms.iter().find_map(|t| t.as_fused().and_then(|f| f.newtonian())).map_or(0.0, |t| t.0);
     let m = &sys.model.mass;
     let c = (0..m.len()).fold(0, |c, i| if m[i] > m[c] { i } else { c });
-    Some((g, c, g * m.get(c).copied().unwrap_or(0.0)))
+    (c, g * m.get(c).copied().unwrap_or(0.0))
 }
 
 impl<V: Vector> WisdomHolman<V> {
-    /// v ← v + h a_interaction: every force but the Sun's unsoftened Kepler pull on each body and
-    /// the reaction to it on the Sun.
-    fn kick(&mut self, sys: &mut Particles<V>, h: Real, g_newton: Real, c: usize) {
-        let (x, m, im, g, single) = (&sys.state.x, &sys.model.mass, &sys.model.inv_mass, sys.forces.g, sys.single);
-        let (f, xc, gm0) = (&self.f, x[c], g_newton * m[c]);
-        par::chunks2(&mut sys.state.v, &mut self.k, |s, v, k| {
-            for j in 0..v.len() {
-                let i = s + j;
-                if i == c || im[i] == 0.0 {
-                    k[j] = V::ZERO;
-                    continue;
-                }
-                let d = x[i] - xc;
-                let r2 = d.dot(d);
-                k[j] = d * (-gm0 * m[i] / (r2 * r2.sqrt()));
-                v[j] = store(v[j] + accel(f[i] - k[j], im[i], g) * h, single);
+    /// The forces at the state now, gravity without the pairs of the central body `c`.
+    fn eval(&mut self, sys: &mut Particles<V>, c: usize) {
+        for t in sys.forces.terms.iter_mut() {
+            t.set(Setting::KeplerCentre(Some(c)));
+        }
+        sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
+        for t in sys.forces.terms.iter_mut() {
+            t.set(Setting::KeplerCentre(None));
+        }
+    }
+
+    /// v ← v + h a_interaction (the forces of `eval`).
+    fn kick(&self, sys: &mut Particles<V>, h: Real) {
+        let (f, im, g, single) = (&self.f, &sys.model.inv_mass, sys.forces.g, sys.single);
+        par::chunks1(&mut sys.state.v, |s, v| {
+            for (j, v) in v.iter_mut().enumerate() {
+                *v = store(*v + accel(f[s + j], im[s + j], g) * h, single);
             }
         });
-        let k = &self.k;
-        let pull = par::sum(k.len(), V::ZERO, |r| r.fold(V::ZERO, |a, i| a + k[i]));
-        let v = &mut sys.state.v;
-        v[c] = store(v[c] + accel(f[c] + pull, im[c], g) * h, single);
     }
 
     /// The jumps and the Kepler drift of dt, and the centre of mass's uniform motion.
@@ -169,27 +166,26 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         if n == 0 {
             return false;
         }
-        // `check_step` made sure the split exists; without one the drift is a straight line.
-        let (g_newton, c, mu) = split(sys).unwrap_or((0.0, 0, 0.0));
-        for b in [&mut self.q, &mut self.w, &mut self.k] {
+        let (c, mu) = centre(sys);
+        for b in [&mut self.q, &mut self.w] {
             ensure_len(b, n);
         }
         if !self.valid || self.f.len() != n {
             ensure_len(&mut self.f, n);
-            sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
+            self.eval(sys, c);
             self.p = sys.forces.last_power().to_vec();
             self.valid = true;
         }
         // Dissipation by the trapezoidal rule, as velocity Verlet books it.
         sys.forces.set_last_power(&self.p);
         sys.forces.book_power(0.5 * dt);
-        self.kick(sys, 0.5 * dt, g_newton, c);
+        self.kick(sys, 0.5 * dt);
         self.drift(sys, dt, mu, c);
-        sys.forces.eval(&sys.state.x, &sys.state.v, &sys.model, &mut self.f);
+        self.eval(sys, c);
         sys.forces.book_power(0.5 * dt);
         self.p.clear();
         self.p.extend_from_slice(sys.forces.last_power());
-        self.kick(sys, 0.5 * dt, g_newton, c);
+        self.kick(sys, 0.5 * dt);
         let (x, v) = (&sys.state.x, &sys.state.v);
         par::sum(n, 0u32, |r| r.map(|i| bad(x[i], v[i]) as u32).sum()) > 0
     }
@@ -197,7 +193,7 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         &self.f
     }
     fn scratch(&mut self, _velocity_dependent: bool) -> Vec<&mut Vec<V>> {
-        vec![&mut self.f, &mut self.q, &mut self.w, &mut self.k]
+        vec![&mut self.f, &mut self.q, &mut self.w]
     }
     fn reset(&mut self) {
         self.valid = false;
@@ -219,6 +215,12 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         }
         if let Some(t) = sys.forces.terms.iter().find(|t| t.traits().velocity_dependent) {
             return why(format!("kicks with position-dependent forces, and term {:?} depends on velocity", t.name()));
+        }
+        let (c, _) = centre(sys);
+        if let Some(k) = (0..sys.model.inv_mass.len()).find(|&k| k != c && sys.model.inv_mass[k] == 0.0) {
+            return why(format!(
+                "moves every body but the heaviest (particle {c}), which alone may be pinned (a fixed centre), and particle {k} is pinned"
+            ));
         }
         Ok(())
     }

@@ -137,6 +137,10 @@ pub enum Setting {
     /// A term whose one evaluation may take long polls it and skips the rest of its work once
     /// it is set (see `crate::stop`).
     Stop(Stop),
+    /// The Wisdom–Holman integrator's central body during its force evaluation (`None` after
+    /// it): Newtonian gravity leaves out every pair with that body, whose pull the integrator
+    /// takes as Kepler orbits (`integrators::wisdom_holman`).
+    KeplerCentre(Option<usize>),
 }
 
 /// What a term reports besides its forces and energies (`Term::diagnostics`); empty by default.

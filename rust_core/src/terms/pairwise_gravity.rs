@@ -117,6 +117,8 @@ pub struct Pairwise {
     sym32: SymScratch<f32>,
     /// The stop flag of the call in progress.
     stop: Stop,
+    /// Gravity only: the body whose pairs the forces leave out (`Setting::KeplerCentre`).
+    kepler_centre: Option<usize>,
     /// The potential's sources (the energy books are read through `&self`), reserved by
     /// `reserve_potential` so that reading them allocates nothing sized by N.
     pot: std::sync::Mutex<Soa<Real>>,
@@ -160,6 +162,7 @@ impl Pairwise {
             sym: SymScratch::default(),
             sym32: SymScratch::default(),
             stop: Stop::default(),
+            kepler_centre: None,
             pot: std::sync::Mutex::new(Soa::default()),
         }
     }
@@ -566,6 +569,7 @@ impl<V: Vector> Term<V> for Pairwise {
         match setting {
             Setting::Single(single) => self.single = single,
             Setting::Stop(stop) => self.stop = stop,
+            Setting::KeplerCentre(c) => self.kepler_centre = c.filter(|_| matches!(self.law, Law::Gravity(_))),
         }
     }
 
@@ -624,6 +628,8 @@ impl<V: Vector> Term<V> for Pairwise {
         let mut acc = std::mem::take(&mut self.acc);
         let n = x.len();
         let stop = self.stop.flag();
+        // Without the central body as a source, and with no force on it (Setting::KeplerCentre).
+        let centre = self.kepler_centre.filter(|&c| c < n);
         match (self.single, n >= SYM_MIN) {
             (false, _) if n <= SMALL => {
                 // Few bodies: the lane-by-lane IEEE sum (`pairwise_small`, module docs there).
@@ -635,10 +641,18 @@ impl<V: Vector> Term<V> for Pairwise {
                 }
                 acc.clear();
                 acc.resize(n, [0.0; 3]);
-                small_sum(&xs[..n], &w[..n], eps2, V::DIM, 0.0, 1.0, &mut acc);
+                let mut ws = [0.0; SMALL];
+                ws[..n].copy_from_slice(&w[..n]);
+                if let Some(c) = centre {
+                    ws[c] = 0.0;
+                }
+                small_sum(&xs[..n], &ws[..n], eps2, V::DIM, 0.0, 1.0, &mut acc);
             }
             (true, sym) => {
                 self.src32.pack(x, w);
+                if let Some(c) = centre {
+                    self.src32.ms[c] = 0.0;
+                }
                 if sym {
                     accelerations_sym(&self.src32, n, eps2 as f32, level, stop, &mut self.sym32, &mut acc);
                 } else {
@@ -647,6 +661,9 @@ impl<V: Vector> Term<V> for Pairwise {
             }
             (false, sym) => {
                 self.src.pack(x, w);
+                if let Some(c) = centre {
+                    self.src.ms[c] = 0.0;
+                }
                 if sym {
                     accelerations_sym(&self.src, n, eps2, level, stop, &mut self.sym, &mut acc);
                 } else {
@@ -658,8 +675,8 @@ impl<V: Vector> Term<V> for Pairwise {
         par::chunks1(f, |s, f| {
             for (k, fi) in f.iter_mut().enumerate() {
                 let i = s + k;
-                if model.inv_mass[i] == 0.0 {
-                    // Pinned: its force is never used.
+                if model.inv_mass[i] == 0.0 || centre == Some(i) {
+                    // Pinned: its force is never used. The Kepler centre: left out.
                     if write == Write::Overwrite {
                         *fi = V::ZERO;
                     }
