@@ -8,7 +8,8 @@ samples; energy calls and WHFast's synchronize at outputs are excluded), median 
 which every configuration runs once, in a fixed interleaved order (physcore and REBOUND rows
 alternate), so load changes hit both.
 
-physcore: verlet, yoshida4, rk4 (fixed dt), dopri5 (rtol sweep, atol = 1e-3 rtol, dt = output
+physcore: wisdom_holman (the Wisdom–Holman map in democratic heliocentric coordinates, no
+corrector), verlet, yoshida4, rk4 (fixed dt), dopri5 (rtol sweep, atol = 1e-3 rtol, dt = output
 interval); all threads = 1. REBOUND: leapfrog (the same KDK/DKD method as verlet), WHFast
 (Jacobi, safe_mode=1, no corrector: "wh" default), WHFast with the 17th-order corrector and
 safe_mode = 0 (keep_unsynchronized = 1: outputs do not perturb the run), IAS15 (epsilon 1e-9).
@@ -115,7 +116,8 @@ class RbRun:
 def configs(full: bool):
     f = [PJ / 100, PJ / 300, PJ / 1000, PJ / 3000] + ([PJ / 10000] if full else [])
     w = [PJ / 10, PJ / 20, PJ / 50, PJ / 100]
-    pc_runs = ([PcRun("verlet", dt) for dt in f[1:]] + [PcRun("yoshida4", dt) for dt in [PJ / 30] + f[:3]]
+    pc_runs = ([PcRun("wisdom_holman", dt) for dt in w]
+               + [PcRun("verlet", dt) for dt in f[1:]] + [PcRun("yoshida4", dt) for dt in [PJ / 30] + f[:3]]
                + [PcRun("rk4", dt) for dt in f[:3]] + [PcRun("dopri5", rtol=r) for r in (1e-8, 1e-10, 1e-12)])
     rb_runs = ([RbRun("whfast", dt) for dt in w] + [RbRun("whfast", dt, corrector=17, safe=0) for dt in w]
                + [RbRun("leapfrog", dt) for dt in f[1:3]] + [RbRun("ias15")])

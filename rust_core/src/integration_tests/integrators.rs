@@ -50,6 +50,7 @@ fn integrator_table() {
             ("yoshida4", 4, true, 3),
             ("rk4", 4, false, 4),
             ("dopri5", 5, false, 6),
+            ("wisdom_holman", 2, true, 1),
             ("boris", 2, false, 1),
             ("xpbd", 1, false, 10),
             ("implicit_euler", 1, false, 1),

@@ -2,7 +2,7 @@
 //! attempts, it rolls everything back, and reading it never changes a result; `run_watched`
 //! leaves the calling thread free to set it.
 
-use super::common::cloth;
+use super::common::{cloth, planets};
 use glam::DVec3;
 use physcore_core::error::Error;
 use physcore_core::integrators::NAMES;
@@ -60,9 +60,10 @@ fn snapshot(s: &World<DVec3>) -> Snapshot {
 }
 
 /// A damped 8×8 cloth (dissipation books in play) with a tripwire; dopri5 gets one long output
-/// step of many internal steps.
+/// step of many internal steps. The Wisdom–Holman map steps planetary systems only: it gets a
+/// star and five planets.
 fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> World<DVec3> {
-    let mut s = cloth(8, integrator, threads, 0.05);
+    let mut s = if integrator == "wisdom_holman" { planets(5, integrator, threads) } else { cloth(8, integrator, threads, 0.05) };
     s.particles_mut().add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
     if integrator == "dopri5" {
         s.set_dt(0.5).unwrap();

@@ -147,7 +147,9 @@ fn restartable(integrator: &str) -> World<glam::DVec3> {
 
 #[test]
 fn a_run_restarted_from_its_saved_arrays_continues_bit_for_bit() {
-    for integrator in physcore_core::integrators::NAMES {
+    // The Wisdom–Holman map steps planetary systems only (no floor, no pins): its restart is
+    // tests/integrators/test_wisdom_holman.py's.
+    for integrator in physcore_core::integrators::NAMES.into_iter().filter(|n| *n != "wisdom_holman") {
         let mut a = restartable(integrator);
         a.step(30).unwrap();
         let (clock, systems) = a.save().unwrap();

@@ -88,3 +88,23 @@ pub fn cloud(n: usize, threads: usize, softening: f64) -> World<DVec3> {
     sim.particles_mut().add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, softening))).unwrap();
     sim
 }
+
+/// A star (mass 1) and `n` light planets (1e-4 each) on circular orbits at radii 1, 1.3, 1.6, …
+/// (G = 1), stepped by `integrator` at a twentieth of the inner period: a scene every integrator
+/// steps, "wisdom_holman" included.
+pub fn planets(n: usize, integrator: &str, threads: usize) -> World<DVec3> {
+    let mut x = vec![DVec3::ZERO];
+    let mut v = vec![DVec3::ZERO];
+    for k in 0..n {
+        let (r, a) = (1.0 + 0.3 * k as f64, 2.0 * k as f64);
+        x.push(DVec3::new(r * a.cos(), r * a.sin(), 0.01 * k as f64));
+        v.push(DVec3::new(-a.sin(), a.cos(), 0.0) / r.sqrt());
+    }
+    let dt = 2.0 * std::f64::consts::PI / 20.0;
+    let mut sim = World::new(ParticleSystem::new(integrator).unwrap(), dt, Some(threads)).unwrap();
+    let mut m = vec![1e-4; n + 1];
+    m[0] = 1.0;
+    sim.particles_mut().add_particles(x, v, m, vec![false; n + 1]).unwrap();
+    sim.particles_mut().add_term(Box::new(PairwiseGravity::new("pairwise_gravity".into(), 1.0, 0.0))).unwrap();
+    sim
+}
