@@ -63,7 +63,11 @@ fn snapshot(s: &World<DVec3>) -> Snapshot {
 /// step of many internal steps. The Wisdom–Holman map steps planetary systems only: it gets a
 /// star and five planets.
 fn scene(integrator: &str, threads: usize, flag: &Arc<AtomicBool>, at: u64) -> World<DVec3> {
-    let mut s = if integrator == "wisdom_holman" { planets(5, integrator, threads) } else { cloth(8, integrator, threads, 0.05) };
+    let mut s = if integrator == "wisdom_holman" {
+        planets(5, integrator, threads)
+    } else {
+        cloth(8, integrator, threads, 0.05)
+    };
     s.particles_mut().add_term(Box::new(Tripwire { flag: flag.clone(), at, calls: 0 })).unwrap();
     if integrator == "dopri5" {
         s.set_dt(0.5).unwrap();

@@ -478,7 +478,10 @@ mod tests {
         let sys = oscillator(4.0, 1.0, DVec2::new(1.0, 0.0), DVec2::ZERO);
         assert!(ie.check_step(&sys, 1e150).is_ok() && ie.check_step(&sys, 1e-150).is_ok());
         for h in [1e155, 1e300, 1e-155] {
-            assert!(matches!(ie.check_step(&sys, h), Err(crate::Error::InvalidInput { arg, .. }) if arg == "dt"), "{h:e}");
+            assert!(
+                matches!(ie.check_step(&sys, h), Err(crate::Error::InvalidInput { arg, .. }) if arg == "dt"),
+                "{h:e}"
+            );
         }
     }
 }

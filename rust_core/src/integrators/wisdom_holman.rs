@@ -31,9 +31,9 @@
 //! rate r > 0), then moves by Gauss's f and g functions. Elliptic, parabolic and hyperbolic orbits
 //! alike.
 use super::{accel, bad, ensure_len, store, Carry, Integrator, IntegratorInfo, Particles};
-use crate::terms::Setting;
 use crate::error::{invalid, Result};
 use crate::par;
+use crate::terms::Setting;
 use crate::vector::{Real, Vector};
 
 #[derive(Default)]
@@ -206,7 +206,8 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
     }
     fn check_step(&self, sys: &Particles<V>, _dt: Real) -> Result<()> {
         let why = |s: String| Err(invalid("integrator", format!("'wisdom_holman' {s}; use 'yoshida4' or 'verlet'")));
-        let gravity: Vec<_> = sys.forces.terms.iter().filter_map(|t| t.as_fused().and_then(|f| f.newtonian())).collect();
+        let gravity: Vec<_> =
+            sys.forces.terms.iter().filter_map(|t| t.as_fused().and_then(|f| f.newtonian())).collect();
         match gravity[..] {
             [] => return why("splits each body's Kepler orbit about the heaviest one off the scene's pairwise gravity, and this scene has none (add pc.PairwiseGravity; TreeGravity is not split)".into()),
             [(_, eps)] if eps > 0.0 => return why(format!("splits off unsoftened Kepler orbits, and the pairwise gravity's softening is {eps:e} m (set it to 0)")),
