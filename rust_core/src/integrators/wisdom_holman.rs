@@ -113,7 +113,7 @@ impl<V: Vector> WisdomHolman<V> {
             par::chunks1(q, |s, q| {
                 for (j, q) in q.iter_mut().enumerate() {
                     if free(s + j) {
-                        *q = *q + d;
+                        *q += d;
                     }
                 }
             });
