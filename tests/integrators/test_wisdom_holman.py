@@ -11,6 +11,7 @@ import pytest
 import physcore as pc
 
 TWO_PI = 2.0 * math.pi
+EPS = np.finfo(np.float64).eps
 
 
 def _kepler_state(a: float, e: float, mu: float, dim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -123,11 +124,14 @@ def test_a_thousand_times_better_than_verlet_at_the_same_step():
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_momentum_and_angular_momentum_are_kept_to_rounding(dim):
+    # Every factor of the map (kick, jump, Kepler drift) keeps both exactly, so what is left is
+    # rounding: a few roundings a step (4 ε of |L| a step bounds it), where an error of the
+    # method would change L by order (m/M) dt², 1e-3 of it here.
     s = _scene(*_planets(1e-2, dim))
     p0, l0 = s.momentum(), np.atleast_1d(s.angular_momentum())
     s.step(2000)
     assert np.abs(s.momentum() - p0).max() < 1e-16
-    assert np.abs(np.atleast_1d(s.angular_momentum()) - l0).max() < 1e-13 * np.abs(l0).max()
+    assert np.abs(np.atleast_1d(s.angular_momentum()) - l0).max() < 2000 * 4 * EPS * np.abs(l0).max()
 
 
 # ------------------------------------------------------------------ determinism, restarts

@@ -315,7 +315,8 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         let newton = -fs / fp;
         let ds = -fs / (fp + 0.5 * fpp * newton);
         let mut next = s + ds;
-        if !(next > lo && next < hi) {
+        let halley = next > lo && next < hi;
+        if !halley {
             // Halley left the bracket (or f was not finite): bisect it, or widen an open one.
             next = if lo.is_finite() && hi.is_finite() { 0.5 * (lo + hi) } else { 2.0 * s };
         }
@@ -324,6 +325,11 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         }
         s = next;
         g = g_functions(s, beta);
+        // Halley converges cubically: a step below 1e-6 of s leaves an error of order 1e-18 of
+        // it, so s is final (one evaluation of the G-functions fewer than a last, null step).
+        if halley && ds.abs() <= 1e-6 * s.abs() {
+            break;
+        }
     }
     let r = r0 * g[0] + eta * g[1] + mu * g[2];
     // f − 1, g, ḟ and ġ − 1 (Danby, eq. 6.9.29), as increments to keep the rounding small.
