@@ -380,6 +380,25 @@ def test_the_intermediate_axis_flips_with_the_exact_period_keeping_energy_and_mo
     assert np.ptp(energy) < 1e-10 * energy[0] and np.ptp(momentum) < 1e-10 * momentum[0]
 
 
+def test_a_group_without_positions_takes_its_dimension_from_its_velocities():
+    """Without positions, 3-component velocities or angular velocities make a 3D group (they
+    were read as a 2D one's and refused); widths that disagree are refused naming both."""
+    s = _scene(gravity=False)
+    spun = s.add(pc.Bodies("ball", size=0.1, angular_velocities=[(0.0, 0.0, 5.0)]))
+    moving = s.add(pc.Bodies("ball", size=0.1, velocities=[(1.0, 0.0, 0.0)]))
+    assert spun.dim == moving.dim == 3
+    assert np.array_equal(spun.angular_velocities, [[0.0, 0.0, 5.0]])
+    assert np.array_equal(moving.positions, [[0.0, 0.0, 0.0]]) and np.array_equal(moving.velocities, [[1.0, 0.0, 0.0]])
+    assert pc.Bodies("ball", size=0.1, angular_velocities=(0.0, 0.0, 5.0)).dim == 3  # one vector for the group
+    with pytest.raises(pc.InvalidInputError, match=r"angular_velocities: 3 components say a 3D group, but velocities says 2D"):
+        pc.Bodies("ball", size=0.1, velocities=[(1.0, 0.0)], angular_velocities=[(0.0, 0.0, 1.0)])
+    with pytest.raises(pc.InvalidInputError, match=r"velocities: 2 components say a 2D group, but orientations says 3D"):
+        pc.Bodies("ball", size=0.1, orientations=[(0.0, 0.0, 0.0, 1.0)], velocities=[(1.0, 0.0)])
+    # Three balls of the plane, one spin each: a 2D group still.
+    flat = pc.Scene(dim=2).add(pc.Bodies("ball", size=[0.1, 0.2, 0.3], angular_velocities=[1.0, 2.0, 3.0]))
+    assert flat.dim == 2 and np.array_equal(flat.angular_velocities, [1.0, 2.0, 3.0])
+
+
 def test_orientations_set_and_read_back_normalised():
     s = _scene(gravity=False)
     g = s.add(pc.Bodies("box", size=(0.1, 0.2, 0.3), positions=[(0, 0, 0), (1, 0, 0)]))
