@@ -93,6 +93,12 @@ fn sized_shape(shape: &str, s: &[Real]) -> ColliderBuilder {
     }
 }
 
+/// What a collider's shape lacks in parry's mass properties (see the 2D one): nothing in 3D,
+/// where a capsule's caps are hemispheres, their centroids 3r/8 from the flat side as parry has.
+fn added_mass(_c: &Collider) -> Option<MassProperties> {
+    None
+}
+
 /// A hull or mesh group's one shape: the convex hull of its `vertices` (K·3 values,
 /// `n_vertices`), or the triangle mesh of `vertices` and `triangles` (T·3 indices,
 /// `n_triangles`), for fixed bodies only (a mesh has no volume, so no mass).
