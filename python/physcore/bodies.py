@@ -313,7 +313,8 @@ class Bodies(_BodiesPart):
     rolling_friction : float
         μ_r as given (dimensionless).
     inertia : float64
-        kg·m²: (N,) in 2D; (N, 3) in 3D, the principal moments.
+        kg·m²: (N,) in 2D; (N, 3) in 3D, the inertia tensor's diagonal in the body's axes
+        (a box's and a capsule's principal moments; see the property).
 
     Raises
     ------
@@ -737,7 +738,9 @@ class Bodies(_BodiesPart):
     @property
     def inertia(self) -> np.ndarray:
         """Moments of inertia about the centres of mass, kg·m²: (N,) float64 in 2D; (N, 3) in
-        3D, the principal moments."""
+        3D, the diagonal of the inertia tensor in each body's own axes (x, y, z): a box's and a
+        capsule's principal moments (a capsule's axis is its x); a hull's principal axes are
+        where its shape puts them, and its products of inertia are not given."""
         if self.dim == 2:
             return self._fields(["inertia"])[0]
         return np.stack(self._fields(["ix", "iy", "iz"]), axis=1)

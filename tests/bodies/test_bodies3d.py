@@ -380,6 +380,33 @@ def test_the_intermediate_axis_flips_with_the_exact_period_keeping_energy_and_mo
     assert np.ptp(energy) < 1e-10 * energy[0] and np.ptp(momentum) < 1e-10 * momentum[0]
 
 
+def test_inertia_is_about_each_bodys_own_axes():
+    """`inertia` is the diagonal of the inertia tensor in the body's own axes. A capsule's axis
+    is its x: a cylinder (mass m_c, half-length l) and two hemispheres (together m_s), each
+    with its centroid 3r/8 from its flat side, so I_x = m_c r²/2 + 2 m_s r²/5 and
+    I_y = I_z = m_c (3r² + 4l²)/12 + m_s (2r²/5 + l² + 3lr/4) by parallel axes (parry's
+    frame put the axis on y, and the moments came as (I_y, I_x, I_z)); spun about x at ω its
+    kinetic energy is ½ I_x ω². A hull's principal axes are its own affair: the hull of a box
+    turned by φ about z reads cos²φ I_a + sin²φ I_b, sin²φ I_a + cos²φ I_b, I_c."""
+    s = _scene(gravity=False)
+    half, r, rho, w = 0.2, 0.1, 1000.0, 10.0
+    cap = s.add(pc.Bodies("capsule", size=[(half, r)], positions=[(0.0, 0.0, 0.0)], angular_velocities=[(w, 0.0, 0.0)]))
+    m_c, m_s = rho * math.pi * r * r * 2 * half, rho * 4 / 3 * math.pi * r**3
+    axial = m_c * r * r / 2 + 0.4 * m_s * r * r
+    across = m_c * (3 * r * r + 4 * half**2) / 12 + m_s * (0.4 * r * r + half**2 + 0.75 * half * r)
+    assert cap.inertia[0] == pytest.approx([axial, across, across], rel=1e-12)
+    assert s.energy().kinetic == pytest.approx(0.5 * axial * w * w, rel=1e-12)
+    a, b, c = _BRICK
+    phi = 0.5
+    corners = np.array([(x, y, z) for x in (-a, a) for y in (-b, b) for z in (-c, c)])
+    turn = np.array([[math.cos(phi), -math.sin(phi), 0.0], [math.sin(phi), math.cos(phi), 0.0], [0.0, 0.0, 1.0]])
+    hull = s.add(pc.Bodies("hull", vertices=corners @ turn.T, positions=[(2.0, 0.0, 0.0)]))
+    m = rho * 8 * a * b * c
+    i_a, i_b, i_c = m / 3 * np.array([b * b + c * c, a * a + c * c, a * a + b * b])
+    co, si = math.cos(phi) ** 2, math.sin(phi) ** 2
+    assert hull.inertia[0] == pytest.approx([co * i_a + si * i_b, si * i_a + co * i_b, i_c], rel=1e-9)
+
+
 def test_a_group_without_positions_takes_its_dimension_from_its_velocities():
     """Without positions, 3-component velocities or angular velocities make a 3D group (they
     were read as a 2D one's and refused); widths that disagree are refused naming both."""

@@ -166,9 +166,15 @@ fn turning(body: &RigidBody, rc: Vector, t: Vector) -> Real {
     r.dot(body.mass_properties().effective_world_inv_inertia * r)
 }
 
+/// "ix", "iy", "iz": the diagonal of the inertia tensor about the centre of mass in the body's
+/// own axes (kg·m²). parry's principal moments come in its own frame (a capsule's axis, the
+/// body's x, turned onto y; a hull's eigenvectors in any order), so they are turned back; for
+/// a box and a capsule these are the principal moments, for a hull its products of inertia
+/// (off the diagonal) are left out.
 fn get_one(b: &RigidBody, name: &str) -> Real {
     let (t, q, v, w) = (b.translation(), b.rotation(), b.linvel(), b.angvel());
-    let i = b.mass_properties().local_mprops.principal_inertia();
+    let m = b.mass_properties().local_mprops.reconstruct_inertia_matrix();
+    let i = Vector::new(m.x_axis.x, m.y_axis.y, m.z_axis.z);
     match name {
         "x" => t.x,
         "y" => t.y,
