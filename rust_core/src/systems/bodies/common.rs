@@ -1304,7 +1304,7 @@ impl System for Bodies {
         let (k0, u0) = self.mechanical();
         self.params.dt = dt;
         let r = &mut self.d.r;
-        gyroscopic_step(&mut r.bodies, dt);
+        let turns = gyroscopic_step(&mut r.bodies, dt, self.params.num_solver_iterations);
         let tops = tops(r, self.gravity, dt);
         let substep = dt / self.params.num_solver_iterations as Real;
         (self.impacts.gravity, self.impacts.dt, self.impacts.substep) = (self.gravity, dt, substep);
@@ -1312,6 +1312,7 @@ impl System for Bodies {
         hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
         self.rapier_step(stop)?;
         let r = &mut self.d.r;
+        end_turns(&mut r.bodies, turns);
         place_tops(r, tops);
         // The list is emptied in place: its buffer serves every step's impacts.
         let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());

@@ -327,7 +327,11 @@ fn own_gyroscopic(b: RigidBodyBuilder) -> RigidBodyBuilder {
     b
 }
 fn joined_gyroscopic(_bodies: &mut RigidBodySet, _h: RigidBodyHandle) {}
-fn gyroscopic_step(_bodies: &mut RigidBodySet, _dt: Real) {}
+struct Turn;
+fn gyroscopic_step(_bodies: &mut RigidBodySet, _dt: Real, _substeps: usize) -> Vec<Turn> {
+    Vec::new()
+}
+fn end_turns(_bodies: &mut RigidBodySet, _turns: Vec<Turn>) {}
 /// No tops in the plane: a body on a joint turns about one axis, as rapier steps it.
 struct Top;
 fn tops(_r: &Rapier, _gravity: Vector, _dt: Real) -> Vec<Top> {
