@@ -141,22 +141,61 @@ def _width(value: Any) -> int | None:
     return int(a.shape[-1]) if a.ndim >= 1 and a.shape[-1] in (2, 3) and a.dtype != object else None
 
 
-def _dim_of(shape: str, positions: Any, size: Any, orientations: Any, angles: Any, vertices: Any) -> int | None:
-    """The dimension the arguments give (None: they do not say; the scene's then)."""
+def _spin_width(value: Any, n: int) -> int | None:
+    """3 if angular velocities can only be 3D ones: rows of 3, or one vector of 3 for a group
+    of other than 3 bodies (in 2D they are one value a body); None otherwise."""
+    try:
+        a = np.asarray(value)
+    except Exception:  # noqa: BLE001 - checked by name later
+        return None
+    if a.dtype == object:
+        return None
+    if a.ndim == 2 and a.shape[-1] == 3:
+        return 3
+    return 3 if a.ndim == 1 and a.shape[0] == 3 and n != 3 else None
+
+
+def _dim_of(shape: str, positions: Any, size: Any, orientations: Any, angles: Any, vertices: Any,
+            velocities: Any = None, angular_velocities: Any = None) -> int | None:
+    """The dimension the arguments give (None: they do not say; the scene's then). Without
+    positions, the widths of the velocities and angular velocities count too; arguments that
+    give different dimensions are refused, naming both."""
     if positions is not None:
         w = _width(positions)
         if w is None:
             raise InvalidInputError(f"positions: expected shape (N, 2) or (N, 3), got {_check.array('positions', positions).shape}")
         return w
     if shape in _SHAPES_3D or orientations is not None:
-        return 3
-    if shape in _SHAPES_2D_ONLY or angles is not None:
-        return 2
-    if vertices is not None:
-        return _width(vertices)
-    if shape == "box" and size is not None:
-        return _width(size)
-    return None
+        dim, first = 3, "orientations" if orientations is not None else f"shape {shape!r}"
+    elif shape in _SHAPES_2D_ONLY or angles is not None:
+        dim, first = 2, "angles" if angles is not None else f"shape {shape!r}"
+    elif vertices is not None:
+        dim, first = _width(vertices), "vertices"
+    elif shape == "box" and size is not None:
+        dim, first = _width(size), "size"
+    else:
+        dim, first = None, ""
+    said: list[tuple[str, int]] = [(first, dim)] if dim is not None else []
+    if velocities is not None and (w := _width(velocities)):
+        said.append(("velocities", w))
+    if angular_velocities is not None:
+        # Bodies in the group as the sizes count them (one without sizes).
+        try:
+            sized = np.asarray(size) if size is not None and vertices is None else None
+        except Exception:  # noqa: BLE001 - checked by name later
+            sized = None
+        n = 1 if sized is None or sized.dtype == object or sized.ndim == 0 else (
+            sized.shape[0] if sized.ndim == 2 or shape == "ball" else 1)
+        if w := _spin_width(angular_velocities, n):
+            said.append(("angular_velocities", w))
+    if not said:
+        return None
+    first, dim = said[0]
+    for other, d in said[1:]:
+        if d != dim:
+            raise InvalidInputError(f"{other}: {d} components say a {d}D group, but {first} says {dim}D; "
+                                    "make them agree (or give positions, (N, 2) or (N, 3))")
+    return dim
 
 
 class _BodiesPart(Part):
@@ -206,8 +245,9 @@ class Bodies(_BodiesPart):
         radius)``, (N, 2), its axis along the body's x; m, > 0. Not used by polygons, hulls and
         meshes. Its length sets N when ``positions`` is not given.
     positions : (N, 2) or (N, 3) array_like of float, default one body at the origin
-        Centres, m. Their width sets the dimension (else the size's, the shape's, or the
-        scene's when the group is added).
+        Centres, m. Their width sets the dimension (else the shape's, the orientations' or
+        angles', the vertices', a box's size's, the velocities' or angular velocities' (rows of
+        3: 3D), which must agree; else the scene's when the group is added).
     angles : (N,) array_like of float or float, default 0, 2D only
         Orientations, rad (counter-clockwise).
     orientations : (N, 4) or (4,) array_like of float, default identity, 3D only
@@ -273,7 +313,8 @@ class Bodies(_BodiesPart):
     rolling_friction : float
         μ_r as given (dimensionless).
     inertia : float64
-        kg·m²: (N,) in 2D; (N, 3) in 3D, the principal moments.
+        kg·m²: (N,) in 2D; (N, 3) in 3D, the inertia tensor's diagonal in the body's axes
+        (a box's and a capsule's principal moments; see the property).
 
     Raises
     ------
@@ -450,7 +491,7 @@ class Bodies(_BodiesPart):
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
         self.name = name
         self._color_arg = color
-        self.dim = _dim_of(self.shape, positions, size, orientations, angles, vertices)
+        self.dim = _dim_of(self.shape, positions, size, orientations, angles, vertices, velocities, angular_velocities)
         # Checked now in the dimension the arguments give (2 if they do not say; checked again
         # in the scene's when added).
         self._resolve(self.dim or 2)
@@ -697,7 +738,9 @@ class Bodies(_BodiesPart):
     @property
     def inertia(self) -> np.ndarray:
         """Moments of inertia about the centres of mass, kg·m²: (N,) float64 in 2D; (N, 3) in
-        3D, the principal moments."""
+        3D, the diagonal of the inertia tensor in each body's own axes (x, y, z): a box's and a
+        capsule's principal moments (a capsule's axis is its x); a hull's principal axes are
+        where its shape puts them, and its products of inertia are not given."""
         if self.dim == 2:
             return self._fields(["inertia"])[0]
         return np.stack(self._fields(["ix", "iy", "iz"]), axis=1)

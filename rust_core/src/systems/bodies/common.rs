@@ -68,6 +68,22 @@ fn rapier_step_on(
     );
 }
 
+/// Gives body `h` what its collider `c`'s shape lacks in parry's mass properties
+/// (`added_mass`), as its additional mass properties, and its own recomputed from them. Only a
+/// body whose additional ones differ is taken mutably: rapier lists every body so taken as
+/// modified, and the list is saved (a loaded state taken again stays bit for bit).
+fn exact_mass(r: &mut Rapier, h: RigidBodyHandle, c: ColliderHandle) {
+    let Some(add) = r.colliders.get(c).and_then(added_mass) else {
+        return;
+    };
+    let added = Some(Box::new(RigidBodyAdditionalMassProps::MassProps(add)));
+    if r.bodies.get(h).is_some_and(|b| b.mass_properties().additional_local_mprops != added) {
+        let body = &mut r.bodies[h];
+        body.set_additional_mass_properties(add, false);
+        body.recompute_mass_properties_from_colliders(&r.colliders);
+    }
+}
+
 /// A rapier step that took this long runs the next on a watched thread (`Bodies::rapier_step`):
 /// starting the thread costs about 30 µs, under 0.3 % of such a step.
 const WATCHED_STEP: std::time::Duration = std::time::Duration::from_millis(10);
@@ -336,6 +352,7 @@ impl Bodies {
                 .restitution_combine_rule(CoefficientCombineRule::Max);
             let h = self.d.r.bodies.insert(builder(i));
             let ch = self.d.r.colliders.insert_with_parent(c, h, &mut self.d.r.bodies);
+            exact_mass(&mut self.d.r, h, ch);
             self.handles.push(h);
             self.colliders.push(ch);
             let at = ch.into_raw_parts().0 as usize;
@@ -505,7 +522,7 @@ impl Bodies {
     /// bodies and colliders, each collider of the same shape, density and material as the
     /// scene's records built (a state of another scene with as many bodies is refused), and
     /// every body finite.
-    fn take_state(&mut self, d: Dynamic) -> Result<()> {
+    fn take_state(&mut self, mut d: Dynamic) -> Result<()> {
         let same = d.r.colliders.len() == self.colliders.len()
             && self.handles.iter().all(|&h| d.r.bodies.contains(h))
             && self.colliders.iter().all(|&h| {
@@ -520,6 +537,11 @@ impl Bodies {
             });
         if !same {
             return Err(invalid("state", "holds other bodies than the scene's"));
+        }
+        // The exact mass properties whatever the file holds (states saved before 2D capsules
+        // had them carry parry's); none of the bodies changes unless its own are amiss.
+        for (&h, &c) in self.handles.iter().zip(&self.colliders) {
+            exact_mass(&mut d.r, h, c);
         }
         // The trial steps with the tolerances the state's own steps will have (its length unit).
         let kept = self.params;
@@ -1282,7 +1304,7 @@ impl System for Bodies {
         let (k0, u0) = self.mechanical();
         self.params.dt = dt;
         let r = &mut self.d.r;
-        gyroscopic_step(&mut r.bodies, dt);
+        let turns = gyroscopic_step(&mut r.bodies, dt, self.params.num_solver_iterations);
         let tops = tops(r, self.gravity, dt);
         let substep = dt / self.params.num_solver_iterations as Real;
         (self.impacts.gravity, self.impacts.dt, self.impacts.substep) = (self.gravity, dt, substep);
@@ -1290,6 +1312,7 @@ impl System for Bodies {
         hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
         self.rapier_step(stop)?;
         let r = &mut self.d.r;
+        end_turns(&mut r.bodies, turns);
         place_tops(r, tops);
         // The list is emptied in place: its buffer serves every step's impacts.
         let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());
