@@ -87,6 +87,26 @@ def test_an_orbit_about_a_fixed_centre_is_exact_at_any_step(dim, e, bound):
     assert gaps["verlet"] > 1e-2, gaps
 
 
+def test_a_pinned_star_is_the_centre_beside_a_body_of_its_own_mass():
+    # scenes.kepler(mass_ratio=0)'s layout reversed: the test body (mass 1) first, the pinned
+    # star (mass 1) second. The pinned one of the heaviest is the fixed centre.
+    x0, v0 = _kepler_state(1.0, 0.5, 1.0, 2)
+    s = _scene(np.array([x0, [0.0, 0.0]]), np.array([v0, [0.0, 0.0]]), [1.0, 1.0], dt=TWO_PI / 7.3,
+               pinned=[False, True])
+    s.step(73)
+    assert np.linalg.norm(s.positions[0] - _kepler_position(73 * TWO_PI / 7.3, 0.5)) < 1e-11
+
+
+def test_a_body_on_the_star_is_a_divergence():
+    x, v, m = _planets(1e-3)
+    x[2] = x[0]
+    s = _scene(x, v, m)
+    before = s.positions.copy()
+    with pytest.raises(pc.SimulationDiverged):
+        s.step(1)
+    assert np.array_equal(s.positions, before)
+
+
 def test_a_hyperbolic_flyby_agrees_with_a_fine_yoshida4_run():
     # A light body passing the star on a hyperbola (e = 1.5) beside a planet: the Kepler solver's
     # hyperbolic branch, against Yoshida's fourth order at a step 200 times finer.

@@ -48,12 +48,14 @@ pub struct WisdomHolman<V: Vector> {
     w: Vec<V>,
 }
 
-/// The index of the central body (the heaviest, the first of equals) and μ = G m_0 for the
-/// scene's Newtonian gravity (μ = 0 without one: `check_step` refuses that scene).
+/// The index of the central body (the heaviest; of equals, a pinned one, then the first) and
+/// μ = G m_0 for the scene's Newtonian gravity (μ = 0 without one: `check_step` refuses that
+/// scene). A pinned star beside a test body of its own mass is the fixed centre, wherever it is.
 fn centre<V: Vector>(sys: &Particles<V>) -> (usize, Real) {
     let g = sys.forces.terms.iter().find_map(|t| t.as_fused().and_then(|f| f.newtonian())).map_or(0.0, |t| t.0);
-    let m = &sys.model.mass;
-    let c = (0..m.len()).fold(0, |c, i| if m[i] > m[c] { i } else { c });
+    let (m, im) = (&sys.model.mass, &sys.model.inv_mass);
+    let heavier = |i: usize, c: usize| m[i] > m[c] || (m[i] == m[c] && im[i] == 0.0 && im[c] != 0.0);
+    let c = (0..m.len()).fold(0, |c, i| if heavier(i, c) { i } else { c });
     (c, g * m.get(c).copied().unwrap_or(0.0))
 }
 
@@ -101,6 +103,10 @@ impl<V: Vector> WisdomHolman<V> {
                 for j in 0..q.len() {
                     let i = s + j;
                     (q[j], w[j]) = if free(i) { (x[i] - xc, v[i] - vcm) } else { (V::ZERO, V::ZERO) };
+                    if free(i) && x[i] == xc {
+                        // A body on the central one has no orbit: a divergence the step reports.
+                        q[j] = q[j] * Real::NAN;
+                    }
                 }
             });
         }
@@ -292,6 +298,10 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         return (r0v, v0);
     }
     let r0 = r0v.dot(r0v).sqrt();
+    if r0 == 0.0 {
+        // At the centre: no orbit, a divergence for the step to report.
+        return (r0v * Real::NAN, v0 * Real::NAN);
+    }
     let eta = r0v.dot(v0);
     let beta = 2.0 * mu / r0 - v0.dot(v0);
     let zeta = mu - beta * r0;
