@@ -165,14 +165,11 @@ impl<V: Vector> Carry<V> for Boris<V> {
     /// The forces and powers; B is not part of the cache (it depends on the positions alone and
     /// is recomputed, to the same bits, at the next step).
     fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
-        if f.len() != v.len() || p.len() != n_terms {
-            return false;
+        let set = super::set_carried((&mut self.f, &mut self.p, &mut self.valid), f, p, v, n_terms);
+        if set {
+            self.b_valid = false;
         }
-        self.f = f;
-        self.p = p;
-        self.valid = true;
-        self.b_valid = false;
-        true
+        set
     }
 }
 

@@ -294,6 +294,24 @@ pub fn by_name<V: Vector>(name: &str) -> Result<Box<dyn Integrator<V>>> {
     })
 }
 
+/// `Carry::set` for an integrator that carries the forces (N) and term powers (W) of the state it
+/// ended at, "first same as last" (verlet, boris, wisdom_holman): the `slots` take `f` and `p`
+/// and become valid, unless `f` is not one force per velocity of `v` or `p` one power per term
+/// of `n_terms` (then nothing changes and it is false).
+pub(crate) fn set_carried<V: Vector>(
+    slots: (&mut Vec<V>, &mut Vec<Real>, &mut bool),
+    f: Vec<V>,
+    p: Vec<Real>,
+    v: &[V],
+    n_terms: usize,
+) -> bool {
+    if f.len() != v.len() || p.len() != n_terms {
+        return false;
+    }
+    (*slots.0, *slots.1, *slots.2) = (f, p, true);
+    true
+}
+
 /// A copy of `s`, allocated fallibly.
 pub(crate) fn try_copy<T: Clone>(s: &[T]) -> std::result::Result<Vec<T>, TryReserveError> {
     let mut v = Vec::new();

@@ -104,12 +104,6 @@ impl<V: Vector> Carry<V> for VelocityVerlet<V> {
         Some((&mut self.f, &mut self.p, &mut self.valid))
     }
     fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
-        if f.len() != v.len() || p.len() != n_terms {
-            return false;
-        }
-        self.f = f;
-        self.p = p;
-        self.valid = true;
-        true
+        super::set_carried((&mut self.f, &mut self.p, &mut self.valid), f, p, v, n_terms)
     }
 }
