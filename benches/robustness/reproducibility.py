@@ -75,12 +75,20 @@ def _chain(integrator: str, threads: int | None) -> pc.Scene:
 
 
 def _solar(integrator: str, threads: int | None) -> pc.Scene:
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "integrators"))
-    from _solar import initial_state
-
-    x, v, m = initial_state()
+    """The Sun and the four giant planets (their masses, M_sun) on circular orbits at their
+    distances (AU; G = 1, time in yr/2π), a little inclined, in the centre-of-mass frame, at
+    P_Jupiter/20: built here, so the bench needs no peer code (benches/integrators/_solar.py
+    takes REBOUND to turn real elements into positions)."""
+    planets = ((9.547919e-4, 5.2026, 20.0), (2.858860e-4, 9.5549, 317.0), (4.366244e-5, 19.2184, 142.0),
+               (5.151389e-5, 30.1104, 256.0))
+    x, v, m = [np.zeros(3)], [np.zeros(3)], [1.0]
+    for k, (mass, a, deg) in enumerate(planets):
+        ang, tilt, speed = np.radians(deg), 0.01 * (k + 1), np.sqrt((1.0 + mass) / a)
+        x.append(a * np.array([np.cos(ang), np.sin(ang), 0.0]))
+        v.append(speed * np.array([-np.sin(ang) * np.cos(tilt), np.cos(ang) * np.cos(tilt), np.sin(tilt)]))
+        m.append(mass)
+    x, v, m = np.array(x), np.array(v), np.array(m)
+    x, v = x - m @ x / m.sum(), v - m @ v / m.sum()
     s = pc.Scene(3, integrator=integrator, dt=2 * np.pi * 5.2026**1.5 / 20, threads=threads)
     s.add_particles(x, v, masses=m)
     s.add(pc.PairwiseGravity(G=1.0))
@@ -94,8 +102,7 @@ def cases() -> dict[str, tuple[Callable[[int | None], pc.Scene], int]]:
         out[name] = ((lambda t, fn=fn: fn(threads=t)), FEWER.get(name, STEPS))
     for integ in ("euler", "semi_implicit_euler", "verlet", "yoshida4", "rk4", "dopri5", "implicit_euler"):
         out[f"spring_chain/{integ}"] = ((lambda t, i=integ: _chain(i, t)), STEPS)
-    # The Wisdom–Holman map steps planetary systems only: the Sun and the four giant planets
-    # (benches/integrators/_solar.py's elements) at P_Jupiter/20.
+    # The Wisdom–Holman map steps planetary systems only: the Sun and the four giant planets.
     out["solar/wisdom_holman"] = ((lambda t: _solar("wisdom_holman", t)), STEPS)
     for integ in ("verlet", "rk4"):
         # 5184 particles: past the springs' parallel threshold.

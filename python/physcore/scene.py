@@ -451,7 +451,10 @@ class Scene:
         evaluations per step), ``"rk4"``
         (classic Runge–Kutta, 4th order, 4 force evaluations per step), ``"dopri5"`` (adaptive
         Dormand–Prince 5(4), Dormand & Prince 1980: error-controlled internal steps, 6 force
-        evaluations each; see `rtol`; old name ``"rk45"``, deprecated) or ``"boris"`` (the Boris push for charges in magnetic
+        evaluations each; see `rtol`; old name ``"rk45"``, deprecated), ``"wisdom_holman"`` (the
+        Wisdom–Holman map for planetary systems, Wisdom & Holman 1991: Kepler orbits about the
+        heaviest body followed exactly, 2nd order, symplectic; needs one unsoftened
+        :class:`PairwiseGravity`, see :class:`WisdomHolman`) or ``"boris"`` (the Boris push for charges in magnetic
         fields, 2nd order, volume-preserving: turns each velocity through B exactly, so the
         speed keeps to round-off in a pure magnetic field for any dt; velocity Verlet when the
         scene has no magnetic term), ``"xpbd"`` (position-based dynamics with substeps,
