@@ -39,6 +39,13 @@ def client():
         yield c
 
 
+def _workers(c) -> list[str]:
+    """The cluster's worker addresses, asked of the scheduler now. (``scheduler_info()`` hands
+    back its cached identity, whose worker list is empty, when the query meets an OSError: a
+    CI run under load compared the sweep's workers with that empty list.)"""
+    return list(c.nthreads())
+
+
 # ------------------------------------------------------------------------------ runs
 def chain(k: float, dt: float, seed: int | None = None) -> pc.Scene:
     """A hanging spring chain, started from slightly random positions when seeded: nonlinear
@@ -116,7 +123,7 @@ def test_cluster_sweep_equals_plain_loop_bit_for_bit(client):
         for k, v in want.items():
             assert row[k] == v, k
     assert list(par["run"]) == list(range(6))
-    assert set(par["worker"]) <= {w for w in client.scheduler_info()["workers"]}
+    assert set(par["worker"]) <= set(_workers(client))
     assert par["error"].isna().all()
     assert (par["wall_s"] > 0).all()
 
@@ -723,7 +730,7 @@ def test_a_sweep_that_steps_gives_the_rows_of_measure_stepping_alone(how, where,
         assert sorted(sizes) == ([3, 8] if how == "int" else [3, 3, 4])
         assert set(got["worker"]) == set(ref["worker"])
     else:
-        assert set(got["worker"]) <= set(c.scheduler_info()["workers"])
+        assert set(got["worker"]) <= set(_workers(c))
 
 
 def test_a_sweep_that_steps_resumes_running_only_the_missing_runs(tmp_path):
