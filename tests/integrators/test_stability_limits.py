@@ -14,7 +14,21 @@ euler                  [[1, h], [-h, 1]]: |λ| = sqrt(1 + h²)        never (lim
 semi_implicit_euler    kick then drift: [[1 - h², h], [-h, 1]]     h < 2
 verlet                 [[1 - h²/2, h], [-h(1 - h²/4), 1 - h²/2]]   h < 2
 rk4                    R(z) = 1 + z + z²/2 + z³/6 + z⁴/24, z = ih  h ≤ 2√2
+boris                  no magnetic field: velocity Verlet's         h < 2
+yoshida4               V(w₁h) V(w₀h) V(w₁h), V Verlet's (Yoshida    h < 1.5734019474 (first
+                       1990, eq. 4.14)                              |tr| = 2: tr = +2 there)
+xpbd                   `substeps` s semi-implicit Euler substeps    h < 2s (20 at s = 10)
+                       of h/s (no constraints: no projection)
+implicit_euler         (1/(1 + h²)) [[1, h], [-h, 1]]:              every h (A-stable)
+                       |λ| = 1/sqrt(1 + h²)
 =====================  ==========================================  ==============================
+
+A symplectic 2×2 map M (det M = 1) is stable while |tr M| < 2 and leaves the imaginary axis
+where |tr M| = 2: Verlet and semi-implicit Euler at tr = -2 (eigenvalues through -1), Yoshida's
+composition at tr = +2 (through +1: its middle substep runs backwards). Its invariant quadratic
+form is Q = [[-c, (a - d)/2], [(a - d)/2, b]] for M = [[a, b], [c, d]] (MᵀQM = Q), the
+"modified energy" the map conserves exactly. Yoshida's limit has no closed form here: it is the
+root of tr M(h) = 2 found from the matrix (1.5734019474), not from the code.
 
 Every test runs at every SIMD level this CPU has (the ``simd_level`` fixture; the others are
 skipped, saying so), on two scenes: one oscillator tied to an anchor (a spring slice of 8 lanes
@@ -48,15 +62,37 @@ PATHS = ("one", "slice")
 
 # --------------------------------------------------------------------------------- theory
 #: Theoretical stability limit of h = ω·dt, and the bisection bracket (stable end, unstable end).
-LIMIT = {"euler": 0.0, "semi_implicit_euler": 2.0, "verlet": 2.0, "rk4": ROOT8}
-BRACKET = {"euler": (1e-3, 1.0), "semi_implicit_euler": (1.0, 3.0), "verlet": (1.0, 3.0), "rk4": (1.0, 3.0)}
+#: Yoshida's weights (Yoshida 1990, eq. 4.14), as in rust_core/src/integrators/yoshida.rs.
+YOSHIDA_W1 = 1.0 / (2.0 - 2.0 ** (1.0 / 3.0))
+YOSHIDA_W0 = 1.0 - 2.0 * YOSHIDA_W1
+#: pc.XPBD's default substeps (the scenes below pass integrator="xpbd": the defaults).
+XPBD_SUBSTEPS = 10
+LIMIT = {"euler": 0.0, "semi_implicit_euler": 2.0, "verlet": 2.0, "rk4": ROOT8, "boris": 2.0, "xpbd": 2.0 * XPBD_SUBSTEPS}
+BRACKET = {
+    "euler": (1e-3, 1.0),
+    "semi_implicit_euler": (1.0, 3.0),
+    "verlet": (1.0, 3.0),
+    "rk4": (1.0, 3.0),
+    "boris": (1.0, 3.0),
+    "yoshida4": (1.0, 2.0),
+    "xpbd": (10.0, 30.0),
+}
 #: Phase-space start (x, u) of the bisection runs: for the symplectic maps the long axis of the
 #: invariant ellipse (Verlet: u² + (1 - h²/4) x² = const, long axis along x; semi-implicit Euler:
 #: x² + u² - h x u = const, long axis along x = u), the same direction for every h < 2. Starting
 #: there the amplitude never exceeds its start below the limit, so "ends above GAIN × start"
 #: cannot fire on the stable side however eccentric the ellipse gets as h → 2 (from a generic
 #: start the amplitude reaches ~1/sqrt(2 - h) × start, which would bias the measured limit low).
-START = {"euler": (1.0, 0.0), "semi_implicit_euler": (2**-0.5, 2**-0.5), "verlet": (1.0, 0.0), "rk4": (0.6, 0.8)}
+START = {
+    "euler": (1.0, 0.0),
+    "semi_implicit_euler": (2**-0.5, 2**-0.5),
+    "verlet": (1.0, 0.0),
+    "rk4": (0.6, 0.8),
+    "boris": (1.0, 0.0),
+    "xpbd": (2**-0.5, 2**-0.5),  # semi-implicit Euler's, substep by substep
+}
+#: The symplectic maps: stable while |tr M| < 2 (see the module docstring).
+SYMPLECTIC = ("semi_implicit_euler", "verlet", "boris", "yoshida4", "xpbd")
 
 
 def step_matrix(name: str, h: float) -> np.ndarray:
@@ -70,7 +106,37 @@ def step_matrix(name: str, h: float) -> np.ndarray:
     if name == "rk4":  # R(z) on x + i u with z = -ih (u' = -x, x' = u): a scaled rotation
         r = np.polyval([1 / 24, 1 / 6, 1 / 2, 1.0, 1.0], -1j * h)
         return np.array([[r.real, -r.imag], [r.imag, r.real]])
+    if name == "boris":  # the Boris push with no magnetic term is velocity Verlet
+        return step_matrix("verlet", h)
+    if name == "yoshida4":  # V(w₁h), then V(w₀h), then V(w₁h) (symmetric: either order)
+        v1, v0 = step_matrix("verlet", YOSHIDA_W1 * h), step_matrix("verlet", YOSHIDA_W0 * h)
+        return v1 @ v0 @ v1
+    if name == "xpbd":  # s substeps of semi-implicit Euler at h/s; nothing to project
+        return np.linalg.matrix_power(step_matrix("semi_implicit_euler", h / XPBD_SUBSTEPS), XPBD_SUBSTEPS)
+    if name == "implicit_euler":  # (I - hA)⁻¹ with A = [[0, 1], [-1, 0]]
+        return np.array([[1.0, h], [-h, 1.0]]) / (1.0 + h * h)
     raise KeyError(name)
+
+
+def trace_limit(name: str, lo: float, hi: float) -> float:
+    """The first h in (lo, hi) where the symplectic map's |tr M(h)| reaches 2 (bisection to 1e-15)."""
+    a, b = bisect(lambda h: abs(np.trace(step_matrix(name, h))) > 2.0, lo, hi, 1e-15)
+    return 0.5 * (a + b)
+
+
+def edge_start(name: str) -> tuple[float, float]:
+    """The eigenvector of M(h0) at the limit (M ∓ I is nilpotent there): the long axis of the
+    invariant ellipse as h → h0, from where no run grows below the limit (see START)."""
+    m = step_matrix(name, LIMIT[name])
+    a = m - np.sign(np.trace(m)) * np.eye(2)
+    p, q = a[np.argmax(np.abs(a).sum(axis=1))]  # its larger row; the null vector is normal to it
+    return float(-q / math.hypot(p, q)), float(p / math.hypot(p, q))
+
+
+def trace_slope(name: str) -> float:
+    """|d tr M / dh| at the limit (central difference; 4 for Verlet, exactly 2h)."""
+    h0, e = LIMIT[name], 1e-6 * LIMIT[name]
+    return abs(np.trace(step_matrix(name, h0 + e)) - np.trace(step_matrix(name, h0 - e))) / (2 * e)
 
 
 def spectral_radius(name: str, h: float) -> float:
@@ -96,6 +162,10 @@ def finite_run_offset(name: str, n: int, gain: float) -> float:
         return math.sqrt(gain ** (2.0 / n) - 1.0)
     if name in ("semi_implicit_euler", "verlet"):
         return (math.acosh(gain) / (2.0 * n)) ** 2
+    if name in SYMPLECTIC:
+        # The same argument for any symplectic map: |tr M| = 2 + |T'| δ, 2 cosh μ = |tr M|, so
+        # μ ≈ sqrt(|T'| δ) and cosh(nμ) = gain at δ_n = (arccosh(gain) / n)² / |T'| (T' = 4 above).
+        return (math.acosh(gain) / n) ** 2 / trace_slope(name)
     if name == "rk4":
         return 72.0 * math.log(gain) / (n * ROOT8**5)
     raise KeyError(name)
@@ -117,6 +187,10 @@ def bisect(unstable: Callable[[float], bool], lo: float, hi: float, rel: float) 
         else:
             lo = mid
     return lo, hi
+
+
+LIMIT["yoshida4"] = trace_limit("yoshida4", *BRACKET["yoshida4"])
+START["yoshida4"] = edge_start("yoshida4")  # (0, 1): M - I = [[0, 0], [-1.78, 0]] at h0
 
 
 # --------------------------------------------------------------------------------- scenes
@@ -183,6 +257,12 @@ def _params(names):
         n = d["name"]
         if n == "dopri5":
             out.append(pytest.param(n, marks=pytest.mark.skip(reason="dopri5 is adaptive: its step is error-controlled, no fixed-h stability limit")))
+        elif n == "wisdom_holman":
+            reason = "wisdom_holman steps only Kepler problems (a PairwiseGravity scene), no oscillator: its Kepler part is exact"
+            out.append(pytest.param(n, marks=pytest.mark.skip(reason=reason)))
+        elif n == "implicit_euler":
+            reason = "implicit_euler has no limit (A-stable): test_implicit_euler_energy_shrinks_by_exactly_one_over_one_plus_h_squared"
+            out.append(pytest.param(n, marks=pytest.mark.skip(reason=reason)))
         elif n not in LIMIT:
             out.append(pytest.param(n, marks=pytest.mark.skip(reason=f"no stability theory for {n!r} in this file")))
         elif n not in names:
@@ -192,8 +272,8 @@ def _params(names):
     return out
 
 
-ALL = ("euler", "semi_implicit_euler", "verlet", "rk4")
-WITH_STABLE_RANGE = ("semi_implicit_euler", "verlet", "rk4")
+ALL = ("euler", "semi_implicit_euler", "verlet", "rk4", "boris", "yoshida4", "xpbd")
+WITH_STABLE_RANGE = ("semi_implicit_euler", "verlet", "rk4", "boris", "yoshida4", "xpbd")
 
 
 # --------------------------------------------------------------------------------- 1. bisection
@@ -252,7 +332,11 @@ def shadow_form(name: str, h: float) -> np.ndarray:
         return np.array([[1.0 - h * h / 4, 0.0], [0.0, 1.0]])
     if name == "semi_implicit_euler":  # x² + u² - h x u (u after the kick)
         return np.array([[1.0, -h / 2], [-h / 2, 1.0]])
-    raise KeyError(name)
+    # Any other symplectic map: Q = [[-c, (a - d)/2], [(a - d)/2, b]] (the two above, scaled by
+    # h), signed positive definite inside the limit.
+    (a, b), (c, d) = step_matrix(name, h)
+    q = np.array([[-c, (a - d) / 2], [(a - d) / 2, b]])
+    return q / np.sign(np.trace(q))
 
 
 @pytest.mark.parametrize("path", PATHS)
@@ -275,8 +359,13 @@ def test_just_inside_the_limit_the_amplitude_stays_bounded(name, path, simd_leve
     # reaches that bound (so the bound is the sharp one). From (x, u) = (0.6, -0.8) at h = 1.98 it
     # is 5.7× the start for Verlet and 14× for semi-implicit Euler (λ_min = 0.0199 and 0.01).
     n = 4000
-    x, u = trajectory(name, h, path, (0.6, -0.8), n)
     Q = shadow_form(name, h)
+    start = (0.6, -0.8)
+    if name not in ("verlet", "semi_implicit_euler"):
+        # From the ellipse's short axis the amplitude sweeps the whole ratio sqrt(λmax/λmin) of
+        # Q's eigenvalues (Yoshida's ellipse at 0.99 h0 is 5.9:1; from (0.6, -0.8) only 3.6).
+        start = tuple(np.linalg.eigh(Q)[1][:, 1])
+    x, u = trajectory(name, h, path, start, n)
     q = Q[0, 0] * x * x + 2 * Q[0, 1] * x * u + Q[1, 1] * u * u
     np.testing.assert_allclose(q, np.broadcast_to(q[0], q.shape), rtol=1e-11)
     bound = np.sqrt(q[0] / np.linalg.eigvalsh(Q)[0])
@@ -294,10 +383,16 @@ def test_just_outside_the_limit_growth_matches_the_eigenvalue(name, path, record
     if name == "rk4":
         # A scaled rotation: the amplitude is multiplied by exactly |R(ih)| = 1.073 every step.
         n0, n1 = 0, 2000
+    elif name == "xpbd":
+        # Ten semi-implicit Euler substeps at 2.02 each: |λ| = 1.33^10 = 16.9 a step, so the
+        # decaying mode is 16.9^-20 ≈ 3e-25 of the growing one after 10 steps (and 30 more
+        # steps grow by 7e36, within range).
+        n0, n1 = 10, 40
     else:
-        # Two real eigenvalues -|λ|, -1/|λ| (|λ| = 1.33 at h = 2.02): after n0 = 100 steps the
-        # decaying mode is |λ|^-200 ≈ 1e-25 of the growing one, so the amplitude grows by exactly
-        # |λ| per step from then on (before that, by a start-dependent prefactor).
+        # Two real eigenvalues -|λ|, -1/|λ| (|λ| = 1.33 at h = 2.02; Yoshida's: +1.35, +1/1.35
+        # at 1.01 h0): after n0 = 100 steps the decaying mode is |λ|^-200 ≈ 1e-25 of the growing
+        # one, so the amplitude grows by exactly |λ| per step from then on (before that, by a
+        # start-dependent prefactor).
         n0, n1 = 100, 400
     x, u = trajectory(name, h, path, START[name] if name == "rk4" else (0.6, 0.8), n1)
     a = np.hypot(x, u)
@@ -333,6 +428,30 @@ def test_explicit_euler_energy_grows_by_exactly_one_plus_h_squared(h, path, simd
     # Over n steps: log E_n/E_0 = n log1p(h²) up to round-off, at most a few ulp of E per step
     # (measured: below 0.03·n·eps, the errors do not accumulate coherently).
     assert abs(math.log(e[-1] / e[0]) - n * math.log1p(h * h)) <= 4 * n * np.finfo(float).eps
+
+
+# --------------------------------------------------------------------------------- 4. implicit Euler
+@pytest.mark.parametrize("path", PATHS)
+@pytest.mark.parametrize("h", [1e-3, 0.3, 1.0, 10.0, 1e3, 1e5])
+def test_implicit_euler_energy_shrinks_by_exactly_one_over_one_plus_h_squared(h, path, simd_level):
+    # Backward Euler's map M = (I - hA)⁻¹ = [[1, h], [-h, 1]] / (1 + h²) has MᵀM = I / (1 + h²):
+    # every state's energy is multiplied by exactly 1/(1 + h²) each step, at every dt (A-stable,
+    # no limit to find). The spring is linear, so the Baraff–Witkin step (one Newton iteration
+    # of backward Euler) is backward Euler itself, and with every oscillator tied to a pinned
+    # anchor its system matrix is (m + k dt²) I: Jacobi-preconditioned CG solves it exactly.
+    n = 30
+    s, _ = oscillators("implicit_euler", h, path, (0.6, 0.8))
+    e = [s.energy().total]
+    for _ in range(n):
+        s.step(1)
+        e.append(s.energy().total)
+    e = np.array(e)
+    assert np.all(e[1:] < e[:-1]), "backward Euler must lose energy at every step"
+    # Rounding: v' = v0 + Δv cancels to 1/(1 + h²) of v0, so each step's state is relatively
+    # wrong by ~(1 + h²) ulp (measured 9e-11 at h = 1e3; 8 ulp of that is the bound).
+    np.testing.assert_allclose(e[1:] / e[:-1], 1.0 / (1.0 + h * h), rtol=8 * (1.0 + h * h) * np.finfo(float).eps, atol=0)
+    stats = s.integrator_stats
+    assert stats["cg_unconverged"] == 0 and stats["cg_iterations"] == stats["cg_solves"] == n, stats
 
 
 # --------------------------------------------------------------------------------- kernel edge case
