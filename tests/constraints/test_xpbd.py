@@ -352,6 +352,61 @@ def test_physical_pendulum_period():
     assert abs(err) < 1e-5
 
 
+def test_pins_that_fix_a_cluster_hold_it_rigidly():
+    # Two pins fix a rigid body in 2D, three not on a line in 3D: a rigid shape (stiffness 1)
+    # under gravity must not move at all. (The rotation was once fitted to the free particles
+    # alone and turned about the pins' mean: the free particles swung 1.1 m in 0.5 s and the
+    # "rigid" cluster stretched from 0.5 to 0.93 m.)
+    for dim, x, pinned in [
+        (2, [[0, 0], [1, 0], [1.5, 0.0], [1.5, 0.2]], [True, True, False, False]),
+        (3, [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1.5, 0.3, 0.0], [1.5, 0.2, 0.4]], [True, True, True, False, False]),
+    ]:
+        s = pc.Scene(dim, integrator="xpbd", dt=1e-3, xpbd_substeps=10, threads=1)
+        s.add_particles(x, masses=[1.0] * (len(x) - 2) + [0.5, 0.5], pinned=pinned)
+        s.add(pc.Gravity([0.0] * (dim - 1) + [-G]))
+        s.add(pc.XpbdConstraints(shapes=[np.arange(len(x))]))
+        s.step(500)
+        moved = np.abs(s.positions - np.array(x, float)).max()
+        print(f"{dim}D: largest move {moved:.1e} m")
+        assert moved < 1e-12, dim  # the goals are the rest shape itself: rounding only
+
+
+def test_pins_on_a_line_make_a_hinge_in_3d():
+    # Two pins on the x axis leave a 3D cluster one turn, about that axis: a bar of 5 particles
+    # hanging from the axis (in the y-z plane, 0.1 m apart, starting at x = 0.3 and 0.7) swings
+    # as a physical pendulum, each particle keeping its x and its distance to the axis, with the
+    # period 2π√(I/(M g d)) (1 + θ0²/16) of the 2D test above.
+    k, m, a, theta0 = 5, 0.1, 0.1, 0.05
+    r = (1 + np.arange(k)) * a
+    xs = np.where(np.arange(k) % 2 == 0, 0.3, 0.7)
+    free = np.stack([xs, r * math.sin(theta0), -r * math.cos(theta0)], 1)
+    x = np.vstack([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], free])
+    dt = 1e-3
+    s = pc.Scene(3, integrator="xpbd", dt=dt, xpbd_substeps=10, threads=1)
+    s.add_particles(x, masses=m, pinned=[True, True] + [False] * k)
+    s.add(pc.Gravity([0.0, 0.0, -G]))
+    s.add(pc.XpbdConstraints(shapes=[np.arange(k + 2)]))
+    inertia, mass = (m * r**2).sum(), m * k
+    d = (m * r).sum() / mass
+    t0 = 2 * math.pi * math.sqrt(inertia / (mass * G * d))
+    angle, times, worst = [], [], 0.0
+    for _ in range(int(3 * t0 / dt)):
+        s.step(1)
+        p = s.positions[2:]
+        worst = max(worst, np.abs(p[:, 0] - xs).max(), np.abs(np.hypot(p[:, 1], p[:, 2]) - r).max())
+        angle.append(math.atan2(p[-1, 1], -p[-1, 2]))
+        times.append(s.time)
+    angle, times = np.array(angle), np.array(times)
+    idx = np.flatnonzero((angle[:-1] > 0) & (angle[1:] <= 0))
+    tc = times[idx] + dt * angle[idx] / (angle[idx] - angle[idx + 1])
+    period = np.diff(tc).mean()
+    expected = t0 * (1 + theta0**2 / 16)
+    err = period / expected - 1
+    print(f"hinge: period {period:.6f} s, expected {expected:.6f} s, relative error {err:.1e}; largest drift off the hinge's circles {worst:.1e} m")
+    assert worst < 1e-12
+    assert abs(err) < 1e-5  # as the 2D pendulum: XPBD's damping, second order in the period
+
+
 def test_bad_input_raises_value_error_naming_the_argument_before_anything_changes():
     s = pc.Scene(2, integrator="xpbd", threads=1)
     s.add_particles([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [2.0, 0.0]])

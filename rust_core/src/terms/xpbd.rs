@@ -36,7 +36,10 @@
 //!   part of deformations", MIG 2016, warm-started from the shape's previous rotation, so it
 //!   also holds for flat and straight clusters, where A_pq is singular and eq. 7's S⁻¹ fails.
 //!   A cluster with pinned particles turns about their mean (the mass-weighted centre of a
-//!   cluster holding an infinite mass). Shape matching is not compliant: no potential, and s is
+//!   cluster holding an infinite mass), and its rotation is the pins' wherever they fix it (the
+//!   same limit): two pins in 2D, or three not on a line in 3D, hold it rigidly (R fitted to the
+//!   pins alone); pins on a line in 3D leave only the turn about that line, fitted to the free
+//!   particles; one pin leaves every turn to them. Shape matching is not compliant: no potential, and s is
 //!   a fraction per iteration, not a material constant.
 //!
 //! Parallel and deterministic: Gauss–Seidel by graph colouring. Each kind's constraints are
@@ -558,19 +561,79 @@ impl<V: Vector> XpbdConstraints<V> {
                 }
                 cm /= mt;
                 cm0 /= mt;
-                let mut am = DMat3::ZERO;
+                // A_pq split into the free particles' part (mass-weighted) and the pins' (unit
+                // weights): the pins' infinite mass makes their part decide every turn it
+                // determines, the free particles only the turns the pins leave open.
+                let (mut am, mut ap) = (DMat3::ZERO, DMat3::ZERO);
+                let (mut spread, mut far) = (0.0, (0.0, DVec3::ZERO, DVec3::ZERO));
                 for (k, &i) in mem.iter().enumerate() {
+                    let (pk, qk) = (xs[k] - cm, q0[k] - cm0);
+                    spread += qk.length_squared();
                     if model.inv_mass[i as usize] == 0.0 {
+                        ap += DMat3::from_cols(pk * qk.x, pk * qk.y, pk * qk.z);
+                        if qk.length_squared() > far.0 {
+                            far = (qk.length_squared(), qk, pk);
+                        }
                         continue;
                     }
-                    let (pk, qk) = ((xs[k] - cm) * model.mass[i as usize], q0[k] - cm0);
+                    let pk = pk * model.mass[i as usize];
                     am += DMat3::from_cols(pk * qk.x, pk * qk.y, pk * qk.z);
                 }
+                // How many directions the pins fix: none (one pin, or pins at one point), their
+                // axis (pins on a line; 2D: that fixes the turn), or all (3D, pins in a plane).
+                let tiny = 1e-24 * spread;
+                let rank = if !(far.0 > tiny) {
+                    0
+                } else if V::DIM == 2 {
+                    2
+                } else {
+                    let a0 = far.1 / far.0.sqrt();
+                    let off_axis = mem
+                        .iter()
+                        .enumerate()
+                        .filter(|&(_, &i)| model.inv_mass[i as usize] == 0.0)
+                        .map(|(k, _)| (q0[k] - cm0).cross(a0).length_squared())
+                        .fold(0.0, Real::max);
+                    if off_axis > tiny {
+                        2
+                    } else {
+                        1
+                    }
+                };
                 let r = if V::DIM == 2 {
-                    let th = (am.x_axis.y - am.y_axis.x).atan2(am.x_axis.x + am.y_axis.y);
+                    let a = if rank == 0 { am } else { ap };
+                    let th = (a.x_axis.y - a.y_axis.x).atan2(a.x_axis.x + a.y_axis.y);
                     DMat3::from_rotation_z(th)
                 } else {
-                    let q = unsafe { rotation3(am, *rp.get().add(s)) };
+                    let q = match rank {
+                        0 => unsafe { rotation3(am, *rp.get().add(s)) },
+                        2 => unsafe { rotation3(ap, *rp.get().add(s)) },
+                        _ => {
+                            // Pins on a line: turn their rest axis onto the present one, then
+                            // about it by the angle that best fits the free particles.
+                            let (a0, a) = (far.1.normalize(), far.2.normalize_or_zero());
+                            let align =
+                                if a == DVec3::ZERO { DQuat::IDENTITY } else { DQuat::from_rotation_arc(a0, a) };
+                            let (mut sn, mut cs) = (0.0, 0.0);
+                            for (k, &i) in mem.iter().enumerate() {
+                                if model.inv_mass[i as usize] == 0.0 {
+                                    continue;
+                                }
+                                let q = align * (q0[k] - cm0);
+                                let (q, p) = (q - a * a.dot(q), xs[k] - cm);
+                                let p = p - a * a.dot(p);
+                                let m = model.mass[i as usize];
+                                sn += m * a.dot(q.cross(p));
+                                cs += m * q.dot(p);
+                            }
+                            let twist = if a == DVec3::ZERO {
+                                DQuat::IDENTITY
+                            } else {
+                                DQuat::from_axis_angle(a, sn.atan2(cs))
+                            };
+                            twist * align
+                        }
+                    };
                     unsafe { *rp.get().add(s) = q };
                     DMat3::from_quat(q)
                 };
