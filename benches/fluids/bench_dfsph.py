@@ -47,10 +47,10 @@ def front(x, h: float) -> float:
     return float(x[count >= 4, 0].max())
 
 
-def run(nx: int, method: str, threads: int | None) -> dict:
+def run(nx: int, method: str, threads: int | None, dim: int = 2) -> dict:
     """From rest to T* = 4, one advance per frame of T* = 4/120; returns the figures."""
     precision = "f32" if method == "wcsph" else "f64"
-    scene = pc.scenes.dam_break(n=nx, method=method, pass_precision=precision, threads=threads)
+    scene = pc.scenes.dam_break(dim=dim, n=nx, method=method, pass_precision=precision, threads=threads)
     h = scene.fluids[0].h
     scale = math.sqrt(2.0 * G / 1.0)
     frame = 4.0 / 120 / scale

@@ -116,7 +116,10 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
         5–7: goals ``g_i = R (x⁰_i − x⁰_cm) + x_cm`` with ``R`` the rotation of
         ``A_pq = Σ m_i p_i q_iᵀ``; each particle moves ``shape_stiffness`` of the way to its
         goal per iteration). At least 2 particles each. A cluster with pinned particles turns
-        about them. (Or a flat index array with ``shape_sizes``.)
+        about them as far as they let it: one pin is a pivot, two pins in 2D or three not on a
+        line in 3D hold it still, and pins on a line in 3D are a hinge (the rotation is fitted
+        to the pins where they fix it, to the free particles where they do not: the limit of
+        pins of infinite mass). (Or a flat index array with ``shape_sizes``.)
     shape_sizes : None or array_like of int, shape (S,)
         With a flat ``shapes``: the particle count of each cluster, in order.
     shape_rest : None or array_like, shape (Σ sizes, dim)
