@@ -15,13 +15,14 @@ kind              dim  u(x, y, z)                                               
 ``rossler``       3    −y − z, x + ay, b + z(x − c)                                    a=0.2, b=0.2, c=5.7
 ``thomas``        3    sin y − bx, sin z − by, sin x − bz                              b=0.208186
 ``aizawa``        3    (z−b)x − dy, dx + (z−b)y, c + az − z³/3 − (x²+y²)(1+ez) + fzx³  a=0.95, b=0.7, c=0.6, d=3.5, e=0.25, f=0.1
-``halvorsen``     3    −ax − 4y − 4z − y², and cyclically                              a=1.89
+``halvorsen``     3    −ax − 4y − 4z − y², and cyclically                              a=1.27
 ``van_der_pol``   2    y, μ(1 − x²)y − x                                               mu=1
 ================  ===  ==============================================================  ==========================================
 
 Sources: Lorenz, J. Atmos. Sci. 20 (1963) 130, eqs. 25–27; Rössler, Phys. Lett. A 57 (1976)
 397; Thomas, Int. J. Bifurcation Chaos 9 (1999) 1889; Sprott, "Chaos and Time-Series
-Analysis" (2003), Table A.3 (Halvorsen) and "Elegant Chaos" (2010) (Aizawa); van der Pol,
+Analysis" (2003), Table A.3 (Halvorsen, a = 1.27: largest Lyapunov exponent 0.7899; the
+a = 1.89 met in many drawings of it is a limit cycle, exponent 0) and "Elegant Chaos" (2010) (Aizawa); van der Pol,
 Phil. Mag. 2 (1926) 978.
 
 Examples
@@ -60,7 +61,7 @@ FLOWS: dict[str, dict[str, Any]] = {
         "start": (0.1, 0.0, 0.0),
         "max_dt": 0.01,
     },
-    "halvorsen": {"dim": 3, "params": {"a": 1.89}, "start": (-1.48, -1.51, 2.04), "max_dt": 0.005},
+    "halvorsen": {"dim": 3, "params": {"a": 1.27}, "start": (-1.48, -1.51, 2.04), "max_dt": 0.005},
     "van_der_pol": {"dim": 2, "params": {"mu": 1.0}, "start": (0.5, 0.0), "max_dt": 0.01},
 }
 _METHODS = ("euler", "heun", "rk4", "dopri5")
