@@ -42,7 +42,7 @@ def spring_chain(
     suggested step: the whip at the end of the swing reaches energy errors (``energy_drift()``
     at t = 3 s, the defaults) of 5.6e-3 at the suggested step (stable, but visible in the
     books), 1.1e-3 at half of it and 2.8e-4 at a quarter (converging at second order; undamped,
-    3.6e-4 at half the step).
+    −3.6e-4 at half the step).
 
     The defaults make a rope that stretches a few per cent (each link's stiffness × length,
     34000 N/m × 1/39 m, holds the whip's tension to about 4 % strain; 2000 N/m stretched links
