@@ -287,6 +287,8 @@ def test_readme_style_example():
 GRAIN_SCENES = ("galton_board", "billiards", "newtons_cradle", "jelly")
 # Surface tension is DFSPH's, which steps with semi-implicit Euler only (tests/fluids/test_surface_tension.py).
 SEMI_IMPLICIT_ONLY = GRAIN_SCENES + ("droplets", "crown")
+#: Scenes of XpbdConstraints, which only the "xpbd" integrator projects.
+XPBD_ONLY = ("xpbd_cloth", "shape_matched_boxes")
 
 
 GRID_SCENES = {"ripple", "double_slit", "turing", "smoke", "cavity", "vortex_street"}
@@ -313,6 +315,10 @@ def test_every_registered_scene_builds_and_steps(name):
     # the surface-tension scenes, DFSPH's). The grid scenes' integrator= did nothing: since
     # issue 45 it is deprecated and ignored (their grids step with their own schemes).
     integrator = "semi_implicit_euler" if name in SEMI_IMPLICIT_ONLY else "rk4"
+    if name in XPBD_ONLY:  # XpbdConstraints: any other integrator is refused by name
+        with pytest.raises(pc.InvalidInputError, match="integrator"):
+            pc.scenes.REGISTRY[name](integrator=integrator, threads=1)
+        integrator = "xpbd"
     if name in GRID_SCENES:
         assert "integrator" not in inspect.signature(pc.scenes.REGISTRY[name]).parameters
         with pytest.warns(DeprecationWarning, match="integrator= does nothing here and is ignored"):

@@ -154,8 +154,10 @@ class XpbdConstraints(Term, kind="xpbd_constraints"):
 
     Notes
     -----
-    Only ``Scene(integrator="xpbd")`` projects the constraints; under any other integrator the
-    term is inert (no force, no projection) and only reports its potential.
+    Only ``Scene(integrator="xpbd")`` projects the constraints. Any other integrator would step
+    the particles as if they were not there (the term adds no force), so it is refused by name:
+    adding the term to such a scene, or changing an xpbd scene's integrator, raises
+    :class:`~physcore.InvalidInputError` naming ``integrator``, before anything changes.
 
     Examples
     --------

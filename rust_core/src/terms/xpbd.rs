@@ -473,7 +473,7 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
     }
     Ok(Box::new(XpbdConstraints::<V> { name, sets, shapes, n_cov: n, _v: std::marker::PhantomData }))
 }
-crate::register_term!("xpbd_constraints", build);
+crate::register_term!("xpbd_constraints", build, (&["xpbd"], "integrator", "XpbdConstraints are projected by"));
 
 impl<V: Vector> XpbdConstraints<V> {
     /// Number of constraints of each kind: distance, bending, pins, area, volume, shapes.
@@ -703,7 +703,10 @@ impl<V: Vector> Term<V> for XpbdConstraints<V> {
                 .max()
                 .unwrap_or(0),
         );
-        Traits { velocity_dependent: false, min_particles, ..Traits::dissipative() }
+        // Another integrator would step the particles as if the constraints were not there
+        // (they add no force): refused by name, as Contacts are.
+        let integrators = crate::terms::registry::integrator_rule("xpbd_constraints").map(|r| r.0);
+        Traits { velocity_dependent: false, min_particles, integrators, ..Traits::dissipative() }
     }
 
     /// 1/ω_max of the compliant distance and pin constraints, ω_max² ≤ max_p (2/m_p) Σ_{c ∋ p}
