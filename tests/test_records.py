@@ -148,6 +148,8 @@ BAD_FIELDS = [
     (lambda: pc.XPBD(substeps=0), "substeps", pc.InvalidInputError),
     (lambda: pc.XPBD(substeps=True), "substeps", pc.InvalidTypeError),
     (lambda: pc.XPBD(iterations=10_001), "iterations", pc.InvalidInputError),
+    (lambda: pc.WisdomHolman(coordinates="heliocentric"), "coordinates", pc.InvalidInputError),
+    (lambda: pc.WisdomHolman(coordinates=0), "coordinates", pc.InvalidTypeError),
     (lambda: pc.WCSPH(gamma=16), "gamma", pc.InvalidInputError),
     (lambda: pc.WCSPH(clamp_pressure=1), "clamp_pressure", pc.InvalidTypeError),
     (lambda: pc.WCSPH(pass_precision="f16"), "pass_precision", pc.InvalidInputError),
@@ -191,6 +193,7 @@ CONFLICTS = [
     ({"integrator": pc.ImplicitEuler(cg_max_iter=7), "cg_max_iter": 8}, "cg_max_iter"),
     ({"integrator": pc.XPBD(substeps=4), "xpbd_substeps": 5}, "xpbd_substeps"),
     ({"integrator": pc.XPBD(iterations=2), "xpbd_iterations": 3}, "xpbd_iterations"),
+    ({"integrator": pc.WisdomHolman(coordinates="jacobi"), "wh_coordinates": "democratic_heliocentric"}, "wh_coordinates"),
 ]
 
 

@@ -8,8 +8,8 @@ samples; energy calls and WHFast's synchronize at outputs are excluded), median 
 which every configuration runs once, in a fixed interleaved order (physcore and REBOUND rows
 alternate), so load changes hit both.
 
-physcore: wisdom_holman (the Wisdom–Holman map in democratic heliocentric coordinates, no
-corrector), verlet, yoshida4, rk4 (fixed dt), dopri5 (rtol sweep, atol = 1e-3 rtol, dt = output
+physcore: wisdom_holman (the Wisdom–Holman map, no corrector, in Jacobi coordinates, "wh jacobi",
+and in democratic heliocentric ones, "wh dh"), verlet, yoshida4, rk4 (fixed dt), dopri5 (rtol sweep, atol = 1e-3 rtol, dt = output
 interval); all threads = 1. REBOUND: leapfrog (the same KDK/DKD method as verlet), WHFast
 (Jacobi, safe_mode=1, no corrector: "wh" default), WHFast with the 17th-order corrector and
 safe_mode = 0 (keep_unsynchronized = 1: outputs do not perturb the run), IAS15 (epsilon 1e-9).
@@ -42,11 +42,16 @@ PJ = 2 * np.pi * 5.2026 ** 1.5  # Jupiter's period, time units (~11.86 yr)
 class PcRun:
     code = "physcore"
 
-    def __init__(self, integrator, dt=None, rtol=None):
-        self.integrator, self.dt, self.rtol = integrator, dt, rtol
+    def __init__(self, integrator, dt=None, rtol=None, coordinates="jacobi"):
+        self.integrator, self.dt, self.rtol, self.coordinates = integrator, dt, rtol, coordinates
 
     def label(self):
-        return f"{self.integrator} rtol={self.rtol:g}" if self.rtol else f"{self.integrator} dt=P_J/{PJ / self.dt:.0f}"
+        if self.rtol:
+            return f"{self.integrator} rtol={self.rtol:g}"
+        name = self.integrator
+        if name == "wisdom_holman":
+            name = f"wh {'jacobi' if self.coordinates == 'jacobi' else 'dh'}"
+        return f"{name} dt=P_J/{PJ / self.dt:.0f}"
 
     def run(self, T, S):
         if self.rtol:
@@ -54,7 +59,7 @@ class PcRun:
             per = 1
         else:
             per = max(1, round(T / S / self.dt))
-            s = pc.Scene(3, integrator=self.integrator, dt=T / S / per, threads=1)
+            s = pc.Scene(3, integrator=self.integrator, dt=T / S / per, threads=1, wh_coordinates=self.coordinates)
         s.add_particles(X, V, masses=M)
         s.add(pc.PairwiseGravity(G=1.0))
         e0 = s.energy().total
@@ -117,6 +122,7 @@ def configs(full: bool):
     f = [PJ / 100, PJ / 300, PJ / 1000, PJ / 3000] + ([PJ / 10000] if full else [])
     w = [PJ / 10, PJ / 20, PJ / 50, PJ / 100]
     pc_runs = ([PcRun("wisdom_holman", dt) for dt in w]
+               + [PcRun("wisdom_holman", dt, coordinates="democratic_heliocentric") for dt in w]
                + [PcRun("verlet", dt) for dt in f[1:]] + [PcRun("yoshida4", dt) for dt in [PJ / 30] + f[:3]]
                + [PcRun("rk4", dt) for dt in f[:3]] + [PcRun("dopri5", rtol=r) for r in (1e-8, 1e-10, 1e-12)])
     rb_runs = ([RbRun("whfast", dt) for dt in w] + [RbRun("whfast", dt, corrector=17, safe=0) for dt in w]

@@ -59,6 +59,16 @@ def check_xpbd_iterations(value: object, arg: str = "xpbd_iterations") -> int:
     return _check.int_in_range(arg, value, *XPBD_ITERATIONS_RANGE)
 
 
+#: The coordinates of ``"wisdom_holman"`` (``WisdomHolman(coordinates=...)``, Scene's
+#: ``wh_coordinates``), the default first.
+WH_COORDINATES = ("jacobi", "democratic_heliocentric")
+
+
+def check_wh_coordinates(value: object, arg: str = "wh_coordinates") -> str:
+    """``value`` as one of :data:`WH_COORDINATES` (TypeError / InvalidInputError naming ``arg``)."""
+    return _check.choice(arg, value, WH_COORDINATES)
+
+
 def _core_rules() -> Any:
     """A bare core simulation, asked only to check options: the ranges of ``rtol``, ``atol`` and
     ``cg_tol`` are the core's (``set_tolerances``, ``set_solver_options``), stated there once.
@@ -177,26 +187,53 @@ class Dopri5(Integrator, name="dopri5"):
 
 @dataclass(frozen=True, kw_only=True)
 class WisdomHolman(Integrator, name="wisdom_holman"):
-    """The Wisdom–Holman map for planetary systems (Wisdom & Holman, AJ 102 (1991) 1528), in the
-    democratic heliocentric coordinates of Duncan, Levison & Lee (AJ 116 (1998) 2067): each body
-    follows its Kepler orbit about the heaviest particle exactly (a universal-variable Kepler
-    solver, Danby 1992 §6.9), and the rest of the forces kick it. Second order, symplectic, one
-    force evaluation a step, with an error of order (m_planet / m_central) dt²: on the outer Solar
-    System it reaches Verlet's energy error at a step 30 times longer (P_Jupiter/20 against
-    P_Jupiter/600). No options.
+    """The Wisdom–Holman map for planetary systems (Wisdom & Holman, AJ 102 (1991) 1528): each
+    body follows a Kepler orbit exactly (a universal-variable Kepler solver, Danby 1992 §6.9), and
+    the rest of the forces kick it. Second order, symplectic, one force evaluation a step, with
+    an error of order (m_planet / m_central) dt²: on the outer Solar System it reaches Verlet's
+    energy error at a step 43 times longer (P_Jupiter/20 against P_Jupiter/860, in Jacobi
+    coordinates).
+
+    Parameters
+    ----------
+    coordinates : {"jacobi", "democratic_heliocentric"}
+        The split. ``"jacobi"`` (default; Wisdom & Holman 1991, as REBOUND's WHFast, Rein &
+        Tamayo, MNRAS 452 (2015) 376): body k's orbit is about the centre of mass of the
+        heaviest particle and the bodies listed before it, with their mass (list the planets from
+        the inside out). ``"democratic_heliocentric"`` (Duncan, Levison & Lee, AJ 116 (1998)
+        2067): each orbit is about the heaviest particle, with heliocentric positions and
+        barycentric velocities, and the Sun's reflex is a separate drift (the order of the bodies
+        does not matter). Jacobi is the default because it is the more accurate on a hierarchical
+        system for the same force evaluations: on the outer Solar System over 10⁴ years at
+        P_Jupiter/20 its energy error is half the heliocentric one (REBOUND's WHFast's, to three
+        digits), on a star with planets at a = 1 and 4 a fifteenth of it, and two bodies are
+        exact. Its step costs two Kepler solves a body to the heliocentric one's one, so on the
+        outer Solar System the two reach a given error in about the same time; a body that
+        passes inside the orbit of one listed before it (a comet) is better served by the
+        heliocentric split (docs/guide/integrators.md). Scene's keyword ``wh_coordinates``.
+        About a pinned (fixed) centre the two are the same map.
 
     The scene needs exactly one :class:`~physcore.PairwiseGravity` with ``softening=0`` (the
-    Kepler part is split off it: its pairs with the heaviest particle are left out of the kick)
-    and no velocity-dependent force; other conservative terms (uniform fields, springs, Coulomb
-    forces) join the kick. Only the heaviest particle may be pinned, which makes it a fixed
-    centre. A scene that does not fit is refused when it steps, before anything changes
-    (:class:`~physcore.InvalidInputError` naming ``integrator``). Close encounters between the
-    other bodies are not treated specially: the step must resolve them, as with Verlet.
+    Kepler part is split off it) and no velocity-dependent force; other conservative terms
+    (uniform fields, springs, Coulomb forces) join the kick. Only the heaviest particle may be
+    pinned, which makes it a fixed centre. A scene that does not fit is refused when it steps,
+    before anything changes (:class:`~physcore.InvalidInputError` naming ``integrator``). Close
+    encounters between the other bodies are not treated specially: the step must resolve them,
+    as with Verlet.
+
+    Raises
+    ------
+    InvalidTypeError
+        (a ``TypeError``) ``coordinates`` not a str, naming it.
+    InvalidInputError
+        (a ``ValueError``) ``coordinates`` not one of the names, naming it.
 
     Examples
     --------
     >>> import physcore as pc
     >>> scene = pc.Scene(dim=2, dt=0.05, integrator=pc.WisdomHolman())
+    >>> scene.wh_coordinates
+    'jacobi'
     >>> _ = scene.add_particles([[0, 0], [1, 0], [2, 0]], [[0, 0], [0, 1], [0, 0.7071]],
     ...                         masses=[1.0, 1e-3, 1e-3])
     >>> _ = scene.add(pc.PairwiseGravity(G=1.0))
@@ -205,6 +242,13 @@ class WisdomHolman(Integrator, name="wisdom_holman"):
     >>> abs(scene.energy().total / e0 - 1) < 1e-5
     True
     """
+
+    scene_options: ClassVar[dict[str, str]] = {"wh_coordinates": "coordinates"}
+
+    coordinates: str = WH_COORDINATES[0]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "coordinates", check_wh_coordinates(self.coordinates, "coordinates"))
 
 
 @dataclass(frozen=True, kw_only=True)

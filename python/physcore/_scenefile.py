@@ -118,6 +118,10 @@ _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 # accelerations were current; its raw rows are the members device_* (_expected_members).
 _META_DEFAULTS.update({"device": "cpu", "device_acc_valid": False})
 _META_OPTIONAL.update({"device": "str", "device_acc_valid": "bool"})
+# The "wisdom_holman" coordinates: files written before the option stepped the democratic
+# heliocentric split, and go on with it.
+_META_DEFAULTS["wh_coordinates"] = "democratic_heliocentric"
+_META_OPTIONAL["wh_coordinates"] = "str"
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {

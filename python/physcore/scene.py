@@ -35,7 +35,9 @@ from ._integrators import (
     Dopri5,
     ImplicitEuler,
     Integrator,
+    WisdomHolman,
     check_cg_max_iter,
+    check_wh_coordinates,
     check_xpbd_iterations,
     check_xpbd_substeps,
 )
@@ -470,7 +472,8 @@ class Scene:
         Each name has an immutable record holding that integrator's own options, checked when
         the record is made: :class:`~physcore.Euler`, :class:`~physcore.SemiImplicitEuler`,
         :class:`~physcore.Verlet`, :class:`~physcore.Yoshida4`, :class:`~physcore.RK4`,
-        :class:`~physcore.Dopri5` (``rtol``, ``atol``), :class:`~physcore.Boris`,
+        :class:`~physcore.Dopri5` (``rtol``, ``atol``), :class:`~physcore.WisdomHolman`
+        (``coordinates``: ``wh_coordinates`` here), :class:`~physcore.Boris`,
         :class:`~physcore.XPBD` (``substeps``, ``iterations``: ``xpbd_substeps``,
         ``xpbd_iterations`` here) and :class:`~physcore.ImplicitEuler` (``cg_tol``,
         ``cg_max_iter``). ``integrator=pc.Dopri5(rtol=1e-8)`` makes the same scene as
@@ -536,6 +539,9 @@ class Scene:
         10000, default 1) of ``"xpbd"``; kept, and ignored, by the other integrators. Many
         substeps of one iteration each converge faster than few substeps of many iterations
         ("Small steps in physics simulation", Macklin et al., SCA 2019).
+    wh_coordinates : {"jacobi", "democratic_heliocentric"}
+        The coordinates of ``"wisdom_holman"``'s split (default ``"jacobi"``; see
+        :class:`WisdomHolman`); kept, and ignored, by the other integrators.
 
     Raises
     ------
@@ -574,6 +580,7 @@ class Scene:
         threads: int | None = None,
         xpbd_substeps: int = XPBD.substeps,
         xpbd_iterations: int = XPBD.iterations,
+        wh_coordinates: str = WisdomHolman.coordinates,
         device: str = "cpu",
     ) -> None:
         device = _check_device(device)
@@ -586,13 +593,16 @@ class Scene:
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
         cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), check_cg_max_iter(cg_max_iter)
         xpbd_substeps, xpbd_iterations = check_xpbd_substeps(xpbd_substeps), check_xpbd_iterations(xpbd_iterations)
+        wh_coordinates = check_wh_coordinates(wh_coordinates)
         options = _record_options(
             integrator,
             {"rtol": rtol, "atol": atol, "cg_tol": cg_tol, "cg_max_iter": cg_max_iter,
-             "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations},
+             "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations,
+             "wh_coordinates": wh_coordinates},
         )
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
+        wh_coordinates = options["wh_coordinates"]
         integrator = name
         # device="auto": the precision follows the choice made at the first step (f64 on the CPU,
         # f32 on a GPU) unless it was given.
@@ -612,6 +622,7 @@ class Scene:
             )
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.set_substeps(xpbd_substeps, xpbd_iterations)
+        sim.set_wh_coordinates(wh_coordinates)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         # The CPU's f32 mode rounds the stored state; a device computes in its own precision.
         sim.single = precision == "f32" and device in ("cpu", "auto")
@@ -1265,6 +1276,16 @@ class Scene:
         self._sim.set_substeps(self.xpbd_substeps, check_xpbd_iterations(value))
 
     @property
+    def wh_coordinates(self) -> str:
+        """The coordinates of ``"wisdom_holman"``'s split (see :class:`WisdomHolman`). Settable;
+        a change takes effect at the next step."""
+        return str(self._sim.wh_coordinates)
+
+    @wh_coordinates.setter
+    def wh_coordinates(self, value: str) -> None:
+        self._sim.set_wh_coordinates(check_wh_coordinates(value))
+
+    @property
     def precision(self) -> str:
         """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor; on
         a GPU, of the device's state and arithmetic)."""
@@ -1897,6 +1918,7 @@ class Scene:
             "precision": self.precision,
             "xpbd_substeps": self.xpbd_substeps,
             "xpbd_iterations": self.xpbd_iterations,
+            "wh_coordinates": self.wh_coordinates,
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,
@@ -2029,6 +2051,7 @@ class Scene:
                 threads=threads,
                 xpbd_substeps=meta["xpbd_substeps"],
                 xpbd_iterations=meta["xpbd_iterations"],
+                wh_coordinates=meta["wh_coordinates"],
                 device=device,
             )
         if z["positions"].shape[0]:

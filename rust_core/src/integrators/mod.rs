@@ -74,6 +74,8 @@ pub struct IntegratorOptions {
     pub xpbd_substeps: u32,
     /// "xpbd": constraint iterations per substep, 1..=10000. Default 1.
     pub xpbd_iterations: u32,
+    /// "wisdom_holman": the coordinates of the split. Default Jacobi.
+    pub wh_coordinates: wisdom_holman::Coordinates,
 }
 
 impl Default for IntegratorOptions {
@@ -85,6 +87,7 @@ impl Default for IntegratorOptions {
             cg_max_iter: implicit_euler::DEFAULT_MAX_ITER,
             xpbd_substeps: 10,
             xpbd_iterations: 1,
+            wh_coordinates: wisdom_holman::Coordinates::default(),
         }
     }
 }

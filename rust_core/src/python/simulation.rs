@@ -429,6 +429,16 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.particles_mut().set_substeps(substeps, iterations)).map_err(|e| to_py(py, e))
     }
 
+    /// The coordinates of "wisdom_holman" ("jacobi" or "democratic_heliocentric").
+    #[getter]
+    fn wh_coordinates(&self) -> &'static str {
+        with_sim!(&self.inner, s => s.particles().wh_coordinates())
+    }
+
+    fn set_wh_coordinates(&mut self, py: Python<'_>, name: &str) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.particles_mut().set_wh_coordinates(name)).map_err(|e| to_py(py, e))
+    }
+
     /// (accepted, rejected, next internal step s) for "dopri5", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
         with_sim!(&self.inner, s => s.particles().adaptive_stats())

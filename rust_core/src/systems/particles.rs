@@ -255,6 +255,17 @@ impl<V: Vector> ParticleSystem<V> {
         (self.options.xpbd_substeps, self.options.xpbd_iterations)
     }
 
+    /// The coordinates of the "wisdom_holman" split by name ("jacobi", "democratic_heliocentric";
+    /// `InvalidInput` naming `wh_coordinates` for another); stored for any integrator.
+    pub fn set_wh_coordinates(&mut self, name: &str) -> Result<()> {
+        let wh_coordinates = integrators::wisdom_holman::Coordinates::by_name(name)?;
+        self.set_options(IntegratorOptions { wh_coordinates, ..self.options })
+    }
+    /// The name of the "wisdom_holman" coordinates.
+    pub fn wh_coordinates(&self) -> &'static str {
+        self.options.wh_coordinates.name()
+    }
+
     /// Relative and absolute (m, m/s) tolerances of the adaptive integrator; stored for any
     /// integrator, used by "dopri5". rtol in [1e-14, 1), atol >= 0.
     pub fn set_tolerances(&mut self, rtol: Real, atol: Real) -> Result<()> {
