@@ -315,6 +315,14 @@ def test_rigid_boxes_collide_through_their_grains_and_stack():
     assert abs(s.energy_drift()) < 1e-3
 
 
+def _period(angle, times, dt: float) -> float:
+    """The mean time between downward zero crossings of ``angle`` (linear interpolation)."""
+    angle, times = np.asarray(angle), np.asarray(times)
+    idx = np.flatnonzero((angle[:-1] > 0) & (angle[1:] <= 0))
+    tc = times[idx] + dt * angle[idx] / (angle[idx] - angle[idx + 1])
+    return float(np.diff(tc).mean())
+
+
 def test_physical_pendulum_period():
     # A rigid bar of 6 particles (0.1 kg each, 0.1 m apart) swinging about the pinned first one.
     k, m, a = 6, 0.1, 0.1
@@ -336,11 +344,7 @@ def test_physical_pendulum_period():
         p = s.positions[-1]
         angle.append(math.atan2(p[0], -p[1]))
         times.append(s.time)
-    angle, times = np.array(angle), np.array(times)
-    # Downward zero crossings (linear interpolation), two of them one period apart.
-    idx = np.flatnonzero((angle[:-1] > 0) & (angle[1:] <= 0))
-    tc = times[idx] + dt * angle[idx] / (angle[idx] - angle[idx + 1])
-    period = np.diff(tc).mean()
+    period = _period(angle, times, dt)
     # The finite amplitude lengthens the period by θ0²/16 (3e-4 relative at 0.05 rad).
     expected = t0 * (1 + theta0**2 / 16)
     err = period / expected - 1
@@ -396,10 +400,7 @@ def test_pins_on_a_line_make_a_hinge_in_3d():
         worst = max(worst, np.abs(p[:, 0] - xs).max(), np.abs(np.hypot(p[:, 1], p[:, 2]) - r).max())
         angle.append(math.atan2(p[-1, 1], -p[-1, 2]))
         times.append(s.time)
-    angle, times = np.array(angle), np.array(times)
-    idx = np.flatnonzero((angle[:-1] > 0) & (angle[1:] <= 0))
-    tc = times[idx] + dt * angle[idx] / (angle[idx] - angle[idx + 1])
-    period = np.diff(tc).mean()
+    period = _period(angle, times, dt)
     expected = t0 * (1 + theta0**2 / 16)
     err = period / expected - 1
     print(f"hinge: period {period:.6f} s, expected {expected:.6f} s, relative error {err:.1e}; largest drift off the hinge's circles {worst:.1e} m")
