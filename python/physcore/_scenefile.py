@@ -118,10 +118,12 @@ _META_OPTIONAL.update({"xpbd_substeps": "int", "xpbd_iterations": "int"})
 # accelerations were current; its raw rows are the members device_* (_expected_members).
 _META_DEFAULTS.update({"device": "cpu", "device_acc_valid": False})
 _META_OPTIONAL.update({"device": "str", "device_acc_valid": "bool"})
-# The "wisdom_holman" coordinates: files written before the option stepped the democratic
-# heliocentric split, and go on with it.
-_META_DEFAULTS["wh_coordinates"] = "democratic_heliocentric"
+# The "wisdom_holman" coordinates, written where they matter (a wisdom_holman scene, or one set
+# off the default; `Scene.save`), so that other scenes' files keep their bytes. Without the
+# key a wisdom_holman file was written before the option and stepped the democratic
+# heliocentric split, and goes on with it; any other file takes the default, Jacobi (`read`).
 _META_OPTIONAL["wh_coordinates"] = "str"
+WH_DEFAULT = "jacobi"
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {
@@ -344,6 +346,7 @@ def _parse_meta(r: _Reader, text: str) -> dict[str, Any]:
     meta = r.record("meta", raw, fields, dim)
     for k, default in _META_DEFAULTS.items():
         meta.setdefault(k, default)
+    meta.setdefault("wh_coordinates", "democratic_heliocentric" if meta.get("integrator") == "wisdom_holman" else WH_DEFAULT)
 
     terms = []
     names = {"collisions"}  # reserved: the colliders' entry in the energy books

@@ -1918,7 +1918,9 @@ class Scene:
             "precision": self.precision,
             "xpbd_substeps": self.xpbd_substeps,
             "xpbd_iterations": self.xpbd_iterations,
-            "wh_coordinates": self.wh_coordinates,
+            # Where it matters only: other scenes' files keep their bytes (`_scenefile`).
+            **({"wh_coordinates": self.wh_coordinates}
+               if self.integrator == "wisdom_holman" or self.wh_coordinates != _scenefile.WH_DEFAULT else {}),
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,

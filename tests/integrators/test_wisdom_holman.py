@@ -276,6 +276,40 @@ def test_save_load_continues_bit_for_bit(tmp_path, coordinates):
     assert np.array_equal(again.velocities, straight.velocities)
 
 
+def test_files_hold_the_coordinates_where_they_matter(tmp_path):
+    # A wisdom_holman scene's file names its coordinates; another scene's names them only when
+    # set off the default, so files of every other scene keep their bytes (the naming tests
+    # compare saved files with stored ones). Without the key a wisdom_holman file was written
+    # before the option: it stepped, and goes on with, the democratic heliocentric split.
+    import json
+
+    def meta(path):
+        with np.load(path) as z:
+            return json.loads(str(z["meta"]))
+
+    for integrator, coords, written in [("wisdom_holman", "jacobi", True), ("verlet", "jacobi", False),
+                                        ("verlet", "democratic_heliocentric", True)]:
+        s = _scene(*_planets(1e-3), integrator=integrator, coordinates=coords)
+        path = s.save(tmp_path / f"{integrator}_{coords}.npz")
+        assert ("wh_coordinates" in meta(path)) == written, (integrator, coords)
+        assert pc.Scene.load(path).wh_coordinates == coords
+    # An old wisdom_holman file: the key removed.
+    s = _scene(*_planets(1e-3), coordinates="democratic_heliocentric")
+    s.step(5)
+    path = s.save(tmp_path / "old.npz")
+    with np.load(path) as z:
+        members = {k: z[k] for k in z.files}
+    m = meta(path)
+    del m["wh_coordinates"]
+    members["meta"] = np.array(json.dumps(m))
+    np.savez(tmp_path / "old2.npz", **members)
+    old = pc.Scene.load(tmp_path / "old2.npz")
+    assert old.wh_coordinates == "democratic_heliocentric"
+    old.step(5)
+    s.step(5)
+    assert np.array_equal(old.positions, s.positions)
+
+
 # -------------------------------------------------------------------------------- option
 def test_the_default_is_jacobi_and_the_record_is_the_keyword():
     assert pc.WisdomHolman().coordinates == "jacobi" == pc.Scene().wh_coordinates
