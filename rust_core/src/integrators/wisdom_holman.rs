@@ -21,7 +21,7 @@
 //! (the centre of mass drifts uniformly beside it), one force evaluation mid-step, nothing
 //! carried from one step to the next. With the Kepler flow outermost the leading error term,
 //! of first order in the planets' masses, has half the coefficient it has with the kick
-//! outermost (Strang splitting's [A,[A,B]] term: 1/24 for the outer flow A, 1/12 for the
+//! outermost (Strang splitting's `[A, [A, B]]` term: 1/24 for the outer flow A, 1/12 for the
 //! inner). Measured on the outer Solar System at P_Jupiter/20 over 10⁴ years: 2.31e-6 of the
 //! energy, WHFast's to three digits, where the kick-first order gave 4.54e-6 in Jacobi and
 //! 4.74e-6 in heliocentric coordinates. The coordinates matter more the wider apart the orbits:
