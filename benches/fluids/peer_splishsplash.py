@@ -8,7 +8,8 @@ rest to T* = t √(2g/W) = 4 (t = 0.903 s: the collapse, the surge and its impac
 DFSPH (Bender & Koschier 2017) with density and divergence tolerances of 0.1 % (mean), at most 100
 iterations per solve, steps by the CFL condition.
 
-* physcore: ``pc.scenes.dam_break(dim, n=nx, method="dfsph")`` (f64; cubic spline h = 1.3 Δx;
+* physcore: ``pc.scenes.dam_break(dim, n=nx, method="dfsph")`` (f64; cubic spline, h the fluid's default,
+  1.3 Δx in 2D and 1.0 Δx in 3D, or ``--smoothing``;
   3 layers of wall particles, Akinci et al. 2012; Monaghan viscosity α = 0.05; dt = 0.4 h/|v|max
   and the viscous and force limits), advanced frame by frame as a render does (bench_dfsph.run).
 * SPlisHSPlasH 2.19 (``pip install pysplishsplash``): the same geometry as a scene file (fluid
@@ -175,7 +176,7 @@ def run_splish(nx: int, dim: int, threads: int, python: str) -> dict:
     return rec
 
 
-def run_physcore(nx: int, dim: int, threads: int, frames: bool, smoothing: float) -> dict:
+def run_physcore(nx: int, dim: int, threads: int, frames: bool, smoothing: float | None) -> dict:
     """physcore from rest to T* = 4: one ``advance`` per mark (T* = 1, 2, 3, 4), as SPlisHSPlasH
     steps freely between them, or with ``frames`` one per frame of T* = 4/120 as a render does
     (``bench_dfsph.run``: each frame a whole number of equal steps, up to twice as many)."""
@@ -185,7 +186,7 @@ def run_physcore(nx: int, dim: int, threads: int, frames: bool, smoothing: float
     import physcore as pc
 
     if frames:
-        if smoothing != 1.3:
+        if smoothing is not None:
             sys.exit("--frames runs bench_dfsph.run, at the default smoothing only")
         r = bench_dfsph.run(nx, "dfsph", threads, dim=dim)
         r["it_d"], r["it_v"] = r["it_d"] * r["steps"], r["it_v"] * r["steps"]  # totals, as SPlisHSPlasH's
@@ -200,7 +201,7 @@ def run_physcore(nx: int, dim: int, threads: int, frames: bool, smoothing: float
         wall += time.perf_counter() - t0
         fronts[mark] = bench_dfsph.front(scene.positions, h)
     st = scene.solver_stats()
-    return dict(N=scene.n_particles, steps=steps, wall=wall, fronts=fronts,
+    return dict(N=scene.n_particles, steps=steps, wall=wall, fronts=fronts, smoothing=scene.fluids[0].smoothing,
                 it_d=st["density_iterations"], it_v=st["divergence_iterations"])
 
 
@@ -212,7 +213,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=2, help="alternated rounds of both codes")
     ap.add_argument("--splishsplash-python", default=sys.executable, help="a Python with pysplishsplash (and scipy)")
     ap.add_argument("--frames", action="store_true", help="advance physcore frame by frame, as a render does")
-    ap.add_argument("--smoothing", type=float, default=1.3, help="physcore's h/Δx (1.3, the default; 1.0: SPlisHSPlasH's reach)")
+    ap.add_argument("--smoothing", type=float, default=None,
+                    help="physcore's h/Δx (default the fluid's: 1.0 in 3D, SPlisHSPlasH's reach, 1.3 in 2D)")
     args = ap.parse_args()
     require_release()
     runs: dict[str, list[dict]] = {"physcore": [], "SPlisHSPlasH": []}
@@ -232,7 +234,7 @@ def main() -> None:
                      ", ".join(f"{r['fronts'][m]:.2f}" for m in MARKS[:3])])
     print(header(args.threads))
     print(f"dam break {args.dim}D, {args.nx} particles across, from rest to T* = 4 (t = {T_END:.3f} s), DFSPH at 0.1 %; "
-          f"physcore h = {args.smoothing} Δx{', frame by frame' if args.frames else ''}; {args.rounds} alternated rounds\n")
+          f"physcore h = {runs['physcore'][0].get('smoothing', 'the default')} Δx{', frame by frame' if args.frames else ''}; {args.rounds} alternated rounds\n")
     print(table(["code", "fluid particles", "steps", "wall to T*=4 (s), each round", "ms/step (median)",
                  "density / divergence it/step", "front/W at T* = 1, 2, 3"], rows))
     print(f"\nSPlisHSPlasH / physcore, wall time (medians): {walls['SPlisHSPlasH'] / walls['physcore']:.1f}×")

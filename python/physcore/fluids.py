@@ -56,13 +56,43 @@ from .shapes import lattice, tank_walls  # the lattice and tank builders, still 
 from .shapes import lattice_counts as lattice_counts
 from .terms import Gravity, Term
 
-__all__ = ["Fluid", "WCSPH", "DFSPH", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS"]
+__all__ = ["Fluid", "WCSPH", "DFSPH", "neighbors", "lattice", "tank_walls", "kernel_w", "KERNELS", "default_smoothing"]
 
 #: Kernel names accepted by :class:`Fluid`.
 KERNELS = ("cubic_spline", "wendland_c2")
 
 #: Pressure methods accepted by :class:`Fluid`.
 METHODS = ("wcsph", "dfsph")
+
+def default_smoothing(dim: int, method: str, surface: bool = False) -> float:
+    """The default ``h/Δx`` of a :class:`Fluid`: 1.0 for a 3D DFSPH fluid without surface
+    tension or adhesion, 1.3 otherwise.
+
+    Such a fluid takes the DFSPH paper's reach (Bender & Koschier 2017; SPlisHSPlasH's default: a
+    support of 2 Δx, about 33 neighbours). At 1.3 a pass visits 2.2 times the pairs and the
+    solves' Jacobi iterations need relaxing (ω = 0.585; at 1.0 ω = 1,
+    docs/guide/fluids_dfsph.md, "Relaxation"): a 3D dam break costs about twice as much for
+    fronts within 2 % of each other and of SPlisHSPlasH's (the guide's "Choosing h in 3D").
+    Where the fluid has surface tension or adhesion it keeps 1.3: at 1.0 a 12³ cube of water
+    freezes into a lumpy drop (the outermost particles' spread over 26 directions 4.9 % against
+    2.1 %, averaged over 0.5–1.0 s). In 2D a narrower h gains nothing (the CFL step shrinks with
+    h and the pairs are few), and WCSPH keeps 1.3, the value its tests and tables were measured at.
+
+    Parameters
+    ----------
+    dim : int
+        2 or 3.
+    method : str
+        ``"wcsph"`` or ``"dfsph"``.
+    surface : bool
+        The fluid has surface tension or adhesion.
+
+    Returns
+    -------
+    float
+    """
+    return 1.0 if dim == 3 and method == "dfsph" and not surface else 1.3
+
 
 #: Range of ``Fluid(spacing=...)``, m: keeps ``h^dim``, its reciprocal (the kernel's
 #: normalisation) and squared kernel distances inside float64.
@@ -370,8 +400,10 @@ class Fluid(Term, kind="fluid"):
     alpha : float
         Artificial viscosity ``α`` ≥ 0, dimensionless (Monaghan 1992, eq. 4.1–4.2). Default 0.05.
         (Not a kinematic viscosity ν: the one of :class:`~physcore.StableFluid` is ``nu``.)
-    smoothing : float
-        ``h / Δx`` > 0. Default 1.3.
+    smoothing : float, optional
+        ``h / Δx``, in [0.5, 4]. Default :func:`default_smoothing`: 1.0 for a 3D DFSPH fluid
+        without surface tension or adhesion (the DFSPH paper's reach: its step costs half of
+        1.3's), 1.3 otherwise; set when the fluid is made (``dataclasses.replace`` keeps it).
     kernel : {"cubic_spline", "wendland_c2"}
         Default ``"cubic_spline"``.
     gamma : int
@@ -474,7 +506,8 @@ class Fluid(Term, kind="fluid"):
     density: float = 1000.0
     sound_speed: float | None = None
     alpha: float = 0.05
-    smoothing: float = 1.3
+    #: None while being made: then :func:`default_smoothing` of the dimension and the solver.
+    smoothing: float = None  # type: ignore[assignment]
     kernel: str = "cubic_spline"
     # The solver options' defaults are their records' (WCSPH, DFSPH).
     gamma: int = WCSPH.gamma
@@ -513,6 +546,15 @@ class Fluid(Term, kind="fluid"):
         if self.sound_speed is not None:
             object.__setattr__(self, "sound_speed", _finite_float(self.sound_speed, "sound_speed", minimum=0.0, strict=True))
         object.__setattr__(self, "alpha", _finite_float(self.alpha, "alpha", minimum=0.0))
+        if self.smoothing is None:
+            # The default follows the solver and the dimension (DEFAULT_SMOOTHING's note); the
+            # solver is read here because the masses below depend on h.
+            method = getattr(solver, "name", None) or (self.method if isinstance(self.method, str) else None) or "wcsph"
+            surface = any(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                for v in (getattr(solver, arg, getattr(self, arg)) for arg in ("surface_tension", "adhesion"))
+            )
+            object.__setattr__(self, "smoothing", default_smoothing(dim, method, surface))
         object.__setattr__(self, "smoothing", _finite_float(self.smoothing, "smoothing", minimum=0.0, strict=True))
         if not 0.5 <= self.smoothing <= 4.0:
             raise InvalidInputError(f"smoothing: h/spacing must be in [0.5, 4] (typical 1.2-2), got {self.smoothing}")

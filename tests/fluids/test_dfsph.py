@@ -302,6 +302,39 @@ def test_save_and_load_continue_bit_for_bit(tmp_path):
     assert np.array_equal(scene.pressure(), copy.pressure())
 
 
+def test_a_3d_dfsph_fluid_takes_the_papers_reach_unless_told_otherwise(tmp_path):
+    """``Fluid(smoothing=None)`` resolves, when the fluid is made, to 1.0 for a 3D DFSPH fluid
+    without surface tension or adhesion (Bender & Koschier's reach: docs/guide/fluids_dfsph.md,
+    "Choosing h in 3D") and to 1.3 otherwise, whether the solver comes as ``method`` or as a
+    record; a given smoothing is kept, and a 3D DFSPH file saved at 1.3 (as every file before
+    2026-12-01) loads and steps at 1.3, its masses those it was saved with."""
+    from physcore.fluids import default_smoothing
+
+    x3, x2 = lattice([0, 0, 0], [0.1, 0.1, 0.1], 0.025), lattice([0, 0], [0.1, 0.1], 0.025)
+    assert pc.Fluid(x3, 0.025, method="dfsph").smoothing == 1.0
+    assert pc.Fluid(x3, 0.025, solver=pc.DFSPH(cfl=0.3)).smoothing == 1.0
+    assert pc.Fluid(x3, 0.025, method="dfsph", surface_tension=0.072).smoothing == 1.3
+    assert pc.Fluid(x3, 0.025, solver=pc.DFSPH(adhesion=0.01)).smoothing == 1.3
+    assert pc.Fluid(x3, 0.025).smoothing == 1.3  # WCSPH
+    assert pc.Fluid(x2, 0.025, method="dfsph").smoothing == 1.3
+    assert pc.Fluid(x3, 0.025, method="dfsph", smoothing=1.5).smoothing == 1.5
+    assert [default_smoothing(d, m) for d in (2, 3) for m in ("wcsph", "dfsph")] == [1.3, 1.3, 1.3, 1.0]
+    # The default sets h, and with it the masses (ρ0 over the lattice's kernel sum at that h).
+    f10, f13 = pc.Fluid(x3, 0.025, method="dfsph"), pc.Fluid(x3, 0.025, method="dfsph", smoothing=1.3)
+    assert f10.h == 0.025 and f13.h == pytest.approx(1.3 * 0.025)
+    assert f10.particle_mass() != f13.particle_mass()
+    assert pc.scenes.dam_break(dim=3, n=4).fluids[0].smoothing == 1.0
+    assert pc.scenes.dam_break(dim=3, n=4, smoothing=1.3).fluids[0].smoothing == 1.3
+    assert pc.scenes.dam_break(dim=2, n=4).fluids[0].smoothing == 1.3
+    old = pc.scenes.dam_break(dim=3, n=4, smoothing=1.3)
+    path = old.save(tmp_path / "old.npz")
+    copy = pc.Scene.load(path)
+    assert copy.fluids[0].smoothing == 1.3 and np.array_equal(copy.masses, old.masses)
+    old.step(3)
+    copy.step(3)
+    assert np.array_equal(copy.positions, old.positions)
+
+
 # --------------------------------------------------------------------------- bad input
 @pytest.mark.parametrize(
     ("kwargs", "arg"),
@@ -489,11 +522,13 @@ def test_pinned_fluid_particles_stay_and_the_books_balance():
 def test_3d_dam_break_converges_keeps_its_walls_and_its_books():
     """The 3D dam break (``dam_break(dim=3, n=8, depth=0.5)``, 512 particles, T = 0..3): every
     solve converges (none stopped at max_iterations, the density error at most 0.1 % every step),
-    nothing goes a spacing past a wall (measured 0.27 dx), the books balance to the
-    integrator's error (measured drift −3.8e-3), and both solves dissipate (measured: the density
-    solve 854 J, the divergence solve 213 J). Before the solves' relaxation (ω = 0.585 in 3D,
-    rust_core/src/sph/dfsph/relax.rs) the density solve put 446 J in here (the divergence
-    solve took 305 J out), past a wall 0.36 dx, drift +2.2e-4."""
+    nothing goes a spacing past a wall (measured 0.16 dx), the books balance to the
+    integrator's error (measured drift −5.6e-3), and both solves dissipate (measured: the density
+    solve 402 J, the divergence solve 191 J). At the default h = 1.0 Δx (3D DFSPH's since
+    2026-12-01); at h = 1.3 Δx, the default before: 0.27 dx, −3.8e-3, 854 and 213 J. Before the
+    solves' relaxation (ω = 0.585 in 3D at h = 1.3 Δx, rust_core/src/sph/dfsph/relax.rs) the
+    density solve put 446 J in there (the divergence solve took 305 J out), past a wall 0.36 dx,
+    drift +2.2e-4."""
     scene = pc.scenes.dam_break(dim=3, n=8, depth=0.5)
     assert scene.fluids[0].method == "dfsph"
     dx, scale = 1.0 / 8, math.sqrt(2 * G)
@@ -511,7 +546,7 @@ def test_3d_dam_break_converges_keeps_its_walls_and_its_books():
     assert abs(scene.energy_drift()) < 0.01, scene.energy_drift()
 
 
-@pytest.mark.parametrize("dim, n, smoothing", [(2, 32, 2.0), (3, 12, 2.0), (3, 16, 1.5), (3, 24, 1.3)])
+@pytest.mark.parametrize("dim, n, smoothing", [(2, 32, 2.0), (3, 12, 2.0), (3, 16, 1.5), (3, 24, 1.3), (3, 24, 1.0)])
 def test_the_solves_stay_stable_however_wide_the_neighbourhood(dim, n, smoothing):
     """A dam-break column (1 × 2 m, 1 m deep in 3D, ``n`` particles across) for 12 steps of 1 ms
     at h = ``smoothing`` Δx: the fastest particle stays below 3.5 g t (the surge's toe reaches
@@ -519,8 +554,10 @@ def test_the_solves_stay_stable_however_wide_the_neighbourhood(dim, n, smoothing
     iterations multiply a lattice wave's error by 1 − ω λ/D, and λ/D grows with the
     neighbourhood (rust_core/src/sph/dfsph/relax.rs). Unrelaxed (ω = 1, before the relaxation)
     these columns reached 10⁶¹ m/s (2D, h = 2 Δx, by step 4), 10⁶⁸ (3D, h = 2 Δx, step 1) and
-    10⁵⁵ (3D, h = 1.5 Δx); 3D at the default h = 1.3 Δx grew a jitter above the floor ×1.8 a
-    step: 0.82 m/s by step 8 at 24 across, 2.5 km/s by step 24 at 40 across."""
+    10⁵⁵ (3D, h = 1.5 Δx); 3D at h = 1.3 Δx (the default then) grew a jitter above the floor
+    ×1.8 a step: 0.82 m/s by step 8 at 24 across, 2.5 km/s by step 24 at 40 across. At 3D's
+    default h = 1.0 Δx the ratio is under 2D's at 1.3, so ω is 1 there: unrelaxed, as the
+    DFSPH paper's solves."""
     dx = 1.0 / n
     scene = pc.Scene(dim, integrator="semi_implicit_euler", dt=1e-3)
     scene.add(pc.Gravity([0.0] * (dim - 1) + [-G]))

@@ -134,7 +134,7 @@ def droplet_reading(dim, n, seed, *, sigma=0.03, dx=5e-4, rho0=800.0):
 @pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_laplace_pressure_of_2d_droplets():
     """Six 2D droplets of R = 6.2 H (32 particles across; σ = 0.03 N, 0.5 mm spacing, ρ0 = 800,
-    a σ, ρ0 and spacing other than those `LAPLACE_FACTOR` was measured at), started 1e-9 m
+    a σ, ρ0 and spacing other than those the Laplace factor was measured at), started 1e-9 m
     apart: each reads σ/R within a factor of 2 and their geometric mean within 30 %.
 
     Measured: seeds 0–5 read 0.968, 1.002, 1.007, 1.079, 1.079, 0.892 (geometric mean 1.002;
@@ -154,8 +154,9 @@ def test_laplace_pressure_of_2d_droplets():
 @pytest.mark.slow  # 10 s or more (tests/README.md)
 def test_laplace_pressure_of_a_3d_droplet():
     """A 3D droplet of R = 2.9 H (15 particles across, the 2D test's σ, ρ0 and spacing): 2σ/R
-    within a factor of 1.5 (measured 1.13; 3D has its own `LAPLACE_FACTOR`, measured on a
-    droplet of R = 5.6 H). Smaller 3D droplets read high, as small 2D ones do: R = 2.2 H 1.49,
+    within a factor of 1.5 (measured 1.13, and 1.11 on 2026-12-01; 3D has its own Laplace factor,
+    measured on a droplet of R = 5.6 H; the fluid takes h = 1.3 Δx, a surface fluid's default,
+    ``default_smoothing``). Smaller 3D droplets read high, as small 2D ones do: R = 2.2 H 1.49,
     R = 3.7 H 1.02. Two 3D droplets started 1e-9 m apart read within 1 % of each other (1.64
     and 1.65 with the 2D factor): a 3D droplet's core averages many more particles."""
     q, _ = droplet_reading(3, 15, 0)

@@ -70,7 +70,7 @@ def _box(dim: int, x: tuple[float, float], height: tuple[float, float], depth: t
 
 def _water_in_tank(
     positions, dx, tlo, thi, *, dim, lid, pass_precision, kernel, alpha, sound_speed, integrator, dt, threads, method="wcsph",
-    velocities=None, device="cpu", smoothing=1.3, **surface: float,
+    velocities=None, device="cpu", smoothing=None, **surface: float,
 ) -> Scene:
     """A fluid scene: water particles at ``positions`` in a tank lined with 3 wall layers
     (``surface``: DFSPH's ``surface_tension`` and ``adhesion``). On a GPU ``device`` the tank
@@ -111,7 +111,7 @@ def dam_break(
     lid: bool = True,
     pass_precision: str = "f32",
     kernel: str = "cubic_spline",
-    smoothing: float = 1.3,
+    smoothing: float | None = None,
     alpha: float = 0.05,
     sound_speed: float | None = None,
     integrator: str = "semi_implicit_euler",
@@ -157,10 +157,11 @@ def dam_break(
     kernel : {"cubic_spline", "wendland_c2"}
     smoothing : float
         Smoothing length over the spacing, h = smoothing·Δx (0.5 to 4; :class:`~physcore.fluids.Fluid`).
-        Default 1.3. In 3D, DFSPH at 1.0 (SPlisHSPlasH's reach, a support of 2Δx) visits 2.2×
-        fewer pairs a pass: from rest to T = 4 at ``n=24`` (27 648 particles) 10.3 s against
-        18.1 s on 2 cores, the fronts within 2 % (docs/guide/fluids_dfsph.md, "Beside
-        SPlisHSPlasH"). In 2D it gains nothing (steps follow h).
+        Default the fluid's (:func:`~physcore.fluids.default_smoothing`): 1.0 for 3D DFSPH
+        without surface tension (SPlisHSPlasH's reach, a support of 2Δx: 2.2× fewer pairs a pass
+        than 1.3; from rest to T = 4 at ``n=24``, 27 648 particles, 10.3 s against 18.1 s on 2
+        cores, the fronts within 2 %: docs/guide/fluids_dfsph.md, "Choosing h in 3D"), 1.3
+        otherwise (in 2D a smaller h gains nothing: the steps follow h).
     alpha : float
         Monaghan artificial viscosity α (≥ 0, dimensionless). Default 0.05. (Old name
         ``viscosity``, deprecated.)

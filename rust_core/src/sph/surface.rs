@@ -16,7 +16,7 @@
 //!   interface of a fluid of uniform density ρ0 (pair force γ m m' C(r)) gives
 //!   σ_c = (π/8) ρ0² γ ∫ C r⁴ dr in 3D and σ_c = (1/3) ρ0² γ ∫ C r³ dr in 2D (Kirkwood & Buff,
 //!   J. Chem. Phys. 17, 1949; the 2D form by the same half-space integral), divided by the
-//!   measured `LAPLACE_FACTOR` (below): the curvature term adds a surface tension of its own,
+//!   measured `laplace_factor` (below): the curvature term adds a surface tension of its own,
 //!   which has no closed form. The `adhesion`, in σ's units, is half the work of adhesion W_a
 //!   of a fluid half-space on a wall half-space of density ρ0 (Ψ_b / V_b = ρ0), by the same
 //!   integral over A: `adhesion = surface_tension` is complete wetting in the continuum
@@ -26,7 +26,8 @@
 //!   is not dimensionally consistent, and its balance of the two terms is that of water in SI
 //!   units. Scaling by ρ0 / 1000 keeps that balance in any unit system.
 //!
-//! - **`LAPLACE_FACTOR` = 2.3 in 2D, 3.4 in 3D**, measured: the mechanical pressure at the centre
+//! - **The Laplace factor: 2.3 in 2D, 3.4 in 3D at h = 1.3 Δx, 2.9 in 3D at h = 1.0 Δx**
+//!   (`laplace_factor`), measured: the mechanical pressure at the centre
 //!   of droplets at rest (the solvers' pressure plus the surface forces' virial,
 //!   `Dfsph::surface_acceleration`, averaged over every step from 4 to 10 capillary times), with
 //!   γ from σ_c alone, read Δp R/σ ≈ 2.5–5.3 for 2D droplets of R = 3–12 H (H = 2h,
@@ -35,7 +36,10 @@
 //!   read σ/R × 1.60 on average at R = 3.1 H (6 droplets), 1.18 at 4.6 H (16), 1.06 at 6.2 H
 //!   (13, each 0.66–1.34) and 0.84–1.11 at 8.5 H (4): small droplets read high, large ones
 //!   about right. 3D droplets read 2σ/R × 1.64 and 1.65 at R = 2.9 H, 1.50 at 3.7 H and 1.46
-//!   at 5.6 H: not the 2D trend to 1, so 3D has its own factor, 2.3 × 1.46 ≈ 3.4. One
+//!   at 5.6 H: not the 2D trend to 1, so 3D has its own factor, 2.3 × 1.46 ≈ 3.4. At
+//!   h = 1.0 Δx (3D DFSPH's default since 2026-12-01) the same droplets read 2σ/R × 0.675 at
+//!   R = 2.8 H, 0.737 and 0.664 at 3.8 H (two droplets), 0.859 at 5.5 H and 0.845 at 7.5 H with
+//!   3.4, so 3D takes 3.4 × 0.85 ≈ 2.9 there, linear in h/Δx between the two. One
 //!   droplet scatters because the reading is the small difference of the solvers' pressure and
 //!   the virial, each 30 to 70 times σ/R (the cohesion's bulk tension), and each droplet
 //!   freezes into its own packing (with the solves at 0.001 % the step-to-step noise falls to
@@ -47,12 +51,22 @@ use std::f64::consts::PI;
 /// The reference density of the curvature term's scale c = ρ0 / `CURVATURE_RHO`, kg/m^d (module doc).
 pub const CURVATURE_RHO: Real = 1000.0;
 
-/// Surface tension of the whole model over its cohesion's σ_c, measured (module doc), 2D and 3D.
-pub const LAPLACE_FACTOR: [Real; 2] = [2.3, 3.4];
+/// Surface tension of the whole model over its cohesion's σ_c, measured (module doc): 2D at
+/// h = 1.3 Δx.
+pub const LAPLACE_FACTOR_2D: Real = 2.3;
 
-/// `LAPLACE_FACTOR` of a dimension (2 or 3).
-fn laplace_factor(dim: usize) -> Real {
-    LAPLACE_FACTOR[(dim == 3) as usize]
+/// The same in 3D, measured at two smoothings (h/Δx, factor): 1.0 (3D DFSPH's default) and 1.3.
+pub const LAPLACE_FACTOR_3D: [(Real, Real); 2] = [(1.0, 2.9), (1.3, 3.4)];
+
+/// The `LAPLACE_FACTOR` of a dimension (2 or 3) and smoothing h/Δx: in 3D linear between the two
+/// measured smoothings and held at the nearer one outside them; in 2D the one measured value.
+pub fn laplace_factor(dim: usize, smoothing: Real) -> Real {
+    if dim != 3 {
+        return LAPLACE_FACTOR_2D;
+    }
+    let [(s0, f0), (s1, f1)] = LAPLACE_FACTOR_3D;
+    let t = ((smoothing - s0) / (s1 - s0)).clamp(0.0, 1.0);
+    f0 + t * (f1 - f0)
 }
 
 /// Akinci's cohesion spline without its normalisation: (H − r)³ r³ for H/2 < r ≤ H,
@@ -125,13 +139,14 @@ pub struct Surface {
 
 impl Surface {
     /// `sigma`: surface tension (N/m in 3D, N in 2D); `adhesion`: half the work of adhesion on
-    /// the walls, same units; `h`: smoothing length; `rho0`: rest density.
-    pub fn new(sigma: Real, adhesion: Real, h: Real, rho0: Real, dim: usize) -> Self {
+    /// the walls, same units; `h`: smoothing length; `rho0`: rest density; `smoothing`: h/Δx
+    /// (`laplace_factor`).
+    pub fn new(sigma: Real, adhesion: Real, h: Real, rho0: Real, dim: usize, smoothing: Real) -> Self {
         let big_h = 2.0 * h;
         let norm = cohesion_norm(big_h, dim);
         let unit_sigma = rho0 * rho0 * kirkwood_buff(|r| norm * cohesion_shape(r, big_h), big_h, dim);
         let unit_adhesion = rho0 * rho0 * kirkwood_buff(|r| adhesion_kernel(r, big_h), big_h, dim);
-        let gamma = if sigma > 0.0 { sigma / (laplace_factor(dim) * unit_sigma) } else { 0.0 };
+        let gamma = if sigma > 0.0 { sigma / (laplace_factor(dim, smoothing) * unit_sigma) } else { 0.0 };
         let beta = if adhesion > 0.0 { adhesion / unit_adhesion } else { 0.0 };
         Self { big_h, norm, gamma, c: rho0 / CURVATURE_RHO, beta }
     }
@@ -176,21 +191,36 @@ mod tests {
     fn the_kirkwood_buff_maps_match_their_closed_forms() {
         // 3D: σ = (π/8) ρ0² γ (32/(π H⁹)) ∫ shape r⁴ dr = (π/8)(32/π)(21/28160) ρ0² γ H².
         let (h, rho0) = (0.37, 998.0);
-        let s = Surface::new(0.072, 0.0, h, rho0, 3);
+        let s = Surface::new(0.072, 0.0, h, rho0, 3, 1.3);
         let big_h = 2.0 * h;
-        let want = 0.072 / (4.0 * 21.0 / 28160.0 * rho0 * rho0 * big_h * big_h) / LAPLACE_FACTOR[1];
+        let want = 0.072 / (4.0 * 21.0 / 28160.0 * rho0 * rho0 * big_h * big_h) / 3.4;
         assert!((s.gamma / want - 1.0).abs() < 1e-6, "{} {}", s.gamma, want);
         // 2D: σ = (1/3) ρ0² γ k₂ (33/28672) H².
-        let s = Surface::new(0.072, 0.0, h, rho0, 2);
+        let s = Surface::new(0.072, 0.0, h, rho0, 2, 1.3);
         let k2 = 79.0 * 35840.0 / (336.0 * 209.0 * PI);
-        let want = 0.072 / (k2 * 33.0 / 28672.0 / 3.0 * rho0 * rho0 * big_h * big_h) / LAPLACE_FACTOR[0];
+        let want = 0.072 / (k2 * 33.0 / 28672.0 / 3.0 * rho0 * rho0 * big_h * big_h) / 2.3;
         assert!((s.gamma / want - 1.0).abs() < 1e-6, "{} {}", s.gamma, want);
         assert_eq!(s.beta, 0.0);
     }
 
     #[test]
+    fn the_laplace_factor_is_the_measured_one_at_each_measured_smoothing() {
+        assert_eq!(laplace_factor(2, 1.3), 2.3);
+        assert_eq!(laplace_factor(2, 1.0), 2.3);
+        assert_eq!(laplace_factor(3, 1.3), 3.4);
+        assert_eq!(laplace_factor(3, 1.0), 2.9);
+        assert_eq!(laplace_factor(3, 0.5), 2.9);
+        assert_eq!(laplace_factor(3, 2.0), 3.4);
+        assert!((laplace_factor(3, 1.15) - 3.15).abs() < 1e-12);
+        // γ scales as 1/factor: a 3D fluid at h = 1.0 Δx pulls 3.4/2.9 times harder than the
+        // 1.3 factor would make it (module doc: its droplets read 0.85 of 2σ/R with 3.4).
+        let (a, b) = (Surface::new(0.072, 0.0, 0.01, 1000.0, 3, 1.0), Surface::new(0.072, 0.0, 0.01, 1000.0, 3, 1.3));
+        assert!((a.gamma / b.gamma - 3.4 / 2.9).abs() < 1e-12);
+    }
+
+    #[test]
     fn the_cohesion_spline_is_continuous_and_repels_at_short_range() {
-        let s = Surface::new(1.0, 0.0, 0.5, 1.0, 3);
+        let s = Surface::new(1.0, 0.0, 0.5, 1.0, 3, 1.3);
         let hh = s.big_h;
         assert!(s.cohesion(0.01 * hh) < 0.0);
         assert!(s.cohesion(0.75 * hh) > 0.0);

@@ -109,7 +109,7 @@ impl DeviceDfsph {
         // The CPU's own coefficients of Akinci et al. (2013), from the fluid's σ and adhesion.
         let (h, rho0) = (fp.number("h")?, fp.number("density")?);
         let (sigma, adhesion) = (fp.number("surface_tension")?, fp.number("adhesion")?);
-        let surface = Surface::new(sigma, adhesion, h, rho0, dim);
+        let surface = Surface::new(sigma, adhesion, h, rho0, dim, smoothing(fp)?);
         let params = DfsphParams {
             dim,
             h,

@@ -169,6 +169,9 @@ pub struct DfsphParams {
     /// own correction (`relaxation`, from the dimension, kernel and h/Δx; 1 in 2D at the
     /// default h = 1.3 Δx).
     pub relaxation: Real,
+    /// h/Δx, the smoothing the surface tension's calibration was measured at
+    /// (`sph::surface::laplace_factor`).
+    pub smoothing: Real,
 }
 
 impl DfsphParams {
@@ -391,6 +394,7 @@ fn build<V: Vector>(name: String, mut p: Params, ctx: &Context) -> Result<Box<dy
         surface_tension: p.number("surface_tension")?,
         adhesion: p.number("adhesion")?,
         relaxation: relaxation(V::DIM, KernelKind::by_name(p.text("kernel")?)?, smoothing(&p)?),
+        smoothing: smoothing(&p)?,
     };
     let walls = p.take_vectors::<V>("walls")?;
     let psi = p.take_floats("wall_psi")?;
@@ -486,7 +490,7 @@ impl<V: Vector> Solver<V> {
             kappa_v: vec![0.0; n],
             pressure: vec![0.0; n],
             n_min: 0,
-            surface: Surface::new(p.surface_tension, p.adhesion, p.h, p.rho0, V::DIM),
+            surface: Surface::new(p.surface_tension, p.adhesion, p.h, p.rho0, V::DIM, p.smoothing),
             normals: Vec::new(),
             surface_p: Vec::new(),
             kick_dt: 0.0,

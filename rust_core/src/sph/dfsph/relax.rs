@@ -8,17 +8,18 @@
 //! divides by the diagonal D ∝ Σ_p |g_p|² (module doc's D_i; λ's mean over θ). A Jacobi
 //! iteration with relaxation ω multiplies a wave's error by 1 − ω λ(θ)/D, so it grows once
 //! ω max λ/D > 2. That ratio grows with the neighbourhood: 2.87 in 2D at the default h = 1.3 Δx
-//! with the cubic spline, 4.91 in 3D, 6.7 and 17.6 at h = 2 Δx (`ratio`). The one-sided
+//! with the cubic spline, 4.91 in 3D, 6.7 and 17.6 at h = 2 Δx, 2.82 in 3D at h = 1.0 Δx (3D
+//! DFSPH's default since 2026-12-01: unrelaxed, as the DFSPH paper) (`ratio`). The one-sided
 //! solves (only compressing particles push) tolerate 2D's 2.87 (tuned, tested against
 //! Martin & Moyce with ω = 1), but not 3D's: a 3D dam break 40 particles across at h = 1.3 Δx
 //! grew a jitter in its fourth layer above the floor by ×1.8 a step whatever dt or warm start,
 //! and blew up (2.5 km/s) by step 9, the density solve content with its 2 iterations because
 //! the mean error hid it; at h = 2 Δx a 2D column blew up (10⁶¹ m/s) within 4 steps. So
 //! ω = min(1, R/ratio) with R the ratio of the 2D cubic spline at h = 1.3 Δx: exactly 1 there
-//! and wherever the neighbourhood is as narrow (those scenes keep their bits), 0.585 in 3D at
-//! h = 1.3 Δx, 0.43 at h = 2 Δx in 2D. The same rule as IISPH's relaxed Jacobi (Ihmsen et
-//! al., IEEE TVCG 20 (2014) 426, eq. 14, ω = 0.5), with ω chosen from the kernel instead of
-//! fixed.
+//! and wherever the neighbourhood is as narrow (2D scenes at the defaults kept their bits; 3D at
+//! h = 1.0 Δx), 0.585 in 3D at h = 1.3 Δx, 0.43 at h = 2 Δx in 2D. The same rule as IISPH's
+//! relaxed Jacobi (Ihmsen et al., IEEE TVCG 20 (2014) 426, eq. 14, ω = 0.5), with ω chosen
+//! from the kernel instead of fixed.
 use super::super::kernels::{CubicSpline, Kernel, WendlandC2};
 use super::super::params::KernelKind;
 use crate::vector::Real;
@@ -111,6 +112,9 @@ mod tests {
         }
         assert_eq!(relaxation(2, c, 1.3), 1.0);
         assert_eq!(relaxation(2, c, 1.0), 1.0);
+        // 3D's default h = 1.0 Δx: a ratio under the reference (numpy: 2.815), so unrelaxed.
+        assert!((ratio(3, c, 1.0) / 2.815 - 1.0).abs() < 6e-3, "3D s = 1.0: {}", ratio(3, c, 1.0));
+        assert_eq!(relaxation(3, c, 1.0), 1.0);
         assert_eq!(relaxation(2, KernelKind::WendlandC2, 1.3), 1.0);
         let w3 = relaxation(3, c, 1.3);
         assert!((0.57..0.60).contains(&w3), "3D at 1.3: {w3}");

@@ -37,6 +37,7 @@ fn params(dx: f64) -> DfsphParams {
         surface_tension: 0.0,
         adhesion: 0.0,
         relaxation: 1.0,
+        smoothing: 1.3,
     }
 }
 
