@@ -292,8 +292,9 @@ class DFSPH(SPHSolver):
     step, warm-started (module docstring). ``Fluid(..., solver=pc.DFSPH(...))`` is
     ``Fluid(..., method="dfsph", ...)`` with the same options. Steps inside
     ``integrator="semi_implicit_euler"`` only. The solves' Jacobi iterations are relaxed by an ω
-    that follows from the dimension, the kernel and ``smoothing`` (1 in 2D at the default
-    h = 1.3 Δx, 0.585 in 3D; Ihmsen et al. 2014, eq. 14), so wider neighbourhoods stay stable
+    that follows from the dimension, the kernel and ``smoothing`` (1 at the defaults, h = 1.3 Δx
+    in 2D and 1.0 Δx in 3D; 0.585 in 3D at 1.3 Δx; Ihmsen et al. 2014, eq. 14), so wider
+    neighbourhoods stay stable
     (docs/guide/fluids_dfsph.md, "Relaxation").
 
     Parameters

@@ -139,8 +139,9 @@ def dam_break(
         Particles across the column width (spacing ``width / n``). Default 72 in 2D
         (N = 2n² = 10 368 particles; the default render to T = 8 then takes seconds, and the
         surface drawing shows no grain at 480 × 360) and 16 in 3D (N = 2n³·depth/width = 8 192:
-        the default render takes 21 s on 2 cores of an AMD EPYC at AVX2, drawn as a lit
-        surface in a glass tank; ``n=24``, 27 648 particles, took 83 s). The guide's speed and
+        the default render takes 8 s on 2 cores of an AMD EPYC at AVX2, drawn as a lit
+        surface in a glass tank; 21 s at h = 1.3 Δx, 3D's default before 2026-12-01, when
+        ``n=24``, 27 648 particles, took 83 s). The guide's speed and
         Martin & Moyce tables (docs/guide/fluids_dfsph.md) use n = 144 (41 472).
     width, height : float
         The water column, m (> 0).

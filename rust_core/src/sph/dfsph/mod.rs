@@ -166,8 +166,8 @@ pub struct DfsphParams {
     /// Adhesion to the walls, half the work of adhesion, σ's units, ≥ 0.
     pub adhesion: Real,
     /// The solves' Jacobi relaxation ω in (0, 1]: each iteration applies ω times a particle's
-    /// own correction (`relaxation`, from the dimension, kernel and h/Δx; 1 in 2D at the
-    /// default h = 1.3 Δx).
+    /// own correction (`relaxation`, from the dimension, kernel and h/Δx; 1 at the defaults,
+    /// h = 1.3 Δx in 2D and 1.0 Δx in 3D).
     pub relaxation: Real,
     /// h/Δx, the smoothing the surface tension's calibration was measured at
     /// (`sph::surface::laplace_factor`).
