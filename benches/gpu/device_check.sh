@@ -66,7 +66,11 @@ if [ -x .devbin/base_dfsph-tests ]; then
   for r in 1 2; do
     for who in base this; do
       b=.devbin/dfsph-tests; [ $who = base ] && b=.devbin/base_dfsph-tests
-      PHYSCORE_DFSPH_BENCH=262144,1048576 timeout 60 $b --ignored --nocapture bench_dam_break_3d 2>&1 | grep -E "^DFSPH" | sed "s/^/$r $who  /"
+      # h = 1.0 dx, 3D's default since 2026-12-01 (a base built before then ignores the variable
+      # and runs 1.3), then 1.3 dx, the default before.
+      for hs in 1.0 1.3; do
+        PHYSCORE_DFSPH_SMOOTHING=$hs PHYSCORE_DFSPH_BENCH=262144,1048576 timeout 60 $b --ignored --nocapture bench_dam_break_3d 2>&1 | grep -E "^DFSPH" | sed "s/^/$r $who h=$hs  /"
+      done
     done
   done
 fi

@@ -791,21 +791,30 @@ fn bad_input_is_refused() {
 ///     PHYSCORE_DFSPH_BENCH=32768,262144,1048576 PHYSCORE_GPU_ALLOW_CPU=1 \
 ///       cargo test --release -p physcore-gpu --test dfsph -- --ignored --nocapture
 ///
-/// A cube of water (spacing 0.01 m, h = 1.3 dx, α = 0.05, c0 = 20, tolerances 0.1 %, at most
-/// 100 iterations) in the corner of a tank twice its width, lined by three layers of wall
-/// particles, dt = 1e-3 s, f32. Reported: the median of 3 timed blocks of 10 steps after 10
-/// steps of warm-up (each block ends with the submission's read-back), and the mean iterations.
+/// A cube of water (spacing 0.01 m, h = `PHYSCORE_DFSPH_SMOOTHING` dx: 1.0, the core's 3D
+/// default since 2026-12-01, or 1.3, the default before; α = 0.05, c0 = 20, tolerances 0.1 %,
+/// at most 100 iterations) in the corner of a tank twice its width, lined by three layers of
+/// wall particles, dt = 1e-3 s, f32. Reported: the median of 3 timed blocks of 10 steps after
+/// 10 steps of warm-up (each block ends with the submission's read-back), and the mean
+/// iterations.
 #[test]
 #[ignore]
 fn bench_dam_break_3d() {
     let Some(gpu) = gpu() else { return };
     let list = std::env::var("PHYSCORE_DFSPH_BENCH").unwrap_or_else(|_| "32768,262144,1048576".into());
+    let smoothing: f64 = std::env::var("PHYSCORE_DFSPH_SMOOTHING").map_or(1.0, |s| s.parse().expect("1.0 or 1.3"));
+    // The core's Jacobi relaxation for 3D (`sph::dfsph::relaxation`): 1 at h = 1.0 Δx, 0.585 at
+    // 1.3 Δx (unrelaxed, a 3D column that fine blows up within 10 steps).
+    let relaxation = match smoothing {
+        s if s == 1.0 => 1.0,
+        s if s == 1.3 => 0.5846,
+        s => panic!("PHYSCORE_DFSPH_SMOOTHING: 1.0 or 1.3, got {s}"),
+    };
     for count in list.split(',').map(|c| c.trim().parse::<usize>().expect("a particle count")) {
         let side = (count as f64).cbrt().round() as usize;
         let mut s = tank(3, [side, side, side], 2 * side, 2 * side, 0.0);
-        // The core's Jacobi relaxation for 3D at h = 1.3 Δx (`sph::dfsph::relaxation`, 0.585):
-        // unrelaxed, a 3D column this fine blows up within 10 steps.
-        s.p.relaxation = 0.5846;
+        s.p.h = smoothing * DX;
+        s.p.relaxation = relaxation;
         let v0 = vec![0.0; s.x.len()];
         let stop = AtomicBool::new(false);
         let mut f = Dfsph::with_walls(gpu.clone(), Precision::F32, s.p, &s.x, &v0, &s.walls, &s.psi).unwrap();
@@ -823,8 +832,8 @@ fn bench_dam_break_3d() {
         let steps = (it.steps - before.steps) as f64;
         let n = f.len();
         eprintln!(
-            "DFSPH 3D dam break, {n} particles ({} walls) on {}: {:.3e} particle-steps/s ({:.2} ms a step); \
-             iterations a step: divergence {:.2}, density {:.2}",
+            "DFSPH 3D dam break, {n} particles ({} walls), h = {smoothing} dx, on {}: {:.3e} particle-steps/s \
+             ({:.2} ms a step); iterations a step: divergence {:.2}, density {:.2}",
             f.n_walls(),
             gpu.adapter().name,
             n as f64 * 10.0 / times[1],
