@@ -186,7 +186,8 @@ def dam_break(
         WCSPH). The tank then also stands in a :class:`~physcore.Box`
         4 spacings outside its walls, the extent of the device's cell list. On an NVIDIA H200,
         ``dim=3, n=80`` (10⁶ particles) took 132 s to simulate the default render's 120 frames
-        (docs/guide/gpu.md, measured before the device's neighbour lists).
+        (docs/guide/gpu.md, measured before the device's neighbour lists, at h = 1.3 Δx, 3D's
+        default then).
 
     Returns
     -------
