@@ -37,8 +37,9 @@ moving walls, and its pressure solve pushes each body as it pushes its particles
 iteration (the body's response enters the next iteration, as in the strong coupling of Gissler
 et al., ACM TOG 38 (2019) 5: a floating body's added mass exceeds its own); a sample mirrors
 its particle's pressure plus the hydrostatic rise between them (Adami et al., J. Comput. Phys.
-231 (2012) 7057, eq. 27), and a box floats at its Archimedes draft (within 3 % at 6 spacings of
-draft, 80 across; the guide's table and its limits). A WCSPH fluid meets them through the same samples, counted in its density
+231 (2012) 7057, eq. 27), and a box floats at its Archimedes draft to a fifth or a third of a
+spacing (3.7 % shallow at 6 spacings of draft, 80 across, at the fluid's defaults; the guide's
+table and its limits). A WCSPH fluid meets them through the same samples, counted in its density
 and pushing with −m_i Ψ_b (p_i/ρ_i²) ∇W_ib (paper eq. 10), the reaction applied to the body
 (eq. 11). Fixed bodies are the fluid's walls to give (``boundary=``).
 
