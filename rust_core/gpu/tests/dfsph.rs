@@ -805,10 +805,12 @@ fn bench_dam_break_3d() {
     let smoothing: f64 = std::env::var("PHYSCORE_DFSPH_SMOOTHING").map_or(1.0, |s| s.parse().expect("1.0 or 1.3"));
     // The core's Jacobi relaxation for 3D (`sph::dfsph::relaxation`): 1 at h = 1.0 Δx, 0.585 at
     // 1.3 Δx (unrelaxed, a 3D column that fine blows up within 10 steps).
-    let relaxation = match smoothing {
-        s if s == 1.0 => 1.0,
-        s if s == 1.3 => 0.5846,
-        s => panic!("PHYSCORE_DFSPH_SMOOTHING: 1.0 or 1.3, got {s}"),
+    let relaxation = if smoothing == 1.0 {
+        1.0
+    } else if smoothing == 1.3 {
+        0.5846
+    } else {
+        panic!("PHYSCORE_DFSPH_SMOOTHING: 1.0 or 1.3, got {smoothing}")
     };
     for count in list.split(',').map(|c| c.trim().parse::<usize>().expect("a particle count")) {
         let side = (count as f64).cbrt().round() as usize;
