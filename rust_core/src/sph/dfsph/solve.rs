@@ -351,7 +351,8 @@ impl<V: Vector> Solver<V> {
     /// difference is known at the step's start, so it is given once, as a force: particle k by
     /// dt Σ_b Ψ_b (g·(x_k − x_b)/ρ_k) ∇W_kb, its body the opposite at b. Without it a floating
     /// box rode 0.1–0.2 spacings higher (2D, a 0.3 × 0.15 m box of 250 kg/m², 80 across: −6.1 %
-    /// of Archimedes' draft, −0.2 % with it); left out on the box's vertical sides only, most
+    /// of Archimedes' draft, −0.2 % with it, both read with the test's old surface estimate,
+    /// which read 0.15 cm deep at 80 across: tests/bodies/test_floating.py, `_draft`); left out on the box's vertical sides only, most
     /// of that came back: with p_b = p_k the particle below a side's sample presses it harder
     /// than the one above, an upward push on a wall that hydrostatics pushes only sideways. In
     /// pair order: the same bits for any thread count.
