@@ -43,7 +43,7 @@ def _draft(n: int, rho_body: float, method: str = "dfsph", **fluid) -> float:
     would not apply).
 
     The box heaves after its drop with a period of 0.88 s, decaying at about 0.5 /s at the
-    defaults: at t = 4 s still ±0.6 cm at 80 across (8 % of the draft), ±0.3 cm at 6–7 s. The
+    defaults: at t = 4 s still ±0.6 cm at 80 across (8 % of the draft), ±0.24 cm at 6–7 s. The
     window was t = 2.5 .. 4 s, 1.7 periods of a larger heave, whose mean was off by up to 2.6 %
     (80 across, 500 kg/m³, the old estimator: 7.42 cm there, 7.62 settled); t = 4 .. 7 s holds
     3.4 periods of a smaller one (3 whole periods, 4 .. 6.64 s, give the same to 0.4 %)."""
