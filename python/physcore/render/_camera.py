@@ -113,17 +113,27 @@ class _Camera:
 
 
 def _screen_bounds(cam: _Camera, positions: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Screen-plane bounding box (lo, hi) of all finite (F, N, dim) positions, and max |x|."""
-    lo, hi, amax = np.full(2, np.inf), np.full(2, -np.inf), 0.0
-    for x in positions:  # per frame: the (F, N, 2) projection of a big run need not fit in memory
-        if not np.isfinite(x).all():
+    """Screen-plane bounding box (lo, hi) of all finite (F, N, dim) positions, and max |x|.
+    Frames side by side on threads (:func:`._threads.map_frames`; min and max do not depend on
+    the order): 3.3 s on one core for 120 frames of 10⁶ particles."""
+    from ._threads import map_frames
+
+    def one(k: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+        x = positions[k]  # per frame: the (F, N, 2) projection of a big run need not fit in memory
+        with np.errstate(invalid="ignore"):
+            amax = float(np.abs(x).max()) if x.size else 0.0
+        if not math.isfinite(amax):  # a NaN or inf coordinate: that frame's finite rows only
             x = x[_rows_finite(x)]
+            amax = float(np.abs(x).max()) if x.size else 0.0
         if x.size == 0:
-            continue
+            return None
         s, _ = cam.project(x)
-        lo = np.minimum(lo, [s[:, 0].min(), s[:, 1].min()])
-        hi = np.maximum(hi, [s[:, 0].max(), s[:, 1].max()])
-        amax = max(amax, float(np.abs(x).max()))
+        return np.array([s[:, 0].min(), s[:, 1].min()]), np.array([s[:, 0].max(), s[:, 1].max()]), amax
+
+    lo, hi, amax = np.full(2, np.inf), np.full(2, -np.inf), 0.0
+    for b in map_frames(one, len(positions)):
+        if b is not None:
+            lo, hi, amax = np.minimum(lo, b[0]), np.maximum(hi, b[1]), max(amax, b[2])
     return lo, hi, amax
 
 

@@ -12,7 +12,7 @@ import numpy as np
 from .. import _check
 from .._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write, ctrl_c_held
 from .._errors import InvalidInputError, InvalidTypeError
-from . import _recording
+from . import _recording, _threads
 from ._checks import (
     _check_arrows,
     _check_background,
@@ -483,7 +483,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
-        return _emit(fmt, path, (ras.frame_rgb(k) for k in range(rec.frames)), None, fps, rec.frames)
+        # A liquid's frames are drawn side by side on threads (the same bytes: _threads).
+        return _emit(fmt, path, _threads.in_order(ras.frame_rgb, rec.frames, ras.frames_independent), None, fps, rec.frames)
     return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), ras.palette, fps, rec.frames)
 
 

@@ -585,7 +585,8 @@ class _Rasteriser:
         }.get(color_by, (None, None, 0, 0))
         if values is not None and values.size:
             if scale is None:
-                finite = values[np.isfinite(values)]
+                # All finite (the usual case): no masked copy of the (F, N) values.
+                finite = values.reshape(-1) if np.isfinite(values).all() else values[np.isfinite(values)]
                 # 99th percentile: a few outliers should not wash out the whole map.
                 scale = float(np.percentile(finite, 99)) if finite.size else 0.0
             self.vmax = float(scale)
@@ -1251,6 +1252,14 @@ class _Rasteriser:
         self._draw_overlays(buf, k, cam)
         self._draw_clock(buf, k)
         return buf
+
+    @property
+    def frames_independent(self) -> bool:
+        """Whether frame_rgb(k) depends on k alone, so that frames may be drawn side by side
+        (:mod:`._threads`): a liquid's surface. Not a glow with trails (each frame decays the
+        last one's), nor a mesh (its shader keeps the geometry it drew for the shadows drawn
+        after it)."""
+        return self.surface and self.mesh is None
 
     def frame_rgb(self, k: int) -> np.ndarray:
         """(H, W, 3) uint8 RGB image of frame k: :meth:`frame` in the theme's colours or, with a
