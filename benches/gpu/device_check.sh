@@ -127,6 +127,10 @@ timeout 150 python3 -m physcore render dam_break --param dim=3 --param n=80 --pa
 awk 'NR % 25 == 1' /tmp/gif.log; tail -4 /tmp/gif.log
 python3 -c "import time; print('wall', round(time.time() - $t0, 2), 's')"
 }
+part_liquid_draw() {
+section "Drawing a 10^6-particle liquid's GIF on the host's cores (1 drawing thread, then the default; same bytes)"
+timeout 150 python3 benches/render/bench_liquid_draw.py --rounds 1
+}
 part_fluid() {
 section "The stable fluid (CPU to 1024²)"
 timeout 150 python3 benches/gpu/bench_gpu_grids.py --device gpu --kinds fluid --n 256,1024,4096 --steps 20 --cpu-max 1024
