@@ -22,6 +22,7 @@ from ._errors import (
     SimulationDiverged,
     ThreadPoolError,
     ThreadPoolWarning,
+    UnchargedWarning,
 )
 from ._integrators import (
     RK4,
@@ -101,6 +102,7 @@ __all__ = [
     "ThreadPoolError",
     "ThreadPoolWarning",
     "ContactStepWarning",
+    "UnchargedWarning",
     "EnergyBooksWarning",
     "SeparateFluidsWarning",
     "scenes",

@@ -17,6 +17,7 @@ __all__ = [
     "SeparateFluidsWarning",
     "ContactStepWarning",
     "EnergyBooksWarning",
+    "UnchargedWarning",
 ]
 
 
@@ -154,6 +155,16 @@ class ContactStepWarning(UserWarning):
     other forces need it): collisions then lose or gain energy and the restitution is wrong.
     :meth:`~physcore.Scene.advance` picks the step itself; or set
     ``scene.dt = scene.suggest_dt()``."""
+
+
+class UnchargedWarning(UserWarning):
+    """A scene with a term that acts on charges (:class:`~physcore.Coulomb`,
+    :class:`~physcore.ElectricField`, :class:`~physcore.MagneticField`, their grid forms,
+    :class:`~physcore.PointCharges`, a :class:`~physcore.PotentialGrid` with
+    ``coupling="charge"``) was stepped while no particle has a charge (no ``"charge"``
+    attribute, or all zero), so the term exerts nothing. Set the charges with
+    ``scene.set_attribute("charge", q)`` (C). Checked at the first step after a term or an
+    attribute changes."""
 
 
 class EnergyBooksWarning(RuntimeWarning):

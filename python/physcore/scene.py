@@ -28,6 +28,7 @@ from ._errors import (
     InvalidInputError,
     InvalidTypeError,
     ThreadPoolWarning,
+    UnchargedWarning,
     allocating,
 )
 from ._integrators import (
@@ -639,6 +640,7 @@ class Scene:
         #: Everything the scene holds, as stored, in the order added (see physcore._parts).
         self._parts: list[Part] = []
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
+        self._charge_checked = False  # terms on charges checked against the charges (_warn_uncharged)
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
         #: ``None``: the renderer's own (real-time playback). Not saved with the scene.
@@ -814,6 +816,7 @@ class Scene:
                 self._parts.append(stored)
             raise
         self._parts.append(stored)
+        self._charge_checked = False
         if cls.changes_energy:
             self._e0 = None
         return stored
@@ -974,6 +977,10 @@ class Scene:
         ContactStepWarning
             The scene has :class:`~physcore.Contacts` and ``dt`` is more than twice
             :meth:`auto_dt` (checked once per ``dt`` value): the collisions would be wrong.
+        UnchargedWarning
+            A term acts on charges (:class:`Coulomb`, :class:`ElectricField`, ...) and no
+            particle has one, so it does nothing (checked once after each change of the terms
+            or attributes).
         """
         n = _check_int(n, "n", 0)
         if n > _MAX_STEPS - self.step_count:
@@ -982,6 +989,7 @@ class Scene:
         if self._e0 is None:
             self._set_reference_energy()
         self.warn_contact_step()
+        self._warn_uncharged()
         self._exclusive(lambda sim: sim.step(n))
 
     @property
@@ -1120,6 +1128,32 @@ class Scene:
                 stacklevel=3,
             )
 
+    def _warn_uncharged(self) -> None:
+        """Warn (UnchargedWarning) when a term acts on charges and no particle has one: such a
+        term then does nothing, silently. Once after each change of the terms or attributes."""
+        if self._charge_checked:
+            return
+        self._charge_checked = True
+        from .potentials import PointCharges
+        from .terms.charges import Coulomb, ElectricField, GridElectricField, GridMagneticField, MagneticField
+
+        on_charge = (Coulomb, ElectricField, MagneticField, GridElectricField, GridMagneticField, PointCharges)
+        users = [t for t in self.terms if isinstance(t, on_charge) or getattr(t, "coupling", None) == "charge"]
+        if not users:
+            return
+        try:
+            q = self.attributes.get("charge")
+        except MemoryError:  # no room for a copy of the charges now: the step goes on unwarned
+            return
+        if q is None or not np.any(q):
+            names = ", ".join(dict.fromkeys(type(t).__name__ for t in users))
+            warnings.warn(
+                f"{names}: no particle has a charge ({'no charge attribute' if q is None else 'every charge is 0'}), "
+                "so it exerts no force; set them with scene.set_attribute('charge', q) (C)",
+                UnchargedWarning,
+                stacklevel=3,
+            )
+
     def advance(self, duration: float, *, substeps: str | int = "auto") -> int:
         """Advance ``duration`` seconds in ``n`` substeps and return ``n``; sets :attr:`dt` to
         ``duration / n`` (equal substeps; with a DFSPH fluid, see below, the last substep).
@@ -1151,6 +1185,11 @@ class Scene:
             substeps above 1e12 per call.
         SimulationDiverged, KeyboardInterrupt
             As for :meth:`step`; ``dt`` is rolled back too.
+
+        Warns
+        -----
+        UnchargedWarning
+            As for :meth:`step`.
         """
         if isinstance(duration, bool) or not isinstance(duration, (int, float, np.integer, np.floating)):
             raise InvalidTypeError(f"duration: expected a number of seconds, got {type(duration).__name__}")
@@ -1173,6 +1212,7 @@ class Scene:
         self._to_device()
         if self._e0 is None:
             self._set_reference_energy()
+        self._warn_uncharged()
         return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
 
     def auto_dt(self) -> float:
@@ -1427,6 +1467,7 @@ class Scene:
             a = np.ascontiguousarray(a, dtype=np.float64)
         self._exclusive(lambda sim: sim.set_attribute(name, a))
         self._e0 = None  # the potential of charge-dependent terms changed
+        self._charge_checked = False
 
     def _section(self, section: str) -> list[Any]:
         """The parts of one section of the scene file, in the order added."""

@@ -260,7 +260,10 @@ def test_uncharged_particles_ignore_every_field():
     s.add(pc.MagneticField([0.0, 0.0, 5.0]))
     s.add(pc.Coulomb(k=1.0))
     s.add(pc.GridElectricField(np.ones((2, 2, 2, 3)), [-5.0, -5.0, -5.0], spacing=10.0))
-    s.step(100)
+    with pytest.warns(pc.UnchargedWarning, match="MagneticField, Coulomb, GridElectricField: no particle has a charge") as caught:
+        s.step(50)
+        s.step(50)  # once after each change, not at every step
+    assert len(caught) == 1
     assert np.allclose(s.positions, [[0.1, 0.0, 0.0], [1.0, 0.1, 0.0]], rtol=0, atol=1e-15)
     assert s.energy().potential["coulomb"] == 0.0
     # Charge 0 on one particle: it neither pushes nor is pushed.

@@ -60,15 +60,21 @@ def test_uncharged_scenes_and_later_particles_feel_nothing():
     s = pc.Scene(dim=2, dt=1e-3, threads=1)
     s.add_particles([[0.0, 0.0]], [[1.0, 0.0]], masses=[1.0])
     s.add(pc.ElectricField([1e3, 1e3]))
-    s.step(100)
+    with pytest.warns(pc.UnchargedWarning, match=r"ElectricField: no particle has a charge \(no charge attribute\), so it exerts no force; "
+                      r"set them with scene.set_attribute\('charge', q\)"):
+        s.step(100)
     assert np.allclose(s.positions, [[0.1, 0.0]], rtol=0, atol=1e-15)
     assert s.energy().potential["electric_field"] == 0.0
     s.set_attribute("charge", [0.0])
     s.add_particles([[5.0, 5.0]], masses=[1.0])  # added after: charge 0 until set again
     assert np.array_equal(s.attributes["charge"], [0.0, 0.0])
     x = s.positions
-    s.step(100)
+    with pytest.warns(pc.UnchargedWarning, match=r"\(every charge is 0\)"):
+        s.advance(0.1, substeps=100)
     assert np.array_equal(s.positions[1], x[1])
+    # Charged: no warning (filterwarnings = error would fail the test).
+    s.set_attribute("charge", [0.0, 1.0])
+    s.step(1)
 
 
 def test_pinned_charges_do_not_move_and_store_no_potential():

@@ -346,7 +346,8 @@ def test_charge_coupling_without_charges_does_nothing_and_pinned_particles_are_s
     s.add_particles([[0.5, 0.5], [0.2, 0.2]], masses=[1.0, 1.0], pinned=[False, True])
     s.add(pc.PotentialGrid(phi, h, coupling="charge", name="volts"))
     s.add(pc.PointCharges([0.0, 0.0], 1.0, name="q"))
-    s.step(10)
+    with pytest.warns(pc.UnchargedWarning, match=r"PotentialGrid, PointCharges: no particle has a charge \(no charge attribute\)"):
+        s.step(10)
     assert np.array_equal(s.positions, [[0.5, 0.5], [0.2, 0.2]])
     assert s.energy().potential == {"volts": 0.0, "q": 0.0}
     s.set_attribute("charge", [2.0, 3.0])
@@ -502,6 +503,7 @@ def test_bad_input_names_the_argument_and_changes_nothing(call, exc, arg):
 def test_negative_source_charges_and_zero_masses_are_fine():
     s = pc.Scene(dim=2, threads=1)
     s.add_particles([[0.5, 0.5]], masses=[1.0])
+    s.set_attribute("charge", [1.0])
     s.add(pc.PointCharges([[0.0, 0.0], [1.0, 0.0]], [-1.0, 1.0]))
     s.add(pc.PointMasses([0.0, 0.0], 0.0))
     s.add(pc.HarmonicTrap([0.0, 1.0]))

@@ -75,6 +75,7 @@ def _term(make):
     def attach(term):
         for dim in (2, 3):
             s = _particles(dim, "xpbd" if isinstance(term, pc.XpbdConstraints) else "verlet")
+            s.set_attribute("charge", [1.0, -1.0, 2.0, -0.5])  # so that the terms on charges act
             try:
                 s.add(term)
             except pc.PhyscoreError:
