@@ -749,7 +749,8 @@ def _palette_frames(rgb: list[np.ndarray], n_colours: int = 256) -> tuple[list[A
         im.putpalette(colours)
         return im
 
-    return [mapped(f) for f in rgb], colours
+    # Each frame's mapping is its own (Pillow and numpy release the GIL): side by side on threads.
+    return _threads.map_frames(lambda k: mapped(rgb[k]), len(rgb)), colours
 
 
 #: The GIF writer stores a pixel of a frame only where its colour differs from the one the
@@ -854,7 +855,7 @@ def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int],
     h, w = frames[0].shape
     rgb = pal.astype(np.int16)
     shown = rgb[frames[0]]
-    stored: list[list[Any]] = [[frames[0], 0, 0, int(duration_ms[0])]]  # pixels, x, y, ms
+    stored: list[list[Any]] = [[frames[0], 0, 0, int(duration_ms[0]), None]]  # pixels, x, y, ms, LZW code
     for f, ms in zip(frames[1:], duration_ms[1:], strict=True):
         now = rgb[f]
         changed = np.abs(now - shown).max(axis=2) > tolerance
@@ -873,19 +874,19 @@ def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int],
             code = _lzw(cand)
             if best is None or len(code) < len(best[0]):
                 best = (code, mask, cand, left, top)
-        _, mask, cand, x, y = best
+        code, mask, cand, x, y = best
         shown[mask] = now[mask]
-        stored.append([cand, x, y, int(ms)])
+        stored.append([cand, x, y, int(ms), code])  # the code chosen by, kept: not encoded twice
     head = b"GIF89a" + struct.pack("<HHBBB", w, h, 0xF7, 0, 0) + pal.tobytes()
     head += b"!\xff\x0bNETSCAPE2.0\x03\x01" + struct.pack("<H", 0) + b"\x00"  # loop for ever
     flags = (1 << 2) | (0 if slot is None else 1)  # do not dispose; transparent index given
 
     def write(fh: Any) -> None:
         fh.write(head)
-        for pixels, x, y, ms in stored:
+        for pixels, x, y, ms, code in stored:
             ph, pw = pixels.shape
             fh.write(b"!\xf9\x04" + struct.pack("<BHBB", flags, min(65535, round(ms / 10)), slot or 0, 0))
-            fh.write(b"," + struct.pack("<HHHHB", x, y, pw, ph, 0) + b"\x08" + _lzw(pixels) + b"\x00")
+            fh.write(b"," + struct.pack("<HHHHB", x, y, pw, ph, 0) + b"\x08" + (_lzw(pixels) if code is None else code) + b"\x00")
         fh.write(b";")
 
     atomic_write(path, write)
