@@ -46,8 +46,9 @@ def test_the_gif_bytes_do_not_depend_on_the_drawing_threads(monkeypatch, tmp_pat
 
 
 def test_only_frames_drawn_from_their_index_alone_are_drawn_side_by_side(liquids, monkeypatch):
-    # A liquid's surface is; the same liquid as discs, and a cloth (its mesh shader keeps what it
-    # drew for the shadows after it), are drawn one frame after another.
+    # A liquid's surface and discs are; a glow (color_by="density": with trails each frame
+    # decays the last one's) and a cloth (its mesh shader keeps what it drew for the shadows
+    # after it) are drawn one frame after another.
     asked = []
     original = _threads.in_order
 
@@ -59,9 +60,12 @@ def test_only_frames_drawn_from_their_index_alone_are_drawn_side_by_side(liquids
     rec = liquids[1]
     list(pc.render.frames(rec, size=(120, 90)))
     list(pc.render.frames(rec, size=(120, 90), surface=False, antialias=True))
+    list(pc.render.frames(rec, size=(120, 90), surface=False, antialias=False))
+    glow = pc.render.record(pc.scenes.galaxies(n=200), frames=4, color_by="density")
+    list(pc.render.frames(glow, size=(120, 90), trail=3))
     cloth = pc.render.record(pc.scenes.cloth(n=6), frames=3, frame_time=0.02)
     list(pc.render.frames(cloth, size=(120, 90)))
-    assert asked == [True, False, False]
+    assert asked == [True, True, True, False, False]
 
 
 def test_in_order_keeps_the_order_and_raises_a_frames_error_at_its_turn(monkeypatch):
@@ -115,3 +119,13 @@ def test_the_drawing_threads_follow_the_threads_set_for_the_context(monkeypatch)
     assert _threads.workers() == _threads.MAX_WORKERS
     monkeypatch.setattr(pc._core, "default_threads", lambda: 3)
     assert _threads.workers() == 3
+
+
+@pytest.mark.parametrize("name", sorted(pc.scenes.REGISTRY))
+def test_every_scenes_frames_are_the_same_drawn_side_by_side(name, monkeypatch):
+    """Each ready-made scene's first frames (its own look, a smaller image), drawn one by one and
+    by three threads: the same pixels. Guards :attr:`_Rasteriser.frames_independent` against a
+    drawing path that keeps state from one frame to the next."""
+    rec = pc.render.record(pc.scenes.REGISTRY[name](), frames=6)
+    one = _drawn(rec, 1, monkeypatch)
+    assert np.array_equal(_drawn(rec, 3, monkeypatch), one)

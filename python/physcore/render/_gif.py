@@ -483,9 +483,10 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     if ras.full_colour:
         if fmt == "gif":  # full-colour frames are kept until the palette is made: 3 bytes a pixel
             _check.memory("frames, size", rec.frames * 4 * size[0] * size[1], f"{rec.frames} colour frames of {size[0]}x{size[1]} pixels")
-        # A liquid's frames are drawn side by side on threads (the same bytes: _threads).
+        # Frames that depend on their index alone are drawn side by side on threads (the same
+        # bytes: _threads).
         return _emit(fmt, path, _threads.in_order(ras.frame_rgb, rec.frames, ras.frames_independent), None, fps, rec.frames)
-    return _emit(fmt, path, (ras.frame(k) for k in range(rec.frames)), ras.palette, fps, rec.frames)
+    return _emit(fmt, path, _threads.in_order(ras.frame, rec.frames, ras.frames_independent), ras.palette, fps, rec.frames)
 
 
 def _check_halo(halo: Any, n: int) -> np.ndarray | None:

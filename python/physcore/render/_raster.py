@@ -1255,11 +1255,14 @@ class _Rasteriser:
 
     @property
     def frames_independent(self) -> bool:
-        """Whether frame_rgb(k) depends on k alone, so that frames may be drawn side by side
-        (:mod:`._threads`): a liquid's surface. Not a glow with trails (each frame decays the
-        last one's), nor a mesh (its shader keeps the geometry it drew for the shadows drawn
-        after it)."""
-        return self.surface and self.mesh is None
+        """Whether frame(k) and frame_rgb(k) depend on k alone, so that frames may be drawn
+        side by side (:mod:`._threads`): discs, trails, springs, bodies, a liquid's surface
+        (what they cache on the way, such as the projected trails or the backdrop, is the same
+        whichever frame fills it). Not a glow (``color_by="density"``: with trails each frame
+        decays the last one's), nor a mesh (its shader keeps the geometry it drew for the
+        shadows drawn after it). Every ready-made scene's first frames are tested to be the
+        same drawn one by one and side by side."""
+        return self.mesh is None and self.color_by != "density"
 
     def frame_rgb(self, k: int) -> np.ndarray:
         """(H, W, 3) uint8 RGB image of frame k: :meth:`frame` in the theme's colours or, with a

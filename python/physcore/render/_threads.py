@@ -3,8 +3,8 @@
 A frame of a big liquid (10⁶ particles) takes about 0.13 s to draw on one core, most of it in
 numpy and in the core's raster kernels, which both release the GIL; drawing 120 such frames one
 after another left a many-core machine idle for 16 s after the simulation (GPU or CPU) was done.
-Frames whose drawing keeps no state from one frame to the next (a liquid's surface: see
-``_Rasteriser.frames_independent``) are drawn here by a small pool of threads, at most
+Frames whose drawing keeps no state from one frame to the next (all but a glow and a shaded
+mesh: see ``_Rasteriser.frames_independent``) are drawn here by a small pool of threads, at most
 ``2 · workers`` ahead of the consumer, and handed on in frame order: the same images, bit for
 bit, as drawn one by one (each frame is a function of its index alone; the caches the drawing
 fills on the way are the same whatever frame fills them), so the file's bytes do not depend on
