@@ -21,6 +21,7 @@ __all__ = [
     "sphere_depths",
     "blur",
     "draw_discs",
+    "fill_polygons",
     "rasterise_mesh",
     "neighbors",
     "sph_kernel",
@@ -55,6 +56,12 @@ def draw_discs(
     col: npt.NDArray[np.float32],
     row: npt.NDArray[np.float32],
     radius: npt.NDArray[np.float32],
+    colours: npt.NDArray[np.uint8],
+) -> None: ...
+def fill_polygons(
+    image: npt.NDArray[np.uint8],
+    verts: npt.NDArray[np.float64],
+    starts: npt.NDArray[np.uint64],
     colours: npt.NDArray[np.uint8],
 ) -> None: ...
 def sph_kernel(q: npt.NDArray[np.float64], h: float, dim: int, kernel: str) -> npt.NDArray[np.float64]: ...

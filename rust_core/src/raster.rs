@@ -90,6 +90,112 @@ pub fn draw_discs(
     Ok(())
 }
 
+/// Filled convex polygons over `image` (`height × width × 3` bytes), in order (the renderer's 2D
+/// rigid bodies, `physcore.render._bodies`): polygon p's vertices are `verts[2s..2e]` (pixel
+/// column, row pairs; pixel k spans [k, k+1)) for s, e = `starts[p]`, `starts[p + 1]`, its colour
+/// `colours[3p..3p+3]`. Each is antialiased by the signed distance to its edges (coverage
+/// clamp(½ − d, 0, 1), d the largest of the edges' outward half-plane distances), lit from above
+/// (the colour × (1.18 − 0.33 t), t from 0 at its top vertex to 1 at its foot) and rimmed darker
+/// (× 0.55 within 1.6 px of its edge). This is the numpy `_fill` the renderer kept as its
+/// reference, operation for operation in its precisions (f64, the rim colour in f32, the
+/// result truncated to a byte), so the bytes are the same, without numpy's per-polygon
+/// overhead (some 0.24 ms each: 51 bodies took 12 ms a frame). Degenerate edges (≤ 1e-9 px)
+/// are dropped; a polygon with fewer than 3 edges left, or off the image, draws nothing.
+/// Serial: the painter's order is the drawing order.
+/// InvalidInput for inconsistent lengths or starts not increasing.
+pub fn fill_polygons(
+    image: &mut [u8],
+    width: usize,
+    height: usize,
+    verts: &[f64],
+    starts: &[usize],
+    colours: &[u8],
+) -> Result<()> {
+    if image.len() != 3 * width * height {
+        return Err(invalid("image", "image must be height × width × 3"));
+    }
+    let n = starts.len().saturating_sub(1);
+    if starts.is_empty() || starts[0] != 0 || starts.windows(2).any(|w| w[1] < w[0]) || 2 * starts[n] != verts.len() {
+        return Err(invalid("starts", "starts must rise from 0 to the vertex count"));
+    }
+    if colours.len() != 3 * n {
+        return Err(invalid("colours", "one colour (3 bytes) per polygon"));
+    }
+    let mut edges: Vec<[f64; 4]> = Vec::new(); // px, py, nx, ny
+    for p in 0..n {
+        let poly = &verts[2 * starts[p]..2 * starts[p + 1]];
+        let v = poly.len() / 2;
+        if v == 0 || poly.iter().any(|x| !x.is_finite()) {
+            continue;
+        }
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        let mut sum = [0.0f64; 2];
+        for i in 0..v {
+            for a in 0..2 {
+                lo[a] = lo[a].min(poly[2 * i + a]);
+                hi[a] = hi[a].max(poly[2 * i + a]);
+                sum[a] += poly[2 * i + a];
+            }
+        }
+        let c0 = ((lo[0] - 1.0).floor() as i64).max(0);
+        let r0 = ((lo[1] - 1.0).floor() as i64).max(0);
+        let c1 = ((hi[0] + 1.0).ceil() as i64).min(width as i64);
+        let r1 = ((hi[1] + 1.0).ceil() as i64).min(height as i64);
+        if c0 >= c1 || r0 >= r1 {
+            continue;
+        }
+        let centre = [sum[0] / v as f64, sum[1] / v as f64];
+        edges.clear();
+        let (mut top, mut foot) = (f64::INFINITY, f64::NEG_INFINITY);
+        for i in 0..v {
+            let j = (i + 1) % v;
+            let (px, py) = (poly[2 * i], poly[2 * i + 1]);
+            let (ex, ey) = (poly[2 * j] - px, poly[2 * j + 1] - py);
+            let length = ex.hypot(ey);
+            if length.partial_cmp(&1e-9) != Some(std::cmp::Ordering::Greater) {
+                continue;
+            }
+            let (mut nx, mut ny) = (ey / length, -ex / length);
+            if (centre[0] - px) * nx + (centre[1] - py) * ny > 0.0 {
+                (nx, ny) = (-nx, -ny); // point outward, whatever the winding
+            }
+            edges.push([px, py, nx, ny]);
+            top = top.min(py);
+            foot = foot.max(py);
+        }
+        if edges.len() < 3 {
+            continue;
+        }
+        let span = if foot - top > 1.0 { foot - top } else { 1.0 };
+        let base: [f32; 3] = [colours[3 * p] as f32, colours[3 * p + 1] as f32, colours[3 * p + 2] as f32];
+        let rim_colour = base.map(|b| (b * 0.55f32) as f64);
+        for r in r0..r1 {
+            let row = r as f64 + 0.5;
+            let t = ((row - top) / span).clamp(0.0, 1.0);
+            let light = 1.18 - 0.33 * t;
+            for c in c0..c1 {
+                let col = c as f64 + 0.5;
+                let mut d = f64::NEG_INFINITY;
+                for e in &edges {
+                    d = d.max((col - e[0]) * e[2] + (row - e[1]) * e[3]);
+                }
+                let cover = (0.5 - d).clamp(0.0, 1.0);
+                if cover == 0.0 {
+                    continue; // region · 1 + shade · 0: the pixel as it was
+                }
+                let inside_rim = (-d).max(0.0) < 1.6;
+                let at = 3 * (r as usize * width + c as usize);
+                for ch in 0..3 {
+                    let shade = if inside_rim { rim_colour[ch] } else { base[ch] as f64 * light };
+                    let region = image[at + ch] as f32 as f64;
+                    image[at + ch] = (region * (1.0 - cover) + shade * cover).clamp(0.0, 255.0) as u8;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// ⌊v⌋ by truncation, for v within i64's range: f64::floor is a libm call on baseline x86-64
 /// (three pixel boxes a point took 70 % of `sphere_depths`' time with it).
 fn floor_i64(v: f64) -> i64 {

@@ -141,6 +141,33 @@ fn draw_discs<'py>(
     py.detach(|| crate::raster::draw_discs(img, shape[1], shape[0], c, r, rad, cs)).map_err(|e| to_py(py, e))
 }
 
+/// Filled, lit convex polygons on `image` (H, W, 3) uint8 in place, in order
+/// (`crate::raster::fill_polygons`): `verts` (V, 2) float64 pixel (column, row) of every
+/// polygon's vertices one after another, `starts` (P + 1,) uint64 where each begins (0 first, V
+/// last), `colours` (P, 3) uint8. InvalidInputError for inconsistent shapes.
+#[pyfunction]
+fn fill_polygons<'py>(
+    py: Python<'py>,
+    mut image: numpy::PyReadwriteArray3<'py, u8>,
+    verts: PyReadonlyArray2<'py, f64>,
+    starts: numpy::PyReadonlyArray1<'py, u64>,
+    colours: PyReadonlyArray2<'py, u8>,
+) -> PyResult<()> {
+    let contiguous = |name: &str| err(crate::error::invalid(name, "array must be C-contiguous"));
+    let shape = image.shape().to_vec();
+    if shape[2] != 3 {
+        return Err(err(crate::error::invalid("image", "image must be (H, W, 3)")));
+    }
+    if verts.shape()[1] != 2 {
+        return Err(err(crate::error::invalid("verts", "verts must be (V, 2)")));
+    }
+    let img = image.as_slice_mut().map_err(|_| contiguous("image"))?;
+    let v = verts.as_slice().map_err(|_| contiguous("verts"))?;
+    let st: Vec<usize> = starts.as_slice().map_err(|_| contiguous("starts"))?.iter().map(|&x| x as usize).collect();
+    let cs = colours.as_slice().map_err(|_| contiguous("colours"))?;
+    py.detach(|| crate::raster::fill_polygons(img, shape[1], shape[0], v, &st, cs)).map_err(|e| to_py(py, e))
+}
+
 /// Points `col`, `row` (N,) float64 in pixels splatted bilinearly on an (H, W) float32 grid
 /// (`crate::raster::splat`): counts, or `weights` (N,) float32. InvalidInputError for
 /// inconsistent shapes.
@@ -331,6 +358,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterise_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(mesh_normals, m)?)?;
     m.add_function(wrap_pyfunction!(draw_discs, m)?)?;
+    m.add_function(wrap_pyfunction!(fill_polygons, m)?)?;
     m.add_function(wrap_pyfunction!(splat, m)?)?;
     m.add_function(wrap_pyfunction!(sphere_depths, m)?)?;
     m.add_function(wrap_pyfunction!(blur, m)?)?;
