@@ -131,7 +131,8 @@ def _screen_bounds(cam: _Camera, positions: np.ndarray) -> tuple[np.ndarray, np.
         return np.array([s[:, 0].min(), s[:, 1].min()]), np.array([s[:, 0].max(), s[:, 1].max()]), amax
 
     lo, hi, amax = np.full(2, np.inf), np.full(2, -np.inf), 0.0
-    for b in map_frames(one, len(positions)):
+    # Threads for big frames only: a few particles' frame takes microseconds, a thread's turn more.
+    for b in map_frames(one, len(positions), parallel=positions.shape[1] >= 10_000):
         if b is not None:
             lo, hi, amax = np.minimum(lo, b[0]), np.maximum(hi, b[1]), max(amax, b[2])
     return lo, hi, amax

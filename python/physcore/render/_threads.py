@@ -62,10 +62,11 @@ def in_order(draw: Callable[[int], T], count: int, parallel: bool = True) -> Ite
         pool.shutdown(wait=True, cancel_futures=True)
 
 
-def map_frames(fn: Callable[[int], T], count: int) -> list[T]:
+def map_frames(fn: Callable[[int], T], count: int, parallel: bool = True) -> list[T]:
     """``[fn(0), …, fn(count − 1)]``, computed by :func:`workers` threads (for reductions over
-    frames whose result does not depend on the order, such as bounds)."""
-    n = workers()
+    frames whose result does not depend on the order, such as bounds); one after another
+    without `parallel` (work too small to hand to a thread)."""
+    n = workers() if parallel else 1
     if n <= 1 or count <= 1:
         return [fn(k) for k in range(count)]
     with ThreadPoolExecutor(n, thread_name_prefix="physcore-draw") as pool:
