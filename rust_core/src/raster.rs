@@ -115,7 +115,11 @@ pub fn fill_polygons(
         return Err(invalid("image", "image must be height × width × 3"));
     }
     let n = starts.len().saturating_sub(1);
-    if starts.is_empty() || starts[0] != 0 || starts.windows(2).any(|w| w[1] < w[0]) || 2 * starts[n] != verts.len() {
+    if starts.is_empty()
+        || starts[0] != 0
+        || starts.windows(2).any(|w| w[1] < w[0])
+        || starts[n].checked_mul(2) != Some(verts.len())
+    {
         return Err(invalid("starts", "starts must rise from 0 to the vertex count"));
     }
     if colours.len() != 3 * n {

@@ -175,5 +175,7 @@ def test_the_polygon_fill_refuses_inconsistent_arrays():
         pc._core.fill_polygons(img, v, np.array([0, 2], np.uint64), np.zeros((1, 3), np.uint8))
     with pytest.raises(pc.InvalidInputError, match="colours"):
         pc._core.fill_polygons(img, v, np.array([0, 3], np.uint64), np.zeros((2, 3), np.uint8))
+    with pytest.raises(pc.InvalidInputError, match="starts"):  # 2 · 2⁶³ vertices would wrap to 0
+        pc._core.fill_polygons(img, np.zeros((0, 2)), np.array([0, 2**63], np.uint64), np.zeros((1, 3), np.uint8))
     with pytest.raises(pc.InvalidInputError, match="verts"):
         pc._core.fill_polygons(img, np.zeros((3, 3)), np.array([0, 3], np.uint64), np.zeros((1, 3), np.uint8))

@@ -130,15 +130,25 @@ fn draw_discs<'py>(
     radius: numpy::PyReadonlyArray1<'py, f32>,
     colours: PyReadonlyArray2<'py, u8>,
 ) -> PyResult<()> {
-    let contiguous = |name: &str| err(crate::error::invalid(name, "array must be C-contiguous"));
+    let (img, height, width) = rgb_image(&mut image)?;
+    let (c, r, rad) = (slice1(&col, "col")?, slice1(&row, "row")?, slice1(&radius, "radius")?);
+    let cs = colours.as_slice().map_err(|_| not_contiguous("colours"))?;
+    py.detach(|| crate::raster::draw_discs(img, width, height, c, r, rad, cs)).map_err(|e| to_py(py, e))
+}
+
+/// InvalidInputError naming an array that is not C-contiguous.
+fn not_contiguous(name: &str) -> PyErr {
+    err(crate::error::invalid(name, "array must be C-contiguous"))
+}
+
+/// The bytes of an (H, W, 3) uint8 RGB `image` drawn on in place, with H and W; InvalidInputError
+/// for another shape or a non-contiguous array.
+fn rgb_image<'a>(image: &'a mut numpy::PyReadwriteArray3<'_, u8>) -> PyResult<(&'a mut [u8], usize, usize)> {
     let shape = image.shape().to_vec();
     if shape[2] != 3 {
         return Err(err(crate::error::invalid("image", "image must be (H, W, 3)")));
     }
-    let img = image.as_slice_mut().map_err(|_| contiguous("image"))?;
-    let (c, r, rad) = (slice1(&col, "col")?, slice1(&row, "row")?, slice1(&radius, "radius")?);
-    let cs = colours.as_slice().map_err(|_| contiguous("colours"))?;
-    py.detach(|| crate::raster::draw_discs(img, shape[1], shape[0], c, r, rad, cs)).map_err(|e| to_py(py, e))
+    Ok((image.as_slice_mut().map_err(|_| not_contiguous("image"))?, shape[0], shape[1]))
 }
 
 /// Filled, lit convex polygons on `image` (H, W, 3) uint8 in place, in order
@@ -153,19 +163,15 @@ fn fill_polygons<'py>(
     starts: numpy::PyReadonlyArray1<'py, u64>,
     colours: PyReadonlyArray2<'py, u8>,
 ) -> PyResult<()> {
-    let contiguous = |name: &str| err(crate::error::invalid(name, "array must be C-contiguous"));
-    let shape = image.shape().to_vec();
-    if shape[2] != 3 {
-        return Err(err(crate::error::invalid("image", "image must be (H, W, 3)")));
-    }
     if verts.shape()[1] != 2 {
         return Err(err(crate::error::invalid("verts", "verts must be (V, 2)")));
     }
-    let img = image.as_slice_mut().map_err(|_| contiguous("image"))?;
-    let v = verts.as_slice().map_err(|_| contiguous("verts"))?;
-    let st: Vec<usize> = starts.as_slice().map_err(|_| contiguous("starts"))?.iter().map(|&x| x as usize).collect();
-    let cs = colours.as_slice().map_err(|_| contiguous("colours"))?;
-    py.detach(|| crate::raster::fill_polygons(img, shape[1], shape[0], v, &st, cs)).map_err(|e| to_py(py, e))
+    let (img, height, width) = rgb_image(&mut image)?;
+    let v = verts.as_slice().map_err(|_| not_contiguous("verts"))?;
+    let st = starts.as_slice().map_err(|_| not_contiguous("starts"))?;
+    let st: Vec<usize> = st.iter().map(|&x| usize::try_from(x).unwrap_or(usize::MAX)).collect();
+    let cs = colours.as_slice().map_err(|_| not_contiguous("colours"))?;
+    py.detach(|| crate::raster::fill_polygons(img, width, height, v, &st, cs)).map_err(|e| to_py(py, e))
 }
 
 /// Points `col`, `row` (N,) float64 in pixels splatted bilinearly on an (H, W) float32 grid
