@@ -124,6 +124,10 @@ _META_OPTIONAL.update({"device": "str", "device_acc_valid": "bool"})
 # heliocentric split, and goes on with it; any other file takes the default, Jacobi (`read`).
 _META_OPTIONAL["wh_coordinates"] = "str"
 WH_DEFAULT = "jacobi"
+# The order of the "wisdom_holman" corrector, written only when one is set (other files keep
+# their bytes); absent, none (0).
+_META_OPTIONAL["wh_corrector"] = "int"
+_META_DEFAULTS["wh_corrector"] = 0
 #: A grid's state members by kind (the record fixes their sizes): name -> (dtype, size axis), the
 #: axis "G" being the grid's cell count.
 _GRID_STATE: dict[str, dict[str, tuple[str, Any]]] = {

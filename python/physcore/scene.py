@@ -39,6 +39,7 @@ from ._integrators import (
     WisdomHolman,
     check_cg_max_iter,
     check_wh_coordinates,
+    check_wh_corrector,
     check_xpbd_iterations,
     check_xpbd_substeps,
 )
@@ -543,6 +544,10 @@ class Scene:
     wh_coordinates : {"jacobi", "democratic_heliocentric"}
         The coordinates of ``"wisdom_holman"``'s split (default ``"jacobi"``; see
         :class:`WisdomHolman`); kept, and ignored, by the other integrators.
+    wh_corrector : {0, 3, 5, 7, 11, 17}
+        The order of ``"wisdom_holman"``'s symplectic corrector, applied at both ends of each
+        ``step``/``advance`` call (default 0: none; see :class:`WisdomHolman`); kept, and
+        ignored, by the other integrators.
 
     Raises
     ------
@@ -582,6 +587,7 @@ class Scene:
         xpbd_substeps: int = XPBD.substeps,
         xpbd_iterations: int = XPBD.iterations,
         wh_coordinates: str = WisdomHolman.coordinates,
+        wh_corrector: int = WisdomHolman.corrector,
         device: str = "cpu",
     ) -> None:
         device = _check_device(device)
@@ -594,16 +600,16 @@ class Scene:
         rtol, atol = _check_tol(rtol, "rtol"), _check_tol(atol, "atol")
         cg_tol, cg_max_iter = _check_tol(cg_tol, "cg_tol"), check_cg_max_iter(cg_max_iter)
         xpbd_substeps, xpbd_iterations = check_xpbd_substeps(xpbd_substeps), check_xpbd_iterations(xpbd_iterations)
-        wh_coordinates = check_wh_coordinates(wh_coordinates)
+        wh_coordinates, wh_corrector = check_wh_coordinates(wh_coordinates), check_wh_corrector(wh_corrector)
         options = _record_options(
             integrator,
             {"rtol": rtol, "atol": atol, "cg_tol": cg_tol, "cg_max_iter": cg_max_iter,
              "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations,
-             "wh_coordinates": wh_coordinates},
+             "wh_coordinates": wh_coordinates, "wh_corrector": wh_corrector},
         )
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
-        wh_coordinates = options["wh_coordinates"]
+        wh_coordinates, wh_corrector = options["wh_coordinates"], options["wh_corrector"]
         integrator = name
         # device="auto": the precision follows the choice made at the first step (f64 on the CPU,
         # f32 on a GPU) unless it was given.
@@ -624,6 +630,7 @@ class Scene:
         sim.set_tolerances(rtol, atol)  # validates (ValueError naming rtol/atol)
         sim.set_substeps(xpbd_substeps, xpbd_iterations)
         sim.set_wh_coordinates(wh_coordinates)
+        sim.set_wh_corrector(wh_corrector)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
         # The CPU's f32 mode rounds the stored state; a device computes in its own precision.
         sim.single = precision == "f32" and device in ("cpu", "auto")
@@ -1326,6 +1333,16 @@ class Scene:
         self._sim.set_wh_coordinates(check_wh_coordinates(value))
 
     @property
+    def wh_corrector(self) -> int:
+        """The order of ``"wisdom_holman"``'s symplectic corrector, 0 for none (see
+        :class:`WisdomHolman`). Settable; a change takes effect at the next call."""
+        return int(self._sim.wh_corrector)
+
+    @wh_corrector.setter
+    def wh_corrector(self, value: int) -> None:
+        self._sim.set_wh_corrector(check_wh_corrector(value))
+
+    @property
     def precision(self) -> str:
         """``"f64"`` or ``"f32"``: the precision of the stored state (set in the constructor; on
         a GPU, of the device's state and arithmetic)."""
@@ -1962,6 +1979,7 @@ class Scene:
             # Where it matters only: other scenes' files keep their bytes (`_scenefile`).
             **({"wh_coordinates": self.wh_coordinates}
                if self.integrator == "wisdom_holman" or self.wh_coordinates != _scenefile.WH_DEFAULT else {}),
+            **({"wh_corrector": self.wh_corrector} if self.wh_corrector else {}),
             "threads": self._threads,
             "time": self.time,
             "step": self.step_count,
@@ -2095,6 +2113,7 @@ class Scene:
                 xpbd_substeps=meta["xpbd_substeps"],
                 xpbd_iterations=meta["xpbd_iterations"],
                 wh_coordinates=meta["wh_coordinates"],
+                wh_corrector=meta["wh_corrector"],
                 device=device,
             )
         if z["positions"].shape[0]:

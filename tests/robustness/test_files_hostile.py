@@ -321,6 +321,7 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("xpbd_substeps",), [0, -1, 1.5, True, "2", 10**6, None]),
     (("xpbd_iterations",), [0, -1, 1.5, True, "2", 10**5, None]),
     (("wh_coordinates",), ["heliocentric", "", 3, True, None]),
+    (("wh_corrector",), [4, 1, -1, 18, 2**64, 3.0, "17", True, None]),
     (("threads",), [0, -1, 1.5, True, "2", 2**63, [2]]),
     (("time",), [NAN, INF, -INF, -1.0, "0", True, None]),
     (("step",), [1.5, -1, 2**63, 2**64 - 1, 2**64, True, "3", None, 3.0]),

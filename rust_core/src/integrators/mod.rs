@@ -76,6 +76,9 @@ pub struct IntegratorOptions {
     pub xpbd_iterations: u32,
     /// "wisdom_holman": the coordinates of the split. Default Jacobi.
     pub wh_coordinates: wisdom_holman::Coordinates,
+    /// "wisdom_holman": the order of the symplectic corrector applied at both ends of a call
+    /// (`wisdom_holman::CORRECTOR_ORDERS`; Jacobi coordinates only), 0 for none. Default 0.
+    pub wh_corrector: u32,
 }
 
 impl Default for IntegratorOptions {
@@ -88,6 +91,7 @@ impl Default for IntegratorOptions {
             xpbd_substeps: 10,
             xpbd_iterations: 1,
             wh_coordinates: wisdom_holman::Coordinates::default(),
+            wh_corrector: 0,
         }
     }
 }
@@ -117,6 +121,16 @@ impl IntegratorOptions {
         }
         if !(1..=10_000).contains(&self.xpbd_iterations) {
             return Err(invalid("iterations", format!("{} must be in 1..=10000", self.xpbd_iterations)));
+        }
+        if self.wh_corrector != 0 && !wisdom_holman::CORRECTOR_ORDERS.contains(&self.wh_corrector) {
+            return Err(invalid(
+                "wh_corrector",
+                format!(
+                    "{} is no corrector's order: 0 (none) or one of {:?}",
+                    self.wh_corrector,
+                    wisdom_holman::CORRECTOR_ORDERS
+                ),
+            ));
         }
         Ok(())
     }
@@ -154,6 +168,15 @@ pub trait Integrator<V: Vector>: Send + Sync {
     }
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
+    /// The call of steps ended (`System::settle`): completes what the steps left for its end
+    /// (the Wisdom–Holman corrector's output transformation). Returns `true` if any position or
+    /// velocity is not finite afterwards. Default: nothing left.
+    fn settle(&mut self, _sys: &mut Particles<V>) -> bool {
+        false
+    }
+    /// The call of steps was rolled back (to a checkpoint taken before it): forget what was
+    /// left for its end. Default: nothing left.
+    fn abandon(&mut self) {}
     /// What the integrator carries from one step to the next, as one value (`Carry`); `None`
     /// for an integrator that carries nothing.
     fn as_carry(&self) -> Option<&dyn Carry<V>> {

@@ -52,6 +52,25 @@
 //! and no pinned particle but the Sun: a pinned Sun is a fixed centre (no jump, inertial
 //! velocities, the Kepler orbits of G m_0 about it), where both coordinate sets are the same map.
 //!
+//! Symplectic correctors (Jacobi only; `IntegratorOptions::wh_corrector`, off by default):
+//! the map W is conjugate, to first order in the planets' masses, to the exact flow of H
+//! through a near-identity map C, W ≈ C⁻¹ ∘ exp(dt H) ∘ C (Wisdom, Holman & Touma, Fields Inst.
+//! Commun. 10 (1996) 217). The map's error of first order in the masses is then a coordinate
+//! change, not a drift: stepping C(x) and handing back C⁻¹ of the result removes it, through
+//! dt^(order+1), leaving the error of second order in the masses. As REBOUND's WHFast (Rein &
+//! Tamayo 2015, §4), C is a product of stages Z(a, b) = K(a) ∘ I(−b) ∘ K(−2a) ∘ I(b) ∘ K(a)
+//! (K a Kepler drift, I a kick of the interaction, each for the time given), at drifts
+//! a_j = j √(7/40) dt and kicks ±β_j dt, the stages Z(−a_k, −β_k) … Z(−a_1, −β_1), Z(a_1, β_1)
+//! … Z(a_k, β_k): to first order in the masses their generator is Σ_j 4 β_j sinh(a_j L_A) of
+//! the interaction (L_A the Kepler part's Lie operator, times dt), which must equal
+//! 1/w − 1/(2 sinh(w/2)) at w = L_A dt through w^(2k−1) (the conjugacy of the map
+//! exp(½dt A) exp(dt B) exp(½dt A), whose generator to that order is A + (w/2)/sinh(w/2) B).
+//! The β_j solve those k linear equations (`CORRECTOR_B`, computed at 60 digits; they are
+//! WHT96's and WHFast's for orders 3, 5, 7 and 11). Negating every β gives the exact inverse.
+//! Applied at the first step of a call and undone when the call ends (`settle`), it costs
+//! 4(order − 1) force evaluations a call (each end order − 1 stages of two), not a step: between the steps of one call the state is
+//! the corrected one, so `step(n)` and n calls of `step(1)` agree to rounding, not bit for bit.
+//!
 //! The Kepler drift solves the universal Kepler equation for the universal anomaly s,
 //!   dt = r_0 G_1(s) + η_0 G_2(s) + μ G_3(s),   η_0 = r_0·v_0,   β = 2μ/r_0 − v_0²,
 //! with the G-functions G_k(s) = s^k c_k(βs²) of Stumpff's c_k (Danby, *Fundamentals of Celestial
@@ -98,9 +117,48 @@ impl Coordinates {
     }
 }
 
+/// The symplectic correctors' orders (`IntegratorOptions::wh_corrector`; 0 is none).
+pub const CORRECTOR_ORDERS: [u32; 5] = [3, 5, 7, 11, 17];
+
+/// √(7/40): stage j of a corrector drifts ±j times this, times dt (Wisdom, Holman & Touma 1996).
+const CORRECTOR_A: Real = 0.4183300132670378;
+
+/// β_1 … β_k of the corrector of order 2k + 1 (the module's docs: Σ_j 4 β_j sinh(j a w) equals
+/// 1/w − 1/(2 sinh(w/2)) through w^(2k−1); solved at 60 digits, rounded to float64).
+fn corrector_b(order: u32) -> &'static [Real] {
+    match order {
+        3 => &[0.024900596027799867],
+        5 => &[0.041500993379666444, -0.008300198675933288],
+        7 => &[0.0539643990931275, -0.018270923246702132, 0.0024926811426922105],
+        11 => &[
+            0.07259339474884274,
+            -0.03812161368128865,
+            0.012309078592019946,
+            -0.0023487215292295354,
+            0.0002036157964785465,
+        ],
+        17 => &[
+            0.09305610377142595,
+            -0.0651928635763779,
+            0.03242219886471358,
+            -0.01207176082234229,
+            0.0033132577069380654,
+            -0.0006359998307581766,
+            7.643635522793574e-05,
+            -4.334741547337358e-06,
+        ],
+        _ => &[],
+    }
+}
+
 #[derive(Default)]
 pub struct WisdomHolman<V: Vector> {
     coords: Coordinates,
+    /// The corrector's order (0: none).
+    corrector: u32,
+    /// The state is the corrected one (C(x)), to be handed back at `settle`: Some(the dt the
+    /// corrector took).
+    corrected: Option<Real>,
     /// Forces of the last evaluation (all terms, N), kept for the next step's first kick.
     f: Vec<V>,
     /// Term powers at the cached force state.
@@ -222,7 +280,7 @@ impl<V: Vector> WisdomHolman<V> {
 
     /// Jacobi: the Kepler drift of dt about the masses within, and the centre of mass's uniform
     /// motion. `self.q` holds the Jacobi positions.
-    fn drift_jacobi(&mut self, sys: &mut Particles<V>, dt: Real, gc: Real, c: usize) {
+    fn drift_jacobi(&mut self, sys: &mut Particles<V>, dt: Real, gc: Real, c: usize, com: bool) {
         let (m, single) = (&sys.model.mass, sys.single);
         to_jacobi(&sys.state.v, m, c, &self.eta, &mut self.w);
         let eta = &self.eta;
@@ -234,9 +292,40 @@ impl<V: Vector> WisdomHolman<V> {
                 }
             }
         });
-        self.q[0] += self.w[0] * dt;
+        if com {
+            self.q[0] += self.w[0] * dt;
+        }
         from_jacobi(&self.q, m, c, eta, &mut sys.state.x, single);
         from_jacobi(&self.w, m, c, eta, &mut sys.state.v, single);
+    }
+
+    /// One corrector stage Z(a, b) = K(a) ∘ I(−b) ∘ K(−2a) ∘ I(b) ∘ K(a) (the module's docs),
+    /// in Jacobi coordinates; the centre of mass does not move (its drifts sum to 0).
+    fn corrector_stage(&mut self, sys: &mut Particles<V>, a: Real, b: Real, gc: Real, c: usize) {
+        let m = &sys.model.mass;
+        to_jacobi(&sys.state.x, m, c, &self.eta, &mut self.q);
+        self.drift_jacobi(sys, a, gc, c, false);
+        for (h, drift) in [(-b, -2.0 * a), (b, a)] {
+            self.eval(sys, c, false);
+            to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
+            self.kick_jacobi(sys, h, gc, c);
+            self.drift_jacobi(sys, drift, gc, c, false);
+        }
+    }
+
+    /// The corrector C (`sign` 1) or its inverse (−1) for steps of `dt`: the stages
+    /// Z(−a_k, −sβ_k) … Z(−a_1, −sβ_1), Z(a_1, sβ_1) … Z(a_k, sβ_k). Returns `true` if any
+    /// position or velocity is not finite afterwards.
+    fn correct(&mut self, sys: &mut Particles<V>, dt: Real, sign: Real) -> bool {
+        let (c, gc) = centre(sys);
+        masses_within(&sys.model.mass, c, &mut self.eta);
+        let b = corrector_b(self.corrector);
+        for j in (1..=b.len()).rev().map(|j| -(j as Real)).chain((1..=b.len()).map(|j| j as Real)) {
+            let beta = b[j.abs() as usize - 1] * j.signum();
+            self.corrector_stage(sys, j * CORRECTOR_A * dt, sign * beta * dt, gc, c);
+        }
+        let (x, v) = (&sys.state.x, &sys.state.v);
+        par::sum(x.len(), 0u32, |r| r.map(|i| bad(x[i], v[i]) as u32).sum()) > 0
     }
 
     /// v ← v + h a_interaction (the forces of `eval`).
@@ -356,9 +445,16 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
                 // A body on the central one, as the heliocentric map sees it: a divergence.
                 sys.state.v[i] = sys.state.v[i] * Real::NAN;
             }
+            if self.corrector > 0 && self.corrected.is_none() {
+                // The call's first step: from here on the state is C(x), handed back at `settle`.
+                self.corrected = Some(dt);
+                if self.correct(sys, dt, 1.0) {
+                    return true;
+                }
+            }
             masses_within(&sys.model.mass, c, &mut self.eta);
             to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
-            self.drift_jacobi(sys, 0.5 * dt, gc, c);
+            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
             self.eval(sys, c, false);
             self.p.clear();
             self.p.extend_from_slice(sys.forces.last_power());
@@ -367,7 +463,7 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
             sys.forces.book_power(dt);
             to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
             self.kick_jacobi(sys, dt, gc, c);
-            self.drift_jacobi(sys, 0.5 * dt, gc, c);
+            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
         } else {
             if stale {
                 self.eval(sys, c, true);
@@ -400,9 +496,19 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
             self.coords = o.wh_coordinates;
             self.valid = false;
         }
+        self.corrector = o.wh_corrector;
     }
     fn reset(&mut self) {
         self.valid = false;
+    }
+    fn settle(&mut self, sys: &mut Particles<V>) -> bool {
+        match self.corrected.take() {
+            Some(dt) => self.correct(sys, dt, -1.0),
+            None => false,
+        }
+    }
+    fn abandon(&mut self) {
+        self.corrected = None;
     }
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
         Some(self)
@@ -424,6 +530,17 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
             return why(format!("kicks with position-dependent forces, and term {:?} depends on velocity", t.name()));
         }
         let (c, _) = centre(sys);
+        if self.corrector > 0 && (self.coords != Coordinates::Jacobi || sys.model.inv_mass[c] == 0.0) {
+            let what = if self.coords != Coordinates::Jacobi {
+                format!("these are {:?}", self.coords.name())
+            } else {
+                format!("the heaviest body (particle {c}) is pinned, a fixed centre, whose map is the heliocentric one")
+            };
+            return Err(invalid(
+                "wh_corrector",
+                format!("the symplectic corrector is derived for the map in Jacobi coordinates about a free centre, and {what} (set wh_corrector=0, or wh_coordinates='jacobi' and unpin it)"),
+            ));
+        }
         if let Some(k) = (0..sys.model.inv_mass.len()).find(|&k| k != c && sys.model.inv_mass[k] == 0.0) {
             return why(format!(
                 "moves every body but the heaviest (particle {c}), which alone may be pinned (a fixed centre), and particle {k} is pinned"
@@ -680,5 +797,40 @@ mod tests {
         }
         let e = Coordinates::by_name("heliocentric").unwrap_err().to_string();
         assert!(e.contains("wh_coordinates") && e.contains("jacobi"), "{e}");
+    }
+
+    /// Each corrector's β_j solve its conditions: Σ_j 4 β_j (j a)^(2m+1)/(2m+1)! equals the
+    /// coefficient of w^(2m+1) in 1/w − 1/(2 sinh(w/2)) for m < k (the module's docs), that
+    /// coefficient being −½ · 2(1 − 2^(2n−1)) B_2n/(2n)! / 2^(2n−1), n = m + 1, from the series of
+    /// 1/sinh z (Abramowitz & Stegun 4.5.63) with Bernoulli's B_2 … B_16.
+    #[test]
+    fn corrector_coefficients_meet_their_conditions() {
+        let bernoulli =
+            [1.0 / 6.0, -1.0 / 30.0, 1.0 / 42.0, -1.0 / 30.0, 5.0 / 66.0, -691.0 / 2730.0, 7.0 / 6.0, -3617.0 / 510.0];
+        let factorial = |k: i32| (1..=k).map(|i| i as Real).product::<Real>();
+        let target = |m: usize| {
+            let n = m as i32 + 1;
+            let c = 2.0 * (1.0 - (2.0 as Real).powi(2 * n - 1)) * bernoulli[m] / factorial(2 * n);
+            -0.5 * c / (2.0 as Real).powi(2 * n - 1)
+        };
+        assert_eq!(target(0), 1.0 / 24.0);
+        assert!((target(1) + 7.0 / 5760.0).abs() < 1e-18);
+        for order in CORRECTOR_ORDERS {
+            let b = corrector_b(order);
+            assert_eq!(2 * b.len() + 1, order as usize);
+            for m in 0..b.len() {
+                let p = 2 * m as i32 + 1;
+                let sum: Real = b
+                    .iter()
+                    .enumerate()
+                    .map(|(j, bj)| 4.0 * bj * ((j + 1) as Real * CORRECTOR_A).powi(p) / factorial(p))
+                    .sum();
+                // The terms alternate in sign and cancel to a few hundredths of their largest at
+                // order 17's highest powers: f64 evaluates the sum to about 1e-12 of itself.
+                assert!((sum / target(m) - 1.0).abs() < 1e-10, "order {order}, w^{p}: {sum:e} against {:e}", target(m));
+            }
+        }
+        assert!((CORRECTOR_A * CORRECTOR_A / (7.0 / 40.0) - 1.0).abs() < 4.0 * Real::EPSILON);
+        assert!(corrector_b(4).is_empty());
     }
 }

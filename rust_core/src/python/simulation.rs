@@ -439,6 +439,16 @@ impl PySimulation {
         with_sim!(&mut self.inner, s => s.particles_mut().set_wh_coordinates(name)).map_err(|e| to_py(py, e))
     }
 
+    /// The order of "wisdom_holman"'s symplectic corrector (0: none).
+    #[getter]
+    fn wh_corrector(&self) -> u32 {
+        with_sim!(&self.inner, s => s.particles().wh_corrector())
+    }
+
+    fn set_wh_corrector(&mut self, py: Python<'_>, order: u32) -> PyResult<()> {
+        with_sim!(&mut self.inner, s => s.particles_mut().set_wh_corrector(order)).map_err(|e| to_py(py, e))
+    }
+
     /// (accepted, rejected, next internal step s) for "dopri5", else None.
     fn adaptive_stats(&self) -> Option<(u64, u64, f64)> {
         with_sim!(&self.inner, s => s.particles().adaptive_stats())

@@ -51,6 +51,8 @@ pub struct ParticleSystem<V: Vector> {
     /// most `SPARE_MAX` particles: the next snapshot copies into its buffers instead of
     /// allocating ~7 (a batch of small members takes one per general member per call).
     spare: std::sync::Mutex<Option<Box<ParticleSnapshot<V>>>>,
+    /// The integrator's `settle` left a position or velocity not finite (`settled_fault`).
+    settled_non_finite: bool,
 }
 
 /// What `ParticleSystem::restore` returns to (see `System::snapshot`).
@@ -95,6 +97,7 @@ impl<V: Vector> ParticleSystem<V> {
             constraints: Constraints::default(),
             options: IntegratorOptions::default(),
             spare: std::sync::Mutex::new(None),
+            settled_non_finite: false,
         })
     }
 
@@ -264,6 +267,16 @@ impl<V: Vector> ParticleSystem<V> {
     /// The name of the "wisdom_holman" coordinates.
     pub fn wh_coordinates(&self) -> &'static str {
         self.options.wh_coordinates.name()
+    }
+    /// The order of the "wisdom_holman" symplectic corrector (0: none, or one of
+    /// `wisdom_holman::CORRECTOR_ORDERS`; `InvalidInput` naming `wh_corrector` for another);
+    /// stored for any integrator.
+    pub fn set_wh_corrector(&mut self, order: u32) -> Result<()> {
+        self.set_options(IntegratorOptions { wh_corrector: order, ..self.options })
+    }
+    /// The order of the "wisdom_holman" corrector (0: none).
+    pub fn wh_corrector(&self) -> u32 {
+        self.options.wh_corrector
     }
 
     /// Relative and absolute (m, m/s) tolerances of the adaptive integrator; stored for any
@@ -805,6 +818,8 @@ impl<V: Vector> System for ParticleSystem<V> {
     }
 
     fn settle(&mut self) {
+        // The integrator first (the Wisdom–Holman corrector hands back the state the terms see).
+        self.settled_non_finite = self.integrator.settle(&mut self.sys);
         let sys = &mut self.sys;
         for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
             s.settle(&sys.state.x, &sys.state.v, &sys.model);
@@ -814,6 +829,9 @@ impl<V: Vector> System for ParticleSystem<V> {
     /// A term's own state (`Term::non_finite`), then the books. Also run after every step: a
     /// commit deferred to the next evaluation then shows there.
     fn settled_fault(&self) -> Option<(usize, Failure)> {
+        if self.settled_non_finite {
+            return Some(self.first_non_finite().unwrap_or((0, Failure::Position)));
+        }
         if let Some(index) = self.sys.forces.terms.iter().filter_map(|t| t.as_own_state()).find_map(|s| s.non_finite())
         {
             return Some((index, Failure::Spin));
@@ -1078,6 +1096,8 @@ impl<V: Vector> System for ParticleSystem<V> {
             }
         }
         let n = state.x.len();
+        self.integrator.abandon();
+        self.settled_non_finite = false;
         for (t, h) in self.sys.forces.terms.iter_mut().zip(&histories) {
             if let Some(h) = h {
                 // A snapshot this system made: it fits, and may hold the non-finite values of
