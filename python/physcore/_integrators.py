@@ -230,15 +230,17 @@ class WisdomHolman(Integrator, name="wisdom_holman"):
         (1996) 217; as REBOUND's WHFast, Rein & Tamayo 2015, §4); 0 (default) for none. The map
         is, to first order in the planets' masses, a change of coordinates C away from the exact
         flow: stepping C(x) and handing back C⁻¹ of the result removes that part of its error
-        through dt^(order+1). C is applied at the first step of each ``step``/``advance`` call and
-        undone when the call returns, at 4(order − 1) force evaluations a call (64 for order 17), so take many steps
-        a call: ``step(1)`` in a loop pays them every step. Between the steps of one call the
-        state is the corrected one: ``step(n)`` and ``n`` calls of ``step(1)`` agree to rounding,
-        not bit for bit (one and many threads, and a saved and loaded scene, still step the same
-        bits). On the outer Solar System at P_Jupiter/20, order 17 keeps the energy to 1.96e-9
-        against 2.31e-6 without, WHFast's errors to three digits (docs/guide/integrators.md). Jacobi coordinates about a free
-        centre only (refused otherwise, naming ``wh_corrector``, when the scene steps). Scene's
-        keyword ``wh_corrector``.
+        through dt^(order+1). C is applied at the first step of each ``step``/``advance`` call
+        and undone when the call returns, at 4(order − 1) force evaluations a call (64 for order
+        17), so take many steps a call: ``step(1)`` in a loop pays them every step. Between the
+        steps of one call the state is a private one (the corrected coordinates, and each step's
+        second half drift joined with the next step's first, as WHFast does): ``step(n)`` and
+        ``n`` calls of ``step(1)`` agree to rounding, not bit for bit (one and many threads, and a
+        saved and loaded scene, still step the same bits). On the outer Solar System at
+        P_Jupiter/20, order 17 keeps the energy to 1.96e-9 against 2.31e-6 without, WHFast's
+        errors to three digits (docs/guide/integrators.md). Jacobi coordinates about a free
+        centre, and a scene without colliders, only (refused otherwise, naming
+        ``wh_corrector``, when the scene steps). Scene's keyword ``wh_corrector``.
 
     The scene needs exactly one :class:`~physcore.PairwiseGravity` with ``softening=0`` (the
     Kepler part is split off it) and no velocity-dependent force; other conservative terms

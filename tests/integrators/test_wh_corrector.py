@@ -188,3 +188,20 @@ def test_scenes_it_is_not_derived_for_are_refused_before_a_step(why):
     s.wh_corrector = 0
     s.step(1)  # the plain map steps it
     assert math.isfinite(s.energy().total)
+
+
+def test_a_scene_with_colliders_is_refused_with_the_corrector():
+    """Between the steps of a corrected call the state is private (the corrected coordinates,
+    a half drift owed), so a collider acting between steps would act on the wrong state: such a
+    scene is refused by name when it steps, and steps without the corrector."""
+    x, v, m = _planets(1e-3)
+    s = _scene(x, v, m, 17)
+    s.add(pc.Plane([0.0, 0.0, -50.0], [0.0, 0.0, 1.0]))
+    before = (s.positions.copy(), s.velocities.copy())
+    with pytest.raises(pc.InvalidInputError, match="wh_corrector") as info:
+        s.step(10)
+    assert "colliders" in str(info.value)
+    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.time == 0.0
+    s.wh_corrector = 0
+    s.step(10)
+    assert s.step_count == 10

@@ -70,6 +70,10 @@
 //! Applied at the first step of a call and undone when the call ends (`settle`), it costs
 //! 4(order − 1) force evaluations a call (each end order − 1 stages of two), not a step: between the steps of one call the state is
 //! the corrected one, so `step(n)` and n calls of `step(1)` agree to rounding, not bit for bit.
+//! Being private, it is also left between a step's kick and its second half drift, which is
+//! joined with the next step's first into one Kepler drift of dt (as WHFast does without
+//! `safe_mode`): one drift a step instead of two. Nothing may change the state between the
+//! steps of such a call: a scene with colliders is refused (`ParticleSystem::check_dt`).
 //!
 //! The Kepler drift solves the universal Kepler equation for the universal anomaly s,
 //!   dt = r_0 G_1(s) + η_0 G_2(s) + μ G_3(s),   η_0 = r_0·v_0,   β = 2μ/r_0 − v_0²,
@@ -159,6 +163,9 @@ pub struct WisdomHolman<V: Vector> {
     /// The state is the corrected one (C(x)), to be handed back at `settle`: Some(the dt the
     /// corrector took).
     corrected: Option<Real>,
+    /// While corrected: the last step's second half drift is owed (joined with the next step's
+    /// first, or made at `settle`); the state is then the one after that step's kick.
+    owed: bool,
     /// Forces of the last evaluation (all terms, N), kept for the next step's first kick.
     f: Vec<V>,
     /// Term powers at the cached force state.
@@ -453,8 +460,15 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
                 }
             }
             masses_within(&sys.model.mass, c, &mut self.eta);
-            to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
-            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
+            if std::mem::take(&mut self.owed) {
+                // The last step's second half drift and this one's first, joined (the state
+                // between a corrected call's steps is private: WHFast's joined drifts). `self.q`
+                // still holds the Jacobi positions of x: the kick moved no position.
+                self.drift_jacobi(sys, dt, gc, c, true);
+            } else {
+                to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
+                self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
+            }
             self.eval(sys, c, false);
             self.p.clear();
             self.p.extend_from_slice(sys.forces.last_power());
@@ -463,7 +477,12 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
             sys.forces.book_power(dt);
             to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
             self.kick_jacobi(sys, dt, gc, c);
-            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
+            if self.corrected.is_some() {
+                // Owed to the next step, or to `settle`.
+                self.owed = true;
+            } else {
+                self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
+            }
         } else {
             if stale {
                 self.eval(sys, c, true);
@@ -502,13 +521,19 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         self.valid = false;
     }
     fn settle(&mut self, sys: &mut Particles<V>) -> bool {
-        match self.corrected.take() {
-            Some(dt) => self.correct(sys, dt, -1.0),
-            None => false,
+        let Some(dt) = self.corrected.take() else {
+            return false;
+        };
+        if std::mem::take(&mut self.owed) {
+            // The last step's second half drift (`self.q` and `self.eta` are that step's).
+            let (c, gc) = centre(sys);
+            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
         }
+        self.correct(sys, dt, -1.0)
     }
     fn abandon(&mut self) {
         self.corrected = None;
+        self.owed = false;
     }
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
         Some(self)

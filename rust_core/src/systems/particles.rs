@@ -180,6 +180,17 @@ impl<V: Vector> ParticleSystem<V> {
     /// Refuses a step `dt`, or these particles and terms, where the integrator cannot step them
     /// (`Integrator::check_step`).
     pub fn check_dt(&self, dt: Real) -> Result<()> {
+        if self.options.wh_corrector > 0
+            && self.integrator.info().name == "wisdom_holman"
+            && !self.constraints.is_empty()
+        {
+            // The corrected map keeps a private state between a call's steps (its joined
+            // drifts), which a collision between them would not see.
+            return Err(invalid(
+                "wh_corrector",
+                "the symplectic corrector steps a call's steps unobserved, and this scene has colliders (planes, boxes or spheres) that act between steps (set wh_corrector=0, or remove them)",
+            ));
+        }
         self.integrator.check_step(&self.sys, dt)
     }
 
