@@ -4,7 +4,8 @@ the bodies iteration by iteration (``physcore.bodies``, "Bodies in a fluid").
 
 * a floating box's draft against Archimedes (ρ_body/ρ_fluid × height), within 0.4 spacing at
   80 across and closing on it as the pool is refined (test_floating_fine.py: converging on
-  Archimedes at a tight density tolerance, and the same boundary under a WCSPH fluid);
+  Archimedes at a tight density tolerance; test_floating_wcsph.py: the same boundary under a
+  WCSPH fluid);
 * momentum: a box shot into a blob of water, weightless or falling, keeps the total (plus
   M g t) to rounding (both);
 * one and two threads, and a saved scene, step the same bits.
@@ -36,10 +37,10 @@ def _pool(n: int, rho_body: float, threads: int | None = None, method: str = "df
     return s, box, dx
 
 
-def _draft(n: int, rho_body: float, method: str = "dfsph", **fluid) -> float:
+def _draft(n: int, rho_body: float, method: str = "dfsph", until: float = 7.0, **fluid) -> float:
     """The settled draft: the water's surface away from the box (the mean of its columns' top
     particles, plus half a spacing: the fluid's edge) less the box's bottom, both averaged over
-    t = 4 .. 7 s. Checks that no water lies on the box's deck (it would load the box: Archimedes
+    t = 4 .. `until` s (7 unless said). Checks that no water lies on the box's deck (it would load the box: Archimedes
     would not apply).
 
     The box heaves after its drop with a period of 0.88 s, decaying at about 0.5 /s at the
@@ -49,7 +50,7 @@ def _draft(n: int, rho_body: float, method: str = "dfsph", **fluid) -> float:
     3.4 periods of a smaller one (3 whole periods, 4 .. 6.64 s, give the same to 0.4 %)."""
     s, box, dx = _pool(n, rho_body, method=method, **fluid)
     drafts = []
-    while s.time < 7.0:
+    while s.time < until:
         s.dt = min(s.suggest_dt(), 2e-3) if method == "dfsph" else s.suggest_dt()
         s.step(1)
         if s.time > 4.0:
