@@ -65,11 +65,12 @@
 //! the interaction (L_A the Kepler part's Lie operator, times dt), which must equal
 //! 1/w − 1/(2 sinh(w/2)) at w = L_A dt through w^(2k−1) (the conjugacy of the map
 //! exp(½dt A) exp(dt B) exp(½dt A), whose generator to that order is A + (w/2)/sinh(w/2) B).
-//! The β_j solve those k linear equations (`CORRECTOR_B`, computed at 60 digits; they are
+//! The β_j solve those k linear equations (`corrector_b`, computed at 60 digits; they are
 //! WHT96's and WHFast's for orders 3, 5, 7 and 11). Negating every β gives the exact inverse.
 //! Applied at the first step of a call and undone when the call ends (`settle`), it costs
-//! 4(order − 1) force evaluations a call (each end order − 1 stages of two), not a step: between the steps of one call the state is
-//! the corrected one, so `step(n)` and n calls of `step(1)` agree to rounding, not bit for bit.
+//! 4(order − 1) force evaluations a call (each end order − 1 stages of two), not a step:
+//! between the steps of one call the state is the corrected one, so `step(n)` and n calls of
+//! `step(1)` agree to rounding, not bit for bit.
 //! Being private, it is also left between a step's kick and its second half drift, which is
 //! joined with the next step's first into one Kepler drift of dt (as WHFast does without
 //! `safe_mode`): one drift a step instead of two. Nothing may change the state between the
