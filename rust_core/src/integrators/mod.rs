@@ -168,15 +168,6 @@ pub trait Integrator<V: Vector>: Send + Sync {
     }
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
-    /// The call of steps ended (`System::settle`): completes what the steps left for its end
-    /// (the Wisdom–Holman corrector's output transformation). Returns `true` if any position or
-    /// velocity is not finite afterwards. Default: nothing left.
-    fn settle(&mut self, _sys: &mut Particles<V>) -> bool {
-        false
-    }
-    /// The call of steps was rolled back (to a checkpoint taken before it): forget what was
-    /// left for its end. Default: nothing left.
-    fn abandon(&mut self) {}
     /// What the integrator carries from one step to the next, as one value (`Carry`); `None`
     /// for an integrator that carries nothing.
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
@@ -217,8 +208,19 @@ pub trait Integrator<V: Vector>: Send + Sync {
 /// What an integrator carries from one step to the next ("first same as last" forces, the
 /// term powers there, an adaptive controller's memory): needed to continue a saved run, or to
 /// retry a rolled-back one, bit for bit. One value behind `Integrator::as_carry`, so that the
-/// central trait does not hold five ways to reach it.
+/// central trait does not hold five ways to reach it. It may also carry, within one call of
+/// steps, a state of its own that the call's end hands back (`settle`: the Wisdom–Holman
+/// corrector's coordinates) and a rollback forgets (`abandon`).
 pub trait Carry<V: Vector> {
+    /// The call of steps ended (`System::settle`): completes what the steps left for its end
+    /// (the Wisdom–Holman corrector's output transformation). Returns `true` if any position or
+    /// velocity is not finite afterwards. Default: nothing left.
+    fn settle(&mut self, _sys: &mut Particles<V>) -> bool {
+        false
+    }
+    /// The call of steps was rolled back (to a checkpoint taken before it): forget what was
+    /// left for its end. Default: nothing left.
+    fn abandon(&mut self) {}
     /// A copy (forces, N, one per particle; powers, W, one per term, then any controller
     /// memory), or `None` while nothing valid is carried.
     fn get(&self) -> Option<Cache<V>> {

@@ -521,21 +521,6 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
     fn reset(&mut self) {
         self.valid = false;
     }
-    fn settle(&mut self, sys: &mut Particles<V>) -> bool {
-        let Some(dt) = self.corrected.take() else {
-            return false;
-        };
-        if std::mem::take(&mut self.owed) {
-            // The last step's second half drift (`self.q` and `self.eta` are that step's).
-            let (c, gc) = centre(sys);
-            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
-        }
-        self.correct(sys, dt, -1.0)
-    }
-    fn abandon(&mut self) {
-        self.corrected = None;
-        self.owed = false;
-    }
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
         Some(self)
     }
@@ -577,6 +562,21 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
 }
 
 impl<V: Vector> Carry<V> for WisdomHolman<V> {
+    fn settle(&mut self, sys: &mut Particles<V>) -> bool {
+        let Some(dt) = self.corrected.take() else {
+            return false;
+        };
+        if std::mem::take(&mut self.owed) {
+            // The last step's second half drift (`self.q` and `self.eta` are that step's).
+            let (c, gc) = centre(sys);
+            self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
+        }
+        self.correct(sys, dt, -1.0)
+    }
+    fn abandon(&mut self) {
+        self.corrected = None;
+        self.owed = false;
+    }
     fn borrow(&self) -> Option<(&[V], &[Real])> {
         self.valid.then_some((&self.f[..], &self.p[..]))
     }

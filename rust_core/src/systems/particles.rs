@@ -830,7 +830,7 @@ impl<V: Vector> System for ParticleSystem<V> {
 
     fn settle(&mut self) {
         // The integrator first (the Wisdom–Holman corrector hands back the state the terms see).
-        self.settled_non_finite = self.integrator.settle(&mut self.sys);
+        self.settled_non_finite = self.integrator.as_carry_mut().is_some_and(|c| c.settle(&mut self.sys));
         let sys = &mut self.sys;
         for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
             s.settle(&sys.state.x, &sys.state.v, &sys.model);
@@ -1107,7 +1107,9 @@ impl<V: Vector> System for ParticleSystem<V> {
             }
         }
         let n = state.x.len();
-        self.integrator.abandon();
+        if let Some(c) = self.integrator.as_carry_mut() {
+            c.abandon();
+        }
         self.settled_non_finite = false;
         for (t, h) in self.sys.forces.terms.iter_mut().zip(&histories) {
             if let Some(h) = h {
