@@ -10,26 +10,30 @@ import math
 
 import numpy as np
 import pytest
+import test_wisdom_holman as wh
 from test_interrupt import _interrupt
 from test_wisdom_holman import TWO_PI, _planets
 
 import physcore as pc
 
 
-def _scene(x, v, m, corrector, dt=TWO_PI / 20, threads=1, coordinates="jacobi") -> pc.Scene:
-    s = pc.Scene(x.shape[1], integrator="wisdom_holman", dt=dt, threads=threads, wh_coordinates=coordinates,
-                 wh_corrector=corrector)
-    s.add_particles(x, v, masses=m)
-    s.add(pc.PairwiseGravity(G=1.0))
-    return s
+def _scene(x, v, m, corrector, **kw) -> pc.Scene:
+    """test_wisdom_holman's scene (G = 1, P/20, one thread, Jacobi) with the corrector of `corrector`."""
+    return wh._scene(x, v, m, corrector=corrector, **kw)
 
 
-def _energy_error(s: pc.Scene, steps: int, samples: int = 20) -> float:
-    e0, worst = s.energy().total, 0.0
-    for _ in range(samples):
-        s.step(steps // samples)
-        worst = max(worst, abs(s.energy().total / e0 - 1.0))
-    return worst
+def _energy_error(s: pc.Scene, steps: int) -> float:
+    """|E/E0 − 1| at its worst of 20 samples (20 calls: the corrector runs at each one's ends)."""
+    return wh._energy_error(s, steps, samples=20)
+
+
+def _refused_unchanged(s: pc.Scene, words: str) -> None:
+    """A step of `s` refused naming ``wh_corrector`` (its message holding `words`), the scene as before."""
+    before = (s.positions.copy(), s.velocities.copy())
+    with pytest.raises(pc.InvalidInputError, match="wh_corrector") as info:
+        s.step(10)
+    assert words in str(info.value)
+    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.time == 0.0
 
 
 # ------------------------------------------------------------------------------ its error
@@ -180,11 +184,7 @@ def test_scenes_it_is_not_derived_for_are_refused_before_a_step(why):
                  wh_coordinates="democratic_heliocentric" if why == "democratic_heliocentric" else "jacobi")
     s.add_particles(x, v, masses=m, pinned=[why == "pinned", False, False])
     s.add(pc.PairwiseGravity(G=1.0))
-    before = (s.positions.copy(), s.velocities.copy())
-    with pytest.raises(pc.InvalidInputError, match="wh_corrector") as info:
-        s.step(1)
-    assert "Jacobi" in str(info.value)
-    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.time == 0.0
+    _refused_unchanged(s, "Jacobi")
     s.wh_corrector = 0
     s.step(1)  # the plain map steps it
     assert math.isfinite(s.energy().total)
@@ -197,11 +197,7 @@ def test_a_scene_with_colliders_is_refused_with_the_corrector():
     x, v, m = _planets(1e-3)
     s = _scene(x, v, m, 17)
     s.add(pc.Plane([0.0, 0.0, -50.0], [0.0, 0.0, 1.0]))
-    before = (s.positions.copy(), s.velocities.copy())
-    with pytest.raises(pc.InvalidInputError, match="wh_corrector") as info:
-        s.step(10)
-    assert "colliders" in str(info.value)
-    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.time == 0.0
+    _refused_unchanged(s, "colliders")
     s.wh_corrector = 0
     s.step(10)
     assert s.step_count == 10

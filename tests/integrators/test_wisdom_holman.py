@@ -43,8 +43,10 @@ def _planets(mu: float, dim: int = 3, outer: float = 1.6) -> tuple[np.ndarray, n
 COORDINATES = ("jacobi", "democratic_heliocentric")
 
 
-def _scene(x, v, m, integrator="wisdom_holman", dt=TWO_PI / 20, threads=1, coordinates="jacobi", **particles) -> pc.Scene:
-    s = pc.Scene(x.shape[1], integrator=integrator, dt=dt, threads=threads, wh_coordinates=coordinates)
+def _scene(x, v, m, integrator="wisdom_holman", dt=TWO_PI / 20, threads=1, coordinates="jacobi", corrector=0,
+           **particles) -> pc.Scene:
+    s = pc.Scene(x.shape[1], integrator=integrator, dt=dt, threads=threads, wh_coordinates=coordinates,
+                 wh_corrector=corrector)
     s.add_particles(x, v, masses=m, **particles)
     s.add(pc.PairwiseGravity(G=1.0))
     return s
