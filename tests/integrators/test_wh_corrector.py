@@ -96,20 +96,7 @@ def test_one_call_and_many_agree_to_rounding_and_the_state_between_is_the_visibl
 
 
 def test_threads_give_the_same_bits():
-    rng = np.random.default_rng(5)
-    n = 4600  # past the core's parallel threshold
-    r = rng.uniform(1.0, 3.0, n)
-    ang = rng.uniform(0.0, TWO_PI, n)
-    x = np.c_[r * np.cos(ang), r * np.sin(ang), rng.normal(0.0, 0.01, n)]
-    v = np.c_[-np.sin(ang), np.cos(ang), np.zeros(n)] / np.sqrt(r)[:, None]
-    x[0], v[0] = 0.0, 0.0
-    m = np.full(n, 1e-9)
-    m[0] = 1.0
-    runs = []
-    for threads in (1, 2):
-        s = _scene(x, v, m, 3, threads=threads)
-        s.step(2)
-        runs.append((s.positions.copy(), s.velocities.copy()))
+    runs = wh._thread_runs(5, 2, corrector=3)
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
 
 

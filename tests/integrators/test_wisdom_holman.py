@@ -244,10 +244,10 @@ def test_a_scene_switched_to_the_other_coordinates_steps_their_map():
 
 
 # ------------------------------------------------------------------ determinism, restarts
-@pytest.mark.parametrize("coordinates", COORDINATES)
-def test_threads_give_the_same_bits(coordinates):
-    # 4,600 bodies: past the core's parallel threshold, so the chunked passes and sums run.
-    rng = np.random.default_rng(3)
+def _thread_runs(seed: int, steps: int, **scene) -> list[tuple[np.ndarray, np.ndarray]]:
+    """4,600 light bodies on circles about a unit star (past the core's parallel threshold, so
+    the chunked passes and sums run), stepped `steps` on one and on two threads: the states."""
+    rng = np.random.default_rng(seed)
     n = 4600
     r = rng.uniform(1.0, 3.0, n)
     ang = rng.uniform(0.0, TWO_PI, n)
@@ -258,9 +258,15 @@ def test_threads_give_the_same_bits(coordinates):
     m[0] = 1.0
     runs = []
     for threads in (1, 2):
-        s = _scene(x, v, m, threads=threads, coordinates=coordinates)
-        s.step(3)
+        s = _scene(x, v, m, threads=threads, **scene)
+        s.step(steps)
         runs.append((s.positions.copy(), s.velocities.copy()))
+    return runs
+
+
+@pytest.mark.parametrize("coordinates", COORDINATES)
+def test_threads_give_the_same_bits(coordinates):
+    runs = _thread_runs(3, 3, coordinates=coordinates)
     assert np.array_equal(runs[0][0], runs[1][0]) and np.array_equal(runs[0][1], runs[1][1])
 
 
