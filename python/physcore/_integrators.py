@@ -230,13 +230,16 @@ class WisdomHolman(Integrator, name="wisdom_holman"):
         (1996) 217; as REBOUND's WHFast, Rein & Tamayo 2015, §4); 0 (default) for none. The map
         is, to first order in the planets' masses, a change of coordinates C away from the exact
         flow: stepping C(x) and handing back C⁻¹ of the result removes that part of its error
-        through dt^(order+1). C is applied at the first step of each ``step``/``advance`` call
-        and undone when the call returns, at 4(order − 1) force evaluations a call (64 for order
-        17), so take many steps a call: ``step(1)`` in a loop pays them every step. Between the
-        steps of one call the state is a private one (the corrected coordinates, and each step's
-        second half drift joined with the next step's first, as WHFast does): ``step(n)`` and
-        ``n`` calls of ``step(1)`` agree to rounding, not bit for bit (one and many threads, and a
-        saved and loaded scene, still step the same bits). On the outer Solar System at
+        through dt^(order+1). C is applied at the first step; each ``step``/``advance`` call
+        hands back C⁻¹ of the corrected state, at 2(order − 1) force evaluations a call (32 for
+        order 17), and keeps that state, from which the next call goes on (as WHFast with
+        ``keep_unsynchronized``): outputs do not perturb the run, and ``step(n)`` and ``n``
+        calls of ``step(1)`` give the same bits (as do one and many threads, and a saved and
+        loaded scene: :meth:`Scene.state` and the file hold the corrected state). Changing the
+        scene between calls (positions, velocities, terms, ``dt``, the order) makes the next
+        call apply C afresh to the state it then has. Between the steps of one call the state is
+        a private one (the corrected coordinates, and each step's second half drift joined with
+        the next step's first, as WHFast does). On the outer Solar System at
         P_Jupiter/20, order 17 keeps the energy to 1.96e-9 against 2.31e-6 without, WHFast's
         errors to three digits (docs/guide/integrators.md). Jacobi coordinates about a free
         centre, and a scene without colliders, only (refused otherwise, naming

@@ -5,7 +5,9 @@ A scene file is a zip archive of uncompressed ``.npy`` members, as ``numpy.savez
 ``meta`` (a JSON string: parameters, terms, colliders, counters), ``time_hex`` (the time as
 ``float.hex``), ``positions``, ``velocities``, ``masses``, ``pinned``, the per-term arrays
 ``term{k}_*``, ``ledger`` (energy dissipated per term, J) and, for the integrators that keep one,
-``cache_forces`` and ``cache_power``. A scene saved on a GPU names its device in ``meta``
+``cache_forces`` and ``cache_power`` (the forces carried to the next step and the term powers
+there, then any controller memory; for ``wisdom_holman`` with a corrector, the corrected state
+the next call goes on from: 2N rows, positions then velocities, and its dt last). A scene saved on a GPU names its device in ``meta``
 (``device``; absent means the CPU) and holds the device's rows, read back as float64:
 ``device_pos``, ``device_vel``, ``device_acc``, ``device_aux`` (N × 4) and ``device_hits`` (N);
 its ledger is read from the device's books, and it has no integrator cache (``Scene.load``).
@@ -820,8 +822,9 @@ def _read_archive(r: _Reader, fh: IO[bytes], size: int) -> SceneFile:
                 raise r.error("time_hex", f"{_show(text)} does not match meta.time = {meta['time']!r}")
 
     n = sizes["N"][0]
-    if sizes.get("C", (0,))[0] not in (0, n):
-        raise r.error("cache_forces", f"has {sizes['C'][0]} rows where positions has {n}")
+    # N rows (forces), or 2N (wisdom_holman's corrected state: positions, then velocities).
+    if sizes.get("C", (0,))[0] not in (0, n, 2 * n):
+        raise r.error("cache_forces", f"has {sizes['C'][0]} rows where positions has {n} (N or 2N expected)")
     if sizes.get("K", (0,))[0] > len(meta["terms"]) + 2:
         raise r.error("cache_power", f"has {sizes['K'][0]} entries, more than the integrators keep for {len(meta['terms'])} terms")
     taken: list[tuple[int, int, int]] = []

@@ -545,9 +545,9 @@ class Scene:
         The coordinates of ``"wisdom_holman"``'s split (default ``"jacobi"``; see
         :class:`WisdomHolman`); kept, and ignored, by the other integrators.
     wh_corrector : {0, 3, 5, 7, 11, 17}
-        The order of ``"wisdom_holman"``'s symplectic corrector, applied at both ends of each
-        ``step``/``advance`` call (default 0: none; see :class:`WisdomHolman`); kept, and
-        ignored, by the other integrators.
+        The order of ``"wisdom_holman"``'s symplectic corrector (default 0: none; see
+        :class:`WisdomHolman`): applied at the first step, undone for each call's output;
+        kept, and ignored, by the other integrators.
 
     Raises
     ------
@@ -1741,7 +1741,9 @@ class Scene:
             Energy dissipated by the colliders so far, J.
         ``"cache_forces"`` : ndarray (float64) or None; ``"cache_power"`` : ndarray, (P,) float64, or None
             The integrator's cache (velocity Verlet's forces at the current positions, the
-            dopri5 step-size controller); None where it holds none.
+            dopri5 step-size controller, ``wisdom_holman``'s corrected state with a corrector:
+            2N rows, positions then velocities, and its dt after the powers); None where it
+            holds none.
         ``"reference_energy"`` : ndarray, (2,) float64, or None
             The books' reference ``(E0, S0)`` in J (:attr:`Session.reference_energy
             <physcore.session.Session.reference_energy>`); None until the next step takes it.

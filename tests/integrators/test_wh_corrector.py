@@ -5,8 +5,10 @@ place the corrected state differs from the visible one, determinism and restarts
 and the scenes it refuses."""
 from __future__ import annotations
 
+import io
 import json
 import math
+import zipfile
 
 import numpy as np
 import pytest
@@ -78,21 +80,67 @@ def test_what_is_left_is_of_higher_order_in_the_masses():
 
 
 # ---------------------------------------------------------------------- calls and restarts
-def test_one_call_and_many_agree_to_rounding_and_the_state_between_is_the_visible_one():
-    """C is applied when a call starts and undone when it returns: ``step(200)`` and 200 calls of
-    ``step(1)`` give the same orbit to rounding (each pair of ends rounds), not bit for bit."""
+def test_calls_go_on_from_the_kept_state_so_outputs_do_not_perturb_the_run():
+    """C is applied at the first step; each call hands back C⁻¹ of the corrected state and the
+    next call goes on from that state (WHFast's ``keep_unsynchronized``): ``step(200)``, 200
+    calls of ``step(1)`` and calls of uneven lengths give the same bits."""
     one = _scene(*_planets(1e-3), 17)
     one.step(200)
     many = _scene(*_planets(1e-3), 17)
     for _ in range(200):
         many.step(1)
-    scale = np.abs(one.positions).max()
-    diff = np.abs(one.positions - many.positions).max() / scale
-    assert 0.0 <= diff < 1e-11, diff
+    uneven = _scene(*_planets(1e-3), 17)
+    for n in (1, 7, 50, 2, 140):
+        uneven.step(n)
+    for s in (many, uneven):
+        assert np.array_equal(s.positions, one.positions) and np.array_equal(s.velocities, one.velocities)
     # The corrector changes the state handed back: the plain map's differs by the first-order error.
     plain = _scene(*_planets(1e-3), 0)
     plain.step(200)
-    assert np.abs(one.positions - plain.positions).max() / scale > 1e-6
+    assert np.abs(one.positions - plain.positions).max() / np.abs(one.positions).max() > 1e-6
+
+
+def _fresh_from(s: pc.Scene, corrector: int, dt: float) -> pc.Scene:
+    """A new scene at `s`'s visible state (same masses), with the corrector of `corrector`."""
+    return _scene(s.positions.copy(), s.velocities.copy(), s.masses.copy(), corrector, dt=dt)
+
+
+@pytest.mark.parametrize("change", ["state", "dt", "order"])
+def test_a_change_between_calls_applies_the_corrector_afresh(change):
+    """Setting the state, dt or the order between calls drops the kept state: the next call
+    applies C to the state it is given, as a new scene from that state does (the same bits),
+    not to the kept one (which would step other bits)."""
+    s = _scene(*_planets(1e-3), 11)
+    s.step(30)
+    dt, order = TWO_PI / 20, 11
+    if change == "state":
+        s.velocities = s.velocities * (1 + 1e-12)
+    elif change == "dt":
+        dt = s.dt = TWO_PI / 25
+    else:
+        order = s.wh_corrector = 17
+    fresh = _fresh_from(s, order, dt)
+    s.step(30)
+    fresh.step(30)
+    assert np.array_equal(s.positions, fresh.positions) and np.array_equal(s.velocities, fresh.velocities)
+
+
+def test_the_state_dict_holds_the_corrected_state_and_continues_bit_for_bit():
+    """``Scene.state`` holds the kept corrected state (2N rows: positions, then velocities; its
+    dt after the term powers), and ``set_state`` on a twin continues as the original does;
+    without it (the cache dropped) the twin applies C afresh and steps other bits."""
+    s = _scene(*_planets(1e-3), 7)
+    s.step(25)
+    snap = s.state()
+    assert snap["cache_forces"].shape == (6, 3) and snap["cache_power"][-1] == s.dt
+    twin, cold = _scene(*_planets(1e-3), 7), _scene(*_planets(1e-3), 7)
+    twin.set_state(snap)
+    cold.set_state(snap | {"cache_forces": None, "cache_power": None})
+    for x in (s, twin, cold):
+        x.step(25)
+    assert np.array_equal(twin.positions, s.positions) and np.array_equal(twin.velocities, s.velocities)
+    assert not np.array_equal(cold.positions, s.positions)
+    assert np.abs(cold.positions - s.positions).max() < 1e-9  # the same orbit, to the corrector's rounding
 
 
 def test_threads_give_the_same_bits():
@@ -109,6 +157,7 @@ def test_save_load_continues_bit_for_bit_and_files_hold_the_order_where_set(tmp_
     path = s.save(tmp_path / "planets.npz")
     with np.load(path) as z:
         assert json.loads(str(z["meta"]))["wh_corrector"] == 11
+        assert z["cache_forces"].shape == (6, 3)  # the corrected state: positions, then velocities
     again = pc.Scene.load(path)
     assert again.wh_corrector == 11
     again.step(20)
@@ -121,17 +170,61 @@ def test_save_load_continues_bit_for_bit_and_files_hold_the_order_where_set(tmp_
     assert pc.Scene.load(path).wh_corrector == 0
 
 
+def _rewritten(path, out, meta=None, **members) -> None:
+    """`path`'s scene file with `members` (name -> array) and `meta` (key -> value, None to drop)
+    replaced, written to `out` as Scene.save writes (stored .npy members)."""
+    with zipfile.ZipFile(path) as z:
+        data = {i.filename: z.read(i) for i in z.infolist()}
+    for name, a in members.items():
+        buf = io.BytesIO()
+        np.save(buf, a)
+        data[f"{name}.npy"] = buf.getvalue()
+    if meta:
+        m = json.loads(str(np.load(io.BytesIO(data["meta.npy"]))))
+        for k, val in meta.items():
+            m.pop(k) if val is None else m.__setitem__(k, val)
+        buf = io.BytesIO()
+        np.save(buf, np.array(json.dumps(m)))
+        data["meta.npy"] = buf.getvalue()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as z:
+        for name, b in data.items():
+            z.writestr(name, b)
+
+
+def test_a_file_whose_corrected_state_does_not_fit_is_refused_naming_the_cache(tmp_path):
+    """The kept state is checked on load: its dt must be a positive step, it needs a scene
+    with the corrector (a file edited to wh_corrector 0), and its 2N rows come whole."""
+    s = _scene(*_planets(1e-3), 5)
+    s.step(10)
+    path = s.save(tmp_path / "ok.npz")
+    with np.load(path) as z:
+        forces, power = z["cache_forces"], z["cache_power"]
+    assert pc.Scene.load(path).wh_corrector == 5  # the untouched file loads
+    bad = tmp_path / "bad.npz"
+    for meta, members in (
+        (None, {"cache_power": np.append(power[:-1], 0.0)}),
+        (None, {"cache_power": np.append(power[:-1], -s.dt)}),
+        ({"wh_corrector": None}, {}),
+        (None, {"cache_forces": forces[:3]}),
+    ):
+        _rewritten(path, bad, meta, **members)
+        with pytest.raises(pc.SceneFileError, match="cache"):
+            pc.Scene.load(bad)
+
+
 def test_a_call_rolled_back_leaves_nothing_for_the_next():
     """Ctrl-C part-way through a long call rolls the scene back to its state before the call,
-    corrected state and all; the next call then starts from that state afresh, as in a scene
-    that was never interrupted (the same bits)."""
+    the kept corrected state included; the next call then goes on from it as in a scene that
+    was never interrupted (the same bits)."""
     fresh = _scene(*_planets(1e-3), 5)
     fresh.step(7)
     s = _scene(*_planets(1e-3), 5)
-    before = (s.positions.copy(), s.velocities.copy())
+    s.step(3)
+    before = (s.positions.copy(), s.velocities.copy(), s.state()["cache_forces"].copy())
     _interrupt(lambda: s.step(10**9), 0.2)
-    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.time == 0.0
-    s.step(7)
+    assert np.array_equal(s.positions, before[0]) and np.array_equal(s.velocities, before[1]) and s.step_count == 3
+    assert np.array_equal(s.state()["cache_forces"], before[2])
+    s.step(4)
     assert np.array_equal(s.positions, fresh.positions) and np.array_equal(s.velocities, fresh.velocities)
 
 

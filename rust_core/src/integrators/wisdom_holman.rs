@@ -67,14 +67,17 @@
 //! exp(½dt A) exp(dt B) exp(½dt A), whose generator to that order is A + (w/2)/sinh(w/2) B).
 //! The β_j solve those k linear equations (`corrector_b`, computed at 60 digits; they are
 //! WHT96's and WHFast's for orders 3, 5, 7 and 11). Negating every β gives the exact inverse.
-//! Applied at the first step of a call and undone when the call ends (`settle`), it costs
-//! 4(order − 1) force evaluations a call (each end order − 1 stages of two), not a step:
-//! between the steps of one call the state is the corrected one, so `step(n)` and n calls of
-//! `step(1)` agree to rounding, not bit for bit.
-//! Being private, it is also left between a step's kick and its second half drift, which is
-//! joined with the next step's first into one Kepler drift of dt (as WHFast does without
-//! `safe_mode`): one drift a step instead of two. Nothing may change the state between the
-//! steps of such a call: a scene with colliders is refused (`ParticleSystem::check_dt`).
+//! C is applied at the first step of a run; each call's end (`settle`) hands back C⁻¹ of the
+//! corrected state and keeps that state (`Carry`: a checkpoint, `Scene.state` and a saved file
+//! hold it), from which the next call goes on, as WHFast does with `keep_unsynchronized`. So
+//! outputs do not perturb the run: `step(n)` and n calls of `step(1)` give the same bits, and a
+//! call costs 2(order − 1) force evaluations for its output, not a step. Anything that changes
+//! the scene between calls (its state, terms, precision, dt, the corrector's order) resets the
+//! integrator, and the next call applies C afresh to the state it is given.
+//! Being private, the corrected state is also left between a step's kick and its second half
+//! drift, which is joined with the next step's first into one Kepler drift of dt (as WHFast does
+//! without `safe_mode`): one drift a step instead of two. Nothing may change the state between
+//! the steps of such a call: a scene with colliders is refused (`ParticleSystem::check_dt`).
 //!
 //! The Kepler drift solves the universal Kepler equation for the universal anomaly s,
 //!   dt = r_0 G_1(s) + η_0 G_2(s) + μ G_3(s),   η_0 = r_0·v_0,   β = 2μ/r_0 − v_0²,
@@ -180,6 +183,13 @@ pub struct WisdomHolman<V: Vector> {
     d: Vec<V>,
     /// Jacobi: η_k, the mass of bodies 0..=k.
     eta: Vec<Real>,
+    /// The corrected state the last call ended in (positions, then velocities: after that
+    /// step's kick, its second half drift owed), from which the next call goes on; valid while
+    /// `kept_dt` is Some (the dt it was stepped with).
+    kept: Vec<V>,
+    /// The term powers of that step, then its dt: the carried value's second part (`Carry`).
+    kept_p: Vec<Real>,
+    kept_dt: Option<Real>,
 }
 
 /// The index of the central body (the heaviest; of equals, a pinned one, then the first) and
@@ -448,13 +458,26 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         if jacobi {
             // Kepler(½dt) ∘ kick(dt) ∘ Kepler(½dt): the one evaluation is mid-step, nothing is
             // carried in, and its dissipation is booked by the midpoint rule.
+            let resume = self.corrector > 0 && self.corrected.is_none() && self.kept_dt == Some(dt);
+            if resume && self.kept.len() == 2 * n {
+                // The last call's corrected state, its second half drift owed: the run goes on
+                // from it as if that call had not ended.
+                let (x, v) = self.kept.split_at(n);
+                sys.state.x.copy_from_slice(x);
+                sys.state.v.copy_from_slice(v);
+                self.corrected = Some(dt);
+                self.owed = true;
+                masses_within(&sys.model.mass, c, &mut self.eta);
+                to_jacobi(&sys.state.x, &sys.model.mass, c, &self.eta, &mut self.q);
+            }
             let xc = sys.state.x[c];
             if let Some(i) = (0..n).find(|&i| i != c && sys.state.x[i] == xc) {
                 // A body on the central one, as the heliocentric map sees it: a divergence.
                 sys.state.v[i] = sys.state.v[i] * Real::NAN;
             }
             if self.corrector > 0 && self.corrected.is_none() {
-                // The call's first step: from here on the state is C(x), handed back at `settle`.
+                // The run's first step (or the first since a reset): from here on the state is
+                // C(x), handed back at `settle`.
                 self.corrected = Some(dt);
                 if self.correct(sys, dt, 1.0) {
                     return true;
@@ -515,11 +538,16 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         if o.wh_coordinates != self.coords {
             self.coords = o.wh_coordinates;
             self.valid = false;
+            self.kept_dt = None;
         }
-        self.corrector = o.wh_corrector;
+        if o.wh_corrector != self.corrector {
+            self.corrector = o.wh_corrector;
+            self.kept_dt = None;
+        }
     }
     fn reset(&mut self) {
         self.valid = false;
+        self.kept_dt = None;
     }
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
         Some(self)
@@ -566,7 +594,16 @@ impl<V: Vector> Carry<V> for WisdomHolman<V> {
         let Some(dt) = self.corrected.take() else {
             return false;
         };
+        self.kept_dt = None;
         if std::mem::take(&mut self.owed) {
+            // Kept for the next call (a rollback restores the copy its checkpoint took).
+            self.kept.clear();
+            self.kept.extend_from_slice(&sys.state.x);
+            self.kept.extend_from_slice(&sys.state.v);
+            self.kept_p.clear();
+            self.kept_p.extend_from_slice(&self.p);
+            self.kept_p.push(dt);
+            self.kept_dt = Some(dt);
             // The last step's second half drift (`self.q` and `self.eta` are that step's).
             let (c, gc) = centre(sys);
             self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
@@ -577,10 +614,26 @@ impl<V: Vector> Carry<V> for WisdomHolman<V> {
         self.corrected = None;
         self.owed = false;
     }
+    /// The forces of the heliocentric map's last evaluation (N) and the term powers there; or,
+    /// in Jacobi coordinates with the corrector, the corrected state the next call goes on from
+    /// (positions, then velocities: 2N) and the term powers, then that state's dt.
     fn borrow(&self) -> Option<(&[V], &[Real])> {
+        if self.kept_dt.is_some() {
+            return Some((&self.kept[..], &self.kept_p[..]));
+        }
         self.valid.then_some((&self.f[..], &self.p[..]))
     }
     fn set(&mut self, f: Vec<V>, p: Vec<Real>, v: &[V], n_terms: usize) -> bool {
+        let n = v.len();
+        if n > 0 && f.len() == 2 * n && p.len() == n_terms + 1 {
+            let dt = p[n_terms];
+            if self.corrector == 0 || self.coords != Coordinates::Jacobi || !(dt.is_finite() && dt > 0.0) {
+                return false;
+            }
+            (self.kept, self.kept_p, self.kept_dt, self.valid) = (f, p, Some(dt), false);
+            return true;
+        }
+        self.kept_dt = None;
         super::set_carried((&mut self.f, &mut self.p, &mut self.valid), f, p, v, n_terms)
     }
 }
