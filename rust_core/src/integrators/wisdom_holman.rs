@@ -653,17 +653,22 @@ const INV_FACTORIAL: [Real; 19] = {
 /// quartered until |z| ≤ 0.1, where eight terms of the series are exact to rounding, and the
 /// doubling formulas c_0(4z) = 2c_0² − 1, c_1(4z) = c_0 c_1, c_2(4z) = c_1²/2,
 /// c_3(4z) = (c_2 + c_0 c_3)/4 bring it back (Danby, eq. 6.9.26).
+#[inline(always)]
 fn stumpff(z: Real) -> [Real; 4] {
     let (mut z, mut quarters) = (z, 0);
     while z.abs() > 0.1 && quarters < 64 {
         z *= 0.25;
         quarters += 1;
     }
-    let (mut c2, mut c3) = (0.0, 0.0);
-    for j in (0..8).rev() {
-        c2 = INV_FACTORIAL[2 * j + 2] - z * c2;
-        c3 = INV_FACTORIAL[2 * j + 3] - z * c3;
-    }
+    // Σ_{j<8} (−z)^j / (2j + k)! by Estrin's scheme: three dependent multiply-adds, not eight
+    // (Horner's), on the Kepler solver's critical path (the same terms, rounded alike to an ulp).
+    let (y, f) = (-z, &INV_FACTORIAL);
+    let (y2, y4) = (y * y, (y * y) * (y * y));
+    let series = |k: usize| {
+        let pair = |j: usize| f[2 * j + k] + y * f[2 * j + 2 + k];
+        (pair(0) + y2 * pair(2)) + y4 * (pair(4) + y2 * pair(6))
+    };
+    let (mut c2, mut c3) = (series(2), series(3));
     let (mut c0, mut c1) = (1.0 - z * c2, 1.0 - z * c3);
     for _ in 0..quarters {
         c3 = 0.25 * (c2 + c0 * c3);
@@ -692,8 +697,10 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         // At the centre: no orbit, a divergence for the step to report.
         return (r0v * Real::NAN, v0 * Real::NAN);
     }
+    // Products with 1/r0 and 1/r, not quotients: the divisions are the chain's slowest links.
+    let ri = 1.0 / r0;
     let eta = r0v.dot(v0);
-    let beta = 2.0 * mu / r0 - v0.dot(v0);
+    let beta = 2.0 * mu * ri - v0.dot(v0);
     let zeta = mu - beta * r0;
     // f(s) = r0 G1 + η G2 + μ G3 − dt rises in s (f' = r > 0), with f(0) = −dt.
     // The first guess reverses dt = r0 s + a2 s² + a3 s³ + a4 s⁴ + O(s⁵) (a2 = η/2, a3 = ζ/6,
@@ -702,12 +709,12 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
     // Halley step then ends it. For a step that is a large part of the orbit, where the series
     // does not converge, it falls back on s to second order; the bracket [lo, hi] of the root,
     // the half-line on dt's side of 0 at first, closes as the iterates fall on either side.
-    let u = dt / r0;
-    let s2 = u - 0.5 * eta * u * u / r0;
+    let u = dt * ri;
+    let s2 = u - 0.5 * eta * u * u * ri;
     let (a2, a3, a4) = (0.5 * eta, zeta / 6.0, -beta * eta / 24.0);
     let s4 = s2
-        + (2.0 * a2 * a2 - r0 * a3) * u * u * u / (r0 * r0)
-        + (5.0 * r0 * a2 * a3 - r0 * r0 * a4 - 5.0 * a2 * a2 * a2) * u * u * u * u / (r0 * r0 * r0);
+        + (2.0 * a2 * a2 - r0 * a3) * u * u * u * (ri * ri)
+        + (5.0 * r0 * a2 * a3 - r0 * r0 * a4 - 5.0 * a2 * a2 * a2) * u * u * u * u * (ri * ri * ri);
     // |β| s² < 1: within about a sixth of a period (z = βs² = (n dt)² on a circle).
     let short = (beta * s2 * s2).abs() < 1.0 && (s4 - s2).abs() <= 0.1 * s2.abs();
     let s0 = if short { s4 } else { s2 };
@@ -724,8 +731,14 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         }
         let fp = r0 * g[0] + eta * g[1] + mu * g[2];
         let fpp = eta * g[0] + zeta * g[1];
-        let newton = -fs / fp;
-        let ds = -fs / (fp + 0.5 * fpp * newton);
+        // Halley's step −f/(f′ − ½f″ f/f′) over one division, not two in a row (the chain's
+        // slowest links); over two where f′² or f f′ leaves the float range.
+        let (num, den) = (fs * fp, fp * fp - 0.5 * fpp * fs);
+        let ds = if num.is_finite() && den.is_finite() && den != 0.0 {
+            -num / den
+        } else {
+            -fs / (fp + 0.5 * fpp * (-fs / fp))
+        };
         let mut next = s + ds;
         let halley = next > lo && next < hi;
         if !halley {
@@ -743,12 +756,12 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
             break;
         }
     }
-    let r = r0 * g[0] + eta * g[1] + mu * g[2];
+    let rinv = 1.0 / (r0 * g[0] + eta * g[1] + mu * g[2]);
     // f − 1, g, ḟ and ġ − 1 (Danby, eq. 6.9.29), as increments to keep the rounding small.
-    let fm1 = -mu * g[2] / r0;
+    let fm1 = -mu * g[2] * ri;
     let gg = r0 * g[1] + eta * g[2];
-    let fdot = -mu * g[1] / (r0 * r);
-    let gdotm1 = -mu * g[2] / r;
+    let fdot = -mu * g[1] * (ri * rinv);
+    let gdotm1 = -mu * g[2] * rinv;
     (r0v + (r0v * fm1 + v0 * gg), v0 + (r0v * fdot + v0 * gdotm1))
 }
 
@@ -799,6 +812,25 @@ mod tests {
 
     /// Eccentric (e = 0.9), hyperbolic and radial-ish orbits keep their energy and angular
     /// momentum over a drift many periods long, and a drift there and back returns to the start.
+    #[test]
+    fn kepler_drift_scales_to_the_ends_of_the_float_range() {
+        // Lengths × λ, times × λ^(3/2), velocities × λ^(−1/2) at the same μ: the same orbit. At
+        // λ = 1e150 (r² near the top of the range) Halley's one-division form can overflow
+        // (f f′ up to dt r ≈ 1e375), where its two-division form, or the bracket, takes over; at
+        // 1e-150, 1/r0 and the quotients reach 1e150.
+        let (x0, v0, dt) = (DVec3::new(1.0, 0.2, 0.0), DVec3::new(0.1, 1.3, 0.05), 0.9);
+        let (x1, v1) = kepler(x0, v0, 1.0, dt);
+        for lambda in [1e150, 1e-150, 3.7] {
+            let (sx, sv) = (lambda, (1.0 / lambda as Real).sqrt());
+            let (x, v) = kepler(x0 * sx, v0 * sv, 1.0, dt * lambda * lambda.sqrt());
+            let (x, v) = (x * (1.0 / sx), v * (1.0 / sv));
+            assert!(
+                (x - x1).length() < 1e-12 * x1.length() && (v - v1).length() < 1e-12 * v1.length(),
+                "λ {lambda}: {x} {v} vs {x1} {v1}"
+            );
+        }
+    }
+
     #[test]
     fn kepler_drift_keeps_the_integrals_and_reverses() {
         let mu = 1.0;
