@@ -13,7 +13,8 @@ physcore: wisdom_holman (the Wisdom–Holman map in Jacobi coordinates, "wh jaco
 symplectic corrector of order N, "wh jacobi cN", and in democratic heliocentric ones, "wh dh"), verlet, yoshida4, rk4 (fixed dt), dopri5 (rtol sweep, atol = 1e-3 rtol, dt = output
 interval); all threads = 1. REBOUND: leapfrog (the same KDK/DKD method as verlet), WHFast
 (Jacobi, safe_mode=1, no corrector: "wh" default), WHFast with the 17th-order corrector and
-safe_mode = 0 (keep_unsynchronized = 1: outputs do not perturb the run), IAS15 (epsilon 1e-9).
+safe_mode = 0 (keep_unsynchronized = 1: outputs do not perturb the run, as physcore's corrector
+keeps its state between calls), IAS15 (epsilon 1e-9).
 
 Install the peer with ``pip install .[bench]`` (REBOUND's wheel; it has no OpenMP, so it runs
 on one thread). docs/guide/orbits_charges_attractors.md quotes this bench's tables.
