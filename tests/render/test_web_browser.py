@@ -110,13 +110,16 @@ def _click(page, selector: str) -> None:
 @pytest.mark.parametrize("name", list(SCENES))
 def test_the_player_draws_plays_and_turns(pages, browser, name, tmp_path):
     try:
-        _player_draws_plays_and_turns(pages, browser, name, tmp_path)
+        problems = _player_draws_plays_and_turns(pages, browser, name, tmp_path)
     except _BlankCanvas as blank:  # the browser's GL, not the player: a fresh page, once
         print(f"{name}: a blank canvas (context lost: {blank}); the page opened again")
-        _player_draws_plays_and_turns(pages, browser, name, tmp_path)
+        problems = _player_draws_plays_and_turns(pages, browser, name, tmp_path)
+    assert not problems, problems
 
 
-def _player_draws_plays_and_turns(pages, browser, name, tmp_path):
+def _player_draws_plays_and_turns(pages, browser, name, tmp_path) -> list[str]:
+    """Opens `name`'s page, checks that it draws, plays and turns (asserting each), and returns
+    the console errors and page errors it logged meanwhile."""
     problems: list[str] = []
     page = browser.new_page(viewport={"width": 320, "height": 256})
     try:
@@ -175,4 +178,4 @@ def _player_draws_plays_and_turns(pages, browser, name, tmp_path):
         Image.fromarray(after.astype(np.uint8)).save(tmp_path / f"{name}_turned.png")
     finally:
         page.close()
-    assert not problems, problems
+    return problems
