@@ -732,13 +732,21 @@ pub(crate) fn kepler<V: Vector>(r0v: V, v0: V, mu: Real, dt: Real) -> (V, V) {
         let fp = r0 * g[0] + eta * g[1] + mu * g[2];
         let fpp = eta * g[0] + zeta * g[1];
         // Halley's step −f/(f′ − ½f″ f/f′) over one division, not two in a row (the chain's
-        // slowest links); over two where f′² or f f′ leaves the float range.
+        // slowest links); over two where f′² or f f′ leaves the float range (or f f′ falls
+        // below it, which would read as a step of 0).
         let (num, den) = (fs * fp, fp * fp - 0.5 * fpp * fs);
-        let ds = if num.is_finite() && den.is_finite() && den != 0.0 {
+        let ds = if (num.is_normal() || fs == 0.0) && den.is_normal() {
             -num / den
         } else {
             -fs / (fp + 0.5 * fpp * (-fs / fp))
         };
+        if ds.abs() <= 4.0 * Real::EPSILON * s.abs() {
+            // Converged: f is 0 at s to rounding. (Taken on, a step below half an ulp of s
+            // leaves next = s, which the bracket test takes for a step out of the bracket: it
+            // then bisected, or doubled s, away from the root and came back, at three times the
+            // cost of the solve at the short steps of the outer planets, P/5000 and shorter.)
+            break;
+        }
         let mut next = s + ds;
         let halley = next > lo && next < hi;
         if !halley {
@@ -817,7 +825,8 @@ mod tests {
         // Lengths × λ, times × λ^(3/2), velocities × λ^(−1/2) at the same μ: the same orbit. At
         // λ = 1e150 (r² near the top of the range) Halley's one-division form can overflow
         // (f f′ up to dt r ≈ 1e375), where its two-division form, or the bracket, takes over; at
-        // 1e-150, 1/r0 and the quotients reach 1e150.
+        // 1e-150, 1/r0 and the quotients reach 1e150, and f f′ underflows (1e-375), which read
+        // as a step of 0 would end the solve at its first guess.
         let (x0, v0, dt) = (DVec3::new(1.0, 0.2, 0.0), DVec3::new(0.1, 1.3, 0.05), 0.9);
         let (x1, v1) = kepler(x0, v0, 1.0, dt);
         for lambda in [1e150, 1e-150, 3.7] {
