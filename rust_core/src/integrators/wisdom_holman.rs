@@ -185,11 +185,11 @@ pub struct WisdomHolman<V: Vector> {
     eta: Vec<Real>,
     /// The corrected state the last call ended in (positions, then velocities: after that
     /// step's kick, its second half drift owed), from which the next call goes on; valid while
-    /// `kept_dt` is Some (the dt it was stepped with).
+    /// `kept_p` is not empty.
     kept: Vec<V>,
-    /// The term powers of that step, then its dt: the carried value's second part (`Carry`).
+    /// The term powers of that step, then its dt (`kept_dt`): the carried value's second part
+    /// (`Carry`); empty while nothing is kept.
     kept_p: Vec<Real>,
-    kept_dt: Option<Real>,
 }
 
 /// The index of the central body (the heaviest; of equals, a pinned one, then the first) and
@@ -252,6 +252,11 @@ pub(crate) fn from_jacobi<V: Vector>(xj: &[V], m: &[Real], c: usize, eta: &[Real
 }
 
 impl<V: Vector> WisdomHolman<V> {
+    /// The dt of the kept corrected state, if one is kept.
+    fn kept_dt(&self) -> Option<Real> {
+        self.kept_p.last().copied()
+    }
+
     /// The forces at the state now: with `split`, gravity without the pairs of the central body
     /// `c` (democratic heliocentric); else all of them (Jacobi).
     fn eval(&mut self, sys: &mut Particles<V>, c: usize, split: bool) {
@@ -458,7 +463,7 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         if jacobi {
             // Kepler(½dt) ∘ kick(dt) ∘ Kepler(½dt): the one evaluation is mid-step, nothing is
             // carried in, and its dissipation is booked by the midpoint rule.
-            let resume = self.corrector > 0 && self.corrected.is_none() && self.kept_dt == Some(dt);
+            let resume = self.corrector > 0 && self.corrected.is_none() && self.kept_dt() == Some(dt);
             if resume && self.kept.len() == 2 * n {
                 // The last call's corrected state, its second half drift owed: the run goes on
                 // from it as if that call had not ended.
@@ -538,16 +543,16 @@ impl<V: Vector> Integrator<V> for WisdomHolman<V> {
         if o.wh_coordinates != self.coords {
             self.coords = o.wh_coordinates;
             self.valid = false;
-            self.kept_dt = None;
+            self.kept_p.clear();
         }
         if o.wh_corrector != self.corrector {
             self.corrector = o.wh_corrector;
-            self.kept_dt = None;
+            self.kept_p.clear();
         }
     }
     fn reset(&mut self) {
         self.valid = false;
-        self.kept_dt = None;
+        self.kept_p.clear();
     }
     fn as_carry(&self) -> Option<&dyn Carry<V>> {
         Some(self)
@@ -594,16 +599,14 @@ impl<V: Vector> Carry<V> for WisdomHolman<V> {
         let Some(dt) = self.corrected.take() else {
             return false;
         };
-        self.kept_dt = None;
+        self.kept_p.clear();
         if std::mem::take(&mut self.owed) {
             // Kept for the next call (a rollback restores the copy its checkpoint took).
             self.kept.clear();
             self.kept.extend_from_slice(&sys.state.x);
             self.kept.extend_from_slice(&sys.state.v);
-            self.kept_p.clear();
             self.kept_p.extend_from_slice(&self.p);
             self.kept_p.push(dt);
-            self.kept_dt = Some(dt);
             // The last step's second half drift (`self.q` and `self.eta` are that step's).
             let (c, gc) = centre(sys);
             self.drift_jacobi(sys, 0.5 * dt, gc, c, true);
@@ -618,7 +621,7 @@ impl<V: Vector> Carry<V> for WisdomHolman<V> {
     /// in Jacobi coordinates with the corrector, the corrected state the next call goes on from
     /// (positions, then velocities: 2N) and the term powers, then that state's dt.
     fn borrow(&self) -> Option<(&[V], &[Real])> {
-        if self.kept_dt.is_some() {
+        if self.kept_dt().is_some() {
             return Some((&self.kept[..], &self.kept_p[..]));
         }
         self.valid.then_some((&self.f[..], &self.p[..]))
@@ -630,10 +633,10 @@ impl<V: Vector> Carry<V> for WisdomHolman<V> {
             if self.corrector == 0 || self.coords != Coordinates::Jacobi || !(dt.is_finite() && dt > 0.0) {
                 return false;
             }
-            (self.kept, self.kept_p, self.kept_dt, self.valid) = (f, p, Some(dt), false);
+            (self.kept, self.kept_p, self.valid) = (f, p, false);
             return true;
         }
-        self.kept_dt = None;
+        self.kept_p.clear();
         super::set_carried((&mut self.f, &mut self.p, &mut self.valid), f, p, v, n_terms)
     }
 }
