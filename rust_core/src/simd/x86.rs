@@ -3,7 +3,7 @@
 use super::{newton_rsqrt_f32, rsqrt_specials_f32, rsqrt_specials_f64, Simd};
 use pulp::x86::{V3, V4};
 use pulp::{cast, Simd as _};
-use std::arch::x86_64::__m256d;
+use std::arch::x86_64::{__m256d, __m512d};
 
 type F64s3 = <V3 as pulp::Simd>::f64s;
 type F32s3 = <V3 as pulp::Simd>::f32s;
@@ -98,8 +98,9 @@ impl Simd for V3 {
     }
 }
 
-/// AVX-512: the hardware row gather (Zen 5, cloth 128²: 54 M particle-steps/s against 26–31 M lane
-/// by lane; not used on Zen 4, see `hardware_gather_pays`), and `vrsqrt14` (relative error
+/// AVX-512: whole-row loads of consecutive rows, the hardware row gather for the others (Zen 5,
+/// cloth 128²: 54 M particle-steps/s against 26–31 M lane by lane when it took every row; not
+/// used on Zen 4, see `hardware_gather_pays`), and `vrsqrt14` (relative error
 /// < 2⁻¹⁴) over the whole range; one fourth-order step for f64 (→ 4e-18, round-off), one Newton
 /// step for f32 (→ 5.6e-9, below float32 rounding).
 impl Simd for V4 {
@@ -118,6 +119,38 @@ impl Simd for V4 {
             unsafe {
                 ra[c] = cast(self.avx512f._mm512_i32gather_pd::<8>(offs, a.as_ptr().add(c)));
                 rb[c] = cast(self.avx512f._mm512_i32gather_pd::<8>(offs, b.as_ptr().add(c)));
+            }
+        }
+        (ra, rb)
+    }
+
+    /// Eight consecutive rows as whole vectors (2–3 loads per array), de-interleaved by
+    /// two-source permutes (`vpermt2pd`: 1 per component in 2D, 2 in 3D).
+    #[inline(always)]
+    fn load_rows_f64s(self, a: &[f64], b: &[f64], dim: usize, first: usize) -> ([F64s4; 3], [F64s4; 3]) {
+        let zero = self.splat_f64s(0.0);
+        let (mut ra, mut rb) = ([zero; 3], [zero; 3]);
+        let f = self.avx512f;
+        for (src, out) in [(a, &mut ra), (b, &mut rb)] {
+            // Rows first..first+8 are src[dim·first .. dim·(first+8)] (bounds checked here).
+            let w = &src[dim * first..dim * (first + 8)];
+            let ld = |k: usize| -> __m512d {
+                cast(pulp::bytemuck::pod_read_unaligned::<F64s4>(pulp::bytemuck::cast_slice(&w[8 * k..8 * k + 8])))
+            };
+            if dim == 3 {
+                // Component c of row k is element 3k + c of p ‖ q ‖ r: the first five or six
+                // from p ‖ q (indices 0–15), the rest from r (indices 8–15 of the second permute).
+                let (p, q, r) = (ld(0), ld(1), ld(2));
+                let x = f._mm512_permutex2var_pd(p, f._mm512_setr_epi64(0, 3, 6, 9, 12, 15, 0, 0), q);
+                let y = f._mm512_permutex2var_pd(p, f._mm512_setr_epi64(1, 4, 7, 10, 13, 0, 0, 0), q);
+                let z = f._mm512_permutex2var_pd(p, f._mm512_setr_epi64(2, 5, 8, 11, 14, 0, 0, 0), q);
+                out[0] = cast(f._mm512_permutex2var_pd(x, f._mm512_setr_epi64(0, 1, 2, 3, 4, 5, 10, 13), r));
+                out[1] = cast(f._mm512_permutex2var_pd(y, f._mm512_setr_epi64(0, 1, 2, 3, 4, 8, 11, 14), r));
+                out[2] = cast(f._mm512_permutex2var_pd(z, f._mm512_setr_epi64(0, 1, 2, 3, 4, 9, 12, 15), r));
+            } else {
+                let (p, q) = (ld(0), ld(1));
+                out[0] = cast(f._mm512_permutex2var_pd(p, f._mm512_setr_epi64(0, 2, 4, 6, 8, 10, 12, 14), q));
+                out[1] = cast(f._mm512_permutex2var_pd(p, f._mm512_setr_epi64(1, 3, 5, 7, 9, 11, 13, 15), q));
             }
         }
         (ra, rb)
