@@ -117,7 +117,7 @@ def main() -> None:
     r_pc = median_rate(scene.step, n * n, a.steps)
     u, v = g.u.T.copy(), g.v.T.copy()
     un, vn = np.empty_like(u), np.empty_like(v)
-    du, dv = g.du / g.dx**2, g.dv / g.dx**2
+    du, dv = g.du / g.spacing**2, g.dv / g.spacing**2
 
     def nb_gs(s):
         nonlocal u, v, un, vn
