@@ -856,12 +856,19 @@ def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int],
     pal[: min(256, len(colours))] = colours[:256]
     slot = _transparent_slot(frames, pal)
     h, w = frames[0].shape
+    # What is on screen is always some palette entry's colour, so it is tracked as an index
+    # image, and "changed" is a lookup in the 256 × 256 table of index pairs whose colours differ
+    # by more than `tolerance`: keyed by (new << 8) | shown, 0.14 against 8.6 ms a 480×360 frame
+    # for the colours' channel-wise difference.
     rgb = pal.astype(np.int16)
-    shown = rgb[frames[0]]
+    differs = (np.abs(rgb[:, None, :] - rgb[None, :, :]).max(axis=2) > tolerance).ravel()
+    shown = frames[0].astype(np.uint16)
     stored: list[list[Any]] = [[frames[0], 0, 0, int(duration_ms[0]), None]]  # pixels, x, y, ms, LZW code
     for f, ms in zip(frames[1:], duration_ms[1:], strict=True):
-        now = rgb[f]
-        changed = np.abs(now - shown).max(axis=2) > tolerance
+        key = f.astype(np.uint16)
+        key <<= 8
+        key |= shown
+        changed = np.take(differs, key)
         box = _box(changed)
         if box is None:
             stored[-1][3] += int(ms)
@@ -878,7 +885,7 @@ def _write_indexed(path: Path, frames: list[np.ndarray], duration_ms: list[int],
             if best is None or len(code) < len(best[0]):
                 best = (code, mask, cand, left, top)
         code, mask, cand, x, y = best
-        shown[mask] = now[mask]
+        np.copyto(shown, f, where=mask)
         stored.append([cand, x, y, int(ms), code])  # the code chosen by, kept: not encoded twice
     head = b"GIF89a" + struct.pack("<HHBBB", w, h, 0xF7, 0, 0) + pal.tobytes()
     head += b"!\xff\x0bNETSCAPE2.0\x03\x01" + struct.pack("<H", 0) + b"\x00"  # loop for ever

@@ -951,7 +951,7 @@ class _Rasteriser:
         h = self._glow_density(k, self._density_rgb)
         cam = self.cam_at(k)
         under = self._under(cam)
-        out = self.palette[under].astype(np.float32)
+        out = np.take(self.palette, under, axis=0).astype(np.float32)
         d = h[0]
         if self.glow_scale > 0:
             t = (1.0 - np.exp(-2.5 * (np.maximum(d, 0) / self.glow_scale) ** 0.75))[..., None]
@@ -1065,7 +1065,7 @@ class _Rasteriser:
                 wsum = _blur(_splat(col[body], row[body], under.shape, v[body]), r) / self._surf_ref
                 mean = wsum / np.maximum(dens, 1e-12)
                 idx = self._value_levels_of(mean.reshape(-1)).reshape(mean.shape)
-                colour = self.palette[idx].astype(np.float32)
+                colour = np.take(self.palette, idx, axis=0).astype(np.float32)
             else:
                 colour = np.broadcast_to(self.palette[_PLAIN].astype(np.float32), out.shape)
             alpha = np.clip((dens - 0.3) / 0.3, 0.0, 1.0)
@@ -1795,12 +1795,12 @@ class _Rasteriser:
     def _rgb(self, under: np.ndarray, cam: _Camera) -> np.ndarray:
         """The full-colour image of the index image `under`, with the look's backdrop and props
         where `under` shows the background (labels, colliders and walls stay on top)."""
-        out = self.palette[under]
+        # `take` and a masked copy, not fancy and boolean indexing: 2.5 against 7.5 ms a
+        # 480×360 frame.
+        out = np.take(self.palette, under, axis=0)
         if self.look.backdrop is None and not self.look.decor:
             return out
-        static = self._static_image(cam)
-        bg = under == _BACKGROUND
-        out[bg] = static[bg]
+        np.copyto(out, self._static_image(cam), where=(under == _BACKGROUND)[..., None])
         return out
 
     def _static_image(self, cam: _Camera) -> np.ndarray:
