@@ -75,15 +75,16 @@
 //! normal dashpots and of friction, booked per contact and step as the work its force drew from the motion
 //! (the mean of its power at the step's two ends: semi-implicit Euler changes the kinetic
 //! energy by exactly F·(v + v')/2 dt) less what its spring gained. A pair's books go to its
-//! first grain, kept per grain on the device, summed on the host in index order. Two
-//! differences from the CPU's books, both so that the totals balance to rounding (but for
-//! gravity's ½dt Σ m g·(v₀ − v), the integrator's own and bounded): the power at the step's end
-//! is taken through the geometry the force was evaluated with (the CPU: through the new normal
-//! and levers, equal to first order; the rolling torque's as M·(ω_i − ω_j)), and a contact's
-//! first evaluation does not book the energy its normal spring already holds (the overlap
-//! formed within a step with no force doing work on it; the CPU books it, and its totals keep a
-//! jump of that energy, O((ω dt)²) of the impact's, per contact formed). The first step after
-//! `new` books those it finds, as the CPU does: they were in the books from the start.
+//! first grain, kept per grain on the device, summed on the host in index order. The totals
+//! balance to rounding (but for gravity's ½dt Σ m g·(v₀ − v), the integrator's own and
+//! bounded): the power at the step's end is taken through the geometry the force was evaluated
+//! with (the CPU does so for the normal force; for friction and the rolling torque it takes the
+//! new normal and levers, equal to first order; the rolling torque's here as M·(ω_i − ω_j)),
+//! and a contact's first evaluation does not book the energy its normal spring already holds
+//! (the overlap formed within a step with no force doing work on it), which the books thus
+//! take as negative dissipation (the CPU books the same energy at the commit of the step that
+//! made it). The first step after `new` books those it finds, as the CPU does: they were in
+//! the books from the start.
 //!
 //! Against the CPU the arithmetic is the same expression by expression but not bit for bit
 //! (fused multiply-adds where the driver makes them, and the rolling torques summed with each

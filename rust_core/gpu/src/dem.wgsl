@@ -524,7 +524,7 @@ fn find(base: u32, count: u32, key: u32) -> u32 {
 // the normal spring's energy: that overlap formed within the last step with no force doing
 // work on it (the potential of the books counts it from then on), so leaving it out here books
 // that energy, which the scheme made, against dissipation and the totals stay balanced. (The
-// CPU books it, and its totals keep a jump of that energy per contact formed.) Not on the first
+// CPU books it at the commit of the step that made it.) Not on the first
 // step after `Dem::new`: those overlaps were there when the books began.
 @compute @workgroup_size(WG)
 fn contacts(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -758,8 +758,8 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
 // Commits the step for grain i's evaluated contacts at the new state (Material::commit,
 // Commit::Full): the spring follows the contact point, ξ ← ξ_capped + dt·v_t (frictionless
 // contacts hold none), and the books close with ½dt·(the power the evaluated force draws at the
-// step's end) less the energy the springs now store. (The CPU takes that power through the new
-// geometry, v_n and v_t at the new normal and levers: the same to first order.) Done now rather than at the next evaluation (as the CPU defers it):
+// step's end) less the energy the springs now store. (The CPU takes the normal force's power
+// so too, and friction's through the new normal and levers: the same to first order.) Done now rather than at the next evaluation (as the CPU defers it):
 // the same arithmetic on the same state, and the history is whole between calls.
 @compute @workgroup_size(WG)
 fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {

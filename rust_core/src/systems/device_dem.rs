@@ -12,9 +12,10 @@
 //!
 //! Books, history and step limit are the CPU term's (`terms::contacts`): the same energy names
 //! and order, its `OwnState::history` layout both ways (`term_history`, `set_term_history`), so
-//! a scene saved on either path continues on the other, and its `max_dt`. The device books its
-//! dissipation per contact a little differently from the CPU (see `physcore_gpu::dem`'s docs):
-//! the dissipated entries agree to the scheme's error, not to rounding.
+//! a scene saved on either path continues on the other, and its `max_dt`. The device books
+//! friction's dissipation per contact a little differently from the CPU (see
+//! `physcore_gpu::dem`'s docs): the friction entries agree to the scheme's error, the normal
+//! damping entries to the order of their sums.
 //!
 //! The cell list's box (which orders the force sums, so the bits, not the physics) is fitted to
 //! the grains at `from_records` and kept in the saved rows: a load rebuilds it as it was, and

@@ -161,10 +161,12 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 d2 = if c == 0 { dx[c] * dx[c] } else { d2 + dx[c] * dx[c] };
             }
             let sr = ri + rj;
-            let touching = and(s, and(s, m_eval, d2.lt(sr * sr)), and(s, d2.gt(zero), ne(imi + imj, zero)));
-            let touching = and(s, touching, valid);
+            let overlap = and(s, and(s, d2.lt(sr * sr), and(s, d2.gt(zero), ne(imi + imj, zero))), valid);
+            let touching = and(s, m_eval, overlap);
             let live = ge(lfn, zero);
-            if !any(s, and(s, valid, or(s, touching, live))) {
+            // Contacts that formed in the step being committed (the scalar loop's `formed`).
+            let formed = andnot(s, and(s, m_commit, overlap), live);
+            if !any(s, and(s, valid, or(s, or(s, touching, live), formed))) {
                 // Candidates apart and without a contact (most of them in a sparse scene).
                 if eval {
                     forces[p..p + cnt].iter_mut().for_each(|f| *f = PairForce::ZERO);
@@ -173,7 +175,7 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 continue;
             }
             let committing = and(s, m_commit, live);
-            let active = and(s, or(s, touching, committing), ne(d2, zero));
+            let active = and(s, or(s, or(s, touching, committing), formed), ne(d2, zero));
             let active = and(s, active, valid);
             for c in 0..dim {
                 vi[c] = g(v, &ii, dim, c);
@@ -230,9 +232,10 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 vt[c] = vc[c] - nrm[c] * vn;
             }
 
-            // Commit (Material::commit, Commit::Full).
+            // Commit (Material::commit, Commit::Full), and the contacts that formed.
             let cm = and(s, active, committing);
-            if any(s, cm) {
+            let fm = and(s, active, formed);
+            if any(s, or(s, cm, fm)) {
                 let dcl = d.max(zero);
                 let mut xn = [zero; 3];
                 if mu > 0.0 {
@@ -242,9 +245,18 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                 }
                 let u = half * kt(mat, dcl) * dot(&xn, &xn);
                 let lost_t = lbt - splat(0.5 * dtc) * dot(&lft, &vt) - u;
-                let lost_n = lbn + splat(0.5 * dtc) * lfn * vn - normal_energy(mat, dcl);
+                // The normal force as applied, f_t − f (f: the last evaluation's force on the
+                // first grain), at the relative velocity now.
+                let mut fnv = [zero; 3];
+                let mut vr = [zero; 3];
+                for c in 0..dim {
+                    fnv[c] = lft[c] - F::<S>::from_fn(s, |k| forces[p + k.min(cnt - 1)].f.comp(c));
+                    vr[c] = vi[c] - vj[c];
+                }
+                let un = normal_energy(mat, dcl);
+                let lost_n = cm.select(lbn + splat(0.5 * dtc) * dot(&fnv, &vr) - un, neg(un));
                 in_order(&mut b_lt, cm, lost_t, cnt);
-                in_order(&mut b_ln, cm, lost_n, cnt);
+                in_order(&mut b_ln, or(s, cm, fm), lost_n, cnt);
                 lxi = sel3(cm, xn, lxi, dim);
                 lbt = cm.select(u, lbt);
             }

@@ -81,7 +81,15 @@
 //! power at the step's two ends (semi-implicit Euler changes the kinetic energy by exactly
 //! F·(v + v')/2 dt), less what its spring gained; so the dashpots, the clamp letting go of an
 //! overlap, slipping, and a tangential spring dropped when its contact ends are all in the
-//! books, which balance to the scheme's first-order error.
+//! books. The normal force's power at the step's end is taken along the normal it was applied
+//! on (`Material::commit`), and a contact that formed during a step books the energy its
+//! normal spring holds at the step's end as negative dissipation at that step's commit (the
+//! scheme made it: the grains drifted into the overlap with no force doing work), so for
+//! semi-implicit Euler the normal books balance the kinetic and potential energy to rounding,
+//! as the device's do (`physcore_gpu::dem`). Overlaps present when the books begin are in
+//! the potential from the start, not booked. Friction's books take the tangential force's
+//! power at the step's end through the new normal and levers, which is the same to first
+//! order.
 //!
 //! Layout, one stage a file: this file holds the contact laws (`Material`), the term, its
 //! registration and its roles (`Term`, `OwnState`); `verlet` the Verlet lists (when they are
@@ -499,8 +507,16 @@ impl Material {
     /// ξ ← ξ + dt·v_t (frictionless contacts hold none: it could never push), and the books take
     /// what each force drew over the step (the mean of its power at the two ends) less what its
     /// spring now stores more. Adds the dissipated energies to `s`. `fp`, `vr`: the force the
-    /// last evaluation put on the first grain and the grains' relative velocity now (for
-    /// `Commit::Books` / `Springs`).
+    /// last evaluation put on the first grain and the grains' relative velocity now (a wall's
+    /// grain: its velocity).
+    ///
+    /// The normal force's power at the step's end is that of the force as applied, n₀ f_n =
+    /// f_t − `fp` along the evaluation's normal n₀, at the velocities now: exactly what
+    /// semi-implicit Euler took from the kinetic energy. (Through the new normal n, as this
+    /// did before, it is the same to first order, but the error has one sign: n turns towards
+    /// the sliding direction, so a glancing contact booked −½f_n v_t² dt²/r a step. An elastic
+    /// gas of 1,600 discs booked −21 % of its energy as dissipated in 18 collision times while
+    /// it kept its energy to 0.4 %.)
     #[inline(always)]
     #[allow(clippy::too_many_arguments)]
     fn commit<V: Vector>(
@@ -524,14 +540,14 @@ impl Material {
                 let u = 0.5 * self.kt(d) * l.xi.length_squared();
                 s.lost_t += l.bt - 0.5 * dt * l.ft.dot(vt) - u;
                 l.bt = u;
-                s.lost_n += l.bn + 0.5 * dt * l.fn_ * vn - self.normal_energy(d);
+                s.lost_n += l.bn + 0.5 * dt * (l.ft - fp).dot(vr) - self.normal_energy(d);
             }
             Commit::Books(h) => {
                 let xi = if mu > 0.0 { l.xi + vt * h } else { V::ZERO };
                 let u = 0.5 * self.kt(d) * xi.length_squared();
                 s.lost_t += l.bt - 0.5 * h * l.ft.dot(vt) - u;
                 l.bt = u;
-                s.lost_n += l.bn + 0.5 * h * l.fn_ * vn - self.normal_energy(d);
+                s.lost_n += l.bn + 0.5 * h * (l.ft - fp).dot(vr) - self.normal_energy(d);
                 l.bn = 0.5 * h * fp.dot(vr);
             }
             Commit::Springs(dt) => {

@@ -39,6 +39,7 @@ impl<V: Vector> Contacts<V> {
             Some(_) => None,
         }
         .filter(|_| self.path != PairPath::Loop);
+        let full_commit = matches!(commit, Some(Commit::Full(_)));
         let (xf, vf, wf, pi) = (V::flat(x), V::flat(v), V::axial_flat(omega), &l.pi);
         let body = |c: usize, links: &mut [Link<V>], forces: &mut [PairForce<V>]| -> Sums {
             let (s0, s1) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
@@ -73,9 +74,12 @@ impl<V: Vector> Contacts<V> {
                     let dx = x[j] - xi;
                     let d2 = dx.length_squared();
                     let s = ri + r[j];
-                    let touching = eval && d2 < s * s && d2 > 0.0 && imi + im[j] != 0.0;
+                    let overlap = d2 < s * s && d2 > 0.0 && imi + im[j] != 0.0;
+                    let touching = eval && overlap;
                     let committing = commit.is_some() && l.live();
-                    if !(touching || committing) || d2 == 0.0 {
+                    // A contact that formed in the step being committed (module docs, energy books).
+                    let formed = full_commit && !l.live() && overlap;
+                    if !(touching || committing || formed) || d2 == 0.0 {
                         if eval {
                             end_contact(l, &mut sums);
                             *pf = PairForce::ZERO;
@@ -89,6 +93,8 @@ impl<V: Vector> Contacts<V> {
                     let vc = vi - v[j] + spin::<V>(wi * ai + omega[j] * aj, nrm);
                     if let (Some(c), true) = (commit, l.live()) {
                         mat.commit(l, nrm, d, vc, mat.friction, c, pf.f, vi - v[j], &mut sums);
+                    } else if formed {
+                        sums.lost_n += -mat.normal_energy(d);
                     }
                     if touching {
                         let c = match &uniform {
@@ -175,6 +181,7 @@ impl<V: Vector> Contacts<V> {
             .uniform
             .map(|(m, im0)| walls.iter().map(|w| mat.coef(im0, (kn * m).sqrt(), w.zeta, w.friction, dt)).collect());
         let im = &model.inv_mass;
+        let full_commit = matches!(commit, Some(Commit::Full(_)));
         let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], (wl, wn): (&mut [Link<V>], &mut [V])| -> Sums {
             let s0 = c * CHUNK;
             let base = wstart[s0] as usize;
@@ -212,7 +219,8 @@ impl<V: Vector> Contacts<V> {
                     let surface = if PLANES { planes[wall[q] as usize].closest(x[i]) } else { w.closest(x[i]) };
                     let sd = surface.distance;
                     let touching = eval && sd < ri;
-                    if !(touching || (commit.is_some() && l.live())) {
+                    let formed = full_commit && !l.live() && sd < ri;
+                    if !(touching || formed || (commit.is_some() && l.live())) {
                         if eval {
                             end_contact(l, &mut sums);
                         }
@@ -223,15 +231,12 @@ impl<V: Vector> Contacts<V> {
                     let ai = ri - 0.5 * d;
                     let vc = v[i] + spin::<V>(omega[i] * ai, nrm);
                     if let (Some(c), true) = (commit, l.live()) {
-                        // "xpbd"'s commits read the force of the last evaluation, f_t − n f_n
-                        // with that evaluation's normal (a plane's is fixed); a full commit
-                        // does not.
-                        let fp = match c {
-                            Commit::Full(_) => V::ZERO,
-                            _ if PLANES => l.ft + surface.normal * l.fn_,
-                            _ => l.ft + wn[q - base] * l.fn_,
-                        };
+                        // The force of the last evaluation, f_t − n f_n with that evaluation's
+                        // normal (a plane's is fixed).
+                        let fp = if PLANES { l.ft + surface.normal * l.fn_ } else { l.ft + wn[q - base] * l.fn_ };
                         mat.commit(l, nrm, d, vc, w.friction, c, fp, v[i], &mut sums);
+                    } else if formed {
+                        sums.lost_n += -mat.normal_energy(d);
                     }
                     if touching {
                         let c = match &wall_coef {
