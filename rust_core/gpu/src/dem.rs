@@ -78,8 +78,7 @@
 //! first grain, kept per grain on the device, summed on the host in index order. The totals
 //! balance to rounding (but for gravity's ½dt Σ m g·(v₀ − v), the integrator's own and
 //! bounded): the power at the step's end is taken through the geometry the force was evaluated
-//! with (the CPU does so for the normal force; for friction and the rolling torque it takes the
-//! new normal and levers, equal to first order; the rolling torque's here as M·(ω_i − ω_j)),
+//! with (as the CPU does; the rolling torque's as M·(ω_i − ω_j)),
 //! and a contact's first evaluation does not book the energy its normal spring already holds
 //! (the overlap formed within a step with no force doing work on it), which the books thus
 //! take as negative dissipation (the CPU books the same energy at the commit of the step that

@@ -758,8 +758,8 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
 // Commits the step for grain i's evaluated contacts at the new state (Material::commit,
 // Commit::Full): the spring follows the contact point, ξ ← ξ_capped + dt·v_t (frictionless
 // contacts hold none), and the books close with ½dt·(the power the evaluated force draws at the
-// step's end) less the energy the springs now store. (The CPU takes the normal force's power
-// so too, and friction's through the new normal and levers: the same to first order.) Done now rather than at the next evaluation (as the CPU defers it):
+// step's end) less the energy the springs now store, each force's power through the geometry
+// it was evaluated with, as the CPU's. Done now rather than at the next evaluation (as the CPU defers it):
 // the same arithmetic on the same state, and the history is whole between calls.
 @compute @workgroup_size(WG)
 fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {

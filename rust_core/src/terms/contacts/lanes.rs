@@ -244,7 +244,6 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                     }
                 }
                 let u = half * kt(mat, dcl) * dot(&xn, &xn);
-                let lost_t = lbt - splat(0.5 * dtc) * dot(&lft, &vt) - u;
                 // The normal force as applied, f_t − f (f: the last evaluation's force on the
                 // first grain), at the relative velocity now.
                 let mut fnv = [zero; 3];
@@ -253,6 +252,19 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                     fnv[c] = lft[c] - F::<S>::from_fn(s, |k| forces[p + k.min(cnt - 1)].f.comp(c));
                     vr[c] = vi[c] - vj[c];
                 }
+                // The tangential force's power as applied: f_t·v_r + τ_i·ω_i + τ_j·ω_j.
+                // Summed as the scalar loop's `axial_dot`s, for the same bits.
+                let (mut pi_, mut pj_) = (zero, zero);
+                for a in 0..ad {
+                    let pf = |k: usize| &forces[p + k.min(cnt - 1)];
+                    let (ti, tj) = (
+                        F::<S>::from_fn(s, |k| V::axial_flat(std::slice::from_ref(&pf(k).ti))[a]),
+                        F::<S>::from_fn(s, |k| V::axial_flat(std::slice::from_ref(&pf(k).tj))[a]),
+                    );
+                    (pi_, pj_) = if a == 0 { (ti * wi[a], tj * wj[a]) } else { (pi_ + ti * wi[a], pj_ + tj * wj[a]) };
+                }
+                let pt = dot(&lft, &vr) + pi_ + pj_;
+                let lost_t = lbt - splat(0.5 * dtc) * pt - u;
                 let un = normal_energy(mat, dcl);
                 let lost_n = cm.select(lbn + splat(0.5 * dtc) * dot(&fnv, &vr) - un, neg(un));
                 in_order(&mut b_lt, cm, lost_t, cnt);

@@ -92,7 +92,10 @@ impl<V: Vector> Contacts<V> {
                     let (ai, aj) = (ri - 0.5 * d, r[j] - 0.5 * d);
                     let vc = vi - v[j] + spin::<V>(wi * ai + omega[j] * aj, nrm);
                     if let (Some(c), true) = (commit, l.live()) {
-                        mat.commit(l, nrm, d, vc, mat.friction, c, pf.f, vi - v[j], &mut sums);
+                        let vr = vi - v[j];
+                        // The tangential force's power as applied (`Material::commit`).
+                        let pt = l.ft.dot(vr) + axial_dot::<V>(pf.ti, wi) + axial_dot::<V>(pf.tj, omega[j]);
+                        mat.commit(l, nrm, d, vc, mat.friction, c, pf.f, vr, pt, &mut sums);
                     } else if formed {
                         sums.lost_n += -mat.normal_energy(d);
                     }
@@ -182,7 +185,8 @@ impl<V: Vector> Contacts<V> {
             .map(|(m, im0)| walls.iter().map(|w| mat.coef(im0, (kn * m).sqrt(), w.zeta, w.friction, dt)).collect());
         let im = &model.inv_mass;
         let full_commit = matches!(commit, Some(Commit::Full(_)));
-        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], (wl, wn): (&mut [Link<V>], &mut [V])| -> Sums {
+        type Kept<'a, V> = (&'a mut [Link<V>], &'a mut [V], &'a mut [Real]);
+        let body = |c: usize, f: &mut [V], tq: &mut [V::Axial], (wl, wn, wa): Kept<'_, V>| -> Sums {
             let s0 = c * CHUNK;
             let base = wstart[s0] as usize;
             let mut sums = Sums::default();
@@ -233,8 +237,12 @@ impl<V: Vector> Contacts<V> {
                     if let (Some(c), true) = (commit, l.live()) {
                         // The force of the last evaluation, f_t − n f_n with that evaluation's
                         // normal (a plane's is fixed).
-                        let fp = if PLANES { l.ft + surface.normal * l.fn_ } else { l.ft + wn[q - base] * l.fn_ };
-                        mat.commit(l, nrm, d, vc, w.friction, c, fp, v[i], &mut sums);
+                        let n0 = if PLANES { surface.normal } else { wn[q - base] };
+                        let fp = l.ft + n0 * l.fn_;
+                        // Friction's power as applied: its torque (n₀' × f_t)·a₀ with the
+                        // evaluation's normal into the wall n₀' = −n₀ and lever a₀.
+                        let pt = l.ft.dot(v[i]) + axial_dot::<V>(moment(n0 * -1.0, l.ft) * wa[q - base], omega[i]);
+                        mat.commit(l, nrm, d, vc, w.friction, c, fp, v[i], pt, &mut sums);
                     } else if formed {
                         sums.lost_n += -mat.normal_energy(d);
                     }
@@ -247,6 +255,7 @@ impl<V: Vector> Contacts<V> {
                         if !PLANES {
                             wn[q - base] = surface.normal;
                         }
+                        wa[q - base] = ai;
                         force += fw;
                         torque = torque + moment(nrm, ft) * ai;
                         sums.walls += 1;
@@ -266,7 +275,9 @@ impl<V: Vector> Contacts<V> {
         let torque = &mut self.torque;
         let wls = split_at(&mut l.wlinks, &bounds);
         let wns = split_at(&mut l.wnormal, &bounds);
-        let items = f.chunks_mut(CHUNK).zip(torque.chunks_mut(CHUNK)).zip(wls.into_iter().zip(wns)).collect();
+        let was = split_at(&mut l.wlever, &bounds);
+        let kept = wls.into_iter().zip(wns).zip(was).map(|((a, b), c)| (a, b, c));
+        let items = f.chunks_mut(CHUNK).zip(torque.chunks_mut(CHUNK)).zip(kept).collect();
         let parts: Vec<Sums> = par::map_vec(n, items, |c, ((f, t), w)| body(c, f, t, w));
         parts.into_iter().fold(Sums::default(), Sums::add)
     }
@@ -343,9 +354,10 @@ impl<V: Vector> Contacts<V> {
                     let nrm = if d2 > 0.0 { dx * (1.0 / d2.sqrt()) } else { dx };
                     let d = r[i] + r[j] - d2.sqrt();
                     let reff = r[i] * r[j] / (r[i] + r[j]);
-                    let wr = rolling_part::<V>(omega[i] + omega[j] * -1.0, nrm);
+                    let wrel = omega[i] + omega[j] * -1.0;
+                    let wr = rolling_part::<V>(wrel, nrm);
                     if let (Some(h), true) = (commit, rl.live) {
-                        mat.roll_commit(rl, d, reff, wr, h, &mut sums);
+                        mat.roll_commit(rl, d, reff, wr, wrel, h, &mut sums);
                     }
                     if on {
                         if !rl.live {
@@ -395,7 +407,7 @@ impl<V: Vector> Contacts<V> {
                     let d = r[i] - surface.distance;
                     let wr = rolling_part::<V>(omega[i], nrm);
                     if let (Some(h), true) = (commit, rl.live) {
-                        mat.roll_commit(rl, d, r[i], wr, h, &mut sums);
+                        mat.roll_commit(rl, d, r[i], wr, omega[i], h, &mut sums);
                     }
                     if on {
                         if !rl.live {

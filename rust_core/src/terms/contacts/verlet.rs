@@ -182,6 +182,8 @@ impl<V: Vector> Contacts<V> {
         l.fill = fill;
         l.wnormal.clear();
         l.wnormal.resize(l.wall.len(), V::ZERO);
+        l.wlever.clear();
+        l.wlever.resize(l.wall.len(), 0.0);
         l.forces.clear();
         l.forces.resize(l.pj.len(), PairForce::ZERO);
         l.rt.clear();
