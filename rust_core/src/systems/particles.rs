@@ -800,16 +800,26 @@ impl<V: Vector> System for ParticleSystem<V> {
         if self.refusal().is_some() {
             return Err(Halt::Diverged { index: 0, quantity: Failure::Memory });
         }
-        if !self.constraints.is_empty() {
-            let (f, g) = (self.integrator.last_forces(), self.sys.forces.g);
-            if self.constraints.apply(&mut self.sys.state, &self.sys.model, f, g, self.sys.single) {
-                self.integrator.reset();
-            }
-        }
         if !non_finite {
             let sys = &mut self.sys;
             for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
                 s.end_step(&sys.state.x, &sys.state.v, &sys.model, dt);
+            }
+        }
+        if !self.constraints.is_empty() {
+            // The own states close the step at the state the integrator made, before the
+            // projections move it: a contact's books take its force's work at the velocities it
+            // did that work with (closed after a reflection, at the reflected velocity, an
+            // elastic gas in a box drifted +2.2e-3 of its energy in 40 collision times).
+            if !non_finite {
+                let sys = &mut self.sys;
+                for s in sys.forces.terms.iter_mut().filter_map(|t| t.as_own_state_mut()) {
+                    s.settle(&sys.state.x, &sys.state.v, &sys.model);
+                }
+            }
+            let (f, g) = (self.integrator.last_forces(), self.sys.forces.g);
+            if self.constraints.apply(&mut self.sys.state, &self.sys.model, f, g, self.sys.single) {
+                self.integrator.reset();
             }
         }
         if non_finite {

@@ -130,11 +130,12 @@ pub trait Jacobian<V: Vector> {
 pub trait OwnState<V: Vector> {
     /// Called before each integrator step (or "xpbd" substep) with its dt (s).
     fn begin_step(&mut self, _dt: Real) {}
-    /// Called after each accepted step (and the constraint stage) with the new state: the term
-    /// advances its own state here.
+    /// Called after each integrator step, before the constraint stage, with the state the step
+    /// made: the term advances its own state here.
     fn end_step(&mut self, _x: &[V], _v: &[V], _model: &Model, _dt: Real) {}
     /// Completes what `end_step` deferred to the next evaluation (the contacts' springs), when a
-    /// call of steps ends or before something else changes the state; idempotent.
+    /// call of steps ends or before something else changes the state (the constraint stage's
+    /// projections among them); idempotent.
     fn settle(&mut self, _x: &[V], _v: &[V], _model: &Model) {}
     /// "xpbd" only: the state a substep of `h` predicted, before its projections move it (the
     /// term may close its books here).

@@ -89,8 +89,8 @@
 //! semi-implicit Euler the books balance the kinetic and potential energy to rounding,
 //! friction and rolling resistance included, as the device's do (`physcore_gpu::dem`).
 //! Overlaps present when the books begin are in the potential from the start, not booked.
-//! (A `Box` constraint reflecting a grain in contact is the exception: the contact's power at
-//! the step's end is then taken at the reflected velocity.)
+//! With constraints (a `Box`), the particle system settles the step before their projections
+//! move the grains, so the books close at the velocities the forces did their work with.
 //!
 //! Layout, one stage a file: this file holds the contact laws (`Material`), the term, its
 //! registration and its roles (`Term`, `OwnState`); `verlet` the Verlet lists (when they are
