@@ -16,6 +16,7 @@ __all__ = [
     "ThreadPoolWarning",
     "SeparateFluidsWarning",
     "ContactStepWarning",
+    "StabilityWarning",
     "EnergyBooksWarning",
     "UnchargedWarning",
 ]
@@ -155,6 +156,18 @@ class ContactStepWarning(UserWarning):
     other forces need it): collisions then lose or gain energy and the restitution is wrong.
     :meth:`~physcore.Scene.advance` picks the step itself; or set
     ``scene.dt = scene.suggest_dt()``."""
+
+
+class StabilityWarning(UserWarning):
+    """A scene with a grid was stepped with :meth:`~physcore.Scene.step` at a ``dt`` above the
+    grid's stability limit: the wave equation's CFL limit ``spacing / (c √dim)``
+    (:attr:`~physcore.Wave.cfl_limit`) or Gray-Scott's explicit diffusion limit
+    ``dx² / (2·dim·max(D))`` (:attr:`~physcore.GrayScott.diffusion_limit`). The scheme is
+    unstable there: the field grows without bound until it overflows and the step raises
+    :class:`SimulationDiverged`. A wave grid's energy books stay balanced meanwhile (leapfrog's
+    conserved energy, whose potential part turns negative past the limit), so the books cannot
+    show it. :meth:`~physcore.Scene.advance` steps within the limits; or set ``scene.dt =
+    scene.suggest_dt()``. Checked once per ``dt`` value."""
 
 
 class UnchargedWarning(UserWarning):

@@ -9,6 +9,7 @@ import tempfile
 from typing import Any
 
 from . import _core
+from ._errors import InvalidTypeError
 
 __all__ = ["simd_level", "simd_levels", "set_simd_level", "info"]
 
@@ -45,9 +46,13 @@ def set_simd_level(level: str | None = None) -> None:
 
     Raises
     ------
+    InvalidTypeError
+        ``level`` is neither a string nor ``None``.
     InvalidInputError
         ``level`` is not one of :func:`simd_levels` (unknown, or this CPU lacks it).
     """
+    if level is not None and not isinstance(level, str):
+        raise InvalidTypeError(f"level: expected a SIMD level name (one of {', '.join(simd_levels())}) or None, got {type(level).__name__}")
     _core.set_simd_level(level)
 
 

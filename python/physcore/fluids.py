@@ -673,6 +673,10 @@ class Fluid(Term, kind="fluid"):
         "cfl": "number",
         "surface_tension": "number",
         "adhesion": "number",
+        # How the boundary's Ψ_b came about ("lattice", "akinci" or "given"): a load recomputes
+        # them by the same rule, bit for bit (ρ0·(Ψ/ρ0) is not always Ψ: a dam break loaded
+        # from its file stepped 3e-14 m/s away from the run it was saved from).
+        "wall_rule": "str",
     }
     record_arrays: ClassVar[dict[str, tuple[str, tuple[str, ...]]]] = {
         "positions": ("f8", ("count", "D")),
@@ -697,7 +701,11 @@ class Fluid(Term, kind="fluid"):
         meta["clamp_pressure"] = bool(self.clamp_pressure)
         meta["mass"] = self.particle_mass()
         walls = self.boundary if self.boundary is not None else np.zeros((0, self.dim))
-        return meta, {"positions": self.positions, "walls": walls, "wall_volume": self.boundary_psi() / self.density}
+        wv = self.boundary_volume
+        meta["wall_rule"] = wv if isinstance(wv, str) else "given"
+        # Given volumes as given (Ψ = ρ0·V again on load); a rule's Ψ/ρ0 for readers of the volumes.
+        volume = wv if isinstance(wv, np.ndarray) and len(wv) == len(walls) else self.boundary_psi() / self.density
+        return meta, {"positions": self.positions, "walls": walls, "wall_volume": volume}
 
     @classmethod
     def record_api_names(cls, k: int, ctx: str) -> dict[str, str]:
@@ -708,6 +716,11 @@ class Fluid(Term, kind="fluid"):
     @classmethod
     def _load(cls, ctx: LoadContext, meta: dict[str, Any], arrays: dict[str, np.ndarray]) -> None:
         walls = arrays["walls"]
+        # Files written before "wall_rule" hold the volumes alone.
+        rule = meta.get("wall_rule", "given")
+        if rule not in ("lattice", "akinci", "given"):
+            raise InvalidInputError(f"wall_rule: expected 'lattice', 'akinci' or 'given', got {rule!r}")
+        volume = (arrays["wall_volume"] if rule == "given" else rule) if len(walls) else "lattice"
         fluid = cls(
             arrays["positions"],
             meta["spacing"],
@@ -720,7 +733,7 @@ class Fluid(Term, kind="fluid"):
             clamp_pressure=meta["clamp_pressure"],
             mass=meta["mass"],
             boundary=walls if len(walls) else None,
-            boundary_volume=arrays["wall_volume"] if len(walls) else "lattice",
+            boundary_volume=volume,
             pass_precision=meta["precision"],
             # Files written before DFSPH have no method: they are WCSPH.
             method=meta.get("method", "wcsph"),

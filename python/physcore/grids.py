@@ -307,7 +307,10 @@ class Wave(Grid):
     Stepped by the leapfrog scheme (central differences, second order in time and space;
     Langtangen & Linge, "Finite Difference Computing with PDEs", 2017, §2.1), stable for
     ``c·dt/dx ≤ 1/√dim`` (the CFL condition): :meth:`Scene.advance` keeps ``cfl`` of that limit;
-    :meth:`Scene.step` with a larger ``dt`` diverges and raises :class:`SimulationDiverged`.
+    :meth:`Scene.step` with a larger ``dt`` warns (:class:`StabilityWarning`), and the field
+    grows without bound (the energy books still balance: leapfrog's conserved energy holds past
+    the limit, its potential part negative) until it overflows and :class:`SimulationDiverged`
+    is raised.
 
     Parameters
     ----------

@@ -27,6 +27,7 @@ from ._errors import (
     ContactStepWarning,
     InvalidInputError,
     InvalidTypeError,
+    StabilityWarning,
     ThreadPoolWarning,
     UnchargedWarning,
     allocating,
@@ -647,6 +648,7 @@ class Scene:
         #: Everything the scene holds, as stored, in the order added (see physcore._parts).
         self._parts: list[Part] = []
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
+        self._grid_step_checked: float | None = None  # ... and against the grids' limits
         self._charge_checked = False  # terms on charges checked against the charges (_warn_uncharged)
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
@@ -984,6 +986,10 @@ class Scene:
         ContactStepWarning
             The scene has :class:`~physcore.Contacts` and ``dt`` is more than twice
             :meth:`auto_dt` (checked once per ``dt`` value): the collisions would be wrong.
+        StabilityWarning
+            ``dt`` is above a grid's stability limit (:attr:`Wave.cfl_limit`,
+            :attr:`GrayScott.diffusion_limit`; checked once per ``dt`` value): the grid's field
+            will grow without bound.
         UnchargedWarning
             A term acts on charges (:class:`Coulomb`, :class:`ElectricField`, ...) and no
             particle has one, so it does nothing (checked once after each change of the terms
@@ -996,6 +1002,7 @@ class Scene:
         if self._e0 is None:
             self._set_reference_energy()
         self.warn_contact_step()
+        self._warn_grid_step()
         self._warn_uncharged()
         self._exclusive(lambda sim: sim.step(n))
 
@@ -1134,6 +1141,25 @@ class Scene:
                 ContactStepWarning,
                 stacklevel=3,
             )
+
+    def _warn_grid_step(self) -> None:
+        """Warn (StabilityWarning, once per dt value) when dt is above a grid's stability limit."""
+        if self._grid_step_checked == self.dt:
+            return
+        self._grid_step_checked = self.dt
+        for g in self.grids:
+            for attr, what in (("cfl_limit", "CFL limit spacing/(c*sqrt(dim))"),
+                               ("diffusion_limit", "explicit diffusion limit dx^2/(2*dim*max(D))")):
+                limit = getattr(g, attr, None)
+                if limit is not None and self.dt > limit:
+                    ratio = self.dt / limit if limit > 0 else math.inf  # a limit may underflow to 0
+                    warnings.warn(
+                        f"dt: {self.dt:.3g} s is {ratio:.3g}x the {what} = {limit:.3g} s of grid {g.name!r}: "
+                        "the scheme is unstable there and the field will grow without bound; "
+                        "use scene.advance(), or scene.dt = scene.suggest_dt()",
+                        StabilityWarning,
+                        stacklevel=3,
+                    )
 
     def _warn_uncharged(self) -> None:
         """Warn (UnchargedWarning) when a term acts on charges and no particle has one: such a
@@ -1622,7 +1648,9 @@ class Scene:
 
     def solver_stats(self, name: str | None = None) -> dict[str, float]:
         """The pressure solvers' books of a DFSPH fluid (``Fluid(method="dfsph")``), over every step
-        since it was added (including steps later rolled back by a divergence or Ctrl-C).
+        this scene object has taken since the fluid was added (including steps later rolled back
+        by a divergence or Ctrl-C). They describe this process's solves, not the scene's state: a
+        scene loaded from a file or unpickled starts them from zero (its energy books carry on).
 
         Keys: ``steps``; ``density_iterations`` and ``divergence_iterations`` (totals);
         ``unconverged`` (solves stopped at ``max_iterations`` above tolerance); ``density_error``

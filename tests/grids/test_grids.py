@@ -97,8 +97,9 @@ def test_just_above_the_cfl_limit_diverges_and_is_rolled_back():
     assert abs(scene.energy_drift()) < 1e-10
     before, t0 = w.u, scene.time
     scene.dt = 1.01 * w.cfl_limit
-    with pytest.raises(pc.SimulationDiverged) as info:
-        scene.step(20000)
+    with pytest.warns(pc.StabilityWarning, match=r"^dt: .* 1.01x the CFL limit .* of grid 'wave'"):
+        with pytest.raises(pc.SimulationDiverged) as info:
+            scene.step(20000)
     assert "grid cell" in str(info.value) and "CFL" in str(info.value)
     assert info.value.suggested_dt < w.cfl_limit
     assert scene.time == t0 and np.array_equal(w.u, before)
@@ -274,8 +275,25 @@ def test_above_the_diffusion_limit_diverges():
     scene, gs = _gs(32)
     gs.seed(0)
     scene.dt = 1.2 * gs.diffusion_limit
-    with pytest.raises(pc.SimulationDiverged, match="grid cell"):
-        scene.step(5000)
+    with pytest.warns(pc.StabilityWarning, match="1.2x the explicit diffusion limit"):
+        with pytest.raises(pc.SimulationDiverged, match="grid cell"):
+            scene.step(5000)
+
+
+def test_a_step_above_a_wave_grids_limit_warns_though_its_books_balance():
+    # Past the CFL limit leapfrog's conserved energy still balances (its potential part turns
+    # negative), so the books cannot tell a blow-up: the step warns, once per dt value.
+    scene = pc.Scene(dim=2)
+    w = scene.add(pc.Wave((32, 32), 1 / 32, c=1.0))
+    w.u = _pulse(32, 0.1)
+    scene.dt = w.cfl_limit  # at the limit: no warning (pyproject's filterwarnings = error)
+    scene.step(10)
+    scene.dt = 3.0 * w.cfl_limit
+    with pytest.warns(pc.StabilityWarning, match="3x the CFL limit"):
+        scene.step(20)
+    assert np.abs(w.u).max() > 1e6 and abs(scene.energy_drift()) < 1e-6  # blown up, books "fine"
+    scene.step(1)  # the same dt: not warned again
+    scene.advance(0.1)  # advance steps within the limit
 
 
 def _pattern(preset: str, t: float = 8000.0) -> tuple[pc.Scene, pc.GrayScott, np.ndarray]:

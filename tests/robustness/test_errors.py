@@ -463,3 +463,14 @@ def test_a_clock_past_the_largest_float_is_refused_in_any_scene():
     with pytest.raises(pc.InvalidInputError, match="^n: "):
         b.step(1)
     assert b.time == 1e308
+
+
+@pytest.mark.parametrize("level", [3, b"avx2", 2.0, ["scalar"]])
+def test_set_simd_level_names_its_argument_for_a_wrong_type(level):
+    before = pc.simd_level()
+    with pytest.raises(pc.InvalidTypeError, match=r"^level: expected a SIMD level name .* got "):
+        pc.set_simd_level(level)
+    assert pc.simd_level() == before
+    with pytest.raises(pc.InvalidInputError, match="^level"):
+        pc.set_simd_level("avx9000")
+    assert pc.simd_level() == before

@@ -364,6 +364,7 @@ BAD_FIELDS: list[tuple[tuple, list[Any]]] = [
     (("terms", FLUID, "sound_speed"), [INF, 0.0, 1e300, None, Either(1e150)]),
     (("terms", FLUID, "viscosity"), [-0.1, NAN, Either(1e300)]),
     (("terms", FLUID, "method"), ["iisph", 3, None]),
+    (("terms", FLUID, "wall_rule"), ["sampled", 3, None, Either("given"), Either("akinci")]),
     (("terms", FLUID, "density_error"), [0.0, 1.5, NAN, None, "x"]),
     (("terms", FLUID, "divergence_error"), [-1.0, INF, True]),
     (("terms", FLUID, "max_iterations"), [0, 1.5, True, 10**6, None]),
