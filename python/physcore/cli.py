@@ -96,6 +96,23 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def _int_in(lo: int, hi: int | None = None) -> Callable[[str], int]:
+    """An integer argument in [lo, hi], refused by argparse (exit 2) before anything runs."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if value < lo:
+            raise argparse.ArgumentTypeError(f"must be >= {lo}, got {value}")
+        if hi is not None and value > hi:
+            raise argparse.ArgumentTypeError(f"must be <= {hi}, got {value}")
+        return value
+
+    return parse
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -841,7 +858,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
         help="also write a plot of the energy books over time (kinetic, potential by term, "
         "dissipated, total, relative drift), sampled every frame; needs matplotlib",
     )
-    r.add_argument("--radius", type=int, metavar="PX", help="particle radius in pixels (default: automatic)")
+    r.add_argument("--radius", type=_int_in(0, 200), metavar="PX", help="particle radius in pixels, 0-200 (default: automatic)")
     r.add_argument("--view", type=_view, metavar="AZ,EL", help="3D camera azimuth,elevation in degrees")
     r.add_argument("--theme", choices=("light", "dark"), help="colours of particle animations (default: the scene's)")
     r.add_argument("--title", metavar="TEXT", help="a caption in the top-left corner of particle animations")
@@ -861,7 +878,7 @@ def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
                    help="soft-edged discs (default: the scene's; the ready-made particle scenes have them)")
     r.add_argument("--texture", metavar="IMAGE",
                    help="an image (PNG, JPEG, ...) mapped onto the scene's shaded surface (cloth)")
-    r.add_argument("--trail", type=int, metavar="N",
+    r.add_argument("--trail", type=_int_in(0), metavar="N",
                    help="draw each particle's path over the last N frames, fading (0: none; default: the scene's)")
     r.add_argument("--param", type=_key_value, action="append", metavar="KEY=VALUE",
                    help="scene parameter, repeatable (e.g. --param n=48 --param ground=true)")

@@ -187,6 +187,9 @@ def test_bad_param(tmp_path, capsys, param, message):
         ["--frame-time", "0"],
         ["--frame-time", "1", "--steps-per-frame", "1"],
         ["--param", "n=0"],  # rejected by the scene itself
+        ["--trail", "-5"],  # these two were refused only after the simulation had run
+        ["--radius", "-2"],
+        ["--radius", "201"],
     ],
 )
 def test_bad_options_exit_2(tmp_path, capsys, extra):
