@@ -740,7 +740,9 @@ fn drift(@builtin(global_invocation_id) gid: vec3<u32>) {
         box_faces(&xn, &vn);
         // The kinetic energy the faces took, and gravity's work over the projection (the
         // potential −m g·x changes by it: the books stay balanced).
-        books[3u * n + i] = books[3u * n + i] + (0.5 * m * (dot3(vb, vb) - dot3(vn, vn)) + m * dot3(grav, xn - x0));
+        // And semi-implicit Euler's share of the velocity change (the CPU's `projection_kick`).
+        books[3u * n + i] = books[3u * n + i] + (0.5 * m * (dot3(vb, vb) - dot3(vn, vn)) + m * dot3(grav, xn - x0))
+            - 0.5 * P.dt * m * dot3(grav, vn - vb);
     }
     var broken = false;
     for (var a = 0u; a < d; a = a + 1u) {

@@ -51,7 +51,9 @@ struct Params {
     kc: real,
     eps2c: real,
     h_b: real,
-    pad3: real,
+    // The colliders' share of the scheme's energy error (s; the CPU's
+    // `Integrator::projection_kick`): −dt/2 for semi-implicit Euler, else 0.
+    kick: real,
 };
 
 const WG: u32 = 256u;
@@ -575,6 +577,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
         let e = h.y;
         let mu = h.z;
         let ke0 = 0.5 * m * dot(v, v);
+        let vb = v;
         var dx = vec3<real>(0.0, 0.0, 0.0);
         if (h.x == 0.0) {
             // A plane through a with unit normal b into the allowed side.
@@ -691,7 +694,7 @@ fn project(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
         touched = true;
         let ke1 = 0.5 * m * dot(v, v);
-        d += (ke0 - ke1) + dot(f, dx);
+        d += (ke0 - ke1) + dot(f, dx) + P.kick * dot(vec3<real>(P.gx, P.gy, P.gz) * m, v - vb);
     }
     if (touched) {
         pos[i] = vec4<real>(x, m);

@@ -365,13 +365,16 @@ fn integrate(@builtin(global_invocation_id) gid: vec3<u32>) {
         var ke0: real = 0.0;
         var ke1: real = 0.0;
         var work: real = 0.0;
+        var kicked: real = 0.0;
         for (var a = 0u; a < d; a = a + 1u) {
             ke0 = ke0 + v0[a] * v0[a];
             ke1 = ke1 + vn[a] * vn[a];
             work = work + (fs[a] + grav[a] * P.mass) * (xn[a] - x0[a]);
+            kicked = kicked + grav[a] * P.mass * (vn[a] - v0[a]);
         }
         let du = 0.0 - work;
-        books[P.n + i] = books[P.n + i] + ((0.5 * P.mass * ke0 - 0.5 * P.mass * ke1) - du);
+        // And semi-implicit Euler's share of the velocity change (the CPU's `projection_kick`).
+        books[P.n + i] = books[P.n + i] + ((0.5 * P.mass * ke0 - 0.5 * P.mass * ke1) - du) - 0.5 * P.dt * kicked;
     }
     var broken = false;
     for (var a = 0u; a < d; a = a + 1u) {

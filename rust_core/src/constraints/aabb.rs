@@ -33,7 +33,7 @@ impl<V: Vector> Aabb<V> {
 }
 
 impl<V: Vector> Constraint<V> for Aabb<V> {
-    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V, kick: Real) -> (Real, bool) {
         let Contact { restitution: e, friction: mu } = self.contact;
         let mut lo = [0.0; 3];
         let mut hi = [0.0; 3];
@@ -71,7 +71,7 @@ impl<V: Vector> Constraint<V> for Aabb<V> {
                         va[a] = v[k].comp(a);
                     }
                     let ke0 = 0.5 * m * v[k].length_squared();
-                    let x0 = x[k];
+                    let (x0, v0) = (x[k], v[k]);
                     for a in 0..V::DIM {
                         // Outward direction along axis a: −1 below lo, +1 above hi.
                         let out = if xa[a] < lo[a] {
@@ -104,7 +104,7 @@ impl<V: Vector> Constraint<V> for Aabb<V> {
                     let ke1 = 0.5 * m * v[k].length_squared();
                     let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
                     let du = -f.dot(x[k] - x0);
-                    d += (ke0 - ke1) - du;
+                    d += (ke0 - ke1) - du + kick * (g * m).dot(v[k] - v0);
                 }
                 (d, touched)
             },

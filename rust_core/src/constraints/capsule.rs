@@ -53,7 +53,7 @@ mod tests {
         let c = Capsule::new(DVec3::ZERO, DVec3::new(2.0, 0.0, 0.0), 0.5, 1.0, 0.0).unwrap();
         let mut x = vec![DVec3::new(1.0, 0.3, 0.0), DVec3::new(2.3, 0.0, 0.2), DVec3::new(1.0, 0.0, 0.6)];
         let mut v = vec![DVec3::new(0.0, -1.0, 0.0), DVec3::ZERO, DVec3::new(0.0, 0.0, -1.0)];
-        let (d, touched) = c.project(&mut x, &mut v, &model(3, 1.0), &[], DVec3::ZERO);
+        let (d, touched) = c.project(&mut x, &mut v, &model(3, 1.0), &[], DVec3::ZERO, 0.0);
         assert!(touched);
         assert!((x[0] - DVec3::new(1.0, 0.5, 0.0)).length() < 1e-15);
         assert_eq!(v[0], DVec3::new(0.0, 1.0, 0.0), "e = 1: the normal velocity reverses");
@@ -71,7 +71,7 @@ mod tests {
         let (m, g) = (2.0, DVec2::new(0.0, -9.81));
         let mut x = vec![DVec2::new(0.2, 0.09)];
         let mut v = vec![DVec2::new(0.5, -3.0)];
-        let (d, _) = c.project(&mut x, &mut v, &model(1, m), &[], g);
+        let (d, _) = c.project(&mut x, &mut v, &model(1, m), &[], g, 0.0);
         // (The nearest axis point, −1 + 1.2 = 0.19999999999999996, tilts the normal by 5e-16.)
         assert!((v[0] - DVec2::new(0.5, 0.0)).length() < 1e-14, "{}", v[0]);
         let work = -(g * m).dot(x[0] - DVec2::new(0.2, 0.09));

@@ -61,7 +61,7 @@ impl<V: Vector, S: Collide<V>> Collider<V, S> {
 }
 
 impl<V: Vector, S: Collide<V> + Clone> Constraint<V> for Collider<V, S> {
-    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V) -> (Real, bool) {
+    fn project(&self, x: &mut [V], v: &mut [V], model: &Model, f_last: &[V], g: V, kick: Real) -> (Real, bool) {
         let (shape, contact) = (&self.shape, self.contact);
         par::chunks2_fold(
             x,
@@ -87,14 +87,14 @@ impl<V: Vector, S: Collide<V> + Clone> Constraint<V> for Collider<V, S> {
                     }
                     touched = true;
                     let m = model.mass[i];
-                    let ke0 = 0.5 * m * v[k].length_squared();
+                    let (ke0, v0) = (0.5 * m * v[k].length_squared(), v[k]);
                     x[k] = r.x;
                     v[k] = r.v;
                     let ke1 = 0.5 * m * v[k].length_squared();
-                    // Projection work: ΔU ≈ −F·Δx.
+                    // Projection work: ΔU ≈ −F·Δx; and the integrator's error term (`kick`).
                     let f = if f_last.len() > i { f_last[i] } else { V::ZERO } + g * m;
                     let du = -f.dot(r.dx);
-                    d += (ke0 - ke1) - du;
+                    d += (ke0 - ke1) - du + kick * (g * m).dot(r.v - v0);
                 }
                 (d, touched)
             },

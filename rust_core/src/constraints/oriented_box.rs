@@ -55,7 +55,7 @@ mod tests {
             let x0 = ramp.shape.center + n * 0.99;
             let v0 = DVec2::new(0.0, -2.0);
             let (mut x, mut v) = (vec![x0], vec![v0]);
-            let (d, touched) = ramp.project(&mut x, &mut v, &model(1, m), &[], g);
+            let (d, touched) = ramp.project(&mut x, &mut v, &model(1, m), &[], g, 0.0);
             assert!(touched);
             assert!(((x[0] - ramp.shape.center).dot(n) - 1.0).abs() < 1e-14, "on the top face: {:?}", x[0]);
             let (vn0, vt0) = (v0.dot(n), v0 - n * v0.dot(n));
@@ -82,7 +82,7 @@ mod tests {
         let mut x = vec![DVec3::new(0.1, 0.0, 0.0), DVec3::new(0.0, 0.0, 2.0)];
         let mut v = vec![DVec3::new(0.0, 0.0, -1.0), DVec3::new(0.0, 0.0, -1.0)];
         let (x0, v0) = (x.clone(), v.clone());
-        assert_eq!(b.project(&mut x, &mut v, &m, &[], DVec3::new(0.0, 0.0, -9.81)), (0.0, false));
+        assert_eq!(b.project(&mut x, &mut v, &m, &[], DVec3::new(0.0, 0.0, -9.81), 0.0), (0.0, false));
         assert_eq!((x, v), (x0, v0));
     }
 

@@ -58,7 +58,7 @@ mod tests {
         let t = DVec3::new(2.0, -1.0, 0.0) / 5f64.sqrt(); // ⟂ n
         let mut x = vec![s.shape.center + n * 0.4];
         let mut v = vec![n * -3.0 + t * 1.5];
-        let (d, touched) = s.project(&mut x, &mut v, &model(&[m]), &[], DVec3::ZERO);
+        let (d, touched) = s.project(&mut x, &mut v, &model(&[m]), &[], DVec3::ZERO, 0.0);
         assert!(touched);
         assert!(((x[0] - s.shape.center).length() - 0.5).abs() < 1e-15, "not on the surface: {:?}", x[0]);
         assert!((x[0] - (s.shape.center + n * 0.5)).length() < 1e-15, "not projected along the radius");
@@ -76,11 +76,11 @@ mod tests {
         // Normal speed 2 in: the impulse takes μ (1 + e)·2 = 0.6 m/s of tangential speed.
         let mut x = vec![DVec2::new(0.0, 0.9), DVec2::new(0.0, 0.9)];
         let mut v = vec![DVec2::new(1.0, -2.0), DVec2::new(0.5, -2.0)];
-        let _ = s.project(&mut x, &mut v, &m, &[], DVec2::ZERO);
+        let _ = s.project(&mut x, &mut v, &m, &[], DVec2::ZERO, 0.0);
         assert!((v[0] - DVec2::new(0.4, 1.0)).length() < 1e-14, "{:?}", v[0]);
         let mut x = vec![DVec2::new(0.0, 0.9), DVec2::new(0.0, 0.9)];
         let mut v = vec![DVec2::new(0.5, -2.0), DVec2::new(0.3, -4.0)];
-        let _ = s.project(&mut x, &mut v, &m, &[], DVec2::ZERO);
+        let _ = s.project(&mut x, &mut v, &m, &[], DVec2::ZERO, 0.0);
         assert_eq!(v[0].x, 0.0, "0.5 m/s stops, never reverses");
         assert_eq!(v[1].x, 0.0);
     }
@@ -93,7 +93,7 @@ mod tests {
         // booked energy is −m g h (energy added, as the plane books its lift).
         let mut x = vec![DVec3::new(0.0, 0.0, 0.99), DVec3::new(0.0, 0.0, 1.5)];
         let mut v = vec![DVec3::ZERO, DVec3::new(0.0, 0.0, -1.0)];
-        let (d, touched) = s.project(&mut x, &mut v, &model(&[3.0, 1.0]), &[], g);
+        let (d, touched) = s.project(&mut x, &mut v, &model(&[3.0, 1.0]), &[], g, 0.0);
         assert!(touched);
         assert!((d + 3.0 * 9.81 * 0.01).abs() < 1e-12, "booked {d}");
         assert_eq!(x[1], DVec3::new(0.0, 0.0, 1.5), "outside: not moved");
@@ -101,7 +101,7 @@ mod tests {
         // A particle at the centre at rest goes up; one moving goes back the way it came.
         let mut x = vec![DVec3::ZERO, DVec3::ZERO];
         let mut v = vec![DVec3::ZERO, DVec3::new(1.0, 0.0, 0.0)];
-        let _ = s.project(&mut x, &mut v, &model(&[1.0, 1.0]), &[], DVec3::ZERO);
+        let _ = s.project(&mut x, &mut v, &model(&[1.0, 1.0]), &[], DVec3::ZERO, 0.0);
         assert_eq!(x, vec![DVec3::Z, -DVec3::X]);
         assert_eq!(v[1], DVec3::new(-1.0, 0.0, 0.0), "e = 1 reverses it");
     }
@@ -111,7 +111,7 @@ mod tests {
         let s = Sphere::new(DVec2::new(0.0, 1.0), 1.0, true, 0.0, 0.0).unwrap();
         let mut x = vec![DVec2::new(0.0, -0.1), DVec2::new(0.0, 0.5)];
         let mut v = vec![DVec2::new(1.0, -1.0), DVec2::new(0.0, -1.0)];
-        let (d, _) = s.project(&mut x, &mut v, &model(&[1.0, 1.0]), &[], DVec2::ZERO);
+        let (d, _) = s.project(&mut x, &mut v, &model(&[1.0, 1.0]), &[], DVec2::ZERO, 0.0);
         assert!((x[0] - DVec2::ZERO).length() < 1e-15);
         assert_eq!(v[0], DVec2::new(1.0, 0.0), "e = 0: the outward speed is removed");
         assert_eq!((x[1], v[1]), (DVec2::new(0.0, 0.5), DVec2::new(0.0, -1.0)), "inside: left alone");
@@ -125,7 +125,7 @@ mod tests {
         m.inv_mass[0] = 0.0;
         let mut x = vec![DVec2::new(0.1, 0.0)];
         let mut v = vec![DVec2::new(-1.0, 0.0)];
-        assert_eq!(s.project(&mut x, &mut v, &m, &[], DVec2::ZERO), (0.0, false));
+        assert_eq!(s.project(&mut x, &mut v, &m, &[], DVec2::ZERO, 0.0), (0.0, false));
         assert_eq!(x[0], DVec2::new(0.1, 0.0));
         let err = |r: Result<Sphere<DVec2>>| match r {
             Err(crate::Error::InvalidInput { arg, .. }) => arg,

@@ -166,6 +166,17 @@ pub trait Integrator<V: Vector>: Send + Sync {
     fn axial_scratch(&mut self) -> Vec<&mut Vec<V::Axial>> {
         Vec::new()
     }
+    /// The constraint stage's share of this integrator's energy error, s: a projection that
+    /// changes a velocity from v to v′ books `projection_kick(dt)`·F·(v′ − v) with the uniform
+    /// field's force F = m g (`Constraint::project`). Semi-implicit Euler's books balance to ½dt F·(v₀ − v)
+    /// over a step of constant force F, which telescopes over steps to the bounded ½dt F·(v₀ −
+    /// v_N), unless a projection resets v between steps: a particle resting on a plane then
+    /// booked −½ m g² dt² a step, without bound (energy_drift −1.0 after a second at dt = 1e-3).
+    /// −dt/2 for the kick-then-drift schemes, +dt/2 for explicit Euler (drift then kick), 0 for
+    /// the schemes exact under a constant force (velocity Verlet, Yoshida, RK4, ...).
+    fn projection_kick(&self, _dt: Real) -> Real {
+        0.0
+    }
     /// Drop anything cached across steps (the state was changed from outside the integrator).
     fn reset(&mut self) {}
     /// What the integrator carries from one step to the next, as one value (`Carry`); `None`
