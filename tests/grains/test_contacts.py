@@ -759,3 +759,37 @@ def test_a_grain_scene_saved_or_pickled_before_its_first_step_continues_bit_for_
         assert np.array_equal(s.particle_field(spin), t.particle_field(spin))
         assert s.energy().total == t.energy().total and s.energy().dissipated == t.energy().dissipated
         assert s.contact_count() == t.contact_count()
+
+
+@pytest.mark.parametrize("law", ["linear", "hertz"])
+@pytest.mark.parametrize("e", [0.1, 0.5])
+def test_a_sliding_grain_stores_no_more_than_its_spring_can_hold(law, e):
+    """A disc sliding on a floor (m = 0.01 kg, r = 1 cm, 1 m/s, no spin, mu = 0.1): its
+    tangential spring holds at most (mu m g)^2/(2 k_t), and friction's book is the sliding
+    work mu m g s. The linear law's slipping spring also carries the dashpot's share (Luding's
+    rule to continue the slip), which the books took as stored energy: at e = 0.1 a contact
+    potential of 0.022 J, 4.8 times the disc's kinetic energy, and a friction book of -0.022 J
+    (a physics audit)."""
+    g, r, m, mu = 9.81, 0.01, 0.01, 0.1
+    k = 1e4 if law == "linear" else 1e7
+    d0 = m * g / k if law == "linear" else (m * g / k) ** (2 / 3)
+    s = pc.Scene(dim=2, integrator="semi_implicit_euler")
+    s.add_particles([[0.0, r - d0]], [[1.0, 0.0]], masses=m)
+    s.set_attribute("radius", [r])
+    s.add(pc.Gravity([0.0, -g]))
+    s.add(pc.Contacts(stiffness=k, restitution=e, friction=mu, law=law,
+                      walls=pc.Plane([0.0, 0.0], [0.0, 1.0], restitution=e, friction=mu)))
+    s.dt = s.suggest_dt()
+    s.step(int(0.05 / s.dt))
+    rep = s.energy()
+    spin = float(s.particle_field("angular_velocity")[0])
+    slip = float(s.velocities[0, 0]) + spin * r  # the contact point's speed (the spin is < 0)
+    assert spin < 0 and slip > 0.5  # turned by friction, and still sliding
+    # The contact potential: the resting overlap's (~5e-7 J) and a spring at the Coulomb cap
+    # (~2e-8 J), far below the kinetic energy (4.6e-3 J).
+    assert 0 < rep.potential["contacts"] < 1e-3 * rep.kinetic, (rep.potential, rep.kinetic)
+    # Friction's work: mu m g over the contact point's slip path, which falls linearly from
+    # 1 m/s (constant deceleration, constant spin-up).
+    path = 0.5 * (1.0 + slip) * s.time
+    lost = rep.dissipated["contacts (friction)"]
+    assert abs(lost - mu * m * g * path) < 0.02 * mu * m * g * path, (lost, mu * m * g * path)

@@ -69,7 +69,7 @@
 //!
 //! Energy books ([`DemBooks`]), as the CPU keeps them: kinetic (translation + rotation), the
 //! contact potential (½k_n δ² or ⅖k_n δ^{5/2} over the overlaps now, + ½k_t|ξ|² of the stored
-//! springs), gravity's potential −Σ m g·x (kinetic and gravity over the free grains only), the
+//! springs, at most ½(μ f_n)²/k_t: the CPU's `Material::spring_energy`), gravity's potential −Σ m g·x (kinetic and gravity over the free grains only), the
 //! energy drag dissipated (dt·b Σ|v|² a step, the power at the step's start: the CPU's
 //! `book_power`, so the drag book is the CPU's to rounding), and the dissipated energy of the
 //! normal dashpots and of friction, booked per contact and step as the work its force drew from the motion

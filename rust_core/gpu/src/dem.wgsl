@@ -828,7 +828,13 @@ fn commit(@builtin(global_invocation_id) gid: vec3<u32>) {
             x1 = vec_at(vout + q * sc) + vt * P.dt;
         }
         let d1 = max(g.d, 0.0);
-        let u1 = 0.5 * kt_of(d1) * dot(x1, x1);
+        // The spring's energy, at most that of the force it can hold, μ f_n of the evaluation
+        // (`Material::spring_energy`).
+        let kt1 = kt_of(d1);
+        let x2 = dot(x1, x1);
+        let cap = mu * f;
+        let held = kt1 * kt1 * x2 <= cap * cap;
+        let u1 = select(0.5 * cap * cap / select(kt1, 1.0, held), 0.5 * kt1 * x2, held);
         keys[kin + 1u + q] = key;
         put(vin + q * sv, x1);
         vals[vin + q * sv + d] = u1;

@@ -243,7 +243,12 @@ impl<V: Vector> Kernel for Lanes<'_, V> {
                         xn[c] = lxi[c] + vt[c] * splat(dtc);
                     }
                 }
-                let u = half * kt(mat, dcl) * dot(&xn, &xn);
+                // `Material::spring_energy`, at the cap μ f_n of the last evaluation.
+                let (ktv, x2) = (kt(mat, dcl), dot(&xn, &xn));
+                let cap = splat(mu) * lfn;
+                let held = le(ktv * ktv * x2, cap * cap);
+                let ktd = held.select(splat(1.0), ktv);
+                let u = held.select(half * ktv * x2, half * cap * cap / ktd);
                 // The normal force as applied, f_t − f (f: the last evaluation's force on the
                 // first grain), at the relative velocity now.
                 let mut fnv = [zero; 3];

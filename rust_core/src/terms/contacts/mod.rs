@@ -545,17 +545,18 @@ impl Material {
         let vn = vc.dot(n);
         let vt = vc - n * vn;
         let d = d.max(0.0);
+        let cap = mu * l.fn_;
         match c {
             Commit::Full(dt) => {
                 l.xi = if mu > 0.0 { l.xi + vt * dt } else { V::ZERO };
-                let u = 0.5 * self.kt(d) * l.xi.length_squared();
+                let u = self.spring_energy(d, l.xi, cap);
                 s.lost_t += l.bt - 0.5 * dt * pt - u;
                 l.bt = u;
                 s.lost_n += l.bn + 0.5 * dt * (l.ft - fp).dot(vr) - self.normal_energy(d);
             }
             Commit::Books(h) => {
                 let xi = if mu > 0.0 { l.xi + vt * h } else { V::ZERO };
-                let u = 0.5 * self.kt(d) * xi.length_squared();
+                let u = self.spring_energy(d, xi, cap);
                 s.lost_t += l.bt - 0.5 * h * pt - u;
                 l.bt = u;
                 s.lost_n += l.bn + 0.5 * h * (l.ft - fp).dot(vr) - self.normal_energy(d);
@@ -563,7 +564,7 @@ impl Material {
             }
             Commit::Springs(dt) => {
                 l.xi = if mu > 0.0 { l.xi + vt * dt } else { V::ZERO };
-                let u = 0.5 * self.kt(d) * l.xi.length_squared();
+                let u = self.spring_energy(d, l.xi, cap);
                 s.lost_t += l.bt - u;
                 l.bt = u;
                 // "xpbd" books what the projections did as the change of Σ ½m u² + U + ½ f·Δx
@@ -571,6 +572,23 @@ impl Material {
                 // not work this contact did, so it is taken back here.
                 s.lost_n += 0.5 * dt * fp.dot(vr) - l.bn;
             }
+        }
+    }
+
+    /// The energy a tangential spring ξ holds at overlap `d` (J): ½k_t|ξ|², but at most that of
+    /// the force it can hold, `cap` = μ f_n of the last evaluation, ½cap²/k_t. A slipping
+    /// linear-law spring takes the dashpot's share too (Luding 2008: the next step continues
+    /// the slip), so that |k_t ξ| = μ f_n + γ_t|v_t|: as ½k_t|ξ|², a disc sliding on a floor at
+    /// e = 0.1 showed a contact potential 4.8 times its kinetic energy and a friction book of
+    /// −0.02 J (a physics audit). The books balance with either: it is their state's energy.
+    #[inline(always)]
+    fn spring_energy<V: Vector>(&self, d: Real, xi: V, cap: Real) -> Real {
+        let kt = self.kt(d);
+        let x2 = xi.length_squared();
+        if kt * kt * x2 <= cap * cap {
+            0.5 * kt * x2
+        } else {
+            0.5 * cap * cap / kt
         }
     }
 
