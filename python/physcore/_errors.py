@@ -1,8 +1,12 @@
 """physcore's exception hierarchy (raised from Rust through ``physcore._core`` as well)."""
 from __future__ import annotations
 
-from collections.abc import Iterator
+import functools
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from typing import Any, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
 
 __all__ = [
     "PhyscoreError",
@@ -125,6 +129,23 @@ def allocating(what: str, context: str) -> Iterator[None]:
         err = OutOfMemoryError(f"{what}: {tail}", nbytes)
         err._allocating = tail  # type: ignore[attr-defined]
         raise err from e
+
+
+def refusing_memory(what: str, context: str) -> Callable[[F], F]:
+    """A decorator: the function's body under :func:`allocating` (``what``, ``context``). Its
+    wrapper is a frame of this package, so a warning raised inside that points at the first
+    frame outside physcore (``user_stacklevel``) still finds the caller's line (contextlib's
+    decorator form would be that frame)."""
+
+    def wrap(f: F) -> F:
+        @functools.wraps(f)
+        def inner(*args: Any, **kwargs: Any) -> Any:
+            with allocating(what, context):
+                return f(*args, **kwargs)
+
+        return inner  # type: ignore[return-value]
+
+    return wrap
 
 
 class ThreadPoolError(PhyscoreError, RuntimeError):

@@ -88,6 +88,37 @@ def test_png_sequence_on_a_full_disk_leaves_the_old_sequence_whole(rec, tmp_path
     assert all((tmp_path / name).read_bytes() == data for name, data in old.items())
 
 
+@pytest.mark.parametrize("ext", ["mp4", "webm"])
+def test_a_video_on_a_full_disk_raises_the_oserror_and_keeps_the_old_file(rec, tmp_path, monkeypatch, ext):
+    # A fault-injection review: under WebM's muxer PyAV wrapped the full disk's OSError in its
+    # own callback error (a RuntimeError, "Error in PyAV callback: '3'"); MP4's came through.
+    from physcore import _atomic
+
+    target = tmp_path / f"orbit.{ext}"
+    target.write_bytes(b"OLD")
+
+    class Full(io.FileIO):
+        def write(self, b):  # the disk fills after the first 4 KiB
+            if self.tell() + len(b) > 4096:
+                raise OSError(errno.ENOSPC, "No space left on device")
+            return super().write(b)
+
+    real_fdopen = _atomic.os.fdopen
+    monkeypatch.setattr(_atomic.os, "fdopen", lambda fd, mode="r", **kw: Full(fd, "w") if "b" in mode else real_fdopen(fd, mode, **kw))
+    with pytest.raises(OSError, match="No space left") as info:
+        pc.render.save(rec, target, size=(320, 240))
+    assert info.value.errno == errno.ENOSPC
+    assert target.read_bytes() == b"OLD" and sorted(p.name for p in tmp_path.iterdir()) == [target.name]
+
+
+def test_a_render_path_with_a_nul_is_refused_by_name_before_anything_is_simulated(tmp_path):
+    s = pc.scenes.kepler()
+    for render, ext in ((pc.render.gif, "gif"), (pc.render.save, "mp4"), (pc.render.html, "html"), (pc.render.gltf, "glb")):
+        with pytest.raises(pc.InvalidInputError, match="^path: contains a NUL character"):
+            render(s, str(tmp_path / f"a\0b.{ext}"), frames=2, steps_per_frame=1)
+    assert s.step_count == 0
+
+
 def test_a_png_sequence_over_a_directory_is_refused_before_anything_is_simulated(tmp_path):
     # A fault audit: frame 1's name was a directory; found only as the frames were put in
     # place, after the simulation, it left frame 0 new and frames 2-3 old (a bare

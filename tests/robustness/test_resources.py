@@ -91,6 +91,27 @@ print("ok")
     assert out.strip() == "ok"
 
 
+def test_ready_made_scenes_and_renders_that_do_not_fit_raise_out_of_memory_error():
+    """Found by a fault-injection review: galaxies(n=10**7) under a cap exited the process
+    (OpenBLAS gave up in a matrix product and called exit), pyramid(rows=2000) raised numpy's
+    bare MemoryError, and so did a render's frame arrays. Now each is an OutOfMemoryError naming
+    the call, and the process goes on."""
+    out = _child(PRELUDE + """
+import warnings
+warnings.simplefilter("ignore")
+cap(400)
+refused(lambda: pc.scenes.galaxies(n=10**7), "scenes.galaxies")
+refused(lambda: pc.scenes.pyramid(rows=2000), "scenes.pyramid")
+lift()
+s = pc.scenes.cloth(n=400)  # 160,000 particles: 200 frames of them need about 1 GB
+cap(64)
+refused(lambda: pc.render.record(s, frames=200, steps_per_frame=1, progress=False), "record")
+lift()
+print("ok")
+""")
+    assert out.strip() == "ok"
+
+
 def test_crowded_grains_whose_contacts_do_not_fit_refuse_the_step_and_change_nothing():
     """20,000 grains of radius 10 m in a 1 m square: every pair a candidate contact, 2·10⁸ of
     them. Their lists are built inside the step's parallel parts, where a refused allocation

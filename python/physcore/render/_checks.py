@@ -239,6 +239,7 @@ def _check_arrows(arrows: Any) -> str | None:
 def _check_path(path: Any, fmt: str = "gif") -> Path:
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
+    _check_no_nul(path)
     p = Path(path)
     if p.suffix.lower() != f".{fmt}":
         raise InvalidInputError(f"path must end in .{fmt}, got {str(p)!r}")
@@ -262,11 +263,20 @@ def _check_png_targets(path: Path, count: int) -> None:
             raise InvalidInputError(f"path: frame file {str(target)!r} is a directory or not a regular file")
 
 
+def _check_no_nul(path: Any) -> None:
+    """Refuse a path holding a NUL character (the OS cannot open it; tempfile raised a bare
+    ValueError "embedded null byte"), as Scene.save does."""
+    p = os.fspath(path)
+    if ("\0" if isinstance(p, str) else b"\0") in p:
+        raise InvalidInputError("path: contains a NUL character")
+
+
 def _check_writable(path: Path) -> None:
     """Create and remove a file beside ``path``, as the final atomic write will: an unwritable
     directory then fails in milliseconds, not after the whole simulation. Raises OSError."""
     import tempfile
 
+    _check_no_nul(path)
     try:
         fd, probe = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".probe")
     except OSError as e:

@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import _check
 from .._atomic import TEMP_PREFIX, TEMP_SUFFIX, atomic_write, ctrl_c_held
-from .._errors import InvalidInputError, InvalidTypeError
+from .._errors import InvalidInputError, InvalidTypeError, refusing_memory
 from . import _recording, _threads
 from ._checks import (
     _check_arrows,
@@ -38,6 +38,7 @@ from ._palette import _PALETTE, THEMES
 from ._raster import _Rasteriser
 
 
+@refusing_memory("gif", "the frames")
 def gif(
     scene: Any,
     path: str | os.PathLike,
@@ -601,6 +602,19 @@ def _write_video(path: Path, rgb: Any, fps: float, fmt: str) -> None:
     codec, options = ("libx264", {"crf": "26", "preset": "medium"}) if fmt == "mp4" else ("libvpx-vp9", {"crf": "32", "b": "0"})
 
     def write(fh: Any) -> None:
+        try:
+            encode(fh)
+        except Exception as e:
+            # PyAV wraps an error of the file's own writes (a full disk under WebM's muxer) in
+            # its callback error, a RuntimeError: raise the OSError itself, as the other formats do.
+            inner = e.__cause__ or e.__context__
+            while inner is not None and not isinstance(inner, OSError):
+                inner = inner.__cause__ or inner.__context__
+            if isinstance(e, OSError) or inner is None:
+                raise
+            raise inner from e
+
+    def encode(fh: Any) -> None:
         with av.open(fh, mode="w", format=fmt) as container:
             stream = None
             for frame in rgb:
@@ -640,6 +654,7 @@ def _video_module() -> Any:
     return av
 
 
+@refusing_memory("save", "the frames")
 def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
     """Draw a scene or :class:`Recording` like :func:`gif`, in the format `path`'s extension names.
 

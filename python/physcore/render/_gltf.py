@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from .._errors import InvalidInputError, InvalidTypeError
+from .._errors import InvalidInputError, InvalidTypeError, refusing_memory
 from . import _recording
 from ._camera import DEFAULT_VIEW, _view_basis
 from ._checks import _check_colors, _check_fps, _check_int, _check_view
@@ -328,8 +328,11 @@ def _check_recording(source: Any) -> None:
 
 
 def _check_out(path: Any, exts: tuple[str, ...]) -> Path:
+    from ._checks import _check_no_nul
+
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path must be a str or os.PathLike, got {type(path).__name__}")
+    _check_no_nul(path)
     p = Path(path)
     if p.suffix.lower() not in exts:
         raise InvalidInputError(f"path must end in {' or '.join(exts)}, got {str(p)!r}")
@@ -596,6 +599,7 @@ def glb_bytes(rec: Any, fps: float, theme: str, view: tuple[float, float], mesh:
     return b"".join(g.save_to_bytes())
 
 
+@refusing_memory("gltf", "the frames")
 def gltf(
     scene: Any,
     path: str | os.PathLike,

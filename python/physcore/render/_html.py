@@ -10,6 +10,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from .._errors import refusing_memory
 from ._gltf import _check_out, _prepare, glb_bytes, pygltflib_module
 
 #: The vendored scripts, in the order the page loads them (THREE first).
@@ -89,6 +90,7 @@ def write_scripts(folder: str | os.PathLike) -> list[Path]:
     return written
 
 
+@refusing_memory("html", "the frames")
 def html(
     scene: Any,
     path: str | os.PathLike,

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import _check
 from .._deprecate import user_stacklevel
-from .._errors import EnergyBooksWarning, InvalidInputError, InvalidTypeError
+from .._errors import EnergyBooksWarning, InvalidInputError, InvalidTypeError, refusing_memory
 from ._checks import (
     _check_advance,
     _check_auto_substeps,
@@ -524,6 +524,7 @@ def _plan(
     }
 
 
+@refusing_memory("record", "the frames")
 def record(
     scene: Any,
     *,

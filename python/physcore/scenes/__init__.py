@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from .._errors import refusing_memory
 from ..scene import Scene
 from ..shapes import cloth_springs as cloth_springs
 from ..shapes import mesh_edges_and_hinges as mesh_edges_and_hinges
@@ -104,6 +105,16 @@ REGISTRY: dict[str, Callable[..., Scene]] = {
 }
 #: The scene `physcore render` and `physcore view` show when none is named.
 DEFAULT_SCENE = "cloth"
+
+# A bare MemoryError of numpy's while a scene's arrays are built becomes OutOfMemoryError naming
+# the scene, as the core's refusals read (pyramid(rows=2000) under a memory limit raised numpy's).
+for _name, _f in (*REGISTRY.items(), ("galton_bins", galton_bins)):
+    _w = refusing_memory(f"scenes.{_name}", "the scene's arrays")(_f)
+    globals()[_name] = _w
+    if _name in REGISTRY:
+        REGISTRY[_name] = _w
+galton_bins = globals()["galton_bins"]
+del _name, _f, _w
 
 # Defined in the family modules, public here: they read, pickle and document as physcore.scenes.NAME.
 for _public in (*REGISTRY.values(), galton_bins):

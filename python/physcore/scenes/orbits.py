@@ -354,9 +354,13 @@ def galaxies(
         inside = m_disk * (np.argsort(np.argsort(r)) + 1) / stars  # M_d(≤ r)
         vc = spin * np.sqrt(m_centre * r * r / (r * r + softening**2) ** 1.5 + inside / r)
         c, s = math.cos(math.radians(tilt)), math.sin(math.radians(tilt))
-        tilt_x = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-        p = np.stack([r * np.cos(phi), r * np.sin(phi), np.zeros(stars)], axis=1) @ tilt_x.T
-        u = np.stack([-vc * np.sin(phi), vc * np.cos(phi), np.zeros(stars)], axis=1) @ tilt_x.T
+        # Tilted about x: (x, y, 0) -> (x, c y, s y). Written out, not as a matrix product: BLAS
+        # gave up with "OpenBLAS error: Memory allocation still failed" and exited the process
+        # under a memory limit (n = 10^7), where numpy raises MemoryError (the same numbers).
+        y = r * np.sin(phi)
+        p = np.stack([r * np.cos(phi), c * y, s * y], axis=1)
+        y = vc * np.cos(phi)
+        u = np.stack([-vc * np.sin(phi), c * y, s * y], axis=1)
         xs += [np.zeros((1, 3)), p]
         vs += [np.zeros((1, 3)), u]
         ms += [[m_centre], np.full(stars, m_disk / stars)]

@@ -560,7 +560,7 @@ impl Particles {
         let (kc, epc) = f.coulomb.unwrap_or((0.0, 0.0));
         let [ha, hb] = self.fused_h;
         // The colliders' share of semi-implicit Euler's energy error (the CPU's
-        // `Integrator::projection_kick`).
+        // `IntegratorInfo::projection_kick`).
         let kick = if matches!(self.scheme, Scheme::SemiImplicitEuler) { -0.5 * dt } else { 0.0 };
         let r = [dt, h1, h2, w_new, w_old, gg, eps * eps, f.drag, f.g[0], f.g[1], f.g[2], ha, kc, epc * epc, hb, kick];
         self.gpu.write_params_at(self.precision, &self.params, k * self.slot, &u, &r);

@@ -52,7 +52,7 @@ struct Params {
     eps2c: real,
     h_b: real,
     // The colliders' share of the scheme's energy error (s; the CPU's
-    // `Integrator::projection_kick`): −dt/2 for semi-implicit Euler, else 0.
+    // `IntegratorInfo::projection_kick`): −dt/2 for semi-implicit Euler, else 0.
     kick: real,
 };
 

@@ -32,7 +32,7 @@ pub trait Constraint<V: Vector>: Send + Sync {
     /// (energy removed, J; whether any particle was moved). `f_last`: forces (N) of the last
     /// evaluation, `g`: the uniform acceleration (m/s², not in `f_last`), for the work the
     /// projection does against them. `kick` (s): the integrator's share of a velocity change
-    /// in its own energy error (`Integrator::projection_kick`): each moved particle also books
+    /// in its own energy error (`IntegratorInfo::projection_kick`): each moved particle also books
     /// `kick`·m g·(v_new − v_old). (The uniform field's alone: the terms that book their own
     /// dissipation, the contacts, already balance theirs exactly; with the whole force an
     /// elastic gas in a box drifted 1.1e-3.)

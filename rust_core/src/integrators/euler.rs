@@ -30,9 +30,6 @@ impl<V: Vector> Integrator<V> for ExplicitEuler<V> {
             b
         })
     }
-    fn projection_kick(&self, dt: Real) -> Real {
-        0.5 * dt
-    }
     fn last_forces(&self) -> &[V] {
         &self.f
     }

@@ -255,9 +255,6 @@ impl<V: Vector> Integrator<V> for ImplicitEuler<V> {
         }))
     }
 
-    fn projection_kick(&self, dt: Real) -> Real {
-        -0.5 * dt
-    }
     fn last_forces(&self) -> &[V] {
         &self.f
     }

@@ -73,9 +73,6 @@ impl<V: Vector> Integrator<V> for SemiImplicitEuler<V> {
             b
         })
     }
-    fn projection_kick(&self, dt: Real) -> Real {
-        -0.5 * dt
-    }
     fn last_forces(&self) -> &[V] {
         &self.f
     }

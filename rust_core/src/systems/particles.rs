@@ -817,7 +817,8 @@ impl<V: Vector> System for ParticleSystem<V> {
                     s.settle(&sys.state.x, &sys.state.v, &sys.model);
                 }
             }
-            let (f, g, kick) = (self.integrator.last_forces(), self.sys.forces.g, self.integrator.projection_kick(dt));
+            let (f, g, kick) =
+                (self.integrator.last_forces(), self.sys.forces.g, self.integrator.info().projection_kick(dt));
             if self.constraints.apply(&mut self.sys.state, &self.sys.model, f, g, kick, self.sys.single) {
                 self.integrator.reset();
             }
