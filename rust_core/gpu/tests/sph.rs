@@ -135,7 +135,7 @@ fn densities(p: &SphParams, x: &[f64], walls: &Walls) -> Vec<f64> {
 /// One step of the host reference; returns how many coordinates the box's faces projected and
 /// the largest |dv/dt| of the pressure, viscosity and wall-particle forces (m/s²). Books into
 /// `books` the viscous dissipation (the power at the step's start times dt) and what the box's
-/// faces removed (ΔKE plus the work of the step's force over the projection), as the CPU's
+/// faces removed (ΔKE plus the work of the step's force over the projection, less ½dt m g·Δv), as the CPU's
 /// WCSPH and box collider do. The wall particles push with p_i/ρ_i² Σ_b Ψ_b g(q) (x_i − x_b)
 /// (Akinci et al. 2012, eq. 10; no viscosity), as passes.rs `Forces`.
 fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], walls: &Walls, dt: f64, books: &mut [f64; 2]) -> (usize, f64) {
@@ -233,7 +233,10 @@ fn step(p: &SphParams, x: &mut [f64], v: &mut [f64], walls: &Walls, dt: f64, boo
         if xn != xb || vn != vb {
             let ke = |u: &[f64; 3]| 0.5 * m * (0..d).map(|a| u[a] * u[a]).sum::<f64>();
             let work: f64 = (0..d).map(|a| (f[a] + p.gravity[a] * m) * (xn[a] - xb[a])).sum();
-            books[1] += ke(&vb) - ke(&vn) + work;
+            // Semi-implicit Euler's share of the velocity change in gravity's field (the CPU's
+            // `IntegratorInfo::projection_kick`).
+            let kicked: f64 = (0..d).map(|a| p.gravity[a] * m * (vn[a] - vb[a])).sum();
+            books[1] += ke(&vb) - ke(&vn) + work - 0.5 * dt * kicked;
         }
         x[d * i..d * i + d].copy_from_slice(&xn[..d]);
         v[d * i..d * i + d].copy_from_slice(&vn[..d]);
