@@ -54,8 +54,14 @@ def test_default_scene_keeps_energy_books_balanced(name):
         scene.step(int(round(3.0 / scene.dt)))
     assert np.isfinite(scene.positions).all()
     # 1e-3 of the energy scale: well above each scene's integrator error at its default dt
-    # (measured 1e-9..2e-4), far below the O(1) drift of an unstable default.
-    assert abs(scene.energy_drift()) < 1e-3, f"{name}: drift {scene.energy_drift():.2e}"
+    # (measured 1e-9..2e-4), far below the O(1) drift of an unstable default. floating: 3e-3,
+    # since from t = 0.86 s the jet pins its bodies against the far wall, and the water it
+    # drives into them is put back on their surfaces by the coupling (BodyContacts), whose
+    # change of the fluid's pressure energy is left to the drift, as documented there (the
+    # books measured 1e-4 until then, then 1.7e-3 at n = 12, 1.3e-3 at 16 and 2.7e-3 at 24;
+    # at 16: 1.2e-3, 1.8e-3 and 5.0e-4 at 1, 2 and 4 times the substeps).
+    bound = 3e-3 if name == "floating" else 1e-3
+    assert abs(scene.energy_drift()) < bound, f"{name}: drift {scene.energy_drift():.2e}"
 
 
 def test_cloth_with_ground_rests_on_it():

@@ -666,14 +666,21 @@ def floating(
     integrator: str = "semi_implicit_euler",
     threads: int | None = None,
 ) -> Scene:
-    """Crates and a ball riding a dam break: a water column (:func:`dam_break`'s, DFSPH, ``n``
-    particles across its width, 1 m wide and 2 m high in a 4 × 3 m tank) collapses with two
-    crates and a ball (``density`` kg/m², lighter than the water's 1000) resting on its top; they sink with
-    it, ride the surge to the far wall and back. The tank is both the fluid's walls and fixed
-    bodies; the crates and the ball meet the fluid through boundary particles on their surfaces
-    (Akinci et al. 2012, :mod:`physcore.bodies`), so they float at their Archimedes draft and the
-    surge pushes them by its pressure. ``method`` and ``integrator`` step the fluid (see
-    :func:`dam_break`).
+    """Crates and a ball afloat on a pool, struck by a dam break: a water column
+    (:func:`dam_break`'s, DFSPH, ``n`` particles across its width, 1 m wide and 2 m high in a
+    4 × 3 m tank) collapses onto a still layer 0.3 m deep on which two crates and a ball
+    (``density`` kg/m², lighter than the water's 1000) float at rest; the bore lifts them,
+    carries them to the far wall and back. The tank is both the fluid's walls and fixed bodies;
+    the crates and the ball meet the fluid through boundary particles on their surfaces
+    (Akinci et al. 2012, :mod:`physcore.bodies`), so they float at their Archimedes draft
+    (measured in still water at this resolution: 10.01 cm for a ball of radius 10 cm at 500
+    kg/m², 5.08 at 200) and the surge pushes them by its pressure. ``method`` and
+    ``integrator`` step the fluid (see :func:`dam_break`).
+
+    Until 2026-12-02 the column fell onto a dry floor with the bodies on its top: the surge
+    left 0.2–0.3 m of water beside them, the run-up and backwash then buried them from 2.0 to
+    about 4.2 s (floating correctly on the water that was there), and the 3.2 s render ended
+    with them under it. The layer keeps water under them throughout.
 
     Raises TypeError / InvalidInputError naming the argument (a ``density`` below 100 kg/m², a
     tenth of the water's, which the coupling refuses: such a body is flung out by the
@@ -682,20 +689,38 @@ def floating(
     rho = _positive(density, "density")
     if rho < 100.0:  # the core's LIGHTEST (0.1) times the water's 1000: refused here, not at the first step
         raise InvalidInputError(f"density: the bodies must be at least 100 kg/m² (a tenth of the water's), got {rho:g}")
-    scene = dam_break(n=n, integrator=integrator, threads=threads, method=method)
-    wall, w, h = 0.1, 4.0, 3.0
+    n = _count(n, "n", 2)
+    dx = _spacing(_per(1.0, n), "n")
+    wall, w, h, bed = 0.1, 4.0, 3.0, 0.3
+    _particles("n", _lattice_size([0.0, 0.0], [1.0, 2.0], dx) + _lattice_size([1.0, 0.0], [w, bed], dx)
+               + _walls_size([0.0, 0.0], [w, h], dx))
+    if method is None:
+        method = "dfsph" if isinstance(integrator, str) and integrator == "semi_implicit_euler" else "wcsph"
+    # The bodies float at rest on the layer, their centres near its surface (the draft of a
+    # half-density body); the layer's water is cut away within half a spacing of each.
+    crates = [(1.6, bed + 0.02, 0.15, 0.1), (3.2, bed + 0.04, 0.12, 0.12)]
+    ball = (2.4, bed + 0.02, 0.1)
+    pool = lattice([1.0, 0.0], [w, bed], dx)
+    keep = np.hypot(pool[:, 0] - ball[0], pool[:, 1] - ball[1]) > ball[2] + 0.5 * dx
+    for cx, cy, hx, hy in crates:
+        keep &= ~((np.abs(pool[:, 0] - cx) < hx + 0.5 * dx) & (np.abs(pool[:, 1] - cy) < hy + 0.5 * dx))
+    water = np.vstack([lattice([0.0, 0.0], [1.0, 2.0], dx), pool[keep]])
+    scene = _water_in_tank(
+        water, dx, [0.0, 0.0], [w, h], dim=2, lid=True, pass_precision="f32", kernel="cubic_spline", alpha=0.05,
+        sound_speed=None, integrator=integrator, dt=None, threads=threads, method=method,
+    )
     scene.add(Bodies("box", size=[(w / 2 + 2 * wall, wall), (wall, h / 2 + wall), (wall, h / 2 + wall)],
                      positions=[(w / 2, -wall), (-wall, h / 2), (w + wall, h / 2)], kind="fixed", color=(84, 92, 104), name="tank"))
-    scene.add(Bodies("box", size=[(0.15, 0.1), (0.12, 0.12)], positions=[(0.25, 2.15), (0.7, 2.5)], angles=[0.0, 0.3],
+    scene.add(Bodies("box", size=[c[2:] for c in crates], positions=[c[:2] for c in crates],
                      density=rho, friction=0.4, restitution=0.1, color=[(214, 156, 96), (226, 172, 110)], name="crates"))
-    scene.add(Bodies("ball", size=[0.1], positions=[(0.5, 2.9)], density=rho, friction=0.4, restitution=0.1,
+    scene.add(Bodies("ball", size=[ball[2]], positions=[ball[:2]], density=rho, friction=0.4, restitution=0.1,
                      color=(214, 96, 77), name="ball"))
     scene.render_defaults = None
     return _finite_books(scene, "density")
 
 
-# 3.2 s: the collapse, the surge to the far wall, and the ride back to the near one (100 frames,
-# 2 s, ended with the bodies on the floor before the water came back for them).
+# 3.2 s: the collapse, the bore striking the floating bodies and carrying them to the far wall,
+# and the ride back.
 floating.render_defaults = {"frames": 160, "fps": 30, "frame_time": 1 / 50, "substeps": "auto", "color_by": "speed",
                             "size": (480, 360), "surface": True, "cmap": "ice"}
 floating = _stamped(floating)
