@@ -747,6 +747,9 @@ struct Impacts {
     dt: Real,
     substep: Real,
     found: std::sync::Mutex<Vec<Impact>>,
+    /// The bodies' orientations before the step, by handle index (`restitution`'s levers,
+    /// `contact_points`); filled only where a collider is bouncy, its buffer kept between steps.
+    before: Vec<Option<Rotation>>,
 }
 
 /// The normal motion's energy per unit effective mass that semi-implicit Euler of step `h` keeps
@@ -777,8 +780,8 @@ const PREDICTION_REACH: Real = 2.0;
 /// read 0.965–1.000 e² h₀ by where the impact fell within the step (1.000–1.068 at 1/60,
 /// where rapier's own sweep against fixed colliders caught it); with it 0.999–1.000 at both,
 /// no depth. Only the fast ones: predicting for every body made a settling pile of 1,000
-/// (3,000) boxes step 22 % (32 %) slower.
-fn hook_fast(r: &mut Rapier, handles: &[RigidBodyHandle], colliders: &[ColliderHandle], fast: Real) {
+/// (3,000) boxes step 22 % (32 %) slower. Returns whether any collider is bouncy.
+fn hook_fast(r: &mut Rapier, handles: &[RigidBodyHandle], colliders: &[ColliderHandle], fast: Real) -> bool {
     // A contact takes the larger e of its two colliders, so a body of e = 0 bounces off a
     // bouncy one: where any collider has e > 0, every fast body is hooked.
     let bouncy = colliders.iter().any(|&c| r.colliders.get(c).is_some_and(|c| c.restitution() > 0.0));
@@ -800,6 +803,7 @@ fn hook_fast(r: &mut Rapier, handles: &[RigidBodyHandle], colliders: &[ColliderH
             r.bodies[h].set_soft_ccd_prediction(ahead);
         }
     }
+    bouncy
 }
 
 impl PhysicsHooks for Impacts {
@@ -1341,10 +1345,11 @@ impl System for Bodies {
         let substep = dt / self.params.num_solver_iterations as Real;
         (self.impacts.gravity, self.impacts.dt, self.impacts.substep) = (self.gravity, dt, substep);
         // Faster than gravity gives in two steps: a body resting on another stays below it.
-        hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
+        let bouncy = hook_fast(r, &self.handles, &self.colliders, 2.0 * self.gravity.length() * dt);
         // The orientations the narrow phase sees, by handle index: `restitution`'s levers.
-        let mut before: Vec<Option<Rotation>> = Vec::new();
-        if r.colliders.iter().any(|(_, c)| c.restitution() > 0.0) {
+        let before = &mut self.impacts.before;
+        before.clear();
+        if bouncy {
             for (h, b) in r.bodies.iter() {
                 let i = h.into_raw_parts().0 as usize;
                 if before.len() <= i {
@@ -1359,7 +1364,7 @@ impl System for Bodies {
         place_tops(r, tops);
         // The list is emptied in place: its buffer serves every step's impacts.
         let found = self.impacts.found.get_mut().unwrap_or_else(|p| p.into_inner());
-        restitution(r, found, substep, &before);
+        restitution(r, found, substep, &self.impacts.before);
         found.clear();
         if self.rolling.iter().any(|&m| m > 0.0) {
             // rapier's step is n substeps of semi-implicit Euler: a velocity change spread evenly
