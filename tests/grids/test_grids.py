@@ -444,6 +444,32 @@ def test_fluid_smoke_rises_and_its_books_balance():
     assert abs(scene.energy_drift()) < 1e-12  # every stage's change is booked
 
 
+def test_smoke_leaves_a_soft_slot_vent_and_its_animation_starts_with_a_plume():
+    # Its vent was a disc of cells set to smoke 1: drawn as a staircase, with a blocky plume.
+    # Now a slot with soft sides (a smoothstep in steps of 1/16, a source each, the full one
+    # first: tracers start there), ν = 3e-4 m²/s and ε = 0.1; the GIF starts 2 s in.
+    for n in (16, 24, 128):
+        f = pc.scenes.smoke(n=n).grids[0]
+        assert f.nu == 3e-4 and f.vorticity == 0.1
+        strength = [s.density for s in f.sources]
+        assert strength[0] == 1.0 and strength == sorted(strength, reverse=True)
+        for s in f.sources:
+            assert s.temperature == s.density and tuple(s.velocity) == (0.0, 0.3 * s.density)
+    w = np.zeros(f.shape)
+    for s in f.sources:
+        w[np.asarray(s.region)] = s.density
+    row = w[:, int(round(0.03 * 128))]
+    x = (np.arange(128) + 0.5) / 128
+    assert row.max() == 1.0 and (row[np.abs(x - 0.5) > 0.08] == 0).all()
+    assert np.abs(np.diff(row)).max() <= 5 / 16  # no step from 1 to 0: the sides fade
+    assert (w.sum(axis=0) > 0).sum() == 4  # a slot 3 cm deep: 4 rows at n = 128
+    scene = pc.scenes.smoke(n=32)
+    assert scene.render_defaults["lead_in"] == 2.0
+    rec = pc.render.record(scene, frames=1)
+    d, y = rec.fields[0], (np.arange(48) + 0.5) / 32
+    assert rec.times[0] == pytest.approx(2.0) and d[:, y > 0.45].max() > 0.3  # smoke up at the disc
+
+
 def test_fluid_save_load_continues_bit_identically(tmp_path):
     scene = pc.scenes.smoke(n=24, tracers=50)
     scene.advance(0.2)
@@ -804,10 +830,23 @@ def test_the_render_lead_in_starts_the_animation_where_something_shows():
     from physcore import render
 
     d = pc.scenes.double_slit(n=48)
-    assert d.time == 0.0 and d.render_defaults["lead_in"] == 1.0
+    assert d.time == 0.0 and d.render_defaults["lead_in"] == 2.0
     rec = render.record(d, frames=2)
-    assert abs(rec.times[0] - 1.0) < 1e-9 and rec.times[1] > rec.times[0]
+    assert abs(rec.times[0] - 2.0) < 1e-9 and rec.times[1] > rec.times[0]
     assert np.abs(rec.fields[0]).max() > 0  # the wave train, not a tank at rest
+    # The first frame already has the fringes behind the slits: the front 0.37 m past the wall.
+    u, wall = np.abs(rec.fields[0]), int(0.35 * 48)
+    assert u[wall + 12 : wall + 16].max() > 0.05 * u[:wall].max()
+    assert u[wall + 24 :].max() < 1e-3 * u[:wall].max()  # the front, not yet 0.5 m past it
+    # A frame is an eighth of the source's period (the waves move λ/8 a frame: smooth, not
+    # strobed), at any wavelength and speed; the default frames close whole periods (a loop).
+    assert abs((rec.times[1] - rec.times[0]) - 0.05 / 0.3 / 8) < 1e-12
+    for kw in ({}, {"wavelength": 0.08, "speed": 0.4}):
+        rd = pc.scenes.double_slit(n=48, **kw).render_defaults
+        lam, c = kw.get("wavelength", 0.05), kw.get("speed", 0.3)
+        assert rd["frame_time"] == pytest.approx(lam / c / 8) and rd["lead_in"] == pytest.approx(0.6 / c)
+    fn = pc.scenes.double_slit.render_defaults
+    assert fn["frame_time"] == pytest.approx(0.05 / 0.3 / 8) and fn["frames"] % 8 == 0 and fn["lead_in"] == 2.0
     # A scene returned already started is not led in again; the lead-in scales with the duration.
     assert pc.scenes.double_slit(n=48, start=0.5).render_defaults["lead_in"] == 0.0
     t = pc.scenes.turing(n=32, duration=450.0)

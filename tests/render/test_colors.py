@@ -408,3 +408,121 @@ def test_a_3d_tank_is_drawn_as_glass_without_a_stipple():
     assert grain(glass) < 2.0  # smooth (a gradient at most)
     assert glass[0, 0] - glass[patch].mean() > 10.0  # tinted
     assert grain(discs) > 10 * grain(glass)  # what it replaces
+
+
+def _circling(frames_per_turn: int, turns: float = 1.0, velocities: bool = True) -> pc.render.Recording:
+    """A bob on a circle of radius 1 about a pinned centre (a zero-length spring, ω = 1:
+    uniform circular motion), recorded `frames_per_turn` frames a period, its positions (and
+    with `velocities` its velocities) those of the exact circle."""
+    s = pc.Scene(2, dt=1e-3)
+    s.add_particles([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 1.0]], masses=1.0, pinned=[True, False])
+    s.add(pc.Springs([0], [1], stiffness=1.0, rest_length=0.0))
+    rec = pc.render.record(s, frames=int(frames_per_turn * turns) + 1, frame_time=2 * np.pi / frames_per_turn)
+    # The integrator's orbit is a near circle (0.9 % eccentric at dt = 1e-3): the exact one.
+    th = 2 * np.pi * np.arange(rec.frames) / frames_per_turn
+    centre = rec.positions[0, 0].astype(np.float64)
+    x = np.zeros((rec.frames, 2, 2))
+    x[:, 0] = centre
+    x[:, 1] = centre + np.stack([np.cos(th), np.sin(th)], axis=1)
+    v = np.zeros_like(x)
+    v[:, 1] = np.stack([-np.sin(th), np.cos(th)], axis=1)
+    return rec._replace(positions=x.astype(np.float32), velocities=v.astype(np.float32) if velocities else None)
+
+
+def _rasteriser(rec: pc.render.Recording, **kw):
+    from physcore.render._look import check_look
+    from physcore.render._raster import _Rasteriser
+
+    look = check_look(kw.pop("look", None))
+    return _Rasteriser(rec, (320, 320), kw.pop("color_by", "none"), 2, (0.0, 0.0), look=look, **kw)
+
+
+def _off_circle(rec: pc.render.Recording, ras, cs: np.ndarray, rs: np.ndarray) -> tuple[np.ndarray, float]:
+    """|distance from the circle's centre (particle 0) / radius − 1| of pixel points, and the
+    radius in pixels (the bob's distance in frame 0)."""
+    (cc, cb), (rc, rb) = ras.cam.pixels(ras.cam.project(rec.positions[0])[0])
+    radius = float(np.hypot(cb - cc, rb - rc))
+    return np.abs(np.hypot(cs - cc, rs - rc) / radius - 1.0), radius
+
+
+def test_trail_samples_follow_the_hermite_curve_not_the_chord():
+    # Eight frames a turn: a chord strays 7.6 % of the radius inside the circle at its middle
+    # (1 − cos 22.5°); the Hermite curve of the positions and velocities at its ends stays
+    # within 0.1 %, and that of Catmull–Rom tangents (a recording without velocities) within 1.5 %.
+    for velocities, tol in ((True, 1e-3), (False, 1.5e-2)):
+        rec = _circling(8, velocities=velocities)
+        ras = _rasteriser(rec, trail=8, look={"trail_samples": 8})
+        cs, rs = ras._sub_pixels(2, ras.cam)
+        assert cs.shape == (9, 2)
+        off, radius = _off_circle(rec, ras, cs[:, 1], rs[:, 1])
+        mid, _ = _off_circle(rec, ras, 0.5 * (cs[[0, -1], 1]), 0.5 * (rs[[0, -1], 1]))
+        assert mid[0] > 0.07 and radius > 80
+        assert off.max() < tol, (velocities, off.max())
+    # Drawn: 8 pieces a step put the trail's pixels on the circle, 1 a step on the chords.
+    rec = _circling(8)
+    ras = _rasteriser(rec, trail=8)
+    opts = dict(size=(320, 320), trail=8, color_by="none", colors=["#808080", "#ff4000"], springs=False, colorbar=False,
+                antialias=False, radius=2)
+
+    def sag(samples: int) -> float:
+        img = list(pc.render.frames(rec, look={"trail_samples": samples}, **opts))[-1].astype(int)
+        drawn = np.abs(img - img[0, 0]).sum(axis=2) > 30
+        drawn[-40:] = False  # the clock and the scale bar
+        rows, cols = np.nonzero(drawn)
+        dot_r, dot_c = np.nonzero(np.abs(img - 128).sum(axis=2) < 10)  # the centre, a grey disc
+        d = np.hypot(rows - dot_r.mean(), cols - dot_c.mean())
+        d = d[d > 20]
+        return float(np.ptp(np.percentile(d, [3, 97])) / np.median(d))  # the spread of the radius
+
+    assert sag(8) < 0.03 < 0.5 * sag(1)
+
+
+def test_trail_samples_default_leaves_the_trail_as_it_was():
+    from physcore.render import Look
+
+    assert Look().trail_samples == 1
+    rec = _circling(12, 0.75)
+    opts = dict(size=(160, 160), trail=6, color_by="none", colors=["#808080", "#ff4000"], colorbar=False)
+    for extra in ({"antialias": False}, {"look": {"trail_fade": 0.0, "trail_width": 3}}):
+        look = extra.get("look", {})
+        rest = {k: v for k, v in extra.items() if k != "look"}
+        base = list(pc.render.frames(rec, look=look, **rest, **opts))
+        same = list(pc.render.frames(rec, look={**look, "trail_samples": 1}, **rest, **opts))
+        curved = list(pc.render.frames(rec, look={**look, "trail_samples": 8}, **rest, **opts))
+        assert all(np.array_equal(a, b) for a, b in zip(base, same, strict=True))
+        assert not np.array_equal(base[-1], curved[-1])
+
+
+@pytest.mark.parametrize("bad, err", [(0, ValueError), (65, ValueError), (2.5, TypeError), (True, TypeError), ("8", TypeError)])
+def test_trail_samples_is_checked_naming_it(tmp_path, bad, err):
+    s = _two_balls()
+    path = tmp_path / "x.gif"
+    with pytest.raises(err, match="trail_samples") as info:
+        pc.render.gif(s, path, frames=2, size=(64, 48), trail=2, look={"trail_samples": bad})
+    assert isinstance(info.value, pc.PhyscoreError)
+    assert not path.exists() and s.time == 0.0
+
+
+def test_glow_trails_follow_curves_and_fade_without_seams():
+    # A glowing point going round a circle at 45° a frame (about 90 px a step, a recording
+    # without velocities): its glow's path is sampled on the curve through the frames (a
+    # chord's middle sags 7.6 % of the radius inside the circle), densely (no gap), and its
+    # weight falls off with age continuously, across each frame's end too (no seam).
+    rec = _circling(8, velocities=False)
+    ras = _rasteriser(rec, trail=4, color_by="density")
+    decay = 0.05 ** (1 / 4)
+    c2, r2, w2, o2 = ras._streak(2)
+    c3, r3, w3, o3 = ras._streak(3)
+    for c, r in ((c2, r2), (c3, r3)):
+        off, radius = _off_circle(rec, ras, c, r)
+        assert off.max() < 0.015 and radius > 80
+        assert np.hypot(np.diff(c), np.diff(r)).max() < 1.0  # every 0.6 px along the path
+    assert (o2 == 0).all() and np.all(np.diff(w2) > 0)  # brighter towards the bob, one particle
+    # The start of frame 3's path is as bright as the end of frame 2's, one frame older.
+    assert w3[0] == pytest.approx(decay * w2[-1], rel=0.02)
+    # The first frame, with no history, shows the path on to the next frame, not a dot alone.
+    c0, r0, w0, _ = ras._streak(0, True)
+    assert c0.size > 100 and np.all(np.diff(w0) < 0)
+    frames = list(pc.render.frames(rec, size=(320, 320), trail=4, color_by="density", theme="dark", colorbar=False))
+    lit = lambda img: int((img.astype(int).sum(axis=2) > img[5, 5].astype(int).sum() + 60).sum())  # noqa: E731
+    assert lit(frames[0]) > 0.5 * lit(frames[1])

@@ -1137,3 +1137,61 @@ def test_a_lead_in_steps_as_the_frames_do():
     assert s.dt == dt
     assert rec.times[0] == pytest.approx(3.0, abs=dt)
     np.testing.assert_allclose(np.diff(rec.times), 1 / 30, atol=dt)
+
+
+def test_dither_mixes_the_shades_of_a_ramp_and_is_checked_by_name(tmp_path):
+    """``dither=True`` rounds each pixel of a field up or down by Bayer's ordered dither: a smooth
+    ramp drawn in few shades (the cavity's dye had visible steps) then has the ramp's value on
+    average over every 8 × 8 tile, two shades mixed where it lies between them, the same
+    pixels every time and in every frame where the field stands still; a value that is no bool
+    is refused naming `dither`, from the call or from the scene's render_defaults."""
+    from physcore.render._fields import FieldRasteriser, _image, palette
+
+    scene = pc.Scene(2, dt=1e-2)
+    fluid = scene.add(pc.StableFluid((64, 8), 1 / 64, name="tank"))
+    # A slow ramp (0.3 to 0.45 over 40 cells, a few shades) between patches of 0 and 1 (the scale).
+    ramp = np.concatenate([np.zeros(12), np.linspace(0.3, 0.45, 40), np.ones(12)])
+    fluid.density = np.broadcast_to(ramp[:, None], (64, 8)).copy()
+    scene.render_defaults = {"style": "turing", "field": "density"}
+    rec = render.record(scene, frames=2, frame_time=0.05)  # at rest: the field stands still
+    index = {tuple(c): k for k, c in enumerate(palette("turing")[:255])}
+
+    def drawn(**kw):
+        frames = [f for f in render.frames(rec, size=(256, 32), colorbar=False, **kw)]
+        assert frames[0].shape == (32, 256, 3)
+        return [np.array([[index[tuple(p)] for p in row] for row in f], dtype=float) / 254 for f in frames]
+
+    plain, dithered = drawn(dither=False), drawn(dither=True)
+    assert np.array_equal(dithered[0], dithered[1])  # a still field stays still: nothing to store
+    # The ramp as drawn before its shades are rounded, per 8 × 8 tile (the mean over the tile).
+    fr = FieldRasteriser(rec.fields, "turing", (256, 32), None, rec.field_extent)
+    ramp = np.clip((_image(rec.fields[0], (256, 32)) - fr.lo) / (fr.hi - fr.lo), 0.0, 1.0)
+
+    def tiles(a):
+        return a.reshape(4, 8, 32, 8).mean(axis=(1, 3))
+
+    want = tiles(ramp)
+    mid = slice(8, 24)  # the tiles over the ramp's middle, away from the patches' edges
+    err_plain = np.abs(tiles(plain[0]) - want)[:, mid].mean()
+    err_dith = np.abs(tiles(dithered[0]) - want)[:, mid].mean()
+    assert err_dith < 0.25 * err_plain, (err_dith, err_plain)
+    # Locally two shades where the ramp lies between them; undithered, flat bands.
+    mixed = [np.mean([len(np.unique(t)) > 1 for t in f[0].reshape(4, 8, 32, 8).transpose(0, 2, 1, 3)[:, mid].reshape(-1, 64)])
+             for f in (plain, dithered)]
+    assert mixed[1] > 0.8 and mixed[0] < 0.3, mixed
+    # Deterministic: the same GIF, byte for byte.
+    a = render.gif(rec, tmp_path / "a.gif", size=(256, 32), dither=True).read_bytes()
+    b = render.gif(rec, tmp_path / "b.gif", size=(256, 32), dither=True).read_bytes()
+    assert a == b and a != render.gif(rec, tmp_path / "c.gif", size=(256, 32)).read_bytes()
+    # The scene's default: on for the cavity, off elsewhere; a bad value refused by name.
+    assert pc.scenes.cavity.render_defaults["dither"] is True and "dither" not in pc.scenes.smoke.render_defaults
+    scene.render_defaults["dither"] = True
+    assert render.gif(scene, tmp_path / "d.gif", frames=2, frame_time=0.05, size=(256, 32)).read_bytes() == a
+    t = scene.time
+    for bad in ("yes", 1, None):
+        scene.render_defaults["dither"] = bad
+        with pytest.raises(pc.PhyscoreError, match="dither"):
+            render.gif(scene, tmp_path / "e.gif", frames=2, size=(256, 32))
+        with pytest.raises(pc.PhyscoreError, match="dither"):
+            render.gif(rec, tmp_path / "e.gif", size=(256, 32), dither=bad if bad is not None else "on")
+    assert not (tmp_path / "e.gif").exists() and scene.time == t  # refused before a step

@@ -72,6 +72,7 @@ def gif(
     halo: Any = None,
     loop: bool | None = None,
     look: Any = None,
+    dither: bool | None = None,
 ) -> Path:
     """Draw a :class:`Recording` as an animated GIF, or simulate `scene` forward and draw it:
     ``gif(scene, path, ...)`` is ``gif(record(scene, ...), path, ...)``.
@@ -303,6 +304,13 @@ def gif(
         picture as it was. Any of them but the trail's draws the frames in full colour with
         soft discs (unless ``antialias=False`` is given, which leaves them out). With a mesh or
         a liquid surface only the backdrop and props are drawn (behind it); with glow, none.
+    dither : bool, optional
+        Field animations: round each pixel to the map's shades with Bayer's 8 × 8 ordered dither
+        instead of to the nearest shade, so a slow gradient (a dye's soft edge) reads as a smooth
+        mix of neighbouring shades instead of flat bands. The thresholds are fixed to the pixels'
+        places, so the frames are the same for the same recording and still regions stay still
+        (the GIF stores only what changes). Particle frames ignore it. Default: the scene's
+        ``render_defaults`` (``scenes.cavity`` has it on), else False.
 
     Returns
     -------
@@ -341,13 +349,13 @@ def gif(
                    springs=springs, view=view, progress=progress, trail=trail, size_by=size_by, theme=theme,
                    title=title, camera=camera, arrows=arrows, mesh=mesh, texture=texture, antialias=antialias,
                    colors=colors, cmap=cmap, background=background, surface=surface, extent=extent,
-                   halo=halo, loop=loop, look=look)
+                   halo=halo, loop=loop, look=look, dither=dither)
 
 
 #: gif()'s keyword options, in its signature's order (what save(), frames() and _render take).
 _OPTIONS = ("frames", "steps_per_frame", "frame_time", "substeps", "fps", "size", "color_by", "colorbar", "radius",
             "springs", "view", "progress", "trail", "size_by", "theme", "title", "camera", "arrows", "mesh", "texture",
-            "antialias", "colors", "cmap", "background", "surface", "extent", "halo", "loop", "look")
+            "antialias", "colors", "cmap", "background", "surface", "extent", "halo", "loop", "look", "dither")
 
 
 def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **options: Any) -> Any:
@@ -359,7 +367,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     bound.apply_defaults()
     (frames, steps_per_frame, frame_time, substeps, fps, size, color_by, colorbar, radius, springs, view, progress,
      trail, size_by, theme, title, camera, arrows, mesh, texture, antialias, colors, cmap, background, surface, extent, halo, loop,
-     look) = (
+     look, dither) = (
         bound.arguments[k] for k in _OPTIONS)
     # Defaults: the scene's render_defaults (the ready-made scenes', as `physcore render` uses
     # them), else 30 fps, 480x360, speed.
@@ -411,6 +419,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     antialias = _check.flag("antialias", bool(d.get("antialias", False)) if antialias is None else antialias)
     cmap = _check_cmap(d.get("cmap") if cmap is None else cmap)
     surface = _check.flag("surface", bool(d.get("surface", False)) if surface is None else surface)
+    dither = _check.flag("dither", d.get("dither", False) if dither is None else dither)
     background = _check_background(d.get("background") if background is None else background)
     # One colour per drawn point: a recording's, or the scene's particles (a flow's points).
     n_colors = (scene.positions.shape[1] if isinstance(scene, _recording.Recording)
@@ -471,7 +480,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
 
         fsize = fit_size(rec.field_extent, size)
         fr = FieldRasteriser(
-            rec.fields, rec.field_style, fsize, rec.field_mask, rec.field_extent, rec.field_points, rec.times, rec.field_label, colorbar
+            rec.fields, rec.field_style, fsize, rec.field_mask, rec.field_extent, rec.field_points, rec.times, rec.field_label, colorbar,
+            dither=dither,
         )
         return _emit(fmt, path, (fr.frame(k) for k in range(rec.frames)), palette(rec.field_style), fps, rec.frames)
     if loop and loop_default and not _closes(rec):

@@ -35,6 +35,12 @@ class Look:
         ramp (15 % to 75 % of the particle's colour, or the palette's trail shades).
     trail_width : int, optional
         Trail width in pixels, 1 to 16. Default: 1, and 2 on images of 300 pixels and more.
+    trail_samples : int, optional
+        Points per frame step along each trail, 1 to 64: with more than 1, the path between
+        two frames is the cubic Hermite curve of the recorded positions and velocities at both
+        ends (without velocities, Catmull–Rom tangents from the neighbouring frames), drawn
+        as that many segments, so a close pass that turns sharply between two frames reads as
+        a curve, not a corner. Default 1: one straight segment a frame step.
     trail_of : sequence of int, optional
         The particles whose paths the trail draws (a chain's free end, a pendulum's bob: one
         path that reads where every particle's would clutter). Default: every moving one.
@@ -79,6 +85,7 @@ class Look:
 
     trail_fade: float | None = None
     trail_width: int | None = None
+    trail_samples: int = 1
     trail_of: tuple = ()
     spring_width: int | None = None
     shading: str = "flat"
@@ -116,7 +123,7 @@ def check_look(value: Any, base: Any = None) -> Look:
     fade = fields.get("trail_fade")
     if fade is not None:
         out["trail_fade"] = _check.float_in_range("look.trail_fade", fade, 0.0, 1.0)
-    for name, top in (("trail_width", 16), ("spring_width", 32)):
+    for name, top in (("trail_width", 16), ("spring_width", 32), ("trail_samples", 64)):
         if fields.get(name) is not None:
             out[name] = _check_int(f"look.{name}", fields[name], 1, top)
     if fields.get("shading") is not None:

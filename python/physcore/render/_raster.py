@@ -498,6 +498,60 @@ def _splat(col: np.ndarray, row: np.ndarray, shape: tuple[int, int], weights: np
                        None if weights is None else np.ascontiguousarray(weights, dtype=np.float32))
 
 
+#: A glow trail's path between two frames is sampled every GLOW_STEP pixels of its length (the
+#: splat shares each sample among four pixels and the blur closes what is left: no seam), at
+#: most GLOW_MAX_SAMPLES a particle a frame and GLOW_BUDGET samples a frame in all.
+GLOW_STEP = 0.6
+GLOW_MAX_SAMPLES = 256
+GLOW_BUDGET = 2_000_000
+
+
+def _hermite_px(p0: np.ndarray, t0: np.ndarray, p1: np.ndarray, t1: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Cubic Hermite points between (M, 2) pixel points p0 and p1 with (M, 2) tangents t0, t1
+    (pixels per frame step), at (M,) fractions `t` of the step (one per row)."""
+    t = t[:, None]
+    t2, t3 = t * t, t * t * t
+    return (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * t0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * t1
+
+
+def _path_samples(p0: np.ndarray, t0: np.ndarray, p1: np.ndarray, t1: np.ndarray, step: float = GLOW_STEP,
+                  cap: int = GLOW_MAX_SAMPLES, budget: int = GLOW_BUDGET
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Points along each of N paths from its (N, 2) pixel point p0 to p1, the cubic Hermite
+    curve of the tangents t0, t1 (pixels per frame step): (col, row, frac, owner), each (S,),
+    the samples of path i at fractions j / m_i, j = 1 … m_i (its start is the previous path's
+    end), m_i = ⌈L_i / step⌉ for the length bound L_i of the curve's Bézier control polygon,
+    1 ≤ m_i ≤ `cap`, scaled down to `budget` samples in all. A path with a non-finite end is
+    its end point alone (NaN: not drawn)."""
+    ctrl = np.stack([p0, p0 + t0 / 3.0, p1 - t1 / 3.0, p1])  # the Bézier form of the curve
+    with np.errstate(invalid="ignore", over="ignore"):
+        length = np.hypot(*np.moveaxis(np.diff(ctrl, axis=0), -1, 0)).sum(axis=0)
+    length = np.where(np.isfinite(length), length, 0.0)
+    m = np.clip(np.ceil(length / step), 1, cap).astype(np.int64)
+    total = int(m.sum())
+    if total > budget:
+        m = np.maximum(1, (m * (budget / total)).astype(np.int64))
+    owner = np.repeat(np.arange(m.size), m)
+    first = np.cumsum(m) - m
+    frac = (np.arange(owner.size) - first[owner] + 1) / m[owner]
+    tan0, tan1 = np.nan_to_num(t0[owner]), np.nan_to_num(t1[owner])
+    with np.errstate(invalid="ignore", over="ignore"):
+        pts = _hermite_px(p0[owner], tan0, p1[owner], tan1, frac)
+    return pts[:, 0], pts[:, 1], frac, owner
+
+
+def _with_offsets(c0: np.ndarray, r0: np.ndarray, c1: np.ndarray, r1: np.ndarray, vals: np.ndarray,
+                  offsets: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Segments (P, M) `c0` … `r1` with values `vals` ((P, M) or (P, M, C)) drawn once at each
+    pixel offset (dc, dr) of `offsets` (a width's passes), flattened piece by piece, pass by
+    pass (the order the trails were drawn in one frame step at a time)."""
+    d = np.asarray(offsets, np.float64).reshape(-1, 2)
+    p, m = c0.shape
+    cols = [(a[:, None, :] + d[None, :, i, None]).reshape(-1) for a, i in ((c0, 0), (r0, 1), (c1, 0), (r1, 1))]
+    v = np.broadcast_to(vals[:, None], (p, d.shape[0]) + vals.shape[1:]).reshape((p * d.shape[0] * m,) + vals.shape[2:])
+    return cols[0], cols[1], cols[2], cols[3], v
+
+
 def _overlay(shape: tuple[int, int]) -> np.ndarray:
     """An (H, W) int16 layer of palette indices to draw over a full-colour image: −1 (nothing)
     until drawn on (the drawing functions take it as they take an index image)."""
@@ -574,6 +628,9 @@ class _Rasteriser:
         self.color_by = color_by
         self.trail = int(trail)
         self.loop = bool(loop)
+        self._glow_px: dict[int, np.ndarray] = {}  # a few frames' pixel positions (the glow's paths)
+        self._glow_history: tuple[int, np.ndarray] | None = None  # (frame, glow with trail)
+        self._sub_pix: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # trail_samples' paths, by frame
         # The colour scale: 0 at the bottom, the top fixed over the animation.
         self.vmax = 0.0
         values, scale, base, levels = {
@@ -723,15 +780,18 @@ class _Rasteriser:
             self._arrows = _arrow_vectors(rec, arrows, min(size) / 12.0, pick)
         self.glow_scale = 0.0
         if color_by == "density":
-            # One brightness scale for the whole animation, from three frames' density.
-            sample = np.concatenate([d[d > 0] for d in (self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1}))] or [np.zeros(1)])
+            # One brightness scale for the whole animation, from three frames' density (the
+            # middle and last ones' with their trails, which add up where paths cross, with a
+            # still camera).
+            trails = self.trail and self._centres is None
+            glows = [self._glow_density(k) if k and trails else self._density(k) for k in sorted({0, rec.frames // 2, rec.frames - 1})]
+            sample = np.concatenate([d[d > 0] for d in glows] or [np.zeros(1)])
             self.glow_scale = float(np.percentile(sample, 99.5)) if sample.size else 1.0
         self.trail = int(trail)
         #: (N,) bool: the particles whose paths the trails draw (the moving ones, or look.trail_of's).
         self._trailed = ~rec.pinned
         if self.look.trail_of:
             self._trailed = self._trailed & np.isin(np.arange(len(rec.pinned)), self.look.trail_of)
-        self._glow_history: tuple[int, np.ndarray] | None = None  # (frame, glow with trail)
         self._pix: list | None = None  # per-frame pixel positions, projected once (trails)
         # 2D draw order: pinned particles last, so they stay visible (3D sorts by depth per frame).
         self.pin_order = np.argsort(rec.pinned, kind="stable") if dim == 2 and rec.pinned.any() else None
@@ -816,6 +876,9 @@ class _Rasteriser:
         """Drop the per-frame pixel positions projected so far (the trails'): the recording's
         history moved, so they are projected again at the next frame."""
         self._pix = None
+        self._glow_px = {}
+        self._sub_pix = {}
+
     def cam_at(self, k: int) -> _Camera:
         """The camera of frame k: the fitted one, or that frame's follow or orbit camera (the
         same scale and image, its own centre and, orbiting, its own basis)."""
@@ -867,19 +930,27 @@ class _Rasteriser:
             self._glass_cache = glass
         return glass
 
-    def _density(self, k: int) -> np.ndarray:
+    def _density(self, k: int, ahead: bool = False) -> np.ndarray:
         """Frame k's glow: the free particles' density (per pixel), a tight blur plus a wide
-        bloom. Additive, so it needs no depth order in 3D."""
-        col, row, w = self._streak(k)
+        bloom. Additive, so it needs no depth order in 3D. `ahead`: their paths to frame k + 1
+        instead (:meth:`_streak`)."""
+        col, row, w, _ = self._streak(k, ahead)
         d = _splat(col, row, self.background.shape, w)
         r = max(1, self.radius // 2)
         return _blur(d, r) + 0.5 * _bloom(d, 4 * r)
 
-    def _streak(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Pixel positions (and weights) to splat for frame k's glow: the free particles where
-        they are or, with a `trail` and a still camera, sampled along the straight path from
-        frame k − 1 (one sample a pixel of the longest move, at most 16, each weighing 1/m), so
-        the glow's history draws continuous streaks rather than one dot a frame."""
+    def _streak(self, k: int, ahead: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """Pixel positions, weights and owners (the index among the free particles of each
+        sample; None: one sample each, in order) to splat for frame k's glow: the free particles
+        where they are or, with a `trail` and a still camera, their paths from frame k − 1
+        sampled every GLOW_STEP pixels (:func:`_path_samples`: the cubic Hermite curve of the
+        recorded velocities, or of Catmull–Rom tangents from the neighbouring frames, so a
+        point that moves 80 pixels a frame round a bend draws the bend, not its chord). Each
+        sample weighs its share of the path's length (a pixel's worth at most) times the
+        trail's decay over its age within the frame, so the glow's history is one continuous
+        fading line: neither dots nor a seam at each frame. `ahead`: the paths on to frame
+        k + 1 instead, fading away from frame k (what the first frame, with no history, shows of
+        the motion: :meth:`_glow_density`)."""
         rec = self.rec
         cam = self.cam_at(k)
         free = ~rec.pinned
@@ -889,25 +960,66 @@ class _Rasteriser:
             # Zoomed in z times, the particles spread over z² times the pixels: each weighs z²,
             # so that a region's glow (its surface brightness) does not change with the zoom.
             gain = (float(self._scales[k]) / self.cam.scale) ** 2
-            return col, row, np.full(col.shape, gain, dtype=np.float32)
-        if not self.trail or k == 0 or self._centres is not None:
-            return col, row, None
-        x0 = rec.positions[k - 1][free] if rec.pinned.any() else rec.positions[k - 1]
-        c0, r0 = cam.pixels(cam.project(x0)[0])
+            return col, row, np.full(col.shape, gain, dtype=np.float32), None
+        if not self.trail or (k == 0 and not ahead) or self._centres is not None:
+            return col, row, None, None
+        sel = free if rec.pinned.any() else slice(None)
+        cache = self._glow_px
+        if len(cache) > 8:
+            cache.clear()
+
+        def px(f: int) -> np.ndarray:
+            if f not in cache:
+                y = rec.positions[f][sel]
+                cache[f] = np.stack(self.cam.pixels(self.cam.project(y)[0]), axis=1)
+            return cache[f]
+
+        cache[k] = np.stack([col, row], axis=1)
+        a, b = (k, k + 1) if ahead else (k - 1, k)
+        p0, p1 = px(a), px(b)
+        t0, t1 = self._tangent_px(a, b, px, sel), self._tangent_px(b, a, px, sel)
+        cs, rs, frac, owner = _path_samples(p0, t0, p1, t1)
         with np.errstate(invalid="ignore"):
-            reach = np.nanmax(np.maximum(np.abs(col - c0), np.abs(row - r0)), initial=0.0)
-        m = int(min(16, max(1, math.ceil(reach))))
-        if m == 1:
-            return col, row, None
-        t = (np.arange(1, m + 1) / m)[:, None]
-        cs = (c0[None] + t * (col - c0)[None]).reshape(-1)
-        rs = (r0[None] + t * (row - r0)[None]).reshape(-1)
-        return cs, rs, np.full(cs.shape, 1.0 / m, dtype=np.float32)
+            length = np.hypot(p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1])
+        m = np.bincount(owner, minlength=p0.shape[0])
+        share = np.maximum(np.nan_to_num(length), 1.0) / np.maximum(m, 1)  # ~1 a pixel along the path
+        decay = 0.05 ** (1.0 / self.trail)
+        w = (share[owner] * decay ** (frac if ahead else 1.0 - frac)).astype(np.float32)
+        return cs, rs, w, owner
+
+    def _tangent_px(self, f: int, other: int, px: Any, sel: Any) -> np.ndarray:
+        """(M, 2) tangents, in pixels per frame step, at frame f of the path between frames f
+        and `other` (f ± 1; frame indices taken modulo the frame count, a periodic recording's):
+        the recorded velocities (times the frame interval) where there are velocities and
+        times, else Catmull–Rom's (p(f + 1) − p(f − 1)) / 2 of the pixel positions `px(frame)`
+        (one-sided at the recording's ends). `sel` picks the particles."""
+        rec = self.rec
+        n = rec.frames
+        lo, hi = min(f, other), max(f, other)
+        if rec.velocities is not None and rec.times is not None:
+            t = rec.times
+            h = float(t[hi % n] - t[lo % n]) if 0 <= lo and hi < n else float("nan")
+            if not (math.isfinite(h) and h > 0) and n > 1:
+                d = np.diff(np.asarray(t, np.float64))
+                d = d[np.isfinite(d) & (d > 0)]
+                h = float(np.median(d)) if d.size else float("nan")
+            if math.isfinite(h) and h > 0:
+                s = self.cam.project(rec.velocities[f % n][sel].astype(np.float64) * h)[0]
+                return np.stack([s[:, 0] * self.cam.scale, -s[:, 1] * self.cam.scale], axis=1)
+        if self.loop:
+            a, b = (f - 1) % n, (f + 1) % n
+        else:
+            a, b = max(0, f - 1), min(n - 1, f + 1)
+        if a == b:
+            return np.zeros_like(px(f % n))
+        return (px(b) - px(a)) / float(b - a if not self.loop else 2)
 
     def _glow_density(self, k: int, density: Any = None) -> np.ndarray:
-        """Frame k's density, or with a `trail` its fading history: max(d_k, decay · h_{k−1}),
-        decay = 0.05^(1/trail), a phosphor's persistence: the particles shine at full
-        brightness and their paths fade to 5 % over `trail` frames. The history is carried
+        """Frame k's density, or with a `trail` its fading history: d_k + decay · h_{k−1},
+        decay = 0.05^(1/trail), a phosphor's persistence: the paths fade to 5 % over `trail`
+        frames, continuously (each frame's path fades along its length, see :meth:`_streak`),
+        and add up where they cross, as in a long exposure (a maximum of the two drew a seam
+        at every frame's end and bands where paths overlap). The history is carried
         from frame to frame when they are drawn in order, else rebuilt from `trail` frames.
         With a following or orbiting camera the history would smear across the image: the glow
         then has no trail."""
@@ -916,25 +1028,31 @@ class _Rasteriser:
             # A moving camera would smear a history kept in pixels: no glow trail there.
             return density(k)
         decay = 0.05 ** (1.0 / self.trail)
+        if k == 0 and not self.loop and self.rec.frames > 1:
+            # No history yet: the first frame (a GIF's thumbnail) shows the particles' paths on
+            # to the next frame, fading away from them, where it would show only dots; the
+            # history it passes on is the dots', so nothing is drawn twice.
+            h = density(0)
+            self._glow_history = (0, h)
+            return h + density(0, True)
         if self._glow_history is not None and self._glow_history[0] == k - 1:
-            h = np.maximum(density(k), decay * self._glow_history[1])
+            h = density(k) + decay * self._glow_history[1]
         else:
             h = density(max(0, k - self.trail))
             for f in range(max(0, k - self.trail) + 1, k + 1):
-                h = np.maximum(density(f), decay * h)
+                h = density(f) + decay * h
         self._glow_history = (k, h)
         return h
 
-    def _density_rgb(self, k: int) -> np.ndarray:
+    def _density_rgb(self, k: int, ahead: bool = False) -> np.ndarray:
         """(4, H, W): frame k's glow density (as _density) and its sums of the particles' own
         colours (red, green, blue in [0, 1], each weighted by the particle's density)."""
         rec = self.rec
         free = ~rec.pinned
-        col, row, wt = self._streak(k)
+        col, row, wt, owner = self._streak(k, ahead)
         c = (self.colors[free] if rec.pinned.any() else self.colors).astype(np.float32) / 255.0
-        m = col.size // max(1, c.shape[0])
-        if m > 1:
-            c = np.tile(c, (m, 1))
+        if owner is not None:
+            c = c[owner]
         r = max(1, self.radius // 2)
         out = []
         for w in (wt, c[:, 0], c[:, 1], c[:, 2]):
@@ -1601,19 +1719,17 @@ class _Rasteriser:
                 first = k - self.trail
             # Every segment in one call, in the order they used to be drawn one frame at a time
             # (oldest first, pass by pass): the same pixels, a fraction of the time.
-            parts: list[list[np.ndarray]] = [[], [], [], [], []]
-            for f in range(first, k):
-                if self._centres is None:
-                    (c0, r0), (c1, r1) = self._pix[f], self._pix[f + 1]
-                else:
-                    (c0, r0), (c1, r1) = (cam.pixels(cam.project(rec.positions[g])[0]) for g in (f, f + 1))
-                a = 0.15 + 0.6 * (f - first + 1) / max(1, k - first)
-                shade = np.rint(bg * (1 - a) + rgb[moving] * a).astype(np.uint8)
-                for dc, dr in passes:
-                    for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, shade), strict=True):
-                        part.append(v)
-            if parts[0]:
-                _draw_lines(out, *(np.concatenate(p) for p in parts))
+            if self._centres is None:
+                pix = self._pix.__getitem__
+            else:
+                def pix(g: int) -> tuple[np.ndarray, np.ndarray]:
+                    return cam.pixels(cam.project(rec.positions[g])[0])
+            c0, r0, c1, r1, _, hi = self._trail_pieces(first, k, pix, cam, moving)
+            if c0.size:
+                a = 0.15 + 0.6 * (hi - first) / max(1, k - first)
+                w0, w1 = (1 - a).astype(np.float32)[:, None, None], a.astype(np.float32)[:, None, None]
+                shade = np.rint(bg * w0 + rgb[moving][None] * w1).astype(np.uint8)
+                _draw_lines(out, *_with_offsets(c0, r0, c1, r1, shade, passes))
         if springs and rec.pairs is not None and rec.strain is not None:
             passes = width_offsets(self._line_px)
             i, j = rec.pairs
@@ -1709,29 +1825,98 @@ class _Rasteriser:
             pix = {f: cam.pixels(cam.project(rec.positions[f])[0]) for f in range(first, k + 1)}
         # Every segment in one call, in the order they used to be drawn one frame at a time
         # (oldest first, pass by pass): the same pixels, a fraction of the time.
-        parts: list[list[np.ndarray]] = [[], [], [], [], []]
         fade = self.look.trail_fade
-        for f in range(first, k):
-            (c0, r0), (c1, r1) = pix[f], pix[f + 1]
-            if fade is None:
-                shade = _TRAIL0 + min(_N_TRAIL - 1, (f - first) * _N_TRAIL // max(1, k - first))
-            else:  # look.trail_fade: the shade of the opacity at this age (see _trail_alpha)
-                a = self._trail_alpha(k, f)
-                if a < 0.5 / _N_TRAIL:
-                    continue
-                shade = _TRAIL0 + min(_N_TRAIL - 1, int(a * _N_TRAIL))
-            colors = np.full(int(moving.sum()), shade, dtype=np.uint8)
-            for dc, dr in width_offsets(self.trail_px):
-                for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, colors), strict=True):
-                    part.append(v)
-        if parts[0]:
-            _draw_lines(buf, *(np.concatenate(p) for p in parts))
+        c0, r0, c1, r1, lo, hi = self._trail_pieces(first, k, pix.__getitem__, cam, moving)
+        if not c0.size:
+            return
+        if fade is None:
+            shade = _TRAIL0 + np.minimum(_N_TRAIL - 1, ((lo - first) * _N_TRAIL // max(1, k - first)).astype(np.int64))
+        else:  # look.trail_fade: the shade of the opacity at this age (see _trail_alpha)
+            a = self._trail_alpha(k, hi - 1)
+            keep = a >= 0.5 / _N_TRAIL
+            c0, r0, c1, r1, a = c0[keep], r0[keep], c1[keep], r1[keep], a[keep]
+            shade = _TRAIL0 + np.minimum(_N_TRAIL - 1, (a * _N_TRAIL).astype(np.int64))
+        if c0.size:
+            colors = np.broadcast_to(shade.astype(np.uint8)[:, None], c0.shape)
+            _draw_lines(buf, *_with_offsets(c0, r0, c1, r1, colors, width_offsets(self.trail_px)))
 
     # ------------------------------------------------------------------ look (see _look.Look)
 
-    def _trail_alpha(self, k: int, f: int) -> float:
+    def _trail_pieces(self, first: int, k: int, pix: Any, cam: _Camera, sel: Any
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The pieces of frame k's trails from frame `first`, oldest first: (c0, r0, c1, r1),
+        each (P, M), the pixel ends of the selected (`sel`) particles' P pieces, and (P,) lo,
+        hi, the fractional frames each spans. One straight piece a frame step, pix(f) to
+        pix(f + 1), or with ``look.trail_samples`` = S > 1 the S pieces of the path's cubic
+        Hermite curve (:meth:`_sub_pixels`)."""
+        S = self.look.trail_samples
+        blocks = []
+        for f in range(first, k):
+            if S <= 1:
+                (c0, r0), (c1, r1) = pix(f), pix(f + 1)
+                blocks.append((c0[sel][None], r0[sel][None], c1[sel][None], r1[sel][None]))
+            else:
+                cs, rs = self._sub_pixels(f, cam)
+                cs, rs = cs[:, sel], rs[:, sel]
+                blocks.append((cs[:-1], rs[:-1], cs[1:], rs[1:]))
+        if not blocks:
+            none = np.zeros((0, 0))
+            return none, none, none, none, np.zeros(0), np.zeros(0)
+        c0, r0, c1, r1 = (np.concatenate([b[i] for b in blocks]) for i in range(4))
+        f = np.repeat(np.arange(first, k, dtype=np.float64), max(S, 1))
+        j = np.tile(np.arange(max(S, 1), dtype=np.float64), k - first)
+        return c0, r0, c1, r1, f + j / max(S, 1), f + (j + 1) / max(S, 1)
+
+    def _sub_pixels(self, f: int, cam: _Camera) -> tuple[np.ndarray, np.ndarray]:
+        """(S + 1, N) pixel columns and rows along every particle's path from frame f to f + 1
+        (modulo the frame count with `loop`), seen through `cam`: the cubic Hermite curve of the
+        positions and the recorded velocities times the frame interval (without velocities or
+        times, Catmull–Rom tangents from the neighbouring frames, one-sided at the ends), at
+        S = ``look.trail_samples`` + 1 evenly spaced fractions of the step. The fitted
+        camera's are kept."""
+        rec = self.rec
+        n = rec.frames
+        a, b = (f % n, (f + 1) % n) if self.loop else (f, min(f + 1, n - 1))
+        still = self._centres is None
+        if still and a in self._sub_pix:
+            return self._sub_pix[a]
+        x = rec.positions
+        p0, p1 = x[a].astype(np.float64), x[b].astype(np.float64)
+        tangents = None
+        if rec.velocities is not None and rec.times is not None and n > 1:
+            h = float(rec.times[b] - rec.times[a]) if b == a + 1 else float("nan")
+            if not (math.isfinite(h) and h > 0):
+                d = np.diff(np.asarray(rec.times, np.float64))
+                d = d[np.isfinite(d) & (d > 0)]
+                h = float(np.median(d)) if d.size else float("nan")
+            if math.isfinite(h) and h > 0:
+                tangents = (rec.velocities[a].astype(np.float64) * h, rec.velocities[b].astype(np.float64) * h)
+        if tangents is None:
+            def cr(g: int) -> np.ndarray:
+                lo, hi = ((g - 1) % n, (g + 1) % n) if self.loop else (max(0, g - 1), min(n - 1, g + 1))
+                if lo == hi:
+                    return np.zeros_like(p0)
+                return (x[hi].astype(np.float64) - x[lo].astype(np.float64)) / (2.0 if self.loop else float(hi - lo))
+            tangents = (cr(a), cr(b))
+        S = self.look.trail_samples
+        t = (np.arange(S + 1) / S)[:, None, None]
+        t2, t3 = t * t, t * t * t
+        with np.errstate(invalid="ignore", over="ignore"):
+            pts = ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * tangents[0]
+                   + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * tangents[1])
+        pts[0], pts[-1] = p0, p1  # the frames' own points, exactly
+        c, r = cam.pixels(cam.project(pts.reshape(-1, pts.shape[-1]))[0])
+        out = (c.reshape(S + 1, -1), r.reshape(S + 1, -1))
+        if still:
+            self._sub_pix[a] = out
+        return out
+
+
+    def _trail_alpha(self, k: int, f: Any) -> Any:
         """The opacity of frame k's trail segment from frame f to f + 1 under
-        ``look.trail_fade`` = φ: φ + (1 − φ)(1 − age)², age = (k − 1 − f) / trail."""
+        ``look.trail_fade`` = φ: φ + (1 − φ)(1 − age)², age = (k − 1 − f) / trail (f
+        fractional for the pieces of ``look.trail_samples``: a piece ending at frame g is as old
+        as a whole step ending there)."""
         fade = float(self.look.trail_fade or 0.0)
         age = (k - 1 - f) / max(1, self.trail)
         return fade + (1.0 - fade) * (1.0 - age) ** 2
@@ -1758,20 +1943,17 @@ class _Rasteriser:
         moving = np.flatnonzero(self._trailed)
         first, pix = self._trail_pixels(k, cam)
         h, w = out.shape[:2]
-        parts: list[list[np.ndarray]] = [[], [], [], [], []]
-        offsets = width_offsets(self.trail_px)
-        for f in range(first, k):
-            (c0, r0), (c1, r1) = pix(f), pix(f + 1)
-            a = self._trail_alpha(k, f)
-            if a <= 0.0:
-                continue
-            vals = np.concatenate([rgb[moving], np.full((moving.size, 1), a, np.float32)], axis=1).astype(np.float32)
-            for dc, dr in offsets:
-                for part, v in zip(parts, (c0[moving] + dc, r0[moving] + dr, c1[moving] + dc, r1[moving] + dr, vals), strict=True):
-                    part.append(v)
-        if not parts[0]:
+        c0, r0, c1, r1, _, hi = self._trail_pieces(first, k, pix, cam, moving)
+        if not c0.size:
             return
-        c0, r0, c1, r1, vals = (np.concatenate(p) for p in parts)
+        a = self._trail_alpha(k, hi - 1)
+        keep = a > 0.0
+        c0, r0, c1, r1, a = c0[keep], r0[keep], c1[keep], r1[keep], a[keep]
+        if not c0.size:
+            return
+        vals = np.concatenate([np.broadcast_to(rgb[moving].astype(np.float32), c0.shape + (3,)),
+                               np.broadcast_to(a.astype(np.float32)[:, None, None], c0.shape + (1,))], axis=2)
+        c0, r0, c1, r1, vals = _with_offsets(c0, r0, c1, r1, vals, width_offsets(self.trail_px))
         # The layer covers the trails' box only (clipped to the image).
         with np.errstate(invalid="ignore"):
             cols, rows = np.concatenate([c0, c1]), np.concatenate([r0, r1])

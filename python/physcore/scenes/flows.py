@@ -42,14 +42,17 @@ def lorenz(
     _check.memory("n", 72 * n, f"{_big(n)} flow points")
     scene = Scene(3, integrator="rk4" if integrator == "rk4" else "verlet", dt=step, threads=threads)
     scene.add(Flow(kind, n, spread=spread, seed=seed, method=integrator))
-    # Frames every 6 steps of the default dt (0.03 time units for Lorenz): the streaks stay smooth
-    # and the 150 frames reach t = 4.5, when the cloud has spread over the whole attractor.
-    scene.render_defaults = {"steps_per_frame": max(1, round(6 * FLOWS[kind]["max_dt"] / step))}
+    # Frames every 6 steps of the default dt (0.03 time units for Lorenz), after a lead-in of 420
+    # (t = 2.1 for Lorenz: the ball of points already drawn out into a thread along both wings,
+    # so the first frame, the thumbnail, shows the butterfly begun); the 120 frames reach
+    # t = 5.7, the cloud spread over the whole attractor by the second half.
+    max_dt = FLOWS[kind]["max_dt"]
+    scene.render_defaults = {"steps_per_frame": max(1, round(6 * max_dt / step)), "lead_in": 420 * max_dt}
     return scene
 
 
 lorenz.render_defaults = {
-    "frames": 150, "fps": 30, "steps_per_frame": 6, "size": (480, 400), "view": (-80.0, 8.0), "radius": 1,
+    "frames": 120, "fps": 30, "steps_per_frame": 6, "size": (480, 400), "view": (-80.0, 8.0), "radius": 1,
     "speed_unit": "(flow units)", "theme": "dark", "color_by": "density",  # glow: the cloud paints the attractor
     "trail": 30,  # a second of fading streaks behind each point (a still camera: a turning one would smear them)
 }

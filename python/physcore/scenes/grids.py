@@ -82,10 +82,13 @@ def double_slit(
     grid is (1.5 n) × n; the source's frequency is speed / wavelength. With ``start`` > 0 the scene
     is returned already stepped `start` seconds (0 to 100) from rest (its clock reads `start`).
     The default, 0, returns the tank at rest, and its animation (``render_defaults["lead_in"]``)
-    begins 0.3 / `speed` s later (1 s at the default speed): the plane wave's front, 0.23 m from
-    the source line to the wall, has just passed the slits (0.77 s at 0.3 m/s), so the first
-    frame shows the incoming wave train and the first wavelets behind the wall, not an empty
-    tank. The lead-in is simulated by the renderer, under its progress bar and Ctrl-C, not here.
+    begins 0.6 / `speed` s later (2 s at the default speed): the plane wave's front, 0.23 m from
+    the source line to the wall, passed the slits at 0.23 / `speed` s (0.77 s at 0.3 m/s) and
+    has spread 0.37 m beyond them, so the first frame already shows the fringes behind the
+    wall, not an empty tank. The lead-in is simulated by the renderer, under its progress bar
+    and Ctrl-C, not here. Frames are `wavelength` / `speed` / 8 s apart (``frame_time``): the
+    waves move an eighth of a wavelength a frame, smoothly rather than strobed, and the default
+    96 frames span 12 of the source's periods, so the waves loop without a jump in phase.
     ``device="gpu"`` (or ``"gpu:NAME"``) steps the grid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
     from ..grids import Oscillator, Wave
@@ -124,12 +127,17 @@ def double_slit(
         step = scene.dt
         scene.advance(start)
         scene.dt = step  # advance leaves dt at its last substep: keep the scene's own step
-    # Recorded from when the front has passed the slits (a scene returned at rest only).
-    scene.render_defaults = {"lead_in": 0.3 / speed if start == 0 else 0.0}
+    # Recorded from when the fringes have spread behind the slits (a scene returned at rest
+    # only), an eighth of the source's period a frame.
+    scene.render_defaults = {"lead_in": 0.6 / speed if start == 0 else 0.0, "frame_time": wavelength / speed / 8}
     return scene
 
 
-double_slit.render_defaults = {"frames": 100, "fps": 25, "frame_time": 1 / 25, "lead_in": 1.0, "substeps": "auto", "size": (480, 320), "style": "signed"}
+# 24 fps, a frame an eighth of a period (0.05 m / 0.3 m/s / 8 = 1/48 s): 96 frames are 12 periods
+# in 4 s. The lead-in, 2 s, starts the animation with the fringes already behind the slits.
+double_slit.render_defaults = {
+    "frames": 96, "fps": 24, "frame_time": 0.05 / 0.3 / 8, "lead_in": 2.0, "substeps": "auto", "size": (480, 320), "style": "signed",
+}
 double_slit = _stamped(double_slit, old_order=('n', 'wavelength', 'separation', 'width', 'speed', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
@@ -200,7 +208,7 @@ def smoke(
     n: int = 128,
     *,
     buoyancy: float = 4.0,
-    vorticity: float = 0.3,
+    vorticity: float = 0.1,
     obstacle: bool = True,
     tracers: int = 0,
     dt: float | None = None,
@@ -209,13 +217,19 @@ def smoke(
 ) -> Scene:
     """Smoke: a hot plume rises from a vent and curls around a disc.
 
-    The box is 1 m × 1.5 m (n × 1.5n cells, free-slip walls); the smoke is lifted by `buoyancy` (β, m/s² per unit
-    temperature) and curled by vorticity confinement (ε = `vorticity`), around a disc
-    (`obstacle`), with `tracers` passive particles (:class:`~physcore.grids.StableFluid`; none by
-    default: drawn as single pixels over the smoke they read as noise).
+    The box is 1 m × 1.5 m (n × 1.5n cells, free-slip walls, viscosity ν = 3e-4 m²/s); the
+    smoke is lifted by `buoyancy` (β, m/s² per unit temperature) and curled by vorticity
+    confinement (ε = `vorticity`), around a disc of radius 0.09 m (`obstacle`), with `tracers`
+    passive particles (:class:`~physcore.grids.StableFluid`; none by default: drawn as single
+    pixels over the smoke they read as noise). The vent is a slot 3 cm deep, 3 cm above the
+    floor and 16 cm across at x = 0.5 m, blowing smoke (density 1) at temperature 1 upwards at
+    0.3 m/s over its middle 8 cm, fading to nothing by a smoothstep over 4 cm either side (in
+    steps of 1/16, a source each), so the plume leaves it with soft sides rather than the
+    staircase of a disc of cells. Its animation (``render_defaults``) begins after a lead-in
+    of 2 s, when the plume has reached the disc and curls around it, and runs to t = 4.5 s.
     ``device="gpu"`` (or ``"gpu:NAME"``) steps the fluid on a GPU in float32 (see :class:`~physcore.Scene`).
     """
-    from ..grids import Source, StableFluid
+    from ..grids import StableFluid
 
     n = _count(n, "n", 16)
     _cells("n", (3 * n * n) // 2, arrays=40)
@@ -229,18 +243,45 @@ def smoke(
         x = (np.arange(n) + 0.5) * dx
         y = (np.arange(ny) + 0.5) * dx
         mask = (x[:, None] - 0.45) ** 2 + (y[None, :] - 0.55) ** 2 < 0.09**2
-    vent = Source(density=1.0, temperature=1.0, velocity=(0.0, 0.3), center=(0.5, 0.08), radius=0.06)
     scene = Scene(2, dt=1e-2 if dt is None else dt, threads=threads, device=device)
     scene.add(
         StableFluid(
-            (n, ny), dx, buoyancy=(0.0, buoyancy), vorticity=vorticity, obstacles=mask, sources=[vent], tracers=tracers,
-            tolerance=1e-6, name="smoke",
+            (n, ny), dx, nu=3e-4, buoyancy=(0.0, buoyancy), vorticity=vorticity, obstacles=mask, sources=_vent(n, ny, dx),
+            tracers=tracers, tolerance=1e-6, name="smoke",
         )
     )
     return scene
 
 
-smoke.render_defaults = {"frames": 120, "fps": 30, "frame_time": 1 / 30, "substeps": "auto", "size": (320, 480)}
+def _vent(n: int, ny: int, dx: float) -> list:
+    """The smoke's soft slot vent: a slot 3 cm deep, 3 cm above the floor (the rows nearest
+    that, at least one), centred on x = 0.5 m, whose strength w is 1 over its middle 8 cm and
+    falls to 0 by a smoothstep over 4 cm either side (16 cm across in all); as sources of w's
+    steps of 1/16 (density and temperature w, velocity w · 0.3 m/s up). Soft at the sides only:
+    a source sets its cells every step, so a fringe above the slot would cap the plume with its
+    own weak smoke; and raised, as the disc before it was, so that air flows in from below (on
+    the floor the slot's smoke left in a few thin strands). The full-strength middle comes
+    first (tracers start in the first source); a step that covers no cell of a coarse grid is
+    left out (the middle always covers the cells either side of x = 0.5 m)."""
+    from ..grids import Source
+
+    x = (np.arange(n) + 0.5) * dx
+    s = np.clip((np.abs(x - 0.5) - 0.04) / 0.04, 0.0, 1.0)
+    level = np.round(16 * (1.0 - s * s * (3.0 - 2.0 * s))).astype(int)  # 16: the middle
+    j0 = int(round(0.03 / dx))
+    slot = np.zeros((n, ny), dtype=int)
+    slot[:, j0 : max(j0 + 1, int(round(0.06 / dx)))] = level[:, None]
+    return [
+        Source(density=k / 16, temperature=k / 16, velocity=(0.0, 0.3 * k / 16), region=slot == k)
+        for k in range(16, 0, -1)
+        if (slot == k).any()
+    ]
+
+
+# From t = 2 s, when the plume has reached the disc and curls around it (from rest, the first
+# frames were a lone puff rising through an empty box), to t = 4.5 s in 4 s of playback: later
+# the smoke fills the box with a murk of one colour (and 120 frames to t = 5 s made 3.7 MB).
+smoke.render_defaults = {"frames": 100, "fps": 25, "frame_time": 0.025, "lead_in": 2.0, "substeps": "auto", "size": (320, 480)}
 smoke = _stamped(smoke, old_order=('n', 'buoyancy', 'vorticity', 'obstacle', 'tracers', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
 
@@ -288,8 +329,11 @@ def cavity(
 
 
 # 12 s of the spin-up from rest in 3.6 s: the dye winds into the vortex to the last frame.
+# Dithered: the dye's soft edges and the mixed middle are slow gradients, which the map's 24
+# shades drew as flat bands with visible steps.
 cavity.render_defaults = {
     "frames": 90, "fps": 25, "frame_time": 0.135, "substeps": "auto", "size": (400, 400), "field": "density", "style": "turing",
+    "dither": True,
 }
 cavity = _stamped(cavity, old_order=('n', 'reynolds', 'tracers', 'dye', 'integrator', 'dt', 'threads'), keep=1, ignored=("integrator",))
 
