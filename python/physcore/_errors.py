@@ -97,30 +97,35 @@ def _memory_error_in(e: BaseException | None) -> MemoryError | None:
 
 
 @contextmanager
-def allocating(what: str, context: str) -> Iterator[None]:
+def allocating(what: str, context: str, rename: tuple[str, ...] = ()) -> Iterator[None]:
     """Turns a bare ``MemoryError`` raised in the block (numpy's, for an array the facade
     allocates) into :class:`OutOfMemoryError` naming the call ``what``, the array and
-    ``context``, so that every refusal of memory reads the same as the core's. Usable as a
-    decorator."""
+    ``context``, so that every refusal of memory reads the same as the core's. The core's own
+    refusals named one of ``rename`` (its "save" of a system's state, read for
+    ``Scene.to_bytes``) are named ``what`` too. Usable as a decorator."""
     try:
         yield
-    except OutOfMemoryError as e:
-        # Made by an inner block of this kind (a part's constructor inside Scene.add_fluid):
-        # named again as this, the outer call, the one the user made.
-        tail = getattr(e, "_allocating", None)
-        if tail is None or e.args[0].startswith(f"{what}: "):
-            raise
-        again = OutOfMemoryError(f"{what}: {tail}", e.bytes)
-        again._allocating = tail  # type: ignore[attr-defined]
-        raise again from e.__cause__
     except Exception as raised:
         # A MemoryError, or an error raised while cleaning up after one (np.savez into a full
         # BytesIO: zipfile's close then raises "I/O operation on closed file", a ValueError).
-        e = _memory_error_in(raised)
+        e = raised if isinstance(raised, OutOfMemoryError) else _memory_error_in(raised)
         if e is None:
             raise
         if isinstance(e, OutOfMemoryError):
-            raise e from None
+            # Made by an inner block of this kind (a part's constructor inside
+            # Scene.add_fluid), or by the core under one of `rename`: named again as this, the
+            # outer call, the one the user made.
+            tail = getattr(e, "_allocating", None)
+            inner = next((r for r in rename if e.args[0].startswith(f"{r}: ")), None)
+            if tail is None and inner is not None:
+                tail = e.args[0][len(inner) + 2:]
+            if tail is None or e.args[0].startswith(f"{what}: "):
+                if e is raised:
+                    raise
+                raise e from None
+            again = OutOfMemoryError(f"{what}: {tail}", e.bytes)
+            again._allocating = tail  # type: ignore[attr-defined]
+            raise again from e.__cause__
         nbytes = getattr(e, "_total_size", -1)  # numpy's _ArrayMemoryError knows the size
         shape, dtype = getattr(e, "shape", None), getattr(e, "dtype", None)
         array = f"an array of shape {tuple(shape)}, {dtype}" if shape is not None else "an array"

@@ -563,7 +563,7 @@ def _stepper(scene: Any) -> str:
 
 def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from . import render
-    from ._errors import EnergyBooksWarning, SimulationDiverged
+    from ._errors import ContactStepWarning, EnergyBooksWarning, SimulationDiverged, StabilityWarning
     from .render import painter
 
     name, fn, kwargs = _scene_call(args, parser)
@@ -667,8 +667,10 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
 
     produce = ("frames", "steps_per_frame", "frame_time", "substeps", "color_by")
     try:
+        ours = (EnergyBooksWarning, StabilityWarning, ContactStepWarning)
         with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", EnergyBooksWarning)
+            for category in ours:
+                warnings.simplefilter("always", category)
             recording = render.record(
                 scene,
                 springs=not args.no_springs,
@@ -678,7 +680,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 **{k: v for k, v in settings.items() if k in produce},
             )
         for w in caught:  # ours said as the command's own; others as Python would have
-            if issubclass(w.category, EnergyBooksWarning):
+            if issubclass(w.category, ours):
                 print(f"physcore render: warning: {w.message}", file=sys.stderr)
             else:
                 warnings.showwarning(w.message, w.category, w.filename, w.lineno)

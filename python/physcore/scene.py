@@ -649,6 +649,7 @@ class Scene:
         self._parts: list[Part] = []
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
         self._grid_step_checked: float | None = None  # ... and against the grids' limits
+        self._stable_step_checked: float | None = None  # ... and against the terms' stability
         self._charge_checked = False  # terms on charges checked against the charges (_warn_uncharged)
         #: Animation defaults of :mod:`physcore.render` for this scene (``frames``, ``fps``,
         #: ``frame_time``, ``size``, ...), set by the ready-made scenes of :mod:`physcore.scenes`;
@@ -988,8 +989,15 @@ class Scene:
             :meth:`auto_dt` (checked once per ``dt`` value): the collisions would be wrong.
         StabilityWarning
             ``dt`` is above a grid's stability limit (:attr:`Wave.cfl_limit`,
-            :attr:`GrayScott.diffusion_limit`; checked once per ``dt`` value): the grid's field
-            will grow without bound.
+            :attr:`GrayScott.diffusion_limit`): the grid's field will grow without bound; or,
+            with an explicit fixed-step integrator (``"euler"``, ``"semi_implicit_euler"``,
+            ``"verlet"``: stable while ω·dt < h = 2; ``"rk4"``: 2√2; ``"yoshida4"``: 1.5734),
+            ``dt`` is over 4h × :meth:`auto_dt`: past the stability interval of the stiffest
+            spring or drag for certain (auto_dt's ω is a Gershgorin bound, at most twice the
+            true one, so a dt just past the interval may go unwarned), over 8× a fluid's CFL
+            step (Verlet), or over 4 closest free-fall times. The motion is then wrong or grows
+            without bound. Scenes with contacts or grids are checked by their own rules above.
+            Checked once per ``dt`` value.
         UnchargedWarning
             A term acts on charges (:class:`Coulomb`, :class:`ElectricField`, ...) and no
             particle has one, so it does nothing (checked once after each change of the terms
@@ -1003,6 +1011,7 @@ class Scene:
             self._set_reference_energy()
         self.warn_contact_step()
         self._warn_grid_step()
+        self._warn_unstable_step()
         self._warn_uncharged()
         self._exclusive(lambda sim: sim.step(n))
 
@@ -1160,6 +1169,43 @@ class Scene:
                         StabilityWarning,
                         stacklevel=3,
                     )
+
+    #: ω dt at which each fixed-step explicit integrator loses stability on an undamped
+    #: oscillation (tests/integrators/test_stability_limits.py derives each): Verlet and
+    #: semi-implicit Euler 2, RK4 2√2, Yoshida's composition 1.5734 (Yoshida 1990, its middle
+    #: substep runs backwards). Explicit Euler grows at every dt; it is warned where the
+    #: symplectic ones fail. Not warned: implicit Euler and XPBD (stable at any dt on what they
+    #: take implicitly), dopri5 (picks its own steps), Wisdom–Holman (takes the central body's
+    #: pull exactly, so a free fall is no limit on it) and Boris (its gyration is a rotation,
+    #: stable at any ω_c dt, so a magnetic field's time scale is no limit on it).
+    _STABILITY_INTERVAL = {
+        "euler": 2.0, "semi_implicit_euler": 2.0, "verlet": 2.0, "rk4": 2.0 * math.sqrt(2.0), "yoshida4": 1.5734019474,
+    }
+
+    def _warn_unstable_step(self) -> None:
+        """Warn (StabilityWarning, once per dt value) when a fixed-step explicit integrator's dt
+        is over 4h x :meth:`auto_dt` (h in :attr:`_STABILITY_INTERVAL`): ω·dt > 2h for the
+        Gershgorin bound ω = 1/(2 auto_dt) of the stiffest spring or drag, which is at most twice
+        the true ω_max, so such a dt is past the stability interval for certain (a dt between h
+        and 2h of it may be too, unwarned); or 8x a fluid's CFL step (Verlet); or 4 closest
+        free-fall times, where an orbit is not resolved. Scenes with contacts or grids have
+        their own warnings."""
+        if self._stable_step_checked == self.dt:
+            return
+        self._stable_step_checked = self.dt
+        h = self._STABILITY_INTERVAL.get(self.integrator)
+        if h is None or self.grids or self.n_particles == 0 or any(isinstance(t, Contacts) for t in self.terms):
+            return
+        limit = self._exclusive(lambda sim: sim.auto_dt())
+        if limit is not None and self.dt > 4.0 * h * limit:
+            warnings.warn(
+                f"dt: {self.dt:.3g} s is {self.dt / limit:.3g}x auto_dt() = {limit:.3g} s: with {self.integrator!r} that is past "
+                "the stability limit of this scene's stiffest spring or drag, several times a fluid's CFL step, or too "
+                "long for its closest free fall: the motion will be wrong or grow without bound; use scene.advance(), or "
+                "scene.dt = scene.auto_dt()",
+                StabilityWarning,
+                stacklevel=3,
+            )
 
     def _warn_uncharged(self) -> None:
         """Warn (UnchargedWarning) when a term acts on charges and no particle has one: such a
@@ -1794,7 +1840,15 @@ class Scene:
         Stepping after ``set_state(s)`` repeats, bit for bit, what stepping after ``s = state()``
         did, on the CPU and on the GPU path. The layout is described in
         docs/guide/architecture.md (Saving, checkpoints and the state protocol).
+
+        Raises :class:`OutOfMemoryError` (a ``MemoryError``), naming ``state``, where the
+        snapshot's arrays cannot be had now; nothing changes.
         """
+        with allocating("state", "the snapshot's arrays", rename=("save",)):
+            return self._snapshot()
+
+    def _snapshot(self) -> dict[str, Any]:
+        """:meth:`state`'s dict, unguarded."""
         sim = self._sim
         on_device = self._device != "cpu" and sim.on_device
         out: dict[str, Any] = {
@@ -2042,7 +2096,7 @@ class Scene:
         """The scene file :meth:`save` writes, as bytes (no file is written). Raises what
         :meth:`save` raises for books that are not finite, and :class:`OutOfMemoryError` (a
         ``MemoryError``) where the file's arrays or their bytes cannot be had now."""
-        with allocating("save", "the scene file's arrays"):
+        with allocating("to_bytes", "the scene file's arrays", rename=("save",)):
             buf = io.BytesIO()
             np.savez(buf, **self._file_arrays())
             return buf.getvalue()

@@ -111,7 +111,7 @@ def test_a_gpu_fluid_that_diverges_is_rolled_back() -> None:
     s.step(5)
     x0, v0, e0 = s.positions, s.velocities, s.energy().total
     s.dt = 1e100
-    with pytest.raises(pc.SimulationDiverged, match="particle"):
+    with pytest.raises(pc.SimulationDiverged, match="particle"), pytest.warns(pc.StabilityWarning, match="CFL"):
         s.step(20)
     np.testing.assert_array_equal(s.positions, x0)
     np.testing.assert_array_equal(s.velocities, v0)

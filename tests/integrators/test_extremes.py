@@ -104,7 +104,8 @@ def test_divergence_is_caught_within_one_step_and_named():
     scene = pc.Scene(2, integrator="verlet", dt=3.0)
     scene.add_particles([[0.0, 0.0], [1.5, 0.0]], pinned=[True, False])
     scene.add(pc.Springs([0], [1], stiffness=1.0, rest_length=1.0))
-    with pytest.raises(pc.SimulationDiverged) as info:
+    # The step warns first: 3 s is 8.5x auto_dt (its Gershgorin ω is √2, over by √2 here).
+    with pytest.warns(pc.StabilityWarning, match="8.49x auto_dt"), pytest.raises(pc.SimulationDiverged) as info:
         scene.step(10_000)
     e = info.value
     # Caught at the first step whose state is not finite (not later): replaying e.step − 1 steps
@@ -112,7 +113,8 @@ def test_divergence_is_caught_within_one_step_and_named():
     check = pc.Scene(2, integrator="verlet", dt=3.0)
     check.add_particles([[0.0, 0.0], [1.5, 0.0]], pinned=[True, False])
     check.add(pc.Springs([0], [1], stiffness=1.0, rest_length=1.0))
-    check.step(e.step - 1)
+    with pytest.warns(pc.StabilityWarning):
+        check.step(e.step - 1)
     assert np.isfinite(check.positions).all() and np.isfinite(check.velocities).all()
     assert e.particle == 1
     assert 0 < e.suggested_dt < 2.0  # inside the stability limit ω·dt < 2

@@ -43,6 +43,7 @@ steps, the shadow energy at h = 0.7, Euler's factor at h = 0.1) is not repeated 
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -281,10 +282,16 @@ def _code_unstable(name: str, path: str, n: int) -> Callable[[float], bool]:
     def unstable(h: float) -> bool:
         s, osc = oscillators(name, h, path, START[name])
         a0 = amplitude(s, osc)
-        try:
-            s.step(n)
-        except pc.SimulationDiverged:
-            return True
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", pc.StabilityWarning)
+            try:
+                s.step(n)
+            except pc.SimulationDiverged:
+                return True
+            finally:
+                # The step's StabilityWarning is never a false alarm: only past the limit.
+                warned = any(issubclass(w.category, pc.StabilityWarning) for w in caught)
+                assert not warned or h > LIMIT[name], f"{name}: warned at ω·dt = {h}, inside the stable range"
         return bool(np.any(amplitude(s, osc) > GAIN * a0))
 
     return unstable
@@ -468,3 +475,58 @@ def test_spring_kernels_handle_lengths_below_1e_154(length, simd_level):
     # (AVX2 takes its estimate in float32, whose range ends at 1e-38: those lanes go exact.)
     for path in PATHS:
         assert result[path] == pytest.approx(length * (1 - 0.5**2 / 2), rel=1e-12, abs=0), path
+
+
+# --------------------------------------------------------------------------------- the step's warning
+#: The integrators Scene.step warns past their stability interval (StabilityWarning), with the
+#: interval's ω·dt; the others are stable at any dt on what sets their step (implicit Euler,
+#: XPBD, Boris in a magnetic field), or pick it themselves (dopri5, Wisdom–Holman's Kepler part).
+WARNED = {"euler": 2.0, "semi_implicit_euler": 2.0, "verlet": 2.0, "rk4": ROOT8, "yoshida4": LIMIT["yoshida4"]}
+
+
+@pytest.mark.parametrize("name", [d["name"] for d in pc.INTEGRATORS])
+def test_the_step_warns_past_the_interval_and_never_inside_it(name):
+    # The anchored oscillator's Gershgorin ω is √2 ω (the spring's row counts the pinned anchor),
+    # and the warning allows auto_dt's ω up to twice the true one: so it fires from ω·dt = √2 h.
+    if name in ("dopri5", "wisdom_holman"):
+        pytest.skip(f"{name}: no oscillator step of a fixed h (adaptive, or Kepler problems only)")
+    h = WARNED.get(name, 2.0)
+    inside, _ = oscillators(name, 0.99 * h, "one", (0.6, 0.8))
+    inside.step(3)  # filterwarnings = error: a warning here fails the test
+    past, _ = oscillators(name, 1.5 * h, "one", (0.6, 0.8))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", pc.StabilityWarning)
+        try:
+            past.step(3)
+        except pc.SimulationDiverged:
+            pass
+    names = [str(w.message) for w in caught if issubclass(w.category, pc.StabilityWarning)]
+    if name in WARNED:
+        assert len(names) == 1 and names[0].startswith("dt: ") and repr(name) in names[0], names
+        past.step(1)  # once per dt value
+    else:
+        assert names == [], names
+
+
+def test_a_spring_chain_and_a_fluid_far_past_their_steps_warn_and_their_books_show_it():
+    from physcore import scenes
+
+    chain = scenes.spring_chain()
+    chain.dt = 50 * chain.suggest_dt()
+    with pytest.warns(pc.StabilityWarning, match=r"^dt: .* is 50x auto_dt"):
+        try:
+            chain.step(200)
+        except pc.SimulationDiverged:
+            pass
+    assert chain.step_count == 0 or abs(chain.energy_drift()) > 0.1
+    tank = scenes.dam_break(n=8)
+    tank.dt = 100 * tank.auto_dt()
+    with pytest.warns(pc.StabilityWarning, match="'semi_implicit_euler'"):
+        try:
+            tank.step(5)
+        except pc.SimulationDiverged:
+            pass
+    calm = scenes.spring_chain()  # its own dt, a quarter of the suggested one: no warning
+    calm.step(10)
+    calm.dt = calm.suggest_dt()
+    calm.step(10)

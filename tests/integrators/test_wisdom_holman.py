@@ -6,6 +6,7 @@ refuses."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -88,7 +89,11 @@ def test_an_orbit_about_a_fixed_centre_is_exact_at_any_step(dim, e, bound, coord
     gaps = {}
     for integrator in ("wisdom_holman", "verlet"):
         s = _scene(x, v, [1.0, 1e-3], integrator, dt=dt, coordinates=coordinates, pinned=[True, False])
-        s.step(700)
+        with warnings.catch_warnings():
+            # Verlet at e = 0.9 is warned that the step is far past the pericentre's free fall
+            # (not at e = 0.5); Wisdom–Holman never is.
+            warnings.simplefilter("ignore" if integrator == "verlet" else "error", pc.StabilityWarning)
+            s.step(700)
         gaps[integrator] = np.linalg.norm(s.positions[1] - expected)
         assert np.array_equal(s.positions[0], np.zeros(dim))
     assert gaps["wisdom_holman"] < bound, gaps

@@ -191,7 +191,7 @@ def test_diverging_video_render_leaves_no_file(tmp_path):
     scene = pc.Scene(dim=2, dt=0.05)
     scene.add_particles([[0.0, 0.0], [0.1, 0.0]], [[0.0, 0.0], [1.0, 0.0]], pinned=[True, False])
     scene.add(pc.Springs([0], [1], stiffness=1e9))
-    with pytest.raises(pc.SimulationDiverged):
+    with pytest.raises(pc.SimulationDiverged), pytest.warns(pc.StabilityWarning, match="stiffest spring"):
         pc.render.save(scene, tmp_path / "boom.mp4", frames=20, steps_per_frame=50)
     assert list(tmp_path.iterdir()) == []
 

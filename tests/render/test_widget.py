@@ -492,6 +492,7 @@ def test_a_gravity_of_zero_gets_no_slider():
         w.set_param("gravity", 9.81)
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 @pytest.mark.parametrize("background", [True, False])
 def test_a_diverging_scene_pauses_with_its_message(background):
     from concurrent.futures import wait

@@ -255,8 +255,8 @@ def test_divergence_is_reported_and_rolled_back(integrator):
     s.step(50)  # fine at ω·dt = 0.1
     assert np.all(np.isfinite(s.positions))
     before = _snapshot(s)
-    s.dt = 1e-3  # ω·dt = 1000: far outside every method's stability region
-    with pytest.raises(pc.SimulationDiverged) as info:
+    s.dt = 1e-3  # ω·dt = 1000: far outside every method's stability region, and warned so
+    with pytest.warns(pc.StabilityWarning, match=f"with {integrator!r}"), pytest.raises(pc.SimulationDiverged) as info:
         s.step(100_000)
     e = info.value
     # Rolled back to where the failing call started.
@@ -393,7 +393,7 @@ def test_spring_divergence_advice_names_only_remedies_the_scene_has():
     # "t = 1.026640e0 s". Springs are taken implicitly by implicit_euler: that is offered.
     s = _stiff_scene("verlet")
     s.dt = 1e-3
-    with pytest.raises(pc.SimulationDiverged) as info:
+    with pytest.warns(pc.StabilityWarning), pytest.raises(pc.SimulationDiverged) as info:
         s.step(100_000)
     msg = str(info.value)
     assert "softening" not in msg and "implicit_euler" in msg, msg

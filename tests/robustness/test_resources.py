@@ -232,7 +232,7 @@ lift()
 assert "40,000 rigid bodies" in str(e), str(e)
 assert scene.step_count == 2 and np.array_equal(b.positions, x)
 cap(16)
-refused(lambda: pickle.dumps(scene), "save")
+refused(lambda: pickle.dumps(scene), "to_bytes")
 lift()
 data = pickle.dumps(scene)
 cap(16)
@@ -442,9 +442,9 @@ def dump():
 # so each one meets the cap and the ladder is the same from run to run. And a worker thread's
 # arena grows by reserving 64 MB of address space at a time, so under the cap a small buffer of a
 # worker failed where the main arena had room (an artefact of RLIMIT_AS, not of memory): one arena.
-# What a save may be refused as: the file's arrays ("save"), or the reads it makes (the
-# particles' state, a grid's fields), each named as the call that reads it names it.
-SAVE = ("save", "field", "positions", "velocities", "masses", "integrator_cache")
+# What dump() (Scene.to_bytes) may be refused as: the file's arrays ("to_bytes"), or the reads
+# it makes (the particles' state, a grid's fields), each named as the call that reads it names it.
+SAVE = ("to_bytes", "field", "positions", "velocities", "masses", "integrator_cache")
 
 FIXED_MMAP = {"MALLOC_MMAP_THRESHOLD_": str(128 * 1024), "MALLOC_ARENA_MAX": "1"}
 
@@ -555,7 +555,7 @@ g = np.stack(np.meshgrid(*[np.arange(35)] * 3, indexing="ij"), -1).reshape(-1, 3
 scene = pc.Scene(3, dt=1e-3)
 scene.add(pc.Gravity([0.0, 0.0, -9.81]))
 b = pc.Bodies("ball", size=np.full(n, 0.5), positions=g)
-""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
+""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("to_bytes", "field")),
       ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
     "bodies_2d": ("""
 n = 60_000
@@ -563,7 +563,7 @@ g = np.stack(np.meshgrid(np.arange(250), np.arange(240), indexing="ij"), -1).res
 scene = pc.Scene(2, dt=1e-3)
 scene.add(pc.Gravity([0.0, -9.81]))
 b = pc.Bodies("box", size=np.full((n, 2), 0.5), positions=g)  # half widths: touching
-""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("save", "field")),
+""", [("scene.add(b)", ("add", "add_bodies")), ("scene.step(1)", ("step",)), ("dump()", ("to_bytes", "field")),
       ("pc.Scene.from_bytes(data)", ("load", "add", "add_bodies"))]),
     "xpbd": ("""
 n = 1_000_000

@@ -164,6 +164,7 @@ def explode(k: float, dt: float) -> pc.Scene:
     return chain(k, dt)
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 def test_diverging_and_failing_runs_are_rows(client):
     params = [{"k": 1000.0, "dt": 1e-4}, {"k": 1e9, "dt": 0.05}, {"k": -1.0, "dt": 1e-4}]
     for c in ("serial", client):
@@ -602,6 +603,7 @@ def test_contact_sheet_refuses_bad_arguments(tmp_path, kwargs, error, match):
     assert not (tmp_path / "s.gif").exists()
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 def test_contact_sheet_tile_that_diverges_writes_nothing(tmp_path):
     with pytest.raises(pc.SimulationDiverged):
         pc.render.contact_sheet([chain(1000.0, 1e-4), chain(1e9, 0.05)], tmp_path / "s.gif", frames=3, steps_per_frame=50)
@@ -697,6 +699,7 @@ def physics(df):
     return df[[c for c in df.columns if c not in ("wall_s", "worker")]]
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 @pytest.mark.parametrize("how", ["int", "callable"])
 @pytest.mark.parametrize("where", ["serial", "cluster"])
 def test_a_sweep_that_steps_gives_the_rows_of_measure_stepping_alone(how, where, request, monkeypatch):
@@ -733,6 +736,7 @@ def test_a_sweep_that_steps_gives_the_rows_of_measure_stepping_alone(how, where,
         assert set(got["worker"]) <= set(_workers(c))
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 def test_a_sweep_that_steps_resumes_running_only_the_missing_runs(tmp_path):
     out = tmp_path / "runs.csv"
     ref = pc.sweep(varied, VARIED, measure=stepped_then_looked, client="serial", seed=5, progress=False)
@@ -777,6 +781,7 @@ def counted_look(scene) -> dict:
     return looked(scene)
 
 
+@pytest.mark.filterwarnings("ignore::physcore.StabilityWarning")  # diverges on purpose; warned before it steps
 def test_an_interrupted_sweep_that_steps_keeps_the_rows_made_and_resumes(tmp_path):
     # In this process the rows of a sweep with steps= arrive one by one: Ctrl-C during the 4th
     # run's measure keeps the three before it in `out`, and the resume runs only the others.

@@ -84,7 +84,7 @@ def _cells(args: str, cells: float, arrays: int = 6) -> None:
 
 def _big(count: float) -> str:
     if count < 1e15:
-        return str(count)
+        return str(math.ceil(count))  # an estimate may be fractional; a count is whole
     if isinstance(count, int):  # may be beyond float64: give its order of magnitude
         return f"about 1e{int(count.bit_length() * math.log10(2))}"
     return f"{count:.3g}"
