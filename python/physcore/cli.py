@@ -342,9 +342,15 @@ def _substeps_arg(text: str) -> Any:
     return text if text == "auto" else _positive_int(text)
 
 
-def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace) -> tuple[int, tuple[int, int]]:
+def _defaults(fn: Callable[..., Any], scene: Any = None) -> dict[str, Any]:
+    """The scene function's ``render_defaults``, updated by the built scene's own where there is
+    one: a scene function sets some from its arguments (double_slit's frame_time from ``speed``)."""
+    return {**(getattr(fn, "render_defaults", None) or {}), **(getattr(scene, "render_defaults", None) or {})}
+
+
+def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace, scene: Any = None) -> tuple[int, tuple[int, int]]:
     """Frames and (width, height): the command line's, else the scene's render_defaults."""
-    d = dict(getattr(fn, "render_defaults", None) or {})
+    d = _defaults(fn, scene)
     frames = args.frames if args.frames is not None else int(d.get("frames", _FALLBACK["frames"]))
     size = args.size if args.size is not None else d.get("size", _FALLBACK["size"])
     if isinstance(size, str):
@@ -368,14 +374,15 @@ def _too_many_steps(frame_time: float, dt: float) -> _UsageError:
     )
 
 
-def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float) -> dict[str, Any]:
-    """Animation settings: command-line options, else the scene's render_defaults, else fallbacks.
+def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float, scene: Any = None) -> dict[str, Any]:
+    """Animation settings: command-line options, else the built scene's render_defaults (the
+    function's, updated by what it set from its arguments), else fallbacks.
 
     The result holds either ``steps_per_frame`` (fixed steps of dt) or ``frame_time`` (automatic
     substeps: ``scene.advance``), never both.
     """
-    d = dict(getattr(fn, "render_defaults", None) or {})
-    frames, size = _frames_and_size(fn, args)
+    d = _defaults(fn, scene)
+    frames, size = _frames_and_size(fn, args, scene)
     auto = str(d.get("substeps", "")).lower() == "auto"
     frame_time = args.frame_time if args.frame_time is not None else d.get("frame_time")
     stepping: dict[str, Any]
@@ -565,6 +572,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     from . import render
     from ._errors import ContactStepWarning, EnergyBooksWarning, SimulationDiverged, StabilityWarning
     from .render import painter
+    from .render._recording import wants_velocities
 
     name, fn, kwargs = _scene_call(args, parser)
     out = Path(args.output if args.output is not None else f"{name}.gif")
@@ -623,7 +631,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         except ValueError as e:
             parser.error(str(e))
     try:
-        settings = _render_settings(fn, args, scene.dt)
+        settings = _render_settings(fn, args, scene.dt, scene)
         if args.view is not None and int(getattr(scene, "dim", 0)) == 2:  # before simulating
             parser.error("--view: a 2D scene is drawn in its plane; --view AZ,EL turns 3D scenes only")
         if "camera" in settings:  # before simulating: orbit needs 3D, follow:I a particle I
@@ -676,7 +684,8 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 springs=not args.no_springs,
                 progress=not args.quiet,
                 on_frame=on_frame,
-                velocities=settings.get("arrows", "none") != "none",
+                # Arrows, swept areas and curved trail pieces (pythagorean's) draw from them.
+                velocities=wants_velocities(settings.get("arrows"), _defaults(fn, scene).get("look"), settings.get("trail")),
                 **{k: v for k, v in settings.items() if k in produce},
             )
         for w in caught:  # ours said as the command's own; others as Python would have

@@ -410,14 +410,19 @@ def test_a_3d_tank_is_drawn_as_glass_without_a_stipple():
     assert grain(discs) > 10 * grain(glass)  # what it replaces
 
 
-def _circling(frames_per_turn: int, turns: float = 1.0, velocities: bool = True) -> pc.render.Recording:
+def _circling_scene(dt: float = 1e-3) -> pc.Scene:
     """A bob on a circle of radius 1 about a pinned centre (a zero-length spring, ω = 1:
-    uniform circular motion), recorded `frames_per_turn` frames a period, its positions (and
-    with `velocities` its velocities) those of the exact circle."""
-    s = pc.Scene(2, dt=1e-3)
+    uniform circular motion)."""
+    s = pc.Scene(2, dt=dt)
     s.add_particles([[0.0, 0.0], [1.0, 0.0]], [[0.0, 0.0], [0.0, 1.0]], masses=1.0, pinned=[True, False])
     s.add(pc.Springs([0], [1], stiffness=1.0, rest_length=0.0))
-    rec = pc.render.record(s, frames=int(frames_per_turn * turns) + 1, frame_time=2 * np.pi / frames_per_turn)
+    return s
+
+
+def _circling(frames_per_turn: int, turns: float = 1.0, velocities: bool = True) -> pc.render.Recording:
+    """:func:`_circling_scene` recorded `frames_per_turn` frames a period, its positions (and
+    with `velocities` its velocities) those of the exact circle."""
+    rec = pc.render.record(_circling_scene(), frames=int(frames_per_turn * turns) + 1, frame_time=2 * np.pi / frames_per_turn)
     # The integrator's orbit is a near circle (0.9 % eccentric at dt = 1e-3): the exact one.
     th = 2 * np.pi * np.arange(rec.frames) / frames_per_turn
     centre = rec.positions[0, 0].astype(np.float64)
@@ -491,6 +496,43 @@ def test_trail_samples_default_leaves_the_trail_as_it_was():
         curved = list(pc.render.frames(rec, look={**look, "trail_samples": 8}, **rest, **opts))
         assert all(np.array_equal(a, b) for a, b in zip(base, same, strict=True))
         assert not np.array_equal(base[-1], curved[-1])
+
+
+def test_trail_samples_have_the_velocities_recorded_for_them():
+    # Simulating a scene to draw it, gif() records the velocities when the trail is drawn as
+    # look.trail_samples pieces a frame step, so they follow the true tangents, not Catmull–Rom's
+    # from the neighbouring frames: at 45° a frame the drawn ring of the bob's path is as thin
+    # as a recording with velocities draws it, well under what one without them draws.
+    turn = 2 * np.pi
+    dt = turn / 8 / 400  # whole steps a frame
+    opts = dict(size=(320, 320), trail=8, color_by="none", colors=["#808080", "#ff4000"], springs=False, colorbar=False,
+                antialias=False, radius=2, look={"trail_samples": 8})
+    drawn = list(pc.render.frames(_circling_scene(dt), frames=9, frame_time=turn / 8, **opts))[-1]
+
+    def recorded(velocities: bool) -> np.ndarray:
+        rec = pc.render.record(_circling_scene(dt), frames=9, frame_time=turn / 8, velocities=velocities)
+        assert (rec.velocities is not None) == velocities
+        return list(pc.render.frames(rec, **opts))[-1]
+
+    def ring(img: np.ndarray) -> float:  # the 90th percentile of the trail pixels' distances off the ring
+        drawn = np.abs(img.astype(int) - img[0, 0]).sum(axis=2) > 30
+        drawn[-40:] = False  # the clock and the scale bar
+        rows, cols = np.nonzero(drawn)
+        dot_r, dot_c = np.nonzero(np.abs(img.astype(int) - 128).sum(axis=2) < 10)  # the centre, a grey disc
+        d = np.hypot(rows - dot_r.mean(), cols - dot_c.mean())
+        d = d[d > 20]
+        return float(np.percentile(np.abs(d - np.median(d)), 90))
+
+    with_v, without = recorded(True), recorded(False)
+    assert np.array_equal(drawn, with_v)
+    assert not np.array_equal(drawn, without)
+    assert ring(drawn) < 2.0 and ring(drawn) < 0.6 * ring(without)
+    # record() asks for them as gif() does: a trail of trail_samples pieces (none without a trail).
+    for defaults, wanted in (({"trail": 8, "look": {"trail_samples": 8}}, True), ({"trail": 8, "look": {"trail_samples": 1}}, False),
+                             ({"trail": 0, "look": {"trail_samples": 8}}, False), ({"trail": 8}, False)):
+        s = _circling_scene()
+        s.render_defaults = defaults
+        assert (pc.render.record(s, frames=2, frame_time=0.01).velocities is not None) == wanted, defaults
 
 
 @pytest.mark.parametrize("bad, err", [(0, ValueError), (65, ValueError), (2.5, TypeError), (True, TypeError), ("8", TypeError)])

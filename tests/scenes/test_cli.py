@@ -374,6 +374,29 @@ def test_frame_time_option(tmp_path, capsys, tanks):
     assert "20 steps of dt = 0.001 s, 5 per frame" in capsys.readouterr().out
 
 
+def test_a_frame_time_the_scene_sets_from_its_arguments_wins_over_the_functions(tmp_path, capsys, tanks, monkeypatch):
+    # double_slit sets frame_time = wavelength / speed / 8 on the scene it builds: the CLI's
+    # --param speed=... must change the frame spacing, as render.gif(scene) does.
+    registry = dict(cli._registry())
+    tank = registry["tank"]
+
+    def tank_timed(n: int = 4, frame_time: float = 0.05):
+        made = tank(n)
+        made.scene.render_defaults = {"frame_time": frame_time}
+        return made
+
+    tank_timed.render_defaults = dict(tank.render_defaults)  # frame_time 0.05
+    registry["tank_timed"] = tank_timed
+    monkeypatch.setattr(cli, "_registry", lambda: registry)
+    out = tmp_path / "t.gif"
+    assert main(["render", "tank_timed", "-o", str(out), "--param", "frame_time=0.03", "--frames", "3", "-q"]) == 0
+    assert tanks[-1].advanced == [0.03, 0.03]
+    # The command line's own --frame-time still wins over both.
+    assert main(["render", "tank_timed", "-o", str(out), "--param", "frame_time=0.03", "--frame-time", "0.02",
+                 "--frames", "3", "-q"]) == 0
+    assert tanks[-1].advanced == [0.02, 0.02]
+
+
 @pytest.mark.parametrize(
     "extra",
     [
@@ -500,3 +523,15 @@ def test_a_bad_option_is_named_as_typed(tmp_path, monkeypatch, capsys, option, m
     assert main(["render", "projectile", *option] + SMALL) == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_cli_draws_curved_trail_pieces_from_the_velocities_as_the_library_does(tmp_path):
+    # pythagorean draws each trail step as 8 Hermite pieces (look.trail_samples), which need the
+    # recorded velocities; the CLI once recorded them only for arrows and drew Catmull-Rom curves.
+    cli_out, lib_out = tmp_path / "cli.gif", tmp_path / "lib.gif"
+    assert main(["render", "pythagorean", "-o", str(cli_out), "--frames", "12", "-q"]) == 0
+    render.gif(pc.scenes.pythagorean(), lib_out, frames=12)
+    no_velocities = tmp_path / "nov.gif"
+    render.gif(render.record(pc.scenes.pythagorean(), frames=12, velocities=False), no_velocities)
+    assert cli_out.read_bytes() == lib_out.read_bytes()
+    assert cli_out.read_bytes() != no_velocities.read_bytes()  # the velocities do change the trails

@@ -436,8 +436,9 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     check_look_particles(look, n_colors, dim)
     if look.full_colour and not antialias and bound.arguments["antialias"] is None:
         antialias = True  # the look's strokes, shading, backdrop and wedges are drawn in full colour
-    # The swept areas follow the body's path between frames by its recorded velocities.
-    velocities = arrows is not None or look.swept_areas is not None
+    # Arrows, and the swept areas and look.trail_samples' curves, which follow the bodies' paths
+    # between frames by their recorded velocities.
+    velocities = _recording.wants_velocities(arrows, look, trail)
     path = None if fmt == "frames" else _check_path(path, fmt)
     if isinstance(scene, _recording.Recording):
         rec = scene

@@ -38,9 +38,10 @@ class Look:
     trail_samples : int, optional
         Points per frame step along each trail, 1 to 64: with more than 1, the path between
         two frames is the cubic Hermite curve of the recorded positions and velocities at both
-        ends (without velocities, Catmull–Rom tangents from the neighbouring frames), drawn
-        as that many segments, so a close pass that turns sharply between two frames reads as
-        a curve, not a corner. Default 1: one straight segment a frame step.
+        ends (:func:`gif` records the velocities for it; a recording without them takes
+        Catmull–Rom tangents from the neighbouring frames), drawn as that many segments, so a
+        close pass that turns sharply between two frames reads as a curve, not a corner.
+        Default 1: one straight segment a frame step.
     trail_of : sequence of int, optional
         The particles whose paths the trail draws (a chain's free end, a pendulum's bob: one
         path that reads where every particle's would clutter). Default: every moving one.

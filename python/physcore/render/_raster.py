@@ -506,10 +506,10 @@ GLOW_MAX_SAMPLES = 256
 GLOW_BUDGET = 2_000_000
 
 
-def _hermite_px(p0: np.ndarray, t0: np.ndarray, p1: np.ndarray, t1: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Cubic Hermite points between (M, 2) pixel points p0 and p1 with (M, 2) tangents t0, t1
-    (pixels per frame step), at (M,) fractions `t` of the step (one per row)."""
-    t = t[:, None]
+def _hermite(p0: np.ndarray, t0: np.ndarray, p1: np.ndarray, t1: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Cubic Hermite points between points p0 and p1 with tangents t0, t1 (per frame step), at
+    fractions `t` of the step, all broadcast together: `t` shaped (M, 1) for one fraction a row
+    of (M, D) points, (S, 1, 1) for S fractions along every one."""
     t2, t3 = t * t, t * t * t
     return (2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * t0 + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * t1
 
@@ -536,7 +536,7 @@ def _path_samples(p0: np.ndarray, t0: np.ndarray, p1: np.ndarray, t1: np.ndarray
     frac = (np.arange(owner.size) - first[owner] + 1) / m[owner]
     tan0, tan1 = np.nan_to_num(t0[owner]), np.nan_to_num(t1[owner])
     with np.errstate(invalid="ignore", over="ignore"):
-        pts = _hermite_px(p0[owner], tan0, p1[owner], tan1, frac)
+        pts = _hermite(p0[owner], tan0, p1[owner], tan1, frac[:, None])
     return pts[:, 0], pts[:, 1], frac, owner
 
 
@@ -944,13 +944,13 @@ class _Rasteriser:
         sample; None: one sample each, in order) to splat for frame k's glow: the free particles
         where they are or, with a `trail` and a still camera, their paths from frame k − 1
         sampled every GLOW_STEP pixels (:func:`_path_samples`: the cubic Hermite curve of the
-        recorded velocities, or of Catmull–Rom tangents from the neighbouring frames, so a
-        point that moves 80 pixels a frame round a bend draws the bend, not its chord). Each
-        sample weighs its share of the path's length (a pixel's worth at most) times the
-        trail's decay over its age within the frame, so the glow's history is one continuous
-        fading line: neither dots nor a seam at each frame. `ahead`: the paths on to frame
-        k + 1 instead, fading away from frame k (what the first frame, with no history, shows of
-        the motion: :meth:`_glow_density`)."""
+        recorded velocities, or of Catmull–Rom tangents from the neighbouring frames, see
+        :meth:`_tangents`, so a point that moves 80 pixels a frame round a bend draws the bend,
+        not its chord). Each sample weighs its share of the path's length (a pixel's worth at
+        most) times the trail's decay over its age within the frame, so the glow's history is
+        one continuous fading line: neither dots nor a seam at each frame. `ahead`: the paths
+        on to frame k + 1 instead, fading away from frame k (what the first frame, with no
+        history, shows of the motion: :meth:`_glow_density`)."""
         rec = self.rec
         cam = self.cam_at(k)
         free = ~rec.pinned
@@ -977,7 +977,12 @@ class _Rasteriser:
         cache[k] = np.stack([col, row], axis=1)
         a, b = (k, k + 1) if ahead else (k - 1, k)
         p0, p1 = px(a), px(b)
-        t0, t1 = self._tangent_px(a, b, px, sel), self._tangent_px(b, a, px, sel)
+
+        def velocity_px(g: int, h: float) -> np.ndarray:  # pixels per frame step
+            s = self.cam.project(rec.velocities[g % rec.frames][sel].astype(np.float64) * h)[0]
+            return np.stack([s[:, 0] * self.cam.scale, -s[:, 1] * self.cam.scale], axis=1)
+
+        t0, t1 = self._tangents(a, b, px, velocity_px)
         cs, rs, frac, owner = _path_samples(p0, t0, p1, t1)
         with np.errstate(invalid="ignore"):
             length = np.hypot(p1[:, 0] - p0[:, 0], p1[:, 1] - p0[:, 1])
@@ -987,32 +992,41 @@ class _Rasteriser:
         w = (share[owner] * decay ** (frac if ahead else 1.0 - frac)).astype(np.float32)
         return cs, rs, w, owner
 
-    def _tangent_px(self, f: int, other: int, px: Any, sel: Any) -> np.ndarray:
-        """(M, 2) tangents, in pixels per frame step, at frame f of the path between frames f
-        and `other` (f ± 1; frame indices taken modulo the frame count, a periodic recording's):
-        the recorded velocities (times the frame interval) where there are velocities and
-        times, else Catmull–Rom's (p(f + 1) − p(f − 1)) / 2 of the pixel positions `px(frame)`
-        (one-sided at the recording's ends). `sel` picks the particles."""
-        rec = self.rec
-        n = rec.frames
-        lo, hi = min(f, other), max(f, other)
-        if rec.velocities is not None and rec.times is not None:
-            t = rec.times
-            h = float(t[hi % n] - t[lo % n]) if 0 <= lo and hi < n else float("nan")
-            if not (math.isfinite(h) and h > 0) and n > 1:
-                d = np.diff(np.asarray(t, np.float64))
-                d = d[np.isfinite(d) & (d > 0)]
-                h = float(np.median(d)) if d.size else float("nan")
-            if math.isfinite(h) and h > 0:
-                s = self.cam.project(rec.velocities[f % n][sel].astype(np.float64) * h)[0]
-                return np.stack([s[:, 0] * self.cam.scale, -s[:, 1] * self.cam.scale], axis=1)
-        if self.loop:
-            a, b = (f - 1) % n, (f + 1) % n
-        else:
-            a, b = max(0, f - 1), min(n - 1, f + 1)
-        if a == b:
-            return np.zeros_like(px(f % n))
-        return (px(b) - px(a)) / float(b - a if not self.loop else 2)
+    def _tangents(self, a: int, b: int, at: Any, velocity: Any) -> tuple[np.ndarray, np.ndarray]:
+        """The tangents (per frame step) at both ends of the path from frame a to b = a + 1
+        (taken modulo the frame count with `loop`): `velocity(g, h)`, frame g's recorded
+        velocities times the frame interval h (:meth:`_frame_interval`) in the units of
+        `at`, where there are velocities and times, else Catmull–Rom's of the positions
+        `at(frame)` (:meth:`_catmull_rom`)."""
+        h = None if self.rec.velocities is None else self._frame_interval(a, b)
+        if h is None:
+            return self._catmull_rom(a, at), self._catmull_rom(b, at)
+        return velocity(a, h), velocity(b, h)
+
+    def _frame_interval(self, a: int, b: int) -> float | None:
+        """The time from frame a to frame b = a + 1 that turns recorded velocities into tangents
+        per frame step: the difference of their times, or where that is not a positive number
+        (a step across a periodic recording's end, or past it) the median positive interval;
+        None where there is none (no times, one frame)."""
+        t = self.rec.times
+        if t is None:
+            return None
+        h = float(t[b] - t[a]) if 0 <= a and b == a + 1 and b < self.rec.frames else float("nan")
+        if not (math.isfinite(h) and h > 0):
+            d = np.diff(np.asarray(t, np.float64))
+            d = d[np.isfinite(d) & (d > 0)]
+            h = float(np.median(d)) if d.size else float("nan")
+        return h if math.isfinite(h) and h > 0 else None
+
+    def _catmull_rom(self, g: int, at: Any) -> np.ndarray:
+        """Catmull–Rom's tangent (per frame step) at frame g of the positions `at(frame)`:
+        (at(g + 1) − at(g − 1)) / 2, frames taken modulo the frame count with `loop`, else
+        one-sided at the recording's ends (zero for a recording of one frame)."""
+        n = self.rec.frames
+        lo, hi = ((g - 1) % n, (g + 1) % n) if self.loop else (max(0, g - 1), min(n - 1, g + 1))
+        if lo == hi:
+            return np.zeros_like(at(g % n))
+        return (at(hi) - at(lo)) / (2.0 if self.loop else float(hi - lo))
 
     def _glow_density(self, k: int, density: Any = None) -> np.ndarray:
         """Frame k's density, or with a `trail` its fading history: d_k + decay · h_{k−1},
@@ -1712,19 +1726,9 @@ class _Rasteriser:
             self._draw_faded_trail(out, k, cam, rgb)
         elif self.trail and (k > 0 or self.loop):
             moving = self._trailed
-            first = max(0, k - self.trail)
-            if self._centres is None and self._pix is None:
-                self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
-            if self.loop and self._centres is None:  # periodic: the trail runs on from the end
-                first = k - self.trail
             # Every segment in one call, in the order they used to be drawn one frame at a time
             # (oldest first, pass by pass): the same pixels, a fraction of the time.
-            if self._centres is None:
-                pix = self._pix.__getitem__
-            else:
-                def pix(g: int) -> tuple[np.ndarray, np.ndarray]:
-                    return cam.pixels(cam.project(rec.positions[g])[0])
-            c0, r0, c1, r1, _, hi = self._trail_pieces(first, k, pix, cam, moving)
+            first, c0, r0, c1, r1, _, hi = self._trail_pieces(k, cam, moving)
             if c0.size:
                 a = 0.15 + 0.6 * (hi - first) / max(1, k - first)
                 w0, w1 = (1 - a).astype(np.float32)[:, None, None], a.astype(np.float32)[:, None, None]
@@ -1806,35 +1810,14 @@ class _Rasteriser:
         """The paths of the moving particles over the `trail` frames before k, oldest (palest)
         first: one segment per particle per frame step, under everything that moves; seen
         through frame k's camera `cam`."""
-        rec = self.rec
         moving = self._trailed
-        first = max(0, k - self.trail)
-        if self._centres is None:
-            if self._pix is None:
-                self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
-            pix = self._pix
-            if self.loop:  # a periodic recording: the trail runs on from the end (pix[-1] ...)
-                first = k - self.trail
-        elif self._bases is None:
-            # Following: the paths' screen-plane points are fixed, only the centre moves.
-            if self._pix is None:
-                self._pix = [self.cam.project(rec.positions[f])[0] for f in range(rec.frames)]
-            pix = {f: cam.pixels(self._pix[f]) for f in range(first, k + 1)}
-        else:
-            # Orbiting: the paths turn with the view, so they are projected again.
-            pix = {f: cam.pixels(cam.project(rec.positions[f])[0]) for f in range(first, k + 1)}
         # Every segment in one call, in the order they used to be drawn one frame at a time
         # (oldest first, pass by pass): the same pixels, a fraction of the time.
-        fade = self.look.trail_fade
-        c0, r0, c1, r1, lo, hi = self._trail_pieces(first, k, pix.__getitem__, cam, moving)
-        if not c0.size:
-            return
-        if fade is None:
+        if self.look.trail_fade is None:
+            first, c0, r0, c1, r1, lo, _ = self._trail_pieces(k, cam, moving)
             shade = _TRAIL0 + np.minimum(_N_TRAIL - 1, ((lo - first) * _N_TRAIL // max(1, k - first)).astype(np.int64))
         else:  # look.trail_fade: the shade of the opacity at this age (see _trail_alpha)
-            a = self._trail_alpha(k, hi - 1)
-            keep = a >= 0.5 / _N_TRAIL
-            c0, r0, c1, r1, a = c0[keep], r0[keep], c1[keep], r1[keep], a[keep]
+            c0, r0, c1, r1, a = self._faded_pieces(k, cam, moving, lambda a: a >= 0.5 / _N_TRAIL)
             shade = _TRAIL0 + np.minimum(_N_TRAIL - 1, (a * _N_TRAIL).astype(np.int64))
         if c0.size:
             colors = np.broadcast_to(shade.astype(np.uint8)[:, None], c0.shape)
@@ -1842,13 +1825,15 @@ class _Rasteriser:
 
     # ------------------------------------------------------------------ look (see _look.Look)
 
-    def _trail_pieces(self, first: int, k: int, pix: Any, cam: _Camera, sel: Any
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The pieces of frame k's trails from frame `first`, oldest first: (c0, r0, c1, r1),
-        each (P, M), the pixel ends of the selected (`sel`) particles' P pieces, and (P,) lo,
-        hi, the fractional frames each spans. One straight piece a frame step, pix(f) to
-        pix(f + 1), or with ``look.trail_samples`` = S > 1 the S pieces of the path's cubic
-        Hermite curve (:meth:`_sub_pixels`)."""
+    def _trail_pieces(self, k: int, cam: _Camera, sel: Any
+                      ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The pieces of frame k's trails seen through `cam`, oldest first: the first frame they
+        start from (:meth:`_trail_pixels`), (c0, r0, c1, r1), each (P, M), the pixel ends of
+        the selected (`sel`) particles' P pieces, and (P,) lo, hi, the fractional frames each
+        spans. One straight piece a frame step, pix(f) to pix(f + 1), or with
+        ``look.trail_samples`` = S > 1 the S pieces of the path's cubic Hermite curve
+        (:meth:`_sub_pixels`)."""
+        first, pix = self._trail_pixels(k, cam)
         S = self.look.trail_samples
         blocks = []
         for f in range(first, k):
@@ -1861,17 +1846,27 @@ class _Rasteriser:
                 blocks.append((cs[:-1], rs[:-1], cs[1:], rs[1:]))
         if not blocks:
             none = np.zeros((0, 0))
-            return none, none, none, none, np.zeros(0), np.zeros(0)
+            return first, none, none, none, none, np.zeros(0), np.zeros(0)
         c0, r0, c1, r1 = (np.concatenate([b[i] for b in blocks]) for i in range(4))
         f = np.repeat(np.arange(first, k, dtype=np.float64), max(S, 1))
         j = np.tile(np.arange(max(S, 1), dtype=np.float64), k - first)
-        return c0, r0, c1, r1, f + j / max(S, 1), f + (j + 1) / max(S, 1)
+        return first, c0, r0, c1, r1, f + j / max(S, 1), f + (j + 1) / max(S, 1)
+
+    def _faded_pieces(self, k: int, cam: _Camera, sel: Any, keep: Any
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Frame k's trail pieces (:meth:`_trail_pieces`: c0, r0, c1, r1) and (P,) opacities
+        under ``look.trail_fade`` (:meth:`_trail_alpha`), only those whose opacity passes
+        `keep` (a mask of the opacities)."""
+        _, c0, r0, c1, r1, _, hi = self._trail_pieces(k, cam, sel)
+        a = self._trail_alpha(k, hi - 1)
+        kept = keep(a)
+        return c0[kept], r0[kept], c1[kept], r1[kept], a[kept]
 
     def _sub_pixels(self, f: int, cam: _Camera) -> tuple[np.ndarray, np.ndarray]:
         """(S + 1, N) pixel columns and rows along every particle's path from frame f to f + 1
         (modulo the frame count with `loop`), seen through `cam`: the cubic Hermite curve of the
         positions and the recorded velocities times the frame interval (without velocities or
-        times, Catmull–Rom tangents from the neighbouring frames, one-sided at the ends), at
+        times, Catmull–Rom tangents from the neighbouring frames: :meth:`_tangents`), at
         S = ``look.trail_samples`` + 1 evenly spaced fractions of the step. The fitted
         camera's are kept."""
         rec = self.rec
@@ -1880,37 +1875,21 @@ class _Rasteriser:
         still = self._centres is None
         if still and a in self._sub_pix:
             return self._sub_pix[a]
-        x = rec.positions
-        p0, p1 = x[a].astype(np.float64), x[b].astype(np.float64)
-        tangents = None
-        if rec.velocities is not None and rec.times is not None and n > 1:
-            h = float(rec.times[b] - rec.times[a]) if b == a + 1 else float("nan")
-            if not (math.isfinite(h) and h > 0):
-                d = np.diff(np.asarray(rec.times, np.float64))
-                d = d[np.isfinite(d) & (d > 0)]
-                h = float(np.median(d)) if d.size else float("nan")
-            if math.isfinite(h) and h > 0:
-                tangents = (rec.velocities[a].astype(np.float64) * h, rec.velocities[b].astype(np.float64) * h)
-        if tangents is None:
-            def cr(g: int) -> np.ndarray:
-                lo, hi = ((g - 1) % n, (g + 1) % n) if self.loop else (max(0, g - 1), min(n - 1, g + 1))
-                if lo == hi:
-                    return np.zeros_like(p0)
-                return (x[hi].astype(np.float64) - x[lo].astype(np.float64)) / (2.0 if self.loop else float(hi - lo))
-            tangents = (cr(a), cr(b))
+
+        def at(g: int) -> np.ndarray:
+            return rec.positions[g].astype(np.float64)
+
+        p0, p1 = at(a), at(b)
+        t0, t1 = self._tangents(a, b, at, lambda g, h: rec.velocities[g].astype(np.float64) * h)
         S = self.look.trail_samples
-        t = (np.arange(S + 1) / S)[:, None, None]
-        t2, t3 = t * t, t * t * t
         with np.errstate(invalid="ignore", over="ignore"):
-            pts = ((2 * t3 - 3 * t2 + 1) * p0 + (t3 - 2 * t2 + t) * tangents[0]
-                   + (-2 * t3 + 3 * t2) * p1 + (t3 - t2) * tangents[1])
+            pts = _hermite(p0, t0, p1, t1, (np.arange(S + 1) / S)[:, None, None])
         pts[0], pts[-1] = p0, p1  # the frames' own points, exactly
         c, r = cam.pixels(cam.project(pts.reshape(-1, pts.shape[-1]))[0])
         out = (c.reshape(S + 1, -1), r.reshape(S + 1, -1))
         if still:
             self._sub_pix[a] = out
         return out
-
 
     def _trail_alpha(self, k: int, f: Any) -> Any:
         """The opacity of frame k's trail segment from frame f to f + 1 under
@@ -1923,7 +1902,9 @@ class _Rasteriser:
 
     def _trail_pixels(self, k: int, cam: _Camera) -> tuple[int, Any]:
         """(first frame, f -> (col, row) of every particle at frame f through `cam`) of frame k's
-        trails, as :meth:`_draw_trail` sees them (a periodic recording runs on from its end)."""
+        trails: with the fitted camera projected once for all frames (a periodic recording's
+        trail runs on from its end: pix[-1] ...), following the screen-plane points projected
+        once (only the centre moves), orbiting projected again (the paths turn with the view)."""
         rec = self.rec
         first = max(0, k - self.trail)
         if self._centres is None:
@@ -1931,8 +1912,12 @@ class _Rasteriser:
                 self._pix = [self.cam.pixels(self.cam.project(rec.positions[f])[0]) for f in range(rec.frames)]
             if self.loop:
                 first = k - self.trail
+            return first, self._pix.__getitem__
+        if self._bases is None:
+            if self._pix is None:
+                self._pix = [self.cam.project(rec.positions[f])[0] for f in range(rec.frames)]
             pix = self._pix
-            return first, lambda f: pix[f]
+            return first, lambda f: cam.pixels(pix[f])
         return first, lambda f: cam.pixels(cam.project(rec.positions[f])[0])
 
     def _draw_faded_trail(self, out: np.ndarray, k: int, cam: _Camera, rgb: np.ndarray) -> None:
@@ -1941,14 +1926,8 @@ class _Rasteriser:
         into one layer of colour and opacity, oldest first (a newer segment covers an older
         one where they cross), then laid over `out` once, so nothing is blended twice."""
         moving = np.flatnonzero(self._trailed)
-        first, pix = self._trail_pixels(k, cam)
         h, w = out.shape[:2]
-        c0, r0, c1, r1, _, hi = self._trail_pieces(first, k, pix, cam, moving)
-        if not c0.size:
-            return
-        a = self._trail_alpha(k, hi - 1)
-        keep = a > 0.0
-        c0, r0, c1, r1, a = c0[keep], r0[keep], c1[keep], r1[keep], a[keep]
+        c0, r0, c1, r1, a = self._faded_pieces(k, cam, moving, lambda a: a > 0.0)
         if not c0.size:
             return
         vals = np.concatenate([np.broadcast_to(rgb[moving].astype(np.float32), c0.shape + (3,)),

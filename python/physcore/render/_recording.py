@@ -433,6 +433,21 @@ def _check_lead_in(scene: Any, d: dict[str, Any], fixed: bool = False) -> float:
     return v
 
 
+def wants_velocities(arrows: Any, look: Any, trail: Any) -> bool:
+    """Whether a drawing with these options needs the recorded velocities: `arrows` (other than
+    None or "none"), a `look`'s swept areas (their path between frames follows the velocities)
+    or a `trail` drawn as ``look.trail_samples`` > 1 pieces a frame step (the Hermite curve of
+    the positions and velocities; with Catmull–Rom tangents instead, pythagorean's 8 pieces a
+    step stray 1.2 px from the true paths at the 90th percentile, against 0.2 px). `look` a
+    :class:`Look`, a mapping of its fields or None."""
+    if look is None:
+        look = {}
+    field = look.get if isinstance(look, dict) else (lambda name: getattr(look, name, None))
+    samples = field("trail_samples")
+    return (arrows not in (None, "none") or bool(field("swept_areas"))
+            or bool(trail) and isinstance(samples, int) and samples > 1)
+
+
 def scene_defaults(scene: Any) -> dict[str, Any]:
     """The scene's animation defaults (``scene.render_defaults``, set by :mod:`physcore.scenes`),
     or {} for a scene without them."""
@@ -560,8 +575,8 @@ def record(
     velocities : bool, optional
         Also record every frame's (N, dim) velocities (``Recording.velocities``, float32), which
         :func:`gif`'s `arrows` draw (and its ``look`` swept areas follow between frames); 4·N·dim
-        bytes a frame more. Default: only when the scene's ``render_defaults`` ask for arrows or
-        swept areas.
+        bytes a frame more. Default: only when the scene's ``render_defaults`` ask for arrows,
+        swept areas or a trail with ``look.trail_samples`` above 1.
 
     Returns
     -------
@@ -589,8 +604,7 @@ def record(
         raise InvalidTypeError(f"on_frame: expected a callable or None, got {type(on_frame).__name__}")
     if velocities is None:
         d = scene_defaults(scene)
-        # Arrows, and swept areas (their path between frames follows the velocities).
-        velocities = d.get("arrows") not in (None, "none") or bool((d.get("look") or {}).get("swept_areas"))
+        velocities = wants_velocities(d.get("arrows"), d.get("look"), d.get("trail"))
     velocities = _check.flag("velocities", velocities)
     plan = _plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, velocities)
     _check_memory(scene, plan["frames"], (0, 0), springs, velocities)
