@@ -568,3 +568,45 @@ def test_glow_trails_follow_curves_and_fade_without_seams():
     frames = list(pc.render.frames(rec, size=(320, 320), trail=4, color_by="density", theme="dark", colorbar=False))
     lit = lambda img: int((img.astype(int).sum(axis=2) > img[5, 5].astype(int).sum() + 60).sum())  # noqa: E731
     assert lit(frames[0]) > 0.5 * lit(frames[1])
+
+
+def test_a_path_looping_once_a_frame_is_drawn_smooth_not_as_a_saw_tooth():
+    # A bob circling (radius 1) at 0.97 turns a frame while drifting 3 a frame: at every frame it
+    # is at about the same phase, so its velocities are near the same, off the chord by the
+    # circling speed. A cubic through them zig-zags 0.6 off the drift line each frame
+    # (pythagorean's escaping binary); those steps take Catmull-Rom's tangents, and the pieces
+    # keep close to the drift line, while a resolved path (45° a frame) keeps its velocities.
+    from physcore.render._raster import _hermite
+
+    frames, w, drift = 12, 2 * np.pi * 0.97, 3.0
+    k = np.arange(frames, dtype=np.float64)
+    x = np.zeros((frames, 2, 2))
+    x[:, 1] = np.stack([drift * k + np.cos(w * k), np.sin(w * k)], axis=1)
+    v = np.zeros_like(x)
+    v[:, 1] = np.stack([drift - w * np.sin(w * k), w * np.cos(w * k)], axis=1)  # per frame (times 1 s apart)
+    rec = _circling(8, turns=(frames - 1) / 8)._replace(positions=x.astype(np.float32), velocities=v.astype(np.float32),
+                                                        times=k)
+    ras = _rasteriser(rec, trail=8, look={"trail_samples": 8})
+
+    def at(g: int) -> np.ndarray:
+        return rec.positions[g].astype(np.float64)
+
+    def off_line(t0: np.ndarray, t1: np.ndarray, a: int) -> float:  # the pieces' largest distance off the chord
+        s = np.linspace(0.0, 1.0, 9)[:, None, None]
+        pts = _hermite(at(a), t0, at(a + 1), t1, s)[:, 1]
+        p0, p1 = at(a)[1], at(a + 1)[1]
+        d = (p1 - p0) / np.linalg.norm(p1 - p0)
+        rel = pts - p0
+        return float(np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0]).max())
+
+    for a in range(2, 8):
+        t0, t1 = ras._tangents(a, a + 1, at, lambda g, h: rec.velocities[g].astype(np.float64) * h)
+        raw = (v[a], v[a + 1])
+        assert off_line(*raw, a) > 0.2  # the velocities' cubic strays off the line
+        assert off_line(t0, t1, a) < 0.05  # Catmull-Rom's keeps to it
+    resolved = _circling(8)
+    ras = _rasteriser(resolved, trail=8, look={"trail_samples": 8})
+    t0, t1 = ras._tangents(2, 3, lambda g: resolved.positions[g].astype(np.float64),
+                           lambda g, h: resolved.velocities[g].astype(np.float64) * h)
+    h = float(resolved.times[3] - resolved.times[2])
+    np.testing.assert_allclose(t0[1], resolved.velocities[2, 1] * h, rtol=1e-6)
