@@ -1075,6 +1075,22 @@ def test_field_labels_dimensionless_clock_and_a_scale_from_zero():
     assert shifted.lo > 5.0  # far from 0: the scale keeps its low percentile
 
 
+def test_a_colour_scale_ends_on_a_round_number_within_two_percent():
+    # The scale's end is a percentile of the run's field: a smoke concentration of at most 1
+    # gave "0.999", which reads as an error. Raised to a round number within 2 %, else kept.
+    from physcore.render._fields import FieldRasteriser, _round_top
+
+    rng = np.random.default_rng(1)
+    for top, want in ((0.999, 1.0), (0.0493, 0.05), (7.9, 8.0), (0.0487, 0.0487), (2.37, 2.37), (1.0, 1.0)):
+        f = (rng.random((2, 32, 32)) * top).astype(np.float64)
+        f[:, :, :8] = top  # a quarter of the field at its top: the 99.5th percentile is `top`
+        for style in ("smoke", "turing", "signed"):
+            r = FieldRasteriser(f, style, (100, 100), None, (1.0, 1.0))
+            assert r.hi == pytest.approx(want, rel=1e-12), (top, style, r.hi)
+            assert r.hi >= top * (1 - 1e-12)  # never clips the field's top
+    assert _round_top(0.0) == 0.0 and np.isnan(_round_top(float("nan")))
+
+
 def test_a_stable_fluids_scalar_is_labelled_smoke_or_dye_not_density():
     """The fluid's `density` is a passive 0..1 scalar: the colour bar calls it smoke where
     buoyancy lifts it and dye otherwise (the cavity's bands, the vortex street's streaks)."""

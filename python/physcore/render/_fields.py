@@ -110,6 +110,20 @@ def _mask_image(mask: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return np.asarray(img) >= 128
 
 
+def _round_top(top: float) -> float:
+    """`top`, the colour scale's end (a percentile of the run's field, so arbitrary in its last
+    digits), raised to the round number just above it where one lies within 2 %: a scale to
+    "1" reads, one to "0.999" looks like an error, and 2 % less contrast does not show. Round:
+    1, 1.2, 1.5, 2, 2.5, 3, 4, 5, 6, 8 times a power of ten."""
+    if not (np.isfinite(top) and top > 0):
+        return top
+    scale = 10.0 ** np.floor(np.log10(top))
+    for m in (1.0, 1.2, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0):
+        if m * scale >= top * (1 - 1e-12):
+            return float(m * scale) if m * scale <= 1.02 * top else top
+    return top
+
+
 def fit_size(extent: tuple[float, ...], size: tuple[int, int]) -> tuple[int, int]:
     """The largest image within `size` with the domain's aspect ratio (pixels square)."""
     w, h = size
@@ -153,7 +167,7 @@ class FieldRasteriser:
             # Slopes scaled so the run's steepest ripples tilt the surface by ~35°.
             self.gain = 0.7 / top if top > 0 else 0.0
         elif style == "signed":
-            top = float(np.percentile(np.abs(finite), 99)) if finite.size else 0.0
+            top = _round_top(float(np.percentile(np.abs(finite), 99))) if finite.size else 0.0
             self.lo, self.hi = -top, top
         elif style == "turing":
             self.lo = float(np.percentile(finite, 1)) if finite.size else 0.0
@@ -162,8 +176,9 @@ class FieldRasteriser:
             # 0 starts its scale at 0: "0" reads, "0.000115" does not.
             if finite.size and float(finite.min()) >= 0.0 and self.lo < 0.05 * self.hi:
                 self.lo = 0.0
+            self.hi = _round_top(self.hi)
         else:
-            self.lo, self.hi = 0.0, float(np.percentile(finite, 99.5)) if finite.size else 1.0
+            self.lo, self.hi = 0.0, _round_top(float(np.percentile(finite, 99.5))) if finite.size else 1.0
         if style != "water" and not self.hi > self.lo:
             self.hi = self.lo + 1.0
 
