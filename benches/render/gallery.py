@@ -118,17 +118,40 @@ def contact_sheet(path: Path, out: Path) -> None:
     Image.fromarray(sheet).save(out)
 
 
-def thumbnail(path: Path, out: Path, width: int = 240, max_bytes: int = 200_000) -> int:
-    """A small copy of the GIF at `path` for the README's gallery, at most `max_bytes`: the
-    first of these that fits, `width` pixels wide with 255 then 64 colours (one palette fitted
-    to the whole animation), every frame or every 2nd or 3rd at the same playing time, then
-    narrower (5/6, 2/3, 1/2 of `width`) and sparser. Returns its size in bytes."""
+#: The README's thumbnails together (docs/gallery/*.gif; tests/scenes/test_docs.py holds them to
+#: 5 MB): each scene gets an equal share of this, at most THUMB_MAX_BYTES, so the gallery fits with
+#: room to spare however the scenes change, and every thumbnail is made by one rule.
+THUMBS_BUDGET = 4_800_000
+THUMB_MAX_BYTES = 200_000
+
+
+def thumb_share(n_scenes: int | None = None) -> int:
+    """Bytes one README thumbnail may take: an equal share of THUMBS_BUDGET among `n_scenes`
+    (default: every registered scene), at most THUMB_MAX_BYTES (32 scenes: 150 000)."""
+    if n_scenes is None:
+        import physcore as pc
+
+        n_scenes = len(pc.scenes.REGISTRY)
+    return min(THUMB_MAX_BYTES, THUMBS_BUDGET // max(1, n_scenes))
+
+
+def thumbnail(path: Path, out: Path, width: int = 240, max_bytes: int | None = None) -> int:
+    """A small copy of the GIF at `path` for the README's gallery, at most `max_bytes` (default:
+    `thumb_share()`): the first of these that fits, `width` pixels wide with 255 then 64 colours
+    (one palette fitted to the whole animation), every frame or every 2nd or 3rd at the same
+    playing time, then narrower (5/6, 2/3, 1/2 of `width`) and sparser. Returns its size in bytes.
+
+    The palette is cut by median cut at 255 colours and by octree below: median cut splits by
+    pixel count, so at 64 or 32 colours it merged small saturated subjects into the background's
+    shades (tumbling_boxes' boxes grey, pythagorean's bodies beige); octree keeps them."""
     from PIL import Image
 
+    if max_bytes is None:
+        max_bytes = thumb_share()
     frames, durations = read_gif(path)
     h, w, _ = frames[0].shape
     tries = [(width, c, k) for c in (255, 64) for k in (1, 2, 3)]
-    tries += [(width * 5 // 6, 64, k) for k in (2, 3, 4)] + [(width * 2 // 3, 32, k) for k in (3, 4, 6, 8)]
+    tries += [(width * 5 // 6, 64, k) for k in (2, 3, 4)] + [(width * 2 // 3, 32, k) for k in (3, 4, 5, 6, 7, 8)]
     tries += [(width // 2, 32, 4), (width // 2, 16, 8)]
     cache: dict[int, list[np.ndarray]] = {}
     for wide, colours, stride in tries:
@@ -138,7 +161,8 @@ def thumbnail(path: Path, out: Path, width: int = 240, max_bytes: int = 200_000)
         small = cache[wide]
         picks = list(range(0, len(small), stride))
         mosaic = Image.fromarray(np.concatenate([small[k] for k in picks[:: max(1, len(picks) // 12)]], axis=0))
-        pal = mosaic.quantize(colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+        method = Image.Quantize.MEDIANCUT if colours > 128 else Image.Quantize.FASTOCTREE
+        pal = mosaic.quantize(colours, method=method, dither=Image.Dither.NONE)
         seq = [Image.fromarray(small[k]).quantize(palette=pal, dither=Image.Dither.NONE) for k in picks]
         dur = [round(1000 * sum(durations[k : k + stride])) for k in picks]
         seq[0].save(out, save_all=True, append_images=seq[1:], duration=dur, loop=0, optimize=False, disposal=1)
@@ -245,7 +269,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="*", help="scene names (default: every registered scene)")
     ap.add_argument("--out", default="gallery", help="output folder (default ./gallery)")
-    ap.add_argument("--thumbs", metavar="DIR", help="also write README thumbnails (240 px, <= 200 kB) into DIR")
+    ap.add_argument("--thumbs", metavar="DIR", help="also write README thumbnails (240 px, an equal share of 4.8 MB each) into DIR")
     ap.add_argument("--readme", metavar="README", help="with --thumbs: rewrite README's gallery table (between its markers)")
     args = ap.parse_args(argv)
     names = args.scenes or list(pc.scenes.REGISTRY)
