@@ -1211,3 +1211,42 @@ def test_dither_mixes_the_shades_of_a_ramp_and_is_checked_by_name(tmp_path):
         with pytest.raises(pc.PhyscoreError, match="dither"):
             render.gif(rec, tmp_path / "e.gif", size=(256, 32), dither=bad if bad is not None else "on")
     assert not (tmp_path / "e.gif").exists() and scene.time == t  # refused before a step
+
+
+def test_dither_of_full_colour_frames_mixes_a_glows_colours_and_keeps_the_flat_ones_exact():
+    """Full-colour frames are put on one palette of 255 colours: a smooth glow over colours the
+    palette cannot all hold drew rings (Kepler's sun under the swept areas). With ``dither``
+    each 8 × 8 tile of the glow has on average the colours drawn, much closer than the nearest
+    colours alone; the flat colours (the background, a disc) stay exact, and the same frames
+    give the same indices."""
+    from physcore.render._gif import _palette_frames
+
+    h, w = 96, 256
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    bg = np.array([12, 14, 24], dtype=np.float64)
+    # A warm glow fading over the background, and a blue wedge over its left half: over 255
+    # colours in all, so some fall between the palette's.
+    glow = np.exp(-((x - 128) ** 2 + (y - 48) ** 2) / (2 * 40.0**2))[..., None]
+    frame = bg + glow * (np.array([255, 214, 120]) - bg)
+    frame[:, : w // 2] = 0.6 * frame[:, : w // 2] + 0.4 * np.array([40, 90, 160])
+    frame[40:56, 120:136] = [255, 214, 120]  # a flat disc
+    frame[:8] = bg  # a flat strip of background
+    frame = frame.round().astype(np.uint8)
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 600
+
+    def decoded(dither: bool) -> np.ndarray:
+        images, colours = _palette_frames([frame, frame], n_colours=255, dither=dither)
+        pal = np.frombuffer(colours, np.uint8).reshape(-1, 3)
+        a, b = (np.asarray(im) for im in images)
+        assert np.array_equal(a, b)  # the same frame: the same indices
+        return pal[a].astype(np.float64)
+
+    def tile_error(img: np.ndarray) -> float:
+        t = lambda a: a.reshape(h // 8, 8, w // 8, 8, 3).mean(axis=(1, 3))  # noqa: E731
+        return float(np.abs(t(img) - t(frame.astype(np.float64))).mean())
+
+    plain, dithered = decoded(False), decoded(True)
+    assert tile_error(dithered) < 0.25 * tile_error(plain), (tile_error(dithered), tile_error(plain))
+    for img in (plain, dithered):  # the flat colours exact
+        assert np.array_equal(img[40:56, 120:136], frame[40:56, 120:136].astype(np.float64))
+        assert np.array_equal(img[:8], frame[:8].astype(np.float64))

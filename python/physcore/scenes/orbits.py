@@ -133,6 +133,9 @@ def kepler(
 
 
 kepler.render_defaults = {"antialias": True,
+    # The sun's glow under the translucent swept areas is a smooth gradient: ordered dither, not
+    # rings of the GIF's 255 colours.
+    "dither": True,
     "frames": 120,
     "fps": 30,
     "frame_time": 4 * math.pi / 120,
