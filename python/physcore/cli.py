@@ -572,7 +572,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     from . import render
     from ._errors import ContactStepWarning, EnergyBooksWarning, SimulationDiverged, StabilityWarning
     from .render import painter
-    from .render._recording import wants_velocities
+    from .render.painter import wants_velocities
 
     name, fn, kwargs = _scene_call(args, parser)
     out = Path(args.output if args.output is not None else f"{name}.gif")

@@ -19,7 +19,8 @@ Palette
 Scene state as the renderer reads it
     :func:`scene_springs`, :func:`strain`, :func:`row_norms`, :func:`body_track`.
 Stepping as the renderer steps
-    :func:`simulate`, :func:`default_stepping`, :func:`scene_defaults`, :func:`steps_for`.
+    :func:`simulate`, :func:`default_stepping`, :func:`scene_defaults`, :func:`steps_for`,
+    :func:`wants_velocities`.
 Option checks
     :func:`check_background`, :func:`check_camera`, :func:`check_cmap`, :func:`check_color_by`,
     :func:`check_colors`, :func:`check_fps`, :func:`check_halo`, :func:`check_look`, :func:`check_mesh`,
@@ -55,7 +56,7 @@ from ._raster import _overlay as overlay
 from ._raster import _paste as paste
 from ._raster import _Rasteriser as Rasteriser
 from ._recording import _simulate as simulate
-from ._recording import default_stepping, points_view, scene_defaults, steps_for
+from ._recording import default_stepping, points_view, scene_defaults, steps_for, wants_velocities
 from ._rows import _row_norms as row_norms
 from ._scene_state import _scene_springs as scene_springs
 from ._scene_state import _strain as strain
@@ -65,5 +66,5 @@ __all__ = [
     "check_cmap", "check_color_by", "check_colors", "check_fps", "check_halo", "check_look", "check_mesh", "check_path",
     "check_radius", "check_size", "check_texture", "check_view", "check_writable", "default_stepping", "draw_text",
     "draw_title", "extent_box", "overlay", "paste", "points_view", "row_norms", "scene_defaults", "scene_springs", "simulate",
-    "steps_for", "strain", "text_mask",
+    "steps_for", "strain", "text_mask", "wants_velocities",
 ]
