@@ -358,12 +358,14 @@ def _frames_and_size(fn: Callable[..., Any], args: argparse.Namespace, scene: An
     return frames, (int(size[0]), int(size[1]))
 
 
-def _check_frames_memory(fn: Callable[..., Any], args: argparse.Namespace) -> None:
+def _check_frames_memory(fn: Callable[..., Any], args: argparse.Namespace, scene: Any = None) -> None:
     """Refuse, before the scene is built, a frames buffer too large for memory (the palette
-    index buffer and its Pillow image, one byte per pixel each, for every frame)."""
+    index buffer and its Pillow image, one byte per pixel each, for every frame); with the
+    built `scene`, again by its own render_defaults (a scene function may set frames or size
+    from its arguments), before it is simulated."""
     from ._check import memory
 
-    frames, (w, h) = _frames_and_size(fn, args)
+    frames, (w, h) = _frames_and_size(fn, args, scene)
     memory("--frames, --size", 2 * frames * w * h, f"{frames} frames of {w}x{h} pixels")
 
 
@@ -632,6 +634,7 @@ def _cmd_render(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             parser.error(str(e))
     try:
         settings = _render_settings(fn, args, scene.dt, scene)
+        _check_frames_memory(fn, args, scene)
         if args.view is not None and int(getattr(scene, "dim", 0)) == 2:  # before simulating
             parser.error("--view: a 2D scene is drawn in its plane; --view AZ,EL turns 3D scenes only")
         if "camera" in settings:  # before simulating: orbit needs 3D, follow:I a particle I

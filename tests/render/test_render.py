@@ -1250,3 +1250,20 @@ def test_dither_of_full_colour_frames_mixes_a_glows_colours_and_keeps_the_flat_o
     for img in (plain, dithered):  # the flat colours exact
         assert np.array_equal(img[40:56, 120:136], frame[40:56, 120:136].astype(np.float64))
         assert np.array_equal(img[:8], frame[:8].astype(np.float64))
+
+
+@pytest.mark.parametrize("grey", [0, 64, 128, 200, 255])
+def test_ordered_dither_between_two_colours_has_the_mean_of_the_colour_drawn(grey):
+    """On a palette of black and white, each 8 × 8 tile of a flat grey g takes white at the
+    pixels whose Bayer threshold is below g/255: round(64 g / 255) of 64 (to within the
+    thresholds' spacing), so the tile's mean is g to within 4 levels; a palette of one colour
+    gives that colour everywhere (nothing to mix), not an error."""
+    from physcore.render._gif import _ordered_indices
+
+    frame = np.full((16, 24, 3), grey, dtype=np.uint8)
+    pal = np.array([[0, 0, 0], [255, 255, 255]], dtype=np.uint8)
+    idx = _ordered_indices(frame, pal)
+    assert idx.shape == (16, 24) and set(np.unique(idx)) <= {0, 1}
+    tiles = pal[idx][..., 0].astype(np.float64).reshape(2, 8, 3, 8).mean(axis=(1, 3))
+    assert np.all(np.abs(tiles - grey) <= 4.0), tiles
+    assert np.array_equal(_ordered_indices(frame, pal[:1]), np.zeros((16, 24), dtype=np.uint8))

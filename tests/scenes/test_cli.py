@@ -535,3 +535,25 @@ def test_the_cli_draws_curved_trail_pieces_from_the_velocities_as_the_library_do
     render.gif(render.record(pc.scenes.pythagorean(), frames=12, velocities=False), no_velocities)
     assert cli_out.read_bytes() == lib_out.read_bytes()
     assert cli_out.read_bytes() != no_velocities.read_bytes()  # the velocities do change the trails
+
+
+def test_frames_a_built_scene_sets_are_checked_against_memory_before_simulating(tmp_path, monkeypatch, capsys):
+    """A scene function may set frames or size on the scene it builds (double_slit sets its
+    frame_time so): the frames buffer is checked again by the built scene's render_defaults,
+    a usage error (exit 2) before any step, with no file written."""
+    base = pc.scenes.spring_chain
+    stepped = []
+
+    def big(**kwargs):
+        scene = base(**kwargs)
+        scene.render_defaults = {**scene.render_defaults, "frames": 10**9, "size": (640, 480)}
+        stepped.append(scene)
+        return scene
+
+    big.render_defaults = base.render_defaults
+    monkeypatch.setattr(cli, "_registry", lambda: {"big": big})
+    out = tmp_path / "b.gif"
+    assert main(["render", "big", "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "--frames, --size" in err and "1000000000 frames of 640x480 pixels" in err, err
+    assert not out.exists() and stepped and stepped[0].step_count == 0
