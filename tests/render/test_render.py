@@ -1267,3 +1267,32 @@ def test_ordered_dither_between_two_colours_has_the_mean_of_the_colour_drawn(gre
     tiles = pal[idx][..., 0].astype(np.float64).reshape(2, 8, 3, 8).mean(axis=(1, 3))
     assert np.all(np.abs(tiles - grey) <= 4.0), tiles
     assert np.array_equal(_ordered_indices(frame, pal[:1]), np.zeros((16, 24), dtype=np.uint8))
+
+
+def test_dither_of_full_colour_frames_leaves_no_lone_specks_and_keeps_thin_lines_solid():
+    """A glow fading into a dark background is drawn by mixing close shades only: no pixel of a
+    smooth region is more than 16 levels off the colour drawn (mixing in a far colour at a small
+    ratio left lone bright specks on kepler's glow edge: 50 levels off). A thin antialiased line
+    (an edge: over DITHER_EDGE levels from its neighbours) takes its nearest colour, pixel for
+    pixel, so it reads solid, not dotted."""
+    from physcore.render._gif import DITHER_EDGE, _edges, _palette_frames
+
+    h, w = 96, 256
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    bg = np.array([12, 14, 24], dtype=np.float64)
+    glow = np.exp(-((x - 128) ** 2 + (y - 48) ** 2) / (2 * 40.0**2))[..., None]
+    frame = bg + glow * (np.array([255, 214, 120]) - bg)
+    frame[:, : w // 2] = 0.6 * frame[:, : w // 2] + 0.4 * np.array([40, 90, 160])
+    frame[:8] = bg
+    frame[20, 10:240] = 0.5 * frame[20, 10:240] + 0.5 * np.array([235, 235, 235])  # half a pixel's cover
+    frame = frame.round().astype(np.uint8)
+    images, colours = _palette_frames([frame], n_colours=255, dither=True)
+    pal = np.frombuffer(colours, np.uint8).reshape(-1, 3)[:255].astype(np.float64)
+    idx = np.asarray(images[0])
+    off = np.abs(pal[idx] - frame).max(axis=2)
+    edge = _edges(frame, DITHER_EDGE)
+    assert edge[20, 10:240].all() and not edge[30:90, 20:120].any() and not edge[30:90, 136:236].any()
+    assert off[~edge].max() <= 16, np.percentile(off[~edge], [99, 99.9, 100])
+    line = frame[20, 10:240].astype(np.float64)
+    nearest = ((line[:, None] - pal[None]) ** 2).sum(axis=2).min(axis=1)
+    assert np.array_equal(((pal[idx[20, 10:240]] - line) ** 2).sum(axis=1), nearest)

@@ -312,7 +312,7 @@ def gif(
         (the GIF stores only what changes). Full-colour particle frames (a ``look``'s, soft
         discs) are put on the GIF's 255 colours by the same thresholds, each pixel one of the
         two colours its own lies between (:func:`_ordered_indices`), their flat colours exact:
-        a glow reads smooth, not as rings (Kepler's GIF: 284 → 375 kB, its render about 1.7×
+        a glow reads smooth, not as rings (Kepler's GIF: 284 → 362 kB, its render about 1.7×
         as long). Other particle frames ignore it. Default: the scene's ``render_defaults``
         (``scenes.cavity`` and ``scenes.kepler`` have it on), else False.
 
@@ -744,15 +744,27 @@ def _gif_delays_ms(fps: float, frames: int) -> list[int]:
     return [10 * (b - a) for a, b in zip(starts[:-1], starts[1:], strict=True)]
 
 
+#: Full-colour dither (:func:`_ordered_indices`): a pair of palette colours p, q mixed at a
+#: ratio r scores its miss of the colour drawn plus DITHER_NOISE times the pattern's own noise,
+#: r (1 − r) |q − p|²: without it a colour just off the line of its nearest shades mixed in a
+#: far one at a small ratio, lone bright specks on a dark glow's edge (kepler's). Pixels that
+#: differ from a 4-neighbour by over DITHER_EDGE levels in a channel (a stroke's or a disc's
+#: antialiased edge, not a glow) take their nearest colour: dithered, a thin line reads dotted.
+DITHER_NOISE = 0.2
+DITHER_EDGE = 24
+
+
 def _ordered_indices(frame: np.ndarray, palette: np.ndarray, candidates: int = 8) -> np.ndarray:
     """(H, W) uint8 palette indices of an (H, W, 3) uint8 frame by Bayer's 8 × 8 ordered dither
     between two colours (after Yliluoma's "arbitrary-palette positional dithering"): each colour
-    c lies nearest the segment from its nearest palette colour p to one q of its `candidates`
-    nearest, at c ≈ p + r (q − p), 0 ≤ r ≤ 1, and a pixel takes q where its threshold (fixed to
-    its place: :func:`._fields._threshold`) is below r, else p. So each 8 × 8 tile has on average
-    the colour drawn, to within the palette's reach, however far apart its colours are (an
-    offset of fixed size mixed colours only near the boundaries between them), and a still
-    region stays still from frame to frame. Computed once per distinct colour of the frame."""
+    c is drawn as a mix of its nearest palette colour p and one q of its `candidates` nearest,
+    at c ≈ p + r (q − p), 0 ≤ r ≤ 1, the pair that misses c least counting the mix's noise
+    (DITHER_NOISE), and a pixel takes q where its threshold (fixed to its place:
+    :func:`._fields._threshold`) is below r, else p. So each 8 × 8 tile has on average the
+    colour drawn, to within the palette's reach, however far apart its colours are (an offset
+    of fixed size mixed colours only near the boundaries between them), and a still region
+    stays still from frame to frame. Edges (DITHER_EDGE) take the nearest colour. Computed once
+    per distinct colour of the frame."""
     from ._fields import _threshold
 
     flat = frame.reshape(-1, 3)
@@ -774,13 +786,30 @@ def _ordered_indices(frame: np.ndarray, palette: np.ndarray, candidates: int = 8
     span = q - p[:, None]
     length2 = np.maximum((span * span).sum(axis=2), 1e-12)
     r = np.clip(((u - p)[:, None] * span).sum(axis=2) / length2, 0.0, 1.0)
-    miss = (((p[:, None] + r[..., None] * span) - u[:, None]) ** 2).sum(axis=2)
+    miss = (((p[:, None] + r[..., None] * span) - u[:, None]) ** 2).sum(axis=2) + DITHER_NOISE * r * (1 - r) * length2
     best = np.argmin(miss, axis=1)
     rows = np.arange(len(u))
     second, ratio = near[rows, 1 + best], r[rows, best]
     t = _threshold(frame.shape[:2]).ravel()
     pick = np.where(t < ratio[inverse], second[inverse], near[inverse, 0])
+    edge = _edges(frame, DITHER_EDGE).ravel()
+    pick[edge] = near[inverse[edge], 0]
     return pick.reshape(frame.shape[:2]).astype(np.uint8)
+
+
+def _edges(frame: np.ndarray, levels: int) -> np.ndarray:
+    """(H, W) bool: the pixels of an (H, W, 3) uint8 frame that differ from a 4-neighbour by
+    more than `levels` in some channel."""
+    f = frame.astype(np.int16)
+    out = np.zeros(frame.shape[:2], dtype=bool)
+    for axis in (0, 1):
+        step = np.abs(np.diff(f, axis=axis)).max(axis=2) > levels
+        lo = [slice(None)] * 2
+        hi = [slice(None)] * 2
+        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
+        out[tuple(lo)] |= step
+        out[tuple(hi)] |= step
+    return out
 
 
 def _palette_frames(rgb: list[np.ndarray], n_colours: int = 256, dither: bool = False) -> tuple[list[Any], bytes]:
