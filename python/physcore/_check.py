@@ -58,6 +58,17 @@ def _short(value: Any) -> str:
     return text if len(text) <= 40 else text[:37] + "..."
 
 
+def text(name: str, value: str) -> str:
+    """``value``, a str, refused (naming ``name``) where it cannot be written as UTF-8: a lone
+    surrogate (what Python makes of undecodable bytes in argv or a file name) would raise
+    UnicodeEncodeError deep in the core or at a file's write, after the work."""
+    try:
+        value.encode("utf-8")
+    except UnicodeEncodeError as e:
+        raise InvalidInputError(f"{name}: not valid text (an unpaired surrogate {value[e.start]!r} at {e.start}), got {value!r:.80}") from None
+    return value
+
+
 def real(name: str, value: Any) -> float:
     """``value`` as a float: a Python or numpy real number (or a 0-d numeric array).
 

@@ -490,6 +490,8 @@ class Bodies(_BodiesPart):
         self.rolling_friction = _number("rolling_friction", rolling_friction, 0.0)
         if name is not None and (not isinstance(name, str) or not name):
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
+        if name is not None:
+            _check.text("name", name)
         self.name = name
         self._color_arg = color
         self.dim = _dim_of(self.shape, positions, size, orientations, angles, vertices, velocities, angular_velocities)
@@ -631,8 +633,10 @@ class Bodies(_BodiesPart):
         idx = np.arange(self.n)
         try:
             sel = np.atleast_1d(idx[key])
-        except (IndexError, TypeError) as e:
-            raise InvalidInputError(f"key: {key!r} does not select bodies of this group of {self.n} ({e})") from None
+        except (IndexError, TypeError, OverflowError) as e:  # OverflowError: an index beyond int64
+            raise InvalidInputError(f"key: {key!r:.80} does not select bodies of this group of {self.n} ({e})") from None
+        if sel.ndim != 1:  # None, True or a nested list add axes: the bodies are a list, not a table
+            raise InvalidInputError(f"key: {key!r:.80} selects a {sel.ndim}-D table of bodies, shape {sel.shape}; expected one body or a 1-D selection")
         return BodyRef(self, sel.astype(np.int64))
 
     # -- state
@@ -955,6 +959,8 @@ class Joints(_BodiesPart):
         m = len(ra) if ra is not None else len(rb)  # type: ignore[arg-type]
         if ra is not None and rb is not None and len(ra) != len(rb):
             raise InvalidInputError(f"b: joins {len(rb)} bodies to {len(ra)} (a and b must have equal counts)")
+        if m == 0:  # as the scene file's rule (m >= 1): what is added must save and load again
+            raise InvalidInputError(f"{'a' if ra is not None else 'b'}: selects no bodies; a Joints part joins at least one pair")
         self.m = m
         self.a, self.b = ra, rb
         dim = _width(anchors)
@@ -1103,6 +1109,18 @@ class Pins(_BodiesPart):
         if self._host is not None:
             raise InvalidInputError("item: these pins are already in a scene")
         m = self.particles.size
+        # Checked here, for a file's pins as for new ones: distinct, in the scene, and pinned
+        # by no other Pins part (one point each particle is put on).
+        if np.unique(self.particles).size != m:
+            raise InvalidInputError("particles: each particle can be pinned once")
+        if int(self.particles.max()) >= ctx.n_particles:
+            raise InvalidInputError(f"particles: index {int(self.particles.max())} is beyond the scene's "
+                                    f"{ctx.n_particles} particles (add the particles first)")
+        for other in ctx.parts:
+            if isinstance(other, Pins) and other is not self:
+                twice = np.intersect1d(self.particles, other.particles)
+                if twice.size:
+                    raise InvalidInputError(f"particles: particle {int(twice[0])} is pinned already (each particle can be pinned once)")
         if self._loaded is not None:
             numbers, points = self._loaded["body"], self._loaded["points"]
         else:
@@ -1112,9 +1130,6 @@ class Pins(_BodiesPart):
             if g.dim != ctx.dim:
                 raise InvalidInputError(f"body: these bodies are {g.dim}D and the scene is {ctx.dim}D")
             numbers = np.broadcast_to(g.first + self.body.index, (m,)).astype(np.float64)
-            if int(self.particles.max()) >= ctx.n_particles:
-                raise InvalidInputError(f"particles: index {int(self.particles.max())} is beyond the scene's "
-                                        f"{ctx.n_particles} particles (add the particles first)")
             points = np.asarray(ctx.read_positions(), np.float64)[self.particles]
         ctx.sim.add_pins({"m": m, "particles": self.particles.astype(np.float64), "body": np.ascontiguousarray(numbers),
                           "points": np.ascontiguousarray(points).reshape(-1)})

@@ -439,7 +439,9 @@ def _render_settings(fn: Callable[..., Any], args: argparse.Namespace, dt: float
         settings["theme"] = theme
     title = getattr(args, "title", None) or d.get("title")
     if title:
-        settings["title"] = title
+        from ._check import text
+
+        settings["title"] = text("--title", title)  # before simulating: bytes not UTF-8 in argv
     camera = getattr(args, "camera", None) or d.get("camera")
     if camera is not None:
         settings["camera"] = camera

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import atomic_write
-from ._errors import InvalidInputError
+from ._errors import InvalidInputError, InvalidTypeError
 from .session import left_sum
 
 __all__ = ["EnergyRecorder"]
@@ -51,10 +51,25 @@ class EnergyRecorder:
         self._dis: dict[str, list[float]] = {}
         self._tot: list[float] = []
         self._scale: list[float] = []
+        self._scene: object = None  # the scene of the samples
 
     def record(self, scene) -> None:
-        """Append the books of ``scene`` now (one ``scene.energy()`` call)."""
+        """Append the books of ``scene`` now (one ``scene.energy()`` call).
+
+        Raises
+        ------
+        InvalidTypeError
+            ``scene`` has no energy books (not a :class:`~physcore.Scene`).
+        InvalidInputError
+            ``scene`` is not the scene of the first sample: one recorder follows one scene
+            (samples of two would make a drift of neither).
+        """
+        if not (callable(getattr(scene, "energy", None)) and hasattr(scene, "time")):
+            raise InvalidTypeError(f"scene: expected a physcore Scene (with energy books), got {type(scene).__name__}")
+        if self._t and scene is not self._scene:
+            raise InvalidInputError("scene: this recorder follows another scene (its first sample's); use one recorder per scene")
         e = scene.energy()
+        self._scene = scene
         k = len(self._t)
         for book, src in ((self._pot, e.potential), (self._dis, e.dissipated)):
             for name, value in src.items():

@@ -143,7 +143,7 @@ class Flow(Part):
             name = kind
         if not isinstance(name, str) or not name:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
-        self.name = name
+        self.name = _check.text("name", name)
         self.start = self._points(points, spread, seed)
         self.start.setflags(write=False)  # the record save writes: read-only (see Bodies)
         self._host: Host | None = None

@@ -628,6 +628,7 @@ class Fluid(Term, kind="fluid"):
                 raise InvalidInputError(f"{arg}: needs method='dfsph' (WCSPH has no surface tension), got {v} with method={self.method!r}")
         if not isinstance(self.name, str) or not self.name:
             raise InvalidTypeError("name: expected a non-empty str")
+        _check.text("name", self.name)
 
     def _take_solver(self, solver: object) -> None:
         """Set ``method`` and the options from a solver record. An option also given as a keyword

@@ -174,7 +174,7 @@ class Grid(Part):
         self.edges = _edges(edges, self.dim)
         if not isinstance(name, str) or not name:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")
-        self.name = name
+        self.name = _check.text("name", name)
         self._host: Host | None = None
 
     #: Deprecated alias of :attr:`spacing` (the cell size, m).

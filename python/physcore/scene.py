@@ -411,6 +411,8 @@ def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
         v = _check.real(arg, value)
         if not math.isfinite(v):
             raise InvalidInputError(f"{arg}: must be finite, got {v}")
+        if key == "time" and v < 0:  # as Scene.load's rule: a state saved must load again
+            raise InvalidInputError(f"{arg}: must be >= 0 (s), got {v}")
         return v
     if key == "dt":
         v = _check.real(arg, value)
@@ -437,6 +439,8 @@ def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
         raise InvalidInputError(f"{arg}: expected {1 if now is None else now.ndim} dimension(s), got shape {a.shape}")
     if not np.isfinite(a).all():
         raise InvalidInputError(f"{arg}: must be finite")
+    if key == "reference_energy" and a[1] < 0:  # (E0, its scale): a scale is >= 0, as load's rule
+        raise InvalidInputError(f"{arg}: its scale (entry 1) must be >= 0, got {a[1]}")
     if key in ("positions", "velocities"):
         _fit_precision(a, arg, scene.precision)
     return np.ascontiguousarray(a)
@@ -1547,6 +1551,7 @@ class Scene:
         """
         if not isinstance(name, str):
             raise InvalidTypeError(f"name: expected a str, got {type(name).__name__}")
+        _check.text("name", name)
         a = _check.real_array(name, values, sized=False)  # its length is checked before the copy
         if a.ndim != 1:
             raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")

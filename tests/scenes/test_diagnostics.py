@@ -77,3 +77,16 @@ def test_cli_says_what_fps_a_gif_plays_at_when_it_cannot_store_the_one_asked(tmp
     assert "so it plays at 50 fps" in capsys.readouterr().out
     assert main(["render", "kepler", "-o", str(tmp_path / "k.gif"), "--frames", "3", "--fps", "25"]) == 0
     assert "plays at" not in capsys.readouterr().out
+
+
+def test_record_refuses_what_is_not_a_scene_and_a_second_scene():
+    rec = EnergyRecorder()
+    with pytest.raises(pc.InvalidTypeError, match="^scene: expected a physcore Scene"):
+        rec.record(None)
+    a, b = pc.scenes.projectile(), pc.scenes.spring_chain(n=4)
+    rec.record(a)
+    with pytest.raises(pc.InvalidInputError, match="^scene: this recorder follows another scene"):
+        rec.record(b)  # its books mixed with a's made a drift of neither
+    a.step(5)
+    rec.record(a)
+    assert len(rec) == 2

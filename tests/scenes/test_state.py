@@ -112,6 +112,9 @@ def test_set_state_refuses_bad_input_naming_the_key_before_changing_anything() -
     _bad(scene, snap, "step", -1, ValueError)
     _bad(scene, snap, "step", 1.5, TypeError)
     _bad(scene, snap, "time", float("inf"), ValueError)
+    # What Scene.load would refuse is refused here too: a state set must save and load again.
+    _bad(scene, snap, "time", -1.0, pc.InvalidInputError)
+    _bad(scene, snap, "reference_energy", np.array([1.0, -2.0]), pc.InvalidInputError)
     _bad(scene, snap, "dt", 0.0, ValueError)
     _bad(scene, snap, "ledger", np.zeros(len(snap["ledger"]) + 1), pc.PhyscoreError)
     _bad(scene, snap, "not_a_key", 1.0, pc.InvalidInputError)

@@ -395,6 +395,8 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
         raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")
     if title is not None and ("\n" in title or len(title) > 200):
         raise InvalidInputError(f"title must be one line of at most 200 characters, got {_short(title)}")
+    if title is not None:
+        _check.text("title", title)
     theme = d.get("theme", "light") if theme is None else theme
     theme = _check.choice("theme", theme, THEMES)
     radius = _check_radius(d.get("radius") if radius is None else radius)

@@ -154,6 +154,9 @@ def html(
             raise InvalidTypeError(f"title must be a str, got {type(title).__name__}")
         if "\n" in title or len(title) > 200:
             raise InvalidInputError(f"title must be one line of at most 200 characters, got {_short(title)}")
+        from .. import _check
+
+        _check.text("title", title)
     text = player_text(scene, frames=frames, steps_per_frame=steps_per_frame, frame_time=frame_time, substeps=substeps,
                        fps=fps, mesh=mesh, theme=theme, view=view, title=title, progress=progress,
                        before_simulating=lambda: _check_writable(p))

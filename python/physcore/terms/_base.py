@@ -166,6 +166,8 @@ class Term(Part):
     # ------------------------------------------------------------ the protocol of a term type
     def _claim_name(self, ctx: AttachContext) -> str:
         """A term whose name is taken (by another term, or reserved) gets ``_2``, ``_3``, ..."""
+        if isinstance(self.name, str):  # text the core can take (unique_name checks the type)
+            _check.text("name", self.name)
         return unique_name(self.name, ctx.names["terms"] | RESERVED_NAMES)
 
     def _attach(self, ctx: AttachContext, name: str) -> Term:
