@@ -647,10 +647,11 @@ class Scene:
         # host side hands them over with the particles, and they cannot change there.
         self._device_attrs: dict[str, np.ndarray] | None = None
         # One thread at a time, and the books' reference (physcore.session).
-        self._session = Session(sim)
-        self._threads = threads
-        #: Everything the scene holds, as stored, in the order added (see physcore._parts).
+        #: Everything the scene holds, as stored, in the order added (see physcore._parts); the
+        #: session shares the list (never rebound), which a Batch counts.
         self._parts: list[Part] = []
+        self._session = Session(sim, self._parts)
+        self._threads = threads
         self._step_checked: float | None = None  # the dt last checked against the contacts' step
         self._grid_step_checked: float | None = None  # ... and against the grids' limits
         self._stable_step_checked: float | None = None  # ... and against the terms' stability
@@ -1554,7 +1555,8 @@ class Scene:
         _check.text("name", name)
         a = _check.real_array(name, values, sized=False)  # its length is checked before the copy
         if a.ndim != 1:
-            raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}")
+            one = " (one value per particle; a scalar is not broadcast: np.full(scene.n_particles, v))" if a.ndim == 0 else ""
+            raise InvalidInputError(f"{name}: expected shape ({self.n_particles},), got {a.shape}{one}")
         if a.shape[0] != self.n_particles:  # before the copy: it may not fit in memory
             raise InvalidInputError(f"{name}: has {a.shape[0]} entries, the scene has {self.n_particles} particles")
         with allocating("set_attribute", f"a copy of {name}"):

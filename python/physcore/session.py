@@ -95,6 +95,10 @@ class Session:
         ``pending(session)`` writes it into :attr:`sim` (:meth:`checked` and :meth:`exclusive`
         call it, so every use of the scene sees its newest state). None when :attr:`sim` is
         current.
+    parts : list
+        The scene's parts as it stores them (a list it appends to and never rebinds; read
+        only): a driver of many scenes counts them to see a member's structure change
+        (:class:`~physcore.Batch`).
 
     Examples
     --------
@@ -110,10 +114,11 @@ class Session:
     True
     """
 
-    __slots__ = ("busy", "lock", "pending", "reference_energy", "sim")
+    __slots__ = ("busy", "lock", "parts", "pending", "reference_energy", "sim")
 
-    def __init__(self, sim: Any) -> None:
+    def __init__(self, sim: Any, parts: list[Any] | None = None) -> None:
         self.sim = sim
+        self.parts: list[Any] = [] if parts is None else parts
         # A re-entrant lock for its owner check, not for re-entry (refused by `busy`): Ctrl-C
         # can land between any call's return and the next line, so a call cannot learn from a
         # returned value that it took the lock; it releases in `finally` whatever this thread
