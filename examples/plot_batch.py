@@ -17,7 +17,7 @@ import physcore as pc
 
 batch = pc.Batch.from_scene(pc.scenes.figure_eight(), 8, positions=lambda k, x: x * (1 + 0.01 * k))
 paths = []
-for _ in range(300):  # 300 calls of 20 steps: three periods (2000 steps each)
+for _ in range(315):  # 315 calls of 20 steps: three periods (2100 steps each)
     batch.step(20)
     paths.append(batch.positions[:, 0])  # (M, dim): body 0 of every member
 paths = np.array(paths)  # (frames, M, dim)

@@ -27,8 +27,14 @@ def build(dt, integrator):
 
 
 def measure(scene):
-    scene.step(round(10.0 / scene.dt))
-    return {"drift": abs(scene.energy_drift())}
+    # The worst drift over the run, sampled every 0.2 s: at a whole number of periods the
+    # symplectic schemes' bounded energy error passes near zero (Verlet's read 64x smaller per
+    # halving of dt there, not its 4x).
+    worst = 0.0
+    for _ in range(50):
+        scene.step(round(0.2 / scene.dt))
+        worst = max(worst, abs(scene.energy_drift()))
+    return {"drift": worst}
 
 
 df = pc.sweep(build, {"integrator": ["euler", "verlet", "yoshida4"], "dt": [0.04, 0.02, 0.01, 0.005]},
@@ -39,6 +45,6 @@ print(df[["integrator", "dt", "drift", "wall_s"]].to_string(index=False))
 for name, rows in df.groupby("integrator"):
     plt.loglog(rows["dt"], rows["drift"], "o-", label=name)
 plt.xlabel("dt (s)")
-plt.ylabel("|relative energy drift| after 10 periods")
+plt.ylabel("max |relative energy drift| over 10 periods")
 plt.legend()
 plt.show()

@@ -230,7 +230,11 @@ def _scene_kwargs(scene_name: str, fn: Callable[..., Any], pairs: Sequence[tuple
     params = _scene_params(fn)
     kwargs: dict[str, Any] = {}
     old_names = getattr(fn, "deprecated_params", {})
+    given: dict[str, str] = {}
     for key, text in pairs:
+        if key in given:  # the last would win unseen
+            raise _UsageError(f"--param {key} given twice ({given[key]}, {text})")
+        given[key] = text
         if key in old_names and key not in params:
             new = old_names[key]
             print(f"physcore: --param {key} is deprecated: " + (f"it is now {new}" if new else "it did nothing and is ignored"), file=sys.stderr)

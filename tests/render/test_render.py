@@ -1296,3 +1296,13 @@ def test_dither_of_full_colour_frames_leaves_no_lone_specks_and_keeps_thin_lines
     line = frame[20, 10:240].astype(np.float64)
     nearest = ((line[:, None] - pal[None]) ** 2).sum(axis=2).min(axis=1)
     assert np.array_equal(((pal[idx[20, 10:240]] - line) ** 2).sum(axis=1), nearest)
+
+
+def test_extent_errors_name_what_is_wrong(tmp_path):
+    x = np.array([[0.0, 0.0], [1.0, 1.0]])
+    with pytest.raises(pc.InvalidInputError, match=r"extent: lower must be <= upper on every axis, got lower \[3.0, 3.0\]"):
+        render.render_frame(x, extent=((3, 3), (-3, -3)))
+    with pytest.raises(pc.InvalidInputError, match=r"extent: expected \(lower, upper\), two finite points of 2 coordinates, got shape \(3,\)"):
+        render.render_frame(x, extent=(0, 1, 2))
+    with pytest.raises(pc.InvalidInputError, match=r"path must end in \.gif, got .*; pc\.render\.save\(scene, 'x\.mp4'\) writes \.mp4"):
+        render.gif(pc.scenes.projectile(), tmp_path / "x.mp4")

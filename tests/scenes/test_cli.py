@@ -557,3 +557,10 @@ def test_frames_a_built_scene_sets_are_checked_against_memory_before_simulating(
     err = capsys.readouterr().err
     assert "--frames, --size" in err and "1000000000 frames of 640x480 pixels" in err, err
     assert not out.exists() and stepped and stepped[0].step_count == 0
+
+
+def test_a_param_given_twice_is_a_usage_error(tmp_path, capsys):
+    """The last of two would win unseen (kepler e=0.8 then e=0.5 drew e=0.5)."""
+    out = tmp_path / "k.gif"
+    assert main(["render", "kepler", "-o", str(out), "-q", "--param", "e=0.8", "--param", "e=0.5"] + SMALL) == 2
+    assert "--param e given twice (0.8, 0.5)" in capsys.readouterr().err and not out.exists()

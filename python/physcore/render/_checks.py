@@ -242,7 +242,9 @@ def _check_path(path: Any, fmt: str = "gif") -> Path:
     _check_no_nul(path)
     p = Path(path)
     if p.suffix.lower() != f".{fmt}":
-        raise InvalidInputError(f"path must end in .{fmt}, got {str(p)!r}")
+        other = fmt == "gif" and p.suffix.lower() in (".mp4", ".webm", ".png", ".glb", ".gltf", ".html", ".htm")
+        hint = f"; pc.render.save(scene, {p.name!r}) writes {p.suffix.lower()}" if other else ""
+        raise InvalidInputError(f"path must end in .{fmt}, got {str(p)!r}{hint}")
     if not p.parent.is_dir():
         raise InvalidInputError(f"path: directory {str(p.parent)!r} does not exist")
     if p.is_dir():
@@ -339,8 +341,11 @@ def _extent_box(extent: Any, dim: int) -> np.ndarray | None:
     if extent is None:
         return None
     lo_hi = _check.real_array("extent", extent).astype(np.float64)
-    if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)) or not np.all(lo_hi[1] >= lo_hi[0]):
+    if lo_hi.shape != (2, dim) or not np.all(np.isfinite(lo_hi)):
         raise InvalidInputError(
-            f"extent: expected (lower, upper), two finite points of {dim} coordinates with lower <= upper, got shape {lo_hi.shape}"
+            f"extent: expected (lower, upper), two finite points of {dim} coordinates, got shape {lo_hi.shape}"
+            + ("" if lo_hi.shape != (2, dim) else f": {lo_hi.tolist()}")
         )
+    if not np.all(lo_hi[1] >= lo_hi[0]):
+        raise InvalidInputError(f"extent: lower must be <= upper on every axis, got lower {lo_hi[0].tolist()}, upper {lo_hi[1].tolist()}")
     return np.array([[lo_hi[(k >> a) & 1, a] for a in range(dim)] for k in range(2**dim)])
