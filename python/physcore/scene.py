@@ -1547,8 +1547,8 @@ class Scene:
         TypeError
             ``name`` is not a str, or ``values`` is not numeric.
         InvalidInputError
-            (a ``ValueError``) unknown ``name``, wrong length, a non-finite value or a negative
-            radius. Nothing changes.
+            (a ``ValueError``) unknown ``name``, wrong length, a non-finite value, a negative
+            radius or one below float64's normal range (not 0). Nothing changes.
         """
         if not isinstance(name, str):
             raise InvalidTypeError(f"name: expected a str, got {type(name).__name__}")
@@ -1561,6 +1561,11 @@ class Scene:
             raise InvalidInputError(f"{name}: has {a.shape[0]} entries, the scene has {self.n_particles} particles")
         with allocating("set_attribute", f"a copy of {name}"):
             a = np.ascontiguousarray(a, dtype=np.float64)
+        if name == "radius":  # a subnormal radius's r² (a ball's inertia) underflows: a spin of inf
+            tiny = np.flatnonzero((a > 0) & (a < _check.MIN_NORMAL))
+            if tiny.size:
+                raise InvalidInputError(f"radius: entry {int(tiny[0])} is {a[tiny[0]]} m, below float64's normal range "
+                                        f"(a radius is 0 or at least {_check.MIN_NORMAL:.3g} m)")
         self._exclusive(lambda sim: sim.set_attribute(name, a))
         self._e0 = None  # the potential of charge-dependent terms changed
         self._charge_checked = False

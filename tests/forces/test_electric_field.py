@@ -121,6 +121,9 @@ def test_save_and_load_keep_the_charges_and_continue_bit_for_bit(tmp_path):
         (lambda s: s.set_attribute("charge", [1.0, 2.0]), pc.InvalidInputError, "charge"),
         (lambda s: s.set_attribute("charge", [1.0, np.nan, 0.0]), pc.InvalidInputError, "charge"),
         (lambda s: s.set_attribute("radius", [1.0, -1.0, 0.0]), pc.InvalidInputError, "radius"),
+        # subnormal: r² underflows, and a ball's spin went non-finite at the first contact
+        (lambda s: s.set_attribute("radius", [1.0, 1e-310, 0.0]), pc.InvalidInputError, "radius"),
+        (lambda s: s.set_attribute("radius", 0.5), pc.InvalidInputError, "radius"),
         (lambda s: s.set_attribute("charge", ["a", "b", "c"]), TypeError, "charge"),
         (lambda s: s.set_attribute(3, [1.0, 2.0, 3.0]), TypeError, "name"),
     ],
