@@ -22,8 +22,8 @@ def test_figure_eight_closes_after_one_period():
     np.testing.assert_allclose(s.momentum(), 0.0, atol=1e-8)  # Simó's values to 8 digits
     s.step(2100)  # one period T = 6.32591398 in steps of T/2100
     # Measured 2.3e-8: the error of the 8-digit initial conditions and of the step.
-    assert np.abs(s.positions - x0).max() < 1e-6
-    assert np.abs(s.velocities - v0).max() < 1e-6
+    assert np.abs(s.positions - x0).max() < 1e-7
+    assert np.abs(s.velocities - v0).max() < 1e-7
     assert abs(s.energy_drift()) < 1e-10
 
 
