@@ -89,10 +89,16 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[Any]], None], *, b
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         if fh is not None:
             fh.close()
         if tmp is not None:
             Path(tmp).unlink(missing_ok=True)
+        # Ctrl-C inside a writer that cleans up on the way out (np.savez's ZipFile: "Can't
+        # close the ZIP file while there is an open writing handle") came out as that error,
+        # with the interrupt only its context: an `except KeyboardInterrupt` missed it.
+        cause = e.__context__
+        if not isinstance(e, KeyboardInterrupt) and isinstance(cause, KeyboardInterrupt):
+            raise cause from None
         raise
     return path

@@ -136,7 +136,7 @@ def allocating(what: str, context: str, rename: tuple[str, ...] = ()) -> Iterato
         raise err from e
 
 
-def refusing_memory(what: str, context: str) -> Callable[[F], F]:
+def refusing_memory(what: str, context: str, rename: tuple[str, ...] = ()) -> Callable[[F], F]:
     """A decorator: the function's body under :func:`allocating` (``what``, ``context``). Its
     wrapper is a frame of this package, so a warning raised inside that points at the first
     frame outside physcore (``user_stacklevel``) still finds the caller's line (contextlib's
@@ -145,7 +145,7 @@ def refusing_memory(what: str, context: str) -> Callable[[F], F]:
     def wrap(f: F) -> F:
         @functools.wraps(f)
         def inner(*args: Any, **kwargs: Any) -> Any:
-            with allocating(what, context):
+            with allocating(what, context, rename):
                 return f(*args, **kwargs)
 
         return inner  # type: ignore[return-value]

@@ -404,6 +404,11 @@ def _fit_precision(a: np.ndarray, arg: str, precision: str) -> np.ndarray:
     return a
 
 
+#: The core's reads a save or a snapshot makes, whose memory refusals are named as the call the
+#: user made (``save``, ``state``, ``to_bytes``), not as the read inside it.
+_READS = ("positions", "velocities", "masses", "integrator_cache", "field", "attributes")
+
+
 def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
     """``value`` of ``state[key]`` checked against the scene's own ``now`` (see Scene.set_state)."""
     arg = f"state[{key!r}]"
@@ -1797,7 +1802,7 @@ class Scene:
         path = _scenefile.check_path(path)
         if path.suffix != ".npz":
             raise InvalidInputError(f"path: must end in .npz, got {str(path)!r}")
-        with allocating("save", "the scene file's arrays"):
+        with allocating("save", "the scene file's arrays", rename=_READS):
             arrays = self._file_arrays()
             atomic_write(path, lambda fh: np.savez(fh, **arrays))
         return path
@@ -1856,7 +1861,7 @@ class Scene:
         Raises :class:`OutOfMemoryError` (a ``MemoryError``), naming ``state``, where the
         snapshot's arrays cannot be had now; nothing changes.
         """
-        with allocating("state", "the snapshot's arrays", rename=("save",)):
+        with allocating("state", "the snapshot's arrays", rename=("save", *_READS)):
             return self._snapshot()
 
     def _snapshot(self) -> dict[str, Any]:
@@ -2108,7 +2113,7 @@ class Scene:
         """The scene file :meth:`save` writes, as bytes (no file is written). Raises what
         :meth:`save` raises for books that are not finite, and :class:`OutOfMemoryError` (a
         ``MemoryError``) where the file's arrays or their bytes cannot be had now."""
-        with allocating("to_bytes", "the scene file's arrays", rename=("save",)):
+        with allocating("to_bytes", "the scene file's arrays", rename=("save", *_READS)):
             buf = io.BytesIO()
             np.savez(buf, **self._file_arrays())
             return buf.getvalue()

@@ -84,6 +84,15 @@ impl Call {
         self.outcomes.is_empty()
     }
 
+    /// The first world that failed for want of memory, and its error (a copy): the caller rolls
+    /// every world back then, since the others stepped and the refusal says nothing changed.
+    pub fn out_of_memory(&self) -> Option<(usize, Error)> {
+        self.outcomes.iter().enumerate().find_map(|(k, o)| match o {
+            Outcome::Failed(e @ Error::OutOfMemory { .. }) => Some((k, e.clone())),
+            _ => None,
+        })
+    }
+
     /// Ends world `k`'s part (`world` is the call's world `k`). `keep`: its `n` steps stay
     /// (a fused member is written back as its general step would have left it) and this is
     /// `Ok`, or the error it failed with (it is back where the call started). Not `keep`: it is

@@ -10,6 +10,7 @@
 //! and `ss × ss` supersamples per pixel averaged into colour and coverage (antialiased edges).
 //! The image is cut into bands of rows, each drawn by one task from the triangles binned to it
 //! in their given order: bit-identical for any thread count.
+use crate::alloc::Need;
 use crate::error::{invalid, Result};
 use rayon::prelude::*;
 
@@ -224,6 +225,10 @@ pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, he
         return Err(invalid("col", "col, row and weights must describe the same points"));
     }
     let wp = width + 2;
+    // Every buffer below at once, checked before any is made: a refusal is an error the
+    // renderer reports (OutOfMemoryError), where an infallible one aborted the process.
+    let bytes = (height as u128 + 2) * wp as u128 * 8 + n as u128 * 24 + (width * height) as u128 * 4;
+    Need::new("splat", bytes, format!("a {width} × {height} splat of {n} points")).room(bytes)?;
     let mut grid = vec![0f64; (height + 2) * wp];
     // Per point, once: its base cell and the fractions, as numpy computes them (fx in f64, the
     // fractions rounded to f32, the products in f32). Computing each point's corner four times,
@@ -283,6 +288,9 @@ pub fn blur(a: &[f32], width: usize, height: usize, r: usize, passes: usize) -> 
     if r > MAX_BLUR_RADIUS {
         return Err(invalid("r", format!("{r} pixels (at most {MAX_BLUR_RADIUS})")));
     }
+    // The image, a scratch copy and a padded line per thread, checked at once (as `splat`).
+    let bytes = 3 * a.len() as u128 * 4 + 64 * (width.max(height) as u128 + 2 * r as u128 + 2) * 8;
+    Need::new("blur", bytes, format!("a {width} × {height} blur")).room(bytes)?;
     let mut cur = a.to_vec();
     if width == 0 || height == 0 {
         return Ok(cur);
@@ -440,6 +448,9 @@ pub fn sphere_depths(
     if i32::try_from(n).is_err() {
         return Err(invalid("col", "at most 2³¹ − 1 points"));
     }
+    // The depths, ids and the points' bins, checked at once (as `splat`).
+    let bytes = (width * height) as u128 * 8 + n as u128 * 48;
+    Need::new("sphere_depths", bytes, format!("a {width} × {height} depth buffer of {n} spheres")).room(bytes)?;
     let mut z = vec![f32::NEG_INFINITY; width * height];
     let mut ids = vec![-1i32; width * height];
     if width == 0 || height == 0 {
@@ -598,6 +609,10 @@ pub fn rasterise(
     if !mesh.faces.len().is_multiple_of(3) || mesh.faces.iter().any(|&i| i as usize >= nv) {
         return Err(invalid("faces", format!("face indices must lie in [0, {nv})")));
     }
+    // The supersampled bands' depth, colour and hit buffers (17 bytes a sample, every band at
+    // once at worst) and the triangles' setups and bins, checked at once (as `splat`).
+    let bytes = (width * height) as u128 * (ss * ss) as u128 * 17 + mesh.faces.len() as u128 * 64;
+    Need::new("rasterise", bytes, format!("a {width} × {height} mesh image at {ss}× supersampling")).room(bytes)?;
     if let Some(uv) = mesh.uv {
         if uv.len() != 2 * nv {
             return Err(invalid("uv", "uv must have one (u, v) per vertex"));

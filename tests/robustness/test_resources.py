@@ -661,3 +661,79 @@ def test_a_part_works_on_after_its_scene_is_dropped():
         gc.enable()
     box.positions = [(1.0, 2.0)]
     assert np.array_equal(box.positions, [[1.0, 2.0]])
+
+
+FINE = LADDER + """
+def fine(label, call, whats, check=None, step=0.25, most=256.0):
+    # The cap raised a quarter MiB at a time from what the process maps now: the doubling
+    # ladder steps over the narrow windows where one buffer of a call fits and the next does
+    # not (a DFSPH fluid's history aborted the process there on save, in a batch's step and
+    # a liquid's splat). Every rung: OutOfMemoryError naming the call, and `check()` holds.
+    global REFUSED
+    mib = 0.0
+    while True:
+        vm = int(re.search(r"VmSize:\\s+(\\d+) kB", open("/proc/self/status").read()).group(1)) * 1024
+        resource.setrlimit(resource.RLIMIT_AS, (vm + int(mib * 2**20), resource.getrlimit(resource.RLIMIT_AS)[1]))
+        try:
+            call()
+        except MemoryError as e:
+            lift()
+            if not isinstance(e, pc.OutOfMemoryError):
+                print(f"BAD {label}: {mib} MiB: bare {e!r}")
+            elif not any(str(e).startswith(w + ": needs ") for w in whats):
+                print(f"BAD {label}: {mib} MiB: names another call: {e}")
+            if check is not None and not check():
+                print(f"BAD {label}: {mib} MiB: changed by the refusal")
+            REFUSED += 1
+            mib += step
+            assert mib <= most, f"{label}: still refused with {most} MiB of headroom: {e}"
+            continue
+        lift()
+        print(f"{label}: ok at {mib} MiB after {REFUSED} refusals")
+        return
+"""
+
+
+@pytest.mark.parametrize("case", ["save", "batch_step", "gif"])
+def test_a_dfsph_fluid_refuses_memory_at_every_fine_cap_never_an_abort(case):
+    """Issue: a helper's audit of faults (2026-12-03). Under a cap a quarter MiB above what the
+    process maps, the DFSPH dam break aborted the process (SIGABRT, "memory allocation of 248832
+    bytes failed": its warm starts, 24 bytes a particle) on ``save``/``state`` and in a batch's
+    step, and a liquid's surface aborted in the splat of a frame; a batch whose member was
+    refused had stepped the others while saying nothing changed, and ``render.gif`` refused
+    after simulating left the scene advanced. Now every rung is an OutOfMemoryError naming the
+    call and leaves the scene (every member) as it was."""
+    setups = {
+        "save": """
+scene = pc.scenes.dam_break()
+scene.step(2)
+before = scene.to_bytes()
+fine("state", scene.state, ("state",), lambda: scene.to_bytes() == before)
+fine("save", lambda: scene.save(PATH), ("save",), lambda: scene.to_bytes() == before)
+""",
+        "batch_step": """
+b = pc.Batch.from_scene(pc.scenes.dam_break(), 3, threads=1)
+b.step(1)
+before = [m.to_bytes() for m in b]
+fine("step", lambda: b.step(2), ("step",), lambda: [m.to_bytes() for m in b] == before)
+assert list(b.step_count) == [3, 3, 3], b.step_count
+""",
+        "gif": """
+from physcore import render
+# Pillow's modules, its font and the renderer's caches loaded before the cap (a shared object
+# mapped under it fails as an ImportError: the test's artefact, not the renderer's).
+render.gif(pc.scenes.dam_break(), PATH, frames=2, size=(480, 360), progress=False)
+scene = pc.scenes.dam_break()
+scene.step(1)
+before = scene.to_bytes()
+fine("gif", lambda: render.gif(scene, PATH, frames=2, size=(480, 360), progress=False), ("gif",),
+     lambda: scene.to_bytes() == before)
+""",
+    }
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as tmp:
+        path = os.path.join(tmp, "out.gif" if case == "gif" else "out.npz")
+        code = FINE + f"PATH = {path!r}\n" + setups[case] + 'assert REFUSED > 0, "no call was refused: the cap never bit"\nprint("ok")\n'
+        out = _child(code, env=FIXED_MMAP, timeout=600)
+    assert "BAD" not in out and out.strip().endswith("ok"), out

@@ -37,8 +37,12 @@ from ._mesh import check_mesh, check_texture
 from ._palette import _PALETTE, THEMES
 from ._raster import _Rasteriser
 
+#: The core's calls a render makes (stepping the scene, reading it, drawing its frames), whose
+#: memory refusals are named as the call the user made (``gif``, ``save``).
+_DRAWING = ("step", "advance", "positions", "velocities", "splat", "blur", "sphere_depths", "rasterise")
 
-@refusing_memory("gif", "the frames")
+
+@refusing_memory("gif", "the frames", rename=_DRAWING)
 def gif(
     scene: Any,
     path: str | os.PathLike,
@@ -339,6 +343,10 @@ def gif(
     OSError
         If the file cannot be written: an unwritable directory is found before simulating; a
         failure while writing leaves no partial file behind.
+    physcore.OutOfMemoryError
+        (a ``MemoryError``) Memory refused while simulating or drawing, naming ``gif``; no file
+        is written and a scene is put back as it was before the call (its state is kept for
+        that, so one that cannot be had is refused before anything is simulated).
 
     Notes
     -----
@@ -480,8 +488,41 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             _check_writable(path)
             if fmt == "png":
                 _check_png_targets(path, plan["frames"])
+        # What the scene was, put back if drawing runs out of memory after the simulation (a
+        # refusal leaves the scene as it was); None where the scene has no state (a batch's
+        # view): then it is left at the last step, as after Ctrl-C.
+        before = _state_before(scene)
         # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
         rec = _recording._simulate(scene, progress=progress, **plan)
+        if fmt != "frames":
+            try:
+                return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera,
+                             arrows, mesh, texture, theme, antialias, colors, cmap, background, surface, box, halo, loop,
+                             loop_default, look, dither)
+            except MemoryError:
+                if before is not None:
+                    scene.set_state(before)
+                raise
+    return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera, arrows, mesh,
+                 texture, theme, antialias, colors, cmap, background, surface, box, halo, loop, loop_default, look, dither)
+
+
+def _state_before(scene: Any) -> dict[str, Any] | None:
+    """``scene.state()`` where the scene has one, else None. OutOfMemoryError where it cannot be
+    had now (before anything is simulated: a render that cannot keep it would not draw)."""
+    from ..scene import Scene
+
+    if not isinstance(scene, Scene):
+        return None
+    return scene.state()
+
+
+def _draw(rec: Any, fmt: str, path: Any, size: Any, fps: Any, color_by: Any, radius: Any, view: Any, colorbar: Any, trail: Any,
+          size_by: Any, title: Any, camera: Any, arrows: Any, mesh: Any, texture: Any, theme: Any, antialias: Any, colors: Any,
+          cmap: Any, background: Any, surface: Any, box: Any, halo: Any, loop: Any, loop_default: Any, look: Any,
+          dither: Any) -> Any:
+    """The frames of the recording `rec`, drawn and written as `fmt` (:func:`_render`'s options,
+    checked there)."""
     if rec.fields is not None and rec.positions.shape[1] == 0:
         from ._fields import FieldRasteriser, fit_size, palette
 
@@ -672,7 +713,7 @@ def _video_module() -> Any:
     return av
 
 
-@refusing_memory("save", "the frames")
+@refusing_memory("save", "the frames", rename=_DRAWING)
 def save(scene: Any, path: str | os.PathLike, **options: Any) -> Any:
     """Draw a scene or :class:`Recording` like :func:`gif`, in the format `path`'s extension names.
 

@@ -99,12 +99,18 @@ pub(super) fn step_batch(
             step_members(inners, n, &stop)
         })
     });
-    let keep = pending.is_none();
+    // A member refused memory: every member back where the call started, and the refusal
+    // raised (it says nothing changed; the others had stepped).
+    let oom = if pending.is_none() { call.out_of_memory() } else { None };
+    let keep = pending.is_none() && oom.is_none();
     let mut failed = Vec::new();
     for (k, r) in refs.iter_mut().enumerate() {
         if let Err(e) = with_sim!(r.inner_mut(), s => call.end(k, s, keep)) {
             failed.push((k, to_py(py, e).into_value(py).into_any()));
         }
+    }
+    if let Some((_, e)) = oom {
+        return Err(to_py(py, e));
     }
     match pending {
         Some(e) => Err(e),

@@ -135,7 +135,7 @@ fn canonical<V: Vector>(record: &Params, name: &str, n: usize, h: &[Real]) -> Re
         return Err(invalid(name, "the contacts term keeps no history"));
     };
     s.set_history(h, n)?;
-    Ok(s.history())
+    s.history()
 }
 
 /// Axial components per grain: 1 in 2D (about z), 3 in 3D.

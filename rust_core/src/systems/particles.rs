@@ -601,7 +601,7 @@ impl<V: Vector> ParticleSystem<V> {
 
     /// The own state (`OwnState::history`) of the term named `name`, `None` if it keeps none.
     pub fn term_history(&self, name: &str) -> Result<Option<Vec<Real>>> {
-        Ok(self.term_named(name)?.as_own_state().map(|s| s.history()))
+        self.term_named(name)?.as_own_state().map(|s| s.history()).transpose()
     }
 
     /// Restores a term's own state (checked; nothing changes on error).
@@ -995,7 +995,10 @@ impl<V: Vector> System for ParticleSystem<V> {
         snap.collisions = self.constraints.dissipated;
         snap.adaptive = self.integrator.as_adaptive().map(|a| a.stats());
         snap.histories.clear();
-        snap.histories.extend(self.sys.forces.terms.iter().map(|t| t.as_own_state().map(|s| s.history())));
+        for t in &self.sys.forces.terms {
+            let h = t.as_own_state().map(|s| s.history()).transpose().map_err(|_| need().error())?;
+            snap.histories.push(h);
+        }
         Ok(snap)
     }
 
@@ -1041,7 +1044,7 @@ impl<V: Vector> System for ParticleSystem<V> {
         }
         for t in &self.sys.forces.terms {
             if let Some(s) = t.as_own_state() {
-                out.push((format!("history:{}", t.name()), s.history()));
+                out.push((format!("history:{}", t.name()), s.history()?));
             }
         }
         if let Some((accepted, rejected, _)) = self.integrator.as_adaptive().map(|a| a.stats()) {

@@ -168,8 +168,9 @@ pub trait OwnState<V: Vector> {
     fn refused(&self) -> Option<crate::error::Error> {
         None
     }
-    /// The own state as reals (rollback, save/load).
-    fn history(&self) -> Vec<Real>;
+    /// The own state as reals (rollback, save/load); `Error::OutOfMemory` where its buffer
+    /// cannot be had (a save under a memory cap aborted the process before).
+    fn history(&self) -> Result<Vec<Real>>;
     /// Restores what `history` returned, for a scene of `n_particles`; checked, nothing changes
     /// on error.
     fn set_history(&mut self, h: &[Real], n_particles: usize) -> Result<()>;

@@ -735,14 +735,20 @@ impl<V: Vector> Solver<V> {
     }
 
     /// Member `who`'s slices of the warm starts and pressures.
-    fn history_of(&self, who: usize) -> Vec<Real> {
+    fn history_of(&self, who: usize) -> Result<Vec<Real>> {
         let m = &self.members[who];
         let r = m.offset..m.offset + m.range.len();
-        let mut h = Vec::with_capacity(3 * r.len());
+        let mut h = Vec::new();
+        Need::new(
+            "save",
+            Need::bytes_of::<Real>(3 * r.len()),
+            format!("a DFSPH fluid's warm starts of {} particles", r.len()),
+        )
+        .reserve(&mut h, 3 * r.len())?;
         h.extend_from_slice(&self.kappa[r.clone()]);
         h.extend_from_slice(&self.kappa_v[r.clone()]);
         h.extend_from_slice(&self.pressure[r]);
-        h
+        Ok(h)
     }
 
     fn set_history_of(&mut self, who: usize, h: &[Real]) {
@@ -936,7 +942,7 @@ impl<V: Vector> Term<V> for Dfsph<V> {
 
 impl<V: Vector> OwnState<V> for Dfsph<V> {
     /// The warm starts and the last step's pressure: 3 values per particle.
-    fn history(&self) -> Vec<Real> {
+    fn history(&self) -> Result<Vec<Real>> {
         self.solver().history_of(self.who)
     }
     fn set_history(&mut self, h: &[Real], _n_particles: usize) -> Result<()> {

@@ -1594,16 +1594,21 @@ impl<V: Vector> OwnState<V> for Contacts<V> {
     /// [n, ω (n·axial), angle (n), dissipated (2), then per live contact: first grain, partner
     /// (a grain, or n + wall index), ξ (dim) seen from the first grain, spring energy, and with
     /// rolling resistance θ_r (axial) seen from the first grain and its energy].
-    fn history(&self) -> Vec<Real> {
+    fn history(&self) -> Result<Vec<Real>> {
         let n = self.omega.len();
-        let mut h = Vec::with_capacity(3 + n * (V::AXIAL_DIM + 1));
+        let carry = self.carry();
+        let per = 2 + V::DIM + 1 + if self.material.rolling_friction > 0.0 { V::AXIAL_DIM + 1 } else { 0 };
+        let len = 1 + n * V::AXIAL_DIM + self.angle.len() + self.dissipated.len() + carry.len() * per;
+        let mut h = Vec::new();
+        Need::new("save", Need::bytes_of::<Real>(len), format!("the contacts' history of {} grains", count(n as u128)))
+            .reserve(&mut h, len)?;
         h.push(n as Real);
         for w in &self.omega {
             push_axial::<V>(&mut h, *w);
         }
         h.extend_from_slice(&self.angle);
         h.extend_from_slice(&self.dissipated);
-        for k in self.carry() {
+        for k in carry {
             h.push(k.i as Real);
             h.push(if k.wall { (n + k.j as usize) as Real } else { k.j as Real });
             h.extend_from_slice(&V::flat(std::slice::from_ref(&k.xi))[..V::DIM]);
@@ -1613,7 +1618,7 @@ impl<V: Vector> OwnState<V> for Contacts<V> {
                 h.push(k.ur);
             }
         }
-        h
+        Ok(h)
     }
     /// Loads `history`. A pair may also be given from its higher index (ξ seen from that
     /// grain), or from both sides (files of physcore before the Verlet lists): the record from
