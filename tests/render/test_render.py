@@ -1213,6 +1213,19 @@ def test_dither_mixes_the_shades_of_a_ramp_and_is_checked_by_name(tmp_path):
     assert not (tmp_path / "e.gif").exists() and scene.time == t  # refused before a step
 
 
+def _glow(h: int, w: int) -> np.ndarray:
+    """(h, w, 3) float64: a warm glow fading over a dark background, a blue wedge over its left
+    half and a flat strip of background on top: over 255 colours in all, so some fall between
+    a GIF palette's (the look of kepler's sun under its swept areas)."""
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    bg = np.array([12, 14, 24], dtype=np.float64)
+    glow = np.exp(-((x - 128) ** 2 + (y - 48) ** 2) / (2 * 40.0**2))[..., None]
+    frame = bg + glow * (np.array([255, 214, 120]) - bg)
+    frame[:, : w // 2] = 0.6 * frame[:, : w // 2] + 0.4 * np.array([40, 90, 160])
+    frame[:8] = bg
+    return frame
+
+
 def test_dither_of_full_colour_frames_mixes_a_glows_colours_and_keeps_the_flat_ones_exact():
     """Full-colour frames are put on one palette of 255 colours: a smooth glow over colours the
     palette cannot all hold drew rings (Kepler's sun under the swept areas). With ``dither``
@@ -1222,15 +1235,8 @@ def test_dither_of_full_colour_frames_mixes_a_glows_colours_and_keeps_the_flat_o
     from physcore.render._gif import _palette_frames
 
     h, w = 96, 256
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    bg = np.array([12, 14, 24], dtype=np.float64)
-    # A warm glow fading over the background, and a blue wedge over its left half: over 255
-    # colours in all, so some fall between the palette's.
-    glow = np.exp(-((x - 128) ** 2 + (y - 48) ** 2) / (2 * 40.0**2))[..., None]
-    frame = bg + glow * (np.array([255, 214, 120]) - bg)
-    frame[:, : w // 2] = 0.6 * frame[:, : w // 2] + 0.4 * np.array([40, 90, 160])
+    frame = _glow(h, w)
     frame[40:56, 120:136] = [255, 214, 120]  # a flat disc
-    frame[:8] = bg  # a flat strip of background
     frame = frame.round().astype(np.uint8)
     assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 600
 
@@ -1278,12 +1284,7 @@ def test_dither_of_full_colour_frames_leaves_no_lone_specks_and_keeps_thin_lines
     from physcore.render._gif import DITHER_EDGE, _edges, _palette_frames
 
     h, w = 96, 256
-    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
-    bg = np.array([12, 14, 24], dtype=np.float64)
-    glow = np.exp(-((x - 128) ** 2 + (y - 48) ** 2) / (2 * 40.0**2))[..., None]
-    frame = bg + glow * (np.array([255, 214, 120]) - bg)
-    frame[:, : w // 2] = 0.6 * frame[:, : w // 2] + 0.4 * np.array([40, 90, 160])
-    frame[:8] = bg
+    frame = _glow(h, w)
     frame[20, 10:240] = 0.5 * frame[20, 10:240] + 0.5 * np.array([235, 235, 235])  # half a pixel's cover
     frame = frame.round().astype(np.uint8)
     images, colours = _palette_frames([frame], n_colours=255, dither=True)
