@@ -332,7 +332,7 @@ def lyapunov(
     if not dt > 0:
         raise InvalidInputError(f"dt: must be > 0, got {dt}")
     if not dt >= _check.MIN_NORMAL:  # as Scene(dt=...) refuses it
-        raise InvalidInputError(f"dt: must be finite and >= {_check.MIN_NORMAL:.3g} (seconds), got {dt}")
+        raise InvalidInputError(f"dt: must be > 0 and finite (at least {_check.MIN_NORMAL:.3g} s, the smallest normal float64), got {dt}")
     x0 = _check.real_array("start", spec["start"] if start is None else start).astype(np.float64).reshape(-1)
     if x0.shape != (spec["dim"],) or not np.isfinite(x0).all():
         raise InvalidInputError(f"start: expected {spec['dim']} finite coordinates, got {start!r}")

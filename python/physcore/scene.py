@@ -422,7 +422,7 @@ def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:
     if key == "dt":
         v = _check.real(arg, value)
         if not (math.isfinite(v) and v >= _MIN_DT):
-            raise InvalidInputError(f"{arg}: must be finite and >= {_MIN_DT:.3g} s, got {v}")
+            raise InvalidInputError(f"{arg}: must be > 0 and finite (at least {_MIN_DT:.3g} s, the smallest normal float64), got {v}")
         return v
     if key == "step":
         return _check_int(value, arg, 0, _MAX_STEPS)
@@ -1285,7 +1285,7 @@ class Scene:
         duration = _check.real("duration", duration)
         # As for dt: a subnormal duration would become a step with no finite reciprocal.
         if not (math.isfinite(duration) and duration >= _MIN_DT):
-            raise InvalidInputError(f"duration: must be finite and >= {_MIN_DT:.3g} (seconds), got {duration}")
+            raise InvalidInputError(f"duration: must be > 0 and finite (at least {_MIN_DT:.3g} s, the smallest normal float64), got {duration}")
         if isinstance(substeps, str):
             if substeps != "auto":
                 raise InvalidInputError(f"substeps: must be 'auto' or an int >= 1, got {substeps!r}")

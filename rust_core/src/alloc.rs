@@ -59,9 +59,16 @@ impl Need {
 
     /// Checks that `bytes` more can be had now (reserved and freed at once, never touched), for
     /// transient buffers allocated where a refusal cannot be reported (inside parallel parts).
+    /// The reservation is handed to `black_box`: the optimiser may remove an allocation that is
+    /// never used (and assume it succeeded), which would make the check pass at any limit. A
+    /// room check is only as good as its byte count: a buffer grown by doubling (a `collect` of
+    /// a filter) can pass its estimate; such buffers are better allocated fallibly themselves.
     pub fn room(&self, bytes: u128) -> Result<()> {
         let b = usize::try_from(bytes).map_err(|_| self.error())?;
-        Vec::<u8>::new().try_reserve_exact(b).map_err(|_| self.error())
+        let mut v = Vec::<u8>::new();
+        v.try_reserve_exact(b).map_err(|_| self.error())?;
+        std::hint::black_box(&mut v);
+        Ok(())
     }
 
     /// `vec![value; n]`.
@@ -140,5 +147,13 @@ mod tests {
         let msg = e.to_string();
         assert!(msg.starts_with("neighbors: needs 1.10 TB for 68,719,476,736 pairs"), "{msg}");
         assert!(v.capacity() == 0);
+    }
+
+    #[test]
+    fn room_refuses_what_the_allocator_refuses() {
+        // 2^46 bytes (64 TiB): addressable, but more than any machine this runs on commits.
+        let need = Need::new("blur", 1u128 << 46, "a test");
+        assert!(need.room(1u128 << 46).is_err());
+        assert!(need.room(1 << 20).is_ok());
     }
 }

@@ -225,27 +225,28 @@ pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, he
         return Err(invalid("col", "col, row and weights must describe the same points"));
     }
     let wp = width + 2;
-    // Every buffer below at once, checked before any is made: a refusal is an error the
-    // renderer reports (OutOfMemoryError), where an infallible one aborted the process.
+    // Every buffer allocated fallibly: a refusal is an error the renderer reports
+    // (OutOfMemoryError), where an infallible one aborted the process.
     let bytes = (height as u128 + 2) * wp as u128 * 8 + n as u128 * 24 + (width * height) as u128 * 4;
-    Need::new("splat", bytes, format!("a {width} × {height} splat of {n} points")).room(bytes)?;
-    let mut grid = vec![0f64; (height + 2) * wp];
+    let need = Need::new("splat", bytes, format!("a {width} × {height} splat of {n} points"));
+    need.check()?;
+    let mut grid = need.filled((height + 2) * wp, 0f64)?;
     // Per point, once: its base cell and the fractions, as numpy computes them (fx in f64, the
     // fractions rounded to f32, the products in f32). Computing each point's corner four times,
     // with two libm floors each, took 28 ms of a 10⁶-point splat.
     let floor = |v: f64| floor_i64(v) as f64;
-    let points: Vec<(usize, f32, f32, f32)> = (0..n)
-        .filter_map(|i| {
-            let (fx, fy) = (col[i] - 0.5, row[i] - 0.5);
-            if !(fx > -1.0 && fx < width as f64 && fy > -1.0 && fy < height as f64) {
-                return None;
-            }
-            let (x0, y0) = (floor(fx), floor(fy));
-            let (ax, ay) = ((fx - x0) as f32, (fy - y0) as f32);
-            let base = ((y0 as i64 + 1) * wp as i64 + (x0 as i64 + 1)) as usize;
-            Some((base, ax, ay, weights.map_or(1.0, |w| w[i])))
-        })
-        .collect();
+    let mut points: Vec<(usize, f32, f32, f32)> = Vec::new();
+    need.reserve(&mut points, n)?;
+    points.extend((0..n).filter_map(|i| {
+        let (fx, fy) = (col[i] - 0.5, row[i] - 0.5);
+        if !(fx > -1.0 && fx < width as f64 && fy > -1.0 && fy < height as f64) {
+            return None;
+        }
+        let (x0, y0) = (floor(fx), floor(fy));
+        let (ax, ay) = ((fx - x0) as f32, (fy - y0) as f32);
+        let base = ((y0 as i64 + 1) * wp as i64 + (x0 as i64 + 1)) as usize;
+        Some((base, ax, ay, weights.map_or(1.0, |w| w[i])))
+    }));
     let weighted = weights.is_some();
     for corner in 0..4 {
         for &(base, ax, ay, w) in &points {
@@ -260,7 +261,8 @@ pub fn splat(col: &[f64], row: &[f64], weights: Option<&[f32]>, width: usize, he
             grid[at] += f as f64;
         }
     }
-    let mut out = Vec::with_capacity(width * height);
+    let mut out = Vec::new();
+    need.reserve(&mut out, width * height)?;
     for y in 1..=height {
         out.extend(grid[y * wp + 1..y * wp + 1 + width].iter().map(|&v| v as f32));
     }
@@ -288,16 +290,23 @@ pub fn blur(a: &[f32], width: usize, height: usize, r: usize, passes: usize) -> 
     if r > MAX_BLUR_RADIUS {
         return Err(invalid("r", format!("{r} pixels (at most {MAX_BLUR_RADIUS})")));
     }
-    // The image, a scratch copy and a padded line per thread, checked at once (as `splat`).
-    let bytes = 3 * a.len() as u128 * 4 + 64 * (width.max(height) as u128 + 2 * r as u128 + 2) * 8;
-    Need::new("blur", bytes, format!("a {width} × {height} blur")).room(bytes)?;
-    let mut cur = a.to_vec();
+    // The image, a scratch copy and the columns' running sums allocated fallibly; the padded
+    // line each thread grows is checked first (as `splat`).
+    let ring = if r > 2 { 2 * r + 2 } else { 0 };
+    let bytes = 2 * a.len() as u128 * 4 + (ring + 1) as u128 * width as u128 * 4;
+    let lines = 64 * (width.max(height) as u128 + 2 * r as u128 + 2) * 8;
+    let need = Need::new("blur", bytes + lines, format!("a {width} × {height} blur"));
+    need.check()?;
+    let mut cur = need.copy(a)?;
     if width == 0 || height == 0 {
         return Ok(cur);
     }
-    let mut tmp = vec![0f32; cur.len()];
+    let mut tmp = need.filled(cur.len(), 0f32)?;
+    let zeros = need.filled(width, 0f32)?;
+    let mut sums = need.filled(ring * width, 0f32)?;
+    need.room(lines)?;
     for _ in 0..passes {
-        box_columns(&cur, &mut tmp, width, height, r);
+        box_columns(&cur, &mut tmp, width, height, r, &zeros, &mut sums);
         let line = |scratch: &mut Vec<f32>, (src, dst): (&[f32], &mut [f32])| box_line(src, dst, r, scratch);
         if crate::par::fork_if(cur.len(), || {
             tmp.par_chunks(width).zip(cur.par_chunks_mut(width)).for_each_init(Vec::new, line)
@@ -351,15 +360,15 @@ fn box_line(src: &[f32], dst: &mut [f32], r: usize, scratch: &mut Vec<f32>) {
 }
 
 /// One box pass down the columns of `src` into `dst` (`_box_blur` along axis 0), a whole row of
-/// columns at a time (the same operations per column as `box_line`).
-fn box_columns(src: &[f32], dst: &mut [f32], width: usize, height: usize, r: usize) {
+/// columns at a time (the same operations per column as `box_line`). `zeros`: a row of zeros;
+/// `c`: (2r + 2) rows for the running sums where r > 2.
+fn box_columns(src: &[f32], dst: &mut [f32], width: usize, height: usize, r: usize, zeros: &[f32], c: &mut [f32]) {
     let inv = box_factor(r);
-    let zeros = vec![0f32; width];
     let row = |t: usize, pad: usize| -> &[f32] {
         if t >= pad && t - pad < height {
             &src[(t - pad) * width..(t - pad + 1) * width]
         } else {
-            &zeros
+            zeros
         }
     };
     if r <= 2 {
@@ -382,14 +391,13 @@ fn box_columns(src: &[f32], dst: &mut [f32], width: usize, height: usize, r: usi
     // The running sum over the padded rows, kept for the 2r + 2 rows a difference reads (a
     // ring), so the pass streams through the image once, a row (vector-wide) at a time.
     let ring = 2 * r + 2;
-    let mut c = vec![0f32; ring * width];
     for t in 0..height + 2 * r + 1 {
         let (prev, cur) = ((t + ring - 1) % ring, t % ring);
         let p = row(t, r + 1);
         if t == 0 {
             c[..width].copy_from_slice(p);
         } else {
-            let (before, to) = rows2(&mut c, prev, cur, width);
+            let (before, to) = rows2(c, prev, cur, width);
             for ((o, &q), &v) in to.iter_mut().zip(before).zip(p) {
                 *o = q + v;
             }
@@ -448,11 +456,12 @@ pub fn sphere_depths(
     if i32::try_from(n).is_err() {
         return Err(invalid("col", "at most 2³¹ − 1 points"));
     }
-    // The depths, ids and the points' bins, checked at once (as `splat`).
+    // The depths, ids and the points' bins, allocated fallibly (as `splat`).
     let bytes = (width * height) as u128 * 8 + n as u128 * 48;
-    Need::new("sphere_depths", bytes, format!("a {width} × {height} depth buffer of {n} spheres")).room(bytes)?;
-    let mut z = vec![f32::NEG_INFINITY; width * height];
-    let mut ids = vec![-1i32; width * height];
+    let need = Need::new("sphere_depths", bytes, format!("a {width} × {height} depth buffer of {n} spheres"));
+    need.check()?;
+    let mut z = need.filled(width * height, f32::NEG_INFINITY)?;
+    let mut ids = need.filled(width * height, -1i32)?;
     if width == 0 || height == 0 {
         return Ok((z, ids));
     }
@@ -461,30 +470,28 @@ pub fn sphere_depths(
     // beyond the image (which leaves a point off it off it): f64::floor and ceil are libm calls
     // on baseline x86-64, and three boxes a point took 70 % of the time.
     let floor = floor_i64;
-    let spans: Vec<[u32; 4]> = (0..n)
-        .map(|i| {
-            let (c, r, d) = (col[i], row[i], depth[i]);
-            if !(c.is_finite() && r.is_finite() && d.is_finite()) {
-                return [u32::MAX; 4];
-            }
-            let c = c.clamp(-radius - 2.0, width as f64 + radius + 2.0);
-            let r = r.clamp(-radius - 2.0, height as f64 + radius + 2.0);
-            // ceil(a) = −floor(−a)
-            let x0 = (-floor(radius + 0.5 - c)).max(0);
-            let x1 = floor(c + radius - 0.5).min(width as i64 - 1);
-            let y0 = (-floor(radius + 0.5 - r)).max(0);
-            let y1 = floor(r + radius - 0.5).min(height as i64 - 1);
-            if x0 <= x1 && y0 <= y1 {
-                [x0 as u32, x1 as u32, y0 as u32, y1 as u32]
-            } else {
-                [u32::MAX; 4]
-            }
-        })
-        .collect();
+    let spans: Vec<[u32; 4]> = need.collect((0..n).map(|i| {
+        let (c, r, d) = (col[i], row[i], depth[i]);
+        if !(c.is_finite() && r.is_finite() && d.is_finite()) {
+            return [u32::MAX; 4];
+        }
+        let c = c.clamp(-radius - 2.0, width as f64 + radius + 2.0);
+        let r = r.clamp(-radius - 2.0, height as f64 + radius + 2.0);
+        // ceil(a) = −floor(−a)
+        let x0 = (-floor(radius + 0.5 - c)).max(0);
+        let x1 = floor(c + radius - 0.5).min(width as i64 - 1);
+        let y0 = (-floor(radius + 0.5 - r)).max(0);
+        let y1 = floor(r + radius - 0.5).min(height as i64 - 1);
+        if x0 <= x1 && y0 <= y1 {
+            [x0 as u32, x1 as u32, y0 as u32, y1 as u32]
+        } else {
+            [u32::MAX; 4]
+        }
+    }))?;
     // Bin the points to bands of rows in their order (a counting sort, as `rasterise`): each
     // band then keeps the first nearest point of the sequential loop, for any thread count.
     let bands = height.div_ceil(BAND);
-    let mut start = vec![0usize; bands + 1];
+    let mut start = need.filled(bands + 1, 0usize)?;
     for b in spans.iter().filter(|b| b[0] != u32::MAX) {
         for band in b[2] as usize / BAND..=b[3] as usize / BAND {
             start[band + 1] += 1;
@@ -493,8 +500,8 @@ pub fn sphere_depths(
     for b in 0..bands {
         start[b + 1] += start[b];
     }
-    let mut fill = start.clone();
-    let mut binned = vec![0u32; start[bands]];
+    let mut fill = need.copy(&start)?;
+    let mut binned = need.filled(start[bands], 0u32)?;
     for (i, b) in spans.iter().enumerate().filter(|(_, b)| b[0] != u32::MAX) {
         for band in b[2] as usize / BAND..=b[3] as usize / BAND {
             binned[fill[band]] = i as u32;
@@ -612,7 +619,8 @@ pub fn rasterise(
     // The supersampled bands' depth, colour and hit buffers (17 bytes a sample, every band at
     // once at worst) and the triangles' setups and bins, checked at once (as `splat`).
     let bytes = (width * height) as u128 * (ss * ss) as u128 * 17 + mesh.faces.len() as u128 * 64;
-    Need::new("rasterise", bytes, format!("a {width} × {height} mesh image at {ss}× supersampling")).room(bytes)?;
+    let need = Need::new("rasterise", bytes, format!("a {width} × {height} mesh image at {ss}× supersampling"));
+    need.room(bytes)?;
     if let Some(uv) = mesh.uv {
         if uv.len() != 2 * nv {
             return Err(invalid("uv", "uv must have one (u, v) per vertex"));
@@ -630,7 +638,7 @@ pub fn rasterise(
     // Bin the triangles to bands, keeping their order (a counting sort).
     let bands = height.div_ceil(BAND);
     let band_rows = BAND * ss;
-    let mut start = vec![0usize; bands + 1];
+    let mut start = need.filled(bands + 1, 0usize)?;
     for t in &tris {
         for b in t.bbox[2] / band_rows..=t.bbox[3] / band_rows {
             start[b + 1] += 1;
@@ -639,8 +647,8 @@ pub fn rasterise(
     for b in 0..bands {
         start[b + 1] += start[b];
     }
-    let mut fill = start.clone();
-    let mut binned = vec![0u32; start[bands]];
+    let mut fill = need.copy(&start)?;
+    let mut binned = need.filled(start[bands], 0u32)?;
     for (k, t) in tris.iter().enumerate() {
         for b in t.bbox[2] / band_rows..=t.bbox[3] / band_rows {
             binned[fill[b]] = k as u32;

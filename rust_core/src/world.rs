@@ -842,7 +842,11 @@ pub fn check_dt(dt: Real) -> Result<()> {
     if !(dt.is_finite() && dt >= Real::MIN_POSITIVE) {
         return Err(invalid(
             "dt",
-            format!("must be finite and >= {:.3e} s, got {}", Real::MIN_POSITIVE, crate::error::seconds(dt)),
+            format!(
+                "must be > 0 and finite (at least {:.3e} s, the smallest normal float64), got {}",
+                Real::MIN_POSITIVE,
+                crate::error::seconds(dt)
+            ),
         ));
     }
     Ok(())

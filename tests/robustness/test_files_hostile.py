@@ -695,7 +695,7 @@ def test_corpus_covers_every_meta_field(ref):
         (("step",), 2**64 - 1, "meta.step: must be an integer in [0, 2**63)"),
         (("time",), NAN, "meta.time: must be a finite number, got nan"),
         (("e0",), "abc", "meta.e0: must be a finite number, got a string 'abc'"),
-        (("dt",), -1.0, "meta.dt: must be finite and >= "),
+        (("dt",), -1.0, "meta.dt: must be > 0 and finite (at least "),
         (("terms", DRAG, "coefficient"), -1.0, f"meta.terms[{DRAG}].coefficient: must be >= 0"),
         (("terms", FLUID, "first"), -1, f"meta.terms[{FLUID}].first: must be an integer in [0, 2**63)"),
     ],

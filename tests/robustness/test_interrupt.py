@@ -389,7 +389,7 @@ def test_real_keyboard_interrupts_of_a_loop_of_short_steps_never_leave_a_scene_b
 
     rng = random.Random(0)
     old = signal.signal(signal.SIGALRM, signal.default_int_handler)
-    trials = 0
+    trials = lost = 0
     end = time.perf_counter() + 1.5
     try:
         while time.perf_counter() < end:
@@ -401,18 +401,26 @@ def test_real_keyboard_interrupts_of_a_loop_of_short_steps_never_leave_a_scene_b
                 members.append(s)
             target = pc.Batch(members, threads=1) if batch else members[0]
             signal.setitimer(signal.ITIMER_REAL, rng.uniform(0.001, 0.01))
+            t0 = time.perf_counter()
             try:
-                while True:
+                # Bounded: once in a full suite under xdist (2026-12-03) an alarm raised nothing
+                # and `while True` spun until the worker was killed; not seen again in 3,141
+                # trials alone. What this test checks is the step after an interrupt, so an
+                # alarm that never came is not counted as a trial.
+                while time.perf_counter() - t0 < 1.0:
                     target.step(1)
+                lost += 1
+                continue
             except KeyboardInterrupt:
                 pass
-            signal.setitimer(signal.ITIMER_REAL, 0)
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
             target.step(1)  # SceneBusyError if the interrupt left it taken
             trials += 1
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
-    assert trials >= 20
+    assert trials >= 20, (trials, lost)
 
 
 class _RaisesAfter:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import traceback
 from pathlib import Path
 from typing import Any
 
@@ -499,8 +500,12 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
                 return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera,
                              arrows, mesh, texture, theme, antialias, colors, cmap, background, surface, box, halo, loop,
                              loop_default, look, dither)
-            except MemoryError:
+            except MemoryError as e:
                 if before is not None:
+                    # The drawing's buffers (held by the traceback's frames) and the recording
+                    # freed first: the restore needs room under the same limit.
+                    traceback.clear_frames(e.__traceback__)
+                    del rec
                     scene.set_state(before)
                 raise
     return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera, arrows, mesh,

@@ -119,19 +119,30 @@ impl IntegratorOptions {
     /// `InvalidInput` naming the first field out of its range (see the fields).
     pub fn validate(&self) -> Result<()> {
         use crate::error::invalid;
-        let resolvable = |v: Real| v.is_finite() && (1e-14..1.0).contains(&v);
-        if !resolvable(self.rtol) {
-            return Err(invalid("rtol", format!("{} must be in [1e-14, 1) (float64 cannot resolve less)", self.rtol)));
-        }
+        // A relative tolerance in [1e-14, 1), the message saying which end was missed.
+        let tolerance = |name: &str, v: Real| -> Result<()> {
+            if v.is_finite() && (1e-14..1.0).contains(&v) {
+                return Ok(());
+            }
+            let why = if !(v > 0.0 && v.is_finite()) {
+                "a tolerance is positive and finite"
+            } else if v < 1e-14 {
+                "float64 cannot resolve less"
+            } else {
+                "a relative error of 1 or more accepts any step"
+            };
+            let shown = if v != 0.0 && v.is_finite() && !(1e-3..1e5).contains(&v.abs()) {
+                format!("{v:e}")
+            } else {
+                format!("{v}")
+            };
+            Err(invalid(name, format!("{shown} must be in [1e-14, 1) ({why})")))
+        };
+        tolerance("rtol", self.rtol)?;
         if !(self.atol.is_finite() && self.atol >= 0.0) {
             return Err(invalid("atol", format!("{} must be finite and >= 0 (m and m/s)", self.atol)));
         }
-        if !resolvable(self.cg_tol) {
-            return Err(invalid(
-                "cg_tol",
-                format!("{} must be in [1e-14, 1) (float64 cannot resolve less)", self.cg_tol),
-            ));
-        }
+        tolerance("cg_tol", self.cg_tol)?;
         if !(1..=1_000_000).contains(&self.cg_max_iter) {
             return Err(invalid("cg_max_iter", format!("{} must be in 1..=1000000", self.cg_max_iter)));
         }

@@ -107,8 +107,11 @@ fn rasterise_mesh<'py>(
     let mesh = crate::raster::Mesh { verts: v, faces: f, front: fr, back: bk, uv: uv_s, texture: tex };
     let pool = crate::par::default_pool().ok();
     py.detach(|| {
-        let mut rgb = vec![0f32; 3 * width * height];
-        let mut cover = vec![0f32; width * height];
+        let bytes = crate::alloc::Need::bytes_of::<f32>(width * height) * 4;
+        let need = crate::alloc::Need::new("rasterise", bytes, format!("a {width} × {height} mesh image"));
+        need.check()?;
+        let mut rgb = need.filled(3 * width * height, 0f32)?;
+        let mut cover = need.filled(width * height, 0f32)?;
         crate::par::install(pool.as_ref(), || {
             crate::raster::rasterise(&mesh, width, height, ss, &mut rgb, &mut cover)
         })?;
