@@ -105,9 +105,11 @@ def _resting_layer(seed: int):
 
 def test_a_resting_layer_comes_to_rest_at_default_settings():
     """The layer of ``_resting_layer`` (0.5 × 0.5 m, 24 × 24 particles, lattice start) at every
-    default (α = 0.05) settles as WCSPH's does: rms speed below 0.05 m/s at t = 4 s, and the
-    books' total within 1 % from t = 1 to 4 s (issue "Physics you can trust, round 2", item 1).
-    Measured: rms 0.013, 0.013, 0.018 m/s at t = 1, 2, 4 s; books −7e-5. Before the static
+    default (α = 0.05) settles as WCSPH's does: rms speed below 0.025 m/s at t = 4 s, and the
+    books' total within 2e-4 from t = 1 to 4 s (issue "Physics you can trust, round 2", item 1;
+    the guards were 0.05 m/s and 1 % until 2026-12-03). Measured: rms 0.013–0.018 m/s between
+    t = 1 and 4 s, depending on how ``advance`` is split (advance(1), (1), (2): 0.0145 and 0.0141
+    at 2 and 4 s, alike at scalar, avx2 and avx512); books −7e-5 here, +5.4e-5 so split. Before the static
     walls mirrored the hydrostatic part of the pressure (``hydrostatic_walls``, Adami et al.
     2012) a circulation down the walls and up the middle ran at 0.19–0.23 m/s, and the books,
     which counted the kick's ½ m (g dt)² that the density solve takes out as dissipation, rose
@@ -122,8 +124,8 @@ def test_a_resting_layer_comes_to_rest_at_default_settings():
     scene.advance(3.0)
     v = np.linalg.norm(scene.velocities, axis=1)
     rms = float(np.sqrt((v**2).mean()))
-    assert rms < 0.05, rms
-    assert abs(scene.energy().total - e1) < 0.01 * abs(e1), (scene.energy().total, e1)
+    assert rms < 0.025, rms
+    assert abs(scene.energy().total - e1) < 2e-4 * abs(e1), (scene.energy().total, e1)
 
 
 LAYERS = 16
