@@ -10,7 +10,7 @@
 //! kernel instead, one member per SIMD lane (`crate::batch`), with the same bits.
 use super::errors::*;
 use super::simulation::PySimulation;
-use super::watch::SIGNAL_POLL;
+use super::watch::{SHORT_CALL, SIGNAL_POLL};
 use super::Inner;
 use crate::batch::Call;
 use crate::error::{invalid, Error};
@@ -36,15 +36,28 @@ fn borrow_all<'py>(py: Python<'py>, sims: &[Bound<'py, PySimulation>]) -> PyResu
         .collect()
 }
 
-/// The pool a batch call runs on: `threads` threads of its own, or the default pool (`None`).
+/// The pool a batch call runs on: `threads` threads, or the default pool (`None`). A pool of
+/// `threads` threads is kept for the next call (the last few sizes asked for): built anew each
+/// call, its thread's start was most of a short call's time.
 fn batch_pool(py: Python<'_>, threads: Option<usize>) -> PyResult<Arc<rayon::ThreadPool>> {
+    use std::sync::Mutex;
+    static POOLS: Mutex<Vec<(usize, Arc<rayon::ThreadPool>)>> = Mutex::new(Vec::new());
+    const KEPT: usize = 4;
     let err = |threads: usize, reason: String| to_py(py, Error::Threads { threads, reason });
-    Ok(match threads {
-        Some(t) => {
-            Arc::new(rayon::ThreadPoolBuilder::new().num_threads(t.max(1)).build().map_err(|e| err(t, e.to_string()))?)
-        }
-        None => crate::par::default_pool().map_err(|e| err(0, e))?,
-    })
+    let Some(t) = threads else {
+        return crate::par::default_pool().map_err(|e| err(0, e));
+    };
+    let t = t.max(1);
+    let mut pools = POOLS.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((_, p)) = pools.iter().find(|(k, _)| *k == t) {
+        return Ok(p.clone());
+    }
+    let p = Arc::new(rayon::ThreadPoolBuilder::new().num_threads(t).build().map_err(|e| err(t, e.to_string()))?);
+    if pools.len() == KEPT {
+        pools.remove(0); // its threads end once no call holds it
+    }
+    pools.push((t, p.clone()));
+    Ok(p)
 }
 
 /// Steps every member `n` steps on the current pool: through `crate::batch::step_worlds` (its
@@ -87,18 +100,37 @@ pub(super) fn step_batch(
     }
     let pool = batch_pool(py, threads)?;
     let ptrs: Vec<SyncPtr<Inner>> = refs.iter_mut().map(|r| SyncPtr(r.inner_mut() as *mut Inner)).collect();
+    // A short call (at most SHORT_CALL steps × elements over all members, none adaptive) runs
+    // unwatched, as a scene's short step does: the calling thread waits for the pool without a
+    // watching thread, whose start was most of such a call's time. Signals are checked once it
+    // ends (a signal then undoes the call, as below).
+    let short = refs
+        .iter_mut()
+        .try_fold(0u64, |total, r| {
+            with_sim!(r.inner_mut(), s => {
+                let work = n.saturating_mul(s.elements() as u64);
+                s.particles().adaptive_stats().is_none().then(|| total.saturating_add(work))
+            })
+        })
+        .is_some_and(|total| total <= SHORT_CALL);
     let stop = Arc::new(AtomicBool::new(false));
-    // A signal during the call, or right after it: every member goes back to where it started
-    // (those that stopped on the flag, or diverged, already are; a fused member was never
-    // written). Else each member's steps are kept: a fused member written back now.
-    let (mut call, pending): (Call, _) = with_signals(py, &stop, || {
+    let run = || {
         pool.install(|| {
             // SAFETY: each pointer is a distinct simulation (each was borrowed mutably above,
             // and the borrows outlive this call), used by one task at a time.
             let inners: Vec<&mut Inner> = ptrs.iter().map(|p| unsafe { &mut *p.0 }).collect();
             step_members(inners, n, &stop)
         })
-    });
+    };
+    // A signal during the call, or right after it: every member goes back to where it started
+    // (those that stopped on the flag, or diverged, already are; a fused member was never
+    // written). Else each member's steps are kept: a fused member written back now.
+    let (mut call, pending): (Call, _) = if short {
+        let call = py.detach(run);
+        (call, py.check_signals().err())
+    } else {
+        with_signals(py, &stop, run)
+    };
     // A member refused memory: every member back where the call started, and the refusal
     // raised (it says nothing changed; the others had stepped).
     let oom = if pending.is_none() { call.out_of_memory() } else { None };
