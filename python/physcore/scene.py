@@ -406,7 +406,7 @@ def _fit_precision(a: np.ndarray, arg: str, precision: str) -> np.ndarray:
 
 #: The core's reads a save or a snapshot makes, whose memory refusals are named as the call the
 #: user made (``save``, ``state``, ``to_bytes``), not as the read inside it.
-_READS = ("positions", "velocities", "masses", "integrator_cache", "field", "attributes")
+_READS = ("positions", "velocities", "masses", "pinned", "integrator_cache", "field", "attributes")
 
 
 def _check_state_value(key: str, value: Any, now: Any, scene: Scene) -> Any:

@@ -369,8 +369,11 @@ pub fn rows2_sum(
 
 /// Σ f(r) over `rows` rows, in row order, in parallel (read-only passes: energies, norms).
 pub fn sum_rows(rows: usize, cells: usize, f: impl Fn(usize) -> Real + Sync + Send) -> Real {
-    if cells >= par::PAR_MIN {
-        let mut partials = vec![0.0; rows];
+    // The partials allocated fallibly: where they cannot be had (a memory cap: this runs in
+    // the energy books, which report nothing), the serial sum below gives the same bits.
+    let mut partials = Vec::new();
+    if cells >= par::PAR_MIN && partials.try_reserve_exact(rows).is_ok() {
+        partials.resize(rows, 0.0);
         let p = par::Shared::new(&mut partials);
         // SAFETY: partial r goes to index r alone.
         if par::for_each_index_min(rows, MIN_ROWS, &|r| unsafe { *p.at(r) = f(r) }) {

@@ -956,7 +956,10 @@ impl PySimulation {
 
     /// Cached forces (N, dim) and term powers carried between steps, or None.
     fn integrator_cache<'py>(&self, py: Python<'py>) -> PyResult<Option<CacheArrays<'py>>> {
-        with_sim!(&self.inner, s => s.particles().integrator_cache().map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose())
+        with_sim!(&self.inner, s => {
+            let cache = s.particles().try_integrator_cache("integrator_cache").map_err(|e| to_py(py, e))?;
+            cache.map(|(f, p)| Ok((to_array2(py, &f, "integrator_cache")?, p))).transpose()
+        })
     }
 
     #[pyo3(signature = (t, step, dissipated, collisions, cache_forces=None, cache_power=None))]
