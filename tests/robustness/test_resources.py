@@ -743,3 +743,26 @@ def test_a_gif_refused_memory_after_simulating_puts_the_scene_back(tmp_path, mon
     with pytest.raises(pc.OutOfMemoryError, match="^gif: needs 2.34 MB"):
         render.gif(scene, tmp_path / "d.gif", frames=3, progress=False)
     assert scene.to_bytes() == before and not (tmp_path / "d.gif").exists()
+
+
+@pytest.mark.parametrize("name", ["dam_break", "lorenz", "turing"])
+def test_a_gif_refused_memory_while_simulating_puts_the_scene_back(tmp_path, monkeypatch, name):
+    """A memory refusal part way through the simulation (after some frames were stepped) leaves
+    the scene as it was before the call, particles, flows and grids alike (the helper's fine-cap
+    audit of 2026-12-03 found lorenz, ripple, turing, vortex_street and double_slit left
+    advanced), and is named as the call; no file is written."""
+    from physcore import render
+    from physcore.render import _recording
+
+    scene = getattr(pc.scenes, name)()
+    scene.step(1)
+    before = scene.to_bytes()
+
+    def refused(scene, **kwargs):
+        scene.step(3)  # some frames in
+        raise pc.OutOfMemoryError("step: needs 5.83 MB for the step's transient buffers, more than can be allocated now", 5_830_000)
+
+    monkeypatch.setattr(_recording, "_simulate", refused)
+    with pytest.raises(pc.OutOfMemoryError, match="^gif: needs 5.83 MB"):
+        render.gif(scene, tmp_path / "d.gif", frames=3, progress=False)
+    assert scene.to_bytes() == before and not (tmp_path / "d.gif").exists()

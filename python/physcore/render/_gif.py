@@ -479,6 +479,7 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             if fmt == "png":
                 _check_png_targets(path, rec.frames)
     else:
+        own = scene  # what the state is kept of (the view below may be a flows' points view)
         scene = _recording.points_view(scene)
         camera = _check_camera(camera, int(getattr(scene, "dim", 0)), int(getattr(scene, "n_particles", 0)))
         plan = _recording._plan(scene, frames, steps_per_frame, frame_time, substeps, color_by, springs, velocities)
@@ -489,25 +490,26 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
             _check_writable(path)
             if fmt == "png":
                 _check_png_targets(path, plan["frames"])
-        # What the scene was, put back if drawing runs out of memory after the simulation (a
+        # What the scene was, put back if the simulation or the drawing runs out of memory (a
         # refusal leaves the scene as it was); None where the scene has no state (a batch's
         # view): then it is left at the last step, as after Ctrl-C.
-        before = _state_before(scene)
-        # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
-        rec = _recording._simulate(scene, progress=progress, **plan)
-        if fmt != "frames":
-            try:
+        before = _state_before(own)
+        rec = None
+        try:
+            # Looked up at call time, as record() does, so that patching _recording._simulate covers both.
+            rec = _recording._simulate(scene, progress=progress, **plan)
+            if fmt != "frames":
                 return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera,
                              arrows, mesh, texture, theme, antialias, colors, cmap, background, surface, box, halo, loop,
                              loop_default, look, dither)
-            except MemoryError as e:
-                if before is not None:
-                    # The drawing's buffers (held by the traceback's frames) and the recording
-                    # freed first: the restore needs room under the same limit.
-                    traceback.clear_frames(e.__traceback__)
-                    del rec
-                    scene.set_state(before)
-                raise
+        except MemoryError as e:
+            if before is not None:
+                # The drawing's buffers (held by the traceback's frames) and the recording
+                # freed first: the restore needs room under the same limit.
+                traceback.clear_frames(e.__traceback__)
+                rec = None
+                own.set_state(before)
+            raise
     return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera, arrows, mesh,
                  texture, theme, antialias, colors, cmap, background, surface, box, halo, loop, loop_default, look, dither)
 
