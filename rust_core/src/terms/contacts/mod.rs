@@ -1045,7 +1045,8 @@ impl<V: Vector> Contacts<V> {
     /// `set_history`; `checked`: refuse non-finite values (what a file or a caller gives), else
     /// take them as they are (the term's own snapshot, see `restore_history`).
     fn load_history(&mut self, h: &[Real], n_particles: usize, checked: bool) -> Result<()> {
-        let bad = |why: &str| invalid("history", format!("contact term {:?}: {why}", self.name));
+        let name = self.name.clone(); // `bad` borrows it, not self: the spins' room is reserved below
+        let bad = |why: &str| invalid("history", format!("contact term {name:?}: {why}"));
         if h.is_empty() || (checked && h.iter().any(|v| !v.is_finite())) {
             return Err(bad("must be a non-empty array of finite numbers"));
         }
@@ -1065,14 +1066,7 @@ impl<V: Vector> Contacts<V> {
         // changes if it cannot be had): a rollback restores a snapshot into buffers already of
         // its size, so it allocates none of them (new ones, 8 MB for 10⁶ grains in 2D, aborted
         // the process in the rollback of a step refused memory).
-        let need = Need::new(
-            "load",
-            Need::bytes_of::<V::Axial>(2 * n) + Need::bytes_of::<Real>(n),
-            format!("the spins of {} grains", count(n as u128)),
-        );
-        need.reserve(&mut self.omega, n)?;
-        need.reserve(&mut self.angle, n)?;
-        need.reserve(&mut self.torque, n)?;
+        self.reserve_spins("load", n)?;
         let dissipated = [h[head - 2], h[head - 1]];
         let nw = self.walls.len();
         // (record, whether it was given from the higher index)
@@ -1129,6 +1123,16 @@ impl<V: Vector> Contacts<V> {
         self.prebooked = false;
         self.evaluated = false;
         Ok(())
+    }
+
+    /// Room for `n` grains' spins, angles and torques (their contents unchanged); a refusal is
+    /// `Error::OutOfMemory` naming `what`.
+    fn reserve_spins(&mut self, what: &'static str, n: usize) -> Result<()> {
+        let bytes = Need::bytes_of::<V::Axial>(2 * n) + Need::bytes_of::<Real>(n);
+        let need = Need::new(what, bytes, format!("the spins of {} grains", count(n as u128)));
+        need.reserve(&mut self.omega, n)?;
+        need.reserve(&mut self.angle, n)?;
+        need.reserve(&mut self.torque, n)
     }
 
     /// Sizes the per-particle state for `n` particles (new particles at rest); the contacts
@@ -1473,11 +1477,7 @@ impl<V: Vector> Term<V> for Contacts<V> {
         // [alloc] Room for the spins (`fit`) and the cell list before the first step builds
         // them: their infallible growth aborted the process under memory pressure. The list's
         // size is set by the radii at its first build (`rebuild`); 1 m until then.
-        let bytes = Need::bytes_of::<V::Axial>(2 * n) + Need::bytes_of::<Real>(n);
-        let need = Need::new("step", bytes, format!("the spins of {} grains", count(n as u128)));
-        need.reserve(&mut self.omega, n)?;
-        need.reserve(&mut self.angle, n)?;
-        need.reserve(&mut self.torque, n)?;
+        self.reserve_spins("step", n)?;
         self.fit(n);
         if self.lists.is_none() {
             let l = self.room.get_or_insert_with(Lists::default);
