@@ -204,9 +204,60 @@ def test_a_record_and_a_conflicting_scene_keyword_raise_naming_it(kwargs, keywor
 
 
 def test_keywords_of_other_integrators_are_kept_beside_a_record():
-    # As with a name: the other integrators' options are kept (and ignored until switched to).
-    scene = pc.Scene(integrator=pc.Dopri5(rtol=1e-8), cg_tol=1e-5, xpbd_substeps=3)
+    # As with a name: the other integrators' options are kept (and ignored until switched to),
+    # with a warning naming each and the integrator that uses it.
+    with pytest.warns(pc.UnusedOptionWarning, match=r"^integrator='dopri5' does not use cg_tol \('implicit_euler'\), "
+                      r"xpbd_substeps \('xpbd'\); kept for a later switch of integrator, they change nothing"):
+        scene = pc.Scene(integrator=pc.Dopri5(rtol=1e-8), cg_tol=1e-5, xpbd_substeps=3)
     assert (scene.rtol, scene.cg_tol, scene.xpbd_substeps) == (1e-8, 1e-5, 3)
+
+
+UNUSED = [
+    ("verlet", {"rtol": 1e-8}, "rtol ('dopri5')"),
+    ("rk4", {"atol": 1e-12}, "atol ('dopri5')"),
+    ("dopri5", {"cg_max_iter": 5}, "cg_max_iter ('implicit_euler')"),
+    ("implicit_euler", {"xpbd_iterations": 3}, "xpbd_iterations ('xpbd')"),
+    ("xpbd", {"wh_coordinates": "democratic_heliocentric"}, "wh_coordinates ('wisdom_holman')"),
+    ("boris", {"wh_corrector": 5}, "wh_corrector ('wisdom_holman')"),
+]
+
+
+@pytest.mark.parametrize(("integrator", "kwargs", "named"), UNUSED, ids=[u[2].split()[0] for u in UNUSED])
+def test_an_option_the_integrator_does_not_use_warns_naming_it_and_is_kept(integrator, kwargs, named):
+    with pytest.warns(pc.UnusedOptionWarning) as caught:
+        scene = pc.Scene(dim=2, integrator=integrator, **kwargs)
+    assert len(caught) == 1 and f"does not use {named};" in str(caught[0].message)
+    assert caught[0].filename == __file__  # points at the caller's line
+    (kw, value), = kwargs.items()
+    assert getattr(scene, kw) == value
+    # A switch to the integrator that uses it takes it up.
+    scene.integrator = _OWNER[kw]
+    assert getattr(scene, kw) == value
+
+
+_OWNER = {"rtol": "dopri5", "atol": "dopri5", "cg_tol": "implicit_euler", "cg_max_iter": "implicit_euler",
+          "xpbd_substeps": "xpbd", "xpbd_iterations": "xpbd", "wh_coordinates": "wisdom_holman",
+          "wh_corrector": "wisdom_holman"}
+
+
+def test_options_at_their_defaults_used_options_and_reloads_do_not_warn(tmp_path):
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pc.Scene(integrator="verlet", rtol=1e-6, atol=1e-9, cg_tol=1e-8, xpbd_substeps=10)  # the defaults
+        pc.Scene(integrator="dopri5", rtol=1e-10, atol=1e-12)
+        pc.Scene(integrator="implicit_euler", cg_tol=1e-10, cg_max_iter=50)
+        pc.Scene(integrator="xpbd", xpbd_substeps=3, xpbd_iterations=2)
+        pc.Scene(integrator="wisdom_holman", wh_coordinates="democratic_heliocentric", wh_corrector=3)
+        # A scene that switched integrators keeps (and saves) the options of the last one.
+        a = pc.Scene(integrator="dopri5", rtol=1e-10)
+        a.integrator = "verlet"
+        b = pc.Scene.load(a.save(tmp_path / "a.npz"))
+        c = pc.Scene.from_bytes(a.to_bytes())
+        # Ready-made scenes keep their own options whatever the integrator asked for.
+        pc.scenes.pythagorean(integrator="verlet")
+    assert b.rtol == c.rtol == 1e-10 and b.integrator == c.integrator == "verlet"
 
 
 FLUID_CONFLICTS = [

@@ -24,6 +24,7 @@ from ._errors import (
     ThreadPoolError,
     ThreadPoolWarning,
     UnchargedWarning,
+    UnusedOptionWarning,
 )
 from ._integrators import (
     RK4,
@@ -105,6 +106,7 @@ __all__ = [
     "ContactStepWarning",
     "StabilityWarning",
     "UnchargedWarning",
+    "UnusedOptionWarning",
     "EnergyBooksWarning",
     "SeparateFluidsWarning",
     "scenes",

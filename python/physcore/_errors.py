@@ -23,6 +23,7 @@ __all__ = [
     "StabilityWarning",
     "EnergyBooksWarning",
     "UnchargedWarning",
+    "UnusedOptionWarning",
 ]
 
 
@@ -204,6 +205,15 @@ class UnchargedWarning(UserWarning):
     attribute, or all zero), so the term exerts nothing. Set the charges with
     ``scene.set_attribute("charge", q)`` (C). Checked at the first step after a term or an
     attribute changes."""
+
+
+class UnusedOptionWarning(UserWarning):
+    """A :class:`~physcore.Scene` was given an integrator option away from its default that its
+    integrator does not use: ``rtol``/``atol`` (``"dopri5"`` only), ``cg_tol``/``cg_max_iter``
+    (``"implicit_euler"``), ``xpbd_substeps``/``xpbd_iterations`` (``"xpbd"``),
+    ``wh_coordinates``/``wh_corrector`` (``"wisdom_holman"``). The value is kept, and takes
+    effect if the scene later switches to that integrator (``scene.integrator = "dopri5"``); until
+    then it changes nothing. As SciPy's ``solve_ivp`` warns of options its method ignores."""
 
 
 class EnergyBooksWarning(RuntimeWarning):

@@ -5,6 +5,7 @@ all state and steps ``n`` steps per call with the GIL released. Arrays cross in 
 """
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import copy
 import dataclasses
@@ -30,9 +31,11 @@ from ._errors import (
     StabilityWarning,
     ThreadPoolWarning,
     UnchargedWarning,
+    UnusedOptionWarning,
     allocating,
 )
 from ._integrators import (
+    REGISTRY,
     XPBD,
     Dopri5,
     ImplicitEuler,
@@ -225,6 +228,42 @@ def _record_options(integrator: object, options: dict[str, Any]) -> dict[str, An
                 f"give it once (in the record, or integrator={integrator.name!r} with {kw}=)"
             )
     return {**options, **own}
+
+
+#: Each integrator option of Scene's keywords -> the integrator that uses it (of the records'
+#: ``scene_options``: rtol -> "dopri5", cg_tol -> "implicit_euler", ...).
+_OPTION_OWNER = {kw: name for name, rec in REGISTRY.items() for kw in rec.scene_options}
+_OPTION_DEFAULTS = {kw: v for rec in REGISTRY.values() for kw, v in rec.defaults().items()}
+
+#: Set while a scene is rebuilt from its own file or by a ready-made scene, whose options are
+#: kept whatever the integrator (a scene that switched integrators saves them all).
+_QUIET_OPTIONS: contextvars.ContextVar[bool] = contextvars.ContextVar("physcore_quiet_options", default=False)
+
+
+@contextlib.contextmanager
+def _quiet_options() -> Iterator[None]:
+    """Within: a Scene made keeps every option given without :class:`UnusedOptionWarning`."""
+    token = _QUIET_OPTIONS.set(True)
+    try:
+        yield
+    finally:
+        _QUIET_OPTIONS.reset(token)
+
+
+def _warn_unused_options(integrator: str, given: dict[str, Any]) -> None:
+    """UnusedOptionWarning naming each option in ``given`` away from its default that
+    ``integrator`` does not use (it is kept for a later switch of integrator)."""
+    if _QUIET_OPTIONS.get():
+        return
+    unused = [kw for kw, v in given.items() if _OPTION_OWNER[kw] != integrator and v != _OPTION_DEFAULTS[kw]]
+    if unused:
+        owners = ", ".join(f"{kw} ({_OPTION_OWNER[kw]!r})" for kw in unused)
+        warnings.warn(
+            f"integrator={integrator!r} does not use {owners}; kept for a later switch of "
+            f"integrator, {'it changes' if len(unused) == 1 else 'they change'} nothing until then",
+            UnusedOptionWarning,
+            stacklevel=3,
+        )
 
 
 def _check_tol(value: object, arg: str) -> float:
@@ -492,18 +531,22 @@ class Scene:
         ``integrator="dopri5", rtol=1e-8`` (same core calls, same saved file). A keyword that the
         record owns, also given here with another value than the record's, raises
         InvalidInputError naming the keyword (left at its default, it defers to the record).
+        An option of another integrator given away from its default is kept (it takes effect
+        when the scene switches to that integrator) with an :class:`UnusedOptionWarning`.
     dt : float
         Time step, s: finite and at least the smallest normal float64 (2.2e-308; a subnormal
         step has no finite reciprocal). Default 1e-3. For ``"dopri5"`` it is the output interval: each step
         of ``dt`` is integrated in as many internal steps as the tolerances need and lands
         exactly on its end.
     rtol, atol : float
-        Tolerances of ``"dopri5"`` (kept, and ignored, by the fixed-step integrators). A step is
+        Tolerances of ``"dopri5"`` (kept, and ignored, by the other integrators, with an
+        :class:`UnusedOptionWarning`). A step is
         accepted when every position and velocity component i has a local error estimate below
         ``atol + rtol · |y_i|`` (atol in m for positions and m/s for velocities; max norm over
         all particles). ``rtol`` in [1e-14, 1), default 1e-6; ``atol`` >= 0, default 1e-9.
     cg_tol, cg_max_iter : float, int
-        The linear solve of ``"implicit_euler"`` (kept, and ignored, by the other integrators):
+        The linear solve of ``"implicit_euler"`` (kept, and ignored, by the other integrators,
+        with an :class:`UnusedOptionWarning`):
         conjugate gradients stop once the residual is below ``cg_tol`` times the right-hand
         side's norm, or after ``cg_max_iter`` iterations. ``cg_tol`` in [1e-14, 1), default
         1e-8; ``cg_max_iter`` in 1..1000000, default 200. A solve stopped by the limit keeps its
@@ -548,7 +591,8 @@ class Scene:
 
     xpbd_substeps, xpbd_iterations : int
         Substeps per step (1 to 100000, default 10) and constraint iterations per substep (1 to
-        10000, default 1) of ``"xpbd"``; kept, and ignored, by the other integrators. Many
+        10000, default 1) of ``"xpbd"``; kept, and ignored, by the other integrators (with an
+        :class:`UnusedOptionWarning`). Many
         substeps of one iteration each converge faster than few substeps of many iterations
         ("Small steps in physics simulation", Macklin et al., SCA 2019).
     wh_coordinates : {"jacobi", "democratic_heliocentric"}
@@ -557,7 +601,7 @@ class Scene:
     wh_corrector : {0, 3, 5, 7, 11, 17}
         The order of ``"wisdom_holman"``'s symplectic corrector (default 0: none; see
         :class:`WisdomHolman`): applied at the first step, undone for each call's output;
-        kept, and ignored, by the other integrators.
+        kept, and ignored, by the other integrators (with an :class:`UnusedOptionWarning`).
 
     Raises
     ------
@@ -568,6 +612,14 @@ class Scene:
         float64, ``threads=2**64``); names it.
     ThreadPoolError
         ``threads=n`` threads could not be started.
+
+    Warns
+    -----
+    UnusedOptionWarning
+        An option of another integrator than ``integrator`` (``rtol`` with ``"verlet"``) was
+        given away from its default; names it and the integrator that uses it.
+    ThreadPoolWarning
+        ``threads=None`` could not start a thread pool; the scene runs on the calling thread.
 
     Examples
     --------
@@ -617,6 +669,7 @@ class Scene:
              "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations,
              "wh_coordinates": wh_coordinates, "wh_corrector": wh_corrector},
         )
+        _warn_unused_options(name, options)
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
         wh_coordinates, wh_corrector = options["wh_coordinates"], options["wh_corrector"]
@@ -2200,7 +2253,7 @@ class Scene:
         device = meta["device"] if device is None else device
         if threads is None and meta["threads"] is not None:
             threads = min(meta["threads"], usable_cpus())
-        with r.api("meta"):
+        with r.api("meta"), _quiet_options():
             scene = cls(
                 meta["dim"],
                 integrator=_check_integrator(meta["integrator"], warn=False),  # old files: "rk45"

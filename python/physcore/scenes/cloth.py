@@ -9,7 +9,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError
 from ..render import Mesh
-from ..scene import Scene
+from ..scene import Scene, _quiet_options
 from ..shapes import cloth_springs, mesh_edges_and_hinges
 from ..terms import Drag, Gravity, Plane, Sphere, Springs, XpbdConstraints
 from ._common import (
@@ -255,7 +255,8 @@ def xpbd_cloth(
         pinned[:n] = True
     else:
         pinned[[0, n - 1]] = True
-    scene = Scene(3, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
+    with _quiet_options():  # the scene's option is kept whatever the integrator
+        scene = Scene(3, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
     scene.add_particles(x, masses=m, pinned=pinned)
     mesh = Mesh.grid(n, n)
     edges, hinges = mesh_edges_and_hinges(mesh.faces)

@@ -9,7 +9,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError, InvalidTypeError
 from ..contacts import Contacts
-from ..scene import Scene
+from ..scene import Scene, _quiet_options
 from ..terms import Gravity, Plane, Springs, XpbdConstraints
 from ._common import SKY_2D, _count, _finite_books, _nonneg, _optional, _particle_mass, _particles, _positive, _stamped
 
@@ -84,7 +84,8 @@ def shape_matched_boxes(
         xs.append(centre + r)
         vs.append(omega * np.stack([-r[:, 1], r[:, 0]], axis=1))
         shapes.append(np.arange(b * k * k, (b + 1) * k * k))
-    scene = Scene(2, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
+    with _quiet_options():  # the scene's option is kept whatever the integrator
+        scene = Scene(2, integrator=integrator, dt=dt, threads=threads, xpbd_substeps=substeps)
     scene.add_particles(np.concatenate(xs), np.concatenate(vs), masses=m)
     scene.set_attribute("radius", np.full(n_boxes * k * k, 0.45 * spacing))
     scene.add(Gravity([0.0, -9.81]))

@@ -9,7 +9,7 @@ import numpy as np
 from .. import _check
 from .._errors import InvalidInputError
 from .._system import gpu_adapters
-from ..scene import Scene, _best_gpu
+from ..scene import Scene, _best_gpu, _quiet_options
 from ..terms import Drag, Gravity, PairwiseGravity, Plane, TreeGravity
 from ._common import _count, _finite_books, _flag, _nonneg, _particle_mass, _particles, _positive, _stamped
 
@@ -222,7 +222,8 @@ def pythagorean(
     default; ``dt`` (default 0.1) is then the output interval.
     """
     rtol = _check.float_in_range("rtol", rtol, 1e-14, 1.0, hi_open=True)
-    scene = Scene(2, integrator=integrator, dt=0.1 if dt is None else dt, threads=threads, rtol=rtol, atol=rtol * 1e-3)
+    with _quiet_options():  # the scene's option is kept whatever the integrator
+        scene = Scene(2, integrator=integrator, dt=0.1 if dt is None else dt, threads=threads, rtol=rtol, atol=rtol * 1e-3)
     x = np.array([[1.0, 3.0], [-2.0, -1.0], [1.0, -1.0]])
     scene.add_particles(x, np.zeros((3, 2)), masses=[3.0, 4.0, 5.0])
     scene.add(PairwiseGravity(G=1.0))
