@@ -44,6 +44,27 @@ def test_stretch_is_m_g_alpha_for_any_step_and_iteration_count(dt, substeps, ite
         assert abs(ratio - 1.0) < 1e-6
 
 
+@pytest.mark.parametrize("kind", ["distance", "pins"])
+def test_a_compliance_past_float64_over_h_squared_is_no_constraint(kind):
+    # alpha / h² overflows to inf for alpha = 1e308: infinitely soft, so the bob falls freely
+    # as with no constraint, to round-off (the velocity is then (x − x_prev)/h); the
+    # projection's ∞/∞ made it NaN and "diverged".
+    def run(constrained: bool) -> np.ndarray:
+        s = pc.Scene(dim=2, integrator="xpbd", dt=1e-2, xpbd_substeps=4, threads=1)
+        s.add_particles([[0.0, 0.0], [0.0, -1.0]], [[0.0, 0.0], [0.3, 0.0]], pinned=[True, False])
+        s.add(pc.Gravity([0.0, -G]))
+        if constrained and kind == "distance":
+            s.add(pc.XpbdConstraints(distance=[[0, 1]], distance_compliance=1e308))
+        elif constrained:
+            s.add(pc.XpbdConstraints(pins=[1], pin_targets=[[0.0, -1.0]], pin_compliance=1e308))
+        s.step(50)
+        return s.positions
+
+    free, soft = run(False), run(True)
+    assert np.isfinite(soft).all() and soft[1, 1] < -1.0 - 0.9 * 0.5 * G * 0.5**2  # it fell (0.5 s)
+    np.testing.assert_allclose(soft, free, rtol=1e-11, atol=0)  # measured 2.9e-13: 200 substeps of (x − x_prev)/h
+
+
 def spring_cloth_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     i, j = cloth_springs(n)
     return i, j

@@ -516,6 +516,11 @@ impl<V: Vector> XpbdConstraints<V> {
                 let t = if kind == Kind::Pin { target[c] } else { DVec3::ZERO };
                 let Some((cv, g)) = eval(kind, &p, rest[c], t) else { return };
                 let at = alpha[c] / (h * h);
+                if at == Real::INFINITY {
+                    // α/h² past float64 (a compliance of 1e308): infinitely soft, no correction
+                    // (Δλ → 0 as α̃ → ∞), where the formula below would give ∞/∞.
+                    return;
+                }
                 let mut den = at;
                 for k in 0..a {
                     den += w[m[k] as usize] * g[k].length_squared();
