@@ -21,6 +21,7 @@ Examples
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from dataclasses import KW_ONLY, dataclass
 from typing import Any, ClassVar
@@ -73,6 +74,27 @@ def _positive(name: str, v: Any, unit: str, allow_zero: bool = False) -> float:
     if not (math.isfinite(x) and (x >= 0 if allow_zero else x > 0)):
         raise InvalidInputError(f"{name}: must be finite and {'>= 0' if allow_zero else '> 0'} ({unit}), got {x}")
     return x
+
+
+def _cell_size(dx: float, shape: tuple[int, ...]) -> float:
+    """``dx`` (m), refused by name where a cell's size dx^dim (what the books multiply each cell
+    by, and 1/dx² the Laplacian's) or the domain (each side n·dx, its size Π n · dx^dim) is not
+    a normal float64: a grid of spacing 1e308 stepped into infinite books and could not be
+    saved; 1e-308, cells of zero area."""
+    lg, dim = math.log(dx), len(shape)
+    cell = dim * lg  # log of dx^dim
+    worst = max(cell + sum(math.log(n) for n in shape), max(math.log(n) for n in shape) + lg)
+    if not (_LOG_MIN_NORMAL <= cell and worst < _LOG_MAX):
+        unit = "m²" if dim == 2 else "m³"
+        raise InvalidInputError(
+            f"spacing: {dx:g} m makes a cell of 10^{cell / math.log(10):.0f} {unit} (dx^{dim}; the books sum each "
+            f"cell times it) or a domain of 10^{worst / math.log(10):.0f} (m or {unit}), outside float64's normal "
+            "range; give a cell size of a physical size (e.g. 1e-100 to 1e100 m)"
+        )
+    return dx
+
+
+_LOG_MIN_NORMAL, _LOG_MAX = math.log(sys.float_info.min), math.log(sys.float_info.max)
 
 
 def _cells_mask(name: str, a: Any, shape: tuple[int, ...]) -> np.ndarray:
@@ -170,7 +192,7 @@ class Grid(Part):
     def __init__(self, shape: Any, spacing: float, edges: Any, name: str) -> None:
         self.shape = _shape(shape)
         self.dim = len(self.shape)
-        self.spacing = _positive("spacing", spacing, "m")
+        self.spacing = _cell_size(_positive("spacing", spacing, "m"), self.shape)
         self.edges = _edges(edges, self.dim)
         if not isinstance(name, str) or not name:
             raise InvalidInputError(f"name: expected a non-empty str, got {name!r}")

@@ -28,6 +28,7 @@ from ._errors import (
     ContactStepWarning,
     InvalidInputError,
     InvalidTypeError,
+    SceneBusyError,
     StabilityWarning,
     ThreadPoolWarning,
     UnchargedWarning,
@@ -669,7 +670,6 @@ class Scene:
              "xpbd_substeps": xpbd_substeps, "xpbd_iterations": xpbd_iterations,
              "wh_coordinates": wh_coordinates, "wh_corrector": wh_corrector},
         )
-        _warn_unused_options(name, options)
         rtol, atol, cg_tol, cg_max_iter = options["rtol"], options["atol"], options["cg_tol"], options["cg_max_iter"]
         xpbd_substeps, xpbd_iterations = options["xpbd_substeps"], options["xpbd_iterations"]
         wh_coordinates, wh_corrector = options["wh_coordinates"], options["wh_corrector"]
@@ -695,6 +695,7 @@ class Scene:
         sim.set_wh_coordinates(wh_coordinates)
         sim.set_wh_corrector(wh_corrector)
         sim.set_solver_options(cg_tol, cg_max_iter)  # validates (ValueError naming cg_tol)
+        _warn_unused_options(name, options)  # once every option is known valid
         # The CPU's f32 mode rounds the stored state; a device computes in its own precision.
         sim.single = precision == "f32" and device in ("cpu", "auto")
         self._device = device
@@ -1070,13 +1071,23 @@ class Scene:
         if n > _MAX_STEPS - self.step_count:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         self._to_device()
-        if self._e0 is None:
-            self._set_reference_energy()
-        self.warn_contact_step()
-        self._warn_grid_step()
-        self._warn_unstable_step()
-        self._warn_uncharged()
-        self._exclusive(lambda sim: sim.step(n))
+        fresh = self._e0 is None
+        if fresh:
+            # The books' reference is taken at the first step: its refusal is the step's.
+            with allocating("step", "the energy books' reference", rename=("energy",)):
+                self._set_reference_energy()
+        try:
+            self.warn_contact_step()
+            self._warn_grid_step()
+            self._warn_unstable_step()
+            self._warn_uncharged()
+            self._exclusive(lambda sim: sim.step(n))
+        except SceneBusyError:
+            raise  # another thread's call, whose reference this is
+        except BaseException:
+            if fresh:  # a failed first step is undone whole, its reference too (to_bytes as before)
+                self._e0 = None
+            raise
 
     @property
     def device(self) -> str:
@@ -1352,10 +1363,20 @@ class Scene:
             if fixed > _MAX_STEPS - self.step_count:
                 raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         self._to_device()
-        if self._e0 is None:
-            self._set_reference_energy()
-        self._warn_uncharged()
-        return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
+        fresh = self._e0 is None
+        if fresh:
+            # The books' reference is taken at the first step: its refusal is the advance's.
+            with allocating("advance", "the energy books' reference", rename=("energy",)):
+                self._set_reference_energy()
+        try:
+            self._warn_uncharged()
+            return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
+        except SceneBusyError:
+            raise  # another thread's call, whose reference this is
+        except BaseException:
+            if fresh:  # a failed first call is undone whole, its reference too
+                self._e0 = None
+            raise
 
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before

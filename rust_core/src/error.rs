@@ -172,11 +172,27 @@ fn advise(
 ) -> String {
     let (now, then) = (seconds(dt), seconds(suggested_dt));
     let softening = if remedies.softening { ", a larger softening" } else { "" };
+    // A usable step: a normal float64 (a subnormal or zero one would read "try dt = 0", and
+    // Scene refuses it).
+    let usable = suggested_dt >= f64::MIN_POSITIVE && suggested_dt.is_finite();
+    // At the first steps, from the state as given: a value beyond what float64 holds for this
+    // physics (a compliance or field of 1e308) fails at any dt, which the advice says too.
+    let first = if step <= 2 {
+        " If it fails at the first step whatever the dt, some value given is too large or too small \
+         for float64 here (of some 1e150 or 1e-150): give values of a physical size."
+    } else {
+        ""
+    };
     match quantity {
         // Grids step by their own explicit schemes: their limit is a CFL or diffusion number.
+        Failure::Cell if !usable => format!(
+            "No stable dt exists for this grid (its CFL or diffusion limit is {then}; dt now {now}): \
+             its spacing, speed, diffusion or forcing is beyond float64's range: give values of a \
+             physical size."
+        ),
         Failure::Cell => format!(
             "Try a smaller dt (now {now}), e.g. {then}, within the grid's CFL or diffusion limit \
-             (Scene.advance keeps to it)."
+             (Scene.advance keeps to it).{first}"
         ),
         // |1 + iω dt| > 1 for every ω > 0: explicit Euler amplifies every undamped oscillation
         // (springs, orbits) by (1 + ω²dt²)^(1/2) a step, so a smaller dt only delays this.
@@ -212,13 +228,14 @@ fn advise(
              it if the scene was built, not loaded."
             .to_string(),
         // dopri5's dt is an output interval: a loose rtol may have led the trajectory astray.
+        // (An atol below the state's round-off, 1e-308, cannot be met either.)
         Failure::Error => format!(
-            "Try a tighter rtol (a loose one can let an orbit decay into a collision){softening} \
-             or a fixed-step integrator."
+            "Try a tighter rtol (a loose one can let an orbit decay into a collision){softening}, \
+             an atol above the state's round-off (about 1e-16 of its values) or a fixed-step integrator."
         ),
         // A suggestion that is not a usable step (0, subnormal, NaN) would read "try dt = 0":
         // the forces themselves are the problem (overflowing masses, coincident particles).
-        _ if !(suggested_dt >= f64::MIN_POSITIVE && suggested_dt.is_finite()) => format!(
+        _ if !usable => format!(
             "No stable dt exists for this state (the fastest time scale is {then}): check for \
              coincident particles, overflowing masses or stiffnesses{} (dt now {now}).",
             if remedies.softening { "; a larger softening helps with gravity" } else { "" }
@@ -226,7 +243,7 @@ fn advise(
         _ => {
             let implicit =
                 if remedies.implicit { ", integrator='implicit_euler' (springs and drag implicitly)" } else { "" };
-            format!("Try a smaller dt (now {now}), e.g. {then}{implicit}{softening}.")
+            format!("Try a smaller dt (now {now}), e.g. {then}{implicit}{softening}.{first}")
         }
     }
 }
@@ -262,11 +279,15 @@ mod tests {
     use super::*;
 
     fn diverged(suggested_dt: f64) -> String {
+        diverged_at(3, Failure::Position, suggested_dt)
+    }
+
+    fn diverged_at(step: u64, quantity: Failure, suggested_dt: f64) -> String {
         Error::Diverged {
-            step: 3,
-            t: 0.3,
+            step,
+            t: 0.1 * step as f64,
             particle: 1,
-            quantity: Failure::Position,
+            quantity,
             rolled_back_to: 0,
             dt: 0.1,
             suggested_dt,
@@ -274,6 +295,28 @@ mod tests {
             remedies: Remedies::default(),
         }
         .to_string()
+    }
+
+    #[test]
+    fn a_grid_without_a_usable_step_is_told_to_give_values_of_a_physical_size() {
+        // Gray–Scott at a spacing of 1e-308 advised "e.g. 0 s", the wave "e.g. 4.941e-324 s".
+        for bad in [0.0, 4.941e-324, f64::NAN] {
+            let m = diverged_at(3, Failure::Cell, bad);
+            assert!(m.contains("No stable dt exists for this grid") && m.contains("physical size"), "{m}");
+            assert!(!m.contains("e.g."), "{m}");
+        }
+        assert!(diverged_at(3, Failure::Cell, 1e-3).contains("e.g. 0.001 s"));
+    }
+
+    #[test]
+    fn a_divergence_at_the_first_steps_also_names_values_out_of_range() {
+        // An XPBD rest length or a field of 1e308 fails at any dt: from the state as given,
+        // the advice says so beside the smaller dt; later in a run it does not.
+        for q in [Failure::Position, Failure::Cell] {
+            let first = diverged_at(1, q, 0.05);
+            assert!(first.contains("e.g. 0.05 s") && first.contains("whatever the dt"), "{first}");
+            assert!(!diverged_at(3, q, 0.05).contains("whatever the dt"));
+        }
     }
 
     #[test]

@@ -878,3 +878,27 @@ def test_a_field_name_the_grid_does_not_have_is_refused_naming_it():
             grid.field("w")
         with pytest.raises(pc.InvalidTypeError, match="name"):
             grid.field(None)
+
+
+@pytest.mark.parametrize("spacing", [1e308, 1e154, 1e-308, 5e-324, 1e-160])
+@pytest.mark.parametrize("make", [
+    lambda dx: pc.GrayScott((12, 10), dx, preset="spots"),
+    lambda dx: pc.Wave((8, 8, 8), spacing=dx, drops=[pc.Drop(0.0, (4 * dx, 4 * dx, 4 * dx), radius=2 * dx, amplitude=0.1)]),
+    lambda dx: pc.StableFluid((16, 16), spacing=dx),
+], ids=["gray_scott", "wave_3d", "stable_fluid"])
+def test_a_cell_size_beyond_float64_is_refused_by_name(make, spacing):
+    # The books sum each cell times dx^dim, the Laplacian divides by dx²: a spacing of 1e308
+    # stepped into infinite books and a scene that could no longer be saved; 1e-308, cells of
+    # zero area; and the cell centres overflowed with numpy's bare RuntimeWarning.
+    with pytest.raises(pc.InvalidInputError, match=r"^spacing: .* outside float64's normal range"):
+        make(spacing)
+
+
+@pytest.mark.parametrize("spacing", [1e-100, 1e100])
+def test_cell_sizes_of_any_physical_scale_step_and_save(spacing):
+    scene = pc.Scene(2, dt=1e-3)
+    gs = scene.add(pc.GrayScott((12, 10), spacing, du=spacing**2 * 0.1, dv=spacing**2 * 0.05, feed=0.03, kill=0.06))
+    scene.step(5)
+    assert np.isfinite(gs.u).all() and np.isfinite(list(gs.books().values())).all()
+    assert pc.Scene.from_bytes(scene.to_bytes()).time == scene.time
+

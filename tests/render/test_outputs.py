@@ -187,6 +187,17 @@ def test_a_video_refuses_a_rate_it_cannot_carry_before_simulating(tmp_path, fps)
     assert scene.time == 0.0 and list(tmp_path.iterdir()) == []
 
 
+def test_a_gif_refuses_a_rate_slower_than_its_longest_frame_before_simulating(tmp_path):
+    # A GIF frame lasts at most 65535 cs: fps = 1e-308 was clamped to that without a word.
+    scene = pc.scenes.kepler()
+    for fps in (1e-308, 5e-324, 0.0015):
+        with pytest.raises(pc.InvalidInputError, match=r"^fps must be at least 100/65535"):
+            pc.render.gif(scene, tmp_path / "a.gif", frames=2, fps=fps)
+    assert scene.time == 0.0 and list(tmp_path.iterdir()) == []
+    pc.render.gif(scene, tmp_path / "a.gif", frames=2, fps=100 / 65535)  # the slowest a GIF plays
+    assert (tmp_path / "a.gif").stat().st_size > 0
+
+
 def test_diverging_video_render_leaves_no_file(tmp_path):
     scene = pc.Scene(dim=2, dt=0.05)
     scene.add_particles([[0.0, 0.0], [0.1, 0.0]], [[0.0, 0.0], [1.0, 0.0]], pinned=[True, False])

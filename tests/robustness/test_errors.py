@@ -290,6 +290,42 @@ def test_divergence_is_reported_and_rolled_back(integrator):
         assert s.step_count == 1050
 
 
+def _grains(**contacts) -> pc.Scene:
+    s = pc.Scene(2, threads=1, integrator="semi_implicit_euler")
+    s.add_particles([[0.0, 0.0], [0.019, 0.0], [0.0, 0.05]], [[0.1, 0], [-0.1, 0], [0, -0.5]])
+    s.set_attribute("radius", [0.01, 0.01, 0.01])
+    s.add(pc.Gravity([0.0, -9.81]))
+    s.add(pc.Contacts(1e4, walls=[pc.Plane([0.0, -0.01], [0.0, 1.0])], **contacts))
+    return s
+
+
+def _huge_velocity() -> pc.Scene:
+    s = pc.Scene(3, dt=1e-3, threads=1)
+    s.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 1e300, 0.0]])
+    s.add(pc.Springs([0], [1], stiffness=1.0))
+    return s
+
+
+@pytest.mark.parametrize("make", [
+    lambda: _grains(rolling_friction=1e308),  # a contact spring goes non-finite
+    lambda: _grains(tangential_ratio=1e308),
+    _huge_velocity,
+], ids=["rolling_friction", "tangential_ratio", "springs"])
+@pytest.mark.parametrize("call", ["step", "advance"])
+def test_a_failed_first_call_leaves_the_scene_as_it_was_byte_for_byte(make, call):
+    # Everything the first call sets up (the books' reference, a contact term's per-grain
+    # state) is undone with it: the scene file is the same bytes, and the next call starts
+    # afresh. (The contacts sized their grains before the step's checkpoint, and the
+    # reference stayed: a diverged first step changed the file.)
+    s = make()
+    before = s.to_bytes()
+    with pytest.raises(pc.SimulationDiverged) as info:
+        s.step(3) if call == "step" else s.advance(3 * s.dt, substeps=3)
+    assert info.value.rolled_back_to == 0
+    assert s.to_bytes() == before
+    assert s.step_count == 0 and s.energy_drift() == 0.0  # no reference: "0 before any step"
+
+
 def test_divergence_from_huge_velocities():
     s = pc.Scene(3, integrator="verlet", dt=1e-3, threads=1)
     s.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 1e300, 0.0], [0.0, 0.0, 0.0]])

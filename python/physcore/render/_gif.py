@@ -128,7 +128,8 @@ def gif(
         inside the integrator's stability region (see :meth:`physcore.Scene.advance`); an int
         (1 to 2**53) fixes that many per frame. Needs `frame_time`.
     fps : float, optional
-        Playback rate, > 0. GIF stores delays in whole centiseconds, so the delays alternate
+        Playback rate, > 0 (a GIF's at least 100/65535 ≈ 0.0015: a frame lasts at most
+        655.35 s; a video's 1/1001 to 2**31 − 1). GIF stores delays in whole centiseconds, so the delays alternate
         (30 fps: 30, 30, 40 ms, …) to keep the playing time exact: frame k starts at
         ``round(k · 100 / fps)`` cs. Most viewers play delays below 20 ms at 100 ms, so each is
         at least 20 ms (fps above 50 play at 50).
@@ -394,6 +395,9 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
     fps = _check_fps(d.get("fps", 30.0) if fps is None else fps)
     if fmt in ("mp4", "webm"):
         _check_video_rate(fps)
+    elif fmt == "gif" and fps < 100 / 65535:
+        # A GIF frame lasts at most 65535 cs: a slower rate cannot be written (it was clamped).
+        raise InvalidInputError(f"fps must be at least 100/65535 = 0.00153 for a GIF (a frame lasts at most 655.35 s), got {fps:g}")
     size = _check_size(tuple(d.get("size", (480, 360))) if size is None else size)
     color_by = _check_color_by(d.get("color_by", "speed") if color_by is None else color_by)
     trail = _check_int("trail", d.get("trail", 0) if trail is None else trail, 0, 2**31)

@@ -1476,10 +1476,12 @@ impl<V: Vector> Term<V> for Contacts<V> {
         }
         // [alloc] Room for the spins (`fit`) and the cell list before the first step builds
         // them: their infallible growth aborted the process under memory pressure. The list's
-        // size is set by the radii at its first build (`rebuild`); 1 m until then.
+        // size is set by the radii at its first build (`rebuild`); 1 m until then. Room only:
+        // the sizing itself (`fit`, in `add_forces`) comes after the step's checkpoint, so
+        // that a rolled-back first step leaves the term as it was, unsized (its history then
+        // reads as before the call, byte for byte).
         self.reserve_spins("step", n)?;
-        self.fit(n);
-        if self.lists.is_none() {
+        if self.lists.is_none() || self.omega.len() != n {
             let l = self.room.get_or_insert_with(Lists::default);
             let bytes = Need::bytes_of::<u32>(4 * n + 3) + Need::bytes_of::<V>(n) + Need::bytes_of::<Real>(n);
             let need = Need::new("step", bytes, format!("the contact lists of {} grains", count(n as u128)));
