@@ -542,15 +542,25 @@ class Batch:
         with _holding(sessions, locks):
             missing = self._set_reference_energies([s for s in fresh if s.session.reference_energy is None]) if fresh else []
             # The core checks n against every member's step count before stepping any.
-            failed = None if missing else _core.step_batch(sims, n, self._threads)
+            try:
+                failed = None if missing else _core.step_batch(sims, n, self._threads)
+            except BaseException:
+                # Every member rolled back (Ctrl-C, a refusal): as after a failed first
+                # Scene.step, those whose first step this was have no reference either.
+                for s in fresh:
+                    s.session.reference_energy = None
+                raise
         if failed is None:  # nothing stepped: read those books alone (raising what alone raises)
             for s in missing:
                 s.session.take_reference_energy()
             return self.step(n)
+        first = {id(s.session) for s in fresh}
         for j, e in failed:
             if not isinstance(e, SimulationDiverged):
                 raise e
             self.diverged[j if live is None else live[j]] = e
+            if id(sessions[j]) in first:  # rolled back to before its first step: no reference
+                sessions[j].reference_energy = None
 
     def _fresh(self, scenes: Sequence[Scene], sessions: Sequence[Session]) -> list[Scene]:
         """Those of `scenes` whose books' reference is to be taken before this step; a large

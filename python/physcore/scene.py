@@ -92,6 +92,10 @@ MAX_THREADS = 65535
 #: ``Scene.threads`` still reports what the scene was given (None), and files save None.
 DEFAULT_THREADS: contextvars.ContextVar[int | None] = contextvars.ContextVar("physcore_default_threads", default=None)
 _MIN_DT = _check.MIN_NORMAL
+#: The shortest step of a scene with a DFSPH fluid, s: its density solve divides by dt²
+#: (Bender & Koschier 2017, Alg. 3: the pressure's ρ_err/dt²), which overflows below 7.5e-155 s
+#: (a step of 1e-160 s "diverged" at step 1, advising a smaller dt).
+_DFSPH_MIN_DT = 1e-150
 _MAX_SUBSTEPS = 2**53  # as render.MAX_STEPS: beyond it n·dt is no longer exact
 
 
@@ -1070,6 +1074,7 @@ class Scene:
         n = _check_int(n, "n", 0)
         if n > _MAX_STEPS - self.step_count:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
+        self._check_dfsph_step(self.dt, "dt")
         self._to_device()
         fresh = self._e0 is None
         if fresh:
@@ -1225,6 +1230,15 @@ class Scene:
                 stacklevel=3,
             )
 
+    def _check_dfsph_step(self, h: float, arg: str) -> None:
+        """InvalidInputError naming `arg` where a step of `h` s is too short for a DFSPH fluid of
+        the scene (:data:`_DFSPH_MIN_DT`); nothing has changed."""
+        if h < _DFSPH_MIN_DT and any(f.method == "dfsph" for f in self.fluids):
+            raise InvalidInputError(
+                f"{arg}: a step of {h:.3e} s is too short for a DFSPH fluid: its density solve divides by "
+                f"dt² (Bender & Koschier 2017), which float64 holds for steps of {_DFSPH_MIN_DT:g} s or more"
+            )
+
     def _warn_grid_step(self) -> None:
         """Warn (StabilityWarning, once per dt value) when dt is above a grid's stability limit."""
         if self._grid_step_checked == self.dt:
@@ -1358,10 +1372,12 @@ class Scene:
             fixed = _check_int(substeps, "substeps", 1, _MAX_SUBSTEPS)
             if not duration / fixed >= _MIN_DT:
                 raise InvalidInputError(
-                    f"substeps: {fixed} substeps of {duration:g} s would each be below float64's normal range"
+                    f"substeps: {fixed} substeps of {duration:.3e} s would each last {duration / fixed:.3e} s, below float64's normal range"
                 )
             if fixed > _MAX_STEPS - self.step_count:
                 raise InvalidInputError(f"substeps: {fixed} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
+        # A substep is at most the duration, a fixed one exactly duration / substeps.
+        self._check_dfsph_step(duration if fixed is None else duration / fixed, "duration" if fixed is None else "substeps")
         self._to_device()
         fresh = self._e0 is None
         if fresh:

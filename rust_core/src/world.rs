@@ -528,6 +528,15 @@ impl<V: Vector> World<V> {
                     if stop.load(Ordering::Relaxed) {
                         return Err(Error::Interrupted { rolled_back_to: 0 });
                     }
+                    if !(safe >= Real::MIN_POSITIVE) {
+                        return Err(invalid(
+                            "duration",
+                            format!(
+                                "the scene's fastest time scale asks for substeps of {safe:.3e} s, below \
+                                 float64's normal range: no stable step exists; give values of a physical size"
+                            ),
+                        ));
+                    }
                     let n = (duration / safe).ceil().max(1.0);
                     if n > 1e12 {
                         return Err(invalid(
@@ -548,10 +557,19 @@ impl<V: Vector> World<V> {
             // duration is finite and > 0: the quotient is never NaN, at worst 0 or subnormal,
             // a step with no finite reciprocal (rates, CFL numbers): refused.
             if duration / (n as Real) < Real::MIN_POSITIVE {
-                return Err(invalid(
-                    "substeps",
-                    format!("{n} substeps of {duration:.3e} s would each be below float64's normal range"),
-                ));
+                let each = duration / n as Real;
+                return Err(match substeps {
+                    Some(_) => invalid(
+                        "substeps",
+                        format!("{n} substeps of {duration:.3e} s would each last {each:.3e} s, below float64's normal range"),
+                    ),
+                    // Automatic, of a usable step (checked above): a duration that is itself
+                    // subnormal is refused by the facade; kept for the core's other callers.
+                    None => invalid(
+                        "duration",
+                        format!("{duration:.3e} s in {n} substeps would each last {each:.3e} s, below float64's normal range"),
+                    ),
+                });
             }
             // Any scene, not only an empty one: a clock at inf stepped on silently (issue 64's
             // hostile pass: dt = 1e308, two steps).

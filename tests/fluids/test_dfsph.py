@@ -406,6 +406,27 @@ def test_a_scene_dfsph_cannot_step_is_refused_before_anything_changes():
         scene.solver_stats("nope")
 
 
+@pytest.mark.parametrize("solver", [{"method": "dfsph"}, {"solver": pc.DFSPH()}], ids=["method", "record"])
+def test_a_step_too_short_for_the_density_solve_is_refused_by_name(solver):
+    # The solve divides by dt², which overflows below 7.5e-155 s: a step of 1e-160 s
+    # "diverged" at step 1 advising a smaller dt. Refused by name; 1e-150 s still steps.
+    scene = pc.Scene(2, integrator="semi_implicit_euler")
+    scene.add(pc.Gravity([0.0, -G]))
+    scene.add_fluid(lattice([0, 0], [0.1, 0.1], 0.01), spacing=0.01, **solver)
+    before = scene.to_bytes()
+    scene.dt = 1e-160
+    with pytest.raises(pc.InvalidInputError, match=r"^dt: a step of 1\.000e-160 s is too short for a DFSPH fluid"):
+        scene.step()
+    for kwargs, arg in [({"duration": 1e-200}, "duration"), ({"duration": 1e-140, "substeps": 10**12}, "substeps")]:
+        with pytest.raises(pc.InvalidInputError, match=rf"^{arg}: a step of .* too short for a DFSPH fluid"):
+            scene.advance(**kwargs)
+    scene.dt = 1e-3
+    assert scene.to_bytes() == before
+    scene.dt = 1e-150
+    scene.step(2)
+    assert np.isfinite(scene.positions).all() and scene.step_count == 2
+
+
 def _edit_meta(src, dst, edit):
     """Copy the scene file ``src`` to ``dst`` with ``edit(meta)`` applied to its JSON meta."""
     import io

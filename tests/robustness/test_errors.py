@@ -326,6 +326,20 @@ def test_a_failed_first_call_leaves_the_scene_as_it_was_byte_for_byte(make, call
     assert s.step_count == 0 and s.energy_drift() == 0.0  # no reference: "0 before any step"
 
 
+@pytest.mark.parametrize("duration", [1e-300, 1.0])
+def test_advance_says_when_the_scenes_own_time_scale_is_below_float64(duration):
+    # A wave of c = 1e308 asks for substeps of 6e-311 s: the refusal read "substeps: 15713484027
+    # substeps of 1.000e-300 s would each be below ..." (substeps not given, the duration
+    # called a substep) or "would take inf substeps".
+    scene = pc.Scene(2)
+    scene.add(pc.Wave((16, 16), spacing=0.01, c=1e308))
+    before = scene.to_bytes()
+    with pytest.raises(pc.InvalidInputError, match=r"^duration: the scene's fastest time scale asks for substeps of "
+                                                    r"6\.364e-311 s, below float64's normal range: no stable step exists"):
+        scene.advance(duration)
+    assert scene.to_bytes() == before
+
+
 def test_divergence_from_huge_velocities():
     s = pc.Scene(3, integrator="verlet", dt=1e-3, threads=1)
     s.add_particles([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 1e300, 0.0], [0.0, 0.0, 0.0]])

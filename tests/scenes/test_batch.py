@@ -112,7 +112,7 @@ def test_large_members_that_fork_inside_agree_too():
 def test_a_diverging_member_is_rolled_back_and_retired_alone():
     members = _fan(4, pc.scenes.spring_chain())
     members[2].dt = 1.0  # far past the chain's stability limit: it blows up within a few dozen steps
-    before = members[2].positions
+    before, file = members[2].positions, members[2].to_bytes()
     alone = _alone([members[k] for k in (0, 1, 3)], 200)
     with pytest.raises(pc.SimulationDiverged) as lone, pytest.warns(pc.StabilityWarning):  # the same member stepped alone
         pickle.loads(pickle.dumps(members[2])).step(200)
@@ -122,6 +122,8 @@ def test_a_diverging_member_is_rolled_back_and_retired_alone():
     e = batch.diverged[2]
     assert isinstance(e, pc.SimulationDiverged) and e.rolled_back_to == 0 and 0 < e.step == lone.value.step < 200
     assert np.array_equal(members[2].positions, before) and members[2].step_count == 0
+    # Byte for byte as before, the books' reference too (the batch took it for the first step).
+    assert members[2].to_bytes() == file
     assert all(_same(members[k], a) for k, a in zip((0, 1, 3), alone, strict=True))
     batch.step(10)  # the retired member is not stepped again
     assert members[2].step_count == 0 and members[0].step_count == 210
@@ -137,12 +139,12 @@ def test_a_small_nbody_member_that_diverges_in_the_fused_kernel_fails_alone():
     twin = pickle.loads(pickle.dumps(members[3]))
     with pytest.raises(pc.SimulationDiverged) as alone_error:
         twin.step(200)
-    before = members[3].positions
+    before, file = members[3].positions, members[3].to_bytes()
     batch = pc.Batch(members)
     batch.step(200)
     assert list(batch.diverged) == [3]
     assert batch.diverged[3].step == alone_error.value.step and batch.diverged[3].rolled_back_to == 0
-    assert np.array_equal(members[3].positions, before)
+    assert np.array_equal(members[3].positions, before) and members[3].to_bytes() == file
     assert all(_same(b, a) for b, a in zip([m for k, m in enumerate(members) if k != 3], alone, strict=True))
 
 
@@ -151,11 +153,13 @@ def test_a_small_nbody_member_that_diverges_in_the_fused_kernel_fails_alone():
 def test_ctrl_c_rolls_every_member_back(integrator):
     members = _fan(64, pc.scenes.figure_eight(integrator=integrator))
     before = [(m.positions, m.velocities, m.step_count, m.time) for m in members]
+    files = [m.to_bytes() for m in members]
     batch = pc.Batch(members, threads=2)
     assert _interrupt(lambda: batch.step(10**9), 0.3) < 9.7  # 10 s from the call's start
     for m, (x, v, n, t) in zip(members, before, strict=True):
         assert np.array_equal(m.positions, x) and np.array_equal(m.velocities, v)
         assert m.step_count == n and m.time == t
+    assert [m.to_bytes() for m in members] == files  # the first call's books' reference undone too
     assert not batch.diverged
 
 

@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+import time
 import zlib
 from pathlib import Path
 
@@ -267,7 +268,11 @@ def test_pages_open_in_a_real_browser_without_errors(site, tmp_path):
             page.goto(base + "gallery_pages/cloth_on_ball.html", wait_until="load")
             player = page.locator("iframe.pc-player")
             player.scroll_into_view_if_needed()
-            frame = next(f for f in page.frames if f.url.endswith("_players/cloth_on_ball.html"))
+            # The iframe starts loading once scrolled to (lazily), later under load: waited for.
+            deadline = time.monotonic() + 30
+            while (frame := next((f for f in page.frames if f.url.endswith("_players/cloth_on_ball.html")), None)) is None:
+                assert time.monotonic() < deadline, "the player's frame never loaded"
+                page.wait_for_timeout(100)
             frame.wait_for_function("window.physcore && (physcore.ready || physcore.error !== null)", timeout=30_000)
             assert frame.evaluate("physcore.error") is None
             frame.evaluate("physcore.pause(); physcore.setTime(0)")
