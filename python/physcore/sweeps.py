@@ -1077,6 +1077,8 @@ def ensemble(
     steps = _check.int_in_range("steps_per_sample", steps_per_sample, 1, 2**53)
     if not callable(perturb):
         perturb = _check.nonneg_float("perturb", perturb, unit="m")
+        if perturb > 1e150:  # times a normal draw it overflowed float64 (numpy's bare warning)
+            raise InvalidInputError(f"perturb: at most 1e150 m (a perturbation of a physical size), got {perturb:g}")
     if observe is not None and not callable(observe):
         raise InvalidTypeError(f"observe: expected a callable (scene -> array), got {type(observe).__name__}")
     seed = _check.int_in_range("seed", seed, 0)

@@ -1305,5 +1305,11 @@ def test_extent_errors_name_what_is_wrong(tmp_path):
         render.render_frame(x, extent=((3, 3), (-3, -3)))
     with pytest.raises(pc.InvalidInputError, match=r"extent: expected \(lower, upper\), two finite points of 2 coordinates, got shape \(3,\)"):
         render.render_frame(x, extent=(0, 1, 2))
+    # The drawing is float32: ±1e308 overflowed in a cast with numpy's bare RuntimeWarning.
+    scene = pc.Scene(3)
+    scene.add_particles(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 1]]))
+    with pytest.raises(pc.InvalidInputError, match=r"^extent: coordinates must be within ±1e38 m"):
+        render.gif(scene, tmp_path / "e.gif", frames=2, size=(32, 32), extent=([-1e308] * 3, [1e308] * 3))
+    assert scene.time == 0.0 and not (tmp_path / "e.gif").exists()
     with pytest.raises(pc.InvalidInputError, match=r"path must end in \.gif, got .*; pc\.render\.save\(scene, 'x\.mp4'\) writes \.mp4"):
         render.gif(pc.scenes.projectile(), tmp_path / "x.mp4")

@@ -137,6 +137,18 @@ def test_an_estimated_sound_speed_that_overflows_is_refused_by_name():
     assert _state(s) == before
 
 
+def test_a_density_that_overflows_the_tait_stiffness_is_refused_as_the_density():
+    # The sound speed estimated (10 v_max, ~44 m/s) is fine: density · c0² overflows by the
+    # density alone, which the refusal named sound_speed.
+    s = pc.Scene(2, threads=1)
+    s.add(pc.Gravity([0.0, -9.81]))
+    before = _state(s)
+    with pytest.raises(pc.InvalidInputError, match=r"^density: 1e308 kg/m³ makes the Tait stiffness") as info:
+        s.add_fluid(lattice([0, 0], [1.0, 1.0], 0.1), spacing=0.1, density=1e308)
+    assert _names(info.value, "density")
+    assert _state(s) == before
+
+
 def test_springs_between_particles_too_far_apart_for_float64_name_rest_length():
     s = pc.Scene(2, threads=1)
     s.add_particles([[-1e308, 0.0], [1e308, 0.0]])

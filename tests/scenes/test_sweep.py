@@ -529,6 +529,7 @@ def test_ensemble_records_a_failing_member():
         ({"steps_per_sample": 0}, ValueError, "steps_per_sample"),
         ({"perturb": -1.0}, ValueError, "perturb"),
         ({"perturb": math.nan}, ValueError, "perturb"),
+        ({"perturb": 1e308}, ValueError, r"^perturb: at most 1e150 m"),  # overflowed with numpy's bare warning
         ({"observe": 3}, TypeError, "observe"),
         ({"client": object()}, TypeError, "client"),
     ],

@@ -348,4 +348,6 @@ def _extent_box(extent: Any, dim: int) -> np.ndarray | None:
         )
     if not np.all(lo_hi[1] >= lo_hi[0]):
         raise InvalidInputError(f"extent: lower must be <= upper on every axis, got lower {lo_hi[0].tolist()}, upper {lo_hi[1].tolist()}")
+    if np.abs(lo_hi).max() > 1e38:  # the drawing's coordinates are float32 (3.4e38 at most)
+        raise InvalidInputError(f"extent: coordinates must be within ±1e38 m (the drawing is float32), got {lo_hi.tolist()}")
     return np.array([[lo_hi[(k >> a) & 1, a] for a in range(dim)] for k in range(2**dim)])

@@ -274,6 +274,18 @@ pub fn sound_speed(s: &AtRest<'_>) -> Result<Real> {
         ));
     }
     let c0 = 10.0 * vmax;
+    if (c0 * c0 * 1e4).is_finite() && !(s.density * c0 * c0).is_finite() {
+        // The estimate would do for any liquid's density (up to 1e4 kg/m³): the density given
+        // makes the stiffness overflow (1e308 was refused as sound_speed's).
+        return Err(invalid(
+            "density",
+            format!(
+                "{:e} kg/m³ makes the Tait stiffness density · c0² overflow float64 (c0 = 10·v_max = \
+                 {c0:.3e} m/s, estimated); give a density of a physical size",
+                s.density
+            ),
+        ));
+    }
     if !(c0.is_finite() && (s.density * c0 * c0).is_finite()) {
         let (args, capillary) =
             if s.surface > 0.0 { (", surface_tension, adhesion", " and the capillary speed") } else { ("", "") };
