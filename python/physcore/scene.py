@@ -1076,23 +1076,12 @@ class Scene:
             raise InvalidInputError(f"n: {n} more steps would take the step count past 2**63 - 1 (it is {self.step_count})")
         self._check_dfsph_step(self.dt, "dt")
         self._to_device()
-        fresh = self._e0 is None
-        if fresh:
-            # The books' reference is taken at the first step: its refusal is the step's.
-            with allocating("step", "the energy books' reference", rename=("energy",)):
-                self._set_reference_energy()
-        try:
+        with self._books_reference("step"):
             self.warn_contact_step()
             self._warn_grid_step()
             self._warn_unstable_step()
             self._warn_uncharged()
             self._exclusive(lambda sim: sim.step(n))
-        except SceneBusyError:
-            raise  # another thread's call, whose reference this is
-        except BaseException:
-            if fresh:  # a failed first step is undone whole, its reference too (to_bytes as before)
-                self._e0 = None
-            raise
 
     @property
     def device(self) -> str:
@@ -1379,20 +1368,9 @@ class Scene:
         # A substep is at most the duration, a fixed one exactly duration / substeps.
         self._check_dfsph_step(duration if fixed is None else duration / fixed, "duration" if fixed is None else "substeps")
         self._to_device()
-        fresh = self._e0 is None
-        if fresh:
-            # The books' reference is taken at the first step: its refusal is the advance's.
-            with allocating("advance", "the energy books' reference", rename=("energy",)):
-                self._set_reference_energy()
-        try:
+        with self._books_reference("advance"):
             self._warn_uncharged()
             return int(self._exclusive(lambda sim: sim.advance(duration, fixed)))
-        except SceneBusyError:
-            raise  # another thread's call, whose reference this is
-        except BaseException:
-            if fresh:  # a failed first call is undone whole, its reference too
-                self._e0 = None
-            raise
 
     def auto_dt(self) -> float:
         """The substep (s) ``advance(duration)`` would take now with ``substeps="auto"`` (before
@@ -1406,6 +1384,24 @@ class Scene:
 
     def _set_reference_energy(self) -> None:
         self._session.take_reference_energy()
+
+    @contextlib.contextmanager
+    def _books_reference(self, call: str) -> Iterator[None]:
+        """Within: the stepping of `call` ("step", "advance"). The books' reference is taken
+        first if there is none (a refusal of its memory is `call`'s), and dropped again if the
+        block fails: a failed first call is undone whole (the scene's file as before)."""
+        fresh = self._e0 is None
+        if fresh:
+            with allocating(call, "the energy books' reference", rename=("energy",)):
+                self._set_reference_energy()
+        try:
+            yield
+        except SceneBusyError:
+            raise  # another thread's call, whose reference this is
+        except BaseException:
+            if fresh:
+                self._e0 = None
+            raise
 
     # ---------------------------------------------------------------- state
     @property
