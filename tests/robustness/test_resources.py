@@ -770,3 +770,26 @@ def test_a_gif_refused_memory_while_simulating_puts_the_scene_back(tmp_path, mon
     with pytest.raises(pc.OutOfMemoryError, match="^gif: needs 5.83 MB"):
         render.gif(scene, tmp_path / "d.gif", frames=3, progress=False)
     assert scene.to_bytes() == before and not (tmp_path / "d.gif").exists()
+
+
+def test_a_gif_refused_memory_before_any_step_is_named_as_the_gif_and_restores_nothing(tmp_path, monkeypatch):
+    """A refusal before a step was taken (the first step's, which the scene undoes whole) needs
+    no restore: under the same limit the restore was itself refused and named itself
+    (``set_state: needs 240 kB``, the fine-cap ladder on galaxies) in place of the call."""
+    from physcore import render
+    from physcore.render import _recording
+
+    scene = pc.scenes.galaxies()
+    before = scene.to_bytes()
+
+    def refused(scene, **kwargs):
+        raise pc.OutOfMemoryError("step: needs 3.12 MB for tree gravity's potential of 10,000 bodies, more than can be allocated now", 3_120_000)
+
+    def no_restore(self, state):  # as the restore was refused under the cap
+        raise pc.OutOfMemoryError("set_state: needs 240 kB for 10,000 positions, more than can be allocated now", 240_000)
+
+    monkeypatch.setattr(_recording, "_simulate", refused)
+    monkeypatch.setattr(pc.Scene, "set_state", no_restore)
+    with pytest.raises(pc.OutOfMemoryError, match="^gif: needs 3.12 MB"):
+        render.gif(scene, tmp_path / "d.gif", frames=3, progress=False)
+    assert scene.to_bytes() == before and not (tmp_path / "d.gif").exists()

@@ -512,7 +512,11 @@ def _render(scene: Any, path: Path | str | os.PathLike | None, fmt: str, **optio
                 # freed first: the restore needs room under the same limit.
                 traceback.clear_frames(e.__traceback__)
                 rec = None
-                own.set_state(before)
+                # Not a step taken (refused at the first, which the scene itself undoes whole):
+                # nothing to put back, and the restore, refused under the same limit, named
+                # itself (set_state) in place of the call.
+                if own.step_count != before["step"] or own.time != before["time"]:
+                    own.set_state(before)
             raise
     return _draw(rec, fmt, path, size, fps, color_by, radius, view, colorbar, trail, size_by, title, camera, arrows, mesh,
                  texture, theme, antialias, colors, cmap, background, surface, box, halo, loop, loop_default, look, dither)
